@@ -1,0 +1,60 @@
+"""The ``dopus-gen`` command line.
+
+Each verb is a thin click wrapper; the work lives in the module named in its
+body, imported lazily so that ``dopus-gen --help`` stays fast.
+"""
+from __future__ import annotations
+
+import click
+
+from . import __version__
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="dopus-gen")
+def main() -> None:
+    """Generate, build and run DOPUS NMPC solvers from an OCP file.
+
+    An OCP file is a Python file that defines build() returning a
+    dopus_codegen.Ocp (see examples/robot_arm.py).
+    """
+
+
+def _int_list_or_full(value: str) -> list:
+    out = []
+    for item in value.split(","):
+        item = item.strip()
+        if item == "full":
+            out.append("full")
+        elif item.isdigit():
+            out.append(int(item))
+        else:
+            raise click.BadParameter(f"'{item}' is neither a non-negative integer nor 'full'")
+    return out
+
+
+@main.command()
+@click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--M", "m_list", default="full,5,1,0", show_default=True,
+              help="Comma-separated values of M (stages re-linearised per iteration); 'full' is the full RTI (M = N-1).")
+@click.option("--iters", default=40, show_default=True, type=click.IntRange(1, 100000), help="Iterations per run.")
+@click.option("--start", type=click.Choice(["cold", "warm"]), default="warm", show_default=True,
+              help="cold: the OCP file's initial guess at its initial state; warm: the converged solution at the "
+                   "initial state, then iterate for the disturbed initial state.")
+@click.option("--hessian", type=click.Choice(["exact", "gauss-newton"]), default="exact", show_default=True)
+@click.option("--regularization", type=click.Choice(["none", "project", "mirror"]), default="none", show_default=True)
+@click.option("--reg-eps", default=1e-4, show_default=True, type=float, help="Eigenvalue floor of the regularisation.")
+@click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the study as JSON.")
+@click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None, help="Write KKT against iteration as PNG.")
+def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, backend, json_out, plot_out):
+    """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M."""
+    from .converge import run_converge_cli
+
+    run_converge_cli(ocp_file=ocp_file, m_list=_int_list_or_full(m_list), iters=iters, start=start,
+                     hessian=hessian, regularization=regularization, reg_eps=reg_eps, backend=backend,
+                     json_out=json_out, plot_out=plot_out)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
