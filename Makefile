@@ -1,0 +1,42 @@
+# The verbs a person types. Each target sets up what it needs itself.
+VENV   := .venv
+PY     := $(VENV)/bin/python
+OUT    := out
+EXAMPLE := examples/robot_arm.py
+
+.PHONY: demo test bench generate firmware clean setup help
+
+help:
+	@echo "make demo      generate, build and run the robot-arm closed loop (DOPUS M=1 vs full RTI); plots in $(OUT)/robot_arm"
+	@echo "make test      run the test suite"
+	@echo "make bench     run the benchmarks (tables on stdout, JSON in bench/results)"
+	@echo "make generate  regenerate the checked-in generated/ folders"
+	@echo "make firmware  build the static library of generated/robot_arm with make only"
+	@echo "make clean     remove build products and outputs"
+
+setup:
+	@bash scripts/bootstrap.sh
+
+demo: setup
+	$(VENV)/bin/dopus-gen sil $(EXAMPLE) --M 1 --compare full --duration 3.0 \
+	    --json $(OUT)/robot_arm/sil.json --plot-dir $(OUT)/robot_arm
+	$(VENV)/bin/dopus-gen converge $(EXAMPLE) --M full,5,1,0 --iters 40 --start warm \
+	    --json $(OUT)/robot_arm/converge.json --plot $(OUT)/robot_arm/converge.png
+
+test: setup
+	$(PY) -m pytest -q
+
+bench: setup
+	$(PY) bench/runtime_bench.py
+	$(PY) bench/qp_bench.py
+
+generate: setup
+	$(VENV)/bin/dopus-gen generate examples/robot_arm.py -o generated/robot_arm
+	$(VENV)/bin/dopus-gen generate examples/unicycle.py -o generated/unicycle
+
+firmware:
+	$(MAKE) -C generated/robot_arm
+
+clean:
+	rm -rf $(OUT) build .pytest_cache
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +
