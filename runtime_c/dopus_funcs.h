@@ -1,0 +1,55 @@
+/* Wrappers around the CasADi-generated per-stage functions (docs/algorithm.md section 2).
+ *
+ * The definitions are generated (dopus_funcs.c) because they call the CasADi functions by
+ * their problem-specific names; the runtime only sees these fixed signatures. Every call uses
+ * a caller-supplied work struct, so the generated code holds no static state and two solvers
+ * (or two threads) never share scratch memory.
+ *
+ * Matrices are dense column-major (Phi: nx x nw, A: nw x nw, C: ng x nw, R: nr x nx,
+ * R_eq: ne x nx). Inputs and outputs of size zero may be pointers to 1-element dummies.
+ * Every function returns 0 on success and nonzero if the CasADi function reported failure.
+ */
+#ifndef DOPUS_FUNCS_H
+#define DOPUS_FUNCS_H
+
+#include "dopus_sizes.h"
+
+typedef struct {
+    int iw[DOPUS_SZ_IW];
+    double w[DOPUS_SZ_W];
+    const double *arg[DOPUS_SZ_ARG];
+    double *res[DOPUS_SZ_RES];
+} dopus_fun_work;
+
+/* stage_eval: phi (nx), l (1), g (ng) */
+int dopus_eval_stage_eval(const double *x, const double *u, const double *p,
+                          double *phi, double *l, double *g, dopus_fun_work *wk);
+
+/* stage_grad, F_k of eq. 14: gL = grad_w l - Phi' lam_next + C' mu_g, plus phi, l, g */
+int dopus_eval_stage_grad(const double *x, const double *u, const double *p,
+                          const double *lam_next, const double *mu_g,
+                          double *gL, double *phi, double *l, double *g, dopus_fun_work *wk);
+
+/* stage_hess, H_k of eq. 15: A (nw x nw), Phi (nx x nw), C (ng x nw).
+ * gauss_newton != 0 selects the Gauss-Newton A; nonzero return if !DOPUS_HAS_GN then. */
+int dopus_eval_stage_hess(int gauss_newton, const double *x, const double *u, const double *p,
+                          const double *lam_next, const double *mu_g,
+                          double *A, double *Phi, double *C, dopus_fun_work *wk);
+
+/* term_eval: E (1), r (nr), r_eq (ne) */
+int dopus_eval_term_eval(const double *x, const double *p, double *E, double *r, double *r_eq,
+                         dopus_fun_work *wk);
+
+/* term_grad: gL = grad E + R' mu_r + R_eq' nu, plus E, r, r_eq */
+int dopus_eval_term_grad(const double *x, const double *p, const double *mu_r, const double *nu,
+                         double *gL, double *E, double *r, double *r_eq, dopus_fun_work *wk);
+
+/* term_hess: A (nx x nx), R (nr x nx), R_eq (ne x nx); always available (no GN restriction) */
+int dopus_eval_term_hess(int gauss_newton, const double *x, const double *p, const double *mu_r,
+                         const double *nu, double *A, double *R, double *R_eq, dopus_fun_work *wk);
+
+/* ode: continuous model xdot = f(x, u, p) */
+int dopus_eval_ode(const double *x, const double *u, const double *p, double *xdot,
+                   dopus_fun_work *wk);
+
+#endif /* DOPUS_FUNCS_H */

@@ -1,0 +1,41 @@
+/* Problem data generated from the OCP file (dopus_problem.c): bounds, defaults, the initial
+ * guess and, when the OCP asks for it, the offline primal-dual solution at the default x0.
+ *
+ * Infinite bounds are INFINITY / -INFINITY; the runtime treats them as "no bound on that side"
+ * (docs/algorithm.md section 1). Sizes of possibly empty arrays use DOPUS_DIM so that every
+ * array has at least one element (C99 forbids zero-length arrays).
+ */
+#ifndef DOPUS_PROBLEM_H
+#define DOPUS_PROBLEM_H
+
+#include "dopus_sizes.h"
+
+extern const double dopus_lbx[DOPUS_NX], dopus_ubx[DOPUS_NX];
+extern const double dopus_lbu[DOPUS_NU], dopus_ubu[DOPUS_NU];
+extern const double dopus_lg[DOPUS_DIM(DOPUS_NG)], dopus_ug[DOPUS_DIM(DOPUS_NG)];
+extern const double dopus_lr[DOPUS_DIM(DOPUS_NR)], dopus_ur[DOPUS_DIM(DOPUS_NR)];
+extern const double dopus_p_default[DOPUS_DIM(DOPUS_NP)]; /* every node */
+extern const double dopus_dt;
+extern const double dopus_x0_default[DOPUS_NX];
+/* the OCP file's initial guess */
+extern const double dopus_guess_x[DOPUS_N + 1][DOPUS_NX];
+extern const double dopus_guess_u[DOPUS_N][DOPUS_NU];
+extern const int dopus_default_M;
+extern const int dopus_default_hessian;        /* 0 exact, 1 gauss-newton */
+extern const int dopus_default_regularization; /* 0 none, 1 project, 2 mirror */
+extern const double dopus_default_reg_eps;
+
+#if DOPUS_HAS_NOMINAL
+/* offline primal-dual solution at dopus_x0_default (IPOPT at generation time), so the
+ * controller starts warm (DESIGN.md section 8) */
+extern const double dopus_nominal_x[DOPUS_N + 1][DOPUS_NX];
+extern const double dopus_nominal_u[DOPUS_N][DOPUS_NU];
+extern const double dopus_nominal_lam[DOPUS_N + 1][DOPUS_NX];
+extern const double dopus_nominal_mu_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
+extern const double dopus_nominal_mu_b[DOPUS_N][DOPUS_NW];
+extern const double dopus_nominal_mu_bN[DOPUS_NX];
+extern const double dopus_nominal_mu_r[DOPUS_DIM(DOPUS_NR)];
+extern const double dopus_nominal_nu[DOPUS_DIM(DOPUS_NE)];
+#endif
+
+#endif /* DOPUS_PROBLEM_H */
