@@ -1,0 +1,215 @@
+/* Sparse stage-wise QP solver: primal-dual interior point (Mehrotra predictor-corrector)
+ * with the Newton systems solved by a Riccati recursion, O(N (nx+nu)^3) per iteration.
+ *
+ * The QP (docs/algorithm.md section 3), stages k = 0..N-1, w_k = (x_k, u_k), nw = nx + nu:
+ *
+ *   minimize   sum_k 0.5 w_k' H_k w_k + g_k' w_k + 0.5 x_N' HN x_N + gN' x_N
+ *   subject to x_0 = x0                                       multiplier lam_0
+ *              x_{k+1} = Phi_k w_k + b_k                      multiplier lam_{k+1}
+ *              lbw_k <= w_k <= ubw_k                          multiplier mu_b_k
+ *              lg_k <= C_k w_k <= ug_k                        multiplier mu_g_k
+ *              lbxN <= x_N <= ubxN                            multiplier mu_bN
+ *              lr <= R x_N <= ur                              multiplier mu_r
+ *              Req x_N = req                                  multiplier nu
+ *
+ * Bounds: an entry -INFINITY (lower) or +INFINITY (upper) means "no bound on that side";
+ * the masks are built at run time, so no compile-time index lists are needed. The x part
+ * of lbw_0/ubw_0 is ignored (x_0 is fixed by x0). lb == ub is accepted (two inequality
+ * sides); the dynamics, x0 and Req rows are always handled as equalities.
+ *
+ * Sign conventions (all multipliers SIGNED, positive when the upper side is active,
+ * negative when the lower side is), stationarity of the solution:
+ *   stage k:  H_k w_k + g_k + [lam_k; 0] - Phi_k' lam_{k+1} + C_k' mu_g_k + mu_b_k = 0
+ *   terminal: HN x_N + gN + lam_N + R' mu_r + Req' nu + mu_bN = 0
+ * lam_0 multiplies (x_0 - x0). The x part of mu_b_0 is always 0.
+ *
+ * Storage: all matrices dense column-major. Stage matrices are read through per-stage
+ * pointer tables (no copies: the DOPUS ring buffer hands its slots over directly):
+ *   H[k]   nw x nw  (symmetric; only the lower triangle is read)
+ *   Phi[k] nx x nw  = [A_k B_k], A_k the first nx columns
+ *   C[k]   ng x nw  (may be NULL when DOPUS_NG == 0)
+ *   HN     nx x nx  (symmetric; lower triangle read), R nr x nx, Req ne x nx (NULL if 0 rows)
+ *
+ * Hessians may be indefinite: the solver never convexifies up front. The nu x nu Riccati
+ * pivot blocks are factored by Cholesky; when one fails, the terminal equality is first
+ * added as an exact augmented-Lagrangian term (rho Req'Req, which does not change the
+ * solution of the Newton system because Req dx_N is fixed by the equality) and then, if
+ * still needed, delta*I is added to the stage Hessians with delta increased geometrically
+ * (IPOPT-style inertia correction). Both are counted in dopus_qp_info.
+ *
+ * Sizes come from dopus_sizes.h: DOPUS_N, DOPUS_NX, DOPUS_NU, DOPUS_NG, DOPUS_NR, DOPUS_NE
+ * (NG, NR, NE may be 0). No malloc, no VLAs, no recursion, no state outside the workspace.
+ */
+#ifndef DOPUS_QP_H
+#define DOPUS_QP_H
+
+#include "dopus_sizes.h"
+
+#if !defined(DOPUS_N) || !defined(DOPUS_NX) || !defined(DOPUS_NU) || !defined(DOPUS_NG) || \
+    !defined(DOPUS_NR) || !defined(DOPUS_NE)
+#error "dopus_sizes.h must define DOPUS_N, DOPUS_NX, DOPUS_NU, DOPUS_NG, DOPUS_NR, DOPUS_NE"
+#endif
+
+/* C99 forbids zero-length arrays: arrays of a size that may be 0 use DOPUS_QP_MAX1(n). */
+#define DOPUS_QP_MAX1(n) ((n) > 0 ? (n) : 1)
+
+#define DOPUS_QP_NW (DOPUS_NX + DOPUS_NU)
+#define DOPUS_QP_NG1 DOPUS_QP_MAX1(DOPUS_NG)
+#define DOPUS_QP_NR1 DOPUS_QP_MAX1(DOPUS_NR)
+#define DOPUS_QP_NE1 DOPUS_QP_MAX1(DOPUS_NE)
+#define DOPUS_QP_NU1 DOPUS_QP_MAX1(DOPUS_NU)
+/* All stacked primal variables (w_0, ..., w_{N-1}, x_N). */
+#define DOPUS_QP_NPRIM (DOPUS_N * DOPUS_QP_NW + DOPUS_NX)
+/* Inequality rows, each with a lower and an upper side: stage k holds nw box rows then ng
+ * general rows; then the nx terminal box rows and the nr terminal rows. */
+#define DOPUS_QP_NSTAGEINEQ (DOPUS_QP_NW + DOPUS_NG)
+#define DOPUS_QP_NINEQ (DOPUS_N * DOPUS_QP_NSTAGEINEQ + DOPUS_NX + DOPUS_NR)
+
+/* Status codes (dopus_qp_solve return value and dopus_qp_info.status). */
+enum dopus_qp_status {
+    DOPUS_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
+    DOPUS_QP_MAX_ITER = 1,          /* iteration limit reached, best point returned */
+    DOPUS_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */
+    DOPUS_QP_DUAL_INFEASIBLE = 3,   /* unbounded below: feasible descent ray found */
+    DOPUS_QP_NUMERICAL = 4,         /* factorisation / step failure */
+    DOPUS_QP_INVALID_INPUT = 5      /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+};
+
+typedef struct {
+    double tol;        /* tolerance on the scaled KKT residuals (default 1e-8) */
+    int max_iter;      /* iteration limit (default 100) */
+    int warm_start;    /* nonzero: start from the primal-dual point in *sol (default 0) */
+    int refine_steps;  /* iterative refinement steps per Newton solve (default 1) */
+} dopus_qp_settings;
+
+typedef struct {
+    /* stage matrices, one pointer per stage (see header comment for the shapes) */
+    const double *H[DOPUS_N];
+    const double *Phi[DOPUS_N];
+    const double *C[DOPUS_N];
+    const double *HN;
+    const double *R;
+    const double *Req;
+    /* vectors */
+    double g[DOPUS_N][DOPUS_QP_NW];
+    double b[DOPUS_N][DOPUS_NX];
+    double x0[DOPUS_NX];
+    double gN[DOPUS_NX];
+    double lbw[DOPUS_N][DOPUS_QP_NW];
+    double ubw[DOPUS_N][DOPUS_QP_NW];
+    double lbxN[DOPUS_NX];
+    double ubxN[DOPUS_NX];
+    double lg[DOPUS_N][DOPUS_QP_NG1];
+    double ug[DOPUS_N][DOPUS_QP_NG1];
+    double lr[DOPUS_QP_NR1];
+    double ur[DOPUS_QP_NR1];
+    double req[DOPUS_QP_NE1];
+} dopus_qp_in;
+
+/* Primal-dual solution (output; also the warm-start point when settings.warm_start). */
+typedef struct {
+    double x[DOPUS_N + 1][DOPUS_NX];
+    double u[DOPUS_N][DOPUS_QP_NU1];
+    double lam[DOPUS_N + 1][DOPUS_NX];
+    double mu_b[DOPUS_N][DOPUS_QP_NW];
+    double mu_bN[DOPUS_NX];
+    double mu_g[DOPUS_N][DOPUS_QP_NG1];
+    double mu_r[DOPUS_QP_NR1];
+    double nu[DOPUS_QP_NE1];
+} dopus_qp_sol;
+
+typedef struct {
+    int status;              /* enum dopus_qp_status */
+    int iterations;          /* interior-point iterations taken */
+    int inertia_corrections; /* factorisations retried with delta*I added to the Hessians */
+    int terminal_augmentations; /* factorisations retried with rho Req'Req (exact, see top) */
+    double delta;            /* largest delta used (0 when no correction was needed) */
+    /* final residuals, infinity norms, unscaled */
+    double res_stat;         /* stationarity (both equations of the header comment) */
+    double res_eq;           /* x0, dynamics and Req rows */
+    double res_ineq;         /* bound / constraint violation max(0, l - v, v - u) */
+    double res_comp;         /* complementarity max(slack * multiplier) over all sides */
+    /* the same, scaled as compared with settings.tol */
+    double res_stat_scaled;
+    double res_eq_scaled;
+    double res_ineq_scaled;
+    double res_comp_scaled;
+    double obj;              /* objective value at the returned point */
+} dopus_qp_info;
+
+/* The whole solver memory; the user declares one (static, global or on a task stack).
+ * Fields are internal. */
+typedef struct {
+    /* problem data prepared once per solve */
+    double lo[DOPUS_QP_NINEQ];
+    double up[DOPUS_QP_NINEQ];
+    unsigned char has_lo[DOPUS_QP_NINEQ];
+    unsigned char has_up[DOPUS_QP_NINEQ];
+    /* iterate: primal, equality multipliers, slacks and multipliers of each side */
+    double prim[DOPUS_QP_NPRIM];
+    double lam[(DOPUS_N + 1) * DOPUS_NX];
+    double nu[DOPUS_QP_NE1];
+    double t_lo[DOPUS_QP_NINEQ];
+    double t_up[DOPUS_QP_NINEQ];
+    double z_lo[DOPUS_QP_NINEQ];
+    double z_up[DOPUS_QP_NINEQ];
+    /* constraint values v = D w and residuals */
+    double v[DOPUS_QP_NINEQ];
+    double r_stat[DOPUS_QP_NPRIM];
+    double r_dyn[(DOPUS_N + 1) * DOPUS_NX];
+    double r_eqN[DOPUS_QP_NE1];
+    double r_lo[DOPUS_QP_NINEQ];
+    double r_up[DOPUS_QP_NINEQ];
+    /* barrier weights and Newton directions */
+    double qdiag[DOPUS_QP_NINEQ];
+    double d_prim[DOPUS_QP_NPRIM];
+    double d_lam[(DOPUS_N + 1) * DOPUS_NX];
+    double d_nu[DOPUS_QP_NE1];
+    double dt_lo[DOPUS_QP_NINEQ];
+    double dt_up[DOPUS_QP_NINEQ];
+    double dz_lo[DOPUS_QP_NINEQ];
+    double dz_up[DOPUS_QP_NINEQ];
+    double rc_lo[DOPUS_QP_NINEQ];
+    double rc_up[DOPUS_QP_NINEQ];
+    /* Newton right-hand side, solution and refinement buffers */
+    double rhs_stat[DOPUS_QP_NPRIM];
+    double rhs_dyn[(DOPUS_N + 1) * DOPUS_NX];
+    double rhs_eqN[DOPUS_QP_NE1];
+    double res_stat_lin[DOPUS_QP_NPRIM];
+    double res_dyn_lin[(DOPUS_N + 1) * DOPUS_NX];
+    double res_eqN_lin[DOPUS_QP_NE1];
+    double c_prim[DOPUS_QP_NPRIM];
+    double c_lam[(DOPUS_N + 1) * DOPUS_NX];
+    double c_nu[DOPUS_QP_NE1];
+    /* Riccati factorisation: condensed stage Hessians and value-function data */
+    double M[DOPUS_N][DOPUS_QP_NW * DOPUS_QP_NW];     /* H + D'QD + delta I (+ Phi'P Phi) */
+    double HNc[DOPUS_NX * DOPUS_NX];                   /* terminal condensed Hessian */
+    double P[DOPUS_N + 1][DOPUS_NX * DOPUS_NX];       /* value function Hessians */
+    double G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];   /* value function x-nu coupling */
+    double Lu[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NU1];  /* Cholesky factor of M_uu */
+    double LK[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux */
+    double LKn[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
+    double W[DOPUS_QP_NE1 * DOPUS_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
+    double p[DOPUS_N + 1][DOPUS_NX];
+    double e[DOPUS_QP_NE1];
+    double lk[DOPUS_N][DOPUS_QP_NU1];
+    double work[4 * DOPUS_QP_NW * (DOPUS_QP_NW + DOPUS_QP_NE1 + 1)];
+    double delta;          /* current inertia-correction shift */
+    double rho_aug;        /* current terminal augmented-Lagrangian weight */
+    double scale_stat;     /* residual scaling factors */
+    double scale_eq;
+} dopus_qp_workspace;
+
+/* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */
+void dopus_qp_settings_default(dopus_qp_settings *settings);
+
+/* sizeof(dopus_qp_workspace), the memory bill of the solver. */
+unsigned long dopus_qp_workspace_size(void);
+
+/* Solve the QP. `sol` is read as the warm-start point when settings->warm_start is
+ * nonzero and always written (best point found; zeros on invalid input). `info` may be
+ * NULL. Returns the status (enum dopus_qp_status). */
+int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in,
+                   const dopus_qp_settings *settings, dopus_qp_sol *sol, dopus_qp_info *info);
+
+#endif /* DOPUS_QP_H */
