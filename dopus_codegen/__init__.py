@@ -1,2 +1,27 @@
 """dopus-codegen: fixed-size C99 NMPC solvers running DOPUS, generated from CasADi OCPs."""
 __version__ = "0.1.0"
+
+# The public names are imported lazily so that `dopus-gen --help` does not load CasADi.
+_EXPORTS = {
+    "Ocp": "ocp", "OcpError": "ocp", "Integrator": "ocp", "RK4": "ocp", "Event": "ocp",
+    "Guess": "ocp", "ScenarioSpec": "ocp", "load_ocp": "ocp",
+    "Discretized": "derivatives", "build_functions": "derivatives",
+    "solve_ocp": "offline",
+}
+
+__all__ = ["__version__", *_EXPORTS]
+
+
+def __getattr__(name):
+    if name in _EXPORTS:
+        import importlib
+
+        module = importlib.import_module(f".{_EXPORTS[name]}", __name__)
+        value = getattr(module, name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'dopus_codegen' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + list(_EXPORTS))

@@ -1,0 +1,118 @@
+"""Direct multiple shooting: from a validated :class:`~dopus_codegen.ocp.Ocp` to the
+symbolic per-stage pieces ``phi_k, l_k, g_k`` and the terminal ``E, r, r_eq``.
+
+Everything here is SX, built in declaration order so that the same OCP always yields
+the same expressions (and hence byte-identical generated C).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from .ocp import Ocp, OcpError
+
+__all__ = ["StageModel", "discretize"]
+
+
+@dataclass
+class StageModel:
+    """Symbolic stage and terminal expressions of one OCP (docs/algorithm.md section 1)."""
+    x: ca.SX
+    u: ca.SX
+    p: ca.SX
+    w: ca.SX
+    xdot: ca.SX
+    phi: ca.SX
+    l: ca.SX              # full stage cost 0.5 res' W res + l_extra
+    res: ca.SX            # stacked stage least-squares residual (0 rows if none)
+    W: np.ndarray
+    l_extra: ca.SX
+    g: ca.SX
+    lg: np.ndarray
+    ug: np.ndarray
+    E: ca.SX
+    resN: ca.SX
+    WN: np.ndarray
+    E_extra: ca.SX
+    r: ca.SX              # terminal inequality rows
+    lr: np.ndarray
+    ur: np.ndarray
+    r_eq: ca.SX           # terminal equality rows, r_eq = r_row - value
+    has_stage_ls: bool
+
+
+def _stack(items, what: str):
+    """Vertical stack of (expr, lb, ub) triples."""
+    if not items:
+        return ca.SX(0, 1), np.zeros(0), np.zeros(0)
+    try:
+        expr = ca.vertcat(*[e for e, _, _ in items])
+    except Exception as exc:  # noqa: BLE001 - CasADi errors on user expressions
+        raise OcpError(f"{what}: {exc}") from None
+    return expr, np.concatenate([a for _, a, _ in items]), np.concatenate([b for _, _, b in items])
+
+
+def _least_squares(items, what: str):
+    """Stacked residual, block-diagonal weight and the cost 0.5 res' W res."""
+    if not items:
+        return ca.SX(0, 1), np.zeros((0, 0)), ca.SX(0)
+    res = ca.vertcat(*[r for r, _ in items])
+    n = res.size1()
+    W = np.zeros((n, n))
+    i = 0
+    for r, Wi in items:
+        m = r.size1()
+        W[i:i + m, i:i + m] = Wi
+        i += m
+    try:
+        cost = 0.5 * ca.dot(res, ca.mtimes(ca.DM(W), res))
+    except Exception as exc:  # noqa: BLE001
+        raise OcpError(f"{what}: {exc}") from None
+    return res, W, cost
+
+
+def _sum(items) -> ca.SX:
+    out = ca.SX(0)
+    for c in items:
+        out = out + c
+    return out
+
+
+def discretize(ocp: Ocp) -> StageModel:
+    """Validate ``ocp`` and build the symbolic multiple-shooting pieces."""
+    ocp.validate()
+    x, u, p = ocp.x_sym(), ocp.u_sym(), ocp.p_sym()
+    w = ca.vertcat(x, u)
+    xdot = ocp._xdot
+    try:
+        ode = ca.Function("ode_tmp", [x, u, p], [xdot])
+        phi = ocp.integrator.step(ode, x, u, p, ocp.dt)
+    except OcpError:
+        raise
+    except Exception as exc:  # noqa: BLE001
+        raise OcpError(f"dynamics: cannot discretise with {ocp.integrator.describe()}: {exc}") from None
+    if not isinstance(phi, ca.SX) or phi.shape != (x.size1(), 1):
+        raise OcpError(f"dynamics: integrator {ocp.integrator.describe()} returned shape "
+                       f"{getattr(phi, 'shape', None)}, expected ({x.size1()}, 1)")
+
+    res, W, l_ls = _least_squares(ocp._stage_ls, "stage least squares")
+    l_extra = _sum(ocp._stage_costs)
+    l = l_ls + l_extra
+    g, lg, ug = _stack(ocp._path, "path constraints")
+
+    resN, WN, E_ls = _least_squares(ocp._term_ls, "terminal least squares")
+    E_extra = _sum(ocp._term_costs)
+    E = E_ls + E_extra
+
+    rows, lbs, ubs = _stack(ocp._term_con, "terminal constraints")
+    is_eq = lbs == ubs
+    ineq = np.flatnonzero(~is_eq)
+    eq = np.flatnonzero(is_eq)
+    r = rows[ineq.tolist()] if ineq.size else ca.SX(0, 1)
+    r_eq = rows[eq.tolist()] - ca.DM(lbs[eq]) if eq.size else ca.SX(0, 1)
+
+    return StageModel(x=x, u=u, p=p, w=w, xdot=xdot, phi=phi, l=l, res=res, W=W, l_extra=l_extra,
+                      g=g, lg=lg, ug=ug, E=E, resN=resN, WN=WN, E_extra=E_extra,
+                      r=r, lr=lbs[ineq], ur=ubs[ineq], r_eq=r_eq, has_stage_ls=bool(ocp._stage_ls))

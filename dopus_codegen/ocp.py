@@ -1,0 +1,644 @@
+"""The optimal control problem as the user writes it, and its validation.
+
+An OCP file is a Python file that defines ``build()`` returning an :class:`Ocp`::
+
+    import casadi as ca
+    from dopus_codegen import Ocp, RK4, Event
+
+    def build():
+        ocp = Ocp("pendulum")
+        x = ocp.state("x", 2, lb=[-5, -10], ub=[5, 10])
+        u = ocp.control("u", lb=-1, ub=1)
+        target = ocp.parameter("target", value=0.0)
+        ocp.dynamics(ca.vertcat(x[1], u - ca.sin(x[0])), integrator=RK4(substeps=2))
+        ocp.stage_least_squares(ca.vertcat(x[0] - target, u), weights=[1.0, 0.01])
+        ocp.horizon(N=20, dt=0.05)
+        ocp.initial_state([0.5, 0.0])
+        return ocp
+
+Conventions (docs/algorithm.md sections 1 and 8):
+
+- ``state``/``control``/``parameter`` return CasADi ``SX`` column vectors; every other
+  expression must be built from them (and constants). The stage vector is
+  ``w = (x, u)`` with the states and controls stacked in declaration order.
+- The stage cost ``l`` is the cost of one interval as written (no implicit ``dt``
+  factor): ``l = 0.5 res' W res + l_extra`` with ``res``/``W`` from
+  :meth:`Ocp.stage_least_squares` and ``l_extra`` from :meth:`Ocp.stage_cost`.
+  Several calls of either add up (residuals stack, weights become block diagonal).
+- Path constraints ``lb <= g(x, u, p) <= ub`` hold on stages ``0..N-1``; state bounds
+  on nodes ``1..N``; control bounds on stages ``0..N-1``.
+- A terminal constraint row with ``lb == ub`` becomes an equality row.
+- Parameters are runtime-settable, one vector per node; ``value`` is the default.
+
+Every user mistake raises :class:`OcpError` with a message naming the offending item.
+"""
+from __future__ import annotations
+
+import importlib.util
+import keyword
+import math
+import re
+import sys
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Optional
+
+import casadi as ca
+import numpy as np
+
+__all__ = [
+    "OcpError", "Integrator", "RK4", "Event", "Guess", "ScenarioSpec", "Ocp", "load_ocp",
+]
+
+_C_KEYWORDS = {
+    "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
+    "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
+    "restrict", "return", "short", "signed", "sizeof", "static", "struct", "switch",
+    "typedef", "union", "unsigned", "void", "volatile", "while", "_Bool", "_Complex",
+    "_Imaginary",
+}
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+class OcpError(ValueError):
+    """A mistake in the OCP description; the message names the offending item."""
+
+
+# --------------------------------------------------------------------------- integrators
+class Integrator:
+    """Maps the continuous model ``xdot = f(x, u, p)`` to the interval map ``phi``.
+
+    Subclasses implement :meth:`step`; ``phi`` must be a smooth SX expression so that
+    its first and second derivatives can be taken symbolically.
+    """
+
+    def step(self, ode: ca.Function, x: ca.SX, u: ca.SX, p: ca.SX, h: float) -> ca.SX:
+        """State after one interval of length ``h`` with ``u`` and ``p`` held constant."""
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        """Short deterministic description (used in generated headers)."""
+        return type(self).__name__
+
+
+class RK4(Integrator):
+    """Classical fourth-order Runge-Kutta with ``substeps`` equal steps per interval."""
+
+    def __init__(self, substeps: int = 1):
+        if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+            raise OcpError(f"RK4: substeps must be an integer >= 1, got {substeps!r}")
+        self.substeps = int(substeps)
+
+    def step(self, ode, x, u, p, h):
+        hs = h / self.substeps
+        for _ in range(self.substeps):
+            k1 = ode(x, u, p)
+            k2 = ode(x + 0.5 * hs * k1, u, p)
+            k3 = ode(x + 0.5 * hs * k2, u, p)
+            k4 = ode(x + hs * k3, u, p)
+            x = x + (hs / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+        return x
+
+    def describe(self) -> str:
+        return f"RK4(substeps={self.substeps})"
+
+    def __repr__(self) -> str:
+        return self.describe()
+
+
+# --------------------------------------------------------------------------- plain data
+@dataclass
+class Event:
+    """At ``time`` (seconds) the closed-loop plant state is replaced by ``fn(x)``."""
+    time: float
+    fn: Callable[[np.ndarray], np.ndarray]
+    label: str = "event"
+
+
+@dataclass
+class Guess:
+    """A primal-dual point in the signed convention of docs/algorithm.md section 1.
+
+    ``x (N+1, nx)``, ``u (N, nu)``; multipliers ``None`` mean zeros.
+    """
+    x: np.ndarray
+    u: np.ndarray
+    lam: Optional[np.ndarray] = None
+    mu_g: Optional[np.ndarray] = None
+    mu_b: Optional[np.ndarray] = None
+    mu_bN: Optional[np.ndarray] = None
+    mu_r: Optional[np.ndarray] = None
+    nu: Optional[np.ndarray] = None
+
+    def filled(self, disc) -> "Guess":
+        """A copy with every multiplier present (zeros where ``None``), float arrays."""
+        N, nx, nu_, ng, nr, ne = disc.N, disc.nx, disc.nu, disc.ng, disc.nr, disc.ne
+
+        def arr(v, shape):
+            if v is None:
+                return np.zeros(shape)
+            a = np.array(v, dtype=float).reshape(shape)
+            return a
+
+        return Guess(x=arr(self.x, (N + 1, nx)), u=arr(self.u, (N, nu_)),
+                     lam=arr(self.lam, (N + 1, nx)), mu_g=arr(self.mu_g, (N, ng)),
+                     mu_b=arr(self.mu_b, (N, nx + nu_)), mu_bN=arr(self.mu_bN, (nx,)),
+                     mu_r=arr(self.mu_r, (nr,)), nu=arr(self.nu, (ne,)))
+
+    def copy(self) -> "Guess":
+        c = lambda v: None if v is None else np.array(v, dtype=float, copy=True)  # noqa: E731
+        return Guess(x=c(self.x), u=c(self.u), lam=c(self.lam), mu_g=c(self.mu_g),
+                     mu_b=c(self.mu_b), mu_bN=c(self.mu_bN), mu_r=c(self.mu_r), nu=c(self.nu))
+
+
+@dataclass
+class ScenarioSpec:
+    """The closed-loop scenario, in a form the SIL layer reads without CasADi symbols.
+
+    ``signals``: name -> ``casadi.Function(x, u, p) -> value``; ``plant_ode``:
+    ``casadi.Function(x, u, p) -> xdot`` (the model itself unless a mismatch was given);
+    ``x0``: initial plant state.
+    """
+    duration: float
+    events: list
+    signals: dict
+    plant_ode: ca.Function
+    x0: np.ndarray
+
+
+@dataclass
+class _Decl:
+    name: str
+    sym: ca.SX
+    size: int
+    lb: np.ndarray
+    ub: np.ndarray
+    value: Optional[np.ndarray] = None
+
+
+# --------------------------------------------------------------------------- helpers
+def _vector(value, size: int, what: str, allow_inf: bool = True) -> np.ndarray:
+    """A float vector of length ``size`` (scalars broadcast); NaN always rejected."""
+    try:
+        a = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise OcpError(f"{what}: expected numbers, got {value!r} ({exc})") from None
+    if a.ndim == 0:
+        a = np.full(size, float(a))
+    elif a.size == size and (a.ndim == 1 or (a.ndim == 2 and 1 in a.shape)):
+        a = a.reshape(size)
+    else:
+        raise OcpError(f"{what}: expected a scalar or {size} values, got shape {a.shape}")
+    if np.any(np.isnan(a)):
+        raise OcpError(f"{what}: NaN at row {int(np.flatnonzero(np.isnan(a))[0])}")
+    if not allow_inf and np.any(np.isinf(a)):
+        raise OcpError(f"{what}: infinite value at row {int(np.flatnonzero(np.isinf(a))[0])}")
+    return a
+
+
+def _as_sx(expr, what: str) -> ca.SX:
+    """Column SX vector from a user expression (numbers allowed)."""
+    if isinstance(expr, ca.MX):
+        raise OcpError(f"{what}: got a casadi MX expression; build it from the SX symbols "
+                       f"returned by state()/control()/parameter()")
+    if isinstance(expr, (ca.DM, int, float, np.ndarray, list, tuple, np.floating, np.integer)):
+        try:
+            expr = ca.SX(ca.DM(np.array(expr, dtype=float)))
+        except Exception as exc:  # noqa: BLE001 - user data of any kind
+            raise OcpError(f"{what}: cannot convert {expr!r} to an expression ({exc})") from None
+    if not isinstance(expr, ca.SX):
+        raise OcpError(f"{what}: expected a casadi SX expression, got {type(expr).__name__}")
+    if expr.size2() != 1:
+        if expr.size1() == 1:
+            expr = expr.T
+        else:
+            raise OcpError(f"{what}: expected a column vector, got a {expr.size1()}x{expr.size2()} matrix")
+    return ca.densify(expr)
+
+
+def _check_bounds(lb: np.ndarray, ub: np.ndarray, what: str) -> None:
+    bad = np.flatnonzero(lb > ub)
+    if bad.size:
+        i = int(bad[0])
+        raise OcpError(f"{what}: lb > ub at row {i} ({lb[i]} > {ub[i]})")
+
+
+def _check_identifier(name, what: str) -> str:
+    if not isinstance(name, str) or not _IDENT.match(name) or name in _C_KEYWORDS or keyword.iskeyword(name):
+        raise OcpError(f"{what}: {name!r} is not a valid C identifier")
+    return name
+
+
+# --------------------------------------------------------------------------- the OCP
+class Ocp:
+    """Declarative description of one OCP (see the module docstring)."""
+
+    def __init__(self, name: str):
+        self.name = _check_identifier(name, "Ocp name")
+        self._states: list[_Decl] = []
+        self._controls: list[_Decl] = []
+        self._params: list[_Decl] = []
+        self._xdot = None
+        self._integrator: Integrator = RK4(1)
+        self._stage_costs: list[ca.SX] = []
+        self._stage_ls: list[tuple[ca.SX, np.ndarray]] = []
+        self._term_costs: list[ca.SX] = []
+        self._term_ls: list[tuple[ca.SX, np.ndarray]] = []
+        self._path: list[tuple[ca.SX, np.ndarray, np.ndarray]] = []
+        self._term_con: list[tuple[ca.SX, np.ndarray, np.ndarray]] = []
+        self._N = None
+        self._dt = None
+        self._x0 = None
+        self._guess_x = None
+        self._guess_u = None
+        self._options = dict(hessian="exact", regularization="none", reg_eps=1e-4, M=1,
+                             offline_guess=False)
+        self._disturbance = None
+        self._scenario = None
+
+    # ------------------------------------------------------------------ declarations
+    def _declare(self, kind: str, store: list, name, size, lb, ub, value=None) -> ca.SX:
+        _check_identifier(name, f"{kind} name")
+        for decl in self._states + self._controls + self._params:
+            if decl.name == name:
+                raise OcpError(f"{kind} '{name}': duplicate name (already declared)")
+        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
+            raise OcpError(f"{kind} '{name}': size must be an integer >= 1, got {size!r}")
+        size = int(size)
+        lbv = _vector(lb, size, f"{kind} '{name}' lb")
+        ubv = _vector(ub, size, f"{kind} '{name}' ub")
+        _check_bounds(lbv, ubv, f"{kind} '{name}' bounds")
+        val = None
+        if value is not None:
+            val = _vector(value, size, f"{kind} '{name}' value", allow_inf=False)
+        sym = ca.SX.sym(name, size)
+        store.append(_Decl(name, sym, size, lbv, ubv, val))
+        return sym
+
+    def state(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf) -> ca.SX:
+        """Declare a state vector; bounds hold on nodes 1..N."""
+        return self._declare("state", self._states, name, size, lb, ub)
+
+    def control(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf) -> ca.SX:
+        """Declare a control vector; bounds hold on stages 0..N-1."""
+        return self._declare("control", self._controls, name, size, lb, ub)
+
+    def parameter(self, name: str, size: int = 1, value=0.0) -> ca.SX:
+        """Declare a runtime parameter (one value per node); ``value`` is the default."""
+        return self._declare("parameter", self._params, name, size, -math.inf, math.inf,
+                             value=0.0 if value is None else value)
+
+    # ------------------------------------------------------------------ model and costs
+    def dynamics(self, xdot, integrator: Optional[Integrator] = None) -> None:
+        """Continuous model ``xdot = f(x, u, p)``, discretised by ``integrator``."""
+        self._xdot = _as_sx(xdot, "dynamics")
+        if integrator is not None:
+            if not isinstance(integrator, Integrator):
+                raise OcpError(f"dynamics: integrator must be an Integrator such as RK4(substeps=2), "
+                               f"got {type(integrator).__name__}")
+            self._integrator = integrator
+
+    def stage_cost(self, expr) -> None:
+        """Add a general (non least-squares) term to the stage cost."""
+        self._stage_costs.append(_as_sx(expr, f"stage cost {len(self._stage_costs)}"))
+
+    def terminal_cost(self, expr) -> None:
+        """Add a general term to the terminal cost ``E(x_N, p)``."""
+        self._term_costs.append(_as_sx(expr, f"terminal cost {len(self._term_costs)}"))
+
+    def _weights(self, weights, n: int, what: str) -> np.ndarray:
+        try:
+            W = np.array(weights, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise OcpError(f"{what}: weights must be numbers ({exc})") from None
+        if W.ndim == 0:
+            W = np.full(n, float(W))
+        if W.ndim == 1 or (W.ndim == 2 and W.shape[1] == 1 and n != 1):
+            W = W.reshape(-1)
+            if W.size != n:
+                raise OcpError(f"{what}: {W.size} weights for a residual of {n} rows")
+            W = np.diag(W)
+        if W.shape != (n, n):
+            raise OcpError(f"{what}: weight matrix must be {n}x{n}, got {W.shape}")
+        if not np.all(np.isfinite(W)):
+            raise OcpError(f"{what}: weights must be finite (no NaN/inf)")
+        if not np.allclose(W, W.T, rtol=0, atol=1e-12 * max(1.0, np.abs(W).max())):
+            raise OcpError(f"{what}: weight matrix is not symmetric")
+        W = 0.5 * (W + W.T)
+        if n and np.linalg.eigvalsh(W).min() < -1e-12 * max(1.0, np.abs(W).max()):
+            raise OcpError(f"{what}: weights must be positive semidefinite")
+        return W
+
+    def stage_least_squares(self, residual, weights) -> None:
+        """Add ``0.5 res' W res`` to the stage cost (weights: vector = diagonal, or matrix)."""
+        what = f"stage least squares {len(self._stage_ls)}"
+        res = _as_sx(residual, what)
+        self._stage_ls.append((res, self._weights(weights, res.size1(), what)))
+
+    def terminal_least_squares(self, residual, weights) -> None:
+        """Add ``0.5 res' W res`` to the terminal cost."""
+        what = f"terminal least squares {len(self._term_ls)}"
+        res = _as_sx(residual, what)
+        self._term_ls.append((res, self._weights(weights, res.size1(), what)))
+
+    def path_constraint(self, expr, lb=-math.inf, ub=math.inf) -> None:
+        """``lb <= g(x, u, p) <= ub`` on stages 0..N-1 (several calls stack)."""
+        what = f"path constraint {len(self._path)}"
+        g = _as_sx(expr, what)
+        lbv = _vector(lb, g.size1(), f"{what} lb")
+        ubv = _vector(ub, g.size1(), f"{what} ub")
+        _check_bounds(lbv, ubv, what)
+        self._path.append((g, lbv, ubv))
+
+    def terminal_constraint(self, expr, lb=-math.inf, ub=math.inf) -> None:
+        """``lb <= r(x_N, p) <= ub``; rows with ``lb == ub`` become equality rows."""
+        what = f"terminal constraint {len(self._term_con)}"
+        r = _as_sx(expr, what)
+        lbv = _vector(lb, r.size1(), f"{what} lb")
+        ubv = _vector(ub, r.size1(), f"{what} ub")
+        _check_bounds(lbv, ubv, what)
+        eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
+        if eq.size:
+            raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")
+        self._term_con.append((r, lbv, ubv))
+
+    # ------------------------------------------------------------------ horizon and data
+    def horizon(self, N: int, dt: float) -> None:
+        """``N`` shooting intervals of length ``dt`` seconds (also the sampling time)."""
+        if isinstance(N, bool) or not isinstance(N, (int, np.integer)):
+            raise OcpError(f"horizon: N must be an integer, got {N!r}")
+        if N < 2:
+            raise OcpError(f"horizon: N must be >= 2, got {N}")
+        try:
+            dtf = float(dt)
+        except (TypeError, ValueError):
+            raise OcpError(f"horizon: dt must be a number, got {dt!r}") from None
+        if not math.isfinite(dtf) or dtf <= 0:
+            raise OcpError(f"horizon: dt must be positive and finite, got {dt!r}")
+        self._N, self._dt = int(N), dtf
+
+    def initial_state(self, x0) -> None:
+        """The initial state ``xhat_0`` used by the examples, the guess and the scenario."""
+        self._x0 = x0
+
+    def initial_guess(self, x=None, u=None) -> None:
+        """Guess: a vector broadcast to all nodes, or a full (N+1, nx) / (N, nu) array."""
+        self._guess_x, self._guess_u = x, u
+
+    def options(self, hessian: str = "exact", regularization: str = "none", reg_eps: float = 1e-4,
+                M: int = 1, offline_guess: bool = False) -> None:
+        """Solver defaults (the generated solver and the CLI can override them).
+
+        ``offline_guess=True``: the initial guess is replaced by the NLP solution for the
+        initial state (IPOPT, at build time), with its multipliers.
+        """
+        if hessian not in ("exact", "gauss-newton"):
+            raise OcpError(f"options: hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
+        if regularization not in ("none", "project", "mirror"):
+            raise OcpError(f"options: regularization must be 'none', 'project' or 'mirror', got {regularization!r}")
+        try:
+            eps = float(reg_eps)
+        except (TypeError, ValueError):
+            raise OcpError(f"options: reg_eps must be a number, got {reg_eps!r}") from None
+        if not math.isfinite(eps) or eps <= 0:
+            raise OcpError(f"options: reg_eps must be positive and finite, got {reg_eps!r}")
+        if isinstance(M, bool) or not isinstance(M, (int, np.integer)) or M < 0:
+            raise OcpError(f"options: M must be an integer >= 0, got {M!r}")
+        if not isinstance(offline_guess, bool):
+            raise OcpError(f"options: offline_guess must be True or False, got {offline_guess!r}")
+        self._options = dict(hessian=hessian, regularization=regularization, reg_eps=eps, M=int(M),
+                             offline_guess=offline_guess)
+
+    def disturbance(self, fn: Callable[[np.ndarray], np.ndarray]) -> None:
+        """State map used by the warm-start convergence study (numpy in, numpy out)."""
+        if not callable(fn):
+            raise OcpError(f"disturbance: expected a function of the state, got {type(fn).__name__}")
+        self._disturbance = fn
+
+    def scenario(self, duration: float, events=(), signals=None, plant=None, x0=None) -> None:
+        """Closed-loop scenario: ``duration`` seconds, state ``events``, recorded ``signals``
+        (name -> expression of the declared symbols), ``plant`` xdot (None: the model)."""
+        self._scenario = dict(duration=duration, events=list(events), signals=dict(signals or {}),
+                              plant=plant, x0=x0)
+
+    # ------------------------------------------------------------------ derived views
+    @property
+    def N(self) -> Optional[int]:
+        return self._N
+
+    @property
+    def dt(self) -> Optional[float]:
+        return self._dt
+
+    @property
+    def integrator(self) -> Integrator:
+        return self._integrator
+
+    def x_sym(self) -> ca.SX:
+        return ca.vertcat(*[d.sym for d in self._states]) if self._states else ca.SX(0, 1)
+
+    def u_sym(self) -> ca.SX:
+        return ca.vertcat(*[d.sym for d in self._controls]) if self._controls else ca.SX(0, 1)
+
+    def p_sym(self) -> ca.SX:
+        return ca.vertcat(*[d.sym for d in self._params]) if self._params else ca.SX(0, 1)
+
+    @staticmethod
+    def _labels(decls) -> list[str]:
+        out = []
+        for d in decls:
+            out += [d.name] if d.size == 1 else [f"{d.name}[{i}]" for i in range(d.size)]
+        return out
+
+    # ------------------------------------------------------------------ validation
+    def _check_symbols(self, expr: ca.SX, what: str, allowed: str) -> None:
+        """``allowed``: which kinds may appear: subset of 'xup'."""
+        kinds = {"x": ("state", self._states), "u": ("control", self._controls),
+                 "p": ("parameter", self._params)}
+        ok = {}
+        for key in allowed:
+            for d in kinds[key][1]:
+                for i in range(d.size):
+                    ok[d.sym[i].element_hash()] = True
+        for s in ca.symvar(expr):
+            if s.element_hash() in ok:
+                continue
+            name = s.name()
+            for key in "xup":
+                for d in kinds[key][1]:
+                    if any(d.sym[i].element_hash() == s.element_hash() for i in range(d.size)):
+                        allowed_names = " or ".join(kinds[k][0] for k in allowed)
+                        raise OcpError(f"{what} uses {kinds[key][0]} '{name}', but may only depend on "
+                                       f"{allowed_names} symbols")
+            names = {"xup": "state, control or parameter", "xp": "state or parameter",
+                     "p": "parameter"}.get(allowed, "declared")
+            raise OcpError(f"{what} uses symbol '{name}' that is not a declared {names}")
+
+    def validate(self) -> None:
+        """One consistency pass over everything declared; raises OcpError."""
+        if not self._states:
+            raise OcpError("no state declared (use ocp.state(...))")
+        if not self._controls:
+            raise OcpError("no control declared (use ocp.control(...))")
+        if self._xdot is None:
+            raise OcpError("missing dynamics (use ocp.dynamics(xdot))")
+        if self._N is None:
+            raise OcpError("missing horizon (use ocp.horizon(N, dt))")
+        if self._x0 is None:
+            raise OcpError("missing initial state (use ocp.initial_state(x0))")
+        nx = sum(d.size for d in self._states)
+        nu = sum(d.size for d in self._controls)
+        if self._xdot.size1() != nx:
+            raise OcpError(f"dynamics: expected {nx} rows (one per state), got {self._xdot.size1()}")
+        self._check_symbols(self._xdot, "dynamics", "xup")
+        for i, c in enumerate(self._stage_costs):
+            if c.numel() != 1:
+                raise OcpError(f"stage cost {i}: must be a scalar, got {c.size1()} rows")
+            self._check_symbols(c, "stage cost" if len(self._stage_costs) == 1 else f"stage cost {i}", "xup")
+        for i, (res, _) in enumerate(self._stage_ls):
+            self._check_symbols(res, f"stage least squares {i}", "xup")
+        for i, c in enumerate(self._term_costs):
+            if c.numel() != 1:
+                raise OcpError(f"terminal cost {i}: must be a scalar, got {c.size1()} rows")
+            self._check_symbols(c, "terminal cost" if len(self._term_costs) == 1 else f"terminal cost {i}", "xp")
+        for i, (res, _) in enumerate(self._term_ls):
+            self._check_symbols(res, f"terminal least squares {i}", "xp")
+        for i, (g, _, _) in enumerate(self._path):
+            self._check_symbols(g, f"path constraint {i}", "xup")
+        for i, (r, _, _) in enumerate(self._term_con):
+            self._check_symbols(r, f"terminal constraint {i}", "xp")
+        if self._options["hessian"] == "gauss-newton" and not self._stage_ls:
+            raise OcpError("options: hessian='gauss-newton' needs stage_least_squares")
+        x0 = self.x0_array(nx)
+        N = self._N
+        self.guess_arrays(nx, nu, N, x0)
+        if self._scenario is not None:
+            self._validate_scenario(nx)
+
+    def x0_array(self, nx: int) -> np.ndarray:
+        return self._full_vector(self._x0, nx, "initial state")
+
+    @staticmethod
+    def _full_vector(value, n: int, what: str) -> np.ndarray:
+        try:
+            a = np.array(value, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise OcpError(f"{what}: expected {n} numbers ({exc})") from None
+        if a.size != n or a.ndim > 2 or (a.ndim == 2 and 1 not in a.shape):
+            raise OcpError(f"{what}: expected {n} values, got shape {a.shape}")
+        a = a.reshape(n)
+        if not np.all(np.isfinite(a)):
+            raise OcpError(f"{what}: non-finite value (NaN or inf) at row {int(np.flatnonzero(~np.isfinite(a))[0])}")
+        return a
+
+    def guess_arrays(self, nx: int, nu: int, N: int, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The initial guess as (N+1, nx), (N, nu) arrays; defaults: x0 everywhere, u = 0
+        clipped into the control bounds."""
+        def full(value, rows, n, what, default):
+            if value is None:
+                return np.tile(default, (rows, 1))
+            try:
+                a = np.array(value, dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise OcpError(f"{what}: expected numbers ({exc})") from None
+            if a.ndim == 0 and n == 1:
+                a = np.full((rows, 1), float(a))
+            elif a.ndim == 1 and a.size == n:
+                a = np.tile(a, (rows, 1))
+            elif a.ndim == 2 and a.shape == (rows, n):
+                a = a.copy()
+            elif n == 1 and a.ndim == 1 and a.size == rows:
+                a = a.reshape(rows, 1)
+            else:
+                raise OcpError(f"{what}: expected {n} values or a ({rows}, {n}) array, got shape {a.shape}")
+            if not np.all(np.isfinite(a)):
+                bad = np.argwhere(~np.isfinite(a))[0]
+                raise OcpError(f"{what}: non-finite value (NaN or inf) at node {bad[0]}, row {bad[1]}")
+            return a
+
+        lbu = np.concatenate([d.lb for d in self._controls])
+        ubu = np.concatenate([d.ub for d in self._controls])
+        gx = full(self._guess_x, N + 1, nx, "initial guess x", x0)
+        gu = full(self._guess_u, N, nu, "initial guess u", np.clip(np.zeros(nu), lbu, ubu))
+        return gx, gu
+
+    def _validate_scenario(self, nx: int) -> None:
+        sc = self._scenario
+        try:
+            dur = float(sc["duration"])
+        except (TypeError, ValueError):
+            raise OcpError(f"scenario: duration must be a number, got {sc['duration']!r}") from None
+        if not math.isfinite(dur) or dur <= 0:
+            raise OcpError(f"scenario: duration must be positive and finite, got {sc['duration']!r}")
+        for i, ev in enumerate(sc["events"]):
+            if not isinstance(ev, Event):
+                raise OcpError(f"scenario event {i}: expected Event(time, fn, label), got {type(ev).__name__}")
+            if not callable(ev.fn):
+                raise OcpError(f"scenario event {i} ('{ev.label}'): fn is not callable")
+            try:
+                t = float(ev.time)
+            except (TypeError, ValueError):
+                raise OcpError(f"scenario event {i} ('{ev.label}'): time must be a number") from None
+            if not (0 <= t <= dur):
+                raise OcpError(f"scenario event {i} ('{ev.label}'): time {t} outside [0, {dur}]")
+        for name, expr in sc["signals"].items():
+            if not isinstance(name, str) or not name:
+                raise OcpError(f"scenario signal {name!r}: the name must be a non-empty string")
+            e = _as_sx(expr, f"scenario signal '{name}'")
+            self._check_symbols(e, f"scenario signal '{name}'", "xup")
+        if sc["plant"] is not None:
+            e = _as_sx(sc["plant"], "scenario plant")
+            if e.size1() != nx:
+                raise OcpError(f"scenario plant: expected {nx} rows (one per state), got {e.size1()}")
+            self._check_symbols(e, "scenario plant", "xup")
+        if sc["x0"] is not None:
+            self._full_vector(sc["x0"], nx, "scenario x0")
+
+
+# --------------------------------------------------------------------------- loading
+def load_ocp(path) -> Ocp:
+    """Import an OCP file, call its ``build()`` and validate the result."""
+    p = Path(path)
+    if not p.is_file():
+        raise OcpError(f"OCP file '{path}' does not exist")
+    try:
+        source = p.read_text()
+    except OSError as exc:
+        raise OcpError(f"OCP file '{path}': cannot read it ({exc})") from None
+    try:
+        code = compile(source, str(p), "exec")
+    except SyntaxError as exc:
+        raise OcpError(f"OCP file '{path}', line {exc.lineno}: syntax error: {exc.msg}") from None
+    modname = f"_dopus_ocp_{re.sub(r'[^0-9A-Za-z_]', '_', p.stem)}"
+    spec = importlib.util.spec_from_file_location(modname, str(p))
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[modname] = module
+    try:
+        exec(code, module.__dict__)  # noqa: S102 - running the user's OCP file is the point
+    except OcpError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - any failure of user code gets the file and line
+        raise OcpError(f"OCP file '{path}'{_user_line(exc, p)}: {type(exc).__name__}: {exc}") from None
+    build = getattr(module, "build", None)
+    if not callable(build):
+        raise OcpError(f"OCP file '{path}' defines no build() function")
+    try:
+        ocp = build()
+    except OcpError:
+        raise
+    except Exception as exc:  # noqa: BLE001
+        raise OcpError(f"OCP file '{path}'{_user_line(exc, p)}: build() failed: {type(exc).__name__}: {exc}") from None
+    if not isinstance(ocp, Ocp):
+        raise OcpError(f"OCP file '{path}': build() returned {type(ocp).__name__}, expected an Ocp")
+    ocp.validate()
+    return ocp
+
+
+def _user_line(exc: BaseException, path: Path) -> str:
+    """', line L' of the innermost frame in the OCP file, if any."""
+    line = None
+    for frame in traceback.extract_tb(exc.__traceback__):
+        if Path(frame.filename) == path:
+            line = frame.lineno
+    return f", line {line}" if line is not None else ""

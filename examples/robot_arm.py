@@ -1,0 +1,94 @@
+"""Predictive path following with a planar two-link arm (paper section 3).
+
+Every number is the one of the project's robot-arm reference problem: a two-link arm
+in the vertical plane follows the circle p(theta) and is rewarded for progress
+theta_N; the tip must end on the path (two terminal equality rows).
+"""
+import math
+
+import casadi as ca
+import numpy as np
+
+from dopus_codegen import RK4, Event, Ocp
+
+# Model parameters (paper eq. 21).
+M1, M2 = 1.0, 1.0
+L1, L2 = 0.4, 0.4
+LC1, LC2 = 0.2, 0.2
+I1, I2 = M1 * L1**2 / 12.0, M2 * L2**2 / 12.0
+FV = 0.1
+GRAV = 9.81
+A1 = I1 + I2 + M1 * LC1**2 + M2 * (L1**2 + LC2**2)
+A2 = M2 * L1 * LC2
+A3 = I2 + M2 * LC2**2
+
+# OCP (paper eq. 22).
+N, DT = 40, 0.01
+TAU_MAX, DTHETA_MAX = 10.0, 50.0
+W_PATH, W_TAU, W_DTHETA = 1e4, 1e-3, 1e-2
+
+
+def tip(q):
+    """End-effector position for joint angles q."""
+    return ca.vertcat(L1 * ca.cos(q[0]) + L2 * ca.cos(q[0] + q[1]),
+                      L1 * ca.sin(q[0]) + L2 * ca.sin(q[0] + q[1]))
+
+
+def path(theta):
+    """The circle the tip follows."""
+    return ca.vertcat(0.4 + 0.15 * ca.cos(theta), 0.2 + 0.15 * ca.sin(theta))
+
+
+def arm_ode(q, dq, tau):
+    """ddq = B(q)^-1 (tau - C(q,dq) dq - Fv dq - g(q))."""
+    c2, s2 = ca.cos(q[1]), ca.sin(q[1])
+    B = ca.vertcat(ca.horzcat(A1 + 2 * A2 * c2, A3 + A2 * c2),
+                   ca.horzcat(A3 + A2 * c2, A3))
+    Cdq = ca.vertcat(-A2 * s2 * (2 * dq[0] * dq[1] + dq[1] ** 2), A2 * s2 * dq[0] ** 2)
+    grav = ca.vertcat((M1 * LC1 + M2 * L1) * GRAV * ca.cos(q[0]) + M2 * LC2 * GRAV * ca.cos(q[0] + q[1]),
+                      M2 * LC2 * GRAV * ca.cos(q[0] + q[1]))
+    return ca.solve(B, tau - Cdq - FV * dq - grav)
+
+
+def initial_state() -> np.ndarray:
+    """At rest on the path start (theta = 0), elbow q2 > 0, closed-form inverse kinematics."""
+    px, py = 0.4 + 0.15, 0.2
+    c2 = (px**2 + py**2 - L1**2 - L2**2) / (2 * L1 * L2)
+    q2 = math.acos(c2)
+    q1 = math.atan2(py, px) - math.atan2(L2 * math.sin(q2), L1 + L2 * math.cos(q2))
+    return np.array([q1, q2, 0.0, 0.0, 0.0])
+
+
+def disturb(x):
+    """Brings the arm to a standstill and turns it slightly: dq <- 0, q += [0.05, -0.05]."""
+    x = np.array(x, dtype=float, copy=True)
+    x[0] += 0.05
+    x[1] -= 0.05
+    x[2:4] = 0.0
+    return x
+
+
+def build():
+    ocp = Ocp("robot_arm")
+    q = ocp.state("q", 2)
+    dq = ocp.state("dq", 2)
+    theta = ocp.state("theta")
+    tau = ocp.control("tau", 2, lb=-TAU_MAX, ub=TAU_MAX)
+    dtheta = ocp.control("dtheta", lb=0.0, ub=DTHETA_MAX)
+
+    ocp.dynamics(ca.vertcat(dq, arm_ode(q, dq, tau), dtheta), integrator=RK4(substeps=2))
+    # l = dt (1e4 |tip - p|^2 + 1e-3 |tau|^2 + 1e-2 dtheta^2) = 0.5 res' W res
+    ocp.stage_least_squares(ca.vertcat(tip(q) - path(theta), tau, dtheta),
+                            weights=2 * DT * np.array([W_PATH, W_PATH, W_TAU, W_TAU, W_DTHETA]))
+    ocp.terminal_cost(-theta)
+    ocp.terminal_constraint(tip(q) - path(theta), lb=0, ub=0)
+    ocp.horizon(N=N, dt=DT)
+
+    x0 = initial_state()
+    ocp.initial_state(x0)
+    ocp.initial_guess(x=x0, u=[0.0, 0.0, 5.0])
+    ocp.options(hessian="exact", regularization="none", reg_eps=1e-4, M=1)
+    ocp.disturbance(disturb)
+    ocp.scenario(duration=3.0, events=[Event(1.0, disturb, "disturbance")],
+                 signals={"deviation": ca.norm_2(tip(q) - path(theta))}, plant=None)
+    return ocp
