@@ -1,0 +1,148 @@
+"""The KKT measure of docs/algorithm.md section 6 (the one place it is implemented in Python).
+
+Everything is evaluated with the exact derivative functions of a ``Discretized``
+(``stage_grad``, ``term_grad``) at the given primal-dual point, never with stored or
+outdated blocks::
+
+    stat = max( max_k |gL_k + mu_b_k + [lam_k; 0]|_inf , |gL_N + mu_bN + lam_N|_inf )
+    eq   = max( |x_0 - xhat_0|, max_k |x_{k+1} - phi_k|, |r_eq| )
+    ineq = max(0, g - ug, lg - g, r - ur, lr - r, x_k - ubx, lbx - x_k (k >= 1), u - ubu, lbu - u)
+    comp = max over signed pairs of max(mu,0)|ub - v| and max(-mu,0)|v - lb|
+           (a nonzero multiplier on an infinite side contributes |mu|)
+    kkt  = max(stat, eq, ineq, comp)
+
+The x part of ``mu_b[0]`` has no bound to push against (``x_0`` is fixed by ``xhat_0``),
+so a nonzero entry there counts as a multiplier on an infinite side.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["kkt_measure", "kkt_of_guess", "node_parameters", "signed_comp", "eval_stages"]
+
+
+def node_parameters(disc, p=None) -> np.ndarray:
+    """Parameters as an ``(N+1, np)`` array: ``None`` -> the OCP defaults, ``(np,)`` ->
+    the same vector at every node, ``(N+1, np)`` as given."""
+    N, npar = disc.N, disc.np
+    if p is None:
+        p = getattr(disc, "p_default", None)
+        if p is None:
+            p = np.zeros(npar)
+    a = np.array(p, dtype=float)
+    if a.ndim <= 1 and a.size == npar:
+        a = np.tile(a.reshape(1, npar), (N + 1, 1))
+    if a.shape != (N + 1, npar):
+        raise ValueError(f"parameters must have shape ({npar},) or ({N + 1}, {npar}), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError("parameters contain non-finite values")
+    return a
+
+
+_MAPPED: dict = {}
+
+
+def eval_stages(fn, N: int, *args) -> list:
+    """Evaluate a per-stage CasADi function for ``N`` stages in one call.
+
+    ``args`` are ``(N, n)`` numpy arrays (one row per stage); returns the outputs as
+    ``(N, n_out)`` arrays (row k = stage k). Matrix outputs are not supported here.
+    """
+    key = (id(fn), N)
+    m = _MAPPED.get(key)
+    if m is None or m[0] is not fn:
+        m = (fn, fn.map(N))
+        _MAPPED[key] = m
+    ins = []
+    for a in args:
+        a = np.asarray(a, dtype=float)
+        ins.append(a.reshape(N, a.size // N).T)
+    res = m[1](*ins)
+    if not isinstance(res, (list, tuple)):
+        res = [res]
+    out = []
+    for r in res:
+        r = np.array(r, dtype=float)
+        out.append(r.T.reshape(N, r.size // N))
+    return out
+
+
+def signed_comp(v, lo, hi, mu) -> float:
+    """Complementarity of signed multipliers ``mu`` on rows ``lo <= v <= hi``."""
+    v = np.asarray(v, float).reshape(-1)
+    lo = np.asarray(lo, float).reshape(-1)
+    hi = np.asarray(hi, float).reshape(-1)
+    mu = np.asarray(mu, float).reshape(-1)
+    if mu.size == 0:
+        return 0.0
+    up = np.maximum(mu, 0.0)
+    dn = np.maximum(-mu, 0.0)
+    with np.errstate(invalid="ignore"):
+        cu = np.where(np.isfinite(hi), up * np.abs(hi - v), up)
+        cl = np.where(np.isfinite(lo), dn * np.abs(v - lo), dn)
+    return float(max(np.max(cu), np.max(cl)))
+
+
+def _viol(v, lo, hi) -> float:
+    v = np.asarray(v, float).reshape(-1)
+    if v.size == 0:
+        return 0.0
+    return float(np.max(np.maximum(0.0, np.maximum(v - np.asarray(hi).reshape(-1),
+                                                   np.asarray(lo).reshape(-1) - v))))
+
+
+def kkt_measure(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p=None) -> dict:
+    """``{"kkt", "stat", "eq", "ineq", "comp"}`` of the point for initial state ``xhat0``."""
+    N, nx, nu_, ng, nr, ne = disc.N, disc.nx, disc.nu, disc.ng, disc.nr, disc.ne
+    nw = nx + nu_
+    P = node_parameters(disc, p)
+    x = np.asarray(x, float).reshape(N + 1, nx)
+    u = np.asarray(u, float).reshape(N, nu_)
+    lam = np.asarray(lam, float).reshape(N + 1, nx)
+    mu_g = np.asarray(mu_g, float).reshape(N, ng)
+    mu_b = np.asarray(mu_b, float).reshape(N, nw)
+    mu_bN = np.asarray(mu_bN, float).reshape(nx)
+    mu_r = np.asarray(mu_r, float).reshape(nr)
+    nu = np.asarray(nu, float).reshape(ne)
+    xhat0 = np.asarray(xhat0, float).reshape(nx)
+
+    gL, phi, _l, g = eval_stages(disc.stage_grad, N, x[:N], u, P[:N], lam[1:], mu_g)
+    tg = disc.term_grad(x[N], P[N], mu_r, nu)
+    gLN = np.array(tg[0], float).reshape(nx)
+    r = np.array(tg[2], float).reshape(nr)
+    r_eq = np.array(tg[3], float).reshape(ne)
+
+    sk = gL + mu_b
+    sk[:, :nx] += lam[:N]
+    stat = max(float(np.max(np.abs(sk))), float(np.max(np.abs(gLN + mu_bN + lam[N]))))
+
+    eq = max(float(np.max(np.abs(x[0] - xhat0))), float(np.max(np.abs(x[1:] - phi))))
+    if ne:
+        eq = max(eq, float(np.max(np.abs(r_eq))))
+
+    lbx, ubx = np.asarray(disc.lbx, float), np.asarray(disc.ubx, float)
+    lbu, ubu = np.asarray(disc.lbu, float), np.asarray(disc.ubu, float)
+    ineq = max(0.0, _viol(x[1:], np.tile(lbx, N), np.tile(ubx, N)), _viol(u, np.tile(lbu, N), np.tile(ubu, N)))
+    if ng:
+        ineq = max(ineq, _viol(g, np.tile(disc.lg, N), np.tile(disc.ug, N)))
+    if nr:
+        ineq = max(ineq, _viol(r, disc.lr, disc.ur))
+
+    # x_0 carries no bound: its slot of mu_b[0] pairs with infinite sides
+    lbw = np.tile(np.concatenate([lbx, lbu]), (N, 1))
+    ubw = np.tile(np.concatenate([ubx, ubu]), (N, 1))
+    lbw[0, :nx] = -np.inf
+    ubw[0, :nx] = np.inf
+    W = np.hstack([x[:N], u])
+    comp = max(signed_comp(W, lbw, ubw, mu_b), signed_comp(x[N], lbx, ubx, mu_bN))
+    if ng:
+        comp = max(comp, signed_comp(g, np.tile(disc.lg, N), np.tile(disc.ug, N), mu_g))
+    if nr:
+        comp = max(comp, signed_comp(r, disc.lr, disc.ur, mu_r))
+    return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
+
+
+def kkt_of_guess(disc, xhat0, guess, p=None) -> dict:
+    """:func:`kkt_measure` of a ``Guess`` (missing multipliers are zeros)."""
+    gf = guess.filled(disc)
+    return kkt_measure(disc, xhat0, gf.x, gf.u, gf.lam, gf.mu_g, gf.mu_b, gf.mu_bN, gf.mu_r, gf.nu, p)

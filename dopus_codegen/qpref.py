@@ -1,0 +1,488 @@
+"""The stage-wise QP format and the reference QP solver.
+
+QP format (a dict of numpy float arrays and ints; the C QP solver's tests and
+benchmark consume the same dict, keep it stable):
+
+=========  ===============  =====================================================
+key        shape            meaning
+=========  ===============  =====================================================
+N, nx, nu  int              stages, states, controls; ``nw = nx + nu``
+ng, nr, ne int              path rows per stage, terminal inequality/equality rows
+H          (N, nw, nw)      stage Hessian blocks (symmetric, may be indefinite)
+g          (N, nw)          stage gradients
+Phi        (N, nx, nw)      dynamics ``[A_k B_k]``
+b          (N, nx)          ``x_{k+1} = Phi_k w_k + b_k``
+x0         (nx,)            ``x_0 = x0``
+HN, gN     (nx, nx), (nx,)  terminal Hessian and gradient
+lbw, ubw   (N, nw)          simple bounds on ``w_k = (x_k, u_k)``; the x part of
+                            stage 0 is ignored; +-inf means no bound on that side
+lbxN, ubxN (nx,)            simple bounds on ``x_N``
+C          (N, ng, nw)      path constraint Jacobians, ``lg_k <= C_k w_k <= ug_k``
+lg, ug     (N, ng)
+R          (nr, nx)         ``lr <= R x_N <= ur``
+lr, ur     (nr,)
+Req, req   (ne, nx), (ne,)  ``Req x_N = req``
+=========  ===============  =====================================================
+
+Problem::
+
+    min  sum_k 0.5 w_k' H_k w_k + g_k' w_k + 0.5 x_N' HN x_N + gN' x_N
+    s.t. x_0 = x0,  x_{k+1} = Phi_k w_k + b_k,  bounds,  lg <= C_k w_k <= ug,
+         lr <= R x_N <= ur,  Req x_N = req
+
+Solution dict: ``x (N+1, nx)``, ``u (N, nu)``, ``lam (N+1, nx)``, ``mu_b (N, nw)``,
+``mu_bN (nx,)``, ``mu_g (N, ng)``, ``mu_r (nr,)``, ``nu (ne,)``, plus ``iterations``
+(IPOPT iterations) and ``polished`` (bool). Multipliers are signed as in
+docs/algorithm.md (positive when the upper side is active). Stationarity of stage k::
+
+    H_k w_k + g_k + [lam_k; 0] - Phi_k' lam_{k+1} + C_k' mu_g_k + mu_b_k = 0
+
+terminal ``HN x_N + gN + lam_N + R' mu_r + Req' nu + mu_bN = 0``; ``lam_0``
+multiplies ``x_0 - x0``.
+
+Why IPOPT plus an active-set polish: the QPs of the exact-Hessian DOPUS iteration
+have indefinite stage blocks whose reduced Hessian is positive definite (DESIGN.md
+section 8). Convex conic solvers (clarabel, piqp) reject them, and a convexification
+that provably keeps the solution must know the active set, which is what we are
+looking for. IPOPT (through CasADi) takes the nonconvex QP as it is and corrects the
+inertia only when the factorisation asks for it, so it finds the local minimiser with
+the right active set; its interior-point answer is accurate only to about the barrier
+parameter (1e-9 .. 1e-11 in the multipliers). We therefore identify the active set from
+IPOPT's answer and solve the equality-constrained KKT system of that active set once
+with a sparse direct factorisation (the "polish" of OSQP). The result satisfies
+stationarity and feasibility to round-off (~1e-13) with exactly zero multipliers on
+inactive constraints; it is accepted only if every inactive constraint stays feasible
+and every active multiplier keeps its sign, otherwise the active set is corrected
+(a few primal-dual active-set sweeps) or the IPOPT answer is returned unpolished.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+__all__ = ["QPError", "QPInfeasibleError", "solve_qp_reference", "qp_kkt_residual", "check_qp",
+           "qp_reduced_hessian_min_eig"]
+
+
+class QPError(RuntimeError):
+    """The reference QP solver failed."""
+
+
+class QPInfeasibleError(QPError):
+    """The QP has no feasible point."""
+
+
+_INT_KEYS = ("N", "nx", "nu", "ng", "nr", "ne")
+
+
+def _shapes(N, nx, nu, ng, nr, ne):
+    nw = nx + nu
+    return {
+        "H": (N, nw, nw), "g": (N, nw), "Phi": (N, nx, nw), "b": (N, nx), "x0": (nx,),
+        "HN": (nx, nx), "gN": (nx,), "lbw": (N, nw), "ubw": (N, nw), "lbxN": (nx,), "ubxN": (nx,),
+        "C": (N, ng, nw), "lg": (N, ng), "ug": (N, ng), "R": (nr, nx), "lr": (nr,), "ur": (nr,),
+        "Req": (ne, nx), "req": (ne,),
+    }
+
+
+def check_qp(qp: dict) -> dict:
+    """Validate a QP dict; return a copy with float arrays of the documented shapes."""
+    if not isinstance(qp, dict):
+        raise TypeError("QP must be a dict (see dopus_codegen.qpref)")
+    missing = [k for k in _INT_KEYS if k not in qp]
+    if missing:
+        raise ValueError(f"QP dict lacks the size entries {missing}")
+    sizes = {k: int(qp[k]) for k in _INT_KEYS}
+    if sizes["N"] < 1 or sizes["nx"] < 1 or min(sizes.values()) < 0:
+        raise ValueError(f"QP sizes must be N >= 1, nx >= 1, others >= 0; got {sizes}")
+    out = dict(sizes)
+    for key, shape in _shapes(**sizes).items():
+        if key not in qp:
+            raise ValueError(f"QP dict lacks '{key}' of shape {shape}")
+        arr = np.array(qp[key], dtype=float)
+        if arr.size == 0 and 0 in shape:
+            arr = arr.reshape(shape)
+        if arr.shape != shape:
+            raise ValueError(f"QP entry '{key}' has shape {arr.shape}, expected {shape}")
+        if key not in ("lbw", "ubw", "lbxN", "ubxN", "lg", "ug", "lr", "ur") and not np.all(np.isfinite(arr)):
+            raise ValueError(f"QP entry '{key}' has non-finite values")
+        if np.any(np.isnan(arr)):
+            raise ValueError(f"QP entry '{key}' has NaN values")
+        out[key] = arr
+    for lo, hi in (("lbw", "ubw"), ("lbxN", "ubxN"), ("lg", "ug"), ("lr", "ur")):
+        if np.any(out[lo] > out[hi]):
+            raise QPInfeasibleError(f"QP is infeasible: some entry of '{lo}' exceeds '{hi}'")
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Flattening: z = (x_0, u_0, x_1, u_1, ..., x_{N-1}, u_{N-1}, x_N)
+# ---------------------------------------------------------------------------
+
+@dataclass
+class _Rows:
+    """The constraints of the QP as sparse rows over z."""
+    A_eq: sp.csr_matrix      # x0 equality, dynamics, Req rows
+    b_eq: np.ndarray
+    A_in: sp.csr_matrix      # C rows (stage-wise), R rows
+    l_in: np.ndarray
+    u_in: np.ndarray
+    lbz: np.ndarray
+    ubz: np.ndarray
+
+
+def _flatten(q: dict):
+    N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
+    nw = nx + nu
+    nz = N * nw + nx
+    Hz = sp.block_diag([q["H"][k] for k in range(N)] + [q["HN"]], format="csc")
+    Hz = 0.5 * (Hz + Hz.T)
+    gz = np.concatenate([q["g"].reshape(-1), q["gN"]])
+    # equality rows: x_0 = x0 ; x_{k+1} - Phi_k w_k = b_k ; Req x_N = req
+    rows, cols, vals = [], [], []
+    for i in range(nx):
+        rows.append(i); cols.append(i); vals.append(1.0)
+    for k in range(N):
+        r0 = nx * (k + 1)
+        blk = -q["Phi"][k]
+        ii, jj = np.nonzero(np.ones_like(blk))
+        rows.extend(r0 + ii); cols.extend(k * nw + jj); vals.extend(blk[ii, jj])
+        c0 = (k + 1) * nw if k < N - 1 else N * nw
+        rows.extend(r0 + np.arange(nx)); cols.extend(c0 + np.arange(nx)); vals.extend([1.0] * nx)
+    r0 = nx * (N + 1)
+    if ne:
+        ii, jj = np.nonzero(np.ones_like(q["Req"]))
+        rows.extend(r0 + ii); cols.extend(N * nw + jj); vals.extend(q["Req"][ii, jj])
+    A_eq = sp.csr_matrix((vals, (rows, cols)), shape=(nx * (N + 1) + ne, nz))
+    b_eq = np.concatenate([q["x0"], q["b"].reshape(-1), q["req"]])
+    # inequality rows: C_k w_k (stage-wise), then R x_N
+    rows, cols, vals = [], [], []
+    for k in range(N):
+        if ng:
+            ii, jj = np.nonzero(np.ones_like(q["C"][k]))
+            rows.extend(k * ng + ii); cols.extend(k * nw + jj); vals.extend(q["C"][k][ii, jj])
+    if nr:
+        ii, jj = np.nonzero(np.ones_like(q["R"]))
+        rows.extend(N * ng + ii); cols.extend(N * nw + jj); vals.extend(q["R"][ii, jj])
+    A_in = sp.csr_matrix((vals, (rows, cols)), shape=(N * ng + nr, nz))
+    l_in = np.concatenate([q["lg"].reshape(-1), q["lr"]])
+    u_in = np.concatenate([q["ug"].reshape(-1), q["ur"]])
+    lbz = np.concatenate([q["lbw"].reshape(-1), q["lbxN"]])
+    ubz = np.concatenate([q["ubw"].reshape(-1), q["ubxN"]])
+    lbz[:nx] = -np.inf       # no bound on x_0: it is fixed by the equality row
+    ubz[:nx] = np.inf
+    return Hz, gz, _Rows(A_eq, b_eq, A_in, l_in, u_in, lbz, ubz)
+
+
+def _unflatten(q: dict, z, y_eq, y_in, mu_z) -> dict:
+    N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
+    nw = nx + nu
+    W = z[: N * nw].reshape(N, nw)
+    x = np.vstack([W[:, :nx], z[N * nw:][None, :]])
+    mu_b = mu_z[: N * nw].reshape(N, nw).copy()
+    mu_b[0, :nx] = 0.0
+    return {
+        "x": x, "u": W[:, nx:].copy(),
+        "lam": y_eq[: nx * (N + 1)].reshape(N + 1, nx).copy(),
+        "nu": y_eq[nx * (N + 1):].copy(),
+        "mu_b": mu_b, "mu_bN": mu_z[N * nw:].copy(),
+        "mu_g": y_in[: N * ng].reshape(N, ng).copy(), "mu_r": y_in[N * ng:].copy(),
+    }
+
+
+def _flatten_sol(q: dict, sol: dict):
+    N, nx, nu, ng = q["N"], q["nx"], q["nu"], q["ng"]
+    z = np.concatenate([np.hstack([sol["x"][:N], sol["u"]]).reshape(-1), sol["x"][N]])
+    y_eq = np.concatenate([np.asarray(sol["lam"]).reshape(-1), np.asarray(sol["nu"]).reshape(-1)])
+    y_in = np.concatenate([np.asarray(sol["mu_g"]).reshape(-1), np.asarray(sol["mu_r"]).reshape(-1)])
+    mu_z = np.concatenate([np.asarray(sol["mu_b"]).reshape(-1), np.asarray(sol["mu_bN"]).reshape(-1)])
+    return z, y_eq, y_in, mu_z
+
+
+# ---------------------------------------------------------------------------
+# KKT residual of a QP solution (independent of how it was computed)
+# ---------------------------------------------------------------------------
+
+def _signed_pairs(v, lo, hi, mu):
+    """Complementarity and dual-sign violation of signed multipliers on lo <= v <= hi."""
+    mu = np.asarray(mu, dtype=float)
+    if mu.size == 0:
+        return 0.0, 0.0
+    up = np.maximum(mu, 0.0)
+    dn = np.maximum(-mu, 0.0)
+    comp = 0.0
+    sign = 0.0
+    fin_hi = np.isfinite(hi)
+    fin_lo = np.isfinite(lo)
+    if np.any(fin_hi):
+        comp = max(comp, float(np.max(up[fin_hi] * np.abs(hi[fin_hi] - v[fin_hi]))))
+    if np.any(fin_lo):
+        comp = max(comp, float(np.max(dn[fin_lo] * np.abs(v[fin_lo] - lo[fin_lo]))))
+    if np.any(~fin_hi):
+        sign = max(sign, float(np.max(up[~fin_hi])))
+    if np.any(~fin_lo):
+        sign = max(sign, float(np.max(dn[~fin_lo])))
+    return comp, sign
+
+
+def qp_kkt_residual(qp: dict, sol: dict) -> dict:
+    """Inf-norm KKT residuals of ``sol`` for ``qp``.
+
+    Returns ``{"stat", "eq", "ineq", "comp", "sign", "kkt"}``: stationarity (per
+    stage and terminal, the formulas of the module docstring), equality violation
+    (initial value, dynamics, Req rows), inequality violation (bounds, C, R rows),
+    complementarity ``max(mu,0)|ub - v|`` / ``max(-mu,0)|v - lb|`` on finite sides,
+    and dual sign (the size of a multiplier pushing on an infinite side, including
+    a nonzero x part of ``mu_b[0]``); ``kkt`` is their maximum.
+    """
+    q = check_qp(qp)
+    N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
+    x = np.asarray(sol["x"], float); u = np.asarray(sol["u"], float)
+    lam = np.asarray(sol["lam"], float)
+    mu_b = np.asarray(sol["mu_b"], float).reshape(N, nx + nu)
+    mu_g = np.asarray(sol["mu_g"], float).reshape(N, ng)
+    mu_bN = np.asarray(sol["mu_bN"], float).reshape(nx)
+    mu_r = np.asarray(sol["mu_r"], float).reshape(nr)
+    nu_ = np.asarray(sol["nu"], float).reshape(ne)
+    stat = 0.0
+    eq = float(np.max(np.abs(x[0] - q["x0"])))
+    ineq = 0.0
+    comp = 0.0
+    sign = 0.0
+    for k in range(N):
+        w = np.concatenate([x[k], u[k]])
+        r = q["H"][k] @ w + q["g"][k] - q["Phi"][k].T @ lam[k + 1] + q["C"][k].T @ mu_g[k] + mu_b[k]
+        r[:nx] += lam[k]
+        stat = max(stat, float(np.max(np.abs(r))))
+        eq = max(eq, float(np.max(np.abs(x[k + 1] - q["Phi"][k] @ w - q["b"][k]))))
+        lo = q["lbw"][k].copy(); hi = q["ubw"][k].copy()
+        if k == 0:
+            lo[:nx] = -np.inf; hi[:nx] = np.inf
+        ineq = max(ineq, float(np.max(np.maximum(0.0, np.maximum(w - hi, lo - w)))))
+        c, s = _signed_pairs(w, lo, hi, mu_b[k]); comp = max(comp, c); sign = max(sign, s)
+        if ng:
+            cw = q["C"][k] @ w
+            ineq = max(ineq, float(np.max(np.maximum(0.0, np.maximum(cw - q["ug"][k], q["lg"][k] - cw)))))
+            c, s = _signed_pairs(cw, q["lg"][k], q["ug"][k], mu_g[k]); comp = max(comp, c); sign = max(sign, s)
+    xN = x[N]
+    r = q["HN"] @ xN + q["gN"] + lam[N] + q["R"].T @ mu_r + q["Req"].T @ nu_ + mu_bN
+    stat = max(stat, float(np.max(np.abs(r))))
+    if ne:
+        eq = max(eq, float(np.max(np.abs(q["Req"] @ xN - q["req"]))))
+    ineq = max(ineq, float(np.max(np.maximum(0.0, np.maximum(xN - q["ubxN"], q["lbxN"] - xN)))))
+    c, s = _signed_pairs(xN, q["lbxN"], q["ubxN"], mu_bN); comp = max(comp, c); sign = max(sign, s)
+    if nr:
+        rx = q["R"] @ xN
+        ineq = max(ineq, float(np.max(np.maximum(0.0, np.maximum(rx - q["ur"], q["lr"] - rx)))))
+        c, s = _signed_pairs(rx, q["lr"], q["ur"], mu_r); comp = max(comp, c); sign = max(sign, s)
+    return {"stat": stat, "eq": eq, "ineq": ineq, "comp": comp, "sign": sign,
+            "kkt": max(stat, eq, ineq, comp, sign)}
+
+
+# ---------------------------------------------------------------------------
+# IPOPT on the QP (one parametric CasADi NLP per size tuple, cached)
+# ---------------------------------------------------------------------------
+
+_IPOPT_CACHE: dict = {}
+
+
+def _ipopt_solver(N, nx, nu, ng, nr, ne):
+    key = (N, nx, nu, ng, nr, ne)
+    if key in _IPOPT_CACHE:
+        return _IPOPT_CACHE[key]
+    import casadi as ca
+
+    nw = nx + nu
+    nz = N * nw + nx
+    z = ca.SX.sym("z", nz)
+    H = ca.SX.sym("H", N * nw * nw)      # row-major per stage, as numpy reshape(-1)
+    g = ca.SX.sym("g", N * nw)
+    Phi = ca.SX.sym("Phi", N * nx * nw)
+    HN = ca.SX.sym("HN", nx * nx)
+    gN = ca.SX.sym("gN", nx)
+    C = ca.SX.sym("C", N * ng * nw)
+    R = ca.SX.sym("R", nr * nx)
+    Req = ca.SX.sym("Req", ne * nx)
+    f = 0
+    cons = [z[:nx]]
+    cin = []
+    for k in range(N):
+        w = z[k * nw:(k + 1) * nw]
+        Hk = ca.reshape(H[k * nw * nw:(k + 1) * nw * nw], nw, nw).T
+        f += 0.5 * ca.dot(w, ca.mtimes(Hk, w)) + ca.dot(g[k * nw:(k + 1) * nw], w)
+        Pk = ca.reshape(Phi[k * nx * nw:(k + 1) * nx * nw], nw, nx).T
+        xn = z[(k + 1) * nw:(k + 1) * nw + nx]
+        cons.append(xn - ca.mtimes(Pk, w))
+        if ng:
+            Ck = ca.reshape(C[k * ng * nw:(k + 1) * ng * nw], nw, ng).T
+            cin.append(ca.mtimes(Ck, w))
+    xN = z[N * nw:]
+    HNm = ca.reshape(HN, nx, nx).T
+    f += 0.5 * ca.dot(xN, ca.mtimes(HNm, xN)) + ca.dot(gN, xN)
+    if ne:
+        cons.append(ca.mtimes(ca.reshape(Req, nx, ne).T, xN))
+    if nr:
+        cin.append(ca.mtimes(ca.reshape(R, nx, nr).T, xN))
+    gexpr = ca.vertcat(*(cons + cin))
+    p = ca.vertcat(H, g, Phi, HN, gN, C, R, Req)
+    opts = {
+        "print_time": False,
+        "ipopt": {
+            "print_level": 0, "sb": "yes", "tol": 1e-12, "acceptable_iter": 0,
+            "bound_relax_factor": 0.0, "honor_original_bounds": "yes",
+            "mu_strategy": "adaptive", "max_iter": 500,
+            "hessian_constant": "yes", "jac_c_constant": "yes", "jac_d_constant": "yes",
+        },
+    }
+    solver = ca.nlpsol("qpref_ipopt", "ipopt", {"x": z, "p": p, "f": f, "g": gexpr}, opts)
+    _IPOPT_CACHE[key] = solver
+    return solver
+
+
+def _solve_ipopt(q: dict, Hz, gz, rows: _Rows):
+    N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
+    solver = _ipopt_solver(N, nx, nu, ng, nr, ne)
+    p = np.concatenate([q["H"].reshape(-1), q["g"].reshape(-1), q["Phi"].reshape(-1), q["HN"].reshape(-1),
+                        q["gN"], q["C"].reshape(-1), q["R"].reshape(-1), q["Req"].reshape(-1)])
+    lbg = np.concatenate([rows.b_eq, rows.l_in])
+    ubg = np.concatenate([rows.b_eq, rows.u_in])
+    # start inside the bounds: IPOPT pushes the start anyway, a clipped zero is as good as any
+    z0 = np.clip(np.zeros(Hz.shape[0]), rows.lbz, rows.ubz)
+    z0 = np.where(np.isfinite(z0), z0, 0.0)
+    res = solver(x0=z0, p=p, lbx=rows.lbz, ubx=rows.ubz, lbg=lbg, ubg=ubg)
+    stats = solver.stats()
+    status = stats.get("return_status", "")
+    z = np.array(res["x"]).reshape(-1)
+    lam_g = np.array(res["lam_g"]).reshape(-1)
+    lam_x = np.array(res["lam_x"]).reshape(-1)
+    neq = rows.A_eq.shape[0]
+    return z, lam_g[:neq], lam_g[neq:], lam_x, status, int(stats.get("iter_count", -1))
+
+
+# ---------------------------------------------------------------------------
+# Active-set polish
+# ---------------------------------------------------------------------------
+
+def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol):
+    """Solve the KKT system of the active set read from (z, y_in, mu_z); refine it."""
+    nz = Hz.shape[0]
+    Ain = rows.A_in
+    v_in = Ain @ z
+    # +1: upper side active, -1: lower side active, 0: inactive. A side is active when
+    # its multiplier outweighs its slack (the two are complementary at IPOPT's answer).
+    def classify(v, lo, hi, mu):
+        act = np.zeros(v.shape, dtype=int)
+        eqrow = np.isfinite(lo) & np.isfinite(hi) & (lo == hi)
+        up = np.isfinite(hi) & (mu > 0) & (mu > hi - v)
+        dn = np.isfinite(lo) & (mu < 0) & (-mu > v - lo)
+        act[up] = 1
+        act[dn] = -1
+        act[eqrow] = np.where(act[eqrow] != 0, act[eqrow], 1)
+        return act
+    act_z = classify(z, rows.lbz, rows.ubz, mu_z)
+    act_in = classify(v_in, rows.l_in, rows.u_in, y_in)
+    neq = rows.A_eq.shape[0]
+    for _sweep in range(10):
+        iz = np.nonzero(act_z)[0]
+        ii = np.nonzero(act_in)[0]
+        Ab = sp.csr_matrix((np.ones(iz.size), (np.arange(iz.size), iz)), shape=(iz.size, nz))
+        A = sp.vstack([rows.A_eq, Ain[ii], Ab], format="csc")
+        rhs_c = np.concatenate([
+            rows.b_eq,
+            np.where(act_in[ii] > 0, rows.u_in[ii], rows.l_in[ii]),
+            np.where(act_z[iz] > 0, rows.ubz[iz], rows.lbz[iz]),
+        ])
+        m = A.shape[0]
+        K = sp.bmat([[Hz, A.T], [A, None]], format="csc")
+        rhs = np.concatenate([-gz, rhs_c])
+        try:
+            with np.errstate(all="raise"):
+                lu = spla.splu(K)
+                sol = lu.solve(rhs)
+                # one step of iterative refinement against the unfactored matrix
+                sol = sol + lu.solve(rhs - K @ sol)
+        except (RuntimeError, FloatingPointError):
+            return None
+        if not np.all(np.isfinite(sol)):
+            return None
+        zp = sol[:nz]
+        y = sol[nz:]
+        y_eq = y[:neq]
+        yin = np.zeros(Ain.shape[0]); yin[ii] = y[neq:neq + ii.size]
+        muz = np.zeros(nz); muz[iz] = y[neq + ii.size:]
+        vin = Ain @ zp
+        changed = False
+        # dual sign of the active set: drop rows whose multiplier points the wrong way
+        for act, mu, lo, hi in ((act_z, muz, rows.lbz, rows.ubz), (act_in, yin, rows.l_in, rows.u_in)):
+            eqrow = np.isfinite(lo) & np.isfinite(hi) & (lo == hi)
+            bad = (~eqrow) & (((act > 0) & (mu < -tol)) | ((act < 0) & (mu > tol)))
+            if np.any(bad):
+                act[bad] = 0
+                changed = True
+        # primal feasibility of the inactive set: add violated sides
+        for act, v, lo, hi in ((act_z, zp, rows.lbz, rows.ubz), (act_in, vin, rows.l_in, rows.u_in)):
+            up = (act == 0) & (v > hi + tol)
+            dn = (act == 0) & (v < lo - tol)
+            if np.any(up | dn):
+                act[up] = 1
+                act[dn] = -1
+                changed = True
+        if not changed:
+            return zp, y_eq, yin, muz
+    return None
+
+
+def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True) -> dict:
+    """Solve a QP of the module's format; return the solution dict (see module docstring).
+
+    ``tol`` is the feasibility / dual-sign tolerance the polished active set must meet
+    (the polished solution itself satisfies stationarity and the active rows to
+    round-off). Raises :class:`QPInfeasibleError` for an infeasible QP and
+    :class:`QPError` when IPOPT fails otherwise.
+    """
+    t0 = time.perf_counter()
+    q = check_qp(qp)
+    Hz, gz, rows = _flatten(q)
+    z, y_eq, y_in, mu_z, status, iters = _solve_ipopt(q, Hz, gz, rows)
+    if status in ("Infeasible_Problem_Detected", "Restoration_Failed"):
+        raise QPInfeasibleError(f"QP is infeasible (IPOPT: {status})")
+    ok_status = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    out = None
+    if polish and np.all(np.isfinite(z)):
+        pol = _polish(Hz, gz, rows, z, y_in, mu_z, tol)
+        if pol is not None:
+            sol = _unflatten(q, *pol)
+            res = qp_kkt_residual(q, sol)
+            if res["ineq"] <= tol and res["sign"] <= tol and res["stat"] <= 1e3 * tol and res["eq"] <= 1e3 * tol:
+                out = sol
+                out["polished"] = True
+    if out is None:
+        if not ok_status:
+            raise QPError(f"reference QP solver failed (IPOPT: {status})")
+        out = _unflatten(q, z, y_eq, y_in, mu_z)
+        out["polished"] = False
+    out["iterations"] = iters
+    out["status"] = status
+    out["solve_time"] = time.perf_counter() - t0
+    return out
+
+
+def qp_reduced_hessian_min_eig(qp: dict, sol: dict, tol: float = 1e-9) -> float:
+    """Smallest eigenvalue of the QP Hessian on the null space of the equality rows and
+    the active inequality rows of ``sol`` (second-order check; dense, for tests)."""
+    import scipy.linalg as sla
+
+    q = check_qp(qp)
+    Hz, gz, rows = _flatten(q)
+    z, _, y_in, mu_z = _flatten_sol(q, sol)
+    act_z = np.nonzero(np.abs(mu_z) > tol)[0]
+    act_in = np.nonzero(np.abs(y_in) > tol)[0]
+    A = np.vstack([rows.A_eq.toarray(), rows.A_in.toarray()[act_in], np.eye(Hz.shape[0])[act_z]])
+    Z = sla.null_space(A)
+    if Z.shape[1] == 0:
+        return float("inf")
+    return float(np.min(np.linalg.eigvalsh(Z.T @ Hz.toarray() @ Z)))

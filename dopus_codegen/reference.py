@@ -1,0 +1,400 @@
+"""The pure-Python DOPUS reference implementation (the oracle of the C runtime).
+
+Implements docs/algorithm.md sections 3 to 7 literally, with numpy, the per-stage CasADi
+functions of a ``Discretized`` and the reference QP solver of
+:mod:`dopus_codegen.qpref`. The C runtime is compared against it iterate by iterate, so
+the order of operations follows the contract:
+
+- the ring buffer: stage ``k`` lives in slot ``(ring_head + k) mod N``; a slot holds the
+  blocks the QP uses (``Ht, Phit, Ct``), ``F_old = (F_w, phi, g)`` of the last gradient
+  evaluation of its stage and ``domega = (dw, dlam_next, dmu_g, dmu_b)`` of the last QP;
+- ``feedback`` solves the QP, stores ``domega`` per stage, takes the full step;
+- ``prepare`` shifts (receding mode), evaluates ``F_k`` and ``rho_k`` (eq. 16) for
+  ``k < N-1``, evaluates stage ``N-1`` and the terminal node fresh, recomputes ``H`` for
+  the ``M`` stages with the largest ``rho`` (ties: lower index), regularises every fresh
+  ``A`` (section 5) and assembles the adjoint-corrected QP (eq. 12, section 3).
+
+Usage (the backend protocol of section 7)::
+
+    ref = ReferenceDopus(disc, M=1, mode="receding", hessian="exact")
+    ref.init(xhat0, guess)
+    u0 = ref.feedback(xhat0); ref.prepare()
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .kkt import eval_stages, kkt_measure, node_parameters
+from .qpref import QPError, QPInfeasibleError, solve_qp_reference
+
+__all__ = ["DopusError", "ReferenceDopus", "regularize", "STATUS_OK", "STATUS_BAD_INPUT",
+           "STATUS_QP_FAILED", "STATUS_QP_INFEASIBLE", "STATUS_NONFINITE"]
+
+STATUS_OK = 0
+STATUS_BAD_INPUT = 1        # non-finite xhat_0
+STATUS_QP_FAILED = 2        # the QP solver did not return a solution
+STATUS_QP_INFEASIBLE = 3    # the QP is infeasible
+STATUS_NONFINITE = 4        # a derivative function returned a non-finite value
+
+
+class DopusError(RuntimeError):
+    """A DOPUS call failed; ``status`` is one of the ``STATUS_*`` codes. The iterate is
+    unchanged by the failing call (docs/algorithm.md section 4)."""
+
+    def __init__(self, message: str, status: int):
+        super().__init__(message)
+        self.status = status
+
+
+def regularize(A: np.ndarray, mode: str, eps: float) -> np.ndarray:
+    """Section 5: eigenvalue floor on the symmetric block ``A`` (``none`` returns it as is)."""
+    if mode == "none":
+        return A
+    S = 0.5 * (A + A.T)
+    e, V = np.linalg.eigh(S)
+    if mode == "project":
+        e = np.maximum(e, eps)
+    elif mode == "mirror":
+        e = np.maximum(np.abs(e), eps)
+    else:
+        raise ValueError(f"regularization must be 'none', 'project' or 'mirror', got {mode!r}")
+    return (V * e) @ V.T
+
+
+class _Slot:
+    """One ring-buffer slot (docs/algorithm.md section 4)."""
+    __slots__ = ("Ht", "Phit", "Ct", "F_w", "phi", "g", "dw", "dlam", "dmu_g", "dmu_b")
+
+    def __init__(self, nx, nu, ng):
+        nw = nx + nu
+        self.Ht = np.zeros((nw, nw))
+        self.Phit = np.zeros((nx, nw))
+        self.Ct = np.zeros((ng, nw))
+        self.F_w = np.zeros(nw)
+        self.phi = np.zeros(nx)
+        self.g = np.zeros(ng)
+        self.dw = np.zeros(nw)
+        self.dlam = np.zeros(nx)
+        self.dmu_g = np.zeros(ng)
+        self.dmu_b = np.zeros(nw)
+
+    def copy(self):
+        s = _Slot.__new__(_Slot)
+        for name in _Slot.__slots__:
+            setattr(s, name, getattr(self, name).copy())
+        return s
+
+
+def _arr(v, shape, what):
+    a = np.array(v, dtype=float)
+    if a.size != int(np.prod(shape)):
+        raise ValueError(f"{what}: expected shape {shape}, got {a.shape}")
+    return a.reshape(shape)
+
+
+class ReferenceDopus:
+    """The DOPUS iteration in numpy (backend protocol, docs/algorithm.md section 7).
+
+    Extra to the protocol: :meth:`qp_of_current` (the QP the next ``feedback`` solves,
+    in the :mod:`dopus_codegen.qpref` format), ``last_qp`` / ``last_qp_solution`` (the
+    QP solved by the last ``feedback`` and its solution) and ``status``.
+    """
+
+    def __init__(self, disc, M: int = 1, mode: str = "receding", hessian: str = "exact",
+                 regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10):
+        self.disc = disc
+        self.N, self.nx, self.n_u, self.ng = disc.N, disc.nx, disc.nu, disc.ng
+        self.nr, self.ne, self.np = disc.nr, disc.ne, disc.np
+        self.nw = self.nx + self.n_u
+        if hessian == "exact":
+            self._stage_hess, self._term_hess = disc.stage_hess_exact, disc.term_hess_exact
+        elif hessian in ("gauss-newton", "gn"):
+            if getattr(disc, "stage_hess_gn", None) is None or getattr(disc, "term_hess_gn", None) is None:
+                raise ValueError("hessian='gauss-newton' needs a least-squares stage cost "
+                                 "(the OCP declares no stage_least_squares)")
+            self._stage_hess, self._term_hess = disc.stage_hess_gn, disc.term_hess_gn
+        else:
+            raise ValueError(f"hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
+        self.hessian = "exact" if hessian == "exact" else "gauss-newton"
+        if regularization not in ("none", "project", "mirror"):
+            raise ValueError(f"regularization must be 'none', 'project' or 'mirror', got {regularization!r}")
+        eps = float(reg_eps)
+        if not np.isfinite(eps) or eps <= 0:
+            raise ValueError(f"reg_eps must be positive and finite, got {reg_eps!r}")
+        qp_tol = float(qp_tol)
+        if not np.isfinite(qp_tol) or qp_tol <= 0:
+            raise ValueError(f"qp_tol must be positive and finite, got {qp_tol!r}")
+        self.regularization, self.reg_eps, self.qp_tol = regularization, eps, qp_tol
+        self.set_M(M)
+        self.set_mode(mode)
+        self.lbx, self.ubx = np.asarray(disc.lbx, float), np.asarray(disc.ubx, float)
+        self.lbu, self.ubu = np.asarray(disc.lbu, float), np.asarray(disc.ubu, float)
+        self.lg, self.ug = np.asarray(disc.lg, float).reshape(self.ng), np.asarray(disc.ug, float).reshape(self.ng)
+        self.lr, self.ur = np.asarray(disc.lr, float).reshape(self.nr), np.asarray(disc.ur, float).reshape(self.nr)
+        self.p = node_parameters(disc, None)
+        self.status = STATUS_OK
+        self.timings = {}
+        self.qp_iterations = 0
+        self.rho = np.zeros(self.N)
+        self.recomputed = []
+        self.last_qp = None
+        self.last_qp_solution = None
+        self._initialised = False
+
+    # ------------------------------------------------------------------ settings
+    def set_M(self, M: int) -> None:
+        if isinstance(M, bool) or not isinstance(M, (int, np.integer)):
+            raise ValueError(f"M must be an integer, got {M!r}")
+        self.M = int(min(max(int(M), 0), self.N - 1))
+
+    def set_mode(self, mode: str) -> None:
+        if mode not in ("receding", "fixed"):
+            raise ValueError(f"mode must be 'receding' or 'fixed', got {mode!r}")
+        self.mode = mode
+
+    def set_parameters(self, p) -> None:
+        """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
+        self.p = node_parameters(self.disc, p)
+
+    # ------------------------------------------------------------------ evaluations
+    def _slot(self, k: int) -> int:
+        return (self.ring_head + k) % self.N
+
+    def _stage_hess_eval(self, k, x, u, lam, mu_g):
+        A, Phi, C = self._stage_hess(x[k], u[k], self.p[k], lam[k + 1], mu_g[k])
+        A = np.array(A, float).reshape(self.nw, self.nw)
+        Phi = np.array(Phi, float).reshape(self.nx, self.nw)
+        C = np.array(C, float).reshape(self.ng, self.nw)
+        return regularize(A, self.regularization, self.reg_eps), Phi, C
+
+    def _term_eval(self, xN, mu_r, nu):
+        gL, _E, r, r_eq = self.disc.term_grad(xN, self.p[self.N], mu_r, nu)
+        A, R, Req = self._term_hess(xN, self.p[self.N], mu_r, nu)
+        t = {
+            "gL": np.array(gL, float).reshape(self.nx), "r": np.array(r, float).reshape(self.nr),
+            "r_eq": np.array(r_eq, float).reshape(self.ne),
+            "A": regularize(np.array(A, float).reshape(self.nx, self.nx), self.regularization, self.reg_eps),
+            "R": np.array(R, float).reshape(self.nr, self.nx), "Req": np.array(Req, float).reshape(self.ne, self.nx),
+        }
+        return t
+
+    @staticmethod
+    def _finite(*arrays) -> bool:
+        return all(np.all(np.isfinite(a)) for a in arrays)
+
+    # ------------------------------------------------------------------ init
+    def init(self, xhat0, guess=None) -> None:
+        """Iterate = guess; every stage and the terminal node evaluated fresh (section 4)."""
+        t0 = time.perf_counter()
+        N, nx, nu, ng = self.N, self.nx, self.n_u, self.ng
+        xhat0 = _arr(xhat0, (nx,), "xhat0")
+        if not np.all(np.isfinite(xhat0)):
+            raise DopusError("init: xhat0 has non-finite entries", STATUS_BAD_INPUT)
+        if guess is None:
+            guess = self.disc.initial_guess
+        g = guess.filled(self.disc)
+        for name in ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu"):
+            if not np.all(np.isfinite(getattr(g, name))):
+                raise DopusError(f"init: guess.{name} has non-finite entries", STATUS_BAD_INPUT)
+        x, u, lam, mu_g, mu_b = g.x.copy(), g.u.copy(), g.lam.copy(), g.mu_g.copy(), g.mu_b.copy()
+        mu_b[0, :nx] = 0.0
+        slots = [_Slot(nx, nu, ng) for _ in range(N)]
+        gL, phi, _l, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
+        for k in range(N):
+            s = slots[k]
+            s.F_w = gL[k] + mu_b[k]
+            s.phi = phi[k].copy()
+            s.g = gv[k].copy()
+            s.Ht, s.Phit, s.Ct = self._stage_hess_eval(k, x, u, lam, mu_g)
+        term = self._term_eval(x[N], g.mu_r, g.nu)
+        if not self._finite(gL, phi, gv, *[v for s in slots for v in (s.Ht, s.Phit, s.Ct)], *term.values()):
+            raise DopusError("init: a derivative function returned a non-finite value at the guess",
+                             STATUS_NONFINITE)
+        self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
+        self.mu_bN, self.mu_r, self.nu = g.mu_bN.copy(), g.mu_r.copy(), g.nu.copy()
+        self.ring_head = 0
+        self.slots = slots
+        self.term = term
+        self.rho = np.zeros(N)
+        self.recomputed = list(range(N))
+        self.status = STATUS_OK
+        self._initialised = True
+        self.timings = {"init": time.perf_counter() - t0}
+
+    def _need_init(self):
+        if not self._initialised:
+            raise DopusError("call init(xhat0, guess) first", STATUS_BAD_INPUT)
+
+    # ------------------------------------------------------------------ the QP
+    def qp_of_current(self, xhat0) -> dict:
+        """The QP of section 3 at the current iterate for initial state ``xhat0``."""
+        self._need_init()
+        N, nx, nu, ng, nr, ne, nw = self.N, self.nx, self.n_u, self.ng, self.nr, self.ne, self.nw
+        xhat0 = _arr(xhat0, (nx,), "xhat0")
+        H = np.empty((N, nw, nw)); gq = np.empty((N, nw)); Phi = np.empty((N, nx, nw))
+        b = np.empty((N, nx)); C = np.empty((N, ng, nw)); lgq = np.empty((N, ng)); ugq = np.empty((N, ng))
+        lbw = np.empty((N, nw)); ubw = np.empty((N, nw))
+        for k in range(N):
+            s = self.slots[self._slot(k)]
+            H[k] = s.Ht
+            Phi[k] = s.Phit
+            C[k] = s.Ct
+            # eq. 12: a_k = F_w + Phit' lam_{k+1} - Ct' mu_g_k - mu_b_k
+            gq[k] = s.F_w + s.Phit.T @ self.lam[k + 1] - s.Ct.T @ self.mu_g[k] - self.mu_b[k]
+            b[k] = s.phi - self.x[k + 1]
+            lgq[k] = self.lg - s.g
+            ugq[k] = self.ug - s.g
+            lbw[k, :nx] = self.lbx - self.x[k]
+            ubw[k, :nx] = self.ubx - self.x[k]
+            lbw[k, nx:] = self.lbu - self.u[k]
+            ubw[k, nx:] = self.ubu - self.u[k]
+        lbw[0, :nx] = -np.inf
+        ubw[0, :nx] = np.inf
+        t = self.term
+        gN = t["gL"] - t["R"].T @ self.mu_r - t["Req"].T @ self.nu
+        return {
+            "N": N, "nx": nx, "nu": nu, "ng": ng, "nr": nr, "ne": ne,
+            "H": H, "g": gq, "Phi": Phi, "b": b, "x0": xhat0 - self.x[0],
+            "HN": t["A"].copy(), "gN": gN, "lbw": lbw, "ubw": ubw,
+            "lbxN": self.lbx - self.x[N], "ubxN": self.ubx - self.x[N],
+            "C": C, "lg": lgq, "ug": ugq, "R": t["R"].copy(), "lr": self.lr - t["r"], "ur": self.ur - t["r"],
+            "Req": t["Req"].copy(), "req": -t["r_eq"],
+        }
+
+    # ------------------------------------------------------------------ feedback
+    def feedback(self, xhat0) -> np.ndarray:
+        """Solve the QP for ``xhat0``, store ``domega`` per slot, full step; return ``u_0``."""
+        self._need_init()
+        t0 = time.perf_counter()
+        xhat0 = np.array(xhat0, dtype=float).reshape(-1)
+        if xhat0.size != self.nx or not np.all(np.isfinite(xhat0)):
+            self.status = STATUS_BAD_INPUT
+            raise DopusError(f"feedback: xhat0 must be {self.nx} finite numbers, got {xhat0}", STATUS_BAD_INPUT)
+        qp = self.qp_of_current(xhat0)
+        t1 = time.perf_counter()
+        try:
+            sol = solve_qp_reference(qp, tol=self.qp_tol)
+        except QPInfeasibleError as exc:
+            self.status = STATUS_QP_INFEASIBLE
+            raise DopusError(f"feedback: {exc}", STATUS_QP_INFEASIBLE) from None
+        except QPError as exc:
+            self.status = STATUS_QP_FAILED
+            raise DopusError(f"feedback: {exc}", STATUS_QP_FAILED) from None
+        t2 = time.perf_counter()
+        N, nx = self.N, self.nx
+        dW = np.hstack([sol["x"][:N], sol["u"]])
+        for k in range(N):
+            s = self.slots[self._slot(k)]
+            s.dw = dW[k].copy()
+            s.dlam = sol["lam"][k + 1] - self.lam[k + 1]
+            s.dmu_g = sol["mu_g"][k] - self.mu_g[k]
+            s.dmu_b = sol["mu_b"][k] - self.mu_b[k]
+        # full step (eq. 4): primal increment, multipliers replaced
+        self.x = self.x + sol["x"]
+        self.u = self.u + sol["u"]
+        self.lam = sol["lam"].copy()
+        self.mu_g = sol["mu_g"].copy()
+        self.mu_b = sol["mu_b"].copy()
+        self.mu_bN = sol["mu_bN"].copy()
+        self.mu_r = sol["mu_r"].copy()
+        self.nu = sol["nu"].copy()
+        self.qp_iterations = int(sol.get("iterations", 0))
+        self.last_qp = qp
+        self.last_qp_solution = sol
+        self.status = STATUS_OK
+        t3 = time.perf_counter()
+        self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
+        return self.u[0].copy()
+
+    # ------------------------------------------------------------------ prepare
+    def prepare(self) -> None:
+        """Shift (receding), F and rho, fresh last stage and terminal, M worst H (section 4)."""
+        self._need_init()
+        t0 = time.perf_counter()
+        N, nx = self.N, self.nx
+        # step 1: shift (receding mode only)
+        if self.mode == "receding":
+            x = self.x.copy(); u = self.u.copy(); lam = self.lam.copy()
+            mu_g = self.mu_g.copy(); mu_b = self.mu_b.copy()
+            x[:N] = self.x[1:]
+            u[:N - 1] = self.u[1:]
+            lam[:N] = self.lam[1:]
+            mu_g[:N - 1] = self.mu_g[1:]
+            mu_b[:N - 1] = self.mu_b[1:]
+            mu_b[N - 1, :nx] = self.mu_bN
+            mu_b[0, :nx] = 0.0
+            self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
+            self.ring_head = (self.ring_head + 1) % N
+        x, u, lam, mu_g, mu_b = self.x, self.u, self.lam, self.mu_g, self.mu_b
+        t1 = time.perf_counter()
+        # steps 2 and 3 on copies of the slots: a non-finite value leaves the state of step 1
+        slots = [s.copy() for s in self.slots]
+        rho = np.zeros(N)
+        gL, phi, _l, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
+        if not self._finite(gL, phi, gv):
+            self.status = STATUS_NONFINITE
+            raise DopusError("prepare: stage_grad returned a non-finite value", STATUS_NONFINITE)
+        for k in range(N - 1):
+            s = slots[self._slot(k)]
+            F_w = gL[k] + mu_b[k]
+            # eq. 16 with the block the last QP used for this stage
+            r1 = s.F_w + s.Ht @ s.dw - s.Phit.T @ s.dlam + s.Ct.T @ s.dmu_g + s.dmu_b - F_w
+            r2 = -(s.phi + s.Phit @ s.dw) + phi[k]
+            r3 = s.g + s.Ct @ s.dw - gv[k]
+            num = np.linalg.norm(np.concatenate([r1, r2, r3]))
+            den = np.linalg.norm(np.concatenate([s.dw, s.dlam, s.dmu_g, s.dmu_b]))
+            rho[k] = num / den if den > 0.0 else 0.0
+            s.F_w = F_w
+            s.phi = phi[k].copy()
+            s.g = gv[k].copy()
+        t2 = time.perf_counter()
+        # step 3: stage N-1 and the terminal node, always fresh
+        k = N - 1
+        s = slots[self._slot(k)]
+        s.F_w = gL[k] + mu_b[k]
+        s.phi = phi[k].copy()
+        s.g = gv[k].copy()
+        s.Ht, s.Phit, s.Ct = self._stage_hess_eval(k, x, u, lam, mu_g)
+        xN = phi[k].copy() if self.mode == "receding" else x[N].copy()
+        term = self._term_eval(xN, self.mu_r, self.nu)
+        if not self._finite(s.Ht, s.Phit, s.Ct, *term.values()):
+            self.status = STATUS_NONFINITE
+            raise DopusError("prepare: a derivative function returned a non-finite value (last stage "
+                             "or terminal node)", STATUS_NONFINITE)
+        # step 4: the M stages among 0..N-2 with the largest rho, ties to the lower index
+        order = sorted(range(N - 1), key=lambda i: (-rho[i], i))
+        chosen = order[:self.M]
+        for i in chosen:
+            si = slots[self._slot(i)]
+            si.Ht, si.Phit, si.Ct = self._stage_hess_eval(i, x, u, lam, mu_g)
+            if not self._finite(si.Ht, si.Phit, si.Ct):
+                self.status = STATUS_NONFINITE
+                raise DopusError(f"prepare: stage_hess returned a non-finite value at stage {i}", STATUS_NONFINITE)
+        t3 = time.perf_counter()
+        # commit
+        if self.mode == "receding":
+            self.x = x.copy()
+            self.x[N] = xN
+        self.slots = slots
+        self.term = term
+        self.rho = rho
+        self.recomputed = sorted(chosen + [N - 1])
+        self.status = STATUS_OK
+        self.timings.update({"prepare": time.perf_counter() - t0, "shift": t1 - t0,
+                             "stage_grad_rho": t2 - t1, "stage_hess": t3 - t2})
+
+    # ------------------------------------------------------------------ KKT
+    def kkt(self, xhat0) -> dict:
+        """Section 6 at the current iterate for initial state ``xhat0``."""
+        self._need_init()
+        return kkt_measure(self.disc, xhat0, self.x, self.u, self.lam, self.mu_g, self.mu_b,
+                           self.mu_bN, self.mu_r, self.nu, self.p)
+
+    def guess(self):
+        """The current iterate as a ``Guess``."""
+        from .ocp import Guess
+
+        return Guess(x=self.x.copy(), u=self.u.copy(), lam=self.lam.copy(), mu_g=self.mu_g.copy(),
+                     mu_b=self.mu_b.copy(), mu_bN=self.mu_bN.copy(), mu_r=self.mu_r.copy(), nu=self.nu.copy())
