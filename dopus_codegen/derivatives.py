@@ -70,6 +70,7 @@ class Discretized:
     ode: ca.Function
     has_gn: bool
     weights: dict = field(default_factory=dict)   # {"W": stage LS weight, "WN": terminal}
+    cache: dict = field(default_factory=dict, repr=False, compare=False)  # e.g. offline solvers
 
     def stage_hess(self, kind: str) -> ca.Function:
         """``stage_hess_exact`` for ``"exact"``, ``stage_hess_gn`` for ``"gauss-newton"``."""

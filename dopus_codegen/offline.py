@@ -1,0 +1,183 @@
+"""Offline solution of the multiple-shooting NLP with IPOPT.
+
+The NLP is exactly the one DOPUS iterates on (docs/algorithm.md section 1), built from
+the same ``stage_eval``/``term_eval`` functions of a :class:`Discretized`:
+
+    variables   V = (x_0, u_0, x_1, u_1, ..., x_{N-1}, u_{N-1}, x_N)
+    constraints x_0 - xhat_0 = 0;  per stage k: x_{k+1} - phi_k = 0, lg <= g_k <= ug;
+                lr <= r(x_N) <= ur;  r_eq(x_N) = 0
+    bounds      lbu <= u_k <= ubu;  lbx <= x_k <= ubx for k >= 1 (x_0 free)
+
+CasADi's IPOPT interface uses the Lagrangian ``f + lam_g' g + lam_x' V`` with multipliers
+positive when the upper side is active. Each constraint above is written so that this
+is term by term the Lagrangian of algorithm.md section 1 (``lam_0'(x_0 - xhat_0)``,
+``lam_{k+1}'(x_{k+1} - phi_k)``, ``mu_g' g``, ``mu_r' r``, ``nu' r_eq``, ``mu_b' w``),
+so the IPOPT multipliers are the signed multipliers of the project without any sign
+flip. ``tests/test_offline.py`` checks this through the KKT measure.
+"""
+from __future__ import annotations
+
+import numpy as np
+import casadi as ca
+
+from .ocp import Guess
+
+__all__ = ["solve_ocp", "nlp_layout"]
+
+
+def nlp_layout(disc):
+    """Index arrays of the NLP vectors: ``(ix (N+1, nx), iu (N, nu), ig_dyn (N+1, nx)
+    [row 0 = x_0 - xhat_0], ig_path (N, ng), ig_r (nr,), ig_eq (ne,))``."""
+    N, nx, nu, ng, nr, ne = disc.N, disc.nx, disc.nu, disc.ng, disc.nr, disc.ne
+    nw = nx + nu
+    ix = np.array([np.arange(nx) + k * nw for k in range(N + 1)])
+    iu = np.array([np.arange(nu) + k * nw + nx for k in range(N)])
+    ig_dyn = np.zeros((N + 1, nx), dtype=int)
+    ig_path = np.zeros((N, ng), dtype=int)
+    ig_dyn[0] = np.arange(nx)
+    row = nx
+    for k in range(N):
+        ig_dyn[k + 1] = np.arange(nx) + row
+        row += nx
+        ig_path[k] = np.arange(ng) + row
+        row += ng
+    ig_r = np.arange(nr) + row
+    ig_eq = np.arange(ne) + row + nr
+    return ix, iu, ig_dyn, ig_path, ig_r, ig_eq
+
+
+def _build_solver(disc, hessian: str, tol: float, max_iter: int):
+    N, nx, nu, npar = disc.N, disc.nx, disc.nu, disc.np
+    nw = nx + nu
+    V = ca.SX.sym("V", N * nw + nx)
+    P = ca.SX.sym("P", nx + (N + 1) * npar)     # (xhat_0, p_0, ..., p_N)
+    xhat0 = P[:nx]
+
+    def xk(k):
+        return V[k * nw:k * nw + nx]
+
+    def uk(k):
+        return V[k * nw + nx:(k + 1) * nw]
+
+    def pk(k):
+        return P[nx + k * npar:nx + (k + 1) * npar]
+
+    f = 0
+    g = [xk(0) - xhat0]
+    for k in range(N):
+        phi, l, gk = disc.stage_eval(xk(k), uk(k), pk(k))
+        f = f + l
+        g += [xk(k + 1) - phi, gk]
+    E, r, r_eq = disc.term_eval(xk(N), pk(N))
+    f = f + E
+    g += [r, r_eq]
+    nlp = {"x": V, "p": P, "f": f, "g": ca.vertcat(*g)}
+    opts = {
+        "print_time": False,
+        "ipopt.print_level": 0,
+        "ipopt.sb": "yes",
+        "ipopt.tol": tol,
+        "ipopt.bound_relax_factor": 0.0,
+        "ipopt.honor_original_bounds": "yes",
+        "ipopt.max_iter": max_iter,
+    }
+    if hessian == "limited-memory":
+        opts["ipopt.hessian_approximation"] = "limited-memory"
+    elif hessian == "gauss-newton":
+        opts["hess_lag"] = _gn_hess_lag(disc, V, P, nlp["g"].size1(), xk, uk, pk)
+    elif hessian != "exact":
+        raise ValueError(f"solve_ocp: hessian must be 'exact', 'gauss-newton' or 'limited-memory', "
+                         f"got {hessian!r}")
+    return ca.nlpsol(f"{disc.name}_offline", "ipopt", nlp, opts)
+
+
+def _gn_hess_lag(disc, V, P, ng_total, xk, uk, pk):
+    """Block-diagonal Gauss-Newton Hessian of the Lagrangian from the ``*_hess_gn``
+    functions (no curvature of dynamics or constraints)."""
+    N, nx, nu = disc.N, disc.nx, disc.nu
+    lam_f = ca.SX.sym("lam_f")
+    lam_g = ca.SX.sym("lam_g", ng_total)
+    blocks = []
+    hess = disc.stage_hess("gauss-newton")
+    for k in range(N):
+        A = hess(xk(k), uk(k), pk(k), ca.SX.zeros(nx), ca.SX.zeros(disc.ng))[0]
+        blocks.append(lam_f * A)
+    AN = disc.term_hess_gn(xk(N), pk(N), ca.SX.zeros(disc.nr), ca.SX.zeros(disc.ne))[0]
+    blocks.append(lam_f * AN)
+    H = ca.diagcat(*blocks)
+    return ca.Function("hess_lag", [V, P, lam_f, lam_g], [ca.triu(H)],
+                       ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+
+
+def _solver(disc, hessian: str, tol: float, max_iter: int):
+    key = ("ipopt", hessian, float(tol), int(max_iter))
+    cache = disc.cache
+    if key not in cache:
+        cache[key] = _build_solver(disc, hessian, tol, max_iter)
+    return cache[key]
+
+
+def solve_ocp(disc, xhat0, guess: Guess | None = None, tol: float = 1e-12, hessian: str = "exact",
+              p=None, max_iter: int = 3000):
+    """Solve the NLP for initial state ``xhat0`` with IPOPT.
+
+    ``guess``: starting point (``disc.initial_guess`` if None; only ``x``, ``u`` are used).
+    ``p``: parameters, ``(np,)`` or ``(N+1, np)``; None: ``disc.p0``.
+    Returns ``(Guess, info)``: the primal-dual solution in the signed convention of
+    algorithm.md section 1, and ``info = {"objective", "x_N", "status", "success",
+    "iterations"}``.
+    """
+    N, nx, nu, npar = disc.N, disc.nx, disc.nu, disc.np
+    nw = nx + nu
+    xhat0 = np.asarray(xhat0, dtype=float).reshape(-1)
+    if xhat0.size != nx or not np.all(np.isfinite(xhat0)):
+        raise ValueError(f"solve_ocp: xhat0 must be {nx} finite numbers, got {xhat0}")
+    if p is None:
+        P = disc.p0
+    else:
+        P = np.array(p, dtype=float)
+        if P.ndim <= 1 and P.size == npar:
+            P = np.tile(P.reshape(1, npar), (N + 1, 1))
+        if P.shape != (N + 1, npar):
+            raise ValueError(f"solve_ocp: p must have shape ({npar},) or ({N + 1}, {npar}), got {P.shape}")
+    guess = disc.initial_guess if guess is None else guess
+    ix, iu, ig_dyn, ig_path, ig_r, ig_eq = nlp_layout(disc)
+
+    v0 = np.zeros(N * nw + nx)
+    v0[ix] = np.asarray(guess.x, float).reshape(N + 1, nx)
+    v0[iu] = np.asarray(guess.u, float).reshape(N, nu)
+    lbv = np.full(v0.size, -np.inf)
+    ubv = np.full(v0.size, np.inf)
+    lbv[ix[1:]] = disc.lbx
+    ubv[ix[1:]] = disc.ubx
+    lbv[iu] = disc.lbu
+    ubv[iu] = disc.ubu
+    ngt = nx + N * (nx + disc.ng) + disc.nr + disc.ne
+    lbg = np.zeros(ngt)
+    ubg = np.zeros(ngt)
+    if disc.ng:
+        lbg[ig_path] = disc.lg
+        ubg[ig_path] = disc.ug
+    lbg[ig_r] = disc.lr
+    ubg[ig_r] = disc.ur
+
+    solver = _solver(disc, hessian, tol, max_iter)
+    sol = solver(x0=v0, p=np.concatenate([xhat0, P.reshape(-1)]), lbx=lbv, ubx=ubv, lbg=lbg, ubg=ubg)
+    stats = solver.stats()
+    V = np.array(sol["x"]).reshape(-1)
+    lg_ = np.array(sol["lam_g"]).reshape(-1)
+    lx_ = np.array(sol["lam_x"]).reshape(-1)
+
+    mu_b = np.hstack([lx_[ix[:N]], lx_[iu]])
+    mu_b[0, :nx] = 0.0          # x_0 carries no bound (fixed by xhat_0)
+    out = Guess(x=V[ix].copy(), u=V[iu].copy(), lam=lg_[ig_dyn].copy(),
+                mu_g=lg_[ig_path].copy() if disc.ng else np.zeros((N, 0)),
+                mu_b=mu_b, mu_bN=lx_[ix[N]].copy(), mu_r=lg_[ig_r].copy(), nu=lg_[ig_eq].copy())
+    info = {
+        "objective": float(sol["f"]),
+        "x_N": out.x[N].copy(),
+        "status": stats.get("return_status", "unknown"),
+        "success": bool(stats.get("success", False)),
+        "iterations": int(stats.get("iter_count", -1)),
+    }
+    return out, info
