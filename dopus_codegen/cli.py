@@ -56,5 +56,51 @@ def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, b
                      json_out=json_out, plot_out=plot_out)
 
 
+@main.command()
+@click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Output folder (default: generated/<name> under the current directory). An existing "
+                   "folder is replaced only if dopus-gen generated it.")
+@click.option("--offline-guess/--no-offline-guess", default=None,
+              help="Solve the OCP with IPOPT at its initial state now and carry the primal-dual solution "
+                   "as static data (warm start in firmware). Default: the OCP file's options(offline_guess=...).")
+def generate(ocp_file, out_dir, offline_guess):
+    """Generate the C99 solver folder of OCP_FILE.
+
+    The folder holds the CasADi functions, sizes and problem data, the renamed runtime,
+    a Makefile (`make` builds lib<name>.a, lib<name>.so and main_<name>), a CMake
+    fragment and the cffi declarations. Generating twice gives identical bytes.
+    """
+    from .codegen import CodegenError, generate_file
+    from .ocp import OcpError
+
+    try:
+        path = generate_file(ocp_file, out_dir, offline_guess=offline_guess)
+    except (OcpError, CodegenError) as exc:
+        raise click.ClickException(str(exc)) from None
+    click.echo(f"generated {path}")
+
+
+@main.command()
+@click.argument("folder", type=click.Path(file_okay=False))
+@click.option("--cc", default="cc", show_default=True, help="C compiler.")
+@click.option("--opt", default="-O2", show_default=True, help="Optimisation flags (quoted if several).")
+@click.option("--force", is_flag=True, help="Rebuild even if the sources did not change.")
+def build(folder, cc, opt, force):
+    """Compile a generated FOLDER into build/py/lib<name>.so (cffi) and lib<name>.a (firmware).
+
+    Runtime and glue compile with -std=c99 -Wall -Wextra -Werror -pedantic, the CasADi file
+    with -std=c99 -Wall. Nothing is recompiled if sources, compiler and flags are unchanged.
+    """
+    from .build import BuildError, build as build_folder
+
+    try:
+        res = build_folder(folder, cc=cc, opt=opt, force=force)
+    except BuildError as exc:
+        raise click.ClickException(str(exc)) from None
+    state = "built" if res.rebuilt else "up to date"
+    click.echo(f"{state}: {res.shared_lib}\n{state}: {res.static_lib}\ncdef: {res.cdef_path}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -1,0 +1,523 @@
+"""Code generation: a ``Discretized`` problem -> one self-contained C99 folder.
+
+The folder holds (names after renaming ``dopus_`` -> ``<name>_``):
+
+- ``<name>_casadi.c/.h``: every per-stage CasADi function of docs/algorithm.md section 2,
+  emitted by one ``casadi.CodeGenerator`` with explicit options;
+- ``<name>_sizes.h``, ``<name>_problem.c``, ``<name>_funcs.c``: sizes, problem data and the
+  wrappers of ``runtime_c/dopus_funcs.h``, rendered from ``templates/*.j2``;
+- the hand-written ``runtime_c/*.c|*.h``, copied with the prefix renamed;
+- ``main_<name>.c``, ``Makefile``, ``<name>.cmake``, ``<name>_cdef.h`` (cffi declarations,
+  cut out of the renamed public header) and ``<name>_meta.json``.
+
+Generation is deterministic: everything is rendered in memory first (fixed order, floats
+at round-trip precision, no timestamps), so generating twice gives identical bytes.
+"""
+from __future__ import annotations
+
+import json
+import keyword
+import math
+import re
+import tempfile
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import casadi as ca
+import jinja2
+import numpy as np
+
+from . import __version__
+from .paths import runtime_c_dir, templates_dir
+
+PLACEHOLDER = "dopus"
+
+#: Compiler flags shared by the rendered Makefile and dopus_codegen.build.
+STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
+#: CasADi's generated code has unused parameters in its helpers, so it only gets -Wall.
+CASADI_CFLAGS = ("-std=c99", "-Wall")
+
+#: The functions of docs/algorithm.md section 2 in the order they are emitted, with the
+#: attribute of ``Discretized`` that holds them and whether they may be absent.
+FUNCTION_SLOTS = (
+    ("stage_eval", False),
+    ("stage_grad", False),
+    ("stage_hess_exact", False),
+    ("stage_hess_gn", True),
+    ("term_eval", False),
+    ("term_grad", False),
+    ("term_hess_exact", False),
+    ("term_hess_gn", False),
+    ("ode", False),
+)
+
+_C_KEYWORDS = frozenset(
+    "auto break case char const continue default do double else enum extern float for goto if "
+    "inline int long register restrict return short signed sizeof static struct switch typedef "
+    "union unsigned void volatile while _Bool _Complex _Imaginary main".split()
+)
+
+_HESSIAN_CODES = {"exact": 0, "gauss-newton": 1}
+_REGULARIZATION_CODES = {"none": 0, "project": 1, "mirror": 2}
+
+
+class CodegenError(ValueError):
+    """A problem cannot be generated; the message names the offending item."""
+
+
+# ----------------------------------------------------------------------------------------
+# small helpers
+
+
+def c_double(value: float, what: str = "value") -> str:
+    """A C double literal that reads back to exactly ``value`` (repr is round-trip)."""
+    v = float(value)
+    if math.isnan(v):
+        raise CodegenError(f"{what}: NaN cannot be generated")
+    if math.isinf(v):
+        return "INFINITY" if v > 0 else "-INFINITY"
+    return repr(v)
+
+
+def c_vector(values, size: int, what: str) -> str:
+    """``{a, b, ...}`` of a vector of ``size`` entries; an empty vector becomes ``{0.0}``
+    to match the DIM(n) >= 1 array sizes of dopus_problem.h."""
+    arr = np.asarray(values if values is not None else [], dtype=float).reshape(-1)
+    if arr.size != size:
+        raise CodegenError(f"{what}: expected {size} entries, got {arr.size}")
+    if size == 0:
+        return "{0.0}"
+    return "{" + ", ".join(c_double(v, f"{what}[{i}]") for i, v in enumerate(arr)) + "}"
+
+
+def c_matrix(values, rows: int, cols: int, what: str) -> List[str]:
+    """One ``{...}`` initialiser per row of a (rows, cols) array (row k = node k)."""
+    if values is None:
+        arr = np.zeros((rows, cols))
+    else:
+        arr = np.asarray(values, dtype=float)
+        if cols == 0 and arr.size == 0:
+            arr = np.zeros((rows, 0))
+        if arr.shape != (rows, cols):
+            raise CodegenError(f"{what}: expected shape ({rows}, {cols}), got {arr.shape}")
+    return [c_vector(arr[k], cols, f"{what}[{k}]") for k in range(rows)]
+
+
+def rename_placeholder(text: str, name: str) -> str:
+    """The textual renaming of the runtime: ``dopus_`` -> ``<name>_``, ``DOPUS_`` -> ``<NAME>_``
+    (one pass, so a problem name containing the placeholder is not renamed twice)."""
+    lower, upper = f"{name}_", f"{name.upper()}_"
+    return re.sub(r"dopus_|DOPUS_", lambda m: lower if m.group(0) == "dopus_" else upper, text)
+
+
+def check_name(name: Any) -> str:
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        raise CodegenError(f"problem name {name!r} is not a valid C identifier")
+    if name in _C_KEYWORDS or keyword.iskeyword(name):
+        raise CodegenError(f"problem name {name!r} is a reserved word")
+    return name
+
+
+def _option(options: Any, key: str, default: Any) -> Any:
+    if options is None:
+        return default
+    if isinstance(options, dict):
+        return options.get(key, default)
+    return getattr(options, key, default)
+
+
+def _attr(disc: Any, key: str) -> Any:
+    try:
+        return getattr(disc, key)
+    except AttributeError:
+        raise CodegenError(f"the discretized problem has no '{key}'") from None
+
+
+# ----------------------------------------------------------------------------------------
+# CasADi part
+
+
+def _expected_io(slot: str, s: Dict[str, int]) -> tuple:
+    """(input shapes, output shapes) of each function, docs/algorithm.md section 2."""
+    nx, nu, nw, np_, ng, nr, ne = (s[k] for k in ("nx", "nu", "nw", "np", "ng", "nr", "ne"))
+    stage_in = [(nx, 1), (nu, 1), (np_, 1)]
+    stage_in_dual = stage_in + [(nx, 1), (ng, 1)]
+    term_in = [(nx, 1), (np_, 1)]
+    term_in_dual = term_in + [(nr, 1), (ne, 1)]
+    table = {
+        "stage_eval": (stage_in, [(nx, 1), (1, 1), (ng, 1)]),
+        "stage_grad": (stage_in_dual, [(nw, 1), (nx, 1), (1, 1), (ng, 1)]),
+        "stage_hess_exact": (stage_in_dual, [(nw, nw), (nx, nw), (ng, nw)]),
+        "stage_hess_gn": (stage_in_dual, [(nw, nw), (nx, nw), (ng, nw)]),
+        "term_eval": (term_in, [(1, 1), (nr, 1), (ne, 1)]),
+        "term_grad": (term_in_dual, [(nx, 1), (1, 1), (nr, 1), (ne, 1)]),
+        "term_hess_exact": (term_in_dual, [(nx, nx), (nr, nx), (ne, nx)]),
+        "term_hess_gn": (term_in_dual, [(nx, nx), (nr, nx), (ne, nx)]),
+        "ode": (stage_in, [(nx, 1)]),
+    }
+    return table[slot]
+
+
+def _shape_ok(sp: ca.Sparsity, shape: tuple) -> bool:
+    rows, cols = shape
+    if rows * cols == 0:
+        return sp.numel() == 0
+    return (sp.size1(), sp.size2()) == shape or (cols == 1 and sp.numel() == rows and 1 in (sp.size1(), sp.size2()))
+
+
+def _check_function(fun: ca.Function, slot: str, name: str, sizes: Dict[str, int]) -> None:
+    want = f"{name}_{slot}"
+    if fun.name() != want:
+        raise CodegenError(f"function '{slot}' is named '{fun.name()}', expected '{want}'")
+    ins, outs = _expected_io(slot, sizes)
+    if fun.n_in() != len(ins) or fun.n_out() != len(outs):
+        raise CodegenError(f"function '{want}': expected {len(ins)} inputs and {len(outs)} outputs, "
+                           f"got {fun.n_in()} and {fun.n_out()}")
+    for kind, shapes, get in (("input", ins, fun.sparsity_in), ("output", outs, fun.sparsity_out)):
+        for i, shape in enumerate(shapes):
+            sp = get(i)
+            if not _shape_ok(sp, shape):
+                raise CodegenError(f"function '{want}': {kind} {i} has shape {sp.size1()}x{sp.size2()}, "
+                                   f"expected {shape[0]}x{shape[1]}")
+            if kind == "output" and sp.numel() > 0 and not sp.is_dense():
+                raise CodegenError(f"function '{want}': output {i} is not dense (the C glue reads "
+                                   "dense column-major blocks)")
+
+
+def _with_cse(fun: ca.Function) -> ca.Function:
+    """The same function as an SX function with common subexpression elimination on
+    (CasADi's Function option 'cse'; CodeGenerator has no such option)."""
+    sx = fun if fun.is_a("SXFunction") else fun.expand()
+    args = sx.sx_in()
+    return ca.Function(sx.name(), args, sx.call(args), sx.name_in(), sx.name_out(), {"cse": True})
+
+
+def casadi_functions(disc: Any, name: str, sizes: Dict[str, int]) -> Dict[str, ca.Function]:
+    """The functions to emit, checked against docs/algorithm.md section 2, in emit order."""
+    out: Dict[str, ca.Function] = {}
+    for slot, optional in FUNCTION_SLOTS:
+        fun = getattr(disc, slot, None)
+        if fun is None:
+            if optional:
+                continue
+            raise CodegenError(f"the discretized problem has no function '{slot}'")
+        if not isinstance(fun, ca.Function):
+            raise CodegenError(f"'{slot}' is not a casadi.Function")
+        _check_function(fun, slot, name, sizes)
+        out[slot] = _with_cse(fun)
+    return out
+
+
+def casadi_sources(functions: Dict[str, ca.Function], name: str) -> Dict[str, str]:
+    """``<name>_casadi.c`` and ``.h`` from one CodeGenerator with explicit options."""
+    opts = {"casadi_int": "int", "casadi_real": "double", "mex": False, "with_header": True,
+            "verbose": False, "main": False, "cpp": False, "with_mem": False}
+    base = f"{name}_casadi"
+    cg = ca.CodeGenerator(base, opts)
+    for fun in functions.values():
+        cg.add(fun)
+    with tempfile.TemporaryDirectory(prefix="dopus_cg_") as tmp:
+        cg.generate(str(Path(tmp)) + "/")
+        return {f"{base}.c": (Path(tmp) / f"{base}.c").read_text(),
+                f"{base}.h": (Path(tmp) / f"{base}.h").read_text()}
+
+
+def work_sizes(functions: Dict[str, ca.Function]) -> Dict[str, int]:
+    """SZ_ARG/RES/IW/W: the max over every emitted function, at least 1 (C99 arrays)."""
+    return {
+        "sz_arg": max([1] + [int(f.sz_arg()) for f in functions.values()]),
+        "sz_res": max([1] + [int(f.sz_res()) for f in functions.values()]),
+        "sz_iw": max([1] + [int(f.sz_iw()) for f in functions.values()]),
+        "sz_w": max([1] + [int(f.sz_w()) for f in functions.values()]),
+    }
+
+
+# ----------------------------------------------------------------------------------------
+# problem data
+
+
+def problem_sizes(disc: Any) -> Dict[str, int]:
+    sizes = {k: int(_attr(disc, k)) for k in ("N", "nx", "nu", "nw", "np", "ng", "nr", "ne")}
+    if sizes["N"] < 1 or sizes["nx"] < 1 or sizes["nu"] < 1:
+        raise CodegenError(f"sizes N={sizes['N']}, nx={sizes['nx']}, nu={sizes['nu']} must be >= 1")
+    if sizes["nw"] != sizes["nx"] + sizes["nu"]:
+        raise CodegenError(f"nw={sizes['nw']} is not nx + nu = {sizes['nx'] + sizes['nu']}")
+    for k in ("np", "ng", "nr", "ne"):
+        if sizes[k] < 0:
+            raise CodegenError(f"size {k}={sizes[k]} is negative")
+    return sizes
+
+
+def _default_parameters(disc: Any, s: Dict[str, int]) -> np.ndarray:
+    """The one default parameter vector of dopus_problem.h (every node)."""
+    p0 = _attr(disc, "p0")
+    arr = np.asarray(p0 if p0 is not None else np.zeros((s["N"] + 1, s["np"])), dtype=float)
+    if s["np"] == 0:
+        return np.zeros(0)
+    if arr.ndim == 1:
+        arr = np.tile(arr, (s["N"] + 1, 1))
+    if arr.shape != (s["N"] + 1, s["np"]):
+        raise CodegenError(f"p0: expected shape ({s['N'] + 1}, {s['np']}), got {arr.shape}")
+    if not np.array_equal(arr, np.tile(arr[0], (s["N"] + 1, 1))):
+        raise CodegenError("p0: the default parameters differ between nodes; the generated data "
+                           "carries one default vector for every node (set per-node values at run time)")
+    return arr[0]
+
+
+def _code(table: Dict[str, int], value: Any, what: str) -> int:
+    if value not in table:
+        raise CodegenError(f"option {what}={value!r} is not one of {sorted(table)}")
+    return table[value]
+
+
+def problem_context(disc: Any, s: Dict[str, int], nominal: Any) -> Dict[str, Any]:
+    """Everything dopus_problem.c renders, pre-formatted (the template only places it)."""
+    N, nx, nu, nw = s["N"], s["nx"], s["nu"], s["nw"]
+    options = getattr(disc, "options", None)
+    guess = _attr(disc, "initial_guess")
+    ctx: Dict[str, Any] = {
+        "lbx": c_vector(_attr(disc, "lbx"), nx, "lbx"),
+        "ubx": c_vector(_attr(disc, "ubx"), nx, "ubx"),
+        "lbu": c_vector(_attr(disc, "lbu"), nu, "lbu"),
+        "ubu": c_vector(_attr(disc, "ubu"), nu, "ubu"),
+        "lg": c_vector(_attr(disc, "lg"), s["ng"], "lg"),
+        "ug": c_vector(_attr(disc, "ug"), s["ng"], "ug"),
+        "lr": c_vector(_attr(disc, "lr"), s["nr"], "lr"),
+        "ur": c_vector(_attr(disc, "ur"), s["nr"], "ur"),
+        "p_default": c_vector(_default_parameters(disc, s), s["np"], "p0"),
+        "dt": c_double(_attr(disc, "dt"), "dt"),
+        "x0_default": c_vector(_attr(disc, "x0"), nx, "x0"),
+        "guess_x": c_matrix(getattr(guess, "x", None), N + 1, nx, "initial_guess.x"),
+        "guess_u": c_matrix(getattr(guess, "u", None), N, nu, "initial_guess.u"),
+        "default_M": int(_option(options, "M", 1)),
+        "default_hessian": _code(_HESSIAN_CODES, _option(options, "hessian", "exact"), "hessian"),
+        "default_regularization": _code(_REGULARIZATION_CODES,
+                                        _option(options, "regularization", "none"), "regularization"),
+        "default_reg_eps": c_double(_option(options, "reg_eps", 1e-4), "reg_eps"),
+        "has_nominal": nominal is not None,
+    }
+    if getattr(guess, "x", None) is None or getattr(guess, "u", None) is None:
+        raise CodegenError("initial_guess: x and u are required")
+    if nominal is not None:
+        dim = lambda n: max(n, 1)  # noqa: E731  (DOPUS_DIM of the header)
+        ctx.update({
+            "nominal_x": c_matrix(nominal.x, N + 1, nx, "nominal.x"),
+            "nominal_u": c_matrix(nominal.u, N, nu, "nominal.u"),
+            "nominal_lam": c_matrix(nominal.lam, N + 1, nx, "nominal.lam"),
+            "nominal_mu_g": c_matrix(_pad(nominal.mu_g, N, s["ng"]), N, dim(s["ng"]), "nominal.mu_g"),
+            "nominal_mu_b": c_matrix(nominal.mu_b, N, nw, "nominal.mu_b"),
+            "nominal_mu_bN": c_vector(_zeros_if_none(nominal.mu_bN, nx), nx, "nominal.mu_bN"),
+            "nominal_mu_r": c_vector(_pad_vec(nominal.mu_r, s["nr"]), dim(s["nr"]), "nominal.mu_r"),
+            "nominal_nu": c_vector(_pad_vec(nominal.nu, s["ne"]), dim(s["ne"]), "nominal.nu"),
+        })
+    return ctx
+
+
+def _zeros_if_none(v, n):
+    return np.zeros(n) if v is None else v
+
+
+def _pad_vec(v, n):
+    """An (n,) vector, as the DIM(n) >= 1 array of the header (a zero for n == 0)."""
+    arr = np.zeros(n) if v is None else np.asarray(v, dtype=float).reshape(-1)
+    return arr if n > 0 else np.zeros(1)
+
+
+def _pad(v, rows, cols):
+    arr = np.zeros((rows, cols)) if v is None else np.asarray(v, dtype=float).reshape(rows, cols)
+    return arr if cols > 0 else np.zeros((rows, 1))
+
+
+# ----------------------------------------------------------------------------------------
+# the folder
+
+
+def _templates() -> jinja2.Environment:
+    return jinja2.Environment(
+        loader=jinja2.FileSystemLoader(str(templates_dir())),
+        undefined=jinja2.StrictUndefined,
+        keep_trailing_newline=True,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        autoescape=False,
+    )
+
+
+def runtime_sources(name: str) -> Dict[str, str]:
+    """runtime_c/*.c|*.h with the prefix renamed, in file names and contents."""
+    root = runtime_c_dir()
+    out: Dict[str, str] = {}
+    for path in sorted(list(root.glob("*.c")) + list(root.glob("*.h"))):
+        out[rename_placeholder(path.name, name)] = rename_placeholder(path.read_text(), name)
+    if f"{name}_solver.h" not in out:
+        raise CodegenError(f"the runtime has no public header dopus_solver.h in {root}")
+    return out
+
+
+def extract_cdef(header_text: str, name: str, header_name: str) -> str:
+    """The cffi declarations: the lines between the CDEF marker lines of the public header."""
+    begin, end = f"/* {name.upper()}_CDEF_BEGIN */", f"/* {name.upper()}_CDEF_END */"
+    lines = header_text.splitlines()
+    stripped = [ln.strip() for ln in lines]
+    if stripped.count(begin) != 1 or stripped.count(end) != 1:
+        raise CodegenError(f"{header_name}: expected exactly one '{begin}' and one '{end}' line")
+    i, j = stripped.index(begin), stripped.index(end)
+    if j < i:
+        raise CodegenError(f"{header_name}: '{end}' comes before '{begin}'")
+    return "\n".join(lines[i + 1:j]).strip("\n") + "\n"
+
+
+def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
+    """Every file of the generated folder, as {file name: text}, without touching the disk."""
+    name = check_name(_attr(disc, "name"))
+    NAME = name.upper()
+    s = problem_sizes(disc)
+    functions = casadi_functions(disc, name, s)
+    files: Dict[str, str] = {}
+    files.update(casadi_sources(functions, name))
+    files.update(runtime_sources(name))
+
+    header = (f"Generated by dopus-gen {__version__} with CasADi {ca.__version__} "
+              f"for the problem '{name}'. Do not edit: regenerate with dopus-gen generate.")
+    has_gn = "stage_hess_gn" in functions
+    main_file = f"main_{name}.c"
+    ctx: Dict[str, Any] = {
+        "name": name, "NAME": NAME, "header": header, "casadi_version": ca.__version__,
+        "has_gn": int(has_gn), "sizes": s, "work": work_sizes(functions), "main_file": main_file,
+        "strict_cflags": " ".join(STRICT_CFLAGS), "casadi_cflags": " ".join(CASADI_CFLAGS),
+    }
+    ctx.update(problem_context(disc, s, nominal))
+    ctx["has_nominal"] = int(ctx["has_nominal"])
+
+    env = _templates()
+    rendered = {
+        f"{name}_sizes.h": "sizes.h.j2",
+        f"{name}_problem.c": "problem.c.j2",
+        f"{name}_funcs.c": "funcs.c.j2",
+        main_file: "main.c.j2",
+    }
+    for fname, tname in rendered.items():
+        files[fname] = env.get_template(tname).render(**ctx)
+
+    cdef = extract_cdef(files[f"{name}_solver.h"], name, f"{name}_solver.h")
+    files[f"{name}_cdef.h"] = f"/* {header} */\n/* cffi declarations cut from {name}_solver.h */\n" + cdef
+
+    c_sources = sorted(f for f in files if f.endswith(".c") and f != main_file)
+    headers = sorted(f for f in files if f.endswith(".h") and f != f"{name}_cdef.h")
+    build_ctx = dict(ctx, casadi_source=f"{name}_casadi.c",
+                     strict_sources=[f for f in c_sources if f != f"{name}_casadi.c"],
+                     lib_sources=c_sources, headers=headers)
+    files["Makefile"] = env.get_template("Makefile.j2").render(**build_ctx)
+    files[f"{name}.cmake"] = env.get_template("cmake.j2").render(**build_ctx)
+
+    meta_file = f"{name}_meta.json"
+    meta = {
+        "generator": "dopus-gen",
+        "dopus_codegen_version": __version__,
+        "casadi_version": ca.__version__,
+        "name": name,
+        "sizes": s,
+        "work": ctx["work"],
+        "has_gn": bool(has_gn),
+        "has_nominal": bool(ctx["has_nominal"]),
+        "state_names": list(getattr(disc, "state_names", []) or []),
+        "control_names": list(getattr(disc, "control_names", []) or []),
+        "files": sorted(list(files) + [meta_file]),
+        "sources": {"strict": build_ctx["strict_sources"], "casadi": f"{name}_casadi.c", "main": main_file},
+        "cdef": f"{name}_cdef.h",
+    }
+    files[meta_file] = json.dumps(meta, indent=2, sort_keys=True) + "\n"
+    return files
+
+
+def find_meta(out_dir: Path) -> Optional[Path]:
+    """The ``*_meta.json`` written by dopus-gen in a folder, or None."""
+    for path in sorted(Path(out_dir).glob("*_meta.json")):
+        try:
+            meta = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(meta, dict) and meta.get("generator") == "dopus-gen" and \
+                path.name == f"{meta.get('name')}_meta.json":
+            return path
+    return None
+
+
+def read_meta(out_dir: Path) -> Dict[str, Any]:
+    """The meta data of a generated folder; CodegenError if the folder is not one."""
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        raise CodegenError(f"'{out_dir}' is not a directory")
+    path = find_meta(out_dir)
+    if path is None:
+        raise CodegenError(f"'{out_dir}' is not a folder generated by dopus-gen (no <name>_meta.json)")
+    return json.loads(path.read_text())
+
+
+def write_folder(files: Dict[str, str], out_dir: Path) -> Path:
+    """Write the files; replace a previous generation, refuse to overwrite anything else."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise CodegenError(f"output '{out_dir}' exists and is not a directory")
+    if out_dir.is_dir():
+        meta_path = find_meta(out_dir)
+        if meta_path is not None:
+            old = json.loads(meta_path.read_text()).get("files", [])
+            for fname in old:
+                p = out_dir / fname
+                if p.is_file() and p.parent == out_dir:
+                    p.unlink()
+        else:
+            foreign = sorted(p.name for p in out_dir.iterdir() if p.name != "build")
+            if foreign:
+                raise CodegenError(f"output folder '{out_dir}' is not empty and was not generated by "
+                                   f"dopus-gen (found {', '.join(foreign[:5])}); choose another folder")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for fname in sorted(files):
+        with open(out_dir / fname, "w", encoding="utf-8", newline="\n") as fh:
+            fh.write(files[fname])
+    return out_dir
+
+
+def generate(disc: Any, out_dir, *, offline_guess: Optional[bool] = None) -> Path:
+    """Generate the C folder of ``disc`` into ``out_dir`` and return its path.
+
+    ``offline_guess`` overrides the OCP option of the same name: when on, the OCP is solved
+    with IPOPT at its default x0 and the primal-dual solution becomes static data
+    (DOPUS_HAS_NOMINAL 1), so firmware can start warm (``dopus_init_nominal``).
+    """
+    want_nominal = _option(getattr(disc, "options", None), "offline_guess", False) \
+        if offline_guess is None else bool(offline_guess)
+    nominal = None
+    if want_nominal:
+        from .offline import solve_ocp
+
+        nominal, info = solve_ocp(disc, np.asarray(_attr(disc, "x0"), dtype=float))
+        _check_offline(info)
+    files = render_folder(disc, nominal)
+    return write_folder(files, Path(out_dir))
+
+
+def _check_offline(info: Any) -> None:
+    success = _option(info, "success", None)
+    status = _option(info, "status", None)
+    if success is False or (success is None and status is not None
+                            and str(status) not in ("Solve_Succeeded", "0")):
+        raise CodegenError(f"offline_guess: the IPOPT solve at x0 did not converge (status {status!r}); "
+                           "the nominal guess would not be a solution")
+
+
+def generate_file(ocp_file, out_dir=None, *, offline_guess: Optional[bool] = None) -> Path:
+    """``dopus-gen generate``: load the OCP file, discretise, generate (default generated/<name>)."""
+    from .derivatives import build_functions
+    from .ocp import load_ocp
+
+    ocp = load_ocp(ocp_file)
+    disc = build_functions(ocp)
+    if out_dir is None:
+        out_dir = Path("generated") / check_name(_attr(disc, "name"))
+    return generate(disc, out_dir, offline_guess=offline_guess)
+
+
+__all__ = ["CodegenError", "generate", "generate_file", "render_folder", "read_meta", "find_meta",
+           "rename_placeholder", "c_double", "STRICT_CFLAGS", "CASADI_CFLAGS"]
