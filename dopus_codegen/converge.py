@@ -1,0 +1,291 @@
+"""Fixed-xhat_0 convergence study (the paper's figure 1) and the ``dopus-gen converge`` verb.
+
+For every ``M`` in a list the study runs the DOPUS iteration in fixed mode
+(docs/algorithm.md section 4): ``init(xhat_init, guess)``, then ``iters`` times
+``feedback(xhat_fixed); prepare()``, recording the KKT measure (section 6) of the
+iterate before the first and after every iteration.
+
+Starts:
+
+- ``cold``: the OCP file's initial guess at its initial state, ``xhat_fixed`` = the
+  initial state;
+- ``warm``: the offline IPOPT solution at the initial state (every block computed
+  there, multipliers included), ``xhat_fixed`` = the OCP's disturbance map applied to
+  the initial state.
+
+JSON written by :func:`run_study`::
+
+    {"problem": name, "N": N, "backend": "reference" | "c", "start": "cold" | "warm",
+     "hessian": ..., "regularization": ..., "reg_eps": ...,
+     "runs": [{"M": M, "kkt": [...], "stat": [...], "eq": [...], "ineq": [...], "comp": [...],
+               "status": "ok" | message}, ...],
+     "solution": {"x": [[...]], "u": [[...]], "objective": J}}
+
+``kkt[i]`` is the measure after ``i`` iterations (``kkt[0]``: the initial point with
+``xhat_fixed``); a run that fails stops early and says why in ``status``; non-finite
+numbers (a diverged run) are written as ``null``. ``solution``
+is the last iterate of the full-RTI run (``M = N-1``; if the list has no full run, of
+the run with the largest ``M``).
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+
+__all__ = ["StartPoint", "make_start", "run_study", "run_converge_cli", "backend_factory",
+           "iterations_to", "objective"]
+
+
+@dataclass
+class StartPoint:
+    """Where a convergence run starts: ``init(xhat_init, guess)``, then iterate for ``xhat_fixed``."""
+    label: str
+    xhat_init: np.ndarray
+    guess: object
+    xhat_fixed: np.ndarray
+
+
+def make_start(disc, start: str, solve_ocp: Optional[Callable] = None) -> StartPoint:
+    """The ``cold`` or ``warm`` start of the module docstring.
+
+    ``solve_ocp`` (default :func:`dopus_codegen.offline.solve_ocp`) is called as
+    ``solve_ocp(disc, xhat0) -> (Guess, info)`` for the warm start.
+    """
+    x0 = np.array(disc.x0, dtype=float)
+    if start == "cold":
+        return StartPoint("cold", x0, disc.initial_guess, x0.copy())
+    if start == "warm":
+        if disc.disturbance is None:
+            raise ValueError(f"{disc.name}: --start warm needs a disturbance map "
+                             f"(ocp.disturbance(fn) in the OCP file)")
+        try:
+            xf = np.array(disc.disturbance(x0.copy()), dtype=float).reshape(-1)
+        except Exception as exc:  # noqa: BLE001 - user code
+            raise ValueError(f"{disc.name}: the disturbance map failed on the initial state: "
+                             f"{type(exc).__name__}: {exc}") from None
+        if xf.size != disc.nx or not np.all(np.isfinite(xf)):
+            raise ValueError(f"{disc.name}: the disturbance map must return {disc.nx} finite numbers, "
+                             f"got {xf}")
+        if solve_ocp is None:
+            from .offline import solve_ocp
+        guess, info = solve_ocp(disc, x0)
+        if not info.get("success", False):
+            raise ValueError(f"{disc.name}: IPOPT did not solve the OCP at the initial state "
+                             f"({info.get('status', 'unknown status')}); the warm start needs its solution")
+        return StartPoint("warm", x0, guess, xf)
+    raise ValueError(f"start must be 'cold' or 'warm', got {start!r}")
+
+
+def backend_factory(backend: str) -> Callable:
+    """The class implementing the backend protocol (docs/algorithm.md section 7)."""
+    if backend == "reference":
+        from .reference import ReferenceDopus
+        return ReferenceDopus
+    if backend == "c":
+        try:
+            from .solver import CSolver
+        except ImportError as exc:
+            raise RuntimeError(f"backend 'c' is not available: dopus_codegen.solver.CSolver cannot be "
+                               f"imported ({exc})") from None
+        return CSolver
+    raise ValueError(f"backend must be 'reference' or 'c', got {backend!r}")
+
+
+def _resolve_M(m, N: int) -> int:
+    if m == "full":
+        return N - 1
+    if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 0:
+        raise ValueError(f"M must be a non-negative integer or 'full', got {m!r}")
+    if m > N - 1:
+        raise ValueError(f"M = {m} exceeds N-1 = {N - 1} (use 'full' for the full RTI)")
+    return int(m)
+
+
+def objective(disc, x, u, p=None) -> float:
+    """``sum_k l_k + E`` at the primal point (exact functions)."""
+    from .kkt import eval_stages, node_parameters
+
+    P = node_parameters(disc, p)
+    N = disc.N
+    _phi, l, _g = eval_stages(disc.stage_eval, N, np.asarray(x)[:N], u, P[:N])
+    E = float(np.array(disc.term_eval(np.asarray(x)[N], P[N])[0]).reshape(-1)[0])
+    return float(np.sum(l)) + E
+
+
+def iterations_to(kkt: list, tol: float) -> Optional[int]:
+    """First iteration whose KKT is ``<= tol`` (None if never)."""
+    for i, v in enumerate(kkt):
+        if v <= tol:
+            return i
+    return None
+
+
+def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regularization: str = "none",
+              reg_eps: float = 1e-4, backend_factory: Optional[Callable] = None,
+              backend_name: Optional[str] = None, progress: Optional[Callable] = None) -> dict:
+    """Run the study; return the JSON structure of the module docstring.
+
+    ``start``: a :class:`StartPoint` or ``"cold"`` / ``"warm"`` (see :func:`make_start`).
+    ``backend_factory(disc, M=, mode="fixed", hessian=, regularization=, reg_eps=)`` builds a
+    backend (default: :class:`~dopus_codegen.reference.ReferenceDopus`).
+    ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
+    """
+    from .reference import DopusError, ReferenceDopus
+
+    if isinstance(start, str):
+        start = make_start(disc, start)
+    if backend_factory is None:
+        backend_factory = ReferenceDopus
+        backend_name = backend_name or "reference"
+    if isinstance(iters, bool) or not isinstance(iters, (int, np.integer)) or iters < 1:
+        raise ValueError(f"iters must be a positive integer, got {iters!r}")
+    Ms = [_resolve_M(m, disc.N) for m in m_list]
+    if not Ms:
+        raise ValueError("the list of M values is empty")
+    runs = []
+    last_iterates = {}
+    for run_index, M in enumerate(Ms):
+        be = backend_factory(disc, M=M, mode="fixed", hessian=hessian, regularization=regularization,
+                             reg_eps=reg_eps)
+        rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "status": "ok"}
+
+        def record():
+            k = be.kkt(start.xhat_fixed)
+            for key in ("kkt", "stat", "eq", "ineq", "comp"):
+                rec[key].append(float(k[key]))
+            return k["kkt"]
+
+        try:
+            be.init(start.xhat_init, start.guess)
+            record()
+            for it in range(1, iters + 1):
+                be.feedback(start.xhat_fixed)
+                be.prepare()
+                val = record()
+                if progress is not None:
+                    progress(run_index, M, it, val)
+                if not math.isfinite(val):
+                    rec["status"] = f"non-finite KKT at iteration {it}"
+                    break
+        except DopusError as exc:
+            rec["status"] = f"stopped at iteration {len(rec['kkt'])}: {exc} (status {exc.status})"
+            if progress is not None:
+                progress(run_index, M, iters, float("nan"))
+        runs.append(rec)
+        last_iterates[M] = (np.array(be.x, dtype=float), np.array(be.u, dtype=float))
+    Msol = disc.N - 1 if disc.N - 1 in last_iterates else max(last_iterates)
+    xs, us = last_iterates[Msol]
+    try:
+        obj = objective(disc, xs, us)
+    except Exception:  # noqa: BLE001 - a diverged iterate may not evaluate
+        obj = float("nan")
+    return {
+        "problem": disc.name, "N": int(disc.N), "backend": backend_name or getattr(backend_factory, "__name__", "custom"),
+        "start": start.label, "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
+        "runs": runs,
+        "solution": {"M": int(Msol), "x": xs.tolist(), "u": us.tolist(), "objective": obj},
+    }
+
+
+def _json_safe(obj):
+    """Strict JSON: non-finite floats (a diverged run) become null."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    return obj
+
+
+def format_table(study: dict, tol: float = 1e-8) -> str:
+    """Plain-text summary: per M the iterations to ``tol`` and the last KKT."""
+    N = study["N"]
+    lines = [f"{study['problem']}: {study['start']} start, {study['hessian']} Hessian, "
+             f"regularization {study['regularization']}, backend {study['backend']}",
+             f"{'M':>8} {'iters to %.0e' % tol:>14} {'last KKT':>10}  status"]
+    for r in study["runs"]:
+        it = iterations_to(r["kkt"], tol)
+        label = f"{r['M']} (full)" if r["M"] == N - 1 else str(r["M"])
+        last = r["kkt"][-1] if r["kkt"] else float("nan")
+        lines.append(f"{label:>8} {('-' if it is None else str(it)):>14} {last:10.2e}  {r['status']}")
+    return "\n".join(lines)
+
+
+def plot_study(study: dict, path: str) -> None:
+    """KKT against iteration, log scale, one curve per M."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    N = study["N"]
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for r in study["runs"]:
+        kk = np.maximum(np.array(r["kkt"], dtype=float), 1e-16)  # exact zeros cannot be drawn on a log axis
+        label = f"M = {r['M']} (full RTI)" if r["M"] == N - 1 else f"M = {r['M']}"
+        ax.semilogy(np.arange(kk.size), kk, marker="o", markersize=3, label=label)
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("KKT measure (inf-norm)")
+    ax.set_title(f"{study['problem']}: DOPUS convergence, {study['start']} start, {study['hessian']} Hessian")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, backend,
+                     json_out=None, plot_out=None) -> dict:
+    """The body of ``dopus-gen converge`` (errors become click exceptions)."""
+    import click
+
+    from .derivatives import build_functions
+    from .ocp import OcpError, load_ocp
+
+    try:
+        factory = backend_factory(backend)
+        disc = build_functions(load_ocp(ocp_file))
+        if hessian == "gauss-newton" and disc.stage_hess_gn is None:
+            raise ValueError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
+                             f"(ocp.stage_least_squares)")
+        Ms = [_resolve_M(m, disc.N) for m in m_list]
+        if not math.isfinite(reg_eps) or reg_eps <= 0:
+            raise ValueError(f"--reg-eps must be positive and finite, got {reg_eps}")
+        click.echo(f"{disc.name}: preparing the {start} start ...", err=True)
+        sp = make_start(disc, start)
+    except (OcpError, ValueError, RuntimeError) as exc:
+        raise click.ClickException(str(exc)) from None
+
+    total = len(Ms) * iters
+    with click.progressbar(length=total, label="DOPUS iterations", file=sys.stderr,
+                           show_pos=True) as bar:
+        done = {"n": 0}
+
+        def progress(run_index, M, it, kkt):
+            # a run that stops early jumps to its end
+            target = run_index * iters + it
+            if target > done["n"]:
+                bar.update(target - done["n"])
+                done["n"] = target
+
+        try:
+            study = run_study(disc, Ms, iters, sp, hessian=hessian, regularization=regularization,
+                              reg_eps=reg_eps, backend_factory=factory, backend_name=backend,
+                              progress=progress)
+        except (ValueError, RuntimeError) as exc:
+            raise click.ClickException(str(exc)) from None
+    click.echo(format_table(study))
+    if json_out:
+        with open(json_out, "w") as fh:
+            json.dump(_json_safe(study), fh, indent=1, allow_nan=False)
+        click.echo(f"wrote {json_out}", err=True)
+    if plot_out:
+        plot_study(study, plot_out)
+        click.echo(f"wrote {plot_out}", err=True)
+    return study
