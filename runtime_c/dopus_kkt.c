@@ -1,0 +1,115 @@
+/* KKT measure (docs/algorithm.md section 6). */
+#include <math.h>
+
+#include "dopus_kkt.h"
+#include "dopus_problem.h"
+#include "dopus_solver.h"
+
+static double dopus_kkt_max(double a, double b)
+{
+    return a > b ? a : b;
+}
+
+/* Violation max(0, v - ub, lb - v) of one row. */
+static double dopus_kkt_viol(double v, double lb, double ub)
+{
+    return dopus_kkt_max(0.0, dopus_kkt_max(v - ub, lb - v));
+}
+
+/* Complementarity of a signed multiplier mu of the row lb <= v <= ub:
+ * max(mu,0) |ub - v| and max(-mu,0) |v - lb|; a nonzero multiplier on an infinite side
+ * contributes |mu|. */
+static double dopus_kkt_comp(double mu, double v, double lb, double ub)
+{
+    double c = 0.0;
+    if (mu > 0.0) {
+        c = isinf(ub) ? mu : mu * fabs(ub - v);
+    } else if (mu < 0.0) {
+        c = isinf(lb) ? -mu : -mu * fabs(v - lb);
+    }
+    return c;
+}
+
+static int dopus_kkt_finite(const double *v, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        if (!isfinite(v[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts)
+{
+    double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
+    double gL[DOPUS_NW], phi[DOPUS_NX], g[DOPUS_DIM(DOPUS_NG)], l;
+    double gLN[DOPUS_NX], E, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
+    int k, i;
+
+    for (i = 0; i < DOPUS_NX; ++i) {
+        eq = dopus_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
+    }
+    for (k = 0; k < DOPUS_N; ++k) {
+        if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
+                                  &l, g, &s->fun_work) != 0) {
+            return DOPUS_ERR_FUNCTION;
+        }
+        if (!dopus_kkt_finite(gL, DOPUS_NW) || !dopus_kkt_finite(phi, DOPUS_NX) ||
+            !dopus_kkt_finite(g, DOPUS_NG) || !isfinite(l)) {
+            return DOPUS_ERR_NONFINITE_VALUE;
+        }
+        /* stationarity gL_k + mu_b_k + [lam_k; 0] */
+        for (i = 0; i < DOPUS_NW; ++i) {
+            double v = gL[i] + s->mu_b[k][i] + (i < DOPUS_NX ? s->lam[k][i] : 0.0);
+            stat = dopus_kkt_max(stat, fabs(v));
+        }
+        for (i = 0; i < DOPUS_NX; ++i) {
+            eq = dopus_kkt_max(eq, fabs(s->x[k + 1][i] - phi[i]));
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            ineq = dopus_kkt_max(ineq, dopus_kkt_viol(g[i], dopus_lg[i], dopus_ug[i]));
+            comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_g[k][i], g[i], dopus_lg[i], dopus_ug[i]));
+        }
+        /* simple bounds: x_k only for k >= 1 (x_0 is fixed by xhat0) */
+        if (k >= 1) {
+            for (i = 0; i < DOPUS_NX; ++i) {
+                ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->x[k][i], dopus_lbx[i], dopus_ubx[i]));
+                comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_b[k][i], s->x[k][i], dopus_lbx[i],
+                                                          dopus_ubx[i]));
+            }
+        }
+        for (i = 0; i < DOPUS_NU; ++i) {
+            ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->u[k][i], dopus_lbu[i], dopus_ubu[i]));
+            comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_b[k][DOPUS_NX + i], s->u[k][i],
+                                                      dopus_lbu[i], dopus_ubu[i]));
+        }
+    }
+    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
+                             &s->fun_work) != 0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    if (!dopus_kkt_finite(gLN, DOPUS_NX) || !isfinite(E) || !dopus_kkt_finite(r, DOPUS_NR) ||
+        !dopus_kkt_finite(r_eq, DOPUS_NE)) {
+        return DOPUS_ERR_NONFINITE_VALUE;
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        stat = dopus_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]));
+        ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->x[DOPUS_N][i], dopus_lbx[i], dopus_ubx[i]));
+        comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_bN[i], s->x[DOPUS_N][i], dopus_lbx[i],
+                                                  dopus_ubx[i]));
+    }
+    for (i = 0; i < DOPUS_NE; ++i) {
+        eq = dopus_kkt_max(eq, fabs(r_eq[i]));
+    }
+    for (i = 0; i < DOPUS_NR; ++i) {
+        ineq = dopus_kkt_max(ineq, dopus_kkt_viol(r[i], dopus_lr[i], dopus_ur[i]));
+        comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_r[i], r[i], dopus_lr[i], dopus_ur[i]));
+    }
+    parts[0] = stat;
+    parts[1] = eq;
+    parts[2] = ineq;
+    parts[3] = comp;
+    return DOPUS_OK;
+}

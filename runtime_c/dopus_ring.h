@@ -1,0 +1,59 @@
+/* The ring buffer of stage slots (DESIGN.md section 5, docs/algorithm.md section 4).
+ *
+ * Stage k lives in slot (ring_head + k) mod N. The receding-horizon shift advances
+ * ring_head, so the sensitivities of stage k+1 become those of stage k without a copy and
+ * the slot that falls off the front becomes the new last stage. The QP reads Ht, Phit, Ct
+ * in place through per-stage pointer tables.
+ */
+#ifndef DOPUS_RING_H
+#define DOPUS_RING_H
+
+#include "dopus_sizes.h"
+
+typedef struct {
+    /* the blocks the QP uses (possibly outdated, A regularised), column-major */
+    double Ht[DOPUS_NW * DOPUS_NW];            /* nw x nw */
+    double Phit[DOPUS_NX * DOPUS_NW];          /* nx x nw, [A_k B_k] */
+    double Ct[DOPUS_DIM(DOPUS_NG) * DOPUS_NW]; /* ng x nw */
+    /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
+    double F_w[DOPUS_NW];
+    double phi[DOPUS_NX];
+    double g[DOPUS_DIM(DOPUS_NG)];
+    /* domega = (dw, dlam_next, dmu_g, dmu_b): the last QP step of this stage */
+    double dw[DOPUS_NW];
+    double dlam[DOPUS_NX];
+    double dmu_g[DOPUS_DIM(DOPUS_NG)];
+    double dmu_b[DOPUS_NW];
+} dopus_stage_slot;
+
+typedef struct {
+    dopus_stage_slot slot[DOPUS_N];
+    int ring_head;
+} dopus_ring;
+
+/* head = 0, every slot zero. */
+void dopus_ring_reset(dopus_ring *ring);
+
+/* The slot of stage k (0 <= k < N). */
+dopus_stage_slot *dopus_ring_stage(dopus_ring *ring, int k);
+const dopus_stage_slot *dopus_ring_stage_const(const dopus_ring *ring, int k);
+
+/* One sampling interval: ring_head <- (ring_head + 1) mod N. */
+void dopus_ring_advance(dopus_ring *ring);
+
+/* Zero the step domega of a slot. */
+void dopus_ring_clear_step(dopus_stage_slot *slot);
+
+/* Secant criterion rho_k (eq. 16) of the slot against the fresh F_new = (F_w, phi, g):
+ *   num = | [F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new ;
+ *            -(phi_old + Phit dw) + phi_new ;
+ *            g_old + Ct dw - g_new] |
+ *   rho = num / |(dw, dlam, dmu_g, dmu_b)|, 0 when the denominator is 0 (2-norms). */
+double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new,
+                         const double *phi_new, const double *g_new);
+
+/* Store F_new as F_old. */
+void dopus_ring_store_F(dopus_stage_slot *slot, const double *F_w, const double *phi,
+                        const double *g);
+
+#endif /* DOPUS_RING_H */

@@ -1,0 +1,989 @@
+/* The DOPUS real-time iteration (docs/algorithm.md section 4; paper Algorithm 1).
+ *
+ * init: F and H of every stage at the guess. Per sampling instant:
+ *   feedback: QP with the measured xhat0, full step, u_0 out;
+ *   prepare:  shift (receding mode), F_k and rho_k (eq. 16) of every stage, fresh F/H of
+ *             stage N-1 and the terminal node, fresh H for the M stages with the largest
+ *             rho_k, regularisation of every fresh A, QP vectors with the adjoint-corrected
+ *             gradient (eq. 12).
+ * The order of operations is that of the contract, so that the Python reference and this
+ * runtime produce the same iterates to round-off.
+ */
+#include <math.h>
+
+#include "dopus_kkt.h"
+#include "dopus_problem.h"
+#include "dopus_solver.h"
+
+#define DOPUS_MAGIC 0x444f5055 /* "DOPU" */
+#define DOPUS_DEFAULT_QP_TOL 1e-10
+
+/* ---- small helpers ------------------------------------------------------------------ */
+
+static int dopus_all_finite(const double *v, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        if (!isfinite(v[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+static void dopus_copy(double *dst, const double *src, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        dst[i] = src[i];
+    }
+}
+
+static void dopus_ensure_setup(dopus_solver *s)
+{
+    if (s->magic != DOPUS_MAGIC) {
+        dopus_defaults(s);
+    }
+}
+
+static int dopus_ret(dopus_solver *s, int status)
+{
+    s->status = status;
+    return status;
+}
+
+/* ---- generic information ------------------------------------------------------------ */
+
+size_t dopus_solver_sizeof(void)
+{
+    return sizeof(dopus_solver);
+}
+
+void dopus_get_dims(int *dims)
+{
+    dims[0] = DOPUS_N;
+    dims[1] = DOPUS_NX;
+    dims[2] = DOPUS_NU;
+    dims[3] = DOPUS_NW;
+    dims[4] = DOPUS_NP;
+    dims[5] = DOPUS_NG;
+    dims[6] = DOPUS_NR;
+    dims[7] = DOPUS_NE;
+    dims[8] = DOPUS_HAS_GN;
+    dims[9] = DOPUS_HAS_NOMINAL;
+}
+
+const char *dopus_name(void)
+{
+    return DOPUS_NAME;
+}
+
+const char *dopus_status_string(int status)
+{
+    switch (status) {
+    case DOPUS_OK:
+        return "ok";
+    case DOPUS_ERR_QP:
+        return "the QP was not solved (no step taken)";
+    case DOPUS_ERR_NONFINITE_INPUT:
+        return "NaN or Inf in an input array";
+    case DOPUS_ERR_NONFINITE_VALUE:
+        return "a generated function returned NaN or Inf";
+    case DOPUS_ERR_FUNCTION:
+        return "a generated function reported failure";
+    case DOPUS_ERR_INVALID_ARGUMENT:
+        return "invalid argument";
+    case DOPUS_ERR_NOT_INITIALIZED:
+        return "the solver is not initialised (call init first)";
+    case DOPUS_ERR_NOT_PREPARED:
+        return "no prepared QP (call prepare after each feedback)";
+    case DOPUS_ERR_NO_NOMINAL:
+        return "the solver was generated without a nominal guess";
+    case DOPUS_ERR_REGULARIZATION:
+        return "the eigen-decomposition of a Hessian block did not converge";
+    default:
+        return "unknown status";
+    }
+}
+
+void dopus_defaults(dopus_solver *s)
+{
+    int k, i;
+    s->magic = DOPUS_MAGIC;
+    s->initialized = 0;
+    s->qp_ready = 0;
+    s->status = DOPUS_OK;
+    s->M = dopus_default_M < 0 ? 0 : (dopus_default_M > DOPUS_N - 1 ? DOPUS_N - 1 : dopus_default_M);
+    s->mode = DOPUS_MODE_RECEDING;
+    s->hessian = (dopus_default_hessian == DOPUS_HESSIAN_GAUSS_NEWTON && DOPUS_HAS_GN)
+                     ? DOPUS_HESSIAN_GAUSS_NEWTON
+                     : DOPUS_HESSIAN_EXACT;
+    s->regularization = dopus_default_regularization;
+    s->reg_eps = dopus_default_reg_eps;
+    dopus_qp_settings_default(&s->qp_settings);
+    s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NP; ++i) {
+            s->p[k][i] = dopus_p_default[i];
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->xhat0[i] = dopus_x0_default[i];
+    }
+    s->n_recomputed = 0;
+    s->qp_status = 0;
+    s->qp_iterations = 0;
+    for (k = 0; k < DOPUS_N; ++k) {
+        s->rho[k] = 0.0;
+    }
+    for (i = 0; i < 4; ++i) {
+        s->kkt[i] = NAN;
+    }
+    dopus_timer_init(&s->timer);
+}
+
+/* ---- function evaluations ----------------------------------------------------------- */
+
+/* F_k (eq. 14) at the current point into s->tmp_F (= gL + mu_b_k), s->tmp_phi, s->tmp_g. */
+static int dopus_stage_F(dopus_solver *s, int k)
+{
+    double l = 0.0;
+    int i;
+    if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL,
+                              s->tmp_phi, &l, s->tmp_g, &s->fun_work) != 0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    if (!dopus_all_finite(s->tmp_gL, DOPUS_NW) || !dopus_all_finite(s->tmp_phi, DOPUS_NX) ||
+        !dopus_all_finite(s->tmp_g, DOPUS_NG) || !isfinite(l)) {
+        return DOPUS_ERR_NONFINITE_VALUE;
+    }
+    for (i = 0; i < DOPUS_NW; ++i) {
+        s->tmp_F[i] = s->tmp_gL[i] + s->mu_b[k][i];
+    }
+    return DOPUS_OK;
+}
+
+/* Regularise a fresh A block (algorithm.md section 5), timed as its own phase. */
+static int dopus_regularize(dopus_solver *s, int n, double *A)
+{
+    double t0;
+    int rc;
+    if (s->regularization == DOPUS_REG_NONE) {
+        return DOPUS_OK;
+    }
+    t0 = dopus_timer_now(&s->timer);
+    rc = dopus_reg_apply(n, A, s->regularization, s->reg_eps, s->reg_work);
+    dopus_timer_add(&s->timer, DOPUS_PHASE_REGULARIZATION, t0);
+    return rc == 0 ? DOPUS_OK : DOPUS_ERR_REGULARIZATION;
+}
+
+/* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot. Evaluated
+ * into scratch first, so a failed evaluation leaves the slot as it was. */
+static int dopus_stage_H(dopus_solver *s, int k)
+{
+    dopus_stage_slot *slot;
+    double t0 = dopus_timer_now(&s->timer);
+    int rc;
+    rc = dopus_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                               s->tmp_A, s->tmp_Phi, s->tmp_C, &s->fun_work);
+    dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
+    if (rc != 0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    if (!dopus_all_finite(s->tmp_A, DOPUS_NW * DOPUS_NW) ||
+        !dopus_all_finite(s->tmp_Phi, DOPUS_NX * DOPUS_NW) ||
+        !dopus_all_finite(s->tmp_C, DOPUS_NG * DOPUS_NW)) {
+        return DOPUS_ERR_NONFINITE_VALUE;
+    }
+    rc = dopus_regularize(s, DOPUS_NW, s->tmp_A);
+    if (rc != DOPUS_OK) {
+        return rc;
+    }
+    slot = dopus_ring_stage(&s->ring, k);
+    dopus_copy(slot->Ht, s->tmp_A, DOPUS_NW * DOPUS_NW);
+    dopus_copy(slot->Phit, s->tmp_Phi, DOPUS_NX * DOPUS_NW);
+    dopus_copy(slot->Ct, s->tmp_C, DOPUS_NG * DOPUS_NW);
+    return DOPUS_OK;
+}
+
+/* Terminal F: gL_N, E, r, r_eq at the current point. */
+static int dopus_term_F(dopus_solver *s)
+{
+    double gL[DOPUS_NX], E = 0.0, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
+    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, &E, r, r_eq,
+                             &s->fun_work) != 0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    if (!dopus_all_finite(gL, DOPUS_NX) || !isfinite(E) || !dopus_all_finite(r, DOPUS_NR) ||
+        !dopus_all_finite(r_eq, DOPUS_NE)) {
+        return DOPUS_ERR_NONFINITE_VALUE;
+    }
+    dopus_copy(s->gL_N, gL, DOPUS_NX);
+    s->E = E;
+    dopus_copy(s->r, r, DOPUS_NR);
+    dopus_copy(s->r_eq, r_eq, DOPUS_NE);
+    return DOPUS_OK;
+}
+
+/* Terminal H: A_N (regularised), R, R_eq. */
+static int dopus_term_H(dopus_solver *s)
+{
+    double R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX], R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
+    double t0 = dopus_timer_now(&s->timer);
+    int rc;
+    rc = dopus_eval_term_hess(s->hessian, s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, s->tmp_A,
+                              R, R_eq, &s->fun_work);
+    dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
+    if (rc != 0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    if (!dopus_all_finite(s->tmp_A, DOPUS_NX * DOPUS_NX) ||
+        !dopus_all_finite(R, DOPUS_NR * DOPUS_NX) || !dopus_all_finite(R_eq, DOPUS_NE * DOPUS_NX)) {
+        return DOPUS_ERR_NONFINITE_VALUE;
+    }
+    rc = dopus_regularize(s, DOPUS_NX, s->tmp_A);
+    if (rc != DOPUS_OK) {
+        return rc;
+    }
+    dopus_copy(s->A_N, s->tmp_A, DOPUS_NX * DOPUS_NX);
+    dopus_copy(s->R, R, DOPUS_NR * DOPUS_NX);
+    dopus_copy(s->R_eq, R_eq, DOPUS_NE * DOPUS_NX);
+    return DOPUS_OK;
+}
+
+/* ---- QP assembly (algorithm.md section 3) ------------------------------------------- */
+
+static void dopus_assemble(dopus_solver *s)
+{
+    dopus_qp_in *in = &s->qp_in;
+    int k, i, j;
+    double t0 = dopus_timer_now(&s->timer);
+
+    for (k = 0; k < DOPUS_N; ++k) {
+        const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
+        /* the QP reads the ring slots in place */
+        in->H[k] = slot->Ht;
+        in->Phi[k] = slot->Phit;
+        in->C[k] = DOPUS_NG > 0 ? slot->Ct : 0;
+        /* a_k = F_w,k + Phit_k' lam_{k+1} - Ct_k' mu_g_k - mu_b_k (eq. 12) */
+        for (i = 0; i < DOPUS_NW; ++i) {
+            double pl = 0.0, cm = 0.0;
+            for (j = 0; j < DOPUS_NX; ++j) {
+                pl += slot->Phit[j + i * DOPUS_NX] * s->lam[k + 1][j];
+            }
+            for (j = 0; j < DOPUS_NG; ++j) {
+                cm += slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] * s->mu_g[k][j];
+            }
+            in->g[k][i] = slot->F_w[i] + pl - cm - s->mu_b[k][i];
+        }
+        /* dx_{k+1} = Phit_k dw_k + (phi_k - x_{k+1}) */
+        for (i = 0; i < DOPUS_NX; ++i) {
+            in->b[k][i] = slot->phi[i] - s->x[k + 1][i];
+        }
+        for (i = 0; i < DOPUS_NX; ++i) {
+            /* x_0 is fixed by xhat0; the QP ignores the x part of stage 0 */
+            in->lbw[k][i] = k == 0 ? -INFINITY : dopus_lbx[i] - s->x[k][i];
+            in->ubw[k][i] = k == 0 ? INFINITY : dopus_ubx[i] - s->x[k][i];
+        }
+        for (i = 0; i < DOPUS_NU; ++i) {
+            in->lbw[k][DOPUS_NX + i] = dopus_lbu[i] - s->u[k][i];
+            in->ubw[k][DOPUS_NX + i] = dopus_ubu[i] - s->u[k][i];
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            in->lg[k][i] = dopus_lg[i] - slot->g[i];
+            in->ug[k][i] = dopus_ug[i] - slot->g[i];
+        }
+    }
+    in->HN = s->A_N;
+    in->R = DOPUS_NR > 0 ? s->R : 0;
+    in->Req = DOPUS_NE > 0 ? s->R_eq : 0;
+    /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
+    for (i = 0; i < DOPUS_NX; ++i) {
+        double rm = 0.0, en = 0.0;
+        for (j = 0; j < DOPUS_NR; ++j) {
+            rm += s->R[j + i * DOPUS_DIM(DOPUS_NR)] * s->mu_r[j];
+        }
+        for (j = 0; j < DOPUS_NE; ++j) {
+            en += s->R_eq[j + i * DOPUS_DIM(DOPUS_NE)] * s->nu[j];
+        }
+        in->gN[i] = s->gL_N[i] - rm - en;
+        in->lbxN[i] = dopus_lbx[i] - s->x[DOPUS_N][i];
+        in->ubxN[i] = dopus_ubx[i] - s->x[DOPUS_N][i];
+    }
+    for (i = 0; i < DOPUS_NR; ++i) {
+        in->lr[i] = dopus_lr[i] - s->r[i];
+        in->ur[i] = dopus_ur[i] - s->r[i];
+    }
+    for (i = 0; i < DOPUS_NE; ++i) {
+        in->req[i] = -s->r_eq[i];
+    }
+    dopus_timer_add(&s->timer, DOPUS_PHASE_ASSEMBLY, t0);
+}
+
+/* ---- init --------------------------------------------------------------------------- */
+
+static void dopus_clear_timings(dopus_solver *s, int first, int last)
+{
+    int i;
+    for (i = first; i <= last; ++i) {
+        s->timer.t[i] = 0.0;
+    }
+}
+
+/* F (stored as F_old) and H of every stage, terminal F and H, at the current iterate. */
+static int dopus_linearize_all(dopus_solver *s)
+{
+    double t0;
+    int k, rc;
+    for (k = 0; k < DOPUS_N; ++k) {
+        t0 = dopus_timer_now(&s->timer);
+        rc = dopus_stage_F(s, k);
+        dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
+        if (rc != DOPUS_OK) {
+            return rc;
+        }
+        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->tmp_F, s->tmp_phi, s->tmp_g);
+        rc = dopus_stage_H(s, k);
+        if (rc != DOPUS_OK) {
+            return rc;
+        }
+    }
+    t0 = dopus_timer_now(&s->timer);
+    rc = dopus_term_F(s);
+    dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
+    if (rc != DOPUS_OK) {
+        return rc;
+    }
+    return dopus_term_H(s);
+}
+
+int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const double *u,
+               const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
+               const double *mu_r, const double *nu)
+{
+    int k, i, rc;
+
+    dopus_ensure_setup(s);
+    s->initialized = 0;
+    s->qp_ready = 0;
+    if ((xhat0 && !dopus_all_finite(xhat0, DOPUS_NX)) ||
+        (x && !dopus_all_finite(x, (DOPUS_N + 1) * DOPUS_NX)) ||
+        (u && !dopus_all_finite(u, DOPUS_N * DOPUS_NU)) ||
+        (lam && !dopus_all_finite(lam, (DOPUS_N + 1) * DOPUS_NX)) ||
+        (mu_g && !dopus_all_finite(mu_g, DOPUS_N * DOPUS_NG)) ||
+        (mu_b && !dopus_all_finite(mu_b, DOPUS_N * DOPUS_NW)) ||
+        (mu_bN && !dopus_all_finite(mu_bN, DOPUS_NX)) ||
+        (mu_r && !dopus_all_finite(mu_r, DOPUS_NR)) || (nu && !dopus_all_finite(nu, DOPUS_NE))) {
+        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    dopus_clear_timings(s, 0, DOPUS_N_PHASES - 1);
+
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->xhat0[i] = xhat0 ? xhat0[i] : dopus_x0_default[i];
+    }
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NX; ++i) {
+            s->x[k][i] = x ? x[k * DOPUS_NX + i] : dopus_guess_x[k][i];
+            s->lam[k][i] = lam ? lam[k * DOPUS_NX + i] : 0.0;
+        }
+    }
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NU; ++i) {
+            s->u[k][i] = u ? u[k * DOPUS_NU + i] : dopus_guess_u[k][i];
+        }
+        for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i) {
+            s->mu_g[k][i] = (mu_g && i < DOPUS_NG) ? mu_g[k * DOPUS_NG + i] : 0.0;
+        }
+        for (i = 0; i < DOPUS_NW; ++i) {
+            s->mu_b[k][i] = mu_b ? mu_b[k * DOPUS_NW + i] : 0.0;
+        }
+        /* x_0 carries no bound: its multiplier is 0 by definition */
+        if (k == 0) {
+            for (i = 0; i < DOPUS_NX; ++i) {
+                s->mu_b[0][i] = 0.0;
+            }
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
+    }
+    for (i = 0; i < DOPUS_DIM(DOPUS_NR); ++i) {
+        s->mu_r[i] = (mu_r && i < DOPUS_NR) ? mu_r[i] : 0.0;
+    }
+    for (i = 0; i < DOPUS_DIM(DOPUS_NE); ++i) {
+        s->nu[i] = (nu && i < DOPUS_NE) ? nu[i] : 0.0;
+    }
+
+    dopus_ring_reset(&s->ring);
+    for (k = 0; k < DOPUS_N; ++k) {
+        s->rho[k] = 0.0;
+        s->recomputed[k] = k;
+        s->selected[k] = 0;
+    }
+    s->n_recomputed = DOPUS_N;
+    s->qp_status = 0;
+    s->qp_iterations = 0;
+
+    rc = dopus_linearize_all(s);
+    if (rc != DOPUS_OK) {
+        return dopus_ret(s, rc);
+    }
+    dopus_assemble(s);
+    s->initialized = 1;
+    s->qp_ready = 1;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_init_nominal(dopus_solver *s, const double *xhat0)
+{
+#if DOPUS_HAS_NOMINAL
+    return dopus_init(s, xhat0, &dopus_nominal_x[0][0], &dopus_nominal_u[0][0],
+                      &dopus_nominal_lam[0][0], DOPUS_NG > 0 ? &dopus_nominal_mu_g[0][0] : 0,
+                      &dopus_nominal_mu_b[0][0], dopus_nominal_mu_bN,
+                      DOPUS_NR > 0 ? dopus_nominal_mu_r : 0, DOPUS_NE > 0 ? dopus_nominal_nu : 0);
+#else
+    (void)xhat0;
+    dopus_ensure_setup(s);
+    return dopus_ret(s, DOPUS_ERR_NO_NOMINAL);
+#endif
+}
+
+/* ---- feedback ----------------------------------------------------------------------- */
+
+static int dopus_qp_solution_finite(const dopus_qp_sol *sol)
+{
+    return dopus_all_finite(&sol->x[0][0], (DOPUS_N + 1) * DOPUS_NX) &&
+           dopus_all_finite(&sol->u[0][0], DOPUS_N * DOPUS_QP_NU1) &&
+           dopus_all_finite(&sol->lam[0][0], (DOPUS_N + 1) * DOPUS_NX) &&
+           dopus_all_finite(&sol->mu_b[0][0], DOPUS_N * DOPUS_QP_NW) &&
+           dopus_all_finite(sol->mu_bN, DOPUS_NX) &&
+           dopus_all_finite(&sol->mu_g[0][0], DOPUS_N * DOPUS_QP_NG1) &&
+           dopus_all_finite(sol->mu_r, DOPUS_QP_NR1) && dopus_all_finite(sol->nu, DOPUS_QP_NE1);
+}
+
+int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
+{
+    const dopus_qp_sol *sol = &s->qp_sol;
+    double t0;
+    int k, i, qs;
+
+    dopus_ensure_setup(s);
+    if (!s->initialized) {
+        return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
+    }
+    if (xhat0 == 0 || !dopus_all_finite(xhat0, DOPUS_NX)) {
+        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    if (!s->qp_ready) {
+        return dopus_ret(s, DOPUS_ERR_NOT_PREPARED);
+    }
+    s->timer.t[DOPUS_PHASE_FEEDBACK] = 0.0;
+    t0 = dopus_timer_now(&s->timer);
+
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->xhat0[i] = xhat0[i];
+        s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
+    }
+    s->qp_settings.warm_start = 0;
+    qs = dopus_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    s->qp_status = qs;
+    s->qp_iterations = s->qp_info.iterations;
+    if (qs != DOPUS_QP_SOLVED || !dopus_qp_solution_finite(sol)) {
+        dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
+        return dopus_ret(s, DOPUS_ERR_QP);
+    }
+
+    /* domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k) */
+    for (k = 0; k < DOPUS_N; ++k) {
+        dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
+        for (i = 0; i < DOPUS_NX; ++i) {
+            slot->dw[i] = sol->x[k][i];
+            slot->dlam[i] = sol->lam[k + 1][i] - s->lam[k + 1][i];
+        }
+        for (i = 0; i < DOPUS_NU; ++i) {
+            slot->dw[DOPUS_NX + i] = sol->u[k][i];
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            slot->dmu_g[i] = sol->mu_g[k][i] - s->mu_g[k][i];
+        }
+        for (i = 0; i < DOPUS_NW; ++i) {
+            slot->dmu_b[i] = sol->mu_b[k][i] - s->mu_b[k][i];
+        }
+    }
+    /* the full step (paper eq. 4): w += dw, multipliers replaced by the QP's */
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NX; ++i) {
+            s->x[k][i] += sol->x[k][i];
+            s->lam[k][i] = sol->lam[k][i];
+        }
+    }
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NU; ++i) {
+            s->u[k][i] += sol->u[k][i];
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            s->mu_g[k][i] = sol->mu_g[k][i];
+        }
+        for (i = 0; i < DOPUS_NW; ++i) {
+            s->mu_b[k][i] = sol->mu_b[k][i];
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->mu_bN[i] = sol->mu_bN[i];
+    }
+    for (i = 0; i < DOPUS_NR; ++i) {
+        s->mu_r[i] = sol->mu_r[i];
+    }
+    for (i = 0; i < DOPUS_NE; ++i) {
+        s->nu[i] = sol->nu[i];
+    }
+    s->qp_ready = 0;
+    if (u0) {
+        for (i = 0; i < DOPUS_NU; ++i) {
+            u0[i] = s->u[0][i];
+        }
+    }
+    dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
+    return dopus_ret(s, DOPUS_OK);
+}
+
+/* ---- prepare ------------------------------------------------------------------------ */
+
+/* Step 1 (receding mode): shift the iterate by one interval and advance ring_head.
+ * x_N is set from phi_{N-1} in step 3. */
+static void dopus_shift(dopus_solver *s)
+{
+    int k, i;
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NX; ++i) {
+            s->x[k][i] = s->x[k + 1][i];
+            s->lam[k][i] = s->lam[k + 1][i];
+        }
+    }
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        for (i = 0; i < DOPUS_NU; ++i) {
+            s->u[k][i] = s->u[k + 1][i];
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            s->mu_g[k][i] = s->mu_g[k + 1][i];
+        }
+        for (i = 0; i < DOPUS_NW; ++i) {
+            s->mu_b[k][i] = s->mu_b[k + 1][i];
+        }
+    }
+    /* the last stage: the x part of mu_b from mu_bN, the u part kept */
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->mu_b[DOPUS_N - 1][i] = s->mu_bN[i];
+        s->mu_b[0][i] = 0.0;
+    }
+    dopus_ring_advance(&s->ring);
+}
+
+/* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
+static void dopus_select(dopus_solver *s, int M)
+{
+    int m, k, n = 0;
+    for (k = 0; k < DOPUS_N; ++k) {
+        s->selected[k] = 0;
+    }
+    for (m = 0; m < M; ++m) {
+        int best = -1;
+        for (k = 0; k < DOPUS_N - 1; ++k) {
+            if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
+                best = k;
+            }
+        }
+        if (best < 0) {
+            break;
+        }
+        s->selected[best] = 1;
+    }
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        if (s->selected[k]) {
+            s->recomputed[n++] = k;
+        }
+    }
+    s->recomputed[n++] = DOPUS_N - 1;
+    s->n_recomputed = n;
+}
+
+int dopus_prepare(dopus_solver *s)
+{
+    double xN_saved[DOPUS_NX];
+    double t0;
+    int k, rc, M;
+
+    dopus_ensure_setup(s);
+    if (!s->initialized) {
+        return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
+    }
+    dopus_clear_timings(s, DOPUS_PHASE_SHIFT, DOPUS_PHASE_ASSEMBLY);
+    s->qp_ready = 0;
+
+    /* 1. shift */
+    t0 = dopus_timer_now(&s->timer);
+    if (s->mode == DOPUS_MODE_RECEDING) {
+        dopus_shift(s);
+    }
+    t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_SHIFT, t0);
+    dopus_copy(xN_saved, s->x[DOPUS_N], DOPUS_NX);
+
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2, F_new stored as F_old */
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
+        rc = dopus_stage_F(s, k);
+        t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
+        if (rc != DOPUS_OK) {
+            return dopus_ret(s, rc);
+        }
+        s->rho[k] = dopus_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        dopus_ring_store_F(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_RHO, t0);
+    }
+
+    /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
+    rc = dopus_stage_F(s, DOPUS_N - 1);
+    t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
+    if (rc != DOPUS_OK) {
+        return dopus_ret(s, rc);
+    }
+    if (s->mode == DOPUS_MODE_RECEDING) {
+        dopus_copy(s->x[DOPUS_N], s->tmp_phi, DOPUS_NX);
+    }
+    dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->tmp_F, s->tmp_phi, s->tmp_g);
+    s->rho[DOPUS_N - 1] = 0.0;
+    rc = dopus_stage_H(s, DOPUS_N - 1);
+    if (rc == DOPUS_OK) {
+        t0 = dopus_timer_now(&s->timer);
+        rc = dopus_term_F(s);
+        dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
+    }
+    if (rc == DOPUS_OK) {
+        rc = dopus_term_H(s);
+    }
+
+    /* 4. re-linearise the M stages with the largest rho_k */
+    if (rc == DOPUS_OK) {
+        M = s->M < 0 ? 0 : (s->M > DOPUS_N - 1 ? DOPUS_N - 1 : s->M);
+        dopus_select(s, M);
+        for (k = 0; k < DOPUS_N - 1 && rc == DOPUS_OK; ++k) {
+            if (s->selected[k]) {
+                rc = dopus_stage_H(s, k);
+            }
+        }
+    }
+    if (rc != DOPUS_OK) {
+        /* leave the iterate as it was after step 1 */
+        dopus_copy(s->x[DOPUS_N], xN_saved, DOPUS_NX);
+        return dopus_ret(s, rc);
+    }
+
+    /* 5. QP vectors (the fresh A blocks were regularised when stored) */
+    dopus_assemble(s);
+    s->qp_ready = 1;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+/* ---- KKT ---------------------------------------------------------------------------- */
+
+int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4)
+{
+    double parts[4];
+    double t0;
+    int i, rc;
+
+    dopus_ensure_setup(s);
+    if (!s->initialized) {
+        return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
+    }
+    if (xhat0 && !dopus_all_finite(xhat0, DOPUS_NX)) {
+        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    s->timer.t[DOPUS_PHASE_KKT] = 0.0;
+    t0 = dopus_timer_now(&s->timer);
+    rc = dopus_kkt_measure(s, xhat0 ? xhat0 : s->xhat0, parts);
+    dopus_timer_add(&s->timer, DOPUS_PHASE_KKT, t0);
+    if (rc != DOPUS_OK) {
+        return dopus_ret(s, rc);
+    }
+    for (i = 0; i < 4; ++i) {
+        s->kkt[i] = parts[i];
+        if (kkt4) {
+            kkt4[i] = parts[i];
+        }
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+double dopus_get_kkt(const dopus_solver *s)
+{
+    double m = s->kkt[0];
+    int i;
+    for (i = 1; i < 4; ++i) {
+        m = s->kkt[i] > m ? s->kkt[i] : m;
+    }
+    return m;
+}
+
+/* ---- settings ----------------------------------------------------------------------- */
+
+int dopus_set_M(dopus_solver *s, int M)
+{
+    dopus_ensure_setup(s);
+    if (M < 0 || M > DOPUS_N - 1) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->M = M;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_M(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->M;
+}
+
+int dopus_set_mode(dopus_solver *s, int mode)
+{
+    dopus_ensure_setup(s);
+    if (mode != DOPUS_MODE_RECEDING && mode != DOPUS_MODE_FIXED) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->mode = mode;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_mode(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->mode;
+}
+
+int dopus_set_hessian(dopus_solver *s, int hessian)
+{
+    dopus_ensure_setup(s);
+    if (hessian != DOPUS_HESSIAN_EXACT && hessian != DOPUS_HESSIAN_GAUSS_NEWTON) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (hessian == DOPUS_HESSIAN_GAUSS_NEWTON && !DOPUS_HAS_GN) {
+        /* Gauss-Newton needs a least-squares stage cost */
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->hessian = hessian;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_hessian(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->hessian;
+}
+
+int dopus_set_regularization(dopus_solver *s, int regularization, double eps)
+{
+    dopus_ensure_setup(s);
+    if ((regularization != DOPUS_REG_NONE && regularization != DOPUS_REG_PROJECT &&
+         regularization != DOPUS_REG_MIRROR) ||
+        !isfinite(eps) || !(eps > 0.0)) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->regularization = regularization;
+    s->reg_eps = eps;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_regularization(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->regularization;
+}
+
+double dopus_get_reg_eps(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->reg_eps;
+}
+
+int dopus_set_qp_tol(dopus_solver *s, double tol)
+{
+    dopus_ensure_setup(s);
+    if (!isfinite(tol) || !(tol > 0.0)) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->qp_settings.tol = tol;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+double dopus_get_qp_tol(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->qp_settings.tol;
+}
+
+int dopus_set_qp_max_iter(dopus_solver *s, int max_iter)
+{
+    dopus_ensure_setup(s);
+    if (max_iter < 1) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->qp_settings.max_iter = max_iter;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_qp_max_iter(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->qp_settings.max_iter;
+}
+
+int dopus_set_parameters(dopus_solver *s, const double *p)
+{
+    int k, i;
+    dopus_ensure_setup(s);
+    if (DOPUS_NP == 0) {
+        return dopus_ret(s, DOPUS_OK);
+    }
+    if (p == 0) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (!dopus_all_finite(p, (DOPUS_N + 1) * DOPUS_NP)) {
+        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NP; ++i) {
+            s->p[k][i] = p[k * DOPUS_NP + i];
+        }
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_set_parameters_node(dopus_solver *s, int k, const double *pk)
+{
+    int i;
+    dopus_ensure_setup(s);
+    if (k < 0 || k > DOPUS_N) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (DOPUS_NP == 0) {
+        return dopus_ret(s, DOPUS_OK);
+    }
+    if (pk == 0) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (!dopus_all_finite(pk, DOPUS_NP)) {
+        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    for (i = 0; i < DOPUS_NP; ++i) {
+        s->p[k][i] = pk[i];
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+void dopus_get_parameters(dopus_solver *s, double *p)
+{
+    int k, i;
+    dopus_ensure_setup(s);
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NP; ++i) {
+            p[k * DOPUS_NP + i] = s->p[k][i];
+        }
+    }
+}
+
+/* ---- getters ------------------------------------------------------------------------ */
+
+void dopus_get_x(const dopus_solver *s, double *x)
+{
+    dopus_copy(x, &s->x[0][0], (DOPUS_N + 1) * DOPUS_NX);
+}
+
+void dopus_get_u(const dopus_solver *s, double *u)
+{
+    dopus_copy(u, &s->u[0][0], DOPUS_N * DOPUS_NU);
+}
+
+void dopus_get_lam(const dopus_solver *s, double *lam)
+{
+    dopus_copy(lam, &s->lam[0][0], (DOPUS_N + 1) * DOPUS_NX);
+}
+
+void dopus_get_mu_g(const dopus_solver *s, double *mu_g)
+{
+    int k, i;
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NG; ++i) {
+            mu_g[k * DOPUS_NG + i] = s->mu_g[k][i];
+        }
+    }
+}
+
+void dopus_get_mu_b(const dopus_solver *s, double *mu_b)
+{
+    dopus_copy(mu_b, &s->mu_b[0][0], DOPUS_N * DOPUS_NW);
+}
+
+void dopus_get_mu_bN(const dopus_solver *s, double *mu_bN)
+{
+    dopus_copy(mu_bN, s->mu_bN, DOPUS_NX);
+}
+
+void dopus_get_mu_r(const dopus_solver *s, double *mu_r)
+{
+    dopus_copy(mu_r, s->mu_r, DOPUS_NR);
+}
+
+void dopus_get_nu(const dopus_solver *s, double *nu)
+{
+    dopus_copy(nu, s->nu, DOPUS_NE);
+}
+
+void dopus_get_rho(const dopus_solver *s, double *rho)
+{
+    dopus_copy(rho, s->rho, DOPUS_N);
+}
+
+int dopus_get_recomputed(const dopus_solver *s, int *stages)
+{
+    int i;
+    for (i = 0; i < s->n_recomputed; ++i) {
+        stages[i] = s->recomputed[i];
+    }
+    return s->n_recomputed;
+}
+
+int dopus_get_qp_iterations(const dopus_solver *s)
+{
+    return s->qp_iterations;
+}
+
+int dopus_get_qp_status(const dopus_solver *s)
+{
+    return s->qp_status;
+}
+
+int dopus_get_status(const dopus_solver *s)
+{
+    return s->status;
+}
+
+int dopus_is_initialized(const dopus_solver *s)
+{
+    return s->magic == DOPUS_MAGIC && s->initialized;
+}
+
+int dopus_get_ring_head(const dopus_solver *s)
+{
+    return s->ring.ring_head;
+}
+
+void dopus_get_timings(const dopus_solver *s, double *t)
+{
+    dopus_copy(t, s->timer.t, DOPUS_N_PHASES);
+}
+
+void dopus_set_clock(dopus_solver *s, double (*clock)(void *ctx), void *ctx)
+{
+    dopus_ensure_setup(s);
+    s->timer.clock = clock ? clock : dopus_timer_default_clock;
+    s->timer.ctx = clock ? ctx : 0;
+}

@@ -1,0 +1,237 @@
+/* The DOPUS real-time iteration: public API of the generated solver.
+ *
+ * DOPUS (Dynamic Optimization with Partially Updated Sensitivities, van Duijkeren et al.,
+ * IFAC 2017) is an RTI scheme in which the stage sensitivities are shifted with the
+ * horizon (a ring buffer of stage slots) and only the M stages with the largest secant
+ * violation rho_k (eq. 16) are re-linearised per iteration; the QP gradient carries the
+ * adjoint correction (eq. 12), so fixed points satisfy the exact KKT conditions.
+ * docs/algorithm.md is the normative description of every step.
+ *
+ * Usage (receding horizon):
+ *     static dopus_solver s;
+ *     dopus_init(&s, xhat0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL);
+ *     loop: dopus_feedback(&s, xhat0, u0); apply u0; dopus_prepare(&s);
+ * The memory is one struct (sizeof is the memory bill; no malloc anywhere). Settings may be
+ * changed before dopus_init; a struct that was never set up (zeroed or uninitialised
+ * memory) gets the generated defaults on its first use.
+ *
+ * Array conventions: every array argument is a flat, C-contiguous (row-major) array of
+ * doubles, node by node: x is (N+1) x nx (x + k*nx is node k), u is N x nu, lam (N+1) x nx,
+ * mu_g N x ng, mu_b N x nw, mu_bN nx, mu_r nr, nu ne, parameters (N+1) x np. Multipliers are
+ * signed (positive when the upper side of a row is active, negative for the lower side);
+ * docs/algorithm.md section 1 gives the Lagrangian. Arrays of size zero are not read or
+ * written (any pointer, also NULL, may be passed).
+ *
+ * Every function returning int returns a status (enum dopus_status below) unless stated.
+ * On failure the state stays consistent: a failed feedback takes no step; a failed
+ * prepare leaves the shifted iterate, and the next prepare re-runs from there.
+ */
+#ifndef DOPUS_SOLVER_H
+#define DOPUS_SOLVER_H
+
+#include <stddef.h>
+
+/* DOPUS_CDEF_BEGIN */
+typedef struct dopus_solver dopus_solver;
+
+/* Size of struct dopus_solver in bytes (for callers that allocate it as raw memory). */
+size_t dopus_solver_sizeof(void);
+/* Reset every setting to the generated defaults (M, Hessian, regularisation, eps from the
+ * OCP file, receding mode, QP tolerance 1e-10, parameters p_default at every node, default
+ * clock) and mark the solver uninitialised. */
+void dopus_defaults(dopus_solver *s);
+/* Dimensions: dims[0..9] = N, nx, nu, nw, np, ng, nr, ne, has_gn, has_nominal. */
+void dopus_get_dims(int *dims);
+/* Problem name (the generator's DOPUS_NAME). */
+const char *dopus_name(void);
+/* A short English description of a status code. */
+const char *dopus_status_string(int status);
+
+/* Initialisation (algorithm.md section 4, init): the iterate is the given guess; NULL x or
+ * u: the OCP file's initial guess; NULL multipliers: zeros. F and H of every stage and of
+ * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
+ * rho = 0. xhat0 is checked and kept for dopus_kkt_eval (may be NULL: the default x0). */
+int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const double *u,
+               const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
+               const double *mu_r, const double *nu);
+/* Initialisation from the generated nominal primal-dual guess (the offline NLP solution at
+ * the default x0); DOPUS_ERR_NO_NOMINAL when the solver was generated without one. */
+int dopus_init_nominal(dopus_solver *s, const double *xhat0);
+
+/* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
+ * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: DOPUS_ERR_NONFINITE_INPUT,
+ * nothing changes. QP failure: DOPUS_ERR_QP, no step (dopus_get_qp_status tells why). */
+int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0);
+/* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
+ * stage and terminal node, re-linearise the M stages with the largest rho_k, assemble the
+ * QP. Must run between two feedback calls. */
+int dopus_prepare(dopus_solver *s);
+/* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
+ * the initial state xhat0 (NULL: the last one given to init or feedback):
+ * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed. */
+int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4);
+/* The largest of the four parts of the last dopus_kkt_eval (NaN before the first). */
+double dopus_get_kkt(const dopus_solver *s);
+
+/* Settings. M: stages re-linearised per iteration besides stage N-1, 0 <= M <= N-1
+ * (N-1 is the full RTI). mode: DOPUS_MODE_RECEDING or DOPUS_MODE_FIXED. hessian:
+ * DOPUS_HESSIAN_EXACT or DOPUS_HESSIAN_GAUSS_NEWTON (only with a least-squares stage cost).
+ * regularization: DOPUS_REG_NONE, DOPUS_REG_PROJECT or DOPUS_REG_MIRROR with eps > 0.
+ * The QP tolerance (> 0) and iteration limit (>= 1) are those of dopus_qp_solve. */
+int dopus_set_M(dopus_solver *s, int M);
+int dopus_get_M(dopus_solver *s);
+int dopus_set_mode(dopus_solver *s, int mode);
+int dopus_get_mode(dopus_solver *s);
+int dopus_set_hessian(dopus_solver *s, int hessian);
+int dopus_get_hessian(dopus_solver *s);
+int dopus_set_regularization(dopus_solver *s, int regularization, double eps);
+int dopus_get_regularization(dopus_solver *s);
+double dopus_get_reg_eps(dopus_solver *s);
+int dopus_set_qp_tol(dopus_solver *s, double tol);
+double dopus_get_qp_tol(dopus_solver *s);
+int dopus_set_qp_max_iter(dopus_solver *s, int max_iter);
+int dopus_get_qp_max_iter(dopus_solver *s);
+/* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
+ * evaluation on (prepare, kkt). */
+int dopus_set_parameters(dopus_solver *s, const double *p);
+int dopus_set_parameters_node(dopus_solver *s, int k, const double *pk);
+void dopus_get_parameters(dopus_solver *s, double *p);
+
+/* The iterate (shapes in the header comment). */
+void dopus_get_x(const dopus_solver *s, double *x);
+void dopus_get_u(const dopus_solver *s, double *u);
+void dopus_get_lam(const dopus_solver *s, double *lam);
+void dopus_get_mu_g(const dopus_solver *s, double *mu_g);
+void dopus_get_mu_b(const dopus_solver *s, double *mu_b);
+void dopus_get_mu_bN(const dopus_solver *s, double *mu_bN);
+void dopus_get_mu_r(const dopus_solver *s, double *mu_r);
+void dopus_get_nu(const dopus_solver *s, double *nu);
+/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1). */
+void dopus_get_rho(const dopus_solver *s, double *rho);
+/* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
+ * N-1 included; writes up to N ints and returns their count. */
+int dopus_get_recomputed(const dopus_solver *s, int *stages);
+/* The last QP: iterations, status (enum dopus_qp_status of dopus_qp.h). */
+int dopus_get_qp_iterations(const dopus_solver *s);
+int dopus_get_qp_status(const dopus_solver *s);
+/* Status of the last call that returns a status. */
+int dopus_get_status(const dopus_solver *s);
+int dopus_is_initialized(const dopus_solver *s);
+/* ring_head (stage k lives in slot (ring_head + k) mod N). */
+int dopus_get_ring_head(const dopus_solver *s);
+
+/* Seconds per phase of the last call that ran it (t[0..7] = feedback, shift, gradients,
+ * rho, hessians, regularization, assembly, kkt; indices of enum dopus_phase). init fills
+ * the phases it runs too. */
+void dopus_get_timings(const dopus_solver *s, double *t);
+/* Replace the clock (seconds, any origin); NULL restores the default clock. */
+void dopus_set_clock(dopus_solver *s, double (*clock)(void *ctx), void *ctx);
+/* DOPUS_CDEF_END */
+
+/* Status codes returned by the functions above. */
+enum dopus_status {
+    DOPUS_OK = 0,
+    DOPUS_ERR_QP = 1,                /* QP not solved; no step; see dopus_get_qp_status */
+    DOPUS_ERR_NONFINITE_INPUT = 2,   /* NaN or Inf in an input array */
+    DOPUS_ERR_NONFINITE_VALUE = 3,   /* a generated function returned NaN or Inf */
+    DOPUS_ERR_FUNCTION = 4,          /* a generated function reported failure */
+    DOPUS_ERR_INVALID_ARGUMENT = 5,  /* M out of range, bad mode/Hessian/regularisation,
+                                        Gauss-Newton without least squares, bad node index */
+    DOPUS_ERR_NOT_INITIALIZED = 6,   /* feedback/prepare/kkt before a successful init */
+    DOPUS_ERR_NOT_PREPARED = 7,      /* feedback without a successful prepare since the last
+                                        step (the QP would be stale) */
+    DOPUS_ERR_NO_NOMINAL = 8,        /* dopus_init_nominal without DOPUS_HAS_NOMINAL */
+    DOPUS_ERR_REGULARIZATION = 9     /* eigen-decomposition did not converge */
+};
+
+enum dopus_mode {
+    DOPUS_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
+    DOPUS_MODE_FIXED = 1     /* no shift: fixed-xhat0 convergence studies */
+};
+
+enum dopus_hessian {
+    DOPUS_HESSIAN_EXACT = 0,
+    DOPUS_HESSIAN_GAUSS_NEWTON = 1
+};
+
+/* ------------------------------------------------------------------------------------- */
+/* The full state. Its layout is public so firmware can declare `static dopus_solver s;`;
+ * the fields are internal (use the functions above). */
+
+#include "dopus_sizes.h"
+#include "dopus_funcs.h"
+#include "dopus_qp.h"
+#include "dopus_reg.h"
+#include "dopus_ring.h"
+#include "dopus_timer.h"
+
+struct dopus_solver {
+    int magic;          /* DOPUS_MAGIC once the settings hold valid values */
+    int initialized;    /* a successful init happened */
+    int qp_ready;       /* QP assembled at the current iterate (prepare or init succeeded) */
+    int status;         /* status of the last call */
+
+    /* settings */
+    int M;
+    int mode;
+    int hessian;
+    int regularization;
+    double reg_eps;
+    dopus_qp_settings qp_settings;
+
+    /* iterate (algorithm.md section 1) */
+    double x[DOPUS_N + 1][DOPUS_NX];
+    double u[DOPUS_N][DOPUS_NU];
+    double lam[DOPUS_N + 1][DOPUS_NX];
+    double mu_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
+    double mu_b[DOPUS_N][DOPUS_NW];
+    double mu_bN[DOPUS_NX];
+    double mu_r[DOPUS_DIM(DOPUS_NR)];
+    double nu[DOPUS_DIM(DOPUS_NE)];
+    double p[DOPUS_N + 1][DOPUS_DIM(DOPUS_NP)];
+    double xhat0[DOPUS_NX];
+
+    /* stage slots (Ht, Phit, Ct, F_old, domega) and ring_head */
+    dopus_ring ring;
+
+    /* terminal node, always fresh: A (regularised), R, R_eq and F = (gL, E, r, r_eq) */
+    double A_N[DOPUS_NX * DOPUS_NX];
+    double R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX];
+    double R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
+    double gL_N[DOPUS_NX];
+    double E;
+    double r[DOPUS_DIM(DOPUS_NR)];
+    double r_eq[DOPUS_DIM(DOPUS_NE)];
+
+    /* secant criterion and the recomputed set of the last prepare */
+    double rho[DOPUS_N];
+    int recomputed[DOPUS_N];
+    int n_recomputed;
+    unsigned char selected[DOPUS_N];
+
+    /* QP data, solution and workspace (the matrices are pointers into the ring) */
+    dopus_qp_in qp_in;
+    dopus_qp_sol qp_sol;
+    dopus_qp_info qp_info;
+    dopus_qp_workspace qp_work;
+    int qp_status;
+    int qp_iterations;
+
+    /* scratch for the generated functions and the regularisation */
+    dopus_fun_work fun_work;
+    double tmp_A[DOPUS_NW * DOPUS_NW];
+    double tmp_Phi[DOPUS_NX * DOPUS_NW];
+    double tmp_C[DOPUS_DIM(DOPUS_NG) * DOPUS_NW];
+    double tmp_gL[DOPUS_NW];
+    double tmp_F[DOPUS_NW];
+    double tmp_phi[DOPUS_NX];
+    double tmp_g[DOPUS_DIM(DOPUS_NG)];
+    double reg_work[2 * DOPUS_NW * DOPUS_NW];
+
+    /* KKT parts of the last dopus_kkt_eval: stat, eq, ineq, comp */
+    double kkt[4];
+
+    dopus_timer timer;
+};
+
+#endif /* DOPUS_SOLVER_H */

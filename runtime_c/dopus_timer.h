@@ -1,0 +1,44 @@
+/* Phase timers of the DOPUS runtime.
+ *
+ * The runtime reads time through a user-replaceable clock (seconds as a double,
+ * any origin). The default clock is POSIX clock_gettime(CLOCK_MONOTONIC); compile
+ * with -DDOPUS_CLOCK_POSIX=0 on targets without POSIX, then the default clock
+ * reads 0 and firmware installs its own with dopus_set_clock().
+ */
+#ifndef DOPUS_TIMER_H
+#define DOPUS_TIMER_H
+
+#ifndef DOPUS_CLOCK_POSIX
+#define DOPUS_CLOCK_POSIX 1
+#endif
+
+/* Phases timed per call (seconds of the last call that ran the phase). */
+enum dopus_phase {
+    DOPUS_PHASE_FEEDBACK = 0,      /* dopus_feedback: QP solve + step */
+    DOPUS_PHASE_SHIFT = 1,         /* prepare step 1: shift, ring head */
+    DOPUS_PHASE_GRADIENTS = 2,     /* prepare steps 2-3: stage_grad / term_grad (F_k) */
+    DOPUS_PHASE_RHO = 3,           /* prepare step 2: secant criterion eq. 16 */
+    DOPUS_PHASE_HESSIANS = 4,      /* stage_hess / term_hess (H_k), without regularisation */
+    DOPUS_PHASE_REGULARIZATION = 5,/* eigenvalue regularisation of fresh A blocks */
+    DOPUS_PHASE_ASSEMBLY = 6,      /* QP vectors a_k, b_k, bounds */
+    DOPUS_PHASE_KKT = 7,           /* dopus_kkt_eval */
+    DOPUS_N_PHASES = 8
+};
+
+typedef double (*dopus_clock_fn)(void *ctx);
+
+typedef struct {
+    dopus_clock_fn clock;
+    void *ctx;
+    double t[DOPUS_N_PHASES];
+} dopus_timer;
+
+/* The default clock: CLOCK_MONOTONIC in seconds (0 when DOPUS_CLOCK_POSIX is 0). */
+double dopus_timer_default_clock(void *ctx);
+
+void dopus_timer_init(dopus_timer *tm);
+double dopus_timer_now(const dopus_timer *tm);
+/* t[phase] += now - since; returns now so consecutive phases chain without a second read. */
+double dopus_timer_add(dopus_timer *tm, int phase, double since);
+
+#endif /* DOPUS_TIMER_H */
