@@ -70,6 +70,10 @@ class Discretized:
     ode: ca.Function
     has_gn: bool
     weights: dict = field(default_factory=dict)   # {"W": stage LS weight, "WN": terminal}
+    # Least-squares residuals (x, u, p) -> res and (x, p) -> res_N, None without them; for
+    # checks and plots, not part of the generated code.
+    stage_residual: Optional[ca.Function] = None
+    term_residual: Optional[ca.Function] = None
     cache: dict = field(default_factory=dict, repr=False, compare=False)  # e.g. offline solvers
 
     def stage_hess(self, kind: str) -> ca.Function:
@@ -232,6 +236,12 @@ def build_functions(ocp: Ocp) -> Discretized:
         term_eval=term[0], term_grad=term[1], term_hess_exact=term[2], term_hess_gn=term[3],
         ode=ode, has_gn=stage[3] is not None, weights={"W": m.W.copy(), "WN": m.WN.copy()},
     )
+    if m.res.size1():
+        disc.stage_residual = ca.Function(f"{name}_stage_residual", [m.x, m.u, m.p], [_d(m.res)],
+                                          ["x", "u", "p"], ["res"])
+    if m.resN.size1():
+        disc.term_residual = ca.Function(f"{name}_term_residual", [m.x, m.p], [_d(m.resN)],
+                                         ["x", "p"], ["res"])
     _check_finite_at_guess(disc)
     if disc.options.get("offline_guess"):
         from .offline import solve_ocp
