@@ -16,7 +16,7 @@ import casadi as ca
 import numpy
 
 from .discretize import StageModel, discretize
-from .ocp import Guess, Ocp, OcpError, ScenarioSpec
+from .ocp import Guess, Ocp, OcpError, ScenarioSpec, casadi_message
 
 __all__ = ["Discretized", "build_functions"]
 
@@ -212,7 +212,7 @@ def build_functions(ocp: Ocp) -> Discretized:
     except OcpError:
         raise
     except Exception as exc:  # noqa: BLE001 - CasADi failures on user expressions
-        raise OcpError(f"{name}: cannot build the stage functions: {exc}") from None
+        raise OcpError(f"{name}: cannot build the stage functions: {casadi_message(exc)}") from None
     nx, nu, np_ = m.x.size1(), m.u.size1(), m.p.size1()
     N = ocp.N
     x0 = ocp.x0_array(nx)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .ocp import Ocp, OcpError
+from .ocp import Ocp, OcpError, casadi_message
 
 __all__ = ["StageModel", "discretize"]
 
@@ -50,7 +50,7 @@ def _stack(items, what: str):
     try:
         expr = ca.vertcat(*[e for e, _, _ in items])
     except Exception as exc:  # noqa: BLE001 - CasADi errors on user expressions
-        raise OcpError(f"{what}: {exc}") from None
+        raise OcpError(f"{what}: {casadi_message(exc)}") from None
     return expr, np.concatenate([a for _, a, _ in items]), np.concatenate([b for _, _, b in items])
 
 
@@ -69,7 +69,7 @@ def _least_squares(items, what: str):
     try:
         cost = 0.5 * ca.dot(res, ca.mtimes(ca.DM(W), res))
     except Exception as exc:  # noqa: BLE001
-        raise OcpError(f"{what}: {exc}") from None
+        raise OcpError(f"{what}: {casadi_message(exc)}") from None
     return res, W, cost
 
 
@@ -92,7 +92,7 @@ def discretize(ocp: Ocp) -> StageModel:
     except OcpError:
         raise
     except Exception as exc:  # noqa: BLE001
-        raise OcpError(f"dynamics: cannot discretise with {ocp.integrator.describe()}: {exc}") from None
+        raise OcpError(f"dynamics: cannot discretise with {ocp.integrator.describe()}: {casadi_message(exc)}") from None
     if not isinstance(phi, ca.SX) or phi.shape != (x.size1(), 1):
         raise OcpError(f"dynamics: integrator {ocp.integrator.describe()} returned shape "
                        f"{getattr(phi, 'shape', None)}, expected ({x.size1()}, 1)")

@@ -206,7 +206,7 @@ def _as_sx(expr, what: str) -> ca.SX:
         try:
             expr = ca.SX(ca.DM(np.array(expr, dtype=float)))
         except Exception as exc:  # noqa: BLE001 - user data of any kind
-            raise OcpError(f"{what}: cannot convert {expr!r} to an expression ({exc})") from None
+            raise OcpError(f"{what}: cannot convert {expr!r} to an expression ({casadi_message(exc)})") from None
     if not isinstance(expr, ca.SX):
         raise OcpError(f"{what}: expected a casadi SX expression, got {type(expr).__name__}")
     if expr.size2() != 1:
@@ -222,6 +222,17 @@ def _check_bounds(lb: np.ndarray, ub: np.ndarray, what: str) -> None:
     if bad.size:
         i = int(bad[0])
         raise OcpError(f"{what}: lb > ub at row {i} ({lb[i]} > {ub[i]})")
+
+
+def casadi_message(exc: BaseException) -> str:
+    """The user-relevant part of an exception message: CasADi prefixes its messages with
+    source locations of its own C++ code, which say nothing about the OCP."""
+    text = str(exc).strip()
+    if ".cpp:" in text or "casadi" in text.lower():
+        lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+        useful = [ln for ln in lines if ".cpp:" not in ln]
+        text = useful[-1] if useful else re.sub(r"^.*\.cpp:\d+:\s*", "", lines[-1])
+    return text
 
 
 def _check_identifier(name, what: str) -> str:
@@ -619,7 +630,8 @@ def load_ocp(path) -> Ocp:
     except OcpError:
         raise
     except Exception as exc:  # noqa: BLE001 - any failure of user code gets the file and line
-        raise OcpError(f"OCP file '{path}'{_user_line(exc, p)}: {type(exc).__name__}: {exc}") from None
+        raise OcpError(f"OCP file '{path}'{_user_line(exc, p)}: {type(exc).__name__}: "
+                       f"{casadi_message(exc)}") from None
     build = getattr(module, "build", None)
     if not callable(build):
         raise OcpError(f"OCP file '{path}' defines no build() function")
@@ -628,7 +640,8 @@ def load_ocp(path) -> Ocp:
     except OcpError:
         raise
     except Exception as exc:  # noqa: BLE001
-        raise OcpError(f"OCP file '{path}'{_user_line(exc, p)}: build() failed: {type(exc).__name__}: {exc}") from None
+        raise OcpError(f"OCP file '{path}'{_user_line(exc, p)}: build() failed: {type(exc).__name__}: "
+                       f"{casadi_message(exc)}") from None
     if not isinstance(ocp, Ocp):
         raise OcpError(f"OCP file '{path}': build() returned {type(ocp).__name__}, expected an Ocp")
     ocp.validate()
