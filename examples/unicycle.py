@@ -4,6 +4,12 @@ Small companion to the robot arm: a nonlinear path inequality (stay outside the
 obstacle) that is active at the solution, a runtime parameter (the target position),
 least-squares stage and terminal costs (so Gauss-Newton applies) and a closed-loop
 scenario with a sideways push.
+
+As with the robot arm, start DOPUS from a good guess (the NLP solution, e.g.
+``options(offline_guess=True)``) or use the Gauss-Newton Hessian: from the cold guess
+below (standing still) the exact-Hessian QPs lose convexity within a few iterations.
+Reversing is allowed (v >= -0.5) so that the car can come to rest at the target with no
+active speed bound there.
 """
 import casadi as ca
 import numpy as np
@@ -14,7 +20,7 @@ N, DT = 20, 0.1
 OBSTACLE = (1.0, 0.1)       # centre, m; slightly above the straight line to the target
 RADIUS = 0.4                # m
 TARGET = (2.5, 0.0)         # default of the runtime parameter "target"
-V_MAX, A_MAX, OMEGA_MAX = 1.5, 2.0, 2.0
+V_MAX, V_REVERSE, A_MAX, OMEGA_MAX = 1.5, 0.5, 2.0, 2.0
 
 
 def clearance_sq(px, py):
@@ -35,7 +41,7 @@ def build():
     ocp = Ocp("unicycle")
     pos = ocp.state("pos", 2)
     psi = ocp.state("psi")
-    v = ocp.state("v", lb=0.0, ub=V_MAX)
+    v = ocp.state("v", lb=-V_REVERSE, ub=V_MAX)
     acc = ocp.control("acc", lb=-A_MAX, ub=A_MAX)
     omega = ocp.control("omega", lb=-OMEGA_MAX, ub=OMEGA_MAX)
     target = ocp.parameter("target", 2, value=TARGET)
