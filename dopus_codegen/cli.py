@@ -58,6 +58,40 @@ def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, b
 
 @main.command()
 @click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--M", "m", default=1, show_default=True, type=click.IntRange(0),
+              help="Stages re-linearised per iteration (clamped to N-1, the full RTI).")
+@click.option("--duration", default=None, type=click.FloatRange(min=0, min_open=True),
+              help="Simulated seconds [default: the scenario's duration].")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None,
+              help="Write every run (time series, KKT, timings, settings) as JSON.")
+@click.option("--plot-dir", type=click.Path(file_okay=False), default=None, help="Write the PNG figures here.")
+@click.option("--compare", type=click.Choice(["none", "full"]), default="none", show_default=True,
+              help="full: also run the full RTI (M = N-1) on the same scenario.")
+@click.option("--hessian", type=click.Choice(["exact", "gauss-newton"]), default="exact", show_default=True)
+@click.option("--regularization", type=click.Choice(["none", "project", "mirror"]), default="none", show_default=True)
+@click.option("--reg-eps", default=1e-4, show_default=True, type=click.FloatRange(min=0, min_open=True),
+              help="Eigenvalue floor of the regularisation.")
+@click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
+def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps, backend):
+    """Closed loop against a CVODES simulation of the plant (paper figures 2 to 4).
+
+    One DOPUS iteration per sampling instant, started from the offline solution at the
+    scenario's initial state; the scenario's events disturb the plant.
+    """
+    from .ocp import OcpError
+    from .plant import PlantError
+    from .sil import SilError, run_sil_cli
+
+    try:
+        run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
+                    compare=compare, hessian=hessian, regularization=regularization, reg_eps=reg_eps,
+                    backend=backend, echo=click.echo)
+    except (OcpError, SilError, PlantError) as exc:
+        raise click.ClickException(str(exc)) from None
+
+
+@main.command()
+@click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
 @click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Output folder (default: generated/<name> under the current directory). An existing "
                    "folder is replaced only if dopus-gen generated it.")

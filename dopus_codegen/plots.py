@@ -1,0 +1,262 @@
+"""Figures of the software-in-the-loop runs (paper figures 2 to 4 and the DOPUS internals).
+
+Every function takes the run records of :func:`dopus_codegen.sil.run_closed_loop` (plain
+dicts, so a JSON file written by ``dopus-gen sil --json`` can be plotted again), draws all
+runs on the same axes where that reads well, and marks the scenario events on every time
+axis. Files are PNG, written with the non-interactive Agg backend.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+__all__ = ["plot_sil", "plot_signals", "plot_kkt", "plot_controls", "plot_plane", "plot_recomputed",
+           "plot_timing"]
+
+_STYLES = [dict(color="C0", lw=1.6, ls="-"), dict(color="C3", lw=1.3, ls="--"),
+           dict(color="C2", lw=1.3, ls="-."), dict(color="C4", lw=1.3, ls=":")]
+_DPI = 130
+
+
+def _arr(values):
+    return np.asarray([np.nan if v is None else v for v in values], dtype=float)
+
+
+def _mat(values):
+    return np.asarray([[np.nan if v is None else v for v in row] for row in values], dtype=float)
+
+
+def _style(i):
+    return _STYLES[i % len(_STYLES)]
+
+
+def _mark_events(ax, runs, text=True):
+    """Dashed vertical line at each event (events of the first run; all runs share them)."""
+    seen = set()
+    for run in runs:
+        for ev in run.get("events", []):
+            key = (round(ev["time"], 9), ev["label"])
+            if key in seen:
+                continue
+            seen.add(key)
+            ax.axvline(ev["time"], color="0.35", ls=":", lw=1.2, zorder=0)
+            if text:
+                ax.annotate(ev["label"], xy=(ev["time"], 1.0), xycoords=("data", "axes fraction"),
+                            xytext=(3, -3), textcoords="offset points", ha="left", va="top",
+                            fontsize=8, color="0.3")
+
+
+def _label_with_unit(name: str, default_unit: str = "") -> str:
+    """Axis label: a name that already carries '[unit]' is kept as it is."""
+    if re.search(r"\[.*\]", name) or not default_unit:
+        return name
+    return f"{name} [{default_unit}]"
+
+
+def _suptitle(fig, title, what):
+    fig.suptitle(f"{title}: {what}" if title else what, fontsize=11)
+
+
+def _save(fig, path):
+    fig.savefig(path, dpi=_DPI)
+    plt.close(fig)
+    return str(path)
+
+
+def _scalar_signals(runs):
+    names = []
+    for run in runs:
+        for name, vals in run["signals"].items():
+            if name not in names and vals and not isinstance(vals[0], list):
+                names.append(name)
+    return names
+
+
+def plot_signals(runs, path, title=None, log=None):
+    """Scalar scenario signals against time (paper figure 2: the path deviation).
+
+    ``log``: logarithmic y axis; by default when a signal spans more than three decades.
+    """
+    names = _scalar_signals(runs)
+    if not names:
+        return None
+    fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.2 + 1.8 * len(names)), sharex=True, squeeze=False)
+    for ax, name in zip(axes[:, 0], names):
+        pos = []
+        for i, run in enumerate(runs):
+            if name not in run["signals"]:
+                continue
+            v = _arr(run["signals"][name])
+            ax.plot(run["t"], v, label=run["label"], **_style(i))
+            pos.extend(np.abs(v[np.isfinite(v) & (v != 0)]))
+        use_log = log if log is not None else (len(pos) > 0 and np.max(pos) / max(np.min(pos), 1e-300) > 1e3)
+        if use_log:
+            ax.set_yscale("log")
+        ax.set_ylabel(name)
+        ax.grid(True, which="both", alpha=0.3)
+        _mark_events(ax, runs)
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]")
+    _suptitle(fig, title, "scenario signals (closed loop, CVODES plant)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_kkt(runs, path, title=None):
+    """KKT measure of every iteration, right after its feedback step (paper figure 3)."""
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for i, run in enumerate(runs):
+        k = _arr(run["kkt"])
+        t = np.asarray(run["t"], dtype=float)
+        ax.semilogy(t, k, label=run["label"], **_style(i))
+        bad = np.asarray(run["status"]) != 0
+        if np.any(bad):
+            ax.semilogy(t[bad], np.where(np.isfinite(k[bad]), k[bad], np.nanmax(k)), "x",
+                        color=_style(i)["color"], ms=7, label=f"{run['label']}: QP failure")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("KKT measure (inf-norm)")
+    ax.grid(True, which="both", alpha=0.3)
+    _mark_events(ax, runs)
+    ax.legend(loc="upper right", fontsize=8)
+    _suptitle(fig, title, "KKT measure after each feedback (one iteration per sampling instant)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_controls(runs, path, title=None, names=None):
+    """Applied controls (zero-order hold) with their bounds (paper figure 4: the torques)."""
+    u0 = _mat(runs[0]["u"])
+    nu = u0.shape[1] if u0.ndim == 2 else 0
+    if nu == 0:
+        return None
+    names = names or runs[0]["settings"].get("u_labels") or [f"u[{j}]" for j in range(nu)]
+    fig, axes = plt.subplots(nu, 1, figsize=(8, 1.2 + 1.9 * nu), sharex=True, squeeze=False)
+    lbu = _arr(runs[0]["settings"].get("lbu", [None] * nu))
+    ubu = _arr(runs[0]["settings"].get("ubu", [None] * nu))
+    for j, ax in enumerate(axes[:, 0]):
+        for i, run in enumerate(runs):
+            u = _mat(run["u"])
+            t = np.asarray(run["t"], dtype=float)
+            dt = run["settings"]["dt"]
+            # Step plot over [t_i, t_i + dt): the control is held by the plant.
+            ax.step(np.append(t, t[-1] + dt), np.append(u[:, j], u[-1, j]), where="post",
+                    label=run["label"], **_style(i))
+        for b, txt in ((lbu[j], "lower bound"), (ubu[j], "upper bound")):
+            if np.isfinite(b):
+                ax.axhline(b, color="k", ls="--", lw=0.9, alpha=0.7)
+        lo, hi = ax.get_ylim()
+        finite = [b for b in (lbu[j], ubu[j]) if np.isfinite(b)]
+        if finite:
+            span = max(hi, *finite) - min(lo, *finite)
+            ax.set_ylim(min(lo, *finite) - 0.05 * span, max(hi, *finite) + 0.05 * span)
+        ax.set_ylabel(names[j])
+        ax.grid(True, alpha=0.3)
+        _mark_events(ax, runs, text=(j == 0))
+        if j == 0:
+            ax.legend(loc="upper right", fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]")
+    _suptitle(fig, title, "applied controls (dashed black: bounds)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_plane(runs, path, title=None, plane=None):
+    """A two-component signal against a reference curve in the plane (the tip on the circle)."""
+    plane = plane or runs[0]["settings"].get("plane")
+    if not plane:
+        return None
+    path_name, ref_name = plane
+    fig, ax = plt.subplots(figsize=(6.4, 6.0))
+    ref = _mat(runs[0]["signals"][ref_name])
+    ax.plot(ref[:, 0], ref[:, 1], color="0.6", lw=5, alpha=0.5, label=f"{ref_name} (reference)", zorder=0)
+    for i, run in enumerate(runs):
+        xy = _mat(run["signals"][path_name])
+        ax.plot(xy[:, 0], xy[:, 1], label=f"{run['label']}: {path_name}", **_style(i))
+        t = np.asarray(run["t"], dtype=float)
+        for ev in run.get("events", []):
+            k = int(np.searchsorted(t, ev["time"] - 1e-9))
+            if k < len(t):
+                ax.plot(xy[k, 0], xy[k, 1], "o", mfc="none", mec=_style(i)["color"], ms=9)
+                if i == 0:
+                    ax.annotate(f"{ev['label']} (t = {ev['time']:g} s)", xy=(xy[k, 0], xy[k, 1]),
+                                xytext=(8, 8), textcoords="offset points", fontsize=8)
+    ax.plot(ref[0, 0], ref[0, 1], "k^", ms=7, label="start")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(f"{path_name}[0]")
+    ax.set_ylabel(f"{path_name}[1]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    _suptitle(fig, title, f"{path_name} in the plane against {ref_name}")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_recomputed(runs, path, title=None):
+    """Stages whose sensitivities were recomputed at each instant (time x stage raster)."""
+    fig, axes = plt.subplots(len(runs), 1, figsize=(8, 1.0 + 2.4 * len(runs)), sharex=True, squeeze=False)
+    for ax, (i, run) in zip(axes[:, 0], enumerate(runs)):
+        N = int(run["settings"]["N"])
+        t = np.asarray(run["t"], dtype=float)
+        dt = run["settings"]["dt"]
+        img = np.zeros((N, len(t)))
+        for j, stages in enumerate(run["recomputed"]):
+            img[list(stages), j] = 1.0
+        ax.imshow(img, aspect="auto", origin="lower", interpolation="nearest", cmap="Greys", vmin=0, vmax=1,
+                  extent=(t[0] - 0.5 * dt if len(t) else 0, (t[-1] + 0.5 * dt) if len(t) else 1, -0.5, N - 0.5))
+        ax.set_ylabel("stage k")
+        counts = [len(s) for s in run["recomputed"]]
+        ax.set_title(f"{run['label']}: {np.mean(counts):.2f} stages per instant on average "
+                     f"(stage N-1 = {N - 1} is always fresh)", fontsize=9)
+        _mark_events(ax, runs)
+    axes[-1, 0].set_xlabel("time [s]")
+    _suptitle(fig, title, "stages with recomputed Hessian and Jacobians (black)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_timing(runs, path, title=None):
+    """Computation time per iteration split by phase (stacked), one panel per run."""
+    fig, axes = plt.subplots(len(runs), 1, figsize=(8, 1.0 + 2.6 * len(runs)), sharex=True, sharey=True,
+                             squeeze=False)
+    for ax, run in zip(axes[:, 0], runs):
+        t = np.asarray(run["t"], dtype=float)
+        tim = run["timing_us"]
+        phases = [k for k in tim if k.startswith("phase:")]
+        if phases:
+            labels = [k.split(":", 1)[1] for k in phases]
+            data = [_arr(tim[k]) for k in phases]
+        else:
+            labels, data = ["feedback", "prepare"], [_arr(tim["feedback"]), _arr(tim["prepare"])]
+        ax.stackplot(t, *data, labels=labels, step="post", alpha=0.85)
+        ax.plot(t, _arr(tim["total"]), color="k", lw=0.6, label="feedback + prepare (wall)", drawstyle="steps-post")
+        ax.set_ylabel("time [us]")
+        ax.set_title(f"{run['label']} ({run['settings']['backend']} backend): median "
+                     f"{np.median(_arr(tim['total'])):.0f} us per iteration", fontsize=9)
+        ax.grid(True, alpha=0.3)
+        _mark_events(ax, runs)
+        ax.legend(loc="upper right", fontsize=7, ncol=2)
+    axes[-1, 0].set_xlabel("time [s]")
+    _suptitle(fig, title, "computation time per iteration by phase")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_sil(runs, plot_dir, title=None) -> list:
+    """All SIL figures into ``plot_dir``; returns the written paths."""
+    d = Path(plot_dir)
+    d.mkdir(parents=True, exist_ok=True)
+    out = [
+        plot_signals(runs, d / "sil_signals.png", title),
+        plot_kkt(runs, d / "sil_kkt.png", title),
+        plot_controls(runs, d / "sil_controls.png", title),
+        plot_plane(runs, d / "sil_plane.png", title),
+        plot_recomputed(runs, d / "sil_recomputed.png", title),
+        plot_timing(runs, d / "sil_timing.png", title),
+    ]
+    return [p for p in out if p]
