@@ -1,0 +1,521 @@
+"""QP benchmark: our stage-wise QP solver against HPIPM, in one process, same tolerance.
+
+Solves the same QPs with ``runtime_c/dopus_qp.c`` and with HPIPM through its C API
+(``d_ocp_qp_ipm_solve``), both linked into one C program (bench/qp_bench_main.c) that
+interleaves the repetitions solver by solver after warm-up runs and reports medians:
+
+* robot-arm QPs: the QP of the current iterate (``ReferenceDopus.qp_of_current``) along
+  the cold Gauss-Newton run (OCP file's guess) and the warm exact-Hessian run (converged
+  solution, disturbed initial state), full RTI, fixed xhat_0;
+* random QPs with the robot's sizes (nx = 5, nu = 3, 3 control bounds, 2 terminal
+  equality rows) at N = 10, 20, 40, 80, 160.
+
+The HPIPM anchor is the HPIPM + BLASFEO (X64_INTEL_HASWELL) build of the PyPI wheel
+comma-deps-acados, installed by bench/setup_hpipm.sh into its own virtualenv
+(bench/.env) so that the wheel's stripped CasADi never shadows the project's; only its C
+headers and shared libraries are used here. The HPIPM inside the casadi wheel (generic
+BLASFEO target) is reported as a second, non-anchor column when available.
+
+HPIPM configurations (each a column of the tables):
+
+* ``hpipm``        the terminal equality as a two-sided general row with lg = ug, x0 as a
+                   box with lb = ub (what acados does); the robot-arm QPs as stated;
+* ``hpipm_eqmask`` the same rows declared in HPIPM's own equality mask (idxbxe, idxge);
+* ``hpipm_scaled`` (robot-arm QPs) the terminal equality rows divided by
+                   ``--eq-scale`` times their largest entry: the hand rescaling that lets
+                   HPIPM converge on the robot arm (clearly labelled, see the README).
+
+Never a pass/fail on time: this prints tables and writes bench/results/qp_bench.json.
+
+    python bench/qp_bench.py                    # everything (a few minutes on a busy machine)
+    python bench/qp_bench.py --quick            # fewer repetitions, smoke run
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shlex
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+BENCH = Path(__file__).resolve().parent
+ROOT = BENCH.parent
+RUNTIME = ROOT / "runtime_c"
+RESULTS = BENCH / "results"
+BUILD = RESULTS / "build"
+ENV = Path(os.environ.get("BENCH_ENV", BENCH / ".env"))
+
+NX, NU, NE = 5, 3, 2           # the robot arm's sizes (robot-arm.md)
+RANDOM_NS = (10, 20, 40, 80, 160)
+HPIPM_MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
+HPIPM_STATUS = {0: "success", 1: "max_iter", 2: "min_step", 3: "nan", 4: "inconsistent_eq"}
+DOPUS_STATUS = {0: "solved", 1: "max_iter", 2: "primal_infeasible", 3: "dual_infeasible",
+                4: "numerical", 5: "invalid_input"}
+# HPIPM configurations, one column each; the first is the anchor ("as stated").
+# ric_alg -1 keeps the mode's default (square-root Riccati, which needs every Riccati
+# matrix P_k > 0); 0 is the classic Riccati recursion (only the reduced Hessian must be > 0).
+HPIPM_CONFIGS = {
+    "hpipm": {"mode": "balance", "eq_mask": 0, "eq_scale": False, "ric_alg": -1,
+              "what": "acados' default mode (balance); x0 and the terminal equality as rows with lb = ub"},
+    "hpipm_eqmask": {"mode": "balance", "eq_mask": 1, "eq_scale": False, "ric_alg": -1,
+                     "what": "as hpipm, rows declared in HPIPM's equality mask (idxbxe, idxge)"},
+    "hpipm_robust": {"mode": "robust", "eq_mask": 0, "eq_scale": False, "ric_alg": -1,
+                     "what": "as hpipm in mode robust"},
+    "hpipm_speed_abs": {"mode": "speed_abs", "eq_mask": 0, "eq_scale": False, "ric_alg": -1,
+                        "what": "as hpipm in mode speed_abs (exits on the duality measure only)"},
+    "hpipm_scaled": {"mode": "balance", "eq_mask": 0, "eq_scale": True, "ric_alg": 0, "robot_only": True,
+                     "what": "RESCALED BY HAND: terminal equality rows divided by eq_scale * max|row|, "
+                             "classic Riccati; the configuration found to converge on the robot-arm QPs"},
+}
+HARNESS_SOURCES = ("qp_bench_main.c", "qp_bench_qp.c", "qp_bench_hpipm.c")
+
+
+class BenchError(RuntimeError):
+    pass
+
+
+# ---------------------------------------------------------------------------- HPIPM builds
+def _site_packages(env: Path) -> Path:
+    hits = sorted(env.glob("lib/python3*/site-packages"))
+    if not hits:
+        raise BenchError(f"no site-packages under {env}")
+    return hits[0]
+
+
+def ensure_bench_env() -> None:
+    """Create bench/.env with bench/setup_hpipm.sh when the anchor is not installed yet."""
+    try:
+        root = _site_packages(ENV) / "acados" / "install"
+        if (root / "lib" / "libhpipm.so").is_file():
+            return
+    except BenchError:
+        pass
+    print(f"HPIPM anchor missing in {ENV}: running bench/setup_hpipm.sh", flush=True)
+    subprocess.run(["bash", str(BENCH / "setup_hpipm.sh")], check=True,
+                   env={**os.environ, "BENCH_ENV": str(ENV)})
+
+
+def hpipm_targets(with_casadi: bool) -> dict:
+    """name -> {include: [...], libdir, label} of every HPIPM build to benchmark."""
+    root = _site_packages(ENV) / "acados" / "install"
+    target = "unknown"
+    tfile = root / "include" / "blasfeo" / "include" / "blasfeo_target.h"
+    for line in tfile.read_text().splitlines():
+        if line.startswith("#define TARGET_") and "NEED_FEATURE" not in line:
+            target = line.split()[1][len("TARGET_"):]
+            break
+    out = {"acados": {"include": [root / "include" / "blasfeo" / "include", root / "include" / "hpipm" / "include"],
+                      "libdir": root / "lib",
+                      "label": f"comma-deps-acados wheel, BLASFEO {target}"}}
+    if with_casadi:
+        try:
+            import casadi  # the project's CasADi; bench/.env is never on sys.path
+            cdir = Path(casadi.__file__).resolve().parent
+            if (cdir / "libhpipm.so").is_file() and (cdir / "include" / "hpipm_d_ocp_qp_ipm.h").is_file():
+                ctarget = "unknown"
+                for line in (cdir / "include" / "blasfeo_target.h").read_text().splitlines():
+                    if line.startswith("#define TARGET_"):
+                        ctarget = line.split()[1][len("TARGET_"):]
+                        break
+                out["casadi"] = {"include": [cdir / "include"], "libdir": cdir,
+                                 "label": f"casadi {casadi.__version__} wheel, BLASFEO {ctarget}"}
+        except ImportError:
+            pass
+    return out
+
+
+def build_harness(hp_name: str, hp: dict, sizes: dict | None, cflags: str) -> Path:
+    """Compile qp_bench_main against one HPIPM build and (sizes given) our solver."""
+    BUILD.mkdir(parents=True, exist_ok=True)
+    tag = hp_name
+    srcs = [BENCH / s for s in HARNESS_SOURCES]
+    incs = [BENCH] + list(hp["include"])
+    defs = []
+    if sizes is not None:
+        tag += "_N{N}_nx{nx}_nu{nu}_ng{ng}_nr{nr}_ne{ne}".format(**sizes)
+        sdir = BUILD / f"sizes_{tag}"
+        sdir.mkdir(exist_ok=True)
+        (sdir / "dopus_sizes.h").write_text(
+            "/* sizes of the benchmark build */\n#ifndef DOPUS_SIZES_H\n#define DOPUS_SIZES_H\n"
+            + "".join(f"#define DOPUS_{k.upper()} {v}\n" for k, v in sizes.items())
+            + f"#define DOPUS_NW {sizes['nx'] + sizes['nu']}\n#define DOPUS_DIM(n) ((n) > 0 ? (n) : 1)\n"
+            + "#endif\n")
+        incs = [sdir] + incs + [RUNTIME]
+        srcs += [BENCH / "qp_bench_dopus.c", RUNTIME / "dopus_qp.c", RUNTIME / "dopus_linalg.c"]
+        defs.append("-DQPB_WITH_DOPUS")
+    exe = BUILD / f"qp_bench_{tag}"
+    deps = srcs + [p for p in BENCH.glob("qp_bench_*.h")] + ([RUNTIME / "dopus_qp.h", RUNTIME / "dopus_linalg.h"]
+                                                               if sizes else [])
+    stamp = exe.with_suffix(".flags")
+    flags_key = cflags + " " + str(hp["libdir"])
+    if exe.is_file() and stamp.is_file() and stamp.read_text() == flags_key and \
+            all(exe.stat().st_mtime >= d.stat().st_mtime for d in deps if d.exists()):
+        return exe
+    cmd = ["cc", "-std=c99", "-Wall", "-Wextra", *shlex.split(cflags), *defs,
+           *[f"-I{i}" for i in incs], *map(str, srcs), "-o", str(exe),
+           f"-L{hp['libdir']}", "-Wl,--disable-new-dtags", f"-Wl,-rpath,{hp['libdir']}", "-lhpipm", "-lblasfeo", "-lm"]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise BenchError("compiling the benchmark harness failed:\n" + " ".join(cmd) + "\n" + r.stderr[-4000:])
+    stamp.write_text(flags_key)
+    return exe
+
+
+# ---------------------------------------------------------------------------- QP files
+def write_qps(path: Path, qps: list) -> None:
+    """Binary layout of bench/qp_bench_qp.h; QPs in the dopus_codegen.qpref dict format."""
+    chunks = [struct.pack("<d", float(len(qps)))]
+
+    def put(a):
+        chunks.append(np.asarray(a, dtype="<f8").ravel(order="F").tobytes())
+
+    for q in qps:
+        N, nx, nu, ng, nr, ne = (int(q[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne"))
+        put([N, nx, nu, ng, nr, ne])
+        put(q["x0"])
+        for k in range(N):
+            put(q["H"][k]); put(q["g"][k]); put(q["Phi"][k]); put(q["b"][k])
+            put(np.reshape(q["C"][k], (ng, nx + nu))); put(np.reshape(q["lg"][k], ng))
+            put(np.reshape(q["ug"][k], ng)); put(q["lbw"][k]); put(q["ubw"][k])
+        put(q["HN"]); put(q["gN"]); put(q["lbxN"]); put(q["ubxN"])
+        put(np.reshape(q["R"], (nr, nx))); put(np.reshape(q["lr"], nr)); put(np.reshape(q["ur"], nr))
+        put(np.reshape(q["Req"], (ne, nx))); put(np.reshape(q["req"], ne))
+    path.write_bytes(b"".join(chunks))
+
+
+def random_qp(N: int, rng: np.random.Generator) -> dict:
+    """A feasible random QP with the robot's sizes: stable-ish dynamics, positive definite
+    stage blocks, |du| <= 1 on the 3 controls (some active), 2 terminal equality rows that a
+    trajectory strictly inside the bounds satisfies."""
+    nx, nu, nw = NX, NU, NX + NU
+    from scipy.linalg import expm
+    H = np.empty((N, nw, nw)); Phi = np.empty((N, nx, nw)); b = np.empty((N, nx)); g = np.empty((N, nw))
+    for k in range(N):
+        K = rng.standard_normal((nx, nx))
+        Phi[k, :, :nx] = expm(0.1 * (K - K.T) / 2) * 0.99 + 0.02 * rng.standard_normal((nx, nx))
+        Phi[k, :, nx:] = 0.1 * rng.standard_normal((nx, nu))
+        Mh = rng.standard_normal((nw, nw))
+        H[k] = Mh @ Mh.T / nw + 0.1 * np.eye(nw)
+        g[k] = rng.standard_normal(nw)
+        b[k] = 0.01 * rng.standard_normal(nx)
+    x0 = 0.5 * rng.standard_normal(nx)
+    # a feasible trajectory strictly inside the bounds fixes the terminal right-hand side
+    x = x0.copy()
+    for k in range(N):
+        u = rng.uniform(-0.5, 0.5, nu)
+        x = Phi[k] @ np.concatenate([x, u]) + b[k]
+    Req = rng.standard_normal((NE, nx))
+    MN = rng.standard_normal((nx, nx))
+    lbw = np.full((N, nw), -np.inf); ubw = np.full((N, nw), np.inf)
+    lbw[:, nx:] = -1.0; ubw[:, nx:] = 1.0
+    return {"N": N, "nx": nx, "nu": nu, "ng": 0, "nr": 0, "ne": NE, "H": H, "g": g, "Phi": Phi, "b": b,
+            "x0": x0, "HN": MN @ MN.T / nx + 0.1 * np.eye(nx), "gN": rng.standard_normal(nx),
+            "lbw": lbw, "ubw": ubw, "lbxN": np.full(nx, -np.inf), "ubxN": np.full(nx, np.inf),
+            "C": np.zeros((N, 0, nw)), "lg": np.zeros((N, 0)), "ug": np.zeros((N, 0)),
+            "R": np.zeros((0, nx)), "lr": np.zeros(0), "ur": np.zeros(0), "Req": Req, "req": Req @ x}
+
+
+def robot_arm_qps(gn_iters: int, exact_iters: int, log=print) -> list:
+    """(tag, qp) along the two convergence runs of the robot arm, full RTI, fixed xhat_0."""
+    from dopus_codegen.derivatives import build_functions
+    from dopus_codegen.ocp import load_ocp
+    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference import ReferenceDopus
+
+    disc = build_functions(load_ocp(ROOT / "examples" / "robot_arm.py"))
+    full = disc.N - 1
+    out = []
+    t0 = time.perf_counter()
+    # cold start, Gauss-Newton (DESIGN.md section 8: the exact Hessian diverges from there)
+    ref = ReferenceDopus(disc, M=full, mode="fixed", hessian="gauss-newton")
+    xhat = np.asarray(disc.x0, float)
+    ref.init(xhat)
+    for it in range(gn_iters):
+        out.append((f"cold_gn_{it}", ref.qp_of_current(xhat)))
+        ref.feedback(xhat)
+        ref.prepare()
+    log(f"  robot arm: {gn_iters} cold Gauss-Newton QPs, KKT {ref.kkt(xhat)['kkt']:.1e} "
+        f"({time.perf_counter() - t0:.1f} s)")
+    # warm start: converged at xhat_0, then the disturbed initial state, exact Hessian
+    t0 = time.perf_counter()
+    guess, _ = solve_ocp(disc, xhat)
+    xdist = disc.disturbance(xhat) if disc.disturbance is not None else xhat
+    ref = ReferenceDopus(disc, M=full, mode="fixed", hessian="exact")
+    ref.init(xhat, guess)
+    for it in range(exact_iters):
+        out.append((f"warm_exact_{it}", ref.qp_of_current(xdist)))
+        ref.feedback(xdist)
+        ref.prepare()
+    log(f"  robot arm: {exact_iters} warm exact-Hessian QPs, KKT {ref.kkt(xdist)['kkt']:.1e} "
+        f"({time.perf_counter() - t0:.1f} s)")
+    return out
+
+
+# ---------------------------------------------------------------------------- running
+def run_harness(exe: Path, qps: list, solvers: list, reps: int, warmup: int, tol: float,
+                iter_max: int, workdir: Path) -> tuple:
+    """Run one harness; returns (per-QP result dicts, primal solutions [qp, solver, n])."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    qfile, sfile = workdir / "qps.bin", workdir / "sol.bin"
+    write_qps(qfile, qps)
+    cmd = [str(exe), str(qfile), "--reps", str(reps), "--warmup", str(warmup), "--tol", repr(tol),
+           "--iter-max", str(iter_max), "--sol", str(sfile)]
+    for s in solvers:
+        if s["kind"] == "hpipm":
+            cmd += ["--hpipm", s["name"], str(s["mode"]), str(s["eq_mask"]), repr(s["eq_scale"]), str(s["ric_alg"])]
+        else:
+            cmd += ["--dopus", s["name"]]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise BenchError(f"{exe.name} failed ({r.returncode}): {r.stderr.strip()}")
+    rows = [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
+    n = qps[0]["N"] * (qps[0]["nx"] + qps[0]["nu"]) + qps[0]["nx"]
+    sol = np.fromfile(sfile, dtype="<f8").reshape(len(qps), len(solvers), n)
+    return rows, sol, cmd
+
+
+def primal_of(sol: dict) -> np.ndarray:
+    N = sol["u"].shape[0]
+    return np.concatenate([np.concatenate([sol["x"][k], sol["u"][k]]) for k in range(N)] + [sol["x"][N]])
+
+
+def reference_primals(qps: list, log=print) -> list:
+    """Primal solutions of the independent reference (IPOPT + active-set polish)."""
+    from dopus_codegen.qpref import solve_qp_reference
+    out = []
+    for q in qps:
+        try:
+            out.append(primal_of(solve_qp_reference(q)))
+        except Exception as exc:  # a reference failure is reported, not fatal
+            log(f"  reference QP solver failed: {exc}")
+            out.append(None)
+    return out
+
+
+def summarise(rows: list, sols: np.ndarray, refs: list, names: list, tags: list) -> list:
+    """Flatten the harness output, add the distance of each primal to the reference."""
+    out = []
+    for i, row in enumerate(rows):
+        entry = {"tag": tags[i], "N": row["N"], "solvers": {}}
+        for j, name in enumerate(names):
+            s = dict(row["solvers"][name])
+            s["time_per_iter"] = s["t_median"] / s["iterations"] if s["iterations"] else None
+            s["err_vs_reference"] = (float(np.max(np.abs(sols[i, j] - refs[i]))) if refs[i] is not None else None)
+            entry["solvers"][name] = s
+        out.append(entry)
+    return out
+
+
+def med(vals):
+    vals = [v for v in vals if v is not None and np.isfinite(v)]
+    return float(np.median(vals)) if vals else None
+
+
+def fmt_us(t):
+    return "       -" if t is None else f"{1e6 * t:8.1f}"
+
+
+def table(title: str, groups: dict, names: list, anchors: list, ours: str, log=print) -> dict:
+    """Print one table (rows: groups of QPs); return the medians per group and solver.
+
+    Ratios are medians over the QPs of the per-QP ratios ours / anchor."""
+    anchors = [a for a in anchors if a in names and ours in names]
+    log(f"\n{title}")
+    log(f"{'QPs':<18}{'#':>4}" + "".join(f" | {n:>25}" for n in names)
+        + "".join(f" | {'ours/' + a:>17}" for a in anchors))
+    log(f"{'':<18}{'':>4}" + "".join(f" | {'us/QP iters us/iter ok':>25}" for _ in names)
+        + "".join(f" | {'QP   iter':>17}" for _ in anchors))
+    summary = {}
+    for gname, entries in groups.items():
+        if not entries:
+            continue
+        line = f"{gname:<18}{len(entries):>4}"
+        gs = {}
+        for n in names:
+            t = med([e["solvers"][n]["t_median"] for e in entries])
+            it = med([e["solvers"][n]["iterations"] for e in entries])
+            tpi = med([e["solvers"][n]["time_per_iter"] for e in entries])
+            ok = sum(1 for e in entries if e["solvers"][n]["status"] == 0)
+            errs = [e["solvers"][n]["err_vs_reference"] for e in entries
+                    if e["solvers"][n]["err_vs_reference"] is not None]
+            gs[n] = {"t_median": t, "iterations_median": it, "time_per_iter_median": tpi,
+                     "converged": ok, "count": len(entries),
+                     "err_vs_reference_max": max(errs) if errs else None,
+                     "statuses": sorted({e["solvers"][n]["status"] for e in entries})}
+            line += f" | {fmt_us(t)} {it if it is not None else 0:5.1f} {fmt_us(tpi)} {ok:>2}"
+        for a in anchors:
+            r_qp = med([e["solvers"][ours]["t_median"] / e["solvers"][a]["t_median"] for e in entries])
+            r_it = med([e["solvers"][ours]["time_per_iter"] / e["solvers"][a]["time_per_iter"]
+                        for e in entries if e["solvers"][ours]["iterations"] and e["solvers"][a]["iterations"]])
+            gs[f"ratio_ours_over_{a}"] = {"per_qp": r_qp, "per_iter": r_it}
+            line += f" | {r_qp if r_qp is not None else float('nan'):7.2f} {r_it if r_it is not None else float('nan'):7.2f}"
+        log(line)
+        summary[gname] = gs
+    return summary
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--tol", type=float, default=1e-8, help="tolerance of every solver (default %(default)s)")
+    ap.add_argument("--reps", type=int, default=200, help="timed repetitions per QP and solver")
+    ap.add_argument("--warmup", type=int, default=20, help="untimed repetitions first")
+    ap.add_argument("--iter-max", type=int, default=100)
+    ap.add_argument("--random-per-n", type=int, default=5, help="random QPs per horizon length")
+    ap.add_argument("--gn-iters", type=int, default=20, help="cold Gauss-Newton robot-arm QPs")
+    ap.add_argument("--exact-iters", type=int, default=6, help="warm exact-Hessian robot-arm QPs")
+    ap.add_argument("--eq-scale", type=float, default=1e3,
+                    help="hpipm_scaled: terminal equality rows divided by eq_scale * max|row| (default %(default)g)")
+    ap.add_argument("--cflags", default="-O2", help="C flags of the harness and our solver "
+                    "(default %(default)s, the generated Makefile's OPT)")
+    ap.add_argument("--no-casadi-hpipm", action="store_true", help="skip the casadi wheel's HPIPM column")
+    ap.add_argument("--no-robot", action="store_true", help="random QPs only")
+    ap.add_argument("--no-ours", action="store_true", help="HPIPM only (our solver not built)")
+    ap.add_argument("--no-reference", action="store_true", help="skip the reference QP solves")
+    ap.add_argument("--quick", action="store_true", help="smoke run: few repetitions and QPs")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", type=Path, default=RESULTS / "qp_bench.json")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.reps, args.warmup, args.random_per_n, args.gn_iters, args.exact_iters = 10, 2, 2, 4, 3
+    log = lambda *a: print(*a, flush=True)
+
+    ensure_bench_env()
+    with_ours = not args.no_ours
+    if with_ours and not (RUNTIME / "dopus_qp.c").is_file():
+        log("runtime_c/dopus_qp.c not found: HPIPM only")
+        with_ours = False
+    targets = hpipm_targets(not args.no_casadi_hpipm)
+    log(f"HPIPM anchor: {targets['acados']['label']} ({targets['acados']['libdir']})")
+    if "casadi" in targets:
+        log(f"second HPIPM: {targets['casadi']['label']} (not the anchor)")
+    log(f"tolerance {args.tol:g}, {args.reps} repetitions "
+        f"(+{args.warmup} warm-up), cflags '{args.cflags}'")
+
+    def solvers_for(robot: bool, hp_name: str):
+        sv = []
+        if with_ours and hp_name == "acados":
+            sv.append({"kind": "dopus", "name": "ours"})
+        for name, cfg in HPIPM_CONFIGS.items():
+            if hp_name != "acados":
+                if name not in ("hpipm", "hpipm_scaled"):
+                    continue
+                name = name.replace("hpipm", "hpipm_casadi")
+            if cfg.get("robot_only") and not robot:
+                continue
+            sv.append({"kind": "hpipm", "name": name, "mode": HPIPM_MODES[cfg["mode"]], "eq_mask": cfg["eq_mask"],
+                       "eq_scale": args.eq_scale if cfg["eq_scale"] else 0.0, "ric_alg": cfg["ric_alg"]})
+        return sv
+
+    def bench_set(label: str, tagged: list, robot: bool) -> tuple:
+        """Run one family of QPs (same sizes within each N) through every harness."""
+        by_n = {}
+        for tag, q in tagged:
+            by_n.setdefault(int(q["N"]), []).append((tag, q))
+        entries, cmds = [], []
+        for N, items in sorted(by_n.items()):
+            tags = [t for t, _ in items]
+            qps = [q for _, q in items]
+            refs = [None] * len(qps) if args.no_reference else reference_primals(qps, log)
+            sizes = {k: int(qps[0][k]) for k in ("N", "nx", "nu", "ng", "nr", "ne")}
+            merged = None
+            for hp_name, hp in targets.items():
+                sv = solvers_for(robot, hp_name)
+                exe = build_harness(hp_name, hp, sizes if any(s["kind"] == "dopus" for s in sv) else None,
+                                    args.cflags)
+                rows, sols, cmd = run_harness(exe, qps, sv, args.reps, args.warmup, args.tol, args.iter_max,
+                                              BUILD / f"run_{label}_{hp_name}_N{N}")
+                cmds.append(" ".join(shlex.quote(c) for c in cmd))
+                part = summarise(rows, sols, refs, [s["name"] for s in sv], tags)
+                if merged is None:
+                    merged = part
+                else:
+                    for m, p in zip(merged, part):
+                        m["solvers"].update(p["solvers"])
+            entries += merged
+        return entries, cmds
+
+    report = {"config": {"tol": args.tol, "reps": args.reps, "warmup": args.warmup, "iter_max": args.iter_max,
+                         "hpipm_configs": HPIPM_CONFIGS, "eq_scale": args.eq_scale, "cflags": args.cflags,
+                         "hpipm": {k: {"label": v["label"], "libdir": str(v["libdir"])} for k, v in targets.items()},
+                         "machine": platform.processor() or platform.machine(),
+                         "cpu": _cpu_name(), "seed": args.seed},
+              "notes": NOTES}
+    anchor, ours = "hpipm", "ours"
+
+    # random QPs
+    rng = np.random.default_rng(args.seed)
+    tagged = [(f"random_N{N}_{i}", random_qp(N, rng)) for N in RANDOM_NS for i in range(args.random_per_n)]
+    log(f"\nrandom QPs: {len(tagged)} ({args.random_per_n} per N)")
+    entries, cmds = bench_set("random", tagged, robot=False)
+    names = list(entries[0]["solvers"])
+    groups = {f"random N={N}": [e for e in entries if e["N"] == N] for N in RANDOM_NS}
+    report["random"] = {"qps": entries, "summary": table("Random QPs (nx=5, nu=3, 3 control bounds, 2 terminal "
+                                                           "equality rows), medians", groups, names, [anchor], ours, log),
+                        "commands": cmds}
+
+    if not args.no_robot:
+        log("\nrobot-arm QPs (Python reference, full RTI, fixed xhat_0)")
+        tagged = robot_arm_qps(args.gn_iters, args.exact_iters, log)
+        entries, cmds = bench_set("robot", tagged, robot=True)
+        names = list(entries[0]["solvers"])
+        groups = {"robot cold GN": [e for e in entries if e["tag"].startswith("cold_gn")],
+                  "robot warm exact": [e for e in entries if e["tag"].startswith("warm_exact")],
+                  "robot all": entries}
+        report["robot_arm"] = {"qps": entries, "summary": table(
+            "Robot-arm QPs (N=40), medians; hpipm/hpipm_eqmask: equality as stated; hpipm_scaled: rows rescaled "
+            "by hand", groups, names, [anchor, "hpipm_scaled"], ours, log), "commands": cmds}
+        st = {n: sorted({HPIPM_STATUS.get(e['solvers'][n]['status'], str(e['solvers'][n]['status']))
+                         if n.startswith("hpipm") else DOPUS_STATUS.get(e['solvers'][n]['status'], '?')
+                         for e in entries}) for n in names}
+        log("statuses on the robot-arm QPs: " + "; ".join(f"{n}: {', '.join(v)}" for n, v in st.items()))
+
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(report, indent=1, default=_json_default))
+    log(f"\nwrote {args.json}")
+    return 0
+
+
+NOTES = ("Times are medians over repetitions of the solve call alone (the data already in each solver's "
+         "structures; t_set_median is the copy-in, HPIPM's conversion to BLASFEO panels, ours the vector copies). "
+         "Repetitions are interleaved solver by solver in one process after warm-up. Every solver gets the same "
+         "tolerance value; each measures it its own way (HPIPM: inf-norms of its residuals; ours: scaled KKT "
+         "residuals), so the residuals and err_vs_reference (max |dw - dw_ref|, reference: IPOPT + active-set "
+         "polish of dopus_codegen.qpref) are recorded per QP. HPIPM status: 0 success, 1 max_iter, 2 min_step, "
+         "3 nan, 4 inconsistent equality. Ours: 0 solved, 1 max_iter, 2 primal infeasible, 3 dual infeasible, "
+         "4 numerical, 5 invalid input.")
+
+
+def _cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return ""
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(type(o).__name__)
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except BenchError as exc:
+        print(f"qp_bench: {exc}", file=sys.stderr)
+        sys.exit(1)

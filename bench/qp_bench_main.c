@@ -1,0 +1,255 @@
+/* QP benchmark driver: solves every QP of a file with each configured solver in this one
+ * process, repetitions interleaved solver by solver (so that load from other processes
+ * hits all solvers alike), after warm-up runs (warm caches). Prints one JSON object per
+ * QP on stdout; bench/qp_bench.py builds, runs and summarises it.
+ *
+ * usage: qp_bench_main QPFILE [options]
+ *   --reps R         timed repetitions per QP and solver (median reported)
+ *   --warmup W       untimed repetitions first
+ *   --tol T          tolerance of every solver
+ *   --iter-max K
+ *   --sol FILE       write the primal solutions (float64, QP by QP, solver by solver)
+ *   --hpipm NAME MODE EQMASK EQSCALE RICALG   add an HPIPM configuration (qp_bench_hpipm.h)
+ *   --dopus NAME     add our solver (only when built with QPB_WITH_DOPUS)
+ *   --only NAME      time only that solver (for profilers)
+ */
+#define _POSIX_C_SOURCE 200112L
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "qp_bench_hpipm.h"
+#include "qp_bench_qp.h"
+#ifdef QPB_WITH_DOPUS
+#include "qp_bench_dopus.h"
+#endif
+
+#define MAX_SOLVERS 12
+
+typedef struct {
+    char name[64];
+    int kind; /* 0 HPIPM, 1 ours */
+    bench_hpipm_opts hopts;
+    void *handle;
+    double *times, *set_times;
+    int status, iterations;
+    double res[4];
+    int has_res;
+} solver_entry;
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static double quantile(double *v, int n, double q)
+{
+    qsort(v, (size_t)n, sizeof(double), cmp_double);
+    {
+        double pos = q * (double)(n - 1);
+        int i = (int)floor(pos);
+        double f = pos - (double)i;
+        return i + 1 < n ? v[i] * (1.0 - f) + v[i + 1] * f : v[n - 1];
+    }
+}
+
+static void print_num(double v)
+{
+    if (isfinite(v)) printf("%.6e", v);
+    else printf("null");
+}
+
+static int solver_create(solver_entry *s, const bench_qp *qp, double tol, int iter_max)
+{
+    if (s->kind == 0) {
+        s->hopts.tol = tol;
+        s->hopts.iter_max = iter_max;
+        s->handle = bench_hpipm_create(qp, &s->hopts);
+        return s->handle == NULL;
+    }
+#ifdef QPB_WITH_DOPUS
+    s->handle = bench_dopus_create(qp, tol, iter_max);
+    return s->handle == NULL;
+#else
+    return 1;
+#endif
+}
+
+static void solver_set(solver_entry *s, const bench_qp *qp)
+{
+    if (s->kind == 0) bench_hpipm_set_data((bench_hpipm *)s->handle, qp);
+#ifdef QPB_WITH_DOPUS
+    else bench_dopus_set_data((bench_dopus *)s->handle, qp);
+#endif
+}
+
+static int solver_solve(solver_entry *s)
+{
+    if (s->kind == 0) return bench_hpipm_solve((bench_hpipm *)s->handle);
+#ifdef QPB_WITH_DOPUS
+    return bench_dopus_solve((bench_dopus *)s->handle);
+#else
+    return -1;
+#endif
+}
+
+static void solver_finish(solver_entry *s, double *dw)
+{
+    s->has_res = 0;
+    if (s->kind == 0) {
+        bench_hpipm *h = (bench_hpipm *)s->handle;
+        s->iterations = bench_hpipm_iterations(h);
+        bench_hpipm_residuals(h, s->res);
+        s->has_res = 1;
+        bench_hpipm_primal(h, dw);
+        bench_hpipm_free(h);
+    }
+#ifdef QPB_WITH_DOPUS
+    else {
+        bench_dopus *d = (bench_dopus *)s->handle;
+        s->iterations = bench_dopus_iterations(d);
+        s->has_res = bench_dopus_residuals(d, s->res) == 0;
+        bench_dopus_primal(d, dw);
+        bench_dopus_free(d);
+    }
+#endif
+    s->handle = NULL;
+}
+
+int main(int argc, char **argv)
+{
+    solver_entry sv[MAX_SOLVERS];
+    int ns = 0, reps = 100, warmup = 10, iter_max = 100, i, q, nqp;
+    double tol = 1e-8, count;
+    const char *qpfile = NULL, *solfile = NULL, *only = NULL;
+    FILE *f, *fsol = NULL;
+
+    memset(sv, 0, sizeof(sv));
+    for (i = 1; i < argc; ++i) {
+        if (!strcmp(argv[i], "--reps") && i + 1 < argc) reps = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--warmup") && i + 1 < argc) warmup = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--tol") && i + 1 < argc) tol = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--iter-max") && i + 1 < argc) iter_max = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--sol") && i + 1 < argc) solfile = argv[++i];
+        else if (!strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
+        else if (!strcmp(argv[i], "--hpipm") && i + 5 < argc && ns < MAX_SOLVERS) {
+            solver_entry *s = &sv[ns++];
+            strncpy(s->name, argv[i + 1], sizeof(s->name) - 1);
+            s->kind = 0;
+            s->hopts.mode = atoi(argv[i + 2]);
+            s->hopts.eq_mask = atoi(argv[i + 3]);
+            s->hopts.eq_scale = atof(argv[i + 4]);
+            s->hopts.ric_alg = atoi(argv[i + 5]);
+            i += 5;
+        } else if (!strcmp(argv[i], "--dopus") && i + 1 < argc && ns < MAX_SOLVERS) {
+#ifdef QPB_WITH_DOPUS
+            solver_entry *s = &sv[ns++];
+            strncpy(s->name, argv[i + 1], sizeof(s->name) - 1);
+            s->kind = 1;
+            i += 1;
+#else
+            fprintf(stderr, "qp_bench_main: built without our solver (QPB_WITH_DOPUS)\n");
+            return 2;
+#endif
+        } else if (argv[i][0] != '-' && qpfile == NULL) qpfile = argv[i];
+        else {
+            fprintf(stderr, "qp_bench_main: bad argument '%s'\n", argv[i]);
+            return 2;
+        }
+    }
+    if (qpfile == NULL || ns == 0 || reps < 1 || warmup < 0) {
+        fprintf(stderr, "usage: qp_bench_main QPFILE [--reps R] [--warmup W] [--tol T] [--iter-max K] "
+                        "[--sol FILE] [--only NAME] (--hpipm NAME MODE EQMASK EQSCALE RICALG | --dopus NAME)...\n");
+        return 2;
+    }
+    if (only != NULL) {
+        int keep = 0;
+        for (i = 0; i < ns; ++i)
+            if (!strcmp(sv[i].name, only)) sv[keep++] = sv[i];
+        ns = keep;
+        if (ns == 0) { fprintf(stderr, "qp_bench_main: no solver named '%s'\n", only); return 2; }
+    }
+    f = fopen(qpfile, "rb");
+    if (f == NULL) { fprintf(stderr, "qp_bench_main: cannot open %s\n", qpfile); return 2; }
+    if (fread(&count, sizeof(double), 1, f) != 1) { fprintf(stderr, "qp_bench_main: empty file\n"); return 2; }
+    nqp = (int)count;
+    if (solfile != NULL && (fsol = fopen(solfile, "wb")) == NULL) {
+        fprintf(stderr, "qp_bench_main: cannot write %s\n", solfile);
+        return 2;
+    }
+    for (i = 0; i < ns; ++i) {
+        sv[i].times = (double *)malloc((size_t)reps * sizeof(double));
+        sv[i].set_times = (double *)malloc((size_t)reps * sizeof(double));
+        if (!sv[i].times || !sv[i].set_times) return 3;
+    }
+
+    for (q = 0; q < nqp; ++q) {
+        bench_qp qp;
+        double *dw;
+        int r, n, rc = bench_qp_read(f, &qp);
+        if (rc != 0) { fprintf(stderr, "qp_bench_main: QP %d unreadable (code %d)\n", q, rc); return 3; }
+        n = qp.N * (qp.nx + qp.nu) + qp.nx;
+        dw = (double *)calloc((size_t)n, sizeof(double));
+        for (i = 0; i < ns; ++i)
+            if (solver_create(&sv[i], &qp, tol, iter_max)) {
+                fprintf(stderr, "qp_bench_main: solver %s could not take QP %d\n", sv[i].name, q);
+                return 3;
+            }
+        for (r = 0; r < warmup + reps; ++r) {
+            for (i = 0; i < ns; ++i) {
+                double t0 = now(), t1, t2;
+                solver_set(&sv[i], &qp);
+                t1 = now();
+                sv[i].status = solver_solve(&sv[i]);
+                t2 = now();
+                if (r >= warmup) {
+                    sv[i].set_times[r - warmup] = t1 - t0;
+                    sv[i].times[r - warmup] = t2 - t1;
+                }
+            }
+        }
+        printf("{\"qp\": %d, \"N\": %d, \"solvers\": {", q, qp.N);
+        for (i = 0; i < ns; ++i) {
+            solver_entry *s = &sv[i];
+            double med = quantile(s->times, reps, 0.5), q25 = quantile(s->times, reps, 0.25),
+                   q75 = quantile(s->times, reps, 0.75), tmin = s->times[0],
+                   tset = quantile(s->set_times, reps, 0.5);
+            solver_finish(s, dw);
+            if (fsol != NULL) fwrite(dw, sizeof(double), (size_t)n, fsol);
+            printf("%s\"%s\": {\"status\": %d, \"iterations\": %d, \"t_median\": ", i ? ", " : "", s->name,
+                   s->status, s->iterations);
+            print_num(med);
+            printf(", \"t_q25\": "); print_num(q25);
+            printf(", \"t_q75\": "); print_num(q75);
+            printf(", \"t_min\": "); print_num(tmin);
+            printf(", \"t_set_median\": "); print_num(tset);
+            printf(", \"objective\": "); print_num(bench_qp_objective(&qp, dw));
+            printf(", \"infeasibility\": "); print_num(bench_qp_infeasibility(&qp, dw));
+            if (s->has_res) {
+                int j;
+                printf(", \"residuals\": [");
+                for (j = 0; j < 4; ++j) { if (j) printf(", "); print_num(s->res[j]); }
+                printf("]");
+            }
+            printf("}");
+        }
+        printf("}}\n");
+        fflush(stdout);
+        free(dw);
+        bench_qp_free(&qp);
+    }
+    fclose(f);
+    if (fsol != NULL) fclose(fsol);
+    for (i = 0; i < ns; ++i) { free(sv[i].times); free(sv[i].set_times); }
+    return 0;
+}
