@@ -1,0 +1,465 @@
+"""The Python handle of a generated C solver (cffi, ABI mode).
+
+:class:`CSolver` implements the backend protocol of docs/algorithm.md section 7, so the
+convergence study (``dopus-gen converge --backend c``) and the software-in-the-loop runs
+drive the generated C exactly as they drive :class:`~dopus_codegen.reference.ReferenceDopus`::
+
+    solver = CSolver(disc, M=1)                 # generate + build into a cache, then load
+    solver.init(xhat0)                          # the OCP file's guess
+    u0 = solver.feedback(xhat0); solver.prepare()
+
+``CSolver(disc, lib_dir=...)`` or :meth:`CSolver.from_dir` load an already generated folder
+(``dopus-gen generate`` + ``dopus-gen build``). Without ``lib_dir`` the folder is generated
+into a cache keyed by a hash of the generated sources (``$DOPUS_CACHE_DIR``, default
+``~/.cache/dopus-codegen``), so an unchanged problem is neither regenerated on disk nor
+rebuilt.
+
+numpy in, numpy out: every array is checked for shape, dtype and finiteness before it
+reaches C; a bad input raises :class:`DopusError` (which is also a ``ValueError``) naming
+the argument, with ``status`` the C status code. A failing call leaves the solver usable:
+the next good call works (the C runtime keeps its state consistent).
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+import threading
+from pathlib import Path
+from typing import Dict, Optional
+
+import numpy as np
+
+from .reference import DopusError as _ReferenceDopusError
+
+__all__ = ["CSolver", "DopusError", "STATUS", "QP_STATUS", "PHASES", "load_library", "build_for"]
+
+#: C status codes (enum dopus_status of runtime_c/dopus_solver.h).
+STATUS = {
+    0: "ok",
+    1: "QP not solved",
+    2: "NaN/Inf input",
+    3: "non-finite function value",
+    4: "function evaluation failure",
+    5: "invalid argument",
+    6: "not initialised",
+    7: "not prepared",
+    8: "no nominal guess",
+    9: "regularisation failure",
+}
+STATUS_OK, STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = 0, 1, 2, 5
+
+#: QP status codes (enum dopus_qp_status of runtime_c/dopus_qp.h).
+QP_STATUS = {0: "solved", 1: "max iterations", 2: "primal infeasible", 3: "dual infeasible",
+             4: "numerical failure", 5: "invalid input"}
+
+#: Timed phases, in the order of enum dopus_phase (runtime_c/dopus_timer.h).
+PHASES = ("feedback", "shift", "gradients", "rho", "hessians", "regularization", "assembly", "kkt")
+
+_MODES = {"receding": 0, "fixed": 1}
+_HESSIANS = {"exact": 0, "gauss-newton": 1, "gn": 1}
+_REGULARIZATIONS = {"none": 0, "project": 1, "mirror": 2}
+
+
+class DopusError(_ReferenceDopusError, ValueError):
+    """A call of the C solver failed. ``status`` is the C status code (see :data:`STATUS`),
+    ``qp_status`` the QP solver's status for a failed QP (else None). It derives from the
+    reference's ``DopusError`` (so code written for either backend catches it) and from
+    ``ValueError`` (bad input)."""
+
+    def __init__(self, message: str, status: int, qp_status: Optional[int] = None):
+        super().__init__(message, status)
+        self.qp_status = qp_status
+
+
+# ---------------------------------------------------------------------------------- build
+_LIB_CACHE: Dict[str, tuple] = {}
+_DISC_CACHE: Dict[int, tuple] = {}
+_LOCK = threading.Lock()
+
+
+def cache_root() -> Path:
+    return Path(os.environ.get("DOPUS_CACHE_DIR") or (Path.home() / ".cache" / "dopus-codegen"))
+
+
+def build_for(disc, cache_dir=None) -> Path:
+    """Generate the C folder of ``disc`` into the cache (keyed by the hash of the generated
+    sources) and build it; return the folder. Cheap when nothing changed."""
+    from .build import build
+    from .codegen import render_folder, write_folder
+
+    key = id(disc)
+    with _LOCK:
+        hit = _DISC_CACHE.get(key)
+        if hit is not None and hit[0] is disc and (cache_dir is None or Path(cache_dir) == hit[1].parent):
+            build(hit[1])
+            return hit[1]
+    files = render_folder(disc, None)
+    h = hashlib.sha256()
+    for fname in sorted(files):
+        h.update(fname.encode() + b"\0" + files[fname].encode() + b"\0")
+    root = Path(cache_dir) if cache_dir is not None else cache_root()
+    out = root / f"{disc.name}-{h.hexdigest()[:16]}"
+    if not (out / f"{disc.name}_meta.json").is_file():
+        root.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{disc.name}-", dir=str(root)))
+        write_folder(files, tmp)
+        try:
+            os.rename(tmp, out)
+        except OSError:  # another process won the race: its folder has the same content
+            import shutil
+
+            shutil.rmtree(tmp, ignore_errors=True)
+    build(out)
+    with _LOCK:
+        _DISC_CACHE[key] = (disc, out)
+    return out
+
+
+def load_library(folder) -> tuple:
+    """``(ffi, lib, meta)`` of a built folder (built first if needed); cached per library."""
+    import cffi
+
+    from .build import build
+    from .codegen import read_meta
+
+    folder = Path(folder)
+    res = build(folder)
+    meta = read_meta(folder)
+    key = str(res.shared_lib)
+    stamp = res.shared_lib.stat().st_mtime_ns
+    with _LOCK:
+        hit = _LIB_CACHE.get(key)
+        if hit is not None and hit[3] == stamp:
+            return hit[0], hit[1], hit[2]
+        ffi = cffi.FFI()
+        ffi.cdef(Path(res.cdef_path).read_text())
+        lib = ffi.dlopen(str(res.shared_lib))
+        _LIB_CACHE[key] = (ffi, lib, meta, stamp)
+    return ffi, lib, meta
+
+
+# ---------------------------------------------------------------------------------- handle
+class CSolver:
+    """The generated C solver behind the backend protocol of docs/algorithm.md section 7.
+
+    Read-only state after each call: ``x (N+1,nx)``, ``u (N,nu)``, ``lam (N+1,nx)``,
+    ``mu_g (N,ng)``, ``mu_b (N,nw)``, ``mu_bN (nx,)``, ``mu_r (nr,)``, ``nu (ne,)``,
+    ``rho (N,)``, ``recomputed`` (sorted stage list), ``qp_iterations``, ``qp_status``,
+    ``status``, ``timings`` (seconds per phase of the last call that ran it, see
+    :data:`PHASES`, plus ``prepare`` = the sum of its phases), ``ring_head``.
+    """
+
+    def __init__(self, disc=None, M: int = 1, mode: str = "receding", hessian: str = "exact",
+                 regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10,
+                 lib_dir=None, qp_max_iter: Optional[int] = None):
+        if lib_dir is None:
+            if disc is None:
+                raise ValueError("CSolver needs a Discretized problem or lib_dir (a generated folder)")
+            lib_dir = build_for(disc)
+        self.lib_dir = Path(lib_dir)
+        self._ffi, self._lib, self.meta = load_library(self.lib_dir)
+        self.name = self.meta["name"]
+        dims = self._ffi.new("int[10]")
+        self._c("get_dims")(dims)
+        (self.N, self.nx, self.n_u, self.nw, self.np, self.ng, self.nr, self.ne,
+         has_gn, has_nominal) = [int(v) for v in dims]
+        self.has_gn, self.has_nominal = bool(has_gn), bool(has_nominal)
+        self.disc = disc
+        if disc is not None:
+            want = (disc.N, disc.nx, disc.nu, disc.np, disc.ng, disc.nr, disc.ne)
+            have = (self.N, self.nx, self.n_u, self.np, self.ng, self.nr, self.ne)
+            if tuple(int(v) for v in want) != have or disc.name != self.name:
+                raise ValueError(f"the library in '{self.lib_dir}' is problem '{self.name}' with sizes "
+                                 f"(N, nx, nu, np, ng, nr, ne) = {have}, the given problem is "
+                                 f"'{disc.name}' with {tuple(int(v) for v in want)}")
+        size = int(self._c("solver_sizeof")())
+        self.sizeof = size
+        # doubles keep the struct 8-byte aligned; cffi zero-fills, the C side sets defaults
+        self._mem = self._ffi.new("double[]", (size + 7) // 8)
+        self._s = self._ffi.cast(f"{self.name}_solver *", self._mem)
+        self._c("defaults")(self._s)
+        self.status = STATUS_OK
+        self._check(self._c("set_qp_tol")(self._s, self._positive(qp_tol, "qp_tol")), "qp_tol")
+        if qp_max_iter is not None:
+            self._check(self._c("set_qp_max_iter")(self._s, int(qp_max_iter)), f"qp_max_iter={qp_max_iter!r}")
+        self.set_M(M)
+        self.set_mode(mode)
+        self.set_hessian(hessian)
+        self.set_regularization(regularization, reg_eps)
+
+    @classmethod
+    def from_dir(cls, path, disc=None, **settings) -> "CSolver":
+        """Load an already generated (and built, or buildable) folder."""
+        return cls(disc, lib_dir=path, **settings)
+
+    # ------------------------------------------------------------------ plumbing
+    def _c(self, fname: str):
+        return getattr(self._lib, f"{self.name}_{fname}")
+
+    def _status_text(self, status: int) -> str:
+        return self._ffi.string(self._c("status_string")(int(status))).decode()
+
+    def _check(self, status: int, what: str) -> None:
+        status = int(status)
+        self.status = status
+        if status == STATUS_OK:
+            return
+        qp_status = None
+        msg = f"{self.name}: {what}: {self._status_text(status)} (status {status})"
+        if status == STATUS_QP:
+            qp_status = int(self._c("get_qp_status")(self._s))
+            msg += (f"; QP status {qp_status} ({QP_STATUS.get(qp_status, 'unknown')}) after "
+                    f"{int(self._c('get_qp_iterations')(self._s))} iterations")
+        raise DopusError(msg, status, qp_status)
+
+    def _bad(self, message: str, status: int = STATUS_INVALID_ARGUMENT):
+        self.status = status
+        raise DopusError(f"{self.name}: {message}", status)
+
+    def _array(self, value, shape, what: str, check_finite: bool = True) -> np.ndarray:
+        """A C-contiguous float64 copy of ``value`` with exactly ``shape`` (a vector may
+        also come as a row or column)."""
+        try:
+            a = np.asarray(value)
+        except Exception as exc:  # noqa: BLE001 - ragged lists and the like
+            self._bad(f"{what}: not an array ({exc})")
+        if a.dtype.kind not in "biuf":
+            self._bad(f"{what}: expected real numbers, got dtype {a.dtype}")
+        shape = tuple(int(s) for s in shape)
+        if a.shape != shape:
+            vector_like = len(shape) == 1 and a.size == shape[0] and sum(d != 1 for d in a.shape) <= 1
+            if not vector_like:
+                self._bad(f"{what}: expected shape {shape}, got {a.shape}")
+            a = a.reshape(shape)
+        a = np.ascontiguousarray(a, dtype=np.float64)
+        if check_finite and not np.all(np.isfinite(a)):
+            bad = np.argwhere(~np.isfinite(a))
+            where = ", ".join(str(tuple(int(i) for i in b)) if a.ndim > 1 else str(int(b[0]))
+                              for b in bad[:5])
+            self._bad(f"{what}: NaN or Inf at index {where}", STATUS_NONFINITE_INPUT)
+        return a
+
+    def _ptr(self, a: Optional[np.ndarray]):
+        if a is None or a.size == 0:
+            return self._ffi.NULL
+        return self._ffi.from_buffer("double[]", a)
+
+    def _get(self, fname: str, shape) -> np.ndarray:
+        out = np.zeros(shape)
+        if out.size:
+            self._c(fname)(self._s, self._ffi.from_buffer("double[]", out))
+        return out
+
+    @staticmethod
+    def _positive(v, what: str) -> float:
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            raise DopusError(f"{what} must be a positive number, got {v!r}", STATUS_INVALID_ARGUMENT) from None
+        if not np.isfinite(f) or f <= 0:
+            raise DopusError(f"{what} must be positive and finite, got {v!r}", STATUS_INVALID_ARGUMENT)
+        return f
+
+    # ------------------------------------------------------------------ settings
+    def set_M(self, M: int) -> None:
+        """Stages re-linearised per iteration; values above N-1 mean the full RTI (N-1),
+        as in the reference."""
+        if isinstance(M, bool) or not isinstance(M, (int, np.integer)) or M < 0:
+            self._bad(f"M must be a non-negative integer, got {M!r}")
+        self._check(self._c("set_M")(self._s, int(min(int(M), self.N - 1))), f"M={M!r}")
+
+    def set_mode(self, mode: str) -> None:
+        if mode not in _MODES:
+            self._bad(f"mode must be 'receding' or 'fixed', got {mode!r}")
+        self._check(self._c("set_mode")(self._s, _MODES[mode]), f"mode={mode!r}")
+
+    def set_hessian(self, hessian: str) -> None:
+        if hessian not in _HESSIANS:
+            self._bad(f"hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
+        if _HESSIANS[hessian] == 1 and not self.has_gn:
+            self._bad("hessian='gauss-newton' needs a least-squares stage cost (the OCP declares no "
+                      "stage_least_squares)")
+        self._check(self._c("set_hessian")(self._s, _HESSIANS[hessian]), f"hessian={hessian!r}")
+
+    def set_regularization(self, regularization: str, reg_eps: Optional[float] = None) -> None:
+        if regularization not in _REGULARIZATIONS:
+            self._bad(f"regularization must be 'none', 'project' or 'mirror', got {regularization!r}")
+        eps = self.reg_eps if reg_eps is None else self._positive(reg_eps, "reg_eps")
+        self._check(self._c("set_regularization")(self._s, _REGULARIZATIONS[regularization], eps),
+                    f"regularization={regularization!r}, reg_eps={reg_eps!r}")
+
+    def set_qp_tol(self, tol: float) -> None:
+        self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")
+
+    def set_parameters(self, p) -> None:
+        """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
+        a = np.asarray(p) if not isinstance(p, np.ndarray) else p
+        if a.ndim <= 1 and a.size == self.np:
+            a = np.tile(self._array(a, (self.np,), "parameters").reshape(1, self.np), (self.N + 1, 1))
+        a = self._array(a, (self.N + 1, self.np), "parameters")
+        self._check(self._c("set_parameters")(self._s, self._ptr(a)), "set_parameters")
+
+    def set_parameters_node(self, k: int, pk) -> None:
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k <= self.N:
+            self._bad(f"node index must be an integer in 0..{self.N}, got {k!r}")
+        a = self._array(pk, (self.np,), f"parameters of node {k}")
+        self._check(self._c("set_parameters_node")(self._s, int(k), self._ptr(a)), "set_parameters_node")
+
+    @property
+    def M(self) -> int:
+        return int(self._c("get_M")(self._s))
+
+    @property
+    def mode(self) -> str:
+        return {v: k for k, v in _MODES.items()}[int(self._c("get_mode")(self._s))]
+
+    @property
+    def hessian(self) -> str:
+        return "exact" if int(self._c("get_hessian")(self._s)) == 0 else "gauss-newton"
+
+    @property
+    def regularization(self) -> str:
+        return {v: k for k, v in _REGULARIZATIONS.items()}[int(self._c("get_regularization")(self._s))]
+
+    @property
+    def reg_eps(self) -> float:
+        return float(self._c("get_reg_eps")(self._s))
+
+    @property
+    def qp_tol(self) -> float:
+        return float(self._c("get_qp_tol")(self._s))
+
+    @property
+    def p(self) -> np.ndarray:
+        return self._get("get_parameters", (self.N + 1, self.np))
+
+    # ------------------------------------------------------------------ the iteration
+    def init(self, xhat0, guess=None) -> None:
+        """Iterate = ``guess`` (None: the OCP file's guess compiled into the library; missing
+        multipliers: zeros); every stage and the terminal node linearised there."""
+        N, nx, nu, ng, nr, ne, nw = self.N, self.nx, self.n_u, self.ng, self.nr, self.ne, self.nw
+        xh = self._array(xhat0, (nx,), "init: xhat0")
+        arrays = [None] * 8
+        if guess is not None:
+            specs = (("x", (N + 1, nx)), ("u", (N, nu)), ("lam", (N + 1, nx)), ("mu_g", (N, ng)),
+                     ("mu_b", (N, nw)), ("mu_bN", (nx,)), ("mu_r", (nr,)), ("nu", (ne,)))
+            for i, (field, shape) in enumerate(specs):
+                v = getattr(guess, field, None)
+                if v is None and field in ("x", "u"):
+                    self._bad(f"init: guess.{field} is required")
+                if v is not None:
+                    arrays[i] = self._array(v, shape, f"init: guess.{field}")
+        self._check(self._c("init")(self._s, self._ptr(xh), *[self._ptr(a) for a in arrays]), "init")
+
+    def init_nominal(self, xhat0) -> None:
+        """Initialise from the nominal primal-dual guess generated into the library."""
+        xh = self._array(xhat0, (self.nx,), "init_nominal: xhat0")
+        self._check(self._c("init_nominal")(self._s, self._ptr(xh)), "init_nominal")
+
+    def feedback(self, xhat0) -> np.ndarray:
+        """Solve the prepared QP for ``xhat0``, take the full step, return ``u_0``."""
+        xh = self._array(xhat0, (self.nx,), "feedback: xhat0")
+        u0 = np.zeros(self.n_u)
+        self._check(self._c("feedback")(self._s, self._ptr(xh), self._ptr(u0)), "feedback")
+        return u0
+
+    def prepare(self) -> None:
+        """Shift (receding mode), F and rho, fresh last stage and terminal node, the M worst H."""
+        self._check(self._c("prepare")(self._s), "prepare")
+
+    def kkt(self, xhat0=None) -> dict:
+        """KKT measure (algorithm.md section 6) of the current iterate for ``xhat0``."""
+        xh = None if xhat0 is None else self._array(xhat0, (self.nx,), "kkt: xhat0")
+        out = np.zeros(4)
+        self._check(self._c("kkt_eval")(self._s, self._ptr(xh), self._ptr(out)), "kkt")
+        stat, eq, ineq, comp = (float(v) for v in out)
+        return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
+
+    # ------------------------------------------------------------------ read-only state
+    @property
+    def initialized(self) -> bool:
+        return bool(self._c("is_initialized")(self._s))
+
+    @property
+    def x(self) -> np.ndarray:
+        return self._get("get_x", (self.N + 1, self.nx))
+
+    @property
+    def u(self) -> np.ndarray:
+        return self._get("get_u", (self.N, self.n_u))
+
+    @property
+    def lam(self) -> np.ndarray:
+        return self._get("get_lam", (self.N + 1, self.nx))
+
+    @property
+    def mu_g(self) -> np.ndarray:
+        return self._get("get_mu_g", (self.N, self.ng))
+
+    @property
+    def mu_b(self) -> np.ndarray:
+        return self._get("get_mu_b", (self.N, self.nw))
+
+    @property
+    def mu_bN(self) -> np.ndarray:
+        return self._get("get_mu_bN", (self.nx,))
+
+    @property
+    def mu_r(self) -> np.ndarray:
+        return self._get("get_mu_r", (self.nr,))
+
+    @property
+    def nu(self) -> np.ndarray:
+        return self._get("get_nu", (self.ne,))
+
+    @property
+    def rho(self) -> np.ndarray:
+        return self._get("get_rho", (self.N,))
+
+    @property
+    def recomputed(self) -> list:
+        buf = self._ffi.new("int[]", self.N)
+        n = int(self._c("get_recomputed")(self._s, buf))
+        return [int(buf[i]) for i in range(n)]
+
+    @property
+    def ring_head(self) -> int:
+        return int(self._c("get_ring_head")(self._s))
+
+    @property
+    def qp_iterations(self) -> int:
+        return int(self._c("get_qp_iterations")(self._s))
+
+    @property
+    def qp_status(self) -> int:
+        return int(self._c("get_qp_status")(self._s))
+
+    @property
+    def timings(self) -> dict:
+        t = self._get("get_timings", (len(PHASES),))
+        out = {name: float(v) for name, v in zip(PHASES, t)}
+        out["prepare"] = sum(out[k] for k in ("shift", "gradients", "rho", "hessians", "regularization", "assembly"))
+        return out
+
+    def guess(self):
+        """The current iterate as a ``Guess``."""
+        from .ocp import Guess
+
+        return Guess(x=self.x, u=self.u, lam=self.lam, mu_g=self.mu_g, mu_b=self.mu_b,
+                     mu_bN=self.mu_bN, mu_r=self.mu_r, nu=self.nu)
+
+    def set_clock(self, clock=None) -> None:
+        """Replace the C clock by a Python callable returning seconds (None: the default).
+        The callback is kept alive by the handle."""
+        if clock is None:
+            self._clock_cb = None
+            self._c("set_clock")(self._s, self._ffi.NULL, self._ffi.NULL)
+            return
+        cb = self._ffi.callback("double(void *)", lambda _ctx: float(clock()))
+        self._clock_cb = cb
+        self._c("set_clock")(self._s, cb, self._ffi.NULL)
+
+    def __repr__(self) -> str:
+        return (f"CSolver({self.name!r}, N={self.N}, M={self.M}, mode={self.mode!r}, "
+                f"hessian={self.hessian!r}, regularization={self.regularization!r}, lib_dir='{self.lib_dir}')")
