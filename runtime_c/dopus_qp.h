@@ -182,17 +182,19 @@ typedef struct {
     double c_lam[(DOPUS_N + 1) * DOPUS_NX];
     double c_nu[DOPUS_QP_NE1];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
-    double M[DOPUS_N][DOPUS_QP_NW * DOPUS_QP_NW];     /* H + D'QD + delta I (+ Phi'P Phi) */
-    double HNc[DOPUS_NX * DOPUS_NX];                   /* terminal condensed Hessian */
+    double M[DOPUS_QP_NW * DOPUS_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
     double P[DOPUS_N + 1][DOPUS_NX * DOPUS_NX];       /* value function Hessians */
     double G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];   /* value function x-nu coupling */
     double Lu[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NU1];  /* Cholesky factor of M_uu */
     double LK[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux */
     double LKn[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
-    double W[DOPUS_QP_NE1 * DOPUS_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
+    double S[DOPUS_QP_NE1 * DOPUS_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
     double p[DOPUS_N + 1][DOPUS_NX];
     double e[DOPUS_QP_NE1];
     double lk[DOPUS_N][DOPUS_QP_NU1];
+    double aty[DOPUS_QP_NPRIM];                        /* constraint part of r_stat (A'y) */
+    double hwg[DOPUS_QP_NPRIM];                        /* objective part of r_stat (Hw + g) */
+    double yrow[DOPUS_QP_NINEQ];                       /* per-row scratch */
     double work[4 * DOPUS_QP_NW * (DOPUS_QP_NW + DOPUS_QP_NE1 + 1)];
     double delta;          /* current inertia-correction shift */
     double rho_aug;        /* current terminal augmented-Lagrangian weight */

@@ -1,0 +1,322 @@
+"""Random OCP-structured QPs with a known primal-dual solution, and independent solvers.
+
+``make_qp`` constructs a QP in the dict format of dopus_codegen.qp_harness around a chosen
+point: it picks w*, lam*, nu* and an active set (strictly active bounds with nonzero signed
+multipliers, weakly active ones with zero multiplier, inactive ones at a distance), then
+sets the gradients g_k, gN so that the stationarity conditions hold exactly. When the
+active constraints satisfy LICQ and the Hessian is positive definite on the null space of
+the equalities (checked by ``check_unique``), that point is THE unique solution and its
+multipliers are unique, so every array can be compared.
+
+``solve_clarabel`` solves the same QP (stacked, sparse) with Clarabel and maps its duals
+to the signed conventions of dopus_qp.h.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+
+INF = np.inf
+
+
+def _status_draw(rng, p_active, p_weak, p_free):
+    r = rng.random()
+    if r < p_active:
+        return "active"
+    if r < p_active + p_weak:
+        return "weak"
+    if r < p_active + p_weak + p_free:
+        return "free"
+    return "inactive"
+
+
+def _row(rng, value, status, dual_scale, gap_scale, two_sided_prob=0.7):
+    """Bounds (lo, up) around `value` and the signed multiplier for one row."""
+    gap = gap_scale * rng.uniform(0.2, 2.0)
+    side = rng.choice([-1.0, 1.0])
+    other = gap_scale * rng.uniform(0.2, 2.0) if rng.random() < two_sided_prob else INF
+    if status == "free":
+        return -INF, INF, 0.0
+    if status == "inactive":
+        lo = value - gap if rng.random() < 0.8 else -INF
+        up = value + gap_scale * rng.uniform(0.2, 2.0) if rng.random() < 0.8 else INF
+        return lo, up, 0.0
+    mu = side * dual_scale * rng.uniform(0.5, 2.0) if status == "active" else 0.0
+    if side > 0:  # upper side active
+        return value - other, value, mu
+    return value, value + other, mu
+
+
+def make_qp(rng, N, nx, nu, ng=0, nr=0, ne=0, *, p_active=0.25, p_weak=0.0, p_free=0.2,
+            hessian="pd", var_scale=0.0, row_scale=0.0, eq_row_scale=0.0, dual_scale=1.0):
+    """A random QP with known solution. Scales are log10 ranges of random factors."""
+    nw = nx + nu
+    xs = 10.0 ** rng.uniform(-var_scale, var_scale, nx)   # per-state scale, all stages
+    us = 10.0 ** rng.uniform(-var_scale, var_scale, nu)
+    ws_ = np.concatenate([xs, us])
+    x = rng.standard_normal((N + 1, nx)) * xs
+    u = rng.standard_normal((N, nu)) * us
+    lam = rng.standard_normal((N + 1, nx)) * dual_scale
+    nu_m = rng.standard_normal(ne) * dual_scale
+
+    Phi = np.empty((N, nx, nw))
+    b = np.empty((N, nx))
+    H = np.empty((N, nw, nw))
+    for k in range(N):
+        A = np.eye(nx) + 0.3 * rng.standard_normal((nx, nx)) / np.sqrt(nx)
+        B = rng.standard_normal((nx, nu))
+        # dynamics in the scaled variables: x~_{k+1} = A x~ + B u~
+        Phi[k, :, :nx] = (A * xs[None, :]) / xs[:, None]
+        Phi[k, :, nx:] = (B * us[None, :]) / xs[:, None]
+        w = np.concatenate([x[k], u[k]])
+        b[k] = x[k + 1] - Phi[k] @ w
+        M = rng.standard_normal((nw, nw))
+        Hs = M @ M.T / nw + 0.1 * np.eye(nw)
+        if hessian == "psd":
+            # rank-deficient: no curvature on the states and on one control direction
+            Hs[:nx, :] = 0.0
+            Hs[:, :nx] = 0.0
+            if nu > 1:
+                v = rng.standard_normal(nu)
+                v /= np.linalg.norm(v)
+                Hs[nx:, nx:] -= (v @ Hs[nx:, nx:] @ v) * np.outer(v, v)
+                Hs[nx:, nx:] = 0.5 * (Hs[nx:, nx:] + Hs[nx:, nx:].T)
+                ev, V = np.linalg.eigh(Hs[nx:, nx:])
+                Hs[nx:, nx:] = (V * np.maximum(ev, 0.0)) @ V.T
+        elif hessian == "indef":
+            Hs[:nx, :nx] *= 0.05
+        H[k] = Hs / np.outer(ws_, ws_)
+    MN = rng.standard_normal((nx, nx))
+    HNs = MN @ MN.T / nx + 0.1 * np.eye(nx)
+    if hessian == "psd":
+        HNs = np.zeros((nx, nx))
+    elif hessian == "indef":
+        HNs *= 0.05
+    HN = HNs / np.outer(xs, xs)
+
+    lbw = np.full((N, nw), -INF)
+    ubw = np.full((N, nw), INF)
+    mu_b = np.zeros((N, nw))
+    for k in range(N):
+        w = np.concatenate([x[k], u[k]])
+        for i in range(nw):
+            if k == 0 and i < nx:
+                continue
+            st = _status_draw(rng, p_active, p_weak, p_free)
+            lbw[k, i], ubw[k, i], mu_b[k, i] = _row(rng, w[i], st, dual_scale / ws_[i], ws_[i])
+    C = np.zeros((N, ng, nw))
+    lg = np.full((N, ng), -INF)
+    ug = np.full((N, ng), INF)
+    mu_g = np.zeros((N, ng))
+    for k in range(N):
+        w = np.concatenate([x[k], u[k]])
+        for j in range(ng):
+            rs = 10.0 ** rng.uniform(-row_scale, row_scale)
+            C[k, j] = rng.standard_normal(nw) / ws_ * rs
+            v = C[k, j] @ w
+            st = _status_draw(rng, p_active, p_weak, 0.0)
+            lg[k, j], ug[k, j], mu_g[k, j] = _row(rng, v, st, dual_scale / rs, rs)
+    lbxN = np.full(nx, -INF)
+    ubxN = np.full(nx, INF)
+    mu_bN = np.zeros(nx)
+    for i in range(nx):
+        st = _status_draw(rng, p_active * 0.5, p_weak * 0.5, p_free)
+        lbxN[i], ubxN[i], mu_bN[i] = _row(rng, x[N, i], st, dual_scale / xs[i], xs[i])
+    R = np.zeros((nr, nx))
+    lr = np.full(nr, -INF)
+    ur = np.full(nr, INF)
+    mu_r = np.zeros(nr)
+    for j in range(nr):
+        rs = 10.0 ** rng.uniform(-row_scale, row_scale)
+        R[j] = rng.standard_normal(nx) / xs * rs
+        st = _status_draw(rng, p_active, p_weak, 0.0)
+        lr[j], ur[j], mu_r[j] = _row(rng, R[j] @ x[N], st, dual_scale / rs, rs)
+    Req = np.zeros((ne, nx))
+    for j in range(ne):
+        Req[j] = rng.standard_normal(nx) / xs * 10.0 ** rng.uniform(-eq_row_scale, eq_row_scale)
+    req = Req @ x[N]
+
+    g = np.empty((N, nw))
+    for k in range(N):
+        w = np.concatenate([x[k], u[k]])
+        r = H[k] @ w + np.concatenate([lam[k], np.zeros(nu)]) - Phi[k].T @ lam[k + 1] + C[k].T @ mu_g[k] + mu_b[k]
+        g[k] = -r
+    gN = -(HN @ x[N] + lam[N] + R.T @ mu_r + Req.T @ nu_m + mu_bN)
+
+    qp = dict(N=N, nx=nx, nu=nu, ng=ng, nr=nr, ne=ne, H=H, g=g, Phi=Phi, b=b, x0=x[0].copy(), HN=HN, gN=gN,
+              lbw=lbw, ubw=ubw, lbxN=lbxN, ubxN=ubxN, C=C, lg=lg, ug=ug, R=R, lr=lr, ur=ur, Req=Req, req=req)
+    sol = dict(x=x, u=u, lam=lam, mu_b=mu_b, mu_bN=mu_bN, mu_g=mu_g, mu_r=mu_r, nu=nu_m)
+    return qp, sol
+
+
+# ------------------------------------------------------------------ stacked form
+
+def stacked(qp):
+    """Dense stacked data: z = (w_0, ..., w_{N-1}, x_N).
+    Returns P, q, Aeq, beq, D (inequality rows), lo, up, and index helpers."""
+    N, nx, nu, ng, nr, ne = (int(qp[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne"))
+    nw = nx + nu
+    n = N * nw + nx
+    P = np.zeros((n, n))
+    q = np.zeros(n)
+    for k in range(N):
+        s = slice(k * nw, (k + 1) * nw)
+        P[s, s] = qp["H"][k]
+        q[s] = qp["g"][k]
+    P[N * nw:, N * nw:] = qp["HN"]
+    q[N * nw:] = qp["gN"]
+    P = 0.5 * (P + P.T)
+    Aeq = np.zeros(((N + 1) * nx + ne, n))
+    beq = np.zeros((N + 1) * nx + ne)
+    Aeq[:nx, :nx] = np.eye(nx)
+    beq[:nx] = qp["x0"]
+    for k in range(N):
+        r = slice((k + 1) * nx, (k + 2) * nx)
+        Aeq[r, k * nw:(k + 1) * nw] = -qp["Phi"][k]
+        Aeq[r, (k + 1) * nw:(k + 1) * nw + nx] += np.eye(nx)
+        beq[r] = qp["b"][k]
+    if ne:
+        Aeq[(N + 1) * nx:, N * nw:] = qp["Req"]
+        beq[(N + 1) * nx:] = qp["req"]
+    rows, lo, up = [], [], []
+    for k in range(N):
+        for i in range(nw):
+            e = np.zeros(n)
+            e[k * nw + i] = 1.0
+            rows.append(e)
+            if k == 0 and i < nx:
+                lo.append(-INF); up.append(INF)
+            else:
+                lo.append(qp["lbw"][k, i]); up.append(qp["ubw"][k, i])
+        for j in range(ng):
+            e = np.zeros(n)
+            e[k * nw:(k + 1) * nw] = qp["C"][k, j]
+            rows.append(e); lo.append(qp["lg"][k, j]); up.append(qp["ug"][k, j])
+    for i in range(nx):
+        e = np.zeros(n)
+        e[N * nw + i] = 1.0
+        rows.append(e); lo.append(qp["lbxN"][i]); up.append(qp["ubxN"][i])
+    for j in range(nr):
+        e = np.zeros(n)
+        e[N * nw:] = qp["R"][j]
+        rows.append(e); lo.append(qp["lr"][j]); up.append(qp["ur"][j])
+    D = np.array(rows)
+    return P, q, Aeq, beq, D, np.array(lo, float), np.array(up, float)
+
+
+def stack_primal(qp, sol):
+    N, nx, nu = (int(qp[k]) for k in ("N", "nx", "nu"))
+    z = [np.concatenate([sol["x"][k], sol["u"][k]]) for k in range(N)]
+    return np.concatenate(z + [sol["x"][N]])
+
+
+def signed_rows(qp, sol):
+    """Signed inequality multipliers in the row order of ``stacked``."""
+    N, nx, nu, ng, nr = (int(qp[k]) for k in ("N", "nx", "nu", "ng", "nr"))
+    out = []
+    for k in range(N):
+        out.extend(sol["mu_b"][k])
+        out.extend(sol["mu_g"][k])
+    out.extend(sol["mu_bN"])
+    out.extend(sol["mu_r"])
+    return np.array(out, float)
+
+
+def unstack(qp, z, y_eq, y_in):
+    N, nx, nu, ng, nr, ne = (int(qp[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne"))
+    nw = nx + nu
+    x = np.array([z[k * nw:k * nw + nx] for k in range(N)] + [z[N * nw:]])
+    u = np.array([z[k * nw + nx:(k + 1) * nw] for k in range(N)]).reshape(N, nu)
+    lam = y_eq[:(N + 1) * nx].reshape(N + 1, nx)
+    nu_m = y_eq[(N + 1) * nx:]
+    per = nw + ng
+    mu_b = np.array([y_in[k * per:k * per + nw] for k in range(N)])
+    mu_g = np.array([y_in[k * per + nw:(k + 1) * per] for k in range(N)]).reshape(N, ng)
+    mu_bN = y_in[N * per:N * per + nx]
+    mu_r = y_in[N * per + nx:]
+    return dict(x=x, u=u, lam=lam, mu_b=mu_b, mu_bN=mu_bN, mu_g=mu_g, mu_r=mu_r, nu=nu_m)
+
+
+def kkt_residual(qp, sol):
+    """Infinity norms (stat, eq, ineq, comp) of the KKT conditions in dopus_qp.h signs."""
+    P, q, Aeq, beq, D, lo, up = stacked(qp)
+    z = stack_primal(qp, sol)
+    ye = np.concatenate([sol["lam"].ravel(), sol["nu"]])
+    yi = signed_rows(qp, sol)
+    stat = P @ z + q + Aeq.T @ ye + D.T @ yi
+    eq = Aeq @ z - beq
+    v = D @ z
+    with np.errstate(invalid="ignore"):
+        viol = np.maximum(0.0, np.maximum(np.where(np.isfinite(lo), lo - v, 0.0), np.where(np.isfinite(up), v - up, 0.0)))
+        cu = np.where(yi > 0, yi * np.where(np.isfinite(up), np.abs(up - v), 1.0), 0.0)
+        cl = np.where(yi < 0, -yi * np.where(np.isfinite(lo), np.abs(v - lo), 1.0), 0.0)
+    return dict(stat=np.abs(stat).max(), eq=np.abs(eq).max(initial=0.0), ineq=viol.max(initial=0.0),
+                comp=max(cu.max(initial=0.0), cl.max(initial=0.0)))
+
+
+def check_unique(qp, sol, tol=1e-9):
+    """LICQ of the equalities + active rows, and positive definiteness of the Hessian on
+    the null space of the equalities and the strictly active rows. Returns the smallest
+    eigenvalue of the reduced Hessian and of the Hessian on the equality null space."""
+    P, q, Aeq, beq, D, lo, up = stacked(qp)
+    z = stack_primal(qp, sol)
+    yi = signed_rows(qp, sol)
+    v = D @ z
+    scale = np.maximum(1.0, np.abs(v))
+    active = (np.abs(v - lo) <= 1e-12 * scale) | (np.abs(up - v) <= 1e-12 * scale)
+    strict = active & (yi != 0.0)
+    J = np.vstack([Aeq, D[active]])
+    Jn = J / np.linalg.norm(J, axis=1, keepdims=True)
+    s = np.linalg.svd(Jn, compute_uv=False)
+    licq = s.min() > tol * s.max() and J.shape[0] <= J.shape[1]
+    Z = sla.null_space(np.vstack([Aeq, D[strict]]))
+    red = np.linalg.eigvalsh(Z.T @ P @ Z).min() if Z.shape[1] else np.inf
+    Ze = sla.null_space(Aeq)
+    red_eq = np.linalg.eigvalsh(Ze.T @ P @ Ze).min() if Ze.shape[1] else np.inf
+    return licq, red, red_eq
+
+
+def solve_clarabel(qp, tol=1e-11):
+    """Solve with Clarabel; returns (status string, solution dict in dopus_qp.h signs)."""
+    import clarabel
+
+    P, q, Aeq, beq, D, lo, up = stacked(qp)
+    n = P.shape[0]
+    hasu = np.isfinite(up)
+    hasl = np.isfinite(lo)
+    A = np.vstack([Aeq, D[hasu], -D[hasl]])
+    bvec = np.concatenate([beq, up[hasu], -lo[hasl]])
+    cones = [clarabel.ZeroConeT(Aeq.shape[0])]
+    nin = int(hasu.sum() + hasl.sum())
+    if nin:
+        cones.append(clarabel.NonnegativeConeT(nin))
+    st = clarabel.DefaultSettings()
+    st.verbose = False
+    st.tol_gap_abs = tol
+    st.tol_gap_rel = tol
+    st.tol_feas = tol
+    st.tol_ktratio = 1e-8
+    st.max_iter = 500
+    solver = clarabel.DefaultSolver(sp.csc_matrix(np.triu(P)), q, sp.csc_matrix(A), bvec, cones, st)
+    res = solver.solve()
+    status = str(res.status)
+    y = np.array(res.z)
+    ne_rows = Aeq.shape[0]
+    yi = np.zeros(D.shape[0])
+    yi[hasu] += y[ne_rows:ne_rows + hasu.sum()]
+    yi[hasl] -= y[ne_rows + hasu.sum():]
+    return status, unstack(qp, np.array(res.x), y[:ne_rows], yi)
+
+
+def compare(a, b, keys=("x", "u", "lam", "mu_b", "mu_bN", "mu_g", "mu_r", "nu")):
+    """Largest relative difference per array: |a - b|_inf / max(1, |b|_inf)."""
+    out = {}
+    for k in keys:
+        A = np.asarray(a[k], float)
+        B = np.asarray(b[k], float)
+        if B.size == 0:
+            out[k] = 0.0
+            continue
+        out[k] = float(np.abs(A - B).max() / max(1.0, np.abs(B).max()))
+    return out
