@@ -397,29 +397,43 @@ class Ocp:
         """Guess: a vector broadcast to all nodes, or a full (N+1, nx) / (N, nu) array."""
         self._guess_x, self._guess_u = x, u
 
-    def options(self, hessian: str = "exact", regularization: str = "none", reg_eps: float = 1e-4,
-                M: int = 1, offline_guess: bool = False) -> None:
-        """Solver defaults (the generated solver and the CLI can override them).
+    def options(self, hessian: Optional[str] = None, regularization: Optional[str] = None,
+                reg_eps: Optional[float] = None, M: Optional[int] = None,
+                offline_guess: Optional[bool] = None) -> None:
+        """Solver defaults (the generated solver and the CLI can override them); only the
+        options given change. Defaults: ``hessian="exact"``, ``regularization="none"``,
+        ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``.
 
         ``offline_guess=True``: the initial guess is replaced by the NLP solution for the
         initial state (IPOPT, at build time), with its multipliers.
         """
-        if hessian not in ("exact", "gauss-newton"):
-            raise OcpError(f"options: hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
-        if regularization not in ("none", "project", "mirror"):
-            raise OcpError(f"options: regularization must be 'none', 'project' or 'mirror', got {regularization!r}")
-        try:
-            eps = float(reg_eps)
-        except (TypeError, ValueError):
-            raise OcpError(f"options: reg_eps must be a number, got {reg_eps!r}") from None
-        if not math.isfinite(eps) or eps <= 0:
-            raise OcpError(f"options: reg_eps must be positive and finite, got {reg_eps!r}")
-        if isinstance(M, bool) or not isinstance(M, (int, np.integer)) or M < 0:
-            raise OcpError(f"options: M must be an integer >= 0, got {M!r}")
-        if not isinstance(offline_guess, bool):
-            raise OcpError(f"options: offline_guess must be True or False, got {offline_guess!r}")
-        self._options = dict(hessian=hessian, regularization=regularization, reg_eps=eps, M=int(M),
-                             offline_guess=offline_guess)
+        opts = dict(self._options)
+        if hessian is not None:
+            if hessian not in ("exact", "gauss-newton"):
+                raise OcpError(f"options: hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
+            opts["hessian"] = hessian
+        if regularization is not None:
+            if regularization not in ("none", "project", "mirror"):
+                raise OcpError(f"options: regularization must be 'none', 'project' or 'mirror', "
+                               f"got {regularization!r}")
+            opts["regularization"] = regularization
+        if reg_eps is not None:
+            try:
+                eps = float(reg_eps)
+            except (TypeError, ValueError):
+                raise OcpError(f"options: reg_eps must be a number, got {reg_eps!r}") from None
+            if not math.isfinite(eps) or eps <= 0:
+                raise OcpError(f"options: reg_eps must be positive and finite, got {reg_eps!r}")
+            opts["reg_eps"] = eps
+        if M is not None:
+            if isinstance(M, bool) or not isinstance(M, (int, np.integer)) or M < 0:
+                raise OcpError(f"options: M must be an integer >= 0, got {M!r}")
+            opts["M"] = int(M)
+        if offline_guess is not None:
+            if not isinstance(offline_guess, bool):
+                raise OcpError(f"options: offline_guess must be True or False, got {offline_guess!r}")
+            opts["offline_guess"] = offline_guess
+        self._options = opts
 
     def disturbance(self, fn: Callable[[np.ndarray], np.ndarray]) -> None:
         """State map used by the warm-start convergence study (numpy in, numpy out)."""
@@ -430,7 +444,13 @@ class Ocp:
     def scenario(self, duration: float, events=(), signals=None, plant=None, x0=None) -> None:
         """Closed-loop scenario: ``duration`` seconds, state ``events``, recorded ``signals``
         (name -> expression of the declared symbols), ``plant`` xdot (None: the model)."""
-        self._scenario = dict(duration=duration, events=list(events), signals=dict(signals or {}),
+        try:
+            events = list(events)
+        except TypeError:
+            raise OcpError(f"scenario: events must be a list of Event, got {type(events).__name__}") from None
+        if signals is not None and not isinstance(signals, dict):
+            raise OcpError(f"scenario: signals must be a dict name -> expression, got {type(signals).__name__}")
+        self._scenario = dict(duration=duration, events=events, signals=dict(signals or {}),
                               plant=plant, x0=x0)
 
     # ------------------------------------------------------------------ derived views
@@ -611,8 +631,10 @@ class Ocp:
 def load_ocp(path) -> Ocp:
     """Import an OCP file, call its ``build()`` and validate the result."""
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise OcpError(f"OCP file '{path}' does not exist")
+    if not p.is_file():
+        raise OcpError(f"OCP file '{path}' is not a file")
     try:
         source = p.read_text()
     except OSError as exc:

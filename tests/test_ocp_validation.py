@@ -194,6 +194,15 @@ def test_bad_options():
     raises(lambda: ocp.options(regularization="clip"), "options: regularization must be")
     raises(lambda: ocp.options(M=-1), "options: M must be an integer >= 0")
     raises(lambda: ocp.options(reg_eps=0), "options: reg_eps must be positive")
+    raises(lambda: ocp.options(offline_guess="yes"), "options: offline_guess must be True or False")
+
+
+def test_options_update_only_what_is_given():
+    ocp, _ = make()
+    ocp.options(hessian="gauss-newton", M=3)
+    ocp.options(regularization="mirror")
+    assert build_functions(ocp).options == dict(hessian="gauss-newton", regularization="mirror",
+                                                reg_eps=1e-4, M=3, offline_guess=False)
 
 
 def test_terminal_equality_at_infinity():
@@ -247,6 +256,8 @@ def test_scenario_errors():
     ocp.scenario(duration=-1.0)
     raises(ocp.validate, "scenario: duration must be positive")
     raises(lambda: ocp.disturbance(3), "disturbance: expected a function of the state")
+    raises(lambda: ocp.scenario(1.0, events=Event(0.5, lambda x: x)), "scenario: events must be a list of Event")
+    raises(lambda: ocp.scenario(1.0, signals=[s["x"]]), "scenario: signals must be a dict")
 
 
 def test_scenario_spec_with_plant_mismatch():
@@ -269,6 +280,10 @@ def write(tmp_path, body, name="prob.py"):
 
 def test_load_missing_file(tmp_path):
     raises(lambda: load_ocp(tmp_path / "nope.py"), f"OCP file '{tmp_path / 'nope.py'}' does not exist")
+
+
+def test_load_directory(tmp_path):
+    raises(lambda: load_ocp(tmp_path), f"OCP file '{tmp_path}' is not a file")
 
 
 def test_load_syntax_error_names_file_and_line(tmp_path):
