@@ -413,7 +413,7 @@ def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
     meta_file = f"{name}_meta.json"
     meta = {
         "generator": "dopus-gen",
-        "dopus_codegen_version": __version__,
+        "generator_version": __version__,
         "casadi_version": ca.__version__,
         "name": name,
         "sizes": s,

@@ -330,6 +330,32 @@ def test_make_builds_and_main_matches_reference(name, generated, request):
             assert kkt_c < 1e-7
 
 
+@pytest.mark.skipif(shutil.which("cmake") is None, reason="cmake is not installed (the CMake fragment is optional)")
+def test_cmake_fragment_builds_main(generated, tmp_path):
+    """include(<name>.cmake) gives a static library target the standalone main links to;
+    the program prints the same numbers as the one built by the folder's Makefile."""
+    name = "unicycle"
+    disc, folder = generated[name]
+    (tmp_path / "CMakeLists.txt").write_text(
+        "cmake_minimum_required(VERSION 3.13)\nproject(fragment C)\n"
+        f'include("{folder}/{name}.cmake")\n'
+        f'add_executable(main_{name} "{folder}/main_{name}.c")\n'
+        f"target_link_libraries(main_{name} PRIVATE {name})\n")
+    for cmd in (["cmake", "-S", ".", "-B", "b", "-DCMAKE_BUILD_TYPE=Release"], ["cmake", "--build", "b", "-j2"]):
+        proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True)
+        assert proc.returncode == 0, f"{' '.join(cmd)} failed:\n{proc.stdout}\n{proc.stderr}"
+    _make(folder)
+    outs = [subprocess.run([str(exe)], capture_output=True, text=True, timeout=120)
+            for exe in (tmp_path / "b" / f"main_{name}", folder / "build" / f"main_{name}")]
+    cm, mk = (_parse_run(o.stdout, disc.nu) for o in outs)
+    assert outs[0].returncode == outs[1].returncode
+    for mode in mk:
+        for (s1, u1, k1), (s2, u2, k2) in zip(cm[mode], mk[mode]):
+            assert s1 == s2
+            np.testing.assert_allclose(u1, u2, rtol=1e-9, atol=1e-12)
+            assert abs(k1 - k2) <= 1e-9 * max(k2, 1e-12) + 1e-14
+
+
 # ----------------------------------------------------------------------------------------
 # 4. no allocator in any object of the static libraries
 
