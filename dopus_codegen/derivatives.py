@@ -243,13 +243,6 @@ def build_functions(ocp: Ocp) -> Discretized:
         disc.term_residual = ca.Function(f"{name}_term_residual", [m.x, m.p], [_d(m.resN)],
                                          ["x", "p"], ["res"])
     _check_finite_at_guess(disc)
-    if disc.options.get("offline_guess"):
-        from .offline import solve_ocp
-        sol, info = solve_ocp(disc, disc.x0, disc.initial_guess)
-        if not info["success"]:
-            raise OcpError(f"options: offline_guess: IPOPT did not solve the OCP from the initial guess "
-                           f"({info['status']})")
-        disc.initial_guess = sol
     return disc
 
 

@@ -404,8 +404,9 @@ class Ocp:
         options given change. Defaults: ``hessian="exact"``, ``regularization="none"``,
         ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``.
 
-        ``offline_guess=True``: the initial guess is replaced by the NLP solution for the
-        initial state (IPOPT, at build time), with its multipliers.
+        ``offline_guess=True``: the code generator solves the NLP at the initial state
+        offline (IPOPT) and carries the primal-dual solution as static data, so the
+        controller can start warm; ``initial_guess`` stays the declared (cold) guess.
         """
         opts = dict(self._options)
         if hessian is not None:

@@ -5,8 +5,8 @@ obstacle) that is active at the solution, a runtime parameter (the target positi
 least-squares stage and terminal costs (so Gauss-Newton applies) and a closed-loop
 scenario with a sideways push.
 
-As with the robot arm, start DOPUS from a good guess (the NLP solution, e.g.
-``options(offline_guess=True)``) or use the Gauss-Newton Hessian: from the cold guess
+As with the robot arm, DOPUS starts from the offline NLP solution
+(``options(offline_guess=True)``) or uses the Gauss-Newton Hessian: from the cold guess
 below (standing still) the exact-Hessian QPs lose convexity within a few iterations.
 Reversing is allowed (v >= -0.5) so that the car can come to rest at the target with no
 active speed bound there.
@@ -56,7 +56,7 @@ def build():
     x0 = np.array([0.0, 0.0, 0.0, 0.0])
     ocp.initial_state(x0)
     ocp.initial_guess(x=x0, u=[0.0, 0.0])
-    ocp.options(hessian="exact", regularization="none", M=1)
+    ocp.options(hessian="exact", regularization="none", M=1, offline_guess=True)
     ocp.disturbance(push)
     ocp.scenario(duration=3.0, events=[Event(1.0, push, "push")],
                  signals={"clearance": ca.sqrt(clearance_sq(pos[0], pos[1])) - RADIUS,

@@ -174,6 +174,8 @@ def test_robot_arm_model_cost_and_integrator(robot_disc):
     assert np.allclose(arm_tip(d.x0[:2]), arm_path(0.0), atol=1e-15)
     assert np.array_equal(d.initial_guess.u, np.tile([0, 0, 5.0], (40, 1)))
     assert np.array_equal(d.initial_guess.x, np.tile(d.x0, (41, 1)))
+    # the offline solution is carried by the generated code; the guess stays the cold one
+    assert d.options["offline_guess"] is True
     rng = np.random.default_rng(3)
     for _ in range(5):
         x = d.x0 + 0.3 * rng.standard_normal(5)

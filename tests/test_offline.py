@@ -81,22 +81,3 @@ def test_solve_ocp_rejects_bad_xhat0(robot_disc):
     with pytest.raises(ValueError, match="xhat0"):
         solve_ocp(robot_disc, [0, 0, 0])
 
-
-def test_offline_guess_option_carries_the_nlp_solution(second_disc, second_solution):
-    import importlib.util
-
-    from conftest import SECOND_FILE
-    from dopus_codegen import build_functions
-
-    spec = importlib.util.spec_from_file_location("unicycle_example", SECOND_FILE)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    ocp = mod.build()
-    ocp.options(offline_guess=True)
-    d = build_functions(ocp)
-    g = d.initial_guess
-    sol, _ = second_solution
-    assert np.allclose(g.x, sol.x, atol=1e-9) and np.allclose(g.mu_g, sol.mu_g, atol=1e-7)
-    assert kkt_of_guess(d, d.x0, g)["kkt"] < 1e-8
-    # the declared cold guess is far from optimal
-    assert kkt_of_guess(second_disc, second_disc.x0, second_disc.initial_guess)["kkt"] > 1e-2
