@@ -68,11 +68,15 @@ def build(out_dir, cc: str = "cc", opt: str = "-O2", *, force: bool = False) -> 
         meta = read_meta(out_dir)
     except CodegenError as exc:
         raise BuildError(f"build: {exc}") from None
-    name = meta["name"]
-    strict = list(meta["sources"]["strict"])
-    casadi_src = meta["sources"]["casadi"]
-    cdef_path = out_dir / meta["cdef"]
-    listed = sorted(set(meta["files"]))
+    try:
+        name = meta["name"]
+        strict = list(meta["sources"]["strict"])
+        casadi_src = meta["sources"]["casadi"]
+        cdef_path = out_dir / meta["cdef"]
+        listed = sorted(set(meta["files"]))
+    except (KeyError, TypeError) as exc:
+        raise BuildError(f"build: the meta data of '{out_dir}' lacks {exc}; regenerate the folder "
+                         "with this version of dopus-gen") from None
     missing = [f for f in listed if not (out_dir / f).is_file()]
     if missing:
         raise BuildError(f"build: generated folder '{out_dir}' is incomplete, missing {', '.join(missing)}; "
