@@ -173,7 +173,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
                     rec["status"] = f"non-finite KKT at iteration {it}"
                     break
         except DopusError as exc:
-            rec["status"] = f"stopped at iteration {len(rec['kkt'])}: {exc} (status {exc.status})"
+            rec["status"] = f"failed in iteration {len(rec['kkt'])}: {exc} (status {exc.status})"
             if progress is not None:
                 progress(run_index, M, iters, float("nan"))
         runs.append(rec)
@@ -240,6 +240,29 @@ def plot_study(study: dict, path: str) -> None:
     plt.close(fig)
 
 
+def _cli_M_list(m_list, N: int) -> list:
+    """Resolve the CLI's M values. An explicit value above N-1 is an error; the default list
+    (full,5,1,0) drops entries a short horizon cannot have."""
+    import click
+
+    ctx = click.get_current_context(silent=True)
+    is_default = False
+    if ctx is not None:
+        try:
+            src = ctx.get_parameter_source("m_list")
+            is_default = src is not None and src.name in ("DEFAULT", "DEFAULT_MAP")
+        except Exception:  # noqa: BLE001 - older click: treat as explicit
+            is_default = False
+    if is_default:
+        m_list = [m for m in m_list if m == "full" or m <= N - 1]
+    out = []
+    for m in m_list:
+        M = _resolve_M(m, N)
+        if M not in out:
+            out.append(M)
+    return out
+
+
 def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, backend,
                      json_out=None, plot_out=None) -> dict:
     """The body of ``dopus-gen converge`` (errors become click exceptions)."""
@@ -254,7 +277,7 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, re
         if hessian == "gauss-newton" and disc.stage_hess_gn is None:
             raise ValueError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
                              f"(ocp.stage_least_squares)")
-        Ms = [_resolve_M(m, disc.N) for m in m_list]
+        Ms = _cli_M_list(m_list, disc.N)
         if not math.isfinite(reg_eps) or reg_eps <= 0:
             raise ValueError(f"--reg-eps must be positive and finite, got {reg_eps}")
         click.echo(f"{disc.name}: preparing the {start} start ...", err=True)

@@ -440,8 +440,9 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True) -> dict
     """Solve a QP of the module's format; return the solution dict (see module docstring).
 
     ``tol`` is the feasibility / dual-sign tolerance the polished active set must meet
-    (the polished solution itself satisfies stationarity and the active rows to
-    round-off). Raises :class:`QPInfeasibleError` for an infeasible QP and
+    (floored at 1e-12; the polished solution itself satisfies stationarity and the active
+    rows to round-off, its inactive multipliers are exactly zero). ``polished`` is False
+    when no consistent active set was found: the answer is then IPOPT's (tol 1e-12). Raises :class:`QPInfeasibleError` for an infeasible QP and
     :class:`QPError` when IPOPT fails otherwise.
     """
     t0 = time.perf_counter()
@@ -453,11 +454,14 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True) -> dict
     ok_status = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
     out = None
     if polish and np.all(np.isfinite(z)):
-        pol = _polish(Hz, gz, rows, z, y_in, mu_z, tol)
+        # active-set decisions at the requested tolerance, but never below round-off
+        ftol = max(float(tol), 1e-12)
+        pol = _polish(Hz, gz, rows, z, y_in, mu_z, ftol)
         if pol is not None:
             sol = _unflatten(q, *pol)
             res = qp_kkt_residual(q, sol)
-            if res["ineq"] <= tol and res["sign"] <= tol and res["stat"] <= 1e3 * tol and res["eq"] <= 1e3 * tol:
+            scale = max(1.0, float(np.max(np.abs(gz))), float(np.max(np.abs(Hz.data))) if Hz.nnz else 1.0)
+            if res["ineq"] <= ftol and res["sign"] <= ftol and max(res["stat"], res["eq"]) <= 1e-9 * scale:
                 out = sol
                 out["polished"] = True
     if out is None:
