@@ -310,6 +310,17 @@ def test_make_builds_and_main_matches_reference(name, generated, request):
     proc = subprocess.run([str(folder / "build" / f"main_{name}")], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, f"main_{name} failed:\n{proc.stdout}\n{proc.stderr}"
     runs = _parse_run(proc.stdout, disc.nu)
+    # the cffi declarations cut from the public header load the library dopus_codegen.build made,
+    # and it has the same struct layout as the program make built
+    import cffi
+
+    res = build(folder)
+    ffi = cffi.FFI()
+    ffi.cdef(res.cdef_path.read_text())
+    lib = ffi.dlopen(str(res.shared_lib))
+    head = proc.stdout.splitlines()[0].split()
+    assert head[:2] == ["problem", name] and int(head[head.index("sizeof") + 1]) == getattr(lib, f"{name}_solver_sizeof")()
+    assert ffi.string(getattr(lib, f"{name}_name")()).decode() == name
     nominal = None
     if _wants_nominal(disc):
         nominal, info = request.getfixturevalue(SOLUTION_FIXTURE[name])
