@@ -202,6 +202,8 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                 status = status or -1
 
             kkt = ctrl.kkt(xhat)
+            # A backend may time its KKT evaluation too; that is not part of the iteration.
+            snap_fb = dict(getattr(ctrl, "timings", {}) or {})
 
             rec_t.append(t_i)
             rec_x.append(xhat)
