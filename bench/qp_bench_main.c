@@ -5,12 +5,16 @@
  *
  * usage: qp_bench_main QPFILE [options]
  *   --reps R         timed repetitions per QP and solver (median reported)
- *   --warmup W       untimed repetitions first
+ *   --warmup W       untimed repetitions first (at least 1)
+ *   --budget S       at most about S seconds of timed runs per QP (all solvers together), but
+ *                    never fewer than --min-reps repetitions
+ *   --min-reps M
  *   --tol T          tolerance of every solver
  *   --iter-max K
  *   --sol FILE       write the primal solutions (float64, QP by QP, solver by solver)
  *   --hpipm NAME MODE EQMASK EQSCALE RICALG   add an HPIPM configuration (qp_bench_hpipm.h)
  *   --dopus NAME     add our solver (only when built with QPB_WITH_DOPUS)
+ *   --dopus-alt NAME add the renamed copy of our solver built with other flags (QPB_WITH_DOPUS_ALT)
  *   --only NAME      time only that solver (for profilers)
  */
 #define _POSIX_C_SOURCE 200112L
@@ -25,18 +29,23 @@
 #ifdef QPB_WITH_DOPUS
 #include "qp_bench_dopus.h"
 #endif
+#ifdef QPB_WITH_DOPUS_ALT
+/* a renamed copy of our solver (prefix qpbn_) compiled with other flags */
+#include "qp_bench_qpbn.h"
+#endif
 
 #define MAX_SOLVERS 12
 
 typedef struct {
     char name[64];
-    int kind; /* 0 HPIPM, 1 ours */
+    int kind; /* 0 HPIPM, 1 ours, 2 ours compiled with the alternative flags */
     bench_hpipm_opts hopts;
     void *handle;
     double *times, *set_times;
     int status, iterations;
     double res[4];
     int has_res;
+    int inertia, augment; /* ours: inertia corrections and terminal augmentations */
 } solver_entry;
 
 static double now(void)
@@ -78,18 +87,22 @@ static int solver_create(solver_entry *s, const bench_qp *qp, double tol, int it
         return s->handle == NULL;
     }
 #ifdef QPB_WITH_DOPUS
-    s->handle = bench_dopus_create(qp, tol, iter_max);
-    return s->handle == NULL;
-#else
-    return 1;
+    if (s->kind == 1) s->handle = bench_dopus_create(qp, tol, iter_max);
 #endif
+#ifdef QPB_WITH_DOPUS_ALT
+    if (s->kind == 2) s->handle = bench_qpbn_create(qp, tol, iter_max);
+#endif
+    return s->handle == NULL;
 }
 
 static void solver_set(solver_entry *s, const bench_qp *qp)
 {
     if (s->kind == 0) bench_hpipm_set_data((bench_hpipm *)s->handle, qp);
 #ifdef QPB_WITH_DOPUS
-    else bench_dopus_set_data((bench_dopus *)s->handle, qp);
+    else if (s->kind == 1) bench_dopus_set_data((bench_dopus *)s->handle, qp);
+#endif
+#ifdef QPB_WITH_DOPUS_ALT
+    else if (s->kind == 2) bench_qpbn_set_data((bench_qpbn *)s->handle, qp);
 #endif
 }
 
@@ -97,10 +110,12 @@ static int solver_solve(solver_entry *s)
 {
     if (s->kind == 0) return bench_hpipm_solve((bench_hpipm *)s->handle);
 #ifdef QPB_WITH_DOPUS
-    return bench_dopus_solve((bench_dopus *)s->handle);
-#else
-    return -1;
+    if (s->kind == 1) return bench_dopus_solve((bench_dopus *)s->handle);
 #endif
+#ifdef QPB_WITH_DOPUS_ALT
+    if (s->kind == 2) return bench_qpbn_solve((bench_qpbn *)s->handle);
+#endif
+    return -1;
 }
 
 static void solver_finish(solver_entry *s, double *dw)
@@ -115,12 +130,23 @@ static void solver_finish(solver_entry *s, double *dw)
         bench_hpipm_free(h);
     }
 #ifdef QPB_WITH_DOPUS
-    else {
+    else if (s->kind == 1) {
         bench_dopus *d = (bench_dopus *)s->handle;
         s->iterations = bench_dopus_iterations(d);
         s->has_res = bench_dopus_residuals(d, s->res) == 0;
+        bench_dopus_corrections(d, &s->inertia, &s->augment);
         bench_dopus_primal(d, dw);
         bench_dopus_free(d);
+    }
+#endif
+#ifdef QPB_WITH_DOPUS_ALT
+    else if (s->kind == 2) {
+        bench_qpbn *d = (bench_qpbn *)s->handle;
+        s->iterations = bench_qpbn_iterations(d);
+        s->has_res = bench_qpbn_residuals(d, s->res) == 0;
+        bench_qpbn_corrections(d, &s->inertia, &s->augment);
+        bench_qpbn_primal(d, dw);
+        bench_qpbn_free(d);
     }
 #endif
     s->handle = NULL;
@@ -129,8 +155,8 @@ static void solver_finish(solver_entry *s, double *dw)
 int main(int argc, char **argv)
 {
     solver_entry sv[MAX_SOLVERS];
-    int ns = 0, reps = 100, warmup = 10, iter_max = 100, i, q, nqp;
-    double tol = 1e-8, count;
+    int ns = 0, reps = 100, warmup = 10, iter_max = 100, min_reps = 20, i, q, nqp;
+    double tol = 1e-8, count, budget = 1e30;
     const char *qpfile = NULL, *solfile = NULL, *only = NULL;
     FILE *f, *fsol = NULL;
 
@@ -139,6 +165,8 @@ int main(int argc, char **argv)
         if (!strcmp(argv[i], "--reps") && i + 1 < argc) reps = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--warmup") && i + 1 < argc) warmup = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--tol") && i + 1 < argc) tol = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--budget") && i + 1 < argc) budget = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--min-reps") && i + 1 < argc) min_reps = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--iter-max") && i + 1 < argc) iter_max = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--sol") && i + 1 < argc) solfile = argv[++i];
         else if (!strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
@@ -151,6 +179,16 @@ int main(int argc, char **argv)
             s->hopts.eq_scale = atof(argv[i + 4]);
             s->hopts.ric_alg = atoi(argv[i + 5]);
             i += 5;
+        } else if (!strcmp(argv[i], "--dopus-alt") && i + 1 < argc && ns < MAX_SOLVERS) {
+#ifdef QPB_WITH_DOPUS_ALT
+            solver_entry *s = &sv[ns++];
+            strncpy(s->name, argv[i + 1], sizeof(s->name) - 1);
+            s->kind = 2;
+            i += 1;
+#else
+            fprintf(stderr, "qp_bench_main: built without the alternative build of our solver\n");
+            return 2;
+#endif
         } else if (!strcmp(argv[i], "--dopus") && i + 1 < argc && ns < MAX_SOLVERS) {
 #ifdef QPB_WITH_DOPUS
             solver_entry *s = &sv[ns++];
@@ -167,7 +205,9 @@ int main(int argc, char **argv)
             return 2;
         }
     }
-    if (qpfile == NULL || ns == 0 || reps < 1 || warmup < 0) {
+    if (warmup < 1) warmup = 1;
+    if (min_reps > reps) min_reps = reps;
+    if (qpfile == NULL || ns == 0 || reps < 1 || min_reps < 1) {
         fprintf(stderr, "usage: qp_bench_main QPFILE [--reps R] [--warmup W] [--tol T] [--iter-max K] "
                         "[--sol FILE] [--only NAME] (--hpipm NAME MODE EQMASK EQSCALE RICALG | --dopus NAME)...\n");
         return 2;
@@ -196,6 +236,7 @@ int main(int argc, char **argv)
     for (q = 0; q < nqp; ++q) {
         bench_qp qp;
         double *dw;
+        int reps_done;
         int r, n, rc = bench_qp_read(f, &qp);
         if (rc != 0) { fprintf(stderr, "qp_bench_main: QP %d unreadable (code %d)\n", q, rc); return 3; }
         n = qp.N * (qp.nx + qp.nu) + qp.nx;
@@ -205,29 +246,43 @@ int main(int argc, char **argv)
                 fprintf(stderr, "qp_bench_main: solver %s could not take QP %d\n", sv[i].name, q);
                 return 3;
             }
-        for (r = 0; r < warmup + reps; ++r) {
-            for (i = 0; i < ns; ++i) {
-                double t0 = now(), t1, t2;
-                solver_set(&sv[i], &qp);
-                t1 = now();
-                sv[i].status = solver_solve(&sv[i]);
-                t2 = now();
-                if (r >= warmup) {
-                    sv[i].set_times[r - warmup] = t1 - t0;
-                    sv[i].times[r - warmup] = t2 - t1;
+        {
+            int nrep = reps;
+            double round_time = 0.0;
+            for (r = 0; r < warmup + nrep; ++r) {
+                double tr = now();
+                for (i = 0; i < ns; ++i) {
+                    double t0 = now(), t1, t2;
+                    solver_set(&sv[i], &qp);
+                    t1 = now();
+                    sv[i].status = solver_solve(&sv[i]);
+                    t2 = now();
+                    if (r >= warmup) {
+                        sv[i].set_times[r - warmup] = t1 - t0;
+                        sv[i].times[r - warmup] = t2 - t1;
+                    }
+                }
+                /* after the warm-up, cap the repetitions by the time budget */
+                if (r == warmup - 1) {
+                    round_time = now() - tr;
+                    if (round_time * (double)nrep > budget) {
+                        nrep = (int)(budget / round_time);
+                        if (nrep < min_reps) nrep = min_reps;
+                    }
                 }
             }
+            reps_done = nrep;
         }
         printf("{\"qp\": %d, \"N\": %d, \"solvers\": {", q, qp.N);
         for (i = 0; i < ns; ++i) {
             solver_entry *s = &sv[i];
-            double med = quantile(s->times, reps, 0.5), q25 = quantile(s->times, reps, 0.25),
-                   q75 = quantile(s->times, reps, 0.75), tmin = s->times[0],
-                   tset = quantile(s->set_times, reps, 0.5);
+            double med = quantile(s->times, reps_done, 0.5), q25 = quantile(s->times, reps_done, 0.25),
+                   q75 = quantile(s->times, reps_done, 0.75), tmin = s->times[0],
+                   tset = quantile(s->set_times, reps_done, 0.5);
             solver_finish(s, dw);
             if (fsol != NULL) fwrite(dw, sizeof(double), (size_t)n, fsol);
-            printf("%s\"%s\": {\"status\": %d, \"iterations\": %d, \"t_median\": ", i ? ", " : "", s->name,
-                   s->status, s->iterations);
+            printf("%s\"%s\": {\"status\": %d, \"iterations\": %d, \"reps\": %d, \"t_median\": ",
+                   i ? ", " : "", s->name, s->status, s->iterations, reps_done);
             print_num(med);
             printf(", \"t_q25\": "); print_num(q25);
             printf(", \"t_q75\": "); print_num(q75);
@@ -235,6 +290,8 @@ int main(int argc, char **argv)
             printf(", \"t_set_median\": "); print_num(tset);
             printf(", \"objective\": "); print_num(bench_qp_objective(&qp, dw));
             printf(", \"infeasibility\": "); print_num(bench_qp_infeasibility(&qp, dw));
+            if (s->kind != 0)
+                printf(", \"inertia_corrections\": %d, \"terminal_augmentations\": %d", s->inertia, s->augment);
             if (s->has_res) {
                 int j;
                 printf(", \"residuals\": [");
