@@ -549,6 +549,21 @@ def test_cli_help_texts():
         assert word in bld.output
 
 
+def test_cli_generate_and_build(generated, tmp_path):
+    """The verbs `make generate` uses give the same folder as the Python call."""
+    runner = CliRunner()
+    out = tmp_path / "unicycle"
+    res = runner.invoke(cli_main, ["generate", str(EXAMPLES["unicycle"]), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    ref = generated["unicycle"][1]
+    for path in sorted(p for p in ref.iterdir() if p.is_file()):
+        assert (out / path.name).read_bytes() == path.read_bytes(), path.name
+    res = runner.invoke(cli_main, ["build", str(out)])
+    assert res.exit_code == 0 and "built:" in res.output and "libunicycle.so" in res.output, res.output
+    res = runner.invoke(cli_main, ["build", str(out)])
+    assert res.exit_code == 0 and "up to date:" in res.output, res.output
+
+
 def test_cli_errors(tmp_path):
     runner = CliRunner()
     no_build = tmp_path / "no_build.py"
