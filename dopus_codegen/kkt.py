@@ -11,8 +11,8 @@ outdated blocks::
            (a nonzero multiplier on an infinite side contributes |mu|)
     kkt  = max(stat, eq, ineq, comp)
 
-The x part of ``mu_b[0]`` has no bound to push against (``x_0`` is fixed by ``xhat_0``),
-so a nonzero entry there counts as a multiplier on an infinite side.
+The x part of ``mu_b[0]`` has no bound to pair with (``x_0`` is fixed by ``xhat_0``; the
+entry is always 0 by section 1): it enters ``stat`` only, as in the C runtime.
 """
 from __future__ import annotations
 
@@ -128,13 +128,13 @@ def kkt_measure(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p=None) -> 
     if nr:
         ineq = max(ineq, _viol(r, disc.lr, disc.ur))
 
-    # x_0 carries no bound: its slot of mu_b[0] pairs with infinite sides
+    # x_0 carries no bound: the x part of mu_b[0] (always 0, section 1) has no pair
     lbw = np.tile(np.concatenate([lbx, lbu]), (N, 1))
     ubw = np.tile(np.concatenate([ubx, ubu]), (N, 1))
-    lbw[0, :nx] = -np.inf
-    ubw[0, :nx] = np.inf
+    mu_bc = mu_b.copy()
+    mu_bc[0, :nx] = 0.0
     W = np.hstack([x[:N], u])
-    comp = max(signed_comp(W, lbw, ubw, mu_b), signed_comp(x[N], lbx, ubx, mu_bN))
+    comp = max(signed_comp(W, lbw, ubw, mu_bc), signed_comp(x[N], lbx, ubx, mu_bN))
     if ng:
         comp = max(comp, signed_comp(g, np.tile(disc.lg, N), np.tile(disc.ug, N), mu_g))
     if nr:
