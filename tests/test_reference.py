@@ -456,3 +456,52 @@ def test_reference_rejects_bad_input(robot_disc):
     np.testing.assert_array_equal(ref.x, before)
     with pytest.raises(ValueError, match="parameters"):
         ref.set_parameters(np.zeros(3))
+
+
+def test_parameters_reach_every_function(second_disc, second_solution):
+    """set_parameters: the full RTI converges to IPOPT's solution for the new target."""
+    from dopus_codegen.offline import solve_ocp
+
+    d = second_disc
+    sol, _ = second_solution
+    p = d.p0[0].copy()
+    p[1] += 0.3                                 # target 0.3 m further up
+    opt, info = solve_ocp(d, d.x0, guess=sol, p=p)
+    assert info["success"]
+    ref = ReferenceDopus(d, M=d.N - 1, mode="fixed")
+    ref.init(d.x0, sol)                         # blocks at the old target's solution
+    ref.set_parameters(p)
+    ref.prepare()                               # F, H at the new parameters
+    ks = _iterate(ref, d.x0, 15, tol=1e-11)
+    assert ks[-1] < 1e-10
+    assert max(np.max(np.abs(ref.x - opt.x)), np.max(np.abs(ref.u - opt.u))) < 1e-6
+    assert kkt_of_guess(d, d.x0, ref.guess(), p=p)["kkt"] < 1e-10
+
+
+def test_nonfinite_function_value_leaves_state(tmp_path):
+    import casadi as ca
+
+    from dopus_codegen import Ocp, build_functions
+
+    ocp = Ocp("logdyn")
+    x = ocp.state("x")
+    u = ocp.control("u", lb=-1, ub=1)
+    ocp.dynamics(-ca.log(x) + u)               # NaN for x < 0
+    ocp.stage_least_squares(ca.vertcat(x - 1.0, u), weights=[1.0, 0.1])
+    ocp.horizon(N=5, dt=0.1)
+    ocp.initial_state([1.2])
+    d = build_functions(ocp)
+    ref = ReferenceDopus(d, M=4, mode="fixed")
+    ref.init(d.x0)
+    ref.feedback(d.x0)
+    ref.prepare()
+    x_before = ref.x.copy()
+    H_before = [s.Ht.copy() for s in ref.slots]
+    ref.x[3, 0] = -1.0
+    with pytest.raises(DopusError, match="non-finite") as exc:
+        ref.prepare()
+    assert exc.value.status == 4
+    assert ref.x[3, 0] == -1.0 and np.array_equal(np.delete(ref.x, 3), np.delete(x_before, 3))
+    assert all(np.array_equal(s.Ht, h) for s, h in zip(ref.slots, H_before))
+    with pytest.raises(DopusError, match="non-finite"):
+        ref.init(d.x0, ref.guess())
