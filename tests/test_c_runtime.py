@@ -1,0 +1,312 @@
+"""The C runtime through its Python handle: regularisation, KKT, rho, parameters, errors.
+
+Every number is checked against an independent computation: numpy.linalg.eigh for the
+Jacobi eigen-decomposition, dopus_codegen.kkt.kkt_measure (numpy + CasADi) for the KKT
+measure, the reference DOPUS for rho_k and for runs after an error.
+"""
+from __future__ import annotations
+
+import math
+import subprocess
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from dopus_codegen import Ocp, RK4, build_functions
+from dopus_codegen.converge import make_start
+from dopus_codegen.kkt import kkt_measure
+from dopus_codegen.paths import runtime_c_dir
+from dopus_codegen.reference import ReferenceDopus
+from dopus_codegen.solver import CSolver, DopusError
+
+STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_NONFINITE_VALUE = 1, 2, 3
+STATUS_INVALID, STATUS_NOT_INITIALIZED, STATUS_NOT_PREPARED = 5, 6, 7
+
+
+# ------------------------------------------------------------------ the Jacobi regularisation
+@pytest.fixture(scope="module")
+def reg_lib(tmp_path_factory):
+    """runtime_c/dopus_reg.c alone, as a shared library (it has no size dependency)."""
+    import cffi
+
+    d = tmp_path_factory.mktemp("reg")
+    so = d / "libreg.so"
+    subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-fPIC", "-shared",
+                    str(runtime_c_dir() / "dopus_reg.c"), "-o", str(so), "-lm"], check=True)
+    ffi = cffi.FFI()
+    ffi.cdef("int dopus_reg_jacobi_eig(int n, double *a, double *v);"
+             "int dopus_reg_apply(int n, double *A, int mode, double eps, double *work);")
+    return ffi, ffi.dlopen(str(so))
+
+
+def _sym_cases(rng):
+    cases = []
+    for n in (1, 2, 3, 5, 8, 12):
+        B = rng.standard_normal((n, n))
+        cases.append(0.5 * (B + B.T))
+    # repeated eigenvalues, a graded spectrum, an indefinite block like the robot arm's
+    Q, _ = np.linalg.qr(rng.standard_normal((6, 6)))
+    cases.append(Q @ np.diag([2.0, 2.0, 2.0, -1.0, -1.0, 0.0]) @ Q.T)
+    cases.append(Q @ np.diag([1e4, 1e2, 1.0, 1e-2, -1e-4, -0.02]) @ Q.T)
+    cases.append(np.zeros((4, 4)))
+    cases.append(np.diag([3.0, -2.0, 1e-6]))
+    return cases
+
+
+def test_jacobi_eigenvalues_match_numpy(reg_lib):
+    ffi, lib = reg_lib
+    rng = np.random.default_rng(7)
+    for A in _sym_cases(rng):
+        n = A.shape[0]
+        a = np.asfortranarray(A.copy()).ravel(order="F").copy()
+        v = np.zeros(n * n)
+        sweeps = lib.dopus_reg_jacobi_eig(n, ffi.from_buffer("double[]", a), ffi.from_buffer("double[]", v))
+        assert sweeps >= 0
+        a = a.reshape((n, n), order="F")
+        V = v.reshape((n, n), order="F")
+        e = np.diag(a)
+        scale = max(1.0, np.max(np.abs(A)))
+        assert np.allclose(np.sort(e), np.linalg.eigvalsh(A), rtol=0, atol=1e-13 * scale)
+        assert np.max(np.abs(V.T @ V - np.eye(n))) < 1e-13
+        assert np.max(np.abs(V @ np.diag(e) @ V.T - A)) < 1e-13 * scale
+
+
+@pytest.mark.parametrize("mode,name", [(1, "project"), (2, "mirror")])
+def test_regularisation_matches_eigh(reg_lib, mode, name):
+    ffi, lib = reg_lib
+    rng = np.random.default_rng(11)
+    eps = 1e-4
+    for A in _sym_cases(rng):
+        n = A.shape[0]
+        e, V = np.linalg.eigh(A)
+        e = np.maximum(e, eps) if name == "project" else np.maximum(np.abs(e), eps)
+        want = (V * e) @ V.T
+        buf = A.ravel(order="F").copy()
+        work = np.zeros(2 * n * n)
+        assert lib.dopus_reg_apply(n, ffi.from_buffer("double[]", buf), mode, eps,
+                                   ffi.from_buffer("double[]", work)) == 0
+        got = buf.reshape((n, n), order="F")
+        assert np.max(np.abs(got - want)) <= 1e-13 * max(1.0, np.max(np.abs(A)))
+        assert np.min(np.linalg.eigvalsh(got)) >= eps - 1e-12 * max(1.0, np.max(np.abs(A)))
+
+
+# ------------------------------------------------------------------ KKT and rho
+@pytest.fixture(scope="module")
+def robot_c(robot_disc):
+    return CSolver(robot_disc, M=1, mode="fixed", qp_tol=1e-14)
+
+
+def test_kkt_matches_python_measure(robot_disc, robot_solution, robot_c):
+    """C KKT parts at perturbed primal-dual points == dopus_codegen.kkt.kkt_measure."""
+    rng = np.random.default_rng(3)
+    g = robot_solution[0].filled(robot_disc)
+    for trial in range(3):
+        pert = g.copy()
+        pert.x = g.x + 1e-2 * trial * rng.standard_normal(g.x.shape)
+        pert.u = g.u + 1e-1 * trial * rng.standard_normal(g.u.shape)
+        pert.lam = g.lam + trial * rng.standard_normal(g.lam.shape)
+        pert.mu_b = g.mu_b + 0.1 * trial * rng.standard_normal(g.mu_b.shape)
+        pert.mu_b[0, :robot_disc.nx] = 0.0
+        pert.mu_bN = g.mu_bN + trial * rng.standard_normal(g.mu_bN.shape)
+        pert.nu = g.nu + trial * rng.standard_normal(g.nu.shape)
+        xhat = np.array(robot_disc.x0) + 1e-3 * trial
+        robot_c.init(xhat, pert)
+        kc = robot_c.kkt(xhat)
+        kp = kkt_measure(robot_disc, xhat, pert.x, pert.u, pert.lam, pert.mu_g, pert.mu_b, pert.mu_bN,
+                         pert.mu_r, pert.nu)
+        for key in ("kkt", "stat", "eq", "ineq", "comp"):
+            assert kc[key] == pytest.approx(kp[key], rel=1e-12, abs=1e-14), (trial, key)
+    # at the IPOPT solution the measure is small (the solution is optimal to tol 1e-12)
+    robot_c.init(robot_disc.x0, g)
+    assert robot_c.kkt(robot_disc.x0)["kkt"] < 1e-8
+
+
+def test_rho_matches_reference(robot_disc, robot_solution):
+    """rho_k of eq. 16 (not only the selection it drives) against the reference."""
+    start = make_start(robot_disc, "warm", solve_ocp=lambda d, x0: robot_solution)
+    c = CSolver(robot_disc, M=3, mode="fixed", qp_tol=1e-14)
+    r = ReferenceDopus(robot_disc, M=3, mode="fixed", qp_tol=1e-14)
+    for b in (c, r):
+        b.init(start.xhat_init, start.guess)
+    for it in range(3):
+        for b in (c, r):
+            b.feedback(start.xhat_fixed)
+            b.prepare()
+        assert np.max(np.abs(c.rho - r.rho)) <= 1e-8 * np.max(np.abs(r.rho)), it
+        assert c.rho[-1] == 0.0 and np.all(c.rho[:-1] > 0)
+        assert c.recomputed == r.recomputed and len(c.recomputed) == 4
+
+
+# ------------------------------------------------------------------ errors through the handle
+def test_bad_input_then_good_call(robot_disc, robot_solution):
+    """Wrong shapes and NaN give DopusError naming the problem; the next good call works and
+    the run continues exactly as a run without the bad calls."""
+    start = make_start(robot_disc, "warm", solve_ocp=lambda d, x0: robot_solution)
+    clean = CSolver(robot_disc, M=1, mode="receding")
+    c = CSolver(robot_disc, M=1, mode="receding")
+
+    with pytest.raises(DopusError, match="not initialised") as ei:
+        c.feedback(start.xhat_fixed)
+    assert ei.value.status == STATUS_NOT_INITIALIZED
+    with pytest.raises(DopusError, match=r"init: xhat0: expected shape \(5,\), got \(4,\)"):
+        c.init(start.xhat_init[:4], start.guess)
+    bad = start.guess.copy()
+    bad.u = bad.u[:-1]
+    with pytest.raises(DopusError, match=r"guess.u: expected shape \(40, 3\), got \(39, 3\)"):
+        c.init(start.xhat_init, bad)
+    bad = start.guess.copy()
+    bad.lam = np.array(bad.lam, dtype=float)
+    bad.lam[3, 1] = np.nan
+    with pytest.raises(DopusError, match=r"guess.lam: NaN or Inf at index \(3, 1\)") as ei:
+        c.init(start.xhat_init, bad)
+    assert ei.value.status == STATUS_NONFINITE_INPUT
+
+    for b in (clean, c):
+        b.init(start.xhat_init, start.guess)
+    xh = start.xhat_fixed
+    nan_x = xh.copy()
+    nan_x[2] = np.nan
+    with pytest.raises(DopusError, match=r"robot_arm: feedback: xhat0: NaN or Inf at index 2") as ei:
+        c.feedback(nan_x)
+    assert ei.value.status == STATUS_NONFINITE_INPUT
+    with pytest.raises(DopusError, match=r"expected shape \(5,\), got \(2, 5\)"):
+        c.feedback(np.vstack([xh, xh]))
+    with pytest.raises(DopusError, match="expected real numbers"):
+        c.feedback(np.array(["a"] * 5))
+    x_before = c.x
+    u0 = c.feedback(xh)
+    assert np.array_equal(u0, clean.feedback(xh))
+    assert not np.array_equal(c.x, x_before)
+    # a second feedback without prepare would solve a stale QP
+    with pytest.raises(DopusError, match="no prepared QP") as ei:
+        c.feedback(xh)
+    assert ei.value.status == STATUS_NOT_PREPARED
+    for b in (clean, c):
+        b.prepare()
+    for it in range(3):
+        assert np.array_equal(c.feedback(xh), clean.feedback(xh))
+        c.prepare()
+        clean.prepare()
+    assert np.array_equal(c.x, clean.x) and np.array_equal(c.lam, clean.lam)
+    assert c.ring_head == clean.ring_head == 4
+
+    # invalid settings
+    with pytest.raises(DopusError, match="M must be a non-negative integer"):
+        c.set_M(-1)
+    with pytest.raises(DopusError, match="mode must be"):
+        c.set_mode("sideways")
+    with pytest.raises(DopusError, match="regularization must be"):
+        c.set_regularization("flip")
+    with pytest.raises(DopusError, match="reg_eps must be positive"):
+        c.set_regularization("project", -1.0)
+    c.set_M(1000)
+    assert c.M == robot_disc.N - 1     # clamped to the full RTI, as the reference does
+    assert c.feedback(xh).shape == (3,)
+
+
+def test_timings_with_a_custom_clock(robot_disc, robot_solution):
+    """The clock hook: a clock that ticks one unit per read makes every phase time an exact
+    count of clock reads."""
+    c = CSolver(robot_disc, M=1, mode="receding")
+    c.init(robot_disc.x0, robot_solution[0])
+    ticks = {"n": 0}
+
+    def clock():
+        ticks["n"] += 1
+        return float(ticks["n"])
+
+    c.set_clock(clock)
+    c.feedback(robot_disc.x0)
+    assert c.timings["feedback"] == 1.0
+    c.prepare()
+    t = c.timings
+    # shift is read once; stage_grad and rho alternate per stage; M + 1 + terminal Hessians
+    assert t["shift"] == 1.0 and t["regularization"] == 0.0
+    assert t["hessians"] == 3.0     # stage N-1, terminal node, one selected stage
+    assert t["gradients"] > 0 and t["rho"] > 0 and t["assembly"] == 1.0
+    c.set_clock(None)
+    c.feedback(robot_disc.x0)
+    assert 0.0 < c.timings["feedback"] < 10.0
+
+
+# ------------------------------------------------------------------ a tiny problem: NR > 0, no LS
+def _tiny_ocp():
+    """A pendulum-like double integrator with no least-squares cost (so no Gauss-Newton), one runtime
+    parameter scaling the cost through sqrt(p) (p < 0 makes the functions return NaN), a
+    terminal inequality row and a path constraint."""
+    ocp = Ocp("tiny")
+    x = ocp.state("x", 2, lb=-5, ub=5)
+    u = ocp.control("u", lb=-1, ub=1)
+    w = ocp.parameter("w", value=1.0)
+    ocp.dynamics(ca.vertcat(x[1], u - 2.0 * ca.sin(x[0])), integrator=RK4(substeps=1))
+    ocp.stage_cost(ca.sqrt(w) * (x[0] ** 2 + x[1] ** 2 + 0.1 * u ** 2))
+    ocp.terminal_cost(10 * (x[0] ** 2 + x[1] ** 2))
+    ocp.path_constraint(x[0] + x[1], ub=1.5)
+    ocp.terminal_constraint(x[0] - 0.5 * x[1], lb=-0.2)
+    ocp.horizon(N=10, dt=0.1)
+    ocp.initial_state([1.0, 0.0])
+    ocp.initial_guess(x=[1.0, 0.0], u=[0.0])
+    return ocp
+
+
+@pytest.fixture(scope="module")
+def tiny_disc():
+    return build_functions(_tiny_ocp())
+
+
+def test_tiny_matches_reference_and_recovers(tiny_disc):
+    disc = tiny_disc
+    assert (disc.nr, disc.ne, disc.np, disc.ng) == (1, 0, 1, 1)
+    c = CSolver(disc, M=2, mode="receding", qp_tol=1e-14)
+    r = ReferenceDopus(disc, M=2, mode="receding", qp_tol=1e-14)
+    with pytest.raises(DopusError, match="gauss-newton.*least-squares"):
+        c.set_hessian("gauss-newton")
+    xhat = np.array(disc.x0, dtype=float)
+    for b in (c, r):
+        b.init(xhat, None)
+    for it in range(12):
+        if it == 4:
+            for b in (c, r):
+                b.set_parameters(np.array([4.0]))
+        if it == 8:
+            p = np.ones((disc.N + 1, 1))
+            p[3] = 2.0
+            for b in (c, r):
+                b.set_parameters(p)
+        uc, ur = c.feedback(xhat), r.feedback(xhat)
+        assert np.max(np.abs(uc - ur)) < 1e-9
+        for b in (c, r):
+            b.prepare()
+        for f in ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r"):
+            a, b_ = getattr(c, f), getattr(r, f)
+            assert np.max(np.abs(a - b_)) <= 1e-9 * max(1.0, np.max(np.abs(b_))), (it, f)
+        assert c.recomputed == r.recomputed, it
+        kc, kr = c.kkt(xhat), r.kkt(xhat)
+        assert kc["kkt"] == pytest.approx(kr["kkt"], rel=1e-9, abs=1e-12)
+        xhat = np.array(disc.stage_eval(xhat, ur, r.p[0])[0], dtype=float).reshape(-1)
+
+    # a parameter that makes the stage functions return NaN: prepare fails with a status,
+    # the iterate stays as after the shift, and the next prepare with a good parameter works
+    c.feedback(xhat)
+    c.set_parameters(np.array([-1.0]))
+    x_fb = c.x
+    with pytest.raises(DopusError, match="non-finite|NaN") as ei:
+        c.prepare()
+    assert ei.value.status == STATUS_NONFINITE_VALUE
+    shifted = np.vstack([x_fb[1:], x_fb[-1:]])
+    assert np.array_equal(c.x, shifted)
+    with pytest.raises(DopusError, match="no prepared QP"):
+        c.feedback(xhat)
+    c.set_parameters(np.array([1.0]))
+    c.set_mode("fixed")          # do not shift a second time
+    c.prepare()
+    u0 = c.feedback(xhat)
+    assert np.all(np.isfinite(u0)) and c.kkt(xhat)["kkt"] < math.inf
+
+
+def test_sizeof_and_dims(robot_c, robot_disc):
+    """The memory bill: one struct, a compile-time constant."""
+    print(f"sizeof(robot_arm_solver) = {robot_c.sizeof} bytes")
+    assert robot_c.sizeof > 8 * (robot_disc.N * (robot_disc.nw ** 2 + robot_disc.nx * robot_disc.nw))
+    assert (robot_c.N, robot_c.nx, robot_c.n_u, robot_c.ne) == (40, 5, 3, 2)
