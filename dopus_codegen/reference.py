@@ -215,6 +215,7 @@ class ReferenceDopus:
         self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
         self.mu_bN, self.mu_r, self.nu = g.mu_bN.copy(), g.mu_r.copy(), g.nu.copy()
         self.ring_head = 0
+        self._xhat_last = xhat0.copy()
         self.slots = slots
         self.term = term
         self.rho = np.zeros(N)
@@ -228,11 +229,14 @@ class ReferenceDopus:
             raise DopusError("call init(xhat0, guess) first", STATUS_BAD_INPUT)
 
     # ------------------------------------------------------------------ the QP
-    def qp_of_current(self, xhat0) -> dict:
-        """The QP of section 3 at the current iterate for initial state ``xhat0``."""
+    def qp_of_current(self, xhat0=None) -> dict:
+        """The QP of section 3 at the current iterate for initial state ``xhat0`` (default:
+        the last one given to ``init``/``feedback``), in the :mod:`dopus_codegen.qpref`
+        format. Meaningful after ``init`` or ``prepare`` (it is the QP the next ``feedback``
+        solves)."""
         self._need_init()
         N, nx, nu, ng, nr, ne, nw = self.N, self.nx, self.n_u, self.ng, self.nr, self.ne, self.nw
-        xhat0 = _arr(xhat0, (nx,), "xhat0")
+        xhat0 = _arr(self._xhat_last if xhat0 is None else xhat0, (nx,), "xhat0")
         H = np.empty((N, nw, nw)); gq = np.empty((N, nw)); Phi = np.empty((N, nx, nw))
         b = np.empty((N, nx)); C = np.empty((N, ng, nw)); lgq = np.empty((N, ng)); ugq = np.empty((N, ng))
         lbw = np.empty((N, nw)); ubw = np.empty((N, nw))
@@ -273,6 +277,7 @@ class ReferenceDopus:
             self.status = STATUS_BAD_INPUT
             raise DopusError(f"feedback: xhat0 must be {self.nx} finite numbers, got {xhat0}", STATUS_BAD_INPUT)
         qp = self.qp_of_current(xhat0)
+        self._xhat_last = xhat0.copy()
         t1 = time.perf_counter()
         try:
             sol = solve_qp_reference(qp, tol=self.qp_tol)
