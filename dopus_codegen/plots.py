@@ -103,7 +103,7 @@ def plot_signals(runs, path, title=None, log=None):
         _mark_events(ax, runs)
         ax.legend(loc="upper right", fontsize=8)
     axes[-1, 0].set_xlabel("time [s]")
-    _suptitle(fig, title, "scenario signals (closed loop, CVODES plant)")
+    _suptitle(fig, title, "closed-loop signals (CVODES plant)")
     fig.tight_layout()
     return _save(fig, path)
 
@@ -124,7 +124,7 @@ def plot_kkt(runs, path, title=None):
     ax.grid(True, which="both", alpha=0.3)
     _mark_events(ax, runs)
     ax.legend(loc="upper right", fontsize=8)
-    _suptitle(fig, title, "KKT measure after each feedback (one iteration per sampling instant)")
+    _suptitle(fig, title, "KKT measure after each feedback")
     fig.tight_layout()
     return _save(fig, path)
 
@@ -174,7 +174,7 @@ def plot_plane(runs, path, title=None, plane=None):
     path_name, ref_name = plane
     fig, ax = plt.subplots(figsize=(6.4, 6.0))
     ref = _mat(runs[0]["signals"][ref_name])
-    ax.plot(ref[:, 0], ref[:, 1], color="0.6", lw=5, alpha=0.5, label=f"{ref_name} (reference)", zorder=0)
+    ax.plot(ref[:, 0], ref[:, 1], color="0.55", lw=3, alpha=0.5, label=f"{ref_name} (reference)", zorder=0)
     for i, run in enumerate(runs):
         xy = _mat(run["signals"][path_name])
         ax.plot(xy[:, 0], xy[:, 1], label=f"{run['label']}: {path_name}", **_style(i))
@@ -220,30 +220,60 @@ def plot_recomputed(runs, path, title=None):
     return _save(fig, path)
 
 
+def _phase_series(run):
+    """(labels, arrays in us) of the disjoint phases of each iteration."""
+    tim = run["timing_us"]
+    phases = [k for k in tim if k.startswith("phase:")]
+    if phases:
+        return [k.split(":", 1)[1] for k in phases], [_arr(tim[k]) for k in phases]
+    return ["feedback", "prepare"], [_arr(tim["feedback"]), _arr(tim["prepare"])]
+
+
 def plot_timing(runs, path, title=None):
-    """Computation time per iteration split by phase (stacked), one panel per run."""
-    fig, axes = plt.subplots(len(runs), 1, figsize=(8, 1.0 + 2.6 * len(runs)), sharex=True, sharey=True,
-                             squeeze=False)
-    for ax, run in zip(axes[:, 0], runs):
+    """Computation time per iteration: median split by phase (stacked bars) and the
+    wall-clock time of every iteration against time."""
+    fig, (ax_bar, ax_t) = plt.subplots(1, 2, figsize=(11.5, 4.6), gridspec_kw={"width_ratios": [1, 1.9]},
+                                       layout="constrained")
+    all_labels = []
+    for run in runs:
+        for lab in _phase_series(run)[0]:
+            if lab not in all_labels:
+                all_labels.append(lab)
+    colors = {lab: f"C{j % 10}" for j, lab in enumerate(all_labels)}
+    heights = []
+    for i, run in enumerate(runs):
+        labels, data = _phase_series(run)
+        bottom = 0.0
+        for lab, v in zip(labels, data):
+            med = float(np.nanmedian(v)) if v.size else 0.0
+            ax_bar.bar(i, med, bottom=bottom, color=colors[lab], width=0.6,
+                       label=lab if i == next(j for j, r in enumerate(runs) if lab in _phase_series(r)[0]) else None)
+            bottom += med
+        heights.append(bottom)
+        ax_bar.annotate(f"{bottom:.0f} us", xy=(i, bottom), xytext=(0, 3), textcoords="offset points",
+                        ha="center", fontsize=8)
+    ax_bar.set_xticks(range(len(runs)))
+    ax_bar.set_xticklabels([f"{r['label']}\n({r['settings']['backend']})" for r in runs], fontsize=8)
+    ax_bar.set_ylabel("median time per iteration [us]")
+    ax_bar.set_title("median by phase (backend timers)", fontsize=9)
+    ax_bar.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0), borderaxespad=0.2)
+    ax_bar.set_xlim(-0.6, len(runs) - 0.4)
+    ax_bar.set_ylim(0, 1.15 * max(heights + [1e-9]))
+    ax_bar.grid(True, axis="y", alpha=0.3)
+    for i, run in enumerate(runs):
         t = np.asarray(run["t"], dtype=float)
-        tim = run["timing_us"]
-        phases = [k for k in tim if k.startswith("phase:")]
-        if phases:
-            labels = [k.split(":", 1)[1] for k in phases]
-            data = [_arr(tim[k]) for k in phases]
-        else:
-            labels, data = ["feedback", "prepare"], [_arr(tim["feedback"]), _arr(tim["prepare"])]
-        ax.stackplot(t, *data, labels=labels, step="post", alpha=0.85)
-        ax.plot(t, _arr(tim["total"]), color="k", lw=0.6, label="feedback + prepare (wall)", drawstyle="steps-post")
-        ax.set_ylabel("time [us]")
-        ax.set_title(f"{run['label']} ({run['settings']['backend']} backend): median "
-                     f"{np.median(_arr(tim['total'])):.0f} us per iteration", fontsize=9)
-        ax.grid(True, alpha=0.3)
-        _mark_events(ax, runs)
-        ax.legend(loc="upper right", fontsize=7, ncol=2)
-    axes[-1, 0].set_xlabel("time [s]")
-    _suptitle(fig, title, "computation time per iteration by phase")
-    fig.tight_layout()
+        tot = _arr(run["timing_us"]["total"])
+        ax_t.semilogy(t, tot, ".", ms=3, color=_style(i)["color"], alpha=0.7,
+                      label=f"{run['label']}: feedback + prepare")
+        ax_t.axhline(np.nanmedian(tot), color=_style(i)["color"], ls=_style(i)["ls"], lw=1.2,
+                     label=f"{run['label']}: median {np.nanmedian(tot):.0f} us")
+    ax_t.set_xlabel("time [s]")
+    ax_t.set_ylabel("wall-clock time per iteration [us]")
+    ax_t.set_title("every iteration (wall clock, Python call included)", fontsize=9)
+    ax_t.grid(True, which="both", alpha=0.3)
+    _mark_events(ax_t, runs)
+    ax_t.legend(fontsize=7, loc="upper right")
+    _suptitle(fig, title, "computation time per iteration")
     return _save(fig, path)
 
 

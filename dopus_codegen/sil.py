@@ -169,8 +169,9 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
 
     rec_t, rec_x, rec_u, rec_kkt, rec_parts, rec_status, rec_rec = [], [], [], [], [], [], []
     rec_sig = {name: [] for name in spec.signals}
+    rec_qp_it = []
     timing: dict[str, list] = {"feedback": [], "prepare": [], "total": []}
-    phase_keys: list[str] = []
+    phase_timing: dict[str, list] = {}  # the backend's own phase timers
     aborted = None
 
     bar = None
@@ -195,13 +196,21 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                 status = _status_of(err)
                 u0 = np.asarray(ctrl.u, dtype=float)[0].copy()
             t_fb = time.perf_counter() - t0
+            rec_qp_it.append(int(getattr(ctrl, "qp_iterations", 0) or 0))
             snap_fb = dict(getattr(ctrl, "timings", {}) or {})
             phases = _split_phases("feedback", _changed(snap, snap_fb))
             if not np.all(np.isfinite(u0)):
                 u0 = np.clip(np.nan_to_num(np.asarray(ctrl.u, dtype=float)[0]), lbu, ubu)
                 status = status or -1
 
-            kkt = ctrl.kkt(xhat)
+            try:
+                kkt = ctrl.kkt(xhat)
+            except Exception as err:  # noqa: BLE001
+                if not _is_dopus_error(err):
+                    raise
+                # A non-finite iterate has no KKT measure; the instant counts as failed.
+                kkt = {"kkt": math.nan}
+                status = status or _status_of(err)
             # A backend may time its KKT evaluation too; that is not part of the iteration.
             snap_fb = dict(getattr(ctrl, "timings", {}) or {})
 
@@ -239,7 +248,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
             timing["feedback"].append(t_fb * 1e6)
             timing["prepare"].append(t_pr * 1e6)
             timing["total"].append((t_fb + t_pr) * 1e6)
-            _record_phases(timing, phase_keys, phases, i)
+            _record_phases(phase_timing, phases, i)
 
             if progress and bar is None and time.perf_counter() - t_start > _PROGRESS_AFTER:
                 import click
@@ -259,7 +268,6 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
         if bar is not None:
             bar.__exit__(None, None, None)
 
-    phases = {k: timing[k] for k in phase_keys}
     run = {
         "label": label,
         "t": rec_t,
@@ -270,8 +278,9 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
         "status": rec_status,
         "signals": {k: [float(v[0]) if v.size == 1 else list(v) for v in vals] for k, vals in rec_sig.items()},
         "recomputed": rec_rec,
+        "qp_iterations": rec_qp_it[:len(rec_status)],
         "timing_us": {"feedback": timing["feedback"], "prepare": timing["prepare"], "total": timing["total"],
-                      **{f"phase:{k}": v for k, v in phases.items()}},
+                      **{f"phase:{k}": v for k, v in phase_timing.items()}},
         "events": [{"time": float(ev.time), "label": str(ev.label)} for ev in events],
         "settings": {"M": M_eff, "N": N, "dt": dt, "duration": n_steps * dt, "hessian": hessian,
                      "regularization": regularization, "reg_eps": float(reg_eps), "backend": backend,
@@ -307,14 +316,13 @@ def _split_phases(call: str, changed: dict) -> dict:
     return out
 
 
-def _record_phases(timing, phase_keys, phases, i):
+def _record_phases(timing, phases, i):
     """Append this instant's phase durations (microseconds); absent phases count 0."""
     for k, v in phases.items():
         if k not in timing:
             timing[k] = [0.0] * i
-            phase_keys.append(k)
         timing[k].append(v * 1e6)
-    for k in phase_keys:
+    for k in timing:
         if len(timing[k]) < i + 1:
             timing[k].append(0.0)
 
@@ -371,7 +379,9 @@ def summarize(run, settle: float = 0.2) -> dict:
     for ev in run["events"]:
         settled &= ~((t >= ev["time"]) & (t < ev["time"] + settle))
     out["settle"] = settle
-    out["kkt_max_settled"] = float(np.max(kkt[settled])) if np.any(settled) else math.nan
+    ks = kkt[settled & np.isfinite(kkt)]
+    out["kkt_max_settled"] = float(np.max(ks)) if ks.size else math.nan
+    out["kkt_nonfinite"] = int(np.count_nonzero(~np.isfinite(kkt)))
     out["qp_failures"] = int(np.count_nonzero(np.asarray(run["status"]) != 0))
     u = np.asarray(run["u"], dtype=float)
     lbu = np.asarray([-np.inf if a is None else a for a in run["settings"]["lbu"]], dtype=float)
