@@ -70,6 +70,8 @@ HPIPM_CONFIGS = {
                      "what": "as hpipm in mode robust"},
     "hpipm_speed_abs": {"mode": "speed_abs", "eq_mask": 0, "eq_scale": False, "ric_alg": -1,
                         "what": "as hpipm in mode speed_abs (exits on the duality measure only)"},
+    "hpipm_classic": {"mode": "balance", "eq_mask": 0, "eq_scale": False, "ric_alg": 0, "robot_only": True,
+                      "what": "as hpipm with the classic Riccati recursion, equality rows as stated"},
     "hpipm_scaled": {"mode": "balance", "eq_mask": 0, "eq_scale": True, "ric_alg": 0, "robot_only": True,
                      "what": "RESCALED BY HAND: terminal equality rows divided by eq_scale * max|row|, "
                              "classic Riccati; the configuration found to converge on the robot-arm QPs"},
@@ -388,15 +390,17 @@ def fmt_us(t):
     return "       -" if t is None else f"{1e6 * t:8.1f}"
 
 
-def table(title: str, groups: dict, names: list, anchors: list, ours: str, log=print) -> dict:
-    """Print one table (rows: groups of QPs); return the medians per group and solver.
+def table(title: str, groups: dict, names: list, anchors: list, ours: str, log=print, shown=None) -> dict:
+    """Print one table (rows: groups of QPs; columns: the solvers in ``shown``, all if None);
+    return the medians per group for every solver.
 
     Ratios are medians over the QPs of the per-QP ratios ours / anchor."""
     anchors = [a for a in anchors if a in names and ours in names]
     log(f"\n{title}")
-    log(f"{'QPs':<18}{'#':>4}" + "".join(f" | {n:>25}" for n in names)
+    cols = [n for n in names if shown is None or n in shown]
+    log(f"{'QPs':<18}{'#':>4}" + "".join(f" | {n:>25}" for n in cols)
         + "".join(f" | {'ours/' + a:>17}" for a in anchors))
-    log(f"{'':<18}{'':>4}" + "".join(f" | {'us/QP iters us/iter ok':>25}" for _ in names)
+    log(f"{'':<18}{'':>4}" + "".join(f" | {'us/QP iters us/iter ok':>25}" for _ in cols)
         + "".join(f" | {'QP   iter':>17}" for _ in anchors))
     summary = {}
     for gname, entries in groups.items():
@@ -418,7 +422,8 @@ def table(title: str, groups: dict, names: list, anchors: list, ours: str, log=p
                      "err_vs_reference_max": max(errs) if errs else None,
                      "obj_rel_err_vs_reference_max": max(oerrs) if oerrs else None,
                      "statuses": sorted({e["solvers"][n]["status"] for e in entries})}
-            line += f" | {fmt_us(t)} {it if it is not None else 0:5.1f} {fmt_us(tpi)} {ok:>2}"
+            if n in cols:
+                line += f" | {fmt_us(t)} {it if it is not None else 0:5.1f} {fmt_us(tpi)} {ok:>2}"
         for a in anchors:
             r_qp = med([e["solvers"][ours]["t_median"] / e["solvers"][a]["t_median"] for e in entries
                         if e["solvers"][a]["t_median"]])
@@ -455,6 +460,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-robot", action="store_true", help="random QPs only")
     ap.add_argument("--no-ours", action="store_true", help="HPIPM only (our solver not built)")
     ap.add_argument("--no-reference", action="store_true", help="skip the reference QP solves")
+    ap.add_argument("--wide", action="store_true", help="print every column (the JSON always has all)")
     ap.add_argument("--quick", action="store_true", help="smoke run: few repetitions and QPs")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=RESULTS / "qp_bench.json")
@@ -538,6 +544,8 @@ def main(argv=None) -> int:
                                                                           "dopus_linalg.c")}},
               "notes": NOTES}
     anchor, ours = "hpipm", "ours"
+    shown = None if args.wide else {"ours", "ours_alt", "hpipm", "hpipm_eqmask", "hpipm_robust", "hpipm_classic",
+                                    "hpipm_scaled", "hpipm_casadi", "hpipm_best"}
 
     # random QPs
     rng = np.random.default_rng(args.seed)
@@ -547,7 +555,7 @@ def main(argv=None) -> int:
     names = list(entries[0]["solvers"])
     groups = {f"random N={N}": [e for e in entries if e["N"] == N] for N in RANDOM_NS}
     report["random"] = {"qps": entries, "summary": table("Random QPs (nx=5, nu=3, 3 control bounds, 2 terminal "
-                                                           "equality rows), medians", groups, names, [anchor, "hpipm_best"], ours, log),
+                                                           "equality rows), medians", groups, names, [anchor, "hpipm_best"], ours, log, shown),
                         "commands": cmds}
 
     if not args.no_robot:
@@ -560,7 +568,7 @@ def main(argv=None) -> int:
                   "robot all": entries}
         report["robot_arm"] = {"qps": entries, "summary": table(
             "Robot-arm QPs (N=40), medians; hpipm/hpipm_eqmask: equality as stated; hpipm_scaled: rows rescaled "
-            "by hand", groups, names, [anchor, "hpipm_scaled", "hpipm_best"], ours, log), "commands": cmds}
+            "by hand", groups, names, [anchor, "hpipm_scaled", "hpipm_best"], ours, log, shown), "commands": cmds}
         st = {n: sorted({HPIPM_STATUS.get(e['solvers'][n]['status'], str(e['solvers'][n]['status']))
                          if n.startswith("hpipm") else DOPUS_STATUS.get(e['solvers'][n]['status'], '?')
                          for e in entries}) for n in names if n != "hpipm_best"}
