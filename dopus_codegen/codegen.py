@@ -275,6 +275,8 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any) -> Dict[str, Any
     N, nx, nu, nw = s["N"], s["nx"], s["nu"], s["nw"]
     options = getattr(disc, "options", None)
     guess = _attr(disc, "initial_guess")
+    if getattr(guess, "x", None) is None or getattr(guess, "u", None) is None:
+        raise CodegenError("initial_guess: x and u are required")
     ctx: Dict[str, Any] = {
         "lbx": c_vector(_attr(disc, "lbx"), nx, "lbx"),
         "ubx": c_vector(_attr(disc, "ubx"), nx, "ubx"),
@@ -296,8 +298,8 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any) -> Dict[str, Any
         "default_reg_eps": c_double(_option(options, "reg_eps", 1e-4), "reg_eps"),
         "has_nominal": nominal is not None,
     }
-    if getattr(guess, "x", None) is None or getattr(guess, "u", None) is None:
-        raise CodegenError("initial_guess: x and u are required")
+    if not 0 <= ctx["default_M"] <= N - 1:
+        raise CodegenError(f"option M={ctx['default_M']} is outside 0..N-1 = 0..{N - 1}")
     if nominal is not None:
         dim = lambda n: max(n, 1)  # noqa: E731  (DOPUS_DIM of the header)
         ctx.update({
