@@ -72,8 +72,13 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
             ineq = dopus_kkt_max(ineq, dopus_kkt_viol(g[i], dopus_lg[i], dopus_ug[i]));
             comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_g[k][i], g[i], dopus_lg[i], dopus_ug[i]));
         }
-        /* simple bounds: x_k only for k >= 1 (x_0 is fixed by xhat0) */
-        if (k >= 1) {
+        /* simple bounds: x_k only for k >= 1 (x_0 is fixed by xhat0, so a multiplier on
+         * it pairs with infinite sides and counts with its magnitude) */
+        if (k == 0) {
+            for (i = 0; i < DOPUS_NX; ++i) {
+                comp = dopus_kkt_max(comp, fabs(s->mu_b[0][i]));
+            }
+        } else {
             for (i = 0; i < DOPUS_NX; ++i) {
                 ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->x[k][i], dopus_lbx[i], dopus_ubx[i]));
                 comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_b[k][i], s->x[k][i], dopus_lbx[i],
