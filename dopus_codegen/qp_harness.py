@@ -324,6 +324,7 @@ class QPSolverHandle:
             "iterations": int(i.iterations),
             "inertia_corrections": int(i.inertia_corrections),
             "terminal_augmentations": int(i.terminal_augmentations),
+            "pivot_floors": int(i.pivot_floors),
             "delta": float(i.delta),
             "res_stat": float(i.res_stat),
             "res_eq": float(i.res_eq),

@@ -1,6 +1,7 @@
 /* Small dense column-major linear algebra, see dopus_linalg.h. */
 #include "dopus_linalg.h"
 
+#include <float.h>
 #include <math.h>
 
 int dopus_la_potrf_l(int n, double *A, int lda)
@@ -13,6 +14,37 @@ int dopus_la_potrf_l(int n, double *A, int lda)
         /* !(d > 0) also rejects NaN */
         if (!(d > 0.0) || !isfinite(d))
             return j + 1;
+        d = sqrt(d);
+        A[j + j * lda] = d;
+        for (i = j + 1; i < n; ++i) {
+            double s = A[i + j * lda];
+            for (k = 0; k < j; ++k)
+                s -= A[i + k * lda] * A[j + k * lda];
+            A[i + j * lda] = s / d;
+        }
+    }
+    return 0;
+}
+
+int dopus_la_potrf_l_noise(int n, double *A, int lda, const double *noise, int *nfloor)
+{
+    int i, j, k;
+    for (j = 0; j < n; ++j) {
+        const double ajj = fabs(A[j + j * lda]);
+        const double tol = noise ? noise[j] : 0.0;
+        double d = A[j + j * lda];
+        for (k = 0; k < j; ++k)
+            d -= A[j + k * lda] * A[j + k * lda];
+        if (!isfinite(d))
+            return j + 1;
+        if (d <= 0.0) {
+            const double floor_d = tol > DBL_EPSILON * ajj ? tol : DBL_EPSILON * ajj;
+            if (d < -tol || !(floor_d > 0.0))
+                return j + 1;
+            d = floor_d;
+            if (nfloor)
+                ++*nfloor;
+        }
         d = sqrt(d);
         A[j + j * lda] = d;
         for (i = j + 1; i < n; ++i) {

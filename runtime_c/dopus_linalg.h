@@ -12,6 +12,12 @@
  * positive or not finite (A is then partially overwritten). */
 int dopus_la_potrf_l(int n, double *A, int lda);
 
+/* As dopus_la_potrf_l, but a pivot d with -noise[j] <= d <= 0 (noise: absolute round-off
+ * estimate of the diagonal entry, n values; NULL means 0) is taken as a numerical zero and
+ * replaced by max(noise[j], DBL_EPSILON |A_jj|); *nfloor (if not NULL) counts them. Only
+ * pivots below -noise[j] (or non-finite) fail; positive pivots are never changed. */
+int dopus_la_potrf_l_noise(int n, double *A, int lda, const double *noise, int *nfloor);
+
 /* In-place L D L' factorisation (unit lower L, diagonal D stored on the diagonal) of the
  * symmetric n x n matrix A, no pivoting. Returns 0 on success, j+1 on a zero/non-finite
  * pivot. The number of negative pivots is written to *neg when neg is not NULL. */

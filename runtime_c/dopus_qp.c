@@ -40,6 +40,12 @@
 #define DELTA_GROW 10.0
 #define DELTA_MAX_REL 1e10
 #define RHO_TRIES 3
+#define MU_FLOOR_REL 0.1
+#define STALL_ITERS 10
+#define RHO_MAX_REL 1e4
+/* Relative rounding unit used in the round-off estimates of the Riccati recursion (a few
+ * DBL_EPSILON times the accumulation length). */
+#define RICCATI_EPS (16.0 * (NW + 1) * 2.220446049250313e-16)
 /* Infeasibility certificates are tested on the dual (primal) iterate normalised to unit
  * infinity norm once it has grown this much beyond the data scale. */
 #define CERT_EPS 1e-9
@@ -186,6 +192,7 @@ typedef struct {
     double stat, eq, ineq, comp;            /* unscaled inf-norms */
     double stat_s, eq_s, ineq_s, comp_s;    /* scaled */
     double ny;       /* inf-norm of the dual iterate */
+    double nz;       /* inf-norm of the inequality multipliers */
     double obj;
 } qp_res;
 
@@ -294,6 +301,7 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
     r->eq_s = r->eq / s_eq;
     r->ineq_s = r->ineq / s_ineq;
     r->comp_s = r->comp / dmax(1.0, nz);
+    r->nz = nz;
     r->ny = dmax(nz, dmax(dopus_la_norm_inf((N + 1) * NX, ws->lam), NE > 0 ? dopus_la_norm_inf(NE, ws->nu) : 0.0));
     r->obj = obj;
     ws->scale_stat = s_stat;
@@ -321,6 +329,7 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
     double *PhiP = ws->work;                 /* NX x NW: P_{k+1} Phi_k */
     double *Gam = ws->work + NX * NW;        /* NW x NE: Phi_k' G_{k+1} */
     const double delta = ws->delta;
+    double pmag;
 
     /* terminal: P_N = HN + D'QD + delta I + rho Req'Req, G_N = Req' */
     {
@@ -348,6 +357,12 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
     for (i = 0; i < NE1 * NE1; ++i)
         ws->S[i] = 0.0;
 
+    /* Round-off of the Schur complements: P_{k+1} = M_xx - M_xu M_uu^{-1} M_ux may cancel
+     * large barrier terms (an active state bound enters M_xx, is absorbed by the controls
+     * of the stage before and cancels), leaving an absolute error of about eps times the
+     * magnitude `pmag` of the cancelled terms. That error reaches the pivots of M_uu of
+     * stage k through B' P B, so a negative pivot within that noise is a numerical zero. */
+    pmag = dopus_la_max_abs_mat(NX, NX, ws->P[N], NX);
     for (k = N - 1; k >= 0; --k) {
         double *M = ws->M;
         const double *Phi = in->Phi[k];
@@ -356,6 +371,8 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         double *LK = ws->LK[k];
         double *LKn = ws->LKn[k];
         double *P = ws->P[k];
+        const double pmax = dopus_la_max_abs_mat(NX, NX, ws->P[k + 1], NX);
+        double mxx = 0.0;
 
         /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi */
         dopus_la_copy_mat(NW, NW, in->H[k], NW, M, NW);
@@ -371,6 +388,19 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
                     for (a = 0; a < NW; ++a)
                         M[a + c * NW] += qg * C[j + a * NG] * C[j + c * NG];
         }
+        for (j = 0; j < NU; ++j) {
+            /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P */
+            double colsum = 0.0;
+            for (i = 0; i < NX; ++i)
+                colsum += fabs(Phi[i + (NX + j) * NX]);
+            ws->noise[j] = RICCATI_EPS * (fabs(M[NX + j + (NX + j) * NW]) + colsum * colsum * dmax(pmax, pmag));
+        }
+        for (j = 0; j < NX; ++j) {
+            double colsum = 0.0;
+            for (i = 0; i < NX; ++i)
+                colsum += fabs(Phi[i + j * NX]);
+            mxx = dmax(mxx, fabs(M[j + j * NW]) + colsum * colsum * pmax);
+        }
         dopus_la_gemm_nn(NX, NW, NX, 1.0, ws->P[k + 1], NX, Phi, NX, 0.0, PhiP, NX);
         dopus_la_gemm_tn(NW, NW, NX, 1.0, Phi, NX, PhiP, NX, 1.0, M, NW);
         /* symmetric by construction up to round-off: average to keep P exactly symmetric */
@@ -383,10 +413,11 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         if (NE > 0)
             dopus_la_gemm_tn(NW, NE, NX, 1.0, Phi, NX, ws->G[k + 1], NX, 0.0, Gam, NW);
 
-        /* M_uu = Lu Lu' */
+        /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
         dopus_la_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
-        if (dopus_la_potrf_l(NU, Lu, NU1) != 0)
+        if (dopus_la_potrf_l_noise(NU, Lu, NU1, ws->noise, &ws->pivot_floors) != 0)
             return 1;
+        pmag = mxx;
         /* LK = Lu^{-1} M_ux, LKn = Lu^{-1} Gam_u */
         dopus_la_copy_mat(NU, NX, M + NX, NW, LK, NU1);
         dopus_la_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
@@ -821,6 +852,30 @@ static void initial_point(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
     }
 }
 
+static void copy_iterate(dopus_qp_workspace *ws, int to_best)
+{
+    int i;
+    double *a[7], *b[7];
+    const int n[7] = {NP, (N + 1) * NX, NE1, NI, NI, NI, NI};
+    int j;
+    a[0] = ws->prim; a[1] = ws->lam; a[2] = ws->nu; a[3] = ws->t_lo; a[4] = ws->t_up;
+    a[5] = ws->z_lo; a[6] = ws->z_up;
+    b[0] = ws->best_prim; b[1] = ws->best_lam; b[2] = ws->best_nu; b[3] = ws->best_t_lo;
+    b[4] = ws->best_t_up; b[5] = ws->best_z_lo; b[6] = ws->best_z_up;
+    for (j = 0; j < 7; ++j)
+        for (i = 0; i < n[j]; ++i) {
+            if (to_best)
+                b[j][i] = a[j][i];
+            else
+                a[j][i] = b[j][i];
+        }
+}
+
+static double merit(const qp_res *r)
+{
+    return dmax(dmax(r->stat_s, r->eq_s), dmax(r->ineq_s, r->comp_s));
+}
+
 static int finish(dopus_qp_workspace *ws, const qp_res *r, int status, int iter, dopus_qp_sol *sol,
                   dopus_qp_info *info)
 {
@@ -848,7 +903,8 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
     qp_res r;
     int iter, i, status = DOPUS_QP_MAX_ITER;
     int n_corr = 0, n_aug = 0;
-    double hscale, data_scale, delta_last = 0.0, delta_used = 0.0;
+    double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
+    int best_iter = 0;
 
     if (settings)
         st = *settings;
@@ -863,6 +919,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
     if (info) {
         info->status = DOPUS_QP_INVALID_INPUT;
         info->iterations = info->inertia_corrections = info->terminal_augmentations = 0;
+        info->pivot_floors = 0;
         info->delta = 0.0;
         info->res_stat = info->res_eq = info->res_ineq = info->res_comp = INFINITY;
         info->res_stat_scaled = info->res_eq_scaled = info->res_ineq_scaled = info->res_comp_scaled = INFINITY;
@@ -890,6 +947,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
     }
     ws->delta = 0.0;
     ws->rho_aug = 0.0;
+    ws->pivot_floors = 0;
     if (!setup_bounds(ws, in)) {
         zero_solution(sol);
         if (info)
@@ -917,8 +975,8 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         data_scale = dmax(data_scale, dopus_la_norm_inf(NE, in->req));
 
     for (iter = 0;; ++iter) {
-        double alpha, mu_aff, sigma;
-        int fact;
+        double alpha, mu_aff, sigma, target;
+        int fact, floors_before, nref;
 
         compute_residuals(ws, in, &r);
         if (!(isfinite(r.stat) && isfinite(r.eq) && isfinite(r.mu))) {
@@ -927,6 +985,14 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         }
         if (r.stat_s <= st.tol && r.eq_s <= st.tol && r.ineq_s <= st.tol && r.comp_s <= st.tol) {
             status = DOPUS_QP_SOLVED;
+            break;
+        }
+        if (iter == 0 || merit(&r) < best_merit) {
+            best_merit = merit(&r);
+            best_iter = iter;
+            copy_iterate(ws, 1);
+        } else if (iter - best_iter >= STALL_ITERS) {
+            status = DOPUS_QP_MAX_ITER;
             break;
         }
         if (primal_infeasible(ws, in, &r, data_scale)) {
@@ -954,12 +1020,13 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         /* factorisation with minimal inertia correction: first the exact terminal
          * augmentation rho Req'Req, then delta I growing geometrically */
         ws->delta = 0.0;
+        floors_before = ws->pivot_floors;
         fact = riccati_factor(ws, in);
         if (fact == 1 && NE > 0) {
             int tries;
             double rho0 = hscale / dmax(dopus_la_max_abs_mat(NE, NX, in->Req, NE1), 1e-150);
             rho0 /= dmax(dopus_la_max_abs_mat(NE, NX, in->Req, NE1), 1e-150);
-            for (tries = 0; tries < RHO_TRIES && fact == 1; ++tries) {
+            for (tries = 0; tries < RHO_TRIES && fact == 1 && ws->rho_aug < rho0 * RHO_MAX_REL; ++tries) {
                 ws->rho_aug = ws->rho_aug > 0.0 ? 100.0 * ws->rho_aug : rho0;
                 ++n_aug;
                 fact = riccati_factor(ws, in);
@@ -981,12 +1048,14 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             status = DOPUS_QP_NUMERICAL;
             break;
         }
+        /* floored pivots make the factorisation inexact: refine more */
+        nref = st.refine_steps + (ws->pivot_floors > floors_before ? 2 : 0);
 
         if (r.nsides == 0) {
             /* equality-constrained QP: one Newton step is exact */
             for (i = 0; i < NI; ++i)
                 ws->rc_lo[i] = ws->rc_up[i] = 0.0;
-            newton_direction(ws, in, st.refine_steps);
+            newton_direction(ws, in, nref);
             dopus_la_axpy(NP, 1.0, ws->d_prim, ws->prim);
             dopus_la_axpy((N + 1) * NX, 1.0, ws->d_lam, ws->lam);
             dopus_la_axpy(NE, 1.0, ws->d_nu, ws->nu);
@@ -998,7 +1067,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             ws->rc_lo[i] = ws->has_lo[i] ? ws->t_lo[i] * ws->z_lo[i] : 0.0;
             ws->rc_up[i] = ws->has_up[i] ? ws->t_up[i] * ws->z_up[i] : 0.0;
         }
-        newton_direction(ws, in, st.refine_steps);
+        newton_direction(ws, in, nref);
         alpha = max_step(ws);
         mu_aff = 0.0;
         for (i = 0; i < NI; ++i) {
@@ -1011,14 +1080,18 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         sigma = r.mu > 0.0 ? mu_aff / r.mu : 0.0;
         sigma = dmin(1.0, dmax(0.0, sigma * sigma * sigma));
 
-        /* corrector: rc = t z + dt_aff dz_aff - sigma mu */
+        /* corrector: rc = t z + dt_aff dz_aff - target. The target is kept above a
+         * fraction of the complementarity tolerance: driving mu far below what the
+         * termination test needs only makes the barrier weights z/t of active rows huge,
+         * and their cancellation in the Riccati recursion spoils the Newton directions. */
+        target = dmax(sigma * r.mu, MU_FLOOR_REL * st.tol * dmax(1.0, r.nz));
         for (i = 0; i < NI; ++i) {
             if (ws->has_lo[i])
-                ws->rc_lo[i] += ws->dt_lo[i] * ws->dz_lo[i] - sigma * r.mu;
+                ws->rc_lo[i] += ws->dt_lo[i] * ws->dz_lo[i] - target;
             if (ws->has_up[i])
-                ws->rc_up[i] += ws->dt_up[i] * ws->dz_up[i] - sigma * r.mu;
+                ws->rc_up[i] += ws->dt_up[i] * ws->dz_up[i] - target;
         }
-        newton_direction(ws, in, st.refine_steps);
+        newton_direction(ws, in, nref);
         alpha = dmin(1.0, STEP_TAU * max_step(ws));
 
         dopus_la_axpy(NP, alpha, ws->d_prim, ws->prim);
@@ -1035,9 +1108,16 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             }
         }
     }
+    if ((status == DOPUS_QP_MAX_ITER || status == DOPUS_QP_NUMERICAL) && isfinite(best_merit) &&
+        !(merit(&r) <= best_merit)) {
+        /* return the best point seen, with its residuals */
+        copy_iterate(ws, 0);
+        compute_residuals(ws, in, &r);
+    }
     if (info) {
         info->inertia_corrections = n_corr;
         info->terminal_augmentations = n_aug;
+        info->pivot_floors = ws->pivot_floors;
         info->delta = delta_used;
     }
     return finish(ws, &r, status, iter, sol, info);

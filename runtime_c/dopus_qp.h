@@ -68,7 +68,8 @@
 /* Status codes (dopus_qp_solve return value and dopus_qp_info.status). */
 enum dopus_qp_status {
     DOPUS_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
-    DOPUS_QP_MAX_ITER = 1,          /* iteration limit reached, best point returned */
+    DOPUS_QP_MAX_ITER = 1,          /* iteration limit reached or no progress in the KKT
+                                       residuals for 10 iterations; best point returned */
     DOPUS_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */
     DOPUS_QP_DUAL_INFEASIBLE = 3,   /* unbounded below: feasible descent ray found */
     DOPUS_QP_NUMERICAL = 4,         /* factorisation / step failure */
@@ -123,6 +124,8 @@ typedef struct {
     int iterations;          /* interior-point iterations taken */
     int inertia_corrections; /* factorisations retried with delta*I added to the Hessians */
     int terminal_augmentations; /* factorisations retried with rho Req'Req (exact, see top) */
+    int pivot_floors;        /* Riccati pivots within their round-off estimate of zero that were
+                                floored (cured by iterative refinement), summed over iterations */
     double delta;            /* largest delta used (0 when no correction was needed) */
     /* final residuals, infinity norms, unscaled */
     double res_stat;         /* stationarity (both equations of the header comment) */
@@ -195,9 +198,19 @@ typedef struct {
     double aty[DOPUS_QP_NPRIM];                        /* constraint part of r_stat (A'y) */
     double hwg[DOPUS_QP_NPRIM];                        /* objective part of r_stat (Hw + g) */
     double yrow[DOPUS_QP_NINEQ];                       /* per-row scratch */
+    /* best iterate so far (returned when the solver stops without success) */
+    double best_prim[DOPUS_QP_NPRIM];
+    double best_lam[(DOPUS_N + 1) * DOPUS_NX];
+    double best_nu[DOPUS_QP_NE1];
+    double best_t_lo[DOPUS_QP_NINEQ];
+    double best_t_up[DOPUS_QP_NINEQ];
+    double best_z_lo[DOPUS_QP_NINEQ];
+    double best_z_up[DOPUS_QP_NINEQ];
     double work[4 * DOPUS_QP_NW * (DOPUS_QP_NW + DOPUS_QP_NE1 + 1)];
     double delta;          /* current inertia-correction shift */
     double rho_aug;        /* current terminal augmented-Lagrangian weight */
+    double noise[DOPUS_QP_NU1];                        /* round-off estimate of M_uu pivots */
+    int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     double scale_stat;     /* residual scaling factors */
     double scale_eq;
 } dopus_qp_workspace;

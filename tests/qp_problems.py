@@ -65,6 +65,7 @@ def make_qp(rng, N, nx, nu, ng=0, nr=0, ne=0, *, p_active=0.25, p_weak=0.0, p_fr
     H = np.empty((N, nw, nw))
     for k in range(N):
         A = np.eye(nx) + 0.3 * rng.standard_normal((nx, nx)) / np.sqrt(nx)
+        A /= max(1.0, np.abs(np.linalg.eigvals(A)).max())  # long horizons stay well conditioned
         B = rng.standard_normal((nx, nu))
         # dynamics in the scaled variables: x~_{k+1} = A x~ + B u~
         Phi[k, :, :nx] = (A * xs[None, :]) / xs[:, None]
@@ -85,7 +86,10 @@ def make_qp(rng, N, nx, nu, ng=0, nr=0, ne=0, *, p_active=0.25, p_weak=0.0, p_fr
                 ev, V = np.linalg.eigh(Hs[nx:, nx:])
                 Hs[nx:, nx:] = (V * np.maximum(ev, 0.0)) @ V.T
         elif hessian == "indef":
-            Hs[:nx, :nx] *= 0.05
+            # small state curvature (congruence keeps it positive definite); make_indefinite
+            # then shifts the state blocks down
+            sc = np.concatenate([np.full(nx, np.sqrt(0.05)), np.ones(nu)])
+            Hs = Hs * np.outer(sc, sc)
         H[k] = Hs / np.outer(ws_, ws_)
     MN = rng.standard_normal((nx, nx))
     HNs = MN @ MN.T / nx + 0.1 * np.eye(nx)
@@ -95,43 +99,68 @@ def make_qp(rng, N, nx, nu, ng=0, nr=0, ne=0, *, p_active=0.25, p_weak=0.0, p_fr
         HNs *= 0.05
     HN = HNs / np.outer(xs, xs)
 
+    # Active (strict or weak) rows are drawn under a degree-of-freedom budget so that they
+    # satisfy LICQ together with the dynamics generically: rows of stage k touching u_k
+    # (control bounds, general rows) use the nu controls of that stage, pure state rows use
+    # freedom left over from earlier stages (at most nx can be carried in the state).
+    def statuses(nrows, n_state_rows, budget, p_free_rows):
+        st = [_status_draw(rng, p_active, p_weak, p_free_rows) for _ in range(nrows)]
+        order = list(range(nrows))
+        rng.shuffle(order)
+        used_x = used_u = 0
+        for i in order:
+            if st[i] not in ("active", "weak"):
+                continue
+            if i < n_state_rows:
+                if used_x < budget:
+                    used_x += 1
+                    continue
+            elif used_u < nu:
+                used_u += 1
+                continue
+            st[i] = "inactive"
+        return st, used_x, used_u
+
     lbw = np.full((N, nw), -INF)
     ubw = np.full((N, nw), INF)
     mu_b = np.zeros((N, nw))
-    for k in range(N):
-        w = np.concatenate([x[k], u[k]])
-        for i in range(nw):
-            if k == 0 and i < nx:
-                continue
-            st = _status_draw(rng, p_active, p_weak, p_free)
-            lbw[k, i], ubw[k, i], mu_b[k, i] = _row(rng, w[i], st, dual_scale / ws_[i], ws_[i])
     C = np.zeros((N, ng, nw))
     lg = np.full((N, ng), -INF)
     ug = np.full((N, ng), INF)
     mu_g = np.zeros((N, ng))
+    budget = 0
     for k in range(N):
         w = np.concatenate([x[k], u[k]])
+        st, used_x, used_u = statuses(nw + ng, nx if k > 0 else 0, budget, p_free)
+        if k == 0:
+            st[:nx] = ["free"] * nx
+        budget = min(nx, budget - used_x + nu - used_u)
+        for i in range(nw):
+            if k == 0 and i < nx:
+                continue
+            lbw[k, i], ubw[k, i], mu_b[k, i] = _row(rng, w[i], st[i], dual_scale / ws_[i], ws_[i])
         for j in range(ng):
             rs = 10.0 ** rng.uniform(-row_scale, row_scale)
             C[k, j] = rng.standard_normal(nw) / ws_ * rs
             v = C[k, j] @ w
-            st = _status_draw(rng, p_active, p_weak, 0.0)
-            lg[k, j], ug[k, j], mu_g[k, j] = _row(rng, v, st, dual_scale / rs, rs)
+            stj = st[nw + j] if st[nw + j] != "free" else "inactive"
+            lg[k, j], ug[k, j], mu_g[k, j] = _row(rng, v, stj, dual_scale / rs, rs)
     lbxN = np.full(nx, -INF)
     ubxN = np.full(nx, INF)
     mu_bN = np.zeros(nx)
-    for i in range(nx):
-        st = _status_draw(rng, p_active * 0.5, p_weak * 0.5, p_free)
-        lbxN[i], ubxN[i], mu_bN[i] = _row(rng, x[N, i], st, dual_scale / xs[i], xs[i])
     R = np.zeros((nr, nx))
     lr = np.full(nr, -INF)
     ur = np.full(nr, INF)
     mu_r = np.zeros(nr)
+    # terminal rows (box, R) are pure state rows; the ne equality rows use budget first
+    st, _, _ = statuses(nx + nr, nx + nr, max(0, budget - ne), p_free)
+    for i in range(nx):
+        lbxN[i], ubxN[i], mu_bN[i] = _row(rng, x[N, i], st[i], dual_scale / xs[i], xs[i])
     for j in range(nr):
         rs = 10.0 ** rng.uniform(-row_scale, row_scale)
         R[j] = rng.standard_normal(nx) / xs * rs
-        st = _status_draw(rng, p_active, p_weak, 0.0)
-        lr[j], ur[j], mu_r[j] = _row(rng, R[j] @ x[N], st, dual_scale / rs, rs)
+        stj = st[nx + j] if st[nx + j] != "free" else "inactive"
+        lr[j], ur[j], mu_r[j] = _row(rng, R[j] @ x[N], stj, dual_scale / rs, rs)
     Req = np.zeros((ne, nx))
     for j in range(ne):
         Req[j] = rng.standard_normal(nx) / xs * 10.0 ** rng.uniform(-eq_row_scale, eq_row_scale)
@@ -320,3 +349,126 @@ def compare(a, b, keys=("x", "u", "lam", "mu_b", "mu_bN", "mu_g", "mu_r", "nu"))
             continue
         out[k] = float(np.abs(A - B).max() / max(1.0, np.abs(B).max()))
     return out
+
+
+def _recompute_gradients(qp, sol):
+    """Set g, gN so that the stationarity conditions hold exactly at sol."""
+    N, nx, nu = (int(qp[k]) for k in ("N", "nx", "nu"))
+    for k in range(N):
+        w = np.concatenate([sol["x"][k], sol["u"][k]])
+        r = (qp["H"][k] @ w + np.concatenate([sol["lam"][k], np.zeros(nu)]) - qp["Phi"][k].T @ sol["lam"][k + 1]
+             + qp["C"][k].T @ sol["mu_g"][k] + sol["mu_b"][k])
+        qp["g"][k] = -r
+    qp["gN"] = -(qp["HN"] @ sol["x"][N] + sol["lam"][N] + qp["R"].T @ sol["mu_r"] + qp["Req"].T @ sol["nu"]
+                 + sol["mu_bN"])
+
+
+def make_indefinite(qp, sol, frac=0.6):
+    """Subtract gamma*I from the state blocks of H_1..H_{N-1} and HN, with gamma = frac times
+    the largest shift that keeps the Hessian positive definite on the null space of the
+    equalities (x0, dynamics, Req). The QP stays strictly convex on its feasible set (so sol
+    is its unique solution) while stage blocks become indefinite. Returns the smallest
+    block eigenvalue and the smallest reduced eigenvalue after the shift."""
+    N, nx, nu = (int(qp[k]) for k in ("N", "nx", "nu"))
+    nw = nx + nu
+    P, q, Aeq, beq, D, lo, up = stacked(qp)
+    Z = sla.null_space(Aeq)
+    E = np.zeros(P.shape[0])
+    for k in range(1, N):
+        E[k * nw:k * nw + nx] = 1.0
+    E[N * nw:] = 1.0
+    A = Z.T @ P @ Z
+    B = (Z.T * E) @ Z
+    mu = sla.eigh(B, A, eigvals_only=True).max()
+    gamma = frac / mu
+    for k in range(1, N):
+        qp["H"][k][:nx, :nx] -= gamma * np.eye(nx)
+    qp["HN"] = qp["HN"] - gamma * np.eye(nx)
+    _recompute_gradients(qp, sol)
+    P2 = stacked(qp)[0]
+    block_min = min(np.linalg.eigvalsh(qp["H"][k]).min() for k in range(N))
+    block_min = min(block_min, np.linalg.eigvalsh(qp["HN"]).min())
+    red_min = np.linalg.eigvalsh(Z.T @ P2 @ Z).min()
+    return block_min, red_min
+
+
+def kkt_sigma_min(qp, sol):
+    """Smallest singular value of the KKT matrix of the active set [[P, J'], [J, 0]]
+    (J: equalities and strictly active rows), rows of J normalised: small values mean the
+    solution and multipliers are ill-conditioned functions of the data."""
+    P, q, Aeq, beq, D, lo, up = stacked(qp)
+    z = stack_primal(qp, sol)
+    yi = signed_rows(qp, sol)
+    v = D @ z
+    scale = np.maximum(1.0, np.abs(v))
+    active = ((np.abs(v - lo) <= 1e-12 * scale) | (np.abs(up - v) <= 1e-12 * scale))
+    J = np.vstack([Aeq, D[active]])
+    J = J / np.linalg.norm(J, axis=1, keepdims=True)
+    n, m = P.shape[0], J.shape[0]
+    K = np.zeros((n + m, n + m))
+    K[:n, :n] = P / max(1.0, np.abs(P).max())
+    K[:n, n:] = J.T
+    K[n:, :n] = J
+    return np.linalg.svd(K, compute_uv=False).min()
+
+
+def make_infeasible(rng, N, nx, nu, ng, nr, ne, kind):
+    """A random QP made primal infeasible in one of several ways (requires the sizes the
+    kind needs: 'row_vs_box' ng >= 1, 'terminal_eq_vs_box' ne >= 1, 'unreachable' nu >= 1,
+    'terminal_rows' nr >= 2)."""
+    qp, _ = make_qp(rng, N, nx, nu, ng, nr, ne, p_active=0.2)
+    k = int(rng.integers(1, N)) if N > 1 else 0
+    if kind == "row_vs_box":
+        # a general row equal to one control, with its range above the control's box
+        j = nx + int(rng.integers(nu)) if nu else int(rng.integers(nx))
+        qp["C"][k, 0] = 0.0
+        qp["C"][k, 0, j] = rng.uniform(0.5, 2.0)
+        qp["lbw"][k, j], qp["ubw"][k, j] = -1.0, 1.0
+        qp["lg"][k, 0] = qp["C"][k, 0, j] * (1.0 + rng.uniform(0.01, 1.0))
+        qp["ug"][k, 0] = np.inf
+    elif kind == "terminal_eq_vs_box":
+        # Req x_N = req forces x_N[i] outside its box
+        i = int(rng.integers(nx))
+        qp["Req"][0] = 0.0
+        qp["Req"][0, i] = rng.uniform(0.5, 2.0) * 10.0 ** rng.uniform(-3, 3)
+        qp["lbxN"][i], qp["ubxN"][i] = -1.0, 1.0
+        qp["req"][0] = qp["Req"][0, i] * (1.0 + rng.uniform(0.01, 1.0))
+    elif kind == "unreachable":
+        # controls boxed in [-1, 1], x_1 must reach a target outside the reachable set
+        qp["lbw"][0, nx:], qp["ubw"][0, nx:] = -1.0, 1.0
+        A, B = qp["Phi"][0][:, :nx], qp["Phi"][0][:, nx:]
+        reach = np.abs(B).sum(axis=1)
+        i = int(np.argmax(reach))
+        centre = A[i] @ qp["x0"] + qp["b"][0, i]
+        qp["lbw"][1, i] = centre + reach[i] * (1.0 + rng.uniform(0.01, 1.0)) if N > 1 else -np.inf
+        qp["ubw"][1, i] = np.inf
+        if N == 1:
+            qp["lbxN"][i] = centre + reach[i] * (1.0 + rng.uniform(0.01, 1.0))
+            qp["ubxN"][i] = np.inf
+    elif kind == "terminal_rows":
+        # two terminal rows r and -r with contradicting ranges
+        qp["R"][1] = -qp["R"][0] * rng.uniform(0.5, 2.0)
+        s = qp["R"][1, 0] / qp["R"][0, 0] if qp["R"][0, 0] else 1.0
+        qp["lr"][0], qp["ur"][0] = 1.0, 2.0
+        # R1 x = s R0 x in [s, 2s] (s < 0): demand R1 x >= -s/2 > 0 instead
+        qp["lr"][1], qp["ur"][1] = -0.5 * s * 2.0, np.inf
+    else:
+        raise ValueError(kind)
+    return qp
+
+
+def make_unbounded(rng, N, nx, nu, ng, nr, ne):
+    """Convex QP unbounded below: one control has no curvature, no bounds, and a cost slope."""
+    qp, _ = make_qp(rng, N, nx, nu, ng, nr, ne, p_active=0.0, p_free=1.0)
+    k = int(rng.integers(N))
+    j = nx + int(rng.integers(nu))
+    for kk in range(N):
+        qp["H"][kk][j, :] = 0.0
+        qp["H"][kk][:, j] = 0.0
+    qp["H"][k][j, :] = 0.0
+    qp["g"][k][j] = -rng.uniform(0.5, 2.0)
+    # the control must not move anything constrained: cut it out of the dynamics
+    qp["Phi"][k][:, j] = 0.0
+    qp["C"][k][:, j] = 0.0
+    qp["lbw"][k, j], qp["ubw"][k, j] = -np.inf, np.inf
+    return qp
