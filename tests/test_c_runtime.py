@@ -310,3 +310,48 @@ def test_sizeof_and_dims(robot_c, robot_disc):
     print(f"sizeof(robot_arm_solver) = {robot_c.sizeof} bytes")
     assert robot_c.sizeof > 8 * (robot_disc.N * (robot_disc.nw ** 2 + robot_disc.nx * robot_disc.nw))
     assert (robot_c.N, robot_c.nx, robot_c.n_u, robot_c.ne) == (40, 5, 3, 2)
+
+
+# ------------------------------------------------------------------ nominal guess, clock macro
+def test_init_nominal_is_the_offline_solution(robot_disc, robot_solution, robot_c, tmp_path):
+    """A folder generated with the offline guess starts at the IPOPT solution (carried as
+    static data); a folder without it says so."""
+    from dopus_codegen.codegen import generate
+
+    with pytest.raises(DopusError, match="without a nominal guess") as ei:
+        robot_c.init_nominal(robot_disc.x0)
+    assert ei.value.status == 8
+    out = generate(robot_disc, tmp_path / "robot_arm", offline_guess=True)
+    c = CSolver.from_dir(out, robot_disc, M=1, mode="fixed")
+    assert c.has_nominal
+    c.init_nominal(robot_disc.x0)
+    g = robot_solution[0].filled(robot_disc)
+    for f in ("x", "u", "lam", "mu_b", "mu_bN", "nu"):
+        a, b = getattr(c, f), getattr(g, f)
+        if f == "mu_b":
+            b = b.copy()
+            b[0, :robot_disc.nx] = 0.0
+        assert np.max(np.abs(a - b)) <= 1e-9 * max(1.0, np.max(np.abs(b))), f
+    assert c.kkt(robot_disc.x0)["kkt"] < 1e-8
+
+
+def test_clock_macro(tmp_path):
+    """dopus_timer.c builds strict with and without the POSIX clock; the default clock is
+    CLOCK_MONOTONIC (Python's time.monotonic on Linux) or, without POSIX, reads 0."""
+    import time
+
+    import cffi
+
+    for posix in (1, 0):
+        so = tmp_path / f"libtimer{posix}.so"
+        subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-fPIC", "-shared",
+                        f"-DDOPUS_CLOCK_POSIX={posix}", str(runtime_c_dir() / "dopus_timer.c"), "-o", str(so)],
+                       check=True)
+        ffi = cffi.FFI()
+        ffi.cdef("double dopus_timer_default_clock(void *ctx);")
+        lib = ffi.dlopen(str(so))
+        t_c = lib.dopus_timer_default_clock(ffi.NULL)
+        if posix:
+            assert abs(t_c - time.monotonic()) < 0.5
+        else:
+            assert t_c == 0.0
