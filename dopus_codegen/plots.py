@@ -52,6 +52,14 @@ def _mark_events(ax, runs, text=True):
                             fontsize=8, color="0.3")
 
 
+def _legend_above(ax):
+    """Legend in a row above the axes, where it hides no data."""
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        ax.legend(handles, labels, loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=min(len(labels), 3),
+                  fontsize=8, frameon=False, borderaxespad=0.0)
+
+
 def _label_with_unit(name: str, default_unit: str = "") -> str:
     """Axis label: a name that already carries '[unit]' is kept as it is."""
     if re.search(r"\[.*\]", name) or not default_unit:
@@ -98,32 +106,48 @@ def plot_signals(runs, path, title=None, log=None):
         use_log = log if log is not None else (len(pos) > 0 and np.max(pos) / max(np.min(pos), 1e-300) > 1e3)
         if use_log:
             ax.set_yscale("log")
+            # The start (often exactly on the reference) would stretch the axis over many
+            # decades; the axis starts just below the bulk of the values.
+            ax.set_ylim(bottom=np.percentile(pos, 2) / 3)
         ax.set_ylabel(name)
         ax.grid(True, which="both", alpha=0.3)
         _mark_events(ax, runs)
-        ax.legend(loc="upper right", fontsize=8)
+        _legend_above(ax)
     axes[-1, 0].set_xlabel("time [s]")
     _suptitle(fig, title, "closed-loop signals (CVODES plant)")
     fig.tight_layout()
     return _save(fig, path)
 
 
-def plot_kkt(runs, path, title=None):
-    """KKT measure of every iteration, right after its feedback step (paper figure 3)."""
-    fig, ax = plt.subplots(figsize=(8, 4))
+def plot_kkt(runs, path, title=None, cap=1e4):
+    """KKT measure of every iteration, right after its feedback step (paper figure 3).
+
+    Values above ``cap`` (a diverged iteration) are drawn on the upper edge as triangles so
+    that they do not flatten the rest of the figure.
+    """
+    fig, ax = plt.subplots(figsize=(8, 4.4))
+    clipped = False
     for i, run in enumerate(runs):
         k = _arr(run["kkt"])
         t = np.asarray(run["t"], dtype=float)
-        ax.semilogy(t, k, label=run["label"], **_style(i))
+        over = ~(k <= cap)  # also NaN: no KKT measure (non-finite iterate)
+        ax.semilogy(t, np.where(over, np.nan, k), label=run["label"], **_style(i))
+        if np.any(over):
+            clipped = True
+            ax.semilogy(t[over], np.full(np.count_nonzero(over), cap), "^", color=_style(i)["color"], ms=5,
+                        label=f"{run['label']}: > {cap:g} or not finite")
         bad = np.asarray(run["status"]) != 0
         if np.any(bad):
-            ax.semilogy(t[bad], np.where(np.isfinite(k[bad]), k[bad], np.nanmax(k)), "x",
-                        color=_style(i)["color"], ms=7, label=f"{run['label']}: QP failure")
+            ax.semilogy(t[bad], np.where(k[bad] <= cap, k[bad], cap), "x", color=_style(i)["color"], ms=7,
+                        label=f"{run['label']}: QP failure ({np.count_nonzero(bad)})")
+    if clipped:
+        lo = ax.get_ylim()[0]
+        ax.set_ylim(lo, cap * 3)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("KKT measure (inf-norm)")
     ax.grid(True, which="both", alpha=0.3)
     _mark_events(ax, runs)
-    ax.legend(loc="upper right", fontsize=8)
+    _legend_above(ax)
     _suptitle(fig, title, "KKT measure after each feedback")
     fig.tight_layout()
     return _save(fig, path)
@@ -159,7 +183,7 @@ def plot_controls(runs, path, title=None, names=None):
         ax.grid(True, alpha=0.3)
         _mark_events(ax, runs, text=(j == 0))
         if j == 0:
-            ax.legend(loc="upper right", fontsize=8)
+            _legend_above(ax)
     axes[-1, 0].set_xlabel("time [s]")
     _suptitle(fig, title, "applied controls (dashed black: bounds)")
     fig.tight_layout()
