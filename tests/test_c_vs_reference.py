@@ -100,9 +100,13 @@ def step(c, r, xhat0, where: str, tally: Tally):
     try:
         uc = c.feedback(xhat0)
     except DopusError as exc:
-        if exc.qp_status is not None:
-            pytest.xfail(f"{where}: the C QP solver did not solve a QP the reference solves: {exc}")
-        raise
+        if exc.qp_status is None:
+            raise
+        try:
+            r.feedback(xhat0)
+        except Exception as ref_exc:  # noqa: BLE001 - any reference failure
+            pytest.xfail(f"{where}: neither QP solver solves this QP: C: {exc}; reference: {ref_exc}")
+        pytest.xfail(f"{where}: the C QP solver did not solve a QP the reference solves: {exc}")
     sol_c = {"x": c.x - x_before, "u": c.u - u_before, "lam": c.lam, "mu_b": c.mu_b, "mu_bN": c.mu_bN,
              "mu_g": c.mu_g, "mu_r": c.mu_r, "nu": c.nu}
     ur = r.feedback(xhat0)
@@ -189,12 +193,12 @@ def test_robot_cold_projected_exact(robot_disc):
     print(f"robot_arm cold exact+project M=5: {tally}, reference KKT {kkt:.2e}")
 
 
-def run_receding(disc, guess, M, iters=50):
+def run_receding(disc, guess, M, iters=50, hessian="exact"):
     """Closed loop on the discrete model phi from the IPOPT solution; the measurement
     sequence comes from the reference (so both backends see identical inputs). The
     disturbance of the OCP file hits at the first and at the middle iteration, so the steps
     are far from round-off and rho_k ranks the stages."""
-    c, r = pair(disc, M=M, mode="receding", hessian="exact")
+    c, r = pair(disc, M=M, mode="receding", hessian=hessian)
     xhat = np.array(disc.x0, dtype=float)
     for b in (c, r):
         b.init(xhat, guess)
@@ -222,8 +226,10 @@ def test_robot_receding(robot_disc, robot_solution, M):
     print(f"robot_arm receding M={M}: {tally}")
 
 
+# The unicycle's exact-Hessian QPs lose convexity in this closed loop within ten
+# iterations (the reference's own QP solver fails there too); Gauss-Newton keeps them convex.
 @pytest.mark.parametrize("M", [5, "full"])
 def test_second_receding(second_disc, second_solution, M):
     M = second_disc.N - 1 if M == "full" else M
-    tally = run_receding(second_disc, second_solution[0], M)
-    print(f"{second_disc.name} receding M={M}: {tally}")
+    tally = run_receding(second_disc, second_solution[0], M, hessian="gauss-newton")
+    print(f"{second_disc.name} receding M={M} Gauss-Newton: {tally}")
