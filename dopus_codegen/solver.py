@@ -182,7 +182,7 @@ class CSolver:
         self.status = STATUS_OK
         self._check(self._c("set_qp_tol")(self._s, self._positive(qp_tol, "qp_tol")), "qp_tol")
         if qp_max_iter is not None:
-            self._check(self._c("set_qp_max_iter")(self._s, int(qp_max_iter)), f"qp_max_iter={qp_max_iter!r}")
+            self.set_qp_max_iter(qp_max_iter)
         self.set_M(M)
         self.set_mode(mode)
         self.set_hessian(hessian)
@@ -291,6 +291,11 @@ class CSolver:
 
     def set_qp_tol(self, tol: float) -> None:
         self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")
+
+    def set_qp_max_iter(self, max_iter: int) -> None:
+        if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+            self._bad(f"qp_max_iter must be a positive integer, got {max_iter!r}")
+        self._check(self._c("set_qp_max_iter")(self._s, int(max_iter)), "qp_max_iter")
 
     def set_parameters(self, p) -> None:
         """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""

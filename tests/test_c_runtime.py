@@ -355,3 +355,32 @@ def test_clock_macro(tmp_path):
             assert abs(t_c - time.monotonic()) < 0.5
         else:
             assert t_c == 0.0
+
+
+def test_failed_qp_takes_no_step(robot_disc, robot_solution):
+    """A QP stopped by its iteration limit: DopusError with the QP status, no step, and the
+    run goes on exactly like the reference's run that skipped that feedback."""
+    xhat = np.array(robot_disc.disturbance(np.array(robot_disc.x0, dtype=float)), dtype=float)
+    c = CSolver(robot_disc, M=2, mode="receding", qp_tol=1e-14)
+    r = ReferenceDopus(robot_disc, M=2, mode="receding", qp_tol=1e-14)
+    for b in (c, r):
+        b.init(robot_disc.x0, robot_solution[0])
+    state = {f: getattr(c, f) for f in ("x", "u", "lam", "mu_b", "nu")}
+    c.set_qp_max_iter(1)
+    with pytest.raises(DopusError, match=r"QP status 1 \(max iterations\)") as ei:
+        c.feedback(xhat)
+    assert ei.value.status == STATUS_QP and ei.value.qp_status == 1
+    for f, v in state.items():
+        assert np.array_equal(getattr(c, f), v), f
+    c.set_qp_max_iter(100)
+    for b in (c, r):      # the sampling instant passes without a step
+        b.prepare()
+    for it in range(3):
+        uc, ur = c.feedback(xhat), r.feedback(xhat)
+        assert np.max(np.abs(uc - ur)) <= 1e-9 * max(1.0, np.max(np.abs(ur))), it
+        for b in (c, r):
+            b.prepare()
+        for f in ("x", "u", "lam", "mu_b", "mu_bN", "nu"):
+            a, b_ = getattr(c, f), getattr(r, f)
+            assert np.max(np.abs(a - b_)) <= 1e-9 * max(1.0, np.max(np.abs(b_))), (it, f)
+        assert c.recomputed == r.recomputed
