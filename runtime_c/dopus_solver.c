@@ -981,9 +981,9 @@ void dopus_get_timings(const dopus_solver *s, double *t)
     dopus_copy(t, s->timer.t, DOPUS_N_PHASES);
 }
 
-void dopus_set_clock(dopus_solver *s, double (*clock)(void *ctx), void *ctx)
+void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx)
 {
     dopus_ensure_setup(s);
-    s->timer.clock = clock ? clock : dopus_timer_default_clock;
-    s->timer.ctx = clock ? ctx : 0;
+    s->timer.clock = clock_fn ? clock_fn : dopus_timer_default_clock;
+    s->timer.ctx = clock_fn ? ctx : 0;
 }

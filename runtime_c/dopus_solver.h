@@ -125,7 +125,7 @@ int dopus_get_ring_head(const dopus_solver *s);
  * the phases it runs too. */
 void dopus_get_timings(const dopus_solver *s, double *t);
 /* Replace the clock (seconds, any origin); NULL restores the default clock. */
-void dopus_set_clock(dopus_solver *s, double (*clock)(void *ctx), void *ctx);
+void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx);
 /* DOPUS_CDEF_END */
 
 /* Status codes returned by the functions above. */
