@@ -458,6 +458,7 @@ def main(argv=None) -> int:
                          "ours_alt); '' to skip (default %(default)s)")
     ap.add_argument("--no-casadi-hpipm", action="store_true", help="skip the casadi wheel's HPIPM column")
     ap.add_argument("--no-robot", action="store_true", help="random QPs only")
+    ap.add_argument("--no-random", action="store_true", help="robot-arm QPs only")
     ap.add_argument("--no-ours", action="store_true", help="HPIPM only (our solver not built)")
     ap.add_argument("--no-reference", action="store_true", help="skip the reference QP solves")
     ap.add_argument("--wide", action="store_true", help="print every column (the JSON always has all)")
@@ -549,14 +550,16 @@ def main(argv=None) -> int:
 
     # random QPs
     rng = np.random.default_rng(args.seed)
-    tagged = [(f"random_N{N}_{i}", random_qp(N, rng)) for N in RANDOM_NS for i in range(args.random_per_n)]
-    log(f"\nrandom QPs: {len(tagged)} ({args.random_per_n} per N)")
-    entries, cmds = bench_set("random", tagged, robot=False)
-    names = list(entries[0]["solvers"])
-    groups = {f"random N={N}": [e for e in entries if e["N"] == N] for N in RANDOM_NS}
-    report["random"] = {"qps": entries, "summary": table("Random QPs (nx=5, nu=3, 3 control bounds, 2 terminal "
-                                                           "equality rows), medians", groups, names, [anchor, "hpipm_best"], ours, log, shown),
-                        "commands": cmds}
+    ns_run = () if args.no_random else RANDOM_NS
+    tagged = [(f"random_N{N}_{i}", random_qp(N, rng)) for N in ns_run for i in range(args.random_per_n)]
+    if tagged:
+        log(f"\nrandom QPs: {len(tagged)} ({args.random_per_n} per N)")
+        entries, cmds = bench_set("random", tagged, robot=False)
+        names = list(entries[0]["solvers"])
+        groups = {f"random N={N}": [e for e in entries if e["N"] == N] for N in RANDOM_NS}
+        report["random"] = {"qps": entries, "summary": table(
+            "Random QPs (nx=5, nu=3, 3 control bounds, 2 terminal equality rows), medians", groups, names,
+            [anchor, "hpipm_best"], ours, log, shown), "commands": cmds}
 
     if not args.no_robot:
         log("\nrobot-arm QPs (Python reference, full RTI, fixed xhat_0)")
