@@ -436,6 +436,27 @@ def table(title: str, groups: dict, names: list, anchors: list, ours: str, log=p
     return summary
 
 
+def markdown_table(summary: dict, cols: list, ratios: list) -> str:
+    """The summary of one QP set as a markdown table (what bench/README.md shows). Cell:
+    time per QP / iterations / time per iteration in microseconds (converged/count)."""
+    out = ["| QPs | " + " | ".join(cols) + " | " + " | ".join(f"ours/{a} QP (iter)" for a in ratios) + " |",
+           "|---|" + "---|" * (len(cols) + len(ratios))]
+    for g, gs in summary.items():
+        cells = []
+        for c in cols:
+            v = gs.get(c)
+            cells.append("-" if v is None or v["t_median"] is None else
+                         f"{1e6 * v['t_median']:.0f} / {v['iterations_median']:.1f} / "
+                         f"{1e6 * v['time_per_iter_median']:.1f} ({v['converged']}/{v['count']})")
+        for a in ratios:
+            v = gs.get(f"ratio_ours_over_{a}")
+            cells.append("-" if v is None or v["per_qp"] is None else
+                         f"**{v['per_qp']:.2f}** ({v['per_iter']:.2f})" if v["per_iter"] is not None
+                         else f"**{v['per_qp']:.2f}**")
+        out.append(f"| {g} (#{gs['ours']['count'] if 'ours' in gs else '?'}) | " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -461,6 +482,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-random", action="store_true", help="robot-arm QPs only")
     ap.add_argument("--no-ours", action="store_true", help="HPIPM only (our solver not built)")
     ap.add_argument("--no-reference", action="store_true", help="skip the reference QP solves")
+    ap.add_argument("--markdown", type=Path, default=None, help="also write the tables as markdown to this file")
     ap.add_argument("--wide", action="store_true", help="print every column (the JSON always has all)")
     ap.add_argument("--quick", action="store_true", help="smoke run: few repetitions and QPs")
     ap.add_argument("--seed", type=int, default=0)
@@ -577,6 +599,22 @@ def main(argv=None) -> int:
                          for e in entries}) for n in names if n != "hpipm_best"}
         log("statuses on the robot-arm QPs: " + "; ".join(f"{n}: {', '.join(v)}" for n, v in st.items()))
 
+    if args.markdown is not None:
+        md = [f"tolerance {args.tol:g}, commit {report['config']['git_head']}, "
+              f"sources {report['config']['sources_sha1']}\n"]
+        if "robot_arm" in report:
+            names = [n for n in ("ours", "ours_alt", "hpipm", "hpipm_classic", "hpipm_scaled",
+                                 "hpipm_casadi_scaled", "hpipm_best") if n in report["robot_arm"]["summary"]["robot all"]]
+            md += ["\nRobot-arm QPs\n\n", markdown_table(report["robot_arm"]["summary"], names,
+                                                          ["hpipm", "hpipm_scaled", "hpipm_best"])]
+        if "random" in report:
+            first = next(iter(report["random"]["summary"].values()))
+            names = [n for n in ("ours", "ours_alt", "hpipm", "hpipm_robust", "hpipm_casadi", "hpipm_best")
+                     if n in first]
+            md += ["\nRandom QPs\n\n", markdown_table(report["random"]["summary"], names, ["hpipm", "hpipm_best"])]
+        args.markdown.parent.mkdir(parents=True, exist_ok=True)
+        args.markdown.write_text("".join(md))
+        log(f"wrote {args.markdown}")
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(report, indent=1, default=_json_default))
     log(f"\nwrote {args.json}")
