@@ -16,14 +16,14 @@ comma-deps-acados, installed by bench/setup_hpipm.sh into its own virtualenv
 headers and shared libraries are used here. The HPIPM inside the casadi wheel (generic
 BLASFEO target) is reported as a second, non-anchor column when available.
 
-HPIPM configurations (each a column of the tables):
-
-* ``hpipm``        the terminal equality as a two-sided general row with lg = ug, x0 as a
-                   box with lb = ub (what acados does); the robot-arm QPs as stated;
-* ``hpipm_eqmask`` the same rows declared in HPIPM's own equality mask (idxbxe, idxge);
-* ``hpipm_scaled`` (robot-arm QPs) the terminal equality rows divided by
-                   ``--eq-scale`` times their largest entry: the hand rescaling that lets
-                   HPIPM converge on the robot arm (clearly labelled, see the README).
+HPIPM configurations (each a column; HPIPM_CONFIGS below, bench/README.md explains them):
+``hpipm`` is the QP as stated (mode balance, x0 as a box with lb = ub, the terminal
+equality as general rows with lg = ug, as acados does); ``hpipm_eqmask`` adds HPIPM's
+equality mask; ``hpipm_robust``, ``hpipm_speed_abs`` other modes; on the robot arm
+``hpipm_classic`` uses the classic Riccati recursion and ``hpipm_scaled`` is RESCALED BY
+HAND (classic Riccati, terminal equality rows divided by ``--eq-scale`` times their largest
+entry), the configuration that converges on every robot-arm QP. ``hpipm_best`` is per QP
+the fastest anchor configuration that converged to the tolerance.
 
 Never a pass/fail on time: this prints tables and writes bench/results/qp_bench.json.
 
