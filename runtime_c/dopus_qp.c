@@ -39,10 +39,10 @@
 #define STEP_TAU 0.995
 #define DELTA_GROW 10.0
 #define DELTA_MAX_REL 1e10
-#define RHO_TRIES 3
+#define RHO_TRIES 6
 #define MU_FLOOR_REL 0.1
 #define STALL_ITERS 10
-#define RHO_MAX_REL 1e4
+#define RHO_MAX_REL 1e10
 /* Relative rounding unit used in the round-off estimates of the Riccati recursion (a few
  * DBL_EPSILON times the accumulation length). */
 #define RICCATI_EPS (16.0 * (NW + 1) * 2.220446049250313e-16)
@@ -421,9 +421,11 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         /* LK = Lu^{-1} M_ux, LKn = Lu^{-1} Gam_u */
         dopus_la_copy_mat(NU, NX, M + NX, NW, LK, NU1);
         dopus_la_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
-        /* P_k = M_xx - LK' LK */
+        /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
         dopus_la_copy_mat(NX, NX, M, NW, P, NX);
         dopus_la_gemm_tn(NX, NX, NU, -1.0, LK, NU1, LK, NU1, 1.0, P, NX);
+        for (j = 0; j < NX; ++j)
+            pmag = dmax(pmag, dopus_la_dot(NU, LK + j * NU1, LK + j * NU1));
         if (NE > 0) {
             dopus_la_copy_mat(NU, NE, Gam + NX, NW, LKn, NU1);
             dopus_la_trsm_lln(NU, NE, Lu, NU1, LKn, NU1);

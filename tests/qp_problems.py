@@ -103,7 +103,7 @@ def make_qp(rng, N, nx, nu, ng=0, nr=0, ne=0, *, p_active=0.25, p_weak=0.0, p_fr
     # satisfy LICQ together with the dynamics generically: rows of stage k touching u_k
     # (control bounds, general rows) use the nu controls of that stage, pure state rows use
     # freedom left over from earlier stages (at most nx can be carried in the state).
-    def statuses(nrows, n_state_rows, budget, p_free_rows):
+    def statuses(nrows, n_state_rows, budget, p_free_rows, max_total=None):
         st = [_status_draw(rng, p_active, p_weak, p_free_rows) for _ in range(nrows)]
         order = list(range(nrows))
         rng.shuffle(order)
@@ -111,7 +111,9 @@ def make_qp(rng, N, nx, nu, ng=0, nr=0, ne=0, *, p_active=0.25, p_weak=0.0, p_fr
         for i in order:
             if st[i] not in ("active", "weak"):
                 continue
-            if i < n_state_rows:
+            if max_total is not None and used_x + used_u >= max_total:
+                pass
+            elif i < n_state_rows:
                 if used_x < budget:
                     used_x += 1
                     continue
@@ -128,13 +130,21 @@ def make_qp(rng, N, nx, nu, ng=0, nr=0, ne=0, *, p_active=0.25, p_weak=0.0, p_fr
     lg = np.full((N, ng), -INF)
     ug = np.full((N, ng), INF)
     mu_g = np.zeros((N, ng))
+    # terminal rows first: they and the ne equality rows use the controls of stage N-1
+    n_term_cap = max(0, nu - min(ne, nu))
+    st_term, _, used_term = statuses(nx + nr, 0, 0, p_free, max_total=n_term_cap)
     budget = 0
     for k in range(N):
         w = np.concatenate([x[k], u[k]])
-        st, used_x, used_u = statuses(nw + ng, nx if k > 0 else 0, budget, p_free)
+        max_total = budget + nu
+        if k == N - 1:
+            max_total = max(0, nu - min(ne, nu) - used_term)
+        st, used_x, used_u = statuses(nw + ng, nx if k > 0 else 0, budget, p_free, max_total=max_total)
         if k == 0:
             st[:nx] = ["free"] * nx
-        budget = min(nx, budget - used_x + nu - used_u)
+        # pure state rows of stage k+1 may only use controls of stage k left free (short
+        # chains keep the active-set KKT matrix well conditioned)
+        budget = min(nx, nu - used_u)
         for i in range(nw):
             if k == 0 and i < nx:
                 continue
@@ -152,8 +162,7 @@ def make_qp(rng, N, nx, nu, ng=0, nr=0, ne=0, *, p_active=0.25, p_weak=0.0, p_fr
     lr = np.full(nr, -INF)
     ur = np.full(nr, INF)
     mu_r = np.zeros(nr)
-    # terminal rows (box, R) are pure state rows; the ne equality rows use budget first
-    st, _, _ = statuses(nx + nr, nx + nr, max(0, budget - ne), p_free)
+    st = st_term
     for i in range(nx):
         lbxN[i], ubxN[i], mu_bN[i] = _row(rng, x[N, i], st[i], dual_scale / xs[i], xs[i])
     for j in range(nr):
@@ -267,8 +276,9 @@ def unstack(qp, z, y_eq, y_in):
     return dict(x=x, u=u, lam=lam, mu_b=mu_b, mu_bN=mu_bN, mu_g=mu_g, mu_r=mu_r, nu=nu_m)
 
 
-def kkt_residual(qp, sol):
-    """Infinity norms (stat, eq, ineq, comp) of the KKT conditions in dopus_qp.h signs."""
+def kkt_residual(qp, sol, scaled=False):
+    """Infinity norms (stat, eq, ineq, comp) of the KKT conditions in dopus_qp.h signs;
+    scaled: stat and comp divided by max(1, largest multiplier)."""
     P, q, Aeq, beq, D, lo, up = stacked(qp)
     z = stack_primal(qp, sol)
     ye = np.concatenate([sol["lam"].ravel(), sol["nu"]])
@@ -280,8 +290,13 @@ def kkt_residual(qp, sol):
         viol = np.maximum(0.0, np.maximum(np.where(np.isfinite(lo), lo - v, 0.0), np.where(np.isfinite(up), v - up, 0.0)))
         cu = np.where(yi > 0, yi * np.where(np.isfinite(up), np.abs(up - v), 1.0), 0.0)
         cl = np.where(yi < 0, -yi * np.where(np.isfinite(lo), np.abs(v - lo), 1.0), 0.0)
-    return dict(stat=np.abs(stat).max(), eq=np.abs(eq).max(initial=0.0), ineq=viol.max(initial=0.0),
-                comp=max(cu.max(initial=0.0), cl.max(initial=0.0)))
+    out = dict(stat=np.abs(stat).max(), eq=np.abs(eq).max(initial=0.0), ineq=viol.max(initial=0.0),
+               comp=max(cu.max(initial=0.0), cl.max(initial=0.0)))
+    if scaled:
+        s = max(1.0, np.abs(ye).max(initial=0.0), np.abs(yi).max(initial=0.0))
+        out["stat"] /= s
+        out["comp"] /= s
+    return out
 
 
 def check_unique(qp, sol, tol=1e-9):
@@ -472,3 +487,87 @@ def make_unbounded(rng, N, nx, nu, ng, nr, ne):
     qp["C"][k][:, j] = 0.0
     qp["lbw"][k, j], qp["ubw"][k, j] = -np.inf, np.inf
     return qp
+
+
+def objective(qp, sol):
+    P_, q, *_ = stacked(qp)
+    z = stack_primal(qp, sol)
+    return float(0.5 * z @ P_ @ z + q @ z)
+
+
+def active_mask(qp, sol, key, tol=1e-12):
+    """Which entries of the multiplier array `key` belong to rows at a bound of sol."""
+    P_, q, Aeq, beq, D, lo, up = stacked(qp)
+    z = stack_primal(qp, sol)
+    v = D @ z
+    scale = np.maximum(1.0, np.abs(v))
+    act = (np.abs(v - lo) <= tol * scale) | (np.abs(up - v) <= tol * scale)
+    # split the row order of `stacked` back into the arrays
+    N, nx, nu, ng, nr = (int(qp[k]) for k in ("N", "nx", "nu", "ng", "nr"))
+    nw = nx + nu
+    per = nw + ng
+    if key == "mu_b":
+        return np.array([act[k * per:k * per + nw] for k in range(N)])
+    if key == "mu_g":
+        return np.array([act[k * per + nw:(k + 1) * per] for k in range(N)]).reshape(N, ng)
+    if key == "mu_bN":
+        return act[N * per:N * per + nx]
+    if key == "mu_r":
+        return act[N * per + nx:]
+    raise KeyError(key)
+
+
+def reduced_hessian_min(qp, sol, act_tol=1e-7):
+    """Smallest eigenvalue of the Hessian on the null space of the equalities and the rows
+    that are active (within act_tol) at sol with a nonzero multiplier: >= 0 at a local
+    minimiser, < 0 at a saddle point."""
+    P_, q, Aeq, beq, D, lo, up = stacked(qp)
+    z = stack_primal(qp, sol)
+    yi = signed_rows(qp, sol)
+    v = D @ z
+    scale = np.maximum(1.0, np.abs(v))
+    act = ((np.abs(v - lo) <= act_tol * scale) | (np.abs(up - v) <= act_tol * scale)) & (np.abs(yi) > act_tol)
+    Z = sla.null_space(np.vstack([Aeq, D[act]]))
+    return np.linalg.eigvalsh(Z.T @ P_ @ Z).min() if Z.shape[1] else np.inf
+
+
+def solve_piqp(qp, tol=1e-12):
+    """Solve with PIQP; returns (status string, solution dict in dopus_qp.h signs)."""
+    import piqp
+
+    P_, q, Aeq, beq, D, lo, up = stacked(qp)
+    s = piqp.SparseSolver()
+    s.settings.verbose = False
+    s.settings.eps_abs = tol
+    s.settings.eps_rel = 0.0
+    s.settings.eps_duality_gap_abs = tol
+    s.settings.eps_duality_gap_rel = 0.0
+    s.settings.max_iter = 500
+    s.settings.iterative_refinement_always_enabled = True
+    rows = np.isfinite(lo) | np.isfinite(up)
+    s.setup(sp.csc_matrix(P_), q, sp.csc_matrix(Aeq), beq, sp.csc_matrix(D[rows]), lo[rows], up[rows])
+    status = str(s.solve())
+    r = s.result
+    z = np.array(r.x)
+    y = np.array(r.y)
+    yi = np.zeros(D.shape[0])
+    yi[rows] = np.array(r.z_u) - np.array(r.z_l)
+    # PIQP's sign of the equality multipliers: fix it from stationarity
+    stat_plus = P_ @ z + q + Aeq.T @ y + D.T @ yi
+    stat_minus = P_ @ z + q - Aeq.T @ y + D.T @ yi
+    if np.abs(stat_minus).max() < np.abs(stat_plus).max():
+        y = -y
+    return status, unstack(qp, z, y, yi)
+
+
+def solve_independent(qp):
+    """PIQP at 1e-12 (the most accurate of the two on these problems); Clarabel at 1e-12
+    when PIQP does not converge (it stalls on terminal equality rows scaled by 1e4).
+    Returns ("solved" or the failing statuses, solution)."""
+    st, sol = solve_piqp(qp, tol=1e-12)
+    if "SOLVED" in st:
+        return "solved", sol
+    st2, sol2 = solve_clarabel(qp, tol=1e-12)
+    if st2 == "Solved":
+        return "solved", sol2
+    return f"{st} / {st2}", sol

@@ -1,0 +1,326 @@
+"""The C QP solver (runtime_c/dopus_qp.c), compiled inside the tests through
+dopus_codegen.qp_harness and checked against independent references:
+
+* every random QP is built around a known primal-dual point (tests/qp_problems.py) and is
+  also solved by Clarabel;
+* problems with LICQ and strict complementarity (the generator's default; the KKT matrix
+  of the active set is checked to be well conditioned) compare the primal AND every
+  multiplier array to 1e-6 relative, against the constructed solution and against Clarabel;
+* problems with weakly active rows (zero multiplier on an active row: strict
+  complementarity fails, an interior point method approaches those multipliers only like
+  sqrt(mu)) compare the primal to 1e-6 and the KKT residual of the returned point;
+* indefinite stage blocks with a Hessian positive definite on the null space of the
+  equalities: the constructed point is the unique solution (second-order check in the
+  generator), compared to 1e-6 including multipliers;
+* infeasible and unbounded QPs must be flagged, as Clarabel flags them.
+"""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small dense checks; the machine is shared
+
+import shutil
+import zlib
+import subprocess
+
+import numpy as np
+import pytest
+
+from dopus_codegen.qp_harness import QPHarnessError, build_qp_solver
+
+import qp_problems as P
+
+TOL_QP = 1e-13       # solver tolerance for the accuracy comparisons
+REL = 1e-6           # required agreement, relative to max(1, |reference|_inf) per array
+SIGMA_UNIQUE = 1e-6  # smallest singular value of the active-set KKT matrix for "unique"
+
+_SOLVERS: dict = {}
+
+
+def solver(sizes):
+    if sizes not in _SOLVERS:
+        _SOLVERS[sizes] = build_qp_solver(*sizes)
+    return _SOLVERS[sizes]
+
+
+# (name, sizes (N, nx, nu, ng, nr, ne), generator options, number of problems)
+CONFIGS = [
+    ("tiny", (2, 1, 1, 0, 0, 0), {}, 20),
+    ("small_general", (3, 2, 1, 1, 0, 0), {}, 20),
+    ("terminal_equality", (8, 3, 2, 0, 0, 1), {}, 20),
+    ("terminal_rows", (12, 4, 2, 1, 2, 1), {}, 20),
+    ("robot_sizes", (40, 5, 3, 0, 0, 2), {"p_active": 0.5}, 20),
+    ("many_active", (20, 4, 3, 2, 1, 1), {"p_active": 0.8}, 20),
+    ("long_horizon", (80, 3, 2, 1, 0, 0), {}, 12),
+    ("wide", (10, 6, 4, 3, 2, 2), {}, 20),
+    ("single_control", (30, 2, 1, 0, 1, 0), {}, 20),
+    # flat directions (non-unique primal in most of them): the Riccati pivots of those
+    # directions carry only barrier curvature and some of these QPs stall between 1e-10 and
+    # 1e-11; run at the runtime's 1e-10 and compare multipliers only where the active-set
+    # KKT matrix keeps the error of a 1e-10 residual below 1e-6
+    ("semidefinite", (15, 4, 2, 1, 1, 1), {"hessian": "psd", "tol": 1e-10, "sigma_unique": 1e-4}, 20),
+    ("badly_scaled", (15, 4, 2, 1, 1, 1), {"var_scale": 1.0, "row_scale": 1.5, "eq_row_scale": 3.0}, 20),
+    ("equality_rows_scaled", (25, 4, 2, 0, 0, 2), {"eq_row_scale": 4.0, "p_active": 0.5}, 15),
+]
+WEAK_CONFIGS = [
+    ("weak", (10, 5, 3, 2, 1, 1), {"p_weak": 0.25}, 20),
+    ("weak_robot_sizes", (40, 5, 3, 0, 0, 2), {"p_weak": 0.2, "p_active": 0.4}, 10),
+]
+INDEF_CONFIGS = [
+    ("indefinite", (20, 4, 2, 1, 1, 1), 15),
+    ("indefinite_robot_sizes", (40, 5, 3, 0, 0, 2), 10),
+]
+
+
+def _max_rel(d):
+    return max(d.values())
+
+
+def _fmt(d):
+    return {k: f"{v:.1e}" for k, v in d.items()}
+
+
+@pytest.mark.parametrize("name,sizes,opts,count", CONFIGS, ids=[c[0] for c in CONFIGS])
+def test_random_qps_against_known_solution_and_clarabel(name, sizes, opts, count):
+    h = solver(sizes)
+    rng = np.random.default_rng(zlib.crc32(name.encode()))
+    opts = dict(opts)
+    tol = opts.pop("tol", TOL_QP)
+    sigma_unique = opts.pop("sigma_unique", SIGMA_UNIQUE)
+    n_unique = 0
+    for trial in range(count):
+        qp, ref = P.make_qp(rng, *sizes, **opts)
+        sol, info = h.solve(qp, tol=tol, max_iter=100)
+        assert info["status"] == "solved", (name, trial, info)
+        pq_status, pq = P.solve_independent(qp)
+        assert pq_status == "solved", (name, trial, pq_status)
+        sigma = P.kkt_sigma_min(qp, ref)
+        if sigma >= sigma_unique:
+            # LICQ + strict complementarity + second order: unique primal and multipliers
+            n_unique += 1
+            err_ref = P.compare(sol, ref)
+            err_pq = P.compare(sol, pq)
+            assert _max_rel(err_ref) <= REL, (name, trial, sigma, _fmt(err_ref))
+            assert _max_rel(err_pq) <= REL, (name, trial, sigma, _fmt(err_pq), _fmt(P.compare(pq, ref)))
+        else:
+            # ill-determined (or non-unique) solution: KKT residual of the returned point
+            # and the optimal value against the independent solver
+            kkt = P.kkt_residual(qp, sol, scaled=True)
+            assert max(kkt.values()) <= 1e-8, (name, trial, kkt)
+            obj_pq = P.objective(qp, pq)
+            assert abs(info["obj"] - obj_pq) <= 1e-8 * max(1.0, abs(obj_pq)), (name, trial, info["obj"], obj_pq)
+    # the comparison of multipliers must not be vacuous
+    assert n_unique >= 0.5 * count, (name, n_unique, count)
+
+
+@pytest.mark.parametrize("name,sizes,opts,count", WEAK_CONFIGS, ids=[c[0] for c in WEAK_CONFIGS])
+def test_weakly_active_qps(name, sizes, opts, count):
+    """Degenerate (weakly active) rows: primal unique, multipliers approached like sqrt(mu):
+    compare the primal and the KKT residual; the objective against Clarabel."""
+    h = solver(sizes)
+    rng = np.random.default_rng(zlib.crc32(name.encode()))
+    n_weak = 0
+    for trial in range(count):
+        qp, ref = P.make_qp(rng, *sizes, **opts)
+        sol, info = h.solve(qp, tol=TOL_QP, max_iter=100)
+        assert info["status"] == "solved", (name, trial, info)
+        err = P.compare(sol, ref, keys=("x", "u"))
+        assert _max_rel(err) <= REL, (name, trial, _fmt(err))
+        kkt = P.kkt_residual(qp, sol)
+        assert max(kkt.values()) <= 1e-8, (name, trial, kkt)
+        pq_status, pq = P.solve_independent(qp)
+        assert pq_status == "solved"
+        assert _max_rel(P.compare(sol, pq, keys=("x", "u"))) <= REL
+        obj_pq = P.objective(qp, pq)
+        assert abs(info["obj"] - obj_pq) <= 1e-8 * max(1.0, abs(obj_pq)), (name, trial, info["obj"], obj_pq)
+        n_weak += int(any(np.any((ref[k] == 0.0) & P.active_mask(qp, ref, k)) for k in ("mu_b", "mu_g", "mu_bN", "mu_r")))
+    assert n_weak >= 0.5 * count
+
+
+@pytest.mark.parametrize("name,sizes,count", INDEF_CONFIGS, ids=[c[0] for c in INDEF_CONFIGS])
+def test_indefinite_stage_blocks(name, sizes, count):
+    """Stage blocks with negative eigenvalues, Hessian positive definite on the null space
+    of the equalities: the exact (not convexified) solution and its multipliers."""
+    h = solver(sizes)
+    rng = np.random.default_rng(zlib.crc32(name.encode()))
+    for trial in range(count):
+        qp, ref = P.make_qp(rng, *sizes, hessian="indef", p_active=0.4)
+        block_min, red_min = P.make_indefinite(qp, ref)
+        assert block_min < -1e-3 and red_min > 0.0, (block_min, red_min)
+        sigma = P.kkt_sigma_min(qp, ref)
+        sol, info = h.solve(qp, tol=TOL_QP)
+        assert info["status"] == "solved", (name, trial, info)
+        err = P.compare(sol, ref) if sigma >= SIGMA_UNIQUE else P.compare(sol, ref, keys=("x", "u"))
+        assert _max_rel(err) <= REL, (name, trial, sigma, _fmt(err))
+        # the same QP convexified would give a different point: the answer is not convexified
+        kkt = P.kkt_residual(qp, sol)
+        assert max(kkt.values()) <= 1e-8
+
+
+def test_inertia_correction_on_indefinite_reduced_pivots():
+    """Riccati pivots that fail without the terminal equality (negative curvature only
+    removed by Req) are handled exactly: the terminal augmentation does not change the
+    solution. Reference: the constructed solution (second order checked on the null space
+    of all equalities)."""
+    sizes = (6, 2, 1, 0, 0, 2)
+    h = solver(sizes)
+    rng = np.random.default_rng(7)
+    n_aug = 0
+    for trial in range(15):
+        qp, ref = P.make_qp(rng, *sizes, p_active=0.0, p_free=1.0)
+        # negative terminal curvature that the two terminal equalities (ne = nx) remove
+        qp["HN"] = qp["HN"] - 50.0 * np.eye(2) * np.abs(qp["HN"]).max()
+        P._recompute_gradients(qp, ref)
+        licq, red, red_eq = P.check_unique(qp, ref)
+        assert licq and red_eq > 0
+        sol, info = h.solve(qp, tol=TOL_QP)
+        assert info["status"] == "solved", info
+        n_aug += info["terminal_augmentations"]
+        assert info["inertia_corrections"] == 0
+        assert _max_rel(P.compare(sol, ref)) <= REL, _fmt(P.compare(sol, ref))
+    assert n_aug > 0
+
+
+def test_nonconvex_reduced_hessian_is_corrected_and_reported():
+    """A stage Hessian whose reduced Hessian is indefinite: the solver must correct inertia
+    (counted), never return a saddle point as solved."""
+    sizes = (5, 2, 1, 0, 0, 0)
+    h = solver(sizes)
+    rng = np.random.default_rng(3)
+    for trial in range(5):
+        qp, ref = P.make_qp(rng, *sizes, p_active=0.0, p_free=0.0)
+        for k in range(5):
+            qp["H"][k][2, 2] = -1e3  # strong negative curvature in the control
+        sol, info = h.solve(qp, tol=1e-10)
+        assert info["inertia_corrections"] > 0
+        assert info["status"] in ("solved", "dual_infeasible"), info
+        if info["status"] == "solved":
+            # a KKT point of the true QP that is a local minimiser, not a saddle point
+            assert max(P.kkt_residual(qp, sol, scaled=True).values()) <= 1e-8
+            assert P.reduced_hessian_min(qp, sol) >= -1e-9 * np.abs(qp["H"]).max()
+
+
+@pytest.mark.parametrize("kind,sizes", [
+    ("row_vs_box", (10, 4, 2, 1, 2, 1)),
+    ("terminal_eq_vs_box", (10, 4, 2, 1, 2, 1)),
+    ("unreachable", (6, 3, 2, 0, 0, 0)),
+    ("terminal_rows", (10, 4, 2, 1, 2, 1)),
+])
+def test_infeasible_qps_are_flagged(kind, sizes):
+    h = solver(sizes)
+    rng = np.random.default_rng(zlib.crc32(kind.encode()))
+    for trial in range(10):
+        qp = P.make_infeasible(rng, *sizes, kind)
+        cl_status, _ = P.solve_clarabel(qp)
+        assert "Infeasible" in cl_status and "Primal" in cl_status, cl_status
+        sol, info = h.solve(qp, tol=1e-10)
+        assert info["status"] == "primal_infeasible", (kind, trial, info)
+        assert info["iterations"] < 100
+
+
+def test_crossed_bounds_are_infeasible():
+    sizes = (3, 2, 1, 0, 0, 0)
+    h = solver(sizes)
+    qp, _ = P.make_qp(np.random.default_rng(0), *sizes)
+    qp["lbw"][1, 2], qp["ubw"][1, 2] = 1.0, 0.5
+    sol, info = h.solve(qp)
+    assert info["status"] == "primal_infeasible"
+
+
+def test_unbounded_qps_are_flagged():
+    sizes = (10, 4, 2, 1, 2, 1)
+    h = solver(sizes)
+    rng = np.random.default_rng(11)
+    for trial in range(10):
+        qp = P.make_unbounded(rng, *sizes)
+        cl_status, _ = P.solve_clarabel(qp)
+        assert "DualInfeasible" in cl_status, cl_status
+        sol, info = h.solve(qp, tol=1e-10)
+        assert info["status"] == "dual_infeasible", (trial, info)
+
+
+def test_invalid_input_is_rejected():
+    sizes = (3, 2, 1, 1, 0, 1)
+    h = solver(sizes)
+    rng = np.random.default_rng(1)
+    qp, ref = P.make_qp(rng, *sizes)
+    for key, idx, val in [("H", (1, 0, 0), np.nan), ("Phi", (0, 1, 1), np.inf), ("g", (2, 0), np.nan),
+                          ("x0", (0,), np.inf), ("lbw", (1, 0), np.nan), ("lbw", (1, 0), np.inf),
+                          ("ubw", (1, 2), -np.inf), ("req", (0,), np.nan), ("C", (0, 0, 1), np.nan)]:
+        bad = {k: (np.array(v, dtype=float, copy=True) if isinstance(v, np.ndarray) else v) for k, v in qp.items()}
+        bad[key][idx] = val
+        sol, info = h.solve(bad)
+        assert info["status"] == "invalid_input", (key, idx, val, info)
+        assert np.all(np.isfinite(sol["x"]))
+    # a bad warm start is invalid input too
+    warm = {k: np.array(v, copy=True) for k, v in ref.items()}
+    warm["lam"][1, 0] = np.nan
+    sol, info = h.solve(qp, warm=warm)
+    assert info["status"] == "invalid_input"
+    # the harness names shape mistakes
+    bad = dict(qp)
+    bad["g"] = qp["g"][:, :2]
+    with pytest.raises(QPHarnessError, match="'g' has shape"):
+        h.solve(bad)
+
+
+def test_default_tolerance_and_iteration_limit():
+    """Default tolerance 1e-8 on the scaled residuals; max_iter is respected and the result
+    is then not reported as solved."""
+    sizes = (40, 5, 3, 0, 0, 2)
+    h = solver(sizes)
+    rng = np.random.default_rng(5)
+    qp, ref = P.make_qp(rng, *sizes, p_active=0.5)
+    sol, info = h.solve(qp, tol=1e-8)
+    assert info["status"] == "solved"
+    assert max(info[k] for k in ("res_stat_scaled", "res_eq_scaled", "res_ineq_scaled", "res_comp_scaled")) <= 1e-8
+    sol, info = h.solve(qp, tol=1e-12, max_iter=3)
+    assert info["status"] == "max_iter" and info["iterations"] <= 3
+
+
+def test_warm_start_from_solution_converges_fast_and_agrees():
+    sizes = (40, 5, 3, 0, 0, 2)
+    h = solver(sizes)
+    rng = np.random.default_rng(9)
+    for trial in range(5):
+        qp, ref = P.make_qp(rng, *sizes, p_active=0.5)
+        cold, info_c = h.solve(qp, tol=TOL_QP)
+        # perturb the data slightly and warm start from the old solution
+        qp2 = dict(qp)
+        qp2["x0"] = qp["x0"] + 1e-3 * rng.standard_normal(qp["x0"].shape)
+        warm, info_w = h.solve(qp2, tol=TOL_QP, warm=cold)
+        assert info_w["status"] == "solved", info_w
+        pq_status, pq = P.solve_independent(qp2)
+        assert _max_rel(P.compare(warm, pq)) <= REL, _fmt(P.compare(warm, pq))
+        # warm starting from the exact solution of the same QP takes few iterations
+        again, info_a = h.solve(qp, tol=1e-10, warm=cold)
+        assert info_a["status"] == "solved" and info_a["iterations"] <= info_c["iterations"]
+
+
+def test_no_dynamic_memory_in_object_files():
+    nm = shutil.which("nm")
+    if nm is None:
+        pytest.skip("nm not available")
+    for sizes in [(40, 5, 3, 0, 0, 2), (3, 2, 1, 1, 0, 0)]:
+        h = solver(sizes)
+        for obj in h.objects:
+            out = subprocess.run([nm, "-u", str(obj)], capture_output=True, text=True, check=True).stdout
+            undefined = {line.split()[-1] for line in out.splitlines() if line.strip()}
+            bad = undefined & {"malloc", "calloc", "realloc", "free"}
+            assert not bad, (obj, bad)
+            # nothing from libc beyond libm and the compiler's memset/memcpy; the rest are
+            # the solver's own dopus_ symbols
+            allowed = ("sqrt", "fabs", "memset", "memcpy")
+            assert all(sym in allowed or sym.startswith("dopus_") for sym in undefined), (obj, undefined)
+
+
+def test_zero_sizes_compile_and_solve():
+    """nu, ng, nr, ne may all be zero (C99 arrays sized with max(1, n))."""
+    sizes = (4, 2, 0, 0, 0, 0)
+    h = solver(sizes)
+    rng = np.random.default_rng(2)
+    qp, ref = P.make_qp(rng, *sizes, p_active=0.0)
+    sol, info = h.solve(qp, tol=TOL_QP)
+    assert info["status"] == "solved"
+    assert _max_rel(P.compare(sol, ref)) <= REL
