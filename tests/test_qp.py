@@ -32,6 +32,7 @@ from dopus_codegen.qp_harness import QPHarnessError, build_qp_solver
 import qp_problems as P
 
 TOL_QP = 1e-13       # solver tolerance for the accuracy comparisons
+TOL_QP_ROBOT = 1e-12
 REL = 1e-6           # required agreement, relative to max(1, |reference|_inf) per array
 SIGMA_UNIQUE = 1e-6  # smallest singular value of the active-set KKT matrix for "unique"
 
@@ -324,3 +325,67 @@ def test_zero_sizes_compile_and_solve():
     sol, info = h.solve(qp, tol=TOL_QP)
     assert info["status"] == "solved"
     assert _max_rel(P.compare(sol, ref)) <= REL
+
+
+# --------------------------------------------------------------------------- robot arm
+def _robot_qps(ref, xhat, iters):
+    """The QPs along a reference DOPUS run (the QP of each feedback, then the step)."""
+    out = []
+    for _ in range(iters):
+        out.append(ref.qp_of_current(xhat))
+        ref.feedback(xhat)
+        ref.prepare()
+    return out
+
+
+@pytest.fixture(scope="module")
+def robot_qps(robot_disc, robot_solution):
+    """QPs of the robot arm (N=40, nx=5, nu=3, ne=2 terminal equality rows, no rescaling):
+    cold start with Gauss-Newton (full RTI), warm start with the exact Hessian (indefinite
+    blocks) for the full RTI and for DOPUS with M = 1 (stale blocks), a few iterations each."""
+    from dopus_codegen.reference import ReferenceDopus
+
+    d = robot_disc
+    sol0, _ = robot_solution
+    xw = d.disturbance(d.x0)
+    runs = []
+    ref = ReferenceDopus(d, M=d.N - 1, mode="fixed", hessian="gauss-newton")
+    ref.init(d.x0)
+    runs += [("cold_gauss_newton", q) for q in _robot_qps(ref, d.x0, 3)]
+    ref = ReferenceDopus(d, M=d.N - 1, mode="fixed", hessian="exact")
+    ref.init(d.x0, sol0)
+    runs += [("warm_exact_full", q) for q in _robot_qps(ref, xw, 4)]
+    ref = ReferenceDopus(d, M=1, mode="fixed", hessian="exact")
+    ref.init(d.x0, sol0)
+    runs += [("warm_exact_M1", q) for q in _robot_qps(ref, xw, 3)]
+    return runs
+
+
+def test_robot_arm_qps_against_reference_solver(robot_qps):
+    """Each QP against dopus_codegen.qpref.solve_qp_reference (IPOPT + active-set polish,
+    an independent method that takes the indefinite blocks as they are), to 1e-6 on the
+    primal and every multiplier. Solver tolerance 1e-12: the exact-Hessian QPs near the
+    solution have a reduced Hessian down to ~2e-5, so 1e-10 leaves errors up to ~4e-5."""
+    from dopus_codegen.qpref import solve_qp_reference
+
+    qp0 = robot_qps[0][1]
+    sizes = tuple(int(qp0[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne"))
+    assert sizes[5] == 2 and np.abs(qp0["Req"]).max() > 0
+    h = solver(sizes)
+    n_indef = 0
+    iters = {}
+    for label, qp in robot_qps:
+        ref = solve_qp_reference(qp)
+        assert ref["polished"]
+        sol, info = h.solve(qp, tol=TOL_QP_ROBOT)
+        assert info["status"] == "solved", (label, info)
+        err = P.compare(sol, ref)
+        assert _max_rel(err) <= REL, (label, _fmt(err))
+        # and at the default tolerance the QP is solved as well
+        _, info8 = h.solve(qp, tol=1e-8)
+        assert info8["status"] == "solved"
+        iters.setdefault(label, []).append((info8["iterations"], info["iterations"]))
+        n_indef += int(min(np.linalg.eigvalsh(Hk).min() for Hk in qp["H"]) < -1e-3)
+    assert n_indef >= 4  # the exact-Hessian QPs do have indefinite stage blocks
+    print("\nrobot-arm QP iterations (tol 1e-8, tol 1e-12):", iters)
+
