@@ -42,6 +42,7 @@
 #define RHO_TRIES 6
 #define MU_FLOOR_REL 0.1
 #define STALL_ITERS 10
+#define REFINE_BELOW 1e-6
 #define RHO_MAX_REL 1e10
 /* Relative rounding unit used in the round-off estimates of the Riccati recursion (a few
  * DBL_EPSILON times the accumulation length). */
@@ -1050,8 +1051,11 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             status = DOPUS_QP_NUMERICAL;
             break;
         }
-        /* floored pivots make the factorisation inexact: refine more */
+        /* floored pivots make the factorisation inexact: refine more; far from the
+         * solution the directions need no refinement */
         nref = st.refine_steps + (ws->pivot_floors > floors_before ? 2 : 0);
+        if (merit(&r) > REFINE_BELOW && ws->pivot_floors == floors_before)
+            nref = 0;
 
         if (r.nsides == 0) {
             /* equality-constrained QP: one Newton step is exact */
@@ -1069,7 +1073,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             ws->rc_lo[i] = ws->has_lo[i] ? ws->t_lo[i] * ws->z_lo[i] : 0.0;
             ws->rc_up[i] = ws->has_up[i] ? ws->t_up[i] * ws->z_up[i] : 0.0;
         }
-        newton_direction(ws, in, nref);
+        newton_direction(ws, in, 0);
         alpha = max_step(ws);
         mu_aff = 0.0;
         for (i = 0; i < NI; ++i) {

@@ -80,7 +80,9 @@ typedef struct {
     double tol;        /* tolerance on the scaled KKT residuals (default 1e-8) */
     int max_iter;      /* iteration limit (default 100) */
     int warm_start;    /* nonzero: start from the primal-dual point in *sol (default 0) */
-    int refine_steps;  /* iterative refinement steps per Newton solve (default 1) */
+    int refine_steps;  /* iterative refinement steps of the corrector direction once the
+                          scaled KKT residuals are below 1e-6 (more after a floored pivot);
+                          default 1 */
 } dopus_qp_settings;
 
 typedef struct {
