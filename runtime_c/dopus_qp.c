@@ -318,7 +318,8 @@ static double hessian_scale(const dopus_qp_in *in)
     double s = dopus_la_max_abs_mat(NX, NX, in->HN, NX);
     for (k = 0; k < N; ++k)
         s = dmax(s, dopus_la_max_abs_mat(NW, NW, in->H[k], NW));
-    return dmax(s, 1e-300);
+    /* a zero Hessian (an LP) still needs a scale for the inertia correction */
+    return s > 0.0 ? s : 1.0;
 }
 
 /* Factor the Newton system for the current barrier weights qdiag, delta and rho.

@@ -389,3 +389,35 @@ def test_robot_arm_qps_against_reference_solver(robot_qps):
     assert n_indef >= 4  # the exact-Hessian QPs do have indefinite stage blocks
     print("\nrobot-arm QP iterations (tol 1e-8, tol 1e-12):", iters)
 
+
+
+def test_linear_programs():
+    """H = 0 everywhere (an LP in OCP form, every control and state boxed): the optimal
+    value against PIQP and the KKT residual of the returned point (LP solutions need not be
+    unique)."""
+    sizes = (10, 3, 2, 1, 0, 1)
+    h = solver(sizes)
+    rng = np.random.default_rng(21)
+    n_solved = 0
+    for trial in range(10):
+        qp, _ = P.make_qp(rng, *sizes, p_active=0.0, p_free=0.0)
+        qp["H"] = np.zeros_like(qp["H"])
+        qp["HN"] = np.zeros_like(qp["HN"])
+        # every variable boxed so that the LP is bounded
+        qp["lbw"] = np.where(np.isfinite(qp["lbw"]), qp["lbw"], -5.0)
+        qp["ubw"] = np.where(np.isfinite(qp["ubw"]), qp["ubw"], 5.0)
+        qp["lbxN"] = np.where(np.isfinite(qp["lbxN"]), qp["lbxN"], -50.0)
+        qp["ubxN"] = np.where(np.isfinite(qp["ubxN"]), qp["ubxN"], 50.0)
+        pq_status, pq = P.solve_independent(qp)
+        sol, info = h.solve(qp, tol=1e-10)
+        if pq_status != "solved":
+            # the random boxes can make the LP infeasible: then both must say so
+            cl_status, _ = P.solve_clarabel(qp)
+            assert "PrimalInfeasible" in cl_status and info["status"] == "primal_infeasible", (cl_status, info)
+            continue
+        n_solved += 1
+        assert info["status"] == "solved", (trial, info)
+        obj_pq = P.objective(qp, pq)
+        assert abs(info["obj"] - obj_pq) <= 1e-7 * max(1.0, abs(obj_pq)), (trial, info["obj"], obj_pq)
+        assert max(P.kkt_residual(qp, sol, scaled=True).values()) <= 1e-8
+    assert n_solved >= 5
