@@ -457,17 +457,21 @@ def read_meta(out_dir: Path) -> Dict[str, Any]:
 
 
 def write_folder(files: Dict[str, str], out_dir: Path) -> Path:
-    """Write the files; replace a previous generation, refuse to overwrite anything else."""
+    """Write the files; replace a previous generation, refuse to overwrite anything else.
+
+    Files whose content is unchanged are left alone (their time stamps too, so a Makefile
+    build after regenerating an unchanged problem recompiles nothing); files of the previous
+    generation that are no longer produced are removed.
+    """
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise CodegenError(f"output '{out_dir}' exists and is not a directory")
     if out_dir.is_dir():
         meta_path = find_meta(out_dir)
         if meta_path is not None:
-            old = json.loads(meta_path.read_text()).get("files", [])
-            for fname in old:
+            for fname in json.loads(meta_path.read_text()).get("files", []):
                 p = out_dir / fname
-                if p.is_file() and p.parent == out_dir:
+                if fname not in files and p.is_file() and p.parent == out_dir:
                     p.unlink()
         else:
             foreign = sorted(p.name for p in out_dir.iterdir() if p.name != "build")
@@ -476,8 +480,11 @@ def write_folder(files: Dict[str, str], out_dir: Path) -> Path:
                                    f"dopus-gen (found {', '.join(foreign[:5])}); choose another folder")
     out_dir.mkdir(parents=True, exist_ok=True)
     for fname in sorted(files):
-        with open(out_dir / fname, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(files[fname])
+        path = out_dir / fname
+        data = files[fname].encode("utf-8")
+        if path.is_file() and path.read_bytes() == data:
+            continue
+        path.write_bytes(data)
     return out_dir
 
 
