@@ -28,7 +28,7 @@ import numpy as np
 
 from .paths import runtime_c_dir
 
-STRICT_CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-fPIC"]
+STRICT_CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O3", "-fPIC"]
 
 STATUS_NAMES = {
     0: "solved",

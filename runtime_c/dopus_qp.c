@@ -76,20 +76,20 @@ static int check_input(const dopus_qp_in *in)
     for (k = 0; k < N; ++k) {
         if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
             return 0;
-        if (!dopus_la_all_finite(NW, NW, in->H[k], NW) ||
-            !dopus_la_all_finite(NX, NW, in->Phi[k], NX) ||
-            (NG > 0 && !dopus_la_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
-            !dopus_la_all_finite(NW, 1, in->g[k], NW) || !dopus_la_all_finite(NX, 1, in->b[k], NX))
+        if (!dopus_lai_all_finite(NW, NW, in->H[k], NW) ||
+            !dopus_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+            (NG > 0 && !dopus_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
+            !dopus_lai_all_finite(NW, 1, in->g[k], NW) || !dopus_lai_all_finite(NX, 1, in->b[k], NX))
             return 0;
     }
     if (in->HN == NULL || (NR > 0 && in->R == NULL) || (NE > 0 && in->Req == NULL))
         return 0;
-    if (!dopus_la_all_finite(NX, NX, in->HN, NX) || !dopus_la_all_finite(NX, 1, in->x0, NX) ||
-        !dopus_la_all_finite(NX, 1, in->gN, NX))
+    if (!dopus_lai_all_finite(NX, NX, in->HN, NX) || !dopus_lai_all_finite(NX, 1, in->x0, NX) ||
+        !dopus_lai_all_finite(NX, 1, in->gN, NX))
         return 0;
-    if (NR > 0 && !dopus_la_all_finite(NR, NX, in->R, NR > 0 ? NR : 1))
+    if (NR > 0 && !dopus_lai_all_finite(NR, NX, in->R, NR > 0 ? NR : 1))
         return 0;
-    if (NE > 0 && (!dopus_la_all_finite(NE, NX, in->Req, NE1) || !dopus_la_all_finite(NE, 1, in->req, NE1)))
+    if (NE > 0 && (!dopus_lai_all_finite(NE, NX, in->Req, NE1) || !dopus_lai_all_finite(NE, 1, in->req, NE1)))
         return 0;
     for (k = 0; k < N; ++k) {
         for (i = 0; i < NW; ++i)
@@ -159,12 +159,12 @@ static void apply_D(const dopus_qp_in *in, const double *prim, double *v)
         for (i = 0; i < NW; ++i)
             vk[i] = w[i];
         if (NG > 0)
-            dopus_la_gemv_n(NG, NW, 1.0, in->C[k], NG > 0 ? NG : 1, w, 0.0, vk + NW);
+            dopus_lai_gemv_n(NG, NW, 1.0, in->C[k], NG > 0 ? NG : 1, w, 0.0, vk + NW);
     }
     for (i = 0; i < NX; ++i)
         v[TOFF + i] = prim[N * NW + i];
     if (NR > 0)
-        dopus_la_gemv_n(NR, NX, 1.0, in->R, NR > 0 ? NR : 1, prim + N * NW, 0.0, v + TOFF + NX);
+        dopus_lai_gemv_n(NR, NX, 1.0, in->R, NR > 0 ? NR : 1, prim + N * NW, 0.0, v + TOFF + NX);
 }
 
 /* out += D' y */
@@ -177,12 +177,12 @@ static void add_Dt(const dopus_qp_in *in, const double *y, double *out)
         for (i = 0; i < NW; ++i)
             o[i] += yk[i];
         if (NG > 0)
-            dopus_la_gemv_t(NG, NW, 1.0, in->C[k], NG > 0 ? NG : 1, yk + NW, 1.0, o);
+            dopus_lai_gemv_t(NG, NW, 1.0, in->C[k], NG > 0 ? NG : 1, yk + NW, 1.0, o);
     }
     for (i = 0; i < NX; ++i)
         out[N * NW + i] += y[TOFF + i];
     if (NR > 0)
-        dopus_la_gemv_t(NR, NX, 1.0, in->R, NR > 0 ? NR : 1, y + TOFF + NX, 1.0, out + N * NW);
+        dopus_lai_gemv_t(NR, NX, 1.0, in->R, NR > 0 ? NR : 1, y + TOFF + NX, 1.0, out + N * NW);
 }
 
 /* ---------------------------------------------------------------- residuals */
@@ -217,52 +217,52 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
         const double *w = ws->prim + k * NW;
         double *h = ws->hwg + k * NW;
         double *a = ws->aty + k * NW;
-        dopus_la_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
-        s_stat = dmax(s_stat, dopus_la_norm_inf(NW, h));
-        obj += 0.5 * dopus_la_dot(NW, w, h) + dopus_la_dot(NW, in->g[k], w);
-        s_stat = dmax(s_stat, dopus_la_norm_inf(NW, in->g[k]));
-        dopus_la_axpy(NW, 1.0, in->g[k], h);
+        dopus_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
+        s_stat = dmax(s_stat, dopus_lai_norm_inf(NW, h));
+        obj += 0.5 * dopus_lai_dot(NW, w, h) + dopus_lai_dot(NW, in->g[k], w);
+        s_stat = dmax(s_stat, dopus_lai_norm_inf(NW, in->g[k]));
+        dopus_lai_axpy(NW, 1.0, in->g[k], h);
         for (i = 0; i < NW; ++i)
             a[i] = i < NX ? ws->lam[k * NX + i] : 0.0;
-        dopus_la_gemv_t(NX, NW, -1.0, in->Phi[k], NX, ws->lam + (k + 1) * NX, 1.0, a);
+        dopus_lai_gemv_t(NX, NW, -1.0, in->Phi[k], NX, ws->lam + (k + 1) * NX, 1.0, a);
     }
     {
         const double *xN = ws->prim + N * NW;
         double *h = ws->hwg + N * NW;
         double *a = ws->aty + N * NW;
-        dopus_la_symv_l(NX, 1.0, in->HN, NX, xN, 0.0, h);
-        s_stat = dmax(s_stat, dopus_la_norm_inf(NX, h));
-        obj += 0.5 * dopus_la_dot(NX, xN, h) + dopus_la_dot(NX, in->gN, xN);
-        s_stat = dmax(s_stat, dopus_la_norm_inf(NX, in->gN));
-        dopus_la_axpy(NX, 1.0, in->gN, h);
+        dopus_lai_symv_l(NX, 1.0, in->HN, NX, xN, 0.0, h);
+        s_stat = dmax(s_stat, dopus_lai_norm_inf(NX, h));
+        obj += 0.5 * dopus_lai_dot(NX, xN, h) + dopus_lai_dot(NX, in->gN, xN);
+        s_stat = dmax(s_stat, dopus_lai_norm_inf(NX, in->gN));
+        dopus_lai_axpy(NX, 1.0, in->gN, h);
         for (i = 0; i < NX; ++i)
             a[i] = ws->lam[N * NX + i];
         if (NE > 0)
-            dopus_la_gemv_t(NE, NX, 1.0, in->Req, NE1, ws->nu, 1.0, a);
+            dopus_lai_gemv_t(NE, NX, 1.0, in->Req, NE1, ws->nu, 1.0, a);
     }
     add_Dt(in, ws->yrow, ws->aty);
-    s_stat = dmax(s_stat, dopus_la_norm_inf(NP, ws->aty));
+    s_stat = dmax(s_stat, dopus_lai_norm_inf(NP, ws->aty));
     for (i = 0; i < NP; ++i)
         ws->r_stat[i] = ws->hwg[i] + ws->aty[i];
 
     /* equalities */
     for (i = 0; i < NX; ++i)
         ws->r_dyn[i] = ws->prim[i] - in->x0[i];
-    s_eq = dmax(s_eq, dopus_la_norm_inf(NX, in->x0));
+    s_eq = dmax(s_eq, dopus_lai_norm_inf(NX, in->x0));
     for (k = 0; k < N; ++k) {
         double *rd = ws->r_dyn + (k + 1) * NX;
         const double *xn = ws->prim + (k + 1) * NW;
-        dopus_la_gemv_n(NX, NW, -1.0, in->Phi[k], NX, ws->prim + k * NW, 0.0, rd);
-        s_eq = dmax(s_eq, dopus_la_norm_inf(NX, rd));
-        s_eq = dmax(s_eq, dopus_la_norm_inf(NX, in->b[k]));
+        dopus_lai_gemv_n(NX, NW, -1.0, in->Phi[k], NX, ws->prim + k * NW, 0.0, rd);
+        s_eq = dmax(s_eq, dopus_lai_norm_inf(NX, rd));
+        s_eq = dmax(s_eq, dopus_lai_norm_inf(NX, in->b[k]));
         for (i = 0; i < NX; ++i)
             rd[i] += xn[i] - in->b[k][i];
     }
-    s_eq = dmax(s_eq, dopus_la_norm_inf(NP, ws->prim));
+    s_eq = dmax(s_eq, dopus_lai_norm_inf(NP, ws->prim));
     if (NE > 0) {
-        dopus_la_gemv_n(NE, NX, 1.0, in->Req, NE1, ws->prim + N * NW, 0.0, ws->r_eqN);
-        s_eq = dmax(s_eq, dopus_la_norm_inf(NE, ws->r_eqN));
-        s_eq = dmax(s_eq, dopus_la_norm_inf(NE, in->req));
+        dopus_lai_gemv_n(NE, NX, 1.0, in->Req, NE1, ws->prim + N * NW, 0.0, ws->r_eqN);
+        s_eq = dmax(s_eq, dopus_lai_norm_inf(NE, ws->r_eqN));
+        s_eq = dmax(s_eq, dopus_lai_norm_inf(NE, in->req));
         for (i = 0; i < NE; ++i)
             ws->r_eqN[i] -= in->req[i];
     }
@@ -294,8 +294,8 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
 
     r->nsides = m;
     r->mu = m > 0 ? sum_c / m : 0.0;
-    r->stat = dopus_la_norm_inf(NP, ws->r_stat);
-    r->eq = dmax(dopus_la_norm_inf((N + 1) * NX, ws->r_dyn), NE > 0 ? dopus_la_norm_inf(NE, ws->r_eqN) : 0.0);
+    r->stat = dopus_lai_norm_inf(NP, ws->r_stat);
+    r->eq = dmax(dopus_lai_norm_inf((N + 1) * NX, ws->r_dyn), NE > 0 ? dopus_lai_norm_inf(NE, ws->r_eqN) : 0.0);
     r->ineq = ineq;
     r->comp = comp;
     r->stat_s = r->stat / s_stat;
@@ -303,7 +303,7 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
     r->ineq_s = r->ineq / s_ineq;
     r->comp_s = r->comp / dmax(1.0, nz);
     r->nz = nz;
-    r->ny = dmax(nz, dmax(dopus_la_norm_inf((N + 1) * NX, ws->lam), NE > 0 ? dopus_la_norm_inf(NE, ws->nu) : 0.0));
+    r->ny = dmax(nz, dmax(dopus_lai_norm_inf((N + 1) * NX, ws->lam), NE > 0 ? dopus_lai_norm_inf(NE, ws->nu) : 0.0));
     r->obj = obj;
     ws->scale_stat = s_stat;
     ws->scale_eq = s_eq;
@@ -315,9 +315,9 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
 static double hessian_scale(const dopus_qp_in *in)
 {
     int k;
-    double s = dopus_la_max_abs_mat(NX, NX, in->HN, NX);
+    double s = dopus_lai_max_abs_mat(NX, NX, in->HN, NX);
     for (k = 0; k < N; ++k)
-        s = dmax(s, dopus_la_max_abs_mat(NW, NW, in->H[k], NW));
+        s = dmax(s, dopus_lai_max_abs_mat(NW, NW, in->H[k], NW));
     /* a zero Hessian (an LP) still needs a scale for the inertia correction */
     return s > 0.0 ? s : 1.0;
 }
@@ -337,8 +337,8 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
     {
         double *P = ws->P[N];
         const double *q = ws->qdiag + TOFF;
-        dopus_la_copy_mat(NX, NX, in->HN, NX, P, NX);
-        dopus_la_symmetrize_l(NX, P, NX);
+        dopus_lai_copy_mat(NX, NX, in->HN, NX, P, NX);
+        dopus_lai_symmetrize_l(NX, P, NX);
         for (i = 0; i < NX; ++i)
             P[i + i * NX] += q[i] + delta;
         for (k = 0; k < NR; ++k) {
@@ -350,7 +350,7 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         }
         if (NE > 0) {
             if (ws->rho_aug > 0.0)
-                dopus_la_gemm_tn(NX, NX, NE, ws->rho_aug, in->Req, NE1, in->Req, NE1, 1.0, P, NX);
+                dopus_lai_gemm_tn(NX, NX, NE, ws->rho_aug, in->Req, NE1, in->Req, NE1, 1.0, P, NX);
             for (j = 0; j < NE; ++j)
                 for (i = 0; i < NX; ++i)
                     ws->G[N][i + j * NX] = in->Req[j + i * NE1];
@@ -364,7 +364,7 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
      * of the stage before and cancels), leaving an absolute error of about eps times the
      * magnitude `pmag` of the cancelled terms. That error reaches the pivots of M_uu of
      * stage k through B' P B, so a negative pivot within that noise is a numerical zero. */
-    pmag = dopus_la_max_abs_mat(NX, NX, ws->P[N], NX);
+    pmag = dopus_lai_max_abs_mat(NX, NX, ws->P[N], NX);
     for (k = N - 1; k >= 0; --k) {
         double *M = ws->M;
         const double *Phi = in->Phi[k];
@@ -373,12 +373,12 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         double *LK = ws->LK[k];
         double *LKn = ws->LKn[k];
         double *P = ws->P[k];
-        const double pmax = dopus_la_max_abs_mat(NX, NX, ws->P[k + 1], NX);
+        const double pmax = dopus_lai_max_abs_mat(NX, NX, ws->P[k + 1], NX);
         double mxx = 0.0;
 
         /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi */
-        dopus_la_copy_mat(NW, NW, in->H[k], NW, M, NW);
-        dopus_la_symmetrize_l(NW, M, NW);
+        dopus_lai_copy_mat(NW, NW, in->H[k], NW, M, NW);
+        dopus_lai_symmetrize_l(NW, M, NW);
         for (i = 0; i < NW; ++i)
             M[i + i * NW] += q[i] + delta;
         for (j = 0; j < NG; ++j) {
@@ -403,8 +403,8 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
                 colsum += fabs(Phi[i + j * NX]);
             mxx = dmax(mxx, fabs(M[j + j * NW]) + colsum * colsum * pmax);
         }
-        dopus_la_gemm_nn(NX, NW, NX, 1.0, ws->P[k + 1], NX, Phi, NX, 0.0, PhiP, NX);
-        dopus_la_gemm_tn(NW, NW, NX, 1.0, Phi, NX, PhiP, NX, 1.0, M, NW);
+        dopus_lai_gemm_nn(NX, NW, NX, 1.0, ws->P[k + 1], NX, Phi, NX, 0.0, PhiP, NX);
+        dopus_lai_gemm_tn(NW, NW, NX, 1.0, Phi, NX, PhiP, NX, 1.0, M, NW);
         /* symmetric by construction up to round-off: average to keep P exactly symmetric */
         for (j = 0; j < NW; ++j)
             for (i = j + 1; i < NW; ++i) {
@@ -413,28 +413,28 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
                 M[j + i * NW] = s;
             }
         if (NE > 0)
-            dopus_la_gemm_tn(NW, NE, NX, 1.0, Phi, NX, ws->G[k + 1], NX, 0.0, Gam, NW);
+            dopus_lai_gemm_tn(NW, NE, NX, 1.0, Phi, NX, ws->G[k + 1], NX, 0.0, Gam, NW);
 
         /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
-        dopus_la_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
-        if (dopus_la_potrf_l_noise(NU, Lu, NU1, ws->noise, &ws->pivot_floors) != 0)
+        dopus_lai_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
+        if (dopus_lai_potrf_l_noise(NU, Lu, NU1, ws->noise, &ws->pivot_floors) != 0)
             return 1;
         pmag = mxx;
         /* LK = Lu^{-1} M_ux, LKn = Lu^{-1} Gam_u */
-        dopus_la_copy_mat(NU, NX, M + NX, NW, LK, NU1);
-        dopus_la_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
+        dopus_lai_copy_mat(NU, NX, M + NX, NW, LK, NU1);
+        dopus_lai_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
         /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
-        dopus_la_copy_mat(NX, NX, M, NW, P, NX);
-        dopus_la_gemm_tn(NX, NX, NU, -1.0, LK, NU1, LK, NU1, 1.0, P, NX);
+        dopus_lai_copy_mat(NX, NX, M, NW, P, NX);
+        dopus_lai_gemm_tn(NX, NX, NU, -1.0, LK, NU1, LK, NU1, 1.0, P, NX);
         for (j = 0; j < NX; ++j)
-            pmag = dmax(pmag, dopus_la_dot(NU, LK + j * NU1, LK + j * NU1));
+            pmag = dmax(pmag, dopus_lai_dot(NU, LK + j * NU1, LK + j * NU1));
         if (NE > 0) {
-            dopus_la_copy_mat(NU, NE, Gam + NX, NW, LKn, NU1);
-            dopus_la_trsm_lln(NU, NE, Lu, NU1, LKn, NU1);
+            dopus_lai_copy_mat(NU, NE, Gam + NX, NW, LKn, NU1);
+            dopus_lai_trsm_lln(NU, NE, Lu, NU1, LKn, NU1);
             /* G_k = Gam_x - LK' LKn;  S += LKn' LKn (S = -(nu-nu block of V_0)) */
-            dopus_la_copy_mat(NX, NE, Gam, NW, ws->G[k], NX);
-            dopus_la_gemm_tn(NX, NE, NU, -1.0, LK, NU1, LKn, NU1, 1.0, ws->G[k], NX);
-            dopus_la_gemm_tn(NE, NE, NU, 1.0, LKn, NU1, LKn, NU1, 1.0, ws->S, NE1);
+            dopus_lai_copy_mat(NX, NE, Gam, NW, ws->G[k], NX);
+            dopus_lai_gemm_tn(NX, NE, NU, -1.0, LK, NU1, LKn, NU1, 1.0, ws->G[k], NX);
+            dopus_lai_gemm_tn(NE, NE, NU, 1.0, LKn, NU1, LKn, NU1, 1.0, ws->S, NE1);
         }
     }
     if (NE > 0) {
@@ -444,12 +444,12 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         double smax = 0.0;
         for (i = 0; i < NE; ++i)
             smax = dmax(smax, ws->S[i + i * NE1]);
-        dopus_la_copy_mat(NE, NE, ws->S, NE1, ws->work, NE1);
-        if (dopus_la_potrf_l(NE, ws->S, NE1) != 0) {
-            dopus_la_copy_mat(NE, NE, ws->work, NE1, ws->S, NE1);
+        dopus_lai_copy_mat(NE, NE, ws->S, NE1, ws->work, NE1);
+        if (dopus_lai_potrf_l(NE, ws->S, NE1) != 0) {
+            dopus_lai_copy_mat(NE, NE, ws->work, NE1, ws->S, NE1);
             for (i = 0; i < NE; ++i)
                 ws->S[i + i * NE1] += 1e-13 * dmax(smax, 1e-300);
-            if (dopus_la_potrf_l(NE, ws->S, NE1) != 0)
+            if (dopus_lai_potrf_l(NE, ws->S, NE1) != 0)
                 return 2;
         }
     }
@@ -473,7 +473,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
         ws->p[N][i] = -rhs_stat[N * NW + i];
     if (NE > 0) {
         if (ws->rho_aug > 0.0)
-            dopus_la_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, rhs_eqN, 1.0, ws->p[N]);
+            dopus_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, rhs_eqN, 1.0, ws->p[N]);
         for (i = 0; i < NE; ++i)
             e[i] = -rhs_eqN[i];
     }
@@ -483,21 +483,21 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
         /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
         for (i = 0; i < NX; ++i)
             tv[i] = ws->p[k + 1][i];
-        dopus_la_gemv_n(NX, NX, 1.0, ws->P[k + 1], NX, c, 1.0, tv);
+        dopus_lai_gemv_n(NX, NX, 1.0, ws->P[k + 1], NX, c, 1.0, tv);
         for (i = 0; i < NW; ++i)
             m[i] = -rhs_stat[k * NW + i];
-        dopus_la_gemv_t(NX, NW, 1.0, Phi, NX, tv, 1.0, m);
+        dopus_lai_gemv_t(NX, NW, 1.0, Phi, NX, tv, 1.0, m);
         if (NE > 0)
-            dopus_la_gemv_t(NX, NE, 1.0, ws->G[k + 1], NX, c, 1.0, e);
+            dopus_lai_gemv_t(NX, NE, 1.0, ws->G[k + 1], NX, c, 1.0, e);
         /* lk = Lu^{-1} m_u; p_k = m_x - LK' lk; e -= LKn' lk */
         for (i = 0; i < NU; ++i)
             ws->lk[k][i] = m[NX + i];
-        dopus_la_trsv_ln(NU, ws->Lu[k], NU1, ws->lk[k]);
+        dopus_lai_trsv_ln(NU, ws->Lu[k], NU1, ws->lk[k]);
         for (i = 0; i < NX; ++i)
             ws->p[k][i] = m[i];
-        dopus_la_gemv_t(NU, NX, -1.0, ws->LK[k], NU1, ws->lk[k], 1.0, ws->p[k]);
+        dopus_lai_gemv_t(NU, NX, -1.0, ws->LK[k], NU1, ws->lk[k], 1.0, ws->p[k]);
         if (NE > 0)
-            dopus_la_gemv_t(NU, NE, -1.0, ws->LKn[k], NU1, ws->lk[k], 1.0, e);
+            dopus_lai_gemv_t(NU, NE, -1.0, ws->LKn[k], NU1, ws->lk[k], 1.0, e);
     }
     /* stage 0: dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
     for (i = 0; i < NX; ++i)
@@ -505,9 +505,9 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
     if (NE > 0) {
         for (i = 0; i < NE; ++i)
             sn[i] = e[i];
-        dopus_la_gemv_t(NX, NE, 1.0, ws->G[0], NX, sp, 1.0, sn);
-        dopus_la_trsv_ln(NE, ws->S, NE1, sn);
-        dopus_la_trsv_lt(NE, ws->S, NE1, sn);
+        dopus_lai_gemv_t(NX, NE, 1.0, ws->G[0], NX, sp, 1.0, sn);
+        dopus_lai_trsv_ln(NE, ws->S, NE1, sn);
+        dopus_lai_trsv_lt(NE, ws->S, NE1, sn);
     }
     for (k = 0; k < N; ++k) {
         double *w = sp + k * NW;
@@ -516,22 +516,22 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
         /* u_k = -Lu'^{-1} (LK x_k + lk + LKn nu) */
         for (i = 0; i < NU; ++i)
             u[i] = ws->lk[k][i];
-        dopus_la_gemv_n(NU, NX, 1.0, ws->LK[k], NU1, w, 1.0, u);
+        dopus_lai_gemv_n(NU, NX, 1.0, ws->LK[k], NU1, w, 1.0, u);
         if (NE > 0)
-            dopus_la_gemv_n(NU, NE, 1.0, ws->LKn[k], NU1, sn, 1.0, u);
-        dopus_la_trsv_lt(NU, ws->Lu[k], NU1, u);
+            dopus_lai_gemv_n(NU, NE, 1.0, ws->LKn[k], NU1, sn, 1.0, u);
+        dopus_lai_trsv_lt(NU, ws->Lu[k], NU1, u);
         for (i = 0; i < NU; ++i)
             u[i] = -u[i];
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
             lamk[i] = -ws->p[k][i];
-        dopus_la_gemv_n(NX, NX, -1.0, ws->P[k], NX, w, 1.0, lamk);
+        dopus_lai_gemv_n(NX, NX, -1.0, ws->P[k], NX, w, 1.0, lamk);
         if (NE > 0)
-            dopus_la_gemv_n(NX, NE, -1.0, ws->G[k], NX, sn, 1.0, lamk);
+            dopus_lai_gemv_n(NX, NE, -1.0, ws->G[k], NX, sn, 1.0, lamk);
         /* x_{k+1} = Phi_k w_k + c_k */
         for (i = 0; i < NX; ++i)
             sp[(k + 1) * NW + i] = rhs_dyn[(k + 1) * NX + i];
-        dopus_la_gemv_n(NX, NW, 1.0, in->Phi[k], NX, w, 1.0, sp + (k + 1) * NW);
+        dopus_lai_gemv_n(NX, NW, 1.0, in->Phi[k], NX, w, 1.0, sp + (k + 1) * NW);
     }
     {
         const double *xN = sp + N * NW;
@@ -539,9 +539,9 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
         /* lam_N = -(dV_N/dx); the rho terms cancel because Req x_N = rhs_eqN */
         for (i = 0; i < NX; ++i)
             lamN[i] = -ws->p[N][i];
-        dopus_la_gemv_n(NX, NX, -1.0, ws->P[N], NX, xN, 1.0, lamN);
+        dopus_lai_gemv_n(NX, NX, -1.0, ws->P[N], NX, xN, 1.0, lamN);
         if (NE > 0)
-            dopus_la_gemv_n(NX, NE, -1.0, ws->G[N], NX, sn, 1.0, lamN);
+            dopus_lai_gemv_n(NX, NE, -1.0, ws->G[N], NX, sn, 1.0, lamN);
     }
 }
 
@@ -563,18 +563,18 @@ static void newton_residual(dopus_qp_workspace *ws, const dopus_qp_in *in, const
     add_Dt(in, dv, os);
     for (k = 0; k < N; ++k) {
         double *o = os + k * NW;
-        dopus_la_symv_l(NW, -1.0, in->H[k], NW, sp + k * NW, 1.0, o);
+        dopus_lai_symv_l(NW, -1.0, in->H[k], NW, sp + k * NW, 1.0, o);
         for (i = 0; i < NX; ++i)
             o[i] -= sl[k * NX + i];
-        dopus_la_gemv_t(NX, NW, 1.0, in->Phi[k], NX, sl + (k + 1) * NX, 1.0, o);
+        dopus_lai_gemv_t(NX, NW, 1.0, in->Phi[k], NX, sl + (k + 1) * NX, 1.0, o);
     }
     {
         double *o = os + N * NW;
-        dopus_la_symv_l(NX, -1.0, in->HN, NX, sp + N * NW, 1.0, o);
+        dopus_lai_symv_l(NX, -1.0, in->HN, NX, sp + N * NW, 1.0, o);
         for (i = 0; i < NX; ++i)
             o[i] -= sl[N * NX + i];
         if (NE > 0)
-            dopus_la_gemv_t(NE, NX, -1.0, in->Req, NE1, sn, 1.0, o);
+            dopus_lai_gemv_t(NE, NX, -1.0, in->Req, NE1, sn, 1.0, o);
     }
     for (i = 0; i < NX; ++i)
         od[i] = rhs_dyn[i] - sp[i];
@@ -582,12 +582,12 @@ static void newton_residual(dopus_qp_workspace *ws, const dopus_qp_in *in, const
         double *o = od + (k + 1) * NX;
         for (i = 0; i < NX; ++i)
             o[i] = rhs_dyn[(k + 1) * NX + i] - sp[(k + 1) * NW + i];
-        dopus_la_gemv_n(NX, NW, 1.0, in->Phi[k], NX, sp + k * NW, 1.0, o);
+        dopus_lai_gemv_n(NX, NW, 1.0, in->Phi[k], NX, sp + k * NW, 1.0, o);
     }
     if (NE > 0) {
         for (i = 0; i < NE; ++i)
             oe[i] = rhs_eqN[i];
-        dopus_la_gemv_n(NE, NX, -1.0, in->Req, NE1, sp + N * NW, 1.0, oe);
+        dopus_lai_gemv_n(NE, NX, -1.0, in->Req, NE1, sp + N * NW, 1.0, oe);
     }
 }
 
@@ -619,9 +619,9 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
                         ws->rhs_eqN, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
         riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin, ws->c_prim,
                       ws->c_lam, ws->c_nu);
-        dopus_la_axpy(NP, 1.0, ws->c_prim, ws->d_prim);
-        dopus_la_axpy((N + 1) * NX, 1.0, ws->c_lam, ws->d_lam);
-        dopus_la_axpy(NE, 1.0, ws->c_nu, ws->d_nu);
+        dopus_lai_axpy(NP, 1.0, ws->c_prim, ws->d_prim);
+        dopus_lai_axpy((N + 1) * NX, 1.0, ws->c_lam, ws->d_lam);
+        dopus_lai_axpy(NE, 1.0, ws->c_nu, ws->d_nu);
     }
 
     /* dt_lo = D dw + r_lo, dt_up = r_up - D dw, dz = -(rc + z dt) / t */
@@ -674,16 +674,16 @@ static int primal_infeasible(const dopus_qp_workspace *ws, const dopus_qp_in *in
     double bty = 0.0, aty, bscale = 1.0;
     if (!(r->ny > CERT_GROWTH * data_scale))
         return 0;
-    aty = dopus_la_norm_inf(NP, ws->aty) / r->ny;
-    bty -= dopus_la_dot(NX, ws->lam, in->x0);
-    bscale = dmax(bscale, dopus_la_norm_inf(NX, in->x0));
+    aty = dopus_lai_norm_inf(NP, ws->aty) / r->ny;
+    bty -= dopus_lai_dot(NX, ws->lam, in->x0);
+    bscale = dmax(bscale, dopus_lai_norm_inf(NX, in->x0));
     for (k = 0; k < N; ++k) {
-        bty -= dopus_la_dot(NX, ws->lam + (k + 1) * NX, in->b[k]);
-        bscale = dmax(bscale, dopus_la_norm_inf(NX, in->b[k]));
+        bty -= dopus_lai_dot(NX, ws->lam + (k + 1) * NX, in->b[k]);
+        bscale = dmax(bscale, dopus_lai_norm_inf(NX, in->b[k]));
     }
     if (NE > 0) {
-        bty -= dopus_la_dot(NE, ws->nu, in->req);
-        bscale = dmax(bscale, dopus_la_norm_inf(NE, in->req));
+        bty -= dopus_lai_dot(NE, ws->nu, in->req);
+        bscale = dmax(bscale, dopus_lai_norm_inf(NE, in->req));
     }
     for (i = 0; i < NI; ++i) {
         if (ws->has_lo[i]) {
@@ -706,7 +706,7 @@ static int dual_infeasible(dopus_qp_workspace *ws, const dopus_qp_in *in, double
                            double hscale)
 {
     int k, i;
-    double nw = dopus_la_norm_inf(NP, ws->prim), dhd = 0.0, gd = 0.0, hd = 0.0, eq = 0.0, cone = 0.0;
+    double nw = dopus_lai_norm_inf(NP, ws->prim), dhd = 0.0, gd = 0.0, hd = 0.0, eq = 0.0, cone = 0.0;
     double *hdv = ws->c_prim;
     if (!(nw > CERT_GROWTH * data_scale))
         return 0;
@@ -714,28 +714,28 @@ static int dual_infeasible(dopus_qp_workspace *ws, const dopus_qp_in *in, double
         const double *w = ws->prim + k * NW;
         double *h = hdv + k * NW;
         double *t = ws->work;
-        dopus_la_symv_l(NW, 1.0 / nw, in->H[k], NW, w, 0.0, h);
-        dhd += dopus_la_dot(NW, w, h) / nw;
-        gd += dopus_la_dot(NW, in->g[k], w) / nw;
-        hd = dmax(hd, dopus_la_norm_inf(NW, h));
+        dopus_lai_symv_l(NW, 1.0 / nw, in->H[k], NW, w, 0.0, h);
+        dhd += dopus_lai_dot(NW, w, h) / nw;
+        gd += dopus_lai_dot(NW, in->g[k], w) / nw;
+        hd = dmax(hd, dopus_lai_norm_inf(NW, h));
         for (i = 0; i < NX; ++i)
             t[i] = ws->prim[(k + 1) * NW + i] / nw;
-        dopus_la_gemv_n(NX, NW, -1.0 / nw, in->Phi[k], NX, w, 1.0, t);
-        eq = dmax(eq, dopus_la_norm_inf(NX, t));
+        dopus_lai_gemv_n(NX, NW, -1.0 / nw, in->Phi[k], NX, w, 1.0, t);
+        eq = dmax(eq, dopus_lai_norm_inf(NX, t));
     }
     {
         const double *xN = ws->prim + N * NW;
         double *h = hdv + N * NW;
-        dopus_la_symv_l(NX, 1.0 / nw, in->HN, NX, xN, 0.0, h);
-        dhd += dopus_la_dot(NX, xN, h) / nw;
-        gd += dopus_la_dot(NX, in->gN, xN) / nw;
-        hd = dmax(hd, dopus_la_norm_inf(NX, h));
+        dopus_lai_symv_l(NX, 1.0 / nw, in->HN, NX, xN, 0.0, h);
+        dhd += dopus_lai_dot(NX, xN, h) / nw;
+        gd += dopus_lai_dot(NX, in->gN, xN) / nw;
+        hd = dmax(hd, dopus_lai_norm_inf(NX, h));
         if (NE > 0) {
-            dopus_la_gemv_n(NE, NX, 1.0 / nw, in->Req, NE1, xN, 0.0, ws->work);
-            eq = dmax(eq, dopus_la_norm_inf(NE, ws->work));
+            dopus_lai_gemv_n(NE, NX, 1.0 / nw, in->Req, NE1, xN, 0.0, ws->work);
+            eq = dmax(eq, dopus_lai_norm_inf(NE, ws->work));
         }
     }
-    eq = dmax(eq, dopus_la_norm_inf(NX, ws->prim) / nw);
+    eq = dmax(eq, dopus_lai_norm_inf(NX, ws->prim) / nw);
     for (i = 0; i < NI; ++i) {
         const double dv = ws->v[i] / nw;
         if (ws->has_lo[i])
@@ -937,14 +937,14 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
     }
     if (st.warm_start) {
         /* a non-finite warm start is bad input, not a reason to produce NaN */
-        if (!dopus_la_all_finite(NX, N + 1, &sol->x[0][0], NX) ||
-            !dopus_la_all_finite(NX, N + 1, &sol->lam[0][0], NX) ||
-            !dopus_la_all_finite(NU1, N, &sol->u[0][0], NU1) ||
-            !dopus_la_all_finite(NW, N, &sol->mu_b[0][0], NW) ||
-            !dopus_la_all_finite(DOPUS_QP_NG1, N, &sol->mu_g[0][0], DOPUS_QP_NG1) ||
-            !dopus_la_all_finite(NX, 1, sol->mu_bN, NX) ||
-            !dopus_la_all_finite(DOPUS_QP_NR1, 1, sol->mu_r, DOPUS_QP_NR1) ||
-            !dopus_la_all_finite(NE1, 1, sol->nu, NE1)) {
+        if (!dopus_lai_all_finite(NX, N + 1, &sol->x[0][0], NX) ||
+            !dopus_lai_all_finite(NX, N + 1, &sol->lam[0][0], NX) ||
+            !dopus_lai_all_finite(NU1, N, &sol->u[0][0], NU1) ||
+            !dopus_lai_all_finite(NW, N, &sol->mu_b[0][0], NW) ||
+            !dopus_lai_all_finite(DOPUS_QP_NG1, N, &sol->mu_g[0][0], DOPUS_QP_NG1) ||
+            !dopus_lai_all_finite(NX, 1, sol->mu_bN, NX) ||
+            !dopus_lai_all_finite(DOPUS_QP_NR1, 1, sol->mu_r, DOPUS_QP_NR1) ||
+            !dopus_lai_all_finite(NE1, 1, sol->nu, NE1)) {
             zero_solution(sol);
             return DOPUS_QP_INVALID_INPUT;
         }
@@ -969,14 +969,14 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         if (ws->has_up[i])
             data_scale = dmax(data_scale, fabs(ws->up[i]));
     }
-    data_scale = dmax(data_scale, dopus_la_norm_inf(NX, in->x0));
+    data_scale = dmax(data_scale, dopus_lai_norm_inf(NX, in->x0));
     for (i = 0; i < N; ++i) {
-        data_scale = dmax(data_scale, dopus_la_norm_inf(NX, in->b[i]));
-        data_scale = dmax(data_scale, dopus_la_norm_inf(NW, in->g[i]));
+        data_scale = dmax(data_scale, dopus_lai_norm_inf(NX, in->b[i]));
+        data_scale = dmax(data_scale, dopus_lai_norm_inf(NW, in->g[i]));
     }
-    data_scale = dmax(data_scale, dopus_la_norm_inf(NX, in->gN));
+    data_scale = dmax(data_scale, dopus_lai_norm_inf(NX, in->gN));
     if (NE > 0)
-        data_scale = dmax(data_scale, dopus_la_norm_inf(NE, in->req));
+        data_scale = dmax(data_scale, dopus_lai_norm_inf(NE, in->req));
 
     for (iter = 0;; ++iter) {
         double alpha, mu_aff, sigma, target;
@@ -1028,8 +1028,8 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         fact = riccati_factor(ws, in);
         if (fact == 1 && NE > 0) {
             int tries;
-            double rho0 = hscale / dmax(dopus_la_max_abs_mat(NE, NX, in->Req, NE1), 1e-150);
-            rho0 /= dmax(dopus_la_max_abs_mat(NE, NX, in->Req, NE1), 1e-150);
+            double rho0 = hscale / dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), 1e-150);
+            rho0 /= dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), 1e-150);
             for (tries = 0; tries < RHO_TRIES && fact == 1 && ws->rho_aug < rho0 * RHO_MAX_REL; ++tries) {
                 ws->rho_aug = ws->rho_aug > 0.0 ? 100.0 * ws->rho_aug : rho0;
                 ++n_aug;
@@ -1063,9 +1063,9 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             for (i = 0; i < NI; ++i)
                 ws->rc_lo[i] = ws->rc_up[i] = 0.0;
             newton_direction(ws, in, nref);
-            dopus_la_axpy(NP, 1.0, ws->d_prim, ws->prim);
-            dopus_la_axpy((N + 1) * NX, 1.0, ws->d_lam, ws->lam);
-            dopus_la_axpy(NE, 1.0, ws->d_nu, ws->nu);
+            dopus_lai_axpy(NP, 1.0, ws->d_prim, ws->prim);
+            dopus_lai_axpy((N + 1) * NX, 1.0, ws->d_lam, ws->lam);
+            dopus_lai_axpy(NE, 1.0, ws->d_nu, ws->nu);
             continue;
         }
 
@@ -1101,9 +1101,9 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         newton_direction(ws, in, nref);
         alpha = dmin(1.0, STEP_TAU * max_step(ws));
 
-        dopus_la_axpy(NP, alpha, ws->d_prim, ws->prim);
-        dopus_la_axpy((N + 1) * NX, alpha, ws->d_lam, ws->lam);
-        dopus_la_axpy(NE, alpha, ws->d_nu, ws->nu);
+        dopus_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
+        dopus_lai_axpy((N + 1) * NX, alpha, ws->d_lam, ws->lam);
+        dopus_lai_axpy(NE, alpha, ws->d_nu, ws->nu);
         for (i = 0; i < NI; ++i) {
             if (ws->has_lo[i]) {
                 ws->t_lo[i] += alpha * ws->dt_lo[i];
