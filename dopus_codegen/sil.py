@@ -161,8 +161,13 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
         from .offline import solve_ocp
         guess, _info = solve_ocp(disc, x)
     if backend_obj is None:
-        backend_obj = make_backend(disc, backend, M=M_eff, hessian=hessian, regularization=regularization,
-                                   reg_eps=reg_eps)
+        try:
+            backend_obj = make_backend(disc, backend, M=M_eff, hessian=hessian, regularization=regularization,
+                                       reg_eps=reg_eps)
+        except SilError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - settings rejected, C build failed, ...
+            raise SilError(f"cannot set up the {backend} backend: {exc}") from None
     ctrl = backend_obj
     ctrl.init(x, guess)
     snap = dict(getattr(ctrl, "timings", {}) or {})
@@ -438,10 +443,14 @@ def write_json(runs, path) -> None:
 
 # --------------------------------------------------------------------------- CLI
 def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps,
-                backend, echo=print, progress=True) -> list:
+                backend, echo=None, progress=True) -> list:
     """The ``dopus-gen sil`` command: runs, summary table, JSON and plots."""
     from .ocp import load_ocp
     from .derivatives import build_functions
+
+    if echo is None:
+        import click
+        echo = click.echo
 
     ocp = load_ocp(ocp_file)
     disc = build_functions(ocp)
@@ -455,12 +464,19 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
 
     from .offline import solve_ocp
     guess, info = solve_ocp(disc, x0)
+    if not info.get("success", True):
+        echo(f"warning: the offline solve at the initial state did not converge ({info.get('status')}); "
+             "the controller starts from its last iterate", err=True)
 
+    N = int(disc.N)
     configs = [(M, None)]
-    if compare == "full":
-        configs.append((int(disc.N) - 1, "full RTI"))
+    if compare == "full" and min(M, N - 1) != N - 1:
+        configs.append((N - 1, "full RTI"))
     runs = []
     for m, label in configs:
+        name = label or ("full RTI" if min(m, N - 1) == N - 1 else f"DOPUS M = {m}")
+        echo(f"{name}: {backend} backend, {hessian} Hessian, regularization {regularization}, "
+             f"{duration if duration is not None else spec.duration} s ...", err=True)
         run = run_closed_loop(disc, backend=backend, M=m, hessian=hessian, regularization=regularization,
                               reg_eps=reg_eps, duration=duration, guess=guess, progress=progress, label=label)
         runs.append(run)

@@ -100,8 +100,8 @@ def _backend_params():
                 # solution changes most towards the end of the horizon (progress reward -theta_N,
                 # no turnpike), so blocks computed for stage N-1 are 30-90 % off when the stage
                 # reaches the front; with one refresh per instant the exact-Hessian iteration
-                # does not settle (KKT 0.5 -> 20, deviation 4.7 cm). The C backend additionally
-                # stops on a QP numerical failure at instant 4 whose QP the reference solves
+                # does not settle (KKT 0.5 -> 20, deviation 4.7 cm). The C backend's QP also
+                # fails (max iterations) at instant 4 on a QP that the reference solves
                 # (reduced Hessian min eigenvalue 2e-5).
                 marks.append(pytest.mark.xfail(strict=True, reason="DOPUS M = 1 with the exact Hessian "
                                                "does not settle in this scenario (see the comment)"))
