@@ -238,17 +238,19 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
             x = plant.step(x, u0, p, duration=t_next - t_cur)
 
             t0 = time.perf_counter()
+            prepared = True
             try:
                 ctrl.prepare()
             except Exception as err:  # noqa: BLE001
                 if not _is_dopus_error(err):
                     raise
                 status = status or _status_of(err)
+                prepared = False
             t_pr = time.perf_counter() - t0
             snap = dict(getattr(ctrl, "timings", {}) or {})
             phases.update(_split_phases("prepare", _changed(snap_fb, snap)))
             rec_status.append(int(status))
-            rec_rec.append([int(k) for k in getattr(ctrl, "recomputed", [])])
+            rec_rec.append([int(k) for k in getattr(ctrl, "recomputed", [])] if prepared else [])
 
             timing["feedback"].append(t_fb * 1e6)
             timing["prepare"].append(t_pr * 1e6)
