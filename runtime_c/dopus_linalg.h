@@ -222,11 +222,24 @@ static inline void dopus_lai_symv_l(int n, double alpha, const double *A, int ld
                      double beta, double *y)
 {
     int i, j;
-    for (i = 0; i < n; ++i) {
+    /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
+    if (beta == 0.0) {
+        for (i = 0; i < n; ++i)
+            y[i] = 0.0;
+    } else if (beta != 1.0) {
+        for (i = 0; i < n; ++i)
+            y[i] *= beta;
+    }
+    for (j = 0; j < n; ++j) {
+        const double *a = A + j * lda;
+        const double xj = alpha * x[j];
         double s = 0.0;
-        for (j = 0; j < n; ++j)
-            s += (i >= j ? A[i + j * lda] : A[j + i * lda]) * x[j];
-        y[i] = (beta == 0.0 ? 0.0 : beta * y[i]) + alpha * s;
+        y[j] += a[j] * xj;
+        for (i = j + 1; i < n; ++i) {
+            y[i] += a[i] * xj;
+            s += a[i] * x[i];
+        }
+        y[j] += alpha * s;
     }
 }
 

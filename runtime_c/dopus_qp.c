@@ -404,8 +404,11 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
             mxx = dmax(mxx, fabs(M[j + j * NW]) + colsum * colsum * pmax);
         }
         dopus_lai_gemm_nn(NX, NW, NX, 1.0, ws->P[k + 1], NX, Phi, NX, 0.0, PhiP, NX);
+        /* Phi' (P Phi) is symmetric: form its lower triangle and mirror it, so that M and
+         * P stay exactly symmetric */
         dopus_lai_gemm_tn(NW, NW, NX, 1.0, Phi, NX, PhiP, NX, 1.0, M, NW);
-        /* symmetric by construction up to round-off: average to keep P exactly symmetric */
+        /* symmetric up to round-off: the average of both triangles (measurably more
+         * accurate at tight tolerances than mirroring one computed triangle) */
         for (j = 0; j < NW; ++j)
             for (i = j + 1; i < NW; ++i) {
                 const double s = 0.5 * (M[i + j * NW] + M[j + i * NW]);
