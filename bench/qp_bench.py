@@ -76,6 +76,10 @@ HPIPM_CONFIGS = {
                      "what": "RESCALED BY HAND: terminal equality rows divided by eq_scale * max|row|, "
                              "classic Riccati; the configuration found to converge on the robot-arm QPs"},
 }
+# ratio columns (numerator, denominator)
+RANDOM_RATIOS = [("ours", "hpipm"), ("ours", "hpipm_best"), ("ours_alt", "hpipm_best")]
+ROBOT_RATIOS = [("ours", "hpipm"), ("ours", "hpipm_scaled"), ("ours", "hpipm_best"),
+                ("ours_alt", "hpipm_scaled"), ("ours_alt", "hpipm_best")]
 HARNESS_SOURCES = ("qp_bench_main.c", "qp_bench_qp.c", "qp_bench_hpipm.c")
 
 
@@ -166,7 +170,7 @@ def build_harness(hp_name: str, hp: dict, sizes: dict | None, cflags: str, alt_c
         incs = [sdir] + incs + [RUNTIME]
         ours = [BENCH / "qp_bench_dopus.c", RUNTIME / "dopus_qp.c", RUNTIME / "dopus_linalg.c"]
         srcs += ours
-        deps += ours + [BENCH / "qp_bench_dopus.h", RUNTIME / "dopus_qp.h", RUNTIME / "dopus_linalg.h"]
+        deps += ours + [BENCH / "qp_bench_dopus.h", *RUNTIME.glob("dopus_*.h")]
         defs.append("-DQPB_WITH_DOPUS")
         if alt_cflags:
             tag += "_alt"
@@ -174,7 +178,7 @@ def build_harness(hp_name: str, hp: dict, sizes: dict | None, cflags: str, alt_c
             adir.mkdir(exist_ok=True)
             (adir / "qpbn_sizes.h").write_text(_rename(sizes_h))
             for src in (BENCH / "qp_bench_dopus.c", BENCH / "qp_bench_dopus.h", RUNTIME / "dopus_qp.c",
-                        RUNTIME / "dopus_qp.h", RUNTIME / "dopus_linalg.c", RUNTIME / "dopus_linalg.h"):
+                        RUNTIME / "dopus_linalg.c", *sorted(RUNTIME.glob("dopus_*.h"))):
                 (adir / _rename(src.name)).write_text(_rename(src.read_text()))
             for c in ("qp_bench_qpbn.c", "qpbn_qp.c", "qpbn_linalg.c"):
                 obj = adir / (c[:-2] + ".o")
@@ -390,18 +394,19 @@ def fmt_us(t):
     return "       -" if t is None else f"{1e6 * t:8.1f}"
 
 
-def table(title: str, groups: dict, names: list, anchors: list, ours: str, log=print, shown=None) -> dict:
-    """Print one table (rows: groups of QPs; columns: the solvers in ``shown``, all if None);
-    return the medians per group for every solver.
+def table(title: str, groups: dict, names: list, ratios: list, log=print, shown=None) -> dict:
+    """Print one table (rows: groups of QPs; columns: the solvers in ``shown``, all if None,
+    then the ratios); return the medians per group for every solver.
 
-    Ratios are medians over the QPs of the per-QP ratios ours / anchor."""
-    anchors = [a for a in anchors if a in names and ours in names]
-    log(f"\n{title}")
+    ``ratios``: (numerator, denominator) solver names; a ratio is the median over the QPs of
+    the per-QP ratios (per QP and per IPM iteration)."""
+    ratios = [(a, b) for a, b in ratios if a in names and b in names]
     cols = [n for n in names if shown is None or n in shown]
+    log(f"\n{title}")
     log(f"{'QPs':<18}{'#':>4}" + "".join(f" | {n:>25}" for n in cols)
-        + "".join(f" | {'ours/' + a:>17}" for a in anchors))
+        + "".join(f" | {a + '/' + b:>21}" for a, b in ratios))
     log(f"{'':<18}{'':>4}" + "".join(f" | {'us/QP iters us/iter ok':>25}" for _ in cols)
-        + "".join(f" | {'QP   iter':>17}" for _ in anchors))
+        + "".join(f" | {'QP   iter':>21}" for _ in ratios))
     summary = {}
     for gname, entries in groups.items():
         if not entries:
@@ -424,13 +429,14 @@ def table(title: str, groups: dict, names: list, anchors: list, ours: str, log=p
                      "statuses": sorted({e["solvers"][n]["status"] for e in entries})}
             if n in cols:
                 line += f" | {fmt_us(t)} {it if it is not None else 0:5.1f} {fmt_us(tpi)} {ok:>2}"
-        for a in anchors:
-            r_qp = med([e["solvers"][ours]["t_median"] / e["solvers"][a]["t_median"] for e in entries
-                        if e["solvers"][a]["t_median"]])
-            r_it = med([e["solvers"][ours]["time_per_iter"] / e["solvers"][a]["time_per_iter"]
-                        for e in entries if e["solvers"][ours]["iterations"] and e["solvers"][a]["time_per_iter"]])
-            gs[f"ratio_ours_over_{a}"] = {"per_qp": r_qp, "per_iter": r_it}
-            line += f" | {r_qp if r_qp is not None else float('nan'):7.2f} {r_it if r_it is not None else float('nan'):7.2f}"
+        for a, b in ratios:
+            r_qp = med([e["solvers"][a]["t_median"] / e["solvers"][b]["t_median"] for e in entries
+                        if e["solvers"][b]["t_median"]])
+            r_it = med([e["solvers"][a]["time_per_iter"] / e["solvers"][b]["time_per_iter"]
+                        for e in entries if e["solvers"][a]["iterations"] and e["solvers"][b]["time_per_iter"]])
+            gs[f"ratio_{a}_over_{b}"] = {"per_qp": r_qp, "per_iter": r_it}
+            line += (f" | {r_qp if r_qp is not None else float('nan'):10.2f} "
+                     f"{r_it if r_it is not None else float('nan'):10.2f}")
         log(line)
         summary[gname] = gs
     return summary
@@ -439,7 +445,9 @@ def table(title: str, groups: dict, names: list, anchors: list, ours: str, log=p
 def markdown_table(summary: dict, cols: list, ratios: list) -> str:
     """The summary of one QP set as a markdown table (what bench/README.md shows). Cell:
     time per QP / iterations / time per iteration in microseconds (converged/count)."""
-    out = ["| QPs | " + " | ".join(cols) + " | " + " | ".join(f"ours/{a} QP (iter)" for a in ratios) + " |",
+    first = next(iter(summary.values()))
+    ratios = [(a, b) for a, b in ratios if f"ratio_{a}_over_{b}" in first]
+    out = ["| QPs | " + " | ".join(cols) + " | " + " | ".join(f"{a}/{b} QP (iter)" for a, b in ratios) + " |",
            "|---|" + "---|" * (len(cols) + len(ratios))]
     for g, gs in summary.items():
         cells = []
@@ -448,8 +456,8 @@ def markdown_table(summary: dict, cols: list, ratios: list) -> str:
             cells.append("-" if v is None or v["t_median"] is None else
                          f"{1e6 * v['t_median']:.0f} / {v['iterations_median']:.1f} / "
                          f"{1e6 * v['time_per_iter_median']:.1f} ({v['converged']}/{v['count']})")
-        for a in ratios:
-            v = gs.get(f"ratio_ours_over_{a}")
+        for a, b in ratios:
+            v = gs.get(f"ratio_{a}_over_{b}")
             cells.append("-" if v is None or v["per_qp"] is None else
                          f"**{v['per_qp']:.2f}** ({v['per_iter']:.2f})" if v["per_iter"] is not None
                          else f"**{v['per_qp']:.2f}**")
@@ -566,7 +574,6 @@ def main(argv=None) -> int:
                          "sources_sha1": {f: _sha1(RUNTIME / f) for f in ("dopus_qp.c", "dopus_qp.h",
                                                                           "dopus_linalg.c")}},
               "notes": NOTES}
-    anchor, ours = "hpipm", "ours"
     shown = None if args.wide else {"ours", "ours_alt", "hpipm", "hpipm_eqmask", "hpipm_robust", "hpipm_classic",
                                     "hpipm_scaled", "hpipm_casadi", "hpipm_best"}
 
@@ -581,7 +588,7 @@ def main(argv=None) -> int:
         groups = {f"random N={N}": [e for e in entries if e["N"] == N] for N in RANDOM_NS}
         report["random"] = {"qps": entries, "summary": table(
             "Random QPs (nx=5, nu=3, 3 control bounds, 2 terminal equality rows), medians", groups, names,
-            [anchor, "hpipm_best"], ours, log, shown), "commands": cmds}
+            RANDOM_RATIOS, log, shown), "commands": cmds}
 
     if not args.no_robot:
         log("\nrobot-arm QPs (Python reference, full RTI, fixed xhat_0)")
@@ -593,7 +600,7 @@ def main(argv=None) -> int:
                   "robot all": entries}
         report["robot_arm"] = {"qps": entries, "summary": table(
             "Robot-arm QPs (N=40), medians; hpipm/hpipm_eqmask: equality as stated; hpipm_scaled: rows rescaled "
-            "by hand", groups, names, [anchor, "hpipm_scaled", "hpipm_best"], ours, log, shown), "commands": cmds}
+            "by hand", groups, names, ROBOT_RATIOS, log, shown), "commands": cmds}
         st = {n: sorted({HPIPM_STATUS.get(e['solvers'][n]['status'], str(e['solvers'][n]['status']))
                          if n.startswith("hpipm") else DOPUS_STATUS.get(e['solvers'][n]['status'], '?')
                          for e in entries}) for n in names if n != "hpipm_best"}
@@ -605,13 +612,12 @@ def main(argv=None) -> int:
         if "robot_arm" in report:
             names = [n for n in ("ours", "ours_alt", "hpipm", "hpipm_classic", "hpipm_scaled",
                                  "hpipm_casadi_scaled", "hpipm_best") if n in report["robot_arm"]["summary"]["robot all"]]
-            md += ["\nRobot-arm QPs\n\n", markdown_table(report["robot_arm"]["summary"], names,
-                                                          ["hpipm", "hpipm_scaled", "hpipm_best"])]
+            md += ["\nRobot-arm QPs\n\n", markdown_table(report["robot_arm"]["summary"], names, ROBOT_RATIOS)]
         if "random" in report:
             first = next(iter(report["random"]["summary"].values()))
             names = [n for n in ("ours", "ours_alt", "hpipm", "hpipm_robust", "hpipm_casadi", "hpipm_best")
                      if n in first]
-            md += ["\nRandom QPs\n\n", markdown_table(report["random"]["summary"], names, ["hpipm", "hpipm_best"])]
+            md += ["\nRandom QPs\n\n", markdown_table(report["random"]["summary"], names, RANDOM_RATIOS)]
         args.markdown.parent.mkdir(parents=True, exist_ok=True)
         args.markdown.write_text("".join(md))
         log(f"wrote {args.markdown}")
