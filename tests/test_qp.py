@@ -421,3 +421,20 @@ def test_linear_programs():
         assert abs(info["obj"] - obj_pq) <= 1e-7 * max(1.0, abs(obj_pq)), (trial, info["obj"], obj_pq)
         assert max(P.kkt_residual(qp, sol, scaled=True).values()) <= 1e-8
     assert n_solved >= 5
+
+
+def test_robot_arm_qps_made_infeasible_are_flagged(robot_qps):
+    """Robot-arm QPs with the control steps frozen and the terminal equality moved: no
+    feasible point (Clarabel agrees), also for the indefinite exact-Hessian QPs."""
+    qp0 = robot_qps[0][1]
+    h = solver(tuple(int(qp0[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne")))
+    nx = int(qp0["nx"])
+    for label, qp in robot_qps[::2]:
+        q = {k: (np.array(v, copy=True) if isinstance(v, np.ndarray) else v) for k, v in qp.items()}
+        q["lbw"][:, nx:] = np.maximum(q["lbw"][:, nx:], -1e-6)
+        q["ubw"][:, nx:] = np.minimum(q["ubw"][:, nx:], 1e-6)
+        q["req"] = q["req"] + 0.05
+        cl_status, _ = P.solve_clarabel(q)
+        assert cl_status == "PrimalInfeasible", (label, cl_status)
+        sol, info = h.solve(q, tol=1e-10)
+        assert info["status"] == "primal_infeasible", (label, info)
