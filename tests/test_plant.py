@@ -125,3 +125,13 @@ def test_plant_bad_input():
         plant.step(XHAT0, [1.0, 2.0])
     with pytest.raises(PlantError, match="not finite"):
         plant.step(XHAT0 * np.nan, [1.0, 2.0, 3.0])
+
+
+def test_plant_integration_failure_is_reported():
+    """xdot = x^2 from x = 10 leaves every bound at t = 0.1 s: CVODES must fail, clearly."""
+    x, u, p = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("p", 0)
+    plant = Plant(ca.Function("blowup", [x, u, p], [x ** 2 + u]), 0.5, 0)
+    # Before the blow-up the plant is the exact solution x(t) = 1 / (1/10 - t).
+    assert plant.step([10.0], [0.0], duration=0.05)[0] == pytest.approx(20.0, rel=1e-8)
+    with pytest.raises(PlantError, match="CVODES failed"):
+        plant.step([10.0], [0.0])
