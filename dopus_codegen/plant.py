@@ -84,7 +84,7 @@ class Plant:
         dae = {"x": x, "p": ca.vertcat(u, p, h), "ode": h * ca.reshape(xdot, self.nx, 1)}
         opts = {"reltol": float(reltol), "abstol": float(abstol), "max_num_steps": 100000,
                 "linear_multistep_method": method,
-                "show_eval_warnings": False}
+                "show_eval_warnings": False, "disable_internal_warnings": True}
         self._integrator = ca.integrator("plant", "cvodes", dae, 0.0, 1.0, opts)
 
     def _vector(self, value, n: int, what: str) -> np.ndarray:
