@@ -74,6 +74,11 @@ class Discretized:
     # checks and plots, not part of the generated code.
     stage_residual: Optional[ca.Function] = None
     term_residual: Optional[ca.Function] = None
+    # Stage-cost part A_l of the stage Hessian, (x, u, p) -> A_l (algorithm.md sections 2
+    # and 4 step 5): exact hess_w l; Gauss-Newton J' W J + hess_w l_extra (None without a
+    # least-squares stage cost). Cheap: l is evaluated at the node, no integrator.
+    stage_hess_cost_exact: Optional[ca.Function] = None
+    stage_hess_cost_gn: Optional[ca.Function] = None
     cache: dict = field(default_factory=dict, repr=False, compare=False)  # e.g. offline solvers
 
     def stage_hess(self, kind: str) -> ca.Function:
@@ -86,6 +91,21 @@ class Discretized:
             return self.stage_hess_gn
         raise ValueError(f"unknown Hessian kind {kind!r} (expected 'exact' or 'gauss-newton')")
 
+    def stage_hess_cost(self, kind: str) -> ca.Function:
+        """``stage_hess_cost_exact`` for ``"exact"``, ``stage_hess_cost_gn`` for
+        ``"gauss-newton"``: ``(x, u, p) -> A_l``, the stage-cost part of ``stage_hess(kind)``'s A."""
+        if kind == "exact":
+            fun = self.stage_hess_cost_exact
+        elif kind in ("gauss-newton", "gn"):
+            if self.stage_hess_cost_gn is None:
+                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
+            fun = self.stage_hess_cost_gn
+        else:
+            raise ValueError(f"unknown Hessian kind {kind!r} (expected 'exact' or 'gauss-newton')")
+        if fun is None:
+            raise OcpError(f"{self.name}: the problem was built without the stage-cost Hessian functions")
+        return fun
+
     def term_hess(self, kind: str) -> ca.Function:
         """Terminal counterpart of :meth:`stage_hess`."""
         if kind == "exact":
@@ -97,8 +117,9 @@ class Discretized:
     @property
     def functions(self) -> list:
         """Every CasADi function of algorithm.md section 2, in table order (GN stage
-        Hessian omitted when the OCP has no least-squares stage cost)."""
+        Hessians omitted when the OCP has no least-squares stage cost)."""
         fns = [self.stage_eval, self.stage_grad, self.stage_hess_exact, self.stage_hess_gn,
+               self.stage_hess_cost_exact, self.stage_hess_cost_gn,
                self.term_eval, self.term_grad, self.term_hess_exact, self.term_hess_gn, self.ode]
         return [f for f in fns if f is not None]
 
@@ -139,7 +160,12 @@ def _stage_functions(name: str, m: StageModel):
                              in_names, ["gL", "phi", "l", "g"], _FN_OPTS)
     stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [_d(A), _d(Phi), _d(C)],
                                    in_names, ["A", "Phi", "C"], _FN_OPTS)
-    stage_hess_gn = None
+    # stage-cost part of A (algorithm.md section 4 step 5): l is evaluated at the node, so
+    # this needs no integrator sensitivities
+    cost_in, cost_in_names = [x, u, p], ["x", "u", "p"]
+    stage_hess_cost_exact = ca.Function(f"{name}_stage_hess_cost_exact", cost_in,
+                                        [_d(ca.hessian(m.l, w)[0])], cost_in_names, ["A_l"], _FN_OPTS)
+    stage_hess_gn = stage_hess_cost_gn = None
     if m.has_stage_ls:
         J = ca.jacobian(m.res, w)
         # Gauss-Newton: J' W J + exact Hessian of the non least-squares part, no curvature
@@ -147,7 +173,10 @@ def _stage_functions(name: str, m: StageModel):
         A_gn = ca.mtimes([J.T, ca.DM(m.W), J]) + ca.hessian(m.l_extra, w)[0]
         stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [_d(A_gn), _d(Phi), _d(C)],
                                     in_names, ["A", "Phi", "C"], _FN_OPTS)
-    return stage_eval, stage_grad, stage_hess_exact, stage_hess_gn
+        # the same expression: A - A_l = 0 for Gauss-Newton
+        stage_hess_cost_gn = ca.Function(f"{name}_stage_hess_cost_gn", cost_in, [_d(A_gn)],
+                                         cost_in_names, ["A_l"], _FN_OPTS)
+    return stage_eval, stage_grad, stage_hess_exact, stage_hess_gn, stage_hess_cost_exact, stage_hess_cost_gn
 
 
 def _terminal_functions(name: str, m: StageModel):
@@ -235,6 +264,7 @@ def build_functions(ocp: Ocp) -> Discretized:
         stage_eval=stage[0], stage_grad=stage[1], stage_hess_exact=stage[2], stage_hess_gn=stage[3],
         term_eval=term[0], term_grad=term[1], term_hess_exact=term[2], term_hess_gn=term[3],
         ode=ode, has_gn=stage[3] is not None, weights={"W": m.W.copy(), "WN": m.WN.copy()},
+        stage_hess_cost_exact=stage[4], stage_hess_cost_gn=stage[5],
     )
     if m.res.size1():
         disc.stage_residual = ca.Function(f"{name}_stage_residual", [m.x, m.u, m.p], [_d(m.res)],

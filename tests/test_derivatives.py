@@ -101,6 +101,72 @@ def test_stage_grad_and_hessian_blocks(disc):
         assert np.array_equal(dm(Phi_gn), dm(Phi)) and np.array_equal(dm(C_gn), dm(C))
 
 
+def test_stage_cost_hessian(disc):
+    """A_l (algorithm.md section 4 step 5): exact = FD of grad_w l (stage_grad with zero
+    multipliers); Gauss-Newton = J' W J with J by FD of the residual."""
+    rng = np.random.default_rng(5)
+    nx = disc.nx
+    zl, zg = np.zeros(disc.nx), np.zeros(disc.ng)
+    for x, u, p, _, _ in random_points(disc, rng, 4):
+        w = np.concatenate([x, u])
+
+        def split(wv):
+            return wv[:nx], wv[nx:]
+
+        A_l = dm(disc.stage_hess_cost("exact")(x, u, p))
+        assert A_l.shape == (disc.nw, disc.nw) and np.array_equal(A_l, A_l.T)
+        A_fd = fd_jac(lambda z: dm(disc.stage_grad(*split(z), p, zl, zg)[0]), w, H2)
+        ok, err = close(A_l, A_fd, RTOL)
+        assert ok, f"A_l exact vs FD of grad l: {err}"
+        A_gn = dm(disc.stage_hess_cost("gauss-newton")(x, u, p))
+        J = fd_jac(lambda z: dm(disc.stage_residual(*split(z), p)), w, H1)
+        ok, err = close(A_gn, J.T @ disc.weights["W"] @ J, RTOL)
+        assert ok, f"A_l GN vs J'WJ: {err}"
+        # the Gauss-Newton A has no curvature besides the cost's: A - A_l = 0
+        lam, mu_g = rng.standard_normal(disc.nx), rng.standard_normal(disc.ng)
+        assert np.max(np.abs(dm(disc.stage_hess_gn(x, u, p, lam, mu_g)[0]) - A_gn)) <= 1e-14 * max(1.0, np.abs(A_gn).max())
+
+
+def test_stage_cost_hessian_with_extra_cost():
+    """Gauss-Newton A_l = J' W J + hess l_extra: with an affine residual this is the exact
+    hess l, checked by FD of grad l; without least squares there is no GN A_l."""
+    import casadi as ca
+
+    from dopus_codegen import Ocp
+    from dopus_codegen.ocp import OcpError
+
+    ocp = Ocp("extra_cost")
+    x = ocp.state("x", 2)
+    u = ocp.control("u", lb=-1, ub=1)
+    ocp.dynamics(ca.vertcat(x[1], u - ca.sin(x[0])))
+    ocp.stage_least_squares(ca.vertcat(x - 1.0, u), weights=[1.0, 0.5, 0.1])
+    ocp.stage_cost(x[0] ** 2 * u + ca.cos(x[1]))
+    ocp.horizon(N=4, dt=0.1)
+    ocp.initial_state([0.3, 0.0])
+    d = build_functions(ocp)
+    rng = np.random.default_rng(2)
+    zl, zg = np.zeros(d.nx), np.zeros(d.ng)
+    for _ in range(3):
+        w = rng.standard_normal(d.nw)
+        A_fd = fd_jac(lambda z: dm(d.stage_grad(z[:2], z[2:], [], zl, zg)[0]), w, H2)
+        for kind in ("exact", "gauss-newton"):
+            ok, err = close(dm(d.stage_hess_cost(kind)(w[:2], w[2:], [])), A_fd, RTOL)
+            assert ok, f"{kind} A_l vs FD: {err}"
+    ocp2 = Ocp("no_ls")
+    y = ocp2.state("y")
+    v = ocp2.control("v")
+    ocp2.dynamics(v - y)
+    ocp2.stage_cost(y ** 4 + v ** 2)
+    ocp2.horizon(N=3, dt=0.1)
+    ocp2.initial_state([1.0])
+    d2 = build_functions(ocp2)
+    assert d2.stage_hess_cost_gn is None
+    with pytest.raises(OcpError, match="stage_least_squares"):
+        d2.stage_hess_cost("gauss-newton")
+    A = dm(d2.stage_hess_cost("exact")([0.5], [0.2], []))
+    np.testing.assert_allclose(A, np.diag([12 * 0.25, 2.0]), rtol=1e-14)
+
+
 def test_terminal_functions(disc):
     rng = np.random.default_rng(11)
     for x, _, p, _, _ in random_points(disc, rng, 4):
