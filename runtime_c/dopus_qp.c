@@ -912,6 +912,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
     int n_corr = 0, n_aug = 0;
     double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
     int best_iter = 0;
+    double mu_prev = INFINITY;
 
     if (settings)
         st = *settings;
@@ -982,7 +983,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         data_scale = dmax(data_scale, dopus_lai_norm_inf(NE, in->req));
 
     for (iter = 0;; ++iter) {
-        double alpha, mu_aff, sigma, target;
+        double alpha, mu_aff, sigma, target, eta;
         int fact, floors_before, nref;
 
         compute_residuals(ws, in, &r);
@@ -1095,11 +1096,16 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
          * termination test needs only makes the barrier weights z/t of active rows huge,
          * and their cancellation in the Riccati recursion spoils the Newton directions. */
         target = dmax(sigma * r.mu, MU_FLOOR_REL * st.tol * dmax(1.0, r.nz));
+        /* safeguard: when complementarity is all that is left and the last step raised mu,
+         * drop the second-order term this time (Mehrotra's corrector can otherwise cycle
+         * on a pair far from the central path) */
+        eta = (iter > 0 && r.mu > mu_prev && dmax(r.stat_s, r.eq_s) < r.comp_s) ? 0.0 : 1.0;
+        mu_prev = r.mu;
         for (i = 0; i < NI; ++i) {
             if (ws->has_lo[i])
-                ws->rc_lo[i] += ws->dt_lo[i] * ws->dz_lo[i] - target;
+                ws->rc_lo[i] += eta * ws->dt_lo[i] * ws->dz_lo[i] - target;
             if (ws->has_up[i])
-                ws->rc_up[i] += ws->dt_up[i] * ws->dz_up[i] - target;
+                ws->rc_up[i] += eta * ws->dt_up[i] * ws->dz_up[i] - target;
         }
         newton_direction(ws, in, nref);
         alpha = dmin(1.0, STEP_TAU * max_step(ws));
