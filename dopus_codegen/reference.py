@@ -6,13 +6,17 @@ functions of a ``Discretized`` and the reference QP solver of
 the order of operations follows the contract:
 
 - the ring buffer: stage ``k`` lives in slot ``(ring_head + k) mod N``; a slot holds the
-  blocks the QP uses (``Ht, Phit, Ct``), ``F_old = (F_w, phi, g)`` of the last gradient
-  evaluation of its stage and ``domega = (dw, dlam_next, dmu_g, dmu_b)`` of the last QP;
+  blocks the QP uses (``Ht, Phit, Ct``), ``A_dyn = A - A_l`` of its last H evaluation,
+  ``F_old = (F_w, phi, g)`` of the last gradient evaluation of its stage and
+  ``domega = (dw, dlam_next, dmu_g, dmu_b)`` of the last QP;
 - ``feedback`` solves the QP, stores ``domega`` per stage, takes the full step;
 - ``prepare`` shifts (receding mode), evaluates ``F_k`` and ``rho_k`` (eq. 16) for
   ``k < N-1``, evaluates stage ``N-1`` and the terminal node fresh, recomputes ``H`` for
-  the ``M`` stages with the largest ``rho`` (ties: lower index), regularises every fresh
-  ``A`` (section 5) and assembles the adjoint-corrected QP (eq. 12, section 3).
+  the ``M`` stages with the largest ``rho`` (ties: lower index), with
+  ``cost_hessian="fresh"`` (default) refreshes the stage-cost Hessian ``A_l`` of every
+  other stage (``Ht = reg(A_dyn + A_l)``; ``"stored"`` is the paper's literal algorithm),
+  regularises every fresh ``A`` (section 5) and assembles the adjoint-corrected QP
+  (eq. 12, section 3).
 
 Usage (the backend protocol of section 7)::
 
@@ -65,11 +69,12 @@ def regularize(A: np.ndarray, mode: str, eps: float) -> np.ndarray:
 
 class _Slot:
     """One ring-buffer slot (docs/algorithm.md section 4)."""
-    __slots__ = ("Ht", "Phit", "Ct", "F_w", "phi", "g", "dw", "dlam", "dmu_g", "dmu_b")
+    __slots__ = ("Ht", "Phit", "Ct", "F_w", "phi", "g", "dw", "dlam", "dmu_g", "dmu_b", "A_dyn")
 
     def __init__(self, nx, nu, ng):
         nw = nx + nu
         self.Ht = np.zeros((nw, nw))
+        self.A_dyn = np.zeros((nw, nw))
         self.Phit = np.zeros((nx, nw))
         self.Ct = np.zeros((ng, nw))
         self.F_w = np.zeros(nw)
@@ -103,8 +108,12 @@ class ReferenceDopus:
     """
 
     def __init__(self, disc, M: int = 1, mode: str = "receding", hessian: str = "exact",
-                 regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10):
+                 regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10,
+                 cost_hessian: str = "fresh"):
         self.disc = disc
+        if cost_hessian not in ("fresh", "stored"):
+            raise ValueError(f"cost_hessian must be 'fresh' or 'stored', got {cost_hessian!r}")
+        self.cost_hessian = cost_hessian
         self.N, self.nx, self.n_u, self.ng = disc.N, disc.nx, disc.nu, disc.ng
         self.nr, self.ne, self.np = disc.nr, disc.ne, disc.np
         self.nw = self.nx + self.n_u
@@ -118,6 +127,14 @@ class ReferenceDopus:
         else:
             raise ValueError(f"hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
         self.hessian = "exact" if hessian == "exact" else "gauss-newton"
+        # (x, u, p) -> A_l, the stage-cost part of A (section 4 step 5)
+        self._stage_hess_cost = None
+        if cost_hessian == "fresh":
+            fun = getattr(disc, "stage_hess_cost_exact" if self.hessian == "exact" else "stage_hess_cost_gn", None)
+            if fun is None:
+                raise ValueError("cost_hessian='fresh' needs the stage-cost Hessian function of the problem "
+                                 "(Discretized.stage_hess_cost); use cost_hessian='stored'")
+            self._stage_hess_cost = fun
         if regularization not in ("none", "project", "mirror"):
             raise ValueError(f"regularization must be 'none', 'project' or 'mirror', got {regularization!r}")
         eps = float(reg_eps)
@@ -167,7 +184,19 @@ class ReferenceDopus:
         A = np.array(A, float).reshape(self.nw, self.nw)
         Phi = np.array(Phi, float).reshape(self.nx, self.nw)
         C = np.array(C, float).reshape(self.ng, self.nw)
-        return regularize(A, self.regularization, self.reg_eps), Phi, C
+        return A, Phi, C
+
+    def _cost_hess_eval(self, k, x, u):
+        A = self._stage_hess_cost(x[k], u[k], self.p[k])
+        return np.array(A, float).reshape(self.nw, self.nw)
+
+    def _set_block(self, s, k, x, u, lam, mu_g):
+        """Fresh H of stage k into slot s: ``A_dyn = A - A_l`` (the curvature of dynamics and
+        path constraints, kept for step 5 with ``cost_hessian='fresh'``), ``Ht = reg(A)``."""
+        A, s.Phit, s.Ct = self._stage_hess_eval(k, x, u, lam, mu_g)
+        s.A_dyn = A - self._cost_hess_eval(k, x, u) if self.cost_hessian == "fresh" else A
+        s.Ht = regularize(A, self.regularization, self.reg_eps)
+        return s
 
     def _term_eval(self, xN, mu_r, nu):
         gL, _E, r, r_eq = self.disc.term_grad(xN, self.p[self.N], mu_r, nu)
@@ -207,9 +236,10 @@ class ReferenceDopus:
             s.F_w = gL[k] + mu_b[k]
             s.phi = phi[k].copy()
             s.g = gv[k].copy()
-            s.Ht, s.Phit, s.Ct = self._stage_hess_eval(k, x, u, lam, mu_g)
+            self._set_block(s, k, x, u, lam, mu_g)
         term = self._term_eval(x[N], g.mu_r, g.nu)
-        if not self._finite(gL, phi, gv, *[v for s in slots for v in (s.Ht, s.Phit, s.Ct)], *term.values()):
+        if not self._finite(gL, phi, gv, *[v for s in slots for v in (s.Ht, s.A_dyn, s.Phit, s.Ct)],
+                            *term.values()):
             raise DopusError("init: a derivative function returned a non-finite value at the guess",
                              STATUS_NONFINITE)
         self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
@@ -315,7 +345,8 @@ class ReferenceDopus:
 
     # ------------------------------------------------------------------ prepare
     def prepare(self) -> None:
-        """Shift (receding), F and rho, fresh last stage and terminal, M worst H (section 4)."""
+        """Shift (receding), F and rho, fresh last stage and terminal, M worst H, fresh
+        stage-cost Hessians (section 4)."""
         self._need_init()
         t0 = time.perf_counter()
         N, nx = self.N, self.nx
@@ -361,10 +392,10 @@ class ReferenceDopus:
         s.F_w = gL[k] + mu_b[k]
         s.phi = phi[k].copy()
         s.g = gv[k].copy()
-        s.Ht, s.Phit, s.Ct = self._stage_hess_eval(k, x, u, lam, mu_g)
+        self._set_block(s, k, x, u, lam, mu_g)
         xN = phi[k].copy() if self.mode == "receding" else x[N].copy()
         term = self._term_eval(xN, self.mu_r, self.nu)
-        if not self._finite(s.Ht, s.Phit, s.Ct, *term.values()):
+        if not self._finite(s.Ht, s.A_dyn, s.Phit, s.Ct, *term.values()):
             self.status = STATUS_NONFINITE
             raise DopusError("prepare: a derivative function returned a non-finite value (last stage "
                              "or terminal node)", STATUS_NONFINITE)
@@ -373,11 +404,26 @@ class ReferenceDopus:
         chosen = order[:self.M]
         for i in chosen:
             si = slots[self._slot(i)]
-            si.Ht, si.Phit, si.Ct = self._stage_hess_eval(i, x, u, lam, mu_g)
-            if not self._finite(si.Ht, si.Phit, si.Ct):
+            self._set_block(si, i, x, u, lam, mu_g)
+            if not self._finite(si.Ht, si.A_dyn, si.Phit, si.Ct):
                 self.status = STATUS_NONFINITE
                 raise DopusError(f"prepare: stage_hess returned a non-finite value at stage {i}", STATUS_NONFINITE)
         t3 = time.perf_counter()
+        # step 5: the cost part of every A_k at the current point (no integrator); the other
+        # stages keep the curvature of dynamics and constraints A_dyn of their last H
+        if self.cost_hessian == "fresh":
+            fresh = set(chosen) | {N - 1}
+            for k in range(N):
+                if k in fresh:
+                    continue      # A_l,k was evaluated with its H above, at the same point
+                s = slots[self._slot(k)]
+                Al = self._cost_hess_eval(k, x, u)
+                if not self._finite(Al):
+                    self.status = STATUS_NONFINITE
+                    raise DopusError(f"prepare: stage_hess_cost returned a non-finite value at stage {k}",
+                                     STATUS_NONFINITE)
+                s.Ht = regularize(s.A_dyn + Al, self.regularization, self.reg_eps)
+        t4 = time.perf_counter()
         # commit
         if self.mode == "receding":
             self.x = x.copy()
@@ -388,7 +434,7 @@ class ReferenceDopus:
         self.recomputed = sorted(chosen + [N - 1])
         self.status = STATUS_OK
         self.timings.update({"prepare": time.perf_counter() - t0, "shift": t1 - t0,
-                             "stage_grad_rho": t2 - t1, "stage_hess": t3 - t2})
+                             "stage_grad_rho": t2 - t1, "stage_hess": t3 - t2, "cost_hessian": t4 - t3})
 
     # ------------------------------------------------------------------ KKT
     def kkt(self, xhat0) -> dict:
