@@ -443,3 +443,28 @@ def test_robot_arm_qps_made_infeasible_are_flagged(robot_qps):
         assert cl_status == "PrimalInfeasible", (label, cl_status)
         sol, info = h.solve(q, tol=1e-10)
         assert info["status"] == "primal_infeasible", (label, info)
+
+
+def test_robot_arm_sqp_warm_start(robot_qps):
+    """Warm start as an SQP method would use it: zero primal step, the multipliers of the
+    previous QP of the same run. Every QP is solved and agrees with the reference solver."""
+    from dopus_codegen.qpref import solve_qp_reference
+
+    qp0 = robot_qps[0][1]
+    h = solver(tuple(int(qp0[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne")))
+    prev_label, prev_sol = None, None
+    n_warm = 0
+    for label, qp in robot_qps:
+        if prev_label == label:
+            warm = dict(prev_sol)
+            warm["x"] = np.zeros_like(prev_sol["x"])
+            warm["x"][0] = qp["x0"]
+            warm["u"] = np.zeros_like(prev_sol["u"])
+            sol, info = h.solve(qp, tol=TOL_QP_ROBOT, warm=warm)
+            assert info["status"] == "solved", (label, info)
+            ref = solve_qp_reference(qp)
+            assert _max_rel(P.compare(sol, ref)) <= REL, (label, _fmt(P.compare(sol, ref)))
+            n_warm += 1
+        prev_sol, _ = h.solve(qp, tol=TOL_QP_ROBOT)
+        prev_label = label
+    assert n_warm >= 6
