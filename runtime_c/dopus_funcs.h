@@ -36,6 +36,12 @@ int dopus_eval_stage_hess(int gauss_newton, const double *x, const double *u, co
                           const double *lam_next, const double *mu_g,
                           double *A, double *Phi, double *C, dopus_fun_work *wk);
 
+/* stage_hess_cost: A_l (nw x nw), the stage-cost part of A (docs/algorithm.md section 4
+ * step 5): exact hess_w l, or with gauss_newton != 0 J' W J + hess_w l_extra (nonzero
+ * return if !DOPUS_HAS_GN then). No integrator: l is evaluated at the node. */
+int dopus_eval_stage_hess_cost(int gauss_newton, const double *x, const double *u, const double *p,
+                               double *A_l, dopus_fun_work *wk);
+
 /* term_eval: E (1), r (nr), r_eq (ne) */
 int dopus_eval_term_eval(const double *x, const double *p, double *E, double *r, double *r_eq,
                          dopus_fun_work *wk);
