@@ -59,6 +59,7 @@ PHASES = ("feedback", "shift", "gradients", "rho", "hessians", "regularization",
 _MODES = {"receding": 0, "fixed": 1}
 _HESSIANS = {"exact": 0, "gauss-newton": 1, "gn": 1}
 _REGULARIZATIONS = {"none": 0, "project": 1, "mirror": 2}
+_COST_HESSIANS = {"stored": 0, "fresh": 1}
 
 
 class DopusError(_ReferenceDopusError, ValueError):
@@ -152,7 +153,7 @@ class CSolver:
 
     def __init__(self, disc=None, M: int = 1, mode: str = "receding", hessian: str = "exact",
                  regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10,
-                 lib_dir=None, qp_max_iter: Optional[int] = None):
+                 lib_dir=None, qp_max_iter: Optional[int] = None, cost_hessian: str = "fresh"):
         if lib_dir is None:
             if disc is None:
                 raise ValueError("CSolver needs a Discretized problem or lib_dir (a generated folder)")
@@ -187,6 +188,7 @@ class CSolver:
         self.set_mode(mode)
         self.set_hessian(hessian)
         self.set_regularization(regularization, reg_eps)
+        self.set_cost_hessian(cost_hessian)
 
     @classmethod
     def from_dir(cls, path, disc=None, **settings) -> "CSolver":
@@ -289,6 +291,14 @@ class CSolver:
         self._check(self._c("set_regularization")(self._s, _REGULARIZATIONS[regularization], eps),
                     f"regularization={regularization!r}, reg_eps={reg_eps!r}")
 
+    def set_cost_hessian(self, cost_hessian: str) -> None:
+        """``"fresh"``: the stage-cost Hessian of every stage is refreshed in every prepare;
+        ``"stored"``: the paper's literal algorithm (docs/algorithm.md section 4 step 5)."""
+        if cost_hessian not in _COST_HESSIANS:
+            self._bad(f"cost_hessian must be 'fresh' or 'stored', got {cost_hessian!r}")
+        self._check(self._c("set_cost_hessian")(self._s, _COST_HESSIANS[cost_hessian]),
+                    f"cost_hessian={cost_hessian!r}")
+
     def set_qp_tol(self, tol: float) -> None:
         self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")
 
@@ -326,6 +336,10 @@ class CSolver:
     @property
     def regularization(self) -> str:
         return {v: k for k, v in _REGULARIZATIONS.items()}[int(self._c("get_regularization")(self._s))]
+
+    @property
+    def cost_hessian(self) -> str:
+        return "fresh" if int(self._c("get_cost_hessian")(self._s)) else "stored"
 
     @property
     def reg_eps(self) -> float:

@@ -9,6 +9,7 @@ void dopus_ring_reset(dopus_ring *ring)
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *s = &ring->slot[k];
         for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i) s->Ht[i] = 0.0;
+        for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i) s->A_dyn[i] = 0.0;
         for (i = 0; i < DOPUS_NX * DOPUS_NW; ++i) s->Phit[i] = 0.0;
         for (i = 0; i < DOPUS_DIM(DOPUS_NG) * DOPUS_NW; ++i) s->Ct[i] = 0.0;
         for (i = 0; i < DOPUS_NW; ++i) s->F_w[i] = 0.0;

@@ -13,6 +13,9 @@
 typedef struct {
     /* the blocks the QP uses (possibly outdated, A regularised), column-major */
     double Ht[DOPUS_NW * DOPUS_NW];            /* nw x nw */
+    /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
+     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l */
+    double A_dyn[DOPUS_NW * DOPUS_NW];         /* nw x nw */
     double Phit[DOPUS_NX * DOPUS_NW];          /* nx x nw, [A_k B_k] */
     double Ct[DOPUS_DIM(DOPUS_NG) * DOPUS_NW]; /* ng x nw */
     /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */

@@ -4,8 +4,9 @@
  *   feedback: QP with the measured xhat0, full step, u_0 out;
  *   prepare:  shift (receding mode), F_k and rho_k (eq. 16) of every stage, fresh F/H of
  *             stage N-1 and the terminal node, fresh H for the M stages with the largest
- *             rho_k, regularisation of every fresh A, QP vectors with the adjoint-corrected
- *             gradient (eq. 12).
+ *             rho_k, the fresh stage-cost Hessian A_l of the other stages added to their
+ *             A_dyn (cost_hessian fresh), regularisation of every fresh A, QP vectors with
+ *             the adjoint-corrected gradient (eq. 12).
  * The order of operations is that of the contract, so that the Python reference and this
  * runtime produce the same iterates to round-off.
  */
@@ -120,6 +121,7 @@ void dopus_defaults(dopus_solver *s)
                      : DOPUS_HESSIAN_EXACT;
     s->regularization = dopus_default_regularization;
     s->reg_eps = dopus_default_reg_eps;
+    s->cost_hessian = 1;
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
     for (k = 0; k <= DOPUS_N; ++k) {
@@ -177,13 +179,26 @@ static int dopus_regularize(dopus_solver *s, int n, double *A)
     return rc == 0 ? DOPUS_OK : DOPUS_ERR_REGULARIZATION;
 }
 
-/* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot. Evaluated
- * into scratch first, so a failed evaluation leaves the slot as it was. */
+/* The stage-cost Hessian A_l of stage k at the current point into s->tmp_Al. */
+static int dopus_stage_Al(dopus_solver *s, int k)
+{
+    double t0 = dopus_timer_now(&s->timer);
+    int rc = dopus_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->tmp_Al, &s->fun_work);
+    dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
+    if (rc != 0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    return dopus_all_finite(s->tmp_Al, DOPUS_NW * DOPUS_NW) ? DOPUS_OK : DOPUS_ERR_NONFINITE_VALUE;
+}
+
+/* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
+ * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
+ * leaves the slot as it was. */
 static int dopus_stage_H(dopus_solver *s, int k)
 {
     dopus_stage_slot *slot;
     double t0 = dopus_timer_now(&s->timer);
-    int rc;
+    int rc, i;
     rc = dopus_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
                                s->tmp_A, s->tmp_Phi, s->tmp_C, &s->fun_work);
     dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
@@ -195,12 +210,21 @@ static int dopus_stage_H(dopus_solver *s, int k)
         !dopus_all_finite(s->tmp_C, DOPUS_NG * DOPUS_NW)) {
         return DOPUS_ERR_NONFINITE_VALUE;
     }
+    /* A_dyn = A - A_l, kept whatever cost_hessian is, so the setting may change at any time */
+    rc = dopus_stage_Al(s, k);
+    if (rc != DOPUS_OK) {
+        return rc;
+    }
+    for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i) {
+        s->tmp_Al[i] = s->tmp_A[i] - s->tmp_Al[i];
+    }
     rc = dopus_regularize(s, DOPUS_NW, s->tmp_A);
     if (rc != DOPUS_OK) {
         return rc;
     }
     slot = dopus_ring_stage(&s->ring, k);
     dopus_copy(slot->Ht, s->tmp_A, DOPUS_NW * DOPUS_NW);
+    dopus_copy(slot->A_dyn, s->tmp_Al, DOPUS_NW * DOPUS_NW);
     dopus_copy(slot->Phit, s->tmp_Phi, DOPUS_NX * DOPUS_NW);
     dopus_copy(slot->Ct, s->tmp_C, DOPUS_NG * DOPUS_NW);
     return DOPUS_OK;
@@ -672,13 +696,36 @@ int dopus_prepare(dopus_solver *s)
             }
         }
     }
+
+    /* 5. cost_hessian fresh: every stage whose H was not computed above gets
+     *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept) */
+    if (rc == DOPUS_OK && s->cost_hessian) {
+        for (k = 0; k < DOPUS_N - 1 && rc == DOPUS_OK; ++k) {
+            dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
+            int i;
+            if (s->selected[k]) {
+                continue;
+            }
+            rc = dopus_stage_Al(s, k);
+            if (rc != DOPUS_OK) {
+                break;
+            }
+            for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i) {
+                s->tmp_A[i] = slot->A_dyn[i] + s->tmp_Al[i];
+            }
+            rc = dopus_regularize(s, DOPUS_NW, s->tmp_A);
+            if (rc == DOPUS_OK) {
+                dopus_copy(slot->Ht, s->tmp_A, DOPUS_NW * DOPUS_NW);
+            }
+        }
+    }
     if (rc != DOPUS_OK) {
         /* leave the iterate as it was after step 1 */
         dopus_copy(s->x[DOPUS_N], xN_saved, DOPUS_NX);
         return dopus_ret(s, rc);
     }
 
-    /* 5. QP vectors (the fresh A blocks were regularised when stored) */
+    /* 6. QP vectors (the fresh A blocks were regularised when stored) */
     dopus_assemble(s);
     s->qp_ready = 1;
     return dopus_ret(s, DOPUS_OK);
@@ -802,6 +849,22 @@ double dopus_get_reg_eps(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->reg_eps;
+}
+
+int dopus_set_cost_hessian(dopus_solver *s, int fresh)
+{
+    dopus_ensure_setup(s);
+    if (fresh != 0 && fresh != 1) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->cost_hessian = fresh;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_cost_hessian(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->cost_hessian;
 }
 
 int dopus_set_qp_tol(dopus_solver *s, double tol)

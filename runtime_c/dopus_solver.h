@@ -63,8 +63,9 @@ int dopus_init_nominal(dopus_solver *s, const double *xhat0);
  * nothing changes. QP failure: DOPUS_ERR_QP, no step (dopus_get_qp_status tells why). */
 int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
- * stage and terminal node, re-linearise the M stages with the largest rho_k, assemble the
- * QP. Must run between two feedback calls. */
+ * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
+ * stage-cost Hessian of the other stages (dopus_set_cost_hessian), assemble the QP. Must
+ * run between two feedback calls. */
 int dopus_prepare(dopus_solver *s);
 /* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
  * the initial state xhat0 (NULL: the last one given to init or feedback):
@@ -87,6 +88,13 @@ int dopus_get_hessian(dopus_solver *s);
 int dopus_set_regularization(dopus_solver *s, int regularization, double eps);
 int dopus_get_regularization(dopus_solver *s);
 double dopus_get_reg_eps(dopus_solver *s);
+/* Stage-cost Hessian (algorithm.md section 4 step 5): fresh = 1 (the default) refreshes the
+ * cost part A_l of the Hessian block of every stage in every prepare (only the curvature of
+ * dynamics and constraints is partially updated); fresh = 0 is the paper's literal
+ * algorithm (the whole A moves with its slot). The slots always carry A_dyn = A - A_l, so
+ * the setting may change between any two calls. */
+int dopus_set_cost_hessian(dopus_solver *s, int fresh);
+int dopus_get_cost_hessian(dopus_solver *s);
 int dopus_set_qp_tol(dopus_solver *s, double tol);
 double dopus_get_qp_tol(dopus_solver *s);
 int dopus_set_qp_max_iter(dopus_solver *s, int max_iter);
@@ -122,7 +130,7 @@ int dopus_get_ring_head(const dopus_solver *s);
 
 /* Seconds per phase of the last call that ran it (t[0..7] = feedback, shift, gradients,
  * rho, hessians, regularization, assembly, kkt; indices of enum dopus_phase). init fills
- * the phases it runs too. */
+ * the phases it runs too. "hessians" includes the stage-cost Hessians A_l. */
 void dopus_get_timings(const dopus_solver *s, double *t);
 /* Replace the clock (seconds, any origin); NULL restores the default clock. */
 void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx);
@@ -177,6 +185,7 @@ struct dopus_solver {
     int hessian;
     int regularization;
     double reg_eps;
+    int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
     dopus_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */
@@ -191,7 +200,7 @@ struct dopus_solver {
     double p[DOPUS_N + 1][DOPUS_DIM(DOPUS_NP)];
     double xhat0[DOPUS_NX];
 
-    /* stage slots (Ht, Phit, Ct, F_old, domega) and ring_head */
+    /* stage slots (Ht, A_dyn, Phit, Ct, F_old, domega) and ring_head */
     dopus_ring ring;
 
     /* terminal node, always fresh: A (regularised), R, R_eq and F = (gL, E, r, r_eq) */
@@ -220,6 +229,7 @@ struct dopus_solver {
     /* scratch for the generated functions and the regularisation */
     dopus_fun_work fun_work;
     double tmp_A[DOPUS_NW * DOPUS_NW];
+    double tmp_Al[DOPUS_NW * DOPUS_NW];
     double tmp_Phi[DOPUS_NX * DOPUS_NW];
     double tmp_C[DOPUS_DIM(DOPUS_NG) * DOPUS_NW];
     double tmp_gL[DOPUS_NW];
