@@ -35,10 +35,31 @@
  * added as an exact augmented-Lagrangian term (rho Req'Req, which does not change the
  * solution of the Newton system because Req dx_N is fixed by the equality) and then, if
  * still needed, delta*I is added to the stage Hessians with delta increased geometrically
- * (IPOPT-style inertia correction). Both are counted in dopus_qp_info.
+ * (IPOPT-style inertia correction). Both are counted in dopus_qp_info. A negative pivot
+ * within the round-off estimate of the recursion (cancellation of large barrier terms) is
+ * a numerical zero: it is floored, counted, and iterative refinement restores the step.
+ *
+ * Termination: all four scaled residuals <= settings.tol, where (infinity norms)
+ *   stat / max(1, |H w|, |g|, |constraint part of the stationarity|),
+ *   eq   / max(1, |x0|, |b|, |Phi w|, |w|, |req|, |Req x_N|),
+ *   ineq / max(1, |finite bounds|, |row values|),  comp (max slack*multiplier) / max(1, |mu|).
+ * Accuracy of the answer is tol divided by the conditioning of the QP: on the robot-arm
+ * exact-Hessian QPs (reduced Hessian down to ~2e-5) tol 1e-10 leaves errors up to ~4e-5 in
+ * the primal step, tol 1e-12 about 2e-7.
+ *
+ * Infeasibility: the dual (primal) iterate, once grown far beyond the data, is tested as
+ * a Farkas certificate (unboundedness ray): A'y ~ 0 with b'y > 0 proves infeasibility;
+ * a feasible ray with d'Hd < 0, or Hd ~ 0 and g'd < 0, proves unboundedness.
+ *
+ * Warm start (settings.warm_start): primal and multipliers are read from *sol; slacks are
+ * taken from the primal point, slacks and multipliers floored at 1e-4 (relative). An
+ * SQP-style warm start (zero primal step, the last multipliers) takes 3-6 iterations once
+ * the active set has settled, and more than a cold start far from it.
  *
  * Sizes come from dopus_sizes.h: DOPUS_N, DOPUS_NX, DOPUS_NU, DOPUS_NG, DOPUS_NR, DOPUS_NE
  * (NG, NR, NE may be 0). No malloc, no VLAs, no recursion, no state outside the workspace.
+ * Compile with -O3 where possible: the linear algebra is inlined with compile-time sizes
+ * and -O3 vectorises it (about 1.8x faster than -O2 on the robot-arm QPs).
  */
 #ifndef DOPUS_QP_H
 #define DOPUS_QP_H
