@@ -128,13 +128,11 @@ class ReferenceDopus:
             raise ValueError(f"hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
         self.hessian = "exact" if hessian == "exact" else "gauss-newton"
         # (x, u, p) -> A_l, the stage-cost part of A (section 4 step 5)
-        self._stage_hess_cost = None
-        if cost_hessian == "fresh":
-            fun = getattr(disc, "stage_hess_cost_exact" if self.hessian == "exact" else "stage_hess_cost_gn", None)
-            if fun is None:
-                raise ValueError("cost_hessian='fresh' needs the stage-cost Hessian function of the problem "
-                                 "(Discretized.stage_hess_cost); use cost_hessian='stored'")
-            self._stage_hess_cost = fun
+        self._stage_hess_cost = getattr(disc, "stage_hess_cost_exact" if self.hessian == "exact"
+                                        else "stage_hess_cost_gn", None)
+        if cost_hessian == "fresh" and self._stage_hess_cost is None:
+            raise ValueError("cost_hessian='fresh' needs the stage-cost Hessian function of the problem "
+                             "(Discretized.stage_hess_cost); use cost_hessian='stored'")
         if regularization not in ("none", "project", "mirror"):
             raise ValueError(f"regularization must be 'none', 'project' or 'mirror', got {regularization!r}")
         eps = float(reg_eps)
@@ -192,9 +190,10 @@ class ReferenceDopus:
 
     def _set_block(self, s, k, x, u, lam, mu_g):
         """Fresh H of stage k into slot s: ``A_dyn = A - A_l`` (the curvature of dynamics and
-        path constraints, kept for step 5 with ``cost_hessian='fresh'``), ``Ht = reg(A)``."""
+        path constraints, used by step 5 with ``cost_hessian='fresh'``; kept under both
+        settings, as in the C slots), ``Ht = reg(A)``."""
         A, s.Phit, s.Ct = self._stage_hess_eval(k, x, u, lam, mu_g)
-        s.A_dyn = A - self._cost_hess_eval(k, x, u) if self.cost_hessian == "fresh" else A
+        s.A_dyn = A - self._cost_hess_eval(k, x, u) if self._stage_hess_cost is not None else A
         s.Ht = regularize(A, self.regularization, self.reg_eps)
         return s
 
