@@ -44,16 +44,20 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--hessian", type=click.Choice(["exact", "gauss-newton"]), default="exact", show_default=True)
 @click.option("--regularization", type=click.Choice(["none", "project", "mirror"]), default="none", show_default=True)
 @click.option("--reg-eps", default=1e-4, show_default=True, type=float, help="Eigenvalue floor of the regularisation.")
+@click.option("--cost-hessian", type=click.Choice(["fresh", "stored"]), default="fresh", show_default=True,
+              help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
+                   "paper's literal algorithm (figure 1, DESIGN.md section 8).")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the study as JSON.")
 @click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None, help="Write KKT against iteration as PNG.")
-def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, backend, json_out, plot_out):
+def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, cost_hessian, backend, json_out,
+             plot_out):
     """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M."""
     from .converge import run_converge_cli
 
     run_converge_cli(ocp_file=ocp_file, m_list=_int_list_or_full(m_list), iters=iters, start=start,
                      hessian=hessian, regularization=regularization, reg_eps=reg_eps, backend=backend,
-                     json_out=json_out, plot_out=plot_out)
+                     json_out=json_out, plot_out=plot_out, cost_hessian=cost_hessian)
 
 
 @main.command()

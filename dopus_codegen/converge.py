@@ -16,7 +16,7 @@ Starts:
 JSON written by :func:`run_study`::
 
     {"problem": name, "N": N, "backend": "reference" | "c", "start": "cold" | "warm",
-     "hessian": ..., "regularization": ..., "reg_eps": ...,
+     "hessian": ..., "regularization": ..., "reg_eps": ..., "cost_hessian": "fresh" | "stored",
      "runs": [{"M": M, "kkt": [...], "stat": [...], "eq": [...], "ineq": [...], "comp": [...],
                "status": "ok" | message}, ...],
      "solution": {"x": [[...]], "u": [[...]], "objective": J}}
@@ -26,6 +26,10 @@ JSON written by :func:`run_study`::
 numbers (a diverged run) are written as ``null``. ``solution``
 is the last iterate of the full-RTI run (``M = N-1``; if the list has no full run, of
 the run with the largest ``M``).
+
+``cost_hessian`` (docs/algorithm.md section 4 step 5): ``fresh`` (default) refreshes the
+stage-cost Hessian of every stage in every iteration; ``stored`` is the paper's literal
+algorithm, whose warm-start study is the paper's figure 1 and DESIGN.md section 8.
 """
 from __future__ import annotations
 
@@ -127,12 +131,13 @@ def iterations_to(kkt: list, tol: float) -> Optional[int]:
 
 def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regularization: str = "none",
               reg_eps: float = 1e-4, backend_factory: Optional[Callable] = None,
-              backend_name: Optional[str] = None, progress: Optional[Callable] = None) -> dict:
+              backend_name: Optional[str] = None, progress: Optional[Callable] = None,
+              cost_hessian: str = "fresh") -> dict:
     """Run the study; return the JSON structure of the module docstring.
 
     ``start``: a :class:`StartPoint` or ``"cold"`` / ``"warm"`` (see :func:`make_start`).
-    ``backend_factory(disc, M=, mode="fixed", hessian=, regularization=, reg_eps=)`` builds a
-    backend (default: :class:`~dopus_codegen.reference.ReferenceDopus`).
+    ``backend_factory(disc, M=, mode="fixed", hessian=, regularization=, reg_eps=,
+    cost_hessian=)`` builds a backend (default: :class:`~dopus_codegen.reference.ReferenceDopus`).
     ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
     """
     from .reference import DopusError, ReferenceDopus
@@ -144,6 +149,8 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
         backend_name = backend_name or "reference"
     if isinstance(iters, bool) or not isinstance(iters, (int, np.integer)) or iters < 1:
         raise ValueError(f"iters must be a positive integer, got {iters!r}")
+    if cost_hessian not in ("fresh", "stored"):
+        raise ValueError(f"cost_hessian must be 'fresh' or 'stored', got {cost_hessian!r}")
     Ms = [_resolve_M(m, disc.N) for m in m_list]
     if not Ms:
         raise ValueError("the list of M values is empty")
@@ -151,7 +158,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     last_iterates = {}
     for run_index, M in enumerate(Ms):
         be = backend_factory(disc, M=M, mode="fixed", hessian=hessian, regularization=regularization,
-                             reg_eps=reg_eps)
+                             reg_eps=reg_eps, cost_hessian=cost_hessian)
         rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "status": "ok"}
 
         def record():
@@ -187,7 +194,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     return {
         "problem": disc.name, "N": int(disc.N), "backend": backend_name or getattr(backend_factory, "__name__", "custom"),
         "start": start.label, "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
-        "runs": runs,
+        "cost_hessian": cost_hessian, "runs": runs,
         "solution": {"M": int(Msol), "x": xs.tolist(), "u": us.tolist(), "objective": obj},
     }
 
@@ -207,7 +214,8 @@ def format_table(study: dict, tol: float = 1e-8) -> str:
     """Plain-text summary: per M the iterations to ``tol`` and the last KKT."""
     N = study["N"]
     lines = [f"{study['problem']}: {study['start']} start, {study['hessian']} Hessian, "
-             f"regularization {study['regularization']}, backend {study['backend']}",
+             f"regularization {study['regularization']}, cost Hessian {study.get('cost_hessian', 'fresh')}, "
+             f"backend {study['backend']}",
              f"{'M':>8} {'iters to %.0e' % tol:>14} {'last KKT':>10}  status"]
     for r in study["runs"]:
         it = iterations_to(r["kkt"], tol)
@@ -232,7 +240,8 @@ def plot_study(study: dict, path: str) -> None:
         ax.semilogy(np.arange(kk.size), kk, marker="o", markersize=3, label=label)
     ax.set_xlabel("iteration")
     ax.set_ylabel("KKT measure (inf-norm)")
-    ax.set_title(f"{study['problem']}: DOPUS convergence, {study['start']} start, {study['hessian']} Hessian")
+    ax.set_title(f"{study['problem']}: DOPUS convergence, {study['start']} start, {study['hessian']} Hessian, "
+                 f"{study.get('cost_hessian', 'fresh')} cost Hessian", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -264,7 +273,7 @@ def _cli_M_list(m_list, N: int) -> list:
 
 
 def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, backend,
-                     json_out=None, plot_out=None) -> dict:
+                     json_out=None, plot_out=None, cost_hessian: str = "fresh") -> dict:
     """The body of ``dopus-gen converge`` (errors become click exceptions)."""
     import click
 
@@ -300,7 +309,7 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, re
         try:
             study = run_study(disc, Ms, iters, sp, hessian=hessian, regularization=regularization,
                               reg_eps=reg_eps, backend_factory=factory, backend_name=backend,
-                              progress=progress)
+                              progress=progress, cost_hessian=cost_hessian)
         except (ValueError, RuntimeError) as exc:
             raise click.ClickException(str(exc)) from None
     click.echo(format_table(study))

@@ -1,8 +1,10 @@
 """The fixed-xhat_0 convergence study (paper figure 1) and ``dopus-gen converge``.
 
-The warm-start table of DESIGN.md section 8 is reproduced with the reference backend and
-checked against independent numbers: the KKT measure of the IPOPT point, and IPOPT's own
-solution for the disturbed initial state.
+The warm-start table of DESIGN.md section 8 (the paper's literal algorithm,
+``cost_hessian="stored"``) is reproduced with the reference backend and checked against
+independent numbers: the KKT measure of the IPOPT point, and IPOPT's own solution for the
+disturbed initial state. The default ``cost_hessian="fresh"`` (docs/algorithm.md section 4
+step 5) is held to the same iteration bounds.
 """
 from __future__ import annotations
 
@@ -25,7 +27,16 @@ def warm_study(robot_disc, robot_solution):
     d = robot_disc
     sol, _ = robot_solution
     start = StartPoint("warm", d.x0, sol, d.disturbance(d.x0))
-    return run_study(d, ["full", 20, 10, 5, 2, 1, 0], 40, start, hessian="exact", regularization="none")
+    return run_study(d, ["full", 20, 10, 5, 2, 1, 0], 40, start, hessian="exact", regularization="none",
+                     cost_hessian="stored")
+
+
+@pytest.fixture(scope="module")
+def warm_study_fresh(robot_disc, robot_solution):
+    d = robot_disc
+    sol, _ = robot_solution
+    start = StartPoint("warm", d.x0, sol, d.disturbance(d.x0))
+    return run_study(d, ["full", 5, 1], 40, start, hessian="exact", regularization="none")
 
 
 @pytest.fixture(scope="module")
@@ -64,6 +75,28 @@ def test_warm_start_table(robot_disc, robot_solution, warm_study, disturbed_ipop
     assert abs(warm_study["solution"]["objective"] - info["objective"]) < 1e-8
 
 
+def test_warm_start_fresh_cost_hessian(robot_disc, robot_solution, warm_study, warm_study_fresh, disturbed_ipopt):
+    """The default cost_hessian='fresh': the same bounds as the paper's algorithm; with
+    every stage re-linearised (the full RTI) it is the same iteration, bit for bit."""
+    d = robot_disc
+    assert warm_study_fresh["cost_hessian"] == "fresh" and warm_study["cost_hessian"] == "stored"
+    runs = {r["M"]: r for r in warm_study_fresh["runs"]}
+    stored = {r["M"]: r for r in warm_study["runs"]}
+    print("\n" + format_table(warm_study_fresh))
+    assert all(r["status"] == "ok" for r in warm_study_fresh["runs"])
+    assert runs[d.N - 1]["kkt"] == stored[d.N - 1]["kkt"]
+    assert iterations_to(runs[d.N - 1]["kkt"], 1e-10) <= 8
+    assert iterations_to(runs[5]["kkt"], 1e-8) <= 20
+    assert iterations_to(runs[1]["kkt"], 1e-8) <= 40
+    # partial updates are not the full RTI: M = 1 differs from the first iterations on
+    assert runs[1]["kkt"][2] != stored[1]["kkt"][2]
+    # the full-RTI iterate is IPOPT's solution for the disturbed state
+    sol, info = disturbed_ipopt
+    x = np.array(warm_study_fresh["solution"]["x"])
+    u = np.array(warm_study_fresh["solution"]["u"])
+    assert max(np.max(np.abs(x - sol.x)), np.max(np.abs(u - sol.u))) < 1e-6
+
+
 def test_kkt_parts_are_consistent(warm_study):
     for r in warm_study["runs"]:
         parts = np.array([r["stat"], r["eq"], r["ineq"], r["comp"]])
@@ -73,11 +106,12 @@ def test_kkt_parts_are_consistent(warm_study):
 def test_converge_cli_warm(tmp_path, robot_disc, warm_study):
     out_json, out_png = tmp_path / "study.json", tmp_path / "study.png"
     res = CliRunner().invoke(main, ["converge", str(ROBOT_ARM_FILE), "--M", "full,1", "--iters", "6",
-                                    "--json", str(out_json), "--plot", str(out_png)])
+                                    "--cost-hessian", "stored", "--json", str(out_json), "--plot", str(out_png)])
     assert res.exit_code == 0, res.output
     study = json.loads(out_json.read_text())
     assert study["problem"] == "robot_arm" and study["N"] == robot_disc.N
     assert study["backend"] == "reference" and study["start"] == "warm"
+    assert study["cost_hessian"] == "stored"
     assert [r["M"] for r in study["runs"]] == [robot_disc.N - 1, 1]
     # the CLI reproduces the library study (same IPOPT start, same iteration)
     ref = {r["M"]: r for r in warm_study["runs"]}
@@ -88,12 +122,25 @@ def test_converge_cli_warm(tmp_path, robot_disc, warm_study):
     assert "iters to" in res.output
 
 
+def test_converge_cli_fresh_is_the_default(tmp_path, warm_study_fresh):
+    out_json = tmp_path / "fresh.json"
+    res = CliRunner().invoke(main, ["converge", str(ROBOT_ARM_FILE), "--M", "1", "--iters", "4",
+                                    "--json", str(out_json)])
+    assert res.exit_code == 0, res.output
+    study = json.loads(out_json.read_text())
+    assert study["cost_hessian"] == "fresh" and "cost Hessian fresh" in res.output
+    ref = {r["M"]: r for r in warm_study_fresh["runs"]}
+    np.testing.assert_allclose(study["runs"][0]["kkt"], ref[1]["kkt"][:5], rtol=1e-6, atol=1e-13)
+
+
 def test_converge_cli_bad_input(tmp_path):
     runner = CliRunner()
     res = runner.invoke(main, ["converge", str(ROBOT_ARM_FILE), "--M", "45", "--iters", "2"])
     assert res.exit_code != 0 and "exceeds N-1" in res.output
     res = runner.invoke(main, ["converge", str(ROBOT_ARM_FILE), "--M", "full,x"])
     assert res.exit_code != 0 and "'x'" in res.output
+    res = runner.invoke(main, ["converge", str(ROBOT_ARM_FILE), "--cost-hessian", "always"])
+    assert res.exit_code != 0 and "cost-hessian" in res.output
     ocp = tmp_path / "no_ls.py"
     ocp.write_text(
         "import casadi as ca\nfrom dopus_codegen import Ocp\n\n"
