@@ -212,9 +212,13 @@ def robot_exact_kkt_point(robot_disc, robot_solution):
     return point
 
 
+@pytest.mark.parametrize("cost_hessian", ["stored", "fresh"])
 @pytest.mark.parametrize("hessian,scale", [("exact", 0.4), ("gauss-newton", 1.0)])
-def test_adjoint_correction_keeps_kkt_point_with_stale_blocks(robot_disc, robot_exact_kkt_point, hessian, scale):
-    """Eq. 12: with blocks from another point, the exact KKT point is still a fixed point."""
+def test_adjoint_correction_keeps_kkt_point_with_stale_blocks(robot_disc, robot_exact_kkt_point, hessian, scale,
+                                                              cost_hessian):
+    """Eq. 12: with blocks from another point, the exact KKT point is still a fixed point
+    (with cost_hessian='fresh' the cost part of the Hessian blocks is at the solution, the
+    curvature of the dynamics and Phit, Ct stay stale)."""
     d = robot_disc
     sol = robot_exact_kkt_point
     stale = sol.copy()
@@ -222,7 +226,7 @@ def test_adjoint_correction_keeps_kkt_point_with_stale_blocks(robot_disc, robot_
     stale.x = sol.x + scale * 0.05 * rng.standard_normal(sol.x.shape)
     stale.u = sol.u + scale * 0.5 * rng.standard_normal(sol.u.shape)
     stale.lam = sol.lam * (1 + scale * 0.3)
-    ref = ReferenceDopus(d, M=0, mode="fixed", hessian=hessian)
+    ref = ReferenceDopus(d, M=0, mode="fixed", hessian=hessian, cost_hessian=cost_hessian)
     ref.init(d.x0, stale)                    # every block computed at the perturbed point
     ref.x, ref.u = sol.x.copy(), sol.u.copy()
     ref.lam, ref.mu_g, ref.mu_b = sol.lam.copy(), sol.mu_g.copy(), sol.mu_b.copy()
@@ -232,6 +236,12 @@ def test_adjoint_correction_keeps_kkt_point_with_stale_blocks(robot_disc, robot_
     # the stored blocks really are stale
     _, Phi0, _ = d.stage_hess_exact(sol.x[0], sol.u[0], d.p0[0], sol.lam[1], sol.mu_g[0])
     assert np.max(np.abs(ref.slots[ref._slot(0)].Phit - np.array(Phi0))) > 1e-2
+    A0 = np.array(d.stage_hess(hessian)(sol.x[0], sol.u[0], d.p0[0], sol.lam[1], sol.mu_g[0])[0])
+    dH = np.max(np.abs(ref.slots[ref._slot(0)].Ht - A0))
+    if hessian == "gauss-newton" and cost_hessian == "fresh":
+        assert dH <= 1e-12 * np.abs(A0).max()    # the GN block is all cost: refreshed exactly
+    else:
+        assert dH > 1e-2                         # stale (exact: the dynamics' curvature)
     qp = ref.qp_of_current(d.x0)
     ref.feedback(d.x0)
     dev = max(np.max(np.abs(ref.x - sol.x)), np.max(np.abs(ref.u - sol.u)),
@@ -368,12 +378,26 @@ def test_receding_full_recompute_equals_fresh_init(robot_disc, robot_solution):
     for key in ("H", "g", "Phi", "b", "HN", "gN", "lbw", "ubw", "Req", "req"):
         np.testing.assert_allclose(qa[key], qb[key], rtol=0, atol=1e-12, err_msg=key)
     # and with M = 0 the stale stage blocks are those of the right (shifted) stage
-    ref0 = ReferenceDopus(d, M=0, mode="receding")
+    ref0 = ReferenceDopus(d, M=0, mode="receding", cost_hessian="stored")
     ref0.init(d.x0, sol)
     H1 = ref0.slots[ref0._slot(1)].Ht.copy()
     ref0.feedback(d.x0)
     ref0.prepare()
     np.testing.assert_array_equal(ref0.slots[ref0._slot(0)].Ht, H1)
+    # cost_hessian='fresh': Phit and A_dyn shift with the slot, the cost part is new
+    ref1 = ReferenceDopus(d, M=0, mode="receding", cost_hessian="fresh")
+    ref1.init(d.x0, sol)
+    s1 = ref1.slots[ref1._slot(1)].copy()
+    ref1.feedback(d.disturbance(d.x0))
+    ref1.prepare()
+    s0 = ref1.slots[ref1._slot(0)]
+    np.testing.assert_array_equal(s0.Phit, s1.Phit)
+    np.testing.assert_array_equal(s0.A_dyn, s1.A_dyn)
+    A_l = np.array(d.stage_hess_cost("exact")(ref1.x[0], ref1.u[0], d.p0[0]))
+    np.testing.assert_array_equal(s0.Ht, s1.A_dyn + A_l)
+    # A_dyn + A_l at the point where H was computed is that H
+    A_l1 = np.array(d.stage_hess_cost("exact")(sol.x[1], sol.u[1], d.p0[1]))
+    np.testing.assert_allclose(s1.A_dyn + A_l1, s1.Ht, rtol=0, atol=1e-12 * np.abs(s1.Ht).max())
 
 
 def test_second_example_full_rti_reaches_ipopt_with_active_path_constraint(second_disc, second_solution):
@@ -436,6 +460,71 @@ def test_receding_horizon_tracks_from_ipopt_solution(robot_disc, robot_solution,
         assert du[1] < 1.0               # torques span +-10: M = 1 stays near the optimum
 
 
+@pytest.mark.parametrize("hessian", ["exact", "gauss-newton"])
+def test_cost_hessian_settings_agree_for_the_full_rti(robot_disc, robot_solution, hessian):
+    """With every stage re-linearised (M = N-1) 'fresh' and 'stored' are the same algorithm:
+    identical iterates, bit for bit (receding mode, disturbed start)."""
+    d = robot_disc
+    sol, _ = robot_solution
+    a = ReferenceDopus(d, M=d.N - 1, hessian=hessian, cost_hessian="fresh")
+    b = ReferenceDopus(d, M=d.N - 1, hessian=hessian, cost_hessian="stored")
+    x = d.disturbance(d.x0)
+    for r in (a, b):
+        r.init(d.x0, sol)
+    for _ in range(4):
+        ua, ub = a.feedback(x), b.feedback(x)
+        np.testing.assert_array_equal(ua, ub)
+        for f in ("x", "u", "lam", "mu_b", "mu_bN", "nu"):
+            np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+        x = np.array(d.stage_eval(x, ua, d.p0[0])[0]).ravel()
+        a.prepare()
+        b.prepare()
+        for sa, sb in zip(a.slots, b.slots):
+            np.testing.assert_array_equal(sa.Ht, sb.Ht)
+
+
+def _closed_loop(d, guess, M, cost_hessian, steps, hessian="gauss-newton"):
+    """``steps`` sampling instants on the discrete model phi, the OCP's disturbance at the
+    first; returns u0 per instant and the KKT measure after each feedback."""
+    r = ReferenceDopus(d, M=M, mode="receding", hessian=hessian, cost_hessian=cost_hessian)
+    r.init(d.x0, guess)
+    x = d.disturbance(d.x0)
+    us, kkts = [], []
+    for _ in range(steps):
+        u0 = r.feedback(x)
+        us.append(u0)
+        kkts.append(r.kkt(x)["kkt"])
+        x = np.array(d.stage_eval(x, u0, d.p0[0])[0]).ravel()
+        r.prepare()
+    return np.array(us), np.array(kkts)
+
+
+def test_receding_gauss_newton_m1_fresh_stays_with_the_full_rti(robot_disc, robot_solution):
+    """The robot arm's end-of-horizon manoeuvre moves with the horizon, so the stored cost
+    Hessians of M = 1 go stale; refreshed ('fresh') the M = 1 closed loop follows the full
+    RTI. Bounds: the torques span +-10 and the full RTI itself is ~0.02 in KKT (median)
+    from the moving optimum, so M = 1 must stay within 0.5 (max) / 0.1 (RMS) of the full
+    RTI's u0 and within twice its median KKT; 'stored' misses each bound by a factor >= 5
+    (so the test has teeth)."""
+    d = robot_disc
+    sol, _ = robot_solution
+    steps = 30
+    u_full, k_full = _closed_loop(d, sol, d.N - 1, "fresh", steps)
+    res = {}
+    for ch in ("fresh", "stored"):
+        u, k = _closed_loop(d, sol, 1, ch, steps)
+        du = u - u_full
+        res[ch] = (np.abs(du).max(), np.sqrt(np.mean(du ** 2)), np.median(k))
+    print(f"\nreceding GN, {steps} steps, u0 against the full RTI (max, RMS) and median KKT "
+          f"(full RTI {np.median(k_full):.2e}): " +
+          "; ".join(f"M=1 {ch}: {a:.3f}, {b:.3f}, {c:.2e}" for ch, (a, b, c) in res.items()))
+    mx, rms, kmed = res["fresh"]
+    assert mx < 0.5 and rms < 0.1
+    assert kmed < 2.0 * np.median(k_full)
+    mx, rms, kmed = res["stored"]
+    assert mx > 2.5 and rms > 0.5 and kmed > 10.0 * np.median(k_full)
+
+
 def test_reference_rejects_bad_input(robot_disc):
     d = robot_disc
     with pytest.raises(ValueError, match="hessian"):
@@ -444,6 +533,8 @@ def test_reference_rejects_bad_input(robot_disc):
         ReferenceDopus(d, regularization="clip")
     with pytest.raises(ValueError, match="mode"):
         ReferenceDopus(d, mode="free")
+    with pytest.raises(ValueError, match="cost_hessian"):
+        ReferenceDopus(d, cost_hessian="always")
     ref = ReferenceDopus(d, M=1000)
     assert ref.M == d.N - 1
     with pytest.raises(DopusError, match="init"):
