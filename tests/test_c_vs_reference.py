@@ -10,10 +10,12 @@ to round-off), so the QP tolerance is set to 1e-14 for both: an interior point s
 looser tolerance leaves slacks of about complementarity / multiplier on weakly active
 bounds, which is a QP accuracy figure, not a property of the DOPUS iteration.
 
-Runs (a modest number of iterations each, to keep the file fast):
+Runs (a modest number of iterations each, to keep the file fast), all with the default
+``cost_hessian="fresh"`` (docs/algorithm.md section 4 step 5) unless named:
 - fixed-xhat0 convergence studies: warm start (the IPOPT solution, then the disturbed
-  initial state), exact Hessian, no regularisation, M in {0, 1, 5, N-1}; cold start with
-  Gauss-Newton, full RTI; cold start with the exact Hessian projected (the Jacobi path);
+  initial state), exact Hessian, no regularisation, M in {0, 1, 5, N-1}, and M in {1, 5}
+  with ``cost_hessian="stored"``; cold start with Gauss-Newton, full RTI; cold start with
+  the exact Hessian projected (the Jacobi path, also for the refreshed blocks);
 - 50 receding-horizon iterations (the closed loop on the discrete model, disturbed at the
   first and the middle iteration), both backends fed the same measurements.
 """
@@ -128,12 +130,14 @@ def step(c, r, xhat0, where: str, tally: Tally):
     return uc, ur
 
 
-def run_fixed(disc, start, M, hessian, iters, regularization="none"):
+def run_fixed(disc, start, M, hessian, iters, regularization="none", cost_hessian="fresh"):
     """Compare ``iters`` iterations, or fewer: the run stops once the reference KKT is at
     KKT_FLOOR, where the steps are so small that rho_k (a ratio of round-off-sized
     residuals and steps) no longer ranks the stages and either backend's selection is as
     good as the other's."""
-    c, r = pair(disc, M=M, mode="fixed", hessian=hessian, regularization=regularization)
+    c, r = pair(disc, M=M, mode="fixed", hessian=hessian, regularization=regularization,
+                cost_hessian=cost_hessian)
+    assert c.cost_hessian == r.cost_hessian == cost_hessian
     for b in (c, r):
         b.init(start.xhat_init, start.guess)
     tally = Tally()
@@ -164,6 +168,24 @@ def test_robot_warm_exact(robot_disc, robot_warm, M):
     M = robot_disc.N - 1 if M == "full" else M
     tally, kkt = run_fixed(robot_disc, robot_warm, M, "exact", iters=6)
     print(f"robot_arm warm exact M={M}: {tally}, reference KKT {kkt:.2e}")
+
+
+@pytest.mark.parametrize("M", [1, 5])
+def test_robot_warm_exact_stored_cost_hessian(robot_disc, robot_warm, M):
+    """The paper's literal algorithm (the whole A moves with its slot)."""
+    tally, kkt = run_fixed(robot_disc, robot_warm, M, "exact", iters=6, cost_hessian="stored")
+    print(f"robot_arm warm exact M={M} stored: {tally}, reference KKT {kkt:.2e}")
+
+
+def test_cost_hessian_setting(robot_disc):
+    c = CSolver(robot_disc)
+    assert c.cost_hessian == "fresh"                 # the default
+    c.set_cost_hessian("stored")
+    assert c.cost_hessian == "stored"
+    with pytest.raises(DopusError, match="cost_hessian"):
+        c.set_cost_hessian("always")
+    assert int(c._c("set_cost_hessian")(c._s, 2)) == 5   # DOPUS_ERR_INVALID_ARGUMENT
+    assert c.cost_hessian == "stored"
 
 
 @pytest.mark.parametrize("M", [0, 1, 5, "full"])
