@@ -223,8 +223,14 @@ def test_timings_with_a_custom_clock(robot_disc, robot_solution):
     t = c.timings
     # shift is read once; stage_grad and rho alternate per stage; M + 1 + terminal Hessians
     assert t["shift"] == 1.0 and t["regularization"] == 0.0
-    assert t["hessians"] == 3.0     # stage N-1, terminal node, one selected stage
+    # stage N-1, terminal node, one selected stage, and the stage-cost Hessian of every
+    # stage (cost_hessian fresh, the default)
+    assert t["hessians"] == 3.0 + robot_disc.N
     assert t["gradients"] > 0 and t["rho"] > 0 and t["assembly"] == 1.0
+    c.set_cost_hessian("stored")
+    c.feedback(robot_disc.x0)
+    c.prepare()
+    assert c.timings["hessians"] == 5.0   # stored: A_l only with the two fresh stage H (A_dyn)
     c.set_clock(None)
     c.feedback(robot_disc.x0)
     assert 0.0 < c.timings["feedback"] < 10.0
