@@ -48,9 +48,13 @@
  * DBL_EPSILON times the accumulation length). */
 #define RICCATI_EPS (16.0 * (NW + 1) * 2.220446049250313e-16)
 /* Infeasibility certificates are tested on the dual (primal) iterate normalised to unit
- * infinity norm once it has grown this much beyond the data scale. */
-#define CERT_EPS 1e-9
+ * infinity norm once it has grown CERT_GROWTH times beyond the data scale: the normalised
+ * constraint residual (A'y, or the ray's equality/cone violation) must be below CERT_RES,
+ * the separating value (b'y, or the descent g'd / curvature d'Hd) beyond CERT_SEP. */
 #define CERT_GROWTH 1e6
+#define CERT_RES_DUAL 1e-9
+#define CERT_RES_PRIMAL 1e-6
+#define CERT_SEP 1e-6
 
 static double dmax(double a, double b) { return a > b ? a : b; }
 static double dmin(double a, double b) { return a < b ? a : b; }
@@ -699,7 +703,7 @@ static int primal_infeasible(const dopus_qp_workspace *ws, const dopus_qp_in *in
         }
     }
     bty /= r->ny;
-    return aty <= 1e-6 * CERT_EPS * CERT_GROWTH && bty > 1e-6 * bscale;
+    return aty <= CERT_RES_DUAL && bty > CERT_SEP * bscale;
 }
 
 /* Unboundedness certificate on the normalised primal iterate d = w / |w|: a feasible ray
@@ -746,11 +750,11 @@ static int dual_infeasible(dopus_qp_workspace *ws, const dopus_qp_in *in, double
         if (ws->has_up[i])
             cone = dmax(cone, dv);
     }
-    if (eq > 1e-6 || cone > 1e-6)
+    if (eq > CERT_RES_PRIMAL || cone > CERT_RES_PRIMAL)
         return 0;
-    if (dhd < -1e-6 * hscale)
+    if (dhd < -CERT_SEP * hscale)
         return 1;
-    return hd <= 1e-6 * hscale && gd < -1e-6 * data_scale;
+    return hd <= CERT_RES_PRIMAL * hscale && gd < -CERT_SEP * data_scale;
 }
 
 /* ---------------------------------------------------------------- driver */
