@@ -201,6 +201,13 @@ def test_robot_cold_gauss_newton(robot_disc):
     print(f"robot_arm cold GN full: {tally}, reference KKT {kkt:.2e}")
 
 
+def test_robot_warm_gauss_newton_m1(robot_disc, robot_warm):
+    """M = 1 with Gauss-Newton: 38 of 40 stage blocks per iteration are A_dyn (zero for
+    Gauss-Newton) plus the generated stage_hess_cost_gn."""
+    tally, kkt = run_fixed(robot_disc, robot_warm, 1, "gauss-newton", iters=6)
+    print(f"robot_arm warm GN M=1: {tally}, reference KKT {kkt:.2e}")
+
+
 def test_second_cold_gauss_newton(second_disc):
     start = make_start(second_disc, "cold")
     tally, kkt = run_fixed(second_disc, start, second_disc.N - 1, "gauss-newton", iters=8)
