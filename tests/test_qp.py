@@ -468,3 +468,114 @@ def test_robot_arm_sqp_warm_start(robot_qps):
         prev_sol, _ = h.solve(qp, tol=TOL_QP_ROBOT)
         prev_label = label
     assert n_warm >= 6
+
+
+def test_linalg_kernels_match_numpy(tmp_path):
+    """The linkable dopus_la_* functions (for other runtime modules) against numpy, with
+    leading dimensions larger than the matrices."""
+    import cffi
+
+    from dopus_codegen.paths import runtime_c_dir
+
+    rc = runtime_c_dir()
+    lib_path = tmp_path / "liblinalg.so"
+    subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-fPIC", "-shared",
+                    f"-I{rc}", str(rc / "dopus_linalg.c"), "-o", str(lib_path), "-lm"], check=True)
+    ffi = cffi.FFI()
+    decls = [line for line in (rc / "dopus_linalg.h").read_text().split("/* ----")[0].splitlines()
+             if not line.startswith("#")]
+    ffi.cdef("\n".join(decls))
+    lib = ffi.dlopen(str(lib_path))
+    rng = np.random.default_rng(4)
+
+    def buf(a):  # column-major copy with leading dimension rows + 2
+        m, n = a.shape
+        b = np.zeros((n, m + 2))
+        b[:, :m] = a.T
+        return b
+
+    def mat(b, m, n):
+        return b[:, :m].T.copy()
+
+    def ptr(a):
+        return ffi.cast("double *", ffi.from_buffer(a))
+
+    m, n, k = 5, 3, 4
+    A = rng.standard_normal((m, n))
+    B = rng.standard_normal((n, k))
+    x = rng.standard_normal(n)
+    y = rng.standard_normal(m)
+    yy = y.copy()
+    Ab = buf(A)
+    lib.dopus_la_gemv_n(m, n, 2.0, ptr(Ab), m + 2, ptr(x), 0.5, ptr(yy))
+    np.testing.assert_allclose(yy, 2.0 * A @ x + 0.5 * y, rtol=1e-14, atol=1e-14)
+    xx = x.copy()
+    lib.dopus_la_gemv_t(m, n, -1.0, ptr(Ab), m + 2, ptr(y), 2.0, ptr(xx))
+    np.testing.assert_allclose(xx, -A.T @ y + 2.0 * x, rtol=1e-14, atol=1e-14)
+    C = rng.standard_normal((m, k))
+    Cb = buf(C)
+    Bb = buf(B)
+    lib.dopus_la_gemm_nn(m, k, n, 1.5, ptr(Ab), m + 2, ptr(Bb), n + 2, -1.0, ptr(Cb), m + 2)
+    np.testing.assert_allclose(mat(Cb, m, k), 1.5 * A @ B - C, rtol=1e-13, atol=1e-13)
+    D = rng.standard_normal((m, k))
+    Db = buf(D)
+    Cb2 = buf(np.zeros((n, k)))
+    lib.dopus_la_gemm_tn(n, k, m, 1.0, ptr(Ab), m + 2, ptr(Db), m + 2, 0.0, ptr(Cb2), n + 2)
+    np.testing.assert_allclose(mat(Cb2, n, k), A.T @ D, rtol=1e-13, atol=1e-13)
+    # symmetric: symv with the lower triangle only (garbage above the diagonal)
+    S = rng.standard_normal((n, n))
+    S = S + S.T + 2 * n * np.eye(n)
+    Sg = np.tril(S) + np.triu(np.full((n, n), 7.0), 1)
+    Sb = buf(Sg)
+    out = x.copy()
+    lib.dopus_la_symv_l(n, 1.0, ptr(Sb), n + 2, ptr(x), 0.0, ptr(out))
+    np.testing.assert_allclose(out, S @ x, rtol=1e-13, atol=1e-13)
+    # Cholesky and triangular solves
+    Lb = buf(Sg)
+    assert lib.dopus_la_potrf_l(n, ptr(Lb), n + 2) == 0
+    L = np.tril(mat(Lb, n, n))
+    np.testing.assert_allclose(L, np.linalg.cholesky(S), rtol=1e-13, atol=1e-13)
+    v = x.copy()
+    lib.dopus_la_trsv_ln(n, ptr(Lb), n + 2, ptr(v))
+    lib.dopus_la_trsv_lt(n, ptr(Lb), n + 2, ptr(v))
+    np.testing.assert_allclose(v, np.linalg.solve(S, x), rtol=1e-12, atol=1e-12)
+    Bs = rng.standard_normal((n, 2))
+    Bsb = buf(Bs)
+    lib.dopus_la_trsm_lln(n, 2, ptr(Lb), n + 2, ptr(Bsb), n + 2)
+    lib.dopus_la_trsm_llt(n, 2, ptr(Lb), n + 2, ptr(Bsb), n + 2)
+    np.testing.assert_allclose(mat(Bsb, n, 2), np.linalg.solve(S, Bs), rtol=1e-12, atol=1e-12)
+    # indefinite: Cholesky fails at the first negative pivot, LDL' counts the negative ones
+    E = np.diag([2.0, -1.0, 3.0])
+    Eb = buf(E)
+    assert lib.dopus_la_potrf_l(3, ptr(Eb), 5) == 2
+    nneg = ffi.new("int *")
+    Eb = buf(E)
+    assert lib.dopus_la_ldlt_l(3, ptr(Eb), 5, nneg) == 0 and nneg[0] == 1
+    # the noise-aware Cholesky floors a pivot within the noise and counts it
+    Z = np.array([[1.0, 1.0], [1.0, 1.0 - 1e-14]])
+    noise = np.array([0.0, 1e-12])
+    nfl = ffi.new("int *")
+    Zb = buf(Z)
+    assert lib.dopus_la_potrf_l_noise(2, ptr(Zb), 4, ptr(noise), nfl) == 0 and nfl[0] == 1
+    Zb = buf(Z)
+    no_noise = np.zeros(2)
+    assert lib.dopus_la_potrf_l_noise(2, ptr(Zb), 4, ptr(no_noise), nfl) == 2
+    # vector helpers
+    assert lib.dopus_la_dot(n, ptr(x), ptr(x)) == pytest.approx(x @ x, rel=1e-14)
+    assert lib.dopus_la_norm_inf(m, ptr(y)) == np.abs(y).max()
+    assert lib.dopus_la_max_abs_mat(m, n, ptr(Ab), m + 2) == np.abs(A).max()
+    assert lib.dopus_la_all_finite(m, n, ptr(Ab), m + 2) == 1
+    Ab[1, 2] = np.nan
+    assert lib.dopus_la_all_finite(m, n, ptr(Ab), m + 2) == 0
+    z = y.copy()
+    w = rng.standard_normal(m)
+    lib.dopus_la_axpy(m, 3.0, ptr(w), ptr(z))
+    np.testing.assert_allclose(z, y + 3.0 * w, rtol=1e-14)
+    # copies
+    Ab = buf(A)
+    Cc = np.zeros((n, m + 4))
+    lib.dopus_la_copy_mat(m, n, ptr(Ab), m + 2, ptr(Cc), m + 4)
+    np.testing.assert_array_equal(Cc[:, :m].T, A)
+    Sb = buf(Sg)
+    lib.dopus_la_symmetrize_l(n, ptr(Sb), n + 2)
+    np.testing.assert_array_equal(mat(Sb, n, n), S)
