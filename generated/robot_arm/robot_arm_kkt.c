@@ -1,0 +1,120 @@
+/* KKT measure (docs/algorithm.md section 6). */
+#include <math.h>
+
+#include "robot_arm_kkt.h"
+#include "robot_arm_problem.h"
+#include "robot_arm_solver.h"
+
+static double robot_arm_kkt_max(double a, double b)
+{
+    return a > b ? a : b;
+}
+
+/* Violation max(0, v - ub, lb - v) of one row. */
+static double robot_arm_kkt_viol(double v, double lb, double ub)
+{
+    return robot_arm_kkt_max(0.0, robot_arm_kkt_max(v - ub, lb - v));
+}
+
+/* Complementarity of a signed multiplier mu of the row lb <= v <= ub:
+ * max(mu,0) |ub - v| and max(-mu,0) |v - lb|; a nonzero multiplier on an infinite side
+ * contributes |mu|. */
+static double robot_arm_kkt_comp(double mu, double v, double lb, double ub)
+{
+    double c = 0.0;
+    if (mu > 0.0) {
+        c = isinf(ub) ? mu : mu * fabs(ub - v);
+    } else if (mu < 0.0) {
+        c = isinf(lb) ? -mu : -mu * fabs(v - lb);
+    }
+    return c;
+}
+
+static int robot_arm_kkt_finite(const double *v, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        if (!isfinite(v[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, double *parts)
+{
+    double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
+    double gL[ROBOT_ARM_NW], phi[ROBOT_ARM_NX], g[ROBOT_ARM_DIM(ROBOT_ARM_NG)], l;
+    double gLN[ROBOT_ARM_NX], E, r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
+    int k, i;
+
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        eq = robot_arm_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
+    }
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
+                                  &l, g, &s->fun_work) != 0) {
+            return ROBOT_ARM_ERR_FUNCTION;
+        }
+        if (!robot_arm_kkt_finite(gL, ROBOT_ARM_NW) || !robot_arm_kkt_finite(phi, ROBOT_ARM_NX) ||
+            !robot_arm_kkt_finite(g, ROBOT_ARM_NG) || !isfinite(l)) {
+            return ROBOT_ARM_ERR_NONFINITE_VALUE;
+        }
+        /* stationarity gL_k + mu_b_k + [lam_k; 0] */
+        for (i = 0; i < ROBOT_ARM_NW; ++i) {
+            double v = gL[i] + s->mu_b[k][i] + (i < ROBOT_ARM_NX ? s->lam[k][i] : 0.0);
+            stat = robot_arm_kkt_max(stat, fabs(v));
+        }
+        for (i = 0; i < ROBOT_ARM_NX; ++i) {
+            eq = robot_arm_kkt_max(eq, fabs(s->x[k + 1][i] - phi[i]));
+        }
+        for (i = 0; i < ROBOT_ARM_NG; ++i) {
+            ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(g[i], robot_arm_lg[i], robot_arm_ug[i]));
+            comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_g[k][i], g[i], robot_arm_lg[i], robot_arm_ug[i]));
+        }
+        /* simple bounds: x_k only for k >= 1 (x_0 is fixed by xhat0, so a multiplier on
+         * it pairs with infinite sides and counts with its magnitude) */
+        if (k == 0) {
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                comp = robot_arm_kkt_max(comp, fabs(s->mu_b[0][i]));
+            }
+        } else {
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(s->x[k][i], robot_arm_lbx[i], robot_arm_ubx[i]));
+                comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_b[k][i], s->x[k][i], robot_arm_lbx[i],
+                                                          robot_arm_ubx[i]));
+            }
+        }
+        for (i = 0; i < ROBOT_ARM_NU; ++i) {
+            ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(s->u[k][i], robot_arm_lbu[i], robot_arm_ubu[i]));
+            comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_b[k][ROBOT_ARM_NX + i], s->u[k][i],
+                                                      robot_arm_lbu[i], robot_arm_ubu[i]));
+        }
+    }
+    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
+                             &s->fun_work) != 0) {
+        return ROBOT_ARM_ERR_FUNCTION;
+    }
+    if (!robot_arm_kkt_finite(gLN, ROBOT_ARM_NX) || !isfinite(E) || !robot_arm_kkt_finite(r, ROBOT_ARM_NR) ||
+        !robot_arm_kkt_finite(r_eq, ROBOT_ARM_NE)) {
+        return ROBOT_ARM_ERR_NONFINITE_VALUE;
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        stat = robot_arm_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[ROBOT_ARM_N][i]));
+        ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(s->x[ROBOT_ARM_N][i], robot_arm_lbx[i], robot_arm_ubx[i]));
+        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_bN[i], s->x[ROBOT_ARM_N][i], robot_arm_lbx[i],
+                                                  robot_arm_ubx[i]));
+    }
+    for (i = 0; i < ROBOT_ARM_NE; ++i) {
+        eq = robot_arm_kkt_max(eq, fabs(r_eq[i]));
+    }
+    for (i = 0; i < ROBOT_ARM_NR; ++i) {
+        ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(r[i], robot_arm_lr[i], robot_arm_ur[i]));
+        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_r[i], r[i], robot_arm_lr[i], robot_arm_ur[i]));
+    }
+    parts[0] = stat;
+    parts[1] = eq;
+    parts[2] = ineq;
+    parts[3] = comp;
+    return ROBOT_ARM_OK;
+}

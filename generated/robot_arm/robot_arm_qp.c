@@ -1,0 +1,1144 @@
+/* Sparse stage-wise QP solver, see robot_arm_qp.h for the problem, signs and API.
+ *
+ * Method: infeasible-start primal-dual interior point with Mehrotra's predictor-corrector.
+ * Every inequality row i (value v_i = D_i w: a component of w_k, a row of C_k w_k, of
+ * x_N or of R x_N) has a lower and an upper side, each with a slack and a multiplier:
+ *     v - lo - t_lo = 0,  up - v - t_up = 0,  t, z >= 0,  t_lo z_lo = t_up z_up = sigma mu.
+ * Eliminating the slacks and multipliers leaves the Newton system of an equality-constrained
+ * LQ problem with stage Hessians H_k + D'QD (Q = z_lo/t_lo + z_up/t_up), solved by a
+ * Riccati recursion in which the terminal equality multipliers nu are carried as
+ * parameters of the value function (V_k affine in nu) and found from a small ne x ne
+ * system at stage 0. This is exact for any scaling of the Req rows.
+ *
+ * Newton system (unknowns dw, dlam, dnu; rows as in robot_arm_qp.h):
+ *   (H_k + D'QD + delta I) dw_k + [dlam_k; 0] - Phi_k' dlam_{k+1} = rhs_stat_k
+ *   (HN + D'QD + delta I) dx_N + dlam_N + Req' dnu               = rhs_stat_N
+ *   dx_0 = rhs_dyn_0,  dx_{k+1} - Phi_k dw_k = rhs_dyn_{k+1},  Req dx_N = rhs_eqN
+ */
+#include "robot_arm_qp.h"
+#include "robot_arm_linalg.h"
+
+#include <math.h>
+#include <stddef.h>
+
+#define N ROBOT_ARM_N
+#define NX ROBOT_ARM_NX
+#define NU ROBOT_ARM_NU
+#define NG ROBOT_ARM_NG
+#define NR ROBOT_ARM_NR
+#define NE ROBOT_ARM_NE
+#define NW ROBOT_ARM_QP_NW
+#define NSI ROBOT_ARM_QP_NSTAGEINEQ
+#define NI ROBOT_ARM_QP_NINEQ
+#define NP ROBOT_ARM_QP_NPRIM
+#define NE1 ROBOT_ARM_QP_NE1
+#define NU1 ROBOT_ARM_QP_NU1
+#define TOFF (N * NSI) /* first terminal inequality row */
+
+/* Fraction-to-boundary factor and limits of the inertia correction. */
+#define STEP_TAU 0.995
+#define DELTA_GROW 10.0
+#define DELTA_MAX_REL 1e10
+#define RHO_TRIES 6
+#define MU_FLOOR_REL 0.1
+#define STALL_ITERS 10
+#define REFINE_BELOW 1e-6
+#define RHO_MAX_REL 1e10
+/* Relative rounding unit used in the round-off estimates of the Riccati recursion (a few
+ * DBL_EPSILON times the accumulation length). */
+#define RICCATI_EPS (16.0 * (NW + 1) * 2.220446049250313e-16)
+/* Infeasibility certificates are tested on the dual (primal) iterate normalised to unit
+ * infinity norm once it has grown CERT_GROWTH times beyond the data scale: the normalised
+ * constraint residual (A'y, or the ray's equality/cone violation) must be below CERT_RES,
+ * the separating value (b'y, or the descent g'd / curvature d'Hd) beyond CERT_SEP. */
+#define CERT_GROWTH 1e6
+#define CERT_RES_DUAL 1e-9
+#define CERT_RES_PRIMAL 1e-6
+#define CERT_SEP 1e-6
+
+static double dmax(double a, double b) { return a > b ? a : b; }
+static double dmin(double a, double b) { return a < b ? a : b; }
+
+void robot_arm_qp_settings_default(robot_arm_qp_settings *settings)
+{
+    settings->tol = 1e-8;
+    settings->max_iter = 100;
+    settings->warm_start = 0;
+    settings->refine_steps = 1;
+}
+
+unsigned long robot_arm_qp_workspace_size(void)
+{
+    return (unsigned long)sizeof(robot_arm_qp_workspace);
+}
+
+/* ---------------------------------------------------------------- data checks */
+
+static int check_input(const robot_arm_qp_in *in)
+{
+    int k, i;
+    for (k = 0; k < N; ++k) {
+        if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
+            return 0;
+        if (!robot_arm_lai_all_finite(NW, NW, in->H[k], NW) ||
+            !robot_arm_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+            (NG > 0 && !robot_arm_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
+            !robot_arm_lai_all_finite(NW, 1, in->g[k], NW) || !robot_arm_lai_all_finite(NX, 1, in->b[k], NX))
+            return 0;
+    }
+    if (in->HN == NULL || (NR > 0 && in->R == NULL) || (NE > 0 && in->Req == NULL))
+        return 0;
+    if (!robot_arm_lai_all_finite(NX, NX, in->HN, NX) || !robot_arm_lai_all_finite(NX, 1, in->x0, NX) ||
+        !robot_arm_lai_all_finite(NX, 1, in->gN, NX))
+        return 0;
+    if (NR > 0 && !robot_arm_lai_all_finite(NR, NX, in->R, NR > 0 ? NR : 1))
+        return 0;
+    if (NE > 0 && (!robot_arm_lai_all_finite(NE, NX, in->Req, NE1) || !robot_arm_lai_all_finite(NE, 1, in->req, NE1)))
+        return 0;
+    for (k = 0; k < N; ++k) {
+        for (i = 0; i < NW; ++i)
+            if (in->lbw[k][i] != in->lbw[k][i] || in->ubw[k][i] != in->ubw[k][i] ||
+                in->lbw[k][i] == INFINITY || in->ubw[k][i] == -INFINITY)
+                if (k > 0 || i >= NX)
+                    return 0;
+        for (i = 0; i < NG; ++i)
+            if (in->lg[k][i] != in->lg[k][i] || in->ug[k][i] != in->ug[k][i] ||
+                in->lg[k][i] == INFINITY || in->ug[k][i] == -INFINITY)
+                return 0;
+    }
+    for (i = 0; i < NX; ++i)
+        if (in->lbxN[i] != in->lbxN[i] || in->ubxN[i] != in->ubxN[i] || in->lbxN[i] == INFINITY ||
+            in->ubxN[i] == -INFINITY)
+            return 0;
+    for (i = 0; i < NR; ++i)
+        if (in->lr[i] != in->lr[i] || in->ur[i] != in->ur[i] || in->lr[i] == INFINITY ||
+            in->ur[i] == -INFINITY)
+            return 0;
+    return 1;
+}
+
+/* Bounds into the flat row layout; returns 0 when some lo > up (trivially infeasible). */
+static int setup_bounds(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+{
+    int k, i, ok = 1;
+    for (k = 0; k < N; ++k) {
+        const int o = k * NSI;
+        for (i = 0; i < NW; ++i) {
+            ws->lo[o + i] = in->lbw[k][i];
+            ws->up[o + i] = in->ubw[k][i];
+        }
+        for (i = 0; i < NG; ++i) {
+            ws->lo[o + NW + i] = in->lg[k][i];
+            ws->up[o + NW + i] = in->ug[k][i];
+        }
+    }
+    for (i = 0; i < NX; ++i) {
+        ws->lo[TOFF + i] = in->lbxN[i];
+        ws->up[TOFF + i] = in->ubxN[i];
+    }
+    for (i = 0; i < NR; ++i) {
+        ws->lo[TOFF + NX + i] = in->lr[i];
+        ws->up[TOFF + NX + i] = in->ur[i];
+    }
+    for (i = 0; i < NI; ++i) {
+        /* x_0 is fixed by x0: its box rows are ignored */
+        const int ignored = (i < NX);
+        ws->has_lo[i] = (unsigned char)(!ignored && isfinite(ws->lo[i]));
+        ws->has_up[i] = (unsigned char)(!ignored && isfinite(ws->up[i]));
+        if (ws->has_lo[i] && ws->has_up[i] && ws->lo[i] > ws->up[i])
+            ok = 0;
+    }
+    return ok;
+}
+
+/* ---------------------------------------------------------------- row maps D, D' */
+
+/* v = D prim */
+static void apply_D(const robot_arm_qp_in *in, const double *prim, double *v)
+{
+    int k, i;
+    for (k = 0; k < N; ++k) {
+        const double *w = prim + k * NW;
+        double *vk = v + k * NSI;
+        for (i = 0; i < NW; ++i)
+            vk[i] = w[i];
+        if (NG > 0)
+            robot_arm_lai_gemv_n(NG, NW, 1.0, in->C[k], NG > 0 ? NG : 1, w, 0.0, vk + NW);
+    }
+    for (i = 0; i < NX; ++i)
+        v[TOFF + i] = prim[N * NW + i];
+    if (NR > 0)
+        robot_arm_lai_gemv_n(NR, NX, 1.0, in->R, NR > 0 ? NR : 1, prim + N * NW, 0.0, v + TOFF + NX);
+}
+
+/* out += D' y */
+static void add_Dt(const robot_arm_qp_in *in, const double *y, double *out)
+{
+    int k, i;
+    for (k = 0; k < N; ++k) {
+        const double *yk = y + k * NSI;
+        double *o = out + k * NW;
+        for (i = 0; i < NW; ++i)
+            o[i] += yk[i];
+        if (NG > 0)
+            robot_arm_lai_gemv_t(NG, NW, 1.0, in->C[k], NG > 0 ? NG : 1, yk + NW, 1.0, o);
+    }
+    for (i = 0; i < NX; ++i)
+        out[N * NW + i] += y[TOFF + i];
+    if (NR > 0)
+        robot_arm_lai_gemv_t(NR, NX, 1.0, in->R, NR > 0 ? NR : 1, y + TOFF + NX, 1.0, out + N * NW);
+}
+
+/* ---------------------------------------------------------------- residuals */
+
+typedef struct {
+    double mu;       /* average complementarity */
+    int nsides;      /* number of bounded sides */
+    double stat, eq, ineq, comp;            /* unscaled inf-norms */
+    double stat_s, eq_s, ineq_s, comp_s;    /* scaled */
+    double ny;       /* inf-norm of the dual iterate */
+    double nz;       /* inf-norm of the inequality multipliers */
+    double obj;
+} qp_res;
+
+static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, qp_res *r)
+{
+    int k, i;
+    double s_stat = 1.0, s_eq = 1.0, s_ineq = 1.0, nz = 0.0, obj = 0.0, comp = 0.0, ineq = 0.0;
+    double sum_c = 0.0;
+    int m = 0;
+
+    apply_D(in, ws->prim, ws->v);
+    /* signed multipliers per row */
+    for (i = 0; i < NI; ++i) {
+        const double zl = ws->has_lo[i] ? ws->z_lo[i] : 0.0;
+        const double zu = ws->has_up[i] ? ws->z_up[i] : 0.0;
+        ws->yrow[i] = zu - zl;
+        nz = dmax(nz, dmax(zl, zu));
+    }
+    /* objective part Hw + g and constraint part A'y of the stationarity residual */
+    for (k = 0; k < N; ++k) {
+        const double *w = ws->prim + k * NW;
+        double *h = ws->hwg + k * NW;
+        double *a = ws->aty + k * NW;
+        robot_arm_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
+        s_stat = dmax(s_stat, robot_arm_lai_norm_inf(NW, h));
+        obj += 0.5 * robot_arm_lai_dot(NW, w, h) + robot_arm_lai_dot(NW, in->g[k], w);
+        s_stat = dmax(s_stat, robot_arm_lai_norm_inf(NW, in->g[k]));
+        robot_arm_lai_axpy(NW, 1.0, in->g[k], h);
+        for (i = 0; i < NW; ++i)
+            a[i] = i < NX ? ws->lam[k * NX + i] : 0.0;
+        robot_arm_lai_gemv_t(NX, NW, -1.0, in->Phi[k], NX, ws->lam + (k + 1) * NX, 1.0, a);
+    }
+    {
+        const double *xN = ws->prim + N * NW;
+        double *h = ws->hwg + N * NW;
+        double *a = ws->aty + N * NW;
+        robot_arm_lai_symv_l(NX, 1.0, in->HN, NX, xN, 0.0, h);
+        s_stat = dmax(s_stat, robot_arm_lai_norm_inf(NX, h));
+        obj += 0.5 * robot_arm_lai_dot(NX, xN, h) + robot_arm_lai_dot(NX, in->gN, xN);
+        s_stat = dmax(s_stat, robot_arm_lai_norm_inf(NX, in->gN));
+        robot_arm_lai_axpy(NX, 1.0, in->gN, h);
+        for (i = 0; i < NX; ++i)
+            a[i] = ws->lam[N * NX + i];
+        if (NE > 0)
+            robot_arm_lai_gemv_t(NE, NX, 1.0, in->Req, NE1, ws->nu, 1.0, a);
+    }
+    add_Dt(in, ws->yrow, ws->aty);
+    s_stat = dmax(s_stat, robot_arm_lai_norm_inf(NP, ws->aty));
+    for (i = 0; i < NP; ++i)
+        ws->r_stat[i] = ws->hwg[i] + ws->aty[i];
+
+    /* equalities */
+    for (i = 0; i < NX; ++i)
+        ws->r_dyn[i] = ws->prim[i] - in->x0[i];
+    s_eq = dmax(s_eq, robot_arm_lai_norm_inf(NX, in->x0));
+    for (k = 0; k < N; ++k) {
+        double *rd = ws->r_dyn + (k + 1) * NX;
+        const double *xn = ws->prim + (k + 1) * NW;
+        robot_arm_lai_gemv_n(NX, NW, -1.0, in->Phi[k], NX, ws->prim + k * NW, 0.0, rd);
+        s_eq = dmax(s_eq, robot_arm_lai_norm_inf(NX, rd));
+        s_eq = dmax(s_eq, robot_arm_lai_norm_inf(NX, in->b[k]));
+        for (i = 0; i < NX; ++i)
+            rd[i] += xn[i] - in->b[k][i];
+    }
+    s_eq = dmax(s_eq, robot_arm_lai_norm_inf(NP, ws->prim));
+    if (NE > 0) {
+        robot_arm_lai_gemv_n(NE, NX, 1.0, in->Req, NE1, ws->prim + N * NW, 0.0, ws->r_eqN);
+        s_eq = dmax(s_eq, robot_arm_lai_norm_inf(NE, ws->r_eqN));
+        s_eq = dmax(s_eq, robot_arm_lai_norm_inf(NE, in->req));
+        for (i = 0; i < NE; ++i)
+            ws->r_eqN[i] -= in->req[i];
+    }
+
+    /* inequality sides */
+    for (i = 0; i < NI; ++i) {
+        const double v = ws->v[i];
+        ws->r_lo[i] = 0.0;
+        ws->r_up[i] = 0.0;
+        if (ws->has_lo[i]) {
+            ws->r_lo[i] = v - ws->lo[i] - ws->t_lo[i];
+            ineq = dmax(ineq, ws->lo[i] - v);
+            s_ineq = dmax(s_ineq, fabs(ws->lo[i]));
+            comp = dmax(comp, ws->t_lo[i] * ws->z_lo[i]);
+            sum_c += ws->t_lo[i] * ws->z_lo[i];
+            ++m;
+        }
+        if (ws->has_up[i]) {
+            ws->r_up[i] = ws->up[i] - v - ws->t_up[i];
+            ineq = dmax(ineq, v - ws->up[i]);
+            s_ineq = dmax(s_ineq, fabs(ws->up[i]));
+            comp = dmax(comp, ws->t_up[i] * ws->z_up[i]);
+            sum_c += ws->t_up[i] * ws->z_up[i];
+            ++m;
+        }
+        if (ws->has_lo[i] || ws->has_up[i])
+            s_ineq = dmax(s_ineq, fabs(v));
+    }
+
+    r->nsides = m;
+    r->mu = m > 0 ? sum_c / m : 0.0;
+    r->stat = robot_arm_lai_norm_inf(NP, ws->r_stat);
+    r->eq = dmax(robot_arm_lai_norm_inf((N + 1) * NX, ws->r_dyn), NE > 0 ? robot_arm_lai_norm_inf(NE, ws->r_eqN) : 0.0);
+    r->ineq = ineq;
+    r->comp = comp;
+    r->stat_s = r->stat / s_stat;
+    r->eq_s = r->eq / s_eq;
+    r->ineq_s = r->ineq / s_ineq;
+    r->comp_s = r->comp / dmax(1.0, nz);
+    r->nz = nz;
+    r->ny = dmax(nz, dmax(robot_arm_lai_norm_inf((N + 1) * NX, ws->lam), NE > 0 ? robot_arm_lai_norm_inf(NE, ws->nu) : 0.0));
+    r->obj = obj;
+    ws->scale_stat = s_stat;
+    ws->scale_eq = s_eq;
+}
+
+/* ---------------------------------------------------------------- Riccati factorisation */
+
+/* Largest absolute entry of the Hessian data (scale of delta and rho). */
+static double hessian_scale(const robot_arm_qp_in *in)
+{
+    int k;
+    double s = robot_arm_lai_max_abs_mat(NX, NX, in->HN, NX);
+    for (k = 0; k < N; ++k)
+        s = dmax(s, robot_arm_lai_max_abs_mat(NW, NW, in->H[k], NW));
+    /* a zero Hessian (an LP) still needs a scale for the inertia correction */
+    return s > 0.0 ? s : 1.0;
+}
+
+/* Factor the Newton system for the current barrier weights qdiag, delta and rho.
+ * Returns 0, or 1 when a stage pivot block M_uu is not positive definite (wrong inertia),
+ * or 2 when the terminal-multiplier block S is singular. */
+static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+{
+    int k, i, j;
+    double *PhiP = ws->work;                 /* NX x NW: P_{k+1} Phi_k */
+    double *Gam = ws->work + NX * NW;        /* NW x NE: Phi_k' G_{k+1} */
+    const double delta = ws->delta;
+    double pmag;
+
+    /* terminal: P_N = HN + D'QD + delta I + rho Req'Req, G_N = Req' */
+    {
+        double *P = ws->P[N];
+        const double *q = ws->qdiag + TOFF;
+        robot_arm_lai_copy_mat(NX, NX, in->HN, NX, P, NX);
+        robot_arm_lai_symmetrize_l(NX, P, NX);
+        for (i = 0; i < NX; ++i)
+            P[i + i * NX] += q[i] + delta;
+        for (k = 0; k < NR; ++k) {
+            const double qr = q[NX + k];
+            if (qr != 0.0)
+                for (j = 0; j < NX; ++j)
+                    for (i = 0; i < NX; ++i)
+                        P[i + j * NX] += qr * in->R[k + i * NR] * in->R[k + j * NR];
+        }
+        if (NE > 0) {
+            if (ws->rho_aug > 0.0)
+                robot_arm_lai_gemm_tn(NX, NX, NE, ws->rho_aug, in->Req, NE1, in->Req, NE1, 1.0, P, NX);
+            for (j = 0; j < NE; ++j)
+                for (i = 0; i < NX; ++i)
+                    ws->G[N][i + j * NX] = in->Req[j + i * NE1];
+        }
+    }
+    for (i = 0; i < NE1 * NE1; ++i)
+        ws->S[i] = 0.0;
+
+    /* Round-off of the Schur complements: P_{k+1} = M_xx - M_xu M_uu^{-1} M_ux may cancel
+     * large barrier terms (an active state bound enters M_xx, is absorbed by the controls
+     * of the stage before and cancels), leaving an absolute error of about eps times the
+     * magnitude `pmag` of the cancelled terms. That error reaches the pivots of M_uu of
+     * stage k through B' P B, so a negative pivot within that noise is a numerical zero. */
+    pmag = robot_arm_lai_max_abs_mat(NX, NX, ws->P[N], NX);
+    for (k = N - 1; k >= 0; --k) {
+        double *M = ws->M;
+        const double *Phi = in->Phi[k];
+        const double *q = ws->qdiag + k * NSI;
+        double *Lu = ws->Lu[k];
+        double *LK = ws->LK[k];
+        double *LKn = ws->LKn[k];
+        double *P = ws->P[k];
+        const double pmax = robot_arm_lai_max_abs_mat(NX, NX, ws->P[k + 1], NX);
+        double mxx = 0.0;
+
+        /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi */
+        robot_arm_lai_copy_mat(NW, NW, in->H[k], NW, M, NW);
+        robot_arm_lai_symmetrize_l(NW, M, NW);
+        for (i = 0; i < NW; ++i)
+            M[i + i * NW] += q[i] + delta;
+        for (j = 0; j < NG; ++j) {
+            const double qg = q[NW + j];
+            const double *C = in->C[k];
+            int a, c;
+            if (qg != 0.0)
+                for (c = 0; c < NW; ++c)
+                    for (a = 0; a < NW; ++a)
+                        M[a + c * NW] += qg * C[j + a * NG] * C[j + c * NG];
+        }
+        for (j = 0; j < NU; ++j) {
+            /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P */
+            double colsum = 0.0;
+            for (i = 0; i < NX; ++i)
+                colsum += fabs(Phi[i + (NX + j) * NX]);
+            ws->noise[j] = RICCATI_EPS * (fabs(M[NX + j + (NX + j) * NW]) + colsum * colsum * dmax(pmax, pmag));
+        }
+        for (j = 0; j < NX; ++j) {
+            double colsum = 0.0;
+            for (i = 0; i < NX; ++i)
+                colsum += fabs(Phi[i + j * NX]);
+            mxx = dmax(mxx, fabs(M[j + j * NW]) + colsum * colsum * pmax);
+        }
+        robot_arm_lai_gemm_nn(NX, NW, NX, 1.0, ws->P[k + 1], NX, Phi, NX, 0.0, PhiP, NX);
+        /* Phi' (P Phi) is symmetric: form its lower triangle and mirror it, so that M and
+         * P stay exactly symmetric */
+        robot_arm_lai_gemm_tn(NW, NW, NX, 1.0, Phi, NX, PhiP, NX, 1.0, M, NW);
+        /* symmetric up to round-off: the average of both triangles (measurably more
+         * accurate at tight tolerances than mirroring one computed triangle) */
+        for (j = 0; j < NW; ++j)
+            for (i = j + 1; i < NW; ++i) {
+                const double s = 0.5 * (M[i + j * NW] + M[j + i * NW]);
+                M[i + j * NW] = s;
+                M[j + i * NW] = s;
+            }
+        if (NE > 0)
+            robot_arm_lai_gemm_tn(NW, NE, NX, 1.0, Phi, NX, ws->G[k + 1], NX, 0.0, Gam, NW);
+
+        /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
+        robot_arm_lai_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
+        if (robot_arm_lai_potrf_l_noise(NU, Lu, NU1, ws->noise, &ws->pivot_floors) != 0)
+            return 1;
+        pmag = mxx;
+        /* LK = Lu^{-1} M_ux, LKn = Lu^{-1} Gam_u */
+        robot_arm_lai_copy_mat(NU, NX, M + NX, NW, LK, NU1);
+        robot_arm_lai_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
+        /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
+        robot_arm_lai_copy_mat(NX, NX, M, NW, P, NX);
+        robot_arm_lai_gemm_tn(NX, NX, NU, -1.0, LK, NU1, LK, NU1, 1.0, P, NX);
+        for (j = 0; j < NX; ++j)
+            pmag = dmax(pmag, robot_arm_lai_dot(NU, LK + j * NU1, LK + j * NU1));
+        if (NE > 0) {
+            robot_arm_lai_copy_mat(NU, NE, Gam + NX, NW, LKn, NU1);
+            robot_arm_lai_trsm_lln(NU, NE, Lu, NU1, LKn, NU1);
+            /* G_k = Gam_x - LK' LKn;  S += LKn' LKn (S = -(nu-nu block of V_0)) */
+            robot_arm_lai_copy_mat(NX, NE, Gam, NW, ws->G[k], NX);
+            robot_arm_lai_gemm_tn(NX, NE, NU, -1.0, LK, NU1, LKn, NU1, 1.0, ws->G[k], NX);
+            robot_arm_lai_gemm_tn(NE, NE, NU, 1.0, LKn, NU1, LKn, NU1, 1.0, ws->S, NE1);
+        }
+    }
+    if (NE > 0) {
+        /* S is positive definite iff Req has full row rank on the states reachable from
+         * x_0 (LICQ). A rank-deficient S gets a tiny shift; refinement removes its effect
+         * when the equality rows are consistent. */
+        double smax = 0.0;
+        for (i = 0; i < NE; ++i)
+            smax = dmax(smax, ws->S[i + i * NE1]);
+        robot_arm_lai_copy_mat(NE, NE, ws->S, NE1, ws->work, NE1);
+        if (robot_arm_lai_potrf_l(NE, ws->S, NE1) != 0) {
+            robot_arm_lai_copy_mat(NE, NE, ws->work, NE1, ws->S, NE1);
+            for (i = 0; i < NE; ++i)
+                ws->S[i + i * NE1] += 1e-13 * dmax(smax, 1e-300);
+            if (robot_arm_lai_potrf_l(NE, ws->S, NE1) != 0)
+                return 2;
+        }
+    }
+    return 0;
+}
+
+/* Solve the factored Newton system for one right-hand side (rhs_stat, rhs_dyn, rhs_eqN)
+ * into (sp, sl, sn): backward sweep of the value-function vectors, nu at stage 0, forward
+ * sweep of the primal and the costates lam_k = -dV_k/dx. */
+static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const double *rhs_stat,
+                          const double *rhs_dyn, const double *rhs_eqN, double *sp, double *sl,
+                          double *sn)
+{
+    int k, i;
+    double *tv = ws->work;       /* NX */
+    double *m = ws->work + NX;   /* NW */
+    double *e = ws->e;
+
+    /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
+    for (i = 0; i < NX; ++i)
+        ws->p[N][i] = -rhs_stat[N * NW + i];
+    if (NE > 0) {
+        if (ws->rho_aug > 0.0)
+            robot_arm_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, rhs_eqN, 1.0, ws->p[N]);
+        for (i = 0; i < NE; ++i)
+            e[i] = -rhs_eqN[i];
+    }
+    for (k = N - 1; k >= 0; --k) {
+        const double *Phi = in->Phi[k];
+        const double *c = rhs_dyn + (k + 1) * NX;
+        /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
+        for (i = 0; i < NX; ++i)
+            tv[i] = ws->p[k + 1][i];
+        robot_arm_lai_gemv_n(NX, NX, 1.0, ws->P[k + 1], NX, c, 1.0, tv);
+        for (i = 0; i < NW; ++i)
+            m[i] = -rhs_stat[k * NW + i];
+        robot_arm_lai_gemv_t(NX, NW, 1.0, Phi, NX, tv, 1.0, m);
+        if (NE > 0)
+            robot_arm_lai_gemv_t(NX, NE, 1.0, ws->G[k + 1], NX, c, 1.0, e);
+        /* lk = Lu^{-1} m_u; p_k = m_x - LK' lk; e -= LKn' lk */
+        for (i = 0; i < NU; ++i)
+            ws->lk[k][i] = m[NX + i];
+        robot_arm_lai_trsv_ln(NU, ws->Lu[k], NU1, ws->lk[k]);
+        for (i = 0; i < NX; ++i)
+            ws->p[k][i] = m[i];
+        robot_arm_lai_gemv_t(NU, NX, -1.0, ws->LK[k], NU1, ws->lk[k], 1.0, ws->p[k]);
+        if (NE > 0)
+            robot_arm_lai_gemv_t(NU, NE, -1.0, ws->LKn[k], NU1, ws->lk[k], 1.0, e);
+    }
+    /* stage 0: dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
+    for (i = 0; i < NX; ++i)
+        sp[i] = rhs_dyn[i];
+    if (NE > 0) {
+        for (i = 0; i < NE; ++i)
+            sn[i] = e[i];
+        robot_arm_lai_gemv_t(NX, NE, 1.0, ws->G[0], NX, sp, 1.0, sn);
+        robot_arm_lai_trsv_ln(NE, ws->S, NE1, sn);
+        robot_arm_lai_trsv_lt(NE, ws->S, NE1, sn);
+    }
+    for (k = 0; k < N; ++k) {
+        double *w = sp + k * NW;
+        double *u = w + NX;
+        double *lamk = sl + k * NX;
+        /* u_k = -Lu'^{-1} (LK x_k + lk + LKn nu) */
+        for (i = 0; i < NU; ++i)
+            u[i] = ws->lk[k][i];
+        robot_arm_lai_gemv_n(NU, NX, 1.0, ws->LK[k], NU1, w, 1.0, u);
+        if (NE > 0)
+            robot_arm_lai_gemv_n(NU, NE, 1.0, ws->LKn[k], NU1, sn, 1.0, u);
+        robot_arm_lai_trsv_lt(NU, ws->Lu[k], NU1, u);
+        for (i = 0; i < NU; ++i)
+            u[i] = -u[i];
+        /* lam_k = -(P_k x_k + p_k + G_k nu) */
+        for (i = 0; i < NX; ++i)
+            lamk[i] = -ws->p[k][i];
+        robot_arm_lai_gemv_n(NX, NX, -1.0, ws->P[k], NX, w, 1.0, lamk);
+        if (NE > 0)
+            robot_arm_lai_gemv_n(NX, NE, -1.0, ws->G[k], NX, sn, 1.0, lamk);
+        /* x_{k+1} = Phi_k w_k + c_k */
+        for (i = 0; i < NX; ++i)
+            sp[(k + 1) * NW + i] = rhs_dyn[(k + 1) * NX + i];
+        robot_arm_lai_gemv_n(NX, NW, 1.0, in->Phi[k], NX, w, 1.0, sp + (k + 1) * NW);
+    }
+    {
+        const double *xN = sp + N * NW;
+        double *lamN = sl + N * NX;
+        /* lam_N = -(dV_N/dx); the rho terms cancel because Req x_N = rhs_eqN */
+        for (i = 0; i < NX; ++i)
+            lamN[i] = -ws->p[N][i];
+        robot_arm_lai_gemv_n(NX, NX, -1.0, ws->P[N], NX, xN, 1.0, lamN);
+        if (NE > 0)
+            robot_arm_lai_gemv_n(NX, NE, -1.0, ws->G[N], NX, sn, 1.0, lamN);
+    }
+}
+
+/* (os, od, oe) = rhs - K (sp, sl, sn): residual of the (delta-shifted, unaugmented) Newton
+ * system, for iterative refinement. */
+static void newton_residual(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const double *sp,
+                            const double *sl, const double *sn, const double *rhs_stat,
+                            const double *rhs_dyn, const double *rhs_eqN, double *os, double *od,
+                            double *oe)
+{
+    int k, i;
+    double *dv = ws->yrow;
+    /* os = rhs_stat - (H + delta I) sp - D'Q D sp - [sl_k;0] + Phi' sl_{k+1} - Req' sn */
+    apply_D(in, sp, dv);
+    for (i = 0; i < NI; ++i)
+        dv[i] *= -ws->qdiag[i];
+    for (i = 0; i < NP; ++i)
+        os[i] = rhs_stat[i] - ws->delta * sp[i];
+    add_Dt(in, dv, os);
+    for (k = 0; k < N; ++k) {
+        double *o = os + k * NW;
+        robot_arm_lai_symv_l(NW, -1.0, in->H[k], NW, sp + k * NW, 1.0, o);
+        for (i = 0; i < NX; ++i)
+            o[i] -= sl[k * NX + i];
+        robot_arm_lai_gemv_t(NX, NW, 1.0, in->Phi[k], NX, sl + (k + 1) * NX, 1.0, o);
+    }
+    {
+        double *o = os + N * NW;
+        robot_arm_lai_symv_l(NX, -1.0, in->HN, NX, sp + N * NW, 1.0, o);
+        for (i = 0; i < NX; ++i)
+            o[i] -= sl[N * NX + i];
+        if (NE > 0)
+            robot_arm_lai_gemv_t(NE, NX, -1.0, in->Req, NE1, sn, 1.0, o);
+    }
+    for (i = 0; i < NX; ++i)
+        od[i] = rhs_dyn[i] - sp[i];
+    for (k = 0; k < N; ++k) {
+        double *o = od + (k + 1) * NX;
+        for (i = 0; i < NX; ++i)
+            o[i] = rhs_dyn[(k + 1) * NX + i] - sp[(k + 1) * NW + i];
+        robot_arm_lai_gemv_n(NX, NW, 1.0, in->Phi[k], NX, sp + k * NW, 1.0, o);
+    }
+    if (NE > 0) {
+        for (i = 0; i < NE; ++i)
+            oe[i] = rhs_eqN[i];
+        robot_arm_lai_gemv_n(NE, NX, -1.0, in->Req, NE1, sp + N * NW, 1.0, oe);
+    }
+}
+
+/* Newton direction for the barrier right-hand side rc (t z - target per side): build the
+ * condensed right-hand side, solve with refinement, recover slack and multiplier steps. */
+static void newton_direction(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int refine_steps)
+{
+    int i, it;
+    double *y = ws->yrow;
+    for (i = 0; i < NI; ++i) {
+        double s = 0.0;
+        if (ws->has_lo[i])
+            s += (ws->rc_lo[i] + ws->z_lo[i] * ws->r_lo[i]) / ws->t_lo[i];
+        if (ws->has_up[i])
+            s -= (ws->rc_up[i] + ws->z_up[i] * ws->r_up[i]) / ws->t_up[i];
+        y[i] = -s;
+    }
+    for (i = 0; i < NP; ++i)
+        ws->rhs_stat[i] = -ws->r_stat[i];
+    add_Dt(in, y, ws->rhs_stat);
+    for (i = 0; i < (N + 1) * NX; ++i)
+        ws->rhs_dyn[i] = -ws->r_dyn[i];
+    for (i = 0; i < NE; ++i)
+        ws->rhs_eqN[i] = -ws->r_eqN[i];
+
+    riccati_solve(ws, in, ws->rhs_stat, ws->rhs_dyn, ws->rhs_eqN, ws->d_prim, ws->d_lam, ws->d_nu);
+    for (it = 0; it < refine_steps; ++it) {
+        newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->rhs_stat, ws->rhs_dyn,
+                        ws->rhs_eqN, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
+        riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin, ws->c_prim,
+                      ws->c_lam, ws->c_nu);
+        robot_arm_lai_axpy(NP, 1.0, ws->c_prim, ws->d_prim);
+        robot_arm_lai_axpy((N + 1) * NX, 1.0, ws->c_lam, ws->d_lam);
+        robot_arm_lai_axpy(NE, 1.0, ws->c_nu, ws->d_nu);
+    }
+
+    /* dt_lo = D dw + r_lo, dt_up = r_up - D dw, dz = -(rc + z dt) / t */
+    apply_D(in, ws->d_prim, y);
+    for (i = 0; i < NI; ++i) {
+        ws->dt_lo[i] = ws->dz_lo[i] = ws->dt_up[i] = ws->dz_up[i] = 0.0;
+        if (ws->has_lo[i]) {
+            ws->dt_lo[i] = y[i] + ws->r_lo[i];
+            ws->dz_lo[i] = -(ws->rc_lo[i] + ws->z_lo[i] * ws->dt_lo[i]) / ws->t_lo[i];
+        }
+        if (ws->has_up[i]) {
+            ws->dt_up[i] = ws->r_up[i] - y[i];
+            ws->dz_up[i] = -(ws->rc_up[i] + ws->z_up[i] * ws->dt_up[i]) / ws->t_up[i];
+        }
+    }
+}
+
+/* Largest alpha in (0, 1] keeping t + alpha dt >= 0 and z + alpha dz >= 0. */
+static double max_step(const robot_arm_qp_workspace *ws)
+{
+    int i;
+    double a = 1.0;
+    for (i = 0; i < NI; ++i) {
+        if (ws->has_lo[i]) {
+            if (ws->dt_lo[i] < 0.0)
+                a = dmin(a, -ws->t_lo[i] / ws->dt_lo[i]);
+            if (ws->dz_lo[i] < 0.0)
+                a = dmin(a, -ws->z_lo[i] / ws->dz_lo[i]);
+        }
+        if (ws->has_up[i]) {
+            if (ws->dt_up[i] < 0.0)
+                a = dmin(a, -ws->t_up[i] / ws->dt_up[i]);
+            if (ws->dz_up[i] < 0.0)
+                a = dmin(a, -ws->z_up[i] / ws->dz_up[i]);
+        }
+    }
+    return a;
+}
+
+/* ---------------------------------------------------------------- infeasibility */
+
+/* Farkas certificate on the normalised dual iterate y = (lam, nu, z):
+ *   A'y = 0 (the constraint part of the stationarity residual) and
+ *   b'y = -lam_0'x0 - sum lam_{k+1}'b_k - nu'req - up'z_up + lo'z_lo > 0
+ * proves that no feasible point exists (for feasible w the Lagrangian term is <= 0). */
+static int primal_infeasible(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r,
+                             double data_scale)
+{
+    int k, i;
+    double bty = 0.0, aty, bscale = 1.0;
+    if (!(r->ny > CERT_GROWTH * data_scale))
+        return 0;
+    aty = robot_arm_lai_norm_inf(NP, ws->aty) / r->ny;
+    bty -= robot_arm_lai_dot(NX, ws->lam, in->x0);
+    bscale = dmax(bscale, robot_arm_lai_norm_inf(NX, in->x0));
+    for (k = 0; k < N; ++k) {
+        bty -= robot_arm_lai_dot(NX, ws->lam + (k + 1) * NX, in->b[k]);
+        bscale = dmax(bscale, robot_arm_lai_norm_inf(NX, in->b[k]));
+    }
+    if (NE > 0) {
+        bty -= robot_arm_lai_dot(NE, ws->nu, in->req);
+        bscale = dmax(bscale, robot_arm_lai_norm_inf(NE, in->req));
+    }
+    for (i = 0; i < NI; ++i) {
+        if (ws->has_lo[i]) {
+            bty += ws->lo[i] * ws->z_lo[i];
+            bscale = dmax(bscale, fabs(ws->lo[i]));
+        }
+        if (ws->has_up[i]) {
+            bty -= ws->up[i] * ws->z_up[i];
+            bscale = dmax(bscale, fabs(ws->up[i]));
+        }
+    }
+    bty /= r->ny;
+    return aty <= CERT_RES_DUAL && bty > CERT_SEP * bscale;
+}
+
+/* Unboundedness certificate on the normalised primal iterate d = w / |w|: a feasible ray
+ * (homogeneous equalities, inside the recession cone of the bounds) along which the
+ * objective decreases without bound: d'Hd < 0, or Hd = 0 and g'd < 0. */
+static int dual_infeasible(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, double data_scale,
+                           double hscale)
+{
+    int k, i;
+    double nw = robot_arm_lai_norm_inf(NP, ws->prim), dhd = 0.0, gd = 0.0, hd = 0.0, eq = 0.0, cone = 0.0;
+    double *hdv = ws->c_prim;
+    if (!(nw > CERT_GROWTH * data_scale))
+        return 0;
+    for (k = 0; k < N; ++k) {
+        const double *w = ws->prim + k * NW;
+        double *h = hdv + k * NW;
+        double *t = ws->work;
+        robot_arm_lai_symv_l(NW, 1.0 / nw, in->H[k], NW, w, 0.0, h);
+        dhd += robot_arm_lai_dot(NW, w, h) / nw;
+        gd += robot_arm_lai_dot(NW, in->g[k], w) / nw;
+        hd = dmax(hd, robot_arm_lai_norm_inf(NW, h));
+        for (i = 0; i < NX; ++i)
+            t[i] = ws->prim[(k + 1) * NW + i] / nw;
+        robot_arm_lai_gemv_n(NX, NW, -1.0 / nw, in->Phi[k], NX, w, 1.0, t);
+        eq = dmax(eq, robot_arm_lai_norm_inf(NX, t));
+    }
+    {
+        const double *xN = ws->prim + N * NW;
+        double *h = hdv + N * NW;
+        robot_arm_lai_symv_l(NX, 1.0 / nw, in->HN, NX, xN, 0.0, h);
+        dhd += robot_arm_lai_dot(NX, xN, h) / nw;
+        gd += robot_arm_lai_dot(NX, in->gN, xN) / nw;
+        hd = dmax(hd, robot_arm_lai_norm_inf(NX, h));
+        if (NE > 0) {
+            robot_arm_lai_gemv_n(NE, NX, 1.0 / nw, in->Req, NE1, xN, 0.0, ws->work);
+            eq = dmax(eq, robot_arm_lai_norm_inf(NE, ws->work));
+        }
+    }
+    eq = dmax(eq, robot_arm_lai_norm_inf(NX, ws->prim) / nw);
+    for (i = 0; i < NI; ++i) {
+        const double dv = ws->v[i] / nw;
+        if (ws->has_lo[i])
+            cone = dmax(cone, -dv);
+        if (ws->has_up[i])
+            cone = dmax(cone, dv);
+    }
+    if (eq > CERT_RES_PRIMAL || cone > CERT_RES_PRIMAL)
+        return 0;
+    if (dhd < -CERT_SEP * hscale)
+        return 1;
+    return hd <= CERT_RES_PRIMAL * hscale && gd < -CERT_SEP * data_scale;
+}
+
+/* ---------------------------------------------------------------- driver */
+
+static void write_solution(const robot_arm_qp_workspace *ws, robot_arm_qp_sol *sol)
+{
+    int k, i;
+    for (k = 0; k <= N; ++k)
+        for (i = 0; i < NX; ++i) {
+            sol->x[k][i] = ws->prim[k * NW + i];
+            sol->lam[k][i] = ws->lam[k * NX + i];
+        }
+    for (k = 0; k < N; ++k) {
+        for (i = 0; i < NU; ++i)
+            sol->u[k][i] = ws->prim[k * NW + NX + i];
+        for (i = 0; i < NW; ++i) {
+            const int r = k * NSI + i;
+            sol->mu_b[k][i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
+        }
+        for (i = 0; i < NG; ++i) {
+            const int r = k * NSI + NW + i;
+            sol->mu_g[k][i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
+        }
+    }
+    for (i = 0; i < NX; ++i) {
+        const int r = TOFF + i;
+        sol->mu_bN[i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
+    }
+    for (i = 0; i < NR; ++i) {
+        const int r = TOFF + NX + i;
+        sol->mu_r[i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
+    }
+    for (i = 0; i < NE; ++i)
+        sol->nu[i] = ws->nu[i];
+}
+
+static void zero_solution(robot_arm_qp_sol *sol)
+{
+    int k, i;
+    for (k = 0; k <= N; ++k)
+        for (i = 0; i < NX; ++i)
+            sol->x[k][i] = sol->lam[k][i] = 0.0;
+    for (k = 0; k < N; ++k) {
+        for (i = 0; i < NU1; ++i)
+            sol->u[k][i] = 0.0;
+        for (i = 0; i < NW; ++i)
+            sol->mu_b[k][i] = 0.0;
+        for (i = 0; i < ROBOT_ARM_QP_NG1; ++i)
+            sol->mu_g[k][i] = 0.0;
+    }
+    for (i = 0; i < NX; ++i)
+        sol->mu_bN[i] = 0.0;
+    for (i = 0; i < ROBOT_ARM_QP_NR1; ++i)
+        sol->mu_r[i] = 0.0;
+    for (i = 0; i < NE1; ++i)
+        sol->nu[i] = 0.0;
+}
+
+/* Starting point. Cold: w = 0, lam = nu = 0, slacks max(1, v - lo), multipliers 1.
+ * Warm: the given primal-dual point with slacks and multipliers pushed off zero. */
+static void initial_point(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const robot_arm_qp_settings *st,
+                          const robot_arm_qp_sol *sol)
+{
+    int k, i;
+    const int warm = st->warm_start != 0;
+    for (i = 0; i < NP; ++i)
+        ws->prim[i] = 0.0;
+    for (i = 0; i < (N + 1) * NX; ++i)
+        ws->lam[i] = 0.0;
+    for (i = 0; i < NE1; ++i)
+        ws->nu[i] = 0.0;
+    if (warm) {
+        for (k = 0; k <= N; ++k)
+            for (i = 0; i < NX; ++i) {
+                ws->prim[k * NW + i] = sol->x[k][i];
+                ws->lam[k * NX + i] = sol->lam[k][i];
+            }
+        for (k = 0; k < N; ++k)
+            for (i = 0; i < NU; ++i)
+                ws->prim[k * NW + NX + i] = sol->u[k][i];
+        for (i = 0; i < NE; ++i)
+            ws->nu[i] = sol->nu[i];
+    }
+    apply_D(in, ws->prim, ws->v);
+    for (i = 0; i < NI; ++i) {
+        double mu_signed = 0.0;
+        ws->t_lo[i] = ws->t_up[i] = 1.0;
+        ws->z_lo[i] = ws->z_up[i] = 0.0;
+        if (warm) {
+            const int k2 = i / NSI, j = i % NSI;
+            if (i >= TOFF)
+                mu_signed = (i - TOFF < NX) ? sol->mu_bN[i - TOFF] : sol->mu_r[i - TOFF - NX];
+            else
+                mu_signed = (j < NW) ? sol->mu_b[k2][j] : sol->mu_g[k2][j - NW];
+        }
+        if (ws->has_lo[i]) {
+            const double floor_t = warm ? 1e-4 * dmax(1.0, fabs(ws->lo[i])) : 1.0;
+            ws->t_lo[i] = dmax(ws->v[i] - ws->lo[i], floor_t);
+            ws->z_lo[i] = warm ? dmax(-mu_signed, 1e-4) : 1.0;
+        }
+        if (ws->has_up[i]) {
+            const double floor_t = warm ? 1e-4 * dmax(1.0, fabs(ws->up[i])) : 1.0;
+            ws->t_up[i] = dmax(ws->up[i] - ws->v[i], floor_t);
+            ws->z_up[i] = warm ? dmax(mu_signed, 1e-4) : 1.0;
+        }
+    }
+}
+
+static void copy_iterate(robot_arm_qp_workspace *ws, int to_best)
+{
+    int i;
+    double *a[7], *b[7];
+    const int n[7] = {NP, (N + 1) * NX, NE1, NI, NI, NI, NI};
+    int j;
+    a[0] = ws->prim; a[1] = ws->lam; a[2] = ws->nu; a[3] = ws->t_lo; a[4] = ws->t_up;
+    a[5] = ws->z_lo; a[6] = ws->z_up;
+    b[0] = ws->best_prim; b[1] = ws->best_lam; b[2] = ws->best_nu; b[3] = ws->best_t_lo;
+    b[4] = ws->best_t_up; b[5] = ws->best_z_lo; b[6] = ws->best_z_up;
+    for (j = 0; j < 7; ++j)
+        for (i = 0; i < n[j]; ++i) {
+            if (to_best)
+                b[j][i] = a[j][i];
+            else
+                a[j][i] = b[j][i];
+        }
+}
+
+static double merit(const qp_res *r)
+{
+    return dmax(dmax(r->stat_s, r->eq_s), dmax(r->ineq_s, r->comp_s));
+}
+
+static int finish(robot_arm_qp_workspace *ws, const qp_res *r, int status, int iter, robot_arm_qp_sol *sol,
+                  robot_arm_qp_info *info)
+{
+    write_solution(ws, sol);
+    if (info) {
+        info->status = status;
+        info->iterations = iter;
+        info->res_stat = r->stat;
+        info->res_eq = r->eq;
+        info->res_ineq = r->ineq;
+        info->res_comp = r->comp;
+        info->res_stat_scaled = r->stat_s;
+        info->res_eq_scaled = r->eq_s;
+        info->res_ineq_scaled = r->ineq_s;
+        info->res_comp_scaled = r->comp_s;
+        info->obj = r->obj;
+    }
+    return status;
+}
+
+int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const robot_arm_qp_settings *settings,
+                   robot_arm_qp_sol *sol, robot_arm_qp_info *info)
+{
+    robot_arm_qp_settings st;
+    qp_res r;
+    int iter, i, status = ROBOT_ARM_QP_MAX_ITER;
+    int n_corr = 0, n_aug = 0;
+    double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
+    int best_iter = 0;
+    double mu_prev = INFINITY;
+
+    if (settings)
+        st = *settings;
+    else
+        robot_arm_qp_settings_default(&st);
+    if (!(st.tol > 0.0))
+        st.tol = 1e-8;
+    if (st.max_iter < 0)
+        st.max_iter = 0;
+    if (st.refine_steps < 0)
+        st.refine_steps = 0;
+    if (info) {
+        info->status = ROBOT_ARM_QP_INVALID_INPUT;
+        info->iterations = info->inertia_corrections = info->terminal_augmentations = 0;
+        info->pivot_floors = 0;
+        info->delta = 0.0;
+        info->res_stat = info->res_eq = info->res_ineq = info->res_comp = INFINITY;
+        info->res_stat_scaled = info->res_eq_scaled = info->res_ineq_scaled = info->res_comp_scaled = INFINITY;
+        info->obj = NAN;
+    }
+    if (ws == NULL || in == NULL || sol == NULL)
+        return ROBOT_ARM_QP_INVALID_INPUT;
+    if (!check_input(in)) {
+        zero_solution(sol);
+        return ROBOT_ARM_QP_INVALID_INPUT;
+    }
+    if (st.warm_start) {
+        /* a non-finite warm start is bad input, not a reason to produce NaN */
+        if (!robot_arm_lai_all_finite(NX, N + 1, &sol->x[0][0], NX) ||
+            !robot_arm_lai_all_finite(NX, N + 1, &sol->lam[0][0], NX) ||
+            !robot_arm_lai_all_finite(NU1, N, &sol->u[0][0], NU1) ||
+            !robot_arm_lai_all_finite(NW, N, &sol->mu_b[0][0], NW) ||
+            !robot_arm_lai_all_finite(ROBOT_ARM_QP_NG1, N, &sol->mu_g[0][0], ROBOT_ARM_QP_NG1) ||
+            !robot_arm_lai_all_finite(NX, 1, sol->mu_bN, NX) ||
+            !robot_arm_lai_all_finite(ROBOT_ARM_QP_NR1, 1, sol->mu_r, ROBOT_ARM_QP_NR1) ||
+            !robot_arm_lai_all_finite(NE1, 1, sol->nu, NE1)) {
+            zero_solution(sol);
+            return ROBOT_ARM_QP_INVALID_INPUT;
+        }
+    }
+    ws->delta = 0.0;
+    ws->rho_aug = 0.0;
+    ws->pivot_floors = 0;
+    if (!setup_bounds(ws, in)) {
+        zero_solution(sol);
+        if (info)
+            info->status = ROBOT_ARM_QP_PRIMAL_INFEASIBLE;
+        return ROBOT_ARM_QP_PRIMAL_INFEASIBLE;
+    }
+    hscale = hessian_scale(in);
+    initial_point(ws, in, &st, sol);
+
+    /* data scale for the divergence tests of the certificates */
+    data_scale = 1.0;
+    for (i = 0; i < NI; ++i) {
+        if (ws->has_lo[i])
+            data_scale = dmax(data_scale, fabs(ws->lo[i]));
+        if (ws->has_up[i])
+            data_scale = dmax(data_scale, fabs(ws->up[i]));
+    }
+    data_scale = dmax(data_scale, robot_arm_lai_norm_inf(NX, in->x0));
+    for (i = 0; i < N; ++i) {
+        data_scale = dmax(data_scale, robot_arm_lai_norm_inf(NX, in->b[i]));
+        data_scale = dmax(data_scale, robot_arm_lai_norm_inf(NW, in->g[i]));
+    }
+    data_scale = dmax(data_scale, robot_arm_lai_norm_inf(NX, in->gN));
+    if (NE > 0)
+        data_scale = dmax(data_scale, robot_arm_lai_norm_inf(NE, in->req));
+
+    for (iter = 0;; ++iter) {
+        double alpha, mu_aff, sigma, target, eta;
+        int fact, floors_before, nref;
+
+        compute_residuals(ws, in, &r);
+        if (!(isfinite(r.stat) && isfinite(r.eq) && isfinite(r.mu))) {
+            status = ROBOT_ARM_QP_NUMERICAL;
+            break;
+        }
+        if (r.stat_s <= st.tol && r.eq_s <= st.tol && r.ineq_s <= st.tol && r.comp_s <= st.tol) {
+            status = ROBOT_ARM_QP_SOLVED;
+            break;
+        }
+        if (iter == 0 || merit(&r) < best_merit) {
+            best_merit = merit(&r);
+            best_iter = iter;
+            copy_iterate(ws, 1);
+        } else if (iter - best_iter >= STALL_ITERS) {
+            status = ROBOT_ARM_QP_MAX_ITER;
+            break;
+        }
+        if (primal_infeasible(ws, in, &r, data_scale)) {
+            status = ROBOT_ARM_QP_PRIMAL_INFEASIBLE;
+            break;
+        }
+        if (dual_infeasible(ws, in, data_scale, hscale)) {
+            status = ROBOT_ARM_QP_DUAL_INFEASIBLE;
+            break;
+        }
+        if (iter >= st.max_iter) {
+            status = ROBOT_ARM_QP_MAX_ITER;
+            break;
+        }
+
+        /* barrier weights Q = z/t per row */
+        for (i = 0; i < NI; ++i) {
+            double q = 0.0;
+            if (ws->has_lo[i])
+                q += ws->z_lo[i] / ws->t_lo[i];
+            if (ws->has_up[i])
+                q += ws->z_up[i] / ws->t_up[i];
+            ws->qdiag[i] = q;
+        }
+        /* factorisation with minimal inertia correction: first the exact terminal
+         * augmentation rho Req'Req, then delta I growing geometrically */
+        ws->delta = 0.0;
+        floors_before = ws->pivot_floors;
+        fact = riccati_factor(ws, in);
+        if (fact == 1 && NE > 0) {
+            int tries;
+            double rho0 = hscale / dmax(robot_arm_lai_max_abs_mat(NE, NX, in->Req, NE1), 1e-150);
+            rho0 /= dmax(robot_arm_lai_max_abs_mat(NE, NX, in->Req, NE1), 1e-150);
+            for (tries = 0; tries < RHO_TRIES && fact == 1 && ws->rho_aug < rho0 * RHO_MAX_REL; ++tries) {
+                ws->rho_aug = ws->rho_aug > 0.0 ? 100.0 * ws->rho_aug : rho0;
+                ++n_aug;
+                fact = riccati_factor(ws, in);
+            }
+        }
+        if (fact == 1) {
+            ws->delta = delta_last > 0.0 ? dmax(1e-20 * hscale, delta_last / 3.0) : 1e-8 * hscale;
+            for (;;) {
+                ++n_corr;
+                fact = riccati_factor(ws, in);
+                if (fact != 1 || ws->delta > DELTA_MAX_REL * hscale)
+                    break;
+                ws->delta *= DELTA_GROW;
+            }
+            delta_last = ws->delta;
+            delta_used = dmax(delta_used, ws->delta);
+        }
+        if (fact != 0) {
+            status = ROBOT_ARM_QP_NUMERICAL;
+            break;
+        }
+        /* floored pivots make the factorisation inexact: refine more; far from the
+         * solution the directions need no refinement */
+        nref = st.refine_steps + (ws->pivot_floors > floors_before ? 2 : 0);
+        if (merit(&r) > REFINE_BELOW && ws->pivot_floors == floors_before)
+            nref = 0;
+
+        if (r.nsides == 0) {
+            /* equality-constrained QP: one Newton step is exact */
+            for (i = 0; i < NI; ++i)
+                ws->rc_lo[i] = ws->rc_up[i] = 0.0;
+            newton_direction(ws, in, nref);
+            robot_arm_lai_axpy(NP, 1.0, ws->d_prim, ws->prim);
+            robot_arm_lai_axpy((N + 1) * NX, 1.0, ws->d_lam, ws->lam);
+            robot_arm_lai_axpy(NE, 1.0, ws->d_nu, ws->nu);
+            continue;
+        }
+
+        /* predictor (affine scaling) */
+        for (i = 0; i < NI; ++i) {
+            ws->rc_lo[i] = ws->has_lo[i] ? ws->t_lo[i] * ws->z_lo[i] : 0.0;
+            ws->rc_up[i] = ws->has_up[i] ? ws->t_up[i] * ws->z_up[i] : 0.0;
+        }
+        newton_direction(ws, in, 0);
+        alpha = max_step(ws);
+        mu_aff = 0.0;
+        for (i = 0; i < NI; ++i) {
+            if (ws->has_lo[i])
+                mu_aff += (ws->t_lo[i] + alpha * ws->dt_lo[i]) * (ws->z_lo[i] + alpha * ws->dz_lo[i]);
+            if (ws->has_up[i])
+                mu_aff += (ws->t_up[i] + alpha * ws->dt_up[i]) * (ws->z_up[i] + alpha * ws->dz_up[i]);
+        }
+        mu_aff /= r.nsides;
+        sigma = r.mu > 0.0 ? mu_aff / r.mu : 0.0;
+        sigma = dmin(1.0, dmax(0.0, sigma * sigma * sigma));
+
+        /* corrector: rc = t z + dt_aff dz_aff - target. The target is kept above a
+         * fraction of the complementarity tolerance: driving mu far below what the
+         * termination test needs only makes the barrier weights z/t of active rows huge,
+         * and their cancellation in the Riccati recursion spoils the Newton directions. */
+        target = dmax(sigma * r.mu, MU_FLOOR_REL * st.tol * dmax(1.0, r.nz));
+        /* safeguard: when complementarity is all that is left and the last step raised mu,
+         * drop the second-order term this time (Mehrotra's corrector can otherwise cycle
+         * on a pair far from the central path) */
+        eta = (iter > 0 && r.mu > mu_prev && dmax(r.stat_s, r.eq_s) < r.comp_s) ? 0.0 : 1.0;
+        mu_prev = r.mu;
+        for (i = 0; i < NI; ++i) {
+            if (ws->has_lo[i])
+                ws->rc_lo[i] += eta * ws->dt_lo[i] * ws->dz_lo[i] - target;
+            if (ws->has_up[i])
+                ws->rc_up[i] += eta * ws->dt_up[i] * ws->dz_up[i] - target;
+        }
+        newton_direction(ws, in, nref);
+        alpha = dmin(1.0, STEP_TAU * max_step(ws));
+
+        robot_arm_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
+        robot_arm_lai_axpy((N + 1) * NX, alpha, ws->d_lam, ws->lam);
+        robot_arm_lai_axpy(NE, alpha, ws->d_nu, ws->nu);
+        for (i = 0; i < NI; ++i) {
+            if (ws->has_lo[i]) {
+                ws->t_lo[i] += alpha * ws->dt_lo[i];
+                ws->z_lo[i] += alpha * ws->dz_lo[i];
+            }
+            if (ws->has_up[i]) {
+                ws->t_up[i] += alpha * ws->dt_up[i];
+                ws->z_up[i] += alpha * ws->dz_up[i];
+            }
+        }
+    }
+    if ((status == ROBOT_ARM_QP_MAX_ITER || status == ROBOT_ARM_QP_NUMERICAL) && isfinite(best_merit) &&
+        !(merit(&r) <= best_merit)) {
+        /* return the best point seen, with its residuals */
+        copy_iterate(ws, 0);
+        compute_residuals(ws, in, &r);
+    }
+    if (info) {
+        info->inertia_corrections = n_corr;
+        info->terminal_augmentations = n_aug;
+        info->pivot_floors = ws->pivot_floors;
+        info->delta = delta_used;
+    }
+    return finish(ws, &r, status, iter, sol, info);
+}

@@ -1,0 +1,62 @@
+/* The ring buffer of stage slots (DESIGN.md section 5, docs/algorithm.md section 4).
+ *
+ * Stage k lives in slot (ring_head + k) mod N. The receding-horizon shift advances
+ * ring_head, so the sensitivities of stage k+1 become those of stage k without a copy and
+ * the slot that falls off the front becomes the new last stage. The QP reads Ht, Phit, Ct
+ * in place through per-stage pointer tables.
+ */
+#ifndef ROBOT_ARM_RING_H
+#define ROBOT_ARM_RING_H
+
+#include "robot_arm_sizes.h"
+
+typedef struct {
+    /* the blocks the QP uses (possibly outdated, A regularised), column-major */
+    double Ht[ROBOT_ARM_NW * ROBOT_ARM_NW];            /* nw x nw */
+    /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
+     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l */
+    double A_dyn[ROBOT_ARM_NW * ROBOT_ARM_NW];         /* nw x nw */
+    double Phit[ROBOT_ARM_NX * ROBOT_ARM_NW];          /* nx x nw, [A_k B_k] */
+    double Ct[ROBOT_ARM_DIM(ROBOT_ARM_NG) * ROBOT_ARM_NW]; /* ng x nw */
+    /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
+    double F_w[ROBOT_ARM_NW];
+    double phi[ROBOT_ARM_NX];
+    double g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    /* domega = (dw, dlam_next, dmu_g, dmu_b): the last QP step of this stage */
+    double dw[ROBOT_ARM_NW];
+    double dlam[ROBOT_ARM_NX];
+    double dmu_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    double dmu_b[ROBOT_ARM_NW];
+} robot_arm_stage_slot;
+
+typedef struct {
+    robot_arm_stage_slot slot[ROBOT_ARM_N];
+    int ring_head;
+} robot_arm_ring;
+
+/* head = 0, every slot zero. */
+void robot_arm_ring_reset(robot_arm_ring *ring);
+
+/* The slot of stage k (0 <= k < N). */
+robot_arm_stage_slot *robot_arm_ring_stage(robot_arm_ring *ring, int k);
+const robot_arm_stage_slot *robot_arm_ring_stage_const(const robot_arm_ring *ring, int k);
+
+/* One sampling interval: ring_head <- (ring_head + 1) mod N. */
+void robot_arm_ring_advance(robot_arm_ring *ring);
+
+/* Zero the step domega of a slot. */
+void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);
+
+/* Secant criterion rho_k (eq. 16) of the slot against the fresh F_new = (F_w, phi, g):
+ *   num = | [F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new ;
+ *            -(phi_old + Phit dw) + phi_new ;
+ *            g_old + Ct dw - g_new] |
+ *   rho = num / |(dw, dlam, dmu_g, dmu_b)|, 0 when the denominator is 0 (2-norms). */
+double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w_new,
+                         const double *phi_new, const double *g_new);
+
+/* Store F_new as F_old. */
+void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const double *F_w, const double *phi,
+                        const double *g);
+
+#endif /* ROBOT_ARM_RING_H */

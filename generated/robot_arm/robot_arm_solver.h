@@ -1,0 +1,247 @@
+/* The DOPUS real-time iteration: public API of the generated solver.
+ *
+ * DOPUS (Dynamic Optimization with Partially Updated Sensitivities, van Duijkeren et al.,
+ * IFAC 2017) is an RTI scheme in which the stage sensitivities are shifted with the
+ * horizon (a ring buffer of stage slots) and only the M stages with the largest secant
+ * violation rho_k (eq. 16) are re-linearised per iteration; the QP gradient carries the
+ * adjoint correction (eq. 12), so fixed points satisfy the exact KKT conditions.
+ * docs/algorithm.md is the normative description of every step.
+ *
+ * Usage (receding horizon):
+ *     static robot_arm_solver s;
+ *     robot_arm_init(&s, xhat0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL);
+ *     loop: robot_arm_feedback(&s, xhat0, u0); apply u0; robot_arm_prepare(&s);
+ * The memory is one struct (sizeof is the memory bill; no malloc anywhere). Settings may be
+ * changed before robot_arm_init; a struct that was never set up (zeroed or uninitialised
+ * memory) gets the generated defaults on its first use.
+ *
+ * Array conventions: every array argument is a flat, C-contiguous (row-major) array of
+ * doubles, node by node: x is (N+1) x nx (x + k*nx is node k), u is N x nu, lam (N+1) x nx,
+ * mu_g N x ng, mu_b N x nw, mu_bN nx, mu_r nr, nu ne, parameters (N+1) x np. Multipliers are
+ * signed (positive when the upper side of a row is active, negative for the lower side);
+ * docs/algorithm.md section 1 gives the Lagrangian. Arrays of size zero are not read or
+ * written (any pointer, also NULL, may be passed).
+ *
+ * Every function returning int returns a status (enum robot_arm_status below) unless stated.
+ * On failure the state stays consistent: a failed feedback takes no step; a failed
+ * prepare leaves the shifted iterate, and the next prepare re-runs from there.
+ */
+#ifndef ROBOT_ARM_SOLVER_H
+#define ROBOT_ARM_SOLVER_H
+
+#include <stddef.h>
+
+/* ROBOT_ARM_CDEF_BEGIN */
+typedef struct robot_arm_solver robot_arm_solver;
+
+/* Size of struct robot_arm_solver in bytes (for callers that allocate it as raw memory). */
+size_t robot_arm_solver_sizeof(void);
+/* Reset every setting to the generated defaults (M, Hessian, regularisation, eps from the
+ * OCP file, receding mode, QP tolerance 1e-10, parameters p_default at every node, default
+ * clock) and mark the solver uninitialised. */
+void robot_arm_defaults(robot_arm_solver *s);
+/* Dimensions: dims[0..9] = N, nx, nu, nw, np, ng, nr, ne, has_gn, has_nominal. */
+void robot_arm_get_dims(int *dims);
+/* Problem name (the generator's ROBOT_ARM_NAME). */
+const char *robot_arm_name(void);
+/* A short English description of a status code. */
+const char *robot_arm_status_string(int status);
+
+/* Initialisation (algorithm.md section 4, init): the iterate is the given guess; NULL x or
+ * u: the OCP file's initial guess; NULL multipliers: zeros. F and H of every stage and of
+ * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
+ * rho = 0. xhat0 is checked and kept for robot_arm_kkt_eval (may be NULL: the default x0). */
+int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, const double *u,
+               const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
+               const double *mu_r, const double *nu);
+/* Initialisation from the generated nominal primal-dual guess (the offline NLP solution at
+ * the default x0); ROBOT_ARM_ERR_NO_NOMINAL when the solver was generated without one. */
+int robot_arm_init_nominal(robot_arm_solver *s, const double *xhat0);
+
+/* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
+ * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: ROBOT_ARM_ERR_NONFINITE_INPUT,
+ * nothing changes. QP failure: ROBOT_ARM_ERR_QP, no step (robot_arm_get_qp_status tells why). */
+int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0);
+/* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
+ * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
+ * stage-cost Hessian of the other stages (robot_arm_set_cost_hessian), assemble the QP. Must
+ * run between two feedback calls. */
+int robot_arm_prepare(robot_arm_solver *s);
+/* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
+ * the initial state xhat0 (NULL: the last one given to init or feedback):
+ * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed. */
+int robot_arm_kkt_eval(robot_arm_solver *s, const double *xhat0, double *kkt4);
+/* The largest of the four parts of the last robot_arm_kkt_eval (NaN before the first). */
+double robot_arm_get_kkt(const robot_arm_solver *s);
+
+/* Settings. M: stages re-linearised per iteration besides stage N-1, 0 <= M <= N-1
+ * (N-1 is the full RTI). mode: ROBOT_ARM_MODE_RECEDING or ROBOT_ARM_MODE_FIXED. hessian:
+ * ROBOT_ARM_HESSIAN_EXACT or ROBOT_ARM_HESSIAN_GAUSS_NEWTON (only with a least-squares stage cost).
+ * regularization: ROBOT_ARM_REG_NONE, ROBOT_ARM_REG_PROJECT or ROBOT_ARM_REG_MIRROR with eps > 0.
+ * The QP tolerance (> 0) and iteration limit (>= 1) are those of robot_arm_qp_solve. */
+int robot_arm_set_M(robot_arm_solver *s, int M);
+int robot_arm_get_M(robot_arm_solver *s);
+int robot_arm_set_mode(robot_arm_solver *s, int mode);
+int robot_arm_get_mode(robot_arm_solver *s);
+int robot_arm_set_hessian(robot_arm_solver *s, int hessian);
+int robot_arm_get_hessian(robot_arm_solver *s);
+int robot_arm_set_regularization(robot_arm_solver *s, int regularization, double eps);
+int robot_arm_get_regularization(robot_arm_solver *s);
+double robot_arm_get_reg_eps(robot_arm_solver *s);
+/* Stage-cost Hessian (algorithm.md section 4 step 5): fresh = 1 (the default) refreshes the
+ * cost part A_l of the Hessian block of every stage in every prepare (only the curvature of
+ * dynamics and constraints is partially updated); fresh = 0 is the paper's literal
+ * algorithm (the whole A moves with its slot). The slots always carry A_dyn = A - A_l, so
+ * the setting may change between any two calls. */
+int robot_arm_set_cost_hessian(robot_arm_solver *s, int fresh);
+int robot_arm_get_cost_hessian(robot_arm_solver *s);
+int robot_arm_set_qp_tol(robot_arm_solver *s, double tol);
+double robot_arm_get_qp_tol(robot_arm_solver *s);
+int robot_arm_set_qp_max_iter(robot_arm_solver *s, int max_iter);
+int robot_arm_get_qp_max_iter(robot_arm_solver *s);
+/* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
+ * evaluation on (prepare, kkt). */
+int robot_arm_set_parameters(robot_arm_solver *s, const double *p);
+int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const double *pk);
+void robot_arm_get_parameters(robot_arm_solver *s, double *p);
+
+/* The iterate (shapes in the header comment). */
+void robot_arm_get_x(const robot_arm_solver *s, double *x);
+void robot_arm_get_u(const robot_arm_solver *s, double *u);
+void robot_arm_get_lam(const robot_arm_solver *s, double *lam);
+void robot_arm_get_mu_g(const robot_arm_solver *s, double *mu_g);
+void robot_arm_get_mu_b(const robot_arm_solver *s, double *mu_b);
+void robot_arm_get_mu_bN(const robot_arm_solver *s, double *mu_bN);
+void robot_arm_get_mu_r(const robot_arm_solver *s, double *mu_r);
+void robot_arm_get_nu(const robot_arm_solver *s, double *nu);
+/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1). */
+void robot_arm_get_rho(const robot_arm_solver *s, double *rho);
+/* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
+ * N-1 included; writes up to N ints and returns their count. */
+int robot_arm_get_recomputed(const robot_arm_solver *s, int *stages);
+/* The last QP: iterations, status (enum robot_arm_qp_status of robot_arm_qp.h). */
+int robot_arm_get_qp_iterations(const robot_arm_solver *s);
+int robot_arm_get_qp_status(const robot_arm_solver *s);
+/* Status of the last call that returns a status. */
+int robot_arm_get_status(const robot_arm_solver *s);
+int robot_arm_is_initialized(const robot_arm_solver *s);
+/* ring_head (stage k lives in slot (ring_head + k) mod N). */
+int robot_arm_get_ring_head(const robot_arm_solver *s);
+
+/* Seconds per phase of the last call that ran it (t[0..7] = feedback, shift, gradients,
+ * rho, hessians, regularization, assembly, kkt; indices of enum robot_arm_phase). init fills
+ * the phases it runs too. "hessians" includes the stage-cost Hessians A_l. */
+void robot_arm_get_timings(const robot_arm_solver *s, double *t);
+/* Replace the clock (seconds, any origin); NULL restores the default clock. */
+void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), void *ctx);
+/* ROBOT_ARM_CDEF_END */
+
+/* Status codes returned by the functions above. */
+enum robot_arm_status {
+    ROBOT_ARM_OK = 0,
+    ROBOT_ARM_ERR_QP = 1,                /* QP not solved; no step; see robot_arm_get_qp_status */
+    ROBOT_ARM_ERR_NONFINITE_INPUT = 2,   /* NaN or Inf in an input array */
+    ROBOT_ARM_ERR_NONFINITE_VALUE = 3,   /* a generated function returned NaN or Inf */
+    ROBOT_ARM_ERR_FUNCTION = 4,          /* a generated function reported failure */
+    ROBOT_ARM_ERR_INVALID_ARGUMENT = 5,  /* M out of range, bad mode/Hessian/regularisation,
+                                        Gauss-Newton without least squares, bad node index */
+    ROBOT_ARM_ERR_NOT_INITIALIZED = 6,   /* feedback/prepare/kkt before a successful init */
+    ROBOT_ARM_ERR_NOT_PREPARED = 7,      /* feedback without a successful prepare since the last
+                                        step (the QP would be stale) */
+    ROBOT_ARM_ERR_NO_NOMINAL = 8,        /* robot_arm_init_nominal without ROBOT_ARM_HAS_NOMINAL */
+    ROBOT_ARM_ERR_REGULARIZATION = 9     /* eigen-decomposition did not converge */
+};
+
+enum robot_arm_mode {
+    ROBOT_ARM_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
+    ROBOT_ARM_MODE_FIXED = 1     /* no shift: fixed-xhat0 convergence studies */
+};
+
+enum robot_arm_hessian {
+    ROBOT_ARM_HESSIAN_EXACT = 0,
+    ROBOT_ARM_HESSIAN_GAUSS_NEWTON = 1
+};
+
+/* ------------------------------------------------------------------------------------- */
+/* The full state. Its layout is public so firmware can declare `static robot_arm_solver s;`;
+ * the fields are internal (use the functions above). */
+
+#include "robot_arm_sizes.h"
+#include "robot_arm_funcs.h"
+#include "robot_arm_qp.h"
+#include "robot_arm_reg.h"
+#include "robot_arm_ring.h"
+#include "robot_arm_timer.h"
+
+struct robot_arm_solver {
+    int magic;          /* ROBOT_ARM_MAGIC once the settings hold valid values */
+    int initialized;    /* a successful init happened */
+    int qp_ready;       /* QP assembled at the current iterate (prepare or init succeeded) */
+    int status;         /* status of the last call */
+
+    /* settings */
+    int M;
+    int mode;
+    int hessian;
+    int regularization;
+    double reg_eps;
+    int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    robot_arm_qp_settings qp_settings;
+
+    /* iterate (algorithm.md section 1) */
+    double x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
+    double u[ROBOT_ARM_N][ROBOT_ARM_NU];
+    double lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
+    double mu_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    double mu_b[ROBOT_ARM_N][ROBOT_ARM_NW];
+    double mu_bN[ROBOT_ARM_NX];
+    double mu_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
+    double nu[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
+    double p[ROBOT_ARM_N + 1][ROBOT_ARM_DIM(ROBOT_ARM_NP)];
+    double xhat0[ROBOT_ARM_NX];
+
+    /* stage slots (Ht, A_dyn, Phit, Ct, F_old, domega) and ring_head */
+    robot_arm_ring ring;
+
+    /* terminal node, always fresh: A (regularised), R, R_eq and F = (gL, E, r, r_eq) */
+    double A_N[ROBOT_ARM_NX * ROBOT_ARM_NX];
+    double R[ROBOT_ARM_DIM(ROBOT_ARM_NR) * ROBOT_ARM_NX];
+    double R_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE) * ROBOT_ARM_NX];
+    double gL_N[ROBOT_ARM_NX];
+    double E;
+    double r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
+    double r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
+
+    /* secant criterion and the recomputed set of the last prepare */
+    double rho[ROBOT_ARM_N];
+    int recomputed[ROBOT_ARM_N];
+    int n_recomputed;
+    unsigned char selected[ROBOT_ARM_N];
+
+    /* QP data, solution and workspace (the matrices are pointers into the ring) */
+    robot_arm_qp_in qp_in;
+    robot_arm_qp_sol qp_sol;
+    robot_arm_qp_info qp_info;
+    robot_arm_qp_workspace qp_work;
+    int qp_status;
+    int qp_iterations;
+
+    /* scratch for the generated functions and the regularisation */
+    robot_arm_fun_work fun_work;
+    double tmp_A[ROBOT_ARM_NW * ROBOT_ARM_NW];
+    double tmp_Al[ROBOT_ARM_NW * ROBOT_ARM_NW];
+    double tmp_Phi[ROBOT_ARM_NX * ROBOT_ARM_NW];
+    double tmp_C[ROBOT_ARM_DIM(ROBOT_ARM_NG) * ROBOT_ARM_NW];
+    double tmp_gL[ROBOT_ARM_NW];
+    double tmp_F[ROBOT_ARM_NW];
+    double tmp_phi[ROBOT_ARM_NX];
+    double tmp_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    double reg_work[2 * ROBOT_ARM_NW * ROBOT_ARM_NW];
+
+    /* KKT parts of the last robot_arm_kkt_eval: stat, eq, ineq, comp */
+    double kkt[4];
+
+    robot_arm_timer timer;
+};
+
+#endif /* ROBOT_ARM_SOLVER_H */

@@ -1,0 +1,51 @@
+/* Phase timers: the POSIX monotonic clock behind ROBOT_ARM_CLOCK_POSIX. */
+/* clock_gettime is POSIX, not C99: request it before any header. */
+#ifndef _POSIX_C_SOURCE
+#define _POSIX_C_SOURCE 199309L
+#endif
+
+#include "robot_arm_timer.h"
+
+#if ROBOT_ARM_CLOCK_POSIX
+#include <time.h>
+#endif
+
+double robot_arm_timer_default_clock(void *ctx)
+{
+    (void)ctx;
+#if ROBOT_ARM_CLOCK_POSIX
+    {
+        struct timespec ts;
+        if (clock_gettime(CLOCK_MONOTONIC, &ts) != 0) {
+            return 0.0;
+        }
+        return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+    }
+#else
+    return 0.0;
+#endif
+}
+
+void robot_arm_timer_init(robot_arm_timer *tm)
+{
+    int i;
+    tm->clock = robot_arm_timer_default_clock;
+    tm->ctx = 0;
+    for (i = 0; i < ROBOT_ARM_N_PHASES; ++i) {
+        tm->t[i] = 0.0;
+    }
+}
+
+double robot_arm_timer_now(const robot_arm_timer *tm)
+{
+    return tm->clock ? tm->clock(tm->ctx) : 0.0;
+}
+
+double robot_arm_timer_add(robot_arm_timer *tm, int phase, double since)
+{
+    double now = robot_arm_timer_now(tm);
+    if (phase >= 0 && phase < ROBOT_ARM_N_PHASES) {
+        tm->t[phase] += now - since;
+    }
+    return now;
+}

@@ -1,0 +1,120 @@
+/* KKT measure (docs/algorithm.md section 6). */
+#include <math.h>
+
+#include "unicycle_kkt.h"
+#include "unicycle_problem.h"
+#include "unicycle_solver.h"
+
+static double unicycle_kkt_max(double a, double b)
+{
+    return a > b ? a : b;
+}
+
+/* Violation max(0, v - ub, lb - v) of one row. */
+static double unicycle_kkt_viol(double v, double lb, double ub)
+{
+    return unicycle_kkt_max(0.0, unicycle_kkt_max(v - ub, lb - v));
+}
+
+/* Complementarity of a signed multiplier mu of the row lb <= v <= ub:
+ * max(mu,0) |ub - v| and max(-mu,0) |v - lb|; a nonzero multiplier on an infinite side
+ * contributes |mu|. */
+static double unicycle_kkt_comp(double mu, double v, double lb, double ub)
+{
+    double c = 0.0;
+    if (mu > 0.0) {
+        c = isinf(ub) ? mu : mu * fabs(ub - v);
+    } else if (mu < 0.0) {
+        c = isinf(lb) ? -mu : -mu * fabs(v - lb);
+    }
+    return c;
+}
+
+static int unicycle_kkt_finite(const double *v, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        if (!isfinite(v[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double *parts)
+{
+    double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
+    double gL[UNICYCLE_NW], phi[UNICYCLE_NX], g[UNICYCLE_DIM(UNICYCLE_NG)], l;
+    double gLN[UNICYCLE_NX], E, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
+    int k, i;
+
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        eq = unicycle_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
+    }
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
+                                  &l, g, &s->fun_work) != 0) {
+            return UNICYCLE_ERR_FUNCTION;
+        }
+        if (!unicycle_kkt_finite(gL, UNICYCLE_NW) || !unicycle_kkt_finite(phi, UNICYCLE_NX) ||
+            !unicycle_kkt_finite(g, UNICYCLE_NG) || !isfinite(l)) {
+            return UNICYCLE_ERR_NONFINITE_VALUE;
+        }
+        /* stationarity gL_k + mu_b_k + [lam_k; 0] */
+        for (i = 0; i < UNICYCLE_NW; ++i) {
+            double v = gL[i] + s->mu_b[k][i] + (i < UNICYCLE_NX ? s->lam[k][i] : 0.0);
+            stat = unicycle_kkt_max(stat, fabs(v));
+        }
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            eq = unicycle_kkt_max(eq, fabs(s->x[k + 1][i] - phi[i]));
+        }
+        for (i = 0; i < UNICYCLE_NG; ++i) {
+            ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(g[i], unicycle_lg[i], unicycle_ug[i]));
+            comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_g[k][i], g[i], unicycle_lg[i], unicycle_ug[i]));
+        }
+        /* simple bounds: x_k only for k >= 1 (x_0 is fixed by xhat0, so a multiplier on
+         * it pairs with infinite sides and counts with its magnitude) */
+        if (k == 0) {
+            for (i = 0; i < UNICYCLE_NX; ++i) {
+                comp = unicycle_kkt_max(comp, fabs(s->mu_b[0][i]));
+            }
+        } else {
+            for (i = 0; i < UNICYCLE_NX; ++i) {
+                ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->x[k][i], unicycle_lbx[i], unicycle_ubx[i]));
+                comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_b[k][i], s->x[k][i], unicycle_lbx[i],
+                                                          unicycle_ubx[i]));
+            }
+        }
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->u[k][i], unicycle_lbu[i], unicycle_ubu[i]));
+            comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_b[k][UNICYCLE_NX + i], s->u[k][i],
+                                                      unicycle_lbu[i], unicycle_ubu[i]));
+        }
+    }
+    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
+                             &s->fun_work) != 0) {
+        return UNICYCLE_ERR_FUNCTION;
+    }
+    if (!unicycle_kkt_finite(gLN, UNICYCLE_NX) || !isfinite(E) || !unicycle_kkt_finite(r, UNICYCLE_NR) ||
+        !unicycle_kkt_finite(r_eq, UNICYCLE_NE)) {
+        return UNICYCLE_ERR_NONFINITE_VALUE;
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        stat = unicycle_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]));
+        ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->x[UNICYCLE_N][i], unicycle_lbx[i], unicycle_ubx[i]));
+        comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_bN[i], s->x[UNICYCLE_N][i], unicycle_lbx[i],
+                                                  unicycle_ubx[i]));
+    }
+    for (i = 0; i < UNICYCLE_NE; ++i) {
+        eq = unicycle_kkt_max(eq, fabs(r_eq[i]));
+    }
+    for (i = 0; i < UNICYCLE_NR; ++i) {
+        ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(r[i], unicycle_lr[i], unicycle_ur[i]));
+        comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_r[i], r[i], unicycle_lr[i], unicycle_ur[i]));
+    }
+    parts[0] = stat;
+    parts[1] = eq;
+    parts[2] = ineq;
+    parts[3] = comp;
+    return UNICYCLE_OK;
+}

@@ -1,0 +1,347 @@
+/* Small dense linear algebra on column-major matrices (leading dimension `ld*`).
+ *
+ * Generic helpers for fixed-size stage blocks: no allocation, no size limits beyond the
+ * caller's arrays. Naming follows BLAS/LAPACK (potrf, trsm, gemm, ...) so the intent of a
+ * call is clear; there is no BLAS behind it.
+ */
+#ifndef UNICYCLE_LINALG_H
+#define UNICYCLE_LINALG_H
+
+/* In-place lower Cholesky factorisation A = L L' of the n x n symmetric matrix A (only the
+ * lower triangle is read and written). Returns 0 on success, or j+1 when pivot j is not
+ * positive or not finite (A is then partially overwritten). */
+int unicycle_la_potrf_l(int n, double *A, int lda);
+
+/* As unicycle_la_potrf_l, but a pivot d with -noise[j] <= d <= 0 (noise: absolute round-off
+ * estimate of the diagonal entry, n values; NULL means 0) is taken as a numerical zero and
+ * replaced by max(noise[j], DBL_EPSILON |A_jj|); *nfloor (if not NULL) counts them. Only
+ * pivots below -noise[j] (or non-finite) fail; positive pivots are never changed. */
+int unicycle_la_potrf_l_noise(int n, double *A, int lda, const double *noise, int *nfloor);
+
+/* In-place L D L' factorisation (unit lower L, diagonal D stored on the diagonal) of the
+ * symmetric n x n matrix A, no pivoting. Returns 0 on success, j+1 on a zero/non-finite
+ * pivot. The number of negative pivots is written to *neg when neg is not NULL. */
+int unicycle_la_ldlt_l(int n, double *A, int lda, int *neg);
+
+/* Solve L x = b (trsv_ln) or L' x = b (trsv_lt) in place, L lower triangular n x n. */
+void unicycle_la_trsv_ln(int n, const double *L, int ldl, double *x);
+void unicycle_la_trsv_lt(int n, const double *L, int ldl, double *x);
+
+/* B <- L^{-1} B for the n x m matrix B (trsm_lln) or B <- L'^{-1} B (trsm_llt). */
+void unicycle_la_trsm_lln(int n, int m, const double *L, int ldl, double *B, int ldb);
+void unicycle_la_trsm_llt(int n, int m, const double *L, int ldl, double *B, int ldb);
+
+/* y <- alpha A x + beta y, A m x n (gemv_n);  y <- alpha A' x + beta y (gemv_t, y of size n).
+ * beta == 0 overwrites y without reading it. */
+void unicycle_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
+                     double beta, double *y);
+void unicycle_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x,
+                     double beta, double *y);
+
+/* y <- alpha A x + beta y for symmetric n x n A of which only the lower triangle is read. */
+void unicycle_la_symv_l(int n, double alpha, const double *A, int lda, const double *x,
+                     double beta, double *y);
+
+/* C <- alpha A B + beta C (gemm_nn: A m x k, B k x n); C <- alpha A' B + beta C (gemm_tn:
+ * A k x m, B k x n). C is m x n. beta == 0 overwrites C without reading it. */
+void unicycle_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda,
+                      const double *B, int ldb, double beta, double *C, int ldc);
+void unicycle_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda,
+                      const double *B, int ldb, double beta, double *C, int ldc);
+
+/* Copy the m x n matrix A into B. */
+void unicycle_la_copy_mat(int m, int n, const double *A, int lda, double *B, int ldb);
+
+/* Mirror the lower triangle of the n x n matrix A into its upper triangle. */
+void unicycle_la_symmetrize_l(int n, double *A, int lda);
+
+/* Vector helpers. */
+double unicycle_la_dot(int n, const double *x, const double *y);
+void unicycle_la_axpy(int n, double alpha, const double *x, double *y);
+double unicycle_la_norm_inf(int n, const double *x);
+/* Infinity norm of the m x n matrix A (largest absolute entry, not the operator norm). */
+double unicycle_la_max_abs_mat(int m, int n, const double *A, int lda);
+/* 1 when all m x n entries are finite, else 0. */
+int unicycle_la_all_finite(int m, int n, const double *A, int lda);
+
+
+/* ------------------------------------------------------------------------------------
+ * Inline kernels (unicycle_lai_*): the same operations as static inline functions, so that
+ * a caller with compile-time sizes (the QP solver) gets them specialised and unrolled.
+ * The unicycle_la_* functions above are linkable wrappers around them. */
+#include <float.h>
+#include <math.h>
+
+static inline int unicycle_lai_potrf_l(int n, double *A, int lda)
+{
+    int i, j, k;
+    for (j = 0; j < n; ++j) {
+        double d = A[j + j * lda];
+        for (k = 0; k < j; ++k)
+            d -= A[j + k * lda] * A[j + k * lda];
+        /* !(d > 0) also rejects NaN */
+        if (!(d > 0.0) || !isfinite(d))
+            return j + 1;
+        d = sqrt(d);
+        A[j + j * lda] = d;
+        for (i = j + 1; i < n; ++i) {
+            double s = A[i + j * lda];
+            for (k = 0; k < j; ++k)
+                s -= A[i + k * lda] * A[j + k * lda];
+            A[i + j * lda] = s / d;
+        }
+    }
+    return 0;
+}
+
+static inline int unicycle_lai_potrf_l_noise(int n, double *A, int lda, const double *noise, int *nfloor)
+{
+    int i, j, k;
+    for (j = 0; j < n; ++j) {
+        const double ajj = fabs(A[j + j * lda]);
+        const double tol = noise ? noise[j] : 0.0;
+        double d = A[j + j * lda];
+        for (k = 0; k < j; ++k)
+            d -= A[j + k * lda] * A[j + k * lda];
+        if (!isfinite(d))
+            return j + 1;
+        if (d <= 0.0) {
+            const double floor_d = tol > DBL_EPSILON * ajj ? tol : DBL_EPSILON * ajj;
+            if (d < -tol || !(floor_d > 0.0))
+                return j + 1;
+            d = floor_d;
+            if (nfloor)
+                ++*nfloor;
+        }
+        d = sqrt(d);
+        A[j + j * lda] = d;
+        for (i = j + 1; i < n; ++i) {
+            double s = A[i + j * lda];
+            for (k = 0; k < j; ++k)
+                s -= A[i + k * lda] * A[j + k * lda];
+            A[i + j * lda] = s / d;
+        }
+    }
+    return 0;
+}
+
+static inline int unicycle_lai_ldlt_l(int n, double *A, int lda, int *neg)
+{
+    int i, j, k, nneg = 0;
+    for (j = 0; j < n; ++j) {
+        double d = A[j + j * lda];
+        for (k = 0; k < j; ++k)
+            d -= A[j + k * lda] * A[j + k * lda] * A[k + k * lda];
+        if (d == 0.0 || !isfinite(d)) {
+            if (neg)
+                *neg = nneg;
+            return j + 1;
+        }
+        if (d < 0.0)
+            ++nneg;
+        A[j + j * lda] = d;
+        for (i = j + 1; i < n; ++i) {
+            double s = A[i + j * lda];
+            for (k = 0; k < j; ++k)
+                s -= A[i + k * lda] * A[j + k * lda] * A[k + k * lda];
+            A[i + j * lda] = s / d;
+        }
+    }
+    if (neg)
+        *neg = nneg;
+    return 0;
+}
+
+static inline void unicycle_lai_trsv_ln(int n, const double *L, int ldl, double *x)
+{
+    int i, k;
+    for (i = 0; i < n; ++i) {
+        double s = x[i];
+        for (k = 0; k < i; ++k)
+            s -= L[i + k * ldl] * x[k];
+        x[i] = s / L[i + i * ldl];
+    }
+}
+
+static inline void unicycle_lai_trsv_lt(int n, const double *L, int ldl, double *x)
+{
+    int i, k;
+    for (i = n - 1; i >= 0; --i) {
+        double s = x[i];
+        for (k = i + 1; k < n; ++k)
+            s -= L[k + i * ldl] * x[k];
+        x[i] = s / L[i + i * ldl];
+    }
+}
+
+static inline void unicycle_lai_trsm_lln(int n, int m, const double *L, int ldl, double *B, int ldb)
+{
+    int j;
+    for (j = 0; j < m; ++j)
+        unicycle_lai_trsv_ln(n, L, ldl, B + j * ldb);
+}
+
+static inline void unicycle_lai_trsm_llt(int n, int m, const double *L, int ldl, double *B, int ldb)
+{
+    int j;
+    for (j = 0; j < m; ++j)
+        unicycle_lai_trsv_lt(n, L, ldl, B + j * ldb);
+}
+
+static inline void unicycle_lai_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
+                     double beta, double *y)
+{
+    int i, j;
+    if (beta == 0.0) {
+        for (i = 0; i < m; ++i)
+            y[i] = 0.0;
+    } else if (beta != 1.0) {
+        for (i = 0; i < m; ++i)
+            y[i] *= beta;
+    }
+    for (j = 0; j < n; ++j) {
+        const double a = alpha * x[j];
+        for (i = 0; i < m; ++i)
+            y[i] += A[i + j * lda] * a;
+    }
+}
+
+static inline void unicycle_lai_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x,
+                     double beta, double *y)
+{
+    int i, j;
+    for (j = 0; j < n; ++j) {
+        double s = 0.0;
+        for (i = 0; i < m; ++i)
+            s += A[i + j * lda] * x[i];
+        y[j] = (beta == 0.0 ? 0.0 : beta * y[j]) + alpha * s;
+    }
+}
+
+static inline void unicycle_lai_symv_l(int n, double alpha, const double *A, int lda, const double *x,
+                     double beta, double *y)
+{
+    int i, j;
+    /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
+    if (beta == 0.0) {
+        for (i = 0; i < n; ++i)
+            y[i] = 0.0;
+    } else if (beta != 1.0) {
+        for (i = 0; i < n; ++i)
+            y[i] *= beta;
+    }
+    for (j = 0; j < n; ++j) {
+        const double *a = A + j * lda;
+        const double xj = alpha * x[j];
+        double s = 0.0;
+        y[j] += a[j] * xj;
+        for (i = j + 1; i < n; ++i) {
+            y[i] += a[i] * xj;
+            s += a[i] * x[i];
+        }
+        y[j] += alpha * s;
+    }
+}
+
+static inline void unicycle_lai_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda,
+                      const double *B, int ldb, double beta, double *C, int ldc)
+{
+    int i, j, l;
+    for (j = 0; j < n; ++j) {
+        double *c = C + j * ldc;
+        if (beta == 0.0) {
+            for (i = 0; i < m; ++i)
+                c[i] = 0.0;
+        } else if (beta != 1.0) {
+            for (i = 0; i < m; ++i)
+                c[i] *= beta;
+        }
+        for (l = 0; l < k; ++l) {
+            const double b = alpha * B[l + j * ldb];
+            for (i = 0; i < m; ++i)
+                c[i] += A[i + l * lda] * b;
+        }
+    }
+}
+
+static inline void unicycle_lai_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda,
+                      const double *B, int ldb, double beta, double *C, int ldc)
+{
+    int i, j, l;
+    for (j = 0; j < n; ++j) {
+        for (i = 0; i < m; ++i) {
+            double s = 0.0;
+            for (l = 0; l < k; ++l)
+                s += A[l + i * lda] * B[l + j * ldb];
+            C[i + j * ldc] = (beta == 0.0 ? 0.0 : beta * C[i + j * ldc]) + alpha * s;
+        }
+    }
+}
+
+static inline void unicycle_lai_copy_mat(int m, int n, const double *A, int lda, double *B, int ldb)
+{
+    int i, j;
+    for (j = 0; j < n; ++j)
+        for (i = 0; i < m; ++i)
+            B[i + j * ldb] = A[i + j * lda];
+}
+
+static inline void unicycle_lai_symmetrize_l(int n, double *A, int lda)
+{
+    int i, j;
+    for (j = 0; j < n; ++j)
+        for (i = j + 1; i < n; ++i)
+            A[j + i * lda] = A[i + j * lda];
+}
+
+static inline double unicycle_lai_dot(int n, const double *x, const double *y)
+{
+    int i;
+    double s = 0.0;
+    for (i = 0; i < n; ++i)
+        s += x[i] * y[i];
+    return s;
+}
+
+static inline void unicycle_lai_axpy(int n, double alpha, const double *x, double *y)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        y[i] += alpha * x[i];
+}
+
+static inline double unicycle_lai_norm_inf(int n, const double *x)
+{
+    int i;
+    double m = 0.0;
+    for (i = 0; i < n; ++i) {
+        const double a = fabs(x[i]);
+        if (a > m || a != a)
+            m = a;
+    }
+    return m;
+}
+
+static inline double unicycle_lai_max_abs_mat(int m, int n, const double *A, int lda)
+{
+    int j;
+    double r = 0.0;
+    for (j = 0; j < n; ++j) {
+        const double c = unicycle_lai_norm_inf(m, A + j * lda);
+        if (c > r || c != c)
+            r = c;
+    }
+    return r;
+}
+
+static inline int unicycle_lai_all_finite(int m, int n, const double *A, int lda)
+{
+    int i, j;
+    for (j = 0; j < n; ++j)
+        for (i = 0; i < m; ++i)
+            if (!isfinite(A[i + j * lda]))
+                return 0;
+    return 1;
+}
+
+#endif /* UNICYCLE_LINALG_H */

@@ -1,0 +1,41 @@
+/* Problem data generated from the OCP file (unicycle_problem.c): bounds, defaults, the initial
+ * guess and, when the OCP asks for it, the offline primal-dual solution at the default x0.
+ *
+ * Infinite bounds are INFINITY / -INFINITY; the runtime treats them as "no bound on that side"
+ * (docs/algorithm.md section 1). Sizes of possibly empty arrays use UNICYCLE_DIM so that every
+ * array has at least one element (C99 forbids zero-length arrays).
+ */
+#ifndef UNICYCLE_PROBLEM_H
+#define UNICYCLE_PROBLEM_H
+
+#include "unicycle_sizes.h"
+
+extern const double unicycle_lbx[UNICYCLE_NX], unicycle_ubx[UNICYCLE_NX];
+extern const double unicycle_lbu[UNICYCLE_NU], unicycle_ubu[UNICYCLE_NU];
+extern const double unicycle_lg[UNICYCLE_DIM(UNICYCLE_NG)], unicycle_ug[UNICYCLE_DIM(UNICYCLE_NG)];
+extern const double unicycle_lr[UNICYCLE_DIM(UNICYCLE_NR)], unicycle_ur[UNICYCLE_DIM(UNICYCLE_NR)];
+extern const double unicycle_p_default[UNICYCLE_DIM(UNICYCLE_NP)]; /* every node */
+extern const double unicycle_dt;
+extern const double unicycle_x0_default[UNICYCLE_NX];
+/* the OCP file's initial guess */
+extern const double unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX];
+extern const double unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU];
+extern const int unicycle_default_M;
+extern const int unicycle_default_hessian;        /* 0 exact, 1 gauss-newton */
+extern const int unicycle_default_regularization; /* 0 none, 1 project, 2 mirror */
+extern const double unicycle_default_reg_eps;
+
+#if UNICYCLE_HAS_NOMINAL
+/* offline primal-dual solution at unicycle_x0_default (IPOPT at generation time), so the
+ * controller starts warm (DESIGN.md section 8) */
+extern const double unicycle_nominal_x[UNICYCLE_N + 1][UNICYCLE_NX];
+extern const double unicycle_nominal_u[UNICYCLE_N][UNICYCLE_NU];
+extern const double unicycle_nominal_lam[UNICYCLE_N + 1][UNICYCLE_NX];
+extern const double unicycle_nominal_mu_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
+extern const double unicycle_nominal_mu_b[UNICYCLE_N][UNICYCLE_NW];
+extern const double unicycle_nominal_mu_bN[UNICYCLE_NX];
+extern const double unicycle_nominal_mu_r[UNICYCLE_DIM(UNICYCLE_NR)];
+extern const double unicycle_nominal_nu[UNICYCLE_DIM(UNICYCLE_NE)];
+#endif
+
+#endif /* UNICYCLE_PROBLEM_H */

@@ -1,0 +1,253 @@
+/* Sparse stage-wise QP solver: primal-dual interior point (Mehrotra predictor-corrector)
+ * with the Newton systems solved by a Riccati recursion, O(N (nx+nu)^3) per iteration.
+ *
+ * The QP (docs/algorithm.md section 3), stages k = 0..N-1, w_k = (x_k, u_k), nw = nx + nu:
+ *
+ *   minimize   sum_k 0.5 w_k' H_k w_k + g_k' w_k + 0.5 x_N' HN x_N + gN' x_N
+ *   subject to x_0 = x0                                       multiplier lam_0
+ *              x_{k+1} = Phi_k w_k + b_k                      multiplier lam_{k+1}
+ *              lbw_k <= w_k <= ubw_k                          multiplier mu_b_k
+ *              lg_k <= C_k w_k <= ug_k                        multiplier mu_g_k
+ *              lbxN <= x_N <= ubxN                            multiplier mu_bN
+ *              lr <= R x_N <= ur                              multiplier mu_r
+ *              Req x_N = req                                  multiplier nu
+ *
+ * Bounds: an entry -INFINITY (lower) or +INFINITY (upper) means "no bound on that side";
+ * the masks are built at run time, so no compile-time index lists are needed. The x part
+ * of lbw_0/ubw_0 is ignored (x_0 is fixed by x0). lb == ub is accepted (two inequality
+ * sides); the dynamics, x0 and Req rows are always handled as equalities.
+ *
+ * Sign conventions (all multipliers SIGNED, positive when the upper side is active,
+ * negative when the lower side is), stationarity of the solution:
+ *   stage k:  H_k w_k + g_k + [lam_k; 0] - Phi_k' lam_{k+1} + C_k' mu_g_k + mu_b_k = 0
+ *   terminal: HN x_N + gN + lam_N + R' mu_r + Req' nu + mu_bN = 0
+ * lam_0 multiplies (x_0 - x0). The x part of mu_b_0 is always 0.
+ *
+ * Storage: all matrices dense column-major. Stage matrices are read through per-stage
+ * pointer tables (no copies: the DOPUS ring buffer hands its slots over directly):
+ *   H[k]   nw x nw  (symmetric; only the lower triangle is read)
+ *   Phi[k] nx x nw  = [A_k B_k], A_k the first nx columns
+ *   C[k]   ng x nw  (may be NULL when UNICYCLE_NG == 0)
+ *   HN     nx x nx  (symmetric; lower triangle read), R nr x nx, Req ne x nx (NULL if 0 rows)
+ *
+ * Hessians may be indefinite: the solver never convexifies up front. The nu x nu Riccati
+ * pivot blocks are factored by Cholesky; when one fails, the terminal equality is first
+ * added as an exact augmented-Lagrangian term (rho Req'Req, which does not change the
+ * solution of the Newton system because Req dx_N is fixed by the equality) and then, if
+ * still needed, delta*I is added to the stage Hessians with delta increased geometrically
+ * (IPOPT-style inertia correction). Both are counted in unicycle_qp_info. A negative pivot
+ * within the round-off estimate of the recursion (cancellation of large barrier terms) is
+ * a numerical zero: it is floored, counted, and iterative refinement restores the step.
+ *
+ * Termination: all four scaled residuals <= settings.tol, where (infinity norms)
+ *   stat / max(1, |H w|, |g|, |constraint part of the stationarity|),
+ *   eq   / max(1, |x0|, |b|, |Phi w|, |w|, |req|, |Req x_N|),
+ *   ineq / max(1, |finite bounds|, |row values|),  comp (max slack*multiplier) / max(1, |mu|).
+ * Accuracy of the answer is tol divided by the conditioning of the QP: on the robot-arm
+ * exact-Hessian QPs (reduced Hessian down to ~2e-5) tol 1e-10 leaves errors up to ~4e-5 in
+ * the primal step, tol 1e-12 about 2e-7.
+ *
+ * Infeasibility: the dual (primal) iterate, once grown far beyond the data, is tested as
+ * a Farkas certificate (unboundedness ray): A'y ~ 0 with b'y > 0 proves infeasibility;
+ * a feasible ray with d'Hd < 0, or Hd ~ 0 and g'd < 0, proves unboundedness.
+ *
+ * Warm start (settings.warm_start): primal and multipliers are read from *sol; slacks are
+ * taken from the primal point, slacks and multipliers floored at 1e-4 (relative). An
+ * SQP-style warm start (zero primal step, the last multipliers) takes 3-6 iterations once
+ * the active set has settled, and more than a cold start far from it.
+ *
+ * Sizes come from unicycle_sizes.h: UNICYCLE_N, UNICYCLE_NX, UNICYCLE_NU, UNICYCLE_NG, UNICYCLE_NR, UNICYCLE_NE
+ * (NG, NR, NE may be 0). No malloc, no VLAs, no recursion, no state outside the workspace.
+ * Compile with -O3 where possible: the linear algebra is inlined with compile-time sizes
+ * and -O3 vectorises it (about 1.8x faster than -O2 on the robot-arm QPs).
+ */
+#ifndef UNICYCLE_QP_H
+#define UNICYCLE_QP_H
+
+#include "unicycle_sizes.h"
+
+#if !defined(UNICYCLE_N) || !defined(UNICYCLE_NX) || !defined(UNICYCLE_NU) || !defined(UNICYCLE_NG) || \
+    !defined(UNICYCLE_NR) || !defined(UNICYCLE_NE)
+#error "unicycle_sizes.h must define UNICYCLE_N, UNICYCLE_NX, UNICYCLE_NU, UNICYCLE_NG, UNICYCLE_NR, UNICYCLE_NE"
+#endif
+
+/* C99 forbids zero-length arrays: arrays of a size that may be 0 use UNICYCLE_QP_MAX1(n). */
+#define UNICYCLE_QP_MAX1(n) ((n) > 0 ? (n) : 1)
+
+#define UNICYCLE_QP_NW (UNICYCLE_NX + UNICYCLE_NU)
+#define UNICYCLE_QP_NG1 UNICYCLE_QP_MAX1(UNICYCLE_NG)
+#define UNICYCLE_QP_NR1 UNICYCLE_QP_MAX1(UNICYCLE_NR)
+#define UNICYCLE_QP_NE1 UNICYCLE_QP_MAX1(UNICYCLE_NE)
+#define UNICYCLE_QP_NU1 UNICYCLE_QP_MAX1(UNICYCLE_NU)
+/* All stacked primal variables (w_0, ..., w_{N-1}, x_N). */
+#define UNICYCLE_QP_NPRIM (UNICYCLE_N * UNICYCLE_QP_NW + UNICYCLE_NX)
+/* Inequality rows, each with a lower and an upper side: stage k holds nw box rows then ng
+ * general rows; then the nx terminal box rows and the nr terminal rows. */
+#define UNICYCLE_QP_NSTAGEINEQ (UNICYCLE_QP_NW + UNICYCLE_NG)
+#define UNICYCLE_QP_NINEQ (UNICYCLE_N * UNICYCLE_QP_NSTAGEINEQ + UNICYCLE_NX + UNICYCLE_NR)
+
+/* Status codes (unicycle_qp_solve return value and unicycle_qp_info.status). */
+enum unicycle_qp_status {
+    UNICYCLE_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
+    UNICYCLE_QP_MAX_ITER = 1,          /* iteration limit reached or no progress in the KKT
+                                       residuals for 10 iterations; best point returned */
+    UNICYCLE_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */
+    UNICYCLE_QP_DUAL_INFEASIBLE = 3,   /* unbounded below: feasible descent ray found */
+    UNICYCLE_QP_NUMERICAL = 4,         /* factorisation / step failure */
+    UNICYCLE_QP_INVALID_INPUT = 5      /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+};
+
+typedef struct {
+    double tol;        /* tolerance on the scaled KKT residuals (default 1e-8) */
+    int max_iter;      /* iteration limit (default 100) */
+    int warm_start;    /* nonzero: start from the primal-dual point in *sol (default 0) */
+    int refine_steps;  /* iterative refinement steps of the corrector direction once the
+                          scaled KKT residuals are below 1e-6 (more after a floored pivot);
+                          default 1 */
+} unicycle_qp_settings;
+
+typedef struct {
+    /* stage matrices, one pointer per stage (see header comment for the shapes) */
+    const double *H[UNICYCLE_N];
+    const double *Phi[UNICYCLE_N];
+    const double *C[UNICYCLE_N];
+    const double *HN;
+    const double *R;
+    const double *Req;
+    /* vectors */
+    double g[UNICYCLE_N][UNICYCLE_QP_NW];
+    double b[UNICYCLE_N][UNICYCLE_NX];
+    double x0[UNICYCLE_NX];
+    double gN[UNICYCLE_NX];
+    double lbw[UNICYCLE_N][UNICYCLE_QP_NW];
+    double ubw[UNICYCLE_N][UNICYCLE_QP_NW];
+    double lbxN[UNICYCLE_NX];
+    double ubxN[UNICYCLE_NX];
+    double lg[UNICYCLE_N][UNICYCLE_QP_NG1];
+    double ug[UNICYCLE_N][UNICYCLE_QP_NG1];
+    double lr[UNICYCLE_QP_NR1];
+    double ur[UNICYCLE_QP_NR1];
+    double req[UNICYCLE_QP_NE1];
+} unicycle_qp_in;
+
+/* Primal-dual solution (output; also the warm-start point when settings.warm_start). */
+typedef struct {
+    double x[UNICYCLE_N + 1][UNICYCLE_NX];
+    double u[UNICYCLE_N][UNICYCLE_QP_NU1];
+    double lam[UNICYCLE_N + 1][UNICYCLE_NX];
+    double mu_b[UNICYCLE_N][UNICYCLE_QP_NW];
+    double mu_bN[UNICYCLE_NX];
+    double mu_g[UNICYCLE_N][UNICYCLE_QP_NG1];
+    double mu_r[UNICYCLE_QP_NR1];
+    double nu[UNICYCLE_QP_NE1];
+} unicycle_qp_sol;
+
+typedef struct {
+    int status;              /* enum unicycle_qp_status */
+    int iterations;          /* interior-point iterations taken */
+    int inertia_corrections; /* factorisations retried with delta*I added to the Hessians */
+    int terminal_augmentations; /* factorisations retried with rho Req'Req (exact, see top) */
+    int pivot_floors;        /* Riccati pivots within their round-off estimate of zero that were
+                                floored (cured by iterative refinement), summed over iterations */
+    double delta;            /* largest delta used (0 when no correction was needed) */
+    /* final residuals, infinity norms, unscaled */
+    double res_stat;         /* stationarity (both equations of the header comment) */
+    double res_eq;           /* x0, dynamics and Req rows */
+    double res_ineq;         /* bound / constraint violation max(0, l - v, v - u) */
+    double res_comp;         /* complementarity max(slack * multiplier) over all sides */
+    /* the same, scaled as compared with settings.tol */
+    double res_stat_scaled;
+    double res_eq_scaled;
+    double res_ineq_scaled;
+    double res_comp_scaled;
+    double obj;              /* objective value at the returned point */
+} unicycle_qp_info;
+
+/* The whole solver memory; the user declares one (static, global or on a task stack).
+ * Fields are internal. */
+typedef struct {
+    /* problem data prepared once per solve */
+    double lo[UNICYCLE_QP_NINEQ];
+    double up[UNICYCLE_QP_NINEQ];
+    unsigned char has_lo[UNICYCLE_QP_NINEQ];
+    unsigned char has_up[UNICYCLE_QP_NINEQ];
+    /* iterate: primal, equality multipliers, slacks and multipliers of each side */
+    double prim[UNICYCLE_QP_NPRIM];
+    double lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
+    double nu[UNICYCLE_QP_NE1];
+    double t_lo[UNICYCLE_QP_NINEQ];
+    double t_up[UNICYCLE_QP_NINEQ];
+    double z_lo[UNICYCLE_QP_NINEQ];
+    double z_up[UNICYCLE_QP_NINEQ];
+    /* constraint values v = D w and residuals */
+    double v[UNICYCLE_QP_NINEQ];
+    double r_stat[UNICYCLE_QP_NPRIM];
+    double r_dyn[(UNICYCLE_N + 1) * UNICYCLE_NX];
+    double r_eqN[UNICYCLE_QP_NE1];
+    double r_lo[UNICYCLE_QP_NINEQ];
+    double r_up[UNICYCLE_QP_NINEQ];
+    /* barrier weights and Newton directions */
+    double qdiag[UNICYCLE_QP_NINEQ];
+    double d_prim[UNICYCLE_QP_NPRIM];
+    double d_lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
+    double d_nu[UNICYCLE_QP_NE1];
+    double dt_lo[UNICYCLE_QP_NINEQ];
+    double dt_up[UNICYCLE_QP_NINEQ];
+    double dz_lo[UNICYCLE_QP_NINEQ];
+    double dz_up[UNICYCLE_QP_NINEQ];
+    double rc_lo[UNICYCLE_QP_NINEQ];
+    double rc_up[UNICYCLE_QP_NINEQ];
+    /* Newton right-hand side, solution and refinement buffers */
+    double rhs_stat[UNICYCLE_QP_NPRIM];
+    double rhs_dyn[(UNICYCLE_N + 1) * UNICYCLE_NX];
+    double rhs_eqN[UNICYCLE_QP_NE1];
+    double res_stat_lin[UNICYCLE_QP_NPRIM];
+    double res_dyn_lin[(UNICYCLE_N + 1) * UNICYCLE_NX];
+    double res_eqN_lin[UNICYCLE_QP_NE1];
+    double c_prim[UNICYCLE_QP_NPRIM];
+    double c_lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
+    double c_nu[UNICYCLE_QP_NE1];
+    /* Riccati factorisation: condensed stage Hessians and value-function data */
+    double M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
+    double P[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_NX];       /* value function Hessians */
+    double G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];   /* value function x-nu coupling */
+    double Lu[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NU1];  /* Cholesky factor of M_uu */
+    double LK[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* Lu^{-1} M_ux */
+    double LKn[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
+    double S[UNICYCLE_QP_NE1 * UNICYCLE_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
+    double p[UNICYCLE_N + 1][UNICYCLE_NX];
+    double e[UNICYCLE_QP_NE1];
+    double lk[UNICYCLE_N][UNICYCLE_QP_NU1];
+    double aty[UNICYCLE_QP_NPRIM];                        /* constraint part of r_stat (A'y) */
+    double hwg[UNICYCLE_QP_NPRIM];                        /* objective part of r_stat (Hw + g) */
+    double yrow[UNICYCLE_QP_NINEQ];                       /* per-row scratch */
+    /* best iterate so far (returned when the solver stops without success) */
+    double best_prim[UNICYCLE_QP_NPRIM];
+    double best_lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
+    double best_nu[UNICYCLE_QP_NE1];
+    double best_t_lo[UNICYCLE_QP_NINEQ];
+    double best_t_up[UNICYCLE_QP_NINEQ];
+    double best_z_lo[UNICYCLE_QP_NINEQ];
+    double best_z_up[UNICYCLE_QP_NINEQ];
+    double work[4 * UNICYCLE_QP_NW * (UNICYCLE_QP_NW + UNICYCLE_QP_NE1 + 1)];
+    double delta;          /* current inertia-correction shift */
+    double rho_aug;        /* current terminal augmented-Lagrangian weight */
+    double noise[UNICYCLE_QP_NU1];                        /* round-off estimate of M_uu pivots */
+    int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
+    double scale_stat;     /* residual scaling factors */
+    double scale_eq;
+} unicycle_qp_workspace;
+
+/* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */
+void unicycle_qp_settings_default(unicycle_qp_settings *settings);
+
+/* sizeof(unicycle_qp_workspace), the memory bill of the solver. */
+unsigned long unicycle_qp_workspace_size(void);
+
+/* Solve the QP. `sol` is read as the warm-start point when settings->warm_start is
+ * nonzero and always written (best point found; zeros on invalid input). `info` may be
+ * NULL. Returns the status (enum unicycle_qp_status). */
+int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in,
+                   const unicycle_qp_settings *settings, unicycle_qp_sol *sol, unicycle_qp_info *info);
+
+#endif /* UNICYCLE_QP_H */

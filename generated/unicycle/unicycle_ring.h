@@ -1,0 +1,62 @@
+/* The ring buffer of stage slots (DESIGN.md section 5, docs/algorithm.md section 4).
+ *
+ * Stage k lives in slot (ring_head + k) mod N. The receding-horizon shift advances
+ * ring_head, so the sensitivities of stage k+1 become those of stage k without a copy and
+ * the slot that falls off the front becomes the new last stage. The QP reads Ht, Phit, Ct
+ * in place through per-stage pointer tables.
+ */
+#ifndef UNICYCLE_RING_H
+#define UNICYCLE_RING_H
+
+#include "unicycle_sizes.h"
+
+typedef struct {
+    /* the blocks the QP uses (possibly outdated, A regularised), column-major */
+    double Ht[UNICYCLE_NW * UNICYCLE_NW];            /* nw x nw */
+    /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
+     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l */
+    double A_dyn[UNICYCLE_NW * UNICYCLE_NW];         /* nw x nw */
+    double Phit[UNICYCLE_NX * UNICYCLE_NW];          /* nx x nw, [A_k B_k] */
+    double Ct[UNICYCLE_DIM(UNICYCLE_NG) * UNICYCLE_NW]; /* ng x nw */
+    /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
+    double F_w[UNICYCLE_NW];
+    double phi[UNICYCLE_NX];
+    double g[UNICYCLE_DIM(UNICYCLE_NG)];
+    /* domega = (dw, dlam_next, dmu_g, dmu_b): the last QP step of this stage */
+    double dw[UNICYCLE_NW];
+    double dlam[UNICYCLE_NX];
+    double dmu_g[UNICYCLE_DIM(UNICYCLE_NG)];
+    double dmu_b[UNICYCLE_NW];
+} unicycle_stage_slot;
+
+typedef struct {
+    unicycle_stage_slot slot[UNICYCLE_N];
+    int ring_head;
+} unicycle_ring;
+
+/* head = 0, every slot zero. */
+void unicycle_ring_reset(unicycle_ring *ring);
+
+/* The slot of stage k (0 <= k < N). */
+unicycle_stage_slot *unicycle_ring_stage(unicycle_ring *ring, int k);
+const unicycle_stage_slot *unicycle_ring_stage_const(const unicycle_ring *ring, int k);
+
+/* One sampling interval: ring_head <- (ring_head + 1) mod N. */
+void unicycle_ring_advance(unicycle_ring *ring);
+
+/* Zero the step domega of a slot. */
+void unicycle_ring_clear_step(unicycle_stage_slot *slot);
+
+/* Secant criterion rho_k (eq. 16) of the slot against the fresh F_new = (F_w, phi, g):
+ *   num = | [F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new ;
+ *            -(phi_old + Phit dw) + phi_new ;
+ *            g_old + Ct dw - g_new] |
+ *   rho = num / |(dw, dlam, dmu_g, dmu_b)|, 0 when the denominator is 0 (2-norms). */
+double unicycle_ring_secant(const unicycle_stage_slot *slot, const double *F_w_new,
+                         const double *phi_new, const double *g_new);
+
+/* Store F_new as F_old. */
+void unicycle_ring_store_F(unicycle_stage_slot *slot, const double *F_w, const double *phi,
+                        const double *g);
+
+#endif /* UNICYCLE_RING_H */

@@ -1,0 +1,247 @@
+/* The DOPUS real-time iteration: public API of the generated solver.
+ *
+ * DOPUS (Dynamic Optimization with Partially Updated Sensitivities, van Duijkeren et al.,
+ * IFAC 2017) is an RTI scheme in which the stage sensitivities are shifted with the
+ * horizon (a ring buffer of stage slots) and only the M stages with the largest secant
+ * violation rho_k (eq. 16) are re-linearised per iteration; the QP gradient carries the
+ * adjoint correction (eq. 12), so fixed points satisfy the exact KKT conditions.
+ * docs/algorithm.md is the normative description of every step.
+ *
+ * Usage (receding horizon):
+ *     static unicycle_solver s;
+ *     unicycle_init(&s, xhat0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL);
+ *     loop: unicycle_feedback(&s, xhat0, u0); apply u0; unicycle_prepare(&s);
+ * The memory is one struct (sizeof is the memory bill; no malloc anywhere). Settings may be
+ * changed before unicycle_init; a struct that was never set up (zeroed or uninitialised
+ * memory) gets the generated defaults on its first use.
+ *
+ * Array conventions: every array argument is a flat, C-contiguous (row-major) array of
+ * doubles, node by node: x is (N+1) x nx (x + k*nx is node k), u is N x nu, lam (N+1) x nx,
+ * mu_g N x ng, mu_b N x nw, mu_bN nx, mu_r nr, nu ne, parameters (N+1) x np. Multipliers are
+ * signed (positive when the upper side of a row is active, negative for the lower side);
+ * docs/algorithm.md section 1 gives the Lagrangian. Arrays of size zero are not read or
+ * written (any pointer, also NULL, may be passed).
+ *
+ * Every function returning int returns a status (enum unicycle_status below) unless stated.
+ * On failure the state stays consistent: a failed feedback takes no step; a failed
+ * prepare leaves the shifted iterate, and the next prepare re-runs from there.
+ */
+#ifndef UNICYCLE_SOLVER_H
+#define UNICYCLE_SOLVER_H
+
+#include <stddef.h>
+
+/* UNICYCLE_CDEF_BEGIN */
+typedef struct unicycle_solver unicycle_solver;
+
+/* Size of struct unicycle_solver in bytes (for callers that allocate it as raw memory). */
+size_t unicycle_solver_sizeof(void);
+/* Reset every setting to the generated defaults (M, Hessian, regularisation, eps from the
+ * OCP file, receding mode, QP tolerance 1e-10, parameters p_default at every node, default
+ * clock) and mark the solver uninitialised. */
+void unicycle_defaults(unicycle_solver *s);
+/* Dimensions: dims[0..9] = N, nx, nu, nw, np, ng, nr, ne, has_gn, has_nominal. */
+void unicycle_get_dims(int *dims);
+/* Problem name (the generator's UNICYCLE_NAME). */
+const char *unicycle_name(void);
+/* A short English description of a status code. */
+const char *unicycle_status_string(int status);
+
+/* Initialisation (algorithm.md section 4, init): the iterate is the given guess; NULL x or
+ * u: the OCP file's initial guess; NULL multipliers: zeros. F and H of every stage and of
+ * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
+ * rho = 0. xhat0 is checked and kept for unicycle_kkt_eval (may be NULL: the default x0). */
+int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, const double *u,
+               const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
+               const double *mu_r, const double *nu);
+/* Initialisation from the generated nominal primal-dual guess (the offline NLP solution at
+ * the default x0); UNICYCLE_ERR_NO_NOMINAL when the solver was generated without one. */
+int unicycle_init_nominal(unicycle_solver *s, const double *xhat0);
+
+/* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
+ * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: UNICYCLE_ERR_NONFINITE_INPUT,
+ * nothing changes. QP failure: UNICYCLE_ERR_QP, no step (unicycle_get_qp_status tells why). */
+int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0);
+/* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
+ * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
+ * stage-cost Hessian of the other stages (unicycle_set_cost_hessian), assemble the QP. Must
+ * run between two feedback calls. */
+int unicycle_prepare(unicycle_solver *s);
+/* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
+ * the initial state xhat0 (NULL: the last one given to init or feedback):
+ * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed. */
+int unicycle_kkt_eval(unicycle_solver *s, const double *xhat0, double *kkt4);
+/* The largest of the four parts of the last unicycle_kkt_eval (NaN before the first). */
+double unicycle_get_kkt(const unicycle_solver *s);
+
+/* Settings. M: stages re-linearised per iteration besides stage N-1, 0 <= M <= N-1
+ * (N-1 is the full RTI). mode: UNICYCLE_MODE_RECEDING or UNICYCLE_MODE_FIXED. hessian:
+ * UNICYCLE_HESSIAN_EXACT or UNICYCLE_HESSIAN_GAUSS_NEWTON (only with a least-squares stage cost).
+ * regularization: UNICYCLE_REG_NONE, UNICYCLE_REG_PROJECT or UNICYCLE_REG_MIRROR with eps > 0.
+ * The QP tolerance (> 0) and iteration limit (>= 1) are those of unicycle_qp_solve. */
+int unicycle_set_M(unicycle_solver *s, int M);
+int unicycle_get_M(unicycle_solver *s);
+int unicycle_set_mode(unicycle_solver *s, int mode);
+int unicycle_get_mode(unicycle_solver *s);
+int unicycle_set_hessian(unicycle_solver *s, int hessian);
+int unicycle_get_hessian(unicycle_solver *s);
+int unicycle_set_regularization(unicycle_solver *s, int regularization, double eps);
+int unicycle_get_regularization(unicycle_solver *s);
+double unicycle_get_reg_eps(unicycle_solver *s);
+/* Stage-cost Hessian (algorithm.md section 4 step 5): fresh = 1 (the default) refreshes the
+ * cost part A_l of the Hessian block of every stage in every prepare (only the curvature of
+ * dynamics and constraints is partially updated); fresh = 0 is the paper's literal
+ * algorithm (the whole A moves with its slot). The slots always carry A_dyn = A - A_l, so
+ * the setting may change between any two calls. */
+int unicycle_set_cost_hessian(unicycle_solver *s, int fresh);
+int unicycle_get_cost_hessian(unicycle_solver *s);
+int unicycle_set_qp_tol(unicycle_solver *s, double tol);
+double unicycle_get_qp_tol(unicycle_solver *s);
+int unicycle_set_qp_max_iter(unicycle_solver *s, int max_iter);
+int unicycle_get_qp_max_iter(unicycle_solver *s);
+/* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
+ * evaluation on (prepare, kkt). */
+int unicycle_set_parameters(unicycle_solver *s, const double *p);
+int unicycle_set_parameters_node(unicycle_solver *s, int k, const double *pk);
+void unicycle_get_parameters(unicycle_solver *s, double *p);
+
+/* The iterate (shapes in the header comment). */
+void unicycle_get_x(const unicycle_solver *s, double *x);
+void unicycle_get_u(const unicycle_solver *s, double *u);
+void unicycle_get_lam(const unicycle_solver *s, double *lam);
+void unicycle_get_mu_g(const unicycle_solver *s, double *mu_g);
+void unicycle_get_mu_b(const unicycle_solver *s, double *mu_b);
+void unicycle_get_mu_bN(const unicycle_solver *s, double *mu_bN);
+void unicycle_get_mu_r(const unicycle_solver *s, double *mu_r);
+void unicycle_get_nu(const unicycle_solver *s, double *nu);
+/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1). */
+void unicycle_get_rho(const unicycle_solver *s, double *rho);
+/* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
+ * N-1 included; writes up to N ints and returns their count. */
+int unicycle_get_recomputed(const unicycle_solver *s, int *stages);
+/* The last QP: iterations, status (enum unicycle_qp_status of unicycle_qp.h). */
+int unicycle_get_qp_iterations(const unicycle_solver *s);
+int unicycle_get_qp_status(const unicycle_solver *s);
+/* Status of the last call that returns a status. */
+int unicycle_get_status(const unicycle_solver *s);
+int unicycle_is_initialized(const unicycle_solver *s);
+/* ring_head (stage k lives in slot (ring_head + k) mod N). */
+int unicycle_get_ring_head(const unicycle_solver *s);
+
+/* Seconds per phase of the last call that ran it (t[0..7] = feedback, shift, gradients,
+ * rho, hessians, regularization, assembly, kkt; indices of enum unicycle_phase). init fills
+ * the phases it runs too. "hessians" includes the stage-cost Hessians A_l. */
+void unicycle_get_timings(const unicycle_solver *s, double *t);
+/* Replace the clock (seconds, any origin); NULL restores the default clock. */
+void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void *ctx);
+/* UNICYCLE_CDEF_END */
+
+/* Status codes returned by the functions above. */
+enum unicycle_status {
+    UNICYCLE_OK = 0,
+    UNICYCLE_ERR_QP = 1,                /* QP not solved; no step; see unicycle_get_qp_status */
+    UNICYCLE_ERR_NONFINITE_INPUT = 2,   /* NaN or Inf in an input array */
+    UNICYCLE_ERR_NONFINITE_VALUE = 3,   /* a generated function returned NaN or Inf */
+    UNICYCLE_ERR_FUNCTION = 4,          /* a generated function reported failure */
+    UNICYCLE_ERR_INVALID_ARGUMENT = 5,  /* M out of range, bad mode/Hessian/regularisation,
+                                        Gauss-Newton without least squares, bad node index */
+    UNICYCLE_ERR_NOT_INITIALIZED = 6,   /* feedback/prepare/kkt before a successful init */
+    UNICYCLE_ERR_NOT_PREPARED = 7,      /* feedback without a successful prepare since the last
+                                        step (the QP would be stale) */
+    UNICYCLE_ERR_NO_NOMINAL = 8,        /* unicycle_init_nominal without UNICYCLE_HAS_NOMINAL */
+    UNICYCLE_ERR_REGULARIZATION = 9     /* eigen-decomposition did not converge */
+};
+
+enum unicycle_mode {
+    UNICYCLE_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
+    UNICYCLE_MODE_FIXED = 1     /* no shift: fixed-xhat0 convergence studies */
+};
+
+enum unicycle_hessian {
+    UNICYCLE_HESSIAN_EXACT = 0,
+    UNICYCLE_HESSIAN_GAUSS_NEWTON = 1
+};
+
+/* ------------------------------------------------------------------------------------- */
+/* The full state. Its layout is public so firmware can declare `static unicycle_solver s;`;
+ * the fields are internal (use the functions above). */
+
+#include "unicycle_sizes.h"
+#include "unicycle_funcs.h"
+#include "unicycle_qp.h"
+#include "unicycle_reg.h"
+#include "unicycle_ring.h"
+#include "unicycle_timer.h"
+
+struct unicycle_solver {
+    int magic;          /* UNICYCLE_MAGIC once the settings hold valid values */
+    int initialized;    /* a successful init happened */
+    int qp_ready;       /* QP assembled at the current iterate (prepare or init succeeded) */
+    int status;         /* status of the last call */
+
+    /* settings */
+    int M;
+    int mode;
+    int hessian;
+    int regularization;
+    double reg_eps;
+    int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    unicycle_qp_settings qp_settings;
+
+    /* iterate (algorithm.md section 1) */
+    double x[UNICYCLE_N + 1][UNICYCLE_NX];
+    double u[UNICYCLE_N][UNICYCLE_NU];
+    double lam[UNICYCLE_N + 1][UNICYCLE_NX];
+    double mu_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
+    double mu_b[UNICYCLE_N][UNICYCLE_NW];
+    double mu_bN[UNICYCLE_NX];
+    double mu_r[UNICYCLE_DIM(UNICYCLE_NR)];
+    double nu[UNICYCLE_DIM(UNICYCLE_NE)];
+    double p[UNICYCLE_N + 1][UNICYCLE_DIM(UNICYCLE_NP)];
+    double xhat0[UNICYCLE_NX];
+
+    /* stage slots (Ht, A_dyn, Phit, Ct, F_old, domega) and ring_head */
+    unicycle_ring ring;
+
+    /* terminal node, always fresh: A (regularised), R, R_eq and F = (gL, E, r, r_eq) */
+    double A_N[UNICYCLE_NX * UNICYCLE_NX];
+    double R[UNICYCLE_DIM(UNICYCLE_NR) * UNICYCLE_NX];
+    double R_eq[UNICYCLE_DIM(UNICYCLE_NE) * UNICYCLE_NX];
+    double gL_N[UNICYCLE_NX];
+    double E;
+    double r[UNICYCLE_DIM(UNICYCLE_NR)];
+    double r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
+
+    /* secant criterion and the recomputed set of the last prepare */
+    double rho[UNICYCLE_N];
+    int recomputed[UNICYCLE_N];
+    int n_recomputed;
+    unsigned char selected[UNICYCLE_N];
+
+    /* QP data, solution and workspace (the matrices are pointers into the ring) */
+    unicycle_qp_in qp_in;
+    unicycle_qp_sol qp_sol;
+    unicycle_qp_info qp_info;
+    unicycle_qp_workspace qp_work;
+    int qp_status;
+    int qp_iterations;
+
+    /* scratch for the generated functions and the regularisation */
+    unicycle_fun_work fun_work;
+    double tmp_A[UNICYCLE_NW * UNICYCLE_NW];
+    double tmp_Al[UNICYCLE_NW * UNICYCLE_NW];
+    double tmp_Phi[UNICYCLE_NX * UNICYCLE_NW];
+    double tmp_C[UNICYCLE_DIM(UNICYCLE_NG) * UNICYCLE_NW];
+    double tmp_gL[UNICYCLE_NW];
+    double tmp_F[UNICYCLE_NW];
+    double tmp_phi[UNICYCLE_NX];
+    double tmp_g[UNICYCLE_DIM(UNICYCLE_NG)];
+    double reg_work[2 * UNICYCLE_NW * UNICYCLE_NW];
+
+    /* KKT parts of the last unicycle_kkt_eval: stat, eq, ineq, comp */
+    double kkt[4];
+
+    unicycle_timer timer;
+};
+
+#endif /* UNICYCLE_SOLVER_H */
