@@ -84,11 +84,11 @@ def build(out_dir, cc: str = "cc", opt: str = "-O2", *, force: bool = False) -> 
     opt_flags = shlex.split(opt)
     digest = _source_hash(out_dir, listed, cc, opt_flags)
 
+    out_dir = out_dir.resolve()  # the compiler runs inside the folder: absolute paths only
     bdir = out_dir / BUILD_SUBDIR
     shared_lib, static_lib = bdir / f"lib{name}.so", bdir / f"lib{name}.a"
     stamp = bdir / "stamp.json"
-    result = BuildResult(shared_lib.resolve(), static_lib.resolve(), cdef_path.resolve(), name,
-                         out_dir.resolve(), True)
+    result = BuildResult(shared_lib, static_lib, (out_dir / meta["cdef"]), name, out_dir, True)
     if not force and stamp.is_file() and shared_lib.is_file() and static_lib.is_file():
         try:
             if json.loads(stamp.read_text()).get("hash") == digest:

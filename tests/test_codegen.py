@@ -514,11 +514,12 @@ def test_rename_is_one_pass():
         "dopus_x_init DOPUS_X_N dopus_x_x_dopus_x_y"
 
 
-def test_build_skips_unchanged_and_reports_compiler_errors(generated, tmp_path):
+def test_build_skips_unchanged_and_reports_compiler_errors(generated, tmp_path, monkeypatch):
     src = generated["unicycle"][1]
     folder = tmp_path / "unicycle"
     shutil.copytree(src, folder, ignore=shutil.ignore_patterns("build"))
-    first = build(folder)
+    monkeypatch.chdir(tmp_path)
+    first = build("unicycle")  # a relative folder, as typed on the command line
     assert first.rebuilt and first.shared_lib.is_file() and first.static_lib.is_file()
     assert first.cdef_path.read_text().count("unicycle_feedback") == 1
     assert not build(folder).rebuilt
