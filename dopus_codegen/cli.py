@@ -75,8 +75,11 @@ def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, c
 @click.option("--regularization", type=click.Choice(["none", "project", "mirror"]), default="none", show_default=True)
 @click.option("--reg-eps", default=1e-4, show_default=True, type=click.FloatRange(min=0, min_open=True),
               help="Eigenvalue floor of the regularisation.")
+@click.option("--cost-hessian", type=click.Choice(["fresh", "stored"]), default="fresh", show_default=True,
+              help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
+                   "paper's literal algorithm (the whole Hessian block moves with its slot).")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
-def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps, backend):
+def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps, cost_hessian, backend):
     """Closed loop against a CVODES simulation of the plant (paper figures 2 to 4).
 
     One DOPUS iteration per sampling instant, started from the offline solution at the
@@ -89,7 +92,7 @@ def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularizat
     try:
         run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
                     compare=compare, hessian=hessian, regularization=regularization, reg_eps=reg_eps,
-                    backend=backend, echo=click.echo)
+                    cost_hessian=cost_hessian, backend=backend, echo=click.echo)
     except (OcpError, SilError, PlantError) as exc:
         raise click.ClickException(str(exc)) from None
 

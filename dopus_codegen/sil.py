@@ -47,9 +47,10 @@ class SilError(RuntimeError):
 
 # --------------------------------------------------------------------------- backends
 def make_backend(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
-                 regularization: str = "none", reg_eps: float = 1e-4):
+                 regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh"):
     """A receding-horizon backend (docs/algorithm.md section 7) by name: 'c' or 'reference'."""
-    kwargs = dict(M=M, mode="receding", hessian=hessian, regularization=regularization, reg_eps=reg_eps)
+    kwargs = dict(M=M, mode="receding", hessian=hessian, regularization=regularization, reg_eps=reg_eps,
+                  cost_hessian=cost_hessian)
     if backend == "reference":
         from .reference import ReferenceDopus
         return ReferenceDopus(disc, **kwargs)
@@ -116,7 +117,8 @@ def _round_json(v):
 
 # --------------------------------------------------------------------------- the loop
 def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
-                    regularization: str = "none", reg_eps: float = 1e-4, duration: float | None = None,
+                    regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
+                    duration: float | None = None,
                     guess=None, xhat0=None, progress: bool = False, label: str | None = None,
                     backend_obj=None) -> dict:
     """Run the closed loop of the OCP's scenario and return the record of the run.
@@ -163,7 +165,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     if backend_obj is None:
         try:
             backend_obj = make_backend(disc, backend, M=M_eff, hessian=hessian, regularization=regularization,
-                                       reg_eps=reg_eps)
+                                       reg_eps=reg_eps, cost_hessian=cost_hessian)
         except SilError:
             raise
         except Exception as exc:  # noqa: BLE001 - settings rejected, C build failed, ...
@@ -291,6 +293,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
         "events": [{"time": float(ev.time), "label": str(ev.label)} for ev in events],
         "settings": {"M": M_eff, "N": N, "dt": dt, "duration": n_steps * dt, "hessian": hessian,
                      "regularization": regularization, "reg_eps": float(reg_eps), "backend": backend,
+                     "cost_hessian": str(getattr(backend_obj, "cost_hessian", cost_hessian)),
                      "plant": "CVODES (Adams, reltol = abstol = 1e-10)",
                      "lbu": list(lbu), "ubu": list(ubu),
                      "u_labels": list(getattr(disc, "control_names", []) or []) or None,
@@ -445,7 +448,7 @@ def write_json(runs, path) -> None:
 
 # --------------------------------------------------------------------------- CLI
 def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps,
-                backend, echo=None, progress=True) -> list:
+                backend, cost_hessian="fresh", echo=None, progress=True) -> list:
     """The ``dopus-gen sil`` command: runs, summary table, JSON and plots."""
     from .ocp import load_ocp
     from .derivatives import build_functions
@@ -478,9 +481,11 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
     for m, label in configs:
         name = label or ("full RTI" if min(m, N - 1) == N - 1 else f"DOPUS M = {m}")
         echo(f"{name}: {backend} backend, {hessian} Hessian, regularization {regularization}, "
+             f"cost Hessian {cost_hessian}, "
              f"{duration if duration is not None else spec.duration} s ...", err=True)
         run = run_closed_loop(disc, backend=backend, M=m, hessian=hessian, regularization=regularization,
-                              reg_eps=reg_eps, duration=duration, guess=guess, progress=progress, label=label)
+                              reg_eps=reg_eps, cost_hessian=cost_hessian, duration=duration, guess=guess,
+                              progress=progress, label=label)
         runs.append(run)
     summaries = [summarize(r) for r in runs]
     echo(format_summary(summaries))

@@ -93,19 +93,20 @@ def replay(x0, us, events=()):
 def _backend_params():
     params = []
     for backend in ("reference", "c"):
-        for hessian, M in (("exact", 39), ("gauss-newton", 1), ("exact", 1)):
+        for hessian, M, cost_hessian in (("exact", 39, "fresh"), ("gauss-newton", 1, "fresh"),
+                                         ("gauss-newton", 1, "stored"), ("exact", 1, "fresh")):
             marks = []
             if hessian == "exact" and M == 1:
-                # Measured, not a bookkeeping error of the loop: in this scenario the receding
-                # solution changes most towards the end of the horizon (progress reward -theta_N,
-                # no turnpike), so blocks computed for stage N-1 are 30-90 % off when the stage
-                # reaches the front; with one refresh per instant the exact-Hessian iteration
-                # does not settle (KKT 0.5 -> 20, deviation 4.7 cm). The C backend's QP also
-                # fails (max iterations) at instant 4 on a QP that the reference solves
-                # (reduced Hessian min eigenvalue 2e-5).
-                marks.append(pytest.mark.xfail(strict=True, reason="DOPUS M = 1 with the exact Hessian "
-                                               "does not settle in this scenario (see the comment)"))
-            params.append(pytest.param(backend, hessian, M, marks=marks, id=f"{backend}-{hessian}-M{M}"))
+                # Measured: with the exact Hessian and one refresh per instant the tip stays on
+                # the path (5.8 mm, the full RTI 7.1 mm) but the KKT measure does not settle
+                # (0.07 .. 0.5 over the whole 0.3 s, the full RTI reaches 1e-3). The stale blocks
+                # carry dynamics curvature weighted by old multipliers; over 3 s the multipliers
+                # and the indefiniteness of the stored blocks grow until the QP is infeasible
+                # (t = 2.47 s). Not a bookkeeping error of the loop: both backends agree.
+                marks.append(pytest.mark.xfail(strict=True, reason="DOPUS M = 1 with the exact Hessian: the "
+                                               "KKT measure does not settle (see the comment)"))
+            params.append(pytest.param(backend, hessian, M, cost_hessian, marks=marks,
+                                       id=f"{backend}-{hessian}-M{M}-{cost_hessian}"))
     return params
 
 
@@ -117,11 +118,12 @@ def _c_available():
     return True
 
 
-@pytest.mark.parametrize("backend, hessian, M", _backend_params())
-def test_sil_robot_arm(disc, offline, backend, hessian, M):
+@pytest.mark.parametrize("backend, hessian, M, cost_hessian", _backend_params())
+def test_sil_robot_arm(disc, offline, backend, hessian, M, cost_hessian):
     if backend == "c" and not _c_available():
         pytest.skip("the C backend (dopus_codegen.solver.CSolver) is not available")
-    run = run_closed_loop(disc, backend=backend, M=M, hessian=hessian, guess=offline)
+    run = run_closed_loop(disc, backend=backend, M=M, hessian=hessian, cost_hessian=cost_hessian, guess=offline)
+    assert run["settings"]["cost_hessian"] == cost_hessian
     assert run["aborted"] is None
     t, x, u = np.array(run["t"]), np.array(run["x"]), np.array(run["u"])
     assert len(t) == 30 and np.allclose(t, DT * np.arange(30))
