@@ -92,5 +92,8 @@ def build():
     ocp.options(hessian="exact", regularization="none", reg_eps=1e-4, M=1, offline_guess=True)
     ocp.disturbance(disturb)
     ocp.scenario(duration=3.0, events=[Event(1.0, disturb, "disturbance")],
-                 signals={"deviation": ca.norm_2(tip(q) - path(theta))}, plant=None)
+                 signals={"deviation": ca.norm_2(tip(q) - path(theta)),
+                          # the first two 2-component signals: the tip and its reference in the plane
+                          "tip": tip(q), "circle": path(theta)},
+                 plant=None)
     return ocp
