@@ -90,8 +90,14 @@ def _cdef_from_header(header_dir: Path, build_dir: Path) -> str:
     return out
 
 
+def _extra_cflags() -> list:
+    """Additional C flags from the environment variable DOPUS_QP_CFLAGS (for example
+    ``-DDOPUS_QP_TRACE`` for the iteration log on stderr); part of the build cache key."""
+    return os.environ.get("DOPUS_QP_CFLAGS", "").split()
+
+
 def _source_hash(sizes: tuple) -> str:
-    h = hashlib.sha256(repr(sizes).encode())
+    h = hashlib.sha256(repr((sizes, _extra_cflags())).encode())
     for name in _SOURCES:
         h.update((runtime_c_dir() / name).read_bytes())
     return h.hexdigest()[:16]
@@ -138,7 +144,7 @@ def _build(build_dir: Path, sizes: tuple, modname: str) -> None:
     objs = []
     for name in ("dopus_qp.c", "dopus_linalg.c"):
         obj = build_dir / (name[:-2] + ".o")
-        res = subprocess.run([_cc(), *STRICT_CFLAGS, f"-I{build_dir}", f"-I{rc}", "-c", str(rc / name),
+        res = subprocess.run([_cc(), *STRICT_CFLAGS, *_extra_cflags(), f"-I{build_dir}", f"-I{rc}", "-c", str(rc / name),
                               "-o", str(obj)], capture_output=True, text=True)
         if res.returncode != 0:
             raise QPHarnessError(f"compiling {name} failed:\n{res.stderr}")
