@@ -42,6 +42,11 @@ STATUS_QP_FAILED = 2        # the QP solver did not return a solution
 STATUS_QP_INFEASIBLE = 3    # the QP is infeasible
 STATUS_NONFINITE = 4        # a derivative function returned a non-finite value
 
+# Round-off floor of the secant residual (docs/algorithm.md section 4 step 2): rho_k = 0
+# when num_k <= EPS_RHO * (|F_old| + |F_new|), i.e. when the linear model of the stage is
+# exact along its last step to within the round-off of the F values it is formed from.
+EPS_RHO = 1e-12
+
 
 class DopusError(RuntimeError):
     """A DOPUS call failed; ``status`` is one of the ``STATUS_*`` codes. The iterate is
@@ -380,7 +385,10 @@ class ReferenceDopus:
             r3 = s.g + s.Ct @ s.dw - gv[k]
             num = np.linalg.norm(np.concatenate([r1, r2, r3]))
             den = np.linalg.norm(np.concatenate([s.dw, s.dlam, s.dmu_g, s.dmu_b]))
-            rho[k] = num / den if den > 0.0 else 0.0
+            # a residual at the round-off level of F is noise, not a secant violation
+            scale = (np.linalg.norm(np.concatenate([s.F_w, s.phi, s.g]))
+                     + np.linalg.norm(np.concatenate([F_w, phi[k], gv[k]])))
+            rho[k] = num / den if den > 0.0 and num > EPS_RHO * scale else 0.0
             s.F_w = F_w
             s.phi = phi[k].copy()
             s.g = gv[k].copy()

@@ -244,6 +244,47 @@ def run_receding(disc, guess, M, iters=50, hessian="exact"):
     return tally
 
 
+def run_from_solution(disc, guess, iters, **settings):
+    """Closed loop on the discrete model phi from the IPOPT solution, undisturbed: the first
+    QP step is only that solution's error (about 1e-10), every block is exact along it, so
+    the first secant residuals are round-off and rho_k = 0 in both backends (the round-off
+    floor of docs/algorithm.md section 4 step 2); the later shifts give real steps."""
+    c, r = pair(disc, mode="receding", **settings)
+    xhat = np.array(disc.x0, dtype=float)
+    for b in (c, r):
+        b.init(xhat, guess)
+    tally = Tally()
+    compare(c, r, "init", tally)
+    p0 = np.asarray(r.p[0], dtype=float)
+    selections = []
+    for it in range(iters):
+        uc, ur = step(c, r, xhat, f"iteration {it}", tally)
+        selections.append(r.recomputed)
+        if it == 0:
+            assert np.all(r.rho == 0.0) and np.all(c.rho == 0.0), (c.rho, r.rho)
+        else:
+            assert np.max(np.abs(c.rho - r.rho)) <= 1e-8 * np.max(r.rho), it
+        xhat = np.array(disc.stage_eval(xhat, ur, p0)[0], dtype=float).reshape(-1)
+    assert not tally.ill, str(tally)
+    return tally, selections
+
+
+# cost_hessian "stored" with M = 1: the paper's literal algorithm, one re-linearisation per
+# iteration, so a stage chosen by noise would change the path. Exact Hessian projected and
+# Gauss-Newton keep the closed-loop QPs convex for the ten iterations; with the exact
+# Hessian unregularised the loop leaves the region where the C QP solver converges after
+# four iterations (QP status max iterations, the same before and after the floor), so that
+# case runs three.
+@pytest.mark.parametrize("hessian, regularization, iters",
+                         [("exact", "project", 10), ("gauss-newton", "none", 10), ("exact", "none", 3)])
+def test_robot_receding_from_solution_stored_m1(robot_disc, robot_solution, hessian, regularization, iters):
+    tally, selections = run_from_solution(robot_disc, robot_solution[0], iters, M=1, hessian=hessian,
+                                          regularization=regularization, cost_hessian="stored")
+    assert selections[0] == [0, robot_disc.N - 1]      # all rho_k = 0: ties to the lower index
+    print(f"robot_arm receding from the IPOPT solution, {hessian}/{regularization}, stored, M=1: {tally}; "
+          f"selected {[s[0] for s in selections]}")
+
+
 # M = 1 after the disturbance is a poorly converged closed loop (KKT about 10 for the
 # robot arm): it amplifies a 1e-12 difference by about 1.4 per iteration, so after 50
 # iterations the backends differ by the amplified round-off of the two QP solvers (about

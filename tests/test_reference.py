@@ -361,6 +361,94 @@ def test_rho_vanishes_for_an_affine_model(mode):
         assert ref.kkt(xhats[-1])["kkt"] < 1e-10
 
 
+def _secant_parts(d, ref, old, new, mode, hess_fn):
+    """Per stage k < N-1, evaluated independently of the reference's slots: the relative
+    step |domega| / (1 + |omega|), the secant residual of eq. 16 with the blocks of
+    ``hess_fn`` at the old point, the residual of the exact linearisation (the Jacobian of F
+    along the step by central differences), the scale S_k = |F_old| + |F_new|, |domega|
+    and the model error |(Jt - J) domega|."""
+    N = d.N
+    out = []
+    for k in range(N - 1):
+        j = k + 1 if mode == "receding" else k      # the stage the slot held before
+        o = (old.x[j], old.u[j], d.p0[j], old.lam[j + 1], old.mu_g[j], old.mu_b[j])
+        dd = (new.x[j] - old.x[j], new.u[j] - old.u[j], 0 * d.p0[j], new.lam[j + 1] - old.lam[j + 1],
+              new.mu_g[j] - old.mu_g[j], new.mu_b[j] - old.mu_b[j])
+        den = np.linalg.norm(np.concatenate([dd[0], dd[1], dd[3], dd[4], dd[5]]))
+        om = np.linalg.norm(np.concatenate([o[0], o[1], o[3], o[4], o[5]]))
+        h = 1e-5                                    # along the unit direction of the step
+        Fp = _F(d, *[a + h / den * b for a, b in zip(o, dd)])
+        Fm = _F(d, *[a - h / den * b for a, b in zip(o, dd)])
+        Jd = (Fp - Fm) / (2 * h) * den
+        A, Phi, C = [np.array(v) for v in hess_fn(*o[:5])]
+        dw = np.concatenate([dd[0], dd[1]])
+        Jtd = np.concatenate([A @ dw - Phi.T @ dd[3] + C.T @ dd[4] + dd[5], -Phi @ dw, C @ dw])
+        Fo = _F(d, *o)
+        Fn = _F(d, ref.x[k], ref.u[k], d.p0[k], ref.lam[k + 1], ref.mu_g[k], ref.mu_b[k])
+        out.append((den / (1 + om), np.linalg.norm(Fo + Jtd - Fn), np.linalg.norm(Fo + Jd - Fn),
+                    np.linalg.norm(Fo) + np.linalg.norm(Fn), den, np.linalg.norm(Jtd - Jd)))
+    return [np.array(c) for c in zip(*out)]
+
+
+@pytest.mark.parametrize("mode", ["fixed", "receding"])
+def test_rho_is_zero_when_the_secant_residual_is_round_off(robot_disc, robot_solution, mode):
+    """Starting at the IPOPT solution the first QP step is that solution's error (1e-10 to
+    3e-9, far above round-off of the iterate) and every block is exact at the old point, so
+    the true residual of eq. 16 is O(|domega|^2), below the round-off of F: rho_k is 0
+    (docs/algorithm.md section 4 step 2), not noise / |domega| that ranks the stages
+    differently in every backend."""
+    from dopus_codegen.reference import EPS_RHO
+
+    d = robot_disc
+    sol, _ = robot_solution
+    ref = ReferenceDopus(d, M=d.N - 1, mode=mode)
+    ref.init(d.x0, sol)
+    old = ref.guess()
+    ref.feedback(d.x0)
+    new = ref.guess()
+    ref.prepare()
+    rel_step, num, num_fd, S, _, _ = _secant_parts(d, ref, old, new, mode, d.stage_hess_exact)
+    print(f"\n{mode}: |domega|/(1+|omega|) in [{rel_step.min():.1e}, {rel_step.max():.1e}], "
+          f"num/S <= {np.max(num / S):.1e} (exact linearisation by differences {np.max(num_fd / S):.1e})")
+    assert rel_step.min() > 1e-12                   # not a round-off step of the iterate
+    assert np.max(num / S) < 0.1 * EPS_RHO          # the independent residual is round-off
+    assert np.max(num_fd / S) < 0.1 * EPS_RHO
+    assert np.all(ref.rho == 0.0)
+
+
+@pytest.mark.parametrize("mode", ["fixed", "receding"])
+def test_rho_keeps_a_real_secant_violation_of_a_tiny_step(robot_disc, robot_solution, mode):
+    """Gauss-Newton blocks miss the curvature of the dynamics, a secant violation of first
+    order in the step. A push of 1e-8 on the initial state gives steps of 2e-9 to 1e-7
+    relative to the iterate; rho_k stays positive and equals eq. 16 evaluated independently
+    and the first-order prediction |(Jt - J) d| / |d| (J by central differences), so the
+    round-off floor does not hide it, where a floor on |domega| of 1e-8 would."""
+    d = robot_disc
+    sol, _ = robot_solution
+    ref = ReferenceDopus(d, M=d.N - 1, mode=mode, hessian="gauss-newton")
+    ref.init(d.x0, sol)
+    old = ref.guess()
+    xf = np.array(d.x0, dtype=float)
+    xf[2] += 1e-8                                   # the joint velocity
+    ref.feedback(xf)
+    new = ref.guess()
+    ref.prepare()
+    rel_step, num, num_fd, S, den, model_err = _secant_parts(d, ref, old, new, mode, d.stage_hess_gn)
+    rho = ref.rho[:d.N - 1]
+    rho_ind = num / den
+    rho_first = model_err / den                     # first order: rho - rho_first = O(|d|)
+    n_tiny = int(np.sum(rel_step < 1e-8))
+    print(f"\n{mode}: {n_tiny} of {d.N - 1} steps below 1e-8 relative, rho in [{rho.min():.2e}, "
+          f"{rho.max():.2e}], num/S >= {np.min(num / S):.1e}, deviation from eq. 16 evaluated independently "
+          f"{np.max(np.abs(rho - rho_ind) / rho_ind):.1e}, from |(Jt - J) d| / |d| "
+          f"{np.max(np.abs(rho - rho_first) / rho):.1e}")
+    assert n_tiny >= d.N // 2
+    assert np.all(rho > 0.0) and ref.rho[-1] == 0.0
+    assert np.max(np.abs(rho - rho_ind) / rho_ind) < 1e-3
+    assert np.max(np.abs(num_fd / S)) < 1e-13       # the exact linearisation has round-off residual
+    assert np.max(np.abs(rho - rho_first) / rho) < 1e-3
+
+
 def test_receding_full_recompute_equals_fresh_init(robot_disc, robot_solution):
     """Shift + ring buffer: with every block recomputed the QP equals a fresh init's."""
     d = robot_disc
