@@ -134,7 +134,10 @@ def test_rho_matches_reference(robot_disc, robot_solution):
             b.feedback(start.xhat_fixed)
             b.prepare()
         assert np.max(np.abs(c.rho - r.rho)) <= 1e-8 * np.max(np.abs(r.rho)), it
-        assert c.rho[-1] == 0.0 and np.all(c.rho[:-1] > 0)
+        # rho_k is 0 only where the secant residual is round-off (docs/algorithm.md, step 2),
+        # and then in both backends alike; all but at most one stage carry a real violation.
+        assert c.rho[-1] == 0.0 and np.array_equal(c.rho[:-1] > 0, r.rho[:-1] > 0)
+        assert np.sum(r.rho[:-1] > 0) >= robot_disc.N - 2
         assert c.recomputed == r.recomputed and len(c.recomputed) == 4
 
 
