@@ -47,11 +47,15 @@ void robot_arm_ring_advance(robot_arm_ring *ring);
 /* Zero the step domega of a slot. */
 void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);
 
+/* Round-off floor of the secant residual (docs/algorithm.md section 4 step 2). */
+#define ROBOT_ARM_EPS_RHO 1e-12
+
 /* Secant criterion rho_k (eq. 16) of the slot against the fresh F_new = (F_w, phi, g):
  *   num = | [F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new ;
  *            -(phi_old + Phit dw) + phi_new ;
  *            g_old + Ct dw - g_new] |
- *   rho = num / |(dw, dlam, dmu_g, dmu_b)|, 0 when the denominator is 0 (2-norms). */
+ *   rho = num / |(dw, dlam, dmu_g, dmu_b)| (2-norms), 0 when the denominator is 0 or
+ *   num <= ROBOT_ARM_EPS_RHO * (|(F_w_old, phi_old, g_old)| + |(F_w_new, phi_new, g_new)|). */
 double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w_new,
                          const double *phi_new, const double *g_new);
 

@@ -21,6 +21,14 @@
 #include <math.h>
 #include <stddef.h>
 
+/* Iteration log on stderr, for diagnosis only (compile with -DUNICYCLE_QP_TRACE). */
+#ifdef UNICYCLE_QP_TRACE
+#include <stdio.h>
+#define QP_TRACE(...) fprintf(stderr, __VA_ARGS__)
+#else
+#define QP_TRACE(...) ((void)0)
+#endif
+
 #define N UNICYCLE_N
 #define NX UNICYCLE_NX
 #define NU UNICYCLE_NU
@@ -37,6 +45,8 @@
 
 /* Fraction-to-boundary factor and limits of the inertia correction. */
 #define STEP_TAU 0.995
+/* Smallest centring parameter of a step taken with the inertia correction (see there). */
+#define SIGMA_NONCONVEX 0.9
 #define DELTA_GROW 10.0
 #define DELTA_MAX_REL 1e10
 #define RHO_TRIES 6
@@ -424,8 +434,10 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 
         /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
         unicycle_lai_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
-        if (unicycle_lai_potrf_l_noise(NU, Lu, NU1, ws->noise, &ws->pivot_floors) != 0)
+        if (unicycle_lai_potrf_l_noise(NU, Lu, NU1, ws->noise, &ws->pivot_floors) != 0) {
+            QP_TRACE("   pivot fail stage %d delta %.2e rho %.2e\n", k, delta, ws->rho_aug);
             return 1;
+        }
         pmag = mxx;
         /* LK = Lu^{-1} M_ux, LKn = Lu^{-1} Gam_u */
         unicycle_lai_copy_mat(NU, NX, M + NX, NW, LK, NU1);
@@ -987,7 +999,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         data_scale = dmax(data_scale, unicycle_lai_norm_inf(NE, in->req));
 
     for (iter = 0;; ++iter) {
-        double alpha, mu_aff, sigma, target, eta;
+        double alpha, alpha_aff, mu_aff, sigma, target, eta;
         int fact, floors_before, nref;
 
         compute_residuals(ws, in, &r);
@@ -1029,6 +1041,16 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
                 q += ws->z_up[i] / ws->t_up[i];
             ws->qdiag[i] = q;
         }
+#ifdef UNICYCLE_QP_TRACE
+        {
+            int kk;
+            /* barrier weights, for an inertia analysis of H + D'QD offline */
+            QP_TRACE("QD %d", iter);
+            for (kk = 0; kk < NI; ++kk)
+                QP_TRACE(" %.17g", ws->qdiag[kk]);
+            QP_TRACE("\n");
+        }
+#endif
         /* factorisation with minimal inertia correction: first the exact terminal
          * augmentation rho Req'Req, then delta I growing geometrically */
         ws->delta = 0.0;
@@ -1084,6 +1106,8 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         }
         newton_direction(ws, in, 0);
         alpha = max_step(ws);
+        alpha_aff = alpha;
+        (void)alpha_aff;
         mu_aff = 0.0;
         for (i = 0; i < NI; ++i) {
             if (ws->has_lo[i])
@@ -1094,6 +1118,14 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         mu_aff /= r.nsides;
         sigma = r.mu > 0.0 ? mu_aff / r.mu : 0.0;
         sigma = dmin(1.0, dmax(0.0, sigma * sigma * sigma));
+        /* Nonconvex region: the barrier-augmented Hessian needed the inertia correction,
+         * so the current barrier problem is not convex on the null space of the
+         * equalities. Reducing mu there freezes the iterate in the wrong region (the
+         * bounds that must become active to supply curvature keep tiny multipliers, and
+         * the delta-shifted steps stall); keep mu nearly constant (a centring step)
+         * until the barrier terms make the inertia right again. */
+        if (ws->delta > 0.0)
+            sigma = dmax(sigma, SIGMA_NONCONVEX);
 
         /* corrector: rc = t z + dt_aff dz_aff - target. The target is kept above a
          * fraction of the complementarity tolerance: driving mu far below what the
@@ -1113,6 +1145,10 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         }
         newton_direction(ws, in, nref);
         alpha = dmin(1.0, STEP_TAU * max_step(ws));
+        QP_TRACE("it %2d mu %.2e stat %.2e eq %.2e ineq %.2e comp %.2e | a_aff %.3f sigma %.2e "
+                 "alpha %.3e delta %.1e rho %.1e floors %d |dp| %.2e\n",
+                 iter, r.mu, r.stat_s, r.eq_s, r.ineq_s, r.comp_s, alpha_aff, sigma, alpha, ws->delta,
+                 ws->rho_aug, ws->pivot_floors - floors_before, unicycle_lai_norm_inf(NP, ws->d_prim));
 
         unicycle_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
         unicycle_lai_axpy((N + 1) * NX, alpha, ws->d_lam, ws->lam);

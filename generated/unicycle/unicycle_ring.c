@@ -47,7 +47,7 @@ void unicycle_ring_clear_step(unicycle_stage_slot *slot)
 double unicycle_ring_secant(const unicycle_stage_slot *slot, const double *F_w_new,
                          const double *phi_new, const double *g_new)
 {
-    double num2 = 0.0, den2 = 0.0;
+    double num2 = 0.0, den2 = 0.0, old2 = 0.0, new2 = 0.0;
     int i, j;
 
     /* stationarity rows: F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new */
@@ -76,7 +76,15 @@ double unicycle_ring_secant(const unicycle_stage_slot *slot, const double *F_w_n
     for (i = 0; i < UNICYCLE_NW; ++i) den2 += slot->dw[i] * slot->dw[i] + slot->dmu_b[i] * slot->dmu_b[i];
     for (i = 0; i < UNICYCLE_NX; ++i) den2 += slot->dlam[i] * slot->dlam[i];
     for (i = 0; i < UNICYCLE_NG; ++i) den2 += slot->dmu_g[i] * slot->dmu_g[i];
-    if (den2 == 0.0) {
+    /* round-off scale of num: |F_old| + |F_new| */
+    for (i = 0; i < UNICYCLE_NW; ++i) old2 += slot->F_w[i] * slot->F_w[i];
+    for (i = 0; i < UNICYCLE_NX; ++i) old2 += slot->phi[i] * slot->phi[i];
+    for (i = 0; i < UNICYCLE_NG; ++i) old2 += slot->g[i] * slot->g[i];
+    for (i = 0; i < UNICYCLE_NW; ++i) new2 += F_w_new[i] * F_w_new[i];
+    for (i = 0; i < UNICYCLE_NX; ++i) new2 += phi_new[i] * phi_new[i];
+    for (i = 0; i < UNICYCLE_NG; ++i) new2 += g_new[i] * g_new[i];
+    /* a residual at the round-off level of F is noise, not a secant violation */
+    if (den2 == 0.0 || sqrt(num2) <= UNICYCLE_EPS_RHO * (sqrt(old2) + sqrt(new2))) {
         return 0.0;
     }
     return sqrt(num2) / sqrt(den2);
