@@ -47,6 +47,10 @@
 #define STEP_TAU 0.995
 /* Smallest centring parameter of a step taken with the inertia correction (see there). */
 #define SIGMA_NONCONVEX 0.9
+/* Smallest centring parameter after a restart (see the stall test in dopus_qp_solve). */
+#define SIGMA_MIN_RESTART 0.1
+/* Iterations without progress after an inertia correction that trigger the restart. */
+#define RESTART_STALL_ITERS 6
 #define DELTA_GROW 10.0
 #define DELTA_MAX_REL 1e10
 #define RHO_TRIES 6
@@ -929,6 +933,8 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
     double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
     int best_iter = 0;
     double mu_prev = INFINITY;
+    double sigma_min = 0.0; /* SIGMA_MIN_RESTART after a restart */
+    int restarted = 0;
 
     if (settings)
         st = *settings;
@@ -1015,6 +1021,25 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             best_merit = merit(&r);
             best_iter = iter;
             copy_iterate(ws, 1);
+        } else if (!restarted && n_corr > 0 && iter - best_iter >= RESTART_STALL_ITERS) {
+            {
+                /* Stalled after inertia corrections: the aggressive mu reduction of the
+                 * predictor-corrector let a near-singular barrier Hessian throw the iterate
+                 * into a nonconvex region far from a minimiser (huge primal steps, then
+                 * centring steps that cannot recover). Start again from the initial point
+                 * with mu reduced at most SIGMA_MIN_RESTART per iteration, so the bounds
+                 * that supply the curvature are identified before mu is small. */
+                restarted = 1;
+                sigma_min = SIGMA_MIN_RESTART;
+                initial_point(ws, in, &st, sol);
+                ws->rho_aug = 0.0;
+                delta_last = 0.0;
+                mu_prev = INFINITY;
+                best_merit = INFINITY;
+                best_iter = iter + 1;
+                QP_TRACE("restart at iteration %d\n", iter);
+                continue;
+            }
         } else if (iter - best_iter >= STALL_ITERS) {
             status = DOPUS_QP_MAX_ITER;
             break;
@@ -1126,6 +1151,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
          * until the barrier terms make the inertia right again. */
         if (ws->delta > 0.0)
             sigma = dmax(sigma, SIGMA_NONCONVEX);
+        sigma = dmax(sigma, sigma_min);
 
         /* corrector: rc = t z + dt_aff dz_aff - target. The target is kept above a
          * fraction of the complementarity tolerance: driving mu far below what the
