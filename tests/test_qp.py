@@ -579,3 +579,75 @@ def test_linalg_kernels_match_numpy(tmp_path):
     Sb = buf(Sg)
     lib.dopus_la_symmetrize_l(n, ptr(Sb), n + 2)
     np.testing.assert_array_equal(mat(Sb, n, n), S)
+
+
+# --------------------------------------------------------------------------- stored closed-loop QPs
+# QPs of robot-arm closed loops (examples/robot_arm.py, software in the loop on the reference
+# DOPUS, exact Hessian; QP dict format of dopus_codegen.qpref, saved with numpy.savez_compressed,
+# about 26 kB each). Their stage blocks are indefinite and the Hessian on the null space of
+# the equalities has negative curvature (about -1e-3) that only the active control bounds
+# remove; the reduced Hessian of the solution is about 2e-5 against blocks of norm ~50.
+# The solver used to end at "max iterations" on each: the predictor-corrector drove mu down
+# before the bounds supplying the curvature were identified, a near-singular barrier Hessian
+# threw the iterate into the nonconvex region (primal steps of 60 and more) and the
+# inertia-corrected steps then stalled.
+DATA = os.path.join(os.path.dirname(__file__), "data")
+STORED_SAME_MINIMISER = [
+    "robot_arm_qp_M39_exact_instant36",        # full RTI, closed-loop instant 36
+    "robot_arm_qp_M1_exact_stored_instant4",   # M = 1, stored cost Hessian
+    "robot_arm_qp_M39_exact_instant51",
+    "robot_arm_qp_M1_exact_instant244",
+]
+# These have several local minimisers; the solver and the reference (IPOPT from zero)
+# reach different ones, so the answer is checked as a local minimiser of its own: KKT
+# residual, signs, and a positive definite reduced Hessian on its active set.
+STORED_OTHER_MINIMISER = [
+    "robot_arm_qp_M39_exact_instant105",
+    "robot_arm_qp_M39_exact_instant160",
+    "robot_arm_qp_M39_exact_instant272",
+]
+
+
+def _stored_qp(name):
+    with np.load(os.path.join(DATA, name + ".npz")) as f:
+        qp = {k: f[k] for k in f.files}
+    for k in ("N", "nx", "nu", "ng", "nr", "ne"):
+        qp[k] = int(qp[k])
+    return qp
+
+
+def _sizes(qp):
+    return tuple(int(qp[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne"))
+
+
+@pytest.mark.parametrize("name", STORED_SAME_MINIMISER)
+def test_stored_closed_loop_qps_against_reference(name):
+    from dopus_codegen.qpref import solve_qp_reference
+
+    qp = _stored_qp(name)
+    ref = solve_qp_reference(qp)
+    assert ref["polished"]
+    h = solver(_sizes(qp))
+    sol, info = h.solve(qp, tol=TOL_QP_ROBOT)
+    assert info["status"] == "solved", (name, info)
+    err = P.compare(sol, ref)
+    assert _max_rel(err) <= REL, (name, _fmt(err))
+    # the runtime's tolerance solves it too
+    _, info10 = h.solve(qp, tol=1e-10)
+    assert info10["status"] == "solved", (name, info10)
+    print(f"\n{name}: {info10['iterations']} iterations (tol 1e-10), {info['iterations']} (1e-12), "
+          f"reference {ref['iterations']}")
+
+
+@pytest.mark.parametrize("name", STORED_OTHER_MINIMISER)
+def test_stored_closed_loop_qps_reach_a_local_minimiser(name):
+    from dopus_codegen.qpref import qp_kkt_residual, qp_reduced_hessian_min_eig
+
+    qp = _stored_qp(name)
+    h = solver(_sizes(qp))
+    sol, info = h.solve(qp, tol=TOL_QP_ROBOT)
+    assert info["status"] == "solved", (name, info)
+    res = qp_kkt_residual(qp, sol)
+    assert res["kkt"] <= 1e-10 and res["sign"] <= 1e-12, (name, res)
+    # positive curvature on the active set (multipliers above 1e-7 count as active)
+    assert qp_reduced_hessian_min_eig(qp, sol, tol=1e-7) > 1e-6, name
