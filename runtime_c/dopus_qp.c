@@ -155,8 +155,18 @@ static int setup_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in)
         ws->up[TOFF + NX + i] = in->ur[i];
     }
     for (i = 0; i < NI; ++i) {
-        /* x_0 is fixed by x0: its box rows are ignored */
-        const int ignored = (i < NX);
+        /* x_0 is fixed by x0: its box rows are ignored, and so are the general rows of
+         * stage 0 that do not involve u_0 (their value is data; a multiplier on them is
+         * not unique, lam_0 absorbs any value, and a violation by round-off in x0 could
+         * never be removed) */
+        int ignored = (i < NX);
+        if (NG > 0 && i >= NW && i < NW + NG) {
+            int c;
+            ignored = 1;
+            for (c = NX; c < NW; ++c)
+                if (in->C[0][(i - NW) + c * NG] != 0.0)
+                    ignored = 0;
+        }
         ws->has_lo[i] = (unsigned char)(!ignored && isfinite(ws->lo[i]));
         ws->has_up[i] = (unsigned char)(!ignored && isfinite(ws->up[i]));
         if (ws->has_lo[i] && ws->has_up[i] && ws->lo[i] > ws->up[i])

@@ -14,7 +14,10 @@
  *
  * Bounds: an entry -INFINITY (lower) or +INFINITY (upper) means "no bound on that side";
  * the masks are built at run time, so no compile-time index lists are needed. The x part
- * of lbw_0/ubw_0 is ignored (x_0 is fixed by x0). lb == ub is accepted (two inequality
+ * of lbw_0/ubw_0 is ignored (x_0 is fixed by x0), and so are the rows of C_0 whose u part
+ * is exactly zero (their value is fixed by x0: a violation, e.g. by round-off in the
+ * measured state, cannot be removed and their multiplier would not be unique; mu_g_0 of
+ * such a row is returned as 0 and lam_0 carries the force). lb == ub is accepted (two inequality
  * sides); the dynamics, x0 and Req rows are always handled as equalities.
  *
  * Sign conventions (all multipliers SIGNED, positive when the upper side is active,
