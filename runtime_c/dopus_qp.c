@@ -47,8 +47,10 @@
 #define STEP_TAU 0.995
 /* Smallest centring parameter of a step taken with the inertia correction (see there). */
 #define SIGMA_NONCONVEX 0.9
-/* Smallest centring parameter after the restart on nonconvexity (see dopus_qp_solve). */
+/* Smallest centring parameter after the restart on a nonconvex stall (see dopus_qp_solve). */
 #define SIGMA_MIN_RESTART 0.1
+/* Iterations without progress after an inertia correction that trigger the restart. */
+#define RESTART_STALL_ITERS 6
 #define DELTA_GROW 10.0
 #define DELTA_MAX_REL 1e10
 #define RHO_TRIES 6
@@ -1029,6 +1031,26 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             best_merit = merit(&r);
             best_iter = iter;
             copy_iterate(ws, 1);
+        } else if (!restarted && n_corr > 0 && iter - best_iter >= RESTART_STALL_ITERS) {
+            /* Stalled after inertia corrections: the QP is nonconvex on the null space of
+             * the equalities, and Mehrotra's aggressive mu reduction let a near-singular
+             * barrier Hessian throw the iterate far into the nonconvex region before the
+             * bounds that supply the curvature were identified (primal steps of 60 and
+             * more on the robot-arm QPs); the inertia-corrected steps cannot recover.
+             * Start again from the initial point with mu reduced at most
+             * 1/SIGMA_MIN_RESTART per iteration. (Restarting at the first correction
+             * instead saves iterations but loses the QPs that the first attempt solves
+             * and the cautious one does not.) */
+            restarted = 1;
+            sigma_min = SIGMA_MIN_RESTART;
+            initial_point(ws, in, &st, sol);
+            ws->rho_aug = 0.0;
+            delta_last = 0.0;
+            mu_prev = INFINITY;
+            best_merit = INFINITY;
+            best_iter = iter + 1;
+            QP_TRACE("restart at iteration %d\n", iter);
+            continue;
         } else if (iter - best_iter >= STALL_ITERS) {
             status = DOPUS_QP_MAX_ITER;
             break;
@@ -1078,27 +1100,6 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
                 ws->rho_aug = ws->rho_aug > 0.0 ? 100.0 * ws->rho_aug : rho0;
                 ++n_aug;
                 fact = riccati_factor(ws, in);
-            }
-        }
-        if (fact == 1 && !restarted) {
-            /* The barrier Hessian is not convex on the null space of the equalities: the
-             * QP is nonconvex there and the bounds that supply its curvature at the
-             * solution are not identified yet. Mehrotra's aggressive mu reduction lets a
-             * near-singular barrier Hessian throw the iterate far into the nonconvex
-             * region (primal steps of 60 and more on the robot-arm QPs), where the
-             * inertia-corrected steps stall. Start again from the initial point with mu
-             * reduced at most 1/SIGMA_MIN_RESTART per iteration (at iteration 0 the
-             * initial point is kept). */
-            restarted = 1;
-            sigma_min = SIGMA_MIN_RESTART;
-            if (iter > 0) {
-                initial_point(ws, in, &st, sol);
-                ws->rho_aug = 0.0;
-                mu_prev = INFINITY;
-                best_merit = INFINITY;
-                best_iter = iter + 1;
-                QP_TRACE("restart at iteration %d\n", iter);
-                continue;
             }
         }
         if (fact == 1) {

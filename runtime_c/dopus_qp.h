@@ -38,13 +38,14 @@
  * added as an exact augmented-Lagrangian term (rho Req'Req, which does not change the
  * solution of the Newton system because Req dx_N is fixed by the equality) and then, if
  * still needed, delta*I is added to the stage Hessians with delta increased geometrically
- * (IPOPT-style inertia correction). Both are counted in dopus_qp_info. The first time
- * delta is needed, the QP is nonconvex on the null space of the equalities and the bounds
- * that supply its curvature are not yet identified: the solver restarts from its initial
- * point with mu reduced at most 10x per iteration (Mehrotra's aggressive reduction throws
- * the iterate into the nonconvex region there), and every step taken with delta > 0 is a
- * centring step (sigma >= 0.9). Such a QP may have several local minimisers; the one
- * found is a KKT point with positive curvature on its active set. A negative pivot
+ * (IPOPT-style inertia correction). Both are counted in dopus_qp_info. Delta > 0 means
+ * the QP is nonconvex on the null space of the equalities, with the bounds that supply
+ * its curvature not yet identified: every step taken with delta > 0 is a centring step
+ * (sigma >= 0.9), and if the iteration then stalls for 6 iterations the solver restarts
+ * once from its initial point with mu reduced at most 10x per iteration (Mehrotra's
+ * aggressive reduction throws the iterate far into the nonconvex region). Such a QP may
+ * have several local minimisers; the one found is a KKT point with positive curvature on
+ * its active set, not necessarily the one another solver finds. A negative pivot
  * within the round-off estimate of the recursion (cancellation of large barrier terms) is
  * a numerical zero: it is floored, counted, and iterative refinement restores the step.
  *
