@@ -655,8 +655,9 @@ def test_stored_closed_loop_qps_reach_a_local_minimiser(name):
 
 @pytest.mark.xfail(strict=True, reason="known: several local minimisers; the solver stalls in the "
                    "nonconvex region even after its restart (max iterations)")
-def test_stored_closed_loop_qp_still_failing():
-    qp = _stored_qp("robot_arm_qp_M39_exact_instant216")
+@pytest.mark.parametrize("name", ["robot_arm_qp_M39_exact_instant216", "robot_arm_qp_M39_exact_instant257"])
+def test_stored_closed_loop_qp_still_failing(name):
+    qp = _stored_qp(name)
     _, info = solver(_sizes(qp)).solve(qp, tol=1e-10)
     assert info["status"] == "solved", info
 
