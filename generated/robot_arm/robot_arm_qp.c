@@ -47,6 +47,10 @@
 #define STEP_TAU 0.995
 /* Smallest centring parameter of a step taken with the inertia correction (see there). */
 #define SIGMA_NONCONVEX 0.9
+/* Smallest centring parameter after the restart on a nonconvex stall (see robot_arm_qp_solve). */
+#define SIGMA_MIN_RESTART 0.1
+/* Iterations without progress after an inertia correction that trigger the restart. */
+#define RESTART_STALL_ITERS 6
 #define DELTA_GROW 10.0
 #define DELTA_MAX_REL 1e10
 #define RHO_TRIES 6
@@ -151,8 +155,18 @@ static int setup_bounds(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         ws->up[TOFF + NX + i] = in->ur[i];
     }
     for (i = 0; i < NI; ++i) {
-        /* x_0 is fixed by x0: its box rows are ignored */
-        const int ignored = (i < NX);
+        /* x_0 is fixed by x0: its box rows are ignored, and so are the general rows of
+         * stage 0 that do not involve u_0 (their value is data; a multiplier on them is
+         * not unique, lam_0 absorbs any value, and a violation by round-off in x0 could
+         * never be removed) */
+        int ignored = (i < NX);
+        if (NG > 0 && i >= NW && i < NW + NG) {
+            int c;
+            ignored = 1;
+            for (c = NX; c < NW; ++c)
+                if (in->C[0][(i - NW) + c * NG] != 0.0)
+                    ignored = 0;
+        }
         ws->has_lo[i] = (unsigned char)(!ignored && isfinite(ws->lo[i]));
         ws->has_up[i] = (unsigned char)(!ignored && isfinite(ws->up[i]));
         if (ws->has_lo[i] && ws->has_up[i] && ws->lo[i] > ws->up[i])
@@ -929,6 +943,8 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
     double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
     int best_iter = 0;
     double mu_prev = INFINITY;
+    double sigma_min = 0.0; /* SIGMA_MIN_RESTART after a restart */
+    int restarted = 0;
 
     if (settings)
         st = *settings;
@@ -1015,6 +1031,26 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
             best_merit = merit(&r);
             best_iter = iter;
             copy_iterate(ws, 1);
+        } else if (!restarted && n_corr > 0 && iter - best_iter >= RESTART_STALL_ITERS) {
+            /* Stalled after inertia corrections: the QP is nonconvex on the null space of
+             * the equalities, and Mehrotra's aggressive mu reduction let a near-singular
+             * barrier Hessian throw the iterate far into the nonconvex region before the
+             * bounds that supply the curvature were identified (primal steps of 60 and
+             * more on the robot-arm QPs); the inertia-corrected steps cannot recover.
+             * Start again from the initial point with mu reduced at most
+             * 1/SIGMA_MIN_RESTART per iteration. (Restarting at the first correction
+             * instead saves iterations but loses the QPs that the first attempt solves
+             * and the cautious one does not.) */
+            restarted = 1;
+            sigma_min = SIGMA_MIN_RESTART;
+            initial_point(ws, in, &st, sol);
+            ws->rho_aug = 0.0;
+            delta_last = 0.0;
+            mu_prev = INFINITY;
+            best_merit = INFINITY;
+            best_iter = iter + 1;
+            QP_TRACE("restart at iteration %d\n", iter);
+            continue;
         } else if (iter - best_iter >= STALL_ITERS) {
             status = ROBOT_ARM_QP_MAX_ITER;
             break;
@@ -1126,6 +1162,7 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
          * until the barrier terms make the inertia right again. */
         if (ws->delta > 0.0)
             sigma = dmax(sigma, SIGMA_NONCONVEX);
+        sigma = dmax(sigma, sigma_min);
 
         /* corrector: rc = t z + dt_aff dz_aff - target. The target is kept above a
          * fraction of the complementarity tolerance: driving mu far below what the

@@ -14,7 +14,10 @@
  *
  * Bounds: an entry -INFINITY (lower) or +INFINITY (upper) means "no bound on that side";
  * the masks are built at run time, so no compile-time index lists are needed. The x part
- * of lbw_0/ubw_0 is ignored (x_0 is fixed by x0). lb == ub is accepted (two inequality
+ * of lbw_0/ubw_0 is ignored (x_0 is fixed by x0), and so are the rows of C_0 whose u part
+ * is exactly zero (their value is fixed by x0: a violation, e.g. by round-off in the
+ * measured state, cannot be removed and their multiplier would not be unique; mu_g_0 of
+ * such a row is returned as 0 and lam_0 carries the force). lb == ub is accepted (two inequality
  * sides); the dynamics, x0 and Req rows are always handled as equalities.
  *
  * Sign conventions (all multipliers SIGNED, positive when the upper side is active,
@@ -35,7 +38,14 @@
  * added as an exact augmented-Lagrangian term (rho Req'Req, which does not change the
  * solution of the Newton system because Req dx_N is fixed by the equality) and then, if
  * still needed, delta*I is added to the stage Hessians with delta increased geometrically
- * (IPOPT-style inertia correction). Both are counted in robot_arm_qp_info. A negative pivot
+ * (IPOPT-style inertia correction). Both are counted in robot_arm_qp_info. Delta > 0 means
+ * the QP is nonconvex on the null space of the equalities, with the bounds that supply
+ * its curvature not yet identified: every step taken with delta > 0 is a centring step
+ * (sigma >= 0.9), and if the iteration then stalls for 6 iterations the solver restarts
+ * once from its initial point with mu reduced at most 10x per iteration (Mehrotra's
+ * aggressive reduction throws the iterate far into the nonconvex region). Such a QP may
+ * have several local minimisers; the one found is a KKT point with positive curvature on
+ * its active set, not necessarily the one another solver finds. A negative pivot
  * within the round-off estimate of the recursion (cancellation of large barrier terms) is
  * a numerical zero: it is floored, counted, and iterative refinement restores the step.
  *
