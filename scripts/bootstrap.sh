@@ -32,7 +32,7 @@ fi
 stamp=.venv/.dopus-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     echo "bootstrap: installing dopus-codegen and its dependencies into .venv"
-    .venv/bin/python -m pip install -q --upgrade pip
+    .venv/bin/python -m pip install -q --upgrade pip "setuptools>=77" wheel
     .venv/bin/python -m pip install -q -e ".[dev]"
     touch "$stamp"
 fi
