@@ -18,7 +18,7 @@ setup:
 	@bash scripts/bootstrap.sh
 
 demo: setup
-	$(VENV)/bin/dopus-gen sil $(EXAMPLE) --M 1 --compare full --duration 3.0 \
+	$(VENV)/bin/dopus-gen sil $(EXAMPLE) --M 1 --compare full --duration 3.0 --hessian gauss-newton \
 	    --json $(OUT)/robot_arm/sil.json --plot-dir $(OUT)/robot_arm
 	$(VENV)/bin/dopus-gen converge $(EXAMPLE) --M full,5,1,0 --iters 40 --start warm --cost-hessian stored \
 	    --json $(OUT)/robot_arm/converge_stored.json --plot $(OUT)/robot_arm/converge_stored.png

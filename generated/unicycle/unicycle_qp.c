@@ -52,6 +52,9 @@
 /* Iterations without progress after an inertia correction that trigger the restart. */
 #define RESTART_STALL_ITERS 6
 #define DELTA_GROW 10.0
+/* Largest number of delta increases per factorisation (1e-8 to 1e10 times the Hessian
+ * scale takes 18). */
+#define DELTA_TRIES 40
 #define DELTA_MAX_REL 1e10
 #define RHO_TRIES 6
 #define MU_FLOOR_REL 0.1
@@ -1103,11 +1106,14 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             }
         }
         if (fact == 1) {
+            int tries;
             ws->delta = delta_last > 0.0 ? dmax(1e-20 * hscale, delta_last / 3.0) : 1e-8 * hscale;
-            for (;;) {
+            /* bounded by count as well as by size: with huge or non-finite data the size
+             * test alone may never fire (NaN compares false, inf * 10 stays inf) */
+            for (tries = 0;; ++tries) {
                 ++n_corr;
                 fact = riccati_factor(ws, in);
-                if (fact != 1 || ws->delta > DELTA_MAX_REL * hscale)
+                if (fact != 1 || !(ws->delta <= DELTA_MAX_REL * hscale) || tries >= DELTA_TRIES)
                     break;
                 ws->delta *= DELTA_GROW;
             }
