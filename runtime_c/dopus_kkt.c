@@ -2,6 +2,7 @@
 #include <math.h>
 
 #include "dopus_kkt.h"
+#include "dopus_linalg.h"
 #include "dopus_problem.h"
 #include "dopus_solver.h"
 
@@ -30,17 +31,6 @@ static double dopus_kkt_comp(double mu, double v, double lb, double ub)
     return c;
 }
 
-static int dopus_kkt_finite(const double *v, int n)
-{
-    int i;
-    for (i = 0; i < n; ++i) {
-        if (!isfinite(v[i])) {
-            return 0;
-        }
-    }
-    return 1;
-}
-
 int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts)
 {
     double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
@@ -56,8 +46,8 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
                                   &l, g, &s->fun_work) != 0) {
             return DOPUS_ERR_FUNCTION;
         }
-        if (!dopus_kkt_finite(gL, DOPUS_NW) || !dopus_kkt_finite(phi, DOPUS_NX) ||
-            !dopus_kkt_finite(g, DOPUS_NG) || !isfinite(l)) {
+        if (!dopus_lai_vec_finite(DOPUS_NW, gL) || !dopus_lai_vec_finite(DOPUS_NX, phi) ||
+            !dopus_lai_vec_finite(DOPUS_NG, g) || !isfinite(l)) {
             return DOPUS_ERR_NONFINITE_VALUE;
         }
         /* stationarity gL_k + mu_b_k + [lam_k; 0] */
@@ -95,8 +85,8 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
                              &s->fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
-    if (!dopus_kkt_finite(gLN, DOPUS_NX) || !isfinite(E) || !dopus_kkt_finite(r, DOPUS_NR) ||
-        !dopus_kkt_finite(r_eq, DOPUS_NE)) {
+    if (!dopus_lai_vec_finite(DOPUS_NX, gLN) || !isfinite(E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
+        !dopus_lai_vec_finite(DOPUS_NE, r_eq)) {
         return DOPUS_ERR_NONFINITE_VALUE;
     }
     for (i = 0; i < DOPUS_NX; ++i) {

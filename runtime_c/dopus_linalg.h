@@ -310,6 +310,16 @@ static inline void dopus_lai_axpy(int n, double alpha, const double *x, double *
         y[i] += alpha * x[i];
 }
 
+/* 1 when every entry of the vector is finite (no NaN, no Inf) */
+static inline int dopus_lai_vec_finite(int n, const double *x)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        if (!isfinite(x[i]))
+            return 0;
+    return 1;
+}
+
 static inline double dopus_lai_norm_inf(int n, const double *x)
 {
     int i;

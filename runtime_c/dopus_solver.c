@@ -13,6 +13,7 @@
 #include <math.h>
 
 #include "dopus_kkt.h"
+#include "dopus_linalg.h"
 #include "dopus_problem.h"
 #include "dopus_solver.h"
 
@@ -20,17 +21,6 @@
 #define DOPUS_DEFAULT_QP_TOL 1e-10
 
 /* ---- small helpers ------------------------------------------------------------------ */
-
-static int dopus_all_finite(const double *v, int n)
-{
-    int i;
-    for (i = 0; i < n; ++i) {
-        if (!isfinite(v[i])) {
-            return 0;
-        }
-    }
-    return 1;
-}
 
 static void dopus_copy(double *dst, const double *src, int n)
 {
@@ -155,8 +145,8 @@ static int dopus_stage_F(dopus_solver *s, int k)
                               s->tmp_phi, &l, s->tmp_g, &s->fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
-    if (!dopus_all_finite(s->tmp_gL, DOPUS_NW) || !dopus_all_finite(s->tmp_phi, DOPUS_NX) ||
-        !dopus_all_finite(s->tmp_g, DOPUS_NG) || !isfinite(l)) {
+    if (!dopus_lai_vec_finite(DOPUS_NW, s->tmp_gL) || !dopus_lai_vec_finite(DOPUS_NX, s->tmp_phi) ||
+        !dopus_lai_vec_finite(DOPUS_NG, s->tmp_g) || !isfinite(l)) {
         return DOPUS_ERR_NONFINITE_VALUE;
     }
     for (i = 0; i < DOPUS_NW; ++i) {
@@ -188,7 +178,7 @@ static int dopus_stage_Al(dopus_solver *s, int k)
     if (rc != 0) {
         return DOPUS_ERR_FUNCTION;
     }
-    return dopus_all_finite(s->tmp_Al, DOPUS_NW * DOPUS_NW) ? DOPUS_OK : DOPUS_ERR_NONFINITE_VALUE;
+    return dopus_lai_vec_finite(DOPUS_NW * DOPUS_NW, s->tmp_Al) ? DOPUS_OK : DOPUS_ERR_NONFINITE_VALUE;
 }
 
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
@@ -205,9 +195,9 @@ static int dopus_stage_H(dopus_solver *s, int k)
     if (rc != 0) {
         return DOPUS_ERR_FUNCTION;
     }
-    if (!dopus_all_finite(s->tmp_A, DOPUS_NW * DOPUS_NW) ||
-        !dopus_all_finite(s->tmp_Phi, DOPUS_NX * DOPUS_NW) ||
-        !dopus_all_finite(s->tmp_C, DOPUS_NG * DOPUS_NW)) {
+    if (!dopus_lai_vec_finite(DOPUS_NW * DOPUS_NW, s->tmp_A) ||
+        !dopus_lai_vec_finite(DOPUS_NX * DOPUS_NW, s->tmp_Phi) ||
+        !dopus_lai_vec_finite(DOPUS_NG * DOPUS_NW, s->tmp_C)) {
         return DOPUS_ERR_NONFINITE_VALUE;
     }
     /* A_dyn = A - A_l, kept whatever cost_hessian is, so the setting may change at any time */
@@ -238,8 +228,8 @@ static int dopus_term_F(dopus_solver *s)
                              &s->fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
-    if (!dopus_all_finite(gL, DOPUS_NX) || !isfinite(E) || !dopus_all_finite(r, DOPUS_NR) ||
-        !dopus_all_finite(r_eq, DOPUS_NE)) {
+    if (!dopus_lai_vec_finite(DOPUS_NX, gL) || !isfinite(E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
+        !dopus_lai_vec_finite(DOPUS_NE, r_eq)) {
         return DOPUS_ERR_NONFINITE_VALUE;
     }
     dopus_copy(s->gL_N, gL, DOPUS_NX);
@@ -261,8 +251,8 @@ static int dopus_term_H(dopus_solver *s)
     if (rc != 0) {
         return DOPUS_ERR_FUNCTION;
     }
-    if (!dopus_all_finite(s->tmp_A, DOPUS_NX * DOPUS_NX) ||
-        !dopus_all_finite(R, DOPUS_NR * DOPUS_NX) || !dopus_all_finite(R_eq, DOPUS_NE * DOPUS_NX)) {
+    if (!dopus_lai_vec_finite(DOPUS_NX * DOPUS_NX, s->tmp_A) ||
+        !dopus_lai_vec_finite(DOPUS_NR * DOPUS_NX, R) || !dopus_lai_vec_finite(DOPUS_NE * DOPUS_NX, R_eq)) {
         return DOPUS_ERR_NONFINITE_VALUE;
     }
     rc = dopus_regularize(s, DOPUS_NX, s->tmp_A);
@@ -390,14 +380,14 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
     dopus_ensure_setup(s);
     s->initialized = 0;
     s->qp_ready = 0;
-    if ((xhat0 && !dopus_all_finite(xhat0, DOPUS_NX)) ||
-        (x && !dopus_all_finite(x, (DOPUS_N + 1) * DOPUS_NX)) ||
-        (u && !dopus_all_finite(u, DOPUS_N * DOPUS_NU)) ||
-        (lam && !dopus_all_finite(lam, (DOPUS_N + 1) * DOPUS_NX)) ||
-        (mu_g && !dopus_all_finite(mu_g, DOPUS_N * DOPUS_NG)) ||
-        (mu_b && !dopus_all_finite(mu_b, DOPUS_N * DOPUS_NW)) ||
-        (mu_bN && !dopus_all_finite(mu_bN, DOPUS_NX)) ||
-        (mu_r && !dopus_all_finite(mu_r, DOPUS_NR)) || (nu && !dopus_all_finite(nu, DOPUS_NE))) {
+    if ((xhat0 && !dopus_lai_vec_finite(DOPUS_NX, xhat0)) ||
+        (x && !dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NX, x)) ||
+        (u && !dopus_lai_vec_finite(DOPUS_N * DOPUS_NU, u)) ||
+        (lam && !dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NX, lam)) ||
+        (mu_g && !dopus_lai_vec_finite(DOPUS_N * DOPUS_NG, mu_g)) ||
+        (mu_b && !dopus_lai_vec_finite(DOPUS_N * DOPUS_NW, mu_b)) ||
+        (mu_bN && !dopus_lai_vec_finite(DOPUS_NX, mu_bN)) ||
+        (mu_r && !dopus_lai_vec_finite(DOPUS_NR, mu_r)) || (nu && !dopus_lai_vec_finite(DOPUS_NE, nu))) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
     dopus_clear_timings(s, 0, DOPUS_N_PHASES - 1);
@@ -476,13 +466,13 @@ int dopus_init_nominal(dopus_solver *s, const double *xhat0)
 
 static int dopus_qp_solution_finite(const dopus_qp_sol *sol)
 {
-    return dopus_all_finite(&sol->x[0][0], (DOPUS_N + 1) * DOPUS_NX) &&
-           dopus_all_finite(&sol->u[0][0], DOPUS_N * DOPUS_QP_NU1) &&
-           dopus_all_finite(&sol->lam[0][0], (DOPUS_N + 1) * DOPUS_NX) &&
-           dopus_all_finite(&sol->mu_b[0][0], DOPUS_N * DOPUS_QP_NW) &&
-           dopus_all_finite(sol->mu_bN, DOPUS_NX) &&
-           dopus_all_finite(&sol->mu_g[0][0], DOPUS_N * DOPUS_QP_NG1) &&
-           dopus_all_finite(sol->mu_r, DOPUS_QP_NR1) && dopus_all_finite(sol->nu, DOPUS_QP_NE1);
+    return dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NX, &sol->x[0][0]) &&
+           dopus_lai_vec_finite(DOPUS_N * DOPUS_QP_NU1, &sol->u[0][0]) &&
+           dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NX, &sol->lam[0][0]) &&
+           dopus_lai_vec_finite(DOPUS_N * DOPUS_QP_NW, &sol->mu_b[0][0]) &&
+           dopus_lai_vec_finite(DOPUS_NX, sol->mu_bN) &&
+           dopus_lai_vec_finite(DOPUS_N * DOPUS_QP_NG1, &sol->mu_g[0][0]) &&
+           dopus_lai_vec_finite(DOPUS_QP_NR1, sol->mu_r) && dopus_lai_vec_finite(DOPUS_QP_NE1, sol->nu);
 }
 
 int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
@@ -495,7 +485,7 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
     if (!s->initialized) {
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
     }
-    if (xhat0 == 0 || !dopus_all_finite(xhat0, DOPUS_NX)) {
+    if (xhat0 == 0 || !dopus_lai_vec_finite(DOPUS_NX, xhat0)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
@@ -743,7 +733,7 @@ int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4)
     if (!s->initialized) {
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
     }
-    if (xhat0 && !dopus_all_finite(xhat0, DOPUS_NX)) {
+    if (xhat0 && !dopus_lai_vec_finite(DOPUS_NX, xhat0)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
     s->timer.t[DOPUS_PHASE_KKT] = 0.0;
@@ -909,7 +899,7 @@ int dopus_set_parameters(dopus_solver *s, const double *p)
     if (p == 0) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
-    if (!dopus_all_finite(p, (DOPUS_N + 1) * DOPUS_NP)) {
+    if (!dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NP, p)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
     for (k = 0; k <= DOPUS_N; ++k) {
@@ -933,7 +923,7 @@ int dopus_set_parameters_node(dopus_solver *s, int k, const double *pk)
     if (pk == 0) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
-    if (!dopus_all_finite(pk, DOPUS_NP)) {
+    if (!dopus_lai_vec_finite(DOPUS_NP, pk)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
     for (i = 0; i < DOPUS_NP; ++i) {

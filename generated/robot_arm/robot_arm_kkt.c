@@ -2,6 +2,7 @@
 #include <math.h>
 
 #include "robot_arm_kkt.h"
+#include "robot_arm_linalg.h"
 #include "robot_arm_problem.h"
 #include "robot_arm_solver.h"
 
@@ -30,17 +31,6 @@ static double robot_arm_kkt_comp(double mu, double v, double lb, double ub)
     return c;
 }
 
-static int robot_arm_kkt_finite(const double *v, int n)
-{
-    int i;
-    for (i = 0; i < n; ++i) {
-        if (!isfinite(v[i])) {
-            return 0;
-        }
-    }
-    return 1;
-}
-
 int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, double *parts)
 {
     double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
@@ -56,8 +46,8 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
                                   &l, g, &s->fun_work) != 0) {
             return ROBOT_ARM_ERR_FUNCTION;
         }
-        if (!robot_arm_kkt_finite(gL, ROBOT_ARM_NW) || !robot_arm_kkt_finite(phi, ROBOT_ARM_NX) ||
-            !robot_arm_kkt_finite(g, ROBOT_ARM_NG) || !isfinite(l)) {
+        if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW, gL) || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, phi) ||
+            !robot_arm_lai_vec_finite(ROBOT_ARM_NG, g) || !isfinite(l)) {
             return ROBOT_ARM_ERR_NONFINITE_VALUE;
         }
         /* stationarity gL_k + mu_b_k + [lam_k; 0] */
@@ -95,8 +85,8 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
                              &s->fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
-    if (!robot_arm_kkt_finite(gLN, ROBOT_ARM_NX) || !isfinite(E) || !robot_arm_kkt_finite(r, ROBOT_ARM_NR) ||
-        !robot_arm_kkt_finite(r_eq, ROBOT_ARM_NE)) {
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gLN) || !isfinite(E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NE, r_eq)) {
         return ROBOT_ARM_ERR_NONFINITE_VALUE;
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {

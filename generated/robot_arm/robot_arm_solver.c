@@ -13,6 +13,7 @@
 #include <math.h>
 
 #include "robot_arm_kkt.h"
+#include "robot_arm_linalg.h"
 #include "robot_arm_problem.h"
 #include "robot_arm_solver.h"
 
@@ -20,17 +21,6 @@
 #define ROBOT_ARM_DEFAULT_QP_TOL 1e-10
 
 /* ---- small helpers ------------------------------------------------------------------ */
-
-static int robot_arm_all_finite(const double *v, int n)
-{
-    int i;
-    for (i = 0; i < n; ++i) {
-        if (!isfinite(v[i])) {
-            return 0;
-        }
-    }
-    return 1;
-}
 
 static void robot_arm_copy(double *dst, const double *src, int n)
 {
@@ -155,8 +145,8 @@ static int robot_arm_stage_F(robot_arm_solver *s, int k)
                               s->tmp_phi, &l, s->tmp_g, &s->fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
-    if (!robot_arm_all_finite(s->tmp_gL, ROBOT_ARM_NW) || !robot_arm_all_finite(s->tmp_phi, ROBOT_ARM_NX) ||
-        !robot_arm_all_finite(s->tmp_g, ROBOT_ARM_NG) || !isfinite(l)) {
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW, s->tmp_gL) || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->tmp_phi) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NG, s->tmp_g) || !isfinite(l)) {
         return ROBOT_ARM_ERR_NONFINITE_VALUE;
     }
     for (i = 0; i < ROBOT_ARM_NW; ++i) {
@@ -188,7 +178,7 @@ static int robot_arm_stage_Al(robot_arm_solver *s, int k)
     if (rc != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
-    return robot_arm_all_finite(s->tmp_Al, ROBOT_ARM_NW * ROBOT_ARM_NW) ? ROBOT_ARM_OK : ROBOT_ARM_ERR_NONFINITE_VALUE;
+    return robot_arm_lai_vec_finite(ROBOT_ARM_NW * ROBOT_ARM_NW, s->tmp_Al) ? ROBOT_ARM_OK : ROBOT_ARM_ERR_NONFINITE_VALUE;
 }
 
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
@@ -205,9 +195,9 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
     if (rc != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
-    if (!robot_arm_all_finite(s->tmp_A, ROBOT_ARM_NW * ROBOT_ARM_NW) ||
-        !robot_arm_all_finite(s->tmp_Phi, ROBOT_ARM_NX * ROBOT_ARM_NW) ||
-        !robot_arm_all_finite(s->tmp_C, ROBOT_ARM_NG * ROBOT_ARM_NW)) {
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW * ROBOT_ARM_NW, s->tmp_A) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NX * ROBOT_ARM_NW, s->tmp_Phi) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NG * ROBOT_ARM_NW, s->tmp_C)) {
         return ROBOT_ARM_ERR_NONFINITE_VALUE;
     }
     /* A_dyn = A - A_l, kept whatever cost_hessian is, so the setting may change at any time */
@@ -238,8 +228,8 @@ static int robot_arm_term_F(robot_arm_solver *s)
                              &s->fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
-    if (!robot_arm_all_finite(gL, ROBOT_ARM_NX) || !isfinite(E) || !robot_arm_all_finite(r, ROBOT_ARM_NR) ||
-        !robot_arm_all_finite(r_eq, ROBOT_ARM_NE)) {
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gL) || !isfinite(E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NE, r_eq)) {
         return ROBOT_ARM_ERR_NONFINITE_VALUE;
     }
     robot_arm_copy(s->gL_N, gL, ROBOT_ARM_NX);
@@ -261,8 +251,8 @@ static int robot_arm_term_H(robot_arm_solver *s)
     if (rc != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
-    if (!robot_arm_all_finite(s->tmp_A, ROBOT_ARM_NX * ROBOT_ARM_NX) ||
-        !robot_arm_all_finite(R, ROBOT_ARM_NR * ROBOT_ARM_NX) || !robot_arm_all_finite(R_eq, ROBOT_ARM_NE * ROBOT_ARM_NX)) {
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX * ROBOT_ARM_NX, s->tmp_A) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NR * ROBOT_ARM_NX, R) || !robot_arm_lai_vec_finite(ROBOT_ARM_NE * ROBOT_ARM_NX, R_eq)) {
         return ROBOT_ARM_ERR_NONFINITE_VALUE;
     }
     rc = robot_arm_regularize(s, ROBOT_ARM_NX, s->tmp_A);
@@ -390,14 +380,14 @@ int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, co
     robot_arm_ensure_setup(s);
     s->initialized = 0;
     s->qp_ready = 0;
-    if ((xhat0 && !robot_arm_all_finite(xhat0, ROBOT_ARM_NX)) ||
-        (x && !robot_arm_all_finite(x, (ROBOT_ARM_N + 1) * ROBOT_ARM_NX)) ||
-        (u && !robot_arm_all_finite(u, ROBOT_ARM_N * ROBOT_ARM_NU)) ||
-        (lam && !robot_arm_all_finite(lam, (ROBOT_ARM_N + 1) * ROBOT_ARM_NX)) ||
-        (mu_g && !robot_arm_all_finite(mu_g, ROBOT_ARM_N * ROBOT_ARM_NG)) ||
-        (mu_b && !robot_arm_all_finite(mu_b, ROBOT_ARM_N * ROBOT_ARM_NW)) ||
-        (mu_bN && !robot_arm_all_finite(mu_bN, ROBOT_ARM_NX)) ||
-        (mu_r && !robot_arm_all_finite(mu_r, ROBOT_ARM_NR)) || (nu && !robot_arm_all_finite(nu, ROBOT_ARM_NE))) {
+    if ((xhat0 && !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) ||
+        (x && !robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NX, x)) ||
+        (u && !robot_arm_lai_vec_finite(ROBOT_ARM_N * ROBOT_ARM_NU, u)) ||
+        (lam && !robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NX, lam)) ||
+        (mu_g && !robot_arm_lai_vec_finite(ROBOT_ARM_N * ROBOT_ARM_NG, mu_g)) ||
+        (mu_b && !robot_arm_lai_vec_finite(ROBOT_ARM_N * ROBOT_ARM_NW, mu_b)) ||
+        (mu_bN && !robot_arm_lai_vec_finite(ROBOT_ARM_NX, mu_bN)) ||
+        (mu_r && !robot_arm_lai_vec_finite(ROBOT_ARM_NR, mu_r)) || (nu && !robot_arm_lai_vec_finite(ROBOT_ARM_NE, nu))) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
     robot_arm_clear_timings(s, 0, ROBOT_ARM_N_PHASES - 1);
@@ -476,13 +466,13 @@ int robot_arm_init_nominal(robot_arm_solver *s, const double *xhat0)
 
 static int robot_arm_qp_solution_finite(const robot_arm_qp_sol *sol)
 {
-    return robot_arm_all_finite(&sol->x[0][0], (ROBOT_ARM_N + 1) * ROBOT_ARM_NX) &&
-           robot_arm_all_finite(&sol->u[0][0], ROBOT_ARM_N * ROBOT_ARM_QP_NU1) &&
-           robot_arm_all_finite(&sol->lam[0][0], (ROBOT_ARM_N + 1) * ROBOT_ARM_NX) &&
-           robot_arm_all_finite(&sol->mu_b[0][0], ROBOT_ARM_N * ROBOT_ARM_QP_NW) &&
-           robot_arm_all_finite(sol->mu_bN, ROBOT_ARM_NX) &&
-           robot_arm_all_finite(&sol->mu_g[0][0], ROBOT_ARM_N * ROBOT_ARM_QP_NG1) &&
-           robot_arm_all_finite(sol->mu_r, ROBOT_ARM_QP_NR1) && robot_arm_all_finite(sol->nu, ROBOT_ARM_QP_NE1);
+    return robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NX, &sol->x[0][0]) &&
+           robot_arm_lai_vec_finite(ROBOT_ARM_N * ROBOT_ARM_QP_NU1, &sol->u[0][0]) &&
+           robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NX, &sol->lam[0][0]) &&
+           robot_arm_lai_vec_finite(ROBOT_ARM_N * ROBOT_ARM_QP_NW, &sol->mu_b[0][0]) &&
+           robot_arm_lai_vec_finite(ROBOT_ARM_NX, sol->mu_bN) &&
+           robot_arm_lai_vec_finite(ROBOT_ARM_N * ROBOT_ARM_QP_NG1, &sol->mu_g[0][0]) &&
+           robot_arm_lai_vec_finite(ROBOT_ARM_QP_NR1, sol->mu_r) && robot_arm_lai_vec_finite(ROBOT_ARM_QP_NE1, sol->nu);
 }
 
 int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
@@ -495,7 +485,7 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     if (!s->initialized) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
     }
-    if (xhat0 == 0 || !robot_arm_all_finite(xhat0, ROBOT_ARM_NX)) {
+    if (xhat0 == 0 || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
@@ -743,7 +733,7 @@ int robot_arm_kkt_eval(robot_arm_solver *s, const double *xhat0, double *kkt4)
     if (!s->initialized) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
     }
-    if (xhat0 && !robot_arm_all_finite(xhat0, ROBOT_ARM_NX)) {
+    if (xhat0 && !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
     s->timer.t[ROBOT_ARM_PHASE_KKT] = 0.0;
@@ -909,7 +899,7 @@ int robot_arm_set_parameters(robot_arm_solver *s, const double *p)
     if (p == 0) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
     }
-    if (!robot_arm_all_finite(p, (ROBOT_ARM_N + 1) * ROBOT_ARM_NP)) {
+    if (!robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NP, p)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
@@ -933,7 +923,7 @@ int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const double *pk)
     if (pk == 0) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
     }
-    if (!robot_arm_all_finite(pk, ROBOT_ARM_NP)) {
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NP, pk)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
     for (i = 0; i < ROBOT_ARM_NP; ++i) {

@@ -2,6 +2,7 @@
 #include <math.h>
 
 #include "unicycle_kkt.h"
+#include "unicycle_linalg.h"
 #include "unicycle_problem.h"
 #include "unicycle_solver.h"
 
@@ -30,17 +31,6 @@ static double unicycle_kkt_comp(double mu, double v, double lb, double ub)
     return c;
 }
 
-static int unicycle_kkt_finite(const double *v, int n)
-{
-    int i;
-    for (i = 0; i < n; ++i) {
-        if (!isfinite(v[i])) {
-            return 0;
-        }
-    }
-    return 1;
-}
-
 int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double *parts)
 {
     double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
@@ -56,8 +46,8 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
                                   &l, g, &s->fun_work) != 0) {
             return UNICYCLE_ERR_FUNCTION;
         }
-        if (!unicycle_kkt_finite(gL, UNICYCLE_NW) || !unicycle_kkt_finite(phi, UNICYCLE_NX) ||
-            !unicycle_kkt_finite(g, UNICYCLE_NG) || !isfinite(l)) {
+        if (!unicycle_lai_vec_finite(UNICYCLE_NW, gL) || !unicycle_lai_vec_finite(UNICYCLE_NX, phi) ||
+            !unicycle_lai_vec_finite(UNICYCLE_NG, g) || !isfinite(l)) {
             return UNICYCLE_ERR_NONFINITE_VALUE;
         }
         /* stationarity gL_k + mu_b_k + [lam_k; 0] */
@@ -95,8 +85,8 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
                              &s->fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_kkt_finite(gLN, UNICYCLE_NX) || !isfinite(E) || !unicycle_kkt_finite(r, UNICYCLE_NR) ||
-        !unicycle_kkt_finite(r_eq, UNICYCLE_NE)) {
+    if (!unicycle_lai_vec_finite(UNICYCLE_NX, gLN) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NE, r_eq)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {

@@ -13,6 +13,7 @@
 #include <math.h>
 
 #include "unicycle_kkt.h"
+#include "unicycle_linalg.h"
 #include "unicycle_problem.h"
 #include "unicycle_solver.h"
 
@@ -20,17 +21,6 @@
 #define UNICYCLE_DEFAULT_QP_TOL 1e-10
 
 /* ---- small helpers ------------------------------------------------------------------ */
-
-static int unicycle_all_finite(const double *v, int n)
-{
-    int i;
-    for (i = 0; i < n; ++i) {
-        if (!isfinite(v[i])) {
-            return 0;
-        }
-    }
-    return 1;
-}
 
 static void unicycle_copy(double *dst, const double *src, int n)
 {
@@ -155,8 +145,8 @@ static int unicycle_stage_F(unicycle_solver *s, int k)
                               s->tmp_phi, &l, s->tmp_g, &s->fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_all_finite(s->tmp_gL, UNICYCLE_NW) || !unicycle_all_finite(s->tmp_phi, UNICYCLE_NX) ||
-        !unicycle_all_finite(s->tmp_g, UNICYCLE_NG) || !isfinite(l)) {
+    if (!unicycle_lai_vec_finite(UNICYCLE_NW, s->tmp_gL) || !unicycle_lai_vec_finite(UNICYCLE_NX, s->tmp_phi) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NG, s->tmp_g) || !isfinite(l)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
     for (i = 0; i < UNICYCLE_NW; ++i) {
@@ -188,7 +178,7 @@ static int unicycle_stage_Al(unicycle_solver *s, int k)
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    return unicycle_all_finite(s->tmp_Al, UNICYCLE_NW * UNICYCLE_NW) ? UNICYCLE_OK : UNICYCLE_ERR_NONFINITE_VALUE;
+    return unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->tmp_Al) ? UNICYCLE_OK : UNICYCLE_ERR_NONFINITE_VALUE;
 }
 
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
@@ -205,9 +195,9 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_all_finite(s->tmp_A, UNICYCLE_NW * UNICYCLE_NW) ||
-        !unicycle_all_finite(s->tmp_Phi, UNICYCLE_NX * UNICYCLE_NW) ||
-        !unicycle_all_finite(s->tmp_C, UNICYCLE_NG * UNICYCLE_NW)) {
+    if (!unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->tmp_A) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NW, s->tmp_Phi) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NG * UNICYCLE_NW, s->tmp_C)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
     /* A_dyn = A - A_l, kept whatever cost_hessian is, so the setting may change at any time */
@@ -238,8 +228,8 @@ static int unicycle_term_F(unicycle_solver *s)
                              &s->fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_all_finite(gL, UNICYCLE_NX) || !isfinite(E) || !unicycle_all_finite(r, UNICYCLE_NR) ||
-        !unicycle_all_finite(r_eq, UNICYCLE_NE)) {
+    if (!unicycle_lai_vec_finite(UNICYCLE_NX, gL) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NE, r_eq)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
     unicycle_copy(s->gL_N, gL, UNICYCLE_NX);
@@ -261,8 +251,8 @@ static int unicycle_term_H(unicycle_solver *s)
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_all_finite(s->tmp_A, UNICYCLE_NX * UNICYCLE_NX) ||
-        !unicycle_all_finite(R, UNICYCLE_NR * UNICYCLE_NX) || !unicycle_all_finite(R_eq, UNICYCLE_NE * UNICYCLE_NX)) {
+    if (!unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NX, s->tmp_A) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NR * UNICYCLE_NX, R) || !unicycle_lai_vec_finite(UNICYCLE_NE * UNICYCLE_NX, R_eq)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
     rc = unicycle_regularize(s, UNICYCLE_NX, s->tmp_A);
@@ -390,14 +380,14 @@ int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, cons
     unicycle_ensure_setup(s);
     s->initialized = 0;
     s->qp_ready = 0;
-    if ((xhat0 && !unicycle_all_finite(xhat0, UNICYCLE_NX)) ||
-        (x && !unicycle_all_finite(x, (UNICYCLE_N + 1) * UNICYCLE_NX)) ||
-        (u && !unicycle_all_finite(u, UNICYCLE_N * UNICYCLE_NU)) ||
-        (lam && !unicycle_all_finite(lam, (UNICYCLE_N + 1) * UNICYCLE_NX)) ||
-        (mu_g && !unicycle_all_finite(mu_g, UNICYCLE_N * UNICYCLE_NG)) ||
-        (mu_b && !unicycle_all_finite(mu_b, UNICYCLE_N * UNICYCLE_NW)) ||
-        (mu_bN && !unicycle_all_finite(mu_bN, UNICYCLE_NX)) ||
-        (mu_r && !unicycle_all_finite(mu_r, UNICYCLE_NR)) || (nu && !unicycle_all_finite(nu, UNICYCLE_NE))) {
+    if ((xhat0 && !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) ||
+        (x && !unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NX, x)) ||
+        (u && !unicycle_lai_vec_finite(UNICYCLE_N * UNICYCLE_NU, u)) ||
+        (lam && !unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NX, lam)) ||
+        (mu_g && !unicycle_lai_vec_finite(UNICYCLE_N * UNICYCLE_NG, mu_g)) ||
+        (mu_b && !unicycle_lai_vec_finite(UNICYCLE_N * UNICYCLE_NW, mu_b)) ||
+        (mu_bN && !unicycle_lai_vec_finite(UNICYCLE_NX, mu_bN)) ||
+        (mu_r && !unicycle_lai_vec_finite(UNICYCLE_NR, mu_r)) || (nu && !unicycle_lai_vec_finite(UNICYCLE_NE, nu))) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     unicycle_clear_timings(s, 0, UNICYCLE_N_PHASES - 1);
@@ -476,13 +466,13 @@ int unicycle_init_nominal(unicycle_solver *s, const double *xhat0)
 
 static int unicycle_qp_solution_finite(const unicycle_qp_sol *sol)
 {
-    return unicycle_all_finite(&sol->x[0][0], (UNICYCLE_N + 1) * UNICYCLE_NX) &&
-           unicycle_all_finite(&sol->u[0][0], UNICYCLE_N * UNICYCLE_QP_NU1) &&
-           unicycle_all_finite(&sol->lam[0][0], (UNICYCLE_N + 1) * UNICYCLE_NX) &&
-           unicycle_all_finite(&sol->mu_b[0][0], UNICYCLE_N * UNICYCLE_QP_NW) &&
-           unicycle_all_finite(sol->mu_bN, UNICYCLE_NX) &&
-           unicycle_all_finite(&sol->mu_g[0][0], UNICYCLE_N * UNICYCLE_QP_NG1) &&
-           unicycle_all_finite(sol->mu_r, UNICYCLE_QP_NR1) && unicycle_all_finite(sol->nu, UNICYCLE_QP_NE1);
+    return unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NX, &sol->x[0][0]) &&
+           unicycle_lai_vec_finite(UNICYCLE_N * UNICYCLE_QP_NU1, &sol->u[0][0]) &&
+           unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NX, &sol->lam[0][0]) &&
+           unicycle_lai_vec_finite(UNICYCLE_N * UNICYCLE_QP_NW, &sol->mu_b[0][0]) &&
+           unicycle_lai_vec_finite(UNICYCLE_NX, sol->mu_bN) &&
+           unicycle_lai_vec_finite(UNICYCLE_N * UNICYCLE_QP_NG1, &sol->mu_g[0][0]) &&
+           unicycle_lai_vec_finite(UNICYCLE_QP_NR1, sol->mu_r) && unicycle_lai_vec_finite(UNICYCLE_QP_NE1, sol->nu);
 }
 
 int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
@@ -495,7 +485,7 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     if (!s->initialized) {
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
     }
-    if (xhat0 == 0 || !unicycle_all_finite(xhat0, UNICYCLE_NX)) {
+    if (xhat0 == 0 || !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
@@ -743,7 +733,7 @@ int unicycle_kkt_eval(unicycle_solver *s, const double *xhat0, double *kkt4)
     if (!s->initialized) {
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
     }
-    if (xhat0 && !unicycle_all_finite(xhat0, UNICYCLE_NX)) {
+    if (xhat0 && !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     s->timer.t[UNICYCLE_PHASE_KKT] = 0.0;
@@ -909,7 +899,7 @@ int unicycle_set_parameters(unicycle_solver *s, const double *p)
     if (p == 0) {
         return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
     }
-    if (!unicycle_all_finite(p, (UNICYCLE_N + 1) * UNICYCLE_NP)) {
+    if (!unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NP, p)) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     for (k = 0; k <= UNICYCLE_N; ++k) {
@@ -933,7 +923,7 @@ int unicycle_set_parameters_node(unicycle_solver *s, int k, const double *pk)
     if (pk == 0) {
         return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
     }
-    if (!unicycle_all_finite(pk, UNICYCLE_NP)) {
+    if (!unicycle_lai_vec_finite(UNICYCLE_NP, pk)) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     for (i = 0; i < UNICYCLE_NP; ++i) {
