@@ -47,17 +47,19 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--cost-hessian", type=click.Choice(["fresh", "stored"]), default="fresh", show_default=True,
               help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
                    "paper's literal algorithm (figure 1, DESIGN.md section 8).")
+@click.option("--lm", default=0.0, show_default=True, type=click.FloatRange(min=0),
+              help="Levenberg-Marquardt term added to every Hessian block of the QP (0: exact Newton).")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the study as JSON.")
 @click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None, help="Write KKT against iteration as PNG.")
-def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, cost_hessian, backend, json_out,
+def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, cost_hessian, lm, backend, json_out,
              plot_out):
     """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M."""
     from .converge import run_converge_cli
 
     run_converge_cli(ocp_file=ocp_file, m_list=_int_list_or_full(m_list), iters=iters, start=start,
                      hessian=hessian, regularization=regularization, reg_eps=reg_eps, backend=backend,
-                     json_out=json_out, plot_out=plot_out, cost_hessian=cost_hessian)
+                     json_out=json_out, plot_out=plot_out, cost_hessian=cost_hessian, lm=lm)
 
 
 @main.command()
@@ -78,8 +80,12 @@ def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, c
 @click.option("--cost-hessian", type=click.Choice(["fresh", "stored"]), default="fresh", show_default=True,
               help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
                    "paper's literal algorithm (the whole Hessian block moves with its slot).")
+@click.option("--lm", default=1e-4, show_default=True, type=click.FloatRange(min=0),
+              help="Levenberg-Marquardt term added to every Hessian block of the QP (0: the paper's "
+                   "literal exact-Newton QP). Keeps the fixed point; see README, Closed loop.")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
-def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps, cost_hessian, backend):
+def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps, cost_hessian, lm,
+        backend):
     """Closed loop against a CVODES simulation of the plant (paper figures 2 to 4).
 
     One DOPUS iteration per sampling instant, started from the offline solution at the
@@ -92,7 +98,7 @@ def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularizat
     try:
         run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
                     compare=compare, hessian=hessian, regularization=regularization, reg_eps=reg_eps,
-                    cost_hessian=cost_hessian, backend=backend, echo=click.echo)
+                    cost_hessian=cost_hessian, lm=lm, backend=backend, echo=click.echo)
     except (OcpError, SilError, PlantError) as exc:
         raise click.ClickException(str(exc)) from None
 

@@ -132,7 +132,7 @@ def iterations_to(kkt: list, tol: float) -> Optional[int]:
 def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regularization: str = "none",
               reg_eps: float = 1e-4, backend_factory: Optional[Callable] = None,
               backend_name: Optional[str] = None, progress: Optional[Callable] = None,
-              cost_hessian: str = "fresh") -> dict:
+              cost_hessian: str = "fresh", lm: float = 0.0) -> dict:
     """Run the study; return the JSON structure of the module docstring.
 
     ``start``: a :class:`StartPoint` or ``"cold"`` / ``"warm"`` (see :func:`make_start`).
@@ -158,7 +158,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     last_iterates = {}
     for run_index, M in enumerate(Ms):
         be = backend_factory(disc, M=M, mode="fixed", hessian=hessian, regularization=regularization,
-                             reg_eps=reg_eps, cost_hessian=cost_hessian)
+                             reg_eps=reg_eps, cost_hessian=cost_hessian, **({"lm": lm} if lm else {}))
         rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "status": "ok"}
 
         def record():
@@ -194,7 +194,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     return {
         "problem": disc.name, "N": int(disc.N), "backend": backend_name or getattr(backend_factory, "__name__", "custom"),
         "start": start.label, "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
-        "cost_hessian": cost_hessian, "runs": runs,
+        "cost_hessian": cost_hessian, "lm": float(lm), "runs": runs,
         "solution": {"M": int(Msol), "x": xs.tolist(), "u": us.tolist(), "objective": obj},
     }
 
@@ -273,7 +273,7 @@ def _cli_M_list(m_list, N: int) -> list:
 
 
 def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, backend,
-                     json_out=None, plot_out=None, cost_hessian: str = "fresh") -> dict:
+                     json_out=None, plot_out=None, cost_hessian: str = "fresh", lm: float = 0.0) -> dict:
     """The body of ``dopus-gen converge`` (errors become click exceptions)."""
     import click
 
@@ -309,7 +309,7 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, re
         try:
             study = run_study(disc, Ms, iters, sp, hessian=hessian, regularization=regularization,
                               reg_eps=reg_eps, backend_factory=factory, backend_name=backend,
-                              progress=progress, cost_hessian=cost_hessian)
+                              progress=progress, cost_hessian=cost_hessian, lm=lm)
         except (ValueError, RuntimeError) as exc:
             raise click.ClickException(str(exc)) from None
     click.echo(format_table(study))

@@ -114,7 +114,7 @@ class ReferenceDopus:
 
     def __init__(self, disc, M: int = 1, mode: str = "receding", hessian: str = "exact",
                  regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10,
-                 cost_hessian: str = "fresh"):
+                 cost_hessian: str = "fresh", lm: float = 0.0):
         self.disc = disc
         if cost_hessian not in ("fresh", "stored"):
             raise ValueError(f"cost_hessian must be 'fresh' or 'stored', got {cost_hessian!r}")
@@ -147,6 +147,10 @@ class ReferenceDopus:
         if not np.isfinite(qp_tol) or qp_tol <= 0:
             raise ValueError(f"qp_tol must be positive and finite, got {qp_tol!r}")
         self.regularization, self.reg_eps, self.qp_tol = regularization, eps, qp_tol
+        lm = float(lm)
+        if not np.isfinite(lm) or lm < 0:
+            raise ValueError(f"lm must be finite and >= 0, got {lm!r}")
+        self.lm = lm
         self.set_M(M)
         self.set_mode(mode)
         self.lbx, self.ubx = np.asarray(disc.lbx, float), np.asarray(disc.ubx, float)
@@ -276,7 +280,7 @@ class ReferenceDopus:
         lbw = np.empty((N, nw)); ubw = np.empty((N, nw))
         for k in range(N):
             s = self.slots[self._slot(k)]
-            H[k] = s.Ht
+            H[k] = s.Ht + self.lm * np.eye(nw) if self.lm > 0 else s.Ht
             Phi[k] = s.Phit
             C[k] = s.Ct
             # eq. 12: a_k = F_w + Phit' lam_{k+1} - Ct' mu_g_k - mu_b_k
@@ -295,7 +299,7 @@ class ReferenceDopus:
         return {
             "N": N, "nx": nx, "nu": nu, "ng": ng, "nr": nr, "ne": ne,
             "H": H, "g": gq, "Phi": Phi, "b": b, "x0": xhat0 - self.x[0],
-            "HN": t["A"].copy(), "gN": gN, "lbw": lbw, "ubw": ubw,
+            "HN": t["A"] + self.lm * np.eye(nx), "gN": gN, "lbw": lbw, "ubw": ubw,
             "lbxN": self.lbx - self.x[N], "ubxN": self.ubx - self.x[N],
             "C": C, "lg": lgq, "ug": ugq, "R": t["R"].copy(), "lr": self.lr - t["r"], "ur": self.ur - t["r"],
             "Req": t["Req"].copy(), "req": -t["r_eq"],

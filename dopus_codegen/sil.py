@@ -41,16 +41,24 @@ _ON_GRID = 1e-9
 _PROGRESS_AFTER = 2.0
 
 
+# Levenberg-Marquardt term of the closed loop (docs/algorithm.md section 3): the exact-Hessian
+# QPs of the robot arm are nonconvex (their curvature comes from the active torque bounds),
+# and without it the full RTI's QP solutions jump between local minimisers and DOPUS M = 1
+# diverges on its stale exact blocks; see README "Closed loop".
+DEFAULT_LM = 1e-4
+
+
 class SilError(RuntimeError):
     """A closed-loop run could not be set up (bad scenario, bad settings)."""
 
 
 # --------------------------------------------------------------------------- backends
 def make_backend(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
-                 regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh"):
+                 regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
+                 lm: float = DEFAULT_LM):
     """A receding-horizon backend (docs/algorithm.md section 7) by name: 'c' or 'reference'."""
     kwargs = dict(M=M, mode="receding", hessian=hessian, regularization=regularization, reg_eps=reg_eps,
-                  cost_hessian=cost_hessian)
+                  cost_hessian=cost_hessian, lm=lm)
     if backend == "reference":
         from .reference import ReferenceDopus
         return ReferenceDopus(disc, **kwargs)
@@ -118,7 +126,7 @@ def _round_json(v):
 # --------------------------------------------------------------------------- the loop
 def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
                     regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
-                    duration: float | None = None,
+                    lm: float = DEFAULT_LM, duration: float | None = None,
                     guess=None, xhat0=None, progress: bool = False, label: str | None = None,
                     backend_obj=None) -> dict:
     """Run the closed loop of the OCP's scenario and return the record of the run.
@@ -165,7 +173,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     if backend_obj is None:
         try:
             backend_obj = make_backend(disc, backend, M=M_eff, hessian=hessian, regularization=regularization,
-                                       reg_eps=reg_eps, cost_hessian=cost_hessian)
+                                       reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm)
         except SilError:
             raise
         except Exception as exc:  # noqa: BLE001 - settings rejected, C build failed, ...
@@ -294,6 +302,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
         "settings": {"M": M_eff, "N": N, "dt": dt, "duration": n_steps * dt, "hessian": hessian,
                      "regularization": regularization, "reg_eps": float(reg_eps), "backend": backend,
                      "cost_hessian": str(getattr(backend_obj, "cost_hessian", cost_hessian)),
+                     "lm": float(getattr(backend_obj, "lm", lm)),
                      "plant": "CVODES (Adams, reltol = abstol = 1e-10)",
                      "lbu": list(lbu), "ubu": list(ubu),
                      "u_labels": list(getattr(disc, "control_names", []) or []) or None,
@@ -448,7 +457,7 @@ def write_json(runs, path) -> None:
 
 # --------------------------------------------------------------------------- CLI
 def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps,
-                backend, cost_hessian="fresh", echo=None, progress=True) -> list:
+                backend, cost_hessian="fresh", echo=None, progress=True, lm=None) -> list:
     """The ``dopus-gen sil`` command: runs, summary table, JSON and plots."""
     from .ocp import load_ocp
     from .derivatives import build_functions
@@ -473,6 +482,8 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
         echo(f"warning: the offline solve at the initial state did not converge ({info.get('status')}); "
              "the controller starts from its last iterate", err=True)
 
+    if lm is None:
+        lm = DEFAULT_LM
     N = int(disc.N)
     configs = [(M, None)]
     if compare == "full" and min(M, N - 1) != N - 1:
@@ -481,10 +492,10 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
     for m, label in configs:
         name = label or ("full RTI" if min(m, N - 1) == N - 1 else f"DOPUS M = {m}")
         echo(f"{name}: {backend} backend, {hessian} Hessian, regularization {regularization}, "
-             f"cost Hessian {cost_hessian}, "
+             f"cost Hessian {cost_hessian}, Levenberg-Marquardt {lm:g}, "
              f"{duration if duration is not None else spec.duration} s ...", err=True)
         run = run_closed_loop(disc, backend=backend, M=m, hessian=hessian, regularization=regularization,
-                              reg_eps=reg_eps, cost_hessian=cost_hessian, duration=duration, guess=guess,
+                              reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm, duration=duration, guess=guess,
                               progress=progress, label=label)
         runs.append(run)
     summaries = [summarize(r) for r in runs]

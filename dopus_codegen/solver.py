@@ -153,7 +153,8 @@ class CSolver:
 
     def __init__(self, disc=None, M: int = 1, mode: str = "receding", hessian: str = "exact",
                  regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10,
-                 lib_dir=None, qp_max_iter: Optional[int] = None, cost_hessian: str = "fresh"):
+                 lib_dir=None, qp_max_iter: Optional[int] = None, cost_hessian: str = "fresh",
+                 lm: float = 0.0):
         if lib_dir is None:
             if disc is None:
                 raise ValueError("CSolver needs a Discretized problem or lib_dir (a generated folder)")
@@ -189,6 +190,7 @@ class CSolver:
         self.set_hessian(hessian)
         self.set_regularization(regularization, reg_eps)
         self.set_cost_hessian(cost_hessian)
+        self.set_levenberg_marquardt(lm)
 
     @classmethod
     def from_dir(cls, path, disc=None, **settings) -> "CSolver":
@@ -298,6 +300,21 @@ class CSolver:
             self._bad(f"cost_hessian must be 'fresh' or 'stored', got {cost_hessian!r}")
         self._check(self._c("set_cost_hessian")(self._s, _COST_HESSIANS[cost_hessian]),
                     f"cost_hessian={cost_hessian!r}")
+
+    def set_levenberg_marquardt(self, lm: float) -> None:
+        """Levenberg-Marquardt term: the QP uses the Hessian blocks plus ``lm * I``
+        (docs/algorithm.md section 3); finite and >= 0."""
+        try:
+            f = float(lm)
+        except (TypeError, ValueError):
+            self._bad(f"lm must be a number >= 0, got {lm!r}")
+        if not np.isfinite(f) or f < 0:
+            self._bad(f"lm must be finite and >= 0, got {lm!r}")
+        self._check(self._c("set_levenberg_marquardt")(self._s, f), f"lm={lm!r}")
+
+    @property
+    def lm(self) -> float:
+        return float(self._c("get_levenberg_marquardt")(self._s))
 
     def set_qp_tol(self, tol: float) -> None:
         self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")

@@ -112,6 +112,7 @@ void dopus_defaults(dopus_solver *s)
     s->regularization = dopus_default_regularization;
     s->reg_eps = dopus_default_reg_eps;
     s->cost_hessian = 1;
+    s->lm = 0.0;
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
     for (k = 0; k <= DOPUS_N; ++k) {
@@ -309,6 +310,7 @@ static void dopus_assemble(dopus_solver *s)
         }
     }
     in->HN = s->A_N;
+    in->hess_shift = s->lm;
     in->R = DOPUS_NR > 0 ? s->R : 0;
     in->Req = DOPUS_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
@@ -498,6 +500,7 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
+    s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
     qs = dopus_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
     s->qp_status = qs;
@@ -855,6 +858,22 @@ int dopus_get_cost_hessian(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->cost_hessian;
+}
+
+int dopus_set_levenberg_marquardt(dopus_solver *s, double lm)
+{
+    dopus_ensure_setup(s);
+    if (!isfinite(lm) || !(lm >= 0.0)) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->lm = lm;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+double dopus_get_levenberg_marquardt(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->lm;
 }
 
 int dopus_set_qp_tol(dopus_solver *s, double tol)

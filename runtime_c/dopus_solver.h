@@ -95,6 +95,11 @@ double dopus_get_reg_eps(dopus_solver *s);
  * the setting may change between any two calls. */
 int dopus_set_cost_hessian(dopus_solver *s, int fresh);
 int dopus_get_cost_hessian(dopus_solver *s);
+/* Levenberg-Marquardt term (algorithm.md section 3): the QP minimises with the Hessian
+ * blocks A~_k + lm I and A~_N + lm I (the stored blocks are not changed, so the secant
+ * criterion and the fixed point are those of lm = 0). lm finite and >= 0; default 0. */
+int dopus_set_levenberg_marquardt(dopus_solver *s, double lm);
+double dopus_get_levenberg_marquardt(dopus_solver *s);
 int dopus_set_qp_tol(dopus_solver *s, double tol);
 double dopus_get_qp_tol(dopus_solver *s);
 int dopus_set_qp_max_iter(dopus_solver *s, int max_iter);
@@ -186,6 +191,7 @@ struct dopus_solver {
     int regularization;
     double reg_eps;
     int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    double lm;          /* Levenberg-Marquardt term of the QP Hessian */
     dopus_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */

@@ -105,6 +105,8 @@ static int check_input(const robot_arm_qp_in *in)
     }
     if (in->HN == NULL || (NR > 0 && in->R == NULL) || (NE > 0 && in->Req == NULL))
         return 0;
+    if (!(in->hess_shift >= 0.0 && in->hess_shift < INFINITY))
+        return 0;
     if (!robot_arm_lai_all_finite(NX, NX, in->HN, NX) || !robot_arm_lai_all_finite(NX, 1, in->x0, NX) ||
         !robot_arm_lai_all_finite(NX, 1, in->gN, NX))
         return 0;
@@ -249,6 +251,7 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
         double *h = ws->hwg + k * NW;
         double *a = ws->aty + k * NW;
         robot_arm_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
+        robot_arm_lai_axpy(NW, in->hess_shift, w, h);
         s_stat = dmax(s_stat, robot_arm_lai_norm_inf(NW, h));
         obj += 0.5 * robot_arm_lai_dot(NW, w, h) + robot_arm_lai_dot(NW, in->g[k], w);
         s_stat = dmax(s_stat, robot_arm_lai_norm_inf(NW, in->g[k]));
@@ -262,6 +265,7 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
         double *h = ws->hwg + N * NW;
         double *a = ws->aty + N * NW;
         robot_arm_lai_symv_l(NX, 1.0, in->HN, NX, xN, 0.0, h);
+        robot_arm_lai_axpy(NX, in->hess_shift, xN, h);
         s_stat = dmax(s_stat, robot_arm_lai_norm_inf(NX, h));
         obj += 0.5 * robot_arm_lai_dot(NX, xN, h) + robot_arm_lai_dot(NX, in->gN, xN);
         s_stat = dmax(s_stat, robot_arm_lai_norm_inf(NX, in->gN));
@@ -349,6 +353,7 @@ static double hessian_scale(const robot_arm_qp_in *in)
     double s = robot_arm_lai_max_abs_mat(NX, NX, in->HN, NX);
     for (k = 0; k < N; ++k)
         s = dmax(s, robot_arm_lai_max_abs_mat(NW, NW, in->H[k], NW));
+    s += in->hess_shift;
     /* a zero Hessian (an LP) still needs a scale for the inertia correction */
     return s > 0.0 ? s : 1.0;
 }
@@ -371,7 +376,7 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         robot_arm_lai_copy_mat(NX, NX, in->HN, NX, P, NX);
         robot_arm_lai_symmetrize_l(NX, P, NX);
         for (i = 0; i < NX; ++i)
-            P[i + i * NX] += q[i] + delta;
+            P[i + i * NX] += q[i] + delta + in->hess_shift;
         for (k = 0; k < NR; ++k) {
             const double qr = q[NX + k];
             if (qr != 0.0)
@@ -411,7 +416,7 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         robot_arm_lai_copy_mat(NW, NW, in->H[k], NW, M, NW);
         robot_arm_lai_symmetrize_l(NW, M, NW);
         for (i = 0; i < NW; ++i)
-            M[i + i * NW] += q[i] + delta;
+            M[i + i * NW] += q[i] + delta + in->hess_shift;
         for (j = 0; j < NG; ++j) {
             const double qg = q[NW + j];
             const double *C = in->C[k];
@@ -595,7 +600,7 @@ static void newton_residual(robot_arm_qp_workspace *ws, const robot_arm_qp_in *i
     for (i = 0; i < NI; ++i)
         dv[i] *= -ws->qdiag[i];
     for (i = 0; i < NP; ++i)
-        os[i] = rhs_stat[i] - ws->delta * sp[i];
+        os[i] = rhs_stat[i] - (ws->delta + in->hess_shift) * sp[i];
     add_Dt(in, dv, os);
     for (k = 0; k < N; ++k) {
         double *o = os + k * NW;
@@ -751,6 +756,7 @@ static int dual_infeasible(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in
         double *h = hdv + k * NW;
         double *t = ws->work;
         robot_arm_lai_symv_l(NW, 1.0 / nw, in->H[k], NW, w, 0.0, h);
+        robot_arm_lai_axpy(NW, in->hess_shift / nw, w, h);
         dhd += robot_arm_lai_dot(NW, w, h) / nw;
         gd += robot_arm_lai_dot(NW, in->g[k], w) / nw;
         hd = dmax(hd, robot_arm_lai_norm_inf(NW, h));
@@ -763,6 +769,7 @@ static int dual_infeasible(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in
         const double *xN = ws->prim + N * NW;
         double *h = hdv + N * NW;
         robot_arm_lai_symv_l(NX, 1.0 / nw, in->HN, NX, xN, 0.0, h);
+        robot_arm_lai_axpy(NX, in->hess_shift / nw, xN, h);
         dhd += robot_arm_lai_dot(NX, xN, h) / nw;
         gd += robot_arm_lai_dot(NX, in->gN, xN) / nw;
         hd = dmax(hd, robot_arm_lai_norm_inf(NX, h));

@@ -112,6 +112,7 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->regularization = robot_arm_default_regularization;
     s->reg_eps = robot_arm_default_reg_eps;
     s->cost_hessian = 1;
+    s->lm = 0.0;
     robot_arm_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = ROBOT_ARM_DEFAULT_QP_TOL;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
@@ -309,6 +310,7 @@ static void robot_arm_assemble(robot_arm_solver *s)
         }
     }
     in->HN = s->A_N;
+    in->hess_shift = s->lm;
     in->R = ROBOT_ARM_NR > 0 ? s->R : 0;
     in->Req = ROBOT_ARM_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
@@ -498,6 +500,7 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
+    s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
     qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
     s->qp_status = qs;
@@ -855,6 +858,22 @@ int robot_arm_get_cost_hessian(robot_arm_solver *s)
 {
     robot_arm_ensure_setup(s);
     return s->cost_hessian;
+}
+
+int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, double lm)
+{
+    robot_arm_ensure_setup(s);
+    if (!isfinite(lm) || !(lm >= 0.0)) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    s->lm = lm;
+    return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+double robot_arm_get_levenberg_marquardt(robot_arm_solver *s)
+{
+    robot_arm_ensure_setup(s);
+    return s->lm;
 }
 
 int robot_arm_set_qp_tol(robot_arm_solver *s, double tol)

@@ -95,6 +95,11 @@ double robot_arm_get_reg_eps(robot_arm_solver *s);
  * the setting may change between any two calls. */
 int robot_arm_set_cost_hessian(robot_arm_solver *s, int fresh);
 int robot_arm_get_cost_hessian(robot_arm_solver *s);
+/* Levenberg-Marquardt term (algorithm.md section 3): the QP minimises with the Hessian
+ * blocks A~_k + lm I and A~_N + lm I (the stored blocks are not changed, so the secant
+ * criterion and the fixed point are those of lm = 0). lm finite and >= 0; default 0. */
+int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, double lm);
+double robot_arm_get_levenberg_marquardt(robot_arm_solver *s);
 int robot_arm_set_qp_tol(robot_arm_solver *s, double tol);
 double robot_arm_get_qp_tol(robot_arm_solver *s);
 int robot_arm_set_qp_max_iter(robot_arm_solver *s, int max_iter);
@@ -186,6 +191,7 @@ struct robot_arm_solver {
     int regularization;
     double reg_eps;
     int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    double lm;          /* Levenberg-Marquardt term of the QP Hessian */
     robot_arm_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */

@@ -138,6 +138,10 @@ typedef struct {
     double lr[UNICYCLE_QP_NR1];
     double ur[UNICYCLE_QP_NR1];
     double req[UNICYCLE_QP_NE1];
+    /* proximal (Levenberg-Marquardt) term: the objective uses H_k + hess_shift I and
+     * HN + hess_shift I instead of H_k and HN; 0 (the value of a zero-filled struct)
+     * leaves the QP as given; must be finite and >= 0 */
+    double hess_shift;
 } unicycle_qp_in;
 
 /* Primal-dual solution (output; also the warm-start point when settings.warm_start). */

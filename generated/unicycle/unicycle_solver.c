@@ -112,6 +112,7 @@ void unicycle_defaults(unicycle_solver *s)
     s->regularization = unicycle_default_regularization;
     s->reg_eps = unicycle_default_reg_eps;
     s->cost_hessian = 1;
+    s->lm = 0.0;
     unicycle_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = UNICYCLE_DEFAULT_QP_TOL;
     for (k = 0; k <= UNICYCLE_N; ++k) {
@@ -309,6 +310,7 @@ static void unicycle_assemble(unicycle_solver *s)
         }
     }
     in->HN = s->A_N;
+    in->hess_shift = s->lm;
     in->R = UNICYCLE_NR > 0 ? s->R : 0;
     in->Req = UNICYCLE_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
@@ -498,6 +500,7 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
+    s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
     qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
     s->qp_status = qs;
@@ -855,6 +858,22 @@ int unicycle_get_cost_hessian(unicycle_solver *s)
 {
     unicycle_ensure_setup(s);
     return s->cost_hessian;
+}
+
+int unicycle_set_levenberg_marquardt(unicycle_solver *s, double lm)
+{
+    unicycle_ensure_setup(s);
+    if (!isfinite(lm) || !(lm >= 0.0)) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    s->lm = lm;
+    return unicycle_ret(s, UNICYCLE_OK);
+}
+
+double unicycle_get_levenberg_marquardt(unicycle_solver *s)
+{
+    unicycle_ensure_setup(s);
+    return s->lm;
 }
 
 int unicycle_set_qp_tol(unicycle_solver *s, double tol)
