@@ -230,7 +230,7 @@ class QPSolverHandle:
         return self.ffi.cast("double *", self.ffi.from_buffer(f))
 
     def solve(self, qp: dict, tol: float = 1e-8, max_iter: int = 100, warm: dict | None = None,
-              refine_steps: int = 1):
+              refine_steps: int = 1, hess_shift: float = 0.0):
         N, nx, nu, ng, nr, ne = self.sizes
         nw = nx + nu
         for key, val in (("N", N), ("nx", nx), ("nu", nu), ("ng", ng), ("nr", nr), ("ne", ne)):
@@ -280,6 +280,7 @@ class QPSolverHandle:
         self._set_vec("lr", lr[None, :], nr)
         self._set_vec("ur", ur[None, :], nr)
         self._set_vec("req", req[None, :], ne)
+        inp.hess_shift = float(hess_shift)
 
         st = self._set
         self.lib.dopus_qp_settings_default(st)

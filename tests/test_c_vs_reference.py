@@ -222,12 +222,12 @@ def test_robot_cold_projected_exact(robot_disc):
     print(f"robot_arm cold exact+project M=5: {tally}, reference KKT {kkt:.2e}")
 
 
-def run_receding(disc, guess, M, iters=50, hessian="exact"):
+def run_receding(disc, guess, M, iters=50, hessian="exact", **settings):
     """Closed loop on the discrete model phi from the IPOPT solution; the measurement
     sequence comes from the reference (so both backends see identical inputs). The
     disturbance of the OCP file hits at the first and at the middle iteration, so the steps
     are far from round-off and rho_k ranks the stages."""
-    c, r = pair(disc, M=M, mode="receding", hessian=hessian)
+    c, r = pair(disc, M=M, mode="receding", hessian=hessian, **settings)
     xhat = np.array(disc.x0, dtype=float)
     for b in (c, r):
         b.init(xhat, guess)
@@ -291,6 +291,28 @@ def test_robot_receding(robot_disc, robot_solution, M):
     M = robot_disc.N - 1 if M == "full" else M
     tally = run_receding(robot_disc, robot_solution[0], M)
     print(f"robot_arm receding M={M}: {tally}")
+
+
+# The Levenberg-Marquardt term of the closed loop (the default of `dopus-gen sil`): both
+# backends add lm * I to every Hessian block of the QP, the stored blocks stay as they are.
+@pytest.mark.parametrize("M", [1, "full"])
+def test_robot_receding_levenberg_marquardt(robot_disc, robot_solution, M):
+    M = robot_disc.N - 1 if M == "full" else M
+    tally = run_receding(robot_disc, robot_solution[0], M, iters=30, lm=1e-4)
+    print(f"robot_arm receding M={M}, lm=1e-4: {tally}")
+
+
+def test_levenberg_marquardt_setting(robot_disc):
+    c = CSolver(robot_disc)
+    assert c.lm == 0.0
+    c.set_levenberg_marquardt(2.5e-4)
+    assert c.lm == 2.5e-4
+    for bad in (-1e-6, float("nan"), float("inf")):
+        with pytest.raises(DopusError, match="lm"):
+            c.set_levenberg_marquardt(bad)
+        assert c.lm == 2.5e-4
+    with pytest.raises(ValueError, match="lm"):
+        ReferenceDopus(robot_disc, lm=-1.0)
 
 
 # The unicycle's exact-Hessian QPs lose convexity in this closed loop within ten

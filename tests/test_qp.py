@@ -396,6 +396,35 @@ def test_robot_arm_qps_against_reference_solver(robot_qps):
 
 
 
+def _shifted(qp, delta):
+    out = dict(qp)
+    out["H"] = np.asarray(qp["H"]) + delta * np.eye(np.asarray(qp["H"]).shape[1])
+    out["HN"] = np.asarray(qp["HN"]) + delta * np.eye(np.asarray(qp["HN"]).shape[0])
+    return out
+
+
+def test_levenberg_marquardt_shift(robot_qps):
+    """hess_shift = delta solves the QP with H_k + delta I and HN + delta I: against the
+    reference solver on the explicitly shifted data (to 1e-6, primal and multipliers) and
+    against the C solver on the shifted data (to 1e-9); a bad shift is bad input."""
+    from dopus_codegen.qpref import solve_qp_reference
+
+    delta = 1e-4
+    h = solver(_sizes(robot_qps[0][1]))
+    for label, qp in robot_qps:
+        qs = _shifted(qp, delta)
+        ref = solve_qp_reference(qs)
+        sol, info = h.solve(qp, tol=TOL_QP_ROBOT, hess_shift=delta)
+        assert info["status"] == "solved", (label, info)
+        assert _max_rel(P.compare(sol, ref)) <= REL, (label, _fmt(P.compare(sol, ref)))
+        sol2, info2 = h.solve(qs, tol=TOL_QP_ROBOT)
+        assert info2["status"] == "solved"
+        assert _max_rel(P.compare(sol, sol2)) <= 1e-9, label
+    for bad in (-1e-8, float("nan"), float("inf")):
+        _, info = h.solve(robot_qps[0][1], hess_shift=bad)
+        assert info["status"] == "invalid_input", (bad, info)
+
+
 def test_linear_programs():
     """H = 0 everywhere (an LP in OCP form, every control and state boxed): the optimal
     value against PIQP and the KKT residual of the returned point (LP solutions need not be
