@@ -97,6 +97,35 @@ def test_warm_start_fresh_cost_hessian(robot_disc, robot_solution, warm_study, w
     assert max(np.max(np.abs(x - sol.x)), np.max(np.abs(u - sol.u))) < 1e-6
 
 
+def test_levenberg_marquardt_keeps_the_solution(robot_disc, robot_solution, disturbed_ipopt):
+    """lm = 1e-4 (the closed-loop default) changes the steps, not the fixed point: the C
+    backend's full RTI and DOPUS M = 1 reach IPOPT's solution for the disturbed state, at a
+    linear rate (against quadratic without the term): the weakest reduced curvature of the
+    robot arm is about 2e-5, so that direction contracts by about lm / (2e-5 + lm) = 0.83 per
+    iteration, and 200 iterations are needed for a 1e-6 comparison."""
+    from dopus_codegen.solver import CSolver
+
+    d = robot_disc
+    sol0, _ = robot_solution
+    start = StartPoint("warm", d.x0, sol0, d.disturbance(d.x0))
+
+    def factory(disc, **kw):
+        return CSolver(disc, lm=1e-4, qp_tol=1e-13, **kw)
+
+    sol, info = disturbed_ipopt
+    for M in ("full", 1):
+        study = run_study(d, [M], 200, start, hessian="exact", backend_factory=factory, backend_name="c")
+        run = study["runs"][0]
+        assert run["status"] == "ok"
+        it = iterations_to(run["kkt"], 1e-8)
+        assert it is not None and it > 8, run["kkt"]      # slower than exact Newton ...
+        assert run["kkt"][-1] < 1e-11, run["kkt"][-1]
+        x = np.array(study["solution"]["x"])
+        u = np.array(study["solution"]["u"])
+        assert max(np.max(np.abs(x - sol.x)), np.max(np.abs(u - sol.u))) < 1e-6   # ... same point
+        print(f"\nlm = 1e-4, M = {M}: KKT <= 1e-8 at iteration {it}")
+
+
 def test_kkt_parts_are_consistent(warm_study):
     for r in warm_study["runs"]:
         parts = np.array([r["stat"], r["eq"], r["ineq"], r["comp"]])
