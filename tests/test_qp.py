@@ -691,6 +691,19 @@ def test_stored_closed_loop_qp_still_failing(name):
     assert info["status"] == "solved", info
 
 
+@pytest.mark.parametrize("name", ["robot_arm_qp_M39_exact_instant216", "robot_arm_qp_M39_exact_instant257"])
+def test_stored_failing_qps_with_levenberg_marquardt(name):
+    """The two QPs above with the closed loop's Levenberg-Marquardt term (hess_shift 1e-4):
+    solved without an inertia correction, equal to the reference solver on the shifted data."""
+    from dopus_codegen.qpref import solve_qp_reference
+
+    qp = _stored_qp(name)
+    sol, info = solver(_sizes(qp)).solve(qp, tol=TOL_QP_ROBOT, hess_shift=1e-4)
+    assert info["status"] == "solved" and info["inertia_corrections"] == 0, info
+    err = P.compare(sol, solve_qp_reference(_shifted(qp, 1e-4)))
+    assert _max_rel(err) <= REL, (name, _fmt(err))
+
+
 def test_stage0_row_fixed_by_x0_is_ignored():
     """Unicycle closed loop (Gauss-Newton, M = 5, receding, iteration 10 of
     tests/test_c_vs_reference.py): the obstacle row of stage 0 sees only x_0, and the
