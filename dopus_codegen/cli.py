@@ -80,9 +80,10 @@ def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, c
 @click.option("--cost-hessian", type=click.Choice(["fresh", "stored"]), default="fresh", show_default=True,
               help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
                    "paper's literal algorithm (the whole Hessian block moves with its slot).")
-@click.option("--lm", default=1e-4, show_default=True, type=click.FloatRange(min=0),
+@click.option("--lm", default=None, type=click.FloatRange(min=0),
               help="Levenberg-Marquardt term added to every Hessian block of the QP (0: the paper's "
-                   "literal exact-Newton QP). Keeps the fixed point; see README, Closed loop.")
+                   "literal QP). Keeps the fixed point; see README, Closed loop. [default: the OCP "
+                   "file's options(lm=...), else 0; the robot arm: 1e-4]")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
 def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps, cost_hessian, lm,
         backend):

@@ -300,6 +300,7 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any) -> Dict[str, Any
         "default_regularization": _code(_REGULARIZATION_CODES,
                                         _option(options, "regularization", "none"), "regularization"),
         "default_reg_eps": c_double(_option(options, "reg_eps", 1e-4), "reg_eps"),
+        "default_lm": c_double(_option(options, "lm", 0.0), "lm"),
         "has_nominal": nominal is not None,
     }
     if not 0 <= ctx["default_M"] <= N - 1:

@@ -158,7 +158,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     last_iterates = {}
     for run_index, M in enumerate(Ms):
         be = backend_factory(disc, M=M, mode="fixed", hessian=hessian, regularization=regularization,
-                             reg_eps=reg_eps, cost_hessian=cost_hessian, **({"lm": lm} if lm else {}))
+                             reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm)
         rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "status": "ok"}
 
         def record():

@@ -264,7 +264,7 @@ class Ocp:
         self._guess_x = None
         self._guess_u = None
         self._options = dict(hessian="exact", regularization="none", reg_eps=1e-4, M=1,
-                             offline_guess=False)
+                             offline_guess=False, lm=0.0)
         self._disturbance = None
         self._scenario = None
 
@@ -399,10 +399,13 @@ class Ocp:
 
     def options(self, hessian: Optional[str] = None, regularization: Optional[str] = None,
                 reg_eps: Optional[float] = None, M: Optional[int] = None,
-                offline_guess: Optional[bool] = None) -> None:
+                offline_guess: Optional[bool] = None, lm: Optional[float] = None) -> None:
         """Solver defaults (the generated solver and the CLI can override them); only the
         options given change. Defaults: ``hessian="exact"``, ``regularization="none"``,
-        ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``.
+        ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``, ``lm=0``.
+
+        ``lm``: the Levenberg-Marquardt term of the QP (docs/algorithm.md section 3), the
+        default of the generated runtime and of ``dopus-gen sil``.
 
         ``offline_guess=True``: the code generator solves the NLP at the initial state
         offline (IPOPT) and carries the primal-dual solution as static data, so the
@@ -434,6 +437,14 @@ class Ocp:
             if not isinstance(offline_guess, bool):
                 raise OcpError(f"options: offline_guess must be True or False, got {offline_guess!r}")
             opts["offline_guess"] = offline_guess
+        if lm is not None:
+            try:
+                lmf = float(lm)
+            except (TypeError, ValueError):
+                raise OcpError(f"options: lm must be a number, got {lm!r}") from None
+            if not math.isfinite(lmf) or lmf < 0:
+                raise OcpError(f"options: lm must be finite and >= 0, got {lm!r}")
+            opts["lm"] = lmf
         self._options = opts
 
     def disturbance(self, fn: Callable[[np.ndarray], np.ndarray]) -> None:

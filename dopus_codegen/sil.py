@@ -41,11 +41,10 @@ _ON_GRID = 1e-9
 _PROGRESS_AFTER = 2.0
 
 
-# Levenberg-Marquardt term of the closed loop (docs/algorithm.md section 3): the exact-Hessian
-# QPs of the robot arm are nonconvex (their curvature comes from the active torque bounds),
-# and without it the full RTI's QP solutions jump between local minimisers and DOPUS M = 1
-# diverges on its stale exact blocks; see README "Closed loop".
-DEFAULT_LM = 1e-4
+def default_lm(disc) -> float:
+    """The Levenberg-Marquardt term of the closed loop when none is given: the OCP file's
+    ``options(lm=...)``, else 0 (docs/algorithm.md section 3; README "Closed loop")."""
+    return float((getattr(disc, "options", None) or {}).get("lm", 0.0))
 
 
 class SilError(RuntimeError):
@@ -55,7 +54,7 @@ class SilError(RuntimeError):
 # --------------------------------------------------------------------------- backends
 def make_backend(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
                  regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
-                 lm: float = DEFAULT_LM):
+                 lm: float = 0.0):
     """A receding-horizon backend (docs/algorithm.md section 7) by name: 'c' or 'reference'."""
     kwargs = dict(M=M, mode="receding", hessian=hessian, regularization=regularization, reg_eps=reg_eps,
                   cost_hessian=cost_hessian, lm=lm)
@@ -126,7 +125,7 @@ def _round_json(v):
 # --------------------------------------------------------------------------- the loop
 def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
                     regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
-                    lm: float = DEFAULT_LM, duration: float | None = None,
+                    lm: float | None = None, duration: float | None = None,
                     guess=None, xhat0=None, progress: bool = False, label: str | None = None,
                     backend_obj=None) -> dict:
     """Run the closed loop of the OCP's scenario and return the record of the run.
@@ -155,6 +154,8 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     if label is None:
         label = "full RTI" if M_eff == N - 1 else f"DOPUS M = {M_eff}"
 
+    if lm is None:
+        lm = default_lm(disc)
     p = _default_parameters(disc)
     x = np.asarray(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
     if x.size != nx:
@@ -483,7 +484,7 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
              "the controller starts from its last iterate", err=True)
 
     if lm is None:
-        lm = DEFAULT_LM
+        lm = default_lm(disc)
     N = int(disc.N)
     configs = [(M, None)]
     if compare == "full" and min(M, N - 1) != N - 1:

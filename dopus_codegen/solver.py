@@ -154,7 +154,7 @@ class CSolver:
     def __init__(self, disc=None, M: int = 1, mode: str = "receding", hessian: str = "exact",
                  regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10,
                  lib_dir=None, qp_max_iter: Optional[int] = None, cost_hessian: str = "fresh",
-                 lm: float = 0.0):
+                 lm: Optional[float] = 0.0):
         if lib_dir is None:
             if disc is None:
                 raise ValueError("CSolver needs a Discretized problem or lib_dir (a generated folder)")
@@ -190,7 +190,8 @@ class CSolver:
         self.set_hessian(hessian)
         self.set_regularization(regularization, reg_eps)
         self.set_cost_hessian(cost_hessian)
-        self.set_levenberg_marquardt(lm)
+        if lm is not None:  # None: the generated default (the OCP file's options(lm=...))
+            self.set_levenberg_marquardt(lm)
 
     @classmethod
     def from_dir(cls, path, disc=None, **settings) -> "CSolver":

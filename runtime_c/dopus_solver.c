@@ -112,7 +112,7 @@ void dopus_defaults(dopus_solver *s)
     s->regularization = dopus_default_regularization;
     s->reg_eps = dopus_default_reg_eps;
     s->cost_hessian = 1;
-    s->lm = 0.0;
+    s->lm = (dopus_default_lm >= 0.0 && dopus_default_lm < INFINITY) ? dopus_default_lm : 0.0;
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
     for (k = 0; k <= DOPUS_N; ++k) {

@@ -97,7 +97,8 @@ int dopus_set_cost_hessian(dopus_solver *s, int fresh);
 int dopus_get_cost_hessian(dopus_solver *s);
 /* Levenberg-Marquardt term (algorithm.md section 3): the QP minimises with the Hessian
  * blocks A~_k + lm I and A~_N + lm I (the stored blocks are not changed, so the secant
- * criterion and the fixed point are those of lm = 0). lm finite and >= 0; default 0. */
+ * criterion and the fixed point are those of lm = 0). lm finite and >= 0; default: the OCP
+ * file's options(lm=...), else 0. */
 int dopus_set_levenberg_marquardt(dopus_solver *s, double lm);
 double dopus_get_levenberg_marquardt(dopus_solver *s);
 int dopus_set_qp_tol(dopus_solver *s, double tol);

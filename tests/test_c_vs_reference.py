@@ -303,6 +303,7 @@ def test_robot_receding_levenberg_marquardt(robot_disc, robot_solution, M):
 
 
 def test_levenberg_marquardt_setting(robot_disc):
+    assert CSolver(robot_disc, lm=None).lm == 1e-4     # generated: examples/robot_arm.py options(lm=1e-4)
     c = CSolver(robot_disc)
     assert c.lm == 0.0
     c.set_levenberg_marquardt(2.5e-4)

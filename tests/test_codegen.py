@@ -296,7 +296,7 @@ def _reference_run(disc, nominal, mode: str, iterations: int):
 
     o = disc.options
     ref = ReferenceDopus(disc, M=o["M"], mode=mode, hessian=o["hessian"], regularization=o["regularization"],
-                         reg_eps=o.get("reg_eps", 1e-4))
+                         reg_eps=o.get("reg_eps", 1e-4), lm=o.get("lm", 0.0))
     xhat = np.asarray(disc.x0, dtype=float).copy()
     ref.init(xhat, nominal)
     rows = [(np.zeros(disc.nu), ref.kkt(xhat)["kkt"])]

@@ -110,11 +110,11 @@ def test_levenberg_marquardt_keeps_the_solution(robot_disc, robot_solution, dist
     start = StartPoint("warm", d.x0, sol0, d.disturbance(d.x0))
 
     def factory(disc, **kw):
-        return CSolver(disc, lm=1e-4, qp_tol=1e-13, **kw)
+        return CSolver(disc, qp_tol=1e-13, **kw)
 
     sol, info = disturbed_ipopt
     for M in ("full", 1):
-        study = run_study(d, [M], 200, start, hessian="exact", backend_factory=factory, backend_name="c")
+        study = run_study(d, [M], 200, start, hessian="exact", backend_factory=factory, backend_name="c", lm=1e-4)
         run = study["runs"][0]
         assert run["status"] == "ok"
         it = iterations_to(run["kkt"], 1e-8)

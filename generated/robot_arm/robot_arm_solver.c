@@ -112,7 +112,7 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->regularization = robot_arm_default_regularization;
     s->reg_eps = robot_arm_default_reg_eps;
     s->cost_hessian = 1;
-    s->lm = 0.0;
+    s->lm = (robot_arm_default_lm >= 0.0 && robot_arm_default_lm < INFINITY) ? robot_arm_default_lm : 0.0;
     robot_arm_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = ROBOT_ARM_DEFAULT_QP_TOL;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {

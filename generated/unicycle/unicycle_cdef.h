@@ -65,7 +65,8 @@ int unicycle_set_cost_hessian(unicycle_solver *s, int fresh);
 int unicycle_get_cost_hessian(unicycle_solver *s);
 /* Levenberg-Marquardt term (algorithm.md section 3): the QP minimises with the Hessian
  * blocks A~_k + lm I and A~_N + lm I (the stored blocks are not changed, so the secant
- * criterion and the fixed point are those of lm = 0). lm finite and >= 0; default 0. */
+ * criterion and the fixed point are those of lm = 0). lm finite and >= 0; default: the OCP
+ * file's options(lm=...), else 0. */
 int unicycle_set_levenberg_marquardt(unicycle_solver *s, double lm);
 double unicycle_get_levenberg_marquardt(unicycle_solver *s);
 int unicycle_set_qp_tol(unicycle_solver *s, double tol);

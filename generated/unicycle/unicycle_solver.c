@@ -112,7 +112,7 @@ void unicycle_defaults(unicycle_solver *s)
     s->regularization = unicycle_default_regularization;
     s->reg_eps = unicycle_default_reg_eps;
     s->cost_hessian = 1;
-    s->lm = 0.0;
+    s->lm = (unicycle_default_lm >= 0.0 && unicycle_default_lm < INFINITY) ? unicycle_default_lm : 0.0;
     unicycle_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = UNICYCLE_DEFAULT_QP_TOL;
     for (k = 0; k <= UNICYCLE_N; ++k) {
