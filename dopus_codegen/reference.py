@@ -278,9 +278,10 @@ class ReferenceDopus:
         H = np.empty((N, nw, nw)); gq = np.empty((N, nw)); Phi = np.empty((N, nx, nw))
         b = np.empty((N, nx)); C = np.empty((N, ng, nw)); lgq = np.empty((N, ng)); ugq = np.empty((N, ng))
         lbw = np.empty((N, nw)); ubw = np.empty((N, nw))
+        shift = self.lm * np.eye(nw)  # the Levenberg-Marquardt term (section 3)
         for k in range(N):
             s = self.slots[self._slot(k)]
-            H[k] = s.Ht + self.lm * np.eye(nw) if self.lm > 0 else s.Ht
+            H[k] = s.Ht + shift
             Phi[k] = s.Phit
             C[k] = s.Ct
             # eq. 12: a_k = F_w + Phit' lam_{k+1} - Ct' mu_g_k - mu_b_k
@@ -299,7 +300,7 @@ class ReferenceDopus:
         return {
             "N": N, "nx": nx, "nu": nu, "ng": ng, "nr": nr, "ne": ne,
             "H": H, "g": gq, "Phi": Phi, "b": b, "x0": xhat0 - self.x[0],
-            "HN": t["A"] + self.lm * np.eye(nx), "gN": gN, "lbw": lbw, "ubw": ubw,
+            "HN": t["A"] + shift[:nx, :nx], "gN": gN, "lbw": lbw, "ubw": ubw,
             "lbxN": self.lbx - self.x[N], "ubxN": self.ubx - self.x[N],
             "C": C, "lg": lgq, "ug": ugq, "R": t["R"].copy(), "lr": self.lr - t["r"], "ur": self.ur - t["r"],
             "Req": t["Req"].copy(), "req": -t["r_eq"],

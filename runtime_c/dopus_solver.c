@@ -310,7 +310,6 @@ static void dopus_assemble(dopus_solver *s)
         }
     }
     in->HN = s->A_N;
-    in->hess_shift = s->lm;
     in->R = DOPUS_NR > 0 ? s->R : 0;
     in->Req = DOPUS_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */

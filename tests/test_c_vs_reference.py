@@ -222,18 +222,23 @@ def test_robot_cold_projected_exact(robot_disc):
     print(f"robot_arm cold exact+project M=5: {tally}, reference KKT {kkt:.2e}")
 
 
-def run_receding(disc, guess, M, iters=50, hessian="exact", **settings):
-    """Closed loop on the discrete model phi from the IPOPT solution; the measurement
-    sequence comes from the reference (so both backends see identical inputs). The
-    disturbance of the OCP file hits at the first and at the middle iteration, so the steps
-    are far from round-off and rho_k ranks the stages."""
-    c, r = pair(disc, M=M, mode="receding", hessian=hessian, **settings)
+def start_pair(disc, guess, **settings):
+    """Both backends initialised at the OCP's x0 with ``guess`` and compared: (c, r, xhat, tally, p0)."""
+    c, r = pair(disc, **settings)
     xhat = np.array(disc.x0, dtype=float)
     for b in (c, r):
         b.init(xhat, guess)
     tally = Tally()
     compare(c, r, "init", tally)
-    p0 = np.asarray(r.p[0], dtype=float)
+    return c, r, xhat, tally, np.asarray(r.p[0], dtype=float)
+
+
+def run_receding(disc, guess, M, iters=50, hessian="exact", **settings):
+    """Closed loop on the discrete model phi from the IPOPT solution; the measurement
+    sequence comes from the reference (so both backends see identical inputs). The
+    disturbance of the OCP file hits at the first and at the middle iteration, so the steps
+    are far from round-off and rho_k ranks the stages."""
+    c, r, xhat, tally, p0 = start_pair(disc, guess, M=M, mode="receding", hessian=hessian, **settings)
     for it in range(iters):
         if it in (0, iters // 2) and disc.disturbance is not None:
             xhat = np.array(disc.disturbance(xhat.copy()), dtype=float).reshape(-1)
@@ -249,13 +254,7 @@ def run_from_solution(disc, guess, iters, **settings):
     QP step is only that solution's error (about 1e-10), every block is exact along it, so
     the first secant residuals are round-off and rho_k = 0 in both backends (the round-off
     floor of docs/algorithm.md section 4 step 2); the later shifts give real steps."""
-    c, r = pair(disc, mode="receding", **settings)
-    xhat = np.array(disc.x0, dtype=float)
-    for b in (c, r):
-        b.init(xhat, guess)
-    tally = Tally()
-    compare(c, r, "init", tally)
-    p0 = np.asarray(r.p[0], dtype=float)
+    c, r, xhat, tally, p0 = start_pair(disc, guess, mode="receding", **settings)
     selections = []
     for it in range(iters):
         uc, ur = step(c, r, xhat, f"iteration {it}", tally)

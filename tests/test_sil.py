@@ -20,9 +20,9 @@ from dopus_codegen.derivatives import build_functions
 from dopus_codegen.offline import solve_ocp
 from dopus_codegen.ocp import Event
 from dopus_codegen.sil import run_closed_loop, summarize
+from test_plant import arm_rhs_numpy
 
 DEFAULT_LM = 1e-4  # examples/robot_arm.py: options(lm=1e-4)
-from test_plant import arm_rhs_numpy
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "robot_arm.py"
 DT = 0.01
