@@ -165,7 +165,7 @@ def build_harness(hp_name: str, hp: dict, sizes: dict | None, cflags: str, alt_c
         sizes_h = ("/* sizes of the benchmark build */\n#ifndef DOPUS_SIZES_H\n#define DOPUS_SIZES_H\n"
                    + "".join(f"#define DOPUS_{k.upper()} {v}\n" for k, v in sizes.items())
                    + f"#define DOPUS_NW {sizes['nx'] + sizes['nu']}\n#define DOPUS_DIM(n) ((n) > 0 ? (n) : 1)\n"
-                   + "#endif\n")
+                   + "typedef double dopus_real;\n#endif\n")
         (sdir / "dopus_sizes.h").write_text(sizes_h)
         incs = [sdir] + incs + [RUNTIME]
         ours = [BENCH / "qp_bench_dopus.c", RUNTIME / "dopus_qp.c", RUNTIME / "dopus_linalg.c"]

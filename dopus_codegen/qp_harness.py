@@ -56,6 +56,7 @@ def sizes_header(N: int, nx: int, nu: int, ng: int, nr: int, ne: int) -> str:
         "#ifndef DOPUS_SIZES_H\n#define DOPUS_SIZES_H\n"
         f"#define DOPUS_N {N}\n#define DOPUS_NX {nx}\n#define DOPUS_NU {nu}\n"
         f"#define DOPUS_NG {ng}\n#define DOPUS_NR {nr}\n#define DOPUS_NE {ne}\n"
+        "typedef double dopus_real;\n"
         "#endif\n"
     )
 

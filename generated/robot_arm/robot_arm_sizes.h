@@ -26,6 +26,9 @@
 #define ROBOT_ARM_SZ_IW 1
 #define ROBOT_ARM_SZ_W 682
 
+/* The real-number type of the runtime (double; the precision is a generation-time choice) */
+typedef double robot_arm_real;
+
 /* array size of a possibly empty dimension: C99 has no zero-length arrays */
 #define ROBOT_ARM_DIM(n) ((n) > 0 ? (n) : 1)
 

@@ -26,6 +26,9 @@
 #define UNICYCLE_SZ_IW 1
 #define UNICYCLE_SZ_W 32
 
+/* The real-number type of the runtime (double; the precision is a generation-time choice) */
+typedef double unicycle_real;
+
 /* array size of a possibly empty dimension: C99 has no zero-length arrays */
 #define UNICYCLE_DIM(n) ((n) > 0 ? (n) : 1)
 
