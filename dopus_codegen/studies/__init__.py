@@ -1,0 +1,1 @@
+"""Studies that compare the generated solver with other tools (acados, scaling, examples)."""
