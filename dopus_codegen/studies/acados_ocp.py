@@ -78,6 +78,7 @@ DEFAULT_SETTINGS = {
     "lm": 0.0,                     # acados' levenberg_marquardt
     "cond_N": None,                # None: N (no condensing)
     "ric_alg": 0,                  # 0: classical Riccati, 1: square root
+    "cond_ric_alg": 0,             # partial condensing: 0 no factorisation of the Hessian, 1 factorise
     "eq_scale": 1e-2,
     "qp_iter_max": 100,
     "qp_tol": 1e-10,
@@ -243,6 +244,7 @@ def translate(data: dict, settings: dict):
     o.qp_solver = "PARTIAL_CONDENSING_HPIPM"
     o.qp_solver_cond_N = int(s["cond_N"] or N)
     o.qp_solver_ric_alg = int(s["ric_alg"])
+    o.qp_solver_cond_ric_alg = int(s["cond_ric_alg"])
     o.qp_solver_iter_max = int(s["qp_iter_max"])
     o.qp_solver_tol_stat = o.qp_solver_tol_eq = o.qp_solver_tol_ineq = o.qp_solver_tol_comp = float(s["qp_tol"])
     o.qp_solver_warm_start = 0
@@ -319,7 +321,7 @@ def solve(export_path, out_dir, start: dict, settings: dict) -> dict:
     Xs = np.array([solver.get(k, "x") for k in range(N + 1)])
     Us = np.array([solver.get(k, "u") for k in range(N)])
     out = {"x": Xs.tolist(), "u": Us.tolist(), "status": statuses,
-           "sqp_iter": int(solver.get_stats("sqp_iter")),
+           "sqp_iter": int(np.asarray(solver.get_stats("sqp_iter")).reshape(-1)[0]),
            "cost": float(solver.get_cost())}
     return out
 
