@@ -47,9 +47,9 @@ def prepare(ocp_file: Path, work: Path, quick: bool, cond_list) -> Path:
 
     sys.path.insert(0, str(ROOT))
     from dopus_codegen import build_functions, load_ocp
-    from dopus_codegen.codegen import read_meta
-    from dopus_codegen.offline import solve_ocp
-    from dopus_codegen.solver import build_for
+    from dopus_codegen.codegen.generate import read_meta
+    from dopus_codegen.reference.offline import solve_ocp
+    from dopus_codegen.runtime.solver import build_for
     from dopus_codegen.studies import acados_compare as ac
 
     ocp = load_ocp(ocp_file)

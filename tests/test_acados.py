@@ -80,8 +80,8 @@ def test_exact_sqp_from_nominal_at_disturbed_state_matches_ipopt_and_ours(acados
     """From the nominal solution, with the initial state disturbed as in the robot-arm
     scenario: acados' exact-Hessian SQP, IPOPT and our full RTI iterated at the fixed
     state reach the same objective and trajectories."""
-    from dopus_codegen.offline import solve_ocp
-    from dopus_codegen.solver import CSolver
+    from dopus_codegen.reference.offline import solve_ocp
+    from dopus_codegen.runtime.solver import CSolver
 
     ac, py, work = acados_env
     nominal, _ = robot_solution
@@ -103,7 +103,7 @@ def test_exact_sqp_from_nominal_at_disturbed_state_matches_ipopt_and_ours(acados
         ours.feedback(xd)
         ours.prepare()
     assert ours.kkt(xd)["kkt"] <= 1e-9
-    from dopus_codegen.converge import objective
+    from dopus_codegen.studies.converge import objective
 
     assert abs(objective(robot_disc, ours.x, ours.u) - r["cost"]) <= 1e-9 * abs(r["cost"])
     np.testing.assert_allclose(r["x"], ours.x, atol=X_TOL_DISTURBED, rtol=0)
@@ -114,7 +114,7 @@ def test_exact_rti_iterates_converge_to_the_same_solution(acados_env, robot_expo
     """acados' SQP_RTI with the exact Hessian and partial condensing (the setting that is
     timed), iterated at the disturbed state from the nominal solution, converges to IPOPT's
     solution: the timed solver solves our problem."""
-    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference.offline import solve_ocp
 
     ac, py, work = acados_env
     nominal, _ = robot_solution

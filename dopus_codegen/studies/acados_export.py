@@ -27,9 +27,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..derivatives import build_functions
-from ..discretize import discretize
-from ..ocp import RK4, Ocp, OcpError, load_ocp
+from ..problem.derivatives import build_functions
+from ..problem.discretize import discretize
+from ..problem.ocp import RK4, Ocp, OcpError, load_ocp
 
 __all__ = ["FORMAT", "export_function", "export_ocp", "write_export"]
 
