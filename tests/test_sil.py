@@ -1,4 +1,5 @@
-"""Closed loop on the robot arm (robot-arm.md): the SIL record checked against independent numbers.
+"""Closed loop on the robot arm (docs/robot_arm.md section 5): the SIL record checked
+against independent numbers.
 
 - the plant: the applied controls replayed through scipy's solve_ivp on a numpy model of the
   arm written a second time (tests/test_plant.py), events applied at the same instants;

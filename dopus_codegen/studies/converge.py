@@ -29,7 +29,7 @@ the run with the largest ``M``).
 
 ``cost_hessian`` (docs/algorithm.md section 4 step 5): ``fresh`` (default) refreshes the
 stage-cost Hessian of every stage in every iteration; ``stored`` is the paper's literal
-algorithm, whose warm-start study is the paper's figure 1 and DESIGN.md section 8.
+algorithm, whose warm-start study is the paper's figure 1 and docs/design.md section 8.
 """
 from __future__ import annotations
 
