@@ -125,7 +125,7 @@ def _c_available():
 @pytest.mark.parametrize("backend, hessian, M, cost_hessian, lm", _backend_params())
 def test_sil_robot_arm(disc, offline, backend, hessian, M, cost_hessian, lm):
     if backend == "c" and not _c_available():
-        pytest.skip("the C backend (dopus_codegen.solver.CSolver) is not available")
+        pytest.skip("the C backend (dopus_codegen.runtime.solver.CSolver) is not available")
     run = run_closed_loop(disc, backend=backend, M=M, hessian=hessian, cost_hessian=cost_hessian, lm=lm,
                           guess=offline)
     assert run["settings"]["cost_hessian"] == cost_hessian and run["settings"]["lm"] == lm
