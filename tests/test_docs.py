@@ -145,7 +145,7 @@ def test_docs_scanner_finds_planted_errors():
     found = docs_findings("tests/planted.py", text)
     assert sorted(found) == ["tests/planted.py:2: docs/robot_arm.md has no section 9",
                              "tests/planted.py:3: docs/design.md has no section 12",
-                             "tests/planted.py:5: docs/nothing.md is not a tracked path"], found
+                             planted("tests/planted.py:5: do@cs/nothing.md is not a tracked path")], found
 
 
 def test_every_cited_docs_path_and_section_exists():
