@@ -92,9 +92,187 @@ const char *dopus_status_string(int status)
         return "the solver was generated without a nominal guess";
     case DOPUS_ERR_REGULARIZATION:
         return "the eigen-decomposition of a Hessian block did not converge";
+    case DOPUS_ERR_DIVERGED:
+        return "the step diverged (outside the problem's scale; no step, fallback control returned)";
     default:
         return "unknown status";
     }
+}
+
+/* ---- safety: scales, clipping, health (algorithm.md section 9) -------------------- */
+
+static double dopus_absmax(double a, double b)
+{
+    double fa = fabs(a);
+    return isfinite(a) && fa > b ? fa : b;
+}
+
+/* The scale of each state and control: the largest magnitude among its finite bounds, the
+ * OCP file's guess, the default x0 and 1. */
+static void dopus_compute_scales(dopus_solver *s)
+{
+    int k, i;
+    for (i = 0; i < DOPUS_NX; ++i) {
+        double v = 1.0;
+        v = dopus_absmax(dopus_lbx[i], v);
+        v = dopus_absmax(dopus_ubx[i], v);
+        v = dopus_absmax(dopus_x0_default[i], v);
+        for (k = 0; k <= DOPUS_N; ++k) {
+            v = dopus_absmax(dopus_guess_x[k][i], v);
+        }
+        s->scale_x[i] = v;
+    }
+    for (i = 0; i < DOPUS_NU; ++i) {
+        double v = 1.0;
+        v = dopus_absmax(dopus_lbu[i], v);
+        v = dopus_absmax(dopus_ubu[i], v);
+        for (k = 0; k < DOPUS_N; ++k) {
+            v = dopus_absmax(dopus_guess_u[k][i], v);
+        }
+        s->scale_u[i] = v;
+    }
+}
+
+/* Health state after init: no failure, the plan is the iterate's controls. */
+static void dopus_reset_health(dopus_solver *s)
+{
+    int k, i;
+    s->n_failed = 0;
+    s->recover_pending = 0;
+    s->flags = 0;
+    s->n_recoveries = 0;
+    s->recovering = 0;
+    s->xhat_fresh = 1;
+    s->plan_age = 0;
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NU; ++i) {
+            s->plan_u[k][i] = s->initialized ? s->u[k][i] : dopus_guess_u[k][i];
+        }
+    }
+    for (i = 0; i < DOPUS_NU; ++i) {
+        s->u0_out[i] = s->plan_u[0][i];
+    }
+    s->kkt_proxy = 0.0;
+    s->kkt_proxy_ref = 0.0;
+}
+
+/* u clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1 when
+ * an entry changed. */
+static int dopus_clip_u(const double *u, double *out)
+{
+    int i, clipped = 0;
+    for (i = 0; i < DOPUS_NU; ++i) {
+        double v = isnan(u[i]) ? 0.0 : u[i];
+        if (v < dopus_lbu[i]) {
+            v = dopus_lbu[i];
+        }
+        if (v > dopus_ubu[i]) {
+            v = dopus_ubu[i];
+        }
+        if (!(v == u[i])) {
+            clipped = 1;
+        }
+        out[i] = v;
+    }
+    return clipped;
+}
+
+/* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as the iterate
+ * plus an optional step: every entry finite and |v_i| <= BOX scale_i + |xhat0_i| (states),
+ * BOX scale_i (controls). Returns 1 when it passes. */
+static int dopus_box_ok(const dopus_solver *s, const double *x, const double *dx, int dx_stride,
+                        const double *u, const double *du, int du_stride)
+{
+    int k, i;
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NX; ++i) {
+            double v = x[k * DOPUS_NX + i] + (dx ? dx[k * dx_stride + i] : 0.0);
+            if (!(fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + fabs(s->xhat0[i]))) {
+                return 0;
+            }
+        }
+    }
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NU; ++i) {
+            double v = u[k * DOPUS_NU + i] + (du ? du[k * du_stride + i] : 0.0);
+            if (!(fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_u[i])) {
+                return 0;
+            }
+        }
+    }
+    return 1;
+}
+
+/* The fallback control of a failed feedback: the next control of the last good plan. */
+static void dopus_fallback_u0(dopus_solver *s, double *u0)
+{
+    int j = s->mode == DOPUS_MODE_RECEDING ? s->plan_age : 0;
+    j = j > DOPUS_N - 1 ? DOPUS_N - 1 : j;
+    if (dopus_clip_u(s->plan_u[j], s->u0_out)) {
+        s->flags |= DOPUS_FLAG_U0_CLIPPED;
+    }
+    s->flags |= DOPUS_FLAG_FALLBACK;
+    if (u0) {
+        dopus_copy(u0, s->u0_out, DOPUS_NU);
+    }
+}
+
+/* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
+static int dopus_feedback_failed(dopus_solver *s, double *u0, int status)
+{
+    s->n_failed += 1;
+    if (s->recovery && s->mode == DOPUS_MODE_RECEDING && s->n_failed >= s->recovery_failures) {
+        s->recover_pending = 1;
+    }
+    if (status == DOPUS_ERR_DIVERGED) {
+        s->flags |= DOPUS_FLAG_DIVERGED;
+    }
+    dopus_fallback_u0(s, u0);
+    return dopus_ret(s, status);
+}
+
+/* Divergence measure at the current point from the F values in the slots and the terminal
+ * node (after init or a prepare): max of |F_w,k + [lam_k; 0]|, |gL_N + mu_bN + lam_N|,
+ * |phi_k - x_{k+1}|, |r_eq| (inf-norms). */
+static double dopus_kkt_proxy_eval(const dopus_solver *s)
+{
+    double m = 0.0, v;
+    int k, i;
+    for (k = 0; k < DOPUS_N; ++k) {
+        const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
+        for (i = 0; i < DOPUS_NW; ++i) {
+            v = fabs(slot->F_w[i] + (i < DOPUS_NX ? s->lam[k][i] : 0.0));
+            m = (v > m || isnan(v)) ? v : m;
+        }
+        for (i = 0; i < DOPUS_NX; ++i) {
+            v = fabs(slot->phi[i] - s->x[k + 1][i]);
+            m = (v > m || isnan(v)) ? v : m;
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        v = fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]);
+        m = (v > m || isnan(v)) ? v : m;
+    }
+    for (i = 0; i < DOPUS_NE; ++i) {
+        v = fabs(s->r_eq[i]);
+        m = (v > m || isnan(v)) ? v : m;
+    }
+    return m;
+}
+
+/* The divergence test of the prepared iterate: box, finite multipliers, KKT proxy bound. */
+static int dopus_iterate_diverged(dopus_solver *s)
+{
+    double ref = s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0;
+    if (!dopus_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0)) {
+        return 1;
+    }
+    if (!dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NX, &s->lam[0][0]) ||
+        !dopus_lai_vec_finite(DOPUS_N * DOPUS_NW, &s->mu_b[0][0]) ||
+        !dopus_lai_vec_finite(DOPUS_NX, s->mu_bN)) {
+        return 1;
+    }
+    return !(s->kkt_proxy <= DOPUS_DIVERGENCE_KKT * ref);
 }
 
 void dopus_defaults(dopus_solver *s)
@@ -129,6 +307,10 @@ void dopus_defaults(dopus_solver *s)
     for (k = 0; k < DOPUS_N; ++k) {
         s->rho[k] = 0.0;
     }
+    s->recovery = 1;
+    s->recovery_failures = DOPUS_RECOVERY_FAILURES;
+    dopus_compute_scales(s);
+    dopus_reset_health(s);
     for (i = 0; i < 4; ++i) {
         s->kkt[i] = NAN;
     }
@@ -372,6 +554,31 @@ static int dopus_linearize_all(dopus_solver *s)
     return dopus_term_H(s);
 }
 
+/* The second half of init with the iterate in place: ring reset, F and H of every stage and
+ * the terminal node, QP assembly. */
+static int dopus_init_finish(dopus_solver *s)
+{
+    int k, rc;
+    dopus_ring_reset(&s->ring);
+    for (k = 0; k < DOPUS_N; ++k) {
+        s->rho[k] = 0.0;
+        s->recomputed[k] = k;
+        s->selected[k] = 0;
+    }
+    s->n_recomputed = DOPUS_N;
+    s->qp_status = 0;
+    s->qp_iterations = 0;
+
+    rc = dopus_linearize_all(s);
+    if (rc != DOPUS_OK) {
+        return rc;
+    }
+    dopus_assemble(s);
+    s->initialized = 1;
+    s->qp_ready = 1;
+    return DOPUS_OK;
+}
+
 int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const double *u,
                const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
                const double *mu_r, const double *nu)
@@ -380,6 +587,7 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
 
     dopus_ensure_setup(s);
     s->initialized = 0;
+    dopus_reset_health(s);
     s->qp_ready = 0;
     if ((xhat0 && !dopus_lai_vec_finite(DOPUS_NX, xhat0)) ||
         (x && !dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NX, x)) ||
@@ -429,23 +637,13 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
         s->nu[i] = (nu && i < DOPUS_NE) ? nu[i] : 0.0;
     }
 
-    dopus_ring_reset(&s->ring);
-    for (k = 0; k < DOPUS_N; ++k) {
-        s->rho[k] = 0.0;
-        s->recomputed[k] = k;
-        s->selected[k] = 0;
-    }
-    s->n_recomputed = DOPUS_N;
-    s->qp_status = 0;
-    s->qp_iterations = 0;
-
-    rc = dopus_linearize_all(s);
+    rc = dopus_init_finish(s);
     if (rc != DOPUS_OK) {
         return dopus_ret(s, rc);
     }
-    dopus_assemble(s);
-    s->initialized = 1;
-    s->qp_ready = 1;
+    dopus_reset_health(s);
+    s->kkt_proxy = dopus_kkt_proxy_eval(s);
+    s->kkt_proxy_ref = s->kkt_proxy;
     return dopus_ret(s, DOPUS_OK);
 }
 
@@ -483,14 +681,18 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
     int k, i, qs;
 
     dopus_ensure_setup(s);
+    s->flags = 0;
     if (!s->initialized) {
+        dopus_fallback_u0(s, u0);
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
     }
     if (xhat0 == 0 || !dopus_lai_vec_finite(DOPUS_NX, xhat0)) {
-        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+        s->xhat_fresh = 0;
+        return dopus_feedback_failed(s, u0, DOPUS_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
-        return dopus_ret(s, DOPUS_ERR_NOT_PREPARED);
+        /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
+        return dopus_feedback_failed(s, u0, DOPUS_ERR_NOT_PREPARED);
     }
     s->timer.t[DOPUS_PHASE_FEEDBACK] = 0.0;
     t0 = dopus_timer_now(&s->timer);
@@ -499,6 +701,7 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
+    s->xhat_fresh = 1;
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
     qs = dopus_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
@@ -506,7 +709,12 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
     s->qp_iterations = s->qp_info.iterations;
     if (qs != DOPUS_QP_SOLVED || !dopus_qp_solution_finite(sol)) {
         dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
-        return dopus_ret(s, DOPUS_ERR_QP);
+        return dopus_feedback_failed(s, u0, DOPUS_ERR_QP);
+    }
+    /* the divergence test of the step (algorithm.md section 9): no step outside the box */
+    if (!dopus_box_ok(s, &s->x[0][0], &sol->x[0][0], DOPUS_NX, &s->u[0][0], &sol->u[0][0], DOPUS_QP_NU1)) {
+        dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
+        return dopus_feedback_failed(s, u0, DOPUS_ERR_DIVERGED);
     }
 
     /* domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k) */
@@ -554,10 +762,16 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
         s->nu[i] = sol->nu[i];
     }
     s->qp_ready = 0;
+    /* a good plan: the fallback of the next failures; u0 clipped to the bounds */
+    s->n_failed = 0;
+    s->plan_age = 0;
+    s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
+    dopus_copy(&s->plan_u[0][0], &s->u[0][0], DOPUS_N * DOPUS_NU);
+    if (dopus_clip_u(s->u[0], s->u0_out)) {
+        s->flags |= DOPUS_FLAG_U0_CLIPPED;
+    }
     if (u0) {
-        for (i = 0; i < DOPUS_NU; ++i) {
-            u0[i] = s->u[0][i];
-        }
+        dopus_copy(u0, s->u0_out, DOPUS_NU);
     }
     dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
     return dopus_ret(s, DOPUS_OK);
@@ -623,18 +837,110 @@ static void dopus_select(dopus_solver *s, int M)
     s->n_recomputed = n;
 }
 
+/* Forward simulation from x[0] with the controls of the last good plan from its current age
+ * on (use_plan) or the OCP file's guess, clipped to the bounds, into the iterate. Returns 1
+ * when every node is finite and inside the box. */
+static int dopus_simulate(dopus_solver *s, int use_plan)
+{
+    double l = 0.0;
+    int k, j;
+    for (k = 0; k < DOPUS_N; ++k) {
+        j = s->plan_age + k > DOPUS_N - 1 ? DOPUS_N - 1 : s->plan_age + k;
+        dopus_clip_u(use_plan ? s->plan_u[j] : dopus_guess_u[k], s->u[k]);
+        if (dopus_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->tmp_g, &s->fun_work) != 0 ||
+            !dopus_lai_vec_finite(DOPUS_NX, s->x[k + 1])) {
+            return 0;
+        }
+    }
+    return dopus_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
+}
+
+/* The automatic recovery (algorithm.md section 9): re-initialise from a forward simulation of
+ * the predicted state phi(xhat0, u0) with the last good plan (else with the OCP file's guess
+ * controls; else the guess itself from the predicted state), the multipliers of the iterate
+ * (the last plan's, shifted), every block recomputed. */
+static int dopus_recover(dopus_solver *s, int shifted)
+{
+    double l = 0.0;
+    int k, i, rc, hessian;
+    /* x_0: the state predicted for this instant from the last measurement and control; when
+     * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
+    if (!s->xhat_fresh) {
+        if (!shifted) {
+            dopus_copy(s->x[0], s->x[1], DOPUS_NX);
+        }
+    } else if (dopus_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) != 0 ||
+        !dopus_lai_vec_finite(DOPUS_NX, s->x[0])) {
+        dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        if (!(fabs(s->x[0][i]) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + fabs(s->xhat0[i]))) {
+            dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
+            break;
+        }
+    }
+    if (!dopus_simulate(s, 1) && !dopus_simulate(s, 0)) {
+        for (k = 1; k <= DOPUS_N; ++k) {
+            dopus_copy(s->x[k], dopus_guess_x[k], DOPUS_NX);
+        }
+        for (k = 0; k < DOPUS_N; ++k) {
+            dopus_clip_u(dopus_guess_u[k], s->u[k]);
+        }
+    }
+    /* the blocks of the re-initialisation: Gauss-Newton when the problem has it (convex in
+     * the cost, whatever the multipliers); the next prepares re-linearise with the setting */
+    hessian = s->hessian;
+    s->hessian = DOPUS_HAS_GN ? DOPUS_HESSIAN_GAUSS_NEWTON : hessian;
+    rc = dopus_init_finish(s);
+    s->hessian = hessian;
+    if (rc != DOPUS_OK) {
+        s->qp_ready = 0;
+        return rc;
+    }
+    s->kkt_proxy = dopus_kkt_proxy_eval(s);
+    s->kkt_proxy_ref = s->kkt_proxy;
+    s->n_failed = 0;
+    s->recover_pending = 0;
+    s->n_recoveries += 1;
+    s->recovering = DOPUS_RECOVERY_FULL_RTI;
+    s->flags |= DOPUS_FLAG_RECOVERED;
+    return DOPUS_OK;
+}
+
+static int dopus_prepare_iteration(dopus_solver *s);
+
 int dopus_prepare(dopus_solver *s)
 {
-    double xN_saved[DOPUS_NX];
-    double t0;
-    int k, rc, M;
-
     dopus_ensure_setup(s);
     if (!s->initialized) {
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
     }
     dopus_clear_timings(s, DOPUS_PHASE_SHIFT, DOPUS_PHASE_ASSEMBLY);
     s->qp_ready = 0;
+    if (s->mode == DOPUS_MODE_RECEDING && s->plan_age < DOPUS_N) {
+        s->plan_age += 1;
+    }
+    if (s->recover_pending && s->recovery && s->mode == DOPUS_MODE_RECEDING) {
+        return dopus_ret(s, dopus_recover(s, 0));
+    }
+    if (s->recovering > 0 && DOPUS_HAS_GN) {
+        /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
+         * multipliers), every block fresh */
+        int hessian = s->hessian, rc;
+        s->hessian = DOPUS_HESSIAN_GAUSS_NEWTON;
+        rc = dopus_prepare_iteration(s);
+        s->hessian = hessian;
+        return dopus_ret(s, rc);
+    }
+    return dopus_ret(s, dopus_prepare_iteration(s));
+}
+
+/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
+static int dopus_prepare_iteration(dopus_solver *s)
+{
+    double xN_saved[DOPUS_NX];
+    double t0;
+    int k, rc, M;
 
     /* 1. shift */
     t0 = dopus_timer_now(&s->timer);
@@ -650,7 +956,7 @@ int dopus_prepare(dopus_solver *s)
         rc = dopus_stage_F(s, k);
         t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
         if (rc != DOPUS_OK) {
-            return dopus_ret(s, rc);
+            return rc;
         }
         s->rho[k] = dopus_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
         dopus_ring_store_F(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
@@ -661,7 +967,7 @@ int dopus_prepare(dopus_solver *s)
     rc = dopus_stage_F(s, DOPUS_N - 1);
     t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
     if (rc != DOPUS_OK) {
-        return dopus_ret(s, rc);
+        return rc;
     }
     if (s->mode == DOPUS_MODE_RECEDING) {
         dopus_copy(s->x[DOPUS_N], s->tmp_phi, DOPUS_NX);
@@ -681,6 +987,9 @@ int dopus_prepare(dopus_solver *s)
     /* 4. re-linearise the M stages with the largest rho_k */
     if (rc == DOPUS_OK) {
         M = s->M < 0 ? 0 : (s->M > DOPUS_N - 1 ? DOPUS_N - 1 : s->M);
+        if (s->recovering > 0) {
+            M = DOPUS_N - 1; /* after a recovery: every block fresh until it has settled */
+        }
         dopus_select(s, M);
         for (k = 0; k < DOPUS_N - 1 && rc == DOPUS_OK; ++k) {
             if (s->selected[k]) {
@@ -714,13 +1023,22 @@ int dopus_prepare(dopus_solver *s)
     if (rc != DOPUS_OK) {
         /* leave the iterate as it was after step 1 */
         dopus_copy(s->x[DOPUS_N], xN_saved, DOPUS_NX);
-        return dopus_ret(s, rc);
+        return rc;
     }
 
     /* 6. QP vectors (the fresh A blocks were regularised when stored) */
     dopus_assemble(s);
     s->qp_ready = 1;
-    return dopus_ret(s, DOPUS_OK);
+
+    /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
+    s->kkt_proxy = dopus_kkt_proxy_eval(s);
+    if (dopus_iterate_diverged(s)) {
+        s->flags |= DOPUS_FLAG_DIVERGED;
+        if (s->recovery && s->mode == DOPUS_MODE_RECEDING) {
+            return dopus_recover(s, 1);
+        }
+    }
+    return DOPUS_OK;
 }
 
 /* ---- KKT ---------------------------------------------------------------------------- */
@@ -878,7 +1196,7 @@ double dopus_get_levenberg_marquardt(dopus_solver *s)
 int dopus_set_qp_tol(dopus_solver *s, double tol)
 {
     dopus_ensure_setup(s);
-    if (!isfinite(tol) || !(tol > 0.0)) {
+    if (!isfinite(tol) || !(tol > 0.0) || tol > DOPUS_QP_TOL_MAX) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
     s->qp_settings.tol = tol;
@@ -905,6 +1223,32 @@ int dopus_get_qp_max_iter(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->qp_settings.max_iter;
+}
+
+int dopus_set_recovery(dopus_solver *s, int on, int max_failures)
+{
+    dopus_ensure_setup(s);
+    if ((on != 0 && on != 1) || max_failures < 1) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->recovery = on;
+    s->recovery_failures = max_failures;
+    if (!on) {
+        s->recover_pending = 0;
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_recovery(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->recovery;
+}
+
+int dopus_get_recovery_failures(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->recovery_failures;
 }
 
 int dopus_set_parameters(dopus_solver *s, const double *p)
@@ -1030,6 +1374,41 @@ int dopus_get_qp_iterations(const dopus_solver *s)
 int dopus_get_qp_status(const dopus_solver *s)
 {
     return s->qp_status;
+}
+
+int dopus_get_flags(const dopus_solver *s)
+{
+    return s->flags;
+}
+
+void dopus_get_u0(const dopus_solver *s, double *u0)
+{
+    dopus_copy(u0, s->u0_out, DOPUS_NU);
+}
+
+int dopus_get_recoveries(const dopus_solver *s)
+{
+    return s->n_recoveries;
+}
+
+int dopus_get_failed_feedbacks(const dopus_solver *s)
+{
+    return s->n_failed;
+}
+
+double dopus_get_kkt_proxy(const dopus_solver *s)
+{
+    return s->kkt_proxy;
+}
+
+void dopus_get_scales(const dopus_solver *s, double *scale_x, double *scale_u)
+{
+    if (scale_x) {
+        dopus_copy(scale_x, s->scale_x, DOPUS_NX);
+    }
+    if (scale_u) {
+        dopus_copy(scale_u, s->scale_u, DOPUS_NU);
+    }
 }
 
 int dopus_get_status(const dopus_solver *s)

@@ -101,10 +101,19 @@ int dopus_get_cost_hessian(dopus_solver *s);
  * file's options(lm=...), else 0. */
 int dopus_set_levenberg_marquardt(dopus_solver *s, double lm);
 double dopus_get_levenberg_marquardt(dopus_solver *s);
+/* QP tolerance: 0 < tol <= DOPUS_QP_TOL_MAX (1e-2); a larger one would let the QP return
+ * steps that violate the bounds by that much, so it is refused (DOPUS_ERR_INVALID_ARGUMENT). */
 int dopus_set_qp_tol(dopus_solver *s, double tol);
 double dopus_get_qp_tol(dopus_solver *s);
 int dopus_set_qp_max_iter(dopus_solver *s, int max_iter);
 int dopus_get_qp_max_iter(dopus_solver *s);
+/* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
+ * or off (0), and K >= 1, the number of consecutive failed feedbacks after which the next
+ * prepare re-initialises (default DOPUS_RECOVERY_FAILURES). A detected divergence
+ * re-initialises at once. */
+int dopus_set_recovery(dopus_solver *s, int on, int max_failures);
+int dopus_get_recovery(dopus_solver *s);
+int dopus_get_recovery_failures(dopus_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int dopus_set_parameters(dopus_solver *s, const double *p);
@@ -128,6 +137,21 @@ int dopus_get_recomputed(const dopus_solver *s, int *stages);
 /* The last QP: iterations, status (enum dopus_qp_status of dopus_qp.h). */
 int dopus_get_qp_iterations(const dopus_solver *s);
 int dopus_get_qp_status(const dopus_solver *s);
+/* Health of the controller (docs/algorithm.md section 9). Flags (DOPUS_FLAG_*) raised by
+ * the last feedback and the prepare after it (feedback clears them): the returned u0 was
+ * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control
+ * of the last good plan), a divergence was detected, the prepare re-initialised. */
+int dopus_get_flags(const dopus_solver *s);
+/* The control returned by the last feedback (nu), successful or not; within the bounds. */
+void dopus_get_u0(const dopus_solver *s, double *u0);
+/* Re-initialisations by the automatic recovery since init; consecutive failed feedbacks. */
+int dopus_get_recoveries(const dopus_solver *s);
+int dopus_get_failed_feedbacks(const dopus_solver *s);
+/* The divergence measure of the last prepare or init: the stationarity and equality parts of
+ * the KKT measure at the prepared point (max |F_w,k + [lam_k; 0]|, |phi_k - x_{k+1}|, ...);
+ * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
+double dopus_get_kkt_proxy(const dopus_solver *s);
+void dopus_get_scales(const dopus_solver *s, double *scale_x, double *scale_u);
 /* Status of the last call that returns a status. */
 int dopus_get_status(const dopus_solver *s);
 int dopus_is_initialized(const dopus_solver *s);
@@ -155,8 +179,25 @@ enum dopus_status {
     DOPUS_ERR_NOT_PREPARED = 7,      /* feedback without a successful prepare since the last
                                         step (the QP would be stale) */
     DOPUS_ERR_NO_NOMINAL = 8,        /* dopus_init_nominal without DOPUS_HAS_NOMINAL */
-    DOPUS_ERR_REGULARIZATION = 9     /* eigen-decomposition did not converge */
+    DOPUS_ERR_REGULARIZATION = 9,    /* eigen-decomposition did not converge */
+    DOPUS_ERR_DIVERGED = 11          /* the QP step leaves the problem's scale box (or is not
+                                        finite): no step, the fallback control is returned */
 };
+
+/* Flags of dopus_get_flags (docs/algorithm.md section 9). */
+enum dopus_flag {
+    DOPUS_FLAG_U0_CLIPPED = 1,  /* u0 was outside the control bounds and was clipped */
+    DOPUS_FLAG_FALLBACK = 2,    /* feedback failed: u0 is the next control of the last good plan */
+    DOPUS_FLAG_DIVERGED = 4,    /* the step or the prepared iterate failed the divergence test */
+    DOPUS_FLAG_RECOVERED = 8    /* prepare re-initialised (automatic recovery) */
+};
+
+/* Safety constants (docs/algorithm.md section 9). */
+#define DOPUS_QP_TOL_MAX 1e-2            /* largest accepted QP tolerance */
+#define DOPUS_RECOVERY_FAILURES 2        /* default K: consecutive failures before recovery */
+#define DOPUS_RECOVERY_FULL_RTI 10        /* successful feedbacks with every block fresh after a recovery */
+#define DOPUS_DIVERGENCE_BOX 1e3         /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
+#define DOPUS_DIVERGENCE_KKT 1e6         /* kkt proxy <= 1e6 max(1, proxy at the last init) */
 
 enum dopus_mode {
     DOPUS_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
@@ -244,6 +285,23 @@ struct dopus_solver {
     double tmp_phi[DOPUS_NX];
     double tmp_g[DOPUS_DIM(DOPUS_NG)];
     double reg_work[2 * DOPUS_NW * DOPUS_NW];
+
+    /* safe outputs, divergence test and recovery (algorithm.md section 9) */
+    int recovery;               /* automatic recovery on */
+    int recovery_failures;      /* K */
+    int n_failed;               /* consecutive failed feedbacks */
+    int recover_pending;        /* the next prepare re-initialises */
+    int flags;                  /* DOPUS_FLAG_* of the last feedback + prepare */
+    int n_recoveries;
+    int recovering;             /* full-RTI prepares left after a recovery */
+    int xhat_fresh;             /* the last feedback had a finite measurement */
+    int plan_age;               /* receding shifts since the last good plan */
+    double plan_u[DOPUS_N][DOPUS_NU]; /* controls of the last good plan */
+    double u0_out[DOPUS_NU];    /* the control returned by the last feedback */
+    double scale_x[DOPUS_NX];
+    double scale_u[DOPUS_NU];
+    double kkt_proxy;
+    double kkt_proxy_ref;
 
     /* KKT parts of the last dopus_kkt_eval: stat, eq, ineq, comp */
     double kkt[4];

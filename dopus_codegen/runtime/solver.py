@@ -46,12 +46,16 @@ STATUS = {
     7: "not prepared",
     8: "no nominal guess",
     9: "regularisation failure",
+    11: "diverged",
 }
 STATUS_OK, STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = 0, 1, 2, 5
 
 #: QP status codes (enum dopus_qp_status of runtime_c/dopus_qp.h).
 QP_STATUS = {0: "solved", 1: "max iterations", 2: "primal infeasible", 3: "dual infeasible",
              4: "numerical failure", 5: "invalid input"}
+
+#: Health flags (enum dopus_flag of runtime_c/dopus_solver.h).
+FLAGS = {1: "u0_clipped", 2: "fallback", 4: "diverged", 8: "recovered"}
 
 #: Timed phases, in the order of enum dopus_phase (runtime_c/dopus_timer.h).
 PHASES = ("feedback", "shift", "gradients", "rho", "hessians", "regularization", "assembly", "kkt")
@@ -395,11 +399,72 @@ class CSolver:
         self._check(self._c("init_nominal")(self._s, self._ptr(xh)), "init_nominal")
 
     def feedback(self, xhat0) -> np.ndarray:
-        """Solve the prepared QP for ``xhat0``, take the full step, return ``u_0``."""
-        xh = self._array(xhat0, (self.nx,), "feedback: xhat0")
+        """Solve the prepared QP for ``xhat0``, take the full step, return ``u_0`` (clipped
+        to the control bounds). On failure the raised :class:`DopusError` carries ``u0``, the
+        fallback control of docs/algorithm.md section 9 (the next control of the last good
+        plan, clipped), which is also :attr:`u0`. A non-finite ``xhat0`` reaches the C
+        runtime, which counts it as a failed instant."""
+        xh = self._array(xhat0, (self.nx,), "feedback: xhat0", check_finite=False)
         u0 = np.zeros(self.n_u)
-        self._check(self._c("feedback")(self._s, self._ptr(xh), self._ptr(u0)), "feedback")
+        try:
+            self._check(self._c("feedback")(self._s, self._ptr(xh), self._ptr(u0)), "feedback")
+        except DopusError as err:
+            err.u0 = self.u0
+            raise
         return u0
+
+    # ------------------------------------------------------------------ health
+    def set_recovery(self, on: bool = True, max_failures: Optional[int] = None) -> None:
+        """Automatic recovery (docs/algorithm.md section 9): on/off and K, the consecutive
+        failed feedbacks after which the next prepare re-initialises."""
+        if not isinstance(on, (bool, np.bool_)):
+            self._bad(f"recovery must be True or False, got {on!r}")
+        k = self.recovery_failures if max_failures is None else max_failures
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= 2**31 - 1:
+            self._bad(f"recovery max_failures must be an integer >= 1, got {max_failures!r}")
+        self._check(self._c("set_recovery")(self._s, int(bool(on)), int(k)), "set_recovery")
+
+    @property
+    def recovery(self) -> bool:
+        return bool(self._c("get_recovery")(self._s))
+
+    @property
+    def recovery_failures(self) -> int:
+        return int(self._c("get_recovery_failures")(self._s))
+
+    @property
+    def u0(self) -> np.ndarray:
+        """The control returned by the last feedback (successful or not)."""
+        return self._get("get_u0", (self.n_u,))
+
+    @property
+    def flags(self) -> set:
+        """The health flags of the last feedback and the prepare after it, by name:
+        ``u0_clipped``, ``fallback``, ``diverged``, ``recovered``."""
+        f = int(self._c("get_flags")(self._s))
+        return {name for bit, name in FLAGS.items() if f & bit}
+
+    @property
+    def recoveries(self) -> int:
+        """Re-initialisations by the automatic recovery since init."""
+        return int(self._c("get_recoveries")(self._s))
+
+    @property
+    def failed_feedbacks(self) -> int:
+        """Consecutive failed feedbacks."""
+        return int(self._c("get_failed_feedbacks")(self._s))
+
+    @property
+    def kkt_proxy(self) -> float:
+        """The divergence measure of the last prepare or init (section 9)."""
+        return float(self._c("get_kkt_proxy")(self._s))
+
+    @property
+    def scales(self) -> tuple:
+        """``(scale_x, scale_u)`` of the box test (section 9)."""
+        sx, su = np.zeros(self.nx), np.zeros(self.n_u)
+        self._c("get_scales")(self._s, self._ptr(sx), self._ptr(su))
+        return sx, su
 
     def prepare(self) -> None:
         """Shift (receding mode), F and rho, fresh last stage and terminal node, the M worst H."""

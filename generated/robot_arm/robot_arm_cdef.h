@@ -69,10 +69,19 @@ int robot_arm_get_cost_hessian(robot_arm_solver *s);
  * file's options(lm=...), else 0. */
 int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, double lm);
 double robot_arm_get_levenberg_marquardt(robot_arm_solver *s);
+/* QP tolerance: 0 < tol <= ROBOT_ARM_QP_TOL_MAX (1e-2); a larger one would let the QP return
+ * steps that violate the bounds by that much, so it is refused (ROBOT_ARM_ERR_INVALID_ARGUMENT). */
 int robot_arm_set_qp_tol(robot_arm_solver *s, double tol);
 double robot_arm_get_qp_tol(robot_arm_solver *s);
 int robot_arm_set_qp_max_iter(robot_arm_solver *s, int max_iter);
 int robot_arm_get_qp_max_iter(robot_arm_solver *s);
+/* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
+ * or off (0), and K >= 1, the number of consecutive failed feedbacks after which the next
+ * prepare re-initialises (default ROBOT_ARM_RECOVERY_FAILURES). A detected divergence
+ * re-initialises at once. */
+int robot_arm_set_recovery(robot_arm_solver *s, int on, int max_failures);
+int robot_arm_get_recovery(robot_arm_solver *s);
+int robot_arm_get_recovery_failures(robot_arm_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int robot_arm_set_parameters(robot_arm_solver *s, const double *p);
@@ -96,6 +105,21 @@ int robot_arm_get_recomputed(const robot_arm_solver *s, int *stages);
 /* The last QP: iterations, status (enum robot_arm_qp_status of robot_arm_qp.h). */
 int robot_arm_get_qp_iterations(const robot_arm_solver *s);
 int robot_arm_get_qp_status(const robot_arm_solver *s);
+/* Health of the controller (docs/algorithm.md section 9). Flags (ROBOT_ARM_FLAG_*) raised by
+ * the last feedback and the prepare after it (feedback clears them): the returned u0 was
+ * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control
+ * of the last good plan), a divergence was detected, the prepare re-initialised. */
+int robot_arm_get_flags(const robot_arm_solver *s);
+/* The control returned by the last feedback (nu), successful or not; within the bounds. */
+void robot_arm_get_u0(const robot_arm_solver *s, double *u0);
+/* Re-initialisations by the automatic recovery since init; consecutive failed feedbacks. */
+int robot_arm_get_recoveries(const robot_arm_solver *s);
+int robot_arm_get_failed_feedbacks(const robot_arm_solver *s);
+/* The divergence measure of the last prepare or init: the stationarity and equality parts of
+ * the KKT measure at the prepared point (max |F_w,k + [lam_k; 0]|, |phi_k - x_{k+1}|, ...);
+ * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
+double robot_arm_get_kkt_proxy(const robot_arm_solver *s);
+void robot_arm_get_scales(const robot_arm_solver *s, double *scale_x, double *scale_u);
 /* Status of the last call that returns a status. */
 int robot_arm_get_status(const robot_arm_solver *s);
 int robot_arm_is_initialized(const robot_arm_solver *s);

@@ -69,10 +69,19 @@ int unicycle_get_cost_hessian(unicycle_solver *s);
  * file's options(lm=...), else 0. */
 int unicycle_set_levenberg_marquardt(unicycle_solver *s, double lm);
 double unicycle_get_levenberg_marquardt(unicycle_solver *s);
+/* QP tolerance: 0 < tol <= UNICYCLE_QP_TOL_MAX (1e-2); a larger one would let the QP return
+ * steps that violate the bounds by that much, so it is refused (UNICYCLE_ERR_INVALID_ARGUMENT). */
 int unicycle_set_qp_tol(unicycle_solver *s, double tol);
 double unicycle_get_qp_tol(unicycle_solver *s);
 int unicycle_set_qp_max_iter(unicycle_solver *s, int max_iter);
 int unicycle_get_qp_max_iter(unicycle_solver *s);
+/* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
+ * or off (0), and K >= 1, the number of consecutive failed feedbacks after which the next
+ * prepare re-initialises (default UNICYCLE_RECOVERY_FAILURES). A detected divergence
+ * re-initialises at once. */
+int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
+int unicycle_get_recovery(unicycle_solver *s);
+int unicycle_get_recovery_failures(unicycle_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int unicycle_set_parameters(unicycle_solver *s, const double *p);
@@ -96,6 +105,21 @@ int unicycle_get_recomputed(const unicycle_solver *s, int *stages);
 /* The last QP: iterations, status (enum unicycle_qp_status of unicycle_qp.h). */
 int unicycle_get_qp_iterations(const unicycle_solver *s);
 int unicycle_get_qp_status(const unicycle_solver *s);
+/* Health of the controller (docs/algorithm.md section 9). Flags (UNICYCLE_FLAG_*) raised by
+ * the last feedback and the prepare after it (feedback clears them): the returned u0 was
+ * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control
+ * of the last good plan), a divergence was detected, the prepare re-initialised. */
+int unicycle_get_flags(const unicycle_solver *s);
+/* The control returned by the last feedback (nu), successful or not; within the bounds. */
+void unicycle_get_u0(const unicycle_solver *s, double *u0);
+/* Re-initialisations by the automatic recovery since init; consecutive failed feedbacks. */
+int unicycle_get_recoveries(const unicycle_solver *s);
+int unicycle_get_failed_feedbacks(const unicycle_solver *s);
+/* The divergence measure of the last prepare or init: the stationarity and equality parts of
+ * the KKT measure at the prepared point (max |F_w,k + [lam_k; 0]|, |phi_k - x_{k+1}|, ...);
+ * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
+double unicycle_get_kkt_proxy(const unicycle_solver *s);
+void unicycle_get_scales(const unicycle_solver *s, double *scale_x, double *scale_u);
 /* Status of the last call that returns a status. */
 int unicycle_get_status(const unicycle_solver *s);
 int unicycle_is_initialized(const unicycle_solver *s);

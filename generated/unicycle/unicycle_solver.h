@@ -101,10 +101,19 @@ int unicycle_get_cost_hessian(unicycle_solver *s);
  * file's options(lm=...), else 0. */
 int unicycle_set_levenberg_marquardt(unicycle_solver *s, double lm);
 double unicycle_get_levenberg_marquardt(unicycle_solver *s);
+/* QP tolerance: 0 < tol <= UNICYCLE_QP_TOL_MAX (1e-2); a larger one would let the QP return
+ * steps that violate the bounds by that much, so it is refused (UNICYCLE_ERR_INVALID_ARGUMENT). */
 int unicycle_set_qp_tol(unicycle_solver *s, double tol);
 double unicycle_get_qp_tol(unicycle_solver *s);
 int unicycle_set_qp_max_iter(unicycle_solver *s, int max_iter);
 int unicycle_get_qp_max_iter(unicycle_solver *s);
+/* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
+ * or off (0), and K >= 1, the number of consecutive failed feedbacks after which the next
+ * prepare re-initialises (default UNICYCLE_RECOVERY_FAILURES). A detected divergence
+ * re-initialises at once. */
+int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
+int unicycle_get_recovery(unicycle_solver *s);
+int unicycle_get_recovery_failures(unicycle_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int unicycle_set_parameters(unicycle_solver *s, const double *p);
@@ -128,6 +137,21 @@ int unicycle_get_recomputed(const unicycle_solver *s, int *stages);
 /* The last QP: iterations, status (enum unicycle_qp_status of unicycle_qp.h). */
 int unicycle_get_qp_iterations(const unicycle_solver *s);
 int unicycle_get_qp_status(const unicycle_solver *s);
+/* Health of the controller (docs/algorithm.md section 9). Flags (UNICYCLE_FLAG_*) raised by
+ * the last feedback and the prepare after it (feedback clears them): the returned u0 was
+ * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control
+ * of the last good plan), a divergence was detected, the prepare re-initialised. */
+int unicycle_get_flags(const unicycle_solver *s);
+/* The control returned by the last feedback (nu), successful or not; within the bounds. */
+void unicycle_get_u0(const unicycle_solver *s, double *u0);
+/* Re-initialisations by the automatic recovery since init; consecutive failed feedbacks. */
+int unicycle_get_recoveries(const unicycle_solver *s);
+int unicycle_get_failed_feedbacks(const unicycle_solver *s);
+/* The divergence measure of the last prepare or init: the stationarity and equality parts of
+ * the KKT measure at the prepared point (max |F_w,k + [lam_k; 0]|, |phi_k - x_{k+1}|, ...);
+ * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
+double unicycle_get_kkt_proxy(const unicycle_solver *s);
+void unicycle_get_scales(const unicycle_solver *s, double *scale_x, double *scale_u);
 /* Status of the last call that returns a status. */
 int unicycle_get_status(const unicycle_solver *s);
 int unicycle_is_initialized(const unicycle_solver *s);
@@ -155,8 +179,25 @@ enum unicycle_status {
     UNICYCLE_ERR_NOT_PREPARED = 7,      /* feedback without a successful prepare since the last
                                         step (the QP would be stale) */
     UNICYCLE_ERR_NO_NOMINAL = 8,        /* unicycle_init_nominal without UNICYCLE_HAS_NOMINAL */
-    UNICYCLE_ERR_REGULARIZATION = 9     /* eigen-decomposition did not converge */
+    UNICYCLE_ERR_REGULARIZATION = 9,    /* eigen-decomposition did not converge */
+    UNICYCLE_ERR_DIVERGED = 11          /* the QP step leaves the problem's scale box (or is not
+                                        finite): no step, the fallback control is returned */
 };
+
+/* Flags of unicycle_get_flags (docs/algorithm.md section 9). */
+enum unicycle_flag {
+    UNICYCLE_FLAG_U0_CLIPPED = 1,  /* u0 was outside the control bounds and was clipped */
+    UNICYCLE_FLAG_FALLBACK = 2,    /* feedback failed: u0 is the next control of the last good plan */
+    UNICYCLE_FLAG_DIVERGED = 4,    /* the step or the prepared iterate failed the divergence test */
+    UNICYCLE_FLAG_RECOVERED = 8    /* prepare re-initialised (automatic recovery) */
+};
+
+/* Safety constants (docs/algorithm.md section 9). */
+#define UNICYCLE_QP_TOL_MAX 1e-2            /* largest accepted QP tolerance */
+#define UNICYCLE_RECOVERY_FAILURES 2        /* default K: consecutive failures before recovery */
+#define UNICYCLE_RECOVERY_FULL_RTI 10        /* successful feedbacks with every block fresh after a recovery */
+#define UNICYCLE_DIVERGENCE_BOX 1e3         /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
+#define UNICYCLE_DIVERGENCE_KKT 1e6         /* kkt proxy <= 1e6 max(1, proxy at the last init) */
 
 enum unicycle_mode {
     UNICYCLE_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
@@ -244,6 +285,23 @@ struct unicycle_solver {
     double tmp_phi[UNICYCLE_NX];
     double tmp_g[UNICYCLE_DIM(UNICYCLE_NG)];
     double reg_work[2 * UNICYCLE_NW * UNICYCLE_NW];
+
+    /* safe outputs, divergence test and recovery (algorithm.md section 9) */
+    int recovery;               /* automatic recovery on */
+    int recovery_failures;      /* K */
+    int n_failed;               /* consecutive failed feedbacks */
+    int recover_pending;        /* the next prepare re-initialises */
+    int flags;                  /* UNICYCLE_FLAG_* of the last feedback + prepare */
+    int n_recoveries;
+    int recovering;             /* full-RTI prepares left after a recovery */
+    int xhat_fresh;             /* the last feedback had a finite measurement */
+    int plan_age;               /* receding shifts since the last good plan */
+    double plan_u[UNICYCLE_N][UNICYCLE_NU]; /* controls of the last good plan */
+    double u0_out[UNICYCLE_NU];    /* the control returned by the last feedback */
+    double scale_x[UNICYCLE_NX];
+    double scale_u[UNICYCLE_NU];
+    double kkt_proxy;
+    double kkt_proxy_ref;
 
     /* KKT parts of the last unicycle_kkt_eval: stat, eq, ineq, comp */
     double kkt[4];

@@ -1,0 +1,157 @@
+"""Safe outputs, divergence detection and automatic recovery (docs/algorithm.md section 9).
+
+The C runtime against independent references: the control bounds of the OCP (no returned
+u0 outside them, whatever the settings and measurements), the fallback control computed
+here from the last good plan, and a freshly initialised solver (IPOPT's solution at the
+state where the good measurements return) run in its own closed loop from the same plant
+state.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from dopus_codegen.runtime.solver import CSolver, DopusError
+from dopus_codegen.studies.plant import Plant
+
+STATUS_INVALID_ARGUMENT = 5
+
+
+@pytest.fixture(scope="module")
+def arm(robot_disc):
+    return robot_disc
+
+
+def test_qp_tolerance_above_the_limit_is_refused(arm):
+    s = CSolver(arm)
+    for bad in (4.8, 0.011, 1.0):
+        with pytest.raises(DopusError) as exc:
+            s.set_qp_tol(bad)
+        assert exc.value.status == STATUS_INVALID_ARGUMENT
+    s.set_qp_tol(1e-2)
+    assert s.qp_tol == 1e-2
+
+
+def test_no_returned_u0_leaves_the_bounds(arm, robot_solution):
+    """Randomised sweep of settings and measurements in a closed loop on the model: every
+    returned u0 (also the fallback of a failed instant) lies within the OCP's bounds, a
+    failed instant returns the next control of the last good plan clipped, and the
+    u0_clipped flag is raised exactly when the plan's control was outside the bounds."""
+    guess, _ = robot_solution
+    lbu, ubu = np.asarray(arm.lbu, float), np.asarray(arm.ubu, float)
+    rng = np.random.default_rng(11)
+    plant = Plant(arm.ode, arm.dt, 0, reltol=1e-8, abstol=1e-8)
+    n_fail = n_clip = n_ok = 0
+    for case in range(6):
+        s = CSolver(arm, M=int(rng.integers(0, arm.N)), hessian=str(rng.choice(["exact", "gauss-newton"])),
+                    lm=float(rng.choice([0.0, 1e-4, 1e-2])))
+        s.set_qp_tol(float(10 ** rng.uniform(-12, -2)))
+        s.set_qp_max_iter(int(rng.integers(1, 40)))
+        x = np.asarray(arm.x0, float).copy()
+        g = guess
+        if case % 2:   # a plan outside the bounds: its fallback must be clipped
+            g = dataclasses.replace(guess, u=guess.u + rng.uniform(-30, 30, guess.u.shape))
+        s.init(x, g)
+        plan, age = s.u.copy(), 0
+        for i in range(25):
+            kind = 3 if (case % 2 and i == 0) else rng.integers(0, 5)
+            xm = x.copy()
+            if kind == 1:
+                xm = xm + rng.normal(0, 10 ** rng.uniform(-3, 1), xm.size)
+            elif kind == 2:
+                xm[2:4] = [30.0, -30.0]
+            elif kind == 3:
+                xm[int(rng.integers(0, xm.size))] = np.nan
+            try:
+                u0 = s.feedback(xm)
+                ok = True
+            except DopusError as err:
+                u0 = err.u0
+                ok = False
+            assert np.all(u0 >= lbu) and np.all(u0 <= ubu), (case, i, u0)
+            if ok:
+                n_ok += 1
+                plan, age = s.u.copy(), 0
+                want = np.clip(plan[0], lbu, ubu)
+            else:
+                n_fail += 1
+                want = np.clip(plan[min(age, arm.N - 1)], lbu, ubu)
+                assert "fallback" in s.flags
+            np.testing.assert_array_equal(u0, want)
+            outside = bool(np.any(plan[min(age, arm.N - 1)] != want))
+            assert ("u0_clipped" in s.flags) == outside
+            n_clip += outside
+            x = plant.step(x, u0, np.zeros(0))
+            try:
+                s.prepare()
+            except DopusError:
+                pass
+            age += 1
+    assert n_fail > 10 and n_ok > 10 and n_clip > 0
+
+
+def _loop(s, plant, x, n, bad=None):
+    """n instants of the closed loop; bad(i, x) -> measurement (None: the state). Returns the
+    states, the statuses and the final state."""
+    xs, status = [], []
+    for i in range(n):
+        xm = x.copy() if bad is None else bad(i, x)
+        try:
+            u0, st = s.feedback(xm), 0
+        except DopusError as err:
+            u0, st = err.u0, err.status
+        x = plant.step(x, u0, np.zeros(0))
+        try:
+            s.prepare()
+        except DopusError as err:
+            st = st or err.status
+        xs.append(x.copy())
+        status.append(st)
+    return np.array(xs), status, x
+
+
+def _tracking(xs):
+    """Distance of the tip from the circle at theta (examples/robot_arm.py)."""
+    q1, q2, th = xs[:, 0], xs[:, 1], xs[:, 4]
+    tip = np.stack([0.4 * np.cos(q1) + 0.4 * np.cos(q1 + q2), 0.4 * np.sin(q1) + 0.4 * np.sin(q1 + q2)], 1)
+    ref = np.stack([0.4 + 0.15 * np.cos(th), 0.2 + 0.15 * np.sin(th)], 1)
+    return np.linalg.norm(tip - ref, axis=1)
+
+
+# failed instants -> instants after which the recovered loop stays within 1e-3 of the fresh one
+RECOVERED_WITHIN = 40
+
+
+@pytest.mark.parametrize("n_failed", [5, 10])
+def test_back_on_the_fresh_trajectory_after_failed_instants(arm, robot_solution, n_failed):
+    """n_failed instants without a usable measurement (NaN), then good ones: no user call,
+    no further failure, and within RECOVERED_WITHIN instants the plant follows the
+    trajectory of a freshly initialised solver (IPOPT at the state where the good
+    measurements return) to 1e-3."""
+    from dopus_codegen.reference.offline import solve_ocp
+
+    guess, _ = robot_solution
+    plant = Plant(arm.ode, arm.dt, 0, reltol=1e-10, abstol=1e-10)
+    s = CSolver(arm, lm=None)          # the generated defaults (exact Hessian, the OCP's lm)
+    x = np.asarray(arm.x0, float).copy()
+    s.init(x, guess)
+    _, st, x = _loop(s, plant, x, 50)
+    assert not any(st)
+    _, st, x = _loop(s, plant, x, n_failed, bad=lambda i, x: np.full_like(x, np.nan))
+    assert all(v != 0 for v in st)
+    x_resume = x.copy()
+    n_after = 120
+    xs_rec, st_rec, _ = _loop(s, plant, x_resume.copy(), n_after)
+    assert not any(st_rec), st_rec
+    fresh = CSolver(arm, lm=None)
+    g2, info = solve_ocp(arm, x_resume)
+    fresh.init(x_resume, g2)
+    xs_fresh, st_fresh, _ = _loop(fresh, plant, x_resume.copy(), n_after)
+    assert not any(st_fresh)
+    # theta (the path parameter, index 4) is free progress: compare the tracking of the path
+    track_rec, track_fresh = _tracking(xs_rec), _tracking(xs_fresh)
+    print(f"n_failed {n_failed}: tracking after {RECOVERED_WITHIN} instants: recovered "
+          f"{track_rec[RECOVERED_WITHIN:].max():.3e}, fresh {track_fresh[RECOVERED_WITHIN:].max():.3e}")
+    assert track_rec[RECOVERED_WITHIN:].max() <= 1.2 * track_fresh[RECOVERED_WITHIN:].max() + 1e-4
