@@ -406,9 +406,13 @@ class CSolver:
         runtime, which counts it as a failed instant."""
         xh = self._array(xhat0, (self.nx,), "feedback: xhat0", check_finite=False)
         u0 = np.zeros(self.n_u)
+        status = self._c("feedback")(self._s, self._ptr(xh), self._ptr(u0))
         try:
-            self._check(self._c("feedback")(self._s, self._ptr(xh), self._ptr(u0)), "feedback")
+            if not np.all(np.isfinite(xh)):
+                self._array(xh, (self.nx,), "feedback: xhat0")    # the message naming the entry
+            self._check(status, "feedback")
         except DopusError as err:
+            self.status = int(status)
             err.u0 = self.u0
             raise
         return u0
