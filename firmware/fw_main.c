@@ -31,16 +31,18 @@ typedef FW(real) fw_real;
 static FW(solver) solver;
 static FW(fun_work) plant_work;
 
-/* ---- output without stdio: one line in a buffer, written at once ---------------------- */
+/* ---- output without stdio: a line buffer, written at the end of the line ------------- */
 
 static char line[512];
 static int line_len;
 
 static void put_char(char c)
 {
-    if (line_len < (int)sizeof(line) - 1) {
-        line[line_len++] = c;
+    if (line_len == (int)sizeof(line)) {      /* a long line goes out in pieces */
+        fw_write(line, line_len);
+        line_len = 0;
     }
+    line[line_len++] = c;
 }
 
 static void put_str(const char *s)
