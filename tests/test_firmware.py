@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dopus_codegen import firmware as fwm
+from dopus_codegen.codegen import firmware as fwm
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "examples" / "robot_arm.py"
@@ -60,7 +60,7 @@ def test_emulated_double_reproduces_the_host_build(report):
 def test_emulated_full_rti_reaches_ipopt_solution(report, robot_disc):
     """The full RTI of the fixed-xhat_0 study converges (quadratically) on the M7 to the
     solution IPOPT finds for the disturbed initial state."""
-    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference.offline import solve_ocp
 
     s = report["targets"]["m7-double"]
     kkt = s["kkt"]["full"]

@@ -43,7 +43,7 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from .codegen import CASADI_CFLAGS, STRICT_CFLAGS, read_meta
+from .generate import CASADI_CFLAGS, STRICT_CFLAGS, read_meta
 
 __all__ = ["TARGETS", "FirmwareError", "firmware_dir", "toolchain_missing", "setup_toolchain",
            "write_problem_header", "build_target", "link_image", "build_host", "run_qemu", "run_host", "parse_output",
@@ -90,7 +90,7 @@ def firmware_dir() -> Path:
 
 
 def _repo_script() -> Optional[Path]:
-    path = Path(__file__).resolve().parent.parent / "scripts" / "setup_firmware.sh"
+    path = Path(__file__).resolve().parents[2] / "scripts" / "setup_firmware.sh"
     return path if path.is_file() else None
 
 
@@ -153,7 +153,7 @@ def write_problem_header(build_dir: Path, name: str, xhat_fixed: Sequence[float]
 def _generated_sources(gen_dir: Path) -> tuple:
     meta = read_meta(gen_dir)
     name = meta["name"]
-    srcs = [f for f in meta["files"] if f.endswith(".c") and not f.startswith("main_")]
+    srcs = [f for f in meta["files"] if f.endswith(".c") and f not in (f"{name}_main.c", f"main_{name}.c")]
     casadi = f"{name}_casadi.c"
     return name, [f for f in srcs if f != casadi], casadi
 
@@ -397,9 +397,9 @@ def firmware_report(ocp_file, out_dir, targets: Sequence[str] = ("m7-double", "m
                     fixed_iters: int = 12, loop_steps: int = 20, m_list: Optional[Sequence] = None,
                     json_out=None, progress=print) -> Dict[str, Any]:
     """Generate, build, run under QEMU and on the host; return (and write) the report."""
-    from . import codegen
-    from .derivatives import build_functions
-    from .ocp import load_ocp
+    from . import generate as codegen
+    from ..problem.derivatives import build_functions
+    from ..problem.ocp import load_ocp
 
     for t in targets:
         if t not in TARGETS:
