@@ -4,7 +4,7 @@ PY     := $(VENV)/bin/python
 OUT    := out
 EXAMPLE := examples/robot_arm.py
 
-.PHONY: demo test bench generate firmware clean setup help
+.PHONY: demo test bench generate firmware firmware-report clean setup help
 
 help:
 	@echo "make demo      generate, build and run the robot-arm closed loop (DOPUS M=1 vs full RTI); plots in $(OUT)/robot_arm"
@@ -12,6 +12,7 @@ help:
 	@echo "make bench     run the benchmarks (tables on stdout, JSON in bench/results)"
 	@echo "make generate  regenerate the checked-in generated/ folders"
 	@echo "make firmware  build the static library of generated/robot_arm with make only"
+	@echo "make firmware-report  run the robot arm on an emulated Cortex-M7 (QEMU): sizes, instructions, accuracy"
 	@echo "make clean     remove build products and outputs"
 
 setup:
@@ -29,6 +30,7 @@ demo: setup
 	@echo "plots and JSON in $(abspath $(OUT))/robot_arm (Gauss-Newton runs in gauss-newton/)"
 
 test: setup
+	-@bash scripts/setup_firmware.sh
 	$(PY) -m pytest -q
 
 bench: setup
@@ -41,6 +43,10 @@ generate: setup
 
 firmware:
 	$(MAKE) -C generated/robot_arm
+
+firmware-report: setup
+	@bash scripts/setup_firmware.sh
+	$(VENV)/bin/dopus-gen firmware-report $(EXAMPLE) -o $(OUT)/firmware --target m7-double
 
 clean:
 	rm -rf $(OUT) build .pytest_cache
