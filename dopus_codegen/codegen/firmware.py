@@ -393,7 +393,7 @@ TOL_DOUBLE = 1e-8     # relative; newlib's sin/cos differ from glibc's in the la
 KKT_FLOOR_DOUBLE = 1.0   # the KKT measure is a residual: its rounding error is absolute
 
 
-def firmware_report(ocp_file, out_dir, targets: Sequence[str] = ("m7-double", "m7-float", "m4f-float"),
+def firmware_report(ocp_file, out_dir, targets: Sequence[str] = ("m7-double",),
                     fixed_iters: int = 12, loop_steps: int = 20, m_list: Optional[Sequence] = None,
                     json_out=None, progress=print) -> Dict[str, Any]:
     """Generate, build, run under QEMU and on the host; return (and write) the report."""
