@@ -33,7 +33,7 @@ from .paths import runtime_c_dir, templates_dir
 
 PLACEHOLDER = "dopus"
 
-#: Compiler flags shared by the rendered Makefile and dopus_codegen.build.
+#: Compiler flags shared by the rendered Makefile and dopus_codegen.codegen.build.
 STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 #: CasADi's generated code has unused parameters in its helpers, so it only gets -Wall.
 CASADI_CFLAGS = ("-std=c99", "-Wall")
