@@ -497,6 +497,11 @@ class CSolver:
         self._clock_cb = cb
         self._c("set_clock")(self._s, cb, self._ffi.NULL)
 
+    @property
+    def has_clock(self) -> bool:
+        """True if the timings measure time (False: no clock on this platform, they read 0)."""
+        return bool(self._c("has_clock")(self._s))
+
     def __repr__(self) -> str:
         return (f"CSolver({self.name!r}, N={self.N}, M={self.M}, mode={self.mode!r}, "
                 f"hessian={self.hessian!r}, regularization={self.regularization!r}, lib_dir='{self.lib_dir}')")
