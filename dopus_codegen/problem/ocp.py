@@ -566,12 +566,13 @@ class Ocp:
         The consistency pass runs once: the spec is kept and returned again until a
         declaration changes the problem."""
         if self._spec is None:
-            spec = self._check_and_build()
+            spec = self.build_spec()
             self._spec = spec
         return self._spec
 
-    def _check_and_build(self) -> OcpSpec:
-        """One consistency pass over everything declared, then the spec's parts."""
+    def build_spec(self) -> OcpSpec:
+        """One consistency pass over everything declared and a new spec from it; raises
+        OcpError. :meth:`validate` calls it once and keeps the result."""
         if not self._states:
             raise OcpError("no state declared (use ocp.state(...))")
         if not self._controls:
