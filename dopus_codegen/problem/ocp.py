@@ -31,6 +31,9 @@ Conventions (docs/algorithm.md sections 1 and 8):
 - Parameters are runtime-settable, one vector per node; ``value`` is the default.
 
 Every user mistake raises :class:`OcpError` with a message naming the offending item.
+:meth:`Ocp.validate` checks everything declared once and returns the problem as an
+immutable :class:`~dopus_codegen.problem.spec.OcpSpec`, which is all that the rest of the
+pipeline reads.
 """
 from __future__ import annotations
 
