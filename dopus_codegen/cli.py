@@ -8,6 +8,7 @@ from __future__ import annotations
 import click
 
 from . import __version__
+from .codegen.flags import DEFAULT_OPT
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -132,7 +133,7 @@ def generate(ocp_file, out_dir, offline_guess):
 @main.command()
 @click.argument("folder", type=click.Path(file_okay=False))
 @click.option("--cc", default="cc", show_default=True, help="C compiler.")
-@click.option("--opt", default="-O2", show_default=True, help="Optimisation flags (quoted if several).")
+@click.option("--opt", default=DEFAULT_OPT, show_default=True, help="Optimisation flags (quoted if several).")
 @click.option("--force", is_flag=True, help="Rebuild even if the sources did not change.")
 def build(folder, cc, opt, force):
     """Compile a generated FOLDER into build/py/lib<name>.so (cffi) and lib<name>.a (firmware).

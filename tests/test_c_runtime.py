@@ -20,8 +20,13 @@ from dopus_codegen.codegen.paths import runtime_c_dir
 from dopus_codegen.reference.dopus import ReferenceDopus
 from dopus_codegen.runtime.solver import CSolver, DopusError
 
-STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_NONFINITE_VALUE = 1, 2, 3
-STATUS_INVALID, STATUS_NOT_INITIALIZED, STATUS_NOT_PREPARED = 5, 6, 7
+from dopus_codegen.errors import status_code
+
+STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_NONFINITE_VALUE = (status_code(n) for n in ("qp", "nonfinite_input",
+                                                                                     "nonfinite_value"))
+STATUS_INVALID, STATUS_NOT_INITIALIZED, STATUS_NOT_PREPARED = (status_code(n) for n in ("invalid_argument",
+                                                                                       "not_initialized",
+                                                                                       "not_prepared"))
 
 
 # ------------------------------------------------------------------ the Jacobi regularisation
@@ -195,7 +200,7 @@ def test_bad_input_then_good_call(robot_disc, robot_solution):
     assert c.ring_head == clean.ring_head == 4
 
     # invalid settings
-    with pytest.raises(DopusError, match="M must be a non-negative integer"):
+    with pytest.raises(DopusError, match="M must be an integer >= 0"):
         c.set_M(-1)
     with pytest.raises(DopusError, match="mode must be"):
         c.set_mode("sideways")
@@ -376,7 +381,7 @@ def test_failed_qp_takes_no_step(robot_disc, robot_solution):
         b.init(robot_disc.x0, robot_solution[0])
     state = {f: getattr(c, f) for f in ("x", "u", "lam", "mu_b", "nu")}
     c.set_qp_max_iter(1)
-    with pytest.raises(DopusError, match=r"QP status 1 \(max iterations\)") as ei:
+    with pytest.raises(DopusError, match=r"QP status 1 \(max_iter\)") as ei:
         c.feedback(xhat)
     assert ei.value.status == STATUS_QP and ei.value.qp_status == 1
     for f, v in state.items():
