@@ -41,6 +41,9 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from .. import settings
+from .records import json_ready
+
 __all__ = ["StartPoint", "make_start", "run_study", "run_converge_cli", "backend_factory",
            "iterations_to", "objective"]
 
@@ -140,7 +143,8 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     cost_hessian=)`` builds a backend (default: :class:`~dopus_codegen.reference.ReferenceDopus`).
     ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
     """
-    from ..reference.dopus import DopusError, ReferenceDopus
+    from ..errors import DopusError
+    from ..reference.dopus import ReferenceDopus
 
     if isinstance(start, str):
         start = make_start(disc, start)
@@ -149,8 +153,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
         backend_name = backend_name or "reference"
     if isinstance(iters, bool) or not isinstance(iters, (int, np.integer)) or iters < 1:
         raise ValueError(f"iters must be a positive integer, got {iters!r}")
-    if cost_hessian not in ("fresh", "stored"):
-        raise ValueError(f"cost_hessian must be 'fresh' or 'stored', got {cost_hessian!r}")
+    settings.check("cost_hessian", cost_hessian)
     Ms = [_resolve_M(m, disc.N) for m in m_list]
     if not Ms:
         raise ValueError("the list of M values is empty")
@@ -197,17 +200,6 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
         "cost_hessian": cost_hessian, "lm": float(lm), "runs": runs,
         "solution": {"M": int(Msol), "x": xs.tolist(), "u": us.tolist(), "objective": obj},
     }
-
-
-def _json_safe(obj):
-    """Strict JSON: non-finite floats (a diverged run) become null."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    return obj
 
 
 def format_table(study: dict, tol: float = 1e-8) -> str:
@@ -315,7 +307,7 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, re
     click.echo(format_table(study))
     if json_out:
         with open(json_out, "w") as fh:
-            json.dump(_json_safe(study), fh, indent=1, allow_nan=False)
+            json.dump(json_ready(study), fh, indent=1, allow_nan=False)
         click.echo(f"wrote {json_out}", err=True)
     if plot_out:
         plot_study(study, plot_out)
