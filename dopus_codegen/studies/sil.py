@@ -496,9 +496,12 @@ def write_json(runs, path) -> None:
 
 
 # --------------------------------------------------------------------------- CLI
-def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps,
-                backend, cost_hessian="fresh", echo=None, progress=True, lm=None) -> list:
-    """The ``dopus-gen sil`` command: runs, summary table, JSON and plots."""
+def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, compare="none", hessian=None,
+                regularization=None, reg_eps=None, backend="c", cost_hessian=None, echo=None, progress=True,
+                lm=None) -> list:
+    """The ``dopus-gen sil`` command: runs, summary table, JSON and plots. A setting given as
+    None comes from the OCP file's ``options(...)``, else from the defaults of
+    :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from."""
     from ..problem.ocp import load_ocp
     from ..problem.derivatives import build_functions
 
@@ -507,14 +510,20 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
         echo = click.echo
 
     ocp = load_ocp(ocp_file)
+    try:
+        values, sources = settings.resolve(ocp.declared_options(), dict(
+            M=M, hessian=hessian, regularization=regularization, reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm))
+    except settings.SettingError as exc:
+        raise SilError(f"{ocp_file}: {exc}") from None
     disc = build_functions(ocp)
     if getattr(disc, "scenario_spec", None) is None:
         raise SilError(f"{ocp_file}: the OCP declares no closed-loop scenario (ocp.scenario(...))")
-    if hessian == "gauss-newton" and getattr(disc, "stage_hess_gn", True) is None:
+    if values["hessian"] == "gauss-newton" and getattr(disc, "stage_hess_gn", True) is None:
         raise SilError(f"{ocp_file}: --hessian gauss-newton needs a least-squares stage cost "
                        "(ocp.stage_least_squares)")
     spec = disc.scenario_spec
     x0 = np.asarray(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
+    echo(f"settings: {settings.describe(values, sources)}", err=True)
 
     from ..reference.offline import solve_ocp
     guess, info = solve_ocp(disc, x0)
@@ -522,24 +531,27 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
         echo(f"warning: the offline solve at the initial state did not converge ({info.get('status')}); "
              "the controller starts from its last iterate", err=True)
 
-    if lm is None:
-        lm = default_lm(disc)
     N = int(disc.N)
-    configs = [(M, None)]
+    M = values["M"]
+    configs = [(M, None, sources)]
     if compare == "full" and min(M, N - 1) != N - 1:
-        configs.append((N - 1, "full RTI"))
+        configs.append((N - 1, "full RTI", dict(sources, M=settings.SOURCE_CLI)))  # --compare full
     runs = []
-    for m, label in configs:
+    for m, label, src in configs:
         name = label or ("full RTI" if min(m, N - 1) == N - 1 else f"DOPUS M = {m}")
-        echo(f"{name}: {backend} backend, {hessian} Hessian, regularization {regularization}, "
-             f"cost Hessian {cost_hessian}, Levenberg-Marquardt {lm:g}, "
+        echo(f"{name}: {backend} backend, {values['hessian']} Hessian, regularization {values['regularization']}, "
+             f"cost Hessian {values['cost_hessian']}, Levenberg-Marquardt {values['lm']:g}, "
              f"{duration if duration is not None else spec.duration} s ...", err=True)
-        run = run_closed_loop(disc, backend=backend, M=m, hessian=hessian, regularization=regularization,
-                              reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm, duration=duration, guess=guess,
-                              progress=progress, label=label)
+        run = run_closed_loop(disc, backend=backend, M=m, hessian=values["hessian"],
+                              regularization=values["regularization"], reg_eps=values["reg_eps"],
+                              cost_hessian=values["cost_hessian"], lm=values["lm"], duration=duration, guess=guess,
+                              progress=progress, label=label, sources=src)
         runs.append(run)
     summaries = [summarize(r) for r in runs]
     echo(format_summary(summaries))
+    for r in runs:
+        st = r["settings"]
+        echo(f"{r['label']}: " + settings.describe({k: st[k] for k in settings.SOLVER_SETTINGS}, st["sources"]))
     if json_out:
         write_json(runs, json_out)
         echo(f"JSON: {json_out}")
