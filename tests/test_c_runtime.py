@@ -13,6 +13,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from dopus_codegen.codegen.flags import DEFAULT_OPT, PIC, STRICT_CFLAGS
 from dopus_codegen import Ocp, RK4, build_functions
 from dopus_codegen.studies.converge import make_start
 from dopus_codegen.reference.kkt import kkt_measure
@@ -37,7 +38,7 @@ def reg_lib(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("reg")
     so = d / "libreg.so"
-    subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-fPIC", "-shared",
+    subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, "-shared",
                     str(runtime_c_dir() / "dopus_reg.c"), "-o", str(so), "-lm"], check=True)
     ffi = cffi.FFI()
     ffi.cdef("int dopus_reg_jacobi_eig(int n, double *a, double *v);"
@@ -358,7 +359,7 @@ def test_clock_macro(tmp_path):
 
     for posix in (1, 0):
         so = tmp_path / f"libtimer{posix}.so"
-        subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-fPIC", "-shared",
+        subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, "-shared",
                         f"-DDOPUS_CLOCK_POSIX={posix}", str(runtime_c_dir() / "dopus_timer.c"), "-o", str(so)],
                        check=True)
         ffi = cffi.FFI()
