@@ -14,6 +14,32 @@ from .settings import choices
 _FROM_FILE = "[default: the OCP file's options(...), else {}]"
 
 
+def _solver_options(lm_note: str):
+    """The settings of dopus_codegen.settings that converge and sil share; each defaults to
+    the OCP file's options(...)."""
+    opts = [
+        click.option("--hessian", type=click.Choice(choices("hessian")), default=None,
+                     help=_FROM_FILE.format("exact")),
+        click.option("--regularization", type=click.Choice(choices("regularization")), default=None,
+                     help=_FROM_FILE.format("none")),
+        click.option("--reg-eps", default=None, type=click.FloatRange(min=0, min_open=True),
+                     help="Eigenvalue floor of the regularisation. " + _FROM_FILE.format("1e-4")),
+        click.option("--cost-hessian", type=click.Choice(choices("cost_hessian")), default=None,
+                     help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; "
+                          "stored: the paper's literal algorithm (the whole Hessian block moves with its slot; "
+                          "figure 1). " + _FROM_FILE.format("fresh")),
+        click.option("--lm", default=None, type=click.FloatRange(min=0),
+                     help=f"Levenberg-Marquardt term added to every Hessian block of the QP ({lm_note}). "
+                          + _FROM_FILE.format("0")),
+    ]
+
+    def apply(fn):
+        for opt in reversed(opts):
+            fn = opt(fn)
+        return fn
+    return apply
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="dopus-gen")
 def main() -> None:
@@ -46,18 +72,7 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--start", type=click.Choice(["cold", "warm"]), default="warm", show_default=True,
               help="cold: the OCP file's initial guess at its initial state; warm: the converged solution at the "
                    "initial state, then iterate for the disturbed initial state.")
-@click.option("--hessian", type=click.Choice(choices("hessian")), default=None, help=_FROM_FILE.format("exact"))
-@click.option("--regularization", type=click.Choice(choices("regularization")), default=None,
-              help=_FROM_FILE.format("none"))
-@click.option("--reg-eps", default=None, type=float,
-              help="Eigenvalue floor of the regularisation. " + _FROM_FILE.format("1e-4"))
-@click.option("--cost-hessian", type=click.Choice(choices("cost_hessian")), default=None,
-              help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
-                   "paper's literal algorithm (figure 1, docs/algorithm.md section 4 step 5). "
-                   + _FROM_FILE.format("fresh"))
-@click.option("--lm", default=None, type=click.FloatRange(min=0),
-              help="Levenberg-Marquardt term added to every Hessian block of the QP (0: exact Newton). "
-                   + _FROM_FILE.format("0"))
+@_solver_options("0: exact Newton")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the study as JSON.")
 @click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None, help="Write KKT against iteration as PNG.")
@@ -83,19 +98,8 @@ def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, c
 @click.option("--plot-dir", type=click.Path(file_okay=False), default=None, help="Write the PNG figures here.")
 @click.option("--compare", type=click.Choice(["none", "full"]), default="none", show_default=True,
               help="full: also run the full RTI (M = N-1) on the same scenario.")
-@click.option("--hessian", type=click.Choice(choices("hessian")), default=None, help=_FROM_FILE.format("exact"))
-@click.option("--regularization", type=click.Choice(choices("regularization")), default=None,
-              help=_FROM_FILE.format("none"))
-@click.option("--reg-eps", default=None, type=click.FloatRange(min=0, min_open=True),
-              help="Eigenvalue floor of the regularisation. " + _FROM_FILE.format("1e-4"))
-@click.option("--cost-hessian", type=click.Choice(choices("cost_hessian")), default=None,
-              help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
-                   "paper's literal algorithm (the whole Hessian block moves with its slot). "
-                   + _FROM_FILE.format("fresh"))
-@click.option("--lm", default=None, type=click.FloatRange(min=0),
-              help="Levenberg-Marquardt term added to every Hessian block of the QP (0: the paper's "
-                   "literal QP). Keeps the fixed point; see README, Closed loop. "
-                   + _FROM_FILE.format("0") + " (the robot arm: 1e-4)")
+@_solver_options("0: the paper's literal QP; keeps the fixed point, see README, Closed loop; the robot arm "
+                 "declares 1e-4")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
 def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps, cost_hessian, lm,
         backend):

@@ -124,15 +124,18 @@ def test_sil_starts_from_the_ocp_file(ocp_file, tmp_path):
     assert "hessian exact (cli)" in output and "M 2 (cli)" in output
 
 
+def _converge(ocp_file, tmp_path, *flags):
+    out = tmp_path / "conv.json"
+    res = CliRunner().invoke(cli_main, ["converge", str(ocp_file), "--start", "cold", "--json", str(out), *flags])
+    assert res.exit_code == 0, res.output
+    return res, json.loads(out.read_text())
+
+
 def test_converge_starts_from_the_ocp_file(ocp_file, tmp_path):
     from dopus_codegen import build_functions, load_ocp
     from dopus_codegen.studies.converge import run_study
 
-    out = tmp_path / "conv.json"
-    res = CliRunner().invoke(cli_main, ["converge", str(ocp_file), "--iters", "4", "--start", "cold",
-                                        "--json", str(out)])
-    assert res.exit_code == 0, res.output
-    study = json.loads(out.read_text())
+    res, study = _converge(ocp_file, tmp_path, "--iters", "4")
     assert study["hessian"] == "gauss-newton" and [r["M"] for r in study["runs"]] == [3]
     assert study["sources"]["hessian"] == "ocp-file" and study["sources"]["M"] == "ocp-file"
     assert "hessian gauss-newton (ocp-file)" in res.output and "M 3 (ocp-file)" in res.output
@@ -141,9 +144,6 @@ def test_converge_starts_from_the_ocp_file(ocp_file, tmp_path):
     direct = run_study(disc, [3], 4, "cold", hessian="gauss-newton")
     np.testing.assert_allclose(study["runs"][0]["kkt"], direct["runs"][0]["kkt"], rtol=1e-12, atol=0)
 
-    res = CliRunner().invoke(cli_main, ["converge", str(ocp_file), "--iters", "2", "--start", "cold",
-                                        "--M", "1", "--hessian", "exact", "--json", str(out)])
-    assert res.exit_code == 0, res.output
-    study = json.loads(out.read_text())
+    res, study = _converge(ocp_file, tmp_path, "--iters", "2", "--M", "1", "--hessian", "exact")
     assert study["hessian"] == "exact" and [r["M"] for r in study["runs"]] == [1]
     assert study["sources"]["hessian"] == "cli" and study["sources"]["M"] == "cli"
