@@ -22,7 +22,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Dict, Optional, Tuple
 
-__all__ = ["Enum", "parse_enums", "parse_status_strings", "runtime_enums", "status", "qp_status",
+__all__ = ["Enum", "parse_enums", "parse_status_strings", "runtime_enums", "generated_enums", "status", "qp_status",
            "phases", "enum"]
 
 _COMMENT = re.compile(r"/\*(.*?)\*/", re.S)
@@ -131,7 +131,24 @@ def parse_status_strings(text: str) -> Dict[str, str]:
     return {ident: bytes(s, "utf-8").decode("unicode_escape") for ident, s in _CASE.findall(text)}
 
 
-_HEADERS = ("dopus_solver.h", "dopus_qp.h", "dopus_timer.h", "dopus_reg.h")
+_HEADERS = ("solver.h", "qp.h", "timer.h", "reg.h")
+
+
+def _read_enums(root: Path, name: str) -> Dict[str, Enum]:
+    """The enums of the headers ``<name>_solver.h`` ... in ``root`` (prefix ``<NAME>_``),
+    keyed by their placeholder C names (``dopus_status``), with the status texts of
+    ``<name>_solver.c``."""
+    placeholder = f"{name.upper()}_"
+    enums: Dict[str, Enum] = {}
+    for header in _HEADERS:
+        for c_name, e in parse_enums((root / f"{name}_{header}").read_text(), placeholder).items():
+            enums["dopus_" + c_name[len(name) + 1:] if c_name.startswith(name + "_") else c_name] = e
+    solver_c = root / f"{name}_solver.c"
+    texts = parse_status_strings(solver_c.read_text()) if solver_c.is_file() else {}
+    st = enums["dopus_status"]
+    desc = {st.codes[n]: texts.get(ident, st.descriptions[st.codes[n]]) for n, ident in st.identifiers.items()}
+    enums["dopus_status"] = Enum(st.c_name, st.codes, st.identifiers, desc)
+    return enums
 
 
 @lru_cache(maxsize=None)
@@ -140,16 +157,14 @@ def runtime_enums(folder: Optional[str] = None) -> Dict[str, Enum]:
     installed one), with the status texts of dopus_solver.c; parsed once."""
     from .codegen.paths import runtime_c_dir
 
-    root = Path(folder) if folder is not None else runtime_c_dir()
-    enums: Dict[str, Enum] = {}
-    for header in _HEADERS:
-        enums.update(parse_enums((root / header).read_text()))
-    solver_c = root / "dopus_solver.c"
-    texts = parse_status_strings(solver_c.read_text()) if solver_c.is_file() else {}
-    st = enums["dopus_status"]
-    desc = {st.codes[n]: texts.get(ident, st.descriptions[st.codes[n]]) for n, ident in st.identifiers.items()}
-    enums["dopus_status"] = Enum(st.c_name, st.codes, st.identifiers, desc)
-    return enums
+    return _read_enums(Path(folder) if folder is not None else runtime_c_dir(), "dopus")
+
+
+@lru_cache(maxsize=None)
+def generated_enums(folder: str, name: str) -> Dict[str, Enum]:
+    """The same enums read from a generated folder (``<name>_solver.h``, ...: the headers the
+    library was compiled from), keyed by their placeholder C names; parsed once."""
+    return _read_enums(Path(folder), name)
 
 
 def enum(c_name: str) -> Enum:

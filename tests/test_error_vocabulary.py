@@ -122,3 +122,15 @@ def test_same_failures_both_backends(small_disc):
         assert b.qp_status == qp_status_code("max_iter")
     want = (DopusError, status_code("qp"), qp_status_code("max_iter"))
     assert got == [want, want]
+
+
+def test_generated_folder_speaks_the_runtime_codes():
+    """The C handle reads the codes from the generated headers it was built from; they are
+    the runtime's (the renaming changes the prefix only)."""
+    folder = Path(__file__).resolve().parent.parent / "generated" / "robot_arm"
+    gen, run = vocabulary.generated_enums(str(folder), "robot_arm"), vocabulary.runtime_enums()
+    assert sorted(gen) == sorted(run)
+    for c_name in run:
+        assert gen[c_name].codes == run[c_name].codes, c_name
+    assert gen["dopus_status"].descriptions == run["dopus_status"].descriptions
+    assert gen["dopus_status"].identifiers["qp"] == "ROBOT_ARM_ERR_QP"

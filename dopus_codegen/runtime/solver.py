@@ -153,6 +153,8 @@ class CSolver:
                 raise ValueError(f"the library in '{self.lib_dir}' is problem '{self.name}' with sizes "
                                  f"(N, nx, nu, np, ng, nr, ne) = {have}, the given problem is "
                                  f"'{disc.name}' with {tuple(int(v) for v in want)}")
+        # the codes of the headers this library was compiled from (the generated folder)
+        self.enums = vocabulary.generated_enums(str(self.lib_dir.resolve()), self.name)
         size = int(self._c("solver_sizeof")())
         self.sizeof = size
         # doubles keep the struct 8-byte aligned; cffi zero-fills, the C side sets defaults
@@ -192,7 +194,7 @@ class CSolver:
         msg = f"{self.name}: {what}: {self._status_text(status)} (status {status})"
         if status == STATUS_QP:
             qp_status = int(self._c("get_qp_status")(self._s))
-            msg += (f"; QP status {qp_status} ({vocabulary.qp_status().name(qp_status)}) after "
+            msg += (f"; QP status {qp_status} ({self.enums['dopus_qp_status'].name(qp_status)}) after "
                     f"{int(self._c('get_qp_iterations')(self._s))} iterations")
         raise DopusError(msg, status, qp_status)
 
@@ -440,8 +442,9 @@ class CSolver:
 
     @property
     def timings(self) -> dict:
-        t = self._get("get_timings", (len(PHASES),))
-        out = {name: float(v) for name, v in zip(PHASES, t)}
+        phases = self.enums["dopus_phase"].names()
+        t = self._get("get_timings", (len(phases),))
+        out = {name: float(v) for name, v in zip(phases, t)}
         out["prepare"] = sum(out[k] for k in ("shift", "gradients", "rho", "hessians", "regularization", "assembly"))
         return out
 
