@@ -108,6 +108,18 @@ def positive(setting: str, value: Any) -> float:
     return f
 
 
+def qp_tolerance(value: Any) -> float:
+    """A QP tolerance: positive and at most ``DOPUS_QP_TOL_MAX`` (runtime_c/dopus_solver.h,
+    docs/algorithm.md section 9); a looser QP would return controls the bounds do not hold."""
+    from .vocabulary import constants
+
+    f = positive("qp_tol", value)
+    limit = constants()["QP_TOL_MAX"]
+    if f > limit:
+        raise SettingError(f"qp_tol must be at most {limit:g} (DOPUS_QP_TOL_MAX), got {value!r}")
+    return f
+
+
 def nonnegative(setting: str, value: Any) -> float:
     """A finite number >= 0 (``lm``)."""
     f = _number(setting, value, "a number >= 0")
@@ -132,7 +144,7 @@ _CHECKS = {
     "mode": lambda v: check("mode", v),
     "cost_hessian": lambda v: check("cost_hessian", v),
     "reg_eps": lambda v: positive("reg_eps", v),
-    "qp_tol": lambda v: positive("qp_tol", v),
+    "qp_tol": lambda v: qp_tolerance(v),
     "lm": lambda v: nonnegative("lm", v),
 }
 

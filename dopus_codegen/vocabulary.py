@@ -23,11 +23,12 @@ from pathlib import Path
 from typing import Dict, Optional, Tuple
 
 __all__ = ["Enum", "parse_enums", "parse_status_strings", "runtime_enums", "generated_enums", "status", "qp_status",
-           "phases", "enum"]
+           "phases", "enum", "parse_constants", "constants"]
 
 _COMMENT = re.compile(r"/\*(.*?)\*/", re.S)
 _ENUM = re.compile(r"\benum\s+(\w+)\s*\{(.*?)\}\s*;", re.S)
 _MEMBER = re.compile(r"^\s*(\w+)\s*(?:=\s*([-+]?(?:0[xX][0-9a-fA-F]+|\d+)))?\s*$")
+_DEFINE = re.compile(r"^\s*#\s*define\s+(\w+)\s+([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\b", re.M)
 _CASE = re.compile(r"case\s+(\w+)\s*:\s*return\s+\"((?:[^\"\\]|\\.)*)\"\s*;")
 
 
@@ -188,3 +189,24 @@ def qp_status() -> Enum:
 def phases() -> Tuple[str, ...]:
     """The timed phases in the order of ``enum dopus_phase`` (the index of dopus_get_timings)."""
     return enum("dopus_phase").names()
+
+
+def parse_constants(text: str, placeholder: str = "DOPUS_") -> Dict[str, float]:
+    """The numeric ``#define PLACEHOLDER_NAME value`` lines of a C header, by ``NAME``
+    (the identifier without the placeholder): ``DOPUS_QP_TOL_MAX 1e-2`` is ``"QP_TOL_MAX"``."""
+    out: Dict[str, float] = {}
+    for ident, value in _DEFINE.findall(text):
+        if ident.startswith(placeholder):
+            v = float(value)
+            out[ident[len(placeholder):]] = int(v) if v.is_integer() and "." not in value and "e" not in value.lower() else v
+    return out
+
+
+@lru_cache(maxsize=None)
+def constants() -> Dict[str, float]:
+    """The numeric constants of runtime_c/dopus_solver.h (the safety constants of
+    docs/algorithm.md section 9 and the regularisation constants), shared by the reference
+    backend: ``constants()["DIVERGENCE_BOX"]``."""
+    from .codegen.paths import runtime_c_dir
+
+    return parse_constants((runtime_c_dir() / "dopus_solver.h").read_text())

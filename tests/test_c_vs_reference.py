@@ -322,3 +322,83 @@ def test_second_receding(second_disc, second_solution, M):
     M = second_disc.N - 1 if M == "full" else M
     tally = run_receding(second_disc, second_solution[0], M, hessian="gauss-newton")
     print(f"{second_disc.name} receding M={M} Gauss-Newton: {tally}")
+
+
+# ---------------------------------------------------------------- section 9: failures and recovery
+def _call(b, name, *args):
+    """(result or the fallback u0, status) of a call that may fail."""
+    try:
+        return getattr(b, name)(*args), 0
+    except DopusError as err:
+        return getattr(err, "u0", None), err.status
+
+
+@pytest.mark.parametrize("kind", ["nan", "infeasible"])
+def test_robot_receding_failures_and_recovery(robot_disc, robot_solution, kind):
+    """docs/algorithm.md section 9 in both backends: failed instants in the closed loop on
+    the discrete model (five without a measurement, or two with the joint velocities
+    (30, -30) whose QP is infeasible; the next two good measurements fail too, from the
+    state the fallback controls left), then good measurements. Every instant the statuses, the flags, the
+    returned control (the fallback of a failed instant), the recovery count and the
+    recomputed stages are identical, and the iterates equal to REL_TOL, through the
+    re-initialisations and the Gauss-Newton full-RTI phase after them. As in :func:`step`,
+    an iteration whose QP solution is ill-determined (the backends differ by more than
+    REL_TOL) must give a C step that solves the reference's QP to QP_KKT_TOL; such
+    iterations are counted."""
+    disc = robot_disc
+    c, r, x, tally, p0 = start_pair(disc, robot_solution[0], M=1, mode="receding", hessian="exact", lm=1e-4)
+    seen = set()
+    for it in range(40):
+        xm = x.copy()
+        if 10 <= it < (15 if kind == "nan" else 12):
+            if kind == "nan":
+                xm[:] = np.nan
+            else:
+                xm[2:4] = [30.0, -30.0]
+        qp = r.qp_of_current(xm) if np.all(np.isfinite(xm)) else None
+        x_before, u_before = c.x, c.u
+        uc, sc = _call(c, "feedback", xm)
+        ur, sr = _call(r, "feedback", xm)
+        assert sc == sr, (it, sc, sr)
+        assert c.flags == r.flags, (it, c.flags, r.flags)
+        sol_c = {"x": c.x - x_before, "u": c.u - u_before, "lam": c.lam, "mu_b": c.mu_b, "mu_bN": c.mu_bN,
+                 "mu_g": c.mu_g, "mu_r": c.mu_r, "nu": c.nu}
+        pc, pr = _call(c, "prepare")[1], _call(r, "prepare")[1]
+        assert pc == pr == 0, (it, pc, pr)
+        assert c.flags == r.flags and c.recoveries == r.recoveries, (it, c.flags, r.flags)
+        assert c.failed_feedbacks == r.failed_feedbacks
+        errs = differences(c, r)
+        errs["u0"] = rel_err(uc, ur)
+        errs["kkt_proxy"] = abs(c.kkt_proxy - r.kkt_proxy) / max(1.0, r.kkt_proxy)
+        field = max(errs, key=errs.get)
+        tally.n += 1
+        if errs[field] <= REL_TOL:
+            tally.worst = max(tally.worst, errs[field])
+        else:
+            assert sc == 0 and qp is not None, f"iteration {it}: {field} differs by {errs[field]:.3e} relative"
+            res = qp_kkt_residual(qp, sol_c)
+            assert res["kkt"] <= QP_KKT_TOL, (
+                f"iteration {it}: {field} differs by {errs[field]:.3e} relative (> {REL_TOL:g}) and the C step "
+                f"is not a solution of the reference's QP (KKT residual {res})")
+            tally.ill.append((f"iteration {it}", errs[field]))
+        assert c.recomputed == r.recomputed, it
+        seen |= r.flags | ({"failed"} if sr else set())
+        x = np.array(disc.stage_eval(x, ur, p0)[0], dtype=float).reshape(-1)
+    assert {"failed", "fallback", "recovered"} <= seen, seen
+    assert r.recoveries >= 2, r.recoveries
+    assert len(tally.ill) <= max(1, tally.n // 5), f"too many ill-determined QPs: {tally}"
+    print(f"robot_arm receding, failed instants ({kind}), recovery: {tally}; recoveries {r.recoveries}")
+    assert r.recoveries >= 1 and sr == 0
+    sx_c, su_c = c.scales
+    np.testing.assert_array_equal(sx_c, r.scales[0])
+    np.testing.assert_array_equal(su_c, r.scales[1])
+
+
+def test_reference_refuses_a_loose_qp_tolerance(robot_disc):
+    """Both backends refuse a QP tolerance above DOPUS_QP_TOL_MAX with the same status."""
+    with pytest.raises(DopusError) as e_ref:
+        ReferenceDopus(robot_disc, qp_tol=4.8)
+    with pytest.raises(DopusError) as e_c:
+        CSolver(robot_disc).set_qp_tol(4.8)
+    assert e_ref.value.status == e_c.value.status == 5
+    assert ReferenceDopus(robot_disc, qp_tol=1e-2).qp_tol == 1e-2

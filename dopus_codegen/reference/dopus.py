@@ -30,13 +30,22 @@ import time
 
 import numpy as np
 
-from .. import settings
+from .. import settings, vocabulary
 from ..errors import DopusError, qp_status_code as status_code_qp, status_code
 from ..settings import SettingError
 from .kkt import eval_stages, kkt_measure, node_parameters
 from .qp import QPError, free_initial_state, solve_qp_reference
 
-__all__ = ["DopusError", "ReferenceDopus", "regularize", "EPS_RHO"]
+# the QP solution arrays whose finiteness a step needs
+FIELDS_QP = ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu")
+
+__all__ = ["DopusError", "ReferenceDopus", "regularize", "EPS_RHO", "FLAGS"]
+
+#: Health flags (enum dopus_flag of runtime_c/dopus_solver.h): bit -> name.
+FLAGS = {bit: name for name, bit in vocabulary.enum("dopus_flag").codes.items()}
+_FLAG = vocabulary.enum("dopus_flag").codes
+#: The safety constants of runtime_c/dopus_solver.h (docs/algorithm.md section 9).
+_SAFETY = vocabulary.constants()
 
 # Round-off floor of the secant residual (docs/algorithm.md section 4 step 2): rho_k = 0
 # when num_k <= EPS_RHO * (|F_old| + |F_new|), i.e. when the linear model of the stage is
@@ -120,22 +129,17 @@ class ReferenceDopus:
         self.nr, self.ne, self.np = disc.nr, disc.ne, disc.np
         self.nw = self.nx + self.n_u
         self.hessian = _setting(settings.check, "hessian", hessian)
-        if self.hessian == "exact":
-            self._stage_hess, self._term_hess = disc.stage_hess_exact, disc.term_hess_exact
-        else:
-            if getattr(disc, "stage_hess_gn", None) is None or getattr(disc, "term_hess_gn", None) is None:
-                raise DopusError.of("invalid_argument", "hessian='gauss-newton' needs a least-squares stage cost "
-                                    "(the OCP declares no stage_least_squares)")
-            self._stage_hess, self._term_hess = disc.stage_hess_gn, disc.term_hess_gn
-        # (x, u, p) -> A_l, the stage-cost part of A (section 4 step 5)
-        self._stage_hess_cost = getattr(disc, "stage_hess_cost_exact" if self.hessian == "exact"
-                                        else "stage_hess_cost_gn", None)
+        self.has_gn = (getattr(disc, "stage_hess_gn", None) is not None
+                       and getattr(disc, "term_hess_gn", None) is not None)
+        if self.hessian != "exact" and not self.has_gn:
+            raise DopusError.of("invalid_argument", "hessian='gauss-newton' needs a least-squares stage cost "
+                                "(the OCP declares no stage_least_squares)")
         if cost_hessian == "fresh" and self._stage_hess_cost is None:
             raise DopusError.of("invalid_argument", "cost_hessian='fresh' needs the stage-cost Hessian function "
                                 "of the problem (Discretized.stage_hess_cost); use cost_hessian='stored'")
         self.regularization = _setting(settings.check, "regularization", regularization)
         self.reg_eps = _setting(settings.positive, "reg_eps", reg_eps)
-        self.qp_tol = _setting(settings.positive, "qp_tol", qp_tol)
+        self.qp_tol = _setting(settings.qp_tolerance, qp_tol)
         self.lm = _setting(settings.nonnegative, "lm", lm)
         self.qp_max_iter = None
         if qp_max_iter is not None:
@@ -156,6 +160,34 @@ class ReferenceDopus:
         self.last_qp = None
         self.last_qp_solution = None
         self._initialised = False
+        self._qp_ready = False
+        # section 9: safe outputs, divergence test, recovery
+        self.recovery, self.recovery_failures = True, int(_SAFETY["RECOVERY_FAILURES"])
+        self.scales = self._compute_scales()
+        self._xhat_last = np.asarray(disc.x0, float).reshape(self.nx).copy()
+        self._reset_health(np.asarray(disc.initial_guess.u, float).reshape(self.N, self.n_u))
+
+    # ------------------------------------------------------------------ the Hessian in use
+    def _fns(self):
+        """(stage_hess, term_hess, stage_hess_cost) of the Hessian in use (the setting, or
+        Gauss-Newton during a recovery, section 9)."""
+        d = self.disc
+        if self.hessian == "exact":
+            return d.stage_hess_exact, d.term_hess_exact, getattr(d, "stage_hess_cost_exact", None)
+        return d.stage_hess_gn, d.term_hess_gn, getattr(d, "stage_hess_cost_gn", None)
+
+    @property
+    def _stage_hess(self):
+        return self._fns()[0]
+
+    @property
+    def _term_hess(self):
+        return self._fns()[1]
+
+    @property
+    def _stage_hess_cost(self):
+        """(x, u, p) -> A_l, the stage-cost part of A (section 4 step 5)."""
+        return self._fns()[2]
 
     # ------------------------------------------------------------------ settings
     def set_M(self, M: int) -> None:
@@ -233,7 +265,21 @@ class ReferenceDopus:
                 raise DopusError.of("nonfinite_input", f"init: guess.{name} has non-finite entries")
         x, u, lam, mu_g, mu_b = g.x.copy(), g.u.copy(), g.lam.copy(), g.mu_g.copy(), g.mu_b.copy()
         free_initial_state(nx, mu_b=mu_b)
-        slots = [_Slot(nx, nu, ng) for _ in range(N)]
+        self._initialised = False
+        self._qp_ready = False
+        self._reset_health(u)
+        self._init_finish(x, u, lam, mu_g, mu_b, g.mu_bN.copy(), g.mu_r.copy(), g.nu.copy(), "init", "at the guess")
+        self._xhat_last = xhat0.copy()
+        self._reset_health(self.u)
+        self.kkt_proxy = self._kkt_proxy_eval()
+        self.kkt_proxy_ref = self.kkt_proxy
+        self.timings = {"init": time.perf_counter() - t0}
+
+    def _init_finish(self, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, who, where) -> None:
+        """Every stage and the terminal node evaluated fresh at the given iterate (init and
+        the re-initialisation of section 9); the state changes only on success."""
+        N, nx, nu_, ng = self.N, self.nx, self.n_u, self.ng
+        slots = [_Slot(nx, nu_, ng) for _ in range(N)]
         gL, phi, _l, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
         for k in range(N):
             s = slots[k]
@@ -241,22 +287,22 @@ class ReferenceDopus:
             s.phi = phi[k].copy()
             s.g = gv[k].copy()
             self._set_block(s, k, x, u, lam, mu_g)
-        term = self._term_eval(x[N], g.mu_r, g.nu)
+        term = self._term_eval(x[N], mu_r, nu)
         if not self._finite(gL, phi, gv, *[v for s in slots for v in (s.Ht, s.A_dyn, s.Phit, s.Ct)],
                             *term.values()):
-            raise DopusError.of("nonfinite_value", "init: a derivative function returned a non-finite value "
-                                "at the guess")
+            raise self._fail("nonfinite_value", f"{who}: a derivative function returned a non-finite value {where}")
         self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
-        self.mu_bN, self.mu_r, self.nu = g.mu_bN.copy(), g.mu_r.copy(), g.nu.copy()
+        self.mu_bN, self.mu_r, self.nu = mu_bN, mu_r, nu
         self.ring_head = 0
-        self._xhat_last = xhat0.copy()
         self.slots = slots
         self.term = term
         self.rho = np.zeros(N)
         self.recomputed = list(range(N))
+        self.qp_status = 0
+        self.qp_iterations = 0
         self.status = status_code("ok")
         self._initialised = True
-        self.timings = {"init": time.perf_counter() - t0}
+        self._qp_ready = True
 
     def _need_init(self):
         if not self._initialised:
@@ -311,25 +357,41 @@ class ReferenceDopus:
     # ------------------------------------------------------------------ feedback
     def feedback(self, xhat0) -> np.ndarray:
         """Solve the QP for ``xhat0``, store ``domega`` per slot, full step; return ``u_0``."""
-        self._need_init()
         t0 = time.perf_counter()
         xhat0 = np.array(xhat0, dtype=float).reshape(-1)
         if xhat0.size != self.nx:
             raise self._fail("invalid_argument", f"feedback: xhat0 must be {self.nx} numbers, got {xhat0.size}")
+        self._flags = 0
+        if not self._initialised:
+            err = self._fail("not_initialized", "call init(xhat0, guess) first")
+            err.u0 = self._fallback_u0()
+            raise err
         if not np.all(np.isfinite(xhat0)):
-            raise self._fail("nonfinite_input", f"feedback: xhat0 must be {self.nx} finite numbers, got {xhat0}")
+            self._xhat_fresh = False
+            raise self._feedback_failed("nonfinite_input",
+                                        f"feedback: xhat0 must be {self.nx} finite numbers, got {xhat0}")
+        if not self._qp_ready:
+            raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
+                                        "successful feedback)")
         qp = self.qp_of_current(xhat0)
         self._xhat_last = xhat0.copy()
+        self._xhat_fresh = True
         t1 = time.perf_counter()
         try:
             sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter)
         except QPError as exc:
             self.qp_status = status_code_qp(exc.qp_status)
-            raise self._fail("qp", f"feedback: {exc}; QP status {self.qp_status} ({exc.qp_status})",
-                             exc.qp_status) from None
+            raise self._feedback_failed("qp", f"feedback: {exc}; QP status {self.qp_status} ({exc.qp_status})",
+                                        exc.qp_status) from None
         self.qp_status = status_code_qp("solved")
+        self.qp_iterations = int(sol.get("iterations", 0))
         t2 = time.perf_counter()
         N, nx = self.N, self.nx
+        if not self._finite(*(sol[k] for k in FIELDS_QP)):
+            raise self._feedback_failed("qp", "feedback: the QP solution is not finite", "solved")
+        if not self._box_ok(self.x + sol["x"], self.u + sol["u"]):
+            raise self._feedback_failed("diverged", "feedback: the QP step leaves the problem's scale box (or is "
+                                        "not finite); no step, the fallback control is returned")
         dW = np.hstack([sol["x"][:N], sol["u"]])
         for k in range(N):
             s = self.slots[self._slot(k)]
@@ -349,10 +411,19 @@ class ReferenceDopus:
         self.qp_iterations = int(sol.get("iterations", 0))
         self.last_qp = qp
         self.last_qp_solution = sol
+        self._qp_ready = False
+        # a good plan: the fallback of the next failures; u0 clipped to the bounds
+        self._n_failed = 0
+        self._plan_age = 0
+        self._recovering = max(self._recovering - 1, 0)
+        self._plan_u = self.u.copy()
+        self.u0, clipped = self._clip_u(self.u[0])
+        if clipped:
+            self._flag("u0_clipped")
         self.status = status_code("ok")
         t3 = time.perf_counter()
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
-        return self.u[0].copy()
+        return self.u0.copy()
 
     # ------------------------------------------------------------------ prepare
     def prepare(self) -> None:
@@ -360,6 +431,23 @@ class ReferenceDopus:
         stage-cost Hessians (section 4). Steps 2 to 5 work on copies of the slots: a
         non-finite value leaves the state of step 1."""
         self._need_init()
+        self._qp_ready = False
+        if self.mode == "receding" and self._plan_age < self.N:
+            self._plan_age += 1
+        if self._recover_pending and self.recovery and self.mode == "receding":
+            self._recover(shifted=False)
+            return
+        if self._recovering > 0 and self.has_gn:
+            # the recovery phase (section 9): Gauss-Newton blocks, every block fresh
+            hessian, self.hessian = self.hessian, "gauss-newton"
+            try:
+                self._prepare_iteration()
+            finally:
+                self.hessian = hessian
+            return
+        self._prepare_iteration()
+
+    def _prepare_iteration(self) -> None:
         t0 = time.perf_counter()
         self._shift()
         t1 = time.perf_counter()
@@ -374,8 +462,15 @@ class ReferenceDopus:
             self._refresh_cost_hessians(slots, set(chosen) | {self.N - 1})
         t4 = time.perf_counter()
         self._commit(slots, term, rho, chosen, xN)
+        self._qp_ready = True
         self.timings.update({"prepare": time.perf_counter() - t0, "shift": t1 - t0,
                              "stage_grad_rho": t2 - t1, "stage_hess": t3 - t2, "cost_hessian": t4 - t3})
+        # 7. the divergence test of the prepared iterate (section 9)
+        self.kkt_proxy = self._kkt_proxy_eval()
+        if self._iterate_diverged():
+            self._flag("diverged")
+            if self.recovery and self.mode == "receding":
+                self._recover(shifted=True)
 
     def _shift(self) -> None:
         """Step 1 (receding mode only): the iterate moves one stage forward, the ring head too."""
@@ -443,7 +538,7 @@ class ReferenceDopus:
     def _relinearise_worst(self, slots, rho) -> list:
         """Step 4: fresh H for the M stages among 0..N-2 with the largest rho (ties: lower index)."""
         order = sorted(range(self.N - 1), key=lambda i: (-rho[i], i))
-        chosen = order[:self.M]
+        chosen = order[:self.N - 1 if self._recovering > 0 else self.M]
         for i in chosen:
             si = slots[self._slot(i)]
             self._set_block(si, i, self.x, self.u, self.lam, self.mu_g)
@@ -473,6 +568,180 @@ class ReferenceDopus:
         self.rho = rho
         self.recomputed = sorted(chosen + [self.N - 1])
         self.status = status_code("ok")
+
+    # ------------------------------------------------------------------ section 9: health
+    def set_recovery(self, on: bool = True, max_failures=None) -> None:
+        """Automatic recovery (section 9): on/off and K, the consecutive failed feedbacks
+        after which the next prepare re-initialises."""
+        if not isinstance(on, (bool, np.bool_)):
+            raise DopusError.of("invalid_argument", f"recovery must be True or False, got {on!r}")
+        k = self.recovery_failures if max_failures is None else max_failures
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= 2**31 - 1:
+            raise DopusError.of("invalid_argument", f"recovery max_failures must be an integer >= 1, "
+                                f"got {max_failures!r}")
+        self.recovery, self.recovery_failures = bool(on), int(k)
+        if not on:
+            self._recover_pending = False
+
+    @property
+    def flags(self) -> set:
+        """The health flags of the last feedback and the prepare after it, by name."""
+        return {name for bit, name in FLAGS.items() if self._flags & bit}
+
+    def _flag(self, name: str) -> None:
+        self._flags |= _FLAG[name]
+
+    def _compute_scales(self):
+        """``(scale_x, scale_u)``: the largest magnitude among the finite bounds, the OCP
+        file's guess, the default x0 and 1."""
+        d = self.disc
+        gx = np.asarray(d.initial_guess.x, float).reshape(self.N + 1, self.nx)
+        gu = np.asarray(d.initial_guess.u, float).reshape(self.N, self.n_u)
+        x0 = np.asarray(d.x0, float).reshape(self.nx)
+
+        def scale(cols):
+            a = np.abs(np.vstack(cols))
+            a[~np.isfinite(a)] = 0.0
+            return np.maximum(1.0, a.max(axis=0))
+        return (scale([self.lbx[None], self.ubx[None], x0[None], gx]),
+                scale([self.lbu[None], self.ubu[None], gu]))
+
+    def _reset_health(self, plan_u) -> None:
+        self._n_failed = 0
+        self._recover_pending = False
+        self._flags = 0
+        self.recoveries = 0
+        self._recovering = 0
+        self._xhat_fresh = True
+        self._plan_age = 0
+        self._plan_u = np.array(plan_u, float).reshape(self.N, self.n_u).copy()
+        self.u0 = self._plan_u[0].copy()
+        self.kkt_proxy = 0.0
+        self.kkt_proxy_ref = 0.0
+
+    @property
+    def failed_feedbacks(self) -> int:
+        """Consecutive failed feedbacks."""
+        return self._n_failed
+
+    def _clip_u(self, u):
+        """u clipped to the control bounds (NaN: 0, then clipped) and whether it changed."""
+        u = np.asarray(u, float)
+        v = np.minimum(np.maximum(np.where(np.isnan(u), 0.0, u), self.lbu), self.ubu)
+        return v, bool(np.any(~(v == u)))
+
+    def _box_ok(self, x, u) -> bool:
+        """The box test of section 9 on a primal point (finite and inside the scale box)."""
+        box = _SAFETY["DIVERGENCE_BOX"]
+        sx, su = self.scales
+        with np.errstate(invalid="ignore"):
+            return bool(np.all(np.abs(x) <= box * sx + np.abs(self._xhat_last))
+                        and np.all(np.abs(u) <= box * su))
+
+    def _fallback_u0(self) -> np.ndarray:
+        j = min(self._plan_age if self.mode == "receding" else 0, self.N - 1)
+        self.u0, clipped = self._clip_u(self._plan_u[j])
+        if clipped:
+            self._flag("u0_clipped")
+        self._flag("fallback")
+        return self.u0.copy()
+
+    def _feedback_failed(self, status: str, message: str, qp_status=None) -> DopusError:
+        """A failed feedback: counted, the recovery scheduled after K of them, the fallback
+        control attached to the error as ``u0``."""
+        self._n_failed += 1
+        if self.recovery and self.mode == "receding" and self._n_failed >= self.recovery_failures:
+            self._recover_pending = True
+        if status == "diverged":
+            self._flag("diverged")
+        err = self._fail(status, message, qp_status)
+        err.u0 = self._fallback_u0()
+        return err
+
+    def _kkt_proxy_eval(self) -> float:
+        """The divergence measure of section 9 from the F values of the slots and the
+        terminal node."""
+        N, nx = self.N, self.nx
+        parts = [0.0]
+        for k in range(N):
+            sl = self.slots[self._slot(k)]
+            F = sl.F_w.copy()
+            F[:nx] += self.lam[k]
+            parts += [np.abs(F).max(initial=0.0), np.abs(sl.phi - self.x[k + 1]).max(initial=0.0)]
+        parts.append(np.abs(self.term["gL"] + self.mu_bN + self.lam[N]).max(initial=0.0))
+        parts.append(np.abs(self.term["r_eq"]).max(initial=0.0))
+        a = np.array(parts)
+        return float("nan") if np.any(np.isnan(a)) else float(a.max())
+
+    def _iterate_diverged(self) -> bool:
+        ref = max(self.kkt_proxy_ref, 1.0)
+        if not self._box_ok(self.x, self.u):
+            return True
+        if not self._finite(self.lam, self.mu_b, self.mu_bN):
+            return True
+        return not (self.kkt_proxy <= _SAFETY["DIVERGENCE_KKT"] * ref)
+
+    def _stage_phi(self, x, u, p):
+        phi = np.array(self.disc.stage_eval(x, u, p)[0], float).reshape(self.nx)
+        return phi
+
+    def _simulate(self, x, u, use_plan: bool) -> bool:
+        """Forward simulation from x[0] with the last good plan from its current age on (or
+        the OCP file's guess controls), clipped, into x and u; True when every node is
+        finite and inside the box."""
+        gu = np.asarray(self.disc.initial_guess.u, float).reshape(self.N, self.n_u)
+        for k in range(self.N):
+            j = min(self._plan_age + k, self.N - 1)
+            u[k] = self._clip_u(self._plan_u[j] if use_plan else gu[k])[0]
+            try:
+                x[k + 1] = self._stage_phi(x[k], u[k], self.p[k])
+            except RuntimeError:
+                return False
+            if not np.all(np.isfinite(x[k + 1])):
+                return False
+        return self._box_ok(x, u)
+
+    def _recover(self, shifted: bool) -> None:
+        """The automatic recovery of section 9: re-initialise from a forward simulation of the
+        predicted state with the last good plan, the iterate's multipliers, every block
+        recomputed (Gauss-Newton when the problem has it)."""
+        N, nx = self.N, self.nx
+        x, u = self.x.copy(), self.u.copy()
+        if not self._xhat_fresh:
+            if not shifted:
+                x[0] = x[1]
+        else:
+            try:
+                x0 = self._stage_phi(self._xhat_last, self.u0, self.p[0])
+            except RuntimeError:
+                x0 = np.full(nx, np.nan)
+            x[0] = x0 if np.all(np.isfinite(x0)) else self._xhat_last
+        box = _SAFETY["DIVERGENCE_BOX"]
+        if not np.all(np.abs(x[0]) <= box * self.scales[0] + np.abs(self._xhat_last)):
+            x[0] = self._xhat_last
+        if not self._simulate(x, u, True) and not self._simulate(x, u, False):
+            x[1:] = np.asarray(self.disc.initial_guess.x, float).reshape(N + 1, nx)[1:]
+            gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)
+            for k in range(N):
+                u[k] = self._clip_u(gu[k])[0]
+        hessian = self.hessian
+        self.hessian = "gauss-newton" if self.has_gn else hessian
+        try:
+            self._init_finish(x, u, self.lam.copy(), self.mu_g.copy(), self.mu_b.copy(), self.mu_bN.copy(),
+                              self.mu_r.copy(), self.nu.copy(), "prepare", "at the re-initialised iterate")
+        except DopusError:
+            self.x, self.u = x, u
+            self._qp_ready = False
+            raise
+        finally:
+            self.hessian = hessian
+        self.kkt_proxy = self._kkt_proxy_eval()
+        self.kkt_proxy_ref = self.kkt_proxy
+        self._n_failed = 0
+        self._recover_pending = False
+        self.recoveries += 1
+        self._recovering = int(_SAFETY["RECOVERY_FULL_RTI"])
+        self._flag("recovered")
 
     # ------------------------------------------------------------------ KKT
     def kkt(self, xhat0) -> dict:
