@@ -29,9 +29,10 @@ def _solver_options(lm_note: str):
                      help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; "
                           "stored: the paper's literal algorithm (the whole Hessian block moves with its slot; "
                           "figure 1). " + _FROM_FILE.format("fresh")),
-        click.option("--lm", default=None, type=click.FloatRange(min=0),
-                     help=f"Levenberg-Marquardt term added to every Hessian block of the QP ({lm_note}). "
-                          + _FROM_FILE.format("0")),
+        click.option("--lm", default=None, type=str,
+                     help=f"Levenberg-Marquardt term added to every Hessian block of the QP ({lm_note}): "
+                          "'auto' (scale-aware and adaptive, docs/algorithm.md section 10) or a fixed number >= 0. "
+                          + _FROM_FILE.format("auto")),
     ]
 
     def apply(fn):

@@ -36,7 +36,7 @@ DEFAULTS: Dict[str, Any] = {
     "regularization": "none",
     "reg_eps": 1e-4,
     "cost_hessian": "fresh",
-    "lm": 0.0,
+    "lm": "auto",
     "mode": "receding",
     "qp_tol": 1e-10,
     "offline_guess": False,
@@ -128,6 +128,28 @@ def nonnegative(setting: str, value: Any) -> float:
     return f
 
 
+#: The value of ``lm`` that selects the automatic term (docs/algorithm.md section 10).
+LM_AUTO = "auto"
+
+
+def levenberg_marquardt(value: Any):
+    """``"auto"`` (the automatic, adaptive term) or a fixed term: a finite number >= 0."""
+    if isinstance(value, str):
+        if value.strip().lower() == LM_AUTO:
+            return LM_AUTO
+        try:
+            value = float(value)
+        except ValueError:
+            raise SettingError(f"lm must be 'auto' or a number >= 0, got {value!r}") from None
+    return nonnegative("lm", value)
+
+
+def lm_code(value: Any) -> float:
+    """The generated default of ``lm``: the fixed term, or -1 for the automatic one."""
+    v = levenberg_marquardt(value)
+    return -1.0 if v == LM_AUTO else v
+
+
 def count(setting: str, value: Any, minimum: int = 0) -> int:
     """An integer >= ``minimum`` (``M`` >= 0, ``qp_max_iter`` >= 1); numpy integers too."""
     import numbers
@@ -145,7 +167,7 @@ _CHECKS = {
     "cost_hessian": lambda v: check("cost_hessian", v),
     "reg_eps": lambda v: positive("reg_eps", v),
     "qp_tol": lambda v: qp_tolerance(v),
-    "lm": lambda v: nonnegative("lm", v),
+    "lm": lambda v: levenberg_marquardt(v),
 }
 
 

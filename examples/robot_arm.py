@@ -89,9 +89,9 @@ def build():
     ocp.initial_guess(x=x0, u=[0.0, 0.0, 5.0])
     # From the cold guess the exact-Hessian DOPUS diverges (docs/design.md section 8): the
     # generated controller carries the offline NLP solution to start warm.
-    # lm: the Levenberg-Marquardt term of the QP; the closed loop with the exact Hessian needs
-    # it (README, "Closed loop"); it changes the steps, never the solution.
-    ocp.options(hessian="exact", regularization="none", reg_eps=1e-4, M=1, offline_guess=True, lm=1e-4)
+    # The Levenberg-Marquardt term of the QP is the automatic one (lm="auto", the default;
+    # docs/algorithm.md section 10): nothing to tune; it changes the steps, never the solution.
+    ocp.options(hessian="exact", regularization="none", reg_eps=1e-4, M=1, offline_guess=True)
     ocp.disturbance(disturb)
     ocp.scenario(duration=3.0, events=[Event(1.0, disturb, "disturbance")],
                  signals={"deviation": ca.norm_2(tip(q) - path(theta)),

@@ -218,8 +218,11 @@ static void dopus_fallback_u0(dopus_solver *s, double *u0)
 }
 
 /* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
+static void dopus_lm_feedback(dopus_solver *s, int status);
+
 static int dopus_feedback_failed(dopus_solver *s, double *u0, int status)
 {
+    dopus_lm_feedback(s, status);
     s->n_failed += 1;
     if (s->recovery && s->mode == DOPUS_MODE_RECEDING && s->n_failed >= s->recovery_failures) {
         s->recover_pending = 1;
@@ -275,6 +278,170 @@ static int dopus_iterate_diverged(dopus_solver *s)
     return !(s->kkt_proxy <= DOPUS_DIVERGENCE_KKT * ref);
 }
 
+/* ---- automatic Levenberg-Marquardt term (algorithm.md section 10) ------------------- */
+
+/* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
+static double dopus_lm_hessian_scale(const dopus_solver *s)
+{
+    double h = 1e-300, v;
+    int k, i;
+    for (k = 0; k < DOPUS_N; ++k) {
+        const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
+        for (i = 0; i < DOPUS_NW; ++i) {
+            v = fabs(slot->Ht[i + i * DOPUS_NW]);
+            h = v > h ? v : h;
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        v = fabs(s->A_N[i + i * DOPUS_NX]);
+        h = v > h ? v : h;
+    }
+    return h;
+}
+
+/* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
+ * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
+ * out) has control pivots above DOPUS_LM_PIVOT_REL h. */
+static int dopus_lm_convex(dopus_solver *s, double lm)
+{
+    const double tol = DOPUS_LM_PIVOT_REL * s->lm_scale;
+    double *P = s->lm_P, *PA = s->lm_PA, *Z = s->lm_G;
+    double v;
+    int k, i, j, l;
+    for (j = 0; j < DOPUS_NX; ++j) {
+        for (i = 0; i < DOPUS_NX; ++i) {
+            P[i + j * DOPUS_NX] = (i >= j ? s->A_N[i + j * DOPUS_NX] : s->A_N[j + i * DOPUS_NX]) + (i == j ? lm : 0.0);
+        }
+    }
+    for (k = DOPUS_N - 1; k >= 0; --k) {
+        const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
+        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
+        for (j = 0; j < DOPUS_NW; ++j) {
+            for (i = 0; i < DOPUS_NX; ++i) {
+                v = 0.0;
+                for (l = 0; l < DOPUS_NX; ++l) {
+                    v += P[i + l * DOPUS_NX] * slot->Phit[l + j * DOPUS_NX];
+                }
+                PA[i + j * DOPUS_NX] = v;
+            }
+        }
+        for (j = 0; j < DOPUS_NW; ++j) {
+            for (i = 0; i < DOPUS_NW; ++i) {
+                v = (i >= j ? slot->Ht[i + j * DOPUS_NW] : slot->Ht[j + i * DOPUS_NW]) + (i == j ? lm : 0.0);
+                for (l = 0; l < DOPUS_NX; ++l) {
+                    v += slot->Phit[l + i * DOPUS_NX] * PA[l + j * DOPUS_NX];
+                }
+                Z[i + j * DOPUS_NW] = v;
+            }
+        }
+        /* Cholesky of the control block Z_uu in place (lower triangle) */
+        for (j = DOPUS_NX; j < DOPUS_NW; ++j) {
+            double d = Z[j + j * DOPUS_NW];
+            for (l = DOPUS_NX; l < j; ++l) {
+                d -= Z[j + l * DOPUS_NW] * Z[j + l * DOPUS_NW];
+            }
+            if (!(d > tol)) {
+                return 0;
+            }
+            d = sqrt(d);
+            Z[j + j * DOPUS_NW] = d;
+            for (i = j + 1; i < DOPUS_NW; ++i) {
+                v = Z[i + j * DOPUS_NW];
+                for (l = DOPUS_NX; l < j; ++l) {
+                    v -= Z[i + l * DOPUS_NW] * Z[j + l * DOPUS_NW];
+                }
+                Z[i + j * DOPUS_NW] = v / d;
+            }
+        }
+        if (k == 0) {
+            break;   /* x_0 is fixed: P_0 is not needed */
+        }
+        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
+        for (j = 0; j < DOPUS_NX; ++j) {
+            for (i = DOPUS_NX; i < DOPUS_NW; ++i) {
+                v = Z[i + j * DOPUS_NW];
+                for (l = DOPUS_NX; l < i; ++l) {
+                    v -= Z[i + l * DOPUS_NW] * Z[l + j * DOPUS_NW];
+                }
+                Z[i + j * DOPUS_NW] = v / Z[i + i * DOPUS_NW];
+            }
+        }
+        for (j = 0; j < DOPUS_NX; ++j) {
+            for (i = 0; i < DOPUS_NX; ++i) {
+                v = 0.5 * (Z[i + j * DOPUS_NW] + Z[j + i * DOPUS_NW]);
+                for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
+                    v -= Z[l + i * DOPUS_NW] * Z[l + j * DOPUS_NW];
+                }
+                P[i + j * DOPUS_NX] = v;
+            }
+        }
+    }
+    return 1;
+}
+
+/* One raise: from below the minimum to the minimum, else times DOPUS_LM_RAISE, at most the
+ * maximum. */
+static void dopus_lm_raise(dopus_solver *s)
+{
+    double lo = DOPUS_LM_MIN_REL * s->lm_scale, hi = DOPUS_LM_MAX_REL * s->lm_scale;
+    s->lm = s->lm < lo ? lo : s->lm * DOPUS_LM_RAISE;
+    s->lm = s->lm > hi ? hi : s->lm;
+}
+
+/* Raise until the QP is convex on the dynamics or the term is at its maximum. */
+static void dopus_lm_convexify(dopus_solver *s)
+{
+    double hi = DOPUS_LM_MAX_REL * s->lm_scale;
+    while (!dopus_lm_convex(s, s->lm) && s->lm < hi) {
+        dopus_lm_raise(s);
+    }
+}
+
+/* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
+static void dopus_lm_start(dopus_solver *s)
+{
+    if (!s->lm_auto) {
+        return;
+    }
+    s->lm_scale = dopus_lm_hessian_scale(s);
+    s->lm = 0.0;
+    s->lm_kkt_prev = -1.0;
+    dopus_lm_convexify(s);
+}
+
+/* After a prepare (QP assembled, KKT proxy evaluated): the scale, a raise when the proxy
+ * grew DOPUS_LM_KKT_GROWTH times, then convex. */
+static void dopus_lm_prepared(dopus_solver *s)
+{
+    double floor_ = 1e-8 * (s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0);
+    double prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
+    if (!s->lm_auto) {
+        return;
+    }
+    s->lm_scale = dopus_lm_hessian_scale(s);
+    if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= DOPUS_LM_KKT_GROWTH * prev)) {
+        dopus_lm_raise(s);
+    }
+    s->lm_kkt_prev = s->kkt_proxy;
+    dopus_lm_convexify(s);
+}
+
+/* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
+static void dopus_lm_feedback(dopus_solver *s, int status)
+{
+    if (!s->lm_auto) {
+        return;
+    }
+    if (status == DOPUS_OK) {
+        s->lm *= DOPUS_LM_LOWER;
+        if (s->lm < DOPUS_LM_MIN_REL * s->lm_scale) {
+            s->lm = 0.0;
+        }
+    } else if (status == DOPUS_ERR_QP || status == DOPUS_ERR_DIVERGED) {
+        dopus_lm_raise(s);
+    }
+}
+
 void dopus_defaults(dopus_solver *s)
 {
     int k, i;
@@ -290,7 +457,11 @@ void dopus_defaults(dopus_solver *s)
     s->regularization = dopus_default_regularization;
     s->reg_eps = dopus_default_reg_eps;
     s->cost_hessian = dopus_default_cost_hessian ? 1 : 0;
+    /* a negative generated default: the automatic term (algorithm.md section 10) */
+    s->lm_auto = !(dopus_default_lm >= 0.0);
     s->lm = (dopus_default_lm >= 0.0 && dopus_default_lm < INFINITY) ? dopus_default_lm : 0.0;
+    s->lm_scale = 1.0;
+    s->lm_kkt_prev = -1.0;
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
     for (k = 0; k <= DOPUS_N; ++k) {
@@ -576,6 +747,7 @@ static int dopus_init_finish(dopus_solver *s)
     dopus_assemble(s);
     s->initialized = 1;
     s->qp_ready = 1;
+    dopus_lm_start(s);
     return DOPUS_OK;
 }
 
@@ -766,6 +938,7 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
     s->n_failed = 0;
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
+    dopus_lm_feedback(s, DOPUS_OK);
     dopus_copy(&s->plan_u[0][0], &s->u[0][0], DOPUS_N * DOPUS_NU);
     if (dopus_clip_u(s->u[0], s->u0_out)) {
         s->flags |= DOPUS_FLAG_U0_CLIPPED;
@@ -1032,6 +1205,7 @@ static int dopus_prepare_iteration(dopus_solver *s)
 
     /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
     s->kkt_proxy = dopus_kkt_proxy_eval(s);
+    dopus_lm_prepared(s);   /* the automatic Levenberg-Marquardt term (section 10) */
     if (dopus_iterate_diverged(s)) {
         s->flags |= DOPUS_FLAG_DIVERGED;
         if (s->recovery && s->mode == DOPUS_MODE_RECEDING) {
@@ -1183,8 +1357,33 @@ int dopus_set_levenberg_marquardt(dopus_solver *s, double lm)
     if (!isfinite(lm) || !(lm >= 0.0)) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
+    s->lm_auto = 0;
     s->lm = lm;
     return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_set_lm_auto(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    s->lm_auto = 1;
+    s->lm = 0.0;
+    s->lm_kkt_prev = -1.0;
+    if (s->initialized && s->qp_ready) {
+        dopus_lm_start(s);
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_lm_auto(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->lm_auto;
+}
+
+double dopus_get_lm_scale(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->lm_scale;
 }
 
 double dopus_get_levenberg_marquardt(dopus_solver *s)

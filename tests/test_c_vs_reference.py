@@ -302,11 +302,18 @@ def test_robot_receding_levenberg_marquardt(robot_disc, robot_solution, M):
 
 
 def test_levenberg_marquardt_setting(robot_disc):
-    assert CSolver(robot_disc, lm=None).lm == 1e-4     # generated: examples/robot_arm.py options(lm=1e-4)
+    assert CSolver(robot_disc, lm=None).lm_auto       # generated: examples/robot_arm.py declares no lm
     c = CSolver(robot_disc)
-    assert c.lm == 0.0
+    assert c.lm_auto and c.lm == 0.0                   # the default: automatic (section 10)
     c.set_levenberg_marquardt(2.5e-4)
-    assert c.lm == 2.5e-4
+    assert c.lm == 2.5e-4 and not c.lm_auto
+    for bad in ("automatic", "", "-1"):
+        with pytest.raises(DopusError, match="lm"):
+            c.set_levenberg_marquardt(bad)
+        assert c.lm == 2.5e-4 and not c.lm_auto
+    c.set_levenberg_marquardt("auto")
+    assert c.lm_auto
+    c.set_levenberg_marquardt(2.5e-4)
     for bad in (-1e-6, float("nan"), float("inf")):
         with pytest.raises(DopusError, match="lm"):
             c.set_levenberg_marquardt(bad)

@@ -284,7 +284,7 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any) -> Dict[str, Any
         "default_regularization": _code("regularization", options),
         "default_cost_hessian": _code("cost_hessian", options),
         "default_reg_eps": c_double(_option(options, "reg_eps", settings.DEFAULTS["reg_eps"]), "reg_eps"),
-        "default_lm": c_double(_option(options, "lm", settings.DEFAULTS["lm"]), "lm"),
+        "default_lm": c_double(settings.lm_code(_option(options, "lm", settings.DEFAULTS["lm"])), "lm"),
         "has_nominal": nominal is not None,
     }
     if not 0 <= ctx["default_M"] <= N - 1:

@@ -46,7 +46,7 @@ import sys
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Mapping, Optional
+from typing import Callable, Mapping, Optional, Union
 
 import casadi as ca
 import numpy as np
@@ -445,15 +445,17 @@ class Ocp:
     @_declaration
     def options(self, hessian: Optional[str] = None, regularization: Optional[str] = None,
                 reg_eps: Optional[float] = None, M: Optional[int] = None,
-                offline_guess: Optional[bool] = None, lm: Optional[float] = None,
+                offline_guess: Optional[bool] = None, lm: Optional[Union[float, str]] = None,
                 cost_hessian: Optional[str] = None) -> None:
         """Solver defaults (the generated solver and the CLI can override them); only the
         options given change. Names, allowed values and defaults are those of
         :mod:`dopus_codegen.settings`: ``hessian="exact"``, ``regularization="none"``,
-        ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``, ``lm=0``, ``cost_hessian="fresh"``.
+        ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``, ``lm="auto"``, ``cost_hessian="fresh"``.
 
-        ``lm``: the Levenberg-Marquardt term of the QP (docs/algorithm.md section 3), the
-        default of the generated runtime and of ``dopus-gen sil`` and ``converge``.
+        ``lm``: the Levenberg-Marquardt term of the QP (docs/algorithm.md sections 3 and
+        10): ``"auto"`` (the default: scale-aware and adaptive, nothing to tune) or a fixed
+        number >= 0 (``0`` is the paper's literal algorithm); the default of the generated
+        runtime and of ``dopus-gen sil`` and ``converge``.
 
         ``offline_guess=True``: the code generator solves the NLP at the initial state
         offline (IPOPT) and carries the primal-dual solution as static data, so the

@@ -18,7 +18,7 @@ path constraints on stages ``0..N-1``; a terminal row with ``lb == ub`` is an eq
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, Optional, Tuple
+from typing import Any, Callable, Dict, Optional, Tuple, Union
 
 import casadi as ca
 import numpy as np
@@ -181,7 +181,7 @@ class OptionsSpec:
     reg_eps: float
     M: int
     offline_guess: bool
-    lm: float
+    lm: Union[float, str]       # a fixed term >= 0 or "auto" (docs/algorithm.md section 10)
     cost_hessian: str = "fresh"
 
     def as_dict(self) -> Dict[str, Any]:

@@ -140,7 +140,8 @@ class ReferenceDopus:
         self.regularization = _setting(settings.check, "regularization", regularization)
         self.reg_eps = _setting(settings.positive, "reg_eps", reg_eps)
         self.qp_tol = _setting(settings.qp_tolerance, qp_tol)
-        self.lm = _setting(settings.nonnegative, "lm", lm)
+        self.lm, self.lm_auto, self.lm_scale, self._lm_kkt_prev = 0.0, False, 1.0, -1.0
+        self.set_levenberg_marquardt(lm)
         self.qp_max_iter = None
         if qp_max_iter is not None:
             self.set_qp_max_iter(qp_max_iter)
@@ -193,6 +194,19 @@ class ReferenceDopus:
     def set_M(self, M: int) -> None:
         """Values above N-1 mean the full RTI (N-1), as in the C runtime."""
         self.M = min(_setting(settings.count, "M", M), self.N - 1)
+
+    def set_levenberg_marquardt(self, lm) -> None:
+        """``"auto"``: the automatic, adaptive term of section 10; a number >= 0: fixed."""
+        v = _setting(settings.levenberg_marquardt, lm)
+        if v == settings.LM_AUTO:
+            self.lm_auto, self.lm, self._lm_kkt_prev = True, 0.0, -1.0
+            if self._initialised_and_ready():
+                self._lm_start()
+        else:
+            self.lm_auto, self.lm = False, float(v)
+
+    def _initialised_and_ready(self) -> bool:
+        return bool(getattr(self, "_initialised", False) and getattr(self, "_qp_ready", False))
 
     def set_mode(self, mode: str) -> None:
         self.mode = _setting(settings.check, "mode", mode)
@@ -303,6 +317,7 @@ class ReferenceDopus:
         self.status = status_code("ok")
         self._initialised = True
         self._qp_ready = True
+        self._lm_start()
 
     def _need_init(self):
         if not self._initialised:
@@ -416,6 +431,7 @@ class ReferenceDopus:
         self._n_failed = 0
         self._plan_age = 0
         self._recovering = max(self._recovering - 1, 0)
+        self._lm_feedback("ok")
         self._plan_u = self.u.copy()
         self.u0, clipped = self._clip_u(self.u[0])
         if clipped:
@@ -467,6 +483,7 @@ class ReferenceDopus:
                              "stage_grad_rho": t2 - t1, "stage_hess": t3 - t2, "cost_hessian": t4 - t3})
         # 7. the divergence test of the prepared iterate (section 9)
         self.kkt_proxy = self._kkt_proxy_eval()
+        self._lm_prepared()   # the automatic Levenberg-Marquardt term (section 10)
         if self._iterate_diverged():
             self._flag("diverged")
             if self.recovery and self.mode == "receding":
@@ -649,6 +666,7 @@ class ReferenceDopus:
     def _feedback_failed(self, status: str, message: str, qp_status=None) -> DopusError:
         """A failed feedback: counted, the recovery scheduled after K of them, the fallback
         control attached to the error as ``u0``."""
+        self._lm_feedback(status)
         self._n_failed += 1
         if self.recovery and self.mode == "receding" and self._n_failed >= self.recovery_failures:
             self._recover_pending = True
@@ -742,6 +760,83 @@ class ReferenceDopus:
         self.recoveries += 1
         self._recovering = int(_SAFETY["RECOVERY_FULL_RTI"])
         self._flag("recovered")
+
+    # ------------------------------------------------------------------ section 10: automatic lm
+    def _lm_hessian_scale(self) -> float:
+        """h: the largest |diagonal entry| of the QP's stage and terminal blocks."""
+        d = [np.abs(np.diag(sl.Ht)).max() for sl in self.slots] + [np.abs(np.diag(self.term["A"])).max()]
+        return float(max(1e-300, *d))
+
+    def _lm_convex(self, lm: float) -> bool:
+        """The QP with the term lm is strictly convex on the dynamics: the Riccati recursion
+        of its blocks (lower triangles; inequalities and terminal constraints left out)
+        has control pivots above DOPUS_LM_PIVOT_REL h."""
+        nx, nw = self.nx, self.nw
+        tol = _SAFETY["LM_PIVOT_REL"] * self.lm_scale
+
+        def sym(A):
+            return np.tril(A) + np.tril(A, -1).T
+        P = sym(self.term["A"]) + lm * np.eye(nx)
+        for k in range(self.N - 1, -1, -1):
+            sl = self.slots[self._slot(k)]
+            Z = sym(sl.Ht) + lm * np.eye(nw) + sl.Phit.T @ (P @ sl.Phit)
+            nu = nw - nx
+            L = np.zeros((nu, nu))
+            Zuu = Z[nx:, nx:]
+            for j in range(nu):
+                d = Zuu[j, j] - L[j, :j] @ L[j, :j]
+                if not d > tol:
+                    return False
+                L[j, j] = np.sqrt(d)
+                for i in range(j + 1, nu):
+                    L[i, j] = (Zuu[i, j] - L[i, :j] @ L[j, :j]) / L[j, j]
+            if k == 0:
+                break
+            Y = np.linalg.solve(L, Z[nx:, :nx])
+            Zxx = Z[:nx, :nx]
+            P = 0.5 * (Zxx + Zxx.T) - Y.T @ Y
+        return True
+
+    def _lm_raise(self) -> None:
+        lo, hi = _SAFETY["LM_MIN_REL"] * self.lm_scale, _SAFETY["LM_MAX_REL"] * self.lm_scale
+        self.lm = min(lo if self.lm < lo else self.lm * _SAFETY["LM_RAISE"], hi)
+
+    def _lm_convexify(self) -> None:
+        hi = _SAFETY["LM_MAX_REL"] * self.lm_scale
+        while not self._lm_convex(self.lm) and self.lm < hi:
+            self._lm_raise()
+
+    def _lm_start(self) -> None:
+        """After init or a re-initialisation: the scale, lm from 0, raised until convex."""
+        if not self.lm_auto:
+            return
+        self.lm_scale = self._lm_hessian_scale()
+        self.lm = 0.0
+        self._lm_kkt_prev = -1.0
+        self._lm_convexify()
+
+    def _lm_prepared(self) -> None:
+        """After a prepare: the scale, a raise when the KKT proxy grew, then convex."""
+        if not self.lm_auto:
+            return
+        floor = 1e-8 * max(self.kkt_proxy_ref, 1.0)
+        prev = max(self._lm_kkt_prev, floor)
+        self.lm_scale = self._lm_hessian_scale()
+        if self._lm_kkt_prev >= 0.0 and not self.kkt_proxy <= _SAFETY["LM_KKT_GROWTH"] * prev:
+            self._lm_raise()
+        self._lm_kkt_prev = self.kkt_proxy
+        self._lm_convexify()
+
+    def _lm_feedback(self, status: str) -> None:
+        """After a feedback: lowered after a step, raised after a failed QP or a divergence."""
+        if not self.lm_auto:
+            return
+        if status == "ok":
+            self.lm *= _SAFETY["LM_LOWER"]
+            if self.lm < _SAFETY["LM_MIN_REL"] * self.lm_scale:
+                self.lm = 0.0
+        elif status in ("qp", "diverged"):
+            self._lm_raise()
 
     # ------------------------------------------------------------------ KKT
     def kkt(self, xhat0) -> dict:

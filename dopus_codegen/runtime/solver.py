@@ -283,15 +283,29 @@ class CSolver:
         self._check(self._c("set_cost_hessian")(self._s, self._setting(settings.code, "cost_hessian", cost_hessian)),
                     f"cost_hessian={cost_hessian!r}")
 
-    def set_levenberg_marquardt(self, lm: float) -> None:
+    def set_levenberg_marquardt(self, lm) -> None:
         """Levenberg-Marquardt term: the QP uses the Hessian blocks plus ``lm * I``
-        (docs/algorithm.md section 3); finite and >= 0."""
-        self._check(self._c("set_levenberg_marquardt")(self._s, self._setting(settings.nonnegative, "lm", lm)),
-                    f"lm={lm!r}")
+        (docs/algorithm.md section 3): ``"auto"`` for the automatic, adaptive term (section
+        10), or a fixed number >= 0."""
+        v = self._setting(settings.levenberg_marquardt, lm)
+        if v == settings.LM_AUTO:
+            self._check(self._c("set_lm_auto")(self._s), "lm='auto'")
+        else:
+            self._check(self._c("set_levenberg_marquardt")(self._s, v), f"lm={lm!r}")
 
     @property
     def lm(self) -> float:
+        """The term of the next QP (fixed, or the current automatic value)."""
         return float(self._c("get_levenberg_marquardt")(self._s))
+
+    @property
+    def lm_auto(self) -> bool:
+        return bool(self._c("get_lm_auto")(self._s))
+
+    @property
+    def lm_scale(self) -> float:
+        """The Hessian scale of the automatic term (section 10)."""
+        return float(self._c("get_lm_scale")(self._s))
 
     def set_qp_tol(self, tol: float) -> None:
         self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")

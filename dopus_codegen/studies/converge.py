@@ -136,7 +136,7 @@ def iterations_to(kkt: list, tol: float) -> Optional[int]:
 def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regularization: str = "none",
               reg_eps: float = 1e-4, backend_factory: Optional[Callable] = None,
               backend_name: Optional[str] = None, progress: Optional[Callable] = None,
-              cost_hessian: str = "fresh", lm: float = 0.0) -> dict:
+              cost_hessian: str = "fresh", lm="auto") -> dict:
     """Run the study; return the JSON structure of the module docstring.
 
     ``start``: a :class:`StartPoint` or ``"cold"`` / ``"warm"`` (see :func:`make_start`).
@@ -198,7 +198,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     return {
         "problem": disc.name, "N": int(disc.N), "backend": backend_name or getattr(backend_factory, "__name__", "custom"),
         "start": start.label, "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
-        "cost_hessian": cost_hessian, "lm": float(lm), "runs": runs,
+        "cost_hessian": cost_hessian, "lm": lm if isinstance(lm, str) else float(lm), "runs": runs,
         "solution": {"M": int(Msol), "x": xs.tolist(), "u": us.tolist(), "objective": obj},
     }
 

@@ -44,10 +44,11 @@ _ON_GRID = 1e-9
 _PROGRESS_AFTER = 2.0
 
 
-def default_lm(disc) -> float:
+def default_lm(disc):
     """The Levenberg-Marquardt term of the closed loop when none is given: the OCP file's
-    ``options(lm=...)``, else 0 (docs/algorithm.md section 3; README "Closed loop")."""
-    return float(disc.spec.options.lm)
+    ``options(lm=...)``, else ``"auto"`` (docs/algorithm.md sections 3 and 10)."""
+    lm = disc.spec.options.lm
+    return lm if isinstance(lm, str) else float(lm)
 
 
 class SilError(RuntimeError):
@@ -57,7 +58,7 @@ class SilError(RuntimeError):
 # --------------------------------------------------------------------------- backends
 def make_backend(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
                  regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
-                 lm: float = 0.0):
+                 lm="auto"):
     """A receding-horizon backend (docs/algorithm.md section 7) by name: 'c' or 'reference'."""
     kwargs = dict(M=M, mode="receding", hessian=hessian, regularization=regularization, reg_eps=reg_eps,
                   cost_hessian=cost_hessian, lm=lm)
@@ -152,7 +153,8 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                     "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
                     "backend": backend,
                     "cost_hessian": str(getattr(backend_obj, "cost_hessian", cost_hessian)),
-                    "lm": float(getattr(backend_obj, "lm", lm)),
+                    "lm": float(getattr(backend_obj, "lm", 0.0 if isinstance(lm, str) else lm)),
+                    "lm_setting": lm if isinstance(lm, str) else float(lm),
                     "plant": "CVODES (Adams, reltol = abstol = 1e-10)",
                     "lbu": list(loop.lbu), "ubu": list(loop.ubu),
                     "u_labels": list(disc.data.control_names) or None,
@@ -540,7 +542,7 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
     for m, label, src in configs:
         name = label or ("full RTI" if min(m, N - 1) == N - 1 else f"DOPUS M = {m}")
         echo(f"{name}: {backend} backend, {values['hessian']} Hessian, regularization {values['regularization']}, "
-             f"cost Hessian {values['cost_hessian']}, Levenberg-Marquardt {values['lm']:g}, "
+             f"cost Hessian {values['cost_hessian']}, Levenberg-Marquardt {values['lm']}, "
              f"{duration if duration is not None else spec.duration} s ...", err=True)
         run = run_closed_loop(disc, backend=backend, M=m, hessian=values["hessian"],
                               regularization=values["regularization"], reg_eps=values["reg_eps"],

@@ -69,10 +69,19 @@ int robot_arm_set_cost_hessian(robot_arm_solver *s, int fresh);
 int robot_arm_get_cost_hessian(robot_arm_solver *s);
 /* Levenberg-Marquardt term (algorithm.md section 3): the QP minimises with the Hessian
  * blocks A~_k + lm I and A~_N + lm I (the stored blocks are not changed, so the secant
- * criterion and the fixed point are those of lm = 0). lm finite and >= 0; default: the OCP
- * file's options(lm=...), else 0. */
+ * criterion and the fixed point are those of lm = 0). lm finite and >= 0: a fixed term
+ * (the automatic one is switched off); default: the OCP file's options(lm=...), else the
+ * automatic term. */
 int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, double lm);
+/* The term of the next QP (fixed, or the current automatic value). */
 double robot_arm_get_levenberg_marquardt(robot_arm_solver *s);
+/* The automatic, scale-aware, adaptive term (docs/algorithm.md section 10): lm is raised
+ * until the QP is convex on the dynamics (Riccati pivots positive definite), after a
+ * failed feedback and when the KKT proxy grows; lowered after every successful feedback. */
+int robot_arm_set_lm_auto(robot_arm_solver *s);
+int robot_arm_get_lm_auto(robot_arm_solver *s);
+/* The Hessian scale of the automatic term (largest diagonal entry of the QP blocks). */
+double robot_arm_get_lm_scale(robot_arm_solver *s);
 /* QP tolerance: 0 < tol <= ROBOT_ARM_QP_TOL_MAX (1e-2); a larger one would let the QP return
  * steps that violate the bounds by that much, so it is refused (ROBOT_ARM_ERR_INVALID_ARGUMENT). */
 int robot_arm_set_qp_tol(robot_arm_solver *s, double tol);

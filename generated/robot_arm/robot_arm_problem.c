@@ -107,7 +107,7 @@ const int robot_arm_default_hessian = 0;
 const int robot_arm_default_regularization = 0;
 const double robot_arm_default_reg_eps = 0.0001;
 const int robot_arm_default_cost_hessian = 1;
-const double robot_arm_default_lm = 0.0001;
+const double robot_arm_default_lm = -1.0;
 
 /* offline primal-dual solution at robot_arm_x0_default */
 const double robot_arm_nominal_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {

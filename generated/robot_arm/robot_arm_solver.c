@@ -218,8 +218,11 @@ static void robot_arm_fallback_u0(robot_arm_solver *s, double *u0)
 }
 
 /* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
+static void robot_arm_lm_feedback(robot_arm_solver *s, int status);
+
 static int robot_arm_feedback_failed(robot_arm_solver *s, double *u0, int status)
 {
+    robot_arm_lm_feedback(s, status);
     s->n_failed += 1;
     if (s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING && s->n_failed >= s->recovery_failures) {
         s->recover_pending = 1;
@@ -275,6 +278,170 @@ static int robot_arm_iterate_diverged(robot_arm_solver *s)
     return !(s->kkt_proxy <= ROBOT_ARM_DIVERGENCE_KKT * ref);
 }
 
+/* ---- automatic Levenberg-Marquardt term (algorithm.md section 10) ------------------- */
+
+/* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
+static double robot_arm_lm_hessian_scale(const robot_arm_solver *s)
+{
+    double h = 1e-300, v;
+    int k, i;
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
+        for (i = 0; i < ROBOT_ARM_NW; ++i) {
+            v = fabs(slot->Ht[i + i * ROBOT_ARM_NW]);
+            h = v > h ? v : h;
+        }
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        v = fabs(s->A_N[i + i * ROBOT_ARM_NX]);
+        h = v > h ? v : h;
+    }
+    return h;
+}
+
+/* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
+ * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
+ * out) has control pivots above ROBOT_ARM_LM_PIVOT_REL h. */
+static int robot_arm_lm_convex(robot_arm_solver *s, double lm)
+{
+    const double tol = ROBOT_ARM_LM_PIVOT_REL * s->lm_scale;
+    double *P = s->lm_P, *PA = s->lm_PA, *Z = s->lm_G;
+    double v;
+    int k, i, j, l;
+    for (j = 0; j < ROBOT_ARM_NX; ++j) {
+        for (i = 0; i < ROBOT_ARM_NX; ++i) {
+            P[i + j * ROBOT_ARM_NX] = (i >= j ? s->A_N[i + j * ROBOT_ARM_NX] : s->A_N[j + i * ROBOT_ARM_NX]) + (i == j ? lm : 0.0);
+        }
+    }
+    for (k = ROBOT_ARM_N - 1; k >= 0; --k) {
+        const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
+        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
+        for (j = 0; j < ROBOT_ARM_NW; ++j) {
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                v = 0.0;
+                for (l = 0; l < ROBOT_ARM_NX; ++l) {
+                    v += P[i + l * ROBOT_ARM_NX] * slot->Phit[l + j * ROBOT_ARM_NX];
+                }
+                PA[i + j * ROBOT_ARM_NX] = v;
+            }
+        }
+        for (j = 0; j < ROBOT_ARM_NW; ++j) {
+            for (i = 0; i < ROBOT_ARM_NW; ++i) {
+                v = (i >= j ? slot->Ht[i + j * ROBOT_ARM_NW] : slot->Ht[j + i * ROBOT_ARM_NW]) + (i == j ? lm : 0.0);
+                for (l = 0; l < ROBOT_ARM_NX; ++l) {
+                    v += slot->Phit[l + i * ROBOT_ARM_NX] * PA[l + j * ROBOT_ARM_NX];
+                }
+                Z[i + j * ROBOT_ARM_NW] = v;
+            }
+        }
+        /* Cholesky of the control block Z_uu in place (lower triangle) */
+        for (j = ROBOT_ARM_NX; j < ROBOT_ARM_NW; ++j) {
+            double d = Z[j + j * ROBOT_ARM_NW];
+            for (l = ROBOT_ARM_NX; l < j; ++l) {
+                d -= Z[j + l * ROBOT_ARM_NW] * Z[j + l * ROBOT_ARM_NW];
+            }
+            if (!(d > tol)) {
+                return 0;
+            }
+            d = sqrt(d);
+            Z[j + j * ROBOT_ARM_NW] = d;
+            for (i = j + 1; i < ROBOT_ARM_NW; ++i) {
+                v = Z[i + j * ROBOT_ARM_NW];
+                for (l = ROBOT_ARM_NX; l < j; ++l) {
+                    v -= Z[i + l * ROBOT_ARM_NW] * Z[j + l * ROBOT_ARM_NW];
+                }
+                Z[i + j * ROBOT_ARM_NW] = v / d;
+            }
+        }
+        if (k == 0) {
+            break;   /* x_0 is fixed: P_0 is not needed */
+        }
+        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
+        for (j = 0; j < ROBOT_ARM_NX; ++j) {
+            for (i = ROBOT_ARM_NX; i < ROBOT_ARM_NW; ++i) {
+                v = Z[i + j * ROBOT_ARM_NW];
+                for (l = ROBOT_ARM_NX; l < i; ++l) {
+                    v -= Z[i + l * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
+                }
+                Z[i + j * ROBOT_ARM_NW] = v / Z[i + i * ROBOT_ARM_NW];
+            }
+        }
+        for (j = 0; j < ROBOT_ARM_NX; ++j) {
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                v = 0.5 * (Z[i + j * ROBOT_ARM_NW] + Z[j + i * ROBOT_ARM_NW]);
+                for (l = ROBOT_ARM_NX; l < ROBOT_ARM_NW; ++l) {
+                    v -= Z[l + i * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
+                }
+                P[i + j * ROBOT_ARM_NX] = v;
+            }
+        }
+    }
+    return 1;
+}
+
+/* One raise: from below the minimum to the minimum, else times ROBOT_ARM_LM_RAISE, at most the
+ * maximum. */
+static void robot_arm_lm_raise(robot_arm_solver *s)
+{
+    double lo = ROBOT_ARM_LM_MIN_REL * s->lm_scale, hi = ROBOT_ARM_LM_MAX_REL * s->lm_scale;
+    s->lm = s->lm < lo ? lo : s->lm * ROBOT_ARM_LM_RAISE;
+    s->lm = s->lm > hi ? hi : s->lm;
+}
+
+/* Raise until the QP is convex on the dynamics or the term is at its maximum. */
+static void robot_arm_lm_convexify(robot_arm_solver *s)
+{
+    double hi = ROBOT_ARM_LM_MAX_REL * s->lm_scale;
+    while (!robot_arm_lm_convex(s, s->lm) && s->lm < hi) {
+        robot_arm_lm_raise(s);
+    }
+}
+
+/* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
+static void robot_arm_lm_start(robot_arm_solver *s)
+{
+    if (!s->lm_auto) {
+        return;
+    }
+    s->lm_scale = robot_arm_lm_hessian_scale(s);
+    s->lm = 0.0;
+    s->lm_kkt_prev = -1.0;
+    robot_arm_lm_convexify(s);
+}
+
+/* After a prepare (QP assembled, KKT proxy evaluated): the scale, a raise when the proxy
+ * grew ROBOT_ARM_LM_KKT_GROWTH times, then convex. */
+static void robot_arm_lm_prepared(robot_arm_solver *s)
+{
+    double floor_ = 1e-8 * (s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0);
+    double prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
+    if (!s->lm_auto) {
+        return;
+    }
+    s->lm_scale = robot_arm_lm_hessian_scale(s);
+    if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= ROBOT_ARM_LM_KKT_GROWTH * prev)) {
+        robot_arm_lm_raise(s);
+    }
+    s->lm_kkt_prev = s->kkt_proxy;
+    robot_arm_lm_convexify(s);
+}
+
+/* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
+static void robot_arm_lm_feedback(robot_arm_solver *s, int status)
+{
+    if (!s->lm_auto) {
+        return;
+    }
+    if (status == ROBOT_ARM_OK) {
+        s->lm *= ROBOT_ARM_LM_LOWER;
+        if (s->lm < ROBOT_ARM_LM_MIN_REL * s->lm_scale) {
+            s->lm = 0.0;
+        }
+    } else if (status == ROBOT_ARM_ERR_QP || status == ROBOT_ARM_ERR_DIVERGED) {
+        robot_arm_lm_raise(s);
+    }
+}
+
 void robot_arm_defaults(robot_arm_solver *s)
 {
     int k, i;
@@ -290,7 +457,11 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->regularization = robot_arm_default_regularization;
     s->reg_eps = robot_arm_default_reg_eps;
     s->cost_hessian = robot_arm_default_cost_hessian ? 1 : 0;
+    /* a negative generated default: the automatic term (algorithm.md section 10) */
+    s->lm_auto = !(robot_arm_default_lm >= 0.0);
     s->lm = (robot_arm_default_lm >= 0.0 && robot_arm_default_lm < INFINITY) ? robot_arm_default_lm : 0.0;
+    s->lm_scale = 1.0;
+    s->lm_kkt_prev = -1.0;
     robot_arm_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = ROBOT_ARM_DEFAULT_QP_TOL;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
@@ -576,6 +747,7 @@ static int robot_arm_init_finish(robot_arm_solver *s)
     robot_arm_assemble(s);
     s->initialized = 1;
     s->qp_ready = 1;
+    robot_arm_lm_start(s);
     return ROBOT_ARM_OK;
 }
 
@@ -766,6 +938,7 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     s->n_failed = 0;
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
+    robot_arm_lm_feedback(s, ROBOT_ARM_OK);
     robot_arm_copy(&s->plan_u[0][0], &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
     if (robot_arm_clip_u(s->u[0], s->u0_out)) {
         s->flags |= ROBOT_ARM_FLAG_U0_CLIPPED;
@@ -1032,6 +1205,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
 
     /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
     s->kkt_proxy = robot_arm_kkt_proxy_eval(s);
+    robot_arm_lm_prepared(s);   /* the automatic Levenberg-Marquardt term (section 10) */
     if (robot_arm_iterate_diverged(s)) {
         s->flags |= ROBOT_ARM_FLAG_DIVERGED;
         if (s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING) {
@@ -1183,8 +1357,33 @@ int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, double lm)
     if (!isfinite(lm) || !(lm >= 0.0)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
     }
+    s->lm_auto = 0;
     s->lm = lm;
     return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+int robot_arm_set_lm_auto(robot_arm_solver *s)
+{
+    robot_arm_ensure_setup(s);
+    s->lm_auto = 1;
+    s->lm = 0.0;
+    s->lm_kkt_prev = -1.0;
+    if (s->initialized && s->qp_ready) {
+        robot_arm_lm_start(s);
+    }
+    return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+int robot_arm_get_lm_auto(robot_arm_solver *s)
+{
+    robot_arm_ensure_setup(s);
+    return s->lm_auto;
+}
+
+double robot_arm_get_lm_scale(robot_arm_solver *s)
+{
+    robot_arm_ensure_setup(s);
+    return s->lm_scale;
 }
 
 double robot_arm_get_levenberg_marquardt(robot_arm_solver *s)

@@ -101,10 +101,19 @@ int robot_arm_set_cost_hessian(robot_arm_solver *s, int fresh);
 int robot_arm_get_cost_hessian(robot_arm_solver *s);
 /* Levenberg-Marquardt term (algorithm.md section 3): the QP minimises with the Hessian
  * blocks A~_k + lm I and A~_N + lm I (the stored blocks are not changed, so the secant
- * criterion and the fixed point are those of lm = 0). lm finite and >= 0; default: the OCP
- * file's options(lm=...), else 0. */
+ * criterion and the fixed point are those of lm = 0). lm finite and >= 0: a fixed term
+ * (the automatic one is switched off); default: the OCP file's options(lm=...), else the
+ * automatic term. */
 int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, double lm);
+/* The term of the next QP (fixed, or the current automatic value). */
 double robot_arm_get_levenberg_marquardt(robot_arm_solver *s);
+/* The automatic, scale-aware, adaptive term (docs/algorithm.md section 10): lm is raised
+ * until the QP is convex on the dynamics (Riccati pivots positive definite), after a
+ * failed feedback and when the KKT proxy grows; lowered after every successful feedback. */
+int robot_arm_set_lm_auto(robot_arm_solver *s);
+int robot_arm_get_lm_auto(robot_arm_solver *s);
+/* The Hessian scale of the automatic term (largest diagonal entry of the QP blocks). */
+double robot_arm_get_lm_scale(robot_arm_solver *s);
 /* QP tolerance: 0 < tol <= ROBOT_ARM_QP_TOL_MAX (1e-2); a larger one would let the QP return
  * steps that violate the bounds by that much, so it is refused (ROBOT_ARM_ERR_INVALID_ARGUMENT). */
 int robot_arm_set_qp_tol(robot_arm_solver *s, double tol);
@@ -208,6 +217,15 @@ enum robot_arm_flag {
 #define ROBOT_ARM_DIVERGENCE_BOX 1e3         /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
 #define ROBOT_ARM_DIVERGENCE_KKT 1e6         /* kkt proxy <= 1e6 max(1, proxy at the last init) */
 
+/* Automatic Levenberg-Marquardt term (docs/algorithm.md section 10), relative to the
+ * Hessian scale h = max(1e-300, largest |diagonal entry| of the QP's blocks). */
+#define ROBOT_ARM_LM_MIN_REL 1e-8            /* smallest nonzero term: 1e-8 h (below: 0) */
+#define ROBOT_ARM_LM_MAX_REL 1e2             /* largest term: 1e2 h */
+#define ROBOT_ARM_LM_RAISE 10.0              /* factor of a raise */
+#define ROBOT_ARM_LM_LOWER 0.1               /* factor after a successful feedback */
+#define ROBOT_ARM_LM_PIVOT_REL 1e-10         /* Riccati pivots must exceed 1e-10 h */
+#define ROBOT_ARM_LM_KKT_GROWTH 10.0         /* raise when the KKT proxy grows 10x in one prepare */
+
 enum robot_arm_mode {
     ROBOT_ARM_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
     ROBOT_ARM_MODE_FIXED = 1     /* no shift: fixed-xhat0 convergence studies */
@@ -242,7 +260,15 @@ struct robot_arm_solver {
     int regularization;
     double reg_eps;
     int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
-    double lm;          /* Levenberg-Marquardt term of the QP Hessian */
+    double lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
+                           current automatic value) */
+    int lm_auto;        /* 1: automatic term (section 10) */
+    double lm_scale;    /* Hessian scale h of the automatic term */
+    double lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
+    double lm_P[ROBOT_ARM_NX * ROBOT_ARM_NX];   /* Riccati workspace of the convexity test */
+    double lm_P2[ROBOT_ARM_NX * ROBOT_ARM_NX];
+    double lm_PA[ROBOT_ARM_NX * ROBOT_ARM_NW];
+    double lm_G[ROBOT_ARM_NW * ROBOT_ARM_NW];
     robot_arm_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */

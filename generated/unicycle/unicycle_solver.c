@@ -218,8 +218,11 @@ static void unicycle_fallback_u0(unicycle_solver *s, double *u0)
 }
 
 /* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
+static void unicycle_lm_feedback(unicycle_solver *s, int status);
+
 static int unicycle_feedback_failed(unicycle_solver *s, double *u0, int status)
 {
+    unicycle_lm_feedback(s, status);
     s->n_failed += 1;
     if (s->recovery && s->mode == UNICYCLE_MODE_RECEDING && s->n_failed >= s->recovery_failures) {
         s->recover_pending = 1;
@@ -275,6 +278,170 @@ static int unicycle_iterate_diverged(unicycle_solver *s)
     return !(s->kkt_proxy <= UNICYCLE_DIVERGENCE_KKT * ref);
 }
 
+/* ---- automatic Levenberg-Marquardt term (algorithm.md section 10) ------------------- */
+
+/* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
+static double unicycle_lm_hessian_scale(const unicycle_solver *s)
+{
+    double h = 1e-300, v;
+    int k, i;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
+        for (i = 0; i < UNICYCLE_NW; ++i) {
+            v = fabs(slot->Ht[i + i * UNICYCLE_NW]);
+            h = v > h ? v : h;
+        }
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        v = fabs(s->A_N[i + i * UNICYCLE_NX]);
+        h = v > h ? v : h;
+    }
+    return h;
+}
+
+/* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
+ * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
+ * out) has control pivots above UNICYCLE_LM_PIVOT_REL h. */
+static int unicycle_lm_convex(unicycle_solver *s, double lm)
+{
+    const double tol = UNICYCLE_LM_PIVOT_REL * s->lm_scale;
+    double *P = s->lm_P, *PA = s->lm_PA, *Z = s->lm_G;
+    double v;
+    int k, i, j, l;
+    for (j = 0; j < UNICYCLE_NX; ++j) {
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            P[i + j * UNICYCLE_NX] = (i >= j ? s->A_N[i + j * UNICYCLE_NX] : s->A_N[j + i * UNICYCLE_NX]) + (i == j ? lm : 0.0);
+        }
+    }
+    for (k = UNICYCLE_N - 1; k >= 0; --k) {
+        const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
+        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
+        for (j = 0; j < UNICYCLE_NW; ++j) {
+            for (i = 0; i < UNICYCLE_NX; ++i) {
+                v = 0.0;
+                for (l = 0; l < UNICYCLE_NX; ++l) {
+                    v += P[i + l * UNICYCLE_NX] * slot->Phit[l + j * UNICYCLE_NX];
+                }
+                PA[i + j * UNICYCLE_NX] = v;
+            }
+        }
+        for (j = 0; j < UNICYCLE_NW; ++j) {
+            for (i = 0; i < UNICYCLE_NW; ++i) {
+                v = (i >= j ? slot->Ht[i + j * UNICYCLE_NW] : slot->Ht[j + i * UNICYCLE_NW]) + (i == j ? lm : 0.0);
+                for (l = 0; l < UNICYCLE_NX; ++l) {
+                    v += slot->Phit[l + i * UNICYCLE_NX] * PA[l + j * UNICYCLE_NX];
+                }
+                Z[i + j * UNICYCLE_NW] = v;
+            }
+        }
+        /* Cholesky of the control block Z_uu in place (lower triangle) */
+        for (j = UNICYCLE_NX; j < UNICYCLE_NW; ++j) {
+            double d = Z[j + j * UNICYCLE_NW];
+            for (l = UNICYCLE_NX; l < j; ++l) {
+                d -= Z[j + l * UNICYCLE_NW] * Z[j + l * UNICYCLE_NW];
+            }
+            if (!(d > tol)) {
+                return 0;
+            }
+            d = sqrt(d);
+            Z[j + j * UNICYCLE_NW] = d;
+            for (i = j + 1; i < UNICYCLE_NW; ++i) {
+                v = Z[i + j * UNICYCLE_NW];
+                for (l = UNICYCLE_NX; l < j; ++l) {
+                    v -= Z[i + l * UNICYCLE_NW] * Z[j + l * UNICYCLE_NW];
+                }
+                Z[i + j * UNICYCLE_NW] = v / d;
+            }
+        }
+        if (k == 0) {
+            break;   /* x_0 is fixed: P_0 is not needed */
+        }
+        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
+        for (j = 0; j < UNICYCLE_NX; ++j) {
+            for (i = UNICYCLE_NX; i < UNICYCLE_NW; ++i) {
+                v = Z[i + j * UNICYCLE_NW];
+                for (l = UNICYCLE_NX; l < i; ++l) {
+                    v -= Z[i + l * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
+                }
+                Z[i + j * UNICYCLE_NW] = v / Z[i + i * UNICYCLE_NW];
+            }
+        }
+        for (j = 0; j < UNICYCLE_NX; ++j) {
+            for (i = 0; i < UNICYCLE_NX; ++i) {
+                v = 0.5 * (Z[i + j * UNICYCLE_NW] + Z[j + i * UNICYCLE_NW]);
+                for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
+                    v -= Z[l + i * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
+                }
+                P[i + j * UNICYCLE_NX] = v;
+            }
+        }
+    }
+    return 1;
+}
+
+/* One raise: from below the minimum to the minimum, else times UNICYCLE_LM_RAISE, at most the
+ * maximum. */
+static void unicycle_lm_raise(unicycle_solver *s)
+{
+    double lo = UNICYCLE_LM_MIN_REL * s->lm_scale, hi = UNICYCLE_LM_MAX_REL * s->lm_scale;
+    s->lm = s->lm < lo ? lo : s->lm * UNICYCLE_LM_RAISE;
+    s->lm = s->lm > hi ? hi : s->lm;
+}
+
+/* Raise until the QP is convex on the dynamics or the term is at its maximum. */
+static void unicycle_lm_convexify(unicycle_solver *s)
+{
+    double hi = UNICYCLE_LM_MAX_REL * s->lm_scale;
+    while (!unicycle_lm_convex(s, s->lm) && s->lm < hi) {
+        unicycle_lm_raise(s);
+    }
+}
+
+/* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
+static void unicycle_lm_start(unicycle_solver *s)
+{
+    if (!s->lm_auto) {
+        return;
+    }
+    s->lm_scale = unicycle_lm_hessian_scale(s);
+    s->lm = 0.0;
+    s->lm_kkt_prev = -1.0;
+    unicycle_lm_convexify(s);
+}
+
+/* After a prepare (QP assembled, KKT proxy evaluated): the scale, a raise when the proxy
+ * grew UNICYCLE_LM_KKT_GROWTH times, then convex. */
+static void unicycle_lm_prepared(unicycle_solver *s)
+{
+    double floor_ = 1e-8 * (s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0);
+    double prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
+    if (!s->lm_auto) {
+        return;
+    }
+    s->lm_scale = unicycle_lm_hessian_scale(s);
+    if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= UNICYCLE_LM_KKT_GROWTH * prev)) {
+        unicycle_lm_raise(s);
+    }
+    s->lm_kkt_prev = s->kkt_proxy;
+    unicycle_lm_convexify(s);
+}
+
+/* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
+static void unicycle_lm_feedback(unicycle_solver *s, int status)
+{
+    if (!s->lm_auto) {
+        return;
+    }
+    if (status == UNICYCLE_OK) {
+        s->lm *= UNICYCLE_LM_LOWER;
+        if (s->lm < UNICYCLE_LM_MIN_REL * s->lm_scale) {
+            s->lm = 0.0;
+        }
+    } else if (status == UNICYCLE_ERR_QP || status == UNICYCLE_ERR_DIVERGED) {
+        unicycle_lm_raise(s);
+    }
+}
+
 void unicycle_defaults(unicycle_solver *s)
 {
     int k, i;
@@ -290,7 +457,11 @@ void unicycle_defaults(unicycle_solver *s)
     s->regularization = unicycle_default_regularization;
     s->reg_eps = unicycle_default_reg_eps;
     s->cost_hessian = unicycle_default_cost_hessian ? 1 : 0;
+    /* a negative generated default: the automatic term (algorithm.md section 10) */
+    s->lm_auto = !(unicycle_default_lm >= 0.0);
     s->lm = (unicycle_default_lm >= 0.0 && unicycle_default_lm < INFINITY) ? unicycle_default_lm : 0.0;
+    s->lm_scale = 1.0;
+    s->lm_kkt_prev = -1.0;
     unicycle_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = UNICYCLE_DEFAULT_QP_TOL;
     for (k = 0; k <= UNICYCLE_N; ++k) {
@@ -576,6 +747,7 @@ static int unicycle_init_finish(unicycle_solver *s)
     unicycle_assemble(s);
     s->initialized = 1;
     s->qp_ready = 1;
+    unicycle_lm_start(s);
     return UNICYCLE_OK;
 }
 
@@ -766,6 +938,7 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     s->n_failed = 0;
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
+    unicycle_lm_feedback(s, UNICYCLE_OK);
     unicycle_copy(&s->plan_u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
     if (unicycle_clip_u(s->u[0], s->u0_out)) {
         s->flags |= UNICYCLE_FLAG_U0_CLIPPED;
@@ -1032,6 +1205,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
 
     /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
     s->kkt_proxy = unicycle_kkt_proxy_eval(s);
+    unicycle_lm_prepared(s);   /* the automatic Levenberg-Marquardt term (section 10) */
     if (unicycle_iterate_diverged(s)) {
         s->flags |= UNICYCLE_FLAG_DIVERGED;
         if (s->recovery && s->mode == UNICYCLE_MODE_RECEDING) {
@@ -1183,8 +1357,33 @@ int unicycle_set_levenberg_marquardt(unicycle_solver *s, double lm)
     if (!isfinite(lm) || !(lm >= 0.0)) {
         return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
     }
+    s->lm_auto = 0;
     s->lm = lm;
     return unicycle_ret(s, UNICYCLE_OK);
+}
+
+int unicycle_set_lm_auto(unicycle_solver *s)
+{
+    unicycle_ensure_setup(s);
+    s->lm_auto = 1;
+    s->lm = 0.0;
+    s->lm_kkt_prev = -1.0;
+    if (s->initialized && s->qp_ready) {
+        unicycle_lm_start(s);
+    }
+    return unicycle_ret(s, UNICYCLE_OK);
+}
+
+int unicycle_get_lm_auto(unicycle_solver *s)
+{
+    unicycle_ensure_setup(s);
+    return s->lm_auto;
+}
+
+double unicycle_get_lm_scale(unicycle_solver *s)
+{
+    unicycle_ensure_setup(s);
+    return s->lm_scale;
 }
 
 double unicycle_get_levenberg_marquardt(unicycle_solver *s)
