@@ -35,8 +35,9 @@ PLACEHOLDER = "dopus"
 
 #: Compiler flags shared by the rendered Makefile and dopus_codegen.build.
 STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
-#: CasADi's generated code has unused parameters in its helpers, so it only gets -Wall.
-CASADI_CFLAGS = ("-std=c99", "-Wall")
+#: The CasADi file gets the same flags: its unused parameters are marked as such when it is
+#: generated (silence_unused_parameters).
+CASADI_CFLAGS = STRICT_CFLAGS
 
 #: The functions of docs/algorithm.md section 2 in the order they are emitted, with the
 #: attribute of ``Discretized`` that holds them and whether they may be absent.
@@ -190,11 +191,14 @@ def _check_function(fun: ca.Function, slot: str, name: str, sizes: Dict[str, int
 
 
 def _with_cse(fun: ca.Function) -> ca.Function:
-    """The same function as an SX function with common subexpression elimination on
-    (CasADi's Function option 'cse'; CodeGenerator has no such option)."""
-    sx = fun if fun.is_a("SXFunction") else fun.expand()
-    args = sx.sx_in()
-    return ca.Function(sx.name(), args, sx.call(args), sx.name_in(), sx.name_out(), {"cse": True})
+    """An SX function again with common subexpression elimination on (CasADi's Function
+    option 'cse'; CodeGenerator has no such option). An MX function is emitted as it is:
+    expanding it to SX would unroll its loops (the substeps and the map over directions of
+    the stage functions); its SX kernels carry the option themselves."""
+    if not fun.is_a("SXFunction"):
+        return fun
+    args = fun.sx_in()
+    return ca.Function(fun.name(), args, fun.call(args), fun.name_in(), fun.name_out(), {"cse": True})
 
 
 def casadi_functions(disc: Any, name: str, sizes: Dict[str, int]) -> Dict[str, ca.Function]:
@@ -213,6 +217,35 @@ def casadi_functions(disc: Any, name: str, sizes: Dict[str, int]) -> Dict[str, c
     return out
 
 
+_C_FUNCTION_START = re.compile(r"^(?:static |CASADI_SYMBOL_EXPORT )?[A-Za-z_][\w \*]*?\b(\w+)\(([^()]*)\) \{$")
+
+
+def silence_unused_parameters(text: str) -> str:
+    """CasADi's generated C passes the same (arg, res, iw, w, mem) to every function and
+    leaves some unused, which -Wextra reports. Every function definition (one line, body
+    closed by a ``}`` in column 0) gets ``(void)name;`` for each parameter its body does
+    not use, so the file compiles with the project's strict flags."""
+    lines = text.split("\n")
+    out: List[str] = []
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        out.append(line)
+        m = _C_FUNCTION_START.match(line)
+        i += 1
+        if not m or m.group(2).strip() in ("", "void"):
+            continue
+        j = i
+        while j < len(lines) and lines[j] != "}":
+            j += 1
+        body = "\n".join(lines[i:j])
+        params = [re.findall(r"\w+", prm)[-1] for prm in m.group(2).split(",")]
+        unused = [prm for prm in params if not re.search(rf"\b{prm}\b", body)]
+        if unused:
+            out.append("  " + " ".join(f"(void){prm};" for prm in unused))
+    return "\n".join(out)
+
+
 def casadi_sources(functions: Dict[str, ca.Function], name: str) -> Dict[str, str]:
     """``<name>_casadi.c`` and ``.h`` from one CodeGenerator with explicit options."""
     opts = {"casadi_int": "int", "casadi_real": "double", "mex": False, "with_header": True,
@@ -223,7 +256,7 @@ def casadi_sources(functions: Dict[str, ca.Function], name: str) -> Dict[str, st
         cg.add(fun)
     with tempfile.TemporaryDirectory(prefix="dopus_cg_") as tmp:
         cg.generate(str(Path(tmp)) + "/")
-        return {f"{base}.c": (Path(tmp) / f"{base}.c").read_text(),
+        return {f"{base}.c": silence_unused_parameters((Path(tmp) / f"{base}.c").read_text()),
                 f"{base}.h": (Path(tmp) / f"{base}.h").read_text()}
 
 

@@ -73,9 +73,25 @@ class Integrator:
     its first and second derivatives can be taken symbolically.
     """
 
+    #: Equal substeps per interval; the derivative functions iterate one substep
+    #: (dopus_codegen.problem.sensitivities), so the generated code holds it once.
+    substeps = 1
+
     def step(self, ode: ca.Function, x: ca.SX, u: ca.SX, p: ca.SX, h: float) -> ca.SX:
         """State after one interval of length ``h`` with ``u`` and ``p`` held constant."""
         raise NotImplementedError
+
+    def substep(self, ode: ca.Function, x: ca.SX, u: ca.SX, p: ca.SX, h: float) -> ca.SX:
+        """State after one substep of length ``h`` (an SX expression). The default is
+        :meth:`step` itself (one substep per interval)."""
+        return self.step(ode, x, u, p, h)
+
+    def substep_function(self, name: str, ode: ca.Function, x: ca.SX, u: ca.SX, p: ca.SX,
+                         dt: float) -> ca.Function:
+        """``(x, u, p) -> x+`` of one substep of an interval of length ``dt`` (a CasADi
+        function; an implicit scheme returns an MX function with its Newton solver)."""
+        e = self.substep(ode, x, u, p, dt / self.substeps)
+        return ca.Function(name, [x, u, p], [e], ["x", "u", "p"], ["xn"], {"cse": True})
 
     def describe(self) -> str:
         """Short deterministic description (used in generated headers)."""
@@ -90,14 +106,17 @@ class RK4(Integrator):
             raise OcpError(f"RK4: substeps must be an integer >= 1, got {substeps!r}")
         self.substeps = int(substeps)
 
+    def substep(self, ode, x, u, p, hs):
+        k1 = ode(x, u, p)
+        k2 = ode(x + 0.5 * hs * k1, u, p)
+        k3 = ode(x + 0.5 * hs * k2, u, p)
+        k4 = ode(x + hs * k3, u, p)
+        return x + (hs / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+
     def step(self, ode, x, u, p, h):
         hs = h / self.substeps
         for _ in range(self.substeps):
-            k1 = ode(x, u, p)
-            k2 = ode(x + 0.5 * hs * k1, u, p)
-            k3 = ode(x + 0.5 * hs * k2, u, p)
-            k4 = ode(x + hs * k3, u, p)
-            x = x + (hs / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = self.substep(ode, x, u, p, hs)
         return x
 
     def describe(self) -> str:
