@@ -16,6 +16,7 @@ at round-trip precision, no timestamps), so generating twice gives identical byt
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import keyword
 import math
@@ -408,7 +409,7 @@ def extract_cdef(header_text: str, name: str, header_name: str) -> str:
     return "\n".join(lines[i + 1:j]).strip("\n") + "\n"
 
 
-def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
+def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = None) -> Dict[str, str]:
     """Every file of the generated folder, as {file name: text}, without touching the disk."""
     name = check_name(_attr(disc, "name"))
     NAME = name.upper()
@@ -466,9 +467,33 @@ def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
         "files": sorted(list(files) + [meta_file]),
         "sources": {"strict": build_ctx["strict_sources"], "casadi": f"{name}_casadi.c", "main": main_file},
         "cdef": f"{name}_cdef.h",
+        # sha256 of every other file, and of the problem (codegen/cache.py): a second
+        # `dopus-gen generate` of an unchanged problem finds both and writes nothing
+        "sha256": {f: hashlib.sha256(files[f].encode("utf-8")).hexdigest() for f in sorted(files)},
     }
+    if problem_hash is not None:
+        meta["problem_hash"] = problem_hash
     files[meta_file] = json.dumps(meta, indent=2, sort_keys=True) + "\n"
     return files
+
+
+def folder_up_to_date(out_dir: Path, problem_hash: str) -> bool:
+    """True if ``out_dir`` holds the generation of this problem hash, every file intact."""
+    path = find_meta(Path(out_dir))
+    if path is None:
+        return False
+    try:
+        meta = json.loads(path.read_text())
+        digests = meta["sha256"]
+        if meta.get("problem_hash") != problem_hash or set(meta["files"]) != set(digests) | {path.name}:
+            return False
+        for fname, digest in digests.items():
+            f = Path(out_dir) / fname
+            if not f.is_file() or hashlib.sha256(f.read_bytes()).hexdigest() != digest:
+                return False
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return False
+    return True
 
 
 def find_meta(out_dir: Path) -> Optional[Path]:
@@ -536,13 +561,18 @@ def generate(disc: Any, out_dir, *, offline_guess: Optional[bool] = None) -> Pat
     """
     want_nominal = _option(getattr(disc, "options", None), "offline_guess", False) \
         if offline_guess is None else bool(offline_guess)
+    from .cache import problem_hash as _problem_hash
+
+    phash = _problem_hash(disc, bool(want_nominal))
+    if folder_up_to_date(Path(out_dir), phash):
+        return Path(out_dir)
     nominal = None
     if want_nominal:
         from ..reference.offline import solve_ocp
 
         nominal, info = solve_ocp(disc, np.asarray(_attr(disc, "x0"), dtype=float))
         _check_offline(info)
-    files = render_folder(disc, nominal)
+    files = render_folder(disc, nominal, problem_hash=phash)
     return write_folder(files, Path(out_dir))
 
 
@@ -568,4 +598,5 @@ def generate_file(ocp_file, out_dir=None, *, offline_guess: Optional[bool] = Non
 
 
 __all__ = ["CodegenError", "generate", "generate_file", "render_folder", "read_meta", "find_meta",
-           "rename_placeholder", "c_double", "STRICT_CFLAGS", "CASADI_CFLAGS"]
+           "rename_placeholder", "c_double", "STRICT_CFLAGS", "CASADI_CFLAGS", "folder_up_to_date",
+           "silence_unused_parameters"]

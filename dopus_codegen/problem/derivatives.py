@@ -144,7 +144,7 @@ def _d(e):
     return ca.densify(e)
 
 
-def _stage_functions(name: str, m: StageModel, directions: str = "auto"):
+def _stage_functions(name: str, m: StageModel, directions="auto"):
     """The stage functions of algorithm.md section 2 as MX functions over SX kernels.
 
     The cost ``l`` and the path constraints ``g`` live at the shooting node: their
@@ -265,7 +265,7 @@ def build_functions(ocp: Ocp) -> Discretized:
     m = discretize(ocp)
     name = ocp.name
     try:
-        stage = _stage_functions(name, m)
+        stage = _stage_functions(name, m, getattr(ocp.integrator, "directions", "auto"))
         term = _terminal_functions(name, m)
         ode = ca.Function(f"{name}_ode", [m.x, m.u, m.p], [_d(m.xdot)], ["x", "u", "p"], ["xdot"], _FN_OPTS)
     except OcpError:

@@ -76,6 +76,10 @@ class Integrator:
     #: Equal substeps per interval; the derivative functions iterate one substep
     #: (dopus_codegen.problem.sensitivities), so the generated code holds it once.
     substeps = 1
+    #: Seed directions per call of the derivative kernels of one substep: "auto", "one"
+    #: (smallest code, a loop over the nw directions), "all" (one vectorised kernel) or
+    #: an integer chunk (see dopus_codegen.problem.sensitivities.substep_kernels).
+    directions = "auto"
 
     def step(self, ode: ca.Function, x: ca.SX, u: ca.SX, p: ca.SX, h: float) -> ca.SX:
         """State after one interval of length ``h`` with ``u`` and ``p`` held constant."""
@@ -98,13 +102,26 @@ class Integrator:
         return type(self).__name__
 
 
-class RK4(Integrator):
-    """Classical fourth-order Runge-Kutta with ``substeps`` equal steps per interval."""
+def _directions(value, who: str):
+    if value in ("auto", "one", "all"):
+        return value
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 1:
+        return int(value)
+    raise OcpError(f"{who}: directions must be 'auto', 'one', 'all' or an integer >= 1, got {value!r}")
 
-    def __init__(self, substeps: int = 1):
+
+class RK4(Integrator):
+    """Classical fourth-order Runge-Kutta with ``substeps`` equal steps per interval.
+
+    ``directions``: how the derivative code of one substep treats the ``nw`` seed
+    directions (``"auto"``, ``"one"``, ``"all"`` or a chunk size): a trade of code size
+    against speed that never changes the computed values beyond round-off."""
+
+    def __init__(self, substeps: int = 1, directions="auto"):
         if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
             raise OcpError(f"RK4: substeps must be an integer >= 1, got {substeps!r}")
         self.substeps = int(substeps)
+        self.directions = _directions(directions, "RK4")
 
     def substep(self, ode, x, u, p, hs):
         k1 = ode(x, u, p)
@@ -120,7 +137,8 @@ class RK4(Integrator):
         return x
 
     def describe(self) -> str:
-        return f"RK4(substeps={self.substeps})"
+        extra = "" if self.directions == "auto" else f", directions={self.directions!r}"
+        return f"RK4(substeps={self.substeps}{extra})"
 
     def __repr__(self) -> str:
         return self.describe()
