@@ -38,13 +38,16 @@ def _unrolled_reference(ocp):
                                                ca.hessian(L, w)[0]])
 
 
-@pytest.mark.parametrize("path,directions", [(ROBOT_ARM_FILE, "auto"), (ROBOT_ARM_FILE, "one"),
-                                             (ROBOT_ARM_FILE, 2), (SECOND_FILE, "all"),
-                                             (CHAIN_FILE, "auto")])
-def test_structured_blocks_equal_the_unrolled_derivatives(path, directions):
+@pytest.mark.parametrize("path,derivatives,directions", [
+    (ROBOT_ARM_FILE, "structured", "auto"), (ROBOT_ARM_FILE, "structured", "one"),
+    (ROBOT_ARM_FILE, "structured", 2), (SECOND_FILE, "structured", "all"),
+    (ROBOT_ARM_FILE, "unrolled", "auto"), (CHAIN_FILE, "auto", "auto")])
+def test_structured_blocks_equal_the_unrolled_derivatives(path, derivatives, directions):
     ocp = load_ocp(path)
-    ocp._integrator = RK4(ocp.integrator.substeps, directions=directions)
+    ocp._integrator = RK4(ocp.integrator.substeps, derivatives=derivatives, directions=directions)
     disc = build_functions(ocp)
+    want = "SXFunction" if derivatives == "unrolled" else "MXFunction"
+    assert disc.stage_hess_exact.class_name() == want
     ref = _unrolled_reference(ocp)
     rng = np.random.default_rng(3)
     g = disc.initial_guess

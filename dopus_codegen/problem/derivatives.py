@@ -144,6 +144,49 @@ def _d(e):
     return ca.densify(e)
 
 
+def _stage_functions_unrolled(name: str, m: StageModel, phi: ca.SX):
+    """The stage functions as single SX expressions of the unrolled interval map ``phi``
+    (every substep inlined, derivatives by CasADi's SX differentiation with common
+    subexpressions shared across substeps and directions): the fastest code for small
+    models, but its size grows with the substeps and, for the Hessian, with nw times the
+    model."""
+    nx, ng = m.x.size1(), m.g.size1()
+    lam = ca.SX.sym("lam_next", nx)
+    mu_g = ca.SX.sym("mu_g", ng)
+    x, u, p, w = m.x, m.u, m.p, m.w
+    # L_k = l - lam_next' phi + mu_g' g  (algorithm.md section 1)
+    Lk = m.l - ca.dot(lam, phi) + (ca.dot(mu_g, m.g) if ng else 0)
+    Phi = ca.jacobian(phi, w)
+    C = ca.jacobian(m.g, w) if ng else ca.SX(0, w.size1())
+    gL = ca.gradient(Lk, w)
+    A = ca.hessian(Lk, w)[0]
+    ins = [x, u, p, lam, mu_g]
+    in_names = ["x", "u", "p", "lam_next", "mu_g"]
+    stage_eval = ca.Function(f"{name}_stage_eval", [x, u, p], [_d(phi), _d(m.l), _d(m.g)],
+                             ["x", "u", "p"], ["phi", "l", "g"], _FN_OPTS)
+    stage_grad = ca.Function(f"{name}_stage_grad", ins, [_d(gL), _d(phi), _d(m.l), _d(m.g)],
+                             in_names, ["gL", "phi", "l", "g"], _FN_OPTS)
+    stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [_d(A), _d(Phi), _d(C)],
+                                   in_names, ["A", "Phi", "C"], _FN_OPTS)
+    # stage-cost part of A (algorithm.md section 4 step 5): l is evaluated at the node, so
+    # this needs no integrator sensitivities
+    cost_in, cost_in_names = [x, u, p], ["x", "u", "p"]
+    stage_hess_cost_exact = ca.Function(f"{name}_stage_hess_cost_exact", cost_in,
+                                        [_d(ca.hessian(m.l, w)[0])], cost_in_names, ["A_l"], _FN_OPTS)
+    stage_hess_gn = stage_hess_cost_gn = None
+    if m.has_stage_ls:
+        J = ca.jacobian(m.res, w)
+        # Gauss-Newton: J' W J + exact Hessian of the non least-squares part, no curvature
+        # of dynamics or constraints (algorithm.md section 2).
+        A_gn = ca.mtimes([J.T, ca.DM(m.W), J]) + ca.hessian(m.l_extra, w)[0]
+        stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [_d(A_gn), _d(Phi), _d(C)],
+                                    in_names, ["A", "Phi", "C"], _FN_OPTS)
+        # the same expression: A - A_l = 0 for Gauss-Newton
+        stage_hess_cost_gn = ca.Function(f"{name}_stage_hess_cost_gn", cost_in, [_d(A_gn)],
+                                         cost_in_names, ["A_l"], _FN_OPTS)
+    return stage_eval, stage_grad, stage_hess_exact, stage_hess_gn, stage_hess_cost_exact, stage_hess_cost_gn
+
+
 def _stage_functions(name: str, m: StageModel, directions="auto"):
     """The stage functions of algorithm.md section 2 as MX functions over SX kernels.
 
@@ -209,6 +252,33 @@ def _stage_functions(name: str, m: StageModel, directions="auto"):
     return stage_eval, stage_grad, stage_hess_exact, stage_hess_gn, stage_hess_cost_exact, stage_hess_cost_gn
 
 
+#: derivatives="auto" unrolls while the vectorised forward-over-adjoint kernel of one
+#: substep times the substeps stays below this many SX instructions (robot arm: 2 x 6882;
+#: chain of masses: 2 x 51768), i.e. for small models, where the unrolled expression is
+#: the fastest code (robot arm: the structured Hessian takes 2x to 4x its time).
+UNROLL_LIMIT = 20000
+
+
+def _stage_functions_choice(ocp: Ocp, m: StageModel):
+    """Unrolled or structured stage functions, after the integrator's ``derivatives``."""
+    integ = ocp.integrator
+    how = getattr(integ, "derivatives", "auto")
+    directions = getattr(integ, "directions", "auto")
+    sx_substep = m.substep.is_a("SXFunction")
+    if how == "unrolled" and not sx_substep:
+        raise OcpError(f"{integ.describe()}: derivatives='unrolled' needs an explicit (SX) substep")
+    if how == "auto" and sx_substep:
+        nx, nu = m.x.size1(), m.u.size1()
+        K = sensitivities.substep_kernels(f"{ocp.name}_substep", m.substep, nx, nu, m.p.size1(), "all")
+        how = "unrolled" if K.soa.n_instructions() * m.n_substeps <= UNROLL_LIMIT else "structured"
+    if how == "unrolled":
+        phi = m.x
+        for _ in range(m.n_substeps):
+            phi = m.substep(phi, m.u, m.p)
+        return _stage_functions_unrolled(ocp.name, m, phi)
+    return _stage_functions(ocp.name, m, directions)
+
+
 def _terminal_functions(name: str, m: StageModel):
     x, p = m.x, m.p
     nr, ne = m.r.size1(), m.r_eq.size1()
@@ -265,7 +335,7 @@ def build_functions(ocp: Ocp) -> Discretized:
     m = discretize(ocp)
     name = ocp.name
     try:
-        stage = _stage_functions(name, m, getattr(ocp.integrator, "directions", "auto"))
+        stage = _stage_functions_choice(ocp, m)
         term = _terminal_functions(name, m)
         ode = ca.Function(f"{name}_ode", [m.x, m.u, m.p], [_d(m.xdot)], ["x", "u", "p"], ["xdot"], _FN_OPTS)
     except OcpError:

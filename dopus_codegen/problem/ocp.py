@@ -80,6 +80,11 @@ class Integrator:
     #: (smallest code, a loop over the nw directions), "all" (one vectorised kernel) or
     #: an integer chunk (see dopus_codegen.problem.sensitivities.substep_kernels).
     directions = "auto"
+    #: "structured": the stage functions iterate one substep and its derivative kernels
+    #: (code size independent of the substeps); "unrolled": one SX expression of the whole
+    #: interval (fastest for small models, code grows with substeps and nw); "auto": unrolled
+    #: for small models (dopus_codegen.problem.derivatives.UNROLL_LIMIT), else structured.
+    derivatives = "auto"
 
     def step(self, ode: ca.Function, x: ca.SX, u: ca.SX, p: ca.SX, h: float) -> ca.SX:
         """State after one interval of length ``h`` with ``u`` and ``p`` held constant."""
@@ -102,6 +107,12 @@ class Integrator:
         return type(self).__name__
 
 
+def _derivatives(value, who: str) -> str:
+    if value not in ("auto", "unrolled", "structured"):
+        raise OcpError(f"{who}: derivatives must be 'auto', 'unrolled' or 'structured', got {value!r}")
+    return value
+
+
 def _directions(value, who: str):
     if value in ("auto", "one", "all"):
         return value
@@ -113,14 +124,17 @@ def _directions(value, who: str):
 class RK4(Integrator):
     """Classical fourth-order Runge-Kutta with ``substeps`` equal steps per interval.
 
-    ``directions``: how the derivative code of one substep treats the ``nw`` seed
-    directions (``"auto"``, ``"one"``, ``"all"`` or a chunk size): a trade of code size
-    against speed that never changes the computed values beyond round-off."""
+    ``derivatives`` (``"auto"``, ``"unrolled"``, ``"structured"``) and ``directions``
+    (``"auto"``, ``"one"``, ``"all"`` or a chunk size; structured only): how the derivative
+    code is built, a trade of code size against speed that never changes the computed
+    values beyond round-off (see :class:`Integrator`). Firmware with little flash:
+    ``RK4(substeps, derivatives="structured", directions="one")``."""
 
-    def __init__(self, substeps: int = 1, directions="auto"):
+    def __init__(self, substeps: int = 1, derivatives: str = "auto", directions="auto"):
         if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
             raise OcpError(f"RK4: substeps must be an integer >= 1, got {substeps!r}")
         self.substeps = int(substeps)
+        self.derivatives = _derivatives(derivatives, "RK4")
         self.directions = _directions(directions, "RK4")
 
     def substep(self, ode, x, u, p, hs):
@@ -137,7 +151,8 @@ class RK4(Integrator):
         return x
 
     def describe(self) -> str:
-        extra = "" if self.directions == "auto" else f", directions={self.directions!r}"
+        extra = "" if self.derivatives == "auto" else f", derivatives={self.derivatives!r}"
+        extra += "" if self.directions == "auto" else f", directions={self.directions!r}"
         return f"RK4(substeps={self.substeps}{extra})"
 
     def __repr__(self) -> str:

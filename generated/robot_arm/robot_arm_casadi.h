@@ -31,10 +31,10 @@ const casadi_int* robot_arm_stage_eval_sparsity_in(casadi_int i);
 const casadi_int* robot_arm_stage_eval_sparsity_out(casadi_int i);
 int robot_arm_stage_eval_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int robot_arm_stage_eval_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define robot_arm_stage_eval_SZ_ARG 6
-#define robot_arm_stage_eval_SZ_RES 5
+#define robot_arm_stage_eval_SZ_ARG 3
+#define robot_arm_stage_eval_SZ_RES 3
 #define robot_arm_stage_eval_SZ_IW 0
-#define robot_arm_stage_eval_SZ_W 55
+#define robot_arm_stage_eval_SZ_W 0
 int robot_arm_stage_grad(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int robot_arm_stage_grad_checkout(void);
 void robot_arm_stage_grad_release(int mem);
@@ -49,10 +49,10 @@ const casadi_int* robot_arm_stage_grad_sparsity_in(casadi_int i);
 const casadi_int* robot_arm_stage_grad_sparsity_out(casadi_int i);
 int robot_arm_stage_grad_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int robot_arm_stage_grad_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define robot_arm_stage_grad_SZ_ARG 9
-#define robot_arm_stage_grad_SZ_RES 6
+#define robot_arm_stage_grad_SZ_ARG 5
+#define robot_arm_stage_grad_SZ_RES 4
 #define robot_arm_stage_grad_SZ_IW 0
-#define robot_arm_stage_grad_SZ_W 154
+#define robot_arm_stage_grad_SZ_W 0
 int robot_arm_stage_hess_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int robot_arm_stage_hess_exact_checkout(void);
 void robot_arm_stage_hess_exact_release(int mem);
@@ -67,10 +67,10 @@ const casadi_int* robot_arm_stage_hess_exact_sparsity_in(casadi_int i);
 const casadi_int* robot_arm_stage_hess_exact_sparsity_out(casadi_int i);
 int robot_arm_stage_hess_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int robot_arm_stage_hess_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define robot_arm_stage_hess_exact_SZ_ARG 9
-#define robot_arm_stage_hess_exact_SZ_RES 5
+#define robot_arm_stage_hess_exact_SZ_ARG 5
+#define robot_arm_stage_hess_exact_SZ_RES 3
 #define robot_arm_stage_hess_exact_SZ_IW 0
-#define robot_arm_stage_hess_exact_SZ_W 801
+#define robot_arm_stage_hess_exact_SZ_W 0
 int robot_arm_stage_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int robot_arm_stage_hess_gn_checkout(void);
 void robot_arm_stage_hess_gn_release(int mem);
@@ -85,10 +85,10 @@ const casadi_int* robot_arm_stage_hess_gn_sparsity_in(casadi_int i);
 const casadi_int* robot_arm_stage_hess_gn_sparsity_out(casadi_int i);
 int robot_arm_stage_hess_gn_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int robot_arm_stage_hess_gn_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define robot_arm_stage_hess_gn_SZ_ARG 9
-#define robot_arm_stage_hess_gn_SZ_RES 5
+#define robot_arm_stage_hess_gn_SZ_ARG 5
+#define robot_arm_stage_hess_gn_SZ_RES 3
 #define robot_arm_stage_hess_gn_SZ_IW 0
-#define robot_arm_stage_hess_gn_SZ_W 314
+#define robot_arm_stage_hess_gn_SZ_W 0
 int robot_arm_stage_hess_cost_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int robot_arm_stage_hess_cost_exact_checkout(void);
 void robot_arm_stage_hess_cost_exact_release(int mem);

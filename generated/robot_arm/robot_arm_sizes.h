@@ -21,10 +21,10 @@
 #define ROBOT_ARM_HAS_NOMINAL 1
 
 /* CasADi work arrays: the maximum over every generated function, at least 1 */
-#define ROBOT_ARM_SZ_ARG 9
-#define ROBOT_ARM_SZ_RES 6
+#define ROBOT_ARM_SZ_ARG 5
+#define ROBOT_ARM_SZ_RES 4
 #define ROBOT_ARM_SZ_IW 1
-#define ROBOT_ARM_SZ_W 858
+#define ROBOT_ARM_SZ_W 658
 
 /* The real-number type of the runtime (double; the precision is a generation-time choice) */
 typedef double robot_arm_real;

@@ -29,22 +29,9 @@ extern "C" {
 #endif
 
 /* Add prefix to internal symbols */
-#define casadi_c0 CASADI_PREFIX(c0)
-#define casadi_c1 CASADI_PREFIX(c1)
-#define casadi_clear CASADI_PREFIX(clear)
-#define casadi_copy CASADI_PREFIX(copy)
-#define casadi_densify CASADI_PREFIX(densify)
 #define casadi_f0 CASADI_PREFIX(f0)
 #define casadi_f1 CASADI_PREFIX(f1)
 #define casadi_f10 CASADI_PREFIX(f10)
-#define casadi_f11 CASADI_PREFIX(f11)
-#define casadi_f12 CASADI_PREFIX(f12)
-#define casadi_f13 CASADI_PREFIX(f13)
-#define casadi_f14 CASADI_PREFIX(f14)
-#define casadi_f15 CASADI_PREFIX(f15)
-#define casadi_f16 CASADI_PREFIX(f16)
-#define casadi_f17 CASADI_PREFIX(f17)
-#define casadi_f18 CASADI_PREFIX(f18)
 #define casadi_f2 CASADI_PREFIX(f2)
 #define casadi_f3 CASADI_PREFIX(f3)
 #define casadi_f4 CASADI_PREFIX(f4)
@@ -55,8 +42,6 @@ extern "C" {
 #define casadi_f9 CASADI_PREFIX(f9)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
-#define casadi_s10 CASADI_PREFIX(s10)
-#define casadi_s11 CASADI_PREFIX(s11)
 #define casadi_s2 CASADI_PREFIX(s2)
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s4 CASADI_PREFIX(s4)
@@ -84,50 +69,6 @@ extern "C" {
 
 casadi_real casadi_sq(casadi_real x) { return x*x;}
 
-void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
-  casadi_int i;
-  if (y) {
-    if (x) {
-      for (i=0; i<n; ++i) *y++ = *x++;
-    } else {
-      for (i=0; i<n; ++i) *y++ = 0.;
-    }
-  }
-}
-
-void casadi_clear(casadi_real* x, casadi_int n) {
-  casadi_int i;
-  if (x) {
-    for (i=0; i<n; ++i) *x++ = 0;
-  }
-}
-
-#define CASADI_CAST(x,y) ((x) y)
-
-void casadi_densify(const casadi_real* x, const casadi_int* sp_x, casadi_real* y, casadi_int tr) {
-  casadi_int nrow_x, ncol_x, i, el;
-  const casadi_int *colind_x, *row_x;
-  if (!y) return;
-  nrow_x = sp_x[0]; ncol_x = sp_x[1];
-  colind_x = sp_x+2; row_x = sp_x+ncol_x+3;
-  casadi_clear(y, nrow_x*ncol_x);
-  if (!x) return;
-  if (tr) {
-    for (i=0; i<ncol_x; ++i) {
-      for (el=colind_x[i]; el!=colind_x[i+1]; ++el) {
-        y[i + row_x[el]*ncol_x] = CASADI_CAST(casadi_real, *x++);
-      }
-    }
-  } else {
-    for (i=0; i<ncol_x; ++i) {
-      for (el=colind_x[i]; el!=colind_x[i+1]; ++el) {
-        y[row_x[el]] = CASADI_CAST(casadi_real, *x++);
-      }
-      y += nrow_x;
-    }
-  }
-}
-
 /* Configuration this file was compiled with */
 CASADI_SYMBOL_EXPORT void unicycle_casadi_casadi_version(int* major, int* minor, int* patch) {
   *major = 3;
@@ -141,32 +82,18 @@ static const casadi_int casadi_s0[3] = {4, 1, 1};
 static const casadi_int casadi_s1[3] = {2, 1, 1};
 static const casadi_int casadi_s2[3] = {1, 1, 1};
 static const casadi_int casadi_s3[3] = {6, 1, 1};
-static const casadi_int casadi_s4[21] = 
-  {4, 6, 0, 1, 2, 3, 4, 8,
-  12, 0, 1, 2, 3, 0, 1, 2,
-  3, 0, 1, 2, 3};
-static const casadi_int casadi_s5[19] = 
-  {2, 6, 0, 2, 4, 6, 8, 9,
-  10, 0, 1, 0, 1, 0, 1, 0,
-  1, 0, 1};
-static const casadi_int casadi_s6[3] = {6, 6, 1};
-static const casadi_int casadi_s7[3] = {4, 6, 1};
-static const casadi_int casadi_s8[3] = {1, 6, 1};
-static const casadi_int casadi_s9[3] = {0, 1, 1};
-static const casadi_int casadi_s10[3] = {4, 4, 1};
-static const casadi_int casadi_s11[3] = {0, 4, 1};
+static const casadi_int casadi_s4[3] = {6, 6, 1};
+static const casadi_int casadi_s5[3] = {4, 6, 1};
+static const casadi_int casadi_s6[3] = {1, 6, 1};
+static const casadi_int casadi_s7[3] = {0, 1, 1};
+static const casadi_int casadi_s8[3] = {4, 4, 1};
+static const casadi_int casadi_s9[3] = {0, 4, 1};
 
-static const casadi_real casadi_c0[12] = 
-  {1., 1., 1., 1., 0., 0., 0., 0.,
-  0., 0., 0., 0.};
-static const casadi_real casadi_c1[10] = 
-  {0., 0., 0., 0., 0., 0., 0., 0.,
-  1., 1.};
-
-/* unicycle_substep:(x[4],u[2],p[2])->(xn[4]) */
-static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+/* unicycle_stage_eval:(x[4],u[2],p[2])->(phi[4],l,g) */
+static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12;
   a00=arg[0]? arg[0][0] : 0;
   a01=1.6666666666666666e-02;
   a02=arg[0]? arg[0][3] : 0;
@@ -188,106 +115,69 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a09=1.0000000000000001e-01;
   a10=(a09*a06);
   a10=(a02+a10);
-  a09=(a09*a08);
-  a09=(a03+a09);
-  a11=cos(a09);
-  a11=(a10*a11);
-  a04=(a04+a11);
+  a11=(a09*a08);
+  a11=(a03+a11);
+  a12=cos(a11);
+  a12=(a10*a12);
+  a04=(a04+a12);
   a04=(a01*a04);
-  a00=(a00+a04);
-  if (res[0]!=0) res[0][0]=a00;
-  a00=arg[0]? arg[0][1] : 0;
-  a04=sin(a03);
-  a04=(a02*a04);
+  a04=(a00+a04);
+  if (res[0]!=0) res[0][0]=a04;
+  a04=arg[0]? arg[0][1] : 0;
+  a12=sin(a03);
+  a12=(a02*a12);
   a05=sin(a05);
   a07=(a07*a05);
   a07=(2.*a07);
-  a04=(a04+a07);
-  a04=(a04+a07);
-  a09=sin(a09);
-  a10=(a10*a09);
-  a04=(a04+a10);
-  a04=(a01*a04);
-  a00=(a00+a04);
-  if (res[0]!=0) res[0][1]=a00;
-  a00=3.;
-  a04=(a00*a08);
-  a10=(2.*a08);
-  a04=(a04+a10);
-  a04=(a04+a08);
-  a04=(a01*a04);
-  a03=(a03+a04);
+  a12=(a12+a07);
+  a12=(a12+a07);
+  a11=sin(a11);
+  a10=(a10*a11);
+  a12=(a12+a10);
+  a12=(a01*a12);
+  a12=(a04+a12);
+  if (res[0]!=0) res[0][1]=a12;
+  a12=3.;
+  a10=(a12*a08);
+  a11=(2.*a08);
+  a10=(a10+a11);
+  a10=(a10+a08);
+  a10=(a01*a10);
+  a03=(a03+a10);
   if (res[0]!=0) res[0][2]=a03;
-  a00=(a00*a06);
+  a12=(a12*a06);
   a03=(2.*a06);
-  a00=(a00+a03);
-  a00=(a00+a06);
-  a01=(a01*a00);
+  a12=(a12+a03);
+  a12=(a12+a06);
+  a01=(a01*a12);
   a02=(a02+a01);
   if (res[0]!=0) res[0][3]=a02;
-  return 0;
-}
-
-/* unicycle_node_eval:(x[4],u[2],p[2])->(l,g) */
-static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
-  a0=5.0000000000000000e-01;
-  a1=arg[0]? arg[0][0] : 0;
-  a2=arg[2]? arg[2][0] : 0;
-  a2=(a1-a2);
-  a3=1.0000000000000001e-01;
-  a4=(a3*a2);
-  a2=(a2*a4);
-  a4=arg[0]? arg[0][1] : 0;
-  a5=arg[2]? arg[2][1] : 0;
-  a5=(a4-a5);
-  a6=(a3*a5);
-  a5=(a5*a6);
-  a2=(a2+a5);
-  a5=arg[1]? arg[1][0] : 0;
-  a6=1.0000000000000002e-02;
-  a7=(a6*a5);
-  a5=(a5*a7);
-  a2=(a2+a5);
-  a5=arg[1]? arg[1][1] : 0;
-  a6=(a6*a5);
-  a5=(a5*a6);
-  a2=(a2+a5);
-  a0=(a0*a2);
-  if (res[0]!=0) res[0][0]=a0;
-  a0=1.;
-  a1=(a1-a0);
-  a1=casadi_sq(a1);
-  a4=(a4-a3);
-  a4=casadi_sq(a4);
-  a1=(a1+a4);
-  if (res[1]!=0) res[1][0]=a1;
-  return 0;
-}
-
-/* unicycle_stage_eval:(x[4],u[2],p[2])->(phi[4],l,g) */
-static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)mem;
-  casadi_real **res1=res+3, *w0=w+12, *w1=w+16, *w2=w+18, *w3=w+20, w4, w5;
-  const casadi_real **arg1=arg+3;
-  casadi_copy(arg[0], 4, w0);
-  casadi_copy(arg[1], 2, w1);
-  casadi_copy(arg[2], 2, w2);
-  arg1[0]=w0;
-  arg1[1]=w1;
-  arg1[2]=w2;
-  res1[0]=w3;
-  if (casadi_f1(arg1, res1, iw, w, 0)) return 1;
-  casadi_copy(w3, 4, res[0]);
-  arg1[0]=w0;
-  arg1[1]=w1;
-  arg1[2]=w2;
-  res1[0]=(&w4);
-  res1[1]=(&w5);
-  if (casadi_f2(arg1, res1, iw, w, 0)) return 1;
-  if (res[1]) res[1][0] = w4;
-  if (res[2]) res[2][0] = w5;
+  a02=5.0000000000000000e-01;
+  a01=arg[2]? arg[2][0] : 0;
+  a01=(a00-a01);
+  a12=(a09*a01);
+  a01=(a01*a12);
+  a12=arg[2]? arg[2][1] : 0;
+  a12=(a04-a12);
+  a03=(a09*a12);
+  a12=(a12*a03);
+  a01=(a01+a12);
+  a12=1.0000000000000002e-02;
+  a03=(a12*a06);
+  a06=(a06*a03);
+  a01=(a01+a06);
+  a12=(a12*a08);
+  a08=(a08*a12);
+  a01=(a01+a08);
+  a02=(a02*a01);
+  if (res[1]!=0) res[1][0]=a02;
+  a02=1.;
+  a00=(a00-a02);
+  a00=casadi_sq(a00);
+  a04=(a04-a09);
+  a04=casadi_sq(a04);
+  a00=(a00+a04);
+  if (res[2]!=0) res[2][0]=a00;
   return 0;
 }
 
@@ -356,203 +246,201 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_eval_sparsity_out(casadi_i
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_eval_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 6;
-  if (sz_res) *sz_res = 5;
+  if (sz_arg) *sz_arg = 3;
+  if (sz_res) *sz_res = 3;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 24;
+  if (sz_w) *sz_w = 0;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_eval_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 6*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 3*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 24*sizeof(casadi_real);
-  return 0;
-}
-
-/* unicycle_node_grad:(x[4],u[2],p[2],mu_g)->(gLn[6]) */
-static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1, a2, a3, a4;
-  a0=arg[0]? arg[0][0] : 0;
-  a1=1.;
-  a1=(a0-a1);
-  a1=(2.*a1);
-  a2=arg[3]? arg[3][0] : 0;
-  a1=(a1*a2);
-  a3=1.0000000000000001e-01;
-  a4=arg[2]? arg[2][0] : 0;
-  a0=(a0-a4);
-  a0=(a3*a0);
-  a1=(a1+a0);
-  if (res[0]!=0) res[0][0]=a1;
-  a1=arg[0]? arg[0][1] : 0;
-  a0=(a1-a3);
-  a0=(2.*a0);
-  a0=(a0*a2);
-  a2=arg[2]? arg[2][1] : 0;
-  a1=(a1-a2);
-  a3=(a3*a1);
-  a0=(a0+a3);
-  if (res[0]!=0) res[0][1]=a0;
-  a0=0.;
-  if (res[0]!=0) res[0][2]=a0;
-  if (res[0]!=0) res[0][3]=a0;
-  a0=1.0000000000000002e-02;
-  a3=arg[1]? arg[1][0] : 0;
-  a3=(a0*a3);
-  if (res[0]!=0) res[0][4]=a3;
-  a3=arg[1]? arg[1][1] : 0;
-  a0=(a0*a3);
-  if (res[0]!=0) res[0][5]=a0;
-  return 0;
-}
-
-/* unicycle_substep_adj:(xupa[12])->(ax[4],au[2]) */
-static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
-  casadi_real a12, a13, a14, a15, a16, a17, a18, a19;
-  a00=arg[0]? arg[0][8] : 0;
-  if (res[0]!=0) res[0][0]=a00;
-  a01=arg[0]? arg[0][9] : 0;
-  if (res[0]!=0) res[0][1]=a01;
-  a02=arg[0]? arg[0][10] : 0;
-  a03=arg[0]? arg[0][2] : 0;
-  a04=cos(a03);
-  a05=arg[0]? arg[0][3] : 0;
-  a06=1.6666666666666666e-02;
-  a07=(a06*a01);
-  a08=(a05*a07);
-  a08=(a04*a08);
-  a08=(a02+a08);
-  a09=1.0000000000000001e-01;
-  a10=arg[0]? arg[0][5] : 0;
-  a11=(a09*a10);
-  a11=(a03+a11);
-  a12=cos(a11);
-  a13=arg[0]? arg[0][4] : 0;
-  a14=(a09*a13);
-  a14=(a05+a14);
-  a15=(a14*a07);
-  a15=(a12*a15);
-  a11=sin(a11);
-  a16=(a06*a00);
-  a14=(a14*a16);
-  a14=(a11*a14);
-  a15=(a15-a14);
-  a08=(a08+a15);
-  a14=5.0000000000000003e-02;
-  a10=(a14*a10);
-  a10=(a03+a10);
-  a17=cos(a10);
-  a13=(a14*a13);
-  a13=(a05+a13);
-  a18=6.6666666666666666e-02;
-  a01=(a18*a01);
-  a19=(a13*a01);
-  a19=(a17*a19);
-  a10=sin(a10);
-  a18=(a18*a00);
-  a13=(a13*a18);
-  a13=(a10*a13);
-  a19=(a19-a13);
-  a08=(a08+a19);
-  a03=sin(a03);
-  a05=(a05*a16);
-  a05=(a03*a05);
-  a08=(a08-a05);
-  if (res[0]!=0) res[0][2]=a08;
-  a08=arg[0]? arg[0][11] : 0;
-  a03=(a03*a07);
-  a03=(a08+a03);
-  a11=(a11*a07);
-  a12=(a12*a16);
-  a11=(a11+a12);
-  a03=(a03+a11);
-  a10=(a10*a01);
-  a17=(a17*a18);
-  a10=(a10+a17);
-  a03=(a03+a10);
-  a04=(a04*a16);
-  a03=(a03+a04);
-  if (res[0]!=0) res[0][3]=a03;
-  a03=(a06*a08);
-  a04=3.3333333333333333e-02;
-  a16=(a04*a08);
-  a03=(a03+a16);
-  a08=(a14*a08);
-  a03=(a03+a08);
-  a11=(a09*a11);
-  a03=(a03+a11);
-  a10=(a14*a10);
-  a03=(a03+a10);
-  if (res[1]!=0) res[1][0]=a03;
-  a06=(a06*a02);
-  a04=(a04*a02);
-  a06=(a06+a04);
-  a02=(a14*a02);
-  a06=(a06+a02);
-  a09=(a09*a15);
-  a06=(a06+a09);
-  a14=(a14*a19);
-  a06=(a06+a14);
-  if (res[1]!=0) res[1][1]=a06;
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;
 }
 
 /* unicycle_stage_grad:(x[4],u[2],p[2],lam_next[4],mu_g)->(gL[6],phi[4],l,g) */
-static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)mem;
-  casadi_int i;
-  casadi_real **res1=res+4, *rr, *w0=w+20, *w1=w+24, *w2=w+26, w3, *w4=w+28, *w5=w+34, *w6=w+38, *w7=w+50, *w8=w+52, w9;
-  const casadi_real **arg1=arg+5, *cs;
-  casadi_copy(arg[0], 4, w0);
-  casadi_copy(arg[1], 2, w1);
-  casadi_copy(arg[2], 2, w2);
-  w3 = arg[4] ? arg[4][0] : 0;
-  arg1[0]=w0;
-  arg1[1]=w1;
-  arg1[2]=w2;
-  arg1[3]=(&w3);
-  res1[0]=w4;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  casadi_copy(arg[3], 4, w5);
-  for (i=0, rr=w5, cs=w5; i<4; ++i) *rr++ = (- *cs++ );
-  rr=w6;
-  for (i=0, cs=w0; i<4; ++i) *rr++ = *cs++;
-  for (i=0, cs=w1; i<2; ++i) *rr++ = *cs++;
-  for (i=0, cs=w2; i<2; ++i) *rr++ = *cs++;
-  for (i=0, cs=w5; i<4; ++i) *rr++ = *cs++;
-  arg1[0]=w6;
-  res1[0]=w5;
-  res1[1]=w7;
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
-  rr=w8;
-  for (i=0, cs=w5; i<4; ++i) *rr++ = *cs++;
-  for (i=0, cs=w7; i<2; ++i) *rr++ = *cs++;
-  for (i=0, rr=w4, cs=w8; i<6; ++i) (*rr++) += (*cs++);
-  casadi_copy(w4, 6, res[0]);
-  arg1[0]=w0;
-  arg1[1]=w1;
-  arg1[2]=w2;
-  res1[0]=w5;
-  if (casadi_f1(arg1, res1, iw, w, 0)) return 1;
-  casadi_copy(w5, 4, res[1]);
-  arg1[0]=w0;
-  arg1[1]=w1;
-  arg1[2]=w2;
-  res1[0]=(&w3);
-  res1[1]=(&w9);
-  if (casadi_f2(arg1, res1, iw, w, 0)) return 1;
-  if (res[2]) res[2][0] = w3;
-  if (res[3]) res[3][0] = w9;
+static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
+  casadi_real a24, a25, a26, a27, a28, a29, a30, a31;
+  a00=arg[0]? arg[0][0] : 0;
+  a01=1.;
+  a01=(a00-a01);
+  a02=(2.*a01);
+  a03=arg[4]? arg[4][0] : 0;
+  a02=(a02*a03);
+  a04=arg[3]? arg[3][0] : 0;
+  a02=(a02-a04);
+  a05=1.0000000000000001e-01;
+  a06=arg[2]? arg[2][0] : 0;
+  a06=(a00-a06);
+  a07=(a05*a06);
+  a02=(a02+a07);
+  if (res[0]!=0) res[0][0]=a02;
+  a02=arg[0]? arg[0][1] : 0;
+  a08=(a02-a05);
+  a09=(2.*a08);
+  a09=(a09*a03);
+  a03=arg[3]? arg[3][1] : 0;
+  a09=(a09-a03);
+  a10=arg[2]? arg[2][1] : 0;
+  a10=(a02-a10);
+  a11=(a05*a10);
+  a09=(a09+a11);
+  if (res[0]!=0) res[0][1]=a09;
+  a09=arg[0]? arg[0][2] : 0;
+  a12=arg[1]? arg[1][1] : 0;
+  a13=(a05*a12);
+  a13=(a09+a13);
+  a14=sin(a13);
+  a15=arg[0]? arg[0][3] : 0;
+  a16=arg[1]? arg[1][0] : 0;
+  a17=(a05*a16);
+  a17=(a15+a17);
+  a18=1.6666666666666666e-02;
+  a19=(a18*a04);
+  a20=(a17*a19);
+  a20=(a14*a20);
+  a13=cos(a13);
+  a21=(a18*a03);
+  a22=(a17*a21);
+  a22=(a13*a22);
+  a20=(a20-a22);
+  a22=arg[3]? arg[3][2] : 0;
+  a23=cos(a09);
+  a24=(a15*a21);
+  a24=(a23*a24);
+  a24=(a22+a24);
+  a24=(a20-a24);
+  a25=5.0000000000000003e-02;
+  a26=(a25*a12);
+  a26=(a09+a26);
+  a27=cos(a26);
+  a28=(a25*a16);
+  a28=(a15+a28);
+  a29=3.3333333333333333e-02;
+  a03=(a29*a03);
+  a03=(-a03);
+  a03=(2.*a03);
+  a30=(a28*a03);
+  a30=(a27*a30);
+  a26=sin(a26);
+  a29=(a29*a04);
+  a29=(-a29);
+  a29=(2.*a29);
+  a04=(a28*a29);
+  a04=(a26*a04);
+  a30=(a30-a04);
+  a24=(a24+a30);
+  a04=sin(a09);
+  a31=(a15*a19);
+  a31=(a04*a31);
+  a24=(a24+a31);
+  if (res[0]!=0) res[0][2]=a24;
+  a03=(a26*a03);
+  a29=(a27*a29);
+  a03=(a03+a29);
+  a29=arg[3]? arg[3][3] : 0;
+  a24=(a04*a21);
+  a24=(a29+a24);
+  a21=(a14*a21);
+  a31=(a13*a19);
+  a21=(a21+a31);
+  a24=(a24+a21);
+  a24=(a03-a24);
+  a19=(a23*a19);
+  a24=(a24-a19);
+  if (res[0]!=0) res[0][3]=a24;
+  a24=(a18*a29);
+  a19=(-a24);
+  a19=(2.*a19);
+  a19=(a19-a24);
+  a29=(a25*a29);
+  a19=(a19-a29);
+  a21=(a05*a21);
+  a19=(a19-a21);
+  a03=(a25*a03);
+  a19=(a19+a03);
+  a03=5.0000000000000010e-03;
+  a21=(a03*a16);
+  a19=(a19+a21);
+  a19=(a19+a21);
+  if (res[0]!=0) res[0][4]=a19;
+  a19=(a18*a22);
+  a21=(-a19);
+  a21=(2.*a21);
+  a21=(a21-a19);
+  a22=(a25*a22);
+  a21=(a21-a22);
+  a05=(a05*a20);
+  a21=(a21+a05);
+  a25=(a25*a30);
+  a21=(a21+a25);
+  a03=(a03*a12);
+  a21=(a21+a03);
+  a21=(a21+a03);
+  if (res[0]!=0) res[0][5]=a21;
+  a23=(a15*a23);
+  a27=(a28*a27);
+  a27=(2.*a27);
+  a23=(a23+a27);
+  a23=(a23+a27);
+  a13=(a17*a13);
+  a23=(a23+a13);
+  a23=(a18*a23);
+  a00=(a00+a23);
+  if (res[1]!=0) res[1][0]=a00;
+  a04=(a15*a04);
+  a28=(a28*a26);
+  a28=(2.*a28);
+  a04=(a04+a28);
+  a04=(a04+a28);
+  a17=(a17*a14);
+  a04=(a04+a17);
+  a04=(a18*a04);
+  a02=(a02+a04);
+  if (res[1]!=0) res[1][1]=a02;
+  a02=3.;
+  a04=(a02*a12);
+  a17=(2.*a12);
+  a04=(a04+a17);
+  a04=(a04+a12);
+  a04=(a18*a04);
+  a09=(a09+a04);
+  if (res[1]!=0) res[1][2]=a09;
+  a02=(a02*a16);
+  a09=(2.*a16);
+  a02=(a02+a09);
+  a02=(a02+a16);
+  a18=(a18*a02);
+  a15=(a15+a18);
+  if (res[1]!=0) res[1][3]=a15;
+  a15=5.0000000000000000e-01;
+  a06=(a06*a07);
+  a10=(a10*a11);
+  a06=(a06+a10);
+  a10=1.0000000000000002e-02;
+  a11=(a10*a16);
+  a16=(a16*a11);
+  a06=(a06+a16);
+  a10=(a10*a12);
+  a12=(a12*a10);
+  a06=(a06+a12);
+  a15=(a15*a06);
+  if (res[2]!=0) res[2][0]=a15;
+  a01=casadi_sq(a01);
+  a08=casadi_sq(a08);
+  a01=(a01+a08);
+  if (res[3]!=0) res[3][0]=a01;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_grad(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f3(arg, res, iw, w, mem);
+  return casadi_f1(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_grad_checkout(void) {
@@ -622,1320 +510,246 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_grad_sparsity_out(casadi_i
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_grad_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 9;
-  if (sz_res) *sz_res = 6;
+  if (sz_arg) *sz_arg = 5;
+  if (sz_res) *sz_res = 4;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 58;
+  if (sz_w) *sz_w = 0;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_grad_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 9*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 58*sizeof(casadi_real);
-  return 0;
-}
-
-/* unicycle_node_hess:(x[4],u[2],p[2],mu_g)->(An[6x6],C[1x6]) */
-static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1, a2, a3;
-  a0=arg[3]? arg[3][0] : 0;
-  a0=(2.*a0);
-  a1=1.0000000000000001e-01;
-  a0=(a0+a1);
-  if (res[0]!=0) res[0][0]=a0;
-  a2=0.;
-  if (res[0]!=0) res[0][1]=a2;
-  if (res[0]!=0) res[0][2]=a2;
-  if (res[0]!=0) res[0][3]=a2;
-  if (res[0]!=0) res[0][4]=a2;
-  if (res[0]!=0) res[0][5]=a2;
-  if (res[0]!=0) res[0][6]=a2;
-  if (res[0]!=0) res[0][7]=a0;
-  if (res[0]!=0) res[0][8]=a2;
-  if (res[0]!=0) res[0][9]=a2;
-  if (res[0]!=0) res[0][10]=a2;
-  if (res[0]!=0) res[0][11]=a2;
-  if (res[0]!=0) res[0][12]=a2;
-  if (res[0]!=0) res[0][13]=a2;
-  if (res[0]!=0) res[0][14]=a2;
-  if (res[0]!=0) res[0][15]=a2;
-  if (res[0]!=0) res[0][16]=a2;
-  if (res[0]!=0) res[0][17]=a2;
-  if (res[0]!=0) res[0][18]=a2;
-  if (res[0]!=0) res[0][19]=a2;
-  if (res[0]!=0) res[0][20]=a2;
-  if (res[0]!=0) res[0][21]=a2;
-  if (res[0]!=0) res[0][22]=a2;
-  if (res[0]!=0) res[0][23]=a2;
-  if (res[0]!=0) res[0][24]=a2;
-  if (res[0]!=0) res[0][25]=a2;
-  if (res[0]!=0) res[0][26]=a2;
-  if (res[0]!=0) res[0][27]=a2;
-  a0=1.0000000000000002e-02;
-  if (res[0]!=0) res[0][28]=a0;
-  if (res[0]!=0) res[0][29]=a2;
-  if (res[0]!=0) res[0][30]=a2;
-  if (res[0]!=0) res[0][31]=a2;
-  if (res[0]!=0) res[0][32]=a2;
-  if (res[0]!=0) res[0][33]=a2;
-  if (res[0]!=0) res[0][34]=a2;
-  if (res[0]!=0) res[0][35]=a0;
-  a0=arg[0]? arg[0][0] : 0;
-  a3=1.;
-  a0=(a0-a3);
-  a0=(2.*a0);
-  if (res[1]!=0) res[1][0]=a0;
-  a0=arg[0]? arg[0][1] : 0;
-  a0=(a0-a1);
-  a0=(2.*a0);
-  if (res[1]!=0) res[1][1]=a0;
-  if (res[1]!=0) res[1][2]=a2;
-  if (res[1]!=0) res[1][3]=a2;
-  if (res[1]!=0) res[1][4]=a2;
-  if (res[1]!=0) res[1][5]=a2;
-  return 0;
-}
-
-/* unicycle_substep_soa:(xupa[12],dx[4x6],du[2x6],da[4x6])->(dax[4x6],dau[2x6]) */
-static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
-  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
-  casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
-  casadi_real a36, a37, a38, a39, a40, a41, a42, a43, a44, a45, a46, a47;
-  casadi_real a48, a49, a50, a51, a52, a53, a54, a55, a56, a57, a58, a59;
-  casadi_real a60, a61, a62, a63, a64, a65;
-  a00=arg[3]? arg[3][0] : 0;
-  if (res[0]!=0) res[0][0]=a00;
-  a01=arg[3]? arg[3][1] : 0;
-  if (res[0]!=0) res[0][1]=a01;
-  a02=arg[3]? arg[3][2] : 0;
-  a03=arg[0]? arg[0][2] : 0;
-  a04=cos(a03);
-  a05=1.6666666666666666e-02;
-  a06=arg[0]? arg[0][9] : 0;
-  a07=(a05*a06);
-  a08=arg[1]? arg[1][3] : 0;
-  a09=(a07*a08);
-  a10=arg[0]? arg[0][3] : 0;
-  a11=(a05*a01);
-  a12=(a10*a11);
-  a09=(a09+a12);
-  a09=(a04*a09);
-  a12=(a10*a07);
-  a13=sin(a03);
-  a14=arg[1]? arg[1][2] : 0;
-  a15=(a13*a14);
-  a16=(a12*a15);
-  a09=(a09-a16);
-  a09=(a02+a09);
-  a16=1.0000000000000001e-01;
-  a17=arg[0]? arg[0][5] : 0;
-  a18=(a16*a17);
-  a18=(a03+a18);
-  a19=cos(a18);
-  a20=arg[2]? arg[2][0] : 0;
-  a21=(a16*a20);
-  a21=(a08+a21);
-  a22=(a07*a21);
-  a23=arg[0]? arg[0][4] : 0;
-  a24=(a16*a23);
-  a24=(a10+a24);
-  a25=(a24*a11);
-  a22=(a22+a25);
-  a22=(a19*a22);
-  a25=(a24*a07);
-  a18=sin(a18);
-  a26=arg[2]? arg[2][1] : 0;
-  a27=(a16*a26);
-  a27=(a14+a27);
-  a28=(a18*a27);
-  a29=(a25*a28);
-  a22=(a22-a29);
-  a29=arg[0]? arg[0][8] : 0;
-  a30=(a05*a29);
-  a31=(a24*a30);
-  a27=(a19*a27);
-  a32=(a31*a27);
-  a21=(a30*a21);
-  a33=(a05*a00);
-  a34=(a24*a33);
-  a21=(a21+a34);
-  a21=(a18*a21);
-  a32=(a32+a21);
-  a22=(a22-a32);
-  a09=(a09+a22);
-  a32=5.0000000000000003e-02;
-  a17=(a32*a17);
-  a03=(a03+a17);
-  a17=cos(a03);
-  a21=6.6666666666666666e-02;
-  a06=(a21*a06);
-  a20=(a32*a20);
-  a20=(a08+a20);
-  a34=(a06*a20);
-  a23=(a32*a23);
-  a23=(a10+a23);
-  a01=(a21*a01);
-  a35=(a23*a01);
-  a34=(a34+a35);
-  a34=(a17*a34);
-  a35=(a23*a06);
-  a03=sin(a03);
-  a26=(a32*a26);
-  a26=(a14+a26);
-  a36=(a03*a26);
-  a37=(a35*a36);
-  a34=(a34-a37);
-  a29=(a21*a29);
-  a37=(a23*a29);
-  a26=(a17*a26);
-  a38=(a37*a26);
-  a20=(a29*a20);
-  a00=(a21*a00);
-  a39=(a23*a00);
-  a20=(a20+a39);
-  a20=(a03*a20);
-  a38=(a38+a20);
-  a34=(a34-a38);
-  a09=(a09+a34);
-  a38=(a10*a30);
-  a14=(a04*a14);
-  a20=(a38*a14);
-  a08=(a30*a08);
-  a39=(a10*a33);
-  a08=(a08+a39);
-  a08=(a13*a08);
-  a20=(a20+a08);
-  a09=(a09-a20);
-  if (res[0]!=0) res[0][2]=a09;
-  a09=arg[3]? arg[3][3] : 0;
-  a14=(a07*a14);
-  a20=(a13*a11);
-  a14=(a14+a20);
-  a14=(a09+a14);
-  a27=(a07*a27);
-  a11=(a18*a11);
-  a27=(a27+a11);
-  a11=(a19*a33);
-  a28=(a30*a28);
-  a11=(a11-a28);
-  a27=(a27+a11);
-  a14=(a14+a27);
-  a26=(a06*a26);
-  a01=(a03*a01);
-  a26=(a26+a01);
-  a00=(a17*a00);
-  a36=(a29*a36);
-  a00=(a00-a36);
-  a26=(a26+a00);
-  a14=(a14+a26);
-  a33=(a04*a33);
-  a15=(a30*a15);
-  a33=(a33-a15);
-  a14=(a14+a33);
-  if (res[0]!=0) res[0][3]=a14;
-  a14=arg[3]? arg[3][4] : 0;
-  if (res[0]!=0) res[0][4]=a14;
-  a33=arg[3]? arg[3][5] : 0;
-  if (res[0]!=0) res[0][5]=a33;
-  a15=arg[3]? arg[3][6] : 0;
-  a00=arg[1]? arg[1][7] : 0;
-  a36=(a07*a00);
-  a01=(a05*a33);
-  a11=(a10*a01);
-  a36=(a36+a11);
-  a36=(a04*a36);
-  a11=arg[1]? arg[1][6] : 0;
-  a28=(a13*a11);
-  a20=(a12*a28);
-  a36=(a36-a20);
-  a36=(a15+a36);
-  a20=arg[2]? arg[2][2] : 0;
-  a08=(a16*a20);
-  a08=(a00+a08);
-  a39=(a07*a08);
-  a40=(a24*a01);
-  a39=(a39+a40);
-  a39=(a19*a39);
-  a40=arg[2]? arg[2][3] : 0;
-  a41=(a16*a40);
-  a41=(a11+a41);
-  a42=(a18*a41);
-  a43=(a25*a42);
-  a39=(a39-a43);
-  a41=(a19*a41);
-  a43=(a31*a41);
-  a08=(a30*a08);
-  a44=(a05*a14);
-  a45=(a24*a44);
-  a08=(a08+a45);
-  a08=(a18*a08);
-  a43=(a43+a08);
-  a39=(a39-a43);
-  a36=(a36+a39);
-  a20=(a32*a20);
-  a20=(a00+a20);
-  a43=(a06*a20);
-  a33=(a21*a33);
-  a08=(a23*a33);
-  a43=(a43+a08);
-  a43=(a17*a43);
-  a40=(a32*a40);
-  a40=(a11+a40);
-  a08=(a03*a40);
-  a45=(a35*a08);
-  a43=(a43-a45);
-  a40=(a17*a40);
-  a45=(a37*a40);
-  a20=(a29*a20);
-  a14=(a21*a14);
-  a46=(a23*a14);
-  a20=(a20+a46);
-  a20=(a03*a20);
-  a45=(a45+a20);
-  a43=(a43-a45);
-  a36=(a36+a43);
-  a11=(a04*a11);
-  a45=(a38*a11);
-  a00=(a30*a00);
-  a20=(a10*a44);
-  a00=(a00+a20);
-  a00=(a13*a00);
-  a45=(a45+a00);
-  a36=(a36-a45);
-  if (res[0]!=0) res[0][6]=a36;
-  a36=arg[3]? arg[3][7] : 0;
-  a11=(a07*a11);
-  a45=(a13*a01);
-  a11=(a11+a45);
-  a11=(a36+a11);
-  a41=(a07*a41);
-  a01=(a18*a01);
-  a41=(a41+a01);
-  a01=(a19*a44);
-  a42=(a30*a42);
-  a01=(a01-a42);
-  a41=(a41+a01);
-  a11=(a11+a41);
-  a40=(a06*a40);
-  a33=(a03*a33);
-  a40=(a40+a33);
-  a14=(a17*a14);
-  a08=(a29*a08);
-  a14=(a14-a08);
-  a40=(a40+a14);
-  a11=(a11+a40);
-  a44=(a04*a44);
-  a28=(a30*a28);
-  a44=(a44-a28);
-  a11=(a11+a44);
-  if (res[0]!=0) res[0][7]=a11;
-  a11=arg[3]? arg[3][8] : 0;
-  if (res[0]!=0) res[0][8]=a11;
-  a44=arg[3]? arg[3][9] : 0;
-  if (res[0]!=0) res[0][9]=a44;
-  a28=arg[3]? arg[3][10] : 0;
-  a14=arg[1]? arg[1][11] : 0;
-  a08=(a07*a14);
-  a33=(a05*a44);
-  a01=(a10*a33);
-  a08=(a08+a01);
-  a08=(a04*a08);
-  a01=arg[1]? arg[1][10] : 0;
-  a42=(a13*a01);
-  a45=(a12*a42);
-  a08=(a08-a45);
-  a08=(a28+a08);
-  a45=arg[2]? arg[2][4] : 0;
-  a00=(a16*a45);
-  a00=(a14+a00);
-  a20=(a07*a00);
-  a46=(a24*a33);
-  a20=(a20+a46);
-  a20=(a19*a20);
-  a46=arg[2]? arg[2][5] : 0;
-  a47=(a16*a46);
-  a47=(a01+a47);
-  a48=(a18*a47);
-  a49=(a25*a48);
-  a20=(a20-a49);
-  a47=(a19*a47);
-  a49=(a31*a47);
-  a00=(a30*a00);
-  a50=(a05*a11);
-  a51=(a24*a50);
-  a00=(a00+a51);
-  a00=(a18*a00);
-  a49=(a49+a00);
-  a20=(a20-a49);
-  a08=(a08+a20);
-  a45=(a32*a45);
-  a45=(a14+a45);
-  a49=(a06*a45);
-  a44=(a21*a44);
-  a00=(a23*a44);
-  a49=(a49+a00);
-  a49=(a17*a49);
-  a46=(a32*a46);
-  a46=(a01+a46);
-  a00=(a03*a46);
-  a51=(a35*a00);
-  a49=(a49-a51);
-  a46=(a17*a46);
-  a51=(a37*a46);
-  a45=(a29*a45);
-  a11=(a21*a11);
-  a52=(a23*a11);
-  a45=(a45+a52);
-  a45=(a03*a45);
-  a51=(a51+a45);
-  a49=(a49-a51);
-  a08=(a08+a49);
-  a01=(a04*a01);
-  a51=(a38*a01);
-  a14=(a30*a14);
-  a45=(a10*a50);
-  a14=(a14+a45);
-  a14=(a13*a14);
-  a51=(a51+a14);
-  a08=(a08-a51);
-  if (res[0]!=0) res[0][10]=a08;
-  a08=arg[3]? arg[3][11] : 0;
-  a01=(a07*a01);
-  a51=(a13*a33);
-  a01=(a01+a51);
-  a01=(a08+a01);
-  a47=(a07*a47);
-  a33=(a18*a33);
-  a47=(a47+a33);
-  a33=(a19*a50);
-  a48=(a30*a48);
-  a33=(a33-a48);
-  a47=(a47+a33);
-  a01=(a01+a47);
-  a46=(a06*a46);
-  a44=(a03*a44);
-  a46=(a46+a44);
-  a11=(a17*a11);
-  a00=(a29*a00);
-  a11=(a11-a00);
-  a46=(a46+a11);
-  a01=(a01+a46);
-  a50=(a04*a50);
-  a42=(a30*a42);
-  a50=(a50-a42);
-  a01=(a01+a50);
-  if (res[0]!=0) res[0][11]=a01;
-  a01=arg[3]? arg[3][12] : 0;
-  if (res[0]!=0) res[0][12]=a01;
-  a50=arg[3]? arg[3][13] : 0;
-  if (res[0]!=0) res[0][13]=a50;
-  a42=arg[3]? arg[3][14] : 0;
-  a11=arg[1]? arg[1][15] : 0;
-  a00=(a07*a11);
-  a44=(a05*a50);
-  a33=(a10*a44);
-  a00=(a00+a33);
-  a00=(a04*a00);
-  a33=arg[1]? arg[1][14] : 0;
-  a48=(a13*a33);
-  a51=(a12*a48);
-  a00=(a00-a51);
-  a00=(a42+a00);
-  a51=arg[2]? arg[2][6] : 0;
-  a14=(a16*a51);
-  a14=(a11+a14);
-  a45=(a07*a14);
-  a52=(a24*a44);
-  a45=(a45+a52);
-  a45=(a19*a45);
-  a52=arg[2]? arg[2][7] : 0;
-  a53=(a16*a52);
-  a53=(a33+a53);
-  a54=(a18*a53);
-  a55=(a25*a54);
-  a45=(a45-a55);
-  a53=(a19*a53);
-  a55=(a31*a53);
-  a14=(a30*a14);
-  a56=(a05*a01);
-  a57=(a24*a56);
-  a14=(a14+a57);
-  a14=(a18*a14);
-  a55=(a55+a14);
-  a45=(a45-a55);
-  a00=(a00+a45);
-  a51=(a32*a51);
-  a51=(a11+a51);
-  a55=(a06*a51);
-  a50=(a21*a50);
-  a14=(a23*a50);
-  a55=(a55+a14);
-  a55=(a17*a55);
-  a52=(a32*a52);
-  a52=(a33+a52);
-  a14=(a03*a52);
-  a57=(a35*a14);
-  a55=(a55-a57);
-  a52=(a17*a52);
-  a57=(a37*a52);
-  a51=(a29*a51);
-  a01=(a21*a01);
-  a58=(a23*a01);
-  a51=(a51+a58);
-  a51=(a03*a51);
-  a57=(a57+a51);
-  a55=(a55-a57);
-  a00=(a00+a55);
-  a33=(a04*a33);
-  a57=(a38*a33);
-  a11=(a30*a11);
-  a51=(a10*a56);
-  a11=(a11+a51);
-  a11=(a13*a11);
-  a57=(a57+a11);
-  a00=(a00-a57);
-  if (res[0]!=0) res[0][14]=a00;
-  a00=arg[3]? arg[3][15] : 0;
-  a33=(a07*a33);
-  a57=(a13*a44);
-  a33=(a33+a57);
-  a33=(a00+a33);
-  a53=(a07*a53);
-  a44=(a18*a44);
-  a53=(a53+a44);
-  a44=(a19*a56);
-  a54=(a30*a54);
-  a44=(a44-a54);
-  a53=(a53+a44);
-  a33=(a33+a53);
-  a52=(a06*a52);
-  a50=(a03*a50);
-  a52=(a52+a50);
-  a01=(a17*a01);
-  a14=(a29*a14);
-  a01=(a01-a14);
-  a52=(a52+a01);
-  a33=(a33+a52);
-  a56=(a04*a56);
-  a48=(a30*a48);
-  a56=(a56-a48);
-  a33=(a33+a56);
-  if (res[0]!=0) res[0][15]=a33;
-  a33=arg[3]? arg[3][16] : 0;
-  if (res[0]!=0) res[0][16]=a33;
-  a56=arg[3]? arg[3][17] : 0;
-  if (res[0]!=0) res[0][17]=a56;
-  a48=arg[3]? arg[3][18] : 0;
-  a01=arg[1]? arg[1][19] : 0;
-  a14=(a07*a01);
-  a50=(a05*a56);
-  a44=(a10*a50);
-  a14=(a14+a44);
-  a14=(a04*a14);
-  a44=arg[1]? arg[1][18] : 0;
-  a54=(a13*a44);
-  a57=(a12*a54);
-  a14=(a14-a57);
-  a14=(a48+a14);
-  a57=arg[2]? arg[2][8] : 0;
-  a11=(a16*a57);
-  a11=(a01+a11);
-  a51=(a07*a11);
-  a58=(a24*a50);
-  a51=(a51+a58);
-  a51=(a19*a51);
-  a58=arg[2]? arg[2][9] : 0;
-  a59=(a16*a58);
-  a59=(a44+a59);
-  a60=(a18*a59);
-  a61=(a25*a60);
-  a51=(a51-a61);
-  a59=(a19*a59);
-  a61=(a31*a59);
-  a11=(a30*a11);
-  a62=(a05*a33);
-  a63=(a24*a62);
-  a11=(a11+a63);
-  a11=(a18*a11);
-  a61=(a61+a11);
-  a51=(a51-a61);
-  a14=(a14+a51);
-  a57=(a32*a57);
-  a57=(a01+a57);
-  a61=(a06*a57);
-  a56=(a21*a56);
-  a11=(a23*a56);
-  a61=(a61+a11);
-  a61=(a17*a61);
-  a58=(a32*a58);
-  a58=(a44+a58);
-  a11=(a03*a58);
-  a63=(a35*a11);
-  a61=(a61-a63);
-  a58=(a17*a58);
-  a63=(a37*a58);
-  a57=(a29*a57);
-  a33=(a21*a33);
-  a64=(a23*a33);
-  a57=(a57+a64);
-  a57=(a03*a57);
-  a63=(a63+a57);
-  a61=(a61-a63);
-  a14=(a14+a61);
-  a44=(a04*a44);
-  a63=(a38*a44);
-  a01=(a30*a01);
-  a57=(a10*a62);
-  a01=(a01+a57);
-  a01=(a13*a01);
-  a63=(a63+a01);
-  a14=(a14-a63);
-  if (res[0]!=0) res[0][18]=a14;
-  a14=arg[3]? arg[3][19] : 0;
-  a44=(a07*a44);
-  a63=(a13*a50);
-  a44=(a44+a63);
-  a44=(a14+a44);
-  a59=(a07*a59);
-  a50=(a18*a50);
-  a59=(a59+a50);
-  a50=(a19*a62);
-  a60=(a30*a60);
-  a50=(a50-a60);
-  a59=(a59+a50);
-  a44=(a44+a59);
-  a58=(a06*a58);
-  a56=(a03*a56);
-  a58=(a58+a56);
-  a33=(a17*a33);
-  a11=(a29*a11);
-  a33=(a33-a11);
-  a58=(a58+a33);
-  a44=(a44+a58);
-  a62=(a04*a62);
-  a54=(a30*a54);
-  a62=(a62-a54);
-  a44=(a44+a62);
-  if (res[0]!=0) res[0][19]=a44;
-  a44=arg[3]? arg[3][20] : 0;
-  if (res[0]!=0) res[0][20]=a44;
-  a62=arg[3]? arg[3][21] : 0;
-  if (res[0]!=0) res[0][21]=a62;
-  a54=arg[3]? arg[3][22] : 0;
-  a33=arg[1]? arg[1][23] : 0;
-  a11=(a07*a33);
-  a56=(a05*a62);
-  a50=(a10*a56);
-  a11=(a11+a50);
-  a11=(a04*a11);
-  a50=arg[1]? arg[1][22] : 0;
-  a60=(a13*a50);
-  a12=(a12*a60);
-  a11=(a11-a12);
-  a11=(a54+a11);
-  a12=arg[2]? arg[2][10] : 0;
-  a63=(a16*a12);
-  a63=(a33+a63);
-  a01=(a07*a63);
-  a57=(a24*a56);
-  a01=(a01+a57);
-  a01=(a19*a01);
-  a57=arg[2]? arg[2][11] : 0;
-  a64=(a16*a57);
-  a64=(a50+a64);
-  a65=(a18*a64);
-  a25=(a25*a65);
-  a01=(a01-a25);
-  a64=(a19*a64);
-  a31=(a31*a64);
-  a63=(a30*a63);
-  a25=(a05*a44);
-  a24=(a24*a25);
-  a63=(a63+a24);
-  a63=(a18*a63);
-  a31=(a31+a63);
-  a01=(a01-a31);
-  a11=(a11+a01);
-  a12=(a32*a12);
-  a12=(a33+a12);
-  a31=(a06*a12);
-  a62=(a21*a62);
-  a63=(a23*a62);
-  a31=(a31+a63);
-  a31=(a17*a31);
-  a57=(a32*a57);
-  a57=(a50+a57);
-  a63=(a03*a57);
-  a35=(a35*a63);
-  a31=(a31-a35);
-  a57=(a17*a57);
-  a37=(a37*a57);
-  a12=(a29*a12);
-  a21=(a21*a44);
-  a23=(a23*a21);
-  a12=(a12+a23);
-  a12=(a03*a12);
-  a37=(a37+a12);
-  a31=(a31-a37);
-  a11=(a11+a31);
-  a50=(a04*a50);
-  a38=(a38*a50);
-  a33=(a30*a33);
-  a10=(a10*a25);
-  a33=(a33+a10);
-  a33=(a13*a33);
-  a38=(a38+a33);
-  a11=(a11-a38);
-  if (res[0]!=0) res[0][22]=a11;
-  a11=arg[3]? arg[3][23] : 0;
-  a50=(a07*a50);
-  a13=(a13*a56);
-  a50=(a50+a13);
-  a50=(a11+a50);
-  a07=(a07*a64);
-  a18=(a18*a56);
-  a07=(a07+a18);
-  a19=(a19*a25);
-  a65=(a30*a65);
-  a19=(a19-a65);
-  a07=(a07+a19);
-  a50=(a50+a07);
-  a06=(a06*a57);
-  a03=(a03*a62);
-  a06=(a06+a03);
-  a17=(a17*a21);
-  a29=(a29*a63);
-  a17=(a17-a29);
-  a06=(a06+a17);
-  a50=(a50+a06);
-  a04=(a04*a25);
-  a30=(a30*a60);
-  a04=(a04-a30);
-  a50=(a50+a04);
-  if (res[0]!=0) res[0][23]=a50;
-  a50=(a05*a09);
-  a04=3.3333333333333333e-02;
-  a30=(a04*a09);
-  a50=(a50+a30);
-  a09=(a32*a09);
-  a50=(a50+a09);
-  a27=(a16*a27);
-  a50=(a50+a27);
-  a26=(a32*a26);
-  a50=(a50+a26);
-  if (res[1]!=0) res[1][0]=a50;
-  a50=(a05*a02);
-  a26=(a04*a02);
-  a50=(a50+a26);
-  a02=(a32*a02);
-  a50=(a50+a02);
-  a22=(a16*a22);
-  a50=(a50+a22);
-  a34=(a32*a34);
-  a50=(a50+a34);
-  if (res[1]!=0) res[1][1]=a50;
-  a50=(a05*a36);
-  a34=(a04*a36);
-  a50=(a50+a34);
-  a36=(a32*a36);
-  a50=(a50+a36);
-  a41=(a16*a41);
-  a50=(a50+a41);
-  a40=(a32*a40);
-  a50=(a50+a40);
-  if (res[1]!=0) res[1][2]=a50;
-  a50=(a05*a15);
-  a40=(a04*a15);
-  a50=(a50+a40);
-  a15=(a32*a15);
-  a50=(a50+a15);
-  a39=(a16*a39);
-  a50=(a50+a39);
-  a43=(a32*a43);
-  a50=(a50+a43);
-  if (res[1]!=0) res[1][3]=a50;
-  a50=(a05*a08);
-  a43=(a04*a08);
-  a50=(a50+a43);
-  a08=(a32*a08);
-  a50=(a50+a08);
-  a47=(a16*a47);
-  a50=(a50+a47);
-  a46=(a32*a46);
-  a50=(a50+a46);
-  if (res[1]!=0) res[1][4]=a50;
-  a50=(a05*a28);
-  a46=(a04*a28);
-  a50=(a50+a46);
-  a28=(a32*a28);
-  a50=(a50+a28);
-  a20=(a16*a20);
-  a50=(a50+a20);
-  a49=(a32*a49);
-  a50=(a50+a49);
-  if (res[1]!=0) res[1][5]=a50;
-  a50=(a05*a00);
-  a49=(a04*a00);
-  a50=(a50+a49);
-  a00=(a32*a00);
-  a50=(a50+a00);
-  a53=(a16*a53);
-  a50=(a50+a53);
-  a52=(a32*a52);
-  a50=(a50+a52);
-  if (res[1]!=0) res[1][6]=a50;
-  a50=(a05*a42);
-  a52=(a04*a42);
-  a50=(a50+a52);
-  a42=(a32*a42);
-  a50=(a50+a42);
-  a45=(a16*a45);
-  a50=(a50+a45);
-  a55=(a32*a55);
-  a50=(a50+a55);
-  if (res[1]!=0) res[1][7]=a50;
-  a50=(a05*a14);
-  a55=(a04*a14);
-  a50=(a50+a55);
-  a14=(a32*a14);
-  a50=(a50+a14);
-  a59=(a16*a59);
-  a50=(a50+a59);
-  a58=(a32*a58);
-  a50=(a50+a58);
-  if (res[1]!=0) res[1][8]=a50;
-  a50=(a05*a48);
-  a58=(a04*a48);
-  a50=(a50+a58);
-  a48=(a32*a48);
-  a50=(a50+a48);
-  a51=(a16*a51);
-  a50=(a50+a51);
-  a61=(a32*a61);
-  a50=(a50+a61);
-  if (res[1]!=0) res[1][9]=a50;
-  a50=(a05*a11);
-  a61=(a04*a11);
-  a50=(a50+a61);
-  a11=(a32*a11);
-  a50=(a50+a11);
-  a07=(a16*a07);
-  a50=(a50+a07);
-  a06=(a32*a06);
-  a50=(a50+a06);
-  if (res[1]!=0) res[1][10]=a50;
-  a05=(a05*a54);
-  a04=(a04*a54);
-  a05=(a05+a04);
-  a54=(a32*a54);
-  a05=(a05+a54);
-  a16=(a16*a01);
-  a05=(a05+a16);
-  a32=(a32*a31);
-  a05=(a05+a32);
-  if (res[1]!=0) res[1][11]=a05;
-  return 0;
-}
-
-/* unicycle_substep_fwd:(xup[8],dx[4x6],du[2x6])->(dxn[4x6]) */
-static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
-  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
-  casadi_real a24;
-  a00=arg[1]? arg[1][0] : 0;
-  a01=1.6666666666666666e-02;
-  a02=arg[0]? arg[0][2] : 0;
-  a03=cos(a02);
-  a04=arg[1]? arg[1][3] : 0;
-  a05=(a03*a04);
-  a06=arg[0]? arg[0][3] : 0;
-  a07=sin(a02);
-  a08=arg[1]? arg[1][2] : 0;
-  a09=(a07*a08);
-  a09=(a06*a09);
-  a05=(a05-a09);
-  a09=5.0000000000000003e-02;
-  a10=arg[0]? arg[0][5] : 0;
-  a11=(a09*a10);
-  a11=(a02+a11);
-  a12=cos(a11);
-  a13=arg[2]? arg[2][0] : 0;
-  a14=(a09*a13);
-  a14=(a04+a14);
-  a15=(a12*a14);
-  a16=arg[0]? arg[0][4] : 0;
-  a17=(a09*a16);
-  a17=(a06+a17);
-  a11=sin(a11);
-  a18=arg[2]? arg[2][1] : 0;
-  a19=(a09*a18);
-  a19=(a08+a19);
-  a20=(a11*a19);
-  a20=(a17*a20);
-  a15=(a15-a20);
-  a15=(2.*a15);
-  a05=(a05+a15);
-  a05=(a05+a15);
-  a15=1.0000000000000001e-01;
-  a10=(a15*a10);
-  a02=(a02+a10);
-  a10=cos(a02);
-  a20=(a15*a13);
-  a20=(a04+a20);
-  a21=(a10*a20);
-  a16=(a15*a16);
-  a16=(a06+a16);
-  a02=sin(a02);
-  a22=(a15*a18);
-  a22=(a08+a22);
-  a23=(a02*a22);
-  a23=(a16*a23);
-  a21=(a21-a23);
-  a05=(a05+a21);
-  a05=(a01*a05);
-  a00=(a00+a05);
-  if (res[0]!=0) res[0][0]=a00;
-  a00=arg[1]? arg[1][1] : 0;
-  a05=(a07*a04);
-  a21=(a03*a08);
-  a21=(a06*a21);
-  a05=(a05+a21);
-  a14=(a11*a14);
-  a19=(a12*a19);
-  a19=(a17*a19);
-  a14=(a14+a19);
-  a14=(2.*a14);
-  a05=(a05+a14);
-  a05=(a05+a14);
-  a20=(a02*a20);
-  a22=(a10*a22);
-  a22=(a16*a22);
-  a20=(a20+a22);
-  a05=(a05+a20);
-  a05=(a01*a05);
-  a00=(a00+a05);
-  if (res[0]!=0) res[0][1]=a00;
-  a00=3.;
-  a05=(a00*a18);
-  a20=(2.*a18);
-  a05=(a05+a20);
-  a05=(a05+a18);
-  a05=(a01*a05);
-  a08=(a08+a05);
-  if (res[0]!=0) res[0][2]=a08;
-  a08=(a00*a13);
-  a05=(2.*a13);
-  a08=(a08+a05);
-  a08=(a08+a13);
-  a08=(a01*a08);
-  a04=(a04+a08);
-  if (res[0]!=0) res[0][3]=a04;
-  a04=arg[1]? arg[1][4] : 0;
-  a08=arg[1]? arg[1][7] : 0;
-  a13=(a03*a08);
-  a05=arg[1]? arg[1][6] : 0;
-  a18=(a07*a05);
-  a18=(a06*a18);
-  a13=(a13-a18);
-  a18=arg[2]? arg[2][2] : 0;
-  a20=(a09*a18);
-  a20=(a08+a20);
-  a22=(a12*a20);
-  a14=arg[2]? arg[2][3] : 0;
-  a19=(a09*a14);
-  a19=(a05+a19);
-  a21=(a11*a19);
-  a21=(a17*a21);
-  a22=(a22-a21);
-  a22=(2.*a22);
-  a13=(a13+a22);
-  a13=(a13+a22);
-  a22=(a15*a18);
-  a22=(a08+a22);
-  a21=(a10*a22);
-  a23=(a15*a14);
-  a23=(a05+a23);
-  a24=(a02*a23);
-  a24=(a16*a24);
-  a21=(a21-a24);
-  a13=(a13+a21);
-  a13=(a01*a13);
-  a04=(a04+a13);
-  if (res[0]!=0) res[0][4]=a04;
-  a04=arg[1]? arg[1][5] : 0;
-  a13=(a07*a08);
-  a21=(a03*a05);
-  a21=(a06*a21);
-  a13=(a13+a21);
-  a20=(a11*a20);
-  a19=(a12*a19);
-  a19=(a17*a19);
-  a20=(a20+a19);
-  a20=(2.*a20);
-  a13=(a13+a20);
-  a13=(a13+a20);
-  a22=(a02*a22);
-  a23=(a10*a23);
-  a23=(a16*a23);
-  a22=(a22+a23);
-  a13=(a13+a22);
-  a13=(a01*a13);
-  a04=(a04+a13);
-  if (res[0]!=0) res[0][5]=a04;
-  a04=(a00*a14);
-  a13=(2.*a14);
-  a04=(a04+a13);
-  a04=(a04+a14);
-  a04=(a01*a04);
-  a05=(a05+a04);
-  if (res[0]!=0) res[0][6]=a05;
-  a05=(a00*a18);
-  a04=(2.*a18);
-  a05=(a05+a04);
-  a05=(a05+a18);
-  a05=(a01*a05);
-  a08=(a08+a05);
-  if (res[0]!=0) res[0][7]=a08;
-  a08=arg[1]? arg[1][8] : 0;
-  a05=arg[1]? arg[1][11] : 0;
-  a18=(a03*a05);
-  a04=arg[1]? arg[1][10] : 0;
-  a14=(a07*a04);
-  a14=(a06*a14);
-  a18=(a18-a14);
-  a14=arg[2]? arg[2][4] : 0;
-  a13=(a09*a14);
-  a13=(a05+a13);
-  a22=(a12*a13);
-  a23=arg[2]? arg[2][5] : 0;
-  a20=(a09*a23);
-  a20=(a04+a20);
-  a19=(a11*a20);
-  a19=(a17*a19);
-  a22=(a22-a19);
-  a22=(2.*a22);
-  a18=(a18+a22);
-  a18=(a18+a22);
-  a22=(a15*a14);
-  a22=(a05+a22);
-  a19=(a10*a22);
-  a21=(a15*a23);
-  a21=(a04+a21);
-  a24=(a02*a21);
-  a24=(a16*a24);
-  a19=(a19-a24);
-  a18=(a18+a19);
-  a18=(a01*a18);
-  a08=(a08+a18);
-  if (res[0]!=0) res[0][8]=a08;
-  a08=arg[1]? arg[1][9] : 0;
-  a18=(a07*a05);
-  a19=(a03*a04);
-  a19=(a06*a19);
-  a18=(a18+a19);
-  a13=(a11*a13);
-  a20=(a12*a20);
-  a20=(a17*a20);
-  a13=(a13+a20);
-  a13=(2.*a13);
-  a18=(a18+a13);
-  a18=(a18+a13);
-  a22=(a02*a22);
-  a21=(a10*a21);
-  a21=(a16*a21);
-  a22=(a22+a21);
-  a18=(a18+a22);
-  a18=(a01*a18);
-  a08=(a08+a18);
-  if (res[0]!=0) res[0][9]=a08;
-  a08=(a00*a23);
-  a18=(2.*a23);
-  a08=(a08+a18);
-  a08=(a08+a23);
-  a08=(a01*a08);
-  a04=(a04+a08);
-  if (res[0]!=0) res[0][10]=a04;
-  a04=(a00*a14);
-  a08=(2.*a14);
-  a04=(a04+a08);
-  a04=(a04+a14);
-  a04=(a01*a04);
-  a05=(a05+a04);
-  if (res[0]!=0) res[0][11]=a05;
-  a05=arg[1]? arg[1][12] : 0;
-  a04=arg[1]? arg[1][15] : 0;
-  a14=(a03*a04);
-  a08=arg[1]? arg[1][14] : 0;
-  a23=(a07*a08);
-  a23=(a06*a23);
-  a14=(a14-a23);
-  a23=arg[2]? arg[2][6] : 0;
-  a18=(a09*a23);
-  a18=(a04+a18);
-  a22=(a12*a18);
-  a21=arg[2]? arg[2][7] : 0;
-  a13=(a09*a21);
-  a13=(a08+a13);
-  a20=(a11*a13);
-  a20=(a17*a20);
-  a22=(a22-a20);
-  a22=(2.*a22);
-  a14=(a14+a22);
-  a14=(a14+a22);
-  a22=(a15*a23);
-  a22=(a04+a22);
-  a20=(a10*a22);
-  a19=(a15*a21);
-  a19=(a08+a19);
-  a24=(a02*a19);
-  a24=(a16*a24);
-  a20=(a20-a24);
-  a14=(a14+a20);
-  a14=(a01*a14);
-  a05=(a05+a14);
-  if (res[0]!=0) res[0][12]=a05;
-  a05=arg[1]? arg[1][13] : 0;
-  a14=(a07*a04);
-  a20=(a03*a08);
-  a20=(a06*a20);
-  a14=(a14+a20);
-  a18=(a11*a18);
-  a13=(a12*a13);
-  a13=(a17*a13);
-  a18=(a18+a13);
-  a18=(2.*a18);
-  a14=(a14+a18);
-  a14=(a14+a18);
-  a22=(a02*a22);
-  a19=(a10*a19);
-  a19=(a16*a19);
-  a22=(a22+a19);
-  a14=(a14+a22);
-  a14=(a01*a14);
-  a05=(a05+a14);
-  if (res[0]!=0) res[0][13]=a05;
-  a05=(a00*a21);
-  a14=(2.*a21);
-  a05=(a05+a14);
-  a05=(a05+a21);
-  a05=(a01*a05);
-  a08=(a08+a05);
-  if (res[0]!=0) res[0][14]=a08;
-  a08=(a00*a23);
-  a05=(2.*a23);
-  a08=(a08+a05);
-  a08=(a08+a23);
-  a08=(a01*a08);
-  a04=(a04+a08);
-  if (res[0]!=0) res[0][15]=a04;
-  a04=arg[1]? arg[1][16] : 0;
-  a08=arg[1]? arg[1][19] : 0;
-  a23=(a03*a08);
-  a05=arg[1]? arg[1][18] : 0;
-  a21=(a07*a05);
-  a21=(a06*a21);
-  a23=(a23-a21);
-  a21=arg[2]? arg[2][8] : 0;
-  a14=(a09*a21);
-  a14=(a08+a14);
-  a22=(a12*a14);
-  a19=arg[2]? arg[2][9] : 0;
-  a18=(a09*a19);
-  a18=(a05+a18);
-  a13=(a11*a18);
-  a13=(a17*a13);
-  a22=(a22-a13);
-  a22=(2.*a22);
-  a23=(a23+a22);
-  a23=(a23+a22);
-  a22=(a15*a21);
-  a22=(a08+a22);
-  a13=(a10*a22);
-  a20=(a15*a19);
-  a20=(a05+a20);
-  a24=(a02*a20);
-  a24=(a16*a24);
-  a13=(a13-a24);
-  a23=(a23+a13);
-  a23=(a01*a23);
-  a04=(a04+a23);
-  if (res[0]!=0) res[0][16]=a04;
-  a04=arg[1]? arg[1][17] : 0;
-  a23=(a07*a08);
-  a13=(a03*a05);
-  a13=(a06*a13);
-  a23=(a23+a13);
-  a14=(a11*a14);
-  a18=(a12*a18);
-  a18=(a17*a18);
-  a14=(a14+a18);
-  a14=(2.*a14);
-  a23=(a23+a14);
-  a23=(a23+a14);
-  a22=(a02*a22);
-  a20=(a10*a20);
-  a20=(a16*a20);
-  a22=(a22+a20);
-  a23=(a23+a22);
-  a23=(a01*a23);
-  a04=(a04+a23);
-  if (res[0]!=0) res[0][17]=a04;
-  a04=(a00*a19);
-  a23=(2.*a19);
-  a04=(a04+a23);
-  a04=(a04+a19);
-  a04=(a01*a04);
-  a05=(a05+a04);
-  if (res[0]!=0) res[0][18]=a05;
-  a05=(a00*a21);
-  a04=(2.*a21);
-  a05=(a05+a04);
-  a05=(a05+a21);
-  a05=(a01*a05);
-  a08=(a08+a05);
-  if (res[0]!=0) res[0][19]=a08;
-  a08=arg[1]? arg[1][20] : 0;
-  a05=arg[1]? arg[1][23] : 0;
-  a21=(a03*a05);
-  a04=arg[1]? arg[1][22] : 0;
-  a19=(a07*a04);
-  a19=(a06*a19);
-  a21=(a21-a19);
-  a19=arg[2]? arg[2][10] : 0;
-  a23=(a09*a19);
-  a23=(a05+a23);
-  a22=(a12*a23);
-  a20=arg[2]? arg[2][11] : 0;
-  a09=(a09*a20);
-  a09=(a04+a09);
-  a14=(a11*a09);
-  a14=(a17*a14);
-  a22=(a22-a14);
-  a22=(2.*a22);
-  a21=(a21+a22);
-  a21=(a21+a22);
-  a22=(a15*a19);
-  a22=(a05+a22);
-  a14=(a10*a22);
-  a15=(a15*a20);
-  a15=(a04+a15);
-  a18=(a02*a15);
-  a18=(a16*a18);
-  a14=(a14-a18);
-  a21=(a21+a14);
-  a21=(a01*a21);
-  a08=(a08+a21);
-  if (res[0]!=0) res[0][20]=a08;
-  a08=arg[1]? arg[1][21] : 0;
-  a07=(a07*a05);
-  a03=(a03*a04);
-  a06=(a06*a03);
-  a07=(a07+a06);
-  a11=(a11*a23);
-  a12=(a12*a09);
-  a17=(a17*a12);
-  a11=(a11+a17);
-  a11=(2.*a11);
-  a07=(a07+a11);
-  a07=(a07+a11);
-  a02=(a02*a22);
-  a10=(a10*a15);
-  a16=(a16*a10);
-  a02=(a02+a16);
-  a07=(a07+a02);
-  a07=(a01*a07);
-  a08=(a08+a07);
-  if (res[0]!=0) res[0][21]=a08;
-  a08=(a00*a20);
-  a07=(2.*a20);
-  a08=(a08+a07);
-  a08=(a08+a20);
-  a08=(a01*a08);
-  a04=(a04+a08);
-  if (res[0]!=0) res[0][22]=a04;
-  a00=(a00*a19);
-  a04=(2.*a19);
-  a00=(a00+a04);
-  a00=(a00+a19);
-  a01=(a01*a00);
-  a05=(a05+a01);
-  if (res[0]!=0) res[0][23]=a05;
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;
 }
 
 /* unicycle_stage_hess_exact:(x[4],u[2],p[2],lam_next[4],mu_g)->(A[6x6],Phi[4x6],C[1x6]) */
-static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)mem;
-  casadi_int i, j;
-  casadi_real **res1=res+3, *rr, *w00=w+66, *w01=w+70, *w02=w+72, w03, *w04=w+74, *w05=w+110, *w06=w+116, *w07=w+120, *w08=w+132, *w09=w+144;
-  casadi_real *w11=w+168, *w12=w+180, *w13=w+204, *w14=w+228, *w15=w+240, *w16=w+276, *w17=w+312;
-  const casadi_real **arg1=arg+5, *cs, *wr08, *wr10;
-  casadi_copy(arg[0], 4, w00);
-  casadi_copy(arg[1], 2, w01);
-  casadi_copy(arg[2], 2, w02);
-  w03 = arg[4] ? arg[4][0] : 0;
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=(&w03);
-  res1[0]=w04;
-  res1[1]=w05;
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
-  w03 = 5.0000000000000000e-01;
-  casadi_copy(arg[3], 4, w06);
-  for (i=0, rr=w06, cs=w06; i<4; ++i) *rr++ = (- *cs++ );
-  rr=w07;
-  for (i=0, cs=w00; i<4; ++i) *rr++ = *cs++;
-  for (i=0, cs=w01; i<2; ++i) *rr++ = *cs++;
-  for (i=0, cs=w02; i<2; ++i) *rr++ = *cs++;
-  for (i=0, cs=w06; i<4; ++i) *rr++ = *cs++;
-  wr08 = casadi_c0;
-  casadi_densify(wr08, casadi_s4, w09, 0);
-  wr10 = casadi_c1;
-  casadi_densify(wr10, casadi_s5, w11, 0);
-  casadi_clear(w12, 24);
-  arg1[0]=w07;
-  arg1[1]=w09;
-  arg1[2]=w11;
-  arg1[3]=w12;
-  res1[0]=w13;
-  res1[1]=w14;
-  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
-  for (i=0, rr=w09, cs=w13; i<6; ++i) for (j=0; j<4; ++j) rr[i+j*6] = *cs++;
-  for (i=0, rr=w07, cs=w14; i<6; ++i) for (j=0; j<2; ++j) rr[i+j*6] = *cs++;
-  rr=w15;
-  for (i=0, cs=w09; i<24; ++i) *rr++ = *cs++;
-  for (i=0, cs=w07; i<12; ++i) *rr++ = *cs++;
-  for (i=0, rr=w16, cs=w15; i<6; ++i) for (j=0; j<6; ++j) rr[i+j*6] = *cs++;
-  for (i=0, rr=w16, cs=w15; i<36; ++i) (*rr++) += (*cs++);
-  for (i=0, rr=w16, cs=w16; i<36; ++i) (*rr++)  = (w03*(*cs++));
-  for (i=0, rr=w04, cs=w16; i<36; ++i) (*rr++) += (*cs++);
-  casadi_copy(w04, 36, res[0]);
-  rr=w17;
-  for (i=0, cs=w00; i<4; ++i) *rr++ = *cs++;
-  for (i=0, cs=w01; i<2; ++i) *rr++ = *cs++;
-  for (i=0, cs=w02; i<2; ++i) *rr++ = *cs++;
-  casadi_densify(wr08, casadi_s4, w09, 0);
-  wr10 = casadi_c1;
-  casadi_densify(wr10, casadi_s5, w08, 0);
-  arg1[0]=w17;
-  arg1[1]=w09;
-  arg1[2]=w08;
-  res1[0]=w13;
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  casadi_copy(w13, 24, res[1]);
-  casadi_copy(w05, 6, res[2]);
+static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
+  casadi_real a24, a25;
+  a00=arg[4]? arg[4][0] : 0;
+  a00=(2.*a00);
+  a01=1.0000000000000001e-01;
+  a00=(a00+a01);
+  if (res[0]!=0) res[0][0]=a00;
+  a02=0.;
+  if (res[0]!=0) res[0][1]=a02;
+  if (res[0]!=0) res[0][2]=a02;
+  if (res[0]!=0) res[0][3]=a02;
+  if (res[0]!=0) res[0][4]=a02;
+  if (res[0]!=0) res[0][5]=a02;
+  if (res[0]!=0) res[0][6]=a02;
+  if (res[0]!=0) res[0][7]=a00;
+  if (res[0]!=0) res[0][8]=a02;
+  if (res[0]!=0) res[0][9]=a02;
+  if (res[0]!=0) res[0][10]=a02;
+  if (res[0]!=0) res[0][11]=a02;
+  if (res[0]!=0) res[0][12]=a02;
+  if (res[0]!=0) res[0][13]=a02;
+  a00=arg[0]? arg[0][3] : 0;
+  a03=arg[1]? arg[1][0] : 0;
+  a04=(a01*a03);
+  a04=(a00+a04);
+  a05=1.6666666666666666e-02;
+  a06=arg[3]? arg[3][0] : 0;
+  a07=(a05*a06);
+  a08=(a04*a07);
+  a09=arg[0]? arg[0][2] : 0;
+  a10=arg[1]? arg[1][1] : 0;
+  a11=(a01*a10);
+  a11=(a09+a11);
+  a12=cos(a11);
+  a13=(a08*a12);
+  a14=arg[3]? arg[3][1] : 0;
+  a15=(a05*a14);
+  a16=(a04*a15);
+  a11=sin(a11);
+  a17=(a16*a11);
+  a13=(a13+a17);
+  a17=(a00*a15);
+  a18=sin(a09);
+  a17=(a17*a18);
+  a13=(a13+a17);
+  a17=5.0000000000000003e-02;
+  a03=(a17*a03);
+  a03=(a00+a03);
+  a19=3.3333333333333333e-02;
+  a14=(a19*a14);
+  a14=(-a14);
+  a14=(2.*a14);
+  a20=(a03*a14);
+  a10=(a17*a10);
+  a10=(a09+a10);
+  a21=sin(a10);
+  a22=(a20*a21);
+  a19=(a19*a06);
+  a19=(-a19);
+  a19=(2.*a19);
+  a06=(a03*a19);
+  a10=cos(a10);
+  a23=(a06*a10);
+  a22=(a22+a23);
+  a13=(a13-a22);
+  a22=(a00*a07);
+  a09=cos(a09);
+  a22=(a22*a09);
+  a13=(a13+a22);
+  if (res[0]!=0) res[0][14]=a13;
+  a13=(a14*a10);
+  a22=(a19*a21);
+  a13=(a13-a22);
+  a22=(a15*a09);
+  a23=(a15*a12);
+  a24=(a07*a11);
+  a23=(a23-a24);
+  a22=(a22+a23);
+  a22=(a13-a22);
+  a24=(a07*a18);
+  a22=(a22+a24);
+  if (res[0]!=0) res[0][15]=a22;
+  a13=(a17*a13);
+  a23=(a01*a23);
+  a13=(a13-a23);
+  if (res[0]!=0) res[0][16]=a13;
+  a23=(a01*a12);
+  a08=(a08*a23);
+  a24=(a01*a11);
+  a16=(a16*a24);
+  a08=(a08+a16);
+  a16=(a17*a21);
+  a20=(a20*a16);
+  a25=(a17*a10);
+  a06=(a06*a25);
+  a20=(a20+a06);
+  a06=(a08-a20);
+  if (res[0]!=0) res[0][17]=a06;
+  if (res[0]!=0) res[0][18]=a02;
+  if (res[0]!=0) res[0][19]=a02;
+  if (res[0]!=0) res[0][20]=a22;
+  if (res[0]!=0) res[0][21]=a02;
+  if (res[0]!=0) res[0][22]=a02;
+  a14=(a14*a25);
+  a19=(a19*a16);
+  a14=(a14-a19);
+  a15=(a15*a23);
+  a07=(a07*a24);
+  a15=(a15-a07);
+  a07=(a14-a15);
+  if (res[0]!=0) res[0][23]=a07;
+  if (res[0]!=0) res[0][24]=a02;
+  if (res[0]!=0) res[0][25]=a02;
+  if (res[0]!=0) res[0][26]=a13;
+  if (res[0]!=0) res[0][27]=a02;
+  a13=1.0000000000000002e-02;
+  if (res[0]!=0) res[0][28]=a13;
+  a14=(a17*a14);
+  a15=(a01*a15);
+  a14=(a14-a15);
+  if (res[0]!=0) res[0][29]=a14;
+  if (res[0]!=0) res[0][30]=a02;
+  if (res[0]!=0) res[0][31]=a02;
+  if (res[0]!=0) res[0][32]=a06;
+  if (res[0]!=0) res[0][33]=a07;
+  if (res[0]!=0) res[0][34]=a14;
+  a08=(a01*a08);
+  a17=(a17*a20);
+  a08=(a08-a17);
+  a17=5.0000000000000010e-03;
+  a08=(a08+a17);
+  a08=(a08+a17);
+  if (res[0]!=0) res[0][35]=a08;
+  a08=1.;
+  if (res[1]!=0) res[1][0]=a08;
+  if (res[1]!=0) res[1][1]=a02;
+  if (res[1]!=0) res[1][2]=a02;
+  if (res[1]!=0) res[1][3]=a02;
+  if (res[1]!=0) res[1][4]=a02;
+  if (res[1]!=0) res[1][5]=a08;
+  if (res[1]!=0) res[1][6]=a02;
+  if (res[1]!=0) res[1][7]=a02;
+  a17=(a03*a21);
+  a17=(-a17);
+  a17=(2.*a17);
+  a20=(a00*a18);
+  a20=(a17-a20);
+  a20=(a20+a17);
+  a17=(a04*a11);
+  a20=(a20-a17);
+  a20=(a05*a20);
+  if (res[1]!=0) res[1][8]=a20;
+  a00=(a00*a09);
+  a20=(a03*a10);
+  a20=(2.*a20);
+  a00=(a00+a20);
+  a00=(a00+a20);
+  a20=(a04*a12);
+  a00=(a00+a20);
+  a00=(a05*a00);
+  if (res[1]!=0) res[1][9]=a00;
+  if (res[1]!=0) res[1][10]=a08;
+  if (res[1]!=0) res[1][11]=a02;
+  a00=(2.*a10);
+  a09=(a09+a00);
+  a09=(a09+a00);
+  a09=(a09+a12);
+  a09=(a05*a09);
+  if (res[1]!=0) res[1][12]=a09;
+  a09=(2.*a21);
+  a18=(a18+a09);
+  a18=(a18+a09);
+  a18=(a18+a11);
+  a18=(a05*a18);
+  if (res[1]!=0) res[1][13]=a18;
+  if (res[1]!=0) res[1][14]=a02;
+  if (res[1]!=0) res[1][15]=a08;
+  a18=2.0000000000000001e-01;
+  a10=(a18*a10);
+  a10=(a10+a23);
+  a10=(a05*a10);
+  if (res[1]!=0) res[1][16]=a10;
+  a18=(a18*a21);
+  a18=(a18+a24);
+  a18=(a05*a18);
+  if (res[1]!=0) res[1][17]=a18;
+  if (res[1]!=0) res[1][18]=a02;
+  if (res[1]!=0) res[1][19]=a01;
+  a18=4.;
+  a16=(a03*a16);
+  a16=(a18*a16);
+  a24=(a04*a24);
+  a16=(a16+a24);
+  a16=(a05*a16);
+  a16=(-a16);
+  if (res[1]!=0) res[1][20]=a16;
+  a03=(a03*a25);
+  a18=(a18*a03);
+  a04=(a04*a23);
+  a18=(a18+a04);
+  a05=(a05*a18);
+  if (res[1]!=0) res[1][21]=a05;
+  if (res[1]!=0) res[1][22]=a01;
+  if (res[1]!=0) res[1][23]=a02;
+  a05=arg[0]? arg[0][0] : 0;
+  a05=(a05-a08);
+  a05=(2.*a05);
+  if (res[2]!=0) res[2][0]=a05;
+  a05=arg[0]? arg[0][1] : 0;
+  a05=(a05-a01);
+  a05=(2.*a05);
+  if (res[2]!=0) res[2][1]=a05;
+  if (res[2]!=0) res[2][2]=a02;
+  if (res[2]!=0) res[2][3]=a02;
+  if (res[2]!=0) res[2][4]=a02;
+  if (res[2]!=0) res[2][5]=a02;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f6(arg, res, iw, w, mem);
+  return casadi_f2(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_exact_checkout(void) {
@@ -1995,126 +809,185 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_hess_exact_sparsity_in(cas
 
 CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_hess_exact_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s6;
-    case 1: return casadi_s7;
-    case 2: return casadi_s8;
+    case 0: return casadi_s4;
+    case 1: return casadi_s5;
+    case 2: return casadi_s6;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 9;
-  if (sz_res) *sz_res = 5;
+  if (sz_arg) *sz_arg = 5;
+  if (sz_res) *sz_res = 3;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 320;
+  if (sz_w) *sz_w = 0;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 9*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 3*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 320*sizeof(casadi_real);
-  return 0;
-}
-
-/* unicycle_node_gn:(x[4],u[2],p[2],mu_g)->(A[6x6],C[1x6]) */
-static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1, a2, a3;
-  a0=1.0000000000000001e-01;
-  if (res[0]!=0) res[0][0]=a0;
-  a1=0.;
-  if (res[0]!=0) res[0][1]=a1;
-  if (res[0]!=0) res[0][2]=a1;
-  if (res[0]!=0) res[0][3]=a1;
-  if (res[0]!=0) res[0][4]=a1;
-  if (res[0]!=0) res[0][5]=a1;
-  if (res[0]!=0) res[0][6]=a1;
-  if (res[0]!=0) res[0][7]=a0;
-  if (res[0]!=0) res[0][8]=a1;
-  if (res[0]!=0) res[0][9]=a1;
-  if (res[0]!=0) res[0][10]=a1;
-  if (res[0]!=0) res[0][11]=a1;
-  if (res[0]!=0) res[0][12]=a1;
-  if (res[0]!=0) res[0][13]=a1;
-  if (res[0]!=0) res[0][14]=a1;
-  if (res[0]!=0) res[0][15]=a1;
-  if (res[0]!=0) res[0][16]=a1;
-  if (res[0]!=0) res[0][17]=a1;
-  if (res[0]!=0) res[0][18]=a1;
-  if (res[0]!=0) res[0][19]=a1;
-  if (res[0]!=0) res[0][20]=a1;
-  if (res[0]!=0) res[0][21]=a1;
-  if (res[0]!=0) res[0][22]=a1;
-  if (res[0]!=0) res[0][23]=a1;
-  if (res[0]!=0) res[0][24]=a1;
-  if (res[0]!=0) res[0][25]=a1;
-  if (res[0]!=0) res[0][26]=a1;
-  if (res[0]!=0) res[0][27]=a1;
-  a2=1.0000000000000002e-02;
-  if (res[0]!=0) res[0][28]=a2;
-  if (res[0]!=0) res[0][29]=a1;
-  if (res[0]!=0) res[0][30]=a1;
-  if (res[0]!=0) res[0][31]=a1;
-  if (res[0]!=0) res[0][32]=a1;
-  if (res[0]!=0) res[0][33]=a1;
-  if (res[0]!=0) res[0][34]=a1;
-  if (res[0]!=0) res[0][35]=a2;
-  a2=arg[0]? arg[0][0] : 0;
-  a3=1.;
-  a2=(a2-a3);
-  a2=(2.*a2);
-  if (res[1]!=0) res[1][0]=a2;
-  a2=arg[0]? arg[0][1] : 0;
-  a2=(a2-a0);
-  a2=(2.*a2);
-  if (res[1]!=0) res[1][1]=a2;
-  if (res[1]!=0) res[1][2]=a1;
-  if (res[1]!=0) res[1][3]=a1;
-  if (res[1]!=0) res[1][4]=a1;
-  if (res[1]!=0) res[1][5]=a1;
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;
 }
 
 /* unicycle_stage_hess_gn:(x[4],u[2],p[2],lam_next[4],mu_g)->(A[6x6],Phi[4x6],C[1x6]) */
-static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)mem;
-  casadi_int i;
-  casadi_real **res1=res+3, *rr, *w00=w+25, *w01=w+29, *w02=w+31, w03, *w04=w+33, *w05=w+69, *w06=w+75, *w07=w+83, *w08=w+95, *w10=w+119;
-  const casadi_real **arg1=arg+5, *cs, *wr07, *wr09;
-  casadi_copy(arg[0], 4, w00);
-  casadi_copy(arg[1], 2, w01);
-  casadi_copy(arg[2], 2, w02);
-  w03 = arg[4] ? arg[4][0] : 0;
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=(&w03);
-  res1[0]=w04;
-  res1[1]=w05;
-  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
-  casadi_copy(w04, 36, res[0]);
-  rr=w06;
-  for (i=0, cs=w00; i<4; ++i) *rr++ = *cs++;
-  for (i=0, cs=w01; i<2; ++i) *rr++ = *cs++;
-  for (i=0, cs=w02; i<2; ++i) *rr++ = *cs++;
-  wr07 = casadi_c0;
-  casadi_densify(wr07, casadi_s4, w08, 0);
-  wr09 = casadi_c1;
-  casadi_densify(wr09, casadi_s5, w07, 0);
-  arg1[0]=w06;
-  arg1[1]=w08;
-  arg1[2]=w07;
-  res1[0]=w10;
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  casadi_copy(w10, 24, res[1]);
-  casadi_copy(w05, 6, res[2]);
+static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15;
+  a00=1.0000000000000001e-01;
+  if (res[0]!=0) res[0][0]=a00;
+  a01=0.;
+  if (res[0]!=0) res[0][1]=a01;
+  if (res[0]!=0) res[0][2]=a01;
+  if (res[0]!=0) res[0][3]=a01;
+  if (res[0]!=0) res[0][4]=a01;
+  if (res[0]!=0) res[0][5]=a01;
+  if (res[0]!=0) res[0][6]=a01;
+  if (res[0]!=0) res[0][7]=a00;
+  if (res[0]!=0) res[0][8]=a01;
+  if (res[0]!=0) res[0][9]=a01;
+  if (res[0]!=0) res[0][10]=a01;
+  if (res[0]!=0) res[0][11]=a01;
+  if (res[0]!=0) res[0][12]=a01;
+  if (res[0]!=0) res[0][13]=a01;
+  if (res[0]!=0) res[0][14]=a01;
+  if (res[0]!=0) res[0][15]=a01;
+  if (res[0]!=0) res[0][16]=a01;
+  if (res[0]!=0) res[0][17]=a01;
+  if (res[0]!=0) res[0][18]=a01;
+  if (res[0]!=0) res[0][19]=a01;
+  if (res[0]!=0) res[0][20]=a01;
+  if (res[0]!=0) res[0][21]=a01;
+  if (res[0]!=0) res[0][22]=a01;
+  if (res[0]!=0) res[0][23]=a01;
+  if (res[0]!=0) res[0][24]=a01;
+  if (res[0]!=0) res[0][25]=a01;
+  if (res[0]!=0) res[0][26]=a01;
+  if (res[0]!=0) res[0][27]=a01;
+  a02=1.0000000000000002e-02;
+  if (res[0]!=0) res[0][28]=a02;
+  if (res[0]!=0) res[0][29]=a01;
+  if (res[0]!=0) res[0][30]=a01;
+  if (res[0]!=0) res[0][31]=a01;
+  if (res[0]!=0) res[0][32]=a01;
+  if (res[0]!=0) res[0][33]=a01;
+  if (res[0]!=0) res[0][34]=a01;
+  if (res[0]!=0) res[0][35]=a02;
+  a02=1.;
+  if (res[1]!=0) res[1][0]=a02;
+  if (res[1]!=0) res[1][1]=a01;
+  if (res[1]!=0) res[1][2]=a01;
+  if (res[1]!=0) res[1][3]=a01;
+  if (res[1]!=0) res[1][4]=a01;
+  if (res[1]!=0) res[1][5]=a02;
+  if (res[1]!=0) res[1][6]=a01;
+  if (res[1]!=0) res[1][7]=a01;
+  a03=1.6666666666666666e-02;
+  a04=arg[0]? arg[0][3] : 0;
+  a05=5.0000000000000003e-02;
+  a06=arg[1]? arg[1][0] : 0;
+  a07=(a05*a06);
+  a07=(a04+a07);
+  a08=arg[0]? arg[0][2] : 0;
+  a09=arg[1]? arg[1][1] : 0;
+  a10=(a05*a09);
+  a10=(a08+a10);
+  a11=sin(a10);
+  a12=(a07*a11);
+  a12=(-a12);
+  a12=(2.*a12);
+  a13=sin(a08);
+  a14=(a04*a13);
+  a14=(a12-a14);
+  a14=(a14+a12);
+  a06=(a00*a06);
+  a06=(a04+a06);
+  a09=(a00*a09);
+  a09=(a08+a09);
+  a12=sin(a09);
+  a15=(a06*a12);
+  a14=(a14-a15);
+  a14=(a03*a14);
+  if (res[1]!=0) res[1][8]=a14;
+  a08=cos(a08);
+  a04=(a04*a08);
+  a10=cos(a10);
+  a14=(a07*a10);
+  a14=(2.*a14);
+  a04=(a04+a14);
+  a04=(a04+a14);
+  a09=cos(a09);
+  a14=(a06*a09);
+  a04=(a04+a14);
+  a04=(a03*a04);
+  if (res[1]!=0) res[1][9]=a04;
+  if (res[1]!=0) res[1][10]=a02;
+  if (res[1]!=0) res[1][11]=a01;
+  a04=(2.*a10);
+  a08=(a08+a04);
+  a08=(a08+a04);
+  a08=(a08+a09);
+  a08=(a03*a08);
+  if (res[1]!=0) res[1][12]=a08;
+  a08=(2.*a11);
+  a13=(a13+a08);
+  a13=(a13+a08);
+  a13=(a13+a12);
+  a13=(a03*a13);
+  if (res[1]!=0) res[1][13]=a13;
+  if (res[1]!=0) res[1][14]=a01;
+  if (res[1]!=0) res[1][15]=a02;
+  a13=2.0000000000000001e-01;
+  a08=(a13*a10);
+  a09=(a00*a09);
+  a08=(a08+a09);
+  a08=(a03*a08);
+  if (res[1]!=0) res[1][16]=a08;
+  a13=(a13*a11);
+  a12=(a00*a12);
+  a13=(a13+a12);
+  a13=(a03*a13);
+  if (res[1]!=0) res[1][17]=a13;
+  if (res[1]!=0) res[1][18]=a01;
+  if (res[1]!=0) res[1][19]=a00;
+  a13=4.;
+  a11=(a05*a11);
+  a11=(a07*a11);
+  a11=(a13*a11);
+  a12=(a06*a12);
+  a11=(a11+a12);
+  a11=(a03*a11);
+  a11=(-a11);
+  if (res[1]!=0) res[1][20]=a11;
+  a05=(a05*a10);
+  a07=(a07*a05);
+  a13=(a13*a07);
+  a06=(a06*a09);
+  a13=(a13+a06);
+  a03=(a03*a13);
+  if (res[1]!=0) res[1][21]=a03;
+  if (res[1]!=0) res[1][22]=a00;
+  if (res[1]!=0) res[1][23]=a01;
+  a03=arg[0]? arg[0][0] : 0;
+  a03=(a03-a02);
+  a03=(2.*a03);
+  if (res[2]!=0) res[2][0]=a03;
+  a03=arg[0]? arg[0][1] : 0;
+  a03=(a03-a00);
+  a03=(2.*a03);
+  if (res[2]!=0) res[2][1]=a03;
+  if (res[2]!=0) res[2][2]=a01;
+  if (res[2]!=0) res[2][3]=a01;
+  if (res[2]!=0) res[2][4]=a01;
+  if (res[2]!=0) res[2][5]=a01;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f10(arg, res, iw, w, mem);
+  return casadi_f3(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn_checkout(void) {
@@ -2174,31 +1047,31 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_hess_gn_sparsity_in(casadi
 
 CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_hess_gn_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s6;
-    case 1: return casadi_s7;
-    case 2: return casadi_s8;
+    case 0: return casadi_s4;
+    case 1: return casadi_s5;
+    case 2: return casadi_s6;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 9;
-  if (sz_res) *sz_res = 5;
+  if (sz_arg) *sz_arg = 5;
+  if (sz_res) *sz_res = 3;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 143;
+  if (sz_w) *sz_w = 0;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 9*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 3*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 143*sizeof(casadi_real);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;
 }
 
 /* unicycle_stage_hess_cost_exact:(x[4],u[2],p[2])->(A_l[6x6]) */
-static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=1.0000000000000001e-01;
@@ -2244,7 +1117,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f12(arg, res, iw, w, mem);
+  return casadi_f4(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_checkout(void) {
@@ -2298,7 +1171,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_hess_cost_exact_sparsity_i
 
 CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_hess_cost_exact_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s6;
+    case 0: return casadi_s4;
     default: return 0;
   }
 }
@@ -2320,7 +1193,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_work_bytes(casadi_int *s
 }
 
 /* unicycle_stage_hess_cost_gn:(x[4],u[2],p[2])->(A_l[6x6]) */
-static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=1.0000000000000001e-01;
@@ -2366,7 +1239,7 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f13(arg, res, iw, w, mem);
+  return casadi_f5(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_checkout(void) {
@@ -2420,7 +1293,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_hess_cost_gn_sparsity_in(c
 
 CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_hess_cost_gn_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s6;
+    case 0: return casadi_s4;
     default: return 0;
   }
 }
@@ -2442,7 +1315,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_work_bytes(casadi_int *sz_a
 }
 
 /* unicycle_term_eval:(x[4],p[2])->(E,r[0],r_eq[0]) */
-static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4;
   a0=5.0000000000000000e-01;
@@ -2467,7 +1340,7 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_eval(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f14(arg, res, iw, w, mem);
+  return casadi_f6(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_eval_checkout(void) {
@@ -2522,8 +1395,8 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_term_eval_sparsity_in(casadi_int
 CASADI_SYMBOL_EXPORT const casadi_int* unicycle_term_eval_sparsity_out(casadi_int i) {
   switch (i) {
     case 0: return casadi_s2;
-    case 1: return casadi_s9;
-    case 2: return casadi_s9;
+    case 1: return casadi_s7;
+    case 2: return casadi_s7;
     default: return 0;
   }
 }
@@ -2545,7 +1418,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_eval_work_bytes(casadi_int *sz_arg, casad
 }
 
 /* unicycle_term_grad:(x[4],p[2],mu_r[0],nu[0])->(gL[4],E,r[0],r_eq[0]) */
-static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5;
   a0=10.;
@@ -2575,7 +1448,7 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_grad(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f15(arg, res, iw, w, mem);
+  return casadi_f7(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_grad_checkout(void) {
@@ -2626,8 +1499,8 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_term_grad_sparsity_in(casadi_int
   switch (i) {
     case 0: return casadi_s0;
     case 1: return casadi_s1;
-    case 2: return casadi_s9;
-    case 3: return casadi_s9;
+    case 2: return casadi_s7;
+    case 3: return casadi_s7;
     default: return 0;
   }
 }
@@ -2636,8 +1509,8 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_term_grad_sparsity_out(casadi_in
   switch (i) {
     case 0: return casadi_s0;
     case 1: return casadi_s2;
-    case 2: return casadi_s9;
-    case 3: return casadi_s9;
+    case 2: return casadi_s7;
+    case 3: return casadi_s7;
     default: return 0;
   }
 }
@@ -2659,7 +1532,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_grad_work_bytes(casadi_int *sz_arg, casad
 }
 
 /* unicycle_term_hess_exact:(x[4],p[2],mu_r[0],nu[0])->(A[4x4],R[0x4],R_eq[0x4]) */
-static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=10.;
@@ -2685,7 +1558,7 @@ static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f16(arg, res, iw, w, mem);
+  return casadi_f8(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_checkout(void) {
@@ -2735,17 +1608,17 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_term_hess_exact_sparsity_in(casa
   switch (i) {
     case 0: return casadi_s0;
     case 1: return casadi_s1;
-    case 2: return casadi_s9;
-    case 3: return casadi_s9;
+    case 2: return casadi_s7;
+    case 3: return casadi_s7;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* unicycle_term_hess_exact_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s10;
-    case 1: return casadi_s11;
-    case 2: return casadi_s11;
+    case 0: return casadi_s8;
+    case 1: return casadi_s9;
+    case 2: return casadi_s9;
     default: return 0;
   }
 }
@@ -2767,7 +1640,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_work_bytes(casadi_int *sz_arg,
 }
 
 /* unicycle_term_hess_gn:(x[4],p[2],mu_r[0],nu[0])->(A[4x4],R[0x4],R_eq[0x4]) */
-static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=10.;
@@ -2793,7 +1666,7 @@ static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f17(arg, res, iw, w, mem);
+  return casadi_f9(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_checkout(void) {
@@ -2843,17 +1716,17 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_term_hess_gn_sparsity_in(casadi_
   switch (i) {
     case 0: return casadi_s0;
     case 1: return casadi_s1;
-    case 2: return casadi_s9;
-    case 3: return casadi_s9;
+    case 2: return casadi_s7;
+    case 3: return casadi_s7;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* unicycle_term_hess_gn_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s10;
-    case 1: return casadi_s11;
-    case 2: return casadi_s11;
+    case 0: return casadi_s8;
+    case 1: return casadi_s9;
+    case 2: return casadi_s9;
     default: return 0;
   }
 }
@@ -2875,7 +1748,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_work_bytes(casadi_int *sz_arg, ca
 }
 
 /* unicycle_ode:(x[4],u[2],p[2])->(xdot[4]) */
-static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2;
   a0=arg[0]? arg[0][3] : 0;
@@ -2894,7 +1767,7 @@ static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_ode(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f18(arg, res, iw, w, mem);
+  return casadi_f10(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_ode_checkout(void) {

@@ -31,10 +31,10 @@ const casadi_int* unicycle_stage_eval_sparsity_in(casadi_int i);
 const casadi_int* unicycle_stage_eval_sparsity_out(casadi_int i);
 int unicycle_stage_eval_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int unicycle_stage_eval_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define unicycle_stage_eval_SZ_ARG 6
-#define unicycle_stage_eval_SZ_RES 5
+#define unicycle_stage_eval_SZ_ARG 3
+#define unicycle_stage_eval_SZ_RES 3
 #define unicycle_stage_eval_SZ_IW 0
-#define unicycle_stage_eval_SZ_W 24
+#define unicycle_stage_eval_SZ_W 0
 int unicycle_stage_grad(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int unicycle_stage_grad_checkout(void);
 void unicycle_stage_grad_release(int mem);
@@ -49,10 +49,10 @@ const casadi_int* unicycle_stage_grad_sparsity_in(casadi_int i);
 const casadi_int* unicycle_stage_grad_sparsity_out(casadi_int i);
 int unicycle_stage_grad_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int unicycle_stage_grad_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define unicycle_stage_grad_SZ_ARG 9
-#define unicycle_stage_grad_SZ_RES 6
+#define unicycle_stage_grad_SZ_ARG 5
+#define unicycle_stage_grad_SZ_RES 4
 #define unicycle_stage_grad_SZ_IW 0
-#define unicycle_stage_grad_SZ_W 58
+#define unicycle_stage_grad_SZ_W 0
 int unicycle_stage_hess_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int unicycle_stage_hess_exact_checkout(void);
 void unicycle_stage_hess_exact_release(int mem);
@@ -67,10 +67,10 @@ const casadi_int* unicycle_stage_hess_exact_sparsity_in(casadi_int i);
 const casadi_int* unicycle_stage_hess_exact_sparsity_out(casadi_int i);
 int unicycle_stage_hess_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int unicycle_stage_hess_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define unicycle_stage_hess_exact_SZ_ARG 9
-#define unicycle_stage_hess_exact_SZ_RES 5
+#define unicycle_stage_hess_exact_SZ_ARG 5
+#define unicycle_stage_hess_exact_SZ_RES 3
 #define unicycle_stage_hess_exact_SZ_IW 0
-#define unicycle_stage_hess_exact_SZ_W 320
+#define unicycle_stage_hess_exact_SZ_W 0
 int unicycle_stage_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int unicycle_stage_hess_gn_checkout(void);
 void unicycle_stage_hess_gn_release(int mem);
@@ -85,10 +85,10 @@ const casadi_int* unicycle_stage_hess_gn_sparsity_in(casadi_int i);
 const casadi_int* unicycle_stage_hess_gn_sparsity_out(casadi_int i);
 int unicycle_stage_hess_gn_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int unicycle_stage_hess_gn_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define unicycle_stage_hess_gn_SZ_ARG 9
-#define unicycle_stage_hess_gn_SZ_RES 5
+#define unicycle_stage_hess_gn_SZ_ARG 5
+#define unicycle_stage_hess_gn_SZ_RES 3
 #define unicycle_stage_hess_gn_SZ_IW 0
-#define unicycle_stage_hess_gn_SZ_W 143
+#define unicycle_stage_hess_gn_SZ_W 0
 int unicycle_stage_hess_cost_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int unicycle_stage_hess_cost_exact_checkout(void);
 void unicycle_stage_hess_cost_exact_release(int mem);

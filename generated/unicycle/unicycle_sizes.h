@@ -21,10 +21,10 @@
 #define UNICYCLE_HAS_NOMINAL 1
 
 /* CasADi work arrays: the maximum over every generated function, at least 1 */
-#define UNICYCLE_SZ_ARG 9
-#define UNICYCLE_SZ_RES 6
+#define UNICYCLE_SZ_ARG 5
+#define UNICYCLE_SZ_RES 4
 #define UNICYCLE_SZ_IW 1
-#define UNICYCLE_SZ_W 331
+#define UNICYCLE_SZ_W 32
 
 /* The real-number type of the runtime (double; the precision is a generation-time choice) */
 typedef double unicycle_real;
