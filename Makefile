@@ -4,12 +4,13 @@ PY     := $(VENV)/bin/python
 OUT    := out
 EXAMPLE := examples/robot_arm.py
 
-.PHONY: demo test bench generate firmware clean setup help
+.PHONY: demo test bench bench-acados acados-env generate firmware clean setup help
 
 help:
 	@echo "make demo      generate, build and run the robot-arm closed loop (DOPUS M=1 vs full RTI); plots in $(OUT)/robot_arm"
 	@echo "make test      run the test suite"
 	@echo "make bench     run the benchmarks (tables on stdout, JSON in bench/results)"
+	@echo "make bench-acados  time our solver against acados on the robot arm (one process, interleaved)"
 	@echo "make generate  regenerate the checked-in generated/ folders"
 	@echo "make firmware  build the static library of generated/robot_arm with make only"
 	@echo "make clean     remove build products and outputs"
@@ -34,6 +35,12 @@ test: setup
 bench: setup
 	$(PY) bench/runtime_bench.py
 	$(PY) bench/qp_bench.py
+
+acados-env:
+	@bash scripts/setup_acados.sh >/dev/null
+
+bench-acados: setup acados-env
+	$(PY) bench/acados_bench.py $(EXAMPLE) --json bench/results/acados_bench.json
 
 generate: setup
 	$(VENV)/bin/dopus-gen generate examples/robot_arm.py -o generated/robot_arm

@@ -56,7 +56,7 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--reg-eps", default=1e-4, show_default=True, type=float, help="Eigenvalue floor of the regularisation.")
 @click.option("--cost-hessian", type=click.Choice(["fresh", "stored"]), default="fresh", show_default=True,
               help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
-                   "paper's literal algorithm (figure 1, DESIGN.md section 8).")
+                   "paper's literal algorithm (figure 1, docs/design.md section 8).")
 @click.option("--lm", default=0.0, show_default=True, type=click.FloatRange(min=0),
               help="Levenberg-Marquardt term added to every Hessian block of the QP (0: exact Newton).")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)

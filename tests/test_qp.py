@@ -367,7 +367,7 @@ def robot_qps(robot_disc, robot_solution):
 
 
 def test_robot_arm_qps_against_reference_solver(robot_qps):
-    """Each QP against dopus_codegen.qpref.solve_qp_reference (IPOPT + active-set polish,
+    """Each QP against dopus_codegen.reference.qp.solve_qp_reference (IPOPT + active-set polish,
     an independent method that takes the indefinite blocks as they are), to 1e-6 on the
     primal and every multiplier. Solver tolerance 1e-12: the exact-Hessian QPs near the
     solution have a reduced Hessian down to ~2e-5, so 1e-10 leaves errors up to ~4e-5."""

@@ -116,7 +116,7 @@ def test_qp_reference_indefinite_blocks_with_positive_reduced_hessian():
 
 
 def test_qp_reference_robot_arm_exact_hessian_qp(robot_disc, robot_solution):
-    """The warm-start QP of the robot arm: indefinite exact blocks (DESIGN.md section 8)."""
+    """The warm-start QP of the robot arm: indefinite exact blocks (docs/design.md section 8)."""
     d = robot_disc
     sol0, _ = robot_solution
     ref = ReferenceDopus(d, M=d.N - 1, mode="fixed")
@@ -492,7 +492,7 @@ def test_second_example_full_rti_reaches_ipopt_with_active_path_constraint(secon
     d = second_disc
     sol, _ = second_solution
     # from the OCP file's (cold) guess the exact Hessian QPs lose convexity; the mirrored
-    # Hessian keeps them convex and leaves the fixed point unchanged (DESIGN.md section 2)
+    # Hessian keeps them convex and leaves the fixed point unchanged (docs/design.md section 2)
     ref = ReferenceDopus(d, M=d.N - 1, mode="fixed", regularization="mirror")
     ref.init(d.x0)
     ks = _iterate(ref, d.x0, 40, tol=1e-11)

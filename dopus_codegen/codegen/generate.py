@@ -34,7 +34,7 @@ from .paths import runtime_c_dir, templates_dir
 
 PLACEHOLDER = "dopus"
 
-#: Compiler flags shared by the rendered Makefile and dopus_codegen.build.
+#: Compiler flags shared by the rendered Makefile and dopus_codegen.codegen.build.
 STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 #: The CasADi file gets the same flags: its unused parameters are marked as such when it is
 #: generated (silence_unused_parameters).

@@ -2,7 +2,7 @@
 
 :class:`CSolver` implements the backend protocol of docs/algorithm.md section 7, so the
 convergence study (``dopus-gen converge --backend c``) and the software-in-the-loop runs
-drive the generated C exactly as they drive :class:`~dopus_codegen.reference.ReferenceDopus`::
+drive the generated C exactly as they drive :class:`~dopus_codegen.reference.dopus.ReferenceDopus`::
 
     solver = CSolver(disc, M=1)                 # generate + build into a cache, then load
     solver.init(xhat0)                          # the OCP file's guess
