@@ -96,10 +96,12 @@ def discretize(ocp: Ocp) -> StageModel:
         raise
     except Exception as exc:  # noqa: BLE001
         raise OcpError(f"dynamics: cannot discretise with {ocp.integrator.describe()}: {casadi_message(exc)}") from None
-    if not isinstance(substep, ca.Function) or substep.n_in() != 3 or substep.n_out() != 1 \
-            or substep.size_out(0) != (x.size1(), 1):
+    if not isinstance(substep, ca.Function) or substep.n_in() != 3 or substep.n_out() != 1:
         raise OcpError(f"dynamics: integrator {ocp.integrator.describe()} must give a function "
-                       f"(x, u, p) -> x+ of shape ({x.size1()}, 1)")
+                       f"(x, u, p) -> x+")
+    if substep.size_out(0) != (x.size1(), 1):
+        raise OcpError(f"dynamics: integrator {ocp.integrator.describe()} returned shape "
+                       f"{substep.size_out(0)}, expected ({x.size1()}, 1)")
     n_substeps = int(getattr(ocp.integrator, "substeps", 1))
 
     res, W, l_ls = _least_squares(ocp._stage_ls, "stage least squares")
