@@ -150,7 +150,7 @@ def generate(ocp_file, out_dir, offline_guess):
 @click.option("--opt", default="-O2", show_default=True, help="Optimisation flags (quoted if several).")
 @click.option("--force", is_flag=True, help="Rebuild even if the sources did not change.")
 def build(folder, cc, opt, force):
-    """Compile a generated FOLDER into build/py/lib<name>.so (cffi) and lib<name>.a (firmware).
+    """Compile a generated FOLDER into build/lib<name>.so (cffi) and lib<name>.a (firmware).
 
     Every file compiles with -std=c99 -Wall -Wextra -Werror -pedantic. Nothing is
     recompiled if sources, compiler and flags are unchanged, and a file compiled before

@@ -11,8 +11,8 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
-import sys
 
 import casadi as ca
 import numpy as np
@@ -121,9 +121,9 @@ def test_implicit_sensitivities_by_finite_differences(stiff, integ):
 def test_non_stiff_problem_same_solution_as_rk4_within_discretisation():
     mod = _module(SECOND_FILE)
     d_rk = build_functions(mod.build())
-    ocp = load_ocp(SECOND_FILE)
-    ocp._integrator = GaussLegendre(stages=2, substeps=1, newton_iters=4)
-    d_gl = build_functions(ocp)
+    spec = load_ocp(SECOND_FILE).validate()
+    gl = GaussLegendre(stages=2, substeps=1, newton_iters=4)
+    d_gl = build_functions(dataclasses.replace(spec, model=dataclasses.replace(spec.model, integrator=gl)))
     s_rk, i_rk = solve_ocp(d_rk, d_rk.x0)
     s_gl, i_gl = solve_ocp(d_gl, d_gl.x0)
     assert i_rk["success"] and i_gl["success"]

@@ -10,6 +10,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 
@@ -26,12 +27,16 @@ from dopus_codegen.problem.ocp import RK4, load_ocp
 CHAIN_FILE = EXAMPLES / "chain.py"
 
 
-def _unrolled_reference(ocp):
+def _with_integrator(spec, integrator):
+    return dataclasses.replace(spec, model=dataclasses.replace(spec.model, integrator=integrator))
+
+
+def _unrolled_reference(spec):
     """phi, Phi, grad and Hessian of -lam' phi from the unrolled SX expression."""
-    x, u, p = ocp.x_sym(), ocp.u_sym(), ocp.p_sym()
+    x, u, p = spec.model.x, spec.model.u, spec.model.p
     w = ca.vertcat(x, u)
-    ode = ca.Function("ode", [x, u, p], [ocp._xdot])
-    phi = ocp.integrator.step(ode, x, u, p, ocp.dt)
+    ode = ca.Function("ode", [x, u, p], [spec.model.xdot])
+    phi = spec.model.integrator.step(ode, x, u, p, spec.horizon.dt)
     lam = ca.SX.sym("lam", x.size1())
     L = -ca.dot(lam, phi)
     return ca.Function("ref", [x, u, p, lam], [phi, ca.jacobian(phi, w), ca.gradient(L, w),
@@ -43,12 +48,13 @@ def _unrolled_reference(ocp):
     (ROBOT_ARM_FILE, "structured", 2), (SECOND_FILE, "structured", "all"),
     (ROBOT_ARM_FILE, "unrolled", "auto"), (CHAIN_FILE, "auto", "auto")])
 def test_structured_blocks_equal_the_unrolled_derivatives(path, derivatives, directions):
-    ocp = load_ocp(path)
-    ocp._integrator = RK4(ocp.integrator.substeps, derivatives=derivatives, directions=directions)
-    disc = build_functions(ocp)
+    spec = load_ocp(path).validate()
+    spec = _with_integrator(spec, RK4(spec.model.integrator.substeps, derivatives=derivatives,
+                                      directions=directions))
+    disc = build_functions(spec)
     want = "SXFunction" if derivatives == "unrolled" else "MXFunction"
     assert disc.stage_hess_exact.class_name() == want
-    ref = _unrolled_reference(ocp)
+    ref = _unrolled_reference(spec)
     rng = np.random.default_rng(3)
     g = disc.initial_guess
     for k in (0, disc.N // 2):
