@@ -374,15 +374,20 @@ def test_clock_macro(tmp_path):
             assert t_c == 0.0
 
 
-def test_failed_qp_takes_no_step(robot_disc, robot_solution):
+@pytest.mark.parametrize("lm", [0.0, "auto"])
+def test_failed_qp_takes_no_step(robot_disc, robot_solution, lm):
     """A QP stopped by its iteration limit: DopusError with the QP status, no step, and the
-    run goes on exactly like the reference's run that skipped that feedback."""
+    run goes on exactly like the reference's run that skipped that feedback (fixed lm), or
+    whose QP failed the same way (the automatic lm, whose retries and raise after a failure
+    both backends make: docs/algorithm.md section 10)."""
     xhat = np.array(robot_disc.disturbance(np.array(robot_disc.x0, dtype=float)), dtype=float)
-    c = CSolver(robot_disc, M=2, mode="receding", qp_tol=1e-14)
-    r = ReferenceDopus(robot_disc, M=2, mode="receding", qp_tol=1e-14)
+    c = CSolver(robot_disc, M=2, mode="receding", qp_tol=1e-14, lm=lm)
+    r = ReferenceDopus(robot_disc, M=2, mode="receding", qp_tol=1e-14, lm=lm)
     for b in (c, r):
         b.init(robot_disc.x0, robot_solution[0])
     state = {f: getattr(c, f) for f in ("x", "u", "lam", "mu_b", "nu")}
+    lm0 = c.lm
+    assert lm0 == r.lm
     c.set_qp_max_iter(1)
     with pytest.raises(DopusError, match=r"QP status 1 \(max_iter\)") as ei:
         c.feedback(xhat)
@@ -390,6 +395,15 @@ def test_failed_qp_takes_no_step(robot_disc, robot_solution):
     for f, v in state.items():
         assert np.array_equal(getattr(c, f), v), f
     c.set_qp_max_iter(100)
+    if lm == "auto":
+        # three solves with lm raised in between, then one raise after the failure
+        assert c.lm == pytest.approx(max(lm0, 1e-8 * c.lm_scale) * 1e3, rel=1e-12)
+        r.set_qp_max_iter(1)
+        with pytest.raises(DopusError) as er:
+            r.feedback(xhat)
+        assert er.value.status == STATUS_QP and er.value.qp_status == 1
+        r.set_qp_max_iter(None)
+        assert abs(r.lm - c.lm) <= 1e-12 * c.lm
     for b in (c, r):      # the sampling instant passes without a step
         b.prepare()
     for it in range(3):

@@ -392,9 +392,22 @@ class ReferenceDopus:
         self._xhat_last = xhat0.copy()
         self._xhat_fresh = True
         t1 = time.perf_counter()
-        try:
-            sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter)
-        except QPError as exc:
+        retries = 0
+        while True:
+            try:
+                sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter)
+                failure = None if self._finite(*(sol[k] for k in FIELDS_QP)) else "nonfinite"
+            except QPError as exc:
+                failure = exc
+            # the automatic term (section 10): a QP not solved is solved again with lm raised
+            if (failure is None or not self.lm_auto or retries >= _SAFETY["LM_RETRIES"]
+                    or not self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale):
+                break
+            self._lm_raise()
+            qp = self.qp_of_current(xhat0)
+            retries += 1
+        if isinstance(failure, QPError):
+            exc = failure
             self.qp_status = status_code_qp(exc.qp_status)
             raise self._feedback_failed("qp", f"feedback: {exc}; QP status {self.qp_status} ({exc.qp_status})",
                                         exc.qp_status) from None
@@ -402,7 +415,7 @@ class ReferenceDopus:
         self.qp_iterations = int(sol.get("iterations", 0))
         t2 = time.perf_counter()
         N, nx = self.N, self.nx
-        if not self._finite(*(sol[k] for k in FIELDS_QP)):
+        if failure is not None:
             raise self._feedback_failed("qp", "feedback: the QP solution is not finite", "solved")
         if not self._box_ok(self.x + sol["x"], self.u + sol["u"]):
             raise self._feedback_failed("diverged", "feedback: the QP step leaves the problem's scale box (or is "
@@ -431,7 +444,8 @@ class ReferenceDopus:
         self._n_failed = 0
         self._plan_age = 0
         self._recovering = max(self._recovering - 1, 0)
-        self._lm_feedback("ok")
+        if retries == 0:
+            self._lm_feedback("ok")   # lowered, unless this QP needed a raise
         self._plan_u = self.u.copy()
         self.u0, clipped = self._clip_u(self.u[0])
         if clipped:

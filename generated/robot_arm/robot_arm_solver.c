@@ -850,7 +850,7 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
 {
     const robot_arm_qp_sol *sol = &s->qp_sol;
     double t0;
-    int k, i, qs;
+    int k, i, qs, retries;
 
     robot_arm_ensure_setup(s);
     s->flags = 0;
@@ -877,6 +877,15 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
     qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    /* the automatic term (section 10): a QP not solved is solved again with lm raised */
+    retries = 0;
+    while (s->lm_auto && retries < ROBOT_ARM_LM_RETRIES && s->lm < ROBOT_ARM_LM_MAX_REL * s->lm_scale &&
+           (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol))) {
+        robot_arm_lm_raise(s);
+        s->qp_in.hess_shift = s->lm;
+        qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+        retries += 1;
+    }
     s->qp_status = qs;
     s->qp_iterations = s->qp_info.iterations;
     if (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol)) {
@@ -938,7 +947,9 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     s->n_failed = 0;
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
-    robot_arm_lm_feedback(s, ROBOT_ARM_OK);
+    if (retries == 0) {
+        robot_arm_lm_feedback(s, ROBOT_ARM_OK);   /* lowered, unless this QP needed a raise */
+    }
     robot_arm_copy(&s->plan_u[0][0], &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
     if (robot_arm_clip_u(s->u[0], s->u0_out)) {
         s->flags |= ROBOT_ARM_FLAG_U0_CLIPPED;

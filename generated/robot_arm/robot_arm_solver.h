@@ -225,6 +225,7 @@ enum robot_arm_flag {
 #define ROBOT_ARM_LM_LOWER 0.1               /* factor after a successful feedback */
 #define ROBOT_ARM_LM_PIVOT_REL 1e-10         /* Riccati pivots must exceed 1e-10 h */
 #define ROBOT_ARM_LM_KKT_GROWTH 10.0         /* raise when the KKT proxy grows 10x in one prepare */
+#define ROBOT_ARM_LM_RETRIES 2               /* QP solves again with lm raised after a failure */
 
 enum robot_arm_mode {
     ROBOT_ARM_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */

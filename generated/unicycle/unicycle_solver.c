@@ -850,7 +850,7 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
 {
     const unicycle_qp_sol *sol = &s->qp_sol;
     double t0;
-    int k, i, qs;
+    int k, i, qs, retries;
 
     unicycle_ensure_setup(s);
     s->flags = 0;
@@ -877,6 +877,15 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
     qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    /* the automatic term (section 10): a QP not solved is solved again with lm raised */
+    retries = 0;
+    while (s->lm_auto && retries < UNICYCLE_LM_RETRIES && s->lm < UNICYCLE_LM_MAX_REL * s->lm_scale &&
+           (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol))) {
+        unicycle_lm_raise(s);
+        s->qp_in.hess_shift = s->lm;
+        qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+        retries += 1;
+    }
     s->qp_status = qs;
     s->qp_iterations = s->qp_info.iterations;
     if (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol)) {
@@ -938,7 +947,9 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     s->n_failed = 0;
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
-    unicycle_lm_feedback(s, UNICYCLE_OK);
+    if (retries == 0) {
+        unicycle_lm_feedback(s, UNICYCLE_OK);   /* lowered, unless this QP needed a raise */
+    }
     unicycle_copy(&s->plan_u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
     if (unicycle_clip_u(s->u[0], s->u0_out)) {
         s->flags |= UNICYCLE_FLAG_U0_CLIPPED;
