@@ -116,6 +116,8 @@ def step(c, r, xhat0, where: str, tally: Tally):
         b.prepare()
     errs = differences(c, r)
     errs["u0"] = rel_err(uc, ur)
+    # the Levenberg-Marquardt term of the next QP (the automatic one adapts: section 10)
+    assert c.lm_auto == r.lm_auto and abs(c.lm - r.lm) <= REL_TOL * r.lm, f"{where}: lm {c.lm} != {r.lm}"
     field = max(errs, key=errs.get)
     tally.n += 1
     if errs[field] <= REL_TOL:
