@@ -155,3 +155,42 @@ def test_back_on_the_fresh_trajectory_after_failed_instants(arm, robot_solution,
     print(f"n_failed {n_failed}: tracking after {RECOVERED_WITHIN} instants: recovered "
           f"{track_rec[RECOVERED_WITHIN:].max():.3e}, fresh {track_fresh[RECOVERED_WITHIN:].max():.3e}")
     assert track_rec[RECOVERED_WITHIN:].max() <= 1.2 * track_fresh[RECOVERED_WITHIN:].max() + 1e-4
+
+
+def test_realistic_loop_3000_instants(arm, robot_solution):
+    """The loop of the issue that got stuck: the model as the plant, measurement noise
+    (1e-4), the scenario's push every 0.5 s, 3000 instants, the generated defaults (exact
+    Hessian, automatic lm). No failed instant, and the RMS distance of the tip from the
+    path is within 20 % of the full RTI's run the same way (the reference)."""
+    guess, _ = robot_solution
+
+    def run(M):
+        rng = np.random.default_rng(3)
+        plant = Plant(arm.ode, arm.dt, 0, reltol=1e-8, abstol=1e-8)
+        s = CSolver(arm, M=M, lm=None)
+        x = np.asarray(arm.x0, float).copy()
+        s.init(x, guess)
+        failed, xs = 0, []
+        for i in range(3000):
+            if i > 0 and i % 50 == 0:
+                x = np.asarray(arm.disturbance(x), float)
+            try:
+                u = s.feedback(x + rng.normal(0, 1e-4, x.size))
+            except DopusError as err:
+                u, failed = err.u0, failed + 1
+            x = plant.step(x, u, np.zeros(0))
+            try:
+                s.prepare()
+            except DopusError:
+                failed += 1
+            xs.append(x.copy())
+        tr = _tracking(np.array(xs))
+        back = max(tr[k + 40] for k in range(50, 3000 - 41, 50))   # reported
+        return failed, back, float(np.sqrt(np.mean(tr ** 2)))
+
+    failed, back, rms = run(1)
+    failed_full, back_full, rms_full = run(arm.N - 1)
+    print(f"3000 instants: M = 1 {failed} failed, distance 40 instants after a push <= {back:.2e}, "
+          f"RMS {rms:.3e}; full RTI {failed_full} failed, {back_full:.2e}, RMS {rms_full:.3e}")
+    assert failed == 0 and failed_full == 0
+    assert rms <= 1.2 * rms_full
