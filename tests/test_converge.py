@@ -28,7 +28,7 @@ def warm_study(robot_disc, robot_solution):
     sol, _ = robot_solution
     start = StartPoint("warm", d.x0, sol, d.disturbance(d.x0))
     return run_study(d, ["full", 20, 10, 5, 2, 1, 0], 40, start, hessian="exact", regularization="none",
-                     cost_hessian="stored")
+                     cost_hessian="stored", lm=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,7 @@ def warm_study_fresh(robot_disc, robot_solution):
     d = robot_disc
     sol, _ = robot_solution
     start = StartPoint("warm", d.x0, sol, d.disturbance(d.x0))
-    return run_study(d, ["full", 5, 1], 40, start, hessian="exact", regularization="none")
+    return run_study(d, ["full", 5, 1], 40, start, hessian="exact", regularization="none", lm=0.0)
 
 
 @pytest.fixture(scope="module")

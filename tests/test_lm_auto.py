@@ -56,10 +56,10 @@ def test_convexity_test_against_the_reduced_hessian(robot_disc, robot_solution):
     checked = {True: 0, False: 0}
     for it in range(6):
         qp = r.qp_of_current(xhat)      # lm = 0: the blocks themselves
-        r.lm_scale = r._lm_hessian_scale()
+        r.lm_scale = r.lm_hessian_scale()
         for lm in [0.0] + list(np.logspace(-7, -1, 13) * r.lm_scale):
             eig = reduced_hessian_min_eig(qp, lm)
-            passes = r._lm_convex(lm)
+            passes = r.lm_convex(lm)
             if abs(eig) > 1e-6 * r.lm_scale:          # away from the pivot threshold
                 assert passes == (eig > 0), (it, lm, eig)
                 checked[passes] += 1

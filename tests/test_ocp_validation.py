@@ -192,7 +192,7 @@ def test_bad_options():
     ocp, _ = make()
     raises(lambda: ocp.options(hessian="bfgs"), "options: hessian must be")
     raises(lambda: ocp.options(lm=-1e-3), "options: lm must be finite and >= 0")
-    raises(lambda: ocp.options(lm="x"), "options: lm must be a number")
+    raises(lambda: ocp.options(lm="x"), "options: lm must be 'auto' or a number")
     raises(lambda: ocp.options(regularization="clip"), "options: regularization must be")
     raises(lambda: ocp.options(M=-1), "options: M must be an integer >= 0")
     raises(lambda: ocp.options(reg_eps=0), "options: reg_eps must be positive")
@@ -204,7 +204,7 @@ def test_options_update_only_what_is_given():
     ocp.options(hessian="gauss-newton", M=3)
     ocp.options(regularization="mirror")
     assert build_functions(ocp).options == dict(hessian="gauss-newton", regularization="mirror",
-                                                reg_eps=1e-4, M=3, offline_guess=False, lm=0.0,
+                                                reg_eps=1e-4, M=3, offline_guess=False, lm="auto",
                                                 cost_hessian="fresh")
     ocp.options(lm=2e-4)
     assert build_functions(ocp).options["lm"] == 2e-4 and build_functions(ocp).options["M"] == 3

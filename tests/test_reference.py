@@ -1,7 +1,9 @@
 """The Python reference DOPUS and the reference QP solver, checked against independent
 references: clarabel (convex QPs), second-order optimality certificates, IPOPT on the
 NLP (offline.solve_ocp), finite differences of the stage gradients F_k, and an OCP whose
-model is affine (so the secant criterion must vanish)."""
+model is affine (so the secant criterion must vanish). The paper's literal QP throughout
+(lm = 0; the automatic term of docs/algorithm.md section 10 is tested in
+tests/test_lm_auto.py and tests/test_c_vs_reference.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -120,7 +122,7 @@ def test_qp_reference_robot_arm_exact_hessian_qp(robot_disc, robot_solution):
     """The warm-start QP of the robot arm: indefinite exact blocks (docs/design.md section 8)."""
     d = robot_disc
     sol0, _ = robot_solution
-    ref = ReferenceDopus(d, M=d.N - 1, mode="fixed")
+    ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="fixed")
     ref.init(d.x0, sol0)
     qp = ref.qp_of_current(d.disturbance(d.x0))
     assert min(np.linalg.eigvalsh(h).min() for h in qp["H"]) < -1e-3
@@ -180,7 +182,7 @@ def _iterate(ref, xhat, iters, tol=0.0):
 def test_cold_start_gauss_newton_full_rti_reaches_ipopt(robot_disc, robot_solution):
     d = robot_disc
     sol, _ = robot_solution
-    ref = ReferenceDopus(d, M=d.N - 1, mode="fixed", hessian="gauss-newton")
+    ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="fixed", hessian="gauss-newton")
     ref.init(d.x0)
     ks = _iterate(ref, d.x0, 60, tol=1e-11)
     it = next(i for i, k in enumerate(ks) if k <= 1e-8)
@@ -202,7 +204,7 @@ def robot_exact_kkt_point(robot_disc, robot_solution):
     iterate, too coarse to see a fixed point at 1e-9."""
     d = robot_disc
     sol, _ = robot_solution
-    ref = ReferenceDopus(d, M=d.N - 1, mode="fixed")
+    ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="fixed")
     ref.init(d.x0, sol)
     for _ in range(2):
         ref.feedback(d.x0)
@@ -227,7 +229,7 @@ def test_adjoint_correction_keeps_kkt_point_with_stale_blocks(robot_disc, robot_
     stale.x = sol.x + scale * 0.05 * rng.standard_normal(sol.x.shape)
     stale.u = sol.u + scale * 0.5 * rng.standard_normal(sol.u.shape)
     stale.lam = sol.lam * (1 + scale * 0.3)
-    ref = ReferenceDopus(d, M=0, mode="fixed", hessian=hessian, cost_hessian=cost_hessian)
+    ref = ReferenceDopus(d, lm=0.0, M=0, mode="fixed", hessian=hessian, cost_hessian=cost_hessian)
     ref.init(d.x0, stale)                    # every block computed at the perturbed point
     ref.x, ref.u = sol.x.copy(), sol.u.copy()
     ref.lam, ref.mu_g, ref.mu_b = sol.lam.copy(), sol.mu_g.copy(), sol.mu_b.copy()
@@ -271,7 +273,7 @@ def test_rho_matches_finite_difference_secant(robot_disc, robot_solution, mode):
     d = robot_disc
     sol, _ = robot_solution
     N, nx = d.N, d.nx
-    ref = ReferenceDopus(d, M=N - 1, mode=mode)
+    ref = ReferenceDopus(d, lm=0.0, M=N - 1, mode=mode)
     xf = d.disturbance(d.x0)
     ref.init(d.x0, sol)                 # full RTI: every block fresh at the point omega_old
     old = ref.guess()
@@ -309,7 +311,7 @@ def test_rho_is_first_order_in_the_step_with_fresh_blocks(robot_disc, robot_solu
     sol, _ = robot_solution
     out = []
     for eps in (1e-3, 1e-4):
-        ref = ReferenceDopus(d, M=d.N - 1, mode="fixed")
+        ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="fixed")
         ref.init(d.x0, sol)
         xf = d.x0.copy()
         xf[2] += eps                    # a small push of the joint velocity
@@ -343,7 +345,7 @@ def _affine_ocp():
 @pytest.mark.parametrize("mode", ["fixed", "receding"])
 def test_rho_vanishes_for_an_affine_model(mode):
     d = _affine_ocp()
-    ref = ReferenceDopus(d, M=0, mode=mode)
+    ref = ReferenceDopus(d, lm=0.0, M=0, mode=mode)
     ref.init(d.x0)
     # a different initial state every iteration keeps the steps O(0.1)
     xhats = [d.x0, d.x0 + [0.2, -0.1], d.x0 - [0.3, 0.2], d.x0 + [0.1, 0.3]]
@@ -402,7 +404,7 @@ def test_rho_is_zero_when_the_secant_residual_is_round_off(robot_disc, robot_sol
 
     d = robot_disc
     sol, _ = robot_solution
-    ref = ReferenceDopus(d, M=d.N - 1, mode=mode)
+    ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode=mode)
     ref.init(d.x0, sol)
     old = ref.guess()
     ref.feedback(d.x0)
@@ -426,7 +428,7 @@ def test_rho_keeps_a_real_secant_violation_of_a_tiny_step(robot_disc, robot_solu
     round-off floor does not hide it, where a floor on |domega| of 1e-8 would."""
     d = robot_disc
     sol, _ = robot_solution
-    ref = ReferenceDopus(d, M=d.N - 1, mode=mode, hessian="gauss-newton")
+    ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode=mode, hessian="gauss-newton")
     ref.init(d.x0, sol)
     old = ref.guess()
     xf = np.array(d.x0, dtype=float)
@@ -454,27 +456,27 @@ def test_receding_full_recompute_equals_fresh_init(robot_disc, robot_solution):
     """Shift + ring buffer: with every block recomputed the QP equals a fresh init's."""
     d = robot_disc
     sol, _ = robot_solution
-    ref = ReferenceDopus(d, M=d.N - 1, mode="receding")
+    ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="receding")
     ref.init(d.x0, sol)
     for _ in range(3):
         xhat = d.disturbance(d.x0) if _ == 0 else ref.x[0]
         ref.feedback(xhat)
         ref.prepare()
     assert ref.ring_head == 3
-    fresh = ReferenceDopus(d, M=d.N - 1, mode="receding")
+    fresh = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="receding")
     fresh.init(ref.x[0], ref.guess())
     qa, qb = ref.qp_of_current(ref.x[0]), fresh.qp_of_current(ref.x[0])
     for key in ("H", "g", "Phi", "b", "HN", "gN", "lbw", "ubw", "Req", "req"):
         np.testing.assert_allclose(qa[key], qb[key], rtol=0, atol=1e-12, err_msg=key)
     # and with M = 0 the stale stage blocks are those of the right (shifted) stage
-    ref0 = ReferenceDopus(d, M=0, mode="receding", cost_hessian="stored")
+    ref0 = ReferenceDopus(d, lm=0.0, M=0, mode="receding", cost_hessian="stored")
     ref0.init(d.x0, sol)
     H1 = ref0.slot_of(1).Ht.copy()
     ref0.feedback(d.x0)
     ref0.prepare()
     np.testing.assert_array_equal(ref0.slot_of(0).Ht, H1)
     # cost_hessian='fresh': Phit and A_dyn shift with the slot, the cost part is new
-    ref1 = ReferenceDopus(d, M=0, mode="receding", cost_hessian="fresh")
+    ref1 = ReferenceDopus(d, lm=0.0, M=0, mode="receding", cost_hessian="fresh")
     ref1.init(d.x0, sol)
     s1 = ref1.slot_of(1).copy()
     ref1.feedback(d.disturbance(d.x0))
@@ -494,7 +496,7 @@ def test_second_example_full_rti_reaches_ipopt_with_active_path_constraint(secon
     sol, _ = second_solution
     # from the OCP file's (cold) guess the exact Hessian QPs lose convexity; the mirrored
     # Hessian keeps them convex and leaves the fixed point unchanged (docs/design.md section 2)
-    ref = ReferenceDopus(d, M=d.N - 1, mode="fixed", regularization="mirror")
+    ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="fixed", regularization="mirror")
     ref.init(d.x0)
     ks = _iterate(ref, d.x0, 40, tol=1e-11)
     print(f"\nunicycle, cold start, mirrored exact Hessian, full RTI: {len(ks) - 1} iterations, "
@@ -508,7 +510,7 @@ def test_second_example_full_rti_reaches_ipopt_with_active_path_constraint(secon
     np.testing.assert_allclose(ref.mu_g, sol.mu_g, atol=1e-6)
     # the exact Hessian without regularisation from the IPOPT point of the pushed state
     xf = d.disturbance(d.x0)
-    ref = ReferenceDopus(d, M=d.N - 1, mode="fixed")
+    ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="fixed")
     ref.init(xf, sol)
     ks = _iterate(ref, d.x0, 10)
     assert ks[-1] < 1e-10
@@ -523,7 +525,7 @@ def test_receding_horizon_tracks_from_ipopt_solution(robot_disc, robot_solution,
 
     d = robot_disc
     sol, _ = robot_solution
-    ref = ReferenceDopus(d, M=d.N - 1 if M == "full" else M, mode="receding", hessian=hessian)
+    ref = ReferenceDopus(d, lm=0.0, M=d.N - 1 if M == "full" else M, mode="receding", hessian=hessian)
     ref.init(d.x0, sol)
     xhat = d.x0.copy()
     kkts, du = [], []
@@ -555,8 +557,8 @@ def test_cost_hessian_settings_agree_for_the_full_rti(robot_disc, robot_solution
     identical iterates, bit for bit (receding mode, disturbed start)."""
     d = robot_disc
     sol, _ = robot_solution
-    a = ReferenceDopus(d, M=d.N - 1, hessian=hessian, cost_hessian="fresh")
-    b = ReferenceDopus(d, M=d.N - 1, hessian=hessian, cost_hessian="stored")
+    a = ReferenceDopus(d, lm=0.0, M=d.N - 1, hessian=hessian, cost_hessian="fresh")
+    b = ReferenceDopus(d, lm=0.0, M=d.N - 1, hessian=hessian, cost_hessian="stored")
     x = d.disturbance(d.x0)
     for r in (a, b):
         r.init(d.x0, sol)
@@ -575,7 +577,7 @@ def test_cost_hessian_settings_agree_for_the_full_rti(robot_disc, robot_solution
 def _closed_loop(d, guess, M, cost_hessian, steps, hessian="gauss-newton"):
     """``steps`` sampling instants on the discrete model phi, the OCP's disturbance at the
     first; returns u0 per instant and the KKT measure after each feedback."""
-    r = ReferenceDopus(d, M=M, mode="receding", hessian=hessian, cost_hessian=cost_hessian)
+    r = ReferenceDopus(d, lm=0.0, M=M, mode="receding", hessian=hessian, cost_hessian=cost_hessian)
     r.init(d.x0, guess)
     x = d.disturbance(d.x0)
     us, kkts = [], []
@@ -617,14 +619,14 @@ def test_receding_gauss_newton_m1_fresh_stays_with_the_full_rti(robot_disc, robo
 def test_reference_rejects_bad_input(robot_disc):
     d = robot_disc
     with pytest.raises(ValueError, match="hessian"):
-        ReferenceDopus(d, hessian="bfgs")
+        ReferenceDopus(d, lm=0.0, hessian="bfgs")
     with pytest.raises(ValueError, match="regularization"):
-        ReferenceDopus(d, regularization="clip")
+        ReferenceDopus(d, lm=0.0, regularization="clip")
     with pytest.raises(ValueError, match="mode"):
-        ReferenceDopus(d, mode="free")
+        ReferenceDopus(d, lm=0.0, mode="free")
     with pytest.raises(ValueError, match="cost_hessian"):
-        ReferenceDopus(d, cost_hessian="always")
-    ref = ReferenceDopus(d, M=1000)
+        ReferenceDopus(d, lm=0.0, cost_hessian="always")
+    ref = ReferenceDopus(d, lm=0.0, M=1000)
     assert ref.M == d.N - 1
     with pytest.raises(DopusError, match="init"):
         ref.feedback(d.x0)
@@ -648,7 +650,7 @@ def test_parameters_reach_every_function(second_disc, second_solution):
     p[1] += 0.3                                 # target 0.3 m further up
     opt, info = solve_ocp(d, d.x0, guess=sol, p=p)
     assert info["success"]
-    ref = ReferenceDopus(d, M=d.N - 1, mode="fixed")
+    ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="fixed")
     ref.init(d.x0, sol)                         # blocks at the old target's solution
     ref.set_parameters(p)
     ref.prepare()                               # F, H at the new parameters
@@ -671,7 +673,7 @@ def test_nonfinite_function_value_leaves_state(tmp_path):
     ocp.horizon(N=5, dt=0.1)
     ocp.initial_state([1.2])
     d = build_functions(ocp)
-    ref = ReferenceDopus(d, M=4, mode="fixed")
+    ref = ReferenceDopus(d, lm=0.0, M=4, mode="fixed")
     ref.init(d.x0)
     ref.feedback(d.x0)
     ref.prepare()

@@ -776,12 +776,12 @@ class ReferenceDopus:
         self._flag("recovered")
 
     # ------------------------------------------------------------------ section 10: automatic lm
-    def _lm_hessian_scale(self) -> float:
+    def lm_hessian_scale(self) -> float:
         """h: the largest |diagonal entry| of the QP's stage and terminal blocks."""
         d = [np.abs(np.diag(sl.Ht)).max() for sl in self.slots] + [np.abs(np.diag(self.term["A"])).max()]
         return float(max(1e-300, *d))
 
-    def _lm_convex(self, lm: float) -> bool:
+    def lm_convex(self, lm: float) -> bool:
         """The QP with the term lm is strictly convex on the dynamics: the Riccati recursion
         of its blocks (lower triangles; inequalities and terminal constraints left out)
         has control pivots above DOPUS_LM_PIVOT_REL h."""
@@ -817,14 +817,14 @@ class ReferenceDopus:
 
     def _lm_convexify(self) -> None:
         hi = _SAFETY["LM_MAX_REL"] * self.lm_scale
-        while not self._lm_convex(self.lm) and self.lm < hi:
+        while not self.lm_convex(self.lm) and self.lm < hi:
             self._lm_raise()
 
     def _lm_start(self) -> None:
         """After init or a re-initialisation: the scale, lm from 0, raised until convex."""
         if not self.lm_auto:
             return
-        self.lm_scale = self._lm_hessian_scale()
+        self.lm_scale = self.lm_hessian_scale()
         self.lm = 0.0
         self._lm_kkt_prev = -1.0
         self._lm_convexify()
@@ -835,7 +835,7 @@ class ReferenceDopus:
             return
         floor = 1e-8 * max(self.kkt_proxy_ref, 1.0)
         prev = max(self._lm_kkt_prev, floor)
-        self.lm_scale = self._lm_hessian_scale()
+        self.lm_scale = self.lm_hessian_scale()
         if self._lm_kkt_prev >= 0.0 and not self.kkt_proxy <= _SAFETY["LM_KKT_GROWTH"] * prev:
             self._lm_raise()
         self._lm_kkt_prev = self.kkt_proxy
