@@ -57,7 +57,7 @@ RANDOM_NS = (10, 20, 40, 80, 160)
 HPIPM_MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
 HPIPM_STATUS = {0: "success", 1: "max_iter", 2: "min_step", 3: "nan", 4: "inconsistent_eq"}
 DOPUS_STATUS = {0: "solved", 1: "max_iter", 2: "primal_infeasible", 3: "dual_infeasible",
-                4: "numerical", 5: "invalid_input"}
+                4: "numerical", 5: "invalid_input", 6: "stalled"}
 # HPIPM configurations, one column each; the first is the anchor ("as stated").
 # ric_alg -1 keeps the mode's default (square-root Riccati, which needs every Riccati
 # matrix P_k > 0); 0 is the classic Riccati recursion (only the reduced Hessian must be > 0).

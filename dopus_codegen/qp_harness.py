@@ -37,6 +37,7 @@ STATUS_NAMES = {
     3: "dual_infeasible",
     4: "numerical",
     5: "invalid_input",
+    6: "stalled",
 }
 
 _SOURCES = ("dopus_qp.c", "dopus_linalg.c", "dopus_qp.h", "dopus_linalg.h")

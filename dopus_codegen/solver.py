@@ -50,8 +50,8 @@ STATUS = {
 STATUS_OK, STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = 0, 1, 2, 5
 
 #: QP status codes (enum dopus_qp_status of runtime_c/dopus_qp.h).
-QP_STATUS = {0: "solved", 1: "max iterations", 2: "primal infeasible", 3: "dual infeasible",
-             4: "numerical failure", 5: "invalid input"}
+QP_STATUS = {0: "solved", 1: "iteration limit reached", 2: "primal infeasible", 3: "dual infeasible",
+             4: "numerical failure", 5: "invalid input", 6: "stalled (no progress)"}
 
 #: Timed phases, in the order of enum dopus_phase (runtime_c/dopus_timer.h).
 PHASES = ("feedback", "shift", "gradients", "rho", "hessians", "regularization", "assembly", "kkt")

@@ -99,12 +99,14 @@
 /* Status codes (dopus_qp_solve return value and dopus_qp_info.status). */
 enum dopus_qp_status {
     DOPUS_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
-    DOPUS_QP_MAX_ITER = 1,          /* iteration limit reached or no progress in the KKT
-                                       residuals for 10 iterations; best point returned */
+    DOPUS_QP_MAX_ITER = 1,          /* iteration limit (settings.max_iter) reached; best
+                                       point returned */
     DOPUS_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */
     DOPUS_QP_DUAL_INFEASIBLE = 3,   /* unbounded below: feasible descent ray found */
     DOPUS_QP_NUMERICAL = 4,         /* factorisation / step failure */
-    DOPUS_QP_INVALID_INPUT = 5      /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    DOPUS_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    DOPUS_QP_STALLED = 6            /* no progress in the KKT residuals for 10 iterations
+                                       (before the limit); best point returned */
 };
 
 typedef struct {
@@ -235,14 +237,6 @@ typedef struct {
     double aty[DOPUS_QP_NPRIM];                        /* constraint part of r_stat (A'y) */
     double hwg[DOPUS_QP_NPRIM];                        /* objective part of r_stat (Hw + g) */
     double yrow[DOPUS_QP_NINEQ];                       /* per-row scratch */
-    /* best iterate so far (returned when the solver stops without success) */
-    double best_prim[DOPUS_QP_NPRIM];
-    double best_lam[(DOPUS_N + 1) * DOPUS_NX];
-    double best_nu[DOPUS_QP_NE1];
-    double best_t_lo[DOPUS_QP_NINEQ];
-    double best_t_up[DOPUS_QP_NINEQ];
-    double best_z_lo[DOPUS_QP_NINEQ];
-    double best_z_up[DOPUS_QP_NINEQ];
     double work[4 * DOPUS_QP_NW * (DOPUS_QP_NW + DOPUS_QP_NE1 + 1)];
     double delta;          /* current inertia-correction shift */
     double rho_aug;        /* current terminal augmented-Lagrangian weight */
