@@ -480,7 +480,7 @@ def main(argv=None) -> int:
     ap.add_argument("--exact-iters", type=int, default=6, help="warm exact-Hessian robot-arm QPs")
     ap.add_argument("--eq-scale", type=float, default=1e3,
                     help="hpipm_scaled: terminal equality rows divided by eq_scale * max|row| (default %(default)g)")
-    ap.add_argument("--cflags", default="-O2", help="C flags of the harness and our solver "
+    ap.add_argument("--cflags", default="-O3", help="C flags of the harness and our solver "
                     "(default %(default)s, the generated Makefile's OPT)")
     ap.add_argument("--alt-cflags", default="-O3 -march=native",
                     help="flags of a second, renamed copy of our solver in the same process (column "

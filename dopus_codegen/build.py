@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import warnings
 import os
 import shlex
 import shutil
@@ -59,9 +60,36 @@ def _source_hash(out_dir: Path, files: List[str], cc: str, opt: Sequence[str]) -
     return h.hexdigest()
 
 
-def build(out_dir, cc: str = "cc", opt: str = "-O2", *, force: bool = False) -> BuildResult:
-    """Compile the generated folder ``out_dir``; skip the work if nothing changed."""
+#: Default optimisation flags of `dopus-gen build`, the generated Makefile (OPT) and CMake
+#: fragment. No -march: add the target's flags yourself (e.g. --opt "-O3 -march=native" on
+#: the build machine, OPT="-O3 -mcpu=cortex-m7 -mfpu=fpv5-d16 -mfloat-abi=hard" for firmware).
+DEFAULT_OPT = "-O3"
+
+
+def recorded_opt(out_dir) -> str | None:
+    """The optimisation flags the folder was last built with (its stamp), or None."""
+    stamp = Path(out_dir) / BUILD_SUBDIR / "stamp.json"
+    try:
+        opt = json.loads(stamp.read_text()).get("opt")
+    except (OSError, ValueError):
+        return None
+    return shlex.join(opt) if isinstance(opt, list) else None
+
+
+def build(out_dir, cc: str = "cc", opt: str | None = None, *, force: bool = False) -> BuildResult:
+    """Compile the generated folder ``out_dir``; skip the work if nothing changed.
+
+    ``opt`` None keeps the flags the folder was built with (recorded in its stamp), else
+    DEFAULT_OPT: so loading a folder (the Python handle) never rebuilds it with other flags
+    than `dopus-gen build --opt` chose. Explicit flags that differ from the recorded ones
+    rebuild it with a warning naming both."""
     out_dir = Path(out_dir)
+    if opt is None:
+        opt = recorded_opt(out_dir) or DEFAULT_OPT
+    else:
+        was = recorded_opt(out_dir)
+        if was is not None and shlex.split(was) != shlex.split(opt):
+            warnings.warn(f"build: '{out_dir}' was built with '{was}', rebuilding it with '{opt}'", stacklevel=2)
     if not out_dir.exists():
         raise BuildError(f"build: folder '{out_dir}' does not exist (generate it first with dopus-gen generate)")
     try:

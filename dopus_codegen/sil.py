@@ -185,7 +185,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
 
     rec_t, rec_x, rec_u, rec_kkt, rec_parts, rec_status, rec_rec = [], [], [], [], [], [], []
     rec_sig = {name: [] for name in spec.signals}
-    rec_qp_it = []
+    rec_qp_it, rec_qp_cold = [], []
     timing: dict[str, list] = {"feedback": [], "prepare": [], "total": []}
     phase_timing: dict[str, list] = {}  # the backend's own phase timers
     aborted = None
@@ -213,6 +213,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                 u0 = np.asarray(ctrl.u, dtype=float)[0].copy()
             t_fb = time.perf_counter() - t0
             rec_qp_it.append(int(getattr(ctrl, "qp_iterations", 0) or 0))
+            rec_qp_cold.append(bool(getattr(ctrl, "qp_cold_retry", False)))
             snap_fb = dict(getattr(ctrl, "timings", {}) or {})
             phases = _split_phases("feedback", _changed(snap, snap_fb))
             if not np.all(np.isfinite(u0)):
@@ -297,6 +298,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
         "signals": {k: [float(v[0]) if v.size == 1 else list(v) for v in vals] for k, vals in rec_sig.items()},
         "recomputed": rec_rec,
         "qp_iterations": rec_qp_it[:len(rec_status)],
+        "qp_cold_retry": rec_qp_cold[:len(rec_status)],
         "timing_us": {"feedback": timing["feedback"], "prepare": timing["prepare"], "total": timing["total"],
                       **{f"phase:{k}": v for k, v in phase_timing.items()}},
         "events": [{"time": float(ev.time), "label": str(ev.label)} for ev in events],

@@ -50,7 +50,7 @@ STATUS = {
 STATUS_OK, STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = 0, 1, 2, 5
 
 #: QP status codes (enum dopus_qp_status of runtime_c/dopus_qp.h).
-QP_STATUS = {0: "solved", 1: "iteration limit reached", 2: "primal infeasible", 3: "dual infeasible",
+QP_STATUS = {0: "solved", 1: "max iterations", 2: "primal infeasible", 3: "dual infeasible",
              4: "numerical failure", 5: "invalid input", 6: "stalled (no progress)"}
 
 #: Timed phases, in the order of enum dopus_phase (runtime_c/dopus_timer.h).
@@ -154,7 +154,7 @@ class CSolver:
     def __init__(self, disc=None, M: int = 1, mode: str = "receding", hessian: str = "exact",
                  regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10,
                  lib_dir=None, qp_max_iter: Optional[int] = None, cost_hessian: str = "fresh",
-                 lm: Optional[float] = 0.0):
+                 lm: Optional[float] = 0.0, qp_warm_start: Optional[bool] = None):
         if lib_dir is None:
             if disc is None:
                 raise ValueError("CSolver needs a Discretized problem or lib_dir (a generated folder)")
@@ -192,6 +192,8 @@ class CSolver:
         self.set_cost_hessian(cost_hessian)
         if lm is not None:  # None: the generated default (the OCP file's options(lm=...))
             self.set_levenberg_marquardt(lm)
+        if qp_warm_start is not None:  # None: the runtime's default (on)
+            self.set_qp_warm_start(qp_warm_start)
 
     @classmethod
     def from_dir(cls, path, disc=None, **settings) -> "CSolver":
@@ -324,6 +326,21 @@ class CSolver:
         if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
             self._bad(f"qp_max_iter must be a positive integer, got {max_iter!r}")
         self._check(self._c("set_qp_max_iter")(self._s, int(max_iter)), "qp_max_iter")
+
+    def set_qp_warm_start(self, on: bool) -> None:
+        """Warm start of the QP in feedback (default on), with a cold retry when it fails."""
+        if not isinstance(on, (bool, np.bool_)) and on not in (0, 1):
+            self._bad(f"qp_warm_start must be True or False, got {on!r}")
+        self._check(self._c("set_qp_warm_start")(self._s, int(bool(on))), "qp_warm_start")
+
+    @property
+    def qp_warm_start(self) -> bool:
+        return bool(self._c("get_qp_warm_start")(self._s))
+
+    @property
+    def qp_cold_retry(self) -> bool:
+        """True when the last feedback's warm-started QP failed and the cold retry ran."""
+        return bool(self._c("get_qp_cold_retry")(self._s))
 
     def set_parameters(self, p) -> None:
         """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""

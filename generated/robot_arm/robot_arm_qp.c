@@ -346,6 +346,21 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
 
 /* ---------------------------------------------------------------- Riccati factorisation */
 
+/* M += lower triangle of Phi' PhiP (Phi, PhiP nx x nw): the symmetric update of the
+ * Riccati recursion, j <= i only. */
+static void qp_syrk_lower_tn(const robot_arm_real *restrict Phi, const robot_arm_real *restrict PhiP,
+                             robot_arm_real *restrict M)
+{
+    int i, j, l;
+    for (j = 0; j < NW; ++j)
+        for (i = j; i < NW; ++i) {
+            robot_arm_real sum = 0.0;
+            for (l = 0; l < NX; ++l)
+                sum += Phi[l + i * NX] * PhiP[l + j * NX];
+            M[i + j * NW] += sum;
+        }
+}
+
 /* Largest absolute entry of the Hessian data (scale of delta and rho). */
 static double hessian_scale(const robot_arm_qp_in *in)
 {
@@ -412,45 +427,39 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         const double pmax = robot_arm_lai_max_abs_mat(NX, NX, ws->P[k + 1], NX);
         double mxx = 0.0;
 
-        /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi */
-        robot_arm_lai_copy_mat(NW, NW, in->H[k], NW, M, NW);
-        robot_arm_lai_symmetrize_l(NW, M, NW);
+        /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi, lower triangle only (the upper
+         * triangle of M is never read) */
+        for (j = 0; j < NW; ++j)
+            for (i = j; i < NW; ++i)
+                M[i + j * NW] = in->H[k][i + j * NW];
         for (i = 0; i < NW; ++i)
             M[i + i * NW] += q[i] + delta + in->hess_shift;
         for (j = 0; j < NG; ++j) {
-            const double qg = q[NW + j];
-            const double *C = in->C[k];
+            const robot_arm_real qg = q[NW + j];
+            const robot_arm_real *C = in->C[k];
             int a, c;
             if (qg != 0.0)
                 for (c = 0; c < NW; ++c)
-                    for (a = 0; a < NW; ++a)
+                    for (a = c; a < NW; ++a)
                         M[a + c * NW] += qg * C[j + a * NG] * C[j + c * NG];
         }
         for (j = 0; j < NU; ++j) {
             /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P */
-            double colsum = 0.0;
+            robot_arm_real colsum = 0.0;
             for (i = 0; i < NX; ++i)
                 colsum += fabs(Phi[i + (NX + j) * NX]);
             ws->noise[j] = RICCATI_EPS * (fabs(M[NX + j + (NX + j) * NW]) + colsum * colsum * dmax(pmax, pmag));
         }
         for (j = 0; j < NX; ++j) {
-            double colsum = 0.0;
+            robot_arm_real colsum = 0.0;
             for (i = 0; i < NX; ++i)
                 colsum += fabs(Phi[i + j * NX]);
             mxx = dmax(mxx, fabs(M[j + j * NW]) + colsum * colsum * pmax);
         }
+        /* PhiP = P_{k+1} Phi (P_{k+1} is stored as a full symmetric matrix), then the lower
+         * triangle of Phi' PhiP: a symmetric rank-nx update of M */
         robot_arm_lai_gemm_nn(NX, NW, NX, 1.0, ws->P[k + 1], NX, Phi, NX, 0.0, PhiP, NX);
-        /* Phi' (P Phi) is symmetric: form its lower triangle and mirror it, so that M and
-         * P stay exactly symmetric */
-        robot_arm_lai_gemm_tn(NW, NW, NX, 1.0, Phi, NX, PhiP, NX, 1.0, M, NW);
-        /* symmetric up to round-off: the average of both triangles (measurably more
-         * accurate at tight tolerances than mirroring one computed triangle) */
-        for (j = 0; j < NW; ++j)
-            for (i = j + 1; i < NW; ++i) {
-                const double s = 0.5 * (M[i + j * NW] + M[j + i * NW]);
-                M[i + j * NW] = s;
-                M[j + i * NW] = s;
-            }
+        qp_syrk_lower_tn(Phi, PhiP, M);
         if (NE > 0)
             robot_arm_lai_gemm_tn(NW, NE, NX, 1.0, Phi, NX, ws->G[k + 1], NX, 0.0, Gam, NW);
 
@@ -465,8 +474,15 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         robot_arm_lai_copy_mat(NU, NX, M + NX, NW, LK, NU1);
         robot_arm_lai_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
         /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
-        robot_arm_lai_copy_mat(NX, NX, M, NW, P, NX);
-        robot_arm_lai_gemm_tn(NX, NX, NU, -1.0, LK, NU1, LK, NU1, 1.0, P, NX);
+        for (j = 0; j < NX; ++j)
+            for (i = j; i < NX; ++i) {
+                robot_arm_real sum = M[i + j * NW];
+                int l;
+                for (l = 0; l < NU; ++l)
+                    sum -= LK[l + i * NU1] * LK[l + j * NU1];
+                P[i + j * NX] = sum;
+                P[j + i * NX] = sum;
+            }
         for (j = 0; j < NX; ++j)
             pmag = dmax(pmag, robot_arm_lai_dot(NU, LK + j * NU1, LK + j * NU1));
         if (NE > 0) {
@@ -899,25 +915,6 @@ static void initial_point(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
     }
 }
 
-static void copy_iterate(robot_arm_qp_workspace *ws, int to_best)
-{
-    int i;
-    double *a[7], *b[7];
-    const int n[7] = {NP, (N + 1) * NX, NE1, NI, NI, NI, NI};
-    int j;
-    a[0] = ws->prim; a[1] = ws->lam; a[2] = ws->nu; a[3] = ws->t_lo; a[4] = ws->t_up;
-    a[5] = ws->z_lo; a[6] = ws->z_up;
-    b[0] = ws->best_prim; b[1] = ws->best_lam; b[2] = ws->best_nu; b[3] = ws->best_t_lo;
-    b[4] = ws->best_t_up; b[5] = ws->best_z_lo; b[6] = ws->best_z_up;
-    for (j = 0; j < 7; ++j)
-        for (i = 0; i < n[j]; ++i) {
-            if (to_best)
-                b[j][i] = a[j][i];
-            else
-                a[j][i] = b[j][i];
-        }
-}
-
 static double merit(const qp_res *r)
 {
     return dmax(dmax(r->stat_s, r->eq_s), dmax(r->ineq_s, r->comp_s));
@@ -926,7 +923,8 @@ static double merit(const qp_res *r)
 static int finish(robot_arm_qp_workspace *ws, const qp_res *r, int status, int iter, robot_arm_qp_sol *sol,
                   robot_arm_qp_info *info)
 {
-    write_solution(ws, sol);
+    if (sol)
+        write_solution(ws, sol);
     if (info) {
         info->status = status;
         info->iterations = iter;
@@ -947,8 +945,8 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
                    robot_arm_qp_sol *sol, robot_arm_qp_info *info)
 {
     robot_arm_qp_settings st;
-    qp_res r;
-    int iter, i, status = ROBOT_ARM_QP_MAX_ITER;
+    qp_res r, best_r;
+    int iter, i, keep_best, status = ROBOT_ARM_QP_MAX_ITER;
     int n_corr = 0, n_aug = 0;
     double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
     int best_iter = 0;
@@ -1038,9 +1036,12 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
             break;
         }
         if (iter == 0 || merit(&r) < best_merit) {
+            /* the best point so far goes straight into the output (the warm-start point
+             * has been read by then; a restart starts cold) */
             best_merit = merit(&r);
             best_iter = iter;
-            copy_iterate(ws, 1);
+            best_r = r;
+            write_solution(ws, sol);
         } else if (!restarted && n_corr > 0 && iter - best_iter >= RESTART_STALL_ITERS) {
             /* Stalled after inertia corrections: the QP is nonconvex on the null space of
              * the equalities, and Mehrotra's aggressive mu reduction let a near-singular
@@ -1053,6 +1054,7 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
              * and the cautious one does not.) */
             restarted = 1;
             sigma_min = SIGMA_MIN_RESTART;
+            st.warm_start = 0;
             initial_point(ws, in, &st, sol);
             ws->rho_aug = 0.0;
             delta_last = 0.0;
@@ -1062,7 +1064,7 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
             QP_TRACE("restart at iteration %d\n", iter);
             continue;
         } else if (iter - best_iter >= STALL_ITERS) {
-            status = ROBOT_ARM_QP_MAX_ITER;
+            status = ROBOT_ARM_QP_STALLED;
             break;
         }
         if (primal_infeasible(ws, in, &r, data_scale)) {
@@ -1134,6 +1136,10 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
         /* floored pivots make the factorisation inexact: refine more; far from the
          * solution the directions need no refinement */
         nref = st.refine_steps + (ws->pivot_floors > floors_before ? 2 : 0);
+        /* no progress in the last iteration near the solution: the directions are limited
+         * by the accuracy of the factorisation, refine more */
+        if (iter > best_iter)
+            nref += 2;
         if (merit(&r) > REFINE_BELOW && ws->pivot_floors == floors_before)
             nref = 0;
 
@@ -1214,17 +1220,15 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
             }
         }
     }
-    if ((status == ROBOT_ARM_QP_MAX_ITER || status == ROBOT_ARM_QP_NUMERICAL) && isfinite(best_merit) &&
-        !(merit(&r) <= best_merit)) {
-        /* return the best point seen, with its residuals */
-        copy_iterate(ws, 0);
-        compute_residuals(ws, in, &r);
-    }
+    keep_best = (status == ROBOT_ARM_QP_MAX_ITER || status == ROBOT_ARM_QP_STALLED || status == ROBOT_ARM_QP_NUMERICAL) &&
+                isfinite(best_merit) && !(merit(&r) <= best_merit);
+    if (keep_best)
+        r = best_r; /* the best point seen is in *sol already; report its residuals */
     if (info) {
         info->inertia_corrections = n_corr;
         info->terminal_augmentations = n_aug;
         info->pivot_floors = ws->pivot_floors;
         info->delta = delta_used;
     }
-    return finish(ws, &r, status, iter, sol, info);
+    return finish(ws, &r, status, iter, keep_best ? NULL : sol, info);
 }

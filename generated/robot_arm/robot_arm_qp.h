@@ -99,12 +99,14 @@
 /* Status codes (robot_arm_qp_solve return value and robot_arm_qp_info.status). */
 enum robot_arm_qp_status {
     ROBOT_ARM_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
-    ROBOT_ARM_QP_MAX_ITER = 1,          /* iteration limit reached or no progress in the KKT
-                                       residuals for 10 iterations; best point returned */
+    ROBOT_ARM_QP_MAX_ITER = 1,          /* iteration limit (settings.max_iter) reached; best
+                                       point returned */
     ROBOT_ARM_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */
     ROBOT_ARM_QP_DUAL_INFEASIBLE = 3,   /* unbounded below: feasible descent ray found */
     ROBOT_ARM_QP_NUMERICAL = 4,         /* factorisation / step failure */
-    ROBOT_ARM_QP_INVALID_INPUT = 5      /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    ROBOT_ARM_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    ROBOT_ARM_QP_STALLED = 6            /* no progress in the KKT residuals for 10 iterations
+                                       (before the limit); best point returned */
 };
 
 typedef struct {
@@ -235,14 +237,6 @@ typedef struct {
     double aty[ROBOT_ARM_QP_NPRIM];                        /* constraint part of r_stat (A'y) */
     double hwg[ROBOT_ARM_QP_NPRIM];                        /* objective part of r_stat (Hw + g) */
     double yrow[ROBOT_ARM_QP_NINEQ];                       /* per-row scratch */
-    /* best iterate so far (returned when the solver stops without success) */
-    double best_prim[ROBOT_ARM_QP_NPRIM];
-    double best_lam[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
-    double best_nu[ROBOT_ARM_QP_NE1];
-    double best_t_lo[ROBOT_ARM_QP_NINEQ];
-    double best_t_up[ROBOT_ARM_QP_NINEQ];
-    double best_z_lo[ROBOT_ARM_QP_NINEQ];
-    double best_z_up[ROBOT_ARM_QP_NINEQ];
     double work[4 * ROBOT_ARM_QP_NW * (ROBOT_ARM_QP_NW + ROBOT_ARM_QP_NE1 + 1)];
     double delta;          /* current inertia-correction shift */
     double rho_aug;        /* current terminal augmented-Lagrangian weight */

@@ -99,12 +99,14 @@
 /* Status codes (unicycle_qp_solve return value and unicycle_qp_info.status). */
 enum unicycle_qp_status {
     UNICYCLE_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
-    UNICYCLE_QP_MAX_ITER = 1,          /* iteration limit reached or no progress in the KKT
-                                       residuals for 10 iterations; best point returned */
+    UNICYCLE_QP_MAX_ITER = 1,          /* iteration limit (settings.max_iter) reached; best
+                                       point returned */
     UNICYCLE_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */
     UNICYCLE_QP_DUAL_INFEASIBLE = 3,   /* unbounded below: feasible descent ray found */
     UNICYCLE_QP_NUMERICAL = 4,         /* factorisation / step failure */
-    UNICYCLE_QP_INVALID_INPUT = 5      /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    UNICYCLE_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    UNICYCLE_QP_STALLED = 6            /* no progress in the KKT residuals for 10 iterations
+                                       (before the limit); best point returned */
 };
 
 typedef struct {
@@ -235,14 +237,6 @@ typedef struct {
     double aty[UNICYCLE_QP_NPRIM];                        /* constraint part of r_stat (A'y) */
     double hwg[UNICYCLE_QP_NPRIM];                        /* objective part of r_stat (Hw + g) */
     double yrow[UNICYCLE_QP_NINEQ];                       /* per-row scratch */
-    /* best iterate so far (returned when the solver stops without success) */
-    double best_prim[UNICYCLE_QP_NPRIM];
-    double best_lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
-    double best_nu[UNICYCLE_QP_NE1];
-    double best_t_lo[UNICYCLE_QP_NINEQ];
-    double best_t_up[UNICYCLE_QP_NINEQ];
-    double best_z_lo[UNICYCLE_QP_NINEQ];
-    double best_z_up[UNICYCLE_QP_NINEQ];
     double work[4 * UNICYCLE_QP_NW * (UNICYCLE_QP_NW + UNICYCLE_QP_NE1 + 1)];
     double delta;          /* current inertia-correction shift */
     double rho_aug;        /* current terminal augmented-Lagrangian weight */
