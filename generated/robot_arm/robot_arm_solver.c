@@ -545,8 +545,13 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     }
     qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
     s->qp_iterations = s->qp_info.iterations;
-    if (s->qp_warm && qs != ROBOT_ARM_QP_INVALID_INPUT && (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol))) {
-        /* the warm start failed: retry from the cold starting point in the same call */
+    if (s->qp_warm && qs != ROBOT_ARM_QP_INVALID_INPUT &&
+        (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol) || s->qp_info.inertia_corrections > 0)) {
+        /* the warm start failed, or it needed the inertia correction: the QP is nonconvex
+         * on the null space of its equalities there and may have several local minimisers,
+         * and the warm start may have reached another one than the cold start finds (the
+         * one the closed loop has followed so far): retry from the cold starting point in
+         * the same call */
         s->qp_cold_retry = 1;
         s->qp_settings.warm_start = 0;
         qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);

@@ -45,6 +45,14 @@
 
 /* Fraction-to-boundary factor and limits of the inertia correction. */
 #define STEP_TAU 0.995
+/* Warm start: slacks floored at WARM_FLOOR_T times the bound's scale, multipliers at
+ * WARM_FLOOR_Z (both relative to the unit scale of the cold start). */
+#ifndef WARM_FLOOR_T
+#define WARM_FLOOR_T 1e-2
+#endif
+#ifndef WARM_FLOOR_Z
+#define WARM_FLOOR_Z 1e-2
+#endif
 /* Smallest centring parameter of a step taken with the inertia correction (see there). */
 #define SIGMA_NONCONVEX 0.9
 /* Smallest centring parameter after the restart on a nonconvex stall (see unicycle_qp_solve). */
@@ -903,14 +911,14 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
                 mu_signed = (j < NW) ? sol->mu_b[k2][j] : sol->mu_g[k2][j - NW];
         }
         if (ws->has_lo[i]) {
-            const double floor_t = warm ? 1e-4 * dmax(1.0, fabs(ws->lo[i])) : 1.0;
+            const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->lo[i])) : 1.0;
             ws->t_lo[i] = dmax(ws->v[i] - ws->lo[i], floor_t);
-            ws->z_lo[i] = warm ? dmax(-mu_signed, 1e-4) : 1.0;
+            ws->z_lo[i] = warm ? dmax(-mu_signed, WARM_FLOOR_Z) : 1.0;
         }
         if (ws->has_up[i]) {
-            const double floor_t = warm ? 1e-4 * dmax(1.0, fabs(ws->up[i])) : 1.0;
+            const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->up[i])) : 1.0;
             ws->t_up[i] = dmax(ws->up[i] - ws->v[i], floor_t);
-            ws->z_up[i] = warm ? dmax(mu_signed, 1e-4) : 1.0;
+            ws->z_up[i] = warm ? dmax(mu_signed, WARM_FLOOR_Z) : 1.0;
         }
     }
 }
