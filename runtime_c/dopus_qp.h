@@ -195,8 +195,7 @@ typedef struct {
     double t_up[DOPUS_QP_NINEQ];
     double z_lo[DOPUS_QP_NINEQ];
     double z_up[DOPUS_QP_NINEQ];
-    /* constraint values v = D w and residuals */
-    double v[DOPUS_QP_NINEQ];
+    /* residuals */
     double r_stat[DOPUS_QP_NPRIM];
     double r_dyn[(DOPUS_N + 1) * DOPUS_NX];
     double r_eqN[DOPUS_QP_NE1];
@@ -220,9 +219,6 @@ typedef struct {
     double res_stat_lin[DOPUS_QP_NPRIM];
     double res_dyn_lin[(DOPUS_N + 1) * DOPUS_NX];
     double res_eqN_lin[DOPUS_QP_NE1];
-    double c_prim[DOPUS_QP_NPRIM];
-    double c_lam[(DOPUS_N + 1) * DOPUS_NX];
-    double c_nu[DOPUS_QP_NE1];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
     double M[DOPUS_QP_NW * DOPUS_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
     double P[DOPUS_N + 1][DOPUS_NX * DOPUS_NX];       /* value function Hessians */
@@ -235,8 +231,7 @@ typedef struct {
     double e[DOPUS_QP_NE1];
     double lk[DOPUS_N][DOPUS_QP_NU1];
     double aty[DOPUS_QP_NPRIM];                        /* constraint part of r_stat (A'y) */
-    double hwg[DOPUS_QP_NPRIM];                        /* objective part of r_stat (Hw + g) */
-    double yrow[DOPUS_QP_NINEQ];                       /* per-row scratch */
+    double yrow[DOPUS_QP_NINEQ];                       /* per-row scratch; row values v = D w */
     double work[4 * DOPUS_QP_NW * (DOPUS_QP_NW + DOPUS_QP_NE1 + 1)];
     double delta;          /* current inertia-correction shift */
     double rho_aug;        /* current terminal augmented-Lagrangian weight */
@@ -244,6 +239,9 @@ typedef struct {
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     double scale_stat;     /* residual scaling factors */
     double scale_eq;
+    double scale_g;        /* data parts of the scaling (constant during a solve) */
+    double scale_b;
+    double scale_bounds;
 } dopus_qp_workspace;
 
 /* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */

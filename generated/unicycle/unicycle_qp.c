@@ -42,6 +42,9 @@
 #define NE1 UNICYCLE_QP_NE1
 #define NU1 UNICYCLE_QP_NU1
 #define TOFF (N * NSI) /* first terminal inequality row */
+/* The row values v = D w live in the per-row scratch yrow from compute_residuals (or
+ * initial_point) until the next Newton direction overwrites it. */
+#define QP_V(ws) ((ws)->yrow)
 
 /* Fraction-to-boundary factor and limits of the inertia correction. */
 #define STEP_TAU 0.995
@@ -228,6 +231,30 @@ static void add_Dt(const unicycle_qp_in *in, const double *y, double *out)
 
 /* ---------------------------------------------------------------- residuals */
 
+/* The data parts of the residual scaling (constant during a solve): |g|, |gN| into
+ * scale_g; |x0|, |b|, |req| into scale_b; the finite bounds into scale_bounds. */
+static void data_scales(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
+{
+    int k, i;
+    double sg = unicycle_lai_norm_inf(NX, in->gN), sb = unicycle_lai_norm_inf(NX, in->x0), sl = 0.0;
+    for (k = 0; k < N; ++k) {
+        sg = dmax(sg, unicycle_lai_norm_inf(NW, in->g[k]));
+        sb = dmax(sb, unicycle_lai_norm_inf(NX, in->b[k]));
+    }
+    if (NE > 0)
+        sb = dmax(sb, unicycle_lai_norm_inf(NE, in->req));
+    for (i = 0; i < NI; ++i) {
+        if (ws->has_lo[i])
+            sl = dmax(sl, fabs(ws->lo[i]));
+        if (ws->has_up[i])
+            sl = dmax(sl, fabs(ws->up[i]));
+    }
+    ws->scale_g = sg;
+    ws->scale_b = sb;
+    ws->scale_bounds = sl;
+}
+
+
 typedef struct {
     double mu;       /* average complementarity */
     int nsides;      /* number of bounded sides */
@@ -245,8 +272,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     double sum_c = 0.0;
     int m = 0;
 
-    apply_D(in, ws->prim, ws->v);
-    /* signed multipliers per row */
+    /* signed multipliers per row (yrow; it holds the row values v afterwards) */
     for (i = 0; i < NI; ++i) {
         const double zl = ws->has_lo[i] ? ws->z_lo[i] : 0.0;
         const double zu = ws->has_up[i] ? ws->z_up[i] : 0.0;
@@ -256,13 +282,12 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     /* objective part Hw + g and constraint part A'y of the stationarity residual */
     for (k = 0; k < N; ++k) {
         const double *w = ws->prim + k * NW;
-        double *h = ws->hwg + k * NW;
+        double *h = ws->r_stat + k * NW;
         double *a = ws->aty + k * NW;
         unicycle_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
         unicycle_lai_axpy(NW, in->hess_shift, w, h);
         s_stat = dmax(s_stat, unicycle_lai_norm_inf(NW, h));
         obj += 0.5 * unicycle_lai_dot(NW, w, h) + unicycle_lai_dot(NW, in->g[k], w);
-        s_stat = dmax(s_stat, unicycle_lai_norm_inf(NW, in->g[k]));
         unicycle_lai_axpy(NW, 1.0, in->g[k], h);
         for (i = 0; i < NW; ++i)
             a[i] = i < NX ? ws->lam[k * NX + i] : 0.0;
@@ -270,13 +295,13 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     }
     {
         const double *xN = ws->prim + N * NW;
-        double *h = ws->hwg + N * NW;
+        double *h = ws->r_stat + N * NW;
         double *a = ws->aty + N * NW;
         unicycle_lai_symv_l(NX, 1.0, in->HN, NX, xN, 0.0, h);
         unicycle_lai_axpy(NX, in->hess_shift, xN, h);
         s_stat = dmax(s_stat, unicycle_lai_norm_inf(NX, h));
         obj += 0.5 * unicycle_lai_dot(NX, xN, h) + unicycle_lai_dot(NX, in->gN, xN);
-        s_stat = dmax(s_stat, unicycle_lai_norm_inf(NX, in->gN));
+        s_stat = dmax(s_stat, ws->scale_g);
         unicycle_lai_axpy(NX, 1.0, in->gN, h);
         for (i = 0; i < NX; ++i)
             a[i] = ws->lam[N * NX + i];
@@ -286,18 +311,18 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     add_Dt(in, ws->yrow, ws->aty);
     s_stat = dmax(s_stat, unicycle_lai_norm_inf(NP, ws->aty));
     for (i = 0; i < NP; ++i)
-        ws->r_stat[i] = ws->hwg[i] + ws->aty[i];
+        ws->r_stat[i] += ws->aty[i];
+    apply_D(in, ws->prim, QP_V(ws));
 
     /* equalities */
     for (i = 0; i < NX; ++i)
         ws->r_dyn[i] = ws->prim[i] - in->x0[i];
-    s_eq = dmax(s_eq, unicycle_lai_norm_inf(NX, in->x0));
+    s_eq = dmax(s_eq, ws->scale_b);
     for (k = 0; k < N; ++k) {
         double *rd = ws->r_dyn + (k + 1) * NX;
         const double *xn = ws->prim + (k + 1) * NW;
         unicycle_lai_gemv_n(NX, NW, -1.0, in->Phi[k], NX, ws->prim + k * NW, 0.0, rd);
         s_eq = dmax(s_eq, unicycle_lai_norm_inf(NX, rd));
-        s_eq = dmax(s_eq, unicycle_lai_norm_inf(NX, in->b[k]));
         for (i = 0; i < NX; ++i)
             rd[i] += xn[i] - in->b[k][i];
     }
@@ -305,20 +330,18 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     if (NE > 0) {
         unicycle_lai_gemv_n(NE, NX, 1.0, in->Req, NE1, ws->prim + N * NW, 0.0, ws->r_eqN);
         s_eq = dmax(s_eq, unicycle_lai_norm_inf(NE, ws->r_eqN));
-        s_eq = dmax(s_eq, unicycle_lai_norm_inf(NE, in->req));
         for (i = 0; i < NE; ++i)
             ws->r_eqN[i] -= in->req[i];
     }
 
     /* inequality sides */
+    s_ineq = dmax(s_ineq, ws->scale_bounds);
     for (i = 0; i < NI; ++i) {
-        const double v = ws->v[i];
-        ws->r_lo[i] = 0.0;
-        ws->r_up[i] = 0.0;
+        const double v = QP_V(ws)[i];
+        /* r_lo, r_up (and the directions) are only defined on the bounded sides */
         if (ws->has_lo[i]) {
             ws->r_lo[i] = v - ws->lo[i] - ws->t_lo[i];
             ineq = dmax(ineq, ws->lo[i] - v);
-            s_ineq = dmax(s_ineq, fabs(ws->lo[i]));
             comp = dmax(comp, ws->t_lo[i] * ws->z_lo[i]);
             sum_c += ws->t_lo[i] * ws->z_lo[i];
             ++m;
@@ -326,7 +349,6 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
         if (ws->has_up[i]) {
             ws->r_up[i] = ws->up[i] - v - ws->t_up[i];
             ineq = dmax(ineq, v - ws->up[i]);
-            s_ineq = dmax(s_ineq, fabs(ws->up[i]));
             comp = dmax(comp, ws->t_up[i] * ws->z_up[i]);
             sum_c += ws->t_up[i] * ws->z_up[i];
             ++m;
@@ -354,19 +376,43 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
 
 /* ---------------------------------------------------------------- Riccati factorisation */
 
-/* M += lower triangle of Phi' PhiP (Phi, PhiP nx x nw): the symmetric update of the
- * Riccati recursion, j <= i only. */
-static void qp_syrk_lower_tn(const unicycle_real *restrict Phi, const unicycle_real *restrict PhiP,
-                             unicycle_real *restrict M)
+/* The stage update of the Riccati recursion: PhiT = Phi' (nw x nx), PP = P Phi (nx x nw,
+ * P symmetric stored full), M += PhiT PP column by column with contiguous inner loops of
+ * the fixed length nw (vectorised; the upper triangle is computed too, it is cheaper than
+ * the ragged lower triangle at these sizes and never read), and, with terminal
+ * equalities, Gam = Phi' G (nw x ne). */
+static void qp_stage_update(const unicycle_real *restrict Phi, const unicycle_real *restrict P,
+                            const unicycle_real *restrict G, unicycle_real *restrict PhiT,
+                            unicycle_real *restrict PP, unicycle_real *restrict M, unicycle_real *restrict Gam)
 {
     int i, j, l;
-    for (j = 0; j < NW; ++j)
-        for (i = j; i < NW; ++i) {
-            unicycle_real sum = 0.0;
-            for (l = 0; l < NX; ++l)
-                sum += Phi[l + i * NX] * PhiP[l + j * NX];
-            M[i + j * NW] += sum;
+    unicycle_real col[NW];
+    for (l = 0; l < NX; ++l)
+        for (i = 0; i < NW; ++i)
+            PhiT[i + l * NW] = Phi[l + i * NX];
+    unicycle_lai_gemm_nn(NX, NW, NX, 1.0, P, NX, Phi, NX, 0.0, PP, NX);
+    for (j = 0; j < NW; ++j) {
+        unicycle_real *restrict m = M + j * NW;
+        for (i = 0; i < NW; ++i)
+            col[i] = 0.0;
+        for (l = 0; l < NX; ++l) {
+            const unicycle_real f = PP[l + j * NX];
+            for (i = 0; i < NW; ++i)
+                col[i] += PhiT[i + l * NW] * f;
         }
+        for (i = 0; i < NW; ++i)
+            m[i] += col[i];
+    }
+    for (j = 0; j < NE; ++j) {
+        unicycle_real *restrict gm = Gam + j * NW;
+        for (i = 0; i < NW; ++i)
+            gm[i] = 0.0;
+        for (l = 0; l < NX; ++l) {
+            const unicycle_real gv = G[l + j * NX];
+            for (i = 0; i < NW; ++i)
+                gm[i] += PhiT[i + l * NW] * gv;
+        }
+    }
 }
 
 /* Largest absolute entry of the Hessian data (scale of delta and rho). */
@@ -387,10 +433,11 @@ static double hessian_scale(const unicycle_qp_in *in)
 static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 {
     int k, i, j;
-    double *PhiP = ws->work;                 /* NX x NW: P_{k+1} Phi_k */
-    double *Gam = ws->work + NX * NW;        /* NW x NE: Phi_k' G_{k+1} */
+    double *PhiT = ws->work;                 /* NW x NX: Phi_k' */
+    double *WT = ws->work + NX * NW;         /* NX x NW: P_{k+1} Phi_k */
+    double *Gam = ws->work + 2 * NX * NW;    /* NW x NE: Phi_k' G_{k+1} */
     const double delta = ws->delta;
-    double pmag;
+    double pmag, pnext;
 
     /* terminal: P_N = HN + D'QD + delta I + rho Req'Req, G_N = Req' */
     {
@@ -424,6 +471,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
      * magnitude `pmag` of the cancelled terms. That error reaches the pivots of M_uu of
      * stage k through B' P B, so a negative pivot within that noise is a numerical zero. */
     pmag = unicycle_lai_max_abs_mat(NX, NX, ws->P[N], NX);
+    pnext = pmag; /* largest |entry| of P_{k+1}, kept along the recursion */
     for (k = N - 1; k >= 0; --k) {
         double *M = ws->M;
         const double *Phi = in->Phi[k];
@@ -432,13 +480,13 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         double *LK = ws->LK[k];
         double *LKn = ws->LKn[k];
         double *P = ws->P[k];
-        const double pmax = unicycle_lai_max_abs_mat(NX, NX, ws->P[k + 1], NX);
-        double mxx = 0.0;
+        const double pmax = pnext;
+        double mxx = 0.0, pabs;
 
         /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi, lower triangle only (the upper
          * triangle of M is never read) */
         for (j = 0; j < NW; ++j)
-            for (i = j; i < NW; ++i)
+            for (i = 0; i < NW; ++i)
                 M[i + j * NW] = in->H[k][i + j * NW];
         for (i = 0; i < NW; ++i)
             M[i + i * NW] += q[i] + delta + in->hess_shift;
@@ -464,12 +512,8 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
                 colsum += fabs(Phi[i + j * NX]);
             mxx = dmax(mxx, fabs(M[j + j * NW]) + colsum * colsum * pmax);
         }
-        /* PhiP = P_{k+1} Phi (P_{k+1} is stored as a full symmetric matrix), then the lower
-         * triangle of Phi' PhiP: a symmetric rank-nx update of M */
-        unicycle_lai_gemm_nn(NX, NW, NX, 1.0, ws->P[k + 1], NX, Phi, NX, 0.0, PhiP, NX);
-        qp_syrk_lower_tn(Phi, PhiP, M);
-        if (NE > 0)
-            unicycle_lai_gemm_tn(NW, NE, NX, 1.0, Phi, NX, ws->G[k + 1], NX, 0.0, Gam, NW);
+        /* M += Phi' P_{k+1} Phi (lower triangle), Gam = Phi' G_{k+1} */
+        qp_stage_update(Phi, ws->P[k + 1], ws->G[k + 1], PhiT, WT, M, Gam);
 
         /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
         unicycle_lai_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
@@ -482,6 +526,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         unicycle_lai_copy_mat(NU, NX, M + NX, NW, LK, NU1);
         unicycle_lai_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
         /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
+        pabs = 0.0;
         for (j = 0; j < NX; ++j)
             for (i = j; i < NX; ++i) {
                 unicycle_real sum = M[i + j * NW];
@@ -490,7 +535,9 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
                     sum -= LK[l + i * NU1] * LK[l + j * NU1];
                 P[i + j * NX] = sum;
                 P[j + i * NX] = sum;
+                pabs = dmax(pabs, fabs(sum));
             }
+        pnext = pabs;
         for (j = 0; j < NX; ++j)
             pmag = dmax(pmag, unicycle_lai_dot(NU, LK + j * NU1, LK + j * NU1));
         if (NE > 0) {
@@ -522,7 +569,8 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 }
 
 /* Solve the factored Newton system for one right-hand side (rhs_stat, rhs_dyn, rhs_eqN)
- * into (sp, sl, sn): backward sweep of the value-function vectors, nu at stage 0, forward
+ * into (sp, sl, sn), which may be the right-hand side's own arrays (each rhs entry is read
+ * before the entry of the same array is written): backward sweep of the value-function vectors, nu at stage 0, forward
  * sweep of the primal and the costates lam_k = -dV_k/dx. */
 static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const double *rhs_stat,
                           const double *rhs_dyn, const double *rhs_eqN, double *sp, double *sl,
@@ -682,17 +730,17 @@ static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in
     for (it = 0; it < refine_steps; ++it) {
         newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->rhs_stat, ws->rhs_dyn,
                         ws->rhs_eqN, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
-        riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin, ws->c_prim,
-                      ws->c_lam, ws->c_nu);
-        unicycle_lai_axpy(NP, 1.0, ws->c_prim, ws->d_prim);
-        unicycle_lai_axpy((N + 1) * NX, 1.0, ws->c_lam, ws->d_lam);
-        unicycle_lai_axpy(NE, 1.0, ws->c_nu, ws->d_nu);
+        /* the correction overwrites the residual it solves for (riccati_solve allows it) */
+        riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin, ws->res_stat_lin,
+                      ws->res_dyn_lin, ws->res_eqN_lin);
+        unicycle_lai_axpy(NP, 1.0, ws->res_stat_lin, ws->d_prim);
+        unicycle_lai_axpy((N + 1) * NX, 1.0, ws->res_dyn_lin, ws->d_lam);
+        unicycle_lai_axpy(NE, 1.0, ws->res_eqN_lin, ws->d_nu);
     }
 
     /* dt_lo = D dw + r_lo, dt_up = r_up - D dw, dz = -(rc + z dt) / t */
     apply_D(in, ws->d_prim, y);
     for (i = 0; i < NI; ++i) {
-        ws->dt_lo[i] = ws->dz_lo[i] = ws->dt_up[i] = ws->dz_up[i] = 0.0;
         if (ws->has_lo[i]) {
             ws->dt_lo[i] = y[i] + ws->r_lo[i];
             ws->dz_lo[i] = -(ws->rc_lo[i] + ws->z_lo[i] * ws->dt_lo[i]) / ws->t_lo[i];
@@ -772,7 +820,7 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
 {
     int k, i;
     double nw = unicycle_lai_norm_inf(NP, ws->prim), dhd = 0.0, gd = 0.0, hd = 0.0, eq = 0.0, cone = 0.0;
-    double *hdv = ws->c_prim;
+    double *hdv = ws->res_stat_lin;
     if (!(nw > CERT_GROWTH * data_scale))
         return 0;
     for (k = 0; k < N; ++k) {
@@ -804,7 +852,7 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
     }
     eq = dmax(eq, unicycle_lai_norm_inf(NX, ws->prim) / nw);
     for (i = 0; i < NI; ++i) {
-        const double dv = ws->v[i] / nw;
+        const double dv = QP_V(ws)[i] / nw;
         if (ws->has_lo[i])
             cone = dmax(cone, -dv);
         if (ws->has_up[i])
@@ -898,7 +946,7 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         for (i = 0; i < NE; ++i)
             ws->nu[i] = sol->nu[i];
     }
-    apply_D(in, ws->prim, ws->v);
+    apply_D(in, ws->prim, QP_V(ws));
     for (i = 0; i < NI; ++i) {
         double mu_signed = 0.0;
         ws->t_lo[i] = ws->t_up[i] = 1.0;
@@ -912,12 +960,12 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         }
         if (ws->has_lo[i]) {
             const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->lo[i])) : 1.0;
-            ws->t_lo[i] = dmax(ws->v[i] - ws->lo[i], floor_t);
+            ws->t_lo[i] = dmax(QP_V(ws)[i] - ws->lo[i], floor_t);
             ws->z_lo[i] = warm ? dmax(-mu_signed, WARM_FLOOR_Z) : 1.0;
         }
         if (ws->has_up[i]) {
             const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->up[i])) : 1.0;
-            ws->t_up[i] = dmax(ws->up[i] - ws->v[i], floor_t);
+            ws->t_up[i] = dmax(ws->up[i] - QP_V(ws)[i], floor_t);
             ws->z_up[i] = warm ? dmax(mu_signed, WARM_FLOOR_Z) : 1.0;
         }
     }
@@ -1011,6 +1059,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         return UNICYCLE_QP_PRIMAL_INFEASIBLE;
     }
     hscale = hessian_scale(in);
+    data_scales(ws, in);
     initial_point(ws, in, &st, sol);
 
     /* data scale for the divergence tests of the certificates */

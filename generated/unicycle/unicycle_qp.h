@@ -195,8 +195,7 @@ typedef struct {
     double t_up[UNICYCLE_QP_NINEQ];
     double z_lo[UNICYCLE_QP_NINEQ];
     double z_up[UNICYCLE_QP_NINEQ];
-    /* constraint values v = D w and residuals */
-    double v[UNICYCLE_QP_NINEQ];
+    /* residuals */
     double r_stat[UNICYCLE_QP_NPRIM];
     double r_dyn[(UNICYCLE_N + 1) * UNICYCLE_NX];
     double r_eqN[UNICYCLE_QP_NE1];
@@ -220,9 +219,6 @@ typedef struct {
     double res_stat_lin[UNICYCLE_QP_NPRIM];
     double res_dyn_lin[(UNICYCLE_N + 1) * UNICYCLE_NX];
     double res_eqN_lin[UNICYCLE_QP_NE1];
-    double c_prim[UNICYCLE_QP_NPRIM];
-    double c_lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
-    double c_nu[UNICYCLE_QP_NE1];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
     double M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
     double P[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_NX];       /* value function Hessians */
@@ -235,8 +231,7 @@ typedef struct {
     double e[UNICYCLE_QP_NE1];
     double lk[UNICYCLE_N][UNICYCLE_QP_NU1];
     double aty[UNICYCLE_QP_NPRIM];                        /* constraint part of r_stat (A'y) */
-    double hwg[UNICYCLE_QP_NPRIM];                        /* objective part of r_stat (Hw + g) */
-    double yrow[UNICYCLE_QP_NINEQ];                       /* per-row scratch */
+    double yrow[UNICYCLE_QP_NINEQ];                       /* per-row scratch; row values v = D w */
     double work[4 * UNICYCLE_QP_NW * (UNICYCLE_QP_NW + UNICYCLE_QP_NE1 + 1)];
     double delta;          /* current inertia-correction shift */
     double rho_aug;        /* current terminal augmented-Lagrangian weight */
@@ -244,6 +239,9 @@ typedef struct {
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     double scale_stat;     /* residual scaling factors */
     double scale_eq;
+    double scale_g;        /* data parts of the scaling (constant during a solve) */
+    double scale_b;
+    double scale_bounds;
 } unicycle_qp_workspace;
 
 /* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */
