@@ -42,8 +42,8 @@ def main(argv=None) -> int:
 
     sys.path.insert(0, str(ROOT))
     from dopus_codegen import build_functions, load_ocp
-    from dopus_codegen.offline import solve_ocp
-    from dopus_codegen.solver import CSolver, DopusError
+    from dopus_codegen.reference.offline import solve_ocp
+    from dopus_codegen.runtime.solver import CSolver, DopusError
 
     disc = build_functions(load_ocp(ROOT / "examples" / "robot_arm.py"))
     guess = solve_ocp(disc, disc.x0)[0]

@@ -6,6 +6,7 @@ body, imported lazily so that ``dopus-gen --help`` stays fast.
 from __future__ import annotations
 
 import click
+from pathlib import Path
 
 from . import __version__
 
@@ -46,7 +47,7 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--reg-eps", default=1e-4, show_default=True, type=float, help="Eigenvalue floor of the regularisation.")
 @click.option("--cost-hessian", type=click.Choice(["fresh", "stored"]), default="fresh", show_default=True,
               help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
-                   "paper's literal algorithm (figure 1, DESIGN.md section 8).")
+                   "paper's literal algorithm (figure 1, docs/design.md section 8).")
 @click.option("--lm", default=0.0, show_default=True, type=click.FloatRange(min=0),
               help="Levenberg-Marquardt term added to every Hessian block of the QP (0: exact Newton).")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
@@ -55,7 +56,7 @@ def _int_list_or_full(value: str) -> list:
 def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, cost_hessian, lm, backend, json_out,
              plot_out):
     """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M."""
-    from .converge import run_converge_cli
+    from .studies.converge import run_converge_cli
 
     run_converge_cli(ocp_file=ocp_file, m_list=_int_list_or_full(m_list), iters=iters, start=start,
                      hessian=hessian, regularization=regularization, reg_eps=reg_eps, backend=backend,
@@ -92,9 +93,9 @@ def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularizat
     One DOPUS iteration per sampling instant, started from the offline solution at the
     scenario's initial state; the scenario's events disturb the plant.
     """
-    from .ocp import OcpError
-    from .plant import PlantError
-    from .sil import SilError, run_sil_cli
+    from .problem.ocp import OcpError
+    from .studies.plant import PlantError
+    from .studies.sil import SilError, run_sil_cli
 
     try:
         run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
@@ -119,8 +120,8 @@ def generate(ocp_file, out_dir, offline_guess):
     a Makefile (`make` builds lib<name>.a, lib<name>.so and main_<name>), a CMake
     fragment and the cffi declarations. Generating twice gives identical bytes.
     """
-    from .codegen import CodegenError, generate_file
-    from .ocp import OcpError
+    from .codegen.generate import CodegenError, generate_file
+    from .problem.ocp import OcpError
 
     try:
         path = generate_file(ocp_file, out_dir, offline_guess=offline_guess)
@@ -143,7 +144,7 @@ def build(folder, cc, opt, force):
     with -std=c99 -Wall. Nothing is recompiled if sources, compiler and flags are unchanged.
     Without Python, `make -C FOLDER` builds the same libraries and main_<name> into FOLDER/build.
     """
-    from .build import BuildError, build as build_folder
+    from .codegen.build import BuildError, build as build_folder
 
     try:
         res = build_folder(folder, cc=cc, opt=opt, force=force)
@@ -151,6 +152,43 @@ def build(folder, cc, opt, force):
         raise click.ClickException(str(exc)) from None
     state = "built" if res.rebuilt else "up to date"
     click.echo(f"{state}: {res.shared_lib}\n{state}: {res.static_lib}\ncdef: {res.cdef_path}")
+
+
+@main.command("firmware-report")
+@click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False), default="out/firmware",
+              show_default=True, help="Folder of the generated code, the builds and the images.")
+@click.option("--target", "targets", default="m7-double", show_default=True,
+              help="Comma-separated targets: m7-double, m7-float (QEMU mps2-an500), m4f-float (mps2-an386); "
+                   "the float targets need a generator with the real=float option.")
+@click.option("--iters", default=12, show_default=True, type=click.IntRange(1, 1000),
+              help="Iterations of the fixed-xhat_0 study per M (M = 1 and the full RTI).")
+@click.option("--steps", default=20, show_default=True, type=click.IntRange(1, 10000),
+              help="Steps of the closed loop against the generated integrator.")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None,
+              help="Write the report as JSON (default: OUTPUT/firmware_report.json).")
+def firmware_report(ocp_file, out_dir, targets, iters, steps, json_out):
+    """Run the generated solver of OCP_FILE on emulated Cortex-M cores and report sizes and counts.
+
+    Builds the firmware program of firmware/ (bare metal, no heap, semihosting output) with
+    arm-none-eabi-gcc, runs it under qemu-system-arm with instruction counting and the same
+    program on the host, and prints flash, RAM (data + bss + the stack of one iteration),
+    instructions per DOPUS iteration (M = 1, full RTI) and the difference to the host build.
+    Installs the Debian packages it needs when root (scripts/setup_firmware.sh).
+    """
+    from .codegen.firmware import FirmwareError, firmware_report as report_fn, format_table
+    from .problem.ocp import OcpError
+
+    tlist = [t.strip() for t in targets.split(",") if t.strip()]
+    if json_out is None:
+        json_out = str(Path(out_dir) / "firmware_report.json")
+    try:
+        rep = report_fn(ocp_file, out_dir, targets=tlist, fixed_iters=iters, loop_steps=steps,
+                        json_out=json_out, progress=click.echo)
+    except (OcpError, FirmwareError) as exc:
+        raise click.ClickException(str(exc)) from None
+    click.echo(format_table(rep))
+    click.echo(f"JSON: {json_out}")
 
 
 if __name__ == "__main__":  # pragma: no cover

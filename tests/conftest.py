@@ -1,6 +1,6 @@
 """Shared fixtures: the two example problems, discretised once per session.
 
-``robot_disc`` / ``second_disc``: the :class:`~dopus_codegen.derivatives.Discretized` of
+``robot_disc`` / ``second_disc``: the :class:`~dopus_codegen.problem.derivatives.Discretized` of
 examples/robot_arm.py and examples/unicycle.py. ``robot_solution`` /
 ``second_solution``: their IPOPT solution ``(Guess, info)`` at the initial state.
 Treat all of them as read-only.
@@ -33,13 +33,13 @@ def second_disc():
 
 @pytest.fixture(scope="session")
 def robot_solution(robot_disc):
-    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference.offline import solve_ocp
 
     return solve_ocp(robot_disc, robot_disc.x0)
 
 
 @pytest.fixture(scope="session")
 def second_solution(second_disc):
-    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference.offline import solve_ocp
 
     return solve_ocp(second_disc, second_disc.x0)

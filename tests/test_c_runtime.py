@@ -1,7 +1,7 @@
 """The C runtime through its Python handle: regularisation, KKT, rho, parameters, errors.
 
 Every number is checked against an independent computation: numpy.linalg.eigh for the
-Jacobi eigen-decomposition, dopus_codegen.kkt.kkt_measure (numpy + CasADi) for the KKT
+Jacobi eigen-decomposition, dopus_codegen.reference.kkt.kkt_measure (numpy + CasADi) for the KKT
 measure, the reference DOPUS for rho_k and for runs after an error.
 """
 from __future__ import annotations
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from dopus_codegen import Ocp, RK4, build_functions
-from dopus_codegen.converge import make_start
-from dopus_codegen.kkt import kkt_measure
-from dopus_codegen.paths import runtime_c_dir
-from dopus_codegen.reference import ReferenceDopus
-from dopus_codegen.solver import CSolver, DopusError
+from dopus_codegen.studies.converge import make_start
+from dopus_codegen.reference.kkt import kkt_measure
+from dopus_codegen.codegen.paths import runtime_c_dir
+from dopus_codegen.reference.dopus import ReferenceDopus
+from dopus_codegen.runtime.solver import CSolver, DopusError
 
 STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_NONFINITE_VALUE = 1, 2, 3
 STATUS_INVALID, STATUS_NOT_INITIALIZED, STATUS_NOT_PREPARED = 5, 6, 7
@@ -98,7 +98,7 @@ def robot_c(robot_disc):
 
 
 def test_kkt_matches_python_measure(robot_disc, robot_solution, robot_c):
-    """C KKT parts at perturbed primal-dual points == dopus_codegen.kkt.kkt_measure."""
+    """C KKT parts at perturbed primal-dual points == dopus_codegen.reference.kkt.kkt_measure."""
     rng = np.random.default_rng(3)
     g = robot_solution[0].filled(robot_disc)
     for trial in range(3):
@@ -219,7 +219,9 @@ def test_timings_with_a_custom_clock(robot_disc, robot_solution):
         ticks["n"] += 1
         return float(ticks["n"])
 
+    assert c.has_clock            # Linux has POSIX timers: the default clock measures time
     c.set_clock(clock)
+    assert c.has_clock
     c.feedback(robot_disc.x0)
     assert c.timings["feedback"] == 1.0
     c.prepare()
@@ -325,7 +327,7 @@ def test_sizeof_and_dims(robot_c, robot_disc):
 def test_init_nominal_is_the_offline_solution(robot_disc, robot_solution, robot_c, tmp_path):
     """A folder generated with the offline guess starts at the IPOPT solution (carried as
     static data); a folder without it says so."""
-    from dopus_codegen.codegen import generate
+    from dopus_codegen.codegen.generate import generate
 
     with pytest.raises(DopusError, match="without a nominal guess") as ei:
         robot_c.init_nominal(robot_disc.x0)

@@ -1,7 +1,7 @@
 """The functions of docs/algorithm.md section 2 against finite differences of the
 plain evaluations (``stage_eval``, ``term_eval``, the least-squares residuals), at
 random points with random multipliers, for both examples; and the robot-arm model and
-cost against an independent numpy transcription of robot-arm.md."""
+cost against an independent numpy transcription of docs/robot_arm.md."""
 import math
 
 import numpy as np
@@ -133,7 +133,7 @@ def test_stage_cost_hessian_with_extra_cost():
     import casadi as ca
 
     from dopus_codegen import Ocp
-    from dopus_codegen.ocp import OcpError
+    from dopus_codegen.problem.ocp import OcpError
 
     ocp = Ocp("extra_cost")
     x = ocp.state("x", 2)
@@ -202,7 +202,7 @@ def test_terminal_functions(disc):
 
 # ---------------------------------------------------------------- robot arm, by hand
 def arm_xdot(x, u):
-    """robot-arm.md, transcribed with numpy."""
+    """docs/robot_arm.md section 1, transcribed with numpy."""
     m1 = m2 = 1.0
     l1 = 0.4
     lc1 = lc2 = 0.2
@@ -235,7 +235,7 @@ def test_robot_arm_model_cost_and_integrator(robot_disc):
     assert (d.N, d.dt, d.nx, d.nu, d.ng, d.nr, d.ne) == (40, 0.01, 5, 3, 0, 0, 2)
     assert np.array_equal(d.lbu, [-10, -10, 0]) and np.array_equal(d.ubu, [10, 10, 50])
     assert np.all(np.isinf(d.lbx)) and np.all(np.isinf(d.ubx))
-    # xhat_0 of robot-arm.md, 8 significant digits
+    # xhat_0 of docs/robot_arm.md section 3, 8 significant digits
     assert np.allclose(d.x0, [-0.40144188, 1.50042576, 0, 0, 0], rtol=0, atol=5e-9)
     assert np.allclose(arm_tip(d.x0[:2]), arm_path(0.0), atol=1e-15)
     assert np.array_equal(d.initial_guess.u, np.tile([0, 0, 5.0], (40, 1)))

@@ -1,4 +1,5 @@
-"""The CVODES plant against scipy's solve_ivp on the robot arm (robot-arm.md, eq. 21).
+"""The CVODES plant against scipy's solve_ivp on the robot arm (docs/robot_arm.md
+section 1, paper eq. 21).
 
 The reference right-hand side is written here a second time in plain numpy, so a slip in
 the CasADi model and the same slip in the reference cannot cancel.
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from dopus_codegen.plant import Plant, PlantError
+from dopus_codegen.studies.plant import Plant, PlantError
 
 M1 = M2 = 1.0
 L1 = 0.4

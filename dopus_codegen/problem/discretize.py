@@ -1,4 +1,4 @@
-"""Direct multiple shooting: from a validated :class:`~dopus_codegen.ocp.Ocp` to the
+"""Direct multiple shooting: from a validated :class:`~dopus_codegen.problem.ocp.Ocp` to the
 symbolic per-stage pieces ``phi_k, l_k, g_k`` and the terminal ``E, r, r_eq``.
 
 Everything here is SX, built in declaration order so that the same OCP always yields

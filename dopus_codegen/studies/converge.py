@@ -29,7 +29,7 @@ the run with the largest ``M``).
 
 ``cost_hessian`` (docs/algorithm.md section 4 step 5): ``fresh`` (default) refreshes the
 stage-cost Hessian of every stage in every iteration; ``stored`` is the paper's literal
-algorithm, whose warm-start study is the paper's figure 1 and DESIGN.md section 8.
+algorithm, whose warm-start study is the paper's figure 1 and docs/design.md section 8.
 """
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ class StartPoint:
 def make_start(disc, start: str, solve_ocp: Optional[Callable] = None) -> StartPoint:
     """The ``cold`` or ``warm`` start of the module docstring.
 
-    ``solve_ocp`` (default :func:`dopus_codegen.offline.solve_ocp`) is called as
+    ``solve_ocp`` (default :func:`dopus_codegen.reference.offline.solve_ocp`) is called as
     ``solve_ocp(disc, xhat0) -> (Guess, info)`` for the warm start.
     """
     x0 = np.array(disc.x0, dtype=float)
@@ -76,7 +76,7 @@ def make_start(disc, start: str, solve_ocp: Optional[Callable] = None) -> StartP
             raise ValueError(f"{disc.name}: the disturbance map must return {disc.nx} finite numbers, "
                              f"got {xf}")
         if solve_ocp is None:
-            from .offline import solve_ocp
+            from ..reference.offline import solve_ocp
         guess, info = solve_ocp(disc, x0)
         if not info.get("success", False):
             raise ValueError(f"{disc.name}: IPOPT did not solve the OCP at the initial state "
@@ -88,14 +88,14 @@ def make_start(disc, start: str, solve_ocp: Optional[Callable] = None) -> StartP
 def backend_factory(backend: str) -> Callable:
     """The class implementing the backend protocol (docs/algorithm.md section 7)."""
     if backend == "reference":
-        from .reference import ReferenceDopus
+        from ..reference.dopus import ReferenceDopus
         return ReferenceDopus
     if backend == "c":
         try:
-            from .solver import CSolver
+            from ..runtime.solver import CSolver
         except ImportError as exc:
-            raise RuntimeError(f"backend 'c' is not available: dopus_codegen.solver.CSolver cannot be "
-                               f"imported ({exc})") from None
+            raise RuntimeError("backend 'c' is not available: dopus_codegen.runtime.solver.CSolver "
+                               f"cannot be imported ({exc})") from None
         return CSolver
     raise ValueError(f"backend must be 'reference' or 'c', got {backend!r}")
 
@@ -112,7 +112,7 @@ def _resolve_M(m, N: int) -> int:
 
 def objective(disc, x, u, p=None) -> float:
     """``sum_k l_k + E`` at the primal point (exact functions)."""
-    from .kkt import eval_stages, node_parameters
+    from ..reference.kkt import eval_stages, node_parameters
 
     P = node_parameters(disc, p)
     N = disc.N
@@ -137,10 +137,10 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
 
     ``start``: a :class:`StartPoint` or ``"cold"`` / ``"warm"`` (see :func:`make_start`).
     ``backend_factory(disc, M=, mode="fixed", hessian=, regularization=, reg_eps=,
-    cost_hessian=)`` builds a backend (default: :class:`~dopus_codegen.reference.ReferenceDopus`).
+    cost_hessian=)`` builds a backend (default: :class:`~dopus_codegen.reference.dopus.ReferenceDopus`).
     ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
     """
-    from .reference import DopusError, ReferenceDopus
+    from ..reference.dopus import DopusError, ReferenceDopus
 
     if isinstance(start, str):
         start = make_start(disc, start)
@@ -277,8 +277,8 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, re
     """The body of ``dopus-gen converge`` (errors become click exceptions)."""
     import click
 
-    from .derivatives import build_functions
-    from .ocp import OcpError, load_ocp
+    from ..problem.derivatives import build_functions
+    from ..problem.ocp import OcpError, load_ocp
 
     try:
         factory = backend_factory(backend)

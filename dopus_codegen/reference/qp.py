@@ -41,7 +41,7 @@ terminal ``HN x_N + gN + lam_N + R' mu_r + Req' nu + mu_bN = 0``; ``lam_0``
 multiplies ``x_0 - x0``.
 
 Why IPOPT plus an active-set polish: the QPs of the exact-Hessian DOPUS iteration
-have indefinite stage blocks whose reduced Hessian is positive definite (DESIGN.md
+have indefinite stage blocks whose reduced Hessian is positive definite (docs/design.md
 section 8). Convex conic solvers (clarabel, piqp) reject them, and a convexification
 that provably keeps the solution must know the active set, which is what we are
 looking for. IPOPT (through CasADi) takes the nonconvex QP as it is and corrects the
@@ -92,7 +92,7 @@ def _shapes(N, nx, nu, ng, nr, ne):
 def check_qp(qp: dict) -> dict:
     """Validate a QP dict; return a copy with float arrays of the documented shapes."""
     if not isinstance(qp, dict):
-        raise TypeError("QP must be a dict (see dopus_codegen.qpref)")
+        raise TypeError("QP must be a dict (see dopus_codegen.reference.qp)")
     missing = [k for k in _INT_KEYS if k not in qp]
     if missing:
         raise ValueError(f"QP dict lacks the size entries {missing}")

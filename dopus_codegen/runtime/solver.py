@@ -2,7 +2,7 @@
 
 :class:`CSolver` implements the backend protocol of docs/algorithm.md section 7, so the
 convergence study (``dopus-gen converge --backend c``) and the software-in-the-loop runs
-drive the generated C exactly as they drive :class:`~dopus_codegen.reference.ReferenceDopus`::
+drive the generated C exactly as they drive :class:`~dopus_codegen.reference.dopus.ReferenceDopus`::
 
     solver = CSolver(disc, M=1)                 # generate + build into a cache, then load
     solver.init(xhat0)                          # the OCP file's guess
@@ -30,7 +30,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from .reference import DopusError as _ReferenceDopusError
+from ..reference.dopus import DopusError as _ReferenceDopusError
 
 __all__ = ["CSolver", "DopusError", "STATUS", "QP_STATUS", "PHASES", "load_library", "build_for"]
 
@@ -86,8 +86,8 @@ def cache_root() -> Path:
 def build_for(disc, cache_dir=None) -> Path:
     """Generate the C folder of ``disc`` into the cache (keyed by the hash of the generated
     sources) and build it; return the folder. Cheap when nothing changed."""
-    from .build import build
-    from .codegen import render_folder, write_folder
+    from ..codegen.build import build
+    from ..codegen.generate import render_folder, write_folder
 
     key = id(disc)
     with _LOCK:
@@ -121,8 +121,8 @@ def load_library(folder) -> tuple:
     """``(ffi, lib, meta)`` of a built folder (built first if needed); cached per library."""
     import cffi
 
-    from .build import build
-    from .codegen import read_meta
+    from ..codegen.build import build
+    from ..codegen.generate import read_meta
 
     folder = Path(folder)
     res = build(folder)
@@ -498,7 +498,7 @@ class CSolver:
 
     def guess(self):
         """The current iterate as a ``Guess``."""
-        from .ocp import Guess
+        from ..problem.ocp import Guess
 
         return Guess(x=self.x, u=self.u, lam=self.lam, mu_g=self.mu_g, mu_b=self.mu_b,
                      mu_bN=self.mu_bN, mu_r=self.mu_r, nu=self.nu)
@@ -513,6 +513,11 @@ class CSolver:
         cb = self._ffi.callback("double(void *)", lambda _ctx: float(clock()))
         self._clock_cb = cb
         self._c("set_clock")(self._s, cb, self._ffi.NULL)
+
+    @property
+    def has_clock(self) -> bool:
+        """True if the timings measure time (False: no clock on this platform, they read 0)."""
+        return bool(self._c("has_clock")(self._s))
 
     def __repr__(self) -> str:
         return (f"CSolver({self.name!r}, N={self.N}, M={self.M}, mode={self.mode!r}, "
