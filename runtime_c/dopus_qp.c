@@ -45,6 +45,9 @@
 /* The row values v = D w live in the per-row scratch yrow from compute_residuals (or
  * initial_point) until the next Newton direction overwrites it. */
 #define QP_V(ws) ((ws)->yrow)
+/* Loop over the rows with at least one finite side (ws->bidx, built by setup_bounds): the
+ * per-side work skips the unbounded rows (their barrier weight stays 0). */
+#define QP_FOR_BOUNDED(ws, b, i) for ((b) = 0; (b) < (ws)->nb && ((i) = (ws)->bidx[(b)], 1); ++(b))
 
 /* Fraction-to-boundary factor and limits of the inertia correction. */
 #define STEP_TAU 0.995
@@ -150,7 +153,7 @@ static int check_input(const dopus_qp_in *in)
 /* Bounds into the flat row layout; returns 0 when some lo > up (trivially infeasible). */
 static int setup_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in)
 {
-    int k, i, ok = 1;
+    int k, i, ok = 1, nb = 0;
     for (k = 0; k < N; ++k) {
         const int o = k * NSI;
         for (i = 0; i < NW; ++i) {
@@ -185,9 +188,13 @@ static int setup_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in)
         }
         ws->has_lo[i] = (unsigned char)(!ignored && isfinite(ws->lo[i]));
         ws->has_up[i] = (unsigned char)(!ignored && isfinite(ws->up[i]));
+        ws->qdiag[i] = 0.0;
+        if (ws->has_lo[i] || ws->has_up[i])
+            ws->bidx[nb++] = (dopus_qp_row)i;
         if (ws->has_lo[i] && ws->has_up[i] && ws->lo[i] > ws->up[i])
             ok = 0;
     }
+    ws->nb = nb;
     return ok;
 }
 
@@ -267,7 +274,7 @@ typedef struct {
 
 static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_res *r)
 {
-    int k, i;
+    int k, i, b;
     double s_stat = 1.0, s_eq = 1.0, s_ineq = 1.0, nz = 0.0, obj = 0.0, comp = 0.0, ineq = 0.0;
     double sum_c = 0.0;
     int m = 0;
@@ -336,7 +343,7 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
 
     /* inequality sides */
     s_ineq = dmax(s_ineq, ws->scale_bounds);
-    for (i = 0; i < NI; ++i) {
+    QP_FOR_BOUNDED(ws, b, i) {
         const double v = QP_V(ws)[i];
         /* r_lo, r_up (and the directions) are only defined on the bounded sides */
         if (ws->has_lo[i]) {
@@ -708,7 +715,7 @@ static void newton_residual(dopus_qp_workspace *ws, const dopus_qp_in *in, const
  * condensed right-hand side, solve with refinement, recover slack and multiplier steps. */
 static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int refine_steps)
 {
-    int i, it;
+    int i, b, it;
     double *y = ws->yrow;
     for (i = 0; i < NI; ++i) {
         double s = 0.0;
@@ -740,7 +747,7 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
 
     /* dt_lo = D dw + r_lo, dt_up = r_up - D dw, dz = -(rc + z dt) / t */
     apply_D(in, ws->d_prim, y);
-    for (i = 0; i < NI; ++i) {
+    QP_FOR_BOUNDED(ws, b, i) {
         if (ws->has_lo[i]) {
             ws->dt_lo[i] = y[i] + ws->r_lo[i];
             ws->dz_lo[i] = -(ws->rc_lo[i] + ws->z_lo[i] * ws->dt_lo[i]) / ws->t_lo[i];
@@ -755,9 +762,9 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
 /* Largest alpha in (0, 1] keeping t + alpha dt >= 0 and z + alpha dz >= 0. */
 static double max_step(const dopus_qp_workspace *ws)
 {
-    int i;
+    int i, b;
     double a = 1.0;
-    for (i = 0; i < NI; ++i) {
+    QP_FOR_BOUNDED(ws, b, i) {
         if (ws->has_lo[i]) {
             if (ws->dt_lo[i] < 0.0)
                 a = dmin(a, -ws->t_lo[i] / ws->dt_lo[i]);
@@ -1002,7 +1009,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
 {
     dopus_qp_settings st;
     qp_res r, best_r;
-    int iter, i, keep_best, status = DOPUS_QP_MAX_ITER;
+    int iter, i, b, keep_best, status = DOPUS_QP_MAX_ITER;
     int n_corr = 0, n_aug = 0;
     double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
     int best_iter = 0;
@@ -1138,7 +1145,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         }
 
         /* barrier weights Q = z/t per row */
-        for (i = 0; i < NI; ++i) {
+        QP_FOR_BOUNDED(ws, b, i) {
             double q = 0.0;
             if (ws->has_lo[i])
                 q += ws->z_lo[i] / ws->t_lo[i];
@@ -1212,7 +1219,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         }
 
         /* predictor (affine scaling) */
-        for (i = 0; i < NI; ++i) {
+        QP_FOR_BOUNDED(ws, b, i) {
             ws->rc_lo[i] = ws->has_lo[i] ? ws->t_lo[i] * ws->z_lo[i] : 0.0;
             ws->rc_up[i] = ws->has_up[i] ? ws->t_up[i] * ws->z_up[i] : 0.0;
         }
@@ -1221,7 +1228,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         alpha_aff = alpha;
         (void)alpha_aff;
         mu_aff = 0.0;
-        for (i = 0; i < NI; ++i) {
+        QP_FOR_BOUNDED(ws, b, i) {
             if (ws->has_lo[i])
                 mu_aff += (ws->t_lo[i] + alpha * ws->dt_lo[i]) * (ws->z_lo[i] + alpha * ws->dz_lo[i]);
             if (ws->has_up[i])
@@ -1250,7 +1257,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
          * on a pair far from the central path) */
         eta = (iter > 0 && r.mu > mu_prev && dmax(r.stat_s, r.eq_s) < r.comp_s) ? 0.0 : 1.0;
         mu_prev = r.mu;
-        for (i = 0; i < NI; ++i) {
+        QP_FOR_BOUNDED(ws, b, i) {
             if (ws->has_lo[i])
                 ws->rc_lo[i] += eta * ws->dt_lo[i] * ws->dz_lo[i] - target;
             if (ws->has_up[i])
@@ -1266,7 +1273,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         dopus_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
         dopus_lai_axpy((N + 1) * NX, alpha, ws->d_lam, ws->lam);
         dopus_lai_axpy(NE, alpha, ws->d_nu, ws->nu);
-        for (i = 0; i < NI; ++i) {
+        QP_FOR_BOUNDED(ws, b, i) {
             if (ws->has_lo[i]) {
                 ws->t_lo[i] += alpha * ws->dt_lo[i];
                 ws->z_lo[i] += alpha * ws->dz_lo[i];

@@ -102,6 +102,13 @@
 #define DOPUS_QP_NSTAGEINEQ (DOPUS_QP_NW + DOPUS_NG)
 #define DOPUS_QP_NINEQ (DOPUS_N * DOPUS_QP_NSTAGEINEQ + DOPUS_NX + DOPUS_NR)
 
+/* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
+#if DOPUS_QP_NINEQ < 65536
+typedef unsigned short dopus_qp_row;
+#else
+typedef int dopus_qp_row;
+#endif
+
 /* Status codes (dopus_qp_solve return value and dopus_qp_info.status). */
 enum dopus_qp_status {
     DOPUS_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
@@ -193,6 +200,8 @@ typedef struct {
     double up[DOPUS_QP_NINEQ];
     unsigned char has_lo[DOPUS_QP_NINEQ];
     unsigned char has_up[DOPUS_QP_NINEQ];
+    dopus_qp_row bidx[DOPUS_QP_NINEQ];   /* the rows with a finite side, nb of them */
+    int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
     double prim[DOPUS_QP_NPRIM];
     double lam[(DOPUS_N + 1) * DOPUS_NX];

@@ -102,6 +102,13 @@
 #define ROBOT_ARM_QP_NSTAGEINEQ (ROBOT_ARM_QP_NW + ROBOT_ARM_NG)
 #define ROBOT_ARM_QP_NINEQ (ROBOT_ARM_N * ROBOT_ARM_QP_NSTAGEINEQ + ROBOT_ARM_NX + ROBOT_ARM_NR)
 
+/* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
+#if ROBOT_ARM_QP_NINEQ < 65536
+typedef unsigned short robot_arm_qp_row;
+#else
+typedef int robot_arm_qp_row;
+#endif
+
 /* Status codes (robot_arm_qp_solve return value and robot_arm_qp_info.status). */
 enum robot_arm_qp_status {
     ROBOT_ARM_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
@@ -193,6 +200,8 @@ typedef struct {
     double up[ROBOT_ARM_QP_NINEQ];
     unsigned char has_lo[ROBOT_ARM_QP_NINEQ];
     unsigned char has_up[ROBOT_ARM_QP_NINEQ];
+    robot_arm_qp_row bidx[ROBOT_ARM_QP_NINEQ];   /* the rows with a finite side, nb of them */
+    int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
     double prim[ROBOT_ARM_QP_NPRIM];
     double lam[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];

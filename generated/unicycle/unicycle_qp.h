@@ -102,6 +102,13 @@
 #define UNICYCLE_QP_NSTAGEINEQ (UNICYCLE_QP_NW + UNICYCLE_NG)
 #define UNICYCLE_QP_NINEQ (UNICYCLE_N * UNICYCLE_QP_NSTAGEINEQ + UNICYCLE_NX + UNICYCLE_NR)
 
+/* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
+#if UNICYCLE_QP_NINEQ < 65536
+typedef unsigned short unicycle_qp_row;
+#else
+typedef int unicycle_qp_row;
+#endif
+
 /* Status codes (unicycle_qp_solve return value and unicycle_qp_info.status). */
 enum unicycle_qp_status {
     UNICYCLE_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
@@ -193,6 +200,8 @@ typedef struct {
     double up[UNICYCLE_QP_NINEQ];
     unsigned char has_lo[UNICYCLE_QP_NINEQ];
     unsigned char has_up[UNICYCLE_QP_NINEQ];
+    unicycle_qp_row bidx[UNICYCLE_QP_NINEQ];   /* the rows with a finite side, nb of them */
+    int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
     double prim[UNICYCLE_QP_NPRIM];
     double lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
