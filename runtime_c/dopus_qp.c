@@ -711,18 +711,37 @@ static void newton_residual(dopus_qp_workspace *ws, const dopus_qp_in *in, const
     }
 }
 
+/* Barrier right-hand side of one side, rc = t z (predictor) or, for the corrector,
+ * t z + eta dt_aff dz_aff - target with the predictor's steps still in dt, dz (so rc
+ * needs no storage of its own). */
+typedef struct {
+    int corrector;
+    double eta, target;
+} qp_centring;
+
+static double qp_rc(double t, double z, const double *dt, const double *dz, const qp_centring *cc)
+{
+    double rc = t * z;
+    if (cc->corrector) /* dt, dz are read only then: before the first corrector they are unset */
+        rc += cc->eta * *dt * *dz - cc->target;
+    return rc;
+}
+
 /* Newton direction for the barrier right-hand side rc (t z - target per side): build the
  * condensed right-hand side, solve with refinement, recover slack and multiplier steps. */
-static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int refine_steps)
+static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int refine_steps,
+                             const qp_centring *cc)
 {
     int i, b, it;
     double *y = ws->yrow;
     for (i = 0; i < NI; ++i) {
         double s = 0.0;
         if (ws->has_lo[i])
-            s += (ws->rc_lo[i] + ws->z_lo[i] * ws->r_lo[i]) / ws->t_lo[i];
+            s += (qp_rc(ws->t_lo[i], ws->z_lo[i], &ws->dt_lo[i], &ws->dz_lo[i], cc) + ws->z_lo[i] * ws->r_lo[i]) /
+                 ws->t_lo[i];
         if (ws->has_up[i])
-            s -= (ws->rc_up[i] + ws->z_up[i] * ws->r_up[i]) / ws->t_up[i];
+            s -= (qp_rc(ws->t_up[i], ws->z_up[i], &ws->dt_up[i], &ws->dz_up[i], cc) + ws->z_up[i] * ws->r_up[i]) /
+                 ws->t_up[i];
         y[i] = -s;
     }
     for (i = 0; i < NP; ++i)
@@ -748,13 +767,16 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
     /* dt_lo = D dw + r_lo, dt_up = r_up - D dw, dz = -(rc + z dt) / t */
     apply_D(in, ws->d_prim, y);
     QP_FOR_BOUNDED(ws, b, i) {
+        /* rc from the previous (predictor) direction, before it is overwritten */
         if (ws->has_lo[i]) {
+            const double rc = qp_rc(ws->t_lo[i], ws->z_lo[i], &ws->dt_lo[i], &ws->dz_lo[i], cc);
             ws->dt_lo[i] = y[i] + ws->r_lo[i];
-            ws->dz_lo[i] = -(ws->rc_lo[i] + ws->z_lo[i] * ws->dt_lo[i]) / ws->t_lo[i];
+            ws->dz_lo[i] = -(rc + ws->z_lo[i] * ws->dt_lo[i]) / ws->t_lo[i];
         }
         if (ws->has_up[i]) {
+            const double rc = qp_rc(ws->t_up[i], ws->z_up[i], &ws->dt_up[i], &ws->dz_up[i], cc);
             ws->dt_up[i] = ws->r_up[i] - y[i];
-            ws->dz_up[i] = -(ws->rc_up[i] + ws->z_up[i] * ws->dt_up[i]) / ws->t_up[i];
+            ws->dz_up[i] = -(rc + ws->z_up[i] * ws->dt_up[i]) / ws->t_up[i];
         }
     }
 }
@@ -1009,6 +1031,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
 {
     dopus_qp_settings st;
     qp_res r, best_r;
+    qp_centring pred, corr;
     int iter, i, b, keep_best, status = DOPUS_QP_MAX_ITER;
     int n_corr = 0, n_aug = 0;
     double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
@@ -1209,9 +1232,8 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
 
         if (r.nsides == 0) {
             /* equality-constrained QP: one Newton step is exact */
-            for (i = 0; i < NI; ++i)
-                ws->rc_lo[i] = ws->rc_up[i] = 0.0;
-            newton_direction(ws, in, nref);
+            const qp_centring none = {0, 0.0, 0.0}; /* no bounded side: rc is never formed */
+            newton_direction(ws, in, nref, &none);
             dopus_lai_axpy(NP, 1.0, ws->d_prim, ws->prim);
             dopus_lai_axpy((N + 1) * NX, 1.0, ws->d_lam, ws->lam);
             dopus_lai_axpy(NE, 1.0, ws->d_nu, ws->nu);
@@ -1219,11 +1241,9 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         }
 
         /* predictor (affine scaling) */
-        QP_FOR_BOUNDED(ws, b, i) {
-            ws->rc_lo[i] = ws->has_lo[i] ? ws->t_lo[i] * ws->z_lo[i] : 0.0;
-            ws->rc_up[i] = ws->has_up[i] ? ws->t_up[i] * ws->z_up[i] : 0.0;
-        }
-        newton_direction(ws, in, 0);
+        pred.corrector = 0;
+        pred.eta = pred.target = 0.0;
+        newton_direction(ws, in, 0, &pred);
         alpha = max_step(ws);
         alpha_aff = alpha;
         (void)alpha_aff;
@@ -1257,13 +1277,10 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
          * on a pair far from the central path) */
         eta = (iter > 0 && r.mu > mu_prev && dmax(r.stat_s, r.eq_s) < r.comp_s) ? 0.0 : 1.0;
         mu_prev = r.mu;
-        QP_FOR_BOUNDED(ws, b, i) {
-            if (ws->has_lo[i])
-                ws->rc_lo[i] += eta * ws->dt_lo[i] * ws->dz_lo[i] - target;
-            if (ws->has_up[i])
-                ws->rc_up[i] += eta * ws->dt_up[i] * ws->dz_up[i] - target;
-        }
-        newton_direction(ws, in, nref);
+        corr.corrector = 1;
+        corr.eta = eta;
+        corr.target = target;
+        newton_direction(ws, in, nref, &corr);
         alpha = dmin(1.0, STEP_TAU * max_step(ws));
         QP_TRACE("it %2d mu %.2e stat %.2e eq %.2e ineq %.2e comp %.2e | a_aff %.3f sigma %.2e "
                  "alpha %.3e delta %.1e rho %.1e floors %d |dp| %.2e\n",

@@ -225,8 +225,6 @@ typedef struct {
     double dt_up[DOPUS_QP_NINEQ];
     double dz_lo[DOPUS_QP_NINEQ];
     double dz_up[DOPUS_QP_NINEQ];
-    double rc_lo[DOPUS_QP_NINEQ];
-    double rc_up[DOPUS_QP_NINEQ];
     /* Newton right-hand side, solution and refinement buffers */
     double rhs_stat[DOPUS_QP_NPRIM];
     double rhs_dyn[(DOPUS_N + 1) * DOPUS_NX];

@@ -225,8 +225,6 @@ typedef struct {
     double dt_up[ROBOT_ARM_QP_NINEQ];
     double dz_lo[ROBOT_ARM_QP_NINEQ];
     double dz_up[ROBOT_ARM_QP_NINEQ];
-    double rc_lo[ROBOT_ARM_QP_NINEQ];
-    double rc_up[ROBOT_ARM_QP_NINEQ];
     /* Newton right-hand side, solution and refinement buffers */
     double rhs_stat[ROBOT_ARM_QP_NPRIM];
     double rhs_dyn[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];

@@ -225,8 +225,6 @@ typedef struct {
     double dt_up[UNICYCLE_QP_NINEQ];
     double dz_lo[UNICYCLE_QP_NINEQ];
     double dz_up[UNICYCLE_QP_NINEQ];
-    double rc_lo[UNICYCLE_QP_NINEQ];
-    double rc_up[UNICYCLE_QP_NINEQ];
     /* Newton right-hand side, solution and refinement buffers */
     double rhs_stat[UNICYCLE_QP_NPRIM];
     double rhs_dyn[(UNICYCLE_N + 1) * UNICYCLE_NX];
