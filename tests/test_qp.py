@@ -172,7 +172,7 @@ def test_inertia_correction_on_indefinite_reduced_pivots():
         qp, ref = P.make_qp(rng, *sizes, p_active=0.0, p_free=1.0)
         # negative terminal curvature that the two terminal equalities (ne = nx) remove
         qp["HN"] = qp["HN"] - 50.0 * np.eye(2) * np.abs(qp["HN"]).max()
-        P._recompute_gradients(qp, ref)
+        P.recompute_gradients(qp, ref)
         licq, red, red_eq = P.check_unique(qp, ref)
         assert licq and red_eq > 0
         sol, info = h.solve(qp, tol=TOL_QP)

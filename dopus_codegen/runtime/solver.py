@@ -204,6 +204,11 @@ class CSolver:
     def _c(self, fname: str):
         return getattr(self._lib, f"{self.name}_{fname}")
 
+    def call_c(self, fname: str, *args) -> int:
+        """``<name>_<fname>(solver, *args)`` called directly, without the checks of the
+        Python setters; returns the C status (for tests of the C side's own checks)."""
+        return int(self._c(fname)(self._s, *args))
+
     def _status_text(self, status: int) -> str:
         return self._ffi.string(self._c("status_string")(int(status))).decode()
 

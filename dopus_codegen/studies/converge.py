@@ -64,11 +64,12 @@ def make_start(disc, start: str, solve_ocp: Optional[Callable] = None) -> StartP
     if start == "cold":
         return StartPoint("cold", x0, disc.initial_guess, x0.copy())
     if start == "warm":
-        if disc.disturbance is None:
+        disturbance = disc.scenario.disturbance
+        if disturbance is None:
             raise ValueError(f"{disc.name}: --start warm needs a disturbance map "
                              f"(ocp.disturbance(fn) in the OCP file)")
         try:
-            xf = np.array(disc.disturbance(x0.copy()), dtype=float).reshape(-1)
+            xf = np.array(disturbance(x0.copy()), dtype=float).reshape(-1)
         except Exception as exc:  # noqa: BLE001 - user code
             raise ValueError(f"{disc.name}: the disturbance map failed on the initial state: "
                              f"{type(exc).__name__}: {exc}") from None
