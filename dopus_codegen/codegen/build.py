@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import List, Sequence
 
-from .generate import CASADI_CFLAGS, STRICT_CFLAGS, CodegenError, read_meta
+from .flags import CASADI_CFLAGS, DEFAULT_OPT, PIC, STRICT_CFLAGS
+from .generate import CodegenError, read_meta
 
 BUILD_SUBDIR = Path("build") / "py"
 
@@ -58,12 +59,6 @@ def _source_hash(out_dir: Path, files: List[str], cc: str, opt: Sequence[str]) -
         h.update((out_dir / fname).read_bytes())
         h.update(b"\0")
     return h.hexdigest()
-
-
-#: Default optimisation flags of `dopus-gen build`, the generated Makefile (OPT) and CMake
-#: fragment. No -march: add the target's flags yourself (e.g. --opt "-O3 -march=native" on
-#: the build machine, OPT="-O3 -mcpu=cortex-m7 -mfpu=fpv5-d16 -mfloat-abi=hard" for firmware).
-DEFAULT_OPT = "-O3"
 
 
 def recorded_opt(out_dir) -> str | None:
@@ -131,7 +126,7 @@ def build(out_dir, cc: str = "cc", opt: str | None = None, *, force: bool = Fals
         for src in strict + [casadi_src]:
             flags = CASADI_CFLAGS if src == casadi_src else STRICT_CFLAGS
             obj = objdir / (Path(src).stem + ".o")
-            _run([cc, *opt_flags, "-fPIC", *flags, "-c", src, "-o", str(obj)], out_dir, f"compiling {src}")
+            _run([cc, *opt_flags, PIC, *flags, "-c", src, "-o", str(obj)], out_dir, f"compiling {src}")
             objects.append(str(obj))
         tmp_a, tmp_so = objdir / static_lib.name, objdir / shared_lib.name
         _run([os.environ.get("AR", "ar"), "rcs", str(tmp_a), *objects], out_dir, f"archiving {static_lib.name}")
