@@ -163,7 +163,9 @@ def generate(ocp_file, out_dir, offline_guess):
 @main.command()
 @click.argument("folder", type=click.Path(file_okay=False))
 @click.option("--cc", default="cc", show_default=True, help="C compiler.")
-@click.option("--opt", default=DEFAULT_OPT, show_default=True, help="Optimisation flags (quoted if several).")
+@click.option("--opt", default=None,
+              help="Optimisation flags (quoted if several). Default: the flags the folder was last "
+                   f"built with, else {DEFAULT_OPT} (no -march; add the target's, e.g. --opt \"-O3 -march=native\").")
 @click.option("--force", is_flag=True, help="Rebuild even if the sources did not change.")
 def build(folder, cc, opt, force):
     """Compile a generated FOLDER into build/lib<name>.so (cffi) and lib<name>.a (firmware).

@@ -109,6 +109,12 @@ int dopus_set_qp_tol(dopus_solver *s, double tol);
 double dopus_get_qp_tol(dopus_solver *s);
 int dopus_set_qp_max_iter(dopus_solver *s, int max_iter);
 int dopus_get_qp_max_iter(dopus_solver *s);
+/* QP warm start in feedback (1, the default): start from the previous QP solution shifted
+ * with the horizon (a zero step from the shifted iterate, the iterate's multipliers); when
+ * that QP is not solved, feedback retries from the cold starting point in the same call.
+ * 0: always cold. */
+int dopus_set_qp_warm_start(dopus_solver *s, int on);
+int dopus_get_qp_warm_start(dopus_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int dopus_set_parameters(dopus_solver *s, const double *p);
@@ -132,6 +138,9 @@ int dopus_get_recomputed(const dopus_solver *s, int *stages);
 /* The last QP: iterations, status (enum dopus_qp_status of dopus_qp.h). */
 int dopus_get_qp_iterations(const dopus_solver *s);
 int dopus_get_qp_status(const dopus_solver *s);
+/* 1 when the last feedback's warm-started QP failed and the cold retry ran (the
+ * iterations above are then the sum of both solves), else 0. */
+int dopus_get_qp_cold_retry(const dopus_solver *s);
 /* Status of the last call that returns a status. */
 int dopus_get_status(const dopus_solver *s);
 int dopus_is_initialized(const dopus_solver *s);
@@ -241,6 +250,8 @@ struct dopus_solver {
     dopus_qp_workspace qp_work;
     int qp_status;
     int qp_iterations;
+    int qp_warm;        /* warm start in feedback (dopus_set_qp_warm_start) */
+    int qp_cold_retry;  /* the last feedback needed the cold retry */
 
     /* scratch for the generated functions and the regularisation */
     dopus_fun_work fun_work;

@@ -136,7 +136,7 @@ class CSolver:
                  reg_eps: float = settings.DEFAULTS["reg_eps"], qp_tol: float = settings.DEFAULTS["qp_tol"],
                  lib_dir=None, qp_max_iter: Optional[int] = None,
                  cost_hessian: str = settings.DEFAULTS["cost_hessian"],
-                 lm: Optional[float] = settings.DEFAULTS["lm"]):
+                 lm: Optional[float] = settings.DEFAULTS["lm"], qp_warm_start: Optional[bool] = None):
         if lib_dir is None:
             if disc is None:
                 raise ValueError("CSolver needs a Discretized problem or lib_dir (a generated folder)")
@@ -177,6 +177,8 @@ class CSolver:
         self.set_cost_hessian(cost_hessian)
         if lm is not None:  # None: the generated default (the OCP file's options(lm=...))
             self.set_levenberg_marquardt(lm)
+        if qp_warm_start is not None:  # None: the runtime's default (on)
+            self.set_qp_warm_start(qp_warm_start)
 
     @classmethod
     def from_dir(cls, path, disc=None, **settings) -> "CSolver":
@@ -302,6 +304,21 @@ class CSolver:
     def set_qp_max_iter(self, max_iter: int) -> None:
         self._check(self._c("set_qp_max_iter")(self._s, self._setting(settings.count, "qp_max_iter", max_iter, 1)),
                     "qp_max_iter")
+
+    def set_qp_warm_start(self, on: bool) -> None:
+        """Warm start of the QP in feedback (default on), with a cold retry when it fails."""
+        if not isinstance(on, (bool, np.bool_)) and on not in (0, 1):
+            self._bad(f"qp_warm_start must be True or False, got {on!r}")
+        self._check(self._c("set_qp_warm_start")(self._s, int(bool(on))), "qp_warm_start")
+
+    @property
+    def qp_warm_start(self) -> bool:
+        return bool(self._c("get_qp_warm_start")(self._s))
+
+    @property
+    def qp_cold_retry(self) -> bool:
+        """True when the last feedback's warm-started QP failed and the cold retry ran."""
+        return bool(self._c("get_qp_cold_retry")(self._s))
 
     def set_parameters(self, p) -> None:
         """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""

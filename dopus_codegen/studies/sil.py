@@ -200,6 +200,7 @@ class _Record:
         self.t, self.x, self.u, self.kkt, self.parts, self.status, self.recomputed = [], [], [], [], [], [], []
         self.signals = {name: [] for name in spec.signals}
         self.qp_iterations = []
+        self.qp_cold_retry = []
         self.timing: dict[str, list] = {"feedback": [], "prepare": [], "total": []}
         self.phase_timing: dict[str, list] = {}  # the backend's own phase timers
         self.snap: dict = {}
@@ -240,6 +241,7 @@ class _Record:
                         for k, vals in self.signals.items()},
             "recomputed": self.recomputed,
             "qp_iterations": self.qp_iterations[:len(self.status)],
+            "qp_cold_retry": self.qp_cold_retry[:len(self.status)],
             "timing_us": {"feedback": self.timing["feedback"], "prepare": self.timing["prepare"],
                           "total": self.timing["total"],
                           **{f"phase:{k}": v for k, v in self.phase_timing.items()}},
@@ -288,6 +290,7 @@ class _Loop:
         xhat = x.copy()
         u0, status, t_fb = self.feedback(xhat)
         self.rec.qp_iterations.append(int(getattr(self.ctrl, "qp_iterations", 0) or 0))
+        self.rec.qp_cold_retry.append(bool(getattr(self.ctrl, "qp_cold_retry", False)))
         phases = _split_phases("feedback", _changed(self.rec.snap, dict(getattr(self.ctrl, "timings", {}) or {})))
         kkt, status = self.kkt(xhat, status)
         # A backend may time its KKT evaluation too; that is not part of the iteration.

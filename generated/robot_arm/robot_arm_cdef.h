@@ -77,6 +77,12 @@ int robot_arm_set_qp_tol(robot_arm_solver *s, double tol);
 double robot_arm_get_qp_tol(robot_arm_solver *s);
 int robot_arm_set_qp_max_iter(robot_arm_solver *s, int max_iter);
 int robot_arm_get_qp_max_iter(robot_arm_solver *s);
+/* QP warm start in feedback (1, the default): start from the previous QP solution shifted
+ * with the horizon (a zero step from the shifted iterate, the iterate's multipliers); when
+ * that QP is not solved, feedback retries from the cold starting point in the same call.
+ * 0: always cold. */
+int robot_arm_set_qp_warm_start(robot_arm_solver *s, int on);
+int robot_arm_get_qp_warm_start(robot_arm_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int robot_arm_set_parameters(robot_arm_solver *s, const double *p);
@@ -100,6 +106,9 @@ int robot_arm_get_recomputed(const robot_arm_solver *s, int *stages);
 /* The last QP: iterations, status (enum robot_arm_qp_status of robot_arm_qp.h). */
 int robot_arm_get_qp_iterations(const robot_arm_solver *s);
 int robot_arm_get_qp_status(const robot_arm_solver *s);
+/* 1 when the last feedback's warm-started QP failed and the cold retry ran (the
+ * iterations above are then the sum of both solves), else 0. */
+int robot_arm_get_qp_cold_retry(const robot_arm_solver *s);
 /* Status of the last call that returns a status. */
 int robot_arm_get_status(const robot_arm_solver *s);
 int robot_arm_is_initialized(const robot_arm_solver *s);

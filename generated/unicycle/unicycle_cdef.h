@@ -77,6 +77,12 @@ int unicycle_set_qp_tol(unicycle_solver *s, double tol);
 double unicycle_get_qp_tol(unicycle_solver *s);
 int unicycle_set_qp_max_iter(unicycle_solver *s, int max_iter);
 int unicycle_get_qp_max_iter(unicycle_solver *s);
+/* QP warm start in feedback (1, the default): start from the previous QP solution shifted
+ * with the horizon (a zero step from the shifted iterate, the iterate's multipliers); when
+ * that QP is not solved, feedback retries from the cold starting point in the same call.
+ * 0: always cold. */
+int unicycle_set_qp_warm_start(unicycle_solver *s, int on);
+int unicycle_get_qp_warm_start(unicycle_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int unicycle_set_parameters(unicycle_solver *s, const double *p);
@@ -100,6 +106,9 @@ int unicycle_get_recomputed(const unicycle_solver *s, int *stages);
 /* The last QP: iterations, status (enum unicycle_qp_status of unicycle_qp.h). */
 int unicycle_get_qp_iterations(const unicycle_solver *s);
 int unicycle_get_qp_status(const unicycle_solver *s);
+/* 1 when the last feedback's warm-started QP failed and the cold retry ran (the
+ * iterations above are then the sum of both solves), else 0. */
+int unicycle_get_qp_cold_retry(const unicycle_solver *s);
 /* Status of the last call that returns a status. */
 int unicycle_get_status(const unicycle_solver *s);
 int unicycle_is_initialized(const unicycle_solver *s);

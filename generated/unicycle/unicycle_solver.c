@@ -115,6 +115,8 @@ void unicycle_defaults(unicycle_solver *s)
     s->lm = (unicycle_default_lm >= 0.0 && unicycle_default_lm < INFINITY) ? unicycle_default_lm : 0.0;
     unicycle_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = UNICYCLE_DEFAULT_QP_TOL;
+    s->qp_warm = 1;
+    s->qp_cold_retry = 0;
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NP; ++i) {
             s->p[k][i] = unicycle_p_default[i];
@@ -476,6 +478,42 @@ static int unicycle_qp_solution_finite(const unicycle_qp_sol *sol)
            unicycle_lai_vec_finite(UNICYCLE_QP_NR1, sol->mu_r) && unicycle_lai_vec_finite(UNICYCLE_QP_NE1, sol->nu);
 }
 
+/* Warm-start point of the QP (in s->qp_sol): the previous QP solution shifted with the
+ * horizon. Its primal part has been added to the iterate, which prepare shifted, so it is
+ * a zero step from the (shifted) iterate, with x_0's step fixed by the measurement; the
+ * multipliers are the (shifted) iterate's, which are those of the previous QP. */
+static void unicycle_qp_warm_point(unicycle_solver *s)
+{
+    unicycle_qp_sol *w = &s->qp_sol;
+    int k, i;
+    for (k = 0; k <= UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : 0.0;
+            w->lam[k][i] = s->lam[k][i];
+        }
+    }
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_QP_NU1; ++i) {
+            w->u[k][i] = 0.0;
+        }
+        for (i = 0; i < UNICYCLE_NW; ++i) {
+            w->mu_b[k][i] = s->mu_b[k][i];
+        }
+        for (i = 0; i < UNICYCLE_QP_NG1; ++i) {
+            w->mu_g[k][i] = i < UNICYCLE_NG ? s->mu_g[k][i] : 0.0;
+        }
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        w->mu_bN[i] = s->mu_bN[i];
+    }
+    for (i = 0; i < UNICYCLE_QP_NR1; ++i) {
+        w->mu_r[i] = i < UNICYCLE_NR ? s->mu_r[i] : 0.0;
+    }
+    for (i = 0; i < UNICYCLE_QP_NE1; ++i) {
+        w->nu[i] = i < UNICYCLE_NE ? s->nu[i] : 0.0;
+    }
+}
+
 int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
 {
     const unicycle_qp_sol *sol = &s->qp_sol;
@@ -500,10 +538,26 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->qp_in.hess_shift = s->lm;
-    s->qp_settings.warm_start = 0;
+    s->qp_cold_retry = 0;
+    s->qp_settings.warm_start = s->qp_warm;
+    if (s->qp_warm) {
+        unicycle_qp_warm_point(s);
+    }
     qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-    s->qp_status = qs;
     s->qp_iterations = s->qp_info.iterations;
+    if (s->qp_warm && qs != UNICYCLE_QP_INVALID_INPUT &&
+        (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol) || s->qp_info.inertia_corrections > 0)) {
+        /* the warm start failed, or it needed the inertia correction: the QP is nonconvex
+         * on the null space of its equalities there and may have several local minimisers,
+         * and the warm start may have reached another one than the cold start finds (the
+         * one the closed loop has followed so far): retry from the cold starting point in
+         * the same call */
+        s->qp_cold_retry = 1;
+        s->qp_settings.warm_start = 0;
+        qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+        s->qp_iterations += s->qp_info.iterations;
+    }
+    s->qp_status = qs;
     if (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol)) {
         unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
         return unicycle_ret(s, UNICYCLE_ERR_QP);
@@ -905,6 +959,27 @@ int unicycle_get_qp_max_iter(unicycle_solver *s)
 {
     unicycle_ensure_setup(s);
     return s->qp_settings.max_iter;
+}
+
+int unicycle_set_qp_warm_start(unicycle_solver *s, int on)
+{
+    unicycle_ensure_setup(s);
+    if (on != 0 && on != 1) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    s->qp_warm = on;
+    return unicycle_ret(s, UNICYCLE_OK);
+}
+
+int unicycle_get_qp_warm_start(unicycle_solver *s)
+{
+    unicycle_ensure_setup(s);
+    return s->qp_warm;
+}
+
+int unicycle_get_qp_cold_retry(const unicycle_solver *s)
+{
+    return s->qp_cold_retry;
 }
 
 int unicycle_set_parameters(unicycle_solver *s, const double *p)
