@@ -34,13 +34,19 @@ from .kkt import eval_stages, kkt_measure, node_parameters
 from .qpref import QPError, QPInfeasibleError, solve_qp_reference
 
 __all__ = ["DopusError", "ReferenceDopus", "regularize", "STATUS_OK", "STATUS_BAD_INPUT",
-           "STATUS_QP_FAILED", "STATUS_QP_INFEASIBLE", "STATUS_NONFINITE"]
+           "STATUS_QP_FAILED", "STATUS_QP_INFEASIBLE", "STATUS_NONFINITE", "STATUS_NOT_PREPARED",
+           "STATUS_ALREADY_PREPARED"]
 
 STATUS_OK = 0
 STATUS_BAD_INPUT = 1        # non-finite xhat_0
 STATUS_QP_FAILED = 2        # the QP solver did not return a solution
 STATUS_QP_INFEASIBLE = 3    # the QP is infeasible
 STATUS_NONFINITE = 4        # a derivative function returned a non-finite value
+# Calling order (docs/algorithm.md section 4), with the codes of the C runtime's enum
+# dopus_status: feedback needs a prepared QP, and prepare a feedback since the last init or
+# successful prepare (never a double shift).
+STATUS_NOT_PREPARED = 7     # feedback without a successful prepare since the last step
+STATUS_ALREADY_PREPARED = 10  # prepare without a feedback since the last init or prepare
 
 # Round-off floor of the secant residual (docs/algorithm.md section 4 step 2): rho_k = 0
 # when num_k <= EPS_RHO * (|F_old| + |F_new|), i.e. when the linear model of the stage is
@@ -166,6 +172,7 @@ class ReferenceDopus:
         self.last_qp = None
         self.last_qp_solution = None
         self._initialised = False
+        self._qp_ready = self._prepare_due = self._shifted = False
 
     # ------------------------------------------------------------------ settings
     def set_M(self, M: int) -> None:
@@ -238,7 +245,7 @@ class ReferenceDopus:
         x, u, lam, mu_g, mu_b = g.x.copy(), g.u.copy(), g.lam.copy(), g.mu_g.copy(), g.mu_b.copy()
         mu_b[0, :nx] = 0.0
         slots = [_Slot(nx, nu, ng) for _ in range(N)]
-        gL, phi, _l, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
+        gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
         for k in range(N):
             s = slots[k]
             s.F_w = gL[k] + mu_b[k]
@@ -246,7 +253,7 @@ class ReferenceDopus:
             s.g = gv[k].copy()
             self._set_block(s, k, x, u, lam, mu_g)
         term = self._term_eval(x[N], g.mu_r, g.nu)
-        if not self._finite(gL, phi, gv, *[v for s in slots for v in (s.Ht, s.A_dyn, s.Phit, s.Ct)],
+        if not self._finite(gL, phi, lv, gv, *[v for s in slots for v in (s.Ht, s.A_dyn, s.Phit, s.Ct)],
                             *term.values()):
             raise DopusError("init: a derivative function returned a non-finite value at the guess",
                              STATUS_NONFINITE)
@@ -260,6 +267,9 @@ class ReferenceDopus:
         self.recomputed = list(range(N))
         self.status = STATUS_OK
         self._initialised = True
+        self._qp_ready = True        # init assembles the QP of the guess
+        self._prepare_due = False    # a feedback must come first
+        self._shifted = False
         self.timings = {"init": time.perf_counter() - t0}
 
     def _need_init(self):
@@ -315,8 +325,13 @@ class ReferenceDopus:
         if xhat0.size != self.nx or not np.all(np.isfinite(xhat0)):
             self.status = STATUS_BAD_INPUT
             raise DopusError(f"feedback: xhat0 must be {self.nx} finite numbers, got {xhat0}", STATUS_BAD_INPUT)
+        if not self._qp_ready:
+            self.status = STATUS_NOT_PREPARED
+            raise DopusError("feedback: no prepared QP (call prepare after each feedback)", STATUS_NOT_PREPARED)
         qp = self.qp_of_current(xhat0)
         self._xhat_last = xhat0.copy()
+        # the QP is attempted: a prepare (with its shift) is due, whatever the outcome
+        self._prepare_due, self._shifted = True, False
         t1 = time.perf_counter()
         try:
             sol = solve_qp_reference(qp, tol=self.qp_tol)
@@ -347,6 +362,7 @@ class ReferenceDopus:
         self.qp_iterations = int(sol.get("iterations", 0))
         self.last_qp = qp
         self.last_qp_solution = sol
+        self._qp_ready = False
         self.status = STATUS_OK
         t3 = time.perf_counter()
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
@@ -357,10 +373,16 @@ class ReferenceDopus:
         """Shift (receding), F and rho, fresh last stage and terminal, M worst H, fresh
         stage-cost Hessians (section 4)."""
         self._need_init()
+        if not self._prepare_due:
+            self.status = STATUS_ALREADY_PREPARED
+            raise DopusError("prepare: already prepared (call feedback before the next prepare)",
+                             STATUS_ALREADY_PREPARED)
         t0 = time.perf_counter()
         N, nx = self.N, self.nx
-        # step 1: shift (receding mode only)
-        if self.mode == "receding":
+        self._qp_ready = False
+        # step 1: shift (receding mode only; a retry after a failed prepare does not shift again)
+        if self.mode == "receding" and not self._shifted:
+            self._shifted = True
             x = self.x.copy(); u = self.u.copy(); lam = self.lam.copy()
             mu_g = self.mu_g.copy(); mu_b = self.mu_b.copy()
             x[:N] = self.x[1:]
@@ -377,8 +399,9 @@ class ReferenceDopus:
         # steps 2 and 3 on copies of the slots: a non-finite value leaves the state of step 1
         slots = [s.copy() for s in self.slots]
         rho = np.zeros(N)
-        gL, phi, _l, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
-        if not self._finite(gL, phi, gv):
+        gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
+        # every output of a function is checked, the stage cost l too (as the C runtime does)
+        if not self._finite(gL, phi, lv, gv):
             self.status = STATUS_NONFINITE
             raise DopusError("prepare: stage_grad returned a non-finite value", STATUS_NONFINITE)
         for k in range(N - 1):
@@ -444,6 +467,7 @@ class ReferenceDopus:
         self.term = term
         self.rho = rho
         self.recomputed = sorted(chosen + [N - 1])
+        self._qp_ready, self._prepare_due, self._shifted = True, False, False
         self.status = STATUS_OK
         self.timings.update({"prepare": time.perf_counter() - t0, "shift": t1 - t0,
                              "stage_grad_rho": t2 - t1, "stage_hess": t3 - t2, "cost_hessian": t4 - t3})

@@ -46,8 +46,10 @@ STATUS = {
     7: "not prepared",
     8: "no nominal guess",
     9: "regularisation failure",
+    10: "already prepared",
 }
 STATUS_OK, STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = 0, 1, 2, 5
+STATUS_NOT_PREPARED, STATUS_ALREADY_PREPARED = 7, 10
 
 #: QP status codes (enum dopus_qp_status of runtime_c/dopus_qp.h).
 QP_STATUS = {0: "solved", 1: "max iterations", 2: "primal infeasible", 3: "dual infeasible",

@@ -33,7 +33,13 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
  * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
  * stage-cost Hessian of the other stages (unicycle_set_cost_hessian), assemble the QP. Must
- * run between two feedback calls. */
+ * run between two feedback calls.
+ * Calling order: one prepare per feedback that reached the QP (solved or not; a feedback
+ * rejected for its input does not count). prepare right after a successful init or prepare
+ * returns UNICYCLE_ERR_ALREADY_PREPARED and changes nothing, in both modes (in receding mode
+ * it would shift twice, in fixed mode it would measure rho_k against gradients of the
+ * same point). After a failed prepare the next prepare is a retry: it does not shift
+ * again. */
 int unicycle_prepare(unicycle_solver *s);
 /* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
  * the initial state xhat0 (NULL: the last one given to init or feedback):

@@ -92,6 +92,8 @@ const char *unicycle_status_string(int status)
         return "the solver was generated without a nominal guess";
     case UNICYCLE_ERR_REGULARIZATION:
         return "the eigen-decomposition of a Hessian block did not converge";
+    case UNICYCLE_ERR_ALREADY_PREPARED:
+        return "already prepared (call feedback before the next prepare)";
     default:
         return "unknown status";
     }
@@ -103,6 +105,8 @@ void unicycle_defaults(unicycle_solver *s)
     s->magic = UNICYCLE_MAGIC;
     s->initialized = 0;
     s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
     s->status = UNICYCLE_OK;
     s->M = unicycle_default_M < 0 ? 0 : (unicycle_default_M > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : unicycle_default_M);
     s->mode = UNICYCLE_MODE_RECEDING;
@@ -446,6 +450,8 @@ int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, cons
     unicycle_assemble(s);
     s->initialized = 1;
     s->qp_ready = 1;
+    s->prepare_due = 0;
+    s->shifted = 0;
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
@@ -499,6 +505,9 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
+    /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
+    s->prepare_due = 1;
+    s->shifted = 0;
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
     qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
@@ -633,13 +642,18 @@ int unicycle_prepare(unicycle_solver *s)
     if (!s->initialized) {
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
     }
+    if (!s->prepare_due) {
+        /* a second prepare would shift the horizon twice */
+        return unicycle_ret(s, UNICYCLE_ERR_ALREADY_PREPARED);
+    }
     unicycle_clear_timings(s, UNICYCLE_PHASE_SHIFT, UNICYCLE_PHASE_ASSEMBLY);
     s->qp_ready = 0;
 
-    /* 1. shift */
+    /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     t0 = unicycle_timer_now(&s->timer);
-    if (s->mode == UNICYCLE_MODE_RECEDING) {
+    if (s->mode == UNICYCLE_MODE_RECEDING && !s->shifted) {
         unicycle_shift(s);
+        s->shifted = 1;
     }
     t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_SHIFT, t0);
     unicycle_copy(xN_saved, s->x[UNICYCLE_N], UNICYCLE_NX);
@@ -720,6 +734,8 @@ int unicycle_prepare(unicycle_solver *s)
     /* 6. QP vectors (the fresh A blocks were regularised when stored) */
     unicycle_assemble(s);
     s->qp_ready = 1;
+    s->prepare_due = 0;
+    s->shifted = 0;
     return unicycle_ret(s, UNICYCLE_OK);
 }
 

@@ -65,7 +65,13 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
  * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
  * stage-cost Hessian of the other stages (unicycle_set_cost_hessian), assemble the QP. Must
- * run between two feedback calls. */
+ * run between two feedback calls.
+ * Calling order: one prepare per feedback that reached the QP (solved or not; a feedback
+ * rejected for its input does not count). prepare right after a successful init or prepare
+ * returns UNICYCLE_ERR_ALREADY_PREPARED and changes nothing, in both modes (in receding mode
+ * it would shift twice, in fixed mode it would measure rho_k against gradients of the
+ * same point). After a failed prepare the next prepare is a retry: it does not shift
+ * again. */
 int unicycle_prepare(unicycle_solver *s);
 /* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
  * the initial state xhat0 (NULL: the last one given to init or feedback):
@@ -155,7 +161,10 @@ enum unicycle_status {
     UNICYCLE_ERR_NOT_PREPARED = 7,      /* feedback without a successful prepare since the last
                                         step (the QP would be stale) */
     UNICYCLE_ERR_NO_NOMINAL = 8,        /* unicycle_init_nominal without UNICYCLE_HAS_NOMINAL */
-    UNICYCLE_ERR_REGULARIZATION = 9     /* eigen-decomposition did not converge */
+    UNICYCLE_ERR_REGULARIZATION = 9,    /* eigen-decomposition did not converge */
+    UNICYCLE_ERR_ALREADY_PREPARED = 10  /* prepare without a feedback since the last successful
+                                        init or prepare (it would shift the horizon twice);
+                                        nothing changes */
 };
 
 enum unicycle_mode {
@@ -183,6 +192,8 @@ struct unicycle_solver {
     int magic;          /* UNICYCLE_MAGIC once the settings hold valid values */
     int initialized;    /* a successful init happened */
     int qp_ready;       /* QP assembled at the current iterate (prepare or init succeeded) */
+    int prepare_due;    /* a feedback reached the QP since the last successful init/prepare */
+    int shifted;        /* the shift of this sampling instant is done (a prepare failed after it) */
     int status;         /* status of the last call */
 
     /* settings */
