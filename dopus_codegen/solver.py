@@ -59,6 +59,7 @@ QP_STATUS = {0: "solved", 1: "max iterations", 2: "primal infeasible", 3: "dual 
 PHASES = ("feedback", "shift", "gradients", "rho", "hessians", "regularization", "assembly", "kkt")
 
 _MODES = {"receding": 0, "fixed": 1}
+_INT_MAX = 2**31 - 1
 _HESSIANS = {"exact": 0, "gauss-newton": 1, "gn": 1}
 _REGULARIZATIONS = {"none": 0, "project": 1, "mirror": 2}
 _COST_HESSIANS = {"stored": 0, "fresh": 1}
@@ -262,8 +263,8 @@ class CSolver:
     def _positive(v, what: str) -> float:
         try:
             f = float(v)
-        except (TypeError, ValueError):
-            raise DopusError(f"{what} must be a positive number, got {v!r}", STATUS_INVALID_ARGUMENT) from None
+        except (TypeError, ValueError, OverflowError):
+            raise DopusError(f"{what} must be a positive finite number, got {v!r}", STATUS_INVALID_ARGUMENT) from None
         if not np.isfinite(f) or f <= 0:
             raise DopusError(f"{what} must be positive and finite, got {v!r}", STATUS_INVALID_ARGUMENT)
         return f
@@ -277,12 +278,12 @@ class CSolver:
         self._check(self._c("set_M")(self._s, int(min(int(M), self.N - 1))), f"M={M!r}")
 
     def set_mode(self, mode: str) -> None:
-        if mode not in _MODES:
+        if not isinstance(mode, str) or mode not in _MODES:
             self._bad(f"mode must be 'receding' or 'fixed', got {mode!r}")
         self._check(self._c("set_mode")(self._s, _MODES[mode]), f"mode={mode!r}")
 
     def set_hessian(self, hessian: str) -> None:
-        if hessian not in _HESSIANS:
+        if not isinstance(hessian, str) or hessian not in _HESSIANS:
             self._bad(f"hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
         if _HESSIANS[hessian] == 1 and not self.has_gn:
             self._bad("hessian='gauss-newton' needs a least-squares stage cost (the OCP declares no "
@@ -290,7 +291,7 @@ class CSolver:
         self._check(self._c("set_hessian")(self._s, _HESSIANS[hessian]), f"hessian={hessian!r}")
 
     def set_regularization(self, regularization: str, reg_eps: Optional[float] = None) -> None:
-        if regularization not in _REGULARIZATIONS:
+        if not isinstance(regularization, str) or regularization not in _REGULARIZATIONS:
             self._bad(f"regularization must be 'none', 'project' or 'mirror', got {regularization!r}")
         eps = self.reg_eps if reg_eps is None else self._positive(reg_eps, "reg_eps")
         self._check(self._c("set_regularization")(self._s, _REGULARIZATIONS[regularization], eps),
@@ -299,7 +300,7 @@ class CSolver:
     def set_cost_hessian(self, cost_hessian: str) -> None:
         """``"fresh"``: the stage-cost Hessian of every stage is refreshed in every prepare;
         ``"stored"``: the paper's literal algorithm (docs/algorithm.md section 4 step 5)."""
-        if cost_hessian not in _COST_HESSIANS:
+        if not isinstance(cost_hessian, str) or cost_hessian not in _COST_HESSIANS:
             self._bad(f"cost_hessian must be 'fresh' or 'stored', got {cost_hessian!r}")
         self._check(self._c("set_cost_hessian")(self._s, _COST_HESSIANS[cost_hessian]),
                     f"cost_hessian={cost_hessian!r}")
@@ -309,8 +310,8 @@ class CSolver:
         (docs/algorithm.md section 3); finite and >= 0."""
         try:
             f = float(lm)
-        except (TypeError, ValueError):
-            self._bad(f"lm must be a number >= 0, got {lm!r}")
+        except (TypeError, ValueError, OverflowError):
+            self._bad(f"lm must be a finite number >= 0, got {lm!r}")
         if not np.isfinite(f) or f < 0:
             self._bad(f"lm must be finite and >= 0, got {lm!r}")
         self._check(self._c("set_levenberg_marquardt")(self._s, f), f"lm={lm!r}")
@@ -325,6 +326,8 @@ class CSolver:
     def set_qp_max_iter(self, max_iter: int) -> None:
         if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
             self._bad(f"qp_max_iter must be a positive integer, got {max_iter!r}")
+        if max_iter > _INT_MAX:
+            self._bad(f"qp_max_iter must be at most {_INT_MAX} (a C int), got {max_iter!r}")
         self._check(self._c("set_qp_max_iter")(self._s, int(max_iter)), "qp_max_iter")
 
     def set_parameters(self, p) -> None:
@@ -491,6 +494,8 @@ class CSolver:
     def set_clock(self, clock=None) -> None:
         """Replace the C clock by a Python callable returning seconds (None: the default).
         The callback is kept alive by the handle."""
+        if clock is not None and not callable(clock):
+            self._bad(f"set_clock: expected a callable returning seconds (or None), got {clock!r}")
         if clock is None:
             self._clock_cb = None
             self._c("set_clock")(self._s, self._ffi.NULL, self._ffi.NULL)
