@@ -203,7 +203,7 @@ def build_harness(hp_name: str, hp: dict, sizes: dict | None, cflags: str, alt_c
 
 # ---------------------------------------------------------------------------- QP files
 def write_qps(path: Path, qps: list) -> None:
-    """Binary layout of bench/qp_bench_qp.h; QPs in the dopus_codegen.qpref dict format."""
+    """Binary layout of bench/qp_bench_qp.h; QPs in the dopus_codegen.reference.qp dict format."""
     chunks = [struct.pack("<d", float(len(qps)))]
 
     def put(a):
@@ -257,10 +257,10 @@ def random_qp(N: int, rng: np.random.Generator) -> dict:
 
 def robot_arm_qps(gn_iters: int, exact_iters: int, log=print) -> list:
     """(tag, qp) along the two convergence runs of the robot arm, full RTI, fixed xhat_0."""
-    from dopus_codegen.derivatives import build_functions
-    from dopus_codegen.ocp import load_ocp
-    from dopus_codegen.offline import solve_ocp
-    from dopus_codegen.reference import ReferenceDopus
+    from dopus_codegen.problem.derivatives import build_functions
+    from dopus_codegen.problem.ocp import load_ocp
+    from dopus_codegen.reference.offline import solve_ocp
+    from dopus_codegen.reference.dopus import ReferenceDopus
 
     disc = build_functions(load_ocp(ROOT / "examples" / "robot_arm.py"))
     full = disc.N - 1
@@ -323,7 +323,7 @@ def primal_of(sol: dict) -> np.ndarray:
 
 def reference_primals(qps: list, log=print) -> list:
     """Primal solutions of the independent reference (IPOPT + active-set polish)."""
-    from dopus_codegen.qpref import solve_qp_reference
+    from dopus_codegen.reference.qp import solve_qp_reference
     out = []
     for q in qps:
         try:
@@ -632,7 +632,7 @@ NOTES = ("Times are medians over repetitions of the solve call alone (the data a
          "Repetitions are interleaved solver by solver in one process after warm-up. Every solver gets the same "
          "tolerance value; each measures it its own way (HPIPM: inf-norms of its residuals; ours: scaled KKT "
          "residuals), so the residuals and err_vs_reference (max |dw - dw_ref|, reference: IPOPT + active-set "
-         "polish of dopus_codegen.qpref) are recorded per QP. HPIPM status: 0 success, 1 max_iter, 2 min_step, "
+         "polish of dopus_codegen.reference.qp) are recorded per QP. HPIPM status: 0 success, 1 max_iter, 2 min_step, "
          "3 nan, 4 inconsistent equality. Ours: 0 solved, 1 max_iter, 2 primal infeasible, 3 dual infeasible, "
          "4 numerical, 5 invalid input.")
 

@@ -35,7 +35,7 @@ PHASES = ("feedback", "shift", "gradients", "rho", "hessians", "regularization",
 
 def run(solver, disc, guess, setting, iters, repeat):
     """Per-iteration phase times of the iterations whose feedback and prepare succeeded."""
-    from dopus_codegen.solver import DopusError
+    from dopus_codegen.runtime.solver import DopusError
 
     rows, failures, qp_iters = [], 0, []
     p0 = solver.p[0]
@@ -88,8 +88,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     from dopus_codegen import build_functions, load_ocp
-    from dopus_codegen.offline import solve_ocp
-    from dopus_codegen.solver import CSolver
+    from dopus_codegen.reference.offline import solve_ocp
+    from dopus_codegen.runtime.solver import CSolver
 
     disc = build_functions(load_ocp(ROOT / "examples" / "robot_arm.py"))
     guess, _info = solve_ocp(disc, disc.x0)

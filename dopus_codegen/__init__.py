@@ -3,10 +3,11 @@ __version__ = "0.1.0"
 
 # The public names are imported lazily so that `dopus-gen --help` does not load CasADi.
 _EXPORTS = {
-    "Ocp": "ocp", "OcpError": "ocp", "Integrator": "ocp", "RK4": "ocp", "Event": "ocp",
-    "Guess": "ocp", "ScenarioSpec": "ocp", "load_ocp": "ocp",
-    "Discretized": "derivatives", "build_functions": "derivatives",
-    "solve_ocp": "offline",
+    "Ocp": "problem.ocp", "OcpError": "problem.ocp", "Integrator": "problem.ocp",
+    "RK4": "problem.ocp", "Event": "problem.ocp", "Guess": "problem.ocp",
+    "ScenarioSpec": "problem.ocp", "load_ocp": "problem.ocp",
+    "Discretized": "problem.derivatives", "build_functions": "problem.derivatives",
+    "solve_ocp": "reference.offline",
 }
 
 __all__ = ["__version__", *_EXPORTS]

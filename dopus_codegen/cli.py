@@ -55,7 +55,7 @@ def _int_list_or_full(value: str) -> list:
 def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, cost_hessian, lm, backend, json_out,
              plot_out):
     """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M."""
-    from .converge import run_converge_cli
+    from .studies.converge import run_converge_cli
 
     run_converge_cli(ocp_file=ocp_file, m_list=_int_list_or_full(m_list), iters=iters, start=start,
                      hessian=hessian, regularization=regularization, reg_eps=reg_eps, backend=backend,
@@ -92,9 +92,9 @@ def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularizat
     One DOPUS iteration per sampling instant, started from the offline solution at the
     scenario's initial state; the scenario's events disturb the plant.
     """
-    from .ocp import OcpError
-    from .plant import PlantError
-    from .sil import SilError, run_sil_cli
+    from .problem.ocp import OcpError
+    from .studies.plant import PlantError
+    from .studies.sil import SilError, run_sil_cli
 
     try:
         run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
@@ -119,8 +119,8 @@ def generate(ocp_file, out_dir, offline_guess):
     a Makefile (`make` builds lib<name>.a, lib<name>.so and main_<name>), a CMake
     fragment and the cffi declarations. Generating twice gives identical bytes.
     """
-    from .codegen import CodegenError, generate_file
-    from .ocp import OcpError
+    from .codegen.generate import CodegenError, generate_file
+    from .problem.ocp import OcpError
 
     try:
         path = generate_file(ocp_file, out_dir, offline_guess=offline_guess)
@@ -141,7 +141,7 @@ def build(folder, cc, opt, force):
     with -std=c99 -Wall. Nothing is recompiled if sources, compiler and flags are unchanged.
     Without Python, `make -C FOLDER` builds the same libraries and main_<name> into FOLDER/build.
     """
-    from .build import BuildError, build as build_folder
+    from .codegen.build import BuildError, build as build_folder
 
     try:
         res = build_folder(folder, cc=cc, opt=opt, force=force)

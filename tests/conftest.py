@@ -33,13 +33,13 @@ def second_disc():
 
 @pytest.fixture(scope="session")
 def robot_solution(robot_disc):
-    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference.offline import solve_ocp
 
     return solve_ocp(robot_disc, robot_disc.x0)
 
 
 @pytest.fixture(scope="session")
 def second_solution(second_disc):
-    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference.offline import solve_ocp
 
     return solve_ocp(second_disc, second_disc.x0)

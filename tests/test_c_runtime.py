@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from dopus_codegen import Ocp, RK4, build_functions
-from dopus_codegen.converge import make_start
-from dopus_codegen.kkt import kkt_measure
-from dopus_codegen.paths import runtime_c_dir
-from dopus_codegen.reference import ReferenceDopus
-from dopus_codegen.solver import CSolver, DopusError
+from dopus_codegen.studies.converge import make_start
+from dopus_codegen.reference.kkt import kkt_measure
+from dopus_codegen.codegen.paths import runtime_c_dir
+from dopus_codegen.reference.dopus import ReferenceDopus
+from dopus_codegen.runtime.solver import CSolver, DopusError
 
 STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_NONFINITE_VALUE = 1, 2, 3
 STATUS_INVALID, STATUS_NOT_INITIALIZED, STATUS_NOT_PREPARED = 5, 6, 7
@@ -325,7 +325,7 @@ def test_sizeof_and_dims(robot_c, robot_disc):
 def test_init_nominal_is_the_offline_solution(robot_disc, robot_solution, robot_c, tmp_path):
     """A folder generated with the offline guess starts at the IPOPT solution (carried as
     static data); a folder without it says so."""
-    from dopus_codegen.codegen import generate
+    from dopus_codegen.codegen.generate import generate
 
     with pytest.raises(DopusError, match="without a nominal guess") as ei:
         robot_c.init_nominal(robot_disc.x0)

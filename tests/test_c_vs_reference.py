@@ -24,10 +24,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dopus_codegen.converge import make_start
-from dopus_codegen.qpref import qp_kkt_residual
-from dopus_codegen.reference import ReferenceDopus
-from dopus_codegen.solver import CSolver, DopusError
+from dopus_codegen.studies.converge import make_start
+from dopus_codegen.reference.qp import qp_kkt_residual
+from dopus_codegen.reference.dopus import ReferenceDopus
+from dopus_codegen.runtime.solver import CSolver, DopusError
 
 REL_TOL = 1e-9
 QP_TOL = 1e-14

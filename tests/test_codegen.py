@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from dopus_codegen.build import BuildError, build
+from dopus_codegen.codegen.build import BuildError, build
 from dopus_codegen.cli import main as cli_main
-from dopus_codegen.codegen import CodegenError, generate, rename_placeholder
+from dopus_codegen.codegen.generate import CodegenError, generate, rename_placeholder
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
@@ -292,7 +292,7 @@ def _parse_run(stdout: str, nu: int) -> dict:
 
 
 def _reference_run(disc, nominal, mode: str, iterations: int):
-    from dopus_codegen.reference import ReferenceDopus
+    from dopus_codegen.reference.dopus import ReferenceDopus
 
     o = disc.options
     ref = ReferenceDopus(disc, M=o["M"], mode=mode, hessian=o["hessian"], regularization=o["regularization"],
@@ -318,7 +318,7 @@ def test_make_builds_and_main_matches_reference(name, generated, request):
     proc = subprocess.run([str(folder / "build" / f"main_{name}")], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, f"main_{name} failed:\n{proc.stdout}\n{proc.stderr}"
     runs = _parse_run(proc.stdout, disc.nu)
-    # the cffi declarations cut from the public header load the library dopus_codegen.build made,
+    # the cffi declarations cut from the public header load the library dopus_codegen.codegen.build made,
     # and it has the same struct layout as the program make built
     import cffi
 
@@ -358,7 +358,7 @@ def test_cmake_fragment_builds_main(generated, tmp_path):
     (tmp_path / "CMakeLists.txt").write_text(
         "cmake_minimum_required(VERSION 3.13)\nproject(fragment C)\n"
         f'include("{folder}/{name}.cmake")\n'
-        f'add_executable(main_{name} "{folder}/main_{name}.c")\n'
+        f'add_executable(main_{name} "{folder}/{name}_main.c")\n'
         f"target_link_libraries(main_{name} PRIVATE {name})\n")
     for cmd in (["cmake", "-S", ".", "-B", "b", "-DCMAKE_BUILD_TYPE=Release"], ["cmake", "--build", "b", "-j2"]):
         proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True)
@@ -490,7 +490,7 @@ def test_two_problems_link_into_one_program(generated, built, tmp_path):
         assert len(rows) == 11 and all(st == 0 for st, _, _ in rows)
         nominal = None
         if _wants_nominal(disc):
-            from dopus_codegen.offline import solve_ocp
+            from dopus_codegen.reference.offline import solve_ocp
             nominal = solve_ocp(disc, disc.x0)[0]
         ref_rows = _reference_run(disc, nominal, "fixed", 10)
         for k, ((_, u_c, kkt_c), (u_r, kkt_r)) in enumerate(zip(rows, ref_rows)):

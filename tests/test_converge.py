@@ -16,8 +16,8 @@ import pytest
 from click.testing import CliRunner
 
 from dopus_codegen.cli import main
-from dopus_codegen.converge import StartPoint, format_table, iterations_to, run_study
-from dopus_codegen.kkt import kkt_of_guess
+from dopus_codegen.studies.converge import StartPoint, format_table, iterations_to, run_study
+from dopus_codegen.reference.kkt import kkt_of_guess
 
 ROBOT_ARM_FILE = Path(__file__).resolve().parent.parent / "examples" / "robot_arm.py"
 
@@ -41,7 +41,7 @@ def warm_study_fresh(robot_disc, robot_solution):
 
 @pytest.fixture(scope="module")
 def disturbed_ipopt(robot_disc, robot_solution):
-    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference.offline import solve_ocp
 
     d = robot_disc
     sol, info = solve_ocp(d, d.disturbance(d.x0), guess=robot_solution[0])
@@ -103,7 +103,7 @@ def test_levenberg_marquardt_keeps_the_solution(robot_disc, robot_solution, dist
     linear rate (against quadratic without the term): the weakest reduced curvature of the
     robot arm is about 2e-5, so that direction contracts by about lm / (2e-5 + lm) = 0.83 per
     iteration, and 200 iterations are needed for a 1e-6 comparison."""
-    from dopus_codegen.solver import CSolver
+    from dopus_codegen.runtime.solver import CSolver
 
     d = robot_disc
     sol0, _ = robot_solution
@@ -193,7 +193,7 @@ def test_cold_start_study_no_ls_problem_matches_ipopt(tmp_path):
     import casadi as ca
 
     from dopus_codegen import Ocp, build_functions
-    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference.offline import solve_ocp
 
     ocp = Ocp("small")
     x = ocp.state("x", 2)
@@ -217,12 +217,12 @@ def test_cold_start_study_no_ls_problem_matches_ipopt(tmp_path):
 def test_c_backend_factory_error_is_clear(monkeypatch):
     import builtins
 
-    from dopus_codegen.converge import backend_factory
+    from dopus_codegen.studies.converge import backend_factory
 
     real_import = builtins.__import__
 
     def fake_import(name, globals=None, locals=None, fromlist=(), level=0):
-        if name == "solver" and level == 1 or name == "dopus_codegen.solver":
+        if name == "runtime.solver" and level == 2 or name == "dopus_codegen.runtime.solver":
             raise ImportError("no module named solver")
         return real_import(name, globals, locals, fromlist, level)
 

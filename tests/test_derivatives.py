@@ -133,7 +133,7 @@ def test_stage_cost_hessian_with_extra_cost():
     import casadi as ca
 
     from dopus_codegen import Ocp
-    from dopus_codegen.ocp import OcpError
+    from dopus_codegen.problem.ocp import OcpError
 
     ocp = Ocp("extra_cost")
     x = ocp.state("x", 2)

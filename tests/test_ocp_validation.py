@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dopus_codegen import RK4, Event, Ocp, OcpError, build_functions, load_ocp
-from dopus_codegen.ocp import Integrator
+from dopus_codegen.problem.ocp import Integrator
 
 
 def make(skip=(), **over):

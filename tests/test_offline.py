@@ -4,8 +4,8 @@ sign convention of the returned multipliers checked through the KKT measure
 import numpy as np
 import pytest
 
-from dopus_codegen.kkt import kkt_of_guess
-from dopus_codegen.offline import solve_ocp
+from dopus_codegen.reference.kkt import kkt_of_guess
+from dopus_codegen.reference.offline import solve_ocp
 
 
 def test_robot_arm_objective_and_progress(robot_disc, robot_solution):

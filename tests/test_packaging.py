@@ -9,6 +9,7 @@ repository's own.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -22,10 +23,18 @@ ROOT = Path(__file__).resolve().parent.parent
 def installed(tmp_path_factory):
     target = tmp_path_factory.mktemp("site")
     build = tmp_path_factory.mktemp("build")
-    # Build from a copy so the repository's build/ and egg-info stay untouched.
+    # Build from a copy of the tracked files, as a fresh clone would: setuptools builds in the
+    # source tree, so building the checkout itself would leave build/ and egg-info there, and
+    # a stale build/lib from an earlier layout would be installed too.
+    tracked = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
+    src = build / "src"
+    for rel in filter(None, tracked.decode().split("\0")):
+        if (ROOT / rel).is_file():
+            (src / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / rel, src / rel)
     proc = subprocess.run(
         [sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "--no-compile",
-         "-q", "--target", str(target), str(ROOT)],
+         "-q", "--target", str(target), str(src)],
         capture_output=True, text=True, env={**os.environ, "PIP_NO_WARN_SCRIPT_LOCATION": "1"},
         cwd=str(build),
     )
@@ -43,7 +52,7 @@ def _run_installed(target: Path, code: str, cwd: Path) -> str:
 def test_installed_package_finds_its_data(installed, tmp_path):
     out = _run_installed(
         installed,
-        "import dopus_codegen, dopus_codegen.paths as p;"
+        "import dopus_codegen, dopus_codegen.codegen.paths as p;"
         "print(dopus_codegen.__file__); print(p.templates_dir()); print(p.runtime_c_dir())",
         tmp_path,
     )

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from dopus_codegen.plant import Plant, PlantError
+from dopus_codegen.studies.plant import Plant, PlantError
 
 M1 = M2 = 1.0
 L1 = 0.4

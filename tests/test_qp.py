@@ -1,7 +1,7 @@
 """The C QP solver (runtime_c/dopus_qp.c), compiled inside the tests through
-dopus_codegen.qp_harness and checked against independent references:
+harness.qp_harness and checked against independent references:
 
-* every random QP is built around a known primal-dual point (tests/qp_problems.py) and is
+* every random QP is built around a known primal-dual point (tests/harness/qp_problems.py) and is
   also solved by Clarabel;
 * problems with LICQ and strict complementarity (the generator's default; the KKT matrix
   of the active set is checked to be well conditioned) compare the primal AND every
@@ -27,9 +27,9 @@ import subprocess
 import numpy as np
 import pytest
 
-from dopus_codegen.qp_harness import QPHarnessError, build_qp_solver
+from harness.qp_harness import QPHarnessError, build_qp_solver
 
-import qp_problems as P
+from harness import qp_problems as P
 
 TOL_QP = 1e-13       # solver tolerance for the accuracy comparisons
 TOL_QP_ROBOT = 1e-12
@@ -348,7 +348,7 @@ def robot_qps(robot_disc, robot_solution):
     """QPs of the robot arm (N=40, nx=5, nu=3, ne=2 terminal equality rows, no rescaling):
     cold start with Gauss-Newton (full RTI), warm start with the exact Hessian (indefinite
     blocks) for the full RTI and for DOPUS with M = 1 (stale blocks), a few iterations each."""
-    from dopus_codegen.reference import ReferenceDopus
+    from dopus_codegen.reference.dopus import ReferenceDopus
 
     d = robot_disc
     sol0, _ = robot_solution
@@ -371,7 +371,7 @@ def test_robot_arm_qps_against_reference_solver(robot_qps):
     an independent method that takes the indefinite blocks as they are), to 1e-6 on the
     primal and every multiplier. Solver tolerance 1e-12: the exact-Hessian QPs near the
     solution have a reduced Hessian down to ~2e-5, so 1e-10 leaves errors up to ~4e-5."""
-    from dopus_codegen.qpref import solve_qp_reference
+    from dopus_codegen.reference.qp import solve_qp_reference
 
     qp0 = robot_qps[0][1]
     sizes = tuple(int(qp0[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne"))
@@ -407,7 +407,7 @@ def test_levenberg_marquardt_shift(robot_qps):
     """hess_shift = delta solves the QP with H_k + delta I and HN + delta I: against the
     reference solver on the explicitly shifted data (to 1e-6, primal and multipliers) and
     against the C solver on the shifted data (to 1e-9); a bad shift is bad input."""
-    from dopus_codegen.qpref import solve_qp_reference
+    from dopus_codegen.reference.qp import solve_qp_reference
 
     delta = 1e-4
     h = solver(_sizes(robot_qps[0][1]))
@@ -477,7 +477,7 @@ def test_robot_arm_qps_made_infeasible_are_flagged(robot_qps):
 def test_robot_arm_sqp_warm_start(robot_qps):
     """Warm start as an SQP method would use it: zero primal step, the multipliers of the
     previous QP of the same run. Every QP is solved and agrees with the reference solver."""
-    from dopus_codegen.qpref import solve_qp_reference
+    from dopus_codegen.reference.qp import solve_qp_reference
 
     qp0 = robot_qps[0][1]
     h = solver(tuple(int(qp0[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne")))
@@ -504,7 +504,7 @@ def test_linalg_kernels_match_numpy(tmp_path):
     leading dimensions larger than the matrices."""
     import cffi
 
-    from dopus_codegen.paths import runtime_c_dir
+    from dopus_codegen.codegen.paths import runtime_c_dir
 
     rc = runtime_c_dir()
     lib_path = tmp_path / "liblinalg.so"
@@ -612,7 +612,7 @@ def test_linalg_kernels_match_numpy(tmp_path):
 
 # --------------------------------------------------------------------------- stored closed-loop QPs
 # QPs of robot-arm closed loops (examples/robot_arm.py, software in the loop on the reference
-# DOPUS, exact Hessian; QP dict format of dopus_codegen.qpref, saved with numpy.savez_compressed,
+# DOPUS, exact Hessian; QP dict format of dopus_codegen.reference.qp, saved with numpy.savez_compressed,
 # about 26 kB each). Their stage blocks are indefinite and the Hessian on the null space of
 # the equalities has negative curvature (about -1e-3) that only the active control bounds
 # remove; the reduced Hessian of the solution is about 2e-5 against blocks of norm ~50.
@@ -651,7 +651,7 @@ def _sizes(qp):
 
 @pytest.mark.parametrize("name", STORED_SAME_MINIMISER)
 def test_stored_closed_loop_qps_against_reference(name):
-    from dopus_codegen.qpref import solve_qp_reference
+    from dopus_codegen.reference.qp import solve_qp_reference
 
     qp = _stored_qp(name)
     ref = solve_qp_reference(qp)
@@ -670,7 +670,7 @@ def test_stored_closed_loop_qps_against_reference(name):
 
 @pytest.mark.parametrize("name", STORED_OTHER_MINIMISER)
 def test_stored_closed_loop_qps_reach_a_local_minimiser(name):
-    from dopus_codegen.qpref import qp_kkt_residual, qp_reduced_hessian_min_eig
+    from dopus_codegen.reference.qp import qp_kkt_residual, qp_reduced_hessian_min_eig
 
     qp = _stored_qp(name)
     h = solver(_sizes(qp))
@@ -695,7 +695,7 @@ def test_stored_closed_loop_qp_still_failing(name):
 def test_stored_failing_qps_with_levenberg_marquardt(name):
     """The two QPs above with the closed loop's Levenberg-Marquardt term (hess_shift 1e-4):
     solved without an inertia correction, equal to the reference solver on the shifted data."""
-    from dopus_codegen.qpref import solve_qp_reference
+    from dopus_codegen.reference.qp import solve_qp_reference
 
     qp = _stored_qp(name)
     sol, info = solver(_sizes(qp)).solve(qp, tol=TOL_QP_ROBOT, hess_shift=1e-4)
@@ -711,7 +711,7 @@ def test_stage0_row_fixed_by_x0_is_ignored():
     multiplier is not unique (lam_0 absorbs any value), so the solver ignores the row
     (as the x_0 box) instead of stalling with a drifting multiplier; the answer must be a
     KKT point of the QP as stated and agree with the reference primal."""
-    from dopus_codegen.qpref import qp_kkt_residual, solve_qp_reference
+    from dopus_codegen.reference.qp import qp_kkt_residual, solve_qp_reference
 
     qp = _stored_qp("unicycle_qp_M5_gauss_newton_receding_it10")
     assert not np.any(qp["C"][0][:, qp["nx"]:]) and qp["lg"][0, 0] > 0.0  # the situation

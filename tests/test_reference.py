@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dopus_codegen.kkt import eval_stages, kkt_of_guess
-from dopus_codegen.qpref import (QPInfeasibleError, check_qp, qp_kkt_residual, qp_reduced_hessian_min_eig,
+from dopus_codegen.reference.kkt import eval_stages, kkt_of_guess
+from dopus_codegen.reference.qp import (QPInfeasibleError, check_qp, qp_kkt_residual, qp_reduced_hessian_min_eig,
                                  solve_qp_reference)
-from dopus_codegen.reference import DopusError, ReferenceDopus, regularize
+from dopus_codegen.reference.dopus import DopusError, ReferenceDopus, regularize
 
 
 # --------------------------------------------------------------------------- QP helpers
@@ -41,7 +41,7 @@ def clarabel_solve(qp):
     import clarabel
     import scipy.sparse as sp
 
-    from dopus_codegen.qpref import _flatten
+    from dopus_codegen.reference.qp import _flatten
 
     q = check_qp(qp)
     Hz, gz, rows = _flatten(q)
@@ -76,7 +76,7 @@ def clarabel_solve(qp):
 # --------------------------------------------------------------------------- QP tests
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_qp_reference_matches_clarabel_on_convex_qps(seed):
-    from dopus_codegen.qpref import _flatten_sol
+    from dopus_codegen.reference.qp import _flatten_sol
 
     qp = random_qp(seed)
     sol = solve_qp_reference(qp)
@@ -398,7 +398,7 @@ def test_rho_is_zero_when_the_secant_residual_is_round_off(robot_disc, robot_sol
     the true residual of eq. 16 is O(|domega|^2), below the round-off of F: rho_k is 0
     (docs/algorithm.md section 4 step 2), not noise / |domega| that ranks the stages
     differently in every backend."""
-    from dopus_codegen.reference import EPS_RHO
+    from dopus_codegen.reference.dopus import EPS_RHO
 
     d = robot_disc
     sol, _ = robot_solution
@@ -519,7 +519,7 @@ def test_receding_horizon_tracks_from_ipopt_solution(robot_disc, robot_solution,
     """16 closed-loop steps on the nominal model from the IPOPT solution: u0 against IPOPT's
     optimal u0 for the current state; the KKT measure after each feedback stays bounded
     (the shift perturbs the problem by ~0.4 in KKT every step, DOPUS contracts it)."""
-    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference.offline import solve_ocp
 
     d = robot_disc
     sol, _ = robot_solution
@@ -640,7 +640,7 @@ def test_reference_rejects_bad_input(robot_disc):
 
 def test_parameters_reach_every_function(second_disc, second_solution):
     """set_parameters: the full RTI converges to IPOPT's solution for the new target."""
-    from dopus_codegen.offline import solve_ocp
+    from dopus_codegen.reference.offline import solve_ocp
 
     d = second_disc
     sol, _ = second_solution

@@ -16,10 +16,10 @@ from click.testing import CliRunner
 from scipy.integrate import solve_ivp
 
 from dopus_codegen.cli import main as cli_main
-from dopus_codegen.derivatives import build_functions
-from dopus_codegen.offline import solve_ocp
-from dopus_codegen.ocp import Event
-from dopus_codegen.sil import run_closed_loop, summarize
+from dopus_codegen.problem.derivatives import build_functions
+from dopus_codegen.reference.offline import solve_ocp
+from dopus_codegen.problem.ocp import Event
+from dopus_codegen.studies.sil import run_closed_loop, summarize
 from test_plant import arm_rhs_numpy
 
 DEFAULT_LM = 1e-4  # examples/robot_arm.py: options(lm=1e-4)
@@ -115,7 +115,7 @@ def _backend_params():
 
 def _c_available():
     try:
-        from dopus_codegen.solver import CSolver  # noqa: F401
+        from dopus_codegen.runtime.solver import CSolver  # noqa: F401
     except ImportError:
         return False
     return True

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import casadi as ca
 
-from .ocp import Guess
+from ..problem.ocp import Guess
 
 __all__ = ["solve_ocp", "nlp_layout"]
 

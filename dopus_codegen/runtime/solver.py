@@ -30,7 +30,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from .reference import DopusError as _ReferenceDopusError
+from ..reference.dopus import DopusError as _ReferenceDopusError
 
 __all__ = ["CSolver", "DopusError", "STATUS", "QP_STATUS", "PHASES", "load_library", "build_for"]
 
@@ -89,8 +89,8 @@ def cache_root() -> Path:
 def build_for(disc, cache_dir=None) -> Path:
     """Generate the C folder of ``disc`` into the cache (keyed by the hash of the generated
     sources) and build it; return the folder. Cheap when nothing changed."""
-    from .build import build
-    from .codegen import render_folder, write_folder
+    from ..codegen.build import build
+    from ..codegen.generate import render_folder, write_folder
 
     key = id(disc)
     with _LOCK:
@@ -124,8 +124,8 @@ def load_library(folder) -> tuple:
     """``(ffi, lib, meta)`` of a built folder (built first if needed); cached per library."""
     import cffi
 
-    from .build import build
-    from .codegen import read_meta
+    from ..codegen.build import build
+    from ..codegen.generate import read_meta
 
     folder = Path(folder)
     res = build(folder)
@@ -486,7 +486,7 @@ class CSolver:
 
     def guess(self):
         """The current iterate as a ``Guess``."""
-        from .ocp import Guess
+        from ..problem.ocp import Guess
 
         return Guess(x=self.x, u=self.u, lam=self.lam, mu_g=self.mu_g, mu_b=self.mu_b,
                      mu_bN=self.mu_bN, mu_r=self.mu_r, nu=self.nu)

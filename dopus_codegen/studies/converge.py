@@ -76,7 +76,7 @@ def make_start(disc, start: str, solve_ocp: Optional[Callable] = None) -> StartP
             raise ValueError(f"{disc.name}: the disturbance map must return {disc.nx} finite numbers, "
                              f"got {xf}")
         if solve_ocp is None:
-            from .offline import solve_ocp
+            from ..reference.offline import solve_ocp
         guess, info = solve_ocp(disc, x0)
         if not info.get("success", False):
             raise ValueError(f"{disc.name}: IPOPT did not solve the OCP at the initial state "
@@ -88,11 +88,11 @@ def make_start(disc, start: str, solve_ocp: Optional[Callable] = None) -> StartP
 def backend_factory(backend: str) -> Callable:
     """The class implementing the backend protocol (docs/algorithm.md section 7)."""
     if backend == "reference":
-        from .reference import ReferenceDopus
+        from ..reference.dopus import ReferenceDopus
         return ReferenceDopus
     if backend == "c":
         try:
-            from .solver import CSolver
+            from ..runtime.solver import CSolver
         except ImportError as exc:
             raise RuntimeError(f"backend 'c' is not available: dopus_codegen.solver.CSolver cannot be "
                                f"imported ({exc})") from None
@@ -112,7 +112,7 @@ def _resolve_M(m, N: int) -> int:
 
 def objective(disc, x, u, p=None) -> float:
     """``sum_k l_k + E`` at the primal point (exact functions)."""
-    from .kkt import eval_stages, node_parameters
+    from ..reference.kkt import eval_stages, node_parameters
 
     P = node_parameters(disc, p)
     N = disc.N
@@ -140,7 +140,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     cost_hessian=)`` builds a backend (default: :class:`~dopus_codegen.reference.ReferenceDopus`).
     ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
     """
-    from .reference import DopusError, ReferenceDopus
+    from ..reference.dopus import DopusError, ReferenceDopus
 
     if isinstance(start, str):
         start = make_start(disc, start)
@@ -277,8 +277,8 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, re
     """The body of ``dopus-gen converge`` (errors become click exceptions)."""
     import click
 
-    from .derivatives import build_functions
-    from .ocp import OcpError, load_ocp
+    from ..problem.derivatives import build_functions
+    from ..problem.ocp import OcpError, load_ocp
 
     try:
         factory = backend_factory(backend)

@@ -2,7 +2,7 @@
 
 Implements docs/algorithm.md sections 3 to 7 literally, with numpy, the per-stage CasADi
 functions of a ``Discretized`` and the reference QP solver of
-:mod:`dopus_codegen.qpref`. The C runtime is compared against it iterate by iterate, so
+:mod:`dopus_codegen.reference.qp`. The C runtime is compared against it iterate by iterate, so
 the order of operations follows the contract:
 
 - the ring buffer: stage ``k`` lives in slot ``(ring_head + k) mod N``; a slot holds the
@@ -31,7 +31,7 @@ import time
 import numpy as np
 
 from .kkt import eval_stages, kkt_measure, node_parameters
-from .qpref import QPError, QPInfeasibleError, solve_qp_reference
+from .qp import QPError, QPInfeasibleError, solve_qp_reference
 
 __all__ = ["DopusError", "ReferenceDopus", "regularize", "STATUS_OK", "STATUS_BAD_INPUT",
            "STATUS_QP_FAILED", "STATUS_QP_INFEASIBLE", "STATUS_NONFINITE", "STATUS_NOT_PREPARED",
@@ -114,7 +114,7 @@ class ReferenceDopus:
     """The DOPUS iteration in numpy (backend protocol, docs/algorithm.md section 7).
 
     Extra to the protocol: :meth:`qp_of_current` (the QP the next ``feedback`` solves,
-    in the :mod:`dopus_codegen.qpref` format), ``last_qp`` / ``last_qp_solution`` (the
+    in the :mod:`dopus_codegen.reference.qp` format), ``last_qp`` / ``last_qp_solution`` (the
     QP solved by the last ``feedback`` and its solution) and ``status``.
     """
 
@@ -279,7 +279,7 @@ class ReferenceDopus:
     # ------------------------------------------------------------------ the QP
     def qp_of_current(self, xhat0=None) -> dict:
         """The QP of section 3 at the current iterate for initial state ``xhat0`` (default:
-        the last one given to ``init``/``feedback``), in the :mod:`dopus_codegen.qpref`
+        the last one given to ``init``/``feedback``), in the :mod:`dopus_codegen.reference.qp`
         format. Meaningful after ``init`` or ``prepare`` (it is the QP the next ``feedback``
         solves)."""
         self._need_init()
@@ -481,7 +481,7 @@ class ReferenceDopus:
 
     def guess(self):
         """The current iterate as a ``Guess``."""
-        from .ocp import Guess
+        from ..problem.ocp import Guess
 
         return Guess(x=self.x.copy(), u=self.u.copy(), lam=self.lam.copy(), mu_g=self.mu_g.copy(),
                      mu_b=self.mu_b.copy(), mu_bN=self.mu_bN.copy(), mu_r=self.mu_r.copy(), nu=self.nu.copy())

@@ -4,11 +4,12 @@ The folder holds (names after renaming ``dopus_`` -> ``<name>_``):
 
 - ``<name>_casadi.c/.h``: every per-stage CasADi function of docs/algorithm.md section 2,
   emitted by one ``casadi.CodeGenerator`` with explicit options;
-- ``<name>_sizes.h``, ``<name>_problem.c``, ``<name>_funcs.c``: sizes, problem data and the
-  wrappers of ``runtime_c/dopus_funcs.h``, rendered from ``templates/*.j2``;
-- the hand-written ``runtime_c/*.c|*.h``, copied with the prefix renamed;
-- ``main_<name>.c``, ``Makefile``, ``<name>.cmake``, ``<name>_cdef.h`` (cffi declarations,
-  cut out of the renamed public header) and ``<name>_meta.json``.
+- ``<name>_sizes.h``, ``<name>_problem.c``: sizes and problem data, rendered from
+  ``templates/*.j2``;
+- the hand-written ``runtime_c/*.c|*.h``, copied with the prefix renamed (among them the
+  wrappers ``<name>_funcs.c`` of the CasADi functions and the standalone ``<name>_main.c``);
+- ``Makefile``, ``<name>.cmake``, ``<name>_cdef.h`` (cffi declarations, cut out of the
+  renamed public header) and ``<name>_meta.json``.
 
 Generation is deterministic: everything is rendered in memory first (fixed order, floats
 at round-trip precision, no timestamps), so generating twice gives identical bytes.
@@ -27,7 +28,7 @@ import casadi as ca
 import jinja2
 import numpy as np
 
-from . import __version__
+from .. import __version__
 from .paths import runtime_c_dir, templates_dir
 
 PLACEHOLDER = "dopus"
@@ -389,7 +390,7 @@ def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
     has_gn = "stage_hess_gn" in functions
     if has_gn != ("stage_hess_cost_gn" in functions):
         raise CodegenError("stage_hess_gn and stage_hess_cost_gn must both be present or both absent")
-    main_file = f"main_{name}.c"
+    main_file = f"{name}_main.c"
     ctx: Dict[str, Any] = {
         "name": name, "NAME": NAME, "header": header, "casadi_version": ca.__version__,
         "has_gn": int(has_gn), "sizes": s, "work": work_sizes(functions), "main_file": main_file,
@@ -402,8 +403,6 @@ def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
     rendered = {
         f"{name}_sizes.h": "sizes.h.j2",
         f"{name}_problem.c": "problem.c.j2",
-        f"{name}_funcs.c": "funcs.c.j2",
-        main_file: "main.c.j2",
     }
     for fname, tname in rendered.items():
         files[fname] = env.get_template(tname).render(**ctx)
@@ -506,7 +505,7 @@ def generate(disc: Any, out_dir, *, offline_guess: Optional[bool] = None) -> Pat
         if offline_guess is None else bool(offline_guess)
     nominal = None
     if want_nominal:
-        from .offline import solve_ocp
+        from ..reference.offline import solve_ocp
 
         nominal, info = solve_ocp(disc, np.asarray(_attr(disc, "x0"), dtype=float))
         _check_offline(info)
@@ -525,8 +524,8 @@ def _check_offline(info: Any) -> None:
 
 def generate_file(ocp_file, out_dir=None, *, offline_guess: Optional[bool] = None) -> Path:
     """``dopus-gen generate``: load the OCP file, discretise, generate (default generated/<name>)."""
-    from .derivatives import build_functions
-    from .ocp import load_ocp
+    from ..problem.derivatives import build_functions
+    from ..problem.ocp import load_ocp
 
     ocp = load_ocp(ocp_file)
     disc = build_functions(ocp)

@@ -59,10 +59,10 @@ def make_backend(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
     kwargs = dict(M=M, mode="receding", hessian=hessian, regularization=regularization, reg_eps=reg_eps,
                   cost_hessian=cost_hessian, lm=lm)
     if backend == "reference":
-        from .reference import ReferenceDopus
+        from ..reference.dopus import ReferenceDopus
         return ReferenceDopus(disc, **kwargs)
     if backend == "c":
-        from .solver import CSolver
+        from ..runtime.solver import CSolver
         return CSolver(disc, **kwargs)
     raise SilError(f"unknown backend {backend!r}: expected 'c' or 'reference'")
 
@@ -169,7 +169,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                     key=lambda ev: float(ev.time))
 
     if guess is None:
-        from .offline import solve_ocp
+        from ..reference.offline import solve_ocp
         guess, _info = solve_ocp(disc, x)
     if backend_obj is None:
         try:
@@ -460,8 +460,8 @@ def write_json(runs, path) -> None:
 def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps,
                 backend, cost_hessian="fresh", echo=None, progress=True, lm=None) -> list:
     """The ``dopus-gen sil`` command: runs, summary table, JSON and plots."""
-    from .ocp import load_ocp
-    from .derivatives import build_functions
+    from ..problem.ocp import load_ocp
+    from ..problem.derivatives import build_functions
 
     if echo is None:
         import click
@@ -477,7 +477,7 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
     spec = disc.scenario_spec
     x0 = np.asarray(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
 
-    from .offline import solve_ocp
+    from ..reference.offline import solve_ocp
     guess, info = solve_ocp(disc, x0)
     if not info.get("success", True):
         echo(f"warning: the offline solve at the initial state did not converge ({info.get('status')}); "

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import List, Sequence
 
-from .codegen import CASADI_CFLAGS, STRICT_CFLAGS, CodegenError, read_meta
+from .generate import CASADI_CFLAGS, STRICT_CFLAGS, CodegenError, read_meta
 
 BUILD_SUBDIR = Path("build") / "py"
 

@@ -5,7 +5,7 @@
 file, links it into a cffi extension module (API mode) and returns a :class:`QPSolverHandle`.
 Builds are cached per size and source hash under ``workdir``.
 
-The QP dict format (shared with ``dopus_codegen.qpref``):
+The QP dict format (shared with ``dopus_codegen.reference.qp``):
 ``N, nx, nu, ng, nr, ne; H (N,nw,nw); g (N,nw); Phi (N,nx,nw); b (N,nx); x0 (nx,);
 HN (nx,nx); gN (nx,); lbw, ubw (N,nw); lbxN, ubxN (nx,); C (N,ng,nw); lg, ug (N,ng);
 R (nr,nx); lr, ur (nr,); Req (ne,nx); req (ne,)``. Missing bound/constraint entries
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .paths import runtime_c_dir
+from dopus_codegen.codegen.paths import runtime_c_dir
 
 STRICT_CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O3", "-fPIC"]
 

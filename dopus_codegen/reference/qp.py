@@ -92,7 +92,7 @@ def _shapes(N, nx, nu, ng, nr, ne):
 def check_qp(qp: dict) -> dict:
     """Validate a QP dict; return a copy with float arrays of the documented shapes."""
     if not isinstance(qp, dict):
-        raise TypeError("QP must be a dict (see dopus_codegen.qpref)")
+        raise TypeError("QP must be a dict (see dopus_codegen.reference.qp)")
     missing = [k for k in _INT_KEYS if k not in qp]
     if missing:
         raise ValueError(f"QP dict lacks the size entries {missing}")

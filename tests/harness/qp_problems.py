@@ -1,6 +1,6 @@
 """Random OCP-structured QPs with a known primal-dual solution, and independent solvers.
 
-``make_qp`` constructs a QP in the dict format of dopus_codegen.qp_harness around a chosen
+``make_qp`` constructs a QP in the dict format of harness.qp_harness around a chosen
 point: it picks w*, lam*, nu* and an active set (strictly active bounds with nonzero signed
 multipliers, weakly active ones with zero multiplier, inactive ones at a distance), then
 sets the gradients g_k, gN so that the stationarity conditions hold exactly. When the

@@ -1,0 +1,1 @@
+"""The Python handle of a generated solver (cffi): CSolver."""
