@@ -658,7 +658,7 @@ int dopus_prepare(dopus_solver *s)
     t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_SHIFT, t0);
     dopus_copy(xN_saved, s->x[DOPUS_N], DOPUS_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2, F_new stored as F_old */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < DOPUS_N - 1; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
         rc = dopus_stage_F(s, k);
@@ -667,7 +667,10 @@ int dopus_prepare(dopus_solver *s)
             return dopus_ret(s, rc);
         }
         s->rho[k] = dopus_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
-        dopus_ring_store_F(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        /* stored as F_old in step 6, once nothing can fail */
+        dopus_copy(s->Fn_w[k], s->tmp_F, DOPUS_NW);
+        dopus_copy(s->Fn_phi[k], s->tmp_phi, DOPUS_NX);
+        dopus_copy(s->Fn_g[k], s->tmp_g, DOPUS_NG);
         t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_RHO, t0);
     }
 
@@ -731,7 +734,11 @@ int dopus_prepare(dopus_solver *s)
         return dopus_ret(s, rc);
     }
 
-    /* 6. QP vectors (the fresh A blocks were regularised when stored) */
+    /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
+     *    when stored) */
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+    }
     dopus_assemble(s);
     s->qp_ready = 1;
     s->prepare_due = 0;

@@ -71,7 +71,8 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0);
  * returns DOPUS_ERR_ALREADY_PREPARED and changes nothing, in both modes (in receding mode
  * it would shift twice, in fixed mode it would measure rho_k against gradients of the
  * same point). After a failed prepare the next prepare is a retry: it does not shift
- * again. */
+ * again, and it measures rho_k against the same F_old (the gradients of a failed prepare are
+ * not stored); blocks that the failed attempt had already re-linearised stay fresh. */
 int dopus_prepare(dopus_solver *s);
 /* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
  * the initial state xhat0 (NULL: the last one given to init or feedback):
@@ -229,6 +230,12 @@ struct dopus_solver {
     double E;
     double r[DOPUS_DIM(DOPUS_NR)];
     double r_eq[DOPUS_DIM(DOPUS_NE)];
+
+    /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare succeeds,
+     * so a prepare that fails leaves every F_old for its retry */
+    double Fn_w[DOPUS_N][DOPUS_NW];
+    double Fn_phi[DOPUS_N][DOPUS_NX];
+    double Fn_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
 
     /* secant criterion and the recomputed set of the last prepare */
     double rho[DOPUS_N];

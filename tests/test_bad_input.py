@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dopus_codegen.ocp import Guess
-from dopus_codegen.solver import CSolver, DopusError
+from dopus_codegen.problem.ocp import Guess
+from dopus_codegen.runtime.solver import CSolver, DopusError
 
 OK, QP, NONFINITE_INPUT, INVALID, NOT_INIT, NOT_PREPARED, ALREADY_PREPARED = 0, 1, 2, 5, 6, 7, 10
 FIELDS = ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu")

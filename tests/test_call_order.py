@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dopus_codegen.reference import DopusError as RefError
-from dopus_codegen.reference import ReferenceDopus
-from dopus_codegen.solver import CSolver, DopusError
+from dopus_codegen.reference.dopus import DopusError as RefError
+from dopus_codegen.reference.dopus import ReferenceDopus
+from dopus_codegen.runtime.solver import CSolver, DopusError
 
 STATUS_NONFINITE_VALUE, STATUS_NOT_PREPARED, STATUS_ALREADY_PREPARED = 3, 7, 10
 REF_NONFINITE = 4
@@ -136,3 +136,35 @@ def test_retry_after_a_failed_prepare_does_not_shift_again(second_disc, second_s
     uc, ur = c.feedback(xh), r.feedback(xh)
     assert np.max(np.abs(uc - ur)) <= REL_TOL * max(1.0, np.max(np.abs(ur)))
     assert_close(c, r, "one iteration after the retry")
+
+
+def test_retry_after_a_failure_in_the_middle_of_the_gradients(second_disc, second_solution):
+    """The parameter of node 10 alone overflows, so prepare fails at stage 10 of its gradient
+    sweep; the stages before it must keep their F_old (the retry measures rho_k against the
+    same gradients as a first attempt would), so after the retry rho_k, the recomputed set
+    and the iterate equal the reference's, which evaluates on copies of its slots."""
+    d = second_disc
+    c = CSolver(d, M=2, mode="receding", qp_tol=QP_TOL)
+    r = ReferenceDopus(d, M=2, mode="receding", qp_tol=QP_TOL)
+    xh = np.asarray(d.disturbance(d.x0), dtype=float)
+    p_good = np.array(d.p0, dtype=float)
+    for b, nonfinite in ((c, STATUS_NONFINITE_VALUE), (r, REF_NONFINITE)):
+        b.init(d.x0, second_solution[0])
+        b.feedback(xh)
+        b.prepare()
+        b.feedback(xh)                       # a second step, so that rho_k > 0 somewhere
+        p_bad = p_good.copy()
+        p_bad[10, 0] = 1e200
+        b.set_parameters(p_bad)
+        with pytest.raises((DopusError, RefError)) as ei:
+            b.prepare()
+        assert ei.value.status == nonfinite
+        b.set_parameters(p_good)
+        b.prepare()
+    rc, rr = np.asarray(c.rho), np.asarray(r.rho)
+    assert rr.max() > 0
+    assert np.max(np.abs(rc - rr)) <= 1e-6 * max(1.0, rr.max()), (rc, rr)
+    assert c.recomputed == r.recomputed
+    assert_close(c, r, "after a retry that failed in stage 10")
+    uc, ur = c.feedback(xh), r.feedback(xh)
+    assert np.max(np.abs(uc - ur)) <= REL_TOL * max(1.0, np.max(np.abs(ur)))

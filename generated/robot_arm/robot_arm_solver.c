@@ -658,7 +658,7 @@ int robot_arm_prepare(robot_arm_solver *s)
     t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_SHIFT, t0);
     robot_arm_copy(xN_saved, s->x[ROBOT_ARM_N], ROBOT_ARM_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2, F_new stored as F_old */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
         rc = robot_arm_stage_F(s, k);
@@ -667,7 +667,10 @@ int robot_arm_prepare(robot_arm_solver *s)
             return robot_arm_ret(s, rc);
         }
         s->rho[k] = robot_arm_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
-        robot_arm_ring_store_F(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        /* stored as F_old in step 6, once nothing can fail */
+        robot_arm_copy(s->Fn_w[k], s->tmp_F, ROBOT_ARM_NW);
+        robot_arm_copy(s->Fn_phi[k], s->tmp_phi, ROBOT_ARM_NX);
+        robot_arm_copy(s->Fn_g[k], s->tmp_g, ROBOT_ARM_NG);
         t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_RHO, t0);
     }
 
@@ -731,7 +734,11 @@ int robot_arm_prepare(robot_arm_solver *s)
         return robot_arm_ret(s, rc);
     }
 
-    /* 6. QP vectors (the fresh A blocks were regularised when stored) */
+    /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
+     *    when stored) */
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+    }
     robot_arm_assemble(s);
     s->qp_ready = 1;
     s->prepare_due = 0;

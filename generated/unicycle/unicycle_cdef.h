@@ -39,7 +39,8 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0);
  * returns UNICYCLE_ERR_ALREADY_PREPARED and changes nothing, in both modes (in receding mode
  * it would shift twice, in fixed mode it would measure rho_k against gradients of the
  * same point). After a failed prepare the next prepare is a retry: it does not shift
- * again. */
+ * again, and it measures rho_k against the same F_old (the gradients of a failed prepare are
+ * not stored); blocks that the failed attempt had already re-linearised stay fresh. */
 int unicycle_prepare(unicycle_solver *s);
 /* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
  * the initial state xhat0 (NULL: the last one given to init or feedback):

@@ -658,7 +658,7 @@ int unicycle_prepare(unicycle_solver *s)
     t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_SHIFT, t0);
     unicycle_copy(xN_saved, s->x[UNICYCLE_N], UNICYCLE_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2, F_new stored as F_old */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
         unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
         rc = unicycle_stage_F(s, k);
@@ -667,7 +667,10 @@ int unicycle_prepare(unicycle_solver *s)
             return unicycle_ret(s, rc);
         }
         s->rho[k] = unicycle_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
-        unicycle_ring_store_F(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        /* stored as F_old in step 6, once nothing can fail */
+        unicycle_copy(s->Fn_w[k], s->tmp_F, UNICYCLE_NW);
+        unicycle_copy(s->Fn_phi[k], s->tmp_phi, UNICYCLE_NX);
+        unicycle_copy(s->Fn_g[k], s->tmp_g, UNICYCLE_NG);
         t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_RHO, t0);
     }
 
@@ -731,7 +734,11 @@ int unicycle_prepare(unicycle_solver *s)
         return unicycle_ret(s, rc);
     }
 
-    /* 6. QP vectors (the fresh A blocks were regularised when stored) */
+    /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
+     *    when stored) */
+    for (k = 0; k < UNICYCLE_N - 1; ++k) {
+        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+    }
     unicycle_assemble(s);
     s->qp_ready = 1;
     s->prepare_due = 0;
