@@ -18,7 +18,8 @@ const char *robot_arm_status_string(int status);
 /* Initialisation (algorithm.md section 4, init): the iterate is the given guess; NULL x or
  * u: the OCP file's initial guess; NULL multipliers: zeros. F and H of every stage and of
  * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
- * rho = 0. xhat0 is checked and kept for robot_arm_kkt_eval (may be NULL: the default x0). */
+ * rho = 0. xhat0 is checked and kept for robot_arm_kkt_eval (may be NULL: the default x0).
+ * A failed init leaves the solver uninitialised (NaN/Inf input: the iterate untouched). */
 int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, const double *u,
                const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
                const double *mu_r, const double *nu);
