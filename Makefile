@@ -4,14 +4,16 @@ PY     := $(VENV)/bin/python
 OUT    := out
 EXAMPLE := examples/robot_arm.py
 
-.PHONY: demo test bench generate firmware clean setup help
+.PHONY: demo test bench bench-acados acados-env generate firmware firmware-report clean setup help
 
 help:
 	@echo "make demo      generate, build and run the robot-arm closed loop (DOPUS M=1 vs full RTI); plots in $(OUT)/robot_arm"
 	@echo "make test      run the test suite"
 	@echo "make bench     run the benchmarks (tables on stdout, JSON in bench/results)"
+	@echo "make bench-acados  time our solver against acados on the robot arm (one process, interleaved)"
 	@echo "make generate  regenerate the checked-in generated/ folders"
 	@echo "make firmware  build the static library of generated/robot_arm with make only"
+	@echo "make firmware-report  run the robot arm on an emulated Cortex-M7 (QEMU): sizes, instructions, accuracy"
 	@echo "make clean     remove build products and outputs"
 
 setup:
@@ -29,11 +31,18 @@ demo: setup
 	@echo "plots and JSON in $(abspath $(OUT))/robot_arm (Gauss-Newton runs in gauss-newton/)"
 
 test: setup
+	-@bash scripts/setup_firmware.sh
 	$(PY) -m pytest -q
 
 bench: setup
 	$(PY) bench/runtime_bench.py
 	$(PY) bench/qp_bench.py
+
+acados-env:
+	@bash scripts/setup_acados.sh >/dev/null
+
+bench-acados: setup acados-env
+	$(PY) bench/acados_bench.py $(EXAMPLE) --json bench/results/acados_bench.json
 
 generate: setup
 	$(VENV)/bin/dopus-gen generate examples/robot_arm.py -o generated/robot_arm
@@ -41,6 +50,10 @@ generate: setup
 
 firmware:
 	$(MAKE) -C generated/robot_arm
+
+firmware-report: setup
+	@bash scripts/setup_firmware.sh
+	$(VENV)/bin/dopus-gen firmware-report $(EXAMPLE) -o $(OUT)/firmware --target m7-double
 
 clean:
 	rm -rf $(OUT) build .pytest_cache

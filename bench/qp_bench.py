@@ -52,7 +52,7 @@ RESULTS = BENCH / "results"
 BUILD = RESULTS / "build"
 ENV = Path(os.environ.get("BENCH_ENV", BENCH / ".env"))
 
-NX, NU, NE = 5, 3, 2           # the robot arm's sizes (robot-arm.md)
+NX, NU, NE = 5, 3, 2           # the robot arm's sizes (docs/robot_arm.md)
 RANDOM_NS = (10, 20, 40, 80, 160)
 HPIPM_MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
 HPIPM_STATUS = {0: "success", 1: "max_iter", 2: "min_step", 3: "nan", 4: "inconsistent_eq"}
@@ -266,7 +266,7 @@ def robot_arm_qps(gn_iters: int, exact_iters: int, log=print) -> list:
     full = disc.N - 1
     out = []
     t0 = time.perf_counter()
-    # cold start, Gauss-Newton (DESIGN.md section 8: the exact Hessian diverges from there)
+    # cold start, Gauss-Newton (docs/design.md section 8: the exact Hessian diverges from there)
     ref = ReferenceDopus(disc, M=full, mode="fixed", hessian="gauss-newton")
     xhat = np.asarray(disc.x0, float)
     ref.init(xhat)

@@ -2,7 +2,7 @@
 
 Two settings, each for M = 1 (DOPUS) and M = N-1 (the full RTI):
 
-- ``study``: the fixed-xhat0 warm-start convergence study of DESIGN.md section 8 (start at
+- ``study``: the fixed-xhat0 warm-start convergence study of docs/design.md section 8 (start at
   the offline IPOPT solution, iterate for the disturbed initial state), --study-iters
   iterations, repeated --repeat times;
 - ``loop``: the receding-horizon closed loop on the discrete model from the IPOPT

@@ -6,6 +6,7 @@ body, imported lazily so that ``dopus-gen --help`` stays fast.
 from __future__ import annotations
 
 import click
+from pathlib import Path
 
 from . import __version__
 
@@ -46,7 +47,7 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--reg-eps", default=1e-4, show_default=True, type=float, help="Eigenvalue floor of the regularisation.")
 @click.option("--cost-hessian", type=click.Choice(["fresh", "stored"]), default="fresh", show_default=True,
               help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
-                   "paper's literal algorithm (figure 1, DESIGN.md section 8).")
+                   "paper's literal algorithm (figure 1, docs/design.md section 8).")
 @click.option("--lm", default=0.0, show_default=True, type=click.FloatRange(min=0),
               help="Levenberg-Marquardt term added to every Hessian block of the QP (0: exact Newton).")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
@@ -149,6 +150,43 @@ def build(folder, cc, opt, force):
         raise click.ClickException(str(exc)) from None
     state = "built" if res.rebuilt else "up to date"
     click.echo(f"{state}: {res.shared_lib}\n{state}: {res.static_lib}\ncdef: {res.cdef_path}")
+
+
+@main.command("firmware-report")
+@click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False), default="out/firmware",
+              show_default=True, help="Folder of the generated code, the builds and the images.")
+@click.option("--target", "targets", default="m7-double", show_default=True,
+              help="Comma-separated targets: m7-double, m7-float (QEMU mps2-an500), m4f-float (mps2-an386); "
+                   "the float targets need a generator with the real=float option.")
+@click.option("--iters", default=12, show_default=True, type=click.IntRange(1, 1000),
+              help="Iterations of the fixed-xhat_0 study per M (M = 1 and the full RTI).")
+@click.option("--steps", default=20, show_default=True, type=click.IntRange(1, 10000),
+              help="Steps of the closed loop against the generated integrator.")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None,
+              help="Write the report as JSON (default: OUTPUT/firmware_report.json).")
+def firmware_report(ocp_file, out_dir, targets, iters, steps, json_out):
+    """Run the generated solver of OCP_FILE on emulated Cortex-M cores and report sizes and counts.
+
+    Builds the firmware program of firmware/ (bare metal, no heap, semihosting output) with
+    arm-none-eabi-gcc, runs it under qemu-system-arm with instruction counting and the same
+    program on the host, and prints flash, RAM (data + bss + the stack of one iteration),
+    instructions per DOPUS iteration (M = 1, full RTI) and the difference to the host build.
+    Installs the Debian packages it needs when root (scripts/setup_firmware.sh).
+    """
+    from .codegen.firmware import FirmwareError, firmware_report as report_fn, format_table
+    from .problem.ocp import OcpError
+
+    tlist = [t.strip() for t in targets.split(",") if t.strip()]
+    if json_out is None:
+        json_out = str(Path(out_dir) / "firmware_report.json")
+    try:
+        rep = report_fn(ocp_file, out_dir, targets=tlist, fixed_iters=iters, loop_steps=steps,
+                        json_out=json_out, progress=click.echo)
+    except (OcpError, FirmwareError) as exc:
+        raise click.ClickException(str(exc)) from None
+    click.echo(format_table(rep))
+    click.echo(f"JSON: {json_out}")
 
 
 if __name__ == "__main__":  # pragma: no cover

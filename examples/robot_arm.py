@@ -1,7 +1,7 @@
 """Predictive path following with a planar two-link arm (paper section 3).
 
-Every number is the one of the project's robot-arm reference problem: a two-link arm
-in the vertical plane follows the circle p(theta) and is rewarded for progress
+Every number is the one of the project's robot-arm reference problem (docs/robot_arm.md):
+a two-link arm in the vertical plane follows the circle p(theta) and is rewarded for progress
 theta_N; the tip must end on the path (two terminal equality rows).
 """
 import math
@@ -87,7 +87,7 @@ def build():
     x0 = initial_state()
     ocp.initial_state(x0)
     ocp.initial_guess(x=x0, u=[0.0, 0.0, 5.0])
-    # From the cold guess the exact-Hessian DOPUS diverges (DESIGN.md section 8): the
+    # From the cold guess the exact-Hessian DOPUS diverges (docs/design.md section 8): the
     # generated controller carries the offline NLP solution to start warm.
     # lm: the Levenberg-Marquardt term of the QP; the closed loop with the exact Hessian needs
     # it (README, "Closed loop"); it changes the steps, never the solution.

@@ -28,7 +28,7 @@ extern const double dopus_default_lm;            /* Levenberg-Marquardt term, >=
 
 #if DOPUS_HAS_NOMINAL
 /* offline primal-dual solution at dopus_x0_default (IPOPT at generation time), so the
- * controller starts warm (DESIGN.md section 8) */
+ * controller starts warm (docs/design.md section 8) */
 extern const double dopus_nominal_x[DOPUS_N + 1][DOPUS_NX];
 extern const double dopus_nominal_u[DOPUS_N][DOPUS_NU];
 extern const double dopus_nominal_lam[DOPUS_N + 1][DOPUS_NX];

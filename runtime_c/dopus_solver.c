@@ -1081,3 +1081,11 @@ void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx)
     s->timer.clock = clock_fn ? clock_fn : dopus_timer_default_clock;
     s->timer.ctx = clock_fn ? ctx : 0;
 }
+
+int dopus_has_clock(const dopus_solver *s)
+{
+    if (s->timer.clock == 0) {
+        return 0;
+    }
+    return s->timer.clock != dopus_timer_default_clock || dopus_timer_has_default_clock();
+}

@@ -1,16 +1,17 @@
 /* Phase timers of the DOPUS runtime.
  *
- * The runtime reads time through a user-replaceable clock (seconds as a double,
- * any origin). The default clock is POSIX clock_gettime(CLOCK_MONOTONIC); compile
- * with -DDOPUS_CLOCK_POSIX=0 on targets without POSIX, then the default clock
- * reads 0 and firmware installs its own with dopus_set_clock().
+ * The runtime reads time through a clock hook (seconds as a double, any origin) that the
+ * user installs with dopus_set_clock(). The default clock needs no macro:
+ * - where the preprocessor finds POSIX timers (a Unix-like system whose <unistd.h> defines
+ *   _POSIX_TIMERS > 0 and _POSIX_MONOTONIC_CLOCK), it is clock_gettime(CLOCK_MONOTONIC);
+ * - anywhere else (bare-metal toolchains such as arm-none-eabi with newlib) there is no
+ *   default clock: it reads 0, every phase time reads 0, and dopus_timer_has_default_clock()
+ *   and dopus_has_clock() say so. Firmware installs its own clock (a cycle counter, a
+ *   hardware timer) with dopus_set_clock().
+ * -DDOPUS_CLOCK_POSIX=0 forces the no-clock default, -DDOPUS_CLOCK_POSIX=1 forces POSIX.
  */
 #ifndef DOPUS_TIMER_H
 #define DOPUS_TIMER_H
-
-#ifndef DOPUS_CLOCK_POSIX
-#define DOPUS_CLOCK_POSIX 1
-#endif
 
 /* Phases timed per call (seconds of the last call that ran the phase). */
 enum dopus_phase {
@@ -34,8 +35,10 @@ typedef struct {
     double t[DOPUS_N_PHASES];
 } dopus_timer;
 
-/* The default clock: CLOCK_MONOTONIC in seconds (0 when DOPUS_CLOCK_POSIX is 0). */
+/* The default clock: CLOCK_MONOTONIC in seconds where POSIX timers exist, else 0. */
 double dopus_timer_default_clock(void *ctx);
+/* 1 if the default clock measures time on this platform (POSIX timers), 0 if it reads 0. */
+int dopus_timer_has_default_clock(void);
 
 void dopus_timer_init(dopus_timer *tm);
 double dopus_timer_now(const dopus_timer *tm);

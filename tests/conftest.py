@@ -1,6 +1,6 @@
 """Shared fixtures: the two example problems, discretised once per session.
 
-``robot_disc`` / ``second_disc``: the :class:`~dopus_codegen.derivatives.Discretized` of
+``robot_disc`` / ``second_disc``: the :class:`~dopus_codegen.problem.derivatives.Discretized` of
 examples/robot_arm.py and examples/unicycle.py. ``robot_solution`` /
 ``second_solution``: their IPOPT solution ``(Guess, info)`` at the initial state.
 Treat all of them as read-only.

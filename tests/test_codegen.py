@@ -264,7 +264,7 @@ def test_generated_data_is_the_problem(name, generated, built, request):
 
 
 def test_robot_arm_carries_the_offline_guess(robot_disc):
-    """DESIGN.md section 8: from the cold guess the exact-Hessian DOPUS diverges, so the
+    """docs/design.md section 8: from the cold guess the exact-Hessian DOPUS diverges, so the
     robot-arm controller must start warm from the offline solution carried as data."""
     assert _wants_nominal(robot_disc), \
         "examples/robot_arm.py must set options(offline_guess=True) so generated/robot_arm starts warm"

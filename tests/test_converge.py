@@ -1,6 +1,6 @@
 """The fixed-xhat_0 convergence study (paper figure 1) and ``dopus-gen converge``.
 
-The warm-start table of DESIGN.md section 8 (the paper's literal algorithm,
+The warm-start table of docs/design.md section 8 (the paper's literal algorithm,
 ``cost_hessian="stored"``) is reproduced with the reference backend and checked against
 independent numbers: the KKT measure of the IPOPT point, and IPOPT's own solution for the
 disturbed initial state. The default ``cost_hessian="fresh"`` (docs/algorithm.md section 4

@@ -1,7 +1,7 @@
 """The functions of docs/algorithm.md section 2 against finite differences of the
 plain evaluations (``stage_eval``, ``term_eval``, the least-squares residuals), at
 random points with random multipliers, for both examples; and the robot-arm model and
-cost against an independent numpy transcription of robot-arm.md."""
+cost against an independent numpy transcription of docs/robot_arm.md."""
 import math
 
 import numpy as np
@@ -92,7 +92,7 @@ def test_stage_grad_and_hessian_blocks(disc):
         assert disc.has_gn and disc.stage_residual is not None
         A_gn, Phi_gn, C_gn = disc.stage_hess_gn(x, u, p, lam, mu_g)
         J = fd_jac(lambda z: dm(disc.stage_residual(*split(z), p)), w, H1)
-        W = disc.weights["W"]
+        W = disc.data.W
         # both examples have a pure least-squares stage cost: l = 0.5 res' W res
         res = dm(disc.stage_residual(x, u, p)).ravel()
         assert math.isclose(float(l), 0.5 * res @ W @ res, rel_tol=1e-12, abs_tol=1e-15)
@@ -120,7 +120,7 @@ def test_stage_cost_hessian(disc):
         assert ok, f"A_l exact vs FD of grad l: {err}"
         A_gn = dm(disc.stage_hess_cost("gauss-newton")(x, u, p))
         J = fd_jac(lambda z: dm(disc.stage_residual(*split(z), p)), w, H1)
-        ok, err = close(A_gn, J.T @ disc.weights["W"] @ J, RTOL)
+        ok, err = close(A_gn, J.T @ disc.data.W @ J, RTOL)
         assert ok, f"A_l GN vs J'WJ: {err}"
         # the Gauss-Newton A has no curvature besides the cost's: A - A_l = 0
         lam, mu_g = rng.standard_normal(disc.nx), rng.standard_normal(disc.ng)
@@ -192,7 +192,7 @@ def test_terminal_functions(disc):
         A_gn = dm(disc.term_hess_gn(x, p, mu_r, nu)[0])
         if disc.term_residual is not None:
             J = fd_jac(lambda z: dm(disc.term_residual(z, p)), x, H1)
-            expect = J.T @ disc.weights["WN"] @ J
+            expect = J.T @ disc.data.WN @ J
         else:
             # robot arm: E = -theta_N is linear, so the Gauss-Newton block is zero
             expect = fd_jac(lambda z: dm(disc.term_grad(z, p, 0 * mu_r, 0 * nu)[0]), x, H2)
@@ -202,7 +202,7 @@ def test_terminal_functions(disc):
 
 # ---------------------------------------------------------------- robot arm, by hand
 def arm_xdot(x, u):
-    """robot-arm.md, transcribed with numpy."""
+    """docs/robot_arm.md section 1, transcribed with numpy."""
     m1 = m2 = 1.0
     l1 = 0.4
     lc1 = lc2 = 0.2
@@ -235,7 +235,7 @@ def test_robot_arm_model_cost_and_integrator(robot_disc):
     assert (d.N, d.dt, d.nx, d.nu, d.ng, d.nr, d.ne) == (40, 0.01, 5, 3, 0, 0, 2)
     assert np.array_equal(d.lbu, [-10, -10, 0]) and np.array_equal(d.ubu, [10, 10, 50])
     assert np.all(np.isinf(d.lbx)) and np.all(np.isinf(d.ubx))
-    # xhat_0 of robot-arm.md, 8 significant digits
+    # xhat_0 of docs/robot_arm.md section 3, 8 significant digits
     assert np.allclose(d.x0, [-0.40144188, 1.50042576, 0, 0, 0], rtol=0, atol=5e-9)
     assert np.allclose(arm_tip(d.x0[:2]), arm_path(0.0), atol=1e-15)
     assert np.array_equal(d.initial_guess.u, np.tile([0, 0, 5.0], (40, 1)))
@@ -264,7 +264,7 @@ def test_robot_arm_model_cost_and_integrator(robot_disc):
         assert float(E) == -x[4]
         assert np.allclose(dm(r_eq).ravel(), e, atol=1e-15)
     # the scenario signal is the path deviation
-    spec = d.scenario_spec
+    spec = d.scenario.closed_loop
     assert spec.duration == 3.0 and [ev.time for ev in spec.events] == [1.0]
     x = d.x0 + 0.1
     dev = float(spec.signals["deviation"](x, [0, 0, 0], []))

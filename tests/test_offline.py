@@ -1,4 +1,5 @@
-"""IPOPT on the multiple-shooting NLP: the robot-arm figures of robot-arm.md, and the
+"""IPOPT on the multiple-shooting NLP: the robot-arm figures of docs/robot_arm.md section 4,
+and the
 sign convention of the returned multipliers checked through the KKT measure
 (docs/algorithm.md section 6), which uses the exact derivative functions."""
 import numpy as np
@@ -11,7 +12,8 @@ from dopus_codegen.reference.offline import solve_ocp
 def test_robot_arm_objective_and_progress(robot_disc, robot_solution):
     sol, info = robot_solution
     assert info["success"], info["status"]
-    # robot-arm.md: objective -3.7377630 and theta_N = 4.6062345 (8 significant digits)
+    # docs/robot_arm.md section 4: objective -3.7377630 and theta_N = 4.6062345
+    # (8 significant digits)
     assert round(info["objective"], 7) == -3.7377630
     assert round(info["x_N"][4], 7) == 4.6062345
     assert sol.x[-1, 4] == info["x_N"][4]

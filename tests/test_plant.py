@@ -1,4 +1,5 @@
-"""The CVODES plant against scipy's solve_ivp on the robot arm (robot-arm.md, eq. 21).
+"""The CVODES plant against scipy's solve_ivp on the robot arm (docs/robot_arm.md
+section 1, paper eq. 21).
 
 The reference right-hand side is written here a second time in plain numpy, so a slip in
 the CasADi model and the same slip in the reference cannot cancel.

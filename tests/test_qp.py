@@ -172,7 +172,7 @@ def test_inertia_correction_on_indefinite_reduced_pivots():
         qp, ref = P.make_qp(rng, *sizes, p_active=0.0, p_free=1.0)
         # negative terminal curvature that the two terminal equalities (ne = nx) remove
         qp["HN"] = qp["HN"] - 50.0 * np.eye(2) * np.abs(qp["HN"]).max()
-        P._recompute_gradients(qp, ref)
+        P.recompute_gradients(qp, ref)
         licq, red, red_eq = P.check_unique(qp, ref)
         assert licq and red_eq > 0
         sol, info = h.solve(qp, tol=TOL_QP)
@@ -367,7 +367,7 @@ def robot_qps(robot_disc, robot_solution):
 
 
 def test_robot_arm_qps_against_reference_solver(robot_qps):
-    """Each QP against dopus_codegen.qpref.solve_qp_reference (IPOPT + active-set polish,
+    """Each QP against dopus_codegen.reference.qp.solve_qp_reference (IPOPT + active-set polish,
     an independent method that takes the indefinite blocks as they are), to 1e-6 on the
     primal and every multiplier. Solver tolerance 1e-12: the exact-Hessian QPs near the
     solution have a reduced Hessian down to ~2e-5, so 1e-10 leaves errors up to ~4e-5."""

@@ -41,10 +41,10 @@ def clarabel_solve(qp):
     import clarabel
     import scipy.sparse as sp
 
-    from dopus_codegen.reference.qp import _flatten
+    from dopus_codegen.reference.qp import flatten_qp
 
     q = check_qp(qp)
-    Hz, gz, rows = _flatten(q)
+    Hz, gz, rows = flatten_qp(q)
     nz = Hz.shape[0]
     I = sp.identity(nz, format="csr")
     blocks, rhs, kinds = [rows.A_eq], [rows.b_eq], []
@@ -76,14 +76,14 @@ def clarabel_solve(qp):
 # --------------------------------------------------------------------------- QP tests
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_qp_reference_matches_clarabel_on_convex_qps(seed):
-    from dopus_codegen.reference.qp import _flatten_sol
+    from dopus_codegen.reference.qp import flatten_solution
 
     qp = random_qp(seed)
     sol = solve_qp_reference(qp)
     res = qp_kkt_residual(qp, sol)
     assert sol["polished"]
     assert res["kkt"] < 1e-10, res
-    z, y_eq, y_in, mu_z = _flatten_sol(check_qp(qp), sol)
+    z, y_eq, y_in, mu_z = flatten_solution(check_qp(qp), sol)
     zc, y_eqc, y_inc, mu_zc = clarabel_solve(qp)
     assert np.max(np.abs(z - zc)) < 1e-6
     assert np.max(np.abs(y_eq - y_eqc)) < 1e-5
@@ -116,7 +116,7 @@ def test_qp_reference_indefinite_blocks_with_positive_reduced_hessian():
 
 
 def test_qp_reference_robot_arm_exact_hessian_qp(robot_disc, robot_solution):
-    """The warm-start QP of the robot arm: indefinite exact blocks (DESIGN.md section 8)."""
+    """The warm-start QP of the robot arm: indefinite exact blocks (docs/design.md section 8)."""
     d = robot_disc
     sol0, _ = robot_solution
     ref = ReferenceDopus(d, M=d.N - 1, mode="fixed")
@@ -236,9 +236,9 @@ def test_adjoint_correction_keeps_kkt_point_with_stale_blocks(robot_disc, robot_
     assert ref.recomputed == [d.N - 1]
     # the stored blocks really are stale
     _, Phi0, _ = d.stage_hess_exact(sol.x[0], sol.u[0], d.p0[0], sol.lam[1], sol.mu_g[0])
-    assert np.max(np.abs(ref.slots[ref._slot(0)].Phit - np.array(Phi0))) > 1e-2
+    assert np.max(np.abs(ref.slot_of(0).Phit - np.array(Phi0))) > 1e-2
     A0 = np.array(d.stage_hess(hessian)(sol.x[0], sol.u[0], d.p0[0], sol.lam[1], sol.mu_g[0])[0])
-    dH = np.max(np.abs(ref.slots[ref._slot(0)].Ht - A0))
+    dH = np.max(np.abs(ref.slot_of(0).Ht - A0))
     if hessian == "gauss-newton" and cost_hessian == "fresh":
         assert dH <= 1e-12 * np.abs(A0).max()    # the GN block is all cost: refreshed exactly
     else:
@@ -469,17 +469,17 @@ def test_receding_full_recompute_equals_fresh_init(robot_disc, robot_solution):
     # and with M = 0 the stale stage blocks are those of the right (shifted) stage
     ref0 = ReferenceDopus(d, M=0, mode="receding", cost_hessian="stored")
     ref0.init(d.x0, sol)
-    H1 = ref0.slots[ref0._slot(1)].Ht.copy()
+    H1 = ref0.slot_of(1).Ht.copy()
     ref0.feedback(d.x0)
     ref0.prepare()
-    np.testing.assert_array_equal(ref0.slots[ref0._slot(0)].Ht, H1)
+    np.testing.assert_array_equal(ref0.slot_of(0).Ht, H1)
     # cost_hessian='fresh': Phit and A_dyn shift with the slot, the cost part is new
     ref1 = ReferenceDopus(d, M=0, mode="receding", cost_hessian="fresh")
     ref1.init(d.x0, sol)
-    s1 = ref1.slots[ref1._slot(1)].copy()
+    s1 = ref1.slot_of(1).copy()
     ref1.feedback(d.disturbance(d.x0))
     ref1.prepare()
-    s0 = ref1.slots[ref1._slot(0)]
+    s0 = ref1.slot_of(0)
     np.testing.assert_array_equal(s0.Phit, s1.Phit)
     np.testing.assert_array_equal(s0.A_dyn, s1.A_dyn)
     A_l = np.array(d.stage_hess_cost("exact")(ref1.x[0], ref1.u[0], d.p0[0]))
@@ -493,7 +493,7 @@ def test_second_example_full_rti_reaches_ipopt_with_active_path_constraint(secon
     d = second_disc
     sol, _ = second_solution
     # from the OCP file's (cold) guess the exact Hessian QPs lose convexity; the mirrored
-    # Hessian keeps them convex and leaves the fixed point unchanged (DESIGN.md section 2)
+    # Hessian keeps them convex and leaves the fixed point unchanged (docs/design.md section 2)
     ref = ReferenceDopus(d, M=d.N - 1, mode="fixed", regularization="mirror")
     ref.init(d.x0)
     ks = _iterate(ref, d.x0, 40, tol=1e-11)

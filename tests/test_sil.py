@@ -1,4 +1,5 @@
-"""Closed loop on the robot arm (robot-arm.md): the SIL record checked against independent numbers.
+"""Closed loop on the robot arm (docs/robot_arm.md section 5): the SIL record checked
+against independent numbers.
 
 - the plant: the applied controls replayed through scipy's solve_ivp on a numpy model of the
   arm written a second time (tests/test_plant.py), events applied at the same instants;
@@ -124,7 +125,7 @@ def _c_available():
 @pytest.mark.parametrize("backend, hessian, M, cost_hessian, lm", _backend_params())
 def test_sil_robot_arm(disc, offline, backend, hessian, M, cost_hessian, lm):
     if backend == "c" and not _c_available():
-        pytest.skip("the C backend (dopus_codegen.solver.CSolver) is not available")
+        pytest.skip("the C backend (dopus_codegen.runtime.solver.CSolver) is not available")
     run = run_closed_loop(disc, backend=backend, M=M, hessian=hessian, cost_hessian=cost_hessian, lm=lm,
                           guess=offline)
     assert run["settings"]["cost_hessian"] == cost_hessian and run["settings"]["lm"] == lm

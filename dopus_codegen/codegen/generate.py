@@ -33,7 +33,7 @@ from .paths import runtime_c_dir, templates_dir
 
 PLACEHOLDER = "dopus"
 
-#: Compiler flags shared by the rendered Makefile and dopus_codegen.build.
+#: Compiler flags shared by the rendered Makefile and dopus_codegen.codegen.build.
 STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 #: CasADi's generated code has unused parameters in its helpers, so it only gets -Wall.
 CASADI_CFLAGS = ("-std=c99", "-Wall")
@@ -201,7 +201,7 @@ def casadi_functions(disc: Any, name: str, sizes: Dict[str, int]) -> Dict[str, c
     """The functions to emit, checked against docs/algorithm.md section 2, in emit order."""
     out: Dict[str, ca.Function] = {}
     for slot, optional in FUNCTION_SLOTS:
-        fun = getattr(disc, slot, None)
+        fun = getattr(disc.functions, slot, None)
         if fun is None:
             if optional:
                 continue
@@ -242,7 +242,7 @@ def work_sizes(functions: Dict[str, ca.Function]) -> Dict[str, int]:
 
 
 def problem_sizes(disc: Any) -> Dict[str, int]:
-    sizes = {k: int(_attr(disc, k)) for k in ("N", "nx", "nu", "nw", "np", "ng", "nr", "ne")}
+    sizes = {k: int(_attr(disc.data, k)) for k in ("N", "nx", "nu", "nw", "np", "ng", "nr", "ne")}
     if sizes["N"] < 1 or sizes["nx"] < 1 or sizes["nu"] < 1:
         raise CodegenError(f"sizes N={sizes['N']}, nx={sizes['nx']}, nu={sizes['nu']} must be >= 1")
     if sizes["nw"] != sizes["nx"] + sizes["nu"]:
@@ -255,7 +255,7 @@ def problem_sizes(disc: Any) -> Dict[str, int]:
 
 def _default_parameters(disc: Any, s: Dict[str, int]) -> np.ndarray:
     """The one default parameter vector of dopus_problem.h (every node)."""
-    p0 = _attr(disc, "p0")
+    p0 = _attr(disc.data, "p0")
     arr = np.asarray(p0 if p0 is not None else np.zeros((s["N"] + 1, s["np"])), dtype=float)
     if s["np"] == 0:
         return np.zeros(0)
@@ -278,22 +278,23 @@ def _code(table: Dict[str, int], value: Any, what: str) -> int:
 def problem_context(disc: Any, s: Dict[str, int], nominal: Any) -> Dict[str, Any]:
     """Everything dopus_problem.c renders, pre-formatted (the template only places it)."""
     N, nx, nu, nw = s["N"], s["nx"], s["nu"], s["nw"]
-    options = getattr(disc, "options", None)
-    guess = _attr(disc, "initial_guess")
+    options = disc.spec.options
+    data = disc.data
+    guess = _attr(data, "initial_guess")
     if getattr(guess, "x", None) is None or getattr(guess, "u", None) is None:
         raise CodegenError("initial_guess: x and u are required")
     ctx: Dict[str, Any] = {
-        "lbx": c_vector(_attr(disc, "lbx"), nx, "lbx"),
-        "ubx": c_vector(_attr(disc, "ubx"), nx, "ubx"),
-        "lbu": c_vector(_attr(disc, "lbu"), nu, "lbu"),
-        "ubu": c_vector(_attr(disc, "ubu"), nu, "ubu"),
-        "lg": c_vector(_attr(disc, "lg"), s["ng"], "lg"),
-        "ug": c_vector(_attr(disc, "ug"), s["ng"], "ug"),
-        "lr": c_vector(_attr(disc, "lr"), s["nr"], "lr"),
-        "ur": c_vector(_attr(disc, "ur"), s["nr"], "ur"),
+        "lbx": c_vector(_attr(data, "lbx"), nx, "lbx"),
+        "ubx": c_vector(_attr(data, "ubx"), nx, "ubx"),
+        "lbu": c_vector(_attr(data, "lbu"), nu, "lbu"),
+        "ubu": c_vector(_attr(data, "ubu"), nu, "ubu"),
+        "lg": c_vector(_attr(data, "lg"), s["ng"], "lg"),
+        "ug": c_vector(_attr(data, "ug"), s["ng"], "ug"),
+        "lr": c_vector(_attr(data, "lr"), s["nr"], "lr"),
+        "ur": c_vector(_attr(data, "ur"), s["nr"], "ur"),
         "p_default": c_vector(_default_parameters(disc, s), s["np"], "p0"),
-        "dt": c_double(_attr(disc, "dt"), "dt"),
-        "x0_default": c_vector(_attr(disc, "x0"), nx, "x0"),
+        "dt": c_double(_attr(data, "dt"), "dt"),
+        "x0_default": c_vector(_attr(data, "x0"), nx, "x0"),
         "guess_x": c_matrix(getattr(guess, "x", None), N + 1, nx, "initial_guess.x"),
         "guess_u": c_matrix(getattr(guess, "u", None), N, nu, "initial_guess.u"),
         "default_M": int(_option(options, "M", 1)),
@@ -377,7 +378,7 @@ def extract_cdef(header_text: str, name: str, header_name: str) -> str:
 
 def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
     """Every file of the generated folder, as {file name: text}, without touching the disk."""
-    name = check_name(_attr(disc, "name"))
+    name = check_name(_attr(disc.data, "name"))
     NAME = name.upper()
     s = problem_sizes(disc)
     functions = casadi_functions(disc, name, s)
@@ -428,8 +429,8 @@ def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
         "work": ctx["work"],
         "has_gn": bool(has_gn),
         "has_nominal": bool(ctx["has_nominal"]),
-        "state_names": list(getattr(disc, "state_names", []) or []),
-        "control_names": list(getattr(disc, "control_names", []) or []),
+        "state_names": list(disc.data.state_names),
+        "control_names": list(disc.data.control_names),
         "files": sorted(list(files) + [meta_file]),
         "sources": {"strict": build_ctx["strict_sources"], "casadi": f"{name}_casadi.c", "main": main_file},
         "cdef": f"{name}_cdef.h",
@@ -501,13 +502,13 @@ def generate(disc: Any, out_dir, *, offline_guess: Optional[bool] = None) -> Pat
     with IPOPT at its default x0 and the primal-dual solution becomes static data
     (DOPUS_HAS_NOMINAL 1), so firmware can start warm (``dopus_init_nominal``).
     """
-    want_nominal = _option(getattr(disc, "options", None), "offline_guess", False) \
+    want_nominal = _option(disc.spec.options, "offline_guess", False) \
         if offline_guess is None else bool(offline_guess)
     nominal = None
     if want_nominal:
         from ..reference.offline import solve_ocp
 
-        nominal, info = solve_ocp(disc, np.asarray(_attr(disc, "x0"), dtype=float))
+        nominal, info = solve_ocp(disc, np.asarray(_attr(disc.data, "x0"), dtype=float))
         _check_offline(info)
     files = render_folder(disc, nominal)
     return write_folder(files, Path(out_dir))
@@ -530,7 +531,7 @@ def generate_file(ocp_file, out_dir=None, *, offline_guess: Optional[bool] = Non
     ocp = load_ocp(ocp_file)
     disc = build_functions(ocp)
     if out_dir is None:
-        out_dir = Path("generated") / check_name(_attr(disc, "name"))
+        out_dir = Path("generated") / check_name(_attr(disc.data, "name"))
     return generate(disc, out_dir, offline_guess=offline_guess)
 
 

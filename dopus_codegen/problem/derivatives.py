@@ -5,31 +5,46 @@ All functions are SX functions with dense outputs; their names carry the problem
 name (``<name>_stage_grad`` ...) and their inputs follow the order of the table in
 algorithm.md section 2. ``build_functions`` is deterministic: the same OCP gives the
 same functions and therefore the same generated C.
+
+A :class:`Discretized` is immutable and made of four parts: ``spec`` (the validated
+:class:`~.spec.OcpSpec` it was built from, which also holds the options), ``data``
+(:class:`ProblemData`: sizes, bounds, defaults, names), ``functions``
+(:class:`StageFunctions`) and ``scenario`` (:class:`Scenario`: what the studies need
+beyond the OCP). Caches of derived objects (offline solvers) are owned by the modules
+that build them, never by the problem.
 """
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
-from typing import Callable, Optional
+import types
+from dataclasses import dataclass
+from operator import attrgetter
+from typing import Callable, Iterator, Mapping, Optional, Tuple, Union
 
 import casadi as ca
 import numpy
 
 from .discretize import StageModel, discretize
 from .ocp import Guess, Ocp, OcpError, ScenarioSpec, casadi_message
+from .spec import OcpSpec, readonly
 
-__all__ = ["Discretized", "build_functions"]
+__all__ = ["Discretized", "ProblemData", "StageFunctions", "Scenario", "build_functions"]
 
 # Common-subexpression elimination makes the generated C smaller; it is deterministic.
 _FN_OPTS = {"cse": True}
 
+_KINDS = "(expected 'exact' or 'gauss-newton')"
 
-@dataclass
-class Discretized:
-    """The multiple-shooting problem: sizes, bounds, defaults and the stage functions.
+
+@dataclass(frozen=True)
+class ProblemData:
+    """The numbers of the multiple-shooting problem (arrays read-only).
 
     Shapes: ``lbx, ubx (nx,)``, ``lbu, ubu (nu,)``, ``lg, ug (ng,)``, ``lr, ur (nr,)``
-    (infinite entries allowed), ``p0 (N+1, np)``, ``x0 (nx,)``.
+    (infinite entries allowed), ``p0 (N+1, np)``, ``x0 (nx,)``, ``guess_x (N+1, nx)``,
+    ``guess_u (N, nu)`` (the declared cold guess), ``W``/``WN``: the stacked stage and
+    terminal least-squares weights (``(0, 0)`` without them). ``integrator``: its
+    description, e.g. ``"RK4(substeps=2)"``.
     """
     name: str
     N: int
@@ -51,77 +66,19 @@ class Discretized:
     ur: numpy.ndarray
     p0: numpy.ndarray
     x0: numpy.ndarray
-    initial_guess: Guess
-    options: dict
-    disturbance: Optional[Callable[[numpy.ndarray], numpy.ndarray]]
-    scenario_spec: Optional[ScenarioSpec]
-    state_names: list
-    control_names: list
-    parameter_names: list
+    guess_x: numpy.ndarray
+    guess_u: numpy.ndarray
+    state_names: Tuple[str, ...]
+    control_names: Tuple[str, ...]
+    parameter_names: Tuple[str, ...]
     integrator: str
-    stage_eval: ca.Function
-    stage_grad: ca.Function
-    stage_hess_exact: ca.Function
-    stage_hess_gn: Optional[ca.Function]
-    term_eval: ca.Function
-    term_grad: ca.Function
-    term_hess_exact: ca.Function
-    term_hess_gn: ca.Function
-    ode: ca.Function
-    has_gn: bool
-    weights: dict = field(default_factory=dict)   # {"W": stage LS weight, "WN": terminal}
-    # Least-squares residuals (x, u, p) -> res and (x, p) -> res_N, None without them; for
-    # checks and plots, not part of the generated code.
-    stage_residual: Optional[ca.Function] = None
-    term_residual: Optional[ca.Function] = None
-    # Stage-cost part A_l of the stage Hessian, (x, u, p) -> A_l (algorithm.md sections 2
-    # and 4 step 5): exact hess_w l; Gauss-Newton J' W J + hess_w l_extra (None without a
-    # least-squares stage cost). Cheap: l is evaluated at the node, no integrator.
-    stage_hess_cost_exact: Optional[ca.Function] = None
-    stage_hess_cost_gn: Optional[ca.Function] = None
-    cache: dict = field(default_factory=dict, repr=False, compare=False)  # e.g. offline solvers
-
-    def stage_hess(self, kind: str) -> ca.Function:
-        """``stage_hess_exact`` for ``"exact"``, ``stage_hess_gn`` for ``"gauss-newton"``."""
-        if kind == "exact":
-            return self.stage_hess_exact
-        if kind in ("gauss-newton", "gn"):
-            if self.stage_hess_gn is None:
-                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
-            return self.stage_hess_gn
-        raise ValueError(f"unknown Hessian kind {kind!r} (expected 'exact' or 'gauss-newton')")
-
-    def stage_hess_cost(self, kind: str) -> ca.Function:
-        """``stage_hess_cost_exact`` for ``"exact"``, ``stage_hess_cost_gn`` for
-        ``"gauss-newton"``: ``(x, u, p) -> A_l``, the stage-cost part of ``stage_hess(kind)``'s A."""
-        if kind == "exact":
-            fun = self.stage_hess_cost_exact
-        elif kind in ("gauss-newton", "gn"):
-            if self.stage_hess_cost_gn is None:
-                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
-            fun = self.stage_hess_cost_gn
-        else:
-            raise ValueError(f"unknown Hessian kind {kind!r} (expected 'exact' or 'gauss-newton')")
-        if fun is None:
-            raise OcpError(f"{self.name}: the problem was built without the stage-cost Hessian functions")
-        return fun
-
-    def term_hess(self, kind: str) -> ca.Function:
-        """Terminal counterpart of :meth:`stage_hess`."""
-        if kind == "exact":
-            return self.term_hess_exact
-        if kind in ("gauss-newton", "gn"):
-            return self.term_hess_gn
-        raise ValueError(f"unknown Hessian kind {kind!r} (expected 'exact' or 'gauss-newton')")
+    W: numpy.ndarray
+    WN: numpy.ndarray
 
     @property
-    def functions(self) -> list:
-        """Every CasADi function of algorithm.md section 2, in table order (GN stage
-        Hessians omitted when the OCP has no least-squares stage cost)."""
-        fns = [self.stage_eval, self.stage_grad, self.stage_hess_exact, self.stage_hess_gn,
-               self.stage_hess_cost_exact, self.stage_hess_cost_gn,
-               self.term_eval, self.term_grad, self.term_hess_exact, self.term_hess_gn, self.ode]
-        return [f for f in fns if f is not None]
+    def initial_guess(self) -> Guess:
+        """The declared guess as a new :class:`Guess` (its arrays are read-only)."""
+        return Guess(x=self.guess_x, u=self.guess_u)
 
     @property
     def p_default(self) -> numpy.ndarray:
@@ -135,6 +92,152 @@ class Discretized:
     @property
     def ubw(self) -> numpy.ndarray:
         return numpy.concatenate([self.ubx, self.ubu])
+
+
+@dataclass(frozen=True)
+class StageFunctions:
+    """Every CasADi function of algorithm.md section 2 (``name`` is the problem's).
+
+    ``stage_hess_gn``/``stage_hess_cost_gn`` are None without a least-squares stage cost.
+    ``stage_hess_cost_*``: the stage-cost part A_l of the stage Hessian, ``(x, u, p) ->
+    A_l`` (algorithm.md sections 2 and 4 step 5): exact ``hess_w l``; Gauss-Newton ``J' W J
+    + hess_w l_extra``; cheap, ``l`` is evaluated at the node, no integrator.
+    ``stage_residual (x, u, p) -> res`` and ``term_residual (x, p) -> res_N`` are the
+    least-squares residuals (None without them), for checks and plots, not generated.
+    Iterating yields the functions of the table in its order (absent ones skipped).
+    """
+    name: str
+    stage_eval: ca.Function
+    stage_grad: ca.Function
+    stage_hess_exact: ca.Function
+    stage_hess_gn: Optional[ca.Function]
+    stage_hess_cost_exact: ca.Function
+    stage_hess_cost_gn: Optional[ca.Function]
+    term_eval: ca.Function
+    term_grad: ca.Function
+    term_hess_exact: ca.Function
+    term_hess_gn: ca.Function
+    ode: ca.Function
+    stage_residual: Optional[ca.Function] = None
+    term_residual: Optional[ca.Function] = None
+
+    def __iter__(self) -> Iterator[ca.Function]:
+        fns = [self.stage_eval, self.stage_grad, self.stage_hess_exact, self.stage_hess_gn,
+               self.stage_hess_cost_exact, self.stage_hess_cost_gn,
+               self.term_eval, self.term_grad, self.term_hess_exact, self.term_hess_gn, self.ode]
+        return iter([f for f in fns if f is not None])
+
+    @property
+    def has_gn(self) -> bool:
+        """True when the Gauss-Newton stage Hessian exists."""
+        return self.stage_hess_gn is not None
+
+    def stage_hess(self, kind: str) -> ca.Function:
+        """``stage_hess_exact`` for ``"exact"``, ``stage_hess_gn`` for ``"gauss-newton"``."""
+        if kind == "exact":
+            return self.stage_hess_exact
+        if kind in ("gauss-newton", "gn"):
+            if self.stage_hess_gn is None:
+                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
+            return self.stage_hess_gn
+        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+
+    def stage_hess_cost(self, kind: str) -> ca.Function:
+        """``stage_hess_cost_exact`` for ``"exact"``, ``stage_hess_cost_gn`` for
+        ``"gauss-newton"``: ``(x, u, p) -> A_l``, the stage-cost part of ``stage_hess(kind)``'s A."""
+        if kind == "exact":
+            return self.stage_hess_cost_exact
+        if kind in ("gauss-newton", "gn"):
+            if self.stage_hess_cost_gn is None:
+                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
+            return self.stage_hess_cost_gn
+        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+
+    def term_hess(self, kind: str) -> ca.Function:
+        """Terminal counterpart of :meth:`stage_hess`."""
+        if kind == "exact":
+            return self.term_hess_exact
+        if kind in ("gauss-newton", "gn"):
+            return self.term_hess_gn
+        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """What the studies use beyond the OCP: the ``disturbance`` state map of the
+    warm-start convergence study (None if not declared) and the closed-loop scenario of
+    ``dopus-gen sil`` (None if not declared)."""
+    disturbance: Optional[Callable[[numpy.ndarray], numpy.ndarray]]
+    closed_loop: Optional[ScenarioSpec]
+
+
+@dataclass(frozen=True, eq=False)
+class Discretized:
+    """The multiple-shooting problem: the validated spec, its data, its stage functions
+    and its scenario (see the module docstring).
+
+    For brevity every field of :class:`ProblemData` and :class:`StageFunctions` is also a
+    read-only attribute of the problem (``disc.N`` is ``disc.data.N``, ``disc.stage_grad``
+    is ``disc.functions.stage_grad``), as are ``initial_guess``, ``has_gn``,
+    ``disturbance``, ``scenario_spec`` (``scenario.closed_loop``) and the Hessian selectors.
+    """
+    spec: OcpSpec
+    data: ProblemData
+    functions: StageFunctions
+    scenario: Scenario
+
+    @property
+    def options(self) -> Mapping[str, object]:
+        """The declared solver options, a read-only mapping (``spec.options``)."""
+        return types.MappingProxyType(self.spec.options.as_dict())
+
+    @property
+    def initial_guess(self) -> Guess:
+        return self.data.initial_guess
+
+    @property
+    def state_names(self) -> list:
+        return list(self.data.state_names)
+
+    @property
+    def control_names(self) -> list:
+        return list(self.data.control_names)
+
+    @property
+    def parameter_names(self) -> list:
+        return list(self.data.parameter_names)
+
+    @property
+    def disturbance(self) -> Optional[Callable[[numpy.ndarray], numpy.ndarray]]:
+        return self.scenario.disturbance
+
+    @property
+    def scenario_spec(self) -> Optional[ScenarioSpec]:
+        """``scenario.closed_loop``."""
+        return self.scenario.closed_loop
+
+    def stage_hess(self, kind: str) -> ca.Function:
+        return self.functions.stage_hess(kind)
+
+    def stage_hess_cost(self, kind: str) -> ca.Function:
+        return self.functions.stage_hess_cost(kind)
+
+    def term_hess(self, kind: str) -> ca.Function:
+        return self.functions.term_hess(kind)
+
+
+def _shortcuts(part: str, names) -> None:
+    for n in names:
+        if not hasattr(Discretized, n):
+            setattr(Discretized, n, property(attrgetter(f"{part}.{n}"), doc=f"``{part}.{n}``"))
+
+
+_shortcuts("data", ("name", "N", "dt", "nx", "nu", "nw", "np", "ng", "nr", "ne", "lbx", "ubx", "lbu",
+                    "ubu", "lg", "ug", "lr", "ur", "p0", "x0", "p_default", "lbw", "ubw", "integrator"))
+_shortcuts("functions", ("stage_eval", "stage_grad", "stage_hess_exact", "stage_hess_gn",
+                         "stage_hess_cost_exact", "stage_hess_cost_gn", "term_eval", "term_grad",
+                         "term_hess_exact", "term_hess_gn", "ode", "stage_residual", "term_residual",
+                         "has_gn"))
 
 
 def _d(e):
@@ -207,33 +310,40 @@ def _terminal_functions(name: str, m: StageModel):
     return term_eval, term_grad, term_hess_exact, term_hess_gn
 
 
-def _scenario(ocp: Ocp, m: StageModel, ode: ca.Function, x0: numpy.ndarray) -> Optional[ScenarioSpec]:
-    sc = ocp._scenario
+
+
+def _scenario(spec: OcpSpec, m: StageModel, ode: ca.Function) -> Scenario:
+    sc = spec.scenario.closed_loop
     if sc is None:
-        return None
-    from .ocp import _as_sx  # the same conversion the validation used
+        return Scenario(disturbance=spec.scenario.disturbance, closed_loop=None)
+    name = spec.name
     signals = {}
-    for i, (sig, expr) in enumerate(sc["signals"].items()):
-        e = _as_sx(expr, f"scenario signal '{sig}'")
+    for i, (sig, e) in enumerate(sc.signals):
         safe = re.sub(r"[^0-9A-Za-z_]", "_", sig)
-        signals[sig] = ca.Function(f"{ocp.name}_signal_{i}_{safe}", [m.x, m.u, m.p], [_d(e)],
+        signals[sig] = ca.Function(f"{name}_signal_{i}_{safe}", [m.x, m.u, m.p], [_d(e)],
                                    ["x", "u", "p"], ["value"])
-    if sc["plant"] is None:
+    if sc.plant is None:
         plant = ode
     else:
-        e = _as_sx(sc["plant"], "scenario plant")
-        plant = ca.Function(f"{ocp.name}_plant_ode", [m.x, m.u, m.p], [_d(e)], ["x", "u", "p"], ["xdot"])
-    sx0 = x0.copy() if sc["x0"] is None else Ocp._full_vector(sc["x0"], x0.size, "scenario x0")
-    return ScenarioSpec(duration=float(sc["duration"]), events=list(sc["events"]), signals=signals,
-                        plant_ode=plant, x0=sx0)
+        plant = ca.Function(f"{name}_plant_ode", [m.x, m.u, m.p], [_d(sc.plant)], ["x", "u", "p"], ["xdot"])
+    closed = ScenarioSpec(duration=sc.duration, events=sc.events, signals=types.MappingProxyType(signals),
+                          plant_ode=plant, x0=spec.x0 if sc.x0 is None else sc.x0)
+    return Scenario(disturbance=spec.scenario.disturbance, closed_loop=closed)
 
 
-def build_functions(ocp: Ocp) -> Discretized:
-    """Validate ``ocp``, discretise it and build every function of algorithm.md section 2."""
-    if not isinstance(ocp, Ocp):
-        raise OcpError(f"build_functions: expected an Ocp, got {type(ocp).__name__}")
-    m = discretize(ocp)
-    name = ocp.name
+def build_functions(problem: Union[Ocp, OcpSpec]) -> Discretized:
+    """Discretise a problem and build every function of algorithm.md section 2.
+
+    ``problem``: an :class:`Ocp` (validated here by ``Ocp.validate()``, which runs the
+    consistency pass once) or the :class:`~.spec.OcpSpec` it returned."""
+    if isinstance(problem, Ocp):
+        spec = problem.validate()
+    elif isinstance(problem, OcpSpec):
+        spec = problem
+    else:
+        raise OcpError(f"build_functions: expected an Ocp, got {type(problem).__name__}")
+    m = discretize(spec)
+    name = spec.name
     try:
         stage = _stage_functions(name, m)
         term = _terminal_functions(name, m)
@@ -242,36 +352,29 @@ def build_functions(ocp: Ocp) -> Discretized:
         raise
     except Exception as exc:  # noqa: BLE001 - CasADi failures on user expressions
         raise OcpError(f"{name}: cannot build the stage functions: {casadi_message(exc)}") from None
-    nx, nu, np_ = m.x.size1(), m.u.size1(), m.p.size1()
-    N = ocp.N
-    x0 = ocp.x0_array(nx)
-    gx, gu = ocp.guess_arrays(nx, nu, N, x0)
-    p0 = numpy.zeros((N + 1, np_))
-    col = 0
-    for d in ocp._params:
-        p0[:, col:col + d.size] = d.value
-        col += d.size
-    disc = Discretized(
-        name=name, N=N, dt=ocp.dt, nx=nx, nu=nu, nw=nx + nu, np=np_, ng=m.g.size1(),
-        nr=m.r.size1(), ne=m.r_eq.size1(),
-        lbx=numpy.concatenate([d.lb for d in ocp._states]), ubx=numpy.concatenate([d.ub for d in ocp._states]),
-        lbu=numpy.concatenate([d.lb for d in ocp._controls]), ubu=numpy.concatenate([d.ub for d in ocp._controls]),
-        lg=m.lg.copy(), ug=m.ug.copy(), lr=m.lr.copy(), ur=m.ur.copy(), p0=p0, x0=x0,
-        initial_guess=Guess(x=gx, u=gu), options=dict(ocp._options), disturbance=ocp._disturbance,
-        scenario_spec=_scenario(ocp, m, ode, x0),
-        state_names=Ocp._labels(ocp._states), control_names=Ocp._labels(ocp._controls),
-        parameter_names=Ocp._labels(ocp._params), integrator=ocp.integrator.describe(),
-        stage_eval=stage[0], stage_grad=stage[1], stage_hess_exact=stage[2], stage_hess_gn=stage[3],
-        term_eval=term[0], term_grad=term[1], term_hess_exact=term[2], term_hess_gn=term[3],
-        ode=ode, has_gn=stage[3] is not None, weights={"W": m.W.copy(), "WN": m.WN.copy()},
-        stage_hess_cost_exact=stage[4], stage_hess_cost_gn=stage[5],
-    )
+    stage_residual = term_residual = None
     if m.res.size1():
-        disc.stage_residual = ca.Function(f"{name}_stage_residual", [m.x, m.u, m.p], [_d(m.res)],
-                                          ["x", "u", "p"], ["res"])
+        stage_residual = ca.Function(f"{name}_stage_residual", [m.x, m.u, m.p], [_d(m.res)],
+                                     ["x", "u", "p"], ["res"])
     if m.resN.size1():
-        disc.term_residual = ca.Function(f"{name}_term_residual", [m.x, m.p], [_d(m.resN)],
-                                         ["x", "p"], ["res"])
+        term_residual = ca.Function(f"{name}_term_residual", [m.x, m.p], [_d(m.resN)],
+                                    ["x", "p"], ["res"])
+    functions = StageFunctions(
+        name=name, stage_eval=stage[0], stage_grad=stage[1], stage_hess_exact=stage[2],
+        stage_hess_gn=stage[3], stage_hess_cost_exact=stage[4], stage_hess_cost_gn=stage[5],
+        term_eval=term[0], term_grad=term[1], term_hess_exact=term[2], term_hess_gn=term[3], ode=ode,
+        stage_residual=stage_residual, term_residual=term_residual)
+    model, con, N = spec.model, spec.constraints, spec.horizon.N
+    nx, nu, np_ = m.x.size1(), m.u.size1(), m.p.size1()
+    data = ProblemData(
+        name=name, N=N, dt=spec.horizon.dt, nx=nx, nu=nu, nw=nx + nu, np=np_, ng=m.g.size1(),
+        nr=m.r.size1(), ne=m.r_eq.size1(), lbx=con.lbx, ubx=con.ubx, lbu=con.lbu, ubu=con.ubu,
+        lg=readonly(m.lg), ug=readonly(m.ug), lr=readonly(m.lr), ur=readonly(m.ur),
+        p0=readonly(numpy.tile(model.p_default, (N + 1, 1)), (N + 1, np_)), x0=spec.x0,
+        guess_x=spec.guess.x, guess_u=spec.guess.u, state_names=model.state_names,
+        control_names=model.control_names, parameter_names=model.parameter_names,
+        integrator=model.integrator.describe(), W=readonly(m.W), WN=readonly(m.WN))
+    disc = Discretized(spec=spec, data=data, functions=functions, scenario=_scenario(spec, m, ode))
     _check_finite_at_guess(disc)
     return disc
 

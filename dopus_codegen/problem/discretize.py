@@ -1,5 +1,6 @@
-"""Direct multiple shooting: from a validated :class:`~dopus_codegen.ocp.Ocp` to the
-symbolic per-stage pieces ``phi_k, l_k, g_k`` and the terminal ``E, r, r_eq``.
+"""Direct multiple shooting: from a validated problem (:class:`~.spec.OcpSpec`, what
+``Ocp.validate()`` returns) to the symbolic per-stage pieces ``phi_k, l_k, g_k`` and the
+terminal ``E, r, r_eq``.
 
 Everything here is SX, built in declaration order so that the same OCP always yields
 the same expressions (and hence byte-identical generated C).
@@ -11,7 +12,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .ocp import Ocp, OcpError, casadi_message
+from .ocp import OcpError, casadi_message
+from .spec import OcpSpec
 
 __all__ = ["StageModel", "discretize"]
 
@@ -45,6 +47,7 @@ class StageModel:
 
 def _stack(items, what: str):
     """Vertical stack of (expr, lb, ub) triples."""
+    items = [(b.expr, b.lb, b.ub) for b in items]
     if not items:
         return ca.SX(0, 1), np.zeros(0), np.zeros(0)
     try:
@@ -56,6 +59,7 @@ def _stack(items, what: str):
 
 def _least_squares(items, what: str):
     """Stacked residual, block-diagonal weight and the cost 0.5 res' W res."""
+    items = [(t.residual, t.weights) for t in items]
     if not items:
         return ca.SX(0, 1), np.zeros((0, 0)), ca.SX(0)
     res = ca.vertcat(*[r for r, _ in items])
@@ -80,34 +84,38 @@ def _sum(items) -> ca.SX:
     return out
 
 
-def discretize(ocp: Ocp) -> StageModel:
-    """Validate ``ocp`` and build the symbolic multiple-shooting pieces."""
-    ocp.validate()
-    x, u, p = ocp.x_sym(), ocp.u_sym(), ocp.p_sym()
+def discretize(spec: OcpSpec) -> StageModel:
+    """The symbolic multiple-shooting pieces of a validated problem (no validation here:
+    ``spec`` comes from ``Ocp.validate()``)."""
+    if not isinstance(spec, OcpSpec):
+        raise OcpError(f"discretize: expected the OcpSpec of Ocp.validate(), got {type(spec).__name__}")
+    model, cost, con = spec.model, spec.cost, spec.constraints
+    integrator = model.integrator
+    x, u, p = model.x, model.u, model.p
     w = ca.vertcat(x, u)
-    xdot = ocp._xdot
+    xdot = model.xdot
     try:
         ode = ca.Function("ode_tmp", [x, u, p], [xdot])
-        phi = ocp.integrator.step(ode, x, u, p, ocp.dt)
+        phi = integrator.step(ode, x, u, p, spec.horizon.dt)
     except OcpError:
         raise
     except Exception as exc:  # noqa: BLE001
-        raise OcpError(f"dynamics: cannot discretise with {ocp.integrator.describe()}: {casadi_message(exc)}") from None
+        raise OcpError(f"dynamics: cannot discretise with {integrator.describe()}: {casadi_message(exc)}") from None
     if not isinstance(phi, ca.SX) or phi.shape != (x.size1(), 1):
-        raise OcpError(f"dynamics: integrator {ocp.integrator.describe()} returned shape "
+        raise OcpError(f"dynamics: integrator {integrator.describe()} returned shape "
                        f"{getattr(phi, 'shape', None)}, expected ({x.size1()}, 1)")
 
-    res, W, l_ls = _least_squares(ocp._stage_ls, "stage least squares")
-    l_extra = _sum(ocp._stage_costs)
+    res, W, l_ls = _least_squares(cost.stage_least_squares, "stage least squares")
+    l_extra = _sum(cost.stage_terms)
     l = l_ls + l_extra
-    g, lg, ug = _stack(ocp._path, "path constraints")
+    g, lg, ug = _stack(con.path, "path constraints")
 
-    resN, WN, E_ls = _least_squares(ocp._term_ls, "terminal least squares")
-    E_extra = _sum(ocp._term_costs)
+    resN, WN, E_ls = _least_squares(cost.terminal_least_squares, "terminal least squares")
+    E_extra = _sum(cost.terminal_terms)
     E = E_ls + E_extra
 
-    rows, lbs, ubs = _stack(ocp._term_con, "terminal constraints")
-    is_eq = lbs == ubs
+    rows, lbs, ubs = _stack(con.terminal, "terminal constraints")
+    is_eq = con.terminal_equality
     ineq = np.flatnonzero(~is_eq)
     eq = np.flatnonzero(is_eq)
     r = rows[ineq.tolist()] if ineq.size else ca.SX(0, 1)
@@ -115,4 +123,5 @@ def discretize(ocp: Ocp) -> StageModel:
 
     return StageModel(x=x, u=u, p=p, w=w, xdot=xdot, phi=phi, l=l, res=res, W=W, l_extra=l_extra,
                       g=g, lg=lg, ug=ug, E=E, resN=resN, WN=WN, E_extra=E_extra,
-                      r=r, lr=lbs[ineq], ur=ubs[ineq], r_eq=r_eq, has_stage_ls=bool(ocp._stage_ls))
+                      r=r, lr=lbs[ineq], ur=ubs[ineq], r_eq=r_eq,
+                      has_stage_ls=cost.has_stage_least_squares)

@@ -31,9 +31,14 @@ Conventions (docs/algorithm.md sections 1 and 8):
 - Parameters are runtime-settable, one vector per node; ``value`` is the default.
 
 Every user mistake raises :class:`OcpError` with a message naming the offending item.
+:meth:`Ocp.validate` checks everything declared once and returns the problem as an
+immutable :class:`~dopus_codegen.problem.spec.OcpSpec`, which is all that the rest of the
+pipeline reads.
 """
 from __future__ import annotations
 
+import copy
+import functools
 import importlib.util
 import keyword
 import math
@@ -42,10 +47,13 @@ import sys
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable, Mapping, Optional
 
 import casadi as ca
 import numpy as np
+
+from .spec import (ClosedLoopSpec, ConstraintSpec, CostSpec, GuessSpec, HorizonSpec, LeastSquares,
+                   ModelSpec, OcpSpec, OptionsSpec, Rows, ScenarioPart, Variable, readonly)
 
 __all__ = [
     "OcpError", "Integrator", "RK4", "Event", "Guess", "ScenarioSpec", "Ocp", "load_ocp",
@@ -108,7 +116,7 @@ class RK4(Integrator):
 
 
 # --------------------------------------------------------------------------- plain data
-@dataclass
+@dataclass(frozen=True)
 class Event:
     """At ``time`` (seconds) the closed-loop plant state is replaced by ``fn(x)``."""
     time: float
@@ -152,17 +160,18 @@ class Guess:
                      mu_b=c(self.mu_b), mu_bN=c(self.mu_bN), mu_r=c(self.mu_r), nu=c(self.nu))
 
 
-@dataclass
+@dataclass(frozen=True)
 class ScenarioSpec:
     """The closed-loop scenario, in a form the SIL layer reads without CasADi symbols.
 
-    ``signals``: name -> ``casadi.Function(x, u, p) -> value``; ``plant_ode``:
-    ``casadi.Function(x, u, p) -> xdot`` (the model itself unless a mismatch was given);
-    ``x0``: initial plant state.
+    ``events``: tuple of :class:`Event`; ``signals``: read-only mapping name ->
+    ``casadi.Function(x, u, p) -> value``; ``plant_ode``: ``casadi.Function(x, u, p) ->
+    xdot`` (the model itself unless a mismatch was given); ``x0``: initial plant state
+    (read-only).
     """
     duration: float
-    events: list
-    signals: dict
+    events: tuple
+    signals: Mapping[str, ca.Function]
     plant_ode: ca.Function
     x0: np.ndarray
 
@@ -241,11 +250,33 @@ def _check_identifier(name, what: str) -> str:
     return name
 
 
+def _snapshot(value):
+    """A private copy of user data kept until validation (the user's object may change)."""
+    try:
+        return copy.deepcopy(value)
+    except Exception:  # noqa: BLE001 - not copyable: validation reads it as given
+        return value
+
+
+def _declaration(method):
+    """Marks a method that changes the declaration: the validated spec is recomputed."""
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        self._spec = None
+        return method(self, *args, **kwargs)
+    return wrapper
+
+
 # --------------------------------------------------------------------------- the OCP
 class Ocp:
-    """Declarative description of one OCP (see the module docstring)."""
+    """Declarative description of one OCP (see the module docstring).
+
+    :meth:`validate` returns the problem as an immutable :class:`~.spec.OcpSpec`; the
+    validation runs once and its result is kept until the next declaration.
+    """
 
     def __init__(self, name: str):
+        self._spec: Optional[OcpSpec] = None
         self.name = _check_identifier(name, "Ocp name")
         self._states: list[_Decl] = []
         self._controls: list[_Decl] = []
@@ -268,6 +299,11 @@ class Ocp:
         self._disturbance = None
         self._scenario = None
 
+    def __setattr__(self, key, value):
+        if key != "_spec":
+            object.__setattr__(self, "_spec", None)
+        object.__setattr__(self, key, value)
+
     # ------------------------------------------------------------------ declarations
     def _declare(self, kind: str, store: list, name, size, lb, ub, value=None) -> ca.SX:
         _check_identifier(name, f"{kind} name")
@@ -287,20 +323,24 @@ class Ocp:
         store.append(_Decl(name, sym, size, lbv, ubv, val))
         return sym
 
+    @_declaration
     def state(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf) -> ca.SX:
         """Declare a state vector; bounds hold on nodes 1..N."""
         return self._declare("state", self._states, name, size, lb, ub)
 
+    @_declaration
     def control(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf) -> ca.SX:
         """Declare a control vector; bounds hold on stages 0..N-1."""
         return self._declare("control", self._controls, name, size, lb, ub)
 
+    @_declaration
     def parameter(self, name: str, size: int = 1, value=0.0) -> ca.SX:
         """Declare a runtime parameter (one value per node); ``value`` is the default."""
         return self._declare("parameter", self._params, name, size, -math.inf, math.inf,
                              value=0.0 if value is None else value)
 
     # ------------------------------------------------------------------ model and costs
+    @_declaration
     def dynamics(self, xdot, integrator: Optional[Integrator] = None) -> None:
         """Continuous model ``xdot = f(x, u, p)``, discretised by ``integrator``."""
         self._xdot = _as_sx(xdot, "dynamics")
@@ -310,10 +350,12 @@ class Ocp:
                                f"got {type(integrator).__name__}")
             self._integrator = integrator
 
+    @_declaration
     def stage_cost(self, expr) -> None:
         """Add a general (non least-squares) term to the stage cost."""
         self._stage_costs.append(_as_sx(expr, f"stage cost {len(self._stage_costs)}"))
 
+    @_declaration
     def terminal_cost(self, expr) -> None:
         """Add a general term to the terminal cost ``E(x_N, p)``."""
         self._term_costs.append(_as_sx(expr, f"terminal cost {len(self._term_costs)}"))
@@ -341,18 +383,21 @@ class Ocp:
             raise OcpError(f"{what}: weights must be positive semidefinite")
         return W
 
+    @_declaration
     def stage_least_squares(self, residual, weights) -> None:
         """Add ``0.5 res' W res`` to the stage cost (weights: vector = diagonal, or matrix)."""
         what = f"stage least squares {len(self._stage_ls)}"
         res = _as_sx(residual, what)
         self._stage_ls.append((res, self._weights(weights, res.size1(), what)))
 
+    @_declaration
     def terminal_least_squares(self, residual, weights) -> None:
         """Add ``0.5 res' W res`` to the terminal cost."""
         what = f"terminal least squares {len(self._term_ls)}"
         res = _as_sx(residual, what)
         self._term_ls.append((res, self._weights(weights, res.size1(), what)))
 
+    @_declaration
     def path_constraint(self, expr, lb=-math.inf, ub=math.inf) -> None:
         """``lb <= g(x, u, p) <= ub`` on stages 0..N-1 (several calls stack)."""
         what = f"path constraint {len(self._path)}"
@@ -362,6 +407,7 @@ class Ocp:
         _check_bounds(lbv, ubv, what)
         self._path.append((g, lbv, ubv))
 
+    @_declaration
     def terminal_constraint(self, expr, lb=-math.inf, ub=math.inf) -> None:
         """``lb <= r(x_N, p) <= ub``; rows with ``lb == ub`` become equality rows."""
         what = f"terminal constraint {len(self._term_con)}"
@@ -375,6 +421,7 @@ class Ocp:
         self._term_con.append((r, lbv, ubv))
 
     # ------------------------------------------------------------------ horizon and data
+    @_declaration
     def horizon(self, N: int, dt: float) -> None:
         """``N`` shooting intervals of length ``dt`` seconds (also the sampling time)."""
         if isinstance(N, bool) or not isinstance(N, (int, np.integer)):
@@ -389,14 +436,17 @@ class Ocp:
             raise OcpError(f"horizon: dt must be positive and finite, got {dt!r}")
         self._N, self._dt = int(N), dtf
 
+    @_declaration
     def initial_state(self, x0) -> None:
         """The initial state ``xhat_0`` used by the examples, the guess and the scenario."""
-        self._x0 = x0
+        self._x0 = _snapshot(x0)
 
+    @_declaration
     def initial_guess(self, x=None, u=None) -> None:
         """Guess: a vector broadcast to all nodes, or a full (N+1, nx) / (N, nu) array."""
-        self._guess_x, self._guess_u = x, u
+        self._guess_x, self._guess_u = _snapshot(x), _snapshot(u)
 
+    @_declaration
     def options(self, hessian: Optional[str] = None, regularization: Optional[str] = None,
                 reg_eps: Optional[float] = None, M: Optional[int] = None,
                 offline_guess: Optional[bool] = None, lm: Optional[float] = None) -> None:
@@ -447,12 +497,14 @@ class Ocp:
             opts["lm"] = lmf
         self._options = opts
 
+    @_declaration
     def disturbance(self, fn: Callable[[np.ndarray], np.ndarray]) -> None:
         """State map used by the warm-start convergence study (numpy in, numpy out)."""
         if not callable(fn):
             raise OcpError(f"disturbance: expected a function of the state, got {type(fn).__name__}")
         self._disturbance = fn
 
+    @_declaration
     def scenario(self, duration: float, events=(), signals=None, plant=None, x0=None) -> None:
         """Closed-loop scenario: ``duration`` seconds, state ``events``, recorded ``signals``
         (name -> expression of the declared symbols), ``plant`` xdot (None: the model)."""
@@ -463,7 +515,7 @@ class Ocp:
         if signals is not None and not isinstance(signals, dict):
             raise OcpError(f"scenario: signals must be a dict name -> expression, got {type(signals).__name__}")
         self._scenario = dict(duration=duration, events=events, signals=dict(signals or {}),
-                              plant=plant, x0=x0)
+                              plant=plant, x0=_snapshot(x0))
 
     # ------------------------------------------------------------------ derived views
     @property
@@ -486,13 +538,6 @@ class Ocp:
 
     def p_sym(self) -> ca.SX:
         return ca.vertcat(*[d.sym for d in self._params]) if self._params else ca.SX(0, 1)
-
-    @staticmethod
-    def _labels(decls) -> list[str]:
-        out = []
-        for d in decls:
-            out += [d.name] if d.size == 1 else [f"{d.name}[{i}]" for i in range(d.size)]
-        return out
 
     # ------------------------------------------------------------------ validation
     def _check_symbols(self, expr: ca.SX, what: str, allowed: str) -> None:
@@ -518,8 +563,19 @@ class Ocp:
                      "p": "parameter"}.get(allowed, "declared")
             raise OcpError(f"{what} uses symbol '{name}' that is not a declared {names}")
 
-    def validate(self) -> None:
-        """One consistency pass over everything declared; raises OcpError."""
+    def validate(self) -> OcpSpec:
+        """The validated problem as an immutable :class:`~.spec.OcpSpec`; raises OcpError.
+
+        The consistency pass runs once: the spec is kept and returned again until a
+        declaration changes the problem."""
+        if self._spec is None:
+            spec = self.build_spec()
+            self._spec = spec
+        return self._spec
+
+    def build_spec(self) -> OcpSpec:
+        """One consistency pass over everything declared and a new spec from it; raises
+        OcpError. :meth:`validate` calls it once and keeps the result."""
         if not self._states:
             raise OcpError("no state declared (use ocp.state(...))")
         if not self._controls:
@@ -553,14 +609,39 @@ class Ocp:
             self._check_symbols(r, f"terminal constraint {i}", "xp")
         if self._options["hessian"] == "gauss-newton" and not self._stage_ls:
             raise OcpError("options: hessian='gauss-newton' needs stage_least_squares")
-        x0 = self.x0_array(nx)
+        x0 = self._full_vector(self._x0, nx, "initial state")
         N = self._N
-        self.guess_arrays(nx, nu, N, x0)
-        if self._scenario is not None:
-            self._validate_scenario(nx)
+        gx, gu = self._guess_arrays(nx, nu, N, x0)
+        closed_loop = self._validate_scenario(nx) if self._scenario is not None else None
+        return self._spec_parts(x0, gx, gu, closed_loop)
 
-    def x0_array(self, nx: int) -> np.ndarray:
-        return self._full_vector(self._x0, nx, "initial state")
+    def _spec_parts(self, x0, gx, gu, closed_loop) -> OcpSpec:
+        """The immutable spec from declarations that passed validation."""
+        def variables(decls):
+            return tuple(Variable(d.name, d.size, d.sym) for d in decls)
+
+        def bounds(decls, which):
+            return readonly(np.concatenate([getattr(d, which) for d in decls]))
+
+        p_default = np.concatenate([d.value for d in self._params]) if self._params else np.zeros(0)
+        model = ModelSpec(states=variables(self._states), controls=variables(self._controls),
+                          parameters=variables(self._params), xdot=self._xdot,
+                          integrator=copy.copy(self._integrator), p_default=readonly(p_default))
+        cost = CostSpec(
+            stage_terms=tuple(self._stage_costs),
+            stage_least_squares=tuple(LeastSquares(r, readonly(W)) for r, W in self._stage_ls),
+            terminal_terms=tuple(self._term_costs),
+            terminal_least_squares=tuple(LeastSquares(r, readonly(W)) for r, W in self._term_ls))
+        constraints = ConstraintSpec(
+            lbx=bounds(self._states, "lb"), ubx=bounds(self._states, "ub"),
+            lbu=bounds(self._controls, "lb"), ubu=bounds(self._controls, "ub"),
+            path=tuple(Rows(g, readonly(lb), readonly(ub)) for g, lb, ub in self._path),
+            terminal=tuple(Rows(r, readonly(lb), readonly(ub)) for r, lb, ub in self._term_con))
+        return OcpSpec(name=self.name, model=model, cost=cost, constraints=constraints,
+                       horizon=HorizonSpec(N=self._N, dt=self._dt),
+                       options=OptionsSpec(**self._options), x0=readonly(x0),
+                       guess=GuessSpec(x=readonly(gx), u=readonly(gu)),
+                       scenario=ScenarioPart(disturbance=self._disturbance, closed_loop=closed_loop))
 
     @staticmethod
     def _full_vector(value, n: int, what: str) -> np.ndarray:
@@ -575,7 +656,7 @@ class Ocp:
             raise OcpError(f"{what}: non-finite value (NaN or inf) at row {int(np.flatnonzero(~np.isfinite(a))[0])}")
         return a
 
-    def guess_arrays(self, nx: int, nu: int, N: int, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _guess_arrays(self, nx: int, nu: int, N: int, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The initial guess as (N+1, nx), (N, nu) arrays; defaults: x0 everywhere, u = 0
         clipped into the control bounds."""
         def full(value, rows, n, what, default):
@@ -606,7 +687,7 @@ class Ocp:
         gu = full(self._guess_u, N, nu, "initial guess u", np.clip(np.zeros(nu), lbu, ubu))
         return gx, gu
 
-    def _validate_scenario(self, nx: int) -> None:
+    def _validate_scenario(self, nx: int) -> ClosedLoopSpec:
         sc = self._scenario
         try:
             dur = float(sc["duration"])
@@ -614,6 +695,7 @@ class Ocp:
             raise OcpError(f"scenario: duration must be a number, got {sc['duration']!r}") from None
         if not math.isfinite(dur) or dur <= 0:
             raise OcpError(f"scenario: duration must be positive and finite, got {sc['duration']!r}")
+        events = []
         for i, ev in enumerate(sc["events"]):
             if not isinstance(ev, Event):
                 raise OcpError(f"scenario event {i}: expected Event(time, fn, label), got {type(ev).__name__}")
@@ -625,18 +707,24 @@ class Ocp:
                 raise OcpError(f"scenario event {i} ('{ev.label}'): time must be a number") from None
             if not (0 <= t <= dur):
                 raise OcpError(f"scenario event {i} ('{ev.label}'): time {t} outside [0, {dur}]")
+            events.append(Event(time=t, fn=ev.fn, label=ev.label))
+        signals = []
         for name, expr in sc["signals"].items():
             if not isinstance(name, str) or not name:
                 raise OcpError(f"scenario signal {name!r}: the name must be a non-empty string")
             e = _as_sx(expr, f"scenario signal '{name}'")
             self._check_symbols(e, f"scenario signal '{name}'", "xup")
+            signals.append((name, e))
+        plant = None
         if sc["plant"] is not None:
-            e = _as_sx(sc["plant"], "scenario plant")
-            if e.size1() != nx:
-                raise OcpError(f"scenario plant: expected {nx} rows (one per state), got {e.size1()}")
-            self._check_symbols(e, "scenario plant", "xup")
+            plant = _as_sx(sc["plant"], "scenario plant")
+            if plant.size1() != nx:
+                raise OcpError(f"scenario plant: expected {nx} rows (one per state), got {plant.size1()}")
+            self._check_symbols(plant, "scenario plant", "xup")
+        x0 = None
         if sc["x0"] is not None:
-            self._full_vector(sc["x0"], nx, "scenario x0")
+            x0 = readonly(self._full_vector(sc["x0"], nx, "scenario x0"))
+        return ClosedLoopSpec(duration=dur, events=tuple(events), signals=tuple(signals), plant=plant, x0=x0)
 
 
 # --------------------------------------------------------------------------- loading

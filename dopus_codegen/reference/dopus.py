@@ -193,6 +193,10 @@ class ReferenceDopus:
     def _slot(self, k: int) -> int:
         return (self.ring_head + k) % self.N
 
+    def slot_of(self, k: int):
+        """The ring-buffer slot that holds stage ``k`` (``slots[(ring_head + k) mod N]``)."""
+        return self.slots[self._slot(k)]
+
     def _stage_hess_eval(self, k, x, u, lam, mu_g):
         A, Phi, C = self._stage_hess(x[k], u[k], self.p[k], lam[k + 1], mu_g[k])
         A = np.array(A, float).reshape(self.nw, self.nw)

@@ -17,6 +17,8 @@ flip. ``tests/test_offline.py`` checks this through the KKT measure.
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import casadi as ca
 
@@ -109,12 +111,18 @@ def _gn_hess_lag(disc, V, P, ng_total, xk, uk, pk):
                        ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
 
 
+# The IPOPT solvers already built, per problem and (hessian, tol, max_iter): building one
+# takes longer than solving with it. The memo belongs to this module; an entry lives as
+# long as its (immutable) problem.
+_SOLVERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
 def _solver(disc, hessian: str, tol: float, max_iter: int):
-    key = ("ipopt", hessian, float(tol), int(max_iter))
-    cache = disc.cache
-    if key not in cache:
-        cache[key] = _build_solver(disc, hessian, tol, max_iter)
-    return cache[key]
+    key = (hessian, float(tol), int(max_iter))
+    memo = _SOLVERS.setdefault(disc, {})
+    if key not in memo:
+        memo[key] = _build_solver(disc, hessian, tol, max_iter)
+    return memo[key]
 
 
 def solve_ocp(disc, xhat0, guess: Guess | None = None, tol: float = 1e-12, hessian: str = "exact",

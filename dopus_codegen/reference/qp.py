@@ -41,7 +41,7 @@ terminal ``HN x_N + gN + lam_N + R' mu_r + Req' nu + mu_bN = 0``; ``lam_0``
 multiplies ``x_0 - x0``.
 
 Why IPOPT plus an active-set polish: the QPs of the exact-Hessian DOPUS iteration
-have indefinite stage blocks whose reduced Hessian is positive definite (DESIGN.md
+have indefinite stage blocks whose reduced Hessian is positive definite (docs/design.md
 section 8). Convex conic solvers (clarabel, piqp) reject them, and a convexification
 that provably keeps the solution must know the active set, which is what we are
 looking for. IPOPT (through CasADi) takes the nonconvex QP as it is and corrects the
@@ -65,7 +65,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["QPError", "QPInfeasibleError", "solve_qp_reference", "qp_kkt_residual", "check_qp",
-           "qp_reduced_hessian_min_eig"]
+           "qp_reduced_hessian_min_eig", "flatten_qp", "flatten_solution"]
 
 
 class QPError(RuntimeError):
@@ -135,7 +135,9 @@ class _Rows:
     ubz: np.ndarray
 
 
-def _flatten(q: dict):
+def flatten_qp(q: dict):
+    """The stage-wise QP ``q`` as one sparse problem: ``(Hz, gz, rows)`` over the stacked
+    ``z = (w_0, ..., w_{N-1}, x_N)``."""
     N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
     nw = nx + nu
     nz = N * nw + nx
@@ -194,7 +196,9 @@ def _unflatten(q: dict, z, y_eq, y_in, mu_z) -> dict:
     }
 
 
-def _flatten_sol(q: dict, sol: dict):
+def flatten_solution(q: dict, sol: dict):
+    """A stage-wise solution of ``q`` as ``(z, y_eq, y_in, mu_z)`` in the layout of
+    :func:`flatten_qp`."""
     N, nx, nu, ng = q["N"], q["nx"], q["nu"], q["ng"]
     z = np.concatenate([np.hstack([sol["x"][:N], sol["u"]]).reshape(-1), sol["x"][N]])
     y_eq = np.concatenate([np.asarray(sol["lam"]).reshape(-1), np.asarray(sol["nu"]).reshape(-1)])
@@ -447,7 +451,7 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True) -> dict
     """
     t0 = time.perf_counter()
     q = check_qp(qp)
-    Hz, gz, rows = _flatten(q)
+    Hz, gz, rows = flatten_qp(q)
     z, y_eq, y_in, mu_z, status, iters = _solve_ipopt(q, Hz, gz, rows)
     if status in ("Infeasible_Problem_Detected", "Restoration_Failed"):
         raise QPInfeasibleError(f"QP is infeasible (IPOPT: {status})")
@@ -481,8 +485,8 @@ def qp_reduced_hessian_min_eig(qp: dict, sol: dict, tol: float = 1e-9) -> float:
     import scipy.linalg as sla
 
     q = check_qp(qp)
-    Hz, gz, rows = _flatten(q)
-    z, _, y_in, mu_z = _flatten_sol(q, sol)
+    Hz, gz, rows = flatten_qp(q)
+    z, _, y_in, mu_z = flatten_solution(q, sol)
     act_z = np.nonzero(np.abs(mu_z) > tol)[0]
     act_in = np.nonzero(np.abs(y_in) > tol)[0]
     A = np.vstack([rows.A_eq.toarray(), rows.A_in.toarray()[act_in], np.eye(Hz.shape[0])[act_z]])

@@ -2,7 +2,7 @@
 
 :class:`CSolver` implements the backend protocol of docs/algorithm.md section 7, so the
 convergence study (``dopus-gen converge --backend c``) and the software-in-the-loop runs
-drive the generated C exactly as they drive :class:`~dopus_codegen.reference.ReferenceDopus`::
+drive the generated C exactly as they drive :class:`~dopus_codegen.reference.dopus.ReferenceDopus`::
 
     solver = CSolver(disc, M=1)                 # generate + build into a cache, then load
     solver.init(xhat0)                          # the OCP file's guess
@@ -204,6 +204,11 @@ class CSolver:
     # ------------------------------------------------------------------ plumbing
     def _c(self, fname: str):
         return getattr(self._lib, f"{self.name}_{fname}")
+
+    def call_c(self, fname: str, *args) -> int:
+        """``<name>_<fname>(solver, *args)`` called directly, without the checks of the
+        Python setters; returns the C status (for tests of the C side's own checks)."""
+        return int(self._c(fname)(self._s, *args))
 
     def _status_text(self, status: int) -> str:
         return self._ffi.string(self._c("status_string")(int(status))).decode()
@@ -503,6 +508,11 @@ class CSolver:
         cb = self._ffi.callback("double(void *)", lambda _ctx: float(clock()))
         self._clock_cb = cb
         self._c("set_clock")(self._s, cb, self._ffi.NULL)
+
+    @property
+    def has_clock(self) -> bool:
+        """True if the timings measure time (False: no clock on this platform, they read 0)."""
+        return bool(self._c("has_clock")(self._s))
 
     def __repr__(self) -> str:
         return (f"CSolver({self.name!r}, N={self.N}, M={self.M}, mode={self.mode!r}, "

@@ -29,7 +29,7 @@ the run with the largest ``M``).
 
 ``cost_hessian`` (docs/algorithm.md section 4 step 5): ``fresh`` (default) refreshes the
 stage-cost Hessian of every stage in every iteration; ``stored`` is the paper's literal
-algorithm, whose warm-start study is the paper's figure 1 and DESIGN.md section 8.
+algorithm, whose warm-start study is the paper's figure 1 and docs/design.md section 8.
 """
 from __future__ import annotations
 
@@ -57,18 +57,19 @@ class StartPoint:
 def make_start(disc, start: str, solve_ocp: Optional[Callable] = None) -> StartPoint:
     """The ``cold`` or ``warm`` start of the module docstring.
 
-    ``solve_ocp`` (default :func:`dopus_codegen.offline.solve_ocp`) is called as
+    ``solve_ocp`` (default :func:`dopus_codegen.reference.offline.solve_ocp`) is called as
     ``solve_ocp(disc, xhat0) -> (Guess, info)`` for the warm start.
     """
     x0 = np.array(disc.x0, dtype=float)
     if start == "cold":
         return StartPoint("cold", x0, disc.initial_guess, x0.copy())
     if start == "warm":
-        if disc.disturbance is None:
+        disturbance = disc.scenario.disturbance
+        if disturbance is None:
             raise ValueError(f"{disc.name}: --start warm needs a disturbance map "
                              f"(ocp.disturbance(fn) in the OCP file)")
         try:
-            xf = np.array(disc.disturbance(x0.copy()), dtype=float).reshape(-1)
+            xf = np.array(disturbance(x0.copy()), dtype=float).reshape(-1)
         except Exception as exc:  # noqa: BLE001 - user code
             raise ValueError(f"{disc.name}: the disturbance map failed on the initial state: "
                              f"{type(exc).__name__}: {exc}") from None
@@ -94,8 +95,8 @@ def backend_factory(backend: str) -> Callable:
         try:
             from ..runtime.solver import CSolver
         except ImportError as exc:
-            raise RuntimeError(f"backend 'c' is not available: dopus_codegen.solver.CSolver cannot be "
-                               f"imported ({exc})") from None
+            raise RuntimeError("backend 'c' is not available: dopus_codegen.runtime.solver.CSolver "
+                               f"cannot be imported ({exc})") from None
         return CSolver
     raise ValueError(f"backend must be 'reference' or 'c', got {backend!r}")
 
@@ -137,7 +138,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
 
     ``start``: a :class:`StartPoint` or ``"cold"`` / ``"warm"`` (see :func:`make_start`).
     ``backend_factory(disc, M=, mode="fixed", hessian=, regularization=, reg_eps=,
-    cost_hessian=)`` builds a backend (default: :class:`~dopus_codegen.reference.ReferenceDopus`).
+    cost_hessian=)`` builds a backend (default: :class:`~dopus_codegen.reference.dopus.ReferenceDopus`).
     ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
     """
     from ..reference.dopus import DopusError, ReferenceDopus

@@ -1,6 +1,6 @@
 """Figures of the software-in-the-loop runs (paper figures 2 to 4 and the DOPUS internals).
 
-Every function takes the run records of :func:`dopus_codegen.sil.run_closed_loop` (plain
+Every function takes the run records of :func:`dopus_codegen.studies.sil.run_closed_loop` (plain
 dicts, so a JSON file written by ``dopus-gen sil --json`` can be plotted again), draws all
 runs on the same axes where that reads well, and marks the scenario events on every time
 axis. Files are PNG, written with the non-interactive Agg backend.

@@ -44,7 +44,7 @@ _PROGRESS_AFTER = 2.0
 def default_lm(disc) -> float:
     """The Levenberg-Marquardt term of the closed loop when none is given: the OCP file's
     ``options(lm=...)``, else 0 (docs/algorithm.md section 3; README "Closed loop")."""
-    return float((getattr(disc, "options", None) or {}).get("lm", 0.0))
+    return float(disc.spec.options.lm)
 
 
 class SilError(RuntimeError):
@@ -139,7 +139,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     control, ``kkt`` the KKT measure right after feedback), and ``aborted`` (None or why the
     run stopped early).
     """
-    spec = getattr(disc, "scenario_spec", None)
+    spec = disc.scenario.closed_loop
     if spec is None:
         raise SilError("the OCP declares no closed-loop scenario: call ocp.scenario(duration, events=..., "
                        "signals=...) in its build()")
@@ -157,7 +157,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     if lm is None:
         lm = default_lm(disc)
     p = _default_parameters(disc)
-    x = np.asarray(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
+    x = np.array(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
     if x.size != nx:
         raise SilError(f"scenario x0 has {x.size} entries, expected nx = {nx}")
     plant_ode = spec.plant_ode if spec.plant_ode is not None else disc.ode
@@ -306,8 +306,8 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                      "lm": float(getattr(backend_obj, "lm", lm)),
                      "plant": "CVODES (Adams, reltol = abstol = 1e-10)",
                      "lbu": list(lbu), "ubu": list(ubu),
-                     "u_labels": list(getattr(disc, "control_names", []) or []) or None,
-                     "x_labels": list(getattr(disc, "state_names", []) or []) or None,
+                     "u_labels": list(disc.data.control_names) or None,
+                     "x_labels": list(disc.data.state_names) or None,
                      "plane": list(_plane_signals(spec)) if _plane_signals(spec) else None},
         "aborted": aborted,
     }
@@ -469,13 +469,13 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
 
     ocp = load_ocp(ocp_file)
     disc = build_functions(ocp)
-    if getattr(disc, "scenario_spec", None) is None:
+    if disc.scenario.closed_loop is None:
         raise SilError(f"{ocp_file}: the OCP declares no closed-loop scenario (ocp.scenario(...))")
-    if hessian == "gauss-newton" and getattr(disc, "stage_hess_gn", True) is None:
+    if hessian == "gauss-newton" and not disc.functions.has_gn:
         raise SilError(f"{ocp_file}: --hessian gauss-newton needs a least-squares stage cost "
                        "(ocp.stage_least_squares)")
-    spec = disc.scenario_spec
-    x0 = np.asarray(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
+    spec = disc.scenario.closed_loop
+    x0 = np.array(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
 
     from ..reference.offline import solve_ocp
     guess, info = solve_ocp(disc, x0)

@@ -2,6 +2,9 @@
 #
 # CMake fragment: include(robot_arm.cmake) defines the static library target `robot_arm`;
 # link it with target_link_libraries(<your target> PRIVATE robot_arm).
+# Cross-compiling for firmware (a CMake toolchain file for arm-none-eabi-gcc) needs nothing
+# else: no macro, no allocator. The phase timings have no default clock on bare metal
+# (they read 0 and robot_arm_has_clock() says so): install one with robot_arm_set_clock().
 set(ROBOT_ARM_DIR "${CMAKE_CURRENT_LIST_DIR}")
 
 add_library(robot_arm STATIC

@@ -114,5 +114,10 @@ int robot_arm_get_ring_head(const robot_arm_solver *s);
  * rho, hessians, regularization, assembly, kkt; indices of enum robot_arm_phase). init fills
  * the phases it runs too. "hessians" includes the stage-cost Hessians A_l. */
 void robot_arm_get_timings(const robot_arm_solver *s, double *t);
-/* Replace the clock (seconds, any origin); NULL restores the default clock. */
+/* Replace the clock (seconds, any origin); NULL restores the default clock. The default
+ * clock is CLOCK_MONOTONIC where the platform has POSIX timers; on bare metal there is none
+ * and every timing reads 0 until a clock is installed (robot_arm_timer.h). */
 void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), void *ctx);
+/* 1 if the timings measure time (a clock was installed, or the default clock exists on
+ * this platform), 0 if they read 0 for want of a clock. */
+int robot_arm_has_clock(const robot_arm_solver *s);

@@ -28,7 +28,7 @@ extern const double robot_arm_default_lm;            /* Levenberg-Marquardt term
 
 #if ROBOT_ARM_HAS_NOMINAL
 /* offline primal-dual solution at robot_arm_x0_default (IPOPT at generation time), so the
- * controller starts warm (DESIGN.md section 8) */
+ * controller starts warm (docs/design.md section 8) */
 extern const double robot_arm_nominal_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
 extern const double robot_arm_nominal_u[ROBOT_ARM_N][ROBOT_ARM_NU];
 extern const double robot_arm_nominal_lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX];

@@ -1,4 +1,4 @@
-/* The ring buffer of stage slots (DESIGN.md section 5, docs/algorithm.md section 4).
+/* The ring buffer of stage slots (docs/design.md section 5, docs/algorithm.md section 4).
  *
  * Stage k lives in slot (ring_head + k) mod N. The receding-horizon shift advances
  * ring_head, so the sensitivities of stage k+1 become those of stage k without a copy and

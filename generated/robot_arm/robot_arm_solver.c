@@ -1081,3 +1081,11 @@ void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), voi
     s->timer.clock = clock_fn ? clock_fn : robot_arm_timer_default_clock;
     s->timer.ctx = clock_fn ? ctx : 0;
 }
+
+int robot_arm_has_clock(const robot_arm_solver *s)
+{
+    if (s->timer.clock == 0) {
+        return 0;
+    }
+    return s->timer.clock != robot_arm_timer_default_clock || robot_arm_timer_has_default_clock();
+}

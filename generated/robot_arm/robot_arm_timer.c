@@ -1,10 +1,24 @@
-/* Phase timers: the POSIX monotonic clock behind ROBOT_ARM_CLOCK_POSIX. */
-/* clock_gettime is POSIX, not C99: request it before any header. */
+/* Phase timers: the default clock is POSIX clock_gettime(CLOCK_MONOTONIC) where the
+ * preprocessor finds POSIX timers, and no clock (reads 0) elsewhere; see robot_arm_timer.h. */
+/* clock_gettime is POSIX, not C99: request it before any header (harmless without POSIX). */
 #ifndef _POSIX_C_SOURCE
 #define _POSIX_C_SOURCE 199309L
 #endif
 
 #include "robot_arm_timer.h"
+
+#ifndef ROBOT_ARM_CLOCK_POSIX
+/* Only Unix-like systems have <unistd.h>; it tells whether the monotonic clock exists. */
+#if defined(__unix__) || defined(__unix) || (defined(__APPLE__) && defined(__MACH__))
+#include <unistd.h>
+#if defined(_POSIX_TIMERS) && (_POSIX_TIMERS > 0) && defined(_POSIX_MONOTONIC_CLOCK)
+#define ROBOT_ARM_CLOCK_POSIX 1
+#endif
+#endif
+#endif
+#ifndef ROBOT_ARM_CLOCK_POSIX
+#define ROBOT_ARM_CLOCK_POSIX 0
+#endif
 
 #if ROBOT_ARM_CLOCK_POSIX
 #include <time.h>
@@ -24,6 +38,11 @@ double robot_arm_timer_default_clock(void *ctx)
 #else
     return 0.0;
 #endif
+}
+
+int robot_arm_timer_has_default_clock(void)
+{
+    return ROBOT_ARM_CLOCK_POSIX ? 1 : 0;
 }
 
 void robot_arm_timer_init(robot_arm_timer *tm)

@@ -1,16 +1,17 @@
 /* Phase timers of the DOPUS runtime.
  *
- * The runtime reads time through a user-replaceable clock (seconds as a double,
- * any origin). The default clock is POSIX clock_gettime(CLOCK_MONOTONIC); compile
- * with -DROBOT_ARM_CLOCK_POSIX=0 on targets without POSIX, then the default clock
- * reads 0 and firmware installs its own with robot_arm_set_clock().
+ * The runtime reads time through a clock hook (seconds as a double, any origin) that the
+ * user installs with robot_arm_set_clock(). The default clock needs no macro:
+ * - where the preprocessor finds POSIX timers (a Unix-like system whose <unistd.h> defines
+ *   _POSIX_TIMERS > 0 and _POSIX_MONOTONIC_CLOCK), it is clock_gettime(CLOCK_MONOTONIC);
+ * - anywhere else (bare-metal toolchains such as arm-none-eabi with newlib) there is no
+ *   default clock: it reads 0, every phase time reads 0, and robot_arm_timer_has_default_clock()
+ *   and robot_arm_has_clock() say so. Firmware installs its own clock (a cycle counter, a
+ *   hardware timer) with robot_arm_set_clock().
+ * -DROBOT_ARM_CLOCK_POSIX=0 forces the no-clock default, -DROBOT_ARM_CLOCK_POSIX=1 forces POSIX.
  */
 #ifndef ROBOT_ARM_TIMER_H
 #define ROBOT_ARM_TIMER_H
-
-#ifndef ROBOT_ARM_CLOCK_POSIX
-#define ROBOT_ARM_CLOCK_POSIX 1
-#endif
 
 /* Phases timed per call (seconds of the last call that ran the phase). */
 enum robot_arm_phase {
@@ -34,8 +35,10 @@ typedef struct {
     double t[ROBOT_ARM_N_PHASES];
 } robot_arm_timer;
 
-/* The default clock: CLOCK_MONOTONIC in seconds (0 when ROBOT_ARM_CLOCK_POSIX is 0). */
+/* The default clock: CLOCK_MONOTONIC in seconds where POSIX timers exist, else 0. */
 double robot_arm_timer_default_clock(void *ctx);
+/* 1 if the default clock measures time on this platform (POSIX timers), 0 if it reads 0. */
+int robot_arm_timer_has_default_clock(void);
 
 void robot_arm_timer_init(robot_arm_timer *tm);
 double robot_arm_timer_now(const robot_arm_timer *tm);

@@ -2,6 +2,9 @@
 #
 # CMake fragment: include(unicycle.cmake) defines the static library target `unicycle`;
 # link it with target_link_libraries(<your target> PRIVATE unicycle).
+# Cross-compiling for firmware (a CMake toolchain file for arm-none-eabi-gcc) needs nothing
+# else: no macro, no allocator. The phase timings have no default clock on bare metal
+# (they read 0 and unicycle_has_clock() says so): install one with unicycle_set_clock().
 set(UNICYCLE_DIR "${CMAKE_CURRENT_LIST_DIR}")
 
 add_library(unicycle STATIC

@@ -28,7 +28,7 @@ extern const double unicycle_default_lm;            /* Levenberg-Marquardt term,
 
 #if UNICYCLE_HAS_NOMINAL
 /* offline primal-dual solution at unicycle_x0_default (IPOPT at generation time), so the
- * controller starts warm (DESIGN.md section 8) */
+ * controller starts warm (docs/design.md section 8) */
 extern const double unicycle_nominal_x[UNICYCLE_N + 1][UNICYCLE_NX];
 extern const double unicycle_nominal_u[UNICYCLE_N][UNICYCLE_NU];
 extern const double unicycle_nominal_lam[UNICYCLE_N + 1][UNICYCLE_NX];

@@ -1081,3 +1081,11 @@ void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void 
     s->timer.clock = clock_fn ? clock_fn : unicycle_timer_default_clock;
     s->timer.ctx = clock_fn ? ctx : 0;
 }
+
+int unicycle_has_clock(const unicycle_solver *s)
+{
+    if (s->timer.clock == 0) {
+        return 0;
+    }
+    return s->timer.clock != unicycle_timer_default_clock || unicycle_timer_has_default_clock();
+}

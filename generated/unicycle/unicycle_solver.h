@@ -146,8 +146,13 @@ int unicycle_get_ring_head(const unicycle_solver *s);
  * rho, hessians, regularization, assembly, kkt; indices of enum unicycle_phase). init fills
  * the phases it runs too. "hessians" includes the stage-cost Hessians A_l. */
 void unicycle_get_timings(const unicycle_solver *s, double *t);
-/* Replace the clock (seconds, any origin); NULL restores the default clock. */
+/* Replace the clock (seconds, any origin); NULL restores the default clock. The default
+ * clock is CLOCK_MONOTONIC where the platform has POSIX timers; on bare metal there is none
+ * and every timing reads 0 until a clock is installed (unicycle_timer.h). */
 void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void *ctx);
+/* 1 if the timings measure time (a clock was installed, or the default clock exists on
+ * this platform), 0 if they read 0 for want of a clock. */
+int unicycle_has_clock(const unicycle_solver *s);
 /* UNICYCLE_CDEF_END */
 
 /* Status codes returned by the functions above. */

@@ -1,16 +1,17 @@
 /* Phase timers of the DOPUS runtime.
  *
- * The runtime reads time through a user-replaceable clock (seconds as a double,
- * any origin). The default clock is POSIX clock_gettime(CLOCK_MONOTONIC); compile
- * with -DUNICYCLE_CLOCK_POSIX=0 on targets without POSIX, then the default clock
- * reads 0 and firmware installs its own with unicycle_set_clock().
+ * The runtime reads time through a clock hook (seconds as a double, any origin) that the
+ * user installs with unicycle_set_clock(). The default clock needs no macro:
+ * - where the preprocessor finds POSIX timers (a Unix-like system whose <unistd.h> defines
+ *   _POSIX_TIMERS > 0 and _POSIX_MONOTONIC_CLOCK), it is clock_gettime(CLOCK_MONOTONIC);
+ * - anywhere else (bare-metal toolchains such as arm-none-eabi with newlib) there is no
+ *   default clock: it reads 0, every phase time reads 0, and unicycle_timer_has_default_clock()
+ *   and unicycle_has_clock() say so. Firmware installs its own clock (a cycle counter, a
+ *   hardware timer) with unicycle_set_clock().
+ * -DUNICYCLE_CLOCK_POSIX=0 forces the no-clock default, -DUNICYCLE_CLOCK_POSIX=1 forces POSIX.
  */
 #ifndef UNICYCLE_TIMER_H
 #define UNICYCLE_TIMER_H
-
-#ifndef UNICYCLE_CLOCK_POSIX
-#define UNICYCLE_CLOCK_POSIX 1
-#endif
 
 /* Phases timed per call (seconds of the last call that ran the phase). */
 enum unicycle_phase {
@@ -34,8 +35,10 @@ typedef struct {
     double t[UNICYCLE_N_PHASES];
 } unicycle_timer;
 
-/* The default clock: CLOCK_MONOTONIC in seconds (0 when UNICYCLE_CLOCK_POSIX is 0). */
+/* The default clock: CLOCK_MONOTONIC in seconds where POSIX timers exist, else 0. */
 double unicycle_timer_default_clock(void *ctx);
+/* 1 if the default clock measures time on this platform (POSIX timers), 0 if it reads 0. */
+int unicycle_timer_has_default_clock(void);
 
 void unicycle_timer_init(unicycle_timer *tm);
 double unicycle_timer_now(const unicycle_timer *tm);

@@ -366,7 +366,7 @@ def compare(a, b, keys=("x", "u", "lam", "mu_b", "mu_bN", "mu_g", "mu_r", "nu"))
     return out
 
 
-def _recompute_gradients(qp, sol):
+def recompute_gradients(qp, sol):
     """Set g, gN so that the stationarity conditions hold exactly at sol."""
     N, nx, nu = (int(qp[k]) for k in ("N", "nx", "nu"))
     for k in range(N):
@@ -399,7 +399,7 @@ def make_indefinite(qp, sol, frac=0.6):
     for k in range(1, N):
         qp["H"][k][:nx, :nx] -= gamma * np.eye(nx)
     qp["HN"] = qp["HN"] - gamma * np.eye(nx)
-    _recompute_gradients(qp, sol)
+    recompute_gradients(qp, sol)
     P2 = stacked(qp)[0]
     block_min = min(np.linalg.eigvalsh(qp["H"][k]).min() for k in range(N))
     block_min = min(block_min, np.linalg.eigvalsh(qp["HN"]).min())

@@ -1,0 +1,233 @@
+"""The validated problem: a public, immutable specification made of small frozen parts.
+
+:meth:`~dopus_codegen.problem.ocp.Ocp.validate` returns an :class:`OcpSpec`; everything
+after it (:func:`~dopus_codegen.problem.discretize.discretize`,
+:func:`~dopus_codegen.problem.derivatives.build_functions`) reads only this object, never
+the :class:`Ocp` that declared it.
+
+Immutability: every part is a frozen dataclass (assigning a field raises
+``dataclasses.FrozenInstanceError``), sequences are tuples, and every numpy array is a
+read-only copy (writing into it raises ``ValueError``). The CasADi expressions are the
+SX objects the OCP was declared with, and the callables (event maps, the disturbance)
+are the user's functions: both are shared, not copied.
+
+Conventions are those of docs/algorithm.md section 1: ``w = (x, u)`` stacks states and
+controls in declaration order; state bounds hold on nodes ``1..N``, control bounds and
+path constraints on stages ``0..N-1``; a terminal row with ``lb == ub`` is an equality row.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, Optional, Tuple
+
+import casadi as ca
+import numpy as np
+
+__all__ = [
+    "readonly", "Variable", "ModelSpec", "LeastSquares", "CostSpec", "Rows", "ConstraintSpec",
+    "HorizonSpec", "OptionsSpec", "GuessSpec", "ClosedLoopSpec", "ScenarioPart", "OcpSpec",
+]
+
+
+def readonly(value, shape=None) -> np.ndarray:
+    """A read-only float copy of ``value`` (reshaped to ``shape`` when given)."""
+    a = np.array(value, dtype=float, copy=True)
+    if shape is not None:
+        a = a.reshape(shape)
+    a.setflags(write=False)
+    return a
+
+
+def _labels(variables) -> Tuple[str, ...]:
+    out = []
+    for v in variables:
+        out += [v.name] if v.size == 1 else [f"{v.name}[{i}]" for i in range(v.size)]
+    return tuple(out)
+
+
+def _stack_syms(variables) -> ca.SX:
+    return ca.vertcat(*[v.sym for v in variables]) if variables else ca.SX(0, 1)
+
+
+# --------------------------------------------------------------------------- model
+@dataclass(frozen=True)
+class Variable:
+    """One declared state, control or parameter vector (``sym`` is its SX symbol)."""
+    name: str
+    size: int
+    sym: ca.SX
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """States, controls, parameters, the continuous model ``xdot = f(x, u, p)`` and the
+    integrator that maps it to the interval map ``phi`` (the integrator is a private copy
+    of the declared one). ``p_default (np,)``: the parameters' default values."""
+    states: Tuple[Variable, ...]
+    controls: Tuple[Variable, ...]
+    parameters: Tuple[Variable, ...]
+    xdot: ca.SX
+    integrator: Any
+    p_default: np.ndarray
+
+    @property
+    def x(self) -> ca.SX:
+        return _stack_syms(self.states)
+
+    @property
+    def u(self) -> ca.SX:
+        return _stack_syms(self.controls)
+
+    @property
+    def p(self) -> ca.SX:
+        return _stack_syms(self.parameters)
+
+    @property
+    def nx(self) -> int:
+        return sum(v.size for v in self.states)
+
+    @property
+    def nu(self) -> int:
+        return sum(v.size for v in self.controls)
+
+    @property
+    def np(self) -> int:
+        return sum(v.size for v in self.parameters)
+
+    @property
+    def state_names(self) -> Tuple[str, ...]:
+        """One label per state row: ``name`` or ``name[i]``."""
+        return _labels(self.states)
+
+    @property
+    def control_names(self) -> Tuple[str, ...]:
+        return _labels(self.controls)
+
+    @property
+    def parameter_names(self) -> Tuple[str, ...]:
+        return _labels(self.parameters)
+
+
+# --------------------------------------------------------------------------- cost
+@dataclass(frozen=True)
+class LeastSquares:
+    """A term ``0.5 residual' weights residual`` (``weights`` symmetric positive
+    semidefinite, ``(n, n)`` for a residual of ``n`` rows)."""
+    residual: ca.SX
+    weights: np.ndarray
+
+
+@dataclass(frozen=True)
+class CostSpec:
+    """Stage cost ``l = sum 0.5 r' W r + sum stage_terms`` (per interval, as written) and
+    terminal cost ``E = sum 0.5 r' W r + sum terminal_terms``, terms in declaration order."""
+    stage_terms: Tuple[ca.SX, ...]
+    stage_least_squares: Tuple[LeastSquares, ...]
+    terminal_terms: Tuple[ca.SX, ...]
+    terminal_least_squares: Tuple[LeastSquares, ...]
+
+    @property
+    def has_stage_least_squares(self) -> bool:
+        """True when a Gauss-Newton stage Hessian exists."""
+        return bool(self.stage_least_squares)
+
+
+# --------------------------------------------------------------------------- constraints
+@dataclass(frozen=True)
+class Rows:
+    """Constraint rows ``lb <= expr <= ub`` (infinite entries allowed)."""
+    expr: ca.SX
+    lb: np.ndarray
+    ub: np.ndarray
+
+
+@dataclass(frozen=True)
+class ConstraintSpec:
+    """Simple bounds ``lbx, ubx (nx,)`` (nodes 1..N), ``lbu, ubu (nu,)`` (stages 0..N-1),
+    path rows ``g(x, u, p)`` (stages 0..N-1) and terminal rows ``r(x_N, p)``, each block in
+    declaration order."""
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbu: np.ndarray
+    ubu: np.ndarray
+    path: Tuple[Rows, ...]
+    terminal: Tuple[Rows, ...]
+
+    @property
+    def terminal_equality(self) -> np.ndarray:
+        """Over the stacked terminal rows: True where ``lb == ub`` (an equality row)."""
+        if not self.terminal:
+            eq = np.zeros(0, dtype=bool)
+        else:
+            eq = np.concatenate([b.lb for b in self.terminal]) == np.concatenate([b.ub for b in self.terminal])
+        eq.setflags(write=False)
+        return eq
+
+
+# --------------------------------------------------------------------------- horizon, options
+@dataclass(frozen=True)
+class HorizonSpec:
+    """``N`` shooting intervals of ``dt`` seconds (``dt`` is also the sampling time)."""
+    N: int
+    dt: float
+
+
+@dataclass(frozen=True)
+class OptionsSpec:
+    """The solver defaults declared by ``Ocp.options`` (the generated solver and the
+    commands start from them)."""
+    hessian: str
+    regularization: str
+    reg_eps: float
+    M: int
+    offline_guess: bool
+    lm: float
+
+    def as_dict(self) -> Dict[str, Any]:
+        return {"hessian": self.hessian, "regularization": self.regularization,
+                "reg_eps": self.reg_eps, "M": self.M, "offline_guess": self.offline_guess,
+                "lm": self.lm}
+
+
+@dataclass(frozen=True)
+class GuessSpec:
+    """The declared (cold) initial guess: ``x (N+1, nx)``, ``u (N, nu)``."""
+    x: np.ndarray
+    u: np.ndarray
+
+
+# --------------------------------------------------------------------------- scenario
+@dataclass(frozen=True)
+class ClosedLoopSpec:
+    """The declared closed-loop scenario: ``duration`` seconds, state ``events`` (sorted as
+    declared), recorded ``signals`` ((name, SX expression of x, u, p) pairs), the plant
+    model ``plant`` (None: the model itself) and its initial state ``x0`` (None: the OCP's)."""
+    duration: float
+    events: Tuple[Any, ...]
+    signals: Tuple[Tuple[str, ca.SX], ...]
+    plant: Optional[ca.SX]
+    x0: Optional[np.ndarray]
+
+
+@dataclass(frozen=True)
+class ScenarioPart:
+    """What the studies use beyond the OCP: the ``disturbance`` state map of the
+    warm-start convergence study and the closed-loop scenario of ``dopus-gen sil``."""
+    disturbance: Optional[Callable[[np.ndarray], np.ndarray]]
+    closed_loop: Optional[ClosedLoopSpec]
+
+
+# --------------------------------------------------------------------------- the whole
+@dataclass(frozen=True)
+class OcpSpec:
+    """One validated OCP. ``x0 (nx,)`` is the initial state ``xhat_0`` of the examples, the
+    default guess and the scenario."""
+    name: str
+    model: ModelSpec
+    cost: CostSpec
+    constraints: ConstraintSpec
+    horizon: HorizonSpec
+    options: OptionsSpec
+    x0: np.ndarray
+    guess: GuessSpec
+    scenario: ScenarioPart

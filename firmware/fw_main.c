@@ -1,0 +1,279 @@
+/* The firmware program: the generated solver on a bare-metal target (and, compiled for the
+ * host, the reference its output is compared with).
+ *
+ * fw_problem.h (written by `dopus-gen firmware-report`, dopus_codegen/firmware.py) names the
+ * problem: FW(name) is the generated symbol <problem>_name, FW_C(NAME) the macro
+ * <PROBLEM>_NAME, and it carries the scenario: the disturbed state FW_XHAT_FIXED, the
+ * values of M of the fixed-xhat_0 study, the iteration and step counts.
+ *
+ * 1. Fixed-xhat_0 study (what `dopus-gen converge --start warm` runs): for every M, init
+ *    at the generated nominal solution (the offline solution at the default x0), then
+ *    feedback(xhat_fixed); prepare() FW_FIXED_ITERS times in fixed mode with the
+ *    Levenberg-Marquardt term FW_FIXED_LM; after every iteration the KKT measure, u0, the
+ *    QP iterations, the ticks of feedback and prepare and the stack that iteration used;
+ *    at the end the whole primal solution.
+ * 2. Closed loop: receding mode with the generated defaults, solver at the nominal solution,
+ *    plant state at xhat_fixed; the plant is the generated integrator (the discrete model
+ *    phi); FW_LOOP_STEPS steps of feedback, plant step, prepare.
+ *
+ * Every real number is printed as the hexadecimal bit pattern of its IEEE representation
+ * (16 digits for double, 8 for float): exact, and printed without newlib's printf, whose
+ * floating-point conversion allocates memory (there is no heap). The report tool decodes
+ * them and prints them with %.17g. */
+#include <stdint.h>
+#include <string.h>
+
+#include "fw_problem.h"
+#include "platform.h"
+
+typedef FW(real) fw_real;
+
+static FW(solver) solver;
+static FW(fun_work) plant_work;
+
+/* ---- output without stdio: a line buffer, written at the end of the line ------------- */
+
+static char line[512];
+static int line_len;
+
+static void put_char(char c)
+{
+    if (line_len == (int)sizeof(line)) {      /* a long line goes out in pieces */
+        fw_write(line, line_len);
+        line_len = 0;
+    }
+    line[line_len++] = c;
+}
+
+static void put_str(const char *s)
+{
+    while (*s) {
+        put_char(*s++);
+    }
+}
+
+static void put_int(long v)
+{
+    char digits[24];
+    int n = 0;
+    unsigned long m = v < 0 ? 0ul - (unsigned long)v : (unsigned long)v;
+    if (v < 0) {
+        put_char('-');
+    }
+    do {
+        digits[n++] = (char)('0' + (int)(m % 10ul));
+        m /= 10ul;
+    } while (m && n < (int)sizeof(digits));
+    while (n > 0) {
+        put_char(digits[--n]);
+    }
+}
+
+static void put_hex(uint64_t bits, int digits)
+{
+    static const char hex[] = "0123456789abcdef";
+    int i;
+    put_str("0x");
+    for (i = digits - 1; i >= 0; --i) {
+        put_char(hex[(bits >> (4 * i)) & 0xFu]);
+    }
+}
+
+static void put_real(fw_real v)
+{
+    if (sizeof(fw_real) == 8) {
+        uint64_t b;
+        memcpy(&b, &v, 8);
+        put_hex(b, 16);
+    } else {
+        uint32_t b;
+        memcpy(&b, &v, 4);
+        put_hex(b, 8);
+    }
+}
+
+static void put_reals(const char *label, const fw_real *v, int n)
+{
+    int i;
+    put_char(' ');
+    put_str(label);
+    for (i = 0; i < n; ++i) {
+        put_char(' ');
+        put_real(v[i]);
+    }
+}
+
+static void put_field(const char *label, long v)
+{
+    put_char(' ');
+    put_str(label);
+    put_char(' ');
+    put_int(v);
+}
+
+static void end_line(void)
+{
+    put_char('\n');
+    fw_write(line, line_len);
+    line_len = 0;
+}
+
+/* ---- the program ---------------------------------------------------------------------- */
+
+static const fw_real xhat_fixed[FW_C(NX)] = FW_XHAT_FIXED;
+static const int m_list[] = FW_M_LIST;
+
+static fw_real kkt_max(const fw_real *k4)
+{
+    fw_real m = k4[0];
+    int i;
+    for (i = 1; i < 4; ++i) {
+        m = k4[i] > m || k4[i] != k4[i] ? k4[i] : m;
+    }
+    return m;
+}
+
+/* feedback + prepare with ticks and stack; returns the status */
+static int iteration(const fw_real *xhat, fw_real *u0, uint32_t *t_fb, uint32_t *t_prep,
+                     uint32_t *stack)
+{
+    uint32_t sp = fw_stack_paint();
+    uint32_t t0 = fw_ticks(), t1, t2;
+    int status = FW(feedback)(&solver, xhat, u0);
+    t1 = fw_ticks();
+    if (status == FW_C(OK)) {
+        status = FW(prepare)(&solver);
+    }
+    t2 = fw_ticks();
+    *t_fb = t1 - t0;
+    *t_prep = t2 - t1;
+    *stack = sp ? sp - fw_stack_lowest() : 0u;
+    return status;
+}
+
+static int fixed_study(int M)
+{
+    fw_real u0[FW_C(NU)], k4[4];
+    fw_real x[FW_C(N) + 1][FW_C(NX)], u[FW_C(N)][FW_C(NU)];
+    int k, status;
+    uint32_t t_fb = 0, t_prep = 0, stack = 0;
+
+    memset(u0, 0, sizeof(u0));
+    FW(defaults)(&solver);
+    status = FW(set_mode)(&solver, FW_C(MODE_FIXED));
+    if (status == FW_C(OK)) {
+        status = FW(set_M)(&solver, M);
+    }
+    if (status == FW_C(OK)) {
+        status = FW(set_levenberg_marquardt)(&solver, FW_FIXED_LM);
+    }
+    if (status == FW_C(OK)) {
+        status = FW(init_nominal)(&solver, FW(x0_default));
+    }
+    for (k = 0; k <= FW_FIXED_ITERS; ++k) {
+        if (k > 0 && status == FW_C(OK)) {
+            status = iteration(xhat_fixed, u0, &t_fb, &t_prep, &stack);
+        }
+        if (status == FW_C(OK)) {
+            status = FW(kkt_eval)(&solver, xhat_fixed, k4);
+        }
+        put_str("fixed");
+        put_field("M", M);
+        put_field("iter", k);
+        put_field("status", status);
+        put_field("qp_iters", k > 0 ? FW(get_qp_iterations)(&solver) : 0);
+        put_field("ticks_feedback", (long)t_fb);
+        put_field("ticks_prepare", (long)t_prep);
+        put_field("stack", (long)stack);
+        put_str(" kkt ");
+        put_real(status == FW_C(OK) ? kkt_max(k4) : (fw_real)0);
+        put_reals("u0", u0, FW_C(NU));
+        end_line();
+        if (status != FW_C(OK)) {
+            return status;
+        }
+    }
+    FW(get_x)(&solver, &x[0][0]);
+    FW(get_u)(&solver, &u[0][0]);
+    put_str("solution");
+    put_field("M", M);
+    put_reals("x", &x[0][0], (FW_C(N) + 1) * FW_C(NX));
+    put_reals("u", &u[0][0], FW_C(N) * FW_C(NU));
+    end_line();
+    return 0;
+}
+
+static int closed_loop(void)
+{
+    fw_real xhat[FW_C(NX)], xnext[FW_C(NX)], u0[FW_C(NU)], k4[4], l;
+    fw_real g[FW_C(DIM)(FW_C(NG))];
+    int i, k, status;
+    uint32_t t_fb, t_prep, stack;
+
+    FW(defaults)(&solver);
+    status = FW(init_nominal)(&solver, FW(x0_default));
+    for (i = 0; i < FW_C(NX); ++i) {
+        xhat[i] = xhat_fixed[i];
+    }
+    for (k = 1; k <= FW_LOOP_STEPS && status == FW_C(OK); ++k) {
+        status = iteration(xhat, u0, &t_fb, &t_prep, &stack);
+        /* the plant: the generated integrator from the measured state with the applied u0
+         * (iteration() ran prepare already: the plant step does not touch the solver) */
+        if (status == FW_C(OK)
+            && FW(eval_stage_eval)(xhat, u0, FW(p_default), xnext, &l, g, &plant_work) != 0) {
+            status = FW_C(ERR_FUNCTION);
+        }
+        if (status == FW_C(OK)) {
+            status = FW(kkt_eval)(&solver, xhat, k4);
+        }
+        put_str("loop");
+        put_field("M", FW(get_M)(&solver));
+        put_field("step", k);
+        put_field("status", status);
+        put_field("qp_iters", FW(get_qp_iterations)(&solver));
+        put_field("ticks_feedback", (long)t_fb);
+        put_field("ticks_prepare", (long)t_prep);
+        put_field("stack", (long)stack);
+        put_str(" kkt ");
+        put_real(status == FW_C(OK) ? kkt_max(k4) : (fw_real)0);
+        put_reals("u0", u0, FW_C(NU));
+        put_reals("xhat", xhat, FW_C(NX));
+        end_line();
+        for (i = 0; i < FW_C(NX); ++i) {
+            xhat[i] = xnext[i];
+        }
+    }
+    return status;
+}
+
+int main(void)
+{
+    unsigned i;
+    int status = 0;
+
+    fw_platform_init();
+    FW(defaults)(&solver);
+    put_str("problem ");
+    put_str(FW(name)());
+    put_field("N", FW_C(N));
+    put_field("nx", FW_C(NX));
+    put_field("nu", FW_C(NU));
+    put_field("real_bytes", (long)sizeof(fw_real));
+    put_field("solver_bytes", (long)FW(solver_sizeof)());
+    put_field("default_clock", FW(has_clock)(&solver));
+    put_field("ticks", fw_has_ticks());
+    put_field("instructions_per_tick", (long)FW_INSTRUCTIONS_PER_TICK);
+    put_field("calibration_instructions", (long)FW_CALIBRATION_INSTRUCTIONS);
+    put_field("calibration_ticks", (long)fw_calibration_ticks());
+    end_line();
+    for (i = 0; i < sizeof(m_list) / sizeof(m_list[0]) && status == 0; ++i) {
+        status = fixed_study(m_list[i]);
+    }
+    if (status == 0) {
+        status = closed_loop();
+    }
+    put_str("end");
+    put_field("status", status);
+    end_line();
+    return status == 0 ? 0 : 1;
+}
