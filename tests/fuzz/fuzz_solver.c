@@ -86,7 +86,7 @@ static int rd_int(reader *r)
     uint8_t b[4];
     uint32_t u;
     int i;
-    switch (t % 10) {
+    switch (t % 12) {
     case 0:
         return 0;
     case 1:
@@ -98,17 +98,19 @@ static int rd_int(reader *r)
     case 4:
         return N_;
     case 5:
-        return INT_MAX;
+        return N_ + 1;
     case 6:
-        return INT_MIN;
+        return INT_MAX;
     case 7:
+        return INT_MIN;
+    case 8:
         for (i = 0; i < 4; ++i) {
             b[i] = (uint8_t)rd_u8(r);
         }
         memcpy(&u, b, sizeof u);
         return (int)(u & 0x7fffffffu) * ((t & 16u) ? -1 : 1);
     default:
-        return (int)(t / 10u) - 4; /* small: -4 .. 21 */
+        return (int)(t / 12u) - 4; /* small: -4 .. 17 */
     }
 }
 

@@ -31,11 +31,11 @@ def dbl(v) -> list:
 
 
 def integer(v) -> list:
-    special = {0: 0, 1: 1, -1: 2, "N-1": 3, "N": 4, "INT_MAX": 5, "INT_MIN": 6}
+    special = {0: 0, 1: 1, -1: 2, "N-1": 3, "N": 4, "N+1": 5, "INT_MAX": 6, "INT_MIN": 7}
     if v in special:
         return [special[v]]
-    assert -4 <= v <= 21
-    return [(v + 4) * 10 + 8]
+    assert -4 <= v <= 16
+    return [(v + 4) * 12 + 9]
 
 
 def x0() -> list:
@@ -99,12 +99,13 @@ SEEDS = {
     + setter(SET_MAXIT, integer("INT_MIN")) + setter(SET_LM, dbl(-1.0)) + setter(SET_LM, INF)
     + setter(SET_REG, integer(3), dbl(1e-4)) + setter(SET_REG, integer(2), dbl(0.0))
     + setter(SET_COST, integer(2)) + setter(SET_MODE, integer(2)) + setter(SET_HESSIAN, integer(-1))
-    + setter(SET_P_NODE, [0], integer(-1), [0]) + setter(SET_P_NODE, [0], integer("N"), [0])
+    + setter(SET_P_NODE, [0], integer(-1), [0]) + setter(SET_P_NODE, [0], integer("N+1"), [0])
+    + setter(SET_M, integer("N+1"))
     + setter(SET_P, [1], [0]) + init_nominal(x0()) + step(x0()),
     "zeroed_struct": [ZERO] + feedback(x0()) + [PREPARE] + kkt() + init_nominal(x0()) + step(x0()) + step(x0())
     + [ZERO] + step(x0()),
     "qp_iteration_limit": init_nominal(x0()) + setter(SET_MAXIT, integer(1)) + feedback(xstep(0.05))
-    + [PREPARE] + setter(SET_MAXIT, integer(20)) + step(xstep(0.05)) + step(x0()),
+    + [PREPARE] + setter(SET_MAXIT, integer(16)) + step(xstep(0.05)) + step(x0()),
     "nonfinite_measurements": init_nominal(x0()) + feedback(xentry(0, NAN)) + feedback(xentry(1, INF))
     + feedback(xentry(2, MINF)) + feedback(x0(), null_x=True) + feedback(xentry(0, 1e300)) + [PREPARE]
     + feedback(xentry(1, 1e6)) + [PREPARE] + step(x0()),
