@@ -44,6 +44,7 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 from .generate import CASADI_CFLAGS, STRICT_CFLAGS, read_meta
+from .paths import firmware_dir
 
 __all__ = ["TARGETS", "FirmwareError", "firmware_dir", "toolchain_missing", "setup_toolchain",
            "write_problem_header", "build_target", "link_image", "build_host", "run_qemu", "run_host", "parse_output",
@@ -80,13 +81,6 @@ ALLOCATOR_SYMBOLS = ("malloc", "_malloc_r", "calloc", "_calloc_r", "realloc", "_
 FW_SOURCES = ("fw_main.c", "platform_qemu.c", "startup.c")
 HOST_SOURCES = ("fw_main.c", "platform_host.c")
 OPT = "-O2"
-
-
-def firmware_dir() -> Path:
-    """The ``firmware/`` folder (start-up code, linker script, the program)."""
-    from .paths import _package_dir
-
-    return _package_dir("dopus_codegen.firmware_c", "firmware")
 
 
 def _repo_script() -> Optional[Path]:
