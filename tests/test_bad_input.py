@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from dopus_codegen.problem.ocp import Guess
-from dopus_codegen.runtime.solver import CSolver, DopusError
+from dopus_codegen.runtime.solver import CSolver, DopusError, load_library
 
 OK, QP, NONFINITE_INPUT, INVALID, NOT_INIT, NOT_PREPARED, ALREADY_PREPARED = 0, 1, 2, 5, 6, 7, 10
 FIELDS = ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu")
@@ -165,9 +165,12 @@ def test_c_api_bad_inputs(second_disc, second_solution):
     """The C functions themselves (no Python checks in front): each bad argument gets its
     documented status, the setting or iterate is unchanged, and the next good call works."""
     d = second_disc
-    c = CSolver(d, M=1)
-    ffi, s = c._ffi, c._s
-    fn = c._c
+    c = CSolver(d, M=1)                      # built into the cache; its library is used raw
+    ffi, lib, meta = load_library(c.lib_dir)
+    name = meta["name"]
+    fn = lambda f: getattr(lib, f"{name}_{f}")  # noqa: E731
+    mem = ffi.new("double[]", (int(fn("solver_sizeof")()) + 7) // 8)   # zeroed memory
+    s = ffi.cast(f"{name}_solver *", mem)
     N, nx, np_ = d.N, d.nx, d.np
     dbl = lambda a: ffi.from_buffer("double[]", np.ascontiguousarray(a, dtype=float))  # noqa: E731
     x0 = np.asarray(d.x0, dtype=float)
@@ -182,7 +185,7 @@ def test_c_api_bad_inputs(second_disc, second_solution):
         ("init NaN xhat0", lambda: fn("init")(s, dbl(nan_x), NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL),
          NONFINITE_INPUT),
         ("init_nominal without a generated nominal guess",
-         lambda: fn("init_nominal")(s, dbl(x0)), OK if c.has_nominal else 8),
+         lambda: fn("init_nominal")(s, dbl(x0)), OK if meta.get("has_nominal", c.has_nominal) else 8),
         ("set_M N", lambda: fn("set_M")(s, N), INVALID),
         ("set_M -2147483648", lambda: fn("set_M")(s, -2**31), INVALID),
         ("set_mode -1", lambda: fn("set_mode")(s, -1), INVALID),
@@ -198,19 +201,34 @@ def test_c_api_bad_inputs(second_disc, second_solution):
         ("set_parameters_node N+1", lambda: fn("set_parameters_node")(s, N + 1, dbl(np.zeros(np_))), INVALID),
         ("set_parameters_node NULL", lambda: fn("set_parameters_node")(s, 0, NULL), INVALID),
     ]
-    before = (c.M, c.mode, c.hessian, c.regularization, c.reg_eps, c.cost_hessian, c.lm, c.qp_tol,
-              int(fn("get_qp_max_iter")(s)))
-    p_before = c.p
+    def settings():
+        return tuple(float(fn(f"get_{g}")(s)) for g in ("M", "mode", "hessian", "regularization", "reg_eps",
+                                                         "cost_hessian", "levenberg_marquardt", "qp_tol",
+                                                         "qp_max_iter"))
+
+    def get(f, n):
+        out = np.zeros(n)
+        fn(f"get_{f}")(s, dbl_out(out))
+        return out
+
+    dbl_out = lambda a: ffi.from_buffer("double[]", a)  # noqa: E731
+    guess = second_solution[0]
+
+    def init():
+        return int(fn("init")(s, dbl(x0), dbl(np.ravel(guess.x)), dbl(np.ravel(guess.u)), NULL, NULL, NULL, NULL,
+                              NULL, NULL))
+
+    fn("defaults")(s)
+    before, p_before = settings(), get("parameters", (N + 1) * np_)
     for label, call, status in cases:
         got = int(call())
         assert got == status, f"{label}: status {got}, documented {status}"
         assert int(fn("get_status")(s)) == status
-    assert before == (c.M, c.mode, c.hessian, c.regularization, c.reg_eps, c.cost_hessian, c.lm, c.qp_tol,
-                      int(fn("get_qp_max_iter")(s)))
-    assert np.array_equal(c.p, p_before)
+    assert settings() == before
+    assert np.array_equal(get("parameters", (N + 1) * np_), p_before)
     # initialised: the order and input cases
-    c.init(d.x0, second_solution[0])
-    x_init = c.x
+    assert init() == OK
+    x_init = get("x", (N + 1) * nx)
     more = [
         ("prepare after init", lambda: fn("prepare")(s), ALREADY_PREPARED),
         ("feedback NULL xhat0", lambda: fn("feedback")(s, NULL, dbl(u0)), NONFINITE_INPUT),
@@ -223,8 +241,8 @@ def test_c_api_bad_inputs(second_disc, second_solution):
         got = int(call())
         assert got == status, f"{label}: status {got}, documented {status}"
     # init rejected for its input leaves the solver uninitialised but the iterate unchanged
-    assert np.array_equal(c.x, x_init) and not c.initialized
-    c.init(d.x0, second_solution[0])
+    assert np.array_equal(get("x", (N + 1) * nx), x_init) and not fn("is_initialized")(s)
+    assert init() == OK
     assert int(fn("feedback")(s, dbl(x0), NULL)) == OK
     assert int(fn("feedback")(s, dbl(x0), NULL)) == NOT_PREPARED
     assert int(fn("prepare")(s)) == OK

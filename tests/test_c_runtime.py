@@ -387,7 +387,7 @@ def test_failed_qp_takes_no_step(robot_disc, robot_solution):
     # the sampling instant passes without a step: the failed feedback allows one prepare
     # (docs/algorithm.md section 4, calling order); the reference skipped the feedback, so
     # it is told the instant passed as a failed feedback would
-    r._prepare_due = True
+    r.allow_prepare()
     for b in (c, r):
         b.prepare()
     with pytest.raises(DopusError, match="already prepared") as ei:

@@ -231,7 +231,7 @@ def test_adjoint_correction_keeps_kkt_point_with_stale_blocks(robot_disc, robot_
     ref.x, ref.u = sol.x.copy(), sol.u.copy()
     ref.lam, ref.mu_g, ref.mu_b = sol.lam.copy(), sol.mu_g.copy(), sol.mu_b.copy()
     ref.mu_bN, ref.mu_r, ref.nu = sol.mu_bN.copy(), sol.mu_r.copy(), sol.nu.copy()
-    ref._prepare_due = True                  # the iterate was replaced by hand, as a step would
+    ref.allow_prepare()                      # the iterate was replaced by hand, as a step would
     ref.prepare()                            # F at the solution, blocks of stages 0..N-2 kept (M = 0)
     assert ref.recomputed == [d.N - 1]
     # the stored blocks really are stale

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -185,8 +186,16 @@ def test_fuzz_bounded_run_is_clean(built):
     args = [f"-max_total_time={FUZZ_SECONDS}", "-seed=1", "-timeout=60", "-rss_limit_mb=2048",
             "-print_final_stats=1", f"-artifact_prefix={built['tmp']}/", str(work), str(SB.FUZZ_DIR / "corpus")]
     proc = _fuzz(built, args, FUZZ_SECONDS + 600)
-    crashes = sorted(p.name for p in built["tmp"].glob("crash-*")) + sorted(p.name for p in built["tmp"].glob("timeout-*"))
-    assert not crashes, f"{name}: the fuzzer found {crashes} in {built['tmp']}:\n{proc.stderr[-4000:]}"
+    found = sorted(built["tmp"].glob("crash-*")) + sorted(built["tmp"].glob("timeout-*"))
+    if found:   # kept where the next pytest run does not delete them, and printed
+        keep = SB.ROOT / "out" / "fuzz"
+        keep.mkdir(parents=True, exist_ok=True)
+        kept = []
+        for f in found:
+            shutil.copy(f, keep / f"{name}-{f.name}")
+            kept.append(f"{keep / f'{name}-{f.name}'} ({f.read_bytes().hex()})")
+        pytest.fail(f"{name}: the fuzzer found {len(found)} input(s): " + "; ".join(kept) +
+                    "\nreplay: FUZZ_TRACE=1 <fuzzer> <input>\n" + proc.stderr[-4000:])
     assert_clean(proc, f"{name}: fuzzing")
     stats = dict(re.findall(r"stat::(\w+):\s+(\d+)", proc.stderr))
     runs, per_s = int(stats["number_of_executed_units"]), int(stats["average_exec_per_sec"])

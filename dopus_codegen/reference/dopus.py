@@ -372,6 +372,15 @@ class ReferenceDopus:
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
         return self.u[0].copy()
 
+    def allow_prepare(self) -> None:
+        """Let the next ``prepare`` run although no feedback reached the QP since the last
+        ``init`` or ``prepare``: for a sampling instant whose feedback was skipped (the C
+        runtime allows one prepare after a feedback whose QP failed, which takes no step),
+        or after the iterate was replaced by hand. The calling order of
+        docs/algorithm.md section 4 otherwise refuses it (status 10)."""
+        self._need_init()
+        self._prepare_due = True
+
     # ------------------------------------------------------------------ prepare
     def prepare(self) -> None:
         """Shift (receding), F and rho, fresh last stage and terminal, M worst H, fresh

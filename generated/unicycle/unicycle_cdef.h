@@ -45,7 +45,9 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0);
 int unicycle_prepare(unicycle_solver *s);
 /* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
  * the initial state xhat0 (NULL: the last one given to init or feedback):
- * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed. */
+ * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed.
+ * The parts are >= 0 and never NaN; a part is +Inf when it overflows (an iterate or
+ * multipliers near DBL_MAX, e.g. from an init guess: |mu| * |ub - v| > DBL_MAX). */
 int unicycle_kkt_eval(unicycle_solver *s, const double *xhat0, double *kkt4);
 /* The largest of the four parts of the last unicycle_kkt_eval (NaN before the first). */
 double unicycle_get_kkt(const unicycle_solver *s);
