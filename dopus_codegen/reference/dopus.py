@@ -429,7 +429,12 @@ class ReferenceDopus:
             # a residual at the round-off level of F is noise, not a secant violation
             scale = (np.linalg.norm(np.concatenate([s.F_w, s.phi, s.g]))
                      + np.linalg.norm(np.concatenate([F_w, phi[k], gv[k]])))
-            rho[k] = num / den if den > 0.0 and num > EPS_RHO * scale else 0.0
+            if den == 0.0:
+                rho[k] = 0.0
+            elif not (np.isfinite(num) and np.isfinite(den)):
+                rho[k] = np.inf     # the residual or the step overflows: the stage ranks first
+            else:
+                rho[k] = num / den if num > EPS_RHO * scale else 0.0
             s.F_w = F_w
             s.phi = phi[k].copy()
             s.g = gv[k].copy()

@@ -98,7 +98,8 @@ void unicycle_get_mu_b(const unicycle_solver *s, double *mu_b);
 void unicycle_get_mu_bN(const unicycle_solver *s, double *mu_bN);
 void unicycle_get_mu_r(const unicycle_solver *s, double *mu_r);
 void unicycle_get_nu(const unicycle_solver *s, double *nu);
-/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1). */
+/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1): >= 0, never NaN; +Inf when the
+ * residual or the step of the stage overflows (the stage then ranks first). */
 void unicycle_get_rho(const unicycle_solver *s, double *rho);
 /* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
  * N-1 included; writes up to N ints and returns their count. */

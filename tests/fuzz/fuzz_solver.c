@@ -15,7 +15,7 @@
  *    setting; every setting reads back what the model holds;
  *  - feedback OK: u0 finite, equal to u_0 of the iterate and within the control bounds
  *    (up to the QP tolerance scaled as in dopus_qp.h); prepare OK: the recomputed set has
- *    M + 1 sorted stages ending in N-1, rho finite and >= 0, ring_head advanced by one in
+ *    M + 1 sorted stages ending in N-1, rho >= 0 and never NaN, ring_head advanced by one in
  *    receding mode; kkt OK: four non-negative parts, never NaN; the iterate finite after any
  *    successful call.
  *
@@ -494,7 +494,7 @@ static void do_prepare(void)
             }
             API(get_rho)(&s, rho);
             for (k = 0; k < N_; ++k) {
-                check(isfinite(rho[k]) && rho[k] >= 0.0, "rho finite and >= 0");
+                check(!isnan(rho[k]) && rho[k] >= 0.0, "rho >= 0, not NaN (+Inf: overflow, documented)");
             }
         }
     }
