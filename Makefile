@@ -24,9 +24,9 @@ demo: setup
 	    --json $(OUT)/robot_arm/sil.json --plot-dir $(OUT)/robot_arm
 	$(VENV)/bin/dopus-gen sil $(EXAMPLE) --M 1 --compare full --duration 3.0 --hessian gauss-newton \
 	    --json $(OUT)/robot_arm/gauss-newton/sil.json --plot-dir $(OUT)/robot_arm/gauss-newton
-	$(VENV)/bin/dopus-gen converge $(EXAMPLE) --M full,5,1,0 --iters 40 --start warm --cost-hessian stored \
+	$(VENV)/bin/dopus-gen converge $(EXAMPLE) --M full,5,1,0 --iters 40 --start warm --lm 0 --cost-hessian stored \
 	    --json $(OUT)/robot_arm/converge_stored.json --plot $(OUT)/robot_arm/converge_stored.png
-	$(VENV)/bin/dopus-gen converge $(EXAMPLE) --M full,5,1,0 --iters 40 --start warm --cost-hessian fresh \
+	$(VENV)/bin/dopus-gen converge $(EXAMPLE) --M full,5,1,0 --iters 40 --start warm --lm 0 --cost-hessian fresh \
 	    --json $(OUT)/robot_arm/converge_fresh.json --plot $(OUT)/robot_arm/converge_fresh.png
 	@echo "plots and JSON in $(abspath $(OUT))/robot_arm (Gauss-Newton runs in gauss-newton/)"
 

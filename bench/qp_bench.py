@@ -45,6 +45,11 @@ from pathlib import Path
 
 import numpy as np
 
+from dopus_codegen import vocabulary
+from dopus_codegen.cnames import rename_placeholder
+from dopus_codegen.codegen.flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
+from dopus_codegen.codegen.generate import render_sizes_header
+
 BENCH = Path(__file__).resolve().parent
 ROOT = BENCH.parent
 RUNTIME = ROOT / "runtime_c"
@@ -56,8 +61,7 @@ NX, NU, NE = 5, 3, 2           # the robot arm's sizes (docs/robot_arm.md)
 RANDOM_NS = (10, 20, 40, 80, 160)
 HPIPM_MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
 HPIPM_STATUS = {0: "success", 1: "max_iter", 2: "min_step", 3: "nan", 4: "inconsistent_eq"}
-DOPUS_STATUS = {0: "solved", 1: "max_iter", 2: "primal_infeasible", 3: "dual_infeasible",
-                4: "numerical", 5: "invalid_input"}
+DOPUS_STATUS = {code: name for name, code in vocabulary.qp_status().codes.items()}
 # HPIPM configurations, one column each; the first is the anchor ("as stated").
 # ric_alg -1 keeps the mode's default (square-root Riccati, which needs every Riccati
 # matrix P_k > 0); 0 is the classic Riccati recursion (only the reduced Hessian must be > 0).
@@ -139,8 +143,9 @@ def hpipm_targets(with_casadi: bool) -> dict:
 
 def _rename(text: str) -> str:
     """The code generator's textual prefix renaming (dopus_ -> qpbn_), so a second copy of our
-    solver, compiled with other flags, links into the same program."""
-    return text.replace("bench_dopus", "bench_qpbn").replace("dopus_", "qpbn_").replace("DOPUS_", "QPBN_")
+    solver, compiled with other flags, links into the same program (and the benchmark's own
+    qp_bench_dopus files become qp_bench_qpbn)."""
+    return rename_placeholder(text.replace("bench_dopus", "bench_qpbn"), "qpbn")
 
 
 def _compile(cmd: list) -> None:
@@ -162,10 +167,7 @@ def build_harness(hp_name: str, hp: dict, sizes: dict | None, cflags: str, alt_c
         tag += "_N{N}_nx{nx}_nu{nu}_ng{ng}_nr{nr}_ne{ne}".format(**sizes)
         sdir = BUILD / f"sizes_{tag}"
         sdir.mkdir(exist_ok=True)
-        sizes_h = ("/* sizes of the benchmark build */\n#ifndef DOPUS_SIZES_H\n#define DOPUS_SIZES_H\n"
-                   + "".join(f"#define DOPUS_{k.upper()} {v}\n" for k, v in sizes.items())
-                   + f"#define DOPUS_NW {sizes['nx'] + sizes['nu']}\n#define DOPUS_DIM(n) ((n) > 0 ? (n) : 1)\n"
-                   + "typedef double dopus_real;\n#endif\n")
+        sizes_h = render_sizes_header("dopus", sizes, header="sizes of the benchmark build")
         (sdir / "dopus_sizes.h").write_text(sizes_h)
         incs = [sdir] + incs + [RUNTIME]
         ours = [BENCH / "qp_bench_dopus.c", RUNTIME / "dopus_qp.c", RUNTIME / "dopus_linalg.c"]
@@ -182,7 +184,7 @@ def build_harness(hp_name: str, hp: dict, sizes: dict | None, cflags: str, alt_c
                 (adir / _rename(src.name)).write_text(_rename(src.read_text()))
             for c in ("qp_bench_qpbn.c", "qpbn_qp.c", "qpbn_linalg.c"):
                 obj = adir / (c[:-2] + ".o")
-                _compile(["cc", "-std=c99", *shlex.split(alt_cflags), f"-I{adir}", f"-I{BENCH}", "-c",
+                _compile(["cc", *CASADI_CFLAGS[:1], *shlex.split(alt_cflags), f"-I{adir}", f"-I{BENCH}", "-c",
                           str(adir / c), "-o", str(obj)])
                 objs.append(obj)
             incs.append(adir)
@@ -193,7 +195,7 @@ def build_harness(hp_name: str, hp: dict, sizes: dict | None, cflags: str, alt_c
     if exe.is_file() and stamp.is_file() and stamp.read_text() == flags_key and not objs and \
             all(exe.stat().st_mtime >= d.stat().st_mtime for d in deps if d.exists()):
         return exe
-    _compile(["cc", "-std=c99", "-Wall", "-Wextra", *shlex.split(cflags), *defs,
+    _compile(["cc", *STRICT_CFLAGS[:3], *shlex.split(cflags), *defs,
               *[f"-I{i}" for i in incs], *map(str, srcs), *map(str, objs), "-o", str(exe),
               f"-L{hp['libdir']}", "-Wl,--disable-new-dtags", f"-Wl,-rpath,{hp['libdir']}",
               "-lhpipm", "-lblasfeo", "-lm"])
@@ -480,7 +482,7 @@ def main(argv=None) -> int:
     ap.add_argument("--exact-iters", type=int, default=6, help="warm exact-Hessian robot-arm QPs")
     ap.add_argument("--eq-scale", type=float, default=1e3,
                     help="hpipm_scaled: terminal equality rows divided by eq_scale * max|row| (default %(default)g)")
-    ap.add_argument("--cflags", default="-O2", help="C flags of the harness and our solver "
+    ap.add_argument("--cflags", default=DEFAULT_OPT, help="C flags of the harness and our solver "
                     "(default %(default)s, the generated Makefile's OPT)")
     ap.add_argument("--alt-cflags", default="-O3 -march=native",
                     help="flags of a second, renamed copy of our solver in the same process (column "

@@ -9,6 +9,36 @@ import click
 from pathlib import Path
 
 from . import __version__
+from .codegen.flags import DEFAULT_OPT
+from .settings import choices
+
+_FROM_FILE = "[default: the OCP file's options(...), else {}]"
+
+
+def _solver_options(lm_note: str):
+    """The settings of dopus_codegen.settings that converge and sil share; each defaults to
+    the OCP file's options(...)."""
+    opts = [
+        click.option("--hessian", type=click.Choice(choices("hessian")), default=None,
+                     help=_FROM_FILE.format("exact")),
+        click.option("--regularization", type=click.Choice(choices("regularization")), default=None,
+                     help=_FROM_FILE.format("none")),
+        click.option("--reg-eps", default=None, type=click.FloatRange(min=0, min_open=True),
+                     help="Eigenvalue floor of the regularisation. " + _FROM_FILE.format("1e-4")),
+        click.option("--cost-hessian", type=click.Choice(choices("cost_hessian")), default=None,
+                     help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; "
+                          "stored: the paper's literal algorithm (the whole Hessian block moves with its slot; "
+                          "figure 1). " + _FROM_FILE.format("fresh")),
+        click.option("--lm", default=None, type=click.FloatRange(min=0),
+                     help=f"Levenberg-Marquardt term added to every Hessian block of the QP ({lm_note}). "
+                          + _FROM_FILE.format("0")),
+    ]
+
+    def apply(fn):
+        for opt in reversed(opts):
+            fn = opt(fn)
+        return fn
+    return apply
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -36,20 +66,14 @@ def _int_list_or_full(value: str) -> list:
 
 @main.command()
 @click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
-@click.option("--M", "m_list", default="full,5,1,0", show_default=True,
-              help="Comma-separated values of M (stages re-linearised per iteration); 'full' is the full RTI (M = N-1).")
+@click.option("--M", "m_list", default=None,
+              help="Comma-separated values of M (stages re-linearised per iteration); 'full' is the full RTI "
+                   "(M = N-1). [default: the OCP file's options(M=...), else full,5,1,0]")
 @click.option("--iters", default=40, show_default=True, type=click.IntRange(1, 100000), help="Iterations per run.")
 @click.option("--start", type=click.Choice(["cold", "warm"]), default="warm", show_default=True,
               help="cold: the OCP file's initial guess at its initial state; warm: the converged solution at the "
                    "initial state, then iterate for the disturbed initial state.")
-@click.option("--hessian", type=click.Choice(["exact", "gauss-newton"]), default="exact", show_default=True)
-@click.option("--regularization", type=click.Choice(["none", "project", "mirror"]), default="none", show_default=True)
-@click.option("--reg-eps", default=1e-4, show_default=True, type=float, help="Eigenvalue floor of the regularisation.")
-@click.option("--cost-hessian", type=click.Choice(["fresh", "stored"]), default="fresh", show_default=True,
-              help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
-                   "paper's literal algorithm (figure 1, docs/design.md section 8).")
-@click.option("--lm", default=0.0, show_default=True, type=click.FloatRange(min=0),
-              help="Levenberg-Marquardt term added to every Hessian block of the QP (0: exact Newton).")
+@_solver_options("0: exact Newton")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the study as JSON.")
 @click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None, help="Write KKT against iteration as PNG.")
@@ -58,15 +82,16 @@ def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, c
     """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M."""
     from .studies.converge import run_converge_cli
 
-    run_converge_cli(ocp_file=ocp_file, m_list=_int_list_or_full(m_list), iters=iters, start=start,
+    run_converge_cli(ocp_file=ocp_file, m_list=None if m_list is None else _int_list_or_full(m_list),
+                     iters=iters, start=start,
                      hessian=hessian, regularization=regularization, reg_eps=reg_eps, backend=backend,
                      json_out=json_out, plot_out=plot_out, cost_hessian=cost_hessian, lm=lm)
 
 
 @main.command()
 @click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
-@click.option("--M", "m", default=1, show_default=True, type=click.IntRange(0),
-              help="Stages re-linearised per iteration (clamped to N-1, the full RTI).")
+@click.option("--M", "m", default=None, type=click.IntRange(0),
+              help="Stages re-linearised per iteration (clamped to N-1, the full RTI). " + _FROM_FILE.format("1"))
 @click.option("--duration", default=None, type=click.FloatRange(min=0, min_open=True),
               help="Simulated seconds [default: the scenario's duration].")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None,
@@ -74,17 +99,8 @@ def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, c
 @click.option("--plot-dir", type=click.Path(file_okay=False), default=None, help="Write the PNG figures here.")
 @click.option("--compare", type=click.Choice(["none", "full"]), default="none", show_default=True,
               help="full: also run the full RTI (M = N-1) on the same scenario.")
-@click.option("--hessian", type=click.Choice(["exact", "gauss-newton"]), default="exact", show_default=True)
-@click.option("--regularization", type=click.Choice(["none", "project", "mirror"]), default="none", show_default=True)
-@click.option("--reg-eps", default=1e-4, show_default=True, type=click.FloatRange(min=0, min_open=True),
-              help="Eigenvalue floor of the regularisation.")
-@click.option("--cost-hessian", type=click.Choice(["fresh", "stored"]), default="fresh", show_default=True,
-              help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
-                   "paper's literal algorithm (the whole Hessian block moves with its slot).")
-@click.option("--lm", default=None, type=click.FloatRange(min=0),
-              help="Levenberg-Marquardt term added to every Hessian block of the QP (0: the paper's "
-                   "literal QP). Keeps the fixed point; see README, Closed loop. [default: the OCP "
-                   "file's options(lm=...), else 0; the robot arm: 1e-4]")
+@_solver_options("0: the paper's literal QP; keeps the fixed point, see README, Closed loop; the robot arm "
+                 "declares 1e-4")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
 def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps, cost_hessian, lm,
         backend):
@@ -133,7 +149,7 @@ def generate(ocp_file, out_dir, offline_guess):
 @main.command()
 @click.argument("folder", type=click.Path(file_okay=False))
 @click.option("--cc", default="cc", show_default=True, help="C compiler.")
-@click.option("--opt", default="-O2", show_default=True, help="Optimisation flags (quoted if several).")
+@click.option("--opt", default=DEFAULT_OPT, show_default=True, help="Optimisation flags (quoted if several).")
 @click.option("--force", is_flag=True, help="Rebuild even if the sources did not change.")
 def build(folder, cc, opt, force):
     """Compile a generated FOLDER into build/py/lib<name>.so (cffi) and lib<name>.a (firmware).

@@ -50,18 +50,18 @@ size_t dopus_solver_sizeof(void)
     return sizeof(dopus_solver);
 }
 
-void dopus_get_dims(int *dims)
+void dopus_get_dims(dopus_dims *dims)
 {
-    dims[0] = DOPUS_N;
-    dims[1] = DOPUS_NX;
-    dims[2] = DOPUS_NU;
-    dims[3] = DOPUS_NW;
-    dims[4] = DOPUS_NP;
-    dims[5] = DOPUS_NG;
-    dims[6] = DOPUS_NR;
-    dims[7] = DOPUS_NE;
-    dims[8] = DOPUS_HAS_GN;
-    dims[9] = DOPUS_HAS_NOMINAL;
+    dims->N = DOPUS_N;
+    dims->nx = DOPUS_NX;
+    dims->nu = DOPUS_NU;
+    dims->nw = DOPUS_NW;
+    dims->np = DOPUS_NP;
+    dims->ng = DOPUS_NG;
+    dims->nr = DOPUS_NR;
+    dims->ne = DOPUS_NE;
+    dims->has_gn = DOPUS_HAS_GN;
+    dims->has_nominal = DOPUS_HAS_NOMINAL;
 }
 
 const char *dopus_name(void)
@@ -115,7 +115,7 @@ void dopus_defaults(dopus_solver *s)
                      : DOPUS_HESSIAN_EXACT;
     s->regularization = dopus_default_regularization;
     s->reg_eps = dopus_default_reg_eps;
-    s->cost_hessian = 1;
+    s->cost_hessian = dopus_default_cost_hessian ? 1 : 0;
     s->lm = (dopus_default_lm >= 0.0 && dopus_default_lm < INFINITY) ? dopus_default_lm : 0.0;
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;

@@ -18,7 +18,7 @@ from dopus_codegen.reference.dopus import ReferenceDopus
 from dopus_codegen.runtime.solver import CSolver, DopusError
 
 STATUS_NONFINITE_VALUE, STATUS_NOT_PREPARED, STATUS_ALREADY_PREPARED = 3, 7, 10
-REF_NONFINITE = 4
+REF_NONFINITE = 3             # the reference raises the C codes (dopus_codegen.errors)
 FIELDS = ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu")
 QP_TOL = 1e-14
 REL_TOL = 1e-9

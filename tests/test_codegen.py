@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from dopus_codegen.codegen.flags import DEFAULT_OPT, STRICT_CFLAGS
+
 from dopus_codegen.codegen.build import BuildError, build
 from dopus_codegen.cli import main as cli_main
 from dopus_codegen.codegen.generate import CodegenError, generate, rename_placeholder
@@ -474,7 +476,7 @@ def test_two_problems_link_into_one_program(generated, built, tmp_path):
     src = tmp_path / "two.c"
     src.write_text(TWO_PROBLEMS_C)
     exe = tmp_path / "two"
-    cmd = ["cc", "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", str(src)]
+    cmd = ["cc", DEFAULT_OPT, *STRICT_CFLAGS, str(src)]
     for name in NAMES:
         cmd += ["-I", str(generated[name][1])]
     cmd += [str(built[name].static_lib) for name in NAMES] + ["-lm", "-o", str(exe)]

@@ -134,7 +134,7 @@ def test_kkt_parts_are_consistent(warm_study):
 
 def test_converge_cli_warm(tmp_path, robot_disc, warm_study):
     out_json, out_png = tmp_path / "study.json", tmp_path / "study.png"
-    res = CliRunner().invoke(main, ["converge", str(ROBOT_ARM_FILE), "--M", "full,1", "--iters", "6",
+    res = CliRunner().invoke(main, ["converge", str(ROBOT_ARM_FILE), "--M", "full,1", "--iters", "6", "--lm", "0",
                                     "--cost-hessian", "stored", "--json", str(out_json), "--plot", str(out_png)])
     assert res.exit_code == 0, res.output
     study = json.loads(out_json.read_text())
@@ -153,7 +153,7 @@ def test_converge_cli_warm(tmp_path, robot_disc, warm_study):
 
 def test_converge_cli_fresh_is_the_default(tmp_path, warm_study_fresh):
     out_json = tmp_path / "fresh.json"
-    res = CliRunner().invoke(main, ["converge", str(ROBOT_ARM_FILE), "--M", "1", "--iters", "4",
+    res = CliRunner().invoke(main, ["converge", str(ROBOT_ARM_FILE), "--M", "1", "--iters", "4", "--lm", "0",
                                     "--json", str(out_json)])
     assert res.exit_code == 0, res.output
     study = json.loads(out_json.read_text())

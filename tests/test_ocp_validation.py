@@ -204,7 +204,8 @@ def test_options_update_only_what_is_given():
     ocp.options(hessian="gauss-newton", M=3)
     ocp.options(regularization="mirror")
     assert build_functions(ocp).options == dict(hessian="gauss-newton", regularization="mirror",
-                                                reg_eps=1e-4, M=3, offline_guess=False, lm=0.0)
+                                                reg_eps=1e-4, M=3, offline_guess=False, lm=0.0,
+                                                cost_hessian="fresh")
     ocp.options(lm=2e-4)
     assert build_functions(ocp).options["lm"] == 2e-4 and build_functions(ocp).options["M"] == 3
 

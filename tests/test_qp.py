@@ -27,6 +27,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from dopus_codegen.codegen.flags import DEFAULT_OPT, PIC, STRICT_CFLAGS
 from harness.qp_harness import QPHarnessError, build_qp_solver
 
 from harness import qp_problems as P
@@ -508,7 +509,7 @@ def test_linalg_kernels_match_numpy(tmp_path):
 
     rc = runtime_c_dir()
     lib_path = tmp_path / "liblinalg.so"
-    subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-fPIC", "-shared",
+    subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, "-shared",
                     f"-I{rc}", str(rc / "dopus_linalg.c"), "-o", str(lib_path), "-lm"], check=True)
     ffi = cffi.FFI()
     decls = [line for line in (rc / "dopus_linalg.h").read_text().split("/* ----")[0].splitlines()

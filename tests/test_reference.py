@@ -10,6 +10,7 @@ import pytest
 from dopus_codegen.reference.kkt import eval_stages, kkt_of_guess
 from dopus_codegen.reference.qp import (QPInfeasibleError, check_qp, qp_kkt_residual, qp_reduced_hessian_min_eig,
                                  solve_qp_reference)
+from dopus_codegen.errors import status_code
 from dopus_codegen.reference.dopus import DopusError, ReferenceDopus, regularize
 
 
@@ -632,7 +633,7 @@ def test_reference_rejects_bad_input(robot_disc):
     before = ref.x.copy()
     with pytest.raises(DopusError) as exc:
         ref.feedback([np.nan, 0, 0, 0, 0])
-    assert exc.value.status == 1
+    assert exc.value.status == status_code("nonfinite_input")
     np.testing.assert_array_equal(ref.x, before)
     with pytest.raises(ValueError, match="parameters"):
         ref.set_parameters(np.zeros(3))
@@ -680,7 +681,7 @@ def test_nonfinite_function_value_leaves_state(tmp_path):
     ref.x[3, 0] = -1.0
     with pytest.raises(DopusError, match="non-finite") as exc:
         ref.prepare()
-    assert exc.value.status == 4
+    assert exc.value.status == status_code("nonfinite_value")
     assert ref.x[3, 0] == -1.0 and np.array_equal(np.delete(ref.x, 3), np.delete(x_before, 3))
     assert all(np.array_equal(s.Ht, h) for s, h in zip(ref.slots, H_before))
     with pytest.raises(DopusError, match="non-finite"):

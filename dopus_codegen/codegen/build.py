@@ -20,7 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import List, Sequence
 
-from .generate import CASADI_CFLAGS, STRICT_CFLAGS, CodegenError, read_meta
+from .flags import CASADI_CFLAGS, DEFAULT_OPT, PIC, STRICT_CFLAGS
+from .generate import CodegenError, read_meta
 
 BUILD_SUBDIR = Path("build") / "py"
 
@@ -59,7 +60,7 @@ def _source_hash(out_dir: Path, files: List[str], cc: str, opt: Sequence[str]) -
     return h.hexdigest()
 
 
-def build(out_dir, cc: str = "cc", opt: str = "-O2", *, force: bool = False) -> BuildResult:
+def build(out_dir, cc: str = "cc", opt: str = DEFAULT_OPT, *, force: bool = False) -> BuildResult:
     """Compile the generated folder ``out_dir``; skip the work if nothing changed."""
     out_dir = Path(out_dir)
     if not out_dir.exists():
@@ -103,7 +104,7 @@ def build(out_dir, cc: str = "cc", opt: str = "-O2", *, force: bool = False) -> 
         for src in strict + [casadi_src]:
             flags = CASADI_CFLAGS if src == casadi_src else STRICT_CFLAGS
             obj = objdir / (Path(src).stem + ".o")
-            _run([cc, *opt_flags, "-fPIC", *flags, "-c", src, "-o", str(obj)], out_dir, f"compiling {src}")
+            _run([cc, *opt_flags, PIC, *flags, "-c", src, "-o", str(obj)], out_dir, f"compiling {src}")
             objects.append(str(obj))
         tmp_a, tmp_so = objdir / static_lib.name, objdir / shared_lib.name
         _run([os.environ.get("AR", "ar"), "rcs", str(tmp_a), *objects], out_dir, f"archiving {static_lib.name}")

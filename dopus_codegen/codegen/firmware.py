@@ -43,7 +43,8 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from .generate import CASADI_CFLAGS, STRICT_CFLAGS, read_meta
+from .flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
+from .generate import read_meta
 from .paths import firmware_dir
 
 __all__ = ["TARGETS", "FirmwareError", "firmware_dir", "toolchain_missing", "setup_toolchain",
@@ -80,7 +81,7 @@ ALLOCATOR_SYMBOLS = ("malloc", "_malloc_r", "calloc", "_calloc_r", "realloc", "_
                      "_free_r", "_sbrk", "_sbrk_r")
 FW_SOURCES = ("fw_main.c", "platform_qemu.c", "startup.c")
 HOST_SOURCES = ("fw_main.c", "platform_host.c")
-OPT = "-O2"
+OPT = DEFAULT_OPT
 
 
 def _repo_script() -> Optional[Path]:

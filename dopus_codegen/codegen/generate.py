@@ -17,7 +17,6 @@ at round-trip precision, no timestamps), so generating twice gives identical byt
 from __future__ import annotations
 
 import json
-import keyword
 import math
 import re
 import tempfile
@@ -29,14 +28,12 @@ import jinja2
 import numpy as np
 
 from .. import __version__
+from .. import settings
+from ..cnames import identifier_problem, rename_placeholder
+from . import flags
+from .flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
 from .paths import runtime_c_dir, templates_dir
 
-PLACEHOLDER = "dopus"
-
-#: Compiler flags shared by the rendered Makefile and dopus_codegen.codegen.build.
-STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
-#: CasADi's generated code has unused parameters in its helpers, so it only gets -Wall.
-CASADI_CFLAGS = ("-std=c99", "-Wall")
 
 #: The functions of docs/algorithm.md section 2 in the order they are emitted, with the
 #: attribute of ``Discretized`` that holds them and whether they may be absent.
@@ -54,14 +51,6 @@ FUNCTION_SLOTS = (
     ("ode", False),
 )
 
-_C_KEYWORDS = frozenset(
-    "auto break case char const continue default do double else enum extern float for goto if "
-    "inline int long register restrict return short signed sizeof static struct switch typedef "
-    "union unsigned void volatile while _Bool _Complex _Imaginary main".split()
-)
-
-_HESSIAN_CODES = {"exact": 0, "gauss-newton": 1}
-_REGULARIZATION_CODES = {"none": 0, "project": 1, "mirror": 2}
 
 
 class CodegenError(ValueError):
@@ -106,18 +95,10 @@ def c_matrix(values, rows: int, cols: int, what: str) -> List[str]:
     return [c_vector(arr[k], cols, f"{what}[{k}]") for k in range(rows)]
 
 
-def rename_placeholder(text: str, name: str) -> str:
-    """The textual renaming of the runtime: ``dopus_`` -> ``<name>_``, ``DOPUS_`` -> ``<NAME>_``
-    (one pass, so a problem name containing the placeholder is not renamed twice)."""
-    lower, upper = f"{name}_", f"{name.upper()}_"
-    return re.sub(r"dopus_|DOPUS_", lambda m: lower if m.group(0) == "dopus_" else upper, text)
-
-
 def check_name(name: Any) -> str:
-    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
-        raise CodegenError(f"problem name {name!r} is not a valid C identifier")
-    if name in _C_KEYWORDS or keyword.iskeyword(name):
-        raise CodegenError(f"problem name {name!r} is a reserved word")
+    why = identifier_problem(name)
+    if why is not None:
+        raise CodegenError(f"problem name {name!r} {why}")
     return name
 
 
@@ -269,10 +250,11 @@ def _default_parameters(disc: Any, s: Dict[str, int]) -> np.ndarray:
     return arr[0]
 
 
-def _code(table: Dict[str, int], value: Any, what: str) -> int:
-    if value not in table:
-        raise CodegenError(f"option {what}={value!r} is not one of {sorted(table)}")
-    return table[value]
+def _code(setting: str, options: Any) -> int:
+    try:
+        return settings.code(setting, _option(options, setting, settings.DEFAULTS[setting]))
+    except settings.SettingError as exc:
+        raise CodegenError(f"option {exc}") from None
 
 
 def problem_context(disc: Any, s: Dict[str, int], nominal: Any) -> Dict[str, Any]:
@@ -297,12 +279,12 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any) -> Dict[str, Any
         "x0_default": c_vector(_attr(data, "x0"), nx, "x0"),
         "guess_x": c_matrix(getattr(guess, "x", None), N + 1, nx, "initial_guess.x"),
         "guess_u": c_matrix(getattr(guess, "u", None), N, nu, "initial_guess.u"),
-        "default_M": int(_option(options, "M", 1)),
-        "default_hessian": _code(_HESSIAN_CODES, _option(options, "hessian", "exact"), "hessian"),
-        "default_regularization": _code(_REGULARIZATION_CODES,
-                                        _option(options, "regularization", "none"), "regularization"),
-        "default_reg_eps": c_double(_option(options, "reg_eps", 1e-4), "reg_eps"),
-        "default_lm": c_double(_option(options, "lm", 0.0), "lm"),
+        "default_M": int(_option(options, "M", settings.DEFAULTS["M"])),
+        "default_hessian": _code("hessian", options),
+        "default_regularization": _code("regularization", options),
+        "default_cost_hessian": _code("cost_hessian", options),
+        "default_reg_eps": c_double(_option(options, "reg_eps", settings.DEFAULTS["reg_eps"]), "reg_eps"),
+        "default_lm": c_double(_option(options, "lm", settings.DEFAULTS["lm"]), "lm"),
         "has_nominal": nominal is not None,
     }
     if not 0 <= ctx["default_M"] <= N - 1:
@@ -376,6 +358,22 @@ def extract_cdef(header_text: str, name: str, header_name: str) -> str:
     return "\n".join(lines[i + 1:j]).strip("\n") + "\n"
 
 
+def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, has_nominal: int = 0,
+                        work: Optional[Dict[str, int]] = None, header: str = "",
+                        casadi_version: str = "") -> str:
+    """``<name>_sizes.h`` from templates/sizes.h.j2: the one sizes header of the runtime, also
+    for the QP harness and the QP benchmark (which give only the QP sizes N, nx, nu, ng, nr,
+    ne; the other entries then hold placeholders: no CasADi work, no Gauss-Newton)."""
+    s = dict(sizes)
+    s.setdefault("nw", s["nx"] + s["nu"])
+    s.setdefault("np", 0)
+    ctx = {"name": name, "NAME": name.upper(), "sizes": s, "has_gn": int(has_gn),
+           "has_nominal": int(has_nominal), "header": header or f"Sizes of '{name}'",
+           "casadi_version": casadi_version,
+           "work": work or {"sz_arg": 1, "sz_res": 1, "sz_iw": 1, "sz_w": 1}}
+    return _templates().get_template("sizes.h.j2").render(**ctx)
+
+
 def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
     """Every file of the generated folder, as {file name: text}, without touching the disk."""
     name = check_name(_attr(disc.data, "name"))
@@ -396,17 +394,17 @@ def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
         "name": name, "NAME": NAME, "header": header, "casadi_version": ca.__version__,
         "has_gn": int(has_gn), "sizes": s, "work": work_sizes(functions), "main_file": main_file,
         "strict_cflags": " ".join(STRICT_CFLAGS), "casadi_cflags": " ".join(CASADI_CFLAGS),
+        "default_opt": DEFAULT_OPT, "cmake_strict_options": flags.cmake_strict_options(),
+        "cmake_common_options": flags.cmake_common_options(),
     }
     ctx.update(problem_context(disc, s, nominal))
     ctx["has_nominal"] = int(ctx["has_nominal"])
 
     env = _templates()
-    rendered = {
-        f"{name}_sizes.h": "sizes.h.j2",
-        f"{name}_problem.c": "problem.c.j2",
-    }
-    for fname, tname in rendered.items():
-        files[fname] = env.get_template(tname).render(**ctx)
+    files[f"{name}_sizes.h"] = render_sizes_header(name, s, has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
+                                                   work=ctx["work"], header=header,
+                                                   casadi_version=ca.__version__)
+    files[f"{name}_problem.c"] = env.get_template("problem.c.j2").render(**ctx)
 
     cdef = extract_cdef(files[f"{name}_solver.h"], name, f"{name}_solver.h")
     files[f"{name}_cdef.h"] = f"/* {header} */\n/* cffi declarations cut from {name}_solver.h */\n" + cdef
@@ -536,4 +534,4 @@ def generate_file(ocp_file, out_dir=None, *, offline_guess: Optional[bool] = Non
 
 
 __all__ = ["CodegenError", "generate", "generate_file", "render_folder", "read_meta", "find_meta",
-           "rename_placeholder", "c_double", "STRICT_CFLAGS", "CASADI_CFLAGS"]
+           "rename_placeholder", "render_sizes_header", "c_double", "STRICT_CFLAGS", "CASADI_CFLAGS"]

@@ -136,7 +136,7 @@ class StageFunctions:
         """``stage_hess_exact`` for ``"exact"``, ``stage_hess_gn`` for ``"gauss-newton"``."""
         if kind == "exact":
             return self.stage_hess_exact
-        if kind in ("gauss-newton", "gn"):
+        if kind == "gauss-newton":
             if self.stage_hess_gn is None:
                 raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
             return self.stage_hess_gn
@@ -147,7 +147,7 @@ class StageFunctions:
         ``"gauss-newton"``: ``(x, u, p) -> A_l``, the stage-cost part of ``stage_hess(kind)``'s A."""
         if kind == "exact":
             return self.stage_hess_cost_exact
-        if kind in ("gauss-newton", "gn"):
+        if kind == "gauss-newton":
             if self.stage_hess_cost_gn is None:
                 raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
             return self.stage_hess_cost_gn
@@ -157,7 +157,7 @@ class StageFunctions:
         """Terminal counterpart of :meth:`stage_hess`."""
         if kind == "exact":
             return self.term_hess_exact
-        if kind in ("gauss-newton", "gn"):
+        if kind == "gauss-newton":
             return self.term_hess_gn
         raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
 

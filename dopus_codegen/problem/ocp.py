@@ -40,7 +40,6 @@ from __future__ import annotations
 import copy
 import functools
 import importlib.util
-import keyword
 import math
 import re
 import sys
@@ -52,6 +51,7 @@ from typing import Callable, Mapping, Optional
 import casadi as ca
 import numpy as np
 
+from ..cnames import identifier_problem
 from .spec import (ClosedLoopSpec, ConstraintSpec, CostSpec, GuessSpec, HorizonSpec, LeastSquares,
                    ModelSpec, OcpSpec, OptionsSpec, Rows, ScenarioPart, Variable, readonly)
 
@@ -59,14 +59,6 @@ __all__ = [
     "OcpError", "Integrator", "RK4", "Event", "Guess", "ScenarioSpec", "Ocp", "load_ocp",
 ]
 
-_C_KEYWORDS = {
-    "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
-    "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
-    "restrict", "return", "short", "signed", "sizeof", "static", "struct", "switch",
-    "typedef", "union", "unsigned", "void", "volatile", "while", "_Bool", "_Complex",
-    "_Imaginary",
-}
-_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
 class OcpError(ValueError):
@@ -245,8 +237,9 @@ def casadi_message(exc: BaseException) -> str:
 
 
 def _check_identifier(name, what: str) -> str:
-    if not isinstance(name, str) or not _IDENT.match(name) or name in _C_KEYWORDS or keyword.iskeyword(name):
-        raise OcpError(f"{what}: {name!r} is not a valid C identifier")
+    why = identifier_problem(name)
+    if why is not None:
+        raise OcpError(f"{what}: {name!r} {why}")
     return name
 
 
@@ -294,8 +287,11 @@ class Ocp:
         self._x0 = None
         self._guess_x = None
         self._guess_u = None
-        self._options = dict(hessian="exact", regularization="none", reg_eps=1e-4, M=1,
-                             offline_guess=False, lm=0.0)
+        from ..settings import DEFAULTS
+
+        self._options = {k: DEFAULTS[k] for k in ("hessian", "regularization", "reg_eps", "M",
+                                                  "offline_guess", "lm", "cost_hessian")}
+        self._declared: set = set()
         self._disturbance = None
         self._scenario = None
 
@@ -449,53 +445,39 @@ class Ocp:
     @_declaration
     def options(self, hessian: Optional[str] = None, regularization: Optional[str] = None,
                 reg_eps: Optional[float] = None, M: Optional[int] = None,
-                offline_guess: Optional[bool] = None, lm: Optional[float] = None) -> None:
+                offline_guess: Optional[bool] = None, lm: Optional[float] = None,
+                cost_hessian: Optional[str] = None) -> None:
         """Solver defaults (the generated solver and the CLI can override them); only the
-        options given change. Defaults: ``hessian="exact"``, ``regularization="none"``,
-        ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``, ``lm=0``.
+        options given change. Names, allowed values and defaults are those of
+        :mod:`dopus_codegen.settings`: ``hessian="exact"``, ``regularization="none"``,
+        ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``, ``lm=0``, ``cost_hessian="fresh"``.
 
         ``lm``: the Levenberg-Marquardt term of the QP (docs/algorithm.md section 3), the
-        default of the generated runtime and of ``dopus-gen sil``.
+        default of the generated runtime and of ``dopus-gen sil`` and ``converge``.
 
         ``offline_guess=True``: the code generator solves the NLP at the initial state
         offline (IPOPT) and carries the primal-dual solution as static data, so the
         controller can start warm; ``initial_guess`` stays the declared (cold) guess.
         """
+        from ..settings import SettingError, validate
+
+        given = dict(hessian=hessian, regularization=regularization, reg_eps=reg_eps, M=M,
+                     offline_guess=offline_guess, lm=lm, cost_hessian=cost_hessian)
         opts = dict(self._options)
-        if hessian is not None:
-            if hessian not in ("exact", "gauss-newton"):
-                raise OcpError(f"options: hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
-            opts["hessian"] = hessian
-        if regularization is not None:
-            if regularization not in ("none", "project", "mirror"):
-                raise OcpError(f"options: regularization must be 'none', 'project' or 'mirror', "
-                               f"got {regularization!r}")
-            opts["regularization"] = regularization
-        if reg_eps is not None:
+        declared = set(self._declared)
+        for name, value in given.items():
+            if value is None:
+                continue
             try:
-                eps = float(reg_eps)
-            except (TypeError, ValueError):
-                raise OcpError(f"options: reg_eps must be a number, got {reg_eps!r}") from None
-            if not math.isfinite(eps) or eps <= 0:
-                raise OcpError(f"options: reg_eps must be positive and finite, got {reg_eps!r}")
-            opts["reg_eps"] = eps
-        if M is not None:
-            if isinstance(M, bool) or not isinstance(M, (int, np.integer)) or M < 0:
-                raise OcpError(f"options: M must be an integer >= 0, got {M!r}")
-            opts["M"] = int(M)
-        if offline_guess is not None:
-            if not isinstance(offline_guess, bool):
-                raise OcpError(f"options: offline_guess must be True or False, got {offline_guess!r}")
-            opts["offline_guess"] = offline_guess
-        if lm is not None:
-            try:
-                lmf = float(lm)
-            except (TypeError, ValueError):
-                raise OcpError(f"options: lm must be a number, got {lm!r}") from None
-            if not math.isfinite(lmf) or lmf < 0:
-                raise OcpError(f"options: lm must be finite and >= 0, got {lm!r}")
-            opts["lm"] = lmf
-        self._options = opts
+                opts[name] = validate(name, value)
+            except SettingError as exc:
+                raise OcpError(f"options: {exc}") from None
+            declared.add(name)
+        self._options, self._declared = opts, declared
+
+    def declared_options(self) -> dict:
+        """The options this OCP file gave with :meth:`options` (the rest are defaults)."""
+        return {k: v for k, v in self._options.items() if k in self._declared}
 
     @_declaration
     def disturbance(self, fn: Callable[[np.ndarray], np.ndarray]) -> None:

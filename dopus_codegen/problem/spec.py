@@ -182,11 +182,12 @@ class OptionsSpec:
     M: int
     offline_guess: bool
     lm: float
+    cost_hessian: str = "fresh"
 
     def as_dict(self) -> Dict[str, Any]:
         return {"hessian": self.hessian, "regularization": self.regularization,
                 "reg_eps": self.reg_eps, "M": self.M, "offline_guess": self.offline_guess,
-                "lm": self.lm}
+                "lm": self.lm, "cost_hessian": self.cost_hessian}
 
 
 @dataclass(frozen=True)

@@ -30,37 +30,18 @@ import time
 
 import numpy as np
 
+from .. import settings
+from ..errors import DopusError, qp_status_code as status_code_qp, status_code
+from ..settings import SettingError
 from .kkt import eval_stages, kkt_measure, node_parameters
-from .qp import QPError, QPInfeasibleError, solve_qp_reference
+from .qp import QPError, free_initial_state, solve_qp_reference
 
-__all__ = ["DopusError", "ReferenceDopus", "regularize", "STATUS_OK", "STATUS_BAD_INPUT",
-           "STATUS_QP_FAILED", "STATUS_QP_INFEASIBLE", "STATUS_NONFINITE", "STATUS_NOT_PREPARED",
-           "STATUS_ALREADY_PREPARED"]
-
-STATUS_OK = 0
-STATUS_BAD_INPUT = 1        # non-finite xhat_0
-STATUS_QP_FAILED = 2        # the QP solver did not return a solution
-STATUS_QP_INFEASIBLE = 3    # the QP is infeasible
-STATUS_NONFINITE = 4        # a derivative function returned a non-finite value
-# Calling order (docs/algorithm.md section 4), with the codes of the C runtime's enum
-# dopus_status: feedback needs a prepared QP, and prepare a feedback since the last init or
-# successful prepare (never a double shift).
-STATUS_NOT_PREPARED = 7     # feedback without a successful prepare since the last step
-STATUS_ALREADY_PREPARED = 10  # prepare without a feedback since the last init or prepare
+__all__ = ["DopusError", "ReferenceDopus", "regularize", "EPS_RHO"]
 
 # Round-off floor of the secant residual (docs/algorithm.md section 4 step 2): rho_k = 0
 # when num_k <= EPS_RHO * (|F_old| + |F_new|), i.e. when the linear model of the stage is
 # exact along its last step to within the round-off of the F values it is formed from.
 EPS_RHO = 1e-12
-
-
-class DopusError(RuntimeError):
-    """A DOPUS call failed; ``status`` is one of the ``STATUS_*`` codes. The iterate is
-    unchanged by the failing call (docs/algorithm.md section 4)."""
-
-    def __init__(self, message: str, status: int):
-        super().__init__(message)
-        self.status = status
 
 
 def regularize(A: np.ndarray, mode: str, eps: float) -> np.ndarray:
@@ -74,7 +55,7 @@ def regularize(A: np.ndarray, mode: str, eps: float) -> np.ndarray:
     elif mode == "mirror":
         e = np.maximum(np.abs(e), eps)
     else:
-        raise ValueError(f"regularization must be 'none', 'project' or 'mirror', got {mode!r}")
+        settings.check("regularization", mode)
     return (V * e) @ V.T
 
 
@@ -106,8 +87,17 @@ class _Slot:
 def _arr(v, shape, what):
     a = np.array(v, dtype=float)
     if a.size != int(np.prod(shape)):
-        raise ValueError(f"{what}: expected shape {shape}, got {a.shape}")
+        raise DopusError.of("invalid_argument", f"{what}: expected shape {shape}, got {a.shape}")
     return a.reshape(shape)
+
+
+def _setting(check, *args):
+    """A value checked by :mod:`dopus_codegen.settings`; a bad one is DopusError (invalid
+    argument), as the C backend reports it."""
+    try:
+        return check(*args)
+    except SettingError as exc:
+        raise DopusError.of("invalid_argument", str(exc)) from None
 
 
 class ReferenceDopus:
@@ -118,45 +108,39 @@ class ReferenceDopus:
     QP solved by the last ``feedback`` and its solution) and ``status``.
     """
 
-    def __init__(self, disc, M: int = 1, mode: str = "receding", hessian: str = "exact",
-                 regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10,
-                 cost_hessian: str = "fresh", lm: float = 0.0):
+    def __init__(self, disc, M: int = settings.DEFAULTS["M"], mode: str = settings.DEFAULTS["mode"],
+                 hessian: str = settings.DEFAULTS["hessian"],
+                 regularization: str = settings.DEFAULTS["regularization"],
+                 reg_eps: float = settings.DEFAULTS["reg_eps"], qp_tol: float = settings.DEFAULTS["qp_tol"],
+                 cost_hessian: str = settings.DEFAULTS["cost_hessian"], lm: float = settings.DEFAULTS["lm"],
+                 qp_max_iter=None):
         self.disc = disc
-        if cost_hessian not in ("fresh", "stored"):
-            raise ValueError(f"cost_hessian must be 'fresh' or 'stored', got {cost_hessian!r}")
-        self.cost_hessian = cost_hessian
+        self.cost_hessian = _setting(settings.check, "cost_hessian", cost_hessian)
         self.N, self.nx, self.n_u, self.ng = disc.N, disc.nx, disc.nu, disc.ng
         self.nr, self.ne, self.np = disc.nr, disc.ne, disc.np
         self.nw = self.nx + self.n_u
-        if hessian == "exact":
+        self.hessian = _setting(settings.check, "hessian", hessian)
+        if self.hessian == "exact":
             self._stage_hess, self._term_hess = disc.stage_hess_exact, disc.term_hess_exact
-        elif hessian in ("gauss-newton", "gn"):
-            if getattr(disc, "stage_hess_gn", None) is None or getattr(disc, "term_hess_gn", None) is None:
-                raise ValueError("hessian='gauss-newton' needs a least-squares stage cost "
-                                 "(the OCP declares no stage_least_squares)")
-            self._stage_hess, self._term_hess = disc.stage_hess_gn, disc.term_hess_gn
         else:
-            raise ValueError(f"hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
-        self.hessian = "exact" if hessian == "exact" else "gauss-newton"
+            if getattr(disc, "stage_hess_gn", None) is None or getattr(disc, "term_hess_gn", None) is None:
+                raise DopusError.of("invalid_argument", "hessian='gauss-newton' needs a least-squares stage cost "
+                                    "(the OCP declares no stage_least_squares)")
+            self._stage_hess, self._term_hess = disc.stage_hess_gn, disc.term_hess_gn
         # (x, u, p) -> A_l, the stage-cost part of A (section 4 step 5)
         self._stage_hess_cost = getattr(disc, "stage_hess_cost_exact" if self.hessian == "exact"
                                         else "stage_hess_cost_gn", None)
         if cost_hessian == "fresh" and self._stage_hess_cost is None:
-            raise ValueError("cost_hessian='fresh' needs the stage-cost Hessian function of the problem "
-                             "(Discretized.stage_hess_cost); use cost_hessian='stored'")
-        if regularization not in ("none", "project", "mirror"):
-            raise ValueError(f"regularization must be 'none', 'project' or 'mirror', got {regularization!r}")
-        eps = float(reg_eps)
-        if not np.isfinite(eps) or eps <= 0:
-            raise ValueError(f"reg_eps must be positive and finite, got {reg_eps!r}")
-        qp_tol = float(qp_tol)
-        if not np.isfinite(qp_tol) or qp_tol <= 0:
-            raise ValueError(f"qp_tol must be positive and finite, got {qp_tol!r}")
-        self.regularization, self.reg_eps, self.qp_tol = regularization, eps, qp_tol
-        lm = float(lm)
-        if not np.isfinite(lm) or lm < 0:
-            raise ValueError(f"lm must be finite and >= 0, got {lm!r}")
-        self.lm = lm
+            raise DopusError.of("invalid_argument", "cost_hessian='fresh' needs the stage-cost Hessian function "
+                                "of the problem (Discretized.stage_hess_cost); use cost_hessian='stored'")
+        self.regularization = _setting(settings.check, "regularization", regularization)
+        self.reg_eps = _setting(settings.positive, "reg_eps", reg_eps)
+        self.qp_tol = _setting(settings.positive, "qp_tol", qp_tol)
+        self.lm = _setting(settings.nonnegative, "lm", lm)
+        self.qp_max_iter = None
+        if qp_max_iter is not None:
+            self.set_qp_max_iter(qp_max_iter)
+        self.qp_status = 0
         self.set_M(M)
         self.set_mode(mode)
         self.lbx, self.ubx = np.asarray(disc.lbx, float), np.asarray(disc.ubx, float)
@@ -164,7 +148,7 @@ class ReferenceDopus:
         self.lg, self.ug = np.asarray(disc.lg, float).reshape(self.ng), np.asarray(disc.ug, float).reshape(self.ng)
         self.lr, self.ur = np.asarray(disc.lr, float).reshape(self.nr), np.asarray(disc.ur, float).reshape(self.nr)
         self.p = node_parameters(disc, None)
-        self.status = STATUS_OK
+        self.status = status_code("ok")
         self.timings = {}
         self.qp_iterations = 0
         self.rho = np.zeros(self.N)
@@ -172,18 +156,22 @@ class ReferenceDopus:
         self.last_qp = None
         self.last_qp_solution = None
         self._initialised = False
+        # calling order (docs/algorithm.md section 4): a prepared QP, a prepare due, the shift
+        # of this sampling instant done (a prepare failed after it)
         self._qp_ready = self._prepare_due = self._shifted = False
 
     # ------------------------------------------------------------------ settings
     def set_M(self, M: int) -> None:
-        if isinstance(M, bool) or not isinstance(M, (int, np.integer)):
-            raise ValueError(f"M must be an integer, got {M!r}")
-        self.M = int(min(max(int(M), 0), self.N - 1))
+        """Values above N-1 mean the full RTI (N-1), as in the C runtime."""
+        self.M = min(_setting(settings.count, "M", M), self.N - 1)
 
     def set_mode(self, mode: str) -> None:
-        if mode not in ("receding", "fixed"):
-            raise ValueError(f"mode must be 'receding' or 'fixed', got {mode!r}")
-        self.mode = mode
+        self.mode = _setting(settings.check, "mode", mode)
+
+    def set_qp_max_iter(self, max_iter: int) -> None:
+        """The QP solver's iteration limit (None: the reference QP solver's own); reaching it
+        fails the feedback with the QP status ``max_iter``, as in the C runtime."""
+        self.qp_max_iter = None if max_iter is None else _setting(settings.count, "qp_max_iter", max_iter, 1)
 
     def set_parameters(self, p) -> None:
         """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
@@ -239,15 +227,15 @@ class ReferenceDopus:
         N, nx, nu, ng = self.N, self.nx, self.n_u, self.ng
         xhat0 = _arr(xhat0, (nx,), "xhat0")
         if not np.all(np.isfinite(xhat0)):
-            raise DopusError("init: xhat0 has non-finite entries", STATUS_BAD_INPUT)
+            raise DopusError.of("nonfinite_input", "init: xhat0 has non-finite entries")
         if guess is None:
             guess = self.disc.initial_guess
         g = guess.filled(self.disc)
         for name in ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu"):
             if not np.all(np.isfinite(getattr(g, name))):
-                raise DopusError(f"init: guess.{name} has non-finite entries", STATUS_BAD_INPUT)
+                raise DopusError.of("nonfinite_input", f"init: guess.{name} has non-finite entries")
         x, u, lam, mu_g, mu_b = g.x.copy(), g.u.copy(), g.lam.copy(), g.mu_g.copy(), g.mu_b.copy()
-        mu_b[0, :nx] = 0.0
+        free_initial_state(nx, mu_b=mu_b)
         slots = [_Slot(nx, nu, ng) for _ in range(N)]
         gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
         for k in range(N):
@@ -259,8 +247,8 @@ class ReferenceDopus:
         term = self._term_eval(x[N], g.mu_r, g.nu)
         if not self._finite(gL, phi, lv, gv, *[v for s in slots for v in (s.Ht, s.A_dyn, s.Phit, s.Ct)],
                             *term.values()):
-            raise DopusError("init: a derivative function returned a non-finite value at the guess",
-                             STATUS_NONFINITE)
+            raise DopusError.of("nonfinite_value", "init: a derivative function returned a non-finite value "
+                                "at the guess")
         self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
         self.mu_bN, self.mu_r, self.nu = g.mu_bN.copy(), g.mu_r.copy(), g.nu.copy()
         self.ring_head = 0
@@ -269,7 +257,7 @@ class ReferenceDopus:
         self.term = term
         self.rho = np.zeros(N)
         self.recomputed = list(range(N))
-        self.status = STATUS_OK
+        self.status = status_code("ok")
         self._initialised = True
         self._qp_ready = True        # init assembles the QP of the guess
         self._prepare_due = False    # a feedback must come first
@@ -278,7 +266,14 @@ class ReferenceDopus:
 
     def _need_init(self):
         if not self._initialised:
-            raise DopusError("call init(xhat0, guess) first", STATUS_BAD_INPUT)
+            raise self._fail("not_initialized", "call init(xhat0, guess) first")
+
+    def _fail(self, status: str, message: str, qp_status=None) -> DopusError:
+        """The error of a failed call (``status`` names the code of enum dopus_status); the
+        status is kept, as the C runtime keeps it."""
+        err = DopusError.of(status, message, qp_status)
+        self.status = err.status
+        return err
 
     # ------------------------------------------------------------------ the QP
     def qp_of_current(self, xhat0=None) -> dict:
@@ -307,8 +302,7 @@ class ReferenceDopus:
             ubw[k, :nx] = self.ubx - self.x[k]
             lbw[k, nx:] = self.lbu - self.u[k]
             ubw[k, nx:] = self.ubu - self.u[k]
-        lbw[0, :nx] = -np.inf
-        ubw[0, :nx] = np.inf
+        free_initial_state(nx, lower=lbw, upper=ubw)
         t = self.term
         gN = t["gL"] - t["R"].T @ self.mu_r - t["Req"].T @ self.nu
         return {
@@ -326,25 +320,24 @@ class ReferenceDopus:
         self._need_init()
         t0 = time.perf_counter()
         xhat0 = np.array(xhat0, dtype=float).reshape(-1)
-        if xhat0.size != self.nx or not np.all(np.isfinite(xhat0)):
-            self.status = STATUS_BAD_INPUT
-            raise DopusError(f"feedback: xhat0 must be {self.nx} finite numbers, got {xhat0}", STATUS_BAD_INPUT)
+        if xhat0.size != self.nx:
+            raise self._fail("invalid_argument", f"feedback: xhat0 must be {self.nx} numbers, got {xhat0.size}")
+        if not np.all(np.isfinite(xhat0)):
+            raise self._fail("nonfinite_input", f"feedback: xhat0 must be {self.nx} finite numbers, got {xhat0}")
         if not self._qp_ready:
-            self.status = STATUS_NOT_PREPARED
-            raise DopusError("feedback: no prepared QP (call prepare after each feedback)", STATUS_NOT_PREPARED)
+            raise self._fail("not_prepared", "feedback: no prepared QP (call prepare after each feedback)")
         qp = self.qp_of_current(xhat0)
         self._xhat_last = xhat0.copy()
         # the QP is attempted: a prepare (with its shift) is due, whatever the outcome
         self._prepare_due, self._shifted = True, False
         t1 = time.perf_counter()
         try:
-            sol = solve_qp_reference(qp, tol=self.qp_tol)
-        except QPInfeasibleError as exc:
-            self.status = STATUS_QP_INFEASIBLE
-            raise DopusError(f"feedback: {exc}", STATUS_QP_INFEASIBLE) from None
+            sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter)
         except QPError as exc:
-            self.status = STATUS_QP_FAILED
-            raise DopusError(f"feedback: {exc}", STATUS_QP_FAILED) from None
+            self.qp_status = status_code_qp(exc.qp_status)
+            raise self._fail("qp", f"feedback: {exc}; QP status {self.qp_status} ({exc.qp_status})",
+                             exc.qp_status) from None
+        self.qp_status = status_code_qp("solved")
         t2 = time.perf_counter()
         N, nx = self.N, self.nx
         dW = np.hstack([sol["x"][:N], sol["u"]])
@@ -367,7 +360,7 @@ class ReferenceDopus:
         self.last_qp = qp
         self.last_qp_solution = sol
         self._qp_ready = False
-        self.status = STATUS_OK
+        self.status = status_code("ok")
         t3 = time.perf_counter()
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
         return self.u[0].copy()
@@ -377,50 +370,72 @@ class ReferenceDopus:
         ``init`` or ``prepare``: for a sampling instant whose feedback was skipped (the C
         runtime allows one prepare after a feedback whose QP failed, which takes no step),
         or after the iterate was replaced by hand. The calling order of
-        docs/algorithm.md section 4 otherwise refuses it (status 10)."""
+        docs/algorithm.md section 4 otherwise refuses it (status already_prepared)."""
         self._need_init()
         self._prepare_due = True
 
     # ------------------------------------------------------------------ prepare
     def prepare(self) -> None:
         """Shift (receding), F and rho, fresh last stage and terminal, M worst H, fresh
-        stage-cost Hessians (section 4)."""
+        stage-cost Hessians (section 4). Steps 2 to 5 work on copies of the slots: a
+        non-finite value leaves the state of step 1."""
         self._need_init()
         if not self._prepare_due:
-            self.status = STATUS_ALREADY_PREPARED
-            raise DopusError("prepare: already prepared (call feedback before the next prepare)",
-                             STATUS_ALREADY_PREPARED)
+            raise self._fail("already_prepared", "prepare: already prepared (call feedback before the next prepare)")
         t0 = time.perf_counter()
-        N, nx = self.N, self.nx
         self._qp_ready = False
-        # step 1: shift (receding mode only; a retry after a failed prepare does not shift again)
-        if self.mode == "receding" and not self._shifted:
-            self._shifted = True
-            x = self.x.copy(); u = self.u.copy(); lam = self.lam.copy()
-            mu_g = self.mu_g.copy(); mu_b = self.mu_b.copy()
-            x[:N] = self.x[1:]
-            u[:N - 1] = self.u[1:]
-            lam[:N] = self.lam[1:]
-            mu_g[:N - 1] = self.mu_g[1:]
-            mu_b[:N - 1] = self.mu_b[1:]
-            mu_b[N - 1, :nx] = self.mu_bN
-            mu_b[0, :nx] = 0.0
-            self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
-            self.ring_head = (self.ring_head + 1) % N
-        x, u, lam, mu_g, mu_b = self.x, self.u, self.lam, self.mu_g, self.mu_b
+        if not self._shifted:        # a retry after a failed prepare does not shift again
+            self._shift()
+            self._shifted = self.mode == "receding"
         t1 = time.perf_counter()
-        # steps 2 and 3 on copies of the slots: a non-finite value leaves the state of step 1
         slots = [s.copy() for s in self.slots]
-        rho = np.zeros(N)
-        gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
+        stage_values = self._stage_gradients()
+        rho = self._secant_criterion(slots, stage_values)
+        t2 = time.perf_counter()
+        xN, term = self._fresh_last_stage(slots, stage_values)
+        chosen = self._relinearise_worst(slots, rho)
+        t3 = time.perf_counter()
+        if self.cost_hessian == "fresh":
+            self._refresh_cost_hessians(slots, set(chosen) | {self.N - 1})
+        t4 = time.perf_counter()
+        self._commit(slots, term, rho, chosen, xN)
+        self.timings.update({"prepare": time.perf_counter() - t0, "shift": t1 - t0,
+                             "stage_grad_rho": t2 - t1, "stage_hess": t3 - t2, "cost_hessian": t4 - t3})
+
+    def _shift(self) -> None:
+        """Step 1 (receding mode only): the iterate moves one stage forward, the ring head too."""
+        if self.mode != "receding":
+            return
+        N, nx = self.N, self.nx
+        x = self.x.copy(); u = self.u.copy(); lam = self.lam.copy()
+        mu_g = self.mu_g.copy(); mu_b = self.mu_b.copy()
+        x[:N] = self.x[1:]
+        u[:N - 1] = self.u[1:]
+        lam[:N] = self.lam[1:]
+        mu_g[:N - 1] = self.mu_g[1:]
+        mu_b[:N - 1] = self.mu_b[1:]
+        mu_b[N - 1, :nx] = self.mu_bN
+        free_initial_state(nx, mu_b=mu_b)
+        self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
+        self.ring_head = (self.ring_head + 1) % N
+
+    def _stage_gradients(self):
+        """``(gL, phi, g)`` of every stage at the current iterate (stage_grad)."""
+        gL, phi, lv, gv = eval_stages(self.disc.stage_grad, self.N, self.x[:self.N], self.u, self.p[:self.N],
+                                      self.lam[1:], self.mu_g)
         # every output of a function is checked, the stage cost l too (as the C runtime does)
         if not self._finite(gL, phi, lv, gv):
-            self.status = STATUS_NONFINITE
-            raise DopusError("prepare: stage_grad returned a non-finite value", STATUS_NONFINITE)
-        for k in range(N - 1):
+            raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value")
+        return gL, phi, gv
+
+    def _secant_criterion(self, slots, stage_values) -> np.ndarray:
+        """Step 2: rho_k (eq. 16) of the stages 0..N-2 with the block the last QP used, and
+        their F values moved into the slots."""
+        gL, phi, gv = stage_values
+        rho = np.zeros(self.N)
+        for k in range(self.N - 1):
             s = slots[self._slot(k)]
-            F_w = gL[k] + mu_b[k]
-            # eq. 16 with the block the last QP used for this stage
+            F_w = gL[k] + self.mu_b[k]
             r1 = s.F_w + s.Ht @ s.dw - s.Phit.T @ s.dlam + s.Ct.T @ s.dmu_g + s.dmu_b - F_w
             r2 = -(s.phi + s.Phit @ s.dw) + phi[k]
             r3 = s.g + s.Ct @ s.dw - gv[k]
@@ -438,57 +453,58 @@ class ReferenceDopus:
             s.F_w = F_w
             s.phi = phi[k].copy()
             s.g = gv[k].copy()
-        t2 = time.perf_counter()
-        # step 3: stage N-1 and the terminal node, always fresh
-        k = N - 1
+        return rho
+
+    def _fresh_last_stage(self, slots, stage_values):
+        """Step 3: stage N-1 and the terminal node, always fresh. Returns ``(x_N, term)``."""
+        gL, phi, gv = stage_values
+        k = self.N - 1
         s = slots[self._slot(k)]
-        s.F_w = gL[k] + mu_b[k]
+        s.F_w = gL[k] + self.mu_b[k]
         s.phi = phi[k].copy()
         s.g = gv[k].copy()
-        self._set_block(s, k, x, u, lam, mu_g)
-        xN = phi[k].copy() if self.mode == "receding" else x[N].copy()
+        self._set_block(s, k, self.x, self.u, self.lam, self.mu_g)
+        xN = phi[k].copy() if self.mode == "receding" else self.x[self.N].copy()
         term = self._term_eval(xN, self.mu_r, self.nu)
         if not self._finite(s.Ht, s.A_dyn, s.Phit, s.Ct, *term.values()):
-            self.status = STATUS_NONFINITE
-            raise DopusError("prepare: a derivative function returned a non-finite value (last stage "
-                             "or terminal node)", STATUS_NONFINITE)
-        # step 4: the M stages among 0..N-2 with the largest rho, ties to the lower index
-        order = sorted(range(N - 1), key=lambda i: (-rho[i], i))
+            raise self._fail("nonfinite_value", "prepare: a derivative function returned a non-finite value "
+                             "(last stage or terminal node)")
+        return xN, term
+
+    def _relinearise_worst(self, slots, rho) -> list:
+        """Step 4: fresh H for the M stages among 0..N-2 with the largest rho (ties: lower index)."""
+        order = sorted(range(self.N - 1), key=lambda i: (-rho[i], i))
         chosen = order[:self.M]
         for i in chosen:
             si = slots[self._slot(i)]
-            self._set_block(si, i, x, u, lam, mu_g)
+            self._set_block(si, i, self.x, self.u, self.lam, self.mu_g)
             if not self._finite(si.Ht, si.A_dyn, si.Phit, si.Ct):
-                self.status = STATUS_NONFINITE
-                raise DopusError(f"prepare: stage_hess returned a non-finite value at stage {i}", STATUS_NONFINITE)
-        t3 = time.perf_counter()
-        # step 5: the cost part of every A_k at the current point (no integrator); the other
-        # stages keep the curvature of dynamics and constraints A_dyn of their last H
-        if self.cost_hessian == "fresh":
-            fresh = set(chosen) | {N - 1}
-            for k in range(N):
-                if k in fresh:
-                    continue      # A_l,k was evaluated with its H above, at the same point
-                s = slots[self._slot(k)]
-                Al = self._cost_hess_eval(k, x, u)
-                if not self._finite(Al):
-                    self.status = STATUS_NONFINITE
-                    raise DopusError(f"prepare: stage_hess_cost returned a non-finite value at stage {k}",
-                                     STATUS_NONFINITE)
-                s.Ht = regularize(s.A_dyn + Al, self.regularization, self.reg_eps)
-        t4 = time.perf_counter()
-        # commit
+                raise self._fail("nonfinite_value", f"prepare: stage_hess returned a non-finite value at stage {i}")
+        return chosen
+
+    def _refresh_cost_hessians(self, slots, fresh) -> None:
+        """Step 5: the cost part of every A_k at the current point (no integrator); the other
+        stages keep the curvature of dynamics and constraints A_dyn of their last H."""
+        for k in range(self.N):
+            if k in fresh:
+                continue      # A_l,k was evaluated with its H above, at the same point
+            s = slots[self._slot(k)]
+            Al = self._cost_hess_eval(k, self.x, self.u)
+            if not self._finite(Al):
+                raise self._fail("nonfinite_value", f"prepare: stage_hess_cost returned a non-finite value "
+                                 f"at stage {k}")
+            s.Ht = regularize(s.A_dyn + Al, self.regularization, self.reg_eps)
+
+    def _commit(self, slots, term, rho, chosen, xN) -> None:
         if self.mode == "receding":
-            self.x = x.copy()
-            self.x[N] = xN
+            self.x = self.x.copy()
+            self.x[self.N] = xN
         self.slots = slots
         self.term = term
         self.rho = rho
-        self.recomputed = sorted(chosen + [N - 1])
+        self.recomputed = sorted(chosen + [self.N - 1])
         self._qp_ready, self._prepare_due, self._shifted = True, False, False
-        self.status = STATUS_OK
-        self.timings.update({"prepare": time.perf_counter() - t0, "shift": t1 - t0,
-                             "stage_grad_rho": t2 - t1, "stage_hess": t3 - t2, "cost_hessian": t4 - t3})
+        self.status = status_code("ok")
 
     # ------------------------------------------------------------------ KKT
     def kkt(self, xhat0) -> dict:

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .qp import free_initial_state
+
 __all__ = ["kkt_measure", "kkt_of_guess", "node_parameters", "signed_comp", "eval_stages"]
 
 
@@ -132,7 +134,7 @@ def kkt_measure(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p=None) -> 
     lbw = np.tile(np.concatenate([lbx, lbu]), (N, 1))
     ubw = np.tile(np.concatenate([ubx, ubu]), (N, 1))
     mu_bc = mu_b.copy()
-    mu_bc[0, :nx] = 0.0
+    free_initial_state(nx, mu_b=mu_bc)
     W = np.hstack([x[:N], u])
     comp = max(signed_comp(W, lbw, ubw, mu_bc), signed_comp(x[N], lbx, ubx, mu_bN))
     if ng:

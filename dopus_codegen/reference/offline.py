@@ -23,6 +23,7 @@ import numpy as np
 import casadi as ca
 
 from ..problem.ocp import Guess
+from .qp import free_initial_state
 
 __all__ = ["solve_ocp", "nlp_layout"]
 
@@ -177,7 +178,7 @@ def solve_ocp(disc, xhat0, guess: Guess | None = None, tol: float = 1e-12, hessi
     lx_ = np.array(sol["lam_x"]).reshape(-1)
 
     mu_b = np.hstack([lx_[ix[:N]], lx_[iu]])
-    mu_b[0, :nx] = 0.0          # x_0 carries no bound (fixed by xhat_0)
+    free_initial_state(nx, mu_b=mu_b)
     out = Guess(x=V[ix].copy(), u=V[iu].copy(), lam=lg_[ig_dyn].copy(),
                 mu_g=lg_[ig_path].copy() if disc.ng else np.zeros((N, 0)),
                 mu_b=mu_b, mu_bN=lx_[ix[N]].copy(), mu_r=lg_[ig_r].copy(), nu=lg_[ig_eq].copy())

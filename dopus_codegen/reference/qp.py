@@ -64,16 +64,38 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["QPError", "QPInfeasibleError", "solve_qp_reference", "qp_kkt_residual", "check_qp",
-           "qp_reduced_hessian_min_eig", "flatten_qp", "flatten_solution"]
+__all__ = ["QPError", "QPInfeasibleError", "QPIterationLimitError", "free_initial_state", "solve_qp_reference",
+           "qp_kkt_residual", "check_qp", "qp_reduced_hessian_min_eig", "flatten_qp", "flatten_solution"]
 
 
 class QPError(RuntimeError):
-    """The reference QP solver failed."""
+    """The reference QP solver failed. ``qp_status``: the name of the ``enum
+    dopus_qp_status`` member that says why (the C QP solver's vocabulary)."""
+    qp_status = "numerical"
 
 
 class QPInfeasibleError(QPError):
     """The QP has no feasible point."""
+    qp_status = "primal_infeasible"
+
+
+class QPIterationLimitError(QPError):
+    """The QP solver stopped at its iteration limit (``max_iter``) before converging."""
+    qp_status = "max_iter"
+
+
+def free_initial_state(nx: int, mu_b=None, lower=None, upper=None) -> None:
+    """The rule "x_0 carries no bound" (docs/algorithm.md section 1): ``x_0`` is fixed by
+    the equality row ``x_0 = xhat_0``, so the x part of stage 0 has no bound and its
+    multiplier is zero. In place: ``mu_b[0, :nx] = 0``, ``lower[0, :nx] = -inf`` and
+    ``upper[0, :nx] = +inf`` (for a flat vector, its first ``nx`` entries)."""
+    for arr, value in ((mu_b, 0.0), (lower, -np.inf), (upper, np.inf)):
+        if arr is None:
+            continue
+        if arr.ndim == 1:
+            arr[:nx] = value
+        else:
+            arr[0, :nx] = value
 
 
 _INT_KEYS = ("N", "nx", "nu", "ng", "nr", "ne")
@@ -175,8 +197,7 @@ def flatten_qp(q: dict):
     u_in = np.concatenate([q["ug"].reshape(-1), q["ur"]])
     lbz = np.concatenate([q["lbw"].reshape(-1), q["lbxN"]])
     ubz = np.concatenate([q["ubw"].reshape(-1), q["ubxN"]])
-    lbz[:nx] = -np.inf       # no bound on x_0: it is fixed by the equality row
-    ubz[:nx] = np.inf
+    free_initial_state(nx, lower=lbz, upper=ubz)
     return Hz, gz, _Rows(A_eq, b_eq, A_in, l_in, u_in, lbz, ubz)
 
 
@@ -186,7 +207,7 @@ def _unflatten(q: dict, z, y_eq, y_in, mu_z) -> dict:
     W = z[: N * nw].reshape(N, nw)
     x = np.vstack([W[:, :nx], z[N * nw:][None, :]])
     mu_b = mu_z[: N * nw].reshape(N, nw).copy()
-    mu_b[0, :nx] = 0.0
+    free_initial_state(nx, mu_b=mu_b)
     return {
         "x": x, "u": W[:, nx:].copy(),
         "lam": y_eq[: nx * (N + 1)].reshape(N + 1, nx).copy(),
@@ -294,8 +315,8 @@ def qp_kkt_residual(qp: dict, sol: dict) -> dict:
 _IPOPT_CACHE: dict = {}
 
 
-def _ipopt_solver(N, nx, nu, ng, nr, ne):
-    key = (N, nx, nu, ng, nr, ne)
+def _ipopt_solver(N, nx, nu, ng, nr, ne, max_iter=500):
+    key = (N, nx, nu, ng, nr, ne, max_iter)
     if key in _IPOPT_CACHE:
         return _IPOPT_CACHE[key]
     import casadi as ca
@@ -338,7 +359,7 @@ def _ipopt_solver(N, nx, nu, ng, nr, ne):
         "ipopt": {
             "print_level": 0, "sb": "yes", "tol": 1e-12, "acceptable_iter": 0,
             "bound_relax_factor": 0.0, "honor_original_bounds": "yes",
-            "mu_strategy": "adaptive", "max_iter": 500,
+            "mu_strategy": "adaptive", "max_iter": int(max_iter),
             "hessian_constant": "yes", "jac_c_constant": "yes", "jac_d_constant": "yes",
         },
     }
@@ -347,9 +368,9 @@ def _ipopt_solver(N, nx, nu, ng, nr, ne):
     return solver
 
 
-def _solve_ipopt(q: dict, Hz, gz, rows: _Rows):
+def _solve_ipopt(q: dict, Hz, gz, rows: _Rows, max_iter=500):
     N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
-    solver = _ipopt_solver(N, nx, nu, ng, nr, ne)
+    solver = _ipopt_solver(N, nx, nu, ng, nr, ne, max_iter)
     p = np.concatenate([q["H"].reshape(-1), q["g"].reshape(-1), q["Phi"].reshape(-1), q["HN"].reshape(-1),
                         q["gN"], q["C"].reshape(-1), q["R"].reshape(-1), q["Req"].reshape(-1)])
     lbg = np.concatenate([rows.b_eq, rows.l_in])
@@ -440,21 +461,25 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol):
     return None
 
 
-def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True) -> dict:
+def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_iter=None) -> dict:
     """Solve a QP of the module's format; return the solution dict (see module docstring).
 
     ``tol`` is the feasibility / dual-sign tolerance the polished active set must meet
     (floored at 1e-12; the polished solution itself satisfies stationarity and the active
     rows to round-off, its inactive multipliers are exactly zero). ``polished`` is False
     when no consistent active set was found: the answer is then IPOPT's (tol 1e-12). Raises :class:`QPInfeasibleError` for an infeasible QP and
-    :class:`QPError` when IPOPT fails otherwise.
+    :class:`QPError` when IPOPT fails otherwise. ``max_iter`` (default None: 500 with the
+    polish as the fallback): IPOPT's iteration limit; reaching it raises
+    :class:`QPIterationLimitError`, as the C QP solver reports its limit.
     """
     t0 = time.perf_counter()
     q = check_qp(qp)
     Hz, gz, rows = flatten_qp(q)
-    z, y_eq, y_in, mu_z, status, iters = _solve_ipopt(q, Hz, gz, rows)
+    z, y_eq, y_in, mu_z, status, iters = _solve_ipopt(q, Hz, gz, rows, 500 if max_iter is None else max_iter)
     if status in ("Infeasible_Problem_Detected", "Restoration_Failed"):
         raise QPInfeasibleError(f"QP is infeasible (IPOPT: {status})")
+    if max_iter is not None and status == "Maximum_Iterations_Exceeded":
+        raise QPIterationLimitError(f"QP iteration limit {max_iter} reached (IPOPT: {status})")
     ok_status = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
     out = None
     if polish and np.all(np.isfinite(z)):

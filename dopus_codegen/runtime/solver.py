@@ -30,50 +30,22 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from ..reference.dopus import DopusError as _ReferenceDopusError
+from .. import settings, vocabulary
+from ..errors import DopusError, status_code
+from ..settings import SettingError
 
 __all__ = ["CSolver", "DopusError", "STATUS", "QP_STATUS", "PHASES", "load_library", "build_for"]
 
-#: C status codes (enum dopus_status of runtime_c/dopus_solver.h).
-STATUS = {
-    0: "ok",
-    1: "QP not solved",
-    2: "NaN/Inf input",
-    3: "non-finite function value",
-    4: "function evaluation failure",
-    5: "invalid argument",
-    6: "not initialised",
-    7: "not prepared",
-    8: "no nominal guess",
-    9: "regularisation failure",
-    10: "already prepared",
-}
-STATUS_OK, STATUS_QP, STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = 0, 1, 2, 5
-STATUS_NOT_PREPARED, STATUS_ALREADY_PREPARED = 7, 10
-
-#: QP status codes (enum dopus_qp_status of runtime_c/dopus_qp.h).
-QP_STATUS = {0: "solved", 1: "max iterations", 2: "primal infeasible", 3: "dual infeasible",
-             4: "numerical failure", 5: "invalid input"}
-
+#: C status codes by name (enum dopus_status of runtime_c/dopus_solver.h).
+STATUS = vocabulary.status().codes
+#: QP status codes by name (enum dopus_qp_status of runtime_c/dopus_qp.h).
+QP_STATUS = vocabulary.qp_status().codes
 #: Timed phases, in the order of enum dopus_phase (runtime_c/dopus_timer.h).
-PHASES = ("feedback", "shift", "gradients", "rho", "hessians", "regularization", "assembly", "kkt")
-
-_MODES = {"receding": 0, "fixed": 1}
-_INT_MAX = 2**31 - 1
-_HESSIANS = {"exact": 0, "gauss-newton": 1, "gn": 1}
-_REGULARIZATIONS = {"none": 0, "project": 1, "mirror": 2}
-_COST_HESSIANS = {"stored": 0, "fresh": 1}
-
-
-class DopusError(_ReferenceDopusError, ValueError):
-    """A call of the C solver failed. ``status`` is the C status code (see :data:`STATUS`),
-    ``qp_status`` the QP solver's status for a failed QP (else None). It derives from the
-    reference's ``DopusError`` (so code written for either backend catches it) and from
-    ``ValueError`` (bad input)."""
-
-    def __init__(self, message: str, status: int, qp_status: Optional[int] = None):
-        super().__init__(message, status)
-        self.qp_status = qp_status
+PHASES = vocabulary.phases()
+STATUS_OK, STATUS_QP = status_code("ok"), status_code("qp")
+STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = status_code("nonfinite_input"), status_code("invalid_argument")
+_DIMS = ("N", "nx", "nu", "nw", "np", "ng", "nr", "ne", "has_gn", "has_nominal")
+_INT_MAX = 2**31 - 1   # the largest C int (qp_max_iter)
 
 
 # ---------------------------------------------------------------------------------- build
@@ -154,10 +126,13 @@ class CSolver:
     :data:`PHASES`, plus ``prepare`` = the sum of its phases), ``ring_head``.
     """
 
-    def __init__(self, disc=None, M: int = 1, mode: str = "receding", hessian: str = "exact",
-                 regularization: str = "none", reg_eps: float = 1e-4, qp_tol: float = 1e-10,
-                 lib_dir=None, qp_max_iter: Optional[int] = None, cost_hessian: str = "fresh",
-                 lm: Optional[float] = 0.0):
+    def __init__(self, disc=None, M: int = settings.DEFAULTS["M"], mode: str = settings.DEFAULTS["mode"],
+                 hessian: str = settings.DEFAULTS["hessian"],
+                 regularization: str = settings.DEFAULTS["regularization"],
+                 reg_eps: float = settings.DEFAULTS["reg_eps"], qp_tol: float = settings.DEFAULTS["qp_tol"],
+                 lib_dir=None, qp_max_iter: Optional[int] = None,
+                 cost_hessian: str = settings.DEFAULTS["cost_hessian"],
+                 lm: Optional[float] = settings.DEFAULTS["lm"]):
         if lib_dir is None:
             if disc is None:
                 raise ValueError("CSolver needs a Discretized problem or lib_dir (a generated folder)")
@@ -165,11 +140,12 @@ class CSolver:
         self.lib_dir = Path(lib_dir)
         self._ffi, self._lib, self.meta = load_library(self.lib_dir)
         self.name = self.meta["name"]
-        dims = self._ffi.new("int[10]")
+        dims = self._ffi.new(f"{self.name}_dims *")
         self._c("get_dims")(dims)
-        (self.N, self.nx, self.n_u, self.nw, self.np, self.ng, self.nr, self.ne,
-         has_gn, has_nominal) = [int(v) for v in dims]
-        self.has_gn, self.has_nominal = bool(has_gn), bool(has_nominal)
+        self.dims = {f: int(getattr(dims, f)) for f in _DIMS}
+        self.N, self.nx, self.n_u, self.nw = (self.dims[f] for f in ("N", "nx", "nu", "nw"))
+        self.np, self.ng, self.nr, self.ne = (self.dims[f] for f in ("np", "ng", "nr", "ne"))
+        self.has_gn, self.has_nominal = bool(self.dims["has_gn"]), bool(self.dims["has_nominal"])
         self.disc = disc
         if disc is not None:
             want = (disc.N, disc.nx, disc.nu, disc.np, disc.ng, disc.nr, disc.ne)
@@ -178,6 +154,8 @@ class CSolver:
                 raise ValueError(f"the library in '{self.lib_dir}' is problem '{self.name}' with sizes "
                                  f"(N, nx, nu, np, ng, nr, ne) = {have}, the given problem is "
                                  f"'{disc.name}' with {tuple(int(v) for v in want)}")
+        # the codes of the headers this library was compiled from (the generated folder)
+        self.enums = vocabulary.generated_enums(str(self.lib_dir.resolve()), self.name)
         size = int(self._c("solver_sizeof")())
         self.sizeof = size
         # doubles keep the struct 8-byte aligned; cffi zero-fills, the C side sets defaults
@@ -222,7 +200,7 @@ class CSolver:
         msg = f"{self.name}: {what}: {self._status_text(status)} (status {status})"
         if status == STATUS_QP:
             qp_status = int(self._c("get_qp_status")(self._s))
-            msg += (f"; QP status {qp_status} ({QP_STATUS.get(qp_status, 'unknown')}) after "
+            msg += (f"; QP status {qp_status} ({self.enums['dopus_qp_status'].name(qp_status)}) after "
                     f"{int(self._c('get_qp_iterations')(self._s))} iterations")
         raise DopusError(msg, status, qp_status)
 
@@ -264,62 +242,51 @@ class CSolver:
             self._c(fname)(self._s, self._ffi.from_buffer("double[]", out))
         return out
 
-    @staticmethod
-    def _positive(v, what: str) -> float:
+    def _setting(self, check, *args):
+        """A value checked by :mod:`dopus_codegen.settings`; a bad one is DopusError
+        (invalid argument) naming the setting."""
         try:
-            f = float(v)
-        except (TypeError, ValueError, OverflowError):
-            raise DopusError(f"{what} must be a positive finite number, got {v!r}", STATUS_INVALID_ARGUMENT) from None
-        if not np.isfinite(f) or f <= 0:
-            raise DopusError(f"{what} must be positive and finite, got {v!r}", STATUS_INVALID_ARGUMENT)
-        return f
+            return check(*args)
+        except SettingError as exc:
+            self._bad(str(exc))
+
+    def _positive(self, v, what: str) -> float:
+        return self._setting(settings.positive, what, v)
 
     # ------------------------------------------------------------------ settings
     def set_M(self, M: int) -> None:
         """Stages re-linearised per iteration; values above N-1 mean the full RTI (N-1),
         as in the reference."""
-        if isinstance(M, bool) or not isinstance(M, (int, np.integer)) or M < 0:
-            self._bad(f"M must be a non-negative integer, got {M!r}")
-        self._check(self._c("set_M")(self._s, int(min(int(M), self.N - 1))), f"M={M!r}")
+        M = self._setting(settings.count, "M", M)
+        self._check(self._c("set_M")(self._s, int(min(M, self.N - 1))), f"M={M!r}")
 
     def set_mode(self, mode: str) -> None:
-        if not isinstance(mode, str) or mode not in _MODES:
-            self._bad(f"mode must be 'receding' or 'fixed', got {mode!r}")
-        self._check(self._c("set_mode")(self._s, _MODES[mode]), f"mode={mode!r}")
+        self._check(self._c("set_mode")(self._s, self._setting(settings.code, "mode", mode)), f"mode={mode!r}")
 
     def set_hessian(self, hessian: str) -> None:
-        if not isinstance(hessian, str) or hessian not in _HESSIANS:
-            self._bad(f"hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
-        if _HESSIANS[hessian] == 1 and not self.has_gn:
+        code = self._setting(settings.code, "hessian", hessian)
+        if hessian == "gauss-newton" and not self.has_gn:
             self._bad("hessian='gauss-newton' needs a least-squares stage cost (the OCP declares no "
                       "stage_least_squares)")
-        self._check(self._c("set_hessian")(self._s, _HESSIANS[hessian]), f"hessian={hessian!r}")
+        self._check(self._c("set_hessian")(self._s, code), f"hessian={hessian!r}")
 
     def set_regularization(self, regularization: str, reg_eps: Optional[float] = None) -> None:
-        if not isinstance(regularization, str) or regularization not in _REGULARIZATIONS:
-            self._bad(f"regularization must be 'none', 'project' or 'mirror', got {regularization!r}")
+        code = self._setting(settings.code, "regularization", regularization)
         eps = self.reg_eps if reg_eps is None else self._positive(reg_eps, "reg_eps")
-        self._check(self._c("set_regularization")(self._s, _REGULARIZATIONS[regularization], eps),
+        self._check(self._c("set_regularization")(self._s, code, eps),
                     f"regularization={regularization!r}, reg_eps={reg_eps!r}")
 
     def set_cost_hessian(self, cost_hessian: str) -> None:
         """``"fresh"``: the stage-cost Hessian of every stage is refreshed in every prepare;
         ``"stored"``: the paper's literal algorithm (docs/algorithm.md section 4 step 5)."""
-        if not isinstance(cost_hessian, str) or cost_hessian not in _COST_HESSIANS:
-            self._bad(f"cost_hessian must be 'fresh' or 'stored', got {cost_hessian!r}")
-        self._check(self._c("set_cost_hessian")(self._s, _COST_HESSIANS[cost_hessian]),
+        self._check(self._c("set_cost_hessian")(self._s, self._setting(settings.code, "cost_hessian", cost_hessian)),
                     f"cost_hessian={cost_hessian!r}")
 
     def set_levenberg_marquardt(self, lm: float) -> None:
         """Levenberg-Marquardt term: the QP uses the Hessian blocks plus ``lm * I``
         (docs/algorithm.md section 3); finite and >= 0."""
-        try:
-            f = float(lm)
-        except (TypeError, ValueError, OverflowError):
-            self._bad(f"lm must be a finite number >= 0, got {lm!r}")
-        if not np.isfinite(f) or f < 0:
-            self._bad(f"lm must be finite and >= 0, got {lm!r}")
-        self._check(self._c("set_levenberg_marquardt")(self._s, f), f"lm={lm!r}")
+        self._check(self._c("set_levenberg_marquardt")(self._s, self._setting(settings.nonnegative, "lm", lm)),
+                    f"lm={lm!r}")
 
     @property
     def lm(self) -> float:
@@ -329,11 +296,9 @@ class CSolver:
         self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")
 
     def set_qp_max_iter(self, max_iter: int) -> None:
-        if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-            self._bad(f"qp_max_iter must be a positive integer, got {max_iter!r}")
-        if max_iter > _INT_MAX:
-            self._bad(f"qp_max_iter must be at most {_INT_MAX} (a C int), got {max_iter!r}")
-        self._check(self._c("set_qp_max_iter")(self._s, int(max_iter)), "qp_max_iter")
+        self._check(self._c("set_qp_max_iter")(self._s, self._setting(settings.count, "qp_max_iter", max_iter, 1,
+                                                                      _INT_MAX)),
+                    "qp_max_iter")
 
     def set_parameters(self, p) -> None:
         """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
@@ -355,19 +320,19 @@ class CSolver:
 
     @property
     def mode(self) -> str:
-        return {v: k for k, v in _MODES.items()}[int(self._c("get_mode")(self._s))]
+        return settings.value_of("mode", self._c("get_mode")(self._s))
 
     @property
     def hessian(self) -> str:
-        return "exact" if int(self._c("get_hessian")(self._s)) == 0 else "gauss-newton"
+        return settings.value_of("hessian", self._c("get_hessian")(self._s))
 
     @property
     def regularization(self) -> str:
-        return {v: k for k, v in _REGULARIZATIONS.items()}[int(self._c("get_regularization")(self._s))]
+        return settings.value_of("regularization", self._c("get_regularization")(self._s))
 
     @property
     def cost_hessian(self) -> str:
-        return "fresh" if int(self._c("get_cost_hessian")(self._s)) else "stored"
+        return settings.value_of("cost_hessian", self._c("get_cost_hessian")(self._s))
 
     @property
     def reg_eps(self) -> float:
@@ -484,8 +449,9 @@ class CSolver:
 
     @property
     def timings(self) -> dict:
-        t = self._get("get_timings", (len(PHASES),))
-        out = {name: float(v) for name, v in zip(PHASES, t)}
+        phases = self.enums["dopus_phase"].names()
+        t = self._get("get_timings", (len(phases),))
+        out = {name: float(v) for name, v in zip(phases, t)}
         out["prepare"] = sum(out[k] for k in ("shift", "gradients", "rho", "hessians", "regularization", "assembly"))
         return out
 
@@ -500,7 +466,9 @@ class CSolver:
         """Replace the C clock by a Python callable returning seconds (None: the default).
         The callback is kept alive by the handle."""
         if clock is not None and not callable(clock):
-            self._bad(f"set_clock: expected a callable returning seconds (or None), got {clock!r}")
+            self.status = STATUS_INVALID_ARGUMENT
+            raise DopusError(f"{self.name}: set_clock: expected a callable returning seconds (or None), got {clock!r}",
+                             STATUS_INVALID_ARGUMENT)
         if clock is None:
             self._clock_cb = None
             self._c("set_clock")(self._s, self._ffi.NULL, self._ffi.NULL)

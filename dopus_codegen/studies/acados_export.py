@@ -92,7 +92,7 @@ def export_ocp(ocp: Ocp) -> dict:
         raise OcpError(f"export: integrator {ocp.integrator.describe()} has no acados counterpart here "
                        f"(only RK4, which maps to acados' 4-stage ERK)")
     disc = build_functions(ocp)
-    m = discretize(ocp)
+    m = discretize(ocp.validate())
     x, u, p = m.x, m.u, m.p
     dense = ca.densify
     for what, out in (("stage residual", m.res), ("path constraints", m.g), ("terminal residual", m.resN),

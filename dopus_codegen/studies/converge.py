@@ -41,6 +41,9 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from .. import settings
+from .records import json_ready
+
 __all__ = ["StartPoint", "make_start", "run_study", "run_converge_cli", "backend_factory",
            "iterations_to", "objective"]
 
@@ -141,7 +144,8 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     cost_hessian=)`` builds a backend (default: :class:`~dopus_codegen.reference.dopus.ReferenceDopus`).
     ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
     """
-    from ..reference.dopus import DopusError, ReferenceDopus
+    from ..errors import DopusError
+    from ..reference.dopus import ReferenceDopus
 
     if isinstance(start, str):
         start = make_start(disc, start)
@@ -150,8 +154,7 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
         backend_name = backend_name or "reference"
     if isinstance(iters, bool) or not isinstance(iters, (int, np.integer)) or iters < 1:
         raise ValueError(f"iters must be a positive integer, got {iters!r}")
-    if cost_hessian not in ("fresh", "stored"):
-        raise ValueError(f"cost_hessian must be 'fresh' or 'stored', got {cost_hessian!r}")
+    settings.check("cost_hessian", cost_hessian)
     Ms = [_resolve_M(m, disc.N) for m in m_list]
     if not Ms:
         raise ValueError("the list of M values is empty")
@@ -200,17 +203,6 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     }
 
 
-def _json_safe(obj):
-    """Strict JSON: non-finite floats (a diverged run) become null."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    return obj
-
-
 def format_table(study: dict, tol: float = 1e-8) -> str:
     """Plain-text summary: per M the iterations to ``tol`` and the last KKT."""
     N = study["N"]
@@ -250,19 +242,13 @@ def plot_study(study: dict, path: str) -> None:
     plt.close(fig)
 
 
-def _cli_M_list(m_list, N: int) -> list:
+#: The M values of the study when neither the command line nor the OCP file gives M.
+DEFAULT_M_LIST = ("full", 5, 1, 0)
+
+
+def _cli_M_list(m_list, N: int, is_default: bool = False) -> list:
     """Resolve the CLI's M values. An explicit value above N-1 is an error; the default list
     (full,5,1,0) drops entries a short horizon cannot have."""
-    import click
-
-    ctx = click.get_current_context(silent=True)
-    is_default = False
-    if ctx is not None:
-        try:
-            src = ctx.get_parameter_source("m_list")
-            is_default = src is not None and src.name in ("DEFAULT", "DEFAULT_MAP")
-        except Exception:  # noqa: BLE001 - older click: treat as explicit
-            is_default = False
     if is_default:
         m_list = [m for m in m_list if m == "full" or m <= N - 1]
     out = []
@@ -273,9 +259,27 @@ def _cli_M_list(m_list, N: int) -> list:
     return out
 
 
-def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, backend,
-                     json_out=None, plot_out=None, cost_hessian: str = "fresh", lm: float = 0.0) -> dict:
-    """The body of ``dopus-gen converge`` (errors become click exceptions)."""
+def effective_settings(declared: dict, m_list, **cli):
+    """The settings of a study: the command line's (``cli``, None = not given) over the OCP
+    file's ``declared`` options over the defaults; the M list is the command line's, else
+    the file's M, else :data:`DEFAULT_M_LIST`. Returns ``(values, sources, m_list,
+    m_is_default)``."""
+    values, sources = settings.resolve(declared, dict(cli, M=None))
+    if m_list is not None:
+        sources["M"] = settings.SOURCE_CLI
+        return values, sources, list(m_list), False
+    if "M" in declared:
+        sources["M"] = settings.SOURCE_FILE
+        return values, sources, [int(declared["M"])], False
+    sources["M"] = settings.SOURCE_DEFAULT
+    return values, sources, list(DEFAULT_M_LIST), True
+
+
+def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularization=None, reg_eps=None,
+                     backend="reference", json_out=None, plot_out=None, cost_hessian=None, lm=None) -> dict:
+    """The body of ``dopus-gen converge`` (errors become click exceptions). A setting given as
+    None comes from the OCP file's ``options(...)``, else from the defaults of
+    :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from."""
     import click
 
     from ..problem.derivatives import build_functions
@@ -283,17 +287,23 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, re
 
     try:
         factory = backend_factory(backend)
-        disc = build_functions(load_ocp(ocp_file))
-        if hessian == "gauss-newton" and disc.stage_hess_gn is None:
+        ocp = load_ocp(ocp_file)
+        values, sources, m_list, m_default = effective_settings(
+            ocp.declared_options(), m_list, hessian=hessian, regularization=regularization, reg_eps=reg_eps,
+            cost_hessian=cost_hessian, lm=lm)
+        disc = build_functions(ocp)
+        if values["hessian"] == "gauss-newton" and disc.stage_hess_gn is None:
             raise ValueError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
                              f"(ocp.stage_least_squares)")
-        Ms = _cli_M_list(m_list, disc.N)
-        if not math.isfinite(reg_eps) or reg_eps <= 0:
-            raise ValueError(f"--reg-eps must be positive and finite, got {reg_eps}")
+        Ms = _cli_M_list(m_list, disc.N, m_default)
+        click.echo(f"{disc.name}: settings: M {','.join(str(m) for m in Ms)} ({sources['M']}), "
+                   + settings.describe({k: v for k, v in values.items() if k != "M"}, sources), err=True)
         click.echo(f"{disc.name}: preparing the {start} start ...", err=True)
         sp = make_start(disc, start)
     except (OcpError, ValueError, RuntimeError) as exc:
         raise click.ClickException(str(exc)) from None
+    hessian, regularization, reg_eps = values["hessian"], values["regularization"], values["reg_eps"]
+    cost_hessian, lm = values["cost_hessian"], values["lm"]
 
     total = len(Ms) * iters
     with click.progressbar(length=total, label="DOPUS iterations", file=sys.stderr,
@@ -313,10 +323,11 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian, regularization, re
                               progress=progress, cost_hessian=cost_hessian, lm=lm)
         except (ValueError, RuntimeError) as exc:
             raise click.ClickException(str(exc)) from None
+    study["sources"] = {k: sources[k] for k in ("M", *settings.SOLVER_SETTINGS) if k in sources}
     click.echo(format_table(study))
     if json_out:
         with open(json_out, "w") as fh:
-            json.dump(_json_safe(study), fh, indent=1, allow_nan=False)
+            json.dump(json_ready(study), fh, indent=1, allow_nan=False)
         click.echo(f"wrote {json_out}", err=True)
     if plot_out:
         plot_study(study, plot_out)

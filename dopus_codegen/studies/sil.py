@@ -30,7 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import settings
+from ..errors import DopusError
 from .plant import Plant, PlantError
+from .records import json_ready
 
 __all__ = ["SilError", "make_backend", "run_closed_loop", "summarize", "format_summary",
            "write_json", "run_sil_cli"]
@@ -77,9 +80,7 @@ def _status_of(err) -> int:
 
 
 def _is_dopus_error(err) -> bool:
-    # Both backends raise DopusError (a status attribute); match by name so that this module
-    # does not import a backend it does not use.
-    return any(cls.__name__ == "DopusError" for cls in type(err).__mro__)
+    return isinstance(err, DopusError)
 
 
 # --------------------------------------------------------------------------- scenario
@@ -107,43 +108,69 @@ def _apply_event(ev, x: np.ndarray, nx: int) -> np.ndarray:
     return out
 
 
-def _round_json(v):
-    """Floats as JSON numbers; non-finite values become null (strict JSON)."""
-    if isinstance(v, dict):
-        return {k: _round_json(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_round_json(x) for x in v]
-    if isinstance(v, (np.floating, float)):
-        return float(v) if math.isfinite(v) else None
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, np.ndarray):
-        return _round_json(v.tolist())
-    return v
-
-
 # --------------------------------------------------------------------------- the loop
 def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
                     regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
                     lm: float | None = None, duration: float | None = None,
                     guess=None, xhat0=None, progress: bool = False, label: str | None = None,
-                    backend_obj=None) -> dict:
+                    backend_obj=None, sources: dict | None = None) -> dict:
     """Run the closed loop of the OCP's scenario and return the record of the run.
 
     ``guess``: the initialisation of the controller (default: the offline solve at the
     initial state, ``offline.solve_ocp``). ``backend_obj``: an already constructed backend
-    (then ``backend``, ``M``, ``hessian``, ... only label the run).
+    (then ``backend``, ``M``, ``hessian``, ... only label the run). ``sources``: where each
+    setting came from (``settings.resolve``), recorded with the settings.
 
     The record: ``t, x, u, kkt, kkt_parts, status, signals, recomputed, timing_us, settings,
     events`` (one entry per sampling instant; ``x`` is the measured state, ``u`` the applied
     control, ``kkt`` the KKT measure right after feedback), and ``aborted`` (None or why the
     run stopped early).
     """
+    spec, duration, n_steps, M_eff, label = _scenario_of(disc, duration, M, label)
+    if lm is None:
+        lm = default_lm(disc)
+    p = _default_parameters(disc)
+    x = np.array(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
+    if x.size != int(disc.nx):
+        raise SilError(f"scenario x0 has {x.size} entries, expected nx = {int(disc.nx)}")
+    plant_ode = spec.plant_ode if spec.plant_ode is not None else disc.ode
+    plant = Plant(plant_ode, float(disc.dt), p.size, reltol=1e-10, abstol=1e-10)
+    events = sorted([ev for ev in spec.events if float(ev.time) < duration + _ON_GRID * float(disc.dt)],
+                    key=lambda ev: float(ev.time))
+    if guess is None:
+        from ..reference.offline import solve_ocp
+        guess, _info = solve_ocp(disc, x)
+    if backend_obj is None:
+        backend_obj = _make_backend_for_run(disc, backend, M=M_eff, hessian=hessian, regularization=regularization,
+                                            reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm)
+    backend_obj.init(x, guess)
+    rec = _Record(spec, disc)
+    rec.snap = dict(getattr(backend_obj, "timings", {}) or {})
+    loop = _Loop(disc, backend_obj, plant, events, p, rec)
+    loop.run(x, n_steps, progress, label)
+    settings_rec = {"M": M_eff, "N": int(disc.N), "dt": float(disc.dt), "duration": n_steps * float(disc.dt),
+                    "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
+                    "backend": backend,
+                    "cost_hessian": str(getattr(backend_obj, "cost_hessian", cost_hessian)),
+                    "lm": float(getattr(backend_obj, "lm", lm)),
+                    "plant": "CVODES (Adams, reltol = abstol = 1e-10)",
+                    "lbu": list(loop.lbu), "ubu": list(loop.ubu),
+                    "u_labels": list(disc.data.control_names) or None,
+                    "x_labels": list(disc.data.state_names) or None,
+                    "plane": list(_plane_signals(spec)) if _plane_signals(spec) else None}
+    if sources is not None:
+        settings_rec["sources"] = dict(sources)
+    return json_ready(rec.as_run(label, events, settings_rec, loop.aborted))
+
+
+def _scenario_of(disc, duration, M, label):
+    """The scenario, the duration, the number of sampling instants, the effective M and the
+    run's label."""
     spec = disc.scenario.closed_loop
     if spec is None:
         raise SilError("the OCP declares no closed-loop scenario: call ocp.scenario(duration, events=..., "
                        "signals=...) in its build()")
-    N, nx, nu, dt = int(disc.N), int(disc.nx), int(disc.nu), float(disc.dt)
+    N, dt = int(disc.N), float(disc.dt)
     duration = float(spec.duration if duration is None else duration)
     if not (math.isfinite(duration) and duration > 0):
         raise SilError(f"duration must be positive and finite, got {duration}")
@@ -153,165 +180,177 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     M_eff = max(0, min(int(M), N - 1))
     if label is None:
         label = "full RTI" if M_eff == N - 1 else f"DOPUS M = {M_eff}"
+    return spec, duration, n_steps, M_eff, label
 
-    if lm is None:
-        lm = default_lm(disc)
-    p = _default_parameters(disc)
-    x = np.array(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
-    if x.size != nx:
-        raise SilError(f"scenario x0 has {x.size} entries, expected nx = {nx}")
-    plant_ode = spec.plant_ode if spec.plant_ode is not None else disc.ode
-    plant = Plant(plant_ode, dt, p.size, reltol=1e-10, abstol=1e-10)
-    lbu = np.asarray(disc.lbu, dtype=float).reshape(-1)
-    ubu = np.asarray(disc.ubu, dtype=float).reshape(-1)
 
-    events = sorted([ev for ev in spec.events if float(ev.time) < duration + _ON_GRID * dt],
-                    key=lambda ev: float(ev.time))
-
-    if guess is None:
-        from ..reference.offline import solve_ocp
-        guess, _info = solve_ocp(disc, x)
-    if backend_obj is None:
-        try:
-            backend_obj = make_backend(disc, backend, M=M_eff, hessian=hessian, regularization=regularization,
-                                       reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm)
-        except SilError:
-            raise
-        except Exception as exc:  # noqa: BLE001 - settings rejected, C build failed, ...
-            raise SilError(f"cannot set up the {backend} backend: {exc}") from None
-    ctrl = backend_obj
-    ctrl.init(x, guess)
-    snap = dict(getattr(ctrl, "timings", {}) or {})
-
-    rec_t, rec_x, rec_u, rec_kkt, rec_parts, rec_status, rec_rec = [], [], [], [], [], [], []
-    rec_sig = {name: [] for name in spec.signals}
-    rec_qp_it = []
-    timing: dict[str, list] = {"feedback": [], "prepare": [], "total": []}
-    phase_timing: dict[str, list] = {}  # the backend's own phase timers
-    aborted = None
-
-    bar = None
-    t_start = time.perf_counter()
-    ev_idx = 0
+def _make_backend_for_run(disc, backend, **kwargs):
     try:
-        for i in range(n_steps):
-            t_i = i * dt
-            # Events on this instant act before the measurement.
-            while ev_idx < len(events) and float(events[ev_idx].time) <= t_i + _ON_GRID * dt:
-                x = _apply_event(events[ev_idx], x, nx)
-                ev_idx += 1
-            xhat = x.copy()
+        return make_backend(disc, backend, **kwargs)
+    except SilError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - settings rejected, C build failed, ...
+        raise SilError(f"cannot set up the {backend} backend: {exc}") from None
 
-            status = 0
-            t0 = time.perf_counter()
-            try:
-                u0 = np.asarray(ctrl.feedback(xhat), dtype=float).reshape(-1)
-            except Exception as err:  # noqa: BLE001
-                if not _is_dopus_error(err):
-                    raise
-                status = _status_of(err)
-                u0 = np.asarray(ctrl.u, dtype=float)[0].copy()
-            t_fb = time.perf_counter() - t0
-            rec_qp_it.append(int(getattr(ctrl, "qp_iterations", 0) or 0))
-            snap_fb = dict(getattr(ctrl, "timings", {}) or {})
-            phases = _split_phases("feedback", _changed(snap, snap_fb))
-            if not np.all(np.isfinite(u0)):
-                u0 = np.clip(np.nan_to_num(np.asarray(ctrl.u, dtype=float)[0]), lbu, ubu)
-                status = status or -1
 
-            try:
-                kkt = ctrl.kkt(xhat)
-            except Exception as err:  # noqa: BLE001
-                if not _is_dopus_error(err):
-                    raise
-                # A non-finite iterate has no KKT measure; the instant counts as failed.
-                kkt = {"kkt": math.nan}
-                status = status or _status_of(err)
-            # A backend may time its KKT evaluation too; that is not part of the iteration.
-            snap_fb = dict(getattr(ctrl, "timings", {}) or {})
+class _Record:
+    """What the loop records, one entry per finished sampling instant."""
 
-            rec_t.append(t_i)
-            rec_x.append(xhat)
-            rec_u.append(u0.copy())
-            rec_kkt.append(float(kkt["kkt"]))
-            rec_parts.append({k: float(kkt[k]) for k in ("stat", "eq", "ineq", "comp") if k in kkt})
-            for name, fn in spec.signals.items():
-                rec_sig[name].append(_eval(fn, xhat, u0, p))
+    def __init__(self, spec, disc):
+        self.spec = spec
+        self.t, self.x, self.u, self.kkt, self.parts, self.status, self.recomputed = [], [], [], [], [], [], []
+        self.signals = {name: [] for name in spec.signals}
+        self.qp_iterations = []
+        self.timing: dict[str, list] = {"feedback": [], "prepare": [], "total": []}
+        self.phase_timing: dict[str, list] = {}  # the backend's own phase timers
+        self.snap: dict = {}
 
-            # Plant over [t_i, t_i + dt], split at events strictly inside the interval.
-            t_cur, t_next = t_i, (i + 1) * dt
-            while ev_idx < len(events) and float(events[ev_idx].time) < t_next - _ON_GRID * dt:
-                te = float(events[ev_idx].time)
-                x = plant.step(x, u0, p, duration=te - t_cur)
-                x = _apply_event(events[ev_idx], x, nx)
-                t_cur = te
-                ev_idx += 1
-            x = plant.step(x, u0, p, duration=t_next - t_cur)
+    def measurement(self, t_i, xhat, u0, kkt, p):
+        self.t.append(t_i)
+        self.x.append(xhat)
+        self.u.append(u0.copy())
+        self.kkt.append(float(kkt["kkt"]))
+        self.parts.append({k: float(kkt[k]) for k in ("stat", "eq", "ineq", "comp") if k in kkt})
+        for name, fn in self.spec.signals.items():
+            self.signals[name].append(_eval(fn, xhat, u0, p))
 
-            t0 = time.perf_counter()
-            prepared = True
-            try:
-                ctrl.prepare()
-            except Exception as err:  # noqa: BLE001
-                if not _is_dopus_error(err):
-                    raise
-                status = status or _status_of(err)
-                prepared = False
-            t_pr = time.perf_counter() - t0
-            snap = dict(getattr(ctrl, "timings", {}) or {})
-            phases.update(_split_phases("prepare", _changed(snap_fb, snap)))
-            rec_status.append(int(status))
-            rec_rec.append([int(k) for k in getattr(ctrl, "recomputed", [])] if prepared else [])
+    def instant_done(self, i, status, recomputed, t_fb, t_pr, phases):
+        self.status.append(int(status))
+        self.recomputed.append(recomputed)
+        self.timing["feedback"].append(t_fb * 1e6)
+        self.timing["prepare"].append(t_pr * 1e6)
+        self.timing["total"].append((t_fb + t_pr) * 1e6)
+        _record_phases(self.phase_timing, phases, i)
 
-            timing["feedback"].append(t_fb * 1e6)
-            timing["prepare"].append(t_pr * 1e6)
-            timing["total"].append((t_fb + t_pr) * 1e6)
-            _record_phases(phase_timing, phases, i)
+    def drop_unfinished(self):
+        """Drop a half-recorded instant so that all arrays have one entry per finished instant."""
+        n = len(self.status)
+        self.t, self.x, self.u, self.kkt, self.parts = (a[:n] for a in (self.t, self.x, self.u, self.kkt, self.parts))
+        self.signals = {k: v[:n] for k, v in self.signals.items()}
 
-            if progress and bar is None and time.perf_counter() - t_start > _PROGRESS_AFTER:
-                import click
-                bar = click.progressbar(length=n_steps, label=f"{label:>12}", file=sys.stderr,
-                                        show_eta=True, show_percent=True)
-                bar.__enter__()
-                bar.update(i + 1)
-            elif bar is not None:
-                bar.update(1)
-    except PlantError as err:
-        aborted = f"plant failed at t = {len(rec_t) * dt:.4g} s: {err}"
-        n_done = len(rec_status)
-        # Drop the half-recorded instant so that all arrays have one entry per finished instant.
-        rec_t, rec_x, rec_u, rec_kkt, rec_parts = (a[:n_done] for a in (rec_t, rec_x, rec_u, rec_kkt, rec_parts))
-        rec_sig = {k: v[:n_done] for k, v in rec_sig.items()}
-    finally:
-        if bar is not None:
-            bar.__exit__(None, None, None)
+    def as_run(self, label, events, settings_rec, aborted) -> dict:
+        return {
+            "label": label,
+            "t": self.t,
+            "x": [list(v) for v in self.x],
+            "u": [list(v) for v in self.u],
+            "kkt": self.kkt,
+            "kkt_parts": self.parts,
+            "status": self.status,
+            "signals": {k: [float(v[0]) if v.size == 1 else list(v) for v in vals]
+                        for k, vals in self.signals.items()},
+            "recomputed": self.recomputed,
+            "qp_iterations": self.qp_iterations[:len(self.status)],
+            "timing_us": {"feedback": self.timing["feedback"], "prepare": self.timing["prepare"],
+                          "total": self.timing["total"],
+                          **{f"phase:{k}": v for k, v in self.phase_timing.items()}},
+            "events": [{"time": float(ev.time), "label": str(ev.label)} for ev in events],
+            "settings": settings_rec,
+            "aborted": aborted,
+        }
 
-    run = {
-        "label": label,
-        "t": rec_t,
-        "x": [list(v) for v in rec_x],
-        "u": [list(v) for v in rec_u],
-        "kkt": rec_kkt,
-        "kkt_parts": rec_parts,
-        "status": rec_status,
-        "signals": {k: [float(v[0]) if v.size == 1 else list(v) for v in vals] for k, vals in rec_sig.items()},
-        "recomputed": rec_rec,
-        "qp_iterations": rec_qp_it[:len(rec_status)],
-        "timing_us": {"feedback": timing["feedback"], "prepare": timing["prepare"], "total": timing["total"],
-                      **{f"phase:{k}": v for k, v in phase_timing.items()}},
-        "events": [{"time": float(ev.time), "label": str(ev.label)} for ev in events],
-        "settings": {"M": M_eff, "N": N, "dt": dt, "duration": n_steps * dt, "hessian": hessian,
-                     "regularization": regularization, "reg_eps": float(reg_eps), "backend": backend,
-                     "cost_hessian": str(getattr(backend_obj, "cost_hessian", cost_hessian)),
-                     "lm": float(getattr(backend_obj, "lm", lm)),
-                     "plant": "CVODES (Adams, reltol = abstol = 1e-10)",
-                     "lbu": list(lbu), "ubu": list(ubu),
-                     "u_labels": list(disc.data.control_names) or None,
-                     "x_labels": list(disc.data.state_names) or None,
-                     "plane": list(_plane_signals(spec)) if _plane_signals(spec) else None},
-        "aborted": aborted,
-    }
-    return _round_json(run)
+
+class _Loop:
+    """The receding-horizon loop of the module docstring, one method per step of an instant."""
+
+    def __init__(self, disc, ctrl, plant, events, p, rec: _Record):
+        self.ctrl, self.plant, self.events, self.p, self.rec = ctrl, plant, events, p, rec
+        self.nx, self.dt = int(disc.nx), float(disc.dt)
+        self.lbu = np.asarray(disc.lbu, dtype=float).reshape(-1)
+        self.ubu = np.asarray(disc.ubu, dtype=float).reshape(-1)
+        self.ev_idx = 0
+        self.aborted = None
+
+    def run(self, x, n_steps, progress, label):
+        bar = None
+        t_start = time.perf_counter()
+        try:
+            for i in range(n_steps):
+                x = self.instant(i, x)
+                if progress and bar is None and time.perf_counter() - t_start > _PROGRESS_AFTER:
+                    import click
+                    bar = click.progressbar(length=n_steps, label=f"{label:>12}", file=sys.stderr,
+                                            show_eta=True, show_percent=True)
+                    bar.__enter__()
+                    bar.update(i + 1)
+                elif bar is not None:
+                    bar.update(1)
+        except PlantError as err:
+            self.aborted = f"plant failed at t = {len(self.rec.t) * self.dt:.4g} s: {err}"
+            self.rec.drop_unfinished()
+        finally:
+            if bar is not None:
+                bar.__exit__(None, None, None)
+
+    def instant(self, i, x):
+        """One sampling instant: events, measurement, feedback, KKT, plant, prepare."""
+        t_i = i * self.dt
+        x = self.events_until(x, t_i + _ON_GRID * self.dt)
+        xhat = x.copy()
+        u0, status, t_fb = self.feedback(xhat)
+        self.rec.qp_iterations.append(int(getattr(self.ctrl, "qp_iterations", 0) or 0))
+        phases = _split_phases("feedback", _changed(self.rec.snap, dict(getattr(self.ctrl, "timings", {}) or {})))
+        kkt, status = self.kkt(xhat, status)
+        # A backend may time its KKT evaluation too; that is not part of the iteration.
+        snap_fb = dict(getattr(self.ctrl, "timings", {}) or {})
+        self.rec.measurement(t_i, xhat, u0, kkt, self.p)
+        x = self.plant_interval(x, u0, t_i, (i + 1) * self.dt)
+        status, prepared, t_pr = self.prepare(status)
+        self.rec.snap = dict(getattr(self.ctrl, "timings", {}) or {})
+        phases.update(_split_phases("prepare", _changed(snap_fb, self.rec.snap)))
+        recomputed = [int(k) for k in getattr(self.ctrl, "recomputed", [])] if prepared else []
+        self.rec.instant_done(i, status, recomputed, t_fb, t_pr, phases)
+        return x
+
+    def events_until(self, x, t_end):
+        """Apply the events due at an instant (time <= t_end) to the plant state."""
+        while self.ev_idx < len(self.events) and float(self.events[self.ev_idx].time) <= t_end:
+            x = _apply_event(self.events[self.ev_idx], x, self.nx)
+            self.ev_idx += 1
+        return x
+
+    def feedback(self, xhat):
+        """u0 of the controller (timed); a failed feedback applies the first control of the
+        current plan and records the status."""
+        status = 0
+        t0 = time.perf_counter()
+        try:
+            u0 = np.asarray(self.ctrl.feedback(xhat), dtype=float).reshape(-1)
+        except DopusError as err:
+            status = _status_of(err)
+            u0 = np.asarray(self.ctrl.u, dtype=float)[0].copy()
+        t_fb = time.perf_counter() - t0
+        if not np.all(np.isfinite(u0)):
+            u0 = np.clip(np.nan_to_num(np.asarray(self.ctrl.u, dtype=float)[0]), self.lbu, self.ubu)
+            status = status or -1
+        return u0, status, t_fb
+
+    def kkt(self, xhat, status):
+        try:
+            return self.ctrl.kkt(xhat), status
+        except DopusError as err:
+            # A non-finite iterate has no KKT measure; the instant counts as failed.
+            return {"kkt": math.nan}, status or _status_of(err)
+
+    def plant_interval(self, x, u0, t_i, t_next):
+        """The plant over [t_i, t_next] with u0 held, split at events strictly inside."""
+        t_cur = t_i
+        while self.ev_idx < len(self.events) and float(self.events[self.ev_idx].time) < t_next - _ON_GRID * self.dt:
+            te = float(self.events[self.ev_idx].time)
+            x = self.plant.step(x, u0, self.p, duration=te - t_cur)
+            x = _apply_event(self.events[self.ev_idx], x, self.nx)
+            t_cur = te
+            self.ev_idx += 1
+        return self.plant.step(x, u0, self.p, duration=t_next - t_cur)
+
+    def prepare(self, status):
+        t0 = time.perf_counter()
+        prepared = True
+        try:
+            self.ctrl.prepare()
+        except DopusError as err:
+            status = status or _status_of(err)
+            prepared = False
+        return status, prepared, time.perf_counter() - t0
 
 
 def _changed(before: dict, after: dict) -> dict:
@@ -457,9 +496,12 @@ def write_json(runs, path) -> None:
 
 
 # --------------------------------------------------------------------------- CLI
-def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps,
-                backend, cost_hessian="fresh", echo=None, progress=True, lm=None) -> list:
-    """The ``dopus-gen sil`` command: runs, summary table, JSON and plots."""
+def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, compare="none", hessian=None,
+                regularization=None, reg_eps=None, backend="c", cost_hessian=None, echo=None, progress=True,
+                lm=None) -> list:
+    """The ``dopus-gen sil`` command: runs, summary table, JSON and plots. A setting given as
+    None comes from the OCP file's ``options(...)``, else from the defaults of
+    :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from."""
     from ..problem.ocp import load_ocp
     from ..problem.derivatives import build_functions
 
@@ -468,14 +510,20 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
         echo = click.echo
 
     ocp = load_ocp(ocp_file)
+    try:
+        values, sources = settings.resolve(ocp.declared_options(), dict(
+            M=M, hessian=hessian, regularization=regularization, reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm))
+    except settings.SettingError as exc:
+        raise SilError(f"{ocp_file}: {exc}") from None
     disc = build_functions(ocp)
     if disc.scenario.closed_loop is None:
         raise SilError(f"{ocp_file}: the OCP declares no closed-loop scenario (ocp.scenario(...))")
-    if hessian == "gauss-newton" and not disc.functions.has_gn:
+    if values["hessian"] == "gauss-newton" and not disc.functions.has_gn:
         raise SilError(f"{ocp_file}: --hessian gauss-newton needs a least-squares stage cost "
                        "(ocp.stage_least_squares)")
     spec = disc.scenario.closed_loop
     x0 = np.array(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
+    echo(f"settings: {settings.describe(values, sources)}", err=True)
 
     from ..reference.offline import solve_ocp
     guess, info = solve_ocp(disc, x0)
@@ -483,24 +531,27 @@ def run_sil_cli(ocp_file, M, duration, json_out, plot_dir, compare, hessian, reg
         echo(f"warning: the offline solve at the initial state did not converge ({info.get('status')}); "
              "the controller starts from its last iterate", err=True)
 
-    if lm is None:
-        lm = default_lm(disc)
     N = int(disc.N)
-    configs = [(M, None)]
+    M = values["M"]
+    configs = [(M, None, sources)]
     if compare == "full" and min(M, N - 1) != N - 1:
-        configs.append((N - 1, "full RTI"))
+        configs.append((N - 1, "full RTI", dict(sources, M=settings.SOURCE_CLI)))  # --compare full
     runs = []
-    for m, label in configs:
+    for m, label, src in configs:
         name = label or ("full RTI" if min(m, N - 1) == N - 1 else f"DOPUS M = {m}")
-        echo(f"{name}: {backend} backend, {hessian} Hessian, regularization {regularization}, "
-             f"cost Hessian {cost_hessian}, Levenberg-Marquardt {lm:g}, "
+        echo(f"{name}: {backend} backend, {values['hessian']} Hessian, regularization {values['regularization']}, "
+             f"cost Hessian {values['cost_hessian']}, Levenberg-Marquardt {values['lm']:g}, "
              f"{duration if duration is not None else spec.duration} s ...", err=True)
-        run = run_closed_loop(disc, backend=backend, M=m, hessian=hessian, regularization=regularization,
-                              reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm, duration=duration, guess=guess,
-                              progress=progress, label=label)
+        run = run_closed_loop(disc, backend=backend, M=m, hessian=values["hessian"],
+                              regularization=values["regularization"], reg_eps=values["reg_eps"],
+                              cost_hessian=values["cost_hessian"], lm=values["lm"], duration=duration, guess=guess,
+                              progress=progress, label=label, sources=src)
         runs.append(run)
     summaries = [summarize(r) for r in runs]
     echo(format_summary(summaries))
+    for r in runs:
+        st = r["settings"]
+        echo(f"{r['label']}: " + settings.describe({k: st[k] for k in settings.SOLVER_SETTINGS}, st["sources"]))
     if json_out:
         write_json(runs, json_out)
         echo(f"JSON: {json_out}")

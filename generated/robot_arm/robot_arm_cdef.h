@@ -8,8 +8,12 @@ size_t robot_arm_solver_sizeof(void);
  * OCP file, receding mode, QP tolerance 1e-10, parameters p_default at every node, default
  * clock) and mark the solver uninitialised. */
 void robot_arm_defaults(robot_arm_solver *s);
-/* Dimensions: dims[0..9] = N, nx, nu, nw, np, ng, nr, ne, has_gn, has_nominal. */
-void robot_arm_get_dims(int *dims);
+/* Dimensions of the generated problem (nw = nx + nu); has_gn: a Gauss-Newton Hessian is
+ * available (least-squares stage cost); has_nominal: robot_arm_init_nominal has data. */
+typedef struct {
+    int N, nx, nu, nw, np, ng, nr, ne, has_gn, has_nominal;
+} robot_arm_dims;
+void robot_arm_get_dims(robot_arm_dims *dims);
 /* Problem name (the generator's ROBOT_ARM_NAME). */
 const char *robot_arm_name(void);
 /* A short English description of a status code. */

@@ -106,6 +106,7 @@ const int robot_arm_default_M = 1;
 const int robot_arm_default_hessian = 0;
 const int robot_arm_default_regularization = 0;
 const double robot_arm_default_reg_eps = 0.0001;
+const int robot_arm_default_cost_hessian = 1;
 const double robot_arm_default_lm = 0.0001;
 
 /* offline primal-dual solution at robot_arm_x0_default */

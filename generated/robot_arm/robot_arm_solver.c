@@ -50,18 +50,18 @@ size_t robot_arm_solver_sizeof(void)
     return sizeof(robot_arm_solver);
 }
 
-void robot_arm_get_dims(int *dims)
+void robot_arm_get_dims(robot_arm_dims *dims)
 {
-    dims[0] = ROBOT_ARM_N;
-    dims[1] = ROBOT_ARM_NX;
-    dims[2] = ROBOT_ARM_NU;
-    dims[3] = ROBOT_ARM_NW;
-    dims[4] = ROBOT_ARM_NP;
-    dims[5] = ROBOT_ARM_NG;
-    dims[6] = ROBOT_ARM_NR;
-    dims[7] = ROBOT_ARM_NE;
-    dims[8] = ROBOT_ARM_HAS_GN;
-    dims[9] = ROBOT_ARM_HAS_NOMINAL;
+    dims->N = ROBOT_ARM_N;
+    dims->nx = ROBOT_ARM_NX;
+    dims->nu = ROBOT_ARM_NU;
+    dims->nw = ROBOT_ARM_NW;
+    dims->np = ROBOT_ARM_NP;
+    dims->ng = ROBOT_ARM_NG;
+    dims->nr = ROBOT_ARM_NR;
+    dims->ne = ROBOT_ARM_NE;
+    dims->has_gn = ROBOT_ARM_HAS_GN;
+    dims->has_nominal = ROBOT_ARM_HAS_NOMINAL;
 }
 
 const char *robot_arm_name(void)
@@ -115,7 +115,7 @@ void robot_arm_defaults(robot_arm_solver *s)
                      : ROBOT_ARM_HESSIAN_EXACT;
     s->regularization = robot_arm_default_regularization;
     s->reg_eps = robot_arm_default_reg_eps;
-    s->cost_hessian = 1;
+    s->cost_hessian = robot_arm_default_cost_hessian ? 1 : 0;
     s->lm = (robot_arm_default_lm >= 0.0 && robot_arm_default_lm < INFINITY) ? robot_arm_default_lm : 0.0;
     robot_arm_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = ROBOT_ARM_DEFAULT_QP_TOL;

@@ -66,6 +66,7 @@ const int unicycle_default_M = 1;
 const int unicycle_default_hessian = 0;
 const int unicycle_default_regularization = 0;
 const double unicycle_default_reg_eps = 0.0001;
+const int unicycle_default_cost_hessian = 1;
 const double unicycle_default_lm = 0.0;
 
 /* offline primal-dual solution at unicycle_x0_default */

@@ -50,18 +50,18 @@ size_t unicycle_solver_sizeof(void)
     return sizeof(unicycle_solver);
 }
 
-void unicycle_get_dims(int *dims)
+void unicycle_get_dims(unicycle_dims *dims)
 {
-    dims[0] = UNICYCLE_N;
-    dims[1] = UNICYCLE_NX;
-    dims[2] = UNICYCLE_NU;
-    dims[3] = UNICYCLE_NW;
-    dims[4] = UNICYCLE_NP;
-    dims[5] = UNICYCLE_NG;
-    dims[6] = UNICYCLE_NR;
-    dims[7] = UNICYCLE_NE;
-    dims[8] = UNICYCLE_HAS_GN;
-    dims[9] = UNICYCLE_HAS_NOMINAL;
+    dims->N = UNICYCLE_N;
+    dims->nx = UNICYCLE_NX;
+    dims->nu = UNICYCLE_NU;
+    dims->nw = UNICYCLE_NW;
+    dims->np = UNICYCLE_NP;
+    dims->ng = UNICYCLE_NG;
+    dims->nr = UNICYCLE_NR;
+    dims->ne = UNICYCLE_NE;
+    dims->has_gn = UNICYCLE_HAS_GN;
+    dims->has_nominal = UNICYCLE_HAS_NOMINAL;
 }
 
 const char *unicycle_name(void)
@@ -115,7 +115,7 @@ void unicycle_defaults(unicycle_solver *s)
                      : UNICYCLE_HESSIAN_EXACT;
     s->regularization = unicycle_default_regularization;
     s->reg_eps = unicycle_default_reg_eps;
-    s->cost_hessian = 1;
+    s->cost_hessian = unicycle_default_cost_hessian ? 1 : 0;
     s->lm = (unicycle_default_lm >= 0.0 && unicycle_default_lm < INFINITY) ? unicycle_default_lm : 0.0;
     unicycle_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = UNICYCLE_DEFAULT_QP_TOL;

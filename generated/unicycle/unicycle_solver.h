@@ -40,8 +40,12 @@ size_t unicycle_solver_sizeof(void);
  * OCP file, receding mode, QP tolerance 1e-10, parameters p_default at every node, default
  * clock) and mark the solver uninitialised. */
 void unicycle_defaults(unicycle_solver *s);
-/* Dimensions: dims[0..9] = N, nx, nu, nw, np, ng, nr, ne, has_gn, has_nominal. */
-void unicycle_get_dims(int *dims);
+/* Dimensions of the generated problem (nw = nx + nu); has_gn: a Gauss-Newton Hessian is
+ * available (least-squares stage cost); has_nominal: unicycle_init_nominal has data. */
+typedef struct {
+    int N, nx, nu, nw, np, ng, nr, ne, has_gn, has_nominal;
+} unicycle_dims;
+void unicycle_get_dims(unicycle_dims *dims);
 /* Problem name (the generator's UNICYCLE_NAME). */
 const char *unicycle_name(void);
 /* A short English description of a status code. */

@@ -26,18 +26,16 @@ from pathlib import Path
 
 import numpy as np
 
+from dopus_codegen import vocabulary
+from dopus_codegen.codegen.generate import render_sizes_header
 from dopus_codegen.codegen.paths import runtime_c_dir
 
-STRICT_CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O3", "-fPIC"]
+from dopus_codegen.codegen.flags import DEFAULT_OPT, PIC, QP_HARNESS_OPT, STRICT_CFLAGS as _STRICT
 
-STATUS_NAMES = {
-    0: "solved",
-    1: "max_iter",
-    2: "primal_infeasible",
-    3: "dual_infeasible",
-    4: "numerical",
-    5: "invalid_input",
-}
+STRICT_CFLAGS = [*_STRICT, QP_HARNESS_OPT, PIC]
+
+#: QP status names by code (enum dopus_qp_status of runtime_c/dopus_qp.h).
+STATUS_NAMES = {code: name for name, code in vocabulary.qp_status().codes.items()}
 
 _SOURCES = ("dopus_qp.c", "dopus_linalg.c", "dopus_qp.h", "dopus_linalg.h")
 
@@ -51,14 +49,9 @@ def _cc() -> str:
 
 
 def sizes_header(N: int, nx: int, nu: int, ng: int, nr: int, ne: int) -> str:
-    return (
-        "/* QP sizes for the dopus_qp test harness */\n"
-        "#ifndef DOPUS_SIZES_H\n#define DOPUS_SIZES_H\n"
-        f"#define DOPUS_N {N}\n#define DOPUS_NX {nx}\n#define DOPUS_NU {nu}\n"
-        f"#define DOPUS_NG {ng}\n#define DOPUS_NR {nr}\n#define DOPUS_NE {ne}\n"
-        "typedef double dopus_real;\n"
-        "#endif\n"
-    )
+    """The runtime's sizes header (templates/sizes.h.j2) for a QP of these sizes."""
+    return render_sizes_header("dopus", dict(N=N, nx=nx, nu=nu, ng=ng, nr=nr, ne=ne),
+                               header="QP sizes for the dopus_qp test harness")
 
 
 def _eval_c_int(expr: str) -> int:
@@ -153,7 +146,7 @@ def _build(build_dir: Path, sizes: tuple, modname: str) -> None:
     ffi = cffi.FFI()
     ffi.cdef(_cdef_from_header(rc, build_dir))
     ffi.set_source(modname, '#include "dopus_qp.h"\n', include_dirs=[str(build_dir), str(rc)],
-                   extra_objects=objs, extra_compile_args=["-O2"], libraries=["m"])
+                   extra_objects=objs, extra_compile_args=[DEFAULT_OPT], libraries=["m"])
     ffi.compile(tmpdir=str(build_dir), verbose=False)
 
 

@@ -1,0 +1,179 @@
+"""The solver settings: names, allowed values, defaults, validation and where a value came from.
+
+One table for the OCP file's ``options(...)``, the command line, both backends and code
+generation. The values of the enumerated settings are those of the C enums (read by
+:mod:`dopus_codegen.vocabulary`): ``hessian`` from ``enum dopus_hessian``, ``regularization``
+from ``enum dopus_regularization``, ``mode`` from ``enum dopus_mode``, spelled with ``-``
+for ``_`` (``"gauss-newton"``). Every setting has exactly one spelling per value; there are
+no aliases. ``cost_hessian`` is the flag of ``dopus_set_cost_hessian`` (1 = ``"fresh"``).
+
+Precedence (:func:`resolve`): a command-line flag beats the OCP file's ``options(...)``,
+which beats the default here; :func:`resolve` also says which of the three each value came
+from (``"cli"``, ``"ocp-file"``, ``"default"``).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Dict, Mapping, Optional, Tuple
+
+from . import vocabulary
+
+__all__ = ["SettingError", "DEFAULTS", "SOLVER_SETTINGS", "choices", "code", "value_of", "check",
+           "positive", "nonnegative", "count", "resolve", "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT"]
+
+SOURCE_CLI, SOURCE_FILE, SOURCE_DEFAULT = "cli", "ocp-file", "default"
+
+
+class SettingError(ValueError):
+    """A setting has a value it cannot take; the message names the setting and the value."""
+
+
+#: Defaults of every setting (the generated runtime's defaults come from the OCP file,
+#: which starts from these).
+DEFAULTS: Dict[str, Any] = {
+    "M": 1,
+    "hessian": "exact",
+    "regularization": "none",
+    "reg_eps": 1e-4,
+    "cost_hessian": "fresh",
+    "lm": 0.0,
+    "mode": "receding",
+    "qp_tol": 1e-10,
+    "offline_guess": False,
+}
+
+#: The settings of a DOPUS backend that an OCP file and the commands share.
+SOLVER_SETTINGS = ("M", "hessian", "regularization", "reg_eps", "cost_hessian", "lm")
+
+_ENUMS = {"hessian": "dopus_hessian", "regularization": "dopus_regularization", "mode": "dopus_mode"}
+_COST_HESSIAN = {"stored": 0, "fresh": 1}
+
+
+def _table(setting: str) -> Dict[str, int]:
+    if setting == "cost_hessian":
+        return dict(_COST_HESSIAN)
+    if setting not in _ENUMS:
+        raise KeyError(f"{setting!r} is not an enumerated setting; those are {sorted([*_ENUMS, 'cost_hessian'])}")
+    e = vocabulary.enum(_ENUMS[setting])
+    return {name.replace("_", "-"): value for name, value in e.codes.items()}
+
+
+def choices(setting: str) -> Tuple[str, ...]:
+    """The allowed values of an enumerated setting, in the order of their C codes."""
+    t = _table(setting)
+    return tuple(sorted(t, key=t.__getitem__))
+
+
+def _quote_list(values) -> str:
+    values = [repr(v) for v in values]
+    return values[0] if len(values) == 1 else ", ".join(values[:-1]) + " or " + values[-1]
+
+
+def check(setting: str, value: Any) -> str:
+    """``value`` if it is one of :func:`choices`, else :class:`SettingError`."""
+    allowed = choices(setting)
+    if not isinstance(value, str) or value not in allowed:
+        raise SettingError(f"{setting} must be {_quote_list(allowed)}, got {value!r}")
+    return value
+
+
+def code(setting: str, value: Any) -> int:
+    """The C code of an enumerated setting's value (checked)."""
+    return _table(setting)[check(setting, value)]
+
+
+def value_of(setting: str, c_code: int) -> str:
+    """The value of an enumerated setting whose C code is ``c_code``."""
+    for name, value in _table(setting).items():
+        if value == int(c_code):
+            return name
+    raise SettingError(f"{setting}: the C code {c_code!r} is none of {_table(setting)}")
+
+
+def _number(setting: str, value: Any, kind: str) -> float:
+    if isinstance(value, bool):
+        raise SettingError(f"{setting} must be {kind}, got {value!r}")
+    try:
+        f = float(value)
+    except (TypeError, ValueError, OverflowError):    # OverflowError: an int beyond a double
+        raise SettingError(f"{setting} must be {kind}, got {value!r}") from None
+    return f
+
+
+def positive(setting: str, value: Any) -> float:
+    """A finite number > 0 (``reg_eps``, ``qp_tol``)."""
+    f = _number(setting, value, "a positive number")
+    if not math.isfinite(f) or f <= 0:
+        raise SettingError(f"{setting} must be positive and finite, got {value!r}")
+    return f
+
+
+def nonnegative(setting: str, value: Any) -> float:
+    """A finite number >= 0 (``lm``)."""
+    f = _number(setting, value, "a number >= 0")
+    if not math.isfinite(f) or f < 0:
+        raise SettingError(f"{setting} must be finite and >= 0, got {value!r}")
+    return f
+
+
+def count(setting: str, value: Any, minimum: int = 0, maximum: Any = None) -> int:
+    """An integer >= ``minimum`` (``M`` >= 0, ``qp_max_iter`` >= 1) and <= ``maximum``
+    (``qp_max_iter``: a C int); numpy integers too."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
+        raise SettingError(f"{setting} must be an integer >= {minimum}, got {value!r}")
+    if maximum is not None and value > maximum:
+        raise SettingError(f"{setting} must be at most {maximum} (a C int), got {value!r}")
+    return int(value)
+
+
+_CHECKS = {
+    "M": lambda v: count("M", v),
+    "hessian": lambda v: check("hessian", v),
+    "regularization": lambda v: check("regularization", v),
+    "mode": lambda v: check("mode", v),
+    "cost_hessian": lambda v: check("cost_hessian", v),
+    "reg_eps": lambda v: positive("reg_eps", v),
+    "qp_tol": lambda v: positive("qp_tol", v),
+    "lm": lambda v: nonnegative("lm", v),
+}
+
+
+def validate(setting: str, value: Any) -> Any:
+    """The checked (normalised) value of any setting of :data:`DEFAULTS`."""
+    if setting == "offline_guess":
+        if not isinstance(value, bool):
+            raise SettingError(f"offline_guess must be True or False, got {value!r}")
+        return value
+    if setting not in _CHECKS:
+        raise SettingError(f"unknown setting {setting!r}; the settings are {sorted(DEFAULTS)}")
+    return _CHECKS[setting](value)
+
+
+def resolve(file_options: Optional[Mapping[str, Any]], cli: Optional[Mapping[str, Any]],
+            names=SOLVER_SETTINGS) -> Tuple[Dict[str, Any], Dict[str, str]]:
+    """The effective settings and where each came from.
+
+    ``file_options``: what the OCP file declared with ``options(...)`` (only the options it
+    gave); ``cli``: the flags given on the command line (None or absent: not given).
+    Returns ``(values, sources)`` with ``sources[name]`` one of ``"cli"``, ``"ocp-file"``,
+    ``"default"``.
+    """
+    file_options = dict(file_options or {})
+    cli = {k: v for k, v in (cli or {}).items() if v is not None}
+    values, sources = {}, {}
+    for name in names:
+        if name in cli:
+            values[name], sources[name] = validate(name, cli[name]), SOURCE_CLI
+        elif name in file_options:
+            values[name], sources[name] = validate(name, file_options[name]), SOURCE_FILE
+        else:
+            values[name], sources[name] = DEFAULTS[name], SOURCE_DEFAULT
+    return values, sources
+
+
+def describe(values: Mapping[str, Any], sources: Mapping[str, str]) -> str:
+    """One line: ``hessian gauss-newton (ocp-file), M 3 (cli), ...``."""
+    return ", ".join(f"{k} {values[k]:g} ({sources[k]})" if isinstance(values[k], float)
+                     else f"{k} {values[k]} ({sources[k]})" for k in values)
