@@ -95,7 +95,7 @@ def _number(setting: str, value: Any, kind: str) -> float:
         raise SettingError(f"{setting} must be {kind}, got {value!r}")
     try:
         f = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):    # OverflowError: an int beyond a double
         raise SettingError(f"{setting} must be {kind}, got {value!r}") from None
     return f
 
@@ -116,12 +116,15 @@ def nonnegative(setting: str, value: Any) -> float:
     return f
 
 
-def count(setting: str, value: Any, minimum: int = 0) -> int:
-    """An integer >= ``minimum`` (``M`` >= 0, ``qp_max_iter`` >= 1); numpy integers too."""
+def count(setting: str, value: Any, minimum: int = 0, maximum: Any = None) -> int:
+    """An integer >= ``minimum`` (``M`` >= 0, ``qp_max_iter`` >= 1) and <= ``maximum``
+    (``qp_max_iter``: a C int); numpy integers too."""
     import numbers
 
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
         raise SettingError(f"{setting} must be an integer >= {minimum}, got {value!r}")
+    if maximum is not None and value > maximum:
+        raise SettingError(f"{setting} must be at most {maximum} (a C int), got {value!r}")
     return int(value)
 
 

@@ -92,6 +92,8 @@ const char *dopus_status_string(int status)
         return "the solver was generated without a nominal guess";
     case DOPUS_ERR_REGULARIZATION:
         return "the eigen-decomposition of a Hessian block did not converge";
+    case DOPUS_ERR_ALREADY_PREPARED:
+        return "already prepared (call feedback before the next prepare)";
     default:
         return "unknown status";
     }
@@ -103,6 +105,8 @@ void dopus_defaults(dopus_solver *s)
     s->magic = DOPUS_MAGIC;
     s->initialized = 0;
     s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
     s->status = DOPUS_OK;
     s->M = dopus_default_M < 0 ? 0 : (dopus_default_M > DOPUS_N - 1 ? DOPUS_N - 1 : dopus_default_M);
     s->mode = DOPUS_MODE_RECEDING;
@@ -448,6 +452,8 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
     dopus_assemble(s);
     s->initialized = 1;
     s->qp_ready = 1;
+    s->prepare_due = 0;
+    s->shifted = 0;
     return dopus_ret(s, DOPUS_OK);
 }
 
@@ -537,6 +543,9 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
+    /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
+    s->prepare_due = 1;
+    s->shifted = 0;
     s->qp_in.hess_shift = s->lm;
     s->qp_cold_retry = 0;
     s->qp_settings.warm_start = s->qp_warm;
@@ -687,18 +696,23 @@ int dopus_prepare(dopus_solver *s)
     if (!s->initialized) {
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
     }
+    if (!s->prepare_due) {
+        /* a second prepare would shift the horizon twice */
+        return dopus_ret(s, DOPUS_ERR_ALREADY_PREPARED);
+    }
     dopus_clear_timings(s, DOPUS_PHASE_SHIFT, DOPUS_PHASE_ASSEMBLY);
     s->qp_ready = 0;
 
-    /* 1. shift */
+    /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     t0 = dopus_timer_now(&s->timer);
-    if (s->mode == DOPUS_MODE_RECEDING) {
+    if (s->mode == DOPUS_MODE_RECEDING && !s->shifted) {
         dopus_shift(s);
+        s->shifted = 1;
     }
     t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_SHIFT, t0);
     dopus_copy(xN_saved, s->x[DOPUS_N], DOPUS_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2, F_new stored as F_old */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < DOPUS_N - 1; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
         rc = dopus_stage_F(s, k);
@@ -707,7 +721,10 @@ int dopus_prepare(dopus_solver *s)
             return dopus_ret(s, rc);
         }
         s->rho[k] = dopus_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
-        dopus_ring_store_F(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        /* stored as F_old in step 6, once nothing can fail */
+        dopus_copy(s->Fn_w[k], s->tmp_F, DOPUS_NW);
+        dopus_copy(s->Fn_phi[k], s->tmp_phi, DOPUS_NX);
+        dopus_copy(s->Fn_g[k], s->tmp_g, DOPUS_NG);
         t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_RHO, t0);
     }
 
@@ -771,9 +788,15 @@ int dopus_prepare(dopus_solver *s)
         return dopus_ret(s, rc);
     }
 
-    /* 6. QP vectors (the fresh A blocks were regularised when stored) */
+    /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
+     *    when stored) */
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+    }
     dopus_assemble(s);
     s->qp_ready = 1;
+    s->prepare_due = 0;
+    s->shifted = 0;
     return dopus_ret(s, DOPUS_OK);
 }
 

@@ -390,8 +390,15 @@ def test_failed_qp_takes_no_step(robot_disc, robot_solution):
     for f, v in state.items():
         assert np.array_equal(getattr(c, f), v), f
     c.set_qp_max_iter(100)
-    for b in (c, r):      # the sampling instant passes without a step
+    # the sampling instant passes without a step: the failed feedback allows one prepare
+    # (docs/algorithm.md section 4, calling order); the reference skipped the feedback, so
+    # it is told the instant passed as a failed feedback would
+    r.allow_prepare()
+    for b in (c, r):
         b.prepare()
+    with pytest.raises(DopusError, match="already prepared") as ei:
+        c.prepare()
+    assert ei.value.status == 10
     for it in range(3):
         uc, ur = c.feedback(xhat), r.feedback(xhat)
         assert np.max(np.abs(uc - ur)) <= 1e-9 * max(1.0, np.max(np.abs(ur))), it

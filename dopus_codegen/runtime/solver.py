@@ -44,6 +44,7 @@ PHASES = vocabulary.phases()
 STATUS_OK, STATUS_QP = status_code("ok"), status_code("qp")
 STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = status_code("nonfinite_input"), status_code("invalid_argument")
 _DIMS = ("N", "nx", "nu", "nw", "np", "ng", "nr", "ne", "has_gn", "has_nominal")
+_INT_MAX = 2**31 - 1   # the largest C int (qp_max_iter)
 
 
 # ---------------------------------------------------------------------------------- build
@@ -302,7 +303,8 @@ class CSolver:
         self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")
 
     def set_qp_max_iter(self, max_iter: int) -> None:
-        self._check(self._c("set_qp_max_iter")(self._s, self._setting(settings.count, "qp_max_iter", max_iter, 1)),
+        self._check(self._c("set_qp_max_iter")(self._s, self._setting(settings.count, "qp_max_iter", max_iter, 1,
+                                                                      _INT_MAX)),
                     "qp_max_iter")
 
     def set_qp_warm_start(self, on: bool) -> None:
@@ -485,6 +487,10 @@ class CSolver:
     def set_clock(self, clock=None) -> None:
         """Replace the C clock by a Python callable returning seconds (None: the default).
         The callback is kept alive by the handle."""
+        if clock is not None and not callable(clock):
+            self.status = STATUS_INVALID_ARGUMENT
+            raise DopusError(f"{self.name}: set_clock: expected a callable returning seconds (or None), got {clock!r}",
+                             STATUS_INVALID_ARGUMENT)
         if clock is None:
             self._clock_cb = None
             self._c("set_clock")(self._s, self._ffi.NULL, self._ffi.NULL)

@@ -92,6 +92,8 @@ const char *robot_arm_status_string(int status)
         return "the solver was generated without a nominal guess";
     case ROBOT_ARM_ERR_REGULARIZATION:
         return "the eigen-decomposition of a Hessian block did not converge";
+    case ROBOT_ARM_ERR_ALREADY_PREPARED:
+        return "already prepared (call feedback before the next prepare)";
     default:
         return "unknown status";
     }
@@ -103,6 +105,8 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->magic = ROBOT_ARM_MAGIC;
     s->initialized = 0;
     s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
     s->status = ROBOT_ARM_OK;
     s->M = robot_arm_default_M < 0 ? 0 : (robot_arm_default_M > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : robot_arm_default_M);
     s->mode = ROBOT_ARM_MODE_RECEDING;
@@ -448,6 +452,8 @@ int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, co
     robot_arm_assemble(s);
     s->initialized = 1;
     s->qp_ready = 1;
+    s->prepare_due = 0;
+    s->shifted = 0;
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
 
@@ -537,6 +543,9 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
+    /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
+    s->prepare_due = 1;
+    s->shifted = 0;
     s->qp_in.hess_shift = s->lm;
     s->qp_cold_retry = 0;
     s->qp_settings.warm_start = s->qp_warm;
@@ -687,18 +696,23 @@ int robot_arm_prepare(robot_arm_solver *s)
     if (!s->initialized) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
     }
+    if (!s->prepare_due) {
+        /* a second prepare would shift the horizon twice */
+        return robot_arm_ret(s, ROBOT_ARM_ERR_ALREADY_PREPARED);
+    }
     robot_arm_clear_timings(s, ROBOT_ARM_PHASE_SHIFT, ROBOT_ARM_PHASE_ASSEMBLY);
     s->qp_ready = 0;
 
-    /* 1. shift */
+    /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     t0 = robot_arm_timer_now(&s->timer);
-    if (s->mode == ROBOT_ARM_MODE_RECEDING) {
+    if (s->mode == ROBOT_ARM_MODE_RECEDING && !s->shifted) {
         robot_arm_shift(s);
+        s->shifted = 1;
     }
     t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_SHIFT, t0);
     robot_arm_copy(xN_saved, s->x[ROBOT_ARM_N], ROBOT_ARM_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2, F_new stored as F_old */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
         rc = robot_arm_stage_F(s, k);
@@ -707,7 +721,10 @@ int robot_arm_prepare(robot_arm_solver *s)
             return robot_arm_ret(s, rc);
         }
         s->rho[k] = robot_arm_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
-        robot_arm_ring_store_F(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        /* stored as F_old in step 6, once nothing can fail */
+        robot_arm_copy(s->Fn_w[k], s->tmp_F, ROBOT_ARM_NW);
+        robot_arm_copy(s->Fn_phi[k], s->tmp_phi, ROBOT_ARM_NX);
+        robot_arm_copy(s->Fn_g[k], s->tmp_g, ROBOT_ARM_NG);
         t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_RHO, t0);
     }
 
@@ -771,9 +788,15 @@ int robot_arm_prepare(robot_arm_solver *s)
         return robot_arm_ret(s, rc);
     }
 
-    /* 6. QP vectors (the fresh A blocks were regularised when stored) */
+    /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
+     *    when stored) */
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+    }
     robot_arm_assemble(s);
     s->qp_ready = 1;
+    s->prepare_due = 0;
+    s->shifted = 0;
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
 

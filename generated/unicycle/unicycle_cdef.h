@@ -22,7 +22,8 @@ const char *unicycle_status_string(int status);
 /* Initialisation (algorithm.md section 4, init): the iterate is the given guess; NULL x or
  * u: the OCP file's initial guess; NULL multipliers: zeros. F and H of every stage and of
  * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
- * rho = 0. xhat0 is checked and kept for unicycle_kkt_eval (may be NULL: the default x0). */
+ * rho = 0. xhat0 is checked and kept for unicycle_kkt_eval (may be NULL: the default x0).
+ * A failed init leaves the solver uninitialised (NaN/Inf input: the iterate untouched). */
 int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, const double *u,
                const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
                const double *mu_r, const double *nu);
@@ -37,11 +38,20 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
  * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
  * stage-cost Hessian of the other stages (unicycle_set_cost_hessian), assemble the QP. Must
- * run between two feedback calls. */
+ * run between two feedback calls.
+ * Calling order: one prepare per feedback that reached the QP (solved or not; a feedback
+ * rejected for its input does not count). prepare right after a successful init or prepare
+ * returns UNICYCLE_ERR_ALREADY_PREPARED and changes nothing, in both modes (in receding mode
+ * it would shift twice, in fixed mode it would measure rho_k against gradients of the
+ * same point). After a failed prepare the next prepare is a retry: it does not shift
+ * again, and it measures rho_k against the same F_old (the gradients of a failed prepare are
+ * not stored); blocks that the failed attempt had already re-linearised stay fresh. */
 int unicycle_prepare(unicycle_solver *s);
 /* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
  * the initial state xhat0 (NULL: the last one given to init or feedback):
- * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed. */
+ * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed.
+ * The parts are >= 0 and never NaN; a part is +Inf when it overflows (an iterate or
+ * multipliers near DBL_MAX, e.g. from an init guess: |mu| * |ub - v| > DBL_MAX). */
 int unicycle_kkt_eval(unicycle_solver *s, const double *xhat0, double *kkt4);
 /* The largest of the four parts of the last unicycle_kkt_eval (NaN before the first). */
 double unicycle_get_kkt(const unicycle_solver *s);
@@ -98,7 +108,8 @@ void unicycle_get_mu_b(const unicycle_solver *s, double *mu_b);
 void unicycle_get_mu_bN(const unicycle_solver *s, double *mu_bN);
 void unicycle_get_mu_r(const unicycle_solver *s, double *mu_r);
 void unicycle_get_nu(const unicycle_solver *s, double *nu);
-/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1). */
+/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1): >= 0, never NaN; +Inf when the
+ * residual or the step of the stage overflows (the stage then ranks first). */
 void unicycle_get_rho(const unicycle_solver *s, double *rho);
 /* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
  * N-1 included; writes up to N ints and returns their count. */

@@ -92,6 +92,8 @@ const char *unicycle_status_string(int status)
         return "the solver was generated without a nominal guess";
     case UNICYCLE_ERR_REGULARIZATION:
         return "the eigen-decomposition of a Hessian block did not converge";
+    case UNICYCLE_ERR_ALREADY_PREPARED:
+        return "already prepared (call feedback before the next prepare)";
     default:
         return "unknown status";
     }
@@ -103,6 +105,8 @@ void unicycle_defaults(unicycle_solver *s)
     s->magic = UNICYCLE_MAGIC;
     s->initialized = 0;
     s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
     s->status = UNICYCLE_OK;
     s->M = unicycle_default_M < 0 ? 0 : (unicycle_default_M > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : unicycle_default_M);
     s->mode = UNICYCLE_MODE_RECEDING;
@@ -448,6 +452,8 @@ int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, cons
     unicycle_assemble(s);
     s->initialized = 1;
     s->qp_ready = 1;
+    s->prepare_due = 0;
+    s->shifted = 0;
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
@@ -537,6 +543,9 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
+    /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
+    s->prepare_due = 1;
+    s->shifted = 0;
     s->qp_in.hess_shift = s->lm;
     s->qp_cold_retry = 0;
     s->qp_settings.warm_start = s->qp_warm;
@@ -687,18 +696,23 @@ int unicycle_prepare(unicycle_solver *s)
     if (!s->initialized) {
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
     }
+    if (!s->prepare_due) {
+        /* a second prepare would shift the horizon twice */
+        return unicycle_ret(s, UNICYCLE_ERR_ALREADY_PREPARED);
+    }
     unicycle_clear_timings(s, UNICYCLE_PHASE_SHIFT, UNICYCLE_PHASE_ASSEMBLY);
     s->qp_ready = 0;
 
-    /* 1. shift */
+    /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     t0 = unicycle_timer_now(&s->timer);
-    if (s->mode == UNICYCLE_MODE_RECEDING) {
+    if (s->mode == UNICYCLE_MODE_RECEDING && !s->shifted) {
         unicycle_shift(s);
+        s->shifted = 1;
     }
     t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_SHIFT, t0);
     unicycle_copy(xN_saved, s->x[UNICYCLE_N], UNICYCLE_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2, F_new stored as F_old */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
         unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
         rc = unicycle_stage_F(s, k);
@@ -707,7 +721,10 @@ int unicycle_prepare(unicycle_solver *s)
             return unicycle_ret(s, rc);
         }
         s->rho[k] = unicycle_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
-        unicycle_ring_store_F(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        /* stored as F_old in step 6, once nothing can fail */
+        unicycle_copy(s->Fn_w[k], s->tmp_F, UNICYCLE_NW);
+        unicycle_copy(s->Fn_phi[k], s->tmp_phi, UNICYCLE_NX);
+        unicycle_copy(s->Fn_g[k], s->tmp_g, UNICYCLE_NG);
         t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_RHO, t0);
     }
 
@@ -771,9 +788,15 @@ int unicycle_prepare(unicycle_solver *s)
         return unicycle_ret(s, rc);
     }
 
-    /* 6. QP vectors (the fresh A blocks were regularised when stored) */
+    /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
+     *    when stored) */
+    for (k = 0; k < UNICYCLE_N - 1; ++k) {
+        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+    }
     unicycle_assemble(s);
     s->qp_ready = 1;
+    s->prepare_due = 0;
+    s->shifted = 0;
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
