@@ -58,6 +58,9 @@ def test_bench_phases_sum_to_the_total(bench_result):
         ft = np.array(samples["full RTI"]["feedback"]) + np.array(samples["full RTI"]["prepare"])
         mt = np.array(samples["M=1"]["feedback"]) + np.array(samples["M=1"]["prepare"])
         assert m1["paired_ratio"]["median"] == pytest.approx(float(np.median(mt / ft)), rel=1e-12)
+        head = res["headline"][phase]["M=1 / our full RTI"]
+        assert head["ratio"] == m1["ratio"] and head["paired_ratio"] == m1["paired_ratio"]["median"]
+        assert res["headline"][phase]["feedback latency (us, median)"]["M=1"] == m1["feedback_us"]["median"]
     m = res["machine"]
     assert m["cores"] >= 1 and len(m["loadavg"]) == 3 and m["cpu"]
     on_disk = json.loads((_work / "bench.json").read_text())

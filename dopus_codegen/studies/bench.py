@@ -293,6 +293,7 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
               "nominal_objective": float(prob["nominal_info"].get("objective", float("nan"))),
               "kkt": kkt, **res}
     result["machine"] = res.get("machine_before")
+    result["headline"] = headline(result)
     if json_out:
         Path(json_out).parent.mkdir(parents=True, exist_ok=True)
         Path(json_out).write_text(json.dumps(json_ready(result), indent=1, allow_nan=False) + "\n")
@@ -301,6 +302,42 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
         plot_bench(result, plot_out)
         echo(f"wrote {plot_out}")
     return result
+
+
+def headline(result: dict) -> dict:
+    """The ratios the project steers by, per timed phase: ratio of the medians of the total
+    and the median of the per-step ratios (same interleaved run). ``acados fastest working``
+    is the faster (at that phase) of the fastest working exact-Hessian and Gauss-Newton
+    settings."""
+    out = {}
+    N = result["N"]
+    m1, full = _label(1, N), _label(N - 1, N)
+    for phase, t in result.get("timed", {}).items():
+        paired = (result.get("paired_ratios") or {}).get(phase, {})
+        med = {k: v["total_us"]["median"] for k, v in t.items()}
+        rows = {}
+
+        def pair(a, b, name):
+            if a in med and b in med and med[a] and med[b]:
+                rows[name] = {"a": a, "b": b, "ratio": med[a] / med[b],
+                              "paired_ratio": (paired.get(a) or {}).get(b)}
+
+        pair(m1, full, "M=1 / our full RTI")
+        for k in t:
+            if k.startswith("M=") and k != m1:
+                pair(k, full, f"{k} / our full RTI")
+        work = [k for k in ("acados exact fastest working", "acados GN fastest working") if k in med]
+        if work:
+            fastest = min(work, key=lambda k: med[k])
+            pair(m1, fastest, "M=1 / acados fastest working RTI")
+            if "M=1 / acados fastest working RTI" in rows:
+                pick = (result.get("acados_picks") or {}).get(fastest, {})
+                rows["M=1 / acados fastest working RTI"]["acados_setting"] = pick.get("label", fastest)
+        pair(full, "acados exact fastest working", "our full RTI / acados exact-Hessian RTI")
+        fb = {k: v["feedback_us"]["median"] for k, v in t.items()}
+        rows["feedback latency (us, median)"] = fb
+        out[phase] = rows
+    return out
 
 
 # ------------------------------------------------------------------------------ scaling
@@ -440,6 +477,12 @@ def format_table(result: dict) -> str:
             lines.append(f"{r['label']:>12s} {str(r['iters_to_1e-6'] if r['iters_to_1e-6'] is not None else '-'):>6s} "
                          f"{str(r['iters_to_1e-8'] if r['iters_to_1e-8'] is not None else '-'):>6s} "
                          f"{_f(r['last_kkt'], '10.2e')}  {r['status'] if r['status'] != 'ok' else ''}")
+    for phase, rows in (result.get("headline") or {}).items():
+        lines.append(f"\nheadline ratios, {phase} (ratio of the medians / median of the per-step ratios):")
+        for name, r in rows.items():
+            if "ratio" in r:
+                extra = f" ({r['acados_setting']})" if r.get("acados_setting") else ""
+                lines.append(f"  {name:45s} {r['ratio']:6.2f} / {_f(r.get('paired_ratio'), '5.2f')}{extra}")
     if result.get("acados_picks"):
         lines.append("\nacados settings timed: " + "; ".join(f"{k} = {v['label']}"
                                                                for k, v in result["acados_picks"].items()))

@@ -607,6 +607,17 @@ def run_plan(plan, quiet_acados=True):
                 rec = closed_loop(rs, lib.plant, phase["x_start"], phase["guess"], phase["steps"],
                                   skip=phase.get("skip", 0), progress=pg, x0_init=phase.get("x_init"))
             ref = rec.get(ref_label)
+            # per-step ratios of every pair (ours / any) of this interleaved run
+            paired = {}
+            for a in rs:
+                if a.kind != "ours":
+                    continue
+                ta = np.array(rec[a.label]["feedback"]) + np.array(rec[a.label]["prepare"])
+                for b in rs:
+                    tb = np.array(rec[b.label]["feedback"]) + np.array(rec[b.label]["prepare"])
+                    if b is not a and ta.size == tb.size and ta.size:
+                        paired.setdefault(a.label, {})[b.label] = stats(ta / tb)["median"]
+            result.setdefault("paired_ratios", {})[phase["name"]] = paired
             result["timed"][phase["name"]] = {
                 k: dict(summarize(v, ref), **({"x_end": v["x"][-1]} if "x" in v else {}))
                 for k, v in rec.items()}
