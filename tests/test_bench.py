@@ -127,15 +127,17 @@ def test_bench_scaling_fit(tmp_path):
     assert r.exit_code == 0, r.output
     res = json.loads(out.read_text())
     assert res["casadi_imported"] is False
-    for key, f in res["scaling"].items():
-        Ns = [row["N"] for row in f["rows"]]
-        assert Ns == [6, 12]
-        t = [res["timed"]["operating point"][f"N={row['N']} " + ("full RTI" if key == "full" else key)]
-             ["total_us"]["median"] for row in f["rows"]]
-        assert [row["total_us"] for row in f["rows"]] == t
-        slope = (np.log(t[1]) - np.log(t[0])) / (np.log(12) - np.log(6))
-        assert f["exponent_total"] == pytest.approx(slope, rel=1e-9)
-    assert {row["M"] for row in res["scaling"]["full"]["rows"]} == {5, 11}
+    assert set(res["scaling"]) == {"converged", "operating point"}
+    for phase, fits in res["scaling"].items():
+        for key, f in fits.items():
+            Ns = [row["N"] for row in f["rows"]]
+            assert Ns == [6, 12]
+            t = [res["timed"][phase][f"N={row['N']} " + ("full RTI" if key == "full" else key)]
+                 ["total_us"]["median"] for row in f["rows"]]
+            assert [row["total_us"] for row in f["rows"]] == t
+            slope = (np.log(t[1]) - np.log(t[0])) / (np.log(12) - np.log(6))
+            assert f["exponent_total"] == pytest.approx(slope, rel=1e-9)
+        assert {row["M"] for row in fits["full"]["rows"]} == {5, 11}
 
 
 @pytest.mark.parametrize("args, message", [

@@ -394,30 +394,38 @@ def run_scaling(ocp_file, n_list, m_list=("1", "full"), json_out=None, plot_out=
         x0 = np.asarray(disc.x0, float)
     plan = {"libs": libs, "settings_codes": _settings_codes(values), "runs": runs, "reps": reps, "warmup": 10,
             "ref_label": None,
-            "phases": [{"name": "operating point", "kind": "loop", "plant_lib": f"N{n_list[0]}",
+            "phases": [{"name": "converged", "kind": "fixed", "plant_lib": f"N{n_list[0]}",
+                        "xhat": x0.tolist(), "guess": guesses},
+                       {"name": "operating point", "kind": "loop", "plant_lib": f"N{n_list[0]}",
                         "x_start": x0.tolist(), "guess": guesses, "skip": settle, "steps": reps}]}
     work = Path(work) if work else Path(tempfile.gettempdir()) / f"dopus-bench-{os.getuid()}"
     echo(f"timing process: {len(runs)} settings interleaved ...")
     res = _run_worker(plan, work)
-    t = res["timed"]["operating point"]
-    fits = {}
-    for m in m_list:
-        rows = []
-        for N in n_list:
-            M = N - 1 if m == "full" else min(int(m), N - 1)
-            rec = t[_label(M, N, prefix=f"N={N} ")]
-            rows.append({"N": N, "M": M, "total_us": rec["total_us"]["median"],
-                         "feedback_us": rec["feedback_us"]["median"], "prepare_us": rec["prepare_us"]["median"],
-                         "qp_failures": rec["qp_failures"],
-                         "qp_iterations": (rec.get("qp_iterations") or {}).get("median")})
-        key = "full" if m == "full" else f"M={m}"
-        fits[key] = {"rows": rows,
-                     "exponent_total": fit_exponent([r["N"] for r in rows], [r["total_us"] for r in rows]),
-                     "exponent_feedback": fit_exponent([r["N"] for r in rows], [r["feedback_us"] for r in rows]),
-                     "exponent_prepare": fit_exponent([r["N"] for r in rows], [r["prepare_us"] for r in rows])}
+    scaling = {}
+    for phase, t in res["timed"].items():
+        fits = {}
+        for m in m_list:
+            rows = []
+            for N in n_list:
+                M = N - 1 if m == "full" else min(int(m), N - 1)
+                rec = t[_label(M, N, prefix=f"N={N} ")]
+                qpit = (rec.get("qp_iterations") or {}).get("median")
+                rows.append({"N": N, "M": M, "total_us": rec["total_us"]["median"],
+                             "feedback_us": rec["feedback_us"]["median"], "prepare_us": rec["prepare_us"]["median"],
+                             "qp_failures": rec["qp_failures"], "qp_iterations": qpit,
+                             "feedback_per_qp_iteration_us": rec["feedback_us"]["median"] / qpit if qpit else None})
+            key = "full" if m == "full" else f"M={m}"
+            Ns = [r["N"] for r in rows]
+            fits[key] = {"rows": rows, "exponent_total": fit_exponent(Ns, [r["total_us"] for r in rows]),
+                         "exponent_feedback": fit_exponent(Ns, [r["feedback_us"] for r in rows]),
+                         "exponent_prepare": fit_exponent(Ns, [r["prepare_us"] for r in rows])}
+            if all(r["feedback_per_qp_iteration_us"] for r in rows):
+                fits[key]["exponent_per_qp_iteration"] = fit_exponent(
+                    Ns, [r["feedback_per_qp_iteration_us"] for r in rows])
+        scaling[phase] = fits
     result = {"problem": Path(ocp_file).stem, "ocp_file": str(ocp_file), "N_list": n_list,
               "settings": {k: values[k] for k in values if k != "M"}, "sources": sources, "per_N": per_n,
-              "scaling": fits, **res}
+              "scaling": scaling, **res}
     result["machine"] = res.get("machine_before")
     if json_out:
         Path(json_out).parent.mkdir(parents=True, exist_ok=True)
@@ -494,15 +502,21 @@ def format_table(result: dict) -> str:
 
 def format_scaling(result: dict) -> str:
     m = result.get("machine") or {}
-    lines = [f"{result['problem']}: time per iteration against N (operating point, medians, us); "
-             f"CPU {m.get('cpu')}, load {m.get('loadavg')}"]
-    for key, f in result["scaling"].items():
-        lines.append(f"\n{key}: exponent total {f['exponent_total']:.3f}, feedback {f['exponent_feedback']:.3f}, "
-                     f"preparation {f['exponent_prepare']:.3f}")
-        lines.append(f"{'N':>5s} {'M':>5s} {'total':>9s} {'feedback':>9s} {'prepare':>9s} {'QP it':>6s} {'fail':>5s}")
-        for r in f["rows"]:
-            lines.append(f"{r['N']:5d} {r['M']:5d} {_f(r['total_us'], '9.1f')} {_f(r['feedback_us'], '9.1f')} "
-                         f"{_f(r['prepare_us'], '9.1f')} {_f(r['qp_iterations'], '6.0f')} {r['qp_failures']:5d}")
+    lines = [f"{result['problem']}: time per iteration against N (medians, us; the same interval dt); "
+             f"CPU {m.get('cpu')}, load {m.get('loadavg')}",
+             "converged: fixed initial state at IPOPT's solution (fixed mode); operating point: the closed loop "
+             "from that solution after it settled"]
+    for phase, fits in result["scaling"].items():
+        for key, f in fits.items():
+            lines.append(f"\n{phase}, {key}: exponent total {f['exponent_total']:.3f}, feedback "
+                         f"{f['exponent_feedback']:.3f}, preparation {f['exponent_prepare']:.3f}, feedback per QP "
+                         f"iteration {_f(f.get('exponent_per_qp_iteration'), '.3f')}")
+            lines.append(f"{'N':>5s} {'M':>5s} {'total':>9s} {'feedback':>9s} {'prepare':>9s} {'QP it':>6s} "
+                         f"{'per it':>8s} {'fail':>5s}")
+            for r in f["rows"]:
+                lines.append(f"{r['N']:5d} {r['M']:5d} {_f(r['total_us'], '9.1f')} {_f(r['feedback_us'], '9.1f')} "
+                             f"{_f(r['prepare_us'], '9.1f')} {_f(r['qp_iterations'], '6.0f')} "
+                             f"{_f(r['feedback_per_qp_iteration_us'], '8.1f')} {r['qp_failures']:5d}")
     return "\n".join(lines)
 
 
@@ -542,9 +556,11 @@ def plot_scaling(result: dict, path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4.5))
-    for key, f in result["scaling"].items():
-        Ns = [r["N"] for r in f["rows"]]
-        ax.loglog(Ns, [r["total_us"] for r in f["rows"]], "o-", label=f"{key} (exponent {f['exponent_total']:.2f})")
+    for phase, fits in result["scaling"].items():
+        for key, f in fits.items():
+            Ns = [r["N"] for r in f["rows"]]
+            ax.loglog(Ns, [r["total_us"] for r in f["rows"]], "o-" if phase == "converged" else "s--",
+                      label=f"{phase}, {key} (exponent {f['exponent_total']:.2f})")
     ax.set_xlabel("N")
     ax.set_ylabel("median time per iteration [us]")
     ax.set_title(f"{result['problem']}: time per iteration against N", fontsize=10)

@@ -414,6 +414,11 @@ def _step(r, x, rec, record):
     return u, failed
 
 
+def _guess_for(starts, label):
+    """``starts`` is one guess (a dict with x, u, ...) or a dict of guesses by label."""
+    return starts[label] if "x" not in starts and label in starts else starts
+
+
 def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x0_init=None):
     """Each runner in its own closed loop against ``plant(x, u) -> x+``, alternating one
     sampling step of each. ``starts[label]`` (or ``starts`` itself, a dict with x, u, ...)
@@ -425,7 +430,7 @@ def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x
     xs = {r.label: np.array(x_start, float) for r in runners}
     u_last = {}
     for r in runners:
-        guess = starts.get(r.label, starts) if isinstance(starts, dict) and r.label in starts else starts
+        guess = _guess_for(starts, r.label)
         r.start(np.array(x_start if x0_init is None else x0_init, float), guess)
         u_last[r.label] = np.array(guess["u"][0], float)
         out[r.label]["x"] = [xs[r.label].tolist()]
@@ -453,7 +458,7 @@ def operating_point(runners, xhat, guess, reps, warmup=0, progress=None):
     turn, ``warmup`` untimed rounds and ``reps`` timed ones."""
     out = {r.label: _new_record() for r in runners}
     for r in runners:
-        r.start(np.array(xhat, float), guess)
+        r.start(np.array(xhat, float), _guess_for(guess, r.label))
     for i in range(warmup + reps):
         for r in runners:
             _step(r, xhat, out[r.label], i >= warmup)
