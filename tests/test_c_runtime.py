@@ -413,8 +413,7 @@ def test_failed_qp_takes_no_step(robot_disc, robot_solution):
 # --------------------------------------------------------------------------- QP warm start
 def _clone(dst: CSolver, src: CSolver) -> None:
     """Copy the whole solver state (same library): both then face the same QP."""
-    assert dst.lib_dir == src.lib_dir and dst.sizeof == src.sizeof
-    dst._ffi.memmove(dst._mem, src._mem, src.sizeof)
+    dst.copy_state_from(src)
 
 
 def _warm_vs_cold(robot_disc, guess, iters, disturb, **kw):

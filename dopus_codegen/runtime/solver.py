@@ -195,6 +195,17 @@ class CSolver:
         Python setters; returns the C status (for tests of the C side's own checks)."""
         return int(self._c(fname)(self._s, *args))
 
+    def state_bytes(self) -> bytes:
+        """A copy of the whole solver struct (settings and iterate included)."""
+        return bytes(self._ffi.buffer(self._mem, self.sizeof))
+
+    def copy_state_from(self, other: "CSolver") -> None:
+        """Copy the whole solver state of another handle on the same library, settings and
+        iterate included (the two then face the same QP)."""
+        if other.lib_dir != self.lib_dir or other.sizeof != self.sizeof:
+            raise ValueError("copy_state_from: the two handles load different libraries")
+        self._ffi.memmove(self._mem, other.state_bytes(), self.sizeof)
+
     def _status_text(self, status: int) -> str:
         return self._ffi.string(self._c("status_string")(int(status))).decode()
 
