@@ -239,7 +239,8 @@ def casadi_message(exc: BaseException) -> str:
 def _check_identifier(name, what: str) -> str:
     why = identifier_problem(name)
     if why is not None:
-        raise OcpError(f"{what}: {name!r} {why}")
+        shown = repr(name) if not isinstance(name, str) or len(name) <= 40 else repr(name[:20] + "...")
+        raise OcpError(f"{what}: {shown} {why}")
     return name
 
 
@@ -748,7 +749,9 @@ def load_ocp(path) -> Ocp:
                        f"{casadi_message(exc)}") from None
     if not isinstance(ocp, Ocp):
         raise OcpError(f"OCP file '{path}': build() returned {type(ocp).__name__}, expected an Ocp")
-    ocp.validate()
+    from .checks import warn_nonsmooth
+
+    warn_nonsmooth(ocp.validate())
     return ocp
 
 
