@@ -14,7 +14,7 @@ from typing import Optional
 
 from . import vocabulary
 
-__all__ = ["DopusError", "status_code", "status_name", "qp_status_code", "qp_status_name"]
+__all__ = ["DopusError", "status_code", "status_name", "qp_status_code", "qp_status_name", "qp_failure_text"]
 
 
 def status_code(name: str) -> int:
@@ -33,6 +33,24 @@ def qp_status_code(name: str) -> int:
 
 def qp_status_name(code: int) -> str:
     return vocabulary.qp_status().name(code)
+
+
+def qp_failure_text(name: str, iterations: Optional[int] = None, max_iter: Optional[int] = None) -> str:
+    """Why the QP failed, in words that match its status ``name`` (``enum dopus_qp_status``):
+    the iteration limit is named with its value, a stall with the iterations it took."""
+    its = "" if iterations is None else f" after {int(iterations)} iterations"
+    if name == "max_iter":
+        limit = f" of {int(max_iter)}" if max_iter is not None else ""
+        return f"the QP solver reached its iteration limit{limit}{its} (QP status max_iter)"
+    if name == "stalled":
+        return f"the QP solver stalled{its}: no progress in its KKT residuals (QP status stalled)"
+    if name == "primal_infeasible":
+        return f"the QP is infeasible{its} (QP status primal_infeasible)"
+    if name == "dual_infeasible":
+        return f"the QP is unbounded below{its} (QP status dual_infeasible)"
+    if name == "numerical":
+        return f"the QP solver failed numerically{its} (QP status numerical)"
+    return f"QP status {name}{its}"
 
 
 class DopusError(RuntimeError, ValueError):

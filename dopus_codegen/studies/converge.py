@@ -303,8 +303,8 @@ def plot_study(study: dict, path: str) -> None:
         kk = np.maximum(np.array(r["kkt"], dtype=float), 1e-16)  # exact zeros cannot be drawn on a log axis
         label = f"M = {r['M']} (full RTI)" if r["M"] == N - 1 else f"M = {r['M']}"
         ax.semilogy(np.arange(kk.size), kk, marker="o", markersize=3, label=label)
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("KKT measure (inf-norm)")
+    ax.set_xlabel("iteration [-]")
+    ax.set_ylabel("KKT measure (inf-norm) [mixed units]")
     ax.set_title(f"{study['problem']}: DOPUS convergence, {study['start']} start, {study['hessian']} Hessian, "
                  f"{study.get('cost_hessian', 'fresh')} cost Hessian", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)

@@ -167,7 +167,8 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                     "lbu": list(loop.lbu), "ubu": list(loop.ubu),
                     "u_labels": list(disc.data.control_names) or None,
                     "x_labels": list(disc.data.state_names) or None,
-                    "plane": list(_plane_signals(spec)) if _plane_signals(spec) else None}
+                    "plane": list(_plane_signals(spec)) if _plane_signals(spec) else None,
+                    "units": dict(getattr(spec, "units", {}) or {})}
     if sources is not None:
         settings_rec["sources"] = dict(sources)
     run = rec.as_run(label, events, settings_rec, loop.aborted)
