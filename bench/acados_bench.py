@@ -47,6 +47,7 @@ def prepare(ocp_file: Path, work: Path, quick: bool, cond_list) -> Path:
 
     sys.path.insert(0, str(ROOT))
     from dopus_codegen import build_functions, load_ocp
+    from dopus_codegen.codegen.build import BUILD_SUBDIR
     from dopus_codegen.codegen.generate import read_meta
     from dopus_codegen.reference.offline import solve_ocp
     from dopus_codegen.runtime.solver import build_for
@@ -79,7 +80,7 @@ def prepare(ocp_file: Path, work: Path, quick: bool, cond_list) -> Path:
     plan = {
         "ocp_file": str(ocp_file), "name": disc.name, "N": disc.N, "nx": disc.nx, "nu": disc.nu,
         "np": disc.np, "dt": disc.dt, "lm": lm, "p0": disc.p0.tolist(),
-        "ours": {"lib": str(folder / "build" / "py" / f"lib{disc.name}.so"), "cdef": str(folder / meta["cdef"]),
+        "ours": {"lib": str(folder / BUILD_SUBDIR / f"lib{disc.name}.so"), "cdef": str(folder / meta["cdef"]),
                  "has_nominal": bool(disc.options.get("offline_guess"))},
         "x0": disc.x0.tolist(), "x_disturbed": xd.tolist(),
         "nominal": {"x": nominal.x.tolist(), "u": nominal.u.tolist(), "objective": info["objective"]},

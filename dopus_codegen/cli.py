@@ -146,13 +146,19 @@ def _runtime_values(kwargs: dict) -> dict:
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="dopus-gen")
+@click.option("--cache-dir", type=click.Path(file_okay=False), default=None,
+              help="Build cache: compiled objects and the solvers built for --backend c runs. "
+                   "[default: $DOPUS_CACHE_DIR, else ~/.cache/dopus-codegen]")
 @click.option("--debug", is_flag=True, help="Show the Python traceback of an error instead of the one-line message.")
 @click.pass_context
-def main(ctx, debug) -> None:
+def main(ctx, cache_dir, debug) -> None:
     """Generate, build and run DOPUS NMPC solvers from an OCP file.
 
     An OCP file is a Python file that defines build() returning a
     dopus_codegen.Ocp (see examples/robot_arm.py).
+
+    Nothing is generated or compiled twice: a folder whose problem is unchanged is not
+    regenerated, and every compiled file is kept in the build cache (--cache-dir).
 
     Exit codes: 0 done; 1 the work ran and failed (a run of converge failed, the
     plant of sil could not be integrated); 2 bad input (a message names the problem;
@@ -161,6 +167,10 @@ def main(ctx, debug) -> None:
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
     _show_warnings(ctx)
+    if cache_dir is not None:
+        import os
+
+        os.environ["DOPUS_CACHE_DIR"] = str(cache_dir)
 
 
 def _int_list_or_full(value: str) -> list:
@@ -269,9 +279,13 @@ def generate(ocp_file, out_dir, offline_guess):
     from .codegen.generate import generate_file
     from .outputs import check_output_dir
 
+    import time
+
     check_output_dir(out_dir if out_dir is not None else "generated", "--output")
+    t0 = time.time()
     path = generate_file(ocp_file, out_dir, offline_guess=offline_guess)
-    click.echo(f"generated {path}")
+    newest = max((p.stat().st_mtime for p in path.iterdir() if p.is_file()), default=0.0)
+    click.echo(f"{'generated' if newest >= t0 else 'up to date'}: {path}")
 
 
 @main.command()
@@ -280,17 +294,20 @@ def generate(ocp_file, out_dir, offline_guess):
 @click.option("--opt", default=DEFAULT_OPT, show_default=True, help="Optimisation flags (quoted if several).")
 @click.option("--force", is_flag=True, help="Rebuild even if the sources did not change.")
 def build(folder, cc, opt, force):
-    """Compile a generated FOLDER into build/py/lib<name>.so (cffi) and lib<name>.a (firmware).
+    """Compile a generated FOLDER into build/lib<name>.so (cffi) and lib<name>.a (firmware).
 
-    Runtime and glue compile with -std=c99 -Wall -Wextra -Werror -pedantic, the CasADi file
-    with -std=c99 -Wall. Nothing is recompiled if sources, compiler and flags are unchanged.
-    Without Python, `make -C FOLDER` builds the same libraries and main_<name> into FOLDER/build.
+    Every file compiles with -std=c99 -Wall -Wextra -Werror -pedantic. Nothing is
+    recompiled if sources, compiler and flags are unchanged, and a file compiled before
+    (in any folder) comes from the build cache. The products are those of the folder's
+    Makefile (FOLDER/build), so `make -C FOLDER run` afterwards only links main_<name>.
     """
     from .codegen.build import build as build_folder
 
     res = build_folder(folder, cc=cc, opt=opt, force=force)
     state = "built" if res.rebuilt else "up to date"
     click.echo(f"{state}: {res.shared_lib}\n{state}: {res.static_lib}\ncdef: {res.cdef_path}")
+    if res.rebuilt:
+        click.echo(f"compiled {len(res.compiled)} file(s), the others came from the build cache")
 
 
 @main.command("firmware-report")

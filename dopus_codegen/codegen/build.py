@@ -1,11 +1,15 @@
 """Build a generated folder: a shared library (for cffi) and a static library (firmware).
 
-The runtime and the generated glue compile with the strict flags of the project
-(``-std=c99 -Wall -Wextra -Werror -pedantic``); the CasADi file with ``-std=c99 -Wall``.
-The products go to ``<folder>/build/py/`` (the folder's own Makefile uses ``build/``),
-with a stamp holding a hash of the sources, the compiler and the flags: an unchanged
-folder is not rebuilt. Outputs are written under temporary names and renamed, so a
-concurrent build never leaves a half-written library behind.
+Every C file compiles with the strict flags of the project (``-std=c99 -Wall -Wextra
+-Werror -pedantic``), the CasADi file included. The products go to ``<folder>/build/``,
+with the same object and library names and the same flags as the folder's own Makefile
+(``build/obj/*.o``, ``build/lib<name>.a``, ``build/lib<name>.so``), so ``make`` or
+``make run`` in the folder afterwards only links the standalone program. A stamp holds a
+hash of the sources, the compiler and the flags: an unchanged folder is not rebuilt, and
+every object is also looked up in (and added to) the object cache of
+:mod:`dopus_codegen.codegen.cache`, so a source compiled once, in any folder, is never
+compiled again. Outputs are written under temporary names and renamed, so a concurrent
+build never leaves a half-written library behind.
 """
 from __future__ import annotations
 
@@ -15,15 +19,21 @@ import os
 import shlex
 import shutil
 import subprocess
+import sys
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import List, Sequence
+from typing import Callable, List, Optional, Sequence
 
+from . import cache
 from .flags import CASADI_CFLAGS, DEFAULT_OPT, PIC, STRICT_CFLAGS
 from .generate import CodegenError, read_meta
 
-BUILD_SUBDIR = Path("build") / "py"
+BUILD_SUBDIR = Path("build")
+
+
+def _stderr(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
 
 
 class BuildError(RuntimeError):
@@ -38,6 +48,7 @@ class BuildResult:
     name: str
     out_dir: Path
     rebuilt: bool
+    compiled: List[str] = field(default_factory=list)   # sources compiled (not from the cache)
 
 
 def _run(cmd: Sequence[str], cwd: Path, what: str) -> None:
@@ -60,8 +71,15 @@ def _source_hash(out_dir: Path, files: List[str], cc: str, opt: Sequence[str]) -
     return h.hexdigest()
 
 
-def build(out_dir, cc: str = "cc", opt: str = DEFAULT_OPT, *, force: bool = False) -> BuildResult:
-    """Compile the generated folder ``out_dir``; skip the work if nothing changed."""
+def build(out_dir, cc: str = "cc", opt: str = DEFAULT_OPT, *, force: bool = False, cache_dir=None,
+          echo: Optional[Callable[[str], None]] = _stderr) -> BuildResult:
+    """Compile the generated folder ``out_dir``; skip the work if nothing changed.
+
+    ``cache_dir``: the object cache (default :func:`cache.cache_root`). ``echo`` receives
+    one line per compiled file and per link (None: silent); nothing is said when the
+    folder is up to date.
+    """
+    say = echo or (lambda msg: None)
     out_dir = Path(out_dir)
     if not out_dir.exists():
         raise BuildError(f"build: folder '{out_dir}' does not exist (generate it first with dopus-gen generate)")
@@ -73,7 +91,6 @@ def build(out_dir, cc: str = "cc", opt: str = DEFAULT_OPT, *, force: bool = Fals
         name = meta["name"]
         strict = list(meta["sources"]["strict"])
         casadi_src = meta["sources"]["casadi"]
-        cdef_path = out_dir / meta["cdef"]
         listed = sorted(set(meta["files"]))
     except (KeyError, TypeError) as exc:
         raise BuildError(f"build: the meta data of '{out_dir}' lacks {exc}; regenerate the folder "
@@ -97,26 +114,41 @@ def build(out_dir, cc: str = "cc", opt: str = DEFAULT_OPT, *, force: bool = Fals
         except ValueError:
             pass
 
-    bdir.mkdir(parents=True, exist_ok=True)
-    objdir = Path(tempfile.mkdtemp(prefix="obj_", dir=str(bdir)))
+    root = cache.cache_root(cache_dir)
+    headers = {f: (out_dir / f).read_bytes() for f in listed if f.endswith(".h")}
+    objdir_final = bdir / "obj"
+    objdir_final.mkdir(parents=True, exist_ok=True)
+    tmpdir = Path(tempfile.mkdtemp(prefix="tmp_", dir=str(bdir)))
+    compiled: List[str] = []
     try:
         objects = []
         for src in strict + [casadi_src]:
-            flags = CASADI_CFLAGS if src == casadi_src else STRICT_CFLAGS
-            obj = objdir / (Path(src).stem + ".o")
-            _run([cc, *opt_flags, PIC, *flags, "-c", src, "-o", str(obj)], out_dir, f"compiling {src}")
+            flags = [*opt_flags, PIC, *(CASADI_CFLAGS if src == casadi_src else STRICT_CFLAGS)]
+            obj = objdir_final / (Path(src).stem + ".o")
+            key = cache.object_key((out_dir / src).read_bytes(), headers, cc, flags)
+            hit = None if force else cache.cached_object(root, key)
+            tmp_obj = tmpdir / obj.name
+            if hit is not None:
+                shutil.copyfile(hit, tmp_obj)
+            else:
+                say(f"dopus-gen build: compiling {out_dir / src}")
+                _run([cc, *flags, "-c", src, "-o", str(tmp_obj)], out_dir, f"compiling {src}")
+                cache.store_object(root, key, tmp_obj)
+                compiled.append(src)
+            os.replace(tmp_obj, obj)
             objects.append(str(obj))
-        tmp_a, tmp_so = objdir / static_lib.name, objdir / shared_lib.name
+        say(f"dopus-gen build: linking {shared_lib.name} and {static_lib.name} in {bdir}")
+        tmp_a, tmp_so = tmpdir / static_lib.name, tmpdir / shared_lib.name
         _run([os.environ.get("AR", "ar"), "rcs", str(tmp_a), *objects], out_dir, f"archiving {static_lib.name}")
         _run([cc, "-shared", "-o", str(tmp_so), *objects, "-lm"], out_dir, f"linking {shared_lib.name}")
         os.replace(tmp_a, static_lib)
         os.replace(tmp_so, shared_lib)
-        tmp_stamp = objdir / "stamp.json"
+        tmp_stamp = tmpdir / "stamp.json"
         tmp_stamp.write_text(json.dumps({"hash": digest, "cc": cc, "opt": opt_flags}, sort_keys=True) + "\n")
         os.replace(tmp_stamp, stamp)
     finally:
-        shutil.rmtree(objdir, ignore_errors=True)
-    return result
+        shutil.rmtree(tmpdir, ignore_errors=True)
+    return BuildResult(**{**result.__dict__, "compiled": compiled})
 
 
 __all__ = ["build", "BuildResult", "BuildError", "BUILD_SUBDIR"]

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 #: The runtime and the generated glue: C99, warning-free, pedantic.
 STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
-#: CasADi's generated code has unused parameters in its helpers, so it only gets -Wall.
-CASADI_CFLAGS = ("-std=c99", "-Wall")
+#: The CasADi file gets the same flags: its unused parameters are marked as such when it is
+#: generated (generate.silence_unused_parameters).
+CASADI_CFLAGS = STRICT_CFLAGS
 #: The default optimisation level of a build (``dopus-gen build --opt``, the Makefile's OPT).
 DEFAULT_OPT = "-O2"
 #: The optimisation level of the QP test harness and the QP benchmark's harness.
@@ -18,16 +19,10 @@ QP_HARNESS_OPT = "-O3"
 PIC = "-fPIC"
 
 
-def cmake_strict_options() -> str:
-    """STRICT_CFLAGS as the CMake fragment adds them to the strict sources: the standard is a
-    target property there and -Wall applies to every source."""
-    return ";".join(f for f in STRICT_CFLAGS if not f.startswith("-std=") and f not in CASADI_CFLAGS)
+def cmake_options() -> str:
+    """The flags every source of the CMake target gets: STRICT_CFLAGS without the standard,
+    which is a target property there."""
+    return " ".join(f for f in STRICT_CFLAGS if not f.startswith("-std="))
 
 
-def cmake_common_options() -> str:
-    """The flags every source of the CMake target gets (CASADI_CFLAGS without the standard)."""
-    return " ".join(f for f in CASADI_CFLAGS if not f.startswith("-std="))
-
-
-__all__ = ["STRICT_CFLAGS", "CASADI_CFLAGS", "DEFAULT_OPT", "QP_HARNESS_OPT", "PIC",
-           "cmake_strict_options", "cmake_common_options"]
+__all__ = ["STRICT_CFLAGS", "CASADI_CFLAGS", "DEFAULT_OPT", "QP_HARNESS_OPT", "PIC", "cmake_options"]

@@ -16,6 +16,7 @@ at round-trip precision, no timestamps), so generating twice gives identical byt
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import re
@@ -171,11 +172,14 @@ def _check_function(fun: ca.Function, slot: str, name: str, sizes: Dict[str, int
 
 
 def _with_cse(fun: ca.Function) -> ca.Function:
-    """The same function as an SX function with common subexpression elimination on
-    (CasADi's Function option 'cse'; CodeGenerator has no such option)."""
-    sx = fun if fun.is_a("SXFunction") else fun.expand()
-    args = sx.sx_in()
-    return ca.Function(sx.name(), args, sx.call(args), sx.name_in(), sx.name_out(), {"cse": True})
+    """An SX function again with common subexpression elimination on (CasADi's Function
+    option 'cse'; CodeGenerator has no such option). An MX function is emitted as it is:
+    expanding it to SX would unroll its loops (the substeps and the map over directions of
+    the stage functions); its SX kernels carry the option themselves."""
+    if not fun.is_a("SXFunction"):
+        return fun
+    args = fun.sx_in()
+    return ca.Function(fun.name(), args, fun.call(args), fun.name_in(), fun.name_out(), {"cse": True})
 
 
 def casadi_functions(disc: Any, name: str, sizes: Dict[str, int]) -> Dict[str, ca.Function]:
@@ -194,6 +198,35 @@ def casadi_functions(disc: Any, name: str, sizes: Dict[str, int]) -> Dict[str, c
     return out
 
 
+_C_FUNCTION_START = re.compile(r"^(?:static |CASADI_SYMBOL_EXPORT )?[A-Za-z_][\w \*]*?\b(\w+)\(([^()]*)\) \{$")
+
+
+def silence_unused_parameters(text: str) -> str:
+    """CasADi's generated C passes the same (arg, res, iw, w, mem) to every function and
+    leaves some unused, which -Wextra reports. Every function definition (one line, body
+    closed by a ``}`` in column 0) gets ``(void)name;`` for each parameter its body does
+    not use, so the file compiles with the project's strict flags."""
+    lines = text.split("\n")
+    out: List[str] = []
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        out.append(line)
+        m = _C_FUNCTION_START.match(line)
+        i += 1
+        if not m or m.group(2).strip() in ("", "void"):
+            continue
+        j = i
+        while j < len(lines) and lines[j] != "}":
+            j += 1
+        body = "\n".join(lines[i:j])
+        params = [re.findall(r"\w+", prm)[-1] for prm in m.group(2).split(",")]
+        unused = [prm for prm in params if not re.search(rf"\b{prm}\b", body)]
+        if unused:
+            out.append("  " + " ".join(f"(void){prm};" for prm in unused))
+    return "\n".join(out)
+
+
 def casadi_sources(functions: Dict[str, ca.Function], name: str) -> Dict[str, str]:
     """``<name>_casadi.c`` and ``.h`` from one CodeGenerator with explicit options."""
     opts = {"casadi_int": "int", "casadi_real": "double", "mex": False, "with_header": True,
@@ -204,7 +237,7 @@ def casadi_sources(functions: Dict[str, ca.Function], name: str) -> Dict[str, st
         cg.add(fun)
     with tempfile.TemporaryDirectory(prefix="dopus_cg_") as tmp:
         cg.generate(str(Path(tmp)) + "/")
-        out = {f"{base}.c": (Path(tmp) / f"{base}.c").read_text(),
+        out = {f"{base}.c": silence_unused_parameters((Path(tmp) / f"{base}.c").read_text()),
                f"{base}.h": (Path(tmp) / f"{base}.h").read_text()}
     _refuse_without_codegen(out[f"{base}.c"], functions)
     return out
@@ -401,7 +434,7 @@ def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, ha
     return _templates().get_template("sizes.h.j2").render(**ctx)
 
 
-def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
+def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = None) -> Dict[str, str]:
     """Every file of the generated folder, as {file name: text}, without touching the disk."""
     name = check_name(_attr(disc.data, "name"))
     NAME = name.upper()
@@ -421,8 +454,7 @@ def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
         "name": name, "NAME": NAME, "header": header, "casadi_version": ca.__version__,
         "has_gn": int(has_gn), "sizes": s, "work": work_sizes(functions), "main_file": main_file,
         "strict_cflags": " ".join(STRICT_CFLAGS), "casadi_cflags": " ".join(CASADI_CFLAGS),
-        "default_opt": DEFAULT_OPT, "cmake_strict_options": flags.cmake_strict_options(),
-        "cmake_common_options": flags.cmake_common_options(),
+        "default_opt": DEFAULT_OPT, "cmake_options": flags.cmake_options(),
     }
     ctx.update(problem_context(disc, s, nominal))
     ctx["has_nominal"] = int(ctx["has_nominal"])
@@ -459,9 +491,33 @@ def render_folder(disc: Any, nominal: Any = None) -> Dict[str, str]:
         "files": sorted(list(files) + [meta_file]),
         "sources": {"strict": build_ctx["strict_sources"], "casadi": f"{name}_casadi.c", "main": main_file},
         "cdef": f"{name}_cdef.h",
+        # sha256 of every other file, and of the problem (codegen/cache.py): a second
+        # `dopus-gen generate` of an unchanged problem finds both and writes nothing
+        "sha256": {f: hashlib.sha256(files[f].encode("utf-8")).hexdigest() for f in sorted(files)},
     }
+    if problem_hash is not None:
+        meta["problem_hash"] = problem_hash
     files[meta_file] = json.dumps(meta, indent=2, sort_keys=True) + "\n"
     return files
+
+
+def folder_up_to_date(out_dir: Path, problem_hash: str) -> bool:
+    """True if ``out_dir`` holds the generation of this problem hash, every file intact."""
+    path = find_meta(Path(out_dir))
+    if path is None:
+        return False
+    try:
+        meta = json.loads(path.read_text())
+        digests = meta["sha256"]
+        if meta.get("problem_hash") != problem_hash or set(meta["files"]) != set(digests) | {path.name}:
+            return False
+        for fname, digest in digests.items():
+            f = Path(out_dir) / fname
+            if not f.is_file() or hashlib.sha256(f.read_bytes()).hexdigest() != digest:
+                return False
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return False
+    return True
 
 
 def find_meta(out_dir: Path) -> Optional[Path]:
@@ -529,13 +585,18 @@ def generate(disc: Any, out_dir, *, offline_guess: Optional[bool] = None) -> Pat
     """
     want_nominal = _option(disc.spec.options, "offline_guess", False) \
         if offline_guess is None else bool(offline_guess)
+    from .cache import problem_hash as _problem_hash
+
+    phash = _problem_hash(disc, bool(want_nominal))
+    if folder_up_to_date(Path(out_dir), phash):
+        return Path(out_dir)
     nominal = None
     if want_nominal:
         from ..reference.offline import solve_ocp
 
         nominal, info = solve_ocp(disc, np.asarray(_attr(disc.data, "x0"), dtype=float))
         _check_offline(info)
-    files = render_folder(disc, nominal)
+    files = render_folder(disc, nominal, problem_hash=phash)
     return write_folder(files, Path(out_dir))
 
 
@@ -561,4 +622,5 @@ def generate_file(ocp_file, out_dir=None, *, offline_guess: Optional[bool] = Non
 
 
 __all__ = ["CodegenError", "generate", "generate_file", "render_folder", "read_meta", "find_meta",
-           "rename_placeholder", "render_sizes_header", "c_double", "STRICT_CFLAGS", "CASADI_CFLAGS"]
+           "rename_placeholder", "render_sizes_header", "c_double", "STRICT_CFLAGS", "CASADI_CFLAGS",
+           "folder_up_to_date", "silence_unused_parameters"]

@@ -1,7 +1,9 @@
 """The per-stage CasADi functions of docs/algorithm.md section 2 and the
 :class:`Discretized` problem every later layer consumes.
 
-All functions are SX functions with dense outputs; their names carry the problem
+The node functions (cost, constraints, terminal) are SX functions; the stage functions
+that involve the integrator are MX functions that iterate one substep and its derivative
+kernels (:mod:`.sensitivities`). All outputs are dense; the names carry the problem
 name (``<name>_stage_grad`` ...) and their inputs follow the order of the table in
 algorithm.md section 2. ``build_functions`` is deterministic: the same OCP gives the
 same functions and therefore the same generated C.
@@ -24,6 +26,7 @@ from typing import Callable, Iterator, Mapping, Optional, Tuple, Union
 import casadi as ca
 import numpy
 
+from . import sensitivities
 from .discretize import StageModel, discretize
 from .ocp import Guess, Ocp, OcpError, ScenarioSpec, casadi_message
 from .spec import OcpSpec, readonly
@@ -244,22 +247,27 @@ def _d(e):
     return ca.densify(e)
 
 
-def _stage_functions(name: str, m: StageModel):
+def _stage_functions_unrolled(name: str, m: StageModel, phi: ca.SX):
+    """The stage functions as single SX expressions of the unrolled interval map ``phi``
+    (every substep inlined, derivatives by CasADi's SX differentiation with common
+    subexpressions shared across substeps and directions): the fastest code for small
+    models, but its size grows with the substeps and, for the Hessian, with nw times the
+    model."""
     nx, ng = m.x.size1(), m.g.size1()
     lam = ca.SX.sym("lam_next", nx)
     mu_g = ca.SX.sym("mu_g", ng)
     x, u, p, w = m.x, m.u, m.p, m.w
     # L_k = l - lam_next' phi + mu_g' g  (algorithm.md section 1)
-    Lk = m.l - ca.dot(lam, m.phi) + (ca.dot(mu_g, m.g) if ng else 0)
-    Phi = ca.jacobian(m.phi, w)
+    Lk = m.l - ca.dot(lam, phi) + (ca.dot(mu_g, m.g) if ng else 0)
+    Phi = ca.jacobian(phi, w)
     C = ca.jacobian(m.g, w) if ng else ca.SX(0, w.size1())
     gL = ca.gradient(Lk, w)
     A = ca.hessian(Lk, w)[0]
     ins = [x, u, p, lam, mu_g]
     in_names = ["x", "u", "p", "lam_next", "mu_g"]
-    stage_eval = ca.Function(f"{name}_stage_eval", [x, u, p], [_d(m.phi), _d(m.l), _d(m.g)],
+    stage_eval = ca.Function(f"{name}_stage_eval", [x, u, p], [_d(phi), _d(m.l), _d(m.g)],
                              ["x", "u", "p"], ["phi", "l", "g"], _FN_OPTS)
-    stage_grad = ca.Function(f"{name}_stage_grad", ins, [_d(gL), _d(m.phi), _d(m.l), _d(m.g)],
+    stage_grad = ca.Function(f"{name}_stage_grad", ins, [_d(gL), _d(phi), _d(m.l), _d(m.g)],
                              in_names, ["gL", "phi", "l", "g"], _FN_OPTS)
     stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [_d(A), _d(Phi), _d(C)],
                                    in_names, ["A", "Phi", "C"], _FN_OPTS)
@@ -280,6 +288,97 @@ def _stage_functions(name: str, m: StageModel):
         stage_hess_cost_gn = ca.Function(f"{name}_stage_hess_cost_gn", cost_in, [_d(A_gn)],
                                          cost_in_names, ["A_l"], _FN_OPTS)
     return stage_eval, stage_grad, stage_hess_exact, stage_hess_gn, stage_hess_cost_exact, stage_hess_cost_gn
+
+
+def _stage_functions(name: str, m: StageModel, directions="auto"):
+    """The stage functions of algorithm.md section 2 as MX functions over SX kernels.
+
+    The cost ``l`` and the path constraints ``g`` live at the shooting node: their
+    derivatives are plain SX functions. The integrator part (``phi``, ``Phi``, the
+    adjoint ``-Phi' lam_next`` and the Hessian of ``-lam_next' phi``) is propagated through
+    the substeps by :mod:`.sensitivities`, so the generated code keeps one substep.
+    """
+    nx, nu, ng = m.x.size1(), m.u.size1(), m.g.size1()
+    nw, np_ = nx + nu, m.p.size1()
+    x, u, p, w = m.x, m.u, m.p, m.w
+    mu_g_sx = ca.SX.sym("mu_g", ng)
+    # node part of L_k (algorithm.md section 1): l + mu_g' g
+    Ln = m.l + (ca.dot(mu_g_sx, m.g) if ng else 0)
+    C_sx = ca.jacobian(m.g, w) if ng else ca.SX(0, nw)
+    node_in, node_names = [x, u, p, mu_g_sx], ["x", "u", "p", "mu_g"]
+    node_eval = ca.Function(f"{name}_node_eval", [x, u, p], [_d(m.l), _d(m.g)], ["x", "u", "p"],
+                            ["l", "g"], _FN_OPTS)
+    node_grad = ca.Function(f"{name}_node_grad", node_in, [_d(ca.gradient(Ln, w))], node_names, ["gLn"],
+                            _FN_OPTS)
+    node_hess = ca.Function(f"{name}_node_hess", node_in, [_d(ca.hessian(Ln, w)[0]), _d(C_sx)], node_names,
+                            ["An", "C"], _FN_OPTS)
+    K = sensitivities.substep_kernels(f"{name}_substep", m.substep, nx, nu, np_, directions)
+    n = m.n_substeps
+
+    X, U, P = ca.MX.sym("x", nx), ca.MX.sym("u", nu), ca.MX.sym("p", np_)
+    LAM, MUG = ca.MX.sym("lam_next", nx), ca.MX.sym("mu_g", ng)
+    ins = [X, U, P, LAM, MUG]
+    in_names = ["x", "u", "p", "lam_next", "mu_g"]
+    xs = sensitivities.interval_map(K, n, X, U, P)
+    phi = xs[-1]
+    l, g = node_eval(X, U, P)
+    stage_eval = ca.Function(f"{name}_stage_eval", [X, U, P], [phi, l, g], ["x", "u", "p"], ["phi", "l", "g"])
+    # L_k = l - lam_next' phi + mu_g' g: the adjoint sweep starts from -lam_next
+    g_dyn, _ = sensitivities.propagate_adjoint(K, xs, U, P, -LAM)
+    gL = node_grad(X, U, P, MUG) + g_dyn
+    stage_grad = ca.Function(f"{name}_stage_grad", ins, [gL, phi, l, g], in_names, ["gL", "phi", "l", "g"])
+    S = sensitivities.propagate_forward(K, xs, U, P)
+    Phi = S[-1]
+    _, H_dyn = sensitivities.propagate_adjoint(K, xs, U, P, -LAM, S)
+    An, C = node_hess(X, U, P, MUG)
+    A = An + 0.5 * (H_dyn + H_dyn.T)
+    stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [A, Phi, C], in_names, ["A", "Phi", "C"])
+    # stage-cost part of A (algorithm.md section 4 step 5): l is evaluated at the node, so
+    # this needs no integrator sensitivities
+    cost_in, cost_in_names = [x, u, p], ["x", "u", "p"]
+    stage_hess_cost_exact = ca.Function(f"{name}_stage_hess_cost_exact", cost_in,
+                                        [_d(ca.hessian(m.l, w)[0])], cost_in_names, ["A_l"], _FN_OPTS)
+    stage_hess_gn = stage_hess_cost_gn = None
+    if m.has_stage_ls:
+        J = ca.jacobian(m.res, w)
+        # Gauss-Newton: J' W J + exact Hessian of the non least-squares part, no curvature
+        # of dynamics or constraints (algorithm.md section 2).
+        A_gn = ca.mtimes([J.T, ca.DM(m.W), J]) + ca.hessian(m.l_extra, w)[0]
+        # the same expression: A - A_l = 0 for Gauss-Newton
+        stage_hess_cost_gn = ca.Function(f"{name}_stage_hess_cost_gn", cost_in, [_d(A_gn)],
+                                         cost_in_names, ["A_l"], _FN_OPTS)
+        node_gn = ca.Function(f"{name}_node_gn", node_in, [_d(A_gn), _d(C_sx)], node_names, ["A", "C"],
+                              _FN_OPTS)
+        A_gn_mx, C_gn = node_gn(X, U, P, MUG)
+        stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [A_gn_mx, Phi, C_gn], in_names,
+                                    ["A", "Phi", "C"])
+    return stage_eval, stage_grad, stage_hess_exact, stage_hess_gn, stage_hess_cost_exact, stage_hess_cost_gn
+
+
+#: derivatives="auto" unrolls while the vectorised forward-over-adjoint kernel of one
+#: substep times the substeps stays below this many SX instructions (robot arm: 2 x 6882;
+#: chain of masses: 2 x 51768), i.e. for small models, where the unrolled expression is
+#: the fastest code (robot arm: the structured Hessian takes 2x to 4x its time).
+UNROLL_LIMIT = 20000
+
+
+def _stage_functions_choice(name: str, integ, m: StageModel):
+    """Unrolled or structured stage functions, after the integrator's ``derivatives``."""
+    how = getattr(integ, "derivatives", "auto")
+    directions = getattr(integ, "directions", "auto")
+    sx_substep = m.substep.is_a("SXFunction")
+    if how == "unrolled" and not sx_substep:
+        raise OcpError(f"{integ.describe()}: derivatives='unrolled' needs an explicit (SX) substep")
+    if how == "auto" and sx_substep:
+        nx, nu = m.x.size1(), m.u.size1()
+        K = sensitivities.substep_kernels(f"{name}_substep", m.substep, nx, nu, m.p.size1(), "all")
+        how = "unrolled" if K.soa.n_instructions() * m.n_substeps <= UNROLL_LIMIT else "structured"
+    if how == "unrolled":
+        phi = m.x
+        for _ in range(m.n_substeps):
+            phi = m.substep(phi, m.u, m.p)
+        return _stage_functions_unrolled(name, m, phi)
+    return _stage_functions(name, m, directions)
 
 
 def _terminal_functions(name: str, m: StageModel):
@@ -346,7 +445,7 @@ def build_functions(problem: Union[Ocp, OcpSpec]) -> Discretized:
     m = discretize(spec)
     name = spec.name
     try:
-        stage = _stage_functions(name, m)
+        stage = _stage_functions_choice(name, spec.model.integrator, m)
         term = _terminal_functions(name, m)
         ode = ca.Function(f"{name}_ode", [m.x, m.u, m.p], [_d(m.xdot)], ["x", "u", "p"], ["xdot"], _FN_OPTS)
     except OcpError:

@@ -2,8 +2,10 @@
 ``Ocp.validate()`` returns) to the symbolic per-stage pieces ``phi_k, l_k, g_k`` and the
 terminal ``E, r, r_eq``.
 
-Everything here is SX, built in declaration order so that the same OCP always yields
-the same expressions (and hence byte-identical generated C).
+Everything here is SX (the integrator's substep map may be an MX function), built in
+declaration order so that the same OCP always yields the same expressions (and hence
+byte-identical generated C). The interval map ``phi`` is the substep map applied
+``n_substeps`` times; derivatives.py builds it and its derivatives from the substep.
 """
 from __future__ import annotations
 
@@ -26,7 +28,8 @@ class StageModel:
     p: ca.SX
     w: ca.SX
     xdot: ca.SX
-    phi: ca.SX
+    substep: ca.Function   # (x, u, p) -> x+ of one integrator substep
+    n_substeps: int        # phi = substep applied n_substeps times
     l: ca.SX              # full stage cost 0.5 res' W res + l_extra
     res: ca.SX            # stacked stage least-squares residual (0 rows if none)
     W: np.ndarray
@@ -96,14 +99,17 @@ def discretize(spec: OcpSpec) -> StageModel:
     xdot = model.xdot
     try:
         ode = ca.Function("ode_tmp", [x, u, p], [xdot])
-        phi = integrator.step(ode, x, u, p, spec.horizon.dt)
+        substep = integrator.substep_function(f"{spec.name}_substep", ode, x, u, p, spec.horizon.dt)
     except OcpError:
         raise
     except Exception as exc:  # noqa: BLE001
         raise OcpError(f"dynamics: cannot discretise with {integrator.describe()}: {casadi_message(exc)}") from None
-    if not isinstance(phi, ca.SX) or phi.shape != (x.size1(), 1):
+    if not isinstance(substep, ca.Function) or substep.n_in() != 3 or substep.n_out() != 1:
+        raise OcpError(f"dynamics: integrator {integrator.describe()} must give a function (x, u, p) -> x+")
+    if substep.size_out(0) != (x.size1(), 1):
         raise OcpError(f"dynamics: integrator {integrator.describe()} returned shape "
-                       f"{getattr(phi, 'shape', None)}, expected ({x.size1()}, 1)")
+                       f"{substep.size_out(0)}, expected ({x.size1()}, 1)")
+    n_substeps = int(getattr(integrator, "substeps", 1))
 
     res, W, l_ls = _least_squares(cost.stage_least_squares, "stage least squares")
     l_extra = _sum(cost.stage_terms)
@@ -121,7 +127,7 @@ def discretize(spec: OcpSpec) -> StageModel:
     r = rows[ineq.tolist()] if ineq.size else ca.SX(0, 1)
     r_eq = rows[eq.tolist()] - ca.DM(lbs[eq]) if eq.size else ca.SX(0, 1)
 
-    return StageModel(x=x, u=u, p=p, w=w, xdot=xdot, phi=phi, l=l, res=res, W=W, l_extra=l_extra,
+    return StageModel(x=x, u=u, p=p, w=w, xdot=xdot, substep=substep, n_substeps=n_substeps, l=l, res=res, W=W, l_extra=l_extra,
                       g=g, lg=lg, ug=ug, E=E, resN=resN, WN=WN, E_extra=E_extra,
                       r=r, lr=lbs[ineq], ur=ubs[ineq], r_eq=r_eq,
                       has_stage_ls=cost.has_stage_least_squares)

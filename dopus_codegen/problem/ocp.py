@@ -57,7 +57,7 @@ from .spec import (ClosedLoopSpec, ConstraintSpec, CostSpec, GuessSpec, HorizonS
                    ModelSpec, OcpSpec, OptionsSpec, Rows, ScenarioPart, Variable, readonly)
 
 __all__ = [
-    "OcpError", "Integrator", "RK4", "Event", "Guess", "ScenarioSpec", "Ocp", "load_ocp",
+    "OcpError", "Integrator", "RK4", "GaussLegendre", "RadauIIA", "Event", "Guess", "ScenarioSpec", "Ocp", "load_ocp",
 ]
 
 
@@ -74,38 +74,190 @@ class Integrator:
     its first and second derivatives can be taken symbolically.
     """
 
+    #: Equal substeps per interval; the derivative functions iterate one substep
+    #: (dopus_codegen.problem.sensitivities), so the generated code holds it once.
+    substeps = 1
+    #: Seed directions per call of the derivative kernels of one substep: "auto", "one"
+    #: (smallest code, a loop over the nw directions), "all" (one vectorised kernel) or
+    #: an integer chunk (see dopus_codegen.problem.sensitivities.substep_kernels).
+    directions = "auto"
+    #: "structured": the stage functions iterate one substep and its derivative kernels
+    #: (code size independent of the substeps); "unrolled": one SX expression of the whole
+    #: interval (fastest for small models, code grows with substeps and nw); "auto": unrolled
+    #: for small models (dopus_codegen.problem.derivatives.UNROLL_LIMIT), else structured.
+    derivatives = "auto"
+
     def step(self, ode: ca.Function, x: ca.SX, u: ca.SX, p: ca.SX, h: float) -> ca.SX:
         """State after one interval of length ``h`` with ``u`` and ``p`` held constant."""
         raise NotImplementedError
+
+    def substep(self, ode: ca.Function, x: ca.SX, u: ca.SX, p: ca.SX, h: float) -> ca.SX:
+        """State after one substep of length ``h`` (an SX expression). The default is
+        :meth:`step` itself (one substep per interval)."""
+        return self.step(ode, x, u, p, h)
+
+    def substep_function(self, name: str, ode: ca.Function, x: ca.SX, u: ca.SX, p: ca.SX,
+                         dt: float) -> ca.Function:
+        """``(x, u, p) -> x+`` of one substep of an interval of length ``dt`` (a CasADi
+        function; an implicit scheme returns an MX function with its Newton solver)."""
+        e = self.substep(ode, x, u, p, dt / self.substeps)
+        return ca.Function(name, [x, u, p], [e], ["x", "u", "p"], ["xn"], {"cse": True})
 
     def describe(self) -> str:
         """Short deterministic description (used in generated headers)."""
         return type(self).__name__
 
 
-class RK4(Integrator):
-    """Classical fourth-order Runge-Kutta with ``substeps`` equal steps per interval."""
+def _derivatives(value, who: str) -> str:
+    if value not in ("auto", "unrolled", "structured"):
+        raise OcpError(f"{who}: derivatives must be 'auto', 'unrolled' or 'structured', got {value!r}")
+    return value
 
-    def __init__(self, substeps: int = 1):
+
+def _directions(value, who: str):
+    if value in ("auto", "one", "all"):
+        return value
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 1:
+        return int(value)
+    raise OcpError(f"{who}: directions must be 'auto', 'one', 'all' or an integer >= 1, got {value!r}")
+
+
+class RK4(Integrator):
+    """Classical fourth-order Runge-Kutta with ``substeps`` equal steps per interval.
+
+    ``derivatives`` (``"auto"``, ``"unrolled"``, ``"structured"``) and ``directions``
+    (``"auto"``, ``"one"``, ``"all"`` or a chunk size; structured only): how the derivative
+    code is built, a trade of code size against speed that never changes the computed
+    values beyond round-off (see :class:`Integrator`). Firmware with little flash:
+    ``RK4(substeps, derivatives="structured", directions="one")``."""
+
+    def __init__(self, substeps: int = 1, derivatives: str = "auto", directions="auto"):
         if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
             raise OcpError(f"RK4: substeps must be an integer >= 1, got {substeps!r}")
         self.substeps = int(substeps)
+        self.derivatives = _derivatives(derivatives, "RK4")
+        self.directions = _directions(directions, "RK4")
+
+    def substep(self, ode, x, u, p, hs):
+        k1 = ode(x, u, p)
+        k2 = ode(x + 0.5 * hs * k1, u, p)
+        k3 = ode(x + 0.5 * hs * k2, u, p)
+        k4 = ode(x + hs * k3, u, p)
+        return x + (hs / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
 
     def step(self, ode, x, u, p, h):
         hs = h / self.substeps
         for _ in range(self.substeps):
-            k1 = ode(x, u, p)
-            k2 = ode(x + 0.5 * hs * k1, u, p)
-            k3 = ode(x + 0.5 * hs * k2, u, p)
-            k4 = ode(x + hs * k3, u, p)
-            x = x + (hs / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = self.substep(ode, x, u, p, hs)
         return x
 
     def describe(self) -> str:
-        return f"RK4(substeps={self.substeps})"
+        extra = "" if self.derivatives == "auto" else f", derivatives={self.derivatives!r}"
+        extra += "" if self.directions == "auto" else f", directions={self.directions!r}"
+        return f"RK4(substeps={self.substeps}{extra})"
 
     def __repr__(self) -> str:
         return self.describe()
+
+
+def _collocation_points(kind: str, s: int) -> np.ndarray:
+    """Gauss-Legendre: the roots of the shifted Legendre polynomial P_s(2t - 1); Radau IIA:
+    the roots of P_s - P_{s-1} (shifted), which end with t = 1."""
+    from numpy.polynomial import legendre
+
+    coef = [0.0] * s + [1.0]
+    if kind == "radau":
+        coef = legendre.legsub(coef, [0.0] * (s - 1) + [1.0])
+    roots = np.sort(np.real(legendre.legroots(coef)))
+    c = (roots + 1.0) / 2.0
+    if kind == "radau":
+        c[-1] = 1.0
+    return c
+
+
+def collocation_tableau(kind: str, s: int) -> tuple:
+    """Butcher tableau ``(A, b, c)`` of the s-stage collocation method: ``a_ij`` and ``b_j``
+    are the integrals of the Lagrange polynomials of the points ``c`` over ``[0, c_i]``
+    and ``[0, 1]``."""
+    from numpy.polynomial import polynomial as P
+
+    c = _collocation_points(kind, s)
+    A, b = np.zeros((s, s)), np.zeros(s)
+    for j in range(s):
+        others = [c[m] for m in range(s) if m != j]
+        lj = P.polyfromroots(others) / np.prod([c[j] - cm for cm in others]) if others else np.array([1.0])
+        Ij = P.polyint(lj)
+        b[j] = P.polyval(1.0, Ij)
+        for i in range(s):
+            A[i, j] = P.polyval(c[i], Ij)
+    return A, b, c
+
+
+class _Collocation(Integrator):
+    """Implicit Runge-Kutta collocation with ``stages`` stages, ``substeps`` equal substeps
+    per interval and exactly ``newton_iters`` Newton iterations on the stage equations
+    ``K_i = f(x + h sum_j a_ij K_j, u, p)`` per substep (started from ``K_i = f(x, u, p)``;
+    exact Jacobian, dense QR solve: CasADi's ``fast_newton`` rootfinder, which its code
+    generator emits as plain C99 without allocation). The derivatives of the substep are
+    those of the implicit function (implicit function theorem at the computed stages),
+    so they are exact for the converged stage equations.
+    """
+    kind = ""
+    label = ""
+    derivatives = "structured"
+
+    def __init__(self, stages: int = 2, substeps: int = 1, newton_iters: int = 3, directions="auto"):
+        for what, v, lo in (("stages", stages, 1), ("substeps", substeps, 1), ("newton_iters", newton_iters, 1)):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+                raise OcpError(f"{self.label}: {what} must be an integer >= {lo}, got {v!r}")
+        if stages > 9:
+            raise OcpError(f"{self.label}: stages must be <= 9, got {stages}")
+        self.stages, self.substeps, self.newton_iters = int(stages), int(substeps), int(newton_iters)
+        self.directions = _directions(directions, self.label)
+        self.A, self.b, self.c = collocation_tableau(self.kind, self.stages)
+
+    def substep_function(self, name, ode, x, u, p, dt):
+        nx, nu, np_ = x.size1(), u.size1(), p.size1()
+        s, h = self.stages, dt / self.substeps
+        K = ca.SX.sym("K", nx, s)
+        xup = ca.SX.sym("xup", nx + nu + np_)
+        xs, us, ps = xup[:nx], xup[nx:nx + nu], xup[nx + nu:]
+        G = ca.vertcat(*[K[:, i] - ode(xs + h * ca.mtimes(K, ca.DM(self.A[i, :])), us, ps) for i in range(s)])
+        G_fn = ca.Function(f"{name}_stage_equations", [ca.vec(K), xup], [G], {"cse": True})
+        # abstol = abstol_step = 0: always newton_iters iterations (an exact root ends early
+        # with the same result)
+        newton = ca.rootfinder(f"{name}_newton", "fast_newton", G_fn,
+                               {"max_iter": self.newton_iters, "abstol": 0.0, "abstolStep": 0.0,
+                                "error_on_fail": False})
+        X, U, Pm = ca.MX.sym("x", nx), ca.MX.sym("u", nu), ca.MX.sym("p", np_)
+        K0 = ca.repmat(ode(X, U, Pm), s, 1)
+        Ks = ca.reshape(newton(K0, ca.vertcat(X, U, Pm)), nx, s)
+        xn = X + h * ca.mtimes(Ks, ca.DM(self.b))
+        return ca.Function(name, [X, U, Pm], [xn], ["x", "u", "p"], ["xn"])
+
+    def step(self, ode, x, u, p, h):
+        raise OcpError(f"{self.describe()}: an implicit scheme has no unrolled SX form; "
+                       "its stage functions are built from substep_function")
+
+    def describe(self) -> str:
+        extra = "" if self.directions == "auto" else f", directions={self.directions!r}"
+        return (f"{self.label}(stages={self.stages}, substeps={self.substeps}, "
+                f"newton_iters={self.newton_iters}{extra})")
+
+    def __repr__(self) -> str:
+        return self.describe()
+
+
+class GaussLegendre(_Collocation):
+    """Gauss-Legendre collocation (order 2s, A-stable, symplectic); see :class:`_Collocation`."""
+    kind = "gauss"
+    label = "GaussLegendre"
+
+
+class RadauIIA(_Collocation):
+    """Radau IIA collocation (order 2s-1, L-stable: for stiff models); see :class:`_Collocation`."""
+    kind = "radau"
+    label = "RadauIIA"
 
 
 # --------------------------------------------------------------------------- plain data

@@ -52,8 +52,11 @@ def nlp_layout(disc):
 def _build_solver(disc, hessian: str, tol: float, max_iter: int):
     N, nx, nu, npar = disc.N, disc.nx, disc.nu, disc.np
     nw = nx + nu
-    V = ca.SX.sym("V", N * nw + nx)
-    P = ca.SX.sym("P", nx + (N + 1) * npar)     # (xhat_0, p_0, ..., p_N)
+    # SX when every function can be evaluated symbolically in SX; an implicit integrator
+    # (a rootfinder inside the stage functions) needs MX
+    T = ca.SX if _sx_ok(disc) else ca.MX
+    V = T.sym("V", N * nw + nx)
+    P = T.sym("P", nx + (N + 1) * npar)     # (xhat_0, p_0, ..., p_N)
     xhat0 = P[:nx]
 
     def xk(k):
@@ -94,18 +97,27 @@ def _build_solver(disc, hessian: str, tol: float, max_iter: int):
     return ca.nlpsol(f"{disc.name}_offline", "ipopt", nlp, opts)
 
 
+def _sx_ok(disc) -> bool:
+    try:
+        disc.stage_eval(ca.SX.sym("x", disc.nx), ca.SX.sym("u", disc.nu), ca.SX.sym("p", disc.np))
+    except Exception:  # noqa: BLE001 - CasADi: no SX evaluation of some node
+        return False
+    return True
+
+
 def _gn_hess_lag(disc, V, P, ng_total, xk, uk, pk):
     """Block-diagonal Gauss-Newton Hessian of the Lagrangian from the ``*_hess_gn``
     functions (no curvature of dynamics or constraints)."""
     N, nx, nu = disc.N, disc.nx, disc.nu
-    lam_f = ca.SX.sym("lam_f")
-    lam_g = ca.SX.sym("lam_g", ng_total)
+    T = type(V)
+    lam_f = T.sym("lam_f")
+    lam_g = T.sym("lam_g", ng_total)
     blocks = []
     hess = disc.stage_hess("gauss-newton")
     for k in range(N):
-        A = hess(xk(k), uk(k), pk(k), ca.SX.zeros(nx), ca.SX.zeros(disc.ng))[0]
+        A = hess(xk(k), uk(k), pk(k), T.zeros(nx), T.zeros(disc.ng))[0]
         blocks.append(lam_f * A)
-    AN = disc.term_hess_gn(xk(N), pk(N), ca.SX.zeros(disc.nr), ca.SX.zeros(disc.ne))[0]
+    AN = disc.term_hess_gn(xk(N), pk(N), T.zeros(disc.nr), T.zeros(disc.ne))[0]
     blocks.append(lam_f * AN)
     H = ca.diagcat(*blocks)
     return ca.Function("hess_lag", [V, P, lam_f, lam_g], [ca.triu(H)],

@@ -10,9 +10,9 @@ drive the generated C exactly as they drive :class:`~dopus_codegen.reference.dop
 
 ``CSolver(disc, lib_dir=...)`` or :meth:`CSolver.from_dir` load an already generated folder
 (``dopus-gen generate`` + ``dopus-gen build``). Without ``lib_dir`` the folder is generated
-into a cache keyed by a hash of the generated sources (``$DOPUS_CACHE_DIR``, default
-``~/.cache/dopus-codegen``), so an unchanged problem is neither regenerated on disk nor
-rebuilt.
+into the build cache (:mod:`dopus_codegen.codegen.cache`: ``$DOPUS_CACHE_DIR``, default
+``~/.cache/dopus-codegen``) keyed by a hash of the problem, so an unchanged problem is
+neither regenerated nor recompiled; it says on stderr when it generates or compiles.
 
 numpy in, numpy out: every array is checked for shape, dtype and finiteness before it
 reaches C; a bad input raises :class:`DopusError` (which is also a ``ValueError``) naming
@@ -21,7 +21,6 @@ the next good call works (the C runtime keeps its state consistent).
 """
 from __future__ import annotations
 
-import hashlib
 import os
 import tempfile
 import threading
@@ -54,30 +53,36 @@ _LOCK = threading.Lock()
 
 
 def cache_root() -> Path:
-    return Path(os.environ.get("DOPUS_CACHE_DIR") or (Path.home() / ".cache" / "dopus-codegen"))
+    from ..codegen.cache import cache_root as _root
+
+    return _root()
 
 
-def build_for(disc, cache_dir=None) -> Path:
-    """Generate the C folder of ``disc`` into the cache (keyed by the hash of the generated
-    sources) and build it; return the folder. Cheap when nothing changed."""
+def build_for(disc, cache_dir=None, echo=None) -> Path:
+    """The generated and built folder of ``disc`` in the cache (``cache_dir``, else
+    ``$DOPUS_CACHE_DIR``, else ``~/.cache/dopus-codegen``), keyed by the problem hash of
+    :mod:`dopus_codegen.codegen.cache`: an unchanged problem is neither regenerated nor
+    recompiled. Says on stderr (or to ``echo``) when it generates or compiles."""
+    import sys
+
+    from ..codegen import cache
     from ..codegen.build import build
     from ..codegen.generate import render_folder, write_folder
 
+    say = echo or (lambda msg: print(msg, file=sys.stderr, flush=True))
     key = id(disc)
     with _LOCK:
         hit = _DISC_CACHE.get(key)
-        if hit is not None and hit[0] is disc and (cache_dir is None or Path(cache_dir) == hit[1].parent):
-            build(hit[1])
+        if hit is not None and hit[0] is disc and (cache_dir is None or Path(cache_dir) / "problems" == hit[1].parent):
+            build(hit[1], cache_dir=cache_dir, echo=say)
             return hit[1]
-    files = render_folder(disc, None)
-    h = hashlib.sha256()
-    for fname in sorted(files):
-        h.update(fname.encode() + b"\0" + files[fname].encode() + b"\0")
-    root = Path(cache_dir) if cache_dir is not None else cache_root()
-    out = root / f"{disc.name}-{h.hexdigest()[:16]}"
+    root = cache.cache_root(cache_dir)
+    out = root / "problems" / f"{disc.name}-{cache.problem_hash(disc, None)[:20]}"
     if not (out / f"{disc.name}_meta.json").is_file():
-        root.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{disc.name}-", dir=str(root)))
+        say(f"dopus-codegen: generating C for '{disc.name}' into {out}")
+        files = render_folder(disc, None)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{disc.name}-", dir=str(out.parent)))
         write_folder(files, tmp)
         try:
             os.rename(tmp, out)
@@ -85,7 +90,7 @@ def build_for(disc, cache_dir=None) -> Path:
             import shutil
 
             shutil.rmtree(tmp, ignore_errors=True)
-    build(out)
+    build(out, cache_dir=cache_dir, echo=say)
     with _LOCK:
         _DISC_CACHE[key] = (disc, out)
     return out

@@ -22,18 +22,7 @@ add_library(robot_arm STATIC
 target_include_directories(robot_arm PUBLIC "${ROBOT_ARM_DIR}")
 set_target_properties(robot_arm PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON C_EXTENSIONS OFF)
 if(CMAKE_C_COMPILER_ID MATCHES "GNU|Clang")
-    target_compile_options(robot_arm PRIVATE -Wall)
-    set_source_files_properties(
-        "${ROBOT_ARM_DIR}/robot_arm_funcs.c"
-        "${ROBOT_ARM_DIR}/robot_arm_kkt.c"
-        "${ROBOT_ARM_DIR}/robot_arm_linalg.c"
-        "${ROBOT_ARM_DIR}/robot_arm_problem.c"
-        "${ROBOT_ARM_DIR}/robot_arm_qp.c"
-        "${ROBOT_ARM_DIR}/robot_arm_reg.c"
-        "${ROBOT_ARM_DIR}/robot_arm_ring.c"
-        "${ROBOT_ARM_DIR}/robot_arm_solver.c"
-        "${ROBOT_ARM_DIR}/robot_arm_timer.c"
-        PROPERTIES COMPILE_OPTIONS "-Wextra;-Werror;-pedantic")
+    target_compile_options(robot_arm PRIVATE -Wall -Wextra -Werror -pedantic)
 endif()
 find_library(ROBOT_ARM_LIBM m)
 if(ROBOT_ARM_LIBM)

@@ -24,7 +24,7 @@
 #define ROBOT_ARM_SZ_ARG 5
 #define ROBOT_ARM_SZ_RES 4
 #define ROBOT_ARM_SZ_IW 1
-#define ROBOT_ARM_SZ_W 682
+#define ROBOT_ARM_SZ_W 658
 
 /* The real-number type of the runtime (double; the precision is a generation-time choice) */
 typedef double robot_arm_real;

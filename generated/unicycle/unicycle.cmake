@@ -22,18 +22,7 @@ add_library(unicycle STATIC
 target_include_directories(unicycle PUBLIC "${UNICYCLE_DIR}")
 set_target_properties(unicycle PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON C_EXTENSIONS OFF)
 if(CMAKE_C_COMPILER_ID MATCHES "GNU|Clang")
-    target_compile_options(unicycle PRIVATE -Wall)
-    set_source_files_properties(
-        "${UNICYCLE_DIR}/unicycle_funcs.c"
-        "${UNICYCLE_DIR}/unicycle_kkt.c"
-        "${UNICYCLE_DIR}/unicycle_linalg.c"
-        "${UNICYCLE_DIR}/unicycle_problem.c"
-        "${UNICYCLE_DIR}/unicycle_qp.c"
-        "${UNICYCLE_DIR}/unicycle_reg.c"
-        "${UNICYCLE_DIR}/unicycle_ring.c"
-        "${UNICYCLE_DIR}/unicycle_solver.c"
-        "${UNICYCLE_DIR}/unicycle_timer.c"
-        PROPERTIES COMPILE_OPTIONS "-Wextra;-Werror;-pedantic")
+    target_compile_options(unicycle PRIVATE -Wall -Wextra -Werror -pedantic)
 endif()
 find_library(UNICYCLE_LIBM m)
 if(UNICYCLE_LIBM)

@@ -91,6 +91,7 @@ static const casadi_int casadi_s9[3] = {0, 4, 1};
 
 /* unicycle_stage_eval:(x[4],u[2],p[2])->(phi[4],l,g) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12;
   a00=arg[0]? arg[0][0] : 0;
@@ -189,6 +190,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_eval_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_eval_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_eval_incref(void) {
@@ -261,6 +263,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_eval_work_bytes(casadi_int *sz_arg, casa
 
 /* unicycle_stage_grad:(x[4],u[2],p[2],lam_next[4],mu_g)->(gL[6],phi[4],l,g) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31;
@@ -299,116 +302,115 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a17=(a05*a16);
   a17=(a15+a17);
   a18=1.6666666666666666e-02;
-  a04=(a18*a04);
-  a19=(a17*a04);
-  a19=(a14*a19);
+  a19=(a18*a04);
+  a20=(a17*a19);
+  a20=(a14*a20);
   a13=cos(a13);
-  a03=(a18*a03);
-  a20=(a17*a03);
-  a20=(a13*a20);
-  a19=(a19-a20);
-  a20=arg[3]? arg[3][2] : 0;
-  a21=cos(a09);
-  a22=(a15*a03);
-  a22=(a21*a22);
-  a22=(a20+a22);
-  a22=(a19-a22);
-  a23=5.0000000000000003e-02;
-  a24=(a23*a12);
-  a24=(a09+a24);
-  a25=cos(a24);
-  a26=(a23*a16);
-  a26=(a15+a26);
-  a27=(-a03);
-  a27=(2.*a27);
-  a28=(a26*a27);
-  a28=(a25*a28);
-  a24=sin(a24);
-  a29=(-a04);
-  a29=(2.*a29);
-  a30=(a26*a29);
-  a30=(a24*a30);
-  a28=(a28-a30);
-  a22=(a22+a28);
-  a22=(a22+a28);
-  a30=sin(a09);
-  a31=(a15*a04);
-  a31=(a30*a31);
-  a22=(a22+a31);
-  if (res[0]!=0) res[0][2]=a22;
-  a27=(a24*a27);
-  a29=(a25*a29);
-  a27=(a27+a29);
-  a29=arg[3]? arg[3][3] : 0;
-  a22=(a30*a03);
-  a22=(a29+a22);
-  a03=(a14*a03);
-  a31=(a13*a04);
-  a03=(a03+a31);
-  a22=(a22+a03);
-  a22=(a27-a22);
-  a22=(a22+a27);
-  a04=(a21*a04);
-  a22=(a22-a04);
-  if (res[0]!=0) res[0][3]=a22;
-  a22=(a18*a29);
-  a04=(-a22);
-  a04=(2.*a04);
-  a04=(a04-a22);
-  a29=(a23*a29);
-  a04=(a04-a29);
-  a03=(a05*a03);
-  a04=(a04-a03);
-  a27=(a23*a27);
-  a04=(a04+a27);
-  a04=(a04+a27);
-  a27=5.0000000000000010e-03;
-  a03=(a27*a16);
-  a04=(a04+a03);
-  a04=(a04+a03);
-  if (res[0]!=0) res[0][4]=a04;
-  a04=(a18*a20);
-  a03=(-a04);
+  a21=(a18*a03);
+  a22=(a17*a21);
+  a22=(a13*a22);
+  a20=(a20-a22);
+  a22=arg[3]? arg[3][2] : 0;
+  a23=cos(a09);
+  a24=(a15*a21);
+  a24=(a23*a24);
+  a24=(a22+a24);
+  a24=(a20-a24);
+  a25=5.0000000000000003e-02;
+  a26=(a25*a12);
+  a26=(a09+a26);
+  a27=cos(a26);
+  a28=(a25*a16);
+  a28=(a15+a28);
+  a29=3.3333333333333333e-02;
+  a03=(a29*a03);
+  a03=(-a03);
   a03=(2.*a03);
-  a03=(a03-a04);
-  a20=(a23*a20);
-  a03=(a03-a20);
-  a05=(a05*a19);
-  a03=(a03+a05);
-  a23=(a23*a28);
-  a03=(a03+a23);
-  a03=(a03+a23);
-  a27=(a27*a12);
-  a03=(a03+a27);
-  a03=(a03+a27);
-  if (res[0]!=0) res[0][5]=a03;
-  a21=(a15*a21);
-  a25=(a26*a25);
-  a25=(2.*a25);
+  a30=(a28*a03);
+  a30=(a27*a30);
+  a26=sin(a26);
+  a29=(a29*a04);
+  a29=(-a29);
+  a29=(2.*a29);
+  a04=(a28*a29);
+  a04=(a26*a04);
+  a30=(a30-a04);
+  a24=(a24+a30);
+  a04=sin(a09);
+  a31=(a15*a19);
+  a31=(a04*a31);
+  a24=(a24+a31);
+  if (res[0]!=0) res[0][2]=a24;
+  a03=(a26*a03);
+  a29=(a27*a29);
+  a03=(a03+a29);
+  a29=arg[3]? arg[3][3] : 0;
+  a24=(a04*a21);
+  a24=(a29+a24);
+  a21=(a14*a21);
+  a31=(a13*a19);
+  a21=(a21+a31);
+  a24=(a24+a21);
+  a24=(a03-a24);
+  a19=(a23*a19);
+  a24=(a24-a19);
+  if (res[0]!=0) res[0][3]=a24;
+  a24=(a18*a29);
+  a19=(-a24);
+  a19=(2.*a19);
+  a19=(a19-a24);
+  a29=(a25*a29);
+  a19=(a19-a29);
+  a21=(a05*a21);
+  a19=(a19-a21);
+  a03=(a25*a03);
+  a19=(a19+a03);
+  a03=5.0000000000000010e-03;
+  a21=(a03*a16);
+  a19=(a19+a21);
+  a19=(a19+a21);
+  if (res[0]!=0) res[0][4]=a19;
+  a19=(a18*a22);
+  a21=(-a19);
+  a21=(2.*a21);
+  a21=(a21-a19);
+  a22=(a25*a22);
+  a21=(a21-a22);
+  a05=(a05*a20);
+  a21=(a21+a05);
+  a25=(a25*a30);
   a21=(a21+a25);
-  a21=(a21+a25);
+  a03=(a03*a12);
+  a21=(a21+a03);
+  a21=(a21+a03);
+  if (res[0]!=0) res[0][5]=a21;
+  a23=(a15*a23);
+  a27=(a28*a27);
+  a27=(2.*a27);
+  a23=(a23+a27);
+  a23=(a23+a27);
   a13=(a17*a13);
-  a21=(a21+a13);
-  a21=(a18*a21);
-  a00=(a00+a21);
+  a23=(a23+a13);
+  a23=(a18*a23);
+  a00=(a00+a23);
   if (res[1]!=0) res[1][0]=a00;
-  a30=(a15*a30);
-  a26=(a26*a24);
-  a26=(2.*a26);
-  a30=(a30+a26);
-  a30=(a30+a26);
+  a04=(a15*a04);
+  a28=(a28*a26);
+  a28=(2.*a28);
+  a04=(a04+a28);
+  a04=(a04+a28);
   a17=(a17*a14);
-  a30=(a30+a17);
-  a30=(a18*a30);
-  a02=(a02+a30);
+  a04=(a04+a17);
+  a04=(a18*a04);
+  a02=(a02+a04);
   if (res[1]!=0) res[1][1]=a02;
   a02=3.;
-  a30=(a02*a12);
+  a04=(a02*a12);
   a17=(2.*a12);
-  a30=(a30+a17);
-  a30=(a30+a12);
-  a30=(a18*a30);
-  a09=(a09+a30);
+  a04=(a04+a17);
+  a04=(a04+a12);
+  a04=(a18*a04);
+  a09=(a09+a04);
   if (res[1]!=0) res[1][2]=a09;
   a02=(a02*a16);
   a09=(2.*a16);
@@ -446,6 +448,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_grad_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_grad_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_grad_incref(void) {
@@ -524,6 +527,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_grad_work_bytes(casadi_int *sz_arg, casa
 
 /* unicycle_stage_hess_exact:(x[4],u[2],p[2],lam_next[4],mu_g)->(A[6x6],Phi[4x6],C[1x6]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25;
@@ -552,189 +556,185 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a04=(a00+a04);
   a05=1.6666666666666666e-02;
   a06=arg[3]? arg[3][0] : 0;
-  a06=(a05*a06);
-  a07=(a04*a06);
-  a08=arg[0]? arg[0][2] : 0;
-  a09=arg[1]? arg[1][1] : 0;
-  a10=(a01*a09);
-  a10=(a08+a10);
-  a11=cos(a10);
-  a12=(a07*a11);
-  a13=arg[3]? arg[3][1] : 0;
-  a13=(a05*a13);
-  a14=(a04*a13);
-  a10=sin(a10);
-  a15=(a14*a10);
-  a12=(a12+a15);
-  a15=(a00*a13);
-  a16=sin(a08);
-  a15=(a15*a16);
-  a12=(a12+a15);
-  a15=5.0000000000000003e-02;
-  a03=(a15*a03);
+  a07=(a05*a06);
+  a08=(a04*a07);
+  a09=arg[0]? arg[0][2] : 0;
+  a10=arg[1]? arg[1][1] : 0;
+  a11=(a01*a10);
+  a11=(a09+a11);
+  a12=cos(a11);
+  a13=(a08*a12);
+  a14=arg[3]? arg[3][1] : 0;
+  a15=(a05*a14);
+  a16=(a04*a15);
+  a11=sin(a11);
+  a17=(a16*a11);
+  a13=(a13+a17);
+  a17=(a00*a15);
+  a18=sin(a09);
+  a17=(a17*a18);
+  a13=(a13+a17);
+  a17=5.0000000000000003e-02;
+  a03=(a17*a03);
   a03=(a00+a03);
-  a17=(-a13);
-  a17=(2.*a17);
-  a18=(a03*a17);
-  a09=(a15*a09);
-  a09=(a08+a09);
-  a19=sin(a09);
-  a20=(a18*a19);
-  a21=(-a06);
-  a21=(2.*a21);
-  a22=(a03*a21);
+  a19=3.3333333333333333e-02;
+  a14=(a19*a14);
+  a14=(-a14);
+  a14=(2.*a14);
+  a20=(a03*a14);
+  a10=(a17*a10);
+  a10=(a09+a10);
+  a21=sin(a10);
+  a22=(a20*a21);
+  a19=(a19*a06);
+  a19=(-a19);
+  a19=(2.*a19);
+  a06=(a03*a19);
+  a10=cos(a10);
+  a23=(a06*a10);
+  a22=(a22+a23);
+  a13=(a13-a22);
+  a22=(a00*a07);
   a09=cos(a09);
-  a23=(a22*a09);
-  a20=(a20+a23);
-  a12=(a12-a20);
-  a12=(a12-a20);
-  a20=(a00*a06);
-  a08=cos(a08);
-  a20=(a20*a08);
-  a12=(a12+a20);
-  if (res[0]!=0) res[0][14]=a12;
-  a12=(a17*a09);
-  a20=(a21*a19);
-  a12=(a12-a20);
-  a20=(a13*a08);
-  a23=(a13*a11);
-  a24=(a06*a10);
+  a22=(a22*a09);
+  a13=(a13+a22);
+  if (res[0]!=0) res[0][14]=a13;
+  a13=(a14*a10);
+  a22=(a19*a21);
+  a13=(a13-a22);
+  a22=(a15*a09);
+  a23=(a15*a12);
+  a24=(a07*a11);
   a23=(a23-a24);
-  a20=(a20+a23);
-  a20=(a12-a20);
-  a20=(a20+a12);
-  a24=(a06*a16);
-  a20=(a20+a24);
-  if (res[0]!=0) res[0][15]=a20;
-  a12=(a15*a12);
+  a22=(a22+a23);
+  a22=(a13-a22);
+  a24=(a07*a18);
+  a22=(a22+a24);
+  if (res[0]!=0) res[0][15]=a22;
+  a13=(a17*a13);
   a23=(a01*a23);
-  a23=(a12-a23);
-  a23=(a23+a12);
-  if (res[0]!=0) res[0][16]=a23;
-  a12=(a01*a11);
-  a07=(a07*a12);
-  a24=(a01*a10);
-  a14=(a14*a24);
-  a07=(a07+a14);
-  a14=(a15*a19);
-  a18=(a18*a14);
-  a25=(a15*a09);
-  a22=(a22*a25);
-  a18=(a18+a22);
-  a22=(a07-a18);
-  a22=(a22-a18);
-  if (res[0]!=0) res[0][17]=a22;
+  a13=(a13-a23);
+  if (res[0]!=0) res[0][16]=a13;
+  a23=(a01*a12);
+  a08=(a08*a23);
+  a24=(a01*a11);
+  a16=(a16*a24);
+  a08=(a08+a16);
+  a16=(a17*a21);
+  a20=(a20*a16);
+  a25=(a17*a10);
+  a06=(a06*a25);
+  a20=(a20+a06);
+  a06=(a08-a20);
+  if (res[0]!=0) res[0][17]=a06;
   if (res[0]!=0) res[0][18]=a02;
   if (res[0]!=0) res[0][19]=a02;
-  if (res[0]!=0) res[0][20]=a20;
+  if (res[0]!=0) res[0][20]=a22;
   if (res[0]!=0) res[0][21]=a02;
   if (res[0]!=0) res[0][22]=a02;
-  a17=(a17*a25);
-  a21=(a21*a14);
-  a17=(a17-a21);
-  a13=(a13*a12);
-  a06=(a06*a24);
-  a13=(a13-a06);
-  a06=(a17-a13);
-  a06=(a06+a17);
-  if (res[0]!=0) res[0][23]=a06;
+  a14=(a14*a25);
+  a19=(a19*a16);
+  a14=(a14-a19);
+  a15=(a15*a23);
+  a07=(a07*a24);
+  a15=(a15-a07);
+  a07=(a14-a15);
+  if (res[0]!=0) res[0][23]=a07;
   if (res[0]!=0) res[0][24]=a02;
   if (res[0]!=0) res[0][25]=a02;
-  if (res[0]!=0) res[0][26]=a23;
+  if (res[0]!=0) res[0][26]=a13;
   if (res[0]!=0) res[0][27]=a02;
-  a23=1.0000000000000002e-02;
-  if (res[0]!=0) res[0][28]=a23;
-  a17=(a15*a17);
-  a13=(a01*a13);
-  a13=(a17-a13);
-  a13=(a13+a17);
-  if (res[0]!=0) res[0][29]=a13;
+  a13=1.0000000000000002e-02;
+  if (res[0]!=0) res[0][28]=a13;
+  a14=(a17*a14);
+  a15=(a01*a15);
+  a14=(a14-a15);
+  if (res[0]!=0) res[0][29]=a14;
   if (res[0]!=0) res[0][30]=a02;
   if (res[0]!=0) res[0][31]=a02;
-  if (res[0]!=0) res[0][32]=a22;
-  if (res[0]!=0) res[0][33]=a06;
-  if (res[0]!=0) res[0][34]=a13;
-  a07=(a01*a07);
-  a15=(a15*a18);
-  a07=(a07-a15);
-  a07=(a07-a15);
-  a15=5.0000000000000010e-03;
-  a07=(a07+a15);
-  a07=(a07+a15);
-  if (res[0]!=0) res[0][35]=a07;
-  a07=1.;
-  if (res[1]!=0) res[1][0]=a07;
+  if (res[0]!=0) res[0][32]=a06;
+  if (res[0]!=0) res[0][33]=a07;
+  if (res[0]!=0) res[0][34]=a14;
+  a08=(a01*a08);
+  a17=(a17*a20);
+  a08=(a08-a17);
+  a17=5.0000000000000010e-03;
+  a08=(a08+a17);
+  a08=(a08+a17);
+  if (res[0]!=0) res[0][35]=a08;
+  a08=1.;
+  if (res[1]!=0) res[1][0]=a08;
   if (res[1]!=0) res[1][1]=a02;
   if (res[1]!=0) res[1][2]=a02;
   if (res[1]!=0) res[1][3]=a02;
   if (res[1]!=0) res[1][4]=a02;
-  if (res[1]!=0) res[1][5]=a07;
+  if (res[1]!=0) res[1][5]=a08;
   if (res[1]!=0) res[1][6]=a02;
   if (res[1]!=0) res[1][7]=a02;
-  a15=(a03*a19);
-  a15=(-a15);
-  a15=(2.*a15);
-  a18=(a00*a16);
-  a18=(a15-a18);
-  a18=(a18+a15);
-  a15=(a04*a10);
-  a18=(a18-a15);
-  a18=(a05*a18);
-  if (res[1]!=0) res[1][8]=a18;
-  a00=(a00*a08);
-  a18=(a03*a09);
-  a18=(2.*a18);
-  a00=(a00+a18);
-  a00=(a00+a18);
-  a18=(a04*a11);
-  a00=(a00+a18);
+  a17=(a03*a21);
+  a17=(-a17);
+  a17=(2.*a17);
+  a20=(a00*a18);
+  a20=(a17-a20);
+  a20=(a20+a17);
+  a17=(a04*a11);
+  a20=(a20-a17);
+  a20=(a05*a20);
+  if (res[1]!=0) res[1][8]=a20;
+  a00=(a00*a09);
+  a20=(a03*a10);
+  a20=(2.*a20);
+  a00=(a00+a20);
+  a00=(a00+a20);
+  a20=(a04*a12);
+  a00=(a00+a20);
   a00=(a05*a00);
   if (res[1]!=0) res[1][9]=a00;
-  if (res[1]!=0) res[1][10]=a07;
+  if (res[1]!=0) res[1][10]=a08;
   if (res[1]!=0) res[1][11]=a02;
-  a00=(2.*a09);
-  a08=(a08+a00);
-  a08=(a08+a00);
-  a08=(a08+a11);
-  a08=(a05*a08);
-  if (res[1]!=0) res[1][12]=a08;
-  a08=(2.*a19);
-  a16=(a16+a08);
-  a16=(a16+a08);
-  a16=(a16+a10);
-  a16=(a05*a16);
-  if (res[1]!=0) res[1][13]=a16;
-  if (res[1]!=0) res[1][14]=a02;
-  if (res[1]!=0) res[1][15]=a07;
-  a16=2.0000000000000001e-01;
-  a09=(a16*a09);
+  a00=(2.*a10);
+  a09=(a09+a00);
+  a09=(a09+a00);
   a09=(a09+a12);
   a09=(a05*a09);
-  if (res[1]!=0) res[1][16]=a09;
-  a16=(a16*a19);
-  a16=(a16+a24);
-  a16=(a05*a16);
-  if (res[1]!=0) res[1][17]=a16;
+  if (res[1]!=0) res[1][12]=a09;
+  a09=(2.*a21);
+  a18=(a18+a09);
+  a18=(a18+a09);
+  a18=(a18+a11);
+  a18=(a05*a18);
+  if (res[1]!=0) res[1][13]=a18;
+  if (res[1]!=0) res[1][14]=a02;
+  if (res[1]!=0) res[1][15]=a08;
+  a18=2.0000000000000001e-01;
+  a10=(a18*a10);
+  a10=(a10+a23);
+  a10=(a05*a10);
+  if (res[1]!=0) res[1][16]=a10;
+  a18=(a18*a21);
+  a18=(a18+a24);
+  a18=(a05*a18);
+  if (res[1]!=0) res[1][17]=a18;
   if (res[1]!=0) res[1][18]=a02;
   if (res[1]!=0) res[1][19]=a01;
-  a16=4.;
-  a14=(a03*a14);
-  a14=(a16*a14);
+  a18=4.;
+  a16=(a03*a16);
+  a16=(a18*a16);
   a24=(a04*a24);
-  a14=(a14+a24);
-  a14=(a05*a14);
-  a14=(-a14);
-  if (res[1]!=0) res[1][20]=a14;
+  a16=(a16+a24);
+  a16=(a05*a16);
+  a16=(-a16);
+  if (res[1]!=0) res[1][20]=a16;
   a03=(a03*a25);
-  a16=(a16*a03);
-  a04=(a04*a12);
-  a16=(a16+a04);
-  a05=(a05*a16);
+  a18=(a18*a03);
+  a04=(a04*a23);
+  a18=(a18+a04);
+  a05=(a05*a18);
   if (res[1]!=0) res[1][21]=a05;
   if (res[1]!=0) res[1][22]=a01;
   if (res[1]!=0) res[1][23]=a02;
   a05=arg[0]? arg[0][0] : 0;
-  a05=(a05-a07);
+  a05=(a05-a08);
   a05=(2.*a05);
   if (res[2]!=0) res[2][0]=a05;
   a05=arg[0]? arg[0][1] : 0;
@@ -757,6 +757,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_exact_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_hess_exact_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_hess_exact_incref(void) {
@@ -833,6 +834,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_exact_work_bytes(casadi_int *sz_arg
 
 /* unicycle_stage_hess_gn:(x[4],u[2],p[2],lam_next[4],mu_g)->(A[6x6],Phi[4x6],C[1x6]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15;
   a00=1.0000000000000001e-01;
@@ -993,6 +995,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_hess_gn_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_hess_gn_incref(void) {
@@ -1069,6 +1072,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn_work_bytes(casadi_int *sz_arg, c
 
 /* unicycle_stage_hess_cost_exact:(x[4],u[2],p[2])->(A_l[6x6]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=1.0000000000000001e-01;
   if (res[0]!=0) res[0][0]=a0;
@@ -1121,6 +1125,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_hess_cost_exact_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_hess_cost_exact_incref(void) {
@@ -1189,6 +1194,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_work_bytes(casadi_int *s
 
 /* unicycle_stage_hess_cost_gn:(x[4],u[2],p[2])->(A_l[6x6]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=1.0000000000000001e-01;
   if (res[0]!=0) res[0][0]=a0;
@@ -1241,6 +1247,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_hess_cost_gn_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_stage_hess_cost_gn_incref(void) {
@@ -1309,6 +1316,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_work_bytes(casadi_int *sz_a
 
 /* unicycle_term_eval:(x[4],p[2])->(E,r[0],r_eq[0]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4;
   a0=5.0000000000000000e-01;
   a1=arg[0]? arg[0][0] : 0;
@@ -1340,6 +1348,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_eval_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_term_eval_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_term_eval_incref(void) {
@@ -1410,6 +1419,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_eval_work_bytes(casadi_int *sz_arg, casad
 
 /* unicycle_term_grad:(x[4],p[2],mu_r[0],nu[0])->(gL[4],E,r[0],r_eq[0]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5;
   a0=10.;
   a1=arg[0]? arg[0][0] : 0;
@@ -1446,6 +1456,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_grad_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_term_grad_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_term_grad_incref(void) {
@@ -1522,6 +1533,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_grad_work_bytes(casadi_int *sz_arg, casad
 
 /* unicycle_term_hess_exact:(x[4],p[2],mu_r[0],nu[0])->(A[4x4],R[0x4],R_eq[0x4]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=10.;
   if (res[0]!=0) res[0][0]=a0;
@@ -1554,6 +1566,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_term_hess_exact_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_term_hess_exact_incref(void) {
@@ -1628,6 +1641,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_work_bytes(casadi_int *sz_arg,
 
 /* unicycle_term_hess_gn:(x[4],p[2],mu_r[0],nu[0])->(A[4x4],R[0x4],R_eq[0x4]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=10.;
   if (res[0]!=0) res[0][0]=a0;
@@ -1660,6 +1674,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_term_hess_gn_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_term_hess_gn_incref(void) {
@@ -1734,6 +1749,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_work_bytes(casadi_int *sz_arg, ca
 
 /* unicycle_ode:(x[4],u[2],p[2])->(xdot[4]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2;
   a0=arg[0]? arg[0][3] : 0;
   a1=arg[0]? arg[0][2] : 0;
@@ -1759,6 +1775,7 @@ CASADI_SYMBOL_EXPORT int unicycle_ode_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_ode_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void unicycle_ode_incref(void) {
