@@ -345,6 +345,10 @@ def firmware_report(ocp_file, out_dir, targets, iters, steps, json_out):
                     json_out=json_out, progress=click.echo)
     click.echo(format_table(rep))
     click.echo(f"JSON: {json_out}")
+    bad = {t: v["end_status"] for t, v in rep["targets"].items() if v.get("end_status") not in (0, None)}
+    if bad:
+        raise RunFailed("the firmware program ended with a non-zero solver status on "
+                        + ", ".join(f"{t} (status {st})" for t, st in bad.items()))
 
 
 if __name__ == "__main__":  # pragma: no cover
