@@ -327,7 +327,8 @@ def test_sil_aborted_plant_exits_1(write, tmp_path):
                      res.output)
     assert "nan" not in res.output.lower().replace("nan)", "")
     run = json.loads(out.read_text())["runs"][0]
-    assert run["result"] == {"status": "aborted", "instants": 0, "instants_planned": 3, "failed_instants": 0}
+    assert run["result"] == {"status": "aborted", "instants": 0, "instants_planned": 3, "failed_instants": 0,
+                             "first_failure": None}
 
 
 def test_sil_completed_run_and_qp_settings_reach_the_backend(write, tmp_path):
@@ -392,3 +393,19 @@ def test_qp_failure_text_matches_the_status():
     stalled = qp_failure_text("stalled", 12, 100)
     assert "stalled after 12 iterations" in stalled and "limit" not in stalled
     assert "infeasible" in qp_failure_text("primal_infeasible", 7)
+
+
+def test_sil_infeasible_instant_names_the_row(write, tmp_path):
+    """An event pushes the plant to a state that violates the stage-0 path constraint: that
+    instant's QP is infeasible; the summary and the JSON name the row, its value and bound."""
+    f = write(variant(('signals={"err": x[0]})',
+                       'signals={"err": x[0]}, events=[Event(0.05, lambda x: np.array([0.9, 0.5]), "shove")])')))
+    out = tmp_path / "sil.json"
+    res = invoke(["sil", f, "--backend", "reference", "--json", out])
+    assert res.exit_code == 0, res.output
+    pattern = (r"first failed instant at t = 0\.05 s: .*QP is infeasible.*the measured state violates at stage 0: "
+               r"path constraint 0 \(\(x_0\+x_1\)\) = 1\.4 > ub 1")
+    assert re.search(pattern, res.output), res.output
+    run = json.loads(out.read_text())["runs"][0]
+    assert run["result"]["first_failure"]["t"] == pytest.approx(0.05)
+    assert run["status"][1] != 0 and run["result"]["failed_instants"] >= 1

@@ -131,7 +131,9 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     events`` (one entry per sampling instant; ``x`` is the measured state, ``u`` the applied
     control, ``kkt`` the KKT measure right after feedback), ``aborted`` (None or why the
     run stopped early) and ``result``: ``{"status": "completed" | "aborted", "instants":
-    finished, "instants_planned": n, "failed_instants": instants with a non-zero status}``.
+    finished, "instants_planned": n, "failed_instants": instants with a non-zero status,
+    "first_failure": None or {"t", "message"} of the first failed feedback (for an infeasible
+    QP with the stage-0 rows the measured state violates)}``.
     """
     spec, duration, n_steps, M_eff, label = _scenario_of(disc, duration, M, label)
     if lm is None:
@@ -174,7 +176,8 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     run = rec.as_run(label, events, settings_rec, loop.aborted)
     run["result"] = {"status": "aborted" if loop.aborted else "completed", "instants": len(rec.status),
                      "instants_planned": n_steps,
-                     "failed_instants": int(sum(1 for st in rec.status if st != 0))}
+                     "failed_instants": int(sum(1 for st in rec.status if st != 0)),
+                     "first_failure": loop.first_failure}
     return json_ready(run)
 
 
@@ -274,6 +277,8 @@ class _Loop:
         self.ubu = np.asarray(disc.ubu, dtype=float).reshape(-1)
         self.ev_idx = 0
         self.aborted = None
+        self.disc = disc
+        self.first_failure = None   # {"t", "message"} of the first failed feedback
 
     def run(self, x, n_steps, progress, label):
         bar = None
@@ -302,6 +307,8 @@ class _Loop:
         x = self.events_until(x, t_i + _ON_GRID * self.dt)
         xhat = x.copy()
         u0, status, t_fb = self.feedback(xhat)
+        if status != 0 and self.first_failure is None:
+            self.first_failure = {"t": t_i, "message": self._failure_text(xhat)}
         self.rec.qp_iterations.append(int(getattr(self.ctrl, "qp_iterations", 0) or 0))
         phases = _split_phases("feedback", _changed(self.rec.snap, dict(getattr(self.ctrl, "timings", {}) or {})))
         kkt, status = self.kkt(xhat, status)
@@ -327,10 +334,12 @@ class _Loop:
         """u0 of the controller (timed); a failed feedback applies the first control of the
         current plan and records the status."""
         status = 0
+        self.last_error = None
         t0 = time.perf_counter()
         try:
             u0 = np.asarray(self.ctrl.feedback(xhat), dtype=float).reshape(-1)
         except DopusError as err:
+            self.last_error = err
             status = _status_of(err)
             u0 = np.asarray(self.ctrl.u, dtype=float)[0].copy()
         t_fb = time.perf_counter() - t0
@@ -338,6 +347,24 @@ class _Loop:
             u0 = np.clip(np.nan_to_num(np.asarray(self.ctrl.u, dtype=float)[0]), self.lbu, self.ubu)
             status = status or -1
         return u0, status, t_fb
+
+    def _failure_text(self, xhat) -> str:
+        """Why the feedback of an instant failed; for an infeasible QP, with the stage-0 rows
+        the measured state violates."""
+        err = self.last_error
+        if err is None:
+            return "the feedback returned a non-finite control"
+        text = str(err)
+        if getattr(err, "qp_status_name", None) == "primal_infeasible":
+            from ..problem.checks import stage0_violations
+
+            try:
+                rows = stage0_violations(self.disc, xhat, self.p)
+            except Exception:  # noqa: BLE001 - the note is a help, never a second failure
+                rows = []
+            if rows:
+                text += "; the measured state violates at stage 0: " + "; ".join(rows)
+        return text
 
     def kkt(self, xhat, status):
         try:
@@ -438,7 +465,8 @@ def summarize(run, settle: float = 0.2) -> dict:
     not counted in "max KKT after settling".
     """
     t = np.asarray(run["t"], dtype=float)
-    out = {"label": run["label"], "segments": [], "aborted": run.get("aborted")}
+    out = {"label": run["label"], "segments": [], "aborted": run.get("aborted"),
+           "first_failure": (run.get("result") or {}).get("first_failure")}
     for name, vals in run["signals"].items():
         v = np.asarray([np.nan if a is None else a for a in vals], dtype=float)
         if v.ndim != 1:
@@ -503,6 +531,9 @@ def format_summary(summaries) -> str:
         lines.append(f"(max KKT settled: excluding the first {summaries[0]['settle']} s after the start "
                      f"and after each event; it = feedback + prepare, fb = feedback alone)")
     for s in summaries:
+        if s.get("first_failure"):
+            ff = s["first_failure"]
+            lines.append(f"{s['label']}: first failed instant at t = {ff['t']:.4g} s: {ff['message']}")
         if s.get("aborted"):
             lines.append(f"{s['label']}: ABORTED: {s['aborted']}")
     return "\n".join(lines)
