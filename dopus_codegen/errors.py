@@ -35,22 +35,25 @@ def qp_status_name(code: int) -> str:
     return vocabulary.qp_status().name(code)
 
 
-def qp_failure_text(name: str, iterations: Optional[int] = None, max_iter: Optional[int] = None) -> str:
-    """Why the QP failed, in words that match its status ``name`` (``enum dopus_qp_status``):
-    the iteration limit is named with its value, a stall with the iterations it took."""
+def qp_failure_text(name: str, iterations: Optional[int] = None, max_iter: Optional[int] = None,
+                    code: Optional[int] = None) -> str:
+    """Why the QP failed, in words that match its status ``name`` (``enum dopus_qp_status``,
+    ``code`` its value): the iteration limit is named with its value, a stall with the
+    iterations it took; ends with ``(QP status <code> (<name>))``."""
     its = "" if iterations is None else f" after {int(iterations)} iterations"
+    tag = f"(QP status {name})" if code is None else f"(QP status {int(code)} ({name}))"
     if name == "max_iter":
         limit = f" of {int(max_iter)}" if max_iter is not None else ""
-        return f"the QP solver reached its iteration limit{limit}{its} (QP status max_iter)"
+        return f"the QP solver reached its iteration limit{limit}{its} {tag}"
     if name == "stalled":
-        return f"the QP solver stalled{its}: no progress in its KKT residuals (QP status stalled)"
+        return f"the QP solver stalled{its}: no progress in its KKT residuals {tag}"
     if name == "primal_infeasible":
-        return f"the QP is infeasible{its} (QP status primal_infeasible)"
+        return f"the QP is infeasible{its} {tag}"
     if name == "dual_infeasible":
-        return f"the QP is unbounded below{its} (QP status dual_infeasible)"
+        return f"the QP is unbounded below{its} {tag}"
     if name == "numerical":
-        return f"the QP solver failed numerically{its} (QP status numerical)"
-    return f"QP status {name}{its}"
+        return f"the QP solver failed numerically{its} {tag}"
+    return f"the QP failed{its} {tag}"
 
 
 class DopusError(RuntimeError, ValueError):

@@ -388,8 +388,8 @@ def test_smooth_examples_have_no_warning():
 def test_qp_failure_text_matches_the_status():
     from dopus_codegen.errors import qp_failure_text
 
-    assert qp_failure_text("max_iter", 100, 100) == \
-        "the QP solver reached its iteration limit of 100 after 100 iterations (QP status max_iter)"
+    assert qp_failure_text("max_iter", 100, 100, 1) == \
+        "the QP solver reached its iteration limit of 100 after 100 iterations (QP status 1 (max_iter))"
     stalled = qp_failure_text("stalled", 12, 100)
     assert "stalled after 12 iterations" in stalled and "limit" not in stalled
     assert "infeasible" in qp_failure_text("primal_infeasible", 7)

@@ -206,7 +206,7 @@ class CSolver:
             qp_status = int(self._c("get_qp_status")(self._s))
             msg += "; " + qp_failure_text(self.enums["dopus_qp_status"].name(qp_status),
                                           int(self._c("get_qp_iterations")(self._s)),
-                                          int(self._c("get_qp_max_iter")(self._s)))
+                                          int(self._c("get_qp_max_iter")(self._s)), qp_status)
         raise DopusError(msg, status, qp_status)
 
     def _bad(self, message: str, status: int = STATUS_INVALID_ARGUMENT):
