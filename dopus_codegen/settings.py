@@ -126,6 +126,16 @@ def count(setting: str, value: Any, minimum: int = 0) -> int:
     return int(value)
 
 
+_C_INT_MAX = 2**31 - 1
+
+
+def _c_int(setting: str, value: int) -> int:
+    """``value`` if a C int holds it (the runtime's setters take int)."""
+    if value > _C_INT_MAX:
+        raise SettingError(f"{setting} must be at most {_C_INT_MAX} (a C int), got {value!r}")
+    return value
+
+
 _CHECKS = {
     "M": lambda v: count("M", v),
     "hessian": lambda v: check("hessian", v),
@@ -135,7 +145,7 @@ _CHECKS = {
     "reg_eps": lambda v: positive("reg_eps", v),
     "qp_tol": lambda v: positive("qp_tol", v),
     "lm": lambda v: nonnegative("lm", v),
-    "qp_max_iter": lambda v: count("qp_max_iter", v, 1),
+    "qp_max_iter": lambda v: _c_int("qp_max_iter", count("qp_max_iter", v, 1)),
 }
 
 #: The settings a verb that runs the solver takes as flags (``--qp-tol`` for ``qp_tol``),

@@ -204,6 +204,8 @@ CLI_CASES = [
     ("qp-tol-negative", ["converge", "{ocp}", "--qp-tol", "-1"], r"qp_tol must be positive and finite, got -1"),
     ("qp-tol-nan", ["sil", "{ocp}", "--qp-tol", "nan"], r"qp_tol must be positive and finite, got nan"),
     ("qp-max-iter-zero", ["converge", "{ocp}", "--qp-max-iter", "0"], r"qp_max_iter must be an integer >= 1, got 0"),
+    ("qp-max-iter-beyond-c-int", ["converge", "{ocp}", "--qp-max-iter", "2147483648"],
+     r"qp_max_iter must be at most 2147483647 \(a C int\), got 2147483648"),
     ("qp-max-iter-text", ["sil", "{ocp}", "--qp-max-iter", "many"], r"'many' is not a valid integer"),
     ("reg-eps-zero", ["converge", "{ocp}", "--reg-eps", "0"], r"reg_eps must be positive and finite, got 0"),
     ("lm-negative", ["sil", "{ocp}", "--lm", "-1e-3"], r"lm must be finite and >= 0, got -0\.001"),
