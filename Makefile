@@ -21,6 +21,7 @@ setup:
 	@bash scripts/bootstrap.sh
 
 demo: setup
+	mkdir -p $(OUT)/robot_arm/gauss-newton
 	$(VENV)/bin/dopus-gen sil $(EXAMPLE) --M 1 --compare full --duration 3.0 \
 	    --json $(OUT)/robot_arm/sil.json --plot-dir $(OUT)/robot_arm
 	$(VENV)/bin/dopus-gen sil $(EXAMPLE) --M 1 --compare full --duration 3.0 --hessian gauss-newton \

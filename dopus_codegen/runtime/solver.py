@@ -30,7 +30,7 @@ from typing import Dict, Optional
 import numpy as np
 
 from .. import settings, vocabulary
-from ..errors import DopusError, status_code
+from ..errors import DopusError, status_code, qp_failure_text
 from ..settings import SettingError
 
 __all__ = ["CSolver", "DopusError", "STATUS", "QP_STATUS", "PHASES", "load_library", "build_for"]
@@ -218,8 +218,9 @@ class CSolver:
         msg = f"{self.name}: {what}: {self._status_text(status)} (status {status})"
         if status == STATUS_QP:
             qp_status = int(self._c("get_qp_status")(self._s))
-            msg += (f"; QP status {qp_status} ({self.enums['dopus_qp_status'].name(qp_status)}) after "
-                    f"{int(self._c('get_qp_iterations')(self._s))} iterations")
+            msg += "; " + qp_failure_text(self.enums["dopus_qp_status"].name(qp_status),
+                                          int(self._c("get_qp_iterations")(self._s)),
+                                          int(self._c("get_qp_max_iter")(self._s)), qp_status)
         raise DopusError(msg, status, qp_status)
 
     def _bad(self, message: str, status: int = STATUS_INVALID_ARGUMENT):
