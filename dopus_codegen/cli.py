@@ -123,12 +123,14 @@ def _setting_option(name: str, note: str = ""):
     return click.option(flag, name, type=ptype, default=None, callback=_setting_callback(name), help=help_text)
 
 
-def _solver_options(lm_note: str):
-    """The runtime settings of dopus_codegen.settings (RUNTIME_SETTINGS) as flags of a verb
-    that runs the solver; the solver settings default to the OCP file's options(...)."""
+def _solver_options(lm_note: str, names=None):
+    """The runtime settings of dopus_codegen.settings (``names``, default RUNTIME_SETTINGS) as
+    flags of a verb that runs the solver; the solver settings default to the OCP file's
+    options(...)."""
     from . import settings
 
-    opts = [_setting_option(name, lm_note if name == "lm" else "") for name in settings.RUNTIME_SETTINGS]
+    names = settings.RUNTIME_SETTINGS if names is None else names
+    opts = [_setting_option(name, lm_note if name == "lm" else "") for name in names]
 
     def apply(fn):
         for opt in reversed(opts):
@@ -288,7 +290,8 @@ def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, **kwargs):
 @click.option("--quick", is_flag=True, help="acados: fewer settings and closed-loop steps (a smoke run).")
 @click.option("--work", type=click.Path(file_okay=False), default=None,
               help="Folder for the plan, acados' builds and the export [default: a folder in the temp dir].")
-@_solver_options("0: the paper's literal QP")
+@_solver_options("0: the paper's literal QP",
+                 names=("hessian", "regularization", "reg_eps", "cost_hessian", "lm"))
 def bench(ocp_file, m_list, against, json_out, plot_out, reps, settle, steps, kkt_iters, scaling, cond, quick, work,
           hessian, regularization, reg_eps, cost_hessian, lm):
     """Time per iteration of the generated solver on OCP_FILE, by phase, for several M.
