@@ -4,13 +4,14 @@ PY     := $(VENV)/bin/python
 OUT    := out
 EXAMPLE := examples/robot_arm.py
 
-.PHONY: demo test bench bench-acados acados-env generate firmware firmware-report clean setup help
+.PHONY: demo test bench bench-acados bench-scaling acados-env generate firmware firmware-report clean setup help
 
 help:
 	@echo "make demo      generate, build and run the robot-arm closed loop (DOPUS M=1 vs full RTI); plots in $(OUT)/robot_arm"
 	@echo "make test      run the test suite"
 	@echo "make bench     run the benchmarks (tables on stdout, JSON in bench/results)"
 	@echo "make bench-acados  time our solver against acados on the robot arm (one process, interleaved)"
+	@echo "make bench-scaling time per iteration against N = 20, 40, 80, 160 (robot arm), fitted exponent"
 	@echo "make generate  regenerate the checked-in generated/ folders"
 	@echo "make firmware  build the static library of generated/robot_arm with make only"
 	@echo "make firmware-report  run the robot arm on an emulated Cortex-M7 (QEMU): sizes, instructions, accuracy"
@@ -20,6 +21,7 @@ setup:
 	@bash scripts/bootstrap.sh
 
 demo: setup
+	mkdir -p $(OUT)/robot_arm/gauss-newton
 	$(VENV)/bin/dopus-gen sil $(EXAMPLE) --M 1 --compare full --duration 3.0 \
 	    --json $(OUT)/robot_arm/sil.json --plot-dir $(OUT)/robot_arm
 	$(VENV)/bin/dopus-gen sil $(EXAMPLE) --M 1 --compare full --duration 3.0 --hessian gauss-newton \
@@ -42,7 +44,12 @@ acados-env:
 	@bash scripts/setup_acados.sh >/dev/null
 
 bench-acados: setup acados-env
-	$(PY) bench/acados_bench.py $(EXAMPLE) --json bench/results/acados_bench.json
+	$(VENV)/bin/dopus-gen bench $(EXAMPLE) --M 1,5,full --against acados --work build/acados \
+	    --json bench/results/bench_robot_arm.json --plot bench/results/bench_robot_arm.png
+
+bench-scaling: setup
+	$(VENV)/bin/dopus-gen bench $(EXAMPLE) --scaling 20,40,80,160 \
+	    --json bench/results/bench_scaling.json --plot bench/results/bench_scaling.png
 
 generate: setup
 	$(VENV)/bin/dopus-gen generate examples/robot_arm.py -o generated/robot_arm

@@ -591,6 +591,21 @@ def main(argv=None) -> int:
         report["random"] = {"qps": entries, "summary": table(
             "Random QPs (nx=5, nu=3, 3 control bounds, 2 terminal equality rows), medians", groups, names,
             RANDOM_RATIOS, log, shown), "commands": cmds}
+        # growth of the time per IPM iteration with N: least-squares fit t = c N^p over the
+        # per-N medians (p = 1 is the linear cost of the Riccati recursion)
+        fits = {}
+        for name in names:
+            ns, ts = [], []
+            for N in RANDOM_NS:
+                v = report["random"]["summary"].get(f"random N={N}", {}).get(name, {}).get("time_per_iter_median")
+                if v is not None and np.isfinite(v) and v > 0:
+                    ns.append(N)
+                    ts.append(v)
+            if len(ns) >= 2:
+                fits[name] = float(np.polyfit(np.log(ns), np.log(ts), 1)[0])
+        report["random"]["time_per_iter_exponent"] = fits
+        log("time per IPM iteration ~ N^p over N = " + ", ".join(map(str, RANDOM_NS)) + ": "
+            + ", ".join(f"{k} p = {v:.2f}" for k, v in fits.items()))
 
     if not args.no_robot:
         log("\nrobot-arm QPs (Python reference, full RTI, fixed xhat_0)")

@@ -14,26 +14,123 @@ from .settings import choices
 
 _FROM_FILE = "[default: the OCP file's options(...), else {}]"
 
+#: Exit codes: 0 done; 1 the verb ran and what it was asked to do failed (a run of the
+#: study failed, the plant of a closed loop could not be integrated); 2 bad input or an
+#: environment that does not allow the work (a message names the problem), also click's
+#: usage errors.
+EXIT_FAILED, EXIT_BAD_INPUT = 1, 2
 
-def _solver_options(lm_note: str):
-    """The settings of dopus_codegen.settings that converge and sil share; each defaults to
-    the OCP file's options(...)."""
-    opts = [
-        click.option("--hessian", type=click.Choice(choices("hessian")), default=None,
-                     help=_FROM_FILE.format("exact")),
-        click.option("--regularization", type=click.Choice(choices("regularization")), default=None,
-                     help=_FROM_FILE.format("none")),
-        click.option("--reg-eps", default=None, type=click.FloatRange(min=0, min_open=True),
-                     help="Eigenvalue floor of the regularisation. " + _FROM_FILE.format("1e-4")),
-        click.option("--cost-hessian", type=click.Choice(choices("cost_hessian")), default=None,
-                     help="fresh: the stage-cost Hessian of every stage is recomputed in every iteration; "
-                          "stored: the paper's literal algorithm (the whole Hessian block moves with its slot; "
-                          "figure 1). " + _FROM_FILE.format("fresh")),
-        click.option("--lm", default=None, type=str,
-                     help=f"Levenberg-Marquardt term added to every Hessian block of the QP ({lm_note}): "
-                          "'auto' (scale-aware and adaptive, docs/algorithm.md section 10) or a fixed number >= 0. "
-                          + _FROM_FILE.format("auto")),
-    ]
+
+class RunFailed(click.ClickException):
+    """The verb ran, but what it was asked to do failed (exit code 1)."""
+    exit_code = EXIT_FAILED
+
+
+class BadInput(click.ClickException):
+    """Bad input or an environment that does not allow the work (exit code 2)."""
+    exit_code = EXIT_BAD_INPUT
+
+
+def one_line(exc: BaseException) -> str:
+    """The message of an exception on one line (CasADi's source locations dropped)."""
+    from .problem.ocp import casadi_message
+
+    text = casadi_message(exc) if isinstance(exc, RuntimeError) else str(exc).strip()
+    if isinstance(exc, OSError) and exc.filename is not None:
+        text = f"{exc.strerror or text}: '{exc.filename}'"
+    text = " ".join(part.strip() for part in text.splitlines() if part.strip())
+    return text or type(exc).__name__
+
+
+class _Group(click.Group):
+    """Every exception of a verb becomes a one-line message and exit code 2, unless the
+    global ``--debug`` asks for the traceback."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.Exit, click.Abort, click.ClickException, KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001 - the one place that turns errors into messages
+            if (ctx.obj or {}).get("debug"):
+                raise
+            known = _known_errors()
+            if isinstance(exc, known):
+                raise BadInput(one_line(exc)) from None
+            raise BadInput(f"internal error ({type(exc).__name__}): {one_line(exc)} "
+                           "(run 'dopus-gen --debug ...' for the traceback)") from None
+
+
+def _known_errors() -> tuple:
+    """Errors that describe bad input or the environment (their message is the report)."""
+    from .codegen.build import BuildError
+    from .codegen.firmware import FirmwareError
+    from .codegen.generate import CodegenError
+    from .errors import DopusError
+    from .problem.ocp import OcpError
+    from .settings import SettingError
+    from .studies.plant import PlantError
+    from .studies.sil import SilError
+
+    return (OcpError, CodegenError, BuildError, FirmwareError, SettingError, DopusError, SilError, PlantError,
+            ValueError, OSError)
+
+
+def _show_warnings(ctx) -> None:
+    """Python warnings (a non-smooth model, a CasADi construct) as one 'warning:' line each
+    on stderr, for the time of the command."""
+    import warnings
+
+    ctx.with_resource(warnings.catch_warnings())
+    warnings.simplefilter("default")
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        click.echo(f"warning: {message}", err=True)
+
+    warnings.showwarning = show
+
+
+def _setting_callback(name):
+    def callback(ctx, param, value):
+        if value is None:
+            return None
+        from .settings import SettingError, validate
+
+        try:
+            return validate(name, value)
+        except SettingError as exc:
+            raise click.BadParameter(str(exc)) from None
+    return callback
+
+
+def _setting_option(name: str, note: str = ""):
+    """The flag of one runtime setting of dopus_codegen.settings (type, check and help from there)."""
+    from . import settings
+
+    flag = "--" + name.replace("_", "-")
+    kind = settings.kind(name)
+    default = settings.DEFAULTS.get(name)
+    if name in settings.SOLVER_SETTINGS:
+        where = _FROM_FILE.format(default if not isinstance(default, float) else f"{default:g}")
+    elif default is None:
+        where = "[default: the QP solver's own]"
+    else:
+        where = f"[default: {default:g}]" if isinstance(default, float) else f"[default: {default}]"
+    help_text = " ".join(t for t in (settings.HELP[name], note, where) if t)
+    if kind == "choice":
+        return click.option(flag, name, type=click.Choice(choices(name)), default=None, help=help_text)
+    ptype = {"positive": float, "nonnegative": float, "lm": str, "count": int}[kind]
+    return click.option(flag, name, type=ptype, default=None, callback=_setting_callback(name), help=help_text)
+
+
+def _solver_options(lm_note: str, names=None):
+    """The runtime settings of dopus_codegen.settings (``names``, default RUNTIME_SETTINGS) as
+    flags of a verb that runs the solver; the solver settings default to the OCP file's
+    options(...)."""
+    from . import settings
+
+    names = settings.RUNTIME_SETTINGS if names is None else names
+    opts = [_setting_option(name, lm_note if name == "lm" else "") for name in names]
 
     def apply(fn):
         for opt in reversed(opts):
@@ -42,12 +139,21 @@ def _solver_options(lm_note: str):
     return apply
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def _runtime_values(kwargs: dict) -> dict:
+    """The runtime settings of a verb's keyword arguments (None: not given)."""
+    from . import settings
+
+    return {name: kwargs.pop(name) for name in settings.RUNTIME_SETTINGS}
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="dopus-gen")
 @click.option("--cache-dir", type=click.Path(file_okay=False), default=None,
               help="Build cache: compiled objects and the solvers built for --backend c runs. "
                    "[default: $DOPUS_CACHE_DIR, else ~/.cache/dopus-codegen]")
-def main(cache_dir) -> None:
+@click.option("--debug", is_flag=True, help="Show the Python traceback of an error instead of the one-line message.")
+@click.pass_context
+def main(ctx, cache_dir, debug) -> None:
     """Generate, build and run DOPUS NMPC solvers from an OCP file.
 
     An OCP file is a Python file that defines build() returning a
@@ -55,7 +161,14 @@ def main(cache_dir) -> None:
 
     Nothing is generated or compiled twice: a folder whose problem is unchanged is not
     regenerated, and every compiled file is kept in the build cache (--cache-dir).
+
+    Exit codes: 0 done; 1 the work ran and failed (a run of converge failed, the
+    plant of sil could not be integrated); 2 bad input (a message names the problem;
+    --debug shows the traceback instead).
     """
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+    _show_warnings(ctx)
     if cache_dir is not None:
         import os
 
@@ -84,19 +197,34 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--start", type=click.Choice(["cold", "warm"]), default="warm", show_default=True,
               help="cold: the OCP file's initial guess at its initial state; warm: the converged solution at the "
                    "initial state, then iterate for the disturbed initial state.")
+@click.option("--tol", default=1e-8, show_default=True, type=click.FloatRange(min=0, min_open=True),
+              help="A run has converged when its KKT measure reaches this; the JSON 'solution' is the iterate "
+                   "of a converged run.")
 @_solver_options("0: exact Newton")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the study as JSON.")
 @click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None, help="Write KKT against iteration as PNG.")
-def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, cost_hessian, lm, backend, json_out,
-             plot_out):
-    """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M."""
-    from .studies.converge import run_converge_cli
+def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, **kwargs):
+    """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M.
 
-    run_converge_cli(ocp_file=ocp_file, m_list=None if m_list is None else _int_list_or_full(m_list),
-                     iters=iters, start=start,
-                     hessian=hessian, regularization=regularization, reg_eps=reg_eps, backend=backend,
-                     json_out=json_out, plot_out=plot_out, cost_hessian=cost_hessian, lm=lm)
+    Exits with 1 when a run failed (an error of the solver or a non-finite KKT measure),
+    after writing the table, the JSON and the plot; a run that did not reach --tol in
+    --iters iterations is reported as not converged and is not a failure.
+    """
+    from .outputs import check_output_file
+    from .studies.converge import failed_runs, run_converge_cli
+
+    if json_out:
+        check_output_file(json_out, "--json")
+    if plot_out:
+        check_output_file(plot_out, "--plot")
+    study = run_converge_cli(ocp_file=ocp_file, m_list=None if m_list is None else _int_list_or_full(m_list),
+                             iters=iters, start=start, backend=backend, json_out=json_out, plot_out=plot_out,
+                             tol=tol, **_runtime_values(kwargs))
+    bad = failed_runs(study)
+    if bad:
+        raise RunFailed(f"{len(bad)} of {len(study['runs'])} runs failed: "
+                        + "; ".join(f"M = {r['M']}: {r['message']}" for r in bad))
 
 
 @main.command()
@@ -113,23 +241,90 @@ def converge(ocp_file, m_list, iters, start, hessian, regularization, reg_eps, c
 @_solver_options("0: the paper's literal QP; keeps the fixed point, see README, Closed loop; the robot arm "
                  "declares 1e-4")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
-def sil(ocp_file, m, duration, json_out, plot_dir, compare, hessian, regularization, reg_eps, cost_hessian, lm,
-        backend):
+def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, **kwargs):
     """Closed loop against a CVODES simulation of the plant (paper figures 2 to 4).
 
     One DOPUS iteration per sampling instant, started from the offline solution at the
-    scenario's initial state; the scenario's events disturb the plant.
+    scenario's initial state; the scenario's events disturb the plant. Exits with 1 when
+    a run was aborted (the plant could not be integrated), after the summary, JSON and plots.
+    """
+    from .outputs import check_output_dir, check_output_file
+    from .studies.sil import run_sil_cli
+
+    if json_out:
+        check_output_file(json_out, "--json")
+    if plot_dir:
+        check_output_dir(plot_dir, "--plot-dir")
+    runs = run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
+                       compare=compare, backend=backend, echo=click.echo, **_runtime_values(kwargs))
+    aborted = [r for r in runs if r.get("aborted")]
+    if aborted:
+        raise RunFailed("; ".join(f"run '{r['label']}' aborted after {len(r['t'])} of "
+                                  f"{r['result']['instants_planned']} instants: {r['aborted']}" for r in aborted))
+
+
+@main.command()
+@click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--M", "m_list", default="1,5,full", show_default=True,
+              help="Comma-separated values of M; 'full' is the full RTI (M = N-1, always timed: the reference of "
+                   "the ratios).")
+@click.option("--against", type=click.Choice(["none", "acados"]), default="none", show_default=True,
+              help="acados: also time acados (SQP_RTI) on the same OCP file: the fastest working exact-Hessian and "
+                   "Gauss-Newton settings (screened), in the same process (needs scripts/setup_acados.sh).")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the results as JSON.")
+@click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None,
+              help="Write a bar chart of the phases (PNG).")
+@click.option("--reps", default=300, show_default=True, type=click.IntRange(1, 10**6),
+              help="Timed steps at the operating point (and per N with --scaling).")
+@click.option("--settle", default=100, show_default=True, type=click.IntRange(0, 10**6),
+              help="Untimed closed-loop steps before the operating point is timed.")
+@click.option("--steps", default=300, show_default=True, type=click.IntRange(1, 10**6),
+              help="Timed steps of the closed loop from the disturbed state.")
+@click.option("--kkt-iters", default=60, show_default=True, type=click.IntRange(1, 100000),
+              help="Iterations of the fixed-xhat_0 study (iterations to KKT 1e-6 and 1e-8 per M).")
+@click.option("--scaling", "scaling", default=None,
+              help="Comma-separated horizon lengths N (e.g. 20,40,80,160): time per iteration against N at the "
+                   "same interval, fitted exponent; replaces the other studies.")
+@click.option("--cond", default="40,20,10,8,5,4,2,1", show_default=True,
+              help="acados partial-condensing horizons to screen (with --against acados).")
+@click.option("--quick", is_flag=True, help="acados: fewer settings and closed-loop steps (a smoke run).")
+@click.option("--work", type=click.Path(file_okay=False), default=None,
+              help="Folder for the plan, acados' builds and the export [default: a folder in the temp dir].")
+@_solver_options("0: the paper's literal QP",
+                 names=("hessian", "regularization", "reg_eps", "cost_hessian", "lm"))
+def bench(ocp_file, m_list, against, json_out, plot_out, reps, settle, steps, kkt_iters, scaling, cond, quick, work,
+          hessian, regularization, reg_eps, cost_hessian, lm):
+    """Time per iteration of the generated solver on OCP_FILE, by phase, for several M.
+
+    Both at the operating point (the closed loop from the nominal solution, after it has
+    settled) and along the closed loop from the disturbed state, every setting interleaved
+    step by step in one process that loads only the compiled libraries: feedback latency
+    (QP + step), preparation split by the runtime's timers, medians and 10/90 percentiles,
+    ratios to our full RTI, the CPU model and the load; and the fixed-xhat_0 iterations to
+    KKT 1e-6 and 1e-8 per M. Progress goes to stderr, the table to stdout.
     """
     from .problem.ocp import OcpError
-    from .studies.plant import PlantError
-    from .studies.sil import SilError, run_sil_cli
+    from .studies.bench import BenchError, format_scaling, format_table, run_bench, run_scaling
 
+    cli = dict(hessian=hessian, regularization=regularization, reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm)
+    echo = lambda text: click.echo(text, err=True)  # noqa: E731
     try:
-        run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
-                    compare=compare, hessian=hessian, regularization=regularization, reg_eps=reg_eps,
-                    cost_hessian=cost_hessian, lm=lm, backend=backend, echo=click.echo)
-    except (OcpError, SilError, PlantError) as exc:
+        if scaling:
+            res = run_scaling(ocp_file, scaling, m_list=m_list if m_list != "1,5,full" else "1,full",
+                              json_out=json_out, plot_out=plot_out, reps=reps, settle=settle, work=work,
+                              echo=echo, **cli)
+            click.echo(format_scaling(res))
+            return
+        try:
+            cond_list = [int(c) for c in cond.split(",")]
+        except ValueError:
+            raise BenchError(f"--cond: expected comma-separated integers, got {cond!r}") from None
+        res = run_bench(ocp_file, m_list=m_list, against=None if against == "none" else against, json_out=json_out,
+                        plot_out=plot_out, reps=reps, steps=steps, settle=settle, kkt_iters=kkt_iters,
+                        cond_list=cond_list, quick=quick, work=work, echo=echo, **cli)
+    except (OcpError, BenchError, ValueError) as exc:
         raise click.ClickException(str(exc)) from None
+    click.echo(format_table(res))
 
 
 @main.command()
@@ -147,16 +342,14 @@ def generate(ocp_file, out_dir, offline_guess):
     a Makefile (`make` builds lib<name>.a, lib<name>.so and main_<name>), a CMake
     fragment and the cffi declarations. Generating twice gives identical bytes.
     """
-    from .codegen.generate import CodegenError, generate_file
-    from .problem.ocp import OcpError
+    from .codegen.generate import generate_file
+    from .outputs import check_output_dir
 
     import time
 
-    try:
-        t0 = time.time()
-        path = generate_file(ocp_file, out_dir, offline_guess=offline_guess)
-    except (OcpError, CodegenError) as exc:
-        raise click.ClickException(str(exc)) from None
+    check_output_dir(out_dir if out_dir is not None else "generated", "--output")
+    t0 = time.time()
+    path = generate_file(ocp_file, out_dir, offline_guess=offline_guess)
     newest = max((p.stat().st_mtime for p in path.iterdir() if p.is_file()), default=0.0)
     click.echo(f"{'generated' if newest >= t0 else 'up to date'}: {path}")
 
@@ -164,7 +357,9 @@ def generate(ocp_file, out_dir, offline_guess):
 @main.command()
 @click.argument("folder", type=click.Path(file_okay=False))
 @click.option("--cc", default="cc", show_default=True, help="C compiler.")
-@click.option("--opt", default=DEFAULT_OPT, show_default=True, help="Optimisation flags (quoted if several).")
+@click.option("--opt", default=None,
+              help="Optimisation flags (quoted if several). Default: the flags the folder was last "
+                   f"built with, else {DEFAULT_OPT} (no -march; add the target's, e.g. --opt \"-O3 -march=native\").")
 @click.option("--force", is_flag=True, help="Rebuild even if the sources did not change.")
 def build(folder, cc, opt, force):
     """Compile a generated FOLDER into build/lib<name>.so (cffi) and lib<name>.a (firmware).
@@ -174,12 +369,9 @@ def build(folder, cc, opt, force):
     (in any folder) comes from the build cache. The products are those of the folder's
     Makefile (FOLDER/build), so `make -C FOLDER run` afterwards only links main_<name>.
     """
-    from .codegen.build import BuildError, build as build_folder
+    from .codegen.build import build as build_folder
 
-    try:
-        res = build_folder(folder, cc=cc, opt=opt, force=force)
-    except BuildError as exc:
-        raise click.ClickException(str(exc)) from None
+    res = build_folder(folder, cc=cc, opt=opt, force=force)
     state = "built" if res.rebuilt else "up to date"
     click.echo(f"{state}: {res.shared_lib}\n{state}: {res.static_lib}\ncdef: {res.cdef_path}")
     if res.rebuilt:
@@ -208,19 +400,23 @@ def firmware_report(ocp_file, out_dir, targets, iters, steps, json_out):
     instructions per DOPUS iteration (M = 1, full RTI) and the difference to the host build.
     Installs the Debian packages it needs when root (scripts/setup_firmware.sh).
     """
-    from .codegen.firmware import FirmwareError, firmware_report as report_fn, format_table
-    from .problem.ocp import OcpError
+    from .codegen.firmware import firmware_report as report_fn, format_table
+    from .outputs import check_output_dir, check_output_file
 
     tlist = [t.strip() for t in targets.split(",") if t.strip()]
+    check_output_dir(out_dir, "--output")
     if json_out is None:
         json_out = str(Path(out_dir) / "firmware_report.json")
-    try:
-        rep = report_fn(ocp_file, out_dir, targets=tlist, fixed_iters=iters, loop_steps=steps,
-                        json_out=json_out, progress=click.echo)
-    except (OcpError, FirmwareError) as exc:
-        raise click.ClickException(str(exc)) from None
+    elif Path(json_out).parent != Path(out_dir):
+        check_output_file(json_out, "--json")
+    rep = report_fn(ocp_file, out_dir, targets=tlist, fixed_iters=iters, loop_steps=steps,
+                    json_out=json_out, progress=click.echo)
     click.echo(format_table(rep))
     click.echo(f"JSON: {json_out}")
+    bad = {t: v["end_status"] for t, v in rep["targets"].items() if v.get("end_status") not in (0, None)}
+    if bad:
+        raise RunFailed("the firmware program ended with a non-zero solver status on "
+                        + ", ".join(f"{t} (status {st})" for t, st in bad.items()))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,7 +10,7 @@ import keyword
 import re
 from typing import Any, Optional
 
-__all__ = ["PLACEHOLDER", "C_RESERVED", "identifier_problem", "rename_placeholder"]
+__all__ = ["PLACEHOLDER", "C_RESERVED", "MAX_NAME_LENGTH", "identifier_problem", "rename_placeholder"]
 
 #: The prefix of every exported symbol of runtime_c/ (renamed to the problem name).
 PLACEHOLDER = "dopus"
@@ -24,12 +24,20 @@ C_RESERVED = frozenset(
 
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
+#: The longest name: it becomes part of C identifiers (``<name>_set_qp_max_iter``) and of
+#: file names (``<name>_casadi.c``), which compilers, linkers and file systems (255 bytes)
+#: must all accept.
+MAX_NAME_LENGTH = 64
+
 
 def identifier_problem(name: Any) -> Optional[str]:
     """None if ``name`` may be used as a name, else why not (``"is not a valid C identifier"``
     or ``"... (a reserved word)"``)."""
     if not isinstance(name, str) or not _IDENT.fullmatch(name):
         return "is not a valid C identifier"
+    if len(name) > MAX_NAME_LENGTH:
+        return (f"is {len(name)} characters long; at most {MAX_NAME_LENGTH} are allowed (the name becomes "
+                "part of C identifiers and file names)")
     if name in C_RESERVED or keyword.iskeyword(name):
         return "is not a valid C identifier (a reserved word)"
     return None

@@ -14,7 +14,7 @@ from typing import Optional
 
 from . import vocabulary
 
-__all__ = ["DopusError", "status_code", "status_name", "qp_status_code", "qp_status_name"]
+__all__ = ["DopusError", "status_code", "status_name", "qp_status_code", "qp_status_name", "qp_failure_text"]
 
 
 def status_code(name: str) -> int:
@@ -33,6 +33,27 @@ def qp_status_code(name: str) -> int:
 
 def qp_status_name(code: int) -> str:
     return vocabulary.qp_status().name(code)
+
+
+def qp_failure_text(name: str, iterations: Optional[int] = None, max_iter: Optional[int] = None,
+                    code: Optional[int] = None) -> str:
+    """Why the QP failed, in words that match its status ``name`` (``enum dopus_qp_status``,
+    ``code`` its value): the iteration limit is named with its value, a stall with the
+    iterations it took; ends with ``(QP status <code> (<name>))``."""
+    its = "" if iterations is None else f" after {int(iterations)} iterations"
+    tag = f"(QP status {name})" if code is None else f"(QP status {int(code)} ({name}))"
+    if name == "max_iter":
+        limit = f" of {int(max_iter)}" if max_iter is not None else ""
+        return f"the QP solver reached its iteration limit{limit}{its} {tag}"
+    if name == "stalled":
+        return f"the QP solver stalled{its}: no progress in its KKT residuals {tag}"
+    if name == "primal_infeasible":
+        return f"the QP is infeasible{its} {tag}"
+    if name == "dual_infeasible":
+        return f"the QP is unbounded below{its} {tag}"
+    if name == "numerical":
+        return f"the QP solver failed numerically{its} {tag}"
+    return f"the QP failed{its} {tag}"
 
 
 class DopusError(RuntimeError, ValueError):

@@ -19,7 +19,8 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 from . import vocabulary
 
 __all__ = ["SettingError", "DEFAULTS", "SOLVER_SETTINGS", "choices", "code", "value_of", "check",
-           "positive", "nonnegative", "count", "resolve", "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT"]
+           "positive", "nonnegative", "count", "resolve", "RUNTIME_SETTINGS", "HELP", "kind", "validate",
+           "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT"]
 
 SOURCE_CLI, SOURCE_FILE, SOURCE_DEFAULT = "cli", "ocp-file", "default"
 
@@ -95,7 +96,7 @@ def _number(setting: str, value: Any, kind: str) -> float:
         raise SettingError(f"{setting} must be {kind}, got {value!r}")
     try:
         f = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):    # OverflowError: an int beyond a double
         raise SettingError(f"{setting} must be {kind}, got {value!r}") from None
     return f
 
@@ -150,13 +151,26 @@ def lm_code(value: Any) -> float:
     return -1.0 if v == LM_AUTO else v
 
 
-def count(setting: str, value: Any, minimum: int = 0) -> int:
-    """An integer >= ``minimum`` (``M`` >= 0, ``qp_max_iter`` >= 1); numpy integers too."""
+def count(setting: str, value: Any, minimum: int = 0, maximum: Any = None) -> int:
+    """An integer >= ``minimum`` (``M`` >= 0, ``qp_max_iter`` >= 1) and <= ``maximum``
+    (``qp_max_iter``: a C int); numpy integers too."""
     import numbers
 
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
         raise SettingError(f"{setting} must be an integer >= {minimum}, got {value!r}")
+    if maximum is not None and value > maximum:
+        raise SettingError(f"{setting} must be at most {maximum} (a C int), got {value!r}")
     return int(value)
+
+
+_C_INT_MAX = 2**31 - 1
+
+
+def _c_int(setting: str, value: int) -> int:
+    """``value`` if a C int holds it (the runtime's setters take int)."""
+    if value > _C_INT_MAX:
+        raise SettingError(f"{setting} must be at most {_C_INT_MAX} (a C int), got {value!r}")
+    return value
 
 
 _CHECKS = {
@@ -168,7 +182,48 @@ _CHECKS = {
     "reg_eps": lambda v: positive("reg_eps", v),
     "qp_tol": lambda v: qp_tolerance(v),
     "lm": lambda v: levenberg_marquardt(v),
+    "qp_max_iter": lambda v: _c_int("qp_max_iter", count("qp_max_iter", v, 1)),
 }
+
+#: The settings a verb that runs the solver takes as flags (``--qp-tol`` for ``qp_tol``),
+#: in the order of ``--help``. ``M`` has a verb-specific form (a list for ``converge``),
+#: ``mode`` is the verb's (``converge``: fixed, ``sil``: receding) and ``offline_guess`` is
+#: a flag of ``generate``. ``qp_max_iter`` has no entry in :data:`DEFAULTS`: not given, it is
+#: the QP solver's own limit of the backend.
+RUNTIME_SETTINGS = ("hessian", "regularization", "reg_eps", "cost_hessian", "lm", "qp_tol", "qp_max_iter")
+
+#: One line of help per setting (the command line's ``--help``).
+HELP: Dict[str, str] = {
+    "M": "Stages re-linearised per iteration (M = N-1 is the full RTI).",
+    "hessian": "Hessian of the stage Lagrangians: exact, or Gauss-Newton (needs a least-squares stage cost).",
+    "regularization": "Regularisation of the stage Hessian blocks: none, project (eigenvalues floored at "
+                      "reg_eps) or mirror (absolute values floored at reg_eps).",
+    "reg_eps": "Eigenvalue floor of the regularisation.",
+    "cost_hessian": "fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
+                    "paper's literal algorithm (the whole Hessian block moves with its slot; figure 1).",
+    "lm": "Levenberg-Marquardt term added to every Hessian block of the QP.",
+    "mode": "receding: shift by one sampling interval in every prepare; fixed: no shift.",
+    "qp_tol": "Tolerance of the QP solver on its scaled KKT residuals.",
+    "qp_max_iter": "Iteration limit of the QP solver; reaching it fails the feedback (QP status max_iter). "
+                   "Not given: the QP solver's own limit.",
+    "offline_guess": "Solve the OCP with IPOPT at its initial state at generation and carry the solution.",
+}
+
+
+def kind(setting: str) -> str:
+    """How a setting's value is written: ``"choice"``, ``"positive"``, ``"lm"`` (``auto`` or a
+    number >= 0), ``"count"`` or ``"flag"``."""
+    if setting in ("hessian", "regularization", "mode", "cost_hessian"):
+        return "choice"
+    if setting in ("reg_eps", "qp_tol"):
+        return "positive"
+    if setting == "lm":
+        return "lm"
+    if setting in ("M", "qp_max_iter"):
+        return "count"
+    if setting == "offline_guess":
+        return "flag"
+    raise SettingError(f"unknown setting {setting!r}; the settings are {sorted(_CHECKS)}")
 
 
 def validate(setting: str, value: Any) -> Any:
@@ -178,7 +233,7 @@ def validate(setting: str, value: Any) -> Any:
             raise SettingError(f"offline_guess must be True or False, got {value!r}")
         return value
     if setting not in _CHECKS:
-        raise SettingError(f"unknown setting {setting!r}; the settings are {sorted(DEFAULTS)}")
+        raise SettingError(f"unknown setting {setting!r}; the settings are {sorted(_CHECKS)}")
     return _CHECKS[setting](value)
 
 
@@ -200,11 +255,15 @@ def resolve(file_options: Optional[Mapping[str, Any]], cli: Optional[Mapping[str
         elif name in file_options:
             values[name], sources[name] = validate(name, file_options[name]), SOURCE_FILE
         else:
-            values[name], sources[name] = DEFAULTS[name], SOURCE_DEFAULT
+            values[name], sources[name] = DEFAULTS.get(name), SOURCE_DEFAULT
     return values, sources
 
 
 def describe(values: Mapping[str, Any], sources: Mapping[str, str]) -> str:
     """One line: ``hessian gauss-newton (ocp-file), M 3 (cli), ...``."""
-    return ", ".join(f"{k} {values[k]:g} ({sources[k]})" if isinstance(values[k], float)
-                     else f"{k} {values[k]} ({sources[k]})" for k in values)
+    def text(k):
+        v = values[k]
+        if v is None:
+            return f"{k} the solver's own ({sources[k]})"
+        return f"{k} {v:g} ({sources[k]})" if isinstance(v, float) else f"{k} {v} ({sources[k]})"
+    return ", ".join(text(k) for k in values)

@@ -97,5 +97,7 @@ def build():
                  signals={"deviation": ca.norm_2(tip(q) - path(theta)),
                           # the first two 2-component signals: the tip and its reference in the plane
                           "tip": tip(q), "circle": path(theta)},
-                 plant=None)
+                 plant=None,
+                 units={"deviation": "m", "tip": "m", "circle": "m", "q": "rad", "dq": "rad/s", "theta": "rad",
+                        "tau": "N m", "dtheta": "rad/s"})
     return ocp

@@ -60,5 +60,7 @@ def build():
     ocp.disturbance(push)
     ocp.scenario(duration=3.0, events=[Event(1.0, push, "push")],
                  signals={"clearance": ca.sqrt(clearance_sq(pos[0], pos[1])) - RADIUS,
-                          "distance_to_target": ca.norm_2(pos - target)})
+                          "distance_to_target": ca.norm_2(pos - target)},
+                 units={"clearance": "m", "distance_to_target": "m", "pos": "m", "psi": "rad", "v": "m/s",
+                        "acc": "m/s^2", "omega": "rad/s"})
     return ocp

@@ -62,9 +62,15 @@
  * a feasible ray with d'Hd < 0, or Hd ~ 0 and g'd < 0, proves unboundedness.
  *
  * Warm start (settings.warm_start): primal and multipliers are read from *sol; slacks are
- * taken from the primal point, slacks and multipliers floored at 1e-4 (relative). An
- * SQP-style warm start (zero primal step, the last multipliers) takes 3-6 iterations once
- * the active set has settled, and more than a cold start far from it.
+ * taken from the primal point, slacks and multipliers floored at 1e-2 (relative to the
+ * unit values of the cold start; smaller floors save about one iteration in the robot-arm
+ * closed loop but let the warm start reach another local minimiser of nonconvex QPs more
+ * often). A restart after a stall starts cold. Feedback (dopus_solver.c) warm-starts from
+ * the previous solution shifted with the horizon and retries cold when that fails.
+ *
+ * Work per iteration (robot arm, N = 40, nx = 5, nu = 3, ne = 2): one factorisation and
+ * two solves (predictor, corrector), plus one residual/solve pair per refinement step once
+ * the residuals are below 1e-6; the flop count is tabulated in bench/README.md.
  *
  * Sizes come from dopus_sizes.h: DOPUS_N, DOPUS_NX, DOPUS_NU, DOPUS_NG, DOPUS_NR, DOPUS_NE
  * (NG, NR, NE may be 0). No malloc, no VLAs, no recursion, no state outside the workspace.
@@ -96,15 +102,24 @@
 #define DOPUS_QP_NSTAGEINEQ (DOPUS_QP_NW + DOPUS_NG)
 #define DOPUS_QP_NINEQ (DOPUS_N * DOPUS_QP_NSTAGEINEQ + DOPUS_NX + DOPUS_NR)
 
+/* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
+#if DOPUS_QP_NINEQ < 65536
+typedef unsigned short dopus_qp_row;
+#else
+typedef int dopus_qp_row;
+#endif
+
 /* Status codes (dopus_qp_solve return value and dopus_qp_info.status). */
 enum dopus_qp_status {
     DOPUS_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
-    DOPUS_QP_MAX_ITER = 1,          /* iteration limit reached or no progress in the KKT
-                                       residuals for 10 iterations; best point returned */
+    DOPUS_QP_MAX_ITER = 1,          /* iteration limit (settings.max_iter) reached; best
+                                       point returned */
     DOPUS_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */
     DOPUS_QP_DUAL_INFEASIBLE = 3,   /* unbounded below: feasible descent ray found */
     DOPUS_QP_NUMERICAL = 4,         /* factorisation / step failure */
-    DOPUS_QP_INVALID_INPUT = 5      /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    DOPUS_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    DOPUS_QP_STALLED = 6            /* no progress in the KKT residuals for 10 iterations
+                                       (before the limit); best point returned */
 };
 
 typedef struct {
@@ -185,6 +200,8 @@ typedef struct {
     double up[DOPUS_QP_NINEQ];
     unsigned char has_lo[DOPUS_QP_NINEQ];
     unsigned char has_up[DOPUS_QP_NINEQ];
+    dopus_qp_row bidx[DOPUS_QP_NINEQ];   /* the rows with a finite side, nb of them */
+    int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
     double prim[DOPUS_QP_NPRIM];
     double lam[(DOPUS_N + 1) * DOPUS_NX];
@@ -193,8 +210,7 @@ typedef struct {
     double t_up[DOPUS_QP_NINEQ];
     double z_lo[DOPUS_QP_NINEQ];
     double z_up[DOPUS_QP_NINEQ];
-    /* constraint values v = D w and residuals */
-    double v[DOPUS_QP_NINEQ];
+    /* residuals */
     double r_stat[DOPUS_QP_NPRIM];
     double r_dyn[(DOPUS_N + 1) * DOPUS_NX];
     double r_eqN[DOPUS_QP_NE1];
@@ -209,8 +225,6 @@ typedef struct {
     double dt_up[DOPUS_QP_NINEQ];
     double dz_lo[DOPUS_QP_NINEQ];
     double dz_up[DOPUS_QP_NINEQ];
-    double rc_lo[DOPUS_QP_NINEQ];
-    double rc_up[DOPUS_QP_NINEQ];
     /* Newton right-hand side, solution and refinement buffers */
     double rhs_stat[DOPUS_QP_NPRIM];
     double rhs_dyn[(DOPUS_N + 1) * DOPUS_NX];
@@ -218,9 +232,6 @@ typedef struct {
     double res_stat_lin[DOPUS_QP_NPRIM];
     double res_dyn_lin[(DOPUS_N + 1) * DOPUS_NX];
     double res_eqN_lin[DOPUS_QP_NE1];
-    double c_prim[DOPUS_QP_NPRIM];
-    double c_lam[(DOPUS_N + 1) * DOPUS_NX];
-    double c_nu[DOPUS_QP_NE1];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
     double M[DOPUS_QP_NW * DOPUS_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
     double P[DOPUS_N + 1][DOPUS_NX * DOPUS_NX];       /* value function Hessians */
@@ -233,16 +244,7 @@ typedef struct {
     double e[DOPUS_QP_NE1];
     double lk[DOPUS_N][DOPUS_QP_NU1];
     double aty[DOPUS_QP_NPRIM];                        /* constraint part of r_stat (A'y) */
-    double hwg[DOPUS_QP_NPRIM];                        /* objective part of r_stat (Hw + g) */
-    double yrow[DOPUS_QP_NINEQ];                       /* per-row scratch */
-    /* best iterate so far (returned when the solver stops without success) */
-    double best_prim[DOPUS_QP_NPRIM];
-    double best_lam[(DOPUS_N + 1) * DOPUS_NX];
-    double best_nu[DOPUS_QP_NE1];
-    double best_t_lo[DOPUS_QP_NINEQ];
-    double best_t_up[DOPUS_QP_NINEQ];
-    double best_z_lo[DOPUS_QP_NINEQ];
-    double best_z_up[DOPUS_QP_NINEQ];
+    double yrow[DOPUS_QP_NINEQ];                       /* per-row scratch; row values v = D w */
     double work[4 * DOPUS_QP_NW * (DOPUS_QP_NW + DOPUS_QP_NE1 + 1)];
     double delta;          /* current inertia-correction shift */
     double rho_aug;        /* current terminal augmented-Lagrangian weight */
@@ -250,6 +252,9 @@ typedef struct {
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     double scale_stat;     /* residual scaling factors */
     double scale_eq;
+    double scale_g;        /* data parts of the scaling (constant during a solve) */
+    double scale_b;
+    double scale_bounds;
 } dopus_qp_workspace;
 
 /* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */

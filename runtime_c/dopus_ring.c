@@ -1,4 +1,5 @@
 /* Ring buffer of stage slots and the secant criterion (eq. 16). */
+#include <float.h>
 #include <math.h>
 
 #include "dopus_ring.h"
@@ -83,8 +84,16 @@ double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new,
     for (i = 0; i < DOPUS_NW; ++i) new2 += F_w_new[i] * F_w_new[i];
     for (i = 0; i < DOPUS_NX; ++i) new2 += phi_new[i] * phi_new[i];
     for (i = 0; i < DOPUS_NG; ++i) new2 += g_new[i] * g_new[i];
+    if (den2 == 0.0) {
+        return 0.0;
+    }
+    /* a residual or step whose square overflows (or a NaN from Inf - Inf in the residual):
+     * the linear model of this stage says nothing, it ranks first */
+    if (!(num2 <= DBL_MAX) || !(den2 <= DBL_MAX)) {
+        return INFINITY;
+    }
     /* a residual at the round-off level of F is noise, not a secant violation */
-    if (den2 == 0.0 || sqrt(num2) <= DOPUS_EPS_RHO * (sqrt(old2) + sqrt(new2))) {
+    if (sqrt(num2) <= DOPUS_EPS_RHO * (sqrt(old2) + sqrt(new2))) {
         return 0.0;
     }
     return sqrt(num2) / sqrt(den2);

@@ -94,6 +94,8 @@ const char *dopus_status_string(int status)
         return "the eigen-decomposition of a Hessian block did not converge";
     case DOPUS_ERR_DIVERGED:
         return "the step diverged (outside the problem's scale; no step, fallback control returned)";
+    case DOPUS_ERR_ALREADY_PREPARED:
+        return "already prepared (call feedback before the next prepare)";
     default:
         return "unknown status";
     }
@@ -448,6 +450,8 @@ void dopus_defaults(dopus_solver *s)
     s->magic = DOPUS_MAGIC;
     s->initialized = 0;
     s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
     s->status = DOPUS_OK;
     s->M = dopus_default_M < 0 ? 0 : (dopus_default_M > DOPUS_N - 1 ? DOPUS_N - 1 : dopus_default_M);
     s->mode = DOPUS_MODE_RECEDING;
@@ -464,6 +468,8 @@ void dopus_defaults(dopus_solver *s)
     s->lm_kkt_prev = -1.0;
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
+    s->qp_warm = 1;
+    s->qp_cold_retry = 0;
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NP; ++i) {
             s->p[k][i] = dopus_p_default[i];
@@ -747,6 +753,8 @@ static int dopus_init_finish(dopus_solver *s)
     dopus_assemble(s);
     s->initialized = 1;
     s->qp_ready = 1;
+    s->prepare_due = 0;
+    s->shifted = 0;
     dopus_lm_start(s);
     return DOPUS_OK;
 }
@@ -846,6 +854,42 @@ static int dopus_qp_solution_finite(const dopus_qp_sol *sol)
            dopus_lai_vec_finite(DOPUS_QP_NR1, sol->mu_r) && dopus_lai_vec_finite(DOPUS_QP_NE1, sol->nu);
 }
 
+/* Warm-start point of the QP (in s->qp_sol): the previous QP solution shifted with the
+ * horizon. Its primal part has been added to the iterate, which prepare shifted, so it is
+ * a zero step from the (shifted) iterate, with x_0's step fixed by the measurement; the
+ * multipliers are the (shifted) iterate's, which are those of the previous QP. */
+static void dopus_qp_warm_point(dopus_solver *s)
+{
+    dopus_qp_sol *w = &s->qp_sol;
+    int k, i;
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NX; ++i) {
+            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : 0.0;
+            w->lam[k][i] = s->lam[k][i];
+        }
+    }
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_QP_NU1; ++i) {
+            w->u[k][i] = 0.0;
+        }
+        for (i = 0; i < DOPUS_NW; ++i) {
+            w->mu_b[k][i] = s->mu_b[k][i];
+        }
+        for (i = 0; i < DOPUS_QP_NG1; ++i) {
+            w->mu_g[k][i] = i < DOPUS_NG ? s->mu_g[k][i] : 0.0;
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        w->mu_bN[i] = s->mu_bN[i];
+    }
+    for (i = 0; i < DOPUS_QP_NR1; ++i) {
+        w->mu_r[i] = i < DOPUS_NR ? s->mu_r[i] : 0.0;
+    }
+    for (i = 0; i < DOPUS_QP_NE1; ++i) {
+        w->nu[i] = i < DOPUS_NE ? s->nu[i] : 0.0;
+    }
+}
+
 int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
 {
     const dopus_qp_sol *sol = &s->qp_sol;
@@ -860,6 +904,11 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
     }
     if (xhat0 == 0 || !dopus_lai_vec_finite(DOPUS_NX, xhat0)) {
         s->xhat_fresh = 0;
+        if (s->mode == DOPUS_MODE_RECEDING) {
+            /* the sampling instant has passed all the same: its prepare (the shift) is due */
+            s->prepare_due = 1;
+            s->shifted = 0;
+        }
         return dopus_feedback_failed(s, u0, DOPUS_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
@@ -874,20 +923,42 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->xhat_fresh = 1;
+    /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
+    s->prepare_due = 1;
+    s->shifted = 0;
     s->qp_in.hess_shift = s->lm;
-    s->qp_settings.warm_start = 0;
+    s->qp_cold_retry = 0;
+    s->qp_settings.warm_start = s->qp_warm;
+    if (s->qp_warm) {
+        dopus_qp_warm_point(s);
+    }
     qs = dopus_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-    /* the automatic term (section 10): a QP not solved is solved again with lm raised */
+    s->qp_iterations = s->qp_info.iterations;
+    if (s->qp_warm && qs != DOPUS_QP_INVALID_INPUT &&
+        (qs != DOPUS_QP_SOLVED || !dopus_qp_solution_finite(sol) || s->qp_info.inertia_corrections > 0)) {
+        /* the warm start failed, or it needed the inertia correction: the QP is nonconvex
+         * on the null space of its equalities there and may have several local minimisers,
+         * and the warm start may have reached another one than the cold start finds (the
+         * one the closed loop has followed so far): retry from the cold starting point in
+         * the same call */
+        s->qp_cold_retry = 1;
+        s->qp_settings.warm_start = 0;
+        qs = dopus_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+        s->qp_iterations += s->qp_info.iterations;
+    }
+    /* the automatic term (section 10): a QP still not solved is solved again (cold) with lm
+     * raised */
     retries = 0;
     while (s->lm_auto && retries < DOPUS_LM_RETRIES && s->lm < DOPUS_LM_MAX_REL * s->lm_scale &&
-           (qs != DOPUS_QP_SOLVED || !dopus_qp_solution_finite(sol))) {
+           (qs != DOPUS_QP_SOLVED || !dopus_qp_solution_finite(sol)) && qs != DOPUS_QP_INVALID_INPUT) {
         dopus_lm_raise(s);
         s->qp_in.hess_shift = s->lm;
+        s->qp_settings.warm_start = 0;
         qs = dopus_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+        s->qp_iterations += s->qp_info.iterations;
         retries += 1;
     }
     s->qp_status = qs;
-    s->qp_iterations = s->qp_info.iterations;
     if (qs != DOPUS_QP_SOLVED || !dopus_qp_solution_finite(sol)) {
         dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
         return dopus_feedback_failed(s, u0, DOPUS_ERR_QP);
@@ -1095,9 +1166,14 @@ static int dopus_prepare_iteration(dopus_solver *s);
 
 int dopus_prepare(dopus_solver *s)
 {
+    int rc;
     dopus_ensure_setup(s);
     if (!s->initialized) {
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
+    }
+    if (!s->prepare_due) {
+        /* a second prepare would shift the horizon twice */
+        return dopus_ret(s, DOPUS_ERR_ALREADY_PREPARED);
     }
     dopus_clear_timings(s, DOPUS_PHASE_SHIFT, DOPUS_PHASE_ASSEMBLY);
     s->qp_ready = 0;
@@ -1105,18 +1181,23 @@ int dopus_prepare(dopus_solver *s)
         s->plan_age += 1;
     }
     if (s->recover_pending && s->recovery && s->mode == DOPUS_MODE_RECEDING) {
-        return dopus_ret(s, dopus_recover(s, 0));
-    }
-    if (s->recovering > 0 && DOPUS_HAS_GN) {
+        rc = dopus_recover(s, 0);
+    } else if (s->recovering > 0 && DOPUS_HAS_GN) {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
          * multipliers), every block fresh */
-        int hessian = s->hessian, rc;
+        int hessian = s->hessian;
         s->hessian = DOPUS_HESSIAN_GAUSS_NEWTON;
         rc = dopus_prepare_iteration(s);
         s->hessian = hessian;
-        return dopus_ret(s, rc);
+    } else {
+        rc = dopus_prepare_iteration(s);
     }
-    return dopus_ret(s, dopus_prepare_iteration(s));
+    if (rc == DOPUS_OK) {
+        /* one prepare per sampling instant: the next needs a feedback first */
+        s->prepare_due = 0;
+        s->shifted = 0;
+    }
+    return dopus_ret(s, rc);
 }
 
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
@@ -1126,15 +1207,16 @@ static int dopus_prepare_iteration(dopus_solver *s)
     double t0;
     int k, rc, M;
 
-    /* 1. shift */
+    /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     t0 = dopus_timer_now(&s->timer);
-    if (s->mode == DOPUS_MODE_RECEDING) {
+    if (s->mode == DOPUS_MODE_RECEDING && !s->shifted) {
         dopus_shift(s);
+        s->shifted = 1;
     }
     t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_SHIFT, t0);
     dopus_copy(xN_saved, s->x[DOPUS_N], DOPUS_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2, F_new stored as F_old */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < DOPUS_N - 1; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
         rc = dopus_stage_F(s, k);
@@ -1143,7 +1225,10 @@ static int dopus_prepare_iteration(dopus_solver *s)
             return rc;
         }
         s->rho[k] = dopus_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
-        dopus_ring_store_F(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        /* stored as F_old in step 6, once nothing can fail */
+        dopus_copy(s->Fn_w[k], s->tmp_F, DOPUS_NW);
+        dopus_copy(s->Fn_phi[k], s->tmp_phi, DOPUS_NX);
+        dopus_copy(s->Fn_g[k], s->tmp_g, DOPUS_NG);
         t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_RHO, t0);
     }
 
@@ -1210,7 +1295,11 @@ static int dopus_prepare_iteration(dopus_solver *s)
         return rc;
     }
 
-    /* 6. QP vectors (the fresh A blocks were regularised when stored) */
+    /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
+     *    when stored) */
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+    }
     dopus_assemble(s);
     s->qp_ready = 1;
 
@@ -1459,6 +1548,27 @@ int dopus_get_recovery_failures(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->recovery_failures;
+}
+
+int dopus_set_qp_warm_start(dopus_solver *s, int on)
+{
+    dopus_ensure_setup(s);
+    if (on != 0 && on != 1) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->qp_warm = on;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_qp_warm_start(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->qp_warm;
+}
+
+int dopus_get_qp_cold_retry(const dopus_solver *s)
+{
+    return s->qp_cold_retry;
 }
 
 int dopus_set_parameters(dopus_solver *s, const double *p)

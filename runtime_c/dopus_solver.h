@@ -54,7 +54,8 @@ const char *dopus_status_string(int status);
 /* Initialisation (algorithm.md section 4, init): the iterate is the given guess; NULL x or
  * u: the OCP file's initial guess; NULL multipliers: zeros. F and H of every stage and of
  * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
- * rho = 0. xhat0 is checked and kept for dopus_kkt_eval (may be NULL: the default x0). */
+ * rho = 0. xhat0 is checked and kept for dopus_kkt_eval (may be NULL: the default x0).
+ * A failed init leaves the solver uninitialised (NaN/Inf input: the iterate untouched). */
 int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const double *u,
                const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
                const double *mu_r, const double *nu);
@@ -69,11 +70,22 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
  * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
  * stage-cost Hessian of the other stages (dopus_set_cost_hessian), assemble the QP. Must
- * run between two feedback calls. */
+ * run between two feedback calls.
+ * Calling order: one prepare per feedback on an initialised solver that reached the QP
+ * (solved or not) and, in receding mode, also per feedback whose measurement was rejected
+ * as non-finite (the sampling instant has passed all the same and the plan moves on with
+ * it). prepare right after a successful init or prepare
+ * returns DOPUS_ERR_ALREADY_PREPARED and changes nothing, in both modes (in receding mode
+ * it would shift twice, in fixed mode it would measure rho_k against gradients of the
+ * same point). After a failed prepare the next prepare is a retry: it does not shift
+ * again, and it measures rho_k against the same F_old (the gradients of a failed prepare are
+ * not stored); blocks that the failed attempt had already re-linearised stay fresh. */
 int dopus_prepare(dopus_solver *s);
 /* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
  * the initial state xhat0 (NULL: the last one given to init or feedback):
- * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed. */
+ * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed.
+ * The parts are >= 0 and never NaN; a part is +Inf when it overflows (an iterate or
+ * multipliers near DBL_MAX, e.g. from an init guess: |mu| * |ub - v| > DBL_MAX). */
 int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4);
 /* The largest of the four parts of the last dopus_kkt_eval (NaN before the first). */
 double dopus_get_kkt(const dopus_solver *s);
@@ -127,6 +139,12 @@ int dopus_get_qp_max_iter(dopus_solver *s);
 int dopus_set_recovery(dopus_solver *s, int on, int max_failures);
 int dopus_get_recovery(dopus_solver *s);
 int dopus_get_recovery_failures(dopus_solver *s);
+/* QP warm start in feedback (1, the default): start from the previous QP solution shifted
+ * with the horizon (a zero step from the shifted iterate, the iterate's multipliers); when
+ * that QP is not solved, feedback retries from the cold starting point in the same call.
+ * 0: always cold. */
+int dopus_set_qp_warm_start(dopus_solver *s, int on);
+int dopus_get_qp_warm_start(dopus_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int dopus_set_parameters(dopus_solver *s, const double *p);
@@ -142,7 +160,8 @@ void dopus_get_mu_b(const dopus_solver *s, double *mu_b);
 void dopus_get_mu_bN(const dopus_solver *s, double *mu_bN);
 void dopus_get_mu_r(const dopus_solver *s, double *mu_r);
 void dopus_get_nu(const dopus_solver *s, double *nu);
-/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1). */
+/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1): >= 0, never NaN; +Inf when the
+ * residual or the step of the stage overflows (the stage then ranks first). */
 void dopus_get_rho(const dopus_solver *s, double *rho);
 /* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
  * N-1 included; writes up to N ints and returns their count. */
@@ -165,6 +184,9 @@ int dopus_get_failed_feedbacks(const dopus_solver *s);
  * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
 double dopus_get_kkt_proxy(const dopus_solver *s);
 void dopus_get_scales(const dopus_solver *s, double *scale_x, double *scale_u);
+/* 1 when the last feedback's warm-started QP failed and the cold retry ran (the
+ * iterations above are then the sum of both solves), else 0. */
+int dopus_get_qp_cold_retry(const dopus_solver *s);
 /* Status of the last call that returns a status. */
 int dopus_get_status(const dopus_solver *s);
 int dopus_is_initialized(const dopus_solver *s);
@@ -198,6 +220,9 @@ enum dopus_status {
                                         step (the QP would be stale) */
     DOPUS_ERR_NO_NOMINAL = 8,        /* dopus_init_nominal without DOPUS_HAS_NOMINAL */
     DOPUS_ERR_REGULARIZATION = 9,    /* eigen-decomposition did not converge */
+    DOPUS_ERR_ALREADY_PREPARED = 10, /* prepare without a feedback since the last successful
+                                        init or prepare (it would shift the horizon twice);
+                                        nothing changes */
     DOPUS_ERR_DIVERGED = 11          /* the QP step leaves the problem's scale box (or is not
                                         finite): no step, the fallback control is returned */
 };
@@ -252,6 +277,8 @@ struct dopus_solver {
     int magic;          /* DOPUS_MAGIC once the settings hold valid values */
     int initialized;    /* a successful init happened */
     int qp_ready;       /* QP assembled at the current iterate (prepare or init succeeded) */
+    int prepare_due;    /* a feedback reached the QP since the last successful init/prepare */
+    int shifted;        /* the shift of this sampling instant is done (a prepare failed after it) */
     int status;         /* status of the last call */
 
     /* settings */
@@ -296,6 +323,12 @@ struct dopus_solver {
     double r[DOPUS_DIM(DOPUS_NR)];
     double r_eq[DOPUS_DIM(DOPUS_NE)];
 
+    /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare succeeds,
+     * so a prepare that fails leaves every F_old for its retry */
+    double Fn_w[DOPUS_N][DOPUS_NW];
+    double Fn_phi[DOPUS_N][DOPUS_NX];
+    double Fn_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
+
     /* secant criterion and the recomputed set of the last prepare */
     double rho[DOPUS_N];
     int recomputed[DOPUS_N];
@@ -309,6 +342,8 @@ struct dopus_solver {
     dopus_qp_workspace qp_work;
     int qp_status;
     int qp_iterations;
+    int qp_warm;        /* warm start in feedback (dopus_set_qp_warm_start) */
+    int qp_cold_retry;  /* the last feedback needed the cold retry */
 
     /* scratch for the generated functions and the regularisation */
     dopus_fun_work fun_work;

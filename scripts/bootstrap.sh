@@ -24,6 +24,33 @@ if [ ${#need_apt[@]} -gt 0 ]; then
     fi
 fi
 
+# clang with the AddressSanitizer/UndefinedBehaviorSanitizer and libFuzzer runtimes, for the
+# sanitizer and fuzz tests (tests/test_sanitizers.py); Debian ships the runtimes in
+# libclang-rt-<major>-dev. Installed when root and missing; otherwise those tests say so.
+clang_ok() {
+    command -v clang >/dev/null 2>&1 || return 1
+    local d; d=$(mktemp -d)
+    printf '#include <stddef.h>\n#include <stdint.h>\nint LLVMFuzzerTestOneInput(const uint8_t *d, size_t n) { (void)d; (void)n; return 0; }\n' > "$d/p.c"
+    clang -fsanitize=fuzzer,address,undefined "$d/p.c" -o "$d/p" >/dev/null 2>&1
+    local rc=$?
+    rm -rf "$d"
+    return $rc
+}
+if ! clang_ok; then
+    if [ "$(id -u)" = 0 ]; then
+        echo "bootstrap: installing Debian's clang and its sanitizer/libFuzzer runtimes"
+        apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq clang
+        major=$(clang --version | sed -n 's/.*clang version \([0-9]*\).*/\1/p' | head -1)
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "libclang-rt-${major}-dev" \
+            || DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "libclang-common-${major}-dev"
+        clang_ok || echo "bootstrap: clang still cannot build a fuzzer; the sanitizer tests will fail" >&2
+    else
+        echo "bootstrap: clang with libFuzzer missing (as root: apt-get install clang libclang-rt-<version>-dev);" \
+             "the sanitizer and fuzz tests need it" >&2
+    fi
+fi
+
 PY=${PYTHON:-python3}
 if [ ! -x .venv/bin/python ]; then
     echo "bootstrap: creating .venv"

@@ -404,8 +404,15 @@ def test_failed_qp_takes_no_step(robot_disc, robot_solution, lm):
         assert er.value.status == STATUS_QP and er.value.qp_status == 1
         r.set_qp_max_iter(None)
         assert abs(r.lm - c.lm) <= 1e-12 * c.lm
-    for b in (c, r):      # the sampling instant passes without a step
+    else:
+        # the reference skipped the feedback: it is told the instant passed as a failed
+        # feedback would (the calling order of docs/algorithm.md section 4)
+        r.allow_prepare()
+    for b in (c, r):      # the sampling instant passes without a step: one prepare each
         b.prepare()
+    with pytest.raises(DopusError, match="already prepared") as ei:
+        c.prepare()
+    assert ei.value.status == 10
     for it in range(3):
         uc, ur = c.feedback(xhat), r.feedback(xhat)
         assert np.max(np.abs(uc - ur)) <= 1e-9 * max(1.0, np.max(np.abs(ur))), it
@@ -415,3 +422,69 @@ def test_failed_qp_takes_no_step(robot_disc, robot_solution, lm):
             a, b_ = getattr(c, f), getattr(r, f)
             assert np.max(np.abs(a - b_)) <= 1e-9 * max(1.0, np.max(np.abs(b_))), (it, f)
         assert c.recomputed == r.recomputed
+
+
+# --------------------------------------------------------------------------- QP warm start
+def _clone(dst: CSolver, src: CSolver) -> None:
+    """Copy the whole solver state (same library): both then face the same QP."""
+    dst.copy_state_from(src)
+
+
+def _warm_vs_cold(robot_disc, guess, iters, disturb, **kw):
+    """Closed loop with the warm start (the default); at every instant a clone of the state
+    solves the same QP cold. Returns the per-instant (cold retry taken, warm QP iterations,
+    largest relative difference of the iterate after feedback)."""
+    warm = CSolver(robot_disc, qp_tol=1e-14, **kw)
+    cold = CSolver(robot_disc, qp_tol=1e-14, **kw)
+    assert warm.qp_warm_start
+    warm.init(robot_disc.x0, guess)
+    p0 = np.asarray(warm.p[0], dtype=float)
+    xhat = np.array(robot_disc.x0, dtype=float)
+    out = []
+    for it in range(iters):
+        if it in disturb:
+            xhat = np.array(robot_disc.disturbance(xhat.copy()), dtype=float).reshape(-1)
+        _clone(cold, warm)
+        cold.set_qp_warm_start(False)
+        uw, uc = warm.feedback(xhat), cold.feedback(xhat)
+        errs = [np.max(np.abs(getattr(warm, f) - getattr(cold, f))) / max(1.0, np.max(np.abs(getattr(cold, f))))
+                for f in ("x", "u", "lam", "mu_b", "nu")]
+        errs.append(np.max(np.abs(uw - uc)) / max(1.0, np.max(np.abs(uc))))
+        out.append((warm.qp_cold_retry, warm.qp_iterations, max(errs)))
+        assert not cold.qp_cold_retry
+        warm.prepare()
+        xhat = np.array(robot_disc.stage_eval(xhat, uw, p0)[0], dtype=float).reshape(-1)
+    return out
+
+
+def test_qp_warm_start_same_minimiser_as_cold(robot_disc, robot_solution):
+    """Closed loop of the robot arm as `dopus-gen sil` runs it (M = 1, exact Hessian, the OCP
+    file's Levenberg-Marquardt term), disturbed twice: at every instant the warm-started QP
+    (previous solution shifted, the default) reaches the same minimiser as the cold start
+    on the same QP, to the accuracy of a QP tolerance of 1e-14."""
+    runs = _warm_vs_cold(robot_disc, robot_solution[0], 30, (0, 15), M=1, lm=None)
+    worst = max(e for _, _, e in runs)
+    assert worst <= 1e-9, runs
+    print(f"\nwarm vs cold, 30 instants: worst relative difference {worst:.1e}, warm QP iterations "
+          f"{[n for _, n, _ in runs]}, cold retries {sum(r for r, _, _ in runs)}")
+
+
+def test_qp_warm_start_falls_back_to_cold(robot_disc, robot_solution):
+    """The paper's stored-Hessian loop (cost_hessian stored, M = 1, exact Hessian, no
+    Levenberg-Marquardt term) from the IPOPT solution: at its fifth instant the warm-started
+    QP needs the inertia correction (nonconvex on the null space of the equalities, where a
+    warm start may reach another local minimiser than the closed loop follows); feedback
+    then retries cold in the same call, and the result is the cold start's."""
+    runs = _warm_vs_cold(robot_disc, robot_solution[0], 6, (), M=1, cost_hessian="stored", lm=0.0)
+    assert any(r for r, _, _ in runs), runs
+    assert max(e for _, _, e in runs) <= 1e-9, runs
+
+
+def test_qp_warm_start_setting(robot_disc):
+    c = CSolver(robot_disc)
+    assert c.qp_warm_start is True
+    c.set_qp_warm_start(False)
+    assert c.qp_warm_start is False
+    with pytest.raises(DopusError, match="qp_warm_start"):
+        c.set_qp_warm_start(2)
+    assert CSolver(robot_disc, qp_warm_start=False).qp_warm_start is False

@@ -635,6 +635,7 @@ STORED_OTHER_MINIMISER = [
     "robot_arm_qp_M39_exact_instant105",
     "robot_arm_qp_M39_exact_instant160",
     "robot_arm_qp_M39_exact_instant272",
+    "robot_arm_qp_M39_exact_instant257",   # stalled before the lean factorisation's refinement on no progress
 ]
 
 
@@ -685,7 +686,7 @@ def test_stored_closed_loop_qps_reach_a_local_minimiser(name):
 
 @pytest.mark.xfail(strict=True, reason="known: several local minimisers; the solver stalls in the "
                    "nonconvex region even after its restart (max iterations)")
-@pytest.mark.parametrize("name", ["robot_arm_qp_M39_exact_instant216", "robot_arm_qp_M39_exact_instant257"])
+@pytest.mark.parametrize("name", ["robot_arm_qp_M39_exact_instant216"])
 def test_stored_closed_loop_qp_still_failing(name):
     qp = _stored_qp(name)
     _, info = solver(_sizes(qp)).solve(qp, tol=1e-10)

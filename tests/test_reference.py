@@ -234,6 +234,7 @@ def test_adjoint_correction_keeps_kkt_point_with_stale_blocks(robot_disc, robot_
     ref.x, ref.u = sol.x.copy(), sol.u.copy()
     ref.lam, ref.mu_g, ref.mu_b = sol.lam.copy(), sol.mu_g.copy(), sol.mu_b.copy()
     ref.mu_bN, ref.mu_r, ref.nu = sol.mu_bN.copy(), sol.mu_r.copy(), sol.nu.copy()
+    ref.allow_prepare()                      # the iterate was replaced by hand, as a step would
     ref.prepare()                            # F at the solution, blocks of stages 0..N-2 kept (M = 0)
     assert ref.recomputed == [d.N - 1]
     # the stored blocks really are stale
@@ -653,7 +654,7 @@ def test_parameters_reach_every_function(second_disc, second_solution):
     ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="fixed")
     ref.init(d.x0, sol)                         # blocks at the old target's solution
     ref.set_parameters(p)
-    ref.prepare()                               # F, H at the new parameters
+    ref.init(d.x0, sol)                         # the old target's solution, F, H at the new parameters
     ks = _iterate(ref, d.x0, 15, tol=1e-11)
     assert ks[-1] < 1e-10
     assert max(np.max(np.abs(ref.x - opt.x)), np.max(np.abs(ref.u - opt.u))) < 1e-6
@@ -677,6 +678,7 @@ def test_nonfinite_function_value_leaves_state(tmp_path):
     ref.init(d.x0)
     ref.feedback(d.x0)
     ref.prepare()
+    ref.feedback(d.x0)                         # a prepare is due (docs/algorithm.md, calling order)
     x_before = ref.x.copy()
     H_before = [s.Ht.copy() for s in ref.slots]
     ref.x[3, 0] = -1.0

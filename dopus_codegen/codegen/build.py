@@ -21,6 +21,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, List, Optional, Sequence
@@ -71,16 +72,35 @@ def _source_hash(out_dir: Path, files: List[str], cc: str, opt: Sequence[str]) -
     return h.hexdigest()
 
 
-def build(out_dir, cc: str = "cc", opt: str = DEFAULT_OPT, *, force: bool = False, cache_dir=None,
+def recorded_opt(out_dir) -> str | None:
+    """The optimisation flags the folder was last built with (its stamp), or None."""
+    stamp = Path(out_dir) / BUILD_SUBDIR / "stamp.json"
+    try:
+        opt = json.loads(stamp.read_text()).get("opt")
+    except (OSError, ValueError):
+        return None
+    return shlex.join(opt) if isinstance(opt, list) else None
+
+
+def build(out_dir, cc: str = "cc", opt: str | None = None, *, force: bool = False, cache_dir=None,
           echo: Optional[Callable[[str], None]] = _stderr) -> BuildResult:
     """Compile the generated folder ``out_dir``; skip the work if nothing changed.
 
-    ``cache_dir``: the object cache (default :func:`cache.cache_root`). ``echo`` receives
-    one line per compiled file and per link (None: silent); nothing is said when the
-    folder is up to date.
+    ``opt`` None keeps the flags the folder was built with (recorded in its stamp), else
+    DEFAULT_OPT: so loading a folder (the Python handle) never rebuilds it with other flags
+    than `dopus-gen build --opt` chose. Explicit flags that differ from the recorded ones
+    rebuild it with a warning naming both. ``cache_dir``: the object cache (default
+    :func:`cache.cache_root`). ``echo`` receives one line per compiled file and per link
+    (None: silent); nothing is said when the folder is up to date.
     """
     say = echo or (lambda msg: None)
     out_dir = Path(out_dir)
+    if opt is None:
+        opt = recorded_opt(out_dir) or DEFAULT_OPT
+    else:
+        was = recorded_opt(out_dir)
+        if was is not None and shlex.split(was) != shlex.split(opt):
+            warnings.warn(f"build: '{out_dir}' was built with '{was}', rebuilding it with '{opt}'", stacklevel=2)
     if not out_dir.exists():
         raise BuildError(f"build: folder '{out_dir}' does not exist (generate it first with dopus-gen generate)")
     try:

@@ -11,8 +11,10 @@ STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 #: The CasADi file gets the same flags: its unused parameters are marked as such when it is
 #: generated (generate.silence_unused_parameters).
 CASADI_CFLAGS = STRICT_CFLAGS
-#: The default optimisation level of a build (``dopus-gen build --opt``, the Makefile's OPT).
-DEFAULT_OPT = "-O2"
+#: The default optimisation level of a build (``dopus-gen build --opt``, the Makefile's OPT,
+#: the CMake fragment's <NAME>_OPT). No -march: add the target's flags (e.g. --opt "-O3
+#: -march=native" on the build machine, EXTRA_CFLAGS="-mcpu=cortex-m7 ..." for firmware).
+DEFAULT_OPT = "-O3"
 #: The optimisation level of the QP test harness and the QP benchmark's harness.
 QP_HARNESS_OPT = "-O3"
 #: Position-independent code for a shared library.

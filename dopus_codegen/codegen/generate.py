@@ -237,8 +237,35 @@ def casadi_sources(functions: Dict[str, ca.Function], name: str) -> Dict[str, st
         cg.add(fun)
     with tempfile.TemporaryDirectory(prefix="dopus_cg_") as tmp:
         cg.generate(str(Path(tmp)) + "/")
-        return {f"{base}.c": silence_unused_parameters((Path(tmp) / f"{base}.c").read_text()),
-                f"{base}.h": (Path(tmp) / f"{base}.h").read_text()}
+        out = {f"{base}.c": silence_unused_parameters((Path(tmp) / f"{base}.c").read_text()),
+               f"{base}.h": (Path(tmp) / f"{base}.h").read_text()}
+    _refuse_without_codegen(out[f"{base}.c"], functions)
+    return out
+
+
+_NO_CODEGEN = re.compile(r"#error Code generation not supported for (\w+)")
+_FUNCTION_HEAD = re.compile(r"/\* (\w+):\(")
+
+
+def _refuse_without_codegen(source: str, functions: Dict[str, ca.Function]) -> None:
+    """CasADi emits ``#error Code generation not supported for <class>`` for a function it
+    cannot generate (a rootfinder or integrator plugin such as kinsol, IDAS, CVODES, an
+    external solver): the folder would fail at build. Refuse it here, naming the function,
+    its CasADi class and the generated functions that call it."""
+    lines = source.splitlines()
+    for i, line in enumerate(lines):
+        m = _NO_CODEGEN.search(line)
+        if not m:
+            continue
+        fname = next((h.group(1) for h in (_FUNCTION_HEAD.match(ln.strip()) for ln in reversed(lines[:i])) if h),
+                     "?")
+        users = [slot for slot, fun in functions.items()
+                 if any(sub.name() == fname for sub in fun.find_functions())]
+        raise CodegenError(
+            f"the CasADi function '{fname}' ({m.group(1)}) has no C code generation"
+            + (f"; it is called by {', '.join(repr(u) for u in users)}" if users else "")
+            + ": the generated folder could not be compiled. Use a construct CasADi generates C for "
+              "(an explicit integrator, or the rootfinder plugin 'fast_newton')")
 
 
 def work_sizes(functions: Dict[str, ca.Function]) -> Dict[str, int]:

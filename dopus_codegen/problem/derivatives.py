@@ -426,7 +426,8 @@ def _scenario(spec: OcpSpec, m: StageModel, ode: ca.Function) -> Scenario:
     else:
         plant = ca.Function(f"{name}_plant_ode", [m.x, m.u, m.p], [_d(sc.plant)], ["x", "u", "p"], ["xdot"])
     closed = ScenarioSpec(duration=sc.duration, events=sc.events, signals=types.MappingProxyType(signals),
-                          plant_ode=plant, x0=spec.x0 if sc.x0 is None else sc.x0)
+                          plant_ode=plant, x0=spec.x0 if sc.x0 is None else sc.x0,
+                          units=types.MappingProxyType(dict(getattr(sc, "units", ()))))
     return Scenario(disturbance=spec.scenario.disturbance, closed_loop=closed)
 
 

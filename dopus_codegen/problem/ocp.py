@@ -44,7 +44,8 @@ import math
 import re
 import sys
 import traceback
-from dataclasses import dataclass
+import types
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping, Optional, Union
 
@@ -311,13 +312,15 @@ class ScenarioSpec:
     ``events``: tuple of :class:`Event`; ``signals``: read-only mapping name ->
     ``casadi.Function(x, u, p) -> value``; ``plant_ode``: ``casadi.Function(x, u, p) ->
     xdot`` (the model itself unless a mismatch was given); ``x0``: initial plant state
-    (read-only).
+    (read-only); ``units``: read-only mapping of a signal, state or control name to its
+    unit (axis labels of the figures).
     """
     duration: float
     events: tuple
     signals: Mapping[str, ca.Function]
     plant_ode: ca.Function
     x0: np.ndarray
+    units: Mapping[str, str] = field(default_factory=lambda: types.MappingProxyType({}))
 
 
 @dataclass
@@ -391,7 +394,8 @@ def casadi_message(exc: BaseException) -> str:
 def _check_identifier(name, what: str) -> str:
     why = identifier_problem(name)
     if why is not None:
-        raise OcpError(f"{what}: {name!r} {why}")
+        shown = repr(name) if not isinstance(name, str) or len(name) <= 40 else repr(name[:20] + "...")
+        raise OcpError(f"{what}: {shown} {why}")
     return name
 
 
@@ -641,17 +645,21 @@ class Ocp:
         self._disturbance = fn
 
     @_declaration
-    def scenario(self, duration: float, events=(), signals=None, plant=None, x0=None) -> None:
+    def scenario(self, duration: float, events=(), signals=None, plant=None, x0=None, units=None) -> None:
         """Closed-loop scenario: ``duration`` seconds, state ``events``, recorded ``signals``
-        (name -> expression of the declared symbols), ``plant`` xdot (None: the model)."""
+        (name -> expression of the declared symbols), ``plant`` xdot (None: the model),
+        ``units``: the unit of a signal, state or control by name (``{"deviation": "m",
+        "tau": "N m"}``), written on the axes of the figures."""
         try:
             events = list(events)
         except TypeError:
             raise OcpError(f"scenario: events must be a list of Event, got {type(events).__name__}") from None
         if signals is not None and not isinstance(signals, dict):
             raise OcpError(f"scenario: signals must be a dict name -> expression, got {type(signals).__name__}")
+        if units is not None and not isinstance(units, dict):
+            raise OcpError(f"scenario: units must be a dict name -> unit, got {type(units).__name__}")
         self._scenario = dict(duration=duration, events=events, signals=dict(signals or {}),
-                              plant=plant, x0=_snapshot(x0))
+                              plant=plant, x0=_snapshot(x0), units=dict(units or {}))
 
     # ------------------------------------------------------------------ derived views
     @property
@@ -860,7 +868,17 @@ class Ocp:
         x0 = None
         if sc["x0"] is not None:
             x0 = readonly(self._full_vector(sc["x0"], nx, "scenario x0"))
-        return ClosedLoopSpec(duration=dur, events=tuple(events), signals=tuple(signals), plant=plant, x0=x0)
+        known = {n for n, _ in signals} | {d.name for d in self._states + self._controls}
+        units = []
+        for key, unit in sc.get("units", {}).items():
+            if key not in known:
+                raise OcpError(f"scenario units: {key!r} is neither a signal nor a state or control; "
+                               f"the names are {sorted(known)}")
+            if not isinstance(unit, str) or not unit.strip():
+                raise OcpError(f"scenario units: the unit of {key!r} must be a non-empty string, got {unit!r}")
+            units.append((key, unit.strip()))
+        return ClosedLoopSpec(duration=dur, events=tuple(events), signals=tuple(signals), plant=plant, x0=x0,
+                              units=tuple(units))
 
 
 # --------------------------------------------------------------------------- loading
@@ -902,7 +920,9 @@ def load_ocp(path) -> Ocp:
                        f"{casadi_message(exc)}") from None
     if not isinstance(ocp, Ocp):
         raise OcpError(f"OCP file '{path}': build() returned {type(ocp).__name__}, expected an Ocp")
-    ocp.validate()
+    from .checks import warn_nonsmooth
+
+    warn_nonsmooth(ocp.validate())
     return ocp
 
 

@@ -202,12 +202,14 @@ class GuessSpec:
 class ClosedLoopSpec:
     """The declared closed-loop scenario: ``duration`` seconds, state ``events`` (sorted as
     declared), recorded ``signals`` ((name, SX expression of x, u, p) pairs), the plant
-    model ``plant`` (None: the model itself) and its initial state ``x0`` (None: the OCP's)."""
+    model ``plant`` (None: the model itself), its initial state ``x0`` (None: the OCP's) and
+    the ``units`` of signals, states and controls ((name, unit) pairs) for the figures."""
     duration: float
     events: Tuple[Any, ...]
     signals: Tuple[Tuple[str, ca.SX], ...]
     plant: Optional[ca.SX]
     x0: Optional[np.ndarray]
+    units: Tuple[Tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True)

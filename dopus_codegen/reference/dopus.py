@@ -161,7 +161,9 @@ class ReferenceDopus:
         self.last_qp = None
         self.last_qp_solution = None
         self._initialised = False
-        self._qp_ready = False
+        # calling order (docs/algorithm.md section 4): a prepared QP, a prepare due, the shift
+        # of this sampling instant done (a prepare failed after it)
+        self._qp_ready = self._prepare_due = self._shifted = False
         # section 9: safe outputs, divergence test, recovery
         self.recovery, self.recovery_failures = True, int(_SAFETY["RECOVERY_FAILURES"])
         self.scales = self._compute_scales()
@@ -294,7 +296,7 @@ class ReferenceDopus:
         the re-initialisation of section 9); the state changes only on success."""
         N, nx, nu_, ng = self.N, self.nx, self.n_u, self.ng
         slots = [_Slot(nx, nu_, ng) for _ in range(N)]
-        gL, phi, _l, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
+        gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
         for k in range(N):
             s = slots[k]
             s.F_w = gL[k] + mu_b[k]
@@ -302,7 +304,7 @@ class ReferenceDopus:
             s.g = gv[k].copy()
             self._set_block(s, k, x, u, lam, mu_g)
         term = self._term_eval(x[N], mu_r, nu)
-        if not self._finite(gL, phi, gv, *[v for s in slots for v in (s.Ht, s.A_dyn, s.Phit, s.Ct)],
+        if not self._finite(gL, phi, lv, gv, *[v for s in slots for v in (s.Ht, s.A_dyn, s.Phit, s.Ct)],
                             *term.values()):
             raise self._fail("nonfinite_value", f"{who}: a derivative function returned a non-finite value {where}")
         self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
@@ -318,6 +320,8 @@ class ReferenceDopus:
         self._initialised = True
         self._qp_ready = True
         self._lm_start()
+        self._prepare_due = False    # a feedback must come first
+        self._shifted = False
 
     def _need_init(self):
         if not self._initialised:
@@ -383,6 +387,9 @@ class ReferenceDopus:
             raise err
         if not np.all(np.isfinite(xhat0)):
             self._xhat_fresh = False
+            if self.mode == "receding":
+                # the sampling instant has passed all the same: its prepare (the shift) is due
+                self._prepare_due, self._shifted = True, False
             raise self._feedback_failed("nonfinite_input",
                                         f"feedback: xhat0 must be {self.nx} finite numbers, got {xhat0}")
         if not self._qp_ready:
@@ -391,6 +398,8 @@ class ReferenceDopus:
         qp = self.qp_of_current(xhat0)
         self._xhat_last = xhat0.copy()
         self._xhat_fresh = True
+        # the QP is attempted: a prepare (with its shift) is due, whatever the outcome
+        self._prepare_due, self._shifted = True, False
         t1 = time.perf_counter()
         retries = 0
         while True:
@@ -455,12 +464,23 @@ class ReferenceDopus:
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
         return self.u0.copy()
 
+    def allow_prepare(self) -> None:
+        """Let the next ``prepare`` run although no feedback reached the QP since the last
+        ``init`` or ``prepare``: for a sampling instant whose feedback was skipped (the C
+        runtime allows one prepare after a feedback whose QP failed, which takes no step),
+        or after the iterate was replaced by hand. The calling order of
+        docs/algorithm.md section 4 otherwise refuses it (status already_prepared)."""
+        self._need_init()
+        self._prepare_due = True
+
     # ------------------------------------------------------------------ prepare
     def prepare(self) -> None:
         """Shift (receding), F and rho, fresh last stage and terminal, M worst H, fresh
         stage-cost Hessians (section 4). Steps 2 to 5 work on copies of the slots: a
         non-finite value leaves the state of step 1."""
         self._need_init()
+        if not self._prepare_due:
+            raise self._fail("already_prepared", "prepare: already prepared (call feedback before the next prepare)")
         self._qp_ready = False
         if self.mode == "receding" and self._plan_age < self.N:
             self._plan_age += 1
@@ -479,7 +499,10 @@ class ReferenceDopus:
 
     def _prepare_iteration(self) -> None:
         t0 = time.perf_counter()
-        self._shift()
+        self._qp_ready = False
+        if not self._shifted:        # a retry after a failed prepare does not shift again
+            self._shift()
+            self._shifted = self.mode == "receding"
         t1 = time.perf_counter()
         slots = [s.copy() for s in self.slots]
         stage_values = self._stage_gradients()
@@ -522,9 +545,10 @@ class ReferenceDopus:
 
     def _stage_gradients(self):
         """``(gL, phi, g)`` of every stage at the current iterate (stage_grad)."""
-        gL, phi, _l, gv = eval_stages(self.disc.stage_grad, self.N, self.x[:self.N], self.u, self.p[:self.N],
+        gL, phi, lv, gv = eval_stages(self.disc.stage_grad, self.N, self.x[:self.N], self.u, self.p[:self.N],
                                       self.lam[1:], self.mu_g)
-        if not self._finite(gL, phi, gv):
+        # every output of a function is checked, the stage cost l too (as the C runtime does)
+        if not self._finite(gL, phi, lv, gv):
             raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value")
         return gL, phi, gv
 
@@ -544,7 +568,12 @@ class ReferenceDopus:
             # a residual at the round-off level of F is noise, not a secant violation
             scale = (np.linalg.norm(np.concatenate([s.F_w, s.phi, s.g]))
                      + np.linalg.norm(np.concatenate([F_w, phi[k], gv[k]])))
-            rho[k] = num / den if den > 0.0 and num > EPS_RHO * scale else 0.0
+            if den == 0.0:
+                rho[k] = 0.0
+            elif not (np.isfinite(num) and np.isfinite(den)):
+                rho[k] = np.inf     # the residual or the step overflows: the stage ranks first
+            else:
+                rho[k] = num / den if num > EPS_RHO * scale else 0.0
             s.F_w = F_w
             s.phi = phi[k].copy()
             s.g = gv[k].copy()
@@ -598,6 +627,7 @@ class ReferenceDopus:
         self.term = term
         self.rho = rho
         self.recomputed = sorted(chosen + [self.N - 1])
+        self._qp_ready, self._prepare_due, self._shifted = True, False, False
         self.status = status_code("ok")
 
     # ------------------------------------------------------------------ section 9: health

@@ -30,7 +30,7 @@ from typing import Dict, Optional
 import numpy as np
 
 from .. import settings, vocabulary
-from ..errors import DopusError, status_code
+from ..errors import DopusError, status_code, qp_failure_text
 from ..settings import SettingError
 
 __all__ = ["CSolver", "DopusError", "STATUS", "QP_STATUS", "PHASES", "load_library", "build_for"]
@@ -46,6 +46,7 @@ PHASES = vocabulary.phases()
 STATUS_OK, STATUS_QP = status_code("ok"), status_code("qp")
 STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = status_code("nonfinite_input"), status_code("invalid_argument")
 _DIMS = ("N", "nx", "nu", "nw", "np", "ng", "nr", "ne", "has_gn", "has_nominal")
+_INT_MAX = 2**31 - 1   # the largest C int (qp_max_iter)
 
 
 # ---------------------------------------------------------------------------------- build
@@ -138,7 +139,7 @@ class CSolver:
                  reg_eps: float = settings.DEFAULTS["reg_eps"], qp_tol: float = settings.DEFAULTS["qp_tol"],
                  lib_dir=None, qp_max_iter: Optional[int] = None,
                  cost_hessian: str = settings.DEFAULTS["cost_hessian"],
-                 lm: Optional[float] = settings.DEFAULTS["lm"]):
+                 lm: Optional[float] = settings.DEFAULTS["lm"], qp_warm_start: Optional[bool] = None):
         if lib_dir is None:
             if disc is None:
                 raise ValueError("CSolver needs a Discretized problem or lib_dir (a generated folder)")
@@ -179,6 +180,8 @@ class CSolver:
         self.set_cost_hessian(cost_hessian)
         if lm is not None:  # None: the generated default (the OCP file's options(lm=...))
             self.set_levenberg_marquardt(lm)
+        if qp_warm_start is not None:  # None: the runtime's default (on)
+            self.set_qp_warm_start(qp_warm_start)
 
     @classmethod
     def from_dir(cls, path, disc=None, **settings) -> "CSolver":
@@ -194,6 +197,17 @@ class CSolver:
         Python setters; returns the C status (for tests of the C side's own checks)."""
         return int(self._c(fname)(self._s, *args))
 
+    def state_bytes(self) -> bytes:
+        """A copy of the whole solver struct (settings and iterate included)."""
+        return bytes(self._ffi.buffer(self._mem, self.sizeof))
+
+    def copy_state_from(self, other: "CSolver") -> None:
+        """Copy the whole solver state of another handle on the same library, settings and
+        iterate included (the two then face the same QP)."""
+        if other.lib_dir != self.lib_dir or other.sizeof != self.sizeof:
+            raise ValueError("copy_state_from: the two handles load different libraries")
+        self._ffi.memmove(self._mem, other.state_bytes(), self.sizeof)
+
     def _status_text(self, status: int) -> str:
         return self._ffi.string(self._c("status_string")(int(status))).decode()
 
@@ -206,8 +220,9 @@ class CSolver:
         msg = f"{self.name}: {what}: {self._status_text(status)} (status {status})"
         if status == STATUS_QP:
             qp_status = int(self._c("get_qp_status")(self._s))
-            msg += (f"; QP status {qp_status} ({self.enums['dopus_qp_status'].name(qp_status)}) after "
-                    f"{int(self._c('get_qp_iterations')(self._s))} iterations")
+            msg += "; " + qp_failure_text(self.enums["dopus_qp_status"].name(qp_status),
+                                          int(self._c("get_qp_iterations")(self._s)),
+                                          int(self._c("get_qp_max_iter")(self._s)), qp_status)
         raise DopusError(msg, status, qp_status)
 
     def _bad(self, message: str, status: int = STATUS_INVALID_ARGUMENT):
@@ -316,8 +331,24 @@ class CSolver:
         self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")
 
     def set_qp_max_iter(self, max_iter: int) -> None:
-        self._check(self._c("set_qp_max_iter")(self._s, self._setting(settings.count, "qp_max_iter", max_iter, 1)),
+        self._check(self._c("set_qp_max_iter")(self._s, self._setting(settings.count, "qp_max_iter", max_iter, 1,
+                                                                      _INT_MAX)),
                     "qp_max_iter")
+
+    def set_qp_warm_start(self, on: bool) -> None:
+        """Warm start of the QP in feedback (default on), with a cold retry when it fails."""
+        if not isinstance(on, (bool, np.bool_)) and on not in (0, 1):
+            self._bad(f"qp_warm_start must be True or False, got {on!r}")
+        self._check(self._c("set_qp_warm_start")(self._s, int(bool(on))), "qp_warm_start")
+
+    @property
+    def qp_warm_start(self) -> bool:
+        return bool(self._c("get_qp_warm_start")(self._s))
+
+    @property
+    def qp_cold_retry(self) -> bool:
+        """True when the last feedback's warm-started QP failed and the cold retry ran."""
+        return bool(self._c("get_qp_cold_retry")(self._s))
 
     def set_parameters(self, p) -> None:
         """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
@@ -549,6 +580,10 @@ class CSolver:
     def set_clock(self, clock=None) -> None:
         """Replace the C clock by a Python callable returning seconds (None: the default).
         The callback is kept alive by the handle."""
+        if clock is not None and not callable(clock):
+            self.status = STATUS_INVALID_ARGUMENT
+            raise DopusError(f"{self.name}: set_clock: expected a callable returning seconds (or None), got {clock!r}",
+                             STATUS_INVALID_ARGUMENT)
         if clock is None:
             self._clock_cb = None
             self._c("set_clock")(self._s, self._ffi.NULL, self._ffi.NULL)

@@ -17,15 +17,22 @@ JSON written by :func:`run_study`::
 
     {"problem": name, "N": N, "backend": "reference" | "c", "start": "cold" | "warm",
      "hessian": ..., "regularization": ..., "reg_eps": ..., "cost_hessian": "fresh" | "stored",
+     "qp_tol": ..., "qp_max_iter": ..., "tol": tol,
      "runs": [{"M": M, "kkt": [...], "stat": [...], "eq": [...], "ineq": [...], "comp": [...],
-               "status": "ok" | message}, ...],
-     "solution": {"x": [[...]], "u": [[...]], "objective": J}}
+               "status": "converged" | "not converged" | "failed", "message": why or null,
+               "iterations_to_tol": i or null}, ...],
+     "solution": {"M": M, "status": ..., "converged": bool, "kkt": last KKT,
+                  "x": [[...]], "u": [[...]], "objective": J} or null}
 
 ``kkt[i]`` is the measure after ``i`` iterations (``kkt[0]``: the initial point with
-``xhat_fixed``); a run that fails stops early and says why in ``status``; non-finite
-numbers (a diverged run) are written as ``null``. ``solution``
-is the last iterate of the full-RTI run (``M = N-1``; if the list has no full run, of
-the run with the largest ``M``).
+``xhat_fixed``). A run is ``converged`` once ``kkt <= tol``, ``not converged`` if it ran
+every iteration without that, ``failed`` if a call of the backend failed or the measure
+became non-finite: it stops there and ``message`` says why (for an infeasible QP, with the
+stage-0 rows the state violates). Non-finite numbers are written as ``null``.
+``solution`` is the last iterate of a converged run: the full RTI (``M = N-1``) if it
+converged, else the converged run with the largest ``M``; when no run converged, of the
+full RTI (else the largest ``M``) among the runs that did not fail, with ``converged:
+false``; null when every run failed.
 
 ``cost_hessian`` (docs/algorithm.md section 4 step 5): ``fresh`` (default) refreshes the
 stage-cost Hessian of every stage in every iteration; ``stored`` is the paper's literal
@@ -136,13 +143,16 @@ def iterations_to(kkt: list, tol: float) -> Optional[int]:
 def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regularization: str = "none",
               reg_eps: float = 1e-4, backend_factory: Optional[Callable] = None,
               backend_name: Optional[str] = None, progress: Optional[Callable] = None,
-              cost_hessian: str = "fresh", lm="auto") -> dict:
+              cost_hessian: str = "fresh", lm="auto", qp_tol: Optional[float] = None,
+              qp_max_iter: Optional[int] = None, tol: float = 1e-8) -> dict:
     """Run the study; return the JSON structure of the module docstring.
 
     ``start``: a :class:`StartPoint` or ``"cold"`` / ``"warm"`` (see :func:`make_start`).
     ``backend_factory(disc, M=, mode="fixed", hessian=, regularization=, reg_eps=,
     cost_hessian=)`` builds a backend (default: :class:`~dopus_codegen.reference.dopus.ReferenceDopus`).
     ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
+    ``qp_tol``, ``qp_max_iter``: settings of the backend's QP solver (None: its own).
+    ``tol``: the KKT measure at which a run counts as converged.
     """
     from ..errors import DopusError
     from ..reference.dopus import ReferenceDopus
@@ -162,8 +172,8 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
     last_iterates = {}
     for run_index, M in enumerate(Ms):
         be = backend_factory(disc, M=M, mode="fixed", hessian=hessian, regularization=regularization,
-                             reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm)
-        rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "status": "ok"}
+                             reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm, **_qp_kwargs(qp_tol, qp_max_iter))
+        rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "status": None, "message": None}
 
         def record():
             k = be.kkt(start.xhat_fixed)
@@ -181,31 +191,87 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
                 if progress is not None:
                     progress(run_index, M, it, val)
                 if not math.isfinite(val):
-                    rec["status"] = f"non-finite KKT at iteration {it}"
+                    rec["status"], rec["message"] = FAILED, f"non-finite KKT measure at iteration {it}"
                     break
         except DopusError as exc:
-            rec["status"] = f"failed in iteration {len(rec['kkt'])}: {exc} (status {exc.status})"
+            it = len(rec["kkt"])
+            what = "init" if it == 0 else f"iteration {it}"
+            rec["status"] = FAILED
+            rec["message"] = f"in {what}: {exc} (status {exc.status} {exc.status_name})" \
+                + _infeasibility_note(disc, exc, start.xhat_fixed)
             if progress is not None:
                 progress(run_index, M, iters, float("nan"))
+        rec["iterations_to_tol"] = iterations_to(rec["kkt"], tol)
+        if rec["status"] is None:
+            rec["status"] = CONVERGED if rec["iterations_to_tol"] is not None else NOT_CONVERGED
         runs.append(rec)
         last_iterates[M] = (np.array(be.x, dtype=float), np.array(be.u, dtype=float))
-    Msol = disc.N - 1 if disc.N - 1 in last_iterates else max(last_iterates)
-    xs, us = last_iterates[Msol]
+    return {
+        "problem": disc.name, "N": int(disc.N), "backend": backend_name or getattr(backend_factory, "__name__", "custom"),
+        "start": start.label, "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
+        "cost_hessian": cost_hessian, "lm": lm if isinstance(lm, str) else float(lm), "qp_tol": qp_tol, "qp_max_iter": qp_max_iter,
+        "tol": float(tol), "runs": runs,
+        "solution": _solution(disc, runs, last_iterates),
+    }
+
+
+#: The status of a run: it reached the tolerance; it ran every iteration without reaching
+#: it; an iteration failed (an error of the backend or a non-finite KKT measure).
+CONVERGED, NOT_CONVERGED, FAILED = "converged", "not converged", "failed"
+
+
+def failed_runs(study: dict) -> list:
+    """The runs of a study whose status is ``failed``."""
+    return [r for r in study["runs"] if r["status"] == FAILED]
+
+
+def _qp_kwargs(qp_tol, qp_max_iter) -> dict:
+    out = {}
+    if qp_tol is not None:
+        out["qp_tol"] = qp_tol
+    if qp_max_iter is not None:
+        out["qp_max_iter"] = qp_max_iter
+    return out
+
+
+def _infeasibility_note(disc, exc, xhat) -> str:
+    """For an infeasible QP: the stage-0 rows the measured state violates (if any)."""
+    if exc.qp_status_name != "primal_infeasible":
+        return ""
+    from ..problem.checks import stage0_violations
+
+    try:
+        rows = stage0_violations(disc, xhat)
+    except Exception:  # noqa: BLE001 - the note is a help, never a second failure
+        return ""
+    return f"; the state violates at stage 0: {'; '.join(rows)}" if rows else ""
+
+
+def _solution(disc, runs, last_iterates):
+    """The last iterate of the full-RTI run if it converged, else of the converged run with
+    the largest M; if none converged, of the preferred run that did not fail, marked
+    ``converged: false``; None if every run failed."""
+    by_M = {r["M"]: r for r in runs}
+    order = sorted(by_M, key=lambda m: (m != disc.N - 1, -m))
+    pick = next((m for m in order if by_M[m]["status"] == CONVERGED), None)
+    if pick is None:
+        pick = next((m for m in order if by_M[m]["status"] != FAILED), None)
+    if pick is None:
+        return None
+    xs, us = last_iterates[pick]
     try:
         obj = objective(disc, xs, us)
     except Exception:  # noqa: BLE001 - a diverged iterate may not evaluate
         obj = float("nan")
-    return {
-        "problem": disc.name, "N": int(disc.N), "backend": backend_name or getattr(backend_factory, "__name__", "custom"),
-        "start": start.label, "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
-        "cost_hessian": cost_hessian, "lm": lm if isinstance(lm, str) else float(lm), "runs": runs,
-        "solution": {"M": int(Msol), "x": xs.tolist(), "u": us.tolist(), "objective": obj},
-    }
+    return {"M": int(pick), "status": by_M[pick]["status"], "converged": by_M[pick]["status"] == CONVERGED,
+            "kkt": by_M[pick]["kkt"][-1], "x": xs.tolist(), "u": us.tolist(), "objective": obj}
 
 
-def format_table(study: dict, tol: float = 1e-8) -> str:
-    """Plain-text summary: per M the iterations to ``tol`` and the last KKT."""
+def format_table(study: dict, tol: Optional[float] = None) -> str:
+    """Plain-text summary: per M the iterations to ``tol`` (default: the study's), the last
+    KKT, the status and, for a failed run, why."""
     N = study["N"]
+    tol = study.get("tol", 1e-8) if tol is None else tol
     lines = [f"{study['problem']}: {study['start']} start, {study['hessian']} Hessian, "
              f"regularization {study['regularization']}, cost Hessian {study.get('cost_hessian', 'fresh')}, "
              f"backend {study['backend']}",
@@ -214,7 +280,13 @@ def format_table(study: dict, tol: float = 1e-8) -> str:
         it = iterations_to(r["kkt"], tol)
         label = f"{r['M']} (full)" if r["M"] == N - 1 else str(r["M"])
         last = r["kkt"][-1] if r["kkt"] else float("nan")
-        lines.append(f"{label:>8} {('-' if it is None else str(it)):>14} {last:10.2e}  {r['status']}")
+        status = r["status"] + (f": {r['message']}" if r.get("message") else "")
+        lines.append(f"{label:>8} {('-' if it is None else str(it)):>14} {last:10.2e}  {status}")
+    sol = study.get("solution")
+    if sol is None:
+        lines.append("solution: none (every run failed)")
+    else:
+        lines.append(f"solution: the last iterate of M = {sol['M']} ({sol['status']}, KKT {sol['kkt']:.2e})")
     return "\n".join(lines)
 
 
@@ -231,8 +303,8 @@ def plot_study(study: dict, path: str) -> None:
         kk = np.maximum(np.array(r["kkt"], dtype=float), 1e-16)  # exact zeros cannot be drawn on a log axis
         label = f"M = {r['M']} (full RTI)" if r["M"] == N - 1 else f"M = {r['M']}"
         ax.semilogy(np.arange(kk.size), kk, marker="o", markersize=3, label=label)
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("KKT measure (inf-norm)")
+    ax.set_xlabel("iteration [-]")
+    ax.set_ylabel("KKT measure (inf-norm) [mixed units]")
     ax.set_title(f"{study['problem']}: DOPUS convergence, {study['start']} start, {study['hessian']} Hessian, "
                  f"{study.get('cost_hessian', 'fresh')} cost Hessian", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
@@ -264,7 +336,8 @@ def effective_settings(declared: dict, m_list, **cli):
     file's ``declared`` options over the defaults; the M list is the command line's, else
     the file's M, else :data:`DEFAULT_M_LIST`. Returns ``(values, sources, m_list,
     m_is_default)``."""
-    values, sources = settings.resolve(declared, dict(cli, M=None))
+    values, sources = settings.resolve(declared, dict(cli, M=None),
+                                       names=settings.SOLVER_SETTINGS + ("qp_tol", "qp_max_iter"))
     if m_list is not None:
         sources["M"] = settings.SOURCE_CLI
         return values, sources, list(m_list), False
@@ -276,33 +349,43 @@ def effective_settings(declared: dict, m_list, **cli):
 
 
 def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularization=None, reg_eps=None,
-                     backend="reference", json_out=None, plot_out=None, cost_hessian=None, lm=None) -> dict:
-    """The body of ``dopus-gen converge`` (errors become click exceptions). A setting given as
-    None comes from the OCP file's ``options(...)``, else from the defaults of
-    :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from."""
+                     backend="reference", json_out=None, plot_out=None, cost_hessian=None, lm=None,
+                     qp_tol=None, qp_max_iter=None, tol=1e-8) -> dict:
+    """The body of ``dopus-gen converge`` (bad input raises OcpError, ValueError or
+    RuntimeError with a message; the command line turns them into one line). A setting given
+    as None comes from the OCP file's ``options(...)``, else from the defaults of
+    :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from. The
+    output paths are checked before the study runs."""
     import click
 
+    from ..outputs import check_output_file
+    from ..problem.checks import check_initial_state
     from ..problem.derivatives import build_functions
-    from ..problem.ocp import OcpError, load_ocp
+    from ..problem.ocp import load_ocp
 
-    try:
-        factory = backend_factory(backend)
-        ocp = load_ocp(ocp_file)
-        values, sources, m_list, m_default = effective_settings(
-            ocp.declared_options(), m_list, hessian=hessian, regularization=regularization, reg_eps=reg_eps,
-            cost_hessian=cost_hessian, lm=lm)
-        disc = build_functions(ocp)
-        if values["hessian"] == "gauss-newton" and disc.stage_hess_gn is None:
-            raise ValueError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
-                             f"(ocp.stage_least_squares)")
-        Ms = _cli_M_list(m_list, disc.N, m_default)
-        click.echo(f"{disc.name}: settings: M {','.join(str(m) for m in Ms)} ({sources['M']}), "
-                   + settings.describe({k: v for k, v in values.items() if k != "M"}, sources), err=True)
-        click.echo(f"{disc.name}: preparing the {start} start ...", err=True)
-        sp = make_start(disc, start)
-    except (OcpError, ValueError, RuntimeError) as exc:
-        raise click.ClickException(str(exc)) from None
+    if json_out:
+        check_output_file(json_out, "--json")
+    if plot_out:
+        check_output_file(plot_out, "--plot")
+    factory = backend_factory(backend)
+    ocp = load_ocp(ocp_file)
+    values, sources, m_list, m_default = effective_settings(
+        ocp.declared_options(), m_list, hessian=hessian, regularization=regularization, reg_eps=reg_eps,
+        cost_hessian=cost_hessian, lm=lm, qp_tol=qp_tol, qp_max_iter=qp_max_iter)
+    disc = build_functions(ocp)
+    if values["hessian"] == "gauss-newton" and disc.stage_hess_gn is None:
+        raise ValueError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
+                         f"(ocp.stage_least_squares)")
+    Ms = _cli_M_list(m_list, disc.N, m_default)
+    click.echo(f"{disc.name}: settings: M {','.join(str(m) for m in Ms)} ({sources['M']}), "
+               + settings.describe({k: v for k, v in values.items() if k != "M"}, sources), err=True)
+    check_initial_state(disc, disc.x0, "the initial state")
+    click.echo(f"{disc.name}: preparing the {start} start ...", err=True)
+    sp = make_start(disc, start)
+    if start == "warm":
+        check_initial_state(disc, sp.xhat_fixed, "the disturbed initial state (--start warm)")
     hessian, regularization, reg_eps = values["hessian"], values["regularization"], values["reg_eps"]
+    qp_tol, qp_max_iter = values["qp_tol"], values["qp_max_iter"]
     cost_hessian, lm = values["cost_hessian"], values["lm"]
 
     total = len(Ms) * iters
@@ -317,13 +400,11 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularizatio
                 bar.update(target - done["n"])
                 done["n"] = target
 
-        try:
-            study = run_study(disc, Ms, iters, sp, hessian=hessian, regularization=regularization,
-                              reg_eps=reg_eps, backend_factory=factory, backend_name=backend,
-                              progress=progress, cost_hessian=cost_hessian, lm=lm)
-        except (ValueError, RuntimeError) as exc:
-            raise click.ClickException(str(exc)) from None
-    study["sources"] = {k: sources[k] for k in ("M", *settings.SOLVER_SETTINGS) if k in sources}
+        study = run_study(disc, Ms, iters, sp, hessian=hessian, regularization=regularization,
+                          reg_eps=reg_eps, backend_factory=factory, backend_name=backend,
+                          progress=progress, cost_hessian=cost_hessian, lm=lm, qp_tol=qp_tol,
+                          qp_max_iter=qp_max_iter, tol=tol)
+    study["sources"] = {k: sources[k] for k in ("M", *settings.RUNTIME_SETTINGS) if k in sources}
     click.echo(format_table(study))
     if json_out:
         with open(json_out, "w") as fh:

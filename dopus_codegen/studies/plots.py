@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["plot_sil", "plot_signals", "plot_kkt", "plot_controls", "plot_plane", "plot_recomputed",
-           "plot_timing"]
+           "plot_timing", "yscale_for", "NO_UNIT", "KKT_LABEL"]
 
 _STYLES = [dict(color="C0", lw=1.6, ls="-"), dict(color="C3", lw=1.3, ls="--"),
            dict(color="C2", lw=1.3, ls="-."), dict(color="C4", lw=1.3, ls=":")]
@@ -60,11 +60,46 @@ def _legend_above(ax):
                   fontsize=8, frameon=False, borderaxespad=0.0)
 
 
-def _label_with_unit(name: str, default_unit: str = "") -> str:
-    """Axis label: a name that already carries '[unit]' is kept as it is."""
-    if re.search(r"\[.*\]", name) or not default_unit:
+#: The unit written on an axis whose quantity has no unit declared (``ocp.scenario(units=...)``).
+NO_UNIT = "unit not declared"
+#: The KKT measure is the infinity norm over residuals of different units.
+KKT_LABEL = "KKT measure (inf-norm) [mixed units]"
+
+
+def _unit_of(runs, name: str):
+    """The declared unit of a signal, state or control (``name`` or ``name[i]``), else None."""
+    base = re.sub(r"\[\d+\]$", "", name)
+    for run in runs:
+        units = run.get("settings", {}).get("units") or {}
+        for key in (name, base):
+            if key in units:
+                return units[key]
+    return None
+
+
+def _label_with_unit(name: str, unit=None) -> str:
+    """Axis label ``name [unit]``: a name that already ends in '[unit]' is kept as it is; a
+    quantity without a declared unit says so."""
+    if re.search(r"\[[^\]]*[^\d\]][^\]]*\]$", name):
         return name
-    return f"{name} [{default_unit}]"
+    return f"{name} [{unit or NO_UNIT}]"
+
+
+def yscale_for(values, log=None):
+    """(scale, options) of a y axis for ``values``: a signal with both signs is never drawn on
+    a log axis (its negative part would vanish): it gets a symmetric-log axis when it spans
+    more than three decades, else a linear one. ``log`` True/False forces the choice between
+    a (symmetric-)log and a linear axis; None decides by the span."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    mag = np.abs(v[v != 0])
+    wide = mag.size > 0 and np.max(mag) / max(np.min(mag), 1e-300) > 1e3
+    use_log = wide if log is None else bool(log)
+    if not use_log or mag.size == 0:
+        return "linear", {}
+    if np.any(v < 0):
+        return "symlog", {"linthresh": float(max(np.percentile(mag, 2), 1e-300))}
+    return "log", {}
 
 
 def _suptitle(fig, title, what):
@@ -89,27 +124,31 @@ def _scalar_signals(runs):
 def plot_signals(runs, path, title=None, log=None):
     """Scalar scenario signals against time (paper figure 2: the path deviation).
 
-    ``log``: logarithmic y axis; by default when a signal spans more than three decades.
+    ``log``: logarithmic y axis; by default when a signal spans more than three decades. A
+    signal with both signs gets a symmetric-log axis instead (:func:`yscale_for`).
     """
     names = _scalar_signals(runs)
     if not names:
         return None
     fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.2 + 1.8 * len(names)), sharex=True, squeeze=False)
     for ax, name in zip(axes[:, 0], names):
-        pos = []
+        vals = []
         for i, run in enumerate(runs):
             if name not in run["signals"]:
                 continue
             v = _arr(run["signals"][name])
             ax.plot(run["t"], v, label=run["label"], **_style(i))
-            pos.extend(np.abs(v[np.isfinite(v) & (v != 0)]))
-        use_log = log if log is not None else (len(pos) > 0 and np.max(pos) / max(np.min(pos), 1e-300) > 1e3)
-        if use_log:
+            vals.extend(v[np.isfinite(v)])
+        scale, opts = yscale_for(vals, log)
+        if scale == "log":
             ax.set_yscale("log")
             # The start (often exactly on the reference) would stretch the axis over many
             # decades; the axis starts just below the bulk of the values.
-            ax.set_ylim(bottom=np.percentile(pos, 2) / 3)
-        ax.set_ylabel(name)
+            pos = np.abs(np.asarray(vals))
+            ax.set_ylim(bottom=np.percentile(pos[pos > 0], 2) / 3)
+        elif scale == "symlog":
+            ax.set_yscale("symlog", **opts)
+        ax.set_ylabel(_label_with_unit(name, _unit_of(runs, name)))
         ax.grid(True, which="both", alpha=0.3)
         _mark_events(ax, runs)
         _legend_above(ax)
@@ -144,7 +183,7 @@ def plot_kkt(runs, path, title=None, cap=1e4):
         lo = ax.get_ylim()[0]
         ax.set_ylim(lo, cap * 3)
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("KKT measure (inf-norm)")
+    ax.set_ylabel(KKT_LABEL)
     ax.grid(True, which="both", alpha=0.3)
     _mark_events(ax, runs)
     _legend_above(ax)
@@ -179,7 +218,7 @@ def plot_controls(runs, path, title=None, names=None):
         if finite:
             span = max(hi, *finite) - min(lo, *finite)
             ax.set_ylim(min(lo, *finite) - 0.05 * span, max(hi, *finite) + 0.05 * span)
-        ax.set_ylabel(names[j])
+        ax.set_ylabel(_label_with_unit(names[j], _unit_of(runs, names[j])))
         ax.grid(True, alpha=0.3)
         _mark_events(ax, runs, text=(j == 0))
         if j == 0:
@@ -212,8 +251,9 @@ def plot_plane(runs, path, title=None, plane=None):
                                 xytext=(8, 8), textcoords="offset points", fontsize=8)
     ax.plot(ref[0, 0], ref[0, 1], "k^", ms=7, label="start")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel(f"{path_name}[0]")
-    ax.set_ylabel(f"{path_name}[1]")
+    unit = _unit_of(runs, path_name)
+    ax.set_xlabel(_label_with_unit(f"{path_name}[0]", unit))
+    ax.set_ylabel(_label_with_unit(f"{path_name}[1]", unit))
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     _suptitle(fig, title, f"{path_name} in the plane against {ref_name}")
@@ -233,7 +273,7 @@ def plot_recomputed(runs, path, title=None):
             img[list(stages), j] = 1.0
         ax.imshow(img, aspect="auto", origin="lower", interpolation="nearest", cmap="Greys", vmin=0, vmax=1,
                   extent=(t[0] - 0.5 * dt if len(t) else 0, (t[-1] + 0.5 * dt) if len(t) else 1, -0.5, N - 0.5))
-        ax.set_ylabel("stage k")
+        ax.set_ylabel("stage k [-]")
         counts = [len(s) for s in run["recomputed"]]
         ax.set_title(f"{run['label']}: {np.mean(counts):.2f} stages per instant on average "
                      f"(stage N-1 = {N - 1} is always fresh)", fontsize=9)
@@ -278,6 +318,7 @@ def plot_timing(runs, path, title=None):
                         ha="center", fontsize=8)
     ax_bar.set_xticks(range(len(runs)))
     ax_bar.set_xticklabels([f"{r['label']}\n({r['settings']['backend']})" for r in runs], fontsize=8)
+    ax_bar.set_xlabel("run (backend) [-]")
     ax_bar.set_ylabel("median time per iteration [us]")
     ax_bar.set_title("median by phase (backend timers)", fontsize=9)
     ax_bar.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0), borderaxespad=0.2)

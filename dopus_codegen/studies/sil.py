@@ -58,10 +58,15 @@ class SilError(RuntimeError):
 # --------------------------------------------------------------------------- backends
 def make_backend(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
                  regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
-                 lm="auto"):
-    """A receding-horizon backend (docs/algorithm.md section 7) by name: 'c' or 'reference'."""
+                 lm="auto", qp_tol: float | None = None, qp_max_iter: int | None = None):
+    """A receding-horizon backend (docs/algorithm.md section 7) by name: 'c' or 'reference'.
+    ``qp_tol``, ``qp_max_iter``: None keeps the backend's own; ``lm``: 'auto' or a number."""
     kwargs = dict(M=M, mode="receding", hessian=hessian, regularization=regularization, reg_eps=reg_eps,
                   cost_hessian=cost_hessian, lm=lm)
+    if qp_tol is not None:
+        kwargs["qp_tol"] = qp_tol
+    if qp_max_iter is not None:
+        kwargs["qp_max_iter"] = qp_max_iter
     if backend == "reference":
         from ..reference.dopus import ReferenceDopus
         return ReferenceDopus(disc, **kwargs)
@@ -114,7 +119,8 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                     regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
                     lm: float | None = None, duration: float | None = None,
                     guess=None, xhat0=None, progress: bool = False, label: str | None = None,
-                    backend_obj=None, sources: dict | None = None) -> dict:
+                    backend_obj=None, sources: dict | None = None, qp_tol: float | None = None,
+                    qp_max_iter: int | None = None) -> dict:
     """Run the closed loop of the OCP's scenario and return the record of the run.
 
     ``guess``: the initialisation of the controller (default: the offline solve at the
@@ -124,8 +130,11 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
 
     The record: ``t, x, u, kkt, kkt_parts, status, signals, recomputed, timing_us, settings,
     events`` (one entry per sampling instant; ``x`` is the measured state, ``u`` the applied
-    control, ``kkt`` the KKT measure right after feedback), and ``aborted`` (None or why the
-    run stopped early).
+    control, ``kkt`` the KKT measure right after feedback), ``aborted`` (None or why the
+    run stopped early) and ``result``: ``{"status": "completed" | "aborted", "instants":
+    finished, "instants_planned": n, "failed_instants": instants with a non-zero status,
+    "first_failure": None or {"t", "message"} of the first failed feedback (for an infeasible
+    QP with the stage-0 rows the measured state violates)}``.
     """
     spec, duration, n_steps, M_eff, label = _scenario_of(disc, duration, M, label)
     if lm is None:
@@ -143,7 +152,8 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
         guess, _info = solve_ocp(disc, x)
     if backend_obj is None:
         backend_obj = _make_backend_for_run(disc, backend, M=M_eff, hessian=hessian, regularization=regularization,
-                                            reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm)
+                                            reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm,
+                                            qp_tol=qp_tol, qp_max_iter=qp_max_iter)
     backend_obj.init(x, guess)
     rec = _Record(spec, disc)
     rec.snap = dict(getattr(backend_obj, "timings", {}) or {})
@@ -155,14 +165,22 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                     "cost_hessian": str(getattr(backend_obj, "cost_hessian", cost_hessian)),
                     "lm": float(getattr(backend_obj, "lm", 0.0 if isinstance(lm, str) else lm)),
                     "lm_setting": lm if isinstance(lm, str) else float(lm),
+                    "qp_tol": float(getattr(backend_obj, "qp_tol", qp_tol)),
+                    "qp_max_iter": qp_max_iter,
                     "plant": "CVODES (Adams, reltol = abstol = 1e-10)",
                     "lbu": list(loop.lbu), "ubu": list(loop.ubu),
                     "u_labels": list(disc.data.control_names) or None,
                     "x_labels": list(disc.data.state_names) or None,
-                    "plane": list(_plane_signals(spec)) if _plane_signals(spec) else None}
+                    "plane": list(_plane_signals(spec)) if _plane_signals(spec) else None,
+                    "units": dict(getattr(spec, "units", {}) or {})}
     if sources is not None:
         settings_rec["sources"] = dict(sources)
-    return json_ready(rec.as_run(label, events, settings_rec, loop.aborted))
+    run = rec.as_run(label, events, settings_rec, loop.aborted)
+    run["result"] = {"status": "aborted" if loop.aborted else "completed", "instants": len(rec.status),
+                     "instants_planned": n_steps,
+                     "failed_instants": int(sum(1 for st in rec.status if st != 0)),
+                     "first_failure": loop.first_failure}
+    return json_ready(run)
 
 
 def _scenario_of(disc, duration, M, label):
@@ -202,6 +220,7 @@ class _Record:
         self.t, self.x, self.u, self.kkt, self.parts, self.status, self.recomputed = [], [], [], [], [], [], []
         self.signals = {name: [] for name in spec.signals}
         self.qp_iterations = []
+        self.qp_cold_retry = []
         self.timing: dict[str, list] = {"feedback": [], "prepare": [], "total": []}
         self.phase_timing: dict[str, list] = {}  # the backend's own phase timers
         self.snap: dict = {}
@@ -242,6 +261,7 @@ class _Record:
                         for k, vals in self.signals.items()},
             "recomputed": self.recomputed,
             "qp_iterations": self.qp_iterations[:len(self.status)],
+            "qp_cold_retry": self.qp_cold_retry[:len(self.status)],
             "timing_us": {"feedback": self.timing["feedback"], "prepare": self.timing["prepare"],
                           "total": self.timing["total"],
                           **{f"phase:{k}": v for k, v in self.phase_timing.items()}},
@@ -261,6 +281,8 @@ class _Loop:
         self.ubu = np.asarray(disc.ubu, dtype=float).reshape(-1)
         self.ev_idx = 0
         self.aborted = None
+        self.disc = disc
+        self.first_failure = None   # {"t", "message"} of the first failed feedback
 
     def run(self, x, n_steps, progress, label):
         bar = None
@@ -289,7 +311,10 @@ class _Loop:
         x = self.events_until(x, t_i + _ON_GRID * self.dt)
         xhat = x.copy()
         u0, status, t_fb = self.feedback(xhat)
+        if status != 0 and self.first_failure is None:
+            self.first_failure = {"t": t_i, "message": self._failure_text(xhat)}
         self.rec.qp_iterations.append(int(getattr(self.ctrl, "qp_iterations", 0) or 0))
+        self.rec.qp_cold_retry.append(bool(getattr(self.ctrl, "qp_cold_retry", False)))
         phases = _split_phases("feedback", _changed(self.rec.snap, dict(getattr(self.ctrl, "timings", {}) or {})))
         kkt, status = self.kkt(xhat, status)
         # A backend may time its KKT evaluation too; that is not part of the iteration.
@@ -314,10 +339,12 @@ class _Loop:
         """u0 of the controller (timed); a failed feedback applies the first control of the
         current plan and records the status."""
         status = 0
+        self.last_error = None
         t0 = time.perf_counter()
         try:
             u0 = np.asarray(self.ctrl.feedback(xhat), dtype=float).reshape(-1)
         except DopusError as err:
+            self.last_error = err
             status = _status_of(err)
             u0 = np.asarray(self.ctrl.u, dtype=float)[0].copy()
         t_fb = time.perf_counter() - t0
@@ -325,6 +352,24 @@ class _Loop:
             u0 = np.clip(np.nan_to_num(np.asarray(self.ctrl.u, dtype=float)[0]), self.lbu, self.ubu)
             status = status or -1
         return u0, status, t_fb
+
+    def _failure_text(self, xhat) -> str:
+        """Why the feedback of an instant failed; for an infeasible QP, with the stage-0 rows
+        the measured state violates."""
+        err = self.last_error
+        if err is None:
+            return "the feedback returned a non-finite control"
+        text = str(err)
+        if getattr(err, "qp_status_name", None) == "primal_infeasible":
+            from ..problem.checks import stage0_violations
+
+            try:
+                rows = stage0_violations(self.disc, xhat, self.p)
+            except Exception:  # noqa: BLE001 - the note is a help, never a second failure
+                rows = []
+            if rows:
+                text += "; the measured state violates at stage 0: " + "; ".join(rows)
+        return text
 
     def kkt(self, xhat, status):
         try:
@@ -425,7 +470,8 @@ def summarize(run, settle: float = 0.2) -> dict:
     not counted in "max KKT after settling".
     """
     t = np.asarray(run["t"], dtype=float)
-    out = {"label": run["label"], "segments": [], "aborted": run.get("aborted")}
+    out = {"label": run["label"], "segments": [], "aborted": run.get("aborted"),
+           "first_failure": (run.get("result") or {}).get("first_failure")}
     for name, vals in run["signals"].items():
         v = np.asarray([np.nan if a is None else a for a in vals], dtype=float)
         if v.ndim != 1:
@@ -457,6 +503,13 @@ def summarize(run, settle: float = 0.2) -> dict:
     return out
 
 
+def _num(v, fmt: str) -> str:
+    """A number of the summary, or '-' right-aligned where there is none (no instant of a
+    stretch, an aborted run)."""
+    width = int(fmt.split(".")[0])
+    return f"{v:{fmt}}" if isinstance(v, (int, float)) and math.isfinite(v) else f"{'-':>{width}}"
+
+
 def format_summary(summaries) -> str:
     """The summary table of one or more runs as text."""
     lines = []
@@ -469,20 +522,23 @@ def format_summary(summaries) -> str:
         lines += [head, "-" * len(head)]
         for r, seg in sig_rows:
             lines.append(f"{r:<{w_run}}  {seg['signal']:<{w_sig}}  {seg['segment']:<{w_seg}}  "
-                         f"{seg['max']:10.3e}  {seg['rms']:10.3e}")
+                         f"{_num(seg['max'], '10.3e')}  {_num(seg['rms'], '10.3e')}")
         lines.append("")
     w_run = max([len("run")] + [len(s["label"]) for s in summaries])
     head = (f"{'run':<{w_run}}  {'max KKT settled':>15}  {'QP fail':>7}  {'u bound viol':>12}  "
             f"{'median it [us]':>14}  {'max it [us]':>11}  {'median fb [us]':>14}")
     lines += [head, "-" * len(head)]
     for s in summaries:
-        lines.append(f"{s['label']:<{w_run}}  {s['kkt_max_settled']:15.3e}  {s['qp_failures']:7d}  "
-                     f"{s['bound_violation']:12.2e}  {s['time_median_us']:14.1f}  {s['time_max_us']:11.1f}  "
-                     f"{s['feedback_median_us']:14.1f}")
+        lines.append(f"{s['label']:<{w_run}}  {_num(s['kkt_max_settled'], '15.3e')}  {s['qp_failures']:7d}  "
+                     f"{_num(s['bound_violation'], '12.2e')}  {_num(s['time_median_us'], '14.1f')}  "
+                     f"{_num(s['time_max_us'], '11.1f')}  {_num(s['feedback_median_us'], '14.1f')}")
     if summaries:
         lines.append(f"(max KKT settled: excluding the first {summaries[0]['settle']} s after the start "
                      f"and after each event; it = feedback + prepare, fb = feedback alone)")
     for s in summaries:
+        if s.get("first_failure"):
+            ff = s["first_failure"]
+            lines.append(f"{s['label']}: first failed instant at t = {ff['t']:.4g} s: {ff['message']}")
         if s.get("aborted"):
             lines.append(f"{s['label']}: ABORTED: {s['aborted']}")
     return "\n".join(lines)
@@ -500,12 +556,20 @@ def write_json(runs, path) -> None:
 # --------------------------------------------------------------------------- CLI
 def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, compare="none", hessian=None,
                 regularization=None, reg_eps=None, backend="c", cost_hessian=None, echo=None, progress=True,
-                lm=None) -> list:
+                lm=None, qp_tol=None, qp_max_iter=None) -> list:
     """The ``dopus-gen sil`` command: runs, summary table, JSON and plots. A setting given as
     None comes from the OCP file's ``options(...)``, else from the defaults of
-    :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from."""
+    :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from. The
+    output paths and the scenario's initial state are checked before any run starts."""
+    from ..outputs import check_output_dir, check_output_file
+    from ..problem.checks import check_initial_state
     from ..problem.ocp import load_ocp
     from ..problem.derivatives import build_functions
+
+    if json_out:
+        check_output_file(json_out, "--json")
+    if plot_dir:
+        check_output_dir(plot_dir, "--plot-dir")
 
     if echo is None:
         import click
@@ -514,7 +578,8 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
     ocp = load_ocp(ocp_file)
     try:
         values, sources = settings.resolve(ocp.declared_options(), dict(
-            M=M, hessian=hessian, regularization=regularization, reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm))
+            M=M, hessian=hessian, regularization=regularization, reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm,
+            qp_tol=qp_tol, qp_max_iter=qp_max_iter), names=settings.SOLVER_SETTINGS + ("qp_tol", "qp_max_iter"))
     except settings.SettingError as exc:
         raise SilError(f"{ocp_file}: {exc}") from None
     disc = build_functions(ocp)
@@ -526,6 +591,7 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
     spec = disc.scenario.closed_loop
     x0 = np.array(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
     echo(f"settings: {settings.describe(values, sources)}", err=True)
+    check_initial_state(disc, x0, "the scenario's initial state")
 
     from ..reference.offline import solve_ocp
     guess, info = solve_ocp(disc, x0)
@@ -547,13 +613,15 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
         run = run_closed_loop(disc, backend=backend, M=m, hessian=values["hessian"],
                               regularization=values["regularization"], reg_eps=values["reg_eps"],
                               cost_hessian=values["cost_hessian"], lm=values["lm"], duration=duration, guess=guess,
-                              progress=progress, label=label, sources=src)
+                              progress=progress, label=label, sources=src, qp_tol=values["qp_tol"],
+                              qp_max_iter=values["qp_max_iter"])
         runs.append(run)
     summaries = [summarize(r) for r in runs]
     echo(format_summary(summaries))
     for r in runs:
         st = r["settings"]
-        echo(f"{r['label']}: " + settings.describe({k: st[k] for k in settings.SOLVER_SETTINGS}, st["sources"]))
+        names = [k for k in settings.RUNTIME_SETTINGS if k in st and k in st["sources"]]
+        echo(f"{r['label']}: " + settings.describe({k: st[k] for k in names}, st["sources"]))
     if json_out:
         write_json(runs, json_out)
         echo(f"JSON: {json_out}")

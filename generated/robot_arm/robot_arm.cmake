@@ -21,8 +21,11 @@ add_library(robot_arm STATIC
 )
 target_include_directories(robot_arm PUBLIC "${ROBOT_ARM_DIR}")
 set_target_properties(robot_arm PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON C_EXTENSIONS OFF)
+# Optimisation flags of the library (default -O3, as `dopus-gen build`; no -march):
+# set ROBOT_ARM_OPT before include(), e.g. "-O3;-mcpu=cortex-m7;-mfpu=fpv5-d16;-mfloat-abi=hard".
+set(ROBOT_ARM_OPT "-O3" CACHE STRING "optimisation flags of the robot_arm library")
 if(CMAKE_C_COMPILER_ID MATCHES "GNU|Clang")
-    target_compile_options(robot_arm PRIVATE -Wall -Wextra -Werror -pedantic)
+    target_compile_options(robot_arm PRIVATE -Wall -Wextra -Werror -pedantic ${ROBOT_ARM_OPT})
 endif()
 find_library(ROBOT_ARM_LIBM m)
 if(ROBOT_ARM_LIBM)

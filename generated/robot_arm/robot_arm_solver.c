@@ -94,6 +94,8 @@ const char *robot_arm_status_string(int status)
         return "the eigen-decomposition of a Hessian block did not converge";
     case ROBOT_ARM_ERR_DIVERGED:
         return "the step diverged (outside the problem's scale; no step, fallback control returned)";
+    case ROBOT_ARM_ERR_ALREADY_PREPARED:
+        return "already prepared (call feedback before the next prepare)";
     default:
         return "unknown status";
     }
@@ -448,6 +450,8 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->magic = ROBOT_ARM_MAGIC;
     s->initialized = 0;
     s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
     s->status = ROBOT_ARM_OK;
     s->M = robot_arm_default_M < 0 ? 0 : (robot_arm_default_M > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : robot_arm_default_M);
     s->mode = ROBOT_ARM_MODE_RECEDING;
@@ -464,6 +468,8 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->lm_kkt_prev = -1.0;
     robot_arm_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = ROBOT_ARM_DEFAULT_QP_TOL;
+    s->qp_warm = 1;
+    s->qp_cold_retry = 0;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NP; ++i) {
             s->p[k][i] = robot_arm_p_default[i];
@@ -747,6 +753,8 @@ static int robot_arm_init_finish(robot_arm_solver *s)
     robot_arm_assemble(s);
     s->initialized = 1;
     s->qp_ready = 1;
+    s->prepare_due = 0;
+    s->shifted = 0;
     robot_arm_lm_start(s);
     return ROBOT_ARM_OK;
 }
@@ -846,6 +854,42 @@ static int robot_arm_qp_solution_finite(const robot_arm_qp_sol *sol)
            robot_arm_lai_vec_finite(ROBOT_ARM_QP_NR1, sol->mu_r) && robot_arm_lai_vec_finite(ROBOT_ARM_QP_NE1, sol->nu);
 }
 
+/* Warm-start point of the QP (in s->qp_sol): the previous QP solution shifted with the
+ * horizon. Its primal part has been added to the iterate, which prepare shifted, so it is
+ * a zero step from the (shifted) iterate, with x_0's step fixed by the measurement; the
+ * multipliers are the (shifted) iterate's, which are those of the previous QP. */
+static void robot_arm_qp_warm_point(robot_arm_solver *s)
+{
+    robot_arm_qp_sol *w = &s->qp_sol;
+    int k, i;
+    for (k = 0; k <= ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NX; ++i) {
+            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : 0.0;
+            w->lam[k][i] = s->lam[k][i];
+        }
+    }
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_QP_NU1; ++i) {
+            w->u[k][i] = 0.0;
+        }
+        for (i = 0; i < ROBOT_ARM_NW; ++i) {
+            w->mu_b[k][i] = s->mu_b[k][i];
+        }
+        for (i = 0; i < ROBOT_ARM_QP_NG1; ++i) {
+            w->mu_g[k][i] = i < ROBOT_ARM_NG ? s->mu_g[k][i] : 0.0;
+        }
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        w->mu_bN[i] = s->mu_bN[i];
+    }
+    for (i = 0; i < ROBOT_ARM_QP_NR1; ++i) {
+        w->mu_r[i] = i < ROBOT_ARM_NR ? s->mu_r[i] : 0.0;
+    }
+    for (i = 0; i < ROBOT_ARM_QP_NE1; ++i) {
+        w->nu[i] = i < ROBOT_ARM_NE ? s->nu[i] : 0.0;
+    }
+}
+
 int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
 {
     const robot_arm_qp_sol *sol = &s->qp_sol;
@@ -860,6 +904,11 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     }
     if (xhat0 == 0 || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) {
         s->xhat_fresh = 0;
+        if (s->mode == ROBOT_ARM_MODE_RECEDING) {
+            /* the sampling instant has passed all the same: its prepare (the shift) is due */
+            s->prepare_due = 1;
+            s->shifted = 0;
+        }
         return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
@@ -874,20 +923,42 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->xhat_fresh = 1;
+    /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
+    s->prepare_due = 1;
+    s->shifted = 0;
     s->qp_in.hess_shift = s->lm;
-    s->qp_settings.warm_start = 0;
+    s->qp_cold_retry = 0;
+    s->qp_settings.warm_start = s->qp_warm;
+    if (s->qp_warm) {
+        robot_arm_qp_warm_point(s);
+    }
     qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-    /* the automatic term (section 10): a QP not solved is solved again with lm raised */
+    s->qp_iterations = s->qp_info.iterations;
+    if (s->qp_warm && qs != ROBOT_ARM_QP_INVALID_INPUT &&
+        (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol) || s->qp_info.inertia_corrections > 0)) {
+        /* the warm start failed, or it needed the inertia correction: the QP is nonconvex
+         * on the null space of its equalities there and may have several local minimisers,
+         * and the warm start may have reached another one than the cold start finds (the
+         * one the closed loop has followed so far): retry from the cold starting point in
+         * the same call */
+        s->qp_cold_retry = 1;
+        s->qp_settings.warm_start = 0;
+        qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+        s->qp_iterations += s->qp_info.iterations;
+    }
+    /* the automatic term (section 10): a QP still not solved is solved again (cold) with lm
+     * raised */
     retries = 0;
     while (s->lm_auto && retries < ROBOT_ARM_LM_RETRIES && s->lm < ROBOT_ARM_LM_MAX_REL * s->lm_scale &&
-           (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol))) {
+           (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol)) && qs != ROBOT_ARM_QP_INVALID_INPUT) {
         robot_arm_lm_raise(s);
         s->qp_in.hess_shift = s->lm;
+        s->qp_settings.warm_start = 0;
         qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+        s->qp_iterations += s->qp_info.iterations;
         retries += 1;
     }
     s->qp_status = qs;
-    s->qp_iterations = s->qp_info.iterations;
     if (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol)) {
         robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
         return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_QP);
@@ -1095,9 +1166,14 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s);
 
 int robot_arm_prepare(robot_arm_solver *s)
 {
+    int rc;
     robot_arm_ensure_setup(s);
     if (!s->initialized) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
+    }
+    if (!s->prepare_due) {
+        /* a second prepare would shift the horizon twice */
+        return robot_arm_ret(s, ROBOT_ARM_ERR_ALREADY_PREPARED);
     }
     robot_arm_clear_timings(s, ROBOT_ARM_PHASE_SHIFT, ROBOT_ARM_PHASE_ASSEMBLY);
     s->qp_ready = 0;
@@ -1105,18 +1181,23 @@ int robot_arm_prepare(robot_arm_solver *s)
         s->plan_age += 1;
     }
     if (s->recover_pending && s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING) {
-        return robot_arm_ret(s, robot_arm_recover(s, 0));
-    }
-    if (s->recovering > 0 && ROBOT_ARM_HAS_GN) {
+        rc = robot_arm_recover(s, 0);
+    } else if (s->recovering > 0 && ROBOT_ARM_HAS_GN) {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
          * multipliers), every block fresh */
-        int hessian = s->hessian, rc;
+        int hessian = s->hessian;
         s->hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
         rc = robot_arm_prepare_iteration(s);
         s->hessian = hessian;
-        return robot_arm_ret(s, rc);
+    } else {
+        rc = robot_arm_prepare_iteration(s);
     }
-    return robot_arm_ret(s, robot_arm_prepare_iteration(s));
+    if (rc == ROBOT_ARM_OK) {
+        /* one prepare per sampling instant: the next needs a feedback first */
+        s->prepare_due = 0;
+        s->shifted = 0;
+    }
+    return robot_arm_ret(s, rc);
 }
 
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
@@ -1126,15 +1207,16 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
     double t0;
     int k, rc, M;
 
-    /* 1. shift */
+    /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     t0 = robot_arm_timer_now(&s->timer);
-    if (s->mode == ROBOT_ARM_MODE_RECEDING) {
+    if (s->mode == ROBOT_ARM_MODE_RECEDING && !s->shifted) {
         robot_arm_shift(s);
+        s->shifted = 1;
     }
     t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_SHIFT, t0);
     robot_arm_copy(xN_saved, s->x[ROBOT_ARM_N], ROBOT_ARM_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2, F_new stored as F_old */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
         rc = robot_arm_stage_F(s, k);
@@ -1143,7 +1225,10 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
             return rc;
         }
         s->rho[k] = robot_arm_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
-        robot_arm_ring_store_F(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        /* stored as F_old in step 6, once nothing can fail */
+        robot_arm_copy(s->Fn_w[k], s->tmp_F, ROBOT_ARM_NW);
+        robot_arm_copy(s->Fn_phi[k], s->tmp_phi, ROBOT_ARM_NX);
+        robot_arm_copy(s->Fn_g[k], s->tmp_g, ROBOT_ARM_NG);
         t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_RHO, t0);
     }
 
@@ -1210,7 +1295,11 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
         return rc;
     }
 
-    /* 6. QP vectors (the fresh A blocks were regularised when stored) */
+    /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
+     *    when stored) */
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+    }
     robot_arm_assemble(s);
     s->qp_ready = 1;
 
@@ -1459,6 +1548,27 @@ int robot_arm_get_recovery_failures(robot_arm_solver *s)
 {
     robot_arm_ensure_setup(s);
     return s->recovery_failures;
+}
+
+int robot_arm_set_qp_warm_start(robot_arm_solver *s, int on)
+{
+    robot_arm_ensure_setup(s);
+    if (on != 0 && on != 1) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    s->qp_warm = on;
+    return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+int robot_arm_get_qp_warm_start(robot_arm_solver *s)
+{
+    robot_arm_ensure_setup(s);
+    return s->qp_warm;
+}
+
+int robot_arm_get_qp_cold_retry(const robot_arm_solver *s)
+{
+    return s->qp_cold_retry;
 }
 
 int robot_arm_set_parameters(robot_arm_solver *s, const double *p)

@@ -21,8 +21,11 @@ add_library(unicycle STATIC
 )
 target_include_directories(unicycle PUBLIC "${UNICYCLE_DIR}")
 set_target_properties(unicycle PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON C_EXTENSIONS OFF)
+# Optimisation flags of the library (default -O3, as `dopus-gen build`; no -march):
+# set UNICYCLE_OPT before include(), e.g. "-O3;-mcpu=cortex-m7;-mfpu=fpv5-d16;-mfloat-abi=hard".
+set(UNICYCLE_OPT "-O3" CACHE STRING "optimisation flags of the unicycle library")
 if(CMAKE_C_COMPILER_ID MATCHES "GNU|Clang")
-    target_compile_options(unicycle PRIVATE -Wall -Wextra -Werror -pedantic)
+    target_compile_options(unicycle PRIVATE -Wall -Wextra -Werror -pedantic ${UNICYCLE_OPT})
 endif()
 find_library(UNICYCLE_LIBM m)
 if(UNICYCLE_LIBM)

@@ -22,7 +22,8 @@ const char *unicycle_status_string(int status);
 /* Initialisation (algorithm.md section 4, init): the iterate is the given guess; NULL x or
  * u: the OCP file's initial guess; NULL multipliers: zeros. F and H of every stage and of
  * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
- * rho = 0. xhat0 is checked and kept for unicycle_kkt_eval (may be NULL: the default x0). */
+ * rho = 0. xhat0 is checked and kept for unicycle_kkt_eval (may be NULL: the default x0).
+ * A failed init leaves the solver uninitialised (NaN/Inf input: the iterate untouched). */
 int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, const double *u,
                const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
                const double *mu_r, const double *nu);
@@ -37,11 +38,22 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
  * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
  * stage-cost Hessian of the other stages (unicycle_set_cost_hessian), assemble the QP. Must
- * run between two feedback calls. */
+ * run between two feedback calls.
+ * Calling order: one prepare per feedback on an initialised solver that reached the QP
+ * (solved or not) and, in receding mode, also per feedback whose measurement was rejected
+ * as non-finite (the sampling instant has passed all the same and the plan moves on with
+ * it). prepare right after a successful init or prepare
+ * returns UNICYCLE_ERR_ALREADY_PREPARED and changes nothing, in both modes (in receding mode
+ * it would shift twice, in fixed mode it would measure rho_k against gradients of the
+ * same point). After a failed prepare the next prepare is a retry: it does not shift
+ * again, and it measures rho_k against the same F_old (the gradients of a failed prepare are
+ * not stored); blocks that the failed attempt had already re-linearised stay fresh. */
 int unicycle_prepare(unicycle_solver *s);
 /* KKT measure (algorithm.md section 6) of the current iterate with exact derivatives, for
  * the initial state xhat0 (NULL: the last one given to init or feedback):
- * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed. */
+ * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed.
+ * The parts are >= 0 and never NaN; a part is +Inf when it overflows (an iterate or
+ * multipliers near DBL_MAX, e.g. from an init guess: |mu| * |ub - v| > DBL_MAX). */
 int unicycle_kkt_eval(unicycle_solver *s, const double *xhat0, double *kkt4);
 /* The largest of the four parts of the last unicycle_kkt_eval (NaN before the first). */
 double unicycle_get_kkt(const unicycle_solver *s);
@@ -95,6 +107,12 @@ int unicycle_get_qp_max_iter(unicycle_solver *s);
 int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
 int unicycle_get_recovery(unicycle_solver *s);
 int unicycle_get_recovery_failures(unicycle_solver *s);
+/* QP warm start in feedback (1, the default): start from the previous QP solution shifted
+ * with the horizon (a zero step from the shifted iterate, the iterate's multipliers); when
+ * that QP is not solved, feedback retries from the cold starting point in the same call.
+ * 0: always cold. */
+int unicycle_set_qp_warm_start(unicycle_solver *s, int on);
+int unicycle_get_qp_warm_start(unicycle_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int unicycle_set_parameters(unicycle_solver *s, const double *p);
@@ -110,7 +128,8 @@ void unicycle_get_mu_b(const unicycle_solver *s, double *mu_b);
 void unicycle_get_mu_bN(const unicycle_solver *s, double *mu_bN);
 void unicycle_get_mu_r(const unicycle_solver *s, double *mu_r);
 void unicycle_get_nu(const unicycle_solver *s, double *nu);
-/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1). */
+/* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1): >= 0, never NaN; +Inf when the
+ * residual or the step of the stage overflows (the stage then ranks first). */
 void unicycle_get_rho(const unicycle_solver *s, double *rho);
 /* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
  * N-1 included; writes up to N ints and returns their count. */
@@ -133,6 +152,9 @@ int unicycle_get_failed_feedbacks(const unicycle_solver *s);
  * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
 double unicycle_get_kkt_proxy(const unicycle_solver *s);
 void unicycle_get_scales(const unicycle_solver *s, double *scale_x, double *scale_u);
+/* 1 when the last feedback's warm-started QP failed and the cold retry ran (the
+ * iterations above are then the sum of both solves), else 0. */
+int unicycle_get_qp_cold_retry(const unicycle_solver *s);
 /* Status of the last call that returns a status. */
 int unicycle_get_status(const unicycle_solver *s);
 int unicycle_is_initialized(const unicycle_solver *s);

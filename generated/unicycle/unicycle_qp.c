@@ -42,9 +42,23 @@
 #define NE1 UNICYCLE_QP_NE1
 #define NU1 UNICYCLE_QP_NU1
 #define TOFF (N * NSI) /* first terminal inequality row */
+/* The row values v = D w live in the per-row scratch yrow from compute_residuals (or
+ * initial_point) until the next Newton direction overwrites it. */
+#define QP_V(ws) ((ws)->yrow)
+/* Loop over the rows with at least one finite side (ws->bidx, built by setup_bounds): the
+ * per-side work skips the unbounded rows (their barrier weight stays 0). */
+#define QP_FOR_BOUNDED(ws, b, i) for ((b) = 0; (b) < (ws)->nb && ((i) = (ws)->bidx[(b)], 1); ++(b))
 
 /* Fraction-to-boundary factor and limits of the inertia correction. */
 #define STEP_TAU 0.995
+/* Warm start: slacks floored at WARM_FLOOR_T times the bound's scale, multipliers at
+ * WARM_FLOOR_Z (both relative to the unit scale of the cold start). */
+#ifndef WARM_FLOOR_T
+#define WARM_FLOOR_T 1e-2
+#endif
+#ifndef WARM_FLOOR_Z
+#define WARM_FLOOR_Z 1e-2
+#endif
 /* Smallest centring parameter of a step taken with the inertia correction (see there). */
 #define SIGMA_NONCONVEX 0.9
 /* Smallest centring parameter after the restart on a nonconvex stall (see unicycle_qp_solve). */
@@ -139,7 +153,7 @@ static int check_input(const unicycle_qp_in *in)
 /* Bounds into the flat row layout; returns 0 when some lo > up (trivially infeasible). */
 static int setup_bounds(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 {
-    int k, i, ok = 1;
+    int k, i, ok = 1, nb = 0;
     for (k = 0; k < N; ++k) {
         const int o = k * NSI;
         for (i = 0; i < NW; ++i) {
@@ -174,9 +188,13 @@ static int setup_bounds(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         }
         ws->has_lo[i] = (unsigned char)(!ignored && isfinite(ws->lo[i]));
         ws->has_up[i] = (unsigned char)(!ignored && isfinite(ws->up[i]));
+        ws->qdiag[i] = 0.0;
+        if (ws->has_lo[i] || ws->has_up[i])
+            ws->bidx[nb++] = (unicycle_qp_row)i;
         if (ws->has_lo[i] && ws->has_up[i] && ws->lo[i] > ws->up[i])
             ok = 0;
     }
+    ws->nb = nb;
     return ok;
 }
 
@@ -220,6 +238,30 @@ static void add_Dt(const unicycle_qp_in *in, const double *y, double *out)
 
 /* ---------------------------------------------------------------- residuals */
 
+/* The data parts of the residual scaling (constant during a solve): |g|, |gN| into
+ * scale_g; |x0|, |b|, |req| into scale_b; the finite bounds into scale_bounds. */
+static void data_scales(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
+{
+    int k, i;
+    double sg = unicycle_lai_norm_inf(NX, in->gN), sb = unicycle_lai_norm_inf(NX, in->x0), sl = 0.0;
+    for (k = 0; k < N; ++k) {
+        sg = dmax(sg, unicycle_lai_norm_inf(NW, in->g[k]));
+        sb = dmax(sb, unicycle_lai_norm_inf(NX, in->b[k]));
+    }
+    if (NE > 0)
+        sb = dmax(sb, unicycle_lai_norm_inf(NE, in->req));
+    for (i = 0; i < NI; ++i) {
+        if (ws->has_lo[i])
+            sl = dmax(sl, fabs(ws->lo[i]));
+        if (ws->has_up[i])
+            sl = dmax(sl, fabs(ws->up[i]));
+    }
+    ws->scale_g = sg;
+    ws->scale_b = sb;
+    ws->scale_bounds = sl;
+}
+
+
 typedef struct {
     double mu;       /* average complementarity */
     int nsides;      /* number of bounded sides */
@@ -232,13 +274,12 @@ typedef struct {
 
 static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *in, qp_res *r)
 {
-    int k, i;
+    int k, i, b;
     double s_stat = 1.0, s_eq = 1.0, s_ineq = 1.0, nz = 0.0, obj = 0.0, comp = 0.0, ineq = 0.0;
     double sum_c = 0.0;
     int m = 0;
 
-    apply_D(in, ws->prim, ws->v);
-    /* signed multipliers per row */
+    /* signed multipliers per row (yrow; it holds the row values v afterwards) */
     for (i = 0; i < NI; ++i) {
         const double zl = ws->has_lo[i] ? ws->z_lo[i] : 0.0;
         const double zu = ws->has_up[i] ? ws->z_up[i] : 0.0;
@@ -248,13 +289,12 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     /* objective part Hw + g and constraint part A'y of the stationarity residual */
     for (k = 0; k < N; ++k) {
         const double *w = ws->prim + k * NW;
-        double *h = ws->hwg + k * NW;
+        double *h = ws->r_stat + k * NW;
         double *a = ws->aty + k * NW;
         unicycle_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
         unicycle_lai_axpy(NW, in->hess_shift, w, h);
         s_stat = dmax(s_stat, unicycle_lai_norm_inf(NW, h));
         obj += 0.5 * unicycle_lai_dot(NW, w, h) + unicycle_lai_dot(NW, in->g[k], w);
-        s_stat = dmax(s_stat, unicycle_lai_norm_inf(NW, in->g[k]));
         unicycle_lai_axpy(NW, 1.0, in->g[k], h);
         for (i = 0; i < NW; ++i)
             a[i] = i < NX ? ws->lam[k * NX + i] : 0.0;
@@ -262,13 +302,13 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     }
     {
         const double *xN = ws->prim + N * NW;
-        double *h = ws->hwg + N * NW;
+        double *h = ws->r_stat + N * NW;
         double *a = ws->aty + N * NW;
         unicycle_lai_symv_l(NX, 1.0, in->HN, NX, xN, 0.0, h);
         unicycle_lai_axpy(NX, in->hess_shift, xN, h);
         s_stat = dmax(s_stat, unicycle_lai_norm_inf(NX, h));
         obj += 0.5 * unicycle_lai_dot(NX, xN, h) + unicycle_lai_dot(NX, in->gN, xN);
-        s_stat = dmax(s_stat, unicycle_lai_norm_inf(NX, in->gN));
+        s_stat = dmax(s_stat, ws->scale_g);
         unicycle_lai_axpy(NX, 1.0, in->gN, h);
         for (i = 0; i < NX; ++i)
             a[i] = ws->lam[N * NX + i];
@@ -278,18 +318,18 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     add_Dt(in, ws->yrow, ws->aty);
     s_stat = dmax(s_stat, unicycle_lai_norm_inf(NP, ws->aty));
     for (i = 0; i < NP; ++i)
-        ws->r_stat[i] = ws->hwg[i] + ws->aty[i];
+        ws->r_stat[i] += ws->aty[i];
+    apply_D(in, ws->prim, QP_V(ws));
 
     /* equalities */
     for (i = 0; i < NX; ++i)
         ws->r_dyn[i] = ws->prim[i] - in->x0[i];
-    s_eq = dmax(s_eq, unicycle_lai_norm_inf(NX, in->x0));
+    s_eq = dmax(s_eq, ws->scale_b);
     for (k = 0; k < N; ++k) {
         double *rd = ws->r_dyn + (k + 1) * NX;
         const double *xn = ws->prim + (k + 1) * NW;
         unicycle_lai_gemv_n(NX, NW, -1.0, in->Phi[k], NX, ws->prim + k * NW, 0.0, rd);
         s_eq = dmax(s_eq, unicycle_lai_norm_inf(NX, rd));
-        s_eq = dmax(s_eq, unicycle_lai_norm_inf(NX, in->b[k]));
         for (i = 0; i < NX; ++i)
             rd[i] += xn[i] - in->b[k][i];
     }
@@ -297,20 +337,18 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     if (NE > 0) {
         unicycle_lai_gemv_n(NE, NX, 1.0, in->Req, NE1, ws->prim + N * NW, 0.0, ws->r_eqN);
         s_eq = dmax(s_eq, unicycle_lai_norm_inf(NE, ws->r_eqN));
-        s_eq = dmax(s_eq, unicycle_lai_norm_inf(NE, in->req));
         for (i = 0; i < NE; ++i)
             ws->r_eqN[i] -= in->req[i];
     }
 
     /* inequality sides */
-    for (i = 0; i < NI; ++i) {
-        const double v = ws->v[i];
-        ws->r_lo[i] = 0.0;
-        ws->r_up[i] = 0.0;
+    s_ineq = dmax(s_ineq, ws->scale_bounds);
+    QP_FOR_BOUNDED(ws, b, i) {
+        const double v = QP_V(ws)[i];
+        /* r_lo, r_up (and the directions) are only defined on the bounded sides */
         if (ws->has_lo[i]) {
             ws->r_lo[i] = v - ws->lo[i] - ws->t_lo[i];
             ineq = dmax(ineq, ws->lo[i] - v);
-            s_ineq = dmax(s_ineq, fabs(ws->lo[i]));
             comp = dmax(comp, ws->t_lo[i] * ws->z_lo[i]);
             sum_c += ws->t_lo[i] * ws->z_lo[i];
             ++m;
@@ -318,7 +356,6 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
         if (ws->has_up[i]) {
             ws->r_up[i] = ws->up[i] - v - ws->t_up[i];
             ineq = dmax(ineq, v - ws->up[i]);
-            s_ineq = dmax(s_ineq, fabs(ws->up[i]));
             comp = dmax(comp, ws->t_up[i] * ws->z_up[i]);
             sum_c += ws->t_up[i] * ws->z_up[i];
             ++m;
@@ -346,6 +383,45 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
 
 /* ---------------------------------------------------------------- Riccati factorisation */
 
+/* The stage update of the Riccati recursion: PhiT = Phi' (nw x nx), PP = P Phi (nx x nw,
+ * P symmetric stored full), M += PhiT PP column by column with contiguous inner loops of
+ * the fixed length nw (vectorised; the upper triangle is computed too, it is cheaper than
+ * the ragged lower triangle at these sizes and never read), and, with terminal
+ * equalities, Gam = Phi' G (nw x ne). */
+static void qp_stage_update(const unicycle_real *restrict Phi, const unicycle_real *restrict P,
+                            const unicycle_real *restrict G, unicycle_real *restrict PhiT,
+                            unicycle_real *restrict PP, unicycle_real *restrict M, unicycle_real *restrict Gam)
+{
+    int i, j, l;
+    unicycle_real col[NW];
+    for (l = 0; l < NX; ++l)
+        for (i = 0; i < NW; ++i)
+            PhiT[i + l * NW] = Phi[l + i * NX];
+    unicycle_lai_gemm_nn(NX, NW, NX, 1.0, P, NX, Phi, NX, 0.0, PP, NX);
+    for (j = 0; j < NW; ++j) {
+        unicycle_real *restrict m = M + j * NW;
+        for (i = 0; i < NW; ++i)
+            col[i] = 0.0;
+        for (l = 0; l < NX; ++l) {
+            const unicycle_real f = PP[l + j * NX];
+            for (i = 0; i < NW; ++i)
+                col[i] += PhiT[i + l * NW] * f;
+        }
+        for (i = 0; i < NW; ++i)
+            m[i] += col[i];
+    }
+    for (j = 0; j < NE; ++j) {
+        unicycle_real *restrict gm = Gam + j * NW;
+        for (i = 0; i < NW; ++i)
+            gm[i] = 0.0;
+        for (l = 0; l < NX; ++l) {
+            const unicycle_real gv = G[l + j * NX];
+            for (i = 0; i < NW; ++i)
+                gm[i] += PhiT[i + l * NW] * gv;
+        }
+    }
+}
+
 /* Largest absolute entry of the Hessian data (scale of delta and rho). */
 static double hessian_scale(const unicycle_qp_in *in)
 {
@@ -364,10 +440,11 @@ static double hessian_scale(const unicycle_qp_in *in)
 static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 {
     int k, i, j;
-    double *PhiP = ws->work;                 /* NX x NW: P_{k+1} Phi_k */
-    double *Gam = ws->work + NX * NW;        /* NW x NE: Phi_k' G_{k+1} */
+    double *PhiT = ws->work;                 /* NW x NX: Phi_k' */
+    double *WT = ws->work + NX * NW;         /* NX x NW: P_{k+1} Phi_k */
+    double *Gam = ws->work + 2 * NX * NW;    /* NW x NE: Phi_k' G_{k+1} */
     const double delta = ws->delta;
-    double pmag;
+    double pmag, pnext;
 
     /* terminal: P_N = HN + D'QD + delta I + rho Req'Req, G_N = Req' */
     {
@@ -401,6 +478,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
      * magnitude `pmag` of the cancelled terms. That error reaches the pivots of M_uu of
      * stage k through B' P B, so a negative pivot within that noise is a numerical zero. */
     pmag = unicycle_lai_max_abs_mat(NX, NX, ws->P[N], NX);
+    pnext = pmag; /* largest |entry| of P_{k+1}, kept along the recursion */
     for (k = N - 1; k >= 0; --k) {
         double *M = ws->M;
         const double *Phi = in->Phi[k];
@@ -409,50 +487,40 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         double *LK = ws->LK[k];
         double *LKn = ws->LKn[k];
         double *P = ws->P[k];
-        const double pmax = unicycle_lai_max_abs_mat(NX, NX, ws->P[k + 1], NX);
-        double mxx = 0.0;
+        const double pmax = pnext;
+        double mxx = 0.0, pabs;
 
-        /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi */
-        unicycle_lai_copy_mat(NW, NW, in->H[k], NW, M, NW);
-        unicycle_lai_symmetrize_l(NW, M, NW);
+        /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi, lower triangle only (the upper
+         * triangle of M is never read) */
+        for (j = 0; j < NW; ++j)
+            for (i = 0; i < NW; ++i)
+                M[i + j * NW] = in->H[k][i + j * NW];
         for (i = 0; i < NW; ++i)
             M[i + i * NW] += q[i] + delta + in->hess_shift;
         for (j = 0; j < NG; ++j) {
-            const double qg = q[NW + j];
-            const double *C = in->C[k];
+            const unicycle_real qg = q[NW + j];
+            const unicycle_real *C = in->C[k];
             int a, c;
             if (qg != 0.0)
                 for (c = 0; c < NW; ++c)
-                    for (a = 0; a < NW; ++a)
+                    for (a = c; a < NW; ++a)
                         M[a + c * NW] += qg * C[j + a * NG] * C[j + c * NG];
         }
         for (j = 0; j < NU; ++j) {
             /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P */
-            double colsum = 0.0;
+            unicycle_real colsum = 0.0;
             for (i = 0; i < NX; ++i)
                 colsum += fabs(Phi[i + (NX + j) * NX]);
             ws->noise[j] = RICCATI_EPS * (fabs(M[NX + j + (NX + j) * NW]) + colsum * colsum * dmax(pmax, pmag));
         }
         for (j = 0; j < NX; ++j) {
-            double colsum = 0.0;
+            unicycle_real colsum = 0.0;
             for (i = 0; i < NX; ++i)
                 colsum += fabs(Phi[i + j * NX]);
             mxx = dmax(mxx, fabs(M[j + j * NW]) + colsum * colsum * pmax);
         }
-        unicycle_lai_gemm_nn(NX, NW, NX, 1.0, ws->P[k + 1], NX, Phi, NX, 0.0, PhiP, NX);
-        /* Phi' (P Phi) is symmetric: form its lower triangle and mirror it, so that M and
-         * P stay exactly symmetric */
-        unicycle_lai_gemm_tn(NW, NW, NX, 1.0, Phi, NX, PhiP, NX, 1.0, M, NW);
-        /* symmetric up to round-off: the average of both triangles (measurably more
-         * accurate at tight tolerances than mirroring one computed triangle) */
-        for (j = 0; j < NW; ++j)
-            for (i = j + 1; i < NW; ++i) {
-                const double s = 0.5 * (M[i + j * NW] + M[j + i * NW]);
-                M[i + j * NW] = s;
-                M[j + i * NW] = s;
-            }
-        if (NE > 0)
-            unicycle_lai_gemm_tn(NW, NE, NX, 1.0, Phi, NX, ws->G[k + 1], NX, 0.0, Gam, NW);
+        /* M += Phi' P_{k+1} Phi (lower triangle), Gam = Phi' G_{k+1} */
+        qp_stage_update(Phi, ws->P[k + 1], ws->G[k + 1], PhiT, WT, M, Gam);
 
         /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
         unicycle_lai_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
@@ -465,8 +533,18 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         unicycle_lai_copy_mat(NU, NX, M + NX, NW, LK, NU1);
         unicycle_lai_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
         /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
-        unicycle_lai_copy_mat(NX, NX, M, NW, P, NX);
-        unicycle_lai_gemm_tn(NX, NX, NU, -1.0, LK, NU1, LK, NU1, 1.0, P, NX);
+        pabs = 0.0;
+        for (j = 0; j < NX; ++j)
+            for (i = j; i < NX; ++i) {
+                unicycle_real sum = M[i + j * NW];
+                int l;
+                for (l = 0; l < NU; ++l)
+                    sum -= LK[l + i * NU1] * LK[l + j * NU1];
+                P[i + j * NX] = sum;
+                P[j + i * NX] = sum;
+                pabs = dmax(pabs, fabs(sum));
+            }
+        pnext = pabs;
         for (j = 0; j < NX; ++j)
             pmag = dmax(pmag, unicycle_lai_dot(NU, LK + j * NU1, LK + j * NU1));
         if (NE > 0) {
@@ -498,7 +576,8 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 }
 
 /* Solve the factored Newton system for one right-hand side (rhs_stat, rhs_dyn, rhs_eqN)
- * into (sp, sl, sn): backward sweep of the value-function vectors, nu at stage 0, forward
+ * into (sp, sl, sn), which may be the right-hand side's own arrays (each rhs entry is read
+ * before the entry of the same array is written): backward sweep of the value-function vectors, nu at stage 0, forward
  * sweep of the primal and the costates lam_k = -dV_k/dx. */
 static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const double *rhs_stat,
                           const double *rhs_dyn, const double *rhs_eqN, double *sp, double *sl,
@@ -632,18 +711,37 @@ static void newton_residual(unicycle_qp_workspace *ws, const unicycle_qp_in *in,
     }
 }
 
+/* Barrier right-hand side of one side, rc = t z (predictor) or, for the corrector,
+ * t z + eta dt_aff dz_aff - target with the predictor's steps still in dt, dz (so rc
+ * needs no storage of its own). */
+typedef struct {
+    int corrector;
+    double eta, target;
+} qp_centring;
+
+static double qp_rc(double t, double z, const double *dt, const double *dz, const qp_centring *cc)
+{
+    double rc = t * z;
+    if (cc->corrector) /* dt, dz are read only then: before the first corrector they are unset */
+        rc += cc->eta * *dt * *dz - cc->target;
+    return rc;
+}
+
 /* Newton direction for the barrier right-hand side rc (t z - target per side): build the
  * condensed right-hand side, solve with refinement, recover slack and multiplier steps. */
-static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int refine_steps)
+static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int refine_steps,
+                             const qp_centring *cc)
 {
-    int i, it;
+    int i, b, it;
     double *y = ws->yrow;
     for (i = 0; i < NI; ++i) {
         double s = 0.0;
         if (ws->has_lo[i])
-            s += (ws->rc_lo[i] + ws->z_lo[i] * ws->r_lo[i]) / ws->t_lo[i];
+            s += (qp_rc(ws->t_lo[i], ws->z_lo[i], &ws->dt_lo[i], &ws->dz_lo[i], cc) + ws->z_lo[i] * ws->r_lo[i]) /
+                 ws->t_lo[i];
         if (ws->has_up[i])
-            s -= (ws->rc_up[i] + ws->z_up[i] * ws->r_up[i]) / ws->t_up[i];
+            s -= (qp_rc(ws->t_up[i], ws->z_up[i], &ws->dt_up[i], &ws->dz_up[i], cc) + ws->z_up[i] * ws->r_up[i]) /
+                 ws->t_up[i];
         y[i] = -s;
     }
     for (i = 0; i < NP; ++i)
@@ -658,24 +756,27 @@ static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in
     for (it = 0; it < refine_steps; ++it) {
         newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->rhs_stat, ws->rhs_dyn,
                         ws->rhs_eqN, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
-        riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin, ws->c_prim,
-                      ws->c_lam, ws->c_nu);
-        unicycle_lai_axpy(NP, 1.0, ws->c_prim, ws->d_prim);
-        unicycle_lai_axpy((N + 1) * NX, 1.0, ws->c_lam, ws->d_lam);
-        unicycle_lai_axpy(NE, 1.0, ws->c_nu, ws->d_nu);
+        /* the correction overwrites the residual it solves for (riccati_solve allows it) */
+        riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin, ws->res_stat_lin,
+                      ws->res_dyn_lin, ws->res_eqN_lin);
+        unicycle_lai_axpy(NP, 1.0, ws->res_stat_lin, ws->d_prim);
+        unicycle_lai_axpy((N + 1) * NX, 1.0, ws->res_dyn_lin, ws->d_lam);
+        unicycle_lai_axpy(NE, 1.0, ws->res_eqN_lin, ws->d_nu);
     }
 
     /* dt_lo = D dw + r_lo, dt_up = r_up - D dw, dz = -(rc + z dt) / t */
     apply_D(in, ws->d_prim, y);
-    for (i = 0; i < NI; ++i) {
-        ws->dt_lo[i] = ws->dz_lo[i] = ws->dt_up[i] = ws->dz_up[i] = 0.0;
+    QP_FOR_BOUNDED(ws, b, i) {
+        /* rc from the previous (predictor) direction, before it is overwritten */
         if (ws->has_lo[i]) {
+            const double rc = qp_rc(ws->t_lo[i], ws->z_lo[i], &ws->dt_lo[i], &ws->dz_lo[i], cc);
             ws->dt_lo[i] = y[i] + ws->r_lo[i];
-            ws->dz_lo[i] = -(ws->rc_lo[i] + ws->z_lo[i] * ws->dt_lo[i]) / ws->t_lo[i];
+            ws->dz_lo[i] = -(rc + ws->z_lo[i] * ws->dt_lo[i]) / ws->t_lo[i];
         }
         if (ws->has_up[i]) {
+            const double rc = qp_rc(ws->t_up[i], ws->z_up[i], &ws->dt_up[i], &ws->dz_up[i], cc);
             ws->dt_up[i] = ws->r_up[i] - y[i];
-            ws->dz_up[i] = -(ws->rc_up[i] + ws->z_up[i] * ws->dt_up[i]) / ws->t_up[i];
+            ws->dz_up[i] = -(rc + ws->z_up[i] * ws->dt_up[i]) / ws->t_up[i];
         }
     }
 }
@@ -683,9 +784,9 @@ static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in
 /* Largest alpha in (0, 1] keeping t + alpha dt >= 0 and z + alpha dz >= 0. */
 static double max_step(const unicycle_qp_workspace *ws)
 {
-    int i;
+    int i, b;
     double a = 1.0;
-    for (i = 0; i < NI; ++i) {
+    QP_FOR_BOUNDED(ws, b, i) {
         if (ws->has_lo[i]) {
             if (ws->dt_lo[i] < 0.0)
                 a = dmin(a, -ws->t_lo[i] / ws->dt_lo[i]);
@@ -748,7 +849,7 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
 {
     int k, i;
     double nw = unicycle_lai_norm_inf(NP, ws->prim), dhd = 0.0, gd = 0.0, hd = 0.0, eq = 0.0, cone = 0.0;
-    double *hdv = ws->c_prim;
+    double *hdv = ws->res_stat_lin;
     if (!(nw > CERT_GROWTH * data_scale))
         return 0;
     for (k = 0; k < N; ++k) {
@@ -780,7 +881,7 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
     }
     eq = dmax(eq, unicycle_lai_norm_inf(NX, ws->prim) / nw);
     for (i = 0; i < NI; ++i) {
-        const double dv = ws->v[i] / nw;
+        const double dv = QP_V(ws)[i] / nw;
         if (ws->has_lo[i])
             cone = dmax(cone, -dv);
         if (ws->has_up[i])
@@ -874,7 +975,7 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         for (i = 0; i < NE; ++i)
             ws->nu[i] = sol->nu[i];
     }
-    apply_D(in, ws->prim, ws->v);
+    apply_D(in, ws->prim, QP_V(ws));
     for (i = 0; i < NI; ++i) {
         double mu_signed = 0.0;
         ws->t_lo[i] = ws->t_up[i] = 1.0;
@@ -887,35 +988,16 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
                 mu_signed = (j < NW) ? sol->mu_b[k2][j] : sol->mu_g[k2][j - NW];
         }
         if (ws->has_lo[i]) {
-            const double floor_t = warm ? 1e-4 * dmax(1.0, fabs(ws->lo[i])) : 1.0;
-            ws->t_lo[i] = dmax(ws->v[i] - ws->lo[i], floor_t);
-            ws->z_lo[i] = warm ? dmax(-mu_signed, 1e-4) : 1.0;
+            const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->lo[i])) : 1.0;
+            ws->t_lo[i] = dmax(QP_V(ws)[i] - ws->lo[i], floor_t);
+            ws->z_lo[i] = warm ? dmax(-mu_signed, WARM_FLOOR_Z) : 1.0;
         }
         if (ws->has_up[i]) {
-            const double floor_t = warm ? 1e-4 * dmax(1.0, fabs(ws->up[i])) : 1.0;
-            ws->t_up[i] = dmax(ws->up[i] - ws->v[i], floor_t);
-            ws->z_up[i] = warm ? dmax(mu_signed, 1e-4) : 1.0;
+            const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->up[i])) : 1.0;
+            ws->t_up[i] = dmax(ws->up[i] - QP_V(ws)[i], floor_t);
+            ws->z_up[i] = warm ? dmax(mu_signed, WARM_FLOOR_Z) : 1.0;
         }
     }
-}
-
-static void copy_iterate(unicycle_qp_workspace *ws, int to_best)
-{
-    int i;
-    double *a[7], *b[7];
-    const int n[7] = {NP, (N + 1) * NX, NE1, NI, NI, NI, NI};
-    int j;
-    a[0] = ws->prim; a[1] = ws->lam; a[2] = ws->nu; a[3] = ws->t_lo; a[4] = ws->t_up;
-    a[5] = ws->z_lo; a[6] = ws->z_up;
-    b[0] = ws->best_prim; b[1] = ws->best_lam; b[2] = ws->best_nu; b[3] = ws->best_t_lo;
-    b[4] = ws->best_t_up; b[5] = ws->best_z_lo; b[6] = ws->best_z_up;
-    for (j = 0; j < 7; ++j)
-        for (i = 0; i < n[j]; ++i) {
-            if (to_best)
-                b[j][i] = a[j][i];
-            else
-                a[j][i] = b[j][i];
-        }
 }
 
 static double merit(const qp_res *r)
@@ -926,7 +1008,8 @@ static double merit(const qp_res *r)
 static int finish(unicycle_qp_workspace *ws, const qp_res *r, int status, int iter, unicycle_qp_sol *sol,
                   unicycle_qp_info *info)
 {
-    write_solution(ws, sol);
+    if (sol)
+        write_solution(ws, sol);
     if (info) {
         info->status = status;
         info->iterations = iter;
@@ -947,8 +1030,9 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
                    unicycle_qp_sol *sol, unicycle_qp_info *info)
 {
     unicycle_qp_settings st;
-    qp_res r;
-    int iter, i, status = UNICYCLE_QP_MAX_ITER;
+    qp_res r, best_r;
+    qp_centring pred, corr;
+    int iter, i, b, keep_best, status = UNICYCLE_QP_MAX_ITER;
     int n_corr = 0, n_aug = 0;
     double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
     int best_iter = 0;
@@ -1005,6 +1089,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         return UNICYCLE_QP_PRIMAL_INFEASIBLE;
     }
     hscale = hessian_scale(in);
+    data_scales(ws, in);
     initial_point(ws, in, &st, sol);
 
     /* data scale for the divergence tests of the certificates */
@@ -1038,9 +1123,12 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             break;
         }
         if (iter == 0 || merit(&r) < best_merit) {
+            /* the best point so far goes straight into the output (the warm-start point
+             * has been read by then; a restart starts cold) */
             best_merit = merit(&r);
             best_iter = iter;
-            copy_iterate(ws, 1);
+            best_r = r;
+            write_solution(ws, sol);
         } else if (!restarted && n_corr > 0 && iter - best_iter >= RESTART_STALL_ITERS) {
             /* Stalled after inertia corrections: the QP is nonconvex on the null space of
              * the equalities, and Mehrotra's aggressive mu reduction let a near-singular
@@ -1053,6 +1141,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
              * and the cautious one does not.) */
             restarted = 1;
             sigma_min = SIGMA_MIN_RESTART;
+            st.warm_start = 0;
             initial_point(ws, in, &st, sol);
             ws->rho_aug = 0.0;
             delta_last = 0.0;
@@ -1062,7 +1151,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             QP_TRACE("restart at iteration %d\n", iter);
             continue;
         } else if (iter - best_iter >= STALL_ITERS) {
-            status = UNICYCLE_QP_MAX_ITER;
+            status = UNICYCLE_QP_STALLED;
             break;
         }
         if (primal_infeasible(ws, in, &r, data_scale)) {
@@ -1079,7 +1168,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         }
 
         /* barrier weights Q = z/t per row */
-        for (i = 0; i < NI; ++i) {
+        QP_FOR_BOUNDED(ws, b, i) {
             double q = 0.0;
             if (ws->has_lo[i])
                 q += ws->z_lo[i] / ws->t_lo[i];
@@ -1134,14 +1223,17 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         /* floored pivots make the factorisation inexact: refine more; far from the
          * solution the directions need no refinement */
         nref = st.refine_steps + (ws->pivot_floors > floors_before ? 2 : 0);
+        /* no progress in the last iteration near the solution: the directions are limited
+         * by the accuracy of the factorisation, refine more */
+        if (iter > best_iter)
+            nref += 2;
         if (merit(&r) > REFINE_BELOW && ws->pivot_floors == floors_before)
             nref = 0;
 
         if (r.nsides == 0) {
             /* equality-constrained QP: one Newton step is exact */
-            for (i = 0; i < NI; ++i)
-                ws->rc_lo[i] = ws->rc_up[i] = 0.0;
-            newton_direction(ws, in, nref);
+            const qp_centring none = {0, 0.0, 0.0}; /* no bounded side: rc is never formed */
+            newton_direction(ws, in, nref, &none);
             unicycle_lai_axpy(NP, 1.0, ws->d_prim, ws->prim);
             unicycle_lai_axpy((N + 1) * NX, 1.0, ws->d_lam, ws->lam);
             unicycle_lai_axpy(NE, 1.0, ws->d_nu, ws->nu);
@@ -1149,16 +1241,14 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         }
 
         /* predictor (affine scaling) */
-        for (i = 0; i < NI; ++i) {
-            ws->rc_lo[i] = ws->has_lo[i] ? ws->t_lo[i] * ws->z_lo[i] : 0.0;
-            ws->rc_up[i] = ws->has_up[i] ? ws->t_up[i] * ws->z_up[i] : 0.0;
-        }
-        newton_direction(ws, in, 0);
+        pred.corrector = 0;
+        pred.eta = pred.target = 0.0;
+        newton_direction(ws, in, 0, &pred);
         alpha = max_step(ws);
         alpha_aff = alpha;
         (void)alpha_aff;
         mu_aff = 0.0;
-        for (i = 0; i < NI; ++i) {
+        QP_FOR_BOUNDED(ws, b, i) {
             if (ws->has_lo[i])
                 mu_aff += (ws->t_lo[i] + alpha * ws->dt_lo[i]) * (ws->z_lo[i] + alpha * ws->dz_lo[i]);
             if (ws->has_up[i])
@@ -1187,13 +1277,10 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
          * on a pair far from the central path) */
         eta = (iter > 0 && r.mu > mu_prev && dmax(r.stat_s, r.eq_s) < r.comp_s) ? 0.0 : 1.0;
         mu_prev = r.mu;
-        for (i = 0; i < NI; ++i) {
-            if (ws->has_lo[i])
-                ws->rc_lo[i] += eta * ws->dt_lo[i] * ws->dz_lo[i] - target;
-            if (ws->has_up[i])
-                ws->rc_up[i] += eta * ws->dt_up[i] * ws->dz_up[i] - target;
-        }
-        newton_direction(ws, in, nref);
+        corr.corrector = 1;
+        corr.eta = eta;
+        corr.target = target;
+        newton_direction(ws, in, nref, &corr);
         alpha = dmin(1.0, STEP_TAU * max_step(ws));
         QP_TRACE("it %2d mu %.2e stat %.2e eq %.2e ineq %.2e comp %.2e | a_aff %.3f sigma %.2e "
                  "alpha %.3e delta %.1e rho %.1e floors %d |dp| %.2e\n",
@@ -1203,7 +1290,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         unicycle_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
         unicycle_lai_axpy((N + 1) * NX, alpha, ws->d_lam, ws->lam);
         unicycle_lai_axpy(NE, alpha, ws->d_nu, ws->nu);
-        for (i = 0; i < NI; ++i) {
+        QP_FOR_BOUNDED(ws, b, i) {
             if (ws->has_lo[i]) {
                 ws->t_lo[i] += alpha * ws->dt_lo[i];
                 ws->z_lo[i] += alpha * ws->dz_lo[i];
@@ -1214,17 +1301,15 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             }
         }
     }
-    if ((status == UNICYCLE_QP_MAX_ITER || status == UNICYCLE_QP_NUMERICAL) && isfinite(best_merit) &&
-        !(merit(&r) <= best_merit)) {
-        /* return the best point seen, with its residuals */
-        copy_iterate(ws, 0);
-        compute_residuals(ws, in, &r);
-    }
+    keep_best = (status == UNICYCLE_QP_MAX_ITER || status == UNICYCLE_QP_STALLED || status == UNICYCLE_QP_NUMERICAL) &&
+                isfinite(best_merit) && !(merit(&r) <= best_merit);
+    if (keep_best)
+        r = best_r; /* the best point seen is in *sol already; report its residuals */
     if (info) {
         info->inertia_corrections = n_corr;
         info->terminal_augmentations = n_aug;
         info->pivot_floors = ws->pivot_floors;
         info->delta = delta_used;
     }
-    return finish(ws, &r, status, iter, sol, info);
+    return finish(ws, &r, status, iter, keep_best ? NULL : sol, info);
 }

@@ -1,0 +1,571 @@
+"""``dopus-gen bench``: time per iteration of the generated solver on an OCP file, by phase,
+for several M, optionally against acados, and the scaling of the time with N.
+
+Two processes. This one (the project's environment, CasADi) prepares everything: the
+generated and built library (the build cache of :func:`dopus_codegen.runtime.solver.build_for`),
+IPOPT's nominal solution at the initial state, the fixed-xhat_0 convergence study of
+``dopus-gen converge --start warm --backend c`` (iterations to KKT 1e-6 and 1e-8 per M)
+and, with ``--against acados``, acados' solvers (built in acados' own environment by
+:mod:`dopus_codegen.studies.acados_compare`). It writes a plan; the timing process
+(:mod:`dopus_codegen.studies.timing`) loads only the compiled libraries, never CasADi, and
+alternates one sampling step of every setting, so that load from other processes hits
+all settings alike. Timed:
+
+- ``operating point``: the closed loop from the nominal solution at the initial state
+  (receding horizon, plant = the generated discrete model), after ``--settle`` untimed
+  steps (the closed loop has settled), ``--reps`` timed steps;
+- ``closed loop``: the closed loop from the disturbed initial state (the OCP file's
+  disturbance map; the nominal solution as the guess), ``--steps`` timed steps.
+
+Per setting and phase: feedback (from the measured state to u_0: the QP and the step;
+wall clock of the call and the runtime's ``feedback`` timer), preparation (wall clock and
+the runtime's timers, ``dopus_get_timings``: shift, gradients, rho, hessians,
+regularization, assembly), total = feedback + preparation (wall clock); medians and the
+10/90 percentiles; ratios to our full RTI (ratio of the medians, and the median of the
+per-step ratios of the interleaved run); the CPU model and the load before and after.
+
+``--scaling 20,40,80,160``: the OCP file with the horizon set to each N (same interval),
+M = 1 and the full RTI of every N interleaved in one timing process; time per iteration
+against N and the exponent of a least-squares fit of log(time) against log(N).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+
+from .. import settings as st
+from .records import json_ready
+
+__all__ = ["BenchError", "run_bench", "run_scaling", "format_table", "format_scaling", "plot_bench",
+           "fit_exponent", "parse_m_list", "parse_n_list"]
+
+#: acados settings quoted in the project's notes, timed where they are built.
+QUOTED = (("acados exact pc10 noreg", "exact", "NO_REGULARIZE", 10),
+          ("acados GN pc10", "gauss-newton", "NO_REGULARIZE", 10),
+          ("acados GN pc5", "gauss-newton", "NO_REGULARIZE", 5))
+
+
+class BenchError(RuntimeError):
+    """A bench run cannot be done as asked (the message says why)."""
+
+
+# ------------------------------------------------------------------------------ arguments
+def parse_m_list(text: str) -> list:
+    """``"1,5,full"`` -> ``[1, 5, "full"]``; raises BenchError naming a bad item."""
+    out = []
+    for item in str(text).split(","):
+        item = item.strip()
+        if item == "full":
+            out.append("full")
+        elif item.isdigit():
+            out.append(int(item))
+        else:
+            raise BenchError(f"--M: '{item}' is neither a non-negative integer nor 'full'")
+    return out
+
+
+def parse_n_list(text: str) -> list:
+    out = []
+    for item in str(text).split(","):
+        item = item.strip()
+        if not item.isdigit() or int(item) < 2:
+            raise BenchError(f"--scaling: '{item}' is not a horizon length N >= 2")
+        if int(item) not in out:
+            out.append(int(item))
+    if len(out) < 2:
+        raise BenchError("--scaling needs at least two values of N to fit an exponent")
+    return out
+
+
+def _resolve_Ms(m_list, N: int) -> list:
+    Ms = []
+    for m in m_list:
+        if m == "full":
+            M = N - 1
+        elif m > N - 1:
+            raise BenchError(f"--M: M = {m} exceeds N-1 = {N - 1} (use 'full' for the full RTI)")
+        else:
+            M = int(m)
+        if M not in Ms:
+            Ms.append(M)
+    if N - 1 not in Ms:
+        Ms.append(N - 1)        # the reference of the ratios
+    return Ms
+
+
+def _label(M: int, N: int, prefix: str = "") -> str:
+    return f"{prefix}full RTI" if M == N - 1 else f"{prefix}M={M}"
+
+
+# ------------------------------------------------------------------------------ preparation
+def _guess_dict(g) -> dict:
+    out = {}
+    for f in ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu"):
+        v = getattr(g, f, None)
+        if v is not None:
+            out[f] = np.asarray(v, float).tolist()
+    return out
+
+
+def _problem(ocp, echo) -> dict:
+    """Discretise, generate and build (cached), IPOPT's nominal solution; the library spec
+    of the timing process."""
+    from .. import vocabulary
+    from ..codegen.build import build
+    from ..problem.derivatives import build_functions
+    from ..reference.offline import solve_ocp
+    from ..runtime.solver import build_for
+
+    disc = build_functions(ocp)
+    echo(f"{disc.name}: N={disc.N}, nx={disc.nx}, nu={disc.nu}: generating and building ...")
+    folder = build_for(disc)
+    res = build(folder)
+    echo(f"{disc.name}: IPOPT's nominal solution at the initial state ...")
+    nominal, info = solve_ocp(disc, disc.x0)
+    if not info.get("success", False):
+        raise BenchError(f"{disc.name}: IPOPT did not solve the OCP at its initial state "
+                         f"({info.get('status', 'unknown status')}); the bench starts from that solution")
+    p0 = np.asarray(disc.p0, float)
+    spec = {"name": disc.name, "lib": str(res.shared_lib), "cdef": str(res.cdef_path), "N": int(disc.N),
+            "nx": int(disc.nx), "nu": int(disc.nu), "p0": (p0[0] if p0.ndim > 1 else p0).reshape(-1).tolist(),
+            "phases": list(vocabulary.phases()), "folder": str(folder)}
+    return {"disc": disc, "spec": spec, "nominal": nominal, "nominal_info": info}
+
+
+def _disturbed(disc) -> Optional[np.ndarray]:
+    dist = disc.scenario.disturbance if getattr(disc, "scenario", None) is not None else None
+    if dist is None:
+        return None
+    xd = np.array(dist(np.array(disc.x0, float).copy()), float).reshape(-1)
+    if xd.size != disc.nx or not np.all(np.isfinite(xd)):
+        raise BenchError(f"{disc.name}: the disturbance map must return {disc.nx} finite numbers")
+    return xd
+
+
+def _settings_codes(values: dict) -> dict:
+    return {"hessian": st.code("hessian", values["hessian"]),
+            "regularization": st.code("regularization", values["regularization"]),
+            "reg_eps": float(values["reg_eps"]), "cost_hessian": st.code("cost_hessian", values["cost_hessian"]),
+            "lm": float(values["lm"]), "qp_tol": float(st.DEFAULTS["qp_tol"])}
+
+
+def _kkt_study(prob, Ms, values, iters, echo) -> dict:
+    """The fixed-xhat_0 study of ``dopus-gen converge --start warm --backend c`` (cold start
+    without a disturbance map): iterations to KKT 1e-6 and 1e-8 per M."""
+    from .converge import StartPoint, backend_factory, iterations_to, run_study
+
+    disc = prob["disc"]
+    xd = _disturbed(disc)
+    if xd is None:
+        start = StartPoint("cold", np.array(disc.x0, float), disc.initial_guess, np.array(disc.x0, float))
+    else:
+        start = StartPoint("warm", np.array(disc.x0, float), prob["nominal"], xd)
+    echo(f"{disc.name}: fixed-xhat_0 study ({start.label} start), {len(Ms)} x {iters} iterations ...")
+    study = run_study(disc, Ms, iters, start, hessian=values["hessian"], regularization=values["regularization"],
+                      reg_eps=values["reg_eps"], backend_factory=backend_factory("c"), backend_name="c",
+                      cost_hessian=values["cost_hessian"], lm=values["lm"])
+    rows = []
+    for r in study["runs"]:
+        rows.append({"M": r["M"], "label": _label(r["M"], disc.N), "iters_to_1e-6": iterations_to(r["kkt"], 1e-6),
+                     "iters_to_1e-8": iterations_to(r["kkt"], 1e-8), "last_kkt": r["kkt"][-1] if r["kkt"] else None,
+                     "status": r["status"]})
+    return {"start": start.label, "iters": iters, "runs": rows}
+
+
+def _run_worker(plan: dict, work: Path) -> dict:
+    work.mkdir(parents=True, exist_ok=True)
+    fd, plan_path = tempfile.mkstemp(prefix="plan-", suffix=".json", dir=str(work))
+    os.close(fd)
+    out_path = plan_path.replace("plan-", "result-")
+    Path(plan_path).write_text(json.dumps(json_ready(plan)))
+    root = str(Path(__file__).resolve().parents[2])
+    env = dict(os.environ)
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    proc = subprocess.run([sys.executable, "-m", "dopus_codegen.studies.timing", plan_path, out_path],
+                          env=env, check=False)
+    if proc.returncode != 0:
+        raise BenchError(f"the timing process failed (exit {proc.returncode}); plan: {plan_path}")
+    res = json.loads(Path(out_path).read_text())
+    for p in (plan_path, out_path):
+        try:
+            os.unlink(p)
+        except OSError:
+            pass
+    return res
+
+
+def _acados_plan(ocp, prob, values, cond_list, quick, work: Path, echo) -> dict:
+    from . import acados_compare as ac
+
+    disc = prob["disc"]
+    try:
+        py = ac.acados_python()
+    except ac.AcadosUnavailable as exc:
+        raise BenchError(f"--against acados: acados' environment is not available: {exc}") from None
+    echo(f"{disc.name}: translating to acados and building its solvers (acados' environment) ...")
+    ej = ac.export(ocp, work)
+    libs = []
+    regs = ["NO_REGULARIZE"] if quick else ["NO_REGULARIZE", "MIRROR", "PROJECT", "CONVEXIFY"]
+    hess = values["hessian"]
+    for reg in regs:
+        b = ac.build(py, ej, {"hessian": "exact", "regularize": reg, "suffix": f"_ex_{reg.lower()[:4]}"}, work)
+        libs.append({"hessian": "exact", "regularize": reg, **b})
+    if disc.has_gn:
+        try:
+            b = ac.build(py, ej, {"hessian": "gauss-newton", "suffix": "_gn"}, work)
+            libs.append({"hessian": "gauss-newton", "regularize": "NO_REGULARIZE", **b})
+        except RuntimeError as exc:
+            echo(f"acados Gauss-Newton not built: {str(exc).splitlines()[-1]}")
+    del hess
+    xd = _disturbed(disc)
+    g = disc.initial_guess
+    return {"lib_dir": libs[0]["acados_lib_dir"], "N": int(disc.N), "nx": int(disc.nx), "nu": int(disc.nu),
+            "libs": libs, "cond_list": [c for c in cond_list if c <= disc.N], "lm": float(values["lm"]),
+            "plant_lib": "main", "x0": np.asarray(disc.x0, float).tolist(),
+            "x_disturbed": (xd if xd is not None else np.asarray(disc.x0, float)).tolist(),
+            "nominal": _guess_dict(prob["nominal"]), "cold": {"x": np.asarray(g.x, float).tolist(),
+                                                               "u": np.asarray(g.u, float).tolist()},
+            "steps_warm": 100 if quick else 300, "steps_cold": 60 if quick else 200,
+            "select_reps": 100 if quick else 300, "quoted": [list(q) for q in QUOTED]}
+
+
+def _resolve_settings(ocp, cli: dict):
+    values, sources = st.resolve(ocp.declared_options(), {k: v for k, v in cli.items() if v is not None})
+    return values, sources
+
+
+def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None, json_out=None, plot_out=None,
+              reps: int = 300, steps: int = 300, settle: int = 100, kkt_iters: int = 60,
+              cond_list=(40, 20, 10, 8, 5, 4, 2, 1), quick: bool = False, work=None,
+              echo: Callable = None, keep_samples: bool = False, **cli) -> dict:
+    """The body of ``dopus-gen bench OCP_FILE``; returns the result (also written as JSON)."""
+    from ..problem.ocp import load_ocp
+
+    echo = echo or (lambda t: print(t, file=sys.stderr))
+    if against not in (None, "none", "acados"):
+        raise BenchError(f"--against must be 'acados', got {against!r}")
+    for name, v in (("--reps", reps), ("--steps", steps), ("--kkt-iters", kkt_iters)):
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise BenchError(f"{name} must be a positive integer, got {v!r}")
+    if isinstance(settle, bool) or not isinstance(settle, int) or settle < 0:
+        raise BenchError(f"--settle must be a non-negative integer, got {settle!r}")
+    m_list = parse_m_list(m_list) if isinstance(m_list, str) else list(m_list)
+    ocp = load_ocp(ocp_file)
+    values, sources = _resolve_settings(ocp, cli)
+    prob = _problem(ocp, echo)
+    disc = prob["disc"]
+    if values["hessian"] == "gauss-newton" and not disc.has_gn:
+        raise BenchError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
+                         f"(ocp.stage_least_squares)")
+    Ms = _resolve_Ms([int(m) if isinstance(m, str) and m.isdigit() else m for m in m_list], disc.N)
+    echo(f"{disc.name}: settings: M {','.join(map(str, Ms))}, "
+         + st.describe({k: v for k, v in values.items() if k != "M"}, sources))
+    kkt = _kkt_study(prob, Ms, values, kkt_iters, echo)
+    work = Path(work) if work else Path(tempfile.gettempdir()) / f"dopus-bench-{os.getuid()}"
+    xd = _disturbed(disc)
+    x0 = np.asarray(disc.x0, float)
+    nominal = _guess_dict(prob["nominal"])
+    ref = _label(disc.N - 1, disc.N)
+    plan = {"libs": {"main": prob["spec"]}, "settings_codes": _settings_codes(values),
+            "runs": [{"lib": "main", "M": M, "label": _label(M, disc.N)} for M in Ms],
+            "reps": reps, "warmup": 10, "ref_label": ref, "keep_samples": keep_samples,
+            "phases": [{"name": "operating point", "kind": "loop", "plant_lib": "main", "x_start": x0.tolist(),
+                        "guess": nominal, "skip": settle, "steps": reps},
+                       {"name": "closed loop", "kind": "loop", "plant_lib": "main",
+                        "x_start": (xd if xd is not None else x0).tolist(), "x_init": x0.tolist(),
+                        "guess": nominal, "skip": 0, "steps": steps}]}
+    if against == "acados":
+        plan["acados"] = _acados_plan(ocp, prob, values, cond_list, quick, work, echo)
+    echo(f"{disc.name}: timing process (compiled libraries only, settings interleaved) ...")
+    res = _run_worker(plan, work)
+    result = {"problem": disc.name, "ocp_file": str(ocp_file), "N": int(disc.N), "nx": int(disc.nx),
+              "nu": int(disc.nu), "dt": float(disc.dt), "settings": {k: values[k] for k in values if k != "M"},
+              "sources": {k: sources[k] for k in sources if k != "M"}, "M": Ms, "reference": ref,
+              "library": prob["spec"]["lib"], "reps": reps, "settle": settle, "steps": steps,
+              "nominal_objective": float(prob["nominal_info"].get("objective", float("nan"))),
+              "kkt": kkt, **res}
+    result["machine"] = res.get("machine_before")
+    result["headline"] = headline(result)
+    if json_out:
+        Path(json_out).parent.mkdir(parents=True, exist_ok=True)
+        Path(json_out).write_text(json.dumps(json_ready(result), indent=1, allow_nan=False) + "\n")
+        echo(f"wrote {json_out}")
+    if plot_out:
+        plot_bench(result, plot_out)
+        echo(f"wrote {plot_out}")
+    return result
+
+
+def headline(result: dict) -> dict:
+    """The ratios the project steers by, per timed phase: ratio of the medians of the total
+    and the median of the per-step ratios (same interleaved run). ``acados fastest working``
+    is the faster (at that phase) of the fastest working exact-Hessian and Gauss-Newton
+    settings."""
+    out = {}
+    N = result["N"]
+    m1, full = _label(1, N), _label(N - 1, N)
+    for phase, t in result.get("timed", {}).items():
+        paired = (result.get("paired_ratios") or {}).get(phase, {})
+        med = {k: v["total_us"]["median"] for k, v in t.items()}
+        rows = {}
+
+        def pair(a, b, name):
+            if a in med and b in med and med[a] and med[b]:
+                rows[name] = {"a": a, "b": b, "ratio": med[a] / med[b],
+                              "paired_ratio": (paired.get(a) or {}).get(b)}
+
+        pair(m1, full, "M=1 / our full RTI")
+        for k in t:
+            if k.startswith("M=") and k != m1:
+                pair(k, full, f"{k} / our full RTI")
+        work = [k for k in ("acados exact fastest working", "acados GN fastest working") if k in med]
+        if work:
+            fastest = min(work, key=lambda k: med[k])
+            pair(m1, fastest, "M=1 / acados fastest working RTI")
+            if "M=1 / acados fastest working RTI" in rows:
+                pick = (result.get("acados_picks") or {}).get(fastest, {})
+                rows["M=1 / acados fastest working RTI"]["acados_setting"] = pick.get("label", fastest)
+        pair(full, "acados exact fastest working", "our full RTI / acados exact-Hessian RTI")
+        fb = {k: v["feedback_us"]["median"] for k, v in t.items()}
+        rows["feedback latency (us, median)"] = fb
+        out[phase] = rows
+    return out
+
+
+# ------------------------------------------------------------------------------ scaling
+def fit_exponent(Ns, times) -> float:
+    """Slope of the least-squares line through (log N, log t)."""
+    a = np.log(np.asarray(Ns, float))
+    b = np.log(np.asarray(times, float))
+    return float(np.polyfit(a, b, 1)[0])
+
+
+def run_scaling(ocp_file, n_list, m_list=("1", "full"), json_out=None, plot_out=None, reps: int = 200,
+                settle: int = 50, work=None, echo: Callable = None, **cli) -> dict:
+    """Time per iteration against N (same interval dt): the OCP file with ``horizon(N, dt)``
+    for each N, M = 1 and the full RTI of every N interleaved in one timing process, at the
+    operating point (the settled closed loop)."""
+    from ..problem.ocp import OcpError, load_ocp
+
+    echo = echo or (lambda t: print(t, file=sys.stderr))
+    n_list = parse_n_list(n_list) if isinstance(n_list, str) else list(n_list)
+    m_list = parse_m_list(m_list) if isinstance(m_list, str) else list(m_list)
+    libs, runs, guesses, per_n = {}, [], {}, {}
+    values = sources = None
+    x0 = None
+    for N in n_list:
+        ocp = load_ocp(ocp_file)
+        try:
+            dt = ocp.validate().horizon.dt
+        except OcpError as exc:
+            raise BenchError(str(exc)) from None
+        try:
+            ocp.horizon(N=N, dt=dt)
+        except OcpError as exc:
+            raise BenchError(f"--scaling N={N}: {exc}") from None
+        ocp.name = f"{ocp.name}_N{N}"
+        try:
+            ocp.validate()
+        except OcpError as exc:
+            raise BenchError(f"--scaling N={N}: the OCP file does not take another horizon: {exc}") from None
+        values, sources = _resolve_settings(ocp, cli)
+        prob = _problem(ocp, echo)
+        disc = prob["disc"]
+        key = f"N{N}"
+        libs[key] = prob["spec"]
+        Ms = []
+        for m in m_list:
+            M = N - 1 if m == "full" else min(int(m), N - 1)
+            if M not in Ms:
+                Ms.append(M)
+        per_n[N] = {"M": Ms, "objective": float(prob["nominal_info"].get("objective", float("nan")))}
+        for M in Ms:
+            label = _label(M, N, prefix=f"N={N} ")
+            runs.append({"lib": key, "M": M, "label": label})
+            guesses[label] = _guess_dict(prob["nominal"])
+        x0 = np.asarray(disc.x0, float)
+    plan = {"libs": libs, "settings_codes": _settings_codes(values), "runs": runs, "reps": reps, "warmup": 10,
+            "ref_label": None,
+            "phases": [{"name": "converged", "kind": "fixed", "plant_lib": f"N{n_list[0]}",
+                        "xhat": x0.tolist(), "guess": guesses},
+                       {"name": "operating point", "kind": "loop", "plant_lib": f"N{n_list[0]}",
+                        "x_start": x0.tolist(), "guess": guesses, "skip": settle, "steps": reps}]}
+    work = Path(work) if work else Path(tempfile.gettempdir()) / f"dopus-bench-{os.getuid()}"
+    echo(f"timing process: {len(runs)} settings interleaved ...")
+    res = _run_worker(plan, work)
+    scaling = {}
+    for phase, t in res["timed"].items():
+        fits = {}
+        for m in m_list:
+            rows = []
+            for N in n_list:
+                M = N - 1 if m == "full" else min(int(m), N - 1)
+                rec = t[_label(M, N, prefix=f"N={N} ")]
+                qpit = (rec.get("qp_iterations") or {}).get("median")
+                rows.append({"N": N, "M": M, "total_us": rec["total_us"]["median"],
+                             "feedback_us": rec["feedback_us"]["median"], "prepare_us": rec["prepare_us"]["median"],
+                             "qp_failures": rec["qp_failures"], "qp_iterations": qpit,
+                             "feedback_per_qp_iteration_us": rec["feedback_us"]["median"] / qpit if qpit else None})
+            key = "full" if m == "full" else f"M={m}"
+            Ns = [r["N"] for r in rows]
+            fits[key] = {"rows": rows, "exponent_total": fit_exponent(Ns, [r["total_us"] for r in rows]),
+                         "exponent_feedback": fit_exponent(Ns, [r["feedback_us"] for r in rows]),
+                         "exponent_prepare": fit_exponent(Ns, [r["prepare_us"] for r in rows])}
+            if all(r["feedback_per_qp_iteration_us"] for r in rows):
+                fits[key]["exponent_per_qp_iteration"] = fit_exponent(
+                    Ns, [r["feedback_per_qp_iteration_us"] for r in rows])
+        scaling[phase] = fits
+    result = {"problem": Path(ocp_file).stem, "ocp_file": str(ocp_file), "N_list": n_list,
+              "settings": {k: values[k] for k in values if k != "M"}, "sources": sources, "per_N": per_n,
+              "scaling": scaling, **res}
+    result["machine"] = res.get("machine_before")
+    if json_out:
+        Path(json_out).parent.mkdir(parents=True, exist_ok=True)
+        Path(json_out).write_text(json.dumps(json_ready(result), indent=1, allow_nan=False) + "\n")
+        echo(f"wrote {json_out}")
+    if plot_out:
+        plot_scaling(result, plot_out)
+        echo(f"wrote {plot_out}")
+    return result
+
+
+# ------------------------------------------------------------------------------ output
+def _f(v, fmt="8.1f"):
+    return format(v, fmt) if isinstance(v, (int, float)) and v is not None and math.isfinite(v) else "-".rjust(
+        int(fmt.split(".")[0]) if fmt[0].isdigit() else 1)
+
+
+def format_table(result: dict) -> str:
+    m = result.get("machine") or {}
+    ma = result.get("machine_after") or {}
+    lines = [f"{result['problem']}: N={result['N']}, nx={result['nx']}, nu={result['nu']}; "
+             + ", ".join(f"{k} {v}" for k, v in result.get("settings", {}).items()),
+             f"CPU {m.get('cpu')}, {m.get('cores')} cores, load {m.get('loadavg')} before, {ma.get('loadavg')} after"]
+    prep_keys = ("shift", "gradients", "rho", "hessians", "regularization", "assembly")
+    for phase, t in result.get("timed", {}).items():
+        lines.append(f"\n{phase} (us per iteration: median [p10, p90]; ratio to our full RTI: of the medians / "
+                     f"median of the per-step ratios)")
+        lines.append(f"{'setting':30s} {'feedback':>22s} {'preparation':>22s} {'total':>22s} {'ratio':>11s} "
+                     f"{'QP fail':>7s} {'QP it':>5s}")
+        for k, v in t.items():
+            cells = [f"{_f(v[p]['median'])} [{_f(v[p]['p10'], '6.1f')},{_f(v[p]['p90'], '7.1f')}]"
+                     for p in ("feedback_us", "prepare_us", "total_us")]
+            ratio = f"{_f(v.get('ratio'), '5.2f')}/{_f((v.get('paired_ratio') or {}).get('median'), '5.2f')}"
+            qpit = (v.get("qp_iterations") or {}).get("median")
+            lines.append(f"{k:30s} {cells[0]:>22s} {cells[1]:>22s} {cells[2]:>22s} {ratio:>11s} "
+                         f"{v['qp_failures']:7d} {_f(qpit, '5.0f')}")
+        ours = {k: v for k, v in t.items() if "feedback" in v.get("phases_us", {})}
+        if ours:
+            lines.append(f"  runtime timers (us, medians): {'setting':24s} {'feedback':>9s} "
+                         + " ".join(f"{p[:9]:>9s}" for p in prep_keys))
+            for k, v in ours.items():
+                ph = v["phases_us"]
+                lines.append(f"  {'':29s} {k:24s} {_f(ph['feedback']['median'], '9.1f')} "
+                             + " ".join(_f((ph.get(p) or {}).get('median'), '9.1f') for p in prep_keys))
+        acad = {k: v for k, v in t.items() if "qp" in v.get("phases_us", {})}
+        if acad:
+            lines.append(f"  acados timers (us, medians): {'setting':32s} {'QP':>9s} {'linearise':>9s}")
+            for k, v in acad.items():
+                ph = v["phases_us"]
+                lines.append(f"  {'':28s} {k:32s} {_f(ph['qp']['median'], '9.1f')} "
+                             f"{_f((ph.get('lin') or {}).get('median'), '9.1f')}")
+    kk = result.get("kkt")
+    if kk:
+        lines.append(f"\nfixed xhat_0 ({kk['start']} start, as dopus-gen converge --backend c): iterations to KKT")
+        lines.append(f"{'M':>12s} {'1e-6':>6s} {'1e-8':>6s} {'last KKT':>10s}")
+        for r in kk["runs"]:
+            lines.append(f"{r['label']:>12s} {str(r['iters_to_1e-6'] if r['iters_to_1e-6'] is not None else '-'):>6s} "
+                         f"{str(r['iters_to_1e-8'] if r['iters_to_1e-8'] is not None else '-'):>6s} "
+                         f"{_f(r['last_kkt'], '10.2e')}  {r['status'] if r['status'] != 'ok' else ''}")
+    for phase, rows in (result.get("headline") or {}).items():
+        lines.append(f"\nheadline ratios, {phase} (ratio of the medians / median of the per-step ratios):")
+        for name, r in rows.items():
+            if "ratio" in r:
+                extra = f" ({r['acados_setting']})" if r.get("acados_setting") else ""
+                lines.append(f"  {name:45s} {r['ratio']:6.2f} / {_f(r.get('paired_ratio'), '5.2f')}{extra}")
+    if result.get("acados_picks"):
+        lines.append("\nacados settings timed: " + "; ".join(f"{k} = {v['label']}"
+                                                               for k, v in result["acados_picks"].items()))
+        n_ok = sum(1 for r in result.get("acados_screen", []) if r["works"])
+        lines.append(f"acados screening: {n_ok} of {len(result.get('acados_screen', []))} settings work "
+                     f"(no QP failure from the disturbed nominal and from the cold guess)")
+    return "\n".join(lines)
+
+
+def format_scaling(result: dict) -> str:
+    m = result.get("machine") or {}
+    lines = [f"{result['problem']}: time per iteration against N (medians, us; the same interval dt); "
+             f"CPU {m.get('cpu')}, load {m.get('loadavg')}",
+             "converged: fixed initial state at IPOPT's solution (fixed mode); operating point: the closed loop "
+             "from that solution after it settled"]
+    for phase, fits in result["scaling"].items():
+        for key, f in fits.items():
+            lines.append(f"\n{phase}, {key}: exponent total {f['exponent_total']:.3f}, feedback "
+                         f"{f['exponent_feedback']:.3f}, preparation {f['exponent_prepare']:.3f}, feedback per QP "
+                         f"iteration {_f(f.get('exponent_per_qp_iteration'), '.3f')}")
+            lines.append(f"{'N':>5s} {'M':>5s} {'total':>9s} {'feedback':>9s} {'prepare':>9s} {'QP it':>6s} "
+                         f"{'per it':>8s} {'fail':>5s}")
+            for r in f["rows"]:
+                lines.append(f"{r['N']:5d} {r['M']:5d} {_f(r['total_us'], '9.1f')} {_f(r['feedback_us'], '9.1f')} "
+                             f"{_f(r['prepare_us'], '9.1f')} {_f(r['qp_iterations'], '6.0f')} "
+                             f"{_f(r['feedback_per_qp_iteration_us'], '8.1f')} {r['qp_failures']:5d}")
+    return "\n".join(lines)
+
+
+def plot_bench(result: dict, path) -> None:
+    """Stacked bars (feedback, preparation) per setting and timed phase."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    phases = list(result.get("timed", {}))
+    fig, axes = plt.subplots(1, max(1, len(phases)), figsize=(6 * max(1, len(phases)), 0.5 * 8 + 1.5), squeeze=False)
+    for ax, ph in zip(axes[0], phases):
+        t = result["timed"][ph]
+        labels = list(t)
+        fb = [t[k]["feedback_us"]["median"] or 0 for k in labels]
+        pr = [t[k]["prepare_us"]["median"] or 0 for k in labels]
+        y = np.arange(len(labels))
+        ax.barh(y, fb, label="feedback (QP + step)")
+        ax.barh(y, pr, left=fb, label="preparation")
+        ax.set_yticks(y)
+        ax.set_yticklabels(labels, fontsize=8)
+        ax.invert_yaxis()
+        ax.set_xlabel("median time per iteration [us]")
+        ax.set_title(f"{result['problem']}: {ph}", fontsize=10)
+        ax.grid(True, axis="x", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_scaling(result: dict, path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for phase, fits in result["scaling"].items():
+        for key, f in fits.items():
+            Ns = [r["N"] for r in f["rows"]]
+            ax.loglog(Ns, [r["total_us"] for r in f["rows"]], "o-" if phase == "converged" else "s--",
+                      label=f"{phase}, {key} (exponent {f['exponent_total']:.2f})")
+    ax.set_xlabel("N")
+    ax.set_ylabel("median time per iteration [us]")
+    ax.set_title(f"{result['problem']}: time per iteration against N", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

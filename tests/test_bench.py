@@ -1,0 +1,168 @@
+"""dopus-gen bench on a small OCP (the unicycle) with few repetitions.
+
+Never a test on timing: the numbers of the bench are checked against independent
+measures of the same run (the raw samples it keeps, the runtime's timers inside the wall
+clock of the call, the closed loop replayed in this process with CSolver, the iteration
+counts of ``dopus-gen converge``, a least-squares fit recomputed with numpy).
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from conftest import SECOND_FILE
+
+PREP = ("shift", "gradients", "rho", "hessians", "regularization", "assembly")
+
+
+@pytest.fixture(scope="module")
+def bench_result(tmp_path_factory):
+    from dopus_codegen.studies.bench import run_bench
+
+    work = tmp_path_factory.mktemp("bench")
+    return run_bench(SECOND_FILE, m_list="1,full", reps=25, settle=10, steps=25, kkt_iters=20, work=work,
+                     keep_samples=True, json_out=work / "bench.json", plot_out=work / "bench.png"), work
+
+
+def test_bench_phases_sum_to_the_total(bench_result):
+    res, _work = bench_result
+    assert res["casadi_imported"] is False
+    assert set(res["timed"]) == {"operating point", "closed loop"}
+    for phase, t in res["timed"].items():
+        samples = res["samples"][phase]
+        assert set(t) == {"M=1", "full RTI"}
+        for label, rec in t.items():
+            s = samples[label]
+            fb, pr = np.array(s["feedback"]), np.array(s["prepare"])
+            n = 25
+            assert fb.size == pr.size == n == rec["steps"]
+            tot = fb + pr
+            # the reported statistics are those of the kept samples
+            assert rec["total_us"]["median"] == pytest.approx(float(np.median(tot)), rel=1e-12)
+            assert rec["feedback_us"]["median"] == pytest.approx(float(np.median(fb)), rel=1e-12)
+            assert rec["prepare_us"]["p90"] == pytest.approx(float(np.percentile(pr, 90)), rel=1e-12)
+            # the runtime's own timers run inside the wall clock of the calls: feedback inside
+            # feedback(), the preparation phases (summed) inside prepare()
+            for i, ph in enumerate(s["phases"]):
+                assert 0.0 < ph["feedback"] <= fb[i] + 1e-3
+                prep = sum(ph[k] for k in PREP)
+                assert 0.0 < prep <= pr[i] + 1e-3
+            assert rec["qp_failures"] == 0
+        ref = t["full RTI"]
+        assert ref["ratio"] == 1.0 and ref["paired_ratio"]["median"] == 1.0
+        m1 = t["M=1"]
+        assert m1["ratio"] == pytest.approx(m1["total_us"]["median"] / ref["total_us"]["median"], rel=1e-12)
+        ft = np.array(samples["full RTI"]["feedback"]) + np.array(samples["full RTI"]["prepare"])
+        mt = np.array(samples["M=1"]["feedback"]) + np.array(samples["M=1"]["prepare"])
+        assert m1["paired_ratio"]["median"] == pytest.approx(float(np.median(mt / ft)), rel=1e-12)
+        head = res["headline"][phase]["M=1 / our full RTI"]
+        assert head["ratio"] == m1["ratio"] and head["paired_ratio"] == m1["paired_ratio"]["median"]
+        assert res["headline"][phase]["feedback latency (us, median)"]["M=1"] == m1["feedback_us"]["median"]
+    m = res["machine"]
+    assert m["cores"] >= 1 and len(m["loadavg"]) == 3 and m["cpu"]
+    on_disk = json.loads((_work / "bench.json").read_text())
+    assert on_disk["timed"]["closed loop"]["M=1"]["total_us"]["median"] == res["timed"]["closed loop"]["M=1"][
+        "total_us"]["median"]
+    assert (_work / "bench.png").stat().st_size > 1000
+
+
+def test_bench_closed_loop_equals_csolver_replay(bench_result, second_disc, second_solution):
+    """The timing process drives the library as CSolver does: the closed loop from the
+    disturbed state, replayed here with CSolver and the generated plant, gives the same
+    states."""
+    from dopus_codegen.runtime.solver import CSolver
+
+    res, _work = bench_result
+    disc = second_disc
+    guess, _info = second_solution
+    xd = np.array(disc.scenario.disturbance(np.array(disc.x0, float).copy()), float)
+    p0 = np.asarray(disc.p0, float)
+    p0 = p0[0] if p0.ndim > 1 else p0
+    for label, M in (("M=1", 1), ("full RTI", disc.N - 1)):
+        s = CSolver(disc, M=M, mode="receding", hessian=res["settings"]["hessian"],
+                    regularization=res["settings"]["regularization"], lm=res["settings"]["lm"])
+        s.init(np.array(disc.x0, float), guess)
+        x = xd.copy()
+        xs = [x.copy()]
+        for _ in range(25):
+            u = s.feedback(x)
+            s.prepare()
+            x = np.array(disc.stage_eval(x, u, p0)[0], float).reshape(-1)
+            xs.append(x.copy())
+        got = np.array(res["samples"]["closed loop"][label]["x"])
+        assert got.shape == (26, disc.nx)
+        np.testing.assert_allclose(got, np.array(xs), rtol=1e-9, atol=1e-12)
+
+
+def test_bench_kkt_iterations_equal_converge(bench_result, tmp_path):
+    from dopus_codegen.cli import main
+    from dopus_codegen.studies.converge import iterations_to
+
+    res, _work = bench_result
+    out = tmp_path / "conv.json"
+    r = CliRunner().invoke(main, ["converge", str(SECOND_FILE), "--M", "1,full", "--iters", "20", "--start", "warm",
+                                  "--backend", "c", "--json", str(out)])
+    assert r.exit_code == 0, r.output
+    conv = json.loads(out.read_text())
+    assert res["kkt"]["start"] == "warm"
+    by_M = {row["M"]: row for row in res["kkt"]["runs"]}
+    assert len(conv["runs"]) == 2
+    for run in conv["runs"]:
+        row = by_M[run["M"]]
+        assert row["iters_to_1e-6"] == iterations_to(run["kkt"], 1e-6)
+        assert row["iters_to_1e-8"] == iterations_to(run["kkt"], 1e-8)
+        assert row["iters_to_1e-8"] is not None      # the study converges on this problem
+        assert row["last_kkt"] == pytest.approx(run["kkt"][-1], rel=1e-9, abs=1e-15)
+
+
+def test_bench_scaling_fit(tmp_path):
+    from dopus_codegen.cli import main
+
+    out = tmp_path / "scaling.json"
+    r = CliRunner().invoke(main, ["bench", str(SECOND_FILE), "--scaling", "6,12", "--reps", "15", "--settle", "5",
+                                  "--json", str(out), "--work", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    res = json.loads(out.read_text())
+    assert res["casadi_imported"] is False
+    assert set(res["scaling"]) == {"converged", "operating point"}
+    for phase, fits in res["scaling"].items():
+        for key, f in fits.items():
+            Ns = [row["N"] for row in f["rows"]]
+            assert Ns == [6, 12]
+            t = [res["timed"][phase][f"N={row['N']} " + ("full RTI" if key == "full" else key)]
+                 ["total_us"]["median"] for row in f["rows"]]
+            assert [row["total_us"] for row in f["rows"]] == t
+            slope = (np.log(t[1]) - np.log(t[0])) / (np.log(12) - np.log(6))
+            assert f["exponent_total"] == pytest.approx(slope, rel=1e-9)
+        assert {row["M"] for row in fits["full"]["rows"]} == {5, 11}
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--M", "1,x"], "'x' is neither a non-negative integer nor 'full'"),
+    (["--M", "40"], "M = 40 exceeds N-1 = 19"),
+    (["--scaling", "1,20"], "'1' is not a horizon length N >= 2"),
+    (["--scaling", "20"], "at least two values of N"),
+    (["--cond", "10,a"], "--cond: expected comma-separated integers"),
+])
+def test_bench_bad_input(args, message, tmp_path):
+    from dopus_codegen.cli import main
+
+    r = CliRunner().invoke(main, ["bench", str(SECOND_FILE), *args, "--reps", "2", "--steps", "2", "--kkt-iters", "2",
+                                  "--work", str(tmp_path)])
+    assert r.exit_code != 0
+    assert message in r.output
+    assert "Traceback" not in r.output
+    assert r.exception is None or isinstance(r.exception, SystemExit)
+
+
+def test_bench_bad_ocp_file(tmp_path):
+    from dopus_codegen.cli import main
+
+    bad = tmp_path / "bad.py"
+    bad.write_text("def build():\n    return 42\n")
+    r = CliRunner().invoke(main, ["bench", str(bad), "--work", str(tmp_path)])
+    assert r.exit_code != 0 and "Traceback" not in r.output
+    assert "Ocp" in r.output
