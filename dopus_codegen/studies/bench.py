@@ -154,7 +154,8 @@ def _settings_codes(values: dict) -> dict:
     return {"hessian": st.code("hessian", values["hessian"]),
             "regularization": st.code("regularization", values["regularization"]),
             "reg_eps": float(values["reg_eps"]), "cost_hessian": st.code("cost_hessian", values["cost_hessian"]),
-            "lm": float(values["lm"]), "qp_tol": float(st.DEFAULTS["qp_tol"])}
+            "lm": values["lm"] if values["lm"] == st.LM_AUTO else float(values["lm"]),
+            "qp_tol": float(st.DEFAULTS["qp_tol"])}
 
 
 def _kkt_study(prob, Ms, values, iters, echo) -> dict:

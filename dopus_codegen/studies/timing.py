@@ -87,7 +87,9 @@ class Ours:
             checks.append(("set_regularization", (int(settings["regularization"]), float(settings["reg_eps"]))))
         if "cost_hessian" in settings:
             checks.append(("set_cost_hessian", (int(settings["cost_hessian"]),)))
-        if "lm" in settings:
+        if settings.get("lm") == "auto":
+            checks.append(("set_lm_auto", ()))
+        elif "lm" in settings:
             checks.append(("set_levenberg_marquardt", (float(settings["lm"]),)))
         if "qp_tol" in settings:
             checks.append(("set_qp_tol", (float(settings["qp_tol"]),)))
