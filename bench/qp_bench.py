@@ -337,7 +337,7 @@ def reference_primals(qps: list, log=print) -> list:
 
 
 def objective(q: dict, dw: np.ndarray) -> float:
-    N, nx, nw = q["N"], q["nx"], q["nx"] + q["nu"]
+    N, nw = q["N"], q["nx"] + q["nu"]
     J = 0.0
     for k in range(N):
         w = dw[k * nw:(k + 1) * nw]

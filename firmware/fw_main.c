@@ -38,7 +38,7 @@ static int line_len;
 
 static void put_char(char c)
 {
-    if (line_len == (int)sizeof(line)) {      /* a long line goes out in pieces */
+    if (line_len == (int)sizeof(line)) { /* a long line goes out in pieces */
         fw_write(line, line_len);
         line_len = 0;
     }
@@ -134,8 +134,7 @@ static fw_real kkt_max(const fw_real *k4)
 }
 
 /* feedback + prepare with ticks and stack; returns the status */
-static int iteration(const fw_real *xhat, fw_real *u0, uint32_t *t_fb, uint32_t *t_prep,
-                     uint32_t *stack)
+static int iteration(const fw_real *xhat, fw_real *u0, uint32_t *t_fb, uint32_t *t_prep, uint32_t *stack)
 {
     uint32_t sp = fw_stack_paint();
     uint32_t t0 = fw_ticks(), t1, t2;
@@ -219,8 +218,8 @@ static int closed_loop(void)
         status = iteration(xhat, u0, &t_fb, &t_prep, &stack);
         /* the plant: the generated integrator from the measured state with the applied u0
          * (iteration() ran prepare already: the plant step does not touch the solver) */
-        if (status == FW_C(OK)
-            && FW(eval_stage_eval)(xhat, u0, FW(p_default), xnext, &l, g, &plant_work) != 0) {
+        if (status == FW_C(OK) &&
+            FW(eval_stage_eval)(xhat, u0, FW(p_default), xnext, &l, g, &plant_work) != 0) {
             status = FW_C(ERR_FUNCTION);
         }
         if (status == FW_C(OK)) {

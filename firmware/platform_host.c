@@ -53,4 +53,3 @@ uint32_t fw_stack_lowest(void)
 {
     return 0u;
 }
-

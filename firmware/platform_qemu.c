@@ -12,8 +12,8 @@
 
 extern uint32_t __stack_limit__[], __stack_top__[];
 
-#define FW_TIMER0_CTRL   (*(volatile uint32_t *)0x40000000u)
-#define FW_TIMER0_VALUE  (*(volatile uint32_t *)0x40000004u)
+#define FW_TIMER0_CTRL (*(volatile uint32_t *)0x40000000u)
+#define FW_TIMER0_VALUE (*(volatile uint32_t *)0x40000004u)
 #define FW_TIMER0_RELOAD (*(volatile uint32_t *)0x40000008u)
 #define FW_STACK_PATTERN 0xC5C5C5C5u
 
@@ -34,7 +34,7 @@ void fw_platform_init(void)
     FW_TIMER0_CTRL = 0u;
     FW_TIMER0_RELOAD = 0xFFFFFFFFu;
     FW_TIMER0_VALUE = 0xFFFFFFFFu;
-    FW_TIMER0_CTRL = 1u;              /* enable, system clock, no interrupt */
+    FW_TIMER0_CTRL = 1u; /* enable, system clock, no interrupt */
 }
 
 void fw_write(const char *buf, int n)
@@ -85,8 +85,7 @@ uint32_t fw_calibration_ticks(void)
     return t1 - t0;
 }
 
-__attribute__((noinline))
-uint32_t fw_stack_paint(void)
+__attribute__((noinline)) uint32_t fw_stack_paint(void)
 {
     uint32_t sp, *p;
     __asm__ volatile("mov %0, sp" : "=r"(sp));

@@ -21,13 +21,22 @@ typedef void (*fw_vector)(void);
 /* initial SP, reset, NMI, HardFault, MemManage, BusFault, UsageFault, 4 reserved, SVCall,
  * DebugMonitor, reserved, PendSV, SysTick */
 __attribute__((section(".vectors"), used))
-const fw_vector fw_vectors[16] = {
-    (fw_vector)(uintptr_t)__stack_top__,
-    fw_reset_handler,
-    fw_fault_handler, fw_fault_handler, fw_fault_handler, fw_fault_handler, fw_fault_handler,
-    0, 0, 0, 0,
-    fw_fault_handler, fw_fault_handler, 0, fw_fault_handler, fw_fault_handler
-};
+const fw_vector fw_vectors[16] = {(fw_vector)(uintptr_t)__stack_top__,
+                                  fw_reset_handler,
+                                  fw_fault_handler,
+                                  fw_fault_handler,
+                                  fw_fault_handler,
+                                  fw_fault_handler,
+                                  fw_fault_handler,
+                                  0,
+                                  0,
+                                  0,
+                                  0,
+                                  fw_fault_handler,
+                                  fw_fault_handler,
+                                  0,
+                                  fw_fault_handler,
+                                  fw_fault_handler};
 
 static void fw_fault_handler(void)
 {
@@ -37,8 +46,7 @@ static void fw_fault_handler(void)
     }
 }
 
-__attribute__((noreturn, used))
-void fw_reset_handler(void)
+__attribute__((noreturn, used)) void fw_reset_handler(void)
 {
     uint32_t *p, *q;
 #if defined(__ARM_FP)

@@ -42,8 +42,8 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
         eq = dopus_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
     }
     for (k = 0; k < DOPUS_N; ++k) {
-        if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
-                                  &l, g, &s->fun_work) != 0) {
+        if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
+                                  &s->fun_work) != 0) {
             return DOPUS_ERR_FUNCTION;
         }
         if (!dopus_lai_vec_finite(DOPUS_NW, gL) || !dopus_lai_vec_finite(DOPUS_NX, phi) ||
@@ -71,18 +71,18 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
         } else {
             for (i = 0; i < DOPUS_NX; ++i) {
                 ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->x[k][i], dopus_lbx[i], dopus_ubx[i]));
-                comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_b[k][i], s->x[k][i], dopus_lbx[i],
-                                                          dopus_ubx[i]));
+                comp = dopus_kkt_max(comp,
+                                     dopus_kkt_comp(s->mu_b[k][i], s->x[k][i], dopus_lbx[i], dopus_ubx[i]));
             }
         }
         for (i = 0; i < DOPUS_NU; ++i) {
             ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->u[k][i], dopus_lbu[i], dopus_ubu[i]));
-            comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_b[k][DOPUS_NX + i], s->u[k][i],
-                                                      dopus_lbu[i], dopus_ubu[i]));
+            comp = dopus_kkt_max(
+                comp, dopus_kkt_comp(s->mu_b[k][DOPUS_NX + i], s->u[k][i], dopus_lbu[i], dopus_ubu[i]));
         }
     }
-    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
-                             &s->fun_work) != 0) {
+    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gLN, &E, r, r_eq, &s->fun_work) !=
+        0) {
         return DOPUS_ERR_FUNCTION;
     }
     if (!dopus_lai_vec_finite(DOPUS_NX, gLN) || !isfinite(E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
@@ -92,8 +92,7 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
     for (i = 0; i < DOPUS_NX; ++i) {
         stat = dopus_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]));
         ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->x[DOPUS_N][i], dopus_lbx[i], dopus_ubx[i]));
-        comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_bN[i], s->x[DOPUS_N][i], dopus_lbx[i],
-                                                  dopus_ubx[i]));
+        comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_bN[i], s->x[DOPUS_N][i], dopus_lbx[i], dopus_ubx[i]));
     }
     for (i = 0; i < DOPUS_NE; ++i) {
         eq = dopus_kkt_max(eq, fabs(r_eq[i]));

@@ -2,7 +2,6 @@
  * the inline kernels of the header. */
 #include "dopus_linalg.h"
 
-
 int dopus_la_potrf_l(int n, double *A, int lda)
 {
     return dopus_lai_potrf_l(n, A, lda);
@@ -38,32 +37,31 @@ void dopus_la_trsm_llt(int n, int m, const double *L, int ldl, double *B, int ld
     dopus_lai_trsm_llt(n, m, L, ldl, B, ldb);
 }
 
-void dopus_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+void dopus_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
+                     double *y)
 {
     dopus_lai_gemv_n(m, n, alpha, A, lda, x, beta, y);
 }
 
-void dopus_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+void dopus_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
+                     double *y)
 {
     dopus_lai_gemv_t(m, n, alpha, A, lda, x, beta, y);
 }
 
-void dopus_la_symv_l(int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+void dopus_la_symv_l(int n, double alpha, const double *A, int lda, const double *x, double beta, double *y)
 {
     dopus_lai_symv_l(n, alpha, A, lda, x, beta, y);
 }
 
-void dopus_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda,
-                      const double *B, int ldb, double beta, double *C, int ldc)
+void dopus_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
+                      double beta, double *C, int ldc)
 {
     dopus_lai_gemm_nn(m, n, k, alpha, A, lda, B, ldb, beta, C, ldc);
 }
 
-void dopus_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda,
-                      const double *B, int ldb, double beta, double *C, int ldc)
+void dopus_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
+                      double beta, double *C, int ldc)
 {
     dopus_lai_gemm_tn(m, n, k, alpha, A, lda, B, ldb, beta, C, ldc);
 }

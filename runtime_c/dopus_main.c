@@ -30,8 +30,7 @@ static int report(const char *phase, int iter, int status, const double *u0, con
     print_vector("u0", u0, DOPUS_NU);
     printf(" kkt %.17g\n", kkt);
     if (status != DOPUS_OK || !isfinite(kkt)) {
-        fprintf(stderr, "main_dopus: %s iteration %d failed: %s\n", phase, iter,
-                dopus_status_string(status));
+        fprintf(stderr, "main_dopus: %s iteration %d failed: %s\n", phase, iter, dopus_status_string(status));
         return 1;
     }
     return 0;
@@ -94,8 +93,8 @@ static int run(const char *phase, int mode)
 
 int main(void)
 {
-    printf("problem %s N %d nx %d nu %d nominal %d sizeof %lu\n", dopus_name(), DOPUS_N,
-           DOPUS_NX, DOPUS_NU, DOPUS_HAS_NOMINAL, (unsigned long)dopus_solver_sizeof());
+    printf("problem %s N %d nx %d nu %d nominal %d sizeof %lu\n", dopus_name(), DOPUS_N, DOPUS_NX, DOPUS_NU,
+           DOPUS_HAS_NOMINAL, (unsigned long)dopus_solver_sizeof());
     if (run("fixed", DOPUS_MODE_FIXED) || run("receding", DOPUS_MODE_RECEDING)) {
         return 1;
     }

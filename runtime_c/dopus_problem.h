@@ -24,8 +24,8 @@ extern const int dopus_default_M;
 extern const int dopus_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int dopus_default_regularization; /* 0 none, 1 project, 2 mirror */
 extern const double dopus_default_reg_eps;
-extern const int dopus_default_cost_hessian;    /* 1 fresh, 0 stored */
-extern const double dopus_default_lm;            /* Levenberg-Marquardt term, >= 0 */
+extern const int dopus_default_cost_hessian; /* 1 fresh, 0 stored */
+extern const double dopus_default_lm;        /* Levenberg-Marquardt term, >= 0 */
 
 #if DOPUS_HAS_NOMINAL
 /* offline primal-dual solution at dopus_x0_default (IPOPT at generation time), so the

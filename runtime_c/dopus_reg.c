@@ -59,7 +59,8 @@ int dopus_reg_jacobi_eig(int n, double *a, double *v)
                 }
                 /* An entry below round-off of both diagonal entries is zero for
                  * every later rotation too (Golub and Van Loan, section 8.5). */
-                if (fabs(apq) <= 0.25 * DBL_EPSILON * fabs(app) && fabs(apq) <= 0.25 * DBL_EPSILON * fabs(aqq)) {
+                if (fabs(apq) <= 0.25 * DBL_EPSILON * fabs(app) &&
+                    fabs(apq) <= 0.25 * DBL_EPSILON * fabs(aqq)) {
                     a[p + q * n] = 0.0;
                     a[q + p * n] = 0.0;
                     continue;

@@ -9,11 +9,7 @@
 #ifndef DOPUS_REG_H
 #define DOPUS_REG_H
 
-enum dopus_regularization {
-    DOPUS_REG_NONE = 0,
-    DOPUS_REG_PROJECT = 1,
-    DOPUS_REG_MIRROR = 2
-};
+enum dopus_regularization { DOPUS_REG_NONE = 0, DOPUS_REG_PROJECT = 1, DOPUS_REG_MIRROR = 2 };
 
 /* Eigen-decomposition of the symmetric part of the n x n column-major matrix `a`.
  * On return the diagonal of `a` holds the eigenvalues (off-diagonals ~0) and `v` (n x n,

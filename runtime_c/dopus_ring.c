@@ -9,13 +9,20 @@ void dopus_ring_reset(dopus_ring *ring)
     int k, i;
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *s = &ring->slot[k];
-        for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i) s->Ht[i] = 0.0;
-        for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i) s->A_dyn[i] = 0.0;
-        for (i = 0; i < DOPUS_NX * DOPUS_NW; ++i) s->Phit[i] = 0.0;
-        for (i = 0; i < DOPUS_DIM(DOPUS_NG) * DOPUS_NW; ++i) s->Ct[i] = 0.0;
-        for (i = 0; i < DOPUS_NW; ++i) s->F_w[i] = 0.0;
-        for (i = 0; i < DOPUS_NX; ++i) s->phi[i] = 0.0;
-        for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i) s->g[i] = 0.0;
+        for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i)
+            s->Ht[i] = 0.0;
+        for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i)
+            s->A_dyn[i] = 0.0;
+        for (i = 0; i < DOPUS_NX * DOPUS_NW; ++i)
+            s->Phit[i] = 0.0;
+        for (i = 0; i < DOPUS_DIM(DOPUS_NG) * DOPUS_NW; ++i)
+            s->Ct[i] = 0.0;
+        for (i = 0; i < DOPUS_NW; ++i)
+            s->F_w[i] = 0.0;
+        for (i = 0; i < DOPUS_NX; ++i)
+            s->phi[i] = 0.0;
+        for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i)
+            s->g[i] = 0.0;
         dopus_ring_clear_step(s);
     }
     ring->ring_head = 0;
@@ -39,14 +46,18 @@ void dopus_ring_advance(dopus_ring *ring)
 void dopus_ring_clear_step(dopus_stage_slot *slot)
 {
     int i;
-    for (i = 0; i < DOPUS_NW; ++i) slot->dw[i] = 0.0;
-    for (i = 0; i < DOPUS_NX; ++i) slot->dlam[i] = 0.0;
-    for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i) slot->dmu_g[i] = 0.0;
-    for (i = 0; i < DOPUS_NW; ++i) slot->dmu_b[i] = 0.0;
+    for (i = 0; i < DOPUS_NW; ++i)
+        slot->dw[i] = 0.0;
+    for (i = 0; i < DOPUS_NX; ++i)
+        slot->dlam[i] = 0.0;
+    for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i)
+        slot->dmu_g[i] = 0.0;
+    for (i = 0; i < DOPUS_NW; ++i)
+        slot->dmu_b[i] = 0.0;
 }
 
-double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new,
-                         const double *phi_new, const double *g_new)
+double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, const double *phi_new,
+                         const double *g_new)
 {
     double num2 = 0.0, den2 = 0.0, old2 = 0.0, new2 = 0.0;
     int i, j;
@@ -54,36 +65,50 @@ double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new,
     /* stationarity rows: F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new */
     for (i = 0; i < DOPUS_NW; ++i) {
         double hd = 0.0, pl = 0.0, cm = 0.0, v;
-        for (j = 0; j < DOPUS_NW; ++j) hd += slot->Ht[i + j * DOPUS_NW] * slot->dw[j];
-        for (j = 0; j < DOPUS_NX; ++j) pl += slot->Phit[j + i * DOPUS_NX] * slot->dlam[j];
-        for (j = 0; j < DOPUS_NG; ++j) cm += slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] * slot->dmu_g[j];
+        for (j = 0; j < DOPUS_NW; ++j)
+            hd += slot->Ht[i + j * DOPUS_NW] * slot->dw[j];
+        for (j = 0; j < DOPUS_NX; ++j)
+            pl += slot->Phit[j + i * DOPUS_NX] * slot->dlam[j];
+        for (j = 0; j < DOPUS_NG; ++j)
+            cm += slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] * slot->dmu_g[j];
         v = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i] - F_w_new[i];
         num2 += v * v;
     }
     /* dynamics rows: -(phi_old + Phit dw) + phi_new */
     for (i = 0; i < DOPUS_NX; ++i) {
         double pd = 0.0, v;
-        for (j = 0; j < DOPUS_NW; ++j) pd += slot->Phit[i + j * DOPUS_NX] * slot->dw[j];
+        for (j = 0; j < DOPUS_NW; ++j)
+            pd += slot->Phit[i + j * DOPUS_NX] * slot->dw[j];
         v = -(slot->phi[i] + pd) + phi_new[i];
         num2 += v * v;
     }
     /* path constraint rows: g_old + Ct dw - g_new */
     for (i = 0; i < DOPUS_NG; ++i) {
         double cd = 0.0, v;
-        for (j = 0; j < DOPUS_NW; ++j) cd += slot->Ct[i + j * DOPUS_DIM(DOPUS_NG)] * slot->dw[j];
+        for (j = 0; j < DOPUS_NW; ++j)
+            cd += slot->Ct[i + j * DOPUS_DIM(DOPUS_NG)] * slot->dw[j];
         v = slot->g[i] + cd - g_new[i];
         num2 += v * v;
     }
-    for (i = 0; i < DOPUS_NW; ++i) den2 += slot->dw[i] * slot->dw[i] + slot->dmu_b[i] * slot->dmu_b[i];
-    for (i = 0; i < DOPUS_NX; ++i) den2 += slot->dlam[i] * slot->dlam[i];
-    for (i = 0; i < DOPUS_NG; ++i) den2 += slot->dmu_g[i] * slot->dmu_g[i];
+    for (i = 0; i < DOPUS_NW; ++i)
+        den2 += slot->dw[i] * slot->dw[i] + slot->dmu_b[i] * slot->dmu_b[i];
+    for (i = 0; i < DOPUS_NX; ++i)
+        den2 += slot->dlam[i] * slot->dlam[i];
+    for (i = 0; i < DOPUS_NG; ++i)
+        den2 += slot->dmu_g[i] * slot->dmu_g[i];
     /* round-off scale of num: |F_old| + |F_new| */
-    for (i = 0; i < DOPUS_NW; ++i) old2 += slot->F_w[i] * slot->F_w[i];
-    for (i = 0; i < DOPUS_NX; ++i) old2 += slot->phi[i] * slot->phi[i];
-    for (i = 0; i < DOPUS_NG; ++i) old2 += slot->g[i] * slot->g[i];
-    for (i = 0; i < DOPUS_NW; ++i) new2 += F_w_new[i] * F_w_new[i];
-    for (i = 0; i < DOPUS_NX; ++i) new2 += phi_new[i] * phi_new[i];
-    for (i = 0; i < DOPUS_NG; ++i) new2 += g_new[i] * g_new[i];
+    for (i = 0; i < DOPUS_NW; ++i)
+        old2 += slot->F_w[i] * slot->F_w[i];
+    for (i = 0; i < DOPUS_NX; ++i)
+        old2 += slot->phi[i] * slot->phi[i];
+    for (i = 0; i < DOPUS_NG; ++i)
+        old2 += slot->g[i] * slot->g[i];
+    for (i = 0; i < DOPUS_NW; ++i)
+        new2 += F_w_new[i] * F_w_new[i];
+    for (i = 0; i < DOPUS_NX; ++i)
+        new2 += phi_new[i] * phi_new[i];
+    for (i = 0; i < DOPUS_NG; ++i)
+        new2 += g_new[i] * g_new[i];
     if (den2 == 0.0) {
         return 0.0;
     }
@@ -99,11 +124,13 @@ double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new,
     return sqrt(num2) / sqrt(den2);
 }
 
-void dopus_ring_store_F(dopus_stage_slot *slot, const double *F_w, const double *phi,
-                        const double *g)
+void dopus_ring_store_F(dopus_stage_slot *slot, const double *F_w, const double *phi, const double *g)
 {
     int i;
-    for (i = 0; i < DOPUS_NW; ++i) slot->F_w[i] = F_w[i];
-    for (i = 0; i < DOPUS_NX; ++i) slot->phi[i] = phi[i];
-    for (i = 0; i < DOPUS_NG; ++i) slot->g[i] = g[i];
+    for (i = 0; i < DOPUS_NW; ++i)
+        slot->F_w[i] = F_w[i];
+    for (i = 0; i < DOPUS_NX; ++i)
+        slot->phi[i] = phi[i];
+    for (i = 0; i < DOPUS_NG; ++i)
+        slot->g[i] = g[i];
 }

@@ -12,7 +12,7 @@
 
 typedef struct {
     /* the blocks the QP uses (possibly outdated, A regularised), column-major */
-    double Ht[DOPUS_NW * DOPUS_NW];            /* nw x nw */
+    double Ht[DOPUS_NW * DOPUS_NW]; /* nw x nw */
     /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
      * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l */
     double A_dyn[DOPUS_NW * DOPUS_NW];         /* nw x nw */
@@ -56,11 +56,10 @@ void dopus_ring_clear_step(dopus_stage_slot *slot);
  *            g_old + Ct dw - g_new] |
  *   rho = num / |(dw, dlam, dmu_g, dmu_b)| (2-norms), 0 when the denominator is 0 or
  *   num <= DOPUS_EPS_RHO * (|(F_w_old, phi_old, g_old)| + |(F_w_new, phi_new, g_new)|). */
-double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new,
-                         const double *phi_new, const double *g_new);
+double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, const double *phi_new,
+                         const double *g_new);
 
 /* Store F_new as F_old. */
-void dopus_ring_store_F(dopus_stage_slot *slot, const double *F_w, const double *phi,
-                        const double *g);
+void dopus_ring_store_F(dopus_stage_slot *slot, const double *F_w, const double *phi, const double *g);
 
 #endif /* DOPUS_RING_H */

@@ -312,7 +312,8 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
     int k, i, j, l;
     for (j = 0; j < DOPUS_NX; ++j) {
         for (i = 0; i < DOPUS_NX; ++i) {
-            P[i + j * DOPUS_NX] = (i >= j ? s->A_N[i + j * DOPUS_NX] : s->A_N[j + i * DOPUS_NX]) + (i == j ? lm : 0.0);
+            P[i + j * DOPUS_NX] =
+                (i >= j ? s->A_N[i + j * DOPUS_NX] : s->A_N[j + i * DOPUS_NX]) + (i == j ? lm : 0.0);
         }
     }
     for (k = DOPUS_N - 1; k >= 0; --k) {
@@ -356,7 +357,7 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
             }
         }
         if (k == 0) {
-            break;   /* x_0 is fixed: P_0 is not needed */
+            break; /* x_0 is fixed: P_0 is not needed */
         }
         /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
         for (j = 0; j < DOPUS_NX; ++j) {
@@ -501,8 +502,8 @@ static int dopus_stage_F(dopus_solver *s, int k)
 {
     double l = 0.0;
     int i;
-    if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL,
-                              s->tmp_phi, &l, s->tmp_g, &s->fun_work) != 0) {
+    if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL, s->tmp_phi, &l,
+                              s->tmp_g, &s->fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
     if (!dopus_lai_vec_finite(DOPUS_NW, s->tmp_gL) || !dopus_lai_vec_finite(DOPUS_NX, s->tmp_phi) ||
@@ -549,8 +550,8 @@ static int dopus_stage_H(dopus_solver *s, int k)
     dopus_stage_slot *slot;
     double t0 = dopus_timer_now(&s->timer);
     int rc, i;
-    rc = dopus_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
-                               s->tmp_A, s->tmp_Phi, s->tmp_C, &s->fun_work);
+    rc = dopus_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_A,
+                               s->tmp_Phi, s->tmp_C, &s->fun_work);
     dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return DOPUS_ERR_FUNCTION;
@@ -584,8 +585,8 @@ static int dopus_stage_H(dopus_solver *s, int k)
 static int dopus_term_F(dopus_solver *s)
 {
     double gL[DOPUS_NX], E = 0.0, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
-    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, &E, r, r_eq,
-                             &s->fun_work) != 0) {
+    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, &E, r, r_eq, &s->fun_work) !=
+        0) {
         return DOPUS_ERR_FUNCTION;
     }
     if (!dopus_lai_vec_finite(DOPUS_NX, gL) || !isfinite(E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
@@ -605,8 +606,8 @@ static int dopus_term_H(dopus_solver *s)
     double R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX], R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
     double t0 = dopus_timer_now(&s->timer);
     int rc;
-    rc = dopus_eval_term_hess(s->hessian, s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, s->tmp_A,
-                              R, R_eq, &s->fun_work);
+    rc = dopus_eval_term_hess(s->hessian, s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, s->tmp_A, R, R_eq,
+                              &s->fun_work);
     dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return DOPUS_ERR_FUNCTION;
@@ -759,9 +760,9 @@ static int dopus_init_finish(dopus_solver *s)
     return DOPUS_OK;
 }
 
-int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const double *u,
-               const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
-               const double *mu_r, const double *nu)
+int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
+               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
+               const double *nu)
 {
     int k, i, rc;
 
@@ -830,10 +831,10 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
 int dopus_init_nominal(dopus_solver *s, const double *xhat0)
 {
 #if DOPUS_HAS_NOMINAL
-    return dopus_init(s, xhat0, &dopus_nominal_x[0][0], &dopus_nominal_u[0][0],
-                      &dopus_nominal_lam[0][0], DOPUS_NG > 0 ? &dopus_nominal_mu_g[0][0] : 0,
-                      &dopus_nominal_mu_b[0][0], dopus_nominal_mu_bN,
-                      DOPUS_NR > 0 ? dopus_nominal_mu_r : 0, DOPUS_NE > 0 ? dopus_nominal_nu : 0);
+    return dopus_init(s, xhat0, &dopus_nominal_x[0][0], &dopus_nominal_u[0][0], &dopus_nominal_lam[0][0],
+                      DOPUS_NG > 0 ? &dopus_nominal_mu_g[0][0] : 0, &dopus_nominal_mu_b[0][0],
+                      dopus_nominal_mu_bN, DOPUS_NR > 0 ? dopus_nominal_mu_r : 0,
+                      DOPUS_NE > 0 ? dopus_nominal_nu : 0);
 #else
     (void)xhat0;
     dopus_ensure_setup(s);
@@ -1019,7 +1020,7 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
     if (retries == 0) {
-        dopus_lm_feedback(s, DOPUS_OK);   /* lowered, unless this QP needed a raise */
+        dopus_lm_feedback(s, DOPUS_OK); /* lowered, unless this QP needed a raise */
     }
     dopus_copy(&s->plan_u[0][0], &s->u[0][0], DOPUS_N * DOPUS_NU);
     if (dopus_clip_u(s->u[0], s->u0_out)) {
@@ -1124,8 +1125,9 @@ static int dopus_recover(dopus_solver *s, int shifted)
         if (!shifted) {
             dopus_copy(s->x[0], s->x[1], DOPUS_NX);
         }
-    } else if (dopus_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) != 0 ||
-        !dopus_lai_vec_finite(DOPUS_NX, s->x[0])) {
+    } else if (dopus_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) !=
+                   0 ||
+               !dopus_lai_vec_finite(DOPUS_NX, s->x[0])) {
         dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
     }
     for (i = 0; i < DOPUS_NX; ++i) {
@@ -1305,7 +1307,7 @@ static int dopus_prepare_iteration(dopus_solver *s)
 
     /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
     s->kkt_proxy = dopus_kkt_proxy_eval(s);
-    dopus_lm_prepared(s);   /* the automatic Levenberg-Marquardt term (section 10) */
+    dopus_lm_prepared(s); /* the automatic Levenberg-Marquardt term (section 10) */
     if (dopus_iterate_diverged(s)) {
         s->flags |= DOPUS_FLAG_DIVERGED;
         if (s->recovery && s->mode == DOPUS_MODE_RECEDING) {

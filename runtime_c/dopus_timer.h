@@ -15,15 +15,15 @@
 
 /* Phases timed per call (seconds of the last call that ran the phase). */
 enum dopus_phase {
-    DOPUS_PHASE_FEEDBACK = 0,      /* dopus_feedback: QP solve + step */
-    DOPUS_PHASE_SHIFT = 1,         /* prepare step 1: shift, ring head */
-    DOPUS_PHASE_GRADIENTS = 2,     /* prepare steps 2-3: stage_grad / term_grad (F_k) */
-    DOPUS_PHASE_RHO = 3,           /* prepare step 2: secant criterion eq. 16 */
-    DOPUS_PHASE_HESSIANS = 4,      /* stage_hess / term_hess (H_k) and stage_hess_cost (A_l),
+    DOPUS_PHASE_FEEDBACK = 0,       /* dopus_feedback: QP solve + step */
+    DOPUS_PHASE_SHIFT = 1,          /* prepare step 1: shift, ring head */
+    DOPUS_PHASE_GRADIENTS = 2,      /* prepare steps 2-3: stage_grad / term_grad (F_k) */
+    DOPUS_PHASE_RHO = 3,            /* prepare step 2: secant criterion eq. 16 */
+    DOPUS_PHASE_HESSIANS = 4,       /* stage_hess / term_hess (H_k) and stage_hess_cost (A_l),
                                       without regularisation */
-    DOPUS_PHASE_REGULARIZATION = 5,/* eigenvalue regularisation of fresh A blocks */
-    DOPUS_PHASE_ASSEMBLY = 6,      /* QP vectors a_k, b_k, bounds */
-    DOPUS_PHASE_KKT = 7,           /* dopus_kkt_eval */
+    DOPUS_PHASE_REGULARIZATION = 5, /* eigenvalue regularisation of fresh A blocks */
+    DOPUS_PHASE_ASSEMBLY = 6,       /* QP vectors a_k, b_k, bounds */
+    DOPUS_PHASE_KKT = 7,            /* dopus_kkt_eval */
     DOPUS_N_PHASES = 8
 };
 

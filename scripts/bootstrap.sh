@@ -51,6 +51,17 @@ if ! clang_ok; then
     fi
 fi
 
+# clang-format, for the style test of the hand-written C (.clang-format)
+if ! command -v clang-format >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ]; then
+        echo "bootstrap: installing Debian's clang-format"
+        apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq clang-format
+    else
+        echo "bootstrap: clang-format missing (as root: apt-get install clang-format); the style test needs it" >&2
+    fi
+fi
+
 PY=${PYTHON:-python3}
 if [ ! -x .venv/bin/python ]; then
     echo "bootstrap: creating .venv"

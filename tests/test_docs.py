@@ -22,7 +22,6 @@ import tomllib
 from functools import lru_cache
 from pathlib import Path
 
-import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 BINARY_SUFFIXES = {".png", ".npz", ".pdf", ".so", ".a", ".o", ".pyc"}

@@ -14,7 +14,6 @@ from __future__ import annotations
 import re
 
 import numpy as np
-import pytest
 
 from dopus_codegen import build_functions, load_ocp
 from dopus_codegen.reference.dopus import ReferenceDopus

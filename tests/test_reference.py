@@ -50,7 +50,7 @@ def clarabel_solve(qp):
     Hz, gz, rows = flatten_qp(q)
     nz = Hz.shape[0]
     I = sp.identity(nz, format="csr")
-    blocks, rhs, kinds = [rows.A_eq], [rows.b_eq], []
+    blocks, rhs = [rows.A_eq], [rows.b_eq]
     m_eq = rows.A_eq.shape[0]
     up_in = np.isfinite(rows.u_in); lo_in = np.isfinite(rows.l_in)
     up_z = np.isfinite(rows.ubz); lo_z = np.isfinite(rows.lbz)
@@ -273,7 +273,7 @@ def test_rho_matches_finite_difference_secant(robot_disc, robot_solution, mode):
     """rho_k against eq. 16 evaluated independently, H d by central differences of F."""
     d = robot_disc
     sol, _ = robot_solution
-    N, nx = d.N, d.nx
+    N = d.N
     ref = ReferenceDopus(d, lm=0.0, M=N - 1, mode=mode)
     xf = d.disturbance(d.x0)
     ref.init(d.x0, sol)                 # full RTI: every block fresh at the point omega_old

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import shlex
 import shutil
 import statistics
@@ -130,7 +129,7 @@ def write_problem_header(build_dir: Path, name: str, xhat_fixed: Sequence[float]
     """``fw_problem.h``: the problem's prefix for fw_main.c and the scenario."""
     up = name.upper()
     text = "\n".join([
-        f"/* The problem and scenario of the firmware program (dopus_codegen/firmware.py). */",
+        "/* The problem and scenario of the firmware program (dopus_codegen/firmware.py). */",
         "#ifndef FW_PROBLEM_H", "#define FW_PROBLEM_H",
         f'#include "{name}_solver.h"', f'#include "{name}_problem.h"', f'#include "{name}_funcs.h"',
         f"#define FW(name) {name}_##name", f"#define FW_C(name) {up}_##name",

@@ -269,7 +269,7 @@ class ReferenceDopus:
     def init(self, xhat0, guess=None) -> None:
         """Iterate = guess; every stage and the terminal node evaluated fresh (section 4)."""
         t0 = time.perf_counter()
-        N, nx, nu, ng = self.N, self.nx, self.n_u, self.ng
+        nx = self.nx
         xhat0 = _arr(xhat0, (nx,), "xhat0")
         if not np.all(np.isfinite(xhat0)):
             raise DopusError.of("nonfinite_input", "init: xhat0 has non-finite entries")
@@ -423,7 +423,7 @@ class ReferenceDopus:
         self.qp_status = status_code_qp("solved")
         self.qp_iterations = int(sol.get("iterations", 0))
         t2 = time.perf_counter()
-        N, nx = self.N, self.nx
+        N = self.N
         if failure is not None:
             raise self._feedback_failed("qp", "feedback: the QP solution is not finite", "solved")
         if not self._box_ok(self.x + sol["x"], self.u + sol["u"]):

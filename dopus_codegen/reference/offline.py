@@ -108,7 +108,7 @@ def _sx_ok(disc) -> bool:
 def _gn_hess_lag(disc, V, P, ng_total, xk, uk, pk):
     """Block-diagonal Gauss-Newton Hessian of the Lagrangian from the ``*_hess_gn``
     functions (no curvature of dynamics or constraints)."""
-    N, nx, nu = disc.N, disc.nx, disc.nu
+    N, nx = disc.N, disc.nx
     T = type(V)
     lam_f = T.sym("lam_f")
     lam_g = T.sym("lam_g", ng_total)

@@ -220,7 +220,7 @@ def _unflatten(q: dict, z, y_eq, y_in, mu_z) -> dict:
 def flatten_solution(q: dict, sol: dict):
     """A stage-wise solution of ``q`` as ``(z, y_eq, y_in, mu_z)`` in the layout of
     :func:`flatten_qp`."""
-    N, nx, nu, ng = q["N"], q["nx"], q["nu"], q["ng"]
+    N = q["N"]
     z = np.concatenate([np.hstack([sol["x"][:N], sol["u"]]).reshape(-1), sol["x"][N]])
     y_eq = np.concatenate([np.asarray(sol["lam"]).reshape(-1), np.asarray(sol["nu"]).reshape(-1)])
     y_in = np.concatenate([np.asarray(sol["mu_g"]).reshape(-1), np.asarray(sol["mu_r"]).reshape(-1)])
@@ -421,7 +421,6 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol):
             np.where(act_in[ii] > 0, rows.u_in[ii], rows.l_in[ii]),
             np.where(act_z[iz] > 0, rows.ubz[iz], rows.lbz[iz]),
         ])
-        m = A.shape[0]
         K = sp.bmat([[Hz, A.T], [A, None]], format="csc")
         rhs = np.concatenate([-gz, rhs_c])
         try:

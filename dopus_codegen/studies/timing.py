@@ -584,7 +584,7 @@ def run_plan(plan, quiet_acados=True):
         a = plan["acados"]
         plant = libs[a["plant_lib"]].plant
         if quiet is not None:
-            quiet.show(f"acados: screening which settings work (QP failures in the closed loop)")
+            quiet.show("acados: screening which settings work (QP failures in the closed loop)")
         rows = screen_acados(ac, plant, a, a["x0"], a["x_disturbed"], a["nominal"], a["cold"],
                              a["steps_warm"], a["steps_cold"], echo=echo)
         picks, selection = pick_acados(ac, rows, a["x0"], a["nominal"], a["select_reps"],

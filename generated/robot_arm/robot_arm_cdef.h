@@ -24,9 +24,9 @@ const char *robot_arm_status_string(int status);
  * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
  * rho = 0. xhat0 is checked and kept for robot_arm_kkt_eval (may be NULL: the default x0).
  * A failed init leaves the solver uninitialised (NaN/Inf input: the iterate untouched). */
-int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, const double *u,
-               const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
-               const double *mu_r, const double *nu);
+int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
+               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
+               const double *nu);
 /* Initialisation from the generated nominal primal-dual guess (the offline NLP solution at
  * the default x0); ROBOT_ARM_ERR_NO_NOMINAL when the solver was generated without one. */
 int robot_arm_init_nominal(robot_arm_solver *s, const double *xhat0);

@@ -3,8 +3,8 @@
 #include "robot_arm_funcs.h"
 #include "robot_arm_casadi.h"
 
-int robot_arm_eval_stage_eval(const double *x, const double *u, const double *p,
-                          double *phi, double *l, double *g, robot_arm_fun_work *wk)
+int robot_arm_eval_stage_eval(const double *x, const double *u, const double *p, double *phi, double *l,
+                          double *g, robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -15,9 +15,9 @@ int robot_arm_eval_stage_eval(const double *x, const double *u, const double *p,
     return robot_arm_stage_eval(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int robot_arm_eval_stage_grad(const double *x, const double *u, const double *p,
-                          const double *lam_next, const double *mu_g,
-                          double *gL, double *phi, double *l, double *g, robot_arm_fun_work *wk)
+int robot_arm_eval_stage_grad(const double *x, const double *u, const double *p, const double *lam_next,
+                          const double *mu_g, double *gL, double *phi, double *l, double *g,
+                          robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -32,8 +32,8 @@ int robot_arm_eval_stage_grad(const double *x, const double *u, const double *p,
 }
 
 int robot_arm_eval_stage_hess(int gauss_newton, const double *x, const double *u, const double *p,
-                          const double *lam_next, const double *mu_g,
-                          double *A, double *Phi, double *C, robot_arm_fun_work *wk)
+                          const double *lam_next, const double *mu_g, double *A, double *Phi, double *C,
+                          robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -81,8 +81,8 @@ int robot_arm_eval_term_eval(const double *x, const double *p, double *E, double
     return robot_arm_term_eval(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int robot_arm_eval_term_grad(const double *x, const double *p, const double *mu_r, const double *nu,
-                         double *gL, double *E, double *r, double *r_eq, robot_arm_fun_work *wk)
+int robot_arm_eval_term_grad(const double *x, const double *p, const double *mu_r, const double *nu, double *gL,
+                         double *E, double *r, double *r_eq, robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = p;
@@ -111,8 +111,7 @@ int robot_arm_eval_term_hess(int gauss_newton, const double *x, const double *p,
     return robot_arm_term_hess_exact(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int robot_arm_eval_ode(const double *x, const double *u, const double *p, double *xdot,
-                   robot_arm_fun_work *wk)
+int robot_arm_eval_ode(const double *x, const double *u, const double *p, double *xdot, robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;

@@ -22,19 +22,19 @@ typedef struct {
 } robot_arm_fun_work;
 
 /* stage_eval: phi (nx), l (1), g (ng) */
-int robot_arm_eval_stage_eval(const double *x, const double *u, const double *p,
-                          double *phi, double *l, double *g, robot_arm_fun_work *wk);
+int robot_arm_eval_stage_eval(const double *x, const double *u, const double *p, double *phi, double *l,
+                          double *g, robot_arm_fun_work *wk);
 
 /* stage_grad, F_k of eq. 14: gL = grad_w l - Phi' lam_next + C' mu_g, plus phi, l, g */
-int robot_arm_eval_stage_grad(const double *x, const double *u, const double *p,
-                          const double *lam_next, const double *mu_g,
-                          double *gL, double *phi, double *l, double *g, robot_arm_fun_work *wk);
+int robot_arm_eval_stage_grad(const double *x, const double *u, const double *p, const double *lam_next,
+                          const double *mu_g, double *gL, double *phi, double *l, double *g,
+                          robot_arm_fun_work *wk);
 
 /* stage_hess, H_k of eq. 15: A (nw x nw), Phi (nx x nw), C (ng x nw).
  * gauss_newton != 0 selects the Gauss-Newton A; nonzero return if !ROBOT_ARM_HAS_GN then. */
 int robot_arm_eval_stage_hess(int gauss_newton, const double *x, const double *u, const double *p,
-                          const double *lam_next, const double *mu_g,
-                          double *A, double *Phi, double *C, robot_arm_fun_work *wk);
+                          const double *lam_next, const double *mu_g, double *A, double *Phi, double *C,
+                          robot_arm_fun_work *wk);
 
 /* stage_hess_cost: A_l (nw x nw), the stage-cost part of A (docs/algorithm.md section 4
  * step 5): exact hess_w l, or with gauss_newton != 0 J' W J + hess_w l_extra (nonzero
@@ -47,15 +47,14 @@ int robot_arm_eval_term_eval(const double *x, const double *p, double *E, double
                          robot_arm_fun_work *wk);
 
 /* term_grad: gL = grad E + R' mu_r + R_eq' nu, plus E, r, r_eq */
-int robot_arm_eval_term_grad(const double *x, const double *p, const double *mu_r, const double *nu,
-                         double *gL, double *E, double *r, double *r_eq, robot_arm_fun_work *wk);
+int robot_arm_eval_term_grad(const double *x, const double *p, const double *mu_r, const double *nu, double *gL,
+                         double *E, double *r, double *r_eq, robot_arm_fun_work *wk);
 
 /* term_hess: A (nx x nx), R (nr x nx), R_eq (ne x nx); always available (no GN restriction) */
 int robot_arm_eval_term_hess(int gauss_newton, const double *x, const double *p, const double *mu_r,
                          const double *nu, double *A, double *R, double *R_eq, robot_arm_fun_work *wk);
 
 /* ode: continuous model xdot = f(x, u, p) */
-int robot_arm_eval_ode(const double *x, const double *u, const double *p, double *xdot,
-                   robot_arm_fun_work *wk);
+int robot_arm_eval_ode(const double *x, const double *u, const double *p, double *xdot, robot_arm_fun_work *wk);
 
 #endif /* ROBOT_ARM_FUNCS_H */

@@ -42,8 +42,8 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
         eq = robot_arm_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
     }
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
-                                  &l, g, &s->fun_work) != 0) {
+        if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
+                                  &s->fun_work) != 0) {
             return ROBOT_ARM_ERR_FUNCTION;
         }
         if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW, gL) || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, phi) ||
@@ -71,18 +71,18 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
         } else {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
                 ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(s->x[k][i], robot_arm_lbx[i], robot_arm_ubx[i]));
-                comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_b[k][i], s->x[k][i], robot_arm_lbx[i],
-                                                          robot_arm_ubx[i]));
+                comp = robot_arm_kkt_max(comp,
+                                     robot_arm_kkt_comp(s->mu_b[k][i], s->x[k][i], robot_arm_lbx[i], robot_arm_ubx[i]));
             }
         }
         for (i = 0; i < ROBOT_ARM_NU; ++i) {
             ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(s->u[k][i], robot_arm_lbu[i], robot_arm_ubu[i]));
-            comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_b[k][ROBOT_ARM_NX + i], s->u[k][i],
-                                                      robot_arm_lbu[i], robot_arm_ubu[i]));
+            comp = robot_arm_kkt_max(
+                comp, robot_arm_kkt_comp(s->mu_b[k][ROBOT_ARM_NX + i], s->u[k][i], robot_arm_lbu[i], robot_arm_ubu[i]));
         }
     }
-    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
-                             &s->fun_work) != 0) {
+    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gLN, &E, r, r_eq, &s->fun_work) !=
+        0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
     if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gLN) || !isfinite(E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
@@ -92,8 +92,7 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         stat = robot_arm_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[ROBOT_ARM_N][i]));
         ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(s->x[ROBOT_ARM_N][i], robot_arm_lbx[i], robot_arm_ubx[i]));
-        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_bN[i], s->x[ROBOT_ARM_N][i], robot_arm_lbx[i],
-                                                  robot_arm_ubx[i]));
+        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_bN[i], s->x[ROBOT_ARM_N][i], robot_arm_lbx[i], robot_arm_ubx[i]));
     }
     for (i = 0; i < ROBOT_ARM_NE; ++i) {
         eq = robot_arm_kkt_max(eq, fabs(r_eq[i]));

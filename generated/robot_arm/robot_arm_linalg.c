@@ -2,7 +2,6 @@
  * the inline kernels of the header. */
 #include "robot_arm_linalg.h"
 
-
 int robot_arm_la_potrf_l(int n, double *A, int lda)
 {
     return robot_arm_lai_potrf_l(n, A, lda);
@@ -38,32 +37,31 @@ void robot_arm_la_trsm_llt(int n, int m, const double *L, int ldl, double *B, in
     robot_arm_lai_trsm_llt(n, m, L, ldl, B, ldb);
 }
 
-void robot_arm_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+void robot_arm_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
+                     double *y)
 {
     robot_arm_lai_gemv_n(m, n, alpha, A, lda, x, beta, y);
 }
 
-void robot_arm_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+void robot_arm_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
+                     double *y)
 {
     robot_arm_lai_gemv_t(m, n, alpha, A, lda, x, beta, y);
 }
 
-void robot_arm_la_symv_l(int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+void robot_arm_la_symv_l(int n, double alpha, const double *A, int lda, const double *x, double beta, double *y)
 {
     robot_arm_lai_symv_l(n, alpha, A, lda, x, beta, y);
 }
 
-void robot_arm_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda,
-                      const double *B, int ldb, double beta, double *C, int ldc)
+void robot_arm_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
+                      double beta, double *C, int ldc)
 {
     robot_arm_lai_gemm_nn(m, n, k, alpha, A, lda, B, ldb, beta, C, ldc);
 }
 
-void robot_arm_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda,
-                      const double *B, int ldb, double beta, double *C, int ldc)
+void robot_arm_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
+                      double beta, double *C, int ldc)
 {
     robot_arm_lai_gemm_tn(m, n, k, alpha, A, lda, B, ldb, beta, C, ldc);
 }

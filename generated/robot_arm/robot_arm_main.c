@@ -30,8 +30,7 @@ static int report(const char *phase, int iter, int status, const double *u0, con
     print_vector("u0", u0, ROBOT_ARM_NU);
     printf(" kkt %.17g\n", kkt);
     if (status != ROBOT_ARM_OK || !isfinite(kkt)) {
-        fprintf(stderr, "main_dopus: %s iteration %d failed: %s\n", phase, iter,
-                robot_arm_status_string(status));
+        fprintf(stderr, "main_dopus: %s iteration %d failed: %s\n", phase, iter, robot_arm_status_string(status));
         return 1;
     }
     return 0;
@@ -94,8 +93,8 @@ static int run(const char *phase, int mode)
 
 int main(void)
 {
-    printf("problem %s N %d nx %d nu %d nominal %d sizeof %lu\n", robot_arm_name(), ROBOT_ARM_N,
-           ROBOT_ARM_NX, ROBOT_ARM_NU, ROBOT_ARM_HAS_NOMINAL, (unsigned long)robot_arm_solver_sizeof());
+    printf("problem %s N %d nx %d nu %d nominal %d sizeof %lu\n", robot_arm_name(), ROBOT_ARM_N, ROBOT_ARM_NX, ROBOT_ARM_NU,
+           ROBOT_ARM_HAS_NOMINAL, (unsigned long)robot_arm_solver_sizeof());
     if (run("fixed", ROBOT_ARM_MODE_FIXED) || run("receding", ROBOT_ARM_MODE_RECEDING)) {
         return 1;
     }

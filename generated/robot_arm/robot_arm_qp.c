@@ -87,8 +87,14 @@
 #define CERT_RES_PRIMAL 1e-6
 #define CERT_SEP 1e-6
 
-static double dmax(double a, double b) { return a > b ? a : b; }
-static double dmin(double a, double b) { return a < b ? a : b; }
+static double dmax(double a, double b)
+{
+    return a > b ? a : b;
+}
+static double dmin(double a, double b)
+{
+    return a < b ? a : b;
+}
 
 void robot_arm_qp_settings_default(robot_arm_qp_settings *settings)
 {
@@ -111,8 +117,7 @@ static int check_input(const robot_arm_qp_in *in)
     for (k = 0; k < N; ++k) {
         if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
             return 0;
-        if (!robot_arm_lai_all_finite(NW, NW, in->H[k], NW) ||
-            !robot_arm_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+        if (!robot_arm_lai_all_finite(NW, NW, in->H[k], NW) || !robot_arm_lai_all_finite(NX, NW, in->Phi[k], NX) ||
             (NG > 0 && !robot_arm_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
             !robot_arm_lai_all_finite(NW, 1, in->g[k], NW) || !robot_arm_lai_all_finite(NX, 1, in->b[k], NX))
             return 0;
@@ -135,8 +140,8 @@ static int check_input(const robot_arm_qp_in *in)
                 if (k > 0 || i >= NX)
                     return 0;
         for (i = 0; i < NG; ++i)
-            if (in->lg[k][i] != in->lg[k][i] || in->ug[k][i] != in->ug[k][i] ||
-                in->lg[k][i] == INFINITY || in->ug[k][i] == -INFINITY)
+            if (in->lg[k][i] != in->lg[k][i] || in->ug[k][i] != in->ug[k][i] || in->lg[k][i] == INFINITY ||
+                in->ug[k][i] == -INFINITY)
                 return 0;
     }
     for (i = 0; i < NX; ++i)
@@ -261,14 +266,13 @@ static void data_scales(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
     ws->scale_bounds = sl;
 }
 
-
 typedef struct {
-    double mu;       /* average complementarity */
-    int nsides;      /* number of bounded sides */
-    double stat, eq, ineq, comp;            /* unscaled inf-norms */
-    double stat_s, eq_s, ineq_s, comp_s;    /* scaled */
-    double ny;       /* inf-norm of the dual iterate */
-    double nz;       /* inf-norm of the inequality multipliers */
+    double mu;                           /* average complementarity */
+    int nsides;                          /* number of bounded sides */
+    double stat, eq, ineq, comp;         /* unscaled inf-norms */
+    double stat_s, eq_s, ineq_s, comp_s; /* scaled */
+    double ny;                           /* inf-norm of the dual iterate */
+    double nz;                           /* inf-norm of the inequality multipliers */
     double obj;
 } qp_res;
 
@@ -367,7 +371,8 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
     r->nsides = m;
     r->mu = m > 0 ? sum_c / m : 0.0;
     r->stat = robot_arm_lai_norm_inf(NP, ws->r_stat);
-    r->eq = dmax(robot_arm_lai_norm_inf((N + 1) * NX, ws->r_dyn), NE > 0 ? robot_arm_lai_norm_inf(NE, ws->r_eqN) : 0.0);
+    r->eq =
+        dmax(robot_arm_lai_norm_inf((N + 1) * NX, ws->r_dyn), NE > 0 ? robot_arm_lai_norm_inf(NE, ws->r_eqN) : 0.0);
     r->ineq = ineq;
     r->comp = comp;
     r->stat_s = r->stat / s_stat;
@@ -375,7 +380,8 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
     r->ineq_s = r->ineq / s_ineq;
     r->comp_s = r->comp / dmax(1.0, nz);
     r->nz = nz;
-    r->ny = dmax(nz, dmax(robot_arm_lai_norm_inf((N + 1) * NX, ws->lam), NE > 0 ? robot_arm_lai_norm_inf(NE, ws->nu) : 0.0));
+    r->ny = dmax(
+        nz, dmax(robot_arm_lai_norm_inf((N + 1) * NX, ws->lam), NE > 0 ? robot_arm_lai_norm_inf(NE, ws->nu) : 0.0));
     r->obj = obj;
     ws->scale_stat = s_stat;
     ws->scale_eq = s_eq;
@@ -389,8 +395,8 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
  * the ragged lower triangle at these sizes and never read), and, with terminal
  * equalities, Gam = Phi' G (nw x ne). */
 static void qp_stage_update(const robot_arm_real *restrict Phi, const robot_arm_real *restrict P,
-                            const robot_arm_real *restrict G, robot_arm_real *restrict PhiT,
-                            robot_arm_real *restrict PP, robot_arm_real *restrict M, robot_arm_real *restrict Gam)
+                            const robot_arm_real *restrict G, robot_arm_real *restrict PhiT, robot_arm_real *restrict PP,
+                            robot_arm_real *restrict M, robot_arm_real *restrict Gam)
 {
     int i, j, l;
     robot_arm_real col[NW];
@@ -440,9 +446,9 @@ static double hessian_scale(const robot_arm_qp_in *in)
 static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
 {
     int k, i, j;
-    double *PhiT = ws->work;                 /* NW x NX: Phi_k' */
-    double *WT = ws->work + NX * NW;         /* NX x NW: P_{k+1} Phi_k */
-    double *Gam = ws->work + 2 * NX * NW;    /* NW x NE: Phi_k' G_{k+1} */
+    double *PhiT = ws->work;              /* NW x NX: Phi_k' */
+    double *WT = ws->work + NX * NW;      /* NX x NW: P_{k+1} Phi_k */
+    double *Gam = ws->work + 2 * NX * NW; /* NW x NE: Phi_k' G_{k+1} */
     const double delta = ws->delta;
     double pmag, pnext;
 
@@ -511,7 +517,8 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
             robot_arm_real colsum = 0.0;
             for (i = 0; i < NX; ++i)
                 colsum += fabs(Phi[i + (NX + j) * NX]);
-            ws->noise[j] = RICCATI_EPS * (fabs(M[NX + j + (NX + j) * NW]) + colsum * colsum * dmax(pmax, pmag));
+            ws->noise[j] =
+                RICCATI_EPS * (fabs(M[NX + j + (NX + j) * NW]) + colsum * colsum * dmax(pmax, pmag));
         }
         for (j = 0; j < NX; ++j) {
             robot_arm_real colsum = 0.0;
@@ -580,12 +587,11 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
  * before the entry of the same array is written): backward sweep of the value-function vectors, nu at stage 0, forward
  * sweep of the primal and the costates lam_k = -dV_k/dx. */
 static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const double *rhs_stat,
-                          const double *rhs_dyn, const double *rhs_eqN, double *sp, double *sl,
-                          double *sn)
+                          const double *rhs_dyn, const double *rhs_eqN, double *sp, double *sl, double *sn)
 {
     int k, i;
-    double *tv = ws->work;       /* NX */
-    double *m = ws->work + NX;   /* NW */
+    double *tv = ws->work;     /* NX */
+    double *m = ws->work + NX; /* NW */
     double *e = ws->e;
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
@@ -667,10 +673,9 @@ static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
 
 /* (os, od, oe) = rhs - K (sp, sl, sn): residual of the (delta-shifted, unaugmented) Newton
  * system, for iterative refinement. */
-static void newton_residual(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const double *sp,
-                            const double *sl, const double *sn, const double *rhs_stat,
-                            const double *rhs_dyn, const double *rhs_eqN, double *os, double *od,
-                            double *oe)
+static void newton_residual(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const double *sp, const double *sl,
+                            const double *sn, const double *rhs_stat, const double *rhs_dyn,
+                            const double *rhs_eqN, double *os, double *od, double *oe)
 {
     int k, i;
     double *dv = ws->yrow;
@@ -737,10 +742,12 @@ static void newton_direction(robot_arm_qp_workspace *ws, const robot_arm_qp_in *
     for (i = 0; i < NI; ++i) {
         double s = 0.0;
         if (ws->has_lo[i])
-            s += (qp_rc(ws->t_lo[i], ws->z_lo[i], &ws->dt_lo[i], &ws->dz_lo[i], cc) + ws->z_lo[i] * ws->r_lo[i]) /
+            s += (qp_rc(ws->t_lo[i], ws->z_lo[i], &ws->dt_lo[i], &ws->dz_lo[i], cc) +
+                  ws->z_lo[i] * ws->r_lo[i]) /
                  ws->t_lo[i];
         if (ws->has_up[i])
-            s -= (qp_rc(ws->t_up[i], ws->z_up[i], &ws->dt_up[i], &ws->dz_up[i], cc) + ws->z_up[i] * ws->r_up[i]) /
+            s -= (qp_rc(ws->t_up[i], ws->z_up[i], &ws->dt_up[i], &ws->dz_up[i], cc) +
+                  ws->z_up[i] * ws->r_up[i]) /
                  ws->t_up[i];
         y[i] = -s;
     }
@@ -754,8 +761,8 @@ static void newton_direction(robot_arm_qp_workspace *ws, const robot_arm_qp_in *
 
     riccati_solve(ws, in, ws->rhs_stat, ws->rhs_dyn, ws->rhs_eqN, ws->d_prim, ws->d_lam, ws->d_nu);
     for (it = 0; it < refine_steps; ++it) {
-        newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->rhs_stat, ws->rhs_dyn,
-                        ws->rhs_eqN, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
+        newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->rhs_stat, ws->rhs_dyn, ws->rhs_eqN,
+                        ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
         /* the correction overwrites the residual it solves for (riccati_solve allows it) */
         riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin, ws->res_stat_lin,
                       ws->res_dyn_lin, ws->res_eqN_lin);
@@ -844,8 +851,7 @@ static int primal_infeasible(const robot_arm_qp_workspace *ws, const robot_arm_q
 /* Unboundedness certificate on the normalised primal iterate d = w / |w|: a feasible ray
  * (homogeneous equalities, inside the recession cone of the bounds) along which the
  * objective decreases without bound: d'Hd < 0, or Hd = 0 and g'd < 0. */
-static int dual_infeasible(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, double data_scale,
-                           double hscale)
+static int dual_infeasible(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, double data_scale, double hscale)
 {
     int k, i;
     double nw = robot_arm_lai_norm_inf(NP, ws->prim), dhd = 0.0, gd = 0.0, hd = 0.0, eq = 0.0, cone = 0.0;
@@ -1056,7 +1062,8 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
         info->pivot_floors = 0;
         info->delta = 0.0;
         info->res_stat = info->res_eq = info->res_ineq = info->res_comp = INFINITY;
-        info->res_stat_scaled = info->res_eq_scaled = info->res_ineq_scaled = info->res_comp_scaled = INFINITY;
+        info->res_stat_scaled = info->res_eq_scaled = info->res_ineq_scaled = info->res_comp_scaled =
+            INFINITY;
         info->obj = NAN;
     }
     if (ws == NULL || in == NULL || sol == NULL)

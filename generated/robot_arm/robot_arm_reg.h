@@ -9,11 +9,7 @@
 #ifndef ROBOT_ARM_REG_H
 #define ROBOT_ARM_REG_H
 
-enum robot_arm_regularization {
-    ROBOT_ARM_REG_NONE = 0,
-    ROBOT_ARM_REG_PROJECT = 1,
-    ROBOT_ARM_REG_MIRROR = 2
-};
+enum robot_arm_regularization { ROBOT_ARM_REG_NONE = 0, ROBOT_ARM_REG_PROJECT = 1, ROBOT_ARM_REG_MIRROR = 2 };
 
 /* Eigen-decomposition of the symmetric part of the n x n column-major matrix `a`.
  * On return the diagonal of `a` holds the eigenvalues (off-diagonals ~0) and `v` (n x n,

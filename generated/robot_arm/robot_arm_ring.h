@@ -12,7 +12,7 @@
 
 typedef struct {
     /* the blocks the QP uses (possibly outdated, A regularised), column-major */
-    double Ht[ROBOT_ARM_NW * ROBOT_ARM_NW];            /* nw x nw */
+    double Ht[ROBOT_ARM_NW * ROBOT_ARM_NW]; /* nw x nw */
     /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
      * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l */
     double A_dyn[ROBOT_ARM_NW * ROBOT_ARM_NW];         /* nw x nw */
@@ -56,11 +56,10 @@ void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);
  *            g_old + Ct dw - g_new] |
  *   rho = num / |(dw, dlam, dmu_g, dmu_b)| (2-norms), 0 when the denominator is 0 or
  *   num <= ROBOT_ARM_EPS_RHO * (|(F_w_old, phi_old, g_old)| + |(F_w_new, phi_new, g_new)|). */
-double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w_new,
-                         const double *phi_new, const double *g_new);
+double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w_new, const double *phi_new,
+                         const double *g_new);
 
 /* Store F_new as F_old. */
-void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const double *F_w, const double *phi,
-                        const double *g);
+void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const double *F_w, const double *phi, const double *g);
 
 #endif /* ROBOT_ARM_RING_H */

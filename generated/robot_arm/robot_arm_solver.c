@@ -312,7 +312,8 @@ static int robot_arm_lm_convex(robot_arm_solver *s, double lm)
     int k, i, j, l;
     for (j = 0; j < ROBOT_ARM_NX; ++j) {
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            P[i + j * ROBOT_ARM_NX] = (i >= j ? s->A_N[i + j * ROBOT_ARM_NX] : s->A_N[j + i * ROBOT_ARM_NX]) + (i == j ? lm : 0.0);
+            P[i + j * ROBOT_ARM_NX] =
+                (i >= j ? s->A_N[i + j * ROBOT_ARM_NX] : s->A_N[j + i * ROBOT_ARM_NX]) + (i == j ? lm : 0.0);
         }
     }
     for (k = ROBOT_ARM_N - 1; k >= 0; --k) {
@@ -356,7 +357,7 @@ static int robot_arm_lm_convex(robot_arm_solver *s, double lm)
             }
         }
         if (k == 0) {
-            break;   /* x_0 is fixed: P_0 is not needed */
+            break; /* x_0 is fixed: P_0 is not needed */
         }
         /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
         for (j = 0; j < ROBOT_ARM_NX; ++j) {
@@ -501,8 +502,8 @@ static int robot_arm_stage_F(robot_arm_solver *s, int k)
 {
     double l = 0.0;
     int i;
-    if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL,
-                              s->tmp_phi, &l, s->tmp_g, &s->fun_work) != 0) {
+    if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL, s->tmp_phi, &l,
+                              s->tmp_g, &s->fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
     if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW, s->tmp_gL) || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->tmp_phi) ||
@@ -549,8 +550,8 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
     robot_arm_stage_slot *slot;
     double t0 = robot_arm_timer_now(&s->timer);
     int rc, i;
-    rc = robot_arm_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
-                               s->tmp_A, s->tmp_Phi, s->tmp_C, &s->fun_work);
+    rc = robot_arm_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_A,
+                               s->tmp_Phi, s->tmp_C, &s->fun_work);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
@@ -584,8 +585,8 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
 static int robot_arm_term_F(robot_arm_solver *s)
 {
     double gL[ROBOT_ARM_NX], E = 0.0, r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
-    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gL, &E, r, r_eq,
-                             &s->fun_work) != 0) {
+    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gL, &E, r, r_eq, &s->fun_work) !=
+        0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
     if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gL) || !isfinite(E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
@@ -605,8 +606,8 @@ static int robot_arm_term_H(robot_arm_solver *s)
     double R[ROBOT_ARM_DIM(ROBOT_ARM_NR) * ROBOT_ARM_NX], R_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE) * ROBOT_ARM_NX];
     double t0 = robot_arm_timer_now(&s->timer);
     int rc;
-    rc = robot_arm_eval_term_hess(s->hessian, s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, s->tmp_A,
-                              R, R_eq, &s->fun_work);
+    rc = robot_arm_eval_term_hess(s->hessian, s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, s->tmp_A, R, R_eq,
+                              &s->fun_work);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
@@ -759,9 +760,9 @@ static int robot_arm_init_finish(robot_arm_solver *s)
     return ROBOT_ARM_OK;
 }
 
-int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, const double *u,
-               const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
-               const double *mu_r, const double *nu)
+int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
+               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
+               const double *nu)
 {
     int k, i, rc;
 
@@ -830,10 +831,10 @@ int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, co
 int robot_arm_init_nominal(robot_arm_solver *s, const double *xhat0)
 {
 #if ROBOT_ARM_HAS_NOMINAL
-    return robot_arm_init(s, xhat0, &robot_arm_nominal_x[0][0], &robot_arm_nominal_u[0][0],
-                      &robot_arm_nominal_lam[0][0], ROBOT_ARM_NG > 0 ? &robot_arm_nominal_mu_g[0][0] : 0,
-                      &robot_arm_nominal_mu_b[0][0], robot_arm_nominal_mu_bN,
-                      ROBOT_ARM_NR > 0 ? robot_arm_nominal_mu_r : 0, ROBOT_ARM_NE > 0 ? robot_arm_nominal_nu : 0);
+    return robot_arm_init(s, xhat0, &robot_arm_nominal_x[0][0], &robot_arm_nominal_u[0][0], &robot_arm_nominal_lam[0][0],
+                      ROBOT_ARM_NG > 0 ? &robot_arm_nominal_mu_g[0][0] : 0, &robot_arm_nominal_mu_b[0][0],
+                      robot_arm_nominal_mu_bN, ROBOT_ARM_NR > 0 ? robot_arm_nominal_mu_r : 0,
+                      ROBOT_ARM_NE > 0 ? robot_arm_nominal_nu : 0);
 #else
     (void)xhat0;
     robot_arm_ensure_setup(s);
@@ -1019,7 +1020,7 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
     if (retries == 0) {
-        robot_arm_lm_feedback(s, ROBOT_ARM_OK);   /* lowered, unless this QP needed a raise */
+        robot_arm_lm_feedback(s, ROBOT_ARM_OK); /* lowered, unless this QP needed a raise */
     }
     robot_arm_copy(&s->plan_u[0][0], &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
     if (robot_arm_clip_u(s->u[0], s->u0_out)) {
@@ -1124,8 +1125,9 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
         if (!shifted) {
             robot_arm_copy(s->x[0], s->x[1], ROBOT_ARM_NX);
         }
-    } else if (robot_arm_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) != 0 ||
-        !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->x[0])) {
+    } else if (robot_arm_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) !=
+                   0 ||
+               !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->x[0])) {
         robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -1305,7 +1307,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
 
     /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
     s->kkt_proxy = robot_arm_kkt_proxy_eval(s);
-    robot_arm_lm_prepared(s);   /* the automatic Levenberg-Marquardt term (section 10) */
+    robot_arm_lm_prepared(s); /* the automatic Levenberg-Marquardt term (section 10) */
     if (robot_arm_iterate_diverged(s)) {
         s->flags |= ROBOT_ARM_FLAG_DIVERGED;
         if (s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING) {

@@ -56,9 +56,9 @@ const char *robot_arm_status_string(int status);
  * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
  * rho = 0. xhat0 is checked and kept for robot_arm_kkt_eval (may be NULL: the default x0).
  * A failed init leaves the solver uninitialised (NaN/Inf input: the iterate untouched). */
-int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, const double *u,
-               const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
-               const double *mu_r, const double *nu);
+int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
+               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
+               const double *nu);
 /* Initialisation from the generated nominal primal-dual guess (the offline NLP solution at
  * the default x0); ROBOT_ARM_ERR_NO_NOMINAL when the solver was generated without one. */
 int robot_arm_init_nominal(robot_arm_solver *s, const double *xhat0);
@@ -229,38 +229,35 @@ enum robot_arm_status {
 
 /* Flags of robot_arm_get_flags (docs/algorithm.md section 9). */
 enum robot_arm_flag {
-    ROBOT_ARM_FLAG_U0_CLIPPED = 1,  /* u0 was outside the control bounds and was clipped */
-    ROBOT_ARM_FLAG_FALLBACK = 2,    /* feedback failed: u0 is the next control of the last good plan */
-    ROBOT_ARM_FLAG_DIVERGED = 4,    /* the step or the prepared iterate failed the divergence test */
-    ROBOT_ARM_FLAG_RECOVERED = 8    /* prepare re-initialised (automatic recovery) */
+    ROBOT_ARM_FLAG_U0_CLIPPED = 1, /* u0 was outside the control bounds and was clipped */
+    ROBOT_ARM_FLAG_FALLBACK = 2,   /* feedback failed: u0 is the next control of the last good plan */
+    ROBOT_ARM_FLAG_DIVERGED = 4,   /* the step or the prepared iterate failed the divergence test */
+    ROBOT_ARM_FLAG_RECOVERED = 8   /* prepare re-initialised (automatic recovery) */
 };
 
 /* Safety constants (docs/algorithm.md section 9). */
-#define ROBOT_ARM_QP_TOL_MAX 1e-2            /* largest accepted QP tolerance */
-#define ROBOT_ARM_RECOVERY_FAILURES 2        /* default K: consecutive failures before recovery */
-#define ROBOT_ARM_RECOVERY_FULL_RTI 10        /* successful feedbacks with every block fresh after a recovery */
-#define ROBOT_ARM_DIVERGENCE_BOX 1e3         /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
-#define ROBOT_ARM_DIVERGENCE_KKT 1e6         /* kkt proxy <= 1e6 max(1, proxy at the last init) */
+#define ROBOT_ARM_QP_TOL_MAX 1e-2      /* largest accepted QP tolerance */
+#define ROBOT_ARM_RECOVERY_FAILURES 2  /* default K: consecutive failures before recovery */
+#define ROBOT_ARM_RECOVERY_FULL_RTI 10 /* successful feedbacks with every block fresh after a recovery */
+#define ROBOT_ARM_DIVERGENCE_BOX 1e3   /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
+#define ROBOT_ARM_DIVERGENCE_KKT 1e6   /* kkt proxy <= 1e6 max(1, proxy at the last init) */
 
 /* Automatic Levenberg-Marquardt term (docs/algorithm.md section 10), relative to the
  * Hessian scale h = max(1e-300, largest |diagonal entry| of the QP's blocks). */
-#define ROBOT_ARM_LM_MIN_REL 1e-8            /* smallest nonzero term: 1e-8 h (below: 0) */
-#define ROBOT_ARM_LM_MAX_REL 1e2             /* largest term: 1e2 h */
-#define ROBOT_ARM_LM_RAISE 10.0              /* factor of a raise */
-#define ROBOT_ARM_LM_LOWER 0.1               /* factor after a successful feedback */
-#define ROBOT_ARM_LM_PIVOT_REL 1e-10         /* Riccati pivots must exceed 1e-10 h */
-#define ROBOT_ARM_LM_KKT_GROWTH 10.0         /* raise when the KKT proxy grows 10x in one prepare */
-#define ROBOT_ARM_LM_RETRIES 2               /* QP solves again with lm raised after a failure */
+#define ROBOT_ARM_LM_MIN_REL 1e-8    /* smallest nonzero term: 1e-8 h (below: 0) */
+#define ROBOT_ARM_LM_MAX_REL 1e2     /* largest term: 1e2 h */
+#define ROBOT_ARM_LM_RAISE 10.0      /* factor of a raise */
+#define ROBOT_ARM_LM_LOWER 0.1       /* factor after a successful feedback */
+#define ROBOT_ARM_LM_PIVOT_REL 1e-10 /* Riccati pivots must exceed 1e-10 h */
+#define ROBOT_ARM_LM_KKT_GROWTH 10.0 /* raise when the KKT proxy grows 10x in one prepare */
+#define ROBOT_ARM_LM_RETRIES 2       /* QP solves again with lm raised after a failure */
 
 enum robot_arm_mode {
     ROBOT_ARM_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
     ROBOT_ARM_MODE_FIXED = 1     /* no shift: fixed-xhat0 convergence studies */
 };
 
-enum robot_arm_hessian {
-    ROBOT_ARM_HESSIAN_EXACT = 0,
-    ROBOT_ARM_HESSIAN_GAUSS_NEWTON = 1
-};
+enum robot_arm_hessian { ROBOT_ARM_HESSIAN_EXACT = 0, ROBOT_ARM_HESSIAN_GAUSS_NEWTON = 1 };
 
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static robot_arm_solver s;`;
@@ -274,12 +271,12 @@ enum robot_arm_hessian {
 #include "robot_arm_timer.h"
 
 struct robot_arm_solver {
-    int magic;          /* ROBOT_ARM_MAGIC once the settings hold valid values */
-    int initialized;    /* a successful init happened */
-    int qp_ready;       /* QP assembled at the current iterate (prepare or init succeeded) */
-    int prepare_due;    /* a feedback reached the QP since the last successful init/prepare */
-    int shifted;        /* the shift of this sampling instant is done (a prepare failed after it) */
-    int status;         /* status of the last call */
+    int magic;       /* ROBOT_ARM_MAGIC once the settings hold valid values */
+    int initialized; /* a successful init happened */
+    int qp_ready;    /* QP assembled at the current iterate (prepare or init succeeded) */
+    int prepare_due; /* a feedback reached the QP since the last successful init/prepare */
+    int shifted;     /* the shift of this sampling instant is done (a prepare failed after it) */
+    int status;      /* status of the last call */
 
     /* settings */
     int M;
@@ -287,13 +284,13 @@ struct robot_arm_solver {
     int hessian;
     int regularization;
     double reg_eps;
-    int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
-    double lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
+    int cost_hessian;                 /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    double lm;                        /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
                            current automatic value) */
-    int lm_auto;        /* 1: automatic term (section 10) */
-    double lm_scale;    /* Hessian scale h of the automatic term */
-    double lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
-    double lm_P[ROBOT_ARM_NX * ROBOT_ARM_NX];   /* Riccati workspace of the convexity test */
+    int lm_auto;                      /* 1: automatic term (section 10) */
+    double lm_scale;                  /* Hessian scale h of the automatic term */
+    double lm_kkt_prev;               /* KKT proxy of the previous prepare (< 0: none since init) */
+    double lm_P[ROBOT_ARM_NX * ROBOT_ARM_NX]; /* Riccati workspace of the convexity test */
     double lm_P2[ROBOT_ARM_NX * ROBOT_ARM_NX];
     double lm_PA[ROBOT_ARM_NX * ROBOT_ARM_NW];
     double lm_G[ROBOT_ARM_NW * ROBOT_ARM_NW];
@@ -342,8 +339,8 @@ struct robot_arm_solver {
     robot_arm_qp_workspace qp_work;
     int qp_status;
     int qp_iterations;
-    int qp_warm;        /* warm start in feedback (robot_arm_set_qp_warm_start) */
-    int qp_cold_retry;  /* the last feedback needed the cold retry */
+    int qp_warm;       /* warm start in feedback (robot_arm_set_qp_warm_start) */
+    int qp_cold_retry; /* the last feedback needed the cold retry */
 
     /* scratch for the generated functions and the regularisation */
     robot_arm_fun_work fun_work;
@@ -358,17 +355,17 @@ struct robot_arm_solver {
     double reg_work[2 * ROBOT_ARM_NW * ROBOT_ARM_NW];
 
     /* safe outputs, divergence test and recovery (algorithm.md section 9) */
-    int recovery;               /* automatic recovery on */
-    int recovery_failures;      /* K */
-    int n_failed;               /* consecutive failed feedbacks */
-    int recover_pending;        /* the next prepare re-initialises */
-    int flags;                  /* ROBOT_ARM_FLAG_* of the last feedback + prepare */
+    int recovery;          /* automatic recovery on */
+    int recovery_failures; /* K */
+    int n_failed;          /* consecutive failed feedbacks */
+    int recover_pending;   /* the next prepare re-initialises */
+    int flags;             /* ROBOT_ARM_FLAG_* of the last feedback + prepare */
     int n_recoveries;
-    int recovering;             /* full-RTI prepares left after a recovery */
-    int xhat_fresh;             /* the last feedback had a finite measurement */
-    int plan_age;               /* receding shifts since the last good plan */
+    int recovering;                   /* full-RTI prepares left after a recovery */
+    int xhat_fresh;                   /* the last feedback had a finite measurement */
+    int plan_age;                     /* receding shifts since the last good plan */
     double plan_u[ROBOT_ARM_N][ROBOT_ARM_NU]; /* controls of the last good plan */
-    double u0_out[ROBOT_ARM_NU];    /* the control returned by the last feedback */
+    double u0_out[ROBOT_ARM_NU];          /* the control returned by the last feedback */
     double scale_x[ROBOT_ARM_NX];
     double scale_u[ROBOT_ARM_NU];
     double kkt_proxy;

@@ -15,15 +15,15 @@
 
 /* Phases timed per call (seconds of the last call that ran the phase). */
 enum robot_arm_phase {
-    ROBOT_ARM_PHASE_FEEDBACK = 0,      /* robot_arm_feedback: QP solve + step */
-    ROBOT_ARM_PHASE_SHIFT = 1,         /* prepare step 1: shift, ring head */
-    ROBOT_ARM_PHASE_GRADIENTS = 2,     /* prepare steps 2-3: stage_grad / term_grad (F_k) */
-    ROBOT_ARM_PHASE_RHO = 3,           /* prepare step 2: secant criterion eq. 16 */
-    ROBOT_ARM_PHASE_HESSIANS = 4,      /* stage_hess / term_hess (H_k) and stage_hess_cost (A_l),
+    ROBOT_ARM_PHASE_FEEDBACK = 0,       /* robot_arm_feedback: QP solve + step */
+    ROBOT_ARM_PHASE_SHIFT = 1,          /* prepare step 1: shift, ring head */
+    ROBOT_ARM_PHASE_GRADIENTS = 2,      /* prepare steps 2-3: stage_grad / term_grad (F_k) */
+    ROBOT_ARM_PHASE_RHO = 3,            /* prepare step 2: secant criterion eq. 16 */
+    ROBOT_ARM_PHASE_HESSIANS = 4,       /* stage_hess / term_hess (H_k) and stage_hess_cost (A_l),
                                       without regularisation */
-    ROBOT_ARM_PHASE_REGULARIZATION = 5,/* eigenvalue regularisation of fresh A blocks */
-    ROBOT_ARM_PHASE_ASSEMBLY = 6,      /* QP vectors a_k, b_k, bounds */
-    ROBOT_ARM_PHASE_KKT = 7,           /* robot_arm_kkt_eval */
+    ROBOT_ARM_PHASE_REGULARIZATION = 5, /* eigenvalue regularisation of fresh A blocks */
+    ROBOT_ARM_PHASE_ASSEMBLY = 6,       /* QP vectors a_k, b_k, bounds */
+    ROBOT_ARM_PHASE_KKT = 7,            /* robot_arm_kkt_eval */
     ROBOT_ARM_N_PHASES = 8
 };
 

@@ -42,8 +42,8 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
         eq = unicycle_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
-        if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
-                                  &l, g, &s->fun_work) != 0) {
+        if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
+                                  &s->fun_work) != 0) {
             return UNICYCLE_ERR_FUNCTION;
         }
         if (!unicycle_lai_vec_finite(UNICYCLE_NW, gL) || !unicycle_lai_vec_finite(UNICYCLE_NX, phi) ||
@@ -71,18 +71,18 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
         } else {
             for (i = 0; i < UNICYCLE_NX; ++i) {
                 ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->x[k][i], unicycle_lbx[i], unicycle_ubx[i]));
-                comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_b[k][i], s->x[k][i], unicycle_lbx[i],
-                                                          unicycle_ubx[i]));
+                comp = unicycle_kkt_max(comp,
+                                     unicycle_kkt_comp(s->mu_b[k][i], s->x[k][i], unicycle_lbx[i], unicycle_ubx[i]));
             }
         }
         for (i = 0; i < UNICYCLE_NU; ++i) {
             ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->u[k][i], unicycle_lbu[i], unicycle_ubu[i]));
-            comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_b[k][UNICYCLE_NX + i], s->u[k][i],
-                                                      unicycle_lbu[i], unicycle_ubu[i]));
+            comp = unicycle_kkt_max(
+                comp, unicycle_kkt_comp(s->mu_b[k][UNICYCLE_NX + i], s->u[k][i], unicycle_lbu[i], unicycle_ubu[i]));
         }
     }
-    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
-                             &s->fun_work) != 0) {
+    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gLN, &E, r, r_eq, &s->fun_work) !=
+        0) {
         return UNICYCLE_ERR_FUNCTION;
     }
     if (!unicycle_lai_vec_finite(UNICYCLE_NX, gLN) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
@@ -92,8 +92,7 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
     for (i = 0; i < UNICYCLE_NX; ++i) {
         stat = unicycle_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]));
         ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->x[UNICYCLE_N][i], unicycle_lbx[i], unicycle_ubx[i]));
-        comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_bN[i], s->x[UNICYCLE_N][i], unicycle_lbx[i],
-                                                  unicycle_ubx[i]));
+        comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_bN[i], s->x[UNICYCLE_N][i], unicycle_lbx[i], unicycle_ubx[i]));
     }
     for (i = 0; i < UNICYCLE_NE; ++i) {
         eq = unicycle_kkt_max(eq, fabs(r_eq[i]));

@@ -2,7 +2,6 @@
  * the inline kernels of the header. */
 #include "unicycle_linalg.h"
 
-
 int unicycle_la_potrf_l(int n, double *A, int lda)
 {
     return unicycle_lai_potrf_l(n, A, lda);
@@ -38,32 +37,31 @@ void unicycle_la_trsm_llt(int n, int m, const double *L, int ldl, double *B, int
     unicycle_lai_trsm_llt(n, m, L, ldl, B, ldb);
 }
 
-void unicycle_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+void unicycle_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
+                     double *y)
 {
     unicycle_lai_gemv_n(m, n, alpha, A, lda, x, beta, y);
 }
 
-void unicycle_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+void unicycle_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
+                     double *y)
 {
     unicycle_lai_gemv_t(m, n, alpha, A, lda, x, beta, y);
 }
 
-void unicycle_la_symv_l(int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+void unicycle_la_symv_l(int n, double alpha, const double *A, int lda, const double *x, double beta, double *y)
 {
     unicycle_lai_symv_l(n, alpha, A, lda, x, beta, y);
 }
 
-void unicycle_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda,
-                      const double *B, int ldb, double beta, double *C, int ldc)
+void unicycle_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
+                      double beta, double *C, int ldc)
 {
     unicycle_lai_gemm_nn(m, n, k, alpha, A, lda, B, ldb, beta, C, ldc);
 }
 
-void unicycle_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda,
-                      const double *B, int ldb, double beta, double *C, int ldc)
+void unicycle_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
+                      double beta, double *C, int ldc)
 {
     unicycle_lai_gemm_tn(m, n, k, alpha, A, lda, B, ldb, beta, C, ldc);
 }

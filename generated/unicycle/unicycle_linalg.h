@@ -33,21 +33,20 @@ void unicycle_la_trsm_llt(int n, int m, const double *L, int ldl, double *B, int
 
 /* y <- alpha A x + beta y, A m x n (gemv_n);  y <- alpha A' x + beta y (gemv_t, y of size n).
  * beta == 0 overwrites y without reading it. */
-void unicycle_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y);
-void unicycle_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y);
+void unicycle_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
+                     double *y);
+void unicycle_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
+                     double *y);
 
 /* y <- alpha A x + beta y for symmetric n x n A of which only the lower triangle is read. */
-void unicycle_la_symv_l(int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y);
+void unicycle_la_symv_l(int n, double alpha, const double *A, int lda, const double *x, double beta, double *y);
 
 /* C <- alpha A B + beta C (gemm_nn: A m x k, B k x n); C <- alpha A' B + beta C (gemm_tn:
  * A k x m, B k x n). C is m x n. beta == 0 overwrites C without reading it. */
-void unicycle_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda,
-                      const double *B, int ldb, double beta, double *C, int ldc);
-void unicycle_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda,
-                      const double *B, int ldb, double beta, double *C, int ldc);
+void unicycle_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
+                      double beta, double *C, int ldc);
+void unicycle_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
+                      double beta, double *C, int ldc);
 
 /* Copy the m x n matrix A into B. */
 void unicycle_la_copy_mat(int m, int n, const double *A, int lda, double *B, int ldb);
@@ -63,7 +62,6 @@ double unicycle_la_norm_inf(int n, const double *x);
 double unicycle_la_max_abs_mat(int m, int n, const double *A, int lda);
 /* 1 when all m x n entries are finite, else 0. */
 int unicycle_la_all_finite(int m, int n, const double *A, int lda);
-
 
 /* ------------------------------------------------------------------------------------
  * Inline kernels (unicycle_lai_*): the same operations as static inline functions, so that
@@ -189,7 +187,7 @@ static inline void unicycle_lai_trsm_llt(int n, int m, const double *L, int ldl,
 }
 
 static inline void unicycle_lai_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+                                    double beta, double *y)
 {
     int i, j;
     if (beta == 0.0) {
@@ -207,7 +205,7 @@ static inline void unicycle_lai_gemv_n(int m, int n, double alpha, const double 
 }
 
 static inline void unicycle_lai_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+                                    double beta, double *y)
 {
     int i, j;
     for (j = 0; j < n; ++j) {
@@ -219,7 +217,7 @@ static inline void unicycle_lai_gemv_t(int m, int n, double alpha, const double 
 }
 
 static inline void unicycle_lai_symv_l(int n, double alpha, const double *A, int lda, const double *x,
-                     double beta, double *y)
+                                    double beta, double *y)
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
@@ -244,7 +242,7 @@ static inline void unicycle_lai_symv_l(int n, double alpha, const double *A, int
 }
 
 static inline void unicycle_lai_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda,
-                      const double *B, int ldb, double beta, double *C, int ldc)
+                                     const double *B, int ldb, double beta, double *C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -265,7 +263,7 @@ static inline void unicycle_lai_gemm_nn(int m, int n, int k, double alpha, const
 }
 
 static inline void unicycle_lai_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda,
-                      const double *B, int ldb, double beta, double *C, int ldc)
+                                     const double *B, int ldb, double beta, double *C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {

@@ -24,8 +24,8 @@ extern const int unicycle_default_M;
 extern const int unicycle_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int unicycle_default_regularization; /* 0 none, 1 project, 2 mirror */
 extern const double unicycle_default_reg_eps;
-extern const int unicycle_default_cost_hessian;    /* 1 fresh, 0 stored */
-extern const double unicycle_default_lm;            /* Levenberg-Marquardt term, >= 0 */
+extern const int unicycle_default_cost_hessian; /* 1 fresh, 0 stored */
+extern const double unicycle_default_lm;        /* Levenberg-Marquardt term, >= 0 */
 
 #if UNICYCLE_HAS_NOMINAL
 /* offline primal-dual solution at unicycle_x0_default (IPOPT at generation time), so the

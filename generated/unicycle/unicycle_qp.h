@@ -82,7 +82,7 @@
 
 #include "unicycle_sizes.h"
 
-#if !defined(UNICYCLE_N) || !defined(UNICYCLE_NX) || !defined(UNICYCLE_NU) || !defined(UNICYCLE_NG) || \
+#if !defined(UNICYCLE_N) || !defined(UNICYCLE_NX) || !defined(UNICYCLE_NU) || !defined(UNICYCLE_NG) ||                   \
     !defined(UNICYCLE_NR) || !defined(UNICYCLE_NE)
 #error "unicycle_sizes.h must define UNICYCLE_N, UNICYCLE_NX, UNICYCLE_NU, UNICYCLE_NG, UNICYCLE_NR, UNICYCLE_NE"
 #endif
@@ -123,10 +123,10 @@ enum unicycle_qp_status {
 };
 
 typedef struct {
-    double tol;        /* tolerance on the scaled KKT residuals (default 1e-8) */
-    int max_iter;      /* iteration limit (default 100) */
-    int warm_start;    /* nonzero: start from the primal-dual point in *sol (default 0) */
-    int refine_steps;  /* iterative refinement steps of the corrector direction once the
+    double tol;       /* tolerance on the scaled KKT residuals (default 1e-8) */
+    int max_iter;     /* iteration limit (default 100) */
+    int warm_start;   /* nonzero: start from the primal-dual point in *sol (default 0) */
+    int refine_steps; /* iterative refinement steps of the corrector direction once the
                           scaled KKT residuals are below 1e-6 (more after a floored pivot);
                           default 1 */
 } unicycle_qp_settings;
@@ -172,24 +172,24 @@ typedef struct {
 } unicycle_qp_sol;
 
 typedef struct {
-    int status;              /* enum unicycle_qp_status */
-    int iterations;          /* interior-point iterations taken */
-    int inertia_corrections; /* factorisations retried with delta*I added to the Hessians */
+    int status;                 /* enum unicycle_qp_status */
+    int iterations;             /* interior-point iterations taken */
+    int inertia_corrections;    /* factorisations retried with delta*I added to the Hessians */
     int terminal_augmentations; /* factorisations retried with rho Req'Req (exact, see top) */
-    int pivot_floors;        /* Riccati pivots within their round-off estimate of zero that were
+    int pivot_floors;           /* Riccati pivots within their round-off estimate of zero that were
                                 floored (cured by iterative refinement), summed over iterations */
-    double delta;            /* largest delta used (0 when no correction was needed) */
+    double delta;               /* largest delta used (0 when no correction was needed) */
     /* final residuals, infinity norms, unscaled */
-    double res_stat;         /* stationarity (both equations of the header comment) */
-    double res_eq;           /* x0, dynamics and Req rows */
-    double res_ineq;         /* bound / constraint violation max(0, l - v, v - u) */
-    double res_comp;         /* complementarity max(slack * multiplier) over all sides */
+    double res_stat; /* stationarity (both equations of the header comment) */
+    double res_eq;   /* x0, dynamics and Req rows */
+    double res_ineq; /* bound / constraint violation max(0, l - v, v - u) */
+    double res_comp; /* complementarity max(slack * multiplier) over all sides */
     /* the same, scaled as compared with settings.tol */
     double res_stat_scaled;
     double res_eq_scaled;
     double res_ineq_scaled;
     double res_comp_scaled;
-    double obj;              /* objective value at the returned point */
+    double obj; /* objective value at the returned point */
 } unicycle_qp_info;
 
 /* The whole solver memory; the user declares one (static, global or on a task stack).
@@ -200,7 +200,7 @@ typedef struct {
     double up[UNICYCLE_QP_NINEQ];
     unsigned char has_lo[UNICYCLE_QP_NINEQ];
     unsigned char has_up[UNICYCLE_QP_NINEQ];
-    unicycle_qp_row bidx[UNICYCLE_QP_NINEQ];   /* the rows with a finite side, nb of them */
+    unicycle_qp_row bidx[UNICYCLE_QP_NINEQ]; /* the rows with a finite side, nb of them */
     int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
     double prim[UNICYCLE_QP_NPRIM];
@@ -243,16 +243,16 @@ typedef struct {
     double p[UNICYCLE_N + 1][UNICYCLE_NX];
     double e[UNICYCLE_QP_NE1];
     double lk[UNICYCLE_N][UNICYCLE_QP_NU1];
-    double aty[UNICYCLE_QP_NPRIM];                        /* constraint part of r_stat (A'y) */
-    double yrow[UNICYCLE_QP_NINEQ];                       /* per-row scratch; row values v = D w */
+    double aty[UNICYCLE_QP_NPRIM];  /* constraint part of r_stat (A'y) */
+    double yrow[UNICYCLE_QP_NINEQ]; /* per-row scratch; row values v = D w */
     double work[4 * UNICYCLE_QP_NW * (UNICYCLE_QP_NW + UNICYCLE_QP_NE1 + 1)];
-    double delta;          /* current inertia-correction shift */
-    double rho_aug;        /* current terminal augmented-Lagrangian weight */
-    double noise[UNICYCLE_QP_NU1];                        /* round-off estimate of M_uu pivots */
-    int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
-    double scale_stat;     /* residual scaling factors */
+    double delta;               /* current inertia-correction shift */
+    double rho_aug;             /* current terminal augmented-Lagrangian weight */
+    double noise[UNICYCLE_QP_NU1]; /* round-off estimate of M_uu pivots */
+    int pivot_floors;           /* pivots within round-off of zero, replaced (see linalg) */
+    double scale_stat;          /* residual scaling factors */
     double scale_eq;
-    double scale_g;        /* data parts of the scaling (constant during a solve) */
+    double scale_g; /* data parts of the scaling (constant during a solve) */
     double scale_b;
     double scale_bounds;
 } unicycle_qp_workspace;
@@ -266,7 +266,7 @@ unsigned long unicycle_qp_workspace_size(void);
 /* Solve the QP. `sol` is read as the warm-start point when settings->warm_start is
  * nonzero and always written (best point found; zeros on invalid input). `info` may be
  * NULL. Returns the status (enum unicycle_qp_status). */
-int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in,
-                   const unicycle_qp_settings *settings, unicycle_qp_sol *sol, unicycle_qp_info *info);
+int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const unicycle_qp_settings *settings,
+                   unicycle_qp_sol *sol, unicycle_qp_info *info);
 
 #endif /* UNICYCLE_QP_H */

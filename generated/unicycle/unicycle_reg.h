@@ -9,11 +9,7 @@
 #ifndef UNICYCLE_REG_H
 #define UNICYCLE_REG_H
 
-enum unicycle_regularization {
-    UNICYCLE_REG_NONE = 0,
-    UNICYCLE_REG_PROJECT = 1,
-    UNICYCLE_REG_MIRROR = 2
-};
+enum unicycle_regularization { UNICYCLE_REG_NONE = 0, UNICYCLE_REG_PROJECT = 1, UNICYCLE_REG_MIRROR = 2 };
 
 /* Eigen-decomposition of the symmetric part of the n x n column-major matrix `a`.
  * On return the diagonal of `a` holds the eigenvalues (off-diagonals ~0) and `v` (n x n,

@@ -312,7 +312,8 @@ static int unicycle_lm_convex(unicycle_solver *s, double lm)
     int k, i, j, l;
     for (j = 0; j < UNICYCLE_NX; ++j) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            P[i + j * UNICYCLE_NX] = (i >= j ? s->A_N[i + j * UNICYCLE_NX] : s->A_N[j + i * UNICYCLE_NX]) + (i == j ? lm : 0.0);
+            P[i + j * UNICYCLE_NX] =
+                (i >= j ? s->A_N[i + j * UNICYCLE_NX] : s->A_N[j + i * UNICYCLE_NX]) + (i == j ? lm : 0.0);
         }
     }
     for (k = UNICYCLE_N - 1; k >= 0; --k) {
@@ -356,7 +357,7 @@ static int unicycle_lm_convex(unicycle_solver *s, double lm)
             }
         }
         if (k == 0) {
-            break;   /* x_0 is fixed: P_0 is not needed */
+            break; /* x_0 is fixed: P_0 is not needed */
         }
         /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
         for (j = 0; j < UNICYCLE_NX; ++j) {
@@ -501,8 +502,8 @@ static int unicycle_stage_F(unicycle_solver *s, int k)
 {
     double l = 0.0;
     int i;
-    if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL,
-                              s->tmp_phi, &l, s->tmp_g, &s->fun_work) != 0) {
+    if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL, s->tmp_phi, &l,
+                              s->tmp_g, &s->fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
     if (!unicycle_lai_vec_finite(UNICYCLE_NW, s->tmp_gL) || !unicycle_lai_vec_finite(UNICYCLE_NX, s->tmp_phi) ||
@@ -549,8 +550,8 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
     unicycle_stage_slot *slot;
     double t0 = unicycle_timer_now(&s->timer);
     int rc, i;
-    rc = unicycle_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
-                               s->tmp_A, s->tmp_Phi, s->tmp_C, &s->fun_work);
+    rc = unicycle_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_A,
+                               s->tmp_Phi, s->tmp_C, &s->fun_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
@@ -584,8 +585,8 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
 static int unicycle_term_F(unicycle_solver *s)
 {
     double gL[UNICYCLE_NX], E = 0.0, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
-    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, &E, r, r_eq,
-                             &s->fun_work) != 0) {
+    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, &E, r, r_eq, &s->fun_work) !=
+        0) {
         return UNICYCLE_ERR_FUNCTION;
     }
     if (!unicycle_lai_vec_finite(UNICYCLE_NX, gL) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
@@ -605,8 +606,8 @@ static int unicycle_term_H(unicycle_solver *s)
     double R[UNICYCLE_DIM(UNICYCLE_NR) * UNICYCLE_NX], R_eq[UNICYCLE_DIM(UNICYCLE_NE) * UNICYCLE_NX];
     double t0 = unicycle_timer_now(&s->timer);
     int rc;
-    rc = unicycle_eval_term_hess(s->hessian, s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, s->tmp_A,
-                              R, R_eq, &s->fun_work);
+    rc = unicycle_eval_term_hess(s->hessian, s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, s->tmp_A, R, R_eq,
+                              &s->fun_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
@@ -759,9 +760,9 @@ static int unicycle_init_finish(unicycle_solver *s)
     return UNICYCLE_OK;
 }
 
-int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, const double *u,
-               const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
-               const double *mu_r, const double *nu)
+int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
+               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
+               const double *nu)
 {
     int k, i, rc;
 
@@ -830,10 +831,10 @@ int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, cons
 int unicycle_init_nominal(unicycle_solver *s, const double *xhat0)
 {
 #if UNICYCLE_HAS_NOMINAL
-    return unicycle_init(s, xhat0, &unicycle_nominal_x[0][0], &unicycle_nominal_u[0][0],
-                      &unicycle_nominal_lam[0][0], UNICYCLE_NG > 0 ? &unicycle_nominal_mu_g[0][0] : 0,
-                      &unicycle_nominal_mu_b[0][0], unicycle_nominal_mu_bN,
-                      UNICYCLE_NR > 0 ? unicycle_nominal_mu_r : 0, UNICYCLE_NE > 0 ? unicycle_nominal_nu : 0);
+    return unicycle_init(s, xhat0, &unicycle_nominal_x[0][0], &unicycle_nominal_u[0][0], &unicycle_nominal_lam[0][0],
+                      UNICYCLE_NG > 0 ? &unicycle_nominal_mu_g[0][0] : 0, &unicycle_nominal_mu_b[0][0],
+                      unicycle_nominal_mu_bN, UNICYCLE_NR > 0 ? unicycle_nominal_mu_r : 0,
+                      UNICYCLE_NE > 0 ? unicycle_nominal_nu : 0);
 #else
     (void)xhat0;
     unicycle_ensure_setup(s);
@@ -1019,7 +1020,7 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
     if (retries == 0) {
-        unicycle_lm_feedback(s, UNICYCLE_OK);   /* lowered, unless this QP needed a raise */
+        unicycle_lm_feedback(s, UNICYCLE_OK); /* lowered, unless this QP needed a raise */
     }
     unicycle_copy(&s->plan_u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
     if (unicycle_clip_u(s->u[0], s->u0_out)) {
@@ -1124,8 +1125,9 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
         if (!shifted) {
             unicycle_copy(s->x[0], s->x[1], UNICYCLE_NX);
         }
-    } else if (unicycle_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) != 0 ||
-        !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[0])) {
+    } else if (unicycle_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) !=
+                   0 ||
+               !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[0])) {
         unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -1305,7 +1307,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
 
     /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
     s->kkt_proxy = unicycle_kkt_proxy_eval(s);
-    unicycle_lm_prepared(s);   /* the automatic Levenberg-Marquardt term (section 10) */
+    unicycle_lm_prepared(s); /* the automatic Levenberg-Marquardt term (section 10) */
     if (unicycle_iterate_diverged(s)) {
         s->flags |= UNICYCLE_FLAG_DIVERGED;
         if (s->recovery && s->mode == UNICYCLE_MODE_RECEDING) {

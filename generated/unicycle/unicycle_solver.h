@@ -56,9 +56,9 @@ const char *unicycle_status_string(int status);
  * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
  * rho = 0. xhat0 is checked and kept for unicycle_kkt_eval (may be NULL: the default x0).
  * A failed init leaves the solver uninitialised (NaN/Inf input: the iterate untouched). */
-int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, const double *u,
-               const double *lam, const double *mu_g, const double *mu_b, const double *mu_bN,
-               const double *mu_r, const double *nu);
+int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
+               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
+               const double *nu);
 /* Initialisation from the generated nominal primal-dual guess (the offline NLP solution at
  * the default x0); UNICYCLE_ERR_NO_NOMINAL when the solver was generated without one. */
 int unicycle_init_nominal(unicycle_solver *s, const double *xhat0);
@@ -229,38 +229,35 @@ enum unicycle_status {
 
 /* Flags of unicycle_get_flags (docs/algorithm.md section 9). */
 enum unicycle_flag {
-    UNICYCLE_FLAG_U0_CLIPPED = 1,  /* u0 was outside the control bounds and was clipped */
-    UNICYCLE_FLAG_FALLBACK = 2,    /* feedback failed: u0 is the next control of the last good plan */
-    UNICYCLE_FLAG_DIVERGED = 4,    /* the step or the prepared iterate failed the divergence test */
-    UNICYCLE_FLAG_RECOVERED = 8    /* prepare re-initialised (automatic recovery) */
+    UNICYCLE_FLAG_U0_CLIPPED = 1, /* u0 was outside the control bounds and was clipped */
+    UNICYCLE_FLAG_FALLBACK = 2,   /* feedback failed: u0 is the next control of the last good plan */
+    UNICYCLE_FLAG_DIVERGED = 4,   /* the step or the prepared iterate failed the divergence test */
+    UNICYCLE_FLAG_RECOVERED = 8   /* prepare re-initialised (automatic recovery) */
 };
 
 /* Safety constants (docs/algorithm.md section 9). */
-#define UNICYCLE_QP_TOL_MAX 1e-2            /* largest accepted QP tolerance */
-#define UNICYCLE_RECOVERY_FAILURES 2        /* default K: consecutive failures before recovery */
-#define UNICYCLE_RECOVERY_FULL_RTI 10        /* successful feedbacks with every block fresh after a recovery */
-#define UNICYCLE_DIVERGENCE_BOX 1e3         /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
-#define UNICYCLE_DIVERGENCE_KKT 1e6         /* kkt proxy <= 1e6 max(1, proxy at the last init) */
+#define UNICYCLE_QP_TOL_MAX 1e-2      /* largest accepted QP tolerance */
+#define UNICYCLE_RECOVERY_FAILURES 2  /* default K: consecutive failures before recovery */
+#define UNICYCLE_RECOVERY_FULL_RTI 10 /* successful feedbacks with every block fresh after a recovery */
+#define UNICYCLE_DIVERGENCE_BOX 1e3   /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
+#define UNICYCLE_DIVERGENCE_KKT 1e6   /* kkt proxy <= 1e6 max(1, proxy at the last init) */
 
 /* Automatic Levenberg-Marquardt term (docs/algorithm.md section 10), relative to the
  * Hessian scale h = max(1e-300, largest |diagonal entry| of the QP's blocks). */
-#define UNICYCLE_LM_MIN_REL 1e-8            /* smallest nonzero term: 1e-8 h (below: 0) */
-#define UNICYCLE_LM_MAX_REL 1e2             /* largest term: 1e2 h */
-#define UNICYCLE_LM_RAISE 10.0              /* factor of a raise */
-#define UNICYCLE_LM_LOWER 0.1               /* factor after a successful feedback */
-#define UNICYCLE_LM_PIVOT_REL 1e-10         /* Riccati pivots must exceed 1e-10 h */
-#define UNICYCLE_LM_KKT_GROWTH 10.0         /* raise when the KKT proxy grows 10x in one prepare */
-#define UNICYCLE_LM_RETRIES 2               /* QP solves again with lm raised after a failure */
+#define UNICYCLE_LM_MIN_REL 1e-8    /* smallest nonzero term: 1e-8 h (below: 0) */
+#define UNICYCLE_LM_MAX_REL 1e2     /* largest term: 1e2 h */
+#define UNICYCLE_LM_RAISE 10.0      /* factor of a raise */
+#define UNICYCLE_LM_LOWER 0.1       /* factor after a successful feedback */
+#define UNICYCLE_LM_PIVOT_REL 1e-10 /* Riccati pivots must exceed 1e-10 h */
+#define UNICYCLE_LM_KKT_GROWTH 10.0 /* raise when the KKT proxy grows 10x in one prepare */
+#define UNICYCLE_LM_RETRIES 2       /* QP solves again with lm raised after a failure */
 
 enum unicycle_mode {
     UNICYCLE_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
     UNICYCLE_MODE_FIXED = 1     /* no shift: fixed-xhat0 convergence studies */
 };
 
-enum unicycle_hessian {
-    UNICYCLE_HESSIAN_EXACT = 0,
-    UNICYCLE_HESSIAN_GAUSS_NEWTON = 1
-};
+enum unicycle_hessian { UNICYCLE_HESSIAN_EXACT = 0, UNICYCLE_HESSIAN_GAUSS_NEWTON = 1 };
 
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static unicycle_solver s;`;
@@ -274,12 +271,12 @@ enum unicycle_hessian {
 #include "unicycle_timer.h"
 
 struct unicycle_solver {
-    int magic;          /* UNICYCLE_MAGIC once the settings hold valid values */
-    int initialized;    /* a successful init happened */
-    int qp_ready;       /* QP assembled at the current iterate (prepare or init succeeded) */
-    int prepare_due;    /* a feedback reached the QP since the last successful init/prepare */
-    int shifted;        /* the shift of this sampling instant is done (a prepare failed after it) */
-    int status;         /* status of the last call */
+    int magic;       /* UNICYCLE_MAGIC once the settings hold valid values */
+    int initialized; /* a successful init happened */
+    int qp_ready;    /* QP assembled at the current iterate (prepare or init succeeded) */
+    int prepare_due; /* a feedback reached the QP since the last successful init/prepare */
+    int shifted;     /* the shift of this sampling instant is done (a prepare failed after it) */
+    int status;      /* status of the last call */
 
     /* settings */
     int M;
@@ -287,13 +284,13 @@ struct unicycle_solver {
     int hessian;
     int regularization;
     double reg_eps;
-    int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
-    double lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
+    int cost_hessian;                 /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    double lm;                        /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
                            current automatic value) */
-    int lm_auto;        /* 1: automatic term (section 10) */
-    double lm_scale;    /* Hessian scale h of the automatic term */
-    double lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
-    double lm_P[UNICYCLE_NX * UNICYCLE_NX];   /* Riccati workspace of the convexity test */
+    int lm_auto;                      /* 1: automatic term (section 10) */
+    double lm_scale;                  /* Hessian scale h of the automatic term */
+    double lm_kkt_prev;               /* KKT proxy of the previous prepare (< 0: none since init) */
+    double lm_P[UNICYCLE_NX * UNICYCLE_NX]; /* Riccati workspace of the convexity test */
     double lm_P2[UNICYCLE_NX * UNICYCLE_NX];
     double lm_PA[UNICYCLE_NX * UNICYCLE_NW];
     double lm_G[UNICYCLE_NW * UNICYCLE_NW];
@@ -342,8 +339,8 @@ struct unicycle_solver {
     unicycle_qp_workspace qp_work;
     int qp_status;
     int qp_iterations;
-    int qp_warm;        /* warm start in feedback (unicycle_set_qp_warm_start) */
-    int qp_cold_retry;  /* the last feedback needed the cold retry */
+    int qp_warm;       /* warm start in feedback (unicycle_set_qp_warm_start) */
+    int qp_cold_retry; /* the last feedback needed the cold retry */
 
     /* scratch for the generated functions and the regularisation */
     unicycle_fun_work fun_work;
@@ -358,17 +355,17 @@ struct unicycle_solver {
     double reg_work[2 * UNICYCLE_NW * UNICYCLE_NW];
 
     /* safe outputs, divergence test and recovery (algorithm.md section 9) */
-    int recovery;               /* automatic recovery on */
-    int recovery_failures;      /* K */
-    int n_failed;               /* consecutive failed feedbacks */
-    int recover_pending;        /* the next prepare re-initialises */
-    int flags;                  /* UNICYCLE_FLAG_* of the last feedback + prepare */
+    int recovery;          /* automatic recovery on */
+    int recovery_failures; /* K */
+    int n_failed;          /* consecutive failed feedbacks */
+    int recover_pending;   /* the next prepare re-initialises */
+    int flags;             /* UNICYCLE_FLAG_* of the last feedback + prepare */
     int n_recoveries;
-    int recovering;             /* full-RTI prepares left after a recovery */
-    int xhat_fresh;             /* the last feedback had a finite measurement */
-    int plan_age;               /* receding shifts since the last good plan */
+    int recovering;                   /* full-RTI prepares left after a recovery */
+    int xhat_fresh;                   /* the last feedback had a finite measurement */
+    int plan_age;                     /* receding shifts since the last good plan */
     double plan_u[UNICYCLE_N][UNICYCLE_NU]; /* controls of the last good plan */
-    double u0_out[UNICYCLE_NU];    /* the control returned by the last feedback */
+    double u0_out[UNICYCLE_NU];          /* the control returned by the last feedback */
     double scale_x[UNICYCLE_NX];
     double scale_u[UNICYCLE_NU];
     double kkt_proxy;

@@ -15,15 +15,15 @@
 
 /* Phases timed per call (seconds of the last call that ran the phase). */
 enum unicycle_phase {
-    UNICYCLE_PHASE_FEEDBACK = 0,      /* unicycle_feedback: QP solve + step */
-    UNICYCLE_PHASE_SHIFT = 1,         /* prepare step 1: shift, ring head */
-    UNICYCLE_PHASE_GRADIENTS = 2,     /* prepare steps 2-3: stage_grad / term_grad (F_k) */
-    UNICYCLE_PHASE_RHO = 3,           /* prepare step 2: secant criterion eq. 16 */
-    UNICYCLE_PHASE_HESSIANS = 4,      /* stage_hess / term_hess (H_k) and stage_hess_cost (A_l),
+    UNICYCLE_PHASE_FEEDBACK = 0,       /* unicycle_feedback: QP solve + step */
+    UNICYCLE_PHASE_SHIFT = 1,          /* prepare step 1: shift, ring head */
+    UNICYCLE_PHASE_GRADIENTS = 2,      /* prepare steps 2-3: stage_grad / term_grad (F_k) */
+    UNICYCLE_PHASE_RHO = 3,            /* prepare step 2: secant criterion eq. 16 */
+    UNICYCLE_PHASE_HESSIANS = 4,       /* stage_hess / term_hess (H_k) and stage_hess_cost (A_l),
                                       without regularisation */
-    UNICYCLE_PHASE_REGULARIZATION = 5,/* eigenvalue regularisation of fresh A blocks */
-    UNICYCLE_PHASE_ASSEMBLY = 6,      /* QP vectors a_k, b_k, bounds */
-    UNICYCLE_PHASE_KKT = 7,           /* unicycle_kkt_eval */
+    UNICYCLE_PHASE_REGULARIZATION = 5, /* eigenvalue regularisation of fresh A blocks */
+    UNICYCLE_PHASE_ASSEMBLY = 6,       /* QP vectors a_k, b_k, bounds */
+    UNICYCLE_PHASE_KKT = 7,            /* unicycle_kkt_eval */
     UNICYCLE_N_PHASES = 8
 };
 

@@ -326,7 +326,6 @@ def solve_clarabel(qp, tol=1e-11):
     import clarabel
 
     P, q, Aeq, beq, D, lo, up = stacked(qp)
-    n = P.shape[0]
     hasu = np.isfinite(up)
     hasl = np.isfinite(lo)
     A = np.vstack([Aeq, D[hasu], -D[hasl]])
@@ -413,7 +412,6 @@ def kkt_sigma_min(qp, sol):
     solution and multipliers are ill-conditioned functions of the data."""
     P, q, Aeq, beq, D, lo, up = stacked(qp)
     z = stack_primal(qp, sol)
-    yi = signed_rows(qp, sol)
     v = D @ z
     scale = np.maximum(1.0, np.abs(v))
     active = ((np.abs(v - lo) <= 1e-12 * scale) | (np.abs(up - v) <= 1e-12 * scale))
