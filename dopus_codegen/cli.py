@@ -176,16 +176,12 @@ def main(ctx, cache_dir, debug) -> None:
 
 
 def _int_list_or_full(value: str) -> list:
-    out = []
-    for item in value.split(","):
-        item = item.strip()
-        if item == "full":
-            out.append("full")
-        elif item.isdigit():
-            out.append(int(item))
-        else:
-            raise click.BadParameter(f"'{item}' is neither a non-negative integer nor 'full'")
-    return out
+    from .settings import SettingError, parse_m_list
+
+    try:
+        return parse_m_list(value)
+    except SettingError as exc:
+        raise click.BadParameter(str(exc)) from None
 
 
 @main.command()

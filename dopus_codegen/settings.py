@@ -20,7 +20,7 @@ from . import vocabulary
 
 __all__ = ["SettingError", "DEFAULTS", "SOLVER_SETTINGS", "choices", "code", "value_of", "check",
            "positive", "nonnegative", "count", "resolve", "RUNTIME_SETTINGS", "HELP", "kind", "validate",
-           "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT"]
+           "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT", "parse_m_list"]
 
 SOURCE_CLI, SOURCE_FILE, SOURCE_DEFAULT = "cli", "ocp-file", "default"
 
@@ -267,3 +267,18 @@ def describe(values: Mapping[str, Any], sources: Mapping[str, str]) -> str:
             return f"{k} the solver's own ({sources[k]})"
         return f"{k} {v:g} ({sources[k]})" if isinstance(v, float) else f"{k} {v} ({sources[k]})"
     return ", ".join(text(k) for k in values)
+
+
+def parse_m_list(text: Any) -> list:
+    """A list of M values as the command line writes it: ``"1,5,full"`` -> ``[1, 5, "full"]``
+    (``full`` is the full RTI, M = N-1); SettingError names a bad item."""
+    out: list = []
+    for item in str(text).split(","):
+        item = item.strip()
+        if item == "full":
+            out.append("full")
+        elif item.isdigit():
+            out.append(int(item))
+        else:
+            raise SettingError(f"'{item}' is neither a non-negative integer nor 'full'")
+    return out

@@ -60,16 +60,10 @@ class BenchError(RuntimeError):
 # ------------------------------------------------------------------------------ arguments
 def parse_m_list(text: str) -> list:
     """``"1,5,full"`` -> ``[1, 5, "full"]``; raises BenchError naming a bad item."""
-    out = []
-    for item in str(text).split(","):
-        item = item.strip()
-        if item == "full":
-            out.append("full")
-        elif item.isdigit():
-            out.append(int(item))
-        else:
-            raise BenchError(f"--M: '{item}' is neither a non-negative integer nor 'full'")
-    return out
+    try:
+        return st.parse_m_list(text)
+    except st.SettingError as exc:
+        raise BenchError(f"--M: {exc}") from None
 
 
 def parse_n_list(text: str) -> list:
