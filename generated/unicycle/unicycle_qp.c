@@ -42,12 +42,8 @@
 #define NE1 UNICYCLE_QP_NE1
 #define NU1 UNICYCLE_QP_NU1
 #define TOFF (N * NSI) /* first terminal inequality row */
-/* The row values v = D w live in the per-row scratch yrow from compute_residuals (or
- * initial_point) until the next Newton direction overwrites it. */
-#define QP_V(ws) ((ws)->yrow)
-/* Loop over the rows with at least one finite side (ws->bidx, built by setup_bounds): the
- * per-side work skips the unbounded rows (their barrier weight stays 0). */
-#define QP_FOR_BOUNDED(ws, b, i) for ((b) = 0; (b) < (ws)->nb && ((i) = (ws)->bidx[(b)], 1); ++(b))
+/* The row values v = D w of the current iterate (compute_residuals, initial_point). */
+#define QP_V(ws) ((ws)->v)
 
 /* Fraction-to-boundary factor and limits of the inertia correction. */
 #define STEP_TAU 0.995
@@ -150,90 +146,165 @@ static int check_input(const unicycle_qp_in *in)
     return 1;
 }
 
-/* Bounds into the flat row layout; returns 0 when some lo > up (trivially infeasible). */
+/* Lower and upper bound of inequality row i (flat row layout of unicycle_qp.h). */
+static void row_bounds(const unicycle_qp_in *in, int i, double *lo, double *up)
+{
+    if (i < TOFF) {
+        const int k = i / NSI, j = i - k * NSI;
+        if (NG == 0 || j < NW) {
+            *lo = in->lbw[k][j];
+            *up = in->ubw[k][j];
+        } else {
+            *lo = in->lg[k][j - NW];
+            *up = in->ug[k][j - NW];
+        }
+    } else if (NR == 0 || i - TOFF < NX) {
+        *lo = in->lbxN[i - TOFF];
+        *up = in->ubxN[i - TOFF];
+    } else {
+        *lo = in->lr[i - TOFF - NX];
+        *up = in->ur[i - TOFF - NX];
+    }
+}
+
+/* The bounded rows (a finite side that is not ignored) with their bounds. Returns 0, or 1
+ * when some lo > up (trivially infeasible), or 2 when there are more than UNICYCLE_QP_NB. */
 static int setup_bounds(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 {
-    int k, i, ok = 1, nb = 0;
-    for (k = 0; k < N; ++k) {
-        const int o = k * NSI;
-        for (i = 0; i < NW; ++i) {
-            ws->lo[o + i] = in->lbw[k][i];
-            ws->up[o + i] = in->ubw[k][i];
+    int k, i, ok = 0, nb = 0;
+    for (k = 0; k <= N; ++k) {
+        const int first = k * NSI, last = k < N ? first + NSI : NI;
+        ws->bstart[k] = (unicycle_qp_row)nb;
+        for (i = first; i < last; ++i) {
+            /* x_0 is fixed by x0: its box rows are ignored, and so are the general rows of
+             * stage 0 that do not involve u_0 (their value is data; a multiplier on them is
+             * not unique, lam_0 absorbs any value, and a violation by round-off in x0 could
+             * never be removed) */
+            int ignored = (i < NX), hl, hu;
+            double lo, up;
+            if (NG > 0 && i >= NW && i < NW + NG) {
+                int c;
+                ignored = 1;
+                for (c = NX; c < NW; ++c)
+                    if (in->C[0][(i - NW) + c * NG] != 0.0)
+                        ignored = 0;
+            }
+            row_bounds(in, i, &lo, &up);
+            hl = !ignored && isfinite(lo);
+            hu = !ignored && isfinite(up);
+            if (!hl && !hu)
+                continue;
+            if (nb >= UNICYCLE_QP_NB)
+                return 2;
+            ws->bidx[nb] = (unicycle_qp_row)i;
+            ws->has_lo[nb] = (unsigned char)hl;
+            ws->has_up[nb] = (unsigned char)hu;
+            ws->lo[nb] = lo;
+            ws->up[nb] = up;
+            if (hl && hu && lo > up)
+                ok = 1;
+            ++nb;
         }
-        for (i = 0; i < NG; ++i) {
-            ws->lo[o + NW + i] = in->lg[k][i];
-            ws->up[o + NW + i] = in->ug[k][i];
-        }
     }
-    for (i = 0; i < NX; ++i) {
-        ws->lo[TOFF + i] = in->lbxN[i];
-        ws->up[TOFF + i] = in->ubxN[i];
-    }
-    for (i = 0; i < NR; ++i) {
-        ws->lo[TOFF + NX + i] = in->lr[i];
-        ws->up[TOFF + NX + i] = in->ur[i];
-    }
-    for (i = 0; i < NI; ++i) {
-        /* x_0 is fixed by x0: its box rows are ignored, and so are the general rows of
-         * stage 0 that do not involve u_0 (their value is data; a multiplier on them is
-         * not unique, lam_0 absorbs any value, and a violation by round-off in x0 could
-         * never be removed) */
-        int ignored = (i < NX);
-        if (NG > 0 && i >= NW && i < NW + NG) {
-            int c;
-            ignored = 1;
-            for (c = NX; c < NW; ++c)
-                if (in->C[0][(i - NW) + c * NG] != 0.0)
-                    ignored = 0;
-        }
-        ws->has_lo[i] = (unsigned char)(!ignored && isfinite(ws->lo[i]));
-        ws->has_up[i] = (unsigned char)(!ignored && isfinite(ws->up[i]));
-        ws->qdiag[i] = 0.0;
-        if (ws->has_lo[i] || ws->has_up[i])
-            ws->bidx[nb++] = (unicycle_qp_row)i;
-        if (ws->has_lo[i] && ws->has_up[i] && ws->lo[i] > ws->up[i])
-            ok = 0;
-    }
+    ws->bstart[N + 1] = (unicycle_qp_row)nb;
     ws->nb = nb;
     return ok;
 }
 
 /* ---------------------------------------------------------------- row maps D, D' */
 
-/* v = D prim */
-static void apply_D(const unicycle_qp_in *in, const double *prim, double *v)
+/* v_b = D_b prim for the bounded rows b */
+static void apply_D(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, const double *prim, double *v)
 {
-    int k, i;
-    for (k = 0; k < N; ++k) {
+    int k, b;
+    for (k = 0; k <= N; ++k) {
+        const int first = k * NSI, b1 = ws->bstart[k + 1];
         const double *w = prim + k * NW;
-        double *vk = v + k * NSI;
-        for (i = 0; i < NW; ++i)
-            vk[i] = w[i];
-        if (NG > 0)
-            unicycle_lai_gemv_n(NG, NW, 1.0, in->C[k], NG > 0 ? NG : 1, w, 0.0, vk + NW);
+        for (b = ws->bstart[k]; b < b1; ++b) {
+            const int j = ws->bidx[b] - first;
+            if (k < N) {
+                if (NG == 0 || j < NW) {
+                    v[b] = w[j];
+                } else {
+                    const double *C = in->C[k];
+                    double s = 0.0;
+                    int c;
+                    for (c = 0; c < NW; ++c)
+                        s += C[(j - NW) + c * NG] * w[c];
+                    v[b] = s;
+                }
+            } else if (NR == 0 || j < NX) {
+                v[b] = w[j];
+            } else {
+                double s = 0.0;
+                int c;
+                for (c = 0; c < NX; ++c)
+                    s += in->R[(j - NX) + c * NR] * w[c];
+                v[b] = s;
+            }
+        }
     }
-    for (i = 0; i < NX; ++i)
-        v[TOFF + i] = prim[N * NW + i];
-    if (NR > 0)
-        unicycle_lai_gemv_n(NR, NX, 1.0, in->R, NR > 0 ? NR : 1, prim + N * NW, 0.0, v + TOFF + NX);
 }
 
-/* out += D' y */
-static void add_Dt(const unicycle_qp_in *in, const double *y, double *out)
+/* out += D' y over the bounded rows (y indexed by b) */
+static void add_Dt(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, const double *y, double *out)
 {
-    int k, i;
-    for (k = 0; k < N; ++k) {
-        const double *yk = y + k * NSI;
+    int k, b;
+    for (k = 0; k <= N; ++k) {
+        const int first = k * NSI, b1 = ws->bstart[k + 1];
         double *o = out + k * NW;
-        for (i = 0; i < NW; ++i)
-            o[i] += yk[i];
-        if (NG > 0)
-            unicycle_lai_gemv_t(NG, NW, 1.0, in->C[k], NG > 0 ? NG : 1, yk + NW, 1.0, o);
+        for (b = ws->bstart[k]; b < b1; ++b) {
+            const int j = ws->bidx[b] - first;
+            int c;
+            if (k < N) {
+                if (NG == 0 || j < NW)
+                    o[j] += y[b];
+                else
+                    for (c = 0; c < NW; ++c)
+                        o[c] += in->C[k][(j - NW) + c * NG] * y[b];
+            } else if (NR == 0 || j < NX) {
+                o[j] += y[b];
+            } else {
+                for (c = 0; c < NX; ++c)
+                    o[c] += in->R[(j - NX) + c * NR] * y[b];
+            }
+        }
     }
-    for (i = 0; i < NX; ++i)
-        out[N * NW + i] += y[TOFF + i];
-    if (NR > 0)
-        unicycle_lai_gemv_t(NR, NX, 1.0, in->R, NR > 0 ? NR : 1, y + TOFF + NX, 1.0, out + N * NW);
+}
+
+/* Entry (i, j), i >= j, of a symmetric nx x nx matrix packed by lower columns. */
+#define PACKED(i, j) ((j) * NX - (j) * ((j) - 1) / 2 + (i) - (j))
+
+/* y += alpha P x for P packed by lower columns (the order of gemv_n: column by column). */
+static void spmv_packed(const double *restrict Pp, double alpha, const double *restrict x, double *restrict y)
+{
+    int i, j;
+    for (j = 0; j < NX; ++j) {
+        const double a = alpha * x[j];
+        for (i = 0; i < j; ++i)
+            y[i] += Pp[PACKED(j, i)] * a;
+        for (i = j; i < NX; ++i)
+            y[i] += Pp[PACKED(i, j)] * a;
+    }
+}
+
+/* Per bounded row b: the residuals of the slack equations, r_lo = v - lo - t_lo and
+ * r_up = up - v - t_up, the slack steps of the current direction, dt_lo = dv + r_lo and
+ * dt_up = r_up - dv (dv = D dw), and the barrier weight q = z_lo/t_lo + z_up/t_up, formed
+ * where they are used rather than stored. */
+static double r_lo(const unicycle_qp_workspace *ws, int b) { return ws->v[b] - ws->lo[b] - ws->t_lo[b]; }
+static double r_up(const unicycle_qp_workspace *ws, int b) { return ws->up[b] - ws->v[b] - ws->t_up[b]; }
+static double dt_lo(const unicycle_qp_workspace *ws, int b) { return ws->dv[b] + r_lo(ws, b); }
+static double dt_up(const unicycle_qp_workspace *ws, int b) { return r_up(ws, b) - ws->dv[b]; }
+
+static double row_q(const unicycle_qp_workspace *ws, int b)
+{
+    double q = 0.0;
+    if (ws->has_lo[b])
+        q += ws->z_lo[b] / ws->t_lo[b];
+    if (ws->has_up[b])
+        q += ws->z_up[b] / ws->t_up[b];
+    return q;
 }
 
 /* ---------------------------------------------------------------- residuals */
@@ -250,7 +321,7 @@ static void data_scales(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     }
     if (NE > 0)
         sb = dmax(sb, unicycle_lai_norm_inf(NE, in->req));
-    for (i = 0; i < NI; ++i) {
+    for (i = 0; i < ws->nb; ++i) {
         if (ws->has_lo[i])
             sl = dmax(sl, fabs(ws->lo[i]));
         if (ws->has_up[i])
@@ -274,13 +345,14 @@ typedef struct {
 
 static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *in, qp_res *r)
 {
-    int k, i, b;
+    int k, i;
     double s_stat = 1.0, s_eq = 1.0, s_ineq = 1.0, nz = 0.0, obj = 0.0, comp = 0.0, ineq = 0.0;
     double sum_c = 0.0;
     int m = 0;
+    double *aty = ws->res_stat_lin; /* A'y, kept for the infeasibility test */
 
-    /* signed multipliers per row (yrow; it holds the row values v afterwards) */
-    for (i = 0; i < NI; ++i) {
+    /* signed multipliers per row */
+    for (i = 0; i < ws->nb; ++i) {
         const double zl = ws->has_lo[i] ? ws->z_lo[i] : 0.0;
         const double zu = ws->has_up[i] ? ws->z_up[i] : 0.0;
         ws->yrow[i] = zu - zl;
@@ -290,7 +362,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     for (k = 0; k < N; ++k) {
         const double *w = ws->prim + k * NW;
         double *h = ws->r_stat + k * NW;
-        double *a = ws->aty + k * NW;
+        double *a = aty + k * NW;
         unicycle_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
         unicycle_lai_axpy(NW, in->hess_shift, w, h);
         s_stat = dmax(s_stat, unicycle_lai_norm_inf(NW, h));
@@ -303,7 +375,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     {
         const double *xN = ws->prim + N * NW;
         double *h = ws->r_stat + N * NW;
-        double *a = ws->aty + N * NW;
+        double *a = aty + N * NW;
         unicycle_lai_symv_l(NX, 1.0, in->HN, NX, xN, 0.0, h);
         unicycle_lai_axpy(NX, in->hess_shift, xN, h);
         s_stat = dmax(s_stat, unicycle_lai_norm_inf(NX, h));
@@ -315,11 +387,11 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
         if (NE > 0)
             unicycle_lai_gemv_t(NE, NX, 1.0, in->Req, NE1, ws->nu, 1.0, a);
     }
-    add_Dt(in, ws->yrow, ws->aty);
-    s_stat = dmax(s_stat, unicycle_lai_norm_inf(NP, ws->aty));
+    add_Dt(ws, in, ws->yrow, aty);
+    s_stat = dmax(s_stat, unicycle_lai_norm_inf(NP, aty));
     for (i = 0; i < NP; ++i)
-        ws->r_stat[i] += ws->aty[i];
-    apply_D(in, ws->prim, QP_V(ws));
+        ws->r_stat[i] += aty[i];
+    apply_D(ws, in, ws->prim, QP_V(ws));
 
     /* equalities */
     for (i = 0; i < NX; ++i)
@@ -343,25 +415,22 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
 
     /* inequality sides */
     s_ineq = dmax(s_ineq, ws->scale_bounds);
-    QP_FOR_BOUNDED(ws, b, i) {
+    for (i = 0; i < ws->nb; ++i) {
         const double v = QP_V(ws)[i];
         /* r_lo, r_up (and the directions) are only defined on the bounded sides */
         if (ws->has_lo[i]) {
-            ws->r_lo[i] = v - ws->lo[i] - ws->t_lo[i];
             ineq = dmax(ineq, ws->lo[i] - v);
             comp = dmax(comp, ws->t_lo[i] * ws->z_lo[i]);
             sum_c += ws->t_lo[i] * ws->z_lo[i];
             ++m;
         }
         if (ws->has_up[i]) {
-            ws->r_up[i] = ws->up[i] - v - ws->t_up[i];
             ineq = dmax(ineq, v - ws->up[i]);
             comp = dmax(comp, ws->t_up[i] * ws->z_up[i]);
             sum_c += ws->t_up[i] * ws->z_up[i];
             ++m;
         }
-        if (ws->has_lo[i] || ws->has_up[i])
-            s_ineq = dmax(s_ineq, fabs(v));
+        s_ineq = dmax(s_ineq, fabs(v));
     }
 
     r->nsides = m;
@@ -434,7 +503,7 @@ static double hessian_scale(const unicycle_qp_in *in)
     return s > 0.0 ? s : 1.0;
 }
 
-/* Factor the Newton system for the current barrier weights qdiag, delta and rho.
+/* Factor the Newton system for the current barrier weights (row_q), delta and rho.
  * Returns 0, or 1 when a stage pivot block M_uu is not positive definite (wrong inertia),
  * or 2 when the terminal-multiplier block S is singular. */
 static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
@@ -443,23 +512,32 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     double *PhiT = ws->work;                 /* NW x NX: Phi_k' */
     double *WT = ws->work + NX * NW;         /* NX x NW: P_{k+1} Phi_k */
     double *Gam = ws->work + 2 * NX * NW;    /* NW x NE: Phi_k' G_{k+1} */
+    double *Pf = Gam + NW * NE1;             /* NX x NX: P_{k+1} unpacked */
     const double delta = ws->delta;
     double pmag, pnext;
+    int b;
 
     /* terminal: P_N = HN + D'QD + delta I + rho Req'Req, G_N = Req' */
     {
-        double *P = ws->P[N];
-        const double *q = ws->qdiag + TOFF;
+        double *P = Pf;
+        double dq[NX];
+        int l = 0;
         unicycle_lai_copy_mat(NX, NX, in->HN, NX, P, NX);
         unicycle_lai_symmetrize_l(NX, P, NX);
         for (i = 0; i < NX; ++i)
-            P[i + i * NX] += q[i] + delta + in->hess_shift;
-        for (k = 0; k < NR; ++k) {
-            const double qr = q[NX + k];
-            if (qr != 0.0)
+            dq[i] = 0.0;
+        for (b = ws->bstart[N]; b < ws->bstart[N + 1]; ++b)
+            if (NR == 0 || ws->bidx[b] - TOFF < NX)
+                dq[ws->bidx[b] - TOFF] = row_q(ws, b);
+        for (i = 0; i < NX; ++i)
+            P[i + i * NX] += dq[i] + delta + in->hess_shift;
+        for (b = ws->bstart[N]; b < ws->bstart[N + 1]; ++b) {
+            const int r = ws->bidx[b] - TOFF;
+            const double qr = row_q(ws, b);
+            if (NR > 0 && r >= NX && qr != 0.0)
                 for (j = 0; j < NX; ++j)
                     for (i = 0; i < NX; ++i)
-                        P[i + j * NX] += qr * in->R[k + i * NR] * in->R[k + j * NR];
+                        P[i + j * NX] += qr * in->R[(r - NX) + i * NR] * in->R[(r - NX) + j * NR];
         }
         if (NE > 0) {
             if (ws->rho_aug > 0.0)
@@ -468,6 +546,9 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
                 for (i = 0; i < NX; ++i)
                     ws->G[N][i + j * NX] = in->Req[j + i * NE1];
         }
+        for (j = 0; j < NX; ++j)
+            for (i = j; i < NX; ++i)
+                ws->P[N][l++] = P[i + j * NX];
     }
     for (i = 0; i < NE1 * NE1; ++i)
         ws->S[i] = 0.0;
@@ -477,18 +558,25 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
      * of the stage before and cancels), leaving an absolute error of about eps times the
      * magnitude `pmag` of the cancelled terms. That error reaches the pivots of M_uu of
      * stage k through B' P B, so a negative pivot within that noise is a numerical zero. */
-    pmag = unicycle_lai_max_abs_mat(NX, NX, ws->P[N], NX);
+    pmag = unicycle_lai_max_abs_mat(NX, NX, Pf, NX);
     pnext = pmag; /* largest |entry| of P_{k+1}, kept along the recursion */
     for (k = N - 1; k >= 0; --k) {
         double *M = ws->M;
         const double *Phi = in->Phi[k];
-        const double *q = ws->qdiag + k * NSI;
+        double q[NSI];
         double *Lu = ws->Lu[k];
         double *LK = ws->LK[k];
         double *LKn = ws->LKn[k];
         double *P = ws->P[k];
         const double pmax = pnext;
         double mxx = 0.0, pabs;
+        int l = 0;
+
+        /* barrier weights of the stage's rows (0 on the unbounded rows) */
+        for (i = 0; i < NSI; ++i)
+            q[i] = 0.0;
+        for (b = ws->bstart[k]; b < ws->bstart[k + 1]; ++b)
+            q[ws->bidx[b] - k * NSI] = row_q(ws, b);
 
         /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi, lower triangle only (the upper
          * triangle of M is never read) */
@@ -520,7 +608,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             mxx = dmax(mxx, fabs(M[j + j * NW]) + colsum * colsum * pmax);
         }
         /* M += Phi' P_{k+1} Phi (lower triangle), Gam = Phi' G_{k+1} */
-        qp_stage_update(Phi, ws->P[k + 1], ws->G[k + 1], PhiT, WT, M, Gam);
+        qp_stage_update(Phi, Pf, ws->G[k + 1], PhiT, WT, M, Gam);
 
         /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
         unicycle_lai_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
@@ -537,11 +625,12 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         for (j = 0; j < NX; ++j)
             for (i = j; i < NX; ++i) {
                 unicycle_real sum = M[i + j * NW];
-                int l;
-                for (l = 0; l < NU; ++l)
-                    sum -= LK[l + i * NU1] * LK[l + j * NU1];
-                P[i + j * NX] = sum;
-                P[j + i * NX] = sum;
+                int c;
+                for (c = 0; c < NU; ++c)
+                    sum -= LK[c + i * NU1] * LK[c + j * NU1];
+                P[l++] = sum;
+                Pf[i + j * NX] = sum;
+                Pf[j + i * NX] = sum;
                 pabs = dmax(pabs, fabs(sum));
             }
         pnext = pabs;
@@ -603,7 +692,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
         for (i = 0; i < NX; ++i)
             tv[i] = ws->p[k + 1][i];
-        unicycle_lai_gemv_n(NX, NX, 1.0, ws->P[k + 1], NX, c, 1.0, tv);
+        spmv_packed(ws->P[k + 1], 1.0, c, tv);
         for (i = 0; i < NW; ++i)
             m[i] = -rhs_stat[k * NW + i];
         unicycle_lai_gemv_t(NX, NW, 1.0, Phi, NX, tv, 1.0, m);
@@ -645,7 +734,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
             lamk[i] = -ws->p[k][i];
-        unicycle_lai_gemv_n(NX, NX, -1.0, ws->P[k], NX, w, 1.0, lamk);
+        spmv_packed(ws->P[k], -1.0, w, lamk);
         if (NE > 0)
             unicycle_lai_gemv_n(NX, NE, -1.0, ws->G[k], NX, sn, 1.0, lamk);
         /* x_{k+1} = Phi_k w_k + c_k */
@@ -659,14 +748,15 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         /* lam_N = -(dV_N/dx); the rho terms cancel because Req x_N = rhs_eqN */
         for (i = 0; i < NX; ++i)
             lamN[i] = -ws->p[N][i];
-        unicycle_lai_gemv_n(NX, NX, -1.0, ws->P[N], NX, xN, 1.0, lamN);
+        spmv_packed(ws->P[N], -1.0, xN, lamN);
         if (NE > 0)
             unicycle_lai_gemv_n(NX, NE, -1.0, ws->G[N], NX, sn, 1.0, lamN);
     }
 }
 
 /* (os, od, oe) = rhs - K (sp, sl, sn): residual of the (delta-shifted, unaugmented) Newton
- * system, for iterative refinement. */
+ * system, for iterative refinement. The output may be the right-hand side's own arrays
+ * (every entry of the right-hand side is read before the same entry is written). */
 static void newton_residual(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const double *sp,
                             const double *sl, const double *sn, const double *rhs_stat,
                             const double *rhs_dyn, const double *rhs_eqN, double *os, double *od,
@@ -675,12 +765,12 @@ static void newton_residual(unicycle_qp_workspace *ws, const unicycle_qp_in *in,
     int k, i;
     double *dv = ws->yrow;
     /* os = rhs_stat - (H + delta I) sp - D'Q D sp - [sl_k;0] + Phi' sl_{k+1} - Req' sn */
-    apply_D(in, sp, dv);
-    for (i = 0; i < NI; ++i)
-        dv[i] *= -ws->qdiag[i];
+    apply_D(ws, in, sp, dv);
+    for (i = 0; i < ws->nb; ++i)
+        dv[i] *= -row_q(ws, i);
     for (i = 0; i < NP; ++i)
         os[i] = rhs_stat[i] - (ws->delta + in->hess_shift) * sp[i];
-    add_Dt(in, dv, os);
+    add_Dt(ws, in, dv, os);
     for (k = 0; k < N; ++k) {
         double *o = os + k * NW;
         unicycle_lai_symv_l(NW, -1.0, in->H[k], NW, sp + k * NW, 1.0, o);
@@ -719,43 +809,63 @@ typedef struct {
     double eta, target;
 } qp_centring;
 
-static double qp_rc(double t, double z, const double *dt, const double *dz, const qp_centring *cc)
+/* rc of the lower (rc_lo) and the upper side (rc_up) of bounded row b; the predictor's
+ * steps dt, dz are read only for the corrector (before the first corrector they are unset) */
+static double rc_lo(const unicycle_qp_workspace *ws, int b, const qp_centring *cc)
 {
-    double rc = t * z;
-    if (cc->corrector) /* dt, dz are read only then: before the first corrector they are unset */
-        rc += cc->eta * *dt * *dz - cc->target;
+    double rc = ws->t_lo[b] * ws->z_lo[b];
+    if (cc->corrector)
+        rc += cc->eta * dt_lo(ws, b) * ws->dz_lo[b] - cc->target;
     return rc;
 }
 
-/* Newton direction for the barrier right-hand side rc (t z - target per side): build the
- * condensed right-hand side, solve with refinement, recover slack and multiplier steps. */
-static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int refine_steps,
-                             const qp_centring *cc)
+static double rc_up(const unicycle_qp_workspace *ws, int b, const qp_centring *cc)
 {
-    int i, b, it;
+    double rc = ws->t_up[b] * ws->z_up[b];
+    if (cc->corrector)
+        rc += cc->eta * dt_up(ws, b) * ws->dz_up[b] - cc->target;
+    return rc;
+}
+
+/* Newton right-hand side for the barrier right-hand side rc (t z - target per side) into
+ * (os, od, oe): -r_stat + D'y, -r_dyn, -r_eqN. */
+static void newton_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const qp_centring *cc, double *os,
+                       double *od, double *oe)
+{
+    int i;
     double *y = ws->yrow;
-    for (i = 0; i < NI; ++i) {
+    for (i = 0; i < ws->nb; ++i) {
         double s = 0.0;
         if (ws->has_lo[i])
-            s += (qp_rc(ws->t_lo[i], ws->z_lo[i], &ws->dt_lo[i], &ws->dz_lo[i], cc) + ws->z_lo[i] * ws->r_lo[i]) /
-                 ws->t_lo[i];
+            s += (rc_lo(ws, i, cc) + ws->z_lo[i] * r_lo(ws, i)) / ws->t_lo[i];
         if (ws->has_up[i])
-            s -= (qp_rc(ws->t_up[i], ws->z_up[i], &ws->dt_up[i], &ws->dz_up[i], cc) + ws->z_up[i] * ws->r_up[i]) /
-                 ws->t_up[i];
+            s -= (rc_up(ws, i, cc) + ws->z_up[i] * r_up(ws, i)) / ws->t_up[i];
         y[i] = -s;
     }
     for (i = 0; i < NP; ++i)
-        ws->rhs_stat[i] = -ws->r_stat[i];
-    add_Dt(in, y, ws->rhs_stat);
+        os[i] = -ws->r_stat[i];
+    add_Dt(ws, in, y, os);
     for (i = 0; i < (N + 1) * NX; ++i)
-        ws->rhs_dyn[i] = -ws->r_dyn[i];
+        od[i] = -ws->r_dyn[i];
     for (i = 0; i < NE; ++i)
-        ws->rhs_eqN[i] = -ws->r_eqN[i];
+        oe[i] = -ws->r_eqN[i];
+}
 
-    riccati_solve(ws, in, ws->rhs_stat, ws->rhs_dyn, ws->rhs_eqN, ws->d_prim, ws->d_lam, ws->d_nu);
+/* Newton direction for the barrier right-hand side rc (t z - target per side): form the
+ * condensed right-hand side in the direction arrays, solve in place, refine (the
+ * right-hand side formed again in the refinement arrays, its residual and the correction
+ * computed there in place), recover slack and multiplier steps. */
+static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int refine_steps,
+                             const qp_centring *cc)
+{
+    int i, it;
+    double *y = ws->yrow;
+    newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
+    riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->d_prim, ws->d_lam, ws->d_nu);
     for (it = 0; it < refine_steps; ++it) {
-        newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->rhs_stat, ws->rhs_dyn,
-                        ws->rhs_eqN, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
+        newton_rhs(ws, in, cc, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
+        newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->res_stat_lin, ws->res_dyn_lin,
+                        ws->res_eqN_lin, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
         /* the correction overwrites the residual it solves for (riccati_solve allows it) */
         riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin, ws->res_stat_lin,
                       ws->res_dyn_lin, ws->res_eqN_lin);
@@ -764,38 +874,37 @@ static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in
         unicycle_lai_axpy(NE, 1.0, ws->res_eqN_lin, ws->d_nu);
     }
 
-    /* dt_lo = D dw + r_lo, dt_up = r_up - D dw, dz = -(rc + z dt) / t */
-    apply_D(in, ws->d_prim, y);
-    QP_FOR_BOUNDED(ws, b, i) {
+    /* dv = D dw (dt_lo = dv + r_lo, dt_up = r_up - dv), dz = -(rc + z dt) / t */
+    apply_D(ws, in, ws->d_prim, y);
+    for (i = 0; i < ws->nb; ++i) {
         /* rc from the previous (predictor) direction, before it is overwritten */
-        if (ws->has_lo[i]) {
-            const double rc = qp_rc(ws->t_lo[i], ws->z_lo[i], &ws->dt_lo[i], &ws->dz_lo[i], cc);
-            ws->dt_lo[i] = y[i] + ws->r_lo[i];
-            ws->dz_lo[i] = -(rc + ws->z_lo[i] * ws->dt_lo[i]) / ws->t_lo[i];
-        }
-        if (ws->has_up[i]) {
-            const double rc = qp_rc(ws->t_up[i], ws->z_up[i], &ws->dt_up[i], &ws->dz_up[i], cc);
-            ws->dt_up[i] = ws->r_up[i] - y[i];
-            ws->dz_up[i] = -(rc + ws->z_up[i] * ws->dt_up[i]) / ws->t_up[i];
-        }
+        const double rcl = ws->has_lo[i] ? rc_lo(ws, i, cc) : 0.0;
+        const double rcu = ws->has_up[i] ? rc_up(ws, i, cc) : 0.0;
+        ws->dv[i] = y[i];
+        if (ws->has_lo[i])
+            ws->dz_lo[i] = -(rcl + ws->z_lo[i] * dt_lo(ws, i)) / ws->t_lo[i];
+        if (ws->has_up[i])
+            ws->dz_up[i] = -(rcu + ws->z_up[i] * dt_up(ws, i)) / ws->t_up[i];
     }
 }
 
 /* Largest alpha in (0, 1] keeping t + alpha dt >= 0 and z + alpha dz >= 0. */
 static double max_step(const unicycle_qp_workspace *ws)
 {
-    int i, b;
+    int i;
     double a = 1.0;
-    QP_FOR_BOUNDED(ws, b, i) {
+    for (i = 0; i < ws->nb; ++i) {
         if (ws->has_lo[i]) {
-            if (ws->dt_lo[i] < 0.0)
-                a = dmin(a, -ws->t_lo[i] / ws->dt_lo[i]);
+            const double dt = dt_lo(ws, i);
+            if (dt < 0.0)
+                a = dmin(a, -ws->t_lo[i] / dt);
             if (ws->dz_lo[i] < 0.0)
                 a = dmin(a, -ws->z_lo[i] / ws->dz_lo[i]);
         }
         if (ws->has_up[i]) {
-            if (ws->dt_up[i] < 0.0)
-                a = dmin(a, -ws->t_up[i] / ws->dt_up[i]);
+            const double dt = dt_up(ws, i);
+            if (dt < 0.0)
+                a = dmin(a, -ws->t_up[i] / dt);
             if (ws->dz_up[i] < 0.0)
                 a = dmin(a, -ws->z_up[i] / ws->dz_up[i]);
         }
@@ -816,7 +925,7 @@ static int primal_infeasible(const unicycle_qp_workspace *ws, const unicycle_qp_
     double bty = 0.0, aty, bscale = 1.0;
     if (!(r->ny > CERT_GROWTH * data_scale))
         return 0;
-    aty = unicycle_lai_norm_inf(NP, ws->aty) / r->ny;
+    aty = unicycle_lai_norm_inf(NP, ws->res_stat_lin) / r->ny; /* A'y of compute_residuals */
     bty -= unicycle_lai_dot(NX, ws->lam, in->x0);
     bscale = dmax(bscale, unicycle_lai_norm_inf(NX, in->x0));
     for (k = 0; k < N; ++k) {
@@ -827,7 +936,7 @@ static int primal_infeasible(const unicycle_qp_workspace *ws, const unicycle_qp_
         bty -= unicycle_lai_dot(NE, ws->nu, in->req);
         bscale = dmax(bscale, unicycle_lai_norm_inf(NE, in->req));
     }
-    for (i = 0; i < NI; ++i) {
+    for (i = 0; i < ws->nb; ++i) {
         if (ws->has_lo[i]) {
             bty += ws->lo[i] * ws->z_lo[i];
             bscale = dmax(bscale, fabs(ws->lo[i]));
@@ -880,7 +989,7 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
         }
     }
     eq = dmax(eq, unicycle_lai_norm_inf(NX, ws->prim) / nw);
-    for (i = 0; i < NI; ++i) {
+    for (i = 0; i < ws->nb; ++i) {
         const double dv = QP_V(ws)[i] / nw;
         if (ws->has_lo[i])
             cone = dmax(cone, -dv);
@@ -896,6 +1005,25 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
 
 /* ---------------------------------------------------------------- driver */
 
+/* The signed multiplier of inequality row i in the solution layout. */
+static double *row_multiplier(unicycle_qp_sol *sol, int i)
+{
+    if (i < TOFF) {
+        const int k = i / NSI, j = i - k * NSI;
+        return (NG == 0 || j < NW) ? &sol->mu_b[k][j] : &sol->mu_g[k][j - NW];
+    }
+    return (NR == 0 || i - TOFF < NX) ? &sol->mu_bN[i - TOFF] : &sol->mu_r[i - TOFF - NX];
+}
+
+static double row_mu(const unicycle_qp_sol *sol, int i)
+{
+    if (i < TOFF) {
+        const int k = i / NSI, j = i - k * NSI;
+        return (NG == 0 || j < NW) ? sol->mu_b[k][j] : sol->mu_g[k][j - NW];
+    }
+    return (NR == 0 || i - TOFF < NX) ? sol->mu_bN[i - TOFF] : sol->mu_r[i - TOFF - NX];
+}
+
 static void write_solution(const unicycle_qp_workspace *ws, unicycle_qp_sol *sol)
 {
     int k, i;
@@ -907,23 +1035,17 @@ static void write_solution(const unicycle_qp_workspace *ws, unicycle_qp_sol *sol
     for (k = 0; k < N; ++k) {
         for (i = 0; i < NU; ++i)
             sol->u[k][i] = ws->prim[k * NW + NX + i];
-        for (i = 0; i < NW; ++i) {
-            const int r = k * NSI + i;
-            sol->mu_b[k][i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
-        }
-        for (i = 0; i < NG; ++i) {
-            const int r = k * NSI + NW + i;
-            sol->mu_g[k][i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
-        }
+        for (i = 0; i < NW; ++i)
+            sol->mu_b[k][i] = 0.0;
+        for (i = 0; i < NG; ++i)
+            sol->mu_g[k][i] = 0.0;
     }
-    for (i = 0; i < NX; ++i) {
-        const int r = TOFF + i;
-        sol->mu_bN[i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
-    }
-    for (i = 0; i < NR; ++i) {
-        const int r = TOFF + NX + i;
-        sol->mu_r[i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
-    }
+    for (i = 0; i < NX; ++i)
+        sol->mu_bN[i] = 0.0;
+    for (i = 0; i < NR; ++i)
+        sol->mu_r[i] = 0.0;
+    for (i = 0; i < ws->nb; ++i)
+        *row_multiplier(sol, ws->bidx[i]) = (ws->has_up[i] ? ws->z_up[i] : 0.0) - (ws->has_lo[i] ? ws->z_lo[i] : 0.0);
     for (i = 0; i < NE; ++i)
         sol->nu[i] = ws->nu[i];
 }
@@ -975,18 +1097,11 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         for (i = 0; i < NE; ++i)
             ws->nu[i] = sol->nu[i];
     }
-    apply_D(in, ws->prim, QP_V(ws));
-    for (i = 0; i < NI; ++i) {
-        double mu_signed = 0.0;
+    apply_D(ws, in, ws->prim, QP_V(ws));
+    for (i = 0; i < ws->nb; ++i) {
+        const double mu_signed = warm ? row_mu(sol, ws->bidx[i]) : 0.0;
         ws->t_lo[i] = ws->t_up[i] = 1.0;
         ws->z_lo[i] = ws->z_up[i] = 0.0;
-        if (warm) {
-            const int k2 = i / NSI, j = i % NSI;
-            if (i >= TOFF)
-                mu_signed = (i - TOFF < NX) ? sol->mu_bN[i - TOFF] : sol->mu_r[i - TOFF - NX];
-            else
-                mu_signed = (j < NW) ? sol->mu_b[k2][j] : sol->mu_g[k2][j - NW];
-        }
         if (ws->has_lo[i]) {
             const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->lo[i])) : 1.0;
             ws->t_lo[i] = dmax(QP_V(ws)[i] - ws->lo[i], floor_t);
@@ -1032,7 +1147,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
     unicycle_qp_settings st;
     qp_res r, best_r;
     qp_centring pred, corr;
-    int iter, i, b, keep_best, status = UNICYCLE_QP_MAX_ITER;
+    int iter, i, bounds, keep_best, status = UNICYCLE_QP_MAX_ITER;
     int n_corr = 0, n_aug = 0;
     double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
     int best_iter = 0;
@@ -1082,7 +1197,13 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
     ws->delta = 0.0;
     ws->rho_aug = 0.0;
     ws->pivot_floors = 0;
-    if (!setup_bounds(ws, in)) {
+    bounds = setup_bounds(ws, in);
+    if (bounds == 2) {
+        /* more bounded rows than the workspace was generated for */
+        zero_solution(sol);
+        return UNICYCLE_QP_INVALID_INPUT;
+    }
+    if (bounds == 1) {
         zero_solution(sol);
         if (info)
             info->status = UNICYCLE_QP_PRIMAL_INFEASIBLE;
@@ -1094,7 +1215,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
 
     /* data scale for the divergence tests of the certificates */
     data_scale = 1.0;
-    for (i = 0; i < NI; ++i) {
+    for (i = 0; i < ws->nb; ++i) {
         if (ws->has_lo[i])
             data_scale = dmax(data_scale, fabs(ws->lo[i]));
         if (ws->has_up[i])
@@ -1167,22 +1288,15 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             break;
         }
 
-        /* barrier weights Q = z/t per row */
-        QP_FOR_BOUNDED(ws, b, i) {
-            double q = 0.0;
-            if (ws->has_lo[i])
-                q += ws->z_lo[i] / ws->t_lo[i];
-            if (ws->has_up[i])
-                q += ws->z_up[i] / ws->t_up[i];
-            ws->qdiag[i] = q;
-        }
 #ifdef UNICYCLE_QP_TRACE
         {
-            int kk;
-            /* barrier weights, for an inertia analysis of H + D'QD offline */
+            int kk, b2 = 0;
+            /* barrier weights of every row, for an inertia analysis of H + D'QD offline */
             QP_TRACE("QD %d", iter);
-            for (kk = 0; kk < NI; ++kk)
-                QP_TRACE(" %.17g", ws->qdiag[kk]);
+            for (kk = 0; kk < NI; ++kk) {
+                const double qk = (b2 < ws->nb && ws->bidx[b2] == kk) ? row_q(ws, b2++) : 0.0;
+                QP_TRACE(" %.17g", qk);
+            }
             QP_TRACE("\n");
         }
 #endif
@@ -1248,11 +1362,11 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         alpha_aff = alpha;
         (void)alpha_aff;
         mu_aff = 0.0;
-        QP_FOR_BOUNDED(ws, b, i) {
+        for (i = 0; i < ws->nb; ++i) {
             if (ws->has_lo[i])
-                mu_aff += (ws->t_lo[i] + alpha * ws->dt_lo[i]) * (ws->z_lo[i] + alpha * ws->dz_lo[i]);
+                mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha * ws->dz_lo[i]);
             if (ws->has_up[i])
-                mu_aff += (ws->t_up[i] + alpha * ws->dt_up[i]) * (ws->z_up[i] + alpha * ws->dz_up[i]);
+                mu_aff += (ws->t_up[i] + alpha * dt_up(ws, i)) * (ws->z_up[i] + alpha * ws->dz_up[i]);
         }
         mu_aff /= r.nsides;
         sigma = r.mu > 0.0 ? mu_aff / r.mu : 0.0;
@@ -1290,13 +1404,13 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         unicycle_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
         unicycle_lai_axpy((N + 1) * NX, alpha, ws->d_lam, ws->lam);
         unicycle_lai_axpy(NE, alpha, ws->d_nu, ws->nu);
-        QP_FOR_BOUNDED(ws, b, i) {
+        for (i = 0; i < ws->nb; ++i) {
             if (ws->has_lo[i]) {
-                ws->t_lo[i] += alpha * ws->dt_lo[i];
+                ws->t_lo[i] += alpha * dt_lo(ws, i);
                 ws->z_lo[i] += alpha * ws->dz_lo[i];
             }
             if (ws->has_up[i]) {
-                ws->t_up[i] += alpha * ws->dt_up[i];
+                ws->t_up[i] += alpha * dt_up(ws, i);
                 ws->z_up[i] += alpha * ws->dz_up[i];
             }
         }
