@@ -664,12 +664,13 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
     return 0;
 }
 
-/* Solve the factored Newton system for one right-hand side (rhs_stat, rhs_dyn, rhs_eqN)
- * into (sp, sl, sn), which may be the right-hand side's own arrays (each rhs entry is read
- * before the entry of the same array is written): backward sweep of the value-function vectors, nu at stage 0, forward
- * sweep of the primal and the costates lam_k = -dV_k/dx. */
-static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const double *rhs_stat,
-                          const double *rhs_dyn, const double *rhs_eqN, double *sp, double *sl,
+/* Solve the factored Newton system in place: (sp, sl, sn) holds the right-hand side
+ * (rhs_stat, rhs_dyn, rhs_eqN) on entry and the solution on exit. Backward sweep of the
+ * value-function vectors, nu at stage 0, forward sweep of the primal and the costates
+ * lam_k = -dV_k/dx. The sweep vectors live in the arrays they become: once stage k's
+ * rhs_stat has been read, its x part takes rhs_dyn_k (x_k is formed there), its u part
+ * the vector lk_k (u_k is formed there), and sl_k the vector p_k (lam_k is formed there). */
+static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, double *sp, double *sl,
                           double *sn)
 {
     int k, i;
@@ -678,39 +679,48 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
     double *e = ws->e;
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
-    for (i = 0; i < NX; ++i)
-        ws->p[N][i] = -rhs_stat[N * NW + i];
-    if (NE > 0) {
-        if (ws->rho_aug > 0.0)
-            dopus_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, rhs_eqN, 1.0, ws->p[N]);
-        for (i = 0; i < NE; ++i)
-            e[i] = -rhs_eqN[i];
+    {
+        double *xN = sp + N * NW, *pN = sl + N * NX;
+        for (i = 0; i < NX; ++i)
+            tv[i] = -xN[i];
+        if (NE > 0) {
+            if (ws->rho_aug > 0.0)
+                dopus_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, sn, 1.0, tv);
+            for (i = 0; i < NE; ++i)
+                e[i] = -sn[i];
+        }
+        for (i = 0; i < NX; ++i) {
+            xN[i] = pN[i];
+            pN[i] = tv[i];
+        }
     }
     for (k = N - 1; k >= 0; --k) {
         const double *Phi = in->Phi[k];
-        const double *c = rhs_dyn + (k + 1) * NX;
+        const double *c = sp + (k + 1) * NW;   /* rhs_dyn_{k+1} */
+        const double *pn = sl + (k + 1) * NX;  /* p_{k+1} */
+        double *xk = sp + k * NW, *lk = xk + NX, *pk = sl + k * NX;
         /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
         for (i = 0; i < NX; ++i)
-            tv[i] = ws->p[k + 1][i];
+            tv[i] = pn[i];
         spmv_packed(ws->P[k + 1], 1.0, c, tv);
         for (i = 0; i < NW; ++i)
-            m[i] = -rhs_stat[k * NW + i];
+            m[i] = -xk[i];
         dopus_lai_gemv_t(NX, NW, 1.0, Phi, NX, tv, 1.0, m);
         if (NE > 0)
             dopus_lai_gemv_t(NX, NE, 1.0, ws->G[k + 1], NX, c, 1.0, e);
         /* lk = Lu^{-1} m_u; p_k = m_x - LK' lk; e -= LKn' lk */
         for (i = 0; i < NU; ++i)
-            ws->lk[k][i] = m[NX + i];
-        dopus_lai_trsv_ln(NU, ws->Lu[k], NU1, ws->lk[k]);
-        for (i = 0; i < NX; ++i)
-            ws->p[k][i] = m[i];
-        dopus_lai_gemv_t(NU, NX, -1.0, ws->LK[k], NU1, ws->lk[k], 1.0, ws->p[k]);
+            lk[i] = m[NX + i];
+        dopus_lai_trsv_ln(NU, ws->Lu[k], NU1, lk);
+        for (i = 0; i < NX; ++i) {
+            xk[i] = pk[i];
+            pk[i] = m[i];
+        }
+        dopus_lai_gemv_t(NU, NX, -1.0, ws->LK[k], NU1, lk, 1.0, pk);
         if (NE > 0)
-            dopus_lai_gemv_t(NU, NE, -1.0, ws->LKn[k], NU1, ws->lk[k], 1.0, e);
+            dopus_lai_gemv_t(NU, NE, -1.0, ws->LKn[k], NU1, lk, 1.0, e);
     }
-    /* stage 0: dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
-    for (i = 0; i < NX; ++i)
-        sp[i] = rhs_dyn[i];
+    /* stage 0: x_0 = rhs_dyn_0 (in place); dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
     if (NE > 0) {
         for (i = 0; i < NE; ++i)
             sn[i] = e[i];
@@ -723,8 +733,6 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
         double *u = w + NX;
         double *lamk = sl + k * NX;
         /* u_k = -Lu'^{-1} (LK x_k + lk + LKn nu) */
-        for (i = 0; i < NU; ++i)
-            u[i] = ws->lk[k][i];
         dopus_lai_gemv_n(NU, NX, 1.0, ws->LK[k], NU1, w, 1.0, u);
         if (NE > 0)
             dopus_lai_gemv_n(NU, NE, 1.0, ws->LKn[k], NU1, sn, 1.0, u);
@@ -733,13 +741,11 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
             u[i] = -u[i];
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
-            lamk[i] = -ws->p[k][i];
+            lamk[i] = -lamk[i];
         spmv_packed(ws->P[k], -1.0, w, lamk);
         if (NE > 0)
             dopus_lai_gemv_n(NX, NE, -1.0, ws->G[k], NX, sn, 1.0, lamk);
         /* x_{k+1} = Phi_k w_k + c_k */
-        for (i = 0; i < NX; ++i)
-            sp[(k + 1) * NW + i] = rhs_dyn[(k + 1) * NX + i];
         dopus_lai_gemv_n(NX, NW, 1.0, in->Phi[k], NX, w, 1.0, sp + (k + 1) * NW);
     }
     {
@@ -747,7 +753,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
         double *lamN = sl + N * NX;
         /* lam_N = -(dV_N/dx); the rho terms cancel because Req x_N = rhs_eqN */
         for (i = 0; i < NX; ++i)
-            lamN[i] = -ws->p[N][i];
+            lamN[i] = -lamN[i];
         spmv_packed(ws->P[N], -1.0, xN, lamN);
         if (NE > 0)
             dopus_lai_gemv_n(NX, NE, -1.0, ws->G[N], NX, sn, 1.0, lamN);
@@ -861,14 +867,13 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
     int i, it;
     double *y = ws->yrow;
     newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
-    riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->d_prim, ws->d_lam, ws->d_nu);
+    riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
     for (it = 0; it < refine_steps; ++it) {
         newton_rhs(ws, in, cc, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
         newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->res_stat_lin, ws->res_dyn_lin,
                         ws->res_eqN_lin, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
-        /* the correction overwrites the residual it solves for (riccati_solve allows it) */
-        riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin, ws->res_stat_lin,
-                      ws->res_dyn_lin, ws->res_eqN_lin);
+        /* the correction overwrites the residual it solves for */
+        riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
         dopus_lai_axpy(NP, 1.0, ws->res_stat_lin, ws->d_prim);
         dopus_lai_axpy((N + 1) * NX, 1.0, ws->res_dyn_lin, ws->d_lam);
         dopus_lai_axpy(NE, 1.0, ws->res_eqN_lin, ws->d_nu);

@@ -255,9 +255,7 @@ typedef struct {
     double LK[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux */
     double LKn[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     double S[DOPUS_QP_NE1 * DOPUS_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
-    double p[DOPUS_N + 1][DOPUS_NX];
     double e[DOPUS_QP_NE1];
-    double lk[DOPUS_N][DOPUS_QP_NU1];
     double yrow[DOPUS_QP_NB];                          /* per-row scratch */
     double work[DOPUS_QP_NWORK];
     double delta;          /* current inertia-correction shift */

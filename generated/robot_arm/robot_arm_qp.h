@@ -255,9 +255,7 @@ typedef struct {
     double LK[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_NX];      /* Lu^{-1} M_ux */
     double LKn[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     double S[ROBOT_ARM_QP_NE1 * ROBOT_ARM_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
-    double p[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
     double e[ROBOT_ARM_QP_NE1];
-    double lk[ROBOT_ARM_N][ROBOT_ARM_QP_NU1];
     double yrow[ROBOT_ARM_QP_NB];                          /* per-row scratch */
     double work[ROBOT_ARM_QP_NWORK];
     double delta;          /* current inertia-correction shift */

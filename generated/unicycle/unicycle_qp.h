@@ -255,9 +255,7 @@ typedef struct {
     double LK[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* Lu^{-1} M_ux */
     double LKn[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     double S[UNICYCLE_QP_NE1 * UNICYCLE_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
-    double p[UNICYCLE_N + 1][UNICYCLE_NX];
     double e[UNICYCLE_QP_NE1];
-    double lk[UNICYCLE_N][UNICYCLE_QP_NU1];
     double yrow[UNICYCLE_QP_NB];                          /* per-row scratch */
     double work[UNICYCLE_QP_NWORK];
     double delta;          /* current inertia-correction shift */
