@@ -218,8 +218,6 @@ typedef struct {
     unsigned char has_up[DOPUS_QP_NB];
     dopus_qp_row bstart[DOPUS_N + 2];
     int nb;
-    double lo[DOPUS_QP_NB];
-    double up[DOPUS_QP_NB];
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
     double prim[DOPUS_QP_NPRIM];
     double lam[(DOPUS_N + 1) * DOPUS_NX];
@@ -232,8 +230,11 @@ typedef struct {
     double r_stat[DOPUS_QP_NPRIM];
     double r_dyn[(DOPUS_N + 1) * DOPUS_NX];
     double r_eqN[DOPUS_QP_NE1];
-    double v[DOPUS_QP_NB];      /* row values D w (the slack residuals and steps and the
-                                   barrier weights are formed from v, dv, t, z, lo, up) */
+    /* v - lo and up - v of the row values v = D w: the slack residuals and steps and the
+     * barrier weights are formed from them and dv, t, z (the bounds are read from the QP
+     * data where needed); the refinement of a direction also works in r_stat, r_dyn, r_eqN */
+    double vl[DOPUS_QP_NB];
+    double uv[DOPUS_QP_NB];
     /* Newton directions (the Newton right-hand side is formed in the direction arrays and
      * solved in place) */
     double d_prim[DOPUS_QP_NPRIM];
@@ -242,11 +243,6 @@ typedef struct {
     double dv[DOPUS_QP_NB];     /* D d_prim */
     double dz_lo[DOPUS_QP_NB];
     double dz_up[DOPUS_QP_NB];
-    /* refinement: the right-hand side formed again, its residual and the correction, in
-     * place; between residuals and directions also the constraint part A'y of r_stat */
-    double res_stat_lin[DOPUS_QP_NPRIM];
-    double res_dyn_lin[(DOPUS_N + 1) * DOPUS_NX];
-    double res_eqN_lin[DOPUS_QP_NE1];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
     double M[DOPUS_QP_NW * DOPUS_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
     double P[DOPUS_N + 1][DOPUS_QP_NXP];              /* value function Hessians, packed lower */
@@ -256,7 +252,6 @@ typedef struct {
     double LKn[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     double S[DOPUS_QP_NE1 * DOPUS_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
     double e[DOPUS_QP_NE1];
-    double yrow[DOPUS_QP_NB];                          /* per-row scratch */
     double work[DOPUS_QP_NWORK];
     double delta;          /* current inertia-correction shift */
     double rho_aug;        /* current terminal augmented-Lagrangian weight */

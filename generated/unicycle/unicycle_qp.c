@@ -42,8 +42,10 @@
 #define NE1 UNICYCLE_QP_NE1
 #define NU1 UNICYCLE_QP_NU1
 #define TOFF (N * NSI) /* first terminal inequality row */
-/* The row values v = D w of the current iterate (compute_residuals, initial_point). */
-#define QP_V(ws) ((ws)->v)
+/* The bounded rows of stage k (k = N: the terminal rows): b runs over them, j is the row
+ * within the stage (a component of w_k or a row of C_k; of x_N or of R). */
+#define FOR_STAGE_ROWS(ws, k, b, j)                                                        \
+    for ((b) = (ws)->bstart[(k)]; (b) < (ws)->bstart[(k) + 1] && ((j) = (ws)->bidx[(b)] - (k) * NSI, 1); ++(b))
 
 /* Fraction-to-boundary factor and limits of the inertia correction. */
 #define STEP_TAU 0.995
@@ -199,8 +201,6 @@ static int setup_bounds(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             ws->bidx[nb] = (unicycle_qp_row)i;
             ws->has_lo[nb] = (unsigned char)hl;
             ws->has_up[nb] = (unsigned char)hu;
-            ws->lo[nb] = lo;
-            ws->up[nb] = up;
             if (hl && hu && lo > up)
                 ok = 1;
             ++nb;
@@ -213,62 +213,40 @@ static int setup_bounds(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 
 /* ---------------------------------------------------------------- row maps D, D' */
 
-/* v_b = D_b prim for the bounded rows b */
-static void apply_D(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, const double *prim, double *v)
+/* D_j w for row j of stage k (k = N: the terminal rows), w the stage's primal vector. */
+static double row_dot(const unicycle_qp_in *in, int k, int j, const double *w)
 {
-    int k, b;
-    for (k = 0; k <= N; ++k) {
-        const int first = k * NSI, b1 = ws->bstart[k + 1];
-        const double *w = prim + k * NW;
-        for (b = ws->bstart[k]; b < b1; ++b) {
-            const int j = ws->bidx[b] - first;
-            if (k < N) {
-                if (NG == 0 || j < NW) {
-                    v[b] = w[j];
-                } else {
-                    const double *C = in->C[k];
-                    double s = 0.0;
-                    int c;
-                    for (c = 0; c < NW; ++c)
-                        s += C[(j - NW) + c * NG] * w[c];
-                    v[b] = s;
-                }
-            } else if (NR == 0 || j < NX) {
-                v[b] = w[j];
-            } else {
-                double s = 0.0;
-                int c;
-                for (c = 0; c < NX; ++c)
-                    s += in->R[(j - NX) + c * NR] * w[c];
-                v[b] = s;
-            }
-        }
+    double s = 0.0;
+    int c;
+    if (k < N) {
+        if (NG == 0 || j < NW)
+            return w[j];
+        for (c = 0; c < NW; ++c)
+            s += in->C[k][(j - NW) + c * NG] * w[c];
+    } else {
+        if (NR == 0 || j < NX)
+            return w[j];
+        for (c = 0; c < NX; ++c)
+            s += in->R[(j - NX) + c * NR] * w[c];
     }
+    return s;
 }
 
-/* out += D' y over the bounded rows (y indexed by b) */
-static void add_Dt(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, const double *y, double *out)
+/* o += a D_j' for row j of stage k, o the stage's part of a primal-sized vector. */
+static void row_axpy(const unicycle_qp_in *in, int k, int j, double a, double *o)
 {
-    int k, b;
-    for (k = 0; k <= N; ++k) {
-        const int first = k * NSI, b1 = ws->bstart[k + 1];
-        double *o = out + k * NW;
-        for (b = ws->bstart[k]; b < b1; ++b) {
-            const int j = ws->bidx[b] - first;
-            int c;
-            if (k < N) {
-                if (NG == 0 || j < NW)
-                    o[j] += y[b];
-                else
-                    for (c = 0; c < NW; ++c)
-                        o[c] += in->C[k][(j - NW) + c * NG] * y[b];
-            } else if (NR == 0 || j < NX) {
-                o[j] += y[b];
-            } else {
-                for (c = 0; c < NX; ++c)
-                    o[c] += in->R[(j - NX) + c * NR] * y[b];
-            }
-        }
+    int c;
+    if (k < N) {
+        if (NG == 0 || j < NW)
+            o[j] += a;
+        else
+            for (c = 0; c < NW; ++c)
+                o[c] += in->C[k][(j - NW) + c * NG] * a;
+    } else if (NR == 0 || j < NX) {
+        o[j] += a;
+    } else {
+        for (c = 0; c < NX; ++c)
+            o[c] += in->R[(j - NX) + c * NR] * a;
     }
 }
 
@@ -289,11 +267,11 @@ static void spmv_packed(const double *restrict Pp, double alpha, const double *r
 }
 
 /* Per bounded row b: the residuals of the slack equations, r_lo = v - lo - t_lo and
- * r_up = up - v - t_up, the slack steps of the current direction, dt_lo = dv + r_lo and
+ * r_up = up - v - t_up (vl = v - lo and uv = up - v are kept), the slack steps of the current direction, dt_lo = dv + r_lo and
  * dt_up = r_up - dv (dv = D dw), and the barrier weight q = z_lo/t_lo + z_up/t_up, formed
  * where they are used rather than stored. */
-static double r_lo(const unicycle_qp_workspace *ws, int b) { return ws->v[b] - ws->lo[b] - ws->t_lo[b]; }
-static double r_up(const unicycle_qp_workspace *ws, int b) { return ws->up[b] - ws->v[b] - ws->t_up[b]; }
+static double r_lo(const unicycle_qp_workspace *ws, int b) { return ws->vl[b] - ws->t_lo[b]; }
+static double r_up(const unicycle_qp_workspace *ws, int b) { return ws->uv[b] - ws->t_up[b]; }
 static double dt_lo(const unicycle_qp_workspace *ws, int b) { return ws->dv[b] + r_lo(ws, b); }
 static double dt_up(const unicycle_qp_workspace *ws, int b) { return r_up(ws, b) - ws->dv[b]; }
 
@@ -322,10 +300,12 @@ static void data_scales(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     if (NE > 0)
         sb = dmax(sb, unicycle_lai_norm_inf(NE, in->req));
     for (i = 0; i < ws->nb; ++i) {
+        double lo, up;
+        row_bounds(in, ws->bidx[i], &lo, &up);
         if (ws->has_lo[i])
-            sl = dmax(sl, fabs(ws->lo[i]));
+            sl = dmax(sl, fabs(lo));
         if (ws->has_up[i])
-            sl = dmax(sl, fabs(ws->up[i]));
+            sl = dmax(sl, fabs(up));
     }
     ws->scale_g = sg;
     ws->scale_b = sb;
@@ -339,59 +319,79 @@ typedef struct {
     double stat, eq, ineq, comp;            /* unscaled inf-norms */
     double stat_s, eq_s, ineq_s, comp_s;    /* scaled */
     double ny;       /* inf-norm of the dual iterate */
+    double aty;      /* inf-norm of the constraint part A'y of the stationarity residual */
     double nz;       /* inf-norm of the inequality multipliers */
     double obj;
 } qp_res;
 
 static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *in, qp_res *r)
 {
-    int k, i;
+    int k, i, b, j;
     double s_stat = 1.0, s_eq = 1.0, s_ineq = 1.0, nz = 0.0, obj = 0.0, comp = 0.0, ineq = 0.0;
-    double sum_c = 0.0;
+    double sum_c = 0.0, naty = 0.0;
     int m = 0;
-    double *aty = ws->res_stat_lin; /* A'y, kept for the infeasibility test */
 
-    /* signed multipliers per row */
-    for (i = 0; i < ws->nb; ++i) {
-        const double zl = ws->has_lo[i] ? ws->z_lo[i] : 0.0;
-        const double zu = ws->has_up[i] ? ws->z_up[i] : 0.0;
-        ws->yrow[i] = zu - zl;
-        nz = dmax(nz, dmax(zl, zu));
-    }
-    /* objective part Hw + g and constraint part A'y of the stationarity residual */
-    for (k = 0; k < N; ++k) {
+    /* stage by stage: the objective part Hw + g and the constraint part A'y (a) of the
+     * stationarity residual, and the bounded rows of the stage: row values, slack
+     * residuals, violation, complementarity */
+    s_ineq = dmax(s_ineq, ws->scale_bounds);
+    for (k = 0; k <= N; ++k) {
+        const int nk = k < N ? NW : NX;
         const double *w = ws->prim + k * NW;
         double *h = ws->r_stat + k * NW;
-        double *a = aty + k * NW;
-        unicycle_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
-        unicycle_lai_axpy(NW, in->hess_shift, w, h);
-        s_stat = dmax(s_stat, unicycle_lai_norm_inf(NW, h));
-        obj += 0.5 * unicycle_lai_dot(NW, w, h) + unicycle_lai_dot(NW, in->g[k], w);
-        unicycle_lai_axpy(NW, 1.0, in->g[k], h);
-        for (i = 0; i < NW; ++i)
-            a[i] = i < NX ? ws->lam[k * NX + i] : 0.0;
-        unicycle_lai_gemv_t(NX, NW, -1.0, in->Phi[k], NX, ws->lam + (k + 1) * NX, 1.0, a);
+        double a[NW];
+        if (k < N) {
+            unicycle_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
+            unicycle_lai_axpy(NW, in->hess_shift, w, h);
+            s_stat = dmax(s_stat, unicycle_lai_norm_inf(NW, h));
+            obj += 0.5 * unicycle_lai_dot(NW, w, h) + unicycle_lai_dot(NW, in->g[k], w);
+            unicycle_lai_axpy(NW, 1.0, in->g[k], h);
+            for (i = 0; i < NW; ++i)
+                a[i] = i < NX ? ws->lam[k * NX + i] : 0.0;
+            unicycle_lai_gemv_t(NX, NW, -1.0, in->Phi[k], NX, ws->lam + (k + 1) * NX, 1.0, a);
+        } else {
+            unicycle_lai_symv_l(NX, 1.0, in->HN, NX, w, 0.0, h);
+            unicycle_lai_axpy(NX, in->hess_shift, w, h);
+            s_stat = dmax(s_stat, unicycle_lai_norm_inf(NX, h));
+            obj += 0.5 * unicycle_lai_dot(NX, w, h) + unicycle_lai_dot(NX, in->gN, w);
+            s_stat = dmax(s_stat, ws->scale_g);
+            unicycle_lai_axpy(NX, 1.0, in->gN, h);
+            for (i = 0; i < NX; ++i)
+                a[i] = ws->lam[N * NX + i];
+            if (NE > 0)
+                unicycle_lai_gemv_t(NE, NX, 1.0, in->Req, NE1, ws->nu, 1.0, a);
+        }
+        FOR_STAGE_ROWS(ws, k, b, j) {
+            /* signed multiplier y = z_up - z_lo of the row into A'y */
+            const double zl = ws->has_lo[b] ? ws->z_lo[b] : 0.0;
+            const double zu = ws->has_up[b] ? ws->z_up[b] : 0.0;
+            const double v = row_dot(in, k, j, w);
+            double lo, up;
+            nz = dmax(nz, dmax(zl, zu));
+            row_axpy(in, k, j, zu - zl, a);
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            /* vl, uv (and the directions) are only defined on the bounded sides */
+            if (ws->has_lo[b]) {
+                ws->vl[b] = v - lo;
+                ineq = dmax(ineq, lo - v);
+                comp = dmax(comp, ws->t_lo[b] * ws->z_lo[b]);
+                sum_c += ws->t_lo[b] * ws->z_lo[b];
+                ++m;
+            }
+            if (ws->has_up[b]) {
+                ws->uv[b] = up - v;
+                ineq = dmax(ineq, v - up);
+                comp = dmax(comp, ws->t_up[b] * ws->z_up[b]);
+                sum_c += ws->t_up[b] * ws->z_up[b];
+                ++m;
+            }
+            s_ineq = dmax(s_ineq, fabs(v));
+        }
+        naty = dmax(naty, unicycle_lai_norm_inf(nk, a));
+        for (i = 0; i < nk; ++i)
+            h[i] += a[i];
     }
-    {
-        const double *xN = ws->prim + N * NW;
-        double *h = ws->r_stat + N * NW;
-        double *a = aty + N * NW;
-        unicycle_lai_symv_l(NX, 1.0, in->HN, NX, xN, 0.0, h);
-        unicycle_lai_axpy(NX, in->hess_shift, xN, h);
-        s_stat = dmax(s_stat, unicycle_lai_norm_inf(NX, h));
-        obj += 0.5 * unicycle_lai_dot(NX, xN, h) + unicycle_lai_dot(NX, in->gN, xN);
-        s_stat = dmax(s_stat, ws->scale_g);
-        unicycle_lai_axpy(NX, 1.0, in->gN, h);
-        for (i = 0; i < NX; ++i)
-            a[i] = ws->lam[N * NX + i];
-        if (NE > 0)
-            unicycle_lai_gemv_t(NE, NX, 1.0, in->Req, NE1, ws->nu, 1.0, a);
-    }
-    add_Dt(ws, in, ws->yrow, aty);
-    s_stat = dmax(s_stat, unicycle_lai_norm_inf(NP, aty));
-    for (i = 0; i < NP; ++i)
-        ws->r_stat[i] += aty[i];
-    apply_D(ws, in, ws->prim, QP_V(ws));
+    s_stat = dmax(s_stat, naty);
 
     /* equalities */
     for (i = 0; i < NX; ++i)
@@ -413,26 +413,6 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
             ws->r_eqN[i] -= in->req[i];
     }
 
-    /* inequality sides */
-    s_ineq = dmax(s_ineq, ws->scale_bounds);
-    for (i = 0; i < ws->nb; ++i) {
-        const double v = QP_V(ws)[i];
-        /* r_lo, r_up (and the directions) are only defined on the bounded sides */
-        if (ws->has_lo[i]) {
-            ineq = dmax(ineq, ws->lo[i] - v);
-            comp = dmax(comp, ws->t_lo[i] * ws->z_lo[i]);
-            sum_c += ws->t_lo[i] * ws->z_lo[i];
-            ++m;
-        }
-        if (ws->has_up[i]) {
-            ineq = dmax(ineq, v - ws->up[i]);
-            comp = dmax(comp, ws->t_up[i] * ws->z_up[i]);
-            sum_c += ws->t_up[i] * ws->z_up[i];
-            ++m;
-        }
-        s_ineq = dmax(s_ineq, fabs(v));
-    }
-
     r->nsides = m;
     r->mu = m > 0 ? sum_c / m : 0.0;
     r->stat = unicycle_lai_norm_inf(NP, ws->r_stat);
@@ -444,6 +424,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     r->ineq_s = r->ineq / s_ineq;
     r->comp_s = r->comp / dmax(1.0, nz);
     r->nz = nz;
+    r->aty = naty;
     r->ny = dmax(nz, dmax(unicycle_lai_norm_inf((N + 1) * NX, ws->lam), NE > 0 ? unicycle_lai_norm_inf(NE, ws->nu) : 0.0));
     r->obj = obj;
     ws->scale_stat = s_stat;
@@ -768,15 +749,13 @@ static void newton_residual(unicycle_qp_workspace *ws, const unicycle_qp_in *in,
                             const double *rhs_dyn, const double *rhs_eqN, double *os, double *od,
                             double *oe)
 {
-    int k, i;
-    double *dv = ws->yrow;
+    int k, i, b, j;
     /* os = rhs_stat - (H + delta I) sp - D'Q D sp - [sl_k;0] + Phi' sl_{k+1} - Req' sn */
-    apply_D(ws, in, sp, dv);
-    for (i = 0; i < ws->nb; ++i)
-        dv[i] *= -row_q(ws, i);
     for (i = 0; i < NP; ++i)
         os[i] = rhs_stat[i] - (ws->delta + in->hess_shift) * sp[i];
-    add_Dt(ws, in, dv, os);
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+            row_axpy(in, k, j, row_dot(in, k, j, sp + k * NW) * -row_q(ws, b), os + k * NW);
     for (k = 0; k < N; ++k) {
         double *o = os + k * NW;
         unicycle_lai_symv_l(NW, -1.0, in->H[k], NW, sp + k * NW, 1.0, o);
@@ -834,23 +813,22 @@ static double rc_up(const unicycle_qp_workspace *ws, int b, const qp_centring *c
 }
 
 /* Newton right-hand side for the barrier right-hand side rc (t z - target per side) into
- * (os, od, oe): -r_stat + D'y, -r_dyn, -r_eqN. */
+ * (os, od, oe): -r_stat + D'y, -r_dyn, -r_eqN (os may be r_stat itself, and so on). */
 static void newton_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const qp_centring *cc, double *os,
                        double *od, double *oe)
 {
-    int i;
-    double *y = ws->yrow;
-    for (i = 0; i < ws->nb; ++i) {
-        double s = 0.0;
-        if (ws->has_lo[i])
-            s += (rc_lo(ws, i, cc) + ws->z_lo[i] * r_lo(ws, i)) / ws->t_lo[i];
-        if (ws->has_up[i])
-            s -= (rc_up(ws, i, cc) + ws->z_up[i] * r_up(ws, i)) / ws->t_up[i];
-        y[i] = -s;
-    }
+    int i, k, b, j;
     for (i = 0; i < NP; ++i)
         os[i] = -ws->r_stat[i];
-    add_Dt(ws, in, y, os);
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j) {
+            double s = 0.0;
+            if (ws->has_lo[b])
+                s += (rc_lo(ws, b, cc) + ws->z_lo[b] * r_lo(ws, b)) / ws->t_lo[b];
+            if (ws->has_up[b])
+                s -= (rc_up(ws, b, cc) + ws->z_up[b] * r_up(ws, b)) / ws->t_up[b];
+            row_axpy(in, k, j, -s, os + k * NW);
+        }
     for (i = 0; i < (N + 1) * NX; ++i)
         od[i] = -ws->r_dyn[i];
     for (i = 0; i < NE; ++i)
@@ -858,39 +836,44 @@ static void newton_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, cons
 }
 
 /* Newton direction for the barrier right-hand side rc (t z - target per side): form the
- * condensed right-hand side in the direction arrays, solve in place, refine (the
- * right-hand side formed again in the refinement arrays, its residual and the correction
- * computed there in place), recover slack and multiplier steps. */
+ * condensed right-hand side in the direction arrays, solve in place, refine, recover slack
+ * and multiplier steps. A refinement step forms the right-hand side again in the residual
+ * arrays r_stat, r_dyn, r_eqN of the iterate (each direction has read them by then: they
+ * are formed anew at the next iterate), computes the residual of the Newton system and
+ * the correction there in place; a further step first forms the iterate's residuals again. */
 static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int refine_steps,
                              const qp_centring *cc)
 {
-    int i, it;
-    double *y = ws->yrow;
+    int it, k, b, j;
     newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
     riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
     for (it = 0; it < refine_steps; ++it) {
-        newton_rhs(ws, in, cc, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
-        newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->res_stat_lin, ws->res_dyn_lin,
-                        ws->res_eqN_lin, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
+        if (it > 0) {
+            qp_res again; /* the same values as at the start of the iteration */
+            compute_residuals(ws, in, &again);
+        }
+        newton_rhs(ws, in, cc, ws->r_stat, ws->r_dyn, ws->r_eqN);
+        newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->r_stat, ws->r_dyn, ws->r_eqN,
+                        ws->r_stat, ws->r_dyn, ws->r_eqN);
         /* the correction overwrites the residual it solves for */
-        riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
-        unicycle_lai_axpy(NP, 1.0, ws->res_stat_lin, ws->d_prim);
-        unicycle_lai_axpy((N + 1) * NX, 1.0, ws->res_dyn_lin, ws->d_lam);
-        unicycle_lai_axpy(NE, 1.0, ws->res_eqN_lin, ws->d_nu);
+        riccati_solve(ws, in, ws->r_stat, ws->r_dyn, ws->r_eqN);
+        unicycle_lai_axpy(NP, 1.0, ws->r_stat, ws->d_prim);
+        unicycle_lai_axpy((N + 1) * NX, 1.0, ws->r_dyn, ws->d_lam);
+        unicycle_lai_axpy(NE, 1.0, ws->r_eqN, ws->d_nu);
     }
 
     /* dv = D dw (dt_lo = dv + r_lo, dt_up = r_up - dv), dz = -(rc + z dt) / t */
-    apply_D(ws, in, ws->d_prim, y);
-    for (i = 0; i < ws->nb; ++i) {
-        /* rc from the previous (predictor) direction, before it is overwritten */
-        const double rcl = ws->has_lo[i] ? rc_lo(ws, i, cc) : 0.0;
-        const double rcu = ws->has_up[i] ? rc_up(ws, i, cc) : 0.0;
-        ws->dv[i] = y[i];
-        if (ws->has_lo[i])
-            ws->dz_lo[i] = -(rcl + ws->z_lo[i] * dt_lo(ws, i)) / ws->t_lo[i];
-        if (ws->has_up[i])
-            ws->dz_up[i] = -(rcu + ws->z_up[i] * dt_up(ws, i)) / ws->t_up[i];
-    }
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j) {
+            /* rc from the previous (predictor) direction, before it is overwritten */
+            const double rcl = ws->has_lo[b] ? rc_lo(ws, b, cc) : 0.0;
+            const double rcu = ws->has_up[b] ? rc_up(ws, b, cc) : 0.0;
+            ws->dv[b] = row_dot(in, k, j, ws->d_prim + k * NW);
+            if (ws->has_lo[b])
+                ws->dz_lo[b] = -(rcl + ws->z_lo[b] * dt_lo(ws, b)) / ws->t_lo[b];
+            if (ws->has_up[b])
+                ws->dz_up[b] = -(rcu + ws->z_up[b] * dt_up(ws, b)) / ws->t_up[b];
+        }
 }
 
 /* Largest alpha in (0, 1] keeping t + alpha dt >= 0 and z + alpha dz >= 0. */
@@ -930,7 +913,7 @@ static int primal_infeasible(const unicycle_qp_workspace *ws, const unicycle_qp_
     double bty = 0.0, aty, bscale = 1.0;
     if (!(r->ny > CERT_GROWTH * data_scale))
         return 0;
-    aty = unicycle_lai_norm_inf(NP, ws->res_stat_lin) / r->ny; /* A'y of compute_residuals */
+    aty = r->aty / r->ny;
     bty -= unicycle_lai_dot(NX, ws->lam, in->x0);
     bscale = dmax(bscale, unicycle_lai_norm_inf(NX, in->x0));
     for (k = 0; k < N; ++k) {
@@ -942,13 +925,15 @@ static int primal_infeasible(const unicycle_qp_workspace *ws, const unicycle_qp_
         bscale = dmax(bscale, unicycle_lai_norm_inf(NE, in->req));
     }
     for (i = 0; i < ws->nb; ++i) {
+        double lo, up;
+        row_bounds(in, ws->bidx[i], &lo, &up);
         if (ws->has_lo[i]) {
-            bty += ws->lo[i] * ws->z_lo[i];
-            bscale = dmax(bscale, fabs(ws->lo[i]));
+            bty += lo * ws->z_lo[i];
+            bscale = dmax(bscale, fabs(lo));
         }
         if (ws->has_up[i]) {
-            bty -= ws->up[i] * ws->z_up[i];
-            bscale = dmax(bscale, fabs(ws->up[i]));
+            bty -= up * ws->z_up[i];
+            bscale = dmax(bscale, fabs(up));
         }
     }
     bty /= r->ny;
@@ -961,14 +946,13 @@ static int primal_infeasible(const unicycle_qp_workspace *ws, const unicycle_qp_
 static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, double data_scale,
                            double hscale)
 {
-    int k, i;
+    int k, i, b, j;
     double nw = unicycle_lai_norm_inf(NP, ws->prim), dhd = 0.0, gd = 0.0, hd = 0.0, eq = 0.0, cone = 0.0;
-    double *hdv = ws->res_stat_lin;
+    double h[NW];
     if (!(nw > CERT_GROWTH * data_scale))
         return 0;
     for (k = 0; k < N; ++k) {
         const double *w = ws->prim + k * NW;
-        double *h = hdv + k * NW;
         double *t = ws->work;
         unicycle_lai_symv_l(NW, 1.0 / nw, in->H[k], NW, w, 0.0, h);
         unicycle_lai_axpy(NW, in->hess_shift / nw, w, h);
@@ -982,7 +966,6 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
     }
     {
         const double *xN = ws->prim + N * NW;
-        double *h = hdv + N * NW;
         unicycle_lai_symv_l(NX, 1.0 / nw, in->HN, NX, xN, 0.0, h);
         unicycle_lai_axpy(NX, in->hess_shift / nw, xN, h);
         dhd += unicycle_lai_dot(NX, xN, h) / nw;
@@ -994,13 +977,14 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
         }
     }
     eq = dmax(eq, unicycle_lai_norm_inf(NX, ws->prim) / nw);
-    for (i = 0; i < ws->nb; ++i) {
-        const double dv = QP_V(ws)[i] / nw;
-        if (ws->has_lo[i])
-            cone = dmax(cone, -dv);
-        if (ws->has_up[i])
-            cone = dmax(cone, dv);
-    }
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j) {
+            const double dv = row_dot(in, k, j, ws->prim + k * NW) / nw;
+            if (ws->has_lo[b])
+                cone = dmax(cone, -dv);
+            if (ws->has_up[b])
+                cone = dmax(cone, dv);
+        }
     if (eq > CERT_RES_PRIMAL || cone > CERT_RES_PRIMAL)
         return 0;
     if (dhd < -CERT_SEP * hscale)
@@ -1082,7 +1066,7 @@ static void zero_solution(unicycle_qp_sol *sol)
 static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const unicycle_qp_settings *st,
                           const unicycle_qp_sol *sol)
 {
-    int k, i;
+    int k, i, b, j;
     const int warm = st->warm_start != 0;
     for (i = 0; i < NP; ++i)
         ws->prim[i] = 0.0;
@@ -1102,22 +1086,25 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         for (i = 0; i < NE; ++i)
             ws->nu[i] = sol->nu[i];
     }
-    apply_D(ws, in, ws->prim, QP_V(ws));
-    for (i = 0; i < ws->nb; ++i) {
-        const double mu_signed = warm ? row_mu(sol, ws->bidx[i]) : 0.0;
-        ws->t_lo[i] = ws->t_up[i] = 1.0;
-        ws->z_lo[i] = ws->z_up[i] = 0.0;
-        if (ws->has_lo[i]) {
-            const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->lo[i])) : 1.0;
-            ws->t_lo[i] = dmax(QP_V(ws)[i] - ws->lo[i], floor_t);
-            ws->z_lo[i] = warm ? dmax(-mu_signed, WARM_FLOOR_Z) : 1.0;
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j) {
+            const double mu_signed = warm ? row_mu(sol, ws->bidx[b]) : 0.0;
+            const double v = row_dot(in, k, j, ws->prim + k * NW);
+            double lo, up;
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            ws->t_lo[b] = ws->t_up[b] = 1.0;
+            ws->z_lo[b] = ws->z_up[b] = 0.0;
+            if (ws->has_lo[b]) {
+                const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(lo)) : 1.0;
+                ws->t_lo[b] = dmax(v - lo, floor_t);
+                ws->z_lo[b] = warm ? dmax(-mu_signed, WARM_FLOOR_Z) : 1.0;
+            }
+            if (ws->has_up[b]) {
+                const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(up)) : 1.0;
+                ws->t_up[b] = dmax(up - v, floor_t);
+                ws->z_up[b] = warm ? dmax(mu_signed, WARM_FLOOR_Z) : 1.0;
+            }
         }
-        if (ws->has_up[i]) {
-            const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->up[i])) : 1.0;
-            ws->t_up[i] = dmax(ws->up[i] - QP_V(ws)[i], floor_t);
-            ws->z_up[i] = warm ? dmax(mu_signed, WARM_FLOOR_Z) : 1.0;
-        }
-    }
 }
 
 static double merit(const qp_res *r)
@@ -1219,13 +1206,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
     initial_point(ws, in, &st, sol);
 
     /* data scale for the divergence tests of the certificates */
-    data_scale = 1.0;
-    for (i = 0; i < ws->nb; ++i) {
-        if (ws->has_lo[i])
-            data_scale = dmax(data_scale, fabs(ws->lo[i]));
-        if (ws->has_up[i])
-            data_scale = dmax(data_scale, fabs(ws->up[i]));
-    }
+    data_scale = dmax(1.0, ws->scale_bounds); /* the finite bounds */
     data_scale = dmax(data_scale, unicycle_lai_norm_inf(NX, in->x0));
     for (i = 0; i < N; ++i) {
         data_scale = dmax(data_scale, unicycle_lai_norm_inf(NX, in->b[i]));
