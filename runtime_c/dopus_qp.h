@@ -102,6 +102,19 @@
 #define DOPUS_QP_NSTAGEINEQ (DOPUS_QP_NW + DOPUS_NG)
 #define DOPUS_QP_NINEQ (DOPUS_N * DOPUS_QP_NSTAGEINEQ + DOPUS_NX + DOPUS_NR)
 
+/* Rows with a finite side at most (sizes every per-row array of the workspace): the
+ * generated sizes header counts them from the problem's bounds (DOPUS_NB); a QP with more
+ * bounded rows is rejected as invalid input. Without DOPUS_NB, every row. */
+#ifdef DOPUS_NB
+#define DOPUS_QP_NB DOPUS_QP_MAX1(DOPUS_NB)
+#else
+#define DOPUS_QP_NB DOPUS_QP_MAX1(DOPUS_QP_NINEQ)
+#endif
+/* A symmetric nx x nx matrix packed by lower columns. */
+#define DOPUS_QP_NXP (DOPUS_NX * (DOPUS_NX + 1) / 2)
+/* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
+#define DOPUS_QP_NWORK (2 * DOPUS_NX * DOPUS_QP_NW + DOPUS_QP_NW * DOPUS_QP_NE1 + DOPUS_NX * DOPUS_NX)
+
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if DOPUS_QP_NINEQ < 65536
 typedef unsigned short dopus_qp_row;
@@ -117,7 +130,8 @@ enum dopus_qp_status {
     DOPUS_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */
     DOPUS_QP_DUAL_INFEASIBLE = 3,   /* unbounded below: feasible descent ray found */
     DOPUS_QP_NUMERICAL = 4,         /* factorisation / step failure */
-    DOPUS_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    DOPUS_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr,
+                                       more bounded rows than DOPUS_QP_NB */
     DOPUS_QP_STALLED = 6            /* no progress in the KKT residuals for 10 iterations
                                        (before the limit); best point returned */
 };
@@ -195,57 +209,50 @@ typedef struct {
 /* The whole solver memory; the user declares one (static, global or on a task stack).
  * Fields are internal. */
 typedef struct {
-    /* problem data prepared once per solve */
-    double lo[DOPUS_QP_NINEQ];
-    double up[DOPUS_QP_NINEQ];
-    unsigned char has_lo[DOPUS_QP_NINEQ];
-    unsigned char has_up[DOPUS_QP_NINEQ];
-    dopus_qp_row bidx[DOPUS_QP_NINEQ]; /* the rows with a finite side, nb of them */
+    /* the inequality rows with a finite side ("bounded rows"), nb <= DOPUS_QP_NB of them in
+     * increasing row order: the row, its sides and bounds; the rows of stage k are
+     * b = bstart[k] .. bstart[k+1]-1 (k = N: the terminal rows). Every per-row array below
+     * is indexed by b. */
+    dopus_qp_row bidx[DOPUS_QP_NB];
+    unsigned char has_lo[DOPUS_QP_NB];
+    unsigned char has_up[DOPUS_QP_NB];
+    dopus_qp_row bstart[DOPUS_N + 2];
     int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
     double prim[DOPUS_QP_NPRIM];
     double lam[(DOPUS_N + 1) * DOPUS_NX];
     double nu[DOPUS_QP_NE1];
-    double t_lo[DOPUS_QP_NINEQ];
-    double t_up[DOPUS_QP_NINEQ];
-    double z_lo[DOPUS_QP_NINEQ];
-    double z_up[DOPUS_QP_NINEQ];
+    double t_lo[DOPUS_QP_NB];
+    double t_up[DOPUS_QP_NB];
+    double z_lo[DOPUS_QP_NB];
+    double z_up[DOPUS_QP_NB];
     /* residuals */
     double r_stat[DOPUS_QP_NPRIM];
     double r_dyn[(DOPUS_N + 1) * DOPUS_NX];
     double r_eqN[DOPUS_QP_NE1];
-    double r_lo[DOPUS_QP_NINEQ];
-    double r_up[DOPUS_QP_NINEQ];
-    /* barrier weights and Newton directions */
-    double qdiag[DOPUS_QP_NINEQ];
+    /* v - lo and up - v of the row values v = D w: the slack residuals and steps and the
+     * barrier weights are formed from them and dv, t, z (the bounds are read from the QP
+     * data where needed); the refinement of a direction also works in r_stat, r_dyn, r_eqN */
+    double vl[DOPUS_QP_NB];
+    double uv[DOPUS_QP_NB];
+    /* Newton directions (the Newton right-hand side is formed in the direction arrays and
+     * solved in place) */
     double d_prim[DOPUS_QP_NPRIM];
     double d_lam[(DOPUS_N + 1) * DOPUS_NX];
     double d_nu[DOPUS_QP_NE1];
-    double dt_lo[DOPUS_QP_NINEQ];
-    double dt_up[DOPUS_QP_NINEQ];
-    double dz_lo[DOPUS_QP_NINEQ];
-    double dz_up[DOPUS_QP_NINEQ];
-    /* Newton right-hand side, solution and refinement buffers */
-    double rhs_stat[DOPUS_QP_NPRIM];
-    double rhs_dyn[(DOPUS_N + 1) * DOPUS_NX];
-    double rhs_eqN[DOPUS_QP_NE1];
-    double res_stat_lin[DOPUS_QP_NPRIM];
-    double res_dyn_lin[(DOPUS_N + 1) * DOPUS_NX];
-    double res_eqN_lin[DOPUS_QP_NE1];
+    double dv[DOPUS_QP_NB]; /* D d_prim */
+    double dz_lo[DOPUS_QP_NB];
+    double dz_up[DOPUS_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
     double M[DOPUS_QP_NW * DOPUS_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
-    double P[DOPUS_N + 1][DOPUS_NX * DOPUS_NX];       /* value function Hessians */
+    double P[DOPUS_N + 1][DOPUS_QP_NXP];              /* value function Hessians, packed lower */
     double G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];   /* value function x-nu coupling */
     double Lu[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NU1];  /* Cholesky factor of M_uu */
     double LK[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux */
     double LKn[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     double S[DOPUS_QP_NE1 * DOPUS_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
-    double p[DOPUS_N + 1][DOPUS_NX];
     double e[DOPUS_QP_NE1];
-    double lk[DOPUS_N][DOPUS_QP_NU1];
-    double aty[DOPUS_QP_NPRIM];  /* constraint part of r_stat (A'y) */
-    double yrow[DOPUS_QP_NINEQ]; /* per-row scratch; row values v = D w */
-    double work[4 * DOPUS_QP_NW * (DOPUS_QP_NW + DOPUS_QP_NE1 + 1)];
+    double work[DOPUS_QP_NWORK];
     double delta;               /* current inertia-correction shift */
     double rho_aug;             /* current terminal augmented-Lagrangian weight */
     double noise[DOPUS_QP_NU1]; /* round-off estimate of M_uu pivots */

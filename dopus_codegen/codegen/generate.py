@@ -294,6 +294,25 @@ def problem_sizes(disc: Any) -> Dict[str, int]:
     return sizes
 
 
+def bounded_row_counts(disc: Any, s: Dict[str, int]) -> Dict[str, int]:
+    """Rows of the QP with a finite side, per kind (a component or row counts when its lower
+    or its upper bound is finite): nbx state components, nbu controls, nbg path rows, nbr
+    terminal rows. They size the QP's per-row arrays (DOPUS_NB of dopus_qp.h)."""
+    data = disc.data
+
+    def count(lo: str, up: str, n: int) -> int:
+        if n == 0:
+            return 0
+        lb = np.asarray(_attr(data, lo), dtype=float).reshape(-1)
+        ub = np.asarray(_attr(data, up), dtype=float).reshape(-1)
+        if lb.size != n or ub.size != n:
+            raise CodegenError(f"{lo}/{up}: expected {n} entries, got {lb.size} and {ub.size}")
+        return int(np.count_nonzero(np.isfinite(lb) | np.isfinite(ub)))
+
+    return {"nbx": count("lbx", "ubx", s["nx"]), "nbu": count("lbu", "ubu", s["nu"]),
+            "nbg": count("lg", "ug", s["ng"]), "nbr": count("lr", "ur", s["nr"])}
+
+
 def _default_parameters(disc: Any, s: Dict[str, int]) -> np.ndarray:
     """The one default parameter vector of dopus_problem.h (every node)."""
     p0 = _attr(disc.data, "p0")
@@ -427,6 +446,10 @@ def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, ha
     s = dict(sizes)
     s.setdefault("nw", s["nx"] + s["nu"])
     s.setdefault("np", 0)
+    # without the bound pattern every row counts as bounded
+    for key, n in (("nbx", "nx"), ("nbu", "nu"), ("nbg", "ng"), ("nbr", "nr")):
+        s.setdefault(key, s[n])
+    s["nb"] = s["N"] * (s["nbx"] + s["nbu"] + s["nbg"]) + s["nbr"]
     ctx = {"name": name, "NAME": name.upper(), "sizes": s, "has_gn": int(has_gn),
            "has_nominal": int(has_nominal), "header": header or f"Sizes of '{name}'",
            "casadi_version": casadi_version,
@@ -460,7 +483,7 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     ctx["has_nominal"] = int(ctx["has_nominal"])
 
     env = _templates()
-    files[f"{name}_sizes.h"] = render_sizes_header(name, s, has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
+    files[f"{name}_sizes.h"] = render_sizes_header(name, dict(s, **bounded_row_counts(disc, s)), has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
                                                    work=ctx["work"], header=header,
                                                    casadi_version=ca.__version__)
     files[f"{name}_problem.c"] = env.get_template("problem.c.j2").render(**ctx)

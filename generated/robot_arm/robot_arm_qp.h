@@ -102,6 +102,19 @@
 #define ROBOT_ARM_QP_NSTAGEINEQ (ROBOT_ARM_QP_NW + ROBOT_ARM_NG)
 #define ROBOT_ARM_QP_NINEQ (ROBOT_ARM_N * ROBOT_ARM_QP_NSTAGEINEQ + ROBOT_ARM_NX + ROBOT_ARM_NR)
 
+/* Rows with a finite side at most (sizes every per-row array of the workspace): the
+ * generated sizes header counts them from the problem's bounds (ROBOT_ARM_NB); a QP with more
+ * bounded rows is rejected as invalid input. Without ROBOT_ARM_NB, every row. */
+#ifdef ROBOT_ARM_NB
+#define ROBOT_ARM_QP_NB ROBOT_ARM_QP_MAX1(ROBOT_ARM_NB)
+#else
+#define ROBOT_ARM_QP_NB ROBOT_ARM_QP_MAX1(ROBOT_ARM_QP_NINEQ)
+#endif
+/* A symmetric nx x nx matrix packed by lower columns. */
+#define ROBOT_ARM_QP_NXP (ROBOT_ARM_NX * (ROBOT_ARM_NX + 1) / 2)
+/* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
+#define ROBOT_ARM_QP_NWORK (2 * ROBOT_ARM_NX * ROBOT_ARM_QP_NW + ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NE1 + ROBOT_ARM_NX * ROBOT_ARM_NX)
+
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if ROBOT_ARM_QP_NINEQ < 65536
 typedef unsigned short robot_arm_qp_row;
@@ -117,7 +130,8 @@ enum robot_arm_qp_status {
     ROBOT_ARM_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */
     ROBOT_ARM_QP_DUAL_INFEASIBLE = 3,   /* unbounded below: feasible descent ray found */
     ROBOT_ARM_QP_NUMERICAL = 4,         /* factorisation / step failure */
-    ROBOT_ARM_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    ROBOT_ARM_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr,
+                                       more bounded rows than ROBOT_ARM_QP_NB */
     ROBOT_ARM_QP_STALLED = 6            /* no progress in the KKT residuals for 10 iterations
                                        (before the limit); best point returned */
 };
@@ -195,57 +209,50 @@ typedef struct {
 /* The whole solver memory; the user declares one (static, global or on a task stack).
  * Fields are internal. */
 typedef struct {
-    /* problem data prepared once per solve */
-    double lo[ROBOT_ARM_QP_NINEQ];
-    double up[ROBOT_ARM_QP_NINEQ];
-    unsigned char has_lo[ROBOT_ARM_QP_NINEQ];
-    unsigned char has_up[ROBOT_ARM_QP_NINEQ];
-    robot_arm_qp_row bidx[ROBOT_ARM_QP_NINEQ]; /* the rows with a finite side, nb of them */
+    /* the inequality rows with a finite side ("bounded rows"), nb <= ROBOT_ARM_QP_NB of them in
+     * increasing row order: the row, its sides and bounds; the rows of stage k are
+     * b = bstart[k] .. bstart[k+1]-1 (k = N: the terminal rows). Every per-row array below
+     * is indexed by b. */
+    robot_arm_qp_row bidx[ROBOT_ARM_QP_NB];
+    unsigned char has_lo[ROBOT_ARM_QP_NB];
+    unsigned char has_up[ROBOT_ARM_QP_NB];
+    robot_arm_qp_row bstart[ROBOT_ARM_N + 2];
     int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
     double prim[ROBOT_ARM_QP_NPRIM];
     double lam[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
     double nu[ROBOT_ARM_QP_NE1];
-    double t_lo[ROBOT_ARM_QP_NINEQ];
-    double t_up[ROBOT_ARM_QP_NINEQ];
-    double z_lo[ROBOT_ARM_QP_NINEQ];
-    double z_up[ROBOT_ARM_QP_NINEQ];
+    double t_lo[ROBOT_ARM_QP_NB];
+    double t_up[ROBOT_ARM_QP_NB];
+    double z_lo[ROBOT_ARM_QP_NB];
+    double z_up[ROBOT_ARM_QP_NB];
     /* residuals */
     double r_stat[ROBOT_ARM_QP_NPRIM];
     double r_dyn[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
     double r_eqN[ROBOT_ARM_QP_NE1];
-    double r_lo[ROBOT_ARM_QP_NINEQ];
-    double r_up[ROBOT_ARM_QP_NINEQ];
-    /* barrier weights and Newton directions */
-    double qdiag[ROBOT_ARM_QP_NINEQ];
+    /* v - lo and up - v of the row values v = D w: the slack residuals and steps and the
+     * barrier weights are formed from them and dv, t, z (the bounds are read from the QP
+     * data where needed); the refinement of a direction also works in r_stat, r_dyn, r_eqN */
+    double vl[ROBOT_ARM_QP_NB];
+    double uv[ROBOT_ARM_QP_NB];
+    /* Newton directions (the Newton right-hand side is formed in the direction arrays and
+     * solved in place) */
     double d_prim[ROBOT_ARM_QP_NPRIM];
     double d_lam[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
     double d_nu[ROBOT_ARM_QP_NE1];
-    double dt_lo[ROBOT_ARM_QP_NINEQ];
-    double dt_up[ROBOT_ARM_QP_NINEQ];
-    double dz_lo[ROBOT_ARM_QP_NINEQ];
-    double dz_up[ROBOT_ARM_QP_NINEQ];
-    /* Newton right-hand side, solution and refinement buffers */
-    double rhs_stat[ROBOT_ARM_QP_NPRIM];
-    double rhs_dyn[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
-    double rhs_eqN[ROBOT_ARM_QP_NE1];
-    double res_stat_lin[ROBOT_ARM_QP_NPRIM];
-    double res_dyn_lin[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
-    double res_eqN_lin[ROBOT_ARM_QP_NE1];
+    double dv[ROBOT_ARM_QP_NB]; /* D d_prim */
+    double dz_lo[ROBOT_ARM_QP_NB];
+    double dz_up[ROBOT_ARM_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
     double M[ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
-    double P[ROBOT_ARM_N + 1][ROBOT_ARM_NX * ROBOT_ARM_NX];       /* value function Hessians */
+    double P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NXP];              /* value function Hessians, packed lower */
     double G[ROBOT_ARM_N + 1][ROBOT_ARM_NX * ROBOT_ARM_QP_NE1];   /* value function x-nu coupling */
     double Lu[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_QP_NU1];  /* Cholesky factor of M_uu */
     double LK[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_NX];      /* Lu^{-1} M_ux */
     double LKn[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     double S[ROBOT_ARM_QP_NE1 * ROBOT_ARM_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
-    double p[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
     double e[ROBOT_ARM_QP_NE1];
-    double lk[ROBOT_ARM_N][ROBOT_ARM_QP_NU1];
-    double aty[ROBOT_ARM_QP_NPRIM];  /* constraint part of r_stat (A'y) */
-    double yrow[ROBOT_ARM_QP_NINEQ]; /* per-row scratch; row values v = D w */
-    double work[4 * ROBOT_ARM_QP_NW * (ROBOT_ARM_QP_NW + ROBOT_ARM_QP_NE1 + 1)];
+    double work[ROBOT_ARM_QP_NWORK];
     double delta;               /* current inertia-correction shift */
     double rho_aug;             /* current terminal augmented-Lagrangian weight */
     double noise[ROBOT_ARM_QP_NU1]; /* round-off estimate of M_uu pivots */

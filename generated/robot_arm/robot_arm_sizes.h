@@ -15,6 +15,15 @@
 #define ROBOT_ARM_NR 0
 #define ROBOT_ARM_NE 2
 
+/* Rows of the QP with a finite side (a lower or an upper bound): state components, controls,
+ * path-constraint rows, terminal rows. x_0 is fixed by the measured state, so the state
+ * rows count on stages 1..N. NB sizes the per-row arrays of the QP workspace (robot_arm_qp.h). */
+#define ROBOT_ARM_NBX 0
+#define ROBOT_ARM_NBU 3
+#define ROBOT_ARM_NBG 0
+#define ROBOT_ARM_NBR 0
+#define ROBOT_ARM_NB 120 /* N (NBX + NBU + NBG) + NBR */
+
 /* 1 if the OCP has a least-squares stage cost, so the Gauss-Newton Hessian exists */
 #define ROBOT_ARM_HAS_GN 1
 /* 1 if the offline primal-dual solution at the default x0 is carried as data */

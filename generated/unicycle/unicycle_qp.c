@@ -42,12 +42,10 @@
 #define NE1 UNICYCLE_QP_NE1
 #define NU1 UNICYCLE_QP_NU1
 #define TOFF (N * NSI) /* first terminal inequality row */
-/* The row values v = D w live in the per-row scratch yrow from compute_residuals (or
- * initial_point) until the next Newton direction overwrites it. */
-#define QP_V(ws) ((ws)->yrow)
-/* Loop over the rows with at least one finite side (ws->bidx, built by setup_bounds): the
- * per-side work skips the unbounded rows (their barrier weight stays 0). */
-#define QP_FOR_BOUNDED(ws, b, i) for ((b) = 0; (b) < (ws)->nb && ((i) = (ws)->bidx[(b)], 1); ++(b))
+/* The bounded rows of stage k (k = N: the terminal rows): b runs over them, j is the row
+ * within the stage (a component of w_k or a row of C_k; of x_N or of R). */
+#define FOR_STAGE_ROWS(ws, k, b, j)                                                                          \
+    for ((b) = (ws)->bstart[(k)]; (b) < (ws)->bstart[(k) + 1] && ((j) = (ws)->bidx[(b)] - (k)*NSI, 1); ++(b))
 
 /* Fraction-to-boundary factor and limits of the inertia correction. */
 #define STEP_TAU 0.995
@@ -155,90 +153,153 @@ static int check_input(const unicycle_qp_in *in)
     return 1;
 }
 
-/* Bounds into the flat row layout; returns 0 when some lo > up (trivially infeasible). */
+/* Lower and upper bound of inequality row i (flat row layout of unicycle_qp.h). */
+static void row_bounds(const unicycle_qp_in *in, int i, double *lo, double *up)
+{
+    if (i < TOFF) {
+        const int k = i / NSI, j = i - k * NSI;
+        if (NG == 0 || j < NW) {
+            *lo = in->lbw[k][j];
+            *up = in->ubw[k][j];
+        } else {
+            *lo = in->lg[k][j - NW];
+            *up = in->ug[k][j - NW];
+        }
+    } else if (NR == 0 || i - TOFF < NX) {
+        *lo = in->lbxN[i - TOFF];
+        *up = in->ubxN[i - TOFF];
+    } else {
+        *lo = in->lr[i - TOFF - NX];
+        *up = in->ur[i - TOFF - NX];
+    }
+}
+
+/* The bounded rows (a finite side that is not ignored) with their bounds. Returns 0, or 1
+ * when some lo > up (trivially infeasible), or 2 when there are more than UNICYCLE_QP_NB. */
 static int setup_bounds(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 {
-    int k, i, ok = 1, nb = 0;
-    for (k = 0; k < N; ++k) {
-        const int o = k * NSI;
-        for (i = 0; i < NW; ++i) {
-            ws->lo[o + i] = in->lbw[k][i];
-            ws->up[o + i] = in->ubw[k][i];
+    int k, i, ok = 0, nb = 0;
+    for (k = 0; k <= N; ++k) {
+        const int first = k * NSI, last = k < N ? first + NSI : NI;
+        ws->bstart[k] = (unicycle_qp_row)nb;
+        for (i = first; i < last; ++i) {
+            /* x_0 is fixed by x0: its box rows are ignored, and so are the general rows of
+             * stage 0 that do not involve u_0 (their value is data; a multiplier on them is
+             * not unique, lam_0 absorbs any value, and a violation by round-off in x0 could
+             * never be removed) */
+            int ignored = (i < NX), hl, hu;
+            double lo, up;
+            if (NG > 0 && i >= NW && i < NW + NG) {
+                int c;
+                ignored = 1;
+                for (c = NX; c < NW; ++c)
+                    if (in->C[0][(i - NW) + c * NG] != 0.0)
+                        ignored = 0;
+            }
+            row_bounds(in, i, &lo, &up);
+            hl = !ignored && isfinite(lo);
+            hu = !ignored && isfinite(up);
+            if (!hl && !hu)
+                continue;
+            if (nb >= UNICYCLE_QP_NB)
+                return 2;
+            ws->bidx[nb] = (unicycle_qp_row)i;
+            ws->has_lo[nb] = (unsigned char)hl;
+            ws->has_up[nb] = (unsigned char)hu;
+            if (hl && hu && lo > up)
+                ok = 1;
+            ++nb;
         }
-        for (i = 0; i < NG; ++i) {
-            ws->lo[o + NW + i] = in->lg[k][i];
-            ws->up[o + NW + i] = in->ug[k][i];
-        }
     }
-    for (i = 0; i < NX; ++i) {
-        ws->lo[TOFF + i] = in->lbxN[i];
-        ws->up[TOFF + i] = in->ubxN[i];
-    }
-    for (i = 0; i < NR; ++i) {
-        ws->lo[TOFF + NX + i] = in->lr[i];
-        ws->up[TOFF + NX + i] = in->ur[i];
-    }
-    for (i = 0; i < NI; ++i) {
-        /* x_0 is fixed by x0: its box rows are ignored, and so are the general rows of
-         * stage 0 that do not involve u_0 (their value is data; a multiplier on them is
-         * not unique, lam_0 absorbs any value, and a violation by round-off in x0 could
-         * never be removed) */
-        int ignored = (i < NX);
-        if (NG > 0 && i >= NW && i < NW + NG) {
-            int c;
-            ignored = 1;
-            for (c = NX; c < NW; ++c)
-                if (in->C[0][(i - NW) + c * NG] != 0.0)
-                    ignored = 0;
-        }
-        ws->has_lo[i] = (unsigned char)(!ignored && isfinite(ws->lo[i]));
-        ws->has_up[i] = (unsigned char)(!ignored && isfinite(ws->up[i]));
-        ws->qdiag[i] = 0.0;
-        if (ws->has_lo[i] || ws->has_up[i])
-            ws->bidx[nb++] = (unicycle_qp_row)i;
-        if (ws->has_lo[i] && ws->has_up[i] && ws->lo[i] > ws->up[i])
-            ok = 0;
-    }
+    ws->bstart[N + 1] = (unicycle_qp_row)nb;
     ws->nb = nb;
     return ok;
 }
 
 /* ---------------------------------------------------------------- row maps D, D' */
 
-/* v = D prim */
-static void apply_D(const unicycle_qp_in *in, const double *prim, double *v)
+/* D_j w for row j of stage k (k = N: the terminal rows), w the stage's primal vector. */
+static double row_dot(const unicycle_qp_in *in, int k, int j, const double *w)
 {
-    int k, i;
-    for (k = 0; k < N; ++k) {
-        const double *w = prim + k * NW;
-        double *vk = v + k * NSI;
-        for (i = 0; i < NW; ++i)
-            vk[i] = w[i];
-        if (NG > 0)
-            unicycle_lai_gemv_n(NG, NW, 1.0, in->C[k], NG > 0 ? NG : 1, w, 0.0, vk + NW);
+    double s = 0.0;
+    int c;
+    if (k < N) {
+        if (NG == 0 || j < NW)
+            return w[j];
+        for (c = 0; c < NW; ++c)
+            s += in->C[k][(j - NW) + c * NG] * w[c];
+    } else {
+        if (NR == 0 || j < NX)
+            return w[j];
+        for (c = 0; c < NX; ++c)
+            s += in->R[(j - NX) + c * NR] * w[c];
     }
-    for (i = 0; i < NX; ++i)
-        v[TOFF + i] = prim[N * NW + i];
-    if (NR > 0)
-        unicycle_lai_gemv_n(NR, NX, 1.0, in->R, NR > 0 ? NR : 1, prim + N * NW, 0.0, v + TOFF + NX);
+    return s;
 }
 
-/* out += D' y */
-static void add_Dt(const unicycle_qp_in *in, const double *y, double *out)
+/* o += a D_j' for row j of stage k, o the stage's part of a primal-sized vector. */
+static void row_axpy(const unicycle_qp_in *in, int k, int j, double a, double *o)
 {
-    int k, i;
-    for (k = 0; k < N; ++k) {
-        const double *yk = y + k * NSI;
-        double *o = out + k * NW;
-        for (i = 0; i < NW; ++i)
-            o[i] += yk[i];
-        if (NG > 0)
-            unicycle_lai_gemv_t(NG, NW, 1.0, in->C[k], NG > 0 ? NG : 1, yk + NW, 1.0, o);
+    int c;
+    if (k < N) {
+        if (NG == 0 || j < NW)
+            o[j] += a;
+        else
+            for (c = 0; c < NW; ++c)
+                o[c] += in->C[k][(j - NW) + c * NG] * a;
+    } else if (NR == 0 || j < NX) {
+        o[j] += a;
+    } else {
+        for (c = 0; c < NX; ++c)
+            o[c] += in->R[(j - NX) + c * NR] * a;
     }
-    for (i = 0; i < NX; ++i)
-        out[N * NW + i] += y[TOFF + i];
-    if (NR > 0)
-        unicycle_lai_gemv_t(NR, NX, 1.0, in->R, NR > 0 ? NR : 1, y + TOFF + NX, 1.0, out + N * NW);
+}
+
+/* Entry (i, j), i >= j, of a symmetric nx x nx matrix packed by lower columns. */
+#define PACKED(i, j) ((j)*NX - (j) * ((j)-1) / 2 + (i) - (j))
+
+/* y += alpha P x for P packed by lower columns (the order of gemv_n: column by column). */
+static void spmv_packed(const double *restrict Pp, double alpha, const double *restrict x, double *restrict y)
+{
+    int i, j;
+    for (j = 0; j < NX; ++j) {
+        const double a = alpha * x[j];
+        for (i = 0; i < j; ++i)
+            y[i] += Pp[PACKED(j, i)] * a;
+        for (i = j; i < NX; ++i)
+            y[i] += Pp[PACKED(i, j)] * a;
+    }
+}
+
+/* Per bounded row b: the residuals of the slack equations, r_lo = v - lo - t_lo and
+ * r_up = up - v - t_up (vl = v - lo and uv = up - v are kept), the slack steps of the current direction, dt_lo = dv + r_lo and
+ * dt_up = r_up - dv (dv = D dw), and the barrier weight q = z_lo/t_lo + z_up/t_up, formed
+ * where they are used rather than stored. */
+static double r_lo(const unicycle_qp_workspace *ws, int b)
+{
+    return ws->vl[b] - ws->t_lo[b];
+}
+static double r_up(const unicycle_qp_workspace *ws, int b)
+{
+    return ws->uv[b] - ws->t_up[b];
+}
+static double dt_lo(const unicycle_qp_workspace *ws, int b)
+{
+    return ws->dv[b] + r_lo(ws, b);
+}
+static double dt_up(const unicycle_qp_workspace *ws, int b)
+{
+    return r_up(ws, b) - ws->dv[b];
+}
+
+static double row_q(const unicycle_qp_workspace *ws, int b)
+{
+    double q = 0.0;
+    if (ws->has_lo[b])
+        q += ws->z_lo[b] / ws->t_lo[b];
+    if (ws->has_up[b])
+        q += ws->z_up[b] / ws->t_up[b];
+    return q;
 }
 
 /* ---------------------------------------------------------------- residuals */
@@ -255,11 +316,13 @@ static void data_scales(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     }
     if (NE > 0)
         sb = dmax(sb, unicycle_lai_norm_inf(NE, in->req));
-    for (i = 0; i < NI; ++i) {
+    for (i = 0; i < ws->nb; ++i) {
+        double lo, up;
+        row_bounds(in, ws->bidx[i], &lo, &up);
         if (ws->has_lo[i])
-            sl = dmax(sl, fabs(ws->lo[i]));
+            sl = dmax(sl, fabs(lo));
         if (ws->has_up[i])
-            sl = dmax(sl, fabs(ws->up[i]));
+            sl = dmax(sl, fabs(up));
     }
     ws->scale_g = sg;
     ws->scale_b = sb;
@@ -272,58 +335,80 @@ typedef struct {
     double stat, eq, ineq, comp;         /* unscaled inf-norms */
     double stat_s, eq_s, ineq_s, comp_s; /* scaled */
     double ny;                           /* inf-norm of the dual iterate */
-    double nz;                           /* inf-norm of the inequality multipliers */
+    double aty; /* inf-norm of the constraint part A'y of the stationarity residual */
+    double nz;  /* inf-norm of the inequality multipliers */
     double obj;
 } qp_res;
 
 static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *in, qp_res *r)
 {
-    int k, i, b;
+    int k, i, b, j;
     double s_stat = 1.0, s_eq = 1.0, s_ineq = 1.0, nz = 0.0, obj = 0.0, comp = 0.0, ineq = 0.0;
-    double sum_c = 0.0;
+    double sum_c = 0.0, naty = 0.0;
     int m = 0;
 
-    /* signed multipliers per row (yrow; it holds the row values v afterwards) */
-    for (i = 0; i < NI; ++i) {
-        const double zl = ws->has_lo[i] ? ws->z_lo[i] : 0.0;
-        const double zu = ws->has_up[i] ? ws->z_up[i] : 0.0;
-        ws->yrow[i] = zu - zl;
-        nz = dmax(nz, dmax(zl, zu));
-    }
-    /* objective part Hw + g and constraint part A'y of the stationarity residual */
-    for (k = 0; k < N; ++k) {
+    /* stage by stage: the objective part Hw + g and the constraint part A'y (a) of the
+     * stationarity residual, and the bounded rows of the stage: row values, slack
+     * residuals, violation, complementarity */
+    s_ineq = dmax(s_ineq, ws->scale_bounds);
+    for (k = 0; k <= N; ++k) {
+        const int nk = k < N ? NW : NX;
         const double *w = ws->prim + k * NW;
         double *h = ws->r_stat + k * NW;
-        double *a = ws->aty + k * NW;
-        unicycle_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
-        unicycle_lai_axpy(NW, in->hess_shift, w, h);
-        s_stat = dmax(s_stat, unicycle_lai_norm_inf(NW, h));
-        obj += 0.5 * unicycle_lai_dot(NW, w, h) + unicycle_lai_dot(NW, in->g[k], w);
-        unicycle_lai_axpy(NW, 1.0, in->g[k], h);
-        for (i = 0; i < NW; ++i)
-            a[i] = i < NX ? ws->lam[k * NX + i] : 0.0;
-        unicycle_lai_gemv_t(NX, NW, -1.0, in->Phi[k], NX, ws->lam + (k + 1) * NX, 1.0, a);
+        double a[NW];
+        if (k < N) {
+            unicycle_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
+            unicycle_lai_axpy(NW, in->hess_shift, w, h);
+            s_stat = dmax(s_stat, unicycle_lai_norm_inf(NW, h));
+            obj += 0.5 * unicycle_lai_dot(NW, w, h) + unicycle_lai_dot(NW, in->g[k], w);
+            unicycle_lai_axpy(NW, 1.0, in->g[k], h);
+            for (i = 0; i < NW; ++i)
+                a[i] = i < NX ? ws->lam[k * NX + i] : 0.0;
+            unicycle_lai_gemv_t(NX, NW, -1.0, in->Phi[k], NX, ws->lam + (k + 1) * NX, 1.0, a);
+        } else {
+            unicycle_lai_symv_l(NX, 1.0, in->HN, NX, w, 0.0, h);
+            unicycle_lai_axpy(NX, in->hess_shift, w, h);
+            s_stat = dmax(s_stat, unicycle_lai_norm_inf(NX, h));
+            obj += 0.5 * unicycle_lai_dot(NX, w, h) + unicycle_lai_dot(NX, in->gN, w);
+            s_stat = dmax(s_stat, ws->scale_g);
+            unicycle_lai_axpy(NX, 1.0, in->gN, h);
+            for (i = 0; i < NX; ++i)
+                a[i] = ws->lam[N * NX + i];
+            if (NE > 0)
+                unicycle_lai_gemv_t(NE, NX, 1.0, in->Req, NE1, ws->nu, 1.0, a);
+        }
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            /* signed multiplier y = z_up - z_lo of the row into A'y */
+            const double zl = ws->has_lo[b] ? ws->z_lo[b] : 0.0;
+            const double zu = ws->has_up[b] ? ws->z_up[b] : 0.0;
+            const double v = row_dot(in, k, j, w);
+            double lo, up;
+            nz = dmax(nz, dmax(zl, zu));
+            row_axpy(in, k, j, zu - zl, a);
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            /* vl, uv (and the directions) are only defined on the bounded sides */
+            if (ws->has_lo[b]) {
+                ws->vl[b] = v - lo;
+                ineq = dmax(ineq, lo - v);
+                comp = dmax(comp, ws->t_lo[b] * ws->z_lo[b]);
+                sum_c += ws->t_lo[b] * ws->z_lo[b];
+                ++m;
+            }
+            if (ws->has_up[b]) {
+                ws->uv[b] = up - v;
+                ineq = dmax(ineq, v - up);
+                comp = dmax(comp, ws->t_up[b] * ws->z_up[b]);
+                sum_c += ws->t_up[b] * ws->z_up[b];
+                ++m;
+            }
+            s_ineq = dmax(s_ineq, fabs(v));
+        }
+        naty = dmax(naty, unicycle_lai_norm_inf(nk, a));
+        for (i = 0; i < nk; ++i)
+            h[i] += a[i];
     }
-    {
-        const double *xN = ws->prim + N * NW;
-        double *h = ws->r_stat + N * NW;
-        double *a = ws->aty + N * NW;
-        unicycle_lai_symv_l(NX, 1.0, in->HN, NX, xN, 0.0, h);
-        unicycle_lai_axpy(NX, in->hess_shift, xN, h);
-        s_stat = dmax(s_stat, unicycle_lai_norm_inf(NX, h));
-        obj += 0.5 * unicycle_lai_dot(NX, xN, h) + unicycle_lai_dot(NX, in->gN, xN);
-        s_stat = dmax(s_stat, ws->scale_g);
-        unicycle_lai_axpy(NX, 1.0, in->gN, h);
-        for (i = 0; i < NX; ++i)
-            a[i] = ws->lam[N * NX + i];
-        if (NE > 0)
-            unicycle_lai_gemv_t(NE, NX, 1.0, in->Req, NE1, ws->nu, 1.0, a);
-    }
-    add_Dt(in, ws->yrow, ws->aty);
-    s_stat = dmax(s_stat, unicycle_lai_norm_inf(NP, ws->aty));
-    for (i = 0; i < NP; ++i)
-        ws->r_stat[i] += ws->aty[i];
-    apply_D(in, ws->prim, QP_V(ws));
+    s_stat = dmax(s_stat, naty);
 
     /* equalities */
     for (i = 0; i < NX; ++i)
@@ -345,29 +430,6 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
             ws->r_eqN[i] -= in->req[i];
     }
 
-    /* inequality sides */
-    s_ineq = dmax(s_ineq, ws->scale_bounds);
-    QP_FOR_BOUNDED(ws, b, i) {
-        const double v = QP_V(ws)[i];
-        /* r_lo, r_up (and the directions) are only defined on the bounded sides */
-        if (ws->has_lo[i]) {
-            ws->r_lo[i] = v - ws->lo[i] - ws->t_lo[i];
-            ineq = dmax(ineq, ws->lo[i] - v);
-            comp = dmax(comp, ws->t_lo[i] * ws->z_lo[i]);
-            sum_c += ws->t_lo[i] * ws->z_lo[i];
-            ++m;
-        }
-        if (ws->has_up[i]) {
-            ws->r_up[i] = ws->up[i] - v - ws->t_up[i];
-            ineq = dmax(ineq, v - ws->up[i]);
-            comp = dmax(comp, ws->t_up[i] * ws->z_up[i]);
-            sum_c += ws->t_up[i] * ws->z_up[i];
-            ++m;
-        }
-        if (ws->has_lo[i] || ws->has_up[i])
-            s_ineq = dmax(s_ineq, fabs(v));
-    }
-
     r->nsides = m;
     r->mu = m > 0 ? sum_c / m : 0.0;
     r->stat = unicycle_lai_norm_inf(NP, ws->r_stat);
@@ -380,6 +442,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     r->ineq_s = r->ineq / s_ineq;
     r->comp_s = r->comp / dmax(1.0, nz);
     r->nz = nz;
+    r->aty = naty;
     r->ny = dmax(
         nz, dmax(unicycle_lai_norm_inf((N + 1) * NX, ws->lam), NE > 0 ? unicycle_lai_norm_inf(NE, ws->nu) : 0.0));
     r->obj = obj;
@@ -440,7 +503,7 @@ static double hessian_scale(const unicycle_qp_in *in)
     return s > 0.0 ? s : 1.0;
 }
 
-/* Factor the Newton system for the current barrier weights qdiag, delta and rho.
+/* Factor the Newton system for the current barrier weights (row_q), delta and rho.
  * Returns 0, or 1 when a stage pivot block M_uu is not positive definite (wrong inertia),
  * or 2 when the terminal-multiplier block S is singular. */
 static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
@@ -449,23 +512,32 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     double *PhiT = ws->work;              /* NW x NX: Phi_k' */
     double *WT = ws->work + NX * NW;      /* NX x NW: P_{k+1} Phi_k */
     double *Gam = ws->work + 2 * NX * NW; /* NW x NE: Phi_k' G_{k+1} */
+    double *Pf = Gam + NW * NE1;          /* NX x NX: P_{k+1} unpacked */
     const double delta = ws->delta;
     double pmag, pnext;
+    int b;
 
     /* terminal: P_N = HN + D'QD + delta I + rho Req'Req, G_N = Req' */
     {
-        double *P = ws->P[N];
-        const double *q = ws->qdiag + TOFF;
+        double *P = Pf;
+        double dq[NX];
+        int l = 0;
         unicycle_lai_copy_mat(NX, NX, in->HN, NX, P, NX);
         unicycle_lai_symmetrize_l(NX, P, NX);
         for (i = 0; i < NX; ++i)
-            P[i + i * NX] += q[i] + delta + in->hess_shift;
-        for (k = 0; k < NR; ++k) {
-            const double qr = q[NX + k];
-            if (qr != 0.0)
+            dq[i] = 0.0;
+        for (b = ws->bstart[N]; b < ws->bstart[N + 1]; ++b)
+            if (NR == 0 || ws->bidx[b] - TOFF < NX)
+                dq[ws->bidx[b] - TOFF] = row_q(ws, b);
+        for (i = 0; i < NX; ++i)
+            P[i + i * NX] += dq[i] + delta + in->hess_shift;
+        for (b = ws->bstart[N]; b < ws->bstart[N + 1]; ++b) {
+            const int r = ws->bidx[b] - TOFF;
+            const double qr = row_q(ws, b);
+            if (NR > 0 && r >= NX && qr != 0.0)
                 for (j = 0; j < NX; ++j)
                     for (i = 0; i < NX; ++i)
-                        P[i + j * NX] += qr * in->R[k + i * NR] * in->R[k + j * NR];
+                        P[i + j * NX] += qr * in->R[(r - NX) + i * NR] * in->R[(r - NX) + j * NR];
         }
         if (NE > 0) {
             if (ws->rho_aug > 0.0)
@@ -474,6 +546,9 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
                 for (i = 0; i < NX; ++i)
                     ws->G[N][i + j * NX] = in->Req[j + i * NE1];
         }
+        for (j = 0; j < NX; ++j)
+            for (i = j; i < NX; ++i)
+                ws->P[N][l++] = P[i + j * NX];
     }
     for (i = 0; i < NE1 * NE1; ++i)
         ws->S[i] = 0.0;
@@ -483,18 +558,25 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
      * of the stage before and cancels), leaving an absolute error of about eps times the
      * magnitude `pmag` of the cancelled terms. That error reaches the pivots of M_uu of
      * stage k through B' P B, so a negative pivot within that noise is a numerical zero. */
-    pmag = unicycle_lai_max_abs_mat(NX, NX, ws->P[N], NX);
+    pmag = unicycle_lai_max_abs_mat(NX, NX, Pf, NX);
     pnext = pmag; /* largest |entry| of P_{k+1}, kept along the recursion */
     for (k = N - 1; k >= 0; --k) {
         double *M = ws->M;
         const double *Phi = in->Phi[k];
-        const double *q = ws->qdiag + k * NSI;
+        double q[NSI];
         double *Lu = ws->Lu[k];
         double *LK = ws->LK[k];
         double *LKn = ws->LKn[k];
         double *P = ws->P[k];
         const double pmax = pnext;
         double mxx = 0.0, pabs;
+        int l = 0;
+
+        /* barrier weights of the stage's rows (0 on the unbounded rows) */
+        for (i = 0; i < NSI; ++i)
+            q[i] = 0.0;
+        for (b = ws->bstart[k]; b < ws->bstart[k + 1]; ++b)
+            q[ws->bidx[b] - k * NSI] = row_q(ws, b);
 
         /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi, lower triangle only (the upper
          * triangle of M is never read) */
@@ -527,7 +609,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             mxx = dmax(mxx, fabs(M[j + j * NW]) + colsum * colsum * pmax);
         }
         /* M += Phi' P_{k+1} Phi (lower triangle), Gam = Phi' G_{k+1} */
-        qp_stage_update(Phi, ws->P[k + 1], ws->G[k + 1], PhiT, WT, M, Gam);
+        qp_stage_update(Phi, Pf, ws->G[k + 1], PhiT, WT, M, Gam);
 
         /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
         unicycle_lai_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
@@ -544,11 +626,12 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         for (j = 0; j < NX; ++j)
             for (i = j; i < NX; ++i) {
                 unicycle_real sum = M[i + j * NW];
-                int l;
-                for (l = 0; l < NU; ++l)
-                    sum -= LK[l + i * NU1] * LK[l + j * NU1];
-                P[i + j * NX] = sum;
-                P[j + i * NX] = sum;
+                int c;
+                for (c = 0; c < NU; ++c)
+                    sum -= LK[c + i * NU1] * LK[c + j * NU1];
+                P[l++] = sum;
+                Pf[i + j * NX] = sum;
+                Pf[j + i * NX] = sum;
                 pabs = dmax(pabs, fabs(sum));
             }
         pnext = pabs;
@@ -582,12 +665,13 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     return 0;
 }
 
-/* Solve the factored Newton system for one right-hand side (rhs_stat, rhs_dyn, rhs_eqN)
- * into (sp, sl, sn), which may be the right-hand side's own arrays (each rhs entry is read
- * before the entry of the same array is written): backward sweep of the value-function vectors, nu at stage 0, forward
- * sweep of the primal and the costates lam_k = -dV_k/dx. */
-static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const double *rhs_stat,
-                          const double *rhs_dyn, const double *rhs_eqN, double *sp, double *sl, double *sn)
+/* Solve the factored Newton system in place: (sp, sl, sn) holds the right-hand side
+ * (rhs_stat, rhs_dyn, rhs_eqN) on entry and the solution on exit. Backward sweep of the
+ * value-function vectors, nu at stage 0, forward sweep of the primal and the costates
+ * lam_k = -dV_k/dx. The sweep vectors live in the arrays they become: once stage k's
+ * rhs_stat has been read, its x part takes rhs_dyn_k (x_k is formed there), its u part
+ * the vector lk_k (u_k is formed there), and sl_k the vector p_k (lam_k is formed there). */
+static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, double *sp, double *sl, double *sn)
 {
     int k, i;
     double *tv = ws->work;     /* NX */
@@ -595,39 +679,48 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
     double *e = ws->e;
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
-    for (i = 0; i < NX; ++i)
-        ws->p[N][i] = -rhs_stat[N * NW + i];
-    if (NE > 0) {
-        if (ws->rho_aug > 0.0)
-            unicycle_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, rhs_eqN, 1.0, ws->p[N]);
-        for (i = 0; i < NE; ++i)
-            e[i] = -rhs_eqN[i];
+    {
+        double *xN = sp + N * NW, *pN = sl + N * NX;
+        for (i = 0; i < NX; ++i)
+            tv[i] = -xN[i];
+        if (NE > 0) {
+            if (ws->rho_aug > 0.0)
+                unicycle_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, sn, 1.0, tv);
+            for (i = 0; i < NE; ++i)
+                e[i] = -sn[i];
+        }
+        for (i = 0; i < NX; ++i) {
+            xN[i] = pN[i];
+            pN[i] = tv[i];
+        }
     }
     for (k = N - 1; k >= 0; --k) {
         const double *Phi = in->Phi[k];
-        const double *c = rhs_dyn + (k + 1) * NX;
+        const double *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
+        const double *pn = sl + (k + 1) * NX; /* p_{k+1} */
+        double *xk = sp + k * NW, *lk = xk + NX, *pk = sl + k * NX;
         /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
         for (i = 0; i < NX; ++i)
-            tv[i] = ws->p[k + 1][i];
-        unicycle_lai_gemv_n(NX, NX, 1.0, ws->P[k + 1], NX, c, 1.0, tv);
+            tv[i] = pn[i];
+        spmv_packed(ws->P[k + 1], 1.0, c, tv);
         for (i = 0; i < NW; ++i)
-            m[i] = -rhs_stat[k * NW + i];
+            m[i] = -xk[i];
         unicycle_lai_gemv_t(NX, NW, 1.0, Phi, NX, tv, 1.0, m);
         if (NE > 0)
             unicycle_lai_gemv_t(NX, NE, 1.0, ws->G[k + 1], NX, c, 1.0, e);
         /* lk = Lu^{-1} m_u; p_k = m_x - LK' lk; e -= LKn' lk */
         for (i = 0; i < NU; ++i)
-            ws->lk[k][i] = m[NX + i];
-        unicycle_lai_trsv_ln(NU, ws->Lu[k], NU1, ws->lk[k]);
-        for (i = 0; i < NX; ++i)
-            ws->p[k][i] = m[i];
-        unicycle_lai_gemv_t(NU, NX, -1.0, ws->LK[k], NU1, ws->lk[k], 1.0, ws->p[k]);
+            lk[i] = m[NX + i];
+        unicycle_lai_trsv_ln(NU, ws->Lu[k], NU1, lk);
+        for (i = 0; i < NX; ++i) {
+            xk[i] = pk[i];
+            pk[i] = m[i];
+        }
+        unicycle_lai_gemv_t(NU, NX, -1.0, ws->LK[k], NU1, lk, 1.0, pk);
         if (NE > 0)
-            unicycle_lai_gemv_t(NU, NE, -1.0, ws->LKn[k], NU1, ws->lk[k], 1.0, e);
+            unicycle_lai_gemv_t(NU, NE, -1.0, ws->LKn[k], NU1, lk, 1.0, e);
     }
-    /* stage 0: dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
-    for (i = 0; i < NX; ++i)
-        sp[i] = rhs_dyn[i];
+    /* stage 0: x_0 = rhs_dyn_0 (in place); dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
     if (NE > 0) {
         for (i = 0; i < NE; ++i)
             sn[i] = e[i];
@@ -640,8 +733,6 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         double *u = w + NX;
         double *lamk = sl + k * NX;
         /* u_k = -Lu'^{-1} (LK x_k + lk + LKn nu) */
-        for (i = 0; i < NU; ++i)
-            u[i] = ws->lk[k][i];
         unicycle_lai_gemv_n(NU, NX, 1.0, ws->LK[k], NU1, w, 1.0, u);
         if (NE > 0)
             unicycle_lai_gemv_n(NU, NE, 1.0, ws->LKn[k], NU1, sn, 1.0, u);
@@ -650,13 +741,11 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
             u[i] = -u[i];
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
-            lamk[i] = -ws->p[k][i];
-        unicycle_lai_gemv_n(NX, NX, -1.0, ws->P[k], NX, w, 1.0, lamk);
+            lamk[i] = -lamk[i];
+        spmv_packed(ws->P[k], -1.0, w, lamk);
         if (NE > 0)
             unicycle_lai_gemv_n(NX, NE, -1.0, ws->G[k], NX, sn, 1.0, lamk);
         /* x_{k+1} = Phi_k w_k + c_k */
-        for (i = 0; i < NX; ++i)
-            sp[(k + 1) * NW + i] = rhs_dyn[(k + 1) * NX + i];
         unicycle_lai_gemv_n(NX, NW, 1.0, in->Phi[k], NX, w, 1.0, sp + (k + 1) * NW);
     }
     {
@@ -664,28 +753,27 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         double *lamN = sl + N * NX;
         /* lam_N = -(dV_N/dx); the rho terms cancel because Req x_N = rhs_eqN */
         for (i = 0; i < NX; ++i)
-            lamN[i] = -ws->p[N][i];
-        unicycle_lai_gemv_n(NX, NX, -1.0, ws->P[N], NX, xN, 1.0, lamN);
+            lamN[i] = -lamN[i];
+        spmv_packed(ws->P[N], -1.0, xN, lamN);
         if (NE > 0)
             unicycle_lai_gemv_n(NX, NE, -1.0, ws->G[N], NX, sn, 1.0, lamN);
     }
 }
 
 /* (os, od, oe) = rhs - K (sp, sl, sn): residual of the (delta-shifted, unaugmented) Newton
- * system, for iterative refinement. */
+ * system, for iterative refinement. The output may be the right-hand side's own arrays
+ * (every entry of the right-hand side is read before the same entry is written). */
 static void newton_residual(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const double *sp, const double *sl,
                             const double *sn, const double *rhs_stat, const double *rhs_dyn,
                             const double *rhs_eqN, double *os, double *od, double *oe)
 {
-    int k, i;
-    double *dv = ws->yrow;
+    int k, i, b, j;
     /* os = rhs_stat - (H + delta I) sp - D'Q D sp - [sl_k;0] + Phi' sl_{k+1} - Req' sn */
-    apply_D(in, sp, dv);
-    for (i = 0; i < NI; ++i)
-        dv[i] *= -ws->qdiag[i];
     for (i = 0; i < NP; ++i)
         os[i] = rhs_stat[i] - (ws->delta + in->hess_shift) * sp[i];
-    add_Dt(in, dv, os);
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+    row_axpy(in, k, j, row_dot(in, k, j, sp + k * NW) * -row_q(ws, b), os + k * NW);
     for (k = 0; k < N; ++k) {
         double *o = os + k * NW;
         unicycle_lai_symv_l(NW, -1.0, in->H[k], NW, sp + k * NW, 1.0, o);
@@ -724,85 +812,107 @@ typedef struct {
     double eta, target;
 } qp_centring;
 
-static double qp_rc(double t, double z, const double *dt, const double *dz, const qp_centring *cc)
+/* rc of the lower (rc_lo) and the upper side (rc_up) of bounded row b; the predictor's
+ * steps dt, dz are read only for the corrector (before the first corrector they are unset) */
+static double rc_lo(const unicycle_qp_workspace *ws, int b, const qp_centring *cc)
 {
-    double rc = t * z;
-    if (cc->corrector) /* dt, dz are read only then: before the first corrector they are unset */
-        rc += cc->eta * *dt * *dz - cc->target;
+    double rc = ws->t_lo[b] * ws->z_lo[b];
+    if (cc->corrector)
+        rc += cc->eta * dt_lo(ws, b) * ws->dz_lo[b] - cc->target;
     return rc;
 }
 
-/* Newton direction for the barrier right-hand side rc (t z - target per side): build the
- * condensed right-hand side, solve with refinement, recover slack and multiplier steps. */
+static double rc_up(const unicycle_qp_workspace *ws, int b, const qp_centring *cc)
+{
+    double rc = ws->t_up[b] * ws->z_up[b];
+    if (cc->corrector)
+        rc += cc->eta * dt_up(ws, b) * ws->dz_up[b] - cc->target;
+    return rc;
+}
+
+/* Newton right-hand side for the barrier right-hand side rc (t z - target per side) into
+ * (os, od, oe): -r_stat + D'y, -r_dyn, -r_eqN (os may be r_stat itself, and so on). */
+static void newton_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const qp_centring *cc, double *os,
+                       double *od, double *oe)
+{
+    int i, k, b, j;
+    for (i = 0; i < NP; ++i)
+        os[i] = -ws->r_stat[i];
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            double s = 0.0;
+            if (ws->has_lo[b])
+                s += (rc_lo(ws, b, cc) + ws->z_lo[b] * r_lo(ws, b)) / ws->t_lo[b];
+            if (ws->has_up[b])
+                s -= (rc_up(ws, b, cc) + ws->z_up[b] * r_up(ws, b)) / ws->t_up[b];
+            row_axpy(in, k, j, -s, os + k * NW);
+        }
+    for (i = 0; i < (N + 1) * NX; ++i)
+        od[i] = -ws->r_dyn[i];
+    for (i = 0; i < NE; ++i)
+        oe[i] = -ws->r_eqN[i];
+}
+
+/* Newton direction for the barrier right-hand side rc (t z - target per side): form the
+ * condensed right-hand side in the direction arrays, solve in place, refine, recover slack
+ * and multiplier steps. A refinement step forms the right-hand side again in the residual
+ * arrays r_stat, r_dyn, r_eqN of the iterate (each direction has read them by then: they
+ * are formed anew at the next iterate), computes the residual of the Newton system and
+ * the correction there in place; a further step first forms the iterate's residuals again. */
 static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int refine_steps,
                              const qp_centring *cc)
 {
-    int i, b, it;
-    double *y = ws->yrow;
-    for (i = 0; i < NI; ++i) {
-        double s = 0.0;
-        if (ws->has_lo[i])
-            s += (qp_rc(ws->t_lo[i], ws->z_lo[i], &ws->dt_lo[i], &ws->dz_lo[i], cc) +
-                  ws->z_lo[i] * ws->r_lo[i]) /
-                 ws->t_lo[i];
-        if (ws->has_up[i])
-            s -= (qp_rc(ws->t_up[i], ws->z_up[i], &ws->dt_up[i], &ws->dz_up[i], cc) +
-                  ws->z_up[i] * ws->r_up[i]) /
-                 ws->t_up[i];
-        y[i] = -s;
-    }
-    for (i = 0; i < NP; ++i)
-        ws->rhs_stat[i] = -ws->r_stat[i];
-    add_Dt(in, y, ws->rhs_stat);
-    for (i = 0; i < (N + 1) * NX; ++i)
-        ws->rhs_dyn[i] = -ws->r_dyn[i];
-    for (i = 0; i < NE; ++i)
-        ws->rhs_eqN[i] = -ws->r_eqN[i];
-
-    riccati_solve(ws, in, ws->rhs_stat, ws->rhs_dyn, ws->rhs_eqN, ws->d_prim, ws->d_lam, ws->d_nu);
+    int it, k, b, j;
+    newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
+    riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
     for (it = 0; it < refine_steps; ++it) {
-        newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->rhs_stat, ws->rhs_dyn, ws->rhs_eqN,
-                        ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin);
-        /* the correction overwrites the residual it solves for (riccati_solve allows it) */
-        riccati_solve(ws, in, ws->res_stat_lin, ws->res_dyn_lin, ws->res_eqN_lin, ws->res_stat_lin,
-                      ws->res_dyn_lin, ws->res_eqN_lin);
-        unicycle_lai_axpy(NP, 1.0, ws->res_stat_lin, ws->d_prim);
-        unicycle_lai_axpy((N + 1) * NX, 1.0, ws->res_dyn_lin, ws->d_lam);
-        unicycle_lai_axpy(NE, 1.0, ws->res_eqN_lin, ws->d_nu);
+        if (it > 0) {
+            qp_res again; /* the same values as at the start of the iteration */
+            compute_residuals(ws, in, &again);
+        }
+        newton_rhs(ws, in, cc, ws->r_stat, ws->r_dyn, ws->r_eqN);
+        newton_residual(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, ws->r_stat, ws->r_dyn, ws->r_eqN, ws->r_stat,
+                        ws->r_dyn, ws->r_eqN);
+        /* the correction overwrites the residual it solves for */
+        riccati_solve(ws, in, ws->r_stat, ws->r_dyn, ws->r_eqN);
+        unicycle_lai_axpy(NP, 1.0, ws->r_stat, ws->d_prim);
+        unicycle_lai_axpy((N + 1) * NX, 1.0, ws->r_dyn, ws->d_lam);
+        unicycle_lai_axpy(NE, 1.0, ws->r_eqN, ws->d_nu);
     }
 
-    /* dt_lo = D dw + r_lo, dt_up = r_up - D dw, dz = -(rc + z dt) / t */
-    apply_D(in, ws->d_prim, y);
-    QP_FOR_BOUNDED(ws, b, i) {
-        /* rc from the previous (predictor) direction, before it is overwritten */
-        if (ws->has_lo[i]) {
-            const double rc = qp_rc(ws->t_lo[i], ws->z_lo[i], &ws->dt_lo[i], &ws->dz_lo[i], cc);
-            ws->dt_lo[i] = y[i] + ws->r_lo[i];
-            ws->dz_lo[i] = -(rc + ws->z_lo[i] * ws->dt_lo[i]) / ws->t_lo[i];
+    /* dv = D dw (dt_lo = dv + r_lo, dt_up = r_up - dv), dz = -(rc + z dt) / t */
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            /* rc from the previous (predictor) direction, before it is overwritten */
+            const double rcl = ws->has_lo[b] ? rc_lo(ws, b, cc) : 0.0;
+            const double rcu = ws->has_up[b] ? rc_up(ws, b, cc) : 0.0;
+            ws->dv[b] = row_dot(in, k, j, ws->d_prim + k * NW);
+            if (ws->has_lo[b])
+                ws->dz_lo[b] = -(rcl + ws->z_lo[b] * dt_lo(ws, b)) / ws->t_lo[b];
+            if (ws->has_up[b])
+                ws->dz_up[b] = -(rcu + ws->z_up[b] * dt_up(ws, b)) / ws->t_up[b];
         }
-        if (ws->has_up[i]) {
-            const double rc = qp_rc(ws->t_up[i], ws->z_up[i], &ws->dt_up[i], &ws->dz_up[i], cc);
-            ws->dt_up[i] = ws->r_up[i] - y[i];
-            ws->dz_up[i] = -(rc + ws->z_up[i] * ws->dt_up[i]) / ws->t_up[i];
-        }
-    }
 }
 
 /* Largest alpha in (0, 1] keeping t + alpha dt >= 0 and z + alpha dz >= 0. */
 static double max_step(const unicycle_qp_workspace *ws)
 {
-    int i, b;
+    int i;
     double a = 1.0;
-    QP_FOR_BOUNDED(ws, b, i) {
+    for (i = 0; i < ws->nb; ++i) {
         if (ws->has_lo[i]) {
-            if (ws->dt_lo[i] < 0.0)
-                a = dmin(a, -ws->t_lo[i] / ws->dt_lo[i]);
+            const double dt = dt_lo(ws, i);
+            if (dt < 0.0)
+                a = dmin(a, -ws->t_lo[i] / dt);
             if (ws->dz_lo[i] < 0.0)
                 a = dmin(a, -ws->z_lo[i] / ws->dz_lo[i]);
         }
         if (ws->has_up[i]) {
-            if (ws->dt_up[i] < 0.0)
-                a = dmin(a, -ws->t_up[i] / ws->dt_up[i]);
+            const double dt = dt_up(ws, i);
+            if (dt < 0.0)
+                a = dmin(a, -ws->t_up[i] / dt);
             if (ws->dz_up[i] < 0.0)
                 a = dmin(a, -ws->z_up[i] / ws->dz_up[i]);
         }
@@ -823,7 +933,7 @@ static int primal_infeasible(const unicycle_qp_workspace *ws, const unicycle_qp_
     double bty = 0.0, aty, bscale = 1.0;
     if (!(r->ny > CERT_GROWTH * data_scale))
         return 0;
-    aty = unicycle_lai_norm_inf(NP, ws->aty) / r->ny;
+    aty = r->aty / r->ny;
     bty -= unicycle_lai_dot(NX, ws->lam, in->x0);
     bscale = dmax(bscale, unicycle_lai_norm_inf(NX, in->x0));
     for (k = 0; k < N; ++k) {
@@ -834,14 +944,16 @@ static int primal_infeasible(const unicycle_qp_workspace *ws, const unicycle_qp_
         bty -= unicycle_lai_dot(NE, ws->nu, in->req);
         bscale = dmax(bscale, unicycle_lai_norm_inf(NE, in->req));
     }
-    for (i = 0; i < NI; ++i) {
+    for (i = 0; i < ws->nb; ++i) {
+        double lo, up;
+        row_bounds(in, ws->bidx[i], &lo, &up);
         if (ws->has_lo[i]) {
-            bty += ws->lo[i] * ws->z_lo[i];
-            bscale = dmax(bscale, fabs(ws->lo[i]));
+            bty += lo * ws->z_lo[i];
+            bscale = dmax(bscale, fabs(lo));
         }
         if (ws->has_up[i]) {
-            bty -= ws->up[i] * ws->z_up[i];
-            bscale = dmax(bscale, fabs(ws->up[i]));
+            bty -= up * ws->z_up[i];
+            bscale = dmax(bscale, fabs(up));
         }
     }
     bty /= r->ny;
@@ -853,14 +965,13 @@ static int primal_infeasible(const unicycle_qp_workspace *ws, const unicycle_qp_
  * objective decreases without bound: d'Hd < 0, or Hd = 0 and g'd < 0. */
 static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, double data_scale, double hscale)
 {
-    int k, i;
+    int k, i, b, j;
     double nw = unicycle_lai_norm_inf(NP, ws->prim), dhd = 0.0, gd = 0.0, hd = 0.0, eq = 0.0, cone = 0.0;
-    double *hdv = ws->res_stat_lin;
+    double h[NW];
     if (!(nw > CERT_GROWTH * data_scale))
         return 0;
     for (k = 0; k < N; ++k) {
         const double *w = ws->prim + k * NW;
-        double *h = hdv + k * NW;
         double *t = ws->work;
         unicycle_lai_symv_l(NW, 1.0 / nw, in->H[k], NW, w, 0.0, h);
         unicycle_lai_axpy(NW, in->hess_shift / nw, w, h);
@@ -874,7 +985,6 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
     }
     {
         const double *xN = ws->prim + N * NW;
-        double *h = hdv + N * NW;
         unicycle_lai_symv_l(NX, 1.0 / nw, in->HN, NX, xN, 0.0, h);
         unicycle_lai_axpy(NX, in->hess_shift / nw, xN, h);
         dhd += unicycle_lai_dot(NX, xN, h) / nw;
@@ -886,13 +996,15 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
         }
     }
     eq = dmax(eq, unicycle_lai_norm_inf(NX, ws->prim) / nw);
-    for (i = 0; i < NI; ++i) {
-        const double dv = QP_V(ws)[i] / nw;
-        if (ws->has_lo[i])
-            cone = dmax(cone, -dv);
-        if (ws->has_up[i])
-            cone = dmax(cone, dv);
-    }
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            const double dv = row_dot(in, k, j, ws->prim + k * NW) / nw;
+            if (ws->has_lo[b])
+                cone = dmax(cone, -dv);
+            if (ws->has_up[b])
+                cone = dmax(cone, dv);
+        }
     if (eq > CERT_RES_PRIMAL || cone > CERT_RES_PRIMAL)
         return 0;
     if (dhd < -CERT_SEP * hscale)
@@ -901,6 +1013,25 @@ static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
 }
 
 /* ---------------------------------------------------------------- driver */
+
+/* The signed multiplier of inequality row i in the solution layout. */
+static double *row_multiplier(unicycle_qp_sol *sol, int i)
+{
+    if (i < TOFF) {
+        const int k = i / NSI, j = i - k * NSI;
+        return (NG == 0 || j < NW) ? &sol->mu_b[k][j] : &sol->mu_g[k][j - NW];
+    }
+    return (NR == 0 || i - TOFF < NX) ? &sol->mu_bN[i - TOFF] : &sol->mu_r[i - TOFF - NX];
+}
+
+static double row_mu(const unicycle_qp_sol *sol, int i)
+{
+    if (i < TOFF) {
+        const int k = i / NSI, j = i - k * NSI;
+        return (NG == 0 || j < NW) ? sol->mu_b[k][j] : sol->mu_g[k][j - NW];
+    }
+    return (NR == 0 || i - TOFF < NX) ? sol->mu_bN[i - TOFF] : sol->mu_r[i - TOFF - NX];
+}
 
 static void write_solution(const unicycle_qp_workspace *ws, unicycle_qp_sol *sol)
 {
@@ -913,23 +1044,18 @@ static void write_solution(const unicycle_qp_workspace *ws, unicycle_qp_sol *sol
     for (k = 0; k < N; ++k) {
         for (i = 0; i < NU; ++i)
             sol->u[k][i] = ws->prim[k * NW + NX + i];
-        for (i = 0; i < NW; ++i) {
-            const int r = k * NSI + i;
-            sol->mu_b[k][i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
-        }
-        for (i = 0; i < NG; ++i) {
-            const int r = k * NSI + NW + i;
-            sol->mu_g[k][i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
-        }
+        for (i = 0; i < NW; ++i)
+            sol->mu_b[k][i] = 0.0;
+        for (i = 0; i < NG; ++i)
+            sol->mu_g[k][i] = 0.0;
     }
-    for (i = 0; i < NX; ++i) {
-        const int r = TOFF + i;
-        sol->mu_bN[i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
-    }
-    for (i = 0; i < NR; ++i) {
-        const int r = TOFF + NX + i;
-        sol->mu_r[i] = (ws->has_up[r] ? ws->z_up[r] : 0.0) - (ws->has_lo[r] ? ws->z_lo[r] : 0.0);
-    }
+    for (i = 0; i < NX; ++i)
+        sol->mu_bN[i] = 0.0;
+    for (i = 0; i < NR; ++i)
+        sol->mu_r[i] = 0.0;
+    for (i = 0; i < ws->nb; ++i)
+        *row_multiplier(sol, ws->bidx[i]) =
+            (ws->has_up[i] ? ws->z_up[i] : 0.0) - (ws->has_lo[i] ? ws->z_lo[i] : 0.0);
     for (i = 0; i < NE; ++i)
         sol->nu[i] = ws->nu[i];
 }
@@ -961,7 +1087,7 @@ static void zero_solution(unicycle_qp_sol *sol)
 static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const unicycle_qp_settings *st,
                           const unicycle_qp_sol *sol)
 {
-    int k, i;
+    int k, i, b, j;
     const int warm = st->warm_start != 0;
     for (i = 0; i < NP; ++i)
         ws->prim[i] = 0.0;
@@ -981,29 +1107,26 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
         for (i = 0; i < NE; ++i)
             ws->nu[i] = sol->nu[i];
     }
-    apply_D(in, ws->prim, QP_V(ws));
-    for (i = 0; i < NI; ++i) {
-        double mu_signed = 0.0;
-        ws->t_lo[i] = ws->t_up[i] = 1.0;
-        ws->z_lo[i] = ws->z_up[i] = 0.0;
-        if (warm) {
-            const int k2 = i / NSI, j = i % NSI;
-            if (i >= TOFF)
-                mu_signed = (i - TOFF < NX) ? sol->mu_bN[i - TOFF] : sol->mu_r[i - TOFF - NX];
-            else
-                mu_signed = (j < NW) ? sol->mu_b[k2][j] : sol->mu_g[k2][j - NW];
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            const double mu_signed = warm ? row_mu(sol, ws->bidx[b]) : 0.0;
+            const double v = row_dot(in, k, j, ws->prim + k * NW);
+            double lo, up;
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            ws->t_lo[b] = ws->t_up[b] = 1.0;
+            ws->z_lo[b] = ws->z_up[b] = 0.0;
+            if (ws->has_lo[b]) {
+                const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(lo)) : 1.0;
+                ws->t_lo[b] = dmax(v - lo, floor_t);
+                ws->z_lo[b] = warm ? dmax(-mu_signed, WARM_FLOOR_Z) : 1.0;
+            }
+            if (ws->has_up[b]) {
+                const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(up)) : 1.0;
+                ws->t_up[b] = dmax(up - v, floor_t);
+                ws->z_up[b] = warm ? dmax(mu_signed, WARM_FLOOR_Z) : 1.0;
+            }
         }
-        if (ws->has_lo[i]) {
-            const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->lo[i])) : 1.0;
-            ws->t_lo[i] = dmax(QP_V(ws)[i] - ws->lo[i], floor_t);
-            ws->z_lo[i] = warm ? dmax(-mu_signed, WARM_FLOOR_Z) : 1.0;
-        }
-        if (ws->has_up[i]) {
-            const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(ws->up[i])) : 1.0;
-            ws->t_up[i] = dmax(ws->up[i] - QP_V(ws)[i], floor_t);
-            ws->z_up[i] = warm ? dmax(mu_signed, WARM_FLOOR_Z) : 1.0;
-        }
-    }
 }
 
 static double merit(const qp_res *r)
@@ -1038,7 +1161,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
     unicycle_qp_settings st;
     qp_res r, best_r;
     qp_centring pred, corr;
-    int iter, i, b, keep_best, status = UNICYCLE_QP_MAX_ITER;
+    int iter, i, bounds, keep_best, status = UNICYCLE_QP_MAX_ITER;
     int n_corr = 0, n_aug = 0;
     double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
     int best_iter = 0;
@@ -1089,7 +1212,13 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
     ws->delta = 0.0;
     ws->rho_aug = 0.0;
     ws->pivot_floors = 0;
-    if (!setup_bounds(ws, in)) {
+    bounds = setup_bounds(ws, in);
+    if (bounds == 2) {
+        /* more bounded rows than the workspace was generated for */
+        zero_solution(sol);
+        return UNICYCLE_QP_INVALID_INPUT;
+    }
+    if (bounds == 1) {
         zero_solution(sol);
         if (info)
             info->status = UNICYCLE_QP_PRIMAL_INFEASIBLE;
@@ -1100,13 +1229,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
     initial_point(ws, in, &st, sol);
 
     /* data scale for the divergence tests of the certificates */
-    data_scale = 1.0;
-    for (i = 0; i < NI; ++i) {
-        if (ws->has_lo[i])
-            data_scale = dmax(data_scale, fabs(ws->lo[i]));
-        if (ws->has_up[i])
-            data_scale = dmax(data_scale, fabs(ws->up[i]));
-    }
+    data_scale = dmax(1.0, ws->scale_bounds); /* the finite bounds */
     data_scale = dmax(data_scale, unicycle_lai_norm_inf(NX, in->x0));
     for (i = 0; i < N; ++i) {
         data_scale = dmax(data_scale, unicycle_lai_norm_inf(NX, in->b[i]));
@@ -1174,22 +1297,15 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             break;
         }
 
-        /* barrier weights Q = z/t per row */
-        QP_FOR_BOUNDED(ws, b, i) {
-            double q = 0.0;
-            if (ws->has_lo[i])
-                q += ws->z_lo[i] / ws->t_lo[i];
-            if (ws->has_up[i])
-                q += ws->z_up[i] / ws->t_up[i];
-            ws->qdiag[i] = q;
-        }
 #ifdef UNICYCLE_QP_TRACE
         {
-            int kk;
-            /* barrier weights, for an inertia analysis of H + D'QD offline */
+            int kk, b2 = 0;
+            /* barrier weights of every row, for an inertia analysis of H + D'QD offline */
             QP_TRACE("QD %d", iter);
-            for (kk = 0; kk < NI; ++kk)
-                QP_TRACE(" %.17g", ws->qdiag[kk]);
+            for (kk = 0; kk < NI; ++kk) {
+                const double qk = (b2 < ws->nb && ws->bidx[b2] == kk) ? row_q(ws, b2++) : 0.0;
+                QP_TRACE(" %.17g", qk);
+            }
             QP_TRACE("\n");
         }
 #endif
@@ -1255,11 +1371,11 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         alpha_aff = alpha;
         (void)alpha_aff;
         mu_aff = 0.0;
-        QP_FOR_BOUNDED(ws, b, i) {
+        for (i = 0; i < ws->nb; ++i) {
             if (ws->has_lo[i])
-                mu_aff += (ws->t_lo[i] + alpha * ws->dt_lo[i]) * (ws->z_lo[i] + alpha * ws->dz_lo[i]);
+                mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha * ws->dz_lo[i]);
             if (ws->has_up[i])
-                mu_aff += (ws->t_up[i] + alpha * ws->dt_up[i]) * (ws->z_up[i] + alpha * ws->dz_up[i]);
+                mu_aff += (ws->t_up[i] + alpha * dt_up(ws, i)) * (ws->z_up[i] + alpha * ws->dz_up[i]);
         }
         mu_aff /= r.nsides;
         sigma = r.mu > 0.0 ? mu_aff / r.mu : 0.0;
@@ -1297,13 +1413,13 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         unicycle_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
         unicycle_lai_axpy((N + 1) * NX, alpha, ws->d_lam, ws->lam);
         unicycle_lai_axpy(NE, alpha, ws->d_nu, ws->nu);
-        QP_FOR_BOUNDED(ws, b, i) {
+        for (i = 0; i < ws->nb; ++i) {
             if (ws->has_lo[i]) {
-                ws->t_lo[i] += alpha * ws->dt_lo[i];
+                ws->t_lo[i] += alpha * dt_lo(ws, i);
                 ws->z_lo[i] += alpha * ws->dz_lo[i];
             }
             if (ws->has_up[i]) {
-                ws->t_up[i] += alpha * ws->dt_up[i];
+                ws->t_up[i] += alpha * dt_up(ws, i);
                 ws->z_up[i] += alpha * ws->dz_up[i];
             }
         }

@@ -102,6 +102,19 @@
 #define UNICYCLE_QP_NSTAGEINEQ (UNICYCLE_QP_NW + UNICYCLE_NG)
 #define UNICYCLE_QP_NINEQ (UNICYCLE_N * UNICYCLE_QP_NSTAGEINEQ + UNICYCLE_NX + UNICYCLE_NR)
 
+/* Rows with a finite side at most (sizes every per-row array of the workspace): the
+ * generated sizes header counts them from the problem's bounds (UNICYCLE_NB); a QP with more
+ * bounded rows is rejected as invalid input. Without UNICYCLE_NB, every row. */
+#ifdef UNICYCLE_NB
+#define UNICYCLE_QP_NB UNICYCLE_QP_MAX1(UNICYCLE_NB)
+#else
+#define UNICYCLE_QP_NB UNICYCLE_QP_MAX1(UNICYCLE_QP_NINEQ)
+#endif
+/* A symmetric nx x nx matrix packed by lower columns. */
+#define UNICYCLE_QP_NXP (UNICYCLE_NX * (UNICYCLE_NX + 1) / 2)
+/* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
+#define UNICYCLE_QP_NWORK (2 * UNICYCLE_NX * UNICYCLE_QP_NW + UNICYCLE_QP_NW * UNICYCLE_QP_NE1 + UNICYCLE_NX * UNICYCLE_NX)
+
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if UNICYCLE_QP_NINEQ < 65536
 typedef unsigned short unicycle_qp_row;
@@ -117,7 +130,8 @@ enum unicycle_qp_status {
     UNICYCLE_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */
     UNICYCLE_QP_DUAL_INFEASIBLE = 3,   /* unbounded below: feasible descent ray found */
     UNICYCLE_QP_NUMERICAL = 4,         /* factorisation / step failure */
-    UNICYCLE_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr */
+    UNICYCLE_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr,
+                                       more bounded rows than UNICYCLE_QP_NB */
     UNICYCLE_QP_STALLED = 6            /* no progress in the KKT residuals for 10 iterations
                                        (before the limit); best point returned */
 };
@@ -195,57 +209,50 @@ typedef struct {
 /* The whole solver memory; the user declares one (static, global or on a task stack).
  * Fields are internal. */
 typedef struct {
-    /* problem data prepared once per solve */
-    double lo[UNICYCLE_QP_NINEQ];
-    double up[UNICYCLE_QP_NINEQ];
-    unsigned char has_lo[UNICYCLE_QP_NINEQ];
-    unsigned char has_up[UNICYCLE_QP_NINEQ];
-    unicycle_qp_row bidx[UNICYCLE_QP_NINEQ]; /* the rows with a finite side, nb of them */
+    /* the inequality rows with a finite side ("bounded rows"), nb <= UNICYCLE_QP_NB of them in
+     * increasing row order: the row, its sides and bounds; the rows of stage k are
+     * b = bstart[k] .. bstart[k+1]-1 (k = N: the terminal rows). Every per-row array below
+     * is indexed by b. */
+    unicycle_qp_row bidx[UNICYCLE_QP_NB];
+    unsigned char has_lo[UNICYCLE_QP_NB];
+    unsigned char has_up[UNICYCLE_QP_NB];
+    unicycle_qp_row bstart[UNICYCLE_N + 2];
     int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
     double prim[UNICYCLE_QP_NPRIM];
     double lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
     double nu[UNICYCLE_QP_NE1];
-    double t_lo[UNICYCLE_QP_NINEQ];
-    double t_up[UNICYCLE_QP_NINEQ];
-    double z_lo[UNICYCLE_QP_NINEQ];
-    double z_up[UNICYCLE_QP_NINEQ];
+    double t_lo[UNICYCLE_QP_NB];
+    double t_up[UNICYCLE_QP_NB];
+    double z_lo[UNICYCLE_QP_NB];
+    double z_up[UNICYCLE_QP_NB];
     /* residuals */
     double r_stat[UNICYCLE_QP_NPRIM];
     double r_dyn[(UNICYCLE_N + 1) * UNICYCLE_NX];
     double r_eqN[UNICYCLE_QP_NE1];
-    double r_lo[UNICYCLE_QP_NINEQ];
-    double r_up[UNICYCLE_QP_NINEQ];
-    /* barrier weights and Newton directions */
-    double qdiag[UNICYCLE_QP_NINEQ];
+    /* v - lo and up - v of the row values v = D w: the slack residuals and steps and the
+     * barrier weights are formed from them and dv, t, z (the bounds are read from the QP
+     * data where needed); the refinement of a direction also works in r_stat, r_dyn, r_eqN */
+    double vl[UNICYCLE_QP_NB];
+    double uv[UNICYCLE_QP_NB];
+    /* Newton directions (the Newton right-hand side is formed in the direction arrays and
+     * solved in place) */
     double d_prim[UNICYCLE_QP_NPRIM];
     double d_lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
     double d_nu[UNICYCLE_QP_NE1];
-    double dt_lo[UNICYCLE_QP_NINEQ];
-    double dt_up[UNICYCLE_QP_NINEQ];
-    double dz_lo[UNICYCLE_QP_NINEQ];
-    double dz_up[UNICYCLE_QP_NINEQ];
-    /* Newton right-hand side, solution and refinement buffers */
-    double rhs_stat[UNICYCLE_QP_NPRIM];
-    double rhs_dyn[(UNICYCLE_N + 1) * UNICYCLE_NX];
-    double rhs_eqN[UNICYCLE_QP_NE1];
-    double res_stat_lin[UNICYCLE_QP_NPRIM];
-    double res_dyn_lin[(UNICYCLE_N + 1) * UNICYCLE_NX];
-    double res_eqN_lin[UNICYCLE_QP_NE1];
+    double dv[UNICYCLE_QP_NB]; /* D d_prim */
+    double dz_lo[UNICYCLE_QP_NB];
+    double dz_up[UNICYCLE_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
     double M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
-    double P[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_NX];       /* value function Hessians */
+    double P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];              /* value function Hessians, packed lower */
     double G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];   /* value function x-nu coupling */
     double Lu[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NU1];  /* Cholesky factor of M_uu */
     double LK[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* Lu^{-1} M_ux */
     double LKn[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     double S[UNICYCLE_QP_NE1 * UNICYCLE_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
-    double p[UNICYCLE_N + 1][UNICYCLE_NX];
     double e[UNICYCLE_QP_NE1];
-    double lk[UNICYCLE_N][UNICYCLE_QP_NU1];
-    double aty[UNICYCLE_QP_NPRIM];  /* constraint part of r_stat (A'y) */
-    double yrow[UNICYCLE_QP_NINEQ]; /* per-row scratch; row values v = D w */
-    double work[4 * UNICYCLE_QP_NW * (UNICYCLE_QP_NW + UNICYCLE_QP_NE1 + 1)];
+    double work[UNICYCLE_QP_NWORK];
     double delta;               /* current inertia-correction shift */
     double rho_aug;             /* current terminal augmented-Lagrangian weight */
     double noise[UNICYCLE_QP_NU1]; /* round-off estimate of M_uu pivots */

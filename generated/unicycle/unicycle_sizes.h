@@ -15,6 +15,15 @@
 #define UNICYCLE_NR 0
 #define UNICYCLE_NE 0
 
+/* Rows of the QP with a finite side (a lower or an upper bound): state components, controls,
+ * path-constraint rows, terminal rows. x_0 is fixed by the measured state, so the state
+ * rows count on stages 1..N. NB sizes the per-row arrays of the QP workspace (unicycle_qp.h). */
+#define UNICYCLE_NBX 1
+#define UNICYCLE_NBU 2
+#define UNICYCLE_NBG 1
+#define UNICYCLE_NBR 0
+#define UNICYCLE_NB 80 /* N (NBX + NBU + NBG) + NBR */
+
 /* 1 if the OCP has a least-squares stage cost, so the Gauss-Newton Hessian exists */
 #define UNICYCLE_HAS_GN 1
 /* 1 if the offline primal-dual solution at the default x0 is carried as data */
