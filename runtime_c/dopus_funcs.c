@@ -3,8 +3,8 @@
 #include "dopus_funcs.h"
 #include "dopus_casadi.h"
 
-int dopus_eval_stage_eval(const double *x, const double *u, const double *p, double *phi, double *l,
-                          double *g, dopus_fun_work *wk)
+int dopus_eval_stage_eval(const dopus_real *x, const dopus_real *u, const dopus_real *p, dopus_real *phi,
+                          dopus_real *l, dopus_real *g, dopus_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -15,9 +15,9 @@ int dopus_eval_stage_eval(const double *x, const double *u, const double *p, dou
     return dopus_stage_eval(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int dopus_eval_stage_grad(const double *x, const double *u, const double *p, const double *lam_next,
-                          const double *mu_g, double *gL, double *phi, double *l, double *g,
-                          dopus_fun_work *wk)
+int dopus_eval_stage_grad(const dopus_real *x, const dopus_real *u, const dopus_real *p,
+                          const dopus_real *lam_next, const dopus_real *mu_g, dopus_real *gL, dopus_real *phi,
+                          dopus_real *l, dopus_real *g, dopus_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -31,9 +31,9 @@ int dopus_eval_stage_grad(const double *x, const double *u, const double *p, con
     return dopus_stage_grad(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int dopus_eval_stage_hess(int gauss_newton, const double *x, const double *u, const double *p,
-                          const double *lam_next, const double *mu_g, double *A, double *Phi, double *C,
-                          dopus_fun_work *wk)
+int dopus_eval_stage_hess(int gauss_newton, const dopus_real *x, const dopus_real *u, const dopus_real *p,
+                          const dopus_real *lam_next, const dopus_real *mu_g, dopus_real *A, dopus_real *Phi,
+                          dopus_real *C, dopus_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -53,8 +53,8 @@ int dopus_eval_stage_hess(int gauss_newton, const double *x, const double *u, co
     return dopus_stage_hess_exact(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int dopus_eval_stage_hess_cost(int gauss_newton, const double *x, const double *u, const double *p,
-                               double *A_l, dopus_fun_work *wk)
+int dopus_eval_stage_hess_cost(int gauss_newton, const dopus_real *x, const dopus_real *u,
+                               const dopus_real *p, dopus_real *A_l, dopus_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -70,8 +70,8 @@ int dopus_eval_stage_hess_cost(int gauss_newton, const double *x, const double *
     return dopus_stage_hess_cost_exact(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int dopus_eval_term_eval(const double *x, const double *p, double *E, double *r, double *r_eq,
-                         dopus_fun_work *wk)
+int dopus_eval_term_eval(const dopus_real *x, const dopus_real *p, dopus_real *E, dopus_real *r,
+                         dopus_real *r_eq, dopus_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = p;
@@ -81,8 +81,9 @@ int dopus_eval_term_eval(const double *x, const double *p, double *E, double *r,
     return dopus_term_eval(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int dopus_eval_term_grad(const double *x, const double *p, const double *mu_r, const double *nu, double *gL,
-                         double *E, double *r, double *r_eq, dopus_fun_work *wk)
+int dopus_eval_term_grad(const dopus_real *x, const dopus_real *p, const dopus_real *mu_r,
+                         const dopus_real *nu, dopus_real *gL, dopus_real *E, dopus_real *r, dopus_real *r_eq,
+                         dopus_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = p;
@@ -95,8 +96,9 @@ int dopus_eval_term_grad(const double *x, const double *p, const double *mu_r, c
     return dopus_term_grad(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int dopus_eval_term_hess(int gauss_newton, const double *x, const double *p, const double *mu_r,
-                         const double *nu, double *A, double *R, double *R_eq, dopus_fun_work *wk)
+int dopus_eval_term_hess(int gauss_newton, const dopus_real *x, const dopus_real *p, const dopus_real *mu_r,
+                         const dopus_real *nu, dopus_real *A, dopus_real *R, dopus_real *R_eq,
+                         dopus_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = p;
@@ -111,7 +113,8 @@ int dopus_eval_term_hess(int gauss_newton, const double *x, const double *p, con
     return dopus_term_hess_exact(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int dopus_eval_ode(const double *x, const double *u, const double *p, double *xdot, dopus_fun_work *wk)
+int dopus_eval_ode(const dopus_real *x, const dopus_real *u, const dopus_real *p, dopus_real *xdot,
+                   dopus_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;

@@ -10,19 +10,19 @@ void dopus_ring_reset(dopus_ring *ring)
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *s = &ring->slot[k];
         for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i)
-            s->Ht[i] = 0.0;
+            s->Ht[i] = DOPUS_R(0.0);
         for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i)
-            s->A_dyn[i] = 0.0;
+            s->A_dyn[i] = DOPUS_R(0.0);
         for (i = 0; i < DOPUS_NX * DOPUS_NW; ++i)
-            s->Phit[i] = 0.0;
+            s->Phit[i] = DOPUS_R(0.0);
         for (i = 0; i < DOPUS_DIM(DOPUS_NG) * DOPUS_NW; ++i)
-            s->Ct[i] = 0.0;
+            s->Ct[i] = DOPUS_R(0.0);
         for (i = 0; i < DOPUS_NW; ++i)
-            s->F_w[i] = 0.0;
+            s->F_w[i] = DOPUS_R(0.0);
         for (i = 0; i < DOPUS_NX; ++i)
-            s->phi[i] = 0.0;
+            s->phi[i] = DOPUS_R(0.0);
         for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i)
-            s->g[i] = 0.0;
+            s->g[i] = DOPUS_R(0.0);
         dopus_ring_clear_step(s);
     }
     ring->ring_head = 0;
@@ -47,24 +47,24 @@ void dopus_ring_clear_step(dopus_stage_slot *slot)
 {
     int i;
     for (i = 0; i < DOPUS_NW; ++i)
-        slot->dw[i] = 0.0;
+        slot->dw[i] = DOPUS_R(0.0);
     for (i = 0; i < DOPUS_NX; ++i)
-        slot->dlam[i] = 0.0;
+        slot->dlam[i] = DOPUS_R(0.0);
     for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i)
-        slot->dmu_g[i] = 0.0;
+        slot->dmu_g[i] = DOPUS_R(0.0);
     for (i = 0; i < DOPUS_NW; ++i)
-        slot->dmu_b[i] = 0.0;
+        slot->dmu_b[i] = DOPUS_R(0.0);
 }
 
-double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, const double *phi_new,
-                         const double *g_new)
+dopus_real dopus_ring_secant(const dopus_stage_slot *slot, const dopus_real *F_w_new,
+                             const dopus_real *phi_new, const dopus_real *g_new)
 {
-    double num2 = 0.0, den2 = 0.0, old2 = 0.0, new2 = 0.0;
+    dopus_real num2 = DOPUS_R(0.0), den2 = DOPUS_R(0.0), old2 = DOPUS_R(0.0), new2 = DOPUS_R(0.0);
     int i, j;
 
     /* stationarity rows: F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new */
     for (i = 0; i < DOPUS_NW; ++i) {
-        double hd = 0.0, pl = 0.0, cm = 0.0, v;
+        dopus_real hd = DOPUS_R(0.0), pl = DOPUS_R(0.0), cm = DOPUS_R(0.0), v;
         for (j = 0; j < DOPUS_NW; ++j)
             hd += slot->Ht[i + j * DOPUS_NW] * slot->dw[j];
         for (j = 0; j < DOPUS_NX; ++j)
@@ -76,7 +76,7 @@ double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, co
     }
     /* dynamics rows: -(phi_old + Phit dw) + phi_new */
     for (i = 0; i < DOPUS_NX; ++i) {
-        double pd = 0.0, v;
+        dopus_real pd = DOPUS_R(0.0), v;
         for (j = 0; j < DOPUS_NW; ++j)
             pd += slot->Phit[i + j * DOPUS_NX] * slot->dw[j];
         v = -(slot->phi[i] + pd) + phi_new[i];
@@ -84,7 +84,7 @@ double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, co
     }
     /* path constraint rows: g_old + Ct dw - g_new */
     for (i = 0; i < DOPUS_NG; ++i) {
-        double cd = 0.0, v;
+        dopus_real cd = DOPUS_R(0.0), v;
         for (j = 0; j < DOPUS_NW; ++j)
             cd += slot->Ct[i + j * DOPUS_DIM(DOPUS_NG)] * slot->dw[j];
         v = slot->g[i] + cd - g_new[i];
@@ -109,22 +109,23 @@ double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, co
         new2 += phi_new[i] * phi_new[i];
     for (i = 0; i < DOPUS_NG; ++i)
         new2 += g_new[i] * g_new[i];
-    if (den2 == 0.0) {
-        return 0.0;
+    if (den2 == DOPUS_R(0.0)) {
+        return DOPUS_R(0.0);
     }
     /* a residual or step whose square overflows (or a NaN from Inf - Inf in the residual):
      * the linear model of this stage says nothing, it ranks first */
-    if (!(num2 <= DBL_MAX) || !(den2 <= DBL_MAX)) {
+    if (!(num2 <= DOPUS_REAL_MAX) || !(den2 <= DOPUS_REAL_MAX)) {
         return INFINITY;
     }
     /* a residual at the round-off level of F is noise, not a secant violation */
-    if (sqrt(num2) <= DOPUS_EPS_RHO * (sqrt(old2) + sqrt(new2))) {
-        return 0.0;
+    if (dopus_sqrt(num2) <= DOPUS_EPS_RHO * (dopus_sqrt(old2) + dopus_sqrt(new2))) {
+        return DOPUS_R(0.0);
     }
-    return sqrt(num2) / sqrt(den2);
+    return dopus_sqrt(num2) / dopus_sqrt(den2);
 }
 
-void dopus_ring_store_F(dopus_stage_slot *slot, const double *F_w, const double *phi, const double *g)
+void dopus_ring_store_F(dopus_stage_slot *slot, const dopus_real *F_w, const dopus_real *phi,
+                        const dopus_real *g)
 {
     int i;
     for (i = 0; i < DOPUS_NW; ++i)

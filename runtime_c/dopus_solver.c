@@ -18,11 +18,11 @@
 #include "dopus_solver.h"
 
 #define DOPUS_MAGIC 0x444f5055 /* "DOPU" */
-#define DOPUS_DEFAULT_QP_TOL 1e-10
+#define DOPUS_DEFAULT_QP_TOL DOPUS_PREC(1e-10, 1e-5)
 
 /* ---- small helpers ------------------------------------------------------------------ */
 
-static void dopus_copy(double *dst, const double *src, int n)
+static void dopus_copy(dopus_real *dst, const dopus_real *src, int n)
 {
     int i;
     for (i = 0; i < n; ++i) {
@@ -103,9 +103,9 @@ const char *dopus_status_string(int status)
 
 /* ---- safety: scales, clipping, health (algorithm.md section 9) -------------------- */
 
-static double dopus_absmax(double a, double b)
+static dopus_real dopus_absmax(dopus_real a, dopus_real b)
 {
-    double fa = fabs(a);
+    dopus_real fa = dopus_fabs(a);
     return isfinite(a) && fa > b ? fa : b;
 }
 
@@ -115,7 +115,7 @@ static void dopus_compute_scales(dopus_solver *s)
 {
     int k, i;
     for (i = 0; i < DOPUS_NX; ++i) {
-        double v = 1.0;
+        dopus_real v = DOPUS_R(1.0);
         v = dopus_absmax(dopus_lbx[i], v);
         v = dopus_absmax(dopus_ubx[i], v);
         v = dopus_absmax(dopus_x0_default[i], v);
@@ -125,7 +125,7 @@ static void dopus_compute_scales(dopus_solver *s)
         s->scale_x[i] = v;
     }
     for (i = 0; i < DOPUS_NU; ++i) {
-        double v = 1.0;
+        dopus_real v = DOPUS_R(1.0);
         v = dopus_absmax(dopus_lbu[i], v);
         v = dopus_absmax(dopus_ubu[i], v);
         for (k = 0; k < DOPUS_N; ++k) {
@@ -154,17 +154,17 @@ static void dopus_reset_health(dopus_solver *s)
     for (i = 0; i < DOPUS_NU; ++i) {
         s->u0_out[i] = s->plan_u[0][i];
     }
-    s->kkt_proxy = 0.0;
-    s->kkt_proxy_ref = 0.0;
+    s->kkt_proxy = DOPUS_R(0.0);
+    s->kkt_proxy_ref = DOPUS_R(0.0);
 }
 
 /* u clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1 when
  * an entry changed. */
-static int dopus_clip_u(const double *u, double *out)
+static int dopus_clip_u(const dopus_real *u, dopus_real *out)
 {
     int i, clipped = 0;
     for (i = 0; i < DOPUS_NU; ++i) {
-        double v = isnan(u[i]) ? 0.0 : u[i];
+        dopus_real v = isnan(u[i]) ? DOPUS_R(0.0) : u[i];
         if (v < dopus_lbu[i]) {
             v = dopus_lbu[i];
         }
@@ -182,22 +182,22 @@ static int dopus_clip_u(const double *u, double *out)
 /* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as the iterate
  * plus an optional step: every entry finite and |v_i| <= BOX scale_i + |xhat0_i| (states),
  * BOX scale_i (controls). Returns 1 when it passes. */
-static int dopus_box_ok(const dopus_solver *s, const double *x, const double *dx, int dx_stride,
-                        const double *u, const double *du, int du_stride)
+static int dopus_box_ok(const dopus_solver *s, const dopus_real *x, const dopus_real *dx, int dx_stride,
+                        const dopus_real *u, const dopus_real *du, int du_stride)
 {
     int k, i;
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
-            double v = x[k * DOPUS_NX + i] + (dx ? dx[k * dx_stride + i] : 0.0);
-            if (!(fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + fabs(s->xhat0[i]))) {
+            dopus_real v = x[k * DOPUS_NX + i] + (dx ? dx[k * dx_stride + i] : DOPUS_R(0.0));
+            if (!(dopus_fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + dopus_fabs(s->xhat0[i]))) {
                 return 0;
             }
         }
     }
     for (k = 0; k < DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NU; ++i) {
-            double v = u[k * DOPUS_NU + i] + (du ? du[k * du_stride + i] : 0.0);
-            if (!(fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_u[i])) {
+            dopus_real v = u[k * DOPUS_NU + i] + (du ? du[k * du_stride + i] : DOPUS_R(0.0));
+            if (!(dopus_fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_u[i])) {
                 return 0;
             }
         }
@@ -206,7 +206,7 @@ static int dopus_box_ok(const dopus_solver *s, const double *x, const double *dx
 }
 
 /* The fallback control of a failed feedback: the next control of the last good plan. */
-static void dopus_fallback_u0(dopus_solver *s, double *u0)
+static void dopus_fallback_u0(dopus_solver *s, dopus_real *u0)
 {
     int j = s->mode == DOPUS_MODE_RECEDING ? s->plan_age : 0;
     j = j > DOPUS_N - 1 ? DOPUS_N - 1 : j;
@@ -222,7 +222,7 @@ static void dopus_fallback_u0(dopus_solver *s, double *u0)
 /* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
 static void dopus_lm_feedback(dopus_solver *s, int status);
 
-static int dopus_feedback_failed(dopus_solver *s, double *u0, int status)
+static int dopus_feedback_failed(dopus_solver *s, dopus_real *u0, int status)
 {
     dopus_lm_feedback(s, status);
     s->n_failed += 1;
@@ -239,27 +239,27 @@ static int dopus_feedback_failed(dopus_solver *s, double *u0, int status)
 /* Divergence measure at the current point from the F values in the slots and the terminal
  * node (after init or a prepare): max of |F_w,k + [lam_k; 0]|, |gL_N + mu_bN + lam_N|,
  * |phi_k - x_{k+1}|, |r_eq| (inf-norms). */
-static double dopus_kkt_proxy_eval(const dopus_solver *s)
+static dopus_real dopus_kkt_proxy_eval(const dopus_solver *s)
 {
-    double m = 0.0, v;
+    dopus_real m = DOPUS_R(0.0), v;
     int k, i;
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
         for (i = 0; i < DOPUS_NW; ++i) {
-            v = fabs(slot->F_w[i] + (i < DOPUS_NX ? s->lam[k][i] : 0.0));
+            v = dopus_fabs(slot->F_w[i] + (i < DOPUS_NX ? s->lam[k][i] : DOPUS_R(0.0)));
             m = (v > m || isnan(v)) ? v : m;
         }
         for (i = 0; i < DOPUS_NX; ++i) {
-            v = fabs(slot->phi[i] - s->x[k + 1][i]);
+            v = dopus_fabs(slot->phi[i] - s->x[k + 1][i]);
             m = (v > m || isnan(v)) ? v : m;
         }
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        v = fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]);
+        v = dopus_fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]);
         m = (v > m || isnan(v)) ? v : m;
     }
     for (i = 0; i < DOPUS_NE; ++i) {
-        v = fabs(s->r_eq[i]);
+        v = dopus_fabs(s->r_eq[i]);
         m = (v > m || isnan(v)) ? v : m;
     }
     return m;
@@ -268,7 +268,7 @@ static double dopus_kkt_proxy_eval(const dopus_solver *s)
 /* The divergence test of the prepared iterate: box, finite multipliers, KKT proxy bound. */
 static int dopus_iterate_diverged(dopus_solver *s)
 {
-    double ref = s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0;
+    dopus_real ref = s->kkt_proxy_ref > DOPUS_R(1.0) ? s->kkt_proxy_ref : DOPUS_R(1.0);
     if (!dopus_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0)) {
         return 1;
     }
@@ -283,19 +283,19 @@ static int dopus_iterate_diverged(dopus_solver *s)
 /* ---- automatic Levenberg-Marquardt term (algorithm.md section 10) ------------------- */
 
 /* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
-static double dopus_lm_hessian_scale(const dopus_solver *s)
+static dopus_real dopus_lm_hessian_scale(const dopus_solver *s)
 {
-    double h = 1e-300, v;
+    dopus_real h = DOPUS_REAL_TINY, v;
     int k, i;
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
         for (i = 0; i < DOPUS_NW; ++i) {
-            v = fabs(slot->Ht[i + i * DOPUS_NW]);
+            v = dopus_fabs(slot->Ht[i + i * DOPUS_NW]);
             h = v > h ? v : h;
         }
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        v = fabs(s->A_N[i + i * DOPUS_NX]);
+        v = dopus_fabs(s->A_N[i + i * DOPUS_NX]);
         h = v > h ? v : h;
     }
     return h;
@@ -304,16 +304,16 @@ static double dopus_lm_hessian_scale(const dopus_solver *s)
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
  * out) has control pivots above DOPUS_LM_PIVOT_REL h. */
-static int dopus_lm_convex(dopus_solver *s, double lm)
+static int dopus_lm_convex(dopus_solver *s, dopus_real lm)
 {
-    const double tol = DOPUS_LM_PIVOT_REL * s->lm_scale;
-    double *P = s->lm_P, *PA = s->lm_PA, *Z = s->lm_G;
-    double v;
+    const dopus_real tol = DOPUS_LM_PIVOT_REL * s->lm_scale;
+    dopus_real *P = s->lm_P, *PA = s->lm_PA, *Z = s->lm_G;
+    dopus_real v;
     int k, i, j, l;
     for (j = 0; j < DOPUS_NX; ++j) {
         for (i = 0; i < DOPUS_NX; ++i) {
             P[i + j * DOPUS_NX] =
-                (i >= j ? s->A_N[i + j * DOPUS_NX] : s->A_N[j + i * DOPUS_NX]) + (i == j ? lm : 0.0);
+                (i >= j ? s->A_N[i + j * DOPUS_NX] : s->A_N[j + i * DOPUS_NX]) + (i == j ? lm : DOPUS_R(0.0));
         }
     }
     for (k = DOPUS_N - 1; k >= 0; --k) {
@@ -321,7 +321,7 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
         /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
         for (j = 0; j < DOPUS_NW; ++j) {
             for (i = 0; i < DOPUS_NX; ++i) {
-                v = 0.0;
+                v = DOPUS_R(0.0);
                 for (l = 0; l < DOPUS_NX; ++l) {
                     v += P[i + l * DOPUS_NX] * slot->Phit[l + j * DOPUS_NX];
                 }
@@ -330,7 +330,8 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
         }
         for (j = 0; j < DOPUS_NW; ++j) {
             for (i = 0; i < DOPUS_NW; ++i) {
-                v = (i >= j ? slot->Ht[i + j * DOPUS_NW] : slot->Ht[j + i * DOPUS_NW]) + (i == j ? lm : 0.0);
+                v = (i >= j ? slot->Ht[i + j * DOPUS_NW] : slot->Ht[j + i * DOPUS_NW]) +
+                    (i == j ? lm : DOPUS_R(0.0));
                 for (l = 0; l < DOPUS_NX; ++l) {
                     v += slot->Phit[l + i * DOPUS_NX] * PA[l + j * DOPUS_NX];
                 }
@@ -339,14 +340,14 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
         }
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = DOPUS_NX; j < DOPUS_NW; ++j) {
-            double d = Z[j + j * DOPUS_NW];
+            dopus_real d = Z[j + j * DOPUS_NW];
             for (l = DOPUS_NX; l < j; ++l) {
                 d -= Z[j + l * DOPUS_NW] * Z[j + l * DOPUS_NW];
             }
             if (!(d > tol)) {
                 return 0;
             }
-            d = sqrt(d);
+            d = dopus_sqrt(d);
             Z[j + j * DOPUS_NW] = d;
             for (i = j + 1; i < DOPUS_NW; ++i) {
                 v = Z[i + j * DOPUS_NW];
@@ -371,7 +372,7 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
         }
         for (j = 0; j < DOPUS_NX; ++j) {
             for (i = 0; i < DOPUS_NX; ++i) {
-                v = 0.5 * (Z[i + j * DOPUS_NW] + Z[j + i * DOPUS_NW]);
+                v = DOPUS_R(0.5) * (Z[i + j * DOPUS_NW] + Z[j + i * DOPUS_NW]);
                 for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
                     v -= Z[l + i * DOPUS_NW] * Z[l + j * DOPUS_NW];
                 }
@@ -386,7 +387,7 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
  * maximum. */
 static void dopus_lm_raise(dopus_solver *s)
 {
-    double lo = DOPUS_LM_MIN_REL * s->lm_scale, hi = DOPUS_LM_MAX_REL * s->lm_scale;
+    dopus_real lo = DOPUS_LM_MIN_REL * s->lm_scale, hi = DOPUS_LM_MAX_REL * s->lm_scale;
     s->lm = s->lm < lo ? lo : s->lm * DOPUS_LM_RAISE;
     s->lm = s->lm > hi ? hi : s->lm;
 }
@@ -394,7 +395,7 @@ static void dopus_lm_raise(dopus_solver *s)
 /* Raise until the QP is convex on the dynamics or the term is at its maximum. */
 static void dopus_lm_convexify(dopus_solver *s)
 {
-    double hi = DOPUS_LM_MAX_REL * s->lm_scale;
+    dopus_real hi = DOPUS_LM_MAX_REL * s->lm_scale;
     while (!dopus_lm_convex(s, s->lm) && s->lm < hi) {
         dopus_lm_raise(s);
     }
@@ -407,8 +408,8 @@ static void dopus_lm_start(dopus_solver *s)
         return;
     }
     s->lm_scale = dopus_lm_hessian_scale(s);
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
+    s->lm = DOPUS_R(0.0);
+    s->lm_kkt_prev = -DOPUS_R(1.0);
     dopus_lm_convexify(s);
 }
 
@@ -416,13 +417,14 @@ static void dopus_lm_start(dopus_solver *s)
  * grew DOPUS_LM_KKT_GROWTH times, then convex. */
 static void dopus_lm_prepared(dopus_solver *s)
 {
-    double floor_ = 1e-8 * (s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0);
-    double prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
+    dopus_real floor_ =
+        DOPUS_PREC(1e-8, 1e-5) * (s->kkt_proxy_ref > DOPUS_R(1.0) ? s->kkt_proxy_ref : DOPUS_R(1.0));
+    dopus_real prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
     if (!s->lm_auto) {
         return;
     }
     s->lm_scale = dopus_lm_hessian_scale(s);
-    if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= DOPUS_LM_KKT_GROWTH * prev)) {
+    if (s->lm_kkt_prev >= DOPUS_R(0.0) && !(s->kkt_proxy <= DOPUS_LM_KKT_GROWTH * prev)) {
         dopus_lm_raise(s);
     }
     s->lm_kkt_prev = s->kkt_proxy;
@@ -438,7 +440,7 @@ static void dopus_lm_feedback(dopus_solver *s, int status)
     if (status == DOPUS_OK) {
         s->lm *= DOPUS_LM_LOWER;
         if (s->lm < DOPUS_LM_MIN_REL * s->lm_scale) {
-            s->lm = 0.0;
+            s->lm = DOPUS_R(0.0);
         }
     } else if (status == DOPUS_ERR_QP || status == DOPUS_ERR_DIVERGED) {
         dopus_lm_raise(s);
@@ -463,10 +465,11 @@ void dopus_defaults(dopus_solver *s)
     s->reg_eps = dopus_default_reg_eps;
     s->cost_hessian = dopus_default_cost_hessian ? 1 : 0;
     /* a negative generated default: the automatic term (algorithm.md section 10) */
-    s->lm_auto = !(dopus_default_lm >= 0.0);
-    s->lm = (dopus_default_lm >= 0.0 && dopus_default_lm < INFINITY) ? dopus_default_lm : 0.0;
-    s->lm_scale = 1.0;
-    s->lm_kkt_prev = -1.0;
+    s->lm_auto = !(dopus_default_lm >= DOPUS_R(0.0));
+    s->lm =
+        (dopus_default_lm >= DOPUS_R(0.0) && dopus_default_lm < INFINITY) ? dopus_default_lm : DOPUS_R(0.0);
+    s->lm_scale = DOPUS_R(1.0);
+    s->lm_kkt_prev = -DOPUS_R(1.0);
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -483,7 +486,7 @@ void dopus_defaults(dopus_solver *s)
     s->qp_status = 0;
     s->qp_iterations = 0;
     for (k = 0; k < DOPUS_N; ++k) {
-        s->rho[k] = 0.0;
+        s->rho[k] = DOPUS_R(0.0);
     }
     s->recovery = 1;
     s->recovery_failures = DOPUS_RECOVERY_FAILURES;
@@ -500,7 +503,7 @@ void dopus_defaults(dopus_solver *s)
 /* F_k (eq. 14) at the current point into s->tmp_F (= gL + mu_b_k), s->tmp_phi, s->tmp_g. */
 static int dopus_stage_F(dopus_solver *s, int k)
 {
-    double l = 0.0;
+    dopus_real l = DOPUS_R(0.0);
     int i;
     if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL, s->tmp_phi, &l,
                               s->tmp_g, &s->fun_work) != 0) {
@@ -517,7 +520,7 @@ static int dopus_stage_F(dopus_solver *s, int k)
 }
 
 /* Regularise a fresh A block (algorithm.md section 5), timed as its own phase. */
-static int dopus_regularize(dopus_solver *s, int n, double *A)
+static int dopus_regularize(dopus_solver *s, int n, dopus_real *A)
 {
     double t0;
     int rc;
@@ -584,7 +587,7 @@ static int dopus_stage_H(dopus_solver *s, int k)
 /* Terminal F: gL_N, E, r, r_eq at the current point. */
 static int dopus_term_F(dopus_solver *s)
 {
-    double gL[DOPUS_NX], E = 0.0, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
+    dopus_real gL[DOPUS_NX], E = DOPUS_R(0.0), r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
     if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, &E, r, r_eq, &s->fun_work) !=
         0) {
         return DOPUS_ERR_FUNCTION;
@@ -603,7 +606,7 @@ static int dopus_term_F(dopus_solver *s)
 /* Terminal H: A_N (regularised), R, R_eq. */
 static int dopus_term_H(dopus_solver *s)
 {
-    double R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX], R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
+    dopus_real R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX], R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
     double t0 = dopus_timer_now(&s->timer);
     int rc;
     rc = dopus_eval_term_hess(s->hessian, s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, s->tmp_A, R, R_eq,
@@ -642,7 +645,7 @@ static void dopus_assemble(dopus_solver *s)
         in->C[k] = DOPUS_NG > 0 ? slot->Ct : 0;
         /* a_k = F_w,k + Phit_k' lam_{k+1} - Ct_k' mu_g_k - mu_b_k (eq. 12) */
         for (i = 0; i < DOPUS_NW; ++i) {
-            double pl = 0.0, cm = 0.0;
+            dopus_real pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
             for (j = 0; j < DOPUS_NX; ++j) {
                 pl += slot->Phit[j + i * DOPUS_NX] * s->lam[k + 1][j];
             }
@@ -674,7 +677,7 @@ static void dopus_assemble(dopus_solver *s)
     in->Req = DOPUS_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
     for (i = 0; i < DOPUS_NX; ++i) {
-        double rm = 0.0, en = 0.0;
+        dopus_real rm = DOPUS_R(0.0), en = DOPUS_R(0.0);
         for (j = 0; j < DOPUS_NR; ++j) {
             rm += s->R[j + i * DOPUS_DIM(DOPUS_NR)] * s->mu_r[j];
         }
@@ -701,7 +704,7 @@ static void dopus_clear_timings(dopus_solver *s, int first, int last)
 {
     int i;
     for (i = first; i <= last; ++i) {
-        s->timer.t[i] = 0.0;
+        s->timer.t[i] = DOPUS_R(0.0);
     }
 }
 
@@ -739,7 +742,7 @@ static int dopus_init_finish(dopus_solver *s)
     int k, rc;
     dopus_ring_reset(&s->ring);
     for (k = 0; k < DOPUS_N; ++k) {
-        s->rho[k] = 0.0;
+        s->rho[k] = DOPUS_R(0.0);
         s->recomputed[k] = k;
         s->selected[k] = 0;
     }
@@ -760,9 +763,9 @@ static int dopus_init_finish(dopus_solver *s)
     return DOPUS_OK;
 }
 
-int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
-               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
-               const double *nu)
+int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, const dopus_real *u,
+               const dopus_real *lam, const dopus_real *mu_g, const dopus_real *mu_b, const dopus_real *mu_bN,
+               const dopus_real *mu_r, const dopus_real *nu)
 {
     int k, i, rc;
 
@@ -788,7 +791,7 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
             s->x[k][i] = x ? x[k * DOPUS_NX + i] : dopus_guess_x[k][i];
-            s->lam[k][i] = lam ? lam[k * DOPUS_NX + i] : 0.0;
+            s->lam[k][i] = lam ? lam[k * DOPUS_NX + i] : DOPUS_R(0.0);
         }
     }
     for (k = 0; k < DOPUS_N; ++k) {
@@ -796,26 +799,26 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
             s->u[k][i] = u ? u[k * DOPUS_NU + i] : dopus_guess_u[k][i];
         }
         for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i) {
-            s->mu_g[k][i] = (mu_g && i < DOPUS_NG) ? mu_g[k * DOPUS_NG + i] : 0.0;
+            s->mu_g[k][i] = (mu_g && i < DOPUS_NG) ? mu_g[k * DOPUS_NG + i] : DOPUS_R(0.0);
         }
         for (i = 0; i < DOPUS_NW; ++i) {
-            s->mu_b[k][i] = mu_b ? mu_b[k * DOPUS_NW + i] : 0.0;
+            s->mu_b[k][i] = mu_b ? mu_b[k * DOPUS_NW + i] : DOPUS_R(0.0);
         }
         /* x_0 carries no bound: its multiplier is 0 by definition */
         if (k == 0) {
             for (i = 0; i < DOPUS_NX; ++i) {
-                s->mu_b[0][i] = 0.0;
+                s->mu_b[0][i] = DOPUS_R(0.0);
             }
         }
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
+        s->mu_bN[i] = mu_bN ? mu_bN[i] : DOPUS_R(0.0);
     }
     for (i = 0; i < DOPUS_DIM(DOPUS_NR); ++i) {
-        s->mu_r[i] = (mu_r && i < DOPUS_NR) ? mu_r[i] : 0.0;
+        s->mu_r[i] = (mu_r && i < DOPUS_NR) ? mu_r[i] : DOPUS_R(0.0);
     }
     for (i = 0; i < DOPUS_DIM(DOPUS_NE); ++i) {
-        s->nu[i] = (nu && i < DOPUS_NE) ? nu[i] : 0.0;
+        s->nu[i] = (nu && i < DOPUS_NE) ? nu[i] : DOPUS_R(0.0);
     }
 
     rc = dopus_init_finish(s);
@@ -828,7 +831,7 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
     return dopus_ret(s, DOPUS_OK);
 }
 
-int dopus_init_nominal(dopus_solver *s, const double *xhat0)
+int dopus_init_nominal(dopus_solver *s, const dopus_real *xhat0)
 {
 #if DOPUS_HAS_NOMINAL
     return dopus_init(s, xhat0, &dopus_nominal_x[0][0], &dopus_nominal_u[0][0], &dopus_nominal_lam[0][0],
@@ -865,33 +868,33 @@ static void dopus_qp_warm_point(dopus_solver *s)
     int k, i;
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
-            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : 0.0;
+            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : DOPUS_R(0.0);
             w->lam[k][i] = s->lam[k][i];
         }
     }
     for (k = 0; k < DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_QP_NU1; ++i) {
-            w->u[k][i] = 0.0;
+            w->u[k][i] = DOPUS_R(0.0);
         }
         for (i = 0; i < DOPUS_NW; ++i) {
             w->mu_b[k][i] = s->mu_b[k][i];
         }
         for (i = 0; i < DOPUS_QP_NG1; ++i) {
-            w->mu_g[k][i] = i < DOPUS_NG ? s->mu_g[k][i] : 0.0;
+            w->mu_g[k][i] = i < DOPUS_NG ? s->mu_g[k][i] : DOPUS_R(0.0);
         }
     }
     for (i = 0; i < DOPUS_NX; ++i) {
         w->mu_bN[i] = s->mu_bN[i];
     }
     for (i = 0; i < DOPUS_QP_NR1; ++i) {
-        w->mu_r[i] = i < DOPUS_NR ? s->mu_r[i] : 0.0;
+        w->mu_r[i] = i < DOPUS_NR ? s->mu_r[i] : DOPUS_R(0.0);
     }
     for (i = 0; i < DOPUS_QP_NE1; ++i) {
-        w->nu[i] = i < DOPUS_NE ? s->nu[i] : 0.0;
+        w->nu[i] = i < DOPUS_NE ? s->nu[i] : DOPUS_R(0.0);
     }
 }
 
-int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
+int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
     const dopus_qp_sol *sol = &s->qp_sol;
     double t0;
@@ -916,7 +919,7 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
         /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
         return dopus_feedback_failed(s, u0, DOPUS_ERR_NOT_PREPARED);
     }
-    s->timer.t[DOPUS_PHASE_FEEDBACK] = 0.0;
+    s->timer.t[DOPUS_PHASE_FEEDBACK] = DOPUS_R(0.0);
     t0 = dopus_timer_now(&s->timer);
 
     for (i = 0; i < DOPUS_NX; ++i) {
@@ -1060,7 +1063,7 @@ static void dopus_shift(dopus_solver *s)
     /* the last stage: the x part of mu_b from mu_bN, the u part kept */
     for (i = 0; i < DOPUS_NX; ++i) {
         s->mu_b[DOPUS_N - 1][i] = s->mu_bN[i];
-        s->mu_b[0][i] = 0.0;
+        s->mu_b[0][i] = DOPUS_R(0.0);
     }
     dopus_ring_advance(&s->ring);
 }
@@ -1098,7 +1101,7 @@ static void dopus_select(dopus_solver *s, int M)
  * when every node is finite and inside the box. */
 static int dopus_simulate(dopus_solver *s, int use_plan)
 {
-    double l = 0.0;
+    dopus_real l = DOPUS_R(0.0);
     int k, j;
     for (k = 0; k < DOPUS_N; ++k) {
         j = s->plan_age + k > DOPUS_N - 1 ? DOPUS_N - 1 : s->plan_age + k;
@@ -1117,7 +1120,7 @@ static int dopus_simulate(dopus_solver *s, int use_plan)
  * (the last plan's, shifted), every block recomputed. */
 static int dopus_recover(dopus_solver *s, int shifted)
 {
-    double l = 0.0;
+    dopus_real l = DOPUS_R(0.0);
     int k, i, rc, hessian;
     /* x_0: the state predicted for this instant from the last measurement and control; when
      * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
@@ -1131,7 +1134,7 @@ static int dopus_recover(dopus_solver *s, int shifted)
         dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        if (!(fabs(s->x[0][i]) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + fabs(s->xhat0[i]))) {
+        if (!(dopus_fabs(s->x[0][i]) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + dopus_fabs(s->xhat0[i]))) {
             dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
             break;
         }
@@ -1205,7 +1208,7 @@ int dopus_prepare(dopus_solver *s)
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
 static int dopus_prepare_iteration(dopus_solver *s)
 {
-    double xN_saved[DOPUS_NX];
+    dopus_real xN_saved[DOPUS_NX];
     double t0;
     int k, rc, M;
 
@@ -1244,7 +1247,7 @@ static int dopus_prepare_iteration(dopus_solver *s)
         dopus_copy(s->x[DOPUS_N], s->tmp_phi, DOPUS_NX);
     }
     dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->tmp_F, s->tmp_phi, s->tmp_g);
-    s->rho[DOPUS_N - 1] = 0.0;
+    s->rho[DOPUS_N - 1] = DOPUS_R(0.0);
     rc = dopus_stage_H(s, DOPUS_N - 1);
     if (rc == DOPUS_OK) {
         t0 = dopus_timer_now(&s->timer);
@@ -1319,9 +1322,9 @@ static int dopus_prepare_iteration(dopus_solver *s)
 
 /* ---- KKT ---------------------------------------------------------------------------- */
 
-int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4)
+int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
 {
-    double parts[4];
+    dopus_real parts[4];
     double t0;
     int i, rc;
 
@@ -1332,7 +1335,7 @@ int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4)
     if (xhat0 && !dopus_lai_vec_finite(DOPUS_NX, xhat0)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
-    s->timer.t[DOPUS_PHASE_KKT] = 0.0;
+    s->timer.t[DOPUS_PHASE_KKT] = DOPUS_R(0.0);
     t0 = dopus_timer_now(&s->timer);
     rc = dopus_kkt_measure(s, xhat0 ? xhat0 : s->xhat0, parts);
     dopus_timer_add(&s->timer, DOPUS_PHASE_KKT, t0);
@@ -1348,9 +1351,9 @@ int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4)
     return dopus_ret(s, DOPUS_OK);
 }
 
-double dopus_get_kkt(const dopus_solver *s)
+dopus_real dopus_get_kkt(const dopus_solver *s)
 {
-    double m = s->kkt[0];
+    dopus_real m = s->kkt[0];
     int i;
     for (i = 1; i < 4; ++i) {
         m = s->kkt[i] > m ? s->kkt[i] : m;
@@ -1412,12 +1415,12 @@ int dopus_get_hessian(dopus_solver *s)
     return s->hessian;
 }
 
-int dopus_set_regularization(dopus_solver *s, int regularization, double eps)
+int dopus_set_regularization(dopus_solver *s, int regularization, dopus_real eps)
 {
     dopus_ensure_setup(s);
     if ((regularization != DOPUS_REG_NONE && regularization != DOPUS_REG_PROJECT &&
          regularization != DOPUS_REG_MIRROR) ||
-        !isfinite(eps) || !(eps > 0.0)) {
+        !isfinite(eps) || !(eps > DOPUS_R(0.0))) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
     s->regularization = regularization;
@@ -1431,7 +1434,7 @@ int dopus_get_regularization(dopus_solver *s)
     return s->regularization;
 }
 
-double dopus_get_reg_eps(dopus_solver *s)
+dopus_real dopus_get_reg_eps(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->reg_eps;
@@ -1453,10 +1456,10 @@ int dopus_get_cost_hessian(dopus_solver *s)
     return s->cost_hessian;
 }
 
-int dopus_set_levenberg_marquardt(dopus_solver *s, double lm)
+int dopus_set_levenberg_marquardt(dopus_solver *s, dopus_real lm)
 {
     dopus_ensure_setup(s);
-    if (!isfinite(lm) || !(lm >= 0.0)) {
+    if (!isfinite(lm) || !(lm >= DOPUS_R(0.0))) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
     s->lm_auto = 0;
@@ -1468,8 +1471,8 @@ int dopus_set_lm_auto(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     s->lm_auto = 1;
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
+    s->lm = DOPUS_R(0.0);
+    s->lm_kkt_prev = -DOPUS_R(1.0);
     if (s->initialized && s->qp_ready) {
         dopus_lm_start(s);
     }
@@ -1482,29 +1485,29 @@ int dopus_get_lm_auto(dopus_solver *s)
     return s->lm_auto;
 }
 
-double dopus_get_lm_scale(dopus_solver *s)
+dopus_real dopus_get_lm_scale(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->lm_scale;
 }
 
-double dopus_get_levenberg_marquardt(dopus_solver *s)
+dopus_real dopus_get_levenberg_marquardt(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->lm;
 }
 
-int dopus_set_qp_tol(dopus_solver *s, double tol)
+int dopus_set_qp_tol(dopus_solver *s, dopus_real tol)
 {
     dopus_ensure_setup(s);
-    if (!isfinite(tol) || !(tol > 0.0) || tol > DOPUS_QP_TOL_MAX) {
+    if (!isfinite(tol) || !(tol > DOPUS_R(0.0)) || tol > DOPUS_QP_TOL_MAX) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
     s->qp_settings.tol = tol;
     return dopus_ret(s, DOPUS_OK);
 }
 
-double dopus_get_qp_tol(dopus_solver *s)
+dopus_real dopus_get_qp_tol(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->qp_settings.tol;
@@ -1573,7 +1576,7 @@ int dopus_get_qp_cold_retry(const dopus_solver *s)
     return s->qp_cold_retry;
 }
 
-int dopus_set_parameters(dopus_solver *s, const double *p)
+int dopus_set_parameters(dopus_solver *s, const dopus_real *p)
 {
     int k, i;
     dopus_ensure_setup(s);
@@ -1594,7 +1597,7 @@ int dopus_set_parameters(dopus_solver *s, const double *p)
     return dopus_ret(s, DOPUS_OK);
 }
 
-int dopus_set_parameters_node(dopus_solver *s, int k, const double *pk)
+int dopus_set_parameters_node(dopus_solver *s, int k, const dopus_real *pk)
 {
     int i;
     dopus_ensure_setup(s);
@@ -1616,7 +1619,7 @@ int dopus_set_parameters_node(dopus_solver *s, int k, const double *pk)
     return dopus_ret(s, DOPUS_OK);
 }
 
-void dopus_get_parameters(dopus_solver *s, double *p)
+void dopus_get_parameters(dopus_solver *s, dopus_real *p)
 {
     int k, i;
     dopus_ensure_setup(s);
@@ -1629,22 +1632,22 @@ void dopus_get_parameters(dopus_solver *s, double *p)
 
 /* ---- getters ------------------------------------------------------------------------ */
 
-void dopus_get_x(const dopus_solver *s, double *x)
+void dopus_get_x(const dopus_solver *s, dopus_real *x)
 {
     dopus_copy(x, &s->x[0][0], (DOPUS_N + 1) * DOPUS_NX);
 }
 
-void dopus_get_u(const dopus_solver *s, double *u)
+void dopus_get_u(const dopus_solver *s, dopus_real *u)
 {
     dopus_copy(u, &s->u[0][0], DOPUS_N * DOPUS_NU);
 }
 
-void dopus_get_lam(const dopus_solver *s, double *lam)
+void dopus_get_lam(const dopus_solver *s, dopus_real *lam)
 {
     dopus_copy(lam, &s->lam[0][0], (DOPUS_N + 1) * DOPUS_NX);
 }
 
-void dopus_get_mu_g(const dopus_solver *s, double *mu_g)
+void dopus_get_mu_g(const dopus_solver *s, dopus_real *mu_g)
 {
     int k, i;
     for (k = 0; k < DOPUS_N; ++k) {
@@ -1654,27 +1657,27 @@ void dopus_get_mu_g(const dopus_solver *s, double *mu_g)
     }
 }
 
-void dopus_get_mu_b(const dopus_solver *s, double *mu_b)
+void dopus_get_mu_b(const dopus_solver *s, dopus_real *mu_b)
 {
     dopus_copy(mu_b, &s->mu_b[0][0], DOPUS_N * DOPUS_NW);
 }
 
-void dopus_get_mu_bN(const dopus_solver *s, double *mu_bN)
+void dopus_get_mu_bN(const dopus_solver *s, dopus_real *mu_bN)
 {
     dopus_copy(mu_bN, s->mu_bN, DOPUS_NX);
 }
 
-void dopus_get_mu_r(const dopus_solver *s, double *mu_r)
+void dopus_get_mu_r(const dopus_solver *s, dopus_real *mu_r)
 {
     dopus_copy(mu_r, s->mu_r, DOPUS_NR);
 }
 
-void dopus_get_nu(const dopus_solver *s, double *nu)
+void dopus_get_nu(const dopus_solver *s, dopus_real *nu)
 {
     dopus_copy(nu, s->nu, DOPUS_NE);
 }
 
-void dopus_get_rho(const dopus_solver *s, double *rho)
+void dopus_get_rho(const dopus_solver *s, dopus_real *rho)
 {
     dopus_copy(rho, s->rho, DOPUS_N);
 }
@@ -1703,7 +1706,7 @@ int dopus_get_flags(const dopus_solver *s)
     return s->flags;
 }
 
-void dopus_get_u0(const dopus_solver *s, double *u0)
+void dopus_get_u0(const dopus_solver *s, dopus_real *u0)
 {
     dopus_copy(u0, s->u0_out, DOPUS_NU);
 }
@@ -1718,12 +1721,12 @@ int dopus_get_failed_feedbacks(const dopus_solver *s)
     return s->n_failed;
 }
 
-double dopus_get_kkt_proxy(const dopus_solver *s)
+dopus_real dopus_get_kkt_proxy(const dopus_solver *s)
 {
     return s->kkt_proxy;
 }
 
-void dopus_get_scales(const dopus_solver *s, double *scale_x, double *scale_u)
+void dopus_get_scales(const dopus_solver *s, dopus_real *scale_x, dopus_real *scale_u)
 {
     if (scale_x) {
         dopus_copy(scale_x, s->scale_x, DOPUS_NX);
@@ -1750,7 +1753,10 @@ int dopus_get_ring_head(const dopus_solver *s)
 
 void dopus_get_timings(const dopus_solver *s, double *t)
 {
-    dopus_copy(t, s->timer.t, DOPUS_N_PHASES);
+    int i;
+    for (i = 0; i < DOPUS_N_PHASES; ++i) { /* times are double in both precisions */
+        t[i] = s->timer.t[i];
+    }
 }
 
 void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx)

@@ -3,8 +3,8 @@
 #include "robot_arm_funcs.h"
 #include "robot_arm_casadi.h"
 
-int robot_arm_eval_stage_eval(const double *x, const double *u, const double *p, double *phi, double *l,
-                          double *g, robot_arm_fun_work *wk)
+int robot_arm_eval_stage_eval(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p, robot_arm_real *phi,
+                          robot_arm_real *l, robot_arm_real *g, robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -15,9 +15,9 @@ int robot_arm_eval_stage_eval(const double *x, const double *u, const double *p,
     return robot_arm_stage_eval(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int robot_arm_eval_stage_grad(const double *x, const double *u, const double *p, const double *lam_next,
-                          const double *mu_g, double *gL, double *phi, double *l, double *g,
-                          robot_arm_fun_work *wk)
+int robot_arm_eval_stage_grad(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p,
+                          const robot_arm_real *lam_next, const robot_arm_real *mu_g, robot_arm_real *gL, robot_arm_real *phi,
+                          robot_arm_real *l, robot_arm_real *g, robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -31,9 +31,9 @@ int robot_arm_eval_stage_grad(const double *x, const double *u, const double *p,
     return robot_arm_stage_grad(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int robot_arm_eval_stage_hess(int gauss_newton, const double *x, const double *u, const double *p,
-                          const double *lam_next, const double *mu_g, double *A, double *Phi, double *C,
-                          robot_arm_fun_work *wk)
+int robot_arm_eval_stage_hess(int gauss_newton, const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p,
+                          const robot_arm_real *lam_next, const robot_arm_real *mu_g, robot_arm_real *A, robot_arm_real *Phi,
+                          robot_arm_real *C, robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -53,8 +53,8 @@ int robot_arm_eval_stage_hess(int gauss_newton, const double *x, const double *u
     return robot_arm_stage_hess_exact(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int robot_arm_eval_stage_hess_cost(int gauss_newton, const double *x, const double *u, const double *p,
-                               double *A_l, robot_arm_fun_work *wk)
+int robot_arm_eval_stage_hess_cost(int gauss_newton, const robot_arm_real *x, const robot_arm_real *u,
+                               const robot_arm_real *p, robot_arm_real *A_l, robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -70,8 +70,8 @@ int robot_arm_eval_stage_hess_cost(int gauss_newton, const double *x, const doub
     return robot_arm_stage_hess_cost_exact(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int robot_arm_eval_term_eval(const double *x, const double *p, double *E, double *r, double *r_eq,
-                         robot_arm_fun_work *wk)
+int robot_arm_eval_term_eval(const robot_arm_real *x, const robot_arm_real *p, robot_arm_real *E, robot_arm_real *r,
+                         robot_arm_real *r_eq, robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = p;
@@ -81,8 +81,9 @@ int robot_arm_eval_term_eval(const double *x, const double *p, double *E, double
     return robot_arm_term_eval(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int robot_arm_eval_term_grad(const double *x, const double *p, const double *mu_r, const double *nu, double *gL,
-                         double *E, double *r, double *r_eq, robot_arm_fun_work *wk)
+int robot_arm_eval_term_grad(const robot_arm_real *x, const robot_arm_real *p, const robot_arm_real *mu_r,
+                         const robot_arm_real *nu, robot_arm_real *gL, robot_arm_real *E, robot_arm_real *r, robot_arm_real *r_eq,
+                         robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = p;
@@ -95,8 +96,9 @@ int robot_arm_eval_term_grad(const double *x, const double *p, const double *mu_
     return robot_arm_term_grad(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int robot_arm_eval_term_hess(int gauss_newton, const double *x, const double *p, const double *mu_r,
-                         const double *nu, double *A, double *R, double *R_eq, robot_arm_fun_work *wk)
+int robot_arm_eval_term_hess(int gauss_newton, const robot_arm_real *x, const robot_arm_real *p, const robot_arm_real *mu_r,
+                         const robot_arm_real *nu, robot_arm_real *A, robot_arm_real *R, robot_arm_real *R_eq,
+                         robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = p;
@@ -111,7 +113,8 @@ int robot_arm_eval_term_hess(int gauss_newton, const double *x, const double *p,
     return robot_arm_term_hess_exact(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int robot_arm_eval_ode(const double *x, const double *u, const double *p, double *xdot, robot_arm_fun_work *wk)
+int robot_arm_eval_ode(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p, robot_arm_real *xdot,
+                   robot_arm_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;

@@ -10,19 +10,19 @@ void robot_arm_ring_reset(robot_arm_ring *ring)
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         robot_arm_stage_slot *s = &ring->slot[k];
         for (i = 0; i < ROBOT_ARM_NW * ROBOT_ARM_NW; ++i)
-            s->Ht[i] = 0.0;
+            s->Ht[i] = ROBOT_ARM_R(0.0);
         for (i = 0; i < ROBOT_ARM_NW * ROBOT_ARM_NW; ++i)
-            s->A_dyn[i] = 0.0;
+            s->A_dyn[i] = ROBOT_ARM_R(0.0);
         for (i = 0; i < ROBOT_ARM_NX * ROBOT_ARM_NW; ++i)
-            s->Phit[i] = 0.0;
+            s->Phit[i] = ROBOT_ARM_R(0.0);
         for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG) * ROBOT_ARM_NW; ++i)
-            s->Ct[i] = 0.0;
+            s->Ct[i] = ROBOT_ARM_R(0.0);
         for (i = 0; i < ROBOT_ARM_NW; ++i)
-            s->F_w[i] = 0.0;
+            s->F_w[i] = ROBOT_ARM_R(0.0);
         for (i = 0; i < ROBOT_ARM_NX; ++i)
-            s->phi[i] = 0.0;
+            s->phi[i] = ROBOT_ARM_R(0.0);
         for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG); ++i)
-            s->g[i] = 0.0;
+            s->g[i] = ROBOT_ARM_R(0.0);
         robot_arm_ring_clear_step(s);
     }
     ring->ring_head = 0;
@@ -47,24 +47,24 @@ void robot_arm_ring_clear_step(robot_arm_stage_slot *slot)
 {
     int i;
     for (i = 0; i < ROBOT_ARM_NW; ++i)
-        slot->dw[i] = 0.0;
+        slot->dw[i] = ROBOT_ARM_R(0.0);
     for (i = 0; i < ROBOT_ARM_NX; ++i)
-        slot->dlam[i] = 0.0;
+        slot->dlam[i] = ROBOT_ARM_R(0.0);
     for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG); ++i)
-        slot->dmu_g[i] = 0.0;
+        slot->dmu_g[i] = ROBOT_ARM_R(0.0);
     for (i = 0; i < ROBOT_ARM_NW; ++i)
-        slot->dmu_b[i] = 0.0;
+        slot->dmu_b[i] = ROBOT_ARM_R(0.0);
 }
 
-double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w_new, const double *phi_new,
-                         const double *g_new)
+robot_arm_real robot_arm_ring_secant(const robot_arm_stage_slot *slot, const robot_arm_real *F_w_new,
+                             const robot_arm_real *phi_new, const robot_arm_real *g_new)
 {
-    double num2 = 0.0, den2 = 0.0, old2 = 0.0, new2 = 0.0;
+    robot_arm_real num2 = ROBOT_ARM_R(0.0), den2 = ROBOT_ARM_R(0.0), old2 = ROBOT_ARM_R(0.0), new2 = ROBOT_ARM_R(0.0);
     int i, j;
 
     /* stationarity rows: F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new */
     for (i = 0; i < ROBOT_ARM_NW; ++i) {
-        double hd = 0.0, pl = 0.0, cm = 0.0, v;
+        robot_arm_real hd = ROBOT_ARM_R(0.0), pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0), v;
         for (j = 0; j < ROBOT_ARM_NW; ++j)
             hd += slot->Ht[i + j * ROBOT_ARM_NW] * slot->dw[j];
         for (j = 0; j < ROBOT_ARM_NX; ++j)
@@ -76,7 +76,7 @@ double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w
     }
     /* dynamics rows: -(phi_old + Phit dw) + phi_new */
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        double pd = 0.0, v;
+        robot_arm_real pd = ROBOT_ARM_R(0.0), v;
         for (j = 0; j < ROBOT_ARM_NW; ++j)
             pd += slot->Phit[i + j * ROBOT_ARM_NX] * slot->dw[j];
         v = -(slot->phi[i] + pd) + phi_new[i];
@@ -84,7 +84,7 @@ double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w
     }
     /* path constraint rows: g_old + Ct dw - g_new */
     for (i = 0; i < ROBOT_ARM_NG; ++i) {
-        double cd = 0.0, v;
+        robot_arm_real cd = ROBOT_ARM_R(0.0), v;
         for (j = 0; j < ROBOT_ARM_NW; ++j)
             cd += slot->Ct[i + j * ROBOT_ARM_DIM(ROBOT_ARM_NG)] * slot->dw[j];
         v = slot->g[i] + cd - g_new[i];
@@ -109,22 +109,23 @@ double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w
         new2 += phi_new[i] * phi_new[i];
     for (i = 0; i < ROBOT_ARM_NG; ++i)
         new2 += g_new[i] * g_new[i];
-    if (den2 == 0.0) {
-        return 0.0;
+    if (den2 == ROBOT_ARM_R(0.0)) {
+        return ROBOT_ARM_R(0.0);
     }
     /* a residual or step whose square overflows (or a NaN from Inf - Inf in the residual):
      * the linear model of this stage says nothing, it ranks first */
-    if (!(num2 <= DBL_MAX) || !(den2 <= DBL_MAX)) {
+    if (!(num2 <= ROBOT_ARM_REAL_MAX) || !(den2 <= ROBOT_ARM_REAL_MAX)) {
         return INFINITY;
     }
     /* a residual at the round-off level of F is noise, not a secant violation */
-    if (sqrt(num2) <= ROBOT_ARM_EPS_RHO * (sqrt(old2) + sqrt(new2))) {
-        return 0.0;
+    if (robot_arm_sqrt(num2) <= ROBOT_ARM_EPS_RHO * (robot_arm_sqrt(old2) + robot_arm_sqrt(new2))) {
+        return ROBOT_ARM_R(0.0);
     }
-    return sqrt(num2) / sqrt(den2);
+    return robot_arm_sqrt(num2) / robot_arm_sqrt(den2);
 }
 
-void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const double *F_w, const double *phi, const double *g)
+void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const robot_arm_real *F_w, const robot_arm_real *phi,
+                        const robot_arm_real *g)
 {
     int i;
     for (i = 0; i < ROBOT_ARM_NW; ++i)

@@ -3,8 +3,8 @@
 #include "unicycle_funcs.h"
 #include "unicycle_casadi.h"
 
-int unicycle_eval_stage_eval(const double *x, const double *u, const double *p, double *phi, double *l,
-                          double *g, unicycle_fun_work *wk)
+int unicycle_eval_stage_eval(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p, unicycle_real *phi,
+                          unicycle_real *l, unicycle_real *g, unicycle_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -15,9 +15,9 @@ int unicycle_eval_stage_eval(const double *x, const double *u, const double *p, 
     return unicycle_stage_eval(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int unicycle_eval_stage_grad(const double *x, const double *u, const double *p, const double *lam_next,
-                          const double *mu_g, double *gL, double *phi, double *l, double *g,
-                          unicycle_fun_work *wk)
+int unicycle_eval_stage_grad(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
+                          const unicycle_real *lam_next, const unicycle_real *mu_g, unicycle_real *gL, unicycle_real *phi,
+                          unicycle_real *l, unicycle_real *g, unicycle_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -31,9 +31,9 @@ int unicycle_eval_stage_grad(const double *x, const double *u, const double *p, 
     return unicycle_stage_grad(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int unicycle_eval_stage_hess(int gauss_newton, const double *x, const double *u, const double *p,
-                          const double *lam_next, const double *mu_g, double *A, double *Phi, double *C,
-                          unicycle_fun_work *wk)
+int unicycle_eval_stage_hess(int gauss_newton, const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
+                          const unicycle_real *lam_next, const unicycle_real *mu_g, unicycle_real *A, unicycle_real *Phi,
+                          unicycle_real *C, unicycle_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -53,8 +53,8 @@ int unicycle_eval_stage_hess(int gauss_newton, const double *x, const double *u,
     return unicycle_stage_hess_exact(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int unicycle_eval_stage_hess_cost(int gauss_newton, const double *x, const double *u, const double *p,
-                               double *A_l, unicycle_fun_work *wk)
+int unicycle_eval_stage_hess_cost(int gauss_newton, const unicycle_real *x, const unicycle_real *u,
+                               const unicycle_real *p, unicycle_real *A_l, unicycle_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
@@ -70,8 +70,8 @@ int unicycle_eval_stage_hess_cost(int gauss_newton, const double *x, const doubl
     return unicycle_stage_hess_cost_exact(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int unicycle_eval_term_eval(const double *x, const double *p, double *E, double *r, double *r_eq,
-                         unicycle_fun_work *wk)
+int unicycle_eval_term_eval(const unicycle_real *x, const unicycle_real *p, unicycle_real *E, unicycle_real *r,
+                         unicycle_real *r_eq, unicycle_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = p;
@@ -81,8 +81,9 @@ int unicycle_eval_term_eval(const double *x, const double *p, double *E, double 
     return unicycle_term_eval(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int unicycle_eval_term_grad(const double *x, const double *p, const double *mu_r, const double *nu, double *gL,
-                         double *E, double *r, double *r_eq, unicycle_fun_work *wk)
+int unicycle_eval_term_grad(const unicycle_real *x, const unicycle_real *p, const unicycle_real *mu_r,
+                         const unicycle_real *nu, unicycle_real *gL, unicycle_real *E, unicycle_real *r, unicycle_real *r_eq,
+                         unicycle_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = p;
@@ -95,8 +96,9 @@ int unicycle_eval_term_grad(const double *x, const double *p, const double *mu_r
     return unicycle_term_grad(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int unicycle_eval_term_hess(int gauss_newton, const double *x, const double *p, const double *mu_r,
-                         const double *nu, double *A, double *R, double *R_eq, unicycle_fun_work *wk)
+int unicycle_eval_term_hess(int gauss_newton, const unicycle_real *x, const unicycle_real *p, const unicycle_real *mu_r,
+                         const unicycle_real *nu, unicycle_real *A, unicycle_real *R, unicycle_real *R_eq,
+                         unicycle_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = p;
@@ -111,7 +113,8 @@ int unicycle_eval_term_hess(int gauss_newton, const double *x, const double *p, 
     return unicycle_term_hess_exact(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int unicycle_eval_ode(const double *x, const double *u, const double *p, double *xdot, unicycle_fun_work *wk)
+int unicycle_eval_ode(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p, unicycle_real *xdot,
+                   unicycle_fun_work *wk)
 {
     wk->arg[0] = x;
     wk->arg[1] = u;
