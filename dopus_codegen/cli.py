@@ -139,6 +139,15 @@ def _solver_options(lm_note: str, names=None):
     return apply
 
 
+def _real_option(what: str):
+    """``--real``: the real-number type of the generated C (dopus_codegen.settings.REALS)."""
+    from . import settings
+
+    return click.option("--real", "real", type=click.Choice(list(settings.REALS)), default=None,
+                        help=f"{settings.HELP['real']} {what} [default: the OCP file's options(real=...), "
+                             f"else {settings.DEFAULTS['real']}]")
+
+
 def _runtime_values(kwargs: dict) -> dict:
     """The runtime settings of a verb's keyword arguments (None: not given)."""
     from . import settings
@@ -197,10 +206,12 @@ def _int_list_or_full(value: str) -> list:
               help="A run has converged when its KKT measure reaches this; the JSON 'solution' is the iterate "
                    "of a converged run.")
 @_solver_options("0: exact Newton")
+@_real_option("With --backend c, the study runs the solver generated in that type (float: see what single "
+              "precision costs); the default --qp-tol follows it.")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the study as JSON.")
 @click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None, help="Write KKT against iteration as PNG.")
-def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, **kwargs):
+def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, real, **kwargs):
     """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M.
 
     Exits with 1 when a run failed (an error of the solver or a non-finite KKT measure),
@@ -216,7 +227,7 @@ def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, *
         check_output_file(plot_out, "--plot")
     study = run_converge_cli(ocp_file=ocp_file, m_list=None if m_list is None else _int_list_or_full(m_list),
                              iters=iters, start=start, backend=backend, json_out=json_out, plot_out=plot_out,
-                             tol=tol, **_runtime_values(kwargs))
+                             tol=tol, real=real, **_runtime_values(kwargs))
     bad = failed_runs(study)
     if bad:
         raise RunFailed(f"{len(bad)} of {len(study['runs'])} runs failed: "
@@ -236,8 +247,10 @@ def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, *
               help="full: also run the full RTI (M = N-1) on the same scenario.")
 @_solver_options("0: the paper's literal QP; keeps the fixed point, see README, Closed loop; the robot arm "
                  "declares 1e-4")
+@_real_option("The closed loop runs the solver generated in that type (float: see what single precision "
+              "costs); the default --qp-tol follows it.")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
-def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, **kwargs):
+def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, real, **kwargs):
     """Closed loop against a CVODES simulation of the plant (paper figures 2 to 4).
 
     One DOPUS iteration per sampling instant, started from the offline solution at the
@@ -252,7 +265,7 @@ def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, **kwargs):
     if plot_dir:
         check_output_dir(plot_dir, "--plot-dir")
     runs = run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
-                       compare=compare, backend=backend, echo=click.echo, **_runtime_values(kwargs))
+                       compare=compare, backend=backend, echo=click.echo, real=real, **_runtime_values(kwargs))
     aborted = [r for r in runs if r.get("aborted")]
     if aborted:
         raise RunFailed("; ".join(f"run '{r['label']}' aborted after {len(r['t'])} of "
@@ -331,7 +344,8 @@ def bench(ocp_file, m_list, against, json_out, plot_out, reps, settle, steps, kk
 @click.option("--offline-guess/--no-offline-guess", default=None,
               help="Solve the OCP with IPOPT at its initial state now and carry the primal-dual solution "
                    "as static data (warm start in firmware). Default: the OCP file's options(offline_guess=...).")
-def generate(ocp_file, out_dir, offline_guess):
+@_real_option("")
+def generate(ocp_file, out_dir, offline_guess, real):
     """Generate the C99 solver folder of OCP_FILE.
 
     The folder holds the CasADi functions, sizes and problem data, the renamed runtime,
@@ -345,7 +359,7 @@ def generate(ocp_file, out_dir, offline_guess):
 
     check_output_dir(out_dir if out_dir is not None else "generated", "--output")
     t0 = time.time()
-    path = generate_file(ocp_file, out_dir, offline_guess=offline_guess)
+    path = generate_file(ocp_file, out_dir, offline_guess=offline_guess, real=real)
     newest = max((p.stat().st_mtime for p in path.iterdir() if p.is_file()), default=0.0)
     click.echo(f"{'generated' if newest >= t0 else 'up to date'}: {path}")
 
