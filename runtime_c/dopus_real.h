@@ -15,10 +15,11 @@
 #ifndef DOPUS_REAL_H
 #define DOPUS_REAL_H
 
-#include <float.h>
-#include <math.h>
-
+/* The macros name functions and limits of <math.h> and <float.h>, which the files that use
+ * them include (this header is part of the public one, which includes neither). */
+#ifndef DOPUS_REAL_FLOAT /* set by the sizes header (or -DDOPUS_REAL_FLOAT=0|1 without one) */
 #include "dopus_sizes.h"
+#endif
 
 #if DOPUS_REAL_FLOAT
 typedef float dopus_real;

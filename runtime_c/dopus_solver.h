@@ -29,6 +29,8 @@
 #ifndef DOPUS_SOLVER_H
 #define DOPUS_SOLVER_H
 
+#include "dopus_real.h"
+
 #include <stddef.h>
 
 /* DOPUS_CDEF_BEGIN */
@@ -244,13 +246,13 @@ enum dopus_flag {
 
 /* Automatic Levenberg-Marquardt term (docs/algorithm.md section 10), relative to the
  * Hessian scale h = max(1e-300, largest |diagonal entry| of the QP's blocks). */
-#define DOPUS_LM_MIN_REL DOPUS_PREC(1e-8, 1e-6)    /* smallest nonzero term: 1e-8 h (below: 0) */
-#define DOPUS_LM_MAX_REL DOPUS_R(1e2)              /* largest term: 1e2 h */
-#define DOPUS_LM_RAISE DOPUS_R(10.0)               /* factor of a raise */
-#define DOPUS_LM_LOWER DOPUS_R(0.1)                /* factor after a successful feedback */
-#define DOPUS_LM_PIVOT_REL DOPUS_PREC(1e-10, 1e-5) /* Riccati pivots must exceed 1e-10 h */
-#define DOPUS_LM_KKT_GROWTH DOPUS_R(10.0)          /* raise when the KKT proxy grows 10x in one prepare */
-#define DOPUS_LM_RETRIES 2                         /* QP solves again with lm raised after a failure */
+#define DOPUS_LM_MIN_REL DOPUS_R(1e-8)    /* smallest nonzero term: 1e-8 h (below: 0) */
+#define DOPUS_LM_MAX_REL DOPUS_R(1e2)     /* largest term: 1e2 h */
+#define DOPUS_LM_RAISE DOPUS_R(10.0)      /* factor of a raise */
+#define DOPUS_LM_LOWER DOPUS_R(0.1)       /* factor after a successful feedback */
+#define DOPUS_LM_PIVOT_REL DOPUS_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
+#define DOPUS_LM_KKT_GROWTH DOPUS_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
+#define DOPUS_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
 
 enum dopus_mode {
     DOPUS_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */

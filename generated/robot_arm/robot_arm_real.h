@@ -15,10 +15,11 @@
 #ifndef ROBOT_ARM_REAL_H
 #define ROBOT_ARM_REAL_H
 
-#include <float.h>
-#include <math.h>
-
+/* The macros name functions and limits of <math.h> and <float.h>, which the files that use
+ * them include (this header is part of the public one, which includes neither). */
+#ifndef ROBOT_ARM_REAL_FLOAT /* set by the sizes header (or -DROBOT_ARM_REAL_FLOAT=0|1 without one) */
 #include "robot_arm_sizes.h"
+#endif
 
 #if ROBOT_ARM_REAL_FLOAT
 typedef float robot_arm_real;

@@ -29,6 +29,8 @@
 #ifndef ROBOT_ARM_SOLVER_H
 #define ROBOT_ARM_SOLVER_H
 
+#include "robot_arm_real.h"
+
 #include <stddef.h>
 
 /* ROBOT_ARM_CDEF_BEGIN */
@@ -244,13 +246,13 @@ enum robot_arm_flag {
 
 /* Automatic Levenberg-Marquardt term (docs/algorithm.md section 10), relative to the
  * Hessian scale h = max(1e-300, largest |diagonal entry| of the QP's blocks). */
-#define ROBOT_ARM_LM_MIN_REL ROBOT_ARM_PREC(1e-8, 1e-6)    /* smallest nonzero term: 1e-8 h (below: 0) */
-#define ROBOT_ARM_LM_MAX_REL ROBOT_ARM_R(1e2)              /* largest term: 1e2 h */
-#define ROBOT_ARM_LM_RAISE ROBOT_ARM_R(10.0)               /* factor of a raise */
-#define ROBOT_ARM_LM_LOWER ROBOT_ARM_R(0.1)                /* factor after a successful feedback */
-#define ROBOT_ARM_LM_PIVOT_REL ROBOT_ARM_PREC(1e-10, 1e-5) /* Riccati pivots must exceed 1e-10 h */
-#define ROBOT_ARM_LM_KKT_GROWTH ROBOT_ARM_R(10.0)          /* raise when the KKT proxy grows 10x in one prepare */
-#define ROBOT_ARM_LM_RETRIES 2                         /* QP solves again with lm raised after a failure */
+#define ROBOT_ARM_LM_MIN_REL ROBOT_ARM_R(1e-8)    /* smallest nonzero term: 1e-8 h (below: 0) */
+#define ROBOT_ARM_LM_MAX_REL ROBOT_ARM_R(1e2)     /* largest term: 1e2 h */
+#define ROBOT_ARM_LM_RAISE ROBOT_ARM_R(10.0)      /* factor of a raise */
+#define ROBOT_ARM_LM_LOWER ROBOT_ARM_R(0.1)       /* factor after a successful feedback */
+#define ROBOT_ARM_LM_PIVOT_REL ROBOT_ARM_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
+#define ROBOT_ARM_LM_KKT_GROWTH ROBOT_ARM_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
+#define ROBOT_ARM_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
 
 enum robot_arm_mode {
     ROBOT_ARM_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */

@@ -15,10 +15,11 @@
 #ifndef UNICYCLE_REAL_H
 #define UNICYCLE_REAL_H
 
-#include <float.h>
-#include <math.h>
-
+/* The macros name functions and limits of <math.h> and <float.h>, which the files that use
+ * them include (this header is part of the public one, which includes neither). */
+#ifndef UNICYCLE_REAL_FLOAT /* set by the sizes header (or -DUNICYCLE_REAL_FLOAT=0|1 without one) */
 #include "unicycle_sizes.h"
+#endif
 
 #if UNICYCLE_REAL_FLOAT
 typedef float unicycle_real;

@@ -29,6 +29,8 @@
 #ifndef UNICYCLE_SOLVER_H
 #define UNICYCLE_SOLVER_H
 
+#include "unicycle_real.h"
+
 #include <stddef.h>
 
 /* UNICYCLE_CDEF_BEGIN */
@@ -244,13 +246,13 @@ enum unicycle_flag {
 
 /* Automatic Levenberg-Marquardt term (docs/algorithm.md section 10), relative to the
  * Hessian scale h = max(1e-300, largest |diagonal entry| of the QP's blocks). */
-#define UNICYCLE_LM_MIN_REL UNICYCLE_PREC(1e-8, 1e-6)    /* smallest nonzero term: 1e-8 h (below: 0) */
-#define UNICYCLE_LM_MAX_REL UNICYCLE_R(1e2)              /* largest term: 1e2 h */
-#define UNICYCLE_LM_RAISE UNICYCLE_R(10.0)               /* factor of a raise */
-#define UNICYCLE_LM_LOWER UNICYCLE_R(0.1)                /* factor after a successful feedback */
-#define UNICYCLE_LM_PIVOT_REL UNICYCLE_PREC(1e-10, 1e-5) /* Riccati pivots must exceed 1e-10 h */
-#define UNICYCLE_LM_KKT_GROWTH UNICYCLE_R(10.0)          /* raise when the KKT proxy grows 10x in one prepare */
-#define UNICYCLE_LM_RETRIES 2                         /* QP solves again with lm raised after a failure */
+#define UNICYCLE_LM_MIN_REL UNICYCLE_R(1e-8)    /* smallest nonzero term: 1e-8 h (below: 0) */
+#define UNICYCLE_LM_MAX_REL UNICYCLE_R(1e2)     /* largest term: 1e2 h */
+#define UNICYCLE_LM_RAISE UNICYCLE_R(10.0)      /* factor of a raise */
+#define UNICYCLE_LM_LOWER UNICYCLE_R(0.1)       /* factor after a successful feedback */
+#define UNICYCLE_LM_PIVOT_REL UNICYCLE_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
+#define UNICYCLE_LM_KKT_GROWTH UNICYCLE_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
+#define UNICYCLE_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
 
 enum unicycle_mode {
     UNICYCLE_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
