@@ -101,3 +101,22 @@ def test_float_folder_has_no_double_arithmetic(robot_disc, tmp_path):
     for src in sorted(meta["sources"]["strict"]) + [meta["sources"]["casadi"]]:
         subprocess.run(["cc", *STRICT_CFLAGS, "-O1", "-Wdouble-promotion", "-c", str(out / src), "-o",
                         str(tmp_path / (src + ".o"))], check=True, cwd=out)
+
+
+def test_real_setting_and_its_qp_tolerance():
+    """``real`` is a setting of dopus_codegen.settings: checked, and the default QP
+    tolerance follows it unless the command line or the file gives one."""
+    from dopus_codegen import settings
+    from dopus_codegen.problem.ocp import Ocp, OcpError
+
+    names = ("qp_tol", "real")
+    values, sources = settings.resolve({"real": "float"}, {}, names=names)
+    assert values == {"qp_tol": 1e-5, "real": "float"} and sources["real"] == settings.SOURCE_FILE
+    values, _ = settings.resolve({"real": "float"}, {"real": "double"}, names=names)
+    assert values["qp_tol"] == 1e-10
+    values, sources = settings.resolve({"real": "float"}, {"qp_tol": 1e-6}, names=names)
+    assert values["qp_tol"] == 1e-6 and sources["qp_tol"] == settings.SOURCE_CLI
+    with pytest.raises(settings.SettingError, match="real must be 'double' or 'float', got 'single'"):
+        settings.validate("real", "single")
+    with pytest.raises(OcpError, match="real must be"):
+        Ocp("x").options(real="half")

@@ -478,6 +478,15 @@ def format_table(report: Dict[str, Any]) -> str:
     lines.insert(1, "-+-".join("-" * w for w in widths))
     lines.append("")
     lines.append(f"instruction count: {report['count_method']}")
+    tg = report["targets"]
+    if "m7-float" in tg and "m4f-float" in tg:
+        r = (tg["m4f-float"]["instructions"]["M1"]["iteration_median"]
+             / tg["m7-float"]["instructions"]["M1"]["iteration_median"])
+        lines.append(f"M4F float / M7 float instructions per M = 1 iteration: {r:.2f} (goal: at most 1.5)")
+    for t, s in tg.items():
+        goal = 64 if s["real"] == "float" else 128
+        lines.append(f"{t}: RAM (data + bss + stack of one iteration) {s['ram_total'] / 1024:.1f} KiB "
+                     f"(goal: at most {goal} KiB), of which the solver struct {s['solver_bytes'] / 1024:.1f} KiB")
     for t, s in report["targets"].items():
         lines.append(f"{t}: calibration {s['calibration_ratio']:.6f} (counted / known instructions); "
                      f"closed-loop state deviation from the host double build {s['loop_deviation_vs_host_double']:.3g}; "
