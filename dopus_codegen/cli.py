@@ -393,8 +393,8 @@ def build(folder, cc, opt, force):
 @click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False), default="out/firmware",
               show_default=True, help="Folder of the generated code, the builds and the images.")
 @click.option("--target", "targets", default="m7-double", show_default=True,
-              help="Comma-separated targets: m7-double, m7-float (QEMU mps2-an500), m4f-float (mps2-an386); "
-                   "the float targets need a generator with the real=float option.")
+              help="Comma-separated targets: m7-double, m7-float (QEMU mps2-an500), m4f-float (mps2-an386, "
+                   "single-precision FPU); a float target runs the folder generated with real='float'.")
 @click.option("--iters", default=12, show_default=True, type=click.IntRange(1, 1000),
               help="Iterations of the fixed-xhat_0 study per M (M = 1 and the full RTI).")
 @click.option("--steps", default=20, show_default=True, type=click.IntRange(1, 10000),
