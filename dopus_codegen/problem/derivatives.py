@@ -247,6 +247,17 @@ def _d(e):
     return ca.densify(e)
 
 
+def _same_algorithm(f: ca.Function, g: ca.Function) -> bool:
+    """True when the SX functions ``f`` and ``g`` compute the same outputs by the same
+    algorithm (names aside), so one of them can stand for both in the generated code."""
+    def key(fun):
+        args = fun.sx_in()
+        return ca.Function("same", args, fun.call(args), _FN_OPTS).serialize()
+    return (f.n_in() == g.n_in() and f.n_out() == g.n_out()
+            and all(f.sparsity_in(i) == g.sparsity_in(i) for i in range(f.n_in()))
+            and key(f) == key(g))
+
+
 def _stage_functions_unrolled(name: str, m: StageModel, phi: ca.SX):
     """The stage functions as single SX expressions of the unrolled interval map ``phi``
     (every substep inlined, derivatives by CasADi's SX differentiation with common
@@ -349,6 +360,9 @@ def _stage_functions(name: str, m: StageModel, directions="auto"):
                                          cost_in_names, ["A_l"], _FN_OPTS)
         node_gn = ca.Function(f"{name}_node_gn", node_in, [_d(A_gn), _d(C_sx)], node_names, ["A", "C"],
                               _FN_OPTS)
+        if _same_algorithm(node_gn, node_hess):
+            # a least-squares cost without other terms and no path constraints: one kernel
+            node_gn = node_hess
         A_gn_mx, C_gn = node_gn(X, U, P, MUG)
         stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [A_gn_mx, Phi, C_gn], in_names,
                                     ["A", "Phi", "C"])
