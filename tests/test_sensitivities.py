@@ -46,7 +46,8 @@ def _unrolled_reference(spec):
 @pytest.mark.parametrize("path,derivatives,directions", [
     (ROBOT_ARM_FILE, "structured", "auto"), (ROBOT_ARM_FILE, "structured", "one"),
     (ROBOT_ARM_FILE, "structured", 2), (SECOND_FILE, "structured", "all"),
-    (ROBOT_ARM_FILE, "unrolled", "auto"), (CHAIN_FILE, "auto", "auto")])
+    (ROBOT_ARM_FILE, "unrolled", "auto"), (ROBOT_ARM_FILE, "chained", "auto"), (SECOND_FILE, "chained", "auto"),
+    (CHAIN_FILE, "auto", "auto")])
 def test_structured_blocks_equal_the_unrolled_derivatives(path, derivatives, directions):
     spec = load_ocp(path).validate()
     spec = _with_integrator(spec, RK4(spec.model.integrator.substeps, derivatives=derivatives,
@@ -80,9 +81,13 @@ def test_structured_blocks_equal_the_unrolled_derivatives(path, derivatives, dir
             np.testing.assert_array_equal(Phi_gn, Phi)
 
 
-def test_hessian_by_finite_differences_of_the_gradient(robot_disc):
+@pytest.mark.parametrize("derivatives", ["default", "chained"])
+def test_hessian_by_finite_differences_of_the_gradient(robot_disc, derivatives):
     """Independent of CasADi's second derivatives: central differences of stage_grad."""
     d = robot_disc
+    if derivatives != "default":
+        spec = load_ocp(ROBOT_ARM_FILE).validate()
+        d = build_functions(_with_integrator(spec, RK4(spec.model.integrator.substeps, derivatives=derivatives)))
     rng = np.random.default_rng(5)
     x, u, p = d.initial_guess.x[3], d.initial_guess.u[3] + 0.3, d.p0[3]
     lam, mu_g = rng.standard_normal(d.nx), rng.standard_normal(d.ng)
