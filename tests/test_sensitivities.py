@@ -158,3 +158,38 @@ def test_cache_location_from_the_environment(tmp_path, monkeypatch):
     monkeypatch.delenv("DOPUS_CACHE_DIR")
     assert cache_root() == type(tmp_path).home() / ".cache" / "dopus-codegen"
     assert os.environ.get("DOPUS_CACHE_DIR") is None
+
+
+@pytest.mark.parametrize("path", [SECOND_FILE, CHAIN_FILE])
+def test_compact_functions_compute_the_same_values(path):
+    """The emitted (compact) functions against the problem's own: constant SX functions
+    become static arrays, an SX function equal to one emitted before a call to it."""
+    from dopus_codegen.codegen.generate import casadi_functions, problem_sizes
+
+    disc = build_functions(load_ocp(path))
+    emitted = casadi_functions(disc, disc.name, problem_sizes(disc))
+    rng = np.random.default_rng(11)
+    compacted = 0
+    for slot, fun in emitted.items():
+        orig = getattr(disc.functions, slot)
+        compacted += orig.class_name() != fun.class_name()
+        args = [rng.standard_normal(orig.sparsity_in(i).shape) for i in range(orig.n_in())]
+        for want, got in zip(orig(*args) if orig.n_out() > 1 else [orig(*args)],
+                             fun(*args) if fun.n_out() > 1 else [fun(*args)]):
+            np.testing.assert_array_equal(np.array(got), np.array(want))
+    # unicycle: constant stage and terminal cost Hessians; chain: the same, and the
+    # Gauss-Newton forms equal to the exact ones
+    assert compacted >= 2
+
+
+def test_parallel_compilations_from_the_environment(monkeypatch):
+    from dopus_codegen.codegen.build import BuildError, build_jobs
+
+    monkeypatch.setenv("DOPUS_BUILD_JOBS", "3")
+    assert build_jobs(10) == 3 and build_jobs(2) == 2
+    for bad in ("0", "two"):
+        monkeypatch.setenv("DOPUS_BUILD_JOBS", bad)
+        with pytest.raises(BuildError, match="DOPUS_BUILD_JOBS"):
+            build_jobs(4)
+    monkeypatch.delenv("DOPUS_BUILD_JOBS")
+    assert 1 <= build_jobs(10) <= 10
