@@ -83,7 +83,9 @@ class Integrator:
     directions = "auto"
     #: "structured": the stage functions iterate one substep and its derivative kernels
     #: (code size independent of the substeps); "unrolled": one SX expression of the whole
-    #: interval (fastest for small models, code grows with substeps and nw); "auto": unrolled
+    #: interval (fastest for small models, code grows with substeps and nw); "chained": the
+    #: Hessian by Jacobian chaining of one substep kernel over the substeps (explicit
+    #: schemes; code of one substep at about the unrolled operation count); "auto": unrolled
     #: for small models (dopus_codegen.problem.derivatives.UNROLL_LIMIT), else structured.
     derivatives = "auto"
 
@@ -109,8 +111,9 @@ class Integrator:
 
 
 def _derivatives(value, who: str) -> str:
-    if value not in ("auto", "unrolled", "structured"):
-        raise OcpError(f"{who}: derivatives must be 'auto', 'unrolled' or 'structured', got {value!r}")
+    if value not in ("auto", "unrolled", "structured", "chained"):
+        raise OcpError(f"{who}: derivatives must be 'auto', 'unrolled', 'structured' or 'chained', "
+                       f"got {value!r}")
     return value
 
 
@@ -125,11 +128,12 @@ def _directions(value, who: str):
 class RK4(Integrator):
     """Classical fourth-order Runge-Kutta with ``substeps`` equal steps per interval.
 
-    ``derivatives`` (``"auto"``, ``"unrolled"``, ``"structured"``) and ``directions``
+    ``derivatives`` (``"auto"``, ``"unrolled"``, ``"structured"``, ``"chained"``) and ``directions``
     (``"auto"``, ``"one"``, ``"all"`` or a chunk size; structured only): how the derivative
     code is built, a trade of code size against speed that never changes the computed
     values beyond round-off (see :class:`Integrator`). Firmware with little flash:
-    ``RK4(substeps, derivatives="structured", directions="one")``."""
+    ``RK4(substeps, derivatives="chained")`` (robot arm: half the code of the unrolled
+    form) or ``RK4(substeps, derivatives="structured", directions="one")`` (smallest)."""
 
     def __init__(self, substeps: int = 1, derivatives: str = "auto", directions="auto"):
         if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
