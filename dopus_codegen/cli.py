@@ -202,9 +202,9 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--start", type=click.Choice(["cold", "warm"]), default="warm", show_default=True,
               help="cold: the OCP file's initial guess at its initial state; warm: the converged solution at the "
                    "initial state, then iterate for the disturbed initial state.")
-@click.option("--tol", default=1e-8, show_default=True, type=click.FloatRange(min=0, min_open=True),
+@click.option("--tol", default=None, type=click.FloatRange(min=0, min_open=True),
               help="A run has converged when its KKT measure reaches this; the JSON 'solution' is the iterate "
-                   "of a converged run.")
+                   "of a converged run. [default: 1e-8, with --real float 2e-5]")
 @_solver_options("0: exact Newton")
 @_real_option("With --backend c, the study runs the solver generated in that type (float: see what single "
               "precision costs); the default --qp-tol follows it.")

@@ -21,7 +21,7 @@ from . import vocabulary
 __all__ = ["SettingError", "DEFAULTS", "SOLVER_SETTINGS", "choices", "code", "value_of", "check",
            "positive", "nonnegative", "count", "resolve", "RUNTIME_SETTINGS", "HELP", "kind", "validate",
            "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT", "parse_m_list", "REALS", "QP_TOL_DEFAULT",
-           "qp_tol_default", "check_real"]
+           "qp_tol_default", "check_real", "KKT_TOL_DEFAULT"]
 
 SOURCE_CLI, SOURCE_FILE, SOURCE_DEFAULT = "cli", "ocp-file", "default"
 
@@ -53,6 +53,10 @@ REALS = {"double": 0, "float": 1}
 #: runtime_c/dopus_solver.c): single precision resolves the scaled KKT residuals of the
 #: robot arm's QPs to about 1e-6, so 1e-10 is out of reach there (docs/algorithm.md).
 QP_TOL_DEFAULT = {"double": 1e-10, "float": 1e-5}
+
+#: The KKT measure at which a run of ``dopus-gen converge`` counts as converged, per real
+#: type: float's floor on the robot arm is 6e-6 to 8e-6 (docs/algorithm.md section 11).
+KKT_TOL_DEFAULT = {"double": 1e-8, "float": 2e-5}
 
 
 def qp_tol_default(real: str) -> float:

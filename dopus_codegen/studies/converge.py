@@ -350,7 +350,7 @@ def effective_settings(declared: dict, m_list, **cli):
 
 def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularization=None, reg_eps=None,
                      backend="reference", json_out=None, plot_out=None, cost_hessian=None, lm=None,
-                     qp_tol=None, qp_max_iter=None, tol=1e-8, real=None) -> dict:
+                     qp_tol=None, qp_max_iter=None, tol=None, real=None) -> dict:
     """The body of ``dopus-gen converge`` (bad input raises OcpError, ValueError or
     RuntimeError with a message; the command line turns them into one line). A setting given
     as None comes from the OCP file's ``options(...)``, else from the defaults of
@@ -375,6 +375,8 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularizatio
     if values["real"] != settings.DEFAULTS["real"] and backend != "c":
         raise ValueError(f"--real {values['real']} needs --backend c (the reference backend computes in double)")
     ocp.options(real=values["real"])    # the C backend is generated in this type
+    if tol is None:
+        tol = settings.KKT_TOL_DEFAULT[values["real"]]
     disc = build_functions(ocp)
     if values["hessian"] == "gauss-newton" and disc.stage_hess_gn is None:
         raise ValueError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
