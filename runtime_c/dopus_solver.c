@@ -1514,6 +1514,45 @@ int dopus_get_qp_status(const dopus_solver *s)
     return s->qp_status;
 }
 
+/* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
+static double dopus_side_bound(const double *lo, const double *up, int i, int side)
+{
+    return side > 0 ? up[i] : lo[i];
+}
+
+int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
+{
+    int k, j, side;
+    if (s->qp_status != DOPUS_QP_PRIMAL_INFEASIBLE ||
+        !dopus_qp_infeasible_row(&s->qp_work, &s->qp_in, &k, &j, &side)) {
+        return 0;
+    }
+    row->stage = k;
+    row->side = side;
+    if (j < DOPUS_NX) {
+        row->kind = DOPUS_ROW_STATE;
+        row->index = j;
+        row->bound = dopus_side_bound(dopus_lbx, dopus_ubx, j, side);
+    } else if (k < DOPUS_N && j < DOPUS_NW) {
+        row->kind = DOPUS_ROW_CONTROL;
+        row->index = j - DOPUS_NX;
+        row->bound = dopus_side_bound(dopus_lbu, dopus_ubu, row->index, side);
+    } else if (k < DOPUS_N) {
+        row->kind = DOPUS_ROW_PATH;
+        row->index = j - DOPUS_NW;
+        row->bound = dopus_side_bound(dopus_lg, dopus_ug, row->index, side);
+    } else if (j < DOPUS_NX + DOPUS_NR) {
+        row->kind = DOPUS_ROW_TERMINAL;
+        row->index = j - DOPUS_NX;
+        row->bound = dopus_side_bound(dopus_lr, dopus_ur, row->index, side);
+    } else {
+        row->kind = DOPUS_ROW_TERMINAL_EQ;
+        row->index = j - DOPUS_NX - DOPUS_NR;
+        row->bound = 0.0;
+    }
+    return 1;
+}
+
 int dopus_get_flags(const dopus_solver *s)
 {
     return s->flags;

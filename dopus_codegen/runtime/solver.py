@@ -240,6 +240,11 @@ class CSolver:
             msg += "; " + qp_failure_text(self.enums["dopus_qp_status"].name(qp_status),
                                           int(self._c("get_qp_iterations")(self._s)),
                                           int(self._c("get_qp_max_iter")(self._s)), qp_status)
+            row = self.qp_infeasible_row
+            if row is not None:
+                from ..problem.checks import describe_qp_row
+
+                msg += "; " + describe_qp_row(self.disc, row)
         raise DopusError(msg, status, qp_status)
 
     def _bad(self, message: str, status: int = STATUS_INVALID_ARGUMENT):
@@ -484,6 +489,24 @@ class CSolver:
     ring_head = _c_property("get_ring_head")
     qp_iterations = _c_property("get_qp_iterations")
     qp_status = _c_property("get_qp_status")
+
+    @property
+    def qp_infeasible_row(self) -> Optional[dict]:
+        """When the last QP was infeasible: the row of the OCP with the largest multiplier of
+        its infeasibility certificate, ``{"stage", "kind", "index", "side", "bound"}`` (kind:
+        ``state``, ``control``, ``path``, ``terminal`` or ``terminal_eq``; side: ``lower``
+        or ``upper``; see dopus_get_qp_infeasible_row); else None."""
+        import cffi
+
+        try:
+            get, row = self._c("get_qp_infeasible_row"), self._ffi.new(f"{self.name}_row_info *")
+        except (AttributeError, cffi.CDefError):  # a library generated before the getter existed
+            return None
+        if not get(self._s, row):
+            return None
+        return {"stage": int(row.stage), "kind": self.enums["dopus_row_kind"].name(row.kind),
+                "index": int(row.index), "side": {-1: "lower", 1: "upper"}.get(int(row.side), "lower above upper"),
+                "bound": float(row.bound)}
 
     @property
     def timings(self) -> dict:

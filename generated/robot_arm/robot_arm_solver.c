@@ -1514,6 +1514,45 @@ int robot_arm_get_qp_status(const robot_arm_solver *s)
     return s->qp_status;
 }
 
+/* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
+static double robot_arm_side_bound(const double *lo, const double *up, int i, int side)
+{
+    return side > 0 ? up[i] : lo[i];
+}
+
+int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_info *row)
+{
+    int k, j, side;
+    if (s->qp_status != ROBOT_ARM_QP_PRIMAL_INFEASIBLE ||
+        !robot_arm_qp_infeasible_row(&s->qp_work, &s->qp_in, &k, &j, &side)) {
+        return 0;
+    }
+    row->stage = k;
+    row->side = side;
+    if (j < ROBOT_ARM_NX) {
+        row->kind = ROBOT_ARM_ROW_STATE;
+        row->index = j;
+        row->bound = robot_arm_side_bound(robot_arm_lbx, robot_arm_ubx, j, side);
+    } else if (k < ROBOT_ARM_N && j < ROBOT_ARM_NW) {
+        row->kind = ROBOT_ARM_ROW_CONTROL;
+        row->index = j - ROBOT_ARM_NX;
+        row->bound = robot_arm_side_bound(robot_arm_lbu, robot_arm_ubu, row->index, side);
+    } else if (k < ROBOT_ARM_N) {
+        row->kind = ROBOT_ARM_ROW_PATH;
+        row->index = j - ROBOT_ARM_NW;
+        row->bound = robot_arm_side_bound(robot_arm_lg, robot_arm_ug, row->index, side);
+    } else if (j < ROBOT_ARM_NX + ROBOT_ARM_NR) {
+        row->kind = ROBOT_ARM_ROW_TERMINAL;
+        row->index = j - ROBOT_ARM_NX;
+        row->bound = robot_arm_side_bound(robot_arm_lr, robot_arm_ur, row->index, side);
+    } else {
+        row->kind = ROBOT_ARM_ROW_TERMINAL_EQ;
+        row->index = j - ROBOT_ARM_NX - ROBOT_ARM_NR;
+        row->bound = 0.0;
+    }
+    return 1;
+}
+
 int robot_arm_get_flags(const robot_arm_solver *s)
 {
     return s->flags;

@@ -1514,6 +1514,45 @@ int unicycle_get_qp_status(const unicycle_solver *s)
     return s->qp_status;
 }
 
+/* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
+static double unicycle_side_bound(const double *lo, const double *up, int i, int side)
+{
+    return side > 0 ? up[i] : lo[i];
+}
+
+int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *row)
+{
+    int k, j, side;
+    if (s->qp_status != UNICYCLE_QP_PRIMAL_INFEASIBLE ||
+        !unicycle_qp_infeasible_row(&s->qp_work, &s->qp_in, &k, &j, &side)) {
+        return 0;
+    }
+    row->stage = k;
+    row->side = side;
+    if (j < UNICYCLE_NX) {
+        row->kind = UNICYCLE_ROW_STATE;
+        row->index = j;
+        row->bound = unicycle_side_bound(unicycle_lbx, unicycle_ubx, j, side);
+    } else if (k < UNICYCLE_N && j < UNICYCLE_NW) {
+        row->kind = UNICYCLE_ROW_CONTROL;
+        row->index = j - UNICYCLE_NX;
+        row->bound = unicycle_side_bound(unicycle_lbu, unicycle_ubu, row->index, side);
+    } else if (k < UNICYCLE_N) {
+        row->kind = UNICYCLE_ROW_PATH;
+        row->index = j - UNICYCLE_NW;
+        row->bound = unicycle_side_bound(unicycle_lg, unicycle_ug, row->index, side);
+    } else if (j < UNICYCLE_NX + UNICYCLE_NR) {
+        row->kind = UNICYCLE_ROW_TERMINAL;
+        row->index = j - UNICYCLE_NX;
+        row->bound = unicycle_side_bound(unicycle_lr, unicycle_ur, row->index, side);
+    } else {
+        row->kind = UNICYCLE_ROW_TERMINAL_EQ;
+        row->index = j - UNICYCLE_NX - UNICYCLE_NR;
+        row->bound = 0.0;
+    }
+    return 1;
+}
+
 int unicycle_get_flags(const unicycle_solver *s)
 {
     return s->flags;
