@@ -73,37 +73,51 @@ int dopus_la_all_finite(int m, int n, const dopus_real *A, int lda);
 #include <float.h>
 #include <math.h>
 
+/* The pivot of column j of the Cholesky factorisation: A_jj minus the squares of row j of
+ * the factor so far. */
+static inline dopus_real dopus_lai_potrf_pivot(const dopus_real *A, int lda, int j)
+{
+    int k;
+    dopus_real d = A[j + j * lda];
+    for (k = 0; k < j; ++k)
+        d -= A[j + k * lda] * A[j + k * lda];
+    return d;
+}
+
+/* Column j of the factor from its pivot d > 0: L_jj = sqrt(d), the entries below. */
+static inline void dopus_lai_potrf_column(int n, dopus_real *A, int lda, int j, dopus_real d)
+{
+    int i, k;
+    d = dopus_sqrt(d);
+    A[j + j * lda] = d;
+    for (i = j + 1; i < n; ++i) {
+        dopus_real s = A[i + j * lda];
+        for (k = 0; k < j; ++k)
+            s -= A[i + k * lda] * A[j + k * lda];
+        A[i + j * lda] = s / d;
+    }
+}
+
 static inline int dopus_lai_potrf_l(int n, dopus_real *A, int lda)
 {
-    int i, j, k;
+    int j;
     for (j = 0; j < n; ++j) {
-        dopus_real d = A[j + j * lda];
-        for (k = 0; k < j; ++k)
-            d -= A[j + k * lda] * A[j + k * lda];
+        const dopus_real d = dopus_lai_potrf_pivot(A, lda, j);
         /* !(d > 0) also rejects NaN */
         if (!(d > DOPUS_R(0.0)) || !isfinite(d))
             return j + 1;
-        d = dopus_sqrt(d);
-        A[j + j * lda] = d;
-        for (i = j + 1; i < n; ++i) {
-            dopus_real s = A[i + j * lda];
-            for (k = 0; k < j; ++k)
-                s -= A[i + k * lda] * A[j + k * lda];
-            A[i + j * lda] = s / d;
-        }
+        dopus_lai_potrf_column(n, A, lda, j, d);
     }
     return 0;
 }
 
 static inline int dopus_lai_potrf_l_noise(int n, dopus_real *A, int lda, const dopus_real *noise, int *nfloor)
 {
-    int i, j, k;
+    int j;
     for (j = 0; j < n; ++j) {
         const dopus_real ajj = dopus_fabs(A[j + j * lda]);
         const dopus_real tol = noise ? noise[j] : DOPUS_R(0.0);
-        dopus_real d = A[j + j * lda];
-        for (k = 0; k < j; ++k)
-            d -= A[j + k * lda] * A[j + k * lda];
+        dopus_real d = dopus_lai_potrf_pivot(A, lda, j);
         if (!isfinite(d))
             return j + 1;
         if (d <= DOPUS_R(0.0)) {
@@ -114,14 +128,7 @@ static inline int dopus_lai_potrf_l_noise(int n, dopus_real *A, int lda, const d
             if (nfloor)
                 ++*nfloor;
         }
-        d = dopus_sqrt(d);
-        A[j + j * lda] = d;
-        for (i = j + 1; i < n; ++i) {
-            dopus_real s = A[i + j * lda];
-            for (k = 0; k < j; ++k)
-                s -= A[i + k * lda] * A[j + k * lda];
-            A[i + j * lda] = s / d;
-        }
+        dopus_lai_potrf_column(n, A, lda, j, d);
     }
     return 0;
 }
@@ -189,10 +196,10 @@ static inline void dopus_lai_trsm_llt(int n, int m, const dopus_real *L, int ldl
         dopus_lai_trsv_lt(n, L, ldl, B + j * ldb);
 }
 
-static inline void dopus_lai_gemv_n(int m, int n, dopus_real alpha, const dopus_real *A, int lda,
-                                    const dopus_real *x, dopus_real beta, dopus_real *y)
+/* y = beta y (m entries) with beta = 0 writing zeros (y may hold NaN) and beta = 1 no-op. */
+static inline void dopus_lai_scale_y(int m, dopus_real beta, dopus_real *y)
 {
-    int i, j;
+    int i;
     if (beta == DOPUS_R(0.0)) {
         for (i = 0; i < m; ++i)
             y[i] = DOPUS_R(0.0);
@@ -200,6 +207,13 @@ static inline void dopus_lai_gemv_n(int m, int n, dopus_real alpha, const dopus_
         for (i = 0; i < m; ++i)
             y[i] *= beta;
     }
+}
+
+static inline void dopus_lai_gemv_n(int m, int n, dopus_real alpha, const dopus_real *A, int lda,
+                                    const dopus_real *x, dopus_real beta, dopus_real *y)
+{
+    int i, j;
+    dopus_lai_scale_y(m, beta, y);
     for (j = 0; j < n; ++j) {
         const dopus_real a = alpha * x[j];
         for (i = 0; i < m; ++i)
@@ -224,13 +238,7 @@ static inline void dopus_lai_symv_l(int n, dopus_real alpha, const dopus_real *A
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
-    if (beta == DOPUS_R(0.0)) {
-        for (i = 0; i < n; ++i)
-            y[i] = DOPUS_R(0.0);
-    } else if (beta != DOPUS_R(1.0)) {
-        for (i = 0; i < n; ++i)
-            y[i] *= beta;
-    }
+    dopus_lai_scale_y(n, beta, y);
     for (j = 0; j < n; ++j) {
         const dopus_real *a = A + j * lda;
         const dopus_real xj = alpha * x[j];
@@ -250,13 +258,7 @@ static inline void dopus_lai_gemm_nn(int m, int n, int k, dopus_real alpha, cons
     int i, j, l;
     for (j = 0; j < n; ++j) {
         dopus_real *c = C + j * ldc;
-        if (beta == DOPUS_R(0.0)) {
-            for (i = 0; i < m; ++i)
-                c[i] = DOPUS_R(0.0);
-        } else if (beta != DOPUS_R(1.0)) {
-            for (i = 0; i < m; ++i)
-                c[i] *= beta;
-        }
+        dopus_lai_scale_y(m, beta, c);
         for (l = 0; l < k; ++l) {
             const dopus_real b = alpha * B[l + j * ldb];
             for (i = 0; i < m; ++i)

@@ -4,25 +4,26 @@
 
 #include "dopus_ring.h"
 
+static void dopus_ring_zero(dopus_real *v, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        v[i] = DOPUS_R(0.0);
+    }
+}
+
 void dopus_ring_reset(dopus_ring *ring)
 {
-    int k, i;
+    int k;
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *s = &ring->slot[k];
-        for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i)
-            s->Ht[i] = DOPUS_R(0.0);
-        for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i)
-            s->A_dyn[i] = DOPUS_R(0.0);
-        for (i = 0; i < DOPUS_NX * DOPUS_NW; ++i)
-            s->Phit[i] = DOPUS_R(0.0);
-        for (i = 0; i < DOPUS_DIM(DOPUS_NG) * DOPUS_NW; ++i)
-            s->Ct[i] = DOPUS_R(0.0);
-        for (i = 0; i < DOPUS_NW; ++i)
-            s->F_w[i] = DOPUS_R(0.0);
-        for (i = 0; i < DOPUS_NX; ++i)
-            s->phi[i] = DOPUS_R(0.0);
-        for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i)
-            s->g[i] = DOPUS_R(0.0);
+        dopus_ring_zero(s->Ht, DOPUS_NW * DOPUS_NW);
+        dopus_ring_zero(s->A_dyn, DOPUS_NW * DOPUS_NW);
+        dopus_ring_zero(s->Phit, DOPUS_NX * DOPUS_NW);
+        dopus_ring_zero(s->Ct, DOPUS_DIM(DOPUS_NG) * DOPUS_NW);
+        dopus_ring_zero(s->F_w, DOPUS_NW);
+        dopus_ring_zero(s->phi, DOPUS_NX);
+        dopus_ring_zero(s->g, DOPUS_DIM(DOPUS_NG));
         dopus_ring_clear_step(s);
     }
     ring->ring_head = 0;
@@ -45,15 +46,10 @@ void dopus_ring_advance(dopus_ring *ring)
 
 void dopus_ring_clear_step(dopus_stage_slot *slot)
 {
-    int i;
-    for (i = 0; i < DOPUS_NW; ++i)
-        slot->dw[i] = DOPUS_R(0.0);
-    for (i = 0; i < DOPUS_NX; ++i)
-        slot->dlam[i] = DOPUS_R(0.0);
-    for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i)
-        slot->dmu_g[i] = DOPUS_R(0.0);
-    for (i = 0; i < DOPUS_NW; ++i)
-        slot->dmu_b[i] = DOPUS_R(0.0);
+    dopus_ring_zero(slot->dw, DOPUS_NW);
+    dopus_ring_zero(slot->dlam, DOPUS_NX);
+    dopus_ring_zero(slot->dmu_g, DOPUS_DIM(DOPUS_NG));
+    dopus_ring_zero(slot->dmu_b, DOPUS_NW);
 }
 
 dopus_real dopus_ring_secant(const dopus_stage_slot *slot, const dopus_real *F_w_new,

@@ -135,34 +135,29 @@ class StageFunctions:
         """True when the Gauss-Newton stage Hessian exists."""
         return self.stage_hess_gn is not None
 
+    def _of_kind(self, kind: str, exact: ca.Function, gn: Optional[ca.Function]) -> ca.Function:
+        """``exact`` for ``"exact"``, ``gn`` for ``"gauss-newton"`` (an OcpError when there
+        is none: no least-squares stage cost)."""
+        if kind == "exact":
+            return exact
+        if kind == "gauss-newton":
+            if gn is None:
+                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
+            return gn
+        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+
     def stage_hess(self, kind: str) -> ca.Function:
         """``stage_hess_exact`` for ``"exact"``, ``stage_hess_gn`` for ``"gauss-newton"``."""
-        if kind == "exact":
-            return self.stage_hess_exact
-        if kind == "gauss-newton":
-            if self.stage_hess_gn is None:
-                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
-            return self.stage_hess_gn
-        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+        return self._of_kind(kind, self.stage_hess_exact, self.stage_hess_gn)
 
     def stage_hess_cost(self, kind: str) -> ca.Function:
         """``stage_hess_cost_exact`` for ``"exact"``, ``stage_hess_cost_gn`` for
         ``"gauss-newton"``: ``(x, u, p) -> A_l``, the stage-cost part of ``stage_hess(kind)``'s A."""
-        if kind == "exact":
-            return self.stage_hess_cost_exact
-        if kind == "gauss-newton":
-            if self.stage_hess_cost_gn is None:
-                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
-            return self.stage_hess_cost_gn
-        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+        return self._of_kind(kind, self.stage_hess_cost_exact, self.stage_hess_cost_gn)
 
     def term_hess(self, kind: str) -> ca.Function:
-        """Terminal counterpart of :meth:`stage_hess`."""
-        if kind == "exact":
-            return self.term_hess_exact
-        if kind == "gauss-newton":
-            return self.term_hess_gn
-        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+        """Terminal counterpart of :meth:`stage_hess` (the Gauss-Newton form always exists)."""
+        return self._of_kind(kind, self.term_hess_exact, self.term_hess_gn)
 
 
 @dataclass(frozen=True)
@@ -282,23 +277,32 @@ def _stage_functions_unrolled(name: str, m: StageModel, phi: ca.SX):
                              in_names, ["gL", "phi", "l", "g"], _FN_OPTS)
     stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [_d(A), _d(Phi), _d(C)],
                                    in_names, ["A", "Phi", "C"], _FN_OPTS)
-    # stage-cost part of A (algorithm.md section 4 step 5): l is evaluated at the node, so
-    # this needs no integrator sensitivities
-    cost_in, cost_in_names = [x, u, p], ["x", "u", "p"]
-    stage_hess_cost_exact = ca.Function(f"{name}_stage_hess_cost_exact", cost_in,
-                                        [_d(ca.hessian(m.l, w)[0])], cost_in_names, ["A_l"], _FN_OPTS)
-    stage_hess_gn = stage_hess_cost_gn = None
-    if m.has_stage_ls:
-        J = ca.jacobian(m.res, w)
-        # Gauss-Newton: J' W J + exact Hessian of the non least-squares part, no curvature
-        # of dynamics or constraints (algorithm.md section 2).
-        A_gn = ca.mtimes([J.T, ca.DM(m.W), J]) + ca.hessian(m.l_extra, w)[0]
+    stage_hess_cost_exact, stage_hess_cost_gn, A_gn = _stage_cost_hessians(name, m)
+    stage_hess_gn = None
+    if A_gn is not None:
         stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [_d(A_gn), _d(Phi), _d(C)],
                                     in_names, ["A", "Phi", "C"], _FN_OPTS)
-        # the same expression: A - A_l = 0 for Gauss-Newton
-        stage_hess_cost_gn = ca.Function(f"{name}_stage_hess_cost_gn", cost_in, [_d(A_gn)],
-                                         cost_in_names, ["A_l"], _FN_OPTS)
     return stage_eval, stage_grad, stage_hess_exact, stage_hess_gn, stage_hess_cost_exact, stage_hess_cost_gn
+
+
+def _stage_cost_hessians(name: str, m: StageModel) -> tuple:
+    """``(stage_hess_cost_exact, stage_hess_cost_gn, A_gn)``: the stage-cost part of A
+    (algorithm.md section 4 step 5), exact and Gauss-Newton, and the SX expression of the
+    Gauss-Newton A (``None`` twice without a least-squares stage cost). l is evaluated at
+    the node, so this needs no integrator sensitivities."""
+    x, u, p, w = m.x, m.u, m.p, m.w
+    cost_in, cost_in_names = [x, u, p], ["x", "u", "p"]
+    exact = ca.Function(f"{name}_stage_hess_cost_exact", cost_in, [_d(ca.hessian(m.l, w)[0])], cost_in_names,
+                        ["A_l"], _FN_OPTS)
+    if not m.has_stage_ls:
+        return exact, None, None
+    J = ca.jacobian(m.res, w)
+    # Gauss-Newton: J' W J + exact Hessian of the non least-squares part, no curvature of
+    # dynamics or constraints (algorithm.md section 2).
+    A_gn = ca.mtimes([J.T, ca.DM(m.W), J]) + ca.hessian(m.l_extra, w)[0]
+    # the same expression: A - A_l = 0 for Gauss-Newton
+    gn = ca.Function(f"{name}_stage_hess_cost_gn", cost_in, [_d(A_gn)], cost_in_names, ["A_l"], _FN_OPTS)
+    return exact, gn, A_gn
 
 
 def _stage_functions(name: str, m: StageModel, directions="auto"):
@@ -344,20 +348,9 @@ def _stage_functions(name: str, m: StageModel, directions="auto"):
     An, C = node_hess(X, U, P, MUG)
     A = An + 0.5 * (H_dyn + H_dyn.T)
     stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [A, Phi, C], in_names, ["A", "Phi", "C"])
-    # stage-cost part of A (algorithm.md section 4 step 5): l is evaluated at the node, so
-    # this needs no integrator sensitivities
-    cost_in, cost_in_names = [x, u, p], ["x", "u", "p"]
-    stage_hess_cost_exact = ca.Function(f"{name}_stage_hess_cost_exact", cost_in,
-                                        [_d(ca.hessian(m.l, w)[0])], cost_in_names, ["A_l"], _FN_OPTS)
-    stage_hess_gn = stage_hess_cost_gn = None
-    if m.has_stage_ls:
-        J = ca.jacobian(m.res, w)
-        # Gauss-Newton: J' W J + exact Hessian of the non least-squares part, no curvature
-        # of dynamics or constraints (algorithm.md section 2).
-        A_gn = ca.mtimes([J.T, ca.DM(m.W), J]) + ca.hessian(m.l_extra, w)[0]
-        # the same expression: A - A_l = 0 for Gauss-Newton
-        stage_hess_cost_gn = ca.Function(f"{name}_stage_hess_cost_gn", cost_in, [_d(A_gn)],
-                                         cost_in_names, ["A_l"], _FN_OPTS)
+    stage_hess_cost_exact, stage_hess_cost_gn, A_gn = _stage_cost_hessians(name, m)
+    stage_hess_gn = None
+    if A_gn is not None:
         node_gn = ca.Function(f"{name}_node_gn", node_in, [_d(A_gn), _d(C_sx)], node_names, ["A", "C"],
                               _FN_OPTS)
         if _same_algorithm(node_gn, node_hess):

@@ -377,6 +377,16 @@ def _as_sx(expr, what: str) -> ca.SX:
     return ca.densify(expr)
 
 
+def _rows(expr, lb, ub, what: str) -> tuple:
+    """``(expr, lb, ub)`` of a block of constraint rows, checked: an SX column and two bound
+    vectors of its size with ``lb <= ub``."""
+    e = _as_sx(expr, what)
+    lbv = _vector(lb, e.size1(), f"{what} lb")
+    ubv = _vector(ub, e.size1(), f"{what} ub")
+    _check_bounds(lbv, ubv, what)
+    return e, lbv, ubv
+
+
 def _check_bounds(lb: np.ndarray, ub: np.ndarray, what: str) -> None:
     bad = np.flatnonzero(lb > ub)
     if bad.size:
@@ -556,21 +566,13 @@ class Ocp:
     @_declaration
     def path_constraint(self, expr, lb=-math.inf, ub=math.inf) -> None:
         """``lb <= g(x, u, p) <= ub`` on stages 0..N-1 (several calls stack)."""
-        what = f"path constraint {len(self._path)}"
-        g = _as_sx(expr, what)
-        lbv = _vector(lb, g.size1(), f"{what} lb")
-        ubv = _vector(ub, g.size1(), f"{what} ub")
-        _check_bounds(lbv, ubv, what)
-        self._path.append((g, lbv, ubv))
+        self._path.append(_rows(expr, lb, ub, f"path constraint {len(self._path)}"))
 
     @_declaration
     def terminal_constraint(self, expr, lb=-math.inf, ub=math.inf) -> None:
         """``lb <= r(x_N, p) <= ub``; rows with ``lb == ub`` become equality rows."""
         what = f"terminal constraint {len(self._term_con)}"
-        r = _as_sx(expr, what)
-        lbv = _vector(lb, r.size1(), f"{what} lb")
-        ubv = _vector(ub, r.size1(), f"{what} ub")
-        _check_bounds(lbv, ubv, what)
+        r, lbv, ubv = _rows(expr, lb, ub, what)
         eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
         if eq.size:
             raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")

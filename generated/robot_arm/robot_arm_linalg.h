@@ -73,37 +73,51 @@ int robot_arm_la_all_finite(int m, int n, const robot_arm_real *A, int lda);
 #include <float.h>
 #include <math.h>
 
+/* The pivot of column j of the Cholesky factorisation: A_jj minus the squares of row j of
+ * the factor so far. */
+static inline robot_arm_real robot_arm_lai_potrf_pivot(const robot_arm_real *A, int lda, int j)
+{
+    int k;
+    robot_arm_real d = A[j + j * lda];
+    for (k = 0; k < j; ++k)
+        d -= A[j + k * lda] * A[j + k * lda];
+    return d;
+}
+
+/* Column j of the factor from its pivot d > 0: L_jj = sqrt(d), the entries below. */
+static inline void robot_arm_lai_potrf_column(int n, robot_arm_real *A, int lda, int j, robot_arm_real d)
+{
+    int i, k;
+    d = robot_arm_sqrt(d);
+    A[j + j * lda] = d;
+    for (i = j + 1; i < n; ++i) {
+        robot_arm_real s = A[i + j * lda];
+        for (k = 0; k < j; ++k)
+            s -= A[i + k * lda] * A[j + k * lda];
+        A[i + j * lda] = s / d;
+    }
+}
+
 static inline int robot_arm_lai_potrf_l(int n, robot_arm_real *A, int lda)
 {
-    int i, j, k;
+    int j;
     for (j = 0; j < n; ++j) {
-        robot_arm_real d = A[j + j * lda];
-        for (k = 0; k < j; ++k)
-            d -= A[j + k * lda] * A[j + k * lda];
+        const robot_arm_real d = robot_arm_lai_potrf_pivot(A, lda, j);
         /* !(d > 0) also rejects NaN */
         if (!(d > ROBOT_ARM_R(0.0)) || !isfinite(d))
             return j + 1;
-        d = robot_arm_sqrt(d);
-        A[j + j * lda] = d;
-        for (i = j + 1; i < n; ++i) {
-            robot_arm_real s = A[i + j * lda];
-            for (k = 0; k < j; ++k)
-                s -= A[i + k * lda] * A[j + k * lda];
-            A[i + j * lda] = s / d;
-        }
+        robot_arm_lai_potrf_column(n, A, lda, j, d);
     }
     return 0;
 }
 
 static inline int robot_arm_lai_potrf_l_noise(int n, robot_arm_real *A, int lda, const robot_arm_real *noise, int *nfloor)
 {
-    int i, j, k;
+    int j;
     for (j = 0; j < n; ++j) {
         const robot_arm_real ajj = robot_arm_fabs(A[j + j * lda]);
         const robot_arm_real tol = noise ? noise[j] : ROBOT_ARM_R(0.0);
-        robot_arm_real d = A[j + j * lda];
-        for (k = 0; k < j; ++k)
-            d -= A[j + k * lda] * A[j + k * lda];
+        robot_arm_real d = robot_arm_lai_potrf_pivot(A, lda, j);
         if (!isfinite(d))
             return j + 1;
         if (d <= ROBOT_ARM_R(0.0)) {
@@ -114,14 +128,7 @@ static inline int robot_arm_lai_potrf_l_noise(int n, robot_arm_real *A, int lda,
             if (nfloor)
                 ++*nfloor;
         }
-        d = robot_arm_sqrt(d);
-        A[j + j * lda] = d;
-        for (i = j + 1; i < n; ++i) {
-            robot_arm_real s = A[i + j * lda];
-            for (k = 0; k < j; ++k)
-                s -= A[i + k * lda] * A[j + k * lda];
-            A[i + j * lda] = s / d;
-        }
+        robot_arm_lai_potrf_column(n, A, lda, j, d);
     }
     return 0;
 }
@@ -189,10 +196,10 @@ static inline void robot_arm_lai_trsm_llt(int n, int m, const robot_arm_real *L,
         robot_arm_lai_trsv_lt(n, L, ldl, B + j * ldb);
 }
 
-static inline void robot_arm_lai_gemv_n(int m, int n, robot_arm_real alpha, const robot_arm_real *A, int lda,
-                                    const robot_arm_real *x, robot_arm_real beta, robot_arm_real *y)
+/* y = beta y (m entries) with beta = 0 writing zeros (y may hold NaN) and beta = 1 no-op. */
+static inline void robot_arm_lai_scale_y(int m, robot_arm_real beta, robot_arm_real *y)
 {
-    int i, j;
+    int i;
     if (beta == ROBOT_ARM_R(0.0)) {
         for (i = 0; i < m; ++i)
             y[i] = ROBOT_ARM_R(0.0);
@@ -200,6 +207,13 @@ static inline void robot_arm_lai_gemv_n(int m, int n, robot_arm_real alpha, cons
         for (i = 0; i < m; ++i)
             y[i] *= beta;
     }
+}
+
+static inline void robot_arm_lai_gemv_n(int m, int n, robot_arm_real alpha, const robot_arm_real *A, int lda,
+                                    const robot_arm_real *x, robot_arm_real beta, robot_arm_real *y)
+{
+    int i, j;
+    robot_arm_lai_scale_y(m, beta, y);
     for (j = 0; j < n; ++j) {
         const robot_arm_real a = alpha * x[j];
         for (i = 0; i < m; ++i)
@@ -224,13 +238,7 @@ static inline void robot_arm_lai_symv_l(int n, robot_arm_real alpha, const robot
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
-    if (beta == ROBOT_ARM_R(0.0)) {
-        for (i = 0; i < n; ++i)
-            y[i] = ROBOT_ARM_R(0.0);
-    } else if (beta != ROBOT_ARM_R(1.0)) {
-        for (i = 0; i < n; ++i)
-            y[i] *= beta;
-    }
+    robot_arm_lai_scale_y(n, beta, y);
     for (j = 0; j < n; ++j) {
         const robot_arm_real *a = A + j * lda;
         const robot_arm_real xj = alpha * x[j];
@@ -250,13 +258,7 @@ static inline void robot_arm_lai_gemm_nn(int m, int n, int k, robot_arm_real alp
     int i, j, l;
     for (j = 0; j < n; ++j) {
         robot_arm_real *c = C + j * ldc;
-        if (beta == ROBOT_ARM_R(0.0)) {
-            for (i = 0; i < m; ++i)
-                c[i] = ROBOT_ARM_R(0.0);
-        } else if (beta != ROBOT_ARM_R(1.0)) {
-            for (i = 0; i < m; ++i)
-                c[i] *= beta;
-        }
+        robot_arm_lai_scale_y(m, beta, c);
         for (l = 0; l < k; ++l) {
             const robot_arm_real b = alpha * B[l + j * ldb];
             for (i = 0; i < m; ++i)

@@ -73,37 +73,51 @@ int unicycle_la_all_finite(int m, int n, const unicycle_real *A, int lda);
 #include <float.h>
 #include <math.h>
 
+/* The pivot of column j of the Cholesky factorisation: A_jj minus the squares of row j of
+ * the factor so far. */
+static inline unicycle_real unicycle_lai_potrf_pivot(const unicycle_real *A, int lda, int j)
+{
+    int k;
+    unicycle_real d = A[j + j * lda];
+    for (k = 0; k < j; ++k)
+        d -= A[j + k * lda] * A[j + k * lda];
+    return d;
+}
+
+/* Column j of the factor from its pivot d > 0: L_jj = sqrt(d), the entries below. */
+static inline void unicycle_lai_potrf_column(int n, unicycle_real *A, int lda, int j, unicycle_real d)
+{
+    int i, k;
+    d = unicycle_sqrt(d);
+    A[j + j * lda] = d;
+    for (i = j + 1; i < n; ++i) {
+        unicycle_real s = A[i + j * lda];
+        for (k = 0; k < j; ++k)
+            s -= A[i + k * lda] * A[j + k * lda];
+        A[i + j * lda] = s / d;
+    }
+}
+
 static inline int unicycle_lai_potrf_l(int n, unicycle_real *A, int lda)
 {
-    int i, j, k;
+    int j;
     for (j = 0; j < n; ++j) {
-        unicycle_real d = A[j + j * lda];
-        for (k = 0; k < j; ++k)
-            d -= A[j + k * lda] * A[j + k * lda];
+        const unicycle_real d = unicycle_lai_potrf_pivot(A, lda, j);
         /* !(d > 0) also rejects NaN */
         if (!(d > UNICYCLE_R(0.0)) || !isfinite(d))
             return j + 1;
-        d = unicycle_sqrt(d);
-        A[j + j * lda] = d;
-        for (i = j + 1; i < n; ++i) {
-            unicycle_real s = A[i + j * lda];
-            for (k = 0; k < j; ++k)
-                s -= A[i + k * lda] * A[j + k * lda];
-            A[i + j * lda] = s / d;
-        }
+        unicycle_lai_potrf_column(n, A, lda, j, d);
     }
     return 0;
 }
 
 static inline int unicycle_lai_potrf_l_noise(int n, unicycle_real *A, int lda, const unicycle_real *noise, int *nfloor)
 {
-    int i, j, k;
+    int j;
     for (j = 0; j < n; ++j) {
         const unicycle_real ajj = unicycle_fabs(A[j + j * lda]);
         const unicycle_real tol = noise ? noise[j] : UNICYCLE_R(0.0);
-        unicycle_real d = A[j + j * lda];
-        for (k = 0; k < j; ++k)
-            d -= A[j + k * lda] * A[j + k * lda];
+        unicycle_real d = unicycle_lai_potrf_pivot(A, lda, j);
         if (!isfinite(d))
             return j + 1;
         if (d <= UNICYCLE_R(0.0)) {
@@ -114,14 +128,7 @@ static inline int unicycle_lai_potrf_l_noise(int n, unicycle_real *A, int lda, c
             if (nfloor)
                 ++*nfloor;
         }
-        d = unicycle_sqrt(d);
-        A[j + j * lda] = d;
-        for (i = j + 1; i < n; ++i) {
-            unicycle_real s = A[i + j * lda];
-            for (k = 0; k < j; ++k)
-                s -= A[i + k * lda] * A[j + k * lda];
-            A[i + j * lda] = s / d;
-        }
+        unicycle_lai_potrf_column(n, A, lda, j, d);
     }
     return 0;
 }
@@ -189,10 +196,10 @@ static inline void unicycle_lai_trsm_llt(int n, int m, const unicycle_real *L, i
         unicycle_lai_trsv_lt(n, L, ldl, B + j * ldb);
 }
 
-static inline void unicycle_lai_gemv_n(int m, int n, unicycle_real alpha, const unicycle_real *A, int lda,
-                                    const unicycle_real *x, unicycle_real beta, unicycle_real *y)
+/* y = beta y (m entries) with beta = 0 writing zeros (y may hold NaN) and beta = 1 no-op. */
+static inline void unicycle_lai_scale_y(int m, unicycle_real beta, unicycle_real *y)
 {
-    int i, j;
+    int i;
     if (beta == UNICYCLE_R(0.0)) {
         for (i = 0; i < m; ++i)
             y[i] = UNICYCLE_R(0.0);
@@ -200,6 +207,13 @@ static inline void unicycle_lai_gemv_n(int m, int n, unicycle_real alpha, const 
         for (i = 0; i < m; ++i)
             y[i] *= beta;
     }
+}
+
+static inline void unicycle_lai_gemv_n(int m, int n, unicycle_real alpha, const unicycle_real *A, int lda,
+                                    const unicycle_real *x, unicycle_real beta, unicycle_real *y)
+{
+    int i, j;
+    unicycle_lai_scale_y(m, beta, y);
     for (j = 0; j < n; ++j) {
         const unicycle_real a = alpha * x[j];
         for (i = 0; i < m; ++i)
@@ -224,13 +238,7 @@ static inline void unicycle_lai_symv_l(int n, unicycle_real alpha, const unicycl
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
-    if (beta == UNICYCLE_R(0.0)) {
-        for (i = 0; i < n; ++i)
-            y[i] = UNICYCLE_R(0.0);
-    } else if (beta != UNICYCLE_R(1.0)) {
-        for (i = 0; i < n; ++i)
-            y[i] *= beta;
-    }
+    unicycle_lai_scale_y(n, beta, y);
     for (j = 0; j < n; ++j) {
         const unicycle_real *a = A + j * lda;
         const unicycle_real xj = alpha * x[j];
@@ -250,13 +258,7 @@ static inline void unicycle_lai_gemm_nn(int m, int n, int k, unicycle_real alpha
     int i, j, l;
     for (j = 0; j < n; ++j) {
         unicycle_real *c = C + j * ldc;
-        if (beta == UNICYCLE_R(0.0)) {
-            for (i = 0; i < m; ++i)
-                c[i] = UNICYCLE_R(0.0);
-        } else if (beta != UNICYCLE_R(1.0)) {
-            for (i = 0; i < m; ++i)
-                c[i] *= beta;
-        }
+        unicycle_lai_scale_y(m, beta, c);
         for (l = 0; l < k; ++l) {
             const unicycle_real b = alpha * B[l + j * ldb];
             for (i = 0; i < m; ++i)
