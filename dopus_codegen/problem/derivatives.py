@@ -428,8 +428,8 @@ def _scenario(spec: OcpSpec, m: StageModel, ode: ca.Function) -> Scenario:
     plant_q = None
     if sc.plant_q is not None:
         q = ca.vertcat(*[sym for _, sym, _ in sc.quantities])
-        plant_q = ca.Function(f"{name}_plant_ode_q", [m.x, m.u, m.p, q], [_d(sc.plant_q)], ["x", "u", "p", "q"],
-                              ["xdot"])
+        plant_q = ca.Function(f"{name}_plant_ode_q", [m.x, m.u, ca.vertcat(m.p, q)], [_d(sc.plant_q)],
+                              ["x", "u", "p_q"], ["xdot"])
     closed = ScenarioSpec(duration=sc.duration, events=sc.events, signals=types.MappingProxyType(signals),
                           plant_ode=plant, x0=spec.x0 if sc.x0 is None else sc.x0,
                           units=types.MappingProxyType(dict(getattr(sc, "units", ()))),

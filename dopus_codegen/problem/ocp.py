@@ -339,8 +339,8 @@ class ScenarioSpec:
     (read-only); ``units``: read-only mapping of a signal, state or control name to its
     unit (axis labels of the figures); ``quantities``: read-only mapping of the plant
     quantities (``Ocp.plant_quantity``) to their nominal values, in declaration order;
-    ``plant_ode_q``: ``casadi.Function(x, u, p, q) -> xdot`` with the quantities ``q`` as an
-    input (None without quantities); ``campaign``: the declared
+    ``plant_ode_q``: ``casadi.Function(x, u, [p; q]) -> xdot`` with the quantities ``q``
+    stacked under the parameters (None without quantities); ``campaign``: the declared
     :class:`~.spec.CampaignSpec` or None.
     """
     duration: float

@@ -120,13 +120,16 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                     lm: float | None = None, duration: float | None = None,
                     guess=None, xhat0=None, progress: bool = False, label: str | None = None,
                     backend_obj=None, sources: dict | None = None, qp_tol: float | None = None,
-                    qp_max_iter: int | None = None) -> dict:
+                    qp_max_iter: int | None = None, events=None, plant=None) -> dict:
     """Run the closed loop of the OCP's scenario and return the record of the run.
 
     ``guess``: the initialisation of the controller (default: the offline solve at the
     initial state, ``offline.solve_ocp``). ``backend_obj``: an already constructed backend
     (then ``backend``, ``M``, ``hessian``, ... only label the run). ``sources``: where each
-    setting came from (``settings.resolve``), recorded with the settings.
+    setting came from (``settings.resolve``), recorded with the settings. ``xhat0``: the
+    initial plant state (default: the scenario's); ``events``: the events of the run instead
+    of the scenario's; ``plant``: ``(Plant, parameters)``, the plant and its parameter vector
+    instead of the scenario's plant (a campaign run's mismatched plant).
 
     The record: ``t, x, u, kkt, kkt_parts, status, signals, recomputed, timing_us, settings,
     events`` (one entry per sampling instant; ``x`` is the measured state, ``u`` the applied
@@ -140,13 +143,18 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     if lm is None:
         lm = default_lm(disc)
     p = _default_parameters(disc)
-    x = np.array(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
+    if xhat0 is None:
+        xhat0 = spec.x0 if spec.x0 is not None else disc.x0
+    x = np.array(xhat0, dtype=float).reshape(-1)
     if x.size != int(disc.nx):
         raise SilError(f"scenario x0 has {x.size} entries, expected nx = {int(disc.nx)}")
-    plant_ode = spec.plant_ode if spec.plant_ode is not None else disc.ode
-    plant = Plant(plant_ode, float(disc.dt), p.size, reltol=1e-10, abstol=1e-10)
-    events = sorted([ev for ev in spec.events if float(ev.time) < duration + _ON_GRID * float(disc.dt)],
-                    key=lambda ev: float(ev.time))
+    if plant is None:
+        plant_ode = spec.plant_ode if spec.plant_ode is not None else disc.ode
+        plant, plant_p = Plant(plant_ode, float(disc.dt), p.size, reltol=1e-10, abstol=1e-10), p
+    else:
+        plant, plant_p = plant
+    events = sorted([ev for ev in (spec.events if events is None else events)
+                     if float(ev.time) < duration + _ON_GRID * float(disc.dt)], key=lambda ev: float(ev.time))
     if guess is None:
         from ..reference.offline import solve_ocp
         guess, _info = solve_ocp(disc, x)
@@ -157,7 +165,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     backend_obj.init(x, guess)
     rec = _Record(spec, disc)
     rec.snap = dict(getattr(backend_obj, "timings", {}) or {})
-    loop = _Loop(disc, backend_obj, plant, events, p, rec)
+    loop = _Loop(disc, backend_obj, plant, events, p, rec, plant_p=plant_p)
     loop.run(x, n_steps, progress, label)
     settings_rec = {"M": M_eff, "N": int(disc.N), "dt": float(disc.dt), "duration": n_steps * float(disc.dt),
                     "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
@@ -179,8 +187,16 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     run["result"] = {"status": "aborted" if loop.aborted else "completed", "instants": len(rec.status),
                      "instants_planned": n_steps,
                      "failed_instants": int(sum(1 for st in rec.status if st != 0)),
-                     "first_failure": loop.first_failure}
+                     "first_failure": loop.first_failure,
+                     "recoveries": _recoveries(backend_obj)}
     return json_ready(run)
+
+
+def _recoveries(backend_obj):
+    """Re-initialisations by the backend's automatic recovery since its init (None if it
+    does not count them)."""
+    n = getattr(backend_obj, "recoveries", None)
+    return None if n is None else int(n)
 
 
 def _scenario_of(disc, duration, M, label):
@@ -274,8 +290,9 @@ class _Record:
 class _Loop:
     """The receding-horizon loop of the module docstring, one method per step of an instant."""
 
-    def __init__(self, disc, ctrl, plant, events, p, rec: _Record):
+    def __init__(self, disc, ctrl, plant, events, p, rec: _Record, plant_p=None):
         self.ctrl, self.plant, self.events, self.p, self.rec = ctrl, plant, events, p, rec
+        self.plant_p = p if plant_p is None else plant_p
         self.nx, self.dt = int(disc.nx), float(disc.dt)
         self.lbu = np.asarray(disc.lbu, dtype=float).reshape(-1)
         self.ubu = np.asarray(disc.ubu, dtype=float).reshape(-1)
@@ -383,11 +400,11 @@ class _Loop:
         t_cur = t_i
         while self.ev_idx < len(self.events) and float(self.events[self.ev_idx].time) < t_next - _ON_GRID * self.dt:
             te = float(self.events[self.ev_idx].time)
-            x = self.plant.step(x, u0, self.p, duration=te - t_cur)
+            x = self.plant.step(x, u0, self.plant_p, duration=te - t_cur)
             x = _apply_event(self.events[self.ev_idx], x, self.nx)
             t_cur = te
             self.ev_idx += 1
-        return self.plant.step(x, u0, self.p, duration=t_next - t_cur)
+        return self.plant.step(x, u0, self.plant_p, duration=t_next - t_cur)
 
     def prepare(self, status):
         t0 = time.perf_counter()
