@@ -238,7 +238,12 @@ def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, *
 @_solver_options("0: the paper's literal QP; keeps the fixed point, see README, Closed loop; the robot arm "
                  "declares 1e-4")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
-def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, **kwargs):
+@click.option("--campaign-run", type=click.IntRange(0), default=None,
+              help="Replay run I of the OCP file's campaign (dopus-gen campaign): its initial state, pushes and "
+                   "plant mismatch (the file's), with --seed.")
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=None,
+              help="Seed of the campaign run replayed by --campaign-run. [default: 0]")
+def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, campaign_run, seed, **kwargs):
     """Closed loop against a CVODES simulation of the plant (paper figures 2 to 4).
 
     One DOPUS iteration per sampling instant, started from the offline solution at the
@@ -252,8 +257,11 @@ def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, **kwargs):
         check_output_file(json_out, "--json")
     if plot_dir:
         check_output_dir(plot_dir, "--plot-dir")
+    if seed is not None and campaign_run is None:
+        raise BadInput("--seed needs --campaign-run (it seeds the replayed campaign run)")
     runs = run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
-                       compare=compare, backend=backend, echo=click.echo, **_runtime_values(kwargs))
+                       compare=compare, backend=backend, echo=click.echo, campaign_run=campaign_run, seed=seed,
+                       **_runtime_values(kwargs))
     aborted = [r for r in runs if r.get("aborted")]
     if aborted:
         raise RunFailed("; ".join(f"run '{r['label']}' aborted after {len(r['t'])} of "

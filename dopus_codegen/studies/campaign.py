@@ -144,6 +144,7 @@ def campaign_plant(disc, d: dict):
 
 # --------------------------------------------------------------------------- one run (in a worker)
 _STATE: dict = {}
+_GUESS: dict = {}       # the offline solution of the last OCP file, in the calling process
 
 
 def _worker_state(job: Job):
@@ -287,7 +288,7 @@ def _in_process(job, todo, seed, on_result, on_error):
             on_error(i, exc)
 
 
-def connect(workers: int | None, scheduler: str | None, timeout: float = 10.0):
+def connect(workers: int | None, scheduler: str | None, timeout: float = 5.0):
     """A dask client: on the scheduler at ``scheduler``, else on a new LocalCluster of
     ``workers`` single-threaded worker processes (default: one per core)."""
     import logging
@@ -451,10 +452,15 @@ def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | Non
         guess = None
         if todo or plot_dir:
             x0 = np.array(disc.scenario.closed_loop.x0, dtype=float)
-            guess, info = solve_ocp(disc, x0)
-            if not info.get("success", True):
-                say(f"warning: the offline solve at the initial state did not converge ({info.get('status')})",
-                    err=True)
+            key = (hashlib.sha256(ocp_text.encode()).hexdigest(), x0.tobytes())
+            if key not in _GUESS:
+                guess, info = solve_ocp(disc, x0)
+                if not info.get("success", True):
+                    say(f"warning: the offline solve at the initial state did not converge ({info.get('status')})",
+                        err=True)
+                _GUESS.clear()
+                _GUESS[key] = guess
+            guess = _GUESS[key]
         job = Job(ocp_path=str(Path(ocp_file).resolve()), ocp_text=ocp_text, lib_dir=lib_dir, backend=backend,
                   solver=dict(solver), duration=float(camp["duration"]), mismatch=dict(camp["mismatch"]),
                   on_path=tuple(on_path), guess=guess, fingerprint=fp)

@@ -573,11 +573,16 @@ def write_json(runs, path) -> None:
 # --------------------------------------------------------------------------- CLI
 def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, compare="none", hessian=None,
                 regularization=None, reg_eps=None, backend="c", cost_hessian=None, echo=None, progress=True,
-                lm=None, qp_tol=None, qp_max_iter=None) -> list:
+                lm=None, qp_tol=None, qp_max_iter=None, campaign_run=None, seed=None) -> list:
     """The ``dopus-gen sil`` command: runs, summary table, JSON and plots. A setting given as
     None comes from the OCP file's ``options(...)``, else from the defaults of
     :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from. The
-    output paths and the scenario's initial state are checked before any run starts."""
+    output paths and the scenario's initial state are checked before any run starts.
+
+    ``campaign_run``: replay run ``campaign_run`` of the OCP file's campaign for ``seed``
+    (default 0) with the file's mismatch: its initial state, pushes (instead of the
+    scenario's events) and plant (:mod:`.campaign`); the duration stays the scenario's
+    unless given."""
     from ..outputs import check_output_dir, check_output_file
     from ..problem.checks import check_initial_state
     from ..problem.ocp import load_ocp
@@ -609,6 +614,17 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
     x0 = np.array(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
     echo(f"settings: {settings.describe(values, sources)}", err=True)
     check_initial_state(disc, x0, "the scenario's initial state")
+    replay = {}
+    if campaign_run is not None:
+        from .campaign import campaign_events, campaign_plant, draw
+
+        if spec.campaign is None:
+            raise SilError(f"{ocp_file}: --campaign-run needs a campaign declared in the OCP file (ocp.campaign(...))")
+        d = draw(spec, dict(spec.campaign.mismatch), int(campaign_run), int(seed or 0))
+        replay = dict(xhat0=d["x0"], events=campaign_events(d), plant=campaign_plant(disc, d))
+        echo(f"campaign run {campaign_run} (seed {seed or 0}): plant quantities "
+             + ", ".join(f"{k} = {v:.6g}" for k, v in d["quantities"].items())
+             + f"; {len(d['pushes'])} pushes at " + ", ".join(f"{p['time']:.4g} s" for p in d["pushes"]), err=True)
 
     from ..reference.offline import solve_ocp
     guess, info = solve_ocp(disc, x0)
@@ -631,7 +647,7 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
                               regularization=values["regularization"], reg_eps=values["reg_eps"],
                               cost_hessian=values["cost_hessian"], lm=values["lm"], duration=duration, guess=guess,
                               progress=progress, label=label, sources=src, qp_tol=values["qp_tol"],
-                              qp_max_iter=values["qp_max_iter"])
+                              qp_max_iter=values["qp_max_iter"], **replay)
         runs.append(run)
     summaries = [summarize(r) for r in runs]
     echo(format_summary(summaries))
