@@ -131,10 +131,10 @@ def campaign_events(d: dict) -> list:
 def campaign_plant(disc, d: dict):
     """``(Plant, parameters)`` of a draw: the scenario's plant with the drawn quantities."""
     from .plant import Plant
-    from .sil import _default_parameters
 
     spec = disc.scenario.closed_loop
-    p = _default_parameters(disc)
+    n_p = int(disc.np)      # the parameters of node 0, as the closed loop of sil uses them
+    p = np.asarray(disc.p0, dtype=float).reshape(-1, n_p)[0].copy() if n_p else np.zeros(0)
     if spec.plant_ode_q is None:
         return Plant(spec.plant_ode, float(disc.dt), p.size, reltol=1e-10, abstol=1e-10), p
     q = np.array([d["quantities"][n] for n in spec.quantities], dtype=float)
