@@ -589,6 +589,7 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     from .plots import plot_plane, plot_signals
 
@@ -620,6 +621,7 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
     top = int(max(fi.max(initial=0), rc.max(initial=0)))
     edges = np.arange(-0.5, top + 1.5)
     ax.hist([fi, rc], bins=edges, label=["failed instants", "recoveries"], color=["C3", "C1"])
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
     ax.set_xlabel("count per run [-]")
     ax.set_ylabel("runs [-]")
     ax.set_yscale("log")
