@@ -22,6 +22,14 @@ of runs), every other line is one run keyed by ``"run"`` and ``"seed"``. A campa
 again on the same file computes only the runs it lacks; at the end the file is rewritten
 sorted by seed and run, so an interrupted and resumed campaign gives the same file as an
 uninterrupted one, except the measured times (``"time"``) of each run.
+
+A run's line: ``run``, ``seed``, ``draw`` (``quantities``, ``x0``, ``pushes``: ``time`` and
+``kick``), ``on_path``, ``max_deviation`` (the largest ``|signal|`` over the judged instants),
+``max_deviation_all``, ``failed_instants`` (instants whose feedback failed: QP failures),
+``recoveries`` (re-initialisations of the runtime's automatic recovery), ``first_failure``,
+``aborted``, ``instants``, ``instants_planned``, ``final_x``, ``signal`` (the on-path
+signal at every instant) and ``time`` (``median_us``, ``p99_us``, ``max_us`` of feedback +
+prepare, ``feedback_median_us``, ``run_s``: the run's wall time).
 """
 from __future__ import annotations
 
@@ -567,8 +575,9 @@ def format_report(rep: dict) -> str:
         f"failed instants (QP failures): {rep['failed_instants']} in {rep['runs_with_failed_instants']} runs "
         f"(at most {rep['failed_instants_max']} in one run); recoveries: {rep['recoveries']} in "
         f"{rep['runs_with_recoveries']} runs; aborted runs (plant): {rep['aborted']}",
-        f"time per iteration (feedback + prepare): median {f(t['median_of_run_medians'], '.1f')} us, "
-        f"99th percentile {f(t['p99_of_run_p99'], '.1f')} us, max {f(t['max'], '.1f')} us",
+        f"time per iteration (feedback + prepare): median of the runs' medians {f(t['median_of_run_medians'], '.1f')}"
+        f" us, 99th percentile of the runs' 99th percentiles {f(t['p99_of_run_p99'], '.1f')} us, "
+        f"max {f(t['max'], '.1f')} us",
         "worst runs: " + "; ".join(f"run {w['run']}: {d['signal']} {f(w['max_deviation'], '.3g')}{unit}"
                                    f"{'' if w['on_path'] else ' (off the path)'}, {w['failed_instants']} failed"
                                    for w in rep["worst"]),
