@@ -311,7 +311,7 @@ def connect(workers: int | None, scheduler: str | None, timeout: float = 5.0):
         except (OSError, TimeoutError, ValueError) as exc:
             raise CampaignError(f"cannot reach the dask scheduler at '{scheduler}': {exc}") from None
     n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
