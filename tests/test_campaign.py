@@ -168,6 +168,21 @@ def test_a_result_file_of_another_campaign_is_refused(in_process, tmp_path):
     assert other.read_text() == in_process.read_text()
 
 
+def test_the_on_path_signal_and_the_plant_are_checked_by_the_campaign(tmp_path):
+    """What depends on the scenario as finally declared is checked when the campaign starts."""
+    text = ROBOT_ARM_FILE.read_text()
+    for old, new, message in [
+            ('signal="deviation"', 'signal="tip"', "the signal 'tip' must be a scalar"),
+            ('signal="deviation"', 'signal="speed"', "'speed' is not a signal of the scenario"),
+            ("plant=plant,", "plant=None,", "the scenario's plant does not use the plant quantities")]:
+        assert old in text
+        f = tmp_path / "arm.py"
+        f.write_text(text.replace(old, new))
+        res = CliRunner().invoke(main, ["campaign", str(f), "--out", str(tmp_path / "c.jsonl")])
+        assert res.exit_code == 2, res.output
+        assert message in res.output
+
+
 def test_the_campaign_declaration_is_checked():
     import casadi as ca
 
@@ -180,8 +195,8 @@ def test_the_campaign_declaration_is_checked():
     with pytest.raises(OcpError, match="'speed' is not a state"):
         ocp.campaign(initial={"speed": 0.1})
         ocp.validate()
-    with pytest.raises(OcpError, match="'tip' must be a scalar"):
-        ocp.campaign(on_path=OnPath("tip", 0.01, 0.1))
+    with pytest.raises(OcpError, match="threshold must be > 0"):
+        ocp.campaign(on_path=OnPath("deviation", 0.0, 0.1))
         ocp.validate()
     with pytest.raises(OcpError, match="window must satisfy"):
         ocp.campaign(pushes=Pushes(count=1, window=(0.5, 0.2), kick={"dq": 1.0}))

@@ -399,6 +399,15 @@ def _resolve(ocp, cli: dict):
                                    names=settings.CAMPAIGN_SETTINGS)
     if cs.on_path is None:
         raise CampaignError("the OCP's campaign declares no on_path=OnPath(signal, threshold, settle)")
+    signals = dict(sc.signals)
+    if cs.on_path[0] not in signals:
+        raise CampaignError(f"campaign on_path: {cs.on_path[0]!r} is not a signal of the scenario; its signals are "
+                            f"{sorted(signals)}")
+    if signals[cs.on_path[0]].numel() != 1:
+        raise CampaignError(f"campaign on_path: the signal {cs.on_path[0]!r} must be a scalar")
+    if camp["mismatch"] and sc.plant_q is None:
+        raise CampaignError("mismatch: the scenario's plant does not use the plant quantities (declare them with "
+                            "ocp.plant_quantity and use them in ocp.scenario(plant=...)); give --mismatch none")
     if camp["duration"] is None:
         camp["duration"] = float(sc.duration)
     known = [n for n, _, _ in sc.quantities]
