@@ -372,6 +372,7 @@ class _Progress:
     def close(self):
         if self.bar is not None:
             self.bar.__exit__(None, None, None)
+            self.bar = None
 
 
 # --------------------------------------------------------------------------- the command
@@ -508,6 +509,12 @@ def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | Non
                     _in_process(job, todo, seed, on_result, on_error)
                 else:
                     _distributed(client, job, todo, seed, on_result, on_error)
+            except KeyboardInterrupt:
+                prog.close()
+                done = sum(1 for i in range(runs) if (seed, i) in lines)
+                say(f"interrupted: {done} of {runs} runs are in '{out}'; the same command computes the others",
+                    err=True)
+                raise
             finally:
                 prog.close()
         wall = time.perf_counter() - t0
