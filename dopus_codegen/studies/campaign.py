@@ -606,6 +606,15 @@ def format_report(rep: dict) -> str:
 
 
 # --------------------------------------------------------------------------- plots
+def _log_ticks(axis):
+    """Labels at 1, 2 and 5 times the powers of ten of a log axis, in plain numbers."""
+    import matplotlib.ticker as ticker
+
+    axis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+    axis.set_major_formatter(ticker.FormatStrFormatter("%g"))
+    axis.set_minor_formatter(ticker.NullFormatter())
+
+
 def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
     """Histograms of the campaign (max on-path signal after settling, time per iteration,
     failed instants and recoveries per run, the drawn mismatch against the deviation) and
@@ -631,6 +640,7 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
         bins = np.logspace(np.log10(finite.min()), np.log10(max(finite.max(), d["threshold"] * 1.01)), 40)
         ax.hist(finite, bins=bins, color="C0")
         ax.set_xscale("log")
+        _log_ticks(ax.xaxis)
     ax.axvline(d["threshold"], color="C3", ls="--", label=f"threshold {d['threshold']:g} {unit}")
     ax.set_xlabel(f"max {d['signal']} after settling [{unit}]")
     ax.set_ylabel("runs [-]")
@@ -646,7 +656,8 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
     top = int(max(fi.max(initial=0), rc.max(initial=0)))
     edges = np.arange(-0.5, top + 1.5)
     ax.hist([fi, rc], bins=edges, label=["failed instants", "recoveries"], color=["C3", "C1"])
-    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+    ax.set_xticks(range(top + 1)) if top <= 20 else ax.xaxis.set_major_locator(
+        matplotlib.ticker.MaxNLocator(integer=True))
     ax.set_xlabel("count per run [-]")
     ax.set_ylabel("runs [-]")
     ax.set_yscale("log")
@@ -659,6 +670,7 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
         ax.scatter(rel, np.where(np.isfinite(dev), dev, np.nan), s=6, color=f"C{k}", label=name, alpha=0.6)
     ax.axhline(d["threshold"], color="C3", ls="--")
     ax.set_yscale("log")
+    _log_ticks(ax.yaxis)
     ax.set_xlabel("plant quantity against nominal [%]")
     ax.set_ylabel(f"max {d['signal']} after settling [{unit}]")
     if names:
