@@ -891,11 +891,69 @@ static void dopus_qp_warm_point(dopus_solver *s)
     }
 }
 
+/* The step of each stage kept in its slot for the secant criterion:
+ * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
+static void dopus_store_domega(dopus_solver *s)
+{
+    const dopus_qp_sol *sol = &s->qp_sol;
+    int k, i;
+    for (k = 0; k < DOPUS_N; ++k) {
+        dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
+        for (i = 0; i < DOPUS_NX; ++i) {
+            slot->dw[i] = sol->x[k][i];
+            slot->dlam[i] = sol->lam[k + 1][i] - s->lam[k + 1][i];
+        }
+        for (i = 0; i < DOPUS_NU; ++i) {
+            slot->dw[DOPUS_NX + i] = sol->u[k][i];
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            slot->dmu_g[i] = sol->mu_g[k][i] - s->mu_g[k][i];
+        }
+        for (i = 0; i < DOPUS_NW; ++i) {
+            slot->dmu_b[i] = sol->mu_b[k][i] - s->mu_b[k][i];
+        }
+    }
+}
+
+/* The full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
+static void dopus_take_step(dopus_solver *s)
+{
+    const dopus_qp_sol *sol = &s->qp_sol;
+    int k, i;
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NX; ++i) {
+            s->x[k][i] += sol->x[k][i];
+            s->lam[k][i] = sol->lam[k][i];
+        }
+    }
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NU; ++i) {
+            s->u[k][i] += sol->u[k][i];
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            s->mu_g[k][i] = sol->mu_g[k][i];
+        }
+        for (i = 0; i < DOPUS_NW; ++i) {
+            s->mu_b[k][i] = sol->mu_b[k][i];
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->mu_bN[i] = sol->mu_bN[i];
+    }
+    for (i = 0; i < DOPUS_NR; ++i) {
+        s->mu_r[i] = sol->mu_r[i];
+    }
+    for (i = 0; i < DOPUS_NE; ++i) {
+        s->nu[i] = sol->nu[i];
+    }
+    s->qp_ready = 0;
+}
+
 int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
 {
     const dopus_qp_sol *sol = &s->qp_sol;
     double t0;
-    int k, i, qs, retries;
+    int i, qs, retries;
 
     dopus_ensure_setup(s);
     s->flags = 0;
@@ -970,51 +1028,8 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
         return dopus_feedback_failed(s, u0, DOPUS_ERR_DIVERGED);
     }
 
-    /* domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k) */
-    for (k = 0; k < DOPUS_N; ++k) {
-        dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
-        for (i = 0; i < DOPUS_NX; ++i) {
-            slot->dw[i] = sol->x[k][i];
-            slot->dlam[i] = sol->lam[k + 1][i] - s->lam[k + 1][i];
-        }
-        for (i = 0; i < DOPUS_NU; ++i) {
-            slot->dw[DOPUS_NX + i] = sol->u[k][i];
-        }
-        for (i = 0; i < DOPUS_NG; ++i) {
-            slot->dmu_g[i] = sol->mu_g[k][i] - s->mu_g[k][i];
-        }
-        for (i = 0; i < DOPUS_NW; ++i) {
-            slot->dmu_b[i] = sol->mu_b[k][i] - s->mu_b[k][i];
-        }
-    }
-    /* the full step (paper eq. 4): w += dw, multipliers replaced by the QP's */
-    for (k = 0; k <= DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NX; ++i) {
-            s->x[k][i] += sol->x[k][i];
-            s->lam[k][i] = sol->lam[k][i];
-        }
-    }
-    for (k = 0; k < DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NU; ++i) {
-            s->u[k][i] += sol->u[k][i];
-        }
-        for (i = 0; i < DOPUS_NG; ++i) {
-            s->mu_g[k][i] = sol->mu_g[k][i];
-        }
-        for (i = 0; i < DOPUS_NW; ++i) {
-            s->mu_b[k][i] = sol->mu_b[k][i];
-        }
-    }
-    for (i = 0; i < DOPUS_NX; ++i) {
-        s->mu_bN[i] = sol->mu_bN[i];
-    }
-    for (i = 0; i < DOPUS_NR; ++i) {
-        s->mu_r[i] = sol->mu_r[i];
-    }
-    for (i = 0; i < DOPUS_NE; ++i) {
-        s->nu[i] = sol->nu[i];
-    }
-    s->qp_ready = 0;
+    dopus_store_domega(s);
+    dopus_take_step(s);
     /* a good plan: the fallback of the next failures; u0 clipped to the bounds */
     s->n_failed = 0;
     s->plan_age = 0;
@@ -1164,6 +1179,36 @@ static int dopus_recover(dopus_solver *s, int shifted)
     return DOPUS_OK;
 }
 
+/* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the
+ * prepared one, the QP is solved for the state the iterate predicts for this instant
+ * (dx_0 = 0; the measurement, absent or unusable, is left out) and its step taken; its
+ * controls become the plan the next fallbacks read. A failure of this QP changes nothing. */
+static void dopus_predicted_step(dopus_solver *s)
+{
+    int i, qs;
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->qp_in.x0[i] = 0.0;
+    }
+    s->qp_in.hess_shift = s->lm;
+    s->qp_settings.warm_start = 0;
+    qs = dopus_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    if (qs != DOPUS_QP_SOLVED || !dopus_qp_solution_finite(&s->qp_sol) ||
+        !dopus_box_ok(s, &s->x[0][0], &s->qp_sol.x[0][0], DOPUS_NX, &s->u[0][0], &s->qp_sol.u[0][0],
+                      DOPUS_QP_NU1)) {
+        return;
+    }
+    dopus_store_domega(s);
+    dopus_take_step(s);
+    dopus_copy(&s->plan_u[0][0], &s->u[0][0], DOPUS_N * DOPUS_NU);
+    s->plan_age = 0;
+    if (!s->xhat_fresh) {
+        /* no measurement to distrust: the model's prediction carries the loop */
+        s->n_failed = 0;
+        s->recover_pending = 0;
+    }
+    s->flags |= DOPUS_FLAG_PREDICTED;
+}
+
 static int dopus_prepare_iteration(dopus_solver *s);
 
 int dopus_prepare(dopus_solver *s)
@@ -1178,6 +1223,10 @@ int dopus_prepare(dopus_solver *s)
         return dopus_ret(s, DOPUS_ERR_ALREADY_PREPARED);
     }
     dopus_clear_timings(s, DOPUS_PHASE_SHIFT, DOPUS_PHASE_ASSEMBLY);
+    if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
+        s->mode == DOPUS_MODE_RECEDING) {
+        dopus_predicted_step(s);
+    }
     s->qp_ready = 0;
     if (s->mode == DOPUS_MODE_RECEDING && s->plan_age < DOPUS_N) {
         s->plan_age += 1;

@@ -423,28 +423,12 @@ class ReferenceDopus:
         self.qp_status = status_code_qp("solved")
         self.qp_iterations = int(sol.get("iterations", 0))
         t2 = time.perf_counter()
-        N = self.N
         if failure is not None:
             raise self._feedback_failed("qp", "feedback: the QP solution is not finite", "solved")
         if not self._box_ok(self.x + sol["x"], self.u + sol["u"]):
             raise self._feedback_failed("diverged", "feedback: the QP step leaves the problem's scale box (or is "
                                         "not finite); no step, the fallback control is returned")
-        dW = np.hstack([sol["x"][:N], sol["u"]])
-        for k in range(N):
-            s = self.slots[self._slot(k)]
-            s.dw = dW[k].copy()
-            s.dlam = sol["lam"][k + 1] - self.lam[k + 1]
-            s.dmu_g = sol["mu_g"][k] - self.mu_g[k]
-            s.dmu_b = sol["mu_b"][k] - self.mu_b[k]
-        # full step (eq. 4): primal increment, multipliers replaced
-        self.x = self.x + sol["x"]
-        self.u = self.u + sol["u"]
-        self.lam = sol["lam"].copy()
-        self.mu_g = sol["mu_g"].copy()
-        self.mu_b = sol["mu_b"].copy()
-        self.mu_bN = sol["mu_bN"].copy()
-        self.mu_r = sol["mu_r"].copy()
-        self.nu = sol["nu"].copy()
+        self._take_step(sol)
         self.qp_iterations = int(sol.get("iterations", 0))
         self.last_qp = qp
         self.last_qp_solution = sol
@@ -464,6 +448,27 @@ class ReferenceDopus:
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
         return self.u0.copy()
 
+    def _take_step(self, sol) -> None:
+        """``domega`` of each stage into its slot, then the full step (eq. 4): primal
+        increment, multipliers replaced by the QP's."""
+        N = self.N
+        dW = np.hstack([sol["x"][:N], sol["u"]])
+        for k in range(N):
+            s = self.slots[self._slot(k)]
+            s.dw = dW[k].copy()
+            s.dlam = sol["lam"][k + 1] - self.lam[k + 1]
+            s.dmu_g = sol["mu_g"][k] - self.mu_g[k]
+            s.dmu_b = sol["mu_b"][k] - self.mu_b[k]
+        self.x = self.x + sol["x"]
+        self.u = self.u + sol["u"]
+        self.lam = sol["lam"].copy()
+        self.mu_g = sol["mu_g"].copy()
+        self.mu_b = sol["mu_b"].copy()
+        self.mu_bN = sol["mu_bN"].copy()
+        self.mu_r = sol["mu_r"].copy()
+        self.nu = sol["nu"].copy()
+        self._qp_ready = False
+
     def allow_prepare(self) -> None:
         """Let the next ``prepare`` run although no feedback reached the QP since the last
         ``init`` or ``prepare``: for a sampling instant whose feedback was skipped (the C
@@ -481,6 +486,9 @@ class ReferenceDopus:
         self._need_init()
         if not self._prepare_due:
             raise self._fail("already_prepared", "prepare: already prepared (call feedback before the next prepare)")
+        if (self._qp_ready and self._n_failed > 0 and not self._recover_pending and self.recovery
+                and self.mode == "receding"):
+            self._predicted_step()
         self._qp_ready = False
         if self.mode == "receding" and self._plan_age < self.N:
             self._plan_age += 1
@@ -762,6 +770,25 @@ class ReferenceDopus:
             if not np.all(np.isfinite(x[k + 1])):
                 return False
         return self._box_ok(x, u)
+
+    def _predicted_step(self) -> None:
+        """Section 9: after a failed feedback whose QP is still the prepared one, the step of
+        that QP for the state the iterate predicts for this instant (dx_0 = 0); its controls
+        become the plan of the next fallbacks. A failure of this QP changes nothing."""
+        try:
+            sol = solve_qp_reference(self.qp_of_current(self.x[0]), tol=self.qp_tol, max_iter=self.qp_max_iter)
+        except QPError:
+            return
+        if not self._finite(*(sol[k] for k in FIELDS_QP)) or not self._box_ok(self.x + sol["x"],
+                                                                                 self.u + sol["u"]):
+            return
+        self._take_step(sol)
+        self._plan_u = self.u.copy()
+        self._plan_age = 0
+        if not self._xhat_fresh:      # no measurement to distrust: the prediction carries the loop
+            self._n_failed = 0
+            self._recover_pending = False
+        self._flag("predicted")
 
     def _recover(self, shifted: bool) -> None:
         """The automatic recovery of section 9: re-initialise from a forward simulation of the

@@ -891,11 +891,69 @@ static void robot_arm_qp_warm_point(robot_arm_solver *s)
     }
 }
 
+/* The step of each stage kept in its slot for the secant criterion:
+ * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
+static void robot_arm_store_domega(robot_arm_solver *s)
+{
+    const robot_arm_qp_sol *sol = &s->qp_sol;
+    int k, i;
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
+        for (i = 0; i < ROBOT_ARM_NX; ++i) {
+            slot->dw[i] = sol->x[k][i];
+            slot->dlam[i] = sol->lam[k + 1][i] - s->lam[k + 1][i];
+        }
+        for (i = 0; i < ROBOT_ARM_NU; ++i) {
+            slot->dw[ROBOT_ARM_NX + i] = sol->u[k][i];
+        }
+        for (i = 0; i < ROBOT_ARM_NG; ++i) {
+            slot->dmu_g[i] = sol->mu_g[k][i] - s->mu_g[k][i];
+        }
+        for (i = 0; i < ROBOT_ARM_NW; ++i) {
+            slot->dmu_b[i] = sol->mu_b[k][i] - s->mu_b[k][i];
+        }
+    }
+}
+
+/* The full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
+static void robot_arm_take_step(robot_arm_solver *s)
+{
+    const robot_arm_qp_sol *sol = &s->qp_sol;
+    int k, i;
+    for (k = 0; k <= ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NX; ++i) {
+            s->x[k][i] += sol->x[k][i];
+            s->lam[k][i] = sol->lam[k][i];
+        }
+    }
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NU; ++i) {
+            s->u[k][i] += sol->u[k][i];
+        }
+        for (i = 0; i < ROBOT_ARM_NG; ++i) {
+            s->mu_g[k][i] = sol->mu_g[k][i];
+        }
+        for (i = 0; i < ROBOT_ARM_NW; ++i) {
+            s->mu_b[k][i] = sol->mu_b[k][i];
+        }
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        s->mu_bN[i] = sol->mu_bN[i];
+    }
+    for (i = 0; i < ROBOT_ARM_NR; ++i) {
+        s->mu_r[i] = sol->mu_r[i];
+    }
+    for (i = 0; i < ROBOT_ARM_NE; ++i) {
+        s->nu[i] = sol->nu[i];
+    }
+    s->qp_ready = 0;
+}
+
 int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
 {
     const robot_arm_qp_sol *sol = &s->qp_sol;
     double t0;
-    int k, i, qs, retries;
+    int i, qs, retries;
 
     robot_arm_ensure_setup(s);
     s->flags = 0;
@@ -970,51 +1028,8 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
         return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_DIVERGED);
     }
 
-    /* domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k) */
-    for (k = 0; k < ROBOT_ARM_N; ++k) {
-        robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
-        for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            slot->dw[i] = sol->x[k][i];
-            slot->dlam[i] = sol->lam[k + 1][i] - s->lam[k + 1][i];
-        }
-        for (i = 0; i < ROBOT_ARM_NU; ++i) {
-            slot->dw[ROBOT_ARM_NX + i] = sol->u[k][i];
-        }
-        for (i = 0; i < ROBOT_ARM_NG; ++i) {
-            slot->dmu_g[i] = sol->mu_g[k][i] - s->mu_g[k][i];
-        }
-        for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            slot->dmu_b[i] = sol->mu_b[k][i] - s->mu_b[k][i];
-        }
-    }
-    /* the full step (paper eq. 4): w += dw, multipliers replaced by the QP's */
-    for (k = 0; k <= ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            s->x[k][i] += sol->x[k][i];
-            s->lam[k][i] = sol->lam[k][i];
-        }
-    }
-    for (k = 0; k < ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NU; ++i) {
-            s->u[k][i] += sol->u[k][i];
-        }
-        for (i = 0; i < ROBOT_ARM_NG; ++i) {
-            s->mu_g[k][i] = sol->mu_g[k][i];
-        }
-        for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            s->mu_b[k][i] = sol->mu_b[k][i];
-        }
-    }
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->mu_bN[i] = sol->mu_bN[i];
-    }
-    for (i = 0; i < ROBOT_ARM_NR; ++i) {
-        s->mu_r[i] = sol->mu_r[i];
-    }
-    for (i = 0; i < ROBOT_ARM_NE; ++i) {
-        s->nu[i] = sol->nu[i];
-    }
-    s->qp_ready = 0;
+    robot_arm_store_domega(s);
+    robot_arm_take_step(s);
     /* a good plan: the fallback of the next failures; u0 clipped to the bounds */
     s->n_failed = 0;
     s->plan_age = 0;
@@ -1164,6 +1179,36 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
     return ROBOT_ARM_OK;
 }
 
+/* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the
+ * prepared one, the QP is solved for the state the iterate predicts for this instant
+ * (dx_0 = 0; the measurement, absent or unusable, is left out) and its step taken; its
+ * controls become the plan the next fallbacks read. A failure of this QP changes nothing. */
+static void robot_arm_predicted_step(robot_arm_solver *s)
+{
+    int i, qs;
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        s->qp_in.x0[i] = 0.0;
+    }
+    s->qp_in.hess_shift = s->lm;
+    s->qp_settings.warm_start = 0;
+    qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    if (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(&s->qp_sol) ||
+        !robot_arm_box_ok(s, &s->x[0][0], &s->qp_sol.x[0][0], ROBOT_ARM_NX, &s->u[0][0], &s->qp_sol.u[0][0],
+                      ROBOT_ARM_QP_NU1)) {
+        return;
+    }
+    robot_arm_store_domega(s);
+    robot_arm_take_step(s);
+    robot_arm_copy(&s->plan_u[0][0], &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
+    s->plan_age = 0;
+    if (!s->xhat_fresh) {
+        /* no measurement to distrust: the model's prediction carries the loop */
+        s->n_failed = 0;
+        s->recover_pending = 0;
+    }
+    s->flags |= ROBOT_ARM_FLAG_PREDICTED;
+}
+
 static int robot_arm_prepare_iteration(robot_arm_solver *s);
 
 int robot_arm_prepare(robot_arm_solver *s)
@@ -1178,6 +1223,10 @@ int robot_arm_prepare(robot_arm_solver *s)
         return robot_arm_ret(s, ROBOT_ARM_ERR_ALREADY_PREPARED);
     }
     robot_arm_clear_timings(s, ROBOT_ARM_PHASE_SHIFT, ROBOT_ARM_PHASE_ASSEMBLY);
+    if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
+        s->mode == ROBOT_ARM_MODE_RECEDING) {
+        robot_arm_predicted_step(s);
+    }
     s->qp_ready = 0;
     if (s->mode == ROBOT_ARM_MODE_RECEDING && s->plan_age < ROBOT_ARM_N) {
         s->plan_age += 1;

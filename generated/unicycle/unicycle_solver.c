@@ -891,11 +891,69 @@ static void unicycle_qp_warm_point(unicycle_solver *s)
     }
 }
 
+/* The step of each stage kept in its slot for the secant criterion:
+ * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
+static void unicycle_store_domega(unicycle_solver *s)
+{
+    const unicycle_qp_sol *sol = &s->qp_sol;
+    int k, i;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            slot->dw[i] = sol->x[k][i];
+            slot->dlam[i] = sol->lam[k + 1][i] - s->lam[k + 1][i];
+        }
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            slot->dw[UNICYCLE_NX + i] = sol->u[k][i];
+        }
+        for (i = 0; i < UNICYCLE_NG; ++i) {
+            slot->dmu_g[i] = sol->mu_g[k][i] - s->mu_g[k][i];
+        }
+        for (i = 0; i < UNICYCLE_NW; ++i) {
+            slot->dmu_b[i] = sol->mu_b[k][i] - s->mu_b[k][i];
+        }
+    }
+}
+
+/* The full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
+static void unicycle_take_step(unicycle_solver *s)
+{
+    const unicycle_qp_sol *sol = &s->qp_sol;
+    int k, i;
+    for (k = 0; k <= UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            s->x[k][i] += sol->x[k][i];
+            s->lam[k][i] = sol->lam[k][i];
+        }
+    }
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            s->u[k][i] += sol->u[k][i];
+        }
+        for (i = 0; i < UNICYCLE_NG; ++i) {
+            s->mu_g[k][i] = sol->mu_g[k][i];
+        }
+        for (i = 0; i < UNICYCLE_NW; ++i) {
+            s->mu_b[k][i] = sol->mu_b[k][i];
+        }
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->mu_bN[i] = sol->mu_bN[i];
+    }
+    for (i = 0; i < UNICYCLE_NR; ++i) {
+        s->mu_r[i] = sol->mu_r[i];
+    }
+    for (i = 0; i < UNICYCLE_NE; ++i) {
+        s->nu[i] = sol->nu[i];
+    }
+    s->qp_ready = 0;
+}
+
 int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
 {
     const unicycle_qp_sol *sol = &s->qp_sol;
     double t0;
-    int k, i, qs, retries;
+    int i, qs, retries;
 
     unicycle_ensure_setup(s);
     s->flags = 0;
@@ -970,51 +1028,8 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
         return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_DIVERGED);
     }
 
-    /* domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k) */
-    for (k = 0; k < UNICYCLE_N; ++k) {
-        unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            slot->dw[i] = sol->x[k][i];
-            slot->dlam[i] = sol->lam[k + 1][i] - s->lam[k + 1][i];
-        }
-        for (i = 0; i < UNICYCLE_NU; ++i) {
-            slot->dw[UNICYCLE_NX + i] = sol->u[k][i];
-        }
-        for (i = 0; i < UNICYCLE_NG; ++i) {
-            slot->dmu_g[i] = sol->mu_g[k][i] - s->mu_g[k][i];
-        }
-        for (i = 0; i < UNICYCLE_NW; ++i) {
-            slot->dmu_b[i] = sol->mu_b[k][i] - s->mu_b[k][i];
-        }
-    }
-    /* the full step (paper eq. 4): w += dw, multipliers replaced by the QP's */
-    for (k = 0; k <= UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            s->x[k][i] += sol->x[k][i];
-            s->lam[k][i] = sol->lam[k][i];
-        }
-    }
-    for (k = 0; k < UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NU; ++i) {
-            s->u[k][i] += sol->u[k][i];
-        }
-        for (i = 0; i < UNICYCLE_NG; ++i) {
-            s->mu_g[k][i] = sol->mu_g[k][i];
-        }
-        for (i = 0; i < UNICYCLE_NW; ++i) {
-            s->mu_b[k][i] = sol->mu_b[k][i];
-        }
-    }
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->mu_bN[i] = sol->mu_bN[i];
-    }
-    for (i = 0; i < UNICYCLE_NR; ++i) {
-        s->mu_r[i] = sol->mu_r[i];
-    }
-    for (i = 0; i < UNICYCLE_NE; ++i) {
-        s->nu[i] = sol->nu[i];
-    }
-    s->qp_ready = 0;
+    unicycle_store_domega(s);
+    unicycle_take_step(s);
     /* a good plan: the fallback of the next failures; u0 clipped to the bounds */
     s->n_failed = 0;
     s->plan_age = 0;
@@ -1164,6 +1179,36 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
     return UNICYCLE_OK;
 }
 
+/* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the
+ * prepared one, the QP is solved for the state the iterate predicts for this instant
+ * (dx_0 = 0; the measurement, absent or unusable, is left out) and its step taken; its
+ * controls become the plan the next fallbacks read. A failure of this QP changes nothing. */
+static void unicycle_predicted_step(unicycle_solver *s)
+{
+    int i, qs;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->qp_in.x0[i] = 0.0;
+    }
+    s->qp_in.hess_shift = s->lm;
+    s->qp_settings.warm_start = 0;
+    qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    if (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(&s->qp_sol) ||
+        !unicycle_box_ok(s, &s->x[0][0], &s->qp_sol.x[0][0], UNICYCLE_NX, &s->u[0][0], &s->qp_sol.u[0][0],
+                      UNICYCLE_QP_NU1)) {
+        return;
+    }
+    unicycle_store_domega(s);
+    unicycle_take_step(s);
+    unicycle_copy(&s->plan_u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
+    s->plan_age = 0;
+    if (!s->xhat_fresh) {
+        /* no measurement to distrust: the model's prediction carries the loop */
+        s->n_failed = 0;
+        s->recover_pending = 0;
+    }
+    s->flags |= UNICYCLE_FLAG_PREDICTED;
+}
+
 static int unicycle_prepare_iteration(unicycle_solver *s);
 
 int unicycle_prepare(unicycle_solver *s)
@@ -1178,6 +1223,10 @@ int unicycle_prepare(unicycle_solver *s)
         return unicycle_ret(s, UNICYCLE_ERR_ALREADY_PREPARED);
     }
     unicycle_clear_timings(s, UNICYCLE_PHASE_SHIFT, UNICYCLE_PHASE_ASSEMBLY);
+    if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
+        s->mode == UNICYCLE_MODE_RECEDING) {
+        unicycle_predicted_step(s);
+    }
     s->qp_ready = 0;
     if (s->mode == UNICYCLE_MODE_RECEDING && s->plan_age < UNICYCLE_N) {
         s->plan_age += 1;
