@@ -387,6 +387,12 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
 static void dopus_lm_raise(dopus_solver *s)
 {
     double lo = DOPUS_LM_MIN_REL * s->lm_scale, hi = DOPUS_LM_MAX_REL * s->lm_scale;
+    if (s->lm_uncapped > s->lm) {
+        /* the first raise after the cap of dopus_lm_measured restores the term it capped */
+        s->lm = s->lm_uncapped;
+        s->lm_uncapped = -1.0;
+        return;
+    }
     s->lm = s->lm < lo ? lo : s->lm * DOPUS_LM_RAISE;
     s->lm = s->lm > hi ? hi : s->lm;
 }
@@ -409,6 +415,7 @@ static void dopus_lm_start(dopus_solver *s)
     s->lm_scale = dopus_lm_hessian_scale(s);
     s->lm = 0.0;
     s->lm_kkt_prev = -1.0;
+    s->lm_uncapped = -1.0;
     dopus_lm_convexify(s);
 }
 
@@ -422,11 +429,34 @@ static void dopus_lm_prepared(dopus_solver *s)
         return;
     }
     s->lm_scale = dopus_lm_hessian_scale(s);
+    s->lm_uncapped = -1.0;
     if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= DOPUS_LM_KKT_GROWTH * prev)) {
         dopus_lm_raise(s);
     }
     s->lm_kkt_prev = s->kkt_proxy;
     dopus_lm_convexify(s);
+}
+
+/* Feedback, once the measurement is in the QP: the term capped by the distance from the
+ * solution, DOPUS_LM_KKT_REL h max(proxy / max(1, proxy at the last init), max_i |dx0_i| /
+ * scale_x_i) (0 below DOPUS_LM_MIN_REL h), so that it vanishes where the iterate converges. */
+static void dopus_lm_measured(dopus_solver *s)
+{
+    double d = s->kkt_proxy / (s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0), cap, v;
+    int i;
+    s->lm_uncapped = -1.0;
+    if (!s->lm_auto) {
+        return;
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        v = fabs(s->qp_in.x0[i]) / s->scale_x[i];
+        d = v > d ? v : d;
+    }
+    cap = DOPUS_LM_KKT_REL * s->lm_scale * d * d;
+    if (!(s->lm <= cap)) {
+        s->lm_uncapped = s->lm;
+        s->lm = cap < DOPUS_LM_MIN_REL * s->lm_scale ? 0.0 : cap;
+    }
 }
 
 /* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
@@ -467,6 +497,7 @@ void dopus_defaults(dopus_solver *s)
     s->lm = (dopus_default_lm >= 0.0 && dopus_default_lm < INFINITY) ? dopus_default_lm : 0.0;
     s->lm_scale = 1.0;
     s->lm_kkt_prev = -1.0;
+    s->lm_uncapped = -1.0;
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -982,6 +1013,7 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->xhat_fresh = 1;
+    dopus_lm_measured(s);
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;

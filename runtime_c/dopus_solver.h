@@ -254,6 +254,7 @@ enum dopus_flag {
 #define DOPUS_LM_PIVOT_REL 1e-10 /* Riccati pivots must exceed 1e-10 h */
 #define DOPUS_LM_KKT_GROWTH 10.0 /* raise when the KKT proxy grows 10x in one prepare */
 #define DOPUS_LM_RETRIES 2       /* QP solves again with lm raised after a failure */
+#define DOPUS_LM_KKT_REL 1e-2    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
 
 enum dopus_mode {
     DOPUS_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
@@ -293,6 +294,7 @@ struct dopus_solver {
     int lm_auto;                      /* 1: automatic term (section 10) */
     double lm_scale;                  /* Hessian scale h of the automatic term */
     double lm_kkt_prev;               /* KKT proxy of the previous prepare (< 0: none since init) */
+    double lm_uncapped;               /* the term before the cap of this feedback (< 0: not capped) */
     double lm_P[DOPUS_NX * DOPUS_NX]; /* Riccati workspace of the convexity test */
     double lm_P2[DOPUS_NX * DOPUS_NX];
     double lm_PA[DOPUS_NX * DOPUS_NW];

@@ -141,6 +141,7 @@ class ReferenceDopus:
         self.reg_eps = _setting(settings.positive, "reg_eps", reg_eps)
         self.qp_tol = _setting(settings.qp_tolerance, qp_tol)
         self.lm, self.lm_auto, self.lm_scale, self._lm_kkt_prev = 0.0, False, 1.0, -1.0
+        self._lm_uncapped = -1.0
         self.set_levenberg_marquardt(lm)
         self.qp_max_iter = None
         if qp_max_iter is not None:
@@ -395,6 +396,7 @@ class ReferenceDopus:
         if not self._qp_ready:
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
+        self._lm_measured(xhat0)
         qp = self.qp_of_current(xhat0)
         self._xhat_last = xhat0.copy()
         self._xhat_fresh = True
@@ -870,6 +872,10 @@ class ReferenceDopus:
 
     def _lm_raise(self) -> None:
         lo, hi = _SAFETY["LM_MIN_REL"] * self.lm_scale, _SAFETY["LM_MAX_REL"] * self.lm_scale
+        if self._lm_uncapped > self.lm:
+            # the first raise after the cap of _lm_measured restores the term it capped
+            self.lm, self._lm_uncapped = self._lm_uncapped, -1.0
+            return
         self.lm = min(lo if self.lm < lo else self.lm * _SAFETY["LM_RAISE"], hi)
 
     def _lm_convexify(self) -> None:
@@ -884,6 +890,7 @@ class ReferenceDopus:
         self.lm_scale = self.lm_hessian_scale()
         self.lm = 0.0
         self._lm_kkt_prev = -1.0
+        self._lm_uncapped = -1.0
         self._lm_convexify()
 
     def _lm_prepared(self) -> None:
@@ -893,10 +900,25 @@ class ReferenceDopus:
         floor = 1e-8 * max(self.kkt_proxy_ref, 1.0)
         prev = max(self._lm_kkt_prev, floor)
         self.lm_scale = self.lm_hessian_scale()
+        self._lm_uncapped = -1.0
         if self._lm_kkt_prev >= 0.0 and not self.kkt_proxy <= _SAFETY["LM_KKT_GROWTH"] * prev:
             self._lm_raise()
         self._lm_kkt_prev = self.kkt_proxy
         self._lm_convexify()
+
+    def _lm_measured(self, xhat0) -> None:
+        """Feedback, once the measurement is known: the term capped by the distance from the
+        solution, ``LM_KKT_REL h max(proxy / max(1, proxy at the last init), max_i |dx0_i| /
+        scale_x_i)`` (0 below ``LM_MIN_REL h``)."""
+        self._lm_uncapped = -1.0
+        if not self.lm_auto:
+            return
+        d = max(self.kkt_proxy / max(self.kkt_proxy_ref, 1.0),
+                float(np.max(np.abs(xhat0 - self.x[0]) / self.scales[0])))
+        cap = _SAFETY["LM_KKT_REL"] * self.lm_scale * d * d
+        if not self.lm <= cap:
+            self._lm_uncapped = self.lm
+            self.lm = 0.0 if cap < _SAFETY["LM_MIN_REL"] * self.lm_scale else cap
 
     def _lm_feedback(self, status: str) -> None:
         """After a feedback: lowered after a step, raised after a failed QP or a divergence."""

@@ -254,6 +254,7 @@ enum robot_arm_flag {
 #define ROBOT_ARM_LM_PIVOT_REL 1e-10 /* Riccati pivots must exceed 1e-10 h */
 #define ROBOT_ARM_LM_KKT_GROWTH 10.0 /* raise when the KKT proxy grows 10x in one prepare */
 #define ROBOT_ARM_LM_RETRIES 2       /* QP solves again with lm raised after a failure */
+#define ROBOT_ARM_LM_KKT_REL 1e-2    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
 
 enum robot_arm_mode {
     ROBOT_ARM_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
@@ -293,6 +294,7 @@ struct robot_arm_solver {
     int lm_auto;                      /* 1: automatic term (section 10) */
     double lm_scale;                  /* Hessian scale h of the automatic term */
     double lm_kkt_prev;               /* KKT proxy of the previous prepare (< 0: none since init) */
+    double lm_uncapped;               /* the term before the cap of this feedback (< 0: not capped) */
     double lm_P[ROBOT_ARM_NX * ROBOT_ARM_NX]; /* Riccati workspace of the convexity test */
     double lm_P2[ROBOT_ARM_NX * ROBOT_ARM_NX];
     double lm_PA[ROBOT_ARM_NX * ROBOT_ARM_NW];

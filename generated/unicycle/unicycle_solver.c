@@ -387,6 +387,12 @@ static int unicycle_lm_convex(unicycle_solver *s, double lm)
 static void unicycle_lm_raise(unicycle_solver *s)
 {
     double lo = UNICYCLE_LM_MIN_REL * s->lm_scale, hi = UNICYCLE_LM_MAX_REL * s->lm_scale;
+    if (s->lm_uncapped > s->lm) {
+        /* the first raise after the cap of unicycle_lm_measured restores the term it capped */
+        s->lm = s->lm_uncapped;
+        s->lm_uncapped = -1.0;
+        return;
+    }
     s->lm = s->lm < lo ? lo : s->lm * UNICYCLE_LM_RAISE;
     s->lm = s->lm > hi ? hi : s->lm;
 }
@@ -409,6 +415,7 @@ static void unicycle_lm_start(unicycle_solver *s)
     s->lm_scale = unicycle_lm_hessian_scale(s);
     s->lm = 0.0;
     s->lm_kkt_prev = -1.0;
+    s->lm_uncapped = -1.0;
     unicycle_lm_convexify(s);
 }
 
@@ -422,11 +429,34 @@ static void unicycle_lm_prepared(unicycle_solver *s)
         return;
     }
     s->lm_scale = unicycle_lm_hessian_scale(s);
+    s->lm_uncapped = -1.0;
     if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= UNICYCLE_LM_KKT_GROWTH * prev)) {
         unicycle_lm_raise(s);
     }
     s->lm_kkt_prev = s->kkt_proxy;
     unicycle_lm_convexify(s);
+}
+
+/* Feedback, once the measurement is in the QP: the term capped by the distance from the
+ * solution, UNICYCLE_LM_KKT_REL h max(proxy / max(1, proxy at the last init), max_i |dx0_i| /
+ * scale_x_i) (0 below UNICYCLE_LM_MIN_REL h), so that it vanishes where the iterate converges. */
+static void unicycle_lm_measured(unicycle_solver *s)
+{
+    double d = s->kkt_proxy / (s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0), cap, v;
+    int i;
+    s->lm_uncapped = -1.0;
+    if (!s->lm_auto) {
+        return;
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        v = fabs(s->qp_in.x0[i]) / s->scale_x[i];
+        d = v > d ? v : d;
+    }
+    cap = UNICYCLE_LM_KKT_REL * s->lm_scale * d * d;
+    if (!(s->lm <= cap)) {
+        s->lm_uncapped = s->lm;
+        s->lm = cap < UNICYCLE_LM_MIN_REL * s->lm_scale ? 0.0 : cap;
+    }
 }
 
 /* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
@@ -467,6 +497,7 @@ void unicycle_defaults(unicycle_solver *s)
     s->lm = (unicycle_default_lm >= 0.0 && unicycle_default_lm < INFINITY) ? unicycle_default_lm : 0.0;
     s->lm_scale = 1.0;
     s->lm_kkt_prev = -1.0;
+    s->lm_uncapped = -1.0;
     unicycle_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = UNICYCLE_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -982,6 +1013,7 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->xhat_fresh = 1;
+    unicycle_lm_measured(s);
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
