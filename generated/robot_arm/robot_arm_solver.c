@@ -16,6 +16,7 @@
 #include "robot_arm_linalg.h"
 #include "robot_arm_problem.h"
 #include "robot_arm_solver.h"
+#include "robot_arm_solver_internal.h"
 
 #define ROBOT_ARM_MAGIC 0x444f5055 /* "DOPU" */
 #define ROBOT_ARM_DEFAULT_QP_TOL 1e-10
@@ -30,14 +31,14 @@ static void robot_arm_copy(double *dst, const double *src, int n)
     }
 }
 
-static void robot_arm_ensure_setup(robot_arm_solver *s)
+void robot_arm_ensure_setup(robot_arm_solver *s)
 {
     if (s->magic != ROBOT_ARM_MAGIC) {
         robot_arm_defaults(s);
     }
 }
 
-static int robot_arm_ret(robot_arm_solver *s, int status)
+int robot_arm_ret(robot_arm_solver *s, int status)
 {
     s->status = status;
     return status;
@@ -407,7 +408,7 @@ static void robot_arm_lm_convexify(robot_arm_solver *s)
 }
 
 /* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
-static void robot_arm_lm_start(robot_arm_solver *s)
+void robot_arm_lm_start(robot_arm_solver *s)
 {
     if (!s->lm_auto) {
         return;
@@ -922,7 +923,117 @@ static void robot_arm_qp_warm_point(robot_arm_solver *s)
     }
 }
 
-/* The step of each stage kept in its slot for the secant criterion:
+/* Feedback step 1: the call is refused before the QP when the solver is not initialised,
+ * the measurement is not finite or no QP is prepared (the fallback control is returned).
+ * Returns ROBOT_ARM_OK when the QP is to be solved, else the status of the failed call. */
+static int robot_arm_feedback_admit(robot_arm_solver *s, const double *xhat0, double *u0)
+{
+    if (!s->initialized) {
+        robot_arm_fallback_u0(s, u0);
+        return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
+    }
+    if (xhat0 == 0 || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) {
+        s->xhat_fresh = 0;
+        if (s->mode == ROBOT_ARM_MODE_RECEDING) {
+            /* the sampling instant has passed all the same: its prepare (the shift) is due */
+            s->prepare_due = 1;
+            s->shifted = 0;
+        }
+        return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_NONFINITE_INPUT);
+    }
+    if (!s->qp_ready) {
+        /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
+        return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_NOT_PREPARED);
+    }
+    return ROBOT_ARM_OK;
+}
+
+/* Step 2: the measurement enters the QP as the fixed step of x_0. */
+static void robot_arm_feedback_measure(robot_arm_solver *s, const double *xhat0)
+{
+    int i;
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        s->xhat0[i] = xhat0[i];
+        s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
+    }
+    s->xhat_fresh = 1;
+    robot_arm_lm_measured(s);
+    /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
+    s->prepare_due = 1;
+    s->shifted = 0;
+}
+
+/* 1 when the QP status is "solved" and its solution finite. */
+static int robot_arm_qp_ok(const robot_arm_solver *s, int qs)
+{
+    return qs == ROBOT_ARM_QP_SOLVED && robot_arm_qp_solution_finite(&s->qp_sol);
+}
+
+/* One solve of the prepared QP, warm (from the point in s->qp_sol) or cold; its iterations
+ * are added to those of the call. Returns the QP status. */
+static int robot_arm_qp_attempt(robot_arm_solver *s, int warm)
+{
+    int qs;
+    s->qp_settings.warm_start = warm;
+    qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    s->qp_iterations += s->qp_info.iterations;
+    return qs;
+}
+
+/* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry
+ * in the same call when the warm start failed or needed the inertia correction: the QP is
+ * then nonconvex on the null space of its equalities and may have several local
+ * minimisers, and the warm start may have reached another one than the cold start finds
+ * (the one the closed loop has followed so far). Returns the QP status. */
+static int robot_arm_feedback_qp(robot_arm_solver *s)
+{
+    int qs;
+    s->qp_in.hess_shift = s->lm;
+    s->qp_iterations = 0;
+    s->qp_cold_retry = 0;
+    if (s->qp_warm) {
+        robot_arm_qp_warm_point(s);
+    }
+    qs = robot_arm_qp_attempt(s, s->qp_warm);
+    if (s->qp_warm && qs != ROBOT_ARM_QP_INVALID_INPUT &&
+        (!robot_arm_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
+        s->qp_cold_retry = 1;
+        qs = robot_arm_qp_attempt(s, 0);
+    }
+    return qs;
+}
+
+/* Step 4, the automatic term (algorithm.md section 10): a QP still not solved is solved
+ * again (cold) with lm raised, at most ROBOT_ARM_LM_RETRIES times. Returns the QP status; the
+ * number of retries in *retries. */
+static int robot_arm_feedback_lm_retries(robot_arm_solver *s, int qs, int *retries)
+{
+    *retries = 0;
+    while (s->lm_auto && *retries < ROBOT_ARM_LM_RETRIES && s->lm < ROBOT_ARM_LM_MAX_REL * s->lm_scale &&
+           !robot_arm_qp_ok(s, qs) && qs != ROBOT_ARM_QP_INVALID_INPUT) {
+        robot_arm_lm_raise(s);
+        s->qp_in.hess_shift = s->lm;
+        qs = robot_arm_qp_attempt(s, 0);
+        *retries += 1;
+    }
+    return qs;
+}
+
+/* Step 5: the outcome of the QP: ROBOT_ARM_ERR_QP when it is not solved, ROBOT_ARM_ERR_DIVERGED when
+ * its step leaves the box of the divergence test (algorithm.md section 9), else ROBOT_ARM_OK. */
+static int robot_arm_feedback_check_step(const robot_arm_solver *s, int qs)
+{
+    const robot_arm_qp_sol *sol = &s->qp_sol;
+    if (!robot_arm_qp_ok(s, qs)) {
+        return ROBOT_ARM_ERR_QP;
+    }
+    if (!robot_arm_box_ok(s, &s->x[0][0], &sol->x[0][0], ROBOT_ARM_NX, &s->u[0][0], &sol->u[0][0], ROBOT_ARM_QP_NU1)) {
+        return ROBOT_ARM_ERR_DIVERGED;
+    }
+    return ROBOT_ARM_OK;
+}
+
+/* Step 6: the step of each stage kept in its slot for the secant criterion:
  * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
 static void robot_arm_store_domega(robot_arm_solver *s)
 {
@@ -946,7 +1057,7 @@ static void robot_arm_store_domega(robot_arm_solver *s)
     }
 }
 
-/* The full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
+/* Step 7, the full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
 static void robot_arm_take_step(robot_arm_solver *s)
 {
     const robot_arm_qp_sol *sol = &s->qp_sol;
@@ -980,94 +1091,15 @@ static void robot_arm_take_step(robot_arm_solver *s)
     s->qp_ready = 0;
 }
 
-int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
+/* Step 8: a good plan, the fallback of the next failures; the automatic term lowered unless
+ * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
+static void robot_arm_keep_plan(robot_arm_solver *s, double *u0, int lowered)
 {
-    const robot_arm_qp_sol *sol = &s->qp_sol;
-    double t0;
-    int i, qs, retries;
-
-    robot_arm_ensure_setup(s);
-    s->flags = 0;
-    if (!s->initialized) {
-        robot_arm_fallback_u0(s, u0);
-        return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
-    }
-    if (xhat0 == 0 || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) {
-        s->xhat_fresh = 0;
-        if (s->mode == ROBOT_ARM_MODE_RECEDING) {
-            /* the sampling instant has passed all the same: its prepare (the shift) is due */
-            s->prepare_due = 1;
-            s->shifted = 0;
-        }
-        return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_NONFINITE_INPUT);
-    }
-    if (!s->qp_ready) {
-        /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
-        return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_NOT_PREPARED);
-    }
-    s->timer.t[ROBOT_ARM_PHASE_FEEDBACK] = 0.0;
-    t0 = robot_arm_timer_now(&s->timer);
-
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->xhat0[i] = xhat0[i];
-        s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
-    }
-    s->xhat_fresh = 1;
-    robot_arm_lm_measured(s);
-    /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
-    s->prepare_due = 1;
-    s->shifted = 0;
-    s->qp_in.hess_shift = s->lm;
-    s->qp_cold_retry = 0;
-    s->qp_settings.warm_start = s->qp_warm;
-    if (s->qp_warm) {
-        robot_arm_qp_warm_point(s);
-    }
-    qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-    s->qp_iterations = s->qp_info.iterations;
-    if (s->qp_warm && qs != ROBOT_ARM_QP_INVALID_INPUT &&
-        (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol) || s->qp_info.inertia_corrections > 0)) {
-        /* the warm start failed, or it needed the inertia correction: the QP is nonconvex
-         * on the null space of its equalities there and may have several local minimisers,
-         * and the warm start may have reached another one than the cold start finds (the
-         * one the closed loop has followed so far): retry from the cold starting point in
-         * the same call */
-        s->qp_cold_retry = 1;
-        s->qp_settings.warm_start = 0;
-        qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-        s->qp_iterations += s->qp_info.iterations;
-    }
-    /* the automatic term (section 10): a QP still not solved is solved again (cold) with lm
-     * raised */
-    retries = 0;
-    while (s->lm_auto && retries < ROBOT_ARM_LM_RETRIES && s->lm < ROBOT_ARM_LM_MAX_REL * s->lm_scale &&
-           (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol)) && qs != ROBOT_ARM_QP_INVALID_INPUT) {
-        robot_arm_lm_raise(s);
-        s->qp_in.hess_shift = s->lm;
-        s->qp_settings.warm_start = 0;
-        qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-        s->qp_iterations += s->qp_info.iterations;
-        retries += 1;
-    }
-    s->qp_status = qs;
-    if (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol)) {
-        robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
-        return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_QP);
-    }
-    /* the divergence test of the step (algorithm.md section 9): no step outside the box */
-    if (!robot_arm_box_ok(s, &s->x[0][0], &sol->x[0][0], ROBOT_ARM_NX, &s->u[0][0], &sol->u[0][0], ROBOT_ARM_QP_NU1)) {
-        robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
-        return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_DIVERGED);
-    }
-
-    robot_arm_store_domega(s);
-    robot_arm_take_step(s);
-    /* a good plan: the fallback of the next failures; u0 clipped to the bounds */
     s->n_failed = 0;
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
-    if (retries == 0) {
-        robot_arm_lm_feedback(s, ROBOT_ARM_OK); /* lowered, unless this QP needed a raise */
+    if (lowered) {
+        robot_arm_lm_feedback(s, ROBOT_ARM_OK);
     }
     robot_arm_copy(&s->plan_u[0][0], &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
     if (robot_arm_clip_u(s->u[0], s->u0_out)) {
@@ -1076,6 +1108,33 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     if (u0) {
         robot_arm_copy(u0, s->u0_out, ROBOT_ARM_NU);
     }
+}
+
+int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
+{
+    double t0;
+    int rc, qs, retries;
+
+    robot_arm_ensure_setup(s);
+    s->flags = 0;
+    rc = robot_arm_feedback_admit(s, xhat0, u0);
+    if (rc != ROBOT_ARM_OK) {
+        return rc;
+    }
+    s->timer.t[ROBOT_ARM_PHASE_FEEDBACK] = 0.0;
+    t0 = robot_arm_timer_now(&s->timer);
+    robot_arm_feedback_measure(s, xhat0);
+    qs = robot_arm_feedback_qp(s);
+    qs = robot_arm_feedback_lm_retries(s, qs, &retries);
+    s->qp_status = qs;
+    rc = robot_arm_feedback_check_step(s, qs);
+    if (rc != ROBOT_ARM_OK) {
+        robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
+        return robot_arm_feedback_failed(s, u0, rc);
+    }
+    robot_arm_store_domega(s);
+    robot_arm_take_step(s);
+    robot_arm_keep_plan(s, u0, retries == 0);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
@@ -1224,9 +1283,7 @@ static void robot_arm_predicted_step(robot_arm_solver *s)
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
     qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-    if (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(&s->qp_sol) ||
-        !robot_arm_box_ok(s, &s->x[0][0], &s->qp_sol.x[0][0], ROBOT_ARM_NX, &s->u[0][0], &s->qp_sol.u[0][0],
-                      ROBOT_ARM_QP_NU1)) {
+    if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
         return;
     }
     robot_arm_store_domega(s);
@@ -1439,275 +1496,6 @@ double robot_arm_get_kkt(const robot_arm_solver *s)
     return m;
 }
 
-/* ---- settings ----------------------------------------------------------------------- */
-
-int robot_arm_set_M(robot_arm_solver *s, int M)
-{
-    robot_arm_ensure_setup(s);
-    if (M < 0 || M > ROBOT_ARM_N - 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->M = M;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_M(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->M;
-}
-
-int robot_arm_set_mode(robot_arm_solver *s, int mode)
-{
-    robot_arm_ensure_setup(s);
-    if (mode != ROBOT_ARM_MODE_RECEDING && mode != ROBOT_ARM_MODE_FIXED) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->mode = mode;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_mode(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->mode;
-}
-
-int robot_arm_set_hessian(robot_arm_solver *s, int hessian)
-{
-    robot_arm_ensure_setup(s);
-    if (hessian != ROBOT_ARM_HESSIAN_EXACT && hessian != ROBOT_ARM_HESSIAN_GAUSS_NEWTON) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    if (hessian == ROBOT_ARM_HESSIAN_GAUSS_NEWTON && !ROBOT_ARM_HAS_GN) {
-        /* Gauss-Newton needs a least-squares stage cost */
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->hessian = hessian;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_hessian(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->hessian;
-}
-
-int robot_arm_set_regularization(robot_arm_solver *s, int regularization, double eps)
-{
-    robot_arm_ensure_setup(s);
-    if ((regularization != ROBOT_ARM_REG_NONE && regularization != ROBOT_ARM_REG_PROJECT &&
-         regularization != ROBOT_ARM_REG_MIRROR) ||
-        !isfinite(eps) || !(eps > 0.0)) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->regularization = regularization;
-    s->reg_eps = eps;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_regularization(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->regularization;
-}
-
-double robot_arm_get_reg_eps(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->reg_eps;
-}
-
-int robot_arm_set_cost_hessian(robot_arm_solver *s, int fresh)
-{
-    robot_arm_ensure_setup(s);
-    if (fresh != 0 && fresh != 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->cost_hessian = fresh;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_cost_hessian(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->cost_hessian;
-}
-
-int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, double lm)
-{
-    robot_arm_ensure_setup(s);
-    if (!isfinite(lm) || !(lm >= 0.0)) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->lm_auto = 0;
-    s->lm = lm;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_set_lm_auto(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    s->lm_auto = 1;
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
-    if (s->initialized && s->qp_ready) {
-        robot_arm_lm_start(s);
-    }
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_lm_auto(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->lm_auto;
-}
-
-double robot_arm_get_lm_scale(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->lm_scale;
-}
-
-double robot_arm_get_levenberg_marquardt(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->lm;
-}
-
-int robot_arm_set_qp_tol(robot_arm_solver *s, double tol)
-{
-    robot_arm_ensure_setup(s);
-    if (!isfinite(tol) || !(tol > 0.0) || tol > ROBOT_ARM_QP_TOL_MAX) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.tol = tol;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-double robot_arm_get_qp_tol(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->qp_settings.tol;
-}
-
-int robot_arm_set_qp_max_iter(robot_arm_solver *s, int max_iter)
-{
-    robot_arm_ensure_setup(s);
-    if (max_iter < 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.max_iter = max_iter;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_qp_max_iter(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->qp_settings.max_iter;
-}
-
-int robot_arm_set_recovery(robot_arm_solver *s, int on, int max_failures)
-{
-    robot_arm_ensure_setup(s);
-    if ((on != 0 && on != 1) || max_failures < 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->recovery = on;
-    s->recovery_failures = max_failures;
-    if (!on) {
-        s->recover_pending = 0;
-    }
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_recovery(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->recovery;
-}
-
-int robot_arm_get_recovery_failures(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->recovery_failures;
-}
-
-int robot_arm_set_qp_warm_start(robot_arm_solver *s, int on)
-{
-    robot_arm_ensure_setup(s);
-    if (on != 0 && on != 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_warm = on;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_qp_warm_start(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->qp_warm;
-}
-
-int robot_arm_get_qp_cold_retry(const robot_arm_solver *s)
-{
-    return s->qp_cold_retry;
-}
-
-int robot_arm_set_parameters(robot_arm_solver *s, const double *p)
-{
-    int k, i;
-    robot_arm_ensure_setup(s);
-    if (ROBOT_ARM_NP == 0) {
-        return robot_arm_ret(s, ROBOT_ARM_OK);
-    }
-    if (p == 0) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    if (!robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NP, p)) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
-    }
-    for (k = 0; k <= ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NP; ++i) {
-            s->p[k][i] = p[k * ROBOT_ARM_NP + i];
-        }
-    }
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const double *pk)
-{
-    int i;
-    robot_arm_ensure_setup(s);
-    if (k < 0 || k > ROBOT_ARM_N) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    if (ROBOT_ARM_NP == 0) {
-        return robot_arm_ret(s, ROBOT_ARM_OK);
-    }
-    if (pk == 0) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NP, pk)) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
-    }
-    for (i = 0; i < ROBOT_ARM_NP; ++i) {
-        s->p[k][i] = pk[i];
-    }
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-void robot_arm_get_parameters(robot_arm_solver *s, double *p)
-{
-    int k, i;
-    robot_arm_ensure_setup(s);
-    for (k = 0; k <= ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NP; ++i) {
-            p[k * ROBOT_ARM_NP + i] = s->p[k][i];
-        }
-    }
-}
-
 /* ---- getters ------------------------------------------------------------------------ */
 
 void robot_arm_get_x(const robot_arm_solver *s, double *x)
@@ -1814,6 +1602,11 @@ void robot_arm_get_scales(const robot_arm_solver *s, double *scale_x, double *sc
     }
 }
 
+int robot_arm_get_qp_cold_retry(const robot_arm_solver *s)
+{
+    return s->qp_cold_retry;
+}
+
 int robot_arm_get_status(const robot_arm_solver *s)
 {
     return s->status;
@@ -1832,19 +1625,4 @@ int robot_arm_get_ring_head(const robot_arm_solver *s)
 void robot_arm_get_timings(const robot_arm_solver *s, double *t)
 {
     robot_arm_copy(t, s->timer.t, ROBOT_ARM_N_PHASES);
-}
-
-void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), void *ctx)
-{
-    robot_arm_ensure_setup(s);
-    s->timer.clock = clock_fn ? clock_fn : robot_arm_timer_default_clock;
-    s->timer.ctx = clock_fn ? ctx : 0;
-}
-
-int robot_arm_has_clock(const robot_arm_solver *s)
-{
-    if (s->timer.clock == 0) {
-        return 0;
-    }
-    return s->timer.clock != robot_arm_timer_default_clock || robot_arm_timer_has_default_clock();
 }

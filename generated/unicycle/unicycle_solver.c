@@ -16,6 +16,7 @@
 #include "unicycle_linalg.h"
 #include "unicycle_problem.h"
 #include "unicycle_solver.h"
+#include "unicycle_solver_internal.h"
 
 #define UNICYCLE_MAGIC 0x444f5055 /* "DOPU" */
 #define UNICYCLE_DEFAULT_QP_TOL 1e-10
@@ -30,14 +31,14 @@ static void unicycle_copy(double *dst, const double *src, int n)
     }
 }
 
-static void unicycle_ensure_setup(unicycle_solver *s)
+void unicycle_ensure_setup(unicycle_solver *s)
 {
     if (s->magic != UNICYCLE_MAGIC) {
         unicycle_defaults(s);
     }
 }
 
-static int unicycle_ret(unicycle_solver *s, int status)
+int unicycle_ret(unicycle_solver *s, int status)
 {
     s->status = status;
     return status;
@@ -407,7 +408,7 @@ static void unicycle_lm_convexify(unicycle_solver *s)
 }
 
 /* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
-static void unicycle_lm_start(unicycle_solver *s)
+void unicycle_lm_start(unicycle_solver *s)
 {
     if (!s->lm_auto) {
         return;
@@ -922,7 +923,117 @@ static void unicycle_qp_warm_point(unicycle_solver *s)
     }
 }
 
-/* The step of each stage kept in its slot for the secant criterion:
+/* Feedback step 1: the call is refused before the QP when the solver is not initialised,
+ * the measurement is not finite or no QP is prepared (the fallback control is returned).
+ * Returns UNICYCLE_OK when the QP is to be solved, else the status of the failed call. */
+static int unicycle_feedback_admit(unicycle_solver *s, const double *xhat0, double *u0)
+{
+    if (!s->initialized) {
+        unicycle_fallback_u0(s, u0);
+        return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
+    }
+    if (xhat0 == 0 || !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) {
+        s->xhat_fresh = 0;
+        if (s->mode == UNICYCLE_MODE_RECEDING) {
+            /* the sampling instant has passed all the same: its prepare (the shift) is due */
+            s->prepare_due = 1;
+            s->shifted = 0;
+        }
+        return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NONFINITE_INPUT);
+    }
+    if (!s->qp_ready) {
+        /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
+        return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NOT_PREPARED);
+    }
+    return UNICYCLE_OK;
+}
+
+/* Step 2: the measurement enters the QP as the fixed step of x_0. */
+static void unicycle_feedback_measure(unicycle_solver *s, const double *xhat0)
+{
+    int i;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->xhat0[i] = xhat0[i];
+        s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
+    }
+    s->xhat_fresh = 1;
+    unicycle_lm_measured(s);
+    /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
+    s->prepare_due = 1;
+    s->shifted = 0;
+}
+
+/* 1 when the QP status is "solved" and its solution finite. */
+static int unicycle_qp_ok(const unicycle_solver *s, int qs)
+{
+    return qs == UNICYCLE_QP_SOLVED && unicycle_qp_solution_finite(&s->qp_sol);
+}
+
+/* One solve of the prepared QP, warm (from the point in s->qp_sol) or cold; its iterations
+ * are added to those of the call. Returns the QP status. */
+static int unicycle_qp_attempt(unicycle_solver *s, int warm)
+{
+    int qs;
+    s->qp_settings.warm_start = warm;
+    qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    s->qp_iterations += s->qp_info.iterations;
+    return qs;
+}
+
+/* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry
+ * in the same call when the warm start failed or needed the inertia correction: the QP is
+ * then nonconvex on the null space of its equalities and may have several local
+ * minimisers, and the warm start may have reached another one than the cold start finds
+ * (the one the closed loop has followed so far). Returns the QP status. */
+static int unicycle_feedback_qp(unicycle_solver *s)
+{
+    int qs;
+    s->qp_in.hess_shift = s->lm;
+    s->qp_iterations = 0;
+    s->qp_cold_retry = 0;
+    if (s->qp_warm) {
+        unicycle_qp_warm_point(s);
+    }
+    qs = unicycle_qp_attempt(s, s->qp_warm);
+    if (s->qp_warm && qs != UNICYCLE_QP_INVALID_INPUT &&
+        (!unicycle_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
+        s->qp_cold_retry = 1;
+        qs = unicycle_qp_attempt(s, 0);
+    }
+    return qs;
+}
+
+/* Step 4, the automatic term (algorithm.md section 10): a QP still not solved is solved
+ * again (cold) with lm raised, at most UNICYCLE_LM_RETRIES times. Returns the QP status; the
+ * number of retries in *retries. */
+static int unicycle_feedback_lm_retries(unicycle_solver *s, int qs, int *retries)
+{
+    *retries = 0;
+    while (s->lm_auto && *retries < UNICYCLE_LM_RETRIES && s->lm < UNICYCLE_LM_MAX_REL * s->lm_scale &&
+           !unicycle_qp_ok(s, qs) && qs != UNICYCLE_QP_INVALID_INPUT) {
+        unicycle_lm_raise(s);
+        s->qp_in.hess_shift = s->lm;
+        qs = unicycle_qp_attempt(s, 0);
+        *retries += 1;
+    }
+    return qs;
+}
+
+/* Step 5: the outcome of the QP: UNICYCLE_ERR_QP when it is not solved, UNICYCLE_ERR_DIVERGED when
+ * its step leaves the box of the divergence test (algorithm.md section 9), else UNICYCLE_OK. */
+static int unicycle_feedback_check_step(const unicycle_solver *s, int qs)
+{
+    const unicycle_qp_sol *sol = &s->qp_sol;
+    if (!unicycle_qp_ok(s, qs)) {
+        return UNICYCLE_ERR_QP;
+    }
+    if (!unicycle_box_ok(s, &s->x[0][0], &sol->x[0][0], UNICYCLE_NX, &s->u[0][0], &sol->u[0][0], UNICYCLE_QP_NU1)) {
+        return UNICYCLE_ERR_DIVERGED;
+    }
+    return UNICYCLE_OK;
+}
+
+/* Step 6: the step of each stage kept in its slot for the secant criterion:
  * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
 static void unicycle_store_domega(unicycle_solver *s)
 {
@@ -946,7 +1057,7 @@ static void unicycle_store_domega(unicycle_solver *s)
     }
 }
 
-/* The full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
+/* Step 7, the full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
 static void unicycle_take_step(unicycle_solver *s)
 {
     const unicycle_qp_sol *sol = &s->qp_sol;
@@ -980,94 +1091,15 @@ static void unicycle_take_step(unicycle_solver *s)
     s->qp_ready = 0;
 }
 
-int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
+/* Step 8: a good plan, the fallback of the next failures; the automatic term lowered unless
+ * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
+static void unicycle_keep_plan(unicycle_solver *s, double *u0, int lowered)
 {
-    const unicycle_qp_sol *sol = &s->qp_sol;
-    double t0;
-    int i, qs, retries;
-
-    unicycle_ensure_setup(s);
-    s->flags = 0;
-    if (!s->initialized) {
-        unicycle_fallback_u0(s, u0);
-        return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
-    }
-    if (xhat0 == 0 || !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) {
-        s->xhat_fresh = 0;
-        if (s->mode == UNICYCLE_MODE_RECEDING) {
-            /* the sampling instant has passed all the same: its prepare (the shift) is due */
-            s->prepare_due = 1;
-            s->shifted = 0;
-        }
-        return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NONFINITE_INPUT);
-    }
-    if (!s->qp_ready) {
-        /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
-        return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NOT_PREPARED);
-    }
-    s->timer.t[UNICYCLE_PHASE_FEEDBACK] = 0.0;
-    t0 = unicycle_timer_now(&s->timer);
-
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->xhat0[i] = xhat0[i];
-        s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
-    }
-    s->xhat_fresh = 1;
-    unicycle_lm_measured(s);
-    /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
-    s->prepare_due = 1;
-    s->shifted = 0;
-    s->qp_in.hess_shift = s->lm;
-    s->qp_cold_retry = 0;
-    s->qp_settings.warm_start = s->qp_warm;
-    if (s->qp_warm) {
-        unicycle_qp_warm_point(s);
-    }
-    qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-    s->qp_iterations = s->qp_info.iterations;
-    if (s->qp_warm && qs != UNICYCLE_QP_INVALID_INPUT &&
-        (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol) || s->qp_info.inertia_corrections > 0)) {
-        /* the warm start failed, or it needed the inertia correction: the QP is nonconvex
-         * on the null space of its equalities there and may have several local minimisers,
-         * and the warm start may have reached another one than the cold start finds (the
-         * one the closed loop has followed so far): retry from the cold starting point in
-         * the same call */
-        s->qp_cold_retry = 1;
-        s->qp_settings.warm_start = 0;
-        qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-        s->qp_iterations += s->qp_info.iterations;
-    }
-    /* the automatic term (section 10): a QP still not solved is solved again (cold) with lm
-     * raised */
-    retries = 0;
-    while (s->lm_auto && retries < UNICYCLE_LM_RETRIES && s->lm < UNICYCLE_LM_MAX_REL * s->lm_scale &&
-           (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol)) && qs != UNICYCLE_QP_INVALID_INPUT) {
-        unicycle_lm_raise(s);
-        s->qp_in.hess_shift = s->lm;
-        s->qp_settings.warm_start = 0;
-        qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-        s->qp_iterations += s->qp_info.iterations;
-        retries += 1;
-    }
-    s->qp_status = qs;
-    if (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol)) {
-        unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
-        return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_QP);
-    }
-    /* the divergence test of the step (algorithm.md section 9): no step outside the box */
-    if (!unicycle_box_ok(s, &s->x[0][0], &sol->x[0][0], UNICYCLE_NX, &s->u[0][0], &sol->u[0][0], UNICYCLE_QP_NU1)) {
-        unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
-        return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_DIVERGED);
-    }
-
-    unicycle_store_domega(s);
-    unicycle_take_step(s);
-    /* a good plan: the fallback of the next failures; u0 clipped to the bounds */
     s->n_failed = 0;
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
-    if (retries == 0) {
-        unicycle_lm_feedback(s, UNICYCLE_OK); /* lowered, unless this QP needed a raise */
+    if (lowered) {
+        unicycle_lm_feedback(s, UNICYCLE_OK);
     }
     unicycle_copy(&s->plan_u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
     if (unicycle_clip_u(s->u[0], s->u0_out)) {
@@ -1076,6 +1108,33 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     if (u0) {
         unicycle_copy(u0, s->u0_out, UNICYCLE_NU);
     }
+}
+
+int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
+{
+    double t0;
+    int rc, qs, retries;
+
+    unicycle_ensure_setup(s);
+    s->flags = 0;
+    rc = unicycle_feedback_admit(s, xhat0, u0);
+    if (rc != UNICYCLE_OK) {
+        return rc;
+    }
+    s->timer.t[UNICYCLE_PHASE_FEEDBACK] = 0.0;
+    t0 = unicycle_timer_now(&s->timer);
+    unicycle_feedback_measure(s, xhat0);
+    qs = unicycle_feedback_qp(s);
+    qs = unicycle_feedback_lm_retries(s, qs, &retries);
+    s->qp_status = qs;
+    rc = unicycle_feedback_check_step(s, qs);
+    if (rc != UNICYCLE_OK) {
+        unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
+        return unicycle_feedback_failed(s, u0, rc);
+    }
+    unicycle_store_domega(s);
+    unicycle_take_step(s);
+    unicycle_keep_plan(s, u0, retries == 0);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
     return unicycle_ret(s, UNICYCLE_OK);
 }
@@ -1224,9 +1283,7 @@ static void unicycle_predicted_step(unicycle_solver *s)
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
     qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
-    if (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(&s->qp_sol) ||
-        !unicycle_box_ok(s, &s->x[0][0], &s->qp_sol.x[0][0], UNICYCLE_NX, &s->u[0][0], &s->qp_sol.u[0][0],
-                      UNICYCLE_QP_NU1)) {
+    if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         return;
     }
     unicycle_store_domega(s);
@@ -1439,275 +1496,6 @@ double unicycle_get_kkt(const unicycle_solver *s)
     return m;
 }
 
-/* ---- settings ----------------------------------------------------------------------- */
-
-int unicycle_set_M(unicycle_solver *s, int M)
-{
-    unicycle_ensure_setup(s);
-    if (M < 0 || M > UNICYCLE_N - 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->M = M;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_M(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->M;
-}
-
-int unicycle_set_mode(unicycle_solver *s, int mode)
-{
-    unicycle_ensure_setup(s);
-    if (mode != UNICYCLE_MODE_RECEDING && mode != UNICYCLE_MODE_FIXED) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->mode = mode;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_mode(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->mode;
-}
-
-int unicycle_set_hessian(unicycle_solver *s, int hessian)
-{
-    unicycle_ensure_setup(s);
-    if (hessian != UNICYCLE_HESSIAN_EXACT && hessian != UNICYCLE_HESSIAN_GAUSS_NEWTON) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    if (hessian == UNICYCLE_HESSIAN_GAUSS_NEWTON && !UNICYCLE_HAS_GN) {
-        /* Gauss-Newton needs a least-squares stage cost */
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->hessian = hessian;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_hessian(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->hessian;
-}
-
-int unicycle_set_regularization(unicycle_solver *s, int regularization, double eps)
-{
-    unicycle_ensure_setup(s);
-    if ((regularization != UNICYCLE_REG_NONE && regularization != UNICYCLE_REG_PROJECT &&
-         regularization != UNICYCLE_REG_MIRROR) ||
-        !isfinite(eps) || !(eps > 0.0)) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->regularization = regularization;
-    s->reg_eps = eps;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_regularization(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->regularization;
-}
-
-double unicycle_get_reg_eps(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->reg_eps;
-}
-
-int unicycle_set_cost_hessian(unicycle_solver *s, int fresh)
-{
-    unicycle_ensure_setup(s);
-    if (fresh != 0 && fresh != 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->cost_hessian = fresh;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_cost_hessian(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->cost_hessian;
-}
-
-int unicycle_set_levenberg_marquardt(unicycle_solver *s, double lm)
-{
-    unicycle_ensure_setup(s);
-    if (!isfinite(lm) || !(lm >= 0.0)) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->lm_auto = 0;
-    s->lm = lm;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_set_lm_auto(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    s->lm_auto = 1;
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
-    if (s->initialized && s->qp_ready) {
-        unicycle_lm_start(s);
-    }
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_lm_auto(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->lm_auto;
-}
-
-double unicycle_get_lm_scale(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->lm_scale;
-}
-
-double unicycle_get_levenberg_marquardt(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->lm;
-}
-
-int unicycle_set_qp_tol(unicycle_solver *s, double tol)
-{
-    unicycle_ensure_setup(s);
-    if (!isfinite(tol) || !(tol > 0.0) || tol > UNICYCLE_QP_TOL_MAX) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.tol = tol;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-double unicycle_get_qp_tol(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->qp_settings.tol;
-}
-
-int unicycle_set_qp_max_iter(unicycle_solver *s, int max_iter)
-{
-    unicycle_ensure_setup(s);
-    if (max_iter < 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.max_iter = max_iter;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_qp_max_iter(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->qp_settings.max_iter;
-}
-
-int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures)
-{
-    unicycle_ensure_setup(s);
-    if ((on != 0 && on != 1) || max_failures < 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->recovery = on;
-    s->recovery_failures = max_failures;
-    if (!on) {
-        s->recover_pending = 0;
-    }
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_recovery(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->recovery;
-}
-
-int unicycle_get_recovery_failures(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->recovery_failures;
-}
-
-int unicycle_set_qp_warm_start(unicycle_solver *s, int on)
-{
-    unicycle_ensure_setup(s);
-    if (on != 0 && on != 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_warm = on;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_qp_warm_start(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->qp_warm;
-}
-
-int unicycle_get_qp_cold_retry(const unicycle_solver *s)
-{
-    return s->qp_cold_retry;
-}
-
-int unicycle_set_parameters(unicycle_solver *s, const double *p)
-{
-    int k, i;
-    unicycle_ensure_setup(s);
-    if (UNICYCLE_NP == 0) {
-        return unicycle_ret(s, UNICYCLE_OK);
-    }
-    if (p == 0) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    if (!unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NP, p)) {
-        return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
-    }
-    for (k = 0; k <= UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NP; ++i) {
-            s->p[k][i] = p[k * UNICYCLE_NP + i];
-        }
-    }
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_set_parameters_node(unicycle_solver *s, int k, const double *pk)
-{
-    int i;
-    unicycle_ensure_setup(s);
-    if (k < 0 || k > UNICYCLE_N) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    if (UNICYCLE_NP == 0) {
-        return unicycle_ret(s, UNICYCLE_OK);
-    }
-    if (pk == 0) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NP, pk)) {
-        return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
-    }
-    for (i = 0; i < UNICYCLE_NP; ++i) {
-        s->p[k][i] = pk[i];
-    }
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-void unicycle_get_parameters(unicycle_solver *s, double *p)
-{
-    int k, i;
-    unicycle_ensure_setup(s);
-    for (k = 0; k <= UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NP; ++i) {
-            p[k * UNICYCLE_NP + i] = s->p[k][i];
-        }
-    }
-}
-
 /* ---- getters ------------------------------------------------------------------------ */
 
 void unicycle_get_x(const unicycle_solver *s, double *x)
@@ -1814,6 +1602,11 @@ void unicycle_get_scales(const unicycle_solver *s, double *scale_x, double *scal
     }
 }
 
+int unicycle_get_qp_cold_retry(const unicycle_solver *s)
+{
+    return s->qp_cold_retry;
+}
+
 int unicycle_get_status(const unicycle_solver *s)
 {
     return s->status;
@@ -1832,19 +1625,4 @@ int unicycle_get_ring_head(const unicycle_solver *s)
 void unicycle_get_timings(const unicycle_solver *s, double *t)
 {
     unicycle_copy(t, s->timer.t, UNICYCLE_N_PHASES);
-}
-
-void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void *ctx)
-{
-    unicycle_ensure_setup(s);
-    s->timer.clock = clock_fn ? clock_fn : unicycle_timer_default_clock;
-    s->timer.ctx = clock_fn ? ctx : 0;
-}
-
-int unicycle_has_clock(const unicycle_solver *s)
-{
-    if (s->timer.clock == 0) {
-        return 0;
-    }
-    return s->timer.clock != unicycle_timer_default_clock || unicycle_timer_has_default_clock();
 }

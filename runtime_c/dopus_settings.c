@@ -1,0 +1,287 @@
+/* The settings of the solver (dopus_solver.h, "Settings"): setters that check their
+ * argument and return DOPUS_ERR_INVALID_ARGUMENT (nothing changed) or DOPUS_OK, getters, the
+ * runtime parameters and the clock of the phase timings. A struct that was never set up gets
+ * the generated defaults (dopus_defaults) on its first use here too.
+ */
+#include <math.h>
+
+#include "dopus_linalg.h"
+#include "dopus_solver.h"
+#include "dopus_solver_internal.h"
+
+int dopus_set_M(dopus_solver *s, int M)
+{
+    dopus_ensure_setup(s);
+    if (M < 0 || M > DOPUS_N - 1) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->M = M;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_M(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->M;
+}
+
+int dopus_set_mode(dopus_solver *s, int mode)
+{
+    dopus_ensure_setup(s);
+    if (mode != DOPUS_MODE_RECEDING && mode != DOPUS_MODE_FIXED) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->mode = mode;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_mode(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->mode;
+}
+
+int dopus_set_hessian(dopus_solver *s, int hessian)
+{
+    dopus_ensure_setup(s);
+    if (hessian != DOPUS_HESSIAN_EXACT && hessian != DOPUS_HESSIAN_GAUSS_NEWTON) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (hessian == DOPUS_HESSIAN_GAUSS_NEWTON && !DOPUS_HAS_GN) {
+        /* Gauss-Newton needs a least-squares stage cost */
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->hessian = hessian;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_hessian(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->hessian;
+}
+
+int dopus_set_regularization(dopus_solver *s, int regularization, double eps)
+{
+    dopus_ensure_setup(s);
+    if ((regularization != DOPUS_REG_NONE && regularization != DOPUS_REG_PROJECT &&
+         regularization != DOPUS_REG_MIRROR) ||
+        !isfinite(eps) || !(eps > 0.0)) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->regularization = regularization;
+    s->reg_eps = eps;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_regularization(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->regularization;
+}
+
+double dopus_get_reg_eps(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->reg_eps;
+}
+
+int dopus_set_cost_hessian(dopus_solver *s, int fresh)
+{
+    dopus_ensure_setup(s);
+    if (fresh != 0 && fresh != 1) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->cost_hessian = fresh;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_cost_hessian(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->cost_hessian;
+}
+
+int dopus_set_levenberg_marquardt(dopus_solver *s, double lm)
+{
+    dopus_ensure_setup(s);
+    if (!isfinite(lm) || !(lm >= 0.0)) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->lm_auto = 0;
+    s->lm = lm;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_set_lm_auto(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    s->lm_auto = 1;
+    s->lm = 0.0;
+    s->lm_kkt_prev = -1.0;
+    if (s->initialized && s->qp_ready) {
+        dopus_lm_start(s);
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_lm_auto(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->lm_auto;
+}
+
+double dopus_get_lm_scale(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->lm_scale;
+}
+
+double dopus_get_levenberg_marquardt(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->lm;
+}
+
+int dopus_set_qp_tol(dopus_solver *s, double tol)
+{
+    dopus_ensure_setup(s);
+    if (!isfinite(tol) || !(tol > 0.0) || tol > DOPUS_QP_TOL_MAX) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->qp_settings.tol = tol;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+double dopus_get_qp_tol(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->qp_settings.tol;
+}
+
+int dopus_set_qp_max_iter(dopus_solver *s, int max_iter)
+{
+    dopus_ensure_setup(s);
+    if (max_iter < 1) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->qp_settings.max_iter = max_iter;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_qp_max_iter(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->qp_settings.max_iter;
+}
+
+int dopus_set_recovery(dopus_solver *s, int on, int max_failures)
+{
+    dopus_ensure_setup(s);
+    if ((on != 0 && on != 1) || max_failures < 1) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->recovery = on;
+    s->recovery_failures = max_failures;
+    if (!on) {
+        s->recover_pending = 0;
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_recovery(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->recovery;
+}
+
+int dopus_get_recovery_failures(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->recovery_failures;
+}
+
+int dopus_set_qp_warm_start(dopus_solver *s, int on)
+{
+    dopus_ensure_setup(s);
+    if (on != 0 && on != 1) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->qp_warm = on;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_qp_warm_start(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    return s->qp_warm;
+}
+
+int dopus_set_parameters(dopus_solver *s, const double *p)
+{
+    int k, i;
+    dopus_ensure_setup(s);
+    if (DOPUS_NP == 0) {
+        return dopus_ret(s, DOPUS_OK);
+    }
+    if (p == 0) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (!dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NP, p)) {
+        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NP; ++i) {
+            s->p[k][i] = p[k * DOPUS_NP + i];
+        }
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_set_parameters_node(dopus_solver *s, int k, const double *pk)
+{
+    int i;
+    dopus_ensure_setup(s);
+    if (k < 0 || k > DOPUS_N) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (DOPUS_NP == 0) {
+        return dopus_ret(s, DOPUS_OK);
+    }
+    if (pk == 0) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (!dopus_lai_vec_finite(DOPUS_NP, pk)) {
+        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    for (i = 0; i < DOPUS_NP; ++i) {
+        s->p[k][i] = pk[i];
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+void dopus_get_parameters(dopus_solver *s, double *p)
+{
+    int k, i;
+    dopus_ensure_setup(s);
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NP; ++i) {
+            p[k * DOPUS_NP + i] = s->p[k][i];
+        }
+    }
+}
+
+void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx)
+{
+    dopus_ensure_setup(s);
+    s->timer.clock = clock_fn ? clock_fn : dopus_timer_default_clock;
+    s->timer.ctx = clock_fn ? ctx : 0;
+}
+
+int dopus_has_clock(const dopus_solver *s)
+{
+    if (s->timer.clock == 0) {
+        return 0;
+    }
+    return s->timer.clock != dopus_timer_default_clock || dopus_timer_has_default_clock();
+}
