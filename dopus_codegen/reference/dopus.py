@@ -908,13 +908,12 @@ class ReferenceDopus:
 
     def _lm_measured(self, xhat0) -> None:
         """Feedback, once the measurement is known: the term capped by the distance from the
-        solution, ``LM_KKT_REL h max(proxy / max(1, proxy at the last init), max_i |dx0_i| /
-        scale_x_i)`` (0 below ``LM_MIN_REL h``)."""
+        solution, ``LM_KKT_REL h d^2`` with ``d = max(proxy, max_i |dx0_i| / scale_x_i)`` (0
+        below ``LM_MIN_REL h``)."""
         self._lm_uncapped = -1.0
         if not self.lm_auto:
             return
-        d = max(self.kkt_proxy / max(self.kkt_proxy_ref, 1.0),
-                float(np.max(np.abs(xhat0 - self.x[0]) / self.scales[0])))
+        d = max(self.kkt_proxy, float(np.max(np.abs(xhat0 - self.x[0]) / self.scales[0])))
         cap = _SAFETY["LM_KKT_REL"] * self.lm_scale * d * d
         if not self.lm <= cap:
             self._lm_uncapped = self.lm

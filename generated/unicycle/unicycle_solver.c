@@ -439,11 +439,11 @@ static void unicycle_lm_prepared(unicycle_solver *s)
 }
 
 /* Feedback, once the measurement is in the QP: the term capped by the distance from the
- * solution, UNICYCLE_LM_KKT_REL h max(proxy / max(1, proxy at the last init), max_i |dx0_i| /
- * scale_x_i) (0 below UNICYCLE_LM_MIN_REL h), so that it vanishes where the iterate converges. */
+ * solution, UNICYCLE_LM_KKT_REL h d^2 with d = max(proxy, max_i |dx0_i| / scale_x_i) (0 below
+ * UNICYCLE_LM_MIN_REL h), so that it vanishes where the iterate converges. */
 static void unicycle_lm_measured(unicycle_solver *s)
 {
-    double d = s->kkt_proxy / (s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0), cap, v;
+    double d = s->kkt_proxy, cap, v;
     int i;
     s->lm_uncapped = -1.0;
     if (!s->lm_auto) {
