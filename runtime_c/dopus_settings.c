@@ -3,20 +3,28 @@
  * runtime parameters and the clock of the phase timings. A struct that was never set up gets
  * the generated defaults (dopus_defaults) on its first use here too.
  */
+#include <limits.h>
 #include <math.h>
 
 #include "dopus_linalg.h"
 #include "dopus_solver.h"
 #include "dopus_solver_internal.h"
 
-int dopus_set_M(dopus_solver *s, int M)
+/* *field = v when lo <= v <= hi (DOPUS_OK), else DOPUS_ERR_INVALID_ARGUMENT and nothing
+ * changes. */
+static int dopus_set_int(dopus_solver *s, int *field, int v, int lo, int hi)
 {
     dopus_ensure_setup(s);
-    if (M < 0 || M > DOPUS_N - 1) {
+    if (v < lo || v > hi) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
-    s->M = M;
+    *field = v;
     return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_set_M(dopus_solver *s, int M)
+{
+    return dopus_set_int(s, &s->M, M, 0, DOPUS_N - 1);
 }
 
 int dopus_get_M(dopus_solver *s)
@@ -27,12 +35,7 @@ int dopus_get_M(dopus_solver *s)
 
 int dopus_set_mode(dopus_solver *s, int mode)
 {
-    dopus_ensure_setup(s);
-    if (mode != DOPUS_MODE_RECEDING && mode != DOPUS_MODE_FIXED) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->mode = mode;
-    return dopus_ret(s, DOPUS_OK);
+    return dopus_set_int(s, &s->mode, mode, DOPUS_MODE_RECEDING, DOPUS_MODE_FIXED);
 }
 
 int dopus_get_mode(dopus_solver *s)
@@ -43,16 +46,9 @@ int dopus_get_mode(dopus_solver *s)
 
 int dopus_set_hessian(dopus_solver *s, int hessian)
 {
-    dopus_ensure_setup(s);
-    if (hessian != DOPUS_HESSIAN_EXACT && hessian != DOPUS_HESSIAN_GAUSS_NEWTON) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    if (hessian == DOPUS_HESSIAN_GAUSS_NEWTON && !DOPUS_HAS_GN) {
-        /* Gauss-Newton needs a least-squares stage cost */
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->hessian = hessian;
-    return dopus_ret(s, DOPUS_OK);
+    /* Gauss-Newton needs a least-squares stage cost */
+    return dopus_set_int(s, &s->hessian, hessian, DOPUS_HESSIAN_EXACT,
+                         DOPUS_HAS_GN ? DOPUS_HESSIAN_GAUSS_NEWTON : DOPUS_HESSIAN_EXACT);
 }
 
 int dopus_get_hessian(dopus_solver *s)
@@ -88,12 +84,7 @@ double dopus_get_reg_eps(dopus_solver *s)
 
 int dopus_set_cost_hessian(dopus_solver *s, int fresh)
 {
-    dopus_ensure_setup(s);
-    if (fresh != 0 && fresh != 1) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->cost_hessian = fresh;
-    return dopus_ret(s, DOPUS_OK);
+    return dopus_set_int(s, &s->cost_hessian, fresh, 0, 1);
 }
 
 int dopus_get_cost_hessian(dopus_solver *s)
@@ -161,12 +152,7 @@ double dopus_get_qp_tol(dopus_solver *s)
 
 int dopus_set_qp_max_iter(dopus_solver *s, int max_iter)
 {
-    dopus_ensure_setup(s);
-    if (max_iter < 1) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.max_iter = max_iter;
-    return dopus_ret(s, DOPUS_OK);
+    return dopus_set_int(s, &s->qp_settings.max_iter, max_iter, 1, INT_MAX);
 }
 
 int dopus_get_qp_max_iter(dopus_solver *s)
@@ -203,12 +189,7 @@ int dopus_get_recovery_failures(dopus_solver *s)
 
 int dopus_set_qp_warm_start(dopus_solver *s, int on)
 {
-    dopus_ensure_setup(s);
-    if (on != 0 && on != 1) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_warm = on;
-    return dopus_ret(s, DOPUS_OK);
+    return dopus_set_int(s, &s->qp_warm, on, 0, 1);
 }
 
 int dopus_get_qp_warm_start(dopus_solver *s)

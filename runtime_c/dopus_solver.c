@@ -38,6 +38,14 @@ void dopus_ensure_setup(dopus_solver *s)
     }
 }
 
+void dopus_clear_x0_multiplier(dopus_solver *s)
+{
+    int i;
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->mu_b[0][i] = 0.0;
+    }
+}
+
 int dopus_ret(dopus_solver *s, int status)
 {
     s->status = status;
@@ -613,17 +621,26 @@ static int dopus_stage_H(dopus_solver *s, int k)
     return DOPUS_OK;
 }
 
+int dopus_term_grad_checked(dopus_solver *s, double *gL, double *E, double *r, double *r_eq)
+{
+    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, E, r, r_eq, &s->fun_work) !=
+        0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    if (!dopus_lai_vec_finite(DOPUS_NX, gL) || !isfinite(*E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
+        !dopus_lai_vec_finite(DOPUS_NE, r_eq)) {
+        return DOPUS_ERR_NONFINITE_VALUE;
+    }
+    return DOPUS_OK;
+}
+
 /* Terminal F: gL_N, E, r, r_eq at the current point. */
 static int dopus_term_F(dopus_solver *s)
 {
     double gL[DOPUS_NX], E = 0.0, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
-    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, &E, r, r_eq, &s->fun_work) !=
-        0) {
-        return DOPUS_ERR_FUNCTION;
-    }
-    if (!dopus_lai_vec_finite(DOPUS_NX, gL) || !isfinite(E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
-        !dopus_lai_vec_finite(DOPUS_NE, r_eq)) {
-        return DOPUS_ERR_NONFINITE_VALUE;
+    int rc = dopus_term_grad_checked(s, gL, &E, r, r_eq);
+    if (rc != DOPUS_OK) {
+        return rc;
     }
     dopus_copy(s->gL_N, gL, DOPUS_NX);
     s->E = E;
@@ -688,9 +705,8 @@ static void dopus_assemble(dopus_solver *s)
             in->b[k][i] = slot->phi[i] - s->x[k + 1][i];
         }
         for (i = 0; i < DOPUS_NX; ++i) {
-            /* x_0 is fixed by xhat0; the QP ignores the x part of stage 0 */
-            in->lbw[k][i] = k == 0 ? -INFINITY : dopus_lbx[i] - s->x[k][i];
-            in->ubw[k][i] = k == 0 ? INFINITY : dopus_ubx[i] - s->x[k][i];
+            in->lbw[k][i] = dopus_x_bounded(k) ? dopus_lbx[i] - s->x[k][i] : -INFINITY;
+            in->ubw[k][i] = dopus_x_bounded(k) ? dopus_ubx[i] - s->x[k][i] : INFINITY;
         }
         for (i = 0; i < DOPUS_NU; ++i) {
             in->lbw[k][DOPUS_NX + i] = dopus_lbu[i] - s->u[k][i];
@@ -833,13 +849,8 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
         for (i = 0; i < DOPUS_NW; ++i) {
             s->mu_b[k][i] = mu_b ? mu_b[k * DOPUS_NW + i] : 0.0;
         }
-        /* x_0 carries no bound: its multiplier is 0 by definition */
-        if (k == 0) {
-            for (i = 0; i < DOPUS_NX; ++i) {
-                s->mu_b[0][i] = 0.0;
-            }
-        }
     }
+    dopus_clear_x0_multiplier(s);
     for (i = 0; i < DOPUS_NX; ++i) {
         s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
     }
@@ -1166,8 +1177,8 @@ static void dopus_shift(dopus_solver *s)
     /* the last stage: the x part of mu_b from mu_bN, the u part kept */
     for (i = 0; i < DOPUS_NX; ++i) {
         s->mu_b[DOPUS_N - 1][i] = s->mu_bN[i];
-        s->mu_b[0][i] = 0.0;
     }
+    dopus_clear_x0_multiplier(s);
     dopus_ring_advance(&s->ring);
 }
 
@@ -1565,6 +1576,45 @@ int dopus_get_qp_iterations(const dopus_solver *s)
 int dopus_get_qp_status(const dopus_solver *s)
 {
     return s->qp_status;
+}
+
+/* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
+static double dopus_side_bound(const double *lo, const double *up, int i, int side)
+{
+    return side > 0 ? up[i] : lo[i];
+}
+
+int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
+{
+    int k, j, side;
+    if (s->qp_status != DOPUS_QP_PRIMAL_INFEASIBLE ||
+        !dopus_qp_infeasible_row(&s->qp_work, &s->qp_in, &k, &j, &side)) {
+        return 0;
+    }
+    row->stage = k;
+    row->side = side;
+    if (j < DOPUS_NX) {
+        row->kind = DOPUS_ROW_STATE;
+        row->index = j;
+        row->bound = dopus_side_bound(dopus_lbx, dopus_ubx, j, side);
+    } else if (k < DOPUS_N && j < DOPUS_NW) {
+        row->kind = DOPUS_ROW_CONTROL;
+        row->index = j - DOPUS_NX;
+        row->bound = dopus_side_bound(dopus_lbu, dopus_ubu, row->index, side);
+    } else if (k < DOPUS_N) {
+        row->kind = DOPUS_ROW_PATH;
+        row->index = j - DOPUS_NW;
+        row->bound = dopus_side_bound(dopus_lg, dopus_ug, row->index, side);
+    } else if (j < DOPUS_NX + DOPUS_NR) {
+        row->kind = DOPUS_ROW_TERMINAL;
+        row->index = j - DOPUS_NX;
+        row->bound = dopus_side_bound(dopus_lr, dopus_ur, row->index, side);
+    } else {
+        row->kind = DOPUS_ROW_TERMINAL_EQ;
+        row->index = j - DOPUS_NX - DOPUS_NR;
+        row->bound = 0.0;
+    }
+    return 1;
 }
 
 int dopus_get_flags(const dopus_solver *s)

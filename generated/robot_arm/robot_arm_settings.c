@@ -3,20 +3,28 @@
  * runtime parameters and the clock of the phase timings. A struct that was never set up gets
  * the generated defaults (robot_arm_defaults) on its first use here too.
  */
+#include <limits.h>
 #include <math.h>
 
 #include "robot_arm_linalg.h"
 #include "robot_arm_solver.h"
 #include "robot_arm_solver_internal.h"
 
-int robot_arm_set_M(robot_arm_solver *s, int M)
+/* *field = v when lo <= v <= hi (ROBOT_ARM_OK), else ROBOT_ARM_ERR_INVALID_ARGUMENT and nothing
+ * changes. */
+static int robot_arm_set_int(robot_arm_solver *s, int *field, int v, int lo, int hi)
 {
     robot_arm_ensure_setup(s);
-    if (M < 0 || M > ROBOT_ARM_N - 1) {
+    if (v < lo || v > hi) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
     }
-    s->M = M;
+    *field = v;
     return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+int robot_arm_set_M(robot_arm_solver *s, int M)
+{
+    return robot_arm_set_int(s, &s->M, M, 0, ROBOT_ARM_N - 1);
 }
 
 int robot_arm_get_M(robot_arm_solver *s)
@@ -27,12 +35,7 @@ int robot_arm_get_M(robot_arm_solver *s)
 
 int robot_arm_set_mode(robot_arm_solver *s, int mode)
 {
-    robot_arm_ensure_setup(s);
-    if (mode != ROBOT_ARM_MODE_RECEDING && mode != ROBOT_ARM_MODE_FIXED) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->mode = mode;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
+    return robot_arm_set_int(s, &s->mode, mode, ROBOT_ARM_MODE_RECEDING, ROBOT_ARM_MODE_FIXED);
 }
 
 int robot_arm_get_mode(robot_arm_solver *s)
@@ -43,16 +46,9 @@ int robot_arm_get_mode(robot_arm_solver *s)
 
 int robot_arm_set_hessian(robot_arm_solver *s, int hessian)
 {
-    robot_arm_ensure_setup(s);
-    if (hessian != ROBOT_ARM_HESSIAN_EXACT && hessian != ROBOT_ARM_HESSIAN_GAUSS_NEWTON) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    if (hessian == ROBOT_ARM_HESSIAN_GAUSS_NEWTON && !ROBOT_ARM_HAS_GN) {
-        /* Gauss-Newton needs a least-squares stage cost */
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->hessian = hessian;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
+    /* Gauss-Newton needs a least-squares stage cost */
+    return robot_arm_set_int(s, &s->hessian, hessian, ROBOT_ARM_HESSIAN_EXACT,
+                         ROBOT_ARM_HAS_GN ? ROBOT_ARM_HESSIAN_GAUSS_NEWTON : ROBOT_ARM_HESSIAN_EXACT);
 }
 
 int robot_arm_get_hessian(robot_arm_solver *s)
@@ -88,12 +84,7 @@ double robot_arm_get_reg_eps(robot_arm_solver *s)
 
 int robot_arm_set_cost_hessian(robot_arm_solver *s, int fresh)
 {
-    robot_arm_ensure_setup(s);
-    if (fresh != 0 && fresh != 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->cost_hessian = fresh;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
+    return robot_arm_set_int(s, &s->cost_hessian, fresh, 0, 1);
 }
 
 int robot_arm_get_cost_hessian(robot_arm_solver *s)
@@ -161,12 +152,7 @@ double robot_arm_get_qp_tol(robot_arm_solver *s)
 
 int robot_arm_set_qp_max_iter(robot_arm_solver *s, int max_iter)
 {
-    robot_arm_ensure_setup(s);
-    if (max_iter < 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.max_iter = max_iter;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
+    return robot_arm_set_int(s, &s->qp_settings.max_iter, max_iter, 1, INT_MAX);
 }
 
 int robot_arm_get_qp_max_iter(robot_arm_solver *s)
@@ -203,12 +189,7 @@ int robot_arm_get_recovery_failures(robot_arm_solver *s)
 
 int robot_arm_set_qp_warm_start(robot_arm_solver *s, int on)
 {
-    robot_arm_ensure_setup(s);
-    if (on != 0 && on != 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_warm = on;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
+    return robot_arm_set_int(s, &s->qp_warm, on, 0, 1);
 }
 
 int robot_arm_get_qp_warm_start(robot_arm_solver *s)

@@ -38,6 +38,14 @@ void robot_arm_ensure_setup(robot_arm_solver *s)
     }
 }
 
+void robot_arm_clear_x0_multiplier(robot_arm_solver *s)
+{
+    int i;
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        s->mu_b[0][i] = 0.0;
+    }
+}
+
 int robot_arm_ret(robot_arm_solver *s, int status)
 {
     s->status = status;
@@ -613,17 +621,26 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
     return ROBOT_ARM_OK;
 }
 
+int robot_arm_term_grad_checked(robot_arm_solver *s, double *gL, double *E, double *r, double *r_eq)
+{
+    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gL, E, r, r_eq, &s->fun_work) !=
+        0) {
+        return ROBOT_ARM_ERR_FUNCTION;
+    }
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gL) || !isfinite(*E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NE, r_eq)) {
+        return ROBOT_ARM_ERR_NONFINITE_VALUE;
+    }
+    return ROBOT_ARM_OK;
+}
+
 /* Terminal F: gL_N, E, r, r_eq at the current point. */
 static int robot_arm_term_F(robot_arm_solver *s)
 {
     double gL[ROBOT_ARM_NX], E = 0.0, r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
-    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gL, &E, r, r_eq, &s->fun_work) !=
-        0) {
-        return ROBOT_ARM_ERR_FUNCTION;
-    }
-    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gL) || !isfinite(E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
-        !robot_arm_lai_vec_finite(ROBOT_ARM_NE, r_eq)) {
-        return ROBOT_ARM_ERR_NONFINITE_VALUE;
+    int rc = robot_arm_term_grad_checked(s, gL, &E, r, r_eq);
+    if (rc != ROBOT_ARM_OK) {
+        return rc;
     }
     robot_arm_copy(s->gL_N, gL, ROBOT_ARM_NX);
     s->E = E;
@@ -688,9 +705,8 @@ static void robot_arm_assemble(robot_arm_solver *s)
             in->b[k][i] = slot->phi[i] - s->x[k + 1][i];
         }
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            /* x_0 is fixed by xhat0; the QP ignores the x part of stage 0 */
-            in->lbw[k][i] = k == 0 ? -INFINITY : robot_arm_lbx[i] - s->x[k][i];
-            in->ubw[k][i] = k == 0 ? INFINITY : robot_arm_ubx[i] - s->x[k][i];
+            in->lbw[k][i] = robot_arm_x_bounded(k) ? robot_arm_lbx[i] - s->x[k][i] : -INFINITY;
+            in->ubw[k][i] = robot_arm_x_bounded(k) ? robot_arm_ubx[i] - s->x[k][i] : INFINITY;
         }
         for (i = 0; i < ROBOT_ARM_NU; ++i) {
             in->lbw[k][ROBOT_ARM_NX + i] = robot_arm_lbu[i] - s->u[k][i];
@@ -833,13 +849,8 @@ int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, co
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
             s->mu_b[k][i] = mu_b ? mu_b[k * ROBOT_ARM_NW + i] : 0.0;
         }
-        /* x_0 carries no bound: its multiplier is 0 by definition */
-        if (k == 0) {
-            for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                s->mu_b[0][i] = 0.0;
-            }
-        }
     }
+    robot_arm_clear_x0_multiplier(s);
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
     }
@@ -1166,8 +1177,8 @@ static void robot_arm_shift(robot_arm_solver *s)
     /* the last stage: the x part of mu_b from mu_bN, the u part kept */
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->mu_b[ROBOT_ARM_N - 1][i] = s->mu_bN[i];
-        s->mu_b[0][i] = 0.0;
     }
+    robot_arm_clear_x0_multiplier(s);
     robot_arm_ring_advance(&s->ring);
 }
 
@@ -1565,6 +1576,45 @@ int robot_arm_get_qp_iterations(const robot_arm_solver *s)
 int robot_arm_get_qp_status(const robot_arm_solver *s)
 {
     return s->qp_status;
+}
+
+/* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
+static double robot_arm_side_bound(const double *lo, const double *up, int i, int side)
+{
+    return side > 0 ? up[i] : lo[i];
+}
+
+int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_info *row)
+{
+    int k, j, side;
+    if (s->qp_status != ROBOT_ARM_QP_PRIMAL_INFEASIBLE ||
+        !robot_arm_qp_infeasible_row(&s->qp_work, &s->qp_in, &k, &j, &side)) {
+        return 0;
+    }
+    row->stage = k;
+    row->side = side;
+    if (j < ROBOT_ARM_NX) {
+        row->kind = ROBOT_ARM_ROW_STATE;
+        row->index = j;
+        row->bound = robot_arm_side_bound(robot_arm_lbx, robot_arm_ubx, j, side);
+    } else if (k < ROBOT_ARM_N && j < ROBOT_ARM_NW) {
+        row->kind = ROBOT_ARM_ROW_CONTROL;
+        row->index = j - ROBOT_ARM_NX;
+        row->bound = robot_arm_side_bound(robot_arm_lbu, robot_arm_ubu, row->index, side);
+    } else if (k < ROBOT_ARM_N) {
+        row->kind = ROBOT_ARM_ROW_PATH;
+        row->index = j - ROBOT_ARM_NW;
+        row->bound = robot_arm_side_bound(robot_arm_lg, robot_arm_ug, row->index, side);
+    } else if (j < ROBOT_ARM_NX + ROBOT_ARM_NR) {
+        row->kind = ROBOT_ARM_ROW_TERMINAL;
+        row->index = j - ROBOT_ARM_NX;
+        row->bound = robot_arm_side_bound(robot_arm_lr, robot_arm_ur, row->index, side);
+    } else {
+        row->kind = ROBOT_ARM_ROW_TERMINAL_EQ;
+        row->index = j - ROBOT_ARM_NX - ROBOT_ARM_NR;
+        row->bound = 0.0;
+    }
+    return 1;
 }
 
 int robot_arm_get_flags(const robot_arm_solver *s)

@@ -3,20 +3,28 @@
  * runtime parameters and the clock of the phase timings. A struct that was never set up gets
  * the generated defaults (unicycle_defaults) on its first use here too.
  */
+#include <limits.h>
 #include <math.h>
 
 #include "unicycle_linalg.h"
 #include "unicycle_solver.h"
 #include "unicycle_solver_internal.h"
 
-int unicycle_set_M(unicycle_solver *s, int M)
+/* *field = v when lo <= v <= hi (UNICYCLE_OK), else UNICYCLE_ERR_INVALID_ARGUMENT and nothing
+ * changes. */
+static int unicycle_set_int(unicycle_solver *s, int *field, int v, int lo, int hi)
 {
     unicycle_ensure_setup(s);
-    if (M < 0 || M > UNICYCLE_N - 1) {
+    if (v < lo || v > hi) {
         return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
     }
-    s->M = M;
+    *field = v;
     return unicycle_ret(s, UNICYCLE_OK);
+}
+
+int unicycle_set_M(unicycle_solver *s, int M)
+{
+    return unicycle_set_int(s, &s->M, M, 0, UNICYCLE_N - 1);
 }
 
 int unicycle_get_M(unicycle_solver *s)
@@ -27,12 +35,7 @@ int unicycle_get_M(unicycle_solver *s)
 
 int unicycle_set_mode(unicycle_solver *s, int mode)
 {
-    unicycle_ensure_setup(s);
-    if (mode != UNICYCLE_MODE_RECEDING && mode != UNICYCLE_MODE_FIXED) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->mode = mode;
-    return unicycle_ret(s, UNICYCLE_OK);
+    return unicycle_set_int(s, &s->mode, mode, UNICYCLE_MODE_RECEDING, UNICYCLE_MODE_FIXED);
 }
 
 int unicycle_get_mode(unicycle_solver *s)
@@ -43,16 +46,9 @@ int unicycle_get_mode(unicycle_solver *s)
 
 int unicycle_set_hessian(unicycle_solver *s, int hessian)
 {
-    unicycle_ensure_setup(s);
-    if (hessian != UNICYCLE_HESSIAN_EXACT && hessian != UNICYCLE_HESSIAN_GAUSS_NEWTON) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    if (hessian == UNICYCLE_HESSIAN_GAUSS_NEWTON && !UNICYCLE_HAS_GN) {
-        /* Gauss-Newton needs a least-squares stage cost */
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->hessian = hessian;
-    return unicycle_ret(s, UNICYCLE_OK);
+    /* Gauss-Newton needs a least-squares stage cost */
+    return unicycle_set_int(s, &s->hessian, hessian, UNICYCLE_HESSIAN_EXACT,
+                         UNICYCLE_HAS_GN ? UNICYCLE_HESSIAN_GAUSS_NEWTON : UNICYCLE_HESSIAN_EXACT);
 }
 
 int unicycle_get_hessian(unicycle_solver *s)
@@ -88,12 +84,7 @@ double unicycle_get_reg_eps(unicycle_solver *s)
 
 int unicycle_set_cost_hessian(unicycle_solver *s, int fresh)
 {
-    unicycle_ensure_setup(s);
-    if (fresh != 0 && fresh != 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->cost_hessian = fresh;
-    return unicycle_ret(s, UNICYCLE_OK);
+    return unicycle_set_int(s, &s->cost_hessian, fresh, 0, 1);
 }
 
 int unicycle_get_cost_hessian(unicycle_solver *s)
@@ -161,12 +152,7 @@ double unicycle_get_qp_tol(unicycle_solver *s)
 
 int unicycle_set_qp_max_iter(unicycle_solver *s, int max_iter)
 {
-    unicycle_ensure_setup(s);
-    if (max_iter < 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.max_iter = max_iter;
-    return unicycle_ret(s, UNICYCLE_OK);
+    return unicycle_set_int(s, &s->qp_settings.max_iter, max_iter, 1, INT_MAX);
 }
 
 int unicycle_get_qp_max_iter(unicycle_solver *s)
@@ -203,12 +189,7 @@ int unicycle_get_recovery_failures(unicycle_solver *s)
 
 int unicycle_set_qp_warm_start(unicycle_solver *s, int on)
 {
-    unicycle_ensure_setup(s);
-    if (on != 0 && on != 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_warm = on;
-    return unicycle_ret(s, UNICYCLE_OK);
+    return unicycle_set_int(s, &s->qp_warm, on, 0, 1);
 }
 
 int unicycle_get_qp_warm_start(unicycle_solver *s)

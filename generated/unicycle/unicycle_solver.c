@@ -38,6 +38,14 @@ void unicycle_ensure_setup(unicycle_solver *s)
     }
 }
 
+void unicycle_clear_x0_multiplier(unicycle_solver *s)
+{
+    int i;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->mu_b[0][i] = 0.0;
+    }
+}
+
 int unicycle_ret(unicycle_solver *s, int status)
 {
     s->status = status;
@@ -613,17 +621,26 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
     return UNICYCLE_OK;
 }
 
+int unicycle_term_grad_checked(unicycle_solver *s, double *gL, double *E, double *r, double *r_eq)
+{
+    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, E, r, r_eq, &s->fun_work) !=
+        0) {
+        return UNICYCLE_ERR_FUNCTION;
+    }
+    if (!unicycle_lai_vec_finite(UNICYCLE_NX, gL) || !isfinite(*E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NE, r_eq)) {
+        return UNICYCLE_ERR_NONFINITE_VALUE;
+    }
+    return UNICYCLE_OK;
+}
+
 /* Terminal F: gL_N, E, r, r_eq at the current point. */
 static int unicycle_term_F(unicycle_solver *s)
 {
     double gL[UNICYCLE_NX], E = 0.0, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
-    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, &E, r, r_eq, &s->fun_work) !=
-        0) {
-        return UNICYCLE_ERR_FUNCTION;
-    }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NX, gL) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
-        !unicycle_lai_vec_finite(UNICYCLE_NE, r_eq)) {
-        return UNICYCLE_ERR_NONFINITE_VALUE;
+    int rc = unicycle_term_grad_checked(s, gL, &E, r, r_eq);
+    if (rc != UNICYCLE_OK) {
+        return rc;
     }
     unicycle_copy(s->gL_N, gL, UNICYCLE_NX);
     s->E = E;
@@ -688,9 +705,8 @@ static void unicycle_assemble(unicycle_solver *s)
             in->b[k][i] = slot->phi[i] - s->x[k + 1][i];
         }
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            /* x_0 is fixed by xhat0; the QP ignores the x part of stage 0 */
-            in->lbw[k][i] = k == 0 ? -INFINITY : unicycle_lbx[i] - s->x[k][i];
-            in->ubw[k][i] = k == 0 ? INFINITY : unicycle_ubx[i] - s->x[k][i];
+            in->lbw[k][i] = unicycle_x_bounded(k) ? unicycle_lbx[i] - s->x[k][i] : -INFINITY;
+            in->ubw[k][i] = unicycle_x_bounded(k) ? unicycle_ubx[i] - s->x[k][i] : INFINITY;
         }
         for (i = 0; i < UNICYCLE_NU; ++i) {
             in->lbw[k][UNICYCLE_NX + i] = unicycle_lbu[i] - s->u[k][i];
@@ -833,13 +849,8 @@ int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, cons
         for (i = 0; i < UNICYCLE_NW; ++i) {
             s->mu_b[k][i] = mu_b ? mu_b[k * UNICYCLE_NW + i] : 0.0;
         }
-        /* x_0 carries no bound: its multiplier is 0 by definition */
-        if (k == 0) {
-            for (i = 0; i < UNICYCLE_NX; ++i) {
-                s->mu_b[0][i] = 0.0;
-            }
-        }
     }
+    unicycle_clear_x0_multiplier(s);
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
     }
@@ -1166,8 +1177,8 @@ static void unicycle_shift(unicycle_solver *s)
     /* the last stage: the x part of mu_b from mu_bN, the u part kept */
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->mu_b[UNICYCLE_N - 1][i] = s->mu_bN[i];
-        s->mu_b[0][i] = 0.0;
     }
+    unicycle_clear_x0_multiplier(s);
     unicycle_ring_advance(&s->ring);
 }
 
@@ -1565,6 +1576,45 @@ int unicycle_get_qp_iterations(const unicycle_solver *s)
 int unicycle_get_qp_status(const unicycle_solver *s)
 {
     return s->qp_status;
+}
+
+/* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
+static double unicycle_side_bound(const double *lo, const double *up, int i, int side)
+{
+    return side > 0 ? up[i] : lo[i];
+}
+
+int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *row)
+{
+    int k, j, side;
+    if (s->qp_status != UNICYCLE_QP_PRIMAL_INFEASIBLE ||
+        !unicycle_qp_infeasible_row(&s->qp_work, &s->qp_in, &k, &j, &side)) {
+        return 0;
+    }
+    row->stage = k;
+    row->side = side;
+    if (j < UNICYCLE_NX) {
+        row->kind = UNICYCLE_ROW_STATE;
+        row->index = j;
+        row->bound = unicycle_side_bound(unicycle_lbx, unicycle_ubx, j, side);
+    } else if (k < UNICYCLE_N && j < UNICYCLE_NW) {
+        row->kind = UNICYCLE_ROW_CONTROL;
+        row->index = j - UNICYCLE_NX;
+        row->bound = unicycle_side_bound(unicycle_lbu, unicycle_ubu, row->index, side);
+    } else if (k < UNICYCLE_N) {
+        row->kind = UNICYCLE_ROW_PATH;
+        row->index = j - UNICYCLE_NW;
+        row->bound = unicycle_side_bound(unicycle_lg, unicycle_ug, row->index, side);
+    } else if (j < UNICYCLE_NX + UNICYCLE_NR) {
+        row->kind = UNICYCLE_ROW_TERMINAL;
+        row->index = j - UNICYCLE_NX;
+        row->bound = unicycle_side_bound(unicycle_lr, unicycle_ur, row->index, side);
+    } else {
+        row->kind = UNICYCLE_ROW_TERMINAL_EQ;
+        row->index = j - UNICYCLE_NX - UNICYCLE_NR;
+        row->bound = 0.0;
+    }
+    return 1;
 }
 
 int unicycle_get_flags(const unicycle_solver *s)
