@@ -137,7 +137,9 @@ int unicycle_get_qp_max_iter(unicycle_solver *s);
 /* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
  * or off (0), and K >= 1, the number of consecutive failed feedbacks after which the next
  * prepare re-initialises (default UNICYCLE_RECOVERY_FAILURES). A detected divergence
- * re-initialises at once. */
+ * re-initialises at once. While on, the prepare after a failed feedback first takes the step
+ * of that instant's QP for the state the iterate predicts (UNICYCLE_FLAG_PREDICTED): the plan of
+ * the next fallbacks stays current; after a non-finite measurement it clears the count. */
 int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
 int unicycle_get_recovery(unicycle_solver *s);
 int unicycle_get_recovery_failures(unicycle_solver *s);
@@ -260,7 +262,8 @@ enum unicycle_flag {
     UNICYCLE_FLAG_U0_CLIPPED = 1, /* u0 was outside the control bounds and was clipped */
     UNICYCLE_FLAG_FALLBACK = 2,   /* feedback failed: u0 is the next control of the last good plan */
     UNICYCLE_FLAG_DIVERGED = 4,   /* the step or the prepared iterate failed the divergence test */
-    UNICYCLE_FLAG_RECOVERED = 8   /* prepare re-initialised (automatic recovery) */
+    UNICYCLE_FLAG_RECOVERED = 8,  /* prepare re-initialised (automatic recovery) */
+    UNICYCLE_FLAG_PREDICTED = 16  /* prepare took the step of the QP for the predicted state */
 };
 
 /* Safety constants (docs/algorithm.md section 9). */
@@ -279,6 +282,7 @@ enum unicycle_flag {
 #define UNICYCLE_LM_PIVOT_REL UNICYCLE_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
 #define UNICYCLE_LM_KKT_GROWTH UNICYCLE_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
 #define UNICYCLE_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
+#define UNICYCLE_LM_KKT_REL UNICYCLE_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
 
 enum unicycle_mode {
     UNICYCLE_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
@@ -318,6 +322,7 @@ struct unicycle_solver {
     int lm_auto;                          /* 1: automatic term (section 10) */
     unicycle_real lm_scale;                  /* Hessian scale h of the automatic term */
     unicycle_real lm_kkt_prev;               /* KKT proxy of the previous prepare (< 0: none since init) */
+    unicycle_real lm_uncapped;               /* the term before the cap of this feedback (< 0: not capped) */
     unicycle_real lm_P[UNICYCLE_NX * UNICYCLE_NX]; /* Riccati workspace of the convexity test */
     unicycle_real lm_P2[UNICYCLE_NX * UNICYCLE_NX];
     unicycle_real lm_PA[UNICYCLE_NX * UNICYCLE_NW];
