@@ -20,8 +20,9 @@ host, and writes JSON and a table:
   difference to the host build (``host_compare``).
 
 Targets: ``m7-double`` (mps2-an500, Cortex-M7, FPv5 double-precision FPU), ``m7-float`` and
-``m4f-float`` (mps2-an386, Cortex-M4, FPv4 single-precision FPU). The float targets need a
-folder generated with ``real="float"``.
+``m4f-float`` (mps2-an386, Cortex-M4, FPv4 single-precision FPU). Each real type gets its own generated
+folder (``generated_double``, ``generated_float``: ``real="float"``, docs/algorithm.md
+section 11), whatever the OCP file's ``options(real=...)`` says.
 
 The image has no heap: the link wraps every allocator entry point (malloc, calloc, realloc,
 free, their reentrant forms, _sbrk), so a program that pulls one in fails to link with
