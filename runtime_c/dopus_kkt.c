@@ -43,7 +43,7 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
     }
     for (k = 0; k < DOPUS_N; ++k) {
         if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
-                                  &s->fun_work) != 0) {
+                                  &s->mem.ev.fun_work) != 0) {
             return DOPUS_ERR_FUNCTION;
         }
         if (!dopus_lai_vec_finite(DOPUS_NW, gL) || !dopus_lai_vec_finite(DOPUS_NX, phi) ||
@@ -81,8 +81,8 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
                 comp, dopus_kkt_comp(s->mu_b[k][DOPUS_NX + i], s->u[k][i], dopus_lbu[i], dopus_ubu[i]));
         }
     }
-    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gLN, &E, r, r_eq, &s->fun_work) !=
-        0) {
+    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
+                             &s->mem.ev.fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
     if (!dopus_lai_vec_finite(DOPUS_NX, gLN) || !isfinite(E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||

@@ -110,6 +110,8 @@
 #else
 #define DOPUS_QP_NB DOPUS_QP_MAX1(DOPUS_QP_NINEQ)
 #endif
+/* A lower triangular nu x nu matrix packed by lower columns. */
+#define DOPUS_QP_NUP (DOPUS_QP_NU1 * (DOPUS_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define DOPUS_QP_NXP (DOPUS_NX * (DOPUS_NX + 1) / 2)
 /* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
@@ -247,7 +249,7 @@ typedef struct {
     double M[DOPUS_QP_NW * DOPUS_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
     double P[DOPUS_N + 1][DOPUS_QP_NXP];              /* value function Hessians, packed lower */
     double G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];   /* value function x-nu coupling */
-    double Lu[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NU1];  /* Cholesky factor of M_uu */
+    double Lu[DOPUS_N][DOPUS_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
     double LK[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux */
     double LKn[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     double S[DOPUS_QP_NE1 * DOPUS_QP_NE1];            /* -(nu-nu block) at stage 0, factored */

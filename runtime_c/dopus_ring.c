@@ -11,11 +11,11 @@ void dopus_ring_reset(dopus_ring *ring)
         dopus_stage_slot *s = &ring->slot[k];
         for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i)
             s->Ht[i] = 0.0;
-        for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i)
+        for (i = 0; i < DOPUS_NW * (DOPUS_NW + 1) / 2; ++i)
             s->A_dyn[i] = 0.0;
         for (i = 0; i < DOPUS_NX * DOPUS_NW; ++i)
             s->Phit[i] = 0.0;
-        for (i = 0; i < DOPUS_DIM(DOPUS_NG) * DOPUS_NW; ++i)
+        for (i = 0; i < DOPUS_DIM(DOPUS_NG * DOPUS_NW); ++i)
             s->Ct[i] = 0.0;
         for (i = 0; i < DOPUS_NW; ++i)
             s->F_w[i] = 0.0;
@@ -26,6 +26,24 @@ void dopus_ring_reset(dopus_ring *ring)
         dopus_ring_clear_step(s);
     }
     ring->ring_head = 0;
+}
+
+void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const double *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < DOPUS_NW; ++j)
+        for (i = j; i < DOPUS_NW; ++i)
+            slot->A_dyn[l++] = A[i + j * DOPUS_NW];
+}
+
+void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const double *A_l, double *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < DOPUS_NW; ++j)
+        for (i = j; i < DOPUS_NW; ++i, ++l) {
+            A[i + j * DOPUS_NW] = slot->A_dyn[l] + A_l[i + j * DOPUS_NW];
+            A[j + i * DOPUS_NW] = slot->A_dyn[l] + A_l[j + i * DOPUS_NW];
+        }
 }
 
 dopus_stage_slot *dopus_ring_stage(dopus_ring *ring, int k)

@@ -43,7 +43,7 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
     }
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
-                                  &s->fun_work) != 0) {
+                                  &s->mem.ev.fun_work) != 0) {
             return ROBOT_ARM_ERR_FUNCTION;
         }
         if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW, gL) || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, phi) ||
@@ -81,8 +81,8 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
                 comp, robot_arm_kkt_comp(s->mu_b[k][ROBOT_ARM_NX + i], s->u[k][i], robot_arm_lbu[i], robot_arm_ubu[i]));
         }
     }
-    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gLN, &E, r, r_eq, &s->fun_work) !=
-        0) {
+    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
+                             &s->mem.ev.fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
     if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gLN) || !isfinite(E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||

@@ -110,6 +110,8 @@
 #else
 #define ROBOT_ARM_QP_NB ROBOT_ARM_QP_MAX1(ROBOT_ARM_QP_NINEQ)
 #endif
+/* A lower triangular nu x nu matrix packed by lower columns. */
+#define ROBOT_ARM_QP_NUP (ROBOT_ARM_QP_NU1 * (ROBOT_ARM_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define ROBOT_ARM_QP_NXP (ROBOT_ARM_NX * (ROBOT_ARM_NX + 1) / 2)
 /* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
@@ -247,7 +249,7 @@ typedef struct {
     double M[ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
     double P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NXP];              /* value function Hessians, packed lower */
     double G[ROBOT_ARM_N + 1][ROBOT_ARM_NX * ROBOT_ARM_QP_NE1];   /* value function x-nu coupling */
-    double Lu[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_QP_NU1];  /* Cholesky factor of M_uu */
+    double Lu[ROBOT_ARM_N][ROBOT_ARM_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
     double LK[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_NX];      /* Lu^{-1} M_ux */
     double LKn[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     double S[ROBOT_ARM_QP_NE1 * ROBOT_ARM_QP_NE1];            /* -(nu-nu block) at stage 0, factored */

@@ -11,11 +11,11 @@ void robot_arm_ring_reset(robot_arm_ring *ring)
         robot_arm_stage_slot *s = &ring->slot[k];
         for (i = 0; i < ROBOT_ARM_NW * ROBOT_ARM_NW; ++i)
             s->Ht[i] = 0.0;
-        for (i = 0; i < ROBOT_ARM_NW * ROBOT_ARM_NW; ++i)
+        for (i = 0; i < ROBOT_ARM_NW * (ROBOT_ARM_NW + 1) / 2; ++i)
             s->A_dyn[i] = 0.0;
         for (i = 0; i < ROBOT_ARM_NX * ROBOT_ARM_NW; ++i)
             s->Phit[i] = 0.0;
-        for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG) * ROBOT_ARM_NW; ++i)
+        for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW); ++i)
             s->Ct[i] = 0.0;
         for (i = 0; i < ROBOT_ARM_NW; ++i)
             s->F_w[i] = 0.0;
@@ -26,6 +26,24 @@ void robot_arm_ring_reset(robot_arm_ring *ring)
         robot_arm_ring_clear_step(s);
     }
     ring->ring_head = 0;
+}
+
+void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const double *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < ROBOT_ARM_NW; ++j)
+        for (i = j; i < ROBOT_ARM_NW; ++i)
+            slot->A_dyn[l++] = A[i + j * ROBOT_ARM_NW];
+}
+
+void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const double *A_l, double *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < ROBOT_ARM_NW; ++j)
+        for (i = j; i < ROBOT_ARM_NW; ++i, ++l) {
+            A[i + j * ROBOT_ARM_NW] = slot->A_dyn[l] + A_l[i + j * ROBOT_ARM_NW];
+            A[j + i * ROBOT_ARM_NW] = slot->A_dyn[l] + A_l[j + i * ROBOT_ARM_NW];
+        }
 }
 
 robot_arm_stage_slot *robot_arm_ring_stage(robot_arm_ring *ring, int k)

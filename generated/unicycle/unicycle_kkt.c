@@ -43,7 +43,7 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
         if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
-                                  &s->fun_work) != 0) {
+                                  &s->mem.ev.fun_work) != 0) {
             return UNICYCLE_ERR_FUNCTION;
         }
         if (!unicycle_lai_vec_finite(UNICYCLE_NW, gL) || !unicycle_lai_vec_finite(UNICYCLE_NX, phi) ||
@@ -81,8 +81,8 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
                 comp, unicycle_kkt_comp(s->mu_b[k][UNICYCLE_NX + i], s->u[k][i], unicycle_lbu[i], unicycle_ubu[i]));
         }
     }
-    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gLN, &E, r, r_eq, &s->fun_work) !=
-        0) {
+    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
+                             &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
     if (!unicycle_lai_vec_finite(UNICYCLE_NX, gLN) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||

@@ -271,6 +271,23 @@ static void spmv_packed(const double *restrict Pp, double alpha, const double *r
     }
 }
 
+/* The Cholesky factor Lu (nu x nu, lower) of a stage kept packed by lower columns in the
+ * workspace and unpacked where the triangular kernels use it. */
+static void pack_lu(const double *restrict L, double *restrict Lp)
+{
+    int i, j, l = 0;
+    for (j = 0; j < NU; ++j)
+        for (i = j; i < NU; ++i)
+            Lp[l++] = L[i + j * NU1];
+}
+static void unpack_lu(const double *restrict Lp, double *restrict L)
+{
+    int i, j, l = 0;
+    for (j = 0; j < NU; ++j)
+        for (i = j; i < NU; ++i)
+            L[i + j * NU1] = Lp[l++];
+}
+
 /* Per bounded row b: the residuals of the slack equations, r_lo = v - lo - t_lo and
  * r_up = up - v - t_up (vl = v - lo and uv = up - v are kept), the slack steps of the current direction, dt_lo = dv + r_lo and
  * dt_up = r_up - dv (dv = D dw), and the barrier weight q = z_lo/t_lo + z_up/t_up, formed
@@ -564,7 +581,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         double *M = ws->M;
         const double *Phi = in->Phi[k];
         double q[NSI];
-        double *Lu = ws->Lu[k];
+        double Lu[NU1 * NU1];
         double *LK = ws->LK[k];
         double *LKn = ws->LKn[k];
         double *P = ws->P[k];
@@ -618,6 +635,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             return 1;
         }
         pmag = mxx;
+        pack_lu(Lu, ws->Lu[k]);
         /* LK = Lu^{-1} M_ux, LKn = Lu^{-1} Gam_u */
         unicycle_lai_copy_mat(NU, NX, M + NX, NW, LK, NU1);
         unicycle_lai_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
@@ -677,6 +695,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, d
     double *tv = ws->work;     /* NX */
     double *m = ws->work + NX; /* NW */
     double *e = ws->e;
+    double Lu[NU1 * NU1];
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
     {
@@ -711,7 +730,8 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, d
         /* lk = Lu^{-1} m_u; p_k = m_x - LK' lk; e -= LKn' lk */
         for (i = 0; i < NU; ++i)
             lk[i] = m[NX + i];
-        unicycle_lai_trsv_ln(NU, ws->Lu[k], NU1, lk);
+        unpack_lu(ws->Lu[k], Lu);
+        unicycle_lai_trsv_ln(NU, Lu, NU1, lk);
         for (i = 0; i < NX; ++i) {
             xk[i] = pk[i];
             pk[i] = m[i];
@@ -736,7 +756,8 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, d
         unicycle_lai_gemv_n(NU, NX, 1.0, ws->LK[k], NU1, w, 1.0, u);
         if (NE > 0)
             unicycle_lai_gemv_n(NU, NE, 1.0, ws->LKn[k], NU1, sn, 1.0, u);
-        unicycle_lai_trsv_lt(NU, ws->Lu[k], NU1, u);
+        unpack_lu(ws->Lu[k], Lu);
+        unicycle_lai_trsv_lt(NU, Lu, NU1, u);
         for (i = 0; i < NU; ++i)
             u[i] = -u[i];
         /* lam_k = -(P_k x_k + p_k + G_k nu) */

@@ -110,6 +110,8 @@
 #else
 #define UNICYCLE_QP_NB UNICYCLE_QP_MAX1(UNICYCLE_QP_NINEQ)
 #endif
+/* A lower triangular nu x nu matrix packed by lower columns. */
+#define UNICYCLE_QP_NUP (UNICYCLE_QP_NU1 * (UNICYCLE_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define UNICYCLE_QP_NXP (UNICYCLE_NX * (UNICYCLE_NX + 1) / 2)
 /* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
@@ -247,7 +249,7 @@ typedef struct {
     double M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
     double P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];              /* value function Hessians, packed lower */
     double G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];   /* value function x-nu coupling */
-    double Lu[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NU1];  /* Cholesky factor of M_uu */
+    double Lu[UNICYCLE_N][UNICYCLE_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
     double LK[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* Lu^{-1} M_ux */
     double LKn[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     double S[UNICYCLE_QP_NE1 * UNICYCLE_QP_NE1];            /* -(nu-nu block) at stage 0, factored */

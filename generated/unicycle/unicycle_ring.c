@@ -11,11 +11,11 @@ void unicycle_ring_reset(unicycle_ring *ring)
         unicycle_stage_slot *s = &ring->slot[k];
         for (i = 0; i < UNICYCLE_NW * UNICYCLE_NW; ++i)
             s->Ht[i] = 0.0;
-        for (i = 0; i < UNICYCLE_NW * UNICYCLE_NW; ++i)
+        for (i = 0; i < UNICYCLE_NW * (UNICYCLE_NW + 1) / 2; ++i)
             s->A_dyn[i] = 0.0;
         for (i = 0; i < UNICYCLE_NX * UNICYCLE_NW; ++i)
             s->Phit[i] = 0.0;
-        for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG) * UNICYCLE_NW; ++i)
+        for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW); ++i)
             s->Ct[i] = 0.0;
         for (i = 0; i < UNICYCLE_NW; ++i)
             s->F_w[i] = 0.0;
@@ -26,6 +26,24 @@ void unicycle_ring_reset(unicycle_ring *ring)
         unicycle_ring_clear_step(s);
     }
     ring->ring_head = 0;
+}
+
+void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const double *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < UNICYCLE_NW; ++j)
+        for (i = j; i < UNICYCLE_NW; ++i)
+            slot->A_dyn[l++] = A[i + j * UNICYCLE_NW];
+}
+
+void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const double *A_l, double *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < UNICYCLE_NW; ++j)
+        for (i = j; i < UNICYCLE_NW; ++i, ++l) {
+            A[i + j * UNICYCLE_NW] = slot->A_dyn[l] + A_l[i + j * UNICYCLE_NW];
+            A[j + i * UNICYCLE_NW] = slot->A_dyn[l] + A_l[j + i * UNICYCLE_NW];
+        }
 }
 
 unicycle_stage_slot *unicycle_ring_stage(unicycle_ring *ring, int k)

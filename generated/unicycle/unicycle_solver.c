@@ -307,7 +307,7 @@ static double unicycle_lm_hessian_scale(const unicycle_solver *s)
 static int unicycle_lm_convex(unicycle_solver *s, double lm)
 {
     const double tol = UNICYCLE_LM_PIVOT_REL * s->lm_scale;
-    double *P = s->lm_P, *PA = s->lm_PA, *Z = s->lm_G;
+    double *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
     double v;
     int k, i, j, l;
     for (j = 0; j < UNICYCLE_NX; ++j) {
@@ -497,21 +497,22 @@ void unicycle_defaults(unicycle_solver *s)
 
 /* ---- function evaluations ----------------------------------------------------------- */
 
-/* F_k (eq. 14) at the current point into s->tmp_F (= gL + mu_b_k), s->tmp_phi, s->tmp_g. */
+/* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
 static int unicycle_stage_F(unicycle_solver *s, int k)
 {
     double l = 0.0;
     int i;
-    if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL, s->tmp_phi, &l,
-                              s->tmp_g, &s->fun_work) != 0) {
+    if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
+                              s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NW, s->tmp_gL) || !unicycle_lai_vec_finite(UNICYCLE_NX, s->tmp_phi) ||
-        !unicycle_lai_vec_finite(UNICYCLE_NG, s->tmp_g) || !isfinite(l)) {
+    if (!unicycle_lai_vec_finite(UNICYCLE_NW, s->mem.ev.tmp_gL) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NX, s->mem.ev.tmp_phi) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NG, s->mem.ev.tmp_g) || !isfinite(l)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
     for (i = 0; i < UNICYCLE_NW; ++i) {
-        s->tmp_F[i] = s->tmp_gL[i] + s->mu_b[k][i];
+        s->mem.ev.tmp_F[i] = s->mem.ev.tmp_gL[i] + s->mu_b[k][i];
     }
     return UNICYCLE_OK;
 }
@@ -525,21 +526,22 @@ static int unicycle_regularize(unicycle_solver *s, int n, double *A)
         return UNICYCLE_OK;
     }
     t0 = unicycle_timer_now(&s->timer);
-    rc = unicycle_reg_apply(n, A, s->regularization, s->reg_eps, s->reg_work);
+    rc = unicycle_reg_apply(n, A, s->regularization, s->reg_eps, s->mem.ev.reg_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_REGULARIZATION, t0);
     return rc == 0 ? UNICYCLE_OK : UNICYCLE_ERR_REGULARIZATION;
 }
 
-/* The stage-cost Hessian A_l of stage k at the current point into s->tmp_Al. */
+/* The stage-cost Hessian A_l of stage k at the current point into s->mem.ev.tmp_Al. */
 static int unicycle_stage_Al(unicycle_solver *s, int k)
 {
     double t0 = unicycle_timer_now(&s->timer);
-    int rc = unicycle_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->tmp_Al, &s->fun_work);
+    int rc = unicycle_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->mem.ev.tmp_Al,
+                                        &s->mem.ev.fun_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    return unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->tmp_Al) ? UNICYCLE_OK : UNICYCLE_ERR_NONFINITE_VALUE;
+    return unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->mem.ev.tmp_Al) ? UNICYCLE_OK : UNICYCLE_ERR_NONFINITE_VALUE;
 }
 
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
@@ -550,15 +552,15 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
     unicycle_stage_slot *slot;
     double t0 = unicycle_timer_now(&s->timer);
     int rc, i;
-    rc = unicycle_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_A,
-                               s->tmp_Phi, s->tmp_C, &s->fun_work);
+    rc = unicycle_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                               s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->tmp_A) ||
-        !unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NW, s->tmp_Phi) ||
-        !unicycle_lai_vec_finite(UNICYCLE_NG * UNICYCLE_NW, s->tmp_C)) {
+    if (!unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->mem.ev.tmp_A) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NW, s->mem.ev.tmp_Phi) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NG * UNICYCLE_NW, s->mem.ev.tmp_C)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
     /* A_dyn = A - A_l, kept whatever cost_hessian is, so the setting may change at any time */
@@ -567,17 +569,17 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
         return rc;
     }
     for (i = 0; i < UNICYCLE_NW * UNICYCLE_NW; ++i) {
-        s->tmp_Al[i] = s->tmp_A[i] - s->tmp_Al[i];
+        s->mem.ev.tmp_Al[i] = s->mem.ev.tmp_A[i] - s->mem.ev.tmp_Al[i];
     }
-    rc = unicycle_regularize(s, UNICYCLE_NW, s->tmp_A);
+    rc = unicycle_regularize(s, UNICYCLE_NW, s->mem.ev.tmp_A);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
     slot = unicycle_ring_stage(&s->ring, k);
-    unicycle_copy(slot->Ht, s->tmp_A, UNICYCLE_NW * UNICYCLE_NW);
-    unicycle_copy(slot->A_dyn, s->tmp_Al, UNICYCLE_NW * UNICYCLE_NW);
-    unicycle_copy(slot->Phit, s->tmp_Phi, UNICYCLE_NX * UNICYCLE_NW);
-    unicycle_copy(slot->Ct, s->tmp_C, UNICYCLE_NG * UNICYCLE_NW);
+    unicycle_copy(slot->Ht, s->mem.ev.tmp_A, UNICYCLE_NW * UNICYCLE_NW);
+    unicycle_ring_store_A_dyn(slot, s->mem.ev.tmp_Al);
+    unicycle_copy(slot->Phit, s->mem.ev.tmp_Phi, UNICYCLE_NX * UNICYCLE_NW);
+    unicycle_copy(slot->Ct, s->mem.ev.tmp_C, UNICYCLE_NG * UNICYCLE_NW);
     return UNICYCLE_OK;
 }
 
@@ -585,8 +587,8 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
 static int unicycle_term_F(unicycle_solver *s)
 {
     double gL[UNICYCLE_NX], E = 0.0, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
-    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, &E, r, r_eq, &s->fun_work) !=
-        0) {
+    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, &E, r, r_eq,
+                             &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
     if (!unicycle_lai_vec_finite(UNICYCLE_NX, gL) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
@@ -606,21 +608,21 @@ static int unicycle_term_H(unicycle_solver *s)
     double R[UNICYCLE_DIM(UNICYCLE_NR) * UNICYCLE_NX], R_eq[UNICYCLE_DIM(UNICYCLE_NE) * UNICYCLE_NX];
     double t0 = unicycle_timer_now(&s->timer);
     int rc;
-    rc = unicycle_eval_term_hess(s->hessian, s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, s->tmp_A, R, R_eq,
-                              &s->fun_work);
+    rc = unicycle_eval_term_hess(s->hessian, s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
+                              R_eq, &s->mem.ev.fun_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NX, s->tmp_A) ||
+    if (!unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NX, s->mem.ev.tmp_A) ||
         !unicycle_lai_vec_finite(UNICYCLE_NR * UNICYCLE_NX, R) || !unicycle_lai_vec_finite(UNICYCLE_NE * UNICYCLE_NX, R_eq)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
-    rc = unicycle_regularize(s, UNICYCLE_NX, s->tmp_A);
+    rc = unicycle_regularize(s, UNICYCLE_NX, s->mem.ev.tmp_A);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
-    unicycle_copy(s->A_N, s->tmp_A, UNICYCLE_NX * UNICYCLE_NX);
+    unicycle_copy(s->A_N, s->mem.ev.tmp_A, UNICYCLE_NX * UNICYCLE_NX);
     unicycle_copy(s->R, R, UNICYCLE_NR * UNICYCLE_NX);
     unicycle_copy(s->R_eq, R_eq, UNICYCLE_NE * UNICYCLE_NX);
     return UNICYCLE_OK;
@@ -717,7 +719,8 @@ static int unicycle_linearize_all(unicycle_solver *s)
         if (rc != UNICYCLE_OK) {
             return rc;
         }
-        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->tmp_F, s->tmp_phi, s->tmp_g);
+        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                           s->mem.ev.tmp_g);
         rc = unicycle_stage_H(s, k);
         if (rc != UNICYCLE_OK) {
             return rc;
@@ -855,13 +858,13 @@ static int unicycle_qp_solution_finite(const unicycle_qp_sol *sol)
            unicycle_lai_vec_finite(UNICYCLE_QP_NR1, sol->mu_r) && unicycle_lai_vec_finite(UNICYCLE_QP_NE1, sol->nu);
 }
 
-/* Warm-start point of the QP (in s->qp_sol): the previous QP solution shifted with the
+/* Warm-start point of the QP (in s->mem.qp.sol): the previous QP solution shifted with the
  * horizon. Its primal part has been added to the iterate, which prepare shifted, so it is
  * a zero step from the (shifted) iterate, with x_0's step fixed by the measurement; the
  * multipliers are the (shifted) iterate's, which are those of the previous QP. */
 static void unicycle_qp_warm_point(unicycle_solver *s)
 {
-    unicycle_qp_sol *w = &s->qp_sol;
+    unicycle_qp_sol *w = &s->mem.qp.sol;
     int k, i;
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -893,7 +896,7 @@ static void unicycle_qp_warm_point(unicycle_solver *s)
 
 int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
 {
-    const unicycle_qp_sol *sol = &s->qp_sol;
+    const unicycle_qp_sol *sol = &s->mem.qp.sol;
     double t0;
     int k, i, qs, retries;
 
@@ -933,7 +936,7 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     if (s->qp_warm) {
         unicycle_qp_warm_point(s);
     }
-    qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
     s->qp_iterations = s->qp_info.iterations;
     if (s->qp_warm && qs != UNICYCLE_QP_INVALID_INPUT &&
         (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol) || s->qp_info.inertia_corrections > 0)) {
@@ -944,7 +947,7 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
          * the same call */
         s->qp_cold_retry = 1;
         s->qp_settings.warm_start = 0;
-        qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+        qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
         s->qp_iterations += s->qp_info.iterations;
     }
     /* the automatic term (section 10): a QP still not solved is solved again (cold) with lm
@@ -955,7 +958,7 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
         unicycle_lm_raise(s);
         s->qp_in.hess_shift = s->lm;
         s->qp_settings.warm_start = 0;
-        qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+        qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
         s->qp_iterations += s->qp_info.iterations;
         retries += 1;
     }
@@ -1103,7 +1106,8 @@ static int unicycle_simulate(unicycle_solver *s, int use_plan)
     for (k = 0; k < UNICYCLE_N; ++k) {
         j = s->plan_age + k > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->plan_age + k;
         unicycle_clip_u(use_plan ? s->plan_u[j] : unicycle_guess_u[k], s->u[k]);
-        if (unicycle_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->tmp_g, &s->fun_work) != 0 ||
+        if (unicycle_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->mem.ev.tmp_g,
+                                  &s->mem.ev.fun_work) != 0 ||
             !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[k + 1])) {
             return 0;
         }
@@ -1125,8 +1129,8 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
         if (!shifted) {
             unicycle_copy(s->x[0], s->x[1], UNICYCLE_NX);
         }
-    } else if (unicycle_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) !=
-                   0 ||
+    } else if (unicycle_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+                                     &s->mem.ev.fun_work) != 0 ||
                !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[0])) {
         unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
     }
@@ -1226,11 +1230,11 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
         if (rc != UNICYCLE_OK) {
             return rc;
         }
-        s->rho[k] = unicycle_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        s->rho[k] = unicycle_ring_secant(slot, s->mem.ev.tmp_F, s->mem.ev.tmp_phi, s->mem.ev.tmp_g);
         /* stored as F_old in step 6, once nothing can fail */
-        unicycle_copy(s->Fn_w[k], s->tmp_F, UNICYCLE_NW);
-        unicycle_copy(s->Fn_phi[k], s->tmp_phi, UNICYCLE_NX);
-        unicycle_copy(s->Fn_g[k], s->tmp_g, UNICYCLE_NG);
+        unicycle_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, UNICYCLE_NW);
+        unicycle_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, UNICYCLE_NX);
+        unicycle_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, UNICYCLE_NG);
         t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_RHO, t0);
     }
 
@@ -1241,9 +1245,10 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
         return rc;
     }
     if (s->mode == UNICYCLE_MODE_RECEDING) {
-        unicycle_copy(s->x[UNICYCLE_N], s->tmp_phi, UNICYCLE_NX);
+        unicycle_copy(s->x[UNICYCLE_N], s->mem.ev.tmp_phi, UNICYCLE_NX);
     }
-    unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->tmp_F, s->tmp_phi, s->tmp_g);
+    unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                       s->mem.ev.tmp_g);
     s->rho[UNICYCLE_N - 1] = 0.0;
     rc = unicycle_stage_H(s, UNICYCLE_N - 1);
     if (rc == UNICYCLE_OK) {
@@ -1274,7 +1279,6 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
     if (rc == UNICYCLE_OK && s->cost_hessian) {
         for (k = 0; k < UNICYCLE_N - 1 && rc == UNICYCLE_OK; ++k) {
             unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
-            int i;
             if (s->selected[k]) {
                 continue;
             }
@@ -1282,12 +1286,10 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
             if (rc != UNICYCLE_OK) {
                 break;
             }
-            for (i = 0; i < UNICYCLE_NW * UNICYCLE_NW; ++i) {
-                s->tmp_A[i] = slot->A_dyn[i] + s->tmp_Al[i];
-            }
-            rc = unicycle_regularize(s, UNICYCLE_NW, s->tmp_A);
+            unicycle_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
+            rc = unicycle_regularize(s, UNICYCLE_NW, s->mem.ev.tmp_A);
             if (rc == UNICYCLE_OK) {
-                unicycle_copy(slot->Ht, s->tmp_A, UNICYCLE_NW * UNICYCLE_NW);
+                unicycle_copy(slot->Ht, s->mem.ev.tmp_A, UNICYCLE_NW * UNICYCLE_NW);
             }
         }
     }
@@ -1300,7 +1302,8 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
     /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
      *    when stored) */
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
-        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k],
+                           s->mem.ev.Fn_g[k]);
     }
     unicycle_assemble(s);
     s->qp_ready = 1;
