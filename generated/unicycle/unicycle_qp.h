@@ -78,8 +78,9 @@
  * taken from the primal point, slacks and multipliers floored at 1e-2 (relative to the
  * unit values of the cold start; smaller floors save about one iteration in the robot-arm
  * closed loop but let the warm start reach another local minimiser of nonconvex QPs more
- * often); the careful steps throughout. A restart after a stall starts cold. Feedback (unicycle_solver.c) warm-starts from
- * the previous solution shifted with the horizon and retries cold when that fails.
+ * often); the careful steps throughout. A restart after a stall starts cold. Feedback
+ * (unicycle_solver.c) warm-starts from the previous solution shifted with the horizon and
+ * retries cold when that fails.
  *
  * Work per iteration (robot arm, N = 40, nx = 5, nu = 3, ne = 2): one factorisation and
  * two solves (predictor, corrector), plus one residual/solve pair per refinement step once
