@@ -150,6 +150,21 @@ static int iteration(const fw_real *xhat, fw_real *u0, uint32_t *t_fb, uint32_t 
     return status;
 }
 
+/* The fields of a report line after its label: status, QP iterations, ticks, stack, the
+ * KKT measure (0 after a failure) and u0. */
+static void put_iteration(int status, int qp_iters, uint32_t t_fb, uint32_t t_prep, uint32_t stack,
+                          const fw_real *k4, const fw_real *u0)
+{
+    put_field("status", status);
+    put_field("qp_iters", qp_iters);
+    put_field("ticks_feedback", (long)t_fb);
+    put_field("ticks_prepare", (long)t_prep);
+    put_field("stack", (long)stack);
+    put_str(" kkt ");
+    put_real(status == FW_C(OK) ? kkt_max(k4) : (fw_real)0);
+    put_reals("u0", u0, FW_C(NU));
+}
+
 static int fixed_study(int M)
 {
     fw_real u0[FW_C(NU)], k4[4];
@@ -179,14 +194,7 @@ static int fixed_study(int M)
         put_str("fixed");
         put_field("M", M);
         put_field("iter", k);
-        put_field("status", status);
-        put_field("qp_iters", k > 0 ? FW(get_qp_iterations)(&solver) : 0);
-        put_field("ticks_feedback", (long)t_fb);
-        put_field("ticks_prepare", (long)t_prep);
-        put_field("stack", (long)stack);
-        put_str(" kkt ");
-        put_real(status == FW_C(OK) ? kkt_max(k4) : (fw_real)0);
-        put_reals("u0", u0, FW_C(NU));
+        put_iteration(status, k > 0 ? FW(get_qp_iterations)(&solver) : 0, t_fb, t_prep, stack, k4, u0);
         end_line();
         if (status != FW_C(OK)) {
             return status;
@@ -228,14 +236,7 @@ static int closed_loop(void)
         put_str("loop");
         put_field("M", FW(get_M)(&solver));
         put_field("step", k);
-        put_field("status", status);
-        put_field("qp_iters", FW(get_qp_iterations)(&solver));
-        put_field("ticks_feedback", (long)t_fb);
-        put_field("ticks_prepare", (long)t_prep);
-        put_field("stack", (long)stack);
-        put_str(" kkt ");
-        put_real(status == FW_C(OK) ? kkt_max(k4) : (fw_real)0);
-        put_reals("u0", u0, FW_C(NU));
+        put_iteration(status, FW(get_qp_iterations)(&solver), t_fb, t_prep, stack, k4, u0);
         put_reals("xhat", xhat, FW_C(NX));
         end_line();
         for (i = 0; i < FW_C(NX); ++i) {

@@ -5,6 +5,7 @@
 #include "dopus_linalg.h"
 #include "dopus_problem.h"
 #include "dopus_solver.h"
+#include "dopus_solver_internal.h"
 
 static double dopus_kkt_max(double a, double b)
 {
@@ -36,7 +37,7 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
     double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
     double gL[DOPUS_NW], phi[DOPUS_NX], g[DOPUS_DIM(DOPUS_NG)], l;
     double gLN[DOPUS_NX], E, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
-    int k, i;
+    int k, i, rc;
 
     for (i = 0; i < DOPUS_NX; ++i) {
         eq = dopus_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
@@ -62,9 +63,9 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
             ineq = dopus_kkt_max(ineq, dopus_kkt_viol(g[i], dopus_lg[i], dopus_ug[i]));
             comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_g[k][i], g[i], dopus_lg[i], dopus_ug[i]));
         }
-        /* simple bounds: x_k only for k >= 1 (x_0 is fixed by xhat0, so a multiplier on
-         * it pairs with infinite sides and counts with its magnitude) */
-        if (k == 0) {
+        /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
+         * sides and counts with its magnitude) */
+        if (!dopus_x_bounded(k)) {
             for (i = 0; i < DOPUS_NX; ++i) {
                 comp = dopus_kkt_max(comp, fabs(s->mu_b[0][i]));
             }
@@ -81,13 +82,9 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
                 comp, dopus_kkt_comp(s->mu_b[k][DOPUS_NX + i], s->u[k][i], dopus_lbu[i], dopus_ubu[i]));
         }
     }
-    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
-                             &s->mem.ev.fun_work) != 0) {
-        return DOPUS_ERR_FUNCTION;
-    }
-    if (!dopus_lai_vec_finite(DOPUS_NX, gLN) || !isfinite(E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
-        !dopus_lai_vec_finite(DOPUS_NE, r_eq)) {
-        return DOPUS_ERR_NONFINITE_VALUE;
+    rc = dopus_term_grad_checked(s, gLN, &E, r, r_eq);
+    if (rc != DOPUS_OK) {
+        return rc;
     }
     for (i = 0; i < DOPUS_NX; ++i) {
         stat = dopus_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]));

@@ -70,37 +70,51 @@ int dopus_la_all_finite(int m, int n, const double *A, int lda);
 #include <float.h>
 #include <math.h>
 
+/* The pivot of column j of the Cholesky factorisation: A_jj minus the squares of row j of
+ * the factor so far. */
+static inline double dopus_lai_potrf_pivot(const double *A, int lda, int j)
+{
+    int k;
+    double d = A[j + j * lda];
+    for (k = 0; k < j; ++k)
+        d -= A[j + k * lda] * A[j + k * lda];
+    return d;
+}
+
+/* Column j of the factor from its pivot d > 0: L_jj = sqrt(d), the entries below. */
+static inline void dopus_lai_potrf_column(int n, double *A, int lda, int j, double d)
+{
+    int i, k;
+    d = sqrt(d);
+    A[j + j * lda] = d;
+    for (i = j + 1; i < n; ++i) {
+        double s = A[i + j * lda];
+        for (k = 0; k < j; ++k)
+            s -= A[i + k * lda] * A[j + k * lda];
+        A[i + j * lda] = s / d;
+    }
+}
+
 static inline int dopus_lai_potrf_l(int n, double *A, int lda)
 {
-    int i, j, k;
+    int j;
     for (j = 0; j < n; ++j) {
-        double d = A[j + j * lda];
-        for (k = 0; k < j; ++k)
-            d -= A[j + k * lda] * A[j + k * lda];
+        const double d = dopus_lai_potrf_pivot(A, lda, j);
         /* !(d > 0) also rejects NaN */
         if (!(d > 0.0) || !isfinite(d))
             return j + 1;
-        d = sqrt(d);
-        A[j + j * lda] = d;
-        for (i = j + 1; i < n; ++i) {
-            double s = A[i + j * lda];
-            for (k = 0; k < j; ++k)
-                s -= A[i + k * lda] * A[j + k * lda];
-            A[i + j * lda] = s / d;
-        }
+        dopus_lai_potrf_column(n, A, lda, j, d);
     }
     return 0;
 }
 
 static inline int dopus_lai_potrf_l_noise(int n, double *A, int lda, const double *noise, int *nfloor)
 {
-    int i, j, k;
+    int j;
     for (j = 0; j < n; ++j) {
         const double ajj = fabs(A[j + j * lda]);
         const double tol = noise ? noise[j] : 0.0;
-        double d = A[j + j * lda];
-        for (k = 0; k < j; ++k)
-            d -= A[j + k * lda] * A[j + k * lda];
+        double d = dopus_lai_potrf_pivot(A, lda, j);
         if (!isfinite(d))
             return j + 1;
         if (d <= 0.0) {
@@ -111,14 +125,7 @@ static inline int dopus_lai_potrf_l_noise(int n, double *A, int lda, const doubl
             if (nfloor)
                 ++*nfloor;
         }
-        d = sqrt(d);
-        A[j + j * lda] = d;
-        for (i = j + 1; i < n; ++i) {
-            double s = A[i + j * lda];
-            for (k = 0; k < j; ++k)
-                s -= A[i + k * lda] * A[j + k * lda];
-            A[i + j * lda] = s / d;
-        }
+        dopus_lai_potrf_column(n, A, lda, j, d);
     }
     return 0;
 }
@@ -186,10 +193,10 @@ static inline void dopus_lai_trsm_llt(int n, int m, const double *L, int ldl, do
         dopus_lai_trsv_lt(n, L, ldl, B + j * ldb);
 }
 
-static inline void dopus_lai_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
-                                    double beta, double *y)
+/* y = beta y (m entries) with beta = 0 writing zeros (y may hold NaN) and beta = 1 no-op. */
+static inline void dopus_lai_scale_y(int m, double beta, double *y)
 {
-    int i, j;
+    int i;
     if (beta == 0.0) {
         for (i = 0; i < m; ++i)
             y[i] = 0.0;
@@ -197,6 +204,13 @@ static inline void dopus_lai_gemv_n(int m, int n, double alpha, const double *A,
         for (i = 0; i < m; ++i)
             y[i] *= beta;
     }
+}
+
+static inline void dopus_lai_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
+                                    double beta, double *y)
+{
+    int i, j;
+    dopus_lai_scale_y(m, beta, y);
     for (j = 0; j < n; ++j) {
         const double a = alpha * x[j];
         for (i = 0; i < m; ++i)
@@ -221,13 +235,7 @@ static inline void dopus_lai_symv_l(int n, double alpha, const double *A, int ld
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
-    if (beta == 0.0) {
-        for (i = 0; i < n; ++i)
-            y[i] = 0.0;
-    } else if (beta != 1.0) {
-        for (i = 0; i < n; ++i)
-            y[i] *= beta;
-    }
+    dopus_lai_scale_y(n, beta, y);
     for (j = 0; j < n; ++j) {
         const double *a = A + j * lda;
         const double xj = alpha * x[j];
@@ -247,13 +255,7 @@ static inline void dopus_lai_gemm_nn(int m, int n, int k, double alpha, const do
     int i, j, l;
     for (j = 0; j < n; ++j) {
         double *c = C + j * ldc;
-        if (beta == 0.0) {
-            for (i = 0; i < m; ++i)
-                c[i] = 0.0;
-        } else if (beta != 1.0) {
-            for (i = 0; i < m; ++i)
-                c[i] *= beta;
-        }
+        dopus_lai_scale_y(m, beta, c);
         for (l = 0; l < k; ++l) {
             const double b = alpha * B[l + j * ldb];
             for (i = 0; i < m; ++i)

@@ -4,25 +4,26 @@
 
 #include "dopus_ring.h"
 
+static void dopus_ring_zero(double *v, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        v[i] = 0.0;
+    }
+}
+
 void dopus_ring_reset(dopus_ring *ring)
 {
-    int k, i;
+    int k;
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *s = &ring->slot[k];
-        for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i)
-            s->Ht[i] = 0.0;
-        for (i = 0; i < DOPUS_NW * (DOPUS_NW + 1) / 2; ++i)
-            s->A_dyn[i] = 0.0;
-        for (i = 0; i < DOPUS_NX * DOPUS_NW; ++i)
-            s->Phit[i] = 0.0;
-        for (i = 0; i < DOPUS_DIM(DOPUS_NG * DOPUS_NW); ++i)
-            s->Ct[i] = 0.0;
-        for (i = 0; i < DOPUS_NW; ++i)
-            s->F_w[i] = 0.0;
-        for (i = 0; i < DOPUS_NX; ++i)
-            s->phi[i] = 0.0;
-        for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i)
-            s->g[i] = 0.0;
+        dopus_ring_zero(s->Ht, DOPUS_NW * DOPUS_NW);
+        dopus_ring_zero(s->A_dyn, DOPUS_NW * (DOPUS_NW + 1) / 2);
+        dopus_ring_zero(s->Phit, DOPUS_NX * DOPUS_NW);
+        dopus_ring_zero(s->Ct, DOPUS_DIM(DOPUS_NG * DOPUS_NW));
+        dopus_ring_zero(s->F_w, DOPUS_NW);
+        dopus_ring_zero(s->phi, DOPUS_NX);
+        dopus_ring_zero(s->g, DOPUS_DIM(DOPUS_NG));
         dopus_ring_clear_step(s);
     }
     ring->ring_head = 0;
@@ -63,15 +64,10 @@ void dopus_ring_advance(dopus_ring *ring)
 
 void dopus_ring_clear_step(dopus_stage_slot *slot)
 {
-    int i;
-    for (i = 0; i < DOPUS_NW; ++i)
-        slot->dw[i] = 0.0;
-    for (i = 0; i < DOPUS_NX; ++i)
-        slot->dlam[i] = 0.0;
-    for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i)
-        slot->dmu_g[i] = 0.0;
-    for (i = 0; i < DOPUS_NW; ++i)
-        slot->dmu_b[i] = 0.0;
+    dopus_ring_zero(slot->dw, DOPUS_NW);
+    dopus_ring_zero(slot->dlam, DOPUS_NX);
+    dopus_ring_zero(slot->dmu_g, DOPUS_DIM(DOPUS_NG));
+    dopus_ring_zero(slot->dmu_b, DOPUS_NW);
 }
 
 double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, const double *phi_new,

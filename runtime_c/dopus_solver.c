@@ -16,6 +16,7 @@
 #include "dopus_linalg.h"
 #include "dopus_problem.h"
 #include "dopus_solver.h"
+#include "dopus_solver_internal.h"
 
 #define DOPUS_MAGIC 0x444f5055 /* "DOPU" */
 #define DOPUS_DEFAULT_QP_TOL 1e-10
@@ -30,14 +31,22 @@ static void dopus_copy(double *dst, const double *src, int n)
     }
 }
 
-static void dopus_ensure_setup(dopus_solver *s)
+void dopus_ensure_setup(dopus_solver *s)
 {
     if (s->magic != DOPUS_MAGIC) {
         dopus_defaults(s);
     }
 }
 
-static int dopus_ret(dopus_solver *s, int status)
+void dopus_clear_x0_multiplier(dopus_solver *s)
+{
+    int i;
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->mu_b[0][i] = 0.0;
+    }
+}
+
+int dopus_ret(dopus_solver *s, int status)
 {
     s->status = status;
     return status;
@@ -401,7 +410,7 @@ static void dopus_lm_convexify(dopus_solver *s)
 }
 
 /* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
-static void dopus_lm_start(dopus_solver *s)
+void dopus_lm_start(dopus_solver *s)
 {
     if (!s->lm_auto) {
         return;
@@ -583,17 +592,26 @@ static int dopus_stage_H(dopus_solver *s, int k)
     return DOPUS_OK;
 }
 
+int dopus_term_grad_checked(dopus_solver *s, double *gL, double *E, double *r, double *r_eq)
+{
+    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, E, r, r_eq,
+                             &s->mem.ev.fun_work) != 0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    if (!dopus_lai_vec_finite(DOPUS_NX, gL) || !isfinite(*E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
+        !dopus_lai_vec_finite(DOPUS_NE, r_eq)) {
+        return DOPUS_ERR_NONFINITE_VALUE;
+    }
+    return DOPUS_OK;
+}
+
 /* Terminal F: gL_N, E, r, r_eq at the current point. */
 static int dopus_term_F(dopus_solver *s)
 {
     double gL[DOPUS_NX], E = 0.0, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
-    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, &E, r, r_eq,
-                             &s->mem.ev.fun_work) != 0) {
-        return DOPUS_ERR_FUNCTION;
-    }
-    if (!dopus_lai_vec_finite(DOPUS_NX, gL) || !isfinite(E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
-        !dopus_lai_vec_finite(DOPUS_NE, r_eq)) {
-        return DOPUS_ERR_NONFINITE_VALUE;
+    int rc = dopus_term_grad_checked(s, gL, &E, r, r_eq);
+    if (rc != DOPUS_OK) {
+        return rc;
     }
     dopus_copy(s->gL_N, gL, DOPUS_NX);
     s->E = E;
@@ -658,9 +676,8 @@ static void dopus_assemble(dopus_solver *s)
             in->b[k][i] = slot->phi[i] - s->x[k + 1][i];
         }
         for (i = 0; i < DOPUS_NX; ++i) {
-            /* x_0 is fixed by xhat0; the QP ignores the x part of stage 0 */
-            in->lbw[k][i] = k == 0 ? -INFINITY : dopus_lbx[i] - s->x[k][i];
-            in->ubw[k][i] = k == 0 ? INFINITY : dopus_ubx[i] - s->x[k][i];
+            in->lbw[k][i] = dopus_x_bounded(k) ? dopus_lbx[i] - s->x[k][i] : -INFINITY;
+            in->ubw[k][i] = dopus_x_bounded(k) ? dopus_ubx[i] - s->x[k][i] : INFINITY;
         }
         for (i = 0; i < DOPUS_NU; ++i) {
             in->lbw[k][DOPUS_NX + i] = dopus_lbu[i] - s->u[k][i];
@@ -804,13 +821,8 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
         for (i = 0; i < DOPUS_NW; ++i) {
             s->mu_b[k][i] = mu_b ? mu_b[k * DOPUS_NW + i] : 0.0;
         }
-        /* x_0 carries no bound: its multiplier is 0 by definition */
-        if (k == 0) {
-            for (i = 0; i < DOPUS_NX; ++i) {
-                s->mu_b[0][i] = 0.0;
-            }
-        }
     }
+    dopus_clear_x0_multiplier(s);
     for (i = 0; i < DOPUS_NX; ++i) {
         s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
     }
@@ -894,14 +906,11 @@ static void dopus_qp_warm_point(dopus_solver *s)
     }
 }
 
-int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
+/* Feedback step 1: the call is refused before the QP when the solver is not initialised,
+ * the measurement is not finite or no QP is prepared (the fallback control is returned).
+ * Returns DOPUS_OK when the QP is to be solved, else the status of the failed call. */
+static int dopus_feedback_admit(dopus_solver *s, const double *xhat0, double *u0)
 {
-    const dopus_qp_sol *sol = &s->mem.qp.sol;
-    double t0;
-    int k, i, qs, retries;
-
-    dopus_ensure_setup(s);
-    s->flags = 0;
     if (!s->initialized) {
         dopus_fallback_u0(s, u0);
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
@@ -919,9 +928,13 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
         /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
         return dopus_feedback_failed(s, u0, DOPUS_ERR_NOT_PREPARED);
     }
-    s->timer.t[DOPUS_PHASE_FEEDBACK] = 0.0;
-    t0 = dopus_timer_now(&s->timer);
+    return DOPUS_OK;
+}
 
+/* Step 2: the measurement enters the QP as the fixed step of x_0. */
+static void dopus_feedback_measure(dopus_solver *s, const double *xhat0)
+{
+    int i;
     for (i = 0; i < DOPUS_NX; ++i) {
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
@@ -930,50 +943,84 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
+}
+
+/* 1 when the QP status is "solved" and its solution finite. */
+static int dopus_qp_ok(const dopus_solver *s, int qs)
+{
+    return qs == DOPUS_QP_SOLVED && dopus_qp_solution_finite(&s->mem.qp.sol);
+}
+
+/* One solve of the prepared QP, warm (from the point in s->mem.qp.sol) or cold; its iterations
+ * are added to those of the call. Returns the QP status. */
+static int dopus_qp_attempt(dopus_solver *s, int warm)
+{
+    int qs;
+    s->qp_settings.warm_start = warm;
+    qs = dopus_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    s->qp_iterations += s->qp_info.iterations;
+    return qs;
+}
+
+/* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry
+ * in the same call when the warm start failed or needed the inertia correction: the QP is
+ * then nonconvex on the null space of its equalities and may have several local
+ * minimisers, and the warm start may have reached another one than the cold start finds
+ * (the one the closed loop has followed so far). Returns the QP status. */
+static int dopus_feedback_qp(dopus_solver *s)
+{
+    int qs;
     s->qp_in.hess_shift = s->lm;
+    s->qp_iterations = 0;
     s->qp_cold_retry = 0;
-    s->qp_settings.warm_start = s->qp_warm;
     if (s->qp_warm) {
         dopus_qp_warm_point(s);
     }
-    qs = dopus_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
-    s->qp_iterations = s->qp_info.iterations;
+    qs = dopus_qp_attempt(s, s->qp_warm);
     if (s->qp_warm && qs != DOPUS_QP_INVALID_INPUT &&
-        (qs != DOPUS_QP_SOLVED || !dopus_qp_solution_finite(sol) || s->qp_info.inertia_corrections > 0)) {
-        /* the warm start failed, or it needed the inertia correction: the QP is nonconvex
-         * on the null space of its equalities there and may have several local minimisers,
-         * and the warm start may have reached another one than the cold start finds (the
-         * one the closed loop has followed so far): retry from the cold starting point in
-         * the same call */
+        (!dopus_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
-        s->qp_settings.warm_start = 0;
-        qs = dopus_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
-        s->qp_iterations += s->qp_info.iterations;
+        qs = dopus_qp_attempt(s, 0);
     }
-    /* the automatic term (section 10): a QP still not solved is solved again (cold) with lm
-     * raised */
-    retries = 0;
-    while (s->lm_auto && retries < DOPUS_LM_RETRIES && s->lm < DOPUS_LM_MAX_REL * s->lm_scale &&
-           (qs != DOPUS_QP_SOLVED || !dopus_qp_solution_finite(sol)) && qs != DOPUS_QP_INVALID_INPUT) {
+    return qs;
+}
+
+/* Step 4, the automatic term (algorithm.md section 10): a QP still not solved is solved
+ * again (cold) with lm raised, at most DOPUS_LM_RETRIES times. Returns the QP status; the
+ * number of retries in *retries. */
+static int dopus_feedback_lm_retries(dopus_solver *s, int qs, int *retries)
+{
+    *retries = 0;
+    while (s->lm_auto && *retries < DOPUS_LM_RETRIES && s->lm < DOPUS_LM_MAX_REL * s->lm_scale &&
+           !dopus_qp_ok(s, qs) && qs != DOPUS_QP_INVALID_INPUT) {
         dopus_lm_raise(s);
         s->qp_in.hess_shift = s->lm;
-        s->qp_settings.warm_start = 0;
-        qs = dopus_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
-        s->qp_iterations += s->qp_info.iterations;
-        retries += 1;
+        qs = dopus_qp_attempt(s, 0);
+        *retries += 1;
     }
-    s->qp_status = qs;
-    if (qs != DOPUS_QP_SOLVED || !dopus_qp_solution_finite(sol)) {
-        dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
-        return dopus_feedback_failed(s, u0, DOPUS_ERR_QP);
-    }
-    /* the divergence test of the step (algorithm.md section 9): no step outside the box */
-    if (!dopus_box_ok(s, &s->x[0][0], &sol->x[0][0], DOPUS_NX, &s->u[0][0], &sol->u[0][0], DOPUS_QP_NU1)) {
-        dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
-        return dopus_feedback_failed(s, u0, DOPUS_ERR_DIVERGED);
-    }
+    return qs;
+}
 
-    /* domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k) */
+/* Step 5: the outcome of the QP: DOPUS_ERR_QP when it is not solved, DOPUS_ERR_DIVERGED when
+ * its step leaves the box of the divergence test (algorithm.md section 9), else DOPUS_OK. */
+static int dopus_feedback_check_step(const dopus_solver *s, int qs)
+{
+    const dopus_qp_sol *sol = &s->mem.qp.sol;
+    if (!dopus_qp_ok(s, qs)) {
+        return DOPUS_ERR_QP;
+    }
+    if (!dopus_box_ok(s, &s->x[0][0], &sol->x[0][0], DOPUS_NX, &s->u[0][0], &sol->u[0][0], DOPUS_QP_NU1)) {
+        return DOPUS_ERR_DIVERGED;
+    }
+    return DOPUS_OK;
+}
+
+/* Step 6: the step of each stage kept in its slot for the secant criterion:
+ * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
+static void dopus_store_domega(dopus_solver *s)
+{
+    const dopus_qp_sol *sol = &s->mem.qp.sol;
+    int k, i;
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
         for (i = 0; i < DOPUS_NX; ++i) {
@@ -990,7 +1037,13 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
             slot->dmu_b[i] = sol->mu_b[k][i] - s->mu_b[k][i];
         }
     }
-    /* the full step (paper eq. 4): w += dw, multipliers replaced by the QP's */
+}
+
+/* Step 7, the full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
+static void dopus_take_step(dopus_solver *s)
+{
+    const dopus_qp_sol *sol = &s->mem.qp.sol;
+    int k, i;
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
             s->x[k][i] += sol->x[k][i];
@@ -1018,12 +1071,17 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
         s->nu[i] = sol->nu[i];
     }
     s->qp_ready = 0;
-    /* a good plan: the fallback of the next failures; u0 clipped to the bounds */
+}
+
+/* Step 8: a good plan, the fallback of the next failures; the automatic term lowered unless
+ * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
+static void dopus_keep_plan(dopus_solver *s, double *u0, int lowered)
+{
     s->n_failed = 0;
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
-    if (retries == 0) {
-        dopus_lm_feedback(s, DOPUS_OK); /* lowered, unless this QP needed a raise */
+    if (lowered) {
+        dopus_lm_feedback(s, DOPUS_OK);
     }
     dopus_copy(&s->plan_u[0][0], &s->u[0][0], DOPUS_N * DOPUS_NU);
     if (dopus_clip_u(s->u[0], s->u0_out)) {
@@ -1032,6 +1090,33 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
     if (u0) {
         dopus_copy(u0, s->u0_out, DOPUS_NU);
     }
+}
+
+int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
+{
+    double t0;
+    int rc, qs, retries;
+
+    dopus_ensure_setup(s);
+    s->flags = 0;
+    rc = dopus_feedback_admit(s, xhat0, u0);
+    if (rc != DOPUS_OK) {
+        return rc;
+    }
+    s->timer.t[DOPUS_PHASE_FEEDBACK] = 0.0;
+    t0 = dopus_timer_now(&s->timer);
+    dopus_feedback_measure(s, xhat0);
+    qs = dopus_feedback_qp(s);
+    qs = dopus_feedback_lm_retries(s, qs, &retries);
+    s->qp_status = qs;
+    rc = dopus_feedback_check_step(s, qs);
+    if (rc != DOPUS_OK) {
+        dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
+        return dopus_feedback_failed(s, u0, rc);
+    }
+    dopus_store_domega(s);
+    dopus_take_step(s);
+    dopus_keep_plan(s, u0, retries == 0);
     dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
     return dopus_ret(s, DOPUS_OK);
 }
@@ -1063,8 +1148,8 @@ static void dopus_shift(dopus_solver *s)
     /* the last stage: the x part of mu_b from mu_bN, the u part kept */
     for (i = 0; i < DOPUS_NX; ++i) {
         s->mu_b[DOPUS_N - 1][i] = s->mu_bN[i];
-        s->mu_b[0][i] = 0.0;
     }
+    dopus_clear_x0_multiplier(s);
     dopus_ring_advance(&s->ring);
 }
 
@@ -1361,275 +1446,6 @@ double dopus_get_kkt(const dopus_solver *s)
     return m;
 }
 
-/* ---- settings ----------------------------------------------------------------------- */
-
-int dopus_set_M(dopus_solver *s, int M)
-{
-    dopus_ensure_setup(s);
-    if (M < 0 || M > DOPUS_N - 1) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->M = M;
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_get_M(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->M;
-}
-
-int dopus_set_mode(dopus_solver *s, int mode)
-{
-    dopus_ensure_setup(s);
-    if (mode != DOPUS_MODE_RECEDING && mode != DOPUS_MODE_FIXED) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->mode = mode;
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_get_mode(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->mode;
-}
-
-int dopus_set_hessian(dopus_solver *s, int hessian)
-{
-    dopus_ensure_setup(s);
-    if (hessian != DOPUS_HESSIAN_EXACT && hessian != DOPUS_HESSIAN_GAUSS_NEWTON) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    if (hessian == DOPUS_HESSIAN_GAUSS_NEWTON && !DOPUS_HAS_GN) {
-        /* Gauss-Newton needs a least-squares stage cost */
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->hessian = hessian;
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_get_hessian(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->hessian;
-}
-
-int dopus_set_regularization(dopus_solver *s, int regularization, double eps)
-{
-    dopus_ensure_setup(s);
-    if ((regularization != DOPUS_REG_NONE && regularization != DOPUS_REG_PROJECT &&
-         regularization != DOPUS_REG_MIRROR) ||
-        !isfinite(eps) || !(eps > 0.0)) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->regularization = regularization;
-    s->reg_eps = eps;
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_get_regularization(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->regularization;
-}
-
-double dopus_get_reg_eps(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->reg_eps;
-}
-
-int dopus_set_cost_hessian(dopus_solver *s, int fresh)
-{
-    dopus_ensure_setup(s);
-    if (fresh != 0 && fresh != 1) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->cost_hessian = fresh;
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_get_cost_hessian(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->cost_hessian;
-}
-
-int dopus_set_levenberg_marquardt(dopus_solver *s, double lm)
-{
-    dopus_ensure_setup(s);
-    if (!isfinite(lm) || !(lm >= 0.0)) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->lm_auto = 0;
-    s->lm = lm;
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_set_lm_auto(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    s->lm_auto = 1;
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
-    if (s->initialized && s->qp_ready) {
-        dopus_lm_start(s);
-    }
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_get_lm_auto(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->lm_auto;
-}
-
-double dopus_get_lm_scale(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->lm_scale;
-}
-
-double dopus_get_levenberg_marquardt(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->lm;
-}
-
-int dopus_set_qp_tol(dopus_solver *s, double tol)
-{
-    dopus_ensure_setup(s);
-    if (!isfinite(tol) || !(tol > 0.0) || tol > DOPUS_QP_TOL_MAX) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.tol = tol;
-    return dopus_ret(s, DOPUS_OK);
-}
-
-double dopus_get_qp_tol(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->qp_settings.tol;
-}
-
-int dopus_set_qp_max_iter(dopus_solver *s, int max_iter)
-{
-    dopus_ensure_setup(s);
-    if (max_iter < 1) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.max_iter = max_iter;
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_get_qp_max_iter(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->qp_settings.max_iter;
-}
-
-int dopus_set_recovery(dopus_solver *s, int on, int max_failures)
-{
-    dopus_ensure_setup(s);
-    if ((on != 0 && on != 1) || max_failures < 1) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->recovery = on;
-    s->recovery_failures = max_failures;
-    if (!on) {
-        s->recover_pending = 0;
-    }
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_get_recovery(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->recovery;
-}
-
-int dopus_get_recovery_failures(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->recovery_failures;
-}
-
-int dopus_set_qp_warm_start(dopus_solver *s, int on)
-{
-    dopus_ensure_setup(s);
-    if (on != 0 && on != 1) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_warm = on;
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_get_qp_warm_start(dopus_solver *s)
-{
-    dopus_ensure_setup(s);
-    return s->qp_warm;
-}
-
-int dopus_get_qp_cold_retry(const dopus_solver *s)
-{
-    return s->qp_cold_retry;
-}
-
-int dopus_set_parameters(dopus_solver *s, const double *p)
-{
-    int k, i;
-    dopus_ensure_setup(s);
-    if (DOPUS_NP == 0) {
-        return dopus_ret(s, DOPUS_OK);
-    }
-    if (p == 0) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    if (!dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NP, p)) {
-        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
-    }
-    for (k = 0; k <= DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NP; ++i) {
-            s->p[k][i] = p[k * DOPUS_NP + i];
-        }
-    }
-    return dopus_ret(s, DOPUS_OK);
-}
-
-int dopus_set_parameters_node(dopus_solver *s, int k, const double *pk)
-{
-    int i;
-    dopus_ensure_setup(s);
-    if (k < 0 || k > DOPUS_N) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    if (DOPUS_NP == 0) {
-        return dopus_ret(s, DOPUS_OK);
-    }
-    if (pk == 0) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    if (!dopus_lai_vec_finite(DOPUS_NP, pk)) {
-        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
-    }
-    for (i = 0; i < DOPUS_NP; ++i) {
-        s->p[k][i] = pk[i];
-    }
-    return dopus_ret(s, DOPUS_OK);
-}
-
-void dopus_get_parameters(dopus_solver *s, double *p)
-{
-    int k, i;
-    dopus_ensure_setup(s);
-    for (k = 0; k <= DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NP; ++i) {
-            p[k * DOPUS_NP + i] = s->p[k][i];
-        }
-    }
-}
-
 /* ---- getters ------------------------------------------------------------------------ */
 
 void dopus_get_x(const dopus_solver *s, double *x)
@@ -1701,6 +1517,45 @@ int dopus_get_qp_status(const dopus_solver *s)
     return s->qp_status;
 }
 
+/* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
+static double dopus_side_bound(const double *lo, const double *up, int i, int side)
+{
+    return side > 0 ? up[i] : lo[i];
+}
+
+int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
+{
+    int k, j, side;
+    if (s->qp_status != DOPUS_QP_PRIMAL_INFEASIBLE ||
+        !dopus_qp_infeasible_row(&s->mem.qp.work, &s->qp_in, &k, &j, &side)) {
+        return 0;
+    }
+    row->stage = k;
+    row->side = side;
+    if (j < DOPUS_NX) {
+        row->kind = DOPUS_ROW_STATE;
+        row->index = j;
+        row->bound = dopus_side_bound(dopus_lbx, dopus_ubx, j, side);
+    } else if (k < DOPUS_N && j < DOPUS_NW) {
+        row->kind = DOPUS_ROW_CONTROL;
+        row->index = j - DOPUS_NX;
+        row->bound = dopus_side_bound(dopus_lbu, dopus_ubu, row->index, side);
+    } else if (k < DOPUS_N) {
+        row->kind = DOPUS_ROW_PATH;
+        row->index = j - DOPUS_NW;
+        row->bound = dopus_side_bound(dopus_lg, dopus_ug, row->index, side);
+    } else if (j < DOPUS_NX + DOPUS_NR) {
+        row->kind = DOPUS_ROW_TERMINAL;
+        row->index = j - DOPUS_NX;
+        row->bound = dopus_side_bound(dopus_lr, dopus_ur, row->index, side);
+    } else {
+        row->kind = DOPUS_ROW_TERMINAL_EQ;
+        row->index = j - DOPUS_NX - DOPUS_NR;
+        row->bound = 0.0;
+    }
+    return 1;
+}
+
 int dopus_get_flags(const dopus_solver *s)
 {
     return s->flags;
@@ -1736,6 +1591,11 @@ void dopus_get_scales(const dopus_solver *s, double *scale_x, double *scale_u)
     }
 }
 
+int dopus_get_qp_cold_retry(const dopus_solver *s)
+{
+    return s->qp_cold_retry;
+}
+
 int dopus_get_status(const dopus_solver *s)
 {
     return s->status;
@@ -1754,19 +1614,4 @@ int dopus_get_ring_head(const dopus_solver *s)
 void dopus_get_timings(const dopus_solver *s, double *t)
 {
     dopus_copy(t, s->timer.t, DOPUS_N_PHASES);
-}
-
-void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx)
-{
-    dopus_ensure_setup(s);
-    s->timer.clock = clock_fn ? clock_fn : dopus_timer_default_clock;
-    s->timer.ctx = clock_fn ? ctx : 0;
-}
-
-int dopus_has_clock(const dopus_solver *s)
-{
-    if (s->timer.clock == 0) {
-        return 0;
-    }
-    return s->timer.clock != dopus_timer_default_clock || dopus_timer_has_default_clock();
 }

@@ -169,6 +169,23 @@ int dopus_get_recomputed(const dopus_solver *s, int *stages);
 /* The last QP: iterations, status (enum dopus_qp_status of dopus_qp.h). */
 int dopus_get_qp_iterations(const dopus_solver *s);
 int dopus_get_qp_status(const dopus_solver *s);
+/* A constraint row of the OCP at one stage of the horizon. */
+typedef struct {
+    int stage;    /* 0..N-1; N: the terminal node */
+    int kind;     /* enum dopus_row_kind */
+    int index;    /* the state or control, or the row among the path rows, the terminal
+                     inequality rows or the terminal equality rows (each stacked in
+                     declaration order) */
+    int side;     /* -1: its lower bound, +1: its upper bound (an equality row: the sign of
+                     the certificate's multiplier), 0: lower bound above upper bound */
+    double bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
+                     function is the declared row minus its value) */
+} dopus_row_info;
+/* When the last QP was infeasible (dopus_get_qp_status DOPUS_QP_PRIMAL_INFEASIBLE): the row
+ * with the largest multiplier of its infeasibility certificate, the row that the other rows
+ * of the certificate (the bounds, dynamics and measured state) keep from being met; stages
+ * are those of that QP's horizon. Returns 1 and writes *row, else returns 0. */
+int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row);
 /* Health of the controller (docs/algorithm.md section 9). Flags (DOPUS_FLAG_*) raised by
  * the last feedback and the prepare after it (feedback clears them): the returned u0 was
  * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control
@@ -225,6 +242,15 @@ enum dopus_status {
                                         nothing changes */
     DOPUS_ERR_DIVERGED = 11          /* the QP step leaves the problem's scale box (or is not
                                         finite): no step, the fallback control is returned */
+};
+
+/* Kinds of dopus_row_info. */
+enum dopus_row_kind {
+    DOPUS_ROW_STATE = 0,      /* a bound of a state (stages 1..N) */
+    DOPUS_ROW_CONTROL = 1,    /* a bound of a control */
+    DOPUS_ROW_PATH = 2,       /* a path-constraint row */
+    DOPUS_ROW_TERMINAL = 3,   /* a terminal inequality row (lb < ub) */
+    DOPUS_ROW_TERMINAL_EQ = 4 /* a terminal equality row (lb == ub) */
 };
 
 /* Flags of dopus_get_flags (docs/algorithm.md section 9). */

@@ -20,7 +20,7 @@ import pytest
 
 from conftest import EXAMPLES, ROBOT_ARM_FILE, SECOND_FILE
 from dopus_codegen.codegen.build import build
-from dopus_codegen.codegen.generate import STRICT_CFLAGS, generate, silence_unused_parameters
+from dopus_codegen.codegen.generate import STRICT_CFLAGS, generate, read_meta, silence_unused_parameters
 from dopus_codegen.problem.derivatives import build_functions
 from dopus_codegen.problem.ocp import RK4, load_ocp
 
@@ -46,7 +46,8 @@ def _unrolled_reference(spec):
 @pytest.mark.parametrize("path,derivatives,directions", [
     (ROBOT_ARM_FILE, "structured", "auto"), (ROBOT_ARM_FILE, "structured", "one"),
     (ROBOT_ARM_FILE, "structured", 2), (SECOND_FILE, "structured", "all"),
-    (ROBOT_ARM_FILE, "unrolled", "auto"), (CHAIN_FILE, "auto", "auto")])
+    (ROBOT_ARM_FILE, "unrolled", "auto"), (ROBOT_ARM_FILE, "chained", "auto"), (SECOND_FILE, "chained", "auto"),
+    (CHAIN_FILE, "auto", "auto")])
 def test_structured_blocks_equal_the_unrolled_derivatives(path, derivatives, directions):
     spec = load_ocp(path).validate()
     spec = _with_integrator(spec, RK4(spec.model.integrator.substeps, derivatives=derivatives,
@@ -80,9 +81,13 @@ def test_structured_blocks_equal_the_unrolled_derivatives(path, derivatives, dir
             np.testing.assert_array_equal(Phi_gn, Phi)
 
 
-def test_hessian_by_finite_differences_of_the_gradient(robot_disc):
+@pytest.mark.parametrize("derivatives", ["default", "chained"])
+def test_hessian_by_finite_differences_of_the_gradient(robot_disc, derivatives):
     """Independent of CasADi's second derivatives: central differences of stage_grad."""
     d = robot_disc
+    if derivatives != "default":
+        spec = load_ocp(ROBOT_ARM_FILE).validate()
+        d = build_functions(_with_integrator(spec, RK4(spec.model.integrator.substeps, derivatives=derivatives)))
     rng = np.random.default_rng(5)
     x, u, p = d.initial_guess.x[3], d.initial_guess.u[3] + 0.3, d.p0[3]
     lam, mu_g = rng.standard_normal(d.nx), rng.standard_normal(d.ng)
@@ -126,7 +131,9 @@ def test_second_generate_and_build_compile_nothing(tmp_path, second_disc):
     folder = tmp_path / "u"
     generate(second_disc, folder)
     first = build(folder, cache_dir=cache_dir, echo=None)
-    assert first.rebuilt and len(first.compiled) == 10
+    sources = read_meta(folder)["sources"]
+    # every library source compiled once (the standalone main program is not in the library)
+    assert first.rebuilt and sorted(first.compiled) == sorted([*sources["strict"], sources["casadi"]])
     stamps = {p.name: p.stat().st_mtime_ns for p in folder.iterdir() if p.is_file()}
     # the same problem again, discretised anew: nothing is written or compiled
     disc2 = build_functions(load_ocp(SECOND_FILE))
@@ -153,3 +160,38 @@ def test_cache_location_from_the_environment(tmp_path, monkeypatch):
     monkeypatch.delenv("DOPUS_CACHE_DIR")
     assert cache_root() == type(tmp_path).home() / ".cache" / "dopus-codegen"
     assert os.environ.get("DOPUS_CACHE_DIR") is None
+
+
+@pytest.mark.parametrize("path", [SECOND_FILE, CHAIN_FILE])
+def test_compact_functions_compute_the_same_values(path):
+    """The emitted (compact) functions against the problem's own: constant SX functions
+    become static arrays, an SX function equal to one emitted before a call to it."""
+    from dopus_codegen.codegen.generate import casadi_functions, problem_sizes
+
+    disc = build_functions(load_ocp(path))
+    emitted = casadi_functions(disc, disc.name, problem_sizes(disc))
+    rng = np.random.default_rng(11)
+    compacted = 0
+    for slot, fun in emitted.items():
+        orig = getattr(disc.functions, slot)
+        compacted += orig.class_name() != fun.class_name()
+        args = [rng.standard_normal(orig.sparsity_in(i).shape) for i in range(orig.n_in())]
+        for want, got in zip(orig(*args) if orig.n_out() > 1 else [orig(*args)],
+                             fun(*args) if fun.n_out() > 1 else [fun(*args)]):
+            np.testing.assert_array_equal(np.array(got), np.array(want))
+    # unicycle: constant stage and terminal cost Hessians; chain: the same, and the
+    # Gauss-Newton forms equal to the exact ones
+    assert compacted >= 2
+
+
+def test_parallel_compilations_from_the_environment(monkeypatch):
+    from dopus_codegen.codegen.build import BuildError, build_jobs
+
+    monkeypatch.setenv("DOPUS_BUILD_JOBS", "3")
+    assert build_jobs(10) == 3 and build_jobs(2) == 2
+    for bad in ("0", "two"):
+        monkeypatch.setenv("DOPUS_BUILD_JOBS", bad)
+        with pytest.raises(BuildError, match="DOPUS_BUILD_JOBS"):
+            build_jobs(4)
+    monkeypatch.delenv("DOPUS_BUILD_JOBS")
+    assert 1 <= build_jobs(10) <= 10

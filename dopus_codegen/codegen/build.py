@@ -22,6 +22,7 @@ import subprocess
 import sys
 import tempfile
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, List, Optional, Sequence
@@ -50,6 +51,27 @@ class BuildResult:
     out_dir: Path
     rebuilt: bool
     compiled: List[str] = field(default_factory=list)   # sources compiled (not from the cache)
+
+
+#: Environment variable: how many C files ``build`` compiles at once (default: the
+#: processors this process may use).
+JOBS_VAR = "DOPUS_BUILD_JOBS"
+
+
+def build_jobs(n_files: int) -> int:
+    """Parallel compilations: ``$DOPUS_BUILD_JOBS``, else the usable processors, at most
+    ``n_files`` and at least 1."""
+    raw = os.environ.get(JOBS_VAR, "").strip()
+    if raw:
+        try:
+            jobs = int(raw)
+        except ValueError:
+            raise BuildError(f"{JOBS_VAR}={raw!r} is not a whole number") from None
+        if jobs < 1:
+            raise BuildError(f"{JOBS_VAR}={raw!r} must be at least 1")
+    else:
+        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(jobs, n_files))
 
 
 def _run(cmd: Sequence[str], cwd: Path, what: str) -> None:
@@ -141,22 +163,35 @@ def build(out_dir, cc: str = "cc", opt: str | None = None, *, force: bool = Fals
     tmpdir = Path(tempfile.mkdtemp(prefix="tmp_", dir=str(bdir)))
     compiled: List[str] = []
     try:
-        objects = []
+        objects, todo = [], []
         for src in strict + [casadi_src]:
             flags = [*opt_flags, PIC, *(CASADI_CFLAGS if src == casadi_src else STRICT_CFLAGS)]
             obj = objdir_final / (Path(src).stem + ".o")
             key = cache.object_key((out_dir / src).read_bytes(), headers, cc, flags)
             hit = None if force else cache.cached_object(root, key)
-            tmp_obj = tmpdir / obj.name
             if hit is not None:
-                shutil.copyfile(hit, tmp_obj)
+                shutil.copyfile(hit, tmpdir / obj.name)
             else:
-                say(f"dopus-gen build: compiling {out_dir / src}")
-                _run([cc, *flags, "-c", src, "-o", str(tmp_obj)], out_dir, f"compiling {src}")
-                cache.store_object(root, key, tmp_obj)
-                compiled.append(src)
-            os.replace(tmp_obj, obj)
-            objects.append(str(obj))
+                todo.append((src, flags, key, tmpdir / obj.name))
+            objects.append(obj)
+        # the compilations that miss the cache run side by side, the largest source first
+        todo.sort(key=lambda t: -(out_dir / t[0]).stat().st_size)
+        for src, *_ in todo:
+            say(f"dopus-gen build: compiling {out_dir / src}")
+
+        def compile_one(job):
+            src, flags, key, tmp_obj = job
+            _run([cc, *flags, "-c", src, "-o", str(tmp_obj)], out_dir, f"compiling {src}")
+            cache.store_object(root, key, tmp_obj)
+
+        if todo:
+            with ThreadPoolExecutor(max_workers=build_jobs(len(todo))) as pool:
+                for future in [pool.submit(compile_one, job) for job in todo]:
+                    future.result()
+        compiled = [src for src in strict + [casadi_src] if any(src == t[0] for t in todo)]
+        for obj in objects:
+            os.replace(tmpdir / obj.name, obj)
+        objects = [str(obj) for obj in objects]
         say(f"dopus-gen build: linking {shared_lib.name} and {static_lib.name} in {bdir}")
         tmp_a, tmp_so = tmpdir / static_lib.name, tmpdir / shared_lib.name
         _run([os.environ.get("AR", "ar"), "rcs", str(tmp_a), *objects], out_dir, f"archiving {static_lib.name}")

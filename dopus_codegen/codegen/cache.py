@@ -51,7 +51,8 @@ def _array_bytes(v) -> bytes:
 
 
 def problem_hash(disc: Any, offline_guess: Optional[bool] = None) -> str:
-    """A stable sha256 of everything the generated folder of ``disc`` depends on."""
+    """A stable sha256 of everything the generated folder of ``disc`` depends on (its
+    functions and data, the runtime sources, the templates and the emitter generate.py)."""
     from .generate import FUNCTION_SLOTS
 
     h = hashlib.sha256()
@@ -76,6 +77,8 @@ def problem_hash(disc: Any, offline_guess: Optional[bool] = None) -> str:
         for path in sorted(folder.iterdir()):
             if path.is_file() and path.suffix in (".c", ".h", ".j2"):
                 put(path.name, path.read_bytes())
+    # the emitter itself: a change of how the functions are written out regenerates
+    put("generate.py", (Path(__file__).parent / "generate.py").read_bytes())
     return h.hexdigest()
 
 

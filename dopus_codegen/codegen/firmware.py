@@ -152,25 +152,30 @@ def _generated_sources(gen_dir: Path) -> tuple:
     return name, [f for f in srcs if f != casadi], casadi
 
 
+def _compile(base: List[str], gen_dir: Path, build_dir: Path, fw_sources, obj_dir: Path, what: str) -> List[Path]:
+    """Compile the generated library and the firmware sources ``fw_sources`` with the command
+    ``base`` into ``obj_dir`` (the CasADi file with its own flags); returns the objects."""
+    fw = firmware_dir()
+    _, strict, casadi = _generated_sources(gen_dir)
+    obj_dir.mkdir(parents=True, exist_ok=True)
+    base = [*base, f"-I{gen_dir}", f"-I{build_dir}", f"-I{fw}"]
+    objs = []
+    for src, flags in ([(gen_dir / f, STRICT_CFLAGS) for f in strict] + [(fw / f, STRICT_CFLAGS) for f in fw_sources]
+                       + [(gen_dir / casadi, CASADI_CFLAGS)]):
+        obj = obj_dir / (src.stem + ".o")
+        _run([*base, *flags, "-c", str(src), "-o", str(obj)], f"{what}: compiling {src.name}")
+        objs.append(obj)
+    return objs
+
+
 def build_target(gen_dir, build_dir, target: str) -> Dict[str, Any]:
     """Compile and link the firmware image of ``target``; returns the ELF path and its sizes."""
     tg = TARGETS[target]
     gen_dir, build_dir = Path(gen_dir).resolve(), Path(build_dir).resolve()
-    fw = firmware_dir()
-    name, strict, casadi = _generated_sources(gen_dir)
+    name = read_meta(gen_dir)["name"]
     obj_dir = build_dir / target
-    obj_dir.mkdir(parents=True, exist_ok=True)
-    cc = "arm-none-eabi-gcc"
-    base = [cc, *tg.cflags, OPT, "-ffunction-sections", "-fdata-sections", "-fstack-usage",
-            f"-I{gen_dir}", f"-I{build_dir}", f"-I{fw}"]
-    objs = []
-    for src in [gen_dir / f for f in strict] + [fw / f for f in FW_SOURCES]:
-        obj = obj_dir / (src.stem + ".o")
-        _run([*base, *STRICT_CFLAGS, "-c", str(src), "-o", str(obj)], f"{target}: compiling {src.name}")
-        objs.append(obj)
-    obj = obj_dir / (Path(casadi).stem + ".o")
-    _run([*base, *CASADI_CFLAGS, "-c", str(gen_dir / casadi), "-o", str(obj)], f"{target}: compiling {casadi}")
-    objs.append(obj)
+    base = ["arm-none-eabi-gcc", *tg.cflags, OPT, "-ffunction-sections", "-fdata-sections", "-fstack-usage"]
+    objs = _compile(base, gen_dir, build_dir, FW_SOURCES, obj_dir, target)
     elf = obj_dir / f"{name}_{target}.elf"
     link_image(target, objs, elf)
     sections = {}
@@ -216,19 +221,9 @@ def _max_stack_usage(obj_dir: Path) -> int:
 def build_host(gen_dir, build_dir, cc: str = "cc") -> Path:
     """The same firmware program for the host (stdout instead of semihosting, no ticks)."""
     gen_dir, build_dir = Path(gen_dir).resolve(), Path(build_dir).resolve()
-    fw = firmware_dir()
-    name, strict, casadi = _generated_sources(gen_dir)
+    name = read_meta(gen_dir)["name"]
     out = build_dir / "host"
-    out.mkdir(parents=True, exist_ok=True)
-    base = [cc, OPT, f"-I{gen_dir}", f"-I{build_dir}", f"-I{fw}"]
-    objs = []
-    for src in [gen_dir / f for f in strict] + [fw / f for f in HOST_SOURCES]:
-        obj = out / (src.stem + ".o")
-        _run([*base, *STRICT_CFLAGS, "-c", str(src), "-o", str(obj)], f"host: compiling {src.name}")
-        objs.append(obj)
-    obj = out / (Path(casadi).stem + ".o")
-    _run([*base, *CASADI_CFLAGS, "-c", str(gen_dir / casadi), "-o", str(obj)], f"host: compiling {casadi}")
-    objs.append(obj)
+    objs = _compile([cc, OPT], gen_dir, build_dir, HOST_SOURCES, out, "host")
     exe = out / f"fw_{name}_host"
     _run([cc, *map(str, objs), "-lm", "-o", str(exe)], "host: linking")
     return exe

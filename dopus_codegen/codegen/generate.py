@@ -182,9 +182,54 @@ def _with_cse(fun: ca.Function) -> ca.Function:
     return ca.Function(fun.name(), args, fun.call(args), fun.name_in(), fun.name_out(), {"cse": True})
 
 
+def _algorithm_key(fun: ca.Function) -> Optional[str]:
+    """The serialised algorithm of an SX function without its names (None for other
+    functions): two functions with the same key compute the same outputs."""
+    if not fun.is_a("SXFunction"):
+        return None
+    args = fun.sx_in()
+    canon = ca.Function("same", args, fun.call(args), {"cse": True})
+    return canon.serialize()
+
+
+def _mx_inputs(fun: ca.Function) -> list:
+    return [ca.MX.sym(fun.name_in(i), fun.sparsity_in(i)) for i in range(fun.n_in())]
+
+
+def _compact(fun: ca.Function, emitted: Dict[str, ca.Function]) -> ca.Function:
+    """The same function in a form whose C is smaller, computing the same values:
+
+    - an SX function whose outputs depend on no input (the constant Hessian of a quadratic
+      cost) becomes an MX function copying one static array per output, instead of one
+      assignment per entry;
+    - an SX function with the same algorithm as one emitted before (the Gauss-Newton and
+      exact Hessians of a least-squares cost without other terms) becomes an MX function
+      that calls the earlier one, which is emitted once.
+
+    ``emitted`` maps algorithm keys to the functions emitted so far (updated here)."""
+    if not fun.is_a("SXFunction") or fun.n_in() == 0:
+        return fun
+    args = fun.sx_in()
+    every_input = ca.vertcat(*[ca.vec(a) for a in args])
+    if not any(out.nnz() > 0 and ca.depends_on(out, every_input) for out in fun.call(args)):
+        values = fun.call([ca.DM.zeros(fun.sparsity_in(i)) for i in range(fun.n_in())])
+        outs = [ca.MX(ca.densify(v)) if fun.sparsity_out(i).is_dense() else ca.MX(v)
+                for i, v in enumerate(values)]
+        return ca.Function(fun.name(), _mx_inputs(fun), outs, fun.name_in(), fun.name_out())
+    key = _algorithm_key(fun)
+    first = emitted.get(key)
+    if first is None:
+        emitted[key] = fun
+        return fun
+    ins = _mx_inputs(fun)
+    return ca.Function(fun.name(), ins, first.call(ins), fun.name_in(), fun.name_out())
+
+
 def casadi_functions(disc: Any, name: str, sizes: Dict[str, int]) -> Dict[str, ca.Function]:
-    """The functions to emit, checked against docs/algorithm.md section 2, in emit order."""
+    """The functions to emit, checked against docs/algorithm.md section 2, in emit order
+    (SX functions in their compact form, :func:`_compact`)."""
     out: Dict[str, ca.Function] = {}
+    emitted: Dict[str, ca.Function] = {}
     for slot, optional in FUNCTION_SLOTS:
         fun = getattr(disc.functions, slot, None)
         if fun is None:
@@ -194,7 +239,7 @@ def casadi_functions(disc: Any, name: str, sizes: Dict[str, int]) -> Dict[str, c
         if not isinstance(fun, ca.Function):
             raise CodegenError(f"'{slot}' is not a casadi.Function")
         _check_function(fun, slot, name, sizes)
-        out[slot] = _with_cse(fun)
+        out[slot] = _compact(_with_cse(fun), emitted)
     return out
 
 

@@ -4,6 +4,8 @@
   control within its bounds satisfies the stage-0 path constraints makes every QP of the
   first iteration infeasible; the check names the rows (declaration, row, expression, value
   and bound) instead of a bare "QP is infeasible".
+- :func:`describe_qp_row`: the row of an infeasible QP (any stage; the C runtime decodes it
+  from the QP's infeasibility certificate) in the OCP's words.
 - :func:`nonsmooth_terms` / :func:`warn_nonsmooth`: the method takes first and second
   derivatives of every function; ``fabs``, ``fmax``/``fmin``, ``if_else`` and comparisons,
   ``sign``, ``floor``, ``ceil``, ``fmod`` have kinks or jumps where those derivatives are
@@ -20,7 +22,8 @@ import numpy as np
 
 from .ocp import OcpError
 
-__all__ = ["NonSmoothWarning", "stage0_violations", "check_initial_state", "nonsmooth_terms", "warn_nonsmooth"]
+__all__ = ["NonSmoothWarning", "stage0_violations", "check_initial_state", "nonsmooth_terms", "warn_nonsmooth",
+           "describe_qp_row"]
 
 #: Violations above this (absolute, and relative to the bound) count.
 FEASIBILITY_TOL = 1e-7
@@ -203,3 +206,45 @@ def warn_nonsmooth(problem, limit: int = 3) -> Optional[str]:
         warnings.warn(NonSmoothWarning(msg), stacklevel=2)
         texts.append(msg)
     return "\n".join(texts) if texts else None
+
+
+# --------------------------------------------------------------------------- QP rows
+def _terminal_rows(spec, equality: bool) -> List[Tuple[str, ca.SX, float, float]]:
+    """(label, expression, lb, ub) of the stacked terminal rows with ``lb == ub``
+    (``equality``) or ``lb < ub``, in declaration order."""
+    out = []
+    for i, rows in enumerate(spec.constraints.terminal):
+        n = rows.expr.size1()
+        for r in range(n):
+            lb, ub = float(rows.lb[r]), float(rows.ub[r])
+            if (lb == ub) == equality:
+                label = f"terminal constraint {i}" + (f" row {r}" if n > 1 else "")
+                out.append((label, rows.expr[r], lb, ub))
+    return out
+
+
+def describe_qp_row(problem, row: dict) -> str:
+    """The row of an infeasible QP (``row``: stage, kind, index, side, bound, as
+    ``CSolver.qp_infeasible_row`` gives it) in the OCP's words: ``infeasible at stage 3: path
+    constraint 0 ((x-p)) >= lb 0``; ``problem`` (a spec or a discretised problem, or None)
+    supplies the names and expressions."""
+    spec = None if problem is None else _spec(problem)
+    k, kind, i, side, bound = row["stage"], row["kind"], row["index"], row["side"], row["bound"]
+    where = f"stage {k}" if spec is None or k < spec.horizon.N else f"the terminal node (stage {k})"
+    rel = {"lower": f">= lb {bound:g}", "upper": f"<= ub {bound:g}"}.get(side, f"lb > ub ({bound:g})")
+    if kind in ("state", "control"):
+        names = None if spec is None else (spec.model.state_names if kind == "state" else spec.model.control_names)
+        what = f"{kind} {names[i] if names else i}"
+    elif kind == "path" and spec is not None:
+        label, expr, _, _ = _path_rows(spec)[i]
+        what = f"{label} ({_short(expr)})"
+    elif kind in ("terminal", "terminal_eq") and spec is not None:
+        label, expr, lb, _ = _terminal_rows(spec, kind == "terminal_eq")[i]
+        what = f"{label} ({_short(expr)})"
+        if kind == "terminal_eq":
+            rel = f"= {lb:g}"
+    else:
+        what = f"{kind.replace('_', ' ')} row {i}"
+        if kind == "terminal_eq":
+            rel = "= its value"
+    return f"infeasible at {where}: {what} {rel}"

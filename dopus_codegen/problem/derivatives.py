@@ -135,34 +135,29 @@ class StageFunctions:
         """True when the Gauss-Newton stage Hessian exists."""
         return self.stage_hess_gn is not None
 
+    def _of_kind(self, kind: str, exact: ca.Function, gn: Optional[ca.Function]) -> ca.Function:
+        """``exact`` for ``"exact"``, ``gn`` for ``"gauss-newton"`` (an OcpError when there
+        is none: no least-squares stage cost)."""
+        if kind == "exact":
+            return exact
+        if kind == "gauss-newton":
+            if gn is None:
+                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
+            return gn
+        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+
     def stage_hess(self, kind: str) -> ca.Function:
         """``stage_hess_exact`` for ``"exact"``, ``stage_hess_gn`` for ``"gauss-newton"``."""
-        if kind == "exact":
-            return self.stage_hess_exact
-        if kind == "gauss-newton":
-            if self.stage_hess_gn is None:
-                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
-            return self.stage_hess_gn
-        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+        return self._of_kind(kind, self.stage_hess_exact, self.stage_hess_gn)
 
     def stage_hess_cost(self, kind: str) -> ca.Function:
         """``stage_hess_cost_exact`` for ``"exact"``, ``stage_hess_cost_gn`` for
         ``"gauss-newton"``: ``(x, u, p) -> A_l``, the stage-cost part of ``stage_hess(kind)``'s A."""
-        if kind == "exact":
-            return self.stage_hess_cost_exact
-        if kind == "gauss-newton":
-            if self.stage_hess_cost_gn is None:
-                raise OcpError(f"{self.name}: hessian='gauss-newton' needs stage_least_squares")
-            return self.stage_hess_cost_gn
-        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+        return self._of_kind(kind, self.stage_hess_cost_exact, self.stage_hess_cost_gn)
 
     def term_hess(self, kind: str) -> ca.Function:
-        """Terminal counterpart of :meth:`stage_hess`."""
-        if kind == "exact":
-            return self.term_hess_exact
-        if kind == "gauss-newton":
-            return self.term_hess_gn
-        raise ValueError(f"unknown Hessian kind {kind!r} {_KINDS}")
+        """Terminal counterpart of :meth:`stage_hess` (the Gauss-Newton form always exists)."""
+        return self._of_kind(kind, self.term_hess_exact, self.term_hess_gn)
 
 
 @dataclass(frozen=True)
@@ -247,6 +242,17 @@ def _d(e):
     return ca.densify(e)
 
 
+def _same_algorithm(f: ca.Function, g: ca.Function) -> bool:
+    """True when the SX functions ``f`` and ``g`` compute the same outputs by the same
+    algorithm (names aside), so one of them can stand for both in the generated code."""
+    def key(fun):
+        args = fun.sx_in()
+        return ca.Function("same", args, fun.call(args), _FN_OPTS).serialize()
+    return (f.n_in() == g.n_in() and f.n_out() == g.n_out()
+            and all(f.sparsity_in(i) == g.sparsity_in(i) for i in range(f.n_in()))
+            and key(f) == key(g))
+
+
 def _stage_functions_unrolled(name: str, m: StageModel, phi: ca.SX):
     """The stage functions as single SX expressions of the unrolled interval map ``phi``
     (every substep inlined, derivatives by CasADi's SX differentiation with common
@@ -271,23 +277,32 @@ def _stage_functions_unrolled(name: str, m: StageModel, phi: ca.SX):
                              in_names, ["gL", "phi", "l", "g"], _FN_OPTS)
     stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [_d(A), _d(Phi), _d(C)],
                                    in_names, ["A", "Phi", "C"], _FN_OPTS)
-    # stage-cost part of A (algorithm.md section 4 step 5): l is evaluated at the node, so
-    # this needs no integrator sensitivities
-    cost_in, cost_in_names = [x, u, p], ["x", "u", "p"]
-    stage_hess_cost_exact = ca.Function(f"{name}_stage_hess_cost_exact", cost_in,
-                                        [_d(ca.hessian(m.l, w)[0])], cost_in_names, ["A_l"], _FN_OPTS)
-    stage_hess_gn = stage_hess_cost_gn = None
-    if m.has_stage_ls:
-        J = ca.jacobian(m.res, w)
-        # Gauss-Newton: J' W J + exact Hessian of the non least-squares part, no curvature
-        # of dynamics or constraints (algorithm.md section 2).
-        A_gn = ca.mtimes([J.T, ca.DM(m.W), J]) + ca.hessian(m.l_extra, w)[0]
+    stage_hess_cost_exact, stage_hess_cost_gn, A_gn = _stage_cost_hessians(name, m)
+    stage_hess_gn = None
+    if A_gn is not None:
         stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [_d(A_gn), _d(Phi), _d(C)],
                                     in_names, ["A", "Phi", "C"], _FN_OPTS)
-        # the same expression: A - A_l = 0 for Gauss-Newton
-        stage_hess_cost_gn = ca.Function(f"{name}_stage_hess_cost_gn", cost_in, [_d(A_gn)],
-                                         cost_in_names, ["A_l"], _FN_OPTS)
     return stage_eval, stage_grad, stage_hess_exact, stage_hess_gn, stage_hess_cost_exact, stage_hess_cost_gn
+
+
+def _stage_cost_hessians(name: str, m: StageModel) -> tuple:
+    """``(stage_hess_cost_exact, stage_hess_cost_gn, A_gn)``: the stage-cost part of A
+    (algorithm.md section 4 step 5), exact and Gauss-Newton, and the SX expression of the
+    Gauss-Newton A (``None`` twice without a least-squares stage cost). l is evaluated at
+    the node, so this needs no integrator sensitivities."""
+    x, u, p, w = m.x, m.u, m.p, m.w
+    cost_in, cost_in_names = [x, u, p], ["x", "u", "p"]
+    exact = ca.Function(f"{name}_stage_hess_cost_exact", cost_in, [_d(ca.hessian(m.l, w)[0])], cost_in_names,
+                        ["A_l"], _FN_OPTS)
+    if not m.has_stage_ls:
+        return exact, None, None
+    J = ca.jacobian(m.res, w)
+    # Gauss-Newton: J' W J + exact Hessian of the non least-squares part, no curvature of
+    # dynamics or constraints (algorithm.md section 2).
+    A_gn = ca.mtimes([J.T, ca.DM(m.W), J]) + ca.hessian(m.l_extra, w)[0]
+    # the same expression: A - A_l = 0 for Gauss-Newton
+    gn = ca.Function(f"{name}_stage_hess_cost_gn", cost_in, [_d(A_gn)], cost_in_names, ["A_l"], _FN_OPTS)
+    return exact, gn, A_gn
 
 
 def _stage_functions(name: str, m: StageModel, directions="auto"):
@@ -333,26 +348,71 @@ def _stage_functions(name: str, m: StageModel, directions="auto"):
     An, C = node_hess(X, U, P, MUG)
     A = An + 0.5 * (H_dyn + H_dyn.T)
     stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [A, Phi, C], in_names, ["A", "Phi", "C"])
-    # stage-cost part of A (algorithm.md section 4 step 5): l is evaluated at the node, so
-    # this needs no integrator sensitivities
-    cost_in, cost_in_names = [x, u, p], ["x", "u", "p"]
-    stage_hess_cost_exact = ca.Function(f"{name}_stage_hess_cost_exact", cost_in,
-                                        [_d(ca.hessian(m.l, w)[0])], cost_in_names, ["A_l"], _FN_OPTS)
-    stage_hess_gn = stage_hess_cost_gn = None
-    if m.has_stage_ls:
-        J = ca.jacobian(m.res, w)
-        # Gauss-Newton: J' W J + exact Hessian of the non least-squares part, no curvature
-        # of dynamics or constraints (algorithm.md section 2).
-        A_gn = ca.mtimes([J.T, ca.DM(m.W), J]) + ca.hessian(m.l_extra, w)[0]
-        # the same expression: A - A_l = 0 for Gauss-Newton
-        stage_hess_cost_gn = ca.Function(f"{name}_stage_hess_cost_gn", cost_in, [_d(A_gn)],
-                                         cost_in_names, ["A_l"], _FN_OPTS)
+    stage_hess_cost_exact, stage_hess_cost_gn, A_gn = _stage_cost_hessians(name, m)
+    stage_hess_gn = None
+    if A_gn is not None:
         node_gn = ca.Function(f"{name}_node_gn", node_in, [_d(A_gn), _d(C_sx)], node_names, ["A", "C"],
                               _FN_OPTS)
+        if _same_algorithm(node_gn, node_hess):
+            # a least-squares cost without other terms and no path constraints: one kernel
+            node_gn = node_hess
         A_gn_mx, C_gn = node_gn(X, U, P, MUG)
         stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [A_gn_mx, Phi, C_gn], in_names,
                                     ["A", "Phi", "C"])
     return stage_eval, stage_grad, stage_hess_exact, stage_hess_gn, stage_hess_cost_exact, stage_hess_cost_gn
+
+
+def _stage_functions_chained(name: str, m: StageModel):
+    """Hessians by Jacobian chaining over the substeps (:func:`.sensitivities.chain_hessian`):
+    one SX kernel of a substep with its Jacobian, adjoint and Hessian, called once per
+    substep, so the Hessian code holds one substep at about the operation count of the
+    unrolled expression. The gradient is the unrolled expression (its code is small; a
+    per-substep adjoint would evaluate the first substeps twice); ``stage_eval`` iterates
+    the substep; the Gauss-Newton ``Phi`` reuses the chaining kernel (no more code)."""
+    nx, nu, ng = m.x.size1(), m.u.size1(), m.g.size1()
+    nw, np_ = nx + nu, m.p.size1()
+    phi_sx = m.x
+    for _ in range(m.n_substeps):
+        phi_sx = m.substep(phi_sx, m.u, m.p)
+    unrolled = _stage_functions_unrolled(name, m, phi_sx)
+    x, u, p, w = m.x, m.u, m.p, m.w
+    mu_g_sx = ca.SX.sym("mu_g", ng)
+    Ln = m.l + (ca.dot(mu_g_sx, m.g) if ng else 0)
+    C_sx = ca.jacobian(m.g, w) if ng else ca.SX(0, nw)
+    node_in, node_names = [x, u, p, mu_g_sx], ["x", "u", "p", "mu_g"]
+    node_eval = ca.Function(f"{name}_node_eval", [x, u, p], [_d(m.l), _d(m.g)], ["x", "u", "p"],
+                            ["l", "g"], _FN_OPTS)
+    node_hess = ca.Function(f"{name}_node_hess", node_in, [_d(ca.hessian(Ln, w)[0]), _d(C_sx)], node_names,
+                            ["An", "C"], _FN_OPTS)
+    K = sensitivities.chain_kernel(f"{name}_substep", m.substep, nx, nu, np_)
+    n = m.n_substeps
+    X, U, P = ca.MX.sym("x", nx), ca.MX.sym("u", nu), ca.MX.sym("p", np_)
+    LAM, MUG = ca.MX.sym("lam_next", nx), ca.MX.sym("mu_g", ng)
+    ins = [X, U, P, LAM, MUG]
+    in_names = ["x", "u", "p", "lam_next", "mu_g"]
+    phi = sensitivities.interval_map(types.SimpleNamespace(F=m.substep), n, X, U, P)[-1]
+    l, g = node_eval(X, U, P)
+    stage_eval = ca.Function(f"{name}_stage_eval", [X, U, P], [phi, l, g], ["x", "u", "p"], ["phi", "l", "g"])
+    # L_k = l - lam_next' phi + mu_g' g: the chaining starts from a_n = -lam_next
+    _, Phi, _, H_dyn = sensitivities.chain_hessian(K, m.substep, n, X, U, P, -LAM)
+    An, C = node_hess(X, U, P, MUG)
+    A = An + 0.5 * (H_dyn + H_dyn.T)
+    stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [A, Phi, C], in_names, ["A", "Phi", "C"])
+    stage_hess_gn = None
+    if m.has_stage_ls:
+        J = ca.jacobian(m.res, w)
+        A_gn = ca.mtimes([J.T, ca.DM(m.W), J]) + ca.hessian(m.l_extra, w)[0]
+        node_gn = ca.Function(f"{name}_node_gn", node_in, [_d(A_gn), _d(C_sx)], node_names, ["A", "C"],
+                              _FN_OPTS)
+        if _same_algorithm(node_gn, node_hess):
+            node_gn = node_hess
+        # Phi from the same kernel, its Hessian output unused (a_n = 0)
+        _, Phi_gn, _, _ = sensitivities.chain_hessian(K, m.substep, n, X, U, P, ca.MX.zeros(nx))
+        A_gn_mx, C_gn = node_gn(X, U, P, MUG)
+        stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [A_gn_mx, Phi_gn, C_gn], in_names,
+                                    ["A", "Phi", "C"])
+    return (stage_eval, unrolled[1], stage_hess_exact, stage_hess_gn, unrolled[4], unrolled[5])
+
 
 
 #: derivatives="auto" unrolls while the vectorised forward-over-adjoint kernel of one
@@ -373,6 +433,10 @@ def _stage_functions_choice(name: str, integ, m: StageModel):
         nx, nu = m.x.size1(), m.u.size1()
         K = sensitivities.substep_kernels(f"{name}_substep", m.substep, nx, nu, m.p.size1(), "all")
         how = "unrolled" if K.soa.n_instructions() * m.n_substeps <= UNROLL_LIMIT else "structured"
+    if how == "chained":
+        if not sx_substep:
+            raise OcpError(f"{integ.describe()}: derivatives='chained' needs an explicit (SX) substep")
+        return _stage_functions_chained(name, m)
     if how == "unrolled":
         phi = m.x
         for _ in range(m.n_substeps):

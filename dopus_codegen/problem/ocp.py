@@ -83,7 +83,9 @@ class Integrator:
     directions = "auto"
     #: "structured": the stage functions iterate one substep and its derivative kernels
     #: (code size independent of the substeps); "unrolled": one SX expression of the whole
-    #: interval (fastest for small models, code grows with substeps and nw); "auto": unrolled
+    #: interval (fastest for small models, code grows with substeps and nw); "chained": the
+    #: Hessian by Jacobian chaining of one substep kernel over the substeps (explicit
+    #: schemes; code of one substep at about the unrolled operation count); "auto": unrolled
     #: for small models (dopus_codegen.problem.derivatives.UNROLL_LIMIT), else structured.
     derivatives = "auto"
 
@@ -109,8 +111,9 @@ class Integrator:
 
 
 def _derivatives(value, who: str) -> str:
-    if value not in ("auto", "unrolled", "structured"):
-        raise OcpError(f"{who}: derivatives must be 'auto', 'unrolled' or 'structured', got {value!r}")
+    if value not in ("auto", "unrolled", "structured", "chained"):
+        raise OcpError(f"{who}: derivatives must be 'auto', 'unrolled', 'structured' or 'chained', "
+                       f"got {value!r}")
     return value
 
 
@@ -125,11 +128,12 @@ def _directions(value, who: str):
 class RK4(Integrator):
     """Classical fourth-order Runge-Kutta with ``substeps`` equal steps per interval.
 
-    ``derivatives`` (``"auto"``, ``"unrolled"``, ``"structured"``) and ``directions``
+    ``derivatives`` (``"auto"``, ``"unrolled"``, ``"structured"``, ``"chained"``) and ``directions``
     (``"auto"``, ``"one"``, ``"all"`` or a chunk size; structured only): how the derivative
     code is built, a trade of code size against speed that never changes the computed
     values beyond round-off (see :class:`Integrator`). Firmware with little flash:
-    ``RK4(substeps, derivatives="structured", directions="one")``."""
+    ``RK4(substeps, derivatives="chained")`` (robot arm: half the code of the unrolled
+    form) or ``RK4(substeps, derivatives="structured", directions="one")`` (smallest)."""
 
     def __init__(self, substeps: int = 1, derivatives: str = "auto", directions="auto"):
         if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
@@ -373,6 +377,16 @@ def _as_sx(expr, what: str) -> ca.SX:
     return ca.densify(expr)
 
 
+def _rows(expr, lb, ub, what: str) -> tuple:
+    """``(expr, lb, ub)`` of a block of constraint rows, checked: an SX column and two bound
+    vectors of its size with ``lb <= ub``."""
+    e = _as_sx(expr, what)
+    lbv = _vector(lb, e.size1(), f"{what} lb")
+    ubv = _vector(ub, e.size1(), f"{what} ub")
+    _check_bounds(lbv, ubv, what)
+    return e, lbv, ubv
+
+
 def _check_bounds(lb: np.ndarray, ub: np.ndarray, what: str) -> None:
     bad = np.flatnonzero(lb > ub)
     if bad.size:
@@ -552,21 +566,13 @@ class Ocp:
     @_declaration
     def path_constraint(self, expr, lb=-math.inf, ub=math.inf) -> None:
         """``lb <= g(x, u, p) <= ub`` on stages 0..N-1 (several calls stack)."""
-        what = f"path constraint {len(self._path)}"
-        g = _as_sx(expr, what)
-        lbv = _vector(lb, g.size1(), f"{what} lb")
-        ubv = _vector(ub, g.size1(), f"{what} ub")
-        _check_bounds(lbv, ubv, what)
-        self._path.append((g, lbv, ubv))
+        self._path.append(_rows(expr, lb, ub, f"path constraint {len(self._path)}"))
 
     @_declaration
     def terminal_constraint(self, expr, lb=-math.inf, ub=math.inf) -> None:
         """``lb <= r(x_N, p) <= ub``; rows with ``lb == ub`` become equality rows."""
         what = f"terminal constraint {len(self._term_con)}"
-        r = _as_sx(expr, what)
-        lbv = _vector(lb, r.size1(), f"{what} lb")
-        ubv = _vector(ub, r.size1(), f"{what} ub")
-        _check_bounds(lbv, ubv, what)
+        r, lbv, ubv = _rows(expr, lb, ub, what)
         eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
         if eq.size:
             raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")

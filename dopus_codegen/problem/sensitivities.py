@@ -27,6 +27,12 @@ Propagation over ``w = (x, u)`` of the interval (``E = [0 I]`` selects ``u``):
   recursion along the ``nw`` seeds gives ``D_n = 0``,
   ``(D_j, G_u += ...) = soa(z_j, a_{j+1}, S_j, E, D_{j+1})`` and the Hessian ``[D_0; G_u]``.
 
+For small models a third way (``derivatives="chained"``, :func:`chain_kernel`,
+:func:`chain_hessian`) keeps the unit seeds of the substep constant, so CasADi exploits the
+substep's sparsity: one kernel returns the substep's Jacobian, adjoint and Hessian, and the
+Hessian of the interval is chained from them substep by substep (``G_j = H_j + T_j' G_{j+1}
+T_j``), at about the operation count of the unrolled expression with the code of one substep.
+
 Every kernel is exact (CasADi's algorithmic differentiation of the substep), so the blocks
 equal those of the unrolled expression to round-off. An implicit substep (an MX function
 with a rootfinder) gets its kernels the same way; CasADi then differentiates the
@@ -39,7 +45,7 @@ from typing import Optional
 import casadi as ca
 
 __all__ = ["SubstepKernels", "substep_kernels", "propagate_forward", "propagate_adjoint",
-           "interval_map", "DIRECTION_MODES"]
+           "interval_map", "DIRECTION_MODES", "chain_kernel", "chain_hessian"]
 
 _SX_OPTS = {"cse": True}
 
@@ -180,3 +186,51 @@ def propagate_adjoint(K: SubstepKernels, xs: list, u, p, a_n, S: Optional[list] 
     g = ca.vertcat(a, gu)
     H = ca.vertcat(D, Gu) if S is not None else None
     return g, H
+
+
+def chain_kernel(prefix: str, F: ca.Function, nx: int, nu: int, np_: int) -> ca.Function:
+    """One substep and its first and second derivatives at once, for Hessians by chaining
+    the substeps (:func:`chain_hessian`): ``xupa = (x, u, p, a) -> (x+, F_x, F_u, F_x' a,
+    F_u' a, H)`` with ``H`` the Hessian of ``a' F`` over ``z = (x, u)`` (dense). The seeds
+    are the constant unit directions of ``z``, so CasADi's differentiation keeps the
+    sparsity of the substep (unlike the symbolic seeds of the forward-over-adjoint kernels)."""
+    is_sx = F.is_a("SXFunction")
+    T = ca.SX if is_sx else ca.MX
+    x, u, p, a = T.sym("x", nx), T.sym("u", nu), T.sym("p", np_), T.sym("a", nx)
+    z = ca.vertcat(x, u)
+    xn = F(x, u, p)
+    J = ca.jacobian(xn, z)
+    H, g = ca.hessian(ca.dot(a, xn), z)
+    d = ca.densify
+    return ca.Function(f"{prefix}_chain", [ca.vertcat(x, u, p, a)],
+                       [d(xn), d(J[:, :nx]), d(J[:, nx:]), d(g[:nx]), d(g[nx:]), d(H)], ["xupa"],
+                       ["xn", "Jx", "Ju", "ax", "au", "H"], _SX_OPTS if is_sx else {})
+
+
+def chain_hessian(K: ca.Function, F: ca.Function, n: int, x, u, p, a_n):
+    """``(x_n, Phi, g, H)`` of ``a_n' x_n`` over ``w = (x_0, u)`` by Jacobian chaining.
+
+    With ``T_j = [[F_x, F_u], [0, I]]`` the Jacobian of ``z_j -> z_{j+1}``, the Hessian of
+    the interval is accumulated from the last substep back:
+    ``G_{n-1} = H_{n-1}``, ``G_j = H_j + T_j' G_{j+1} T_j`` (``H_j``: the Hessian of
+    ``a_{j+1}' F`` at ``z_j``, ``a_j = F_x' a_{j+1}``), ``H = G_0``; likewise
+    ``Phi = d x_n / d w`` and the gradient ``g``. The forward pass evaluates ``F`` for the
+    first ``n - 1`` substeps; each substep then calls ``K`` (:func:`chain_kernel`) once."""
+    nx = x.size1()
+    xs = [x]
+    for _ in range(n - 1):
+        xs.append(F(xs[-1], u, p))
+    a, gu = a_n, None
+    xn = G = Px = Pu = None
+    for j in reversed(range(n)):
+        x_next, Jx, Ju, ax, au, Hj = K(ca.vertcat(xs[j], u, p, a))
+        if G is None:
+            xn, G, Px, Pu, gu = x_next, Hj, Jx, Ju, au
+        else:
+            Gx, Gu = G[:, :nx], G[:, nx:]
+            GT = ca.horzcat(ca.mtimes(Gx, Jx), ca.mtimes(Gx, Ju) + Gu)
+            G = Hj + ca.vertcat(ca.mtimes(Jx.T, GT[:nx, :]), ca.mtimes(Ju.T, GT[:nx, :]) + GT[nx:, :])
+            Px, Pu = ca.mtimes(Px, Jx), ca.mtimes(Px, Ju) + Pu
+            gu = gu + au
+        a = ax
+    return xn, ca.horzcat(Px, Pu), ca.vertcat(a, gu), G

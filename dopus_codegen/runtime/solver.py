@@ -122,6 +122,23 @@ def load_library(folder) -> tuple:
     return ffi, lib, meta
 
 
+def _c_property(fname: str, kind=int, doc: Optional[str] = None) -> property:
+    """A read-only property: ``kind(<name>_<fname>(solver))``."""
+    return property(lambda self: kind(self._c(fname)(self._s)), doc=doc)
+
+
+def _setting_property(name: str) -> property:
+    """A read-only property: the value of the setting ``name`` (``<name>_get_<name>``) by
+    its name in :mod:`dopus_codegen.settings`."""
+    return property(lambda self: settings.value_of(name, self._c(f"get_{name}")(self._s)))
+
+
+def _array_property(fname: str, shape, doc: Optional[str] = None) -> property:
+    """A read-only property: the array ``<name>_<fname>(solver, out)`` writes, of the shape
+    ``shape(handle)``."""
+    return property(lambda self: self._get(fname, shape(self)), doc=doc)
+
+
 # ---------------------------------------------------------------------------------- handle
 class CSolver:
     """The generated C solver behind the backend protocol of docs/algorithm.md section 7.
@@ -223,6 +240,11 @@ class CSolver:
             msg += "; " + qp_failure_text(self.enums["dopus_qp_status"].name(qp_status),
                                           int(self._c("get_qp_iterations")(self._s)),
                                           int(self._c("get_qp_max_iter")(self._s)), qp_status)
+            row = self.qp_infeasible_row
+            if row is not None:
+                from ..problem.checks import describe_qp_row
+
+                msg += "; " + describe_qp_row(self.disc, row)
         raise DopusError(msg, status, qp_status)
 
     def _bad(self, message: str, status: int = STATUS_INVALID_ARGUMENT):
@@ -313,19 +335,10 @@ class CSolver:
         else:
             self._check(self._c("set_levenberg_marquardt")(self._s, v), f"lm={lm!r}")
 
-    @property
-    def lm(self) -> float:
-        """The term of the next QP (fixed, or the current automatic value)."""
-        return float(self._c("get_levenberg_marquardt")(self._s))
-
-    @property
-    def lm_auto(self) -> bool:
-        return bool(self._c("get_lm_auto")(self._s))
-
-    @property
-    def lm_scale(self) -> float:
-        """The Hessian scale of the automatic term (section 10)."""
-        return float(self._c("get_lm_scale")(self._s))
+    lm = _c_property("get_levenberg_marquardt", float,
+                     "The term of the next QP (fixed, or the current automatic value).")
+    lm_auto = _c_property("get_lm_auto", bool)
+    lm_scale = _c_property("get_lm_scale", float, "The Hessian scale of the automatic term (section 10).")
 
     def set_qp_tol(self, tol: float) -> None:
         self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")
@@ -341,14 +354,9 @@ class CSolver:
             self._bad(f"qp_warm_start must be True or False, got {on!r}")
         self._check(self._c("set_qp_warm_start")(self._s, int(bool(on))), "qp_warm_start")
 
-    @property
-    def qp_warm_start(self) -> bool:
-        return bool(self._c("get_qp_warm_start")(self._s))
-
-    @property
-    def qp_cold_retry(self) -> bool:
-        """True when the last feedback's warm-started QP failed and the cold retry ran."""
-        return bool(self._c("get_qp_cold_retry")(self._s))
+    qp_warm_start = _c_property("get_qp_warm_start", bool)
+    qp_cold_retry = _c_property("get_qp_cold_retry", bool,
+                                "True when the last feedback's warm-started QP failed and the cold retry ran.")
 
     def set_parameters(self, p) -> None:
         """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
@@ -364,37 +372,14 @@ class CSolver:
         a = self._array(pk, (self.np,), f"parameters of node {k}")
         self._check(self._c("set_parameters_node")(self._s, int(k), self._ptr(a)), "set_parameters_node")
 
-    @property
-    def M(self) -> int:
-        return int(self._c("get_M")(self._s))
-
-    @property
-    def mode(self) -> str:
-        return settings.value_of("mode", self._c("get_mode")(self._s))
-
-    @property
-    def hessian(self) -> str:
-        return settings.value_of("hessian", self._c("get_hessian")(self._s))
-
-    @property
-    def regularization(self) -> str:
-        return settings.value_of("regularization", self._c("get_regularization")(self._s))
-
-    @property
-    def cost_hessian(self) -> str:
-        return settings.value_of("cost_hessian", self._c("get_cost_hessian")(self._s))
-
-    @property
-    def reg_eps(self) -> float:
-        return float(self._c("get_reg_eps")(self._s))
-
-    @property
-    def qp_tol(self) -> float:
-        return float(self._c("get_qp_tol")(self._s))
-
-    @property
-    def p(self) -> np.ndarray:
-        return self._get("get_parameters", (self.N + 1, self.np))
+    M = _c_property("get_M")
+    mode = _setting_property("mode")
+    hessian = _setting_property("hessian")
+    regularization = _setting_property("regularization")
+    cost_hessian = _setting_property("cost_hessian")
+    reg_eps = _c_property("get_reg_eps", float)
+    qp_tol = _c_property("get_qp_tol", float)
+    p = _array_property("get_parameters", lambda s: (s.N + 1, s.np))
 
     # ------------------------------------------------------------------ the iteration
     def init(self, xhat0, guess=None) -> None:
@@ -449,18 +434,9 @@ class CSolver:
             self._bad(f"recovery max_failures must be an integer >= 1, got {max_failures!r}")
         self._check(self._c("set_recovery")(self._s, int(bool(on)), int(k)), "set_recovery")
 
-    @property
-    def recovery(self) -> bool:
-        return bool(self._c("get_recovery")(self._s))
-
-    @property
-    def recovery_failures(self) -> int:
-        return int(self._c("get_recovery_failures")(self._s))
-
-    @property
-    def u0(self) -> np.ndarray:
-        """The control returned by the last feedback (successful or not)."""
-        return self._get("get_u0", (self.n_u,))
+    recovery = _c_property("get_recovery", bool)
+    recovery_failures = _c_property("get_recovery_failures")
+    u0 = _array_property("get_u0", lambda s: (s.n_u,), "The control returned by the last feedback (successful or not).")
 
     @property
     def flags(self) -> set:
@@ -469,20 +445,9 @@ class CSolver:
         f = int(self._c("get_flags")(self._s))
         return {name for bit, name in FLAGS.items() if f & bit}
 
-    @property
-    def recoveries(self) -> int:
-        """Re-initialisations by the automatic recovery since init."""
-        return int(self._c("get_recoveries")(self._s))
-
-    @property
-    def failed_feedbacks(self) -> int:
-        """Consecutive failed feedbacks."""
-        return int(self._c("get_failed_feedbacks")(self._s))
-
-    @property
-    def kkt_proxy(self) -> float:
-        """The divergence measure of the last prepare or init (section 9)."""
-        return float(self._c("get_kkt_proxy")(self._s))
+    recoveries = _c_property("get_recoveries", int, "Re-initialisations by the automatic recovery since init.")
+    failed_feedbacks = _c_property("get_failed_feedbacks", int, "Consecutive failed feedbacks.")
+    kkt_proxy = _c_property("get_kkt_proxy", float, "The divergence measure of the last prepare or init (section 9).")
 
     @property
     def scales(self) -> tuple:
@@ -504,45 +469,16 @@ class CSolver:
         return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
 
     # ------------------------------------------------------------------ read-only state
-    @property
-    def initialized(self) -> bool:
-        return bool(self._c("is_initialized")(self._s))
-
-    @property
-    def x(self) -> np.ndarray:
-        return self._get("get_x", (self.N + 1, self.nx))
-
-    @property
-    def u(self) -> np.ndarray:
-        return self._get("get_u", (self.N, self.n_u))
-
-    @property
-    def lam(self) -> np.ndarray:
-        return self._get("get_lam", (self.N + 1, self.nx))
-
-    @property
-    def mu_g(self) -> np.ndarray:
-        return self._get("get_mu_g", (self.N, self.ng))
-
-    @property
-    def mu_b(self) -> np.ndarray:
-        return self._get("get_mu_b", (self.N, self.nw))
-
-    @property
-    def mu_bN(self) -> np.ndarray:
-        return self._get("get_mu_bN", (self.nx,))
-
-    @property
-    def mu_r(self) -> np.ndarray:
-        return self._get("get_mu_r", (self.nr,))
-
-    @property
-    def nu(self) -> np.ndarray:
-        return self._get("get_nu", (self.ne,))
-
-    @property
-    def rho(self) -> np.ndarray:
-        return self._get("get_rho", (self.N,))
+    initialized = _c_property("is_initialized", bool)
+    x = _array_property("get_x", lambda s: (s.N + 1, s.nx))
+    u = _array_property("get_u", lambda s: (s.N, s.n_u))
+    lam = _array_property("get_lam", lambda s: (s.N + 1, s.nx))
+    mu_g = _array_property("get_mu_g", lambda s: (s.N, s.ng))
+    mu_b = _array_property("get_mu_b", lambda s: (s.N, s.nw))
+    mu_bN = _array_property("get_mu_bN", lambda s: (s.nx,))
+    mu_r = _array_property("get_mu_r", lambda s: (s.nr,))
+    nu = _array_property("get_nu", lambda s: (s.ne,))
+    rho = _array_property("get_rho", lambda s: (s.N,))
 
     @property
     def recomputed(self) -> list:
@@ -550,17 +486,27 @@ class CSolver:
         n = int(self._c("get_recomputed")(self._s, buf))
         return [int(buf[i]) for i in range(n)]
 
-    @property
-    def ring_head(self) -> int:
-        return int(self._c("get_ring_head")(self._s))
+    ring_head = _c_property("get_ring_head")
+    qp_iterations = _c_property("get_qp_iterations")
+    qp_status = _c_property("get_qp_status")
 
     @property
-    def qp_iterations(self) -> int:
-        return int(self._c("get_qp_iterations")(self._s))
+    def qp_infeasible_row(self) -> Optional[dict]:
+        """When the last QP was infeasible: the row of the OCP with the largest multiplier of
+        its infeasibility certificate, ``{"stage", "kind", "index", "side", "bound"}`` (kind:
+        ``state``, ``control``, ``path``, ``terminal`` or ``terminal_eq``; side: ``lower``
+        or ``upper``; see dopus_get_qp_infeasible_row); else None."""
+        import cffi
 
-    @property
-    def qp_status(self) -> int:
-        return int(self._c("get_qp_status")(self._s))
+        try:
+            get, row = self._c("get_qp_infeasible_row"), self._ffi.new(f"{self.name}_row_info *")
+        except (AttributeError, cffi.CDefError):  # a library generated before the getter existed
+            return None
+        if not get(self._s, row):
+            return None
+        return {"stage": int(row.stage), "kind": self.enums["dopus_row_kind"].name(row.kind),
+                "index": int(row.index), "side": {-1: "lower", 1: "upper"}.get(int(row.side), "lower above upper"),
+                "bound": float(row.bound)}
 
     @property
     def timings(self) -> dict:
@@ -592,10 +538,8 @@ class CSolver:
         self._clock_cb = cb
         self._c("set_clock")(self._s, cb, self._ffi.NULL)
 
-    @property
-    def has_clock(self) -> bool:
-        """True if the timings measure time (False: no clock on this platform, they read 0)."""
-        return bool(self._c("has_clock")(self._s))
+    has_clock = _c_property("has_clock", bool,
+                            "True if the timings measure time (False: no clock on this platform, they read 0).")
 
     def __repr__(self) -> str:
         return (f"CSolver({self.name!r}, N={self.N}, M={self.M}, mode={self.mode!r}, "

@@ -237,6 +237,19 @@ def _resolve_settings(ocp, cli: dict):
     return values, sources
 
 
+def _write_outputs(result: dict, json_out, plot_out, plot, echo) -> dict:
+    """The JSON (``json_out``) and the figure (``plot(result, plot_out)``) of a study, where
+    asked; returns ``result``."""
+    if json_out:
+        Path(json_out).parent.mkdir(parents=True, exist_ok=True)
+        Path(json_out).write_text(json.dumps(json_ready(result), indent=1, allow_nan=False) + "\n")
+        echo(f"wrote {json_out}")
+    if plot_out:
+        plot(result, plot_out)
+        echo(f"wrote {plot_out}")
+    return result
+
+
 def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None, json_out=None, plot_out=None,
               reps: int = 300, steps: int = 300, settle: int = 100, kkt_iters: int = 60,
               cond_list=(40, 20, 10, 8, 5, 4, 2, 1), quick: bool = False, work=None,
@@ -289,14 +302,7 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
               "kkt": kkt, **res}
     result["machine"] = res.get("machine_before")
     result["headline"] = headline(result)
-    if json_out:
-        Path(json_out).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_out).write_text(json.dumps(json_ready(result), indent=1, allow_nan=False) + "\n")
-        echo(f"wrote {json_out}")
-    if plot_out:
-        plot_bench(result, plot_out)
-        echo(f"wrote {plot_out}")
-    return result
+    return _write_outputs(result, json_out, plot_out, plot_bench, echo)
 
 
 def headline(result: dict) -> dict:
@@ -422,14 +428,7 @@ def run_scaling(ocp_file, n_list, m_list=("1", "full"), json_out=None, plot_out=
               "settings": {k: values[k] for k in values if k != "M"}, "sources": sources, "per_N": per_n,
               "scaling": scaling, **res}
     result["machine"] = res.get("machine_before")
-    if json_out:
-        Path(json_out).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_out).write_text(json.dumps(json_ready(result), indent=1, allow_nan=False) + "\n")
-        echo(f"wrote {json_out}")
-    if plot_out:
-        plot_scaling(result, plot_out)
-        echo(f"wrote {plot_out}")
-    return result
+    return _write_outputs(result, json_out, plot_out, plot_scaling, echo)
 
 
 # ------------------------------------------------------------------------------ output

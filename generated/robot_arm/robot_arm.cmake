@@ -16,6 +16,7 @@ add_library(robot_arm STATIC
     "${ROBOT_ARM_DIR}/robot_arm_qp.c"
     "${ROBOT_ARM_DIR}/robot_arm_reg.c"
     "${ROBOT_ARM_DIR}/robot_arm_ring.c"
+    "${ROBOT_ARM_DIR}/robot_arm_settings.c"
     "${ROBOT_ARM_DIR}/robot_arm_solver.c"
     "${ROBOT_ARM_DIR}/robot_arm_timer.c"
 )

@@ -137,6 +137,23 @@ int robot_arm_get_recomputed(const robot_arm_solver *s, int *stages);
 /* The last QP: iterations, status (enum robot_arm_qp_status of robot_arm_qp.h). */
 int robot_arm_get_qp_iterations(const robot_arm_solver *s);
 int robot_arm_get_qp_status(const robot_arm_solver *s);
+/* A constraint row of the OCP at one stage of the horizon. */
+typedef struct {
+    int stage;    /* 0..N-1; N: the terminal node */
+    int kind;     /* enum robot_arm_row_kind */
+    int index;    /* the state or control, or the row among the path rows, the terminal
+                     inequality rows or the terminal equality rows (each stacked in
+                     declaration order) */
+    int side;     /* -1: its lower bound, +1: its upper bound (an equality row: the sign of
+                     the certificate's multiplier), 0: lower bound above upper bound */
+    double bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
+                     function is the declared row minus its value) */
+} robot_arm_row_info;
+/* When the last QP was infeasible (robot_arm_get_qp_status ROBOT_ARM_QP_PRIMAL_INFEASIBLE): the row
+ * with the largest multiplier of its infeasibility certificate, the row that the other rows
+ * of the certificate (the bounds, dynamics and measured state) keep from being met; stages
+ * are those of that QP's horizon. Returns 1 and writes *row, else returns 0. */
+int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_info *row);
 /* Health of the controller (docs/algorithm.md section 9). Flags (ROBOT_ARM_FLAG_*) raised by
  * the last feedback and the prepare after it (feedback clears them): the returned u0 was
  * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control

@@ -5,6 +5,7 @@
 #include "robot_arm_linalg.h"
 #include "robot_arm_problem.h"
 #include "robot_arm_solver.h"
+#include "robot_arm_solver_internal.h"
 
 static double robot_arm_kkt_max(double a, double b)
 {
@@ -36,7 +37,7 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
     double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
     double gL[ROBOT_ARM_NW], phi[ROBOT_ARM_NX], g[ROBOT_ARM_DIM(ROBOT_ARM_NG)], l;
     double gLN[ROBOT_ARM_NX], E, r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
-    int k, i;
+    int k, i, rc;
 
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         eq = robot_arm_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
@@ -62,9 +63,9 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
             ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(g[i], robot_arm_lg[i], robot_arm_ug[i]));
             comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_g[k][i], g[i], robot_arm_lg[i], robot_arm_ug[i]));
         }
-        /* simple bounds: x_k only for k >= 1 (x_0 is fixed by xhat0, so a multiplier on
-         * it pairs with infinite sides and counts with its magnitude) */
-        if (k == 0) {
+        /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
+         * sides and counts with its magnitude) */
+        if (!robot_arm_x_bounded(k)) {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
                 comp = robot_arm_kkt_max(comp, fabs(s->mu_b[0][i]));
             }
@@ -81,13 +82,9 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
                 comp, robot_arm_kkt_comp(s->mu_b[k][ROBOT_ARM_NX + i], s->u[k][i], robot_arm_lbu[i], robot_arm_ubu[i]));
         }
     }
-    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
-                             &s->mem.ev.fun_work) != 0) {
-        return ROBOT_ARM_ERR_FUNCTION;
-    }
-    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gLN) || !isfinite(E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
-        !robot_arm_lai_vec_finite(ROBOT_ARM_NE, r_eq)) {
-        return ROBOT_ARM_ERR_NONFINITE_VALUE;
+    rc = robot_arm_term_grad_checked(s, gLN, &E, r, r_eq);
+    if (rc != ROBOT_ARM_OK) {
+        return rc;
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         stat = robot_arm_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[ROBOT_ARM_N][i]));

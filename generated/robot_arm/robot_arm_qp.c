@@ -1528,3 +1528,44 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
     }
     return finish(ws, &r, status, iter, keep_best ? NULL : sol, info);
 }
+
+/* ---------------------------------------------------------------- infeasible row */
+
+int robot_arm_qp_infeasible_row(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int *stage, int *row,
+                            int *side)
+{
+    int i, flat = -1, s = 0;
+    double lo, up, zmax = 0.0;
+    for (i = 0; i < ws->nb; ++i) {
+        row_bounds(in, ws->bidx[i], &lo, &up);
+        if (ws->has_lo[i] && ws->has_up[i] && lo > up) {
+            zmax = INFINITY; /* the solve stopped before forming a certificate */
+            flat = ws->bidx[i];
+            s = 0;
+            break;
+        }
+        if (ws->has_lo[i] && ws->z_lo[i] > zmax) {
+            zmax = ws->z_lo[i];
+            flat = ws->bidx[i];
+            s = -1;
+        }
+        if (ws->has_up[i] && ws->z_up[i] > zmax) {
+            zmax = ws->z_up[i];
+            flat = ws->bidx[i];
+            s = 1;
+        }
+    }
+    for (i = 0; i < NE; ++i) {
+        if (fabs(ws->nu[i]) > zmax) {
+            zmax = fabs(ws->nu[i]);
+            flat = NI + i; /* after the inequality rows: terminal equality row i */
+            s = ws->nu[i] > 0.0 ? 1 : -1;
+        }
+    }
+    if (flat < 0)
+        return 0;
+    *stage = flat < TOFF ? flat / NSI : N;
+    *row = flat - *stage * NSI;
+    *side = s;
+    return 1;
+}

@@ -292,4 +292,14 @@ unsigned long robot_arm_qp_workspace_size(void);
 int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const robot_arm_qp_settings *settings,
                    robot_arm_qp_sol *sol, robot_arm_qp_info *info);
 
+/* After robot_arm_qp_solve returned ROBOT_ARM_QP_PRIMAL_INFEASIBLE (ws and in as they were then): the
+ * row with the largest multiplier of the infeasibility certificate among the bounded rows
+ * and the terminal equality rows, or a row whose lower bound lies above its upper bound.
+ * stage: 0..N-1, or N for the terminal rows; row: within the stage in the order of the
+ * header comment (w_k, then the rows of C_k; x_N, the rows of R, then those of Req); side:
+ * -1 the lower bound, +1 the upper bound (an equality row: the sign of its multiplier), 0
+ * lower above upper. Returns 1, or 0 when no row carries a multiplier. */
+int robot_arm_qp_infeasible_row(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int *stage, int *row,
+                            int *side);
+
 #endif /* ROBOT_ARM_QP_H */

@@ -4,25 +4,26 @@
 
 #include "robot_arm_ring.h"
 
+static void robot_arm_ring_zero(double *v, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        v[i] = 0.0;
+    }
+}
+
 void robot_arm_ring_reset(robot_arm_ring *ring)
 {
-    int k, i;
+    int k;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         robot_arm_stage_slot *s = &ring->slot[k];
-        for (i = 0; i < ROBOT_ARM_NW * ROBOT_ARM_NW; ++i)
-            s->Ht[i] = 0.0;
-        for (i = 0; i < ROBOT_ARM_NW * (ROBOT_ARM_NW + 1) / 2; ++i)
-            s->A_dyn[i] = 0.0;
-        for (i = 0; i < ROBOT_ARM_NX * ROBOT_ARM_NW; ++i)
-            s->Phit[i] = 0.0;
-        for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW); ++i)
-            s->Ct[i] = 0.0;
-        for (i = 0; i < ROBOT_ARM_NW; ++i)
-            s->F_w[i] = 0.0;
-        for (i = 0; i < ROBOT_ARM_NX; ++i)
-            s->phi[i] = 0.0;
-        for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG); ++i)
-            s->g[i] = 0.0;
+        robot_arm_ring_zero(s->Ht, ROBOT_ARM_NW * ROBOT_ARM_NW);
+        robot_arm_ring_zero(s->A_dyn, ROBOT_ARM_NW * (ROBOT_ARM_NW + 1) / 2);
+        robot_arm_ring_zero(s->Phit, ROBOT_ARM_NX * ROBOT_ARM_NW);
+        robot_arm_ring_zero(s->Ct, ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW));
+        robot_arm_ring_zero(s->F_w, ROBOT_ARM_NW);
+        robot_arm_ring_zero(s->phi, ROBOT_ARM_NX);
+        robot_arm_ring_zero(s->g, ROBOT_ARM_DIM(ROBOT_ARM_NG));
         robot_arm_ring_clear_step(s);
     }
     ring->ring_head = 0;
@@ -63,15 +64,10 @@ void robot_arm_ring_advance(robot_arm_ring *ring)
 
 void robot_arm_ring_clear_step(robot_arm_stage_slot *slot)
 {
-    int i;
-    for (i = 0; i < ROBOT_ARM_NW; ++i)
-        slot->dw[i] = 0.0;
-    for (i = 0; i < ROBOT_ARM_NX; ++i)
-        slot->dlam[i] = 0.0;
-    for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG); ++i)
-        slot->dmu_g[i] = 0.0;
-    for (i = 0; i < ROBOT_ARM_NW; ++i)
-        slot->dmu_b[i] = 0.0;
+    robot_arm_ring_zero(slot->dw, ROBOT_ARM_NW);
+    robot_arm_ring_zero(slot->dlam, ROBOT_ARM_NX);
+    robot_arm_ring_zero(slot->dmu_g, ROBOT_ARM_DIM(ROBOT_ARM_NG));
+    robot_arm_ring_zero(slot->dmu_b, ROBOT_ARM_NW);
 }
 
 double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w_new, const double *phi_new,

@@ -16,6 +16,7 @@
 #include "robot_arm_linalg.h"
 #include "robot_arm_problem.h"
 #include "robot_arm_solver.h"
+#include "robot_arm_solver_internal.h"
 
 #define ROBOT_ARM_MAGIC 0x444f5055 /* "DOPU" */
 #define ROBOT_ARM_DEFAULT_QP_TOL 1e-10
@@ -30,14 +31,22 @@ static void robot_arm_copy(double *dst, const double *src, int n)
     }
 }
 
-static void robot_arm_ensure_setup(robot_arm_solver *s)
+void robot_arm_ensure_setup(robot_arm_solver *s)
 {
     if (s->magic != ROBOT_ARM_MAGIC) {
         robot_arm_defaults(s);
     }
 }
 
-static int robot_arm_ret(robot_arm_solver *s, int status)
+void robot_arm_clear_x0_multiplier(robot_arm_solver *s)
+{
+    int i;
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        s->mu_b[0][i] = 0.0;
+    }
+}
+
+int robot_arm_ret(robot_arm_solver *s, int status)
 {
     s->status = status;
     return status;
@@ -401,7 +410,7 @@ static void robot_arm_lm_convexify(robot_arm_solver *s)
 }
 
 /* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
-static void robot_arm_lm_start(robot_arm_solver *s)
+void robot_arm_lm_start(robot_arm_solver *s)
 {
     if (!s->lm_auto) {
         return;
@@ -583,17 +592,26 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
     return ROBOT_ARM_OK;
 }
 
+int robot_arm_term_grad_checked(robot_arm_solver *s, double *gL, double *E, double *r, double *r_eq)
+{
+    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gL, E, r, r_eq,
+                             &s->mem.ev.fun_work) != 0) {
+        return ROBOT_ARM_ERR_FUNCTION;
+    }
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gL) || !isfinite(*E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NE, r_eq)) {
+        return ROBOT_ARM_ERR_NONFINITE_VALUE;
+    }
+    return ROBOT_ARM_OK;
+}
+
 /* Terminal F: gL_N, E, r, r_eq at the current point. */
 static int robot_arm_term_F(robot_arm_solver *s)
 {
     double gL[ROBOT_ARM_NX], E = 0.0, r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
-    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gL, &E, r, r_eq,
-                             &s->mem.ev.fun_work) != 0) {
-        return ROBOT_ARM_ERR_FUNCTION;
-    }
-    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gL) || !isfinite(E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
-        !robot_arm_lai_vec_finite(ROBOT_ARM_NE, r_eq)) {
-        return ROBOT_ARM_ERR_NONFINITE_VALUE;
+    int rc = robot_arm_term_grad_checked(s, gL, &E, r, r_eq);
+    if (rc != ROBOT_ARM_OK) {
+        return rc;
     }
     robot_arm_copy(s->gL_N, gL, ROBOT_ARM_NX);
     s->E = E;
@@ -658,9 +676,8 @@ static void robot_arm_assemble(robot_arm_solver *s)
             in->b[k][i] = slot->phi[i] - s->x[k + 1][i];
         }
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            /* x_0 is fixed by xhat0; the QP ignores the x part of stage 0 */
-            in->lbw[k][i] = k == 0 ? -INFINITY : robot_arm_lbx[i] - s->x[k][i];
-            in->ubw[k][i] = k == 0 ? INFINITY : robot_arm_ubx[i] - s->x[k][i];
+            in->lbw[k][i] = robot_arm_x_bounded(k) ? robot_arm_lbx[i] - s->x[k][i] : -INFINITY;
+            in->ubw[k][i] = robot_arm_x_bounded(k) ? robot_arm_ubx[i] - s->x[k][i] : INFINITY;
         }
         for (i = 0; i < ROBOT_ARM_NU; ++i) {
             in->lbw[k][ROBOT_ARM_NX + i] = robot_arm_lbu[i] - s->u[k][i];
@@ -804,13 +821,8 @@ int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, co
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
             s->mu_b[k][i] = mu_b ? mu_b[k * ROBOT_ARM_NW + i] : 0.0;
         }
-        /* x_0 carries no bound: its multiplier is 0 by definition */
-        if (k == 0) {
-            for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                s->mu_b[0][i] = 0.0;
-            }
-        }
     }
+    robot_arm_clear_x0_multiplier(s);
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
     }
@@ -894,14 +906,11 @@ static void robot_arm_qp_warm_point(robot_arm_solver *s)
     }
 }
 
-int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
+/* Feedback step 1: the call is refused before the QP when the solver is not initialised,
+ * the measurement is not finite or no QP is prepared (the fallback control is returned).
+ * Returns ROBOT_ARM_OK when the QP is to be solved, else the status of the failed call. */
+static int robot_arm_feedback_admit(robot_arm_solver *s, const double *xhat0, double *u0)
 {
-    const robot_arm_qp_sol *sol = &s->mem.qp.sol;
-    double t0;
-    int k, i, qs, retries;
-
-    robot_arm_ensure_setup(s);
-    s->flags = 0;
     if (!s->initialized) {
         robot_arm_fallback_u0(s, u0);
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
@@ -919,9 +928,13 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
         /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
         return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_NOT_PREPARED);
     }
-    s->timer.t[ROBOT_ARM_PHASE_FEEDBACK] = 0.0;
-    t0 = robot_arm_timer_now(&s->timer);
+    return ROBOT_ARM_OK;
+}
 
+/* Step 2: the measurement enters the QP as the fixed step of x_0. */
+static void robot_arm_feedback_measure(robot_arm_solver *s, const double *xhat0)
+{
+    int i;
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
@@ -930,50 +943,84 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
+}
+
+/* 1 when the QP status is "solved" and its solution finite. */
+static int robot_arm_qp_ok(const robot_arm_solver *s, int qs)
+{
+    return qs == ROBOT_ARM_QP_SOLVED && robot_arm_qp_solution_finite(&s->mem.qp.sol);
+}
+
+/* One solve of the prepared QP, warm (from the point in s->mem.qp.sol) or cold; its iterations
+ * are added to those of the call. Returns the QP status. */
+static int robot_arm_qp_attempt(robot_arm_solver *s, int warm)
+{
+    int qs;
+    s->qp_settings.warm_start = warm;
+    qs = robot_arm_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    s->qp_iterations += s->qp_info.iterations;
+    return qs;
+}
+
+/* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry
+ * in the same call when the warm start failed or needed the inertia correction: the QP is
+ * then nonconvex on the null space of its equalities and may have several local
+ * minimisers, and the warm start may have reached another one than the cold start finds
+ * (the one the closed loop has followed so far). Returns the QP status. */
+static int robot_arm_feedback_qp(robot_arm_solver *s)
+{
+    int qs;
     s->qp_in.hess_shift = s->lm;
+    s->qp_iterations = 0;
     s->qp_cold_retry = 0;
-    s->qp_settings.warm_start = s->qp_warm;
     if (s->qp_warm) {
         robot_arm_qp_warm_point(s);
     }
-    qs = robot_arm_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
-    s->qp_iterations = s->qp_info.iterations;
+    qs = robot_arm_qp_attempt(s, s->qp_warm);
     if (s->qp_warm && qs != ROBOT_ARM_QP_INVALID_INPUT &&
-        (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol) || s->qp_info.inertia_corrections > 0)) {
-        /* the warm start failed, or it needed the inertia correction: the QP is nonconvex
-         * on the null space of its equalities there and may have several local minimisers,
-         * and the warm start may have reached another one than the cold start finds (the
-         * one the closed loop has followed so far): retry from the cold starting point in
-         * the same call */
+        (!robot_arm_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
-        s->qp_settings.warm_start = 0;
-        qs = robot_arm_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
-        s->qp_iterations += s->qp_info.iterations;
+        qs = robot_arm_qp_attempt(s, 0);
     }
-    /* the automatic term (section 10): a QP still not solved is solved again (cold) with lm
-     * raised */
-    retries = 0;
-    while (s->lm_auto && retries < ROBOT_ARM_LM_RETRIES && s->lm < ROBOT_ARM_LM_MAX_REL * s->lm_scale &&
-           (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol)) && qs != ROBOT_ARM_QP_INVALID_INPUT) {
+    return qs;
+}
+
+/* Step 4, the automatic term (algorithm.md section 10): a QP still not solved is solved
+ * again (cold) with lm raised, at most ROBOT_ARM_LM_RETRIES times. Returns the QP status; the
+ * number of retries in *retries. */
+static int robot_arm_feedback_lm_retries(robot_arm_solver *s, int qs, int *retries)
+{
+    *retries = 0;
+    while (s->lm_auto && *retries < ROBOT_ARM_LM_RETRIES && s->lm < ROBOT_ARM_LM_MAX_REL * s->lm_scale &&
+           !robot_arm_qp_ok(s, qs) && qs != ROBOT_ARM_QP_INVALID_INPUT) {
         robot_arm_lm_raise(s);
         s->qp_in.hess_shift = s->lm;
-        s->qp_settings.warm_start = 0;
-        qs = robot_arm_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
-        s->qp_iterations += s->qp_info.iterations;
-        retries += 1;
+        qs = robot_arm_qp_attempt(s, 0);
+        *retries += 1;
     }
-    s->qp_status = qs;
-    if (qs != ROBOT_ARM_QP_SOLVED || !robot_arm_qp_solution_finite(sol)) {
-        robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
-        return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_QP);
-    }
-    /* the divergence test of the step (algorithm.md section 9): no step outside the box */
-    if (!robot_arm_box_ok(s, &s->x[0][0], &sol->x[0][0], ROBOT_ARM_NX, &s->u[0][0], &sol->u[0][0], ROBOT_ARM_QP_NU1)) {
-        robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
-        return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_DIVERGED);
-    }
+    return qs;
+}
 
-    /* domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k) */
+/* Step 5: the outcome of the QP: ROBOT_ARM_ERR_QP when it is not solved, ROBOT_ARM_ERR_DIVERGED when
+ * its step leaves the box of the divergence test (algorithm.md section 9), else ROBOT_ARM_OK. */
+static int robot_arm_feedback_check_step(const robot_arm_solver *s, int qs)
+{
+    const robot_arm_qp_sol *sol = &s->mem.qp.sol;
+    if (!robot_arm_qp_ok(s, qs)) {
+        return ROBOT_ARM_ERR_QP;
+    }
+    if (!robot_arm_box_ok(s, &s->x[0][0], &sol->x[0][0], ROBOT_ARM_NX, &s->u[0][0], &sol->u[0][0], ROBOT_ARM_QP_NU1)) {
+        return ROBOT_ARM_ERR_DIVERGED;
+    }
+    return ROBOT_ARM_OK;
+}
+
+/* Step 6: the step of each stage kept in its slot for the secant criterion:
+ * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
+static void robot_arm_store_domega(robot_arm_solver *s)
+{
+    const robot_arm_qp_sol *sol = &s->mem.qp.sol;
+    int k, i;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -990,7 +1037,13 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
             slot->dmu_b[i] = sol->mu_b[k][i] - s->mu_b[k][i];
         }
     }
-    /* the full step (paper eq. 4): w += dw, multipliers replaced by the QP's */
+}
+
+/* Step 7, the full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
+static void robot_arm_take_step(robot_arm_solver *s)
+{
+    const robot_arm_qp_sol *sol = &s->mem.qp.sol;
+    int k, i;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
             s->x[k][i] += sol->x[k][i];
@@ -1018,12 +1071,17 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
         s->nu[i] = sol->nu[i];
     }
     s->qp_ready = 0;
-    /* a good plan: the fallback of the next failures; u0 clipped to the bounds */
+}
+
+/* Step 8: a good plan, the fallback of the next failures; the automatic term lowered unless
+ * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
+static void robot_arm_keep_plan(robot_arm_solver *s, double *u0, int lowered)
+{
     s->n_failed = 0;
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
-    if (retries == 0) {
-        robot_arm_lm_feedback(s, ROBOT_ARM_OK); /* lowered, unless this QP needed a raise */
+    if (lowered) {
+        robot_arm_lm_feedback(s, ROBOT_ARM_OK);
     }
     robot_arm_copy(&s->plan_u[0][0], &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
     if (robot_arm_clip_u(s->u[0], s->u0_out)) {
@@ -1032,6 +1090,33 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     if (u0) {
         robot_arm_copy(u0, s->u0_out, ROBOT_ARM_NU);
     }
+}
+
+int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
+{
+    double t0;
+    int rc, qs, retries;
+
+    robot_arm_ensure_setup(s);
+    s->flags = 0;
+    rc = robot_arm_feedback_admit(s, xhat0, u0);
+    if (rc != ROBOT_ARM_OK) {
+        return rc;
+    }
+    s->timer.t[ROBOT_ARM_PHASE_FEEDBACK] = 0.0;
+    t0 = robot_arm_timer_now(&s->timer);
+    robot_arm_feedback_measure(s, xhat0);
+    qs = robot_arm_feedback_qp(s);
+    qs = robot_arm_feedback_lm_retries(s, qs, &retries);
+    s->qp_status = qs;
+    rc = robot_arm_feedback_check_step(s, qs);
+    if (rc != ROBOT_ARM_OK) {
+        robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
+        return robot_arm_feedback_failed(s, u0, rc);
+    }
+    robot_arm_store_domega(s);
+    robot_arm_take_step(s);
+    robot_arm_keep_plan(s, u0, retries == 0);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
@@ -1063,8 +1148,8 @@ static void robot_arm_shift(robot_arm_solver *s)
     /* the last stage: the x part of mu_b from mu_bN, the u part kept */
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->mu_b[ROBOT_ARM_N - 1][i] = s->mu_bN[i];
-        s->mu_b[0][i] = 0.0;
     }
+    robot_arm_clear_x0_multiplier(s);
     robot_arm_ring_advance(&s->ring);
 }
 
@@ -1361,275 +1446,6 @@ double robot_arm_get_kkt(const robot_arm_solver *s)
     return m;
 }
 
-/* ---- settings ----------------------------------------------------------------------- */
-
-int robot_arm_set_M(robot_arm_solver *s, int M)
-{
-    robot_arm_ensure_setup(s);
-    if (M < 0 || M > ROBOT_ARM_N - 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->M = M;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_M(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->M;
-}
-
-int robot_arm_set_mode(robot_arm_solver *s, int mode)
-{
-    robot_arm_ensure_setup(s);
-    if (mode != ROBOT_ARM_MODE_RECEDING && mode != ROBOT_ARM_MODE_FIXED) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->mode = mode;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_mode(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->mode;
-}
-
-int robot_arm_set_hessian(robot_arm_solver *s, int hessian)
-{
-    robot_arm_ensure_setup(s);
-    if (hessian != ROBOT_ARM_HESSIAN_EXACT && hessian != ROBOT_ARM_HESSIAN_GAUSS_NEWTON) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    if (hessian == ROBOT_ARM_HESSIAN_GAUSS_NEWTON && !ROBOT_ARM_HAS_GN) {
-        /* Gauss-Newton needs a least-squares stage cost */
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->hessian = hessian;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_hessian(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->hessian;
-}
-
-int robot_arm_set_regularization(robot_arm_solver *s, int regularization, double eps)
-{
-    robot_arm_ensure_setup(s);
-    if ((regularization != ROBOT_ARM_REG_NONE && regularization != ROBOT_ARM_REG_PROJECT &&
-         regularization != ROBOT_ARM_REG_MIRROR) ||
-        !isfinite(eps) || !(eps > 0.0)) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->regularization = regularization;
-    s->reg_eps = eps;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_regularization(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->regularization;
-}
-
-double robot_arm_get_reg_eps(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->reg_eps;
-}
-
-int robot_arm_set_cost_hessian(robot_arm_solver *s, int fresh)
-{
-    robot_arm_ensure_setup(s);
-    if (fresh != 0 && fresh != 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->cost_hessian = fresh;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_cost_hessian(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->cost_hessian;
-}
-
-int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, double lm)
-{
-    robot_arm_ensure_setup(s);
-    if (!isfinite(lm) || !(lm >= 0.0)) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->lm_auto = 0;
-    s->lm = lm;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_set_lm_auto(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    s->lm_auto = 1;
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
-    if (s->initialized && s->qp_ready) {
-        robot_arm_lm_start(s);
-    }
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_lm_auto(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->lm_auto;
-}
-
-double robot_arm_get_lm_scale(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->lm_scale;
-}
-
-double robot_arm_get_levenberg_marquardt(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->lm;
-}
-
-int robot_arm_set_qp_tol(robot_arm_solver *s, double tol)
-{
-    robot_arm_ensure_setup(s);
-    if (!isfinite(tol) || !(tol > 0.0) || tol > ROBOT_ARM_QP_TOL_MAX) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.tol = tol;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-double robot_arm_get_qp_tol(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->qp_settings.tol;
-}
-
-int robot_arm_set_qp_max_iter(robot_arm_solver *s, int max_iter)
-{
-    robot_arm_ensure_setup(s);
-    if (max_iter < 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.max_iter = max_iter;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_qp_max_iter(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->qp_settings.max_iter;
-}
-
-int robot_arm_set_recovery(robot_arm_solver *s, int on, int max_failures)
-{
-    robot_arm_ensure_setup(s);
-    if ((on != 0 && on != 1) || max_failures < 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->recovery = on;
-    s->recovery_failures = max_failures;
-    if (!on) {
-        s->recover_pending = 0;
-    }
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_recovery(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->recovery;
-}
-
-int robot_arm_get_recovery_failures(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->recovery_failures;
-}
-
-int robot_arm_set_qp_warm_start(robot_arm_solver *s, int on)
-{
-    robot_arm_ensure_setup(s);
-    if (on != 0 && on != 1) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_warm = on;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_get_qp_warm_start(robot_arm_solver *s)
-{
-    robot_arm_ensure_setup(s);
-    return s->qp_warm;
-}
-
-int robot_arm_get_qp_cold_retry(const robot_arm_solver *s)
-{
-    return s->qp_cold_retry;
-}
-
-int robot_arm_set_parameters(robot_arm_solver *s, const double *p)
-{
-    int k, i;
-    robot_arm_ensure_setup(s);
-    if (ROBOT_ARM_NP == 0) {
-        return robot_arm_ret(s, ROBOT_ARM_OK);
-    }
-    if (p == 0) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    if (!robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NP, p)) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
-    }
-    for (k = 0; k <= ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NP; ++i) {
-            s->p[k][i] = p[k * ROBOT_ARM_NP + i];
-        }
-    }
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const double *pk)
-{
-    int i;
-    robot_arm_ensure_setup(s);
-    if (k < 0 || k > ROBOT_ARM_N) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    if (ROBOT_ARM_NP == 0) {
-        return robot_arm_ret(s, ROBOT_ARM_OK);
-    }
-    if (pk == 0) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NP, pk)) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
-    }
-    for (i = 0; i < ROBOT_ARM_NP; ++i) {
-        s->p[k][i] = pk[i];
-    }
-    return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-void robot_arm_get_parameters(robot_arm_solver *s, double *p)
-{
-    int k, i;
-    robot_arm_ensure_setup(s);
-    for (k = 0; k <= ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NP; ++i) {
-            p[k * ROBOT_ARM_NP + i] = s->p[k][i];
-        }
-    }
-}
-
 /* ---- getters ------------------------------------------------------------------------ */
 
 void robot_arm_get_x(const robot_arm_solver *s, double *x)
@@ -1701,6 +1517,45 @@ int robot_arm_get_qp_status(const robot_arm_solver *s)
     return s->qp_status;
 }
 
+/* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
+static double robot_arm_side_bound(const double *lo, const double *up, int i, int side)
+{
+    return side > 0 ? up[i] : lo[i];
+}
+
+int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_info *row)
+{
+    int k, j, side;
+    if (s->qp_status != ROBOT_ARM_QP_PRIMAL_INFEASIBLE ||
+        !robot_arm_qp_infeasible_row(&s->mem.qp.work, &s->qp_in, &k, &j, &side)) {
+        return 0;
+    }
+    row->stage = k;
+    row->side = side;
+    if (j < ROBOT_ARM_NX) {
+        row->kind = ROBOT_ARM_ROW_STATE;
+        row->index = j;
+        row->bound = robot_arm_side_bound(robot_arm_lbx, robot_arm_ubx, j, side);
+    } else if (k < ROBOT_ARM_N && j < ROBOT_ARM_NW) {
+        row->kind = ROBOT_ARM_ROW_CONTROL;
+        row->index = j - ROBOT_ARM_NX;
+        row->bound = robot_arm_side_bound(robot_arm_lbu, robot_arm_ubu, row->index, side);
+    } else if (k < ROBOT_ARM_N) {
+        row->kind = ROBOT_ARM_ROW_PATH;
+        row->index = j - ROBOT_ARM_NW;
+        row->bound = robot_arm_side_bound(robot_arm_lg, robot_arm_ug, row->index, side);
+    } else if (j < ROBOT_ARM_NX + ROBOT_ARM_NR) {
+        row->kind = ROBOT_ARM_ROW_TERMINAL;
+        row->index = j - ROBOT_ARM_NX;
+        row->bound = robot_arm_side_bound(robot_arm_lr, robot_arm_ur, row->index, side);
+    } else {
+        row->kind = ROBOT_ARM_ROW_TERMINAL_EQ;
+        row->index = j - ROBOT_ARM_NX - ROBOT_ARM_NR;
+        row->bound = 0.0;
+    }
+    return 1;
+}
+
 int robot_arm_get_flags(const robot_arm_solver *s)
 {
     return s->flags;
@@ -1736,6 +1591,11 @@ void robot_arm_get_scales(const robot_arm_solver *s, double *scale_x, double *sc
     }
 }
 
+int robot_arm_get_qp_cold_retry(const robot_arm_solver *s)
+{
+    return s->qp_cold_retry;
+}
+
 int robot_arm_get_status(const robot_arm_solver *s)
 {
     return s->status;
@@ -1754,19 +1614,4 @@ int robot_arm_get_ring_head(const robot_arm_solver *s)
 void robot_arm_get_timings(const robot_arm_solver *s, double *t)
 {
     robot_arm_copy(t, s->timer.t, ROBOT_ARM_N_PHASES);
-}
-
-void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), void *ctx)
-{
-    robot_arm_ensure_setup(s);
-    s->timer.clock = clock_fn ? clock_fn : robot_arm_timer_default_clock;
-    s->timer.ctx = clock_fn ? ctx : 0;
-}
-
-int robot_arm_has_clock(const robot_arm_solver *s)
-{
-    if (s->timer.clock == 0) {
-        return 0;
-    }
-    return s->timer.clock != robot_arm_timer_default_clock || robot_arm_timer_has_default_clock();
 }

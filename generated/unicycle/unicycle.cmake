@@ -16,6 +16,7 @@ add_library(unicycle STATIC
     "${UNICYCLE_DIR}/unicycle_qp.c"
     "${UNICYCLE_DIR}/unicycle_reg.c"
     "${UNICYCLE_DIR}/unicycle_ring.c"
+    "${UNICYCLE_DIR}/unicycle_settings.c"
     "${UNICYCLE_DIR}/unicycle_solver.c"
     "${UNICYCLE_DIR}/unicycle_timer.c"
 )

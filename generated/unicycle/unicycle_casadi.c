@@ -29,6 +29,9 @@ extern "C" {
 #endif
 
 /* Add prefix to internal symbols */
+#define casadi_c0 CASADI_PREFIX(c0)
+#define casadi_c1 CASADI_PREFIX(c1)
+#define casadi_copy CASADI_PREFIX(copy)
 #define casadi_f0 CASADI_PREFIX(f0)
 #define casadi_f1 CASADI_PREFIX(f1)
 #define casadi_f10 CASADI_PREFIX(f10)
@@ -69,6 +72,17 @@ extern "C" {
 
 casadi_real casadi_sq(casadi_real x) { return x*x;}
 
+void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
+  casadi_int i;
+  if (y) {
+    if (x) {
+      for (i=0; i<n; ++i) *y++ = *x++;
+    } else {
+      for (i=0; i<n; ++i) *y++ = 0.;
+    }
+  }
+}
+
 /* Configuration this file was compiled with */
 CASADI_SYMBOL_EXPORT void unicycle_casadi_casadi_version(int* major, int* minor, int* patch) {
   *major = 3;
@@ -88,6 +102,16 @@ static const casadi_int casadi_s6[3] = {1, 6, 1};
 static const casadi_int casadi_s7[3] = {0, 1, 1};
 static const casadi_int casadi_s8[3] = {4, 4, 1};
 static const casadi_int casadi_s9[3] = {0, 4, 1};
+
+static const casadi_real casadi_c0[36] = 
+  {1.0000000000000001e-01, 0., 0., 0., 0., 0., 0., 1.0000000000000001e-01,
+  0., 0., 0., 0., 0., 0., 0., 0.,
+  0., 0., 0., 0., 0., 0., 0., 0.,
+  0., 0., 0., 0., 1.0000000000000002e-02, 0., 0., 0.,
+  0., 0., 0., 1.0000000000000002e-02};
+static const casadi_real casadi_c1[16] = 
+  {10., 0., 0., 0., 0., 10., 0., 0.,
+  0., 0., 0., 0., 0., 0., 0., 1.};
 
 /* unicycle_stage_eval:(x[4],u[2],p[2])->(phi[4],l,g) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
@@ -1073,46 +1097,9 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn_work_bytes(casadi_int *sz_arg, c
 /* unicycle_stage_hess_cost_exact:(x[4],u[2],p[2])->(A_l[6x6]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1;
-  a0=1.0000000000000001e-01;
-  if (res[0]!=0) res[0][0]=a0;
-  a1=0.;
-  if (res[0]!=0) res[0][1]=a1;
-  if (res[0]!=0) res[0][2]=a1;
-  if (res[0]!=0) res[0][3]=a1;
-  if (res[0]!=0) res[0][4]=a1;
-  if (res[0]!=0) res[0][5]=a1;
-  if (res[0]!=0) res[0][6]=a1;
-  if (res[0]!=0) res[0][7]=a0;
-  if (res[0]!=0) res[0][8]=a1;
-  if (res[0]!=0) res[0][9]=a1;
-  if (res[0]!=0) res[0][10]=a1;
-  if (res[0]!=0) res[0][11]=a1;
-  if (res[0]!=0) res[0][12]=a1;
-  if (res[0]!=0) res[0][13]=a1;
-  if (res[0]!=0) res[0][14]=a1;
-  if (res[0]!=0) res[0][15]=a1;
-  if (res[0]!=0) res[0][16]=a1;
-  if (res[0]!=0) res[0][17]=a1;
-  if (res[0]!=0) res[0][18]=a1;
-  if (res[0]!=0) res[0][19]=a1;
-  if (res[0]!=0) res[0][20]=a1;
-  if (res[0]!=0) res[0][21]=a1;
-  if (res[0]!=0) res[0][22]=a1;
-  if (res[0]!=0) res[0][23]=a1;
-  if (res[0]!=0) res[0][24]=a1;
-  if (res[0]!=0) res[0][25]=a1;
-  if (res[0]!=0) res[0][26]=a1;
-  if (res[0]!=0) res[0][27]=a1;
-  a0=1.0000000000000002e-02;
-  if (res[0]!=0) res[0][28]=a0;
-  if (res[0]!=0) res[0][29]=a1;
-  if (res[0]!=0) res[0][30]=a1;
-  if (res[0]!=0) res[0][31]=a1;
-  if (res[0]!=0) res[0][32]=a1;
-  if (res[0]!=0) res[0][33]=a1;
-  if (res[0]!=0) res[0][34]=a1;
-  if (res[0]!=0) res[0][35]=a0;
+  const casadi_real *wr0;
+  wr0 = casadi_c0;
+  casadi_copy(wr0, 36, res[0]);
   return 0;
 }
 
@@ -1178,7 +1165,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_hess_cost_exact_sparsity_o
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 3;
-  if (sz_res) *sz_res = 1;
+  if (sz_res) *sz_res = 2;
   if (sz_iw) *sz_iw = 0;
   if (sz_w) *sz_w = 0;
   return 0;
@@ -1186,7 +1173,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_work(casadi_int *sz_arg,
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;
@@ -1195,46 +1182,9 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_work_bytes(casadi_int *s
 /* unicycle_stage_hess_cost_gn:(x[4],u[2],p[2])->(A_l[6x6]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1;
-  a0=1.0000000000000001e-01;
-  if (res[0]!=0) res[0][0]=a0;
-  a1=0.;
-  if (res[0]!=0) res[0][1]=a1;
-  if (res[0]!=0) res[0][2]=a1;
-  if (res[0]!=0) res[0][3]=a1;
-  if (res[0]!=0) res[0][4]=a1;
-  if (res[0]!=0) res[0][5]=a1;
-  if (res[0]!=0) res[0][6]=a1;
-  if (res[0]!=0) res[0][7]=a0;
-  if (res[0]!=0) res[0][8]=a1;
-  if (res[0]!=0) res[0][9]=a1;
-  if (res[0]!=0) res[0][10]=a1;
-  if (res[0]!=0) res[0][11]=a1;
-  if (res[0]!=0) res[0][12]=a1;
-  if (res[0]!=0) res[0][13]=a1;
-  if (res[0]!=0) res[0][14]=a1;
-  if (res[0]!=0) res[0][15]=a1;
-  if (res[0]!=0) res[0][16]=a1;
-  if (res[0]!=0) res[0][17]=a1;
-  if (res[0]!=0) res[0][18]=a1;
-  if (res[0]!=0) res[0][19]=a1;
-  if (res[0]!=0) res[0][20]=a1;
-  if (res[0]!=0) res[0][21]=a1;
-  if (res[0]!=0) res[0][22]=a1;
-  if (res[0]!=0) res[0][23]=a1;
-  if (res[0]!=0) res[0][24]=a1;
-  if (res[0]!=0) res[0][25]=a1;
-  if (res[0]!=0) res[0][26]=a1;
-  if (res[0]!=0) res[0][27]=a1;
-  a0=1.0000000000000002e-02;
-  if (res[0]!=0) res[0][28]=a0;
-  if (res[0]!=0) res[0][29]=a1;
-  if (res[0]!=0) res[0][30]=a1;
-  if (res[0]!=0) res[0][31]=a1;
-  if (res[0]!=0) res[0][32]=a1;
-  if (res[0]!=0) res[0][33]=a1;
-  if (res[0]!=0) res[0][34]=a1;
-  if (res[0]!=0) res[0][35]=a0;
+  const casadi_real *wr0;
+  wr0 = casadi_c0;
+  casadi_copy(wr0, 36, res[0]);
   return 0;
 }
 
@@ -1300,7 +1250,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_hess_cost_gn_sparsity_out(
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 3;
-  if (sz_res) *sz_res = 1;
+  if (sz_res) *sz_res = 2;
   if (sz_iw) *sz_iw = 0;
   if (sz_w) *sz_w = 0;
   return 0;
@@ -1308,7 +1258,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_work(casadi_int *sz_arg, ca
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;
@@ -1534,26 +1484,9 @@ CASADI_SYMBOL_EXPORT int unicycle_term_grad_work_bytes(casadi_int *sz_arg, casad
 /* unicycle_term_hess_exact:(x[4],p[2],mu_r[0],nu[0])->(A[4x4],R[0x4],R_eq[0x4]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1;
-  a0=10.;
-  if (res[0]!=0) res[0][0]=a0;
-  a1=0.;
-  if (res[0]!=0) res[0][1]=a1;
-  if (res[0]!=0) res[0][2]=a1;
-  if (res[0]!=0) res[0][3]=a1;
-  if (res[0]!=0) res[0][4]=a1;
-  if (res[0]!=0) res[0][5]=a0;
-  if (res[0]!=0) res[0][6]=a1;
-  if (res[0]!=0) res[0][7]=a1;
-  if (res[0]!=0) res[0][8]=a1;
-  if (res[0]!=0) res[0][9]=a1;
-  if (res[0]!=0) res[0][10]=a1;
-  if (res[0]!=0) res[0][11]=a1;
-  if (res[0]!=0) res[0][12]=a1;
-  if (res[0]!=0) res[0][13]=a1;
-  if (res[0]!=0) res[0][14]=a1;
-  a1=1.;
-  if (res[0]!=0) res[0][15]=a1;
+  const casadi_real *wr0;
+  wr0 = casadi_c1;
+  casadi_copy(wr0, 16, res[0]);
   return 0;
 }
 
@@ -1625,7 +1558,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_term_hess_exact_sparsity_out(cas
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 4;
-  if (sz_res) *sz_res = 3;
+  if (sz_res) *sz_res = 4;
   if (sz_iw) *sz_iw = 0;
   if (sz_w) *sz_w = 0;
   return 0;
@@ -1633,7 +1566,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_work(casadi_int *sz_arg, casad
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 3*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;
@@ -1642,26 +1575,9 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_work_bytes(casadi_int *sz_arg,
 /* unicycle_term_hess_gn:(x[4],p[2],mu_r[0],nu[0])->(A[4x4],R[0x4],R_eq[0x4]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1;
-  a0=10.;
-  if (res[0]!=0) res[0][0]=a0;
-  a1=0.;
-  if (res[0]!=0) res[0][1]=a1;
-  if (res[0]!=0) res[0][2]=a1;
-  if (res[0]!=0) res[0][3]=a1;
-  if (res[0]!=0) res[0][4]=a1;
-  if (res[0]!=0) res[0][5]=a0;
-  if (res[0]!=0) res[0][6]=a1;
-  if (res[0]!=0) res[0][7]=a1;
-  if (res[0]!=0) res[0][8]=a1;
-  if (res[0]!=0) res[0][9]=a1;
-  if (res[0]!=0) res[0][10]=a1;
-  if (res[0]!=0) res[0][11]=a1;
-  if (res[0]!=0) res[0][12]=a1;
-  if (res[0]!=0) res[0][13]=a1;
-  if (res[0]!=0) res[0][14]=a1;
-  a1=1.;
-  if (res[0]!=0) res[0][15]=a1;
+  const casadi_real *wr0;
+  wr0 = casadi_c1;
+  casadi_copy(wr0, 16, res[0]);
   return 0;
 }
 
@@ -1733,7 +1649,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* unicycle_term_hess_gn_sparsity_out(casadi
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 4;
-  if (sz_res) *sz_res = 3;
+  if (sz_res) *sz_res = 4;
   if (sz_iw) *sz_iw = 0;
   if (sz_w) *sz_w = 0;
   return 0;
@@ -1741,7 +1657,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_work(casadi_int *sz_arg, casadi_i
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 3*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;

@@ -104,7 +104,7 @@ const casadi_int* unicycle_stage_hess_cost_exact_sparsity_out(casadi_int i);
 int unicycle_stage_hess_cost_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int unicycle_stage_hess_cost_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define unicycle_stage_hess_cost_exact_SZ_ARG 3
-#define unicycle_stage_hess_cost_exact_SZ_RES 1
+#define unicycle_stage_hess_cost_exact_SZ_RES 2
 #define unicycle_stage_hess_cost_exact_SZ_IW 0
 #define unicycle_stage_hess_cost_exact_SZ_W 0
 int unicycle_stage_hess_cost_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
@@ -122,7 +122,7 @@ const casadi_int* unicycle_stage_hess_cost_gn_sparsity_out(casadi_int i);
 int unicycle_stage_hess_cost_gn_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int unicycle_stage_hess_cost_gn_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define unicycle_stage_hess_cost_gn_SZ_ARG 3
-#define unicycle_stage_hess_cost_gn_SZ_RES 1
+#define unicycle_stage_hess_cost_gn_SZ_RES 2
 #define unicycle_stage_hess_cost_gn_SZ_IW 0
 #define unicycle_stage_hess_cost_gn_SZ_W 0
 int unicycle_term_eval(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
@@ -176,7 +176,7 @@ const casadi_int* unicycle_term_hess_exact_sparsity_out(casadi_int i);
 int unicycle_term_hess_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int unicycle_term_hess_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define unicycle_term_hess_exact_SZ_ARG 4
-#define unicycle_term_hess_exact_SZ_RES 3
+#define unicycle_term_hess_exact_SZ_RES 4
 #define unicycle_term_hess_exact_SZ_IW 0
 #define unicycle_term_hess_exact_SZ_W 0
 int unicycle_term_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
@@ -194,7 +194,7 @@ const casadi_int* unicycle_term_hess_gn_sparsity_out(casadi_int i);
 int unicycle_term_hess_gn_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int unicycle_term_hess_gn_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define unicycle_term_hess_gn_SZ_ARG 4
-#define unicycle_term_hess_gn_SZ_RES 3
+#define unicycle_term_hess_gn_SZ_RES 4
 #define unicycle_term_hess_gn_SZ_IW 0
 #define unicycle_term_hess_gn_SZ_W 0
 int unicycle_ode(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);

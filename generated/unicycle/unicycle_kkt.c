@@ -5,6 +5,7 @@
 #include "unicycle_linalg.h"
 #include "unicycle_problem.h"
 #include "unicycle_solver.h"
+#include "unicycle_solver_internal.h"
 
 static double unicycle_kkt_max(double a, double b)
 {
@@ -36,7 +37,7 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
     double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
     double gL[UNICYCLE_NW], phi[UNICYCLE_NX], g[UNICYCLE_DIM(UNICYCLE_NG)], l;
     double gLN[UNICYCLE_NX], E, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
-    int k, i;
+    int k, i, rc;
 
     for (i = 0; i < UNICYCLE_NX; ++i) {
         eq = unicycle_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
@@ -62,9 +63,9 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
             ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(g[i], unicycle_lg[i], unicycle_ug[i]));
             comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_g[k][i], g[i], unicycle_lg[i], unicycle_ug[i]));
         }
-        /* simple bounds: x_k only for k >= 1 (x_0 is fixed by xhat0, so a multiplier on
-         * it pairs with infinite sides and counts with its magnitude) */
-        if (k == 0) {
+        /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
+         * sides and counts with its magnitude) */
+        if (!unicycle_x_bounded(k)) {
             for (i = 0; i < UNICYCLE_NX; ++i) {
                 comp = unicycle_kkt_max(comp, fabs(s->mu_b[0][i]));
             }
@@ -81,13 +82,9 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
                 comp, unicycle_kkt_comp(s->mu_b[k][UNICYCLE_NX + i], s->u[k][i], unicycle_lbu[i], unicycle_ubu[i]));
         }
     }
-    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gLN, &E, r, r_eq,
-                             &s->mem.ev.fun_work) != 0) {
-        return UNICYCLE_ERR_FUNCTION;
-    }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NX, gLN) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
-        !unicycle_lai_vec_finite(UNICYCLE_NE, r_eq)) {
-        return UNICYCLE_ERR_NONFINITE_VALUE;
+    rc = unicycle_term_grad_checked(s, gLN, &E, r, r_eq);
+    if (rc != UNICYCLE_OK) {
+        return rc;
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
         stat = unicycle_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]));

@@ -4,25 +4,26 @@
 
 #include "unicycle_ring.h"
 
+static void unicycle_ring_zero(double *v, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        v[i] = 0.0;
+    }
+}
+
 void unicycle_ring_reset(unicycle_ring *ring)
 {
-    int k, i;
+    int k;
     for (k = 0; k < UNICYCLE_N; ++k) {
         unicycle_stage_slot *s = &ring->slot[k];
-        for (i = 0; i < UNICYCLE_NW * UNICYCLE_NW; ++i)
-            s->Ht[i] = 0.0;
-        for (i = 0; i < UNICYCLE_NW * (UNICYCLE_NW + 1) / 2; ++i)
-            s->A_dyn[i] = 0.0;
-        for (i = 0; i < UNICYCLE_NX * UNICYCLE_NW; ++i)
-            s->Phit[i] = 0.0;
-        for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW); ++i)
-            s->Ct[i] = 0.0;
-        for (i = 0; i < UNICYCLE_NW; ++i)
-            s->F_w[i] = 0.0;
-        for (i = 0; i < UNICYCLE_NX; ++i)
-            s->phi[i] = 0.0;
-        for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG); ++i)
-            s->g[i] = 0.0;
+        unicycle_ring_zero(s->Ht, UNICYCLE_NW * UNICYCLE_NW);
+        unicycle_ring_zero(s->A_dyn, UNICYCLE_NW * (UNICYCLE_NW + 1) / 2);
+        unicycle_ring_zero(s->Phit, UNICYCLE_NX * UNICYCLE_NW);
+        unicycle_ring_zero(s->Ct, UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW));
+        unicycle_ring_zero(s->F_w, UNICYCLE_NW);
+        unicycle_ring_zero(s->phi, UNICYCLE_NX);
+        unicycle_ring_zero(s->g, UNICYCLE_DIM(UNICYCLE_NG));
         unicycle_ring_clear_step(s);
     }
     ring->ring_head = 0;
@@ -63,15 +64,10 @@ void unicycle_ring_advance(unicycle_ring *ring)
 
 void unicycle_ring_clear_step(unicycle_stage_slot *slot)
 {
-    int i;
-    for (i = 0; i < UNICYCLE_NW; ++i)
-        slot->dw[i] = 0.0;
-    for (i = 0; i < UNICYCLE_NX; ++i)
-        slot->dlam[i] = 0.0;
-    for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG); ++i)
-        slot->dmu_g[i] = 0.0;
-    for (i = 0; i < UNICYCLE_NW; ++i)
-        slot->dmu_b[i] = 0.0;
+    unicycle_ring_zero(slot->dw, UNICYCLE_NW);
+    unicycle_ring_zero(slot->dlam, UNICYCLE_NX);
+    unicycle_ring_zero(slot->dmu_g, UNICYCLE_DIM(UNICYCLE_NG));
+    unicycle_ring_zero(slot->dmu_b, UNICYCLE_NW);
 }
 
 double unicycle_ring_secant(const unicycle_stage_slot *slot, const double *F_w_new, const double *phi_new,

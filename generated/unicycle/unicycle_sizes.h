@@ -33,7 +33,7 @@
 #define UNICYCLE_SZ_ARG 5
 #define UNICYCLE_SZ_RES 4
 #define UNICYCLE_SZ_IW 1
-#define UNICYCLE_SZ_W 32
+#define UNICYCLE_SZ_W 36
 
 /* The real-number type of the runtime (double; the precision is a generation-time choice) */
 typedef double unicycle_real;

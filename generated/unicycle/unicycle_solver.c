@@ -16,6 +16,7 @@
 #include "unicycle_linalg.h"
 #include "unicycle_problem.h"
 #include "unicycle_solver.h"
+#include "unicycle_solver_internal.h"
 
 #define UNICYCLE_MAGIC 0x444f5055 /* "DOPU" */
 #define UNICYCLE_DEFAULT_QP_TOL 1e-10
@@ -30,14 +31,22 @@ static void unicycle_copy(double *dst, const double *src, int n)
     }
 }
 
-static void unicycle_ensure_setup(unicycle_solver *s)
+void unicycle_ensure_setup(unicycle_solver *s)
 {
     if (s->magic != UNICYCLE_MAGIC) {
         unicycle_defaults(s);
     }
 }
 
-static int unicycle_ret(unicycle_solver *s, int status)
+void unicycle_clear_x0_multiplier(unicycle_solver *s)
+{
+    int i;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->mu_b[0][i] = 0.0;
+    }
+}
+
+int unicycle_ret(unicycle_solver *s, int status)
 {
     s->status = status;
     return status;
@@ -401,7 +410,7 @@ static void unicycle_lm_convexify(unicycle_solver *s)
 }
 
 /* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
-static void unicycle_lm_start(unicycle_solver *s)
+void unicycle_lm_start(unicycle_solver *s)
 {
     if (!s->lm_auto) {
         return;
@@ -583,17 +592,26 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
     return UNICYCLE_OK;
 }
 
+int unicycle_term_grad_checked(unicycle_solver *s, double *gL, double *E, double *r, double *r_eq)
+{
+    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, E, r, r_eq,
+                             &s->mem.ev.fun_work) != 0) {
+        return UNICYCLE_ERR_FUNCTION;
+    }
+    if (!unicycle_lai_vec_finite(UNICYCLE_NX, gL) || !isfinite(*E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NE, r_eq)) {
+        return UNICYCLE_ERR_NONFINITE_VALUE;
+    }
+    return UNICYCLE_OK;
+}
+
 /* Terminal F: gL_N, E, r, r_eq at the current point. */
 static int unicycle_term_F(unicycle_solver *s)
 {
     double gL[UNICYCLE_NX], E = 0.0, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
-    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, &E, r, r_eq,
-                             &s->mem.ev.fun_work) != 0) {
-        return UNICYCLE_ERR_FUNCTION;
-    }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NX, gL) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
-        !unicycle_lai_vec_finite(UNICYCLE_NE, r_eq)) {
-        return UNICYCLE_ERR_NONFINITE_VALUE;
+    int rc = unicycle_term_grad_checked(s, gL, &E, r, r_eq);
+    if (rc != UNICYCLE_OK) {
+        return rc;
     }
     unicycle_copy(s->gL_N, gL, UNICYCLE_NX);
     s->E = E;
@@ -658,9 +676,8 @@ static void unicycle_assemble(unicycle_solver *s)
             in->b[k][i] = slot->phi[i] - s->x[k + 1][i];
         }
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            /* x_0 is fixed by xhat0; the QP ignores the x part of stage 0 */
-            in->lbw[k][i] = k == 0 ? -INFINITY : unicycle_lbx[i] - s->x[k][i];
-            in->ubw[k][i] = k == 0 ? INFINITY : unicycle_ubx[i] - s->x[k][i];
+            in->lbw[k][i] = unicycle_x_bounded(k) ? unicycle_lbx[i] - s->x[k][i] : -INFINITY;
+            in->ubw[k][i] = unicycle_x_bounded(k) ? unicycle_ubx[i] - s->x[k][i] : INFINITY;
         }
         for (i = 0; i < UNICYCLE_NU; ++i) {
             in->lbw[k][UNICYCLE_NX + i] = unicycle_lbu[i] - s->u[k][i];
@@ -804,13 +821,8 @@ int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, cons
         for (i = 0; i < UNICYCLE_NW; ++i) {
             s->mu_b[k][i] = mu_b ? mu_b[k * UNICYCLE_NW + i] : 0.0;
         }
-        /* x_0 carries no bound: its multiplier is 0 by definition */
-        if (k == 0) {
-            for (i = 0; i < UNICYCLE_NX; ++i) {
-                s->mu_b[0][i] = 0.0;
-            }
-        }
     }
+    unicycle_clear_x0_multiplier(s);
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
     }
@@ -894,14 +906,11 @@ static void unicycle_qp_warm_point(unicycle_solver *s)
     }
 }
 
-int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
+/* Feedback step 1: the call is refused before the QP when the solver is not initialised,
+ * the measurement is not finite or no QP is prepared (the fallback control is returned).
+ * Returns UNICYCLE_OK when the QP is to be solved, else the status of the failed call. */
+static int unicycle_feedback_admit(unicycle_solver *s, const double *xhat0, double *u0)
 {
-    const unicycle_qp_sol *sol = &s->mem.qp.sol;
-    double t0;
-    int k, i, qs, retries;
-
-    unicycle_ensure_setup(s);
-    s->flags = 0;
     if (!s->initialized) {
         unicycle_fallback_u0(s, u0);
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
@@ -919,9 +928,13 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
         /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
         return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NOT_PREPARED);
     }
-    s->timer.t[UNICYCLE_PHASE_FEEDBACK] = 0.0;
-    t0 = unicycle_timer_now(&s->timer);
+    return UNICYCLE_OK;
+}
 
+/* Step 2: the measurement enters the QP as the fixed step of x_0. */
+static void unicycle_feedback_measure(unicycle_solver *s, const double *xhat0)
+{
+    int i;
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
@@ -930,50 +943,84 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
+}
+
+/* 1 when the QP status is "solved" and its solution finite. */
+static int unicycle_qp_ok(const unicycle_solver *s, int qs)
+{
+    return qs == UNICYCLE_QP_SOLVED && unicycle_qp_solution_finite(&s->mem.qp.sol);
+}
+
+/* One solve of the prepared QP, warm (from the point in s->mem.qp.sol) or cold; its iterations
+ * are added to those of the call. Returns the QP status. */
+static int unicycle_qp_attempt(unicycle_solver *s, int warm)
+{
+    int qs;
+    s->qp_settings.warm_start = warm;
+    qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    s->qp_iterations += s->qp_info.iterations;
+    return qs;
+}
+
+/* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry
+ * in the same call when the warm start failed or needed the inertia correction: the QP is
+ * then nonconvex on the null space of its equalities and may have several local
+ * minimisers, and the warm start may have reached another one than the cold start finds
+ * (the one the closed loop has followed so far). Returns the QP status. */
+static int unicycle_feedback_qp(unicycle_solver *s)
+{
+    int qs;
     s->qp_in.hess_shift = s->lm;
+    s->qp_iterations = 0;
     s->qp_cold_retry = 0;
-    s->qp_settings.warm_start = s->qp_warm;
     if (s->qp_warm) {
         unicycle_qp_warm_point(s);
     }
-    qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
-    s->qp_iterations = s->qp_info.iterations;
+    qs = unicycle_qp_attempt(s, s->qp_warm);
     if (s->qp_warm && qs != UNICYCLE_QP_INVALID_INPUT &&
-        (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol) || s->qp_info.inertia_corrections > 0)) {
-        /* the warm start failed, or it needed the inertia correction: the QP is nonconvex
-         * on the null space of its equalities there and may have several local minimisers,
-         * and the warm start may have reached another one than the cold start finds (the
-         * one the closed loop has followed so far): retry from the cold starting point in
-         * the same call */
+        (!unicycle_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
-        s->qp_settings.warm_start = 0;
-        qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
-        s->qp_iterations += s->qp_info.iterations;
+        qs = unicycle_qp_attempt(s, 0);
     }
-    /* the automatic term (section 10): a QP still not solved is solved again (cold) with lm
-     * raised */
-    retries = 0;
-    while (s->lm_auto && retries < UNICYCLE_LM_RETRIES && s->lm < UNICYCLE_LM_MAX_REL * s->lm_scale &&
-           (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol)) && qs != UNICYCLE_QP_INVALID_INPUT) {
+    return qs;
+}
+
+/* Step 4, the automatic term (algorithm.md section 10): a QP still not solved is solved
+ * again (cold) with lm raised, at most UNICYCLE_LM_RETRIES times. Returns the QP status; the
+ * number of retries in *retries. */
+static int unicycle_feedback_lm_retries(unicycle_solver *s, int qs, int *retries)
+{
+    *retries = 0;
+    while (s->lm_auto && *retries < UNICYCLE_LM_RETRIES && s->lm < UNICYCLE_LM_MAX_REL * s->lm_scale &&
+           !unicycle_qp_ok(s, qs) && qs != UNICYCLE_QP_INVALID_INPUT) {
         unicycle_lm_raise(s);
         s->qp_in.hess_shift = s->lm;
-        s->qp_settings.warm_start = 0;
-        qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
-        s->qp_iterations += s->qp_info.iterations;
-        retries += 1;
+        qs = unicycle_qp_attempt(s, 0);
+        *retries += 1;
     }
-    s->qp_status = qs;
-    if (qs != UNICYCLE_QP_SOLVED || !unicycle_qp_solution_finite(sol)) {
-        unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
-        return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_QP);
-    }
-    /* the divergence test of the step (algorithm.md section 9): no step outside the box */
-    if (!unicycle_box_ok(s, &s->x[0][0], &sol->x[0][0], UNICYCLE_NX, &s->u[0][0], &sol->u[0][0], UNICYCLE_QP_NU1)) {
-        unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
-        return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_DIVERGED);
-    }
+    return qs;
+}
 
-    /* domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k) */
+/* Step 5: the outcome of the QP: UNICYCLE_ERR_QP when it is not solved, UNICYCLE_ERR_DIVERGED when
+ * its step leaves the box of the divergence test (algorithm.md section 9), else UNICYCLE_OK. */
+static int unicycle_feedback_check_step(const unicycle_solver *s, int qs)
+{
+    const unicycle_qp_sol *sol = &s->mem.qp.sol;
+    if (!unicycle_qp_ok(s, qs)) {
+        return UNICYCLE_ERR_QP;
+    }
+    if (!unicycle_box_ok(s, &s->x[0][0], &sol->x[0][0], UNICYCLE_NX, &s->u[0][0], &sol->u[0][0], UNICYCLE_QP_NU1)) {
+        return UNICYCLE_ERR_DIVERGED;
+    }
+    return UNICYCLE_OK;
+}
+
+/* Step 6: the step of each stage kept in its slot for the secant criterion:
+ * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
+static void unicycle_store_domega(unicycle_solver *s)
+{
+    const unicycle_qp_sol *sol = &s->mem.qp.sol;
+    int k, i;
     for (k = 0; k < UNICYCLE_N; ++k) {
         unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
         for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -990,7 +1037,13 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
             slot->dmu_b[i] = sol->mu_b[k][i] - s->mu_b[k][i];
         }
     }
-    /* the full step (paper eq. 4): w += dw, multipliers replaced by the QP's */
+}
+
+/* Step 7, the full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
+static void unicycle_take_step(unicycle_solver *s)
+{
+    const unicycle_qp_sol *sol = &s->mem.qp.sol;
+    int k, i;
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
             s->x[k][i] += sol->x[k][i];
@@ -1018,12 +1071,17 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
         s->nu[i] = sol->nu[i];
     }
     s->qp_ready = 0;
-    /* a good plan: the fallback of the next failures; u0 clipped to the bounds */
+}
+
+/* Step 8: a good plan, the fallback of the next failures; the automatic term lowered unless
+ * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
+static void unicycle_keep_plan(unicycle_solver *s, double *u0, int lowered)
+{
     s->n_failed = 0;
     s->plan_age = 0;
     s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
-    if (retries == 0) {
-        unicycle_lm_feedback(s, UNICYCLE_OK); /* lowered, unless this QP needed a raise */
+    if (lowered) {
+        unicycle_lm_feedback(s, UNICYCLE_OK);
     }
     unicycle_copy(&s->plan_u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
     if (unicycle_clip_u(s->u[0], s->u0_out)) {
@@ -1032,6 +1090,33 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     if (u0) {
         unicycle_copy(u0, s->u0_out, UNICYCLE_NU);
     }
+}
+
+int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
+{
+    double t0;
+    int rc, qs, retries;
+
+    unicycle_ensure_setup(s);
+    s->flags = 0;
+    rc = unicycle_feedback_admit(s, xhat0, u0);
+    if (rc != UNICYCLE_OK) {
+        return rc;
+    }
+    s->timer.t[UNICYCLE_PHASE_FEEDBACK] = 0.0;
+    t0 = unicycle_timer_now(&s->timer);
+    unicycle_feedback_measure(s, xhat0);
+    qs = unicycle_feedback_qp(s);
+    qs = unicycle_feedback_lm_retries(s, qs, &retries);
+    s->qp_status = qs;
+    rc = unicycle_feedback_check_step(s, qs);
+    if (rc != UNICYCLE_OK) {
+        unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
+        return unicycle_feedback_failed(s, u0, rc);
+    }
+    unicycle_store_domega(s);
+    unicycle_take_step(s);
+    unicycle_keep_plan(s, u0, retries == 0);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
     return unicycle_ret(s, UNICYCLE_OK);
 }
@@ -1063,8 +1148,8 @@ static void unicycle_shift(unicycle_solver *s)
     /* the last stage: the x part of mu_b from mu_bN, the u part kept */
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->mu_b[UNICYCLE_N - 1][i] = s->mu_bN[i];
-        s->mu_b[0][i] = 0.0;
     }
+    unicycle_clear_x0_multiplier(s);
     unicycle_ring_advance(&s->ring);
 }
 
@@ -1361,275 +1446,6 @@ double unicycle_get_kkt(const unicycle_solver *s)
     return m;
 }
 
-/* ---- settings ----------------------------------------------------------------------- */
-
-int unicycle_set_M(unicycle_solver *s, int M)
-{
-    unicycle_ensure_setup(s);
-    if (M < 0 || M > UNICYCLE_N - 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->M = M;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_M(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->M;
-}
-
-int unicycle_set_mode(unicycle_solver *s, int mode)
-{
-    unicycle_ensure_setup(s);
-    if (mode != UNICYCLE_MODE_RECEDING && mode != UNICYCLE_MODE_FIXED) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->mode = mode;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_mode(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->mode;
-}
-
-int unicycle_set_hessian(unicycle_solver *s, int hessian)
-{
-    unicycle_ensure_setup(s);
-    if (hessian != UNICYCLE_HESSIAN_EXACT && hessian != UNICYCLE_HESSIAN_GAUSS_NEWTON) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    if (hessian == UNICYCLE_HESSIAN_GAUSS_NEWTON && !UNICYCLE_HAS_GN) {
-        /* Gauss-Newton needs a least-squares stage cost */
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->hessian = hessian;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_hessian(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->hessian;
-}
-
-int unicycle_set_regularization(unicycle_solver *s, int regularization, double eps)
-{
-    unicycle_ensure_setup(s);
-    if ((regularization != UNICYCLE_REG_NONE && regularization != UNICYCLE_REG_PROJECT &&
-         regularization != UNICYCLE_REG_MIRROR) ||
-        !isfinite(eps) || !(eps > 0.0)) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->regularization = regularization;
-    s->reg_eps = eps;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_regularization(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->regularization;
-}
-
-double unicycle_get_reg_eps(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->reg_eps;
-}
-
-int unicycle_set_cost_hessian(unicycle_solver *s, int fresh)
-{
-    unicycle_ensure_setup(s);
-    if (fresh != 0 && fresh != 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->cost_hessian = fresh;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_cost_hessian(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->cost_hessian;
-}
-
-int unicycle_set_levenberg_marquardt(unicycle_solver *s, double lm)
-{
-    unicycle_ensure_setup(s);
-    if (!isfinite(lm) || !(lm >= 0.0)) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->lm_auto = 0;
-    s->lm = lm;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_set_lm_auto(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    s->lm_auto = 1;
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
-    if (s->initialized && s->qp_ready) {
-        unicycle_lm_start(s);
-    }
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_lm_auto(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->lm_auto;
-}
-
-double unicycle_get_lm_scale(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->lm_scale;
-}
-
-double unicycle_get_levenberg_marquardt(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->lm;
-}
-
-int unicycle_set_qp_tol(unicycle_solver *s, double tol)
-{
-    unicycle_ensure_setup(s);
-    if (!isfinite(tol) || !(tol > 0.0) || tol > UNICYCLE_QP_TOL_MAX) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.tol = tol;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-double unicycle_get_qp_tol(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->qp_settings.tol;
-}
-
-int unicycle_set_qp_max_iter(unicycle_solver *s, int max_iter)
-{
-    unicycle_ensure_setup(s);
-    if (max_iter < 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_settings.max_iter = max_iter;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_qp_max_iter(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->qp_settings.max_iter;
-}
-
-int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures)
-{
-    unicycle_ensure_setup(s);
-    if ((on != 0 && on != 1) || max_failures < 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->recovery = on;
-    s->recovery_failures = max_failures;
-    if (!on) {
-        s->recover_pending = 0;
-    }
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_recovery(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->recovery;
-}
-
-int unicycle_get_recovery_failures(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->recovery_failures;
-}
-
-int unicycle_set_qp_warm_start(unicycle_solver *s, int on)
-{
-    unicycle_ensure_setup(s);
-    if (on != 0 && on != 1) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    s->qp_warm = on;
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_get_qp_warm_start(unicycle_solver *s)
-{
-    unicycle_ensure_setup(s);
-    return s->qp_warm;
-}
-
-int unicycle_get_qp_cold_retry(const unicycle_solver *s)
-{
-    return s->qp_cold_retry;
-}
-
-int unicycle_set_parameters(unicycle_solver *s, const double *p)
-{
-    int k, i;
-    unicycle_ensure_setup(s);
-    if (UNICYCLE_NP == 0) {
-        return unicycle_ret(s, UNICYCLE_OK);
-    }
-    if (p == 0) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    if (!unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NP, p)) {
-        return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
-    }
-    for (k = 0; k <= UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NP; ++i) {
-            s->p[k][i] = p[k * UNICYCLE_NP + i];
-        }
-    }
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-int unicycle_set_parameters_node(unicycle_solver *s, int k, const double *pk)
-{
-    int i;
-    unicycle_ensure_setup(s);
-    if (k < 0 || k > UNICYCLE_N) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    if (UNICYCLE_NP == 0) {
-        return unicycle_ret(s, UNICYCLE_OK);
-    }
-    if (pk == 0) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NP, pk)) {
-        return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
-    }
-    for (i = 0; i < UNICYCLE_NP; ++i) {
-        s->p[k][i] = pk[i];
-    }
-    return unicycle_ret(s, UNICYCLE_OK);
-}
-
-void unicycle_get_parameters(unicycle_solver *s, double *p)
-{
-    int k, i;
-    unicycle_ensure_setup(s);
-    for (k = 0; k <= UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NP; ++i) {
-            p[k * UNICYCLE_NP + i] = s->p[k][i];
-        }
-    }
-}
-
 /* ---- getters ------------------------------------------------------------------------ */
 
 void unicycle_get_x(const unicycle_solver *s, double *x)
@@ -1701,6 +1517,45 @@ int unicycle_get_qp_status(const unicycle_solver *s)
     return s->qp_status;
 }
 
+/* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
+static double unicycle_side_bound(const double *lo, const double *up, int i, int side)
+{
+    return side > 0 ? up[i] : lo[i];
+}
+
+int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *row)
+{
+    int k, j, side;
+    if (s->qp_status != UNICYCLE_QP_PRIMAL_INFEASIBLE ||
+        !unicycle_qp_infeasible_row(&s->mem.qp.work, &s->qp_in, &k, &j, &side)) {
+        return 0;
+    }
+    row->stage = k;
+    row->side = side;
+    if (j < UNICYCLE_NX) {
+        row->kind = UNICYCLE_ROW_STATE;
+        row->index = j;
+        row->bound = unicycle_side_bound(unicycle_lbx, unicycle_ubx, j, side);
+    } else if (k < UNICYCLE_N && j < UNICYCLE_NW) {
+        row->kind = UNICYCLE_ROW_CONTROL;
+        row->index = j - UNICYCLE_NX;
+        row->bound = unicycle_side_bound(unicycle_lbu, unicycle_ubu, row->index, side);
+    } else if (k < UNICYCLE_N) {
+        row->kind = UNICYCLE_ROW_PATH;
+        row->index = j - UNICYCLE_NW;
+        row->bound = unicycle_side_bound(unicycle_lg, unicycle_ug, row->index, side);
+    } else if (j < UNICYCLE_NX + UNICYCLE_NR) {
+        row->kind = UNICYCLE_ROW_TERMINAL;
+        row->index = j - UNICYCLE_NX;
+        row->bound = unicycle_side_bound(unicycle_lr, unicycle_ur, row->index, side);
+    } else {
+        row->kind = UNICYCLE_ROW_TERMINAL_EQ;
+        row->index = j - UNICYCLE_NX - UNICYCLE_NR;
+        row->bound = 0.0;
+    }
+    return 1;
+}
+
 int unicycle_get_flags(const unicycle_solver *s)
 {
     return s->flags;
@@ -1736,6 +1591,11 @@ void unicycle_get_scales(const unicycle_solver *s, double *scale_x, double *scal
     }
 }
 
+int unicycle_get_qp_cold_retry(const unicycle_solver *s)
+{
+    return s->qp_cold_retry;
+}
+
 int unicycle_get_status(const unicycle_solver *s)
 {
     return s->status;
@@ -1754,19 +1614,4 @@ int unicycle_get_ring_head(const unicycle_solver *s)
 void unicycle_get_timings(const unicycle_solver *s, double *t)
 {
     unicycle_copy(t, s->timer.t, UNICYCLE_N_PHASES);
-}
-
-void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void *ctx)
-{
-    unicycle_ensure_setup(s);
-    s->timer.clock = clock_fn ? clock_fn : unicycle_timer_default_clock;
-    s->timer.ctx = clock_fn ? ctx : 0;
-}
-
-int unicycle_has_clock(const unicycle_solver *s)
-{
-    if (s->timer.clock == 0) {
-        return 0;
-    }
-    return s->timer.clock != unicycle_timer_default_clock || unicycle_timer_has_default_clock();
 }

@@ -169,6 +169,23 @@ int unicycle_get_recomputed(const unicycle_solver *s, int *stages);
 /* The last QP: iterations, status (enum unicycle_qp_status of unicycle_qp.h). */
 int unicycle_get_qp_iterations(const unicycle_solver *s);
 int unicycle_get_qp_status(const unicycle_solver *s);
+/* A constraint row of the OCP at one stage of the horizon. */
+typedef struct {
+    int stage;    /* 0..N-1; N: the terminal node */
+    int kind;     /* enum unicycle_row_kind */
+    int index;    /* the state or control, or the row among the path rows, the terminal
+                     inequality rows or the terminal equality rows (each stacked in
+                     declaration order) */
+    int side;     /* -1: its lower bound, +1: its upper bound (an equality row: the sign of
+                     the certificate's multiplier), 0: lower bound above upper bound */
+    double bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
+                     function is the declared row minus its value) */
+} unicycle_row_info;
+/* When the last QP was infeasible (unicycle_get_qp_status UNICYCLE_QP_PRIMAL_INFEASIBLE): the row
+ * with the largest multiplier of its infeasibility certificate, the row that the other rows
+ * of the certificate (the bounds, dynamics and measured state) keep from being met; stages
+ * are those of that QP's horizon. Returns 1 and writes *row, else returns 0. */
+int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *row);
 /* Health of the controller (docs/algorithm.md section 9). Flags (UNICYCLE_FLAG_*) raised by
  * the last feedback and the prepare after it (feedback clears them): the returned u0 was
  * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control
@@ -225,6 +242,15 @@ enum unicycle_status {
                                         nothing changes */
     UNICYCLE_ERR_DIVERGED = 11          /* the QP step leaves the problem's scale box (or is not
                                         finite): no step, the fallback control is returned */
+};
+
+/* Kinds of unicycle_row_info. */
+enum unicycle_row_kind {
+    UNICYCLE_ROW_STATE = 0,      /* a bound of a state (stages 1..N) */
+    UNICYCLE_ROW_CONTROL = 1,    /* a bound of a control */
+    UNICYCLE_ROW_PATH = 2,       /* a path-constraint row */
+    UNICYCLE_ROW_TERMINAL = 3,   /* a terminal inequality row (lb < ub) */
+    UNICYCLE_ROW_TERMINAL_EQ = 4 /* a terminal equality row (lb == ub) */
 };
 
 /* Flags of unicycle_get_flags (docs/algorithm.md section 9). */

@@ -53,8 +53,8 @@ static unsigned rd_u8(reader *r)
 
 static double rd_double(reader *r)
 {
-    static const double table[] = {0.0, 1.0, -1.0, 0.5, 1e-12, 1e-4, 1e6, 1e300, -1e300, 1e-300,
-                                   4.9e-324, DBL_MAX, -0.0};
+    static const double table[] = {0.0,   1.0,    -1.0,   0.5,      1e-12,   1e-4, 1e6,
+                                   1e300, -1e300, 1e-300, 4.9e-324, DBL_MAX, -0.0};
     unsigned t = rd_u8(r);
     double v;
     uint8_t b[8];
@@ -184,8 +184,8 @@ typedef struct {
 } model;
 
 typedef struct {
-    double x[(N_ + 1) * NX], u[N_ * NU], lam[(N_ + 1) * NX], mu_g[N_ * D(NG)], mu_b[N_ * NW],
-        mu_bN[NX], mu_r[D(NR)], nu[D(NE)];
+    double x[(N_ + 1) * NX], u[N_ * NU], lam[(N_ + 1) * NX], mu_g[N_ * D(NG)], mu_b[N_ * NW], mu_bN[NX],
+        mu_r[D(NR)], nu[D(NE)];
     int head;
 } iterate;
 
@@ -224,10 +224,12 @@ static void read_iterate(iterate *it)
 static int same_bits(const iterate *a, const iterate *b)
 {
     return memcmp(a->x, b->x, sizeof a->x) == 0 && memcmp(a->u, b->u, sizeof a->u) == 0 &&
-           memcmp(a->lam, b->lam, sizeof a->lam) == 0 && memcmp(a->mu_g, b->mu_g, NG * N_ * sizeof(double)) == 0 &&
-           memcmp(a->mu_b, b->mu_b, sizeof a->mu_b) == 0 && memcmp(a->mu_bN, b->mu_bN, sizeof a->mu_bN) == 0 &&
-           memcmp(a->mu_r, b->mu_r, NR * sizeof(double)) == 0 && memcmp(a->nu, b->nu, NE * sizeof(double)) == 0 &&
-           a->head == b->head;
+           memcmp(a->lam, b->lam, sizeof a->lam) == 0 &&
+           memcmp(a->mu_g, b->mu_g, NG * N_ * sizeof(double)) == 0 &&
+           memcmp(a->mu_b, b->mu_b, sizeof a->mu_b) == 0 &&
+           memcmp(a->mu_bN, b->mu_bN, sizeof a->mu_bN) == 0 &&
+           memcmp(a->mu_r, b->mu_r, NR * sizeof(double)) == 0 &&
+           memcmp(a->nu, b->nu, NE * sizeof(double)) == 0 && a->head == b->head;
 }
 
 static int all_finite(const double *v, int n)
@@ -243,9 +245,10 @@ static int all_finite(const double *v, int n)
 
 static int iterate_finite(const iterate *a)
 {
-    return all_finite(a->x, (N_ + 1) * NX) && all_finite(a->u, N_ * NU) && all_finite(a->lam, (N_ + 1) * NX) &&
-           all_finite(a->mu_g, N_ * NG) && all_finite(a->mu_b, N_ * NW) && all_finite(a->mu_bN, NX) &&
-           all_finite(a->mu_r, NR) && all_finite(a->nu, NE);
+    return all_finite(a->x, (N_ + 1) * NX) && all_finite(a->u, N_ * NU) &&
+           all_finite(a->lam, (N_ + 1) * NX) && all_finite(a->mu_g, N_ * NG) &&
+           all_finite(a->mu_b, N_ * NW) && all_finite(a->mu_bN, NX) && all_finite(a->mu_r, NR) &&
+           all_finite(a->nu, NE);
 }
 
 /* the documented shift of prepare step 1 applied to a (receding mode) */
@@ -254,7 +257,8 @@ static int is_shift_of(const iterate *a, const iterate *b)
     int k, i;
     for (k = 0; k < N_; ++k) {
         for (i = 0; i < NX; ++i) {
-            if (b->x[k * NX + i] != a->x[(k + 1) * NX + i] || b->lam[k * NX + i] != a->lam[(k + 1) * NX + i]) {
+            if (b->x[k * NX + i] != a->x[(k + 1) * NX + i] ||
+                b->lam[k * NX + i] != a->lam[(k + 1) * NX + i]) {
                 return 0;
             }
         }
@@ -395,8 +399,9 @@ static void do_init(reader *r, double *xhat)
         pbN = mu_bN;
         pr = mu_r;
         pnu = nu;
-        nonfinite |= !all_finite(lam, (N_ + 1) * NX) || !all_finite(mu_g, N_ * NG) || !all_finite(mu_b, N_ * NW) ||
-                     !all_finite(mu_bN, NX) || !all_finite(mu_r, NR) || !all_finite(nu, NE);
+        nonfinite |= !all_finite(lam, (N_ + 1) * NX) || !all_finite(mu_g, N_ * NG) ||
+                     !all_finite(mu_b, N_ * NW) || !all_finite(mu_bN, NX) || !all_finite(mu_r, NR) ||
+                     !all_finite(nu, NE);
     }
     call_name = "init";
     st = API(init)(&s, (which & 4u) ? NULL : xhat, px, pu, plam, pmg, pmb, pbN, pr, pnu);
@@ -438,7 +443,8 @@ static void do_feedback(reader *r, double *xhat)
         if (!(flags & 2u)) {
             for (i = 0; i < NU; ++i) {
                 /* a failed instant still returns a safe control: the fallback, in bounds */
-                check(u0[i] >= API(lbu)[i] && u0[i] <= API(ubu)[i], "a failed feedback returns a control within the bounds");
+                check(u0[i] >= API(lbu)[i] && u0[i] <= API(ubu)[i],
+                      "a failed feedback returns a control within the bounds");
             }
         }
     } else {
@@ -487,7 +493,8 @@ static void do_prepare(void)
         check(st == K(ERR_ALREADY_PREPARED), "prepare twice returns already-prepared");
         check(same_bits(&before, &after), "a refused prepare changes nothing");
     } else {
-        check(st == K(OK) || st == K(ERR_NONFINITE_VALUE) || st == K(ERR_FUNCTION) || st == K(ERR_REGULARIZATION),
+        check(st == K(OK) || st == K(ERR_NONFINITE_VALUE) || st == K(ERR_FUNCTION) ||
+                  st == K(ERR_REGULARIZATION),
               "prepare returns OK or a function/regularisation failure");
         if (shift_expected) {
             check(is_shift_of(&before, &after), "prepare shifts once in receding mode");
@@ -535,7 +542,8 @@ static void do_kkt(reader *r, double *xhat)
     } else if (!finite) {
         check(st == K(ERR_NONFINITE_INPUT), "kkt with NaN/Inf xhat0");
     } else {
-        check(st == K(OK) || st == K(ERR_NONFINITE_VALUE) || st == K(ERR_FUNCTION), "kkt returns OK or a function failure");
+        check(st == K(OK) || st == K(ERR_NONFINITE_VALUE) || st == K(ERR_FUNCTION),
+              "kkt returns OK or a function failure");
     }
     if (st == K(OK) && !(flags & 2u)) {
         for (i = 0; i < 4; ++i) {
@@ -556,6 +564,27 @@ static void after_setter(int st, int valid)
     check(same_bits(&before, &after), "a setter never changes the iterate");
 }
 
+/* A setter of one int (double) setting: the status as documented for the validity of the
+ * value, the iterate unchanged, the model's field set when the value is valid. */
+static void int_setter(const char *name, int (*set)(solver_t *, int), int v, int valid, int *field)
+{
+    call_name = name;
+    after_setter(set(&s, v), valid);
+    if (valid) {
+        *field = v;
+    }
+}
+
+static void double_setter(const char *name, int (*set)(solver_t *, double), double d, int valid,
+                          double *field)
+{
+    call_name = name;
+    after_setter(set(&s, d), valid);
+    if (valid) {
+        *field = d;
+    }
+}
+
 static void do_setter(unsigned op, reader *r)
 {
     int v = 0, st, valid, k;
@@ -564,33 +593,16 @@ static void do_setter(unsigned op, reader *r)
     switch (op) {
     case 0:
         v = rd_int(r);
-        call_name = "set_M";
-        valid = v >= 0 && v <= N_ - 1;
-        st = API(set_M)(&s, v);
-        after_setter(st, valid);
-        if (valid) {
-            m.M = v;
-        }
+        int_setter("set_M", API(set_M), v, v >= 0 && v <= N_ - 1, &m.M);
         break;
     case 1:
         v = rd_int(r);
-        call_name = "set_mode";
-        valid = v == K(MODE_RECEDING) || v == K(MODE_FIXED);
-        st = API(set_mode)(&s, v);
-        after_setter(st, valid);
-        if (valid) {
-            m.mode = v;
-        }
+        int_setter("set_mode", API(set_mode), v, v == K(MODE_RECEDING) || v == K(MODE_FIXED), &m.mode);
         break;
     case 2:
         v = rd_int(r);
-        call_name = "set_hessian";
-        valid = v == K(HESSIAN_EXACT) || (v == K(HESSIAN_GAUSS_NEWTON) && K(HAS_GN));
-        st = API(set_hessian)(&s, v);
-        after_setter(st, valid);
-        if (valid) {
-            m.hessian = v;
-        }
+        int_setter("set_hessian", API(set_hessian), v,
+                   v == K(HESSIAN_EXACT) || (v == K(HESSIAN_GAUSS_NEWTON) && K(HAS_GN)), &m.hessian);
         break;
     case 3:
         v = rd_int(r);
@@ -606,43 +618,20 @@ static void do_setter(unsigned op, reader *r)
         break;
     case 4:
         v = rd_int(r);
-        call_name = "set_cost_hessian";
-        valid = v == 0 || v == 1;
-        st = API(set_cost_hessian)(&s, v);
-        after_setter(st, valid);
-        if (valid) {
-            m.cost_hessian = v;
-        }
+        int_setter("set_cost_hessian", API(set_cost_hessian), v, v == 0 || v == 1, &m.cost_hessian);
         break;
     case 5:
         d = rd_double(r);
-        call_name = "set_levenberg_marquardt";
-        valid = isfinite(d) && d >= 0.0;
-        st = API(set_levenberg_marquardt)(&s, d);
-        after_setter(st, valid);
-        if (valid) {
-            m.lm = d;
-        }
+        double_setter("set_levenberg_marquardt", API(set_levenberg_marquardt), d, isfinite(d) && d >= 0.0,
+                      &m.lm);
         break;
     case 6:
         d = rd_double(r);
-        call_name = "set_qp_tol";
-        valid = isfinite(d) && d > 0.0 && d <= K(QP_TOL_MAX);
-        st = API(set_qp_tol)(&s, d);
-        after_setter(st, valid);
-        if (valid) {
-            m.tol = d;
-        }
+        double_setter("set_qp_tol", API(set_qp_tol), d, isfinite(d) && d > 0.0 && d <= K(QP_TOL_MAX), &m.tol);
         break;
     case 7:
         v = rd_int(r);
-        call_name = "set_qp_max_iter";
-        valid = v >= 1;
-        st = API(set_qp_max_iter)(&s, v);
-        after_setter(st, valid);
-        if (valid) {
-            m.max_iter = v;
-        }
+        int_setter("set_qp_max_iter", API(set_qp_max_iter), v, v >= 1, &m.max_iter);
         break;
     case 8: {
         unsigned null = rd_u8(r) & 1u;

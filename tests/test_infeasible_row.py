@@ -1,0 +1,158 @@
+"""An infeasible QP is decoded to its stage and row, also at a later stage than 0.
+
+The constructions make the infeasible row known in advance. The model is x' = u with
+|u| <= 1, so whatever the controls, x_k <= x_0 + k dt and x_k >= x_0 - k dt:
+
+- "late": the path constraint x - p >= 0 with the runtime parameter p_k = 0.5 at stage 3
+  and -10 at every other node. From x_0 = 0, x_3 <= 0.3 < 0.5: only that row at stage 3
+  (its lower side, lb = 0) cannot be met. With p_3 = -10 the same QP is feasible, so the
+  named row is the cause.
+- "reach": the terminal inequality x_N >= 5 with N dt = 1: the terminal row (lower side,
+  lb = 5).
+- "home": the terminal equality x_N = 0 from x_0 = 3: the terminal equality row; x_N
+  cannot come down to 0, so its upper side is the one the certificate pushes against.
+
+The runtime getter (dopus_get_qp_infeasible_row), the Python handle's error and the
+messages of `converge` and `sil` name them.
+"""
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from dopus_codegen import Ocp, build_functions
+from dopus_codegen.cli import main as cli_main
+from dopus_codegen.errors import DopusError, qp_status_code
+from dopus_codegen.runtime.solver import CSolver
+
+N, DT = 10, 0.1
+
+
+def _model(name, x0, terminal=None, parameter=False):
+    ocp = Ocp(name)
+    x = ocp.state("x")
+    u = ocp.control("u", lb=-1.0, ub=1.0)
+    ocp.dynamics(u)
+    ocp.stage_least_squares(u, weights=[1.0])
+    if parameter:
+        p = ocp.parameter("p", value=-10.0)
+        ocp.path_constraint(x - p, lb=0.0)
+    if terminal is not None:
+        ocp.terminal_constraint(x, lb=terminal[0], ub=terminal[1])
+    ocp.horizon(N=N, dt=DT)
+    ocp.initial_state([x0])
+    return build_functions(ocp)
+
+
+@pytest.fixture(scope="module")
+def late():
+    return _model("late", 0.0, parameter=True)
+
+
+@pytest.fixture(scope="module")
+def reach():
+    return _model("reach", 0.0, terminal=(5.0, np.inf))
+
+
+@pytest.fixture(scope="module")
+def home():
+    return _model("home", 3.0, terminal=(0.0, 0.0))
+
+
+def _infeasible(s, xhat):
+    with pytest.raises(DopusError) as ei:
+        s.feedback(xhat)
+    assert ei.value.qp_status == qp_status_code("primal_infeasible"), str(ei.value)
+    return str(ei.value), s.qp_infeasible_row
+
+
+def test_later_stage_path_row_is_named(late):
+    s = CSolver(late, M=N - 1, mode="fixed")
+    s.set_parameters(np.full((N + 1, 1), -10.0))
+    s.init([0.0])
+    s.feedback([0.0])                         # every row satisfiable: solved
+    assert s.qp_infeasible_row is None
+    s.set_parameters_node(3, [0.5])           # used from the next prepare on
+    s.prepare()
+    msg, row = _infeasible(s, [0.0])
+    assert row == {"stage": 3, "kind": "path", "index": 0, "side": "lower", "bound": 0.0}, row
+    assert re.search(r"infeasible at stage 3: path constraint 0 \(\(x-p\)\) >= lb 0\b", msg), msg
+    # the same QP without that row is feasible: the named row is the cause
+    s.set_parameters_node(3, [-10.0])
+    s.prepare()
+    s.feedback([0.0])
+
+
+@pytest.mark.parametrize("problem, x0, row, pattern", [
+    ("reach", 0.0, {"stage": N, "kind": "terminal", "index": 0, "side": "lower", "bound": 5.0},
+     r"terminal constraint 0 \(x\) >= lb 5\b"),
+    ("home", 3.0, {"stage": N, "kind": "terminal_eq", "index": 0, "side": "upper", "bound": 0.0},
+     r"terminal constraint 0 \(x\) = 0\b"),
+])
+def test_terminal_row_is_named(problem, x0, row, pattern, request):
+    s = CSolver(request.getfixturevalue(problem), M=1)
+    s.init([x0])
+    msg, got = _infeasible(s, [x0])
+    assert got == row, got
+    assert re.search(rf"infeasible at the terminal node \(stage {N}\): " + pattern, msg), msg
+
+
+def test_no_row_without_an_infeasible_qp(reach):
+    s = CSolver(reach, M=1)
+    s.set_qp_max_iter(1)
+    s.init([0.0])
+    with pytest.raises(DopusError) as ei:
+        s.feedback([0.0])
+    assert ei.value.qp_status == qp_status_code("max_iter")
+    assert s.qp_infeasible_row is None
+    assert "infeasible at" not in str(ei.value)
+
+
+# --------------------------------------------------------------------------- the commands
+REACH_FILE = '''
+import numpy as np
+from dopus_codegen import Ocp
+
+def build():
+    ocp = Ocp("reachfile")
+    x = ocp.state("x")
+    u = ocp.control("u", lb=-1.0, ub=1.0)
+    ocp.dynamics(u)
+    ocp.stage_least_squares(u, weights=[1.0])
+    ocp.terminal_constraint(x, lb=5.0)
+    ocp.horizon(N=10, dt=0.1)
+    ocp.initial_state([0.0])
+    ocp.scenario(duration=0.2, signals={"x": x[0]})
+    return ocp
+'''
+
+NAMED = r"infeasible at the terminal node \(stage 10\): terminal constraint 0 \(x\) >= lb 5"
+
+
+def _invoke(args):
+    return CliRunner().invoke(cli_main, [str(a) for a in args])
+
+
+def test_converge_names_the_row(tmp_path):
+    f = tmp_path / "reachfile.py"
+    f.write_text(REACH_FILE)
+    out = tmp_path / "c.json"
+    res = _invoke(["converge", f, "--backend", "c", "--start", "cold", "--M", "1", "--iters", "2", "--json", out])
+    assert res.exit_code == 1, res.output
+    assert re.search(NAMED, res.output), res.output
+    (run,) = json.loads(out.read_text())["runs"]
+    assert re.search(NAMED, run["message"]), run["message"]
+
+
+def test_sil_names_the_row(tmp_path):
+    f = tmp_path / "reachfile.py"
+    f.write_text(REACH_FILE)
+    out = tmp_path / "s.json"
+    res = _invoke(["sil", f, "--backend", "c", "--M", "1", "--json", out])
+    assert re.search(r"first failed instant at t = 0(\.0+)? s: .*" + NAMED, res.output), res.output
+    run = json.loads(out.read_text())["runs"][0]
+    assert re.search(NAMED, run["result"]["first_failure"]["message"])
