@@ -4,7 +4,7 @@ PY     := $(VENV)/bin/python
 OUT    := out
 EXAMPLE := examples/robot_arm.py
 
-.PHONY: demo test bench bench-acados bench-scaling acados-env generate firmware firmware-report clean setup help
+.PHONY: demo test bench bench-acados bench-scaling campaign acados-env generate firmware firmware-report clean setup help
 
 help:
 	@echo "make demo      generate, build and run the robot-arm closed loop (DOPUS M=1 vs full RTI); plots in $(OUT)/robot_arm"
@@ -12,6 +12,7 @@ help:
 	@echo "make bench     run the benchmarks (tables on stdout, JSON in bench/results)"
 	@echo "make bench-acados  time our solver against acados on the robot arm (one process, interleaved)"
 	@echo "make bench-scaling time per iteration against N = 20, 40, 80, 160 (robot arm), fitted exponent"
+	@echo "make campaign  Monte Carlo campaign on the robot arm (CAMPAIGN_RUNS=1000 runs, dask over all cores); $(OUT)/campaign"
 	@echo "make generate  regenerate the checked-in generated/ folders"
 	@echo "make firmware  build the static library of generated/robot_arm with make only"
 	@echo "make firmware-report  run the robot arm on an emulated Cortex-M7 (QEMU): sizes, instructions, accuracy"
@@ -50,6 +51,14 @@ bench-acados: setup acados-env
 bench-scaling: setup
 	$(VENV)/bin/dopus-gen bench $(EXAMPLE) --scaling 20,40,80,160 \
 	    --json bench/results/bench_scaling.json --plot bench/results/bench_scaling.png
+
+CAMPAIGN_RUNS ?= 1000
+
+# Resumable: run it again after an interruption and only the missing runs are computed.
+campaign: setup
+	mkdir -p $(OUT)/campaign
+	$(VENV)/bin/dopus-gen campaign $(EXAMPLE) --runs $(CAMPAIGN_RUNS) --out $(OUT)/campaign/robot_arm.jsonl \
+	    --json $(OUT)/campaign/robot_arm.json --plot-dir $(OUT)/campaign
 
 generate: setup
 	$(VENV)/bin/dopus-gen generate examples/robot_arm.py -o generated/robot_arm

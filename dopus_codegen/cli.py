@@ -69,11 +69,12 @@ def _known_errors() -> tuple:
     from .errors import DopusError
     from .problem.ocp import OcpError
     from .settings import SettingError
+    from .studies.campaign import CampaignError
     from .studies.plant import PlantError
     from .studies.sil import SilError
 
     return (OcpError, CodegenError, BuildError, FirmwareError, SettingError, DopusError, SilError, PlantError,
-            ValueError, OSError)
+            CampaignError, ValueError, OSError)
 
 
 def _show_warnings(ctx) -> None:
@@ -237,7 +238,12 @@ def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, *
 @_solver_options("0: the paper's literal QP; keeps the fixed point, see README, Closed loop; the robot arm "
                  "declares 1e-4")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
-def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, **kwargs):
+@click.option("--campaign-run", type=click.IntRange(0), default=None,
+              help="Replay run I of the OCP file's campaign (dopus-gen campaign): its initial state, pushes and "
+                   "plant mismatch (the file's), with --seed.")
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=None,
+              help="Seed of the campaign run replayed by --campaign-run. [default: 0]")
+def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, campaign_run, seed, **kwargs):
     """Closed loop against a CVODES simulation of the plant (paper figures 2 to 4).
 
     One DOPUS iteration per sampling instant, started from the offline solution at the
@@ -251,12 +257,90 @@ def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, **kwargs):
         check_output_file(json_out, "--json")
     if plot_dir:
         check_output_dir(plot_dir, "--plot-dir")
+    if seed is not None and campaign_run is None:
+        raise BadInput("--seed needs --campaign-run (it seeds the replayed campaign run)")
     runs = run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
-                       compare=compare, backend=backend, echo=click.echo, **_runtime_values(kwargs))
+                       compare=compare, backend=backend, echo=click.echo, campaign_run=campaign_run, seed=seed,
+                       **_runtime_values(kwargs))
     aborted = [r for r in runs if r.get("aborted")]
     if aborted:
         raise RunFailed("; ".join(f"run '{r['label']}' aborted after {len(r['t'])} of "
                                   f"{r['result']['instants_planned']} instants: {r['aborted']}" for r in aborted))
+
+
+def _campaign_option(name: str, flag_type):
+    from . import settings
+
+    flag = "--" + name.replace("_", "-")
+    default = settings.DEFAULTS.get(name)
+    where = ({"duration": "[default: the OCP file's campaign(duration=...), else the scenario's]",
+              "threshold": "[default: the OCP file's campaign(on_path=OnPath(...))]",
+              "settle": "[default: the OCP file's campaign(on_path=OnPath(...))]",
+              "mismatch": "[default: the OCP file's campaign(mismatch=...)]"}.get(name)
+             or ("[default: 0]" if name == "seed" else f"[default: the OCP file's campaign({name}=...), else {default}]"))
+    return click.option(flag, name, type=flag_type, default=None, callback=_setting_callback(name),
+                        help=f"{settings.HELP[name]} {where}")
+
+
+@main.command()
+@click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--out", "out", type=click.Path(dir_okay=False), required=True,
+              help="The result file (JSON lines, one per run, keyed by run and seed). An existing file of the "
+                   "same campaign is resumed: only the runs it lacks are computed.")
+@_campaign_option("runs", int)
+@_campaign_option("seed", int)
+@_campaign_option("duration", float)
+@_campaign_option("threshold", float)
+@_campaign_option("settle", float)
+@_campaign_option("mismatch", str)
+@click.option("--workers", default=None, type=int,
+              help="Worker processes of the local dask cluster; 0: the runs one by one in this process, no dask. "
+                   "[default: one per core]")
+@click.option("--scheduler", default=None,
+              help="Address of an existing dask scheduler (tcp://host:port) to run on instead of a local cluster; "
+                   "its workers need dopus-codegen installed.")
+@click.option("--M", "m", default=None, type=click.IntRange(0),
+              help="Stages re-linearised per iteration (clamped to N-1, the full RTI). " + _FROM_FILE.format("1"))
+@_solver_options("0: the paper's literal QP")
+@click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the report as JSON.")
+@click.option("--plot-dir", type=click.Path(file_okay=False), default=None,
+              help="Write the histograms and the worst runs' trajectories (PNG) here.")
+@click.option("--worst", default=4, show_default=True, type=click.IntRange(0, 20),
+              help="Runs in the worst-runs figures (simulated again in this process).")
+@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress display on stderr.")
+def campaign(ocp_file, out, runs, seed, duration, threshold, settle, mismatch, workers, scheduler, m, backend,
+             json_out, plot_dir, worst, progress, **kwargs):
+    """Monte Carlo campaign: many closed-loop runs with random starts, pushes and plant mismatch.
+
+    Run i (with --seed s) is the closed loop of `dopus-gen sil` with the random draw of (s, i):
+    plant quantities scaled within the OCP file's campaign(mismatch=...), the initial state
+    offset within campaign(initial=...), the pushes of campaign(pushes=Pushes(...)) instead
+    of the scenario's events. Reports the runs that stay on the path (campaign(on_path=...)),
+    failed instants, recoveries and the time per iteration. Runs on dask.distributed: a local
+    cluster (--workers), or an existing scheduler (--scheduler). `dopus-gen sil --campaign-run
+    I --seed S` replays one run. Exits with 1 when a run raised an error (the others are
+    kept in --out).
+    """
+    from .outputs import check_output_dir, check_output_file
+    from .studies.campaign import run_campaign
+
+    check_output_file(out, "--out")
+    if json_out:
+        check_output_file(json_out, "--json")
+    if plot_dir:
+        check_output_dir(plot_dir, "--plot-dir")
+    if workers is not None and workers < 0:
+        raise BadInput(f"--workers must be >= 0, got {workers}")
+    if scheduler is not None and workers is not None:
+        raise BadInput("--workers and --scheduler exclude each other (the scheduler has its own workers)")
+    rep = run_campaign(ocp_file, out, workers=workers, scheduler=scheduler, backend=backend, json_out=json_out,
+                       plot_dir=plot_dir, echo=click.echo, progress=progress, worst=worst, M=m, runs=runs, seed=seed,
+                       duration=duration, threshold=threshold, settle=settle, mismatch=mismatch,
+                       **_runtime_values(kwargs))
+    if rep["errors"]:
+        raise RunFailed(f"{len(rep['errors'])} runs raised an error (the first: run {rep['errors'][0]['run']}: "
+                        f"{rep['errors'][0]['message']}); the other runs are in '{out}'")
 
 
 @main.command()

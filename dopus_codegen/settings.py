@@ -20,7 +20,7 @@ from . import vocabulary
 
 __all__ = ["SettingError", "DEFAULTS", "SOLVER_SETTINGS", "choices", "code", "value_of", "check",
            "positive", "nonnegative", "count", "resolve", "RUNTIME_SETTINGS", "HELP", "kind", "validate",
-           "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT", "parse_m_list"]
+           "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT", "parse_m_list", "CAMPAIGN_SETTINGS", "mismatch_table"]
 
 SOURCE_CLI, SOURCE_FILE, SOURCE_DEFAULT = "cli", "ocp-file", "default"
 
@@ -41,6 +41,8 @@ DEFAULTS: Dict[str, Any] = {
     "mode": "receding",
     "qp_tol": 1e-10,
     "offline_guess": False,
+    "runs": 100,
+    "seed": 0,
 }
 
 #: The settings of a DOPUS backend that an OCP file and the commands share.
@@ -166,6 +168,37 @@ def count(setting: str, value: Any, minimum: int = 0, maximum: Any = None) -> in
 _C_INT_MAX = 2**31 - 1
 
 
+def mismatch_table(value: Any) -> Dict[str, float]:
+    """The plant mismatch of a campaign: plant quantity -> relative half-width in [0, 1).
+    Written ``"m1=0.1,m2=0.1"`` on the command line (``"none"``: no mismatch), a dict (or
+    (name, width) pairs) in the OCP file. The names are checked against the plant
+    quantities by the campaign."""
+    if isinstance(value, str):
+        text = value.strip()
+        if text.lower() == "none":
+            return {}
+        pairs = []
+        for item in text.split(","):
+            name, sep, width = item.partition("=")
+            if not sep or not name.strip():
+                raise SettingError(f"mismatch must be 'name=width,...' or 'none', got {value!r}")
+            pairs.append((name.strip(), width.strip()))
+    elif isinstance(value, Mapping):
+        pairs = list(value.items())
+    else:
+        try:
+            pairs = [(n, w) for n, w in value]
+        except (TypeError, ValueError):
+            raise SettingError(f"mismatch must be 'name=width,...', 'none' or a dict, got {value!r}") from None
+    out: Dict[str, float] = {}
+    for name, width in pairs:
+        f = _number("mismatch", width, "a number in [0, 1)")
+        if not (0 <= f < 1):
+            raise SettingError(f"mismatch of {name!r} must be a relative half-width in [0, 1), got {width!r}")
+        out[str(name)] = f
+    return out
+
+
 def _c_int(setting: str, value: int) -> int:
     """``value`` if a C int holds it (the runtime's setters take int)."""
     if value > _C_INT_MAX:
@@ -183,7 +216,18 @@ _CHECKS = {
     "qp_tol": lambda v: qp_tolerance(v),
     "lm": lambda v: levenberg_marquardt(v),
     "qp_max_iter": lambda v: _c_int("qp_max_iter", count("qp_max_iter", v, 1)),
+    "runs": lambda v: count("runs", v, 1),
+    "seed": lambda v: count("seed", v, 0, 2**63 - 1),
+    "duration": lambda v: positive("duration", v),
+    "threshold": lambda v: positive("threshold", v),
+    "settle": lambda v: nonnegative("settle", v),
+    "mismatch": mismatch_table,
 }
+
+#: The settings of ``dopus-gen campaign`` beyond the solver's, in the order of ``--help``;
+#: the OCP file's ``campaign(...)`` (``on_path`` for ``threshold`` and ``settle``) gives
+#: their defaults, flags override them. ``duration`` not given is the scenario's.
+CAMPAIGN_SETTINGS = ("runs", "seed", "duration", "threshold", "settle", "mismatch")
 
 #: The settings a verb that runs the solver takes as flags (``--qp-tol`` for ``qp_tol``),
 #: in the order of ``--help``. ``M`` has a verb-specific form (a list for ``converge``),
@@ -207,6 +251,12 @@ HELP: Dict[str, str] = {
     "qp_max_iter": "Iteration limit of the QP solver; reaching it fails the feedback (QP status max_iter). "
                    "Not given: the QP solver's own limit.",
     "offline_guess": "Solve the OCP with IPOPT at its initial state at generation and carry the solution.",
+    "runs": "Closed-loop runs of the campaign (run i uses the random draw of (seed, i)).",
+    "seed": "Seed of the campaign's random draws.",
+    "duration": "Simulated seconds per run.",
+    "threshold": "A run is on the path when its on-path signal stays at or below this (the signal's unit) ...",
+    "settle": "... from this many seconds after the start and after every push.",
+    "mismatch": "Plant mismatch: quantity=relative half-width pairs, e.g. m1=0.1,m2=0.1 (+-10 %), or none.",
 }
 
 
@@ -215,11 +265,15 @@ def kind(setting: str) -> str:
     number >= 0), ``"count"`` or ``"flag"``."""
     if setting in ("hessian", "regularization", "mode", "cost_hessian"):
         return "choice"
-    if setting in ("reg_eps", "qp_tol"):
+    if setting in ("reg_eps", "qp_tol", "duration", "threshold"):
         return "positive"
+    if setting == "settle":
+        return "nonnegative"
     if setting == "lm":
         return "lm"
-    if setting in ("M", "qp_max_iter"):
+    if setting == "mismatch":
+        return "mismatch"
+    if setting in ("M", "qp_max_iter", "runs", "seed"):
         return "count"
     if setting == "offline_guess":
         return "flag"

@@ -9,7 +9,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from dopus_codegen import RK4, Event, Ocp
+from dopus_codegen import RK4, Event, Ocp, OnPath, Pushes
 
 # Model parameters (paper eq. 21).
 M1, M2 = 1.0, 1.0
@@ -39,14 +39,24 @@ def path(theta):
     return ca.vertcat(0.4 + 0.15 * ca.cos(theta), 0.2 + 0.15 * ca.sin(theta))
 
 
-def arm_ode(q, dq, tau):
-    """ddq = B(q)^-1 (tau - C(q,dq) dq - Fv dq - g(q))."""
+def arm_ode(q, dq, tau, m1=M1, m2=M2, l1=L1, l2=L2):
+    """ddq = B(q)^-1 (tau - C(q,dq) dq - Fv dq - g(q)).
+
+    The masses and lengths are numbers for the controller's model and symbols
+    (ocp.plant_quantity) for the plant of a campaign; each link is a uniform rod (centre of
+    mass at half its length, inertia m l^2 / 12). With the default numbers the constants are
+    those of the module (A1, A2, A3)."""
+    lc1, lc2 = l1 / 2, l2 / 2
+    i1, i2 = m1 * l1**2 / 12.0, m2 * l2**2 / 12.0
+    a1 = i1 + i2 + m1 * lc1**2 + m2 * (l1**2 + lc2**2)
+    a2 = m2 * l1 * lc2
+    a3 = i2 + m2 * lc2**2
     c2, s2 = ca.cos(q[1]), ca.sin(q[1])
-    B = ca.vertcat(ca.horzcat(A1 + 2 * A2 * c2, A3 + A2 * c2),
-                   ca.horzcat(A3 + A2 * c2, A3))
-    Cdq = ca.vertcat(-A2 * s2 * (2 * dq[0] * dq[1] + dq[1] ** 2), A2 * s2 * dq[0] ** 2)
-    grav = ca.vertcat((M1 * LC1 + M2 * L1) * GRAV * ca.cos(q[0]) + M2 * LC2 * GRAV * ca.cos(q[0] + q[1]),
-                      M2 * LC2 * GRAV * ca.cos(q[0] + q[1]))
+    B = ca.vertcat(ca.horzcat(a1 + 2 * a2 * c2, a3 + a2 * c2),
+                   ca.horzcat(a3 + a2 * c2, a3))
+    Cdq = ca.vertcat(-a2 * s2 * (2 * dq[0] * dq[1] + dq[1] ** 2), a2 * s2 * dq[0] ** 2)
+    grav = ca.vertcat((m1 * lc1 + m2 * l1) * GRAV * ca.cos(q[0]) + m2 * lc2 * GRAV * ca.cos(q[0] + q[1]),
+                      m2 * lc2 * GRAV * ca.cos(q[0] + q[1]))
     return ca.solve(B, tau - Cdq - FV * dq - grav)
 
 
@@ -93,11 +103,26 @@ def build():
     # docs/algorithm.md section 10): nothing to tune; it changes the steps, never the solution.
     ocp.options(hessian="exact", regularization="none", reg_eps=1e-4, M=1, offline_guess=True)
     ocp.disturbance(disturb)
+    # The plant may differ from the model in the masses and lengths of the links: the plant of
+    # the scenario uses these quantities (their nominal values in `dopus-gen sil`), a campaign
+    # draws them as `campaign(mismatch=...)` says.
+    quantities = {name: ocp.plant_quantity(name, value)
+                  for name, value in (("m1", M1), ("m2", M2), ("l1", L1), ("l2", L2))}
+    plant = ca.vertcat(dq, arm_ode(q, dq, tau, **quantities), dtheta)
     ocp.scenario(duration=3.0, events=[Event(1.0, disturb, "disturbance")],
                  signals={"deviation": ca.norm_2(tip(q) - path(theta)),
                           # the first two 2-component signals: the tip and its reference in the plane
                           "tip": tip(q), "circle": path(theta)},
-                 plant=None,
+                 plant=plant,
                  units={"deviation": "m", "tip": "m", "circle": "m", "q": "rad", "dq": "rad/s", "theta": "rad",
                         "tau": "N m", "dtheta": "rad/s"})
+    # dopus-gen campaign: +-10 % link masses, a start near the path, one or two pushes (joint
+    # velocity kicks); on the path = the tip within 2 cm of the circle (the nominal closed loop
+    # swings up to 6 mm off it while it follows the circle at speed), 0.4 s after the start
+    # and after every push.
+    ocp.campaign(mismatch={"m1": 0.10, "m2": 0.10},
+                 initial={"q": 0.02, "dq": 0.2},
+                 pushes=Pushes(count=(1, 2), window=(0.4, 1.2), kick={"dq": 2.0}),
+                 on_path=OnPath(signal="deviation", threshold=0.02, settle=0.4),
+                 runs=1000, duration=2.0)
     return ocp

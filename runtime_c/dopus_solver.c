@@ -396,6 +396,12 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
 static void dopus_lm_raise(dopus_solver *s)
 {
     double lo = DOPUS_LM_MIN_REL * s->lm_scale, hi = DOPUS_LM_MAX_REL * s->lm_scale;
+    if (s->lm_uncapped > s->lm) {
+        /* the first raise after the cap of dopus_lm_measured restores the term it capped */
+        s->lm = s->lm_uncapped;
+        s->lm_uncapped = -1.0;
+        return;
+    }
     s->lm = s->lm < lo ? lo : s->lm * DOPUS_LM_RAISE;
     s->lm = s->lm > hi ? hi : s->lm;
 }
@@ -418,6 +424,7 @@ void dopus_lm_start(dopus_solver *s)
     s->lm_scale = dopus_lm_hessian_scale(s);
     s->lm = 0.0;
     s->lm_kkt_prev = -1.0;
+    s->lm_uncapped = -1.0;
     dopus_lm_convexify(s);
 }
 
@@ -431,11 +438,34 @@ static void dopus_lm_prepared(dopus_solver *s)
         return;
     }
     s->lm_scale = dopus_lm_hessian_scale(s);
+    s->lm_uncapped = -1.0;
     if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= DOPUS_LM_KKT_GROWTH * prev)) {
         dopus_lm_raise(s);
     }
     s->lm_kkt_prev = s->kkt_proxy;
     dopus_lm_convexify(s);
+}
+
+/* Feedback, once the measurement is in the QP: the term capped by the distance from the
+ * solution, DOPUS_LM_KKT_REL h d^2 with d = max(proxy, max_i |dx0_i| / scale_x_i) (0 below
+ * DOPUS_LM_MIN_REL h), so that it vanishes where the iterate converges. */
+static void dopus_lm_measured(dopus_solver *s)
+{
+    double d = s->kkt_proxy, cap, v;
+    int i;
+    s->lm_uncapped = -1.0;
+    if (!s->lm_auto) {
+        return;
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        v = fabs(s->qp_in.x0[i]) / s->scale_x[i];
+        d = v > d ? v : d;
+    }
+    cap = DOPUS_LM_KKT_REL * s->lm_scale * d * d;
+    if (!(s->lm <= cap)) {
+        s->lm_uncapped = s->lm;
+        s->lm = cap < DOPUS_LM_MIN_REL * s->lm_scale ? 0.0 : cap;
+    }
 }
 
 /* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
@@ -476,6 +506,7 @@ void dopus_defaults(dopus_solver *s)
     s->lm = (dopus_default_lm >= 0.0 && dopus_default_lm < INFINITY) ? dopus_default_lm : 0.0;
     s->lm_scale = 1.0;
     s->lm_kkt_prev = -1.0;
+    s->lm_uncapped = -1.0;
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -940,6 +971,7 @@ static void dopus_feedback_measure(dopus_solver *s, const double *xhat0)
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->xhat_fresh = 1;
+    dopus_lm_measured(s);
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -1253,6 +1285,34 @@ static int dopus_recover(dopus_solver *s, int shifted)
     return DOPUS_OK;
 }
 
+/* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the
+ * prepared one, the QP is solved for the state the iterate predicts for this instant
+ * (dx_0 = 0; the measurement, absent or unusable, is left out) and its step taken; its
+ * controls become the plan the next fallbacks read. A failure of this QP changes nothing. */
+static void dopus_predicted_step(dopus_solver *s)
+{
+    int i, qs;
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->qp_in.x0[i] = 0.0;
+    }
+    s->qp_in.hess_shift = s->lm;
+    s->qp_settings.warm_start = 0;
+    qs = dopus_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    if (dopus_feedback_check_step(s, qs) != DOPUS_OK) {
+        return;
+    }
+    dopus_store_domega(s);
+    dopus_take_step(s);
+    dopus_copy(&s->plan_u[0][0], &s->u[0][0], DOPUS_N * DOPUS_NU);
+    s->plan_age = 0;
+    if (!s->xhat_fresh) {
+        /* no measurement to distrust: the model's prediction carries the loop */
+        s->n_failed = 0;
+        s->recover_pending = 0;
+    }
+    s->flags |= DOPUS_FLAG_PREDICTED;
+}
+
 static int dopus_prepare_iteration(dopus_solver *s);
 
 int dopus_prepare(dopus_solver *s)
@@ -1267,6 +1327,10 @@ int dopus_prepare(dopus_solver *s)
         return dopus_ret(s, DOPUS_ERR_ALREADY_PREPARED);
     }
     dopus_clear_timings(s, DOPUS_PHASE_SHIFT, DOPUS_PHASE_ASSEMBLY);
+    if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
+        s->mode == DOPUS_MODE_RECEDING) {
+        dopus_predicted_step(s);
+    }
     s->qp_ready = 0;
     if (s->mode == DOPUS_MODE_RECEDING && s->plan_age < DOPUS_N) {
         s->plan_age += 1;

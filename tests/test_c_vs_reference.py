@@ -350,7 +350,7 @@ def test_robot_receding_failures_and_recovery(robot_disc, robot_solution, kind):
     state the fallback controls left), then good measurements. Every instant the statuses, the flags, the
     returned control (the fallback of a failed instant), the recovery count and the
     recomputed stages are identical, and the iterates equal to REL_TOL, through the
-    re-initialisations and the Gauss-Newton full-RTI phase after them. As in :func:`step`,
+    predicted steps, the re-initialisations and the Gauss-Newton full-RTI phase after them. As in :func:`step`,
     an iteration whose QP solution is ill-determined (the backends differ by more than
     REL_TOL) must give a C step that solves the reference's QP to QP_KKT_TOL; such
     iterations are counted."""
@@ -393,11 +393,13 @@ def test_robot_receding_failures_and_recovery(robot_disc, robot_solution, kind):
         assert c.recomputed == r.recomputed, it
         seen |= r.flags | ({"failed"} if sr else set())
         x = np.array(disc.stage_eval(x, ur, p0)[0], dtype=float).reshape(-1)
-    assert {"failed", "fallback", "recovered"} <= seen, seen
-    assert r.recoveries >= 2, r.recoveries
+    # without a measurement the predicted steps carry the loop (no re-initialisation); a
+    # measurement whose QP fails twice re-initialises
+    assert {"failed", "fallback", "predicted" if kind == "nan" else "recovered"} <= seen, seen
+    assert r.recoveries >= (0 if kind == "nan" else 2), r.recoveries
     assert len(tally.ill) <= max(1, tally.n // 5), f"too many ill-determined QPs: {tally}"
     print(f"robot_arm receding, failed instants ({kind}), recovery: {tally}; recoveries {r.recoveries}")
-    assert r.recoveries >= 1 and sr == 0
+    assert sr == 0
     sx_c, su_c = c.scales
     np.testing.assert_array_equal(sx_c, r.scales[0])
     np.testing.assert_array_equal(su_c, r.scales[1])

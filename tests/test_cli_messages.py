@@ -330,7 +330,7 @@ def test_sil_aborted_plant_exits_1(write, tmp_path):
     assert "nan" not in res.output.lower().replace("nan)", "")
     run = json.loads(out.read_text())["runs"][0]
     assert run["result"] == {"status": "aborted", "instants": 0, "instants_planned": 3, "failed_instants": 0,
-                             "first_failure": None}
+                             "first_failure": None, "recoveries": 0}
 
 
 def test_sil_completed_run_and_qp_settings_reach_the_backend(write, tmp_path):

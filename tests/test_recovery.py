@@ -43,7 +43,7 @@ def test_no_returned_u0_leaves_the_bounds(arm, robot_solution):
     lbu, ubu = np.asarray(arm.lbu, float), np.asarray(arm.ubu, float)
     rng = np.random.default_rng(11)
     plant = Plant(arm.ode, arm.dt, 0, reltol=1e-8, abstol=1e-8)
-    n_fail = n_clip = n_ok = 0
+    n_fail = n_clip = n_ok = n_pred = 0
     for case in range(6):
         s = CSolver(arm, M=int(rng.integers(0, arm.N)), hessian=str(rng.choice(["exact", "gauss-newton"])),
                     lm=float(rng.choice([0.0, 1e-4, 1e-2])))
@@ -89,7 +89,12 @@ def test_no_returned_u0_leaves_the_bounds(arm, robot_solution):
             except DopusError:
                 pass
             age += 1
-    assert n_fail > 10 and n_ok > 10 and n_clip > 0
+            if "predicted" in s.flags:
+                # the prepare took the step of the QP for the predicted state: its controls,
+                # shifted with the horizon, are the plan of the next fallbacks
+                plan, age = s.u.copy(), 0
+                n_pred += 1
+    assert n_fail > 10 and n_ok > 10 and n_clip > 0 and n_pred > 0
 
 
 def _loop(s, plant, x, n, bad=None):
@@ -120,16 +125,19 @@ def _tracking(xs):
     return np.linalg.norm(tip - ref, axis=1)
 
 
-# failed instants -> instants after which the recovered loop stays within 1e-3 of the fresh one
-RECOVERED_WITHIN = 40
+# instants after the good measurements return from which the recovered loop tracks the path
+# within 20 % (+ 1e-4 m) of the fresh solver's loop (measured: from the first instant on for
+# 5, 10, 20 and 40 failed instants)
+RECOVERED_WITHIN = 10
 
 
-@pytest.mark.parametrize("n_failed", [5, 10])
+@pytest.mark.parametrize("n_failed", [5, 10, 20, 40])
 def test_back_on_the_fresh_trajectory_after_failed_instants(arm, robot_solution, n_failed):
     """n_failed instants without a usable measurement (NaN), then good ones: no user call,
-    no further failure, and within RECOVERED_WITHIN instants the plant follows the
-    trajectory of a freshly initialised solver (IPOPT at the state where the good
-    measurements return) to 1e-3."""
+    no further failure, and from RECOVERED_WITHIN instants on the tip tracks the path as
+    well as (within 20 % + 1e-4 m) under a freshly initialised solver (IPOPT at the state
+    where the good measurements return) run in its own loop from the same plant state. The
+    failed instants keep the plan current by predicted steps (docs/algorithm.md section 9)."""
     from dopus_codegen.reference.offline import solve_ocp
 
     guess, _ = robot_solution
@@ -141,6 +149,7 @@ def test_back_on_the_fresh_trajectory_after_failed_instants(arm, robot_solution,
     assert not any(st)
     _, st, x = _loop(s, plant, x, n_failed, bad=lambda i, x: np.full_like(x, np.nan))
     assert all(v != 0 for v in st)
+    assert "predicted" in s.flags
     x_resume = x.copy()
     n_after = 120
     xs_rec, st_rec, _ = _loop(s, plant, x_resume.copy(), n_after)

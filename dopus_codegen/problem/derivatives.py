@@ -489,9 +489,16 @@ def _scenario(spec: OcpSpec, m: StageModel, ode: ca.Function) -> Scenario:
         plant = ode
     else:
         plant = ca.Function(f"{name}_plant_ode", [m.x, m.u, m.p], [_d(sc.plant)], ["x", "u", "p"], ["xdot"])
+    plant_q = None
+    if sc.plant_q is not None:
+        q = ca.vertcat(*[sym for _, sym, _ in sc.quantities])
+        plant_q = ca.Function(f"{name}_plant_ode_q", [m.x, m.u, ca.vertcat(m.p, q)], [_d(sc.plant_q)],
+                              ["x", "u", "p_q"], ["xdot"])
     closed = ScenarioSpec(duration=sc.duration, events=sc.events, signals=types.MappingProxyType(signals),
                           plant_ode=plant, x0=spec.x0 if sc.x0 is None else sc.x0,
-                          units=types.MappingProxyType(dict(getattr(sc, "units", ()))))
+                          units=types.MappingProxyType(dict(getattr(sc, "units", ()))),
+                          quantities=types.MappingProxyType({n: v for n, _, v in sc.quantities}),
+                          plant_ode_q=plant_q, campaign=sc.campaign)
     return Scenario(disturbance=spec.scenario.disturbance, closed_loop=closed)
 
 

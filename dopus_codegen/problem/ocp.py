@@ -53,11 +53,12 @@ import casadi as ca
 import numpy as np
 
 from ..cnames import identifier_problem
-from .spec import (ClosedLoopSpec, ConstraintSpec, CostSpec, GuessSpec, HorizonSpec, LeastSquares,
+from .spec import (CampaignSpec, ClosedLoopSpec, ConstraintSpec, CostSpec, GuessSpec, HorizonSpec, LeastSquares,
                    ModelSpec, OcpSpec, OptionsSpec, Rows, ScenarioPart, Variable, readonly)
 
 __all__ = [
-    "OcpError", "Integrator", "RK4", "GaussLegendre", "RadauIIA", "Event", "Guess", "ScenarioSpec", "Ocp", "load_ocp",
+    "OcpError", "Integrator", "RK4", "GaussLegendre", "RadauIIA", "Event", "Pushes", "OnPath", "Guess", "ScenarioSpec",
+    "Ocp", "load_ocp",
 ]
 
 
@@ -273,6 +274,29 @@ class Event:
     label: str = "event"
 
 
+@dataclass(frozen=True)
+class Pushes:
+    """The random disturbance events of a campaign run (``Ocp.campaign``): ``count`` pushes
+    (an integer, or ``(min, max)``: uniform in ``min..max``), each at a time uniform in
+    ``window = (t0, t1)`` seconds, adding to the states named in ``kick`` an offset uniform
+    in ``[-a, a]`` (``kick``: state name -> ``a``, one number or one per component), e.g.
+    ``Pushes(count=(1, 2), window=(0.3, 1.2), kick={"dq": 2.0})``: joint-velocity kicks."""
+    count: object
+    window: tuple
+    kick: Mapping[str, object]
+
+
+@dataclass(frozen=True)
+class OnPath:
+    """When a campaign run counts as on the path: after ``settle`` seconds from the start and
+    from every push, the scalar scenario signal ``signal`` stays at or below ``threshold``
+    (in its own unit) at every sampling instant, and the plant could be integrated to the
+    end of the run."""
+    signal: str
+    threshold: float
+    settle: float
+
+
 @dataclass
 class Guess:
     """A primal-dual point in the signed convention of docs/algorithm.md section 1.
@@ -317,7 +341,11 @@ class ScenarioSpec:
     ``casadi.Function(x, u, p) -> value``; ``plant_ode``: ``casadi.Function(x, u, p) ->
     xdot`` (the model itself unless a mismatch was given); ``x0``: initial plant state
     (read-only); ``units``: read-only mapping of a signal, state or control name to its
-    unit (axis labels of the figures).
+    unit (axis labels of the figures); ``quantities``: read-only mapping of the plant
+    quantities (``Ocp.plant_quantity``) to their nominal values, in declaration order;
+    ``plant_ode_q``: ``casadi.Function(x, u, [p; q]) -> xdot`` with the quantities ``q``
+    stacked under the parameters (None without quantities); ``campaign``: the declared
+    :class:`~.spec.CampaignSpec` or None.
     """
     duration: float
     events: tuple
@@ -325,6 +353,9 @@ class ScenarioSpec:
     plant_ode: ca.Function
     x0: np.ndarray
     units: Mapping[str, str] = field(default_factory=lambda: types.MappingProxyType({}))
+    quantities: Mapping[str, float] = field(default_factory=lambda: types.MappingProxyType({}))
+    plant_ode_q: Optional[ca.Function] = None
+    campaign: Optional[CampaignSpec] = None
 
 
 @dataclass
@@ -464,6 +495,8 @@ class Ocp:
         self._declared: set = set()
         self._disturbance = None
         self._scenario = None
+        self._quantities: list = []
+        self._campaign = None
 
     def __setattr__(self, key, value):
         if key != "_spec":
@@ -667,6 +700,48 @@ class Ocp:
         self._scenario = dict(duration=duration, events=events, signals=dict(signals or {}),
                               plant=plant, x0=_snapshot(x0), units=dict(units or {}))
 
+    @_declaration
+    def plant_quantity(self, name: str, nominal: float) -> ca.SX:
+        """A scalar quantity of the plant (a mass, a length) that a campaign may mismatch.
+
+        Returns a symbol to use in the scenario's ``plant`` expression (only there: the
+        controller's model keeps its own numbers). The plant of ``dopus-gen sil`` uses the
+        ``nominal`` value; a campaign run scales it as ``Ocp.campaign(mismatch=...)`` says."""
+        _check_identifier(name, "plant quantity name")
+        if any(n == name for n, _, _ in self._quantities):
+            raise OcpError(f"plant quantity '{name}': duplicate name (already declared)")
+        try:
+            value = float(nominal)
+        except (TypeError, ValueError):
+            raise OcpError(f"plant quantity '{name}': nominal must be a number, got {nominal!r}") from None
+        if not math.isfinite(value):
+            raise OcpError(f"plant quantity '{name}': nominal must be finite, got {nominal!r}")
+        sym = ca.SX.sym(name)
+        self._quantities.append((name, sym, value))
+        return sym
+
+    @_declaration
+    def campaign(self, mismatch=None, initial=None, pushes: Optional[Pushes] = None,
+                 on_path: Optional[OnPath] = None, runs: Optional[int] = None,
+                 duration: Optional[float] = None) -> None:
+        """The Monte Carlo campaign of ``dopus-gen campaign`` (needs :meth:`scenario`).
+
+        ``mismatch``: plant quantity name -> relative half-width ``r`` in [0, 1) (the run's
+        plant uses ``nominal * U(1 - r, 1 + r)``); ``initial``: state name -> half-width
+        ``a`` (one number or one per component; the run starts at the scenario's initial
+        state plus ``U(-a, a)``); ``pushes``: :class:`Pushes`; ``on_path``: :class:`OnPath`;
+        ``runs``, ``duration``: defaults of the command's ``--runs`` and ``--duration``.
+        The scenario's own events are not applied in a campaign run, its pushes are."""
+        for what, value in (("mismatch", mismatch), ("initial", initial)):
+            if value is not None and not isinstance(value, dict):
+                raise OcpError(f"campaign: {what} must be a dict name -> half-width, got {type(value).__name__}")
+        if pushes is not None and not isinstance(pushes, Pushes):
+            raise OcpError(f"campaign: pushes must be Pushes(count, window, kick), got {type(pushes).__name__}")
+        if on_path is not None and not isinstance(on_path, OnPath):
+            raise OcpError(f"campaign: on_path must be OnPath(signal, threshold, settle), got {type(on_path).__name__}")
+        self._campaign = dict(mismatch=dict(mismatch or {}), initial=dict(initial or {}), pushes=pushes,
+                              on_path=on_path, runs=runs, duration=duration)
+
     # ------------------------------------------------------------------ derived views
     @property
     def N(self) -> Optional[int]:
@@ -762,6 +837,8 @@ class Ocp:
         x0 = self._full_vector(self._x0, nx, "initial state")
         N = self._N
         gx, gu = self._guess_arrays(nx, nu, N, x0)
+        if self._campaign is not None and self._scenario is None:
+            raise OcpError("campaign: needs a closed-loop scenario (ocp.scenario(...))")
         closed_loop = self._validate_scenario(nx) if self._scenario is not None else None
         return self._spec_parts(x0, gx, gu, closed_loop)
 
@@ -865,11 +942,15 @@ class Ocp:
             e = _as_sx(expr, f"scenario signal '{name}'")
             self._check_symbols(e, f"scenario signal '{name}'", "xup")
             signals.append((name, e))
-        plant = None
+        plant, plant_q = None, None
         if sc["plant"] is not None:
             plant = _as_sx(sc["plant"], "scenario plant")
             if plant.size1() != nx:
                 raise OcpError(f"scenario plant: expected {nx} rows (one per state), got {plant.size1()}")
+            if self._quantities:
+                plant_q = plant
+                plant = ca.substitute(plant, ca.vertcat(*[q for _, q, _ in self._quantities]),
+                                      ca.DM([v for _, _, v in self._quantities]))
             self._check_symbols(plant, "scenario plant", "xup")
         x0 = None
         if sc["x0"] is not None:
@@ -883,8 +964,93 @@ class Ocp:
             if not isinstance(unit, str) or not unit.strip():
                 raise OcpError(f"scenario units: the unit of {key!r} must be a non-empty string, got {unit!r}")
             units.append((key, unit.strip()))
+        campaign = self._validate_campaign() if self._campaign is not None else None
         return ClosedLoopSpec(duration=dur, events=tuple(events), signals=tuple(signals), plant=plant, x0=x0,
-                              units=tuple(units))
+                              units=tuple(units), quantities=tuple(self._quantities), plant_q=plant_q,
+                              campaign=campaign)
+
+    def _state_rows(self, table, what: str) -> tuple:
+        """((rows, half-widths), ...) of a dict state name -> half-width (a number or one per
+        component, finite and >= 0)."""
+        offsets, start = {}, 0
+        for d in self._states:
+            offsets[d.name] = (start, d.size)
+            start += d.size
+        out = []
+        for name, width in table.items():
+            if name not in offsets:
+                raise OcpError(f"campaign {what}: {name!r} is not a state; the states are {sorted(offsets)}")
+            first, size = offsets[name]
+            try:
+                a = np.broadcast_to(np.asarray(width, dtype=float), (size,)).copy()
+            except (TypeError, ValueError):
+                raise OcpError(f"campaign {what} '{name}': expected one number or {size}, got {width!r}") from None
+            if not np.all(np.isfinite(a)) or np.any(a < 0):
+                raise OcpError(f"campaign {what} '{name}': half-widths must be finite and >= 0, got {width!r}")
+            out.append((tuple(range(first, first + size)), tuple(float(v) for v in a)))
+        return tuple(out)
+
+    def _validate_campaign(self) -> CampaignSpec:
+        """The campaign declaration on its own; what depends on the scenario as finally
+        declared (the on-path signal, a plant that uses the quantities) is checked by the
+        campaign, so that a file may declare its scenario again after the campaign."""
+        cp = self._campaign
+        known = {n: v for n, _, v in self._quantities}
+        mismatch = []
+        for name, r in cp["mismatch"].items():
+            if name not in known:
+                raise OcpError(f"campaign mismatch: {name!r} is not a plant quantity (ocp.plant_quantity); "
+                               f"the plant quantities are {sorted(known) or 'none'}")
+            try:
+                r = float(r)
+            except (TypeError, ValueError):
+                raise OcpError(f"campaign mismatch '{name}': expected a number in [0, 1), got {r!r}") from None
+            if not (0 <= r < 1):
+                raise OcpError(f"campaign mismatch '{name}': the relative half-width must be in [0, 1), got {r!r}")
+            mismatch.append((name, r))
+        initial = self._state_rows(cp["initial"], "initial")
+        count, window, kick = (0, 0), (0.0, 0.0), ()
+        pu = cp["pushes"]
+        if pu is not None:
+            c = pu.count if isinstance(pu.count, (tuple, list)) else (pu.count, pu.count)
+            if (len(c) != 2 or any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) for v in c)
+                    or not 0 <= c[0] <= c[1]):
+                raise OcpError(f"campaign pushes: count must be an integer >= 0 or (min, max), got {pu.count!r}")
+            try:
+                t0, t1 = (float(v) for v in pu.window)
+            except (TypeError, ValueError):
+                raise OcpError(f"campaign pushes: window must be (t0, t1) seconds, got {pu.window!r}") from None
+            if not (math.isfinite(t0) and math.isfinite(t1) and 0 <= t0 <= t1):
+                raise OcpError(f"campaign pushes: window must satisfy 0 <= t0 <= t1, got {pu.window!r}")
+            if not isinstance(pu.kick, Mapping) or not pu.kick:
+                raise OcpError(f"campaign pushes: kick must be a non-empty dict state name -> half-width, "
+                               f"got {pu.kick!r}")
+            count, window, kick = (int(c[0]), int(c[1])), (t0, t1), self._state_rows(pu.kick, "pushes kick")
+        on_path = None
+        if cp["on_path"] is not None:
+            op = cp["on_path"]
+            if not isinstance(op.signal, str) or not op.signal:
+                raise OcpError(f"campaign on_path: signal must be the name of a scenario signal, got {op.signal!r}")
+            try:
+                thr, settle = float(op.threshold), float(op.settle)
+            except (TypeError, ValueError):
+                raise OcpError("campaign on_path: threshold and settle must be numbers") from None
+            if not (math.isfinite(thr) and thr > 0 and math.isfinite(settle) and settle >= 0):
+                raise OcpError(f"campaign on_path: threshold must be > 0 and settle >= 0, got {op.threshold!r}, "
+                               f"{op.settle!r}")
+            on_path = (op.signal, thr, settle)
+        runs, dur = cp["runs"], cp["duration"]
+        if runs is not None and (isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 1):
+            raise OcpError(f"campaign: runs must be an integer >= 1, got {runs!r}")
+        if dur is not None:
+            try:
+                dur = float(dur)
+            except (TypeError, ValueError):
+                raise OcpError(f"campaign: duration must be a number, got {dur!r}") from None
+            if not (math.isfinite(dur) and dur > 0):
+                raise OcpError(f"campaign: duration must be positive and finite, got {cp['duration']!r}")
+        return CampaignSpec(mismatch=tuple(mismatch), initial=initial, push_count=count, push_window=window,
+                            push_kick=kick, on_path=on_path, runs=None if runs is None else int(runs), duration=dur)
 
 
 # --------------------------------------------------------------------------- loading

@@ -25,7 +25,7 @@ import numpy as np
 
 __all__ = [
     "readonly", "Variable", "ModelSpec", "LeastSquares", "CostSpec", "Rows", "ConstraintSpec",
-    "HorizonSpec", "OptionsSpec", "GuessSpec", "ClosedLoopSpec", "ScenarioPart", "OcpSpec",
+    "HorizonSpec", "OptionsSpec", "GuessSpec", "ClosedLoopSpec", "CampaignSpec", "ScenarioPart", "OcpSpec",
 ]
 
 
@@ -199,17 +199,48 @@ class GuessSpec:
 
 # --------------------------------------------------------------------------- scenario
 @dataclass(frozen=True)
+class CampaignSpec:
+    """The declared Monte Carlo campaign of ``dopus-gen campaign`` (``Ocp.campaign``), with
+    state names resolved to rows of ``x``.
+
+    ``mismatch``: ((plant quantity, relative half-width), ...): the plant of a run scales the
+    quantity's nominal value by a factor uniform in ``[1 - r, 1 + r]``; ``initial``: ((state
+    rows, half-widths), ...): offsets uniform in ``[-a, a]`` added to the scenario's initial
+    state; ``push_count`` (min, max), ``push_window`` (t0, t1) seconds and ``push_kick``
+    ((state rows, half-widths), ...): every run has a number of pushes uniform in
+    ``min..max``, each at a time uniform in the window, adding uniform offsets in ``[-a, a]``
+    to those rows; ``on_path``: (signal, threshold, settle) or None; ``runs``, ``duration``:
+    None when not declared."""
+    mismatch: Tuple[Tuple[str, float], ...] = ()
+    initial: Tuple[Tuple[Tuple[int, ...], Tuple[float, ...]], ...] = ()
+    push_count: Tuple[int, int] = (0, 0)
+    push_window: Tuple[float, float] = (0.0, 0.0)
+    push_kick: Tuple[Tuple[Tuple[int, ...], Tuple[float, ...]], ...] = ()
+    on_path: Optional[Tuple[str, float, float]] = None
+    runs: Optional[int] = None
+    duration: Optional[float] = None
+
+
+@dataclass(frozen=True)
 class ClosedLoopSpec:
     """The declared closed-loop scenario: ``duration`` seconds, state ``events`` (sorted as
     declared), recorded ``signals`` ((name, SX expression of x, u, p) pairs), the plant
     model ``plant`` (None: the model itself), its initial state ``x0`` (None: the OCP's) and
-    the ``units`` of signals, states and controls ((name, unit) pairs) for the figures."""
+    the ``units`` of signals, states and controls ((name, unit) pairs) for the figures.
+
+    ``quantities``: the plant quantities ((name, SX symbol, nominal value), ...) declared with
+    ``Ocp.plant_quantity``; ``plant`` has them replaced by their nominal values and
+    ``plant_q`` (None without quantities) keeps the symbols; ``campaign``: the declared
+    :class:`CampaignSpec` or None."""
     duration: float
     events: Tuple[Any, ...]
     signals: Tuple[Tuple[str, ca.SX], ...]
     plant: Optional[ca.SX]
     x0: Optional[np.ndarray]
     units: Tuple[Tuple[str, str], ...] = ()
+    quantities: Tuple[Tuple[str, ca.SX, float], ...] = ()
+    plant_q: Optional[ca.SX] = None
+    campaign: Optional[CampaignSpec] = None
 
 
 @dataclass(frozen=True)

@@ -141,6 +141,7 @@ class ReferenceDopus:
         self.reg_eps = _setting(settings.positive, "reg_eps", reg_eps)
         self.qp_tol = _setting(settings.qp_tolerance, qp_tol)
         self.lm, self.lm_auto, self.lm_scale, self._lm_kkt_prev = 0.0, False, 1.0, -1.0
+        self._lm_uncapped = -1.0
         self.set_levenberg_marquardt(lm)
         self.qp_max_iter = None
         if qp_max_iter is not None:
@@ -395,6 +396,7 @@ class ReferenceDopus:
         if not self._qp_ready:
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
+        self._lm_measured(xhat0)
         qp = self.qp_of_current(xhat0)
         self._xhat_last = xhat0.copy()
         self._xhat_fresh = True
@@ -423,28 +425,12 @@ class ReferenceDopus:
         self.qp_status = status_code_qp("solved")
         self.qp_iterations = int(sol.get("iterations", 0))
         t2 = time.perf_counter()
-        N = self.N
         if failure is not None:
             raise self._feedback_failed("qp", "feedback: the QP solution is not finite", "solved")
         if not self._box_ok(self.x + sol["x"], self.u + sol["u"]):
             raise self._feedback_failed("diverged", "feedback: the QP step leaves the problem's scale box (or is "
                                         "not finite); no step, the fallback control is returned")
-        dW = np.hstack([sol["x"][:N], sol["u"]])
-        for k in range(N):
-            s = self.slots[self._slot(k)]
-            s.dw = dW[k].copy()
-            s.dlam = sol["lam"][k + 1] - self.lam[k + 1]
-            s.dmu_g = sol["mu_g"][k] - self.mu_g[k]
-            s.dmu_b = sol["mu_b"][k] - self.mu_b[k]
-        # full step (eq. 4): primal increment, multipliers replaced
-        self.x = self.x + sol["x"]
-        self.u = self.u + sol["u"]
-        self.lam = sol["lam"].copy()
-        self.mu_g = sol["mu_g"].copy()
-        self.mu_b = sol["mu_b"].copy()
-        self.mu_bN = sol["mu_bN"].copy()
-        self.mu_r = sol["mu_r"].copy()
-        self.nu = sol["nu"].copy()
+        self._take_step(sol)
         self.qp_iterations = int(sol.get("iterations", 0))
         self.last_qp = qp
         self.last_qp_solution = sol
@@ -464,6 +450,27 @@ class ReferenceDopus:
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
         return self.u0.copy()
 
+    def _take_step(self, sol) -> None:
+        """``domega`` of each stage into its slot, then the full step (eq. 4): primal
+        increment, multipliers replaced by the QP's."""
+        N = self.N
+        dW = np.hstack([sol["x"][:N], sol["u"]])
+        for k in range(N):
+            s = self.slots[self._slot(k)]
+            s.dw = dW[k].copy()
+            s.dlam = sol["lam"][k + 1] - self.lam[k + 1]
+            s.dmu_g = sol["mu_g"][k] - self.mu_g[k]
+            s.dmu_b = sol["mu_b"][k] - self.mu_b[k]
+        self.x = self.x + sol["x"]
+        self.u = self.u + sol["u"]
+        self.lam = sol["lam"].copy()
+        self.mu_g = sol["mu_g"].copy()
+        self.mu_b = sol["mu_b"].copy()
+        self.mu_bN = sol["mu_bN"].copy()
+        self.mu_r = sol["mu_r"].copy()
+        self.nu = sol["nu"].copy()
+        self._qp_ready = False
+
     def allow_prepare(self) -> None:
         """Let the next ``prepare`` run although no feedback reached the QP since the last
         ``init`` or ``prepare``: for a sampling instant whose feedback was skipped (the C
@@ -481,6 +488,9 @@ class ReferenceDopus:
         self._need_init()
         if not self._prepare_due:
             raise self._fail("already_prepared", "prepare: already prepared (call feedback before the next prepare)")
+        if (self._qp_ready and self._n_failed > 0 and not self._recover_pending and self.recovery
+                and self.mode == "receding"):
+            self._predicted_step()
         self._qp_ready = False
         if self.mode == "receding" and self._plan_age < self.N:
             self._plan_age += 1
@@ -763,6 +773,25 @@ class ReferenceDopus:
                 return False
         return self._box_ok(x, u)
 
+    def _predicted_step(self) -> None:
+        """Section 9: after a failed feedback whose QP is still the prepared one, the step of
+        that QP for the state the iterate predicts for this instant (dx_0 = 0); its controls
+        become the plan of the next fallbacks. A failure of this QP changes nothing."""
+        try:
+            sol = solve_qp_reference(self.qp_of_current(self.x[0]), tol=self.qp_tol, max_iter=self.qp_max_iter)
+        except QPError:
+            return
+        if not self._finite(*(sol[k] for k in FIELDS_QP)) or not self._box_ok(self.x + sol["x"],
+                                                                                 self.u + sol["u"]):
+            return
+        self._take_step(sol)
+        self._plan_u = self.u.copy()
+        self._plan_age = 0
+        if not self._xhat_fresh:      # no measurement to distrust: the prediction carries the loop
+            self._n_failed = 0
+            self._recover_pending = False
+        self._flag("predicted")
+
     def _recover(self, shifted: bool) -> None:
         """The automatic recovery of section 9: re-initialise from a forward simulation of the
         predicted state with the last good plan, the iterate's multipliers, every block
@@ -843,6 +872,10 @@ class ReferenceDopus:
 
     def _lm_raise(self) -> None:
         lo, hi = _SAFETY["LM_MIN_REL"] * self.lm_scale, _SAFETY["LM_MAX_REL"] * self.lm_scale
+        if self._lm_uncapped > self.lm:
+            # the first raise after the cap of _lm_measured restores the term it capped
+            self.lm, self._lm_uncapped = self._lm_uncapped, -1.0
+            return
         self.lm = min(lo if self.lm < lo else self.lm * _SAFETY["LM_RAISE"], hi)
 
     def _lm_convexify(self) -> None:
@@ -857,6 +890,7 @@ class ReferenceDopus:
         self.lm_scale = self.lm_hessian_scale()
         self.lm = 0.0
         self._lm_kkt_prev = -1.0
+        self._lm_uncapped = -1.0
         self._lm_convexify()
 
     def _lm_prepared(self) -> None:
@@ -866,10 +900,24 @@ class ReferenceDopus:
         floor = 1e-8 * max(self.kkt_proxy_ref, 1.0)
         prev = max(self._lm_kkt_prev, floor)
         self.lm_scale = self.lm_hessian_scale()
+        self._lm_uncapped = -1.0
         if self._lm_kkt_prev >= 0.0 and not self.kkt_proxy <= _SAFETY["LM_KKT_GROWTH"] * prev:
             self._lm_raise()
         self._lm_kkt_prev = self.kkt_proxy
         self._lm_convexify()
+
+    def _lm_measured(self, xhat0) -> None:
+        """Feedback, once the measurement is known: the term capped by the distance from the
+        solution, ``LM_KKT_REL h d^2`` with ``d = max(proxy, max_i |dx0_i| / scale_x_i)`` (0
+        below ``LM_MIN_REL h``)."""
+        self._lm_uncapped = -1.0
+        if not self.lm_auto:
+            return
+        d = max(self.kkt_proxy, float(np.max(np.abs(xhat0 - self.x[0]) / self.scales[0])))
+        cap = _SAFETY["LM_KKT_REL"] * self.lm_scale * d * d
+        if not self.lm <= cap:
+            self._lm_uncapped = self.lm
+            self.lm = 0.0 if cap < _SAFETY["LM_MIN_REL"] * self.lm_scale else cap
 
     def _lm_feedback(self, status: str) -> None:
         """After a feedback: lowered after a step, raised after a failed QP or a divergence."""

@@ -441,7 +441,7 @@ class CSolver:
     @property
     def flags(self) -> set:
         """The health flags of the last feedback and the prepare after it, by name:
-        ``u0_clipped``, ``fallback``, ``diverged``, ``recovered``."""
+        ``u0_clipped``, ``fallback``, ``diverged``, ``recovered``, ``predicted``."""
         f = int(self._c("get_flags")(self._s))
         return {name for bit, name in FLAGS.items() if f & bit}
 

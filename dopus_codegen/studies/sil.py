@@ -120,13 +120,16 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
                     lm: float | None = None, duration: float | None = None,
                     guess=None, xhat0=None, progress: bool = False, label: str | None = None,
                     backend_obj=None, sources: dict | None = None, qp_tol: float | None = None,
-                    qp_max_iter: int | None = None) -> dict:
+                    qp_max_iter: int | None = None, events=None, plant=None) -> dict:
     """Run the closed loop of the OCP's scenario and return the record of the run.
 
     ``guess``: the initialisation of the controller (default: the offline solve at the
     initial state, ``offline.solve_ocp``). ``backend_obj``: an already constructed backend
     (then ``backend``, ``M``, ``hessian``, ... only label the run). ``sources``: where each
-    setting came from (``settings.resolve``), recorded with the settings.
+    setting came from (``settings.resolve``), recorded with the settings. ``xhat0``: the
+    initial plant state (default: the scenario's); ``events``: the events of the run instead
+    of the scenario's; ``plant``: ``(Plant, parameters)``, the plant and its parameter vector
+    instead of the scenario's plant (a campaign run's mismatched plant).
 
     The record: ``t, x, u, kkt, kkt_parts, status, signals, recomputed, timing_us, settings,
     events`` (one entry per sampling instant; ``x`` is the measured state, ``u`` the applied
@@ -140,13 +143,18 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     if lm is None:
         lm = default_lm(disc)
     p = _default_parameters(disc)
-    x = np.array(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
+    if xhat0 is None:
+        xhat0 = spec.x0 if spec.x0 is not None else disc.x0
+    x = np.array(xhat0, dtype=float).reshape(-1)
     if x.size != int(disc.nx):
         raise SilError(f"scenario x0 has {x.size} entries, expected nx = {int(disc.nx)}")
-    plant_ode = spec.plant_ode if spec.plant_ode is not None else disc.ode
-    plant = Plant(plant_ode, float(disc.dt), p.size, reltol=1e-10, abstol=1e-10)
-    events = sorted([ev for ev in spec.events if float(ev.time) < duration + _ON_GRID * float(disc.dt)],
-                    key=lambda ev: float(ev.time))
+    if plant is None:
+        plant_ode = spec.plant_ode if spec.plant_ode is not None else disc.ode
+        plant, plant_p = Plant(plant_ode, float(disc.dt), p.size, reltol=1e-10, abstol=1e-10), p
+    else:
+        plant, plant_p = plant
+    events = sorted([ev for ev in (spec.events if events is None else events)
+                     if float(ev.time) < duration + _ON_GRID * float(disc.dt)], key=lambda ev: float(ev.time))
     if guess is None:
         from ..reference.offline import solve_ocp
         guess, _info = solve_ocp(disc, x)
@@ -157,7 +165,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     backend_obj.init(x, guess)
     rec = _Record(spec, disc)
     rec.snap = dict(getattr(backend_obj, "timings", {}) or {})
-    loop = _Loop(disc, backend_obj, plant, events, p, rec)
+    loop = _Loop(disc, backend_obj, plant, events, p, rec, plant_p=plant_p)
     loop.run(x, n_steps, progress, label)
     settings_rec = {"M": M_eff, "N": int(disc.N), "dt": float(disc.dt), "duration": n_steps * float(disc.dt),
                     "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
@@ -179,8 +187,16 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     run["result"] = {"status": "aborted" if loop.aborted else "completed", "instants": len(rec.status),
                      "instants_planned": n_steps,
                      "failed_instants": int(sum(1 for st in rec.status if st != 0)),
-                     "first_failure": loop.first_failure}
+                     "first_failure": loop.first_failure,
+                     "recoveries": _recoveries(backend_obj)}
     return json_ready(run)
+
+
+def _recoveries(backend_obj):
+    """Re-initialisations by the backend's automatic recovery since its init (None if it
+    does not count them)."""
+    n = getattr(backend_obj, "recoveries", None)
+    return None if n is None else int(n)
 
 
 def _scenario_of(disc, duration, M, label):
@@ -274,8 +290,9 @@ class _Record:
 class _Loop:
     """The receding-horizon loop of the module docstring, one method per step of an instant."""
 
-    def __init__(self, disc, ctrl, plant, events, p, rec: _Record):
+    def __init__(self, disc, ctrl, plant, events, p, rec: _Record, plant_p=None):
         self.ctrl, self.plant, self.events, self.p, self.rec = ctrl, plant, events, p, rec
+        self.plant_p = p if plant_p is None else plant_p
         self.nx, self.dt = int(disc.nx), float(disc.dt)
         self.lbu = np.asarray(disc.lbu, dtype=float).reshape(-1)
         self.ubu = np.asarray(disc.ubu, dtype=float).reshape(-1)
@@ -383,11 +400,11 @@ class _Loop:
         t_cur = t_i
         while self.ev_idx < len(self.events) and float(self.events[self.ev_idx].time) < t_next - _ON_GRID * self.dt:
             te = float(self.events[self.ev_idx].time)
-            x = self.plant.step(x, u0, self.p, duration=te - t_cur)
+            x = self.plant.step(x, u0, self.plant_p, duration=te - t_cur)
             x = _apply_event(self.events[self.ev_idx], x, self.nx)
             t_cur = te
             self.ev_idx += 1
-        return self.plant.step(x, u0, self.p, duration=t_next - t_cur)
+        return self.plant.step(x, u0, self.plant_p, duration=t_next - t_cur)
 
     def prepare(self, status):
         t0 = time.perf_counter()
@@ -556,11 +573,16 @@ def write_json(runs, path) -> None:
 # --------------------------------------------------------------------------- CLI
 def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, compare="none", hessian=None,
                 regularization=None, reg_eps=None, backend="c", cost_hessian=None, echo=None, progress=True,
-                lm=None, qp_tol=None, qp_max_iter=None) -> list:
+                lm=None, qp_tol=None, qp_max_iter=None, campaign_run=None, seed=None) -> list:
     """The ``dopus-gen sil`` command: runs, summary table, JSON and plots. A setting given as
     None comes from the OCP file's ``options(...)``, else from the defaults of
     :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from. The
-    output paths and the scenario's initial state are checked before any run starts."""
+    output paths and the scenario's initial state are checked before any run starts.
+
+    ``campaign_run``: replay run ``campaign_run`` of the OCP file's campaign for ``seed``
+    (default 0) with the file's mismatch: its initial state, pushes (instead of the
+    scenario's events) and plant (:mod:`.campaign`); the duration stays the scenario's
+    unless given."""
     from ..outputs import check_output_dir, check_output_file
     from ..problem.checks import check_initial_state
     from ..problem.ocp import load_ocp
@@ -592,6 +614,17 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
     x0 = np.array(spec.x0 if spec.x0 is not None else disc.x0, dtype=float).reshape(-1)
     echo(f"settings: {settings.describe(values, sources)}", err=True)
     check_initial_state(disc, x0, "the scenario's initial state")
+    replay = {}
+    if campaign_run is not None:
+        from .campaign import campaign_events, campaign_plant, draw
+
+        if spec.campaign is None:
+            raise SilError(f"{ocp_file}: --campaign-run needs a campaign declared in the OCP file (ocp.campaign(...))")
+        d = draw(spec, dict(spec.campaign.mismatch), int(campaign_run), int(seed or 0))
+        replay = dict(xhat0=d["x0"], events=campaign_events(d), plant=campaign_plant(disc, d))
+        echo(f"campaign run {campaign_run} (seed {seed or 0}): plant quantities "
+             + ", ".join(f"{k} = {v:.6g}" for k, v in d["quantities"].items())
+             + f"; {len(d['pushes'])} pushes at " + ", ".join(f"{p['time']:.4g} s" for p in d["pushes"]), err=True)
 
     from ..reference.offline import solve_ocp
     guess, info = solve_ocp(disc, x0)
@@ -614,7 +647,7 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
                               regularization=values["regularization"], reg_eps=values["reg_eps"],
                               cost_hessian=values["cost_hessian"], lm=values["lm"], duration=duration, guess=guess,
                               progress=progress, label=label, sources=src, qp_tol=values["qp_tol"],
-                              qp_max_iter=values["qp_max_iter"])
+                              qp_max_iter=values["qp_max_iter"], **replay)
         runs.append(run)
     summaries = [summarize(r) for r in runs]
     echo(format_summary(summaries))

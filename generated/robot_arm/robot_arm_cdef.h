@@ -103,7 +103,9 @@ int robot_arm_get_qp_max_iter(robot_arm_solver *s);
 /* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
  * or off (0), and K >= 1, the number of consecutive failed feedbacks after which the next
  * prepare re-initialises (default ROBOT_ARM_RECOVERY_FAILURES). A detected divergence
- * re-initialises at once. */
+ * re-initialises at once. While on, the prepare after a failed feedback first takes the step
+ * of that instant's QP for the state the iterate predicts (ROBOT_ARM_FLAG_PREDICTED): the plan of
+ * the next fallbacks stays current; after a non-finite measurement it clears the count. */
 int robot_arm_set_recovery(robot_arm_solver *s, int on, int max_failures);
 int robot_arm_get_recovery(robot_arm_solver *s);
 int robot_arm_get_recovery_failures(robot_arm_solver *s);

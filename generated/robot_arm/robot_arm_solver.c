@@ -396,6 +396,12 @@ static int robot_arm_lm_convex(robot_arm_solver *s, double lm)
 static void robot_arm_lm_raise(robot_arm_solver *s)
 {
     double lo = ROBOT_ARM_LM_MIN_REL * s->lm_scale, hi = ROBOT_ARM_LM_MAX_REL * s->lm_scale;
+    if (s->lm_uncapped > s->lm) {
+        /* the first raise after the cap of robot_arm_lm_measured restores the term it capped */
+        s->lm = s->lm_uncapped;
+        s->lm_uncapped = -1.0;
+        return;
+    }
     s->lm = s->lm < lo ? lo : s->lm * ROBOT_ARM_LM_RAISE;
     s->lm = s->lm > hi ? hi : s->lm;
 }
@@ -418,6 +424,7 @@ void robot_arm_lm_start(robot_arm_solver *s)
     s->lm_scale = robot_arm_lm_hessian_scale(s);
     s->lm = 0.0;
     s->lm_kkt_prev = -1.0;
+    s->lm_uncapped = -1.0;
     robot_arm_lm_convexify(s);
 }
 
@@ -431,11 +438,34 @@ static void robot_arm_lm_prepared(robot_arm_solver *s)
         return;
     }
     s->lm_scale = robot_arm_lm_hessian_scale(s);
+    s->lm_uncapped = -1.0;
     if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= ROBOT_ARM_LM_KKT_GROWTH * prev)) {
         robot_arm_lm_raise(s);
     }
     s->lm_kkt_prev = s->kkt_proxy;
     robot_arm_lm_convexify(s);
+}
+
+/* Feedback, once the measurement is in the QP: the term capped by the distance from the
+ * solution, ROBOT_ARM_LM_KKT_REL h d^2 with d = max(proxy, max_i |dx0_i| / scale_x_i) (0 below
+ * ROBOT_ARM_LM_MIN_REL h), so that it vanishes where the iterate converges. */
+static void robot_arm_lm_measured(robot_arm_solver *s)
+{
+    double d = s->kkt_proxy, cap, v;
+    int i;
+    s->lm_uncapped = -1.0;
+    if (!s->lm_auto) {
+        return;
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        v = fabs(s->qp_in.x0[i]) / s->scale_x[i];
+        d = v > d ? v : d;
+    }
+    cap = ROBOT_ARM_LM_KKT_REL * s->lm_scale * d * d;
+    if (!(s->lm <= cap)) {
+        s->lm_uncapped = s->lm;
+        s->lm = cap < ROBOT_ARM_LM_MIN_REL * s->lm_scale ? 0.0 : cap;
+    }
 }
 
 /* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
@@ -476,6 +506,7 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->lm = (robot_arm_default_lm >= 0.0 && robot_arm_default_lm < INFINITY) ? robot_arm_default_lm : 0.0;
     s->lm_scale = 1.0;
     s->lm_kkt_prev = -1.0;
+    s->lm_uncapped = -1.0;
     robot_arm_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = ROBOT_ARM_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -940,6 +971,7 @@ static void robot_arm_feedback_measure(robot_arm_solver *s, const double *xhat0)
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->xhat_fresh = 1;
+    robot_arm_lm_measured(s);
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -1253,6 +1285,34 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
     return ROBOT_ARM_OK;
 }
 
+/* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the
+ * prepared one, the QP is solved for the state the iterate predicts for this instant
+ * (dx_0 = 0; the measurement, absent or unusable, is left out) and its step taken; its
+ * controls become the plan the next fallbacks read. A failure of this QP changes nothing. */
+static void robot_arm_predicted_step(robot_arm_solver *s)
+{
+    int i, qs;
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        s->qp_in.x0[i] = 0.0;
+    }
+    s->qp_in.hess_shift = s->lm;
+    s->qp_settings.warm_start = 0;
+    qs = robot_arm_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
+        return;
+    }
+    robot_arm_store_domega(s);
+    robot_arm_take_step(s);
+    robot_arm_copy(&s->plan_u[0][0], &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
+    s->plan_age = 0;
+    if (!s->xhat_fresh) {
+        /* no measurement to distrust: the model's prediction carries the loop */
+        s->n_failed = 0;
+        s->recover_pending = 0;
+    }
+    s->flags |= ROBOT_ARM_FLAG_PREDICTED;
+}
+
 static int robot_arm_prepare_iteration(robot_arm_solver *s);
 
 int robot_arm_prepare(robot_arm_solver *s)
@@ -1267,6 +1327,10 @@ int robot_arm_prepare(robot_arm_solver *s)
         return robot_arm_ret(s, ROBOT_ARM_ERR_ALREADY_PREPARED);
     }
     robot_arm_clear_timings(s, ROBOT_ARM_PHASE_SHIFT, ROBOT_ARM_PHASE_ASSEMBLY);
+    if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
+        s->mode == ROBOT_ARM_MODE_RECEDING) {
+        robot_arm_predicted_step(s);
+    }
     s->qp_ready = 0;
     if (s->mode == ROBOT_ARM_MODE_RECEDING && s->plan_age < ROBOT_ARM_N) {
         s->plan_age += 1;

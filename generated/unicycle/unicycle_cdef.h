@@ -103,7 +103,9 @@ int unicycle_get_qp_max_iter(unicycle_solver *s);
 /* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
  * or off (0), and K >= 1, the number of consecutive failed feedbacks after which the next
  * prepare re-initialises (default UNICYCLE_RECOVERY_FAILURES). A detected divergence
- * re-initialises at once. */
+ * re-initialises at once. While on, the prepare after a failed feedback first takes the step
+ * of that instant's QP for the state the iterate predicts (UNICYCLE_FLAG_PREDICTED): the plan of
+ * the next fallbacks stays current; after a non-finite measurement it clears the count. */
 int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
 int unicycle_get_recovery(unicycle_solver *s);
 int unicycle_get_recovery_failures(unicycle_solver *s);

@@ -396,6 +396,12 @@ static int unicycle_lm_convex(unicycle_solver *s, double lm)
 static void unicycle_lm_raise(unicycle_solver *s)
 {
     double lo = UNICYCLE_LM_MIN_REL * s->lm_scale, hi = UNICYCLE_LM_MAX_REL * s->lm_scale;
+    if (s->lm_uncapped > s->lm) {
+        /* the first raise after the cap of unicycle_lm_measured restores the term it capped */
+        s->lm = s->lm_uncapped;
+        s->lm_uncapped = -1.0;
+        return;
+    }
     s->lm = s->lm < lo ? lo : s->lm * UNICYCLE_LM_RAISE;
     s->lm = s->lm > hi ? hi : s->lm;
 }
@@ -418,6 +424,7 @@ void unicycle_lm_start(unicycle_solver *s)
     s->lm_scale = unicycle_lm_hessian_scale(s);
     s->lm = 0.0;
     s->lm_kkt_prev = -1.0;
+    s->lm_uncapped = -1.0;
     unicycle_lm_convexify(s);
 }
 
@@ -431,11 +438,34 @@ static void unicycle_lm_prepared(unicycle_solver *s)
         return;
     }
     s->lm_scale = unicycle_lm_hessian_scale(s);
+    s->lm_uncapped = -1.0;
     if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= UNICYCLE_LM_KKT_GROWTH * prev)) {
         unicycle_lm_raise(s);
     }
     s->lm_kkt_prev = s->kkt_proxy;
     unicycle_lm_convexify(s);
+}
+
+/* Feedback, once the measurement is in the QP: the term capped by the distance from the
+ * solution, UNICYCLE_LM_KKT_REL h d^2 with d = max(proxy, max_i |dx0_i| / scale_x_i) (0 below
+ * UNICYCLE_LM_MIN_REL h), so that it vanishes where the iterate converges. */
+static void unicycle_lm_measured(unicycle_solver *s)
+{
+    double d = s->kkt_proxy, cap, v;
+    int i;
+    s->lm_uncapped = -1.0;
+    if (!s->lm_auto) {
+        return;
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        v = fabs(s->qp_in.x0[i]) / s->scale_x[i];
+        d = v > d ? v : d;
+    }
+    cap = UNICYCLE_LM_KKT_REL * s->lm_scale * d * d;
+    if (!(s->lm <= cap)) {
+        s->lm_uncapped = s->lm;
+        s->lm = cap < UNICYCLE_LM_MIN_REL * s->lm_scale ? 0.0 : cap;
+    }
 }
 
 /* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
@@ -476,6 +506,7 @@ void unicycle_defaults(unicycle_solver *s)
     s->lm = (unicycle_default_lm >= 0.0 && unicycle_default_lm < INFINITY) ? unicycle_default_lm : 0.0;
     s->lm_scale = 1.0;
     s->lm_kkt_prev = -1.0;
+    s->lm_uncapped = -1.0;
     unicycle_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = UNICYCLE_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -940,6 +971,7 @@ static void unicycle_feedback_measure(unicycle_solver *s, const double *xhat0)
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->xhat_fresh = 1;
+    unicycle_lm_measured(s);
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -1253,6 +1285,34 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
     return UNICYCLE_OK;
 }
 
+/* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the
+ * prepared one, the QP is solved for the state the iterate predicts for this instant
+ * (dx_0 = 0; the measurement, absent or unusable, is left out) and its step taken; its
+ * controls become the plan the next fallbacks read. A failure of this QP changes nothing. */
+static void unicycle_predicted_step(unicycle_solver *s)
+{
+    int i, qs;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->qp_in.x0[i] = 0.0;
+    }
+    s->qp_in.hess_shift = s->lm;
+    s->qp_settings.warm_start = 0;
+    qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
+        return;
+    }
+    unicycle_store_domega(s);
+    unicycle_take_step(s);
+    unicycle_copy(&s->plan_u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
+    s->plan_age = 0;
+    if (!s->xhat_fresh) {
+        /* no measurement to distrust: the model's prediction carries the loop */
+        s->n_failed = 0;
+        s->recover_pending = 0;
+    }
+    s->flags |= UNICYCLE_FLAG_PREDICTED;
+}
+
 static int unicycle_prepare_iteration(unicycle_solver *s);
 
 int unicycle_prepare(unicycle_solver *s)
@@ -1267,6 +1327,10 @@ int unicycle_prepare(unicycle_solver *s)
         return unicycle_ret(s, UNICYCLE_ERR_ALREADY_PREPARED);
     }
     unicycle_clear_timings(s, UNICYCLE_PHASE_SHIFT, UNICYCLE_PHASE_ASSEMBLY);
+    if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
+        s->mode == UNICYCLE_MODE_RECEDING) {
+        unicycle_predicted_step(s);
+    }
     s->qp_ready = 0;
     if (s->mode == UNICYCLE_MODE_RECEDING && s->plan_age < UNICYCLE_N) {
         s->plan_age += 1;

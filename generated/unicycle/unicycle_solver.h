@@ -135,7 +135,9 @@ int unicycle_get_qp_max_iter(unicycle_solver *s);
 /* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
  * or off (0), and K >= 1, the number of consecutive failed feedbacks after which the next
  * prepare re-initialises (default UNICYCLE_RECOVERY_FAILURES). A detected divergence
- * re-initialises at once. */
+ * re-initialises at once. While on, the prepare after a failed feedback first takes the step
+ * of that instant's QP for the state the iterate predicts (UNICYCLE_FLAG_PREDICTED): the plan of
+ * the next fallbacks stays current; after a non-finite measurement it clears the count. */
 int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
 int unicycle_get_recovery(unicycle_solver *s);
 int unicycle_get_recovery_failures(unicycle_solver *s);
@@ -258,7 +260,8 @@ enum unicycle_flag {
     UNICYCLE_FLAG_U0_CLIPPED = 1, /* u0 was outside the control bounds and was clipped */
     UNICYCLE_FLAG_FALLBACK = 2,   /* feedback failed: u0 is the next control of the last good plan */
     UNICYCLE_FLAG_DIVERGED = 4,   /* the step or the prepared iterate failed the divergence test */
-    UNICYCLE_FLAG_RECOVERED = 8   /* prepare re-initialised (automatic recovery) */
+    UNICYCLE_FLAG_RECOVERED = 8,  /* prepare re-initialised (automatic recovery) */
+    UNICYCLE_FLAG_PREDICTED = 16  /* prepare took the step of the QP for the predicted state */
 };
 
 /* Safety constants (docs/algorithm.md section 9). */
@@ -277,6 +280,7 @@ enum unicycle_flag {
 #define UNICYCLE_LM_PIVOT_REL 1e-10 /* Riccati pivots must exceed 1e-10 h */
 #define UNICYCLE_LM_KKT_GROWTH 10.0 /* raise when the KKT proxy grows 10x in one prepare */
 #define UNICYCLE_LM_RETRIES 2       /* QP solves again with lm raised after a failure */
+#define UNICYCLE_LM_KKT_REL 1e-2    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
 
 enum unicycle_mode {
     UNICYCLE_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
@@ -348,6 +352,7 @@ struct unicycle_solver {
     int lm_auto;        /* 1: automatic term (section 10) */
     double lm_scale;    /* Hessian scale h of the automatic term */
     double lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
+    double lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     unicycle_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */

@@ -1,0 +1,67 @@
+"""A cart-pole swings its pole up from hanging and balances it, on a short track.
+
+A swing-up: the controller starts with the pole hanging (theta = 0) and must bring it
+upright (theta = pi) with a bounded force on a track whose ends are state bounds (active
+during the swing), then hold it there through a kick on the pole. The dynamics are those of
+a point mass on a massless rod (theta measured from the downward vertical):
+
+    (m_c + m_p sin^2 th) ddp = F + m_p sin th (l dth^2 + g cos th)
+    l (m_c + m_p sin^2 th) ddth = -F cos th - m_p l dth^2 cos th sin th - (m_c + m_p) g sin th
+
+Exact Hessian and the default settings (the automatic Levenberg-Marquardt term); the
+controller starts from the offline NLP solution (``options(offline_guess=True)``).
+"""
+import casadi as ca
+import numpy as np
+
+from dopus_codegen import RK4, Event, Ocp
+
+N, DT = 40, 0.05
+M_CART, M_POLE, LENGTH, GRAV = 1.0, 0.2, 0.5, 9.81
+F_MAX = 12.0         # N
+
+
+def cartpole_ode(x, F):
+    """xdot for x = (p, theta, v, omega)."""
+    th, v, om = x[1], x[2], x[3]
+    s, c = ca.sin(th), ca.cos(th)
+    den = M_CART + M_POLE * s**2
+    acc = (F + M_POLE * s * (LENGTH * om**2 + GRAV * c)) / den
+    alpha = (-F * c - M_POLE * LENGTH * om**2 * c * s - (M_CART + M_POLE) * GRAV * s) / (LENGTH * den)
+    return ca.vertcat(v, om, acc, alpha)
+
+
+def kick(x):
+    """A kick on the pole: its angular velocity jumps by 2 rad/s."""
+    x = np.array(x, dtype=float, copy=True)
+    x[3] += 2.0
+    return x
+
+
+def build():
+    ocp = Ocp("cartpole")
+    p = ocp.state("p")
+    theta = ocp.state("theta")
+    v = ocp.state("v")
+    omega = ocp.state("omega")
+    force = ocp.control("F", lb=-F_MAX, ub=F_MAX)
+    x = ca.vertcat(p, theta, v, omega)
+
+    ocp.dynamics(cartpole_ode(x, force), integrator=RK4(substeps=2))
+    ocp.stage_least_squares(ca.vertcat(p, theta - ca.pi, v, omega, force),
+                            weights=DT * np.array([1.0, 10.0, 0.1, 0.1, 1e-2]))
+    ocp.terminal_least_squares(ca.vertcat(p, theta - ca.pi, v, omega), weights=[10.0, 100.0, 1.0, 1.0])
+    ocp.horizon(N=N, dt=DT)
+
+    x0 = np.zeros(4)
+    ocp.initial_state(x0)
+    # the offline solver starts from the pole turning up at a constant rate
+    ocp.initial_guess(x=np.column_stack([np.zeros(N + 1), np.linspace(0.0, np.pi, N + 1), np.zeros(N + 1),
+                                         np.full(N + 1, np.pi / (N * DT))]), u=[0.0])
+    ocp.options(hessian="exact", regularization="none", M=1, offline_guess=True)
+    ocp.disturbance(kick)
+    ocp.scenario(duration=4.0, events=[Event(3.0, kick, "kick")],
+                 signals={"upright_error": theta - ca.pi, "cart_position": p},
+                 units={"upright_error": "rad", "cart_position": "m", "p": "m", "theta": "rad", "v": "m/s",
+                        "omega": "rad/s", "F": "N"})
+    return ocp
