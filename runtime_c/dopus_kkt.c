@@ -44,7 +44,7 @@ int dopus_kkt_measure(struct dopus_solver *s, const dopus_real *xhat0, dopus_rea
     }
     for (k = 0; k < DOPUS_N; ++k) {
         if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
-                                  &s->fun_work) != 0) {
+                                  &s->mem.ev.fun_work) != 0) {
             return DOPUS_ERR_FUNCTION;
         }
         if (!dopus_lai_vec_finite(DOPUS_NW, gL) || !dopus_lai_vec_finite(DOPUS_NX, phi) ||

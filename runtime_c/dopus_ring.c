@@ -18,15 +18,33 @@ void dopus_ring_reset(dopus_ring *ring)
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *s = &ring->slot[k];
         dopus_ring_zero(s->Ht, DOPUS_NW * DOPUS_NW);
-        dopus_ring_zero(s->A_dyn, DOPUS_NW * DOPUS_NW);
+        dopus_ring_zero(s->A_dyn, DOPUS_NW * (DOPUS_NW + 1) / 2);
         dopus_ring_zero(s->Phit, DOPUS_NX * DOPUS_NW);
-        dopus_ring_zero(s->Ct, DOPUS_DIM(DOPUS_NG) * DOPUS_NW);
+        dopus_ring_zero(s->Ct, DOPUS_DIM(DOPUS_NG * DOPUS_NW));
         dopus_ring_zero(s->F_w, DOPUS_NW);
         dopus_ring_zero(s->phi, DOPUS_NX);
         dopus_ring_zero(s->g, DOPUS_DIM(DOPUS_NG));
         dopus_ring_clear_step(s);
     }
     ring->ring_head = 0;
+}
+
+void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const dopus_real *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < DOPUS_NW; ++j)
+        for (i = j; i < DOPUS_NW; ++i)
+            slot->A_dyn[l++] = A[i + j * DOPUS_NW];
+}
+
+void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const dopus_real *A_l, dopus_real *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < DOPUS_NW; ++j)
+        for (i = j; i < DOPUS_NW; ++i, ++l) {
+            A[i + j * DOPUS_NW] = slot->A_dyn[l] + A_l[i + j * DOPUS_NW];
+            A[j + i * DOPUS_NW] = slot->A_dyn[l] + A_l[j + i * DOPUS_NW];
+        }
 }
 
 dopus_stage_slot *dopus_ring_stage(dopus_ring *ring, int k)

@@ -14,10 +14,11 @@ typedef struct {
     /* the blocks the QP uses (possibly outdated, A regularised), column-major */
     dopus_real Ht[DOPUS_NW * DOPUS_NW]; /* nw x nw */
     /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
-     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l */
-    dopus_real A_dyn[DOPUS_NW * DOPUS_NW];         /* nw x nw */
+     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l;
+     * symmetric, its lower triangle packed by columns (dopus_ring_store_A_dyn) */
+    dopus_real A_dyn[DOPUS_NW * (DOPUS_NW + 1) / 2];
     dopus_real Phit[DOPUS_NX * DOPUS_NW];          /* nx x nw, [A_k B_k] */
-    dopus_real Ct[DOPUS_DIM(DOPUS_NG) * DOPUS_NW]; /* ng x nw */
+    dopus_real Ct[DOPUS_DIM(DOPUS_NG * DOPUS_NW)]; /* ng x nw (leading dimension ng) */
     /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
     dopus_real F_w[DOPUS_NW];
     dopus_real phi[DOPUS_NX];
@@ -43,6 +44,11 @@ const dopus_stage_slot *dopus_ring_stage_const(const dopus_ring *ring, int k);
 
 /* One sampling interval: ring_head <- (ring_head + 1) mod N. */
 void dopus_ring_advance(dopus_ring *ring);
+
+/* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
+void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const dopus_real *A);
+/* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
+void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const dopus_real *A_l, dopus_real *A);
 
 /* Zero the step domega of a slot. */
 void dopus_ring_clear_step(dopus_stage_slot *slot);

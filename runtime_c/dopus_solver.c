@@ -316,7 +316,7 @@ static dopus_real dopus_lm_hessian_scale(const dopus_solver *s)
 static int dopus_lm_convex(dopus_solver *s, dopus_real lm)
 {
     const dopus_real tol = DOPUS_LM_PIVOT_REL * s->lm_scale;
-    dopus_real *P = s->lm_P, *PA = s->lm_PA, *Z = s->lm_G;
+    dopus_real *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
     dopus_real v;
     int k, i, j, l;
     for (j = 0; j < DOPUS_NX; ++j) {
@@ -540,21 +540,22 @@ void dopus_defaults(dopus_solver *s)
 
 /* ---- function evaluations ----------------------------------------------------------- */
 
-/* F_k (eq. 14) at the current point into s->tmp_F (= gL + mu_b_k), s->tmp_phi, s->tmp_g. */
+/* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
 static int dopus_stage_F(dopus_solver *s, int k)
 {
     dopus_real l = DOPUS_R(0.0);
     int i;
-    if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL, s->tmp_phi, &l,
-                              s->tmp_g, &s->fun_work) != 0) {
+    if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
+                              s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
-    if (!dopus_lai_vec_finite(DOPUS_NW, s->tmp_gL) || !dopus_lai_vec_finite(DOPUS_NX, s->tmp_phi) ||
-        !dopus_lai_vec_finite(DOPUS_NG, s->tmp_g) || !isfinite(l)) {
+    if (!dopus_lai_vec_finite(DOPUS_NW, s->mem.ev.tmp_gL) ||
+        !dopus_lai_vec_finite(DOPUS_NX, s->mem.ev.tmp_phi) ||
+        !dopus_lai_vec_finite(DOPUS_NG, s->mem.ev.tmp_g) || !isfinite(l)) {
         return DOPUS_ERR_NONFINITE_VALUE;
     }
     for (i = 0; i < DOPUS_NW; ++i) {
-        s->tmp_F[i] = s->tmp_gL[i] + s->mu_b[k][i];
+        s->mem.ev.tmp_F[i] = s->mem.ev.tmp_gL[i] + s->mu_b[k][i];
     }
     return DOPUS_OK;
 }
@@ -568,21 +569,22 @@ static int dopus_regularize(dopus_solver *s, int n, dopus_real *A)
         return DOPUS_OK;
     }
     t0 = dopus_timer_now(&s->timer);
-    rc = dopus_reg_apply(n, A, s->regularization, s->reg_eps, s->reg_work);
+    rc = dopus_reg_apply(n, A, s->regularization, s->reg_eps, s->mem.ev.reg_work);
     dopus_timer_add(&s->timer, DOPUS_PHASE_REGULARIZATION, t0);
     return rc == 0 ? DOPUS_OK : DOPUS_ERR_REGULARIZATION;
 }
 
-/* The stage-cost Hessian A_l of stage k at the current point into s->tmp_Al. */
+/* The stage-cost Hessian A_l of stage k at the current point into s->mem.ev.tmp_Al. */
 static int dopus_stage_Al(dopus_solver *s, int k)
 {
     double t0 = dopus_timer_now(&s->timer);
-    int rc = dopus_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->tmp_Al, &s->fun_work);
+    int rc = dopus_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->mem.ev.tmp_Al,
+                                        &s->mem.ev.fun_work);
     dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return DOPUS_ERR_FUNCTION;
     }
-    return dopus_lai_vec_finite(DOPUS_NW * DOPUS_NW, s->tmp_Al) ? DOPUS_OK : DOPUS_ERR_NONFINITE_VALUE;
+    return dopus_lai_vec_finite(DOPUS_NW * DOPUS_NW, s->mem.ev.tmp_Al) ? DOPUS_OK : DOPUS_ERR_NONFINITE_VALUE;
 }
 
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
@@ -593,15 +595,15 @@ static int dopus_stage_H(dopus_solver *s, int k)
     dopus_stage_slot *slot;
     double t0 = dopus_timer_now(&s->timer);
     int rc, i;
-    rc = dopus_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_A,
-                               s->tmp_Phi, s->tmp_C, &s->fun_work);
+    rc = dopus_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                               s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
     dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return DOPUS_ERR_FUNCTION;
     }
-    if (!dopus_lai_vec_finite(DOPUS_NW * DOPUS_NW, s->tmp_A) ||
-        !dopus_lai_vec_finite(DOPUS_NX * DOPUS_NW, s->tmp_Phi) ||
-        !dopus_lai_vec_finite(DOPUS_NG * DOPUS_NW, s->tmp_C)) {
+    if (!dopus_lai_vec_finite(DOPUS_NW * DOPUS_NW, s->mem.ev.tmp_A) ||
+        !dopus_lai_vec_finite(DOPUS_NX * DOPUS_NW, s->mem.ev.tmp_Phi) ||
+        !dopus_lai_vec_finite(DOPUS_NG * DOPUS_NW, s->mem.ev.tmp_C)) {
         return DOPUS_ERR_NONFINITE_VALUE;
     }
     /* A_dyn = A - A_l, kept whatever cost_hessian is, so the setting may change at any time */
@@ -610,24 +612,24 @@ static int dopus_stage_H(dopus_solver *s, int k)
         return rc;
     }
     for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i) {
-        s->tmp_Al[i] = s->tmp_A[i] - s->tmp_Al[i];
+        s->mem.ev.tmp_Al[i] = s->mem.ev.tmp_A[i] - s->mem.ev.tmp_Al[i];
     }
-    rc = dopus_regularize(s, DOPUS_NW, s->tmp_A);
+    rc = dopus_regularize(s, DOPUS_NW, s->mem.ev.tmp_A);
     if (rc != DOPUS_OK) {
         return rc;
     }
     slot = dopus_ring_stage(&s->ring, k);
-    dopus_copy(slot->Ht, s->tmp_A, DOPUS_NW * DOPUS_NW);
-    dopus_copy(slot->A_dyn, s->tmp_Al, DOPUS_NW * DOPUS_NW);
-    dopus_copy(slot->Phit, s->tmp_Phi, DOPUS_NX * DOPUS_NW);
-    dopus_copy(slot->Ct, s->tmp_C, DOPUS_NG * DOPUS_NW);
+    dopus_copy(slot->Ht, s->mem.ev.tmp_A, DOPUS_NW * DOPUS_NW);
+    dopus_ring_store_A_dyn(slot, s->mem.ev.tmp_Al);
+    dopus_copy(slot->Phit, s->mem.ev.tmp_Phi, DOPUS_NX * DOPUS_NW);
+    dopus_copy(slot->Ct, s->mem.ev.tmp_C, DOPUS_NG * DOPUS_NW);
     return DOPUS_OK;
 }
 
 int dopus_term_grad_checked(dopus_solver *s, dopus_real *gL, dopus_real *E, dopus_real *r, dopus_real *r_eq)
 {
-    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, E, r, r_eq, &s->fun_work) !=
-        0) {
+    if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, E, r, r_eq,
+                             &s->mem.ev.fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
     if (!dopus_lai_vec_finite(DOPUS_NX, gL) || !isfinite(*E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
@@ -658,21 +660,21 @@ static int dopus_term_H(dopus_solver *s)
     dopus_real R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX], R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
     double t0 = dopus_timer_now(&s->timer);
     int rc;
-    rc = dopus_eval_term_hess(s->hessian, s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, s->tmp_A, R, R_eq,
-                              &s->fun_work);
+    rc = dopus_eval_term_hess(s->hessian, s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
+                              R_eq, &s->mem.ev.fun_work);
     dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return DOPUS_ERR_FUNCTION;
     }
-    if (!dopus_lai_vec_finite(DOPUS_NX * DOPUS_NX, s->tmp_A) ||
+    if (!dopus_lai_vec_finite(DOPUS_NX * DOPUS_NX, s->mem.ev.tmp_A) ||
         !dopus_lai_vec_finite(DOPUS_NR * DOPUS_NX, R) || !dopus_lai_vec_finite(DOPUS_NE * DOPUS_NX, R_eq)) {
         return DOPUS_ERR_NONFINITE_VALUE;
     }
-    rc = dopus_regularize(s, DOPUS_NX, s->tmp_A);
+    rc = dopus_regularize(s, DOPUS_NX, s->mem.ev.tmp_A);
     if (rc != DOPUS_OK) {
         return rc;
     }
-    dopus_copy(s->A_N, s->tmp_A, DOPUS_NX * DOPUS_NX);
+    dopus_copy(s->A_N, s->mem.ev.tmp_A, DOPUS_NX * DOPUS_NX);
     dopus_copy(s->R, R, DOPUS_NR * DOPUS_NX);
     dopus_copy(s->R_eq, R_eq, DOPUS_NE * DOPUS_NX);
     return DOPUS_OK;
@@ -768,7 +770,8 @@ static int dopus_linearize_all(dopus_solver *s)
         if (rc != DOPUS_OK) {
             return rc;
         }
-        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->tmp_F, s->tmp_phi, s->tmp_g);
+        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                           s->mem.ev.tmp_g);
         rc = dopus_stage_H(s, k);
         if (rc != DOPUS_OK) {
             return rc;
@@ -901,13 +904,13 @@ static int dopus_qp_solution_finite(const dopus_qp_sol *sol)
            dopus_lai_vec_finite(DOPUS_QP_NR1, sol->mu_r) && dopus_lai_vec_finite(DOPUS_QP_NE1, sol->nu);
 }
 
-/* Warm-start point of the QP (in s->qp_sol): the previous QP solution shifted with the
+/* Warm-start point of the QP (in s->mem.qp.sol): the previous QP solution shifted with the
  * horizon. Its primal part has been added to the iterate, which prepare shifted, so it is
  * a zero step from the (shifted) iterate, with x_0's step fixed by the measurement; the
  * multipliers are the (shifted) iterate's, which are those of the previous QP. */
 static void dopus_qp_warm_point(dopus_solver *s)
 {
-    dopus_qp_sol *w = &s->qp_sol;
+    dopus_qp_sol *w = &s->mem.qp.sol;
     int k, i;
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
@@ -980,16 +983,16 @@ static void dopus_feedback_measure(dopus_solver *s, const dopus_real *xhat0)
 /* 1 when the QP status is "solved" and its solution finite. */
 static int dopus_qp_ok(const dopus_solver *s, int qs)
 {
-    return qs == DOPUS_QP_SOLVED && dopus_qp_solution_finite(&s->qp_sol);
+    return qs == DOPUS_QP_SOLVED && dopus_qp_solution_finite(&s->mem.qp.sol);
 }
 
-/* One solve of the prepared QP, warm (from the point in s->qp_sol) or cold; its iterations
+/* One solve of the prepared QP, warm (from the point in s->mem.qp.sol) or cold; its iterations
  * are added to those of the call. Returns the QP status. */
 static int dopus_qp_attempt(dopus_solver *s, int warm)
 {
     int qs;
     s->qp_settings.warm_start = warm;
-    qs = dopus_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    qs = dopus_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
     s->qp_iterations += s->qp_info.iterations;
     return qs;
 }
@@ -1037,7 +1040,7 @@ static int dopus_feedback_lm_retries(dopus_solver *s, int qs, int *retries)
  * its step leaves the box of the divergence test (algorithm.md section 9), else DOPUS_OK. */
 static int dopus_feedback_check_step(const dopus_solver *s, int qs)
 {
-    const dopus_qp_sol *sol = &s->qp_sol;
+    const dopus_qp_sol *sol = &s->mem.qp.sol;
     if (!dopus_qp_ok(s, qs)) {
         return DOPUS_ERR_QP;
     }
@@ -1051,7 +1054,7 @@ static int dopus_feedback_check_step(const dopus_solver *s, int qs)
  * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
 static void dopus_store_domega(dopus_solver *s)
 {
-    const dopus_qp_sol *sol = &s->qp_sol;
+    const dopus_qp_sol *sol = &s->mem.qp.sol;
     int k, i;
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
@@ -1074,7 +1077,7 @@ static void dopus_store_domega(dopus_solver *s)
 /* Step 7, the full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
 static void dopus_take_step(dopus_solver *s)
 {
-    const dopus_qp_sol *sol = &s->qp_sol;
+    const dopus_qp_sol *sol = &s->mem.qp.sol;
     int k, i;
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
@@ -1223,7 +1226,8 @@ static int dopus_simulate(dopus_solver *s, int use_plan)
     for (k = 0; k < DOPUS_N; ++k) {
         j = s->plan_age + k > DOPUS_N - 1 ? DOPUS_N - 1 : s->plan_age + k;
         dopus_clip_u(use_plan ? s->plan_u[j] : dopus_guess_u[k], s->u[k]);
-        if (dopus_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->tmp_g, &s->fun_work) != 0 ||
+        if (dopus_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->mem.ev.tmp_g,
+                                  &s->mem.ev.fun_work) != 0 ||
             !dopus_lai_vec_finite(DOPUS_NX, s->x[k + 1])) {
             return 0;
         }
@@ -1245,8 +1249,8 @@ static int dopus_recover(dopus_solver *s, int shifted)
         if (!shifted) {
             dopus_copy(s->x[0], s->x[1], DOPUS_NX);
         }
-    } else if (dopus_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) !=
-                   0 ||
+    } else if (dopus_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+                                     &s->mem.ev.fun_work) != 0 ||
                !dopus_lai_vec_finite(DOPUS_NX, s->x[0])) {
         dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
     }
@@ -1296,7 +1300,7 @@ static void dopus_predicted_step(dopus_solver *s)
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
-    qs = dopus_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    qs = dopus_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
     if (dopus_feedback_check_step(s, qs) != DOPUS_OK) {
         return;
     }
@@ -1378,11 +1382,11 @@ static int dopus_prepare_iteration(dopus_solver *s)
         if (rc != DOPUS_OK) {
             return rc;
         }
-        s->rho[k] = dopus_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        s->rho[k] = dopus_ring_secant(slot, s->mem.ev.tmp_F, s->mem.ev.tmp_phi, s->mem.ev.tmp_g);
         /* stored as F_old in step 6, once nothing can fail */
-        dopus_copy(s->Fn_w[k], s->tmp_F, DOPUS_NW);
-        dopus_copy(s->Fn_phi[k], s->tmp_phi, DOPUS_NX);
-        dopus_copy(s->Fn_g[k], s->tmp_g, DOPUS_NG);
+        dopus_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, DOPUS_NW);
+        dopus_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, DOPUS_NX);
+        dopus_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, DOPUS_NG);
         t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_RHO, t0);
     }
 
@@ -1393,9 +1397,10 @@ static int dopus_prepare_iteration(dopus_solver *s)
         return rc;
     }
     if (s->mode == DOPUS_MODE_RECEDING) {
-        dopus_copy(s->x[DOPUS_N], s->tmp_phi, DOPUS_NX);
+        dopus_copy(s->x[DOPUS_N], s->mem.ev.tmp_phi, DOPUS_NX);
     }
-    dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->tmp_F, s->tmp_phi, s->tmp_g);
+    dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                       s->mem.ev.tmp_g);
     s->rho[DOPUS_N - 1] = DOPUS_R(0.0);
     rc = dopus_stage_H(s, DOPUS_N - 1);
     if (rc == DOPUS_OK) {
@@ -1426,7 +1431,6 @@ static int dopus_prepare_iteration(dopus_solver *s)
     if (rc == DOPUS_OK && s->cost_hessian) {
         for (k = 0; k < DOPUS_N - 1 && rc == DOPUS_OK; ++k) {
             dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
-            int i;
             if (s->selected[k]) {
                 continue;
             }
@@ -1434,12 +1438,10 @@ static int dopus_prepare_iteration(dopus_solver *s)
             if (rc != DOPUS_OK) {
                 break;
             }
-            for (i = 0; i < DOPUS_NW * DOPUS_NW; ++i) {
-                s->tmp_A[i] = slot->A_dyn[i] + s->tmp_Al[i];
-            }
-            rc = dopus_regularize(s, DOPUS_NW, s->tmp_A);
+            dopus_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
+            rc = dopus_regularize(s, DOPUS_NW, s->mem.ev.tmp_A);
             if (rc == DOPUS_OK) {
-                dopus_copy(slot->Ht, s->tmp_A, DOPUS_NW * DOPUS_NW);
+                dopus_copy(slot->Ht, s->mem.ev.tmp_A, DOPUS_NW * DOPUS_NW);
             }
         }
     }
@@ -1452,7 +1454,8 @@ static int dopus_prepare_iteration(dopus_solver *s)
     /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
      *    when stored) */
     for (k = 0; k < DOPUS_N - 1; ++k) {
-        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k],
+                           s->mem.ev.Fn_g[k]);
     }
     dopus_assemble(s);
     s->qp_ready = 1;
@@ -1591,7 +1594,7 @@ int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
 {
     int k, j, side;
     if (s->qp_status != DOPUS_QP_PRIMAL_INFEASIBLE ||
-        !dopus_qp_infeasible_row(&s->qp_work, &s->qp_in, &k, &j, &side)) {
+        !dopus_qp_infeasible_row(&s->mem.qp.work, &s->qp_in, &k, &j, &side)) {
         return 0;
     }
     row->stage = k;

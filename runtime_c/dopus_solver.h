@@ -302,6 +302,38 @@ enum dopus_hessian { DOPUS_HESSIAN_EXACT = 0, DOPUS_HESSIAN_GAUSS_NEWTON = 1 };
 #include "dopus_ring.h"
 #include "dopus_timer.h"
 
+/* Memory that is live only in some calls: the QP's workspace and its solution (also the
+ * warm-start point) in feedback; the scratch of the generated functions, the regularisation,
+ * the convexity test of the automatic lm and F_new in init, prepare and kkt. Never both at
+ * once, so they share it. */
+typedef union {
+    struct {
+        dopus_qp_workspace work;
+        dopus_qp_sol sol;
+    } qp;
+    struct {
+        dopus_fun_work fun_work;
+        /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare
+         * succeeds, so a prepare that fails leaves every F_old for its retry */
+        dopus_real Fn_w[DOPUS_N][DOPUS_NW];
+        dopus_real Fn_phi[DOPUS_N][DOPUS_NX];
+        dopus_real Fn_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
+        dopus_real tmp_A[DOPUS_NW * DOPUS_NW];
+        dopus_real tmp_Al[DOPUS_NW * DOPUS_NW];
+        dopus_real tmp_Phi[DOPUS_NX * DOPUS_NW];
+        dopus_real tmp_C[DOPUS_DIM(DOPUS_NG * DOPUS_NW)];
+        dopus_real tmp_gL[DOPUS_NW];
+        dopus_real tmp_F[DOPUS_NW];
+        dopus_real tmp_phi[DOPUS_NX];
+        dopus_real tmp_g[DOPUS_DIM(DOPUS_NG)];
+        dopus_real reg_work[2 * DOPUS_NW * DOPUS_NW];
+        /* Riccati workspace of the convexity test of the automatic lm */
+        dopus_real lm_P[DOPUS_NX * DOPUS_NX];
+        dopus_real lm_PA[DOPUS_NX * DOPUS_NW];
+        dopus_real lm_G[DOPUS_NW * DOPUS_NW];
+    } ev;
+} dopus_solver_mem;
+
 struct dopus_solver {
     int magic;       /* DOPUS_MAGIC once the settings hold valid values */
     int initialized; /* a successful init happened */
@@ -316,17 +348,13 @@ struct dopus_solver {
     int hessian;
     int regularization;
     dopus_real reg_eps;
-    int cost_hessian;                     /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
-    dopus_real lm;                        /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
+    int cost_hessian;       /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    dopus_real lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
                            current automatic value) */
-    int lm_auto;                          /* 1: automatic term (section 10) */
-    dopus_real lm_scale;                  /* Hessian scale h of the automatic term */
-    dopus_real lm_kkt_prev;               /* KKT proxy of the previous prepare (< 0: none since init) */
-    dopus_real lm_uncapped;               /* the term before the cap of this feedback (< 0: not capped) */
-    dopus_real lm_P[DOPUS_NX * DOPUS_NX]; /* Riccati workspace of the convexity test */
-    dopus_real lm_P2[DOPUS_NX * DOPUS_NX];
-    dopus_real lm_PA[DOPUS_NX * DOPUS_NW];
-    dopus_real lm_G[DOPUS_NW * DOPUS_NW];
+    int lm_auto;            /* 1: automatic term (section 10) */
+    dopus_real lm_scale;    /* Hessian scale h of the automatic term */
+    dopus_real lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
+    dopus_real lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     dopus_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */
@@ -353,39 +381,23 @@ struct dopus_solver {
     dopus_real r[DOPUS_DIM(DOPUS_NR)];
     dopus_real r_eq[DOPUS_DIM(DOPUS_NE)];
 
-    /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare succeeds,
-     * so a prepare that fails leaves every F_old for its retry */
-    dopus_real Fn_w[DOPUS_N][DOPUS_NW];
-    dopus_real Fn_phi[DOPUS_N][DOPUS_NX];
-    dopus_real Fn_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
-
     /* secant criterion and the recomputed set of the last prepare */
     dopus_real rho[DOPUS_N];
     int recomputed[DOPUS_N];
     int n_recomputed;
     unsigned char selected[DOPUS_N];
 
-    /* QP data, solution and workspace (the matrices are pointers into the ring) */
+    /* QP data (the matrices are pointers into the ring) */
     dopus_qp_in qp_in;
-    dopus_qp_sol qp_sol;
     dopus_qp_info qp_info;
-    dopus_qp_workspace qp_work;
     int qp_status;
     int qp_iterations;
     int qp_warm;       /* warm start in feedback (dopus_set_qp_warm_start) */
     int qp_cold_retry; /* the last feedback needed the cold retry */
 
-    /* scratch for the generated functions and the regularisation */
-    dopus_fun_work fun_work;
-    dopus_real tmp_A[DOPUS_NW * DOPUS_NW];
-    dopus_real tmp_Al[DOPUS_NW * DOPUS_NW];
-    dopus_real tmp_Phi[DOPUS_NX * DOPUS_NW];
-    dopus_real tmp_C[DOPUS_DIM(DOPUS_NG) * DOPUS_NW];
-    dopus_real tmp_gL[DOPUS_NW];
-    dopus_real tmp_F[DOPUS_NW];
-    dopus_real tmp_phi[DOPUS_NX];
-    dopus_real tmp_g[DOPUS_DIM(DOPUS_NG)];
-    dopus_real reg_work[2 * DOPUS_NW * DOPUS_NW];
+    /* the QP's workspace and solution, live only inside feedback, share their memory with
+     * the scratch of the function evaluations, live only outside it (dopus_solver_mem) */
+    dopus_solver_mem mem;
 
     /* safe outputs, divergence test and recovery (algorithm.md section 9) */
     int recovery;          /* automatic recovery on */

@@ -44,7 +44,7 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const robot_arm_real *xhat
     }
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
-                                  &s->fun_work) != 0) {
+                                  &s->mem.ev.fun_work) != 0) {
             return ROBOT_ARM_ERR_FUNCTION;
         }
         if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW, gL) || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, phi) ||

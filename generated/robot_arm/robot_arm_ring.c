@@ -18,15 +18,33 @@ void robot_arm_ring_reset(robot_arm_ring *ring)
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         robot_arm_stage_slot *s = &ring->slot[k];
         robot_arm_ring_zero(s->Ht, ROBOT_ARM_NW * ROBOT_ARM_NW);
-        robot_arm_ring_zero(s->A_dyn, ROBOT_ARM_NW * ROBOT_ARM_NW);
+        robot_arm_ring_zero(s->A_dyn, ROBOT_ARM_NW * (ROBOT_ARM_NW + 1) / 2);
         robot_arm_ring_zero(s->Phit, ROBOT_ARM_NX * ROBOT_ARM_NW);
-        robot_arm_ring_zero(s->Ct, ROBOT_ARM_DIM(ROBOT_ARM_NG) * ROBOT_ARM_NW);
+        robot_arm_ring_zero(s->Ct, ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW));
         robot_arm_ring_zero(s->F_w, ROBOT_ARM_NW);
         robot_arm_ring_zero(s->phi, ROBOT_ARM_NX);
         robot_arm_ring_zero(s->g, ROBOT_ARM_DIM(ROBOT_ARM_NG));
         robot_arm_ring_clear_step(s);
     }
     ring->ring_head = 0;
+}
+
+void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < ROBOT_ARM_NW; ++j)
+        for (i = j; i < ROBOT_ARM_NW; ++i)
+            slot->A_dyn[l++] = A[i + j * ROBOT_ARM_NW];
+}
+
+void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const robot_arm_real *A_l, robot_arm_real *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < ROBOT_ARM_NW; ++j)
+        for (i = j; i < ROBOT_ARM_NW; ++i, ++l) {
+            A[i + j * ROBOT_ARM_NW] = slot->A_dyn[l] + A_l[i + j * ROBOT_ARM_NW];
+            A[j + i * ROBOT_ARM_NW] = slot->A_dyn[l] + A_l[j + i * ROBOT_ARM_NW];
+        }
 }
 
 robot_arm_stage_slot *robot_arm_ring_stage(robot_arm_ring *ring, int k)

@@ -14,10 +14,11 @@ typedef struct {
     /* the blocks the QP uses (possibly outdated, A regularised), column-major */
     robot_arm_real Ht[ROBOT_ARM_NW * ROBOT_ARM_NW]; /* nw x nw */
     /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
-     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l */
-    robot_arm_real A_dyn[ROBOT_ARM_NW * ROBOT_ARM_NW];         /* nw x nw */
+     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l;
+     * symmetric, its lower triangle packed by columns (robot_arm_ring_store_A_dyn) */
+    robot_arm_real A_dyn[ROBOT_ARM_NW * (ROBOT_ARM_NW + 1) / 2];
     robot_arm_real Phit[ROBOT_ARM_NX * ROBOT_ARM_NW];          /* nx x nw, [A_k B_k] */
-    robot_arm_real Ct[ROBOT_ARM_DIM(ROBOT_ARM_NG) * ROBOT_ARM_NW]; /* ng x nw */
+    robot_arm_real Ct[ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW)]; /* ng x nw (leading dimension ng) */
     /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
     robot_arm_real F_w[ROBOT_ARM_NW];
     robot_arm_real phi[ROBOT_ARM_NX];
@@ -43,6 +44,11 @@ const robot_arm_stage_slot *robot_arm_ring_stage_const(const robot_arm_ring *rin
 
 /* One sampling interval: ring_head <- (ring_head + 1) mod N. */
 void robot_arm_ring_advance(robot_arm_ring *ring);
+
+/* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
+void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A);
+/* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
+void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const robot_arm_real *A_l, robot_arm_real *A);
 
 /* Zero the step domega of a slot. */
 void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);

@@ -316,7 +316,7 @@ static robot_arm_real robot_arm_lm_hessian_scale(const robot_arm_solver *s)
 static int robot_arm_lm_convex(robot_arm_solver *s, robot_arm_real lm)
 {
     const robot_arm_real tol = ROBOT_ARM_LM_PIVOT_REL * s->lm_scale;
-    robot_arm_real *P = s->lm_P, *PA = s->lm_PA, *Z = s->lm_G;
+    robot_arm_real *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
     robot_arm_real v;
     int k, i, j, l;
     for (j = 0; j < ROBOT_ARM_NX; ++j) {
@@ -540,21 +540,22 @@ void robot_arm_defaults(robot_arm_solver *s)
 
 /* ---- function evaluations ----------------------------------------------------------- */
 
-/* F_k (eq. 14) at the current point into s->tmp_F (= gL + mu_b_k), s->tmp_phi, s->tmp_g. */
+/* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
 static int robot_arm_stage_F(robot_arm_solver *s, int k)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0);
     int i;
-    if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL, s->tmp_phi, &l,
-                              s->tmp_g, &s->fun_work) != 0) {
+    if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
+                              s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
-    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW, s->tmp_gL) || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->tmp_phi) ||
-        !robot_arm_lai_vec_finite(ROBOT_ARM_NG, s->tmp_g) || !isfinite(l)) {
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW, s->mem.ev.tmp_gL) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->mem.ev.tmp_phi) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NG, s->mem.ev.tmp_g) || !isfinite(l)) {
         return ROBOT_ARM_ERR_NONFINITE_VALUE;
     }
     for (i = 0; i < ROBOT_ARM_NW; ++i) {
-        s->tmp_F[i] = s->tmp_gL[i] + s->mu_b[k][i];
+        s->mem.ev.tmp_F[i] = s->mem.ev.tmp_gL[i] + s->mu_b[k][i];
     }
     return ROBOT_ARM_OK;
 }
@@ -568,21 +569,22 @@ static int robot_arm_regularize(robot_arm_solver *s, int n, robot_arm_real *A)
         return ROBOT_ARM_OK;
     }
     t0 = robot_arm_timer_now(&s->timer);
-    rc = robot_arm_reg_apply(n, A, s->regularization, s->reg_eps, s->reg_work);
+    rc = robot_arm_reg_apply(n, A, s->regularization, s->reg_eps, s->mem.ev.reg_work);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_REGULARIZATION, t0);
     return rc == 0 ? ROBOT_ARM_OK : ROBOT_ARM_ERR_REGULARIZATION;
 }
 
-/* The stage-cost Hessian A_l of stage k at the current point into s->tmp_Al. */
+/* The stage-cost Hessian A_l of stage k at the current point into s->mem.ev.tmp_Al. */
 static int robot_arm_stage_Al(robot_arm_solver *s, int k)
 {
     double t0 = robot_arm_timer_now(&s->timer);
-    int rc = robot_arm_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->tmp_Al, &s->fun_work);
+    int rc = robot_arm_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->mem.ev.tmp_Al,
+                                        &s->mem.ev.fun_work);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
-    return robot_arm_lai_vec_finite(ROBOT_ARM_NW * ROBOT_ARM_NW, s->tmp_Al) ? ROBOT_ARM_OK : ROBOT_ARM_ERR_NONFINITE_VALUE;
+    return robot_arm_lai_vec_finite(ROBOT_ARM_NW * ROBOT_ARM_NW, s->mem.ev.tmp_Al) ? ROBOT_ARM_OK : ROBOT_ARM_ERR_NONFINITE_VALUE;
 }
 
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
@@ -593,15 +595,15 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
     robot_arm_stage_slot *slot;
     double t0 = robot_arm_timer_now(&s->timer);
     int rc, i;
-    rc = robot_arm_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_A,
-                               s->tmp_Phi, s->tmp_C, &s->fun_work);
+    rc = robot_arm_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                               s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
-    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW * ROBOT_ARM_NW, s->tmp_A) ||
-        !robot_arm_lai_vec_finite(ROBOT_ARM_NX * ROBOT_ARM_NW, s->tmp_Phi) ||
-        !robot_arm_lai_vec_finite(ROBOT_ARM_NG * ROBOT_ARM_NW, s->tmp_C)) {
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW * ROBOT_ARM_NW, s->mem.ev.tmp_A) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NX * ROBOT_ARM_NW, s->mem.ev.tmp_Phi) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NG * ROBOT_ARM_NW, s->mem.ev.tmp_C)) {
         return ROBOT_ARM_ERR_NONFINITE_VALUE;
     }
     /* A_dyn = A - A_l, kept whatever cost_hessian is, so the setting may change at any time */
@@ -610,24 +612,24 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
         return rc;
     }
     for (i = 0; i < ROBOT_ARM_NW * ROBOT_ARM_NW; ++i) {
-        s->tmp_Al[i] = s->tmp_A[i] - s->tmp_Al[i];
+        s->mem.ev.tmp_Al[i] = s->mem.ev.tmp_A[i] - s->mem.ev.tmp_Al[i];
     }
-    rc = robot_arm_regularize(s, ROBOT_ARM_NW, s->tmp_A);
+    rc = robot_arm_regularize(s, ROBOT_ARM_NW, s->mem.ev.tmp_A);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
     slot = robot_arm_ring_stage(&s->ring, k);
-    robot_arm_copy(slot->Ht, s->tmp_A, ROBOT_ARM_NW * ROBOT_ARM_NW);
-    robot_arm_copy(slot->A_dyn, s->tmp_Al, ROBOT_ARM_NW * ROBOT_ARM_NW);
-    robot_arm_copy(slot->Phit, s->tmp_Phi, ROBOT_ARM_NX * ROBOT_ARM_NW);
-    robot_arm_copy(slot->Ct, s->tmp_C, ROBOT_ARM_NG * ROBOT_ARM_NW);
+    robot_arm_copy(slot->Ht, s->mem.ev.tmp_A, ROBOT_ARM_NW * ROBOT_ARM_NW);
+    robot_arm_ring_store_A_dyn(slot, s->mem.ev.tmp_Al);
+    robot_arm_copy(slot->Phit, s->mem.ev.tmp_Phi, ROBOT_ARM_NX * ROBOT_ARM_NW);
+    robot_arm_copy(slot->Ct, s->mem.ev.tmp_C, ROBOT_ARM_NG * ROBOT_ARM_NW);
     return ROBOT_ARM_OK;
 }
 
 int robot_arm_term_grad_checked(robot_arm_solver *s, robot_arm_real *gL, robot_arm_real *E, robot_arm_real *r, robot_arm_real *r_eq)
 {
-    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gL, E, r, r_eq, &s->fun_work) !=
-        0) {
+    if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gL, E, r, r_eq,
+                             &s->mem.ev.fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
     if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gL) || !isfinite(*E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
@@ -658,21 +660,21 @@ static int robot_arm_term_H(robot_arm_solver *s)
     robot_arm_real R[ROBOT_ARM_DIM(ROBOT_ARM_NR) * ROBOT_ARM_NX], R_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE) * ROBOT_ARM_NX];
     double t0 = robot_arm_timer_now(&s->timer);
     int rc;
-    rc = robot_arm_eval_term_hess(s->hessian, s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, s->tmp_A, R, R_eq,
-                              &s->fun_work);
+    rc = robot_arm_eval_term_hess(s->hessian, s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
+                              R_eq, &s->mem.ev.fun_work);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
-    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX * ROBOT_ARM_NX, s->tmp_A) ||
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX * ROBOT_ARM_NX, s->mem.ev.tmp_A) ||
         !robot_arm_lai_vec_finite(ROBOT_ARM_NR * ROBOT_ARM_NX, R) || !robot_arm_lai_vec_finite(ROBOT_ARM_NE * ROBOT_ARM_NX, R_eq)) {
         return ROBOT_ARM_ERR_NONFINITE_VALUE;
     }
-    rc = robot_arm_regularize(s, ROBOT_ARM_NX, s->tmp_A);
+    rc = robot_arm_regularize(s, ROBOT_ARM_NX, s->mem.ev.tmp_A);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
-    robot_arm_copy(s->A_N, s->tmp_A, ROBOT_ARM_NX * ROBOT_ARM_NX);
+    robot_arm_copy(s->A_N, s->mem.ev.tmp_A, ROBOT_ARM_NX * ROBOT_ARM_NX);
     robot_arm_copy(s->R, R, ROBOT_ARM_NR * ROBOT_ARM_NX);
     robot_arm_copy(s->R_eq, R_eq, ROBOT_ARM_NE * ROBOT_ARM_NX);
     return ROBOT_ARM_OK;
@@ -768,7 +770,8 @@ static int robot_arm_linearize_all(robot_arm_solver *s)
         if (rc != ROBOT_ARM_OK) {
             return rc;
         }
-        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->tmp_F, s->tmp_phi, s->tmp_g);
+        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                           s->mem.ev.tmp_g);
         rc = robot_arm_stage_H(s, k);
         if (rc != ROBOT_ARM_OK) {
             return rc;
@@ -901,13 +904,13 @@ static int robot_arm_qp_solution_finite(const robot_arm_qp_sol *sol)
            robot_arm_lai_vec_finite(ROBOT_ARM_QP_NR1, sol->mu_r) && robot_arm_lai_vec_finite(ROBOT_ARM_QP_NE1, sol->nu);
 }
 
-/* Warm-start point of the QP (in s->qp_sol): the previous QP solution shifted with the
+/* Warm-start point of the QP (in s->mem.qp.sol): the previous QP solution shifted with the
  * horizon. Its primal part has been added to the iterate, which prepare shifted, so it is
  * a zero step from the (shifted) iterate, with x_0's step fixed by the measurement; the
  * multipliers are the (shifted) iterate's, which are those of the previous QP. */
 static void robot_arm_qp_warm_point(robot_arm_solver *s)
 {
-    robot_arm_qp_sol *w = &s->qp_sol;
+    robot_arm_qp_sol *w = &s->mem.qp.sol;
     int k, i;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -980,16 +983,16 @@ static void robot_arm_feedback_measure(robot_arm_solver *s, const robot_arm_real
 /* 1 when the QP status is "solved" and its solution finite. */
 static int robot_arm_qp_ok(const robot_arm_solver *s, int qs)
 {
-    return qs == ROBOT_ARM_QP_SOLVED && robot_arm_qp_solution_finite(&s->qp_sol);
+    return qs == ROBOT_ARM_QP_SOLVED && robot_arm_qp_solution_finite(&s->mem.qp.sol);
 }
 
-/* One solve of the prepared QP, warm (from the point in s->qp_sol) or cold; its iterations
+/* One solve of the prepared QP, warm (from the point in s->mem.qp.sol) or cold; its iterations
  * are added to those of the call. Returns the QP status. */
 static int robot_arm_qp_attempt(robot_arm_solver *s, int warm)
 {
     int qs;
     s->qp_settings.warm_start = warm;
-    qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    qs = robot_arm_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
     s->qp_iterations += s->qp_info.iterations;
     return qs;
 }
@@ -1037,7 +1040,7 @@ static int robot_arm_feedback_lm_retries(robot_arm_solver *s, int qs, int *retri
  * its step leaves the box of the divergence test (algorithm.md section 9), else ROBOT_ARM_OK. */
 static int robot_arm_feedback_check_step(const robot_arm_solver *s, int qs)
 {
-    const robot_arm_qp_sol *sol = &s->qp_sol;
+    const robot_arm_qp_sol *sol = &s->mem.qp.sol;
     if (!robot_arm_qp_ok(s, qs)) {
         return ROBOT_ARM_ERR_QP;
     }
@@ -1051,7 +1054,7 @@ static int robot_arm_feedback_check_step(const robot_arm_solver *s, int qs)
  * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
 static void robot_arm_store_domega(robot_arm_solver *s)
 {
-    const robot_arm_qp_sol *sol = &s->qp_sol;
+    const robot_arm_qp_sol *sol = &s->mem.qp.sol;
     int k, i;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
@@ -1074,7 +1077,7 @@ static void robot_arm_store_domega(robot_arm_solver *s)
 /* Step 7, the full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
 static void robot_arm_take_step(robot_arm_solver *s)
 {
-    const robot_arm_qp_sol *sol = &s->qp_sol;
+    const robot_arm_qp_sol *sol = &s->mem.qp.sol;
     int k, i;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -1223,7 +1226,8 @@ static int robot_arm_simulate(robot_arm_solver *s, int use_plan)
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         j = s->plan_age + k > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->plan_age + k;
         robot_arm_clip_u(use_plan ? s->plan_u[j] : robot_arm_guess_u[k], s->u[k]);
-        if (robot_arm_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->tmp_g, &s->fun_work) != 0 ||
+        if (robot_arm_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->mem.ev.tmp_g,
+                                  &s->mem.ev.fun_work) != 0 ||
             !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->x[k + 1])) {
             return 0;
         }
@@ -1245,8 +1249,8 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
         if (!shifted) {
             robot_arm_copy(s->x[0], s->x[1], ROBOT_ARM_NX);
         }
-    } else if (robot_arm_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) !=
-                   0 ||
+    } else if (robot_arm_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+                                     &s->mem.ev.fun_work) != 0 ||
                !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->x[0])) {
         robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
     }
@@ -1296,7 +1300,7 @@ static void robot_arm_predicted_step(robot_arm_solver *s)
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
-    qs = robot_arm_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    qs = robot_arm_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
     if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
         return;
     }
@@ -1378,11 +1382,11 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
         if (rc != ROBOT_ARM_OK) {
             return rc;
         }
-        s->rho[k] = robot_arm_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        s->rho[k] = robot_arm_ring_secant(slot, s->mem.ev.tmp_F, s->mem.ev.tmp_phi, s->mem.ev.tmp_g);
         /* stored as F_old in step 6, once nothing can fail */
-        robot_arm_copy(s->Fn_w[k], s->tmp_F, ROBOT_ARM_NW);
-        robot_arm_copy(s->Fn_phi[k], s->tmp_phi, ROBOT_ARM_NX);
-        robot_arm_copy(s->Fn_g[k], s->tmp_g, ROBOT_ARM_NG);
+        robot_arm_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, ROBOT_ARM_NW);
+        robot_arm_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, ROBOT_ARM_NX);
+        robot_arm_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, ROBOT_ARM_NG);
         t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_RHO, t0);
     }
 
@@ -1393,9 +1397,10 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
         return rc;
     }
     if (s->mode == ROBOT_ARM_MODE_RECEDING) {
-        robot_arm_copy(s->x[ROBOT_ARM_N], s->tmp_phi, ROBOT_ARM_NX);
+        robot_arm_copy(s->x[ROBOT_ARM_N], s->mem.ev.tmp_phi, ROBOT_ARM_NX);
     }
-    robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, ROBOT_ARM_N - 1), s->tmp_F, s->tmp_phi, s->tmp_g);
+    robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, ROBOT_ARM_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                       s->mem.ev.tmp_g);
     s->rho[ROBOT_ARM_N - 1] = ROBOT_ARM_R(0.0);
     rc = robot_arm_stage_H(s, ROBOT_ARM_N - 1);
     if (rc == ROBOT_ARM_OK) {
@@ -1426,7 +1431,6 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
     if (rc == ROBOT_ARM_OK && s->cost_hessian) {
         for (k = 0; k < ROBOT_ARM_N - 1 && rc == ROBOT_ARM_OK; ++k) {
             robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
-            int i;
             if (s->selected[k]) {
                 continue;
             }
@@ -1434,12 +1438,10 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
             if (rc != ROBOT_ARM_OK) {
                 break;
             }
-            for (i = 0; i < ROBOT_ARM_NW * ROBOT_ARM_NW; ++i) {
-                s->tmp_A[i] = slot->A_dyn[i] + s->tmp_Al[i];
-            }
-            rc = robot_arm_regularize(s, ROBOT_ARM_NW, s->tmp_A);
+            robot_arm_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
+            rc = robot_arm_regularize(s, ROBOT_ARM_NW, s->mem.ev.tmp_A);
             if (rc == ROBOT_ARM_OK) {
-                robot_arm_copy(slot->Ht, s->tmp_A, ROBOT_ARM_NW * ROBOT_ARM_NW);
+                robot_arm_copy(slot->Ht, s->mem.ev.tmp_A, ROBOT_ARM_NW * ROBOT_ARM_NW);
             }
         }
     }
@@ -1452,7 +1454,8 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
     /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
      *    when stored) */
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
-        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k],
+                           s->mem.ev.Fn_g[k]);
     }
     robot_arm_assemble(s);
     s->qp_ready = 1;
@@ -1591,7 +1594,7 @@ int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_inf
 {
     int k, j, side;
     if (s->qp_status != ROBOT_ARM_QP_PRIMAL_INFEASIBLE ||
-        !robot_arm_qp_infeasible_row(&s->qp_work, &s->qp_in, &k, &j, &side)) {
+        !robot_arm_qp_infeasible_row(&s->mem.qp.work, &s->qp_in, &k, &j, &side)) {
         return 0;
     }
     row->stage = k;

@@ -302,6 +302,38 @@ enum robot_arm_hessian { ROBOT_ARM_HESSIAN_EXACT = 0, ROBOT_ARM_HESSIAN_GAUSS_NE
 #include "robot_arm_ring.h"
 #include "robot_arm_timer.h"
 
+/* Memory that is live only in some calls: the QP's workspace and its solution (also the
+ * warm-start point) in feedback; the scratch of the generated functions, the regularisation,
+ * the convexity test of the automatic lm and F_new in init, prepare and kkt. Never both at
+ * once, so they share it. */
+typedef union {
+    struct {
+        robot_arm_qp_workspace work;
+        robot_arm_qp_sol sol;
+    } qp;
+    struct {
+        robot_arm_fun_work fun_work;
+        /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare
+         * succeeds, so a prepare that fails leaves every F_old for its retry */
+        robot_arm_real Fn_w[ROBOT_ARM_N][ROBOT_ARM_NW];
+        robot_arm_real Fn_phi[ROBOT_ARM_N][ROBOT_ARM_NX];
+        robot_arm_real Fn_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+        robot_arm_real tmp_A[ROBOT_ARM_NW * ROBOT_ARM_NW];
+        robot_arm_real tmp_Al[ROBOT_ARM_NW * ROBOT_ARM_NW];
+        robot_arm_real tmp_Phi[ROBOT_ARM_NX * ROBOT_ARM_NW];
+        robot_arm_real tmp_C[ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW)];
+        robot_arm_real tmp_gL[ROBOT_ARM_NW];
+        robot_arm_real tmp_F[ROBOT_ARM_NW];
+        robot_arm_real tmp_phi[ROBOT_ARM_NX];
+        robot_arm_real tmp_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+        robot_arm_real reg_work[2 * ROBOT_ARM_NW * ROBOT_ARM_NW];
+        /* Riccati workspace of the convexity test of the automatic lm */
+        robot_arm_real lm_P[ROBOT_ARM_NX * ROBOT_ARM_NX];
+        robot_arm_real lm_PA[ROBOT_ARM_NX * ROBOT_ARM_NW];
+        robot_arm_real lm_G[ROBOT_ARM_NW * ROBOT_ARM_NW];
+    } ev;
+} robot_arm_solver_mem;
+
 struct robot_arm_solver {
     int magic;       /* ROBOT_ARM_MAGIC once the settings hold valid values */
     int initialized; /* a successful init happened */
@@ -316,17 +348,13 @@ struct robot_arm_solver {
     int hessian;
     int regularization;
     robot_arm_real reg_eps;
-    int cost_hessian;                     /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
-    robot_arm_real lm;                        /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
+    int cost_hessian;       /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    robot_arm_real lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
                            current automatic value) */
-    int lm_auto;                          /* 1: automatic term (section 10) */
-    robot_arm_real lm_scale;                  /* Hessian scale h of the automatic term */
-    robot_arm_real lm_kkt_prev;               /* KKT proxy of the previous prepare (< 0: none since init) */
-    robot_arm_real lm_uncapped;               /* the term before the cap of this feedback (< 0: not capped) */
-    robot_arm_real lm_P[ROBOT_ARM_NX * ROBOT_ARM_NX]; /* Riccati workspace of the convexity test */
-    robot_arm_real lm_P2[ROBOT_ARM_NX * ROBOT_ARM_NX];
-    robot_arm_real lm_PA[ROBOT_ARM_NX * ROBOT_ARM_NW];
-    robot_arm_real lm_G[ROBOT_ARM_NW * ROBOT_ARM_NW];
+    int lm_auto;            /* 1: automatic term (section 10) */
+    robot_arm_real lm_scale;    /* Hessian scale h of the automatic term */
+    robot_arm_real lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
+    robot_arm_real lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     robot_arm_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */
@@ -353,39 +381,23 @@ struct robot_arm_solver {
     robot_arm_real r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
     robot_arm_real r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
 
-    /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare succeeds,
-     * so a prepare that fails leaves every F_old for its retry */
-    robot_arm_real Fn_w[ROBOT_ARM_N][ROBOT_ARM_NW];
-    robot_arm_real Fn_phi[ROBOT_ARM_N][ROBOT_ARM_NX];
-    robot_arm_real Fn_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-
     /* secant criterion and the recomputed set of the last prepare */
     robot_arm_real rho[ROBOT_ARM_N];
     int recomputed[ROBOT_ARM_N];
     int n_recomputed;
     unsigned char selected[ROBOT_ARM_N];
 
-    /* QP data, solution and workspace (the matrices are pointers into the ring) */
+    /* QP data (the matrices are pointers into the ring) */
     robot_arm_qp_in qp_in;
-    robot_arm_qp_sol qp_sol;
     robot_arm_qp_info qp_info;
-    robot_arm_qp_workspace qp_work;
     int qp_status;
     int qp_iterations;
     int qp_warm;       /* warm start in feedback (robot_arm_set_qp_warm_start) */
     int qp_cold_retry; /* the last feedback needed the cold retry */
 
-    /* scratch for the generated functions and the regularisation */
-    robot_arm_fun_work fun_work;
-    robot_arm_real tmp_A[ROBOT_ARM_NW * ROBOT_ARM_NW];
-    robot_arm_real tmp_Al[ROBOT_ARM_NW * ROBOT_ARM_NW];
-    robot_arm_real tmp_Phi[ROBOT_ARM_NX * ROBOT_ARM_NW];
-    robot_arm_real tmp_C[ROBOT_ARM_DIM(ROBOT_ARM_NG) * ROBOT_ARM_NW];
-    robot_arm_real tmp_gL[ROBOT_ARM_NW];
-    robot_arm_real tmp_F[ROBOT_ARM_NW];
-    robot_arm_real tmp_phi[ROBOT_ARM_NX];
-    robot_arm_real tmp_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-    robot_arm_real reg_work[2 * ROBOT_ARM_NW * ROBOT_ARM_NW];
+    /* the QP's workspace and solution, live only inside feedback, share their memory with
+     * the scratch of the function evaluations, live only outside it (robot_arm_solver_mem) */
+    robot_arm_solver_mem mem;
 
     /* safe outputs, divergence test and recovery (algorithm.md section 9) */
     int recovery;          /* automatic recovery on */

@@ -44,7 +44,7 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const unicycle_real *xhat0, 
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
         if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
-                                  &s->fun_work) != 0) {
+                                  &s->mem.ev.fun_work) != 0) {
             return UNICYCLE_ERR_FUNCTION;
         }
         if (!unicycle_lai_vec_finite(UNICYCLE_NW, gL) || !unicycle_lai_vec_finite(UNICYCLE_NX, phi) ||

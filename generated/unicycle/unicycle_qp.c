@@ -57,6 +57,10 @@
 #ifndef WARM_FLOOR_Z
 #define WARM_FLOOR_Z UNICYCLE_R(1e-2)
 #endif
+/* Centred cold start: slacks floored at the primal infeasibility of w = 0, at least
+ * CENTRED_T_MIN and at most 1, and every multiplier z = floor / t (so t z = floor on
+ * every side). */
+#define CENTRED_T_MIN UNICYCLE_R(0.1)
 /* Smallest centring parameter of a step taken with the inertia correction (see there). */
 #define SIGMA_NONCONVEX UNICYCLE_R(0.9)
 /* Smallest centring parameter after the restart on a nonconvex stall (see unicycle_qp_solve). */
@@ -270,6 +274,23 @@ static void spmv_packed(const unicycle_real *restrict Pp, unicycle_real alpha, c
         for (i = j; i < NX; ++i)
             y[i] += Pp[PACKED(i, j)] * a;
     }
+}
+
+/* The Cholesky factor Lu (nu x nu, lower) of a stage kept packed by lower columns in the
+ * workspace and unpacked where the triangular kernels use it. */
+static void pack_lu(const unicycle_real *restrict L, unicycle_real *restrict Lp)
+{
+    int i, j, l = 0;
+    for (j = 0; j < NU; ++j)
+        for (i = j; i < NU; ++i)
+            Lp[l++] = L[i + j * NU1];
+}
+static void unpack_lu(const unicycle_real *restrict Lp, unicycle_real *restrict L)
+{
+    int i, j, l = 0;
+    for (j = 0; j < NU; ++j)
+        for (i = j; i < NU; ++i)
+            L[i + j * NU1] = Lp[l++];
 }
 
 /* Per bounded row b: the residuals of the slack equations, r_lo = v - lo - t_lo and
@@ -566,7 +587,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         unicycle_real *M = ws->M;
         const unicycle_real *Phi = in->Phi[k];
         unicycle_real q[NSI];
-        unicycle_real *Lu = ws->Lu[k];
+        unicycle_real Lu[NU1 * NU1];
         unicycle_real *LK = ws->LK[k];
         unicycle_real *LKn = ws->LKn[k];
         unicycle_real *P = ws->P[k];
@@ -620,6 +641,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             return 1;
         }
         pmag = mxx;
+        pack_lu(Lu, ws->Lu[k]);
         /* LK = Lu^{-1} M_ux, LKn = Lu^{-1} Gam_u */
         unicycle_lai_copy_mat(NU, NX, M + NX, NW, LK, NU1);
         unicycle_lai_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
@@ -680,6 +702,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
     unicycle_real *tv = ws->work;     /* NX */
     unicycle_real *m = ws->work + NX; /* NW */
     unicycle_real *e = ws->e;
+    unicycle_real Lu[NU1 * NU1];
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
     {
@@ -714,7 +737,8 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         /* lk = Lu^{-1} m_u; p_k = m_x - LK' lk; e -= LKn' lk */
         for (i = 0; i < NU; ++i)
             lk[i] = m[NX + i];
-        unicycle_lai_trsv_ln(NU, ws->Lu[k], NU1, lk);
+        unpack_lu(ws->Lu[k], Lu);
+        unicycle_lai_trsv_ln(NU, Lu, NU1, lk);
         for (i = 0; i < NX; ++i) {
             xk[i] = pk[i];
             pk[i] = m[i];
@@ -739,7 +763,8 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         unicycle_lai_gemv_n(NU, NX, UNICYCLE_R(1.0), ws->LK[k], NU1, w, UNICYCLE_R(1.0), u);
         if (NE > 0)
             unicycle_lai_gemv_n(NU, NE, UNICYCLE_R(1.0), ws->LKn[k], NU1, sn, UNICYCLE_R(1.0), u);
-        unicycle_lai_trsv_lt(NU, ws->Lu[k], NU1, u);
+        unpack_lu(ws->Lu[k], Lu);
+        unicycle_lai_trsv_lt(NU, Lu, NU1, u);
         for (i = 0; i < NU; ++i)
             u[i] = -u[i];
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
@@ -900,28 +925,40 @@ static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in
         }
 }
 
-/* Largest alpha in (0, 1] keeping t + alpha dt >= 0 and z + alpha dz >= 0. */
-static unicycle_real max_step(const unicycle_qp_workspace *ws)
+/* Largest steps in (0, 1] keeping t + ap dt >= 0 (ap, the primal step) and z + ad dz >= 0
+ * (ad, the dual step), and whether no side blocks the full primal or dual step. */
+static void max_steps(const unicycle_qp_workspace *ws, unicycle_real *ap, unicycle_real *ad, int *full)
 {
     int i;
-    unicycle_real a = UNICYCLE_R(1.0);
+    unicycle_real a = UNICYCLE_R(2.0), d = UNICYCLE_R(2.0);
     for (i = 0; i < ws->nb; ++i) {
         if (ws->has_lo[i]) {
             const unicycle_real dt = dt_lo(ws, i);
             if (dt < UNICYCLE_R(0.0))
                 a = dmin(a, -ws->t_lo[i] / dt);
             if (ws->dz_lo[i] < UNICYCLE_R(0.0))
-                a = dmin(a, -ws->z_lo[i] / ws->dz_lo[i]);
+                d = dmin(d, -ws->z_lo[i] / ws->dz_lo[i]);
         }
         if (ws->has_up[i]) {
             const unicycle_real dt = dt_up(ws, i);
             if (dt < UNICYCLE_R(0.0))
                 a = dmin(a, -ws->t_up[i] / dt);
             if (ws->dz_up[i] < UNICYCLE_R(0.0))
-                a = dmin(a, -ws->z_up[i] / ws->dz_up[i]);
+                d = dmin(d, -ws->z_up[i] / ws->dz_up[i]);
         }
     }
-    return a;
+    full[0] = a > UNICYCLE_R(1.0);
+    full[1] = d > UNICYCLE_R(1.0);
+    *ap = dmin(UNICYCLE_R(1.0), a);
+    *ad = dmin(UNICYCLE_R(1.0), d);
+}
+
+/* The step taken for the largest step a to the boundary (full: nothing blocks a step of
+ * 1): the full step when nothing blocks it, else a fraction that tends to 1 as a does
+ * (0.99 a for short steps, 0.9999999 a near a = 1). */
+static unicycle_real step_to_boundary(unicycle_real a, int full)
+{
+    return full ? UNICYCLE_R(1.0) : a * ((UNICYCLE_R(1.0) - a) * UNICYCLE_R(0.99) + a * UNICYCLE_R(0.9999999));
 }
 
 /* ---------------------------------------------------------------- infeasibility */
@@ -1088,13 +1125,39 @@ static void zero_solution(unicycle_qp_sol *sol)
         sol->nu[i] = UNICYCLE_R(0.0);
 }
 
-/* Starting point. Cold: w = 0, lam = nu = 0, slacks max(1, v - lo), multipliers 1.
- * Warm: the given primal-dual point with slacks and multipliers pushed off zero. */
+/* The slack floor of the centred cold start: the primal infeasibility of w = 0 (the
+ * largest |x0|, |b_k|, |req| and bound violation), between CENTRED_T_MIN and 1. A nearly
+ * feasible start (the QPs of an SQP or RTI iteration, whose zero step satisfies the bounds
+ * of a feasible iterate) starts close to the boundary with small complementarity t z; a
+ * far infeasible one with t z = 1. */
+static unicycle_real centred_floor(const unicycle_qp_workspace *ws, const unicycle_qp_in *in)
+{
+    int k, b, j;
+    unicycle_real viol = ws->scale_b;
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            unicycle_real lo, up;
+            (void)j;
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            if (ws->has_lo[b])
+                viol = dmax(viol, lo);
+            if (ws->has_up[b])
+                viol = dmax(viol, -up);
+        }
+    return dmin(UNICYCLE_R(1.0), dmax(CENTRED_T_MIN, viol));
+}
+
+/* Starting point. Cold (centred = 0): w = 0, lam = nu = 0, slacks max(1, v - lo),
+ * multipliers 1. Centred cold start (centred = 1): slacks max(floor, v - lo) and
+ * multipliers floor / t (centred_floor). Warm: the given primal-dual point with slacks and
+ * multipliers pushed off zero. */
 static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const unicycle_qp_settings *st,
-                          const unicycle_qp_sol *sol)
+                          const unicycle_qp_sol *sol, int centred)
 {
     int k, i, b, j;
     const int warm = st->warm_start != 0;
+    const unicycle_real floor_c = !warm && centred ? centred_floor(ws, in) : UNICYCLE_R(1.0);
     for (i = 0; i < NP; ++i)
         ws->prim[i] = UNICYCLE_R(0.0);
     for (i = 0; i < (N + 1) * NX; ++i)
@@ -1123,16 +1186,18 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
             ws->t_lo[b] = ws->t_up[b] = UNICYCLE_R(1.0);
             ws->z_lo[b] = ws->z_up[b] = UNICYCLE_R(0.0);
             if (ws->has_lo[b]) {
-                const unicycle_real floor_t =
-                    warm ? WARM_FLOOR_T * dmax(UNICYCLE_R(1.0), unicycle_fabs(lo)) : UNICYCLE_R(1.0);
+                const unicycle_real floor_t = warm ? WARM_FLOOR_T * dmax(UNICYCLE_R(1.0), unicycle_fabs(lo)) : floor_c;
                 ws->t_lo[b] = dmax(v - lo, floor_t);
-                ws->z_lo[b] = warm ? dmax(-mu_signed, WARM_FLOOR_Z) : UNICYCLE_R(1.0);
+                ws->z_lo[b] = warm      ? dmax(-mu_signed, WARM_FLOOR_Z)
+                              : centred ? floor_c / ws->t_lo[b]
+                                        : UNICYCLE_R(1.0);
             }
             if (ws->has_up[b]) {
-                const unicycle_real floor_t =
-                    warm ? WARM_FLOOR_T * dmax(UNICYCLE_R(1.0), unicycle_fabs(up)) : UNICYCLE_R(1.0);
+                const unicycle_real floor_t = warm ? WARM_FLOOR_T * dmax(UNICYCLE_R(1.0), unicycle_fabs(up)) : floor_c;
                 ws->t_up[b] = dmax(up - v, floor_t);
-                ws->z_up[b] = warm ? dmax(mu_signed, WARM_FLOOR_Z) : UNICYCLE_R(1.0);
+                ws->z_up[b] = warm      ? dmax(mu_signed, WARM_FLOOR_Z)
+                              : centred ? floor_c / ws->t_up[b]
+                                        : UNICYCLE_R(1.0);
             }
         }
 }
@@ -1176,7 +1241,10 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
     int best_iter = 0;
     unicycle_real mu_prev = INFINITY;
     unicycle_real sigma_min = UNICYCLE_R(0.0); /* SIGMA_MIN_RESTART after a restart */
-    int restarted = 0;
+    /* attempt 0: the centred cold start with the long steps; 1: the plain start (a warm
+     * start, or the cold start again after attempt 0 stalled) with the careful steps; 2:
+     * the restart after a nonconvex stall (see below) */
+    int attempt, n_corr_attempt = 0;
 
     if (settings)
         st = *settings;
@@ -1235,7 +1303,8 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
     }
     hscale = hessian_scale(in);
     data_scales(ws, in);
-    initial_point(ws, in, &st, sol);
+    attempt = st.warm_start ? 1 : 0;
+    initial_point(ws, in, &st, sol, attempt == 0);
 
     /* data scale for the divergence tests of the certificates */
     data_scale = dmax(UNICYCLE_R(1.0), ws->scale_bounds); /* the finite bounds */
@@ -1249,8 +1318,11 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         data_scale = dmax(data_scale, unicycle_lai_norm_inf(NE, in->req));
 
     for (iter = 0;; ++iter) {
-        unicycle_real alpha, alpha_aff, mu_aff, sigma, target, eta;
-        int fact, floors_before, nref;
+        unicycle_real alpha, alpha_d, alpha_aff, mu_aff, sigma, target, eta;
+        int fact, floors_before, nref, full[2];
+        /* the long steps (separate primal and dual step lengths, up to the boundary) in the
+         * first attempt from the centred start while the QP is convex (no correction) */
+        const int long_steps = attempt == 0 && n_corr == 0 && n_aug == 0;
 
         compute_residuals(ws, in, &r);
         if (!(isfinite(r.stat) && isfinite(r.eq) && isfinite(r.mu))) {
@@ -1268,7 +1340,21 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             best_iter = iter;
             best_r = r;
             write_solution(ws, sol);
-        } else if (!restarted && n_corr > 0 && iter - best_iter >= RESTART_STALL_ITERS) {
+        } else if (attempt == 0 && iter - best_iter >= RESTART_STALL_ITERS) {
+            /* The centred start with its long steps made no progress (a nonconvex QP, whose
+             * iterate it threw into the wrong region): start again from the plain cold
+             * start with the careful steps. */
+            attempt = 1;
+            n_corr_attempt = n_corr;
+            initial_point(ws, in, &st, sol, 0);
+            ws->rho_aug = UNICYCLE_R(0.0);
+            delta_last = UNICYCLE_R(0.0);
+            mu_prev = INFINITY;
+            best_merit = INFINITY;
+            best_iter = iter + 1;
+            QP_TRACE("plain start at iteration %d\n", iter);
+            continue;
+        } else if (attempt == 1 && n_corr > n_corr_attempt && iter - best_iter >= RESTART_STALL_ITERS) {
             /* Stalled after inertia corrections: the QP is nonconvex on the null space of
              * the equalities, and Mehrotra's aggressive mu reduction let a near-singular
              * barrier Hessian throw the iterate far into the nonconvex region before the
@@ -1278,10 +1364,10 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
              * 1/SIGMA_MIN_RESTART per iteration. (Restarting at the first correction
              * instead saves iterations but loses the QPs that the first attempt solves
              * and the cautious one does not.) */
-            restarted = 1;
+            attempt = 2;
             sigma_min = SIGMA_MIN_RESTART;
             st.warm_start = 0;
-            initial_point(ws, in, &st, sol);
+            initial_point(ws, in, &st, sol, 0);
             ws->rho_aug = UNICYCLE_R(0.0);
             delta_last = UNICYCLE_R(0.0);
             mu_prev = INFINITY;
@@ -1379,15 +1465,17 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         pred.corrector = 0;
         pred.eta = pred.target = UNICYCLE_R(0.0);
         newton_direction(ws, in, 0, &pred);
-        alpha = max_step(ws);
+        max_steps(ws, &alpha, &alpha_d, full);
+        if (!long_steps)
+            alpha = alpha_d = dmin(alpha, alpha_d);
         alpha_aff = alpha;
         (void)alpha_aff;
         mu_aff = UNICYCLE_R(0.0);
         for (i = 0; i < ws->nb; ++i) {
             if (ws->has_lo[i])
-                mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha * ws->dz_lo[i]);
+                mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha_d * ws->dz_lo[i]);
             if (ws->has_up[i])
-                mu_aff += (ws->t_up[i] + alpha * dt_up(ws, i)) * (ws->z_up[i] + alpha * ws->dz_up[i]);
+                mu_aff += (ws->t_up[i] + alpha * dt_up(ws, i)) * (ws->z_up[i] + alpha_d * ws->dz_up[i]);
         }
         mu_aff /= r.nsides;
         sigma = r.mu > UNICYCLE_R(0.0) ? mu_aff / r.mu : UNICYCLE_R(0.0);
@@ -1416,23 +1504,29 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         corr.eta = eta;
         corr.target = target;
         newton_direction(ws, in, nref, &corr);
-        alpha = dmin(UNICYCLE_R(1.0), STEP_TAU * max_step(ws));
+        max_steps(ws, &alpha, &alpha_d, full);
+        if (long_steps) {
+            alpha = step_to_boundary(alpha, full[0]);
+            alpha_d = step_to_boundary(alpha_d, full[1]);
+        } else {
+            alpha = alpha_d = STEP_TAU * dmin(alpha, alpha_d);
+        }
         QP_TRACE("it %2d mu %.2e stat %.2e eq %.2e ineq %.2e comp %.2e | a_aff %.3f sigma %.2e "
                  "alpha %.3e delta %.1e rho %.1e floors %d |dp| %.2e\n",
                  iter, r.mu, r.stat_s, r.eq_s, r.ineq_s, r.comp_s, alpha_aff, sigma, alpha, ws->delta,
                  ws->rho_aug, ws->pivot_floors - floors_before, unicycle_lai_norm_inf(NP, ws->d_prim));
 
         unicycle_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
-        unicycle_lai_axpy((N + 1) * NX, alpha, ws->d_lam, ws->lam);
-        unicycle_lai_axpy(NE, alpha, ws->d_nu, ws->nu);
+        unicycle_lai_axpy((N + 1) * NX, alpha_d, ws->d_lam, ws->lam);
+        unicycle_lai_axpy(NE, alpha_d, ws->d_nu, ws->nu);
         for (i = 0; i < ws->nb; ++i) {
             if (ws->has_lo[i]) {
                 ws->t_lo[i] += alpha * dt_lo(ws, i);
-                ws->z_lo[i] += alpha * ws->dz_lo[i];
+                ws->z_lo[i] += alpha_d * ws->dz_lo[i];
             }
             if (ws->has_up[i]) {
                 ws->t_up[i] += alpha * dt_up(ws, i);
-                ws->z_up[i] += alpha * ws->dz_up[i];
+                ws->z_up[i] += alpha_d * ws->dz_up[i];
             }
         }
     }

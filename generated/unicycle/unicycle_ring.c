@@ -18,15 +18,33 @@ void unicycle_ring_reset(unicycle_ring *ring)
     for (k = 0; k < UNICYCLE_N; ++k) {
         unicycle_stage_slot *s = &ring->slot[k];
         unicycle_ring_zero(s->Ht, UNICYCLE_NW * UNICYCLE_NW);
-        unicycle_ring_zero(s->A_dyn, UNICYCLE_NW * UNICYCLE_NW);
+        unicycle_ring_zero(s->A_dyn, UNICYCLE_NW * (UNICYCLE_NW + 1) / 2);
         unicycle_ring_zero(s->Phit, UNICYCLE_NX * UNICYCLE_NW);
-        unicycle_ring_zero(s->Ct, UNICYCLE_DIM(UNICYCLE_NG) * UNICYCLE_NW);
+        unicycle_ring_zero(s->Ct, UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW));
         unicycle_ring_zero(s->F_w, UNICYCLE_NW);
         unicycle_ring_zero(s->phi, UNICYCLE_NX);
         unicycle_ring_zero(s->g, UNICYCLE_DIM(UNICYCLE_NG));
         unicycle_ring_clear_step(s);
     }
     ring->ring_head = 0;
+}
+
+void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < UNICYCLE_NW; ++j)
+        for (i = j; i < UNICYCLE_NW; ++i)
+            slot->A_dyn[l++] = A[i + j * UNICYCLE_NW];
+}
+
+void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const unicycle_real *A_l, unicycle_real *A)
+{
+    int i, j, l = 0;
+    for (j = 0; j < UNICYCLE_NW; ++j)
+        for (i = j; i < UNICYCLE_NW; ++i, ++l) {
+            A[i + j * UNICYCLE_NW] = slot->A_dyn[l] + A_l[i + j * UNICYCLE_NW];
+            A[j + i * UNICYCLE_NW] = slot->A_dyn[l] + A_l[j + i * UNICYCLE_NW];
+        }
 }
 
 unicycle_stage_slot *unicycle_ring_stage(unicycle_ring *ring, int k)

@@ -14,10 +14,11 @@ typedef struct {
     /* the blocks the QP uses (possibly outdated, A regularised), column-major */
     unicycle_real Ht[UNICYCLE_NW * UNICYCLE_NW]; /* nw x nw */
     /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
-     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l */
-    unicycle_real A_dyn[UNICYCLE_NW * UNICYCLE_NW];         /* nw x nw */
+     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l;
+     * symmetric, its lower triangle packed by columns (unicycle_ring_store_A_dyn) */
+    unicycle_real A_dyn[UNICYCLE_NW * (UNICYCLE_NW + 1) / 2];
     unicycle_real Phit[UNICYCLE_NX * UNICYCLE_NW];          /* nx x nw, [A_k B_k] */
-    unicycle_real Ct[UNICYCLE_DIM(UNICYCLE_NG) * UNICYCLE_NW]; /* ng x nw */
+    unicycle_real Ct[UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW)]; /* ng x nw (leading dimension ng) */
     /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
     unicycle_real F_w[UNICYCLE_NW];
     unicycle_real phi[UNICYCLE_NX];
@@ -43,6 +44,11 @@ const unicycle_stage_slot *unicycle_ring_stage_const(const unicycle_ring *ring, 
 
 /* One sampling interval: ring_head <- (ring_head + 1) mod N. */
 void unicycle_ring_advance(unicycle_ring *ring);
+
+/* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
+void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A);
+/* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
+void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const unicycle_real *A_l, unicycle_real *A);
 
 /* Zero the step domega of a slot. */
 void unicycle_ring_clear_step(unicycle_stage_slot *slot);

@@ -316,7 +316,7 @@ static unicycle_real unicycle_lm_hessian_scale(const unicycle_solver *s)
 static int unicycle_lm_convex(unicycle_solver *s, unicycle_real lm)
 {
     const unicycle_real tol = UNICYCLE_LM_PIVOT_REL * s->lm_scale;
-    unicycle_real *P = s->lm_P, *PA = s->lm_PA, *Z = s->lm_G;
+    unicycle_real *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
     unicycle_real v;
     int k, i, j, l;
     for (j = 0; j < UNICYCLE_NX; ++j) {
@@ -540,21 +540,22 @@ void unicycle_defaults(unicycle_solver *s)
 
 /* ---- function evaluations ----------------------------------------------------------- */
 
-/* F_k (eq. 14) at the current point into s->tmp_F (= gL + mu_b_k), s->tmp_phi, s->tmp_g. */
+/* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
 static int unicycle_stage_F(unicycle_solver *s, int k)
 {
     unicycle_real l = UNICYCLE_R(0.0);
     int i;
-    if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_gL, s->tmp_phi, &l,
-                              s->tmp_g, &s->fun_work) != 0) {
+    if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
+                              s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NW, s->tmp_gL) || !unicycle_lai_vec_finite(UNICYCLE_NX, s->tmp_phi) ||
-        !unicycle_lai_vec_finite(UNICYCLE_NG, s->tmp_g) || !isfinite(l)) {
+    if (!unicycle_lai_vec_finite(UNICYCLE_NW, s->mem.ev.tmp_gL) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NX, s->mem.ev.tmp_phi) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NG, s->mem.ev.tmp_g) || !isfinite(l)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
     for (i = 0; i < UNICYCLE_NW; ++i) {
-        s->tmp_F[i] = s->tmp_gL[i] + s->mu_b[k][i];
+        s->mem.ev.tmp_F[i] = s->mem.ev.tmp_gL[i] + s->mu_b[k][i];
     }
     return UNICYCLE_OK;
 }
@@ -568,21 +569,22 @@ static int unicycle_regularize(unicycle_solver *s, int n, unicycle_real *A)
         return UNICYCLE_OK;
     }
     t0 = unicycle_timer_now(&s->timer);
-    rc = unicycle_reg_apply(n, A, s->regularization, s->reg_eps, s->reg_work);
+    rc = unicycle_reg_apply(n, A, s->regularization, s->reg_eps, s->mem.ev.reg_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_REGULARIZATION, t0);
     return rc == 0 ? UNICYCLE_OK : UNICYCLE_ERR_REGULARIZATION;
 }
 
-/* The stage-cost Hessian A_l of stage k at the current point into s->tmp_Al. */
+/* The stage-cost Hessian A_l of stage k at the current point into s->mem.ev.tmp_Al. */
 static int unicycle_stage_Al(unicycle_solver *s, int k)
 {
     double t0 = unicycle_timer_now(&s->timer);
-    int rc = unicycle_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->tmp_Al, &s->fun_work);
+    int rc = unicycle_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->mem.ev.tmp_Al,
+                                        &s->mem.ev.fun_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    return unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->tmp_Al) ? UNICYCLE_OK : UNICYCLE_ERR_NONFINITE_VALUE;
+    return unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->mem.ev.tmp_Al) ? UNICYCLE_OK : UNICYCLE_ERR_NONFINITE_VALUE;
 }
 
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
@@ -593,15 +595,15 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
     unicycle_stage_slot *slot;
     double t0 = unicycle_timer_now(&s->timer);
     int rc, i;
-    rc = unicycle_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->tmp_A,
-                               s->tmp_Phi, s->tmp_C, &s->fun_work);
+    rc = unicycle_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                               s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->tmp_A) ||
-        !unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NW, s->tmp_Phi) ||
-        !unicycle_lai_vec_finite(UNICYCLE_NG * UNICYCLE_NW, s->tmp_C)) {
+    if (!unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->mem.ev.tmp_A) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NW, s->mem.ev.tmp_Phi) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NG * UNICYCLE_NW, s->mem.ev.tmp_C)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
     /* A_dyn = A - A_l, kept whatever cost_hessian is, so the setting may change at any time */
@@ -610,24 +612,24 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
         return rc;
     }
     for (i = 0; i < UNICYCLE_NW * UNICYCLE_NW; ++i) {
-        s->tmp_Al[i] = s->tmp_A[i] - s->tmp_Al[i];
+        s->mem.ev.tmp_Al[i] = s->mem.ev.tmp_A[i] - s->mem.ev.tmp_Al[i];
     }
-    rc = unicycle_regularize(s, UNICYCLE_NW, s->tmp_A);
+    rc = unicycle_regularize(s, UNICYCLE_NW, s->mem.ev.tmp_A);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
     slot = unicycle_ring_stage(&s->ring, k);
-    unicycle_copy(slot->Ht, s->tmp_A, UNICYCLE_NW * UNICYCLE_NW);
-    unicycle_copy(slot->A_dyn, s->tmp_Al, UNICYCLE_NW * UNICYCLE_NW);
-    unicycle_copy(slot->Phit, s->tmp_Phi, UNICYCLE_NX * UNICYCLE_NW);
-    unicycle_copy(slot->Ct, s->tmp_C, UNICYCLE_NG * UNICYCLE_NW);
+    unicycle_copy(slot->Ht, s->mem.ev.tmp_A, UNICYCLE_NW * UNICYCLE_NW);
+    unicycle_ring_store_A_dyn(slot, s->mem.ev.tmp_Al);
+    unicycle_copy(slot->Phit, s->mem.ev.tmp_Phi, UNICYCLE_NX * UNICYCLE_NW);
+    unicycle_copy(slot->Ct, s->mem.ev.tmp_C, UNICYCLE_NG * UNICYCLE_NW);
     return UNICYCLE_OK;
 }
 
 int unicycle_term_grad_checked(unicycle_solver *s, unicycle_real *gL, unicycle_real *E, unicycle_real *r, unicycle_real *r_eq)
 {
-    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, E, r, r_eq, &s->fun_work) !=
-        0) {
+    if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, E, r, r_eq,
+                             &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
     if (!unicycle_lai_vec_finite(UNICYCLE_NX, gL) || !isfinite(*E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
@@ -658,21 +660,21 @@ static int unicycle_term_H(unicycle_solver *s)
     unicycle_real R[UNICYCLE_DIM(UNICYCLE_NR) * UNICYCLE_NX], R_eq[UNICYCLE_DIM(UNICYCLE_NE) * UNICYCLE_NX];
     double t0 = unicycle_timer_now(&s->timer);
     int rc;
-    rc = unicycle_eval_term_hess(s->hessian, s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, s->tmp_A, R, R_eq,
-                              &s->fun_work);
+    rc = unicycle_eval_term_hess(s->hessian, s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
+                              R_eq, &s->mem.ev.fun_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NX, s->tmp_A) ||
+    if (!unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NX, s->mem.ev.tmp_A) ||
         !unicycle_lai_vec_finite(UNICYCLE_NR * UNICYCLE_NX, R) || !unicycle_lai_vec_finite(UNICYCLE_NE * UNICYCLE_NX, R_eq)) {
         return UNICYCLE_ERR_NONFINITE_VALUE;
     }
-    rc = unicycle_regularize(s, UNICYCLE_NX, s->tmp_A);
+    rc = unicycle_regularize(s, UNICYCLE_NX, s->mem.ev.tmp_A);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
-    unicycle_copy(s->A_N, s->tmp_A, UNICYCLE_NX * UNICYCLE_NX);
+    unicycle_copy(s->A_N, s->mem.ev.tmp_A, UNICYCLE_NX * UNICYCLE_NX);
     unicycle_copy(s->R, R, UNICYCLE_NR * UNICYCLE_NX);
     unicycle_copy(s->R_eq, R_eq, UNICYCLE_NE * UNICYCLE_NX);
     return UNICYCLE_OK;
@@ -768,7 +770,8 @@ static int unicycle_linearize_all(unicycle_solver *s)
         if (rc != UNICYCLE_OK) {
             return rc;
         }
-        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->tmp_F, s->tmp_phi, s->tmp_g);
+        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                           s->mem.ev.tmp_g);
         rc = unicycle_stage_H(s, k);
         if (rc != UNICYCLE_OK) {
             return rc;
@@ -901,13 +904,13 @@ static int unicycle_qp_solution_finite(const unicycle_qp_sol *sol)
            unicycle_lai_vec_finite(UNICYCLE_QP_NR1, sol->mu_r) && unicycle_lai_vec_finite(UNICYCLE_QP_NE1, sol->nu);
 }
 
-/* Warm-start point of the QP (in s->qp_sol): the previous QP solution shifted with the
+/* Warm-start point of the QP (in s->mem.qp.sol): the previous QP solution shifted with the
  * horizon. Its primal part has been added to the iterate, which prepare shifted, so it is
  * a zero step from the (shifted) iterate, with x_0's step fixed by the measurement; the
  * multipliers are the (shifted) iterate's, which are those of the previous QP. */
 static void unicycle_qp_warm_point(unicycle_solver *s)
 {
-    unicycle_qp_sol *w = &s->qp_sol;
+    unicycle_qp_sol *w = &s->mem.qp.sol;
     int k, i;
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -980,16 +983,16 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
 /* 1 when the QP status is "solved" and its solution finite. */
 static int unicycle_qp_ok(const unicycle_solver *s, int qs)
 {
-    return qs == UNICYCLE_QP_SOLVED && unicycle_qp_solution_finite(&s->qp_sol);
+    return qs == UNICYCLE_QP_SOLVED && unicycle_qp_solution_finite(&s->mem.qp.sol);
 }
 
-/* One solve of the prepared QP, warm (from the point in s->qp_sol) or cold; its iterations
+/* One solve of the prepared QP, warm (from the point in s->mem.qp.sol) or cold; its iterations
  * are added to those of the call. Returns the QP status. */
 static int unicycle_qp_attempt(unicycle_solver *s, int warm)
 {
     int qs;
     s->qp_settings.warm_start = warm;
-    qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
     s->qp_iterations += s->qp_info.iterations;
     return qs;
 }
@@ -1037,7 +1040,7 @@ static int unicycle_feedback_lm_retries(unicycle_solver *s, int qs, int *retries
  * its step leaves the box of the divergence test (algorithm.md section 9), else UNICYCLE_OK. */
 static int unicycle_feedback_check_step(const unicycle_solver *s, int qs)
 {
-    const unicycle_qp_sol *sol = &s->qp_sol;
+    const unicycle_qp_sol *sol = &s->mem.qp.sol;
     if (!unicycle_qp_ok(s, qs)) {
         return UNICYCLE_ERR_QP;
     }
@@ -1051,7 +1054,7 @@ static int unicycle_feedback_check_step(const unicycle_solver *s, int qs)
  * domega_k = (dw_k, lam_QP_{k+1} - lam_{k+1}, mu_g_QP_k - mu_g_k, mu_b_QP_k - mu_b_k). */
 static void unicycle_store_domega(unicycle_solver *s)
 {
-    const unicycle_qp_sol *sol = &s->qp_sol;
+    const unicycle_qp_sol *sol = &s->mem.qp.sol;
     int k, i;
     for (k = 0; k < UNICYCLE_N; ++k) {
         unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
@@ -1074,7 +1077,7 @@ static void unicycle_store_domega(unicycle_solver *s)
 /* Step 7, the full step (paper eq. 4): w += dw, multipliers replaced by the QP's. */
 static void unicycle_take_step(unicycle_solver *s)
 {
-    const unicycle_qp_sol *sol = &s->qp_sol;
+    const unicycle_qp_sol *sol = &s->mem.qp.sol;
     int k, i;
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -1223,7 +1226,8 @@ static int unicycle_simulate(unicycle_solver *s, int use_plan)
     for (k = 0; k < UNICYCLE_N; ++k) {
         j = s->plan_age + k > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->plan_age + k;
         unicycle_clip_u(use_plan ? s->plan_u[j] : unicycle_guess_u[k], s->u[k]);
-        if (unicycle_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->tmp_g, &s->fun_work) != 0 ||
+        if (unicycle_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->mem.ev.tmp_g,
+                                  &s->mem.ev.fun_work) != 0 ||
             !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[k + 1])) {
             return 0;
         }
@@ -1245,8 +1249,8 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
         if (!shifted) {
             unicycle_copy(s->x[0], s->x[1], UNICYCLE_NX);
         }
-    } else if (unicycle_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->tmp_g, &s->fun_work) !=
-                   0 ||
+    } else if (unicycle_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+                                     &s->mem.ev.fun_work) != 0 ||
                !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[0])) {
         unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
     }
@@ -1296,7 +1300,7 @@ static void unicycle_predicted_step(unicycle_solver *s)
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
-    qs = unicycle_qp_solve(&s->qp_work, &s->qp_in, &s->qp_settings, &s->qp_sol, &s->qp_info);
+    qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
     if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         return;
     }
@@ -1378,11 +1382,11 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
         if (rc != UNICYCLE_OK) {
             return rc;
         }
-        s->rho[k] = unicycle_ring_secant(slot, s->tmp_F, s->tmp_phi, s->tmp_g);
+        s->rho[k] = unicycle_ring_secant(slot, s->mem.ev.tmp_F, s->mem.ev.tmp_phi, s->mem.ev.tmp_g);
         /* stored as F_old in step 6, once nothing can fail */
-        unicycle_copy(s->Fn_w[k], s->tmp_F, UNICYCLE_NW);
-        unicycle_copy(s->Fn_phi[k], s->tmp_phi, UNICYCLE_NX);
-        unicycle_copy(s->Fn_g[k], s->tmp_g, UNICYCLE_NG);
+        unicycle_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, UNICYCLE_NW);
+        unicycle_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, UNICYCLE_NX);
+        unicycle_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, UNICYCLE_NG);
         t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_RHO, t0);
     }
 
@@ -1393,9 +1397,10 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
         return rc;
     }
     if (s->mode == UNICYCLE_MODE_RECEDING) {
-        unicycle_copy(s->x[UNICYCLE_N], s->tmp_phi, UNICYCLE_NX);
+        unicycle_copy(s->x[UNICYCLE_N], s->mem.ev.tmp_phi, UNICYCLE_NX);
     }
-    unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->tmp_F, s->tmp_phi, s->tmp_g);
+    unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                       s->mem.ev.tmp_g);
     s->rho[UNICYCLE_N - 1] = UNICYCLE_R(0.0);
     rc = unicycle_stage_H(s, UNICYCLE_N - 1);
     if (rc == UNICYCLE_OK) {
@@ -1426,7 +1431,6 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
     if (rc == UNICYCLE_OK && s->cost_hessian) {
         for (k = 0; k < UNICYCLE_N - 1 && rc == UNICYCLE_OK; ++k) {
             unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
-            int i;
             if (s->selected[k]) {
                 continue;
             }
@@ -1434,12 +1438,10 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
             if (rc != UNICYCLE_OK) {
                 break;
             }
-            for (i = 0; i < UNICYCLE_NW * UNICYCLE_NW; ++i) {
-                s->tmp_A[i] = slot->A_dyn[i] + s->tmp_Al[i];
-            }
-            rc = unicycle_regularize(s, UNICYCLE_NW, s->tmp_A);
+            unicycle_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
+            rc = unicycle_regularize(s, UNICYCLE_NW, s->mem.ev.tmp_A);
             if (rc == UNICYCLE_OK) {
-                unicycle_copy(slot->Ht, s->tmp_A, UNICYCLE_NW * UNICYCLE_NW);
+                unicycle_copy(slot->Ht, s->mem.ev.tmp_A, UNICYCLE_NW * UNICYCLE_NW);
             }
         }
     }
@@ -1452,7 +1454,8 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
     /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
      *    when stored) */
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
-        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->Fn_w[k], s->Fn_phi[k], s->Fn_g[k]);
+        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k],
+                           s->mem.ev.Fn_g[k]);
     }
     unicycle_assemble(s);
     s->qp_ready = 1;
@@ -1591,7 +1594,7 @@ int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *
 {
     int k, j, side;
     if (s->qp_status != UNICYCLE_QP_PRIMAL_INFEASIBLE ||
-        !unicycle_qp_infeasible_row(&s->qp_work, &s->qp_in, &k, &j, &side)) {
+        !unicycle_qp_infeasible_row(&s->mem.qp.work, &s->qp_in, &k, &j, &side)) {
         return 0;
     }
     row->stage = k;

@@ -302,6 +302,38 @@ enum unicycle_hessian { UNICYCLE_HESSIAN_EXACT = 0, UNICYCLE_HESSIAN_GAUSS_NEWTO
 #include "unicycle_ring.h"
 #include "unicycle_timer.h"
 
+/* Memory that is live only in some calls: the QP's workspace and its solution (also the
+ * warm-start point) in feedback; the scratch of the generated functions, the regularisation,
+ * the convexity test of the automatic lm and F_new in init, prepare and kkt. Never both at
+ * once, so they share it. */
+typedef union {
+    struct {
+        unicycle_qp_workspace work;
+        unicycle_qp_sol sol;
+    } qp;
+    struct {
+        unicycle_fun_work fun_work;
+        /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare
+         * succeeds, so a prepare that fails leaves every F_old for its retry */
+        unicycle_real Fn_w[UNICYCLE_N][UNICYCLE_NW];
+        unicycle_real Fn_phi[UNICYCLE_N][UNICYCLE_NX];
+        unicycle_real Fn_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
+        unicycle_real tmp_A[UNICYCLE_NW * UNICYCLE_NW];
+        unicycle_real tmp_Al[UNICYCLE_NW * UNICYCLE_NW];
+        unicycle_real tmp_Phi[UNICYCLE_NX * UNICYCLE_NW];
+        unicycle_real tmp_C[UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW)];
+        unicycle_real tmp_gL[UNICYCLE_NW];
+        unicycle_real tmp_F[UNICYCLE_NW];
+        unicycle_real tmp_phi[UNICYCLE_NX];
+        unicycle_real tmp_g[UNICYCLE_DIM(UNICYCLE_NG)];
+        unicycle_real reg_work[2 * UNICYCLE_NW * UNICYCLE_NW];
+        /* Riccati workspace of the convexity test of the automatic lm */
+        unicycle_real lm_P[UNICYCLE_NX * UNICYCLE_NX];
+        unicycle_real lm_PA[UNICYCLE_NX * UNICYCLE_NW];
+        unicycle_real lm_G[UNICYCLE_NW * UNICYCLE_NW];
+    } ev;
+} unicycle_solver_mem;
+
 struct unicycle_solver {
     int magic;       /* UNICYCLE_MAGIC once the settings hold valid values */
     int initialized; /* a successful init happened */
@@ -316,17 +348,13 @@ struct unicycle_solver {
     int hessian;
     int regularization;
     unicycle_real reg_eps;
-    int cost_hessian;                     /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
-    unicycle_real lm;                        /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
+    int cost_hessian;       /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    unicycle_real lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
                            current automatic value) */
-    int lm_auto;                          /* 1: automatic term (section 10) */
-    unicycle_real lm_scale;                  /* Hessian scale h of the automatic term */
-    unicycle_real lm_kkt_prev;               /* KKT proxy of the previous prepare (< 0: none since init) */
-    unicycle_real lm_uncapped;               /* the term before the cap of this feedback (< 0: not capped) */
-    unicycle_real lm_P[UNICYCLE_NX * UNICYCLE_NX]; /* Riccati workspace of the convexity test */
-    unicycle_real lm_P2[UNICYCLE_NX * UNICYCLE_NX];
-    unicycle_real lm_PA[UNICYCLE_NX * UNICYCLE_NW];
-    unicycle_real lm_G[UNICYCLE_NW * UNICYCLE_NW];
+    int lm_auto;            /* 1: automatic term (section 10) */
+    unicycle_real lm_scale;    /* Hessian scale h of the automatic term */
+    unicycle_real lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
+    unicycle_real lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     unicycle_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */
@@ -353,39 +381,23 @@ struct unicycle_solver {
     unicycle_real r[UNICYCLE_DIM(UNICYCLE_NR)];
     unicycle_real r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
 
-    /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare succeeds,
-     * so a prepare that fails leaves every F_old for its retry */
-    unicycle_real Fn_w[UNICYCLE_N][UNICYCLE_NW];
-    unicycle_real Fn_phi[UNICYCLE_N][UNICYCLE_NX];
-    unicycle_real Fn_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
-
     /* secant criterion and the recomputed set of the last prepare */
     unicycle_real rho[UNICYCLE_N];
     int recomputed[UNICYCLE_N];
     int n_recomputed;
     unsigned char selected[UNICYCLE_N];
 
-    /* QP data, solution and workspace (the matrices are pointers into the ring) */
+    /* QP data (the matrices are pointers into the ring) */
     unicycle_qp_in qp_in;
-    unicycle_qp_sol qp_sol;
     unicycle_qp_info qp_info;
-    unicycle_qp_workspace qp_work;
     int qp_status;
     int qp_iterations;
     int qp_warm;       /* warm start in feedback (unicycle_set_qp_warm_start) */
     int qp_cold_retry; /* the last feedback needed the cold retry */
 
-    /* scratch for the generated functions and the regularisation */
-    unicycle_fun_work fun_work;
-    unicycle_real tmp_A[UNICYCLE_NW * UNICYCLE_NW];
-    unicycle_real tmp_Al[UNICYCLE_NW * UNICYCLE_NW];
-    unicycle_real tmp_Phi[UNICYCLE_NX * UNICYCLE_NW];
-    unicycle_real tmp_C[UNICYCLE_DIM(UNICYCLE_NG) * UNICYCLE_NW];
-    unicycle_real tmp_gL[UNICYCLE_NW];
-    unicycle_real tmp_F[UNICYCLE_NW];
-    unicycle_real tmp_phi[UNICYCLE_NX];
-    unicycle_real tmp_g[UNICYCLE_DIM(UNICYCLE_NG)];
-    unicycle_real reg_work[2 * UNICYCLE_NW * UNICYCLE_NW];
+    /* the QP's workspace and solution, live only inside feedback, share their memory with
+     * the scratch of the function evaluations, live only outside it (unicycle_solver_mem) */
+    unicycle_solver_mem mem;
 
     /* safe outputs, divergence test and recovery (algorithm.md section 9) */
     int recovery;          /* automatic recovery on */
