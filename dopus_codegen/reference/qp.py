@@ -65,7 +65,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["QPError", "QPInfeasibleError", "QPIterationLimitError", "free_initial_state", "solve_qp_reference",
-           "qp_kkt_residual", "check_qp", "qp_reduced_hessian_min_eig", "flatten_qp", "flatten_solution"]
+           "qp_kkt_residual", "check_qp", "qp_infeasible_row", "qp_reduced_hessian_min_eig", "flatten_qp", "flatten_solution"]
 
 
 class QPError(RuntimeError):
@@ -75,8 +75,10 @@ class QPError(RuntimeError):
 
 
 class QPInfeasibleError(QPError):
-    """The QP has no feasible point."""
+    """The QP has no feasible point. ``row``: ``(stage, j, side)`` of the row that
+    :func:`qp_infeasible_row` names (None when it names none)."""
     qp_status = "primal_infeasible"
+    row = None
 
 
 class QPIterationLimitError(QPError):
@@ -472,11 +474,17 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
     :class:`QPIterationLimitError`, as the C QP solver reports its limit.
     """
     t0 = time.perf_counter()
-    q = check_qp(qp)
+    try:
+        q = check_qp(qp)
+    except QPInfeasibleError as exc:
+        exc.row = qp_infeasible_row(qp)
+        raise
     Hz, gz, rows = flatten_qp(q)
     z, y_eq, y_in, mu_z, status, iters = _solve_ipopt(q, Hz, gz, rows, 500 if max_iter is None else max_iter)
     if status in ("Infeasible_Problem_Detected", "Restoration_Failed"):
-        raise QPInfeasibleError(f"QP is infeasible (IPOPT: {status})")
+        exc = QPInfeasibleError(f"QP is infeasible (IPOPT: {status})")
+        exc.row = qp_infeasible_row(q)
+        raise exc
     if max_iter is not None and status == "Maximum_Iterations_Exceeded":
         raise QPIterationLimitError(f"QP iteration limit {max_iter} reached (IPOPT: {status})")
     ok_status = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -518,3 +526,105 @@ def qp_reduced_hessian_min_eig(qp: dict, sol: dict, tol: float = 1e-9) -> float:
     if Z.shape[1] == 0:
         return float("inf")
     return float(np.min(np.linalg.eigvalsh(Z.T @ Hz.toarray() @ Z)))
+
+
+# ---------------------------------------------------------------------------
+# The row of an infeasible QP
+# ---------------------------------------------------------------------------
+
+def _stage_rows(q: dict):
+    """The inequality rows of ``q`` in the numbering of the C QP solver (dopus_qp.c): per
+    stage ``k < N`` the ``nw`` box rows of ``w_k`` then the ``ng`` path rows (``j``
+    0..nw+ng-1), at the terminal node the ``nx`` box rows of ``x_N`` then the ``nr`` rows
+    of ``R``; the ``ne`` equality rows of ``Req`` follow as ``j = nx + nr + i`` of stage N.
+    Yields ``(k, j, a, lo, up)`` with ``a`` the row over ``z`` (see :func:`flatten_qp`), in
+    that order; the x rows of stage 0 (``x_0`` is fixed) are left out, as in the C solver."""
+    N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
+    nw = nx + nu
+    nz = N * nw + nx
+
+    def unit(c):
+        a = np.zeros(nz)
+        a[c] = 1.0
+        return a
+
+    for k in range(N):
+        for j in range(nx if k == 0 else 0, nw):
+            yield k, j, unit(k * nw + j), q["lbw"][k, j], q["ubw"][k, j]
+        for i in range(ng):
+            a = np.zeros(nz)
+            a[k * nw:(k + 1) * nw] = q["C"][k][i]
+            yield k, nw + i, a, q["lg"][k, i], q["ug"][k, i]
+    for j in range(nx):
+        yield N, j, unit(N * nw + j), q["lbxN"][j], q["ubxN"][j]
+    for i in range(nr):
+        a = np.zeros(nz)
+        a[N * nw:] = q["R"][i]
+        yield N, nx + i, a, q["lr"][i], q["ur"][i]
+    for i in range(ne):
+        a = np.zeros(nz)
+        a[N * nw:] = q["Req"][i]
+        yield N, nx + nr + i, a, q["req"][i], q["req"][i]
+
+
+def qp_infeasible_row(qp: dict):
+    """The row of an infeasible QP that its infeasibility certificate weighs most, by the
+    rule of the C QP solver (dopus_qp_infeasible_row): ``(stage, j, side)`` with ``j`` the
+    row in the C numbering (see :func:`_stage_rows`), ``side`` -1 (its lower bound), +1 (its
+    upper bound; an equality row: the sign of its multiplier) or 0 (the first row, in that
+    order, whose lower bound exceeds its upper bound). None when the QP is feasible.
+
+    The certificate is the smallest violation: ``min 0.5 |s|^2`` over the points that meet
+    the initial state and the dynamics, ``s`` the violations of every other row (its
+    lower side negative). ``s`` is unique, and it is a Farkas certificate: its rows'
+    multipliers, with the dynamics' from the stationarity of the problem, prove that no
+    point meets every row. The named row is the one with the largest ``|s_i|`` (the first
+    in the order above on a tie, the lower side before the upper one)."""
+    from scipy.optimize import lsq_linear
+
+    q = dict(qp)
+    N, nx, nu = (int(q[k]) for k in ("N", "nx", "nu"))
+    for k in _INT_KEYS:
+        q[k] = int(q[k])
+    for key, shape in _shapes(**{k: q[k] for k in _INT_KEYS}).items():
+        q[key] = np.asarray(q[key], dtype=float).reshape(shape)
+    rows = list(_stage_rows(q))
+    for k, j, _, lo, up in rows:
+        if lo > up:
+            return k, j, 0
+    nw = nx + nu
+    nz = N * nw + nx
+    # z = T v + c over the controls v = (u_0, ..., u_{N-1}): the initial state and dynamics
+    T = np.zeros((nz, N * nu))
+    c = np.zeros(nz)
+    Tx, cx = np.zeros((nx, N * nu)), q["x0"].copy()
+    for k in range(N):
+        T[k * nw:k * nw + nx], c[k * nw:k * nw + nx] = Tx, cx
+        T[k * nw + nx:(k + 1) * nw, k * nu:(k + 1) * nu] = np.eye(nu)
+        Phi = q["Phi"][k]
+        Tx = Phi[:, :nx] @ Tx
+        Tx[:, k * nu:(k + 1) * nu] += Phi[:, nx:]
+        cx = Phi[:, :nx] @ cx + q["b"][k]
+    T[N * nw:], c[N * nw:] = Tx, cx
+    kept = [r for r in rows if np.isfinite(r[3]) or np.isfinite(r[4])]
+    if not kept:
+        return None
+    A = np.array([r[2] for r in kept])
+    lo = np.array([r[3] for r in kept])
+    up = np.array([r[4] for r in kept])
+    G, h = A @ T, A @ c
+    # min |G v + h - y|^2 over v free and lo <= y <= up (y = lo on an equality row): the
+    # residual is s
+    ineq = lo < up
+    he = h - np.where(ineq, 0.0, lo)
+    M = np.hstack([G, -np.eye(len(kept))[:, ineq]])
+    lb = np.concatenate([np.full(N * nu, -np.inf), lo[ineq]])
+    ub = np.concatenate([np.full(N * nu, np.inf), up[ineq]])
+    s = he if M.shape[1] == 0 else M @ lsq_linear(M, -he, bounds=(lb, ub), method="bvls", tol=1e-14).x + he
+    scale = max(1.0, float(np.max(np.abs(h))), float(np.max(np.abs(np.where(np.isfinite(lo), lo, 0.0)))),
+                float(np.max(np.abs(np.where(np.isfinite(up), up, 0.0)))))
+    i = int(np.argmax(np.abs(s)))
+    if not abs(s[i]) > 1e-9 * scale:
+        return None
+    k, j = kept[i][0], kept[i][1]
+    return k, j, (1 if s[i] > 0 else -1)
