@@ -574,13 +574,15 @@ def qp_infeasible_row(qp: dict):
     upper bound; an equality row: the sign of its multiplier) or 0 (the first row, in that
     order, whose lower bound exceeds its upper bound). None when the QP is feasible.
 
-    The certificate is the smallest violation: ``min 0.5 |s|^2`` over the points that meet
-    the initial state and the dynamics, ``s`` the violations of every other row (its
-    lower side negative). ``s`` is unique, and it is a Farkas certificate: its rows'
-    multipliers, with the dynamics' from the stationarity of the problem, prove that no
-    point meets every row. The named row is the one with the largest ``|s_i|`` (the first
-    in the order above on a tie, the lower side before the upper one)."""
-    from scipy.optimize import lsq_linear
+    The certificate is Farkas's for the rows other than the initial state and the
+    dynamics (those eliminated by the controls ``v``: each row ``lo <= G v + h <= up``):
+    multipliers ``l >= 0`` of the finite sides with ``G'(l_up - l_lo) = 0`` and a positive
+    gap ``l_lo'(lo - h) - l_up'(up - h)``, the one of the largest gap per unit of
+    multiplier mass (``sum l = 1``; a linear programme, HiGHS). It is a vertex, the
+    certificate of one infeasible subset of rows, as the C solver's diverging multipliers
+    single one out. The named row is the one with the largest multiplier (the first in the
+    order above on a tie, the lower side before the upper one)."""
+    from scipy.optimize import linprog
 
     q = dict(qp)
     N, nx, nu = (int(q[k]) for k in ("N", "nx", "nu"))
@@ -607,24 +609,40 @@ def qp_infeasible_row(qp: dict):
         cx = Phi[:, :nx] @ cx + q["b"][k]
     T[N * nw:], c[N * nw:] = Tx, cx
     kept = [r for r in rows if np.isfinite(r[3]) or np.isfinite(r[4])]
-    if not kept:
-        return None
     A = np.array([r[2] for r in kept])
     lo = np.array([r[3] for r in kept])
     up = np.array([r[4] for r in kept])
     G, h = A @ T, A @ c
-    # min |G v + h - y|^2 over v free and lo <= y <= up (y = lo on an equality row): the
-    # residual is s
-    ineq = lo < up
-    he = h - np.where(ineq, 0.0, lo)
-    M = np.hstack([G, -np.eye(len(kept))[:, ineq]])
-    lb = np.concatenate([np.full(N * nu, -np.inf), lo[ineq]])
-    ub = np.concatenate([np.full(N * nu, np.inf), up[ineq]])
-    s = he if M.shape[1] == 0 else M @ lsq_linear(M, -he, bounds=(lb, ub), method="bvls", tol=1e-14).x + he
-    scale = max(1.0, float(np.max(np.abs(h))), float(np.max(np.abs(np.where(np.isfinite(lo), lo, 0.0)))),
-                float(np.max(np.abs(np.where(np.isfinite(up), up, 0.0)))))
-    i = int(np.argmax(np.abs(s)))
-    if not abs(s[i]) > 1e-9 * scale:
+    # Farkas: lo <= G v + h <= up has no v iff some l_lo, l_up >= 0 (on the finite sides)
+    # have G'(l_up - l_lo) = 0 and l_lo'(lo - h) - l_up'(up - h) > 0; the certificate of
+    # the largest gap per unit of multiplier mass (a vertex: one infeasible subsystem)
+    m = len(kept)
+    flo, fup = np.isfinite(lo), np.isfinite(up)
+    cols = [(i, -1) for i in range(m) if flo[i]] + [(i, 1) for i in range(m) if fup[i]]
+    if not cols:
         return None
+    sgn = np.array([sd for _, sd in cols], dtype=float)
+    idx = np.array([i for i, _ in cols])
+    gap = np.array([(lo[i] - h[i]) if sd < 0 else -(up[i] - h[i]) for i, sd in cols])
+    A_eq = np.vstack([G[idx].T * sgn, np.ones(len(cols))])
+    b_eq = np.concatenate([np.zeros(G.shape[1]), [1.0]])
+    res = linprog(-gap, A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs")
+    if res.status != 0 or not -res.fun > 1e-9 * _scale(h, lo, up):
+        return None
+    # the largest multiplier; on a tie the first row in the order above, its lower side
+    # first (the C rule's scan)
+    best = -1
+    for col in sorted(range(len(cols)), key=lambda col: (idx[col], sgn[col])):
+        if res.x[col] > (res.x[best] if best >= 0 else 0.0):
+            best = col
+    if best < 0:
+        return None
+    i = int(idx[best])
     k, j = kept[i][0], kept[i][1]
-    return k, j, (1 if s[i] > 0 else -1)
+    return k, j, int(sgn[best])
+
+
+def _scale(h, lo, up):
+    return max(1.0, float(np.max(np.abs(h), initial=0.0)),
+               float(np.max(np.abs(np.where(np.isfinite(lo), lo, 0.0)), initial=0.0)),
+               float(np.max(np.abs(np.where(np.isfinite(up), up, 0.0)), initial=0.0)))
