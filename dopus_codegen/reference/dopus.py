@@ -115,7 +115,8 @@ class ReferenceDopus:
 
     Extra to the protocol: :meth:`qp_of_current` (the QP the next ``feedback`` solves,
     in the :mod:`dopus_codegen.reference.qp` format), ``last_qp`` / ``last_qp_solution`` (the
-    QP solved by the last ``feedback`` and its solution) and ``status``.
+    QP solved by the last ``feedback`` and its solution), ``status`` and
+    ``qp_infeasible_row`` (the row that makes the last QP infeasible, as ``CSolver`` gives it).
     """
 
     def __init__(self, disc, M: int = settings.DEFAULTS["M"], mode: str = settings.DEFAULTS["mode"],
