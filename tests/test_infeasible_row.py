@@ -11,6 +11,9 @@ The constructions make the infeasible row known in advance. The model is x' = u 
   lb = 5).
 - "home": the terminal equality x_N = 0 from x_0 = 3: the terminal equality row; x_N
   cannot come down to 0, so its upper side is the one the certificate pushes against.
+- "start": the path constraint x <= 1 measured at x_0 = 3: x_1 >= 2.9, so the row at
+  stage 1 (upper side, ub = 1). The row at stage 0 does not involve u_0: its value is data,
+  the C QP solver drops it, and the reference leaves it out of its certificate too.
 
 Both backends name them by the same rule (the row with the largest multiplier of the QP's
 infeasibility certificate): the C runtime's getter (dopus_get_qp_infeasible_row) through the
@@ -36,7 +39,7 @@ from dopus_codegen.runtime.solver import CSolver
 N, DT = 10, 0.1
 
 
-def _model(name, x0, terminal=None, parameter=False):
+def _model(name, x0, terminal=None, parameter=False, upper=None):
     ocp = Ocp(name)
     x = ocp.state("x")
     u = ocp.control("u", lb=-1.0, ub=1.0)
@@ -45,6 +48,8 @@ def _model(name, x0, terminal=None, parameter=False):
     if parameter:
         p = ocp.parameter("p", value=-10.0)
         ocp.path_constraint(x - p, lb=0.0)
+    if upper is not None:
+        ocp.path_constraint(x, ub=upper)
     if terminal is not None:
         ocp.terminal_constraint(x, lb=terminal[0], ub=terminal[1])
     ocp.horizon(N=N, dt=DT)
@@ -70,6 +75,11 @@ def home():
 @pytest.fixture(params=["c", "reference"])
 def backend(request):
     return {"c": CSolver, "reference": ReferenceDopus}[request.param]
+
+
+@pytest.fixture(scope="module")
+def start():
+    return _model("start", 0.0, upper=1.0)
 
 
 def _params(p3):
@@ -115,6 +125,25 @@ def test_terminal_row_is_named(problem, x0, row, pattern, request, backend):
     msg, got = _infeasible(s, [x0])
     assert got == row, got
     assert re.search(rf"infeasible at the terminal node \(stage {N}\): " + pattern, msg), msg
+
+
+def test_state_only_row_of_stage_0_is_left_out(start, backend):
+    s = backend(start, M=1)
+    s.init([0.0])
+    msg, row = _infeasible(s, [3.0])
+    assert row == {"stage": 1, "kind": "path", "index": 0, "side": "upper", "bound": 1.0}, row
+    assert re.search(r"infeasible at stage 1: path constraint 0 \(x\) <= ub 1\b", msg), msg
+
+
+def test_reference_names_a_state_only_row_of_stage_0_when_nothing_else_is_infeasible(start):
+    """x_0 = 1.05 > 1 while x_1 can come down to 0.95: only the row of stage 0 is violated.
+    The reference's QP keeps it (the C QP solver drops it and solves), so the reference
+    names it."""
+    s = ReferenceDopus(start, M=1)
+    s.init([0.0])
+    msg, row = _infeasible(s, [1.05])
+    assert row == {"stage": 0, "kind": "path", "index": 0, "side": "upper", "bound": 1.0}, row
+    assert re.search(r"infeasible at stage 0: path constraint 0 \(x\) <= ub 1\b", msg), msg
 
 
 def test_no_row_without_an_infeasible_qp(reach, backend):

@@ -532,13 +532,15 @@ def qp_reduced_hessian_min_eig(qp: dict, sol: dict, tol: float = 1e-9) -> float:
 # The row of an infeasible QP
 # ---------------------------------------------------------------------------
 
-def _stage_rows(q: dict):
+def _stage_rows(q: dict, data_rows: bool = False):
     """The inequality rows of ``q`` in the numbering of the C QP solver (dopus_qp.c): per
     stage ``k < N`` the ``nw`` box rows of ``w_k`` then the ``ng`` path rows (``j``
     0..nw+ng-1), at the terminal node the ``nx`` box rows of ``x_N`` then the ``nr`` rows
     of ``R``; the ``ne`` equality rows of ``Req`` follow as ``j = nx + nr + i`` of stage N.
     Yields ``(k, j, a, lo, up)`` with ``a`` the row over ``z`` (see :func:`flatten_qp`), in
-    that order; the x rows of stage 0 (``x_0`` is fixed) are left out, as in the C solver."""
+    that order; the x rows of stage 0 (``x_0`` is fixed) are left out, as in the C solver,
+    and so are the path rows of stage 0 that do not involve ``u_0`` (their value is data)
+    unless ``data_rows``."""
     N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
     nw = nx + nu
     nz = N * nw + nx
@@ -552,6 +554,8 @@ def _stage_rows(q: dict):
         for j in range(nx if k == 0 else 0, nw):
             yield k, j, unit(k * nw + j), q["lbw"][k, j], q["ubw"][k, j]
         for i in range(ng):
+            if k == 0 and not data_rows and not np.any(q["C"][0][i, nx:]):
+                continue
             a = np.zeros(nz)
             a[k * nw:(k + 1) * nw] = q["C"][k][i]
             yield k, nw + i, a, q["lg"][k, i], q["ug"][k, i]
@@ -581,16 +585,26 @@ def qp_infeasible_row(qp: dict):
     multiplier mass (``sum l = 1``; a linear programme, HiGHS). It is a vertex, the
     certificate of one infeasible subset of rows, as the C solver's diverging multipliers
     single one out. The named row is the one with the largest multiplier (the first in the
-    order above on a tie, the lower side before the upper one)."""
-    from scipy.optimize import linprog
+    order above on a tie, the lower side before the upper one).
 
+    As in the C solver, the path rows of stage 0 that do not involve ``u_0`` take no part;
+    only when the other rows are feasible (this QP keeps those rows, the C solver's drops
+    them) is the certificate sought with them."""
     q = dict(qp)
-    N, nx, nu = (int(q[k]) for k in ("N", "nx", "nu"))
     for k in _INT_KEYS:
         q[k] = int(q[k])
     for key, shape in _shapes(**{k: q[k] for k in _INT_KEYS}).items():
         q[key] = np.asarray(q[key], dtype=float).reshape(shape)
-    rows = list(_stage_rows(q))
+    row = _certificate_row(q, data_rows=False)
+    return row if row is not None else _certificate_row(q, data_rows=True)
+
+
+def _certificate_row(q: dict, data_rows: bool):
+    """:func:`qp_infeasible_row` of a checked QP dict, with or without the data rows."""
+    from scipy.optimize import linprog
+
+    N, nx, nu = q["N"], q["nx"], q["nu"]
+    rows = list(_stage_rows(q, data_rows))
     for k, j, _, lo, up in rows:
         if lo > up:
             return k, j, 0
