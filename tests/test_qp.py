@@ -234,19 +234,26 @@ def test_infeasible_qps_are_flagged(kind, sizes):
 ])
 def test_infeasible_row_agrees_with_reference(kind, sizes):
     """The row dopus_qp_infeasible_row names (largest multiplier of the IPM's diverging
-    certificate) is the one the reference names from its own certificate (a Farkas vertex
-    by a linear programme, HiGHS): row, stage and side."""
-    from dopus_codegen.reference.qp import qp_infeasible_row
+    certificate) carries weight in a Farkas certificate of the QP (a linear programme,
+    HiGHS, independent of the IPM), and is the very row the reference names by the same
+    rule unless the QP has several infeasible subsets of rows (then either solver may
+    single out another valid one: about 6 % of such random QPs)."""
+    from dopus_codegen.reference.qp import qp_infeasible_row, qp_row_in_certificate
 
     h = solver(sizes)
     rng = np.random.default_rng(zlib.crc32(kind.encode()) + 1)
+    agree = []
     for trial in range(10):
         qp = P.make_infeasible(rng, *sizes, kind)
         qp.update(zip(("N", "nx", "nu", "ng", "nr", "ne"), sizes))
         _, info = h.solve(qp, tol=1e-10)
         assert info["status"] == "primal_infeasible", (kind, trial, info)
         row = h.infeasible_row()
-        assert row is not None and row == qp_infeasible_row(qp), (kind, trial, row, qp_infeasible_row(qp))
+        assert row is not None, (kind, trial)
+        ref = qp_infeasible_row(qp)
+        assert row == ref or qp_row_in_certificate(qp, row) > 1e-6, (kind, trial, row, ref)
+        agree.append(row == ref)
+    assert np.mean(agree) >= 0.8, (kind, agree)
 
 
 def test_crossed_bounds_are_infeasible():

@@ -599,8 +599,29 @@ def qp_infeasible_row(qp: dict):
     return row if row is not None else _certificate_row(q, data_rows=True)
 
 
-def _certificate_row(q: dict, data_rows: bool):
-    """:func:`qp_infeasible_row` of a checked QP dict, with or without the data rows."""
+def qp_row_in_certificate(qp: dict, row) -> float:
+    """The largest share of multiplier mass that the row ``row = (stage, j, side)`` (as
+    :func:`qp_infeasible_row` names rows) can carry in a Farkas certificate of the QP's
+    infeasibility (the certificates of :func:`qp_infeasible_row`, gap at least a
+    thousandth of the largest); 0 when no certificate uses it. A QP with several
+    infeasible subsets of rows has several valid certificates, and a solver may single out
+    any of them: a row named by a solver is valid when this is positive."""
+    q = dict(qp)
+    for k in _INT_KEYS:
+        q[k] = int(q[k])
+    for key, shape in _shapes(**{k: q[k] for k in _INT_KEYS}).items():
+        q[key] = np.asarray(q[key], dtype=float).reshape(shape)
+    best = 0.0
+    for data_rows in (False, True):
+        share = _certificate_row(q, data_rows, weigh=tuple(row))
+        best = max(best, share or 0.0)
+    return best
+
+
+def _certificate_row(q: dict, data_rows: bool, weigh=None):
+    """:func:`qp_infeasible_row` of a checked QP dict, with or without the data rows; with
+    ``weigh`` a row ``(stage, j, side)``, the largest multiplier share that row can take
+    in a certificate instead (see :func:`qp_row_in_certificate`)."""
     from scipy.optimize import linprog
 
     N, nx, nu = q["N"], q["nx"], q["nu"]
@@ -643,6 +664,18 @@ def _certificate_row(q: dict, data_rows: bool):
     res = linprog(-gap, A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs")
     if res.status != 0 or not -res.fun > 1e-9 * _scale(h, lo, up):
         return None
+    if weigh is not None:
+        cand = [col for col in range(len(cols))
+                if (kept[idx[col]][0], kept[idx[col]][1]) == weigh[:2] and (weigh[2] == 0 or sgn[col] == weigh[2])]
+        share = 0.0
+        for col in cand:
+            # the largest weight of this column over the certificates with a gap of at
+            # least a thousandth of the largest one
+            r2 = linprog(-np.eye(len(cols))[col], A_ub=-gap[None, :], b_ub=[1e-3 * res.fun],
+                         A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs")
+            if r2.status == 0:
+                share = max(share, -r2.fun)
+        return share
     # the largest multiplier; on a tie the first row in the order above, its lower side
     # first (the C rule's scan)
     best = -1
