@@ -335,16 +335,9 @@ def campaign(ocp_file, out, runs, seed, duration, threshold, settle, mismatch, w
     I --seed S` replays one run. Exits with 1 when a run raised an error (the others are
     kept in --out).
     """
-    from .outputs import check_output_dir, check_output_file
     from .studies.campaign import run_campaign
 
-    check_output_file(out, "--out")
-    if json_out:
-        check_output_file(json_out, "--json")
-    if plot_dir:
-        check_output_dir(plot_dir, "--plot-dir")
-    if workers is not None and workers < 0:
-        raise BadInput(f"--workers must be >= 0, got {workers}")
+    # run_campaign checks the output paths and --workers before any run
     if scheduler is not None and workers is not None:
         raise BadInput("--workers and --scheduler exclude each other (the scheduler has its own workers)")
     rep = run_campaign(ocp_file, out, workers=workers, scheduler=scheduler, backend=backend, json_out=json_out,
