@@ -475,6 +475,19 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
 
 /* ---------------------------------------------------------------- Riccati factorisation */
 
+/* out = Phi' v over the transposed copy PhiT (NW x NX, column-major): out (NW), v (NX). */
+static void phit_mv(const robot_arm_real *restrict PhiT, const robot_arm_real *restrict v, robot_arm_real *restrict out)
+{
+    int i, l;
+    for (i = 0; i < NW; ++i)
+        out[i] = ROBOT_ARM_R(0.0);
+    for (l = 0; l < NX; ++l) {
+        const robot_arm_real f = v[l];
+        for (i = 0; i < NW; ++i)
+            out[i] += PhiT[i + l * NW] * f;
+    }
+}
+
 /* The stage update of the Riccati recursion: PhiT = Phi' (nw x nx), PP = P Phi (nx x nw,
  * P symmetric stored full), M += PhiT PP column by column with contiguous inner loops of
  * the fixed length nw (vectorised; the upper triangle is computed too, it is cheaper than
@@ -492,26 +505,12 @@ static void qp_stage_update(const robot_arm_real *restrict Phi, const robot_arm_
     robot_arm_lai_gemm_nn(NX, NW, NX, ROBOT_ARM_R(1.0), P, NX, Phi, NX, ROBOT_ARM_R(0.0), PP, NX);
     for (j = 0; j < NW; ++j) {
         robot_arm_real *restrict m = M + j * NW;
-        for (i = 0; i < NW; ++i)
-            col[i] = ROBOT_ARM_R(0.0);
-        for (l = 0; l < NX; ++l) {
-            const robot_arm_real f = PP[l + j * NX];
-            for (i = 0; i < NW; ++i)
-                col[i] += PhiT[i + l * NW] * f;
-        }
+        phit_mv(PhiT, PP + j * NX, col);
         for (i = 0; i < NW; ++i)
             m[i] += col[i];
     }
-    for (j = 0; j < NE; ++j) {
-        robot_arm_real *restrict gm = Gam + j * NW;
-        for (i = 0; i < NW; ++i)
-            gm[i] = ROBOT_ARM_R(0.0);
-        for (l = 0; l < NX; ++l) {
-            const robot_arm_real gv = G[l + j * NX];
-            for (i = 0; i < NW; ++i)
-                gm[i] += PhiT[i + l * NW] * gv;
-        }
-    }
+    for (j = 0; j < NE; ++j)
+        phit_mv(PhiT, G + j * NX, Gam + j * NW);
 }
 
 /* Largest absolute entry of the Hessian data (scale of delta and rho). */
@@ -1076,6 +1075,23 @@ static robot_arm_real row_mu(const robot_arm_qp_sol *sol, int i)
     return (NR == 0 || i - TOFF < NX) ? sol->mu_bN[i - TOFF] : sol->mu_r[i - TOFF - NX];
 }
 
+/* The multipliers of the inequality rows (box, path, terminal box and terminal rows) set
+ * to zero, padding included. */
+static void zero_row_multipliers(robot_arm_qp_sol *sol)
+{
+    int k, i;
+    for (k = 0; k < N; ++k) {
+        for (i = 0; i < NW; ++i)
+            sol->mu_b[k][i] = ROBOT_ARM_R(0.0);
+        for (i = 0; i < ROBOT_ARM_QP_NG1; ++i)
+            sol->mu_g[k][i] = ROBOT_ARM_R(0.0);
+    }
+    for (i = 0; i < NX; ++i)
+        sol->mu_bN[i] = ROBOT_ARM_R(0.0);
+    for (i = 0; i < ROBOT_ARM_QP_NR1; ++i)
+        sol->mu_r[i] = ROBOT_ARM_R(0.0);
+}
+
 static void write_solution(const robot_arm_qp_workspace *ws, robot_arm_qp_sol *sol)
 {
     int k, i;
@@ -1084,18 +1100,10 @@ static void write_solution(const robot_arm_qp_workspace *ws, robot_arm_qp_sol *s
             sol->x[k][i] = ws->prim[k * NW + i];
             sol->lam[k][i] = ws->lam[k * NX + i];
         }
-    for (k = 0; k < N; ++k) {
+    for (k = 0; k < N; ++k)
         for (i = 0; i < NU; ++i)
             sol->u[k][i] = ws->prim[k * NW + NX + i];
-        for (i = 0; i < NW; ++i)
-            sol->mu_b[k][i] = ROBOT_ARM_R(0.0);
-        for (i = 0; i < NG; ++i)
-            sol->mu_g[k][i] = ROBOT_ARM_R(0.0);
-    }
-    for (i = 0; i < NX; ++i)
-        sol->mu_bN[i] = ROBOT_ARM_R(0.0);
-    for (i = 0; i < NR; ++i)
-        sol->mu_r[i] = ROBOT_ARM_R(0.0);
+    zero_row_multipliers(sol);
     for (i = 0; i < ws->nb; ++i)
         *row_multiplier(sol, ws->bidx[i]) =
             (ws->has_up[i] ? ws->z_up[i] : ROBOT_ARM_R(0.0)) - (ws->has_lo[i] ? ws->z_lo[i] : ROBOT_ARM_R(0.0));
@@ -1109,18 +1117,10 @@ static void zero_solution(robot_arm_qp_sol *sol)
     for (k = 0; k <= N; ++k)
         for (i = 0; i < NX; ++i)
             sol->x[k][i] = sol->lam[k][i] = ROBOT_ARM_R(0.0);
-    for (k = 0; k < N; ++k) {
+    for (k = 0; k < N; ++k)
         for (i = 0; i < NU1; ++i)
             sol->u[k][i] = ROBOT_ARM_R(0.0);
-        for (i = 0; i < NW; ++i)
-            sol->mu_b[k][i] = ROBOT_ARM_R(0.0);
-        for (i = 0; i < ROBOT_ARM_QP_NG1; ++i)
-            sol->mu_g[k][i] = ROBOT_ARM_R(0.0);
-    }
-    for (i = 0; i < NX; ++i)
-        sol->mu_bN[i] = ROBOT_ARM_R(0.0);
-    for (i = 0; i < ROBOT_ARM_QP_NR1; ++i)
-        sol->mu_r[i] = ROBOT_ARM_R(0.0);
+    zero_row_multipliers(sol);
     for (i = 0; i < NE1; ++i)
         sol->nu[i] = ROBOT_ARM_R(0.0);
 }

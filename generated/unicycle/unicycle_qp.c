@@ -475,6 +475,19 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
 
 /* ---------------------------------------------------------------- Riccati factorisation */
 
+/* out = Phi' v over the transposed copy PhiT (NW x NX, column-major): out (NW), v (NX). */
+static void phit_mv(const unicycle_real *restrict PhiT, const unicycle_real *restrict v, unicycle_real *restrict out)
+{
+    int i, l;
+    for (i = 0; i < NW; ++i)
+        out[i] = UNICYCLE_R(0.0);
+    for (l = 0; l < NX; ++l) {
+        const unicycle_real f = v[l];
+        for (i = 0; i < NW; ++i)
+            out[i] += PhiT[i + l * NW] * f;
+    }
+}
+
 /* The stage update of the Riccati recursion: PhiT = Phi' (nw x nx), PP = P Phi (nx x nw,
  * P symmetric stored full), M += PhiT PP column by column with contiguous inner loops of
  * the fixed length nw (vectorised; the upper triangle is computed too, it is cheaper than
@@ -492,26 +505,12 @@ static void qp_stage_update(const unicycle_real *restrict Phi, const unicycle_re
     unicycle_lai_gemm_nn(NX, NW, NX, UNICYCLE_R(1.0), P, NX, Phi, NX, UNICYCLE_R(0.0), PP, NX);
     for (j = 0; j < NW; ++j) {
         unicycle_real *restrict m = M + j * NW;
-        for (i = 0; i < NW; ++i)
-            col[i] = UNICYCLE_R(0.0);
-        for (l = 0; l < NX; ++l) {
-            const unicycle_real f = PP[l + j * NX];
-            for (i = 0; i < NW; ++i)
-                col[i] += PhiT[i + l * NW] * f;
-        }
+        phit_mv(PhiT, PP + j * NX, col);
         for (i = 0; i < NW; ++i)
             m[i] += col[i];
     }
-    for (j = 0; j < NE; ++j) {
-        unicycle_real *restrict gm = Gam + j * NW;
-        for (i = 0; i < NW; ++i)
-            gm[i] = UNICYCLE_R(0.0);
-        for (l = 0; l < NX; ++l) {
-            const unicycle_real gv = G[l + j * NX];
-            for (i = 0; i < NW; ++i)
-                gm[i] += PhiT[i + l * NW] * gv;
-        }
-    }
+    for (j = 0; j < NE; ++j)
+        phit_mv(PhiT, G + j * NX, Gam + j * NW);
 }
 
 /* Largest absolute entry of the Hessian data (scale of delta and rho). */
@@ -1076,6 +1075,23 @@ static unicycle_real row_mu(const unicycle_qp_sol *sol, int i)
     return (NR == 0 || i - TOFF < NX) ? sol->mu_bN[i - TOFF] : sol->mu_r[i - TOFF - NX];
 }
 
+/* The multipliers of the inequality rows (box, path, terminal box and terminal rows) set
+ * to zero, padding included. */
+static void zero_row_multipliers(unicycle_qp_sol *sol)
+{
+    int k, i;
+    for (k = 0; k < N; ++k) {
+        for (i = 0; i < NW; ++i)
+            sol->mu_b[k][i] = UNICYCLE_R(0.0);
+        for (i = 0; i < UNICYCLE_QP_NG1; ++i)
+            sol->mu_g[k][i] = UNICYCLE_R(0.0);
+    }
+    for (i = 0; i < NX; ++i)
+        sol->mu_bN[i] = UNICYCLE_R(0.0);
+    for (i = 0; i < UNICYCLE_QP_NR1; ++i)
+        sol->mu_r[i] = UNICYCLE_R(0.0);
+}
+
 static void write_solution(const unicycle_qp_workspace *ws, unicycle_qp_sol *sol)
 {
     int k, i;
@@ -1084,18 +1100,10 @@ static void write_solution(const unicycle_qp_workspace *ws, unicycle_qp_sol *sol
             sol->x[k][i] = ws->prim[k * NW + i];
             sol->lam[k][i] = ws->lam[k * NX + i];
         }
-    for (k = 0; k < N; ++k) {
+    for (k = 0; k < N; ++k)
         for (i = 0; i < NU; ++i)
             sol->u[k][i] = ws->prim[k * NW + NX + i];
-        for (i = 0; i < NW; ++i)
-            sol->mu_b[k][i] = UNICYCLE_R(0.0);
-        for (i = 0; i < NG; ++i)
-            sol->mu_g[k][i] = UNICYCLE_R(0.0);
-    }
-    for (i = 0; i < NX; ++i)
-        sol->mu_bN[i] = UNICYCLE_R(0.0);
-    for (i = 0; i < NR; ++i)
-        sol->mu_r[i] = UNICYCLE_R(0.0);
+    zero_row_multipliers(sol);
     for (i = 0; i < ws->nb; ++i)
         *row_multiplier(sol, ws->bidx[i]) =
             (ws->has_up[i] ? ws->z_up[i] : UNICYCLE_R(0.0)) - (ws->has_lo[i] ? ws->z_lo[i] : UNICYCLE_R(0.0));
@@ -1109,18 +1117,10 @@ static void zero_solution(unicycle_qp_sol *sol)
     for (k = 0; k <= N; ++k)
         for (i = 0; i < NX; ++i)
             sol->x[k][i] = sol->lam[k][i] = UNICYCLE_R(0.0);
-    for (k = 0; k < N; ++k) {
+    for (k = 0; k < N; ++k)
         for (i = 0; i < NU1; ++i)
             sol->u[k][i] = UNICYCLE_R(0.0);
-        for (i = 0; i < NW; ++i)
-            sol->mu_b[k][i] = UNICYCLE_R(0.0);
-        for (i = 0; i < UNICYCLE_QP_NG1; ++i)
-            sol->mu_g[k][i] = UNICYCLE_R(0.0);
-    }
-    for (i = 0; i < NX; ++i)
-        sol->mu_bN[i] = UNICYCLE_R(0.0);
-    for (i = 0; i < UNICYCLE_QP_NR1; ++i)
-        sol->mu_r[i] = UNICYCLE_R(0.0);
+    zero_row_multipliers(sol);
     for (i = 0; i < NE1; ++i)
         sol->nu[i] = UNICYCLE_R(0.0);
 }
