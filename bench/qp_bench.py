@@ -257,6 +257,14 @@ def random_qp(N: int, rng: np.random.Generator) -> dict:
             "R": np.zeros((0, nx)), "lr": np.zeros(0), "ur": np.zeros(0), "Req": Req, "req": Req @ x}
 
 
+def _record_qps(ref, xhat, iters, tag, out):
+    """Append the QP of each of ``iters`` iterations of ``ref`` at ``xhat`` to ``out``."""
+    for it in range(iters):
+        out.append((f"{tag}_{it}", ref.qp_of_current(xhat)))
+        ref.feedback(xhat)
+        ref.prepare()
+
+
 def robot_arm_qps(gn_iters: int, exact_iters: int, log=print) -> list:
     """(tag, qp) along the two convergence runs of the robot arm, full RTI, fixed xhat_0."""
     from dopus_codegen.problem.derivatives import build_functions
@@ -272,10 +280,7 @@ def robot_arm_qps(gn_iters: int, exact_iters: int, log=print) -> list:
     ref = ReferenceDopus(disc, M=full, mode="fixed", hessian="gauss-newton")
     xhat = np.asarray(disc.x0, float)
     ref.init(xhat)
-    for it in range(gn_iters):
-        out.append((f"cold_gn_{it}", ref.qp_of_current(xhat)))
-        ref.feedback(xhat)
-        ref.prepare()
+    _record_qps(ref, xhat, gn_iters, "cold_gn", out)
     log(f"  robot arm: {gn_iters} cold Gauss-Newton QPs, KKT {ref.kkt(xhat)['kkt']:.1e} "
         f"({time.perf_counter() - t0:.1f} s)")
     # warm start: converged at xhat_0, then the disturbed initial state, exact Hessian
@@ -284,10 +289,7 @@ def robot_arm_qps(gn_iters: int, exact_iters: int, log=print) -> list:
     xdist = disc.disturbance(xhat) if disc.disturbance is not None else xhat
     ref = ReferenceDopus(disc, M=full, mode="fixed", hessian="exact")
     ref.init(xhat, guess)
-    for it in range(exact_iters):
-        out.append((f"warm_exact_{it}", ref.qp_of_current(xdist)))
-        ref.feedback(xdist)
-        ref.prepare()
+    _record_qps(ref, xdist, exact_iters, "warm_exact", out)
     log(f"  robot arm: {exact_iters} warm exact-Hessian QPs, KKT {ref.kkt(xdist)['kkt']:.1e} "
         f"({time.perf_counter() - t0:.1f} s)")
     return out

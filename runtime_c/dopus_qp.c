@@ -1228,6 +1228,19 @@ static int finish(dopus_qp_workspace *ws, const qp_res *r, int status, int iter,
     return status;
 }
 
+/* A fresh start of the iteration within one solve (after a stall): the cold initial
+ * point, no augmentation or regularisation carried over, no best iterate yet. */
+static void restart_point(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_settings *st,
+                          const dopus_qp_sol *sol, dopus_real *delta_last, dopus_real *mu_prev,
+                          dopus_real *best_merit)
+{
+    initial_point(ws, in, st, sol, 0);
+    ws->rho_aug = DOPUS_R(0.0);
+    *delta_last = DOPUS_R(0.0);
+    *mu_prev = INFINITY;
+    *best_merit = INFINITY;
+}
+
 int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_settings *settings,
                    dopus_qp_sol *sol, dopus_qp_info *info)
 {
@@ -1346,11 +1359,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
              * start with the careful steps. */
             attempt = 1;
             n_corr_attempt = n_corr;
-            initial_point(ws, in, &st, sol, 0);
-            ws->rho_aug = DOPUS_R(0.0);
-            delta_last = DOPUS_R(0.0);
-            mu_prev = INFINITY;
-            best_merit = INFINITY;
+            restart_point(ws, in, &st, sol, &delta_last, &mu_prev, &best_merit);
             best_iter = iter + 1;
             QP_TRACE("plain start at iteration %d\n", iter);
             continue;
@@ -1367,11 +1376,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             attempt = 2;
             sigma_min = SIGMA_MIN_RESTART;
             st.warm_start = 0;
-            initial_point(ws, in, &st, sol, 0);
-            ws->rho_aug = DOPUS_R(0.0);
-            delta_last = DOPUS_R(0.0);
-            mu_prev = INFINITY;
-            best_merit = INFINITY;
+            restart_point(ws, in, &st, sol, &delta_last, &mu_prev, &best_merit);
             best_iter = iter + 1;
             QP_TRACE("restart at iteration %d\n", iter);
             continue;

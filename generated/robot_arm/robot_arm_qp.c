@@ -1228,6 +1228,19 @@ static int finish(robot_arm_qp_workspace *ws, const qp_res *r, int status, int i
     return status;
 }
 
+/* A fresh start of the iteration within one solve (after a stall): the cold initial
+ * point, no augmentation or regularisation carried over, no best iterate yet. */
+static void restart_point(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const robot_arm_qp_settings *st,
+                          const robot_arm_qp_sol *sol, robot_arm_real *delta_last, robot_arm_real *mu_prev,
+                          robot_arm_real *best_merit)
+{
+    initial_point(ws, in, st, sol, 0);
+    ws->rho_aug = ROBOT_ARM_R(0.0);
+    *delta_last = ROBOT_ARM_R(0.0);
+    *mu_prev = INFINITY;
+    *best_merit = INFINITY;
+}
+
 int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const robot_arm_qp_settings *settings,
                    robot_arm_qp_sol *sol, robot_arm_qp_info *info)
 {
@@ -1346,11 +1359,7 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
              * start with the careful steps. */
             attempt = 1;
             n_corr_attempt = n_corr;
-            initial_point(ws, in, &st, sol, 0);
-            ws->rho_aug = ROBOT_ARM_R(0.0);
-            delta_last = ROBOT_ARM_R(0.0);
-            mu_prev = INFINITY;
-            best_merit = INFINITY;
+            restart_point(ws, in, &st, sol, &delta_last, &mu_prev, &best_merit);
             best_iter = iter + 1;
             QP_TRACE("plain start at iteration %d\n", iter);
             continue;
@@ -1367,11 +1376,7 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
             attempt = 2;
             sigma_min = SIGMA_MIN_RESTART;
             st.warm_start = 0;
-            initial_point(ws, in, &st, sol, 0);
-            ws->rho_aug = ROBOT_ARM_R(0.0);
-            delta_last = ROBOT_ARM_R(0.0);
-            mu_prev = INFINITY;
-            best_merit = INFINITY;
+            restart_point(ws, in, &st, sol, &delta_last, &mu_prev, &best_merit);
             best_iter = iter + 1;
             QP_TRACE("restart at iteration %d\n", iter);
             continue;

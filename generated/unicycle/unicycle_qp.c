@@ -1228,6 +1228,19 @@ static int finish(unicycle_qp_workspace *ws, const qp_res *r, int status, int it
     return status;
 }
 
+/* A fresh start of the iteration within one solve (after a stall): the cold initial
+ * point, no augmentation or regularisation carried over, no best iterate yet. */
+static void restart_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const unicycle_qp_settings *st,
+                          const unicycle_qp_sol *sol, unicycle_real *delta_last, unicycle_real *mu_prev,
+                          unicycle_real *best_merit)
+{
+    initial_point(ws, in, st, sol, 0);
+    ws->rho_aug = UNICYCLE_R(0.0);
+    *delta_last = UNICYCLE_R(0.0);
+    *mu_prev = INFINITY;
+    *best_merit = INFINITY;
+}
+
 int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const unicycle_qp_settings *settings,
                    unicycle_qp_sol *sol, unicycle_qp_info *info)
 {
@@ -1346,11 +1359,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
              * start with the careful steps. */
             attempt = 1;
             n_corr_attempt = n_corr;
-            initial_point(ws, in, &st, sol, 0);
-            ws->rho_aug = UNICYCLE_R(0.0);
-            delta_last = UNICYCLE_R(0.0);
-            mu_prev = INFINITY;
-            best_merit = INFINITY;
+            restart_point(ws, in, &st, sol, &delta_last, &mu_prev, &best_merit);
             best_iter = iter + 1;
             QP_TRACE("plain start at iteration %d\n", iter);
             continue;
@@ -1367,11 +1376,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             attempt = 2;
             sigma_min = SIGMA_MIN_RESTART;
             st.warm_start = 0;
-            initial_point(ws, in, &st, sol, 0);
-            ws->rho_aug = UNICYCLE_R(0.0);
-            delta_last = UNICYCLE_R(0.0);
-            mu_prev = INFINITY;
-            best_merit = INFINITY;
+            restart_point(ws, in, &st, sol, &delta_last, &mu_prev, &best_merit);
             best_iter = iter + 1;
             QP_TRACE("restart at iteration %d\n", iter);
             continue;
