@@ -11,9 +11,15 @@ The constructions make the infeasible row known in advance. The model is x' = u 
   lb = 5).
 - "home": the terminal equality x_N = 0 from x_0 = 3: the terminal equality row; x_N
   cannot come down to 0, so its upper side is the one the certificate pushes against.
+- "start": the path constraint x <= 1 measured at x_0 = 3: x_1 >= 2.9, so the row at
+  stage 1 (upper side, ub = 1). The row at stage 0 does not involve u_0: its value is data,
+  the C QP solver drops it, and the reference leaves it out of its certificate too.
 
-The runtime getter (dopus_get_qp_infeasible_row), the Python handle's error and the
-messages of `converge` and `sil` name them.
+Both backends name them by the same rule (the row with the largest multiplier of the QP's
+infeasibility certificate): the C runtime's getter (dopus_get_qp_infeasible_row) through the
+Python handle, and the reference from its own certificate (the smallest violation of the
+rows). The handles' errors and the messages of `converge` and `sil` (on either backend) name
+them too.
 """
 from __future__ import annotations
 
@@ -27,12 +33,13 @@ from click.testing import CliRunner
 from dopus_codegen import Ocp, build_functions
 from dopus_codegen.cli import main as cli_main
 from dopus_codegen.errors import DopusError, qp_status_code
+from dopus_codegen.reference.dopus import ReferenceDopus
 from dopus_codegen.runtime.solver import CSolver
 
 N, DT = 10, 0.1
 
 
-def _model(name, x0, terminal=None, parameter=False):
+def _model(name, x0, terminal=None, parameter=False, upper=None):
     ocp = Ocp(name)
     x = ocp.state("x")
     u = ocp.control("u", lb=-1.0, ub=1.0)
@@ -41,6 +48,8 @@ def _model(name, x0, terminal=None, parameter=False):
     if parameter:
         p = ocp.parameter("p", value=-10.0)
         ocp.path_constraint(x - p, lb=0.0)
+    if upper is not None:
+        ocp.path_constraint(x, ub=upper)
     if terminal is not None:
         ocp.terminal_constraint(x, lb=terminal[0], ub=terminal[1])
     ocp.horizon(N=N, dt=DT)
@@ -63,6 +72,22 @@ def home():
     return _model("home", 3.0, terminal=(0.0, 0.0))
 
 
+@pytest.fixture(params=["c", "reference"])
+def backend(request):
+    return {"c": CSolver, "reference": ReferenceDopus}[request.param]
+
+
+@pytest.fixture(scope="module")
+def start():
+    return _model("start", 0.0, upper=1.0)
+
+
+def _params(p3):
+    p = np.full((N + 1, 1), -10.0)
+    p[3] = p3
+    return p
+
+
 def _infeasible(s, xhat):
     with pytest.raises(DopusError) as ei:
         s.feedback(xhat)
@@ -70,21 +95,22 @@ def _infeasible(s, xhat):
     return str(ei.value), s.qp_infeasible_row
 
 
-def test_later_stage_path_row_is_named(late):
-    s = CSolver(late, M=N - 1, mode="fixed")
-    s.set_parameters(np.full((N + 1, 1), -10.0))
+def test_later_stage_path_row_is_named(late, backend):
+    s = backend(late, M=N - 1, mode="fixed")
+    s.set_parameters(_params(-10.0))
     s.init([0.0])
     s.feedback([0.0])                         # every row satisfiable: solved
     assert s.qp_infeasible_row is None
-    s.set_parameters_node(3, [0.5])           # used from the next prepare on
+    s.set_parameters(_params(0.5))            # used from the next prepare on
     s.prepare()
     msg, row = _infeasible(s, [0.0])
     assert row == {"stage": 3, "kind": "path", "index": 0, "side": "lower", "bound": 0.0}, row
     assert re.search(r"infeasible at stage 3: path constraint 0 \(\(x-p\)\) >= lb 0\b", msg), msg
     # the same QP without that row is feasible: the named row is the cause
-    s.set_parameters_node(3, [-10.0])
+    s.set_parameters(_params(-10.0))
     s.prepare()
     s.feedback([0.0])
+    assert s.qp_infeasible_row is None
 
 
 @pytest.mark.parametrize("problem, x0, row, pattern", [
@@ -93,16 +119,35 @@ def test_later_stage_path_row_is_named(late):
     ("home", 3.0, {"stage": N, "kind": "terminal_eq", "index": 0, "side": "upper", "bound": 0.0},
      r"terminal constraint 0 \(x\) = 0\b"),
 ])
-def test_terminal_row_is_named(problem, x0, row, pattern, request):
-    s = CSolver(request.getfixturevalue(problem), M=1)
+def test_terminal_row_is_named(problem, x0, row, pattern, request, backend):
+    s = backend(request.getfixturevalue(problem), M=1)
     s.init([x0])
     msg, got = _infeasible(s, [x0])
     assert got == row, got
     assert re.search(rf"infeasible at the terminal node \(stage {N}\): " + pattern, msg), msg
 
 
-def test_no_row_without_an_infeasible_qp(reach):
-    s = CSolver(reach, M=1)
+def test_state_only_row_of_stage_0_is_left_out(start, backend):
+    s = backend(start, M=1)
+    s.init([0.0])
+    msg, row = _infeasible(s, [3.0])
+    assert row == {"stage": 1, "kind": "path", "index": 0, "side": "upper", "bound": 1.0}, row
+    assert re.search(r"infeasible at stage 1: path constraint 0 \(x\) <= ub 1\b", msg), msg
+
+
+def test_reference_names_a_state_only_row_of_stage_0_when_nothing_else_is_infeasible(start):
+    """x_0 = 1.05 > 1 while x_1 can come down to 0.95: only the row of stage 0 is violated.
+    The reference's QP keeps it (the C QP solver drops it and solves), so the reference
+    names it."""
+    s = ReferenceDopus(start, M=1)
+    s.init([0.0])
+    msg, row = _infeasible(s, [1.05])
+    assert row == {"stage": 0, "kind": "path", "index": 0, "side": "upper", "bound": 1.0}, row
+    assert re.search(r"infeasible at stage 0: path constraint 0 \(x\) <= ub 1\b", msg), msg
+
+
+def test_no_row_without_an_infeasible_qp(reach, backend):
+    s = backend(reach, M=1)
     s.set_qp_max_iter(1)
     s.init([0.0])
     with pytest.raises(DopusError) as ei:
@@ -137,22 +182,25 @@ def _invoke(args):
     return CliRunner().invoke(cli_main, [str(a) for a in args])
 
 
-def test_converge_names_the_row(tmp_path):
+@pytest.mark.parametrize("backend_args", [["--backend", "c"], ["--backend", "reference"], []],
+                         ids=["c", "reference", "default"])
+def test_converge_names_the_row(tmp_path, backend_args):
     f = tmp_path / "reachfile.py"
     f.write_text(REACH_FILE)
     out = tmp_path / "c.json"
-    res = _invoke(["converge", f, "--backend", "c", "--start", "cold", "--M", "1", "--iters", "2", "--json", out])
+    res = _invoke(["converge", f, *backend_args, "--start", "cold", "--M", "1", "--iters", "2", "--json", out])
     assert res.exit_code == 1, res.output
     assert re.search(NAMED, res.output), res.output
     (run,) = json.loads(out.read_text())["runs"]
     assert re.search(NAMED, run["message"]), run["message"]
 
 
-def test_sil_names_the_row(tmp_path):
+@pytest.mark.parametrize("name", ["c", "reference"])
+def test_sil_names_the_row(tmp_path, name):
     f = tmp_path / "reachfile.py"
     f.write_text(REACH_FILE)
     out = tmp_path / "s.json"
-    res = _invoke(["sil", f, "--backend", "c", "--M", "1", "--json", out])
+    res = _invoke(["sil", f, "--backend", name, "--M", "1", "--json", out])
     assert re.search(r"first failed instant at t = 0(\.0+)? s: .*" + NAMED, res.output), res.output
     run = json.loads(out.read_text())["runs"][0]
     assert re.search(NAMED, run["result"]["first_failure"]["message"])

@@ -226,6 +226,36 @@ def test_infeasible_qps_are_flagged(kind, sizes):
         assert info["iterations"] < 100
 
 
+@pytest.mark.parametrize("kind,sizes", [
+    ("row_vs_box", (10, 4, 2, 1, 2, 1)),
+    ("terminal_eq_vs_box", (10, 4, 2, 1, 2, 1)),
+    ("unreachable", (6, 3, 2, 0, 0, 0)),
+    ("terminal_rows", (10, 4, 2, 1, 2, 1)),
+])
+def test_infeasible_row_agrees_with_reference(kind, sizes):
+    """The row dopus_qp_infeasible_row names (largest multiplier of the IPM's diverging
+    certificate) carries weight in a Farkas certificate of the QP (a linear programme,
+    HiGHS, independent of the IPM), and is the very row the reference names by the same
+    rule unless the QP has several infeasible subsets of rows (then either solver may
+    single out another valid one: about 6 % of such random QPs)."""
+    from dopus_codegen.reference.qp import qp_infeasible_row, qp_row_in_certificate
+
+    h = solver(sizes)
+    rng = np.random.default_rng(zlib.crc32(kind.encode()) + 1)
+    agree = []
+    for trial in range(10):
+        qp = P.make_infeasible(rng, *sizes, kind)
+        qp.update(zip(("N", "nx", "nu", "ng", "nr", "ne"), sizes))
+        _, info = h.solve(qp, tol=1e-10)
+        assert info["status"] == "primal_infeasible", (kind, trial, info)
+        row = h.infeasible_row()
+        assert row is not None, (kind, trial)
+        ref = qp_infeasible_row(qp)
+        assert row == ref or qp_row_in_certificate(qp, row) > 1e-6, (kind, trial, row, ref)
+        agree.append(row == ref)
+    assert np.mean(agree) >= 0.8, (kind, agree)
+
+
 def test_crossed_bounds_are_infeasible():
     sizes = (3, 2, 1, 0, 0, 0)
     h = solver(sizes)
@@ -233,6 +263,10 @@ def test_crossed_bounds_are_infeasible():
     qp["lbw"][1, 2], qp["ubw"][1, 2] = 1.0, 0.5
     sol, info = h.solve(qp)
     assert info["status"] == "primal_infeasible"
+    from dopus_codegen.reference.qp import qp_infeasible_row
+
+    qp.update(zip(("N", "nx", "nu", "ng", "nr", "ne"), sizes))
+    assert h.infeasible_row() == qp_infeasible_row(qp) == (1, 2, 0)   # stage 1, u_0 of w_1: lb > ub
 
 
 def test_unbounded_qps_are_flagged():
@@ -460,7 +494,10 @@ def test_linear_programs():
 
 def test_robot_arm_qps_made_infeasible_are_flagged(robot_qps):
     """Robot-arm QPs with the control steps frozen and the terminal equality moved: no
-    feasible point (Clarabel agrees), also for the indefinite exact-Hessian QPs."""
+    feasible point (Clarabel agrees), also for the indefinite exact-Hessian QPs; the C
+    solver and the reference name the same row."""
+    from dopus_codegen.reference.qp import qp_infeasible_row
+
     qp0 = robot_qps[0][1]
     h = solver(tuple(int(qp0[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne")))
     nx = int(qp0["nx"])
@@ -473,6 +510,7 @@ def test_robot_arm_qps_made_infeasible_are_flagged(robot_qps):
         assert cl_status == "PrimalInfeasible", (label, cl_status)
         sol, info = h.solve(q, tol=1e-10)
         assert info["status"] == "primal_infeasible", (label, info)
+        assert h.infeasible_row() == qp_infeasible_row(q), (label, h.infeasible_row(), qp_infeasible_row(q))
 
 
 def test_robot_arm_sqp_warm_start(robot_qps):

@@ -34,6 +34,7 @@ from .. import settings, vocabulary
 from ..errors import DopusError, qp_status_code as status_code_qp, status_code
 from ..settings import SettingError
 from .kkt import eval_stages, kkt_measure, node_parameters
+from ..problem.checks import describe_qp_row
 from .qp import QPError, free_initial_state, solve_qp_reference
 
 # the QP solution arrays whose finiteness a step needs
@@ -114,7 +115,8 @@ class ReferenceDopus:
 
     Extra to the protocol: :meth:`qp_of_current` (the QP the next ``feedback`` solves,
     in the :mod:`dopus_codegen.reference.qp` format), ``last_qp`` / ``last_qp_solution`` (the
-    QP solved by the last ``feedback`` and its solution) and ``status``.
+    QP solved by the last ``feedback`` and its solution), ``status`` and
+    ``qp_infeasible_row`` (the row that makes the last QP infeasible, as ``CSolver`` gives it).
     """
 
     def __init__(self, disc, M: int = settings.DEFAULTS["M"], mode: str = settings.DEFAULTS["mode"],
@@ -374,6 +376,37 @@ class ReferenceDopus:
             "Req": t["Req"].copy(), "req": -t["r_eq"],
         }
 
+    def _row_info(self, row):
+        """``(stage, j, side)`` of :func:`qp_infeasible_row` as the C runtime's
+        dopus_get_qp_infeasible_row gives it: ``{"stage", "kind", "index", "side", "bound"}``
+        with the OCP's bound of that side (0 for a terminal equality row)."""
+        if row is None:
+            return None
+        k, j, side = (int(v) for v in row)
+        nx, nw, nr = self.nx, self.nw, self.nr
+        if j < nx:
+            kind, index, lo, up = "state", j, self.lbx, self.ubx
+        elif k < self.N and j < nw:
+            kind, index, lo, up = "control", j - nx, self.lbu, self.ubu
+        elif k < self.N:
+            kind, index, lo, up = "path", j - nw, self.lg, self.ug
+        elif j < nx + nr:
+            kind, index, lo, up = "terminal", j - nx, self.lr, self.ur
+        else:
+            kind, index, lo, up = "terminal_eq", j - nx - nr, None, None
+        bound = 0.0 if lo is None else float(up[index] if side > 0 else lo[index])
+        return {"stage": k, "kind": kind, "index": index,
+                "side": {-1: "lower", 1: "upper"}.get(side, "lower above upper"), "bound": bound}
+
+    @property
+    def qp_infeasible_row(self):
+        """When the last QP was infeasible: the row of the OCP with the largest multiplier of
+        its infeasibility certificate (:func:`dopus_codegen.reference.qp.qp_infeasible_row`),
+        as ``CSolver.qp_infeasible_row`` gives it; else None."""
+        if self.qp_status != status_code_qp("primal_infeasible"):
+            return None
+        return getattr(self, "_infeasible_row", None)
+
     # ------------------------------------------------------------------ feedback
     def feedback(self, xhat0) -> np.ndarray:
         """Solve the QP for ``xhat0``, store ``domega`` per slot, full step; return ``u_0``."""
@@ -410,8 +443,11 @@ class ReferenceDopus:
         if isinstance(failure, QPError):
             exc = failure
             self.qp_status = status_code_qp(exc.qp_status)
-            raise self._feedback_failed("qp", f"feedback: {exc}; QP status {self.qp_status} ({exc.qp_status})",
-                                        exc.qp_status) from None
+            self._infeasible_row = self._row_info(getattr(exc, "row", None))
+            msg = f"feedback: {exc}; QP status {self.qp_status} ({exc.qp_status})"
+            if self.qp_infeasible_row is not None:
+                msg += "; " + describe_qp_row(self.disc, self.qp_infeasible_row)
+            raise self._feedback_failed("qp", msg, exc.qp_status) from None
         self.qp_status = status_code_qp("solved")
         self.qp_iterations = int(sol.get("iterations", 0))
         t2 = time.perf_counter()

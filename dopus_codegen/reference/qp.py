@@ -65,7 +65,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["QPError", "QPInfeasibleError", "QPIterationLimitError", "free_initial_state", "solve_qp_reference",
-           "qp_kkt_residual", "check_qp", "qp_reduced_hessian_min_eig", "flatten_qp", "flatten_solution"]
+           "qp_kkt_residual", "check_qp", "qp_infeasible_row", "qp_reduced_hessian_min_eig", "flatten_qp", "flatten_solution"]
 
 
 class QPError(RuntimeError):
@@ -75,8 +75,10 @@ class QPError(RuntimeError):
 
 
 class QPInfeasibleError(QPError):
-    """The QP has no feasible point."""
+    """The QP has no feasible point. ``row``: ``(stage, j, side)`` of the row that
+    :func:`qp_infeasible_row` names (None when it names none)."""
     qp_status = "primal_infeasible"
+    row = None
 
 
 class QPIterationLimitError(QPError):
@@ -472,11 +474,17 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
     :class:`QPIterationLimitError`, as the C QP solver reports its limit.
     """
     t0 = time.perf_counter()
-    q = check_qp(qp)
+    try:
+        q = check_qp(qp)
+    except QPInfeasibleError as exc:
+        exc.row = qp_infeasible_row(qp)
+        raise
     Hz, gz, rows = flatten_qp(q)
     z, y_eq, y_in, mu_z, status, iters = _solve_ipopt(q, Hz, gz, rows, 500 if max_iter is None else max_iter)
     if status in ("Infeasible_Problem_Detected", "Restoration_Failed"):
-        raise QPInfeasibleError(f"QP is infeasible (IPOPT: {status})")
+        exc = QPInfeasibleError(f"QP is infeasible (IPOPT: {status})")
+        exc.row = qp_infeasible_row(q)
+        raise exc
     if max_iter is not None and status == "Maximum_Iterations_Exceeded":
         raise QPIterationLimitError(f"QP iteration limit {max_iter} reached (IPOPT: {status})")
     ok_status = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -518,3 +526,170 @@ def qp_reduced_hessian_min_eig(qp: dict, sol: dict, tol: float = 1e-9) -> float:
     if Z.shape[1] == 0:
         return float("inf")
     return float(np.min(np.linalg.eigvalsh(Z.T @ Hz.toarray() @ Z)))
+
+
+# ---------------------------------------------------------------------------
+# The row of an infeasible QP
+# ---------------------------------------------------------------------------
+
+def _stage_rows(q: dict, data_rows: bool = False):
+    """The inequality rows of ``q`` in the numbering of the C QP solver (dopus_qp.c): per
+    stage ``k < N`` the ``nw`` box rows of ``w_k`` then the ``ng`` path rows (``j``
+    0..nw+ng-1), at the terminal node the ``nx`` box rows of ``x_N`` then the ``nr`` rows
+    of ``R``; the ``ne`` equality rows of ``Req`` follow as ``j = nx + nr + i`` of stage N.
+    Yields ``(k, j, a, lo, up)`` with ``a`` the row over ``z`` (see :func:`flatten_qp`), in
+    that order; the x rows of stage 0 (``x_0`` is fixed) are left out, as in the C solver,
+    and so are the path rows of stage 0 that do not involve ``u_0`` (their value is data)
+    unless ``data_rows``."""
+    N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
+    nw = nx + nu
+    nz = N * nw + nx
+
+    def unit(c):
+        a = np.zeros(nz)
+        a[c] = 1.0
+        return a
+
+    for k in range(N):
+        for j in range(nx if k == 0 else 0, nw):
+            yield k, j, unit(k * nw + j), q["lbw"][k, j], q["ubw"][k, j]
+        for i in range(ng):
+            if k == 0 and not data_rows and not np.any(q["C"][0][i, nx:]):
+                continue
+            a = np.zeros(nz)
+            a[k * nw:(k + 1) * nw] = q["C"][k][i]
+            yield k, nw + i, a, q["lg"][k, i], q["ug"][k, i]
+    for j in range(nx):
+        yield N, j, unit(N * nw + j), q["lbxN"][j], q["ubxN"][j]
+    for i in range(nr):
+        a = np.zeros(nz)
+        a[N * nw:] = q["R"][i]
+        yield N, nx + i, a, q["lr"][i], q["ur"][i]
+    for i in range(ne):
+        a = np.zeros(nz)
+        a[N * nw:] = q["Req"][i]
+        yield N, nx + nr + i, a, q["req"][i], q["req"][i]
+
+
+def qp_infeasible_row(qp: dict):
+    """The row of an infeasible QP that its infeasibility certificate weighs most, by the
+    rule of the C QP solver (dopus_qp_infeasible_row): ``(stage, j, side)`` with ``j`` the
+    row in the C numbering (see :func:`_stage_rows`), ``side`` -1 (its lower bound), +1 (its
+    upper bound; an equality row: the sign of its multiplier) or 0 (the first row, in that
+    order, whose lower bound exceeds its upper bound). None when the QP is feasible.
+
+    The certificate is Farkas's for the rows other than the initial state and the
+    dynamics (those eliminated by the controls ``v``: each row ``lo <= G v + h <= up``):
+    multipliers ``l >= 0`` of the finite sides with ``G'(l_up - l_lo) = 0`` and a positive
+    gap ``l_lo'(lo - h) - l_up'(up - h)``, the one of the largest gap per unit of
+    multiplier mass (``sum l = 1``; a linear programme, HiGHS). It is a vertex, the
+    certificate of one infeasible subset of rows, as the C solver's diverging multipliers
+    single one out. The named row is the one with the largest multiplier (the first in the
+    order above on a tie, the lower side before the upper one).
+
+    As in the C solver, the path rows of stage 0 that do not involve ``u_0`` take no part;
+    only when the other rows are feasible (this QP keeps those rows, the C solver's drops
+    them) is the certificate sought with them."""
+    q = dict(qp)
+    for k in _INT_KEYS:
+        q[k] = int(q[k])
+    for key, shape in _shapes(**{k: q[k] for k in _INT_KEYS}).items():
+        q[key] = np.asarray(q[key], dtype=float).reshape(shape)
+    row = _certificate_row(q, data_rows=False)
+    return row if row is not None else _certificate_row(q, data_rows=True)
+
+
+def qp_row_in_certificate(qp: dict, row) -> float:
+    """The largest share of multiplier mass that the row ``row = (stage, j, side)`` (as
+    :func:`qp_infeasible_row` names rows) can carry in a Farkas certificate of the QP's
+    infeasibility (the certificates of :func:`qp_infeasible_row`, gap at least a
+    thousandth of the largest); 0 when no certificate uses it. A QP with several
+    infeasible subsets of rows has several valid certificates, and a solver may single out
+    any of them: a row named by a solver is valid when this is positive."""
+    q = dict(qp)
+    for k in _INT_KEYS:
+        q[k] = int(q[k])
+    for key, shape in _shapes(**{k: q[k] for k in _INT_KEYS}).items():
+        q[key] = np.asarray(q[key], dtype=float).reshape(shape)
+    best = 0.0
+    for data_rows in (False, True):
+        share = _certificate_row(q, data_rows, weigh=tuple(row))
+        best = max(best, share or 0.0)
+    return best
+
+
+def _certificate_row(q: dict, data_rows: bool, weigh=None):
+    """:func:`qp_infeasible_row` of a checked QP dict, with or without the data rows; with
+    ``weigh`` a row ``(stage, j, side)``, the largest multiplier share that row can take
+    in a certificate instead (see :func:`qp_row_in_certificate`)."""
+    from scipy.optimize import linprog
+
+    N, nx, nu = q["N"], q["nx"], q["nu"]
+    rows = list(_stage_rows(q, data_rows))
+    for k, j, _, lo, up in rows:
+        if lo > up:
+            return k, j, 0
+    nw = nx + nu
+    nz = N * nw + nx
+    # z = T v + c over the controls v = (u_0, ..., u_{N-1}): the initial state and dynamics
+    T = np.zeros((nz, N * nu))
+    c = np.zeros(nz)
+    Tx, cx = np.zeros((nx, N * nu)), q["x0"].copy()
+    for k in range(N):
+        T[k * nw:k * nw + nx], c[k * nw:k * nw + nx] = Tx, cx
+        T[k * nw + nx:(k + 1) * nw, k * nu:(k + 1) * nu] = np.eye(nu)
+        Phi = q["Phi"][k]
+        Tx = Phi[:, :nx] @ Tx
+        Tx[:, k * nu:(k + 1) * nu] += Phi[:, nx:]
+        cx = Phi[:, :nx] @ cx + q["b"][k]
+    T[N * nw:], c[N * nw:] = Tx, cx
+    kept = [r for r in rows if np.isfinite(r[3]) or np.isfinite(r[4])]
+    A = np.array([r[2] for r in kept])
+    lo = np.array([r[3] for r in kept])
+    up = np.array([r[4] for r in kept])
+    G, h = A @ T, A @ c
+    # Farkas: lo <= G v + h <= up has no v iff some l_lo, l_up >= 0 (on the finite sides)
+    # have G'(l_up - l_lo) = 0 and l_lo'(lo - h) - l_up'(up - h) > 0; the certificate of
+    # the largest gap per unit of multiplier mass (a vertex: one infeasible subsystem)
+    m = len(kept)
+    flo, fup = np.isfinite(lo), np.isfinite(up)
+    cols = [(i, -1) for i in range(m) if flo[i]] + [(i, 1) for i in range(m) if fup[i]]
+    if not cols:
+        return None
+    sgn = np.array([sd for _, sd in cols], dtype=float)
+    idx = np.array([i for i, _ in cols])
+    gap = np.array([(lo[i] - h[i]) if sd < 0 else -(up[i] - h[i]) for i, sd in cols])
+    A_eq = np.vstack([G[idx].T * sgn, np.ones(len(cols))])
+    b_eq = np.concatenate([np.zeros(G.shape[1]), [1.0]])
+    res = linprog(-gap, A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs")
+    if res.status != 0 or not -res.fun > 1e-9 * _scale(h, lo, up):
+        return None
+    if weigh is not None:
+        cand = [col for col in range(len(cols))
+                if (kept[idx[col]][0], kept[idx[col]][1]) == weigh[:2] and (weigh[2] == 0 or sgn[col] == weigh[2])]
+        share = 0.0
+        for col in cand:
+            # the largest weight of this column over the certificates with a gap of at
+            # least a thousandth of the largest one
+            r2 = linprog(-np.eye(len(cols))[col], A_ub=-gap[None, :], b_ub=[1e-3 * res.fun],
+                         A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs")
+            if r2.status == 0:
+                share = max(share, -r2.fun)
+        return share
+    # the largest multiplier; on a tie the first row in the order above, its lower side
+    # first (the C rule's scan)
+    best = -1
+    for col in sorted(range(len(cols)), key=lambda col: (idx[col], sgn[col])):
+        if res.x[col] > (res.x[best] if best >= 0 else 0.0):
+            best = col
+    if best < 0:
+        return None
+    i = int(idx[best])
+    k, j = kept[i][0], kept[i][1]
+    return k, j, int(sgn[best])
+
+
+def _scale(h, lo, up):
+    return max(1.0, float(np.max(np.abs(h), initial=0.0)),
+               float(np.max(np.abs(np.where(np.isfinite(lo), lo, 0.0)), initial=0.0)),
+               float(np.max(np.abs(np.where(np.isfinite(up), up, 0.0)), initial=0.0)))

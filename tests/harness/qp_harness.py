@@ -288,6 +288,15 @@ class QPSolverHandle:
         status = self.lib.dopus_qp_solve(self._ws, inp, st, self._sol, self._info)
         return self._read_sol(), self._read_info(status)
 
+    def infeasible_row(self):
+        """After a solve that returned primal_infeasible: ``(stage, j, side)`` of the row
+        dopus_qp_infeasible_row names (the row with the largest multiplier of the
+        certificate), or None."""
+        out = self.ffi.new("int[3]")
+        if not self.lib.dopus_qp_infeasible_row(self._ws, self._in, out, out + 1, out + 2):
+            return None
+        return int(out[0]), int(out[1]), int(out[2])
+
     def _sol_views(self) -> dict:
         N, nx, nu, ng, nr, ne = self.sizes
         nw = nx + nu
