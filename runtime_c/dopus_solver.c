@@ -1144,7 +1144,10 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
     qs = dopus_feedback_lm_retries(s, qs, &retries);
     s->qp_status = qs;
     rc = dopus_feedback_check_step(s, qs);
-    if (rc != DOPUS_OK && s->recovery && s->mode == DOPUS_MODE_RECEDING) {
+    /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
+     * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
+    if (rc != DOPUS_OK && s->recovery && s->mode == DOPUS_MODE_RECEDING && qs != DOPUS_QP_MAX_ITER &&
+        qs != DOPUS_QP_INVALID_INPUT) {
         qs = dopus_feedback_recover(s, &retries);
         s->qp_status = qs;
         rc = qs == DOPUS_QP_INVALID_INPUT ? DOPUS_ERR_QP : dopus_feedback_check_step(s, qs);

@@ -138,9 +138,10 @@ int dopus_get_qp_max_iter(dopus_solver *s);
  * re-initialises at once. While on, the prepare after a failed feedback first takes the step
  * of that instant's QP for the state the iterate predicts (DOPUS_FLAG_PREDICTED): the plan of
  * the next fallbacks stays current; after a non-finite measurement it clears the count. A
- * feedback whose QP fails (or diverges) on a finite measurement re-initialises from that
- * measurement and solves the new QP within the same call before it gives up
- * (DOPUS_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm retries). */
+ * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
+ * re-initialises from that measurement and solves the new QP within the same call before it
+ * gives up (DOPUS_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
+ * retries). */
 int dopus_set_recovery(dopus_solver *s, int on, int max_failures);
 int dopus_get_recovery(dopus_solver *s);
 int dopus_get_recovery_failures(dopus_solver *s);

@@ -436,9 +436,11 @@ class ReferenceDopus:
         self._prepare_due, self._shifted = True, False
         t1 = time.perf_counter()
         sol, failure, retries = self._solve_with_retries(xhat0)
-        if failure is not None and self.recovery and self.mode == "receding":
+        if (failure is not None and self.recovery and self.mode == "receding"
+                and getattr(failure, "qp_status", None) not in ("max_iter", "invalid_input")):
             # the recovery within the feedback (section 9): re-initialise from the measured
-            # state and solve the QP of the re-initialised iterate
+            # state and solve the QP of the re-initialised iterate; not for a QP stopped by
+            # its iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid
             sol, failure, retries = self._feedback_recover(xhat0)
         if isinstance(failure, QPError):
             exc = failure

@@ -1144,7 +1144,10 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     qs = robot_arm_feedback_lm_retries(s, qs, &retries);
     s->qp_status = qs;
     rc = robot_arm_feedback_check_step(s, qs);
-    if (rc != ROBOT_ARM_OK && s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING) {
+    /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
+     * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
+    if (rc != ROBOT_ARM_OK && s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING && qs != ROBOT_ARM_QP_MAX_ITER &&
+        qs != ROBOT_ARM_QP_INVALID_INPUT) {
         qs = robot_arm_feedback_recover(s, &retries);
         s->qp_status = qs;
         rc = qs == ROBOT_ARM_QP_INVALID_INPUT ? ROBOT_ARM_ERR_QP : robot_arm_feedback_check_step(s, qs);

@@ -1144,7 +1144,10 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     qs = unicycle_feedback_lm_retries(s, qs, &retries);
     s->qp_status = qs;
     rc = unicycle_feedback_check_step(s, qs);
-    if (rc != UNICYCLE_OK && s->recovery && s->mode == UNICYCLE_MODE_RECEDING) {
+    /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
+     * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
+    if (rc != UNICYCLE_OK && s->recovery && s->mode == UNICYCLE_MODE_RECEDING && qs != UNICYCLE_QP_MAX_ITER &&
+        qs != UNICYCLE_QP_INVALID_INPUT) {
         qs = unicycle_feedback_recover(s, &retries);
         s->qp_status = qs;
         rc = qs == UNICYCLE_QP_INVALID_INPUT ? UNICYCLE_ERR_QP : unicycle_feedback_check_step(s, qs);
