@@ -15,7 +15,7 @@ help:
 	@echo "make campaign  Monte Carlo campaign on the robot arm (CAMPAIGN_RUNS=1000 runs, dask over all cores); $(OUT)/campaign"
 	@echo "make generate  regenerate the checked-in generated/ folders"
 	@echo "make firmware  build the static library of generated/robot_arm with make only"
-	@echo "make firmware-report  run the robot arm on an emulated Cortex-M7 (QEMU): sizes, instructions, accuracy"
+	@echo "make firmware-report  run the robot arm on emulated Cortex-M7 (double, float) and M4F (float) cores (QEMU): sizes, instructions, accuracy"
 	@echo "make clean     remove build products and outputs"
 
 setup:
@@ -69,7 +69,7 @@ firmware:
 
 firmware-report: setup
 	@bash scripts/setup_firmware.sh
-	$(VENV)/bin/dopus-gen firmware-report $(EXAMPLE) -o $(OUT)/firmware --target m7-double
+	$(VENV)/bin/dopus-gen firmware-report $(EXAMPLE) -o $(OUT)/firmware --target m7-double,m7-float,m4f-float
 
 clean:
 	rm -rf $(OUT) build .pytest_cache

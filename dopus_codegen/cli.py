@@ -140,6 +140,15 @@ def _solver_options(lm_note: str, names=None):
     return apply
 
 
+def _real_option(what: str):
+    """``--real``: the real-number type of the generated C (dopus_codegen.settings.REALS)."""
+    from . import settings
+
+    return click.option("--real", "real", type=click.Choice(list(settings.REALS)), default=None,
+                        help=f"{settings.HELP['real']} {what} [default: the OCP file's options(real=...), "
+                             f"else {settings.DEFAULTS['real']}]")
+
+
 def _runtime_values(kwargs: dict) -> dict:
     """The runtime settings of a verb's keyword arguments (None: not given)."""
     from . import settings
@@ -194,14 +203,16 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--start", type=click.Choice(["cold", "warm"]), default="warm", show_default=True,
               help="cold: the OCP file's initial guess at its initial state; warm: the converged solution at the "
                    "initial state, then iterate for the disturbed initial state.")
-@click.option("--tol", default=1e-8, show_default=True, type=click.FloatRange(min=0, min_open=True),
+@click.option("--tol", default=None, type=click.FloatRange(min=0, min_open=True),
               help="A run has converged when its KKT measure reaches this; the JSON 'solution' is the iterate "
-                   "of a converged run.")
+                   "of a converged run. [default: 1e-8, with --real float 2e-5]")
 @_solver_options("0: exact Newton")
+@_real_option("With --backend c, the study runs the solver generated in that type (float: see what single "
+              "precision costs); the default --qp-tol follows it.")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the study as JSON.")
 @click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None, help="Write KKT against iteration as PNG.")
-def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, **kwargs):
+def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, real, **kwargs):
     """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M.
 
     Exits with 1 when a run failed (an error of the solver or a non-finite KKT measure),
@@ -217,7 +228,7 @@ def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, *
         check_output_file(plot_out, "--plot")
     study = run_converge_cli(ocp_file=ocp_file, m_list=None if m_list is None else _int_list_or_full(m_list),
                              iters=iters, start=start, backend=backend, json_out=json_out, plot_out=plot_out,
-                             tol=tol, **_runtime_values(kwargs))
+                             tol=tol, real=real, **_runtime_values(kwargs))
     bad = failed_runs(study)
     if bad:
         raise RunFailed(f"{len(bad)} of {len(study['runs'])} runs failed: "
@@ -237,13 +248,15 @@ def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, *
               help="full: also run the full RTI (M = N-1) on the same scenario.")
 @_solver_options("0: the paper's literal QP; keeps the fixed point, see README, Closed loop; the robot arm "
                  "declares 1e-4")
+@_real_option("The closed loop runs the solver generated in that type (float: see what single precision "
+              "costs); the default --qp-tol follows it.")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
 @click.option("--campaign-run", type=click.IntRange(0), default=None,
               help="Replay run I of the OCP file's campaign (dopus-gen campaign): its initial state, pushes and "
                    "plant mismatch (the file's), with --seed.")
 @click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=None,
               help="Seed of the campaign run replayed by --campaign-run. [default: 0]")
-def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, campaign_run, seed, **kwargs):
+def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, real, campaign_run, seed, **kwargs):
     """Closed loop against a CVODES simulation of the plant (paper figures 2 to 4).
 
     One DOPUS iteration per sampling instant, started from the offline solution at the
@@ -260,8 +273,8 @@ def sil(ocp_file, m, duration, json_out, plot_dir, compare, backend, campaign_ru
     if seed is not None and campaign_run is None:
         raise BadInput("--seed needs --campaign-run (it seeds the replayed campaign run)")
     runs = run_sil_cli(ocp_file=ocp_file, M=m, duration=duration, json_out=json_out, plot_dir=plot_dir,
-                       compare=compare, backend=backend, echo=click.echo, campaign_run=campaign_run, seed=seed,
-                       **_runtime_values(kwargs))
+                       compare=compare, backend=backend, echo=click.echo, real=real, campaign_run=campaign_run,
+                       seed=seed, **_runtime_values(kwargs))
     aborted = [r for r in runs if r.get("aborted")]
     if aborted:
         raise RunFailed("; ".join(f"run '{r['label']}' aborted after {len(r['t'])} of "
@@ -322,16 +335,9 @@ def campaign(ocp_file, out, runs, seed, duration, threshold, settle, mismatch, w
     I --seed S` replays one run. Exits with 1 when a run raised an error (the others are
     kept in --out).
     """
-    from .outputs import check_output_dir, check_output_file
     from .studies.campaign import run_campaign
 
-    check_output_file(out, "--out")
-    if json_out:
-        check_output_file(json_out, "--json")
-    if plot_dir:
-        check_output_dir(plot_dir, "--plot-dir")
-    if workers is not None and workers < 0:
-        raise BadInput(f"--workers must be >= 0, got {workers}")
+    # run_campaign checks the output paths and --workers before any run
     if scheduler is not None and workers is not None:
         raise BadInput("--workers and --scheduler exclude each other (the scheduler has its own workers)")
     rep = run_campaign(ocp_file, out, workers=workers, scheduler=scheduler, backend=backend, json_out=json_out,
@@ -415,7 +421,8 @@ def bench(ocp_file, m_list, against, json_out, plot_out, reps, settle, steps, kk
 @click.option("--offline-guess/--no-offline-guess", default=None,
               help="Solve the OCP with IPOPT at its initial state now and carry the primal-dual solution "
                    "as static data (warm start in firmware). Default: the OCP file's options(offline_guess=...).")
-def generate(ocp_file, out_dir, offline_guess):
+@_real_option("")
+def generate(ocp_file, out_dir, offline_guess, real):
     """Generate the C99 solver folder of OCP_FILE.
 
     The folder holds the CasADi functions, sizes and problem data, the renamed runtime,
@@ -429,7 +436,7 @@ def generate(ocp_file, out_dir, offline_guess):
 
     check_output_dir(out_dir if out_dir is not None else "generated", "--output")
     t0 = time.time()
-    path = generate_file(ocp_file, out_dir, offline_guess=offline_guess)
+    path = generate_file(ocp_file, out_dir, offline_guess=offline_guess, real=real)
     newest = max((p.stat().st_mtime for p in path.iterdir() if p.is_file()), default=0.0)
     click.echo(f"{'generated' if newest >= t0 else 'up to date'}: {path}")
 
@@ -463,8 +470,8 @@ def build(folder, cc, opt, force):
 @click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False), default="out/firmware",
               show_default=True, help="Folder of the generated code, the builds and the images.")
 @click.option("--target", "targets", default="m7-double", show_default=True,
-              help="Comma-separated targets: m7-double, m7-float (QEMU mps2-an500), m4f-float (mps2-an386); "
-                   "the float targets need a generator with the real=float option.")
+              help="Comma-separated targets: m7-double, m7-float (QEMU mps2-an500), m4f-float (mps2-an386, "
+                   "single-precision FPU); a float target runs the folder generated with real='float'.")
 @click.option("--iters", default=12, show_default=True, type=click.IntRange(1, 1000),
               help="Iterations of the fixed-xhat_0 study per M (M = 1 and the full RTI).")
 @click.option("--steps", default=20, show_default=True, type=click.IntRange(1, 10000),

@@ -20,7 +20,8 @@ from . import vocabulary
 
 __all__ = ["SettingError", "DEFAULTS", "SOLVER_SETTINGS", "choices", "code", "value_of", "check",
            "positive", "nonnegative", "count", "resolve", "RUNTIME_SETTINGS", "HELP", "kind", "validate",
-           "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT", "parse_m_list", "CAMPAIGN_SETTINGS", "mismatch_table"]
+           "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT", "parse_m_list", "CAMPAIGN_SETTINGS", "mismatch_table",
+           "REALS", "QP_TOL_DEFAULT", "qp_tol_default", "check_real", "KKT_TOL_DEFAULT"]
 
 SOURCE_CLI, SOURCE_FILE, SOURCE_DEFAULT = "cli", "ocp-file", "default"
 
@@ -41,9 +42,35 @@ DEFAULTS: Dict[str, Any] = {
     "mode": "receding",
     "qp_tol": 1e-10,
     "offline_guess": False,
+    "real": "double",
     "runs": 100,
     "seed": 0,
 }
+
+#: The real-number types a solver can be generated in (``options(real=...)``,
+#: ``--real``), with the value of the generated macro ``<NAME>_REAL_FLOAT``.
+REALS = {"double": 0, "float": 1}
+
+#: The default QP tolerance of each real type (the generated ``DOPUS_DEFAULT_QP_TOL``,
+#: runtime_c/dopus_solver.c): single precision resolves the scaled KKT residuals of the
+#: robot arm's QPs to about 1e-6, so 1e-10 is out of reach there (docs/algorithm.md).
+QP_TOL_DEFAULT = {"double": 1e-10, "float": 1e-5}
+
+#: The KKT measure at which a run of ``dopus-gen converge`` counts as converged, per real
+#: type: float's floor on the robot arm is 6e-6 to 8e-6 (docs/algorithm.md section 11).
+KKT_TOL_DEFAULT = {"double": 1e-8, "float": 2e-5}
+
+
+def qp_tol_default(real: str) -> float:
+    """The default QP tolerance of a solver generated in ``real``."""
+    return QP_TOL_DEFAULT[check_real(real)]
+
+
+def check_real(value: Any) -> str:
+    """``value`` if it is a real type of :data:`REALS`, else :class:`SettingError`."""
+    if not isinstance(value, str) or value not in REALS:
+        raise SettingError(f"real must be {_quote_list(list(REALS))}, got {value!r}")
+    return value
 
 #: The settings of a DOPUS backend that an OCP file and the commands share.
 SOLVER_SETTINGS = ("M", "hessian", "regularization", "reg_eps", "cost_hessian", "lm")
@@ -216,6 +243,7 @@ _CHECKS = {
     "qp_tol": lambda v: qp_tolerance(v),
     "lm": lambda v: levenberg_marquardt(v),
     "qp_max_iter": lambda v: _c_int("qp_max_iter", count("qp_max_iter", v, 1)),
+    "real": lambda v: check_real(v),
     "runs": lambda v: count("runs", v, 1),
     "seed": lambda v: count("seed", v, 0, 2**63 - 1),
     "duration": lambda v: positive("duration", v),
@@ -250,6 +278,7 @@ HELP: Dict[str, str] = {
     "qp_tol": "Tolerance of the QP solver on its scaled KKT residuals.",
     "qp_max_iter": "Iteration limit of the QP solver; reaching it fails the feedback (QP status max_iter). "
                    "Not given: the QP solver's own limit.",
+    "real": "Real-number type of the generated C (runtime, glue and CasADi functions): double or float.",
     "offline_guess": "Solve the OCP with IPOPT at its initial state at generation and carry the solution.",
     "runs": "Closed-loop runs of the campaign (run i uses the random draw of (seed, i)).",
     "seed": "Seed of the campaign's random draws.",
@@ -263,7 +292,7 @@ HELP: Dict[str, str] = {
 def kind(setting: str) -> str:
     """How a setting's value is written: ``"choice"``, ``"positive"``, ``"lm"`` (``auto`` or a
     number >= 0), ``"count"`` or ``"flag"``."""
-    if setting in ("hessian", "regularization", "mode", "cost_hessian"):
+    if setting in ("hessian", "regularization", "mode", "cost_hessian", "real"):
         return "choice"
     if setting in ("reg_eps", "qp_tol", "duration", "threshold"):
         return "positive"
@@ -310,6 +339,10 @@ def resolve(file_options: Optional[Mapping[str, Any]], cli: Optional[Mapping[str
             values[name], sources[name] = validate(name, file_options[name]), SOURCE_FILE
         else:
             values[name], sources[name] = DEFAULTS.get(name), SOURCE_DEFAULT
+    if sources.get("qp_tol") == SOURCE_DEFAULT:
+        # the default QP tolerance is that of the real type the solver is generated in
+        real = values.get("real", cli.get("real", file_options.get("real", DEFAULTS["real"])))
+        values["qp_tol"] = qp_tol_default(real)
     return values, sources
 
 

@@ -28,7 +28,10 @@ __all__ = ["Enum", "parse_enums", "parse_status_strings", "runtime_enums", "gene
 _COMMENT = re.compile(r"/\*(.*?)\*/", re.S)
 _ENUM = re.compile(r"\benum\s+(\w+)\s*\{(.*?)\}\s*;", re.S)
 _MEMBER = re.compile(r"^\s*(\w+)\s*(?:=\s*([-+]?(?:0[xX][0-9a-fA-F]+|\d+)))?\s*$")
-_DEFINE = re.compile(r"^\s*#\s*define\s+(\w+)\s+([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\b", re.M)
+# a number, or one wrapped in the real-type macros of dopus_real.h: DOPUS_R(1e3) reads 1e3,
+# DOPUS_PREC(1e-10, 1e-5) its double value 1e-10 (the reference backend computes in double)
+_DEFINE = re.compile(r"^\s*#\s*define\s+(\w+)\s+(?:\w+_(?:R|PREC)\(\s*)?"
+                     r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\b", re.M)
 _CASE = re.compile(r"case\s+(\w+)\s*:\s*return\s+\"((?:[^\"\\]|\\.)*)\"\s*;")
 
 

@@ -7,40 +7,40 @@
 #include "dopus_solver.h"
 #include "dopus_solver_internal.h"
 
-static double dopus_kkt_max(double a, double b)
+static dopus_real dopus_kkt_max(dopus_real a, dopus_real b)
 {
     return a > b ? a : b;
 }
 
 /* Violation max(0, v - ub, lb - v) of one row. */
-static double dopus_kkt_viol(double v, double lb, double ub)
+static dopus_real dopus_kkt_viol(dopus_real v, dopus_real lb, dopus_real ub)
 {
-    return dopus_kkt_max(0.0, dopus_kkt_max(v - ub, lb - v));
+    return dopus_kkt_max(DOPUS_R(0.0), dopus_kkt_max(v - ub, lb - v));
 }
 
 /* Complementarity of a signed multiplier mu of the row lb <= v <= ub:
  * max(mu,0) |ub - v| and max(-mu,0) |v - lb|; a nonzero multiplier on an infinite side
  * contributes |mu|. */
-static double dopus_kkt_comp(double mu, double v, double lb, double ub)
+static dopus_real dopus_kkt_comp(dopus_real mu, dopus_real v, dopus_real lb, dopus_real ub)
 {
-    double c = 0.0;
-    if (mu > 0.0) {
-        c = isinf(ub) ? mu : mu * fabs(ub - v);
-    } else if (mu < 0.0) {
-        c = isinf(lb) ? -mu : -mu * fabs(v - lb);
+    dopus_real c = DOPUS_R(0.0);
+    if (mu > DOPUS_R(0.0)) {
+        c = isinf(ub) ? mu : mu * dopus_fabs(ub - v);
+    } else if (mu < DOPUS_R(0.0)) {
+        c = isinf(lb) ? -mu : -mu * dopus_fabs(v - lb);
     }
     return c;
 }
 
-int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts)
+int dopus_kkt_measure(struct dopus_solver *s, const dopus_real *xhat0, dopus_real *parts)
 {
-    double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
-    double gL[DOPUS_NW], phi[DOPUS_NX], g[DOPUS_DIM(DOPUS_NG)], l;
-    double gLN[DOPUS_NX], E, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
+    dopus_real stat = DOPUS_R(0.0), eq = DOPUS_R(0.0), ineq = DOPUS_R(0.0), comp = DOPUS_R(0.0);
+    dopus_real gL[DOPUS_NW], phi[DOPUS_NX], g[DOPUS_DIM(DOPUS_NG)], l;
+    dopus_real gLN[DOPUS_NX], E, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
     int k, i, rc;
 
     for (i = 0; i < DOPUS_NX; ++i) {
-        eq = dopus_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
+        eq = dopus_kkt_max(eq, dopus_fabs(s->x[0][i] - xhat0[i]));
     }
     for (k = 0; k < DOPUS_N; ++k) {
         if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
@@ -53,11 +53,11 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
         }
         /* stationarity gL_k + mu_b_k + [lam_k; 0] */
         for (i = 0; i < DOPUS_NW; ++i) {
-            double v = gL[i] + s->mu_b[k][i] + (i < DOPUS_NX ? s->lam[k][i] : 0.0);
-            stat = dopus_kkt_max(stat, fabs(v));
+            dopus_real v = gL[i] + s->mu_b[k][i] + (i < DOPUS_NX ? s->lam[k][i] : DOPUS_R(0.0));
+            stat = dopus_kkt_max(stat, dopus_fabs(v));
         }
         for (i = 0; i < DOPUS_NX; ++i) {
-            eq = dopus_kkt_max(eq, fabs(s->x[k + 1][i] - phi[i]));
+            eq = dopus_kkt_max(eq, dopus_fabs(s->x[k + 1][i] - phi[i]));
         }
         for (i = 0; i < DOPUS_NG; ++i) {
             ineq = dopus_kkt_max(ineq, dopus_kkt_viol(g[i], dopus_lg[i], dopus_ug[i]));
@@ -67,7 +67,7 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
          * sides and counts with its magnitude) */
         if (!dopus_x_bounded(k)) {
             for (i = 0; i < DOPUS_NX; ++i) {
-                comp = dopus_kkt_max(comp, fabs(s->mu_b[0][i]));
+                comp = dopus_kkt_max(comp, dopus_fabs(s->mu_b[0][i]));
             }
         } else {
             for (i = 0; i < DOPUS_NX; ++i) {
@@ -87,12 +87,12 @@ int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts
         return rc;
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        stat = dopus_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]));
+        stat = dopus_kkt_max(stat, dopus_fabs(gLN[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]));
         ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->x[DOPUS_N][i], dopus_lbx[i], dopus_ubx[i]));
         comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_bN[i], s->x[DOPUS_N][i], dopus_lbx[i], dopus_ubx[i]));
     }
     for (i = 0; i < DOPUS_NE; ++i) {
-        eq = dopus_kkt_max(eq, fabs(r_eq[i]));
+        eq = dopus_kkt_max(eq, dopus_fabs(r_eq[i]));
     }
     for (i = 0; i < DOPUS_NR; ++i) {
         ineq = dopus_kkt_max(ineq, dopus_kkt_viol(r[i], dopus_lr[i], dopus_ur[i]));

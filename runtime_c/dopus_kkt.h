@@ -4,11 +4,13 @@
 #ifndef DOPUS_KKT_H
 #define DOPUS_KKT_H
 
+#include "dopus_real.h"
+
 struct dopus_solver;
 
 /* parts[0..3] = stat, eq, ineq, comp (infinity norms). Returns a status of enum
  * dopus_status (DOPUS_OK, DOPUS_ERR_FUNCTION or DOPUS_ERR_NONFINITE_VALUE). The iterate and
  * the stage slots are not touched; only the function scratch of the solver is used. */
-int dopus_kkt_measure(struct dopus_solver *s, const double *xhat0, double *parts);
+int dopus_kkt_measure(struct dopus_solver *s, const dopus_real *xhat0, dopus_real *parts);
 
 #endif /* DOPUS_KKT_H */

@@ -7,61 +7,64 @@
 #ifndef DOPUS_LINALG_H
 #define DOPUS_LINALG_H
 
+#include "dopus_real.h"
+
 /* In-place lower Cholesky factorisation A = L L' of the n x n symmetric matrix A (only the
  * lower triangle is read and written). Returns 0 on success, or j+1 when pivot j is not
  * positive or not finite (A is then partially overwritten). */
-int dopus_la_potrf_l(int n, double *A, int lda);
+int dopus_la_potrf_l(int n, dopus_real *A, int lda);
 
 /* As dopus_la_potrf_l, but a pivot d with -noise[j] <= d <= 0 (noise: absolute round-off
  * estimate of the diagonal entry, n values; NULL means 0) is taken as a numerical zero and
  * replaced by max(noise[j], DBL_EPSILON |A_jj|); *nfloor (if not NULL) counts them. Only
  * pivots below -noise[j] (or non-finite) fail; positive pivots are never changed. */
-int dopus_la_potrf_l_noise(int n, double *A, int lda, const double *noise, int *nfloor);
+int dopus_la_potrf_l_noise(int n, dopus_real *A, int lda, const dopus_real *noise, int *nfloor);
 
 /* In-place L D L' factorisation (unit lower L, diagonal D stored on the diagonal) of the
  * symmetric n x n matrix A, no pivoting. Returns 0 on success, j+1 on a zero/non-finite
  * pivot. The number of negative pivots is written to *neg when neg is not NULL. */
-int dopus_la_ldlt_l(int n, double *A, int lda, int *neg);
+int dopus_la_ldlt_l(int n, dopus_real *A, int lda, int *neg);
 
 /* Solve L x = b (trsv_ln) or L' x = b (trsv_lt) in place, L lower triangular n x n. */
-void dopus_la_trsv_ln(int n, const double *L, int ldl, double *x);
-void dopus_la_trsv_lt(int n, const double *L, int ldl, double *x);
+void dopus_la_trsv_ln(int n, const dopus_real *L, int ldl, dopus_real *x);
+void dopus_la_trsv_lt(int n, const dopus_real *L, int ldl, dopus_real *x);
 
 /* B <- L^{-1} B for the n x m matrix B (trsm_lln) or B <- L'^{-1} B (trsm_llt). */
-void dopus_la_trsm_lln(int n, int m, const double *L, int ldl, double *B, int ldb);
-void dopus_la_trsm_llt(int n, int m, const double *L, int ldl, double *B, int ldb);
+void dopus_la_trsm_lln(int n, int m, const dopus_real *L, int ldl, dopus_real *B, int ldb);
+void dopus_la_trsm_llt(int n, int m, const dopus_real *L, int ldl, dopus_real *B, int ldb);
 
 /* y <- alpha A x + beta y, A m x n (gemv_n);  y <- alpha A' x + beta y (gemv_t, y of size n).
  * beta == 0 overwrites y without reading it. */
-void dopus_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
-                     double *y);
-void dopus_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
-                     double *y);
+void dopus_la_gemv_n(int m, int n, dopus_real alpha, const dopus_real *A, int lda, const dopus_real *x,
+                     dopus_real beta, dopus_real *y);
+void dopus_la_gemv_t(int m, int n, dopus_real alpha, const dopus_real *A, int lda, const dopus_real *x,
+                     dopus_real beta, dopus_real *y);
 
 /* y <- alpha A x + beta y for symmetric n x n A of which only the lower triangle is read. */
-void dopus_la_symv_l(int n, double alpha, const double *A, int lda, const double *x, double beta, double *y);
+void dopus_la_symv_l(int n, dopus_real alpha, const dopus_real *A, int lda, const dopus_real *x,
+                     dopus_real beta, dopus_real *y);
 
 /* C <- alpha A B + beta C (gemm_nn: A m x k, B k x n); C <- alpha A' B + beta C (gemm_tn:
  * A k x m, B k x n). C is m x n. beta == 0 overwrites C without reading it. */
-void dopus_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
-                      double beta, double *C, int ldc);
-void dopus_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
-                      double beta, double *C, int ldc);
+void dopus_la_gemm_nn(int m, int n, int k, dopus_real alpha, const dopus_real *A, int lda,
+                      const dopus_real *B, int ldb, dopus_real beta, dopus_real *C, int ldc);
+void dopus_la_gemm_tn(int m, int n, int k, dopus_real alpha, const dopus_real *A, int lda,
+                      const dopus_real *B, int ldb, dopus_real beta, dopus_real *C, int ldc);
 
 /* Copy the m x n matrix A into B. */
-void dopus_la_copy_mat(int m, int n, const double *A, int lda, double *B, int ldb);
+void dopus_la_copy_mat(int m, int n, const dopus_real *A, int lda, dopus_real *B, int ldb);
 
 /* Mirror the lower triangle of the n x n matrix A into its upper triangle. */
-void dopus_la_symmetrize_l(int n, double *A, int lda);
+void dopus_la_symmetrize_l(int n, dopus_real *A, int lda);
 
 /* Vector helpers. */
-double dopus_la_dot(int n, const double *x, const double *y);
-void dopus_la_axpy(int n, double alpha, const double *x, double *y);
-double dopus_la_norm_inf(int n, const double *x);
+dopus_real dopus_la_dot(int n, const dopus_real *x, const dopus_real *y);
+void dopus_la_axpy(int n, dopus_real alpha, const dopus_real *x, dopus_real *y);
+dopus_real dopus_la_norm_inf(int n, const dopus_real *x);
 /* Infinity norm of the m x n matrix A (largest absolute entry, not the operator norm). */
-double dopus_la_max_abs_mat(int m, int n, const double *A, int lda);
+dopus_real dopus_la_max_abs_mat(int m, int n, const dopus_real *A, int lda);
 /* 1 when all m x n entries are finite, else 0. */
-int dopus_la_all_finite(int m, int n, const double *A, int lda);
+int dopus_la_all_finite(int m, int n, const dopus_real *A, int lda);
 
 /* ------------------------------------------------------------------------------------
  * Inline kernels (dopus_lai_*): the same operations as static inline functions, so that
@@ -72,54 +75,54 @@ int dopus_la_all_finite(int m, int n, const double *A, int lda);
 
 /* The pivot of column j of the Cholesky factorisation: A_jj minus the squares of row j of
  * the factor so far. */
-static inline double dopus_lai_potrf_pivot(const double *A, int lda, int j)
+static inline dopus_real dopus_lai_potrf_pivot(const dopus_real *A, int lda, int j)
 {
     int k;
-    double d = A[j + j * lda];
+    dopus_real d = A[j + j * lda];
     for (k = 0; k < j; ++k)
         d -= A[j + k * lda] * A[j + k * lda];
     return d;
 }
 
 /* Column j of the factor from its pivot d > 0: L_jj = sqrt(d), the entries below. */
-static inline void dopus_lai_potrf_column(int n, double *A, int lda, int j, double d)
+static inline void dopus_lai_potrf_column(int n, dopus_real *A, int lda, int j, dopus_real d)
 {
     int i, k;
-    d = sqrt(d);
+    d = dopus_sqrt(d);
     A[j + j * lda] = d;
     for (i = j + 1; i < n; ++i) {
-        double s = A[i + j * lda];
+        dopus_real s = A[i + j * lda];
         for (k = 0; k < j; ++k)
             s -= A[i + k * lda] * A[j + k * lda];
         A[i + j * lda] = s / d;
     }
 }
 
-static inline int dopus_lai_potrf_l(int n, double *A, int lda)
+static inline int dopus_lai_potrf_l(int n, dopus_real *A, int lda)
 {
     int j;
     for (j = 0; j < n; ++j) {
-        const double d = dopus_lai_potrf_pivot(A, lda, j);
+        const dopus_real d = dopus_lai_potrf_pivot(A, lda, j);
         /* !(d > 0) also rejects NaN */
-        if (!(d > 0.0) || !isfinite(d))
+        if (!(d > DOPUS_R(0.0)) || !isfinite(d))
             return j + 1;
         dopus_lai_potrf_column(n, A, lda, j, d);
     }
     return 0;
 }
 
-static inline int dopus_lai_potrf_l_noise(int n, double *A, int lda, const double *noise, int *nfloor)
+static inline int dopus_lai_potrf_l_noise(int n, dopus_real *A, int lda, const dopus_real *noise, int *nfloor)
 {
     int j;
     for (j = 0; j < n; ++j) {
-        const double ajj = fabs(A[j + j * lda]);
-        const double tol = noise ? noise[j] : 0.0;
-        double d = dopus_lai_potrf_pivot(A, lda, j);
+        const dopus_real ajj = dopus_fabs(A[j + j * lda]);
+        const dopus_real tol = noise ? noise[j] : DOPUS_R(0.0);
+        dopus_real d = dopus_lai_potrf_pivot(A, lda, j);
         if (!isfinite(d))
             return j + 1;
-        if (d <= 0.0) {
-            const double floor_d = tol > DBL_EPSILON * ajj ? tol : DBL_EPSILON * ajj;
-            if (d < -tol || !(floor_d > 0.0))
+        if (d <= DOPUS_R(0.0)) {
+            const dopus_real floor_d = tol > DOPUS_REAL_EPSILON * ajj ? tol : DOPUS_REAL_EPSILON * ajj;
+            if (d < -tol || !(floor_d > DOPUS_R(0.0)))
                 return j + 1;
             d = floor_d;
             if (nfloor)
@@ -130,23 +133,23 @@ static inline int dopus_lai_potrf_l_noise(int n, double *A, int lda, const doubl
     return 0;
 }
 
-static inline int dopus_lai_ldlt_l(int n, double *A, int lda, int *neg)
+static inline int dopus_lai_ldlt_l(int n, dopus_real *A, int lda, int *neg)
 {
     int i, j, k, nneg = 0;
     for (j = 0; j < n; ++j) {
-        double d = A[j + j * lda];
+        dopus_real d = A[j + j * lda];
         for (k = 0; k < j; ++k)
             d -= A[j + k * lda] * A[j + k * lda] * A[k + k * lda];
-        if (d == 0.0 || !isfinite(d)) {
+        if (d == DOPUS_R(0.0) || !isfinite(d)) {
             if (neg)
                 *neg = nneg;
             return j + 1;
         }
-        if (d < 0.0)
+        if (d < DOPUS_R(0.0))
             ++nneg;
         A[j + j * lda] = d;
         for (i = j + 1; i < n; ++i) {
-            double s = A[i + j * lda];
+            dopus_real s = A[i + j * lda];
             for (k = 0; k < j; ++k)
                 s -= A[i + k * lda] * A[j + k * lda] * A[k + k * lda];
             A[i + j * lda] = s / d;
@@ -157,36 +160,36 @@ static inline int dopus_lai_ldlt_l(int n, double *A, int lda, int *neg)
     return 0;
 }
 
-static inline void dopus_lai_trsv_ln(int n, const double *L, int ldl, double *x)
+static inline void dopus_lai_trsv_ln(int n, const dopus_real *L, int ldl, dopus_real *x)
 {
     int i, k;
     for (i = 0; i < n; ++i) {
-        double s = x[i];
+        dopus_real s = x[i];
         for (k = 0; k < i; ++k)
             s -= L[i + k * ldl] * x[k];
         x[i] = s / L[i + i * ldl];
     }
 }
 
-static inline void dopus_lai_trsv_lt(int n, const double *L, int ldl, double *x)
+static inline void dopus_lai_trsv_lt(int n, const dopus_real *L, int ldl, dopus_real *x)
 {
     int i, k;
     for (i = n - 1; i >= 0; --i) {
-        double s = x[i];
+        dopus_real s = x[i];
         for (k = i + 1; k < n; ++k)
             s -= L[k + i * ldl] * x[k];
         x[i] = s / L[i + i * ldl];
     }
 }
 
-static inline void dopus_lai_trsm_lln(int n, int m, const double *L, int ldl, double *B, int ldb)
+static inline void dopus_lai_trsm_lln(int n, int m, const dopus_real *L, int ldl, dopus_real *B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
         dopus_lai_trsv_ln(n, L, ldl, B + j * ldb);
 }
 
-static inline void dopus_lai_trsm_llt(int n, int m, const double *L, int ldl, double *B, int ldb)
+static inline void dopus_lai_trsm_llt(int n, int m, const dopus_real *L, int ldl, dopus_real *B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
@@ -194,52 +197,52 @@ static inline void dopus_lai_trsm_llt(int n, int m, const double *L, int ldl, do
 }
 
 /* y = beta y (m entries) with beta = 0 writing zeros (y may hold NaN) and beta = 1 no-op. */
-static inline void dopus_lai_scale_y(int m, double beta, double *y)
+static inline void dopus_lai_scale_y(int m, dopus_real beta, dopus_real *y)
 {
     int i;
-    if (beta == 0.0) {
+    if (beta == DOPUS_R(0.0)) {
         for (i = 0; i < m; ++i)
-            y[i] = 0.0;
-    } else if (beta != 1.0) {
+            y[i] = DOPUS_R(0.0);
+    } else if (beta != DOPUS_R(1.0)) {
         for (i = 0; i < m; ++i)
             y[i] *= beta;
     }
 }
 
-static inline void dopus_lai_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
-                                    double beta, double *y)
+static inline void dopus_lai_gemv_n(int m, int n, dopus_real alpha, const dopus_real *A, int lda,
+                                    const dopus_real *x, dopus_real beta, dopus_real *y)
 {
     int i, j;
     dopus_lai_scale_y(m, beta, y);
     for (j = 0; j < n; ++j) {
-        const double a = alpha * x[j];
+        const dopus_real a = alpha * x[j];
         for (i = 0; i < m; ++i)
             y[i] += A[i + j * lda] * a;
     }
 }
 
-static inline void dopus_lai_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x,
-                                    double beta, double *y)
+static inline void dopus_lai_gemv_t(int m, int n, dopus_real alpha, const dopus_real *A, int lda,
+                                    const dopus_real *x, dopus_real beta, dopus_real *y)
 {
     int i, j;
     for (j = 0; j < n; ++j) {
-        double s = 0.0;
+        dopus_real s = DOPUS_R(0.0);
         for (i = 0; i < m; ++i)
             s += A[i + j * lda] * x[i];
-        y[j] = (beta == 0.0 ? 0.0 : beta * y[j]) + alpha * s;
+        y[j] = (beta == DOPUS_R(0.0) ? DOPUS_R(0.0) : beta * y[j]) + alpha * s;
     }
 }
 
-static inline void dopus_lai_symv_l(int n, double alpha, const double *A, int lda, const double *x,
-                                    double beta, double *y)
+static inline void dopus_lai_symv_l(int n, dopus_real alpha, const dopus_real *A, int lda,
+                                    const dopus_real *x, dopus_real beta, dopus_real *y)
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
     dopus_lai_scale_y(n, beta, y);
     for (j = 0; j < n; ++j) {
-        const double *a = A + j * lda;
-        const double xj = alpha * x[j];
-        double s = 0.0;
+        const dopus_real *a = A + j * lda;
+        const dopus_real xj = alpha * x[j];
+        dopus_real s = DOPUS_R(0.0);
         y[j] += a[j] * xj;
         for (i = j + 1; i < n; ++i) {
             y[i] += a[i] * xj;
@@ -249,36 +252,36 @@ static inline void dopus_lai_symv_l(int n, double alpha, const double *A, int ld
     }
 }
 
-static inline void dopus_lai_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda,
-                                     const double *B, int ldb, double beta, double *C, int ldc)
+static inline void dopus_lai_gemm_nn(int m, int n, int k, dopus_real alpha, const dopus_real *A, int lda,
+                                     const dopus_real *B, int ldb, dopus_real beta, dopus_real *C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
-        double *c = C + j * ldc;
+        dopus_real *c = C + j * ldc;
         dopus_lai_scale_y(m, beta, c);
         for (l = 0; l < k; ++l) {
-            const double b = alpha * B[l + j * ldb];
+            const dopus_real b = alpha * B[l + j * ldb];
             for (i = 0; i < m; ++i)
                 c[i] += A[i + l * lda] * b;
         }
     }
 }
 
-static inline void dopus_lai_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda,
-                                     const double *B, int ldb, double beta, double *C, int ldc)
+static inline void dopus_lai_gemm_tn(int m, int n, int k, dopus_real alpha, const dopus_real *A, int lda,
+                                     const dopus_real *B, int ldb, dopus_real beta, dopus_real *C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
         for (i = 0; i < m; ++i) {
-            double s = 0.0;
+            dopus_real s = DOPUS_R(0.0);
             for (l = 0; l < k; ++l)
                 s += A[l + i * lda] * B[l + j * ldb];
-            C[i + j * ldc] = (beta == 0.0 ? 0.0 : beta * C[i + j * ldc]) + alpha * s;
+            C[i + j * ldc] = (beta == DOPUS_R(0.0) ? DOPUS_R(0.0) : beta * C[i + j * ldc]) + alpha * s;
         }
     }
 }
 
-static inline void dopus_lai_copy_mat(int m, int n, const double *A, int lda, double *B, int ldb)
+static inline void dopus_lai_copy_mat(int m, int n, const dopus_real *A, int lda, dopus_real *B, int ldb)
 {
     int i, j;
     for (j = 0; j < n; ++j)
@@ -286,7 +289,7 @@ static inline void dopus_lai_copy_mat(int m, int n, const double *A, int lda, do
             B[i + j * ldb] = A[i + j * lda];
 }
 
-static inline void dopus_lai_symmetrize_l(int n, double *A, int lda)
+static inline void dopus_lai_symmetrize_l(int n, dopus_real *A, int lda)
 {
     int i, j;
     for (j = 0; j < n; ++j)
@@ -294,16 +297,16 @@ static inline void dopus_lai_symmetrize_l(int n, double *A, int lda)
             A[j + i * lda] = A[i + j * lda];
 }
 
-static inline double dopus_lai_dot(int n, const double *x, const double *y)
+static inline dopus_real dopus_lai_dot(int n, const dopus_real *x, const dopus_real *y)
 {
     int i;
-    double s = 0.0;
+    dopus_real s = DOPUS_R(0.0);
     for (i = 0; i < n; ++i)
         s += x[i] * y[i];
     return s;
 }
 
-static inline void dopus_lai_axpy(int n, double alpha, const double *x, double *y)
+static inline void dopus_lai_axpy(int n, dopus_real alpha, const dopus_real *x, dopus_real *y)
 {
     int i;
     for (i = 0; i < n; ++i)
@@ -311,7 +314,7 @@ static inline void dopus_lai_axpy(int n, double alpha, const double *x, double *
 }
 
 /* 1 when every entry of the vector is finite (no NaN, no Inf) */
-static inline int dopus_lai_vec_finite(int n, const double *x)
+static inline int dopus_lai_vec_finite(int n, const dopus_real *x)
 {
     int i;
     for (i = 0; i < n; ++i)
@@ -320,31 +323,31 @@ static inline int dopus_lai_vec_finite(int n, const double *x)
     return 1;
 }
 
-static inline double dopus_lai_norm_inf(int n, const double *x)
+static inline dopus_real dopus_lai_norm_inf(int n, const dopus_real *x)
 {
     int i;
-    double m = 0.0;
+    dopus_real m = DOPUS_R(0.0);
     for (i = 0; i < n; ++i) {
-        const double a = fabs(x[i]);
+        const dopus_real a = dopus_fabs(x[i]);
         if (a > m || a != a)
             m = a;
     }
     return m;
 }
 
-static inline double dopus_lai_max_abs_mat(int m, int n, const double *A, int lda)
+static inline dopus_real dopus_lai_max_abs_mat(int m, int n, const dopus_real *A, int lda)
 {
     int j;
-    double r = 0.0;
+    dopus_real r = DOPUS_R(0.0);
     for (j = 0; j < n; ++j) {
-        const double c = dopus_lai_norm_inf(m, A + j * lda);
+        const dopus_real c = dopus_lai_norm_inf(m, A + j * lda);
         if (c > r || c != c)
             r = c;
     }
     return r;
 }
 
-static inline int dopus_lai_all_finite(int m, int n, const double *A, int lda)
+static inline int dopus_lai_all_finite(int m, int n, const dopus_real *A, int lda)
 {
     int i, j;
     for (j = 0; j < n; ++j)

@@ -14,21 +14,21 @@
 static dopus_solver solver;
 static dopus_fun_work plant_work;
 
-static void print_vector(const char *label, const double *v, int n)
+static void print_vector(const char *label, const dopus_real *v, int n)
 {
     int i;
     printf(" %s", label);
     for (i = 0; i < n; ++i) {
-        printf(" %.17g", v[i]);
+        printf(" %.17g", (double)v[i]);
     }
 }
 
-static int report(const char *phase, int iter, int status, const double *u0, const double *kkt4)
+static int report(const char *phase, int iter, int status, const dopus_real *u0, const dopus_real *kkt4)
 {
-    double kkt = fmax(fmax(kkt4[0], kkt4[1]), fmax(kkt4[2], kkt4[3]));
+    dopus_real kkt = dopus_fmax(dopus_fmax(kkt4[0], kkt4[1]), dopus_fmax(kkt4[2], kkt4[3]));
     printf("%s %d status %d", phase, iter, status);
     print_vector("u0", u0, DOPUS_NU);
-    printf(" kkt %.17g\n", kkt);
+    printf(" kkt %.17g\n", (double)kkt);
     if (status != DOPUS_OK || !isfinite(kkt)) {
         fprintf(stderr, "main_dopus: %s iteration %d failed: %s\n", phase, iter, dopus_status_string(status));
         return 1;
@@ -40,14 +40,14 @@ static int report(const char *phase, int iter, int status, const double *u0, con
  * next measurement is the model's prediction phi(x0, u0) */
 static int run(const char *phase, int mode)
 {
-    double xhat0[DOPUS_NX], xnext[DOPUS_NX], u0[DOPUS_NU], kkt4[4], l, g[DOPUS_DIM(DOPUS_NG)];
+    dopus_real xhat0[DOPUS_NX], xnext[DOPUS_NX], u0[DOPUS_NU], kkt4[4], l, g[DOPUS_DIM(DOPUS_NG)];
     int i, k, status;
 
     for (i = 0; i < DOPUS_NX; ++i) {
         xhat0[i] = dopus_x0_default[i];
     }
     for (i = 0; i < DOPUS_NU; ++i) {
-        u0[i] = 0.0;
+        u0[i] = DOPUS_R(0.0);
     }
     dopus_defaults(&solver);
     status = dopus_set_mode(&solver, mode);

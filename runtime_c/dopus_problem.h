@@ -10,34 +10,34 @@
 
 #include "dopus_sizes.h"
 
-extern const double dopus_lbx[DOPUS_NX], dopus_ubx[DOPUS_NX];
-extern const double dopus_lbu[DOPUS_NU], dopus_ubu[DOPUS_NU];
-extern const double dopus_lg[DOPUS_DIM(DOPUS_NG)], dopus_ug[DOPUS_DIM(DOPUS_NG)];
-extern const double dopus_lr[DOPUS_DIM(DOPUS_NR)], dopus_ur[DOPUS_DIM(DOPUS_NR)];
-extern const double dopus_p_default[DOPUS_DIM(DOPUS_NP)]; /* every node */
-extern const double dopus_dt;
-extern const double dopus_x0_default[DOPUS_NX];
+extern const dopus_real dopus_lbx[DOPUS_NX], dopus_ubx[DOPUS_NX];
+extern const dopus_real dopus_lbu[DOPUS_NU], dopus_ubu[DOPUS_NU];
+extern const dopus_real dopus_lg[DOPUS_DIM(DOPUS_NG)], dopus_ug[DOPUS_DIM(DOPUS_NG)];
+extern const dopus_real dopus_lr[DOPUS_DIM(DOPUS_NR)], dopus_ur[DOPUS_DIM(DOPUS_NR)];
+extern const dopus_real dopus_p_default[DOPUS_DIM(DOPUS_NP)]; /* every node */
+extern const dopus_real dopus_dt;
+extern const dopus_real dopus_x0_default[DOPUS_NX];
 /* the OCP file's initial guess */
-extern const double dopus_guess_x[DOPUS_N + 1][DOPUS_NX];
-extern const double dopus_guess_u[DOPUS_N][DOPUS_NU];
+extern const dopus_real dopus_guess_x[DOPUS_N + 1][DOPUS_NX];
+extern const dopus_real dopus_guess_u[DOPUS_N][DOPUS_NU];
 extern const int dopus_default_M;
 extern const int dopus_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int dopus_default_regularization; /* 0 none, 1 project, 2 mirror */
-extern const double dopus_default_reg_eps;
+extern const dopus_real dopus_default_reg_eps;
 extern const int dopus_default_cost_hessian; /* 1 fresh, 0 stored */
-extern const double dopus_default_lm;        /* Levenberg-Marquardt term, >= 0 */
+extern const dopus_real dopus_default_lm;    /* Levenberg-Marquardt term, >= 0 */
 
 #if DOPUS_HAS_NOMINAL
 /* offline primal-dual solution at dopus_x0_default (IPOPT at generation time), so the
  * controller starts warm (docs/design.md section 8) */
-extern const double dopus_nominal_x[DOPUS_N + 1][DOPUS_NX];
-extern const double dopus_nominal_u[DOPUS_N][DOPUS_NU];
-extern const double dopus_nominal_lam[DOPUS_N + 1][DOPUS_NX];
-extern const double dopus_nominal_mu_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
-extern const double dopus_nominal_mu_b[DOPUS_N][DOPUS_NW];
-extern const double dopus_nominal_mu_bN[DOPUS_NX];
-extern const double dopus_nominal_mu_r[DOPUS_DIM(DOPUS_NR)];
-extern const double dopus_nominal_nu[DOPUS_DIM(DOPUS_NE)];
+extern const dopus_real dopus_nominal_x[DOPUS_N + 1][DOPUS_NX];
+extern const dopus_real dopus_nominal_u[DOPUS_N][DOPUS_NU];
+extern const dopus_real dopus_nominal_lam[DOPUS_N + 1][DOPUS_NX];
+extern const dopus_real dopus_nominal_mu_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
+extern const dopus_real dopus_nominal_mu_b[DOPUS_N][DOPUS_NW];
+extern const dopus_real dopus_nominal_mu_bN[DOPUS_NX];
+extern const dopus_real dopus_nominal_mu_r[DOPUS_DIM(DOPUS_NR)];
+extern const dopus_real dopus_nominal_nu[DOPUS_DIM(DOPUS_NE)];
 #endif
 
 #endif /* DOPUS_PROBLEM_H */

@@ -48,59 +48,59 @@
     for ((b) = (ws)->bstart[(k)]; (b) < (ws)->bstart[(k) + 1] && ((j) = (ws)->bidx[(b)] - (k)*NSI, 1); ++(b))
 
 /* Fraction-to-boundary factor and limits of the inertia correction. */
-#define STEP_TAU 0.995
+#define STEP_TAU DOPUS_R(0.995)
 /* Warm start: slacks floored at WARM_FLOOR_T times the bound's scale, multipliers at
  * WARM_FLOOR_Z (both relative to the unit scale of the cold start). */
 #ifndef WARM_FLOOR_T
-#define WARM_FLOOR_T 1e-2
+#define WARM_FLOOR_T DOPUS_R(1e-2)
 #endif
 #ifndef WARM_FLOOR_Z
-#define WARM_FLOOR_Z 1e-2
+#define WARM_FLOOR_Z DOPUS_R(1e-2)
 #endif
 /* Centred cold start: slacks floored at the primal infeasibility of w = 0, at least
  * CENTRED_T_MIN and at most 1, and every multiplier z = floor / t (so t z = floor on
  * every side). */
-#define CENTRED_T_MIN 0.1
+#define CENTRED_T_MIN DOPUS_R(0.1)
 /* Smallest centring parameter of a step taken with the inertia correction (see there). */
-#define SIGMA_NONCONVEX 0.9
+#define SIGMA_NONCONVEX DOPUS_R(0.9)
 /* Smallest centring parameter after the restart on a nonconvex stall (see dopus_qp_solve). */
-#define SIGMA_MIN_RESTART 0.1
+#define SIGMA_MIN_RESTART DOPUS_R(0.1)
 /* Iterations without progress after an inertia correction that trigger the restart. */
 #define RESTART_STALL_ITERS 6
-#define DELTA_GROW 10.0
+#define DELTA_GROW DOPUS_R(10.0)
 /* Largest number of delta increases per factorisation (1e-8 to 1e10 times the Hessian
  * scale takes 18). */
 #define DELTA_TRIES 40
-#define DELTA_MAX_REL 1e10
+#define DELTA_MAX_REL DOPUS_R(1e10)
 #define RHO_TRIES 6
-#define MU_FLOOR_REL 0.1
+#define MU_FLOOR_REL DOPUS_R(0.1)
 #define STALL_ITERS 10
-#define REFINE_BELOW 1e-6
-#define RHO_MAX_REL 1e10
+#define REFINE_BELOW DOPUS_PREC(1e-6, 1e-3)
+#define RHO_MAX_REL DOPUS_R(1e10)
 /* Relative rounding unit used in the round-off estimates of the Riccati recursion (a few
  * DBL_EPSILON times the accumulation length). */
-#define RICCATI_EPS (16.0 * (NW + 1) * 2.220446049250313e-16)
+#define RICCATI_EPS (DOPUS_R(16.0) * (NW + 1) * DOPUS_REAL_EPSILON)
 /* Infeasibility certificates are tested on the dual (primal) iterate normalised to unit
  * infinity norm once it has grown CERT_GROWTH times beyond the data scale: the normalised
  * constraint residual (A'y, or the ray's equality/cone violation) must be below CERT_RES,
  * the separating value (b'y, or the descent g'd / curvature d'Hd) beyond CERT_SEP. */
-#define CERT_GROWTH 1e6
-#define CERT_RES_DUAL 1e-9
-#define CERT_RES_PRIMAL 1e-6
-#define CERT_SEP 1e-6
+#define CERT_GROWTH DOPUS_R(1e6)
+#define CERT_RES_DUAL DOPUS_PREC(1e-9, 1e-4)
+#define CERT_RES_PRIMAL DOPUS_PREC(1e-6, 1e-3)
+#define CERT_SEP DOPUS_PREC(1e-6, 1e-3)
 
-static double dmax(double a, double b)
+static dopus_real dmax(dopus_real a, dopus_real b)
 {
     return a > b ? a : b;
 }
-static double dmin(double a, double b)
+static dopus_real dmin(dopus_real a, dopus_real b)
 {
     return a < b ? a : b;
 }
 
 void dopus_qp_settings_default(dopus_qp_settings *settings)
 {
-    settings->tol = 1e-8;
+    settings->tol = DOPUS_PREC(1e-8, 1e-5);
     settings->max_iter = 100;
     settings->warm_start = 0;
     settings->refine_steps = 1;
@@ -126,7 +126,7 @@ static int check_input(const dopus_qp_in *in)
     }
     if (in->HN == NULL || (NR > 0 && in->R == NULL) || (NE > 0 && in->Req == NULL))
         return 0;
-    if (!(in->hess_shift >= 0.0 && in->hess_shift < INFINITY))
+    if (!(in->hess_shift >= DOPUS_R(0.0) && in->hess_shift < INFINITY))
         return 0;
     if (!dopus_lai_all_finite(NX, NX, in->HN, NX) || !dopus_lai_all_finite(NX, 1, in->x0, NX) ||
         !dopus_lai_all_finite(NX, 1, in->gN, NX))
@@ -158,7 +158,7 @@ static int check_input(const dopus_qp_in *in)
 }
 
 /* Lower and upper bound of inequality row i (flat row layout of dopus_qp.h). */
-static void row_bounds(const dopus_qp_in *in, int i, double *lo, double *up)
+static void row_bounds(const dopus_qp_in *in, int i, dopus_real *lo, dopus_real *up)
 {
     if (i < TOFF) {
         const int k = i / NSI, j = i - k * NSI;
@@ -192,12 +192,12 @@ static int setup_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in)
              * not unique, lam_0 absorbs any value, and a violation by round-off in x0 could
              * never be removed) */
             int ignored = (i < NX), hl, hu;
-            double lo, up;
+            dopus_real lo, up;
             if (NG > 0 && i >= NW && i < NW + NG) {
                 int c;
                 ignored = 1;
                 for (c = NX; c < NW; ++c)
-                    if (in->C[0][(i - NW) + c * NG] != 0.0)
+                    if (in->C[0][(i - NW) + c * NG] != DOPUS_R(0.0))
                         ignored = 0;
             }
             row_bounds(in, i, &lo, &up);
@@ -223,9 +223,9 @@ static int setup_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in)
 /* ---------------------------------------------------------------- row maps D, D' */
 
 /* D_j w for row j of stage k (k = N: the terminal rows), w the stage's primal vector. */
-static double row_dot(const dopus_qp_in *in, int k, int j, const double *w)
+static dopus_real row_dot(const dopus_qp_in *in, int k, int j, const dopus_real *w)
 {
-    double s = 0.0;
+    dopus_real s = DOPUS_R(0.0);
     int c;
     if (k < N) {
         if (NG == 0 || j < NW)
@@ -242,7 +242,7 @@ static double row_dot(const dopus_qp_in *in, int k, int j, const double *w)
 }
 
 /* o += a D_j' for row j of stage k, o the stage's part of a primal-sized vector. */
-static void row_axpy(const dopus_qp_in *in, int k, int j, double a, double *o)
+static void row_axpy(const dopus_qp_in *in, int k, int j, dopus_real a, dopus_real *o)
 {
     int c;
     if (k < N) {
@@ -263,11 +263,12 @@ static void row_axpy(const dopus_qp_in *in, int k, int j, double a, double *o)
 #define PACKED(i, j) ((j)*NX - (j) * ((j)-1) / 2 + (i) - (j))
 
 /* y += alpha P x for P packed by lower columns (the order of gemv_n: column by column). */
-static void spmv_packed(const double *restrict Pp, double alpha, const double *restrict x, double *restrict y)
+static void spmv_packed(const dopus_real *restrict Pp, dopus_real alpha, const dopus_real *restrict x,
+                        dopus_real *restrict y)
 {
     int i, j;
     for (j = 0; j < NX; ++j) {
-        const double a = alpha * x[j];
+        const dopus_real a = alpha * x[j];
         for (i = 0; i < j; ++i)
             y[i] += Pp[PACKED(j, i)] * a;
         for (i = j; i < NX; ++i)
@@ -277,14 +278,14 @@ static void spmv_packed(const double *restrict Pp, double alpha, const double *r
 
 /* The Cholesky factor Lu (nu x nu, lower) of a stage kept packed by lower columns in the
  * workspace and unpacked where the triangular kernels use it. */
-static void pack_lu(const double *restrict L, double *restrict Lp)
+static void pack_lu(const dopus_real *restrict L, dopus_real *restrict Lp)
 {
     int i, j, l = 0;
     for (j = 0; j < NU; ++j)
         for (i = j; i < NU; ++i)
             Lp[l++] = L[i + j * NU1];
 }
-static void unpack_lu(const double *restrict Lp, double *restrict L)
+static void unpack_lu(const dopus_real *restrict Lp, dopus_real *restrict L)
 {
     int i, j, l = 0;
     for (j = 0; j < NU; ++j)
@@ -296,26 +297,26 @@ static void unpack_lu(const double *restrict Lp, double *restrict L)
  * r_up = up - v - t_up (vl = v - lo and uv = up - v are kept), the slack steps of the current direction, dt_lo = dv + r_lo and
  * dt_up = r_up - dv (dv = D dw), and the barrier weight q = z_lo/t_lo + z_up/t_up, formed
  * where they are used rather than stored. */
-static double r_lo(const dopus_qp_workspace *ws, int b)
+static dopus_real r_lo(const dopus_qp_workspace *ws, int b)
 {
     return ws->vl[b] - ws->t_lo[b];
 }
-static double r_up(const dopus_qp_workspace *ws, int b)
+static dopus_real r_up(const dopus_qp_workspace *ws, int b)
 {
     return ws->uv[b] - ws->t_up[b];
 }
-static double dt_lo(const dopus_qp_workspace *ws, int b)
+static dopus_real dt_lo(const dopus_qp_workspace *ws, int b)
 {
     return ws->dv[b] + r_lo(ws, b);
 }
-static double dt_up(const dopus_qp_workspace *ws, int b)
+static dopus_real dt_up(const dopus_qp_workspace *ws, int b)
 {
     return r_up(ws, b) - ws->dv[b];
 }
 
-static double row_q(const dopus_qp_workspace *ws, int b)
+static dopus_real row_q(const dopus_qp_workspace *ws, int b)
 {
-    double q = 0.0;
+    dopus_real q = DOPUS_R(0.0);
     if (ws->has_lo[b])
         q += ws->z_lo[b] / ws->t_lo[b];
     if (ws->has_up[b])
@@ -330,7 +331,7 @@ static double row_q(const dopus_qp_workspace *ws, int b)
 static void data_scales(dopus_qp_workspace *ws, const dopus_qp_in *in)
 {
     int k, i;
-    double sg = dopus_lai_norm_inf(NX, in->gN), sb = dopus_lai_norm_inf(NX, in->x0), sl = 0.0;
+    dopus_real sg = dopus_lai_norm_inf(NX, in->gN), sb = dopus_lai_norm_inf(NX, in->x0), sl = DOPUS_R(0.0);
     for (k = 0; k < N; ++k) {
         sg = dmax(sg, dopus_lai_norm_inf(NW, in->g[k]));
         sb = dmax(sb, dopus_lai_norm_inf(NX, in->b[k]));
@@ -338,12 +339,12 @@ static void data_scales(dopus_qp_workspace *ws, const dopus_qp_in *in)
     if (NE > 0)
         sb = dmax(sb, dopus_lai_norm_inf(NE, in->req));
     for (i = 0; i < ws->nb; ++i) {
-        double lo, up;
+        dopus_real lo, up;
         row_bounds(in, ws->bidx[i], &lo, &up);
         if (ws->has_lo[i])
-            sl = dmax(sl, fabs(lo));
+            sl = dmax(sl, dopus_fabs(lo));
         if (ws->has_up[i])
-            sl = dmax(sl, fabs(up));
+            sl = dmax(sl, dopus_fabs(up));
     }
     ws->scale_g = sg;
     ws->scale_b = sb;
@@ -351,21 +352,22 @@ static void data_scales(dopus_qp_workspace *ws, const dopus_qp_in *in)
 }
 
 typedef struct {
-    double mu;                           /* average complementarity */
-    int nsides;                          /* number of bounded sides */
-    double stat, eq, ineq, comp;         /* unscaled inf-norms */
-    double stat_s, eq_s, ineq_s, comp_s; /* scaled */
-    double ny;                           /* inf-norm of the dual iterate */
-    double aty; /* inf-norm of the constraint part A'y of the stationarity residual */
-    double nz;  /* inf-norm of the inequality multipliers */
-    double obj;
+    dopus_real mu;                           /* average complementarity */
+    int nsides;                              /* number of bounded sides */
+    dopus_real stat, eq, ineq, comp;         /* unscaled inf-norms */
+    dopus_real stat_s, eq_s, ineq_s, comp_s; /* scaled */
+    dopus_real ny;                           /* inf-norm of the dual iterate */
+    dopus_real aty; /* inf-norm of the constraint part A'y of the stationarity residual */
+    dopus_real nz;  /* inf-norm of the inequality multipliers */
+    dopus_real obj;
 } qp_res;
 
 static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_res *r)
 {
     int k, i, b, j;
-    double s_stat = 1.0, s_eq = 1.0, s_ineq = 1.0, nz = 0.0, obj = 0.0, comp = 0.0, ineq = 0.0;
-    double sum_c = 0.0, naty = 0.0;
+    dopus_real s_stat = DOPUS_R(1.0), s_eq = DOPUS_R(1.0), s_ineq = DOPUS_R(1.0), nz = DOPUS_R(0.0),
+               obj = DOPUS_R(0.0), comp = DOPUS_R(0.0), ineq = DOPUS_R(0.0);
+    dopus_real sum_c = DOPUS_R(0.0), naty = DOPUS_R(0.0);
     int m = 0;
 
     /* stage by stage: the objective part Hw + g and the constraint part A'y (a) of the
@@ -374,37 +376,37 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
     s_ineq = dmax(s_ineq, ws->scale_bounds);
     for (k = 0; k <= N; ++k) {
         const int nk = k < N ? NW : NX;
-        const double *w = ws->prim + k * NW;
-        double *h = ws->r_stat + k * NW;
-        double a[NW];
+        const dopus_real *w = ws->prim + k * NW;
+        dopus_real *h = ws->r_stat + k * NW;
+        dopus_real a[NW];
         if (k < N) {
-            dopus_lai_symv_l(NW, 1.0, in->H[k], NW, w, 0.0, h);
+            dopus_lai_symv_l(NW, DOPUS_R(1.0), in->H[k], NW, w, DOPUS_R(0.0), h);
             dopus_lai_axpy(NW, in->hess_shift, w, h);
             s_stat = dmax(s_stat, dopus_lai_norm_inf(NW, h));
-            obj += 0.5 * dopus_lai_dot(NW, w, h) + dopus_lai_dot(NW, in->g[k], w);
-            dopus_lai_axpy(NW, 1.0, in->g[k], h);
+            obj += DOPUS_R(0.5) * dopus_lai_dot(NW, w, h) + dopus_lai_dot(NW, in->g[k], w);
+            dopus_lai_axpy(NW, DOPUS_R(1.0), in->g[k], h);
             for (i = 0; i < NW; ++i)
-                a[i] = i < NX ? ws->lam[k * NX + i] : 0.0;
-            dopus_lai_gemv_t(NX, NW, -1.0, in->Phi[k], NX, ws->lam + (k + 1) * NX, 1.0, a);
+                a[i] = i < NX ? ws->lam[k * NX + i] : DOPUS_R(0.0);
+            dopus_lai_gemv_t(NX, NW, -DOPUS_R(1.0), in->Phi[k], NX, ws->lam + (k + 1) * NX, DOPUS_R(1.0), a);
         } else {
-            dopus_lai_symv_l(NX, 1.0, in->HN, NX, w, 0.0, h);
+            dopus_lai_symv_l(NX, DOPUS_R(1.0), in->HN, NX, w, DOPUS_R(0.0), h);
             dopus_lai_axpy(NX, in->hess_shift, w, h);
             s_stat = dmax(s_stat, dopus_lai_norm_inf(NX, h));
-            obj += 0.5 * dopus_lai_dot(NX, w, h) + dopus_lai_dot(NX, in->gN, w);
+            obj += DOPUS_R(0.5) * dopus_lai_dot(NX, w, h) + dopus_lai_dot(NX, in->gN, w);
             s_stat = dmax(s_stat, ws->scale_g);
-            dopus_lai_axpy(NX, 1.0, in->gN, h);
+            dopus_lai_axpy(NX, DOPUS_R(1.0), in->gN, h);
             for (i = 0; i < NX; ++i)
                 a[i] = ws->lam[N * NX + i];
             if (NE > 0)
-                dopus_lai_gemv_t(NE, NX, 1.0, in->Req, NE1, ws->nu, 1.0, a);
+                dopus_lai_gemv_t(NE, NX, DOPUS_R(1.0), in->Req, NE1, ws->nu, DOPUS_R(1.0), a);
         }
         FOR_STAGE_ROWS(ws, k, b, j)
         {
             /* signed multiplier y = z_up - z_lo of the row into A'y */
-            const double zl = ws->has_lo[b] ? ws->z_lo[b] : 0.0;
-            const double zu = ws->has_up[b] ? ws->z_up[b] : 0.0;
-            const double v = row_dot(in, k, j, w);
-            double lo, up;
+            const dopus_real zl = ws->has_lo[b] ? ws->z_lo[b] : DOPUS_R(0.0);
+            const dopus_real zu = ws->has_up[b] ? ws->z_up[b] : DOPUS_R(0.0);
+            const dopus_real v = row_dot(in, k, j, w);
+            dopus_real lo, up;
             nz = dmax(nz, dmax(zl, zu));
             row_axpy(in, k, j, zu - zl, a);
             row_bounds(in, ws->bidx[b], &lo, &up);
@@ -423,7 +425,7 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
                 sum_c += ws->t_up[b] * ws->z_up[b];
                 ++m;
             }
-            s_ineq = dmax(s_ineq, fabs(v));
+            s_ineq = dmax(s_ineq, dopus_fabs(v));
         }
         naty = dmax(naty, dopus_lai_norm_inf(nk, a));
         for (i = 0; i < nk; ++i)
@@ -436,42 +438,55 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
         ws->r_dyn[i] = ws->prim[i] - in->x0[i];
     s_eq = dmax(s_eq, ws->scale_b);
     for (k = 0; k < N; ++k) {
-        double *rd = ws->r_dyn + (k + 1) * NX;
-        const double *xn = ws->prim + (k + 1) * NW;
-        dopus_lai_gemv_n(NX, NW, -1.0, in->Phi[k], NX, ws->prim + k * NW, 0.0, rd);
+        dopus_real *rd = ws->r_dyn + (k + 1) * NX;
+        const dopus_real *xn = ws->prim + (k + 1) * NW;
+        dopus_lai_gemv_n(NX, NW, -DOPUS_R(1.0), in->Phi[k], NX, ws->prim + k * NW, DOPUS_R(0.0), rd);
         s_eq = dmax(s_eq, dopus_lai_norm_inf(NX, rd));
         for (i = 0; i < NX; ++i)
             rd[i] += xn[i] - in->b[k][i];
     }
     s_eq = dmax(s_eq, dopus_lai_norm_inf(NP, ws->prim));
     if (NE > 0) {
-        dopus_lai_gemv_n(NE, NX, 1.0, in->Req, NE1, ws->prim + N * NW, 0.0, ws->r_eqN);
+        dopus_lai_gemv_n(NE, NX, DOPUS_R(1.0), in->Req, NE1, ws->prim + N * NW, DOPUS_R(0.0), ws->r_eqN);
         s_eq = dmax(s_eq, dopus_lai_norm_inf(NE, ws->r_eqN));
         for (i = 0; i < NE; ++i)
             ws->r_eqN[i] -= in->req[i];
     }
 
     r->nsides = m;
-    r->mu = m > 0 ? sum_c / m : 0.0;
+    r->mu = m > 0 ? sum_c / m : DOPUS_R(0.0);
     r->stat = dopus_lai_norm_inf(NP, ws->r_stat);
-    r->eq =
-        dmax(dopus_lai_norm_inf((N + 1) * NX, ws->r_dyn), NE > 0 ? dopus_lai_norm_inf(NE, ws->r_eqN) : 0.0);
+    r->eq = dmax(dopus_lai_norm_inf((N + 1) * NX, ws->r_dyn),
+                 NE > 0 ? dopus_lai_norm_inf(NE, ws->r_eqN) : DOPUS_R(0.0));
     r->ineq = ineq;
     r->comp = comp;
     r->stat_s = r->stat / s_stat;
     r->eq_s = r->eq / s_eq;
     r->ineq_s = r->ineq / s_ineq;
-    r->comp_s = r->comp / dmax(1.0, nz);
+    r->comp_s = r->comp / dmax(DOPUS_R(1.0), nz);
     r->nz = nz;
     r->aty = naty;
-    r->ny = dmax(
-        nz, dmax(dopus_lai_norm_inf((N + 1) * NX, ws->lam), NE > 0 ? dopus_lai_norm_inf(NE, ws->nu) : 0.0));
+    r->ny = dmax(nz, dmax(dopus_lai_norm_inf((N + 1) * NX, ws->lam),
+                          NE > 0 ? dopus_lai_norm_inf(NE, ws->nu) : DOPUS_R(0.0)));
     r->obj = obj;
     ws->scale_stat = s_stat;
     ws->scale_eq = s_eq;
 }
 
 /* ---------------------------------------------------------------- Riccati factorisation */
+
+/* out = Phi' v over the transposed copy PhiT (NW x NX, column-major): out (NW), v (NX). */
+static void phit_mv(const dopus_real *restrict PhiT, const dopus_real *restrict v, dopus_real *restrict out)
+{
+    int i, l;
+    for (i = 0; i < NW; ++i)
+        out[i] = DOPUS_R(0.0);
+    for (l = 0; l < NX; ++l) {
+        const dopus_real f = v[l];
+        for (i = 0; i < NW; ++i)
+            out[i] += PhiT[i + l * NW] * f;
+    }
+}
 
 /* The stage update of the Riccati recursion: PhiT = Phi' (nw x nx), PP = P Phi (nx x nw,
  * P symmetric stored full), M += PhiT PP column by column with contiguous inner loops of
@@ -487,41 +502,27 @@ static void qp_stage_update(const dopus_real *restrict Phi, const dopus_real *re
     for (l = 0; l < NX; ++l)
         for (i = 0; i < NW; ++i)
             PhiT[i + l * NW] = Phi[l + i * NX];
-    dopus_lai_gemm_nn(NX, NW, NX, 1.0, P, NX, Phi, NX, 0.0, PP, NX);
+    dopus_lai_gemm_nn(NX, NW, NX, DOPUS_R(1.0), P, NX, Phi, NX, DOPUS_R(0.0), PP, NX);
     for (j = 0; j < NW; ++j) {
         dopus_real *restrict m = M + j * NW;
-        for (i = 0; i < NW; ++i)
-            col[i] = 0.0;
-        for (l = 0; l < NX; ++l) {
-            const dopus_real f = PP[l + j * NX];
-            for (i = 0; i < NW; ++i)
-                col[i] += PhiT[i + l * NW] * f;
-        }
+        phit_mv(PhiT, PP + j * NX, col);
         for (i = 0; i < NW; ++i)
             m[i] += col[i];
     }
-    for (j = 0; j < NE; ++j) {
-        dopus_real *restrict gm = Gam + j * NW;
-        for (i = 0; i < NW; ++i)
-            gm[i] = 0.0;
-        for (l = 0; l < NX; ++l) {
-            const dopus_real gv = G[l + j * NX];
-            for (i = 0; i < NW; ++i)
-                gm[i] += PhiT[i + l * NW] * gv;
-        }
-    }
+    for (j = 0; j < NE; ++j)
+        phit_mv(PhiT, G + j * NX, Gam + j * NW);
 }
 
 /* Largest absolute entry of the Hessian data (scale of delta and rho). */
-static double hessian_scale(const dopus_qp_in *in)
+static dopus_real hessian_scale(const dopus_qp_in *in)
 {
     int k;
-    double s = dopus_lai_max_abs_mat(NX, NX, in->HN, NX);
+    dopus_real s = dopus_lai_max_abs_mat(NX, NX, in->HN, NX);
     for (k = 0; k < N; ++k)
         s = dmax(s, dopus_lai_max_abs_mat(NW, NW, in->H[k], NW));
     s += in->hess_shift;
     /* a zero Hessian (an LP) still needs a scale for the inertia correction */
-    return s > 0.0 ? s : 1.0;
+    return s > DOPUS_R(0.0) ? s : DOPUS_R(1.0);
 }
 
 /* Factor the Newton system for the current barrier weights (row_q), delta and rho.
@@ -530,23 +531,23 @@ static double hessian_scale(const dopus_qp_in *in)
 static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
 {
     int k, i, j;
-    double *PhiT = ws->work;              /* NW x NX: Phi_k' */
-    double *WT = ws->work + NX * NW;      /* NX x NW: P_{k+1} Phi_k */
-    double *Gam = ws->work + 2 * NX * NW; /* NW x NE: Phi_k' G_{k+1} */
-    double *Pf = Gam + NW * NE1;          /* NX x NX: P_{k+1} unpacked */
-    const double delta = ws->delta;
-    double pmag, pnext;
+    dopus_real *PhiT = ws->work;              /* NW x NX: Phi_k' */
+    dopus_real *WT = ws->work + NX * NW;      /* NX x NW: P_{k+1} Phi_k */
+    dopus_real *Gam = ws->work + 2 * NX * NW; /* NW x NE: Phi_k' G_{k+1} */
+    dopus_real *Pf = Gam + NW * NE1;          /* NX x NX: P_{k+1} unpacked */
+    const dopus_real delta = ws->delta;
+    dopus_real pmag, pnext;
     int b;
 
     /* terminal: P_N = HN + D'QD + delta I + rho Req'Req, G_N = Req' */
     {
-        double *P = Pf;
-        double dq[NX];
+        dopus_real *P = Pf;
+        dopus_real dq[NX];
         int l = 0;
         dopus_lai_copy_mat(NX, NX, in->HN, NX, P, NX);
         dopus_lai_symmetrize_l(NX, P, NX);
         for (i = 0; i < NX; ++i)
-            dq[i] = 0.0;
+            dq[i] = DOPUS_R(0.0);
         for (b = ws->bstart[N]; b < ws->bstart[N + 1]; ++b)
             if (NR == 0 || ws->bidx[b] - TOFF < NX)
                 dq[ws->bidx[b] - TOFF] = row_q(ws, b);
@@ -554,15 +555,15 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
             P[i + i * NX] += dq[i] + delta + in->hess_shift;
         for (b = ws->bstart[N]; b < ws->bstart[N + 1]; ++b) {
             const int r = ws->bidx[b] - TOFF;
-            const double qr = row_q(ws, b);
-            if (NR > 0 && r >= NX && qr != 0.0)
+            const dopus_real qr = row_q(ws, b);
+            if (NR > 0 && r >= NX && qr != DOPUS_R(0.0))
                 for (j = 0; j < NX; ++j)
                     for (i = 0; i < NX; ++i)
                         P[i + j * NX] += qr * in->R[(r - NX) + i * NR] * in->R[(r - NX) + j * NR];
         }
         if (NE > 0) {
-            if (ws->rho_aug > 0.0)
-                dopus_lai_gemm_tn(NX, NX, NE, ws->rho_aug, in->Req, NE1, in->Req, NE1, 1.0, P, NX);
+            if (ws->rho_aug > DOPUS_R(0.0))
+                dopus_lai_gemm_tn(NX, NX, NE, ws->rho_aug, in->Req, NE1, in->Req, NE1, DOPUS_R(1.0), P, NX);
             for (j = 0; j < NE; ++j)
                 for (i = 0; i < NX; ++i)
                     ws->G[N][i + j * NX] = in->Req[j + i * NE1];
@@ -572,7 +573,7 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
                 ws->P[N][l++] = P[i + j * NX];
     }
     for (i = 0; i < NE1 * NE1; ++i)
-        ws->S[i] = 0.0;
+        ws->S[i] = DOPUS_R(0.0);
 
     /* Round-off of the Schur complements: P_{k+1} = M_xx - M_xu M_uu^{-1} M_ux may cancel
      * large barrier terms (an active state bound enters M_xx, is absorbed by the controls
@@ -582,20 +583,20 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
     pmag = dopus_lai_max_abs_mat(NX, NX, Pf, NX);
     pnext = pmag; /* largest |entry| of P_{k+1}, kept along the recursion */
     for (k = N - 1; k >= 0; --k) {
-        double *M = ws->M;
-        const double *Phi = in->Phi[k];
-        double q[NSI];
-        double Lu[NU1 * NU1];
-        double *LK = ws->LK[k];
-        double *LKn = ws->LKn[k];
-        double *P = ws->P[k];
-        const double pmax = pnext;
-        double mxx = 0.0, pabs;
+        dopus_real *M = ws->M;
+        const dopus_real *Phi = in->Phi[k];
+        dopus_real q[NSI];
+        dopus_real Lu[NU1 * NU1];
+        dopus_real *LK = ws->LK[k];
+        dopus_real *LKn = ws->LKn[k];
+        dopus_real *P = ws->P[k];
+        const dopus_real pmax = pnext;
+        dopus_real mxx = DOPUS_R(0.0), pabs;
         int l = 0;
 
         /* barrier weights of the stage's rows (0 on the unbounded rows) */
         for (i = 0; i < NSI; ++i)
-            q[i] = 0.0;
+            q[i] = DOPUS_R(0.0);
         for (b = ws->bstart[k]; b < ws->bstart[k + 1]; ++b)
             q[ws->bidx[b] - k * NSI] = row_q(ws, b);
 
@@ -610,24 +611,24 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
             const dopus_real qg = q[NW + j];
             const dopus_real *C = in->C[k];
             int a, c;
-            if (qg != 0.0)
+            if (qg != DOPUS_R(0.0))
                 for (c = 0; c < NW; ++c)
                     for (a = c; a < NW; ++a)
                         M[a + c * NW] += qg * C[j + a * NG] * C[j + c * NG];
         }
         for (j = 0; j < NU; ++j) {
             /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P */
-            dopus_real colsum = 0.0;
+            dopus_real colsum = DOPUS_R(0.0);
             for (i = 0; i < NX; ++i)
-                colsum += fabs(Phi[i + (NX + j) * NX]);
+                colsum += dopus_fabs(Phi[i + (NX + j) * NX]);
             ws->noise[j] =
-                RICCATI_EPS * (fabs(M[NX + j + (NX + j) * NW]) + colsum * colsum * dmax(pmax, pmag));
+                RICCATI_EPS * (dopus_fabs(M[NX + j + (NX + j) * NW]) + colsum * colsum * dmax(pmax, pmag));
         }
         for (j = 0; j < NX; ++j) {
-            dopus_real colsum = 0.0;
+            dopus_real colsum = DOPUS_R(0.0);
             for (i = 0; i < NX; ++i)
-                colsum += fabs(Phi[i + j * NX]);
-            mxx = dmax(mxx, fabs(M[j + j * NW]) + colsum * colsum * pmax);
+                colsum += dopus_fabs(Phi[i + j * NX]);
+            mxx = dmax(mxx, dopus_fabs(M[j + j * NW]) + colsum * colsum * pmax);
         }
         /* M += Phi' P_{k+1} Phi (lower triangle), Gam = Phi' G_{k+1} */
         qp_stage_update(Phi, Pf, ws->G[k + 1], PhiT, WT, M, Gam);
@@ -644,7 +645,7 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         dopus_lai_copy_mat(NU, NX, M + NX, NW, LK, NU1);
         dopus_lai_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
         /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
-        pabs = 0.0;
+        pabs = DOPUS_R(0.0);
         for (j = 0; j < NX; ++j)
             for (i = j; i < NX; ++i) {
                 dopus_real sum = M[i + j * NW];
@@ -654,7 +655,7 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
                 P[l++] = sum;
                 Pf[i + j * NX] = sum;
                 Pf[j + i * NX] = sum;
-                pabs = dmax(pabs, fabs(sum));
+                pabs = dmax(pabs, dopus_fabs(sum));
             }
         pnext = pabs;
         for (j = 0; j < NX; ++j)
@@ -664,22 +665,22 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
             dopus_lai_trsm_lln(NU, NE, Lu, NU1, LKn, NU1);
             /* G_k = Gam_x - LK' LKn;  S += LKn' LKn (S = -(nu-nu block of V_0)) */
             dopus_lai_copy_mat(NX, NE, Gam, NW, ws->G[k], NX);
-            dopus_lai_gemm_tn(NX, NE, NU, -1.0, LK, NU1, LKn, NU1, 1.0, ws->G[k], NX);
-            dopus_lai_gemm_tn(NE, NE, NU, 1.0, LKn, NU1, LKn, NU1, 1.0, ws->S, NE1);
+            dopus_lai_gemm_tn(NX, NE, NU, -DOPUS_R(1.0), LK, NU1, LKn, NU1, DOPUS_R(1.0), ws->G[k], NX);
+            dopus_lai_gemm_tn(NE, NE, NU, DOPUS_R(1.0), LKn, NU1, LKn, NU1, DOPUS_R(1.0), ws->S, NE1);
         }
     }
     if (NE > 0) {
         /* S is positive definite iff Req has full row rank on the states reachable from
          * x_0 (LICQ). A rank-deficient S gets a tiny shift; refinement removes its effect
          * when the equality rows are consistent. */
-        double smax = 0.0;
+        dopus_real smax = DOPUS_R(0.0);
         for (i = 0; i < NE; ++i)
             smax = dmax(smax, ws->S[i + i * NE1]);
         dopus_lai_copy_mat(NE, NE, ws->S, NE1, ws->work, NE1);
         if (dopus_lai_potrf_l(NE, ws->S, NE1) != 0) {
             dopus_lai_copy_mat(NE, NE, ws->work, NE1, ws->S, NE1);
             for (i = 0; i < NE; ++i)
-                ws->S[i + i * NE1] += 1e-13 * dmax(smax, 1e-300);
+                ws->S[i + i * NE1] += DOPUS_PREC(1e-13, 1e-6) * dmax(smax, DOPUS_REAL_TINY);
             if (dopus_lai_potrf_l(NE, ws->S, NE1) != 0)
                 return 2;
         }
@@ -693,22 +694,23 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
  * lam_k = -dV_k/dx. The sweep vectors live in the arrays they become: once stage k's
  * rhs_stat has been read, its x part takes rhs_dyn_k (x_k is formed there), its u part
  * the vector lk_k (u_k is formed there), and sl_k the vector p_k (lam_k is formed there). */
-static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, double *sp, double *sl, double *sn)
+static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp, dopus_real *sl,
+                          dopus_real *sn)
 {
     int k, i;
-    double *tv = ws->work;     /* NX */
-    double *m = ws->work + NX; /* NW */
-    double *e = ws->e;
-    double Lu[NU1 * NU1];
+    dopus_real *tv = ws->work;     /* NX */
+    dopus_real *m = ws->work + NX; /* NW */
+    dopus_real *e = ws->e;
+    dopus_real Lu[NU1 * NU1];
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
     {
-        double *xN = sp + N * NW, *pN = sl + N * NX;
+        dopus_real *xN = sp + N * NW, *pN = sl + N * NX;
         for (i = 0; i < NX; ++i)
             tv[i] = -xN[i];
         if (NE > 0) {
-            if (ws->rho_aug > 0.0)
-                dopus_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, sn, 1.0, tv);
+            if (ws->rho_aug > DOPUS_R(0.0))
+                dopus_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, sn, DOPUS_R(1.0), tv);
             for (i = 0; i < NE; ++i)
                 e[i] = -sn[i];
         }
@@ -718,19 +720,19 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, double 
         }
     }
     for (k = N - 1; k >= 0; --k) {
-        const double *Phi = in->Phi[k];
-        const double *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
-        const double *pn = sl + (k + 1) * NX; /* p_{k+1} */
-        double *xk = sp + k * NW, *lk = xk + NX, *pk = sl + k * NX;
+        const dopus_real *Phi = in->Phi[k];
+        const dopus_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
+        const dopus_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
+        dopus_real *xk = sp + k * NW, *lk = xk + NX, *pk = sl + k * NX;
         /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
         for (i = 0; i < NX; ++i)
             tv[i] = pn[i];
-        spmv_packed(ws->P[k + 1], 1.0, c, tv);
+        spmv_packed(ws->P[k + 1], DOPUS_R(1.0), c, tv);
         for (i = 0; i < NW; ++i)
             m[i] = -xk[i];
-        dopus_lai_gemv_t(NX, NW, 1.0, Phi, NX, tv, 1.0, m);
+        dopus_lai_gemv_t(NX, NW, DOPUS_R(1.0), Phi, NX, tv, DOPUS_R(1.0), m);
         if (NE > 0)
-            dopus_lai_gemv_t(NX, NE, 1.0, ws->G[k + 1], NX, c, 1.0, e);
+            dopus_lai_gemv_t(NX, NE, DOPUS_R(1.0), ws->G[k + 1], NX, c, DOPUS_R(1.0), e);
         /* lk = Lu^{-1} m_u; p_k = m_x - LK' lk; e -= LKn' lk */
         for (i = 0; i < NU; ++i)
             lk[i] = m[NX + i];
@@ -740,26 +742,26 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, double 
             xk[i] = pk[i];
             pk[i] = m[i];
         }
-        dopus_lai_gemv_t(NU, NX, -1.0, ws->LK[k], NU1, lk, 1.0, pk);
+        dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->LK[k], NU1, lk, DOPUS_R(1.0), pk);
         if (NE > 0)
-            dopus_lai_gemv_t(NU, NE, -1.0, ws->LKn[k], NU1, lk, 1.0, e);
+            dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->LKn[k], NU1, lk, DOPUS_R(1.0), e);
     }
     /* stage 0: x_0 = rhs_dyn_0 (in place); dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
     if (NE > 0) {
         for (i = 0; i < NE; ++i)
             sn[i] = e[i];
-        dopus_lai_gemv_t(NX, NE, 1.0, ws->G[0], NX, sp, 1.0, sn);
+        dopus_lai_gemv_t(NX, NE, DOPUS_R(1.0), ws->G[0], NX, sp, DOPUS_R(1.0), sn);
         dopus_lai_trsv_ln(NE, ws->S, NE1, sn);
         dopus_lai_trsv_lt(NE, ws->S, NE1, sn);
     }
     for (k = 0; k < N; ++k) {
-        double *w = sp + k * NW;
-        double *u = w + NX;
-        double *lamk = sl + k * NX;
+        dopus_real *w = sp + k * NW;
+        dopus_real *u = w + NX;
+        dopus_real *lamk = sl + k * NX;
         /* u_k = -Lu'^{-1} (LK x_k + lk + LKn nu) */
-        dopus_lai_gemv_n(NU, NX, 1.0, ws->LK[k], NU1, w, 1.0, u);
+        dopus_lai_gemv_n(NU, NX, DOPUS_R(1.0), ws->LK[k], NU1, w, DOPUS_R(1.0), u);
         if (NE > 0)
-            dopus_lai_gemv_n(NU, NE, 1.0, ws->LKn[k], NU1, sn, 1.0, u);
+            dopus_lai_gemv_n(NU, NE, DOPUS_R(1.0), ws->LKn[k], NU1, sn, DOPUS_R(1.0), u);
         unpack_lu(ws->Lu[k], Lu);
         dopus_lai_trsv_lt(NU, Lu, NU1, u);
         for (i = 0; i < NU; ++i)
@@ -767,30 +769,31 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, double 
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
             lamk[i] = -lamk[i];
-        spmv_packed(ws->P[k], -1.0, w, lamk);
+        spmv_packed(ws->P[k], -DOPUS_R(1.0), w, lamk);
         if (NE > 0)
-            dopus_lai_gemv_n(NX, NE, -1.0, ws->G[k], NX, sn, 1.0, lamk);
+            dopus_lai_gemv_n(NX, NE, -DOPUS_R(1.0), ws->G[k], NX, sn, DOPUS_R(1.0), lamk);
         /* x_{k+1} = Phi_k w_k + c_k */
-        dopus_lai_gemv_n(NX, NW, 1.0, in->Phi[k], NX, w, 1.0, sp + (k + 1) * NW);
+        dopus_lai_gemv_n(NX, NW, DOPUS_R(1.0), in->Phi[k], NX, w, DOPUS_R(1.0), sp + (k + 1) * NW);
     }
     {
-        const double *xN = sp + N * NW;
-        double *lamN = sl + N * NX;
+        const dopus_real *xN = sp + N * NW;
+        dopus_real *lamN = sl + N * NX;
         /* lam_N = -(dV_N/dx); the rho terms cancel because Req x_N = rhs_eqN */
         for (i = 0; i < NX; ++i)
             lamN[i] = -lamN[i];
-        spmv_packed(ws->P[N], -1.0, xN, lamN);
+        spmv_packed(ws->P[N], -DOPUS_R(1.0), xN, lamN);
         if (NE > 0)
-            dopus_lai_gemv_n(NX, NE, -1.0, ws->G[N], NX, sn, 1.0, lamN);
+            dopus_lai_gemv_n(NX, NE, -DOPUS_R(1.0), ws->G[N], NX, sn, DOPUS_R(1.0), lamN);
     }
 }
 
 /* (os, od, oe) = rhs - K (sp, sl, sn): residual of the (delta-shifted, unaugmented) Newton
  * system, for iterative refinement. The output may be the right-hand side's own arrays
  * (every entry of the right-hand side is read before the same entry is written). */
-static void newton_residual(dopus_qp_workspace *ws, const dopus_qp_in *in, const double *sp, const double *sl,
-                            const double *sn, const double *rhs_stat, const double *rhs_dyn,
-                            const double *rhs_eqN, double *os, double *od, double *oe)
+static void newton_residual(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_real *sp,
+                            const dopus_real *sl, const dopus_real *sn, const dopus_real *rhs_stat,
+                            const dopus_real *rhs_dyn, const dopus_real *rhs_eqN, dopus_real *os,
+                            dopus_real *od, dopus_real *oe)
 {
     int k, i, b, j;
     /* os = rhs_stat - (H + delta I) sp - D'Q D sp - [sl_k;0] + Phi' sl_{k+1} - Req' sn */
@@ -800,32 +803,32 @@ static void newton_residual(dopus_qp_workspace *ws, const dopus_qp_in *in, const
         FOR_STAGE_ROWS(ws, k, b, j)
     row_axpy(in, k, j, row_dot(in, k, j, sp + k * NW) * -row_q(ws, b), os + k * NW);
     for (k = 0; k < N; ++k) {
-        double *o = os + k * NW;
-        dopus_lai_symv_l(NW, -1.0, in->H[k], NW, sp + k * NW, 1.0, o);
+        dopus_real *o = os + k * NW;
+        dopus_lai_symv_l(NW, -DOPUS_R(1.0), in->H[k], NW, sp + k * NW, DOPUS_R(1.0), o);
         for (i = 0; i < NX; ++i)
             o[i] -= sl[k * NX + i];
-        dopus_lai_gemv_t(NX, NW, 1.0, in->Phi[k], NX, sl + (k + 1) * NX, 1.0, o);
+        dopus_lai_gemv_t(NX, NW, DOPUS_R(1.0), in->Phi[k], NX, sl + (k + 1) * NX, DOPUS_R(1.0), o);
     }
     {
-        double *o = os + N * NW;
-        dopus_lai_symv_l(NX, -1.0, in->HN, NX, sp + N * NW, 1.0, o);
+        dopus_real *o = os + N * NW;
+        dopus_lai_symv_l(NX, -DOPUS_R(1.0), in->HN, NX, sp + N * NW, DOPUS_R(1.0), o);
         for (i = 0; i < NX; ++i)
             o[i] -= sl[N * NX + i];
         if (NE > 0)
-            dopus_lai_gemv_t(NE, NX, -1.0, in->Req, NE1, sn, 1.0, o);
+            dopus_lai_gemv_t(NE, NX, -DOPUS_R(1.0), in->Req, NE1, sn, DOPUS_R(1.0), o);
     }
     for (i = 0; i < NX; ++i)
         od[i] = rhs_dyn[i] - sp[i];
     for (k = 0; k < N; ++k) {
-        double *o = od + (k + 1) * NX;
+        dopus_real *o = od + (k + 1) * NX;
         for (i = 0; i < NX; ++i)
             o[i] = rhs_dyn[(k + 1) * NX + i] - sp[(k + 1) * NW + i];
-        dopus_lai_gemv_n(NX, NW, 1.0, in->Phi[k], NX, sp + k * NW, 1.0, o);
+        dopus_lai_gemv_n(NX, NW, DOPUS_R(1.0), in->Phi[k], NX, sp + k * NW, DOPUS_R(1.0), o);
     }
     if (NE > 0) {
         for (i = 0; i < NE; ++i)
             oe[i] = rhs_eqN[i];
-        dopus_lai_gemv_n(NE, NX, -1.0, in->Req, NE1, sp + N * NW, 1.0, oe);
+        dopus_lai_gemv_n(NE, NX, -DOPUS_R(1.0), in->Req, NE1, sp + N * NW, DOPUS_R(1.0), oe);
     }
 }
 
@@ -834,22 +837,22 @@ static void newton_residual(dopus_qp_workspace *ws, const dopus_qp_in *in, const
  * needs no storage of its own). */
 typedef struct {
     int corrector;
-    double eta, target;
+    dopus_real eta, target;
 } qp_centring;
 
 /* rc of the lower (rc_lo) and the upper side (rc_up) of bounded row b; the predictor's
  * steps dt, dz are read only for the corrector (before the first corrector they are unset) */
-static double rc_lo(const dopus_qp_workspace *ws, int b, const qp_centring *cc)
+static dopus_real rc_lo(const dopus_qp_workspace *ws, int b, const qp_centring *cc)
 {
-    double rc = ws->t_lo[b] * ws->z_lo[b];
+    dopus_real rc = ws->t_lo[b] * ws->z_lo[b];
     if (cc->corrector)
         rc += cc->eta * dt_lo(ws, b) * ws->dz_lo[b] - cc->target;
     return rc;
 }
 
-static double rc_up(const dopus_qp_workspace *ws, int b, const qp_centring *cc)
+static dopus_real rc_up(const dopus_qp_workspace *ws, int b, const qp_centring *cc)
 {
-    double rc = ws->t_up[b] * ws->z_up[b];
+    dopus_real rc = ws->t_up[b] * ws->z_up[b];
     if (cc->corrector)
         rc += cc->eta * dt_up(ws, b) * ws->dz_up[b] - cc->target;
     return rc;
@@ -857,8 +860,8 @@ static double rc_up(const dopus_qp_workspace *ws, int b, const qp_centring *cc)
 
 /* Newton right-hand side for the barrier right-hand side rc (t z - target per side) into
  * (os, od, oe): -r_stat + D'y, -r_dyn, -r_eqN (os may be r_stat itself, and so on). */
-static void newton_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_centring *cc, double *os,
-                       double *od, double *oe)
+static void newton_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_centring *cc, dopus_real *os,
+                       dopus_real *od, dopus_real *oe)
 {
     int i, k, b, j;
     for (i = 0; i < NP; ++i)
@@ -866,7 +869,7 @@ static void newton_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_c
     for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
         {
-            double s = 0.0;
+            dopus_real s = DOPUS_R(0.0);
             if (ws->has_lo[b])
                 s += (rc_lo(ws, b, cc) + ws->z_lo[b] * r_lo(ws, b)) / ws->t_lo[b];
             if (ws->has_up[b])
@@ -901,9 +904,9 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
                         ws->r_dyn, ws->r_eqN);
         /* the correction overwrites the residual it solves for */
         riccati_solve(ws, in, ws->r_stat, ws->r_dyn, ws->r_eqN);
-        dopus_lai_axpy(NP, 1.0, ws->r_stat, ws->d_prim);
-        dopus_lai_axpy((N + 1) * NX, 1.0, ws->r_dyn, ws->d_lam);
-        dopus_lai_axpy(NE, 1.0, ws->r_eqN, ws->d_nu);
+        dopus_lai_axpy(NP, DOPUS_R(1.0), ws->r_stat, ws->d_prim);
+        dopus_lai_axpy((N + 1) * NX, DOPUS_R(1.0), ws->r_dyn, ws->d_lam);
+        dopus_lai_axpy(NE, DOPUS_R(1.0), ws->r_eqN, ws->d_nu);
     }
 
     /* dv = D dw (dt_lo = dv + r_lo, dt_up = r_up - dv), dz = -(rc + z dt) / t */
@@ -911,8 +914,8 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
         FOR_STAGE_ROWS(ws, k, b, j)
         {
             /* rc from the previous (predictor) direction, before it is overwritten */
-            const double rcl = ws->has_lo[b] ? rc_lo(ws, b, cc) : 0.0;
-            const double rcu = ws->has_up[b] ? rc_up(ws, b, cc) : 0.0;
+            const dopus_real rcl = ws->has_lo[b] ? rc_lo(ws, b, cc) : DOPUS_R(0.0);
+            const dopus_real rcu = ws->has_up[b] ? rc_up(ws, b, cc) : DOPUS_R(0.0);
             ws->dv[b] = row_dot(in, k, j, ws->d_prim + k * NW);
             if (ws->has_lo[b])
                 ws->dz_lo[b] = -(rcl + ws->z_lo[b] * dt_lo(ws, b)) / ws->t_lo[b];
@@ -923,38 +926,38 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
 
 /* Largest steps in (0, 1] keeping t + ap dt >= 0 (ap, the primal step) and z + ad dz >= 0
  * (ad, the dual step), and whether no side blocks the full primal or dual step. */
-static void max_steps(const dopus_qp_workspace *ws, double *ap, double *ad, int *full)
+static void max_steps(const dopus_qp_workspace *ws, dopus_real *ap, dopus_real *ad, int *full)
 {
     int i;
-    double a = 2.0, d = 2.0;
+    dopus_real a = DOPUS_R(2.0), d = DOPUS_R(2.0);
     for (i = 0; i < ws->nb; ++i) {
         if (ws->has_lo[i]) {
-            const double dt = dt_lo(ws, i);
-            if (dt < 0.0)
+            const dopus_real dt = dt_lo(ws, i);
+            if (dt < DOPUS_R(0.0))
                 a = dmin(a, -ws->t_lo[i] / dt);
-            if (ws->dz_lo[i] < 0.0)
+            if (ws->dz_lo[i] < DOPUS_R(0.0))
                 d = dmin(d, -ws->z_lo[i] / ws->dz_lo[i]);
         }
         if (ws->has_up[i]) {
-            const double dt = dt_up(ws, i);
-            if (dt < 0.0)
+            const dopus_real dt = dt_up(ws, i);
+            if (dt < DOPUS_R(0.0))
                 a = dmin(a, -ws->t_up[i] / dt);
-            if (ws->dz_up[i] < 0.0)
+            if (ws->dz_up[i] < DOPUS_R(0.0))
                 d = dmin(d, -ws->z_up[i] / ws->dz_up[i]);
         }
     }
-    full[0] = a > 1.0;
-    full[1] = d > 1.0;
-    *ap = dmin(1.0, a);
-    *ad = dmin(1.0, d);
+    full[0] = a > DOPUS_R(1.0);
+    full[1] = d > DOPUS_R(1.0);
+    *ap = dmin(DOPUS_R(1.0), a);
+    *ad = dmin(DOPUS_R(1.0), d);
 }
 
 /* The step taken for the largest step a to the boundary (full: nothing blocks a step of
  * 1): the full step when nothing blocks it, else a fraction that tends to 1 as a does
  * (0.99 a for short steps, 0.9999999 a near a = 1). */
-static double step_to_boundary(double a, int full)
+static dopus_real step_to_boundary(dopus_real a, int full)
 {
-    return full ? 1.0 : a * ((1.0 - a) * 0.99 + a * 0.9999999);
+    return full ? DOPUS_R(1.0) : a * ((DOPUS_R(1.0) - a) * DOPUS_R(0.99) + a * DOPUS_R(0.9999999));
 }
 
 /* ---------------------------------------------------------------- infeasibility */
@@ -964,10 +967,10 @@ static double step_to_boundary(double a, int full)
  *   b'y = -lam_0'x0 - sum lam_{k+1}'b_k - nu'req - up'z_up + lo'z_lo > 0
  * proves that no feasible point exists (for feasible w the Lagrangian term is <= 0). */
 static int primal_infeasible(const dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_res *r,
-                             double data_scale)
+                             dopus_real data_scale)
 {
     int k, i;
-    double bty = 0.0, aty, bscale = 1.0;
+    dopus_real bty = DOPUS_R(0.0), aty, bscale = DOPUS_R(1.0);
     if (!(r->ny > CERT_GROWTH * data_scale))
         return 0;
     aty = r->aty / r->ny;
@@ -982,15 +985,15 @@ static int primal_infeasible(const dopus_qp_workspace *ws, const dopus_qp_in *in
         bscale = dmax(bscale, dopus_lai_norm_inf(NE, in->req));
     }
     for (i = 0; i < ws->nb; ++i) {
-        double lo, up;
+        dopus_real lo, up;
         row_bounds(in, ws->bidx[i], &lo, &up);
         if (ws->has_lo[i]) {
             bty += lo * ws->z_lo[i];
-            bscale = dmax(bscale, fabs(lo));
+            bscale = dmax(bscale, dopus_fabs(lo));
         }
         if (ws->has_up[i]) {
             bty -= up * ws->z_up[i];
-            bscale = dmax(bscale, fabs(up));
+            bscale = dmax(bscale, dopus_fabs(up));
         }
     }
     bty /= r->ny;
@@ -1000,35 +1003,37 @@ static int primal_infeasible(const dopus_qp_workspace *ws, const dopus_qp_in *in
 /* Unboundedness certificate on the normalised primal iterate d = w / |w|: a feasible ray
  * (homogeneous equalities, inside the recession cone of the bounds) along which the
  * objective decreases without bound: d'Hd < 0, or Hd = 0 and g'd < 0. */
-static int dual_infeasible(dopus_qp_workspace *ws, const dopus_qp_in *in, double data_scale, double hscale)
+static int dual_infeasible(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real data_scale,
+                           dopus_real hscale)
 {
     int k, i, b, j;
-    double nw = dopus_lai_norm_inf(NP, ws->prim), dhd = 0.0, gd = 0.0, hd = 0.0, eq = 0.0, cone = 0.0;
-    double h[NW];
+    dopus_real nw = dopus_lai_norm_inf(NP, ws->prim), dhd = DOPUS_R(0.0), gd = DOPUS_R(0.0),
+               hd = DOPUS_R(0.0), eq = DOPUS_R(0.0), cone = DOPUS_R(0.0);
+    dopus_real h[NW];
     if (!(nw > CERT_GROWTH * data_scale))
         return 0;
     for (k = 0; k < N; ++k) {
-        const double *w = ws->prim + k * NW;
-        double *t = ws->work;
-        dopus_lai_symv_l(NW, 1.0 / nw, in->H[k], NW, w, 0.0, h);
+        const dopus_real *w = ws->prim + k * NW;
+        dopus_real *t = ws->work;
+        dopus_lai_symv_l(NW, DOPUS_R(1.0) / nw, in->H[k], NW, w, DOPUS_R(0.0), h);
         dopus_lai_axpy(NW, in->hess_shift / nw, w, h);
         dhd += dopus_lai_dot(NW, w, h) / nw;
         gd += dopus_lai_dot(NW, in->g[k], w) / nw;
         hd = dmax(hd, dopus_lai_norm_inf(NW, h));
         for (i = 0; i < NX; ++i)
             t[i] = ws->prim[(k + 1) * NW + i] / nw;
-        dopus_lai_gemv_n(NX, NW, -1.0 / nw, in->Phi[k], NX, w, 1.0, t);
+        dopus_lai_gemv_n(NX, NW, -DOPUS_R(1.0) / nw, in->Phi[k], NX, w, DOPUS_R(1.0), t);
         eq = dmax(eq, dopus_lai_norm_inf(NX, t));
     }
     {
-        const double *xN = ws->prim + N * NW;
-        dopus_lai_symv_l(NX, 1.0 / nw, in->HN, NX, xN, 0.0, h);
+        const dopus_real *xN = ws->prim + N * NW;
+        dopus_lai_symv_l(NX, DOPUS_R(1.0) / nw, in->HN, NX, xN, DOPUS_R(0.0), h);
         dopus_lai_axpy(NX, in->hess_shift / nw, xN, h);
         dhd += dopus_lai_dot(NX, xN, h) / nw;
         gd += dopus_lai_dot(NX, in->gN, xN) / nw;
         hd = dmax(hd, dopus_lai_norm_inf(NX, h));
         if (NE > 0) {
-            dopus_lai_gemv_n(NE, NX, 1.0 / nw, in->Req, NE1, xN, 0.0, ws->work);
+            dopus_lai_gemv_n(NE, NX, DOPUS_R(1.0) / nw, in->Req, NE1, xN, DOPUS_R(0.0), ws->work);
             eq = dmax(eq, dopus_lai_norm_inf(NE, ws->work));
         }
     }
@@ -1036,7 +1041,7 @@ static int dual_infeasible(dopus_qp_workspace *ws, const dopus_qp_in *in, double
     for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
         {
-            const double dv = row_dot(in, k, j, ws->prim + k * NW) / nw;
+            const dopus_real dv = row_dot(in, k, j, ws->prim + k * NW) / nw;
             if (ws->has_lo[b])
                 cone = dmax(cone, -dv);
             if (ws->has_up[b])
@@ -1052,7 +1057,7 @@ static int dual_infeasible(dopus_qp_workspace *ws, const dopus_qp_in *in, double
 /* ---------------------------------------------------------------- driver */
 
 /* The signed multiplier of inequality row i in the solution layout. */
-static double *row_multiplier(dopus_qp_sol *sol, int i)
+static dopus_real *row_multiplier(dopus_qp_sol *sol, int i)
 {
     if (i < TOFF) {
         const int k = i / NSI, j = i - k * NSI;
@@ -1061,13 +1066,30 @@ static double *row_multiplier(dopus_qp_sol *sol, int i)
     return (NR == 0 || i - TOFF < NX) ? &sol->mu_bN[i - TOFF] : &sol->mu_r[i - TOFF - NX];
 }
 
-static double row_mu(const dopus_qp_sol *sol, int i)
+static dopus_real row_mu(const dopus_qp_sol *sol, int i)
 {
     if (i < TOFF) {
         const int k = i / NSI, j = i - k * NSI;
         return (NG == 0 || j < NW) ? sol->mu_b[k][j] : sol->mu_g[k][j - NW];
     }
     return (NR == 0 || i - TOFF < NX) ? sol->mu_bN[i - TOFF] : sol->mu_r[i - TOFF - NX];
+}
+
+/* The multipliers of the inequality rows (box, path, terminal box and terminal rows) set
+ * to zero, padding included. */
+static void zero_row_multipliers(dopus_qp_sol *sol)
+{
+    int k, i;
+    for (k = 0; k < N; ++k) {
+        for (i = 0; i < NW; ++i)
+            sol->mu_b[k][i] = DOPUS_R(0.0);
+        for (i = 0; i < DOPUS_QP_NG1; ++i)
+            sol->mu_g[k][i] = DOPUS_R(0.0);
+    }
+    for (i = 0; i < NX; ++i)
+        sol->mu_bN[i] = DOPUS_R(0.0);
+    for (i = 0; i < DOPUS_QP_NR1; ++i)
+        sol->mu_r[i] = DOPUS_R(0.0);
 }
 
 static void write_solution(const dopus_qp_workspace *ws, dopus_qp_sol *sol)
@@ -1078,21 +1100,13 @@ static void write_solution(const dopus_qp_workspace *ws, dopus_qp_sol *sol)
             sol->x[k][i] = ws->prim[k * NW + i];
             sol->lam[k][i] = ws->lam[k * NX + i];
         }
-    for (k = 0; k < N; ++k) {
+    for (k = 0; k < N; ++k)
         for (i = 0; i < NU; ++i)
             sol->u[k][i] = ws->prim[k * NW + NX + i];
-        for (i = 0; i < NW; ++i)
-            sol->mu_b[k][i] = 0.0;
-        for (i = 0; i < NG; ++i)
-            sol->mu_g[k][i] = 0.0;
-    }
-    for (i = 0; i < NX; ++i)
-        sol->mu_bN[i] = 0.0;
-    for (i = 0; i < NR; ++i)
-        sol->mu_r[i] = 0.0;
+    zero_row_multipliers(sol);
     for (i = 0; i < ws->nb; ++i)
         *row_multiplier(sol, ws->bidx[i]) =
-            (ws->has_up[i] ? ws->z_up[i] : 0.0) - (ws->has_lo[i] ? ws->z_lo[i] : 0.0);
+            (ws->has_up[i] ? ws->z_up[i] : DOPUS_R(0.0)) - (ws->has_lo[i] ? ws->z_lo[i] : DOPUS_R(0.0));
     for (i = 0; i < NE; ++i)
         sol->nu[i] = ws->nu[i];
 }
@@ -1102,21 +1116,13 @@ static void zero_solution(dopus_qp_sol *sol)
     int k, i;
     for (k = 0; k <= N; ++k)
         for (i = 0; i < NX; ++i)
-            sol->x[k][i] = sol->lam[k][i] = 0.0;
-    for (k = 0; k < N; ++k) {
+            sol->x[k][i] = sol->lam[k][i] = DOPUS_R(0.0);
+    for (k = 0; k < N; ++k)
         for (i = 0; i < NU1; ++i)
-            sol->u[k][i] = 0.0;
-        for (i = 0; i < NW; ++i)
-            sol->mu_b[k][i] = 0.0;
-        for (i = 0; i < DOPUS_QP_NG1; ++i)
-            sol->mu_g[k][i] = 0.0;
-    }
-    for (i = 0; i < NX; ++i)
-        sol->mu_bN[i] = 0.0;
-    for (i = 0; i < DOPUS_QP_NR1; ++i)
-        sol->mu_r[i] = 0.0;
+            sol->u[k][i] = DOPUS_R(0.0);
+    zero_row_multipliers(sol);
     for (i = 0; i < NE1; ++i)
-        sol->nu[i] = 0.0;
+        sol->nu[i] = DOPUS_R(0.0);
 }
 
 /* The slack floor of the centred cold start: the primal infeasibility of w = 0 (the
@@ -1124,14 +1130,14 @@ static void zero_solution(dopus_qp_sol *sol)
  * feasible start (the QPs of an SQP or RTI iteration, whose zero step satisfies the bounds
  * of a feasible iterate) starts close to the boundary with small complementarity t z; a
  * far infeasible one with t z = 1. */
-static double centred_floor(const dopus_qp_workspace *ws, const dopus_qp_in *in)
+static dopus_real centred_floor(const dopus_qp_workspace *ws, const dopus_qp_in *in)
 {
     int k, b, j;
-    double viol = ws->scale_b;
+    dopus_real viol = ws->scale_b;
     for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
         {
-            double lo, up;
+            dopus_real lo, up;
             (void)j;
             row_bounds(in, ws->bidx[b], &lo, &up);
             if (ws->has_lo[b])
@@ -1139,7 +1145,7 @@ static double centred_floor(const dopus_qp_workspace *ws, const dopus_qp_in *in)
             if (ws->has_up[b])
                 viol = dmax(viol, -up);
         }
-    return dmin(1.0, dmax(CENTRED_T_MIN, viol));
+    return dmin(DOPUS_R(1.0), dmax(CENTRED_T_MIN, viol));
 }
 
 /* Starting point. Cold (centred = 0): w = 0, lam = nu = 0, slacks max(1, v - lo),
@@ -1151,13 +1157,13 @@ static void initial_point(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
 {
     int k, i, b, j;
     const int warm = st->warm_start != 0;
-    const double floor_c = !warm && centred ? centred_floor(ws, in) : 1.0;
+    const dopus_real floor_c = !warm && centred ? centred_floor(ws, in) : DOPUS_R(1.0);
     for (i = 0; i < NP; ++i)
-        ws->prim[i] = 0.0;
+        ws->prim[i] = DOPUS_R(0.0);
     for (i = 0; i < (N + 1) * NX; ++i)
-        ws->lam[i] = 0.0;
+        ws->lam[i] = DOPUS_R(0.0);
     for (i = 0; i < NE1; ++i)
-        ws->nu[i] = 0.0;
+        ws->nu[i] = DOPUS_R(0.0);
     if (warm) {
         for (k = 0; k <= N; ++k)
             for (i = 0; i < NX; ++i) {
@@ -1173,26 +1179,30 @@ static void initial_point(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
     for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
         {
-            const double mu_signed = warm ? row_mu(sol, ws->bidx[b]) : 0.0;
-            const double v = row_dot(in, k, j, ws->prim + k * NW);
-            double lo, up;
+            const dopus_real mu_signed = warm ? row_mu(sol, ws->bidx[b]) : DOPUS_R(0.0);
+            const dopus_real v = row_dot(in, k, j, ws->prim + k * NW);
+            dopus_real lo, up;
             row_bounds(in, ws->bidx[b], &lo, &up);
-            ws->t_lo[b] = ws->t_up[b] = 1.0;
-            ws->z_lo[b] = ws->z_up[b] = 0.0;
+            ws->t_lo[b] = ws->t_up[b] = DOPUS_R(1.0);
+            ws->z_lo[b] = ws->z_up[b] = DOPUS_R(0.0);
             if (ws->has_lo[b]) {
-                const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(lo)) : floor_c;
+                const dopus_real floor_t = warm ? WARM_FLOOR_T * dmax(DOPUS_R(1.0), dopus_fabs(lo)) : floor_c;
                 ws->t_lo[b] = dmax(v - lo, floor_t);
-                ws->z_lo[b] = warm ? dmax(-mu_signed, WARM_FLOOR_Z) : centred ? floor_c / ws->t_lo[b] : 1.0;
+                ws->z_lo[b] = warm      ? dmax(-mu_signed, WARM_FLOOR_Z)
+                              : centred ? floor_c / ws->t_lo[b]
+                                        : DOPUS_R(1.0);
             }
             if (ws->has_up[b]) {
-                const double floor_t = warm ? WARM_FLOOR_T * dmax(1.0, fabs(up)) : floor_c;
+                const dopus_real floor_t = warm ? WARM_FLOOR_T * dmax(DOPUS_R(1.0), dopus_fabs(up)) : floor_c;
                 ws->t_up[b] = dmax(up - v, floor_t);
-                ws->z_up[b] = warm ? dmax(mu_signed, WARM_FLOOR_Z) : centred ? floor_c / ws->t_up[b] : 1.0;
+                ws->z_up[b] = warm      ? dmax(mu_signed, WARM_FLOOR_Z)
+                              : centred ? floor_c / ws->t_up[b]
+                                        : DOPUS_R(1.0);
             }
         }
 }
 
-static double merit(const qp_res *r)
+static dopus_real merit(const qp_res *r)
 {
     return dmax(dmax(r->stat_s, r->eq_s), dmax(r->ineq_s, r->comp_s));
 }
@@ -1226,10 +1236,11 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
     qp_centring pred, corr;
     int iter, i, bounds, keep_best, status = DOPUS_QP_MAX_ITER;
     int n_corr = 0, n_aug = 0;
-    double hscale, data_scale, delta_last = 0.0, delta_used = 0.0, best_merit = INFINITY;
+    dopus_real hscale, data_scale, delta_last = DOPUS_R(0.0), delta_used = DOPUS_R(0.0),
+                                   best_merit = INFINITY;
     int best_iter = 0;
-    double mu_prev = INFINITY;
-    double sigma_min = 0.0; /* SIGMA_MIN_RESTART after a restart */
+    dopus_real mu_prev = INFINITY;
+    dopus_real sigma_min = DOPUS_R(0.0); /* SIGMA_MIN_RESTART after a restart */
     /* attempt 0: the centred cold start with the long steps; 1: the plain start (a warm
      * start, or the cold start again after attempt 0 stalled) with the careful steps; 2:
      * the restart after a nonconvex stall (see below) */
@@ -1239,8 +1250,8 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         st = *settings;
     else
         dopus_qp_settings_default(&st);
-    if (!(st.tol > 0.0))
-        st.tol = 1e-8;
+    if (!(st.tol > DOPUS_R(0.0)))
+        st.tol = DOPUS_PREC(1e-8, 1e-5);
     if (st.max_iter < 0)
         st.max_iter = 0;
     if (st.refine_steps < 0)
@@ -1249,7 +1260,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         info->status = DOPUS_QP_INVALID_INPUT;
         info->iterations = info->inertia_corrections = info->terminal_augmentations = 0;
         info->pivot_floors = 0;
-        info->delta = 0.0;
+        info->delta = DOPUS_R(0.0);
         info->res_stat = info->res_eq = info->res_ineq = info->res_comp = INFINITY;
         info->res_stat_scaled = info->res_eq_scaled = info->res_ineq_scaled = info->res_comp_scaled =
             INFINITY;
@@ -1275,8 +1286,8 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             return DOPUS_QP_INVALID_INPUT;
         }
     }
-    ws->delta = 0.0;
-    ws->rho_aug = 0.0;
+    ws->delta = DOPUS_R(0.0);
+    ws->rho_aug = DOPUS_R(0.0);
     ws->pivot_floors = 0;
     bounds = setup_bounds(ws, in);
     if (bounds == 2) {
@@ -1296,7 +1307,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
     initial_point(ws, in, &st, sol, attempt == 0);
 
     /* data scale for the divergence tests of the certificates */
-    data_scale = dmax(1.0, ws->scale_bounds); /* the finite bounds */
+    data_scale = dmax(DOPUS_R(1.0), ws->scale_bounds); /* the finite bounds */
     data_scale = dmax(data_scale, dopus_lai_norm_inf(NX, in->x0));
     for (i = 0; i < N; ++i) {
         data_scale = dmax(data_scale, dopus_lai_norm_inf(NX, in->b[i]));
@@ -1307,7 +1318,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         data_scale = dmax(data_scale, dopus_lai_norm_inf(NE, in->req));
 
     for (iter = 0;; ++iter) {
-        double alpha, alpha_d, alpha_aff, mu_aff, sigma, target, eta;
+        dopus_real alpha, alpha_d, alpha_aff, mu_aff, sigma, target, eta;
         int fact, floors_before, nref, full[2];
         /* the long steps (separate primal and dual step lengths, up to the boundary) in the
          * first attempt from the centred start while the QP is convex (no correction) */
@@ -1336,8 +1347,8 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             attempt = 1;
             n_corr_attempt = n_corr;
             initial_point(ws, in, &st, sol, 0);
-            ws->rho_aug = 0.0;
-            delta_last = 0.0;
+            ws->rho_aug = DOPUS_R(0.0);
+            delta_last = DOPUS_R(0.0);
             mu_prev = INFINITY;
             best_merit = INFINITY;
             best_iter = iter + 1;
@@ -1357,8 +1368,8 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             sigma_min = SIGMA_MIN_RESTART;
             st.warm_start = 0;
             initial_point(ws, in, &st, sol, 0);
-            ws->rho_aug = 0.0;
-            delta_last = 0.0;
+            ws->rho_aug = DOPUS_R(0.0);
+            delta_last = DOPUS_R(0.0);
             mu_prev = INFINITY;
             best_merit = INFINITY;
             best_iter = iter + 1;
@@ -1387,7 +1398,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             /* barrier weights of every row, for an inertia analysis of H + D'QD offline */
             QP_TRACE("QD %d", iter);
             for (kk = 0; kk < NI; ++kk) {
-                const double qk = (b2 < ws->nb && ws->bidx[b2] == kk) ? row_q(ws, b2++) : 0.0;
+                const dopus_real qk = (b2 < ws->nb && ws->bidx[b2] == kk) ? row_q(ws, b2++) : DOPUS_R(0.0);
                 QP_TRACE(" %.17g", qk);
             }
             QP_TRACE("\n");
@@ -1395,22 +1406,24 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
 #endif
         /* factorisation with minimal inertia correction: first the exact terminal
          * augmentation rho Req'Req, then delta I growing geometrically */
-        ws->delta = 0.0;
+        ws->delta = DOPUS_R(0.0);
         floors_before = ws->pivot_floors;
         fact = riccati_factor(ws, in);
         if (fact == 1 && NE > 0) {
             int tries;
-            double rho0 = hscale / dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), 1e-150);
-            rho0 /= dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), 1e-150);
+            dopus_real rho0 =
+                hscale / dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), DOPUS_REAL_SQRT_TINY);
+            rho0 /= dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), DOPUS_REAL_SQRT_TINY);
             for (tries = 0; tries < RHO_TRIES && fact == 1 && ws->rho_aug < rho0 * RHO_MAX_REL; ++tries) {
-                ws->rho_aug = ws->rho_aug > 0.0 ? 100.0 * ws->rho_aug : rho0;
+                ws->rho_aug = ws->rho_aug > DOPUS_R(0.0) ? DOPUS_R(100.0) * ws->rho_aug : rho0;
                 ++n_aug;
                 fact = riccati_factor(ws, in);
             }
         }
         if (fact == 1) {
             int tries;
-            ws->delta = delta_last > 0.0 ? dmax(1e-20 * hscale, delta_last / 3.0) : 1e-8 * hscale;
+            ws->delta = delta_last > DOPUS_R(0.0) ? dmax(DOPUS_R(1e-20) * hscale, delta_last / DOPUS_R(3.0))
+                                                  : DOPUS_R(1e-8) * hscale;
             /* bounded by count as well as by size: with huge or non-finite data the size
              * test alone may never fire (NaN compares false, inf * 10 stays inf) */
             for (tries = 0;; ++tries) {
@@ -1439,24 +1452,25 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
 
         if (r.nsides == 0) {
             /* equality-constrained QP: one Newton step is exact */
-            const qp_centring none = {0, 0.0, 0.0}; /* no bounded side: rc is never formed */
+            const qp_centring none = {0, DOPUS_R(0.0),
+                                      DOPUS_R(0.0)}; /* no bounded side: rc is never formed */
             newton_direction(ws, in, nref, &none);
-            dopus_lai_axpy(NP, 1.0, ws->d_prim, ws->prim);
-            dopus_lai_axpy((N + 1) * NX, 1.0, ws->d_lam, ws->lam);
-            dopus_lai_axpy(NE, 1.0, ws->d_nu, ws->nu);
+            dopus_lai_axpy(NP, DOPUS_R(1.0), ws->d_prim, ws->prim);
+            dopus_lai_axpy((N + 1) * NX, DOPUS_R(1.0), ws->d_lam, ws->lam);
+            dopus_lai_axpy(NE, DOPUS_R(1.0), ws->d_nu, ws->nu);
             continue;
         }
 
         /* predictor (affine scaling) */
         pred.corrector = 0;
-        pred.eta = pred.target = 0.0;
+        pred.eta = pred.target = DOPUS_R(0.0);
         newton_direction(ws, in, 0, &pred);
         max_steps(ws, &alpha, &alpha_d, full);
         if (!long_steps)
             alpha = alpha_d = dmin(alpha, alpha_d);
         alpha_aff = alpha;
         (void)alpha_aff;
-        mu_aff = 0.0;
+        mu_aff = DOPUS_R(0.0);
         for (i = 0; i < ws->nb; ++i) {
             if (ws->has_lo[i])
                 mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha_d * ws->dz_lo[i]);
@@ -1464,15 +1478,15 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
                 mu_aff += (ws->t_up[i] + alpha * dt_up(ws, i)) * (ws->z_up[i] + alpha_d * ws->dz_up[i]);
         }
         mu_aff /= r.nsides;
-        sigma = r.mu > 0.0 ? mu_aff / r.mu : 0.0;
-        sigma = dmin(1.0, dmax(0.0, sigma * sigma * sigma));
+        sigma = r.mu > DOPUS_R(0.0) ? mu_aff / r.mu : DOPUS_R(0.0);
+        sigma = dmin(DOPUS_R(1.0), dmax(DOPUS_R(0.0), sigma * sigma * sigma));
         /* Nonconvex region: the barrier-augmented Hessian needed the inertia correction,
          * so the current barrier problem is not convex on the null space of the
          * equalities. Reducing mu there freezes the iterate in the wrong region (the
          * bounds that must become active to supply curvature keep tiny multipliers, and
          * the delta-shifted steps stall); keep mu nearly constant (a centring step)
          * until the barrier terms make the inertia right again. */
-        if (ws->delta > 0.0)
+        if (ws->delta > DOPUS_R(0.0))
             sigma = dmax(sigma, SIGMA_NONCONVEX);
         sigma = dmax(sigma, sigma_min);
 
@@ -1480,11 +1494,11 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
          * fraction of the complementarity tolerance: driving mu far below what the
          * termination test needs only makes the barrier weights z/t of active rows huge,
          * and their cancellation in the Riccati recursion spoils the Newton directions. */
-        target = dmax(sigma * r.mu, MU_FLOOR_REL * st.tol * dmax(1.0, r.nz));
+        target = dmax(sigma * r.mu, MU_FLOOR_REL * st.tol * dmax(DOPUS_R(1.0), r.nz));
         /* safeguard: when complementarity is all that is left and the last step raised mu,
          * drop the second-order term this time (Mehrotra's corrector can otherwise cycle
          * on a pair far from the central path) */
-        eta = (iter > 0 && r.mu > mu_prev && dmax(r.stat_s, r.eq_s) < r.comp_s) ? 0.0 : 1.0;
+        eta = (iter > 0 && r.mu > mu_prev && dmax(r.stat_s, r.eq_s) < r.comp_s) ? DOPUS_R(0.0) : DOPUS_R(1.0);
         mu_prev = r.mu;
         corr.corrector = 1;
         corr.eta = eta;
@@ -1535,7 +1549,7 @@ int dopus_qp_infeasible_row(const dopus_qp_workspace *ws, const dopus_qp_in *in,
                             int *side)
 {
     int i, flat = -1, s = 0;
-    double lo, up, zmax = 0.0;
+    dopus_real lo, up, zmax = DOPUS_R(0.0);
     for (i = 0; i < ws->nb; ++i) {
         row_bounds(in, ws->bidx[i], &lo, &up);
         if (ws->has_lo[i] && ws->has_up[i] && lo > up) {
@@ -1556,10 +1570,10 @@ int dopus_qp_infeasible_row(const dopus_qp_workspace *ws, const dopus_qp_in *in,
         }
     }
     for (i = 0; i < NE; ++i) {
-        if (fabs(ws->nu[i]) > zmax) {
-            zmax = fabs(ws->nu[i]);
+        if (dopus_fabs(ws->nu[i]) > zmax) {
+            zmax = dopus_fabs(ws->nu[i]);
             flat = NI + i; /* after the inequality rows: terminal equality row i */
-            s = ws->nu[i] > 0.0 ? 1 : -1;
+            s = ws->nu[i] > DOPUS_R(0.0) ? 1 : -1;
         }
     }
     if (flat < 0)

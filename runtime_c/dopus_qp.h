@@ -153,7 +153,7 @@ enum dopus_qp_status {
 };
 
 typedef struct {
-    double tol;       /* tolerance on the scaled KKT residuals (default 1e-8) */
+    dopus_real tol;   /* tolerance on the scaled KKT residuals (default 1e-8) */
     int max_iter;     /* iteration limit (default 100) */
     int warm_start;   /* nonzero: start from the primal-dual point in *sol (default 0) */
     int refine_steps; /* iterative refinement steps of the corrector direction once the
@@ -163,42 +163,42 @@ typedef struct {
 
 typedef struct {
     /* stage matrices, one pointer per stage (see header comment for the shapes) */
-    const double *H[DOPUS_N];
-    const double *Phi[DOPUS_N];
-    const double *C[DOPUS_N];
-    const double *HN;
-    const double *R;
-    const double *Req;
+    const dopus_real *H[DOPUS_N];
+    const dopus_real *Phi[DOPUS_N];
+    const dopus_real *C[DOPUS_N];
+    const dopus_real *HN;
+    const dopus_real *R;
+    const dopus_real *Req;
     /* vectors */
-    double g[DOPUS_N][DOPUS_QP_NW];
-    double b[DOPUS_N][DOPUS_NX];
-    double x0[DOPUS_NX];
-    double gN[DOPUS_NX];
-    double lbw[DOPUS_N][DOPUS_QP_NW];
-    double ubw[DOPUS_N][DOPUS_QP_NW];
-    double lbxN[DOPUS_NX];
-    double ubxN[DOPUS_NX];
-    double lg[DOPUS_N][DOPUS_QP_NG1];
-    double ug[DOPUS_N][DOPUS_QP_NG1];
-    double lr[DOPUS_QP_NR1];
-    double ur[DOPUS_QP_NR1];
-    double req[DOPUS_QP_NE1];
+    dopus_real g[DOPUS_N][DOPUS_QP_NW];
+    dopus_real b[DOPUS_N][DOPUS_NX];
+    dopus_real x0[DOPUS_NX];
+    dopus_real gN[DOPUS_NX];
+    dopus_real lbw[DOPUS_N][DOPUS_QP_NW];
+    dopus_real ubw[DOPUS_N][DOPUS_QP_NW];
+    dopus_real lbxN[DOPUS_NX];
+    dopus_real ubxN[DOPUS_NX];
+    dopus_real lg[DOPUS_N][DOPUS_QP_NG1];
+    dopus_real ug[DOPUS_N][DOPUS_QP_NG1];
+    dopus_real lr[DOPUS_QP_NR1];
+    dopus_real ur[DOPUS_QP_NR1];
+    dopus_real req[DOPUS_QP_NE1];
     /* proximal (Levenberg-Marquardt) term: the objective uses H_k + hess_shift I and
      * HN + hess_shift I instead of H_k and HN; 0 (the value of a zero-filled struct)
      * leaves the QP as given; must be finite and >= 0 */
-    double hess_shift;
+    dopus_real hess_shift;
 } dopus_qp_in;
 
 /* Primal-dual solution (output; also the warm-start point when settings.warm_start). */
 typedef struct {
-    double x[DOPUS_N + 1][DOPUS_NX];
-    double u[DOPUS_N][DOPUS_QP_NU1];
-    double lam[DOPUS_N + 1][DOPUS_NX];
-    double mu_b[DOPUS_N][DOPUS_QP_NW];
-    double mu_bN[DOPUS_NX];
-    double mu_g[DOPUS_N][DOPUS_QP_NG1];
-    double mu_r[DOPUS_QP_NR1];
-    double nu[DOPUS_QP_NE1];
+    dopus_real x[DOPUS_N + 1][DOPUS_NX];
+    dopus_real u[DOPUS_N][DOPUS_QP_NU1];
+    dopus_real lam[DOPUS_N + 1][DOPUS_NX];
+    dopus_real mu_b[DOPUS_N][DOPUS_QP_NW];
+    dopus_real mu_bN[DOPUS_NX];
+    dopus_real mu_g[DOPUS_N][DOPUS_QP_NG1];
+    dopus_real mu_r[DOPUS_QP_NR1];
+    dopus_real nu[DOPUS_QP_NE1];
 } dopus_qp_sol;
 
 typedef struct {
@@ -208,18 +208,18 @@ typedef struct {
     int terminal_augmentations; /* factorisations retried with rho Req'Req (exact, see top) */
     int pivot_floors;           /* Riccati pivots within their round-off estimate of zero that were
                                 floored (cured by iterative refinement), summed over iterations */
-    double delta;               /* largest delta used (0 when no correction was needed) */
+    dopus_real delta;           /* largest delta used (0 when no correction was needed) */
     /* final residuals, infinity norms, unscaled */
-    double res_stat; /* stationarity (both equations of the header comment) */
-    double res_eq;   /* x0, dynamics and Req rows */
-    double res_ineq; /* bound / constraint violation max(0, l - v, v - u) */
-    double res_comp; /* complementarity max(slack * multiplier) over all sides */
+    dopus_real res_stat; /* stationarity (both equations of the header comment) */
+    dopus_real res_eq;   /* x0, dynamics and Req rows */
+    dopus_real res_ineq; /* bound / constraint violation max(0, l - v, v - u) */
+    dopus_real res_comp; /* complementarity max(slack * multiplier) over all sides */
     /* the same, scaled as compared with settings.tol */
-    double res_stat_scaled;
-    double res_eq_scaled;
-    double res_ineq_scaled;
-    double res_comp_scaled;
-    double obj; /* objective value at the returned point */
+    dopus_real res_stat_scaled;
+    dopus_real res_eq_scaled;
+    dopus_real res_ineq_scaled;
+    dopus_real res_comp_scaled;
+    dopus_real obj; /* objective value at the returned point */
 } dopus_qp_info;
 
 /* The whole solver memory; the user declares one (static, global or on a task stack).
@@ -235,49 +235,49 @@ typedef struct {
     dopus_qp_row bstart[DOPUS_N + 2];
     int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
-    double prim[DOPUS_QP_NPRIM];
-    double lam[(DOPUS_N + 1) * DOPUS_NX];
-    double nu[DOPUS_QP_NE1];
-    double t_lo[DOPUS_QP_NB];
-    double t_up[DOPUS_QP_NB];
-    double z_lo[DOPUS_QP_NB];
-    double z_up[DOPUS_QP_NB];
+    dopus_real prim[DOPUS_QP_NPRIM];
+    dopus_real lam[(DOPUS_N + 1) * DOPUS_NX];
+    dopus_real nu[DOPUS_QP_NE1];
+    dopus_real t_lo[DOPUS_QP_NB];
+    dopus_real t_up[DOPUS_QP_NB];
+    dopus_real z_lo[DOPUS_QP_NB];
+    dopus_real z_up[DOPUS_QP_NB];
     /* residuals */
-    double r_stat[DOPUS_QP_NPRIM];
-    double r_dyn[(DOPUS_N + 1) * DOPUS_NX];
-    double r_eqN[DOPUS_QP_NE1];
+    dopus_real r_stat[DOPUS_QP_NPRIM];
+    dopus_real r_dyn[(DOPUS_N + 1) * DOPUS_NX];
+    dopus_real r_eqN[DOPUS_QP_NE1];
     /* v - lo and up - v of the row values v = D w: the slack residuals and steps and the
      * barrier weights are formed from them and dv, t, z (the bounds are read from the QP
      * data where needed); the refinement of a direction also works in r_stat, r_dyn, r_eqN */
-    double vl[DOPUS_QP_NB];
-    double uv[DOPUS_QP_NB];
+    dopus_real vl[DOPUS_QP_NB];
+    dopus_real uv[DOPUS_QP_NB];
     /* Newton directions (the Newton right-hand side is formed in the direction arrays and
      * solved in place) */
-    double d_prim[DOPUS_QP_NPRIM];
-    double d_lam[(DOPUS_N + 1) * DOPUS_NX];
-    double d_nu[DOPUS_QP_NE1];
-    double dv[DOPUS_QP_NB]; /* D d_prim */
-    double dz_lo[DOPUS_QP_NB];
-    double dz_up[DOPUS_QP_NB];
+    dopus_real d_prim[DOPUS_QP_NPRIM];
+    dopus_real d_lam[(DOPUS_N + 1) * DOPUS_NX];
+    dopus_real d_nu[DOPUS_QP_NE1];
+    dopus_real dv[DOPUS_QP_NB]; /* D d_prim */
+    dopus_real dz_lo[DOPUS_QP_NB];
+    dopus_real dz_up[DOPUS_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
-    double M[DOPUS_QP_NW * DOPUS_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
-    double P[DOPUS_N + 1][DOPUS_QP_NXP];              /* value function Hessians, packed lower */
-    double G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];   /* value function x-nu coupling */
-    double Lu[DOPUS_N][DOPUS_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
-    double LK[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux */
-    double LKn[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
-    double S[DOPUS_QP_NE1 * DOPUS_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
-    double e[DOPUS_QP_NE1];
-    double work[DOPUS_QP_NWORK];
-    double delta;               /* current inertia-correction shift */
-    double rho_aug;             /* current terminal augmented-Lagrangian weight */
-    double noise[DOPUS_QP_NU1]; /* round-off estimate of M_uu pivots */
-    int pivot_floors;           /* pivots within round-off of zero, replaced (see linalg) */
-    double scale_stat;          /* residual scaling factors */
-    double scale_eq;
-    double scale_g; /* data parts of the scaling (constant during a solve) */
-    double scale_b;
-    double scale_bounds;
+    dopus_real M[DOPUS_QP_NW * DOPUS_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
+    dopus_real P[DOPUS_N + 1][DOPUS_QP_NXP];              /* value function Hessians, packed lower */
+    dopus_real G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];   /* value function x-nu coupling */
+    dopus_real Lu[DOPUS_N][DOPUS_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
+    dopus_real LK[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux */
+    dopus_real LKn[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
+    dopus_real S[DOPUS_QP_NE1 * DOPUS_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
+    dopus_real e[DOPUS_QP_NE1];
+    dopus_real work[DOPUS_QP_NWORK];
+    dopus_real delta;               /* current inertia-correction shift */
+    dopus_real rho_aug;             /* current terminal augmented-Lagrangian weight */
+    dopus_real noise[DOPUS_QP_NU1]; /* round-off estimate of M_uu pivots */
+    int pivot_floors;               /* pivots within round-off of zero, replaced (see linalg) */
+    dopus_real scale_stat;          /* residual scaling factors */
+    dopus_real scale_eq;
+    dopus_real scale_g; /* data parts of the scaling (constant during a solve) */
+    dopus_real scale_b;
+    dopus_real scale_bounds;
 } dopus_qp_workspace;
 
 /* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */

@@ -4,11 +4,11 @@
 
 #include "dopus_ring.h"
 
-static void dopus_ring_zero(double *v, int n)
+static void dopus_ring_zero(dopus_real *v, int n)
 {
     int i;
     for (i = 0; i < n; ++i) {
-        v[i] = 0.0;
+        v[i] = DOPUS_R(0.0);
     }
 }
 
@@ -29,7 +29,7 @@ void dopus_ring_reset(dopus_ring *ring)
     ring->ring_head = 0;
 }
 
-void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const double *A)
+void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const dopus_real *A)
 {
     int i, j, l = 0;
     for (j = 0; j < DOPUS_NW; ++j)
@@ -37,7 +37,7 @@ void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const double *A)
             slot->A_dyn[l++] = A[i + j * DOPUS_NW];
 }
 
-void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const double *A_l, double *A)
+void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const dopus_real *A_l, dopus_real *A)
 {
     int i, j, l = 0;
     for (j = 0; j < DOPUS_NW; ++j)
@@ -70,15 +70,15 @@ void dopus_ring_clear_step(dopus_stage_slot *slot)
     dopus_ring_zero(slot->dmu_b, DOPUS_NW);
 }
 
-double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, const double *phi_new,
-                         const double *g_new)
+dopus_real dopus_ring_secant(const dopus_stage_slot *slot, const dopus_real *F_w_new,
+                             const dopus_real *phi_new, const dopus_real *g_new)
 {
-    double num2 = 0.0, den2 = 0.0, old2 = 0.0, new2 = 0.0;
+    dopus_real num2 = DOPUS_R(0.0), den2 = DOPUS_R(0.0), old2 = DOPUS_R(0.0), new2 = DOPUS_R(0.0);
     int i, j;
 
     /* stationarity rows: F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new */
     for (i = 0; i < DOPUS_NW; ++i) {
-        double hd = 0.0, pl = 0.0, cm = 0.0, v;
+        dopus_real hd = DOPUS_R(0.0), pl = DOPUS_R(0.0), cm = DOPUS_R(0.0), v;
         for (j = 0; j < DOPUS_NW; ++j)
             hd += slot->Ht[i + j * DOPUS_NW] * slot->dw[j];
         for (j = 0; j < DOPUS_NX; ++j)
@@ -90,7 +90,7 @@ double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, co
     }
     /* dynamics rows: -(phi_old + Phit dw) + phi_new */
     for (i = 0; i < DOPUS_NX; ++i) {
-        double pd = 0.0, v;
+        dopus_real pd = DOPUS_R(0.0), v;
         for (j = 0; j < DOPUS_NW; ++j)
             pd += slot->Phit[i + j * DOPUS_NX] * slot->dw[j];
         v = -(slot->phi[i] + pd) + phi_new[i];
@@ -98,7 +98,7 @@ double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, co
     }
     /* path constraint rows: g_old + Ct dw - g_new */
     for (i = 0; i < DOPUS_NG; ++i) {
-        double cd = 0.0, v;
+        dopus_real cd = DOPUS_R(0.0), v;
         for (j = 0; j < DOPUS_NW; ++j)
             cd += slot->Ct[i + j * DOPUS_DIM(DOPUS_NG)] * slot->dw[j];
         v = slot->g[i] + cd - g_new[i];
@@ -123,22 +123,23 @@ double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, co
         new2 += phi_new[i] * phi_new[i];
     for (i = 0; i < DOPUS_NG; ++i)
         new2 += g_new[i] * g_new[i];
-    if (den2 == 0.0) {
-        return 0.0;
+    if (den2 == DOPUS_R(0.0)) {
+        return DOPUS_R(0.0);
     }
     /* a residual or step whose square overflows (or a NaN from Inf - Inf in the residual):
      * the linear model of this stage says nothing, it ranks first */
-    if (!(num2 <= DBL_MAX) || !(den2 <= DBL_MAX)) {
+    if (!(num2 <= DOPUS_REAL_MAX) || !(den2 <= DOPUS_REAL_MAX)) {
         return INFINITY;
     }
     /* a residual at the round-off level of F is noise, not a secant violation */
-    if (sqrt(num2) <= DOPUS_EPS_RHO * (sqrt(old2) + sqrt(new2))) {
-        return 0.0;
+    if (dopus_sqrt(num2) <= DOPUS_EPS_RHO * (dopus_sqrt(old2) + dopus_sqrt(new2))) {
+        return DOPUS_R(0.0);
     }
-    return sqrt(num2) / sqrt(den2);
+    return dopus_sqrt(num2) / dopus_sqrt(den2);
 }
 
-void dopus_ring_store_F(dopus_stage_slot *slot, const double *F_w, const double *phi, const double *g)
+void dopus_ring_store_F(dopus_stage_slot *slot, const dopus_real *F_w, const dopus_real *phi,
+                        const dopus_real *g)
 {
     int i;
     for (i = 0; i < DOPUS_NW; ++i)

@@ -12,22 +12,22 @@
 
 typedef struct {
     /* the blocks the QP uses (possibly outdated, A regularised), column-major */
-    double Ht[DOPUS_NW * DOPUS_NW]; /* nw x nw */
+    dopus_real Ht[DOPUS_NW * DOPUS_NW]; /* nw x nw */
     /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
      * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l;
      * symmetric, its lower triangle packed by columns (dopus_ring_store_A_dyn) */
-    double A_dyn[DOPUS_NW * (DOPUS_NW + 1) / 2];
-    double Phit[DOPUS_NX * DOPUS_NW];          /* nx x nw, [A_k B_k] */
-    double Ct[DOPUS_DIM(DOPUS_NG * DOPUS_NW)]; /* ng x nw (leading dimension ng) */
+    dopus_real A_dyn[DOPUS_NW * (DOPUS_NW + 1) / 2];
+    dopus_real Phit[DOPUS_NX * DOPUS_NW];          /* nx x nw, [A_k B_k] */
+    dopus_real Ct[DOPUS_DIM(DOPUS_NG * DOPUS_NW)]; /* ng x nw (leading dimension ng) */
     /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
-    double F_w[DOPUS_NW];
-    double phi[DOPUS_NX];
-    double g[DOPUS_DIM(DOPUS_NG)];
+    dopus_real F_w[DOPUS_NW];
+    dopus_real phi[DOPUS_NX];
+    dopus_real g[DOPUS_DIM(DOPUS_NG)];
     /* domega = (dw, dlam_next, dmu_g, dmu_b): the last QP step of this stage */
-    double dw[DOPUS_NW];
-    double dlam[DOPUS_NX];
-    double dmu_g[DOPUS_DIM(DOPUS_NG)];
-    double dmu_b[DOPUS_NW];
+    dopus_real dw[DOPUS_NW];
+    dopus_real dlam[DOPUS_NX];
+    dopus_real dmu_g[DOPUS_DIM(DOPUS_NG)];
+    dopus_real dmu_b[DOPUS_NW];
 } dopus_stage_slot;
 
 typedef struct {
@@ -46,15 +46,15 @@ const dopus_stage_slot *dopus_ring_stage_const(const dopus_ring *ring, int k);
 void dopus_ring_advance(dopus_ring *ring);
 
 /* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
-void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const double *A);
+void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const dopus_real *A);
 /* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
-void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const double *A_l, double *A);
+void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const dopus_real *A_l, dopus_real *A);
 
 /* Zero the step domega of a slot. */
 void dopus_ring_clear_step(dopus_stage_slot *slot);
 
 /* Round-off floor of the secant residual (docs/algorithm.md section 4 step 2). */
-#define DOPUS_EPS_RHO 1e-12
+#define DOPUS_EPS_RHO DOPUS_PREC(1e-12, 1e-6)
 
 /* Secant criterion rho_k (eq. 16) of the slot against the fresh F_new = (F_w, phi, g):
  *   num = | [F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new ;
@@ -62,10 +62,11 @@ void dopus_ring_clear_step(dopus_stage_slot *slot);
  *            g_old + Ct dw - g_new] |
  *   rho = num / |(dw, dlam, dmu_g, dmu_b)| (2-norms), 0 when the denominator is 0 or
  *   num <= DOPUS_EPS_RHO * (|(F_w_old, phi_old, g_old)| + |(F_w_new, phi_new, g_new)|). */
-double dopus_ring_secant(const dopus_stage_slot *slot, const double *F_w_new, const double *phi_new,
-                         const double *g_new);
+dopus_real dopus_ring_secant(const dopus_stage_slot *slot, const dopus_real *F_w_new,
+                             const dopus_real *phi_new, const dopus_real *g_new);
 
 /* Store F_new as F_old. */
-void dopus_ring_store_F(dopus_stage_slot *slot, const double *F_w, const double *phi, const double *g);
+void dopus_ring_store_F(dopus_stage_slot *slot, const dopus_real *F_w, const dopus_real *phi,
+                        const dopus_real *g);
 
 #endif /* DOPUS_RING_H */

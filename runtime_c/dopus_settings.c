@@ -57,12 +57,12 @@ int dopus_get_hessian(dopus_solver *s)
     return s->hessian;
 }
 
-int dopus_set_regularization(dopus_solver *s, int regularization, double eps)
+int dopus_set_regularization(dopus_solver *s, int regularization, dopus_real eps)
 {
     dopus_ensure_setup(s);
     if ((regularization != DOPUS_REG_NONE && regularization != DOPUS_REG_PROJECT &&
          regularization != DOPUS_REG_MIRROR) ||
-        !isfinite(eps) || !(eps > 0.0)) {
+        !isfinite(eps) || !(eps > DOPUS_R(0.0))) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
     s->regularization = regularization;
@@ -76,7 +76,7 @@ int dopus_get_regularization(dopus_solver *s)
     return s->regularization;
 }
 
-double dopus_get_reg_eps(dopus_solver *s)
+dopus_real dopus_get_reg_eps(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->reg_eps;
@@ -93,10 +93,10 @@ int dopus_get_cost_hessian(dopus_solver *s)
     return s->cost_hessian;
 }
 
-int dopus_set_levenberg_marquardt(dopus_solver *s, double lm)
+int dopus_set_levenberg_marquardt(dopus_solver *s, dopus_real lm)
 {
     dopus_ensure_setup(s);
-    if (!isfinite(lm) || !(lm >= 0.0)) {
+    if (!isfinite(lm) || !(lm >= DOPUS_R(0.0))) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
     s->lm_auto = 0;
@@ -108,8 +108,8 @@ int dopus_set_lm_auto(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     s->lm_auto = 1;
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
+    s->lm = DOPUS_R(0.0);
+    s->lm_kkt_prev = -DOPUS_R(1.0);
     if (s->initialized && s->qp_ready) {
         dopus_lm_start(s);
     }
@@ -122,29 +122,29 @@ int dopus_get_lm_auto(dopus_solver *s)
     return s->lm_auto;
 }
 
-double dopus_get_lm_scale(dopus_solver *s)
+dopus_real dopus_get_lm_scale(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->lm_scale;
 }
 
-double dopus_get_levenberg_marquardt(dopus_solver *s)
+dopus_real dopus_get_levenberg_marquardt(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->lm;
 }
 
-int dopus_set_qp_tol(dopus_solver *s, double tol)
+int dopus_set_qp_tol(dopus_solver *s, dopus_real tol)
 {
     dopus_ensure_setup(s);
-    if (!isfinite(tol) || !(tol > 0.0) || tol > DOPUS_QP_TOL_MAX) {
+    if (!isfinite(tol) || !(tol > DOPUS_R(0.0)) || tol > DOPUS_QP_TOL_MAX) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
     s->qp_settings.tol = tol;
     return dopus_ret(s, DOPUS_OK);
 }
 
-double dopus_get_qp_tol(dopus_solver *s)
+dopus_real dopus_get_qp_tol(dopus_solver *s)
 {
     dopus_ensure_setup(s);
     return s->qp_settings.tol;
@@ -198,7 +198,7 @@ int dopus_get_qp_warm_start(dopus_solver *s)
     return s->qp_warm;
 }
 
-int dopus_set_parameters(dopus_solver *s, const double *p)
+int dopus_set_parameters(dopus_solver *s, const dopus_real *p)
 {
     int k, i;
     dopus_ensure_setup(s);
@@ -219,7 +219,7 @@ int dopus_set_parameters(dopus_solver *s, const double *p)
     return dopus_ret(s, DOPUS_OK);
 }
 
-int dopus_set_parameters_node(dopus_solver *s, int k, const double *pk)
+int dopus_set_parameters_node(dopus_solver *s, int k, const dopus_real *pk)
 {
     int i;
     dopus_ensure_setup(s);
@@ -241,7 +241,7 @@ int dopus_set_parameters_node(dopus_solver *s, int k, const double *pk)
     return dopus_ret(s, DOPUS_OK);
 }
 
-void dopus_get_parameters(dopus_solver *s, double *p)
+void dopus_get_parameters(dopus_solver *s, dopus_real *p)
 {
     int k, i;
     dopus_ensure_setup(s);

@@ -19,11 +19,11 @@
 #include "dopus_solver_internal.h"
 
 #define DOPUS_MAGIC 0x444f5055 /* "DOPU" */
-#define DOPUS_DEFAULT_QP_TOL 1e-10
+#define DOPUS_DEFAULT_QP_TOL DOPUS_PREC(1e-10, 1e-5)
 
 /* ---- small helpers ------------------------------------------------------------------ */
 
-static void dopus_copy(double *dst, const double *src, int n)
+static void dopus_copy(dopus_real *dst, const dopus_real *src, int n)
 {
     int i;
     for (i = 0; i < n; ++i) {
@@ -42,7 +42,7 @@ void dopus_clear_x0_multiplier(dopus_solver *s)
 {
     int i;
     for (i = 0; i < DOPUS_NX; ++i) {
-        s->mu_b[0][i] = 0.0;
+        s->mu_b[0][i] = DOPUS_R(0.0);
     }
 }
 
@@ -112,9 +112,9 @@ const char *dopus_status_string(int status)
 
 /* ---- safety: scales, clipping, health (algorithm.md section 9) -------------------- */
 
-static double dopus_absmax(double a, double b)
+static dopus_real dopus_absmax(dopus_real a, dopus_real b)
 {
-    double fa = fabs(a);
+    dopus_real fa = dopus_fabs(a);
     return isfinite(a) && fa > b ? fa : b;
 }
 
@@ -124,7 +124,7 @@ static void dopus_compute_scales(dopus_solver *s)
 {
     int k, i;
     for (i = 0; i < DOPUS_NX; ++i) {
-        double v = 1.0;
+        dopus_real v = DOPUS_R(1.0);
         v = dopus_absmax(dopus_lbx[i], v);
         v = dopus_absmax(dopus_ubx[i], v);
         v = dopus_absmax(dopus_x0_default[i], v);
@@ -134,7 +134,7 @@ static void dopus_compute_scales(dopus_solver *s)
         s->scale_x[i] = v;
     }
     for (i = 0; i < DOPUS_NU; ++i) {
-        double v = 1.0;
+        dopus_real v = DOPUS_R(1.0);
         v = dopus_absmax(dopus_lbu[i], v);
         v = dopus_absmax(dopus_ubu[i], v);
         for (k = 0; k < DOPUS_N; ++k) {
@@ -163,17 +163,17 @@ static void dopus_reset_health(dopus_solver *s)
     for (i = 0; i < DOPUS_NU; ++i) {
         s->u0_out[i] = s->plan_u[0][i];
     }
-    s->kkt_proxy = 0.0;
-    s->kkt_proxy_ref = 0.0;
+    s->kkt_proxy = DOPUS_R(0.0);
+    s->kkt_proxy_ref = DOPUS_R(0.0);
 }
 
 /* u clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1 when
  * an entry changed. */
-static int dopus_clip_u(const double *u, double *out)
+static int dopus_clip_u(const dopus_real *u, dopus_real *out)
 {
     int i, clipped = 0;
     for (i = 0; i < DOPUS_NU; ++i) {
-        double v = isnan(u[i]) ? 0.0 : u[i];
+        dopus_real v = isnan(u[i]) ? DOPUS_R(0.0) : u[i];
         if (v < dopus_lbu[i]) {
             v = dopus_lbu[i];
         }
@@ -191,22 +191,22 @@ static int dopus_clip_u(const double *u, double *out)
 /* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as the iterate
  * plus an optional step: every entry finite and |v_i| <= BOX scale_i + |xhat0_i| (states),
  * BOX scale_i (controls). Returns 1 when it passes. */
-static int dopus_box_ok(const dopus_solver *s, const double *x, const double *dx, int dx_stride,
-                        const double *u, const double *du, int du_stride)
+static int dopus_box_ok(const dopus_solver *s, const dopus_real *x, const dopus_real *dx, int dx_stride,
+                        const dopus_real *u, const dopus_real *du, int du_stride)
 {
     int k, i;
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
-            double v = x[k * DOPUS_NX + i] + (dx ? dx[k * dx_stride + i] : 0.0);
-            if (!(fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + fabs(s->xhat0[i]))) {
+            dopus_real v = x[k * DOPUS_NX + i] + (dx ? dx[k * dx_stride + i] : DOPUS_R(0.0));
+            if (!(dopus_fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + dopus_fabs(s->xhat0[i]))) {
                 return 0;
             }
         }
     }
     for (k = 0; k < DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NU; ++i) {
-            double v = u[k * DOPUS_NU + i] + (du ? du[k * du_stride + i] : 0.0);
-            if (!(fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_u[i])) {
+            dopus_real v = u[k * DOPUS_NU + i] + (du ? du[k * du_stride + i] : DOPUS_R(0.0));
+            if (!(dopus_fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_u[i])) {
                 return 0;
             }
         }
@@ -215,7 +215,7 @@ static int dopus_box_ok(const dopus_solver *s, const double *x, const double *dx
 }
 
 /* The fallback control of a failed feedback: the next control of the last good plan. */
-static void dopus_fallback_u0(dopus_solver *s, double *u0)
+static void dopus_fallback_u0(dopus_solver *s, dopus_real *u0)
 {
     int j = s->mode == DOPUS_MODE_RECEDING ? s->plan_age : 0;
     j = j > DOPUS_N - 1 ? DOPUS_N - 1 : j;
@@ -231,7 +231,7 @@ static void dopus_fallback_u0(dopus_solver *s, double *u0)
 /* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
 static void dopus_lm_feedback(dopus_solver *s, int status);
 
-static int dopus_feedback_failed(dopus_solver *s, double *u0, int status)
+static int dopus_feedback_failed(dopus_solver *s, dopus_real *u0, int status)
 {
     dopus_lm_feedback(s, status);
     s->n_failed += 1;
@@ -248,27 +248,27 @@ static int dopus_feedback_failed(dopus_solver *s, double *u0, int status)
 /* Divergence measure at the current point from the F values in the slots and the terminal
  * node (after init or a prepare): max of |F_w,k + [lam_k; 0]|, |gL_N + mu_bN + lam_N|,
  * |phi_k - x_{k+1}|, |r_eq| (inf-norms). */
-static double dopus_kkt_proxy_eval(const dopus_solver *s)
+static dopus_real dopus_kkt_proxy_eval(const dopus_solver *s)
 {
-    double m = 0.0, v;
+    dopus_real m = DOPUS_R(0.0), v;
     int k, i;
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
         for (i = 0; i < DOPUS_NW; ++i) {
-            v = fabs(slot->F_w[i] + (i < DOPUS_NX ? s->lam[k][i] : 0.0));
+            v = dopus_fabs(slot->F_w[i] + (i < DOPUS_NX ? s->lam[k][i] : DOPUS_R(0.0)));
             m = (v > m || isnan(v)) ? v : m;
         }
         for (i = 0; i < DOPUS_NX; ++i) {
-            v = fabs(slot->phi[i] - s->x[k + 1][i]);
+            v = dopus_fabs(slot->phi[i] - s->x[k + 1][i]);
             m = (v > m || isnan(v)) ? v : m;
         }
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        v = fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]);
+        v = dopus_fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]);
         m = (v > m || isnan(v)) ? v : m;
     }
     for (i = 0; i < DOPUS_NE; ++i) {
-        v = fabs(s->r_eq[i]);
+        v = dopus_fabs(s->r_eq[i]);
         m = (v > m || isnan(v)) ? v : m;
     }
     return m;
@@ -277,7 +277,7 @@ static double dopus_kkt_proxy_eval(const dopus_solver *s)
 /* The divergence test of the prepared iterate: box, finite multipliers, KKT proxy bound. */
 static int dopus_iterate_diverged(dopus_solver *s)
 {
-    double ref = s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0;
+    dopus_real ref = s->kkt_proxy_ref > DOPUS_R(1.0) ? s->kkt_proxy_ref : DOPUS_R(1.0);
     if (!dopus_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0)) {
         return 1;
     }
@@ -292,19 +292,19 @@ static int dopus_iterate_diverged(dopus_solver *s)
 /* ---- automatic Levenberg-Marquardt term (algorithm.md section 10) ------------------- */
 
 /* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
-static double dopus_lm_hessian_scale(const dopus_solver *s)
+static dopus_real dopus_lm_hessian_scale(const dopus_solver *s)
 {
-    double h = 1e-300, v;
+    dopus_real h = DOPUS_REAL_TINY, v;
     int k, i;
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
         for (i = 0; i < DOPUS_NW; ++i) {
-            v = fabs(slot->Ht[i + i * DOPUS_NW]);
+            v = dopus_fabs(slot->Ht[i + i * DOPUS_NW]);
             h = v > h ? v : h;
         }
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        v = fabs(s->A_N[i + i * DOPUS_NX]);
+        v = dopus_fabs(s->A_N[i + i * DOPUS_NX]);
         h = v > h ? v : h;
     }
     return h;
@@ -313,16 +313,16 @@ static double dopus_lm_hessian_scale(const dopus_solver *s)
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
  * out) has control pivots above DOPUS_LM_PIVOT_REL h. */
-static int dopus_lm_convex(dopus_solver *s, double lm)
+static int dopus_lm_convex(dopus_solver *s, dopus_real lm)
 {
-    const double tol = DOPUS_LM_PIVOT_REL * s->lm_scale;
-    double *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
-    double v;
+    const dopus_real tol = DOPUS_LM_PIVOT_REL * s->lm_scale;
+    dopus_real *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
+    dopus_real v;
     int k, i, j, l;
     for (j = 0; j < DOPUS_NX; ++j) {
         for (i = 0; i < DOPUS_NX; ++i) {
             P[i + j * DOPUS_NX] =
-                (i >= j ? s->A_N[i + j * DOPUS_NX] : s->A_N[j + i * DOPUS_NX]) + (i == j ? lm : 0.0);
+                (i >= j ? s->A_N[i + j * DOPUS_NX] : s->A_N[j + i * DOPUS_NX]) + (i == j ? lm : DOPUS_R(0.0));
         }
     }
     for (k = DOPUS_N - 1; k >= 0; --k) {
@@ -330,7 +330,7 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
         /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
         for (j = 0; j < DOPUS_NW; ++j) {
             for (i = 0; i < DOPUS_NX; ++i) {
-                v = 0.0;
+                v = DOPUS_R(0.0);
                 for (l = 0; l < DOPUS_NX; ++l) {
                     v += P[i + l * DOPUS_NX] * slot->Phit[l + j * DOPUS_NX];
                 }
@@ -339,7 +339,8 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
         }
         for (j = 0; j < DOPUS_NW; ++j) {
             for (i = 0; i < DOPUS_NW; ++i) {
-                v = (i >= j ? slot->Ht[i + j * DOPUS_NW] : slot->Ht[j + i * DOPUS_NW]) + (i == j ? lm : 0.0);
+                v = (i >= j ? slot->Ht[i + j * DOPUS_NW] : slot->Ht[j + i * DOPUS_NW]) +
+                    (i == j ? lm : DOPUS_R(0.0));
                 for (l = 0; l < DOPUS_NX; ++l) {
                     v += slot->Phit[l + i * DOPUS_NX] * PA[l + j * DOPUS_NX];
                 }
@@ -348,14 +349,14 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
         }
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = DOPUS_NX; j < DOPUS_NW; ++j) {
-            double d = Z[j + j * DOPUS_NW];
+            dopus_real d = Z[j + j * DOPUS_NW];
             for (l = DOPUS_NX; l < j; ++l) {
                 d -= Z[j + l * DOPUS_NW] * Z[j + l * DOPUS_NW];
             }
             if (!(d > tol)) {
                 return 0;
             }
-            d = sqrt(d);
+            d = dopus_sqrt(d);
             Z[j + j * DOPUS_NW] = d;
             for (i = j + 1; i < DOPUS_NW; ++i) {
                 v = Z[i + j * DOPUS_NW];
@@ -380,7 +381,7 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
         }
         for (j = 0; j < DOPUS_NX; ++j) {
             for (i = 0; i < DOPUS_NX; ++i) {
-                v = 0.5 * (Z[i + j * DOPUS_NW] + Z[j + i * DOPUS_NW]);
+                v = DOPUS_R(0.5) * (Z[i + j * DOPUS_NW] + Z[j + i * DOPUS_NW]);
                 for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
                     v -= Z[l + i * DOPUS_NW] * Z[l + j * DOPUS_NW];
                 }
@@ -395,11 +396,11 @@ static int dopus_lm_convex(dopus_solver *s, double lm)
  * maximum. */
 static void dopus_lm_raise(dopus_solver *s)
 {
-    double lo = DOPUS_LM_MIN_REL * s->lm_scale, hi = DOPUS_LM_MAX_REL * s->lm_scale;
+    dopus_real lo = DOPUS_LM_MIN_REL * s->lm_scale, hi = DOPUS_LM_MAX_REL * s->lm_scale;
     if (s->lm_uncapped > s->lm) {
         /* the first raise after the cap of dopus_lm_measured restores the term it capped */
         s->lm = s->lm_uncapped;
-        s->lm_uncapped = -1.0;
+        s->lm_uncapped = -DOPUS_R(1.0);
         return;
     }
     s->lm = s->lm < lo ? lo : s->lm * DOPUS_LM_RAISE;
@@ -409,7 +410,7 @@ static void dopus_lm_raise(dopus_solver *s)
 /* Raise until the QP is convex on the dynamics or the term is at its maximum. */
 static void dopus_lm_convexify(dopus_solver *s)
 {
-    double hi = DOPUS_LM_MAX_REL * s->lm_scale;
+    dopus_real hi = DOPUS_LM_MAX_REL * s->lm_scale;
     while (!dopus_lm_convex(s, s->lm) && s->lm < hi) {
         dopus_lm_raise(s);
     }
@@ -422,9 +423,9 @@ void dopus_lm_start(dopus_solver *s)
         return;
     }
     s->lm_scale = dopus_lm_hessian_scale(s);
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
-    s->lm_uncapped = -1.0;
+    s->lm = DOPUS_R(0.0);
+    s->lm_kkt_prev = -DOPUS_R(1.0);
+    s->lm_uncapped = -DOPUS_R(1.0);
     dopus_lm_convexify(s);
 }
 
@@ -432,14 +433,15 @@ void dopus_lm_start(dopus_solver *s)
  * grew DOPUS_LM_KKT_GROWTH times, then convex. */
 static void dopus_lm_prepared(dopus_solver *s)
 {
-    double floor_ = 1e-8 * (s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0);
-    double prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
+    dopus_real floor_ =
+        DOPUS_PREC(1e-8, 1e-5) * (s->kkt_proxy_ref > DOPUS_R(1.0) ? s->kkt_proxy_ref : DOPUS_R(1.0));
+    dopus_real prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
     if (!s->lm_auto) {
         return;
     }
     s->lm_scale = dopus_lm_hessian_scale(s);
-    s->lm_uncapped = -1.0;
-    if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= DOPUS_LM_KKT_GROWTH * prev)) {
+    s->lm_uncapped = -DOPUS_R(1.0);
+    if (s->lm_kkt_prev >= DOPUS_R(0.0) && !(s->kkt_proxy <= DOPUS_LM_KKT_GROWTH * prev)) {
         dopus_lm_raise(s);
     }
     s->lm_kkt_prev = s->kkt_proxy;
@@ -451,20 +453,20 @@ static void dopus_lm_prepared(dopus_solver *s)
  * DOPUS_LM_MIN_REL h), so that it vanishes where the iterate converges. */
 static void dopus_lm_measured(dopus_solver *s)
 {
-    double d = s->kkt_proxy, cap, v;
+    dopus_real d = s->kkt_proxy, cap, v;
     int i;
-    s->lm_uncapped = -1.0;
+    s->lm_uncapped = -DOPUS_R(1.0);
     if (!s->lm_auto) {
         return;
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        v = fabs(s->qp_in.x0[i]) / s->scale_x[i];
+        v = dopus_fabs(s->qp_in.x0[i]) / s->scale_x[i];
         d = v > d ? v : d;
     }
     cap = DOPUS_LM_KKT_REL * s->lm_scale * d * d;
     if (!(s->lm <= cap)) {
         s->lm_uncapped = s->lm;
-        s->lm = cap < DOPUS_LM_MIN_REL * s->lm_scale ? 0.0 : cap;
+        s->lm = cap < DOPUS_LM_MIN_REL * s->lm_scale ? DOPUS_R(0.0) : cap;
     }
 }
 
@@ -477,7 +479,7 @@ static void dopus_lm_feedback(dopus_solver *s, int status)
     if (status == DOPUS_OK) {
         s->lm *= DOPUS_LM_LOWER;
         if (s->lm < DOPUS_LM_MIN_REL * s->lm_scale) {
-            s->lm = 0.0;
+            s->lm = DOPUS_R(0.0);
         }
     } else if (status == DOPUS_ERR_QP || status == DOPUS_ERR_DIVERGED) {
         dopus_lm_raise(s);
@@ -502,11 +504,12 @@ void dopus_defaults(dopus_solver *s)
     s->reg_eps = dopus_default_reg_eps;
     s->cost_hessian = dopus_default_cost_hessian ? 1 : 0;
     /* a negative generated default: the automatic term (algorithm.md section 10) */
-    s->lm_auto = !(dopus_default_lm >= 0.0);
-    s->lm = (dopus_default_lm >= 0.0 && dopus_default_lm < INFINITY) ? dopus_default_lm : 0.0;
-    s->lm_scale = 1.0;
-    s->lm_kkt_prev = -1.0;
-    s->lm_uncapped = -1.0;
+    s->lm_auto = !(dopus_default_lm >= DOPUS_R(0.0));
+    s->lm =
+        (dopus_default_lm >= DOPUS_R(0.0) && dopus_default_lm < INFINITY) ? dopus_default_lm : DOPUS_R(0.0);
+    s->lm_scale = DOPUS_R(1.0);
+    s->lm_kkt_prev = -DOPUS_R(1.0);
+    s->lm_uncapped = -DOPUS_R(1.0);
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -523,7 +526,7 @@ void dopus_defaults(dopus_solver *s)
     s->qp_status = 0;
     s->qp_iterations = 0;
     for (k = 0; k < DOPUS_N; ++k) {
-        s->rho[k] = 0.0;
+        s->rho[k] = DOPUS_R(0.0);
     }
     s->recovery = 1;
     s->recovery_failures = DOPUS_RECOVERY_FAILURES;
@@ -540,7 +543,7 @@ void dopus_defaults(dopus_solver *s)
 /* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
 static int dopus_stage_F(dopus_solver *s, int k)
 {
-    double l = 0.0;
+    dopus_real l = DOPUS_R(0.0);
     int i;
     if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
@@ -558,7 +561,7 @@ static int dopus_stage_F(dopus_solver *s, int k)
 }
 
 /* Regularise a fresh A block (algorithm.md section 5), timed as its own phase. */
-static int dopus_regularize(dopus_solver *s, int n, double *A)
+static int dopus_regularize(dopus_solver *s, int n, dopus_real *A)
 {
     double t0;
     int rc;
@@ -623,7 +626,7 @@ static int dopus_stage_H(dopus_solver *s, int k)
     return DOPUS_OK;
 }
 
-int dopus_term_grad_checked(dopus_solver *s, double *gL, double *E, double *r, double *r_eq)
+int dopus_term_grad_checked(dopus_solver *s, dopus_real *gL, dopus_real *E, dopus_real *r, dopus_real *r_eq)
 {
     if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, E, r, r_eq,
                              &s->mem.ev.fun_work) != 0) {
@@ -639,7 +642,7 @@ int dopus_term_grad_checked(dopus_solver *s, double *gL, double *E, double *r, d
 /* Terminal F: gL_N, E, r, r_eq at the current point. */
 static int dopus_term_F(dopus_solver *s)
 {
-    double gL[DOPUS_NX], E = 0.0, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
+    dopus_real gL[DOPUS_NX], E = DOPUS_R(0.0), r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
     int rc = dopus_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != DOPUS_OK) {
         return rc;
@@ -654,7 +657,7 @@ static int dopus_term_F(dopus_solver *s)
 /* Terminal H: A_N (regularised), R, R_eq. */
 static int dopus_term_H(dopus_solver *s)
 {
-    double R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX], R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
+    dopus_real R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX], R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
     double t0 = dopus_timer_now(&s->timer);
     int rc;
     rc = dopus_eval_term_hess(s->hessian, s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
@@ -693,7 +696,7 @@ static void dopus_assemble(dopus_solver *s)
         in->C[k] = DOPUS_NG > 0 ? slot->Ct : 0;
         /* a_k = F_w,k + Phit_k' lam_{k+1} - Ct_k' mu_g_k - mu_b_k (eq. 12) */
         for (i = 0; i < DOPUS_NW; ++i) {
-            double pl = 0.0, cm = 0.0;
+            dopus_real pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
             for (j = 0; j < DOPUS_NX; ++j) {
                 pl += slot->Phit[j + i * DOPUS_NX] * s->lam[k + 1][j];
             }
@@ -724,7 +727,7 @@ static void dopus_assemble(dopus_solver *s)
     in->Req = DOPUS_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
     for (i = 0; i < DOPUS_NX; ++i) {
-        double rm = 0.0, en = 0.0;
+        dopus_real rm = DOPUS_R(0.0), en = DOPUS_R(0.0);
         for (j = 0; j < DOPUS_NR; ++j) {
             rm += s->R[j + i * DOPUS_DIM(DOPUS_NR)] * s->mu_r[j];
         }
@@ -751,7 +754,7 @@ static void dopus_clear_timings(dopus_solver *s, int first, int last)
 {
     int i;
     for (i = first; i <= last; ++i) {
-        s->timer.t[i] = 0.0;
+        s->timer.t[i] = DOPUS_R(0.0);
     }
 }
 
@@ -790,7 +793,7 @@ static int dopus_init_finish(dopus_solver *s)
     int k, rc;
     dopus_ring_reset(&s->ring);
     for (k = 0; k < DOPUS_N; ++k) {
-        s->rho[k] = 0.0;
+        s->rho[k] = DOPUS_R(0.0);
         s->recomputed[k] = k;
         s->selected[k] = 0;
     }
@@ -811,9 +814,9 @@ static int dopus_init_finish(dopus_solver *s)
     return DOPUS_OK;
 }
 
-int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
-               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
-               const double *nu)
+int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, const dopus_real *u,
+               const dopus_real *lam, const dopus_real *mu_g, const dopus_real *mu_b, const dopus_real *mu_bN,
+               const dopus_real *mu_r, const dopus_real *nu)
 {
     int k, i, rc;
 
@@ -839,7 +842,7 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
             s->x[k][i] = x ? x[k * DOPUS_NX + i] : dopus_guess_x[k][i];
-            s->lam[k][i] = lam ? lam[k * DOPUS_NX + i] : 0.0;
+            s->lam[k][i] = lam ? lam[k * DOPUS_NX + i] : DOPUS_R(0.0);
         }
     }
     for (k = 0; k < DOPUS_N; ++k) {
@@ -847,21 +850,21 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
             s->u[k][i] = u ? u[k * DOPUS_NU + i] : dopus_guess_u[k][i];
         }
         for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i) {
-            s->mu_g[k][i] = (mu_g && i < DOPUS_NG) ? mu_g[k * DOPUS_NG + i] : 0.0;
+            s->mu_g[k][i] = (mu_g && i < DOPUS_NG) ? mu_g[k * DOPUS_NG + i] : DOPUS_R(0.0);
         }
         for (i = 0; i < DOPUS_NW; ++i) {
-            s->mu_b[k][i] = mu_b ? mu_b[k * DOPUS_NW + i] : 0.0;
+            s->mu_b[k][i] = mu_b ? mu_b[k * DOPUS_NW + i] : DOPUS_R(0.0);
         }
     }
     dopus_clear_x0_multiplier(s);
     for (i = 0; i < DOPUS_NX; ++i) {
-        s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
+        s->mu_bN[i] = mu_bN ? mu_bN[i] : DOPUS_R(0.0);
     }
     for (i = 0; i < DOPUS_DIM(DOPUS_NR); ++i) {
-        s->mu_r[i] = (mu_r && i < DOPUS_NR) ? mu_r[i] : 0.0;
+        s->mu_r[i] = (mu_r && i < DOPUS_NR) ? mu_r[i] : DOPUS_R(0.0);
     }
     for (i = 0; i < DOPUS_DIM(DOPUS_NE); ++i) {
-        s->nu[i] = (nu && i < DOPUS_NE) ? nu[i] : 0.0;
+        s->nu[i] = (nu && i < DOPUS_NE) ? nu[i] : DOPUS_R(0.0);
     }
 
     rc = dopus_init_finish(s);
@@ -874,7 +877,7 @@ int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const doub
     return dopus_ret(s, DOPUS_OK);
 }
 
-int dopus_init_nominal(dopus_solver *s, const double *xhat0)
+int dopus_init_nominal(dopus_solver *s, const dopus_real *xhat0)
 {
 #if DOPUS_HAS_NOMINAL
     return dopus_init(s, xhat0, &dopus_nominal_x[0][0], &dopus_nominal_u[0][0], &dopus_nominal_lam[0][0],
@@ -911,36 +914,36 @@ static void dopus_qp_warm_point(dopus_solver *s)
     int k, i;
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
-            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : 0.0;
+            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : DOPUS_R(0.0);
             w->lam[k][i] = s->lam[k][i];
         }
     }
     for (k = 0; k < DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_QP_NU1; ++i) {
-            w->u[k][i] = 0.0;
+            w->u[k][i] = DOPUS_R(0.0);
         }
         for (i = 0; i < DOPUS_NW; ++i) {
             w->mu_b[k][i] = s->mu_b[k][i];
         }
         for (i = 0; i < DOPUS_QP_NG1; ++i) {
-            w->mu_g[k][i] = i < DOPUS_NG ? s->mu_g[k][i] : 0.0;
+            w->mu_g[k][i] = i < DOPUS_NG ? s->mu_g[k][i] : DOPUS_R(0.0);
         }
     }
     for (i = 0; i < DOPUS_NX; ++i) {
         w->mu_bN[i] = s->mu_bN[i];
     }
     for (i = 0; i < DOPUS_QP_NR1; ++i) {
-        w->mu_r[i] = i < DOPUS_NR ? s->mu_r[i] : 0.0;
+        w->mu_r[i] = i < DOPUS_NR ? s->mu_r[i] : DOPUS_R(0.0);
     }
     for (i = 0; i < DOPUS_QP_NE1; ++i) {
-        w->nu[i] = i < DOPUS_NE ? s->nu[i] : 0.0;
+        w->nu[i] = i < DOPUS_NE ? s->nu[i] : DOPUS_R(0.0);
     }
 }
 
 /* Feedback step 1: the call is refused before the QP when the solver is not initialised,
  * the measurement is not finite or no QP is prepared (the fallback control is returned).
  * Returns DOPUS_OK when the QP is to be solved, else the status of the failed call. */
-static int dopus_feedback_admit(dopus_solver *s, const double *xhat0, double *u0)
+static int dopus_feedback_admit(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
     if (!s->initialized) {
         dopus_fallback_u0(s, u0);
@@ -963,7 +966,7 @@ static int dopus_feedback_admit(dopus_solver *s, const double *xhat0, double *u0
 }
 
 /* Step 2: the measurement enters the QP as the fixed step of x_0. */
-static void dopus_feedback_measure(dopus_solver *s, const double *xhat0)
+static void dopus_feedback_measure(dopus_solver *s, const dopus_real *xhat0)
 {
     int i;
     for (i = 0; i < DOPUS_NX; ++i) {
@@ -1107,7 +1110,7 @@ static void dopus_take_step(dopus_solver *s)
 
 /* Step 8: a good plan, the fallback of the next failures; the automatic term lowered unless
  * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
-static void dopus_keep_plan(dopus_solver *s, double *u0, int lowered)
+static void dopus_keep_plan(dopus_solver *s, dopus_real *u0, int lowered)
 {
     s->n_failed = 0;
     s->plan_age = 0;
@@ -1126,7 +1129,7 @@ static void dopus_keep_plan(dopus_solver *s, double *u0, int lowered)
 
 static int dopus_feedback_recover(dopus_solver *s, int *retries);
 
-int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
+int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
     double t0;
     int rc, qs, retries;
@@ -1137,7 +1140,7 @@ int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0)
     if (rc != DOPUS_OK) {
         return rc;
     }
-    s->timer.t[DOPUS_PHASE_FEEDBACK] = 0.0;
+    s->timer.t[DOPUS_PHASE_FEEDBACK] = DOPUS_R(0.0);
     t0 = dopus_timer_now(&s->timer);
     dopus_feedback_measure(s, xhat0);
     qs = dopus_feedback_qp(s);
@@ -1228,7 +1231,7 @@ static void dopus_select(dopus_solver *s, int M)
  * when every node is finite and inside the box. */
 static int dopus_simulate(dopus_solver *s, int use_plan)
 {
-    double l = 0.0;
+    dopus_real l = DOPUS_R(0.0);
     int k, j;
     for (k = 0; k < DOPUS_N; ++k) {
         j = s->plan_age + k > DOPUS_N - 1 ? DOPUS_N - 1 : s->plan_age + k;
@@ -1280,7 +1283,7 @@ static int dopus_reinit(dopus_solver *s)
  * the predicted state phi(xhat0, u0) (dopus_reinit). */
 static int dopus_recover(dopus_solver *s, int shifted)
 {
-    double l = 0.0;
+    dopus_real l = DOPUS_R(0.0);
     int i;
     /* x_0: the state predicted for this instant from the last measurement and control; when
      * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
@@ -1294,7 +1297,7 @@ static int dopus_recover(dopus_solver *s, int shifted)
         dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        if (!(fabs(s->x[0][i]) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + fabs(s->xhat0[i]))) {
+        if (!(dopus_fabs(s->x[0][i]) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + dopus_fabs(s->xhat0[i]))) {
             dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
             break;
         }
@@ -1303,7 +1306,7 @@ static int dopus_recover(dopus_solver *s, int shifted)
 }
 
 /* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
- * failed after a failed instant; re-initialise from the measured state (x_0 = xhat0) and
+ * failed (not by its iteration limit) or diverged; re-initialise from the measured state (x_0 = xhat0) and
  * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns the QP
  * status (DOPUS_QP_INVALID_INPUT when the re-initialisation failed). */
 static int dopus_feedback_recover(dopus_solver *s, int *retries)
@@ -1321,7 +1324,7 @@ static int dopus_feedback_recover(dopus_solver *s, int *retries)
     s->prepare_due = 1;
     s->shifted = 0;
     for (i = 0; i < DOPUS_NX; ++i) {
-        s->qp_in.x0[i] = 0.0;
+        s->qp_in.x0[i] = DOPUS_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
     qs = dopus_qp_attempt(s, 0);
@@ -1336,7 +1339,7 @@ static void dopus_predicted_step(dopus_solver *s)
 {
     int i, qs;
     for (i = 0; i < DOPUS_NX; ++i) {
-        s->qp_in.x0[i] = 0.0;
+        s->qp_in.x0[i] = DOPUS_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
@@ -1401,7 +1404,7 @@ int dopus_prepare(dopus_solver *s)
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
 static int dopus_prepare_iteration(dopus_solver *s)
 {
-    double xN_saved[DOPUS_NX];
+    dopus_real xN_saved[DOPUS_NX];
     double t0;
     int k, rc, M;
 
@@ -1441,7 +1444,7 @@ static int dopus_prepare_iteration(dopus_solver *s)
     }
     dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
-    s->rho[DOPUS_N - 1] = 0.0;
+    s->rho[DOPUS_N - 1] = DOPUS_R(0.0);
     rc = dopus_stage_H(s, DOPUS_N - 1);
     if (rc == DOPUS_OK) {
         t0 = dopus_timer_now(&s->timer);
@@ -1514,9 +1517,9 @@ static int dopus_prepare_iteration(dopus_solver *s)
 
 /* ---- KKT ---------------------------------------------------------------------------- */
 
-int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4)
+int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
 {
-    double parts[4];
+    dopus_real parts[4];
     double t0;
     int i, rc;
 
@@ -1527,7 +1530,7 @@ int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4)
     if (xhat0 && !dopus_lai_vec_finite(DOPUS_NX, xhat0)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
-    s->timer.t[DOPUS_PHASE_KKT] = 0.0;
+    s->timer.t[DOPUS_PHASE_KKT] = DOPUS_R(0.0);
     t0 = dopus_timer_now(&s->timer);
     rc = dopus_kkt_measure(s, xhat0 ? xhat0 : s->xhat0, parts);
     dopus_timer_add(&s->timer, DOPUS_PHASE_KKT, t0);
@@ -1543,9 +1546,9 @@ int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4)
     return dopus_ret(s, DOPUS_OK);
 }
 
-double dopus_get_kkt(const dopus_solver *s)
+dopus_real dopus_get_kkt(const dopus_solver *s)
 {
-    double m = s->kkt[0];
+    dopus_real m = s->kkt[0];
     int i;
     for (i = 1; i < 4; ++i) {
         m = s->kkt[i] > m ? s->kkt[i] : m;
@@ -1555,22 +1558,22 @@ double dopus_get_kkt(const dopus_solver *s)
 
 /* ---- getters ------------------------------------------------------------------------ */
 
-void dopus_get_x(const dopus_solver *s, double *x)
+void dopus_get_x(const dopus_solver *s, dopus_real *x)
 {
     dopus_copy(x, &s->x[0][0], (DOPUS_N + 1) * DOPUS_NX);
 }
 
-void dopus_get_u(const dopus_solver *s, double *u)
+void dopus_get_u(const dopus_solver *s, dopus_real *u)
 {
     dopus_copy(u, &s->u[0][0], DOPUS_N * DOPUS_NU);
 }
 
-void dopus_get_lam(const dopus_solver *s, double *lam)
+void dopus_get_lam(const dopus_solver *s, dopus_real *lam)
 {
     dopus_copy(lam, &s->lam[0][0], (DOPUS_N + 1) * DOPUS_NX);
 }
 
-void dopus_get_mu_g(const dopus_solver *s, double *mu_g)
+void dopus_get_mu_g(const dopus_solver *s, dopus_real *mu_g)
 {
     int k, i;
     for (k = 0; k < DOPUS_N; ++k) {
@@ -1580,27 +1583,27 @@ void dopus_get_mu_g(const dopus_solver *s, double *mu_g)
     }
 }
 
-void dopus_get_mu_b(const dopus_solver *s, double *mu_b)
+void dopus_get_mu_b(const dopus_solver *s, dopus_real *mu_b)
 {
     dopus_copy(mu_b, &s->mu_b[0][0], DOPUS_N * DOPUS_NW);
 }
 
-void dopus_get_mu_bN(const dopus_solver *s, double *mu_bN)
+void dopus_get_mu_bN(const dopus_solver *s, dopus_real *mu_bN)
 {
     dopus_copy(mu_bN, s->mu_bN, DOPUS_NX);
 }
 
-void dopus_get_mu_r(const dopus_solver *s, double *mu_r)
+void dopus_get_mu_r(const dopus_solver *s, dopus_real *mu_r)
 {
     dopus_copy(mu_r, s->mu_r, DOPUS_NR);
 }
 
-void dopus_get_nu(const dopus_solver *s, double *nu)
+void dopus_get_nu(const dopus_solver *s, dopus_real *nu)
 {
     dopus_copy(nu, s->nu, DOPUS_NE);
 }
 
-void dopus_get_rho(const dopus_solver *s, double *rho)
+void dopus_get_rho(const dopus_solver *s, dopus_real *rho)
 {
     dopus_copy(rho, s->rho, DOPUS_N);
 }
@@ -1625,7 +1628,7 @@ int dopus_get_qp_status(const dopus_solver *s)
 }
 
 /* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
-static double dopus_side_bound(const double *lo, const double *up, int i, int side)
+static dopus_real dopus_side_bound(const dopus_real *lo, const dopus_real *up, int i, int side)
 {
     return side > 0 ? up[i] : lo[i];
 }
@@ -1658,7 +1661,7 @@ int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
     } else {
         row->kind = DOPUS_ROW_TERMINAL_EQ;
         row->index = j - DOPUS_NX - DOPUS_NR;
-        row->bound = 0.0;
+        row->bound = DOPUS_R(0.0);
     }
     return 1;
 }
@@ -1668,7 +1671,7 @@ int dopus_get_flags(const dopus_solver *s)
     return s->flags;
 }
 
-void dopus_get_u0(const dopus_solver *s, double *u0)
+void dopus_get_u0(const dopus_solver *s, dopus_real *u0)
 {
     dopus_copy(u0, s->u0_out, DOPUS_NU);
 }
@@ -1683,12 +1686,12 @@ int dopus_get_failed_feedbacks(const dopus_solver *s)
     return s->n_failed;
 }
 
-double dopus_get_kkt_proxy(const dopus_solver *s)
+dopus_real dopus_get_kkt_proxy(const dopus_solver *s)
 {
     return s->kkt_proxy;
 }
 
-void dopus_get_scales(const dopus_solver *s, double *scale_x, double *scale_u)
+void dopus_get_scales(const dopus_solver *s, dopus_real *scale_x, dopus_real *scale_u)
 {
     if (scale_x) {
         dopus_copy(scale_x, s->scale_x, DOPUS_NX);
@@ -1720,5 +1723,8 @@ int dopus_get_ring_head(const dopus_solver *s)
 
 void dopus_get_timings(const dopus_solver *s, double *t)
 {
-    dopus_copy(t, s->timer.t, DOPUS_N_PHASES);
+    int i;
+    for (i = 0; i < DOPUS_N_PHASES; ++i) { /* times are double in both precisions */
+        t[i] = s->timer.t[i];
+    }
 }

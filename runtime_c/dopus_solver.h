@@ -29,6 +29,8 @@
 #ifndef DOPUS_SOLVER_H
 #define DOPUS_SOLVER_H
 
+#include "dopus_real.h"
+
 #include <stddef.h>
 
 /* DOPUS_CDEF_BEGIN */
@@ -56,17 +58,17 @@ const char *dopus_status_string(int status);
  * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
  * rho = 0. xhat0 is checked and kept for dopus_kkt_eval (may be NULL: the default x0).
  * A failed init leaves the solver uninitialised (NaN/Inf input: the iterate untouched). */
-int dopus_init(dopus_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
-               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
-               const double *nu);
+int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, const dopus_real *u,
+               const dopus_real *lam, const dopus_real *mu_g, const dopus_real *mu_b, const dopus_real *mu_bN,
+               const dopus_real *mu_r, const dopus_real *nu);
 /* Initialisation from the generated nominal primal-dual guess (the offline NLP solution at
  * the default x0); DOPUS_ERR_NO_NOMINAL when the solver was generated without one. */
-int dopus_init_nominal(dopus_solver *s, const double *xhat0);
+int dopus_init_nominal(dopus_solver *s, const dopus_real *xhat0);
 
 /* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
  * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: DOPUS_ERR_NONFINITE_INPUT,
  * nothing changes. QP failure: DOPUS_ERR_QP, no step (dopus_get_qp_status tells why). */
-int dopus_feedback(dopus_solver *s, const double *xhat0, double *u0);
+int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
  * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
  * stage-cost Hessian of the other stages (dopus_set_cost_hessian), assemble the QP. Must
@@ -86,9 +88,9 @@ int dopus_prepare(dopus_solver *s);
  * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed.
  * The parts are >= 0 and never NaN; a part is +Inf when it overflows (an iterate or
  * multipliers near DBL_MAX, e.g. from an init guess: |mu| * |ub - v| > DBL_MAX). */
-int dopus_kkt_eval(dopus_solver *s, const double *xhat0, double *kkt4);
+int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4);
 /* The largest of the four parts of the last dopus_kkt_eval (NaN before the first). */
-double dopus_get_kkt(const dopus_solver *s);
+dopus_real dopus_get_kkt(const dopus_solver *s);
 
 /* Settings. M: stages re-linearised per iteration besides stage N-1, 0 <= M <= N-1
  * (N-1 is the full RTI). mode: DOPUS_MODE_RECEDING or DOPUS_MODE_FIXED. hessian:
@@ -101,9 +103,9 @@ int dopus_set_mode(dopus_solver *s, int mode);
 int dopus_get_mode(dopus_solver *s);
 int dopus_set_hessian(dopus_solver *s, int hessian);
 int dopus_get_hessian(dopus_solver *s);
-int dopus_set_regularization(dopus_solver *s, int regularization, double eps);
+int dopus_set_regularization(dopus_solver *s, int regularization, dopus_real eps);
 int dopus_get_regularization(dopus_solver *s);
-double dopus_get_reg_eps(dopus_solver *s);
+dopus_real dopus_get_reg_eps(dopus_solver *s);
 /* Stage-cost Hessian (algorithm.md section 4 step 5): fresh = 1 (the default) refreshes the
  * cost part A_l of the Hessian block of every stage in every prepare (only the curvature of
  * dynamics and constraints is partially updated); fresh = 0 is the paper's literal
@@ -116,20 +118,20 @@ int dopus_get_cost_hessian(dopus_solver *s);
  * criterion and the fixed point are those of lm = 0). lm finite and >= 0: a fixed term
  * (the automatic one is switched off); default: the OCP file's options(lm=...), else the
  * automatic term. */
-int dopus_set_levenberg_marquardt(dopus_solver *s, double lm);
+int dopus_set_levenberg_marquardt(dopus_solver *s, dopus_real lm);
 /* The term of the next QP (fixed, or the current automatic value). */
-double dopus_get_levenberg_marquardt(dopus_solver *s);
+dopus_real dopus_get_levenberg_marquardt(dopus_solver *s);
 /* The automatic, scale-aware, adaptive term (docs/algorithm.md section 10): lm is raised
  * until the QP is convex on the dynamics (Riccati pivots positive definite), after a
  * failed feedback and when the KKT proxy grows; lowered after every successful feedback. */
 int dopus_set_lm_auto(dopus_solver *s);
 int dopus_get_lm_auto(dopus_solver *s);
 /* The Hessian scale of the automatic term (largest diagonal entry of the QP blocks). */
-double dopus_get_lm_scale(dopus_solver *s);
+dopus_real dopus_get_lm_scale(dopus_solver *s);
 /* QP tolerance: 0 < tol <= DOPUS_QP_TOL_MAX (1e-2); a larger one would let the QP return
  * steps that violate the bounds by that much, so it is refused (DOPUS_ERR_INVALID_ARGUMENT). */
-int dopus_set_qp_tol(dopus_solver *s, double tol);
-double dopus_get_qp_tol(dopus_solver *s);
+int dopus_set_qp_tol(dopus_solver *s, dopus_real tol);
+dopus_real dopus_get_qp_tol(dopus_solver *s);
 int dopus_set_qp_max_iter(dopus_solver *s, int max_iter);
 int dopus_get_qp_max_iter(dopus_solver *s);
 /* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
@@ -153,22 +155,22 @@ int dopus_set_qp_warm_start(dopus_solver *s, int on);
 int dopus_get_qp_warm_start(dopus_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
-int dopus_set_parameters(dopus_solver *s, const double *p);
-int dopus_set_parameters_node(dopus_solver *s, int k, const double *pk);
-void dopus_get_parameters(dopus_solver *s, double *p);
+int dopus_set_parameters(dopus_solver *s, const dopus_real *p);
+int dopus_set_parameters_node(dopus_solver *s, int k, const dopus_real *pk);
+void dopus_get_parameters(dopus_solver *s, dopus_real *p);
 
 /* The iterate (shapes in the header comment). */
-void dopus_get_x(const dopus_solver *s, double *x);
-void dopus_get_u(const dopus_solver *s, double *u);
-void dopus_get_lam(const dopus_solver *s, double *lam);
-void dopus_get_mu_g(const dopus_solver *s, double *mu_g);
-void dopus_get_mu_b(const dopus_solver *s, double *mu_b);
-void dopus_get_mu_bN(const dopus_solver *s, double *mu_bN);
-void dopus_get_mu_r(const dopus_solver *s, double *mu_r);
-void dopus_get_nu(const dopus_solver *s, double *nu);
+void dopus_get_x(const dopus_solver *s, dopus_real *x);
+void dopus_get_u(const dopus_solver *s, dopus_real *u);
+void dopus_get_lam(const dopus_solver *s, dopus_real *lam);
+void dopus_get_mu_g(const dopus_solver *s, dopus_real *mu_g);
+void dopus_get_mu_b(const dopus_solver *s, dopus_real *mu_b);
+void dopus_get_mu_bN(const dopus_solver *s, dopus_real *mu_bN);
+void dopus_get_mu_r(const dopus_solver *s, dopus_real *mu_r);
+void dopus_get_nu(const dopus_solver *s, dopus_real *nu);
 /* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1): >= 0, never NaN; +Inf when the
  * residual or the step of the stage overflows (the stage then ranks first). */
-void dopus_get_rho(const dopus_solver *s, double *rho);
+void dopus_get_rho(const dopus_solver *s, dopus_real *rho);
 /* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
  * N-1 included; writes up to N ints and returns their count. */
 int dopus_get_recomputed(const dopus_solver *s, int *stages);
@@ -177,14 +179,14 @@ int dopus_get_qp_iterations(const dopus_solver *s);
 int dopus_get_qp_status(const dopus_solver *s);
 /* A constraint row of the OCP at one stage of the horizon. */
 typedef struct {
-    int stage;    /* 0..N-1; N: the terminal node */
-    int kind;     /* enum dopus_row_kind */
-    int index;    /* the state or control, or the row among the path rows, the terminal
+    int stage;        /* 0..N-1; N: the terminal node */
+    int kind;         /* enum dopus_row_kind */
+    int index;        /* the state or control, or the row among the path rows, the terminal
                      inequality rows or the terminal equality rows (each stacked in
                      declaration order) */
-    int side;     /* -1: its lower bound, +1: its upper bound (an equality row: the sign of
+    int side;         /* -1: its lower bound, +1: its upper bound (an equality row: the sign of
                      the certificate's multiplier), 0: lower bound above upper bound */
-    double bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
+    dopus_real bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
                      function is the declared row minus its value) */
 } dopus_row_info;
 /* When the last QP was infeasible (dopus_get_qp_status DOPUS_QP_PRIMAL_INFEASIBLE): the row
@@ -198,15 +200,15 @@ int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row);
  * of the last good plan), a divergence was detected, the prepare re-initialised. */
 int dopus_get_flags(const dopus_solver *s);
 /* The control returned by the last feedback (nu), successful or not; within the bounds. */
-void dopus_get_u0(const dopus_solver *s, double *u0);
+void dopus_get_u0(const dopus_solver *s, dopus_real *u0);
 /* Re-initialisations by the automatic recovery since init; consecutive failed feedbacks. */
 int dopus_get_recoveries(const dopus_solver *s);
 int dopus_get_failed_feedbacks(const dopus_solver *s);
 /* The divergence measure of the last prepare or init: the stationarity and equality parts of
  * the KKT measure at the prepared point (max |F_w,k + [lam_k; 0]|, |phi_k - x_{k+1}|, ...);
  * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
-double dopus_get_kkt_proxy(const dopus_solver *s);
-void dopus_get_scales(const dopus_solver *s, double *scale_x, double *scale_u);
+dopus_real dopus_get_kkt_proxy(const dopus_solver *s);
+void dopus_get_scales(const dopus_solver *s, dopus_real *scale_x, dopus_real *scale_u);
 /* 1 when the last feedback's warm-started QP failed and the cold retry ran (the
  * iterations above are then the sum of both solves), else 0. */
 int dopus_get_qp_cold_retry(const dopus_solver *s);
@@ -269,22 +271,22 @@ enum dopus_flag {
 };
 
 /* Safety constants (docs/algorithm.md section 9). */
-#define DOPUS_QP_TOL_MAX 1e-2      /* largest accepted QP tolerance */
-#define DOPUS_RECOVERY_FAILURES 2  /* default K: consecutive failures before recovery */
-#define DOPUS_RECOVERY_FULL_RTI 10 /* successful feedbacks with every block fresh after a recovery */
-#define DOPUS_DIVERGENCE_BOX 1e3   /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
-#define DOPUS_DIVERGENCE_KKT 1e6   /* kkt proxy <= 1e6 max(1, proxy at the last init) */
+#define DOPUS_QP_TOL_MAX DOPUS_R(1e-2)    /* largest accepted QP tolerance */
+#define DOPUS_RECOVERY_FAILURES 2         /* default K: consecutive failures before recovery */
+#define DOPUS_RECOVERY_FULL_RTI 10        /* successful feedbacks with every block fresh after a recovery */
+#define DOPUS_DIVERGENCE_BOX DOPUS_R(1e3) /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
+#define DOPUS_DIVERGENCE_KKT DOPUS_R(1e6) /* kkt proxy <= 1e6 max(1, proxy at the last init) */
 
 /* Automatic Levenberg-Marquardt term (docs/algorithm.md section 10), relative to the
  * Hessian scale h = max(1e-300, largest |diagonal entry| of the QP's blocks). */
-#define DOPUS_LM_MIN_REL 1e-8    /* smallest nonzero term: 1e-8 h (below: 0) */
-#define DOPUS_LM_MAX_REL 1e2     /* largest term: 1e2 h */
-#define DOPUS_LM_RAISE 10.0      /* factor of a raise */
-#define DOPUS_LM_LOWER 0.1       /* factor after a successful feedback */
-#define DOPUS_LM_PIVOT_REL 1e-10 /* Riccati pivots must exceed 1e-10 h */
-#define DOPUS_LM_KKT_GROWTH 10.0 /* raise when the KKT proxy grows 10x in one prepare */
-#define DOPUS_LM_RETRIES 2       /* QP solves again with lm raised after a failure */
-#define DOPUS_LM_KKT_REL 1e-2    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
+#define DOPUS_LM_MIN_REL DOPUS_R(1e-8)    /* smallest nonzero term: 1e-8 h (below: 0) */
+#define DOPUS_LM_MAX_REL DOPUS_R(1e2)     /* largest term: 1e2 h */
+#define DOPUS_LM_RAISE DOPUS_R(10.0)      /* factor of a raise */
+#define DOPUS_LM_LOWER DOPUS_R(0.1)       /* factor after a successful feedback */
+#define DOPUS_LM_PIVOT_REL DOPUS_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
+#define DOPUS_LM_KKT_GROWTH DOPUS_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
+#define DOPUS_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
+#define DOPUS_LM_KKT_REL DOPUS_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
 
 enum dopus_mode {
     DOPUS_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
@@ -317,22 +319,22 @@ typedef union {
         dopus_fun_work fun_work;
         /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare
          * succeeds, so a prepare that fails leaves every F_old for its retry */
-        double Fn_w[DOPUS_N][DOPUS_NW];
-        double Fn_phi[DOPUS_N][DOPUS_NX];
-        double Fn_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
-        double tmp_A[DOPUS_NW * DOPUS_NW];
-        double tmp_Al[DOPUS_NW * DOPUS_NW];
-        double tmp_Phi[DOPUS_NX * DOPUS_NW];
-        double tmp_C[DOPUS_DIM(DOPUS_NG * DOPUS_NW)];
-        double tmp_gL[DOPUS_NW];
-        double tmp_F[DOPUS_NW];
-        double tmp_phi[DOPUS_NX];
-        double tmp_g[DOPUS_DIM(DOPUS_NG)];
-        double reg_work[2 * DOPUS_NW * DOPUS_NW];
+        dopus_real Fn_w[DOPUS_N][DOPUS_NW];
+        dopus_real Fn_phi[DOPUS_N][DOPUS_NX];
+        dopus_real Fn_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
+        dopus_real tmp_A[DOPUS_NW * DOPUS_NW];
+        dopus_real tmp_Al[DOPUS_NW * DOPUS_NW];
+        dopus_real tmp_Phi[DOPUS_NX * DOPUS_NW];
+        dopus_real tmp_C[DOPUS_DIM(DOPUS_NG * DOPUS_NW)];
+        dopus_real tmp_gL[DOPUS_NW];
+        dopus_real tmp_F[DOPUS_NW];
+        dopus_real tmp_phi[DOPUS_NX];
+        dopus_real tmp_g[DOPUS_DIM(DOPUS_NG)];
+        dopus_real reg_work[2 * DOPUS_NW * DOPUS_NW];
         /* Riccati workspace of the convexity test of the automatic lm */
-        double lm_P[DOPUS_NX * DOPUS_NX];
-        double lm_PA[DOPUS_NX * DOPUS_NW];
-        double lm_G[DOPUS_NW * DOPUS_NW];
+        dopus_real lm_P[DOPUS_NX * DOPUS_NX];
+        dopus_real lm_PA[DOPUS_NX * DOPUS_NW];
+        dopus_real lm_G[DOPUS_NW * DOPUS_NW];
     } ev;
 } dopus_solver_mem;
 
@@ -349,42 +351,42 @@ struct dopus_solver {
     int mode;
     int hessian;
     int regularization;
-    double reg_eps;
-    int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
-    double lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
+    dopus_real reg_eps;
+    int cost_hessian;       /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    dopus_real lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
                            current automatic value) */
-    int lm_auto;        /* 1: automatic term (section 10) */
-    double lm_scale;    /* Hessian scale h of the automatic term */
-    double lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
-    double lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
+    int lm_auto;            /* 1: automatic term (section 10) */
+    dopus_real lm_scale;    /* Hessian scale h of the automatic term */
+    dopus_real lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
+    dopus_real lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     dopus_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */
-    double x[DOPUS_N + 1][DOPUS_NX];
-    double u[DOPUS_N][DOPUS_NU];
-    double lam[DOPUS_N + 1][DOPUS_NX];
-    double mu_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
-    double mu_b[DOPUS_N][DOPUS_NW];
-    double mu_bN[DOPUS_NX];
-    double mu_r[DOPUS_DIM(DOPUS_NR)];
-    double nu[DOPUS_DIM(DOPUS_NE)];
-    double p[DOPUS_N + 1][DOPUS_DIM(DOPUS_NP)];
-    double xhat0[DOPUS_NX];
+    dopus_real x[DOPUS_N + 1][DOPUS_NX];
+    dopus_real u[DOPUS_N][DOPUS_NU];
+    dopus_real lam[DOPUS_N + 1][DOPUS_NX];
+    dopus_real mu_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
+    dopus_real mu_b[DOPUS_N][DOPUS_NW];
+    dopus_real mu_bN[DOPUS_NX];
+    dopus_real mu_r[DOPUS_DIM(DOPUS_NR)];
+    dopus_real nu[DOPUS_DIM(DOPUS_NE)];
+    dopus_real p[DOPUS_N + 1][DOPUS_DIM(DOPUS_NP)];
+    dopus_real xhat0[DOPUS_NX];
 
     /* stage slots (Ht, A_dyn, Phit, Ct, F_old, domega) and ring_head */
     dopus_ring ring;
 
     /* terminal node, always fresh: A (regularised), R, R_eq and F = (gL, E, r, r_eq) */
-    double A_N[DOPUS_NX * DOPUS_NX];
-    double R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX];
-    double R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
-    double gL_N[DOPUS_NX];
-    double E;
-    double r[DOPUS_DIM(DOPUS_NR)];
-    double r_eq[DOPUS_DIM(DOPUS_NE)];
+    dopus_real A_N[DOPUS_NX * DOPUS_NX];
+    dopus_real R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX];
+    dopus_real R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
+    dopus_real gL_N[DOPUS_NX];
+    dopus_real E;
+    dopus_real r[DOPUS_DIM(DOPUS_NR)];
+    dopus_real r_eq[DOPUS_DIM(DOPUS_NE)];
 
     /* secant criterion and the recomputed set of the last prepare */
-    double rho[DOPUS_N];
+    dopus_real rho[DOPUS_N];
     int recomputed[DOPUS_N];
     int n_recomputed;
     unsigned char selected[DOPUS_N];
@@ -408,18 +410,18 @@ struct dopus_solver {
     int recover_pending;   /* the next prepare re-initialises */
     int flags;             /* DOPUS_FLAG_* of the last feedback + prepare */
     int n_recoveries;
-    int recovering;                   /* full-RTI prepares left after a recovery */
-    int xhat_fresh;                   /* the last feedback had a finite measurement */
-    int plan_age;                     /* receding shifts since the last good plan */
-    double plan_u[DOPUS_N][DOPUS_NU]; /* controls of the last good plan */
-    double u0_out[DOPUS_NU];          /* the control returned by the last feedback */
-    double scale_x[DOPUS_NX];
-    double scale_u[DOPUS_NU];
-    double kkt_proxy;
-    double kkt_proxy_ref;
+    int recovering;                       /* full-RTI prepares left after a recovery */
+    int xhat_fresh;                       /* the last feedback had a finite measurement */
+    int plan_age;                         /* receding shifts since the last good plan */
+    dopus_real plan_u[DOPUS_N][DOPUS_NU]; /* controls of the last good plan */
+    dopus_real u0_out[DOPUS_NU];          /* the control returned by the last feedback */
+    dopus_real scale_x[DOPUS_NX];
+    dopus_real scale_u[DOPUS_NU];
+    dopus_real kkt_proxy;
+    dopus_real kkt_proxy_ref;
 
     /* KKT parts of the last dopus_kkt_eval: stat, eq, ineq, comp */
-    double kkt[4];
+    dopus_real kkt[4];
 
     dopus_timer timer;
 };

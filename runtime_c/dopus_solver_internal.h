@@ -15,7 +15,7 @@ void dopus_lm_start(dopus_solver *s);
 /* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
  * DOPUS_ERR_FUNCTION when the function fails, DOPUS_ERR_NONFINITE_VALUE when a value is not
  * finite, else DOPUS_OK. */
-int dopus_term_grad_checked(dopus_solver *s, double *gL, double *E, double *r, double *r_eq);
+int dopus_term_grad_checked(dopus_solver *s, dopus_real *gL, dopus_real *E, dopus_real *r, dopus_real *r_eq);
 /* x_0 carries no bound (docs/algorithm.md section 1): it is fixed by the measurement, so
  * the simple bounds of the states apply at nodes 1..N only (stage 0 passes infinite sides
  * to the QP, the KKT measure counts a multiplier on x_0 with its magnitude) and the x part

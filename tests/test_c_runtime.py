@@ -33,12 +33,13 @@ STATUS_INVALID, STATUS_NOT_INITIALIZED, STATUS_NOT_PREPARED = (status_code(n) fo
 # ------------------------------------------------------------------ the Jacobi regularisation
 @pytest.fixture(scope="module")
 def reg_lib(tmp_path_factory):
-    """runtime_c/dopus_reg.c alone, as a shared library (it has no size dependency)."""
+    """runtime_c/dopus_reg.c alone, as a shared library (it has no size dependency; the
+    real type is given on the command line instead of by a sizes header)."""
     import cffi
 
     d = tmp_path_factory.mktemp("reg")
     so = d / "libreg.so"
-    subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, "-shared",
+    subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, "-shared", "-DDOPUS_REAL_FLOAT=0",
                     str(runtime_c_dir() / "dopus_reg.c"), "-o", str(so), "-lm"], check=True)
     ffi = cffi.FFI()
     ffi.cdef("int dopus_reg_jacobi_eig(int n, double *a, double *v);"

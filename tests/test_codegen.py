@@ -84,7 +84,9 @@ def _glue_cdef(folder: Path, name: str) -> str:
     for key in sorted(consts, key=len, reverse=True):
         text = text.replace(key, str(consts[key]))
     text = re.sub(NAME + r"_DIM\((\d+)\)", lambda m: str(max(int(m.group(1)), 1)), text)
-    return re.sub(r"\[([\d +]+)\]", lambda m: f"[{sum(int(t) for t in m.group(1).split('+'))}]", text)
+    text = re.sub(r"\[([\d +]+)\]", lambda m: f"[{sum(int(t) for t in m.group(1).split('+'))}]", text)
+    real = "float" if consts.get(f"{NAME}_REAL_FLOAT") == 1 else "double"
+    return f"typedef {real} {name}_real;\n" + text
 
 
 def _load_glue(folder: Path, name: str, shared_lib: Path):

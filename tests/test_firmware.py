@@ -1,4 +1,5 @@
-"""The generated solver on an emulated Cortex-M7 (QEMU mps2-an500), in double precision.
+"""The generated solver on emulated Cortex-M cores: M7 in double and in float (QEMU
+mps2-an500), M4F in float (mps2-an386, single-precision FPU).
 
 The firmware program of firmware/ runs the fixed-xhat_0 study (M = 1 and the full RTI, warm
 start at the nominal solution, disturbed state) and a closed loop against the generated
@@ -16,6 +17,18 @@ last-bit difference amplified by the conditioning of these systems stays below 1
 relative to max(KKT, 1): it is a residual, the difference of terms of order one and more,
 so its rounding error is absolute (measured: 5e-15 where it reads 1e-9).
 
+Float builds (``real="float"``): the emulated M7 and M4F builds are checked against IPOPT
+and the double build, not bit for bit against the host float build (newlib's sinf and cosf
+differ from glibc's in the last bit, and in float a last-bit difference is 6e-8, which the
+iteration carries to the size of the QP tolerance 1e-5). The fixed-xhat_0 study converges to
+the float floor of the KKT measure, ``KKT_FLOAT`` (the justification is that of
+tests/test_float.py: one rounding of the stationarity rows, whose terms reach 1e2, is 6e-6);
+the full RTI's solution is within ``SOL_FLOAT`` of IPOPT's (tests/test_float.py); the closed
+loop's states stay within ``LOOP_FLOAT`` of the double build's (absolute; the states reach
+4 rad/s): a QP solved to 1e-5 instead of 1e-10 moves a control that sits at a switching
+point of the bang-bang torque by about 1e-2 at some instants, which the plant integrates
+over one sampling interval (measured: 2e-3 on the host and on both cores).
+
 Needs gcc-arm-none-eabi, libnewlib-arm-none-eabi and qemu-system-arm; installed by
 scripts/setup_firmware.sh when running as root, else the tests are skipped with the reason.
 """
@@ -31,6 +44,10 @@ from dopus_codegen.codegen import firmware as fwm
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "examples" / "robot_arm.py"
 TOL_HOST = 1e-9
+FLOAT_TARGETS = ("m7-float", "m4f-float")
+KKT_FLOAT = 2e-5
+SOL_FLOAT = 5e-3
+LOOP_FLOAT = 2e-2
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +63,7 @@ def toolchain():
 @pytest.fixture(scope="module")
 def report(toolchain, tmp_path_factory):
     out = tmp_path_factory.mktemp("firmware")
-    return fwm.firmware_report(EXAMPLE, out, targets=("m7-double",), fixed_iters=12, loop_steps=20,
+    return fwm.firmware_report(EXAMPLE, out, targets=("m7-double", *FLOAT_TARGETS), fixed_iters=12, loop_steps=20,
                                json_out=out / "report.json", progress=lambda *_: None)
 
 
@@ -79,6 +96,41 @@ def test_emulated_full_rti_reaches_ipopt_solution(report, robot_disc):
     assert np.max(np.abs(u - sol.u)) <= tol * max(1.0, np.max(np.abs(sol.u)))
     # M = 1 converges too (fresh cost Hessian: below 1e-8 within the 12 iterations)
     assert min(s["kkt"]["M1"]) <= 1e-8
+
+
+@pytest.mark.parametrize("target", FLOAT_TARGETS)
+def test_emulated_float_converges_and_tracks(report, robot_disc, target):
+    """M7 float and M4F float: the fixed-xhat_0 study (M = 1 and the full RTI) reaches the
+    float floor of the KKT measure and stays there, the full RTI's solution is IPOPT's to
+    float accuracy, and the closed loop follows the double build."""
+    from dopus_codegen.reference.offline import solve_ocp
+
+    s = report["targets"][target]
+    assert s["end_status"] == 0 and s["real_bytes"] == 4
+    for label in ("M1", "full"):
+        kkt = s["kkt"][label]
+        first = next(i for i, k in enumerate(kkt) if k <= KKT_FLOAT)
+        assert max(kkt[first:]) <= KKT_FLOAT, (label, kkt)
+    sol, info = solve_ocp(robot_disc, np.array(report["xhat_fixed"]))
+    assert info["success"]
+    N = robot_disc.N
+    x = np.array(s["solution"][str(N - 1)]["x"]).reshape(N + 1, -1)
+    u = np.array(s["solution"][str(N - 1)]["u"]).reshape(N, -1)
+    assert np.max(np.abs(x - sol.x)) <= SOL_FLOAT * np.max(np.abs(sol.x))
+    assert np.max(np.abs(u - sol.u)) <= SOL_FLOAT * np.max(np.abs(sol.u))
+    assert s["loop_deviation_vs_host_double"] <= LOOP_FLOAT
+
+
+def test_float_halves_the_solver_and_the_m4f_needs_no_double(report):
+    """The float solver struct is about half the double one; the M4F (single-precision FPU
+    only) runs the float build in about the M7's instruction count, which it could not if
+    any double operation were left (software emulation: 135 M instructions per iteration
+    for the double build on the M4F)."""
+    d, m7, m4 = (report["targets"][t] for t in ("m7-double", "m7-float", "m4f-float"))
+    assert m7["solver_bytes"] <= 0.55 * d["solver_bytes"]
+    assert m4["solver_bytes"] == m7["solver_bytes"]
+    ratio = m4["instructions"]["M1"]["iteration_median"] / m7["instructions"]["M1"]["iteration_median"]
+    assert ratio <= 1.5
 
 
 def test_instruction_count_and_memory_figures(report):

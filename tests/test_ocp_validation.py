@@ -205,7 +205,7 @@ def test_options_update_only_what_is_given():
     ocp.options(regularization="mirror")
     assert build_functions(ocp).options == dict(hessian="gauss-newton", regularization="mirror",
                                                 reg_eps=1e-4, M=3, offline_guess=False, lm="auto",
-                                                cost_hessian="fresh")
+                                                cost_hessian="fresh", real="double")
     ocp.options(lm=2e-4)
     assert build_functions(ocp).options["lm"] == 2e-4 and build_functions(ocp).options["M"] == 3
 

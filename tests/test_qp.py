@@ -547,11 +547,12 @@ def test_linalg_kernels_match_numpy(tmp_path):
 
     rc = runtime_c_dir()
     lib_path = tmp_path / "liblinalg.so"
-    subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, "-shared",
+    subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, "-shared", "-DDOPUS_REAL_FLOAT=0",
                     f"-I{rc}", str(rc / "dopus_linalg.c"), "-o", str(lib_path), "-lm"], check=True)
     ffi = cffi.FFI()
-    decls = [line for line in (rc / "dopus_linalg.h").read_text().split("/* ----")[0].splitlines()
-             if not line.startswith("#")]
+    decls = ["typedef double dopus_real;"] + [
+        line for line in (rc / "dopus_linalg.h").read_text().split("/* ----")[0].splitlines()
+        if not line.startswith("#")]
     ffi.cdef("\n".join(decls))
     lib = ffi.dlopen(str(lib_path))
     rng = np.random.default_rng(4)

@@ -50,7 +50,7 @@ def _array_bytes(v) -> bytes:
     return repr(a.shape).encode() + a.tobytes()
 
 
-def problem_hash(disc: Any, offline_guess: Optional[bool] = None) -> str:
+def problem_hash(disc: Any, offline_guess: Optional[bool] = None, real: Optional[str] = None) -> str:
     """A stable sha256 of everything the generated folder of ``disc`` depends on (its
     functions and data, the runtime sources, the templates and the emitter generate.py)."""
     from .generate import FUNCTION_SLOTS
@@ -62,6 +62,7 @@ def problem_hash(disc: Any, offline_guess: Optional[bool] = None) -> str:
 
     put("versions", f"{__version__} {ca.__version__}".encode())
     put("offline_guess", repr(offline_guess).encode())
+    put("real", repr(real).encode())
     for slot, _ in FUNCTION_SLOTS:
         fun = getattr(disc, slot, None)
         put(slot, b"None" if fun is None else fun.serialize().encode())

@@ -20,8 +20,9 @@ host, and writes JSON and a table:
   difference to the host build (``host_compare``).
 
 Targets: ``m7-double`` (mps2-an500, Cortex-M7, FPv5 double-precision FPU), ``m7-float`` and
-``m4f-float`` (mps2-an386, Cortex-M4, FPv4 single-precision FPU). The float targets need a
-folder generated with ``real="float"``.
+``m4f-float`` (mps2-an386, Cortex-M4, FPv4 single-precision FPU). Each real type gets its own generated
+folder (``generated_double``, ``generated_float``: ``real="float"``, docs/algorithm.md
+section 11), whatever the OCP file's ``options(real=...)`` says.
 
 The image has no heap: the link wraps every allocator entry point (malloc, calloc, realloc,
 free, their reentrant forms, _sbrk), so a program that pulls one in fails to link with
@@ -410,11 +411,8 @@ def firmware_report(ocp_file, out_dir, targets: Sequence[str] = ("m7-double",),
     for real in reals:
         d = out_dir / f"generated_{real}"
         progress(f"firmware: generating {disc.name} ({real}) into {d}")
-        kw = {} if real == "double" else {"real": real}
-        try:
-            codegen.generate(disc, d, offline_guess=True, **kw)
-        except TypeError:
-            raise FirmwareError(f"this dopus-gen cannot generate real={real!r}") from None
+        # the target's type, whatever the OCP file's options(real=...) says
+        codegen.generate(disc, d, offline_guess=True, real=real)
     for real in reals:
         gen[real] = out_dir / f"generated_{real}"
     runs: Dict[str, Any] = {}
@@ -473,6 +471,15 @@ def format_table(report: Dict[str, Any]) -> str:
     lines.insert(1, "-+-".join("-" * w for w in widths))
     lines.append("")
     lines.append(f"instruction count: {report['count_method']}")
+    tg = report["targets"]
+    if "m7-float" in tg and "m4f-float" in tg:
+        r = (tg["m4f-float"]["instructions"]["M1"]["iteration_median"]
+             / tg["m7-float"]["instructions"]["M1"]["iteration_median"])
+        lines.append(f"M4F float / M7 float instructions per M = 1 iteration: {r:.2f} (goal: at most 1.5)")
+    for t, s in tg.items():
+        goal = 64 if s["real"] == "float" else 128
+        lines.append(f"{t}: RAM (data + bss + stack of one iteration) {s['ram_total'] / 1024:.1f} KiB "
+                     f"(goal: at most {goal} KiB), of which the solver struct {s['solver_bytes'] / 1024:.1f} KiB")
     for t, s in report["targets"].items():
         lines.append(f"{t}: calibration {s['calibration_ratio']:.6f} (counted / known instructions); "
                      f"closed-loop state deviation from the host double build {s['loop_deviation_vs_host_double']:.3g}; "

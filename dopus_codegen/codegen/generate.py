@@ -62,17 +62,21 @@ class CodegenError(ValueError):
 # small helpers
 
 
-def c_double(value: float, what: str = "value") -> str:
-    """A C double literal that reads back to exactly ``value`` (repr is round-trip)."""
+def c_double(value: float, what: str = "value", real: str = "double") -> str:
+    """A C literal of the real type that reads back to exactly ``value`` rounded to that type
+    (repr is round-trip): ``0.1`` in double, ``0.1f`` in float, where a value beyond the
+    range of float becomes an infinity (a bound that far out is no bound)."""
     v = float(value)
     if math.isnan(v):
         raise CodegenError(f"{what}: NaN cannot be generated")
+    if real == "float":
+        v = float(np.float32(v)) if abs(v) <= float(np.finfo(np.float32).max) else math.copysign(math.inf, v)
     if math.isinf(v):
         return "INFINITY" if v > 0 else "-INFINITY"
-    return repr(v)
+    return repr(v) + ("f" if real == "float" else "")
 
 
-def c_vector(values, size: int, what: str) -> str:
+def c_vector(values, size: int, what: str, real: str = "double") -> str:
     """``{a, b, ...}`` of a vector of ``size`` entries; an empty vector becomes ``{0.0}``
     to match the DIM(n) >= 1 array sizes of dopus_problem.h."""
     arr = np.asarray(values if values is not None else [], dtype=float).reshape(-1)
@@ -80,10 +84,10 @@ def c_vector(values, size: int, what: str) -> str:
         raise CodegenError(f"{what}: expected {size} entries, got {arr.size}")
     if size == 0:
         return "{0.0}"
-    return "{" + ", ".join(c_double(v, f"{what}[{i}]") for i, v in enumerate(arr)) + "}"
+    return "{" + ", ".join(c_double(v, f"{what}[{i}]", real) for i, v in enumerate(arr)) + "}"
 
 
-def c_matrix(values, rows: int, cols: int, what: str) -> List[str]:
+def c_matrix(values, rows: int, cols: int, what: str, real: str = "double") -> List[str]:
     """One ``{...}`` initialiser per row of a (rows, cols) array (row k = node k)."""
     if values is None:
         arr = np.zeros((rows, cols))
@@ -93,7 +97,7 @@ def c_matrix(values, rows: int, cols: int, what: str) -> List[str]:
             arr = np.zeros((rows, 0))
         if arr.shape != (rows, cols):
             raise CodegenError(f"{what}: expected shape ({rows}, {cols}), got {arr.shape}")
-    return [c_vector(arr[k], cols, f"{what}[{k}]") for k in range(rows)]
+    return [c_vector(arr[k], cols, f"{what}[{k}]", real) for k in range(rows)]
 
 
 def check_name(name: Any) -> str:
@@ -272,9 +276,37 @@ def silence_unused_parameters(text: str) -> str:
     return "\n".join(out)
 
 
-def casadi_sources(functions: Dict[str, ca.Function], name: str) -> Dict[str, str]:
+#: The math functions CasADi's generated C calls, by name; in single precision each becomes
+#: its float form (sinf, ...), so nothing is computed in double.
+CASADI_MATH = ("sqrt", "fabs", "fmax", "fmin", "exp", "log", "log10", "log1p", "expm1", "pow", "floor", "ceil",
+               "fmod", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "asinh",
+               "acosh", "atanh", "erf", "erfc", "hypot", "copysign", "cbrt", "round", "trunc", "tgamma",
+               "lgamma")
+_CASADI_MATH_CALL = re.compile(r"(?<![\w.>])(" + "|".join(CASADI_MATH) + r")\(")
+_FLOAT_LITERAL = re.compile(r"(?<![\w.])((?:\d+\.\d*|\.\d+)(?:[eE][-+]?\d+)?|\d+[eE][-+]?\d+)(?![\w.])")
+
+
+def single_precision(source: str) -> str:
+    """CasADi's C in single precision: ``casadi_real`` is float (CodeGenerator option
+    ``casadi_real``, which only sets the type), and here every floating literal gets the
+    ``f`` suffix and every math call its float form (``sin`` -> ``sinf``), so no expression
+    is evaluated in double (software-emulated on a single-precision FPU). Comments and
+    strings are left alone."""
+    out = []
+    for line in source.split("\n"):
+        code, sep, comment = line.partition("/*")
+        if code.lstrip().startswith("#") or code.lstrip().startswith("//"):
+            out.append(line)
+            continue
+        code = _CASADI_MATH_CALL.sub(lambda m: m.group(1) + "f(", code)
+        code = _FLOAT_LITERAL.sub(lambda m: m.group(1) + "f", code)
+        out.append(code + sep + comment)
+    return "\n".join(out)
+
+
+def casadi_sources(functions: Dict[str, ca.Function], name: str, real: str = "double") -> Dict[str, str]:
     """``<name>_casadi.c`` and ``.h`` from one CodeGenerator with explicit options."""
-    opts = {"casadi_int": "int", "casadi_real": "double", "mex": False, "with_header": True,
+    opts = {"casadi_int": "int", "casadi_real": real, "mex": False, "with_header": True,
             "verbose": False, "main": False, "cpp": False, "with_mem": False}
     base = f"{name}_casadi"
     cg = ca.CodeGenerator(base, opts)
@@ -282,7 +314,8 @@ def casadi_sources(functions: Dict[str, ca.Function], name: str) -> Dict[str, st
         cg.add(fun)
     with tempfile.TemporaryDirectory(prefix="dopus_cg_") as tmp:
         cg.generate(str(Path(tmp)) + "/")
-        out = {f"{base}.c": silence_unused_parameters((Path(tmp) / f"{base}.c").read_text()),
+        source = silence_unused_parameters((Path(tmp) / f"{base}.c").read_text())
+        out = {f"{base}.c": single_precision(source) if real == "float" else source,
                f"{base}.h": (Path(tmp) / f"{base}.h").read_text()}
     _refuse_without_codegen(out[f"{base}.c"], functions)
     return out
@@ -381,9 +414,19 @@ def _code(setting: str, options: Any) -> int:
         raise CodegenError(f"option {exc}") from None
 
 
-def problem_context(disc: Any, s: Dict[str, int], nominal: Any) -> Dict[str, Any]:
+def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "double") -> Dict[str, Any]:
     """Everything dopus_problem.c renders, pre-formatted (the template only places it)."""
     N, nx, nu, nw = s["N"], s["nx"], s["nu"], s["nw"]
+
+    def c_double(value, what):
+        return _c_literal(value, what, real)
+
+    def c_vector(values, size, what):
+        return _c_vector(values, size, what, real)
+
+    def c_matrix(values, rows, cols, what):
+        return _c_matrix(values, rows, cols, what, real)
+
     options = disc.spec.options
     data = disc.data
     guess = _attr(data, "initial_guess")
@@ -426,6 +469,9 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any) -> Dict[str, Any
             "nominal_nu": c_vector(_pad_vec(nominal.nu, s["ne"]), dim(s["ne"]), "nominal.nu"),
         })
     return ctx
+
+
+_c_literal, _c_vector, _c_matrix = c_double, c_vector, c_matrix
 
 
 def _zeros_if_none(v, n):
@@ -484,7 +530,7 @@ def extract_cdef(header_text: str, name: str, header_name: str) -> str:
 
 def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, has_nominal: int = 0,
                         work: Optional[Dict[str, int]] = None, header: str = "",
-                        casadi_version: str = "") -> str:
+                        casadi_version: str = "", real: str = "double") -> str:
     """``<name>_sizes.h`` from templates/sizes.h.j2: the one sizes header of the runtime, also
     for the QP harness and the QP benchmark (which give only the QP sizes N, nx, nu, ng, nr,
     ne; the other entries then hold placeholders: no CasADi work, no Gauss-Newton)."""
@@ -497,19 +543,31 @@ def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, ha
     s["nb"] = s["N"] * (s["nbx"] + s["nbu"] + s["nbg"]) + s["nbr"]
     ctx = {"name": name, "NAME": name.upper(), "sizes": s, "has_gn": int(has_gn),
            "has_nominal": int(has_nominal), "header": header or f"Sizes of '{name}'",
-           "casadi_version": casadi_version,
+           "casadi_version": casadi_version, "real_float": settings.REALS[settings.check_real(real)],
            "work": work or {"sz_arg": 1, "sz_res": 1, "sz_iw": 1, "sz_w": 1}}
     return _templates().get_template("sizes.h.j2").render(**ctx)
 
 
-def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = None) -> Dict[str, str]:
-    """Every file of the generated folder, as {file name: text}, without touching the disk."""
+def real_of(disc: Any, real: Optional[str] = None) -> str:
+    """The real type to generate: ``real`` if given, else the OCP file's ``options(real=...)``."""
+    value = _option(disc.spec.options, "real", settings.DEFAULTS["real"]) if real is None else real
+    try:
+        return settings.check_real(value)
+    except settings.SettingError as exc:
+        raise CodegenError(f"option {exc}") from None
+
+
+def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = None,
+                  real: Optional[str] = None) -> Dict[str, str]:
+    """Every file of the generated folder, as {file name: text}, without touching the disk.
+    ``real`` overrides the OCP file's ``options(real=...)``."""
     name = check_name(_attr(disc.data, "name"))
     NAME = name.upper()
+    real = real_of(disc, real)
     s = problem_sizes(disc)
     functions = casadi_functions(disc, name, s)
     files: Dict[str, str] = {}
-    files.update(casadi_sources(functions, name))
+    files.update(casadi_sources(functions, name, real))
     files.update(runtime_sources(name))
 
     header = (f"Generated by dopus-gen {__version__} with CasADi {ca.__version__} "
@@ -524,17 +582,18 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
         "strict_cflags": " ".join(STRICT_CFLAGS), "casadi_cflags": " ".join(CASADI_CFLAGS),
         "default_opt": DEFAULT_OPT, "cmake_options": flags.cmake_options(),
     }
-    ctx.update(problem_context(disc, s, nominal))
+    ctx.update(problem_context(disc, s, nominal, real))
     ctx["has_nominal"] = int(ctx["has_nominal"])
 
     env = _templates()
     files[f"{name}_sizes.h"] = render_sizes_header(name, dict(s, **bounded_row_counts(disc, s)), has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
                                                    work=ctx["work"], header=header,
-                                                   casadi_version=ca.__version__)
+                                                   casadi_version=ca.__version__, real=real)
     files[f"{name}_problem.c"] = env.get_template("problem.c.j2").render(**ctx)
 
     cdef = extract_cdef(files[f"{name}_solver.h"], name, f"{name}_solver.h")
-    files[f"{name}_cdef.h"] = f"/* {header} */\n/* cffi declarations cut from {name}_solver.h */\n" + cdef
+    files[f"{name}_cdef.h"] = (f"/* {header} */\n/* cffi declarations cut from {name}_solver.h */\n"
+                               f"typedef {real} {name}_real;\n" + cdef)
 
     c_sources = sorted(f for f in files if f.endswith(".c") and f != main_file)
     headers = sorted(f for f in files if f.endswith(".h") and f != f"{name}_cdef.h")
@@ -554,6 +613,7 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
         "work": ctx["work"],
         "has_gn": bool(has_gn),
         "has_nominal": bool(ctx["has_nominal"]),
+        "real": real,
         "state_names": list(disc.data.state_names),
         "control_names": list(disc.data.control_names),
         "files": sorted(list(files) + [meta_file]),
@@ -644,18 +704,20 @@ def write_folder(files: Dict[str, str], out_dir: Path) -> Path:
     return out_dir
 
 
-def generate(disc: Any, out_dir, *, offline_guess: Optional[bool] = None) -> Path:
+def generate(disc: Any, out_dir, *, offline_guess: Optional[bool] = None, real: Optional[str] = None) -> Path:
     """Generate the C folder of ``disc`` into ``out_dir`` and return its path.
 
     ``offline_guess`` overrides the OCP option of the same name: when on, the OCP is solved
     with IPOPT at its default x0 and the primal-dual solution becomes static data
     (DOPUS_HAS_NOMINAL 1), so firmware can start warm (``dopus_init_nominal``).
+    ``real`` (``"double"`` or ``"float"``) overrides the OCP option of the same name.
     """
     want_nominal = _option(disc.spec.options, "offline_guess", False) \
         if offline_guess is None else bool(offline_guess)
     from .cache import problem_hash as _problem_hash
 
-    phash = _problem_hash(disc, bool(want_nominal))
+    real = real_of(disc, real)
+    phash = _problem_hash(disc, bool(want_nominal), real)
     if folder_up_to_date(Path(out_dir), phash):
         return Path(out_dir)
     nominal = None
@@ -664,7 +726,7 @@ def generate(disc: Any, out_dir, *, offline_guess: Optional[bool] = None) -> Pat
 
         nominal, info = solve_ocp(disc, np.asarray(_attr(disc.data, "x0"), dtype=float))
         _check_offline(info)
-    files = render_folder(disc, nominal, problem_hash=phash)
+    files = render_folder(disc, nominal, problem_hash=phash, real=real)
     return write_folder(files, Path(out_dir))
 
 
@@ -677,7 +739,8 @@ def _check_offline(info: Any) -> None:
                            "the nominal guess would not be a solution")
 
 
-def generate_file(ocp_file, out_dir=None, *, offline_guess: Optional[bool] = None) -> Path:
+def generate_file(ocp_file, out_dir=None, *, offline_guess: Optional[bool] = None,
+                  real: Optional[str] = None) -> Path:
     """``dopus-gen generate``: load the OCP file, discretise, generate (default generated/<name>)."""
     from ..problem.derivatives import build_functions
     from ..problem.ocp import load_ocp
@@ -686,9 +749,9 @@ def generate_file(ocp_file, out_dir=None, *, offline_guess: Optional[bool] = Non
     disc = build_functions(ocp)
     if out_dir is None:
         out_dir = Path("generated") / check_name(_attr(disc.data, "name"))
-    return generate(disc, out_dir, offline_guess=offline_guess)
+    return generate(disc, out_dir, offline_guess=offline_guess, real=real)
 
 
 __all__ = ["CodegenError", "generate", "generate_file", "render_folder", "read_meta", "find_meta",
            "rename_placeholder", "render_sizes_header", "c_double", "STRICT_CFLAGS", "CASADI_CFLAGS",
-           "folder_up_to_date", "silence_unused_parameters"]
+           "folder_up_to_date", "silence_unused_parameters", "single_precision", "real_of"]

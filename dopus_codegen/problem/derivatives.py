@@ -305,6 +305,29 @@ def _stage_cost_hessians(name: str, m: StageModel) -> tuple:
     return exact, gn, A_gn
 
 
+def _node_parts(name: str, m: StageModel) -> types.SimpleNamespace:
+    """What every form of the stage functions shares: the sizes, the node part of L_k
+    (algorithm.md section 1: ``Ln = l + mu_g' g``), the path-constraint Jacobian ``C``, the
+    SX node functions (``node_eval``: l, g; ``node_hess``: the Hessian of Ln, C) and the MX
+    inputs ``(x, u, p, lam_next, mu_g)`` of the stage functions."""
+    nx, nu, ng = m.x.size1(), m.u.size1(), m.g.size1()
+    nw, np_ = nx + nu, m.p.size1()
+    x, u, p, w = m.x, m.u, m.p, m.w
+    mu_g_sx = ca.SX.sym("mu_g", ng)
+    Ln = m.l + (ca.dot(mu_g_sx, m.g) if ng else 0)
+    C_sx = ca.jacobian(m.g, w) if ng else ca.SX(0, nw)
+    node_in, node_names = [x, u, p, mu_g_sx], ["x", "u", "p", "mu_g"]
+    node_eval = ca.Function(f"{name}_node_eval", [x, u, p], [_d(m.l), _d(m.g)], ["x", "u", "p"],
+                            ["l", "g"], _FN_OPTS)
+    node_hess = ca.Function(f"{name}_node_hess", node_in, [_d(ca.hessian(Ln, w)[0]), _d(C_sx)], node_names,
+                            ["An", "C"], _FN_OPTS)
+    mx = (ca.MX.sym("x", nx), ca.MX.sym("u", nu), ca.MX.sym("p", np_), ca.MX.sym("lam_next", nx),
+          ca.MX.sym("mu_g", ng))
+    return types.SimpleNamespace(nx=nx, nu=nu, ng=ng, nw=nw, np_=np_, Ln=Ln, C_sx=C_sx, node_in=node_in,
+                                 node_names=node_names, node_eval=node_eval, node_hess=node_hess, mx=mx,
+                                 in_names=["x", "u", "p", "lam_next", "mu_g"])
+
+
 def _stage_functions(name: str, m: StageModel, directions="auto"):
     """The stage functions of algorithm.md section 2 as MX functions over SX kernels.
 
@@ -313,27 +336,16 @@ def _stage_functions(name: str, m: StageModel, directions="auto"):
     adjoint ``-Phi' lam_next`` and the Hessian of ``-lam_next' phi``) is propagated through
     the substeps by :mod:`.sensitivities`, so the generated code keeps one substep.
     """
-    nx, nu, ng = m.x.size1(), m.u.size1(), m.g.size1()
-    nw, np_ = nx + nu, m.p.size1()
-    x, u, p, w = m.x, m.u, m.p, m.w
-    mu_g_sx = ca.SX.sym("mu_g", ng)
-    # node part of L_k (algorithm.md section 1): l + mu_g' g
-    Ln = m.l + (ca.dot(mu_g_sx, m.g) if ng else 0)
-    C_sx = ca.jacobian(m.g, w) if ng else ca.SX(0, nw)
-    node_in, node_names = [x, u, p, mu_g_sx], ["x", "u", "p", "mu_g"]
-    node_eval = ca.Function(f"{name}_node_eval", [x, u, p], [_d(m.l), _d(m.g)], ["x", "u", "p"],
-                            ["l", "g"], _FN_OPTS)
-    node_grad = ca.Function(f"{name}_node_grad", node_in, [_d(ca.gradient(Ln, w))], node_names, ["gLn"],
+    nd = _node_parts(name, m)
+    nx, nu, np_ = nd.nx, nd.nu, nd.np_
+    node_in, node_names, C_sx = nd.node_in, nd.node_names, nd.C_sx
+    node_eval, node_hess = nd.node_eval, nd.node_hess
+    node_grad = ca.Function(f"{name}_node_grad", node_in, [_d(ca.gradient(nd.Ln, m.w))], node_names, ["gLn"],
                             _FN_OPTS)
-    node_hess = ca.Function(f"{name}_node_hess", node_in, [_d(ca.hessian(Ln, w)[0]), _d(C_sx)], node_names,
-                            ["An", "C"], _FN_OPTS)
     K = sensitivities.substep_kernels(f"{name}_substep", m.substep, nx, nu, np_, directions)
     n = m.n_substeps
-
-    X, U, P = ca.MX.sym("x", nx), ca.MX.sym("u", nu), ca.MX.sym("p", np_)
-    LAM, MUG = ca.MX.sym("lam_next", nx), ca.MX.sym("mu_g", ng)
-    ins = [X, U, P, LAM, MUG]
-    in_names = ["x", "u", "p", "lam_next", "mu_g"]
+    X, U, P, LAM, MUG = nd.mx
+    ins, in_names = list(nd.mx), nd.in_names
     xs = sensitivities.interval_map(K, n, X, U, P)
     phi = xs[-1]
     l, g = node_eval(X, U, P)
@@ -369,27 +381,18 @@ def _stage_functions_chained(name: str, m: StageModel):
     unrolled expression. The gradient is the unrolled expression (its code is small; a
     per-substep adjoint would evaluate the first substeps twice); ``stage_eval`` iterates
     the substep; the Gauss-Newton ``Phi`` reuses the chaining kernel (no more code)."""
-    nx, nu, ng = m.x.size1(), m.u.size1(), m.g.size1()
-    nw, np_ = nx + nu, m.p.size1()
     phi_sx = m.x
     for _ in range(m.n_substeps):
         phi_sx = m.substep(phi_sx, m.u, m.p)
     unrolled = _stage_functions_unrolled(name, m, phi_sx)
-    x, u, p, w = m.x, m.u, m.p, m.w
-    mu_g_sx = ca.SX.sym("mu_g", ng)
-    Ln = m.l + (ca.dot(mu_g_sx, m.g) if ng else 0)
-    C_sx = ca.jacobian(m.g, w) if ng else ca.SX(0, nw)
-    node_in, node_names = [x, u, p, mu_g_sx], ["x", "u", "p", "mu_g"]
-    node_eval = ca.Function(f"{name}_node_eval", [x, u, p], [_d(m.l), _d(m.g)], ["x", "u", "p"],
-                            ["l", "g"], _FN_OPTS)
-    node_hess = ca.Function(f"{name}_node_hess", node_in, [_d(ca.hessian(Ln, w)[0]), _d(C_sx)], node_names,
-                            ["An", "C"], _FN_OPTS)
+    nd = _node_parts(name, m)
+    nx, nu, np_, w = nd.nx, nd.nu, nd.np_, m.w
+    node_in, node_names, C_sx = nd.node_in, nd.node_names, nd.C_sx
+    node_eval, node_hess = nd.node_eval, nd.node_hess
     K = sensitivities.chain_kernel(f"{name}_substep", m.substep, nx, nu, np_)
     n = m.n_substeps
-    X, U, P = ca.MX.sym("x", nx), ca.MX.sym("u", nu), ca.MX.sym("p", np_)
-    LAM, MUG = ca.MX.sym("lam_next", nx), ca.MX.sym("mu_g", ng)
-    ins = [X, U, P, LAM, MUG]
-    in_names = ["x", "u", "p", "lam_next", "mu_g"]
+    X, U, P, LAM, MUG = nd.mx
+    ins, in_names = list(nd.mx), nd.in_names
     phi = sensitivities.interval_map(types.SimpleNamespace(F=m.substep), n, X, U, P)[-1]
     l, g = node_eval(X, U, P)
     stage_eval = ca.Function(f"{name}_stage_eval", [X, U, P], [phi, l, g], ["x", "u", "p"], ["phi", "l", "g"])

@@ -491,7 +491,7 @@ class Ocp:
         from ..settings import DEFAULTS
 
         self._options = {k: DEFAULTS[k] for k in ("hessian", "regularization", "reg_eps", "M",
-                                                  "offline_guess", "lm", "cost_hessian")}
+                                                  "offline_guess", "lm", "cost_hessian", "real")}
         self._declared: set = set()
         self._disturbance = None
         self._scenario = None
@@ -641,11 +641,15 @@ class Ocp:
     def options(self, hessian: Optional[str] = None, regularization: Optional[str] = None,
                 reg_eps: Optional[float] = None, M: Optional[int] = None,
                 offline_guess: Optional[bool] = None, lm: Optional[Union[float, str]] = None,
-                cost_hessian: Optional[str] = None) -> None:
+                cost_hessian: Optional[str] = None, real: Optional[str] = None) -> None:
         """Solver defaults (the generated solver and the CLI can override them); only the
         options given change. Names, allowed values and defaults are those of
         :mod:`dopus_codegen.settings`: ``hessian="exact"``, ``regularization="none"``,
-        ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``, ``lm="auto"``, ``cost_hessian="fresh"``.
+        ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``, ``lm="auto"``, ``cost_hessian="fresh"``, ``real="double"``.
+
+        ``real``: the real-number type of the generated C, ``"double"`` or ``"float"``
+        (single precision, for microcontrollers with a single-precision FPU); the default
+        QP tolerance follows it (:data:`dopus_codegen.settings.QP_TOL_DEFAULT`).
 
         ``lm``: the Levenberg-Marquardt term of the QP (docs/algorithm.md sections 3 and
         10): ``"auto"`` (the default: scale-aware and adaptive, nothing to tune) or a fixed
@@ -659,7 +663,7 @@ class Ocp:
         from ..settings import SettingError, validate
 
         given = dict(hessian=hessian, regularization=regularization, reg_eps=reg_eps, M=M,
-                     offline_guess=offline_guess, lm=lm, cost_hessian=cost_hessian)
+                     offline_guess=offline_guess, lm=lm, cost_hessian=cost_hessian, real=real)
         opts = dict(self._options)
         declared = set(self._declared)
         for name, value in given.items():

@@ -183,11 +183,12 @@ class OptionsSpec:
     offline_guess: bool
     lm: Union[float, str]       # a fixed term >= 0 or "auto" (docs/algorithm.md section 10)
     cost_hessian: str = "fresh"
+    real: str = "double"        # real-number type of the generated C: "double" or "float"
 
     def as_dict(self) -> Dict[str, Any]:
         return {"hessian": self.hessian, "regularization": self.regularization,
                 "reg_eps": self.reg_eps, "M": self.M, "offline_guess": self.offline_guess,
-                "lm": self.lm, "cost_hessian": self.cost_hessian}
+                "lm": self.lm, "cost_hessian": self.cost_hessian, "real": self.real}
 
 
 @dataclass(frozen=True)

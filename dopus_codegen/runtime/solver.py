@@ -61,29 +61,31 @@ def cache_root() -> Path:
     return _root()
 
 
-def build_for(disc, cache_dir=None, echo=None) -> Path:
+def build_for(disc, cache_dir=None, echo=None, real: Optional[str] = None) -> Path:
     """The generated and built folder of ``disc`` in the cache (``cache_dir``, else
     ``$DOPUS_CACHE_DIR``, else ``~/.cache/dopus-codegen``), keyed by the problem hash of
     :mod:`dopus_codegen.codegen.cache`: an unchanged problem is neither regenerated nor
-    recompiled. Says on stderr (or to ``echo``) when it generates or compiles."""
+    recompiled. Says on stderr (or to ``echo``) when it generates or compiles. ``real``
+    (``"double"``, ``"float"``) overrides the OCP file's ``options(real=...)``."""
     import sys
 
     from ..codegen import cache
     from ..codegen.build import build
-    from ..codegen.generate import render_folder, write_folder
+    from ..codegen.generate import real_of, render_folder, write_folder
 
     say = echo or (lambda msg: print(msg, file=sys.stderr, flush=True))
-    key = id(disc)
+    real = real_of(disc, real)
+    key = (id(disc), real)
     with _LOCK:
         hit = _DISC_CACHE.get(key)
         if hit is not None and hit[0] is disc and (cache_dir is None or Path(cache_dir) / "problems" == hit[1].parent):
             build(hit[1], cache_dir=cache_dir, echo=say)
             return hit[1]
     root = cache.cache_root(cache_dir)
-    out = root / "problems" / f"{disc.name}-{cache.problem_hash(disc, None)[:20]}"
+    out = root / "problems" / f"{disc.name}-{cache.problem_hash(disc, None, real)[:20]}"
     if not (out / f"{disc.name}_meta.json").is_file():
         say(f"dopus-codegen: generating C for '{disc.name}' into {out}")
-        files = render_folder(disc, None)
+        files = render_folder(disc, None, real=real)
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{disc.name}-", dir=str(out.parent)))
         write_folder(files, tmp)
@@ -153,17 +155,24 @@ class CSolver:
     def __init__(self, disc=None, M: int = settings.DEFAULTS["M"], mode: str = settings.DEFAULTS["mode"],
                  hessian: str = settings.DEFAULTS["hessian"],
                  regularization: str = settings.DEFAULTS["regularization"],
-                 reg_eps: float = settings.DEFAULTS["reg_eps"], qp_tol: float = settings.DEFAULTS["qp_tol"],
+                 reg_eps: float = settings.DEFAULTS["reg_eps"], qp_tol: Optional[float] = None,
                  lib_dir=None, qp_max_iter: Optional[int] = None,
                  cost_hessian: str = settings.DEFAULTS["cost_hessian"],
-                 lm: Optional[float] = settings.DEFAULTS["lm"], qp_warm_start: Optional[bool] = None):
+                 lm: Optional[float] = settings.DEFAULTS["lm"], qp_warm_start: Optional[bool] = None,
+                 real: Optional[str] = None):
         if lib_dir is None:
             if disc is None:
                 raise ValueError("CSolver needs a Discretized problem or lib_dir (a generated folder)")
-            lib_dir = build_for(disc)
+            lib_dir = build_for(disc, real=real)
         self.lib_dir = Path(lib_dir)
         self._ffi, self._lib, self.meta = load_library(self.lib_dir)
         self.name = self.meta["name"]
+        # the real type of the library: arrays cross the boundary as float32 in a float
+        # build (converted from and to float64 here, the handle speaks float64)
+        self.real = self.meta.get("real", "double")
+        if real is not None and real != self.real:
+            raise ValueError(f"the library in '{self.lib_dir}' is generated in {self.real}, not {real}")
+        self._dtype = np.float32 if self.real == "float" else np.float64
         dims = self._ffi.new(f"{self.name}_dims *")
         self._c("get_dims")(dims)
         self.dims = {f: int(getattr(dims, f)) for f in _DIMS}
@@ -187,7 +196,8 @@ class CSolver:
         self._s = self._ffi.cast(f"{self.name}_solver *", self._mem)
         self._c("defaults")(self._s)
         self.status = STATUS_OK
-        self._check(self._c("set_qp_tol")(self._s, self._positive(qp_tol, "qp_tol")), "qp_tol")
+        if qp_tol is not None:  # None: the generated default of the real type (settings.QP_TOL_DEFAULT)
+            self._check(self._c("set_qp_tol")(self._s, self._positive(qp_tol, "qp_tol")), "qp_tol")
         if qp_max_iter is not None:
             self.set_qp_max_iter(qp_max_iter)
         self.set_M(M)
@@ -275,15 +285,27 @@ class CSolver:
         return a
 
     def _ptr(self, a: Optional[np.ndarray]):
+        """A pointer to ``a`` as the library's real type (an input converted to float32 in a
+        float build; an output buffer must come from :meth:`_out`)."""
         if a is None or a.size == 0:
             return self._ffi.NULL
-        return self._ffi.from_buffer("double[]", a)
+        if a.dtype != self._dtype:
+            a = np.ascontiguousarray(a, dtype=self._dtype)
+        return self._ffi.from_buffer(self._ffi.typeof(f"{self.name}_real[]"), a)
+
+    def _out(self, shape) -> np.ndarray:
+        """An output buffer of the library's real type (:meth:`_f64` reads it back)."""
+        return np.zeros(shape, dtype=self._dtype)
+
+    @staticmethod
+    def _f64(a: np.ndarray) -> np.ndarray:
+        return a if a.dtype == np.float64 else a.astype(np.float64)
 
     def _get(self, fname: str, shape) -> np.ndarray:
-        out = np.zeros(shape)
+        out = self._out(shape)
         if out.size:
-            self._c(fname)(self._s, self._ffi.from_buffer("double[]", out))
-        return out
+            self._c(fname)(self._s, self._ptr(out))
+        return self._f64(out)
 
     def _setting(self, check, *args):
         """A value checked by :mod:`dopus_codegen.settings`; a bad one is DopusError
@@ -411,8 +433,9 @@ class CSolver:
         plan, clipped), which is also :attr:`u0`. A non-finite ``xhat0`` reaches the C
         runtime, which counts it as a failed instant."""
         xh = self._array(xhat0, (self.nx,), "feedback: xhat0", check_finite=False)
-        u0 = np.zeros(self.n_u)
+        u0 = self._out(self.n_u)
         status = self._c("feedback")(self._s, self._ptr(xh), self._ptr(u0))
+        u0 = self._f64(u0)
         try:
             if not np.all(np.isfinite(xh)):
                 self._array(xh, (self.nx,), "feedback: xhat0")    # the message naming the entry
@@ -452,9 +475,9 @@ class CSolver:
     @property
     def scales(self) -> tuple:
         """``(scale_x, scale_u)`` of the box test (section 9)."""
-        sx, su = np.zeros(self.nx), np.zeros(self.n_u)
+        sx, su = self._out(self.nx), self._out(self.n_u)
         self._c("get_scales")(self._s, self._ptr(sx), self._ptr(su))
-        return sx, su
+        return self._f64(sx), self._f64(su)
 
     def prepare(self) -> None:
         """Shift (receding mode), F and rho, fresh last stage and terminal node, the M worst H."""
@@ -463,7 +486,7 @@ class CSolver:
     def kkt(self, xhat0=None) -> dict:
         """KKT measure (algorithm.md section 6) of the current iterate for ``xhat0``."""
         xh = None if xhat0 is None else self._array(xhat0, (self.nx,), "kkt: xhat0")
-        out = np.zeros(4)
+        out = self._out(4)
         self._check(self._c("kkt_eval")(self._s, self._ptr(xh), self._ptr(out)), "kkt")
         stat, eq, ineq, comp = (float(v) for v in out)
         return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
@@ -511,7 +534,8 @@ class CSolver:
     @property
     def timings(self) -> dict:
         phases = self.enums["dopus_phase"].names()
-        t = self._get("get_timings", (len(phases),))
+        t = np.zeros(len(phases))    # times are double in both precisions
+        self._c("get_timings")(self._s, self._ffi.from_buffer("double[]", t))
         out = {name: float(v) for name, v in zip(phases, t)}
         out["prepare"] = sum(out[k] for k in ("shift", "gradients", "rho", "hessians", "regularization", "assembly"))
         return out

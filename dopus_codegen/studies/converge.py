@@ -337,7 +337,7 @@ def effective_settings(declared: dict, m_list, **cli):
     the file's M, else :data:`DEFAULT_M_LIST`. Returns ``(values, sources, m_list,
     m_is_default)``."""
     values, sources = settings.resolve(declared, dict(cli, M=None),
-                                       names=settings.SOLVER_SETTINGS + ("qp_tol", "qp_max_iter"))
+                                       names=settings.SOLVER_SETTINGS + ("qp_tol", "qp_max_iter", "real"))
     if m_list is not None:
         sources["M"] = settings.SOURCE_CLI
         return values, sources, list(m_list), False
@@ -350,7 +350,7 @@ def effective_settings(declared: dict, m_list, **cli):
 
 def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularization=None, reg_eps=None,
                      backend="reference", json_out=None, plot_out=None, cost_hessian=None, lm=None,
-                     qp_tol=None, qp_max_iter=None, tol=1e-8) -> dict:
+                     qp_tol=None, qp_max_iter=None, tol=None, real=None) -> dict:
     """The body of ``dopus-gen converge`` (bad input raises OcpError, ValueError or
     RuntimeError with a message; the command line turns them into one line). A setting given
     as None comes from the OCP file's ``options(...)``, else from the defaults of
@@ -371,7 +371,12 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularizatio
     ocp = load_ocp(ocp_file)
     values, sources, m_list, m_default = effective_settings(
         ocp.declared_options(), m_list, hessian=hessian, regularization=regularization, reg_eps=reg_eps,
-        cost_hessian=cost_hessian, lm=lm, qp_tol=qp_tol, qp_max_iter=qp_max_iter)
+        cost_hessian=cost_hessian, lm=lm, qp_tol=qp_tol, qp_max_iter=qp_max_iter, real=real)
+    if values["real"] != settings.DEFAULTS["real"] and backend != "c":
+        raise ValueError(f"--real {values['real']} needs --backend c (the reference backend computes in double)")
+    ocp.options(real=values["real"])    # the C backend is generated in this type
+    if tol is None:
+        tol = settings.KKT_TOL_DEFAULT[values["real"]]
     disc = build_functions(ocp)
     if values["hessian"] == "gauss-newton" and disc.stage_hess_gn is None:
         raise ValueError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
@@ -404,7 +409,8 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularizatio
                           reg_eps=reg_eps, backend_factory=factory, backend_name=backend,
                           progress=progress, cost_hessian=cost_hessian, lm=lm, qp_tol=qp_tol,
                           qp_max_iter=qp_max_iter, tol=tol)
-    study["sources"] = {k: sources[k] for k in ("M", *settings.RUNTIME_SETTINGS) if k in sources}
+    study["sources"] = {k: sources[k] for k in ("M", *settings.RUNTIME_SETTINGS, "real") if k in sources}
+    study["real"] = values["real"]
     click.echo(format_table(study))
     if json_out:
         with open(json_out, "w") as fh:

@@ -169,7 +169,7 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     loop.run(x, n_steps, progress, label)
     settings_rec = {"M": M_eff, "N": int(disc.N), "dt": float(disc.dt), "duration": n_steps * float(disc.dt),
                     "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
-                    "backend": backend,
+                    "backend": backend, "real": str(getattr(backend_obj, "real", "double")),
                     "cost_hessian": str(getattr(backend_obj, "cost_hessian", cost_hessian)),
                     "lm": float(getattr(backend_obj, "lm", 0.0 if isinstance(lm, str) else lm)),
                     "lm_setting": lm if isinstance(lm, str) else float(lm),
@@ -573,7 +573,7 @@ def write_json(runs, path) -> None:
 # --------------------------------------------------------------------------- CLI
 def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, compare="none", hessian=None,
                 regularization=None, reg_eps=None, backend="c", cost_hessian=None, echo=None, progress=True,
-                lm=None, qp_tol=None, qp_max_iter=None, campaign_run=None, seed=None) -> list:
+                lm=None, qp_tol=None, qp_max_iter=None, real=None, campaign_run=None, seed=None) -> list:
     """The ``dopus-gen sil`` command: runs, summary table, JSON and plots. A setting given as
     None comes from the OCP file's ``options(...)``, else from the defaults of
     :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from. The
@@ -601,9 +601,13 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
     try:
         values, sources = settings.resolve(ocp.declared_options(), dict(
             M=M, hessian=hessian, regularization=regularization, reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm,
-            qp_tol=qp_tol, qp_max_iter=qp_max_iter), names=settings.SOLVER_SETTINGS + ("qp_tol", "qp_max_iter"))
+            qp_tol=qp_tol, qp_max_iter=qp_max_iter, real=real),
+            names=settings.SOLVER_SETTINGS + ("qp_tol", "qp_max_iter", "real"))
     except settings.SettingError as exc:
         raise SilError(f"{ocp_file}: {exc}") from None
+    if values["real"] != settings.DEFAULTS["real"] and backend != "c":
+        raise SilError(f"--real {values['real']} needs --backend c (the reference backend computes in double)")
+    ocp.options(real=values["real"])    # the C backend is generated in this type
     disc = build_functions(ocp)
     if disc.scenario.closed_loop is None:
         raise SilError(f"{ocp_file}: the OCP declares no closed-loop scenario (ocp.scenario(...))")

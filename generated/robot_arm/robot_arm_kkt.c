@@ -7,40 +7,40 @@
 #include "robot_arm_solver.h"
 #include "robot_arm_solver_internal.h"
 
-static double robot_arm_kkt_max(double a, double b)
+static robot_arm_real robot_arm_kkt_max(robot_arm_real a, robot_arm_real b)
 {
     return a > b ? a : b;
 }
 
 /* Violation max(0, v - ub, lb - v) of one row. */
-static double robot_arm_kkt_viol(double v, double lb, double ub)
+static robot_arm_real robot_arm_kkt_viol(robot_arm_real v, robot_arm_real lb, robot_arm_real ub)
 {
-    return robot_arm_kkt_max(0.0, robot_arm_kkt_max(v - ub, lb - v));
+    return robot_arm_kkt_max(ROBOT_ARM_R(0.0), robot_arm_kkt_max(v - ub, lb - v));
 }
 
 /* Complementarity of a signed multiplier mu of the row lb <= v <= ub:
  * max(mu,0) |ub - v| and max(-mu,0) |v - lb|; a nonzero multiplier on an infinite side
  * contributes |mu|. */
-static double robot_arm_kkt_comp(double mu, double v, double lb, double ub)
+static robot_arm_real robot_arm_kkt_comp(robot_arm_real mu, robot_arm_real v, robot_arm_real lb, robot_arm_real ub)
 {
-    double c = 0.0;
-    if (mu > 0.0) {
-        c = isinf(ub) ? mu : mu * fabs(ub - v);
-    } else if (mu < 0.0) {
-        c = isinf(lb) ? -mu : -mu * fabs(v - lb);
+    robot_arm_real c = ROBOT_ARM_R(0.0);
+    if (mu > ROBOT_ARM_R(0.0)) {
+        c = isinf(ub) ? mu : mu * robot_arm_fabs(ub - v);
+    } else if (mu < ROBOT_ARM_R(0.0)) {
+        c = isinf(lb) ? -mu : -mu * robot_arm_fabs(v - lb);
     }
     return c;
 }
 
-int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, double *parts)
+int robot_arm_kkt_measure(struct robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *parts)
 {
-    double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
-    double gL[ROBOT_ARM_NW], phi[ROBOT_ARM_NX], g[ROBOT_ARM_DIM(ROBOT_ARM_NG)], l;
-    double gLN[ROBOT_ARM_NX], E, r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
+    robot_arm_real stat = ROBOT_ARM_R(0.0), eq = ROBOT_ARM_R(0.0), ineq = ROBOT_ARM_R(0.0), comp = ROBOT_ARM_R(0.0);
+    robot_arm_real gL[ROBOT_ARM_NW], phi[ROBOT_ARM_NX], g[ROBOT_ARM_DIM(ROBOT_ARM_NG)], l;
+    robot_arm_real gLN[ROBOT_ARM_NX], E, r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
     int k, i, rc;
 
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        eq = robot_arm_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
+        eq = robot_arm_kkt_max(eq, robot_arm_fabs(s->x[0][i] - xhat0[i]));
     }
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
@@ -53,11 +53,11 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
         }
         /* stationarity gL_k + mu_b_k + [lam_k; 0] */
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            double v = gL[i] + s->mu_b[k][i] + (i < ROBOT_ARM_NX ? s->lam[k][i] : 0.0);
-            stat = robot_arm_kkt_max(stat, fabs(v));
+            robot_arm_real v = gL[i] + s->mu_b[k][i] + (i < ROBOT_ARM_NX ? s->lam[k][i] : ROBOT_ARM_R(0.0));
+            stat = robot_arm_kkt_max(stat, robot_arm_fabs(v));
         }
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            eq = robot_arm_kkt_max(eq, fabs(s->x[k + 1][i] - phi[i]));
+            eq = robot_arm_kkt_max(eq, robot_arm_fabs(s->x[k + 1][i] - phi[i]));
         }
         for (i = 0; i < ROBOT_ARM_NG; ++i) {
             ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(g[i], robot_arm_lg[i], robot_arm_ug[i]));
@@ -67,7 +67,7 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
          * sides and counts with its magnitude) */
         if (!robot_arm_x_bounded(k)) {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                comp = robot_arm_kkt_max(comp, fabs(s->mu_b[0][i]));
+                comp = robot_arm_kkt_max(comp, robot_arm_fabs(s->mu_b[0][i]));
             }
         } else {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -87,12 +87,12 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, doubl
         return rc;
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        stat = robot_arm_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[ROBOT_ARM_N][i]));
+        stat = robot_arm_kkt_max(stat, robot_arm_fabs(gLN[i] + s->mu_bN[i] + s->lam[ROBOT_ARM_N][i]));
         ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(s->x[ROBOT_ARM_N][i], robot_arm_lbx[i], robot_arm_ubx[i]));
         comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_bN[i], s->x[ROBOT_ARM_N][i], robot_arm_lbx[i], robot_arm_ubx[i]));
     }
     for (i = 0; i < ROBOT_ARM_NE; ++i) {
-        eq = robot_arm_kkt_max(eq, fabs(r_eq[i]));
+        eq = robot_arm_kkt_max(eq, robot_arm_fabs(r_eq[i]));
     }
     for (i = 0; i < ROBOT_ARM_NR; ++i) {
         ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(r[i], robot_arm_lr[i], robot_arm_ur[i]));

@@ -4,11 +4,13 @@
 #ifndef ROBOT_ARM_KKT_H
 #define ROBOT_ARM_KKT_H
 
+#include "robot_arm_real.h"
+
 struct robot_arm_solver;
 
 /* parts[0..3] = stat, eq, ineq, comp (infinity norms). Returns a status of enum
  * robot_arm_status (ROBOT_ARM_OK, ROBOT_ARM_ERR_FUNCTION or ROBOT_ARM_ERR_NONFINITE_VALUE). The iterate and
  * the stage slots are not touched; only the function scratch of the solver is used. */
-int robot_arm_kkt_measure(struct robot_arm_solver *s, const double *xhat0, double *parts);
+int robot_arm_kkt_measure(struct robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *parts);
 
 #endif /* ROBOT_ARM_KKT_H */

@@ -7,61 +7,64 @@
 #ifndef ROBOT_ARM_LINALG_H
 #define ROBOT_ARM_LINALG_H
 
+#include "robot_arm_real.h"
+
 /* In-place lower Cholesky factorisation A = L L' of the n x n symmetric matrix A (only the
  * lower triangle is read and written). Returns 0 on success, or j+1 when pivot j is not
  * positive or not finite (A is then partially overwritten). */
-int robot_arm_la_potrf_l(int n, double *A, int lda);
+int robot_arm_la_potrf_l(int n, robot_arm_real *A, int lda);
 
 /* As robot_arm_la_potrf_l, but a pivot d with -noise[j] <= d <= 0 (noise: absolute round-off
  * estimate of the diagonal entry, n values; NULL means 0) is taken as a numerical zero and
  * replaced by max(noise[j], DBL_EPSILON |A_jj|); *nfloor (if not NULL) counts them. Only
  * pivots below -noise[j] (or non-finite) fail; positive pivots are never changed. */
-int robot_arm_la_potrf_l_noise(int n, double *A, int lda, const double *noise, int *nfloor);
+int robot_arm_la_potrf_l_noise(int n, robot_arm_real *A, int lda, const robot_arm_real *noise, int *nfloor);
 
 /* In-place L D L' factorisation (unit lower L, diagonal D stored on the diagonal) of the
  * symmetric n x n matrix A, no pivoting. Returns 0 on success, j+1 on a zero/non-finite
  * pivot. The number of negative pivots is written to *neg when neg is not NULL. */
-int robot_arm_la_ldlt_l(int n, double *A, int lda, int *neg);
+int robot_arm_la_ldlt_l(int n, robot_arm_real *A, int lda, int *neg);
 
 /* Solve L x = b (trsv_ln) or L' x = b (trsv_lt) in place, L lower triangular n x n. */
-void robot_arm_la_trsv_ln(int n, const double *L, int ldl, double *x);
-void robot_arm_la_trsv_lt(int n, const double *L, int ldl, double *x);
+void robot_arm_la_trsv_ln(int n, const robot_arm_real *L, int ldl, robot_arm_real *x);
+void robot_arm_la_trsv_lt(int n, const robot_arm_real *L, int ldl, robot_arm_real *x);
 
 /* B <- L^{-1} B for the n x m matrix B (trsm_lln) or B <- L'^{-1} B (trsm_llt). */
-void robot_arm_la_trsm_lln(int n, int m, const double *L, int ldl, double *B, int ldb);
-void robot_arm_la_trsm_llt(int n, int m, const double *L, int ldl, double *B, int ldb);
+void robot_arm_la_trsm_lln(int n, int m, const robot_arm_real *L, int ldl, robot_arm_real *B, int ldb);
+void robot_arm_la_trsm_llt(int n, int m, const robot_arm_real *L, int ldl, robot_arm_real *B, int ldb);
 
 /* y <- alpha A x + beta y, A m x n (gemv_n);  y <- alpha A' x + beta y (gemv_t, y of size n).
  * beta == 0 overwrites y without reading it. */
-void robot_arm_la_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
-                     double *y);
-void robot_arm_la_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x, double beta,
-                     double *y);
+void robot_arm_la_gemv_n(int m, int n, robot_arm_real alpha, const robot_arm_real *A, int lda, const robot_arm_real *x,
+                     robot_arm_real beta, robot_arm_real *y);
+void robot_arm_la_gemv_t(int m, int n, robot_arm_real alpha, const robot_arm_real *A, int lda, const robot_arm_real *x,
+                     robot_arm_real beta, robot_arm_real *y);
 
 /* y <- alpha A x + beta y for symmetric n x n A of which only the lower triangle is read. */
-void robot_arm_la_symv_l(int n, double alpha, const double *A, int lda, const double *x, double beta, double *y);
+void robot_arm_la_symv_l(int n, robot_arm_real alpha, const robot_arm_real *A, int lda, const robot_arm_real *x,
+                     robot_arm_real beta, robot_arm_real *y);
 
 /* C <- alpha A B + beta C (gemm_nn: A m x k, B k x n); C <- alpha A' B + beta C (gemm_tn:
  * A k x m, B k x n). C is m x n. beta == 0 overwrites C without reading it. */
-void robot_arm_la_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
-                      double beta, double *C, int ldc);
-void robot_arm_la_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda, const double *B, int ldb,
-                      double beta, double *C, int ldc);
+void robot_arm_la_gemm_nn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *A, int lda,
+                      const robot_arm_real *B, int ldb, robot_arm_real beta, robot_arm_real *C, int ldc);
+void robot_arm_la_gemm_tn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *A, int lda,
+                      const robot_arm_real *B, int ldb, robot_arm_real beta, robot_arm_real *C, int ldc);
 
 /* Copy the m x n matrix A into B. */
-void robot_arm_la_copy_mat(int m, int n, const double *A, int lda, double *B, int ldb);
+void robot_arm_la_copy_mat(int m, int n, const robot_arm_real *A, int lda, robot_arm_real *B, int ldb);
 
 /* Mirror the lower triangle of the n x n matrix A into its upper triangle. */
-void robot_arm_la_symmetrize_l(int n, double *A, int lda);
+void robot_arm_la_symmetrize_l(int n, robot_arm_real *A, int lda);
 
 /* Vector helpers. */
-double robot_arm_la_dot(int n, const double *x, const double *y);
-void robot_arm_la_axpy(int n, double alpha, const double *x, double *y);
-double robot_arm_la_norm_inf(int n, const double *x);
+robot_arm_real robot_arm_la_dot(int n, const robot_arm_real *x, const robot_arm_real *y);
+void robot_arm_la_axpy(int n, robot_arm_real alpha, const robot_arm_real *x, robot_arm_real *y);
+robot_arm_real robot_arm_la_norm_inf(int n, const robot_arm_real *x);
 /* Infinity norm of the m x n matrix A (largest absolute entry, not the operator norm). */
-double robot_arm_la_max_abs_mat(int m, int n, const double *A, int lda);
+robot_arm_real robot_arm_la_max_abs_mat(int m, int n, const robot_arm_real *A, int lda);
 /* 1 when all m x n entries are finite, else 0. */
-int robot_arm_la_all_finite(int m, int n, const double *A, int lda);
+int robot_arm_la_all_finite(int m, int n, const robot_arm_real *A, int lda);
 
 /* ------------------------------------------------------------------------------------
  * Inline kernels (robot_arm_lai_*): the same operations as static inline functions, so that
@@ -72,54 +75,54 @@ int robot_arm_la_all_finite(int m, int n, const double *A, int lda);
 
 /* The pivot of column j of the Cholesky factorisation: A_jj minus the squares of row j of
  * the factor so far. */
-static inline double robot_arm_lai_potrf_pivot(const double *A, int lda, int j)
+static inline robot_arm_real robot_arm_lai_potrf_pivot(const robot_arm_real *A, int lda, int j)
 {
     int k;
-    double d = A[j + j * lda];
+    robot_arm_real d = A[j + j * lda];
     for (k = 0; k < j; ++k)
         d -= A[j + k * lda] * A[j + k * lda];
     return d;
 }
 
 /* Column j of the factor from its pivot d > 0: L_jj = sqrt(d), the entries below. */
-static inline void robot_arm_lai_potrf_column(int n, double *A, int lda, int j, double d)
+static inline void robot_arm_lai_potrf_column(int n, robot_arm_real *A, int lda, int j, robot_arm_real d)
 {
     int i, k;
-    d = sqrt(d);
+    d = robot_arm_sqrt(d);
     A[j + j * lda] = d;
     for (i = j + 1; i < n; ++i) {
-        double s = A[i + j * lda];
+        robot_arm_real s = A[i + j * lda];
         for (k = 0; k < j; ++k)
             s -= A[i + k * lda] * A[j + k * lda];
         A[i + j * lda] = s / d;
     }
 }
 
-static inline int robot_arm_lai_potrf_l(int n, double *A, int lda)
+static inline int robot_arm_lai_potrf_l(int n, robot_arm_real *A, int lda)
 {
     int j;
     for (j = 0; j < n; ++j) {
-        const double d = robot_arm_lai_potrf_pivot(A, lda, j);
+        const robot_arm_real d = robot_arm_lai_potrf_pivot(A, lda, j);
         /* !(d > 0) also rejects NaN */
-        if (!(d > 0.0) || !isfinite(d))
+        if (!(d > ROBOT_ARM_R(0.0)) || !isfinite(d))
             return j + 1;
         robot_arm_lai_potrf_column(n, A, lda, j, d);
     }
     return 0;
 }
 
-static inline int robot_arm_lai_potrf_l_noise(int n, double *A, int lda, const double *noise, int *nfloor)
+static inline int robot_arm_lai_potrf_l_noise(int n, robot_arm_real *A, int lda, const robot_arm_real *noise, int *nfloor)
 {
     int j;
     for (j = 0; j < n; ++j) {
-        const double ajj = fabs(A[j + j * lda]);
-        const double tol = noise ? noise[j] : 0.0;
-        double d = robot_arm_lai_potrf_pivot(A, lda, j);
+        const robot_arm_real ajj = robot_arm_fabs(A[j + j * lda]);
+        const robot_arm_real tol = noise ? noise[j] : ROBOT_ARM_R(0.0);
+        robot_arm_real d = robot_arm_lai_potrf_pivot(A, lda, j);
         if (!isfinite(d))
             return j + 1;
-        if (d <= 0.0) {
-            const double floor_d = tol > DBL_EPSILON * ajj ? tol : DBL_EPSILON * ajj;
-            if (d < -tol || !(floor_d > 0.0))
+        if (d <= ROBOT_ARM_R(0.0)) {
+            const robot_arm_real floor_d = tol > ROBOT_ARM_REAL_EPSILON * ajj ? tol : ROBOT_ARM_REAL_EPSILON * ajj;
+            if (d < -tol || !(floor_d > ROBOT_ARM_R(0.0)))
                 return j + 1;
             d = floor_d;
             if (nfloor)
@@ -130,23 +133,23 @@ static inline int robot_arm_lai_potrf_l_noise(int n, double *A, int lda, const d
     return 0;
 }
 
-static inline int robot_arm_lai_ldlt_l(int n, double *A, int lda, int *neg)
+static inline int robot_arm_lai_ldlt_l(int n, robot_arm_real *A, int lda, int *neg)
 {
     int i, j, k, nneg = 0;
     for (j = 0; j < n; ++j) {
-        double d = A[j + j * lda];
+        robot_arm_real d = A[j + j * lda];
         for (k = 0; k < j; ++k)
             d -= A[j + k * lda] * A[j + k * lda] * A[k + k * lda];
-        if (d == 0.0 || !isfinite(d)) {
+        if (d == ROBOT_ARM_R(0.0) || !isfinite(d)) {
             if (neg)
                 *neg = nneg;
             return j + 1;
         }
-        if (d < 0.0)
+        if (d < ROBOT_ARM_R(0.0))
             ++nneg;
         A[j + j * lda] = d;
         for (i = j + 1; i < n; ++i) {
-            double s = A[i + j * lda];
+            robot_arm_real s = A[i + j * lda];
             for (k = 0; k < j; ++k)
                 s -= A[i + k * lda] * A[j + k * lda] * A[k + k * lda];
             A[i + j * lda] = s / d;
@@ -157,36 +160,36 @@ static inline int robot_arm_lai_ldlt_l(int n, double *A, int lda, int *neg)
     return 0;
 }
 
-static inline void robot_arm_lai_trsv_ln(int n, const double *L, int ldl, double *x)
+static inline void robot_arm_lai_trsv_ln(int n, const robot_arm_real *L, int ldl, robot_arm_real *x)
 {
     int i, k;
     for (i = 0; i < n; ++i) {
-        double s = x[i];
+        robot_arm_real s = x[i];
         for (k = 0; k < i; ++k)
             s -= L[i + k * ldl] * x[k];
         x[i] = s / L[i + i * ldl];
     }
 }
 
-static inline void robot_arm_lai_trsv_lt(int n, const double *L, int ldl, double *x)
+static inline void robot_arm_lai_trsv_lt(int n, const robot_arm_real *L, int ldl, robot_arm_real *x)
 {
     int i, k;
     for (i = n - 1; i >= 0; --i) {
-        double s = x[i];
+        robot_arm_real s = x[i];
         for (k = i + 1; k < n; ++k)
             s -= L[k + i * ldl] * x[k];
         x[i] = s / L[i + i * ldl];
     }
 }
 
-static inline void robot_arm_lai_trsm_lln(int n, int m, const double *L, int ldl, double *B, int ldb)
+static inline void robot_arm_lai_trsm_lln(int n, int m, const robot_arm_real *L, int ldl, robot_arm_real *B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
         robot_arm_lai_trsv_ln(n, L, ldl, B + j * ldb);
 }
 
-static inline void robot_arm_lai_trsm_llt(int n, int m, const double *L, int ldl, double *B, int ldb)
+static inline void robot_arm_lai_trsm_llt(int n, int m, const robot_arm_real *L, int ldl, robot_arm_real *B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
@@ -194,52 +197,52 @@ static inline void robot_arm_lai_trsm_llt(int n, int m, const double *L, int ldl
 }
 
 /* y = beta y (m entries) with beta = 0 writing zeros (y may hold NaN) and beta = 1 no-op. */
-static inline void robot_arm_lai_scale_y(int m, double beta, double *y)
+static inline void robot_arm_lai_scale_y(int m, robot_arm_real beta, robot_arm_real *y)
 {
     int i;
-    if (beta == 0.0) {
+    if (beta == ROBOT_ARM_R(0.0)) {
         for (i = 0; i < m; ++i)
-            y[i] = 0.0;
-    } else if (beta != 1.0) {
+            y[i] = ROBOT_ARM_R(0.0);
+    } else if (beta != ROBOT_ARM_R(1.0)) {
         for (i = 0; i < m; ++i)
             y[i] *= beta;
     }
 }
 
-static inline void robot_arm_lai_gemv_n(int m, int n, double alpha, const double *A, int lda, const double *x,
-                                    double beta, double *y)
+static inline void robot_arm_lai_gemv_n(int m, int n, robot_arm_real alpha, const robot_arm_real *A, int lda,
+                                    const robot_arm_real *x, robot_arm_real beta, robot_arm_real *y)
 {
     int i, j;
     robot_arm_lai_scale_y(m, beta, y);
     for (j = 0; j < n; ++j) {
-        const double a = alpha * x[j];
+        const robot_arm_real a = alpha * x[j];
         for (i = 0; i < m; ++i)
             y[i] += A[i + j * lda] * a;
     }
 }
 
-static inline void robot_arm_lai_gemv_t(int m, int n, double alpha, const double *A, int lda, const double *x,
-                                    double beta, double *y)
+static inline void robot_arm_lai_gemv_t(int m, int n, robot_arm_real alpha, const robot_arm_real *A, int lda,
+                                    const robot_arm_real *x, robot_arm_real beta, robot_arm_real *y)
 {
     int i, j;
     for (j = 0; j < n; ++j) {
-        double s = 0.0;
+        robot_arm_real s = ROBOT_ARM_R(0.0);
         for (i = 0; i < m; ++i)
             s += A[i + j * lda] * x[i];
-        y[j] = (beta == 0.0 ? 0.0 : beta * y[j]) + alpha * s;
+        y[j] = (beta == ROBOT_ARM_R(0.0) ? ROBOT_ARM_R(0.0) : beta * y[j]) + alpha * s;
     }
 }
 
-static inline void robot_arm_lai_symv_l(int n, double alpha, const double *A, int lda, const double *x,
-                                    double beta, double *y)
+static inline void robot_arm_lai_symv_l(int n, robot_arm_real alpha, const robot_arm_real *A, int lda,
+                                    const robot_arm_real *x, robot_arm_real beta, robot_arm_real *y)
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
     robot_arm_lai_scale_y(n, beta, y);
     for (j = 0; j < n; ++j) {
-        const double *a = A + j * lda;
-        const double xj = alpha * x[j];
-        double s = 0.0;
+        const robot_arm_real *a = A + j * lda;
+        const robot_arm_real xj = alpha * x[j];
+        robot_arm_real s = ROBOT_ARM_R(0.0);
         y[j] += a[j] * xj;
         for (i = j + 1; i < n; ++i) {
             y[i] += a[i] * xj;
@@ -249,36 +252,36 @@ static inline void robot_arm_lai_symv_l(int n, double alpha, const double *A, in
     }
 }
 
-static inline void robot_arm_lai_gemm_nn(int m, int n, int k, double alpha, const double *A, int lda,
-                                     const double *B, int ldb, double beta, double *C, int ldc)
+static inline void robot_arm_lai_gemm_nn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *A, int lda,
+                                     const robot_arm_real *B, int ldb, robot_arm_real beta, robot_arm_real *C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
-        double *c = C + j * ldc;
+        robot_arm_real *c = C + j * ldc;
         robot_arm_lai_scale_y(m, beta, c);
         for (l = 0; l < k; ++l) {
-            const double b = alpha * B[l + j * ldb];
+            const robot_arm_real b = alpha * B[l + j * ldb];
             for (i = 0; i < m; ++i)
                 c[i] += A[i + l * lda] * b;
         }
     }
 }
 
-static inline void robot_arm_lai_gemm_tn(int m, int n, int k, double alpha, const double *A, int lda,
-                                     const double *B, int ldb, double beta, double *C, int ldc)
+static inline void robot_arm_lai_gemm_tn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *A, int lda,
+                                     const robot_arm_real *B, int ldb, robot_arm_real beta, robot_arm_real *C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
         for (i = 0; i < m; ++i) {
-            double s = 0.0;
+            robot_arm_real s = ROBOT_ARM_R(0.0);
             for (l = 0; l < k; ++l)
                 s += A[l + i * lda] * B[l + j * ldb];
-            C[i + j * ldc] = (beta == 0.0 ? 0.0 : beta * C[i + j * ldc]) + alpha * s;
+            C[i + j * ldc] = (beta == ROBOT_ARM_R(0.0) ? ROBOT_ARM_R(0.0) : beta * C[i + j * ldc]) + alpha * s;
         }
     }
 }
 
-static inline void robot_arm_lai_copy_mat(int m, int n, const double *A, int lda, double *B, int ldb)
+static inline void robot_arm_lai_copy_mat(int m, int n, const robot_arm_real *A, int lda, robot_arm_real *B, int ldb)
 {
     int i, j;
     for (j = 0; j < n; ++j)
@@ -286,7 +289,7 @@ static inline void robot_arm_lai_copy_mat(int m, int n, const double *A, int lda
             B[i + j * ldb] = A[i + j * lda];
 }
 
-static inline void robot_arm_lai_symmetrize_l(int n, double *A, int lda)
+static inline void robot_arm_lai_symmetrize_l(int n, robot_arm_real *A, int lda)
 {
     int i, j;
     for (j = 0; j < n; ++j)
@@ -294,16 +297,16 @@ static inline void robot_arm_lai_symmetrize_l(int n, double *A, int lda)
             A[j + i * lda] = A[i + j * lda];
 }
 
-static inline double robot_arm_lai_dot(int n, const double *x, const double *y)
+static inline robot_arm_real robot_arm_lai_dot(int n, const robot_arm_real *x, const robot_arm_real *y)
 {
     int i;
-    double s = 0.0;
+    robot_arm_real s = ROBOT_ARM_R(0.0);
     for (i = 0; i < n; ++i)
         s += x[i] * y[i];
     return s;
 }
 
-static inline void robot_arm_lai_axpy(int n, double alpha, const double *x, double *y)
+static inline void robot_arm_lai_axpy(int n, robot_arm_real alpha, const robot_arm_real *x, robot_arm_real *y)
 {
     int i;
     for (i = 0; i < n; ++i)
@@ -311,7 +314,7 @@ static inline void robot_arm_lai_axpy(int n, double alpha, const double *x, doub
 }
 
 /* 1 when every entry of the vector is finite (no NaN, no Inf) */
-static inline int robot_arm_lai_vec_finite(int n, const double *x)
+static inline int robot_arm_lai_vec_finite(int n, const robot_arm_real *x)
 {
     int i;
     for (i = 0; i < n; ++i)
@@ -320,31 +323,31 @@ static inline int robot_arm_lai_vec_finite(int n, const double *x)
     return 1;
 }
 
-static inline double robot_arm_lai_norm_inf(int n, const double *x)
+static inline robot_arm_real robot_arm_lai_norm_inf(int n, const robot_arm_real *x)
 {
     int i;
-    double m = 0.0;
+    robot_arm_real m = ROBOT_ARM_R(0.0);
     for (i = 0; i < n; ++i) {
-        const double a = fabs(x[i]);
+        const robot_arm_real a = robot_arm_fabs(x[i]);
         if (a > m || a != a)
             m = a;
     }
     return m;
 }
 
-static inline double robot_arm_lai_max_abs_mat(int m, int n, const double *A, int lda)
+static inline robot_arm_real robot_arm_lai_max_abs_mat(int m, int n, const robot_arm_real *A, int lda)
 {
     int j;
-    double r = 0.0;
+    robot_arm_real r = ROBOT_ARM_R(0.0);
     for (j = 0; j < n; ++j) {
-        const double c = robot_arm_lai_norm_inf(m, A + j * lda);
+        const robot_arm_real c = robot_arm_lai_norm_inf(m, A + j * lda);
         if (c > r || c != c)
             r = c;
     }
     return r;
 }
 
-static inline int robot_arm_lai_all_finite(int m, int n, const double *A, int lda)
+static inline int robot_arm_lai_all_finite(int m, int n, const robot_arm_real *A, int lda)
 {
     int i, j;
     for (j = 0; j < n; ++j)

@@ -14,21 +14,21 @@
 static robot_arm_solver solver;
 static robot_arm_fun_work plant_work;
 
-static void print_vector(const char *label, const double *v, int n)
+static void print_vector(const char *label, const robot_arm_real *v, int n)
 {
     int i;
     printf(" %s", label);
     for (i = 0; i < n; ++i) {
-        printf(" %.17g", v[i]);
+        printf(" %.17g", (double)v[i]);
     }
 }
 
-static int report(const char *phase, int iter, int status, const double *u0, const double *kkt4)
+static int report(const char *phase, int iter, int status, const robot_arm_real *u0, const robot_arm_real *kkt4)
 {
-    double kkt = fmax(fmax(kkt4[0], kkt4[1]), fmax(kkt4[2], kkt4[3]));
+    robot_arm_real kkt = robot_arm_fmax(robot_arm_fmax(kkt4[0], kkt4[1]), robot_arm_fmax(kkt4[2], kkt4[3]));
     printf("%s %d status %d", phase, iter, status);
     print_vector("u0", u0, ROBOT_ARM_NU);
-    printf(" kkt %.17g\n", kkt);
+    printf(" kkt %.17g\n", (double)kkt);
     if (status != ROBOT_ARM_OK || !isfinite(kkt)) {
         fprintf(stderr, "main_dopus: %s iteration %d failed: %s\n", phase, iter, robot_arm_status_string(status));
         return 1;
@@ -40,14 +40,14 @@ static int report(const char *phase, int iter, int status, const double *u0, con
  * next measurement is the model's prediction phi(x0, u0) */
 static int run(const char *phase, int mode)
 {
-    double xhat0[ROBOT_ARM_NX], xnext[ROBOT_ARM_NX], u0[ROBOT_ARM_NU], kkt4[4], l, g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    robot_arm_real xhat0[ROBOT_ARM_NX], xnext[ROBOT_ARM_NX], u0[ROBOT_ARM_NU], kkt4[4], l, g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
     int i, k, status;
 
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         xhat0[i] = robot_arm_x0_default[i];
     }
     for (i = 0; i < ROBOT_ARM_NU; ++i) {
-        u0[i] = 0.0;
+        u0[i] = ROBOT_ARM_R(0.0);
     }
     robot_arm_defaults(&solver);
     status = robot_arm_set_mode(&solver, mode);

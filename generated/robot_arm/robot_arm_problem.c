@@ -4,19 +4,19 @@
 
 #include "robot_arm_problem.h"
 
-const double robot_arm_lbx[ROBOT_ARM_NX] = {-INFINITY, -INFINITY, -INFINITY, -INFINITY, -INFINITY};
-const double robot_arm_ubx[ROBOT_ARM_NX] = {INFINITY, INFINITY, INFINITY, INFINITY, INFINITY};
-const double robot_arm_lbu[ROBOT_ARM_NU] = {-10.0, -10.0, 0.0};
-const double robot_arm_ubu[ROBOT_ARM_NU] = {10.0, 10.0, 50.0};
-const double robot_arm_lg[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {0.0};
-const double robot_arm_ug[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {0.0};
-const double robot_arm_lr[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {0.0};
-const double robot_arm_ur[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {0.0};
-const double robot_arm_p_default[ROBOT_ARM_DIM(ROBOT_ARM_NP)] = {0.0};
-const double robot_arm_dt = 0.01;
-const double robot_arm_x0_default[ROBOT_ARM_NX] = {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0};
+const robot_arm_real robot_arm_lbx[ROBOT_ARM_NX] = {-INFINITY, -INFINITY, -INFINITY, -INFINITY, -INFINITY};
+const robot_arm_real robot_arm_ubx[ROBOT_ARM_NX] = {INFINITY, INFINITY, INFINITY, INFINITY, INFINITY};
+const robot_arm_real robot_arm_lbu[ROBOT_ARM_NU] = {-10.0, -10.0, 0.0};
+const robot_arm_real robot_arm_ubu[ROBOT_ARM_NU] = {10.0, 10.0, 50.0};
+const robot_arm_real robot_arm_lg[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {0.0};
+const robot_arm_real robot_arm_ug[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {0.0};
+const robot_arm_real robot_arm_lr[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {0.0};
+const robot_arm_real robot_arm_ur[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {0.0};
+const robot_arm_real robot_arm_p_default[ROBOT_ARM_DIM(ROBOT_ARM_NP)] = {0.0};
+const robot_arm_real robot_arm_dt = 0.01;
+const robot_arm_real robot_arm_x0_default[ROBOT_ARM_NX] = {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0};
 
-const double robot_arm_guess_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {
+const robot_arm_real robot_arm_guess_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {
     {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0},
     {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0},
     {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0},
@@ -59,7 +59,7 @@ const double robot_arm_guess_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {
     {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0},
     {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0}
 };
-const double robot_arm_guess_u[ROBOT_ARM_N][ROBOT_ARM_NU] = {
+const robot_arm_real robot_arm_guess_u[ROBOT_ARM_N][ROBOT_ARM_NU] = {
     {0.0, 0.0, 5.0},
     {0.0, 0.0, 5.0},
     {0.0, 0.0, 5.0},
@@ -105,12 +105,12 @@ const double robot_arm_guess_u[ROBOT_ARM_N][ROBOT_ARM_NU] = {
 const int robot_arm_default_M = 1;
 const int robot_arm_default_hessian = 0;
 const int robot_arm_default_regularization = 0;
-const double robot_arm_default_reg_eps = 0.0001;
+const robot_arm_real robot_arm_default_reg_eps = 0.0001;
 const int robot_arm_default_cost_hessian = 1;
-const double robot_arm_default_lm = -1.0;
+const robot_arm_real robot_arm_default_lm = -1.0;
 
 /* offline primal-dual solution at robot_arm_x0_default */
-const double robot_arm_nominal_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {
+const robot_arm_real robot_arm_nominal_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {
     {-0.4014418773201884, 1.5004257618081907, 0.0, -8.961942161757535e-30, -3.4188934267362985e-32},
     {-0.40085798560921476, 1.5008000708370544, 0.11676764601150239, 0.07466952035826926, 0.004107134170235137},
     {-0.3988232970655864, 1.5005753262993715, 0.28982852652154484, -0.11872313161562353, 0.011604127698972006},
@@ -153,7 +153,7 @@ const double robot_arm_nominal_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {
     {-0.8936293260599845, 2.223807807460262, -4.510245266646893, -8.263764517251857, 4.308655644047409},
     {-0.9336034663798141, 2.1304175511928634, -3.455235453127366, -10.424658916260793, 4.60623453325001}
 };
-const double robot_arm_nominal_u[ROBOT_ARM_N][ROBOT_ARM_NU] = {
+const robot_arm_real robot_arm_nominal_u[ROBOT_ARM_N][ROBOT_ARM_NU] = {
     {9.999999999992074, 1.9818427372928409, 0.41071341702351366},
     {9.999999999991608, 0.8780260321277015, 0.7496993528736869},
     {9.99999999999108, 1.130814149750695, 1.150771647447202},
@@ -195,7 +195,7 @@ const double robot_arm_nominal_u[ROBOT_ARM_N][ROBOT_ARM_NU] = {
     {9.99999999988328, -9.999999999907342, 27.84692143775928},
     {9.999999999613022, -9.999999999625679, 29.757888920260054}
 };
-const double robot_arm_nominal_lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {
+const robot_arm_real robot_arm_nominal_lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {
     {2.663439746600867, 0.5657478443946435, 0.4663327637565591, 0.09921500940216225, 0.008214268304328911},
     {2.6723628287225423, 0.4969695290133061, 0.4411891397889819, 0.09366140531970743, 0.008214268304330577},
     {2.6657239170189815, 0.4606511509562235, 0.41616899900504517, 0.08838374797799833, 0.014993987041526373},
@@ -238,7 +238,7 @@ const double robot_arm_nominal_lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {
     {0.8746295876101424, -0.3695433252237194, 0.01720101111289475, -0.005480973058647733, 0.5569384287553035},
     {1.8176195444534557, -0.460897962649632, -1.5219168018608575e-27, 0.0, 0.5951577784054021}
 };
-const double robot_arm_nominal_mu_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {
+const robot_arm_real robot_arm_nominal_mu_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {
     {0.0},
     {0.0},
     {0.0},
@@ -280,7 +280,7 @@ const double robot_arm_nominal_mu_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)] = 
     {0.0},
     {0.0}
 };
-const double robot_arm_nominal_mu_b[ROBOT_ARM_N][ROBOT_ARM_NW] = {
+const robot_arm_real robot_arm_nominal_mu_b[ROBOT_ARM_N][ROBOT_ARM_NW] = {
     {0.0, 0.0, 0.0, 0.0, 0.0, 0.016121079118204998, 5.1069614556659266e-15, -3.613969756021248e-13},
     {0.0, 0.0, 0.0, 0.0, 0.0, 0.015223869553801785, 2.2621350490744013e-15, -1.5947367029900013e-13},
     {0.0, 0.0, 0.0, 0.0, 0.0, 0.01431882125126205, 2.9113601685591456e-15, -1.0428482147679785e-13},
@@ -322,6 +322,6 @@ const double robot_arm_nominal_mu_b[ROBOT_ARM_N][ROBOT_ARM_NW] = {
     {0.0, 0.0, 0.0, 0.0, 0.0, 0.0010679530143554716, -0.0013923623449921304, 1.1787117774608298e-15},
     {0.0, 0.0, 0.0, 0.0, 0.0, 0.00032649585469405836, -0.00035319181162130807, 2.0091692977535423e-15}
 };
-const double robot_arm_nominal_mu_bN[ROBOT_ARM_NX] = {0.0, 0.0, 0.0, 0.0, 0.0};
-const double robot_arm_nominal_mu_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {0.0};
-const double robot_arm_nominal_nu[ROBOT_ARM_DIM(ROBOT_ARM_NE)] = {-3.2644972317641394, -5.164191923029214};
+const robot_arm_real robot_arm_nominal_mu_bN[ROBOT_ARM_NX] = {0.0, 0.0, 0.0, 0.0, 0.0};
+const robot_arm_real robot_arm_nominal_mu_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {0.0};
+const robot_arm_real robot_arm_nominal_nu[ROBOT_ARM_DIM(ROBOT_ARM_NE)] = {-3.2644972317641394, -5.164191923029214};

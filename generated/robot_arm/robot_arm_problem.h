@@ -10,34 +10,34 @@
 
 #include "robot_arm_sizes.h"
 
-extern const double robot_arm_lbx[ROBOT_ARM_NX], robot_arm_ubx[ROBOT_ARM_NX];
-extern const double robot_arm_lbu[ROBOT_ARM_NU], robot_arm_ubu[ROBOT_ARM_NU];
-extern const double robot_arm_lg[ROBOT_ARM_DIM(ROBOT_ARM_NG)], robot_arm_ug[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-extern const double robot_arm_lr[ROBOT_ARM_DIM(ROBOT_ARM_NR)], robot_arm_ur[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
-extern const double robot_arm_p_default[ROBOT_ARM_DIM(ROBOT_ARM_NP)]; /* every node */
-extern const double robot_arm_dt;
-extern const double robot_arm_x0_default[ROBOT_ARM_NX];
+extern const robot_arm_real robot_arm_lbx[ROBOT_ARM_NX], robot_arm_ubx[ROBOT_ARM_NX];
+extern const robot_arm_real robot_arm_lbu[ROBOT_ARM_NU], robot_arm_ubu[ROBOT_ARM_NU];
+extern const robot_arm_real robot_arm_lg[ROBOT_ARM_DIM(ROBOT_ARM_NG)], robot_arm_ug[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+extern const robot_arm_real robot_arm_lr[ROBOT_ARM_DIM(ROBOT_ARM_NR)], robot_arm_ur[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
+extern const robot_arm_real robot_arm_p_default[ROBOT_ARM_DIM(ROBOT_ARM_NP)]; /* every node */
+extern const robot_arm_real robot_arm_dt;
+extern const robot_arm_real robot_arm_x0_default[ROBOT_ARM_NX];
 /* the OCP file's initial guess */
-extern const double robot_arm_guess_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
-extern const double robot_arm_guess_u[ROBOT_ARM_N][ROBOT_ARM_NU];
+extern const robot_arm_real robot_arm_guess_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
+extern const robot_arm_real robot_arm_guess_u[ROBOT_ARM_N][ROBOT_ARM_NU];
 extern const int robot_arm_default_M;
 extern const int robot_arm_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int robot_arm_default_regularization; /* 0 none, 1 project, 2 mirror */
-extern const double robot_arm_default_reg_eps;
+extern const robot_arm_real robot_arm_default_reg_eps;
 extern const int robot_arm_default_cost_hessian; /* 1 fresh, 0 stored */
-extern const double robot_arm_default_lm;        /* Levenberg-Marquardt term, >= 0 */
+extern const robot_arm_real robot_arm_default_lm;    /* Levenberg-Marquardt term, >= 0 */
 
 #if ROBOT_ARM_HAS_NOMINAL
 /* offline primal-dual solution at robot_arm_x0_default (IPOPT at generation time), so the
  * controller starts warm (docs/design.md section 8) */
-extern const double robot_arm_nominal_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
-extern const double robot_arm_nominal_u[ROBOT_ARM_N][ROBOT_ARM_NU];
-extern const double robot_arm_nominal_lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
-extern const double robot_arm_nominal_mu_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-extern const double robot_arm_nominal_mu_b[ROBOT_ARM_N][ROBOT_ARM_NW];
-extern const double robot_arm_nominal_mu_bN[ROBOT_ARM_NX];
-extern const double robot_arm_nominal_mu_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
-extern const double robot_arm_nominal_nu[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
+extern const robot_arm_real robot_arm_nominal_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
+extern const robot_arm_real robot_arm_nominal_u[ROBOT_ARM_N][ROBOT_ARM_NU];
+extern const robot_arm_real robot_arm_nominal_lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
+extern const robot_arm_real robot_arm_nominal_mu_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+extern const robot_arm_real robot_arm_nominal_mu_b[ROBOT_ARM_N][ROBOT_ARM_NW];
+extern const robot_arm_real robot_arm_nominal_mu_bN[ROBOT_ARM_NX];
+extern const robot_arm_real robot_arm_nominal_mu_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
+extern const robot_arm_real robot_arm_nominal_nu[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
 #endif
 
 #endif /* ROBOT_ARM_PROBLEM_H */

@@ -153,7 +153,7 @@ enum robot_arm_qp_status {
 };
 
 typedef struct {
-    double tol;       /* tolerance on the scaled KKT residuals (default 1e-8) */
+    robot_arm_real tol;   /* tolerance on the scaled KKT residuals (default 1e-8) */
     int max_iter;     /* iteration limit (default 100) */
     int warm_start;   /* nonzero: start from the primal-dual point in *sol (default 0) */
     int refine_steps; /* iterative refinement steps of the corrector direction once the
@@ -163,42 +163,42 @@ typedef struct {
 
 typedef struct {
     /* stage matrices, one pointer per stage (see header comment for the shapes) */
-    const double *H[ROBOT_ARM_N];
-    const double *Phi[ROBOT_ARM_N];
-    const double *C[ROBOT_ARM_N];
-    const double *HN;
-    const double *R;
-    const double *Req;
+    const robot_arm_real *H[ROBOT_ARM_N];
+    const robot_arm_real *Phi[ROBOT_ARM_N];
+    const robot_arm_real *C[ROBOT_ARM_N];
+    const robot_arm_real *HN;
+    const robot_arm_real *R;
+    const robot_arm_real *Req;
     /* vectors */
-    double g[ROBOT_ARM_N][ROBOT_ARM_QP_NW];
-    double b[ROBOT_ARM_N][ROBOT_ARM_NX];
-    double x0[ROBOT_ARM_NX];
-    double gN[ROBOT_ARM_NX];
-    double lbw[ROBOT_ARM_N][ROBOT_ARM_QP_NW];
-    double ubw[ROBOT_ARM_N][ROBOT_ARM_QP_NW];
-    double lbxN[ROBOT_ARM_NX];
-    double ubxN[ROBOT_ARM_NX];
-    double lg[ROBOT_ARM_N][ROBOT_ARM_QP_NG1];
-    double ug[ROBOT_ARM_N][ROBOT_ARM_QP_NG1];
-    double lr[ROBOT_ARM_QP_NR1];
-    double ur[ROBOT_ARM_QP_NR1];
-    double req[ROBOT_ARM_QP_NE1];
+    robot_arm_real g[ROBOT_ARM_N][ROBOT_ARM_QP_NW];
+    robot_arm_real b[ROBOT_ARM_N][ROBOT_ARM_NX];
+    robot_arm_real x0[ROBOT_ARM_NX];
+    robot_arm_real gN[ROBOT_ARM_NX];
+    robot_arm_real lbw[ROBOT_ARM_N][ROBOT_ARM_QP_NW];
+    robot_arm_real ubw[ROBOT_ARM_N][ROBOT_ARM_QP_NW];
+    robot_arm_real lbxN[ROBOT_ARM_NX];
+    robot_arm_real ubxN[ROBOT_ARM_NX];
+    robot_arm_real lg[ROBOT_ARM_N][ROBOT_ARM_QP_NG1];
+    robot_arm_real ug[ROBOT_ARM_N][ROBOT_ARM_QP_NG1];
+    robot_arm_real lr[ROBOT_ARM_QP_NR1];
+    robot_arm_real ur[ROBOT_ARM_QP_NR1];
+    robot_arm_real req[ROBOT_ARM_QP_NE1];
     /* proximal (Levenberg-Marquardt) term: the objective uses H_k + hess_shift I and
      * HN + hess_shift I instead of H_k and HN; 0 (the value of a zero-filled struct)
      * leaves the QP as given; must be finite and >= 0 */
-    double hess_shift;
+    robot_arm_real hess_shift;
 } robot_arm_qp_in;
 
 /* Primal-dual solution (output; also the warm-start point when settings.warm_start). */
 typedef struct {
-    double x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
-    double u[ROBOT_ARM_N][ROBOT_ARM_QP_NU1];
-    double lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
-    double mu_b[ROBOT_ARM_N][ROBOT_ARM_QP_NW];
-    double mu_bN[ROBOT_ARM_NX];
-    double mu_g[ROBOT_ARM_N][ROBOT_ARM_QP_NG1];
-    double mu_r[ROBOT_ARM_QP_NR1];
-    double nu[ROBOT_ARM_QP_NE1];
+    robot_arm_real x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
+    robot_arm_real u[ROBOT_ARM_N][ROBOT_ARM_QP_NU1];
+    robot_arm_real lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
+    robot_arm_real mu_b[ROBOT_ARM_N][ROBOT_ARM_QP_NW];
+    robot_arm_real mu_bN[ROBOT_ARM_NX];
+    robot_arm_real mu_g[ROBOT_ARM_N][ROBOT_ARM_QP_NG1];
+    robot_arm_real mu_r[ROBOT_ARM_QP_NR1];
+    robot_arm_real nu[ROBOT_ARM_QP_NE1];
 } robot_arm_qp_sol;
 
 typedef struct {
@@ -208,18 +208,18 @@ typedef struct {
     int terminal_augmentations; /* factorisations retried with rho Req'Req (exact, see top) */
     int pivot_floors;           /* Riccati pivots within their round-off estimate of zero that were
                                 floored (cured by iterative refinement), summed over iterations */
-    double delta;               /* largest delta used (0 when no correction was needed) */
+    robot_arm_real delta;           /* largest delta used (0 when no correction was needed) */
     /* final residuals, infinity norms, unscaled */
-    double res_stat; /* stationarity (both equations of the header comment) */
-    double res_eq;   /* x0, dynamics and Req rows */
-    double res_ineq; /* bound / constraint violation max(0, l - v, v - u) */
-    double res_comp; /* complementarity max(slack * multiplier) over all sides */
+    robot_arm_real res_stat; /* stationarity (both equations of the header comment) */
+    robot_arm_real res_eq;   /* x0, dynamics and Req rows */
+    robot_arm_real res_ineq; /* bound / constraint violation max(0, l - v, v - u) */
+    robot_arm_real res_comp; /* complementarity max(slack * multiplier) over all sides */
     /* the same, scaled as compared with settings.tol */
-    double res_stat_scaled;
-    double res_eq_scaled;
-    double res_ineq_scaled;
-    double res_comp_scaled;
-    double obj; /* objective value at the returned point */
+    robot_arm_real res_stat_scaled;
+    robot_arm_real res_eq_scaled;
+    robot_arm_real res_ineq_scaled;
+    robot_arm_real res_comp_scaled;
+    robot_arm_real obj; /* objective value at the returned point */
 } robot_arm_qp_info;
 
 /* The whole solver memory; the user declares one (static, global or on a task stack).
@@ -235,49 +235,49 @@ typedef struct {
     robot_arm_qp_row bstart[ROBOT_ARM_N + 2];
     int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
-    double prim[ROBOT_ARM_QP_NPRIM];
-    double lam[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
-    double nu[ROBOT_ARM_QP_NE1];
-    double t_lo[ROBOT_ARM_QP_NB];
-    double t_up[ROBOT_ARM_QP_NB];
-    double z_lo[ROBOT_ARM_QP_NB];
-    double z_up[ROBOT_ARM_QP_NB];
+    robot_arm_real prim[ROBOT_ARM_QP_NPRIM];
+    robot_arm_real lam[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
+    robot_arm_real nu[ROBOT_ARM_QP_NE1];
+    robot_arm_real t_lo[ROBOT_ARM_QP_NB];
+    robot_arm_real t_up[ROBOT_ARM_QP_NB];
+    robot_arm_real z_lo[ROBOT_ARM_QP_NB];
+    robot_arm_real z_up[ROBOT_ARM_QP_NB];
     /* residuals */
-    double r_stat[ROBOT_ARM_QP_NPRIM];
-    double r_dyn[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
-    double r_eqN[ROBOT_ARM_QP_NE1];
+    robot_arm_real r_stat[ROBOT_ARM_QP_NPRIM];
+    robot_arm_real r_dyn[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
+    robot_arm_real r_eqN[ROBOT_ARM_QP_NE1];
     /* v - lo and up - v of the row values v = D w: the slack residuals and steps and the
      * barrier weights are formed from them and dv, t, z (the bounds are read from the QP
      * data where needed); the refinement of a direction also works in r_stat, r_dyn, r_eqN */
-    double vl[ROBOT_ARM_QP_NB];
-    double uv[ROBOT_ARM_QP_NB];
+    robot_arm_real vl[ROBOT_ARM_QP_NB];
+    robot_arm_real uv[ROBOT_ARM_QP_NB];
     /* Newton directions (the Newton right-hand side is formed in the direction arrays and
      * solved in place) */
-    double d_prim[ROBOT_ARM_QP_NPRIM];
-    double d_lam[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
-    double d_nu[ROBOT_ARM_QP_NE1];
-    double dv[ROBOT_ARM_QP_NB]; /* D d_prim */
-    double dz_lo[ROBOT_ARM_QP_NB];
-    double dz_up[ROBOT_ARM_QP_NB];
+    robot_arm_real d_prim[ROBOT_ARM_QP_NPRIM];
+    robot_arm_real d_lam[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];
+    robot_arm_real d_nu[ROBOT_ARM_QP_NE1];
+    robot_arm_real dv[ROBOT_ARM_QP_NB]; /* D d_prim */
+    robot_arm_real dz_lo[ROBOT_ARM_QP_NB];
+    robot_arm_real dz_up[ROBOT_ARM_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
-    double M[ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
-    double P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NXP];              /* value function Hessians, packed lower */
-    double G[ROBOT_ARM_N + 1][ROBOT_ARM_NX * ROBOT_ARM_QP_NE1];   /* value function x-nu coupling */
-    double Lu[ROBOT_ARM_N][ROBOT_ARM_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
-    double LK[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_NX];      /* Lu^{-1} M_ux */
-    double LKn[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
-    double S[ROBOT_ARM_QP_NE1 * ROBOT_ARM_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
-    double e[ROBOT_ARM_QP_NE1];
-    double work[ROBOT_ARM_QP_NWORK];
-    double delta;               /* current inertia-correction shift */
-    double rho_aug;             /* current terminal augmented-Lagrangian weight */
-    double noise[ROBOT_ARM_QP_NU1]; /* round-off estimate of M_uu pivots */
-    int pivot_floors;           /* pivots within round-off of zero, replaced (see linalg) */
-    double scale_stat;          /* residual scaling factors */
-    double scale_eq;
-    double scale_g; /* data parts of the scaling (constant during a solve) */
-    double scale_b;
-    double scale_bounds;
+    robot_arm_real M[ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
+    robot_arm_real P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NXP];              /* value function Hessians, packed lower */
+    robot_arm_real G[ROBOT_ARM_N + 1][ROBOT_ARM_NX * ROBOT_ARM_QP_NE1];   /* value function x-nu coupling */
+    robot_arm_real Lu[ROBOT_ARM_N][ROBOT_ARM_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
+    robot_arm_real LK[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_NX];      /* Lu^{-1} M_ux */
+    robot_arm_real LKn[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
+    robot_arm_real S[ROBOT_ARM_QP_NE1 * ROBOT_ARM_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
+    robot_arm_real e[ROBOT_ARM_QP_NE1];
+    robot_arm_real work[ROBOT_ARM_QP_NWORK];
+    robot_arm_real delta;               /* current inertia-correction shift */
+    robot_arm_real rho_aug;             /* current terminal augmented-Lagrangian weight */
+    robot_arm_real noise[ROBOT_ARM_QP_NU1]; /* round-off estimate of M_uu pivots */
+    int pivot_floors;               /* pivots within round-off of zero, replaced (see linalg) */
+    robot_arm_real scale_stat;          /* residual scaling factors */
+    robot_arm_real scale_eq;
+    robot_arm_real scale_g; /* data parts of the scaling (constant during a solve) */
+    robot_arm_real scale_b;
+    robot_arm_real scale_bounds;
 } robot_arm_qp_workspace;
 
 /* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */

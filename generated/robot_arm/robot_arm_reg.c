@@ -10,9 +10,9 @@
 
 #define ROBOT_ARM_REG_MAX_SWEEPS 64
 
-static double robot_arm_reg_offdiag2(int n, const double *a)
+static robot_arm_real robot_arm_reg_offdiag2(int n, const robot_arm_real *a)
 {
-    double s = 0.0;
+    robot_arm_real s = ROBOT_ARM_R(0.0);
     int i, j;
     for (j = 0; j < n; ++j) {
         for (i = 0; i < j; ++i) {
@@ -22,83 +22,84 @@ static double robot_arm_reg_offdiag2(int n, const double *a)
     return s;
 }
 
-int robot_arm_reg_jacobi_eig(int n, double *a, double *v)
+int robot_arm_reg_jacobi_eig(int n, robot_arm_real *a, robot_arm_real *v)
 {
-    double fro2 = 0.0;
+    robot_arm_real fro2 = ROBOT_ARM_R(0.0);
     int i, j, k, p, q, sweep;
 
     /* Symmetrise (the CasADi Hessians are symmetric up to round-off) and set V = I. */
     for (j = 0; j < n; ++j) {
         for (i = 0; i < j; ++i) {
-            double s = 0.5 * (a[i + j * n] + a[j + i * n]);
+            robot_arm_real s = ROBOT_ARM_R(0.5) * (a[i + j * n] + a[j + i * n]);
             a[i + j * n] = s;
             a[j + i * n] = s;
         }
         for (i = 0; i < n; ++i) {
-            v[i + j * n] = (i == j) ? 1.0 : 0.0;
+            v[i + j * n] = (i == j) ? ROBOT_ARM_R(1.0) : ROBOT_ARM_R(0.0);
             fro2 += a[i + j * n] * a[i + j * n];
         }
     }
-    if (fro2 == 0.0) {
+    if (fro2 == ROBOT_ARM_R(0.0)) {
         return 0;
     }
 
     for (sweep = 0; sweep < ROBOT_ARM_REG_MAX_SWEEPS; ++sweep) {
         /* Stop when the off-diagonal part is at round-off level of the whole matrix. */
-        if (robot_arm_reg_offdiag2(n, a) <= (DBL_EPSILON * DBL_EPSILON) * 1e-2 * fro2) {
+        if (robot_arm_reg_offdiag2(n, a) <= (ROBOT_ARM_REAL_EPSILON * ROBOT_ARM_REAL_EPSILON) * ROBOT_ARM_R(1e-2) * fro2) {
             return sweep;
         }
         for (p = 0; p < n - 1; ++p) {
             for (q = p + 1; q < n; ++q) {
-                double apq = a[p + q * n];
-                double app = a[p + p * n];
-                double aqq = a[q + q * n];
-                double tau, t, c, s;
-                if (apq == 0.0) {
+                robot_arm_real apq = a[p + q * n];
+                robot_arm_real app = a[p + p * n];
+                robot_arm_real aqq = a[q + q * n];
+                robot_arm_real tau, t, c, s;
+                if (apq == ROBOT_ARM_R(0.0)) {
                     continue;
                 }
                 /* An entry below round-off of both diagonal entries is zero for
                  * every later rotation too (Golub and Van Loan, section 8.5). */
-                if (fabs(apq) <= 0.25 * DBL_EPSILON * fabs(app) &&
-                    fabs(apq) <= 0.25 * DBL_EPSILON * fabs(aqq)) {
-                    a[p + q * n] = 0.0;
-                    a[q + p * n] = 0.0;
+                if (robot_arm_fabs(apq) <= ROBOT_ARM_R(0.25) * ROBOT_ARM_REAL_EPSILON * robot_arm_fabs(app) &&
+                    robot_arm_fabs(apq) <= ROBOT_ARM_R(0.25) * ROBOT_ARM_REAL_EPSILON * robot_arm_fabs(aqq)) {
+                    a[p + q * n] = ROBOT_ARM_R(0.0);
+                    a[q + p * n] = ROBOT_ARM_R(0.0);
                     continue;
                 }
                 /* The 2x2 symmetric Schur decomposition (Golub and Van Loan, alg. 8.5.1),
                  * the smaller rotation angle for stability. */
-                tau = (aqq - app) / (2.0 * apq);
-                t = (tau >= 0.0 ? 1.0 : -1.0) / (fabs(tau) + sqrt(1.0 + tau * tau));
-                c = 1.0 / sqrt(1.0 + t * t);
+                tau = (aqq - app) / (ROBOT_ARM_R(2.0) * apq);
+                t = (tau >= ROBOT_ARM_R(0.0) ? ROBOT_ARM_R(1.0) : -ROBOT_ARM_R(1.0)) /
+                    (robot_arm_fabs(tau) + robot_arm_sqrt(ROBOT_ARM_R(1.0) + tau * tau));
+                c = ROBOT_ARM_R(1.0) / robot_arm_sqrt(ROBOT_ARM_R(1.0) + t * t);
                 s = t * c;
                 /* A <- A J (columns p, q), then A <- J' A (rows p, q), V <- V J. */
                 for (k = 0; k < n; ++k) {
-                    double akp = a[k + p * n], akq = a[k + q * n];
+                    robot_arm_real akp = a[k + p * n], akq = a[k + q * n];
                     a[k + p * n] = c * akp - s * akq;
                     a[k + q * n] = s * akp + c * akq;
                 }
                 for (k = 0; k < n; ++k) {
-                    double apk = a[p + k * n], aqk = a[q + k * n];
+                    robot_arm_real apk = a[p + k * n], aqk = a[q + k * n];
                     a[p + k * n] = c * apk - s * aqk;
                     a[q + k * n] = s * apk + c * aqk;
                 }
-                a[p + q * n] = 0.0;
-                a[q + p * n] = 0.0;
+                a[p + q * n] = ROBOT_ARM_R(0.0);
+                a[q + p * n] = ROBOT_ARM_R(0.0);
                 for (k = 0; k < n; ++k) {
-                    double vkp = v[k + p * n], vkq = v[k + q * n];
+                    robot_arm_real vkp = v[k + p * n], vkq = v[k + q * n];
                     v[k + p * n] = c * vkp - s * vkq;
                     v[k + q * n] = s * vkp + c * vkq;
                 }
             }
         }
     }
-    return robot_arm_reg_offdiag2(n, a) <= (DBL_EPSILON * DBL_EPSILON) * fro2 ? sweep : -1;
+    return robot_arm_reg_offdiag2(n, a) <= (ROBOT_ARM_REAL_EPSILON * ROBOT_ARM_REAL_EPSILON) * fro2 ? sweep : -1;
 }
 
-int robot_arm_reg_apply(int n, double *A, int mode, double eps, double *work)
+int robot_arm_reg_apply(int n, robot_arm_real *A, int mode, robot_arm_real eps, robot_arm_real *work)
 {
-    double *a = work;
-    double *v = work + n * n;
+    robot_arm_real *a = work;
+    robot_arm_real *v = work + n * n;
     int i, j, k;
 
     if (mode != ROBOT_ARM_REG_PROJECT && mode != ROBOT_ARM_REG_MIRROR) {
@@ -112,16 +113,16 @@ int robot_arm_reg_apply(int n, double *A, int mode, double eps, double *work)
     }
     /* The regularised eigenvalues go on the diagonal of a. */
     for (k = 0; k < n; ++k) {
-        double e = a[k + k * n];
+        robot_arm_real e = a[k + k * n];
         if (mode == ROBOT_ARM_REG_MIRROR) {
-            e = fabs(e);
+            e = robot_arm_fabs(e);
         }
         a[k + k * n] = e > eps ? e : eps;
     }
     /* A = V diag(e) V', symmetric by construction. */
     for (j = 0; j < n; ++j) {
         for (i = j; i < n; ++i) {
-            double s = 0.0;
+            robot_arm_real s = ROBOT_ARM_R(0.0);
             for (k = 0; k < n; ++k) {
                 s += v[i + k * n] * a[k + k * n] * v[j + k * n];
             }

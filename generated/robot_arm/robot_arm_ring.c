@@ -4,11 +4,11 @@
 
 #include "robot_arm_ring.h"
 
-static void robot_arm_ring_zero(double *v, int n)
+static void robot_arm_ring_zero(robot_arm_real *v, int n)
 {
     int i;
     for (i = 0; i < n; ++i) {
-        v[i] = 0.0;
+        v[i] = ROBOT_ARM_R(0.0);
     }
 }
 
@@ -29,7 +29,7 @@ void robot_arm_ring_reset(robot_arm_ring *ring)
     ring->ring_head = 0;
 }
 
-void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const double *A)
+void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A)
 {
     int i, j, l = 0;
     for (j = 0; j < ROBOT_ARM_NW; ++j)
@@ -37,7 +37,7 @@ void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const double *A)
             slot->A_dyn[l++] = A[i + j * ROBOT_ARM_NW];
 }
 
-void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const double *A_l, double *A)
+void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const robot_arm_real *A_l, robot_arm_real *A)
 {
     int i, j, l = 0;
     for (j = 0; j < ROBOT_ARM_NW; ++j)
@@ -70,15 +70,15 @@ void robot_arm_ring_clear_step(robot_arm_stage_slot *slot)
     robot_arm_ring_zero(slot->dmu_b, ROBOT_ARM_NW);
 }
 
-double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w_new, const double *phi_new,
-                         const double *g_new)
+robot_arm_real robot_arm_ring_secant(const robot_arm_stage_slot *slot, const robot_arm_real *F_w_new,
+                             const robot_arm_real *phi_new, const robot_arm_real *g_new)
 {
-    double num2 = 0.0, den2 = 0.0, old2 = 0.0, new2 = 0.0;
+    robot_arm_real num2 = ROBOT_ARM_R(0.0), den2 = ROBOT_ARM_R(0.0), old2 = ROBOT_ARM_R(0.0), new2 = ROBOT_ARM_R(0.0);
     int i, j;
 
     /* stationarity rows: F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new */
     for (i = 0; i < ROBOT_ARM_NW; ++i) {
-        double hd = 0.0, pl = 0.0, cm = 0.0, v;
+        robot_arm_real hd = ROBOT_ARM_R(0.0), pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0), v;
         for (j = 0; j < ROBOT_ARM_NW; ++j)
             hd += slot->Ht[i + j * ROBOT_ARM_NW] * slot->dw[j];
         for (j = 0; j < ROBOT_ARM_NX; ++j)
@@ -90,7 +90,7 @@ double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w
     }
     /* dynamics rows: -(phi_old + Phit dw) + phi_new */
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        double pd = 0.0, v;
+        robot_arm_real pd = ROBOT_ARM_R(0.0), v;
         for (j = 0; j < ROBOT_ARM_NW; ++j)
             pd += slot->Phit[i + j * ROBOT_ARM_NX] * slot->dw[j];
         v = -(slot->phi[i] + pd) + phi_new[i];
@@ -98,7 +98,7 @@ double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w
     }
     /* path constraint rows: g_old + Ct dw - g_new */
     for (i = 0; i < ROBOT_ARM_NG; ++i) {
-        double cd = 0.0, v;
+        robot_arm_real cd = ROBOT_ARM_R(0.0), v;
         for (j = 0; j < ROBOT_ARM_NW; ++j)
             cd += slot->Ct[i + j * ROBOT_ARM_DIM(ROBOT_ARM_NG)] * slot->dw[j];
         v = slot->g[i] + cd - g_new[i];
@@ -123,22 +123,23 @@ double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w
         new2 += phi_new[i] * phi_new[i];
     for (i = 0; i < ROBOT_ARM_NG; ++i)
         new2 += g_new[i] * g_new[i];
-    if (den2 == 0.0) {
-        return 0.0;
+    if (den2 == ROBOT_ARM_R(0.0)) {
+        return ROBOT_ARM_R(0.0);
     }
     /* a residual or step whose square overflows (or a NaN from Inf - Inf in the residual):
      * the linear model of this stage says nothing, it ranks first */
-    if (!(num2 <= DBL_MAX) || !(den2 <= DBL_MAX)) {
+    if (!(num2 <= ROBOT_ARM_REAL_MAX) || !(den2 <= ROBOT_ARM_REAL_MAX)) {
         return INFINITY;
     }
     /* a residual at the round-off level of F is noise, not a secant violation */
-    if (sqrt(num2) <= ROBOT_ARM_EPS_RHO * (sqrt(old2) + sqrt(new2))) {
-        return 0.0;
+    if (robot_arm_sqrt(num2) <= ROBOT_ARM_EPS_RHO * (robot_arm_sqrt(old2) + robot_arm_sqrt(new2))) {
+        return ROBOT_ARM_R(0.0);
     }
-    return sqrt(num2) / sqrt(den2);
+    return robot_arm_sqrt(num2) / robot_arm_sqrt(den2);
 }
 
-void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const double *F_w, const double *phi, const double *g)
+void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const robot_arm_real *F_w, const robot_arm_real *phi,
+                        const robot_arm_real *g)
 {
     int i;
     for (i = 0; i < ROBOT_ARM_NW; ++i)

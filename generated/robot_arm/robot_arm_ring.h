@@ -12,22 +12,22 @@
 
 typedef struct {
     /* the blocks the QP uses (possibly outdated, A regularised), column-major */
-    double Ht[ROBOT_ARM_NW * ROBOT_ARM_NW]; /* nw x nw */
+    robot_arm_real Ht[ROBOT_ARM_NW * ROBOT_ARM_NW]; /* nw x nw */
     /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
      * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l;
      * symmetric, its lower triangle packed by columns (robot_arm_ring_store_A_dyn) */
-    double A_dyn[ROBOT_ARM_NW * (ROBOT_ARM_NW + 1) / 2];
-    double Phit[ROBOT_ARM_NX * ROBOT_ARM_NW];          /* nx x nw, [A_k B_k] */
-    double Ct[ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW)]; /* ng x nw (leading dimension ng) */
+    robot_arm_real A_dyn[ROBOT_ARM_NW * (ROBOT_ARM_NW + 1) / 2];
+    robot_arm_real Phit[ROBOT_ARM_NX * ROBOT_ARM_NW];          /* nx x nw, [A_k B_k] */
+    robot_arm_real Ct[ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW)]; /* ng x nw (leading dimension ng) */
     /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
-    double F_w[ROBOT_ARM_NW];
-    double phi[ROBOT_ARM_NX];
-    double g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    robot_arm_real F_w[ROBOT_ARM_NW];
+    robot_arm_real phi[ROBOT_ARM_NX];
+    robot_arm_real g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
     /* domega = (dw, dlam_next, dmu_g, dmu_b): the last QP step of this stage */
-    double dw[ROBOT_ARM_NW];
-    double dlam[ROBOT_ARM_NX];
-    double dmu_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-    double dmu_b[ROBOT_ARM_NW];
+    robot_arm_real dw[ROBOT_ARM_NW];
+    robot_arm_real dlam[ROBOT_ARM_NX];
+    robot_arm_real dmu_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    robot_arm_real dmu_b[ROBOT_ARM_NW];
 } robot_arm_stage_slot;
 
 typedef struct {
@@ -46,15 +46,15 @@ const robot_arm_stage_slot *robot_arm_ring_stage_const(const robot_arm_ring *rin
 void robot_arm_ring_advance(robot_arm_ring *ring);
 
 /* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
-void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const double *A);
+void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A);
 /* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
-void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const double *A_l, double *A);
+void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const robot_arm_real *A_l, robot_arm_real *A);
 
 /* Zero the step domega of a slot. */
 void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);
 
 /* Round-off floor of the secant residual (docs/algorithm.md section 4 step 2). */
-#define ROBOT_ARM_EPS_RHO 1e-12
+#define ROBOT_ARM_EPS_RHO ROBOT_ARM_PREC(1e-12, 1e-6)
 
 /* Secant criterion rho_k (eq. 16) of the slot against the fresh F_new = (F_w, phi, g):
  *   num = | [F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new ;
@@ -62,10 +62,11 @@ void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);
  *            g_old + Ct dw - g_new] |
  *   rho = num / |(dw, dlam, dmu_g, dmu_b)| (2-norms), 0 when the denominator is 0 or
  *   num <= ROBOT_ARM_EPS_RHO * (|(F_w_old, phi_old, g_old)| + |(F_w_new, phi_new, g_new)|). */
-double robot_arm_ring_secant(const robot_arm_stage_slot *slot, const double *F_w_new, const double *phi_new,
-                         const double *g_new);
+robot_arm_real robot_arm_ring_secant(const robot_arm_stage_slot *slot, const robot_arm_real *F_w_new,
+                             const robot_arm_real *phi_new, const robot_arm_real *g_new);
 
 /* Store F_new as F_old. */
-void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const double *F_w, const double *phi, const double *g);
+void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const robot_arm_real *F_w, const robot_arm_real *phi,
+                        const robot_arm_real *g);
 
 #endif /* ROBOT_ARM_RING_H */

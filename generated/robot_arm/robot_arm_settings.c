@@ -57,12 +57,12 @@ int robot_arm_get_hessian(robot_arm_solver *s)
     return s->hessian;
 }
 
-int robot_arm_set_regularization(robot_arm_solver *s, int regularization, double eps)
+int robot_arm_set_regularization(robot_arm_solver *s, int regularization, robot_arm_real eps)
 {
     robot_arm_ensure_setup(s);
     if ((regularization != ROBOT_ARM_REG_NONE && regularization != ROBOT_ARM_REG_PROJECT &&
          regularization != ROBOT_ARM_REG_MIRROR) ||
-        !isfinite(eps) || !(eps > 0.0)) {
+        !isfinite(eps) || !(eps > ROBOT_ARM_R(0.0))) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
     }
     s->regularization = regularization;
@@ -76,7 +76,7 @@ int robot_arm_get_regularization(robot_arm_solver *s)
     return s->regularization;
 }
 
-double robot_arm_get_reg_eps(robot_arm_solver *s)
+robot_arm_real robot_arm_get_reg_eps(robot_arm_solver *s)
 {
     robot_arm_ensure_setup(s);
     return s->reg_eps;
@@ -93,10 +93,10 @@ int robot_arm_get_cost_hessian(robot_arm_solver *s)
     return s->cost_hessian;
 }
 
-int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, double lm)
+int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, robot_arm_real lm)
 {
     robot_arm_ensure_setup(s);
-    if (!isfinite(lm) || !(lm >= 0.0)) {
+    if (!isfinite(lm) || !(lm >= ROBOT_ARM_R(0.0))) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
     }
     s->lm_auto = 0;
@@ -108,8 +108,8 @@ int robot_arm_set_lm_auto(robot_arm_solver *s)
 {
     robot_arm_ensure_setup(s);
     s->lm_auto = 1;
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
+    s->lm = ROBOT_ARM_R(0.0);
+    s->lm_kkt_prev = -ROBOT_ARM_R(1.0);
     if (s->initialized && s->qp_ready) {
         robot_arm_lm_start(s);
     }
@@ -122,29 +122,29 @@ int robot_arm_get_lm_auto(robot_arm_solver *s)
     return s->lm_auto;
 }
 
-double robot_arm_get_lm_scale(robot_arm_solver *s)
+robot_arm_real robot_arm_get_lm_scale(robot_arm_solver *s)
 {
     robot_arm_ensure_setup(s);
     return s->lm_scale;
 }
 
-double robot_arm_get_levenberg_marquardt(robot_arm_solver *s)
+robot_arm_real robot_arm_get_levenberg_marquardt(robot_arm_solver *s)
 {
     robot_arm_ensure_setup(s);
     return s->lm;
 }
 
-int robot_arm_set_qp_tol(robot_arm_solver *s, double tol)
+int robot_arm_set_qp_tol(robot_arm_solver *s, robot_arm_real tol)
 {
     robot_arm_ensure_setup(s);
-    if (!isfinite(tol) || !(tol > 0.0) || tol > ROBOT_ARM_QP_TOL_MAX) {
+    if (!isfinite(tol) || !(tol > ROBOT_ARM_R(0.0)) || tol > ROBOT_ARM_QP_TOL_MAX) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
     }
     s->qp_settings.tol = tol;
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
 
-double robot_arm_get_qp_tol(robot_arm_solver *s)
+robot_arm_real robot_arm_get_qp_tol(robot_arm_solver *s)
 {
     robot_arm_ensure_setup(s);
     return s->qp_settings.tol;
@@ -198,7 +198,7 @@ int robot_arm_get_qp_warm_start(robot_arm_solver *s)
     return s->qp_warm;
 }
 
-int robot_arm_set_parameters(robot_arm_solver *s, const double *p)
+int robot_arm_set_parameters(robot_arm_solver *s, const robot_arm_real *p)
 {
     int k, i;
     robot_arm_ensure_setup(s);
@@ -219,7 +219,7 @@ int robot_arm_set_parameters(robot_arm_solver *s, const double *p)
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
 
-int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const double *pk)
+int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const robot_arm_real *pk)
 {
     int i;
     robot_arm_ensure_setup(s);
@@ -241,7 +241,7 @@ int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const double *pk)
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
 
-void robot_arm_get_parameters(robot_arm_solver *s, double *p)
+void robot_arm_get_parameters(robot_arm_solver *s, robot_arm_real *p)
 {
     int k, i;
     robot_arm_ensure_setup(s);

@@ -35,10 +35,13 @@
 #define ROBOT_ARM_SZ_IW 1
 #define ROBOT_ARM_SZ_W 658
 
-/* The real-number type of the runtime (double; the precision is a generation-time choice) */
-typedef double robot_arm_real;
+/* The real-number type of the runtime, chosen at generation (options(real=...)): 1 for
+ * single precision (float), 0 for double. robot_arm_real.h defines robot_arm_real and its macros. */
+#define ROBOT_ARM_REAL_FLOAT 0
 
 /* array size of a possibly empty dimension: C99 has no zero-length arrays */
 #define ROBOT_ARM_DIM(n) ((n) > 0 ? (n) : 1)
+
+#include "robot_arm_real.h"
 
 #endif /* ROBOT_ARM_SIZES_H */

@@ -19,11 +19,11 @@
 #include "robot_arm_solver_internal.h"
 
 #define ROBOT_ARM_MAGIC 0x444f5055 /* "DOPU" */
-#define ROBOT_ARM_DEFAULT_QP_TOL 1e-10
+#define ROBOT_ARM_DEFAULT_QP_TOL ROBOT_ARM_PREC(1e-10, 1e-5)
 
 /* ---- small helpers ------------------------------------------------------------------ */
 
-static void robot_arm_copy(double *dst, const double *src, int n)
+static void robot_arm_copy(robot_arm_real *dst, const robot_arm_real *src, int n)
 {
     int i;
     for (i = 0; i < n; ++i) {
@@ -42,7 +42,7 @@ void robot_arm_clear_x0_multiplier(robot_arm_solver *s)
 {
     int i;
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->mu_b[0][i] = 0.0;
+        s->mu_b[0][i] = ROBOT_ARM_R(0.0);
     }
 }
 
@@ -112,9 +112,9 @@ const char *robot_arm_status_string(int status)
 
 /* ---- safety: scales, clipping, health (algorithm.md section 9) -------------------- */
 
-static double robot_arm_absmax(double a, double b)
+static robot_arm_real robot_arm_absmax(robot_arm_real a, robot_arm_real b)
 {
-    double fa = fabs(a);
+    robot_arm_real fa = robot_arm_fabs(a);
     return isfinite(a) && fa > b ? fa : b;
 }
 
@@ -124,7 +124,7 @@ static void robot_arm_compute_scales(robot_arm_solver *s)
 {
     int k, i;
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        double v = 1.0;
+        robot_arm_real v = ROBOT_ARM_R(1.0);
         v = robot_arm_absmax(robot_arm_lbx[i], v);
         v = robot_arm_absmax(robot_arm_ubx[i], v);
         v = robot_arm_absmax(robot_arm_x0_default[i], v);
@@ -134,7 +134,7 @@ static void robot_arm_compute_scales(robot_arm_solver *s)
         s->scale_x[i] = v;
     }
     for (i = 0; i < ROBOT_ARM_NU; ++i) {
-        double v = 1.0;
+        robot_arm_real v = ROBOT_ARM_R(1.0);
         v = robot_arm_absmax(robot_arm_lbu[i], v);
         v = robot_arm_absmax(robot_arm_ubu[i], v);
         for (k = 0; k < ROBOT_ARM_N; ++k) {
@@ -163,17 +163,17 @@ static void robot_arm_reset_health(robot_arm_solver *s)
     for (i = 0; i < ROBOT_ARM_NU; ++i) {
         s->u0_out[i] = s->plan_u[0][i];
     }
-    s->kkt_proxy = 0.0;
-    s->kkt_proxy_ref = 0.0;
+    s->kkt_proxy = ROBOT_ARM_R(0.0);
+    s->kkt_proxy_ref = ROBOT_ARM_R(0.0);
 }
 
 /* u clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1 when
  * an entry changed. */
-static int robot_arm_clip_u(const double *u, double *out)
+static int robot_arm_clip_u(const robot_arm_real *u, robot_arm_real *out)
 {
     int i, clipped = 0;
     for (i = 0; i < ROBOT_ARM_NU; ++i) {
-        double v = isnan(u[i]) ? 0.0 : u[i];
+        robot_arm_real v = isnan(u[i]) ? ROBOT_ARM_R(0.0) : u[i];
         if (v < robot_arm_lbu[i]) {
             v = robot_arm_lbu[i];
         }
@@ -191,22 +191,22 @@ static int robot_arm_clip_u(const double *u, double *out)
 /* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as the iterate
  * plus an optional step: every entry finite and |v_i| <= BOX scale_i + |xhat0_i| (states),
  * BOX scale_i (controls). Returns 1 when it passes. */
-static int robot_arm_box_ok(const robot_arm_solver *s, const double *x, const double *dx, int dx_stride,
-                        const double *u, const double *du, int du_stride)
+static int robot_arm_box_ok(const robot_arm_solver *s, const robot_arm_real *x, const robot_arm_real *dx, int dx_stride,
+                        const robot_arm_real *u, const robot_arm_real *du, int du_stride)
 {
     int k, i;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            double v = x[k * ROBOT_ARM_NX + i] + (dx ? dx[k * dx_stride + i] : 0.0);
-            if (!(fabs(v) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_x[i] + fabs(s->xhat0[i]))) {
+            robot_arm_real v = x[k * ROBOT_ARM_NX + i] + (dx ? dx[k * dx_stride + i] : ROBOT_ARM_R(0.0));
+            if (!(robot_arm_fabs(v) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_x[i] + robot_arm_fabs(s->xhat0[i]))) {
                 return 0;
             }
         }
     }
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NU; ++i) {
-            double v = u[k * ROBOT_ARM_NU + i] + (du ? du[k * du_stride + i] : 0.0);
-            if (!(fabs(v) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_u[i])) {
+            robot_arm_real v = u[k * ROBOT_ARM_NU + i] + (du ? du[k * du_stride + i] : ROBOT_ARM_R(0.0));
+            if (!(robot_arm_fabs(v) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_u[i])) {
                 return 0;
             }
         }
@@ -215,7 +215,7 @@ static int robot_arm_box_ok(const robot_arm_solver *s, const double *x, const do
 }
 
 /* The fallback control of a failed feedback: the next control of the last good plan. */
-static void robot_arm_fallback_u0(robot_arm_solver *s, double *u0)
+static void robot_arm_fallback_u0(robot_arm_solver *s, robot_arm_real *u0)
 {
     int j = s->mode == ROBOT_ARM_MODE_RECEDING ? s->plan_age : 0;
     j = j > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : j;
@@ -231,7 +231,7 @@ static void robot_arm_fallback_u0(robot_arm_solver *s, double *u0)
 /* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
 static void robot_arm_lm_feedback(robot_arm_solver *s, int status);
 
-static int robot_arm_feedback_failed(robot_arm_solver *s, double *u0, int status)
+static int robot_arm_feedback_failed(robot_arm_solver *s, robot_arm_real *u0, int status)
 {
     robot_arm_lm_feedback(s, status);
     s->n_failed += 1;
@@ -248,27 +248,27 @@ static int robot_arm_feedback_failed(robot_arm_solver *s, double *u0, int status
 /* Divergence measure at the current point from the F values in the slots and the terminal
  * node (after init or a prepare): max of |F_w,k + [lam_k; 0]|, |gL_N + mu_bN + lam_N|,
  * |phi_k - x_{k+1}|, |r_eq| (inf-norms). */
-static double robot_arm_kkt_proxy_eval(const robot_arm_solver *s)
+static robot_arm_real robot_arm_kkt_proxy_eval(const robot_arm_solver *s)
 {
-    double m = 0.0, v;
+    robot_arm_real m = ROBOT_ARM_R(0.0), v;
     int k, i;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            v = fabs(slot->F_w[i] + (i < ROBOT_ARM_NX ? s->lam[k][i] : 0.0));
+            v = robot_arm_fabs(slot->F_w[i] + (i < ROBOT_ARM_NX ? s->lam[k][i] : ROBOT_ARM_R(0.0)));
             m = (v > m || isnan(v)) ? v : m;
         }
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            v = fabs(slot->phi[i] - s->x[k + 1][i]);
+            v = robot_arm_fabs(slot->phi[i] - s->x[k + 1][i]);
             m = (v > m || isnan(v)) ? v : m;
         }
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        v = fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[ROBOT_ARM_N][i]);
+        v = robot_arm_fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[ROBOT_ARM_N][i]);
         m = (v > m || isnan(v)) ? v : m;
     }
     for (i = 0; i < ROBOT_ARM_NE; ++i) {
-        v = fabs(s->r_eq[i]);
+        v = robot_arm_fabs(s->r_eq[i]);
         m = (v > m || isnan(v)) ? v : m;
     }
     return m;
@@ -277,7 +277,7 @@ static double robot_arm_kkt_proxy_eval(const robot_arm_solver *s)
 /* The divergence test of the prepared iterate: box, finite multipliers, KKT proxy bound. */
 static int robot_arm_iterate_diverged(robot_arm_solver *s)
 {
-    double ref = s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0;
+    robot_arm_real ref = s->kkt_proxy_ref > ROBOT_ARM_R(1.0) ? s->kkt_proxy_ref : ROBOT_ARM_R(1.0);
     if (!robot_arm_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0)) {
         return 1;
     }
@@ -292,19 +292,19 @@ static int robot_arm_iterate_diverged(robot_arm_solver *s)
 /* ---- automatic Levenberg-Marquardt term (algorithm.md section 10) ------------------- */
 
 /* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
-static double robot_arm_lm_hessian_scale(const robot_arm_solver *s)
+static robot_arm_real robot_arm_lm_hessian_scale(const robot_arm_solver *s)
 {
-    double h = 1e-300, v;
+    robot_arm_real h = ROBOT_ARM_REAL_TINY, v;
     int k, i;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            v = fabs(slot->Ht[i + i * ROBOT_ARM_NW]);
+            v = robot_arm_fabs(slot->Ht[i + i * ROBOT_ARM_NW]);
             h = v > h ? v : h;
         }
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        v = fabs(s->A_N[i + i * ROBOT_ARM_NX]);
+        v = robot_arm_fabs(s->A_N[i + i * ROBOT_ARM_NX]);
         h = v > h ? v : h;
     }
     return h;
@@ -313,16 +313,16 @@ static double robot_arm_lm_hessian_scale(const robot_arm_solver *s)
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
  * out) has control pivots above ROBOT_ARM_LM_PIVOT_REL h. */
-static int robot_arm_lm_convex(robot_arm_solver *s, double lm)
+static int robot_arm_lm_convex(robot_arm_solver *s, robot_arm_real lm)
 {
-    const double tol = ROBOT_ARM_LM_PIVOT_REL * s->lm_scale;
-    double *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
-    double v;
+    const robot_arm_real tol = ROBOT_ARM_LM_PIVOT_REL * s->lm_scale;
+    robot_arm_real *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
+    robot_arm_real v;
     int k, i, j, l;
     for (j = 0; j < ROBOT_ARM_NX; ++j) {
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
             P[i + j * ROBOT_ARM_NX] =
-                (i >= j ? s->A_N[i + j * ROBOT_ARM_NX] : s->A_N[j + i * ROBOT_ARM_NX]) + (i == j ? lm : 0.0);
+                (i >= j ? s->A_N[i + j * ROBOT_ARM_NX] : s->A_N[j + i * ROBOT_ARM_NX]) + (i == j ? lm : ROBOT_ARM_R(0.0));
         }
     }
     for (k = ROBOT_ARM_N - 1; k >= 0; --k) {
@@ -330,7 +330,7 @@ static int robot_arm_lm_convex(robot_arm_solver *s, double lm)
         /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
         for (j = 0; j < ROBOT_ARM_NW; ++j) {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                v = 0.0;
+                v = ROBOT_ARM_R(0.0);
                 for (l = 0; l < ROBOT_ARM_NX; ++l) {
                     v += P[i + l * ROBOT_ARM_NX] * slot->Phit[l + j * ROBOT_ARM_NX];
                 }
@@ -339,7 +339,8 @@ static int robot_arm_lm_convex(robot_arm_solver *s, double lm)
         }
         for (j = 0; j < ROBOT_ARM_NW; ++j) {
             for (i = 0; i < ROBOT_ARM_NW; ++i) {
-                v = (i >= j ? slot->Ht[i + j * ROBOT_ARM_NW] : slot->Ht[j + i * ROBOT_ARM_NW]) + (i == j ? lm : 0.0);
+                v = (i >= j ? slot->Ht[i + j * ROBOT_ARM_NW] : slot->Ht[j + i * ROBOT_ARM_NW]) +
+                    (i == j ? lm : ROBOT_ARM_R(0.0));
                 for (l = 0; l < ROBOT_ARM_NX; ++l) {
                     v += slot->Phit[l + i * ROBOT_ARM_NX] * PA[l + j * ROBOT_ARM_NX];
                 }
@@ -348,14 +349,14 @@ static int robot_arm_lm_convex(robot_arm_solver *s, double lm)
         }
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = ROBOT_ARM_NX; j < ROBOT_ARM_NW; ++j) {
-            double d = Z[j + j * ROBOT_ARM_NW];
+            robot_arm_real d = Z[j + j * ROBOT_ARM_NW];
             for (l = ROBOT_ARM_NX; l < j; ++l) {
                 d -= Z[j + l * ROBOT_ARM_NW] * Z[j + l * ROBOT_ARM_NW];
             }
             if (!(d > tol)) {
                 return 0;
             }
-            d = sqrt(d);
+            d = robot_arm_sqrt(d);
             Z[j + j * ROBOT_ARM_NW] = d;
             for (i = j + 1; i < ROBOT_ARM_NW; ++i) {
                 v = Z[i + j * ROBOT_ARM_NW];
@@ -380,7 +381,7 @@ static int robot_arm_lm_convex(robot_arm_solver *s, double lm)
         }
         for (j = 0; j < ROBOT_ARM_NX; ++j) {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                v = 0.5 * (Z[i + j * ROBOT_ARM_NW] + Z[j + i * ROBOT_ARM_NW]);
+                v = ROBOT_ARM_R(0.5) * (Z[i + j * ROBOT_ARM_NW] + Z[j + i * ROBOT_ARM_NW]);
                 for (l = ROBOT_ARM_NX; l < ROBOT_ARM_NW; ++l) {
                     v -= Z[l + i * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
                 }
@@ -395,11 +396,11 @@ static int robot_arm_lm_convex(robot_arm_solver *s, double lm)
  * maximum. */
 static void robot_arm_lm_raise(robot_arm_solver *s)
 {
-    double lo = ROBOT_ARM_LM_MIN_REL * s->lm_scale, hi = ROBOT_ARM_LM_MAX_REL * s->lm_scale;
+    robot_arm_real lo = ROBOT_ARM_LM_MIN_REL * s->lm_scale, hi = ROBOT_ARM_LM_MAX_REL * s->lm_scale;
     if (s->lm_uncapped > s->lm) {
         /* the first raise after the cap of robot_arm_lm_measured restores the term it capped */
         s->lm = s->lm_uncapped;
-        s->lm_uncapped = -1.0;
+        s->lm_uncapped = -ROBOT_ARM_R(1.0);
         return;
     }
     s->lm = s->lm < lo ? lo : s->lm * ROBOT_ARM_LM_RAISE;
@@ -409,7 +410,7 @@ static void robot_arm_lm_raise(robot_arm_solver *s)
 /* Raise until the QP is convex on the dynamics or the term is at its maximum. */
 static void robot_arm_lm_convexify(robot_arm_solver *s)
 {
-    double hi = ROBOT_ARM_LM_MAX_REL * s->lm_scale;
+    robot_arm_real hi = ROBOT_ARM_LM_MAX_REL * s->lm_scale;
     while (!robot_arm_lm_convex(s, s->lm) && s->lm < hi) {
         robot_arm_lm_raise(s);
     }
@@ -422,9 +423,9 @@ void robot_arm_lm_start(robot_arm_solver *s)
         return;
     }
     s->lm_scale = robot_arm_lm_hessian_scale(s);
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
-    s->lm_uncapped = -1.0;
+    s->lm = ROBOT_ARM_R(0.0);
+    s->lm_kkt_prev = -ROBOT_ARM_R(1.0);
+    s->lm_uncapped = -ROBOT_ARM_R(1.0);
     robot_arm_lm_convexify(s);
 }
 
@@ -432,14 +433,15 @@ void robot_arm_lm_start(robot_arm_solver *s)
  * grew ROBOT_ARM_LM_KKT_GROWTH times, then convex. */
 static void robot_arm_lm_prepared(robot_arm_solver *s)
 {
-    double floor_ = 1e-8 * (s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0);
-    double prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
+    robot_arm_real floor_ =
+        ROBOT_ARM_PREC(1e-8, 1e-5) * (s->kkt_proxy_ref > ROBOT_ARM_R(1.0) ? s->kkt_proxy_ref : ROBOT_ARM_R(1.0));
+    robot_arm_real prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
     if (!s->lm_auto) {
         return;
     }
     s->lm_scale = robot_arm_lm_hessian_scale(s);
-    s->lm_uncapped = -1.0;
-    if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= ROBOT_ARM_LM_KKT_GROWTH * prev)) {
+    s->lm_uncapped = -ROBOT_ARM_R(1.0);
+    if (s->lm_kkt_prev >= ROBOT_ARM_R(0.0) && !(s->kkt_proxy <= ROBOT_ARM_LM_KKT_GROWTH * prev)) {
         robot_arm_lm_raise(s);
     }
     s->lm_kkt_prev = s->kkt_proxy;
@@ -451,20 +453,20 @@ static void robot_arm_lm_prepared(robot_arm_solver *s)
  * ROBOT_ARM_LM_MIN_REL h), so that it vanishes where the iterate converges. */
 static void robot_arm_lm_measured(robot_arm_solver *s)
 {
-    double d = s->kkt_proxy, cap, v;
+    robot_arm_real d = s->kkt_proxy, cap, v;
     int i;
-    s->lm_uncapped = -1.0;
+    s->lm_uncapped = -ROBOT_ARM_R(1.0);
     if (!s->lm_auto) {
         return;
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        v = fabs(s->qp_in.x0[i]) / s->scale_x[i];
+        v = robot_arm_fabs(s->qp_in.x0[i]) / s->scale_x[i];
         d = v > d ? v : d;
     }
     cap = ROBOT_ARM_LM_KKT_REL * s->lm_scale * d * d;
     if (!(s->lm <= cap)) {
         s->lm_uncapped = s->lm;
-        s->lm = cap < ROBOT_ARM_LM_MIN_REL * s->lm_scale ? 0.0 : cap;
+        s->lm = cap < ROBOT_ARM_LM_MIN_REL * s->lm_scale ? ROBOT_ARM_R(0.0) : cap;
     }
 }
 
@@ -477,7 +479,7 @@ static void robot_arm_lm_feedback(robot_arm_solver *s, int status)
     if (status == ROBOT_ARM_OK) {
         s->lm *= ROBOT_ARM_LM_LOWER;
         if (s->lm < ROBOT_ARM_LM_MIN_REL * s->lm_scale) {
-            s->lm = 0.0;
+            s->lm = ROBOT_ARM_R(0.0);
         }
     } else if (status == ROBOT_ARM_ERR_QP || status == ROBOT_ARM_ERR_DIVERGED) {
         robot_arm_lm_raise(s);
@@ -502,11 +504,12 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->reg_eps = robot_arm_default_reg_eps;
     s->cost_hessian = robot_arm_default_cost_hessian ? 1 : 0;
     /* a negative generated default: the automatic term (algorithm.md section 10) */
-    s->lm_auto = !(robot_arm_default_lm >= 0.0);
-    s->lm = (robot_arm_default_lm >= 0.0 && robot_arm_default_lm < INFINITY) ? robot_arm_default_lm : 0.0;
-    s->lm_scale = 1.0;
-    s->lm_kkt_prev = -1.0;
-    s->lm_uncapped = -1.0;
+    s->lm_auto = !(robot_arm_default_lm >= ROBOT_ARM_R(0.0));
+    s->lm =
+        (robot_arm_default_lm >= ROBOT_ARM_R(0.0) && robot_arm_default_lm < INFINITY) ? robot_arm_default_lm : ROBOT_ARM_R(0.0);
+    s->lm_scale = ROBOT_ARM_R(1.0);
+    s->lm_kkt_prev = -ROBOT_ARM_R(1.0);
+    s->lm_uncapped = -ROBOT_ARM_R(1.0);
     robot_arm_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = ROBOT_ARM_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -523,7 +526,7 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->qp_status = 0;
     s->qp_iterations = 0;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        s->rho[k] = 0.0;
+        s->rho[k] = ROBOT_ARM_R(0.0);
     }
     s->recovery = 1;
     s->recovery_failures = ROBOT_ARM_RECOVERY_FAILURES;
@@ -540,7 +543,7 @@ void robot_arm_defaults(robot_arm_solver *s)
 /* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
 static int robot_arm_stage_F(robot_arm_solver *s, int k)
 {
-    double l = 0.0;
+    robot_arm_real l = ROBOT_ARM_R(0.0);
     int i;
     if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
@@ -558,7 +561,7 @@ static int robot_arm_stage_F(robot_arm_solver *s, int k)
 }
 
 /* Regularise a fresh A block (algorithm.md section 5), timed as its own phase. */
-static int robot_arm_regularize(robot_arm_solver *s, int n, double *A)
+static int robot_arm_regularize(robot_arm_solver *s, int n, robot_arm_real *A)
 {
     double t0;
     int rc;
@@ -623,7 +626,7 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
     return ROBOT_ARM_OK;
 }
 
-int robot_arm_term_grad_checked(robot_arm_solver *s, double *gL, double *E, double *r, double *r_eq)
+int robot_arm_term_grad_checked(robot_arm_solver *s, robot_arm_real *gL, robot_arm_real *E, robot_arm_real *r, robot_arm_real *r_eq)
 {
     if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gL, E, r, r_eq,
                              &s->mem.ev.fun_work) != 0) {
@@ -639,7 +642,7 @@ int robot_arm_term_grad_checked(robot_arm_solver *s, double *gL, double *E, doub
 /* Terminal F: gL_N, E, r, r_eq at the current point. */
 static int robot_arm_term_F(robot_arm_solver *s)
 {
-    double gL[ROBOT_ARM_NX], E = 0.0, r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
+    robot_arm_real gL[ROBOT_ARM_NX], E = ROBOT_ARM_R(0.0), r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
     int rc = robot_arm_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != ROBOT_ARM_OK) {
         return rc;
@@ -654,7 +657,7 @@ static int robot_arm_term_F(robot_arm_solver *s)
 /* Terminal H: A_N (regularised), R, R_eq. */
 static int robot_arm_term_H(robot_arm_solver *s)
 {
-    double R[ROBOT_ARM_DIM(ROBOT_ARM_NR) * ROBOT_ARM_NX], R_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE) * ROBOT_ARM_NX];
+    robot_arm_real R[ROBOT_ARM_DIM(ROBOT_ARM_NR) * ROBOT_ARM_NX], R_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE) * ROBOT_ARM_NX];
     double t0 = robot_arm_timer_now(&s->timer);
     int rc;
     rc = robot_arm_eval_term_hess(s->hessian, s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
@@ -693,7 +696,7 @@ static void robot_arm_assemble(robot_arm_solver *s)
         in->C[k] = ROBOT_ARM_NG > 0 ? slot->Ct : 0;
         /* a_k = F_w,k + Phit_k' lam_{k+1} - Ct_k' mu_g_k - mu_b_k (eq. 12) */
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            double pl = 0.0, cm = 0.0;
+            robot_arm_real pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0);
             for (j = 0; j < ROBOT_ARM_NX; ++j) {
                 pl += slot->Phit[j + i * ROBOT_ARM_NX] * s->lam[k + 1][j];
             }
@@ -724,7 +727,7 @@ static void robot_arm_assemble(robot_arm_solver *s)
     in->Req = ROBOT_ARM_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        double rm = 0.0, en = 0.0;
+        robot_arm_real rm = ROBOT_ARM_R(0.0), en = ROBOT_ARM_R(0.0);
         for (j = 0; j < ROBOT_ARM_NR; ++j) {
             rm += s->R[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NR)] * s->mu_r[j];
         }
@@ -751,7 +754,7 @@ static void robot_arm_clear_timings(robot_arm_solver *s, int first, int last)
 {
     int i;
     for (i = first; i <= last; ++i) {
-        s->timer.t[i] = 0.0;
+        s->timer.t[i] = ROBOT_ARM_R(0.0);
     }
 }
 
@@ -790,7 +793,7 @@ static int robot_arm_init_finish(robot_arm_solver *s)
     int k, rc;
     robot_arm_ring_reset(&s->ring);
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        s->rho[k] = 0.0;
+        s->rho[k] = ROBOT_ARM_R(0.0);
         s->recomputed[k] = k;
         s->selected[k] = 0;
     }
@@ -811,9 +814,9 @@ static int robot_arm_init_finish(robot_arm_solver *s)
     return ROBOT_ARM_OK;
 }
 
-int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
-               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
-               const double *nu)
+int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot_arm_real *x, const robot_arm_real *u,
+               const robot_arm_real *lam, const robot_arm_real *mu_g, const robot_arm_real *mu_b, const robot_arm_real *mu_bN,
+               const robot_arm_real *mu_r, const robot_arm_real *nu)
 {
     int k, i, rc;
 
@@ -839,7 +842,7 @@ int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, co
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
             s->x[k][i] = x ? x[k * ROBOT_ARM_NX + i] : robot_arm_guess_x[k][i];
-            s->lam[k][i] = lam ? lam[k * ROBOT_ARM_NX + i] : 0.0;
+            s->lam[k][i] = lam ? lam[k * ROBOT_ARM_NX + i] : ROBOT_ARM_R(0.0);
         }
     }
     for (k = 0; k < ROBOT_ARM_N; ++k) {
@@ -847,21 +850,21 @@ int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, co
             s->u[k][i] = u ? u[k * ROBOT_ARM_NU + i] : robot_arm_guess_u[k][i];
         }
         for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG); ++i) {
-            s->mu_g[k][i] = (mu_g && i < ROBOT_ARM_NG) ? mu_g[k * ROBOT_ARM_NG + i] : 0.0;
+            s->mu_g[k][i] = (mu_g && i < ROBOT_ARM_NG) ? mu_g[k * ROBOT_ARM_NG + i] : ROBOT_ARM_R(0.0);
         }
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            s->mu_b[k][i] = mu_b ? mu_b[k * ROBOT_ARM_NW + i] : 0.0;
+            s->mu_b[k][i] = mu_b ? mu_b[k * ROBOT_ARM_NW + i] : ROBOT_ARM_R(0.0);
         }
     }
     robot_arm_clear_x0_multiplier(s);
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
+        s->mu_bN[i] = mu_bN ? mu_bN[i] : ROBOT_ARM_R(0.0);
     }
     for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NR); ++i) {
-        s->mu_r[i] = (mu_r && i < ROBOT_ARM_NR) ? mu_r[i] : 0.0;
+        s->mu_r[i] = (mu_r && i < ROBOT_ARM_NR) ? mu_r[i] : ROBOT_ARM_R(0.0);
     }
     for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NE); ++i) {
-        s->nu[i] = (nu && i < ROBOT_ARM_NE) ? nu[i] : 0.0;
+        s->nu[i] = (nu && i < ROBOT_ARM_NE) ? nu[i] : ROBOT_ARM_R(0.0);
     }
 
     rc = robot_arm_init_finish(s);
@@ -874,7 +877,7 @@ int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, co
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
 
-int robot_arm_init_nominal(robot_arm_solver *s, const double *xhat0)
+int robot_arm_init_nominal(robot_arm_solver *s, const robot_arm_real *xhat0)
 {
 #if ROBOT_ARM_HAS_NOMINAL
     return robot_arm_init(s, xhat0, &robot_arm_nominal_x[0][0], &robot_arm_nominal_u[0][0], &robot_arm_nominal_lam[0][0],
@@ -911,36 +914,36 @@ static void robot_arm_qp_warm_point(robot_arm_solver *s)
     int k, i;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : 0.0;
+            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : ROBOT_ARM_R(0.0);
             w->lam[k][i] = s->lam[k][i];
         }
     }
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_QP_NU1; ++i) {
-            w->u[k][i] = 0.0;
+            w->u[k][i] = ROBOT_ARM_R(0.0);
         }
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
             w->mu_b[k][i] = s->mu_b[k][i];
         }
         for (i = 0; i < ROBOT_ARM_QP_NG1; ++i) {
-            w->mu_g[k][i] = i < ROBOT_ARM_NG ? s->mu_g[k][i] : 0.0;
+            w->mu_g[k][i] = i < ROBOT_ARM_NG ? s->mu_g[k][i] : ROBOT_ARM_R(0.0);
         }
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         w->mu_bN[i] = s->mu_bN[i];
     }
     for (i = 0; i < ROBOT_ARM_QP_NR1; ++i) {
-        w->mu_r[i] = i < ROBOT_ARM_NR ? s->mu_r[i] : 0.0;
+        w->mu_r[i] = i < ROBOT_ARM_NR ? s->mu_r[i] : ROBOT_ARM_R(0.0);
     }
     for (i = 0; i < ROBOT_ARM_QP_NE1; ++i) {
-        w->nu[i] = i < ROBOT_ARM_NE ? s->nu[i] : 0.0;
+        w->nu[i] = i < ROBOT_ARM_NE ? s->nu[i] : ROBOT_ARM_R(0.0);
     }
 }
 
 /* Feedback step 1: the call is refused before the QP when the solver is not initialised,
  * the measurement is not finite or no QP is prepared (the fallback control is returned).
  * Returns ROBOT_ARM_OK when the QP is to be solved, else the status of the failed call. */
-static int robot_arm_feedback_admit(robot_arm_solver *s, const double *xhat0, double *u0)
+static int robot_arm_feedback_admit(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
     if (!s->initialized) {
         robot_arm_fallback_u0(s, u0);
@@ -963,7 +966,7 @@ static int robot_arm_feedback_admit(robot_arm_solver *s, const double *xhat0, do
 }
 
 /* Step 2: the measurement enters the QP as the fixed step of x_0. */
-static void robot_arm_feedback_measure(robot_arm_solver *s, const double *xhat0)
+static void robot_arm_feedback_measure(robot_arm_solver *s, const robot_arm_real *xhat0)
 {
     int i;
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -1107,7 +1110,7 @@ static void robot_arm_take_step(robot_arm_solver *s)
 
 /* Step 8: a good plan, the fallback of the next failures; the automatic term lowered unless
  * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
-static void robot_arm_keep_plan(robot_arm_solver *s, double *u0, int lowered)
+static void robot_arm_keep_plan(robot_arm_solver *s, robot_arm_real *u0, int lowered)
 {
     s->n_failed = 0;
     s->plan_age = 0;
@@ -1126,7 +1129,7 @@ static void robot_arm_keep_plan(robot_arm_solver *s, double *u0, int lowered)
 
 static int robot_arm_feedback_recover(robot_arm_solver *s, int *retries);
 
-int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
+int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
     double t0;
     int rc, qs, retries;
@@ -1137,7 +1140,7 @@ int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0)
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
-    s->timer.t[ROBOT_ARM_PHASE_FEEDBACK] = 0.0;
+    s->timer.t[ROBOT_ARM_PHASE_FEEDBACK] = ROBOT_ARM_R(0.0);
     t0 = robot_arm_timer_now(&s->timer);
     robot_arm_feedback_measure(s, xhat0);
     qs = robot_arm_feedback_qp(s);
@@ -1228,7 +1231,7 @@ static void robot_arm_select(robot_arm_solver *s, int M)
  * when every node is finite and inside the box. */
 static int robot_arm_simulate(robot_arm_solver *s, int use_plan)
 {
-    double l = 0.0;
+    robot_arm_real l = ROBOT_ARM_R(0.0);
     int k, j;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         j = s->plan_age + k > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->plan_age + k;
@@ -1280,7 +1283,7 @@ static int robot_arm_reinit(robot_arm_solver *s)
  * the predicted state phi(xhat0, u0) (robot_arm_reinit). */
 static int robot_arm_recover(robot_arm_solver *s, int shifted)
 {
-    double l = 0.0;
+    robot_arm_real l = ROBOT_ARM_R(0.0);
     int i;
     /* x_0: the state predicted for this instant from the last measurement and control; when
      * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
@@ -1294,7 +1297,7 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
         robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        if (!(fabs(s->x[0][i]) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_x[i] + fabs(s->xhat0[i]))) {
+        if (!(robot_arm_fabs(s->x[0][i]) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_x[i] + robot_arm_fabs(s->xhat0[i]))) {
             robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
             break;
         }
@@ -1303,7 +1306,7 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
 }
 
 /* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
- * failed after a failed instant; re-initialise from the measured state (x_0 = xhat0) and
+ * failed (not by its iteration limit) or diverged; re-initialise from the measured state (x_0 = xhat0) and
  * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns the QP
  * status (ROBOT_ARM_QP_INVALID_INPUT when the re-initialisation failed). */
 static int robot_arm_feedback_recover(robot_arm_solver *s, int *retries)
@@ -1321,7 +1324,7 @@ static int robot_arm_feedback_recover(robot_arm_solver *s, int *retries)
     s->prepare_due = 1;
     s->shifted = 0;
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->qp_in.x0[i] = 0.0;
+        s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
     qs = robot_arm_qp_attempt(s, 0);
@@ -1336,7 +1339,7 @@ static void robot_arm_predicted_step(robot_arm_solver *s)
 {
     int i, qs;
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->qp_in.x0[i] = 0.0;
+        s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
@@ -1401,7 +1404,7 @@ int robot_arm_prepare(robot_arm_solver *s)
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
 static int robot_arm_prepare_iteration(robot_arm_solver *s)
 {
-    double xN_saved[ROBOT_ARM_NX];
+    robot_arm_real xN_saved[ROBOT_ARM_NX];
     double t0;
     int k, rc, M;
 
@@ -1441,7 +1444,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
     }
     robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, ROBOT_ARM_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
-    s->rho[ROBOT_ARM_N - 1] = 0.0;
+    s->rho[ROBOT_ARM_N - 1] = ROBOT_ARM_R(0.0);
     rc = robot_arm_stage_H(s, ROBOT_ARM_N - 1);
     if (rc == ROBOT_ARM_OK) {
         t0 = robot_arm_timer_now(&s->timer);
@@ -1514,9 +1517,9 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
 
 /* ---- KKT ---------------------------------------------------------------------------- */
 
-int robot_arm_kkt_eval(robot_arm_solver *s, const double *xhat0, double *kkt4)
+int robot_arm_kkt_eval(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *kkt4)
 {
-    double parts[4];
+    robot_arm_real parts[4];
     double t0;
     int i, rc;
 
@@ -1527,7 +1530,7 @@ int robot_arm_kkt_eval(robot_arm_solver *s, const double *xhat0, double *kkt4)
     if (xhat0 && !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
-    s->timer.t[ROBOT_ARM_PHASE_KKT] = 0.0;
+    s->timer.t[ROBOT_ARM_PHASE_KKT] = ROBOT_ARM_R(0.0);
     t0 = robot_arm_timer_now(&s->timer);
     rc = robot_arm_kkt_measure(s, xhat0 ? xhat0 : s->xhat0, parts);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_KKT, t0);
@@ -1543,9 +1546,9 @@ int robot_arm_kkt_eval(robot_arm_solver *s, const double *xhat0, double *kkt4)
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
 
-double robot_arm_get_kkt(const robot_arm_solver *s)
+robot_arm_real robot_arm_get_kkt(const robot_arm_solver *s)
 {
-    double m = s->kkt[0];
+    robot_arm_real m = s->kkt[0];
     int i;
     for (i = 1; i < 4; ++i) {
         m = s->kkt[i] > m ? s->kkt[i] : m;
@@ -1555,22 +1558,22 @@ double robot_arm_get_kkt(const robot_arm_solver *s)
 
 /* ---- getters ------------------------------------------------------------------------ */
 
-void robot_arm_get_x(const robot_arm_solver *s, double *x)
+void robot_arm_get_x(const robot_arm_solver *s, robot_arm_real *x)
 {
     robot_arm_copy(x, &s->x[0][0], (ROBOT_ARM_N + 1) * ROBOT_ARM_NX);
 }
 
-void robot_arm_get_u(const robot_arm_solver *s, double *u)
+void robot_arm_get_u(const robot_arm_solver *s, robot_arm_real *u)
 {
     robot_arm_copy(u, &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
 }
 
-void robot_arm_get_lam(const robot_arm_solver *s, double *lam)
+void robot_arm_get_lam(const robot_arm_solver *s, robot_arm_real *lam)
 {
     robot_arm_copy(lam, &s->lam[0][0], (ROBOT_ARM_N + 1) * ROBOT_ARM_NX);
 }
 
-void robot_arm_get_mu_g(const robot_arm_solver *s, double *mu_g)
+void robot_arm_get_mu_g(const robot_arm_solver *s, robot_arm_real *mu_g)
 {
     int k, i;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
@@ -1580,27 +1583,27 @@ void robot_arm_get_mu_g(const robot_arm_solver *s, double *mu_g)
     }
 }
 
-void robot_arm_get_mu_b(const robot_arm_solver *s, double *mu_b)
+void robot_arm_get_mu_b(const robot_arm_solver *s, robot_arm_real *mu_b)
 {
     robot_arm_copy(mu_b, &s->mu_b[0][0], ROBOT_ARM_N * ROBOT_ARM_NW);
 }
 
-void robot_arm_get_mu_bN(const robot_arm_solver *s, double *mu_bN)
+void robot_arm_get_mu_bN(const robot_arm_solver *s, robot_arm_real *mu_bN)
 {
     robot_arm_copy(mu_bN, s->mu_bN, ROBOT_ARM_NX);
 }
 
-void robot_arm_get_mu_r(const robot_arm_solver *s, double *mu_r)
+void robot_arm_get_mu_r(const robot_arm_solver *s, robot_arm_real *mu_r)
 {
     robot_arm_copy(mu_r, s->mu_r, ROBOT_ARM_NR);
 }
 
-void robot_arm_get_nu(const robot_arm_solver *s, double *nu)
+void robot_arm_get_nu(const robot_arm_solver *s, robot_arm_real *nu)
 {
     robot_arm_copy(nu, s->nu, ROBOT_ARM_NE);
 }
 
-void robot_arm_get_rho(const robot_arm_solver *s, double *rho)
+void robot_arm_get_rho(const robot_arm_solver *s, robot_arm_real *rho)
 {
     robot_arm_copy(rho, s->rho, ROBOT_ARM_N);
 }
@@ -1625,7 +1628,7 @@ int robot_arm_get_qp_status(const robot_arm_solver *s)
 }
 
 /* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
-static double robot_arm_side_bound(const double *lo, const double *up, int i, int side)
+static robot_arm_real robot_arm_side_bound(const robot_arm_real *lo, const robot_arm_real *up, int i, int side)
 {
     return side > 0 ? up[i] : lo[i];
 }
@@ -1658,7 +1661,7 @@ int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_inf
     } else {
         row->kind = ROBOT_ARM_ROW_TERMINAL_EQ;
         row->index = j - ROBOT_ARM_NX - ROBOT_ARM_NR;
-        row->bound = 0.0;
+        row->bound = ROBOT_ARM_R(0.0);
     }
     return 1;
 }
@@ -1668,7 +1671,7 @@ int robot_arm_get_flags(const robot_arm_solver *s)
     return s->flags;
 }
 
-void robot_arm_get_u0(const robot_arm_solver *s, double *u0)
+void robot_arm_get_u0(const robot_arm_solver *s, robot_arm_real *u0)
 {
     robot_arm_copy(u0, s->u0_out, ROBOT_ARM_NU);
 }
@@ -1683,12 +1686,12 @@ int robot_arm_get_failed_feedbacks(const robot_arm_solver *s)
     return s->n_failed;
 }
 
-double robot_arm_get_kkt_proxy(const robot_arm_solver *s)
+robot_arm_real robot_arm_get_kkt_proxy(const robot_arm_solver *s)
 {
     return s->kkt_proxy;
 }
 
-void robot_arm_get_scales(const robot_arm_solver *s, double *scale_x, double *scale_u)
+void robot_arm_get_scales(const robot_arm_solver *s, robot_arm_real *scale_x, robot_arm_real *scale_u)
 {
     if (scale_x) {
         robot_arm_copy(scale_x, s->scale_x, ROBOT_ARM_NX);
@@ -1720,5 +1723,8 @@ int robot_arm_get_ring_head(const robot_arm_solver *s)
 
 void robot_arm_get_timings(const robot_arm_solver *s, double *t)
 {
-    robot_arm_copy(t, s->timer.t, ROBOT_ARM_N_PHASES);
+    int i;
+    for (i = 0; i < ROBOT_ARM_N_PHASES; ++i) { /* times are double in both precisions */
+        t[i] = s->timer.t[i];
+    }
 }

@@ -29,6 +29,8 @@
 #ifndef ROBOT_ARM_SOLVER_H
 #define ROBOT_ARM_SOLVER_H
 
+#include "robot_arm_real.h"
+
 #include <stddef.h>
 
 /* ROBOT_ARM_CDEF_BEGIN */
@@ -56,17 +58,17 @@ const char *robot_arm_status_string(int status);
  * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
  * rho = 0. xhat0 is checked and kept for robot_arm_kkt_eval (may be NULL: the default x0).
  * A failed init leaves the solver uninitialised (NaN/Inf input: the iterate untouched). */
-int robot_arm_init(robot_arm_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
-               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
-               const double *nu);
+int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot_arm_real *x, const robot_arm_real *u,
+               const robot_arm_real *lam, const robot_arm_real *mu_g, const robot_arm_real *mu_b, const robot_arm_real *mu_bN,
+               const robot_arm_real *mu_r, const robot_arm_real *nu);
 /* Initialisation from the generated nominal primal-dual guess (the offline NLP solution at
  * the default x0); ROBOT_ARM_ERR_NO_NOMINAL when the solver was generated without one. */
-int robot_arm_init_nominal(robot_arm_solver *s, const double *xhat0);
+int robot_arm_init_nominal(robot_arm_solver *s, const robot_arm_real *xhat0);
 
 /* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
  * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: ROBOT_ARM_ERR_NONFINITE_INPUT,
  * nothing changes. QP failure: ROBOT_ARM_ERR_QP, no step (robot_arm_get_qp_status tells why). */
-int robot_arm_feedback(robot_arm_solver *s, const double *xhat0, double *u0);
+int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
  * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
  * stage-cost Hessian of the other stages (robot_arm_set_cost_hessian), assemble the QP. Must
@@ -86,9 +88,9 @@ int robot_arm_prepare(robot_arm_solver *s);
  * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed.
  * The parts are >= 0 and never NaN; a part is +Inf when it overflows (an iterate or
  * multipliers near DBL_MAX, e.g. from an init guess: |mu| * |ub - v| > DBL_MAX). */
-int robot_arm_kkt_eval(robot_arm_solver *s, const double *xhat0, double *kkt4);
+int robot_arm_kkt_eval(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *kkt4);
 /* The largest of the four parts of the last robot_arm_kkt_eval (NaN before the first). */
-double robot_arm_get_kkt(const robot_arm_solver *s);
+robot_arm_real robot_arm_get_kkt(const robot_arm_solver *s);
 
 /* Settings. M: stages re-linearised per iteration besides stage N-1, 0 <= M <= N-1
  * (N-1 is the full RTI). mode: ROBOT_ARM_MODE_RECEDING or ROBOT_ARM_MODE_FIXED. hessian:
@@ -101,9 +103,9 @@ int robot_arm_set_mode(robot_arm_solver *s, int mode);
 int robot_arm_get_mode(robot_arm_solver *s);
 int robot_arm_set_hessian(robot_arm_solver *s, int hessian);
 int robot_arm_get_hessian(robot_arm_solver *s);
-int robot_arm_set_regularization(robot_arm_solver *s, int regularization, double eps);
+int robot_arm_set_regularization(robot_arm_solver *s, int regularization, robot_arm_real eps);
 int robot_arm_get_regularization(robot_arm_solver *s);
-double robot_arm_get_reg_eps(robot_arm_solver *s);
+robot_arm_real robot_arm_get_reg_eps(robot_arm_solver *s);
 /* Stage-cost Hessian (algorithm.md section 4 step 5): fresh = 1 (the default) refreshes the
  * cost part A_l of the Hessian block of every stage in every prepare (only the curvature of
  * dynamics and constraints is partially updated); fresh = 0 is the paper's literal
@@ -116,20 +118,20 @@ int robot_arm_get_cost_hessian(robot_arm_solver *s);
  * criterion and the fixed point are those of lm = 0). lm finite and >= 0: a fixed term
  * (the automatic one is switched off); default: the OCP file's options(lm=...), else the
  * automatic term. */
-int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, double lm);
+int robot_arm_set_levenberg_marquardt(robot_arm_solver *s, robot_arm_real lm);
 /* The term of the next QP (fixed, or the current automatic value). */
-double robot_arm_get_levenberg_marquardt(robot_arm_solver *s);
+robot_arm_real robot_arm_get_levenberg_marquardt(robot_arm_solver *s);
 /* The automatic, scale-aware, adaptive term (docs/algorithm.md section 10): lm is raised
  * until the QP is convex on the dynamics (Riccati pivots positive definite), after a
  * failed feedback and when the KKT proxy grows; lowered after every successful feedback. */
 int robot_arm_set_lm_auto(robot_arm_solver *s);
 int robot_arm_get_lm_auto(robot_arm_solver *s);
 /* The Hessian scale of the automatic term (largest diagonal entry of the QP blocks). */
-double robot_arm_get_lm_scale(robot_arm_solver *s);
+robot_arm_real robot_arm_get_lm_scale(robot_arm_solver *s);
 /* QP tolerance: 0 < tol <= ROBOT_ARM_QP_TOL_MAX (1e-2); a larger one would let the QP return
  * steps that violate the bounds by that much, so it is refused (ROBOT_ARM_ERR_INVALID_ARGUMENT). */
-int robot_arm_set_qp_tol(robot_arm_solver *s, double tol);
-double robot_arm_get_qp_tol(robot_arm_solver *s);
+int robot_arm_set_qp_tol(robot_arm_solver *s, robot_arm_real tol);
+robot_arm_real robot_arm_get_qp_tol(robot_arm_solver *s);
 int robot_arm_set_qp_max_iter(robot_arm_solver *s, int max_iter);
 int robot_arm_get_qp_max_iter(robot_arm_solver *s);
 /* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
@@ -153,22 +155,22 @@ int robot_arm_set_qp_warm_start(robot_arm_solver *s, int on);
 int robot_arm_get_qp_warm_start(robot_arm_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
-int robot_arm_set_parameters(robot_arm_solver *s, const double *p);
-int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const double *pk);
-void robot_arm_get_parameters(robot_arm_solver *s, double *p);
+int robot_arm_set_parameters(robot_arm_solver *s, const robot_arm_real *p);
+int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const robot_arm_real *pk);
+void robot_arm_get_parameters(robot_arm_solver *s, robot_arm_real *p);
 
 /* The iterate (shapes in the header comment). */
-void robot_arm_get_x(const robot_arm_solver *s, double *x);
-void robot_arm_get_u(const robot_arm_solver *s, double *u);
-void robot_arm_get_lam(const robot_arm_solver *s, double *lam);
-void robot_arm_get_mu_g(const robot_arm_solver *s, double *mu_g);
-void robot_arm_get_mu_b(const robot_arm_solver *s, double *mu_b);
-void robot_arm_get_mu_bN(const robot_arm_solver *s, double *mu_bN);
-void robot_arm_get_mu_r(const robot_arm_solver *s, double *mu_r);
-void robot_arm_get_nu(const robot_arm_solver *s, double *nu);
+void robot_arm_get_x(const robot_arm_solver *s, robot_arm_real *x);
+void robot_arm_get_u(const robot_arm_solver *s, robot_arm_real *u);
+void robot_arm_get_lam(const robot_arm_solver *s, robot_arm_real *lam);
+void robot_arm_get_mu_g(const robot_arm_solver *s, robot_arm_real *mu_g);
+void robot_arm_get_mu_b(const robot_arm_solver *s, robot_arm_real *mu_b);
+void robot_arm_get_mu_bN(const robot_arm_solver *s, robot_arm_real *mu_bN);
+void robot_arm_get_mu_r(const robot_arm_solver *s, robot_arm_real *mu_r);
+void robot_arm_get_nu(const robot_arm_solver *s, robot_arm_real *nu);
 /* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1): >= 0, never NaN; +Inf when the
  * residual or the step of the stage overflows (the stage then ranks first). */
-void robot_arm_get_rho(const robot_arm_solver *s, double *rho);
+void robot_arm_get_rho(const robot_arm_solver *s, robot_arm_real *rho);
 /* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
  * N-1 included; writes up to N ints and returns their count. */
 int robot_arm_get_recomputed(const robot_arm_solver *s, int *stages);
@@ -177,14 +179,14 @@ int robot_arm_get_qp_iterations(const robot_arm_solver *s);
 int robot_arm_get_qp_status(const robot_arm_solver *s);
 /* A constraint row of the OCP at one stage of the horizon. */
 typedef struct {
-    int stage;    /* 0..N-1; N: the terminal node */
-    int kind;     /* enum robot_arm_row_kind */
-    int index;    /* the state or control, or the row among the path rows, the terminal
+    int stage;        /* 0..N-1; N: the terminal node */
+    int kind;         /* enum robot_arm_row_kind */
+    int index;        /* the state or control, or the row among the path rows, the terminal
                      inequality rows or the terminal equality rows (each stacked in
                      declaration order) */
-    int side;     /* -1: its lower bound, +1: its upper bound (an equality row: the sign of
+    int side;         /* -1: its lower bound, +1: its upper bound (an equality row: the sign of
                      the certificate's multiplier), 0: lower bound above upper bound */
-    double bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
+    robot_arm_real bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
                      function is the declared row minus its value) */
 } robot_arm_row_info;
 /* When the last QP was infeasible (robot_arm_get_qp_status ROBOT_ARM_QP_PRIMAL_INFEASIBLE): the row
@@ -198,15 +200,15 @@ int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_inf
  * of the last good plan), a divergence was detected, the prepare re-initialised. */
 int robot_arm_get_flags(const robot_arm_solver *s);
 /* The control returned by the last feedback (nu), successful or not; within the bounds. */
-void robot_arm_get_u0(const robot_arm_solver *s, double *u0);
+void robot_arm_get_u0(const robot_arm_solver *s, robot_arm_real *u0);
 /* Re-initialisations by the automatic recovery since init; consecutive failed feedbacks. */
 int robot_arm_get_recoveries(const robot_arm_solver *s);
 int robot_arm_get_failed_feedbacks(const robot_arm_solver *s);
 /* The divergence measure of the last prepare or init: the stationarity and equality parts of
  * the KKT measure at the prepared point (max |F_w,k + [lam_k; 0]|, |phi_k - x_{k+1}|, ...);
  * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
-double robot_arm_get_kkt_proxy(const robot_arm_solver *s);
-void robot_arm_get_scales(const robot_arm_solver *s, double *scale_x, double *scale_u);
+robot_arm_real robot_arm_get_kkt_proxy(const robot_arm_solver *s);
+void robot_arm_get_scales(const robot_arm_solver *s, robot_arm_real *scale_x, robot_arm_real *scale_u);
 /* 1 when the last feedback's warm-started QP failed and the cold retry ran (the
  * iterations above are then the sum of both solves), else 0. */
 int robot_arm_get_qp_cold_retry(const robot_arm_solver *s);
@@ -269,22 +271,22 @@ enum robot_arm_flag {
 };
 
 /* Safety constants (docs/algorithm.md section 9). */
-#define ROBOT_ARM_QP_TOL_MAX 1e-2      /* largest accepted QP tolerance */
-#define ROBOT_ARM_RECOVERY_FAILURES 2  /* default K: consecutive failures before recovery */
-#define ROBOT_ARM_RECOVERY_FULL_RTI 10 /* successful feedbacks with every block fresh after a recovery */
-#define ROBOT_ARM_DIVERGENCE_BOX 1e3   /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
-#define ROBOT_ARM_DIVERGENCE_KKT 1e6   /* kkt proxy <= 1e6 max(1, proxy at the last init) */
+#define ROBOT_ARM_QP_TOL_MAX ROBOT_ARM_R(1e-2)    /* largest accepted QP tolerance */
+#define ROBOT_ARM_RECOVERY_FAILURES 2         /* default K: consecutive failures before recovery */
+#define ROBOT_ARM_RECOVERY_FULL_RTI 10        /* successful feedbacks with every block fresh after a recovery */
+#define ROBOT_ARM_DIVERGENCE_BOX ROBOT_ARM_R(1e3) /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
+#define ROBOT_ARM_DIVERGENCE_KKT ROBOT_ARM_R(1e6) /* kkt proxy <= 1e6 max(1, proxy at the last init) */
 
 /* Automatic Levenberg-Marquardt term (docs/algorithm.md section 10), relative to the
  * Hessian scale h = max(1e-300, largest |diagonal entry| of the QP's blocks). */
-#define ROBOT_ARM_LM_MIN_REL 1e-8    /* smallest nonzero term: 1e-8 h (below: 0) */
-#define ROBOT_ARM_LM_MAX_REL 1e2     /* largest term: 1e2 h */
-#define ROBOT_ARM_LM_RAISE 10.0      /* factor of a raise */
-#define ROBOT_ARM_LM_LOWER 0.1       /* factor after a successful feedback */
-#define ROBOT_ARM_LM_PIVOT_REL 1e-10 /* Riccati pivots must exceed 1e-10 h */
-#define ROBOT_ARM_LM_KKT_GROWTH 10.0 /* raise when the KKT proxy grows 10x in one prepare */
-#define ROBOT_ARM_LM_RETRIES 2       /* QP solves again with lm raised after a failure */
-#define ROBOT_ARM_LM_KKT_REL 1e-2    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
+#define ROBOT_ARM_LM_MIN_REL ROBOT_ARM_R(1e-8)    /* smallest nonzero term: 1e-8 h (below: 0) */
+#define ROBOT_ARM_LM_MAX_REL ROBOT_ARM_R(1e2)     /* largest term: 1e2 h */
+#define ROBOT_ARM_LM_RAISE ROBOT_ARM_R(10.0)      /* factor of a raise */
+#define ROBOT_ARM_LM_LOWER ROBOT_ARM_R(0.1)       /* factor after a successful feedback */
+#define ROBOT_ARM_LM_PIVOT_REL ROBOT_ARM_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
+#define ROBOT_ARM_LM_KKT_GROWTH ROBOT_ARM_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
+#define ROBOT_ARM_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
+#define ROBOT_ARM_LM_KKT_REL ROBOT_ARM_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
 
 enum robot_arm_mode {
     ROBOT_ARM_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
@@ -317,22 +319,22 @@ typedef union {
         robot_arm_fun_work fun_work;
         /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare
          * succeeds, so a prepare that fails leaves every F_old for its retry */
-        double Fn_w[ROBOT_ARM_N][ROBOT_ARM_NW];
-        double Fn_phi[ROBOT_ARM_N][ROBOT_ARM_NX];
-        double Fn_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-        double tmp_A[ROBOT_ARM_NW * ROBOT_ARM_NW];
-        double tmp_Al[ROBOT_ARM_NW * ROBOT_ARM_NW];
-        double tmp_Phi[ROBOT_ARM_NX * ROBOT_ARM_NW];
-        double tmp_C[ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW)];
-        double tmp_gL[ROBOT_ARM_NW];
-        double tmp_F[ROBOT_ARM_NW];
-        double tmp_phi[ROBOT_ARM_NX];
-        double tmp_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-        double reg_work[2 * ROBOT_ARM_NW * ROBOT_ARM_NW];
+        robot_arm_real Fn_w[ROBOT_ARM_N][ROBOT_ARM_NW];
+        robot_arm_real Fn_phi[ROBOT_ARM_N][ROBOT_ARM_NX];
+        robot_arm_real Fn_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+        robot_arm_real tmp_A[ROBOT_ARM_NW * ROBOT_ARM_NW];
+        robot_arm_real tmp_Al[ROBOT_ARM_NW * ROBOT_ARM_NW];
+        robot_arm_real tmp_Phi[ROBOT_ARM_NX * ROBOT_ARM_NW];
+        robot_arm_real tmp_C[ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW)];
+        robot_arm_real tmp_gL[ROBOT_ARM_NW];
+        robot_arm_real tmp_F[ROBOT_ARM_NW];
+        robot_arm_real tmp_phi[ROBOT_ARM_NX];
+        robot_arm_real tmp_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+        robot_arm_real reg_work[2 * ROBOT_ARM_NW * ROBOT_ARM_NW];
         /* Riccati workspace of the convexity test of the automatic lm */
-        double lm_P[ROBOT_ARM_NX * ROBOT_ARM_NX];
-        double lm_PA[ROBOT_ARM_NX * ROBOT_ARM_NW];
-        double lm_G[ROBOT_ARM_NW * ROBOT_ARM_NW];
+        robot_arm_real lm_P[ROBOT_ARM_NX * ROBOT_ARM_NX];
+        robot_arm_real lm_PA[ROBOT_ARM_NX * ROBOT_ARM_NW];
+        robot_arm_real lm_G[ROBOT_ARM_NW * ROBOT_ARM_NW];
     } ev;
 } robot_arm_solver_mem;
 
@@ -349,42 +351,42 @@ struct robot_arm_solver {
     int mode;
     int hessian;
     int regularization;
-    double reg_eps;
-    int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
-    double lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
+    robot_arm_real reg_eps;
+    int cost_hessian;       /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    robot_arm_real lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
                            current automatic value) */
-    int lm_auto;        /* 1: automatic term (section 10) */
-    double lm_scale;    /* Hessian scale h of the automatic term */
-    double lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
-    double lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
+    int lm_auto;            /* 1: automatic term (section 10) */
+    robot_arm_real lm_scale;    /* Hessian scale h of the automatic term */
+    robot_arm_real lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
+    robot_arm_real lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     robot_arm_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */
-    double x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
-    double u[ROBOT_ARM_N][ROBOT_ARM_NU];
-    double lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
-    double mu_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-    double mu_b[ROBOT_ARM_N][ROBOT_ARM_NW];
-    double mu_bN[ROBOT_ARM_NX];
-    double mu_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
-    double nu[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
-    double p[ROBOT_ARM_N + 1][ROBOT_ARM_DIM(ROBOT_ARM_NP)];
-    double xhat0[ROBOT_ARM_NX];
+    robot_arm_real x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
+    robot_arm_real u[ROBOT_ARM_N][ROBOT_ARM_NU];
+    robot_arm_real lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
+    robot_arm_real mu_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    robot_arm_real mu_b[ROBOT_ARM_N][ROBOT_ARM_NW];
+    robot_arm_real mu_bN[ROBOT_ARM_NX];
+    robot_arm_real mu_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
+    robot_arm_real nu[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
+    robot_arm_real p[ROBOT_ARM_N + 1][ROBOT_ARM_DIM(ROBOT_ARM_NP)];
+    robot_arm_real xhat0[ROBOT_ARM_NX];
 
     /* stage slots (Ht, A_dyn, Phit, Ct, F_old, domega) and ring_head */
     robot_arm_ring ring;
 
     /* terminal node, always fresh: A (regularised), R, R_eq and F = (gL, E, r, r_eq) */
-    double A_N[ROBOT_ARM_NX * ROBOT_ARM_NX];
-    double R[ROBOT_ARM_DIM(ROBOT_ARM_NR) * ROBOT_ARM_NX];
-    double R_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE) * ROBOT_ARM_NX];
-    double gL_N[ROBOT_ARM_NX];
-    double E;
-    double r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
-    double r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
+    robot_arm_real A_N[ROBOT_ARM_NX * ROBOT_ARM_NX];
+    robot_arm_real R[ROBOT_ARM_DIM(ROBOT_ARM_NR) * ROBOT_ARM_NX];
+    robot_arm_real R_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE) * ROBOT_ARM_NX];
+    robot_arm_real gL_N[ROBOT_ARM_NX];
+    robot_arm_real E;
+    robot_arm_real r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
+    robot_arm_real r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
 
     /* secant criterion and the recomputed set of the last prepare */
-    double rho[ROBOT_ARM_N];
+    robot_arm_real rho[ROBOT_ARM_N];
     int recomputed[ROBOT_ARM_N];
     int n_recomputed;
     unsigned char selected[ROBOT_ARM_N];
@@ -408,18 +410,18 @@ struct robot_arm_solver {
     int recover_pending;   /* the next prepare re-initialises */
     int flags;             /* ROBOT_ARM_FLAG_* of the last feedback + prepare */
     int n_recoveries;
-    int recovering;                   /* full-RTI prepares left after a recovery */
-    int xhat_fresh;                   /* the last feedback had a finite measurement */
-    int plan_age;                     /* receding shifts since the last good plan */
-    double plan_u[ROBOT_ARM_N][ROBOT_ARM_NU]; /* controls of the last good plan */
-    double u0_out[ROBOT_ARM_NU];          /* the control returned by the last feedback */
-    double scale_x[ROBOT_ARM_NX];
-    double scale_u[ROBOT_ARM_NU];
-    double kkt_proxy;
-    double kkt_proxy_ref;
+    int recovering;                       /* full-RTI prepares left after a recovery */
+    int xhat_fresh;                       /* the last feedback had a finite measurement */
+    int plan_age;                         /* receding shifts since the last good plan */
+    robot_arm_real plan_u[ROBOT_ARM_N][ROBOT_ARM_NU]; /* controls of the last good plan */
+    robot_arm_real u0_out[ROBOT_ARM_NU];          /* the control returned by the last feedback */
+    robot_arm_real scale_x[ROBOT_ARM_NX];
+    robot_arm_real scale_u[ROBOT_ARM_NU];
+    robot_arm_real kkt_proxy;
+    robot_arm_real kkt_proxy_ref;
 
     /* KKT parts of the last robot_arm_kkt_eval: stat, eq, ineq, comp */
-    double kkt[4];
+    robot_arm_real kkt[4];
 
     robot_arm_timer timer;
 };

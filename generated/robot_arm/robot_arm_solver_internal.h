@@ -15,7 +15,7 @@ void robot_arm_lm_start(robot_arm_solver *s);
 /* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
  * ROBOT_ARM_ERR_FUNCTION when the function fails, ROBOT_ARM_ERR_NONFINITE_VALUE when a value is not
  * finite, else ROBOT_ARM_OK. */
-int robot_arm_term_grad_checked(robot_arm_solver *s, double *gL, double *E, double *r, double *r_eq);
+int robot_arm_term_grad_checked(robot_arm_solver *s, robot_arm_real *gL, robot_arm_real *E, robot_arm_real *r, robot_arm_real *r_eq);
 /* x_0 carries no bound (docs/algorithm.md section 1): it is fixed by the measurement, so
  * the simple bounds of the states apply at nodes 1..N only (stage 0 passes infinite sides
  * to the QP, the KKT measure counts a multiplier on x_0 with its magnitude) and the x part

@@ -4,12 +4,12 @@
 #include "unicycle_casadi.h"
 
 /* The signature of every CasADi function of unicycle_casadi.c. */
-typedef int (*unicycle_casadi_fn)(const double **arg, double **res, int *iw, double *w, int mem);
+typedef int (*unicycle_casadi_fn)(const unicycle_real **arg, unicycle_real **res, int *iw, unicycle_real *w, int mem);
 
 /* f on the inputs in[0..n_in-1] and outputs out[0..n_out-1], placed at the start of the work
  * struct's argument and result arrays (CasADi may use the entries after them as scratch). */
-static int unicycle_call(unicycle_casadi_fn f, const double *const *in, int n_in, double *const *out, int n_out,
-                      unicycle_fun_work *wk)
+static int unicycle_call(unicycle_casadi_fn f, const unicycle_real *const *in, int n_in, unicycle_real *const *out,
+                      int n_out, unicycle_fun_work *wk)
 {
     int i;
     for (i = 0; i < n_in; ++i) {
@@ -29,69 +29,72 @@ static int unicycle_call(unicycle_casadi_fn f, const double *const *in, int n_in
 #define UNICYCLE_STAGE_FN(gauss_newton, name) ((gauss_newton) ? (unicycle_casadi_fn)0 : name##_exact)
 #endif
 
-int unicycle_eval_stage_eval(const double *x, const double *u, const double *p, double *phi, double *l,
-                          double *g, unicycle_fun_work *wk)
+int unicycle_eval_stage_eval(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p, unicycle_real *phi,
+                          unicycle_real *l, unicycle_real *g, unicycle_fun_work *wk)
 {
-    const double *in[3] = {x, u, p};
-    double *out[3] = {phi, l, g};
+    const unicycle_real *in[3] = {x, u, p};
+    unicycle_real *out[3] = {phi, l, g};
     return unicycle_call(unicycle_stage_eval, in, 3, out, 3, wk);
 }
 
-int unicycle_eval_stage_grad(const double *x, const double *u, const double *p, const double *lam_next,
-                          const double *mu_g, double *gL, double *phi, double *l, double *g,
-                          unicycle_fun_work *wk)
+int unicycle_eval_stage_grad(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
+                          const unicycle_real *lam_next, const unicycle_real *mu_g, unicycle_real *gL, unicycle_real *phi,
+                          unicycle_real *l, unicycle_real *g, unicycle_fun_work *wk)
 {
-    const double *in[5] = {x, u, p, lam_next, mu_g};
-    double *out[4] = {gL, phi, l, g};
+    const unicycle_real *in[5] = {x, u, p, lam_next, mu_g};
+    unicycle_real *out[4] = {gL, phi, l, g};
     return unicycle_call(unicycle_stage_grad, in, 5, out, 4, wk);
 }
 
-int unicycle_eval_stage_hess(int gauss_newton, const double *x, const double *u, const double *p,
-                          const double *lam_next, const double *mu_g, double *A, double *Phi, double *C,
-                          unicycle_fun_work *wk)
+int unicycle_eval_stage_hess(int gauss_newton, const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
+                          const unicycle_real *lam_next, const unicycle_real *mu_g, unicycle_real *A, unicycle_real *Phi,
+                          unicycle_real *C, unicycle_fun_work *wk)
 {
-    const double *in[5] = {x, u, p, lam_next, mu_g};
-    double *out[3] = {A, Phi, C};
+    const unicycle_real *in[5] = {x, u, p, lam_next, mu_g};
+    unicycle_real *out[3] = {A, Phi, C};
     unicycle_casadi_fn f = UNICYCLE_STAGE_FN(gauss_newton, unicycle_stage_hess);
     return f ? unicycle_call(f, in, 5, out, 3, wk) : 1;
 }
 
-int unicycle_eval_stage_hess_cost(int gauss_newton, const double *x, const double *u, const double *p,
-                               double *A_l, unicycle_fun_work *wk)
+int unicycle_eval_stage_hess_cost(int gauss_newton, const unicycle_real *x, const unicycle_real *u,
+                               const unicycle_real *p, unicycle_real *A_l, unicycle_fun_work *wk)
 {
-    const double *in[3] = {x, u, p};
-    double *out[1] = {A_l};
+    const unicycle_real *in[3] = {x, u, p};
+    unicycle_real *out[1] = {A_l};
     unicycle_casadi_fn f = UNICYCLE_STAGE_FN(gauss_newton, unicycle_stage_hess_cost);
     return f ? unicycle_call(f, in, 3, out, 1, wk) : 1;
 }
 
-int unicycle_eval_term_eval(const double *x, const double *p, double *E, double *r, double *r_eq,
-                         unicycle_fun_work *wk)
+int unicycle_eval_term_eval(const unicycle_real *x, const unicycle_real *p, unicycle_real *E, unicycle_real *r,
+                         unicycle_real *r_eq, unicycle_fun_work *wk)
 {
-    const double *in[2] = {x, p};
-    double *out[3] = {E, r, r_eq};
+    const unicycle_real *in[2] = {x, p};
+    unicycle_real *out[3] = {E, r, r_eq};
     return unicycle_call(unicycle_term_eval, in, 2, out, 3, wk);
 }
 
-int unicycle_eval_term_grad(const double *x, const double *p, const double *mu_r, const double *nu, double *gL,
-                         double *E, double *r, double *r_eq, unicycle_fun_work *wk)
+int unicycle_eval_term_grad(const unicycle_real *x, const unicycle_real *p, const unicycle_real *mu_r,
+                         const unicycle_real *nu, unicycle_real *gL, unicycle_real *E, unicycle_real *r, unicycle_real *r_eq,
+                         unicycle_fun_work *wk)
 {
-    const double *in[4] = {x, p, mu_r, nu};
-    double *out[4] = {gL, E, r, r_eq};
+    const unicycle_real *in[4] = {x, p, mu_r, nu};
+    unicycle_real *out[4] = {gL, E, r, r_eq};
     return unicycle_call(unicycle_term_grad, in, 4, out, 4, wk);
 }
 
-int unicycle_eval_term_hess(int gauss_newton, const double *x, const double *p, const double *mu_r,
-                         const double *nu, double *A, double *R, double *R_eq, unicycle_fun_work *wk)
+int unicycle_eval_term_hess(int gauss_newton, const unicycle_real *x, const unicycle_real *p, const unicycle_real *mu_r,
+                         const unicycle_real *nu, unicycle_real *A, unicycle_real *R, unicycle_real *R_eq,
+                         unicycle_fun_work *wk)
 {
-    const double *in[4] = {x, p, mu_r, nu};
-    double *out[3] = {A, R, R_eq};
+    const unicycle_real *in[4] = {x, p, mu_r, nu};
+    unicycle_real *out[3] = {A, R, R_eq};
     return unicycle_call(gauss_newton ? unicycle_term_hess_gn : unicycle_term_hess_exact, in, 4, out, 3, wk);
 }
 
-int unicycle_eval_ode(const double *x, const double *u, const double *p, double *xdot, unicycle_fun_work *wk)
+int unicycle_eval_ode(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p, unicycle_real *xdot,
+                   unicycle_fun_work *wk)
 {
-    const double *in[3] = {x, u, p};
-    double *out[1] = {xdot};
+    const unicycle_real *in[3] = {x, u, p};
+    unicycle_real *out[1] = {xdot};
     return unicycle_call(unicycle_ode, in, 3, out, 1, wk);
 }

@@ -7,40 +7,40 @@
 #include "unicycle_solver.h"
 #include "unicycle_solver_internal.h"
 
-static double unicycle_kkt_max(double a, double b)
+static unicycle_real unicycle_kkt_max(unicycle_real a, unicycle_real b)
 {
     return a > b ? a : b;
 }
 
 /* Violation max(0, v - ub, lb - v) of one row. */
-static double unicycle_kkt_viol(double v, double lb, double ub)
+static unicycle_real unicycle_kkt_viol(unicycle_real v, unicycle_real lb, unicycle_real ub)
 {
-    return unicycle_kkt_max(0.0, unicycle_kkt_max(v - ub, lb - v));
+    return unicycle_kkt_max(UNICYCLE_R(0.0), unicycle_kkt_max(v - ub, lb - v));
 }
 
 /* Complementarity of a signed multiplier mu of the row lb <= v <= ub:
  * max(mu,0) |ub - v| and max(-mu,0) |v - lb|; a nonzero multiplier on an infinite side
  * contributes |mu|. */
-static double unicycle_kkt_comp(double mu, double v, double lb, double ub)
+static unicycle_real unicycle_kkt_comp(unicycle_real mu, unicycle_real v, unicycle_real lb, unicycle_real ub)
 {
-    double c = 0.0;
-    if (mu > 0.0) {
-        c = isinf(ub) ? mu : mu * fabs(ub - v);
-    } else if (mu < 0.0) {
-        c = isinf(lb) ? -mu : -mu * fabs(v - lb);
+    unicycle_real c = UNICYCLE_R(0.0);
+    if (mu > UNICYCLE_R(0.0)) {
+        c = isinf(ub) ? mu : mu * unicycle_fabs(ub - v);
+    } else if (mu < UNICYCLE_R(0.0)) {
+        c = isinf(lb) ? -mu : -mu * unicycle_fabs(v - lb);
     }
     return c;
 }
 
-int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double *parts)
+int unicycle_kkt_measure(struct unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *parts)
 {
-    double stat = 0.0, eq = 0.0, ineq = 0.0, comp = 0.0;
-    double gL[UNICYCLE_NW], phi[UNICYCLE_NX], g[UNICYCLE_DIM(UNICYCLE_NG)], l;
-    double gLN[UNICYCLE_NX], E, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
+    unicycle_real stat = UNICYCLE_R(0.0), eq = UNICYCLE_R(0.0), ineq = UNICYCLE_R(0.0), comp = UNICYCLE_R(0.0);
+    unicycle_real gL[UNICYCLE_NW], phi[UNICYCLE_NX], g[UNICYCLE_DIM(UNICYCLE_NG)], l;
+    unicycle_real gLN[UNICYCLE_NX], E, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
     int k, i, rc;
 
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        eq = unicycle_kkt_max(eq, fabs(s->x[0][i] - xhat0[i]));
+        eq = unicycle_kkt_max(eq, unicycle_fabs(s->x[0][i] - xhat0[i]));
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
         if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
@@ -53,11 +53,11 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
         }
         /* stationarity gL_k + mu_b_k + [lam_k; 0] */
         for (i = 0; i < UNICYCLE_NW; ++i) {
-            double v = gL[i] + s->mu_b[k][i] + (i < UNICYCLE_NX ? s->lam[k][i] : 0.0);
-            stat = unicycle_kkt_max(stat, fabs(v));
+            unicycle_real v = gL[i] + s->mu_b[k][i] + (i < UNICYCLE_NX ? s->lam[k][i] : UNICYCLE_R(0.0));
+            stat = unicycle_kkt_max(stat, unicycle_fabs(v));
         }
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            eq = unicycle_kkt_max(eq, fabs(s->x[k + 1][i] - phi[i]));
+            eq = unicycle_kkt_max(eq, unicycle_fabs(s->x[k + 1][i] - phi[i]));
         }
         for (i = 0; i < UNICYCLE_NG; ++i) {
             ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(g[i], unicycle_lg[i], unicycle_ug[i]));
@@ -67,7 +67,7 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
          * sides and counts with its magnitude) */
         if (!unicycle_x_bounded(k)) {
             for (i = 0; i < UNICYCLE_NX; ++i) {
-                comp = unicycle_kkt_max(comp, fabs(s->mu_b[0][i]));
+                comp = unicycle_kkt_max(comp, unicycle_fabs(s->mu_b[0][i]));
             }
         } else {
             for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -87,12 +87,12 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const double *xhat0, double 
         return rc;
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        stat = unicycle_kkt_max(stat, fabs(gLN[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]));
+        stat = unicycle_kkt_max(stat, unicycle_fabs(gLN[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]));
         ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->x[UNICYCLE_N][i], unicycle_lbx[i], unicycle_ubx[i]));
         comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_bN[i], s->x[UNICYCLE_N][i], unicycle_lbx[i], unicycle_ubx[i]));
     }
     for (i = 0; i < UNICYCLE_NE; ++i) {
-        eq = unicycle_kkt_max(eq, fabs(r_eq[i]));
+        eq = unicycle_kkt_max(eq, unicycle_fabs(r_eq[i]));
     }
     for (i = 0; i < UNICYCLE_NR; ++i) {
         ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(r[i], unicycle_lr[i], unicycle_ur[i]));

@@ -14,21 +14,21 @@
 static unicycle_solver solver;
 static unicycle_fun_work plant_work;
 
-static void print_vector(const char *label, const double *v, int n)
+static void print_vector(const char *label, const unicycle_real *v, int n)
 {
     int i;
     printf(" %s", label);
     for (i = 0; i < n; ++i) {
-        printf(" %.17g", v[i]);
+        printf(" %.17g", (double)v[i]);
     }
 }
 
-static int report(const char *phase, int iter, int status, const double *u0, const double *kkt4)
+static int report(const char *phase, int iter, int status, const unicycle_real *u0, const unicycle_real *kkt4)
 {
-    double kkt = fmax(fmax(kkt4[0], kkt4[1]), fmax(kkt4[2], kkt4[3]));
+    unicycle_real kkt = unicycle_fmax(unicycle_fmax(kkt4[0], kkt4[1]), unicycle_fmax(kkt4[2], kkt4[3]));
     printf("%s %d status %d", phase, iter, status);
     print_vector("u0", u0, UNICYCLE_NU);
-    printf(" kkt %.17g\n", kkt);
+    printf(" kkt %.17g\n", (double)kkt);
     if (status != UNICYCLE_OK || !isfinite(kkt)) {
         fprintf(stderr, "main_dopus: %s iteration %d failed: %s\n", phase, iter, unicycle_status_string(status));
         return 1;
@@ -40,14 +40,14 @@ static int report(const char *phase, int iter, int status, const double *u0, con
  * next measurement is the model's prediction phi(x0, u0) */
 static int run(const char *phase, int mode)
 {
-    double xhat0[UNICYCLE_NX], xnext[UNICYCLE_NX], u0[UNICYCLE_NU], kkt4[4], l, g[UNICYCLE_DIM(UNICYCLE_NG)];
+    unicycle_real xhat0[UNICYCLE_NX], xnext[UNICYCLE_NX], u0[UNICYCLE_NU], kkt4[4], l, g[UNICYCLE_DIM(UNICYCLE_NG)];
     int i, k, status;
 
     for (i = 0; i < UNICYCLE_NX; ++i) {
         xhat0[i] = unicycle_x0_default[i];
     }
     for (i = 0; i < UNICYCLE_NU; ++i) {
-        u0[i] = 0.0;
+        u0[i] = UNICYCLE_R(0.0);
     }
     unicycle_defaults(&solver);
     status = unicycle_set_mode(&solver, mode);

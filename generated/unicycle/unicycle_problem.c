@@ -4,19 +4,19 @@
 
 #include "unicycle_problem.h"
 
-const double unicycle_lbx[UNICYCLE_NX] = {-INFINITY, -INFINITY, -INFINITY, -0.5};
-const double unicycle_ubx[UNICYCLE_NX] = {INFINITY, INFINITY, INFINITY, 1.5};
-const double unicycle_lbu[UNICYCLE_NU] = {-2.0, -2.0};
-const double unicycle_ubu[UNICYCLE_NU] = {2.0, 2.0};
-const double unicycle_lg[UNICYCLE_DIM(UNICYCLE_NG)] = {0.16000000000000003};
-const double unicycle_ug[UNICYCLE_DIM(UNICYCLE_NG)] = {INFINITY};
-const double unicycle_lr[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
-const double unicycle_ur[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
-const double unicycle_p_default[UNICYCLE_DIM(UNICYCLE_NP)] = {2.5, 0.0};
-const double unicycle_dt = 0.1;
-const double unicycle_x0_default[UNICYCLE_NX] = {0.0, 0.0, 0.0, 0.0};
+const unicycle_real unicycle_lbx[UNICYCLE_NX] = {-INFINITY, -INFINITY, -INFINITY, -0.5};
+const unicycle_real unicycle_ubx[UNICYCLE_NX] = {INFINITY, INFINITY, INFINITY, 1.5};
+const unicycle_real unicycle_lbu[UNICYCLE_NU] = {-2.0, -2.0};
+const unicycle_real unicycle_ubu[UNICYCLE_NU] = {2.0, 2.0};
+const unicycle_real unicycle_lg[UNICYCLE_DIM(UNICYCLE_NG)] = {0.16000000000000003};
+const unicycle_real unicycle_ug[UNICYCLE_DIM(UNICYCLE_NG)] = {INFINITY};
+const unicycle_real unicycle_lr[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
+const unicycle_real unicycle_ur[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
+const unicycle_real unicycle_p_default[UNICYCLE_DIM(UNICYCLE_NP)] = {2.5, 0.0};
+const unicycle_real unicycle_dt = 0.1;
+const unicycle_real unicycle_x0_default[UNICYCLE_NX] = {0.0, 0.0, 0.0, 0.0};
 
-const double unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX] = {
+const unicycle_real unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX] = {
     {0.0, 0.0, 0.0, 0.0},
     {0.0, 0.0, 0.0, 0.0},
     {0.0, 0.0, 0.0, 0.0},
@@ -39,7 +39,7 @@ const double unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX] = {
     {0.0, 0.0, 0.0, 0.0},
     {0.0, 0.0, 0.0, 0.0}
 };
-const double unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU] = {
+const unicycle_real unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU] = {
     {0.0, 0.0},
     {0.0, 0.0},
     {0.0, 0.0},
@@ -65,12 +65,12 @@ const double unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU] = {
 const int unicycle_default_M = 1;
 const int unicycle_default_hessian = 0;
 const int unicycle_default_regularization = 0;
-const double unicycle_default_reg_eps = 0.0001;
+const unicycle_real unicycle_default_reg_eps = 0.0001;
 const int unicycle_default_cost_hessian = 1;
-const double unicycle_default_lm = -1.0;
+const unicycle_real unicycle_default_lm = -1.0;
 
 /* offline primal-dual solution at unicycle_x0_default */
-const double unicycle_nominal_x[UNICYCLE_N + 1][UNICYCLE_NX] = {
+const unicycle_real unicycle_nominal_x[UNICYCLE_N + 1][UNICYCLE_NX] = {
     {-4.405750371246505e-34, 4.277126453924243e-34, 3.881307332189368e-35, 1.7691311353397966e-33},
     {0.009973167625068722, -0.0006901255919963637, -0.10363472893774496, 0.19999999999995718},
     {0.03962059962724365, -0.005217079797216734, -0.1898329719978837, 0.3999999999999057},
@@ -93,7 +93,7 @@ const double unicycle_nominal_x[UNICYCLE_N + 1][UNICYCLE_NX] = {
     {2.170317287418338, -0.08039745522237295, 0.23740092963620482, 1.0812857659242372},
     {2.265690671281109, -0.057307735878953006, 0.23766381664557548, 0.8812857659244597}
 };
-const double unicycle_nominal_u[UNICYCLE_N][UNICYCLE_NU] = {
+const unicycle_real unicycle_nominal_u[UNICYCLE_N][UNICYCLE_NU] = {
     {1.9999999999995717, -1.0363472893774497},
     {1.999999999999485, -0.8619824306013878},
     {1.9999999999993603, -0.6462534707535791},
@@ -115,7 +115,7 @@ const double unicycle_nominal_u[UNICYCLE_N][UNICYCLE_NU] = {
     {-1.999999999996101, 0.009462116162000368},
     {-1.9999999999977744, 0.0026288700937066025}
 };
-const double unicycle_nominal_lam[UNICYCLE_N + 1][UNICYCLE_NX] = {
+const unicycle_real unicycle_nominal_lam[UNICYCLE_N + 1][UNICYCLE_NX] = {
     {5.204159471607932, -1.4356544770470543, -0.10755849857737262, 3.3908997812038373},
     {4.954159471608228, -1.4356544770470248, -0.09665946806429024, 2.8889376179974224},
     {4.705156788371034, -1.4357234896061941, -0.07539398284160245, 2.402637321877883},
@@ -138,7 +138,7 @@ const double unicycle_nominal_lam[UNICYCLE_N + 1][UNICYCLE_NX] = {
     {2.3760615584473124, 0.581117104311731, 0.0005549605262558158, -0.6400706769317464},
     {2.34309328718891, 0.57307735878953, 1.948866133338183e-36, -0.8812857659245728}
 };
-const double unicycle_nominal_mu_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)] = {
+const unicycle_real unicycle_nominal_mu_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)] = {
     {-1.4757877882066623e-13},
     {-1.5108221926902238e-13},
     {-1.6219797745365912e-13},
@@ -160,7 +160,7 @@ const double unicycle_nominal_mu_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)] = {
     {-1.2559665727000627e-13},
     {-1.0080417923106894e-13}
 };
-const double unicycle_nominal_mu_b[UNICYCLE_N][UNICYCLE_NW] = {
+const unicycle_real unicycle_nominal_mu_b[UNICYCLE_N][UNICYCLE_NW] = {
     {0.0, 0.0, 0.0, 0.0, 0.2940934841735245, -8.865228912239132e-14},
     {0.0, 0.0, 0.0, -8.270378646629586e-14, 0.2446313377916686, -6.62481841098655e-14},
     {0.0, 0.0, 0.0, -2.5331836821685346e-14, 0.19696041281807794, -4.518307649361169e-14},
@@ -182,6 +182,6 @@ const double unicycle_nominal_mu_b[UNICYCLE_N][UNICYCLE_NW] = {
     {0.0, 0.0, 0.0, 5.11377292692425e-13, -0.03177665563859315, 5.827173308074124e-16},
     {0.0, 0.0, 0.0, 2.2240189094435687e-13, -0.05606782090623458, 1.615464456803936e-16}
 };
-const double unicycle_nominal_mu_bN[UNICYCLE_NX] = {0.0, 0.0, 0.0, 1.1297814319164635e-13};
-const double unicycle_nominal_mu_r[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
-const double unicycle_nominal_nu[UNICYCLE_DIM(UNICYCLE_NE)] = {0.0};
+const unicycle_real unicycle_nominal_mu_bN[UNICYCLE_NX] = {0.0, 0.0, 0.0, 1.1297814319164635e-13};
+const unicycle_real unicycle_nominal_mu_r[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
+const unicycle_real unicycle_nominal_nu[UNICYCLE_DIM(UNICYCLE_NE)] = {0.0};

@@ -10,34 +10,34 @@
 
 #include "unicycle_sizes.h"
 
-extern const double unicycle_lbx[UNICYCLE_NX], unicycle_ubx[UNICYCLE_NX];
-extern const double unicycle_lbu[UNICYCLE_NU], unicycle_ubu[UNICYCLE_NU];
-extern const double unicycle_lg[UNICYCLE_DIM(UNICYCLE_NG)], unicycle_ug[UNICYCLE_DIM(UNICYCLE_NG)];
-extern const double unicycle_lr[UNICYCLE_DIM(UNICYCLE_NR)], unicycle_ur[UNICYCLE_DIM(UNICYCLE_NR)];
-extern const double unicycle_p_default[UNICYCLE_DIM(UNICYCLE_NP)]; /* every node */
-extern const double unicycle_dt;
-extern const double unicycle_x0_default[UNICYCLE_NX];
+extern const unicycle_real unicycle_lbx[UNICYCLE_NX], unicycle_ubx[UNICYCLE_NX];
+extern const unicycle_real unicycle_lbu[UNICYCLE_NU], unicycle_ubu[UNICYCLE_NU];
+extern const unicycle_real unicycle_lg[UNICYCLE_DIM(UNICYCLE_NG)], unicycle_ug[UNICYCLE_DIM(UNICYCLE_NG)];
+extern const unicycle_real unicycle_lr[UNICYCLE_DIM(UNICYCLE_NR)], unicycle_ur[UNICYCLE_DIM(UNICYCLE_NR)];
+extern const unicycle_real unicycle_p_default[UNICYCLE_DIM(UNICYCLE_NP)]; /* every node */
+extern const unicycle_real unicycle_dt;
+extern const unicycle_real unicycle_x0_default[UNICYCLE_NX];
 /* the OCP file's initial guess */
-extern const double unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX];
-extern const double unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU];
+extern const unicycle_real unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX];
+extern const unicycle_real unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU];
 extern const int unicycle_default_M;
 extern const int unicycle_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int unicycle_default_regularization; /* 0 none, 1 project, 2 mirror */
-extern const double unicycle_default_reg_eps;
+extern const unicycle_real unicycle_default_reg_eps;
 extern const int unicycle_default_cost_hessian; /* 1 fresh, 0 stored */
-extern const double unicycle_default_lm;        /* Levenberg-Marquardt term, >= 0 */
+extern const unicycle_real unicycle_default_lm;    /* Levenberg-Marquardt term, >= 0 */
 
 #if UNICYCLE_HAS_NOMINAL
 /* offline primal-dual solution at unicycle_x0_default (IPOPT at generation time), so the
  * controller starts warm (docs/design.md section 8) */
-extern const double unicycle_nominal_x[UNICYCLE_N + 1][UNICYCLE_NX];
-extern const double unicycle_nominal_u[UNICYCLE_N][UNICYCLE_NU];
-extern const double unicycle_nominal_lam[UNICYCLE_N + 1][UNICYCLE_NX];
-extern const double unicycle_nominal_mu_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
-extern const double unicycle_nominal_mu_b[UNICYCLE_N][UNICYCLE_NW];
-extern const double unicycle_nominal_mu_bN[UNICYCLE_NX];
-extern const double unicycle_nominal_mu_r[UNICYCLE_DIM(UNICYCLE_NR)];
-extern const double unicycle_nominal_nu[UNICYCLE_DIM(UNICYCLE_NE)];
+extern const unicycle_real unicycle_nominal_x[UNICYCLE_N + 1][UNICYCLE_NX];
+extern const unicycle_real unicycle_nominal_u[UNICYCLE_N][UNICYCLE_NU];
+extern const unicycle_real unicycle_nominal_lam[UNICYCLE_N + 1][UNICYCLE_NX];
+extern const unicycle_real unicycle_nominal_mu_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
+extern const unicycle_real unicycle_nominal_mu_b[UNICYCLE_N][UNICYCLE_NW];
+extern const unicycle_real unicycle_nominal_mu_bN[UNICYCLE_NX];
+extern const unicycle_real unicycle_nominal_mu_r[UNICYCLE_DIM(UNICYCLE_NR)];
+extern const unicycle_real unicycle_nominal_nu[UNICYCLE_DIM(UNICYCLE_NE)];
 #endif
 
 #endif /* UNICYCLE_PROBLEM_H */

@@ -153,7 +153,7 @@ enum unicycle_qp_status {
 };
 
 typedef struct {
-    double tol;       /* tolerance on the scaled KKT residuals (default 1e-8) */
+    unicycle_real tol;   /* tolerance on the scaled KKT residuals (default 1e-8) */
     int max_iter;     /* iteration limit (default 100) */
     int warm_start;   /* nonzero: start from the primal-dual point in *sol (default 0) */
     int refine_steps; /* iterative refinement steps of the corrector direction once the
@@ -163,42 +163,42 @@ typedef struct {
 
 typedef struct {
     /* stage matrices, one pointer per stage (see header comment for the shapes) */
-    const double *H[UNICYCLE_N];
-    const double *Phi[UNICYCLE_N];
-    const double *C[UNICYCLE_N];
-    const double *HN;
-    const double *R;
-    const double *Req;
+    const unicycle_real *H[UNICYCLE_N];
+    const unicycle_real *Phi[UNICYCLE_N];
+    const unicycle_real *C[UNICYCLE_N];
+    const unicycle_real *HN;
+    const unicycle_real *R;
+    const unicycle_real *Req;
     /* vectors */
-    double g[UNICYCLE_N][UNICYCLE_QP_NW];
-    double b[UNICYCLE_N][UNICYCLE_NX];
-    double x0[UNICYCLE_NX];
-    double gN[UNICYCLE_NX];
-    double lbw[UNICYCLE_N][UNICYCLE_QP_NW];
-    double ubw[UNICYCLE_N][UNICYCLE_QP_NW];
-    double lbxN[UNICYCLE_NX];
-    double ubxN[UNICYCLE_NX];
-    double lg[UNICYCLE_N][UNICYCLE_QP_NG1];
-    double ug[UNICYCLE_N][UNICYCLE_QP_NG1];
-    double lr[UNICYCLE_QP_NR1];
-    double ur[UNICYCLE_QP_NR1];
-    double req[UNICYCLE_QP_NE1];
+    unicycle_real g[UNICYCLE_N][UNICYCLE_QP_NW];
+    unicycle_real b[UNICYCLE_N][UNICYCLE_NX];
+    unicycle_real x0[UNICYCLE_NX];
+    unicycle_real gN[UNICYCLE_NX];
+    unicycle_real lbw[UNICYCLE_N][UNICYCLE_QP_NW];
+    unicycle_real ubw[UNICYCLE_N][UNICYCLE_QP_NW];
+    unicycle_real lbxN[UNICYCLE_NX];
+    unicycle_real ubxN[UNICYCLE_NX];
+    unicycle_real lg[UNICYCLE_N][UNICYCLE_QP_NG1];
+    unicycle_real ug[UNICYCLE_N][UNICYCLE_QP_NG1];
+    unicycle_real lr[UNICYCLE_QP_NR1];
+    unicycle_real ur[UNICYCLE_QP_NR1];
+    unicycle_real req[UNICYCLE_QP_NE1];
     /* proximal (Levenberg-Marquardt) term: the objective uses H_k + hess_shift I and
      * HN + hess_shift I instead of H_k and HN; 0 (the value of a zero-filled struct)
      * leaves the QP as given; must be finite and >= 0 */
-    double hess_shift;
+    unicycle_real hess_shift;
 } unicycle_qp_in;
 
 /* Primal-dual solution (output; also the warm-start point when settings.warm_start). */
 typedef struct {
-    double x[UNICYCLE_N + 1][UNICYCLE_NX];
-    double u[UNICYCLE_N][UNICYCLE_QP_NU1];
-    double lam[UNICYCLE_N + 1][UNICYCLE_NX];
-    double mu_b[UNICYCLE_N][UNICYCLE_QP_NW];
-    double mu_bN[UNICYCLE_NX];
-    double mu_g[UNICYCLE_N][UNICYCLE_QP_NG1];
-    double mu_r[UNICYCLE_QP_NR1];
-    double nu[UNICYCLE_QP_NE1];
+    unicycle_real x[UNICYCLE_N + 1][UNICYCLE_NX];
+    unicycle_real u[UNICYCLE_N][UNICYCLE_QP_NU1];
+    unicycle_real lam[UNICYCLE_N + 1][UNICYCLE_NX];
+    unicycle_real mu_b[UNICYCLE_N][UNICYCLE_QP_NW];
+    unicycle_real mu_bN[UNICYCLE_NX];
+    unicycle_real mu_g[UNICYCLE_N][UNICYCLE_QP_NG1];
+    unicycle_real mu_r[UNICYCLE_QP_NR1];
+    unicycle_real nu[UNICYCLE_QP_NE1];
 } unicycle_qp_sol;
 
 typedef struct {
@@ -208,18 +208,18 @@ typedef struct {
     int terminal_augmentations; /* factorisations retried with rho Req'Req (exact, see top) */
     int pivot_floors;           /* Riccati pivots within their round-off estimate of zero that were
                                 floored (cured by iterative refinement), summed over iterations */
-    double delta;               /* largest delta used (0 when no correction was needed) */
+    unicycle_real delta;           /* largest delta used (0 when no correction was needed) */
     /* final residuals, infinity norms, unscaled */
-    double res_stat; /* stationarity (both equations of the header comment) */
-    double res_eq;   /* x0, dynamics and Req rows */
-    double res_ineq; /* bound / constraint violation max(0, l - v, v - u) */
-    double res_comp; /* complementarity max(slack * multiplier) over all sides */
+    unicycle_real res_stat; /* stationarity (both equations of the header comment) */
+    unicycle_real res_eq;   /* x0, dynamics and Req rows */
+    unicycle_real res_ineq; /* bound / constraint violation max(0, l - v, v - u) */
+    unicycle_real res_comp; /* complementarity max(slack * multiplier) over all sides */
     /* the same, scaled as compared with settings.tol */
-    double res_stat_scaled;
-    double res_eq_scaled;
-    double res_ineq_scaled;
-    double res_comp_scaled;
-    double obj; /* objective value at the returned point */
+    unicycle_real res_stat_scaled;
+    unicycle_real res_eq_scaled;
+    unicycle_real res_ineq_scaled;
+    unicycle_real res_comp_scaled;
+    unicycle_real obj; /* objective value at the returned point */
 } unicycle_qp_info;
 
 /* The whole solver memory; the user declares one (static, global or on a task stack).
@@ -235,49 +235,49 @@ typedef struct {
     unicycle_qp_row bstart[UNICYCLE_N + 2];
     int nb;
     /* iterate: primal, equality multipliers, slacks and multipliers of each side */
-    double prim[UNICYCLE_QP_NPRIM];
-    double lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
-    double nu[UNICYCLE_QP_NE1];
-    double t_lo[UNICYCLE_QP_NB];
-    double t_up[UNICYCLE_QP_NB];
-    double z_lo[UNICYCLE_QP_NB];
-    double z_up[UNICYCLE_QP_NB];
+    unicycle_real prim[UNICYCLE_QP_NPRIM];
+    unicycle_real lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
+    unicycle_real nu[UNICYCLE_QP_NE1];
+    unicycle_real t_lo[UNICYCLE_QP_NB];
+    unicycle_real t_up[UNICYCLE_QP_NB];
+    unicycle_real z_lo[UNICYCLE_QP_NB];
+    unicycle_real z_up[UNICYCLE_QP_NB];
     /* residuals */
-    double r_stat[UNICYCLE_QP_NPRIM];
-    double r_dyn[(UNICYCLE_N + 1) * UNICYCLE_NX];
-    double r_eqN[UNICYCLE_QP_NE1];
+    unicycle_real r_stat[UNICYCLE_QP_NPRIM];
+    unicycle_real r_dyn[(UNICYCLE_N + 1) * UNICYCLE_NX];
+    unicycle_real r_eqN[UNICYCLE_QP_NE1];
     /* v - lo and up - v of the row values v = D w: the slack residuals and steps and the
      * barrier weights are formed from them and dv, t, z (the bounds are read from the QP
      * data where needed); the refinement of a direction also works in r_stat, r_dyn, r_eqN */
-    double vl[UNICYCLE_QP_NB];
-    double uv[UNICYCLE_QP_NB];
+    unicycle_real vl[UNICYCLE_QP_NB];
+    unicycle_real uv[UNICYCLE_QP_NB];
     /* Newton directions (the Newton right-hand side is formed in the direction arrays and
      * solved in place) */
-    double d_prim[UNICYCLE_QP_NPRIM];
-    double d_lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
-    double d_nu[UNICYCLE_QP_NE1];
-    double dv[UNICYCLE_QP_NB]; /* D d_prim */
-    double dz_lo[UNICYCLE_QP_NB];
-    double dz_up[UNICYCLE_QP_NB];
+    unicycle_real d_prim[UNICYCLE_QP_NPRIM];
+    unicycle_real d_lam[(UNICYCLE_N + 1) * UNICYCLE_NX];
+    unicycle_real d_nu[UNICYCLE_QP_NE1];
+    unicycle_real dv[UNICYCLE_QP_NB]; /* D d_prim */
+    unicycle_real dz_lo[UNICYCLE_QP_NB];
+    unicycle_real dz_up[UNICYCLE_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
-    double M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
-    double P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];              /* value function Hessians, packed lower */
-    double G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];   /* value function x-nu coupling */
-    double Lu[UNICYCLE_N][UNICYCLE_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
-    double LK[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* Lu^{-1} M_ux */
-    double LKn[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
-    double S[UNICYCLE_QP_NE1 * UNICYCLE_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
-    double e[UNICYCLE_QP_NE1];
-    double work[UNICYCLE_QP_NWORK];
-    double delta;               /* current inertia-correction shift */
-    double rho_aug;             /* current terminal augmented-Lagrangian weight */
-    double noise[UNICYCLE_QP_NU1]; /* round-off estimate of M_uu pivots */
-    int pivot_floors;           /* pivots within round-off of zero, replaced (see linalg) */
-    double scale_stat;          /* residual scaling factors */
-    double scale_eq;
-    double scale_g; /* data parts of the scaling (constant during a solve) */
-    double scale_b;
-    double scale_bounds;
+    unicycle_real M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
+    unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];              /* value function Hessians, packed lower */
+    unicycle_real G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];   /* value function x-nu coupling */
+    unicycle_real Lu[UNICYCLE_N][UNICYCLE_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
+    unicycle_real LK[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* Lu^{-1} M_ux */
+    unicycle_real LKn[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
+    unicycle_real S[UNICYCLE_QP_NE1 * UNICYCLE_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
+    unicycle_real e[UNICYCLE_QP_NE1];
+    unicycle_real work[UNICYCLE_QP_NWORK];
+    unicycle_real delta;               /* current inertia-correction shift */
+    unicycle_real rho_aug;             /* current terminal augmented-Lagrangian weight */
+    unicycle_real noise[UNICYCLE_QP_NU1]; /* round-off estimate of M_uu pivots */
+    int pivot_floors;               /* pivots within round-off of zero, replaced (see linalg) */
+    unicycle_real scale_stat;          /* residual scaling factors */
+    unicycle_real scale_eq;
+    unicycle_real scale_g; /* data parts of the scaling (constant during a solve) */
+    unicycle_real scale_b;
+    unicycle_real scale_bounds;
 } unicycle_qp_workspace;
 
 /* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */

@@ -4,11 +4,11 @@
 
 #include "unicycle_ring.h"
 
-static void unicycle_ring_zero(double *v, int n)
+static void unicycle_ring_zero(unicycle_real *v, int n)
 {
     int i;
     for (i = 0; i < n; ++i) {
-        v[i] = 0.0;
+        v[i] = UNICYCLE_R(0.0);
     }
 }
 
@@ -29,7 +29,7 @@ void unicycle_ring_reset(unicycle_ring *ring)
     ring->ring_head = 0;
 }
 
-void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const double *A)
+void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A)
 {
     int i, j, l = 0;
     for (j = 0; j < UNICYCLE_NW; ++j)
@@ -37,7 +37,7 @@ void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const double *A)
             slot->A_dyn[l++] = A[i + j * UNICYCLE_NW];
 }
 
-void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const double *A_l, double *A)
+void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const unicycle_real *A_l, unicycle_real *A)
 {
     int i, j, l = 0;
     for (j = 0; j < UNICYCLE_NW; ++j)
@@ -70,15 +70,15 @@ void unicycle_ring_clear_step(unicycle_stage_slot *slot)
     unicycle_ring_zero(slot->dmu_b, UNICYCLE_NW);
 }
 
-double unicycle_ring_secant(const unicycle_stage_slot *slot, const double *F_w_new, const double *phi_new,
-                         const double *g_new)
+unicycle_real unicycle_ring_secant(const unicycle_stage_slot *slot, const unicycle_real *F_w_new,
+                             const unicycle_real *phi_new, const unicycle_real *g_new)
 {
-    double num2 = 0.0, den2 = 0.0, old2 = 0.0, new2 = 0.0;
+    unicycle_real num2 = UNICYCLE_R(0.0), den2 = UNICYCLE_R(0.0), old2 = UNICYCLE_R(0.0), new2 = UNICYCLE_R(0.0);
     int i, j;
 
     /* stationarity rows: F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new */
     for (i = 0; i < UNICYCLE_NW; ++i) {
-        double hd = 0.0, pl = 0.0, cm = 0.0, v;
+        unicycle_real hd = UNICYCLE_R(0.0), pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0), v;
         for (j = 0; j < UNICYCLE_NW; ++j)
             hd += slot->Ht[i + j * UNICYCLE_NW] * slot->dw[j];
         for (j = 0; j < UNICYCLE_NX; ++j)
@@ -90,7 +90,7 @@ double unicycle_ring_secant(const unicycle_stage_slot *slot, const double *F_w_n
     }
     /* dynamics rows: -(phi_old + Phit dw) + phi_new */
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        double pd = 0.0, v;
+        unicycle_real pd = UNICYCLE_R(0.0), v;
         for (j = 0; j < UNICYCLE_NW; ++j)
             pd += slot->Phit[i + j * UNICYCLE_NX] * slot->dw[j];
         v = -(slot->phi[i] + pd) + phi_new[i];
@@ -98,7 +98,7 @@ double unicycle_ring_secant(const unicycle_stage_slot *slot, const double *F_w_n
     }
     /* path constraint rows: g_old + Ct dw - g_new */
     for (i = 0; i < UNICYCLE_NG; ++i) {
-        double cd = 0.0, v;
+        unicycle_real cd = UNICYCLE_R(0.0), v;
         for (j = 0; j < UNICYCLE_NW; ++j)
             cd += slot->Ct[i + j * UNICYCLE_DIM(UNICYCLE_NG)] * slot->dw[j];
         v = slot->g[i] + cd - g_new[i];
@@ -123,22 +123,23 @@ double unicycle_ring_secant(const unicycle_stage_slot *slot, const double *F_w_n
         new2 += phi_new[i] * phi_new[i];
     for (i = 0; i < UNICYCLE_NG; ++i)
         new2 += g_new[i] * g_new[i];
-    if (den2 == 0.0) {
-        return 0.0;
+    if (den2 == UNICYCLE_R(0.0)) {
+        return UNICYCLE_R(0.0);
     }
     /* a residual or step whose square overflows (or a NaN from Inf - Inf in the residual):
      * the linear model of this stage says nothing, it ranks first */
-    if (!(num2 <= DBL_MAX) || !(den2 <= DBL_MAX)) {
+    if (!(num2 <= UNICYCLE_REAL_MAX) || !(den2 <= UNICYCLE_REAL_MAX)) {
         return INFINITY;
     }
     /* a residual at the round-off level of F is noise, not a secant violation */
-    if (sqrt(num2) <= UNICYCLE_EPS_RHO * (sqrt(old2) + sqrt(new2))) {
-        return 0.0;
+    if (unicycle_sqrt(num2) <= UNICYCLE_EPS_RHO * (unicycle_sqrt(old2) + unicycle_sqrt(new2))) {
+        return UNICYCLE_R(0.0);
     }
-    return sqrt(num2) / sqrt(den2);
+    return unicycle_sqrt(num2) / unicycle_sqrt(den2);
 }
 
-void unicycle_ring_store_F(unicycle_stage_slot *slot, const double *F_w, const double *phi, const double *g)
+void unicycle_ring_store_F(unicycle_stage_slot *slot, const unicycle_real *F_w, const unicycle_real *phi,
+                        const unicycle_real *g)
 {
     int i;
     for (i = 0; i < UNICYCLE_NW; ++i)

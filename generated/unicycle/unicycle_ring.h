@@ -12,22 +12,22 @@
 
 typedef struct {
     /* the blocks the QP uses (possibly outdated, A regularised), column-major */
-    double Ht[UNICYCLE_NW * UNICYCLE_NW]; /* nw x nw */
+    unicycle_real Ht[UNICYCLE_NW * UNICYCLE_NW]; /* nw x nw */
     /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
      * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l;
      * symmetric, its lower triangle packed by columns (unicycle_ring_store_A_dyn) */
-    double A_dyn[UNICYCLE_NW * (UNICYCLE_NW + 1) / 2];
-    double Phit[UNICYCLE_NX * UNICYCLE_NW];          /* nx x nw, [A_k B_k] */
-    double Ct[UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW)]; /* ng x nw (leading dimension ng) */
+    unicycle_real A_dyn[UNICYCLE_NW * (UNICYCLE_NW + 1) / 2];
+    unicycle_real Phit[UNICYCLE_NX * UNICYCLE_NW];          /* nx x nw, [A_k B_k] */
+    unicycle_real Ct[UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW)]; /* ng x nw (leading dimension ng) */
     /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
-    double F_w[UNICYCLE_NW];
-    double phi[UNICYCLE_NX];
-    double g[UNICYCLE_DIM(UNICYCLE_NG)];
+    unicycle_real F_w[UNICYCLE_NW];
+    unicycle_real phi[UNICYCLE_NX];
+    unicycle_real g[UNICYCLE_DIM(UNICYCLE_NG)];
     /* domega = (dw, dlam_next, dmu_g, dmu_b): the last QP step of this stage */
-    double dw[UNICYCLE_NW];
-    double dlam[UNICYCLE_NX];
-    double dmu_g[UNICYCLE_DIM(UNICYCLE_NG)];
-    double dmu_b[UNICYCLE_NW];
+    unicycle_real dw[UNICYCLE_NW];
+    unicycle_real dlam[UNICYCLE_NX];
+    unicycle_real dmu_g[UNICYCLE_DIM(UNICYCLE_NG)];
+    unicycle_real dmu_b[UNICYCLE_NW];
 } unicycle_stage_slot;
 
 typedef struct {
@@ -46,15 +46,15 @@ const unicycle_stage_slot *unicycle_ring_stage_const(const unicycle_ring *ring, 
 void unicycle_ring_advance(unicycle_ring *ring);
 
 /* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
-void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const double *A);
+void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A);
 /* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
-void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const double *A_l, double *A);
+void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const unicycle_real *A_l, unicycle_real *A);
 
 /* Zero the step domega of a slot. */
 void unicycle_ring_clear_step(unicycle_stage_slot *slot);
 
 /* Round-off floor of the secant residual (docs/algorithm.md section 4 step 2). */
-#define UNICYCLE_EPS_RHO 1e-12
+#define UNICYCLE_EPS_RHO UNICYCLE_PREC(1e-12, 1e-6)
 
 /* Secant criterion rho_k (eq. 16) of the slot against the fresh F_new = (F_w, phi, g):
  *   num = | [F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new ;
@@ -62,10 +62,11 @@ void unicycle_ring_clear_step(unicycle_stage_slot *slot);
  *            g_old + Ct dw - g_new] |
  *   rho = num / |(dw, dlam, dmu_g, dmu_b)| (2-norms), 0 when the denominator is 0 or
  *   num <= UNICYCLE_EPS_RHO * (|(F_w_old, phi_old, g_old)| + |(F_w_new, phi_new, g_new)|). */
-double unicycle_ring_secant(const unicycle_stage_slot *slot, const double *F_w_new, const double *phi_new,
-                         const double *g_new);
+unicycle_real unicycle_ring_secant(const unicycle_stage_slot *slot, const unicycle_real *F_w_new,
+                             const unicycle_real *phi_new, const unicycle_real *g_new);
 
 /* Store F_new as F_old. */
-void unicycle_ring_store_F(unicycle_stage_slot *slot, const double *F_w, const double *phi, const double *g);
+void unicycle_ring_store_F(unicycle_stage_slot *slot, const unicycle_real *F_w, const unicycle_real *phi,
+                        const unicycle_real *g);
 
 #endif /* UNICYCLE_RING_H */

@@ -57,12 +57,12 @@ int unicycle_get_hessian(unicycle_solver *s)
     return s->hessian;
 }
 
-int unicycle_set_regularization(unicycle_solver *s, int regularization, double eps)
+int unicycle_set_regularization(unicycle_solver *s, int regularization, unicycle_real eps)
 {
     unicycle_ensure_setup(s);
     if ((regularization != UNICYCLE_REG_NONE && regularization != UNICYCLE_REG_PROJECT &&
          regularization != UNICYCLE_REG_MIRROR) ||
-        !isfinite(eps) || !(eps > 0.0)) {
+        !isfinite(eps) || !(eps > UNICYCLE_R(0.0))) {
         return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
     }
     s->regularization = regularization;
@@ -76,7 +76,7 @@ int unicycle_get_regularization(unicycle_solver *s)
     return s->regularization;
 }
 
-double unicycle_get_reg_eps(unicycle_solver *s)
+unicycle_real unicycle_get_reg_eps(unicycle_solver *s)
 {
     unicycle_ensure_setup(s);
     return s->reg_eps;
@@ -93,10 +93,10 @@ int unicycle_get_cost_hessian(unicycle_solver *s)
     return s->cost_hessian;
 }
 
-int unicycle_set_levenberg_marquardt(unicycle_solver *s, double lm)
+int unicycle_set_levenberg_marquardt(unicycle_solver *s, unicycle_real lm)
 {
     unicycle_ensure_setup(s);
-    if (!isfinite(lm) || !(lm >= 0.0)) {
+    if (!isfinite(lm) || !(lm >= UNICYCLE_R(0.0))) {
         return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
     }
     s->lm_auto = 0;
@@ -108,8 +108,8 @@ int unicycle_set_lm_auto(unicycle_solver *s)
 {
     unicycle_ensure_setup(s);
     s->lm_auto = 1;
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
+    s->lm = UNICYCLE_R(0.0);
+    s->lm_kkt_prev = -UNICYCLE_R(1.0);
     if (s->initialized && s->qp_ready) {
         unicycle_lm_start(s);
     }
@@ -122,29 +122,29 @@ int unicycle_get_lm_auto(unicycle_solver *s)
     return s->lm_auto;
 }
 
-double unicycle_get_lm_scale(unicycle_solver *s)
+unicycle_real unicycle_get_lm_scale(unicycle_solver *s)
 {
     unicycle_ensure_setup(s);
     return s->lm_scale;
 }
 
-double unicycle_get_levenberg_marquardt(unicycle_solver *s)
+unicycle_real unicycle_get_levenberg_marquardt(unicycle_solver *s)
 {
     unicycle_ensure_setup(s);
     return s->lm;
 }
 
-int unicycle_set_qp_tol(unicycle_solver *s, double tol)
+int unicycle_set_qp_tol(unicycle_solver *s, unicycle_real tol)
 {
     unicycle_ensure_setup(s);
-    if (!isfinite(tol) || !(tol > 0.0) || tol > UNICYCLE_QP_TOL_MAX) {
+    if (!isfinite(tol) || !(tol > UNICYCLE_R(0.0)) || tol > UNICYCLE_QP_TOL_MAX) {
         return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
     }
     s->qp_settings.tol = tol;
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
-double unicycle_get_qp_tol(unicycle_solver *s)
+unicycle_real unicycle_get_qp_tol(unicycle_solver *s)
 {
     unicycle_ensure_setup(s);
     return s->qp_settings.tol;
@@ -198,7 +198,7 @@ int unicycle_get_qp_warm_start(unicycle_solver *s)
     return s->qp_warm;
 }
 
-int unicycle_set_parameters(unicycle_solver *s, const double *p)
+int unicycle_set_parameters(unicycle_solver *s, const unicycle_real *p)
 {
     int k, i;
     unicycle_ensure_setup(s);
@@ -219,7 +219,7 @@ int unicycle_set_parameters(unicycle_solver *s, const double *p)
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
-int unicycle_set_parameters_node(unicycle_solver *s, int k, const double *pk)
+int unicycle_set_parameters_node(unicycle_solver *s, int k, const unicycle_real *pk)
 {
     int i;
     unicycle_ensure_setup(s);
@@ -241,7 +241,7 @@ int unicycle_set_parameters_node(unicycle_solver *s, int k, const double *pk)
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
-void unicycle_get_parameters(unicycle_solver *s, double *p)
+void unicycle_get_parameters(unicycle_solver *s, unicycle_real *p)
 {
     int k, i;
     unicycle_ensure_setup(s);

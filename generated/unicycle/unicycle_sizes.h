@@ -35,10 +35,13 @@
 #define UNICYCLE_SZ_IW 1
 #define UNICYCLE_SZ_W 36
 
-/* The real-number type of the runtime (double; the precision is a generation-time choice) */
-typedef double unicycle_real;
+/* The real-number type of the runtime, chosen at generation (options(real=...)): 1 for
+ * single precision (float), 0 for double. unicycle_real.h defines unicycle_real and its macros. */
+#define UNICYCLE_REAL_FLOAT 0
 
 /* array size of a possibly empty dimension: C99 has no zero-length arrays */
 #define UNICYCLE_DIM(n) ((n) > 0 ? (n) : 1)
+
+#include "unicycle_real.h"
 
 #endif /* UNICYCLE_SIZES_H */

@@ -19,11 +19,11 @@
 #include "unicycle_solver_internal.h"
 
 #define UNICYCLE_MAGIC 0x444f5055 /* "DOPU" */
-#define UNICYCLE_DEFAULT_QP_TOL 1e-10
+#define UNICYCLE_DEFAULT_QP_TOL UNICYCLE_PREC(1e-10, 1e-5)
 
 /* ---- small helpers ------------------------------------------------------------------ */
 
-static void unicycle_copy(double *dst, const double *src, int n)
+static void unicycle_copy(unicycle_real *dst, const unicycle_real *src, int n)
 {
     int i;
     for (i = 0; i < n; ++i) {
@@ -42,7 +42,7 @@ void unicycle_clear_x0_multiplier(unicycle_solver *s)
 {
     int i;
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->mu_b[0][i] = 0.0;
+        s->mu_b[0][i] = UNICYCLE_R(0.0);
     }
 }
 
@@ -112,9 +112,9 @@ const char *unicycle_status_string(int status)
 
 /* ---- safety: scales, clipping, health (algorithm.md section 9) -------------------- */
 
-static double unicycle_absmax(double a, double b)
+static unicycle_real unicycle_absmax(unicycle_real a, unicycle_real b)
 {
-    double fa = fabs(a);
+    unicycle_real fa = unicycle_fabs(a);
     return isfinite(a) && fa > b ? fa : b;
 }
 
@@ -124,7 +124,7 @@ static void unicycle_compute_scales(unicycle_solver *s)
 {
     int k, i;
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        double v = 1.0;
+        unicycle_real v = UNICYCLE_R(1.0);
         v = unicycle_absmax(unicycle_lbx[i], v);
         v = unicycle_absmax(unicycle_ubx[i], v);
         v = unicycle_absmax(unicycle_x0_default[i], v);
@@ -134,7 +134,7 @@ static void unicycle_compute_scales(unicycle_solver *s)
         s->scale_x[i] = v;
     }
     for (i = 0; i < UNICYCLE_NU; ++i) {
-        double v = 1.0;
+        unicycle_real v = UNICYCLE_R(1.0);
         v = unicycle_absmax(unicycle_lbu[i], v);
         v = unicycle_absmax(unicycle_ubu[i], v);
         for (k = 0; k < UNICYCLE_N; ++k) {
@@ -163,17 +163,17 @@ static void unicycle_reset_health(unicycle_solver *s)
     for (i = 0; i < UNICYCLE_NU; ++i) {
         s->u0_out[i] = s->plan_u[0][i];
     }
-    s->kkt_proxy = 0.0;
-    s->kkt_proxy_ref = 0.0;
+    s->kkt_proxy = UNICYCLE_R(0.0);
+    s->kkt_proxy_ref = UNICYCLE_R(0.0);
 }
 
 /* u clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1 when
  * an entry changed. */
-static int unicycle_clip_u(const double *u, double *out)
+static int unicycle_clip_u(const unicycle_real *u, unicycle_real *out)
 {
     int i, clipped = 0;
     for (i = 0; i < UNICYCLE_NU; ++i) {
-        double v = isnan(u[i]) ? 0.0 : u[i];
+        unicycle_real v = isnan(u[i]) ? UNICYCLE_R(0.0) : u[i];
         if (v < unicycle_lbu[i]) {
             v = unicycle_lbu[i];
         }
@@ -191,22 +191,22 @@ static int unicycle_clip_u(const double *u, double *out)
 /* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as the iterate
  * plus an optional step: every entry finite and |v_i| <= BOX scale_i + |xhat0_i| (states),
  * BOX scale_i (controls). Returns 1 when it passes. */
-static int unicycle_box_ok(const unicycle_solver *s, const double *x, const double *dx, int dx_stride,
-                        const double *u, const double *du, int du_stride)
+static int unicycle_box_ok(const unicycle_solver *s, const unicycle_real *x, const unicycle_real *dx, int dx_stride,
+                        const unicycle_real *u, const unicycle_real *du, int du_stride)
 {
     int k, i;
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            double v = x[k * UNICYCLE_NX + i] + (dx ? dx[k * dx_stride + i] : 0.0);
-            if (!(fabs(v) <= UNICYCLE_DIVERGENCE_BOX * s->scale_x[i] + fabs(s->xhat0[i]))) {
+            unicycle_real v = x[k * UNICYCLE_NX + i] + (dx ? dx[k * dx_stride + i] : UNICYCLE_R(0.0));
+            if (!(unicycle_fabs(v) <= UNICYCLE_DIVERGENCE_BOX * s->scale_x[i] + unicycle_fabs(s->xhat0[i]))) {
                 return 0;
             }
         }
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NU; ++i) {
-            double v = u[k * UNICYCLE_NU + i] + (du ? du[k * du_stride + i] : 0.0);
-            if (!(fabs(v) <= UNICYCLE_DIVERGENCE_BOX * s->scale_u[i])) {
+            unicycle_real v = u[k * UNICYCLE_NU + i] + (du ? du[k * du_stride + i] : UNICYCLE_R(0.0));
+            if (!(unicycle_fabs(v) <= UNICYCLE_DIVERGENCE_BOX * s->scale_u[i])) {
                 return 0;
             }
         }
@@ -215,7 +215,7 @@ static int unicycle_box_ok(const unicycle_solver *s, const double *x, const doub
 }
 
 /* The fallback control of a failed feedback: the next control of the last good plan. */
-static void unicycle_fallback_u0(unicycle_solver *s, double *u0)
+static void unicycle_fallback_u0(unicycle_solver *s, unicycle_real *u0)
 {
     int j = s->mode == UNICYCLE_MODE_RECEDING ? s->plan_age : 0;
     j = j > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : j;
@@ -231,7 +231,7 @@ static void unicycle_fallback_u0(unicycle_solver *s, double *u0)
 /* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
 static void unicycle_lm_feedback(unicycle_solver *s, int status);
 
-static int unicycle_feedback_failed(unicycle_solver *s, double *u0, int status)
+static int unicycle_feedback_failed(unicycle_solver *s, unicycle_real *u0, int status)
 {
     unicycle_lm_feedback(s, status);
     s->n_failed += 1;
@@ -248,27 +248,27 @@ static int unicycle_feedback_failed(unicycle_solver *s, double *u0, int status)
 /* Divergence measure at the current point from the F values in the slots and the terminal
  * node (after init or a prepare): max of |F_w,k + [lam_k; 0]|, |gL_N + mu_bN + lam_N|,
  * |phi_k - x_{k+1}|, |r_eq| (inf-norms). */
-static double unicycle_kkt_proxy_eval(const unicycle_solver *s)
+static unicycle_real unicycle_kkt_proxy_eval(const unicycle_solver *s)
 {
-    double m = 0.0, v;
+    unicycle_real m = UNICYCLE_R(0.0), v;
     int k, i;
     for (k = 0; k < UNICYCLE_N; ++k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
         for (i = 0; i < UNICYCLE_NW; ++i) {
-            v = fabs(slot->F_w[i] + (i < UNICYCLE_NX ? s->lam[k][i] : 0.0));
+            v = unicycle_fabs(slot->F_w[i] + (i < UNICYCLE_NX ? s->lam[k][i] : UNICYCLE_R(0.0)));
             m = (v > m || isnan(v)) ? v : m;
         }
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            v = fabs(slot->phi[i] - s->x[k + 1][i]);
+            v = unicycle_fabs(slot->phi[i] - s->x[k + 1][i]);
             m = (v > m || isnan(v)) ? v : m;
         }
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        v = fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]);
+        v = unicycle_fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]);
         m = (v > m || isnan(v)) ? v : m;
     }
     for (i = 0; i < UNICYCLE_NE; ++i) {
-        v = fabs(s->r_eq[i]);
+        v = unicycle_fabs(s->r_eq[i]);
         m = (v > m || isnan(v)) ? v : m;
     }
     return m;
@@ -277,7 +277,7 @@ static double unicycle_kkt_proxy_eval(const unicycle_solver *s)
 /* The divergence test of the prepared iterate: box, finite multipliers, KKT proxy bound. */
 static int unicycle_iterate_diverged(unicycle_solver *s)
 {
-    double ref = s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0;
+    unicycle_real ref = s->kkt_proxy_ref > UNICYCLE_R(1.0) ? s->kkt_proxy_ref : UNICYCLE_R(1.0);
     if (!unicycle_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0)) {
         return 1;
     }
@@ -292,19 +292,19 @@ static int unicycle_iterate_diverged(unicycle_solver *s)
 /* ---- automatic Levenberg-Marquardt term (algorithm.md section 10) ------------------- */
 
 /* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
-static double unicycle_lm_hessian_scale(const unicycle_solver *s)
+static unicycle_real unicycle_lm_hessian_scale(const unicycle_solver *s)
 {
-    double h = 1e-300, v;
+    unicycle_real h = UNICYCLE_REAL_TINY, v;
     int k, i;
     for (k = 0; k < UNICYCLE_N; ++k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
         for (i = 0; i < UNICYCLE_NW; ++i) {
-            v = fabs(slot->Ht[i + i * UNICYCLE_NW]);
+            v = unicycle_fabs(slot->Ht[i + i * UNICYCLE_NW]);
             h = v > h ? v : h;
         }
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        v = fabs(s->A_N[i + i * UNICYCLE_NX]);
+        v = unicycle_fabs(s->A_N[i + i * UNICYCLE_NX]);
         h = v > h ? v : h;
     }
     return h;
@@ -313,16 +313,16 @@ static double unicycle_lm_hessian_scale(const unicycle_solver *s)
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
  * out) has control pivots above UNICYCLE_LM_PIVOT_REL h. */
-static int unicycle_lm_convex(unicycle_solver *s, double lm)
+static int unicycle_lm_convex(unicycle_solver *s, unicycle_real lm)
 {
-    const double tol = UNICYCLE_LM_PIVOT_REL * s->lm_scale;
-    double *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
-    double v;
+    const unicycle_real tol = UNICYCLE_LM_PIVOT_REL * s->lm_scale;
+    unicycle_real *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
+    unicycle_real v;
     int k, i, j, l;
     for (j = 0; j < UNICYCLE_NX; ++j) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
             P[i + j * UNICYCLE_NX] =
-                (i >= j ? s->A_N[i + j * UNICYCLE_NX] : s->A_N[j + i * UNICYCLE_NX]) + (i == j ? lm : 0.0);
+                (i >= j ? s->A_N[i + j * UNICYCLE_NX] : s->A_N[j + i * UNICYCLE_NX]) + (i == j ? lm : UNICYCLE_R(0.0));
         }
     }
     for (k = UNICYCLE_N - 1; k >= 0; --k) {
@@ -330,7 +330,7 @@ static int unicycle_lm_convex(unicycle_solver *s, double lm)
         /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
         for (j = 0; j < UNICYCLE_NW; ++j) {
             for (i = 0; i < UNICYCLE_NX; ++i) {
-                v = 0.0;
+                v = UNICYCLE_R(0.0);
                 for (l = 0; l < UNICYCLE_NX; ++l) {
                     v += P[i + l * UNICYCLE_NX] * slot->Phit[l + j * UNICYCLE_NX];
                 }
@@ -339,7 +339,8 @@ static int unicycle_lm_convex(unicycle_solver *s, double lm)
         }
         for (j = 0; j < UNICYCLE_NW; ++j) {
             for (i = 0; i < UNICYCLE_NW; ++i) {
-                v = (i >= j ? slot->Ht[i + j * UNICYCLE_NW] : slot->Ht[j + i * UNICYCLE_NW]) + (i == j ? lm : 0.0);
+                v = (i >= j ? slot->Ht[i + j * UNICYCLE_NW] : slot->Ht[j + i * UNICYCLE_NW]) +
+                    (i == j ? lm : UNICYCLE_R(0.0));
                 for (l = 0; l < UNICYCLE_NX; ++l) {
                     v += slot->Phit[l + i * UNICYCLE_NX] * PA[l + j * UNICYCLE_NX];
                 }
@@ -348,14 +349,14 @@ static int unicycle_lm_convex(unicycle_solver *s, double lm)
         }
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = UNICYCLE_NX; j < UNICYCLE_NW; ++j) {
-            double d = Z[j + j * UNICYCLE_NW];
+            unicycle_real d = Z[j + j * UNICYCLE_NW];
             for (l = UNICYCLE_NX; l < j; ++l) {
                 d -= Z[j + l * UNICYCLE_NW] * Z[j + l * UNICYCLE_NW];
             }
             if (!(d > tol)) {
                 return 0;
             }
-            d = sqrt(d);
+            d = unicycle_sqrt(d);
             Z[j + j * UNICYCLE_NW] = d;
             for (i = j + 1; i < UNICYCLE_NW; ++i) {
                 v = Z[i + j * UNICYCLE_NW];
@@ -380,7 +381,7 @@ static int unicycle_lm_convex(unicycle_solver *s, double lm)
         }
         for (j = 0; j < UNICYCLE_NX; ++j) {
             for (i = 0; i < UNICYCLE_NX; ++i) {
-                v = 0.5 * (Z[i + j * UNICYCLE_NW] + Z[j + i * UNICYCLE_NW]);
+                v = UNICYCLE_R(0.5) * (Z[i + j * UNICYCLE_NW] + Z[j + i * UNICYCLE_NW]);
                 for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
                     v -= Z[l + i * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
                 }
@@ -395,11 +396,11 @@ static int unicycle_lm_convex(unicycle_solver *s, double lm)
  * maximum. */
 static void unicycle_lm_raise(unicycle_solver *s)
 {
-    double lo = UNICYCLE_LM_MIN_REL * s->lm_scale, hi = UNICYCLE_LM_MAX_REL * s->lm_scale;
+    unicycle_real lo = UNICYCLE_LM_MIN_REL * s->lm_scale, hi = UNICYCLE_LM_MAX_REL * s->lm_scale;
     if (s->lm_uncapped > s->lm) {
         /* the first raise after the cap of unicycle_lm_measured restores the term it capped */
         s->lm = s->lm_uncapped;
-        s->lm_uncapped = -1.0;
+        s->lm_uncapped = -UNICYCLE_R(1.0);
         return;
     }
     s->lm = s->lm < lo ? lo : s->lm * UNICYCLE_LM_RAISE;
@@ -409,7 +410,7 @@ static void unicycle_lm_raise(unicycle_solver *s)
 /* Raise until the QP is convex on the dynamics or the term is at its maximum. */
 static void unicycle_lm_convexify(unicycle_solver *s)
 {
-    double hi = UNICYCLE_LM_MAX_REL * s->lm_scale;
+    unicycle_real hi = UNICYCLE_LM_MAX_REL * s->lm_scale;
     while (!unicycle_lm_convex(s, s->lm) && s->lm < hi) {
         unicycle_lm_raise(s);
     }
@@ -422,9 +423,9 @@ void unicycle_lm_start(unicycle_solver *s)
         return;
     }
     s->lm_scale = unicycle_lm_hessian_scale(s);
-    s->lm = 0.0;
-    s->lm_kkt_prev = -1.0;
-    s->lm_uncapped = -1.0;
+    s->lm = UNICYCLE_R(0.0);
+    s->lm_kkt_prev = -UNICYCLE_R(1.0);
+    s->lm_uncapped = -UNICYCLE_R(1.0);
     unicycle_lm_convexify(s);
 }
 
@@ -432,14 +433,15 @@ void unicycle_lm_start(unicycle_solver *s)
  * grew UNICYCLE_LM_KKT_GROWTH times, then convex. */
 static void unicycle_lm_prepared(unicycle_solver *s)
 {
-    double floor_ = 1e-8 * (s->kkt_proxy_ref > 1.0 ? s->kkt_proxy_ref : 1.0);
-    double prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
+    unicycle_real floor_ =
+        UNICYCLE_PREC(1e-8, 1e-5) * (s->kkt_proxy_ref > UNICYCLE_R(1.0) ? s->kkt_proxy_ref : UNICYCLE_R(1.0));
+    unicycle_real prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
     if (!s->lm_auto) {
         return;
     }
     s->lm_scale = unicycle_lm_hessian_scale(s);
-    s->lm_uncapped = -1.0;
-    if (s->lm_kkt_prev >= 0.0 && !(s->kkt_proxy <= UNICYCLE_LM_KKT_GROWTH * prev)) {
+    s->lm_uncapped = -UNICYCLE_R(1.0);
+    if (s->lm_kkt_prev >= UNICYCLE_R(0.0) && !(s->kkt_proxy <= UNICYCLE_LM_KKT_GROWTH * prev)) {
         unicycle_lm_raise(s);
     }
     s->lm_kkt_prev = s->kkt_proxy;
@@ -451,20 +453,20 @@ static void unicycle_lm_prepared(unicycle_solver *s)
  * UNICYCLE_LM_MIN_REL h), so that it vanishes where the iterate converges. */
 static void unicycle_lm_measured(unicycle_solver *s)
 {
-    double d = s->kkt_proxy, cap, v;
+    unicycle_real d = s->kkt_proxy, cap, v;
     int i;
-    s->lm_uncapped = -1.0;
+    s->lm_uncapped = -UNICYCLE_R(1.0);
     if (!s->lm_auto) {
         return;
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        v = fabs(s->qp_in.x0[i]) / s->scale_x[i];
+        v = unicycle_fabs(s->qp_in.x0[i]) / s->scale_x[i];
         d = v > d ? v : d;
     }
     cap = UNICYCLE_LM_KKT_REL * s->lm_scale * d * d;
     if (!(s->lm <= cap)) {
         s->lm_uncapped = s->lm;
-        s->lm = cap < UNICYCLE_LM_MIN_REL * s->lm_scale ? 0.0 : cap;
+        s->lm = cap < UNICYCLE_LM_MIN_REL * s->lm_scale ? UNICYCLE_R(0.0) : cap;
     }
 }
 
@@ -477,7 +479,7 @@ static void unicycle_lm_feedback(unicycle_solver *s, int status)
     if (status == UNICYCLE_OK) {
         s->lm *= UNICYCLE_LM_LOWER;
         if (s->lm < UNICYCLE_LM_MIN_REL * s->lm_scale) {
-            s->lm = 0.0;
+            s->lm = UNICYCLE_R(0.0);
         }
     } else if (status == UNICYCLE_ERR_QP || status == UNICYCLE_ERR_DIVERGED) {
         unicycle_lm_raise(s);
@@ -502,11 +504,12 @@ void unicycle_defaults(unicycle_solver *s)
     s->reg_eps = unicycle_default_reg_eps;
     s->cost_hessian = unicycle_default_cost_hessian ? 1 : 0;
     /* a negative generated default: the automatic term (algorithm.md section 10) */
-    s->lm_auto = !(unicycle_default_lm >= 0.0);
-    s->lm = (unicycle_default_lm >= 0.0 && unicycle_default_lm < INFINITY) ? unicycle_default_lm : 0.0;
-    s->lm_scale = 1.0;
-    s->lm_kkt_prev = -1.0;
-    s->lm_uncapped = -1.0;
+    s->lm_auto = !(unicycle_default_lm >= UNICYCLE_R(0.0));
+    s->lm =
+        (unicycle_default_lm >= UNICYCLE_R(0.0) && unicycle_default_lm < INFINITY) ? unicycle_default_lm : UNICYCLE_R(0.0);
+    s->lm_scale = UNICYCLE_R(1.0);
+    s->lm_kkt_prev = -UNICYCLE_R(1.0);
+    s->lm_uncapped = -UNICYCLE_R(1.0);
     unicycle_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = UNICYCLE_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -523,7 +526,7 @@ void unicycle_defaults(unicycle_solver *s)
     s->qp_status = 0;
     s->qp_iterations = 0;
     for (k = 0; k < UNICYCLE_N; ++k) {
-        s->rho[k] = 0.0;
+        s->rho[k] = UNICYCLE_R(0.0);
     }
     s->recovery = 1;
     s->recovery_failures = UNICYCLE_RECOVERY_FAILURES;
@@ -540,7 +543,7 @@ void unicycle_defaults(unicycle_solver *s)
 /* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
 static int unicycle_stage_F(unicycle_solver *s, int k)
 {
-    double l = 0.0;
+    unicycle_real l = UNICYCLE_R(0.0);
     int i;
     if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
@@ -558,7 +561,7 @@ static int unicycle_stage_F(unicycle_solver *s, int k)
 }
 
 /* Regularise a fresh A block (algorithm.md section 5), timed as its own phase. */
-static int unicycle_regularize(unicycle_solver *s, int n, double *A)
+static int unicycle_regularize(unicycle_solver *s, int n, unicycle_real *A)
 {
     double t0;
     int rc;
@@ -623,7 +626,7 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
     return UNICYCLE_OK;
 }
 
-int unicycle_term_grad_checked(unicycle_solver *s, double *gL, double *E, double *r, double *r_eq)
+int unicycle_term_grad_checked(unicycle_solver *s, unicycle_real *gL, unicycle_real *E, unicycle_real *r, unicycle_real *r_eq)
 {
     if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, E, r, r_eq,
                              &s->mem.ev.fun_work) != 0) {
@@ -639,7 +642,7 @@ int unicycle_term_grad_checked(unicycle_solver *s, double *gL, double *E, double
 /* Terminal F: gL_N, E, r, r_eq at the current point. */
 static int unicycle_term_F(unicycle_solver *s)
 {
-    double gL[UNICYCLE_NX], E = 0.0, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
+    unicycle_real gL[UNICYCLE_NX], E = UNICYCLE_R(0.0), r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
     int rc = unicycle_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != UNICYCLE_OK) {
         return rc;
@@ -654,7 +657,7 @@ static int unicycle_term_F(unicycle_solver *s)
 /* Terminal H: A_N (regularised), R, R_eq. */
 static int unicycle_term_H(unicycle_solver *s)
 {
-    double R[UNICYCLE_DIM(UNICYCLE_NR) * UNICYCLE_NX], R_eq[UNICYCLE_DIM(UNICYCLE_NE) * UNICYCLE_NX];
+    unicycle_real R[UNICYCLE_DIM(UNICYCLE_NR) * UNICYCLE_NX], R_eq[UNICYCLE_DIM(UNICYCLE_NE) * UNICYCLE_NX];
     double t0 = unicycle_timer_now(&s->timer);
     int rc;
     rc = unicycle_eval_term_hess(s->hessian, s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
@@ -693,7 +696,7 @@ static void unicycle_assemble(unicycle_solver *s)
         in->C[k] = UNICYCLE_NG > 0 ? slot->Ct : 0;
         /* a_k = F_w,k + Phit_k' lam_{k+1} - Ct_k' mu_g_k - mu_b_k (eq. 12) */
         for (i = 0; i < UNICYCLE_NW; ++i) {
-            double pl = 0.0, cm = 0.0;
+            unicycle_real pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
             for (j = 0; j < UNICYCLE_NX; ++j) {
                 pl += slot->Phit[j + i * UNICYCLE_NX] * s->lam[k + 1][j];
             }
@@ -724,7 +727,7 @@ static void unicycle_assemble(unicycle_solver *s)
     in->Req = UNICYCLE_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        double rm = 0.0, en = 0.0;
+        unicycle_real rm = UNICYCLE_R(0.0), en = UNICYCLE_R(0.0);
         for (j = 0; j < UNICYCLE_NR; ++j) {
             rm += s->R[j + i * UNICYCLE_DIM(UNICYCLE_NR)] * s->mu_r[j];
         }
@@ -751,7 +754,7 @@ static void unicycle_clear_timings(unicycle_solver *s, int first, int last)
 {
     int i;
     for (i = first; i <= last; ++i) {
-        s->timer.t[i] = 0.0;
+        s->timer.t[i] = UNICYCLE_R(0.0);
     }
 }
 
@@ -790,7 +793,7 @@ static int unicycle_init_finish(unicycle_solver *s)
     int k, rc;
     unicycle_ring_reset(&s->ring);
     for (k = 0; k < UNICYCLE_N; ++k) {
-        s->rho[k] = 0.0;
+        s->rho[k] = UNICYCLE_R(0.0);
         s->recomputed[k] = k;
         s->selected[k] = 0;
     }
@@ -811,9 +814,9 @@ static int unicycle_init_finish(unicycle_solver *s)
     return UNICYCLE_OK;
 }
 
-int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
-               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
-               const double *nu)
+int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle_real *x, const unicycle_real *u,
+               const unicycle_real *lam, const unicycle_real *mu_g, const unicycle_real *mu_b, const unicycle_real *mu_bN,
+               const unicycle_real *mu_r, const unicycle_real *nu)
 {
     int k, i, rc;
 
@@ -839,7 +842,7 @@ int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, cons
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
             s->x[k][i] = x ? x[k * UNICYCLE_NX + i] : unicycle_guess_x[k][i];
-            s->lam[k][i] = lam ? lam[k * UNICYCLE_NX + i] : 0.0;
+            s->lam[k][i] = lam ? lam[k * UNICYCLE_NX + i] : UNICYCLE_R(0.0);
         }
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
@@ -847,21 +850,21 @@ int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, cons
             s->u[k][i] = u ? u[k * UNICYCLE_NU + i] : unicycle_guess_u[k][i];
         }
         for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG); ++i) {
-            s->mu_g[k][i] = (mu_g && i < UNICYCLE_NG) ? mu_g[k * UNICYCLE_NG + i] : 0.0;
+            s->mu_g[k][i] = (mu_g && i < UNICYCLE_NG) ? mu_g[k * UNICYCLE_NG + i] : UNICYCLE_R(0.0);
         }
         for (i = 0; i < UNICYCLE_NW; ++i) {
-            s->mu_b[k][i] = mu_b ? mu_b[k * UNICYCLE_NW + i] : 0.0;
+            s->mu_b[k][i] = mu_b ? mu_b[k * UNICYCLE_NW + i] : UNICYCLE_R(0.0);
         }
     }
     unicycle_clear_x0_multiplier(s);
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->mu_bN[i] = mu_bN ? mu_bN[i] : 0.0;
+        s->mu_bN[i] = mu_bN ? mu_bN[i] : UNICYCLE_R(0.0);
     }
     for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NR); ++i) {
-        s->mu_r[i] = (mu_r && i < UNICYCLE_NR) ? mu_r[i] : 0.0;
+        s->mu_r[i] = (mu_r && i < UNICYCLE_NR) ? mu_r[i] : UNICYCLE_R(0.0);
     }
     for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NE); ++i) {
-        s->nu[i] = (nu && i < UNICYCLE_NE) ? nu[i] : 0.0;
+        s->nu[i] = (nu && i < UNICYCLE_NE) ? nu[i] : UNICYCLE_R(0.0);
     }
 
     rc = unicycle_init_finish(s);
@@ -874,7 +877,7 @@ int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, cons
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
-int unicycle_init_nominal(unicycle_solver *s, const double *xhat0)
+int unicycle_init_nominal(unicycle_solver *s, const unicycle_real *xhat0)
 {
 #if UNICYCLE_HAS_NOMINAL
     return unicycle_init(s, xhat0, &unicycle_nominal_x[0][0], &unicycle_nominal_u[0][0], &unicycle_nominal_lam[0][0],
@@ -911,36 +914,36 @@ static void unicycle_qp_warm_point(unicycle_solver *s)
     int k, i;
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : 0.0;
+            w->x[k][i] = k == 0 ? s->qp_in.x0[i] : UNICYCLE_R(0.0);
             w->lam[k][i] = s->lam[k][i];
         }
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_QP_NU1; ++i) {
-            w->u[k][i] = 0.0;
+            w->u[k][i] = UNICYCLE_R(0.0);
         }
         for (i = 0; i < UNICYCLE_NW; ++i) {
             w->mu_b[k][i] = s->mu_b[k][i];
         }
         for (i = 0; i < UNICYCLE_QP_NG1; ++i) {
-            w->mu_g[k][i] = i < UNICYCLE_NG ? s->mu_g[k][i] : 0.0;
+            w->mu_g[k][i] = i < UNICYCLE_NG ? s->mu_g[k][i] : UNICYCLE_R(0.0);
         }
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
         w->mu_bN[i] = s->mu_bN[i];
     }
     for (i = 0; i < UNICYCLE_QP_NR1; ++i) {
-        w->mu_r[i] = i < UNICYCLE_NR ? s->mu_r[i] : 0.0;
+        w->mu_r[i] = i < UNICYCLE_NR ? s->mu_r[i] : UNICYCLE_R(0.0);
     }
     for (i = 0; i < UNICYCLE_QP_NE1; ++i) {
-        w->nu[i] = i < UNICYCLE_NE ? s->nu[i] : 0.0;
+        w->nu[i] = i < UNICYCLE_NE ? s->nu[i] : UNICYCLE_R(0.0);
     }
 }
 
 /* Feedback step 1: the call is refused before the QP when the solver is not initialised,
  * the measurement is not finite or no QP is prepared (the fallback control is returned).
  * Returns UNICYCLE_OK when the QP is to be solved, else the status of the failed call. */
-static int unicycle_feedback_admit(unicycle_solver *s, const double *xhat0, double *u0)
+static int unicycle_feedback_admit(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
     if (!s->initialized) {
         unicycle_fallback_u0(s, u0);
@@ -963,7 +966,7 @@ static int unicycle_feedback_admit(unicycle_solver *s, const double *xhat0, doub
 }
 
 /* Step 2: the measurement enters the QP as the fixed step of x_0. */
-static void unicycle_feedback_measure(unicycle_solver *s, const double *xhat0)
+static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *xhat0)
 {
     int i;
     for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -1107,7 +1110,7 @@ static void unicycle_take_step(unicycle_solver *s)
 
 /* Step 8: a good plan, the fallback of the next failures; the automatic term lowered unless
  * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
-static void unicycle_keep_plan(unicycle_solver *s, double *u0, int lowered)
+static void unicycle_keep_plan(unicycle_solver *s, unicycle_real *u0, int lowered)
 {
     s->n_failed = 0;
     s->plan_age = 0;
@@ -1126,7 +1129,7 @@ static void unicycle_keep_plan(unicycle_solver *s, double *u0, int lowered)
 
 static int unicycle_feedback_recover(unicycle_solver *s, int *retries);
 
-int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
+int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
     double t0;
     int rc, qs, retries;
@@ -1137,7 +1140,7 @@ int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0)
     if (rc != UNICYCLE_OK) {
         return rc;
     }
-    s->timer.t[UNICYCLE_PHASE_FEEDBACK] = 0.0;
+    s->timer.t[UNICYCLE_PHASE_FEEDBACK] = UNICYCLE_R(0.0);
     t0 = unicycle_timer_now(&s->timer);
     unicycle_feedback_measure(s, xhat0);
     qs = unicycle_feedback_qp(s);
@@ -1228,7 +1231,7 @@ static void unicycle_select(unicycle_solver *s, int M)
  * when every node is finite and inside the box. */
 static int unicycle_simulate(unicycle_solver *s, int use_plan)
 {
-    double l = 0.0;
+    unicycle_real l = UNICYCLE_R(0.0);
     int k, j;
     for (k = 0; k < UNICYCLE_N; ++k) {
         j = s->plan_age + k > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->plan_age + k;
@@ -1280,7 +1283,7 @@ static int unicycle_reinit(unicycle_solver *s)
  * the predicted state phi(xhat0, u0) (unicycle_reinit). */
 static int unicycle_recover(unicycle_solver *s, int shifted)
 {
-    double l = 0.0;
+    unicycle_real l = UNICYCLE_R(0.0);
     int i;
     /* x_0: the state predicted for this instant from the last measurement and control; when
      * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
@@ -1294,7 +1297,7 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
         unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        if (!(fabs(s->x[0][i]) <= UNICYCLE_DIVERGENCE_BOX * s->scale_x[i] + fabs(s->xhat0[i]))) {
+        if (!(unicycle_fabs(s->x[0][i]) <= UNICYCLE_DIVERGENCE_BOX * s->scale_x[i] + unicycle_fabs(s->xhat0[i]))) {
             unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
             break;
         }
@@ -1303,7 +1306,7 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
 }
 
 /* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
- * failed after a failed instant; re-initialise from the measured state (x_0 = xhat0) and
+ * failed (not by its iteration limit) or diverged; re-initialise from the measured state (x_0 = xhat0) and
  * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns the QP
  * status (UNICYCLE_QP_INVALID_INPUT when the re-initialisation failed). */
 static int unicycle_feedback_recover(unicycle_solver *s, int *retries)
@@ -1321,7 +1324,7 @@ static int unicycle_feedback_recover(unicycle_solver *s, int *retries)
     s->prepare_due = 1;
     s->shifted = 0;
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->qp_in.x0[i] = 0.0;
+        s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
     qs = unicycle_qp_attempt(s, 0);
@@ -1336,7 +1339,7 @@ static void unicycle_predicted_step(unicycle_solver *s)
 {
     int i, qs;
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->qp_in.x0[i] = 0.0;
+        s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
@@ -1401,7 +1404,7 @@ int unicycle_prepare(unicycle_solver *s)
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
 static int unicycle_prepare_iteration(unicycle_solver *s)
 {
-    double xN_saved[UNICYCLE_NX];
+    unicycle_real xN_saved[UNICYCLE_NX];
     double t0;
     int k, rc, M;
 
@@ -1441,7 +1444,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
     }
     unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
-    s->rho[UNICYCLE_N - 1] = 0.0;
+    s->rho[UNICYCLE_N - 1] = UNICYCLE_R(0.0);
     rc = unicycle_stage_H(s, UNICYCLE_N - 1);
     if (rc == UNICYCLE_OK) {
         t0 = unicycle_timer_now(&s->timer);
@@ -1514,9 +1517,9 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
 
 /* ---- KKT ---------------------------------------------------------------------------- */
 
-int unicycle_kkt_eval(unicycle_solver *s, const double *xhat0, double *kkt4)
+int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *kkt4)
 {
-    double parts[4];
+    unicycle_real parts[4];
     double t0;
     int i, rc;
 
@@ -1527,7 +1530,7 @@ int unicycle_kkt_eval(unicycle_solver *s, const double *xhat0, double *kkt4)
     if (xhat0 && !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
-    s->timer.t[UNICYCLE_PHASE_KKT] = 0.0;
+    s->timer.t[UNICYCLE_PHASE_KKT] = UNICYCLE_R(0.0);
     t0 = unicycle_timer_now(&s->timer);
     rc = unicycle_kkt_measure(s, xhat0 ? xhat0 : s->xhat0, parts);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_KKT, t0);
@@ -1543,9 +1546,9 @@ int unicycle_kkt_eval(unicycle_solver *s, const double *xhat0, double *kkt4)
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
-double unicycle_get_kkt(const unicycle_solver *s)
+unicycle_real unicycle_get_kkt(const unicycle_solver *s)
 {
-    double m = s->kkt[0];
+    unicycle_real m = s->kkt[0];
     int i;
     for (i = 1; i < 4; ++i) {
         m = s->kkt[i] > m ? s->kkt[i] : m;
@@ -1555,22 +1558,22 @@ double unicycle_get_kkt(const unicycle_solver *s)
 
 /* ---- getters ------------------------------------------------------------------------ */
 
-void unicycle_get_x(const unicycle_solver *s, double *x)
+void unicycle_get_x(const unicycle_solver *s, unicycle_real *x)
 {
     unicycle_copy(x, &s->x[0][0], (UNICYCLE_N + 1) * UNICYCLE_NX);
 }
 
-void unicycle_get_u(const unicycle_solver *s, double *u)
+void unicycle_get_u(const unicycle_solver *s, unicycle_real *u)
 {
     unicycle_copy(u, &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
 }
 
-void unicycle_get_lam(const unicycle_solver *s, double *lam)
+void unicycle_get_lam(const unicycle_solver *s, unicycle_real *lam)
 {
     unicycle_copy(lam, &s->lam[0][0], (UNICYCLE_N + 1) * UNICYCLE_NX);
 }
 
-void unicycle_get_mu_g(const unicycle_solver *s, double *mu_g)
+void unicycle_get_mu_g(const unicycle_solver *s, unicycle_real *mu_g)
 {
     int k, i;
     for (k = 0; k < UNICYCLE_N; ++k) {
@@ -1580,27 +1583,27 @@ void unicycle_get_mu_g(const unicycle_solver *s, double *mu_g)
     }
 }
 
-void unicycle_get_mu_b(const unicycle_solver *s, double *mu_b)
+void unicycle_get_mu_b(const unicycle_solver *s, unicycle_real *mu_b)
 {
     unicycle_copy(mu_b, &s->mu_b[0][0], UNICYCLE_N * UNICYCLE_NW);
 }
 
-void unicycle_get_mu_bN(const unicycle_solver *s, double *mu_bN)
+void unicycle_get_mu_bN(const unicycle_solver *s, unicycle_real *mu_bN)
 {
     unicycle_copy(mu_bN, s->mu_bN, UNICYCLE_NX);
 }
 
-void unicycle_get_mu_r(const unicycle_solver *s, double *mu_r)
+void unicycle_get_mu_r(const unicycle_solver *s, unicycle_real *mu_r)
 {
     unicycle_copy(mu_r, s->mu_r, UNICYCLE_NR);
 }
 
-void unicycle_get_nu(const unicycle_solver *s, double *nu)
+void unicycle_get_nu(const unicycle_solver *s, unicycle_real *nu)
 {
     unicycle_copy(nu, s->nu, UNICYCLE_NE);
 }
 
-void unicycle_get_rho(const unicycle_solver *s, double *rho)
+void unicycle_get_rho(const unicycle_solver *s, unicycle_real *rho)
 {
     unicycle_copy(rho, s->rho, UNICYCLE_N);
 }
@@ -1625,7 +1628,7 @@ int unicycle_get_qp_status(const unicycle_solver *s)
 }
 
 /* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
-static double unicycle_side_bound(const double *lo, const double *up, int i, int side)
+static unicycle_real unicycle_side_bound(const unicycle_real *lo, const unicycle_real *up, int i, int side)
 {
     return side > 0 ? up[i] : lo[i];
 }
@@ -1658,7 +1661,7 @@ int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *
     } else {
         row->kind = UNICYCLE_ROW_TERMINAL_EQ;
         row->index = j - UNICYCLE_NX - UNICYCLE_NR;
-        row->bound = 0.0;
+        row->bound = UNICYCLE_R(0.0);
     }
     return 1;
 }
@@ -1668,7 +1671,7 @@ int unicycle_get_flags(const unicycle_solver *s)
     return s->flags;
 }
 
-void unicycle_get_u0(const unicycle_solver *s, double *u0)
+void unicycle_get_u0(const unicycle_solver *s, unicycle_real *u0)
 {
     unicycle_copy(u0, s->u0_out, UNICYCLE_NU);
 }
@@ -1683,12 +1686,12 @@ int unicycle_get_failed_feedbacks(const unicycle_solver *s)
     return s->n_failed;
 }
 
-double unicycle_get_kkt_proxy(const unicycle_solver *s)
+unicycle_real unicycle_get_kkt_proxy(const unicycle_solver *s)
 {
     return s->kkt_proxy;
 }
 
-void unicycle_get_scales(const unicycle_solver *s, double *scale_x, double *scale_u)
+void unicycle_get_scales(const unicycle_solver *s, unicycle_real *scale_x, unicycle_real *scale_u)
 {
     if (scale_x) {
         unicycle_copy(scale_x, s->scale_x, UNICYCLE_NX);
@@ -1720,5 +1723,8 @@ int unicycle_get_ring_head(const unicycle_solver *s)
 
 void unicycle_get_timings(const unicycle_solver *s, double *t)
 {
-    unicycle_copy(t, s->timer.t, UNICYCLE_N_PHASES);
+    int i;
+    for (i = 0; i < UNICYCLE_N_PHASES; ++i) { /* times are double in both precisions */
+        t[i] = s->timer.t[i];
+    }
 }

@@ -29,6 +29,8 @@
 #ifndef UNICYCLE_SOLVER_H
 #define UNICYCLE_SOLVER_H
 
+#include "unicycle_real.h"
+
 #include <stddef.h>
 
 /* UNICYCLE_CDEF_BEGIN */
@@ -56,17 +58,17 @@ const char *unicycle_status_string(int status);
  * the terminal node are computed (regularised) at the guess, ring_head = 0, domega = 0,
  * rho = 0. xhat0 is checked and kept for unicycle_kkt_eval (may be NULL: the default x0).
  * A failed init leaves the solver uninitialised (NaN/Inf input: the iterate untouched). */
-int unicycle_init(unicycle_solver *s, const double *xhat0, const double *x, const double *u, const double *lam,
-               const double *mu_g, const double *mu_b, const double *mu_bN, const double *mu_r,
-               const double *nu);
+int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle_real *x, const unicycle_real *u,
+               const unicycle_real *lam, const unicycle_real *mu_g, const unicycle_real *mu_b, const unicycle_real *mu_bN,
+               const unicycle_real *mu_r, const unicycle_real *nu);
 /* Initialisation from the generated nominal primal-dual guess (the offline NLP solution at
  * the default x0); UNICYCLE_ERR_NO_NOMINAL when the solver was generated without one. */
-int unicycle_init_nominal(unicycle_solver *s, const double *xhat0);
+int unicycle_init_nominal(unicycle_solver *s, const unicycle_real *xhat0);
 
 /* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
  * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: UNICYCLE_ERR_NONFINITE_INPUT,
  * nothing changes. QP failure: UNICYCLE_ERR_QP, no step (unicycle_get_qp_status tells why). */
-int unicycle_feedback(unicycle_solver *s, const double *xhat0, double *u0);
+int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
  * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
  * stage-cost Hessian of the other stages (unicycle_set_cost_hessian), assemble the QP. Must
@@ -86,9 +88,9 @@ int unicycle_prepare(unicycle_solver *s);
  * kkt4 = stat, eq, ineq, comp (may be NULL). Returns a status; the iterate is not changed.
  * The parts are >= 0 and never NaN; a part is +Inf when it overflows (an iterate or
  * multipliers near DBL_MAX, e.g. from an init guess: |mu| * |ub - v| > DBL_MAX). */
-int unicycle_kkt_eval(unicycle_solver *s, const double *xhat0, double *kkt4);
+int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *kkt4);
 /* The largest of the four parts of the last unicycle_kkt_eval (NaN before the first). */
-double unicycle_get_kkt(const unicycle_solver *s);
+unicycle_real unicycle_get_kkt(const unicycle_solver *s);
 
 /* Settings. M: stages re-linearised per iteration besides stage N-1, 0 <= M <= N-1
  * (N-1 is the full RTI). mode: UNICYCLE_MODE_RECEDING or UNICYCLE_MODE_FIXED. hessian:
@@ -101,9 +103,9 @@ int unicycle_set_mode(unicycle_solver *s, int mode);
 int unicycle_get_mode(unicycle_solver *s);
 int unicycle_set_hessian(unicycle_solver *s, int hessian);
 int unicycle_get_hessian(unicycle_solver *s);
-int unicycle_set_regularization(unicycle_solver *s, int regularization, double eps);
+int unicycle_set_regularization(unicycle_solver *s, int regularization, unicycle_real eps);
 int unicycle_get_regularization(unicycle_solver *s);
-double unicycle_get_reg_eps(unicycle_solver *s);
+unicycle_real unicycle_get_reg_eps(unicycle_solver *s);
 /* Stage-cost Hessian (algorithm.md section 4 step 5): fresh = 1 (the default) refreshes the
  * cost part A_l of the Hessian block of every stage in every prepare (only the curvature of
  * dynamics and constraints is partially updated); fresh = 0 is the paper's literal
@@ -116,20 +118,20 @@ int unicycle_get_cost_hessian(unicycle_solver *s);
  * criterion and the fixed point are those of lm = 0). lm finite and >= 0: a fixed term
  * (the automatic one is switched off); default: the OCP file's options(lm=...), else the
  * automatic term. */
-int unicycle_set_levenberg_marquardt(unicycle_solver *s, double lm);
+int unicycle_set_levenberg_marquardt(unicycle_solver *s, unicycle_real lm);
 /* The term of the next QP (fixed, or the current automatic value). */
-double unicycle_get_levenberg_marquardt(unicycle_solver *s);
+unicycle_real unicycle_get_levenberg_marquardt(unicycle_solver *s);
 /* The automatic, scale-aware, adaptive term (docs/algorithm.md section 10): lm is raised
  * until the QP is convex on the dynamics (Riccati pivots positive definite), after a
  * failed feedback and when the KKT proxy grows; lowered after every successful feedback. */
 int unicycle_set_lm_auto(unicycle_solver *s);
 int unicycle_get_lm_auto(unicycle_solver *s);
 /* The Hessian scale of the automatic term (largest diagonal entry of the QP blocks). */
-double unicycle_get_lm_scale(unicycle_solver *s);
+unicycle_real unicycle_get_lm_scale(unicycle_solver *s);
 /* QP tolerance: 0 < tol <= UNICYCLE_QP_TOL_MAX (1e-2); a larger one would let the QP return
  * steps that violate the bounds by that much, so it is refused (UNICYCLE_ERR_INVALID_ARGUMENT). */
-int unicycle_set_qp_tol(unicycle_solver *s, double tol);
-double unicycle_get_qp_tol(unicycle_solver *s);
+int unicycle_set_qp_tol(unicycle_solver *s, unicycle_real tol);
+unicycle_real unicycle_get_qp_tol(unicycle_solver *s);
 int unicycle_set_qp_max_iter(unicycle_solver *s, int max_iter);
 int unicycle_get_qp_max_iter(unicycle_solver *s);
 /* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
@@ -153,22 +155,22 @@ int unicycle_set_qp_warm_start(unicycle_solver *s, int on);
 int unicycle_get_qp_warm_start(unicycle_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
-int unicycle_set_parameters(unicycle_solver *s, const double *p);
-int unicycle_set_parameters_node(unicycle_solver *s, int k, const double *pk);
-void unicycle_get_parameters(unicycle_solver *s, double *p);
+int unicycle_set_parameters(unicycle_solver *s, const unicycle_real *p);
+int unicycle_set_parameters_node(unicycle_solver *s, int k, const unicycle_real *pk);
+void unicycle_get_parameters(unicycle_solver *s, unicycle_real *p);
 
 /* The iterate (shapes in the header comment). */
-void unicycle_get_x(const unicycle_solver *s, double *x);
-void unicycle_get_u(const unicycle_solver *s, double *u);
-void unicycle_get_lam(const unicycle_solver *s, double *lam);
-void unicycle_get_mu_g(const unicycle_solver *s, double *mu_g);
-void unicycle_get_mu_b(const unicycle_solver *s, double *mu_b);
-void unicycle_get_mu_bN(const unicycle_solver *s, double *mu_bN);
-void unicycle_get_mu_r(const unicycle_solver *s, double *mu_r);
-void unicycle_get_nu(const unicycle_solver *s, double *nu);
+void unicycle_get_x(const unicycle_solver *s, unicycle_real *x);
+void unicycle_get_u(const unicycle_solver *s, unicycle_real *u);
+void unicycle_get_lam(const unicycle_solver *s, unicycle_real *lam);
+void unicycle_get_mu_g(const unicycle_solver *s, unicycle_real *mu_g);
+void unicycle_get_mu_b(const unicycle_solver *s, unicycle_real *mu_b);
+void unicycle_get_mu_bN(const unicycle_solver *s, unicycle_real *mu_bN);
+void unicycle_get_mu_r(const unicycle_solver *s, unicycle_real *mu_r);
+void unicycle_get_nu(const unicycle_solver *s, unicycle_real *nu);
 /* rho_k (N) of the last prepare (eq. 16; 0 for stage N-1): >= 0, never NaN; +Inf when the
  * residual or the step of the stage overflows (the stage then ranks first). */
-void unicycle_get_rho(const unicycle_solver *s, double *rho);
+void unicycle_get_rho(const unicycle_solver *s, unicycle_real *rho);
 /* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
  * N-1 included; writes up to N ints and returns their count. */
 int unicycle_get_recomputed(const unicycle_solver *s, int *stages);
@@ -177,14 +179,14 @@ int unicycle_get_qp_iterations(const unicycle_solver *s);
 int unicycle_get_qp_status(const unicycle_solver *s);
 /* A constraint row of the OCP at one stage of the horizon. */
 typedef struct {
-    int stage;    /* 0..N-1; N: the terminal node */
-    int kind;     /* enum unicycle_row_kind */
-    int index;    /* the state or control, or the row among the path rows, the terminal
+    int stage;        /* 0..N-1; N: the terminal node */
+    int kind;         /* enum unicycle_row_kind */
+    int index;        /* the state or control, or the row among the path rows, the terminal
                      inequality rows or the terminal equality rows (each stacked in
                      declaration order) */
-    int side;     /* -1: its lower bound, +1: its upper bound (an equality row: the sign of
+    int side;         /* -1: its lower bound, +1: its upper bound (an equality row: the sign of
                      the certificate's multiplier), 0: lower bound above upper bound */
-    double bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
+    unicycle_real bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
                      function is the declared row minus its value) */
 } unicycle_row_info;
 /* When the last QP was infeasible (unicycle_get_qp_status UNICYCLE_QP_PRIMAL_INFEASIBLE): the row
@@ -198,15 +200,15 @@ int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *
  * of the last good plan), a divergence was detected, the prepare re-initialised. */
 int unicycle_get_flags(const unicycle_solver *s);
 /* The control returned by the last feedback (nu), successful or not; within the bounds. */
-void unicycle_get_u0(const unicycle_solver *s, double *u0);
+void unicycle_get_u0(const unicycle_solver *s, unicycle_real *u0);
 /* Re-initialisations by the automatic recovery since init; consecutive failed feedbacks. */
 int unicycle_get_recoveries(const unicycle_solver *s);
 int unicycle_get_failed_feedbacks(const unicycle_solver *s);
 /* The divergence measure of the last prepare or init: the stationarity and equality parts of
  * the KKT measure at the prepared point (max |F_w,k + [lam_k; 0]|, |phi_k - x_{k+1}|, ...);
  * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
-double unicycle_get_kkt_proxy(const unicycle_solver *s);
-void unicycle_get_scales(const unicycle_solver *s, double *scale_x, double *scale_u);
+unicycle_real unicycle_get_kkt_proxy(const unicycle_solver *s);
+void unicycle_get_scales(const unicycle_solver *s, unicycle_real *scale_x, unicycle_real *scale_u);
 /* 1 when the last feedback's warm-started QP failed and the cold retry ran (the
  * iterations above are then the sum of both solves), else 0. */
 int unicycle_get_qp_cold_retry(const unicycle_solver *s);
@@ -269,22 +271,22 @@ enum unicycle_flag {
 };
 
 /* Safety constants (docs/algorithm.md section 9). */
-#define UNICYCLE_QP_TOL_MAX 1e-2      /* largest accepted QP tolerance */
-#define UNICYCLE_RECOVERY_FAILURES 2  /* default K: consecutive failures before recovery */
-#define UNICYCLE_RECOVERY_FULL_RTI 10 /* successful feedbacks with every block fresh after a recovery */
-#define UNICYCLE_DIVERGENCE_BOX 1e3   /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
-#define UNICYCLE_DIVERGENCE_KKT 1e6   /* kkt proxy <= 1e6 max(1, proxy at the last init) */
+#define UNICYCLE_QP_TOL_MAX UNICYCLE_R(1e-2)    /* largest accepted QP tolerance */
+#define UNICYCLE_RECOVERY_FAILURES 2         /* default K: consecutive failures before recovery */
+#define UNICYCLE_RECOVERY_FULL_RTI 10        /* successful feedbacks with every block fresh after a recovery */
+#define UNICYCLE_DIVERGENCE_BOX UNICYCLE_R(1e3) /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
+#define UNICYCLE_DIVERGENCE_KKT UNICYCLE_R(1e6) /* kkt proxy <= 1e6 max(1, proxy at the last init) */
 
 /* Automatic Levenberg-Marquardt term (docs/algorithm.md section 10), relative to the
  * Hessian scale h = max(1e-300, largest |diagonal entry| of the QP's blocks). */
-#define UNICYCLE_LM_MIN_REL 1e-8    /* smallest nonzero term: 1e-8 h (below: 0) */
-#define UNICYCLE_LM_MAX_REL 1e2     /* largest term: 1e2 h */
-#define UNICYCLE_LM_RAISE 10.0      /* factor of a raise */
-#define UNICYCLE_LM_LOWER 0.1       /* factor after a successful feedback */
-#define UNICYCLE_LM_PIVOT_REL 1e-10 /* Riccati pivots must exceed 1e-10 h */
-#define UNICYCLE_LM_KKT_GROWTH 10.0 /* raise when the KKT proxy grows 10x in one prepare */
-#define UNICYCLE_LM_RETRIES 2       /* QP solves again with lm raised after a failure */
-#define UNICYCLE_LM_KKT_REL 1e-2    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
+#define UNICYCLE_LM_MIN_REL UNICYCLE_R(1e-8)    /* smallest nonzero term: 1e-8 h (below: 0) */
+#define UNICYCLE_LM_MAX_REL UNICYCLE_R(1e2)     /* largest term: 1e2 h */
+#define UNICYCLE_LM_RAISE UNICYCLE_R(10.0)      /* factor of a raise */
+#define UNICYCLE_LM_LOWER UNICYCLE_R(0.1)       /* factor after a successful feedback */
+#define UNICYCLE_LM_PIVOT_REL UNICYCLE_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
+#define UNICYCLE_LM_KKT_GROWTH UNICYCLE_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
+#define UNICYCLE_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
+#define UNICYCLE_LM_KKT_REL UNICYCLE_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
 
 enum unicycle_mode {
     UNICYCLE_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
@@ -317,22 +319,22 @@ typedef union {
         unicycle_fun_work fun_work;
         /* F_new of stages 0..N-2 (prepare step 2), stored as F_old only when prepare
          * succeeds, so a prepare that fails leaves every F_old for its retry */
-        double Fn_w[UNICYCLE_N][UNICYCLE_NW];
-        double Fn_phi[UNICYCLE_N][UNICYCLE_NX];
-        double Fn_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
-        double tmp_A[UNICYCLE_NW * UNICYCLE_NW];
-        double tmp_Al[UNICYCLE_NW * UNICYCLE_NW];
-        double tmp_Phi[UNICYCLE_NX * UNICYCLE_NW];
-        double tmp_C[UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW)];
-        double tmp_gL[UNICYCLE_NW];
-        double tmp_F[UNICYCLE_NW];
-        double tmp_phi[UNICYCLE_NX];
-        double tmp_g[UNICYCLE_DIM(UNICYCLE_NG)];
-        double reg_work[2 * UNICYCLE_NW * UNICYCLE_NW];
+        unicycle_real Fn_w[UNICYCLE_N][UNICYCLE_NW];
+        unicycle_real Fn_phi[UNICYCLE_N][UNICYCLE_NX];
+        unicycle_real Fn_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
+        unicycle_real tmp_A[UNICYCLE_NW * UNICYCLE_NW];
+        unicycle_real tmp_Al[UNICYCLE_NW * UNICYCLE_NW];
+        unicycle_real tmp_Phi[UNICYCLE_NX * UNICYCLE_NW];
+        unicycle_real tmp_C[UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW)];
+        unicycle_real tmp_gL[UNICYCLE_NW];
+        unicycle_real tmp_F[UNICYCLE_NW];
+        unicycle_real tmp_phi[UNICYCLE_NX];
+        unicycle_real tmp_g[UNICYCLE_DIM(UNICYCLE_NG)];
+        unicycle_real reg_work[2 * UNICYCLE_NW * UNICYCLE_NW];
         /* Riccati workspace of the convexity test of the automatic lm */
-        double lm_P[UNICYCLE_NX * UNICYCLE_NX];
-        double lm_PA[UNICYCLE_NX * UNICYCLE_NW];
-        double lm_G[UNICYCLE_NW * UNICYCLE_NW];
+        unicycle_real lm_P[UNICYCLE_NX * UNICYCLE_NX];
+        unicycle_real lm_PA[UNICYCLE_NX * UNICYCLE_NW];
+        unicycle_real lm_G[UNICYCLE_NW * UNICYCLE_NW];
     } ev;
 } unicycle_solver_mem;
 
@@ -349,42 +351,42 @@ struct unicycle_solver {
     int mode;
     int hessian;
     int regularization;
-    double reg_eps;
-    int cost_hessian;   /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
-    double lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
+    unicycle_real reg_eps;
+    int cost_hessian;       /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
+    unicycle_real lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
                            current automatic value) */
-    int lm_auto;        /* 1: automatic term (section 10) */
-    double lm_scale;    /* Hessian scale h of the automatic term */
-    double lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
-    double lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
+    int lm_auto;            /* 1: automatic term (section 10) */
+    unicycle_real lm_scale;    /* Hessian scale h of the automatic term */
+    unicycle_real lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
+    unicycle_real lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     unicycle_qp_settings qp_settings;
 
     /* iterate (algorithm.md section 1) */
-    double x[UNICYCLE_N + 1][UNICYCLE_NX];
-    double u[UNICYCLE_N][UNICYCLE_NU];
-    double lam[UNICYCLE_N + 1][UNICYCLE_NX];
-    double mu_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
-    double mu_b[UNICYCLE_N][UNICYCLE_NW];
-    double mu_bN[UNICYCLE_NX];
-    double mu_r[UNICYCLE_DIM(UNICYCLE_NR)];
-    double nu[UNICYCLE_DIM(UNICYCLE_NE)];
-    double p[UNICYCLE_N + 1][UNICYCLE_DIM(UNICYCLE_NP)];
-    double xhat0[UNICYCLE_NX];
+    unicycle_real x[UNICYCLE_N + 1][UNICYCLE_NX];
+    unicycle_real u[UNICYCLE_N][UNICYCLE_NU];
+    unicycle_real lam[UNICYCLE_N + 1][UNICYCLE_NX];
+    unicycle_real mu_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
+    unicycle_real mu_b[UNICYCLE_N][UNICYCLE_NW];
+    unicycle_real mu_bN[UNICYCLE_NX];
+    unicycle_real mu_r[UNICYCLE_DIM(UNICYCLE_NR)];
+    unicycle_real nu[UNICYCLE_DIM(UNICYCLE_NE)];
+    unicycle_real p[UNICYCLE_N + 1][UNICYCLE_DIM(UNICYCLE_NP)];
+    unicycle_real xhat0[UNICYCLE_NX];
 
     /* stage slots (Ht, A_dyn, Phit, Ct, F_old, domega) and ring_head */
     unicycle_ring ring;
 
     /* terminal node, always fresh: A (regularised), R, R_eq and F = (gL, E, r, r_eq) */
-    double A_N[UNICYCLE_NX * UNICYCLE_NX];
-    double R[UNICYCLE_DIM(UNICYCLE_NR) * UNICYCLE_NX];
-    double R_eq[UNICYCLE_DIM(UNICYCLE_NE) * UNICYCLE_NX];
-    double gL_N[UNICYCLE_NX];
-    double E;
-    double r[UNICYCLE_DIM(UNICYCLE_NR)];
-    double r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
+    unicycle_real A_N[UNICYCLE_NX * UNICYCLE_NX];
+    unicycle_real R[UNICYCLE_DIM(UNICYCLE_NR) * UNICYCLE_NX];
+    unicycle_real R_eq[UNICYCLE_DIM(UNICYCLE_NE) * UNICYCLE_NX];
+    unicycle_real gL_N[UNICYCLE_NX];
+    unicycle_real E;
+    unicycle_real r[UNICYCLE_DIM(UNICYCLE_NR)];
+    unicycle_real r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
 
     /* secant criterion and the recomputed set of the last prepare */
-    double rho[UNICYCLE_N];
+    unicycle_real rho[UNICYCLE_N];
     int recomputed[UNICYCLE_N];
     int n_recomputed;
     unsigned char selected[UNICYCLE_N];
@@ -408,18 +410,18 @@ struct unicycle_solver {
     int recover_pending;   /* the next prepare re-initialises */
     int flags;             /* UNICYCLE_FLAG_* of the last feedback + prepare */
     int n_recoveries;
-    int recovering;                   /* full-RTI prepares left after a recovery */
-    int xhat_fresh;                   /* the last feedback had a finite measurement */
-    int plan_age;                     /* receding shifts since the last good plan */
-    double plan_u[UNICYCLE_N][UNICYCLE_NU]; /* controls of the last good plan */
-    double u0_out[UNICYCLE_NU];          /* the control returned by the last feedback */
-    double scale_x[UNICYCLE_NX];
-    double scale_u[UNICYCLE_NU];
-    double kkt_proxy;
-    double kkt_proxy_ref;
+    int recovering;                       /* full-RTI prepares left after a recovery */
+    int xhat_fresh;                       /* the last feedback had a finite measurement */
+    int plan_age;                         /* receding shifts since the last good plan */
+    unicycle_real plan_u[UNICYCLE_N][UNICYCLE_NU]; /* controls of the last good plan */
+    unicycle_real u0_out[UNICYCLE_NU];          /* the control returned by the last feedback */
+    unicycle_real scale_x[UNICYCLE_NX];
+    unicycle_real scale_u[UNICYCLE_NU];
+    unicycle_real kkt_proxy;
+    unicycle_real kkt_proxy_ref;
 
     /* KKT parts of the last unicycle_kkt_eval: stat, eq, ineq, comp */
-    double kkt[4];
+    unicycle_real kkt[4];
 
     unicycle_timer timer;
 };

@@ -15,7 +15,7 @@ void unicycle_lm_start(unicycle_solver *s);
 /* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
  * UNICYCLE_ERR_FUNCTION when the function fails, UNICYCLE_ERR_NONFINITE_VALUE when a value is not
  * finite, else UNICYCLE_OK. */
-int unicycle_term_grad_checked(unicycle_solver *s, double *gL, double *E, double *r, double *r_eq);
+int unicycle_term_grad_checked(unicycle_solver *s, unicycle_real *gL, unicycle_real *E, unicycle_real *r, unicycle_real *r_eq);
 /* x_0 carries no bound (docs/algorithm.md section 1): it is fixed by the measurement, so
  * the simple bounds of the states apply at nodes 1..N only (stage 0 passes infinite sides
  * to the QP, the KKT measure counts a multiplier on x_0 with its magnitude) and the x part
