@@ -1127,6 +1127,8 @@ static void dopus_keep_plan(dopus_solver *s, dopus_real *u0, int lowered)
     }
 }
 
+static int dopus_feedback_recover(dopus_solver *s, int *retries);
+
 int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
     double t0;
@@ -1145,6 +1147,14 @@ int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
     qs = dopus_feedback_lm_retries(s, qs, &retries);
     s->qp_status = qs;
     rc = dopus_feedback_check_step(s, qs);
+    /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
+     * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
+    if (rc != DOPUS_OK && s->recovery && s->mode == DOPUS_MODE_RECEDING && qs != DOPUS_QP_MAX_ITER &&
+        qs != DOPUS_QP_INVALID_INPUT) {
+        qs = dopus_feedback_recover(s, &retries);
+        s->qp_status = qs;
+        rc = qs == DOPUS_QP_INVALID_INPUT ? DOPUS_ERR_QP : dopus_feedback_check_step(s, qs);
+    }
     if (rc != DOPUS_OK) {
         dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
         return dopus_feedback_failed(s, u0, rc);
@@ -1235,31 +1245,12 @@ static int dopus_simulate(dopus_solver *s, int use_plan)
     return dopus_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
 }
 
-/* The automatic recovery (algorithm.md section 9): re-initialise from a forward simulation of
- * the predicted state phi(xhat0, u0) with the last good plan (else with the OCP file's guess
- * controls; else the guess itself from the predicted state), the multipliers of the iterate
- * (the last plan's, shifted), every block recomputed. */
-static int dopus_recover(dopus_solver *s, int shifted)
+/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
+ * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
+ * of the iterate, every block recomputed (Gauss-Newton when the problem has it). */
+static int dopus_reinit(dopus_solver *s)
 {
-    dopus_real l = DOPUS_R(0.0);
-    int k, i, rc, hessian;
-    /* x_0: the state predicted for this instant from the last measurement and control; when
-     * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
-    if (!s->xhat_fresh) {
-        if (!shifted) {
-            dopus_copy(s->x[0], s->x[1], DOPUS_NX);
-        }
-    } else if (dopus_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
-                                     &s->mem.ev.fun_work) != 0 ||
-               !dopus_lai_vec_finite(DOPUS_NX, s->x[0])) {
-        dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
-    }
-    for (i = 0; i < DOPUS_NX; ++i) {
-        if (!(dopus_fabs(s->x[0][i]) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + dopus_fabs(s->xhat0[i]))) {
-            dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
-            break;
-        }
-    }
+    int k, rc, hessian;
     if (!dopus_simulate(s, 1) && !dopus_simulate(s, 0)) {
         for (k = 1; k <= DOPUS_N; ++k) {
             dopus_copy(s->x[k], dopus_guess_x[k], DOPUS_NX);
@@ -1286,6 +1277,58 @@ static int dopus_recover(dopus_solver *s, int shifted)
     s->recovering = DOPUS_RECOVERY_FULL_RTI;
     s->flags |= DOPUS_FLAG_RECOVERED;
     return DOPUS_OK;
+}
+
+/* The automatic recovery (algorithm.md section 9): re-initialise from a forward simulation of
+ * the predicted state phi(xhat0, u0) (dopus_reinit). */
+static int dopus_recover(dopus_solver *s, int shifted)
+{
+    dopus_real l = DOPUS_R(0.0);
+    int i;
+    /* x_0: the state predicted for this instant from the last measurement and control; when
+     * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
+    if (!s->xhat_fresh) {
+        if (!shifted) {
+            dopus_copy(s->x[0], s->x[1], DOPUS_NX);
+        }
+    } else if (dopus_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+                                     &s->mem.ev.fun_work) != 0 ||
+               !dopus_lai_vec_finite(DOPUS_NX, s->x[0])) {
+        dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        if (!(dopus_fabs(s->x[0][i]) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + dopus_fabs(s->xhat0[i]))) {
+            dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
+            break;
+        }
+    }
+    return dopus_reinit(s);
+}
+
+/* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
+ * failed (not by its iteration limit) or diverged; re-initialise from the measured state (x_0 = xhat0) and
+ * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns the QP
+ * status (DOPUS_QP_INVALID_INPUT when the re-initialisation failed). */
+static int dopus_feedback_recover(dopus_solver *s, int *retries)
+{
+    int i, qs, rc, n_failed = s->n_failed;
+    dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
+    rc = dopus_reinit(s);
+    s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
+    if (rc != DOPUS_OK) {
+        s->prepare_due = 1;
+        s->shifted = 0;
+        return DOPUS_QP_INVALID_INPUT;
+    }
+    /* the measurement's instant: its prepare (with the shift) is still due */
+    s->prepare_due = 1;
+    s->shifted = 0;
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->qp_in.x0[i] = DOPUS_R(0.0);
+    }
+    s->qp_in.hess_shift = s->lm;
+    qs = dopus_qp_attempt(s, 0);
+    return dopus_feedback_lm_retries(s, qs, retries);
 }
 
 /* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the

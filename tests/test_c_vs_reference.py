@@ -346,8 +346,9 @@ def _call(b, name, *args):
 def test_robot_receding_failures_and_recovery(robot_disc, robot_solution, kind):
     """docs/algorithm.md section 9 in both backends: failed instants in the closed loop on
     the discrete model (five without a measurement, or two with the joint velocities
-    (30, -30) whose QP is infeasible; the next two good measurements fail too, from the
-    state the fallback controls left), then good measurements. Every instant the statuses, the flags, the
+    (300, -300) whose QP is infeasible also after the re-initialisation within the
+    feedback), then good measurements: the first of them fails on the iterate re-initialised
+    from the outliers and succeeds after the re-initialisation within the same feedback. Every instant the statuses, the flags, the
     returned control (the fallback of a failed instant), the recovery count and the
     recomputed stages are identical, and the iterates equal to REL_TOL, through the
     predicted steps, the re-initialisations and the Gauss-Newton full-RTI phase after them. As in :func:`step`,
@@ -356,20 +357,27 @@ def test_robot_receding_failures_and_recovery(robot_disc, robot_solution, kind):
     iterations are counted."""
     disc = robot_disc
     c, r, x, tally, p0 = start_pair(disc, robot_solution[0], M=1, mode="receding", hessian="exact", lm=1e-4)
-    seen = set()
+    seen, feedback_recovered = set(), False
     for it in range(40):
         xm = x.copy()
         if 10 <= it < (15 if kind == "nan" else 12):
             if kind == "nan":
                 xm[:] = np.nan
             else:
-                xm[2:4] = [30.0, -30.0]
+                xm[2:4] = [300.0, -300.0]
         qp = r.qp_of_current(xm) if np.all(np.isfinite(xm)) else None
         x_before, u_before = c.x, c.u
         uc, sc = _call(c, "feedback", xm)
         ur, sr = _call(r, "feedback", xm)
         assert sc == sr, (it, sc, sr)
         assert c.flags == r.flags, (it, c.flags, r.flags)
+        if sr == 0 and "recovered" in r.flags:
+            feedback_recovered = True
+            # the feedback re-initialised (section 9) and solved the QP of the new iterate:
+            # the C step from the reference's re-initialised iterate (the same forward
+            # simulation in both backends)
+            qp = r.last_qp
+            x_before, u_before = r.x - r.last_qp_solution["x"], r.u - r.last_qp_solution["u"]
         sol_c = {"x": c.x - x_before, "u": c.u - u_before, "lam": c.lam, "mu_b": c.mu_b, "mu_bN": c.mu_bN,
                  "mu_g": c.mu_g, "mu_r": c.mu_r, "nu": c.nu}
         pc, pr = _call(c, "prepare")[1], _call(r, "prepare")[1]
@@ -397,6 +405,8 @@ def test_robot_receding_failures_and_recovery(robot_disc, robot_solution, kind):
     # measurement whose QP fails twice re-initialises
     assert {"failed", "fallback", "predicted" if kind == "nan" else "recovered"} <= seen, seen
     assert r.recoveries >= (0 if kind == "nan" else 2), r.recoveries
+    if kind == "infeasible":
+        assert feedback_recovered, "no good measurement was recovered within its feedback"
     assert len(tally.ill) <= max(1, tally.n // 5), f"too many ill-determined QPs: {tally}"
     print(f"robot_arm receding, failed instants ({kind}), recovery: {tally}; recoveries {r.recoveries}")
     assert sr == 0

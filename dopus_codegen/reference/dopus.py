@@ -430,26 +430,18 @@ class ReferenceDopus:
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
         self._lm_measured(xhat0)
-        qp = self.qp_of_current(xhat0)
         self._xhat_last = xhat0.copy()
         self._xhat_fresh = True
         # the QP is attempted: a prepare (with its shift) is due, whatever the outcome
         self._prepare_due, self._shifted = True, False
         t1 = time.perf_counter()
-        retries = 0
-        while True:
-            try:
-                sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter)
-                failure = None if self._finite(*(sol[k] for k in FIELDS_QP)) else "nonfinite"
-            except QPError as exc:
-                failure = exc
-            # the automatic term (section 10): a QP not solved is solved again with lm raised
-            if (failure is None or not self.lm_auto or retries >= _SAFETY["LM_RETRIES"]
-                    or not self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale):
-                break
-            self._lm_raise()
-            qp = self.qp_of_current(xhat0)
-            retries += 1
+        sol, failure, retries = self._solve_with_retries(xhat0)
+        if (failure is not None and self.recovery and self.mode == "receding"
+                and getattr(failure, "qp_status", None) not in ("max_iter", "invalid_input")):
+            # the recovery within the feedback (section 9): re-initialise from the measured
+            # state and solve the QP of the re-initialised iterate; not for a QP stopped by
+            # its iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid
+            sol, failure, retries = self._feedback_recover(xhat0)
         if isinstance(failure, QPError):
             exc = failure
             self.qp_status = status_code_qp(exc.qp_status)
@@ -461,14 +453,14 @@ class ReferenceDopus:
         self.qp_status = status_code_qp("solved")
         self.qp_iterations = int(sol.get("iterations", 0))
         t2 = time.perf_counter()
-        if failure is not None:
+        if failure == "nonfinite":
             raise self._feedback_failed("qp", "feedback: the QP solution is not finite", "solved")
-        if not self._box_ok(self.x + sol["x"], self.u + sol["u"]):
+        if failure == "diverged":
             raise self._feedback_failed("diverged", "feedback: the QP step leaves the problem's scale box (or is "
                                         "not finite); no step, the fallback control is returned")
         self._take_step(sol)
         self.qp_iterations = int(sol.get("iterations", 0))
-        self.last_qp = qp
+        self.last_qp = self._last_qp_tried
         self.last_qp_solution = sol
         self._qp_ready = False
         # a good plan: the fallback of the next failures; u0 clipped to the bounds
@@ -485,6 +477,50 @@ class ReferenceDopus:
         t3 = time.perf_counter()
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
         return self.u0.copy()
+
+    def _solve_with_retries(self, xhat0):
+        """The QP of the current iterate for xhat0, solved again with lm raised while it is not
+        solved (section 10). Returns (solution, failure, retries): failure None, a QPError,
+        "nonfinite" or "diverged" (the step fails the box test of section 9)."""
+        qp = self.qp_of_current(xhat0)
+        retries = 0
+        while True:
+            sol = None
+            try:
+                sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter)
+                failure = None if self._finite(*(sol[k] for k in FIELDS_QP)) else "nonfinite"
+            except QPError as exc:
+                failure = exc
+            # the automatic term (section 10): a QP not solved is solved again with lm raised
+            if (failure is None or not self.lm_auto or retries >= _SAFETY["LM_RETRIES"]
+                    or not self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale):
+                break
+            self._lm_raise()
+            qp = self.qp_of_current(xhat0)
+            retries += 1
+        if failure is None and not self._box_ok(self.x + sol["x"], self.u + sol["u"]):
+            failure = "diverged"
+        self._last_qp_tried = qp
+        return sol, failure, retries
+
+    def _feedback_recover(self, xhat0):
+        """Section 9: the QP of a finite measurement failed; re-initialise from the measured
+        state (x_0 = xhat0) and solve the QP of the re-initialised iterate."""
+        x, u = self.x.copy(), self.u.copy()
+        x[0] = xhat0
+        n_failed = self._n_failed
+        try:
+            self._reinit(x, u)
+        except DopusError:
+            self._n_failed = n_failed
+            self._prepare_due, self._shifted = True, False
+            exc = QPError("the re-initialisation failed")
+            exc.qp_status = "invalid_input"
+            return None, exc, 0
+        self._n_failed = n_failed     # still the count of consecutive failed feedbacks
+        # the measurement's instant: its prepare (with the shift) is still due
+        self._prepare_due, self._shifted = True, False
+        return self._solve_with_retries(xhat0)
 
     def _take_step(self, sol) -> None:
         """``domega`` of each stage into its slot, then the full step (eq. 4): primal
@@ -832,7 +868,7 @@ class ReferenceDopus:
         """The automatic recovery of section 9: re-initialise from a forward simulation of the
         predicted state with the last good plan, the iterate's multipliers, every block
         recomputed (Gauss-Newton when the problem has it)."""
-        N, nx = self.N, self.nx
+        nx = self.nx
         x, u = self.x.copy(), self.u.copy()
         if not self._xhat_fresh:
             if not shifted:
@@ -846,6 +882,13 @@ class ReferenceDopus:
         box = _SAFETY["DIVERGENCE_BOX"]
         if not np.all(np.abs(x[0]) <= box * self.scales[0] + np.abs(self._xhat_last)):
             x[0] = self._xhat_last
+        self._reinit(x, u)
+
+    def _reinit(self, x, u) -> None:
+        """The re-initialisation of section 9 from x[0] in place: a forward simulation with
+        the last good plan (else the OCP file's guess controls; else the guess itself), the
+        iterate's multipliers, every block recomputed (Gauss-Newton when the problem has it)."""
+        N, nx = self.N, self.nx
         if not self._simulate(x, u, True) and not self._simulate(x, u, False):
             x[1:] = np.asarray(self.disc.initial_guess.x, float).reshape(N + 1, nx)[1:]
             gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)

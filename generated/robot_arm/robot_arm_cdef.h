@@ -106,7 +106,11 @@ int robot_arm_get_qp_max_iter(robot_arm_solver *s);
  * prepare re-initialises (default ROBOT_ARM_RECOVERY_FAILURES). A detected divergence
  * re-initialises at once. While on, the prepare after a failed feedback first takes the step
  * of that instant's QP for the state the iterate predicts (ROBOT_ARM_FLAG_PREDICTED): the plan of
- * the next fallbacks stays current; after a non-finite measurement it clears the count. */
+ * the next fallbacks stays current; after a non-finite measurement it clears the count. A
+ * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
+ * re-initialises from that measurement and solves the new QP within the same call before it
+ * gives up (ROBOT_ARM_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
+ * retries). */
 int robot_arm_set_recovery(robot_arm_solver *s, int on, int max_failures);
 int robot_arm_get_recovery(robot_arm_solver *s);
 int robot_arm_get_recovery_failures(robot_arm_solver *s);

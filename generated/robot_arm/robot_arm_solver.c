@@ -1127,6 +1127,8 @@ static void robot_arm_keep_plan(robot_arm_solver *s, robot_arm_real *u0, int low
     }
 }
 
+static int robot_arm_feedback_recover(robot_arm_solver *s, int *retries);
+
 int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
     double t0;
@@ -1145,6 +1147,14 @@ int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
     qs = robot_arm_feedback_lm_retries(s, qs, &retries);
     s->qp_status = qs;
     rc = robot_arm_feedback_check_step(s, qs);
+    /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
+     * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
+    if (rc != ROBOT_ARM_OK && s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING && qs != ROBOT_ARM_QP_MAX_ITER &&
+        qs != ROBOT_ARM_QP_INVALID_INPUT) {
+        qs = robot_arm_feedback_recover(s, &retries);
+        s->qp_status = qs;
+        rc = qs == ROBOT_ARM_QP_INVALID_INPUT ? ROBOT_ARM_ERR_QP : robot_arm_feedback_check_step(s, qs);
+    }
     if (rc != ROBOT_ARM_OK) {
         robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
         return robot_arm_feedback_failed(s, u0, rc);
@@ -1235,31 +1245,12 @@ static int robot_arm_simulate(robot_arm_solver *s, int use_plan)
     return robot_arm_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
 }
 
-/* The automatic recovery (algorithm.md section 9): re-initialise from a forward simulation of
- * the predicted state phi(xhat0, u0) with the last good plan (else with the OCP file's guess
- * controls; else the guess itself from the predicted state), the multipliers of the iterate
- * (the last plan's, shifted), every block recomputed. */
-static int robot_arm_recover(robot_arm_solver *s, int shifted)
+/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
+ * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
+ * of the iterate, every block recomputed (Gauss-Newton when the problem has it). */
+static int robot_arm_reinit(robot_arm_solver *s)
 {
-    robot_arm_real l = ROBOT_ARM_R(0.0);
-    int k, i, rc, hessian;
-    /* x_0: the state predicted for this instant from the last measurement and control; when
-     * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
-    if (!s->xhat_fresh) {
-        if (!shifted) {
-            robot_arm_copy(s->x[0], s->x[1], ROBOT_ARM_NX);
-        }
-    } else if (robot_arm_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
-                                     &s->mem.ev.fun_work) != 0 ||
-               !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->x[0])) {
-        robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
-    }
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        if (!(robot_arm_fabs(s->x[0][i]) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_x[i] + robot_arm_fabs(s->xhat0[i]))) {
-            robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
-            break;
-        }
-    }
+    int k, rc, hessian;
     if (!robot_arm_simulate(s, 1) && !robot_arm_simulate(s, 0)) {
         for (k = 1; k <= ROBOT_ARM_N; ++k) {
             robot_arm_copy(s->x[k], robot_arm_guess_x[k], ROBOT_ARM_NX);
@@ -1286,6 +1277,58 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
     s->recovering = ROBOT_ARM_RECOVERY_FULL_RTI;
     s->flags |= ROBOT_ARM_FLAG_RECOVERED;
     return ROBOT_ARM_OK;
+}
+
+/* The automatic recovery (algorithm.md section 9): re-initialise from a forward simulation of
+ * the predicted state phi(xhat0, u0) (robot_arm_reinit). */
+static int robot_arm_recover(robot_arm_solver *s, int shifted)
+{
+    robot_arm_real l = ROBOT_ARM_R(0.0);
+    int i;
+    /* x_0: the state predicted for this instant from the last measurement and control; when
+     * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
+    if (!s->xhat_fresh) {
+        if (!shifted) {
+            robot_arm_copy(s->x[0], s->x[1], ROBOT_ARM_NX);
+        }
+    } else if (robot_arm_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+                                     &s->mem.ev.fun_work) != 0 ||
+               !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->x[0])) {
+        robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        if (!(robot_arm_fabs(s->x[0][i]) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_x[i] + robot_arm_fabs(s->xhat0[i]))) {
+            robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
+            break;
+        }
+    }
+    return robot_arm_reinit(s);
+}
+
+/* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
+ * failed (not by its iteration limit) or diverged; re-initialise from the measured state (x_0 = xhat0) and
+ * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns the QP
+ * status (ROBOT_ARM_QP_INVALID_INPUT when the re-initialisation failed). */
+static int robot_arm_feedback_recover(robot_arm_solver *s, int *retries)
+{
+    int i, qs, rc, n_failed = s->n_failed;
+    robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
+    rc = robot_arm_reinit(s);
+    s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
+    if (rc != ROBOT_ARM_OK) {
+        s->prepare_due = 1;
+        s->shifted = 0;
+        return ROBOT_ARM_QP_INVALID_INPUT;
+    }
+    /* the measurement's instant: its prepare (with the shift) is still due */
+    s->prepare_due = 1;
+    s->shifted = 0;
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
+    }
+    s->qp_in.hess_shift = s->lm;
+    qs = robot_arm_qp_attempt(s, 0);
+    return robot_arm_feedback_lm_retries(s, qs, retries);
 }
 
 /* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the

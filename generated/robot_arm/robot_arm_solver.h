@@ -139,7 +139,11 @@ int robot_arm_get_qp_max_iter(robot_arm_solver *s);
  * prepare re-initialises (default ROBOT_ARM_RECOVERY_FAILURES). A detected divergence
  * re-initialises at once. While on, the prepare after a failed feedback first takes the step
  * of that instant's QP for the state the iterate predicts (ROBOT_ARM_FLAG_PREDICTED): the plan of
- * the next fallbacks stays current; after a non-finite measurement it clears the count. */
+ * the next fallbacks stays current; after a non-finite measurement it clears the count. A
+ * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
+ * re-initialises from that measurement and solves the new QP within the same call before it
+ * gives up (ROBOT_ARM_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
+ * retries). */
 int robot_arm_set_recovery(robot_arm_solver *s, int on, int max_failures);
 int robot_arm_get_recovery(robot_arm_solver *s);
 int robot_arm_get_recovery_failures(robot_arm_solver *s);
@@ -262,7 +266,7 @@ enum robot_arm_flag {
     ROBOT_ARM_FLAG_U0_CLIPPED = 1, /* u0 was outside the control bounds and was clipped */
     ROBOT_ARM_FLAG_FALLBACK = 2,   /* feedback failed: u0 is the next control of the last good plan */
     ROBOT_ARM_FLAG_DIVERGED = 4,   /* the step or the prepared iterate failed the divergence test */
-    ROBOT_ARM_FLAG_RECOVERED = 8,  /* prepare re-initialised (automatic recovery) */
+    ROBOT_ARM_FLAG_RECOVERED = 8,  /* prepare or feedback re-initialised (automatic recovery) */
     ROBOT_ARM_FLAG_PREDICTED = 16  /* prepare took the step of the QP for the predicted state */
 };
 

@@ -106,7 +106,11 @@ int unicycle_get_qp_max_iter(unicycle_solver *s);
  * prepare re-initialises (default UNICYCLE_RECOVERY_FAILURES). A detected divergence
  * re-initialises at once. While on, the prepare after a failed feedback first takes the step
  * of that instant's QP for the state the iterate predicts (UNICYCLE_FLAG_PREDICTED): the plan of
- * the next fallbacks stays current; after a non-finite measurement it clears the count. */
+ * the next fallbacks stays current; after a non-finite measurement it clears the count. A
+ * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
+ * re-initialises from that measurement and solves the new QP within the same call before it
+ * gives up (UNICYCLE_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
+ * retries). */
 int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
 int unicycle_get_recovery(unicycle_solver *s);
 int unicycle_get_recovery_failures(unicycle_solver *s);

@@ -1127,6 +1127,8 @@ static void unicycle_keep_plan(unicycle_solver *s, unicycle_real *u0, int lowere
     }
 }
 
+static int unicycle_feedback_recover(unicycle_solver *s, int *retries);
+
 int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
     double t0;
@@ -1145,6 +1147,14 @@ int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
     qs = unicycle_feedback_lm_retries(s, qs, &retries);
     s->qp_status = qs;
     rc = unicycle_feedback_check_step(s, qs);
+    /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
+     * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
+    if (rc != UNICYCLE_OK && s->recovery && s->mode == UNICYCLE_MODE_RECEDING && qs != UNICYCLE_QP_MAX_ITER &&
+        qs != UNICYCLE_QP_INVALID_INPUT) {
+        qs = unicycle_feedback_recover(s, &retries);
+        s->qp_status = qs;
+        rc = qs == UNICYCLE_QP_INVALID_INPUT ? UNICYCLE_ERR_QP : unicycle_feedback_check_step(s, qs);
+    }
     if (rc != UNICYCLE_OK) {
         unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
         return unicycle_feedback_failed(s, u0, rc);
@@ -1235,31 +1245,12 @@ static int unicycle_simulate(unicycle_solver *s, int use_plan)
     return unicycle_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
 }
 
-/* The automatic recovery (algorithm.md section 9): re-initialise from a forward simulation of
- * the predicted state phi(xhat0, u0) with the last good plan (else with the OCP file's guess
- * controls; else the guess itself from the predicted state), the multipliers of the iterate
- * (the last plan's, shifted), every block recomputed. */
-static int unicycle_recover(unicycle_solver *s, int shifted)
+/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
+ * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
+ * of the iterate, every block recomputed (Gauss-Newton when the problem has it). */
+static int unicycle_reinit(unicycle_solver *s)
 {
-    unicycle_real l = UNICYCLE_R(0.0);
-    int k, i, rc, hessian;
-    /* x_0: the state predicted for this instant from the last measurement and control; when
-     * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
-    if (!s->xhat_fresh) {
-        if (!shifted) {
-            unicycle_copy(s->x[0], s->x[1], UNICYCLE_NX);
-        }
-    } else if (unicycle_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
-                                     &s->mem.ev.fun_work) != 0 ||
-               !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[0])) {
-        unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
-    }
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        if (!(unicycle_fabs(s->x[0][i]) <= UNICYCLE_DIVERGENCE_BOX * s->scale_x[i] + unicycle_fabs(s->xhat0[i]))) {
-            unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
-            break;
-        }
-    }
+    int k, rc, hessian;
     if (!unicycle_simulate(s, 1) && !unicycle_simulate(s, 0)) {
         for (k = 1; k <= UNICYCLE_N; ++k) {
             unicycle_copy(s->x[k], unicycle_guess_x[k], UNICYCLE_NX);
@@ -1286,6 +1277,58 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
     s->recovering = UNICYCLE_RECOVERY_FULL_RTI;
     s->flags |= UNICYCLE_FLAG_RECOVERED;
     return UNICYCLE_OK;
+}
+
+/* The automatic recovery (algorithm.md section 9): re-initialise from a forward simulation of
+ * the predicted state phi(xhat0, u0) (unicycle_reinit). */
+static int unicycle_recover(unicycle_solver *s, int shifted)
+{
+    unicycle_real l = UNICYCLE_R(0.0);
+    int i;
+    /* x_0: the state predicted for this instant from the last measurement and control; when
+     * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
+    if (!s->xhat_fresh) {
+        if (!shifted) {
+            unicycle_copy(s->x[0], s->x[1], UNICYCLE_NX);
+        }
+    } else if (unicycle_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+                                     &s->mem.ev.fun_work) != 0 ||
+               !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[0])) {
+        unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        if (!(unicycle_fabs(s->x[0][i]) <= UNICYCLE_DIVERGENCE_BOX * s->scale_x[i] + unicycle_fabs(s->xhat0[i]))) {
+            unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
+            break;
+        }
+    }
+    return unicycle_reinit(s);
+}
+
+/* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
+ * failed (not by its iteration limit) or diverged; re-initialise from the measured state (x_0 = xhat0) and
+ * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns the QP
+ * status (UNICYCLE_QP_INVALID_INPUT when the re-initialisation failed). */
+static int unicycle_feedback_recover(unicycle_solver *s, int *retries)
+{
+    int i, qs, rc, n_failed = s->n_failed;
+    unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
+    rc = unicycle_reinit(s);
+    s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
+    if (rc != UNICYCLE_OK) {
+        s->prepare_due = 1;
+        s->shifted = 0;
+        return UNICYCLE_QP_INVALID_INPUT;
+    }
+    /* the measurement's instant: its prepare (with the shift) is still due */
+    s->prepare_due = 1;
+    s->shifted = 0;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->qp_in.x0[i] = UNICYCLE_R(0.0);
+    }
+    s->qp_in.hess_shift = s->lm;
+    qs = unicycle_qp_attempt(s, 0);
+    return unicycle_feedback_lm_retries(s, qs, retries);
 }
 
 /* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the

@@ -139,7 +139,11 @@ int unicycle_get_qp_max_iter(unicycle_solver *s);
  * prepare re-initialises (default UNICYCLE_RECOVERY_FAILURES). A detected divergence
  * re-initialises at once. While on, the prepare after a failed feedback first takes the step
  * of that instant's QP for the state the iterate predicts (UNICYCLE_FLAG_PREDICTED): the plan of
- * the next fallbacks stays current; after a non-finite measurement it clears the count. */
+ * the next fallbacks stays current; after a non-finite measurement it clears the count. A
+ * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
+ * re-initialises from that measurement and solves the new QP within the same call before it
+ * gives up (UNICYCLE_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
+ * retries). */
 int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
 int unicycle_get_recovery(unicycle_solver *s);
 int unicycle_get_recovery_failures(unicycle_solver *s);
@@ -262,7 +266,7 @@ enum unicycle_flag {
     UNICYCLE_FLAG_U0_CLIPPED = 1, /* u0 was outside the control bounds and was clipped */
     UNICYCLE_FLAG_FALLBACK = 2,   /* feedback failed: u0 is the next control of the last good plan */
     UNICYCLE_FLAG_DIVERGED = 4,   /* the step or the prepared iterate failed the divergence test */
-    UNICYCLE_FLAG_RECOVERED = 8,  /* prepare re-initialised (automatic recovery) */
+    UNICYCLE_FLAG_RECOVERED = 8,  /* prepare or feedback re-initialised (automatic recovery) */
     UNICYCLE_FLAG_PREDICTED = 16  /* prepare took the step of the QP for the predicted state */
 };
 
