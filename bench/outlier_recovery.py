@@ -19,29 +19,12 @@ import numpy as np
 
 from dopus_codegen import build_functions, load_ocp
 from dopus_codegen.reference.offline import solve_ocp
-from dopus_codegen.runtime.solver import CSolver, DopusError
+from dopus_codegen.runtime.solver import CSolver
+from dopus_codegen.studies.loops import run_instants
 from dopus_codegen.studies.plant import Plant
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 N_AFTER = 200
-
-
-def loop(s, plant, x, n, bad=None):
-    xs, status = [], []
-    for i in range(n):
-        xm = x.copy() if bad is None else bad(x)
-        try:
-            u0, st = s.feedback(xm), 0
-        except DopusError as err:
-            u0, st = err.u0, err.status
-        x = plant.step(x, u0, np.zeros(0))
-        try:
-            s.prepare()
-        except DopusError as err:
-            st = st or err.status
-        xs.append(x.copy())
-        status.append(st)
-    return np.array(xs), status, x
 
 
 def tracking(xs):
@@ -71,12 +54,12 @@ def main(ks):
         s = CSolver(arm, lm=None)
         x = np.asarray(arm.x0, float).copy()
         s.init(x, guess)
-        _, _, x = loop(s, plant, x, 50)
-        _, st_bad, x = loop(s, plant, x, k, bad=outlier)
-        xs_rec, st_rec, _ = loop(s, plant, x.copy(), N_AFTER)
+        _, _, x = run_instants(s, plant, x, 50)
+        _, st_bad, x = run_instants(s, plant, x, k, measure=lambda i, x: outlier(x))
+        xs_rec, st_rec, _ = run_instants(s, plant, x.copy(), N_AFTER)
         fresh = CSolver(arm, lm=None)
         fresh.init(x, solve_ocp(arm, x)[0])
-        xs_fresh, st_fresh, _ = loop(fresh, plant, x.copy(), N_AFTER)
+        xs_fresh, st_fresh, _ = run_instants(fresh, plant, x.copy(), N_AFTER)
         row = {"K": k, "failed_during": sum(v != 0 for v in st_bad), "failed_after": sum(v != 0 for v in st_rec),
                "recoveries": s.recoveries, "on_path": on_path(tracking(xs_rec)),
                "on_path_fresh": on_path(tracking(xs_fresh)), "fresh_failed": sum(v != 0 for v in st_fresh)}

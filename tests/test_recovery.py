@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from dopus_codegen.runtime.solver import CSolver, DopusError
+from dopus_codegen.studies.loops import run_instants
 from dopus_codegen.studies.plant import Plant
 
 STATUS_INVALID_ARGUMENT = 5
@@ -98,23 +99,21 @@ def test_no_returned_u0_leaves_the_bounds(arm, robot_solution):
 
 
 def _loop(s, plant, x, n, bad=None):
-    """n instants of the closed loop; bad(i, x) -> measurement (None: the state). Returns the
-    states, the statuses and the final state."""
-    xs, status = [], []
-    for i in range(n):
-        xm = x.copy() if bad is None else bad(i, x)
-        try:
-            u0, st = s.feedback(xm), 0
-        except DopusError as err:
-            u0, st = err.u0, err.status
-        x = plant.step(x, u0, np.zeros(0))
-        try:
-            s.prepare()
-        except DopusError as err:
-            st = st or err.status
-        xs.append(x.copy())
-        status.append(st)
-    return np.array(xs), status, x
+    """n instants of the closed loop; bad(i, x) -> measurement (None: the state)."""
+    return run_instants(s, plant, x, n, measure=bad)
+
+
+def _settled(arm, robot_solution):
+    """The generated defaults (exact Hessian, the OCP's lm) at IPOPT's solution, after 50
+    instants of the nominal closed loop (none failed): the solver, the plant, the state."""
+    guess, _ = robot_solution
+    plant = Plant(arm.ode, arm.dt, 0, reltol=1e-10, abstol=1e-10)
+    s = CSolver(arm, lm=None)
+    x = np.asarray(arm.x0, float).copy()
+    s.init(x, guess)
+    _, st, x = _loop(s, plant, x, 50)
+    assert not any(st)
+    return s, plant, x
 
 
 def _tracking(xs):
@@ -140,13 +139,7 @@ def test_back_on_the_fresh_trajectory_after_failed_instants(arm, robot_solution,
     failed instants keep the plan current by predicted steps (docs/algorithm.md section 9)."""
     from dopus_codegen.reference.offline import solve_ocp
 
-    guess, _ = robot_solution
-    plant = Plant(arm.ode, arm.dt, 0, reltol=1e-10, abstol=1e-10)
-    s = CSolver(arm, lm=None)          # the generated defaults (exact Hessian, the OCP's lm)
-    x = np.asarray(arm.x0, float).copy()
-    s.init(x, guess)
-    _, st, x = _loop(s, plant, x, 50)
-    assert not any(st)
+    s, plant, x = _settled(arm, robot_solution)
     _, st, x = _loop(s, plant, x, n_failed, bad=lambda i, x: np.full_like(x, np.nan))
     assert all(v != 0 for v in st)
     assert "predicted" in s.flags
@@ -228,13 +221,7 @@ def test_no_failure_after_finite_outliers(arm, robot_solution, n_outliers):
     own loop from the same plant state."""
     from dopus_codegen.reference.offline import solve_ocp
 
-    guess, _ = robot_solution
-    plant = Plant(arm.ode, arm.dt, 0, reltol=1e-10, abstol=1e-10)
-    s = CSolver(arm, lm=None)          # the generated defaults (exact Hessian, the OCP's lm)
-    x = np.asarray(arm.x0, float).copy()
-    s.init(x, guess)
-    _, st, x = _loop(s, plant, x, 50)
-    assert not any(st)
+    s, plant, x = _settled(arm, robot_solution)
 
     def outlier(i, x):
         xm = x.copy()
