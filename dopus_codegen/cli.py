@@ -390,6 +390,7 @@ def bench(ocp_file, m_list, against, json_out, plot_out, reps, settle, steps, kk
     KKT 1e-6 and 1e-8 per M. Progress goes to stderr, the table to stdout.
     """
     from .problem.ocp import OcpError
+    from .settings import SettingError
     from .studies.bench import BenchError, format_scaling, format_table, run_bench, run_scaling
 
     cli = dict(hessian=hessian, regularization=regularization, reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm)
@@ -408,7 +409,9 @@ def bench(ocp_file, m_list, against, json_out, plot_out, reps, settle, steps, kk
         res = run_bench(ocp_file, m_list=m_list, against=None if against == "none" else against, json_out=json_out,
                         plot_out=plot_out, reps=reps, steps=steps, settle=settle, kkt_iters=kkt_iters,
                         cond_list=cond_list, quick=quick, work=work, echo=echo, **cli)
-    except (OcpError, BenchError, ValueError) as exc:
+    except (OcpError, SettingError) as exc:
+        raise BadInput(str(exc)) from None
+    except (BenchError, ValueError) as exc:
         raise click.ClickException(str(exc)) from None
     click.echo(format_table(res))
 

@@ -137,6 +137,9 @@ OCP_CASES = [
      r"(?i)nan"),
     ("horizon-too-short", variant(("N=5", "N=1")), ["generate"], r"N"),
     ("negative-dt", variant(("dt=0.05", "dt=-0.05")), ["generate"], r"dt"),
+    ("bench-float-build", variant(("    return ocp", "    ocp.options(real='float')\n    return ocp")),
+     ["bench", "--quick"], r"dopus-gen bench times double builds only; the OCP file declares "
+     r"options\(real='float'\)"),
     ("option-unknown-value", variant(("    return ocp", "    ocp.options(hessian='gn')\n    return ocp")),
      ["generate"], r"options: hessian must be 'exact' or 'gauss-newton', got 'gn'"),
     ("units-unknown-name", variant(('signals={"err": x[0]})', 'signals={"err": x[0]}, units={"speed": "m/s"})')),

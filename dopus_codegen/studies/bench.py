@@ -233,7 +233,13 @@ def _acados_plan(ocp, prob, values, cond_list, quick, work: Path, echo) -> dict:
 
 
 def _resolve_settings(ocp, cli: dict):
-    values, sources = st.resolve(ocp.declared_options(), {k: v for k, v in cli.items() if v is not None})
+    declared = ocp.declared_options()
+    if declared.get("real", "double") != "double":
+        # the timing process exchanges doubles with the libraries it loads
+        raise st.SettingError(f"dopus-gen bench times double builds only; the OCP file declares "
+                         f"options(real={declared['real']!r}) (time a float build on its target with "
+                         f"dopus-gen firmware-report, or compare it in closed loop with dopus-gen sil --real)")
+    values, sources = st.resolve(declared, {k: v for k, v in cli.items() if v is not None})
     return values, sources
 
 
