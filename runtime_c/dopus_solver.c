@@ -1315,14 +1315,12 @@ static int dopus_feedback_recover(dopus_solver *s, int *retries)
     dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
     rc = dopus_reinit(s);
     s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
-    if (rc != DOPUS_OK) {
-        s->prepare_due = 1;
-        s->shifted = 0;
-        return DOPUS_QP_INVALID_INPUT;
-    }
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
     s->shifted = 0;
+    if (rc != DOPUS_OK) {
+        return DOPUS_QP_INVALID_INPUT;
+    }
     for (i = 0; i < DOPUS_NX; ++i) {
         s->qp_in.x0[i] = DOPUS_R(0.0);
     }

@@ -571,6 +571,16 @@ def _stage_rows(q: dict, data_rows: bool = False):
         yield N, nx + nr + i, a, q["req"][i], q["req"][i]
 
 
+def _shaped(qp: dict) -> dict:
+    """A copy of the QP dict with integer sizes and arrays in their shapes."""
+    q = dict(qp)
+    for k in _INT_KEYS:
+        q[k] = int(q[k])
+    for key, shape in _shapes(**{k: q[k] for k in _INT_KEYS}).items():
+        q[key] = np.asarray(q[key], dtype=float).reshape(shape)
+    return q
+
+
 def qp_infeasible_row(qp: dict):
     """The row of an infeasible QP that its infeasibility certificate weighs most, by the
     rule of the C QP solver (dopus_qp_infeasible_row): ``(stage, j, side)`` with ``j`` the
@@ -590,11 +600,7 @@ def qp_infeasible_row(qp: dict):
     As in the C solver, the path rows of stage 0 that do not involve ``u_0`` take no part;
     only when the other rows are feasible (this QP keeps those rows, the C solver's drops
     them) is the certificate sought with them."""
-    q = dict(qp)
-    for k in _INT_KEYS:
-        q[k] = int(q[k])
-    for key, shape in _shapes(**{k: q[k] for k in _INT_KEYS}).items():
-        q[key] = np.asarray(q[key], dtype=float).reshape(shape)
+    q = _shaped(qp)
     row = _certificate_row(q, data_rows=False)
     return row if row is not None else _certificate_row(q, data_rows=True)
 
@@ -606,11 +612,7 @@ def qp_row_in_certificate(qp: dict, row) -> float:
     thousandth of the largest); 0 when no certificate uses it. A QP with several
     infeasible subsets of rows has several valid certificates, and a solver may single out
     any of them: a row named by a solver is valid when this is positive."""
-    q = dict(qp)
-    for k in _INT_KEYS:
-        q[k] = int(q[k])
-    for key, shape in _shapes(**{k: q[k] for k in _INT_KEYS}).items():
-        q[key] = np.asarray(q[key], dtype=float).reshape(shape)
+    q = _shaped(qp)
     best = 0.0
     for data_rows in (False, True):
         share = _certificate_row(q, data_rows, weigh=tuple(row))

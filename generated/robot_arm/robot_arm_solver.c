@@ -1315,14 +1315,12 @@ static int robot_arm_feedback_recover(robot_arm_solver *s, int *retries)
     robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
     rc = robot_arm_reinit(s);
     s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
-    if (rc != ROBOT_ARM_OK) {
-        s->prepare_due = 1;
-        s->shifted = 0;
-        return ROBOT_ARM_QP_INVALID_INPUT;
-    }
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
     s->shifted = 0;
+    if (rc != ROBOT_ARM_OK) {
+        return ROBOT_ARM_QP_INVALID_INPUT;
+    }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }

@@ -1315,14 +1315,12 @@ static int unicycle_feedback_recover(unicycle_solver *s, int *retries)
     unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
     rc = unicycle_reinit(s);
     s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
-    if (rc != UNICYCLE_OK) {
-        s->prepare_due = 1;
-        s->shifted = 0;
-        return UNICYCLE_QP_INVALID_INPUT;
-    }
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
     s->shifted = 0;
+    if (rc != UNICYCLE_OK) {
+        return UNICYCLE_QP_INVALID_INPUT;
+    }
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
