@@ -14,13 +14,14 @@ CasADi file with `-std=c99 -Wall`. Nothing of the old folder is changed and noth
 relaxed. Today's `dopus-gen build` (and the Python handle, which builds through it) cannot
 build such a folder: since f44b878 it compiles the CasADi file with the strict flags too
 (the generator now marks CasADi's unused parameters), and c2a9b53's CasADi file has 44
-unused parameters (`iw`, `w`, `mem`), errors under -Wextra -Werror. Today's handle cannot
-load it either: c2a9b53 declares `robot_arm_get_dims(int *dims)` (ten ints), the handle
+unused parameters (`iw`, `w`, `mem` of its 11 function bodies, `mem` of the 11 `*_release`),
+errors under -Wextra -Werror (-Wunused-parameter). Today's handle cannot load it either:
+c2a9b53 declares `robot_arm_get_dims(int *dims)` (ten ints), the handle
 asks for the `robot_arm_dims` struct of 65d976d (the same ten ints in memory) and for
 functions c2a9b53 does not have (`get_u0` on a failed feedback, `set_lm_auto`,
 `set_qp_warm_start`, ...). So an `--old-commit` folder is loaded as built, through its own
 cdef (:class:`FolderHandle`: `defaults`, `set_M`, `init`, `feedback`, `prepare`,
-`get_timings`, `get_qp_iterations`, `get_u`, which every generated solver since c2a9b53 has),
+`get_timings`, `get_qp_iterations`, `get_u`: c2a9b53's folder and this tree's both have them),
 with every other setting at that folder's generated defaults (c2a9b53: exact Hessian, no
 regularisation, lm 1e-4 from its OCP file).
 
@@ -41,8 +42,10 @@ IPOPT solution, M = 1, exact Hessian, each solver's own Levenberg-Marquardt sett
 solver runs its own loop, the instants interleaved (old, new, old, new, ...) so that load on
 the machine hits both alike. Times are the C runtime's own phase timers. Reported: medians
 per iteration of feedback (the QP and its bookkeeping), prepare and their sum, the ratio new
-/ old, the QP share (feedback / iteration) and the QP iterations per instant. Progress goes to
-stderr, the table to stdout, everything with the build commands to --json (default
+/ old (and the median of the per-instant ratios, the same instant of both loops paired), the
+QP share (feedback / iteration) and the QP iterations per instant (failed instants count
+there and as failures, not in the times). Progress goes to stderr, the table to stdout,
+everything with the build commands to --json (default
 bench/results/iteration_compare/<old>.json). Never passes or fails on time.
 """
 from __future__ import annotations
@@ -150,7 +153,7 @@ def prepare_new(workdir: Path) -> Path:
 
 class FolderHandle:
     """A built generated folder loaded as it is (never rebuilt), through its own cdef, with
-    only the calls every generated solver since c2a9b53 has. Settings: the folder's
+    only calls that c2a9b53's folder and this tree's both have. Settings: the folder's
     generated defaults, then ``set_M``. The parts of the :class:`CSolver` interface the
     comparison uses: ``init``, ``feedback`` (raises DopusError on a non-zero status),
     ``prepare``, ``timings``, ``qp_iterations``, ``u``, ``sizeof``, ``lm``."""
@@ -328,21 +331,23 @@ def main(argv=None) -> int:
                 t_fb = s.timings["feedback"]
                 rec[name]["qp_iters"].append(s.qp_iterations)
                 s.prepare()
-                if ok:
-                    t = s.timings
-                    rec[name]["feedback"].append(t_fb)
-                    rec[name]["prepare"].append(sum(t[k] for k in PREPARE))
+                t = s.timings   # a failed instant stays in the lists as NaN: instants pair by index
+                rec[name]["feedback"].append(t_fb if ok else np.nan)
+                rec[name]["prepare"].append(sum(t[k] for k in PREPARE) if ok else np.nan)
                 xs[name] = np.array(disc.stage_eval(x, u0, p0)[0], dtype=float).reshape(-1)
     out = {"config": config}
     for name, r in rec.items():
         fb, pr = np.array(r["feedback"]), np.array(r["prepare"])
-        out[name] = {"feedback_us": float(np.median(fb) * 1e6), "prepare_us": float(np.median(pr) * 1e6),
-                     "iteration_us": float(np.median(fb + pr) * 1e6),
-                     "qp_share": float(np.median(fb / (fb + pr))),
+        out[name] = {"feedback_us": float(np.nanmedian(fb) * 1e6), "prepare_us": float(np.nanmedian(pr) * 1e6),
+                     "iteration_us": float(np.nanmedian(fb + pr) * 1e6),
+                     "qp_share": float(np.nanmedian(fb / (fb + pr))),
                      "qp_iters_median": float(np.median(r["qp_iters"])),
                      "qp_iters_mean": float(np.mean(r["qp_iters"])), "failures": r["failures"],
                      "instants": len(r["qp_iters"]), "sizeof": solvers[name].sizeof}
     out["ratio_new_old"] = out["new"]["iteration_us"] / out["old"]["iteration_us"]
+    # the same instant of both loops ran back to back: the median of their ratios
+    it_old, it_new = (np.array(rec[n]["feedback"]) + np.array(rec[n]["prepare"]) for n in ("old", "new"))
+    out["ratio_new_old_paired"] = float(np.nanmedian(it_new / it_old))
     for name in ("old", "new"):
         o, c = out[name], config[name]
         what = c["commit"][:12] if "commit" in c else c["folder"]
@@ -351,7 +356,8 @@ def main(argv=None) -> int:
               f"{o['feedback_us']:.1f}, prepare {o['prepare_us']:.1f}), QP share {o['qp_share']:.0%}, QP iterations "
               f"median {o['qp_iters_median']:.0f} (mean {o['qp_iters_mean']:.1f}), failures {o['failures']} of "
               f"{o['instants']}, sizeof {o['sizeof']} B")
-    print(f"new / old per iteration: {out['ratio_new_old']:.2f}")
+    print(f"new / old per iteration: {out['ratio_new_old']:.2f} (ratio of the medians), "
+          f"{out['ratio_new_old_paired']:.2f} (median of the per-instant ratios)")
     path = Path(args.json) if args.json else workdir / f"{label}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(out, indent=1) + "\n")
