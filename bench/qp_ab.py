@@ -173,7 +173,8 @@ def main():
     summary = {"base": args.base, "solves": len(rows), "identical": len(rows) - len(mismatches),
                "mismatches": mismatches, "statuses": statuses}
     if timed:
-        print(f"{'group':28s} {'QPs':>4s} {'t_base us':>10s} {'t_work us':>10s} {'median ratio':>13s} "
+        w = max(len(r["qp"].split("/")[0]) for r in timed)
+        print(f"{'group':{w}s} {'QPs':>4s} {'t_base us':>10s} {'t_work us':>10s} {'median ratio':>13s} "
               f"{'geomean':>8s}")
         groups: dict = {}
         for r in timed:
@@ -184,7 +185,7 @@ def main():
             ratios = np.array([r["ratio"] for r in rs])
             tb, tw = np.median([r["t_base"] for r in rs]), np.median([r["t_work"] for r in rs])
             gm = float(np.exp(np.mean(np.log(ratios))))
-            print(f"{g:28s} {len(rs):4d} {tb * 1e6:10.1f} {tw * 1e6:10.1f} {np.median(ratios):13.3f} {gm:8.3f}")
+            print(f"{g:{w}s} {len(rs):4d} {tb * 1e6:10.1f} {tw * 1e6:10.1f} {np.median(ratios):13.3f} {gm:8.3f}")
             summary["groups"][g] = {"qps": len(rs), "median_ratio": float(np.median(ratios)), "geomean_ratio": gm}
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps({"summary": summary, "rows": rows}, indent=1))
