@@ -1643,6 +1643,9 @@ static int qp_result(const qp_loop *L, dopus_qp_workspace *ws, const qp_res *r, 
     return finish(ws, keep_best ? &L->best_r : r, status, iter, keep_best ? NULL : sol, info);
 }
 
+/* Mehrotra's predictor-corrector. Per iteration: the residuals and the stopping tests (with
+ * the restarts on a stall), the factorisation with inertia correction, the predictor, the
+ * centring parameter, the corrector and the step. */
 int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_settings *settings,
                    dopus_qp_sol *sol, dopus_qp_info *info)
 {

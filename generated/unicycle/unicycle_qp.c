@@ -1643,6 +1643,9 @@ static int qp_result(const qp_loop *L, unicycle_qp_workspace *ws, const qp_res *
     return finish(ws, keep_best ? &L->best_r : r, status, iter, keep_best ? NULL : sol, info);
 }
 
+/* Mehrotra's predictor-corrector. Per iteration: the residuals and the stopping tests (with
+ * the restarts on a stall), the factorisation with inertia correction, the predictor, the
+ * centring parameter, the corrector and the step. */
 int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const unicycle_qp_settings *settings,
                    unicycle_qp_sol *sol, unicycle_qp_info *info)
 {
