@@ -10,7 +10,9 @@ structures) and reports the ratio of the median time per QP, working tree / base
 QPs: the random QPs of tests/test_qp.py's configurations (tests/harness/qp_problems.py),
 each solved cold, warm from its cold solution after a small change of x0, and with
 max_iter 3; indefinite and strongly nonconvex ones (inertia correction, restarts);
-infeasible and unbounded ones; the stored robot-arm and unicycle QPs of tests/data.
+infeasible and unbounded ones; the stored robot-arm and unicycle QPs of tests/data; and
+(unless --no-bench-qps) the QPs of bench/qp_bench.py: the 26 robot-arm QPs and its random
+QPs with the robot's sizes, N = 10 to 160, at tolerance 1e-8.
 
     .venv/bin/python bench/qp_ab.py --base main           # equality + timing
     .venv/bin/python bench/qp_ab.py --base main --reps 0  # equality only
@@ -50,6 +52,24 @@ RANDOM = [
     ("badly_scaled", (15, 4, 2, 1, 1, 1), {"var_scale": 1.0, "row_scale": 1.5, "eq_row_scale": 3.0}, 10),
     ("weak", (10, 5, 3, 2, 1, 1), {"p_weak": 0.25}, 10),
 ]
+
+
+def bench_problems(random_per_n: int = 2):
+    """The QPs of bench/qp_bench.py (robot arm: 20 cold Gauss-Newton, 6 warm exact-Hessian;
+    random ones with the robot's sizes), tolerance 1e-8."""
+    import qp_bench as QB
+
+    out = []
+    for tag, qp in QB.robot_arm_qps(20, 6, log=lambda *a: None):
+        sz = tuple(int(qp[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne"))
+        out.append((f"bench_robot_{tag.rsplit('_', 1)[0]}/{tag}", sz, qp, {"tol": 1e-8}))
+    rng = np.random.default_rng(0)
+    for n in QB.RANDOM_NS:
+        for t in range(random_per_n):
+            qp = QB.random_qp(n, rng)
+            sz = tuple(int(qp[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne"))
+            out.append((f"bench_random_N{n}/{t}", sz, qp, {"tol": 1e-8}))
+    return out
 
 
 def problems():
@@ -139,6 +159,7 @@ def main():
     ap.add_argument("--base", default="main", help="git revision of the base runtime_c/ (default %(default)s)")
     ap.add_argument("--reps", type=int, default=40, help="timed repetitions per QP and build (0: no timing)")
     ap.add_argument("--warmup", type=int, default=5)
+    ap.add_argument("--no-bench-qps", action="store_true", help="skip bench/qp_bench.py's QPs (robot-arm runs)")
     ap.add_argument("--json", type=Path, default=BENCH / "results" / "qp_ab.json")
     args = ap.parse_args()
 
@@ -150,7 +171,8 @@ def main():
     work_dir = ROOT / "runtime_c"
     cache: dict = {}
     rows, mismatches = [], []
-    for label, sizes, qp, kw in problems():
+    cases = problems() + ([] if args.no_bench_qps else bench_problems())
+    for label, sizes, qp, kw in cases:
         ha, hb = build(base_dir, sizes, cache), build(work_dir, sizes, cache)
         a, b = run(ha, qp, kw), run(hb, qp, kw)
         ok = same(a, b)
