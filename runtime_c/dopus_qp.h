@@ -260,13 +260,13 @@ typedef struct {
     dopus_real dz_lo[DOPUS_QP_NB];
     dopus_real dz_up[DOPUS_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
-    dopus_real M[DOPUS_QP_NW * DOPUS_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
-    dopus_real P[DOPUS_N + 1][DOPUS_QP_NXP];              /* value function Hessians, packed lower */
-    dopus_real G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];   /* value function x-nu coupling */
-    dopus_real Lu[DOPUS_N][DOPUS_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
-    dopus_real LK[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux */
-    dopus_real LKn[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
-    dopus_real S[DOPUS_QP_NE1 * DOPUS_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
+    dopus_real M[DOPUS_QP_NW * DOPUS_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
+    dopus_real P[DOPUS_N + 1][DOPUS_QP_NXP];             /* value function Hessians, packed lower */
+    dopus_real G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];  /* value function x-nu coupling */
+    dopus_real Lu[DOPUS_N][DOPUS_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
+    dopus_real K[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* gain M_uu^{-1} M_ux */
+    dopus_real KN[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* M_uu^{-1} (Phi'G)_u */
+    dopus_real S[DOPUS_QP_NE1 * DOPUS_QP_NE1];           /* -(nu-nu block) at stage 0, factored */
     dopus_real e[DOPUS_QP_NE1];
     dopus_real work[DOPUS_QP_NWORK];
     dopus_real delta;               /* current inertia-correction shift */

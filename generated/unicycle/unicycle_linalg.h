@@ -323,28 +323,42 @@ static inline int unicycle_lai_vec_finite(int n, const unicycle_real *x)
     return 1;
 }
 
+/* The largest |x_i|, NaN when an entry is NaN. Branch-free: the maximum is a select (one
+ * max instruction) and NaN is tracked by a flag, so the result does not depend on which
+ * entries are new maxima (a data-dependent branch mispredicts half the time). */
 static inline unicycle_real unicycle_lai_norm_inf(int n, const unicycle_real *x)
 {
-    int i;
-    unicycle_real m = UNICYCLE_R(0.0);
-    for (i = 0; i < n; ++i) {
-        const unicycle_real a = unicycle_fabs(x[i]);
-        if (a > m || a != a)
-            m = a;
+    /* four independent maxima (no chain of dependent max instructions), a NaN flag */
+    int i, nan = 0;
+    unicycle_real m[4] = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
+    for (i = 0; i + 4 <= n; i += 4) {
+        int c;
+        for (c = 0; c < 4; ++c) {
+            const unicycle_real a = unicycle_fabs(x[i + c]);
+            m[c] = a > m[c] ? a : m[c];
+            nan |= a != a;
+        }
     }
-    return m;
+    for (; i < n; ++i) {
+        const unicycle_real a = unicycle_fabs(x[i]);
+        m[0] = a > m[0] ? a : m[0];
+        nan |= a != a;
+    }
+    m[0] = m[1] > m[0] ? m[1] : m[0];
+    m[2] = m[3] > m[2] ? m[3] : m[2];
+    return nan ? (unicycle_real)NAN : (m[2] > m[0] ? m[2] : m[0]);
 }
 
 static inline unicycle_real unicycle_lai_max_abs_mat(int m, int n, const unicycle_real *A, int lda)
 {
-    int j;
+    int j, nan = 0;
     unicycle_real r = UNICYCLE_R(0.0);
     for (j = 0; j < n; ++j) {
         const unicycle_real c = unicycle_lai_norm_inf(m, A + j * lda);
-        if (c > r || c != c)
-            r = c;
+        r = c > r ? c : r;
+        nan |= c != c;
     }
-    return r;
+    return nan ? (unicycle_real)NAN : r;
 }
 
 static inline int unicycle_lai_all_finite(int m, int n, const unicycle_real *A, int lda)

@@ -262,35 +262,63 @@ static void row_axpy(const unicycle_qp_in *in, int k, int j, unicycle_real a, un
 /* Entry (i, j), i >= j, of a symmetric nx x nx matrix packed by lower columns. */
 #define PACKED(i, j) ((j)*NX - (j) * ((j)-1) / 2 + (i) - (j))
 
-/* y += alpha P x for P packed by lower columns (the order of gemv_n: column by column). */
-static void spmv_packed(const unicycle_real *restrict Pp, unicycle_real alpha, const unicycle_real *restrict x,
-                        unicycle_real *restrict y)
+/* y += alpha P x for P packed by lower columns: one sequential pass over the packed
+ * entries, each used twice (below the diagonal), the sums kept in a local vector. */
+static inline void spmv_packed(const unicycle_real *restrict Pp, unicycle_real alpha, const unicycle_real *restrict x,
+                               unicycle_real *restrict y)
 {
-    int i, j;
+    unicycle_real acc[NX];
+    int i, j, l = 0;
+    for (i = 0; i < NX; ++i)
+        acc[i] = UNICYCLE_R(0.0);
     for (j = 0; j < NX; ++j) {
-        const unicycle_real a = alpha * x[j];
-        for (i = 0; i < j; ++i)
-            y[i] += Pp[PACKED(j, i)] * a;
-        for (i = j; i < NX; ++i)
-            y[i] += Pp[PACKED(i, j)] * a;
+        const unicycle_real xj = x[j];
+        unicycle_real s = Pp[l++] * xj;
+        for (i = j + 1; i < NX; ++i, ++l) {
+            acc[i] += Pp[l] * xj;
+            s += Pp[l] * x[i];
+        }
+        acc[j] += s;
     }
+    for (i = 0; i < NX; ++i)
+        y[i] += alpha * acc[i];
 }
 
 /* The Cholesky factor Lu (nu x nu, lower) of a stage kept packed by lower columns in the
- * workspace and unpacked where the triangular kernels use it. */
+ * workspace with its diagonal stored inverted, so that the triangular solves multiply
+ * (a division on the recursion's critical path costs several multiplications). */
+#define PACKED_U(i, j) ((j)*NU - (j) * ((j)-1) / 2 + (i) - (j))
 static void pack_lu(const unicycle_real *restrict L, unicycle_real *restrict Lp)
 {
     int i, j, l = 0;
-    for (j = 0; j < NU; ++j)
-        for (i = j; i < NU; ++i)
+    for (j = 0; j < NU; ++j) {
+        Lp[l++] = UNICYCLE_R(1.0) / L[j + j * NU1];
+        for (i = j + 1; i < NU; ++i)
             Lp[l++] = L[i + j * NU1];
+    }
 }
-static void unpack_lu(const unicycle_real *restrict Lp, unicycle_real *restrict L)
+/* x = Lu^{-1} x for the packed factor (column by column: the updates of one column are
+ * independent of each other) */
+static inline void lu_solve_n(const unicycle_real *restrict Lp, unicycle_real *restrict x)
 {
-    int i, j, l = 0;
-    for (j = 0; j < NU; ++j)
-        for (i = j; i < NU; ++i)
-            L[i + j * NU1] = Lp[l++];
+    int i, j;
+    for (j = 0; j < NU; ++j) {
+        const unicycle_real xj = x[j] * Lp[PACKED_U(j, j)];
+        x[j] = xj;
+        for (i = j + 1; i < NU; ++i)
+            x[i] -= Lp[PACKED_U(i, j)] * xj;
+    }
+}
+/* x = Lu'^{-1} x for the packed factor */
+static inline void lu_solve_t(const unicycle_real *restrict Lp, unicycle_real *restrict x)
+{
+    int i, j;
+    for (j = NU - 1; j >= 0; --j) {
+        unicycle_real s = x[j];
+        for (i = j + 1; i < NU; ++i)
+            s -= Lp[PACKED_U(i, j)] * x[i];
+        x[j] = s * Lp[PACKED_U(j, j)];
+    }
 }
 
 /* Per bounded row b: the residuals of the slack equations, r_lo = v - lo - t_lo and
@@ -488,26 +516,33 @@ static void phit_mv(const unicycle_real *restrict PhiT, const unicycle_real *res
     }
 }
 
-/* The stage update of the Riccati recursion: PhiT = Phi' (nw x nx), PP = P Phi (nx x nw,
- * P symmetric stored full), M += PhiT PP column by column with contiguous inner loops of
- * the fixed length nw (vectorised; the upper triangle is computed too, it is cheaper than
- * the ragged lower triangle at these sizes and never read), and, with terminal
- * equalities, Gam = Phi' G (nw x ne). */
+/* The stage update of the Riccati recursion: PhiT = Phi' (nw x nx), WT = Phi' P (nw x nx,
+ * P symmetric stored full), M = H + WT Phi, and with terminal equalities Gam = Phi' G
+ * (nw x ne). Every inner loop runs down a column of nw entries (fixed length, vectorised);
+ * the upper triangle of M is computed too (it is never read; whole columns are cheaper
+ * than the ragged lower triangle at these sizes). */
 static void qp_stage_update(const unicycle_real *restrict Phi, const unicycle_real *restrict P,
-                            const unicycle_real *restrict G, unicycle_real *restrict PhiT, unicycle_real *restrict PP,
-                            unicycle_real *restrict M, unicycle_real *restrict Gam)
+                            const unicycle_real *restrict G, const unicycle_real *restrict H,
+                            unicycle_real *restrict PhiT, unicycle_real *restrict WT, unicycle_real *restrict M,
+                            unicycle_real *restrict Gam)
 {
     int i, j, l;
-    unicycle_real col[NW];
     for (l = 0; l < NX; ++l)
         for (i = 0; i < NW; ++i)
             PhiT[i + l * NW] = Phi[l + i * NX];
-    unicycle_lai_gemm_nn(NX, NW, NX, UNICYCLE_R(1.0), P, NX, Phi, NX, UNICYCLE_R(0.0), PP, NX);
+    for (j = 0; j < NX; ++j)
+        phit_mv(PhiT, P + j * NX, WT + j * NW);
     for (j = 0; j < NW; ++j) {
-        unicycle_real *restrict m = M + j * NW;
-        phit_mv(PhiT, PP + j * NX, col);
+        unicycle_real col[NW];
         for (i = 0; i < NW; ++i)
-            m[i] += col[i];
+            col[i] = H[i + j * NW];
+        for (l = 0; l < NX; ++l) {
+            const unicycle_real f = Phi[l + j * NX];
+            for (i = 0; i < NW; ++i)
+                col[i] += WT[i + l * NW] * f;
+        }
+        for (i = 0; i < NW; ++i)
+            M[i + j * NW] = col[i];
     }
     for (j = 0; j < NE; ++j)
         phit_mv(PhiT, G + j * NX, Gam + j * NW);
@@ -532,7 +567,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 {
     int k, i, j;
     unicycle_real *PhiT = ws->work;              /* NW x NX: Phi_k' */
-    unicycle_real *WT = ws->work + NX * NW;      /* NX x NW: P_{k+1} Phi_k */
+    unicycle_real *WT = ws->work + NX * NW;      /* NW x NX: Phi_k' P_{k+1} */
     unicycle_real *Gam = ws->work + 2 * NX * NW; /* NW x NE: Phi_k' G_{k+1} */
     unicycle_real *Pf = Gam + NW * NE1;          /* NX x NX: P_{k+1} unpacked */
     const unicycle_real delta = ws->delta;
@@ -585,10 +620,10 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     for (k = N - 1; k >= 0; --k) {
         unicycle_real *M = ws->M;
         const unicycle_real *Phi = in->Phi[k];
-        unicycle_real q[NSI];
+        unicycle_real q[NSI], dg[NW];
         unicycle_real Lu[NU1 * NU1];
-        unicycle_real *LK = ws->LK[k];
-        unicycle_real *LKn = ws->LKn[k];
+        unicycle_real *K = ws->K[k];
+        unicycle_real *KN = ws->KN[k];
         unicycle_real *P = ws->P[k];
         const unicycle_real pmax = pnext;
         unicycle_real mxx = UNICYCLE_R(0.0), pabs;
@@ -600,11 +635,29 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         for (b = ws->bstart[k]; b < ws->bstart[k + 1]; ++b)
             q[ws->bidx[b] - k * NSI] = row_q(ws, b);
 
-        /* M = H_k + D'QD + delta I + Phi' P_{k+1} Phi, lower triangle only (the upper
-         * triangle of M is never read) */
-        for (j = 0; j < NW; ++j)
+        /* dg = the diagonal of H_k + D'QD + delta I (the terms before Phi' P Phi: the
+         * round-off estimates below are taken from them) */
+        for (i = 0; i < NW; ++i)
+            dg[i] = in->H[k][i + i * NW] + q[i] + delta + in->hess_shift;
+        for (j = 0; j < NG; ++j)
             for (i = 0; i < NW; ++i)
-                M[i + j * NW] = in->H[k][i + j * NW];
+                dg[i] += q[NW + j] * in->C[k][j + i * NG] * in->C[k][j + i * NG];
+        for (j = 0; j < NU; ++j) {
+            /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P */
+            unicycle_real colsum = UNICYCLE_R(0.0);
+            for (i = 0; i < NX; ++i)
+                colsum += unicycle_fabs(Phi[i + (NX + j) * NX]);
+            ws->noise[j] = RICCATI_EPS * (unicycle_fabs(dg[NX + j]) + colsum * colsum * dmax(pmax, pmag));
+        }
+        for (j = 0; j < NX; ++j) {
+            unicycle_real colsum = UNICYCLE_R(0.0);
+            for (i = 0; i < NX; ++i)
+                colsum += unicycle_fabs(Phi[i + j * NX]);
+            mxx = dmax(mxx, unicycle_fabs(dg[j]) + colsum * colsum * pmax);
+        }
+        /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
+         * read), Gam = Phi' G_{k+1} */
+        qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam);
         for (i = 0; i < NW; ++i)
             M[i + i * NW] += q[i] + delta + in->hess_shift;
         for (j = 0; j < NG; ++j) {
@@ -616,22 +669,6 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
                     for (a = c; a < NW; ++a)
                         M[a + c * NW] += qg * C[j + a * NG] * C[j + c * NG];
         }
-        for (j = 0; j < NU; ++j) {
-            /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P */
-            unicycle_real colsum = UNICYCLE_R(0.0);
-            for (i = 0; i < NX; ++i)
-                colsum += unicycle_fabs(Phi[i + (NX + j) * NX]);
-            ws->noise[j] =
-                RICCATI_EPS * (unicycle_fabs(M[NX + j + (NX + j) * NW]) + colsum * colsum * dmax(pmax, pmag));
-        }
-        for (j = 0; j < NX; ++j) {
-            unicycle_real colsum = UNICYCLE_R(0.0);
-            for (i = 0; i < NX; ++i)
-                colsum += unicycle_fabs(Phi[i + j * NX]);
-            mxx = dmax(mxx, unicycle_fabs(M[j + j * NW]) + colsum * colsum * pmax);
-        }
-        /* M += Phi' P_{k+1} Phi (lower triangle), Gam = Phi' G_{k+1} */
-        qp_stage_update(Phi, Pf, ws->G[k + 1], PhiT, WT, M, Gam);
 
         /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
         unicycle_lai_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
@@ -641,9 +678,10 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         }
         pmag = mxx;
         pack_lu(Lu, ws->Lu[k]);
-        /* LK = Lu^{-1} M_ux, LKn = Lu^{-1} Gam_u */
-        unicycle_lai_copy_mat(NU, NX, M + NX, NW, LK, NU1);
-        unicycle_lai_trsm_lln(NU, NX, Lu, NU1, LK, NU1);
+        /* LK = Lu^{-1} M_ux (in the array of K), LKn = Lu^{-1} Gam_u (in that of KN) */
+        unicycle_lai_copy_mat(NU, NX, M + NX, NW, K, NU1);
+        for (j = 0; j < NX; ++j)
+            lu_solve_n(ws->Lu[k], K + j * NU1);
         /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
         pabs = UNICYCLE_R(0.0);
         for (j = 0; j < NX; ++j)
@@ -651,7 +689,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
                 unicycle_real sum = M[i + j * NW];
                 int c;
                 for (c = 0; c < NU; ++c)
-                    sum -= LK[c + i * NU1] * LK[c + j * NU1];
+                    sum -= K[c + i * NU1] * K[c + j * NU1];
                 P[l++] = sum;
                 Pf[i + j * NX] = sum;
                 Pf[j + i * NX] = sum;
@@ -659,15 +697,22 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             }
         pnext = pabs;
         for (j = 0; j < NX; ++j)
-            pmag = dmax(pmag, unicycle_lai_dot(NU, LK + j * NU1, LK + j * NU1));
+            pmag = dmax(pmag, unicycle_lai_dot(NU, K + j * NU1, K + j * NU1));
         if (NE > 0) {
-            unicycle_lai_copy_mat(NU, NE, Gam + NX, NW, LKn, NU1);
-            unicycle_lai_trsm_lln(NU, NE, Lu, NU1, LKn, NU1);
+            unicycle_lai_copy_mat(NU, NE, Gam + NX, NW, KN, NU1);
+            for (j = 0; j < NE; ++j)
+                lu_solve_n(ws->Lu[k], KN + j * NU1);
             /* G_k = Gam_x - LK' LKn;  S += LKn' LKn (S = -(nu-nu block of V_0)) */
             unicycle_lai_copy_mat(NX, NE, Gam, NW, ws->G[k], NX);
-            unicycle_lai_gemm_tn(NX, NE, NU, -UNICYCLE_R(1.0), LK, NU1, LKn, NU1, UNICYCLE_R(1.0), ws->G[k], NX);
-            unicycle_lai_gemm_tn(NE, NE, NU, UNICYCLE_R(1.0), LKn, NU1, LKn, NU1, UNICYCLE_R(1.0), ws->S, NE1);
+            unicycle_lai_gemm_tn(NX, NE, NU, -UNICYCLE_R(1.0), K, NU1, KN, NU1, UNICYCLE_R(1.0), ws->G[k], NX);
+            unicycle_lai_gemm_tn(NE, NE, NU, UNICYCLE_R(1.0), KN, NU1, KN, NU1, UNICYCLE_R(1.0), ws->S, NE1);
+            /* KN = Lu'^{-1} LKn = M_uu^{-1} Gam_u */
+            for (j = 0; j < NE; ++j)
+                lu_solve_t(ws->Lu[k], KN + j * NU1);
         }
+        /* the gain K = Lu'^{-1} LK = M_uu^{-1} M_ux */
+        for (j = 0; j < NX; ++j)
+            lu_solve_t(ws->Lu[k], K + j * NU1);
     }
     if (NE > 0) {
         /* S is positive definite iff Req has full row rank on the states reachable from
@@ -693,7 +738,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
  * value-function vectors, nu at stage 0, forward sweep of the primal and the costates
  * lam_k = -dV_k/dx. The sweep vectors live in the arrays they become: once stage k's
  * rhs_stat has been read, its x part takes rhs_dyn_k (x_k is formed there), its u part
- * the vector lk_k (u_k is formed there), and sl_k the vector p_k (lam_k is formed there). */
+ * the vector kv_k = M_uu^{-1} m_u (u_k is formed there), and sl_k the vector p_k (lam_k is formed there). */
 static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, unicycle_real *sp, unicycle_real *sl,
                           unicycle_real *sn)
 {
@@ -701,7 +746,6 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
     unicycle_real *tv = ws->work;     /* NX */
     unicycle_real *m = ws->work + NX; /* NW */
     unicycle_real *e = ws->e;
-    unicycle_real Lu[NU1 * NU1];
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
     {
@@ -723,7 +767,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         const unicycle_real *Phi = in->Phi[k];
         const unicycle_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
         const unicycle_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
-        unicycle_real *xk = sp + k * NW, *lk = xk + NX, *pk = sl + k * NX;
+        unicycle_real *xk = sp + k * NW, *kv = xk + NX, *pk = sl + k * NX;
         /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
         for (i = 0; i < NX; ++i)
             tv[i] = pn[i];
@@ -733,18 +777,18 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         unicycle_lai_gemv_t(NX, NW, UNICYCLE_R(1.0), Phi, NX, tv, UNICYCLE_R(1.0), m);
         if (NE > 0)
             unicycle_lai_gemv_t(NX, NE, UNICYCLE_R(1.0), ws->G[k + 1], NX, c, UNICYCLE_R(1.0), e);
-        /* lk = Lu^{-1} m_u; p_k = m_x - LK' lk; e -= LKn' lk */
-        for (i = 0; i < NU; ++i)
-            lk[i] = m[NX + i];
-        unpack_lu(ws->Lu[k], Lu);
-        unicycle_lai_trsv_ln(NU, Lu, NU1, lk);
+        /* p_k = m_x - K' m_u; e -= KN' m_u; kv = M_uu^{-1} m_u (off the recursion's chain) */
         for (i = 0; i < NX; ++i) {
             xk[i] = pk[i];
             pk[i] = m[i];
         }
-        unicycle_lai_gemv_t(NU, NX, -UNICYCLE_R(1.0), ws->LK[k], NU1, lk, UNICYCLE_R(1.0), pk);
+        unicycle_lai_gemv_t(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, m + NX, UNICYCLE_R(1.0), pk);
         if (NE > 0)
-            unicycle_lai_gemv_t(NU, NE, -UNICYCLE_R(1.0), ws->LKn[k], NU1, lk, UNICYCLE_R(1.0), e);
+            unicycle_lai_gemv_t(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, m + NX, UNICYCLE_R(1.0), e);
+        for (i = 0; i < NU; ++i)
+            kv[i] = m[NX + i];
+        lu_solve_n(ws->Lu[k], kv);
+        lu_solve_t(ws->Lu[k], kv);
     }
     /* stage 0: x_0 = rhs_dyn_0 (in place); dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
     if (NE > 0) {
@@ -758,14 +802,12 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         unicycle_real *w = sp + k * NW;
         unicycle_real *u = w + NX;
         unicycle_real *lamk = sl + k * NX;
-        /* u_k = -Lu'^{-1} (LK x_k + lk + LKn nu) */
-        unicycle_lai_gemv_n(NU, NX, UNICYCLE_R(1.0), ws->LK[k], NU1, w, UNICYCLE_R(1.0), u);
-        if (NE > 0)
-            unicycle_lai_gemv_n(NU, NE, UNICYCLE_R(1.0), ws->LKn[k], NU1, sn, UNICYCLE_R(1.0), u);
-        unpack_lu(ws->Lu[k], Lu);
-        unicycle_lai_trsv_lt(NU, Lu, NU1, u);
+        /* u_k = -(K x_k + kv + KN nu) */
         for (i = 0; i < NU; ++i)
             u[i] = -u[i];
+        unicycle_lai_gemv_n(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, w, UNICYCLE_R(1.0), u);
+        if (NE > 0)
+            unicycle_lai_gemv_n(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, sn, UNICYCLE_R(1.0), u);
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
             lamk[i] = -lamk[i];

@@ -260,13 +260,13 @@ typedef struct {
     unicycle_real dz_lo[UNICYCLE_QP_NB];
     unicycle_real dz_up[UNICYCLE_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
-    unicycle_real M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];              /* H + D'QD + delta I + Phi'P Phi */
-    unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];              /* value function Hessians, packed lower */
-    unicycle_real G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];   /* value function x-nu coupling */
-    unicycle_real Lu[UNICYCLE_N][UNICYCLE_QP_NUP];                 /* Cholesky factor of M_uu, packed lower */
-    unicycle_real LK[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* Lu^{-1} M_ux */
-    unicycle_real LKn[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
-    unicycle_real S[UNICYCLE_QP_NE1 * UNICYCLE_QP_NE1];            /* -(nu-nu block) at stage 0, factored */
+    unicycle_real M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
+    unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];             /* value function Hessians, packed lower */
+    unicycle_real G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];  /* value function x-nu coupling */
+    unicycle_real Lu[UNICYCLE_N][UNICYCLE_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
+    unicycle_real K[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* gain M_uu^{-1} M_ux */
+    unicycle_real KN[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* M_uu^{-1} (Phi'G)_u */
+    unicycle_real S[UNICYCLE_QP_NE1 * UNICYCLE_QP_NE1];           /* -(nu-nu block) at stage 0, factored */
     unicycle_real e[UNICYCLE_QP_NE1];
     unicycle_real work[UNICYCLE_QP_NWORK];
     unicycle_real delta;               /* current inertia-correction shift */
