@@ -1314,76 +1314,105 @@ static int finish(dopus_qp_workspace *ws, const qp_res *r, int status, int iter,
     return status;
 }
 
-/* A fresh start of the iteration within one solve (after a stall): the cold initial
- * point, no augmentation or regularisation carried over, no best iterate yet. */
-static void restart_point(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_settings *st,
-                          const dopus_qp_sol *sol, dopus_real *delta_last, dopus_real *mu_prev,
-                          dopus_real *best_merit)
-{
-    initial_point(ws, in, st, sol, 0);
-    ws->rho_aug = DOPUS_R(0.0);
-    *delta_last = DOPUS_R(0.0);
-    *mu_prev = INFINITY;
-    *best_merit = INFINITY;
-}
+/* Returned by the steps of the loop below: the iteration goes on; the iterate was replaced
+ * by a restart (test it afresh). Never returned by dopus_qp_solve. */
+#define QP_GO_ON (-1)
+#define QP_RESTARTED (-2)
 
-int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_settings *settings,
-                   dopus_qp_sol *sol, dopus_qp_info *info)
-{
-    dopus_qp_settings st;
-    qp_res r, best_r;
-    qp_centring pred, corr;
-    int iter, i, bounds, keep_best, status = DOPUS_QP_MAX_ITER;
-    int n_corr = 0, n_aug = 0;
-    dopus_real hscale, data_scale, delta_last = DOPUS_R(0.0), delta_used = DOPUS_R(0.0),
-                                   best_merit = INFINITY;
-    int best_iter = 0;
-    dopus_real mu_prev = INFINITY;
-    dopus_real sigma_min = DOPUS_R(0.0); /* SIGMA_MIN_RESTART after a restart */
+/* The state of the interior point loop of one solve. */
+typedef struct {
+    dopus_qp_settings st;  /* the settings, checked (warm_start cleared by the restart) */
+    dopus_real hscale;     /* Hessian scale: the size of the inertia corrections */
+    dopus_real data_scale; /* data scale for the divergence tests of the certificates */
     /* attempt 0: the centred cold start with the long steps; 1: the plain start (a warm
      * start, or the cold start again after attempt 0 stalled) with the careful steps; 2:
-     * the restart after a nonconvex stall (see below) */
-    int attempt, n_corr_attempt = 0;
+     * the restart after a nonconvex stall (see qp_track_best) */
+    int attempt;
+    int n_corr, n_aug;     /* delta corrections and terminal augmentations, every attempt */
+    int n_corr_attempt;    /* n_corr when attempt 1 began */
+    dopus_real delta_last; /* delta of the last corrected factorisation */
+    dopus_real delta_used; /* the largest delta of the solve */
+    dopus_real mu_prev;    /* mu of the previous iteration */
+    dopus_real sigma_min;  /* SIGMA_MIN_RESTART after a restart */
+    dopus_real best_merit; /* the best iterate so far (it is in *sol) */
+    int best_iter;
+    qp_res best_r;
+} qp_loop;
 
+/* ---------------------------------------------------------------- data, scales, start */
+
+/* The settings, with the defaults for the missing or meaningless ones. */
+static void checked_settings(const dopus_qp_settings *settings, dopus_qp_settings *st)
+{
     if (settings)
-        st = *settings;
+        *st = *settings;
     else
-        dopus_qp_settings_default(&st);
-    if (!(st.tol > DOPUS_R(0.0)))
-        st.tol = DOPUS_PREC(1e-8, 1e-5);
-    if (st.max_iter < 0)
-        st.max_iter = 0;
-    if (st.refine_steps < 0)
-        st.refine_steps = 0;
-    if (info) {
-        info->status = DOPUS_QP_INVALID_INPUT;
-        info->iterations = info->inertia_corrections = info->terminal_augmentations = 0;
-        info->pivot_floors = 0;
-        info->delta = DOPUS_R(0.0);
-        info->res_stat = info->res_eq = info->res_ineq = info->res_comp = INFINITY;
-        info->res_stat_scaled = info->res_eq_scaled = info->res_ineq_scaled = info->res_comp_scaled =
-            INFINITY;
-        info->obj = NAN;
+        dopus_qp_settings_default(st);
+    if (!(st->tol > DOPUS_R(0.0)))
+        st->tol = DOPUS_PREC(1e-8, 1e-5);
+    if (st->max_iter < 0)
+        st->max_iter = 0;
+    if (st->refine_steps < 0)
+        st->refine_steps = 0;
+}
+
+/* The info of a solve that stops before its first iterate. */
+static void info_not_solved(dopus_qp_info *info)
+{
+    info->status = DOPUS_QP_INVALID_INPUT;
+    info->iterations = info->inertia_corrections = info->terminal_augmentations = 0;
+    info->pivot_floors = 0;
+    info->delta = DOPUS_R(0.0);
+    info->res_stat = info->res_eq = info->res_ineq = info->res_comp = INFINITY;
+    info->res_stat_scaled = info->res_eq_scaled = info->res_ineq_scaled = info->res_comp_scaled = INFINITY;
+    info->obj = NAN;
+}
+
+static int warm_start_finite(const dopus_qp_sol *sol)
+{
+    return dopus_lai_all_finite(NX, N + 1, &sol->x[0][0], NX) &&
+           dopus_lai_all_finite(NX, N + 1, &sol->lam[0][0], NX) &&
+           dopus_lai_all_finite(NU1, N, &sol->u[0][0], NU1) &&
+           dopus_lai_all_finite(NW, N, &sol->mu_b[0][0], NW) &&
+           dopus_lai_all_finite(DOPUS_QP_NG1, N, &sol->mu_g[0][0], DOPUS_QP_NG1) &&
+           dopus_lai_all_finite(NX, 1, sol->mu_bN, NX) &&
+           dopus_lai_all_finite(DOPUS_QP_NR1, 1, sol->mu_r, DOPUS_QP_NR1) &&
+           dopus_lai_all_finite(NE1, 1, sol->nu, NE1);
+}
+
+/* The largest data entry the certificates compare their diverging iterates with: the
+ * finite bounds, x0, b, g, gN and req, at least 1. */
+static dopus_real certificate_data_scale(const dopus_qp_workspace *ws, const dopus_qp_in *in)
+{
+    int i;
+    dopus_real s = dmax(DOPUS_R(1.0), ws->scale_bounds);
+    s = dmax(s, dopus_lai_norm_inf(NX, in->x0));
+    for (i = 0; i < N; ++i) {
+        s = dmax(s, dopus_lai_norm_inf(NX, in->b[i]));
+        s = dmax(s, dopus_lai_norm_inf(NW, in->g[i]));
     }
+    s = dmax(s, dopus_lai_norm_inf(NX, in->gN));
+    if (NE > 0)
+        s = dmax(s, dopus_lai_norm_inf(NE, in->req));
+    return s;
+}
+
+/* Settings, data checks, the bounded rows, the data scales and the starting point of the
+ * first attempt. Returns QP_GO_ON, or the status of a solve that ends here (*sol zeroed
+ * unless a pointer was NULL). */
+static int qp_prepare(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
+                      const dopus_qp_settings *settings, dopus_qp_sol *sol, dopus_qp_info *info)
+{
+    int bounds;
+    checked_settings(settings, &L->st);
+    if (info)
+        info_not_solved(info);
     if (ws == NULL || in == NULL || sol == NULL)
         return DOPUS_QP_INVALID_INPUT;
-    if (!check_input(in)) {
+    /* a non-finite warm start is bad input, not a reason to produce NaN */
+    if (!check_input(in) || (L->st.warm_start && !warm_start_finite(sol))) {
         zero_solution(sol);
         return DOPUS_QP_INVALID_INPUT;
-    }
-    if (st.warm_start) {
-        /* a non-finite warm start is bad input, not a reason to produce NaN */
-        if (!dopus_lai_all_finite(NX, N + 1, &sol->x[0][0], NX) ||
-            !dopus_lai_all_finite(NX, N + 1, &sol->lam[0][0], NX) ||
-            !dopus_lai_all_finite(NU1, N, &sol->u[0][0], NU1) ||
-            !dopus_lai_all_finite(NW, N, &sol->mu_b[0][0], NW) ||
-            !dopus_lai_all_finite(DOPUS_QP_NG1, N, &sol->mu_g[0][0], DOPUS_QP_NG1) ||
-            !dopus_lai_all_finite(NX, 1, sol->mu_bN, NX) ||
-            !dopus_lai_all_finite(DOPUS_QP_NR1, 1, sol->mu_r, DOPUS_QP_NR1) ||
-            !dopus_lai_all_finite(NE1, 1, sol->nu, NE1)) {
-            zero_solution(sol);
-            return DOPUS_QP_INVALID_INPUT;
-        }
     }
     ws->delta = DOPUS_R(0.0);
     ws->rho_aug = DOPUS_R(0.0);
@@ -1400,238 +1429,353 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             info->status = DOPUS_QP_PRIMAL_INFEASIBLE;
         return DOPUS_QP_PRIMAL_INFEASIBLE;
     }
-    hscale = hessian_scale(in);
+    L->hscale = hessian_scale(in);
     data_scales(ws, in);
-    attempt = st.warm_start ? 1 : 0;
-    initial_point(ws, in, &st, sol, attempt == 0);
+    L->attempt = L->st.warm_start ? 1 : 0;
+    initial_point(ws, in, &L->st, sol, L->attempt == 0);
+    L->data_scale = certificate_data_scale(ws, in);
+    L->n_corr = L->n_aug = L->n_corr_attempt = 0;
+    L->delta_last = L->delta_used = DOPUS_R(0.0);
+    L->mu_prev = INFINITY;
+    L->sigma_min = DOPUS_R(0.0);
+    L->best_merit = INFINITY;
+    L->best_iter = 0;
+    return QP_GO_ON;
+}
 
-    /* data scale for the divergence tests of the certificates */
-    data_scale = dmax(DOPUS_R(1.0), ws->scale_bounds); /* the finite bounds */
-    data_scale = dmax(data_scale, dopus_lai_norm_inf(NX, in->x0));
-    for (i = 0; i < N; ++i) {
-        data_scale = dmax(data_scale, dopus_lai_norm_inf(NX, in->b[i]));
-        data_scale = dmax(data_scale, dopus_lai_norm_inf(NW, in->g[i]));
+/* ---------------------------------------------------------------- stopping tests, restarts */
+
+/* A fresh start of the iteration within one solve (after a stall, at iteration iter): the
+ * cold initial point, no augmentation or regularisation carried over, no best iterate yet. */
+static void qp_restart(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_sol *sol,
+                       int attempt, int iter)
+{
+    L->attempt = attempt;
+    initial_point(ws, in, &L->st, sol, 0);
+    ws->rho_aug = DOPUS_R(0.0);
+    L->delta_last = DOPUS_R(0.0);
+    L->mu_prev = INFINITY;
+    L->best_merit = INFINITY;
+    L->best_iter = iter + 1;
+}
+
+/* The best iterate so far, and what to do when progress stalls: restart (QP_RESTARTED) or
+ * give up (DOPUS_QP_STALLED); else QP_GO_ON. */
+static int qp_track_best(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_qp_sol *sol,
+                         const qp_res *r, int iter)
+{
+    if (iter == 0 || merit(r) < L->best_merit) {
+        /* the best point so far goes straight into the output (the warm-start point
+         * has been read by then; a restart starts cold) */
+        L->best_merit = merit(r);
+        L->best_iter = iter;
+        L->best_r = *r;
+        write_solution(ws, sol);
+    } else if (L->attempt == 0 && iter - L->best_iter >= RESTART_STALL_ITERS) {
+        /* The centred start with its long steps made no progress (a nonconvex QP, whose
+         * iterate it threw into the wrong region): start again from the plain cold
+         * start with the careful steps. */
+        L->n_corr_attempt = L->n_corr;
+        qp_restart(L, ws, in, sol, 1, iter);
+        QP_TRACE("plain start at iteration %d\n", iter);
+        return QP_RESTARTED;
+    } else if (L->attempt == 1 && L->n_corr > L->n_corr_attempt &&
+               iter - L->best_iter >= RESTART_STALL_ITERS) {
+        /* Stalled after inertia corrections: the QP is nonconvex on the null space of
+         * the equalities, and Mehrotra's aggressive mu reduction let a near-singular
+         * barrier Hessian throw the iterate far into the nonconvex region before the
+         * bounds that supply the curvature were identified (primal steps of 60 and
+         * more on the robot-arm QPs); the inertia-corrected steps cannot recover.
+         * Start again from the initial point with mu reduced at most
+         * 1/SIGMA_MIN_RESTART per iteration. (Restarting at the first correction
+         * instead saves iterations but loses the QPs that the first attempt solves
+         * and the cautious one does not.) */
+        L->sigma_min = SIGMA_MIN_RESTART;
+        L->st.warm_start = 0;
+        qp_restart(L, ws, in, sol, 2, iter);
+        QP_TRACE("restart at iteration %d\n", iter);
+        return QP_RESTARTED;
+    } else if (iter - L->best_iter >= STALL_ITERS) {
+        return DOPUS_QP_STALLED;
     }
-    data_scale = dmax(data_scale, dopus_lai_norm_inf(NX, in->gN));
-    if (NE > 0)
-        data_scale = dmax(data_scale, dopus_lai_norm_inf(NE, in->req));
+    return QP_GO_ON;
+}
 
-    for (iter = 0;; ++iter) {
-        dopus_real alpha, alpha_d, alpha_aff, mu_aff, sigma, target, eta;
-        int fact, floors_before, nref, full[2];
-        /* the long steps (separate primal and dual step lengths, up to the boundary) in the
-         * first attempt from the centred start while the QP is convex (no correction) */
-        const int long_steps = attempt == 0 && n_corr == 0 && n_aug == 0;
-
-        compute_residuals(ws, in, &r);
-        if (!(isfinite(r.stat) && isfinite(r.eq) && isfinite(r.mu))) {
-            status = DOPUS_QP_NUMERICAL;
-            break;
-        }
-        if (r.stat_s <= st.tol && r.eq_s <= st.tol && r.ineq_s <= st.tol && r.comp_s <= st.tol) {
-            status = DOPUS_QP_SOLVED;
-            break;
-        }
-        if (iter == 0 || merit(&r) < best_merit) {
-            /* the best point so far goes straight into the output (the warm-start point
-             * has been read by then; a restart starts cold) */
-            best_merit = merit(&r);
-            best_iter = iter;
-            best_r = r;
-            write_solution(ws, sol);
-        } else if (attempt == 0 && iter - best_iter >= RESTART_STALL_ITERS) {
-            /* The centred start with its long steps made no progress (a nonconvex QP, whose
-             * iterate it threw into the wrong region): start again from the plain cold
-             * start with the careful steps. */
-            attempt = 1;
-            n_corr_attempt = n_corr;
-            restart_point(ws, in, &st, sol, &delta_last, &mu_prev, &best_merit);
-            best_iter = iter + 1;
-            QP_TRACE("plain start at iteration %d\n", iter);
-            continue;
-        } else if (attempt == 1 && n_corr > n_corr_attempt && iter - best_iter >= RESTART_STALL_ITERS) {
-            /* Stalled after inertia corrections: the QP is nonconvex on the null space of
-             * the equalities, and Mehrotra's aggressive mu reduction let a near-singular
-             * barrier Hessian throw the iterate far into the nonconvex region before the
-             * bounds that supply the curvature were identified (primal steps of 60 and
-             * more on the robot-arm QPs); the inertia-corrected steps cannot recover.
-             * Start again from the initial point with mu reduced at most
-             * 1/SIGMA_MIN_RESTART per iteration. (Restarting at the first correction
-             * instead saves iterations but loses the QPs that the first attempt solves
-             * and the cautious one does not.) */
-            attempt = 2;
-            sigma_min = SIGMA_MIN_RESTART;
-            st.warm_start = 0;
-            restart_point(ws, in, &st, sol, &delta_last, &mu_prev, &best_merit);
-            best_iter = iter + 1;
-            QP_TRACE("restart at iteration %d\n", iter);
-            continue;
-        } else if (iter - best_iter >= STALL_ITERS) {
-            status = DOPUS_QP_STALLED;
-            break;
-        }
-        if (primal_infeasible(ws, in, &r, data_scale)) {
-            status = DOPUS_QP_PRIMAL_INFEASIBLE;
-            break;
-        }
-        if (dual_infeasible(ws, in, data_scale, hscale)) {
-            status = DOPUS_QP_DUAL_INFEASIBLE;
-            break;
-        }
-        if (iter >= st.max_iter) {
-            status = DOPUS_QP_MAX_ITER;
-            break;
-        }
+/* The tests of iterate iter with residuals r, in this order: non-finite, converged, the
+ * best iterate and stalls, the infeasibility certificates, the iteration limit. Returns
+ * the status to stop with, QP_RESTARTED or QP_GO_ON. */
+static int qp_stopping_tests(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_qp_sol *sol,
+                             const qp_res *r, int iter)
+{
+    const dopus_real tol = L->st.tol;
+    int s;
+    if (!(isfinite(r->stat) && isfinite(r->eq) && isfinite(r->mu)))
+        return DOPUS_QP_NUMERICAL;
+    if (r->stat_s <= tol && r->eq_s <= tol && r->ineq_s <= tol && r->comp_s <= tol)
+        return DOPUS_QP_SOLVED;
+    s = qp_track_best(L, ws, in, sol, r, iter);
+    if (s != QP_GO_ON)
+        return s;
+    if (primal_infeasible(ws, in, r, L->data_scale))
+        return DOPUS_QP_PRIMAL_INFEASIBLE;
+    if (dual_infeasible(ws, in, L->data_scale, L->hscale))
+        return DOPUS_QP_DUAL_INFEASIBLE;
+    if (iter >= L->st.max_iter)
+        return DOPUS_QP_MAX_ITER;
+    return QP_GO_ON;
+}
 
 #ifdef DOPUS_QP_TRACE
-        {
-            int kk, b2 = 0;
-            /* barrier weights of every row, for an inertia analysis of H + D'QD offline */
-            QP_TRACE("QD %d", iter);
-            for (kk = 0; kk < NI; ++kk) {
-                const dopus_real qk = (b2 < ws->nb && ws->bidx[b2] == kk) ? row_q(ws, b2++) : DOPUS_R(0.0);
-                QP_TRACE(" %.17g", qk);
-            }
-            QP_TRACE("\n");
-        }
+/* barrier weights of every row, for an inertia analysis of H + D'QD offline */
+static void trace_barrier_weights(const dopus_qp_workspace *ws, int iter)
+{
+    int kk, b2 = 0;
+    QP_TRACE("QD %d", iter);
+    for (kk = 0; kk < NI; ++kk) {
+        const dopus_real qk = (b2 < ws->nb && ws->bidx[b2] == kk) ? row_q(ws, b2++) : DOPUS_R(0.0);
+        QP_TRACE(" %.17g", qk);
+    }
+    QP_TRACE("\n");
+}
+#else
+#define trace_barrier_weights(ws, iter) ((void)0)
 #endif
-        /* factorisation with minimal inertia correction: first the exact terminal
-         * augmentation rho Req'Req, then delta I growing geometrically */
-        ws->delta = DOPUS_R(0.0);
-        floors_before = ws->pivot_floors;
+
+/* ---------------------------------------------------------------- factorisation */
+
+/* Exact terminal augmentation rho Req'Req after a failed pivot: rho grows from the Hessian
+ * scale over |Req|^2 by factors of 100. Returns riccati_factor's code of the last try. */
+static int qp_augment_terminal(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
+{
+    int tries, fact = 1;
+    dopus_real rho0 = L->hscale / dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), DOPUS_REAL_SQRT_TINY);
+    rho0 /= dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), DOPUS_REAL_SQRT_TINY);
+    for (tries = 0; tries < RHO_TRIES && fact == 1 && ws->rho_aug < rho0 * RHO_MAX_REL; ++tries) {
+        ws->rho_aug = ws->rho_aug > DOPUS_R(0.0) ? DOPUS_R(100.0) * ws->rho_aug : rho0;
+        ++L->n_aug;
         fact = riccati_factor(ws, in);
-        if (fact == 1 && NE > 0) {
-            int tries;
-            dopus_real rho0 =
-                hscale / dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), DOPUS_REAL_SQRT_TINY);
-            rho0 /= dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), DOPUS_REAL_SQRT_TINY);
-            for (tries = 0; tries < RHO_TRIES && fact == 1 && ws->rho_aug < rho0 * RHO_MAX_REL; ++tries) {
-                ws->rho_aug = ws->rho_aug > DOPUS_R(0.0) ? DOPUS_R(100.0) * ws->rho_aug : rho0;
-                ++n_aug;
-                fact = riccati_factor(ws, in);
-            }
+    }
+    return fact;
+}
+
+/* Inertia correction delta I after a failed pivot, growing geometrically from a third of
+ * the last one used. Returns riccati_factor's code of the last try. */
+static int qp_correct_delta(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
+{
+    int tries, fact;
+    ws->delta = L->delta_last > DOPUS_R(0.0) ? dmax(DOPUS_R(1e-20) * L->hscale, L->delta_last / DOPUS_R(3.0))
+                                             : DOPUS_R(1e-8) * L->hscale;
+    /* bounded by count as well as by size: with huge or non-finite data the size
+     * test alone may never fire (NaN compares false, inf * 10 stays inf) */
+    for (tries = 0;; ++tries) {
+        ++L->n_corr;
+        fact = riccati_factor(ws, in);
+        if (fact != 1 || !(ws->delta <= DELTA_MAX_REL * L->hscale) || tries >= DELTA_TRIES)
+            break;
+        ws->delta *= DELTA_GROW;
+    }
+    L->delta_last = ws->delta;
+    L->delta_used = dmax(L->delta_used, ws->delta);
+    return fact;
+}
+
+/* Factorisation with minimal inertia correction: first the exact terminal augmentation
+ * rho Req'Req, then delta I growing geometrically. Returns 0 when factorised. */
+static int qp_factor_with_correction(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
+{
+    int fact;
+    ws->delta = DOPUS_R(0.0);
+    fact = riccati_factor(ws, in);
+    if (fact == 1 && NE > 0)
+        fact = qp_augment_terminal(L, ws, in);
+    if (fact == 1)
+        fact = qp_correct_delta(L, ws, in);
+    return fact;
+}
+
+/* Iterative refinement steps of the corrector's solve. */
+static int qp_refine_steps(const qp_loop *L, const dopus_qp_workspace *ws, const qp_res *r, int iter,
+                           int floors_before)
+{
+    /* floored pivots make the factorisation inexact: refine more; far from the
+     * solution the directions need no refinement */
+    int nref = L->st.refine_steps + (ws->pivot_floors > floors_before ? 2 : 0);
+    /* no progress in the last iteration near the solution: the directions are limited
+     * by the accuracy of the factorisation, refine more */
+    if (iter > L->best_iter)
+        nref += 2;
+    if (merit(r) > REFINE_BELOW && ws->pivot_floors == floors_before)
+        nref = 0;
+    return nref;
+}
+
+/* ---------------------------------------------------------------- steps */
+
+/* Equality-constrained QP (no bounded side): one full Newton step is exact. */
+static void qp_newton_step(dopus_qp_workspace *ws, const dopus_qp_in *in, int nref)
+{
+    const qp_centring none = {0, DOPUS_R(0.0), DOPUS_R(0.0)}; /* no bounded side: rc is never formed */
+    newton_direction(ws, in, nref, &none);
+    dopus_lai_axpy(NP, DOPUS_R(1.0), ws->d_prim, ws->prim);
+    dopus_lai_axpy((N + 1) * NX, DOPUS_R(1.0), ws->d_lam, ws->lam);
+    dopus_lai_axpy(NE, DOPUS_R(1.0), ws->d_nu, ws->nu);
+}
+
+/* Predictor (affine scaling): the Newton direction without centring, its step lengths
+ * (*alpha_aff, primal; one length for both unless long_steps) and the average
+ * complementarity mu_aff that step would reach, returned. */
+static dopus_real qp_predictor(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_res *r, int long_steps,
+                               dopus_real *alpha_aff)
+{
+    const qp_centring pred = {0, DOPUS_R(0.0), DOPUS_R(0.0)};
+    dopus_real alpha, alpha_d, mu_aff = DOPUS_R(0.0);
+    int i, full[2];
+    newton_direction(ws, in, 0, &pred);
+    max_steps(ws, &alpha, &alpha_d, full);
+    if (!long_steps)
+        alpha = alpha_d = dmin(alpha, alpha_d);
+    *alpha_aff = alpha;
+    for (i = 0; i < ws->nb; ++i) {
+        if (ws->has_lo[i])
+            mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha_d * ws->dz_lo[i]);
+        if (ws->has_up[i])
+            mu_aff += (ws->t_up[i] + alpha * dt_up(ws, i)) * (ws->z_up[i] + alpha_d * ws->dz_up[i]);
+    }
+    return mu_aff / r->nsides;
+}
+
+/* Centring parameter sigma = (mu_aff / mu)^3 (Mehrotra), with the floors below. */
+static dopus_real qp_sigma(const qp_loop *L, const dopus_qp_workspace *ws, const qp_res *r, dopus_real mu_aff)
+{
+    dopus_real sigma = r->mu > DOPUS_R(0.0) ? mu_aff / r->mu : DOPUS_R(0.0);
+    sigma = dmin(DOPUS_R(1.0), dmax(DOPUS_R(0.0), sigma * sigma * sigma));
+    /* Nonconvex region: the barrier-augmented Hessian needed the inertia correction,
+     * so the current barrier problem is not convex on the null space of the
+     * equalities. Reducing mu there freezes the iterate in the wrong region (the
+     * bounds that must become active to supply curvature keep tiny multipliers, and
+     * the delta-shifted steps stall); keep mu nearly constant (a centring step)
+     * until the barrier terms make the inertia right again. */
+    if (ws->delta > DOPUS_R(0.0))
+        sigma = dmax(sigma, SIGMA_NONCONVEX);
+    return dmax(sigma, L->sigma_min);
+}
+
+/* Corrector: the direction towards the centring target sigma mu with Mehrotra's
+ * second-order term, and its step lengths (*alpha primal, *alpha_d dual): up to the
+ * boundary with the long steps, else one length, STEP_TAU of the way to the boundary. */
+static void qp_corrector(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_res *r, int iter,
+                         int nref, dopus_real sigma, int long_steps, dopus_real *alpha, dopus_real *alpha_d)
+{
+    qp_centring corr;
+    int full[2];
+    /* rc = t z + dt_aff dz_aff - target. The target is kept above a fraction of the
+     * complementarity tolerance: driving mu far below what the termination test needs
+     * only makes the barrier weights z/t of active rows huge, and their cancellation in
+     * the Riccati recursion spoils the Newton directions. */
+    corr.corrector = 1;
+    corr.target = dmax(sigma * r->mu, MU_FLOOR_REL * L->st.tol * dmax(DOPUS_R(1.0), r->nz));
+    /* safeguard: when complementarity is all that is left and the last step raised mu,
+     * drop the second-order term this time (Mehrotra's corrector can otherwise cycle
+     * on a pair far from the central path) */
+    corr.eta = (iter > 0 && r->mu > L->mu_prev && dmax(r->stat_s, r->eq_s) < r->comp_s) ? DOPUS_R(0.0)
+                                                                                        : DOPUS_R(1.0);
+    L->mu_prev = r->mu;
+    newton_direction(ws, in, nref, &corr);
+    max_steps(ws, alpha, alpha_d, full);
+    if (long_steps) {
+        *alpha = step_to_boundary(*alpha, full[0]);
+        *alpha_d = step_to_boundary(*alpha_d, full[1]);
+    } else {
+        *alpha = *alpha_d = STEP_TAU * dmin(*alpha, *alpha_d);
+    }
+}
+
+/* The step: primal and slacks by alpha, multipliers by alpha_d. */
+static void qp_take_step(dopus_qp_workspace *ws, dopus_real alpha, dopus_real alpha_d)
+{
+    int i;
+    dopus_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
+    dopus_lai_axpy((N + 1) * NX, alpha_d, ws->d_lam, ws->lam);
+    dopus_lai_axpy(NE, alpha_d, ws->d_nu, ws->nu);
+    for (i = 0; i < ws->nb; ++i) {
+        if (ws->has_lo[i]) {
+            ws->t_lo[i] += alpha * dt_lo(ws, i);
+            ws->z_lo[i] += alpha_d * ws->dz_lo[i];
         }
-        if (fact == 1) {
-            int tries;
-            ws->delta = delta_last > DOPUS_R(0.0) ? dmax(DOPUS_R(1e-20) * hscale, delta_last / DOPUS_R(3.0))
-                                                  : DOPUS_R(1e-8) * hscale;
-            /* bounded by count as well as by size: with huge or non-finite data the size
-             * test alone may never fire (NaN compares false, inf * 10 stays inf) */
-            for (tries = 0;; ++tries) {
-                ++n_corr;
-                fact = riccati_factor(ws, in);
-                if (fact != 1 || !(ws->delta <= DELTA_MAX_REL * hscale) || tries >= DELTA_TRIES)
-                    break;
-                ws->delta *= DELTA_GROW;
-            }
-            delta_last = ws->delta;
-            delta_used = dmax(delta_used, ws->delta);
+        if (ws->has_up[i]) {
+            ws->t_up[i] += alpha * dt_up(ws, i);
+            ws->z_up[i] += alpha_d * ws->dz_up[i];
         }
-        if (fact != 0) {
+    }
+}
+
+/* ---------------------------------------------------------------- the solve */
+
+/* The result of a loop that stopped at iteration iter with status: the last iterate, or
+ * the best one seen when the loop failed at a worse point (it is in *sol already; its
+ * residuals are reported). */
+static int qp_result(const qp_loop *L, dopus_qp_workspace *ws, const qp_res *r, int status, int iter,
+                     dopus_qp_sol *sol, dopus_qp_info *info)
+{
+    const int keep_best =
+        (status == DOPUS_QP_MAX_ITER || status == DOPUS_QP_STALLED || status == DOPUS_QP_NUMERICAL) &&
+        isfinite(L->best_merit) && !(merit(r) <= L->best_merit);
+    if (info) {
+        info->inertia_corrections = L->n_corr;
+        info->terminal_augmentations = L->n_aug;
+        info->pivot_floors = ws->pivot_floors;
+        info->delta = L->delta_used;
+    }
+    return finish(ws, keep_best ? &L->best_r : r, status, iter, keep_best ? NULL : sol, info);
+}
+
+/* Mehrotra's predictor-corrector. Per iteration: the residuals and the stopping tests (with
+ * the restarts on a stall), the factorisation with inertia correction, the predictor, the
+ * centring parameter, the corrector and the step. */
+int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_settings *settings,
+                   dopus_qp_sol *sol, dopus_qp_info *info)
+{
+    qp_loop L;
+    qp_res r;
+    int iter, status = qp_prepare(&L, ws, in, settings, sol, info);
+
+    if (status != QP_GO_ON)
+        return status;
+    for (iter = 0;; ++iter) {
+        dopus_real alpha, alpha_d, alpha_aff, sigma;
+        int floors_before, nref;
+        /* the long steps (separate primal and dual step lengths, up to the boundary) in the
+         * first attempt from the centred start while the QP is convex (no correction) */
+        const int long_steps = L.attempt == 0 && L.n_corr == 0 && L.n_aug == 0;
+
+        compute_residuals(ws, in, &r);
+        status = qp_stopping_tests(&L, ws, in, sol, &r, iter);
+        if (status == QP_RESTARTED)
+            continue;
+        if (status != QP_GO_ON)
+            break;
+        trace_barrier_weights(ws, iter);
+
+        floors_before = ws->pivot_floors;
+        if (qp_factor_with_correction(&L, ws, in) != 0) {
             status = DOPUS_QP_NUMERICAL;
             break;
         }
-        /* floored pivots make the factorisation inexact: refine more; far from the
-         * solution the directions need no refinement */
-        nref = st.refine_steps + (ws->pivot_floors > floors_before ? 2 : 0);
-        /* no progress in the last iteration near the solution: the directions are limited
-         * by the accuracy of the factorisation, refine more */
-        if (iter > best_iter)
-            nref += 2;
-        if (merit(&r) > REFINE_BELOW && ws->pivot_floors == floors_before)
-            nref = 0;
-
+        nref = qp_refine_steps(&L, ws, &r, iter, floors_before);
         if (r.nsides == 0) {
-            /* equality-constrained QP: one Newton step is exact */
-            const qp_centring none = {0, DOPUS_R(0.0),
-                                      DOPUS_R(0.0)}; /* no bounded side: rc is never formed */
-            newton_direction(ws, in, nref, &none);
-            dopus_lai_axpy(NP, DOPUS_R(1.0), ws->d_prim, ws->prim);
-            dopus_lai_axpy((N + 1) * NX, DOPUS_R(1.0), ws->d_lam, ws->lam);
-            dopus_lai_axpy(NE, DOPUS_R(1.0), ws->d_nu, ws->nu);
+            qp_newton_step(ws, in, nref);
             continue;
         }
-
-        /* predictor (affine scaling) */
-        pred.corrector = 0;
-        pred.eta = pred.target = DOPUS_R(0.0);
-        newton_direction(ws, in, 0, &pred);
-        max_steps(ws, &alpha, &alpha_d, full);
-        if (!long_steps)
-            alpha = alpha_d = dmin(alpha, alpha_d);
-        alpha_aff = alpha;
-        (void)alpha_aff;
-        mu_aff = DOPUS_R(0.0);
-        for (i = 0; i < ws->nb; ++i) {
-            if (ws->has_lo[i])
-                mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha_d * ws->dz_lo[i]);
-            if (ws->has_up[i])
-                mu_aff += (ws->t_up[i] + alpha * dt_up(ws, i)) * (ws->z_up[i] + alpha_d * ws->dz_up[i]);
-        }
-        mu_aff /= r.nsides;
-        sigma = r.mu > DOPUS_R(0.0) ? mu_aff / r.mu : DOPUS_R(0.0);
-        sigma = dmin(DOPUS_R(1.0), dmax(DOPUS_R(0.0), sigma * sigma * sigma));
-        /* Nonconvex region: the barrier-augmented Hessian needed the inertia correction,
-         * so the current barrier problem is not convex on the null space of the
-         * equalities. Reducing mu there freezes the iterate in the wrong region (the
-         * bounds that must become active to supply curvature keep tiny multipliers, and
-         * the delta-shifted steps stall); keep mu nearly constant (a centring step)
-         * until the barrier terms make the inertia right again. */
-        if (ws->delta > DOPUS_R(0.0))
-            sigma = dmax(sigma, SIGMA_NONCONVEX);
-        sigma = dmax(sigma, sigma_min);
-
-        /* corrector: rc = t z + dt_aff dz_aff - target. The target is kept above a
-         * fraction of the complementarity tolerance: driving mu far below what the
-         * termination test needs only makes the barrier weights z/t of active rows huge,
-         * and their cancellation in the Riccati recursion spoils the Newton directions. */
-        target = dmax(sigma * r.mu, MU_FLOOR_REL * st.tol * dmax(DOPUS_R(1.0), r.nz));
-        /* safeguard: when complementarity is all that is left and the last step raised mu,
-         * drop the second-order term this time (Mehrotra's corrector can otherwise cycle
-         * on a pair far from the central path) */
-        eta = (iter > 0 && r.mu > mu_prev && dmax(r.stat_s, r.eq_s) < r.comp_s) ? DOPUS_R(0.0) : DOPUS_R(1.0);
-        mu_prev = r.mu;
-        corr.corrector = 1;
-        corr.eta = eta;
-        corr.target = target;
-        newton_direction(ws, in, nref, &corr);
-        max_steps(ws, &alpha, &alpha_d, full);
-        if (long_steps) {
-            alpha = step_to_boundary(alpha, full[0]);
-            alpha_d = step_to_boundary(alpha_d, full[1]);
-        } else {
-            alpha = alpha_d = STEP_TAU * dmin(alpha, alpha_d);
-        }
+        sigma = qp_sigma(&L, ws, &r, qp_predictor(ws, in, &r, long_steps, &alpha_aff));
+        qp_corrector(&L, ws, in, &r, iter, nref, sigma, long_steps, &alpha, &alpha_d);
         QP_TRACE("it %2d mu %.2e stat %.2e eq %.2e ineq %.2e comp %.2e | a_aff %.3f sigma %.2e "
                  "alpha %.3e delta %.1e rho %.1e floors %d |dp| %.2e\n",
                  iter, r.mu, r.stat_s, r.eq_s, r.ineq_s, r.comp_s, alpha_aff, sigma, alpha, ws->delta,
                  ws->rho_aug, ws->pivot_floors - floors_before, dopus_lai_norm_inf(NP, ws->d_prim));
-
-        dopus_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
-        dopus_lai_axpy((N + 1) * NX, alpha_d, ws->d_lam, ws->lam);
-        dopus_lai_axpy(NE, alpha_d, ws->d_nu, ws->nu);
-        for (i = 0; i < ws->nb; ++i) {
-            if (ws->has_lo[i]) {
-                ws->t_lo[i] += alpha * dt_lo(ws, i);
-                ws->z_lo[i] += alpha_d * ws->dz_lo[i];
-            }
-            if (ws->has_up[i]) {
-                ws->t_up[i] += alpha * dt_up(ws, i);
-                ws->z_up[i] += alpha_d * ws->dz_up[i];
-            }
-        }
+        (void)alpha_aff;
+        qp_take_step(ws, alpha, alpha_d);
     }
-    keep_best = (status == DOPUS_QP_MAX_ITER || status == DOPUS_QP_STALLED || status == DOPUS_QP_NUMERICAL) &&
-                isfinite(best_merit) && !(merit(&r) <= best_merit);
-    if (keep_best)
-        r = best_r; /* the best point seen is in *sol already; report its residuals */
-    if (info) {
-        info->inertia_corrections = n_corr;
-        info->terminal_augmentations = n_aug;
-        info->pivot_floors = ws->pivot_floors;
-        info->delta = delta_used;
-    }
-    return finish(ws, &r, status, iter, keep_best ? NULL : sol, info);
+    return qp_result(&L, ws, &r, status, iter, sol, info);
 }
 
 /* ---------------------------------------------------------------- infeasible row */
