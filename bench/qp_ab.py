@@ -179,21 +179,31 @@ def main():
         if not ok:
             mismatches.append(label)
         row = {"qp": label, "identical": ok, "status": b[1]["status"], "iterations": b[1]["iterations"],
-               "iterations_base": a[1]["iterations"]}
+               "status_base": a[1]["status"], "iterations_base": a[1]["iterations"]}
         if args.reps > 0 and "warm_from" not in kw and kw.get("max_iter", 100) > 3:
             time_pair(ha, hb, args.warmup)
             row["t_base"], row["t_work"] = time_pair(ha, hb, args.reps)
             row["ratio"] = row["t_work"] / row["t_base"]
         rows.append(row)
     statuses: dict = {}
+    statuses_base: dict = {}
     for r in rows:
         statuses[r["status"]] = statuses.get(r["status"], 0) + 1
+        statuses_base[r["status_base"]] = statuses_base.get(r["status_base"], 0) + 1
     print(f"{len(rows)} solves, base {args.base} vs working tree: {len(rows) - len(mismatches)} bit-identical, "
           f"{len(mismatches)} differ {mismatches[:10]}")
-    print("statuses:", statuses, " iterations total:", sum(r["iterations"] for r in rows))
+    print("statuses base:", statuses_base, " iterations total:", sum(r["iterations_base"] for r in rows))
+    print("statuses work:", statuses, " iterations total:", sum(r["iterations"] for r in rows))
+    differ = [r for r in rows if not r["identical"]]
+    if differ:
+        w = max(len(r["qp"]) for r in differ)
+        print(f"{'QP that differs':{w}s} {'status base':>18s} {'it':>4s} {'status work':>18s} {'it':>4s}")
+        for r in differ:
+            print(f"{r['qp']:{w}s} {r['status_base']:>18s} {r['iterations_base']:4d} {r['status']:>18s} "
+                  f"{r['iterations']:4d}")
     timed = [r for r in rows if "ratio" in r]
     summary = {"base": args.base, "solves": len(rows), "identical": len(rows) - len(mismatches),
-               "mismatches": mismatches, "statuses": statuses}
+               "mismatches": mismatches, "statuses": statuses, "statuses_base": statuses_base}
     if timed:
         w = max(len(r["qp"].split("/")[0]) for r in timed)
         print(f"{'group':{w}s} {'QPs':>4s} {'t_base us':>10s} {'t_work us':>10s} {'median ratio':>13s} "

@@ -1536,9 +1536,9 @@ static int qp_track_best(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *
         write_solution(ws, sol);
     }
     last = qp_last_progress(L, r, iter);
-    if (last == iter) {
+    if (L->best_iter == iter) {
         return QP_GO_ON;
-    } else if (L->attempt == 0 && iter - last >= RESTART_STALL_ITERS) {
+    } else if (L->attempt == 0 && iter - L->best_iter >= RESTART_STALL_ITERS) {
         /* The centred start with its long steps made no progress (a nonconvex QP, whose
          * iterate it threw into the wrong region): start again from the plain cold
          * start with the careful steps. */
@@ -1546,7 +1546,8 @@ static int qp_track_best(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *
         qp_restart(L, ws, in, sol, 1, iter);
         QP_TRACE("plain start at iteration %d\n", iter);
         return QP_RESTARTED;
-    } else if (L->attempt == 1 && L->n_corr > L->n_corr_attempt && iter - last >= RESTART_STALL_ITERS) {
+    } else if (L->attempt == 1 && L->n_corr > L->n_corr_attempt &&
+               iter - L->best_iter >= RESTART_STALL_ITERS) {
         /* Stalled after inertia corrections: the QP is nonconvex on the null space of
          * the equalities, and Mehrotra's aggressive mu reduction let a near-singular
          * barrier Hessian throw the iterate far into the nonconvex region before the
