@@ -98,6 +98,9 @@
 #define CERT_RES_DUAL ROBOT_ARM_PREC(1e-9, 1e-4)
 #define CERT_RES_PRIMAL ROBOT_ARM_PREC(1e-6, 1e-3)
 #define CERT_SEP ROBOT_ARM_PREC(1e-6, 1e-3)
+/* Reduction of the normalised certificate residual that counts as progress of the
+ * iteration (see qp_last_progress). */
+#define CERT_PROGRESS ROBOT_ARM_R(0.5)
 
 static robot_arm_real dmax(robot_arm_real a, robot_arm_real b)
 {
@@ -1048,42 +1051,76 @@ static robot_arm_real step_to_boundary(robot_arm_real a, int full)
 
 /* ---------------------------------------------------------------- infeasibility */
 
-/* Farkas certificate on the normalised dual iterate y = (lam, nu, z):
- *   A'y = 0 (the constraint part of the stationarity residual) and
- *   b'y = -lam_0'x0 - sum lam_{k+1}'b_k - nu'req - up'z_up + lo'z_lo > 0
- * proves that no feasible point exists (for feasible w the Lagrangian term is <= 0). */
-static int primal_infeasible(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r,
-                             robot_arm_real data_scale)
+/* The separating value of the dual iterate y = (lam, nu, z) as a Farkas certificate,
+ *   b'y = -lam_0'x0 - sum lam_{k+1}'b_k - nu'req - up'z_up + lo'z_lo,
+ * with *bscale the largest data entry in it (at least 1) and *y1 the 1-norm of y. For
+ * A'y = 0 (the constraint part of the stationarity residual) and b'y > 0 no feasible
+ * point exists (for feasible w the Lagrangian term is <= 0); more precisely every w
+ * violates some constraint by at least b'y / |y|_1. */
+static robot_arm_real farkas_separation(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_real *bscale,
+                                    robot_arm_real *y1)
 {
     int k, i;
-    robot_arm_real bty = ROBOT_ARM_R(0.0), aty, bscale = ROBOT_ARM_R(1.0);
-    if (!(r->ny > CERT_GROWTH * data_scale))
-        return 0;
-    aty = r->aty / r->ny;
+    robot_arm_real bty = ROBOT_ARM_R(0.0), bs = ROBOT_ARM_R(1.0), n1 = ROBOT_ARM_R(0.0);
     bty -= robot_arm_lai_dot(NX, ws->lam, in->x0);
-    bscale = dmax(bscale, robot_arm_lai_norm_inf(NX, in->x0));
+    bs = dmax(bs, robot_arm_lai_norm_inf(NX, in->x0));
     for (k = 0; k < N; ++k) {
         bty -= robot_arm_lai_dot(NX, ws->lam + (k + 1) * NX, in->b[k]);
-        bscale = dmax(bscale, robot_arm_lai_norm_inf(NX, in->b[k]));
+        bs = dmax(bs, robot_arm_lai_norm_inf(NX, in->b[k]));
     }
+    for (i = 0; i < (N + 1) * NX; ++i)
+        n1 += robot_arm_fabs(ws->lam[i]);
     if (NE > 0) {
         bty -= robot_arm_lai_dot(NE, ws->nu, in->req);
-        bscale = dmax(bscale, robot_arm_lai_norm_inf(NE, in->req));
+        bs = dmax(bs, robot_arm_lai_norm_inf(NE, in->req));
+        for (i = 0; i < NE; ++i)
+            n1 += robot_arm_fabs(ws->nu[i]);
     }
     for (i = 0; i < ws->nb; ++i) {
         robot_arm_real lo, up;
         row_bounds(in, ws->bidx[i], &lo, &up);
         if (ws->has_lo[i]) {
             bty += lo * ws->z_lo[i];
-            bscale = dmax(bscale, robot_arm_fabs(lo));
+            bs = dmax(bs, robot_arm_fabs(lo));
+            n1 += ws->z_lo[i];
         }
         if (ws->has_up[i]) {
             bty -= up * ws->z_up[i];
-            bscale = dmax(bscale, robot_arm_fabs(up));
+            bs = dmax(bs, robot_arm_fabs(up));
+            n1 += ws->z_up[i];
         }
     }
-    bty /= r->ny;
-    return aty <= CERT_RES_DUAL && bty > CERT_SEP * bscale;
+    *bscale = bs;
+    *y1 = n1;
+    return bty;
+}
+
+/* Farkas certificate on the normalised dual iterate y / |y|_inf once it has diverged:
+ * A'y = 0 to CERT_RES_DUAL and a separating value b'y beyond CERT_SEP. */
+static int primal_infeasible(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r,
+                             robot_arm_real data_scale)
+{
+    robot_arm_real bscale, y1, bty;
+    if (!(r->ny > CERT_GROWTH * data_scale) || !(r->aty / r->ny <= CERT_RES_DUAL))
+        return 0;
+    bty = farkas_separation(ws, in, &bscale, &y1) / r->ny;
+    return bty > CERT_SEP * bscale;
+}
+
+/* The same certificate, tested when progress has stalled, with the separation measured
+ * against the tolerance instead of CERT_SEP: every point violates some constraint by at
+ * least b'y / |y|_1, and when that exceeds tol (relative to the bounds) no point meets the
+ * constraints to the tolerance the solve asks for (a QP infeasible by a margin just above
+ * the tolerance, whose dual iterate diverges to a certificate that is exact to round-off). */
+static int primal_infeasible_at_tol(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r,
+                                    robot_arm_real data_scale, robot_arm_real tol)
+{
+    robot_arm_real bscale, y1, bty;
+    if (!(r->ny > CERT_GROWTH * data_scale) || !(r->aty / r->ny <= CERT_RES_DUAL))
+        return 0;
+    bty = farkas_separation(ws, in, &bscale, &y1);
+    QP_TRACE("stalled: certificate separation %.3e (tolerance %.1e)\n", bty / (y1 * bscale), tol);
+    return y1 > ROBOT_ARM_R(0.0) && bty / y1 > tol * bscale;
 }
 
 /* Unboundedness certificate on the normalised primal iterate d = w / |w|: a feasible ray
@@ -1337,6 +1374,11 @@ typedef struct {
     robot_arm_real best_merit; /* the best iterate so far (it is in *sol) */
     int best_iter;
     qp_res best_r;
+    /* progress towards an infeasibility certificate (see qp_track_best): the smallest
+     * normalised constraint residual |A'y| / |y| of a dual iterate beyond the data scale,
+     * and the iteration that last reduced it by CERT_PROGRESS */
+    robot_arm_real best_cert;
+    int cert_iter;
 } qp_loop;
 
 /* ---------------------------------------------------------------- data, scales, start */
@@ -1440,6 +1482,8 @@ static int qp_prepare(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp
     L->sigma_min = ROBOT_ARM_R(0.0);
     L->best_merit = INFINITY;
     L->best_iter = 0;
+    L->best_cert = INFINITY;
+    L->cert_iter = 0;
     return QP_GO_ON;
 }
 
@@ -1457,13 +1501,32 @@ static void qp_restart(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_q
     L->mu_prev = INFINITY;
     L->best_merit = INFINITY;
     L->best_iter = iter + 1;
+    L->best_cert = INFINITY;
+    L->cert_iter = iter + 1;
+}
+
+/* The iteration of the last progress: a better iterate (smaller merit), or a step towards
+ * a Farkas certificate. On an infeasible QP the residuals stop improving while the dual
+ * iterate y diverges and its direction converges to a certificate (A'y / |y| -> 0, see
+ * primal_infeasible); the iterations until the certificate is exact are progress too, not
+ * a stall. Counted once y is beyond the data scale and each time |A'y| / |y| falls by
+ * CERT_PROGRESS. */
+static int qp_last_progress(qp_loop *L, const qp_res *r, int iter)
+{
+    if (r->ny > L->data_scale && r->aty < CERT_PROGRESS * L->best_cert * r->ny) {
+        L->best_cert = r->aty / r->ny;
+        L->cert_iter = iter;
+    }
+    return L->best_iter > L->cert_iter ? L->best_iter : L->cert_iter;
 }
 
 /* The best iterate so far, and what to do when progress stalls: restart (QP_RESTARTED) or
- * give up (ROBOT_ARM_QP_STALLED); else QP_GO_ON. */
+ * give up (ROBOT_ARM_QP_STALLED, or ROBOT_ARM_QP_PRIMAL_INFEASIBLE when the diverged dual iterate
+ * proves that no point meets the constraints to the tolerance); else QP_GO_ON. */
 static int qp_track_best(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_qp_sol *sol,
                          const qp_res *r, int iter)
 {
+    int last;
     if (iter == 0 || merit(r) < L->best_merit) {
         /* the best point so far goes straight into the output (the warm-start point
          * has been read by then; a restart starts cold) */
@@ -1471,6 +1534,10 @@ static int qp_track_best(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm
         L->best_iter = iter;
         L->best_r = *r;
         write_solution(ws, sol);
+    }
+    last = qp_last_progress(L, r, iter);
+    if (L->best_iter == iter) {
+        return QP_GO_ON;
     } else if (L->attempt == 0 && iter - L->best_iter >= RESTART_STALL_ITERS) {
         /* The centred start with its long steps made no progress (a nonconvex QP, whose
          * iterate it threw into the wrong region): start again from the plain cold
@@ -1495,8 +1562,9 @@ static int qp_track_best(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm
         qp_restart(L, ws, in, sol, 2, iter);
         QP_TRACE("restart at iteration %d\n", iter);
         return QP_RESTARTED;
-    } else if (iter - L->best_iter >= STALL_ITERS) {
-        return ROBOT_ARM_QP_STALLED;
+    } else if (iter - last >= STALL_ITERS) {
+        return primal_infeasible_at_tol(ws, in, r, L->data_scale, L->st.tol) ? ROBOT_ARM_QP_PRIMAL_INFEASIBLE
+                                                                             : ROBOT_ARM_QP_STALLED;
     }
     return QP_GO_ON;
 }
