@@ -226,13 +226,16 @@ def test_infeasible_qps_are_flagged(kind, sizes):
         assert info["iterations"] < 100
 
 
-@pytest.mark.parametrize("kind,sizes", [
-    ("row_vs_box", (10, 4, 2, 1, 2, 1)),
-    ("terminal_eq_vs_box", (10, 4, 2, 1, 2, 1)),
-    ("unreachable", (6, 3, 2, 0, 0, 0)),
-    ("terminal_rows", (10, 4, 2, 1, 2, 1)),
+@pytest.mark.parametrize("kind,sizes,seed", [
+    ("row_vs_box", (10, 4, 2, 1, 2, 1), 1),
+    ("terminal_eq_vs_box", (10, 4, 2, 1, 2, 1), 1),
+    # trial 5 stalled: its dual iterate diverged towards the certificate so slowly that the
+    # KKT residuals made no progress for 10 iterations before the certificate was exact
+    ("terminal_eq_vs_box", (10, 4, 2, 1, 2, 1), 7),
+    ("unreachable", (6, 3, 2, 0, 0, 0), 1),
+    ("terminal_rows", (10, 4, 2, 1, 2, 1), 1),
 ])
-def test_infeasible_row_agrees_with_reference(kind, sizes):
+def test_infeasible_row_agrees_with_reference(kind, sizes, seed):
     """The row dopus_qp_infeasible_row names (largest multiplier of the IPM's diverging
     certificate) carries weight in a Farkas certificate of the QP (a linear programme,
     HiGHS, independent of the IPM), and is the very row the reference names by the same
@@ -241,7 +244,7 @@ def test_infeasible_row_agrees_with_reference(kind, sizes):
     from dopus_codegen.reference.qp import qp_infeasible_row, qp_row_in_certificate
 
     h = solver(sizes)
-    rng = np.random.default_rng(zlib.crc32(kind.encode()) + 1)
+    rng = np.random.default_rng(zlib.crc32(kind.encode()) + seed)
     agree = []
     for trial in range(10):
         qp = P.make_infeasible(rng, *sizes, kind)
@@ -254,6 +257,29 @@ def test_infeasible_row_agrees_with_reference(kind, sizes):
         assert row == ref or qp_row_in_certificate(qp, row) > 1e-6, (kind, trial, row, ref)
         agree.append(row == ref)
     assert np.mean(agree) >= 0.8, (kind, agree)
+
+
+def test_barely_infeasible_qps_are_flagged():
+    """QPs infeasible by a relative margin of 1e-6 (a general row's range misses a
+    control's box by that much): the normalised Farkas certificate separates by less than
+    the fixed threshold of the regular test, the residuals stop improving and the
+    iteration stalls; the certificate tested against the tolerance at the stall (every
+    point violates some row by at least b'y / |y|_1, far above 1e-10) flags them. The named
+    row must carry weight in a certificate of the LP (HiGHS) and be the reference's."""
+    from dopus_codegen.reference.qp import qp_infeasible_row, qp_row_in_certificate
+
+    sizes = (10, 4, 2, 1, 2, 1)
+    h = solver(sizes)
+    rng = np.random.default_rng(zlib.crc32(b"row_vs_box") + 2)
+    for trial in range(10):
+        qp = P.make_infeasible(rng, *sizes, "row_vs_box", margin=1e-6)
+        qp.update(zip(("N", "nx", "nu", "ng", "nr", "ne"), sizes))
+        _, info = h.solve(qp, tol=1e-10)
+        assert info["status"] == "primal_infeasible", (trial, info)
+        assert info["iterations"] < 100
+        row = h.infeasible_row()
+        assert row == qp_infeasible_row(qp), (trial, row)
+        assert qp_row_in_certificate(qp, row) > 1e-6, (trial, row)
 
 
 def test_crossed_bounds_are_infeasible():
@@ -735,6 +761,28 @@ def test_stored_failing_qps_with_levenberg_marquardt(name):
     assert info["status"] == "solved" and info["inertia_corrections"] == 0, info
     err = P.compare(sol, solve_qp_reference(_shifted(qp, 1e-4)))
     assert _max_rel(err) <= REL, (name, _fmt(err))
+
+
+def test_stored_cartpole_qp_infeasible_by_a_small_margin():
+    """Cart-pole swing-up (examples/cartpole.py) with the track ends as state bounds
+    |p| <= 1, closed loop M = 1, exact Hessian, instant 14 (t = 0.7 s), the QP as the
+    reference backend forms it: the cart runs towards the track end with the force at its
+    bound, and the linearised model cannot stop it in time (the controller plans along the
+    edge of the viable set, and the plant, integrated more accurately than the model, ends a
+    little beyond it). The QP is infeasible by a tiny margin (the certificate's separation
+    b'y / |y|_1 is 3.8e-10 relative): the solver stalled (status 6) with its residuals at
+    6e-8 while its dual iterate diverged; it must flag the QP as infeasible and name the
+    track's lower bound at stage 6, as the Farkas certificate of the LP (HiGHS) does."""
+    from dopus_codegen.reference.qp import qp_infeasible_row, qp_row_in_certificate
+
+    qp = _stored_qp("cartpole_qp_M1_exact_track_instant14")
+    h = solver(_sizes(qp))
+    _, info = h.solve(qp, tol=1e-10)
+    assert info["status"] == "primal_infeasible", info
+    assert info["iterations"] < 100
+    row = h.infeasible_row()
+    assert row == qp_infeasible_row(qp) == (6, 0, -1), row   # stage 6, p (x[0]), lower bound
+    assert qp_row_in_certificate(qp, row) > 0.5, row
 
 
 def test_stage0_row_fixed_by_x0_is_ignored():

@@ -425,10 +425,12 @@ def kkt_sigma_min(qp, sol):
     return np.linalg.svd(K, compute_uv=False).min()
 
 
-def make_infeasible(rng, N, nx, nu, ng, nr, ne, kind):
+def make_infeasible(rng, N, nx, nu, ng, nr, ne, kind, margin=None):
     """A random QP made primal infeasible in one of several ways (requires the sizes the
     kind needs: 'row_vs_box' ng >= 1, 'terminal_eq_vs_box' ne >= 1, 'unreachable' nu >= 1,
-    'terminal_rows' nr >= 2)."""
+    'terminal_rows' nr >= 2). ``margin`` ('row_vs_box' only): the relative distance by
+    which the general row's range misses the control's box (default: random in [0.01, 1];
+    the random draw is made either way, so the rest of the QP does not depend on it)."""
     qp, _ = make_qp(rng, N, nx, nu, ng, nr, ne, p_active=0.2)
     k = int(rng.integers(1, N)) if N > 1 else 0
     if kind == "row_vs_box":
@@ -437,7 +439,8 @@ def make_infeasible(rng, N, nx, nu, ng, nr, ne, kind):
         qp["C"][k, 0] = 0.0
         qp["C"][k, 0, j] = rng.uniform(0.5, 2.0)
         qp["lbw"][k, j], qp["ubw"][k, j] = -1.0, 1.0
-        qp["lg"][k, 0] = qp["C"][k, 0, j] * (1.0 + rng.uniform(0.01, 1.0))
+        m = rng.uniform(0.01, 1.0)
+        qp["lg"][k, 0] = qp["C"][k, 0, j] * (1.0 + (m if margin is None else margin))
         qp["ug"][k, 0] = np.inf
     elif kind == "terminal_eq_vs_box":
         # Req x_N = req forces x_N[i] outside its box
@@ -467,6 +470,8 @@ def make_infeasible(rng, N, nx, nu, ng, nr, ne, kind):
         qp["lr"][1], qp["ur"][1] = -0.5 * s * 2.0, np.inf
     else:
         raise ValueError(kind)
+    if margin is not None and kind != "row_vs_box":
+        raise ValueError(f"margin is implemented for row_vs_box only, not {kind}")
     return qp
 
 
