@@ -1,15 +1,23 @@
 """A cart-pole swings its pole up from hanging and balances it, on a short track.
 
 A swing-up: the controller starts with the pole hanging (theta = 0) and must bring it
-upright (theta = pi) with a bounded force on a track whose ends are state bounds (active
-during the swing), then hold it there through a kick on the pole. The dynamics are those of
-a point mass on a massless rod (theta measured from the downward vertical):
+upright (theta = pi) with a bounded force (active during the swing), then hold it there
+through a kick on the pole. The dynamics are those of a point mass on a massless rod (theta
+measured from the downward vertical):
 
     (m_c + m_p sin^2 th) ddp = F + m_p sin th (l dth^2 + g cos th)
     l (m_c + m_p sin^2 th) ddth = -F cos th - m_p l dth^2 cos th sin th - (m_c + m_p) g sin th
 
 Exact Hessian and the default settings (the automatic Levenberg-Marquardt term); the
 controller starts from the offline NLP solution (``options(offline_guess=True)``).
+
+The track is unbounded. With its ends as hard state bounds (``ocp.state("p", lb=-1.0,
+ub=1.0)``, or 1.2) the swing-up runs the cart into the end with the force at its bound,
+along the edge of the set of states from which the cart can still stop in time; the plant,
+integrated more accurately than the RK4 model, ends a little beyond that edge (p = -1.0000005),
+and the QPs of the next instants are infeasible by margins of 4e-10 to 7e-9 (relative): the
+QP solver reports them infeasible and names the track's lower bound
+(tests/data/cartpole_qp_M1_exact_track_instant14.npz).
 """
 import casadi as ca
 import numpy as np
