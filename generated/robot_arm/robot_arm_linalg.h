@@ -329,21 +329,14 @@ static inline int robot_arm_lai_vec_finite(int n, const robot_arm_real *x)
 static inline robot_arm_real robot_arm_lai_norm_inf(int n, const robot_arm_real *x)
 {
     /* four independent maxima (no chain of dependent max instructions), a NaN flag */
-    int i, nan = 0;
+    int i, c, nan = 0;
     robot_arm_real m[4] = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
-    for (i = 0; i + 4 <= n; i += 4) {
-        int c;
-        for (c = 0; c < 4; ++c) {
+    for (i = 0; i < n; i += 4)
+        for (c = 0; c < 4 && i + c < n; ++c) {
             const robot_arm_real a = robot_arm_fabs(x[i + c]);
             m[c] = a > m[c] ? a : m[c];
             nan |= a != a;
         }
-    }
-    for (; i < n; ++i) {
-        const robot_arm_real a = robot_arm_fabs(x[i]);
-        m[0] = a > m[0] ? a : m[0];
-        nan |= a != a;
-    }
     m[0] = m[1] > m[0] ? m[1] : m[0];
     m[2] = m[3] > m[2] ? m[3] : m[2];
     return nan ? (robot_arm_real)NAN : (m[2] > m[0] ? m[2] : m[0]);

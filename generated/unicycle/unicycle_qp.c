@@ -432,40 +432,65 @@ typedef struct {
     unicycle_real ny;                           /* inf-norm of the dual iterate */
     unicycle_real aty; /* inf-norm of the constraint part A'y of the stationarity residual */
     unicycle_real nz;  /* inf-norm of the inequality multipliers */
-    unicycle_real obj;
 } qp_res;
+
+/* acc_i = max(acc_i, |x_i|), entry by entry (n a compile-time size: vectorised, no chain of
+ * dependent max instructions); the scales below reduce acc once at the end. */
+static inline void absmax_acc(int n, const unicycle_real *restrict x, unicycle_real *restrict acc)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        const unicycle_real a = unicycle_fabs(x[i]);
+        acc[i] = a > acc[i] ? a : acc[i];
+    }
+}
 
 static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *in, qp_res *r)
 {
     int k, i, b, j;
     unicycle_real s_stat = UNICYCLE_R(1.0), s_eq = UNICYCLE_R(1.0), s_ineq = UNICYCLE_R(1.0), nz = UNICYCLE_R(0.0),
-               obj = UNICYCLE_R(0.0), comp = UNICYCLE_R(0.0), ineq = UNICYCLE_R(0.0);
-    unicycle_real sum_c = UNICYCLE_R(0.0), naty = UNICYCLE_R(0.0);
+               comp = UNICYCLE_R(0.0), ineq = UNICYCLE_R(0.0);
+    unicycle_real sum_c = UNICYCLE_R(0.0), naty, nlam;
+    /* entry-wise maxima over the stages: |Hw|, |A'y|, |w|, |Phi w| and |lam| */
+    unicycle_real m_h[NW], m_a[NW], m_w[NW], m_pw[NX], m_lam[NX];
     int m = 0;
 
-    /* stage by stage: the objective part Hw + g and the constraint part A'y (a) of the
-     * stationarity residual, and the bounded rows of the stage: row values, slack
-     * residuals, violation, complementarity */
+    /* One pass, stage by stage: the objective part Hw + g and the constraint part A'y (a)
+     * of the stationarity residual, the bounded rows of the stage (row values, slack
+     * residuals, violation, complementarity), the dynamics residual of the stage's
+     * equation and the norms of the iterate. */
     s_ineq = dmax(s_ineq, ws->scale_bounds);
+    s_eq = dmax(s_eq, ws->scale_b);
+    for (i = 0; i < NW; ++i)
+        m_h[i] = m_a[i] = m_w[i] = UNICYCLE_R(0.0);
+    for (i = 0; i < NX; ++i) {
+        m_pw[i] = m_lam[i] = UNICYCLE_R(0.0);
+        ws->r_dyn[i] = ws->prim[i] - in->x0[i];
+    }
     for (k = 0; k <= N; ++k) {
         const int nk = k < N ? NW : NX;
         const unicycle_real *w = ws->prim + k * NW;
         unicycle_real *h = ws->r_stat + k * NW;
         unicycle_real a[NW];
         if (k < N) {
+            unicycle_real *rd = ws->r_dyn + (k + 1) * NX;
+            const unicycle_real *xn = ws->prim + (k + 1) * NW;
             sym_mv(NW, in->H[k], w, h);
             unicycle_lai_axpy(NW, in->hess_shift, w, h);
-            s_stat = dmax(s_stat, unicycle_lai_norm_inf(NW, h));
-            obj += UNICYCLE_R(0.5) * unicycle_lai_dot(NW, w, h) + unicycle_lai_dot(NW, in->g[k], w);
+            absmax_acc(NW, h, m_h);
             unicycle_lai_axpy(NW, UNICYCLE_R(1.0), in->g[k], h);
             for (i = 0; i < NW; ++i)
                 a[i] = i < NX ? ws->lam[k * NX + i] : UNICYCLE_R(0.0);
             unicycle_lai_gemv_t(NX, NW, -UNICYCLE_R(1.0), in->Phi[k], NX, ws->lam + (k + 1) * NX, UNICYCLE_R(1.0), a);
+            /* r_dyn_{k+1} = x_{k+1} - Phi_k w_k - b_k */
+            unicycle_lai_gemv_n(NX, NW, -UNICYCLE_R(1.0), in->Phi[k], NX, w, UNICYCLE_R(0.0), rd);
+            absmax_acc(NX, rd, m_pw);
+            for (i = 0; i < NX; ++i)
+                rd[i] += xn[i] - in->b[k][i];
         } else {
             sym_mv(NX, in->HN, w, h);
             unicycle_lai_axpy(NX, in->hess_shift, w, h);
-            s_stat = dmax(s_stat, unicycle_lai_norm_inf(NX, h));
-            obj += UNICYCLE_R(0.5) * unicycle_lai_dot(NX, w, h) + unicycle_lai_dot(NX, in->gN, w);
+            absmax_acc(NX, h, m_h);
             s_stat = dmax(s_stat, ws->scale_g);
             unicycle_lai_axpy(NX, UNICYCLE_R(1.0), in->gN, h);
             for (i = 0; i < NX; ++i)
@@ -473,6 +498,8 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
             if (NE > 0)
                 unicycle_lai_gemv_t(NE, NX, UNICYCLE_R(1.0), in->Req, NE1, ws->nu, UNICYCLE_R(1.0), a);
         }
+        absmax_acc(nk, w, m_w);
+        absmax_acc(NX, ws->lam + k * NX, m_lam);
         FOR_STAGE_ROWS(ws, k, b, j)
         {
             /* signed multiplier y = z_up - z_lo of the row into A'y */
@@ -500,25 +527,14 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
             }
             s_ineq = dmax(s_ineq, unicycle_fabs(v));
         }
-        naty = dmax(naty, unicycle_lai_norm_inf(nk, a));
+        absmax_acc(nk, a, m_a);
         for (i = 0; i < nk; ++i)
             h[i] += a[i];
     }
-    s_stat = dmax(s_stat, naty);
-
-    /* equalities */
-    for (i = 0; i < NX; ++i)
-        ws->r_dyn[i] = ws->prim[i] - in->x0[i];
-    s_eq = dmax(s_eq, ws->scale_b);
-    for (k = 0; k < N; ++k) {
-        unicycle_real *rd = ws->r_dyn + (k + 1) * NX;
-        const unicycle_real *xn = ws->prim + (k + 1) * NW;
-        unicycle_lai_gemv_n(NX, NW, -UNICYCLE_R(1.0), in->Phi[k], NX, ws->prim + k * NW, UNICYCLE_R(0.0), rd);
-        s_eq = dmax(s_eq, unicycle_lai_norm_inf(NX, rd));
-        for (i = 0; i < NX; ++i)
-            rd[i] += xn[i] - in->b[k][i];
-    }
-    s_eq = dmax(s_eq, unicycle_lai_norm_inf(NP, ws->prim));
+    naty = unicycle_lai_norm_inf(NW, m_a);
+    nlam = unicycle_lai_norm_inf(NX, m_lam);
+    s_stat = dmax(s_stat, dmax(unicycle_lai_norm_inf(NW, m_h), naty));
+    s_eq = dmax(s_eq, dmax(unicycle_lai_norm_inf(NW, m_w), unicycle_lai_norm_inf(NX, m_pw)));
     if (NE > 0) {
         unicycle_lai_gemv_n(NE, NX, UNICYCLE_R(1.0), in->Req, NE1, ws->prim + N * NW, UNICYCLE_R(0.0), ws->r_eqN);
         s_eq = dmax(s_eq, unicycle_lai_norm_inf(NE, ws->r_eqN));
@@ -539,9 +555,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     r->comp_s = r->comp / dmax(UNICYCLE_R(1.0), nz);
     r->nz = nz;
     r->aty = naty;
-    r->ny = dmax(nz, dmax(unicycle_lai_norm_inf((N + 1) * NX, ws->lam),
-                          NE > 0 ? unicycle_lai_norm_inf(NE, ws->nu) : UNICYCLE_R(0.0)));
-    r->obj = obj;
+    r->ny = dmax(nz, dmax(nlam, NE > 0 ? unicycle_lai_norm_inf(NE, ws->nu) : UNICYCLE_R(0.0)));
     ws->scale_stat = s_stat;
     ws->scale_eq = s_eq;
 }
@@ -1346,7 +1360,6 @@ static int finish(unicycle_qp_workspace *ws, const qp_res *r, int status, int it
         info->res_eq_scaled = r->eq_s;
         info->res_ineq_scaled = r->ineq_s;
         info->res_comp_scaled = r->comp_s;
-        info->obj = r->obj;
     }
     return status;
 }
@@ -1782,8 +1795,28 @@ static void qp_take_step(unicycle_qp_workspace *ws, unicycle_real alpha, unicycl
 /* The result of a loop that stopped at iteration iter with status: the last iterate, or
  * the best one seen when the loop failed at a worse point (it is in *sol already; its
  * residuals are reported). */
-static int qp_result(const qp_loop *L, unicycle_qp_workspace *ws, const qp_res *r, int status, int iter,
-                     unicycle_qp_sol *sol, unicycle_qp_info *info)
+/* The objective 1/2 w'(H + hess_shift I) w + g'w of the QP at the point in sol (evaluated
+ * once, for the point reported, not at every iterate). */
+static unicycle_real qp_objective(const unicycle_qp_in *in, const unicycle_qp_sol *sol)
+{
+    unicycle_real obj = UNICYCLE_R(0.0), w[NW], h[NW];
+    int k, i;
+    for (k = 0; k <= N; ++k) {
+        const int nk = k < N ? NW : NX;
+        for (i = 0; i < nk; ++i)
+            w[i] = i < NX ? sol->x[k][i] : sol->u[k][i - NX];
+        if (k < N)
+            sym_mv(NW, in->H[k], w, h);
+        else
+            sym_mv(NX, in->HN, w, h);
+        unicycle_lai_axpy(nk, in->hess_shift, w, h);
+        obj += UNICYCLE_R(0.5) * unicycle_lai_dot(nk, w, h) + unicycle_lai_dot(nk, k < N ? in->g[k] : in->gN, w);
+    }
+    return obj;
+}
+
+static int qp_result(const qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in, const qp_res *r,
+                     int status, int iter, unicycle_qp_sol *sol, unicycle_qp_info *info)
 {
     const int keep_best =
         (status == UNICYCLE_QP_MAX_ITER || status == UNICYCLE_QP_STALLED || status == UNICYCLE_QP_NUMERICAL) &&
@@ -1794,7 +1827,10 @@ static int qp_result(const qp_loop *L, unicycle_qp_workspace *ws, const qp_res *
         info->pivot_floors = ws->pivot_floors;
         info->delta = L->delta_used;
     }
-    return finish(ws, keep_best ? &L->best_r : r, status, iter, keep_best ? NULL : sol, info);
+    status = finish(ws, keep_best ? &L->best_r : r, status, iter, keep_best ? NULL : sol, info);
+    if (info)
+        info->obj = qp_objective(in, sol);
+    return status;
 }
 
 /* Mehrotra's predictor-corrector. Per iteration: the residuals and the stopping tests (with
@@ -1843,7 +1879,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
         (void)alpha_aff;
         qp_take_step(ws, alpha, alpha_d);
     }
-    return qp_result(&L, ws, &r, status, iter, sol, info);
+    return qp_result(&L, ws, in, &r, status, iter, sol, info);
 }
 
 /* ---------------------------------------------------------------- infeasible row */
