@@ -59,7 +59,13 @@
  *
  * Infeasibility: the dual (primal) iterate, once grown far beyond the data, is tested as
  * a Farkas certificate (unboundedness ray): A'y ~ 0 with b'y > 0 proves infeasibility;
- * a feasible ray with d'Hd < 0, or Hd ~ 0 and g'd < 0, proves unboundedness.
+ * a feasible ray with d'Hd < 0, or Hd ~ 0 and g'd < 0, proves unboundedness. On an
+ * infeasible QP the residuals stop improving while the dual iterate diverges towards a
+ * certificate: each halving of |A'y| / |y| counts as progress, so the iteration is not
+ * stopped as stalled before the certificate is exact. When it stalls nonetheless, the
+ * certificate is tested against the tolerance (every point violates some constraint by at
+ * least b'y / |y|_1; above tol relative to the bounds the QP is infeasible to the accuracy
+ * asked for, e.g. a QP infeasible by a relative margin of 1e-9 at tol 1e-10).
  *
  * Cold start: w = 0, lam = nu = 0, centred: every slack t = max(v - bound, f) and its
  * multiplier z = f / t (t z = f on every side), with f the primal infeasibility of w = 0
@@ -148,8 +154,9 @@ enum dopus_qp_status {
     DOPUS_QP_NUMERICAL = 4,         /* factorisation / step failure */
     DOPUS_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr,
                                        more bounded rows than DOPUS_QP_NB */
-    DOPUS_QP_STALLED = 6            /* no progress in the KKT residuals for 10 iterations
-                                       (before the limit); best point returned */
+    DOPUS_QP_STALLED = 6            /* no progress in the KKT residuals nor towards an
+                                       infeasibility certificate for 10 iterations (before
+                                       the limit); best point returned */
 };
 
 typedef struct {
