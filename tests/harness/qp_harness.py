@@ -288,6 +288,12 @@ class QPSolverHandle:
         status = self.lib.dopus_qp_solve(self._ws, inp, st, self._sol, self._info)
         return self._read_sol(), self._read_info(status)
 
+    def solve_again(self) -> int:
+        """The QP, settings and warm-start point of the last ``solve`` solved once more (its
+        data kept in place; for timing the solve call alone). Returns the status code; the
+        warm-start point is the last solution, so use it after cold solves only."""
+        return int(self.lib.dopus_qp_solve(self._ws, self._in, self._set, self._sol, self._info))
+
     def infeasible_row(self):
         """After a solve that returned primal_infeasible: ``(stage, j, side)`` of the row
         dopus_qp_infeasible_row names (the row with the largest multiplier of the
