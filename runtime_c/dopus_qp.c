@@ -32,8 +32,9 @@
 /* Full unrolling of the short loops over compile-time sizes whose inner bounds depend on
  * the outer index (triangles; a complete unroll turns them into straight-line code that the
  * compiler schedules well, about 15 % of the time of an IPM iteration on the robot arm):
- * GCC and clang honour the pragma, other compilers ignore it. */
-#if defined(__GNUC__)
+ * GCC 8 and later and clang honour the pragma; it is left out for other compilers (an
+ * older GCC would warn about an unknown pragma). */
+#if (defined(__GNUC__) && __GNUC__ >= 8) || defined(__clang__)
 #define UNROLL _Pragma("GCC unroll 16")
 #else
 #define UNROLL
@@ -271,9 +272,6 @@ static void row_axpy(const dopus_qp_in *in, int k, int j, dopus_real a, dopus_re
             o[c] += in->R[(j - NX) + c * NR] * a;
     }
 }
-
-/* Entry (i, j), i >= j, of a symmetric nx x nx matrix packed by lower columns. */
-#define PACKED(i, j) ((j)*NX - (j) * ((j)-1) / 2 + (i) - (j))
 
 /* y += alpha P x for P packed by lower columns: one sequential pass over the packed
  * entries, each used twice (below the diagonal), the sums kept in a local vector. */
@@ -1122,17 +1120,23 @@ static int primal_infeasible(const dopus_qp_workspace *ws, const dopus_qp_in *in
 }
 
 /* The same certificate, tested when progress has stalled, with the separation measured
- * against the tolerance instead of CERT_SEP: every point violates some constraint by at
- * least b'y / |y|_1, and when that exceeds tol (relative to the bounds) no point meets the
- * constraints to the tolerance the solve asks for (a QP infeasible by a margin just above
- * the tolerance, whose dual iterate diverges to a certificate that is exact to round-off). */
+ * against the tolerance instead of CERT_SEP: a point w violates some constraint by at
+ * least (b'y - |A'y|_inf |w|_1) / |y|_1, and when that exceeds tol (relative to the bounds)
+ * for points of the size of the iterate, none of them meets the constraints to the
+ * tolerance the solve asks for (a QP infeasible by a margin just above the tolerance, whose
+ * dual iterate diverges to a certificate that is exact to round-off). The A'y term keeps a
+ * residual A'y that is small but not zero from passing for a separation. */
 static int primal_infeasible_at_tol(const dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_res *r,
                                     dopus_real data_scale, dopus_real tol)
 {
-    dopus_real bscale, y1, bty;
+    dopus_real bscale, y1, bty, w1 = DOPUS_R(0.0);
+    int i;
     if (!(r->ny > CERT_GROWTH * data_scale) || !(r->aty / r->ny <= CERT_RES_DUAL))
         return 0;
     bty = farkas_separation(ws, in, &bscale, &y1);
+    for (i = 0; i < NP; ++i)
+        w1 += dopus_fabs(ws->prim[i]);
+    bty -= r->aty * w1;
     QP_TRACE("stalled: certificate separation %.3e (tolerance %.1e)\n", bty / (y1 * bscale), tol);
     return y1 > DOPUS_R(0.0) && bty / y1 > tol * bscale;
 }
