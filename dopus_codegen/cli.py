@@ -35,7 +35,9 @@ def one_line(exc: BaseException) -> str:
     """The message of an exception on one line (CasADi's source locations dropped)."""
     from .problem.ocp import casadi_message
 
-    text = casadi_message(exc) if isinstance(exc, RuntimeError) else str(exc).strip()
+    # CasADi raises plain RuntimeErrors; the project's own errors (a failed compile names
+    # the CasADi file and must keep the compiler's diagnostic) are shown whole
+    text = casadi_message(exc) if type(exc) is RuntimeError else str(exc).strip()
     if isinstance(exc, OSError) and exc.filename is not None:
         text = f"{exc.strerror or text}: '{exc.filename}'"
     text = " ".join(part.strip() for part in text.splitlines() if part.strip())

@@ -539,6 +539,23 @@ def test_build_skips_unchanged_and_reports_compiler_errors(generated, tmp_path, 
     assert "compiling unicycle_problem.c" in msg and "unicycle_problem.c:" in msg and "error" in msg
 
 
+def test_cli_build_shows_the_compiler_diagnostic(generated, tmp_path):
+    """dopus-gen build on a folder whose CasADi file does not compile: exit 2 and the
+    compiler's own error line in the message (not only its last line, 'all warnings being
+    treated as errors' or 'compilation terminated')."""
+    from click.testing import CliRunner
+
+    from dopus_codegen.cli import main as cli_main
+
+    folder = tmp_path / "unicycle"
+    shutil.copytree(generated["unicycle"][1], folder, ignore=shutil.ignore_patterns("build"))
+    with (folder / "unicycle_casadi.c").open("a") as fh:
+        fh.write("\nstatic int unused_for_the_test(int a) { return 0; }\n")
+    res = CliRunner().invoke(cli_main, ["build", str(folder)])
+    assert res.exit_code == 2, res.output
+    assert "unicycle_casadi.c:" in res.output and "unused" in res.output, res.output
+
+
 def test_regenerating_leaves_unchanged_files_alone(second_disc, tmp_path):
     folder = generate(second_disc, tmp_path / "u")
     stamps = {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
