@@ -166,3 +166,23 @@ def test_bench_bad_ocp_file(tmp_path):
     r = CliRunner().invoke(main, ["bench", str(bad), "--work", str(tmp_path)])
     assert r.exit_code != 0 and "Traceback" not in r.output
     assert "Ocp" in r.output
+
+
+def test_acados_gets_the_starting_value_of_the_automatic_lm(robot_disc, robot_solution):
+    """acados has no automatic Levenberg-Marquardt term: with ours automatic (the default)
+    its exact-Hessian settings are screened with the value ours starts from at the nominal
+    solution, here checked against the reference implementation's automatic term; a
+    numeric lm is passed as it is (before, the default 'auto' stopped `make bench-acados`)."""
+    from dopus_codegen.reference.dopus import ReferenceDopus
+    from dopus_codegen.runtime.solver import build_for
+    from dopus_codegen.studies.bench import acados_lm
+
+    nominal, _ = robot_solution
+    prob = {"disc": robot_disc, "spec": {"folder": str(build_for(robot_disc))}, "nominal": nominal}
+    said = []
+    lm = acados_lm(prob, {"lm": "auto"}, said.append)
+    ref = ReferenceDopus(robot_disc, lm="auto")
+    ref.init(np.asarray(robot_disc.x0, float), nominal)
+    assert lm > 0 and lm == pytest.approx(ref.lm, rel=1e-12)
+    assert "no automatic Levenberg-Marquardt term" in said[0]
+    assert acados_lm(prob, {"lm": 3e-4}, said.append) == 3e-4

@@ -197,6 +197,24 @@ def _run_worker(plan: dict, work: Path) -> dict:
     return res
 
 
+def acados_lm(prob, values, echo) -> float:
+    """The fixed Levenberg-Marquardt term acados' exact-Hessian settings are screened with
+    (besides none): ours when it is a number; acados has no automatic term, so with ours
+    automatic (the default) the value our automatic term starts from at the nominal solution
+    (1e-5 times the Hessian scale, docs/algorithm.md section 10)."""
+    if values["lm"] != st.LM_AUTO:
+        return float(values["lm"])
+    from ..runtime.solver import CSolver
+
+    disc = prob["disc"]
+    s = CSolver(disc, lib_dir=prob["spec"]["folder"], lm=st.LM_AUTO)
+    s.init(np.asarray(disc.x0, float), prob["nominal"])
+    lm = float(s.lm)
+    echo(f"{disc.name}: acados has no automatic Levenberg-Marquardt term: its exact-Hessian settings are "
+         f"screened with lm 0 and {lm:.3g}, the value ours starts from at the nominal solution")
+    return lm
+
+
 def _acados_plan(ocp, prob, values, cond_list, quick, work: Path, echo) -> dict:
     from . import acados_compare as ac
 
@@ -223,7 +241,7 @@ def _acados_plan(ocp, prob, values, cond_list, quick, work: Path, echo) -> dict:
     xd = _disturbed(disc)
     g = disc.initial_guess
     return {"lib_dir": libs[0]["acados_lib_dir"], "N": int(disc.N), "nx": int(disc.nx), "nu": int(disc.nu),
-            "libs": libs, "cond_list": [c for c in cond_list if c <= disc.N], "lm": float(values["lm"]),
+            "libs": libs, "cond_list": [c for c in cond_list if c <= disc.N], "lm": acados_lm(prob, values, echo),
             "plant_lib": "main", "x0": np.asarray(disc.x0, float).tolist(),
             "x_disturbed": (xd if xd is not None else np.asarray(disc.x0, float)).tolist(),
             "nominal": _guess_dict(prob["nominal"]), "cold": {"x": np.asarray(g.x, float).tolist(),
