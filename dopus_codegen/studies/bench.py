@@ -540,10 +540,7 @@ def format_scaling(result: dict) -> str:
 
 def plot_bench(result: dict, path) -> None:
     """Stacked bars (feedback, preparation) per setting and timed phase."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .plots import plt
 
     phases = list(result.get("timed", {}))
     fig, axes = plt.subplots(1, max(1, len(phases)), figsize=(6 * max(1, len(phases)), 0.5 * 8 + 1.5), squeeze=False)
@@ -568,10 +565,7 @@ def plot_bench(result: dict, path) -> None:
 
 
 def plot_scaling(result: dict, path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .plots import plt
 
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for phase, fits in result["scaling"].items():

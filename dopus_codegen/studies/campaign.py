@@ -619,13 +619,9 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
     """Histograms of the campaign (max on-path signal after settling, time per iteration,
     failed instants and recoveries per run, the drawn mismatch against the deviation) and
     the trajectories of the ``worst`` runs, simulated again in this process."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import matplotlib.ticker
 
-    from .plots import plot_plane, plot_signals
+    from .plots import plot_plane, plot_signals, plt
 
     out = Path(plot_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -292,10 +292,7 @@ def format_table(study: dict, tol: Optional[float] = None) -> str:
 
 def plot_study(study: dict, path: str) -> None:
     """KKT against iteration, log scale, one curve per M."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .plots import plt
 
     N = study["N"]
     fig, ax = plt.subplots(figsize=(7, 4.5))

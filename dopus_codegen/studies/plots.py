@@ -7,6 +7,7 @@ axis. Files are PNG, written with the non-interactive Agg backend.
 """
 from __future__ import annotations
 
+import logging
 import re
 from pathlib import Path
 
@@ -15,6 +16,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+# Some matplotlib wheels ship the DejaVu fonts only: math text then falls back from STIX
+# and Computer Modern to DejaVu Sans with one log line per glyph lookup (about 80 for the
+# figures of one sil run), which would drown the command's own output.
+logging.getLogger("matplotlib.font_manager").setLevel(logging.ERROR)
 
 __all__ = ["plot_sil", "plot_signals", "plot_kkt", "plot_controls", "plot_plane", "plot_recomputed",
            "plot_timing", "yscale_for", "NO_UNIT", "KKT_LABEL"]
