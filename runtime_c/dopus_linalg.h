@@ -73,6 +73,17 @@ int dopus_la_all_finite(int m, int n, const dopus_real *A, int lda);
 #include <float.h>
 #include <math.h>
 
+/* Full unrolling of short loops whose bounds are compile-time sizes after inlining but whose
+ * inner bounds depend on the outer index (triangles): a complete unroll turns them into
+ * straight-line code that the compiler schedules well. GCC 8 and later and clang honour the
+ * pragma; it is left out for other compilers (an older GCC would warn about an unknown
+ * pragma). */
+#if (defined(__GNUC__) && __GNUC__ >= 8) || defined(__clang__)
+#define DOPUS_UNROLL _Pragma("GCC unroll 16")
+#else
+#define DOPUS_UNROLL
+#endif
+
 /* The pivot of column j of the Cholesky factorisation: A_jj minus the squares of row j of
  * the factor so far. */
 static inline dopus_real dopus_lai_potrf_pivot(const dopus_real *A, int lda, int j)
@@ -237,13 +248,16 @@ static inline void dopus_lai_symv_l(int n, dopus_real alpha, const dopus_real *A
                                     const dopus_real *x, dopus_real beta, dopus_real *y)
 {
     int i, j;
-    /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
+    /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column (the
+     * triangle unrolled where n is a compile-time size) */
     dopus_lai_scale_y(n, beta, y);
+    DOPUS_UNROLL
     for (j = 0; j < n; ++j) {
         const dopus_real *a = A + j * lda;
         const dopus_real xj = alpha * x[j];
         dopus_real s = DOPUS_R(0.0);
         y[j] += a[j] * xj;
+        DOPUS_UNROLL
         for (i = j + 1; i < n; ++i) {
             y[i] += a[i] * xj;
             s += a[i] * x[i];

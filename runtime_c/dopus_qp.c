@@ -29,16 +29,9 @@
 #define QP_TRACE(...) ((void)0)
 #endif
 
-/* Full unrolling of the short loops over compile-time sizes whose inner bounds depend on
- * the outer index (triangles; a complete unroll turns them into straight-line code that the
- * compiler schedules well, about 15 % of the time of an IPM iteration on the robot arm):
- * GCC 8 and later and clang honour the pragma; it is left out for other compilers (an
- * older GCC would warn about an unknown pragma). */
-#if (defined(__GNUC__) && __GNUC__ >= 8) || defined(__clang__)
-#define UNROLL _Pragma("GCC unroll 16")
-#else
-#define UNROLL
-#endif
+/* Full unrolling of the triangular loops over compile-time sizes (dopus_linalg.h): about
+ * 15 % of the time of an IPM iteration on the robot arm. */
+#define UNROLL DOPUS_UNROLL
 
 #define N DOPUS_N
 #define NX DOPUS_NX
@@ -373,30 +366,6 @@ static dopus_real row_q(const dopus_qp_workspace *ws, int b)
 
 /* ---------------------------------------------------------------- residuals */
 
-/* h = H w (n = nw or nx) for a symmetric H of which only the lower triangle is read, the
- * triangles unrolled (n is a compile-time size where it is called). */
-static inline void sym_mv(int n, const dopus_real *restrict H, const dopus_real *restrict w,
-                          dopus_real *restrict h)
-{
-    int i, j;
-    UNROLL
-    for (i = 0; i < n; ++i)
-        h[i] = DOPUS_R(0.0);
-    UNROLL
-    for (j = 0; j < n; ++j) {
-        const dopus_real *restrict a = H + j * n;
-        const dopus_real wj = w[j];
-        dopus_real s = DOPUS_R(0.0);
-        h[j] += a[j] * wj;
-        UNROLL
-        for (i = j + 1; i < n; ++i) {
-            h[i] += a[i] * wj;
-            s += a[i] * w[i];
-        }
-        h[j] += s;
-    }
-}
-
 /* The data parts of the residual scaling (constant during a solve): |g|, |gN| into
  * scale_g; |x0|, |b|, |req| into scale_b; the finite bounds into scale_bounds. */
 static void data_scales(dopus_qp_workspace *ws, const dopus_qp_in *in)
@@ -428,6 +397,7 @@ typedef struct {
     dopus_real stat, eq, ineq, comp;         /* unscaled inf-norms */
     dopus_real stat_s, eq_s, ineq_s, comp_s; /* scaled */
     dopus_real ny;                           /* inf-norm of the dual iterate */
+    dopus_real nw;                           /* inf-norm of the primal iterate */
     dopus_real aty; /* inf-norm of the constraint part A'y of the stationarity residual */
     dopus_real nz;  /* inf-norm of the inequality multipliers */
 } qp_res;
@@ -473,7 +443,7 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
         if (k < N) {
             dopus_real *rd = ws->r_dyn + (k + 1) * NX;
             const dopus_real *xn = ws->prim + (k + 1) * NW;
-            sym_mv(NW, in->H[k], w, h);
+            dopus_lai_symv_l(NW, DOPUS_R(1.0), in->H[k], NW, w, DOPUS_R(0.0), h);
             dopus_lai_axpy(NW, in->hess_shift, w, h);
             absmax_acc(NW, h, m_h);
             dopus_lai_axpy(NW, DOPUS_R(1.0), in->g[k], h);
@@ -486,7 +456,7 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
             for (i = 0; i < NX; ++i)
                 rd[i] += xn[i] - in->b[k][i];
         } else {
-            sym_mv(NX, in->HN, w, h);
+            dopus_lai_symv_l(NX, DOPUS_R(1.0), in->HN, NX, w, DOPUS_R(0.0), h);
             dopus_lai_axpy(NX, in->hess_shift, w, h);
             absmax_acc(NX, h, m_h);
             s_stat = dmax(s_stat, ws->scale_g);
@@ -532,7 +502,8 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
     naty = dopus_lai_norm_inf(NW, m_a);
     nlam = dopus_lai_norm_inf(NX, m_lam);
     s_stat = dmax(s_stat, dmax(dopus_lai_norm_inf(NW, m_h), naty));
-    s_eq = dmax(s_eq, dmax(dopus_lai_norm_inf(NW, m_w), dopus_lai_norm_inf(NX, m_pw)));
+    r->nw = dopus_lai_norm_inf(NW, m_w);
+    s_eq = dmax(s_eq, dmax(r->nw, dopus_lai_norm_inf(NX, m_pw)));
     if (NE > 0) {
         dopus_lai_gemv_n(NE, NX, DOPUS_R(1.0), in->Req, NE1, ws->prim + N * NW, DOPUS_R(0.0), ws->r_eqN);
         s_eq = dmax(s_eq, dopus_lai_norm_inf(NE, ws->r_eqN));
@@ -1107,13 +1078,20 @@ static dopus_real farkas_separation(const dopus_qp_workspace *ws, const dopus_qp
     return bty;
 }
 
+/* The dual iterate has diverged (|y|_inf beyond CERT_GROWTH times the data scale) to a ray
+ * with A'y = 0 to CERT_RES_DUAL: a Farkas certificate once b'y separates. */
+static int dual_ray(const qp_res *r, dopus_real data_scale)
+{
+    return r->ny > CERT_GROWTH * data_scale && r->aty / r->ny <= CERT_RES_DUAL;
+}
+
 /* Farkas certificate on the normalised dual iterate y / |y|_inf once it has diverged:
  * A'y = 0 to CERT_RES_DUAL and a separating value b'y beyond CERT_SEP. */
 static int primal_infeasible(const dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_res *r,
                              dopus_real data_scale)
 {
     dopus_real bscale, y1, bty;
-    if (!(r->ny > CERT_GROWTH * data_scale) || !(r->aty / r->ny <= CERT_RES_DUAL))
+    if (!dual_ray(r, data_scale))
         return 0;
     bty = farkas_separation(ws, in, &bscale, &y1) / r->ny;
     return bty > CERT_SEP * bscale;
@@ -1131,7 +1109,7 @@ static int primal_infeasible_at_tol(const dopus_qp_workspace *ws, const dopus_qp
 {
     dopus_real bscale, y1, bty, w1 = DOPUS_R(0.0);
     int i;
-    if (!(r->ny > CERT_GROWTH * data_scale) || !(r->aty / r->ny <= CERT_RES_DUAL))
+    if (!dual_ray(r, data_scale))
         return 0;
     bty = farkas_separation(ws, in, &bscale, &y1);
     for (i = 0; i < NP; ++i)
@@ -1144,12 +1122,12 @@ static int primal_infeasible_at_tol(const dopus_qp_workspace *ws, const dopus_qp
 /* Unboundedness certificate on the normalised primal iterate d = w / |w|: a feasible ray
  * (homogeneous equalities, inside the recession cone of the bounds) along which the
  * objective decreases without bound: d'Hd < 0, or Hd = 0 and g'd < 0. */
-static int dual_infeasible(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real data_scale,
-                           dopus_real hscale)
+static int dual_infeasible(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_res *r,
+                           dopus_real data_scale, dopus_real hscale)
 {
     int k, i, b, j;
-    dopus_real nw = dopus_lai_norm_inf(NP, ws->prim), dhd = DOPUS_R(0.0), gd = DOPUS_R(0.0),
-               hd = DOPUS_R(0.0), eq = DOPUS_R(0.0), cone = DOPUS_R(0.0);
+    dopus_real nw = r->nw, dhd = DOPUS_R(0.0), gd = DOPUS_R(0.0), hd = DOPUS_R(0.0), eq = DOPUS_R(0.0),
+               cone = DOPUS_R(0.0);
     dopus_real h[NW];
     if (!(nw > CERT_GROWTH * data_scale))
         return 0;
@@ -1603,7 +1581,7 @@ static int qp_stopping_tests(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_
         return s;
     if (primal_infeasible(ws, in, r, L->data_scale))
         return DOPUS_QP_PRIMAL_INFEASIBLE;
-    if (dual_infeasible(ws, in, L->data_scale, L->hscale))
+    if (dual_infeasible(ws, in, r, L->data_scale, L->hscale))
         return DOPUS_QP_DUAL_INFEASIBLE;
     if (iter >= L->st.max_iter)
         return DOPUS_QP_MAX_ITER;
@@ -1810,9 +1788,9 @@ static dopus_real qp_objective(const dopus_qp_in *in, const dopus_qp_sol *sol)
         for (i = 0; i < nk; ++i)
             w[i] = i < NX ? sol->x[k][i] : sol->u[k][i - NX];
         if (k < N)
-            sym_mv(NW, in->H[k], w, h);
+            dopus_lai_symv_l(NW, DOPUS_R(1.0), in->H[k], NW, w, DOPUS_R(0.0), h);
         else
-            sym_mv(NX, in->HN, w, h);
+            dopus_lai_symv_l(NX, DOPUS_R(1.0), in->HN, NX, w, DOPUS_R(0.0), h);
         dopus_lai_axpy(nk, in->hess_shift, w, h);
         obj += DOPUS_R(0.5) * dopus_lai_dot(nk, w, h) + dopus_lai_dot(nk, k < N ? in->g[k] : in->gN, w);
     }

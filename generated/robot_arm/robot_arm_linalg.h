@@ -73,6 +73,17 @@ int robot_arm_la_all_finite(int m, int n, const robot_arm_real *A, int lda);
 #include <float.h>
 #include <math.h>
 
+/* Full unrolling of short loops whose bounds are compile-time sizes after inlining but whose
+ * inner bounds depend on the outer index (triangles): a complete unroll turns them into
+ * straight-line code that the compiler schedules well. GCC 8 and later and clang honour the
+ * pragma; it is left out for other compilers (an older GCC would warn about an unknown
+ * pragma). */
+#if (defined(__GNUC__) && __GNUC__ >= 8) || defined(__clang__)
+#define ROBOT_ARM_UNROLL _Pragma("GCC unroll 16")
+#else
+#define ROBOT_ARM_UNROLL
+#endif
+
 /* The pivot of column j of the Cholesky factorisation: A_jj minus the squares of row j of
  * the factor so far. */
 static inline robot_arm_real robot_arm_lai_potrf_pivot(const robot_arm_real *A, int lda, int j)
@@ -237,13 +248,16 @@ static inline void robot_arm_lai_symv_l(int n, robot_arm_real alpha, const robot
                                     const robot_arm_real *x, robot_arm_real beta, robot_arm_real *y)
 {
     int i, j;
-    /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
+    /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column (the
+     * triangle unrolled where n is a compile-time size) */
     robot_arm_lai_scale_y(n, beta, y);
+    ROBOT_ARM_UNROLL
     for (j = 0; j < n; ++j) {
         const robot_arm_real *a = A + j * lda;
         const robot_arm_real xj = alpha * x[j];
         robot_arm_real s = ROBOT_ARM_R(0.0);
         y[j] += a[j] * xj;
+        ROBOT_ARM_UNROLL
         for (i = j + 1; i < n; ++i) {
             y[i] += a[i] * xj;
             s += a[i] * x[i];

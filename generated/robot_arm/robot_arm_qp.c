@@ -29,16 +29,9 @@
 #define QP_TRACE(...) ((void)0)
 #endif
 
-/* Full unrolling of the short loops over compile-time sizes whose inner bounds depend on
- * the outer index (triangles; a complete unroll turns them into straight-line code that the
- * compiler schedules well, about 15 % of the time of an IPM iteration on the robot arm):
- * GCC 8 and later and clang honour the pragma; it is left out for other compilers (an
- * older GCC would warn about an unknown pragma). */
-#if (defined(__GNUC__) && __GNUC__ >= 8) || defined(__clang__)
-#define UNROLL _Pragma("GCC unroll 16")
-#else
-#define UNROLL
-#endif
+/* Full unrolling of the triangular loops over compile-time sizes (robot_arm_linalg.h): about
+ * 15 % of the time of an IPM iteration on the robot arm. */
+#define UNROLL ROBOT_ARM_UNROLL
 
 #define N ROBOT_ARM_N
 #define NX ROBOT_ARM_NX
@@ -373,30 +366,6 @@ static robot_arm_real row_q(const robot_arm_qp_workspace *ws, int b)
 
 /* ---------------------------------------------------------------- residuals */
 
-/* h = H w (n = nw or nx) for a symmetric H of which only the lower triangle is read, the
- * triangles unrolled (n is a compile-time size where it is called). */
-static inline void sym_mv(int n, const robot_arm_real *restrict H, const robot_arm_real *restrict w,
-                          robot_arm_real *restrict h)
-{
-    int i, j;
-    UNROLL
-    for (i = 0; i < n; ++i)
-        h[i] = ROBOT_ARM_R(0.0);
-    UNROLL
-    for (j = 0; j < n; ++j) {
-        const robot_arm_real *restrict a = H + j * n;
-        const robot_arm_real wj = w[j];
-        robot_arm_real s = ROBOT_ARM_R(0.0);
-        h[j] += a[j] * wj;
-        UNROLL
-        for (i = j + 1; i < n; ++i) {
-            h[i] += a[i] * wj;
-            s += a[i] * w[i];
-        }
-        h[j] += s;
-    }
-}
-
 /* The data parts of the residual scaling (constant during a solve): |g|, |gN| into
  * scale_g; |x0|, |b|, |req| into scale_b; the finite bounds into scale_bounds. */
 static void data_scales(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
@@ -428,6 +397,7 @@ typedef struct {
     robot_arm_real stat, eq, ineq, comp;         /* unscaled inf-norms */
     robot_arm_real stat_s, eq_s, ineq_s, comp_s; /* scaled */
     robot_arm_real ny;                           /* inf-norm of the dual iterate */
+    robot_arm_real nw;                           /* inf-norm of the primal iterate */
     robot_arm_real aty; /* inf-norm of the constraint part A'y of the stationarity residual */
     robot_arm_real nz;  /* inf-norm of the inequality multipliers */
 } qp_res;
@@ -473,7 +443,7 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
         if (k < N) {
             robot_arm_real *rd = ws->r_dyn + (k + 1) * NX;
             const robot_arm_real *xn = ws->prim + (k + 1) * NW;
-            sym_mv(NW, in->H[k], w, h);
+            robot_arm_lai_symv_l(NW, ROBOT_ARM_R(1.0), in->H[k], NW, w, ROBOT_ARM_R(0.0), h);
             robot_arm_lai_axpy(NW, in->hess_shift, w, h);
             absmax_acc(NW, h, m_h);
             robot_arm_lai_axpy(NW, ROBOT_ARM_R(1.0), in->g[k], h);
@@ -486,7 +456,7 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
             for (i = 0; i < NX; ++i)
                 rd[i] += xn[i] - in->b[k][i];
         } else {
-            sym_mv(NX, in->HN, w, h);
+            robot_arm_lai_symv_l(NX, ROBOT_ARM_R(1.0), in->HN, NX, w, ROBOT_ARM_R(0.0), h);
             robot_arm_lai_axpy(NX, in->hess_shift, w, h);
             absmax_acc(NX, h, m_h);
             s_stat = dmax(s_stat, ws->scale_g);
@@ -532,7 +502,8 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
     naty = robot_arm_lai_norm_inf(NW, m_a);
     nlam = robot_arm_lai_norm_inf(NX, m_lam);
     s_stat = dmax(s_stat, dmax(robot_arm_lai_norm_inf(NW, m_h), naty));
-    s_eq = dmax(s_eq, dmax(robot_arm_lai_norm_inf(NW, m_w), robot_arm_lai_norm_inf(NX, m_pw)));
+    r->nw = robot_arm_lai_norm_inf(NW, m_w);
+    s_eq = dmax(s_eq, dmax(r->nw, robot_arm_lai_norm_inf(NX, m_pw)));
     if (NE > 0) {
         robot_arm_lai_gemv_n(NE, NX, ROBOT_ARM_R(1.0), in->Req, NE1, ws->prim + N * NW, ROBOT_ARM_R(0.0), ws->r_eqN);
         s_eq = dmax(s_eq, robot_arm_lai_norm_inf(NE, ws->r_eqN));
@@ -1107,13 +1078,20 @@ static robot_arm_real farkas_separation(const robot_arm_qp_workspace *ws, const 
     return bty;
 }
 
+/* The dual iterate has diverged (|y|_inf beyond CERT_GROWTH times the data scale) to a ray
+ * with A'y = 0 to CERT_RES_DUAL: a Farkas certificate once b'y separates. */
+static int dual_ray(const qp_res *r, robot_arm_real data_scale)
+{
+    return r->ny > CERT_GROWTH * data_scale && r->aty / r->ny <= CERT_RES_DUAL;
+}
+
 /* Farkas certificate on the normalised dual iterate y / |y|_inf once it has diverged:
  * A'y = 0 to CERT_RES_DUAL and a separating value b'y beyond CERT_SEP. */
 static int primal_infeasible(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r,
                              robot_arm_real data_scale)
 {
     robot_arm_real bscale, y1, bty;
-    if (!(r->ny > CERT_GROWTH * data_scale) || !(r->aty / r->ny <= CERT_RES_DUAL))
+    if (!dual_ray(r, data_scale))
         return 0;
     bty = farkas_separation(ws, in, &bscale, &y1) / r->ny;
     return bty > CERT_SEP * bscale;
@@ -1131,7 +1109,7 @@ static int primal_infeasible_at_tol(const robot_arm_qp_workspace *ws, const robo
 {
     robot_arm_real bscale, y1, bty, w1 = ROBOT_ARM_R(0.0);
     int i;
-    if (!(r->ny > CERT_GROWTH * data_scale) || !(r->aty / r->ny <= CERT_RES_DUAL))
+    if (!dual_ray(r, data_scale))
         return 0;
     bty = farkas_separation(ws, in, &bscale, &y1);
     for (i = 0; i < NP; ++i)
@@ -1144,12 +1122,12 @@ static int primal_infeasible_at_tol(const robot_arm_qp_workspace *ws, const robo
 /* Unboundedness certificate on the normalised primal iterate d = w / |w|: a feasible ray
  * (homogeneous equalities, inside the recession cone of the bounds) along which the
  * objective decreases without bound: d'Hd < 0, or Hd = 0 and g'd < 0. */
-static int dual_infeasible(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_real data_scale,
-                           robot_arm_real hscale)
+static int dual_infeasible(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r,
+                           robot_arm_real data_scale, robot_arm_real hscale)
 {
     int k, i, b, j;
-    robot_arm_real nw = robot_arm_lai_norm_inf(NP, ws->prim), dhd = ROBOT_ARM_R(0.0), gd = ROBOT_ARM_R(0.0),
-               hd = ROBOT_ARM_R(0.0), eq = ROBOT_ARM_R(0.0), cone = ROBOT_ARM_R(0.0);
+    robot_arm_real nw = r->nw, dhd = ROBOT_ARM_R(0.0), gd = ROBOT_ARM_R(0.0), hd = ROBOT_ARM_R(0.0), eq = ROBOT_ARM_R(0.0),
+               cone = ROBOT_ARM_R(0.0);
     robot_arm_real h[NW];
     if (!(nw > CERT_GROWTH * data_scale))
         return 0;
@@ -1603,7 +1581,7 @@ static int qp_stopping_tests(qp_loop *L, robot_arm_qp_workspace *ws, const robot
         return s;
     if (primal_infeasible(ws, in, r, L->data_scale))
         return ROBOT_ARM_QP_PRIMAL_INFEASIBLE;
-    if (dual_infeasible(ws, in, L->data_scale, L->hscale))
+    if (dual_infeasible(ws, in, r, L->data_scale, L->hscale))
         return ROBOT_ARM_QP_DUAL_INFEASIBLE;
     if (iter >= L->st.max_iter)
         return ROBOT_ARM_QP_MAX_ITER;
@@ -1810,9 +1788,9 @@ static robot_arm_real qp_objective(const robot_arm_qp_in *in, const robot_arm_qp
         for (i = 0; i < nk; ++i)
             w[i] = i < NX ? sol->x[k][i] : sol->u[k][i - NX];
         if (k < N)
-            sym_mv(NW, in->H[k], w, h);
+            robot_arm_lai_symv_l(NW, ROBOT_ARM_R(1.0), in->H[k], NW, w, ROBOT_ARM_R(0.0), h);
         else
-            sym_mv(NX, in->HN, w, h);
+            robot_arm_lai_symv_l(NX, ROBOT_ARM_R(1.0), in->HN, NX, w, ROBOT_ARM_R(0.0), h);
         robot_arm_lai_axpy(nk, in->hess_shift, w, h);
         obj += ROBOT_ARM_R(0.5) * robot_arm_lai_dot(nk, w, h) + robot_arm_lai_dot(nk, k < N ? in->g[k] : in->gN, w);
     }

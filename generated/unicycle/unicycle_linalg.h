@@ -73,6 +73,17 @@ int unicycle_la_all_finite(int m, int n, const unicycle_real *A, int lda);
 #include <float.h>
 #include <math.h>
 
+/* Full unrolling of short loops whose bounds are compile-time sizes after inlining but whose
+ * inner bounds depend on the outer index (triangles): a complete unroll turns them into
+ * straight-line code that the compiler schedules well. GCC 8 and later and clang honour the
+ * pragma; it is left out for other compilers (an older GCC would warn about an unknown
+ * pragma). */
+#if (defined(__GNUC__) && __GNUC__ >= 8) || defined(__clang__)
+#define UNICYCLE_UNROLL _Pragma("GCC unroll 16")
+#else
+#define UNICYCLE_UNROLL
+#endif
+
 /* The pivot of column j of the Cholesky factorisation: A_jj minus the squares of row j of
  * the factor so far. */
 static inline unicycle_real unicycle_lai_potrf_pivot(const unicycle_real *A, int lda, int j)
@@ -237,13 +248,16 @@ static inline void unicycle_lai_symv_l(int n, unicycle_real alpha, const unicycl
                                     const unicycle_real *x, unicycle_real beta, unicycle_real *y)
 {
     int i, j;
-    /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column */
+    /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column (the
+     * triangle unrolled where n is a compile-time size) */
     unicycle_lai_scale_y(n, beta, y);
+    UNICYCLE_UNROLL
     for (j = 0; j < n; ++j) {
         const unicycle_real *a = A + j * lda;
         const unicycle_real xj = alpha * x[j];
         unicycle_real s = UNICYCLE_R(0.0);
         y[j] += a[j] * xj;
+        UNICYCLE_UNROLL
         for (i = j + 1; i < n; ++i) {
             y[i] += a[i] * xj;
             s += a[i] * x[i];

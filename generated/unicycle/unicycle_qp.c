@@ -29,16 +29,9 @@
 #define QP_TRACE(...) ((void)0)
 #endif
 
-/* Full unrolling of the short loops over compile-time sizes whose inner bounds depend on
- * the outer index (triangles; a complete unroll turns them into straight-line code that the
- * compiler schedules well, about 15 % of the time of an IPM iteration on the robot arm):
- * GCC 8 and later and clang honour the pragma; it is left out for other compilers (an
- * older GCC would warn about an unknown pragma). */
-#if (defined(__GNUC__) && __GNUC__ >= 8) || defined(__clang__)
-#define UNROLL _Pragma("GCC unroll 16")
-#else
-#define UNROLL
-#endif
+/* Full unrolling of the triangular loops over compile-time sizes (unicycle_linalg.h): about
+ * 15 % of the time of an IPM iteration on the robot arm. */
+#define UNROLL UNICYCLE_UNROLL
 
 #define N UNICYCLE_N
 #define NX UNICYCLE_NX
@@ -373,30 +366,6 @@ static unicycle_real row_q(const unicycle_qp_workspace *ws, int b)
 
 /* ---------------------------------------------------------------- residuals */
 
-/* h = H w (n = nw or nx) for a symmetric H of which only the lower triangle is read, the
- * triangles unrolled (n is a compile-time size where it is called). */
-static inline void sym_mv(int n, const unicycle_real *restrict H, const unicycle_real *restrict w,
-                          unicycle_real *restrict h)
-{
-    int i, j;
-    UNROLL
-    for (i = 0; i < n; ++i)
-        h[i] = UNICYCLE_R(0.0);
-    UNROLL
-    for (j = 0; j < n; ++j) {
-        const unicycle_real *restrict a = H + j * n;
-        const unicycle_real wj = w[j];
-        unicycle_real s = UNICYCLE_R(0.0);
-        h[j] += a[j] * wj;
-        UNROLL
-        for (i = j + 1; i < n; ++i) {
-            h[i] += a[i] * wj;
-            s += a[i] * w[i];
-        }
-        h[j] += s;
-    }
-}
-
 /* The data parts of the residual scaling (constant during a solve): |g|, |gN| into
  * scale_g; |x0|, |b|, |req| into scale_b; the finite bounds into scale_bounds. */
 static void data_scales(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
@@ -428,6 +397,7 @@ typedef struct {
     unicycle_real stat, eq, ineq, comp;         /* unscaled inf-norms */
     unicycle_real stat_s, eq_s, ineq_s, comp_s; /* scaled */
     unicycle_real ny;                           /* inf-norm of the dual iterate */
+    unicycle_real nw;                           /* inf-norm of the primal iterate */
     unicycle_real aty; /* inf-norm of the constraint part A'y of the stationarity residual */
     unicycle_real nz;  /* inf-norm of the inequality multipliers */
 } qp_res;
@@ -473,7 +443,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
         if (k < N) {
             unicycle_real *rd = ws->r_dyn + (k + 1) * NX;
             const unicycle_real *xn = ws->prim + (k + 1) * NW;
-            sym_mv(NW, in->H[k], w, h);
+            unicycle_lai_symv_l(NW, UNICYCLE_R(1.0), in->H[k], NW, w, UNICYCLE_R(0.0), h);
             unicycle_lai_axpy(NW, in->hess_shift, w, h);
             absmax_acc(NW, h, m_h);
             unicycle_lai_axpy(NW, UNICYCLE_R(1.0), in->g[k], h);
@@ -486,7 +456,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
             for (i = 0; i < NX; ++i)
                 rd[i] += xn[i] - in->b[k][i];
         } else {
-            sym_mv(NX, in->HN, w, h);
+            unicycle_lai_symv_l(NX, UNICYCLE_R(1.0), in->HN, NX, w, UNICYCLE_R(0.0), h);
             unicycle_lai_axpy(NX, in->hess_shift, w, h);
             absmax_acc(NX, h, m_h);
             s_stat = dmax(s_stat, ws->scale_g);
@@ -532,7 +502,8 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     naty = unicycle_lai_norm_inf(NW, m_a);
     nlam = unicycle_lai_norm_inf(NX, m_lam);
     s_stat = dmax(s_stat, dmax(unicycle_lai_norm_inf(NW, m_h), naty));
-    s_eq = dmax(s_eq, dmax(unicycle_lai_norm_inf(NW, m_w), unicycle_lai_norm_inf(NX, m_pw)));
+    r->nw = unicycle_lai_norm_inf(NW, m_w);
+    s_eq = dmax(s_eq, dmax(r->nw, unicycle_lai_norm_inf(NX, m_pw)));
     if (NE > 0) {
         unicycle_lai_gemv_n(NE, NX, UNICYCLE_R(1.0), in->Req, NE1, ws->prim + N * NW, UNICYCLE_R(0.0), ws->r_eqN);
         s_eq = dmax(s_eq, unicycle_lai_norm_inf(NE, ws->r_eqN));
@@ -1107,13 +1078,20 @@ static unicycle_real farkas_separation(const unicycle_qp_workspace *ws, const un
     return bty;
 }
 
+/* The dual iterate has diverged (|y|_inf beyond CERT_GROWTH times the data scale) to a ray
+ * with A'y = 0 to CERT_RES_DUAL: a Farkas certificate once b'y separates. */
+static int dual_ray(const qp_res *r, unicycle_real data_scale)
+{
+    return r->ny > CERT_GROWTH * data_scale && r->aty / r->ny <= CERT_RES_DUAL;
+}
+
 /* Farkas certificate on the normalised dual iterate y / |y|_inf once it has diverged:
  * A'y = 0 to CERT_RES_DUAL and a separating value b'y beyond CERT_SEP. */
 static int primal_infeasible(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, const qp_res *r,
                              unicycle_real data_scale)
 {
     unicycle_real bscale, y1, bty;
-    if (!(r->ny > CERT_GROWTH * data_scale) || !(r->aty / r->ny <= CERT_RES_DUAL))
+    if (!dual_ray(r, data_scale))
         return 0;
     bty = farkas_separation(ws, in, &bscale, &y1) / r->ny;
     return bty > CERT_SEP * bscale;
@@ -1131,7 +1109,7 @@ static int primal_infeasible_at_tol(const unicycle_qp_workspace *ws, const unicy
 {
     unicycle_real bscale, y1, bty, w1 = UNICYCLE_R(0.0);
     int i;
-    if (!(r->ny > CERT_GROWTH * data_scale) || !(r->aty / r->ny <= CERT_RES_DUAL))
+    if (!dual_ray(r, data_scale))
         return 0;
     bty = farkas_separation(ws, in, &bscale, &y1);
     for (i = 0; i < NP; ++i)
@@ -1144,12 +1122,12 @@ static int primal_infeasible_at_tol(const unicycle_qp_workspace *ws, const unicy
 /* Unboundedness certificate on the normalised primal iterate d = w / |w|: a feasible ray
  * (homogeneous equalities, inside the recession cone of the bounds) along which the
  * objective decreases without bound: d'Hd < 0, or Hd = 0 and g'd < 0. */
-static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, unicycle_real data_scale,
-                           unicycle_real hscale)
+static int dual_infeasible(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const qp_res *r,
+                           unicycle_real data_scale, unicycle_real hscale)
 {
     int k, i, b, j;
-    unicycle_real nw = unicycle_lai_norm_inf(NP, ws->prim), dhd = UNICYCLE_R(0.0), gd = UNICYCLE_R(0.0),
-               hd = UNICYCLE_R(0.0), eq = UNICYCLE_R(0.0), cone = UNICYCLE_R(0.0);
+    unicycle_real nw = r->nw, dhd = UNICYCLE_R(0.0), gd = UNICYCLE_R(0.0), hd = UNICYCLE_R(0.0), eq = UNICYCLE_R(0.0),
+               cone = UNICYCLE_R(0.0);
     unicycle_real h[NW];
     if (!(nw > CERT_GROWTH * data_scale))
         return 0;
@@ -1603,7 +1581,7 @@ static int qp_stopping_tests(qp_loop *L, unicycle_qp_workspace *ws, const unicyc
         return s;
     if (primal_infeasible(ws, in, r, L->data_scale))
         return UNICYCLE_QP_PRIMAL_INFEASIBLE;
-    if (dual_infeasible(ws, in, L->data_scale, L->hscale))
+    if (dual_infeasible(ws, in, r, L->data_scale, L->hscale))
         return UNICYCLE_QP_DUAL_INFEASIBLE;
     if (iter >= L->st.max_iter)
         return UNICYCLE_QP_MAX_ITER;
@@ -1810,9 +1788,9 @@ static unicycle_real qp_objective(const unicycle_qp_in *in, const unicycle_qp_so
         for (i = 0; i < nk; ++i)
             w[i] = i < NX ? sol->x[k][i] : sol->u[k][i - NX];
         if (k < N)
-            sym_mv(NW, in->H[k], w, h);
+            unicycle_lai_symv_l(NW, UNICYCLE_R(1.0), in->H[k], NW, w, UNICYCLE_R(0.0), h);
         else
-            sym_mv(NX, in->HN, w, h);
+            unicycle_lai_symv_l(NX, UNICYCLE_R(1.0), in->HN, NX, w, UNICYCLE_R(0.0), h);
         unicycle_lai_axpy(nk, in->hess_shift, w, h);
         obj += UNICYCLE_R(0.5) * unicycle_lai_dot(nk, w, h) + unicycle_lai_dot(nk, k < N ? in->g[k] : in->gN, w);
     }
