@@ -14,7 +14,12 @@ from typing import Optional
 
 from . import vocabulary
 
-__all__ = ["DopusError", "status_code", "status_name", "qp_status_code", "qp_status_name", "qp_failure_text"]
+__all__ = ["DopusError", "status_code", "status_name", "qp_status_code", "qp_status_name", "qp_failure_text",
+           "PARAMETER_ORDER"]
+
+#: Why a parameter write was refused (status already_prepared), in both backends.
+PARAMETER_ORDER = ("the prepared QP has read the parameters; write them before init or between feedback "
+                   "and prepare (push_parameters for the new last node)")
 
 
 def status_code(name: str) -> int:

@@ -227,7 +227,7 @@ static int closed_loop(void)
         /* the plant: the generated integrator from the measured state with the applied u0
          * (iteration() ran prepare already: the plant step does not touch the solver) */
         if (status == FW_C(OK) &&
-            FW(eval_stage_eval)(xhat, u0, FW(p_default), xnext, &l, g, &plant_work) != 0) {
+            FW(eval_stage_eval)(xhat, u0, FW(p_default)[0], xnext, &l, g, &plant_work) != 0) {
             status = FW_C(ERR_FUNCTION);
         }
         if (status == FW_C(OK)) {

@@ -2,7 +2,9 @@
  * generated nominal solution when there is one, else from the OCP file's guess), then
  * feedback/prepare iterations in fixed mode (convergence at a fixed x0) and in receding
  * mode (closed loop on the discrete model phi). Prints u0, the KKT measure and the status
- * of every iteration; exits nonzero on the first failure. */
+ * of every iteration; exits nonzero on the first failure. With a parameter trajectory
+ * (DOPUS_HAS_P_SCHEDULE) the closed loop pushes the value of each new last node between
+ * feedback and prepare, and the model plant uses the parameters of the instant. */
 #include <math.h>
 #include <stdio.h>
 
@@ -41,6 +43,7 @@ static int report(const char *phase, int iter, int status, const dopus_real *u0,
 static int run(const char *phase, int mode)
 {
     dopus_real xhat0[DOPUS_NX], xnext[DOPUS_NX], u0[DOPUS_NU], kkt4[4], l, g[DOPUS_DIM(DOPUS_NG)];
+    const dopus_real *p_plant = dopus_p_default[0];
     int i, k, status;
 
     for (i = 0; i < DOPUS_NX; ++i) {
@@ -70,7 +73,15 @@ static int run(const char *phase, int mode)
     for (k = 1; k <= ITERATIONS; ++k) {
         status = dopus_feedback(&solver, xhat0, u0);
         if (status == DOPUS_OK && mode == DOPUS_MODE_RECEDING) {
-            if (dopus_eval_stage_eval(xhat0, u0, dopus_p_default, xnext, &l, g, &plant_work)) {
+#if DOPUS_HAS_P_SCHEDULE
+            /* the instant t = (k - 1) dt; the next horizon ends at k dt + N dt */
+            p_plant = dopus_p_schedule[k - 1];
+            status = dopus_push_parameters(&solver, dopus_p_schedule[k + DOPUS_N]);
+            if (status != DOPUS_OK) {
+                return report(phase, k, status, u0, kkt4);
+            }
+#endif
+            if (dopus_eval_stage_eval(xhat0, u0, p_plant, xnext, &l, g, &plant_work)) {
                 fprintf(stderr, "main_dopus: the model failed to evaluate\n");
                 return 1;
             }

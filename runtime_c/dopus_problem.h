@@ -14,7 +14,9 @@ extern const dopus_real dopus_lbx[DOPUS_NX], dopus_ubx[DOPUS_NX];
 extern const dopus_real dopus_lbu[DOPUS_NU], dopus_ubu[DOPUS_NU];
 extern const dopus_real dopus_lg[DOPUS_DIM(DOPUS_NG)], dopus_ug[DOPUS_DIM(DOPUS_NG)];
 extern const dopus_real dopus_lr[DOPUS_DIM(DOPUS_NR)], dopus_ur[DOPUS_DIM(DOPUS_NR)];
-extern const dopus_real dopus_p_default[DOPUS_DIM(DOPUS_NP)]; /* every node */
+/* the parameters of the first horizon (node k at time k dt; the same at every node unless
+ * a parameter declares a trajectory) */
+extern const dopus_real dopus_p_default[DOPUS_N + 1][DOPUS_DIM(DOPUS_NP)];
 extern const dopus_real dopus_dt;
 extern const dopus_real dopus_x0_default[DOPUS_NX];
 /* the OCP file's initial guess */
@@ -26,6 +28,12 @@ extern const int dopus_default_regularization; /* 0 none, 1 project, 2 mirror */
 extern const dopus_real dopus_default_reg_eps;
 extern const int dopus_default_cost_hessian; /* 1 fresh, 0 stored */
 extern const dopus_real dopus_default_lm;    /* Levenberg-Marquardt term, >= 0 */
+
+#if DOPUS_HAS_P_SCHEDULE
+/* the parameters at t = j dt, j = 0..DOPUS_P_SCHEDULE_NODES-1, from the OCP file's
+ * trajectories (the standalone main's closed loop pushes them) */
+extern const dopus_real dopus_p_schedule[DOPUS_P_SCHEDULE_NODES][DOPUS_NP];
+#endif
 
 #if DOPUS_HAS_NOMINAL
 /* offline primal-dual solution at dopus_x0_default (IPOPT at generation time), so the

@@ -200,7 +200,7 @@ int dopus_get_qp_warm_start(dopus_solver *s)
 
 int dopus_set_parameters(dopus_solver *s, const dopus_real *p)
 {
-    int k, i;
+    int k, i, rc;
     dopus_ensure_setup(s);
     if (DOPUS_NP == 0) {
         return dopus_ret(s, DOPUS_OK);
@@ -210,6 +210,10 @@ int dopus_set_parameters(dopus_solver *s, const dopus_real *p)
     }
     if (!dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NP, p)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    rc = dopus_parameters_writable(s);
+    if (rc != DOPUS_OK) {
+        return dopus_ret(s, rc);
     }
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NP; ++i) {
@@ -221,7 +225,7 @@ int dopus_set_parameters(dopus_solver *s, const dopus_real *p)
 
 int dopus_set_parameters_node(dopus_solver *s, int k, const dopus_real *pk)
 {
-    int i;
+    int i, rc;
     dopus_ensure_setup(s);
     if (k < 0 || k > DOPUS_N) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
@@ -235,10 +239,53 @@ int dopus_set_parameters_node(dopus_solver *s, int k, const dopus_real *pk)
     if (!dopus_lai_vec_finite(DOPUS_NP, pk)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
+    rc = dopus_parameters_writable(s);
+    if (rc != DOPUS_OK) {
+        return dopus_ret(s, rc);
+    }
     for (i = 0; i < DOPUS_NP; ++i) {
         s->p[k][i] = pk[i];
     }
     return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_push_parameters(dopus_solver *s, const dopus_real *pN)
+{
+    int i, rc;
+    dopus_ensure_setup(s);
+    if (!s->initialized) {
+        return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
+    }
+    if (s->mode != DOPUS_MODE_RECEDING) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (DOPUS_NP == 0) {
+        return dopus_ret(s, DOPUS_OK);
+    }
+    if (pN == 0) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (!dopus_lai_vec_finite(DOPUS_NP, pN)) {
+        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    rc = dopus_parameters_writable(s);
+    if (rc != DOPUS_OK) {
+        return dopus_ret(s, rc);
+    }
+    for (i = 0; i < DOPUS_NP; ++i) {
+        s->p[DOPUS_N][i] = pN[i];
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+void dopus_stop(dopus_solver *s)
+{
+    dopus_ensure_setup(s);
+    s->initialized = 0;
+    s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
+    s->p_shifted = 0;
 }
 
 void dopus_get_parameters(dopus_solver *s, dopus_real *p)

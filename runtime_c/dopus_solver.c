@@ -502,6 +502,7 @@ void dopus_defaults(dopus_solver *s)
     s->qp_ready = 0;
     s->prepare_due = 0;
     s->shifted = 0;
+    s->p_shifted = 0;
     s->status = DOPUS_OK;
     s->M = dopus_default_M < 0 ? 0 : (dopus_default_M > DOPUS_N - 1 ? DOPUS_N - 1 : dopus_default_M);
     s->mode = DOPUS_MODE_RECEDING;
@@ -524,7 +525,7 @@ void dopus_defaults(dopus_solver *s)
     s->qp_cold_retry = 0;
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NP; ++i) {
-            s->p[k][i] = dopus_p_default[i];
+            s->p[k][i] = dopus_p_default[k][i];
         }
     }
     for (i = 0; i < DOPUS_NX; ++i) {
@@ -832,6 +833,7 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
     s->initialized = 0;
     dopus_reset_health(s);
     s->qp_ready = 0;
+    s->p_shifted = 0;
     if ((xhat0 && !dopus_lai_vec_finite(DOPUS_NX, xhat0)) ||
         (x && !dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NX, x)) ||
         (u && !dopus_lai_vec_finite(DOPUS_N * DOPUS_NU, u)) ||
@@ -1239,6 +1241,36 @@ static void dopus_shift(dopus_solver *s)
     dopus_ring_advance(&s->ring);
 }
 
+/* Step 1 for the parameters (receding mode, once per sampling instant): p_k <- p_{k+1}, p_N
+ * kept (a push replaces it). */
+static void dopus_shift_parameters(dopus_solver *s)
+{
+    int k, i;
+    if (s->mode != DOPUS_MODE_RECEDING || s->p_shifted) {
+        return;
+    }
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NP; ++i) {
+            s->p[k][i] = s->p[k + 1][i];
+        }
+    }
+    s->p_shifted = 1;
+}
+
+int dopus_parameters_writable(dopus_solver *s)
+{
+    if (!s->initialized) {
+        return DOPUS_OK;
+    }
+    if (!s->prepare_due) {
+        /* the prepared QP has read the parameters: a write now would reach the QP one
+         * sampling instant late */
+        return DOPUS_ERR_ALREADY_PREPARED;
+    }
+    dopus_shift_parameters(s);
+    return DOPUS_OK;
+}
+
 /* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
 static void dopus_select(dopus_solver *s, int M)
 {
@@ -1453,6 +1485,7 @@ int dopus_prepare(dopus_solver *s)
         return dopus_ret(s, DOPUS_ERR_ALREADY_PREPARED);
     }
     dopus_clear_timings(s, DOPUS_PHASE_SHIFT, DOPUS_PHASE_ASSEMBLY);
+    dopus_shift_parameters(s);
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
         s->mode == DOPUS_MODE_RECEDING && !(s->flags & DOPUS_FLAG_REINIT_GUESS)) {
         /* (not from the OCP file's guess: its plan is not the plant's) */
@@ -1478,6 +1511,7 @@ int dopus_prepare(dopus_solver *s)
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
         s->shifted = 0;
+        s->p_shifted = 0;
     }
     return dopus_ret(s, rc);
 }

@@ -25,5 +25,9 @@ static inline int dopus_x_bounded(int k)
     return k > 0;
 }
 void dopus_clear_x0_multiplier(dopus_solver *s);
+/* Parameters (algorithm.md section 4): DOPUS_OK when they may be written now (before init,
+ * or a prepare is due), else DOPUS_ERR_ALREADY_PREPARED; in receding mode with a prepare due,
+ * the shift of this sampling instant's parameters is done first (once). */
+int dopus_parameters_writable(dopus_solver *s);
 
 #endif /* DOPUS_SOLVER_INTERNAL_H */

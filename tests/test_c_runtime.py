@@ -284,6 +284,9 @@ def test_tiny_matches_reference_and_recovers(tiny_disc):
     for b in (c, r):
         b.init(xhat, None)
     for it in range(12):
+        uc, ur = c.feedback(xhat), r.feedback(xhat)
+        assert np.max(np.abs(uc - ur)) < 1e-9
+        # parameters are written between feedback and prepare (the next QP's horizon)
         if it == 4:
             for b in (c, r):
                 b.set_parameters(np.array([4.0]))
@@ -292,8 +295,6 @@ def test_tiny_matches_reference_and_recovers(tiny_disc):
             p[3] = 2.0
             for b in (c, r):
                 b.set_parameters(p)
-        uc, ur = c.feedback(xhat), r.feedback(xhat)
-        assert np.max(np.abs(uc - ur)) < 1e-9
         for b in (c, r):
             b.prepare()
         for f in ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r"):

@@ -391,20 +391,30 @@ def bounded_row_counts(disc: Any, s: Dict[str, int]) -> Dict[str, int]:
             "nbg": count("lg", "ug", s["ng"]), "nbr": count("lr", "ur", s["nr"])}
 
 
+#: Sampling instants of the standalone main's closed loop (runtime_c/dopus_main.c ITERATIONS):
+#: the parameter schedule of a time-varying problem covers them and the horizon after them.
+MAIN_ITERATIONS = 10
+
+
 def _default_parameters(disc: Any, s: Dict[str, int]) -> np.ndarray:
-    """The one default parameter vector of dopus_problem.h (every node)."""
+    """The parameters of the first horizon, ``(N+1, DIM(np))`` (dopus_problem.h)."""
     p0 = _attr(disc.data, "p0")
     arr = np.asarray(p0 if p0 is not None else np.zeros((s["N"] + 1, s["np"])), dtype=float)
     if s["np"] == 0:
-        return np.zeros(0)
+        return np.zeros((s["N"] + 1, 1))
     if arr.ndim == 1:
         arr = np.tile(arr, (s["N"] + 1, 1))
     if arr.shape != (s["N"] + 1, s["np"]):
         raise CodegenError(f"p0: expected shape ({s['N'] + 1}, {s['np']}), got {arr.shape}")
-    if not np.array_equal(arr, np.tile(arr[0], (s["N"] + 1, 1))):
-        raise CodegenError("p0: the default parameters differ between nodes; the generated data "
-                           "carries one default vector for every node (set per-node values at run time)")
-    return arr[0]
+    return arr
+
+
+def _parameter_schedule(disc: Any, s: Dict[str, int]):
+    """The parameters at t = j dt, j = 0..N + MAIN_ITERATIONS, of a problem whose parameters
+    declare a trajectory (None otherwise)."""
+    if s["np"] == 0 or not getattr(disc, "time_varying_parameters", False):
+        return None
+    return np.array([disc.parameters_at(j * float(disc.dt)) for j in range(s["N"] + 1 + MAIN_ITERATIONS)])
 
 
 def _code(setting: str, options: Any) -> int:
@@ -441,7 +451,7 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
         "ug": c_vector(_attr(data, "ug"), s["ng"], "ug"),
         "lr": c_vector(_attr(data, "lr"), s["nr"], "lr"),
         "ur": c_vector(_attr(data, "ur"), s["nr"], "ur"),
-        "p_default": c_vector(_default_parameters(disc, s), s["np"], "p0"),
+        "p_default": c_matrix(_default_parameters(disc, s), N + 1, max(s["np"], 1), "p0"),
         "dt": c_double(_attr(data, "dt"), "dt"),
         "x0_default": c_vector(_attr(data, "x0"), nx, "x0"),
         "guess_x": c_matrix(getattr(guess, "x", None), N + 1, nx, "initial_guess.x"),
@@ -454,6 +464,10 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
         "default_lm": c_double(settings.lm_code(_option(options, "lm", settings.DEFAULTS["lm"])), "lm"),
         "has_nominal": nominal is not None,
     }
+    schedule = _parameter_schedule(disc, s)
+    ctx["p_schedule_nodes"] = 0 if schedule is None else schedule.shape[0]
+    if schedule is not None:
+        ctx["p_schedule"] = c_matrix(schedule, schedule.shape[0], s["np"], "parameter schedule")
     if not 0 <= ctx["default_M"] <= N - 1:
         raise CodegenError(f"option M={ctx['default_M']} is outside 0..N-1 = 0..{N - 1}")
     if nominal is not None:
@@ -530,7 +544,7 @@ def extract_cdef(header_text: str, name: str, header_name: str) -> str:
 
 def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, has_nominal: int = 0,
                         work: Optional[Dict[str, int]] = None, header: str = "",
-                        casadi_version: str = "", real: str = "double") -> str:
+                        casadi_version: str = "", real: str = "double", p_schedule_nodes: int = 0) -> str:
     """``<name>_sizes.h`` from templates/sizes.h.j2: the one sizes header of the runtime, also
     for the QP harness and the QP benchmark (which give only the QP sizes N, nx, nu, ng, nr,
     ne; the other entries then hold placeholders: no CasADi work, no Gauss-Newton)."""
@@ -543,6 +557,7 @@ def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, ha
     s["nb"] = s["N"] * (s["nbx"] + s["nbu"] + s["nbg"]) + s["nbr"]
     ctx = {"name": name, "NAME": name.upper(), "sizes": s, "has_gn": int(has_gn),
            "has_nominal": int(has_nominal), "header": header or f"Sizes of '{name}'",
+           "p_schedule_nodes": int(p_schedule_nodes),
            "casadi_version": casadi_version, "real_float": settings.REALS[settings.check_real(real)],
            "work": work or {"sz_arg": 1, "sz_res": 1, "sz_iw": 1, "sz_w": 1}}
     return _templates().get_template("sizes.h.j2").render(**ctx)
@@ -588,7 +603,8 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     env = _templates()
     files[f"{name}_sizes.h"] = render_sizes_header(name, dict(s, **bounded_row_counts(disc, s)), has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
                                                    work=ctx["work"], header=header,
-                                                   casadi_version=ca.__version__, real=real)
+                                                   casadi_version=ca.__version__, real=real,
+                                                   p_schedule_nodes=ctx["p_schedule_nodes"])
     files[f"{name}_problem.c"] = env.get_template("problem.c.j2").render(**ctx)
 
     cdef = extract_cdef(files[f"{name}_solver.h"], name, f"{name}_solver.h")

@@ -214,6 +214,24 @@ class Discretized:
         """``scenario.closed_loop``."""
         return self.scenario.closed_loop
 
+    @property
+    def time_varying_parameters(self) -> bool:
+        """A parameter of the OCP declares a trajectory (``Ocp.parameter(trajectory=...)``)."""
+        tr = getattr(self.spec.model, "p_trajectory", None)
+        return bool(tr is not None and tr.time_varying)
+
+    def parameters_at(self, t: float) -> numpy.ndarray:
+        """The parameter vector at time ``t`` seconds, ``(np,)`` (the default when constant)."""
+        tr = getattr(self.spec.model, "p_trajectory", None)
+        if tr is None:
+            return numpy.array(self.spec.model.p_default, dtype=float)
+        return tr.at(t)
+
+    def parameter_horizon(self, t0: float) -> numpy.ndarray:
+        """``(N+1, np)``: the parameters of the horizon at time ``t0`` (node k at ``t0 + k dt``)."""
+        return numpy.array([self.parameters_at(t0 + k * self.dt) for k in range(self.N + 1)],
+                           dtype=float).reshape(self.N + 1, self.np)
+
     def stage_hess(self, kind: str) -> ca.Function:
         return self.functions.stage_hess(kind)
 
@@ -544,13 +562,21 @@ def build_functions(problem: Union[Ocp, OcpSpec]) -> Discretized:
         name=name, N=N, dt=spec.horizon.dt, nx=nx, nu=nu, nw=nx + nu, np=np_, ng=m.g.size1(),
         nr=m.r.size1(), ne=m.r_eq.size1(), lbx=con.lbx, ubx=con.ubx, lbu=con.lbu, ubu=con.ubu,
         lg=readonly(m.lg), ug=readonly(m.ug), lr=readonly(m.lr), ur=readonly(m.ur),
-        p0=readonly(numpy.tile(model.p_default, (N + 1, 1)), (N + 1, np_)), x0=spec.x0,
+        p0=readonly(_first_horizon(model, N, spec.horizon.dt), (N + 1, np_)), x0=spec.x0,
         guess_x=spec.guess.x, guess_u=spec.guess.u, state_names=model.state_names,
         control_names=model.control_names, parameter_names=model.parameter_names,
         integrator=model.integrator.describe(), W=readonly(m.W), WN=readonly(m.WN))
     disc = Discretized(spec=spec, data=data, functions=functions, scenario=_scenario(spec, m, ode))
     _check_finite_at_guess(disc)
     return disc
+
+
+def _first_horizon(model, N: int, dt: float) -> numpy.ndarray:
+    """The parameters of the horizon at t = 0 (node k at k dt), ``(N+1, np)``."""
+    tr = getattr(model, "p_trajectory", None)
+    if tr is None:
+        return numpy.tile(model.p_default, (N + 1, 1))
+    return tr.horizon(0.0, N, dt).reshape(N + 1, -1)
 
 
 def _check_finite_at_guess(disc: Discretized) -> None:

@@ -28,7 +28,9 @@ Conventions (docs/algorithm.md sections 1 and 8):
 - Path constraints ``lb <= g(x, u, p) <= ub`` hold on stages ``0..N-1``; state bounds
   on nodes ``1..N``; control bounds on stages ``0..N-1``.
 - A terminal constraint row with ``lb == ub`` becomes an equality row.
-- Parameters are runtime-settable, one vector per node; ``value`` is the default.
+- Parameters are runtime-settable, one vector per node; ``value`` is the default, or
+  ``trajectory`` the parameter over time (a moving reference): node ``k`` of the horizon
+  at time ``t`` gets its value at ``t + k dt``.
 
 Every user mistake raises :class:`OcpError` with a message naming the offending item.
 :meth:`Ocp.validate` checks everything declared once and returns the problem as an
@@ -54,7 +56,8 @@ import numpy as np
 
 from ..cnames import identifier_problem
 from .spec import (CampaignSpec, ClosedLoopSpec, ConstraintSpec, CostSpec, GuessSpec, HorizonSpec, LeastSquares,
-                   ModelSpec, OcpSpec, OptionsSpec, Rows, ScenarioPart, Variable, readonly)
+                   ModelSpec, OcpSpec, OptionsSpec, ParameterTrajectory, Rows, ScenarioPart, TrajectoryError, Variable,
+                   readonly)
 
 __all__ = [
     "OcpError", "Integrator", "RK4", "GaussLegendre", "RadauIIA", "Event", "Pushes", "OnPath", "Guess", "ScenarioSpec",
@@ -366,6 +369,7 @@ class _Decl:
     lb: np.ndarray
     ub: np.ndarray
     value: Optional[np.ndarray] = None
+    trajectory: Optional[tuple] = None   # ("function", fn) or ("table", (times, values))
 
 
 # --------------------------------------------------------------------------- helpers
@@ -386,6 +390,33 @@ def _vector(value, size: int, what: str, allow_inf: bool = True) -> np.ndarray:
     if not allow_inf and np.any(np.isinf(a)):
         raise OcpError(f"{what}: infinite value at row {int(np.flatnonzero(np.isinf(a))[0])}")
     return a
+
+
+def _trajectory(value, size: int, what: str) -> tuple:
+    """``("function", fn)`` or ``("table", (times, values))`` of a declared trajectory."""
+    if callable(value):
+        return ("function", value)
+    if not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise OcpError(f"{what} trajectory: expected a function of t or a table (times, values), "
+                       f"got {type(value).__name__}")
+    try:
+        times = np.array(value[0], dtype=float)
+        values = np.array(value[1], dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise OcpError(f"{what} trajectory: the table must hold numbers ({exc})") from None
+    if times.ndim != 1 or times.size < 1:
+        raise OcpError(f"{what} trajectory: times must be a non-empty vector, got shape {times.shape}")
+    if values.ndim == 1 and size == 1:
+        values = values.reshape(-1, 1)
+    if values.shape != (times.size, size):
+        raise OcpError(f"{what} trajectory: expected values of shape ({times.size}, {size}) "
+                       f"(one row per time), got {values.shape}")
+    if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
+        raise OcpError(f"{what} trajectory: the table holds a non-finite value (NaN or inf)")
+    if np.any(np.diff(times) <= 0):
+        i = int(np.flatnonzero(np.diff(times) <= 0)[0])
+        raise OcpError(f"{what} trajectory: times must increase strictly, got {times[i]} then {times[i + 1]}")
+    return ("table", (readonly(times), readonly(values)))
 
 
 def _as_sx(expr, what: str) -> ca.SX:
@@ -533,10 +564,24 @@ class Ocp:
         return self._declare("control", self._controls, name, size, lb, ub)
 
     @_declaration
-    def parameter(self, name: str, size: int = 1, value=0.0) -> ca.SX:
-        """Declare a runtime parameter (one value per node); ``value`` is the default."""
-        return self._declare("parameter", self._params, name, size, -math.inf, math.inf,
-                             value=0.0 if value is None else value)
+    def parameter(self, name: str, size: int = 1, value=None, trajectory=None) -> ca.SX:
+        """Declare a runtime parameter (one value per node); ``value`` is the default (0).
+
+        ``trajectory``: the parameter over time, for references that move: a function of
+        the time ``t`` in seconds returning ``size`` values, or a table ``(times, values)``
+        (``times`` increasing, ``values`` one row of ``size`` per time; linear in between,
+        held before the first and after the last time). Node ``k`` of the horizon at
+        instant ``t`` gets ``trajectory(t + k dt)``: the initial guess, the offline
+        solution, ``converge`` (t = 0), ``sil``, ``campaign``, ``bench`` and the generated
+        main use it; at run time the solver shifts the parameters with the horizon and the
+        caller pushes the value of the new last node (docs/algorithm.md section 4)."""
+        if value is not None and trajectory is not None:
+            raise OcpError(f"parameter '{name}': give value or trajectory, not both")
+        sym = self._declare("parameter", self._params, name, size, -math.inf, math.inf,
+                            value=0.0 if value is None else value)
+        if trajectory is not None:
+            self._params[-1].trajectory = _trajectory(trajectory, self._params[-1].size, f"parameter '{name}'")
+        return sym
 
     # ------------------------------------------------------------------ model and costs
     @_declaration
@@ -854,10 +899,19 @@ class Ocp:
         def bounds(decls, which):
             return readonly(np.concatenate([getattr(d, which) for d in decls]))
 
-        p_default = np.concatenate([d.value for d in self._params]) if self._params else np.zeros(0)
+        trajectory = ParameterTrajectory(tuple(
+            (d.name, d.size, "constant", readonly(d.value)) if d.trajectory is None
+            else (d.name, d.size, d.trajectory[0], d.trajectory[1]) for d in self._params))
+        try:
+            p_default = trajectory.at(0.0)
+            for k in range(1, self._N + 1):    # every node of the first horizon
+                trajectory.at(k * self._dt)
+        except TrajectoryError as exc:
+            raise OcpError(str(exc)) from None
         model = ModelSpec(states=variables(self._states), controls=variables(self._controls),
                           parameters=variables(self._params), xdot=self._xdot,
-                          integrator=copy.copy(self._integrator), p_default=readonly(p_default))
+                          integrator=copy.copy(self._integrator), p_default=readonly(p_default),
+                          p_trajectory=trajectory)
         cost = CostSpec(
             stage_terms=tuple(self._stage_costs),
             stage_least_squares=tuple(LeastSquares(r, readonly(W)) for r, W in self._stage_ls),

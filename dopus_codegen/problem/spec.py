@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 __all__ = [
-    "readonly", "Variable", "ModelSpec", "LeastSquares", "CostSpec", "Rows", "ConstraintSpec",
+    "readonly", "Variable", "ParameterTrajectory", "ModelSpec", "LeastSquares", "CostSpec", "Rows", "ConstraintSpec",
     "HorizonSpec", "OptionsSpec", "GuessSpec", "ClosedLoopSpec", "CampaignSpec", "ScenarioPart", "OcpSpec",
 ]
 
@@ -58,17 +58,69 @@ class Variable:
     sym: ca.SX
 
 
+class TrajectoryError(ValueError):
+    """A declared parameter trajectory failed at some time (the message names it)."""
+
+
+@dataclass(frozen=True)
+class ParameterTrajectory:
+    """The stacked parameter vector as a function of time (seconds from the start of a run).
+
+    ``parts``: one ``(name, size, kind, data)`` per declared parameter, in declaration
+    order: ``kind`` ``"constant"`` (``data``: its value), ``"function"`` (``data``: the
+    user's ``t -> size values``) or ``"table"`` (``data``: ``(times, values)``, linear
+    interpolation, held constant before the first and after the last time)."""
+    parts: Tuple[Tuple[str, int, str, Any], ...]
+
+    @property
+    def time_varying(self) -> bool:
+        return any(kind != "constant" for _, _, kind, _ in self.parts)
+
+    def at(self, t: float) -> np.ndarray:
+        """``p(t)``, shape ``(np,)``; raises :class:`TrajectoryError` naming the parameter."""
+        out = []
+        for name, size, kind, data in self.parts:
+            if kind == "constant":
+                out.append(np.asarray(data, dtype=float).reshape(size))
+                continue
+            if kind == "table":
+                times, values = data
+                v = np.array([np.interp(t, times, values[:, i]) for i in range(size)])
+            else:
+                try:
+                    v = np.array(data(float(t)), dtype=float)
+                except Exception as exc:  # noqa: BLE001 - the user's function
+                    raise TrajectoryError(f"parameter '{name}' trajectory at t = {t:g} s failed: "
+                                          f"{type(exc).__name__}: {exc}") from None
+                if v.size != size:
+                    raise TrajectoryError(f"parameter '{name}' trajectory at t = {t:g} s: expected {size} "
+                                          f"values, got shape {v.shape}")
+            v = v.reshape(size)
+            if not np.all(np.isfinite(v)):
+                raise TrajectoryError(f"parameter '{name}' trajectory at t = {t:g} s: non-finite value {v}")
+            out.append(v)
+        return np.concatenate(out) if out else np.zeros(0)
+
+    def horizon(self, t0: float, N: int, dt: float) -> np.ndarray:
+        """``(N+1, np)``: node ``k`` at time ``t0 + k dt``."""
+        rows = [self.at(t0 + k * dt) for k in range(N + 1)]
+        return np.array(rows, dtype=float).reshape(N + 1, -1)
+
+
 @dataclass(frozen=True)
 class ModelSpec:
     """States, controls, parameters, the continuous model ``xdot = f(x, u, p)`` and the
     integrator that maps it to the interval map ``phi`` (the integrator is a private copy
-    of the declared one). ``p_default (np,)``: the parameters' default values."""
+    of the declared one). ``p_default (np,)``: the parameters' default values (at t = 0);
+    ``p_trajectory``: the parameters over time (:class:`ParameterTrajectory`; constant
+    unless a parameter declares a trajectory)."""
     states: Tuple[Variable, ...]
     controls: Tuple[Variable, ...]
     parameters: Tuple[Variable, ...]
     xdot: ca.SX
     integrator: Any
     p_default: np.ndarray
+    p_trajectory: Optional[ParameterTrajectory] = None
 
     @property
     def x(self) -> ca.SX:

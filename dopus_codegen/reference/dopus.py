@@ -31,7 +31,7 @@ import time
 import numpy as np
 
 from .. import settings, vocabulary
-from ..errors import DopusError, qp_status_code as status_code_qp, status_code
+from ..errors import PARAMETER_ORDER, DopusError, qp_status_code as status_code_qp, status_code
 from ..settings import SettingError
 from .kkt import eval_stages, kkt_measure, node_parameters
 from ..problem.checks import describe_qp_row
@@ -167,6 +167,7 @@ class ReferenceDopus:
         # calling order (docs/algorithm.md section 4): a prepared QP, a prepare due, the shift
         # of this sampling instant done (a prepare failed after it)
         self._qp_ready = self._prepare_due = self._shifted = False
+        self._p_shifted = False      # this sampling instant's parameters are shifted
         # section 9: safe outputs, divergence test, recovery
         self.recovery, self.recovery_failures = True, int(_SAFETY["RECOVERY_FAILURES"])
         self.scales = self._compute_scales()
@@ -221,9 +222,58 @@ class ReferenceDopus:
         fails the feedback with the QP status ``max_iter``, as in the C runtime."""
         self.qp_max_iter = None if max_iter is None else _setting(settings.count, "qp_max_iter", max_iter, 1)
 
+    def _parameters_writable(self, who: str) -> None:
+        """Parameters are read by init and prepare (docs/algorithm.md section 4): writable
+        before init or while a prepare is due; in receding mode the shift of this sampling
+        instant's parameters comes first (once)."""
+        if not getattr(self, "_initialised", False):
+            return
+        if not self._prepare_due:
+            raise self._fail("already_prepared", f"{who} ({PARAMETER_ORDER})")
+        self._shift_parameters()
+
+    def _shift_parameters(self) -> None:
+        """p_k <- p_{k+1}, p_N kept; once per sampling instant, receding mode only."""
+        if self.mode == "receding" and not self._p_shifted:
+            p = self.p.copy()
+            p[:self.N] = self.p[1:]
+            self.p = p
+            self._p_shifted = True
+
     def set_parameters(self, p) -> None:
-        """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
-        self.p = node_parameters(self.disc, p)
+        """``(np,)`` for every node or ``(N+1, np)``: the parameters of the next QP's horizon."""
+        value = node_parameters(self.disc, p)
+        self._parameters_writable("set_parameters")
+        self.p = value
+
+    def set_parameters_node(self, k: int, pk) -> None:
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k <= self.N:
+            raise DopusError.of("invalid_argument", f"node index must be an integer in 0..{self.N}, got {k!r}")
+        v = _arr(pk, (self.np,), f"parameters of node {k}")
+        if not np.all(np.isfinite(v)):
+            raise DopusError.of("nonfinite_input", f"parameters of node {k}: NaN or Inf")
+        self._parameters_writable("set_parameters_node")
+        p = self.p.copy()
+        p[k] = v
+        self.p = p
+
+    def stop(self) -> None:
+        """End the run: uninitialised, settings and parameters kept."""
+        self._initialised = self._qp_ready = self._prepare_due = self._shifted = self._p_shifted = False
+
+    def push_parameters(self, pN) -> None:
+        """The parameters of the next horizon's last node (receding mode, between feedback
+        and prepare)."""
+        self._need_init()
+        if self.mode != "receding":
+            raise DopusError.of("invalid_argument", "push_parameters: only in receding mode (the horizon moves)")
+        v = _arr(pN, (self.np,), "parameters of the new last node")
+        if not np.all(np.isfinite(v)):
+            raise DopusError.of("nonfinite_input", "push_parameters: NaN or Inf")
+        self._parameters_writable("push_parameters")
+        p = self.p.copy()
+        p[self.N] = v
+        self.p = p
 
     # ------------------------------------------------------------------ evaluations
     def _slot(self, k: int) -> int:
@@ -286,6 +336,7 @@ class ReferenceDopus:
         free_initial_state(nx, mu_b=mu_b)
         self._initialised = False
         self._qp_ready = False
+        self._p_shifted = False
         self._reset_health(u)
         self._init_finish(x, u, lam, mu_g, mu_b, g.mu_bN.copy(), g.mu_r.copy(), g.nu.copy(), "init", "at the guess")
         self._xhat_last = xhat0.copy()
@@ -325,6 +376,7 @@ class ReferenceDopus:
         self._lm_start()
         self._prepare_due = False    # a feedback must come first
         self._shifted = False
+        self._p_shifted = False
 
     def _need_init(self):
         if not self._initialised:
@@ -578,6 +630,7 @@ class ReferenceDopus:
         self._need_init()
         if not self._prepare_due:
             raise self._fail("already_prepared", "prepare: already prepared (call feedback before the next prepare)")
+        self._shift_parameters()
         if (self._qp_ready and self._n_failed > 0 and not self._recover_pending and self.recovery
                 and self.mode == "receding" and "reinit_guess" not in self.flags):
             # (not from the OCP file's guess: its plan is not the plant's)
@@ -729,6 +782,7 @@ class ReferenceDopus:
         self.rho = rho
         self.recomputed = sorted(chosen + [self.N - 1])
         self._qp_ready, self._prepare_due, self._shifted = True, False, False
+        self._p_shifted = False
         self.status = status_code("ok")
 
     # ------------------------------------------------------------------ section 9: health

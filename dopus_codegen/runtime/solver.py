@@ -30,7 +30,7 @@ from typing import Dict, Optional
 import numpy as np
 
 from .. import settings, vocabulary
-from ..errors import DopusError, status_code, qp_failure_text
+from ..errors import PARAMETER_ORDER, DopusError, qp_failure_text, status_code
 from ..settings import SettingError
 
 __all__ = ["CSolver", "DopusError", "STATUS", "QP_STATUS", "PHASES", "load_library", "build_for"]
@@ -45,6 +45,7 @@ FLAGS = {bit: name for name, bit in vocabulary.enum("dopus_flag").codes.items()}
 PHASES = vocabulary.phases()
 STATUS_OK, STATUS_QP = status_code("ok"), status_code("qp")
 STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = status_code("nonfinite_input"), status_code("invalid_argument")
+STATUS_ALREADY_PREPARED = status_code("already_prepared")
 _DIMS = ("N", "nx", "nu", "nw", "np", "ng", "nr", "ne", "has_gn", "has_nominal")
 _INT_MAX = 2**31 - 1   # the largest C int (qp_max_iter)
 
@@ -385,19 +386,36 @@ class CSolver:
     qp_cold_retry = _c_property("get_qp_cold_retry", bool,
                                 "True when the last feedback's warm-started QP failed and the cold retry ran.")
 
+    def _check_parameters(self, status: int, what: str) -> None:
+        if int(status) == STATUS_ALREADY_PREPARED:
+            what += f" ({PARAMETER_ORDER})"
+        self._check(status, what)
+
     def set_parameters(self, p) -> None:
-        """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
+        """``(np,)`` for every node or ``(N+1, np)``: the parameters of the next QP's horizon
+        (before init, or between feedback and prepare: docs/algorithm.md section 4)."""
         a = np.asarray(p) if not isinstance(p, np.ndarray) else p
         if a.ndim <= 1 and a.size == self.np:
             a = np.tile(self._array(a, (self.np,), "parameters").reshape(1, self.np), (self.N + 1, 1))
         a = self._array(a, (self.N + 1, self.np), "parameters")
-        self._check(self._c("set_parameters")(self._s, self._ptr(a)), "set_parameters")
+        self._check_parameters(self._c("set_parameters")(self._s, self._ptr(a)), "set_parameters")
 
     def set_parameters_node(self, k: int, pk) -> None:
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k <= self.N:
             self._bad(f"node index must be an integer in 0..{self.N}, got {k!r}")
         a = self._array(pk, (self.np,), f"parameters of node {k}")
-        self._check(self._c("set_parameters_node")(self._s, int(k), self._ptr(a)), "set_parameters_node")
+        self._check_parameters(self._c("set_parameters_node")(self._s, int(k), self._ptr(a)), "set_parameters_node")
+
+    def stop(self) -> None:
+        """End the run: uninitialised, settings and parameters kept (write the parameters
+        of the next run's first horizon, then init)."""
+        self._c("stop")(self._s)
+
+    def push_parameters(self, pN) -> None:
+        """The parameters of the next horizon's last node (receding mode, between feedback
+        and prepare; the prepare shifts the others with the horizon)."""
+        a = self._array(pN, (self.np,), "parameters of the new last node")
+        self._check_parameters(self._c("push_parameters")(self._s, self._ptr(a)), "push_parameters")
 
     M = _c_property("get_M")
     mode = _setting_property("mode")

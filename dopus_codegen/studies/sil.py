@@ -162,10 +162,16 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
         backend_obj = _make_backend_for_run(disc, backend, M=M_eff, hessian=hessian, regularization=regularization,
                                             reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm,
                                             qp_tol=qp_tol, qp_max_iter=qp_max_iter)
+    moving = bool(getattr(disc, "time_varying_parameters", False))
+    if moving:
+        # the first horizon's parameters (node k at k dt), written before init reads them
+        if getattr(backend_obj, "stop", None) is not None:
+            backend_obj.stop()
+        backend_obj.set_parameters(disc.parameter_horizon(0.0))
     backend_obj.init(x, guess)
     rec = _Record(spec, disc)
     rec.snap = dict(getattr(backend_obj, "timings", {}) or {})
-    loop = _Loop(disc, backend_obj, plant, events, p, rec, plant_p=plant_p)
+    loop = _Loop(disc, backend_obj, plant, events, p, rec, plant_p=plant_p, moving=moving)
     loop.run(x, n_steps, progress, label)
     settings_rec = {"M": M_eff, "N": int(disc.N), "dt": float(disc.dt), "duration": n_steps * float(disc.dt),
                     "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
@@ -290,9 +296,13 @@ class _Record:
 class _Loop:
     """The receding-horizon loop of the module docstring, one method per step of an instant."""
 
-    def __init__(self, disc, ctrl, plant, events, p, rec: _Record, plant_p=None):
+    def __init__(self, disc, ctrl, plant, events, p, rec: _Record, plant_p=None, moving=False):
         self.ctrl, self.plant, self.events, self.p, self.rec = ctrl, plant, events, p, rec
         self.plant_p = p if plant_p is None else plant_p
+        # parameters that move (a trajectory in the OCP file): the instant's values for the
+        # plant and the signals, and the new last node pushed before every prepare
+        self.moving = moving
+        self.p_fixed, self.plant_p_fixed = self.p, self.plant_p
         self.nx, self.dt = int(disc.nx), float(disc.dt)
         self.lbu = np.asarray(disc.lbu, dtype=float).reshape(-1)
         self.ubu = np.asarray(disc.ubu, dtype=float).reshape(-1)
@@ -325,6 +335,10 @@ class _Loop:
     def instant(self, i, x):
         """One sampling instant: events, measurement, feedback, KKT, plant, prepare."""
         t_i = i * self.dt
+        if self.moving:
+            self.p = self._parameters_at(t_i)
+            n_p = self.p.size
+            self.plant_p = np.concatenate([self.p, np.asarray(self.plant_p_fixed, dtype=float)[n_p:]])
         x = self.events_until(x, t_i + _ON_GRID * self.dt)
         xhat = x.copy()
         u0, status, t_fb = self.feedback(xhat)
@@ -338,12 +352,30 @@ class _Loop:
         snap_fb = dict(getattr(self.ctrl, "timings", {}) or {})
         self.rec.measurement(t_i, xhat, u0, kkt, self.p)
         x = self.plant_interval(x, u0, t_i, (i + 1) * self.dt)
+        if self.moving:
+            status = self.push((i + 1) * self.dt + int(self.disc.N) * self.dt, status)
         status, prepared, t_pr = self.prepare(status)
         self.rec.snap = dict(getattr(self.ctrl, "timings", {}) or {})
         phases.update(_split_phases("prepare", _changed(snap_fb, self.rec.snap)))
         recomputed = [int(k) for k in getattr(self.ctrl, "recomputed", [])] if prepared else []
         self.rec.instant_done(i, status, recomputed, t_fb, t_pr, phases)
         return x
+
+    def _parameters_at(self, t):
+        from ..problem.spec import TrajectoryError
+
+        try:
+            return np.asarray(self.disc.parameters_at(t), dtype=float).reshape(-1)
+        except TrajectoryError as exc:
+            raise SilError(str(exc)) from None
+
+    def push(self, t_last, status):
+        """The parameters of the next horizon's last node (time ``t_last``), before prepare."""
+        try:
+            self.ctrl.push_parameters(self._parameters_at(t_last))
+        except DopusError as err:
+            status = status or _status_of(err)
+        return status
 
     def events_until(self, x, t_end):
         """Apply the events due at an instant (time <= t_end) to the plant state."""

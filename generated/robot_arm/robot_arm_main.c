@@ -2,7 +2,9 @@
  * generated nominal solution when there is one, else from the OCP file's guess), then
  * feedback/prepare iterations in fixed mode (convergence at a fixed x0) and in receding
  * mode (closed loop on the discrete model phi). Prints u0, the KKT measure and the status
- * of every iteration; exits nonzero on the first failure. */
+ * of every iteration; exits nonzero on the first failure. With a parameter trajectory
+ * (ROBOT_ARM_HAS_P_SCHEDULE) the closed loop pushes the value of each new last node between
+ * feedback and prepare, and the model plant uses the parameters of the instant. */
 #include <math.h>
 #include <stdio.h>
 
@@ -41,6 +43,7 @@ static int report(const char *phase, int iter, int status, const robot_arm_real 
 static int run(const char *phase, int mode)
 {
     robot_arm_real xhat0[ROBOT_ARM_NX], xnext[ROBOT_ARM_NX], u0[ROBOT_ARM_NU], kkt4[4], l, g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    const robot_arm_real *p_plant = robot_arm_p_default[0];
     int i, k, status;
 
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -70,7 +73,15 @@ static int run(const char *phase, int mode)
     for (k = 1; k <= ITERATIONS; ++k) {
         status = robot_arm_feedback(&solver, xhat0, u0);
         if (status == ROBOT_ARM_OK && mode == ROBOT_ARM_MODE_RECEDING) {
-            if (robot_arm_eval_stage_eval(xhat0, u0, robot_arm_p_default, xnext, &l, g, &plant_work)) {
+#if ROBOT_ARM_HAS_P_SCHEDULE
+            /* the instant t = (k - 1) dt; the next horizon ends at k dt + N dt */
+            p_plant = robot_arm_p_schedule[k - 1];
+            status = robot_arm_push_parameters(&solver, robot_arm_p_schedule[k + ROBOT_ARM_N]);
+            if (status != ROBOT_ARM_OK) {
+                return report(phase, k, status, u0, kkt4);
+            }
+#endif
+            if (robot_arm_eval_stage_eval(xhat0, u0, p_plant, xnext, &l, g, &plant_work)) {
                 fprintf(stderr, "main_dopus: the model failed to evaluate\n");
                 return 1;
             }

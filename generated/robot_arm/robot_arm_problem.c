@@ -12,7 +12,49 @@ const robot_arm_real robot_arm_lg[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {0.0};
 const robot_arm_real robot_arm_ug[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {0.0};
 const robot_arm_real robot_arm_lr[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {0.0};
 const robot_arm_real robot_arm_ur[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {0.0};
-const robot_arm_real robot_arm_p_default[ROBOT_ARM_DIM(ROBOT_ARM_NP)] = {0.0};
+const robot_arm_real robot_arm_p_default[ROBOT_ARM_N + 1][ROBOT_ARM_DIM(ROBOT_ARM_NP)] = {
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0},
+    {0.0}
+};
 const robot_arm_real robot_arm_dt = 0.01;
 const robot_arm_real robot_arm_x0_default[ROBOT_ARM_NX] = {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0};
 

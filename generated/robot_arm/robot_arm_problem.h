@@ -14,7 +14,9 @@ extern const robot_arm_real robot_arm_lbx[ROBOT_ARM_NX], robot_arm_ubx[ROBOT_ARM
 extern const robot_arm_real robot_arm_lbu[ROBOT_ARM_NU], robot_arm_ubu[ROBOT_ARM_NU];
 extern const robot_arm_real robot_arm_lg[ROBOT_ARM_DIM(ROBOT_ARM_NG)], robot_arm_ug[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
 extern const robot_arm_real robot_arm_lr[ROBOT_ARM_DIM(ROBOT_ARM_NR)], robot_arm_ur[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
-extern const robot_arm_real robot_arm_p_default[ROBOT_ARM_DIM(ROBOT_ARM_NP)]; /* every node */
+/* the parameters of the first horizon (node k at time k dt; the same at every node unless
+ * a parameter declares a trajectory) */
+extern const robot_arm_real robot_arm_p_default[ROBOT_ARM_N + 1][ROBOT_ARM_DIM(ROBOT_ARM_NP)];
 extern const robot_arm_real robot_arm_dt;
 extern const robot_arm_real robot_arm_x0_default[ROBOT_ARM_NX];
 /* the OCP file's initial guess */
@@ -26,6 +28,12 @@ extern const int robot_arm_default_regularization; /* 0 none, 1 project, 2 mirro
 extern const robot_arm_real robot_arm_default_reg_eps;
 extern const int robot_arm_default_cost_hessian; /* 1 fresh, 0 stored */
 extern const robot_arm_real robot_arm_default_lm;    /* Levenberg-Marquardt term, >= 0 */
+
+#if ROBOT_ARM_HAS_P_SCHEDULE
+/* the parameters at t = j dt, j = 0..ROBOT_ARM_P_SCHEDULE_NODES-1, from the OCP file's
+ * trajectories (the standalone main's closed loop pushes them) */
+extern const robot_arm_real robot_arm_p_schedule[ROBOT_ARM_P_SCHEDULE_NODES][ROBOT_ARM_NP];
+#endif
 
 #if ROBOT_ARM_HAS_NOMINAL
 /* offline primal-dual solution at robot_arm_x0_default (IPOPT at generation time), so the

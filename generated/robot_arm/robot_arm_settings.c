@@ -200,7 +200,7 @@ int robot_arm_get_qp_warm_start(robot_arm_solver *s)
 
 int robot_arm_set_parameters(robot_arm_solver *s, const robot_arm_real *p)
 {
-    int k, i;
+    int k, i, rc;
     robot_arm_ensure_setup(s);
     if (ROBOT_ARM_NP == 0) {
         return robot_arm_ret(s, ROBOT_ARM_OK);
@@ -210,6 +210,10 @@ int robot_arm_set_parameters(robot_arm_solver *s, const robot_arm_real *p)
     }
     if (!robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NP, p)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
+    }
+    rc = robot_arm_parameters_writable(s);
+    if (rc != ROBOT_ARM_OK) {
+        return robot_arm_ret(s, rc);
     }
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NP; ++i) {
@@ -221,7 +225,7 @@ int robot_arm_set_parameters(robot_arm_solver *s, const robot_arm_real *p)
 
 int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const robot_arm_real *pk)
 {
-    int i;
+    int i, rc;
     robot_arm_ensure_setup(s);
     if (k < 0 || k > ROBOT_ARM_N) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
@@ -235,10 +239,53 @@ int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const robot_arm_re
     if (!robot_arm_lai_vec_finite(ROBOT_ARM_NP, pk)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
+    rc = robot_arm_parameters_writable(s);
+    if (rc != ROBOT_ARM_OK) {
+        return robot_arm_ret(s, rc);
+    }
     for (i = 0; i < ROBOT_ARM_NP; ++i) {
         s->p[k][i] = pk[i];
     }
     return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+int robot_arm_push_parameters(robot_arm_solver *s, const robot_arm_real *pN)
+{
+    int i, rc;
+    robot_arm_ensure_setup(s);
+    if (!s->initialized) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
+    }
+    if (s->mode != ROBOT_ARM_MODE_RECEDING) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    if (ROBOT_ARM_NP == 0) {
+        return robot_arm_ret(s, ROBOT_ARM_OK);
+    }
+    if (pN == 0) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NP, pN)) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
+    }
+    rc = robot_arm_parameters_writable(s);
+    if (rc != ROBOT_ARM_OK) {
+        return robot_arm_ret(s, rc);
+    }
+    for (i = 0; i < ROBOT_ARM_NP; ++i) {
+        s->p[ROBOT_ARM_N][i] = pN[i];
+    }
+    return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+void robot_arm_stop(robot_arm_solver *s)
+{
+    robot_arm_ensure_setup(s);
+    s->initialized = 0;
+    s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
+    s->p_shifted = 0;
 }
 
 void robot_arm_get_parameters(robot_arm_solver *s, robot_arm_real *p)

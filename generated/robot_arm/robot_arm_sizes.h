@@ -28,6 +28,9 @@
 #define ROBOT_ARM_HAS_GN 1
 /* 1 if the offline primal-dual solution at the default x0 is carried as data */
 #define ROBOT_ARM_HAS_NOMINAL 1
+/* 1 if a parameter declares a trajectory: robot_arm_p_schedule holds the parameters at
+ * t = j dt for the standalone main's closed loop */
+#define ROBOT_ARM_HAS_P_SCHEDULE 0
 
 /* CasADi work arrays: the maximum over every generated function, at least 1 */
 #define ROBOT_ARM_SZ_ARG 5

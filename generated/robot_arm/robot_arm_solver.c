@@ -502,6 +502,7 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->qp_ready = 0;
     s->prepare_due = 0;
     s->shifted = 0;
+    s->p_shifted = 0;
     s->status = ROBOT_ARM_OK;
     s->M = robot_arm_default_M < 0 ? 0 : (robot_arm_default_M > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : robot_arm_default_M);
     s->mode = ROBOT_ARM_MODE_RECEDING;
@@ -524,7 +525,7 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->qp_cold_retry = 0;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NP; ++i) {
-            s->p[k][i] = robot_arm_p_default[i];
+            s->p[k][i] = robot_arm_p_default[k][i];
         }
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -832,6 +833,7 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
     s->initialized = 0;
     robot_arm_reset_health(s);
     s->qp_ready = 0;
+    s->p_shifted = 0;
     if ((xhat0 && !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) ||
         (x && !robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NX, x)) ||
         (u && !robot_arm_lai_vec_finite(ROBOT_ARM_N * ROBOT_ARM_NU, u)) ||
@@ -1239,6 +1241,36 @@ static void robot_arm_shift(robot_arm_solver *s)
     robot_arm_ring_advance(&s->ring);
 }
 
+/* Step 1 for the parameters (receding mode, once per sampling instant): p_k <- p_{k+1}, p_N
+ * kept (a push replaces it). */
+static void robot_arm_shift_parameters(robot_arm_solver *s)
+{
+    int k, i;
+    if (s->mode != ROBOT_ARM_MODE_RECEDING || s->p_shifted) {
+        return;
+    }
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NP; ++i) {
+            s->p[k][i] = s->p[k + 1][i];
+        }
+    }
+    s->p_shifted = 1;
+}
+
+int robot_arm_parameters_writable(robot_arm_solver *s)
+{
+    if (!s->initialized) {
+        return ROBOT_ARM_OK;
+    }
+    if (!s->prepare_due) {
+        /* the prepared QP has read the parameters: a write now would reach the QP one
+         * sampling instant late */
+        return ROBOT_ARM_ERR_ALREADY_PREPARED;
+    }
+    robot_arm_shift_parameters(s);
+    return ROBOT_ARM_OK;
+}
+
 /* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
 static void robot_arm_select(robot_arm_solver *s, int M)
 {
@@ -1453,6 +1485,7 @@ int robot_arm_prepare(robot_arm_solver *s)
         return robot_arm_ret(s, ROBOT_ARM_ERR_ALREADY_PREPARED);
     }
     robot_arm_clear_timings(s, ROBOT_ARM_PHASE_SHIFT, ROBOT_ARM_PHASE_ASSEMBLY);
+    robot_arm_shift_parameters(s);
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
         s->mode == ROBOT_ARM_MODE_RECEDING && !(s->flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
         /* (not from the OCP file's guess: its plan is not the plant's) */
@@ -1478,6 +1511,7 @@ int robot_arm_prepare(robot_arm_solver *s)
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
         s->shifted = 0;
+        s->p_shifted = 0;
     }
     return robot_arm_ret(s, rc);
 }

@@ -11,6 +11,9 @@
  *     static robot_arm_solver s;
  *     robot_arm_init(&s, xhat0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL);
  *     loop: robot_arm_feedback(&s, xhat0, u0); apply u0; robot_arm_prepare(&s);
+ * With a moving reference (parameters over time): set the first horizon's parameters
+ * before init, and push the value of the new last node between feedback and prepare:
+ *     loop: robot_arm_feedback(&s, xhat0, u0); apply u0; robot_arm_push_parameters(&s, pN); robot_arm_prepare(&s);
  * The memory is one struct (sizeof is the memory bill; no malloc anywhere). Settings may be
  * changed before robot_arm_init; a struct that was never set up (zeroed or uninitialised
  * memory) gets the generated defaults on its first use.
@@ -155,11 +158,28 @@ int robot_arm_get_recovery_failures(robot_arm_solver *s);
  * 0: always cold. */
 int robot_arm_set_qp_warm_start(robot_arm_solver *s, int on);
 int robot_arm_get_qp_warm_start(robot_arm_solver *s);
-/* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
- * evaluation on (prepare, kkt). */
+/* Runtime parameters (algorithm.md section 4, "Parameters"): one vector per node, p_k at the
+ * time of node k. They are read by init and prepare, which build the QP, so they may be
+ * written only before init or between a feedback and its prepare (after a failed prepare:
+ * before its retry); a write while a QP is prepared and not yet used by a feedback returns
+ * ROBOT_ARM_ERR_ALREADY_PREPARED and changes nothing (it would reach the QP one instant late).
+ * In receding mode the parameters move with the horizon: the prepare after a feedback
+ * shifts them (p_k <- p_{k+1}, p_N kept) once per sampling instant, before its first
+ * evaluation; a write between the feedback and the prepare shifts them first, so every
+ * write addresses the horizon of the next QP:
+ *   push_parameters: p_N of the next horizon (the value at t_next + N dt), the usual
+ *     call of a moving reference: loop { feedback; apply u0; push(p(t + dt + N dt)); prepare }
+ *   set_parameters: all nodes ((N+1) x np); set_parameters_node: node k (np).
+ * push_parameters needs an initialised solver (ROBOT_ARM_ERR_NOT_INITIALIZED) in receding mode
+ * (else ROBOT_ARM_ERR_INVALID_ARGUMENT). Parameters that are never written stay as they are
+ * (a constant parameter is unaffected by the shift). */
 int robot_arm_set_parameters(robot_arm_solver *s, const robot_arm_real *p);
 int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const robot_arm_real *pk);
+int robot_arm_push_parameters(robot_arm_solver *s, const robot_arm_real *pN);
 void robot_arm_get_parameters(robot_arm_solver *s, robot_arm_real *p);
+/* End the run: the solver is uninitialised (settings and parameters kept), so that the
+ * parameters of the next run's first horizon may be written before its init. */
+void robot_arm_stop(robot_arm_solver *s);
 
 /* The iterate (shapes in the header comment). */
 void robot_arm_get_x(const robot_arm_solver *s, robot_arm_real *x);
@@ -350,6 +370,8 @@ struct robot_arm_solver {
     int qp_ready;    /* QP assembled at the current iterate (prepare or init succeeded) */
     int prepare_due; /* a feedback reached the QP since the last successful init/prepare */
     int shifted;     /* the shift of this sampling instant is done (a prepare failed after it) */
+    int p_shifted;   /* the parameters of this sampling instant are shifted (a parameter write
+                        or a prepare since the feedback) */
     int status;      /* status of the last call */
 
     /* settings */

@@ -25,5 +25,9 @@ static inline int robot_arm_x_bounded(int k)
     return k > 0;
 }
 void robot_arm_clear_x0_multiplier(robot_arm_solver *s);
+/* Parameters (algorithm.md section 4): ROBOT_ARM_OK when they may be written now (before init,
+ * or a prepare is due), else ROBOT_ARM_ERR_ALREADY_PREPARED; in receding mode with a prepare due,
+ * the shift of this sampling instant's parameters is done first (once). */
+int robot_arm_parameters_writable(robot_arm_solver *s);
 
 #endif /* ROBOT_ARM_SOLVER_INTERNAL_H */

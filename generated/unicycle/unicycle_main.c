@@ -2,7 +2,9 @@
  * generated nominal solution when there is one, else from the OCP file's guess), then
  * feedback/prepare iterations in fixed mode (convergence at a fixed x0) and in receding
  * mode (closed loop on the discrete model phi). Prints u0, the KKT measure and the status
- * of every iteration; exits nonzero on the first failure. */
+ * of every iteration; exits nonzero on the first failure. With a parameter trajectory
+ * (UNICYCLE_HAS_P_SCHEDULE) the closed loop pushes the value of each new last node between
+ * feedback and prepare, and the model plant uses the parameters of the instant. */
 #include <math.h>
 #include <stdio.h>
 
@@ -41,6 +43,7 @@ static int report(const char *phase, int iter, int status, const unicycle_real *
 static int run(const char *phase, int mode)
 {
     unicycle_real xhat0[UNICYCLE_NX], xnext[UNICYCLE_NX], u0[UNICYCLE_NU], kkt4[4], l, g[UNICYCLE_DIM(UNICYCLE_NG)];
+    const unicycle_real *p_plant = unicycle_p_default[0];
     int i, k, status;
 
     for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -70,7 +73,15 @@ static int run(const char *phase, int mode)
     for (k = 1; k <= ITERATIONS; ++k) {
         status = unicycle_feedback(&solver, xhat0, u0);
         if (status == UNICYCLE_OK && mode == UNICYCLE_MODE_RECEDING) {
-            if (unicycle_eval_stage_eval(xhat0, u0, unicycle_p_default, xnext, &l, g, &plant_work)) {
+#if UNICYCLE_HAS_P_SCHEDULE
+            /* the instant t = (k - 1) dt; the next horizon ends at k dt + N dt */
+            p_plant = unicycle_p_schedule[k - 1];
+            status = unicycle_push_parameters(&solver, unicycle_p_schedule[k + UNICYCLE_N]);
+            if (status != UNICYCLE_OK) {
+                return report(phase, k, status, u0, kkt4);
+            }
+#endif
+            if (unicycle_eval_stage_eval(xhat0, u0, p_plant, xnext, &l, g, &plant_work)) {
                 fprintf(stderr, "main_dopus: the model failed to evaluate\n");
                 return 1;
             }

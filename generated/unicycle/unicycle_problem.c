@@ -12,7 +12,29 @@ const unicycle_real unicycle_lg[UNICYCLE_DIM(UNICYCLE_NG)] = {0.1600000000000000
 const unicycle_real unicycle_ug[UNICYCLE_DIM(UNICYCLE_NG)] = {INFINITY};
 const unicycle_real unicycle_lr[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
 const unicycle_real unicycle_ur[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
-const unicycle_real unicycle_p_default[UNICYCLE_DIM(UNICYCLE_NP)] = {2.5, 0.0};
+const unicycle_real unicycle_p_default[UNICYCLE_N + 1][UNICYCLE_DIM(UNICYCLE_NP)] = {
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0},
+    {2.5, 0.0}
+};
 const unicycle_real unicycle_dt = 0.1;
 const unicycle_real unicycle_x0_default[UNICYCLE_NX] = {0.0, 0.0, 0.0, 0.0};
 

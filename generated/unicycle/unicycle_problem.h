@@ -14,7 +14,9 @@ extern const unicycle_real unicycle_lbx[UNICYCLE_NX], unicycle_ubx[UNICYCLE_NX];
 extern const unicycle_real unicycle_lbu[UNICYCLE_NU], unicycle_ubu[UNICYCLE_NU];
 extern const unicycle_real unicycle_lg[UNICYCLE_DIM(UNICYCLE_NG)], unicycle_ug[UNICYCLE_DIM(UNICYCLE_NG)];
 extern const unicycle_real unicycle_lr[UNICYCLE_DIM(UNICYCLE_NR)], unicycle_ur[UNICYCLE_DIM(UNICYCLE_NR)];
-extern const unicycle_real unicycle_p_default[UNICYCLE_DIM(UNICYCLE_NP)]; /* every node */
+/* the parameters of the first horizon (node k at time k dt; the same at every node unless
+ * a parameter declares a trajectory) */
+extern const unicycle_real unicycle_p_default[UNICYCLE_N + 1][UNICYCLE_DIM(UNICYCLE_NP)];
 extern const unicycle_real unicycle_dt;
 extern const unicycle_real unicycle_x0_default[UNICYCLE_NX];
 /* the OCP file's initial guess */
@@ -26,6 +28,12 @@ extern const int unicycle_default_regularization; /* 0 none, 1 project, 2 mirror
 extern const unicycle_real unicycle_default_reg_eps;
 extern const int unicycle_default_cost_hessian; /* 1 fresh, 0 stored */
 extern const unicycle_real unicycle_default_lm;    /* Levenberg-Marquardt term, >= 0 */
+
+#if UNICYCLE_HAS_P_SCHEDULE
+/* the parameters at t = j dt, j = 0..UNICYCLE_P_SCHEDULE_NODES-1, from the OCP file's
+ * trajectories (the standalone main's closed loop pushes them) */
+extern const unicycle_real unicycle_p_schedule[UNICYCLE_P_SCHEDULE_NODES][UNICYCLE_NP];
+#endif
 
 #if UNICYCLE_HAS_NOMINAL
 /* offline primal-dual solution at unicycle_x0_default (IPOPT at generation time), so the

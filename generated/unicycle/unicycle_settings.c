@@ -200,7 +200,7 @@ int unicycle_get_qp_warm_start(unicycle_solver *s)
 
 int unicycle_set_parameters(unicycle_solver *s, const unicycle_real *p)
 {
-    int k, i;
+    int k, i, rc;
     unicycle_ensure_setup(s);
     if (UNICYCLE_NP == 0) {
         return unicycle_ret(s, UNICYCLE_OK);
@@ -210,6 +210,10 @@ int unicycle_set_parameters(unicycle_solver *s, const unicycle_real *p)
     }
     if (!unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NP, p)) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
+    }
+    rc = unicycle_parameters_writable(s);
+    if (rc != UNICYCLE_OK) {
+        return unicycle_ret(s, rc);
     }
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NP; ++i) {
@@ -221,7 +225,7 @@ int unicycle_set_parameters(unicycle_solver *s, const unicycle_real *p)
 
 int unicycle_set_parameters_node(unicycle_solver *s, int k, const unicycle_real *pk)
 {
-    int i;
+    int i, rc;
     unicycle_ensure_setup(s);
     if (k < 0 || k > UNICYCLE_N) {
         return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
@@ -235,10 +239,53 @@ int unicycle_set_parameters_node(unicycle_solver *s, int k, const unicycle_real 
     if (!unicycle_lai_vec_finite(UNICYCLE_NP, pk)) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
+    rc = unicycle_parameters_writable(s);
+    if (rc != UNICYCLE_OK) {
+        return unicycle_ret(s, rc);
+    }
     for (i = 0; i < UNICYCLE_NP; ++i) {
         s->p[k][i] = pk[i];
     }
     return unicycle_ret(s, UNICYCLE_OK);
+}
+
+int unicycle_push_parameters(unicycle_solver *s, const unicycle_real *pN)
+{
+    int i, rc;
+    unicycle_ensure_setup(s);
+    if (!s->initialized) {
+        return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
+    }
+    if (s->mode != UNICYCLE_MODE_RECEDING) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    if (UNICYCLE_NP == 0) {
+        return unicycle_ret(s, UNICYCLE_OK);
+    }
+    if (pN == 0) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    if (!unicycle_lai_vec_finite(UNICYCLE_NP, pN)) {
+        return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
+    }
+    rc = unicycle_parameters_writable(s);
+    if (rc != UNICYCLE_OK) {
+        return unicycle_ret(s, rc);
+    }
+    for (i = 0; i < UNICYCLE_NP; ++i) {
+        s->p[UNICYCLE_N][i] = pN[i];
+    }
+    return unicycle_ret(s, UNICYCLE_OK);
+}
+
+void unicycle_stop(unicycle_solver *s)
+{
+    unicycle_ensure_setup(s);
+    s->initialized = 0;
+    s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
+    s->p_shifted = 0;
 }
 
 void unicycle_get_parameters(unicycle_solver *s, unicycle_real *p)

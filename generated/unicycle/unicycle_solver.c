@@ -502,6 +502,7 @@ void unicycle_defaults(unicycle_solver *s)
     s->qp_ready = 0;
     s->prepare_due = 0;
     s->shifted = 0;
+    s->p_shifted = 0;
     s->status = UNICYCLE_OK;
     s->M = unicycle_default_M < 0 ? 0 : (unicycle_default_M > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : unicycle_default_M);
     s->mode = UNICYCLE_MODE_RECEDING;
@@ -524,7 +525,7 @@ void unicycle_defaults(unicycle_solver *s)
     s->qp_cold_retry = 0;
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NP; ++i) {
-            s->p[k][i] = unicycle_p_default[i];
+            s->p[k][i] = unicycle_p_default[k][i];
         }
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -832,6 +833,7 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
     s->initialized = 0;
     unicycle_reset_health(s);
     s->qp_ready = 0;
+    s->p_shifted = 0;
     if ((xhat0 && !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) ||
         (x && !unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NX, x)) ||
         (u && !unicycle_lai_vec_finite(UNICYCLE_N * UNICYCLE_NU, u)) ||
@@ -1239,6 +1241,36 @@ static void unicycle_shift(unicycle_solver *s)
     unicycle_ring_advance(&s->ring);
 }
 
+/* Step 1 for the parameters (receding mode, once per sampling instant): p_k <- p_{k+1}, p_N
+ * kept (a push replaces it). */
+static void unicycle_shift_parameters(unicycle_solver *s)
+{
+    int k, i;
+    if (s->mode != UNICYCLE_MODE_RECEDING || s->p_shifted) {
+        return;
+    }
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NP; ++i) {
+            s->p[k][i] = s->p[k + 1][i];
+        }
+    }
+    s->p_shifted = 1;
+}
+
+int unicycle_parameters_writable(unicycle_solver *s)
+{
+    if (!s->initialized) {
+        return UNICYCLE_OK;
+    }
+    if (!s->prepare_due) {
+        /* the prepared QP has read the parameters: a write now would reach the QP one
+         * sampling instant late */
+        return UNICYCLE_ERR_ALREADY_PREPARED;
+    }
+    unicycle_shift_parameters(s);
+    return UNICYCLE_OK;
+}
+
 /* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
 static void unicycle_select(unicycle_solver *s, int M)
 {
@@ -1453,6 +1485,7 @@ int unicycle_prepare(unicycle_solver *s)
         return unicycle_ret(s, UNICYCLE_ERR_ALREADY_PREPARED);
     }
     unicycle_clear_timings(s, UNICYCLE_PHASE_SHIFT, UNICYCLE_PHASE_ASSEMBLY);
+    unicycle_shift_parameters(s);
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
         s->mode == UNICYCLE_MODE_RECEDING && !(s->flags & UNICYCLE_FLAG_REINIT_GUESS)) {
         /* (not from the OCP file's guess: its plan is not the plant's) */
@@ -1478,6 +1511,7 @@ int unicycle_prepare(unicycle_solver *s)
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
         s->shifted = 0;
+        s->p_shifted = 0;
     }
     return unicycle_ret(s, rc);
 }

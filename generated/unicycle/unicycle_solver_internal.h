@@ -25,5 +25,9 @@ static inline int unicycle_x_bounded(int k)
     return k > 0;
 }
 void unicycle_clear_x0_multiplier(unicycle_solver *s);
+/* Parameters (algorithm.md section 4): UNICYCLE_OK when they may be written now (before init,
+ * or a prepare is due), else UNICYCLE_ERR_ALREADY_PREPARED; in receding mode with a prepare due,
+ * the shift of this sampling instant's parameters is done first (once). */
+int unicycle_parameters_writable(unicycle_solver *s);
 
 #endif /* UNICYCLE_SOLVER_INTERNAL_H */

@@ -163,7 +163,7 @@ int main(int argc, char **argv)
         }
         /* a failed feedback leaves u0 as it was: the previous control is held */
         iterate("receding", k, xhat, u0);
-        rc = API(eval_stage_eval)(xhat, u0, API(p_default), xnext, &l, g, &plant_work);
+        rc = API(eval_stage_eval)(xhat, u0, API(p_default)[0], xnext, &l, g, &plant_work);
         if (rc != 0) {
             fprintf(stderr, "driver: the model failed to evaluate\n");
             return 2;

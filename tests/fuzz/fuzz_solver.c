@@ -175,9 +175,11 @@ static void rd_array(reader *r, double *a, const double *base, int n)
 /* ---- the model and the checks ------------------------------------------------------- */
 
 static solver_t s;
+static void model_shift_parameters(void);
+static int model_parameters_writable(void);
 
 typedef struct {
-    int initialized, qp_ready, prepare_due, shifted;
+    int initialized, qp_ready, prepare_due, shifted, p_shifted;
     int M, mode, hessian, regularization, cost_hessian, max_iter;
     double reg_eps, lm, tol;
     double p[(N_ + 1) * D(NP)];
@@ -191,6 +193,30 @@ typedef struct {
 
 static model m;
 static iterate before, after;
+
+/* the parameters move with the horizon once per sampling instant (receding mode): at the
+ * first parameter write after a feedback, else at the prepare */
+static void model_shift_parameters(void)
+{
+    if (m.mode == K(MODE_RECEDING) && !m.p_shifted) {
+        memmove(m.p, &m.p[NP], (size_t)(N_ * NP) * sizeof(double));
+        m.p_shifted = 1;
+    }
+}
+
+/* parameters may be written before init or while a prepare is due (else the prepared QP
+ * would read them one instant late: already-prepared) */
+static int model_parameters_writable(void)
+{
+    if (!m.initialized) {
+        return 1;
+    }
+    if (!m.prepare_due) {
+        return 0;
+    }
+    model_shift_parameters();
+    return 1;
+}
 static int call_index;
 static const char *call_name;
 static int trace = -1; /* FUZZ_TRACE=1 in the environment prints every call */
@@ -312,7 +338,7 @@ static void model_from_solver(void)
     m.lm = API(get_levenberg_marquardt)(&s);
     m.tol = API(get_qp_tol)(&s);
     m.max_iter = API(get_qp_max_iter)(&s);
-    m.initialized = m.qp_ready = m.prepare_due = m.shifted = 0;
+    m.initialized = m.qp_ready = m.prepare_due = m.shifted = m.p_shifted = 0;
     if (NP > 0) {
         API(get_parameters)(&s, m.p);
     }
@@ -353,7 +379,7 @@ static void after_init(int st, int expect_nonfinite, int expect_no_nominal)
     /* any failed init leaves the solver uninitialised (documented: init re-starts) */
     m.initialized = st == K(OK);
     m.qp_ready = st == K(OK);
-    m.prepare_due = m.shifted = 0;
+    m.prepare_due = m.shifted = m.p_shifted = 0;
     read_iterate(&after);
     if (st == K(OK)) {
         check(after.head == 0, "init: ring_head 0");
@@ -487,6 +513,9 @@ static void do_prepare(void)
     double rho[N_];
     call_name = "prepare";
     shift_expected = m.mode == K(MODE_RECEDING) && !m.shifted;
+    if (m.initialized && m.prepare_due) {
+        model_shift_parameters();
+    }
     st = API(prepare)(&s);
     check_status(st);
     read_iterate(&after);
@@ -510,7 +539,7 @@ static void do_prepare(void)
         }
         m.qp_ready = st == K(OK);
         if (st == K(OK)) {
-            m.prepare_due = m.shifted = 0;
+            m.prepare_due = m.shifted = m.p_shifted = 0;
             check(iterate_finite(&after), "prepare: iterate finite");
             n = API(get_recomputed)(&s, rec);
             check(n == m.M + 1, "prepare recomputes M + 1 stages");
@@ -640,7 +669,7 @@ static void do_setter(unsigned op, reader *r)
     case 8: {
         unsigned null = rd_u8(r) & 1u;
         for (k = 0; k <= N_; ++k) {
-            memcpy(&p_default[k * D(NP)], API(p_default), D(NP) * sizeof(double));
+            memcpy(&p_default[k * D(NP)], API(p_default)[k], D(NP) * sizeof(double));
         }
         rd_array(r, p, p_default, (N_ + 1) * NP);
         call_name = "set_parameters";
@@ -652,6 +681,8 @@ static void do_setter(unsigned op, reader *r)
             check(st == K(ERR_INVALID_ARGUMENT), "set_parameters(NULL)");
         } else if (!all_finite(p, (N_ + 1) * NP)) {
             check(st == K(ERR_NONFINITE_INPUT), "set_parameters with NaN/Inf");
+        } else if (!model_parameters_writable()) {
+            check(st == K(ERR_ALREADY_PREPARED), "set_parameters while a QP is prepared");
         } else {
             check(st == K(OK), "set_parameters with finite values");
             memcpy(m.p, p, (N_ + 1) * NP * sizeof(double));
@@ -663,7 +694,7 @@ static void do_setter(unsigned op, reader *r)
     default: {
         unsigned null = rd_u8(r) & 1u;
         k = rd_int(r);
-        rd_array(r, p, API(p_default), NP);
+        rd_array(r, p, API(p_default)[0], NP);
         call_name = "set_parameters_node";
         st = API(set_parameters_node)(&s, k, null ? NULL : p);
         check_status(st);
@@ -675,6 +706,8 @@ static void do_setter(unsigned op, reader *r)
             check(st == K(ERR_INVALID_ARGUMENT), "set_parameters_node(NULL)");
         } else if (!all_finite(p, NP)) {
             check(st == K(ERR_NONFINITE_INPUT), "set_parameters_node with NaN/Inf");
+        } else if (!model_parameters_writable()) {
+            check(st == K(ERR_ALREADY_PREPARED), "set_parameters_node while a QP is prepared");
         } else {
             check(st == K(OK), "set_parameters_node with finite values");
             memcpy(&m.p[k * NP], p, NP * sizeof(double));
