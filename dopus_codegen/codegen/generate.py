@@ -541,6 +541,7 @@ def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, ha
     for key, n in (("nbx", "nx"), ("nbu", "nu"), ("nbg", "ng"), ("nbr", "nr")):
         s.setdefault(key, s[n])
     s["nb"] = s["N"] * (s["nbx"] + s["nbu"] + s["nbg"]) + s["nbr"]
+    s.setdefault("nsoft", 0)
     ctx = {"name": name, "NAME": name.upper(), "sizes": s, "has_gn": int(has_gn),
            "has_nominal": int(has_nominal), "header": header or f"Sizes of '{name}'",
            "casadi_version": casadi_version, "real_float": settings.REALS[settings.check_real(real)],
