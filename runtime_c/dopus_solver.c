@@ -745,6 +745,25 @@ static void dopus_assemble(dopus_solver *s)
     for (i = 0; i < DOPUS_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
+#if DOPUS_NSOFT > 0
+    /* soft weights: the rows of a stage (x, u (hard), g) and the terminal rows (x_N, r) */
+    for (j = 0; j < 4; ++j) {
+        dopus_real *st = j == 0 ? in->zl : j == 1 ? in->zu : j == 2 ? in->Zl : in->Zu;
+        dopus_real *te = j == 0 ? in->zlN : j == 1 ? in->zuN : j == 2 ? in->ZlN : in->ZuN;
+        for (i = 0; i < DOPUS_NX; ++i) {
+            st[i] = te[i] = dopus_soft_x[j][i];
+        }
+        for (i = 0; i < DOPUS_NU; ++i) {
+            st[DOPUS_NX + i] = DOPUS_R(0.0);
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            st[DOPUS_NW + i] = dopus_soft_g[j][i];
+        }
+        for (i = 0; i < DOPUS_NR; ++i) {
+            te[DOPUS_NX + i] = dopus_soft_r[j][i];
+        }
+    }
+#endif
     dopus_timer_add(&s->timer, DOPUS_PHASE_ASSEMBLY, t0);
 }
 

@@ -367,7 +367,12 @@ class ReferenceDopus:
         free_initial_state(nx, lower=lbw, upper=ubw)
         t = self.term
         gN = t["gL"] - t["R"].T @ self.mu_r - t["Req"].T @ self.nu
-        return {
+        soft = {}
+        if self.disc.has_soft:
+            ws, wt = self.disc.soft_stage(), self.disc.soft_terminal()
+            soft = dict(zip(("zl", "zu", "Zl", "Zu"), ws.copy()))
+            soft.update(zip(("zlN", "zuN", "ZlN", "ZuN"), wt.copy()))
+        return {**soft,
             "N": N, "nx": nx, "nu": nu, "ng": ng, "nr": nr, "ne": ne,
             "H": H, "g": gq, "Phi": Phi, "b": b, "x0": xhat0 - self.x[0],
             "HN": t["A"] + shift[:nx, :nx], "gN": gN, "lbw": lbw, "ubw": ubw,
