@@ -36,7 +36,7 @@ static dopus_real dopus_kkt_comp(dopus_real mu, dopus_real v, dopus_real lb, dop
 /* A row with soft weights w (w[0 .. 3 * stride]: L1 lower, L1 upper, L2 lower, L2 upper):
  * a hard side as above; a soft side with violation s = max(0, lb - v) needs its multiplier
  * m in [0, l1 + l2 s], m (v - lb)^+ = 0 and (l1 + l2 s - m) s = 0 (docs/algorithm.md
- * section 11), each violation into comp. */
+ * section 12), each violation into comp. */
 static void dopus_kkt_row(dopus_real v, dopus_real lb, dopus_real ub, dopus_real mu, const dopus_real *w,
                           int stride, dopus_real *ineq, dopus_real *comp)
 {
@@ -60,13 +60,13 @@ static void dopus_kkt_row(dopus_real v, dopus_real lb, dopus_real ub, dopus_real
         *comp = dopus_kkt_max(*comp, dopus_kkt_max(DOPUS_R(0.0), cap - m) * sl);
     }
 }
-#define DOPUS_KKT_ROW(v, lb, ub, mu, w, stride)                                                               \
+#define DOPUS_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
     dopus_kkt_row((v), (lb), (ub), (mu), (w), (stride), &ineq, &comp)
 #else
-#define DOPUS_KKT_ROW(v, lb, ub, mu, w, stride)                                                               \
-    do {                                                                                                       \
-        ineq = dopus_kkt_max(ineq, dopus_kkt_viol((v), (lb), (ub)));                                          \
-        comp = dopus_kkt_max(comp, dopus_kkt_comp((mu), (v), (lb), (ub)));                                    \
+#define DOPUS_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
+    do {                                                                                                     \
+        ineq = dopus_kkt_max(ineq, dopus_kkt_viol((v), (lb), (ub)));                                         \
+        comp = dopus_kkt_max(comp, dopus_kkt_comp((mu), (v), (lb), (ub)));                                   \
     } while (0)
 #endif
 
@@ -98,7 +98,8 @@ int dopus_kkt_measure(struct dopus_solver *s, const dopus_real *xhat0, dopus_rea
             eq = dopus_kkt_max(eq, dopus_fabs(s->x[k + 1][i] - phi[i]));
         }
         for (i = 0; i < DOPUS_NG; ++i) {
-            DOPUS_KKT_ROW(g[i], dopus_lg[i], dopus_ug[i], s->mu_g[k][i], &dopus_soft_g[0][i], DOPUS_DIM(DOPUS_NG));
+            DOPUS_KKT_ROW(g[i], dopus_lg[i], dopus_ug[i], s->mu_g[k][i], &dopus_soft_g[0][i],
+                          DOPUS_DIM(DOPUS_NG));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
          * sides and counts with its magnitude) */
@@ -108,7 +109,8 @@ int dopus_kkt_measure(struct dopus_solver *s, const dopus_real *xhat0, dopus_rea
             }
         } else {
             for (i = 0; i < DOPUS_NX; ++i) {
-                DOPUS_KKT_ROW(s->x[k][i], dopus_lbx[i], dopus_ubx[i], s->mu_b[k][i], &dopus_soft_x[0][i], DOPUS_NX);
+                DOPUS_KKT_ROW(s->x[k][i], dopus_lbx[i], dopus_ubx[i], s->mu_b[k][i], &dopus_soft_x[0][i],
+                              DOPUS_NX);
             }
         }
         for (i = 0; i < DOPUS_NU; ++i) {
@@ -123,7 +125,8 @@ int dopus_kkt_measure(struct dopus_solver *s, const dopus_real *xhat0, dopus_rea
     }
     for (i = 0; i < DOPUS_NX; ++i) {
         stat = dopus_kkt_max(stat, dopus_fabs(gLN[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]));
-        DOPUS_KKT_ROW(s->x[DOPUS_N][i], dopus_lbx[i], dopus_ubx[i], s->mu_bN[i], &dopus_soft_x[0][i], DOPUS_NX);
+        DOPUS_KKT_ROW(s->x[DOPUS_N][i], dopus_lbx[i], dopus_ubx[i], s->mu_bN[i], &dopus_soft_x[0][i],
+                      DOPUS_NX);
     }
     for (i = 0; i < DOPUS_NE; ++i) {
         eq = dopus_kkt_max(eq, dopus_fabs(r_eq[i]));

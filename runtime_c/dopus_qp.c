@@ -1037,7 +1037,8 @@ static dopus_real rcs_up(const dopus_qp_workspace *ws, int b, const qp_centring 
 /* The right-hand side term of the lower (side_rhs_lo) and the upper side (side_rhs_up) of
  * bounded row b in the condensed Newton system: (rc + z r) / t for a hard side, the same with
  * the slack eliminated for a soft one (soft_f). */
-static dopus_real side_rhs_lo(const dopus_qp_workspace *ws, const dopus_qp_in *in, int b, const qp_centring *cc)
+static dopus_real side_rhs_lo(const dopus_qp_workspace *ws, const dopus_qp_in *in, int b,
+                              const qp_centring *cc)
 {
     const dopus_real a = (rc_lo(ws, b, cc) + ws->z_lo[b] * r_lo(ws, b)) / ws->t_lo[b];
     if (SOFT && ws->soft_lo[b]) {
@@ -1048,7 +1049,8 @@ static dopus_real side_rhs_lo(const dopus_qp_workspace *ws, const dopus_qp_in *i
     return a;
 }
 
-static dopus_real side_rhs_up(const dopus_qp_workspace *ws, const dopus_qp_in *in, int b, const qp_centring *cc)
+static dopus_real side_rhs_up(const dopus_qp_workspace *ws, const dopus_qp_in *in, int b,
+                              const qp_centring *cc)
 {
     const dopus_real a = (rc_up(ws, b, cc) + ws->z_up[b] * r_up(ws, b)) / ws->t_up[b];
     if (SOFT && ws->soft_up[b]) {
@@ -1466,7 +1468,8 @@ static void initial_point(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
             if (ws->has_lo[b]) {
                 const dopus_real floor_t = warm ? WARM_FLOOR_T * dmax(DOPUS_R(1.0), dopus_fabs(lo)) : floor_c;
                 /* a soft side: the slack takes up the violation, s = max(lo - v, 0) + floor */
-                const dopus_real sl = SOFT && ws->soft_lo[b] ? dmax(lo - v, DOPUS_R(0.0)) + floor_t : DOPUS_R(0.0);
+                const dopus_real sl =
+                    SOFT && ws->soft_lo[b] ? dmax(lo - v, DOPUS_R(0.0)) + floor_t : DOPUS_R(0.0);
                 ws->t_lo[b] = dmax(v - lo + sl, floor_t);
                 ws->z_lo[b] = warm      ? dmax(-mu_signed, WARM_FLOOR_Z)
                               : centred ? floor_c / ws->t_lo[b]
@@ -1482,7 +1485,8 @@ static void initial_point(dopus_qp_workspace *ws, const dopus_qp_in *in, const d
             }
             if (ws->has_up[b]) {
                 const dopus_real floor_t = warm ? WARM_FLOOR_T * dmax(DOPUS_R(1.0), dopus_fabs(up)) : floor_c;
-                const dopus_real su = SOFT && ws->soft_up[b] ? dmax(v - up, DOPUS_R(0.0)) + floor_t : DOPUS_R(0.0);
+                const dopus_real su =
+                    SOFT && ws->soft_up[b] ? dmax(v - up, DOPUS_R(0.0)) + floor_t : DOPUS_R(0.0);
                 ws->t_up[b] = dmax(up - v + su, floor_t);
                 ws->z_up[b] = warm      ? dmax(mu_signed, WARM_FLOOR_Z)
                               : centred ? floor_c / ws->t_up[b]

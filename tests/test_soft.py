@@ -1,4 +1,4 @@
-"""Soft constraints (docs/algorithm.md section 11): the OCP API and its errors, the QP with
+"""Soft constraints (docs/algorithm.md section 12): the OCP API and its errors, the QP with
 soft rows in both backends against Clarabel with explicit slack variables, the OCPs with
 active soft rows against an independent IPOPT transcription with explicit slacks (both
 backends), and the QP that cannot be infeasible."""

@@ -428,7 +428,7 @@ def _check_bounds(lb: np.ndarray, ub: np.ndarray, what: str) -> None:
 
 @dataclass(frozen=True)
 class Soft:
-    """Soft rows: the rows may be violated at a price (docs/algorithm.md section 11).
+    """Soft rows: the rows may be violated at a price (docs/algorithm.md section 12).
 
     The penalty of a row and side is ``l1 * s + 0.5 * l2 * s**2`` with ``s >= 0`` its
     violation (``lb - s_lo <= g <= ub + s_up``), added at every node where the row applies,

@@ -147,7 +147,7 @@ def kkt_measure(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p=None) -> 
 
 
 def _soft_kkt(disc, stat, eq, x, u, g, r, mu_g, mu_b, mu_bN, mu_r) -> dict:
-    """``ineq`` and ``comp`` of a problem with soft rows (docs/algorithm.md section 11): a
+    """``ineq`` and ``comp`` of a problem with soft rows (docs/algorithm.md section 12): a
     soft side has no violation but its multiplier must lie in ``[0, l1 + l2 s]`` with the
     complementarity of the side and of its slack ``s`` (both into ``comp``)."""
     from .qp import _row_check

@@ -36,7 +36,7 @@ static robot_arm_real robot_arm_kkt_comp(robot_arm_real mu, robot_arm_real v, ro
 /* A row with soft weights w (w[0 .. 3 * stride]: L1 lower, L1 upper, L2 lower, L2 upper):
  * a hard side as above; a soft side with violation s = max(0, lb - v) needs its multiplier
  * m in [0, l1 + l2 s], m (v - lb)^+ = 0 and (l1 + l2 s - m) s = 0 (docs/algorithm.md
- * section 11), each violation into comp. */
+ * section 12), each violation into comp. */
 static void robot_arm_kkt_row(robot_arm_real v, robot_arm_real lb, robot_arm_real ub, robot_arm_real mu, const robot_arm_real *w,
                           int stride, robot_arm_real *ineq, robot_arm_real *comp)
 {
@@ -60,13 +60,13 @@ static void robot_arm_kkt_row(robot_arm_real v, robot_arm_real lb, robot_arm_rea
         *comp = robot_arm_kkt_max(*comp, robot_arm_kkt_max(ROBOT_ARM_R(0.0), cap - m) * sl);
     }
 }
-#define ROBOT_ARM_KKT_ROW(v, lb, ub, mu, w, stride)                                                               \
+#define ROBOT_ARM_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
     robot_arm_kkt_row((v), (lb), (ub), (mu), (w), (stride), &ineq, &comp)
 #else
-#define ROBOT_ARM_KKT_ROW(v, lb, ub, mu, w, stride)                                                               \
-    do {                                                                                                       \
-        ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol((v), (lb), (ub)));                                          \
-        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp((mu), (v), (lb), (ub)));                                    \
+#define ROBOT_ARM_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
+    do {                                                                                                     \
+        ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol((v), (lb), (ub)));                                         \
+        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp((mu), (v), (lb), (ub)));                                   \
     } while (0)
 #endif
 
@@ -98,7 +98,8 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const robot_arm_real *xhat
             eq = robot_arm_kkt_max(eq, robot_arm_fabs(s->x[k + 1][i] - phi[i]));
         }
         for (i = 0; i < ROBOT_ARM_NG; ++i) {
-            ROBOT_ARM_KKT_ROW(g[i], robot_arm_lg[i], robot_arm_ug[i], s->mu_g[k][i], &robot_arm_soft_g[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NG));
+            ROBOT_ARM_KKT_ROW(g[i], robot_arm_lg[i], robot_arm_ug[i], s->mu_g[k][i], &robot_arm_soft_g[0][i],
+                          ROBOT_ARM_DIM(ROBOT_ARM_NG));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
          * sides and counts with its magnitude) */
@@ -108,7 +109,8 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const robot_arm_real *xhat
             }
         } else {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                ROBOT_ARM_KKT_ROW(s->x[k][i], robot_arm_lbx[i], robot_arm_ubx[i], s->mu_b[k][i], &robot_arm_soft_x[0][i], ROBOT_ARM_NX);
+                ROBOT_ARM_KKT_ROW(s->x[k][i], robot_arm_lbx[i], robot_arm_ubx[i], s->mu_b[k][i], &robot_arm_soft_x[0][i],
+                              ROBOT_ARM_NX);
             }
         }
         for (i = 0; i < ROBOT_ARM_NU; ++i) {
@@ -123,7 +125,8 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const robot_arm_real *xhat
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         stat = robot_arm_kkt_max(stat, robot_arm_fabs(gLN[i] + s->mu_bN[i] + s->lam[ROBOT_ARM_N][i]));
-        ROBOT_ARM_KKT_ROW(s->x[ROBOT_ARM_N][i], robot_arm_lbx[i], robot_arm_ubx[i], s->mu_bN[i], &robot_arm_soft_x[0][i], ROBOT_ARM_NX);
+        ROBOT_ARM_KKT_ROW(s->x[ROBOT_ARM_N][i], robot_arm_lbx[i], robot_arm_ubx[i], s->mu_bN[i], &robot_arm_soft_x[0][i],
+                      ROBOT_ARM_NX);
     }
     for (i = 0; i < ROBOT_ARM_NE; ++i) {
         eq = robot_arm_kkt_max(eq, robot_arm_fabs(r_eq[i]));

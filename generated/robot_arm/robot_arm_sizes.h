@@ -23,7 +23,7 @@
 #define ROBOT_ARM_NBG 0
 #define ROBOT_ARM_NBR 0
 #define ROBOT_ARM_NB 120 /* N (NBX + NBU + NBG) + NBR */
-/* Soft rows (docs/algorithm.md section 11): state components, path rows and terminal rows
+/* Soft rows (docs/algorithm.md section 12): state components, path rows and terminal rows
  * with a soft side; 0: none, and the QP compiles without the slack machinery */
 #define ROBOT_ARM_NSOFT 0
 /* 1 when every row that depends on the state is soft: the QP is feasible for every finite

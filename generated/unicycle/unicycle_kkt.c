@@ -36,7 +36,7 @@ static unicycle_real unicycle_kkt_comp(unicycle_real mu, unicycle_real v, unicyc
 /* A row with soft weights w (w[0 .. 3 * stride]: L1 lower, L1 upper, L2 lower, L2 upper):
  * a hard side as above; a soft side with violation s = max(0, lb - v) needs its multiplier
  * m in [0, l1 + l2 s], m (v - lb)^+ = 0 and (l1 + l2 s - m) s = 0 (docs/algorithm.md
- * section 11), each violation into comp. */
+ * section 12), each violation into comp. */
 static void unicycle_kkt_row(unicycle_real v, unicycle_real lb, unicycle_real ub, unicycle_real mu, const unicycle_real *w,
                           int stride, unicycle_real *ineq, unicycle_real *comp)
 {
@@ -60,13 +60,13 @@ static void unicycle_kkt_row(unicycle_real v, unicycle_real lb, unicycle_real ub
         *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), cap - m) * sl);
     }
 }
-#define UNICYCLE_KKT_ROW(v, lb, ub, mu, w, stride)                                                               \
+#define UNICYCLE_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
     unicycle_kkt_row((v), (lb), (ub), (mu), (w), (stride), &ineq, &comp)
 #else
-#define UNICYCLE_KKT_ROW(v, lb, ub, mu, w, stride)                                                               \
-    do {                                                                                                       \
-        ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol((v), (lb), (ub)));                                          \
-        comp = unicycle_kkt_max(comp, unicycle_kkt_comp((mu), (v), (lb), (ub)));                                    \
+#define UNICYCLE_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
+    do {                                                                                                     \
+        ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol((v), (lb), (ub)));                                         \
+        comp = unicycle_kkt_max(comp, unicycle_kkt_comp((mu), (v), (lb), (ub)));                                   \
     } while (0)
 #endif
 
@@ -98,7 +98,8 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const unicycle_real *xhat0, 
             eq = unicycle_kkt_max(eq, unicycle_fabs(s->x[k + 1][i] - phi[i]));
         }
         for (i = 0; i < UNICYCLE_NG; ++i) {
-            UNICYCLE_KKT_ROW(g[i], unicycle_lg[i], unicycle_ug[i], s->mu_g[k][i], &unicycle_soft_g[0][i], UNICYCLE_DIM(UNICYCLE_NG));
+            UNICYCLE_KKT_ROW(g[i], unicycle_lg[i], unicycle_ug[i], s->mu_g[k][i], &unicycle_soft_g[0][i],
+                          UNICYCLE_DIM(UNICYCLE_NG));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
          * sides and counts with its magnitude) */
@@ -108,7 +109,8 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const unicycle_real *xhat0, 
             }
         } else {
             for (i = 0; i < UNICYCLE_NX; ++i) {
-                UNICYCLE_KKT_ROW(s->x[k][i], unicycle_lbx[i], unicycle_ubx[i], s->mu_b[k][i], &unicycle_soft_x[0][i], UNICYCLE_NX);
+                UNICYCLE_KKT_ROW(s->x[k][i], unicycle_lbx[i], unicycle_ubx[i], s->mu_b[k][i], &unicycle_soft_x[0][i],
+                              UNICYCLE_NX);
             }
         }
         for (i = 0; i < UNICYCLE_NU; ++i) {
@@ -123,7 +125,8 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const unicycle_real *xhat0, 
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
         stat = unicycle_kkt_max(stat, unicycle_fabs(gLN[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]));
-        UNICYCLE_KKT_ROW(s->x[UNICYCLE_N][i], unicycle_lbx[i], unicycle_ubx[i], s->mu_bN[i], &unicycle_soft_x[0][i], UNICYCLE_NX);
+        UNICYCLE_KKT_ROW(s->x[UNICYCLE_N][i], unicycle_lbx[i], unicycle_ubx[i], s->mu_bN[i], &unicycle_soft_x[0][i],
+                      UNICYCLE_NX);
     }
     for (i = 0; i < UNICYCLE_NE; ++i) {
         eq = unicycle_kkt_max(eq, unicycle_fabs(r_eq[i]));

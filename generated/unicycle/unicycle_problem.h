@@ -29,7 +29,7 @@ extern const unicycle_real unicycle_default_lm;    /* Levenberg-Marquardt term, 
 
 #if UNICYCLE_NSOFT > 0
 /* soft weights of the state bounds (nodes 1..N), path rows and terminal inequality rows;
- * rows: L1 lower, L1 upper, L2 lower, L2 upper (docs/algorithm.md section 11) */
+ * rows: L1 lower, L1 upper, L2 lower, L2 upper (docs/algorithm.md section 12) */
 extern const unicycle_real unicycle_soft_x[4][UNICYCLE_NX];
 extern const unicycle_real unicycle_soft_g[4][UNICYCLE_DIM(UNICYCLE_NG)];
 extern const unicycle_real unicycle_soft_r[4][UNICYCLE_DIM(UNICYCLE_NR)];

@@ -1037,7 +1037,8 @@ static unicycle_real rcs_up(const unicycle_qp_workspace *ws, int b, const qp_cen
 /* The right-hand side term of the lower (side_rhs_lo) and the upper side (side_rhs_up) of
  * bounded row b in the condensed Newton system: (rc + z r) / t for a hard side, the same with
  * the slack eliminated for a soft one (soft_f). */
-static unicycle_real side_rhs_lo(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int b, const qp_centring *cc)
+static unicycle_real side_rhs_lo(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int b,
+                              const qp_centring *cc)
 {
     const unicycle_real a = (rc_lo(ws, b, cc) + ws->z_lo[b] * r_lo(ws, b)) / ws->t_lo[b];
     if (SOFT && ws->soft_lo[b]) {
@@ -1048,7 +1049,8 @@ static unicycle_real side_rhs_lo(const unicycle_qp_workspace *ws, const unicycle
     return a;
 }
 
-static unicycle_real side_rhs_up(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int b, const qp_centring *cc)
+static unicycle_real side_rhs_up(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int b,
+                              const qp_centring *cc)
 {
     const unicycle_real a = (rc_up(ws, b, cc) + ws->z_up[b] * r_up(ws, b)) / ws->t_up[b];
     if (SOFT && ws->soft_up[b]) {
@@ -1466,7 +1468,8 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
             if (ws->has_lo[b]) {
                 const unicycle_real floor_t = warm ? WARM_FLOOR_T * dmax(UNICYCLE_R(1.0), unicycle_fabs(lo)) : floor_c;
                 /* a soft side: the slack takes up the violation, s = max(lo - v, 0) + floor */
-                const unicycle_real sl = SOFT && ws->soft_lo[b] ? dmax(lo - v, UNICYCLE_R(0.0)) + floor_t : UNICYCLE_R(0.0);
+                const unicycle_real sl =
+                    SOFT && ws->soft_lo[b] ? dmax(lo - v, UNICYCLE_R(0.0)) + floor_t : UNICYCLE_R(0.0);
                 ws->t_lo[b] = dmax(v - lo + sl, floor_t);
                 ws->z_lo[b] = warm      ? dmax(-mu_signed, WARM_FLOOR_Z)
                               : centred ? floor_c / ws->t_lo[b]
@@ -1482,7 +1485,8 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
             }
             if (ws->has_up[b]) {
                 const unicycle_real floor_t = warm ? WARM_FLOOR_T * dmax(UNICYCLE_R(1.0), unicycle_fabs(up)) : floor_c;
-                const unicycle_real su = SOFT && ws->soft_up[b] ? dmax(v - up, UNICYCLE_R(0.0)) + floor_t : UNICYCLE_R(0.0);
+                const unicycle_real su =
+                    SOFT && ws->soft_up[b] ? dmax(v - up, UNICYCLE_R(0.0)) + floor_t : UNICYCLE_R(0.0);
                 ws->t_up[b] = dmax(up - v + su, floor_t);
                 ws->z_up[b] = warm      ? dmax(mu_signed, WARM_FLOOR_Z)
                               : centred ? floor_c / ws->t_up[b]
