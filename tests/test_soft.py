@@ -208,3 +208,39 @@ def test_hard_rows_of_a_soft_problem_still_diagnosed_infeasible():
     assert info["status"] == "primal_infeasible", info
     k, j, side = h.infeasible_row()
     assert k == 2 and j in (2, 3)
+
+
+def test_robot_arm_exact_penalty(robot_disc, robot_solution):
+    """The robot arm with its terminal rows soft, l1 = 20 (above the hard problem's terminal
+    multipliers): the IPOPT transcription with explicit slacks reproduces the hard IPOPT
+    solution, and the C full RTI started there stays on it (its KKT measure with the soft
+    rows is that of a solution)."""
+    import importlib.util
+
+    from dopus_codegen.problem.ocp import Guess
+    from dopus_codegen.runtime.solver import CSolver
+    from conftest import ROBOT_ARM_FILE
+
+    spec = importlib.util.spec_from_file_location("robot_arm_soft_test", ROBOT_ARM_FILE)
+    arm = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(arm)
+    hard, _ = robot_solution
+    l1 = 20.0
+    assert np.max(np.abs(hard.nu)) < l1 / 3
+    disc = build_functions(arm.build(soft_terminal=Soft(l1=l1)))
+    assert (disc.nr, disc.ne) == (2, 0)
+    xh = np.asarray(disc.x0)
+    x, u, slack = ipopt_with_slacks(disc, xh)
+    assert slack["r"] < 1e-8
+    assert np.max(np.abs(x - hard.x)) < 1e-6
+    assert np.max(np.abs(u - hard.u)) < 1e-6
+    g = Guess(x=hard.x, u=hard.u, lam=hard.lam, mu_g=hard.mu_g, mu_b=hard.mu_b, mu_bN=hard.mu_bN,
+              mu_r=np.asarray(hard.nu), nu=np.zeros(0))
+    s = CSolver(disc, M=disc.N - 1, mode="fixed", qp_tol=1e-12)
+    s.init(xh, g)
+    assert s.kkt(xh)["kkt"] < 1e-8
+    for _ in range(3):
+        s.feedback(xh)
+        s.prepare()
+    assert np.max(np.abs(s.x - hard.x)) < 1e-6
+    assert s.kkt(xh)["kkt"] < 1e-8
