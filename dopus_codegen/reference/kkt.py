@@ -150,7 +150,7 @@ def _soft_kkt(disc, stat, eq, x, u, g, r, mu_g, mu_b, mu_bN, mu_r) -> dict:
     """``ineq`` and ``comp`` of a problem with soft rows (docs/algorithm.md section 12): a
     soft side has no violation but its multiplier must lie in ``[0, l1 + l2 s]`` with the
     complementarity of the side and of its slack ``s`` (both into ``comp``)."""
-    from .qp import _row_check
+    from .qp import row_check
 
     N, nx = disc.N, disc.nx
     lbx, ubx = np.asarray(disc.lbx, float), np.asarray(disc.ubx, float)
@@ -158,7 +158,7 @@ def _soft_kkt(disc, stat, eq, x, u, g, r, mu_g, mu_b, mu_bN, mu_r) -> dict:
 
     def add(v, lo, hi, mu, w):
         nonlocal ineq, comp
-        i_, c_, s_ = _row_check(v, lo, hi, mu, w)
+        i_, c_, s_ = row_check(v, lo, hi, mu, w)
         ineq, comp = max(ineq, i_), max(comp, c_, s_)
 
     mu_b0 = mu_b[0, :nx]

@@ -379,7 +379,7 @@ def _signed_pairs(v, lo, hi, mu):
     return comp, sign
 
 
-def _row_check(v, lo, hi, mu, w):
+def row_check(v, lo, hi, mu, w):
     """``(ineq, comp, sign)`` of rows ``lo <= v <= hi`` with signed multipliers ``mu`` and
     soft weights ``w`` (4, n) (rows zl, zu, Zl, Zu; a side with both 0 is hard). A hard side
     as in :func:`_signed_pairs`; a soft side with violation ``s`` (``max(0, lo - v)``) needs
@@ -420,7 +420,7 @@ def qp_kkt_residual(qp: dict, sol: dict) -> dict:
     complementarity ``max(mu,0)|ub - v|`` / ``max(-mu,0)|v - lb|`` on finite sides,
     and dual sign (the size of a multiplier pushing on an infinite side, including
     a nonzero x part of ``mu_b[0]``); ``kkt`` is their maximum. Soft sides: no
-    inequality violation, the conditions of :func:`_row_check` instead.
+    inequality violation, the conditions of :func:`row_check` instead.
     """
     q = check_qp(qp)
     N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
@@ -452,17 +452,17 @@ def qp_kkt_residual(qp: dict, sol: dict) -> dict:
         lo = q["lbw"][k].copy(); hi = q["ubw"][k].copy()
         if k == 0:
             lo[:nx] = -np.inf; hi[:nx] = np.inf
-        add(_row_check(w, lo, hi, mu_b[k], ws[:, :nw]))
+        add(row_check(w, lo, hi, mu_b[k], ws[:, :nw]))
         if ng:
-            add(_row_check(q["C"][k] @ w, q["lg"][k], q["ug"][k], mu_g[k], ws[:, nw:]))
+            add(row_check(q["C"][k] @ w, q["lg"][k], q["ug"][k], mu_g[k], ws[:, nw:]))
     xN = x[N]
     r = q["HN"] @ xN + q["gN"] + lam[N] + q["R"].T @ mu_r + q["Req"].T @ nu_ + mu_bN
     stat = max(stat, float(np.max(np.abs(r))))
     if ne:
         eq = max(eq, float(np.max(np.abs(q["Req"] @ xN - q["req"]))))
-    add(_row_check(xN, q["lbxN"], q["ubxN"], mu_bN, wt[:, :nx]))
+    add(row_check(xN, q["lbxN"], q["ubxN"], mu_bN, wt[:, :nx]))
     if nr:
-        add(_row_check(q["R"] @ xN, q["lr"], q["ur"], mu_r, wt[:, nx:]))
+        add(row_check(q["R"] @ xN, q["lr"], q["ur"], mu_r, wt[:, nx:]))
     return {"stat": stat, "eq": eq, "ineq": ineq, "comp": comp, "sign": sign,
             "kkt": max(stat, eq, ineq, comp, sign)}
 
