@@ -123,3 +123,21 @@ def ipopt_with_slacks(disc, xhat0, tol=1e-12):
     s = zz[(N + 1) * nx + N * nu:]
     out = {grp: float(max([v for v, gr in zip(s, groups) if gr == grp], default=0.0)) for grp in ("x", "g", "r")}
     return x, u, out
+
+
+def cone(N=20):
+    """A point pulled towards (1, 1) and kept in the cone 1 - 2(a^2 + b^2) >= 0.5 (a hard
+    path row), guessed at a = b = 0 where the row's gradient vanishes: after the first
+    step, a stage that still holds the guess's linearisation has the row 0 dw >= 0.5 - g
+    with g < 0.5 (docs/algorithm.md section 4, step 4)."""
+    ocp = Ocp("stale_cone")
+    q = ocp.state("q", 2)
+    v = ocp.control("v", 2, lb=-5.0, ub=5.0)
+    ocp.dynamics(v, integrator=RK4(1))
+    ocp.stage_least_squares(ca.vertcat(q[0] - 1.0, q[1] - 1.0, v), [1.0, 1.0, 0.01, 0.01])
+    ocp.terminal_least_squares(ca.vertcat(q[0] - 1.0, q[1] - 1.0), [1.0, 1.0])
+    ocp.path_constraint(1.0 - 2.0 * (q[0] ** 2 + q[1] ** 2), lb=0.5)
+    ocp.horizon(N=N, dt=0.1)
+    ocp.initial_state([0.0, 0.0])
+    ocp.options(hessian="gauss-newton")
+    return ocp

@@ -16,7 +16,7 @@ from dopus_codegen.reference.qp import qp_kkt_residual, solve_qp_reference
 
 from harness.qp_harness import build_qp_solver
 from harness.qp_problems import compare, make_qp, make_soft_qp, solve_clarabel_soft
-from soft_problems import cart_l1, ipopt_with_slacks, orbit_l2, reach_both
+from soft_problems import cart_l1, cone, ipopt_with_slacks, orbit_l2, reach_both
 
 
 # ------------------------------------------------------------------------------ the API
@@ -244,3 +244,32 @@ def test_robot_arm_exact_penalty(robot_disc, robot_solution):
         s.prepare()
     assert np.max(np.abs(s.x - hard.x)) < 1e-6
     assert s.kkt(xh)["kkt"] < 1e-8
+
+
+@pytest.mark.parametrize("M", [1, 5])
+@pytest.mark.parametrize("backend", ["c", "reference"])
+def test_stale_linearisation_is_relinearised(M, backend):
+    """The cone of soft_problems.cone from its cold guess (where the row's gradient
+    vanishes), Gauss-Newton, fixed mode: the stages whose stored linearisation makes the
+    row unsatisfiable are re-linearised ahead of the rho ranking (more than M + 1 stages
+    recomputed in the second iteration), and the iteration converges to IPOPT's solution."""
+    from dopus_codegen.reference.dopus import ReferenceDopus
+    from dopus_codegen.runtime.solver import CSolver
+
+    disc = build_functions(cone())
+    xh = np.asarray(disc.x0)
+    x_ref, u_ref, _ = ipopt_with_slacks(disc, xh)
+    B = CSolver if backend == "c" else ReferenceDopus
+    s = B(disc, M=M, mode="fixed", hessian="gauss-newton", qp_tol=1e-12)
+    s.init(xh)
+    counts = []
+    for _ in range(60):
+        s.feedback(xh)
+        s.prepare()
+        counts.append(len(s.recomputed))
+        if s.kkt(xh)["kkt"] < 1e-9:
+            break
+    assert counts[0] > M + 1, counts
+    assert s.kkt(xh)["kkt"] < 1e-9, (len(counts), s.kkt(xh))
+    assert np.max(np.abs(s.x - x_ref)) < 1e-6
+    assert np.max(np.abs(s.u - u_ref)) < 1e-6
