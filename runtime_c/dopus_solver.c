@@ -754,6 +754,25 @@ static void dopus_assemble(dopus_solver *s)
     for (i = 0; i < DOPUS_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
+#if DOPUS_NSOFT > 0
+    /* soft weights: the rows of a stage (x, u (hard), g) and the terminal rows (x_N, r) */
+    for (j = 0; j < 4; ++j) {
+        dopus_real *st = j == 0 ? in->zl : j == 1 ? in->zu : j == 2 ? in->Zl : in->Zu;
+        dopus_real *te = j == 0 ? in->zlN : j == 1 ? in->zuN : j == 2 ? in->ZlN : in->ZuN;
+        for (i = 0; i < DOPUS_NX; ++i) {
+            st[i] = te[i] = dopus_soft_x[j][i];
+        }
+        for (i = 0; i < DOPUS_NU; ++i) {
+            st[DOPUS_NX + i] = DOPUS_R(0.0);
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            st[DOPUS_NW + i] = dopus_soft_g[j][i];
+        }
+        for (i = 0; i < DOPUS_NR; ++i) {
+            te[DOPUS_NX + i] = dopus_soft_r[j][i];
+        }
+    }
+#endif
     dopus_timer_add(&s->timer, DOPUS_PHASE_ASSEMBLY, t0);
 }
 
@@ -1271,12 +1290,40 @@ int dopus_parameters_writable(dopus_solver *s)
     return DOPUS_OK;
 }
 
-/* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
+/* A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for the
+ * QP: its row of Ct is zero and the value g_new of step 2 lies outside that side's bound
+ * (0 dw >= lg - g_new > 0). Stage 0 is left out (the QP ignores its rows without u). */
+static int dopus_stale_stage(const dopus_solver *s, int k)
+{
+    const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
+    const dopus_real *g = s->mem.ev.Fn_g[k];
+    int i, j;
+    if (k == 0) {
+        return 0;
+    }
+    for (j = 0; j < DOPUS_NG; ++j) {
+        int hard_lo = 1, hard_up = 1, zero = 1;
+#if DOPUS_NSOFT > 0
+        hard_lo = !(dopus_soft_g[0][j] > DOPUS_R(0.0) || dopus_soft_g[2][j] > DOPUS_R(0.0));
+        hard_up = !(dopus_soft_g[1][j] > DOPUS_R(0.0) || dopus_soft_g[3][j] > DOPUS_R(0.0));
+#endif
+        for (i = 0; i < DOPUS_NW && zero; ++i) {
+            zero = slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] == DOPUS_R(0.0);
+        }
+        if (zero && ((hard_lo && g[j] < dopus_lg[j]) || (hard_up && g[j] > dopus_ug[j]))) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Step 4: the stale stages (dopus_stale_stage), then the M stages among the other stages of
+ * 0..N-2 with the largest rho_k, ties to the lower index. */
 static void dopus_select(dopus_solver *s, int M)
 {
     int m, k, n = 0;
     for (k = 0; k < DOPUS_N; ++k) {
-        s->selected[k] = 0;
+        s->selected[k] = k < DOPUS_N - 1 && DOPUS_NG > 0 && dopus_stale_stage(s, k);
     }
     for (m = 0; m < M; ++m) {
         int best = -1;

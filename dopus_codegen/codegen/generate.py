@@ -391,6 +391,19 @@ def bounded_row_counts(disc: Any, s: Dict[str, int]) -> Dict[str, int]:
             "nbg": count("lg", "ug", s["ng"]), "nbr": count("lr", "ur", s["nr"])}
 
 
+def soft_rows(disc: Any) -> Dict[str, Any]:
+    """The soft rows of the problem: ``nsoft`` (state components, path rows and terminal
+    rows with a soft side, the DOPUS_NSOFT of the sizes header; 0 when every row is hard)
+    and ``always_feasible`` (every row that depends on the state is soft: the QP is feasible
+    for every finite measurement)."""
+    data = disc.data
+    if not getattr(data, "has_soft", False):
+        return {"nsoft": 0, "always_feasible": False}
+    n = sum(int(np.count_nonzero(np.any(np.asarray(getattr(data, key)) > 0, axis=0)))
+            for key in ("soft_x", "soft_g", "soft_r"))
+    return {"nsoft": n, "always_feasible": bool(data.always_feasible)}
+
+
 #: Sampling instants of the standalone main's closed loop (runtime_c/dopus_main.c ITERATIONS):
 #: the parameter schedule of a time-varying problem covers them and the horizon after them.
 MAIN_ITERATIONS = 10
@@ -468,6 +481,15 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
     ctx["p_schedule_nodes"] = 0 if schedule is None else schedule.shape[0]
     if schedule is not None:
         ctx["p_schedule"] = c_matrix(schedule, schedule.shape[0], s["np"], "parameter schedule")
+    soft = soft_rows(disc)
+    ctx["nsoft"] = soft["nsoft"]
+    if soft["nsoft"]:
+        d = disc.data
+        ctx["soft_x"] = [c_vector(row, nx, "soft_x") for row in np.asarray(d.soft_x)]
+        ctx["soft_g"] = [c_vector(_pad_vec(row, s["ng"]), max(1, s["ng"]), "soft_g")
+                         for row in np.asarray(d.soft_g).reshape(4, s["ng"])]
+        ctx["soft_r"] = [c_vector(_pad_vec(row, s["nr"]), max(1, s["nr"]), "soft_r")
+                         for row in np.asarray(d.soft_r).reshape(4, s["nr"])]
     if not 0 <= ctx["default_M"] <= N - 1:
         raise CodegenError(f"option M={ctx['default_M']} is outside 0..N-1 = 0..{N - 1}")
     if nominal is not None:
@@ -555,6 +577,8 @@ def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, ha
     for key, n in (("nbx", "nx"), ("nbu", "nu"), ("nbg", "ng"), ("nbr", "nr")):
         s.setdefault(key, s[n])
     s["nb"] = s["N"] * (s["nbx"] + s["nbu"] + s["nbg"]) + s["nbr"]
+    s.setdefault("nsoft", 0)
+    s.setdefault("always_feasible", 0)
     ctx = {"name": name, "NAME": name.upper(), "sizes": s, "has_gn": int(has_gn),
            "has_nominal": int(has_nominal), "header": header or f"Sizes of '{name}'",
            "p_schedule_nodes": int(p_schedule_nodes),
@@ -601,7 +625,10 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     ctx["has_nominal"] = int(ctx["has_nominal"])
 
     env = _templates()
-    files[f"{name}_sizes.h"] = render_sizes_header(name, dict(s, **bounded_row_counts(disc, s)), has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
+    soft = soft_rows(disc)
+    files[f"{name}_sizes.h"] = render_sizes_header(name, dict(s, **bounded_row_counts(disc, s), nsoft=soft["nsoft"],
+                                                               always_feasible=int(soft["always_feasible"])),
+                                                   has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
                                                    work=ctx["work"], header=header,
                                                    casadi_version=ca.__version__, real=real,
                                                    p_schedule_nodes=ctx["p_schedule_nodes"])
@@ -639,6 +666,9 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
         # `dopus-gen generate` of an unchanged problem finds both and writes nothing
         "sha256": {f: hashlib.sha256(files[f].encode("utf-8")).hexdigest() for f in sorted(files)},
     }
+    if soft["nsoft"]:
+        meta["soft_rows"] = soft["nsoft"]
+        meta["qp_always_feasible"] = soft["always_feasible"]
     if problem_hash is not None:
         meta["problem_hash"] = problem_hash
     files[meta_file] = json.dumps(meta, indent=2, sort_keys=True) + "\n"

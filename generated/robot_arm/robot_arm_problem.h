@@ -35,6 +35,14 @@ extern const robot_arm_real robot_arm_default_lm;    /* Levenberg-Marquardt term
 extern const robot_arm_real robot_arm_p_schedule[ROBOT_ARM_P_SCHEDULE_NODES][ROBOT_ARM_NP];
 #endif
 
+#if ROBOT_ARM_NSOFT > 0
+/* soft weights of the state bounds (nodes 1..N), path rows and terminal inequality rows;
+ * rows: L1 lower, L1 upper, L2 lower, L2 upper (docs/algorithm.md section 12) */
+extern const robot_arm_real robot_arm_soft_x[4][ROBOT_ARM_NX];
+extern const robot_arm_real robot_arm_soft_g[4][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+extern const robot_arm_real robot_arm_soft_r[4][ROBOT_ARM_DIM(ROBOT_ARM_NR)];
+#endif
+
 #if ROBOT_ARM_HAS_NOMINAL
 /* offline primal-dual solution at robot_arm_x0_default (IPOPT at generation time), so the
  * controller starts warm (docs/design.md section 8) */
