@@ -241,7 +241,7 @@ def test_generated_data_is_the_problem(name, generated, built, request):
 
     for sym, ref in [("lbx", disc.lbx), ("ubx", disc.ubx), ("lbu", disc.lbu), ("ubu", disc.ubu),
                      ("lg", disc.lg), ("ug", disc.ug), ("lr", disc.lr), ("ur", disc.ur), ("x0_default", disc.x0),
-                     ("p_default", disc.p0[0])]:
+                     ("p_default", disc.p0)]:
         ref = np.asarray(ref, dtype=float).reshape(-1)
         np.testing.assert_array_equal(read(sym, ref.size), ref, err_msg=f"{name}_{sym}")
     np.testing.assert_array_equal(read("guess_x", (N + 1) * nx), np.asarray(disc.initial_guess.x).reshape(-1))

@@ -610,7 +610,7 @@ class Ocp:
             val = _vector(value, size, f"{kind} '{name}' value", allow_inf=False)
         weights = _soft_weights(soft, size, lbv, ubv, f"{kind} '{name}'")
         sym = ca.SX.sym(name, size)
-        store.append(_Decl(name, sym, size, lbv, ubv, val, weights))
+        store.append(_Decl(name, sym, size, lbv, ubv, value=val, soft=weights))
         return sym
 
     @_declaration

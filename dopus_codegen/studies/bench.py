@@ -297,6 +297,13 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
     if values["hessian"] == "gauss-newton" and not disc.has_gn:
         raise BenchError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
                          f"(ocp.stage_least_squares)")
+    if disc.time_varying_parameters:
+        if against == "acados":
+            raise BenchError(f"{disc.name}: --against acados: the OCP's parameters move (trajectory); the acados "
+                             "translation carries constant parameters only")
+        # the parameters at t = j dt for every instant of the closed loops and their horizons
+        n_sched = settle + max(reps, steps) + disc.N + 2
+        prob["spec"]["p_schedule"] = [disc.parameters_at(j * float(disc.dt)).tolist() for j in range(n_sched)]
     Ms = _resolve_Ms([int(m) if isinstance(m, str) and m.isdigit() else m for m in m_list], disc.N)
     echo(f"{disc.name}: settings: M {','.join(map(str, Ms))}, "
          + st.describe({k: v for k, v in values.items() if k != "M"}, sources))

@@ -69,6 +69,11 @@ class Ours:
         self._t = self.ffi.new("double[]", max(1, len(self.phase_names)))
         p0 = np.array(spec.get("p0") or [], float).reshape(-1)
         self.p0 = np.ascontiguousarray(p0)
+        # parameters that move: p(j dt) per row; the closed loop writes the first horizon
+        # before init, pushes the new last node before every prepare, and the plant of
+        # instant j uses row j
+        sched = spec.get("p_schedule")
+        self.schedule = None if not sched else np.ascontiguousarray(np.array(sched, float))
 
     def c(self, f):
         return getattr(self.lib, f"{self.name}_{f}")
@@ -132,13 +137,15 @@ class Ours:
         self.c("get_timings")(s, self._t)
         return {k: float(self._t[i]) for i, k in enumerate(self.phase_names)}
 
-    def plant(self, x, u):
-        """One step of the generated discrete model phi(x, u, p0)."""
+    def plant(self, x, u, instant=None):
+        """One step of the generated discrete model phi(x, u, p) (p: p0, or the schedule's row
+        of the sampling instant)."""
         xa = np.ascontiguousarray(x, dtype=float)
         ua = np.ascontiguousarray(u, dtype=float)
+        pa = self.p0 if self.schedule is None or instant is None else np.ascontiguousarray(self.schedule[instant])
         self._arg[0] = self.ffi.cast("double *", xa.ctypes.data)
         self._arg[1] = self.ffi.cast("double *", ua.ctypes.data)
-        self._arg[2] = self._p(self.p0)
+        self._arg[2] = self._p(pa)
         self._res[0] = self._phi
         for i in range(1, len(self._res)):
             self._res[i] = self.ffi.NULL
@@ -275,10 +282,21 @@ def make_ours(ours: Ours, M, mode, settings, label):
         st = int(ours.c("feedback")(s, xbuf, ours.u0))
         return np.frombuffer(ours.ffi.buffer(ours.u0, 8 * ours.nu), dtype=float).copy(), st == 0
 
+    instant = [0]
+
     def prepare():
+        if ours.schedule is not None and int(mode) != MODE_FIXED:
+            instant[0] += 1
+            ours.c("push_parameters")(s, ours._p(ours.schedule[instant[0] + ours.N]))
         return int(ours.c("prepare")(s)) == 0
 
     def start(xhat0, guess):
+        if ours.schedule is not None:
+            instant[0] = 0
+            ours.c("stop")(s)
+            first = np.ascontiguousarray(ours.schedule[:ours.N + 1])
+            ours._keep_p = first
+            ours.c("set_parameters")(s, ours._p(first))
         st = ours.init(s, xhat0, guess)
         if st != 0:
             raise RuntimeError(f"{label}: {ours.name}_init returned status {st}")
@@ -444,7 +462,7 @@ def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x
             if failed:
                 u = u_last[r.label]
             u_last[r.label] = np.array(u, float)
-            xn = plant(xs[r.label], u)
+            xn = plant(xs[r.label], u, i)
             if not (np.all(np.isfinite(xn)) and np.abs(xn).max() < 1e8):
                 rec["diverged_at"] = rec.get("diverged_at", i)
                 xn = np.array(x_start, float)

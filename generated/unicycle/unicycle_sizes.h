@@ -37,6 +37,7 @@
 /* 1 if a parameter declares a trajectory: unicycle_p_schedule holds the parameters at
  * t = j dt for the standalone main's closed loop */
 #define UNICYCLE_HAS_P_SCHEDULE 0
+#define UNICYCLE_P_SCHEDULE_NODES 1
 
 /* CasADi work arrays: the maximum over every generated function, at least 1 */
 #define UNICYCLE_SZ_ARG 5
