@@ -22,6 +22,13 @@ extern const dopus_real dopus_x0_default[DOPUS_NX];
 /* the OCP file's initial guess */
 extern const dopus_real dopus_guess_x[DOPUS_N + 1][DOPUS_NX];
 extern const dopus_real dopus_guess_u[DOPUS_N][DOPUS_NU];
+/* the rows' names (dopus_row_name): state and control labels, path rows, terminal
+ * inequality rows, terminal equality rows */
+extern const char *const dopus_row_names_x[DOPUS_NX];
+extern const char *const dopus_row_names_u[DOPUS_NU];
+extern const char *const dopus_row_names_g[DOPUS_DIM(DOPUS_NG)];
+extern const char *const dopus_row_names_r[DOPUS_DIM(DOPUS_NR)];
+extern const char *const dopus_row_names_req[DOPUS_DIM(DOPUS_NE)];
 extern const int dopus_default_M;
 extern const int dopus_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int dopus_default_regularization; /* 0 none, 1 project, 2 mirror */

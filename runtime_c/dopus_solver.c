@@ -1828,6 +1828,24 @@ int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
     return 1;
 }
 
+const char *dopus_row_name(int kind, int index)
+{
+    switch (kind) {
+    case DOPUS_ROW_STATE:
+        return index >= 0 && index < DOPUS_NX ? dopus_row_names_x[index] : 0;
+    case DOPUS_ROW_CONTROL:
+        return index >= 0 && index < DOPUS_NU ? dopus_row_names_u[index] : 0;
+    case DOPUS_ROW_PATH:
+        return index >= 0 && index < DOPUS_NG ? dopus_row_names_g[index] : 0;
+    case DOPUS_ROW_TERMINAL:
+        return index >= 0 && index < DOPUS_NR ? dopus_row_names_r[index] : 0;
+    case DOPUS_ROW_TERMINAL_EQ:
+        return index >= 0 && index < DOPUS_NE ? dopus_row_names_req[index] : 0;
+    default:
+        return 0;
+    }
+}
+
 int dopus_get_flags(const dopus_solver *s)
 {
     return s->flags;

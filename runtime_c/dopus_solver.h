@@ -216,6 +216,11 @@ typedef struct {
  * of the certificate (the bounds, dynamics and measured state) keep from being met; stages
  * are those of that QP's horizon. Returns 1 and writes *row, else returns 0. */
 int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row);
+/* The name of a row of the OCP (kind: enum dopus_row_kind; index as in dopus_row_info): the
+ * state or control label ("pos[0]"), the declared name of a constraint ("wall", "wall[1]"
+ * for row 1 of several) or "path constraint 0" / "terminal constraint 1 row 2" for an
+ * unnamed one; NULL for a kind or index out of range. */
+const char *dopus_row_name(int kind, int index);
 /* Health of the controller (docs/algorithm.md section 9). Flags (DOPUS_FLAG_*) raised by
  * the last feedback and the prepare after it (feedback clears them): the returned u0 was
  * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control
@@ -274,7 +279,7 @@ enum dopus_status {
                                         finite): no step, the fallback control is returned */
 };
 
-/* Kinds of dopus_row_info. */
+/* Kinds of dopus_row_info and dopus_row_name. */
 enum dopus_row_kind {
     DOPUS_ROW_STATE = 0,      /* a bound of a state (stages 1..N) */
     DOPUS_ROW_CONTROL = 1,    /* a bound of a control */

@@ -422,6 +422,29 @@ def _default_parameters(disc: Any, s: Dict[str, int]) -> np.ndarray:
     return arr
 
 
+def row_names(disc: Any) -> Dict[str, List[str]]:
+    """The rows' names of dopus_row_name: ``x``, ``u`` (labels), ``g`` (path rows), ``r``
+    (terminal inequality rows), ``req`` (terminal equality rows), in the QP's order."""
+    spec = disc.spec
+    con = spec.constraints
+    g = [n for i, rows in enumerate(con.path) for n in rows.labels("path constraint", i)]
+    term = [n for i, rows in enumerate(con.terminal) for n in rows.labels("terminal constraint", i)]
+    is_eq = np.asarray(con.terminal_equality, dtype=bool).reshape(-1)
+    return {"x": list(spec.model.state_names), "u": list(spec.model.control_names), "g": g,
+            "r": [n for n, e in zip(term, is_eq) if not e], "req": [n for n, e in zip(term, is_eq) if e]}
+
+
+def _row_names(disc: Any) -> Dict[str, str]:
+    """The C initialisers of the row-name tables (one "" entry for an empty table)."""
+    out = {}
+    for key, names in row_names(disc).items():
+        for n in names:
+            if not n.isascii() or '"' in n or "\\" in n:
+                raise CodegenError(f"row name {n!r}: only plain ASCII without quotes or backslashes")
+        out[f"row_names_{key}"] = "{" + ", ".join(f'"{n}"' for n in (names or [""])) + "}"
+    return out
+
+
 def _parameter_schedule(disc: Any, s: Dict[str, int]):
     """The parameters at t = j dt, j = 0..N + MAIN_ITERATIONS, of a problem whose parameters
     declare a trajectory (None otherwise)."""
@@ -477,6 +500,7 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
         "default_lm": c_double(settings.lm_code(_option(options, "lm", settings.DEFAULTS["lm"])), "lm"),
         "has_nominal": nominal is not None,
     }
+    ctx.update(_row_names(disc))
     schedule = _parameter_schedule(disc, s)
     ctx["p_schedule_nodes"] = 0 if schedule is None else schedule.shape[0]
     if schedule is not None:

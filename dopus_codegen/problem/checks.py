@@ -47,11 +47,18 @@ def _path_rows(spec) -> List[Tuple[str, ca.SX, float, float]]:
     """(label, expression, lb, ub) of every stacked path-constraint row."""
     out = []
     for i, rows in enumerate(spec.constraints.path):
-        n = rows.expr.size1()
-        for r in range(n):
-            label = f"path constraint {i}" + (f" row {r}" if n > 1 else "")
+        for r, label in enumerate(_labels(rows, "path constraint", i)):
             out.append((label, rows.expr[r], float(rows.lb[r]), float(rows.ub[r])))
     return out
+
+
+def _labels(rows, kind: str, index: int) -> Tuple[str, ...]:
+    """The rows' labels: ``path constraint 'wall'`` (a named row; ``'wall[1]'`` of several) or
+    ``path constraint 0 (<expression>)``."""
+    names = rows.labels(kind, index) if hasattr(rows, "labels") else (f"{kind} {index}",) * rows.expr.size1()
+    if getattr(rows, "name", None) is not None:
+        return tuple(f"{kind} '{n}'" for n in names)
+    return tuple(f"{n} ({_short(rows.expr[r])})" for r, n in enumerate(names))
 
 
 def _violation(v: float, lb: float, ub: float) -> float:
@@ -91,12 +98,12 @@ def stage0_violations(problem, x, p=None) -> List[str]:
     out = []
     for (label, expr, lb, ub), v in zip(rows, values):
         if not math.isfinite(v):
-            out.append(f"{label} ({_short(expr)}) is not finite ({v})")
+            out.append(f"{label} is not finite ({v})")
         elif _violation(v, lb, ub) > _tol(lb, ub):
             side = f"< lb {lb:g}" if v < lb else f"> ub {ub:g}"
             how = "" if not (depends_u and ca.depends_on(expr, us)) else \
                 " for the least-violating controls " + np.array2string(u_best, precision=4)
-            out.append(f"{label} ({_short(expr)}) = {v:.6g} {side}{how}")
+            out.append(f"{label} = {v:.6g} {side}{how}")
     return out
 
 
@@ -214,11 +221,9 @@ def _terminal_rows(spec, equality: bool) -> List[Tuple[str, ca.SX, float, float]
     (``equality``) or ``lb < ub``, in declaration order."""
     out = []
     for i, rows in enumerate(spec.constraints.terminal):
-        n = rows.expr.size1()
-        for r in range(n):
+        for r, label in enumerate(_labels(rows, "terminal constraint", i)):
             lb, ub = float(rows.lb[r]), float(rows.ub[r])
             if (lb == ub) == equality:
-                label = f"terminal constraint {i}" + (f" row {r}" if n > 1 else "")
                 out.append((label, rows.expr[r], lb, ub))
     return out
 
@@ -237,10 +242,10 @@ def describe_qp_row(problem, row: dict) -> str:
         what = f"{kind} {names[i] if names else i}"
     elif kind == "path" and spec is not None:
         label, expr, _, _ = _path_rows(spec)[i]
-        what = f"{label} ({_short(expr)})"
+        what = label
     elif kind in ("terminal", "terminal_eq") and spec is not None:
         label, expr, lb, _ = _terminal_rows(spec, kind == "terminal_eq")[i]
-        what = f"{label} ({_short(expr)})"
+        what = label
         if kind == "terminal_eq":
             rel = f"= {lb:g}"
     else:

@@ -703,24 +703,57 @@ class Ocp:
         self._term_ls.append((res, self._weights(weights, res.size1(), what)))
 
     @_declaration
-    def path_constraint(self, expr, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None) -> None:
+    def path_constraint(self, expr, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None,
+                        name: Optional[str] = None, terminal: bool = False) -> None:
         """``lb <= g(x, u, p) <= ub`` on stages 0..N-1 (several calls stack); ``soft``:
-        :class:`Soft` weights that make the rows soft."""
+        :class:`Soft` weights that make the rows soft; ``name``: the rows' name in messages,
+        tables and the C API's row description (``name[i]`` for row i of several; default
+        ``path constraint <i>``); ``terminal=True``: the rows also hold at x_N (a terminal
+        constraint of the same rows, bounds and name; they may use states and parameters only)."""
         what = f"path constraint {len(self._path)}"
+        name = self._row_name(name, what)
+        if name is not None:
+            what = f"path constraint '{name}'"
+        if not isinstance(terminal, (bool, np.bool_)):
+            raise OcpError(f"{what}: terminal must be True or False, got {terminal!r}")
         g, lbv, ubv = _rows(expr, lb, ub, what)
-        self._path.append((g, lbv, ubv, _soft_weights(soft, g.size1(), lbv, ubv, what)))
+        weights = _soft_weights(soft, g.size1(), lbv, ubv, what)
+        if terminal:
+            used = [d.name for d in self._controls if ca.depends_on(g, d.sym)]
+            if used:
+                raise OcpError(f"{what}: terminal=True, but the rows use control '{used[0]}' "
+                               f"(at x_N a row may use states and parameters only)")
+            eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
+            if eq.size:
+                raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")
+        self._path.append((g, lbv, ubv, weights, name))
+        if terminal:
+            self._term_con.append((g, lbv, ubv, weights, name))
+
+    def _row_name(self, name, what: str) -> Optional[str]:
+        """A checked row name (an identifier, unique among the constraint names) or None."""
+        if name is None:
+            return None
+        _check_identifier(name, f"{what} name")
+        if any(entry[4] == name for entry in self._path + self._term_con):
+            raise OcpError(f"{what}: duplicate constraint name {name!r}")
+        return name
 
     @_declaration
-    def terminal_constraint(self, expr, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None) -> None:
+    def terminal_constraint(self, expr, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None,
+                            name: Optional[str] = None) -> None:
         """``lb <= r(x_N, p) <= ub``; hard rows with ``lb == ub`` become equality rows;
         ``soft``: :class:`Soft` weights that make the rows soft (a soft row with ``lb ==
         ub`` stays a two-sided inequality row whose sides may be violated at a price)."""
         what = f"terminal constraint {len(self._term_con)}"
+        name = self._row_name(name, what)
+        if name is not None:
+            what = f"terminal constraint '{name}'"
         r, lbv, ubv = _rows(expr, lb, ub, what)
         eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
         if eq.size:
             raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")
-        self._term_con.append((r, lbv, ubv, _soft_weights(soft, r.size1(), lbv, ubv, what)))
+        self._term_con.append((r, lbv, ubv, _soft_weights(soft, r.size1(), lbv, ubv, what), name))
 
     # ------------------------------------------------------------------ horizon and data
     @_declaration
@@ -988,8 +1021,8 @@ class Ocp:
         constraints = ConstraintSpec(
             lbx=bounds(self._states, "lb"), ubx=bounds(self._states, "ub"),
             lbu=bounds(self._controls, "lb"), ubu=bounds(self._controls, "ub"),
-            path=tuple(Rows(g, readonly(lb), readonly(ub), sw) for g, lb, ub, sw in self._path),
-            terminal=tuple(Rows(r, readonly(lb), readonly(ub), sw) for r, lb, ub, sw in self._term_con),
+            path=tuple(Rows(g, readonly(lb), readonly(ub), sw, nm) for g, lb, ub, sw, nm in self._path),
+            terminal=tuple(Rows(r, readonly(lb), readonly(ub), sw, nm) for r, lb, ub, sw, nm in self._term_con),
             soft_x=readonly(soft_x))
         return OcpSpec(name=self.name, model=model, cost=cost, constraints=constraints,
                        horizon=HorizonSpec(N=self._N, dt=self._dt),

@@ -194,6 +194,14 @@ class Rows:
     lb: np.ndarray
     ub: np.ndarray
     soft: Optional[np.ndarray] = None
+    name: Optional[str] = None    # the declared name (messages, tables, the C row names)
+
+    def labels(self, kind: str, index: int) -> Tuple[str, ...]:
+        """One label per row: ``name`` / ``name[i]``, or ``<kind> <index>`` / ``<kind> <index> row i``."""
+        n = self.expr.size1()
+        if self.name is not None:
+            return (self.name,) if n == 1 else tuple(f"{self.name}[{i}]" for i in range(n))
+        return (f"{kind} {index}",) if n == 1 else tuple(f"{kind} {index} row {i}" for i in range(n))
 
     def soft_weights(self) -> np.ndarray:
         """The ``(4, n)`` weights, zeros for hard rows."""

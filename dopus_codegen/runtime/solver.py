@@ -554,6 +554,13 @@ class CSolver:
                 "index": int(row.index), "side": {-1: "lower", 1: "upper"}.get(int(row.side), "lower above upper"),
                 "bound": float(row.bound)}
 
+    def row_name(self, kind: str, index: int) -> Optional[str]:
+        """The C API's name of a row (``dopus_row_name``): kind ``state``, ``control``,
+        ``path``, ``terminal`` or ``terminal_eq``; None out of range."""
+        code = self.enums["dopus_row_kind"][kind]
+        p = self._c("row_name")(code, int(index))
+        return None if p == self._ffi.NULL else self._ffi.string(p).decode()
+
     @property
     def timings(self) -> dict:
         phases = self.enums["dopus_phase"].names()

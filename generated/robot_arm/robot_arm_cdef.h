@@ -180,6 +180,11 @@ typedef struct {
  * of the certificate (the bounds, dynamics and measured state) keep from being met; stages
  * are those of that QP's horizon. Returns 1 and writes *row, else returns 0. */
 int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_info *row);
+/* The name of a row of the OCP (kind: enum robot_arm_row_kind; index as in robot_arm_row_info): the
+ * state or control label ("pos[0]"), the declared name of a constraint ("wall", "wall[1]"
+ * for row 1 of several) or "path constraint 0" / "terminal constraint 1 row 2" for an
+ * unnamed one; NULL for a kind or index out of range. */
+const char *robot_arm_row_name(int kind, int index);
 /* Health of the controller (docs/algorithm.md section 9). Flags (ROBOT_ARM_FLAG_*) raised by
  * the last feedback and the prepare after it (feedback clears them): the returned u0 was
  * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control

@@ -144,6 +144,12 @@ const robot_arm_real robot_arm_guess_u[ROBOT_ARM_N][ROBOT_ARM_NU] = {
     {0.0, 0.0, 5.0}
 };
 
+const char *const robot_arm_row_names_x[ROBOT_ARM_NX] = {"q[0]", "q[1]", "dq[0]", "dq[1]", "theta"};
+const char *const robot_arm_row_names_u[ROBOT_ARM_NU] = {"tau[0]", "tau[1]", "dtheta"};
+const char *const robot_arm_row_names_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {""};
+const char *const robot_arm_row_names_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {""};
+const char *const robot_arm_row_names_req[ROBOT_ARM_DIM(ROBOT_ARM_NE)] = {"terminal constraint 0 row 0", "terminal constraint 0 row 1"};
+
 const int robot_arm_default_M = 1;
 const int robot_arm_default_hessian = 0;
 const int robot_arm_default_regularization = 0;

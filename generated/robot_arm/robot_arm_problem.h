@@ -22,6 +22,13 @@ extern const robot_arm_real robot_arm_x0_default[ROBOT_ARM_NX];
 /* the OCP file's initial guess */
 extern const robot_arm_real robot_arm_guess_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
 extern const robot_arm_real robot_arm_guess_u[ROBOT_ARM_N][ROBOT_ARM_NU];
+/* the rows' names (robot_arm_row_name): state and control labels, path rows, terminal
+ * inequality rows, terminal equality rows */
+extern const char *const robot_arm_row_names_x[ROBOT_ARM_NX];
+extern const char *const robot_arm_row_names_u[ROBOT_ARM_NU];
+extern const char *const robot_arm_row_names_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+extern const char *const robot_arm_row_names_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
+extern const char *const robot_arm_row_names_req[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
 extern const int robot_arm_default_M;
 extern const int robot_arm_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int robot_arm_default_regularization; /* 0 none, 1 project, 2 mirror */

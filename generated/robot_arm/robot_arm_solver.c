@@ -1828,6 +1828,24 @@ int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_inf
     return 1;
 }
 
+const char *robot_arm_row_name(int kind, int index)
+{
+    switch (kind) {
+    case ROBOT_ARM_ROW_STATE:
+        return index >= 0 && index < ROBOT_ARM_NX ? robot_arm_row_names_x[index] : 0;
+    case ROBOT_ARM_ROW_CONTROL:
+        return index >= 0 && index < ROBOT_ARM_NU ? robot_arm_row_names_u[index] : 0;
+    case ROBOT_ARM_ROW_PATH:
+        return index >= 0 && index < ROBOT_ARM_NG ? robot_arm_row_names_g[index] : 0;
+    case ROBOT_ARM_ROW_TERMINAL:
+        return index >= 0 && index < ROBOT_ARM_NR ? robot_arm_row_names_r[index] : 0;
+    case ROBOT_ARM_ROW_TERMINAL_EQ:
+        return index >= 0 && index < ROBOT_ARM_NE ? robot_arm_row_names_req[index] : 0;
+    default:
+        return 0;
+    }
+}
+
 int robot_arm_get_flags(const robot_arm_solver *s)
 {
     return s->flags;

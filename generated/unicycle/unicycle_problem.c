@@ -84,6 +84,12 @@ const unicycle_real unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU] = {
     {0.0, 0.0}
 };
 
+const char *const unicycle_row_names_x[UNICYCLE_NX] = {"pos[0]", "pos[1]", "psi", "v"};
+const char *const unicycle_row_names_u[UNICYCLE_NU] = {"acc", "omega"};
+const char *const unicycle_row_names_g[UNICYCLE_DIM(UNICYCLE_NG)] = {"path constraint 0"};
+const char *const unicycle_row_names_r[UNICYCLE_DIM(UNICYCLE_NR)] = {""};
+const char *const unicycle_row_names_req[UNICYCLE_DIM(UNICYCLE_NE)] = {""};
+
 const int unicycle_default_M = 1;
 const int unicycle_default_hessian = 0;
 const int unicycle_default_regularization = 0;

@@ -22,6 +22,13 @@ extern const unicycle_real unicycle_x0_default[UNICYCLE_NX];
 /* the OCP file's initial guess */
 extern const unicycle_real unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX];
 extern const unicycle_real unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU];
+/* the rows' names (unicycle_row_name): state and control labels, path rows, terminal
+ * inequality rows, terminal equality rows */
+extern const char *const unicycle_row_names_x[UNICYCLE_NX];
+extern const char *const unicycle_row_names_u[UNICYCLE_NU];
+extern const char *const unicycle_row_names_g[UNICYCLE_DIM(UNICYCLE_NG)];
+extern const char *const unicycle_row_names_r[UNICYCLE_DIM(UNICYCLE_NR)];
+extern const char *const unicycle_row_names_req[UNICYCLE_DIM(UNICYCLE_NE)];
 extern const int unicycle_default_M;
 extern const int unicycle_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int unicycle_default_regularization; /* 0 none, 1 project, 2 mirror */

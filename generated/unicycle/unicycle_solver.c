@@ -1828,6 +1828,24 @@ int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *
     return 1;
 }
 
+const char *unicycle_row_name(int kind, int index)
+{
+    switch (kind) {
+    case UNICYCLE_ROW_STATE:
+        return index >= 0 && index < UNICYCLE_NX ? unicycle_row_names_x[index] : 0;
+    case UNICYCLE_ROW_CONTROL:
+        return index >= 0 && index < UNICYCLE_NU ? unicycle_row_names_u[index] : 0;
+    case UNICYCLE_ROW_PATH:
+        return index >= 0 && index < UNICYCLE_NG ? unicycle_row_names_g[index] : 0;
+    case UNICYCLE_ROW_TERMINAL:
+        return index >= 0 && index < UNICYCLE_NR ? unicycle_row_names_r[index] : 0;
+    case UNICYCLE_ROW_TERMINAL_EQ:
+        return index >= 0 && index < UNICYCLE_NE ? unicycle_row_names_req[index] : 0;
+    default:
+        return 0;
+    }
+}
+
 int unicycle_get_flags(const unicycle_solver *s)
 {
     return s->flags;
