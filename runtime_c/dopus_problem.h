@@ -29,6 +29,10 @@ extern const char *const dopus_row_names_u[DOPUS_NU];
 extern const char *const dopus_row_names_g[DOPUS_DIM(DOPUS_NG)];
 extern const char *const dopus_row_names_r[DOPUS_DIM(DOPUS_NR)];
 extern const char *const dopus_row_names_req[DOPUS_DIM(DOPUS_NE)];
+/* the memory states of rate constraints: state row dopus_memory_state[i] carries the last
+ * applied value of control dopus_memory_control[i] */
+extern const int dopus_memory_state[DOPUS_DIM(DOPUS_NMEM)];
+extern const int dopus_memory_control[DOPUS_DIM(DOPUS_NMEM)];
 extern const int dopus_default_M;
 extern const int dopus_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int dopus_default_regularization; /* 0 none, 1 project, 2 mirror */

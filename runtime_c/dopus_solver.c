@@ -868,6 +868,13 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
     for (i = 0; i < DOPUS_NX; ++i) {
         s->xhat0[i] = xhat0 ? xhat0[i] : dopus_x0_default[i];
     }
+    for (i = 0; i < DOPUS_NU; ++i) {
+        s->u_applied[i] = DOPUS_R(0.0);
+    }
+    for (i = 0; i < DOPUS_NMEM; ++i) {
+        /* the last applied control before the first feedback: the memory entries of xhat0 */
+        s->u_applied[dopus_memory_control[i]] = s->xhat0[dopus_memory_state[i]];
+    }
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
             s->x[k][i] = x ? x[k * DOPUS_NX + i] : dopus_guess_x[k][i];
@@ -1178,13 +1185,43 @@ static int dopus_model_finite_at(dopus_solver *s, const dopus_real *xs)
            dopus_lai_vec_finite(DOPUS_NX, xn) && dopus_lai_vec_finite(1, &l);
 }
 
+static int dopus_feedback_step(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0);
+
+/* The memory states of rate constraints (algorithm.md section 4, "Rate constraints"): in
+ * receding mode the measured state with their entries set to the last applied control (a
+ * fixed-xhat0 study reads them as given: nothing is applied there). */
+static const dopus_real *dopus_with_memory(const dopus_solver *s, const dopus_real *xhat0, dopus_real *xm)
+{
+    int i;
+    if (DOPUS_NMEM == 0 || xhat0 == 0 || !s->initialized || s->mode != DOPUS_MODE_RECEDING) {
+        return xhat0;
+    }
+    dopus_copy(xm, xhat0, DOPUS_NX);
+    for (i = 0; i < DOPUS_NMEM; ++i) {
+        xm[dopus_memory_state[i]] = s->u_applied[dopus_memory_control[i]];
+    }
+    return xm;
+}
+
 int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
+{
+    dopus_real xm[DOPUS_NX];
+    int rc;
+    dopus_ensure_setup(s);
+    rc = dopus_feedback_step(s, dopus_with_memory(s, xhat0, xm), u0);
+    if (s->initialized) {
+        /* the control returned is the one applied: the next stage-0 rate row is against it */
+        dopus_copy(s->u_applied, s->u0_out, DOPUS_NU);
+    }
+    return rc;
+}
+
+static int dopus_feedback_step(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
     dopus_real xhat_prev[DOPUS_NX];
     double t0;
     int rc, qs, retries;
 
-    dopus_ensure_setup(s);
     s->flags = 0;
     rc = dopus_feedback_admit(s, xhat0, u0);
     if (rc != DOPUS_OK) {
@@ -1685,10 +1722,13 @@ int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
     double t0;
     int i, rc;
 
+    dopus_real xm[DOPUS_NX];
+
     dopus_ensure_setup(s);
     if (!s->initialized) {
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
     }
+    xhat0 = dopus_with_memory(s, xhat0, xm);
     if (xhat0 && !dopus_lai_vec_finite(DOPUS_NX, xhat0)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }

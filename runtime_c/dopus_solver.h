@@ -69,7 +69,10 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
 int dopus_init_nominal(dopus_solver *s, const dopus_real *xhat0);
 
 /* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
- * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: DOPUS_ERR_NONFINITE_INPUT,
+ * step and write u_0 (nu) into u0 (may be NULL). With rate constraints, in receding mode,
+ * the entries of xhat0 that are memory states (the last applied control, DOPUS_NMEM of them)
+ * are not read: the runtime fills them with the control it returned last (at the first
+ * feedback: the ones given to init); the same holds for dopus_kkt_eval. Non-finite xhat0: DOPUS_ERR_NONFINITE_INPUT,
  * nothing changes. QP failure: DOPUS_ERR_QP, no step (dopus_get_qp_status tells why). */
 int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
@@ -448,6 +451,8 @@ struct dopus_solver {
     int plan_age;                         /* receding shifts since the last good plan */
     dopus_real plan_u[DOPUS_N][DOPUS_NU]; /* controls of the last good plan */
     dopus_real u0_out[DOPUS_NU];          /* the control returned by the last feedback */
+    dopus_real u_applied[DOPUS_NU];       /* the last applied control (rate constraints: the
+                                             memory entries of the measured state) */
     dopus_real scale_x[DOPUS_NX];
     dopus_real scale_u[DOPUS_NU];
     dopus_real kkt_proxy;

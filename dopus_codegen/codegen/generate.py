@@ -501,6 +501,9 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
         "has_nominal": nominal is not None,
     }
     ctx.update(_row_names(disc))
+    memory = list(getattr(disc.spec.model, "memory", ()) or ())
+    ctx["memory_state"] = "{" + ", ".join(str(a) for a, _ in memory or [(0, 0)]) + "}"
+    ctx["memory_control"] = "{" + ", ".join(str(b) for _, b in memory or [(0, 0)]) + "}"
     schedule = _parameter_schedule(disc, s)
     ctx["p_schedule_nodes"] = 0 if schedule is None else schedule.shape[0]
     if schedule is not None:
@@ -651,6 +654,7 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     env = _templates()
     soft = soft_rows(disc)
     files[f"{name}_sizes.h"] = render_sizes_header(name, dict(s, **bounded_row_counts(disc, s), nsoft=soft["nsoft"],
+                                                                  nmem=len(getattr(disc.spec.model, "memory", ()) or ()),
                                                                always_feasible=int(soft["always_feasible"])),
                                                    has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
                                                    work=ctx["work"], header=header,

@@ -89,6 +89,17 @@ def _sum(items) -> ca.SX:
     return out
 
 
+def _with_memory(substep: ca.Function, nx: int, nu: int, np_: int, memory, name: str) -> ca.Function:
+    """The substep with the memory rows of the rate constraints set to their control
+    (``z+ = u``, so after any number of substeps the interval map gives ``z_{k+1} = u_k``)."""
+    sym = ca.SX if substep.is_a("SXFunction") else ca.MX
+    X, U, P = sym.sym("x", nx), sym.sym("u", nu), sym.sym("p", np_)
+    out = substep(X, U, P)
+    rows = dict(memory)
+    xn = ca.vertcat(*[U[rows[i]] if i in rows else out[i] for i in range(nx)])
+    return ca.Function(name, [X, U, P], [xn], ["x", "u", "p"], ["xn"], {"cse": True} if sym is ca.SX else {})
+
+
 def discretize(spec: OcpSpec) -> StageModel:
     """The symbolic multiple-shooting pieces of a validated problem (no validation here:
     ``spec`` comes from ``Ocp.validate()``)."""
@@ -112,6 +123,9 @@ def discretize(spec: OcpSpec) -> StageModel:
         raise OcpError(f"dynamics: integrator {integrator.describe()} returned shape "
                        f"{substep.size_out(0)}, expected ({x.size1()}, 1)")
     n_substeps = int(getattr(integrator, "substeps", 1))
+    memory = tuple(getattr(model, "memory", ()) or ())
+    if memory:
+        substep = _with_memory(substep, x.size1(), u.size1(), p.size1(), memory, f"{spec.name}_substep")
 
     res, W, l_ls = _least_squares(cost.stage_least_squares, "stage least squares")
     l_extra = _sum(cost.stage_terms)

@@ -571,6 +571,7 @@ class Ocp:
         self._stage_ls: list[tuple[ca.SX, np.ndarray]] = []
         self._term_costs: list[ca.SX] = []
         self._term_ls: list[tuple[ca.SX, np.ndarray]] = []
+        self._rates: list[tuple] = []     # (control decl, lb, ub, name, initial, memory decl)
         self._path: list[tuple] = []      # (expr, lb, ub, soft weights or None)
         self._term_con: list[tuple] = []
         self._N = None
@@ -730,12 +731,48 @@ class Ocp:
         if terminal:
             self._term_con.append((g, lbv, ubv, weights, name))
 
+    @_declaration
+    def rate_constraint(self, control: str, lb=-math.inf, ub=math.inf, name: Optional[str] = None,
+                        initial=None, soft: Optional[Soft] = None) -> None:
+        """``lb <= u_k - u_{k-1} <= ub`` for the control named ``control`` (the change per
+        sampling interval), at stages 1..N-1 and at stage 0 against the last applied control,
+        which the runtime keeps (``initial``: its value before the first feedback; default 0
+        clipped into the control's bounds). A memory state ``<control>_prev`` (after the
+        declared states) carries ``u_{k-1}``: its interval map is ``x+ = u``, the measured
+        state's entry is filled by the runtime, the guess and the initial state get it from
+        ``initial`` and the guessed controls. ``name``: the rows' name (default
+        ``<control>_rate``); ``soft``: :class:`Soft` weights, as for :meth:`path_constraint`."""
+        if not isinstance(control, str):
+            raise OcpError(f"rate constraint: control must be the name of a declared control, got {control!r}")
+        decl = next((d for d in self._controls if d.name == control), None)
+        if decl is None:
+            raise OcpError(f"rate constraint: {control!r} is not a declared control; the controls are "
+                           f"{[d.name for d in self._controls]}")
+        if any(r[0].name == control for r in self._rates):
+            raise OcpError(f"rate constraint of '{control}': declared twice")
+        what = f"rate constraint of '{control}'"
+        lbv = _vector(lb, decl.size, f"{what} lb")
+        ubv = _vector(ub, decl.size, f"{what} ub")
+        _check_bounds(lbv, ubv, what)
+        if not np.any(np.isfinite(lbv) | np.isfinite(ubv)):
+            raise OcpError(f"{what}: no finite bound (give lb or ub)")
+        name = self._row_name(f"{control}_rate" if name is None else name, what)
+        init = None if initial is None else _vector(initial, decl.size, f"{what} initial", allow_inf=False)
+        mem_name = f"{control}_prev"
+        if any(d.name == mem_name for d in self._states + self._controls + self._params):
+            raise OcpError(f"{what}: its memory state '{mem_name}' clashes with a declared name")
+        mem = _Decl(mem_name, ca.SX.sym(mem_name, decl.size), decl.size, np.full(decl.size, -math.inf),
+                    np.full(decl.size, math.inf))
+        weights = _soft_weights(soft, decl.size, lbv, ubv, what)
+        self._rates.append((decl, lbv, ubv, name, init, mem, weights))
+
     def _row_name(self, name, what: str) -> Optional[str]:
         """A checked row name (an identifier, unique among the constraint names) or None."""
         if name is None:
             return None
         _check_identifier(name, f"{what} name")
-        if any(entry[4] == name for entry in self._path + self._term_con):
+        if any(entry[4] == name for entry in self._path + self._term_con) or \
+                any(entry[3] == name for entry in self._rates):
             raise OcpError(f"{what}: duplicate constraint name {name!r}")
         return name
 
@@ -988,7 +1025,38 @@ class Ocp:
         if self._campaign is not None and self._scenario is None:
             raise OcpError("campaign: needs a closed-loop scenario (ocp.scenario(...))")
         closed_loop = self._validate_scenario(nx) if self._scenario is not None else None
+        if self._rates:
+            x0, gx, closed_loop = self._with_memory(x0, gx, gu, closed_loop)
         return self._spec_parts(x0, gx, gu, closed_loop)
+
+    def _memory_initial(self, decl, init) -> np.ndarray:
+        return np.clip(np.zeros(decl.size), decl.lb, decl.ub) if init is None else init
+
+    def _with_memory(self, x0, gx, gu, closed_loop):
+        """Initial state, state guess and scenario extended by the memory states of the rate
+        constraints: z_0 = the initial last control, z_k = the guessed u_{k-1}."""
+        import dataclasses
+
+        offsets, start = {}, 0
+        for d in self._controls:
+            offsets[d.name] = start
+            start += d.size
+        init = np.concatenate([self._memory_initial(decl, ini) for decl, _, _, _, ini, *_ in self._rates])
+        cols = [offsets[decl.name] + i for decl, *_ in self._rates for i in range(decl.size)]
+        z = np.vstack([init.reshape(1, -1), gu[:, cols]])
+        x0 = np.concatenate([x0, init])
+        gx = np.hstack([gx, z])
+        if closed_loop is not None:
+            nz = init.size
+            changes = {}
+            if closed_loop.x0 is not None:
+                changes["x0"] = readonly(np.concatenate([closed_loop.x0, init]))
+            if closed_loop.plant is not None:
+                changes["plant"] = ca.vertcat(closed_loop.plant, ca.SX.zeros(nz))
+            if closed_loop.plant_q is not None:
+                changes["plant_q"] = ca.vertcat(closed_loop.plant_q, ca.SX.zeros(nz))
+            closed_loop = dataclasses.replace(closed_loop, **changes)
+        return x0, gx, closed_loop
 
     def _spec_parts(self, x0, gx, gu, closed_loop) -> OcpSpec:
         """The immutable spec from declarations that passed validation."""
@@ -998,7 +1066,22 @@ class Ocp:
         def bounds(decls, which):
             return readonly(np.concatenate([getattr(d, which) for d in decls]))
 
-        soft_x = np.hstack([d.soft if d.soft is not None else np.zeros((4, d.size)) for d in self._states])
+        states = self._states + [r[5] for r in self._rates]
+        soft_x = np.hstack([d.soft if d.soft is not None else np.zeros((4, d.size)) for d in states])
+        xdot = self._xdot
+        memory, path = [], list(self._path)
+        if self._rates:
+            nz = sum(r[5].size for r in self._rates)
+            xdot = ca.vertcat(self._xdot, ca.SX.zeros(nz))
+            row = sum(d.size for d in self._states)
+            offsets, start = {}, 0
+            for d in self._controls:
+                offsets[d.name] = start
+                start += d.size
+            for decl, lbv, ubv, name, _, mem, weights in self._rates:
+                memory += [(row + i, offsets[decl.name] + i) for i in range(decl.size)]
+                row += decl.size
+                path.append((decl.sym - mem.sym, lbv, ubv, weights, name))
 
         trajectory = ParameterTrajectory(tuple(
             (d.name, d.size, "constant", readonly(d.value)) if d.trajectory is None
@@ -1009,19 +1092,19 @@ class Ocp:
                 trajectory.at(k * self._dt)
         except TrajectoryError as exc:
             raise OcpError(str(exc)) from None
-        model = ModelSpec(states=variables(self._states), controls=variables(self._controls),
-                          parameters=variables(self._params), xdot=self._xdot,
+        model = ModelSpec(states=variables(states), controls=variables(self._controls),
+                          parameters=variables(self._params), xdot=xdot,
                           integrator=copy.copy(self._integrator), p_default=readonly(p_default),
-                          p_trajectory=trajectory)
+                          p_trajectory=trajectory, memory=tuple(memory))
         cost = CostSpec(
             stage_terms=tuple(self._stage_costs),
             stage_least_squares=tuple(LeastSquares(r, readonly(W)) for r, W in self._stage_ls),
             terminal_terms=tuple(self._term_costs),
             terminal_least_squares=tuple(LeastSquares(r, readonly(W)) for r, W in self._term_ls))
         constraints = ConstraintSpec(
-            lbx=bounds(self._states, "lb"), ubx=bounds(self._states, "ub"),
+            lbx=bounds(states, "lb"), ubx=bounds(states, "ub"),
             lbu=bounds(self._controls, "lb"), ubu=bounds(self._controls, "ub"),
-            path=tuple(Rows(g, readonly(lb), readonly(ub), sw, nm) for g, lb, ub, sw, nm in self._path),
+            path=tuple(Rows(g, readonly(lb), readonly(ub), sw, nm) for g, lb, ub, sw, nm in path),
             terminal=tuple(Rows(r, readonly(lb), readonly(ub), sw, nm) for r, lb, ub, sw, nm in self._term_con),
             soft_x=readonly(soft_x))
         return OcpSpec(name=self.name, model=model, cost=cost, constraints=constraints,

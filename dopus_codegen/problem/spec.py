@@ -121,6 +121,10 @@ class ModelSpec:
     integrator: Any
     p_default: np.ndarray
     p_trajectory: Optional[ParameterTrajectory] = None
+    #: memory states of rate constraints (``Ocp.rate_constraint``): ``(state row, control
+    #: row)`` pairs; the state carries the control of the previous interval (x+ = u there,
+    #: not integrated), at x_0 the last applied control, which the runtime keeps
+    memory: Tuple[Tuple[int, int], ...] = ()
 
     @property
     def x(self) -> ca.SX:

@@ -340,6 +340,9 @@ class ReferenceDopus:
         self._reset_health(u)
         self._init_finish(x, u, lam, mu_g, mu_b, g.mu_bN.copy(), g.mu_r.copy(), g.nu.copy(), "init", "at the guess")
         self._xhat_last = xhat0.copy()
+        self._u_applied = np.zeros(self.n_u)
+        for row, ctrl in getattr(self.disc.spec.model, "memory", ()) or ():
+            self._u_applied[ctrl] = xhat0[row]
         self._reset_health(self.u)
         self.kkt_proxy = self._kkt_proxy_eval()
         self.kkt_proxy_ref = self.kkt_proxy
@@ -465,7 +468,29 @@ class ReferenceDopus:
         return getattr(self, "_infeasible_row", None)
 
     # ------------------------------------------------------------------ feedback
+    def _with_memory(self, xhat0):
+        """The measured state with the memory entries of the rate constraints set to the last
+        applied control (docs/algorithm.md section 4, "Rate constraints")."""
+        memory = getattr(self.disc.spec.model, "memory", ()) or ()
+        if not memory or xhat0 is None or not self._initialised or self.mode != "receding":
+            return xhat0
+        x = np.array(xhat0, dtype=float).reshape(-1).copy()
+        if x.size != self.nx:
+            return xhat0
+        for row, ctrl in memory:
+            x[row] = self._u_applied[ctrl]
+        return x
+
     def feedback(self, xhat0) -> np.ndarray:
+        """The feedback step; with rate constraints the memory entries of ``xhat0`` are the
+        last applied control, which the backend keeps."""
+        try:
+            return self._feedback_step(self._with_memory(xhat0))
+        finally:
+            if self._initialised and getattr(self, "u0", None) is not None:
+                self._u_applied = np.array(self.u0, dtype=float).copy()
+
+    def _feedback_step(self, xhat0) -> np.ndarray:
         """Solve the QP for ``xhat0``, store ``domega`` per slot, full step; return ``u_0``."""
         t0 = time.perf_counter()
         xhat0 = np.array(xhat0, dtype=float).reshape(-1)
@@ -1126,6 +1151,7 @@ class ReferenceDopus:
     def kkt(self, xhat0) -> dict:
         """Section 6 at the current iterate for initial state ``xhat0``."""
         self._need_init()
+        xhat0 = self._with_memory(xhat0)
         return kkt_measure(self.disc, xhat0, self.x, self.u, self.lam, self.mu_g, self.mu_b,
                            self.mu_bN, self.mu_r, self.nu, self.p)
 

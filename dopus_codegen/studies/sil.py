@@ -302,6 +302,7 @@ class _Loop:
         # parameters that move (a trajectory in the OCP file): the instant's values for the
         # plant and the signals, and the new last node pushed before every prepare
         self.moving = moving
+        self.memory = tuple(getattr(disc.spec.model, "memory", ()) or ())
         self.p_fixed, self.plant_p_fixed = self.p, self.plant_p
         self.nx, self.dt = int(disc.nx), float(disc.dt)
         self.lbu = np.asarray(disc.lbu, dtype=float).reshape(-1)
@@ -352,6 +353,8 @@ class _Loop:
         snap_fb = dict(getattr(self.ctrl, "timings", {}) or {})
         self.rec.measurement(t_i, xhat, u0, kkt, self.p)
         x = self.plant_interval(x, u0, t_i, (i + 1) * self.dt)
+        for row, ctrl in self.memory:    # rate constraints: the memory holds the applied control
+            x[row] = u0[ctrl]
         if self.moving:
             status = self.push((i + 1) * self.dt + int(self.disc.N) * self.dt, status)
         status, prepared, t_pr = self.prepare(status)

@@ -33,7 +33,10 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
 int robot_arm_init_nominal(robot_arm_solver *s, const robot_arm_real *xhat0);
 
 /* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
- * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: ROBOT_ARM_ERR_NONFINITE_INPUT,
+ * step and write u_0 (nu) into u0 (may be NULL). With rate constraints, in receding mode,
+ * the entries of xhat0 that are memory states (the last applied control, ROBOT_ARM_NMEM of them)
+ * are not read: the runtime fills them with the control it returned last (at the first
+ * feedback: the ones given to init); the same holds for robot_arm_kkt_eval. Non-finite xhat0: ROBOT_ARM_ERR_NONFINITE_INPUT,
  * nothing changes. QP failure: ROBOT_ARM_ERR_QP, no step (robot_arm_get_qp_status tells why). */
 int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last

@@ -150,6 +150,8 @@ const char *const robot_arm_row_names_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {""};
 const char *const robot_arm_row_names_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {""};
 const char *const robot_arm_row_names_req[ROBOT_ARM_DIM(ROBOT_ARM_NE)] = {"terminal constraint 0 row 0", "terminal constraint 0 row 1"};
 
+const int robot_arm_memory_state[ROBOT_ARM_DIM(ROBOT_ARM_NMEM)] = {0};
+const int robot_arm_memory_control[ROBOT_ARM_DIM(ROBOT_ARM_NMEM)] = {0};
 const int robot_arm_default_M = 1;
 const int robot_arm_default_hessian = 0;
 const int robot_arm_default_regularization = 0;

@@ -29,6 +29,10 @@ extern const char *const robot_arm_row_names_u[ROBOT_ARM_NU];
 extern const char *const robot_arm_row_names_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
 extern const char *const robot_arm_row_names_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
 extern const char *const robot_arm_row_names_req[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
+/* the memory states of rate constraints: state row robot_arm_memory_state[i] carries the last
+ * applied value of control robot_arm_memory_control[i] */
+extern const int robot_arm_memory_state[ROBOT_ARM_DIM(ROBOT_ARM_NMEM)];
+extern const int robot_arm_memory_control[ROBOT_ARM_DIM(ROBOT_ARM_NMEM)];
 extern const int robot_arm_default_M;
 extern const int robot_arm_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int robot_arm_default_regularization; /* 0 none, 1 project, 2 mirror */

@@ -868,6 +868,13 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->xhat0[i] = xhat0 ? xhat0[i] : robot_arm_x0_default[i];
     }
+    for (i = 0; i < ROBOT_ARM_NU; ++i) {
+        s->u_applied[i] = ROBOT_ARM_R(0.0);
+    }
+    for (i = 0; i < ROBOT_ARM_NMEM; ++i) {
+        /* the last applied control before the first feedback: the memory entries of xhat0 */
+        s->u_applied[robot_arm_memory_control[i]] = s->xhat0[robot_arm_memory_state[i]];
+    }
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
             s->x[k][i] = x ? x[k * ROBOT_ARM_NX + i] : robot_arm_guess_x[k][i];
@@ -1178,13 +1185,43 @@ static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *
            robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn) && robot_arm_lai_vec_finite(1, &l);
 }
 
+static int robot_arm_feedback_step(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0);
+
+/* The memory states of rate constraints (algorithm.md section 4, "Rate constraints"): in
+ * receding mode the measured state with their entries set to the last applied control (a
+ * fixed-xhat0 study reads them as given: nothing is applied there). */
+static const robot_arm_real *robot_arm_with_memory(const robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *xm)
+{
+    int i;
+    if (ROBOT_ARM_NMEM == 0 || xhat0 == 0 || !s->initialized || s->mode != ROBOT_ARM_MODE_RECEDING) {
+        return xhat0;
+    }
+    robot_arm_copy(xm, xhat0, ROBOT_ARM_NX);
+    for (i = 0; i < ROBOT_ARM_NMEM; ++i) {
+        xm[robot_arm_memory_state[i]] = s->u_applied[robot_arm_memory_control[i]];
+    }
+    return xm;
+}
+
 int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
+{
+    robot_arm_real xm[ROBOT_ARM_NX];
+    int rc;
+    robot_arm_ensure_setup(s);
+    rc = robot_arm_feedback_step(s, robot_arm_with_memory(s, xhat0, xm), u0);
+    if (s->initialized) {
+        /* the control returned is the one applied: the next stage-0 rate row is against it */
+        robot_arm_copy(s->u_applied, s->u0_out, ROBOT_ARM_NU);
+    }
+    return rc;
+}
+
+static int robot_arm_feedback_step(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
     robot_arm_real xhat_prev[ROBOT_ARM_NX];
     double t0;
     int rc, qs, retries;
 
-    robot_arm_ensure_setup(s);
     s->flags = 0;
     rc = robot_arm_feedback_admit(s, xhat0, u0);
     if (rc != ROBOT_ARM_OK) {
@@ -1685,10 +1722,13 @@ int robot_arm_kkt_eval(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
     double t0;
     int i, rc;
 
+    robot_arm_real xm[ROBOT_ARM_NX];
+
     robot_arm_ensure_setup(s);
     if (!s->initialized) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
     }
+    xhat0 = robot_arm_with_memory(s, xhat0, xm);
     if (xhat0 && !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }

@@ -33,7 +33,10 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
 int unicycle_init_nominal(unicycle_solver *s, const unicycle_real *xhat0);
 
 /* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
- * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: UNICYCLE_ERR_NONFINITE_INPUT,
+ * step and write u_0 (nu) into u0 (may be NULL). With rate constraints, in receding mode,
+ * the entries of xhat0 that are memory states (the last applied control, UNICYCLE_NMEM of them)
+ * are not read: the runtime fills them with the control it returned last (at the first
+ * feedback: the ones given to init); the same holds for unicycle_kkt_eval. Non-finite xhat0: UNICYCLE_ERR_NONFINITE_INPUT,
  * nothing changes. QP failure: UNICYCLE_ERR_QP, no step (unicycle_get_qp_status tells why). */
 int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last

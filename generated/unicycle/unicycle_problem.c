@@ -90,6 +90,8 @@ const char *const unicycle_row_names_g[UNICYCLE_DIM(UNICYCLE_NG)] = {"path const
 const char *const unicycle_row_names_r[UNICYCLE_DIM(UNICYCLE_NR)] = {""};
 const char *const unicycle_row_names_req[UNICYCLE_DIM(UNICYCLE_NE)] = {""};
 
+const int unicycle_memory_state[UNICYCLE_DIM(UNICYCLE_NMEM)] = {0};
+const int unicycle_memory_control[UNICYCLE_DIM(UNICYCLE_NMEM)] = {0};
 const int unicycle_default_M = 1;
 const int unicycle_default_hessian = 0;
 const int unicycle_default_regularization = 0;

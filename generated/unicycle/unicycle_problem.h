@@ -29,6 +29,10 @@ extern const char *const unicycle_row_names_u[UNICYCLE_NU];
 extern const char *const unicycle_row_names_g[UNICYCLE_DIM(UNICYCLE_NG)];
 extern const char *const unicycle_row_names_r[UNICYCLE_DIM(UNICYCLE_NR)];
 extern const char *const unicycle_row_names_req[UNICYCLE_DIM(UNICYCLE_NE)];
+/* the memory states of rate constraints: state row unicycle_memory_state[i] carries the last
+ * applied value of control unicycle_memory_control[i] */
+extern const int unicycle_memory_state[UNICYCLE_DIM(UNICYCLE_NMEM)];
+extern const int unicycle_memory_control[UNICYCLE_DIM(UNICYCLE_NMEM)];
 extern const int unicycle_default_M;
 extern const int unicycle_default_hessian;        /* 0 exact, 1 gauss-newton */
 extern const int unicycle_default_regularization; /* 0 none, 1 project, 2 mirror */

@@ -36,6 +36,8 @@
 #define UNICYCLE_HAS_NOMINAL 1
 /* 1 if a parameter declares a trajectory: unicycle_p_schedule holds the parameters at
  * t = j dt for the standalone main's closed loop */
+/* memory states of rate constraints (the last applied control, filled by the runtime) */
+#define UNICYCLE_NMEM 0
 #define UNICYCLE_HAS_P_SCHEDULE 0
 #define UNICYCLE_P_SCHEDULE_NODES 1
 

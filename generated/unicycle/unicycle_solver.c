@@ -868,6 +868,13 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->xhat0[i] = xhat0 ? xhat0[i] : unicycle_x0_default[i];
     }
+    for (i = 0; i < UNICYCLE_NU; ++i) {
+        s->u_applied[i] = UNICYCLE_R(0.0);
+    }
+    for (i = 0; i < UNICYCLE_NMEM; ++i) {
+        /* the last applied control before the first feedback: the memory entries of xhat0 */
+        s->u_applied[unicycle_memory_control[i]] = s->xhat0[unicycle_memory_state[i]];
+    }
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
             s->x[k][i] = x ? x[k * UNICYCLE_NX + i] : unicycle_guess_x[k][i];
@@ -1178,13 +1185,43 @@ static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
            unicycle_lai_vec_finite(UNICYCLE_NX, xn) && unicycle_lai_vec_finite(1, &l);
 }
 
+static int unicycle_feedback_step(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0);
+
+/* The memory states of rate constraints (algorithm.md section 4, "Rate constraints"): in
+ * receding mode the measured state with their entries set to the last applied control (a
+ * fixed-xhat0 study reads them as given: nothing is applied there). */
+static const unicycle_real *unicycle_with_memory(const unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *xm)
+{
+    int i;
+    if (UNICYCLE_NMEM == 0 || xhat0 == 0 || !s->initialized || s->mode != UNICYCLE_MODE_RECEDING) {
+        return xhat0;
+    }
+    unicycle_copy(xm, xhat0, UNICYCLE_NX);
+    for (i = 0; i < UNICYCLE_NMEM; ++i) {
+        xm[unicycle_memory_state[i]] = s->u_applied[unicycle_memory_control[i]];
+    }
+    return xm;
+}
+
 int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
+{
+    unicycle_real xm[UNICYCLE_NX];
+    int rc;
+    unicycle_ensure_setup(s);
+    rc = unicycle_feedback_step(s, unicycle_with_memory(s, xhat0, xm), u0);
+    if (s->initialized) {
+        /* the control returned is the one applied: the next stage-0 rate row is against it */
+        unicycle_copy(s->u_applied, s->u0_out, UNICYCLE_NU);
+    }
+    return rc;
+}
+
+static int unicycle_feedback_step(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
     unicycle_real xhat_prev[UNICYCLE_NX];
     double t0;
     int rc, qs, retries;
 
-    unicycle_ensure_setup(s);
     s->flags = 0;
     rc = unicycle_feedback_admit(s, xhat0, u0);
     if (rc != UNICYCLE_OK) {
@@ -1685,10 +1722,13 @@ int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
     double t0;
     int i, rc;
 
+    unicycle_real xm[UNICYCLE_NX];
+
     unicycle_ensure_setup(s);
     if (!s->initialized) {
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
     }
+    xhat0 = unicycle_with_memory(s, xhat0, xm);
     if (xhat0 && !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }

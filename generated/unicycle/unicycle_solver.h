@@ -69,7 +69,10 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
 int unicycle_init_nominal(unicycle_solver *s, const unicycle_real *xhat0);
 
 /* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
- * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: UNICYCLE_ERR_NONFINITE_INPUT,
+ * step and write u_0 (nu) into u0 (may be NULL). With rate constraints, in receding mode,
+ * the entries of xhat0 that are memory states (the last applied control, UNICYCLE_NMEM of them)
+ * are not read: the runtime fills them with the control it returned last (at the first
+ * feedback: the ones given to init); the same holds for unicycle_kkt_eval. Non-finite xhat0: UNICYCLE_ERR_NONFINITE_INPUT,
  * nothing changes. QP failure: UNICYCLE_ERR_QP, no step (unicycle_get_qp_status tells why). */
 int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
@@ -448,6 +451,8 @@ struct unicycle_solver {
     int plan_age;                         /* receding shifts since the last good plan */
     unicycle_real plan_u[UNICYCLE_N][UNICYCLE_NU]; /* controls of the last good plan */
     unicycle_real u0_out[UNICYCLE_NU];          /* the control returned by the last feedback */
+    unicycle_real u_applied[UNICYCLE_NU];       /* the last applied control (rate constraints: the
+                                             memory entries of the measured state) */
     unicycle_real scale_x[UNICYCLE_NX];
     unicycle_real scale_u[UNICYCLE_NU];
     unicycle_real kkt_proxy;
