@@ -117,6 +117,16 @@ class Ours:
         ptrs = [self.ffi.NULL if a is None else self._p(a) for a in arrays]
         return int(self.c("init")(s, *ptrs))
 
+    def first_horizon(self, s):
+        """A moving reference: end the run and write the schedule's first horizon (before init)."""
+        self.c("stop")(s)
+        self._first = np.ascontiguousarray(self.schedule[:self.N + 1])
+        self.c("set_parameters")(s, self._p(self._first))
+
+    def push_parameters(self, s, j):
+        """Push the schedule's row ``j`` as the next horizon's last node."""
+        self.c("push_parameters")(s, self._p(self.schedule[j]))
+
     def iterate(self, s):
         """The current primal-dual iterate as a dict of arrays."""
         N, nx, nu = self.N, self.nx, self.nu
@@ -287,16 +297,13 @@ def make_ours(ours: Ours, M, mode, settings, label):
     def prepare():
         if ours.schedule is not None and int(mode) != MODE_FIXED:
             instant[0] += 1
-            ours.c("push_parameters")(s, ours._p(ours.schedule[instant[0] + ours.N]))
+            ours.push_parameters(s, instant[0] + ours.N)
         return int(ours.c("prepare")(s)) == 0
 
     def start(xhat0, guess):
         if ours.schedule is not None:
             instant[0] = 0
-            ours.c("stop")(s)
-            first = np.ascontiguousarray(ours.schedule[:ours.N + 1])
-            ours._keep_p = first
-            ours.c("set_parameters")(s, ours._p(first))
+            ours.first_horizon(s)
         st = ours.init(s, xhat0, guess)
         if st != 0:
             raise RuntimeError(f"{label}: {ours.name}_init returned status {st}")
