@@ -113,8 +113,10 @@ def _setting_option(name: str, note: str = ""):
     flag = "--" + name.replace("_", "-")
     kind = settings.kind(name)
     default = settings.DEFAULTS.get(name)
-    if name in settings.SOLVER_SETTINGS:
+    if name in settings.FILE_SETTINGS:
         where = _FROM_FILE.format(default if not isinstance(default, float) else f"{default:g}")
+    elif name == "qp_tol":
+        where = "[default: " + ", ".join(f"{v:g} in {r}" for r, v in settings.QP_TOL_DEFAULT.items()) + "]"
     elif default is None:
         where = "[default: the QP solver's own]"
     else:

@@ -112,7 +112,7 @@ def _option(options: Any, key: str, default: Any) -> Any:
         return default
     if isinstance(options, dict):
         return options.get(key, default)
-    return getattr(options, key, default)
+    return options.as_dict().get(key, default)   # OptionsSpec
 
 
 def _attr(disc: Any, key: str) -> Any:
@@ -407,6 +407,14 @@ def _default_parameters(disc: Any, s: Dict[str, int]) -> np.ndarray:
     return arr[0]
 
 
+def _settings_of(disc: Any) -> "settings.Settings":
+    """The solver settings of the OCP file's options(...)."""
+    options = disc.spec.options
+    if isinstance(options, dict):
+        return settings.Settings.of(options)
+    return options.settings
+
+
 def _code(setting: str, options: Any) -> int:
     try:
         return settings.code(setting, _option(options, setting, settings.DEFAULTS[setting]))
@@ -454,8 +462,10 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
         "default_lm": c_double(settings.lm_code(_option(options, "lm", settings.DEFAULTS["lm"])), "lm"),
         "has_nominal": nominal is not None,
     }
-    if not 0 <= ctx["default_M"] <= N - 1:
-        raise CodegenError(f"option M={ctx['default_M']} is outside 0..N-1 = 0..{N - 1}")
+    try:
+        settings.stages(ctx["default_M"], N, strict=True)
+    except settings.SettingError as exc:
+        raise CodegenError(f"option {exc}") from None
     if nominal is not None:
         dim = lambda n: max(n, 1)  # noqa: E731  (DOPUS_DIM of the header)
         ctx.update({
@@ -614,6 +624,9 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
         "has_gn": bool(has_gn),
         "has_nominal": bool(ctx["has_nominal"]),
         "real": real,
+        # the solver settings of the OCP file's options(...): the generated defaults, which a
+        # handle opened on this folder starts from (Solver.load)
+        "settings": _settings_of(disc).as_dict(),
         "state_names": list(disc.data.state_names),
         "control_names": list(disc.data.control_names),
         "files": sorted(list(files) + [meta_file]),

@@ -149,7 +149,7 @@ def _settings_codes(values: dict) -> dict:
             "regularization": st.code("regularization", values["regularization"]),
             "reg_eps": float(values["reg_eps"]), "cost_hessian": st.code("cost_hessian", values["cost_hessian"]),
             "lm": values["lm"] if values["lm"] == st.LM_AUTO else float(values["lm"]),
-            "qp_tol": float(st.DEFAULTS["qp_tol"])}
+            "qp_tol": st.qp_tol_default("double")}
 
 
 def _kkt_study(prob, Ms, values, iters, echo) -> dict:
@@ -164,9 +164,8 @@ def _kkt_study(prob, Ms, values, iters, echo) -> dict:
     else:
         start = StartPoint("warm", np.array(disc.x0, float), prob["nominal"], xd)
     echo(f"{disc.name}: fixed-xhat_0 study ({start.label} start), {len(Ms)} x {iters} iterations ...")
-    study = run_study(disc, Ms, iters, start, hessian=values["hessian"], regularization=values["regularization"],
-                      reg_eps=values["reg_eps"], backend_factory=backend_factory("c"), backend_name="c",
-                      cost_hessian=values["cost_hessian"], lm=values["lm"])
+    study = run_study(disc, Ms, iters, start, st.Settings.of(values), backend_factory=backend_factory("c"),
+                      backend_name="c")
     rows = []
     for r in study["runs"]:
         rows.append({"M": r["M"], "label": _label(r["M"], disc.N), "iters_to_1e-6": iterations_to(r["kkt"], 1e-6),

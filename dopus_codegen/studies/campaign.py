@@ -178,14 +178,13 @@ def _worker_state(job: Job):
 def _backend(job: Job, disc):
     from .sil import make_backend
 
-    kw = dict(job.solver)
+    s = settings.Settings.of(job.solver)
     if job.backend == "c":
-        from ..runtime.solver import CSolver, build_for
+        from ..runtime.solver import Solver, build_for
 
         lib = Path(job.lib_dir) if job.lib_dir and Path(job.lib_dir).is_dir() else build_for(disc)
-        kw = {k: v for k, v in kw.items() if v is not None}
-        return CSolver(disc, lib_dir=lib, mode="receding", **kw)
-    return make_backend(disc, job.backend, **kw)
+        return Solver(disc, s.replace(mode="receding"), lib_dir=lib)
+    return make_backend(disc, job.backend, s)
 
 
 def run_one(job: Job, index: int, seed: int) -> dict:
@@ -199,7 +198,7 @@ def run_one(job: Job, index: int, seed: int) -> dict:
     t0 = time.perf_counter()
     run = run_closed_loop(disc, backend=job.backend, backend_obj=st["backend"], guess=job.guess,
                           duration=job.duration, xhat0=d["x0"], events=campaign_events(d),
-                          plant=campaign_plant(disc, d), M=job.solver["M"], label=f"run {index}")
+                          plant=campaign_plant(disc, d), settings=settings.Settings.of(job.solver), label=f"run {index}")
     wall = time.perf_counter() - t0
     return condense(run, d, index, seed, job.on_path, wall)
 
@@ -379,8 +378,8 @@ class _Progress:
 def _resolve(ocp, cli: dict):
     """Solver and campaign settings: the flags, else the OCP file, else the defaults."""
     declared = ocp.declared_options()
-    names = settings.SOLVER_SETTINGS + ("qp_tol", "qp_max_iter")
-    solver, s_src = settings.resolve(declared, {k: cli.get(k) for k in names}, names=names)
+    s, s_src = settings.Settings.resolve(declared, {k: cli.get(k) for k in settings.SOLVER_SETTINGS})
+    solver = {k: v for k, v in s.as_dict().items() if k != "mode"}
     spec = ocp.validate()
     sc = spec.scenario.closed_loop
     if sc is None:
@@ -688,7 +687,7 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
             dr = draw(disc.scenario.closed_loop, job.mismatch, r["run"], r["seed"])
             runs.append(run_closed_loop(disc, backend=job.backend, backend_obj=st["backend"], guess=job.guess,
                                         duration=job.duration, xhat0=dr["x0"], events=campaign_events(dr),
-                                        plant=campaign_plant(disc, dr), M=job.solver["M"],
+                                        plant=campaign_plant(disc, dr), settings=settings.Settings.of(job.solver),
                                         label=f"run {r['run']}"))
         title = f"{rep['ocp']}: the {len(runs)} worst runs of the campaign"
         for name, fn in (("campaign_worst_signals.png", plot_signals), ("campaign_worst_plane.png", plot_plane)):
