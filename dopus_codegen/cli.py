@@ -67,7 +67,7 @@ def _known_errors() -> tuple:
     """Errors that describe bad input or the environment (their message is the report)."""
     from .codegen.build import BuildError
     from .codegen.firmware import FirmwareError
-    from .codegen.generate import CodegenError
+    from .codegen.folder import CodegenError
     from .errors import DopusError
     from .problem.ocp import OcpError
     from .settings import SettingError

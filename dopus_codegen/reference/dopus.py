@@ -200,6 +200,13 @@ class ReferenceDopus:
         return self._fns()[2]
 
     # ------------------------------------------------------------------ settings
+    @property
+    def settings(self) -> Settings:
+        """The settings it runs with (``M`` at most N-1)."""
+        return Settings(M=self.M, hessian=self.hessian, regularization=self.regularization, reg_eps=self.reg_eps,
+                        cost_hessian=self.cost_hessian, lm="auto" if self.lm_auto else self.lm, qp_tol=self.qp_tol,
+                        qp_max_iter=self.qp_max_iter, mode=self.mode)
+
     def set_M(self, M: int) -> None:
         """Values above N-1 mean the full RTI (N-1), as in the C runtime
         (:func:`dopus_codegen.settings.stages`)."""

@@ -113,7 +113,7 @@ def load_library(folder) -> tuple:
     import cffi
 
     from ..codegen.build import build
-    from ..codegen.generate import read_meta
+    from ..codegen.folder import read_meta
 
     folder = Path(folder)
     res = build(folder)

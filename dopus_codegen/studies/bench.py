@@ -82,12 +82,10 @@ def parse_n_list(text: str) -> list:
 def _resolve_Ms(m_list, N: int) -> list:
     Ms = []
     for m in m_list:
-        if m == "full":
-            M = N - 1
-        elif m > N - 1:
-            raise BenchError(f"--M: M = {m} exceeds N-1 = {N - 1} (use 'full' for the full RTI)")
-        else:
-            M = int(m)
+        try:
+            M = st.stages(m, N, strict=True)
+        except st.SettingError as exc:
+            raise BenchError(f"--M: {exc}") from None
         if M not in Ms:
             Ms.append(M)
     if N - 1 not in Ms:

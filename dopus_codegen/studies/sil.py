@@ -157,13 +157,14 @@ def run_closed_loop(disc, backend: str = "c", settings=None, duration: float | N
     rec.snap = dict(getattr(backend_obj, "timings", {}) or {})
     loop = _Loop(disc, backend_obj, plant, events, p, rec, plant_p=plant_p)
     loop.run(x, n_steps, progress, label)
+    used = getattr(backend_obj, "settings", s)     # the settings the backend runs with
     settings_rec = {"M": M_eff, "N": int(disc.N), "dt": float(disc.dt), "duration": n_steps * float(disc.dt),
-                    "hessian": s.hessian, "regularization": s.regularization, "reg_eps": float(s.reg_eps),
+                    "hessian": used.hessian, "regularization": used.regularization, "reg_eps": float(used.reg_eps),
                     "backend": backend, "real": str(getattr(backend_obj, "real", "double")),
-                    "cost_hessian": str(getattr(backend_obj, "cost_hessian", s.cost_hessian)),
-                    "lm": float(getattr(backend_obj, "lm", 0.0 if isinstance(s.lm, str) else s.lm)),
-                    "lm_setting": s.lm if isinstance(s.lm, str) else float(s.lm),
-                    "qp_tol": float(getattr(backend_obj, "qp_tol", s.qp_tol_of())),
+                    "cost_hessian": used.cost_hessian,
+                    "lm": float(getattr(backend_obj, "lm", 0.0 if isinstance(used.lm, str) else used.lm)),
+                    "lm_setting": used.lm if isinstance(used.lm, str) else float(used.lm),
+                    "qp_tol": float(used.qp_tol_of()),
                     "qp_max_iter": s.qp_max_iter,
                     "plant": "CVODES (Adams, reltol = abstol = 1e-10)",
                     "lbu": list(loop.lbu), "ubu": list(loop.ubu),
