@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dopus_codegen.codegen import firmware as fwm
+from dopus_lab import firmware as fwm
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "examples" / "robot_arm.py"

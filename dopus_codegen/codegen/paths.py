@@ -31,7 +31,3 @@ def runtime_c_dir() -> Path:
     """Folder holding the hand-written C runtime sources."""
     return _package_dir("dopus_codegen.runtime_c", "runtime_c")
 
-
-def firmware_dir() -> Path:
-    """Folder holding the bare-metal target (start-up code, linker script, the program)."""
-    return _package_dir("dopus_codegen.firmware_c", "firmware")

@@ -303,7 +303,8 @@ def connect(workers: int | None, scheduler: str | None, timeout: float = 5.0):
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - a dependency of the package
-        raise CampaignError(f"dask.distributed is not installed ({exc}); pip install 'dask[distributed]'") from None
+        raise CampaignError(f"dask.distributed is not installed ({exc}): pip install 'dopus-codegen[campaign]', "
+                            "or run the campaign in this process with --workers 0") from None
     if scheduler:
         try:
             return Client(scheduler, timeout=f"{timeout}s"), None
