@@ -152,8 +152,7 @@ def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, r
 @click.option("--plot-dir", type=click.Path(file_okay=False), default=None, help="Write the PNG figures here.")
 @click.option("--compare", type=click.Choice(["none", "full"]), default="none", show_default=True,
               help="full: also run the full RTI (M = N-1) on the same scenario.")
-@_solver_options("0: the paper's literal QP; keeps the fixed point, see README, Closed loop; the robot arm "
-                 "declares 1e-4")
+@_solver_options("0: the paper's literal QP; keeps the fixed point, see docs/results.md, Closed loop.")
 @_real_option("The closed loop runs the solver generated in that type (float: see what single precision "
               "costs); the default --qp-tol follows it.")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)

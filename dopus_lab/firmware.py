@@ -377,7 +377,7 @@ def _loop_deviation(run: Dict[str, Any], ref: Dict[str, Any]) -> float:
     return max(float(np.max(np.abs(np.subtract(a["xhat"], b["xhat"])))) for a, b in zip(run["loop"], ref["loop"]))
 
 
-# Tolerances of the comparisons with the host build (docs in README "Firmware").
+# Tolerances of the comparisons with the host build (docs/results.md, "The firmware report").
 TOL_DOUBLE = 1e-8     # relative; newlib's sin/cos differ from glibc's in the last bit
 KKT_FLOOR_DOUBLE = 1.0   # the KKT measure is a residual: its rounding error is absolute
 

@@ -425,25 +425,23 @@ def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x
     """Each runner in its own closed loop against ``plant(x, u) -> x+``, alternating one
     sampling step of each. ``starts[label]`` (or ``starts`` itself, a dict with x, u, ...)
     is the guess of ``start(x0_init or x_start, guess)``. The first ``skip`` steps are not
-    recorded (the closed loop settles). A failed step applies the previous ``u_0``.
-    Returns per label: ``fail``, ``feedback``/``prepare`` (us per recorded step), ``phases``
-    (the solver's own timers, us), ``x`` (the plant states, steps+1 rows)."""
+    recorded (the closed loop settles). Every step applies the control the solver returned,
+    whatever its status (the closed-loop instant of dopus_codegen/studies/loops.py: ours
+    returns its safe control after a failure; a step of acados that fails counts in ``fail``
+    and a plant that diverges on its control is reset). Returns per label: ``fail``,
+    ``feedback``/``prepare`` (us per recorded step), ``phases`` (the solver's own timers, us),
+    ``x`` (the plant states, steps+1 rows)."""
     out = {r.label: _new_record() for r in runners}
     xs = {r.label: np.array(x_start, float) for r in runners}
-    u_last = {}
     for r in runners:
         guess = _guess_for(starts, r.label)
         r.start(np.array(x_start if x0_init is None else x0_init, float), guess)
-        u_last[r.label] = np.array(guess["u"][0], float)
         out[r.label]["x"] = [xs[r.label].tolist()]
     total = steps + skip
     for i in range(total):
         for r in runners:
             rec = out[r.label]
-            u, failed = _step(r, xs[r.label], rec, i >= skip)
-            if failed:
-                u = u_last[r.label]
-            u_last[r.label] = np.array(u, float)
+            u, _failed = _step(r, xs[r.label], rec, i >= skip)
             xn = plant(xs[r.label], u)
             if not (np.all(np.isfinite(xn)) and np.abs(xn).max() < 1e8):
                 rec["diverged_at"] = rec.get("diverged_at", i)

@@ -53,7 +53,7 @@ def _run_installed(target: Path, code: str, cwd: Path) -> str:
 def test_installed_package_finds_its_data(installed, tmp_path):
     out = _run_installed(
         installed,
-        "import dopus_codegen, dopus_codegen.codegen.paths as p;"
+        "import dopus_codegen, dopus_codegen.paths as p;"
         "print(dopus_codegen.__file__); print(p.templates_dir()); print(p.runtime_c_dir())",
         tmp_path,
     )

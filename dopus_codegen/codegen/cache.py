@@ -28,7 +28,7 @@ import numpy as np
 
 from .. import __version__
 from .folder import FUNCTION_SLOTS
-from .paths import runtime_c_dir, templates_dir
+from ..paths import runtime_c_dir, templates_dir
 
 __all__ = ["cache_root", "problem_hash", "object_key", "cached_object", "store_object"]
 

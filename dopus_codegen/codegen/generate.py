@@ -34,7 +34,7 @@ from ..cnames import identifier_problem, rename_placeholder
 from . import flags
 from .flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
 from .folder import FUNCTION_SLOTS, CodegenError, find_meta, read_meta  # noqa: F401 - re-exported
-from .paths import runtime_c_dir, templates_dir
+from ..paths import runtime_c_dir, templates_dir
 
 
 

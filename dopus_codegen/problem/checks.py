@@ -20,7 +20,7 @@ from typing import List, Optional, Tuple
 import casadi as ca
 import numpy as np
 
-from .ocp import OcpError
+from .spec import OcpError
 
 __all__ = ["NonSmoothWarning", "stage0_violations", "check_initial_state", "nonsmooth_terms", "warn_nonsmooth",
            "describe_qp_row"]

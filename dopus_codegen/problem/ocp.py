@@ -54,17 +54,13 @@ import numpy as np
 
 from ..cnames import identifier_problem
 from .spec import (CampaignSpec, ClosedLoopSpec, ConstraintSpec, CostSpec, GuessSpec, HorizonSpec, LeastSquares,
-                   ModelSpec, OcpSpec, OptionsSpec, Rows, ScenarioPart, Variable, readonly)
+                   ModelSpec, OcpError, OcpSpec, OptionsSpec, Rows, ScenarioPart, Variable, readonly)
 
 __all__ = [
     "OcpError", "Integrator", "RK4", "GaussLegendre", "RadauIIA", "Event", "Pushes", "OnPath", "Guess", "ScenarioSpec",
     "Ocp", "load_ocp",
 ]
 
-
-
-class OcpError(ValueError):
-    """A mistake in the OCP description; the message names the offending item."""
 
 
 # --------------------------------------------------------------------------- integrators

@@ -25,6 +25,10 @@ import numpy as np
 
 from ..settings import DEFAULTS, FILE_SETTINGS, Settings
 
+
+class OcpError(ValueError):
+    """A mistake in the OCP description; the message names the offending item."""
+
 __all__ = [
     "readonly", "Variable", "ModelSpec", "LeastSquares", "CostSpec", "Rows", "ConstraintSpec",
     "HorizonSpec", "OptionsSpec", "GuessSpec", "ClosedLoopSpec", "CampaignSpec", "ScenarioPart", "OcpSpec",

@@ -12,9 +12,10 @@ instant ``t_i = i dt``::
                              interval split the step)
                       prepare()                      (timed)
 
-An instant whose feedback fails (QP failure, non-finite input) applies the first control of
-the current, already shifted plan, as a controller in the field would, and records the
-status; the loop goes on. A plant failure (CVODES cannot integrate, state not finite) ends
+Every instant applies the control the runtime returns, whatever the status
+(:mod:`.loops`: the one closed-loop instant of the package, the firmware's too): after a
+failed feedback (QP failure, non-finite input) that is the runtime's safe control; the
+status is recorded and the loop goes on. A plant failure (CVODES cannot integrate, state not finite) ends
 the run and is recorded in ``run["aborted"]``.
 
 A run is a plain JSON-ready dict (see :func:`run_closed_loop`); :func:`summarize` condenses it
@@ -32,6 +33,7 @@ import numpy as np
 
 from .. import settings
 from ..errors import DopusError
+from . import loops
 from .plant import Plant, PlantError
 from .records import json_ready
 
@@ -77,10 +79,6 @@ def _status_of(err) -> int:
     except (TypeError, ValueError):
         status = -1
     return status if status != 0 else -1
-
-
-def _is_dopus_error(err) -> bool:
-    return isinstance(err, DopusError)
 
 
 # --------------------------------------------------------------------------- scenario
@@ -344,22 +342,11 @@ class _Loop:
         return x
 
     def feedback(self, xhat):
-        """u0 of the controller (timed); a failed feedback applies the first control of the
-        current plan and records the status."""
-        status = 0
-        self.last_error = None
-        t0 = time.perf_counter()
-        try:
-            u0 = np.asarray(self.ctrl.feedback(xhat), dtype=float).reshape(-1)
-        except DopusError as err:
-            self.last_error = err
-            status = _status_of(err)
-            u0 = np.asarray(self.ctrl.u, dtype=float)[0].copy()
-        t_fb = time.perf_counter() - t0
-        if not np.all(np.isfinite(u0)):
-            u0 = np.clip(np.nan_to_num(np.asarray(self.ctrl.u, dtype=float)[0]), self.lbu, self.ubu)
-            status = status or -1
-        return u0, status, t_fb
+        """The control of the instant (timed): the runtime's returned control whatever the
+        status (:func:`.loops.feedback`); a failure is recorded, the loop goes on."""
+        fb = loops.feedback(self.ctrl, xhat)
+        self.last_error = fb.error
+        return fb.u0, fb.status, fb.seconds
 
     def _failure_text(self, xhat) -> str:
         """Why the feedback of an instant failed; for an infeasible QP, with the stage-0 rows
@@ -398,14 +385,8 @@ class _Loop:
         return self.plant.step(x, u0, self.plant_p, duration=t_next - t_cur)
 
     def prepare(self, status):
-        t0 = time.perf_counter()
-        prepared = True
-        try:
-            self.ctrl.prepare()
-        except DopusError as err:
-            status = status or _status_of(err)
-            prepared = False
-        return status, prepared, time.perf_counter() - t0
+        st, seconds = loops.prepare(self.ctrl)
+        return status or st, st == 0, seconds
 
 
 def _changed(before: dict, after: dict) -> dict:
@@ -612,7 +593,7 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
     check_initial_state(disc, x0, "the scenario's initial state")
     replay = {}
     if campaign_run is not None:
-        from .campaign import campaign_events, campaign_plant, draw
+        from .draws import campaign_events, campaign_plant, draw
 
         if spec.campaign is None:
             raise SilError(f"{ocp_file}: --campaign-run needs a campaign declared in the OCP file (ocp.campaign(...))")
