@@ -98,7 +98,7 @@ int dopus_kkt_measure(struct dopus_solver *s, const dopus_real *xhat0, dopus_rea
             eq = dopus_kkt_max(eq, dopus_fabs(s->x[k + 1][i] - phi[i]));
         }
         for (i = 0; i < DOPUS_NG; ++i) {
-            DOPUS_KKT_ROW(g[i], dopus_lg[i], dopus_ug[i], s->mu_g[k][i], &dopus_soft_g[0][i],
+            DOPUS_KKT_ROW(g[i], dopus_lg_k[k][i], dopus_ug_k[k][i], s->mu_g[k][i], &dopus_soft_g[0][i],
                           DOPUS_DIM(DOPUS_NG));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite

@@ -13,6 +13,9 @@
 extern const dopus_real dopus_lbx[DOPUS_NX], dopus_ubx[DOPUS_NX];
 extern const dopus_real dopus_lbu[DOPUS_NU], dopus_ubu[DOPUS_NU];
 extern const dopus_real dopus_lg[DOPUS_DIM(DOPUS_NG)], dopus_ug[DOPUS_DIM(DOPUS_NG)];
+/* the path-row bounds per stage: the declared ones where a row holds, infinite where the
+ * OCP leaves it out (path_constraint(stages=...)) */
+extern const dopus_real dopus_lg_k[DOPUS_N][DOPUS_DIM(DOPUS_NG)], dopus_ug_k[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
 extern const dopus_real dopus_lr[DOPUS_DIM(DOPUS_NR)], dopus_ur[DOPUS_DIM(DOPUS_NR)];
 /* the parameters of the first horizon (node k at time k dt; the same at every node unless
  * a parameter declares a trajectory) */

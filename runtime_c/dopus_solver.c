@@ -727,8 +727,8 @@ static void dopus_assemble(dopus_solver *s)
             in->ubw[k][DOPUS_NX + i] = dopus_ubu[i] - s->u[k][i];
         }
         for (i = 0; i < DOPUS_NG; ++i) {
-            in->lg[k][i] = dopus_lg[i] - slot->g[i];
-            in->ug[k][i] = dopus_ug[i] - slot->g[i];
+            in->lg[k][i] = dopus_lg_k[k][i] - slot->g[i];
+            in->ug[k][i] = dopus_ug_k[k][i] - slot->g[i];
         }
     }
     in->HN = s->A_N;
@@ -1347,7 +1347,7 @@ static int dopus_stale_stage(const dopus_solver *s, int k)
         for (i = 0; i < DOPUS_NW && zero; ++i) {
             zero = slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] == DOPUS_R(0.0);
         }
-        if (zero && ((hard_lo && g[j] < dopus_lg[j]) || (hard_up && g[j] > dopus_ug[j]))) {
+        if (zero && ((hard_lo && g[j] < dopus_lg_k[k][j]) || (hard_up && g[j] > dopus_ug_k[k][j]))) {
             return 1;
         }
     }
@@ -1855,7 +1855,7 @@ int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
     } else if (k < DOPUS_N) {
         row->kind = DOPUS_ROW_PATH;
         row->index = j - DOPUS_NW;
-        row->bound = dopus_side_bound(dopus_lg, dopus_ug, row->index, side);
+        row->bound = dopus_side_bound(dopus_lg_k[k], dopus_ug_k[k], row->index, side);
     } else if (j < DOPUS_NX + DOPUS_NR) {
         row->kind = DOPUS_ROW_TERMINAL;
         row->index = j - DOPUS_NX;

@@ -150,3 +150,72 @@ def test_row_names_in_the_c_api_and_messages():
         assert ei.value.qp_status == qp_status_code("primal_infeasible")
         assert re.search(r"infeasible at stage 3: path constraint 'floor' >= lb 0\b", str(ei.value)), str(ei.value)
         backend.stop()
+
+
+@pytest.mark.parametrize("stages, message", [
+    ([N], rf"^path constraint 'wall': stage {N} is outside 0..N-1 = 0..{N - 1}$"),
+    ([], r"^path constraint 'wall': stages is empty \(leave it out for every stage\)$"),
+    ([1, 1], r"^path constraint 'wall': stage 1 given twice$"),
+    (["a"], r"^path constraint 'wall': stages must be integers, got 'a'$"),
+    (3, r"^path constraint 'wall': stages must be stage indices \(e.g. range\(5, 10\)\), got 3$"),
+])
+def test_bad_stages(stages, message):
+    o, x, v, u = _base()
+    with pytest.raises(OcpError, match=message):
+        o.path_constraint(x, ub=0.3, name="wall", stages=stages)
+        o.validate()
+
+
+def _opti_stages(stages):
+    opti = ca.Opti()
+    X, U = opti.variable(2, N + 1), opti.variable(1, N)
+
+    def f(x, u):
+        return ca.vertcat(x[1], u)
+
+    J = 0
+    for k in range(N):
+        k1 = f(X[:, k], U[k])
+        k2 = f(X[:, k] + DT / 2 * k1, U[k])
+        k3 = f(X[:, k] + DT / 2 * k2, U[k])
+        k4 = f(X[:, k] + DT * k3, U[k])
+        opti.subject_to(X[:, k + 1] == X[:, k] + DT / 6 * (k1 + 2 * k2 + 2 * k3 + k4))
+        J += 0.5 * 0.1 * (U[k] ** 2 + X[1, k] ** 2)
+        opti.subject_to(opti.bounded(-1.0, U[k], 1.0))
+        if k in stages:
+            opti.subject_to(X[0, k] <= 0.1)
+    J += 0.5 * 100.0 * (X[0, N] - 2.0) ** 2
+    opti.minimize(J)
+    opti.subject_to(X[:, 0] == 0)
+    opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "tol": 1e-12, "sb": "yes"})
+    sol = opti.solve()
+    return sol.value(X).T, np.atleast_1d(sol.value(U)).reshape(N, 1)
+
+
+def test_rows_on_chosen_stages_equal_independent_transcription():
+    """x <= 0.1 at stages 4..6 only: active there, passed after; the offline solution and the
+    C full RTI (from the cold guess) equal the written-out NLP to 1e-6, and the reference's
+    KKT measure of the C solution is that of a solution."""
+    from dopus_codegen.reference.kkt import kkt_measure
+
+    stages = (4, 5, 6)
+    o, x, v, u = _base("staged")
+    o.stage_least_squares(ca.vertcat(u, v), weights=[0.1, 0.1])
+    o.terminal_least_squares(x - 2.0, weights=[100.0])
+    o.path_constraint(x, ub=0.1, name="gate", stages=range(4, 7))
+    disc = build_functions(o)
+    lo, up = disc.data.path_bounds()
+    assert np.all(np.isinf(up[[0, 1, 2, 3, 7, 8, 9], 0])) and np.all(up[[4, 5, 6], 0] == 0.1)
+    X, U = _opti_stages(stages)
+    g, info = solve_ocp(disc, disc.x0)
+    assert info["success"]
+    assert np.max(np.abs(g.x - X)) < 1e-6 and np.max(np.abs(g.u - U)) < 1e-6
+    assert abs(X[6, 0] - 0.1) < 1e-8 and X[8, 0] > 0.12 and abs(g.mu_g[6, 0]) > 1e-3
+    c = CSolver(disc, M=N - 1, mode="fixed", hessian="gauss-newton")
+    c.init(disc.x0)
+    for _ in range(30):
+        c.feedback(disc.x0)
+        c.prepare()
+    assert np.max(np.abs(c.x - X)) < 1e-6 and np.max(np.abs(c.u - U)) < 1e-6
+    k = kkt_measure(disc, disc.x0, c.x, c.u, c.lam, c.mu_g, c.mu_b, c.mu_bN, c.mu_r, c.nu)
+    assert k["kkt"] < 1e-8 and c.kkt(disc.x0)["kkt"] == pytest.approx(k["kkt"], rel=1e-6, abs=1e-12)

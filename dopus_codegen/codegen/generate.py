@@ -402,6 +402,20 @@ def _default_parameters(disc: Any, s: Dict[str, int]) -> np.ndarray:
     return arr
 
 
+def _stage_path_bounds(disc: Any, s: Dict[str, int]):
+    """``(N, DIM(ng))`` lower and upper path-row bounds per stage (a zero column without rows)."""
+    N, ng = s["N"], s["ng"]
+    if ng == 0:
+        return np.zeros((N, 1)), np.zeros((N, 1))
+    data = disc.data
+    if hasattr(data, "path_bounds"):
+        lo, up = data.path_bounds()
+    else:
+        lo = np.tile(np.asarray(data.lg, float).reshape(1, ng), (N, 1))
+        up = np.tile(np.asarray(data.ug, float).reshape(1, ng), (N, 1))
+    return np.asarray(lo, float).reshape(N, ng), np.asarray(up, float).reshape(N, ng)
+
+
 def row_names(disc: Any) -> Dict[str, List[str]]:
     """The rows' names of dopus_row_name: ``x``, ``u`` (labels), ``g`` (path rows), ``r``
     (terminal inequality rows), ``req`` (terminal equality rows), in the QP's order."""
@@ -489,6 +503,9 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
         "has_nominal": nominal is not None,
     }
     ctx.update(_row_names(disc))
+    lg_k, ug_k = _stage_path_bounds(disc, s)
+    ctx["lg_k"] = c_matrix(lg_k, N, max(s["ng"], 1), "lg per stage")
+    ctx["ug_k"] = c_matrix(ug_k, N, max(s["ng"], 1), "ug per stage")
     memory = list(getattr(disc.spec.model, "memory", ()) or ())
     ctx["memory_state"] = "{" + ", ".join(str(a) for a, _ in memory or [(0, 0)]) + "}"
     ctx["memory_control"] = "{" + ", ".join(str(b) for _, b in memory or [(0, 0)]) + "}"

@@ -52,6 +52,17 @@ def _path_rows(spec) -> List[Tuple[str, ca.SX, float, float]]:
     return out
 
 
+def _stage0_rows(spec) -> List[Tuple[str, ca.SX, float, float]]:
+    """The path rows that hold at stage 0 (``stages=`` may leave a block out there)."""
+    out = []
+    for i, rows in enumerate(spec.constraints.path):
+        if getattr(rows, "stages", None) is not None and 0 not in rows.stages:
+            continue
+        for r, label in enumerate(_labels(rows, "path constraint", i)):
+            out.append((label, rows.expr[r], float(rows.lb[r]), float(rows.ub[r])))
+    return out
+
+
 def _labels(rows, kind: str, index: int) -> Tuple[str, ...]:
     """The rows' labels: ``path constraint 'wall'`` (a named row; ``'wall[1]'`` of several) or
     ``path constraint 0 (<expression>)``."""
@@ -77,7 +88,7 @@ def stage0_violations(problem, x, p=None) -> List[str]:
     the controls that minimise the summed violation (IPOPT over the control box)."""
     spec = _spec(problem)
     model = spec.model
-    rows = _path_rows(spec)
+    rows = _stage0_rows(spec)
     if not rows:
         return []
     x = np.asarray(x, dtype=float).reshape(-1)

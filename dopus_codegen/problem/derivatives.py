@@ -82,6 +82,17 @@ class ProblemData:
     soft_x: numpy.ndarray = None
     soft_g: numpy.ndarray = None
     soft_r: numpy.ndarray = None
+    #: path-row bounds per stage ``(N, ng)``: the declared ones where a row holds, infinite
+    #: where it is absent (``path_constraint(stages=...)``); None: ``lg``/``ug`` at every stage
+    lg_stage: numpy.ndarray = None
+    ug_stage: numpy.ndarray = None
+
+    def path_bounds(self) -> tuple:
+        """``(lg, ug)`` per stage, ``(N, ng)`` each."""
+        if self.lg_stage is None:
+            return (numpy.tile(numpy.asarray(self.lg, float).reshape(1, -1), (self.N, 1)),
+                    numpy.tile(numpy.asarray(self.ug, float).reshape(1, -1), (self.N, 1)))
+        return numpy.asarray(self.lg_stage, float), numpy.asarray(self.ug_stage, float)
 
     @property
     def has_soft(self) -> bool:
@@ -606,6 +617,7 @@ def build_functions(problem: Union[Ocp, OcpSpec]) -> Discretized:
         name=name, N=N, dt=spec.horizon.dt, nx=nx, nu=nu, nw=nx + nu, np=np_, ng=m.g.size1(),
         nr=m.r.size1(), ne=m.r_eq.size1(), lbx=con.lbx, ubx=con.ubx, lbu=con.lbu, ubu=con.ubu,
         lg=readonly(m.lg), ug=readonly(m.ug), lr=readonly(m.lr), ur=readonly(m.ur),
+        lg_stage=readonly(m.lg_stage), ug_stage=readonly(m.ug_stage),
         p0=readonly(_first_horizon(model, N, spec.horizon.dt), (N + 1, np_)), x0=spec.x0,
         guess_x=spec.guess.x, guess_u=spec.guess.u, state_names=model.state_names,
         control_names=model.control_names, parameter_names=model.parameter_names,

@@ -47,6 +47,8 @@ class StageModel:
     r_eq: ca.SX           # terminal equality rows, r_eq = r_row - value
     has_stage_ls: bool
     soft_g: np.ndarray = None   # (4, ng) soft weights of the path rows (zeros: hard)
+    lg_stage: np.ndarray = None  # (N, ng) the bounds per stage (infinite where a row is absent: stages=)
+    ug_stage: np.ndarray = None
     soft_r: np.ndarray = None   # (4, nr) soft weights of the terminal inequality rows
 
 
@@ -60,6 +62,25 @@ def _stack(items, what: str):
     except Exception as exc:  # noqa: BLE001 - CasADi errors on user expressions
         raise OcpError(f"{what}: {casadi_message(exc)}") from None
     return expr, np.concatenate([a for _, a, _ in items]), np.concatenate([b for _, _, b in items])
+
+
+def _stage_bounds(blocks, N: int):
+    """``(N, ng)`` lower and upper bounds of the path rows per stage: the declared ones at the
+    stages where a block holds, infinite elsewhere (``path_constraint(stages=...)``)."""
+    lo, up = [], []
+    for b in blocks:
+        lb = np.tile(np.asarray(b.lb, dtype=float), (N, 1))
+        ub = np.tile(np.asarray(b.ub, dtype=float), (N, 1))
+        stages = getattr(b, "stages", None)
+        if stages is not None:
+            off = np.ones(N, dtype=bool)
+            off[list(stages)] = False
+            lb[off], ub[off] = -np.inf, np.inf
+        lo.append(lb)
+        up.append(ub)
+    if not lo:
+        return np.zeros((N, 0)), np.zeros((N, 0))
+    return np.hstack(lo), np.hstack(up)
 
 
 def _least_squares(items, what: str):
@@ -131,6 +152,7 @@ def discretize(spec: OcpSpec) -> StageModel:
     l_extra = _sum(cost.stage_terms)
     l = l_ls + l_extra
     g, lg, ug = _stack(con.path, "path constraints")
+    lg_stage, ug_stage = _stage_bounds(con.path, spec.horizon.N)
     soft_g = np.hstack([b.soft_weights() for b in con.path]) if con.path else np.zeros((4, 0))
 
     resN, WN, E_ls = _least_squares(cost.terminal_least_squares, "terminal least squares")
@@ -148,4 +170,5 @@ def discretize(spec: OcpSpec) -> StageModel:
     return StageModel(x=x, u=u, p=p, w=w, xdot=xdot, substep=substep, n_substeps=n_substeps, l=l, res=res, W=W, l_extra=l_extra,
                       g=g, lg=lg, ug=ug, E=E, resN=resN, WN=WN, E_extra=E_extra,
                       r=r, lr=lbs[ineq], ur=ubs[ineq], r_eq=r_eq,
-                      has_stage_ls=cost.has_stage_least_squares, soft_g=soft_g, soft_r=soft_rows[:, ineq])
+                      has_stage_ls=cost.has_stage_least_squares, soft_g=soft_g, soft_r=soft_rows[:, ineq],
+                      lg_stage=lg_stage, ug_stage=ug_stage)

@@ -700,12 +700,14 @@ class Ocp:
 
     @_declaration
     def path_constraint(self, expr, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None,
-                        name: Optional[str] = None, terminal: bool = False) -> None:
+                        name: Optional[str] = None, terminal: bool = False, stages=None) -> None:
         """``lb <= g(x, u, p) <= ub`` on stages 0..N-1 (several calls stack); ``soft``:
         :class:`Soft` weights that make the rows soft; ``name``: the rows' name in messages,
         tables and the C API's row description (``name[i]`` for row i of several; default
         ``path constraint <i>``); ``terminal=True``: the rows also hold at x_N (a terminal
-        constraint of the same rows, bounds and name; they may use states and parameters only)."""
+        constraint of the same rows, bounds and name; they may use states and parameters only);
+        ``stages``: the stages (integers in 0..N-1, e.g. ``range(5, 10)``) where the rows hold
+        (default: all); at the other stages they are absent (infinite bounds)."""
         what = f"path constraint {len(self._path)}"
         name = self._row_name(name, what)
         if name is not None:
@@ -722,9 +724,22 @@ class Ocp:
             eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
             if eq.size:
                 raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")
-        self._path.append((g, lbv, ubv, weights, name))
+        if stages is not None:
+            try:
+                stages = tuple(stages)
+            except TypeError:
+                raise OcpError(f"{what}: stages must be stage indices (e.g. range(5, 10)), got {stages!r}") from None
+            bad = [k for k in stages if isinstance(k, bool) or not isinstance(k, (int, np.integer))]
+            if bad:
+                raise OcpError(f"{what}: stages must be integers, got {bad[0]!r}")
+            if not stages:
+                raise OcpError(f"{what}: stages is empty (leave it out for every stage)")
+            if len(set(stages)) != len(stages):
+                raise OcpError(f"{what}: stage {next(k for k in stages if stages.count(k) > 1)} given twice")
+            stages = tuple(sorted(int(k) for k in stages))
+        self._path.append((g, lbv, ubv, weights, name, stages))
         if terminal:
-            self._term_con.append((g, lbv, ubv, weights, name))
+            self._term_con.append((g, lbv, ubv, weights, name, None))
 
     @_declaration
     def rate_constraint(self, control: str, lb=-math.inf, ub=math.inf, name: Optional[str] = None,
@@ -785,7 +800,7 @@ class Ocp:
         eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
         if eq.size:
             raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")
-        self._term_con.append((r, lbv, ubv, _soft_weights(soft, r.size1(), lbv, ubv, what), name))
+        self._term_con.append((r, lbv, ubv, _soft_weights(soft, r.size1(), lbv, ubv, what), name, None))
 
     # ------------------------------------------------------------------ horizon and data
     @_declaration
@@ -1007,8 +1022,12 @@ class Ocp:
             self._check_symbols(c, "terminal cost" if len(self._term_costs) == 1 else f"terminal cost {i}", "xp")
         for i, (res, _) in enumerate(self._term_ls):
             self._check_symbols(res, f"terminal least squares {i}", "xp")
-        for i, (g, *_) in enumerate(self._path):
+        for i, (g, *_, name, stages) in enumerate(self._path):
             self._check_symbols(g, f"path constraint {i}", "xup")
+            out = [k for k in (stages or ()) if not 0 <= k <= self._N - 1]
+            if out:
+                what = f"path constraint '{name}'" if name is not None else f"path constraint {i}"
+                raise OcpError(f"{what}: stage {out[0]} is outside 0..N-1 = 0..{self._N - 1}")
         for i, (r, *_) in enumerate(self._term_con):
             self._check_symbols(r, f"terminal constraint {i}", "xp")
         if self._options["hessian"] == "gauss-newton" and not self._stage_ls:
@@ -1075,7 +1094,7 @@ class Ocp:
             for decl, lbv, ubv, name, _, mem, weights in self._rates:
                 memory += [(row + i, offsets[decl.name] + i) for i in range(decl.size)]
                 row += decl.size
-                path.append((decl.sym - mem.sym, lbv, ubv, weights, name))
+                path.append((decl.sym - mem.sym, lbv, ubv, weights, name, None))
 
         trajectory = ParameterTrajectory(tuple(
             (d.name, d.size, "constant", readonly(d.value)) if d.trajectory is None
@@ -1098,8 +1117,8 @@ class Ocp:
         constraints = ConstraintSpec(
             lbx=bounds(states, "lb"), ubx=bounds(states, "ub"),
             lbu=bounds(self._controls, "lb"), ubu=bounds(self._controls, "ub"),
-            path=tuple(Rows(g, readonly(lb), readonly(ub), sw, nm) for g, lb, ub, sw, nm in path),
-            terminal=tuple(Rows(r, readonly(lb), readonly(ub), sw, nm) for r, lb, ub, sw, nm in self._term_con),
+            path=tuple(Rows(g, readonly(lb), readonly(ub), sw, nm, st) for g, lb, ub, sw, nm, st in path),
+            terminal=tuple(Rows(r, readonly(lb), readonly(ub), sw, nm) for r, lb, ub, sw, nm, _ in self._term_con),
             soft_x=readonly(soft_x))
         return OcpSpec(name=self.name, model=model, cost=cost, constraints=constraints,
                        horizon=HorizonSpec(N=self._N, dt=self._dt),

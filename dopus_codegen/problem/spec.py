@@ -205,6 +205,7 @@ class Rows:
     ub: np.ndarray
     soft: Optional[np.ndarray] = None
     name: Optional[str] = None    # the declared name (messages, tables, the C row names)
+    stages: Optional[Tuple[int, ...]] = None   # path rows: the stages where they hold (None: all)
 
     def labels(self, kind: str, index: int) -> Tuple[str, ...]:
         """One label per row: ``name`` / ``name[i]``, or ``<kind> <index>`` / ``<kind> <index> row i``."""

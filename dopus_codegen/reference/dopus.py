@@ -95,6 +95,16 @@ class _Slot:
         return s
 
 
+def _path_bounds(disc, N: int, ng: int):
+    """The path-row bounds per stage ``(N, ng)`` (``path_constraint(stages=...)``)."""
+    data = getattr(disc, "data", None)
+    if data is not None and hasattr(data, "path_bounds"):
+        lo, up = data.path_bounds()
+        return lo.reshape(N, ng), up.reshape(N, ng)
+    return (np.tile(np.asarray(disc.lg, float).reshape(1, ng), (N, 1)),
+            np.tile(np.asarray(disc.ug, float).reshape(1, ng), (N, 1)))
+
+
 def _arr(v, shape, what):
     a = np.array(v, dtype=float)
     if a.size != int(np.prod(shape)):
@@ -158,6 +168,7 @@ class ReferenceDopus:
         self.lbx, self.ubx = np.asarray(disc.lbx, float), np.asarray(disc.ubx, float)
         self.lbu, self.ubu = np.asarray(disc.lbu, float), np.asarray(disc.ubu, float)
         self.lg, self.ug = np.asarray(disc.lg, float).reshape(self.ng), np.asarray(disc.ug, float).reshape(self.ng)
+        self.lg_k, self.ug_k = _path_bounds(disc, self.N, self.ng)     # per stage (stages=)
         self.lr, self.ur = np.asarray(disc.lr, float).reshape(self.nr), np.asarray(disc.ur, float).reshape(self.nr)
         self.p = node_parameters(disc, None)
         self.status = status_code("ok")
@@ -425,8 +436,8 @@ class ReferenceDopus:
             # eq. 12: a_k = F_w + Phit' lam_{k+1} - Ct' mu_g_k - mu_b_k
             gq[k] = s.F_w + s.Phit.T @ self.lam[k + 1] - s.Ct.T @ self.mu_g[k] - self.mu_b[k]
             b[k] = s.phi - self.x[k + 1]
-            lgq[k] = self.lg - s.g
-            ugq[k] = self.ug - s.g
+            lgq[k] = self.lg_k[k] - s.g
+            ugq[k] = self.ug_k[k] - s.g
             lbw[k, :nx] = self.lbx - self.x[k]
             ubw[k, :nx] = self.ubx - self.x[k]
             lbw[k, nx:] = self.lbu - self.u[k]
@@ -461,7 +472,7 @@ class ReferenceDopus:
         elif k < self.N and j < nw:
             kind, index, lo, up = "control", j - nx, self.lbu, self.ubu
         elif k < self.N:
-            kind, index, lo, up = "path", j - nw, self.lg, self.ug
+            kind, index, lo, up = "path", j - nw, self.lg_k[k], self.ug_k[k]
         elif j < nx + nr:
             kind, index, lo, up = "terminal", j - nx, self.lr, self.ur
         else:
@@ -801,7 +812,7 @@ class ReferenceDopus:
         hard_lo = ~((w[0] > 0) | (w[2] > 0))
         hard_up = ~((w[1] > 0) | (w[3] > 0))
         zero = ~np.any(s.Ct != 0.0, axis=1)
-        return bool(np.any(zero & ((hard_lo & (s.g < self.lg)) | (hard_up & (s.g > self.ug)))))
+        return bool(np.any(zero & ((hard_lo & (s.g < self.lg_k[k])) | (hard_up & (s.g > self.ug_k[k])))))
 
     def _relinearise_worst(self, slots, rho) -> list:
         """Step 4: fresh H for the stale stages (:meth:`_stale`), then for the M stages among

@@ -20,7 +20,18 @@ import numpy as np
 
 from .qp import free_initial_state
 
-__all__ = ["kkt_measure", "kkt_of_guess", "node_parameters", "signed_comp", "eval_stages"]
+__all__ = ["kkt_measure", "kkt_of_guess", "node_parameters", "signed_comp", "eval_stages", "path_bounds"]
+
+
+def path_bounds(disc):
+    """The path-row bounds per stage, ``(N, ng)`` each (``path_constraint(stages=...)``)."""
+    data = getattr(disc, "data", None)
+    N, ng = int(disc.N), int(disc.ng)
+    if data is not None and hasattr(data, "path_bounds"):
+        lo, up = data.path_bounds()
+        return np.asarray(lo, float).reshape(N, ng), np.asarray(up, float).reshape(N, ng)
+    return (np.tile(np.asarray(disc.lg, float).reshape(1, ng), (N, 1)),
+            np.tile(np.asarray(disc.ug, float).reshape(1, ng), (N, 1)))
 
 
 def node_parameters(disc, p=None) -> np.ndarray:
@@ -126,7 +137,8 @@ def kkt_measure(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p=None) -> 
     lbu, ubu = np.asarray(disc.lbu, float), np.asarray(disc.ubu, float)
     ineq = max(0.0, _viol(x[1:], np.tile(lbx, N), np.tile(ubx, N)), _viol(u, np.tile(lbu, N), np.tile(ubu, N)))
     if ng:
-        ineq = max(ineq, _viol(g, np.tile(disc.lg, N), np.tile(disc.ug, N)))
+        lg_k, ug_k = path_bounds(disc)
+        ineq = max(ineq, _viol(g, lg_k.reshape(np.shape(g)), ug_k.reshape(np.shape(g))))
     if nr:
         ineq = max(ineq, _viol(r, disc.lr, disc.ur))
 
@@ -140,7 +152,8 @@ def kkt_measure(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p=None) -> 
     W = np.hstack([x[:N], u])
     comp = max(signed_comp(W, lbw, ubw, mu_bc), signed_comp(x[N], lbx, ubx, mu_bN))
     if ng:
-        comp = max(comp, signed_comp(g, np.tile(disc.lg, N), np.tile(disc.ug, N), mu_g))
+        comp = max(comp, signed_comp(g, lg_k.reshape(np.shape(g)), ug_k.reshape(np.shape(g)),
+                                     np.reshape(mu_g, np.shape(g))))
     if nr:
         comp = max(comp, signed_comp(r, disc.lr, disc.ur, mu_r))
     return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
@@ -161,6 +174,7 @@ def _soft_kkt(disc, stat, eq, x, u, g, r, mu_g, mu_b, mu_bN, mu_r) -> dict:
         i_, c_, s_ = row_check(v, lo, hi, mu, w)
         ineq, comp = max(ineq, i_), max(comp, c_, s_)
 
+    lg_k, ug_k = path_bounds(disc)
     mu_b0 = mu_b[0, :nx]
     comp = max(comp, float(np.max(np.abs(mu_b0)))) if mu_b0.size else comp
     for k in range(N):
@@ -168,7 +182,7 @@ def _soft_kkt(disc, stat, eq, x, u, g, r, mu_g, mu_b, mu_bN, mu_r) -> dict:
             add(x[k], lbx, ubx, mu_b[k, :nx], disc.soft_x)
         add(u[k], disc.lbu, disc.ubu, mu_b[k, nx:], None)
         if disc.ng:
-            add(g[k], disc.lg, disc.ug, mu_g[k], disc.soft_g)
+            add(g[k], lg_k[k], ug_k[k], mu_g[k], disc.soft_g)
     add(x[N], lbx, ubx, mu_bN, disc.soft_x)
     if disc.nr:
         add(r, disc.lr, disc.ur, mu_r, disc.soft_r)

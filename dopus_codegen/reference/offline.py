@@ -177,8 +177,11 @@ def solve_ocp(disc, xhat0, guess: Guess | None = None, tol: float = 1e-12, hessi
     lbg = np.zeros(ngt)
     ubg = np.zeros(ngt)
     if disc.ng:
-        lbg[ig_path] = disc.lg
-        ubg[ig_path] = disc.ug
+        from .kkt import path_bounds
+
+        lg_k, ug_k = path_bounds(disc)
+        lbg[ig_path] = lg_k
+        ubg[ig_path] = ug_k
     lbg[ig_r] = disc.lr
     ubg[ig_r] = disc.ur
 

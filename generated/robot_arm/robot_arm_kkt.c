@@ -98,7 +98,7 @@ int robot_arm_kkt_measure(struct robot_arm_solver *s, const robot_arm_real *xhat
             eq = robot_arm_kkt_max(eq, robot_arm_fabs(s->x[k + 1][i] - phi[i]));
         }
         for (i = 0; i < ROBOT_ARM_NG; ++i) {
-            ROBOT_ARM_KKT_ROW(g[i], robot_arm_lg[i], robot_arm_ug[i], s->mu_g[k][i], &robot_arm_soft_g[0][i],
+            ROBOT_ARM_KKT_ROW(g[i], robot_arm_lg_k[k][i], robot_arm_ug_k[k][i], s->mu_g[k][i], &robot_arm_soft_g[0][i],
                           ROBOT_ARM_DIM(ROBOT_ARM_NG));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite

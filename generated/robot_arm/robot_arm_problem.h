@@ -13,6 +13,9 @@
 extern const robot_arm_real robot_arm_lbx[ROBOT_ARM_NX], robot_arm_ubx[ROBOT_ARM_NX];
 extern const robot_arm_real robot_arm_lbu[ROBOT_ARM_NU], robot_arm_ubu[ROBOT_ARM_NU];
 extern const robot_arm_real robot_arm_lg[ROBOT_ARM_DIM(ROBOT_ARM_NG)], robot_arm_ug[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+/* the path-row bounds per stage: the declared ones where a row holds, infinite where the
+ * OCP leaves it out (path_constraint(stages=...)) */
+extern const robot_arm_real robot_arm_lg_k[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)], robot_arm_ug_k[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
 extern const robot_arm_real robot_arm_lr[ROBOT_ARM_DIM(ROBOT_ARM_NR)], robot_arm_ur[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
 /* the parameters of the first horizon (node k at time k dt; the same at every node unless
  * a parameter declares a trajectory) */

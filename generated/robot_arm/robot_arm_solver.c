@@ -727,8 +727,8 @@ static void robot_arm_assemble(robot_arm_solver *s)
             in->ubw[k][ROBOT_ARM_NX + i] = robot_arm_ubu[i] - s->u[k][i];
         }
         for (i = 0; i < ROBOT_ARM_NG; ++i) {
-            in->lg[k][i] = robot_arm_lg[i] - slot->g[i];
-            in->ug[k][i] = robot_arm_ug[i] - slot->g[i];
+            in->lg[k][i] = robot_arm_lg_k[k][i] - slot->g[i];
+            in->ug[k][i] = robot_arm_ug_k[k][i] - slot->g[i];
         }
     }
     in->HN = s->A_N;
@@ -1347,7 +1347,7 @@ static int robot_arm_stale_stage(const robot_arm_solver *s, int k)
         for (i = 0; i < ROBOT_ARM_NW && zero; ++i) {
             zero = slot->Ct[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NG)] == ROBOT_ARM_R(0.0);
         }
-        if (zero && ((hard_lo && g[j] < robot_arm_lg[j]) || (hard_up && g[j] > robot_arm_ug[j]))) {
+        if (zero && ((hard_lo && g[j] < robot_arm_lg_k[k][j]) || (hard_up && g[j] > robot_arm_ug_k[k][j]))) {
             return 1;
         }
     }
@@ -1855,7 +1855,7 @@ int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_inf
     } else if (k < ROBOT_ARM_N) {
         row->kind = ROBOT_ARM_ROW_PATH;
         row->index = j - ROBOT_ARM_NW;
-        row->bound = robot_arm_side_bound(robot_arm_lg, robot_arm_ug, row->index, side);
+        row->bound = robot_arm_side_bound(robot_arm_lg_k[k], robot_arm_ug_k[k], row->index, side);
     } else if (j < ROBOT_ARM_NX + ROBOT_ARM_NR) {
         row->kind = ROBOT_ARM_ROW_TERMINAL;
         row->index = j - ROBOT_ARM_NX;

@@ -98,7 +98,7 @@ int unicycle_kkt_measure(struct unicycle_solver *s, const unicycle_real *xhat0, 
             eq = unicycle_kkt_max(eq, unicycle_fabs(s->x[k + 1][i] - phi[i]));
         }
         for (i = 0; i < UNICYCLE_NG; ++i) {
-            UNICYCLE_KKT_ROW(g[i], unicycle_lg[i], unicycle_ug[i], s->mu_g[k][i], &unicycle_soft_g[0][i],
+            UNICYCLE_KKT_ROW(g[i], unicycle_lg_k[k][i], unicycle_ug_k[k][i], s->mu_g[k][i], &unicycle_soft_g[0][i],
                           UNICYCLE_DIM(UNICYCLE_NG));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite

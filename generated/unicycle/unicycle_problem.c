@@ -10,6 +10,50 @@ const unicycle_real unicycle_lbu[UNICYCLE_NU] = {-2.0, -2.0};
 const unicycle_real unicycle_ubu[UNICYCLE_NU] = {2.0, 2.0};
 const unicycle_real unicycle_lg[UNICYCLE_DIM(UNICYCLE_NG)] = {0.16000000000000003};
 const unicycle_real unicycle_ug[UNICYCLE_DIM(UNICYCLE_NG)] = {INFINITY};
+const unicycle_real unicycle_lg_k[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)] = {
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003},
+    {0.16000000000000003}
+};
+const unicycle_real unicycle_ug_k[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)] = {
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY},
+    {INFINITY}
+};
 const unicycle_real unicycle_lr[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
 const unicycle_real unicycle_ur[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
 const unicycle_real unicycle_p_default[UNICYCLE_N + 1][UNICYCLE_DIM(UNICYCLE_NP)] = {

@@ -13,6 +13,9 @@
 extern const unicycle_real unicycle_lbx[UNICYCLE_NX], unicycle_ubx[UNICYCLE_NX];
 extern const unicycle_real unicycle_lbu[UNICYCLE_NU], unicycle_ubu[UNICYCLE_NU];
 extern const unicycle_real unicycle_lg[UNICYCLE_DIM(UNICYCLE_NG)], unicycle_ug[UNICYCLE_DIM(UNICYCLE_NG)];
+/* the path-row bounds per stage: the declared ones where a row holds, infinite where the
+ * OCP leaves it out (path_constraint(stages=...)) */
+extern const unicycle_real unicycle_lg_k[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)], unicycle_ug_k[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
 extern const unicycle_real unicycle_lr[UNICYCLE_DIM(UNICYCLE_NR)], unicycle_ur[UNICYCLE_DIM(UNICYCLE_NR)];
 /* the parameters of the first horizon (node k at time k dt; the same at every node unless
  * a parameter declares a trajectory) */

@@ -727,8 +727,8 @@ static void unicycle_assemble(unicycle_solver *s)
             in->ubw[k][UNICYCLE_NX + i] = unicycle_ubu[i] - s->u[k][i];
         }
         for (i = 0; i < UNICYCLE_NG; ++i) {
-            in->lg[k][i] = unicycle_lg[i] - slot->g[i];
-            in->ug[k][i] = unicycle_ug[i] - slot->g[i];
+            in->lg[k][i] = unicycle_lg_k[k][i] - slot->g[i];
+            in->ug[k][i] = unicycle_ug_k[k][i] - slot->g[i];
         }
     }
     in->HN = s->A_N;
@@ -1347,7 +1347,7 @@ static int unicycle_stale_stage(const unicycle_solver *s, int k)
         for (i = 0; i < UNICYCLE_NW && zero; ++i) {
             zero = slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] == UNICYCLE_R(0.0);
         }
-        if (zero && ((hard_lo && g[j] < unicycle_lg[j]) || (hard_up && g[j] > unicycle_ug[j]))) {
+        if (zero && ((hard_lo && g[j] < unicycle_lg_k[k][j]) || (hard_up && g[j] > unicycle_ug_k[k][j]))) {
             return 1;
         }
     }
@@ -1855,7 +1855,7 @@ int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *
     } else if (k < UNICYCLE_N) {
         row->kind = UNICYCLE_ROW_PATH;
         row->index = j - UNICYCLE_NW;
-        row->bound = unicycle_side_bound(unicycle_lg, unicycle_ug, row->index, side);
+        row->bound = unicycle_side_bound(unicycle_lg_k[k], unicycle_ug_k[k], row->index, side);
     } else if (j < UNICYCLE_NX + UNICYCLE_NR) {
         row->kind = UNICYCLE_ROW_TERMINAL;
         row->index = j - UNICYCLE_NX;
