@@ -91,8 +91,13 @@ def export_ocp(ocp: Ocp) -> dict:
     if not isinstance(ocp.integrator, RK4):
         raise OcpError(f"export: integrator {ocp.integrator.describe()} has no acados counterpart here "
                        f"(only RK4, which maps to acados' 4-stage ERK)")
+    spec = ocp.validate()
+    if spec.model.memory:
+        raise OcpError("export: rate constraints (a memory state with x+ = u) have no acados counterpart here")
+    if any(rows.stages is not None for rows in spec.constraints.path):
+        raise OcpError("export: path rows on chosen stages (stages=) have no acados counterpart here")
     disc = build_functions(ocp)
-    m = discretize(ocp.validate())
+    m = discretize(spec)
     x, u, p = m.x, m.u, m.p
     dense = ca.densify
     for what, out in (("stage residual", m.res), ("path constraints", m.g), ("terminal residual", m.resN),

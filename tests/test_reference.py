@@ -653,6 +653,7 @@ def test_parameters_reach_every_function(second_disc, second_solution):
     assert info["success"]
     ref = ReferenceDopus(d, lm=0.0, M=d.N - 1, mode="fixed")
     ref.init(d.x0, sol)                         # blocks at the old target's solution
+    ref.stop()                                  # a new run: its parameters are written before init
     ref.set_parameters(p)
     ref.init(d.x0, sol)                         # the old target's solution, F, H at the new parameters
     ks = _iterate(ref, d.x0, 15, tol=1e-11)

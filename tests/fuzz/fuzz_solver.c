@@ -692,9 +692,34 @@ static void do_setter(unsigned op, reader *r)
         break;
     }
     default: {
-        unsigned null = rd_u8(r) & 1u;
+        unsigned flags = rd_u8(r), null = flags & 1u;
         k = rd_int(r);
         rd_array(r, p, API(p_default)[0], NP);
+        if (flags & 2u) {
+            /* the new last node of the next horizon (receding mode, a prepare due) */
+            call_name = "push_parameters";
+            st = API(push_parameters)(&s, null ? NULL : p);
+            check_status(st);
+            if (!m.initialized) {
+                check(st == K(ERR_NOT_INITIALIZED), "push_parameters before init");
+            } else if (m.mode != K(MODE_RECEDING)) {
+                check(st == K(ERR_INVALID_ARGUMENT), "push_parameters in fixed mode");
+            } else if (NP == 0) {
+                check(st == K(OK), "push_parameters without parameters is OK");
+            } else if (null) {
+                check(st == K(ERR_INVALID_ARGUMENT), "push_parameters(NULL)");
+            } else if (!all_finite(p, NP)) {
+                check(st == K(ERR_NONFINITE_INPUT), "push_parameters with NaN/Inf");
+            } else if (!model_parameters_writable()) {
+                check(st == K(ERR_ALREADY_PREPARED), "push_parameters while a QP is prepared");
+            } else {
+                check(st == K(OK), "push_parameters with finite values");
+                memcpy(&m.p[N_ * NP], p, NP * sizeof(double));
+            }
+            read_iterate(&after);
+            check(same_bits(&before, &after), "push_parameters never changes the iterate");
+            break;
+        }
         call_name = "set_parameters_node";
         st = API(set_parameters_node)(&s, k, null ? NULL : p);
         check_status(st);
