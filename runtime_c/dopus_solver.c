@@ -510,6 +510,14 @@ void dopus_defaults(dopus_solver *s)
     s->lm_scale = DOPUS_R(1.0);
     s->lm_kkt_prev = -DOPUS_R(1.0);
     s->lm_uncapped = -DOPUS_R(1.0);
+    for (k = 0; k < DOPUS_N; ++k) { /* set only during a QP solve (dopus_qp_solve_bound) */
+        s->qp_in.H[k] = 0;
+        s->qp_in.Phi[k] = 0;
+        s->qp_in.C[k] = 0;
+    }
+    s->qp_in.HN = 0;
+    s->qp_in.R = 0;
+    s->qp_in.Req = 0;
     dopus_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -690,10 +698,6 @@ static void dopus_assemble(dopus_solver *s)
 
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
-        /* the QP reads the ring slots in place */
-        in->H[k] = slot->Ht;
-        in->Phi[k] = slot->Phit;
-        in->C[k] = DOPUS_NG > 0 ? slot->Ct : 0;
         /* a_k = F_w,k + Phit_k' lam_{k+1} - Ct_k' mu_g_k - mu_b_k (eq. 12) */
         for (i = 0; i < DOPUS_NW; ++i) {
             dopus_real pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
@@ -722,9 +726,6 @@ static void dopus_assemble(dopus_solver *s)
             in->ug[k][i] = dopus_ug[i] - slot->g[i];
         }
     }
-    in->HN = s->A_N;
-    in->R = DOPUS_NR > 0 ? s->R : 0;
-    in->Req = DOPUS_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
     for (i = 0; i < DOPUS_NX; ++i) {
         dopus_real rm = DOPUS_R(0.0), en = DOPUS_R(0.0);
@@ -980,6 +981,35 @@ static void dopus_feedback_measure(dopus_solver *s, const dopus_real *xhat0)
     s->shifted = 0;
 }
 
+/* The QP's matrix pointers (dopus_qp_in.H, Phi, C, HN, R, Req) point into this struct: the
+ * ring slots in place and the terminal blocks. They are set just before each solve and
+ * cleared after it, so the struct holds no pointer into itself between calls and a byte
+ * copy (memcpy, struct assignment) is a complete, independent solver. */
+static int dopus_qp_solve_bound(dopus_solver *s)
+{
+    dopus_qp_in *in = &s->qp_in;
+    int k, qs;
+    for (k = 0; k < DOPUS_N; ++k) {
+        const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
+        in->H[k] = slot->Ht;
+        in->Phi[k] = slot->Phit;
+        in->C[k] = DOPUS_NG > 0 ? slot->Ct : 0;
+    }
+    in->HN = s->A_N;
+    in->R = DOPUS_NR > 0 ? s->R : 0;
+    in->Req = DOPUS_NE > 0 ? s->R_eq : 0;
+    qs = dopus_qp_solve(&s->mem.qp.work, in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    for (k = 0; k < DOPUS_N; ++k) {
+        in->H[k] = 0;
+        in->Phi[k] = 0;
+        in->C[k] = 0;
+    }
+    in->HN = 0;
+    in->R = 0;
+    in->Req = 0;
+    return qs;
+}
+
 /* 1 when the QP status is "solved" and its solution finite. */
 static int dopus_qp_ok(const dopus_solver *s, int qs)
 {
@@ -992,7 +1022,7 @@ static int dopus_qp_attempt(dopus_solver *s, int warm)
 {
     int qs;
     s->qp_settings.warm_start = warm;
-    qs = dopus_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    qs = dopus_qp_solve_bound(s);
     s->qp_iterations += s->qp_info.iterations;
     return qs;
 }
@@ -1341,7 +1371,7 @@ static void dopus_predicted_step(dopus_solver *s)
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
-    qs = dopus_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    qs = dopus_qp_solve_bound(s);
     if (dopus_feedback_check_step(s, qs) != DOPUS_OK) {
         return;
     }

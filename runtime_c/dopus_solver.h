@@ -11,7 +11,9 @@
  *     static dopus_solver s;
  *     dopus_init(&s, xhat0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL);
  *     loop: dopus_feedback(&s, xhat0, u0); apply u0; dopus_prepare(&s);
- * The memory is one struct (sizeof is the memory bill; no malloc anywhere). Settings may be
+ * The memory is one struct (sizeof is the memory bill; no malloc anywhere). It holds no
+ * pointer into itself between calls, so a byte copy (memcpy, struct assignment: a snapshot,
+ * a double buffer) is a complete solver, independent of the original. Settings may be
  * changed before dopus_init; a struct that was never set up (zeroed or uninitialised
  * memory) gets the generated defaults on its first use.
  *
@@ -391,7 +393,8 @@ struct dopus_solver {
     int n_recomputed;
     unsigned char selected[DOPUS_N];
 
-    /* QP data (the matrices are pointers into the ring) */
+    /* QP data: the vectors; the matrix pointers are set to the ring slots and the terminal
+     * blocks only during a QP solve (NULL between calls, so a byte copy is a valid solver) */
     dopus_qp_in qp_in;
     dopus_qp_info qp_info;
     int qp_status;

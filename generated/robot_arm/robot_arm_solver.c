@@ -510,6 +510,14 @@ void robot_arm_defaults(robot_arm_solver *s)
     s->lm_scale = ROBOT_ARM_R(1.0);
     s->lm_kkt_prev = -ROBOT_ARM_R(1.0);
     s->lm_uncapped = -ROBOT_ARM_R(1.0);
+    for (k = 0; k < ROBOT_ARM_N; ++k) { /* set only during a QP solve (robot_arm_qp_solve_bound) */
+        s->qp_in.H[k] = 0;
+        s->qp_in.Phi[k] = 0;
+        s->qp_in.C[k] = 0;
+    }
+    s->qp_in.HN = 0;
+    s->qp_in.R = 0;
+    s->qp_in.Req = 0;
     robot_arm_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = ROBOT_ARM_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -690,10 +698,6 @@ static void robot_arm_assemble(robot_arm_solver *s)
 
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
-        /* the QP reads the ring slots in place */
-        in->H[k] = slot->Ht;
-        in->Phi[k] = slot->Phit;
-        in->C[k] = ROBOT_ARM_NG > 0 ? slot->Ct : 0;
         /* a_k = F_w,k + Phit_k' lam_{k+1} - Ct_k' mu_g_k - mu_b_k (eq. 12) */
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
             robot_arm_real pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0);
@@ -722,9 +726,6 @@ static void robot_arm_assemble(robot_arm_solver *s)
             in->ug[k][i] = robot_arm_ug[i] - slot->g[i];
         }
     }
-    in->HN = s->A_N;
-    in->R = ROBOT_ARM_NR > 0 ? s->R : 0;
-    in->Req = ROBOT_ARM_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         robot_arm_real rm = ROBOT_ARM_R(0.0), en = ROBOT_ARM_R(0.0);
@@ -980,6 +981,35 @@ static void robot_arm_feedback_measure(robot_arm_solver *s, const robot_arm_real
     s->shifted = 0;
 }
 
+/* The QP's matrix pointers (robot_arm_qp_in.H, Phi, C, HN, R, Req) point into this struct: the
+ * ring slots in place and the terminal blocks. They are set just before each solve and
+ * cleared after it, so the struct holds no pointer into itself between calls and a byte
+ * copy (memcpy, struct assignment) is a complete, independent solver. */
+static int robot_arm_qp_solve_bound(robot_arm_solver *s)
+{
+    robot_arm_qp_in *in = &s->qp_in;
+    int k, qs;
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
+        in->H[k] = slot->Ht;
+        in->Phi[k] = slot->Phit;
+        in->C[k] = ROBOT_ARM_NG > 0 ? slot->Ct : 0;
+    }
+    in->HN = s->A_N;
+    in->R = ROBOT_ARM_NR > 0 ? s->R : 0;
+    in->Req = ROBOT_ARM_NE > 0 ? s->R_eq : 0;
+    qs = robot_arm_qp_solve(&s->mem.qp.work, in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        in->H[k] = 0;
+        in->Phi[k] = 0;
+        in->C[k] = 0;
+    }
+    in->HN = 0;
+    in->R = 0;
+    in->Req = 0;
+    return qs;
+}
+
 /* 1 when the QP status is "solved" and its solution finite. */
 static int robot_arm_qp_ok(const robot_arm_solver *s, int qs)
 {
@@ -992,7 +1022,7 @@ static int robot_arm_qp_attempt(robot_arm_solver *s, int warm)
 {
     int qs;
     s->qp_settings.warm_start = warm;
-    qs = robot_arm_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    qs = robot_arm_qp_solve_bound(s);
     s->qp_iterations += s->qp_info.iterations;
     return qs;
 }
@@ -1341,7 +1371,7 @@ static void robot_arm_predicted_step(robot_arm_solver *s)
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
-    qs = robot_arm_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    qs = robot_arm_qp_solve_bound(s);
     if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
         return;
     }

@@ -11,7 +11,9 @@
  *     static robot_arm_solver s;
  *     robot_arm_init(&s, xhat0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL);
  *     loop: robot_arm_feedback(&s, xhat0, u0); apply u0; robot_arm_prepare(&s);
- * The memory is one struct (sizeof is the memory bill; no malloc anywhere). Settings may be
+ * The memory is one struct (sizeof is the memory bill; no malloc anywhere). It holds no
+ * pointer into itself between calls, so a byte copy (memcpy, struct assignment: a snapshot,
+ * a double buffer) is a complete solver, independent of the original. Settings may be
  * changed before robot_arm_init; a struct that was never set up (zeroed or uninitialised
  * memory) gets the generated defaults on its first use.
  *
@@ -391,7 +393,8 @@ struct robot_arm_solver {
     int n_recomputed;
     unsigned char selected[ROBOT_ARM_N];
 
-    /* QP data (the matrices are pointers into the ring) */
+    /* QP data: the vectors; the matrix pointers are set to the ring slots and the terminal
+     * blocks only during a QP solve (NULL between calls, so a byte copy is a valid solver) */
     robot_arm_qp_in qp_in;
     robot_arm_qp_info qp_info;
     int qp_status;

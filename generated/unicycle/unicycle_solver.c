@@ -510,6 +510,14 @@ void unicycle_defaults(unicycle_solver *s)
     s->lm_scale = UNICYCLE_R(1.0);
     s->lm_kkt_prev = -UNICYCLE_R(1.0);
     s->lm_uncapped = -UNICYCLE_R(1.0);
+    for (k = 0; k < UNICYCLE_N; ++k) { /* set only during a QP solve (unicycle_qp_solve_bound) */
+        s->qp_in.H[k] = 0;
+        s->qp_in.Phi[k] = 0;
+        s->qp_in.C[k] = 0;
+    }
+    s->qp_in.HN = 0;
+    s->qp_in.R = 0;
+    s->qp_in.Req = 0;
     unicycle_qp_settings_default(&s->qp_settings);
     s->qp_settings.tol = UNICYCLE_DEFAULT_QP_TOL;
     s->qp_warm = 1;
@@ -690,10 +698,6 @@ static void unicycle_assemble(unicycle_solver *s)
 
     for (k = 0; k < UNICYCLE_N; ++k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
-        /* the QP reads the ring slots in place */
-        in->H[k] = slot->Ht;
-        in->Phi[k] = slot->Phit;
-        in->C[k] = UNICYCLE_NG > 0 ? slot->Ct : 0;
         /* a_k = F_w,k + Phit_k' lam_{k+1} - Ct_k' mu_g_k - mu_b_k (eq. 12) */
         for (i = 0; i < UNICYCLE_NW; ++i) {
             unicycle_real pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
@@ -722,9 +726,6 @@ static void unicycle_assemble(unicycle_solver *s)
             in->ug[k][i] = unicycle_ug[i] - slot->g[i];
         }
     }
-    in->HN = s->A_N;
-    in->R = UNICYCLE_NR > 0 ? s->R : 0;
-    in->Req = UNICYCLE_NE > 0 ? s->R_eq : 0;
     /* a_N = gL_N - R' mu_r - R_eq' nu (= grad E) */
     for (i = 0; i < UNICYCLE_NX; ++i) {
         unicycle_real rm = UNICYCLE_R(0.0), en = UNICYCLE_R(0.0);
@@ -980,6 +981,35 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
     s->shifted = 0;
 }
 
+/* The QP's matrix pointers (unicycle_qp_in.H, Phi, C, HN, R, Req) point into this struct: the
+ * ring slots in place and the terminal blocks. They are set just before each solve and
+ * cleared after it, so the struct holds no pointer into itself between calls and a byte
+ * copy (memcpy, struct assignment) is a complete, independent solver. */
+static int unicycle_qp_solve_bound(unicycle_solver *s)
+{
+    unicycle_qp_in *in = &s->qp_in;
+    int k, qs;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
+        in->H[k] = slot->Ht;
+        in->Phi[k] = slot->Phit;
+        in->C[k] = UNICYCLE_NG > 0 ? slot->Ct : 0;
+    }
+    in->HN = s->A_N;
+    in->R = UNICYCLE_NR > 0 ? s->R : 0;
+    in->Req = UNICYCLE_NE > 0 ? s->R_eq : 0;
+    qs = unicycle_qp_solve(&s->mem.qp.work, in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        in->H[k] = 0;
+        in->Phi[k] = 0;
+        in->C[k] = 0;
+    }
+    in->HN = 0;
+    in->R = 0;
+    in->Req = 0;
+    return qs;
+}
+
 /* 1 when the QP status is "solved" and its solution finite. */
 static int unicycle_qp_ok(const unicycle_solver *s, int qs)
 {
@@ -992,7 +1022,7 @@ static int unicycle_qp_attempt(unicycle_solver *s, int warm)
 {
     int qs;
     s->qp_settings.warm_start = warm;
-    qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    qs = unicycle_qp_solve_bound(s);
     s->qp_iterations += s->qp_info.iterations;
     return qs;
 }
@@ -1341,7 +1371,7 @@ static void unicycle_predicted_step(unicycle_solver *s)
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
-    qs = unicycle_qp_solve(&s->mem.qp.work, &s->qp_in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    qs = unicycle_qp_solve_bound(s);
     if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         return;
     }
