@@ -3,8 +3,8 @@ working tree's: for a change of the runtime that must not alter the method (a
 restructuring of runtime_c/), every u0, status, flag and iterate must be bit for bit equal.
 
 Each side runs in its own process with its own package (the revision's tree from
-``git archive``) on its own checked-in ``generated/robot_arm`` folder (copied and built
-with its Makefile), driven through the Python handle. The plant is the solver's own
+``git archive``): it generates examples/robot_arm.py with its own runtime_c/ and
+templates, builds the folder and drives it through the Python handle. The plant is the solver's own
 prediction (x_1 of the plan after the feedback), pushed every 37 instants, with a NaN
 measurement at instant 150 and a velocity outlier at 220 (the recovery paths); M = 1 and
 the full RTI, 300 instants each.
@@ -20,7 +20,6 @@ import argparse
 import hashlib
 import json
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -74,8 +73,12 @@ json.dump(out, sys.stdout)
 
 def run_side(tree: Path, work: Path) -> dict:
     folder = work / "robot_arm"
-    shutil.copytree(tree / "generated" / "robot_arm", folder, ignore=shutil.ignore_patterns("build"))
     env = dict(os.environ, PYTHONPATH=str(tree))
+    gen = subprocess.run([sys.executable, "-c", "from dopus_codegen.cli import main; main()", "generate",
+                          str(tree / "examples" / "robot_arm.py"), "-o", str(folder)], capture_output=True,
+                         text=True, env=env, cwd=str(work))
+    if gen.returncode != 0:
+        raise SystemExit(f"closed_loop_ab: generating in {tree} failed:\n{gen.stdout[-2000:]}{gen.stderr[-2000:]}")
     proc = subprocess.run([sys.executable, "-c", CHILD, str(folder), str(INSTANTS)], capture_output=True,
                           text=True, env=env, cwd=str(work))
     if proc.returncode != 0:

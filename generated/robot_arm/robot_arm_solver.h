@@ -269,7 +269,9 @@ enum robot_arm_flag {
     ROBOT_ARM_FLAG_FALLBACK = 2,   /* feedback failed: u0 is the next control of the last good plan */
     ROBOT_ARM_FLAG_DIVERGED = 4,   /* the step or the prepared iterate failed the divergence test */
     ROBOT_ARM_FLAG_RECOVERED = 8,  /* prepare or feedback re-initialised (automatic recovery) */
-    ROBOT_ARM_FLAG_PREDICTED = 16  /* prepare took the step of the QP for the predicted state */
+    ROBOT_ARM_FLAG_PREDICTED = 16, /* prepare took the step of the QP for the predicted state */
+    ROBOT_ARM_FLAG_REINIT_GUESS = 32 /* a re-initialisation fell back to the OCP file's guess: the
+                                    model was not finite at the measured or predicted state */
 };
 
 /* Safety constants (docs/algorithm.md section 9). */

@@ -31,6 +31,14 @@ static void unicycle_copy(unicycle_real *dst, const unicycle_real *src, int n)
     }
 }
 
+static void unicycle_zero(int n, unicycle_real *dst)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        dst[i] = UNICYCLE_R(0.0);
+    }
+}
+
 void unicycle_ensure_setup(unicycle_solver *s)
 {
     if (s->magic != UNICYCLE_MAGIC) {
@@ -960,7 +968,15 @@ static int unicycle_feedback_admit(unicycle_solver *s, const unicycle_real *xhat
         return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
-        /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
+        /* counted as a failed instant: a prepare that keeps failing ends in a recovery, which
+         * starts from the newest measurement, so it is recorded all the same (algorithm.md
+         * section 9); the instant has passed: its prepare (the shift) is due */
+        unicycle_copy(s->xhat0, xhat0, UNICYCLE_NX);
+        s->xhat_fresh = 1;
+        if (s->mode == UNICYCLE_MODE_RECEDING) {
+            s->prepare_due = 1;
+            s->shifted = 0;
+        }
         return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NOT_PREPARED);
     }
     return UNICYCLE_OK;
@@ -1157,7 +1173,7 @@ static void unicycle_keep_plan(unicycle_solver *s, unicycle_real *u0, int lowere
     }
 }
 
-static int unicycle_feedback_recover(unicycle_solver *s, int *retries);
+static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries);
 
 int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
@@ -1181,9 +1197,11 @@ int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
     if (rc != UNICYCLE_OK && s->recovery && s->mode == UNICYCLE_MODE_RECEDING && qs != UNICYCLE_QP_MAX_ITER &&
         qs != UNICYCLE_QP_INVALID_INPUT) {
-        qs = unicycle_feedback_recover(s, &retries);
-        s->qp_status = qs;
-        rc = qs == UNICYCLE_QP_INVALID_INPUT ? UNICYCLE_ERR_QP : unicycle_feedback_check_step(s, qs);
+        rc = unicycle_feedback_recover(s, &qs, &retries);
+        if (rc == UNICYCLE_OK) {
+            s->qp_status = qs;
+            rc = unicycle_feedback_check_step(s, qs);
+        }
     }
     if (rc != UNICYCLE_OK) {
         unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
@@ -1275,26 +1293,60 @@ static int unicycle_simulate(unicycle_solver *s, int use_plan)
     return unicycle_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
 }
 
-/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
- * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
- * of the iterate, every block recomputed (Gauss-Newton when the problem has it). */
-static int unicycle_reinit(unicycle_solver *s)
+/* The OCP file's guess states from node `first` on and its controls (clipped) into the iterate. */
+static void unicycle_guess_primal(unicycle_solver *s, int first)
 {
-    int k, rc, hessian;
-    if (!unicycle_simulate(s, 1) && !unicycle_simulate(s, 0)) {
-        for (k = 1; k <= UNICYCLE_N; ++k) {
-            unicycle_copy(s->x[k], unicycle_guess_x[k], UNICYCLE_NX);
-        }
-        for (k = 0; k < UNICYCLE_N; ++k) {
-            unicycle_clip_u(unicycle_guess_u[k], s->u[k]);
-        }
+    int k;
+    for (k = first; k <= UNICYCLE_N; ++k) {
+        unicycle_copy(s->x[k], unicycle_guess_x[k], UNICYCLE_NX);
     }
-    /* the blocks of the re-initialisation: Gauss-Newton when the problem has it (convex in
-     * the cost, whatever the multipliers); the next prepares re-linearise with the setting */
-    hessian = s->hessian;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        unicycle_clip_u(unicycle_guess_u[k], s->u[k]);
+    }
+}
+
+/* The linearisation of a re-initialisation: Gauss-Newton blocks when the problem has them
+ * (convex in the cost, whatever the multipliers); the next prepares use the setting. */
+static int unicycle_reinit_finish(unicycle_solver *s)
+{
+    int rc, hessian = s->hessian;
     s->hessian = UNICYCLE_HAS_GN ? UNICYCLE_HESSIAN_GAUSS_NEWTON : hessian;
     rc = unicycle_init_finish(s);
     s->hessian = hessian;
+    return rc;
+}
+
+/* The last resort of a re-initialisation whose model evaluation failed (the model is not
+ * finite at the measured or predicted state, e.g. an outlier of 1e6 rad/s): the OCP file's
+ * guess whole, x_0 included, with zero multipliers; the next feedback's QP steps from it to
+ * the measurement. Flag UNICYCLE_FLAG_REINIT_GUESS. */
+static int unicycle_reinit_at_guess(unicycle_solver *s)
+{
+    unicycle_guess_primal(s, 0);
+    unicycle_zero((UNICYCLE_N + 1) * UNICYCLE_NX, &s->lam[0][0]);
+    unicycle_zero(UNICYCLE_N * UNICYCLE_NW, &s->mu_b[0][0]);
+    unicycle_zero(UNICYCLE_NX, s->mu_bN);
+    unicycle_zero(UNICYCLE_N * UNICYCLE_DIM(UNICYCLE_NG), &s->mu_g[0][0]);
+    unicycle_zero(UNICYCLE_DIM(UNICYCLE_NR), s->mu_r);
+    unicycle_zero(UNICYCLE_DIM(UNICYCLE_NE), s->nu);
+    s->flags |= UNICYCLE_FLAG_REINIT_GUESS;
+    return unicycle_reinit_finish(s);
+}
+
+/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
+ * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
+ * of the iterate, every block recomputed (Gauss-Newton when the problem has it); when the
+ * model fails there, the OCP file's guess whole (unicycle_reinit_at_guess). */
+static int unicycle_reinit(unicycle_solver *s)
+{
+    int rc;
+    if (!unicycle_simulate(s, 1) && !unicycle_simulate(s, 0)) {
+        unicycle_guess_primal(s, 1);
+    }
+    rc = unicycle_reinit_finish(s);
+    if (rc != UNICYCLE_OK) {
+        rc = unicycle_reinit_at_guess(s);
+    }
     if (rc != UNICYCLE_OK) {
         s->qp_ready = 0;
         return rc;
@@ -1337,26 +1389,33 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
 
 /* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
  * failed (not by its iteration limit) or diverged; re-initialise from the measured state (x_0 = xhat0) and
- * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns the QP
- * status (UNICYCLE_QP_INVALID_INPUT when the re-initialisation failed). */
-static int unicycle_feedback_recover(unicycle_solver *s, int *retries)
+ * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns UNICYCLE_OK
+ * with the QP status in *qs, or the status of a re-initialisation that could not start from
+ * the measurement (the model failed there: UNICYCLE_ERR_NONFINITE_VALUE or UNICYCLE_ERR_FUNCTION;
+ * the iterate is then the OCP file's guess, prepared, when the model is finite there). */
+static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries)
 {
-    int i, qs, rc, n_failed = s->n_failed;
+    int i, rc, n_failed = s->n_failed;
     unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
     rc = unicycle_reinit(s);
     s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
     s->shifted = 0;
+    if (rc == UNICYCLE_OK && (s->flags & UNICYCLE_FLAG_REINIT_GUESS)) {
+        /* the model failed at the measured state: no QP from it */
+        rc = UNICYCLE_ERR_NONFINITE_VALUE;
+    }
     if (rc != UNICYCLE_OK) {
-        return UNICYCLE_QP_INVALID_INPUT;
+        return rc;
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
-    qs = unicycle_qp_attempt(s, 0);
-    return unicycle_feedback_lm_retries(s, qs, retries);
+    *qs = unicycle_qp_attempt(s, 0);
+    *qs = unicycle_feedback_lm_retries(s, *qs, retries);
+    return UNICYCLE_OK;
 }
 
 /* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the
