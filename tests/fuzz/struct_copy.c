@@ -140,7 +140,8 @@ static int run(int after_feedback)
         printf("\n");
         if (sr != sa || sr != sm || !same(ur, ua, NU) || !same(ur, um, NU) || !same(xr, xa, NX) ||
             !same(xr, xm, NX)) {
-            fprintf(stderr, "struct_copy: %s: the copies differ from the reference at instant %d\n", where, k);
+            fprintf(stderr, "struct_copy: %s: the copies differ from the reference at instant %d\n", where,
+                    k);
             ok = 0;
         }
     }
