@@ -190,7 +190,7 @@ def qp_status() -> Enum:
 
 
 def phases() -> Tuple[str, ...]:
-    """The timed phases in the order of ``enum dopus_phase`` (the index of dopus_get_timings)."""
+    """The timed phases in the order of ``enum dopus_phase`` (the index of the timings of dopus_get_info)."""
     return enum("dopus_phase").names()
 
 

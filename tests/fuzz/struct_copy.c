@@ -52,7 +52,9 @@ static int instant(solver_t *s, double *xhat, double *u0, int k)
 
 static int setup(solver_t *s)
 {
-    API(defaults)(s);
+    if (API(setup)(s, NULL) != K(OK)) {
+        return -1;
+    }
 #if K(HAS_NOMINAL)
     return API(init_nominal)(s, API(x0_default));
 #else
