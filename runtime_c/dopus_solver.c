@@ -848,11 +848,25 @@ static void dopus_keep_plan(dopus_solver *s, dopus_real *u0, int lowered)
 
 static int dopus_feedback_recover(dopus_solver *s, int *qs, int *retries);
 
+/* 1 when the model is finite at the state xs with the next control of the last good plan (one
+ * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
+ * cannot start a re-initialisation: it is no measurement (algorithm.md section 9). */
+static int dopus_model_finite_at(dopus_solver *s, const dopus_real *xs)
+{
+    dopus_real l = DOPUS_R(0.0), u[DOPUS_NU], xn[DOPUS_NX];
+    int j = s->health.plan_age > DOPUS_N - 1 ? DOPUS_N - 1 : s->health.plan_age;
+    dopus_clip_u(s->health.plan_u[j], u);
+    return dopus_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+           dopus_lai_vec_finite(DOPUS_NX, xn) && dopus_lai_vec_finite(1, &l);
+}
+
 /* Feedback once admitted (steps 2 to 8). */
 static int dopus_feedback_run(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
+    dopus_real xhat_prev[DOPUS_NX];
     int rc, qs, retries;
 
+    dopus_copy(xhat_prev, s->xhat0, DOPUS_NX);
     dopus_feedback_measure(s, xhat0);
     qs = dopus_feedback_qp(s);
     qs = dopus_feedback_lm_retries(s, qs, &retries);
@@ -862,10 +876,19 @@ static int dopus_feedback_run(dopus_solver *s, const dopus_real *xhat0, dopus_re
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
     if (rc != DOPUS_OK && s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING &&
         qs != DOPUS_QP_MAX_ITER && qs != DOPUS_QP_INVALID_INPUT) {
-        rc = dopus_feedback_recover(s, &qs, &retries);
-        if (rc == DOPUS_OK) {
-            s->qp_status = qs;
-            rc = dopus_feedback_check_step(s, qs);
+        if (!dopus_model_finite_at(s, xhat0)) {
+            /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
+             * prepare takes the predicted step) */
+            dopus_copy(s->xhat0, xhat_prev, DOPUS_NX);
+            s->health.xhat_fresh = 0;
+            s->health.flags |= DOPUS_FLAG_MEASUREMENT_UNUSABLE;
+            rc = DOPUS_ERR_NONFINITE_VALUE;
+        } else {
+            rc = dopus_feedback_recover(s, &qs, &retries);
+            if (rc == DOPUS_OK) {
+                s->qp_status = qs;
+                rc = dopus_feedback_check_step(s, qs);
+            }
         }
     }
     if (rc != DOPUS_OK) {
@@ -1143,7 +1166,8 @@ int dopus_prepare(dopus_solver *s)
     dopus_timer_begin(&s->timer, DOPUS_PREPARE_PHASES, DOPUS_PHASE_RECOVERY);
     start = s->timer.mark;
     if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
-        s->settings.mode == DOPUS_MODE_RECEDING) {
+        s->settings.mode == DOPUS_MODE_RECEDING && !(s->health.flags & DOPUS_FLAG_REINIT_GUESS)) {
+        /* (not from the OCP file's guess: its plan is not the plant's) */
         dopus_predicted_step(s);
     }
     s->qp_ready = 0;

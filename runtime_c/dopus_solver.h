@@ -74,7 +74,10 @@ const char *dopus_status_string(int status);
  * re-initialises at once, the prepare after a failed feedback first takes the step of that
  * instant's QP for the predicted state (DOPUS_FLAG_PREDICTED), and a feedback whose QP fails
  * (not by its iteration limit) or diverges re-initialises from the measurement and solves
- * again within the call (DOPUS_FLAG_RECOVERED); 0: off. */
+ * again within the call (DOPUS_FLAG_RECOVERED); a measurement at which the model is not
+ * finite is handled as a missing one (DOPUS_ERR_NONFINITE_VALUE,
+ * DOPUS_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
+ * records its measurement, so the recovery starts from the newest one; 0: off. */
 typedef struct {
     int M;
     int mode;
@@ -267,13 +270,15 @@ enum dopus_row_kind {
 
 /* Flags of dopus_info.flags (docs/algorithm.md section 9). */
 enum dopus_flag {
-    DOPUS_FLAG_U0_CLIPPED = 1,   /* u0 was outside the control bounds and was clipped */
-    DOPUS_FLAG_FALLBACK = 2,     /* feedback failed: u0 is the next control of the last good plan */
-    DOPUS_FLAG_DIVERGED = 4,     /* the step or the prepared iterate failed the divergence test */
-    DOPUS_FLAG_RECOVERED = 8,    /* prepare or feedback re-initialised (automatic recovery) */
-    DOPUS_FLAG_PREDICTED = 16,   /* prepare took the step of the QP for the predicted state */
-    DOPUS_FLAG_REINIT_GUESS = 32 /* a re-initialisation fell back to the OCP file's guess: the
-                                    model was not finite at the measured or predicted state */
+    DOPUS_FLAG_U0_CLIPPED = 1,           /* u0 was outside the control bounds and was clipped */
+    DOPUS_FLAG_FALLBACK = 2,             /* feedback failed: u0 is the next control of the last good plan */
+    DOPUS_FLAG_DIVERGED = 4,             /* the step or the prepared iterate failed the divergence test */
+    DOPUS_FLAG_RECOVERED = 8,            /* prepare or feedback re-initialised (automatic recovery) */
+    DOPUS_FLAG_PREDICTED = 16,           /* prepare took the step of the QP for the predicted state */
+    DOPUS_FLAG_REINIT_GUESS = 32,        /* a re-initialisation fell back to the OCP file's guess: the
+                                            model was not finite at the re-initialised iterate */
+    DOPUS_FLAG_MEASUREMENT_UNUSABLE = 64 /* the model is not finite at the (finite) measurement:
+                                            handled as a missing one */
 };
 
 /* Safety constants (docs/algorithm.md section 9; the divergence box and KKT bound are in

@@ -74,7 +74,10 @@ const char *robot_arm_status_string(int status);
  * re-initialises at once, the prepare after a failed feedback first takes the step of that
  * instant's QP for the predicted state (ROBOT_ARM_FLAG_PREDICTED), and a feedback whose QP fails
  * (not by its iteration limit) or diverges re-initialises from the measurement and solves
- * again within the call (ROBOT_ARM_FLAG_RECOVERED); 0: off. */
+ * again within the call (ROBOT_ARM_FLAG_RECOVERED); a measurement at which the model is not
+ * finite is handled as a missing one (ROBOT_ARM_ERR_NONFINITE_VALUE,
+ * ROBOT_ARM_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
+ * records its measurement, so the recovery starts from the newest one; 0: off. */
 typedef struct {
     int M;
     int mode;
@@ -267,13 +270,15 @@ enum robot_arm_row_kind {
 
 /* Flags of robot_arm_info.flags (docs/algorithm.md section 9). */
 enum robot_arm_flag {
-    ROBOT_ARM_FLAG_U0_CLIPPED = 1,   /* u0 was outside the control bounds and was clipped */
-    ROBOT_ARM_FLAG_FALLBACK = 2,     /* feedback failed: u0 is the next control of the last good plan */
-    ROBOT_ARM_FLAG_DIVERGED = 4,     /* the step or the prepared iterate failed the divergence test */
-    ROBOT_ARM_FLAG_RECOVERED = 8,    /* prepare or feedback re-initialised (automatic recovery) */
-    ROBOT_ARM_FLAG_PREDICTED = 16,   /* prepare took the step of the QP for the predicted state */
-    ROBOT_ARM_FLAG_REINIT_GUESS = 32 /* a re-initialisation fell back to the OCP file's guess: the
-                                    model was not finite at the measured or predicted state */
+    ROBOT_ARM_FLAG_U0_CLIPPED = 1,           /* u0 was outside the control bounds and was clipped */
+    ROBOT_ARM_FLAG_FALLBACK = 2,             /* feedback failed: u0 is the next control of the last good plan */
+    ROBOT_ARM_FLAG_DIVERGED = 4,             /* the step or the prepared iterate failed the divergence test */
+    ROBOT_ARM_FLAG_RECOVERED = 8,            /* prepare or feedback re-initialised (automatic recovery) */
+    ROBOT_ARM_FLAG_PREDICTED = 16,           /* prepare took the step of the QP for the predicted state */
+    ROBOT_ARM_FLAG_REINIT_GUESS = 32,        /* a re-initialisation fell back to the OCP file's guess: the
+                                            model was not finite at the re-initialised iterate */
+    ROBOT_ARM_FLAG_MEASUREMENT_UNUSABLE = 64 /* the model is not finite at the (finite) measurement:
+                                            handled as a missing one */
 };
 
 /* Safety constants (docs/algorithm.md section 9; the divergence box and KKT bound are in

@@ -36,7 +36,10 @@ const char *unicycle_status_string(int status);
  * re-initialises at once, the prepare after a failed feedback first takes the step of that
  * instant's QP for the predicted state (UNICYCLE_FLAG_PREDICTED), and a feedback whose QP fails
  * (not by its iteration limit) or diverges re-initialises from the measurement and solves
- * again within the call (UNICYCLE_FLAG_RECOVERED); 0: off. */
+ * again within the call (UNICYCLE_FLAG_RECOVERED); a measurement at which the model is not
+ * finite is handled as a missing one (UNICYCLE_ERR_NONFINITE_VALUE,
+ * UNICYCLE_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
+ * records its measurement, so the recovery starts from the newest one; 0: off. */
 typedef struct {
     int M;
     int mode;

@@ -74,7 +74,10 @@ const char *unicycle_status_string(int status);
  * re-initialises at once, the prepare after a failed feedback first takes the step of that
  * instant's QP for the predicted state (UNICYCLE_FLAG_PREDICTED), and a feedback whose QP fails
  * (not by its iteration limit) or diverges re-initialises from the measurement and solves
- * again within the call (UNICYCLE_FLAG_RECOVERED); 0: off. */
+ * again within the call (UNICYCLE_FLAG_RECOVERED); a measurement at which the model is not
+ * finite is handled as a missing one (UNICYCLE_ERR_NONFINITE_VALUE,
+ * UNICYCLE_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
+ * records its measurement, so the recovery starts from the newest one; 0: off. */
 typedef struct {
     int M;
     int mode;
@@ -267,13 +270,15 @@ enum unicycle_row_kind {
 
 /* Flags of unicycle_info.flags (docs/algorithm.md section 9). */
 enum unicycle_flag {
-    UNICYCLE_FLAG_U0_CLIPPED = 1,   /* u0 was outside the control bounds and was clipped */
-    UNICYCLE_FLAG_FALLBACK = 2,     /* feedback failed: u0 is the next control of the last good plan */
-    UNICYCLE_FLAG_DIVERGED = 4,     /* the step or the prepared iterate failed the divergence test */
-    UNICYCLE_FLAG_RECOVERED = 8,    /* prepare or feedback re-initialised (automatic recovery) */
-    UNICYCLE_FLAG_PREDICTED = 16,   /* prepare took the step of the QP for the predicted state */
-    UNICYCLE_FLAG_REINIT_GUESS = 32 /* a re-initialisation fell back to the OCP file's guess: the
-                                    model was not finite at the measured or predicted state */
+    UNICYCLE_FLAG_U0_CLIPPED = 1,           /* u0 was outside the control bounds and was clipped */
+    UNICYCLE_FLAG_FALLBACK = 2,             /* feedback failed: u0 is the next control of the last good plan */
+    UNICYCLE_FLAG_DIVERGED = 4,             /* the step or the prepared iterate failed the divergence test */
+    UNICYCLE_FLAG_RECOVERED = 8,            /* prepare or feedback re-initialised (automatic recovery) */
+    UNICYCLE_FLAG_PREDICTED = 16,           /* prepare took the step of the QP for the predicted state */
+    UNICYCLE_FLAG_REINIT_GUESS = 32,        /* a re-initialisation fell back to the OCP file's guess: the
+                                            model was not finite at the re-initialised iterate */
+    UNICYCLE_FLAG_MEASUREMENT_UNUSABLE = 64 /* the model is not finite at the (finite) measurement:
+                                            handled as a missing one */
 };
 
 /* Safety constants (docs/algorithm.md section 9; the divergence box and KKT bound are in
