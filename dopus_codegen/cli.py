@@ -10,6 +10,7 @@ from pathlib import Path
 
 from . import __version__
 from .codegen.flags import DEFAULT_OPT
+from .interrupt import EXIT_INTERRUPTED
 from .settings import choices
 
 _FROM_FILE = "[default: the OCP file's options(...), else {}]"
@@ -17,7 +18,7 @@ _FROM_FILE = "[default: the OCP file's options(...), else {}]"
 #: Exit codes: 0 done; 1 the verb ran and what it was asked to do failed (a run of the
 #: study failed, the plant of a closed loop could not be integrated); 2 bad input or an
 #: environment that does not allow the work (a message names the problem), also click's
-#: usage errors.
+#: usage errors; 130 (EXIT_INTERRUPTED) stopped by Ctrl-C (SIGINT).
 EXIT_FAILED, EXIT_BAD_INPUT = 1, 2
 
 
@@ -29,6 +30,20 @@ class RunFailed(click.ClickException):
 class BadInput(click.ClickException):
     """Bad input or an environment that does not allow the work (exit code 2)."""
     exit_code = EXIT_BAD_INPUT
+
+
+class Interrupted(click.ClickException):
+    """Stopped by Ctrl-C (SIGINT): one line ``interrupted[: what was kept]`` on stderr,
+    exit code 130."""
+    exit_code = EXIT_INTERRUPTED
+
+    def show(self, file=None):
+        click.echo(self.format_message(), err=True)
+
+
+def _interrupted_text(exc: BaseException) -> str:
+    detail = str(exc).strip() if isinstance(exc, KeyboardInterrupt) else ""
+    return f"interrupted: {detail}" if detail else "interrupted"
 
 
 def one_line(exc: BaseException) -> str:
@@ -46,21 +61,43 @@ def one_line(exc: BaseException) -> str:
 
 class _Group(click.Group):
     """Every exception of a verb becomes a one-line message and exit code 2, unless the
-    global ``--debug`` asks for the traceback."""
+    global ``--debug`` asks for the traceback. Ctrl-C (SIGINT) stops every verb with exit
+    code 130 and the line ``interrupted``, also where CasADi caught it and reported a
+    failure of its computation instead (:mod:`dopus_codegen.interrupt`)."""
 
     def invoke(self, ctx):
+        from .interrupt import handling
+
+        with handling():
+            return self._invoke(ctx)
+
+    def _invoke(self, ctx):
+        from .interrupt import interrupted
+
+        def debug():
+            return (ctx.obj or {}).get("debug")
+
         try:
-            return super().invoke(ctx)
-        except (click.exceptions.Exit, click.Abort, click.ClickException, KeyboardInterrupt, SystemExit):
-            raise
-        except Exception as exc:  # noqa: BLE001 - the one place that turns errors into messages
-            if (ctx.obj or {}).get("debug"):
+            result = super().invoke(ctx)
+        except KeyboardInterrupt as exc:
+            if debug():
+                raise
+            raise Interrupted(_interrupted_text(exc)) from None
+        except (click.exceptions.Exit, click.Abort, click.ClickException, SystemExit, Exception) as exc:
+            if interrupted() and not debug():
+                raise Interrupted("interrupted") from None
+            if isinstance(exc, (click.exceptions.Exit, click.Abort, click.ClickException, SystemExit)):
+                raise
+            if debug():
                 raise
             known = _known_errors()
             if isinstance(exc, known):
                 raise BadInput(one_line(exc)) from None
             raise BadInput(f"internal error ({type(exc).__name__}): {one_line(exc)} "
                            "(run 'dopus-gen --debug ...' for the traceback)") from None
+        if interrupted():   # caught and reported as a failure by CasADi, and the verb went on
+            raise Interrupted("interrupted")
+        return result
 
 
 def _known_errors() -> tuple:
@@ -301,7 +338,11 @@ def _campaign_option(name: str, flag_type):
 @click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
 @click.option("--out", "out", type=click.Path(dir_okay=False), required=True,
               help="The result file (JSON lines, one per run, keyed by run and seed). An existing file of the "
-                   "same campaign is resumed: only the runs it lacks are computed.")
+                   "same campaign (its header's fingerprint) is resumed: only the runs it lacks are computed; "
+                   "malformed lines are reported and computed again.")
+@click.option("--overwrite", is_flag=True,
+              help="Start a new campaign in --out when it cannot be resumed (a damaged header, another "
+                   "campaign's runs) instead of refusing it.")
 @_campaign_option("runs", int)
 @_campaign_option("seed", int)
 @_campaign_option("duration", float)
@@ -314,6 +355,9 @@ def _campaign_option(name: str, flag_type):
 @click.option("--scheduler", default=None,
               help="Address of an existing dask scheduler (tcp://host:port) to run on instead of a local cluster; "
                    "its workers need dopus-codegen installed.")
+@click.option("--worker-timeout", default=60.0, show_default=True, type=click.FloatRange(min=0, min_open=True),
+              help="Seconds without any dask worker after which the campaign stops (resumable); the runs of a "
+                   "lost worker are re-submitted to the others.")
 @click.option("--M", "m", default=None, type=click.IntRange(0),
               help="Stages re-linearised per iteration (clamped to N-1, the full RTI). " + _FROM_FILE.format("1"))
 @_solver_options("0: the paper's literal QP")
@@ -324,8 +368,8 @@ def _campaign_option(name: str, flag_type):
 @click.option("--worst", default=4, show_default=True, type=click.IntRange(0, 20),
               help="Runs in the worst-runs figures (simulated again in this process).")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress display on stderr.")
-def campaign(ocp_file, out, runs, seed, duration, threshold, settle, mismatch, workers, scheduler, m, backend,
-             json_out, plot_dir, worst, progress, **kwargs):
+def campaign(ocp_file, out, overwrite, runs, seed, duration, threshold, settle, mismatch, workers, scheduler,
+             worker_timeout, m, backend, json_out, plot_dir, worst, progress, **kwargs):
     """Monte Carlo campaign: many closed-loop runs with random starts, pushes and plant mismatch.
 
     Run i (with --seed s) is the closed loop of `dopus-gen sil` with the random draw of (s, i):
@@ -335,7 +379,8 @@ def campaign(ocp_file, out, runs, seed, duration, threshold, settle, mismatch, w
     failed instants, recoveries and the time per iteration. Runs on dask.distributed: a local
     cluster (--workers), or an existing scheduler (--scheduler). `dopus-gen sil --campaign-run
     I --seed S` replays one run. Exits with 1 when a run raised an error (the others are
-    kept in --out).
+    kept in --out). Ctrl-C, or a dask cluster left without workers (--worker-timeout),
+    stops the campaign with the finished runs in --out: the same command computes the others.
     """
     from .studies.campaign import run_campaign
 
@@ -343,7 +388,8 @@ def campaign(ocp_file, out, runs, seed, duration, threshold, settle, mismatch, w
     if scheduler is not None and workers is not None:
         raise BadInput("--workers and --scheduler exclude each other (the scheduler has its own workers)")
     rep = run_campaign(ocp_file, out, workers=workers, scheduler=scheduler, backend=backend, json_out=json_out,
-                       plot_dir=plot_dir, echo=click.echo, progress=progress, worst=worst, M=m, runs=runs, seed=seed,
+                       plot_dir=plot_dir, echo=click.echo, progress=progress, worst=worst, overwrite=overwrite,
+                       worker_timeout=worker_timeout, M=m, runs=runs, seed=seed,
                        duration=duration, threshold=threshold, settle=settle, mismatch=mismatch,
                        **_runtime_values(kwargs))
     if rep["errors"]:

@@ -31,6 +31,7 @@ import numpy as np
 from .. import __version__
 from .. import settings
 from ..cnames import identifier_problem, rename_placeholder
+from ..outputs import write_bytes
 from . import flags
 from .flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
 from .paths import runtime_c_dir, templates_dir
@@ -700,7 +701,7 @@ def write_folder(files: Dict[str, str], out_dir: Path) -> Path:
         data = files[fname].encode("utf-8")
         if path.is_file() and path.read_bytes() == data:
             continue
-        path.write_bytes(data)
+        write_bytes(path, data)
     return out_dir
 
 

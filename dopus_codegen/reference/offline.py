@@ -22,6 +22,7 @@ import weakref
 import numpy as np
 import casadi as ca
 
+from .. import interrupt
 from ..problem.ocp import Guess
 from .qp import free_initial_state
 
@@ -184,6 +185,7 @@ def solve_ocp(disc, xhat0, guess: Guess | None = None, tol: float = 1e-12, hessi
 
     solver = _solver(disc, hessian, tol, max_iter)
     sol = solver(x0=v0, p=np.concatenate([xhat0, P.reshape(-1)]), lbx=lbv, ubx=ubv, lbg=lbg, ubg=ubg)
+    interrupt.check()       # IPOPT ends a solve interrupted by Ctrl-C as a failed one
     stats = solver.stats()
     V = np.array(sol["x"]).reshape(-1)
     lg_ = np.array(sol["lam_g"]).reshape(-1)

@@ -45,7 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import settings
+from .. import interrupt, settings
+from ..outputs import atomic_file, save_figure, write_text
 from .records import json_ready
 
 __all__ = ["CampaignError", "Job", "draw", "run_one", "judge", "read_results", "run_campaign", "format_report",
@@ -53,6 +54,8 @@ __all__ = ["CampaignError", "Job", "draw", "run_one", "judge", "read_results", "
 
 #: The version of the result file's layout (in its first line).
 FORMAT = 1
+#: Seconds without a dask worker after which a campaign stops (``--worker-timeout``).
+WORKER_TIMEOUT = 60.0
 
 
 class CampaignError(RuntimeError):
@@ -248,43 +251,130 @@ def _header(job: Job, name: str) -> dict:
             "on_path": {"signal": job.on_path[0], "threshold": job.on_path[1], "settle": job.on_path[2]}}
 
 
-def read_results(path) -> tuple:
-    """``(header, {(seed, run): line})`` of a result file; a line cut short by an interrupted
-    write is dropped. ``(None, {})`` for a missing or empty file."""
+_NUMBER, _INT, _TEXT, _NULL = "number", "integer", "text", "null"
+#: The fields of a run's line: the JSON types each may have.
+_LINE_FIELDS = {
+    "run": (_INT,), "seed": (_INT,), "draw": (dict,), "on_path": (bool,), "max_deviation": (_NUMBER, _NULL),
+    "max_deviation_all": (_NUMBER, _NULL), "failed_instants": (_INT,), "recoveries": (_INT, _NULL),
+    "first_failure": (dict, _NULL), "aborted": (_TEXT, _NULL), "instants": (_INT,), "instants_planned": (_INT,),
+    "final_x": (list, _NULL), "signal": (list,), "time": (dict,),
+}
+_TIME_FIELDS = {"median_us": (_NUMBER, _NULL), "p99_us": (_NUMBER, _NULL), "max_us": (_NUMBER, _NULL),
+                "feedback_median_us": (_NUMBER, _NULL), "run_s": (_NUMBER,)}
+_DRAW_FIELDS = {"quantities": (dict,), "x0": (list,), "pushes": (list,)}
+
+
+def _is(value, kinds) -> bool:
+    for kind in kinds:
+        if kind == _NULL and value is None:
+            return True
+        if kind == _INT and type(value) is int and value >= 0:
+            return True
+        if kind == _NUMBER and type(value) in (int, float):
+            return True
+        if kind == _TEXT and isinstance(value, str):
+            return True
+        if isinstance(kind, type) and type(value) is kind:
+            return True
+    return False
+
+
+def _fields_problem(obj, fields: dict, where: str = ""):
+    for name, kinds in fields.items():
+        if name not in obj:
+            return f"no field '{where}{name}'"
+        if not _is(obj[name], kinds):
+            return f"field '{where}{name}' is {json.dumps(obj[name])[:40]}"
+    return None
+
+
+def line_problem(obj):
+    """Why ``obj`` (a parsed line of the result file) is not a run's line, or None."""
+    if not isinstance(obj, dict):
+        return "not a JSON object"
+    why = _fields_problem(obj, _LINE_FIELDS) or _fields_problem(obj["time"], _TIME_FIELDS, "time.") \
+        or _fields_problem(obj["draw"], _DRAW_FIELDS, "draw.")
+    if why is None and obj["instants"] > obj["instants_planned"]:
+        why = "more instants than planned"
+    if why is None and not all(type(v) in (int, float) for v in obj["draw"]["quantities"].values()):
+        why = "field 'draw.quantities' holds a value that is not a number"
+    return why
+
+
+def _header_problem(obj):
+    """Why ``obj`` (the parsed first line) is not the header of a result file, or None."""
+    if not isinstance(obj, dict):
+        return "not a JSON object"
+    if not isinstance(obj.get("campaign"), str) or not obj["campaign"]:
+        return "no campaign fingerprint"
+    if obj.get("format") != FORMAT or type(obj.get("format")) is not int:
+        return f"format {obj.get('format')!r}, expected {FORMAT}"
+    return None
+
+
+@dataclass
+class Results:
+    """A result file as read: ``header`` (None for a missing or empty file, or a damaged
+    header: ``header_problem`` says why), ``lines`` ``{(seed, run): line}``, ``malformed``
+    ``[(line number, why)]``: the lines that are not a run's line (cut short by an
+    interruption, missing or mistyped fields); they are dropped, so their runs are
+    computed again."""
+    header: object = None
+    lines: dict = field(default_factory=dict)
+    malformed: list = field(default_factory=list)
+    header_problem: object = None
+
+
+def read_results(path) -> Results:
+    """The result file at ``path`` (:class:`Results`; empty for a missing or empty file)."""
     p = Path(path)
+    res = Results()
     if not p.exists() or p.stat().st_size == 0:
-        return None, {}
-    header, lines = None, {}
-    with open(p) as fh:
-        for k, text in enumerate(fh):
+        return res
+    with open(p, "rb") as fh:
+        for k, raw in enumerate(fh):
             try:
-                obj = json.loads(text)
+                obj = json.loads(raw.decode("utf-8"))
             except ValueError:
-                continue
+                obj, why = None, "cut short" if not raw.endswith(b"\n") else "not JSON"
+            else:
+                why = None
             if k == 0:
-                if not isinstance(obj, dict) or "campaign" not in obj:
-                    raise CampaignError(f"'{path}' is not a campaign result file (its first line is not a "
-                                        "campaign header)")
-                header = obj
+                res.header_problem = why or _header_problem(obj)
+                res.header = obj if res.header_problem is None else None
                 continue
-            if isinstance(obj, dict) and "run" in obj and "seed" in obj:
-                lines.setdefault((int(obj["seed"]), int(obj["run"])), obj)
-    return header, lines
+            why = why or line_problem(obj)
+            if why is not None:
+                res.malformed.append((k + 1, why))
+                continue
+            res.lines.setdefault((obj["seed"], obj["run"]), obj)
+    return res
+
+
+def _malformed_text(path, malformed: list) -> str:
+    shown = "; ".join(f"line {n}: {why}" for n, why in malformed[:5])
+    more = f"; and {len(malformed) - 5} more" if len(malformed) > 5 else ""
+    return (f"warning: '{path}' has {len(malformed)} malformed line{'s' if len(malformed) > 1 else ''} "
+            f"({shown}{more}); dropped, their runs are computed again")
 
 
 def _dump(obj) -> str:
     return json.dumps(obj, sort_keys=True, allow_nan=False)
 
 
+def _append(fd: int, text: str) -> None:
+    """One complete line at the end of the file open at ``fd`` (O_APPEND)."""
+    data = text.encode("utf-8")
+    while data:
+        data = data[os.write(fd, data):]
+
+
 def _rewrite(path, header: dict, lines: dict) -> None:
     """The result file with ``header`` and ``lines`` sorted by (seed, run), replaced atomically."""
-    p = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", dir=p.parent if str(p.parent) else ".")
-    with os.fdopen(fd, "w") as fh:
+    with atomic_file(path) as fh:
         fh.write(_dump(header) + "\n")
         for key in sorted(lines):
             fh.write(_dump(lines[key]) + "\n")
-    os.replace(tmp, p)
 
 
 # --------------------------------------------------------------------------- distribution
@@ -312,22 +402,62 @@ def connect(workers: int | None, scheduler: str | None, timeout: float = 5.0):
             raise CampaignError(f"cannot reach the dask scheduler at '{scheduler}': {exc}") from None
     n = workers or os.cpu_count() or 1
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=logging.ERROR)
+                           silence_logs=logging.ERROR, preload=[__name__])
     return Client(cluster), cluster
 
 
-def _distributed(client, job, todo, seed, on_result, on_error):
-    from dask.distributed import as_completed
+def dask_setup(worker) -> None:
+    """The preload of the local cluster's workers: they ignore Ctrl-C, which a terminal
+    sends to the whole process group; the campaign stops them."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class _NoWorker(Exception):
+    """The dask cluster lost its workers (or its scheduler) for longer than allowed."""
+
+
+def _distributed(client, job, todo, seed, on_result, on_error, worker_timeout: float = WORKER_TIMEOUT,
+                 poll: float = 1.0):
+    """The runs ``todo`` on the dask cluster of ``client``. The scheduler re-submits the
+    runs of a worker it loses to the others (a run that killed its workers three times
+    fails with ``KilledWorker``, reported by ``on_error``); while no worker is left, the
+    cluster is asked every ``poll`` seconds, and after ``worker_timeout`` seconds without a
+    worker (or without an answer of the scheduler) :class:`_NoWorker` stops the campaign."""
+    from dask.distributed import wait
 
     futures = {client.submit(run_one, job, i, seed, key=f"dopus-campaign-{job.fingerprint}-{seed}-{i}", pure=False): i
                for i in todo}
+    pending = set(futures)
+    alone_since = None
     try:
-        for fut in as_completed(list(futures)):
-            if fut.status == "error":
-                on_error(futures[fut], fut.exception())
-            else:
-                on_result(fut.result())
-            fut.release()
+        while pending:
+            try:
+                done, pending = wait(pending, timeout=poll, return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                done = ()
+            except Exception as exc:  # noqa: BLE001 - the scheduler cancelled the runs or went away
+                raise _NoWorker(f"the dask cluster stopped the runs ({type(exc).__name__}: {exc})") from None
+            for fut in done:
+                if fut.status == "error":
+                    on_error(futures[fut], fut.exception())
+                else:
+                    on_result(fut.result())
+                fut.release()
+            if done:
+                alone_since = None
+                continue
+            try:
+                n_workers = len(client.nthreads())
+            except Exception:  # noqa: BLE001 - the scheduler does not answer
+                n_workers = 0
+            if n_workers:
+                alone_since = None
+            elif alone_since is None:
+                alone_since = time.monotonic()
+            elif time.monotonic() - alone_since >= worker_timeout:
+                raise _NoWorker(f"the dask cluster has had no worker for {worker_timeout:g} s (--worker-timeout)")
     finally:
         for fut in futures:
             fut.cancel()
@@ -420,13 +550,21 @@ def _resolve(ocp, cli: dict):
 
 
 def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | None = None, backend: str = "c",
-                 json_out=None, plot_dir=None, echo=None, progress: bool = True, worst: int = 4, **cli) -> dict:
+                 json_out=None, plot_dir=None, echo=None, progress: bool = True, worst: int = 4,
+                 overwrite: bool = False, worker_timeout: float = WORKER_TIMEOUT, **cli) -> dict:
     """The ``dopus-gen campaign`` command; returns the report (:func:`format_report`).
 
     ``workers``: None = one LocalCluster worker per core; 0 = the runs one by one in this
     process (no dask); ``scheduler``: the address of an existing dask scheduler. ``cli``:
     the solver settings and :data:`settings.CAMPAIGN_SETTINGS` given as flags (None: not
-    given). The output paths, the settings and the scheduler are checked before any run."""
+    given). The output paths, the settings and the scheduler are checked before any run.
+
+    ``out`` is resumed only when its header carries this campaign's fingerprint; a damaged
+    header or another campaign's is refused (:class:`CampaignError`), or with ``overwrite``
+    replaced by a new file. Malformed run lines are reported and computed again. A
+    ``KeyboardInterrupt`` (Ctrl-C) stops the campaign with the finished runs in ``out`` and
+    records no interrupted run; the dask cluster without a worker for ``worker_timeout``
+    seconds stops it the same way, with :class:`CampaignError`."""
     from ..outputs import check_output_dir, check_output_file
     from ..problem.ocp import load_ocp
 
@@ -447,10 +585,23 @@ def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | Non
     spec = ocp.validate()
     fp = _fingerprint(ocp_text, backend, solver, camp["duration"], camp["mismatch"], on_path,
                       spec.scenario.closed_loop.campaign)
-    header_old, lines = read_results(out)
-    if header_old is not None and header_old.get("campaign") != fp:
-        raise CampaignError(f"--out '{out}' holds the runs of another campaign (another OCP file or other settings: "
-                            f"fingerprint {header_old.get('campaign')}, this one {fp}); give another file")
+    if not (worker_timeout > 0):
+        raise CampaignError(f"--worker-timeout must be > 0 s, got {worker_timeout}")
+    old = read_results(out)
+    lines = old.lines
+    if old.header_problem is not None or (old.header is not None and old.header.get("campaign") != fp):
+        if old.header_problem is not None:
+            why = (f"--out '{out}' is not a result file of dopus-gen campaign or its header is damaged (line 1: "
+                   f"{old.header_problem}), so it cannot be resumed")
+        else:
+            why = (f"--out '{out}' holds the runs of another campaign (another OCP file or other settings: "
+                   f"fingerprint {old.header.get('campaign')}, this one {fp})")
+        if not overwrite:
+            raise CampaignError(f"{why}; give another file, or --overwrite to start a new campaign in it")
+        say(f"warning: {why}; --overwrite: a new campaign replaces it", err=True)
+        lines = {}
+    elif old.malformed:
+        say(_malformed_text(out, old.malformed), err=True)
     runs, seed = camp["runs"], camp["seed"]
     todo = [i for i in range(runs) if (seed, i) not in lines]
     say(f"settings: {settings.describe(solver, s_src)}; {settings.describe(camp, c_src)}", err=True)
@@ -492,31 +643,34 @@ def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | Non
         prog = _Progress(runs, runs - len(todo), progress)
         t0 = time.perf_counter()
 
-        with open(out, "a") as fh:
-            def on_result(line):
-                lines[(line["seed"], line["run"])] = line
-                fh.write(_dump(line) + "\n")
-                fh.flush()
-                prog.add(line)
+        fd = os.open(out, os.O_WRONLY | os.O_APPEND)
 
-            def on_error(i, exc):
-                errors.append((i, f"{type(exc).__name__}: {exc}"))
+        def on_result(line):
+            interrupt.check()       # a run that ended with Ctrl-C is not a result
+            _append(fd, _dump(line) + "\n")
+            lines[(line["seed"], line["run"])] = line
+            prog.add(line)
 
-            try:
-                if not todo:
-                    pass
-                elif workers == 0:
-                    _in_process(job, todo, seed, on_result, on_error)
-                else:
-                    _distributed(client, job, todo, seed, on_result, on_error)
-            except KeyboardInterrupt:
-                prog.close()
-                done = sum(1 for i in range(runs) if (seed, i) in lines)
-                say(f"interrupted: {done} of {runs} runs are in '{out}'; the same command computes the others",
-                    err=True)
-                raise
-            finally:
-                prog.close()
+        def on_error(i, exc):
+            errors.append((i, f"{type(exc).__name__}: {exc}"))
+
+        def kept():
+            return f"{sum(1 for i in range(runs) if (seed, i) in lines)} of {runs} runs are in '{out}'"
+
+        try:
+            if not todo:
+                pass
+            elif workers == 0:
+                _in_process(job, todo, seed, on_result, on_error)
+            else:
+                _distributed(client, job, todo, seed, on_result, on_error, worker_timeout)
+        except KeyboardInterrupt:
+            raise KeyboardInterrupt(f"{kept()}; the same command computes the others") from None
+        except _NoWorker as exc:
+            raise CampaignError(f"{exc}; {kept()}, the same command computes the others") from None
+        finally:
+            prog.close()
+            os.close(fd)
         wall = time.perf_counter() - t0
         _rewrite(out, header, lines)
     finally:
@@ -529,9 +683,7 @@ def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | Non
                        workers=where, errors=errors)
     say(format_report(report))
     if json_out:
-        with open(json_out, "w") as fh:
-            json.dump(json_ready(report), fh, indent=1, allow_nan=False)
-            fh.write("\n")
+        write_text(json_out, json.dumps(json_ready(report), indent=1, allow_nan=False) + "\n")
         say(f"JSON: {json_out}")
     if plot_dir and chosen:
         files = plot_campaign(report, chosen, disc, job, plot_dir, worst=worst)
@@ -674,7 +826,7 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
     fig.suptitle(f"{rep['ocp']}: campaign of {rep['runs']} runs, {rep['on_path']} on the path")
     fig.tight_layout()
     path = out / "campaign_histograms.png"
-    fig.savefig(path, dpi=130)
+    save_figure(fig, path, dpi=130)
     plt.close(fig)
     files.append(path)
     if worst > 0 and lines:

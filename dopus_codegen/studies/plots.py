@@ -113,7 +113,9 @@ def _suptitle(fig, title, what):
 
 
 def _save(fig, path):
-    fig.savefig(path, dpi=_DPI)
+    from ..outputs import save_figure
+
+    save_figure(fig, path, dpi=_DPI)
     plt.close(fig)
     return str(path)
 

@@ -565,9 +565,9 @@ def write_json(runs, path) -> None:
     path = Path(path)
     if path.parent and not path.parent.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w") as fh:
-        json.dump({"runs": runs}, fh, allow_nan=False)
-        fh.write("\n")
+    from ..outputs import write_text
+
+    write_text(path, json.dumps({"runs": runs}, allow_nan=False) + "\n")
 
 
 # --------------------------------------------------------------------------- CLI
