@@ -305,6 +305,32 @@ def single_precision(source: str) -> str:
     return "\n".join(out)
 
 
+def _check_float_literals(source: str) -> None:
+    """A CodegenError naming the literals of CasADi's C that have no float (a number derived
+    from the problem's, e.g. a product of two small constants in a derivative): the C
+    compiler would refuse them ('floating constant truncated to zero')."""
+    from ..problem.checks import outside_float
+
+    bad, function = [], "?"
+    for line in source.split("\n"):
+        head = _FUNCTION_HEAD.match(line.strip())
+        if head:
+            function = head.group(1)
+        code = line.partition("/*")[0]
+        if code.lstrip().startswith("#"):
+            continue
+        for m in _FLOAT_LITERAL.finditer(code):
+            why = outside_float(float(m.group(1)))
+            if why and (function, f"{float(m.group(1)):g}", why) not in bad:
+                bad.append((function, f"{float(m.group(1)):g}", why))
+    if bad:
+        shown = "; ".join(f"{v} in {f} ({why} the range of float)" for f, v, why in bad[:3])
+        more = f"; and {len(bad) - 3} more" if len(bad) > 3 else ""
+        raise CodegenError(f"real float: the generated functions hold numbers a float cannot: {shown}{more}; "
+                           "they are derived from the problem's constants (a product in a derivative, say): "
+                           "rescale the problem or use real='double'")
+
+
 def casadi_sources(functions: Dict[str, ca.Function], name: str, real: str = "double") -> Dict[str, str]:
     """``<name>_casadi.c`` and ``.h`` from one CodeGenerator with explicit options."""
     opts = {"casadi_int": "int", "casadi_real": real, "mex": False, "with_header": True,
@@ -316,6 +342,8 @@ def casadi_sources(functions: Dict[str, ca.Function], name: str, real: str = "do
     with tempfile.TemporaryDirectory(prefix="dopus_cg_") as tmp:
         cg.generate(str(Path(tmp)) + "/")
         source = silence_unused_parameters((Path(tmp) / f"{base}.c").read_text())
+        if real == "float":
+            _check_float_literals(source)
         out = {f"{base}.c": single_precision(source) if real == "float" else source,
                f"{base}.h": (Path(tmp) / f"{base}.h").read_text()}
     _refuse_without_codegen(out[f"{base}.c"], functions)
@@ -565,6 +593,10 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     name = check_name(_attr(disc.data, "name"))
     NAME = name.upper()
     real = real_of(disc, real)
+    if real == "float" and hasattr(disc, "spec"):
+        from ..problem.checks import check_float_range
+
+        check_float_range(disc)     # the problem's own numbers, named, before any code is generated
     s = problem_sizes(disc)
     functions = casadi_functions(disc, name, s)
     files: Dict[str, str] = {}

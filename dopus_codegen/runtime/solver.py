@@ -84,9 +84,9 @@ def build_for(disc, cache_dir=None, echo=None, real: Optional[str] = None) -> Pa
     root = cache.cache_root(cache_dir)
     out = root / "problems" / f"{disc.name}-{cache.problem_hash(disc, None, real)[:20]}"
     if not (out / f"{disc.name}_meta.json").is_file():
-        say(f"dopus-codegen: generating C for '{disc.name}' into {out}")
         files = render_folder(disc, None, real=real)
-        out.parent.mkdir(parents=True, exist_ok=True)
+        cache.writable_folder("problems", cache_dir)
+        say(f"dopus-codegen: generating C for '{disc.name}' into {out}")
         tmp = Path(tempfile.mkdtemp(prefix=f".{disc.name}-", dir=str(out.parent)))
         write_folder(files, tmp)
         try:
@@ -95,7 +95,12 @@ def build_for(disc, cache_dir=None, echo=None, real: Optional[str] = None) -> Pa
             import shutil
 
             shutil.rmtree(tmp, ignore_errors=True)
-    build(out, cache_dir=cache_dir, echo=say)
+    try:
+        build(out, cache_dir=cache_dir, echo=say)
+    except OSError as exc:
+        if not str(exc.filename or "").startswith(str(root)):
+            raise
+        raise cache.cache_error(root, exc) from None    # the folder in the cache could not be written
     with _LOCK:
         _DISC_CACHE[key] = (disc, out)
     return out
