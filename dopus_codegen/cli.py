@@ -213,7 +213,7 @@ def main(ctx, cache_dir, debug) -> None:
 
     Exit codes: 0 done; 1 the work ran and failed (a run of converge failed, the
     plant of sil could not be integrated); 2 bad input (a message names the problem;
-    --debug shows the traceback instead).
+    --debug shows the traceback instead); 130 interrupted (Ctrl-C).
     """
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
