@@ -31,6 +31,14 @@ static void dopus_copy(dopus_real *dst, const dopus_real *src, int n)
     }
 }
 
+static void dopus_zero(int n, dopus_real *dst)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        dst[i] = DOPUS_R(0.0);
+    }
+}
+
 void dopus_ensure_setup(dopus_solver *s)
 {
     if (s->magic != DOPUS_MAGIC) {
@@ -959,7 +967,15 @@ static int dopus_feedback_admit(dopus_solver *s, const dopus_real *xhat0, dopus_
         return dopus_feedback_failed(s, u0, DOPUS_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
-        /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
+        /* counted as a failed instant: a prepare that keeps failing ends in a recovery, which
+         * starts from the newest measurement, so it is recorded all the same (algorithm.md
+         * section 9); the instant has passed: its prepare (the shift) is due */
+        dopus_copy(s->xhat0, xhat0, DOPUS_NX);
+        s->xhat_fresh = 1;
+        if (s->mode == DOPUS_MODE_RECEDING) {
+            s->prepare_due = 1;
+            s->shifted = 0;
+        }
         return dopus_feedback_failed(s, u0, DOPUS_ERR_NOT_PREPARED);
     }
     return DOPUS_OK;
@@ -1127,10 +1143,23 @@ static void dopus_keep_plan(dopus_solver *s, dopus_real *u0, int lowered)
     }
 }
 
-static int dopus_feedback_recover(dopus_solver *s, int *retries);
+static int dopus_feedback_recover(dopus_solver *s, int *qs, int *retries);
+
+/* 1 when the model is finite at the state xs with the next control of the last good plan (one
+ * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
+ * cannot start a re-initialisation: it is no measurement (algorithm.md section 9). */
+static int dopus_model_finite_at(dopus_solver *s, const dopus_real *xs)
+{
+    dopus_real l = DOPUS_R(0.0), u[DOPUS_NU], xn[DOPUS_NX];
+    int j = s->plan_age > DOPUS_N - 1 ? DOPUS_N - 1 : s->plan_age;
+    dopus_clip_u(s->plan_u[j], u);
+    return dopus_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+           dopus_lai_vec_finite(DOPUS_NX, xn) && dopus_lai_vec_finite(1, &l);
+}
 
 int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
+    dopus_real xhat_prev[DOPUS_NX];
     double t0;
     int rc, qs, retries;
 
@@ -1142,6 +1171,7 @@ int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
     }
     s->timer.t[DOPUS_PHASE_FEEDBACK] = DOPUS_R(0.0);
     t0 = dopus_timer_now(&s->timer);
+    dopus_copy(xhat_prev, s->xhat0, DOPUS_NX);
     dopus_feedback_measure(s, xhat0);
     qs = dopus_feedback_qp(s);
     qs = dopus_feedback_lm_retries(s, qs, &retries);
@@ -1151,9 +1181,20 @@ int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
     if (rc != DOPUS_OK && s->recovery && s->mode == DOPUS_MODE_RECEDING && qs != DOPUS_QP_MAX_ITER &&
         qs != DOPUS_QP_INVALID_INPUT) {
-        qs = dopus_feedback_recover(s, &retries);
-        s->qp_status = qs;
-        rc = qs == DOPUS_QP_INVALID_INPUT ? DOPUS_ERR_QP : dopus_feedback_check_step(s, qs);
+        if (!dopus_model_finite_at(s, xhat0)) {
+            /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
+             * prepare takes the predicted step) */
+            dopus_copy(s->xhat0, xhat_prev, DOPUS_NX);
+            s->xhat_fresh = 0;
+            s->flags |= DOPUS_FLAG_MEASUREMENT_UNUSABLE;
+            rc = DOPUS_ERR_NONFINITE_VALUE;
+        } else {
+            rc = dopus_feedback_recover(s, &qs, &retries);
+            if (rc == DOPUS_OK) {
+                s->qp_status = qs;
+                rc = dopus_feedback_check_step(s, qs);
+            }
+        }
     }
     if (rc != DOPUS_OK) {
         dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
@@ -1245,26 +1286,60 @@ static int dopus_simulate(dopus_solver *s, int use_plan)
     return dopus_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
 }
 
-/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
- * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
- * of the iterate, every block recomputed (Gauss-Newton when the problem has it). */
-static int dopus_reinit(dopus_solver *s)
+/* The OCP file's guess states from node `first` on and its controls (clipped) into the iterate. */
+static void dopus_guess_primal(dopus_solver *s, int first)
 {
-    int k, rc, hessian;
-    if (!dopus_simulate(s, 1) && !dopus_simulate(s, 0)) {
-        for (k = 1; k <= DOPUS_N; ++k) {
-            dopus_copy(s->x[k], dopus_guess_x[k], DOPUS_NX);
-        }
-        for (k = 0; k < DOPUS_N; ++k) {
-            dopus_clip_u(dopus_guess_u[k], s->u[k]);
-        }
+    int k;
+    for (k = first; k <= DOPUS_N; ++k) {
+        dopus_copy(s->x[k], dopus_guess_x[k], DOPUS_NX);
     }
-    /* the blocks of the re-initialisation: Gauss-Newton when the problem has it (convex in
-     * the cost, whatever the multipliers); the next prepares re-linearise with the setting */
-    hessian = s->hessian;
+    for (k = 0; k < DOPUS_N; ++k) {
+        dopus_clip_u(dopus_guess_u[k], s->u[k]);
+    }
+}
+
+/* The linearisation of a re-initialisation: Gauss-Newton blocks when the problem has them
+ * (convex in the cost, whatever the multipliers); the next prepares use the setting. */
+static int dopus_reinit_finish(dopus_solver *s)
+{
+    int rc, hessian = s->hessian;
     s->hessian = DOPUS_HAS_GN ? DOPUS_HESSIAN_GAUSS_NEWTON : hessian;
     rc = dopus_init_finish(s);
     s->hessian = hessian;
+    return rc;
+}
+
+/* The last resort of a re-initialisation whose model evaluation failed (the model is not
+ * finite at the measured or predicted state, e.g. an outlier of 1e6 rad/s): the OCP file's
+ * guess whole, x_0 included, with zero multipliers; the next feedback's QP steps from it to
+ * the measurement. Flag DOPUS_FLAG_REINIT_GUESS. */
+static int dopus_reinit_at_guess(dopus_solver *s)
+{
+    dopus_guess_primal(s, 0);
+    dopus_zero((DOPUS_N + 1) * DOPUS_NX, &s->lam[0][0]);
+    dopus_zero(DOPUS_N * DOPUS_NW, &s->mu_b[0][0]);
+    dopus_zero(DOPUS_NX, s->mu_bN);
+    dopus_zero(DOPUS_N * DOPUS_DIM(DOPUS_NG), &s->mu_g[0][0]);
+    dopus_zero(DOPUS_DIM(DOPUS_NR), s->mu_r);
+    dopus_zero(DOPUS_DIM(DOPUS_NE), s->nu);
+    s->flags |= DOPUS_FLAG_REINIT_GUESS;
+    return dopus_reinit_finish(s);
+}
+
+/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
+ * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
+ * of the iterate, every block recomputed (Gauss-Newton when the problem has it); when the
+ * model fails there, the OCP file's guess whole (dopus_reinit_at_guess). */
+static int dopus_reinit(dopus_solver *s)
+{
+    int rc;
+    if (!dopus_simulate(s, 1) && !dopus_simulate(s, 0)) {
+        dopus_guess_primal(s, 1);
+    }
+    rc = dopus_reinit_finish(s);
+    if (rc != DOPUS_OK) {
+        rc = dopus_reinit_at_guess(s);
+    }
     if (rc != DOPUS_OK) {
         s->qp_ready = 0;
         return rc;
@@ -1307,26 +1382,33 @@ static int dopus_recover(dopus_solver *s, int shifted)
 
 /* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
  * failed (not by its iteration limit) or diverged; re-initialise from the measured state (x_0 = xhat0) and
- * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns the QP
- * status (DOPUS_QP_INVALID_INPUT when the re-initialisation failed). */
-static int dopus_feedback_recover(dopus_solver *s, int *retries)
+ * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns DOPUS_OK
+ * with the QP status in *qs, or the status of a re-initialisation that could not start from
+ * the measurement (the model failed there: DOPUS_ERR_NONFINITE_VALUE or DOPUS_ERR_FUNCTION;
+ * the iterate is then the OCP file's guess, prepared, when the model is finite there). */
+static int dopus_feedback_recover(dopus_solver *s, int *qs, int *retries)
 {
-    int i, qs, rc, n_failed = s->n_failed;
+    int i, rc, n_failed = s->n_failed;
     dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
     rc = dopus_reinit(s);
     s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
     s->shifted = 0;
+    if (rc == DOPUS_OK && (s->flags & DOPUS_FLAG_REINIT_GUESS)) {
+        /* the model failed at the measured state: no QP from it */
+        rc = DOPUS_ERR_NONFINITE_VALUE;
+    }
     if (rc != DOPUS_OK) {
-        return DOPUS_QP_INVALID_INPUT;
+        return rc;
     }
     for (i = 0; i < DOPUS_NX; ++i) {
         s->qp_in.x0[i] = DOPUS_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
-    qs = dopus_qp_attempt(s, 0);
-    return dopus_feedback_lm_retries(s, qs, retries);
+    *qs = dopus_qp_attempt(s, 0);
+    *qs = dopus_feedback_lm_retries(s, *qs, retries);
+    return DOPUS_OK;
 }
 
 /* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the
@@ -1372,7 +1454,8 @@ int dopus_prepare(dopus_solver *s)
     }
     dopus_clear_timings(s, DOPUS_PHASE_SHIFT, DOPUS_PHASE_ASSEMBLY);
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
-        s->mode == DOPUS_MODE_RECEDING) {
+        s->mode == DOPUS_MODE_RECEDING && !(s->flags & DOPUS_FLAG_REINIT_GUESS)) {
+        /* (not from the OCP file's guess: its plan is not the plant's) */
         dopus_predicted_step(s);
     }
     s->qp_ready = 0;

@@ -427,9 +427,16 @@ class ReferenceDopus:
             raise self._feedback_failed("nonfinite_input",
                                         f"feedback: xhat0 must be {self.nx} finite numbers, got {xhat0}")
         if not self._qp_ready:
+            # counted as a failed instant; the measurement is recorded all the same: the
+            # recovery that repeated failures call for starts from it (section 9)
+            self._xhat_last = xhat0.copy()
+            self._xhat_fresh = True
+            if self.mode == "receding":
+                self._prepare_due, self._shifted = True, False
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
         self._lm_measured(xhat0)
+        xhat_prev = self._xhat_last
         self._xhat_last = xhat0.copy()
         self._xhat_fresh = True
         # the QP is attempted: a prepare (with its shift) is due, whatever the outcome
@@ -441,7 +448,15 @@ class ReferenceDopus:
             # the recovery within the feedback (section 9): re-initialise from the measured
             # state and solve the QP of the re-initialised iterate; not for a QP stopped by
             # its iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid
+            if not self._model_finite_at(xhat0):
+                # no measurement: handled as a non-finite one (the iterate and its QP stay)
+                self._xhat_last, self._xhat_fresh = xhat_prev, False
+                self._flag("measurement_unusable")
+                raise self._feedback_failed("nonfinite_value", "feedback: the model is not finite at the measured "
+                                            f"state {xhat0}: handled as a missing measurement")
             sol, failure, retries = self._feedback_recover(xhat0)
+        if isinstance(failure, DopusError):
+            raise self._feedback_failed(failure.status_name, str(failure)) from None
         if isinstance(failure, QPError):
             exc = failure
             self.qp_status = status_code_qp(exc.qp_status)
@@ -509,17 +524,20 @@ class ReferenceDopus:
         x, u = self.x.copy(), self.u.copy()
         x[0] = xhat0
         n_failed = self._n_failed
+        failure = None
         try:
             self._reinit(x, u)
-        except DopusError:
-            self._n_failed = n_failed
-            self._prepare_due, self._shifted = True, False
-            exc = QPError("the re-initialisation failed")
-            exc.qp_status = "invalid_input"
-            return None, exc, 0
+        except DopusError as exc:
+            failure = exc
         self._n_failed = n_failed     # still the count of consecutive failed feedbacks
         # the measurement's instant: its prepare (with the shift) is still due
         self._prepare_due, self._shifted = True, False
+        if failure is None and "reinit_guess" in self.flags:
+            failure = DopusError.of("nonfinite_value", "feedback: the model is not finite at the measured state "
+                                    "(the recovery's re-initialisation from it); the iterate is the OCP file's "
+                                    "guess, prepared for the next measurement")
+        if failure is not None:
+            return None, failure, 0
         return self._solve_with_retries(xhat0)
 
     def _take_step(self, sol) -> None:
@@ -561,7 +579,8 @@ class ReferenceDopus:
         if not self._prepare_due:
             raise self._fail("already_prepared", "prepare: already prepared (call feedback before the next prepare)")
         if (self._qp_ready and self._n_failed > 0 and not self._recover_pending and self.recovery
-                and self.mode == "receding"):
+                and self.mode == "receding" and "reinit_guess" not in self.flags):
+            # (not from the OCP file's guess: its plan is not the plant's)
             self._predicted_step()
         self._qp_ready = False
         if self.mode == "receding" and self._plan_age < self.N:
@@ -845,6 +864,16 @@ class ReferenceDopus:
                 return False
         return self._box_ok(x, u)
 
+    def _model_finite_at(self, xs) -> bool:
+        """Section 9: the model finite at the state xs with the next control of the last good
+        plan (one stage evaluation)."""
+        u = self._clip_u(self._plan_u[min(self._plan_age, self.N - 1)])[0]
+        try:
+            out = self.disc.stage_eval(xs, u, self.p[0])
+        except RuntimeError:
+            return False
+        return all(np.all(np.isfinite(np.asarray(v, float))) for v in out[:2])
+
     def _predicted_step(self) -> None:
         """Section 9: after a failed feedback whose QP is still the prepared one, the step of
         that QP for the state the iterate predicts for this instant (dx_0 = 0); its controls
@@ -889,16 +918,27 @@ class ReferenceDopus:
         the last good plan (else the OCP file's guess controls; else the guess itself), the
         iterate's multipliers, every block recomputed (Gauss-Newton when the problem has it)."""
         N, nx = self.N, self.nx
+        gx = np.asarray(self.disc.initial_guess.x, float).reshape(N + 1, nx)
+        gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)
         if not self._simulate(x, u, True) and not self._simulate(x, u, False):
-            x[1:] = np.asarray(self.disc.initial_guess.x, float).reshape(N + 1, nx)[1:]
-            gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)
+            x[1:] = gx[1:]
             for k in range(N):
                 u[k] = self._clip_u(gu[k])[0]
         hessian = self.hessian
         self.hessian = "gauss-newton" if self.has_gn else hessian
         try:
-            self._init_finish(x, u, self.lam.copy(), self.mu_g.copy(), self.mu_b.copy(), self.mu_bN.copy(),
-                              self.mu_r.copy(), self.nu.copy(), "prepare", "at the re-initialised iterate")
+            try:
+                self._init_finish(x, u, self.lam.copy(), self.mu_g.copy(), self.mu_b.copy(), self.mu_bN.copy(),
+                                  self.mu_r.copy(), self.nu.copy(), "prepare", "at the re-initialised iterate")
+            except DopusError:
+                # the last resort: the model is not finite there (an outlier of 1e6 rad/s, say);
+                # the OCP file's guess whole, x_0 included, with zero multipliers
+                x = gx.copy()
+                u = np.array([self._clip_u(gu[k])[0] for k in range(N)])
+                self._flag("reinit_guess")
+                z = np.zeros
+                self._init_finish(x, u, z((N + 1, nx)), z((N, self.ng)), z((N, self.nw)), z(nx), z(self.nr),
+                                  z(self.ne), "prepare", "at the OCP file's guess")
         except DopusError:
             self.x, self.u = x, u
             self._qp_ready = False

@@ -31,6 +31,14 @@ static void robot_arm_copy(robot_arm_real *dst, const robot_arm_real *src, int n
     }
 }
 
+static void robot_arm_zero(int n, robot_arm_real *dst)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        dst[i] = ROBOT_ARM_R(0.0);
+    }
+}
+
 void robot_arm_ensure_setup(robot_arm_solver *s)
 {
     if (s->magic != ROBOT_ARM_MAGIC) {
@@ -959,7 +967,15 @@ static int robot_arm_feedback_admit(robot_arm_solver *s, const robot_arm_real *x
         return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
-        /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
+        /* counted as a failed instant: a prepare that keeps failing ends in a recovery, which
+         * starts from the newest measurement, so it is recorded all the same (algorithm.md
+         * section 9); the instant has passed: its prepare (the shift) is due */
+        robot_arm_copy(s->xhat0, xhat0, ROBOT_ARM_NX);
+        s->xhat_fresh = 1;
+        if (s->mode == ROBOT_ARM_MODE_RECEDING) {
+            s->prepare_due = 1;
+            s->shifted = 0;
+        }
         return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_NOT_PREPARED);
     }
     return ROBOT_ARM_OK;
@@ -1127,10 +1143,23 @@ static void robot_arm_keep_plan(robot_arm_solver *s, robot_arm_real *u0, int low
     }
 }
 
-static int robot_arm_feedback_recover(robot_arm_solver *s, int *retries);
+static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries);
+
+/* 1 when the model is finite at the state xs with the next control of the last good plan (one
+ * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
+ * cannot start a re-initialisation: it is no measurement (algorithm.md section 9). */
+static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *xs)
+{
+    robot_arm_real l = ROBOT_ARM_R(0.0), u[ROBOT_ARM_NU], xn[ROBOT_ARM_NX];
+    int j = s->plan_age > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->plan_age;
+    robot_arm_clip_u(s->plan_u[j], u);
+    return robot_arm_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+           robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn) && robot_arm_lai_vec_finite(1, &l);
+}
 
 int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
+    robot_arm_real xhat_prev[ROBOT_ARM_NX];
     double t0;
     int rc, qs, retries;
 
@@ -1142,6 +1171,7 @@ int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
     }
     s->timer.t[ROBOT_ARM_PHASE_FEEDBACK] = ROBOT_ARM_R(0.0);
     t0 = robot_arm_timer_now(&s->timer);
+    robot_arm_copy(xhat_prev, s->xhat0, ROBOT_ARM_NX);
     robot_arm_feedback_measure(s, xhat0);
     qs = robot_arm_feedback_qp(s);
     qs = robot_arm_feedback_lm_retries(s, qs, &retries);
@@ -1151,9 +1181,20 @@ int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
     if (rc != ROBOT_ARM_OK && s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING && qs != ROBOT_ARM_QP_MAX_ITER &&
         qs != ROBOT_ARM_QP_INVALID_INPUT) {
-        qs = robot_arm_feedback_recover(s, &retries);
-        s->qp_status = qs;
-        rc = qs == ROBOT_ARM_QP_INVALID_INPUT ? ROBOT_ARM_ERR_QP : robot_arm_feedback_check_step(s, qs);
+        if (!robot_arm_model_finite_at(s, xhat0)) {
+            /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
+             * prepare takes the predicted step) */
+            robot_arm_copy(s->xhat0, xhat_prev, ROBOT_ARM_NX);
+            s->xhat_fresh = 0;
+            s->flags |= ROBOT_ARM_FLAG_MEASUREMENT_UNUSABLE;
+            rc = ROBOT_ARM_ERR_NONFINITE_VALUE;
+        } else {
+            rc = robot_arm_feedback_recover(s, &qs, &retries);
+            if (rc == ROBOT_ARM_OK) {
+                s->qp_status = qs;
+                rc = robot_arm_feedback_check_step(s, qs);
+            }
+        }
     }
     if (rc != ROBOT_ARM_OK) {
         robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
@@ -1245,26 +1286,60 @@ static int robot_arm_simulate(robot_arm_solver *s, int use_plan)
     return robot_arm_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
 }
 
-/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
- * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
- * of the iterate, every block recomputed (Gauss-Newton when the problem has it). */
-static int robot_arm_reinit(robot_arm_solver *s)
+/* The OCP file's guess states from node `first` on and its controls (clipped) into the iterate. */
+static void robot_arm_guess_primal(robot_arm_solver *s, int first)
 {
-    int k, rc, hessian;
-    if (!robot_arm_simulate(s, 1) && !robot_arm_simulate(s, 0)) {
-        for (k = 1; k <= ROBOT_ARM_N; ++k) {
-            robot_arm_copy(s->x[k], robot_arm_guess_x[k], ROBOT_ARM_NX);
-        }
-        for (k = 0; k < ROBOT_ARM_N; ++k) {
-            robot_arm_clip_u(robot_arm_guess_u[k], s->u[k]);
-        }
+    int k;
+    for (k = first; k <= ROBOT_ARM_N; ++k) {
+        robot_arm_copy(s->x[k], robot_arm_guess_x[k], ROBOT_ARM_NX);
     }
-    /* the blocks of the re-initialisation: Gauss-Newton when the problem has it (convex in
-     * the cost, whatever the multipliers); the next prepares re-linearise with the setting */
-    hessian = s->hessian;
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        robot_arm_clip_u(robot_arm_guess_u[k], s->u[k]);
+    }
+}
+
+/* The linearisation of a re-initialisation: Gauss-Newton blocks when the problem has them
+ * (convex in the cost, whatever the multipliers); the next prepares use the setting. */
+static int robot_arm_reinit_finish(robot_arm_solver *s)
+{
+    int rc, hessian = s->hessian;
     s->hessian = ROBOT_ARM_HAS_GN ? ROBOT_ARM_HESSIAN_GAUSS_NEWTON : hessian;
     rc = robot_arm_init_finish(s);
     s->hessian = hessian;
+    return rc;
+}
+
+/* The last resort of a re-initialisation whose model evaluation failed (the model is not
+ * finite at the measured or predicted state, e.g. an outlier of 1e6 rad/s): the OCP file's
+ * guess whole, x_0 included, with zero multipliers; the next feedback's QP steps from it to
+ * the measurement. Flag ROBOT_ARM_FLAG_REINIT_GUESS. */
+static int robot_arm_reinit_at_guess(robot_arm_solver *s)
+{
+    robot_arm_guess_primal(s, 0);
+    robot_arm_zero((ROBOT_ARM_N + 1) * ROBOT_ARM_NX, &s->lam[0][0]);
+    robot_arm_zero(ROBOT_ARM_N * ROBOT_ARM_NW, &s->mu_b[0][0]);
+    robot_arm_zero(ROBOT_ARM_NX, s->mu_bN);
+    robot_arm_zero(ROBOT_ARM_N * ROBOT_ARM_DIM(ROBOT_ARM_NG), &s->mu_g[0][0]);
+    robot_arm_zero(ROBOT_ARM_DIM(ROBOT_ARM_NR), s->mu_r);
+    robot_arm_zero(ROBOT_ARM_DIM(ROBOT_ARM_NE), s->nu);
+    s->flags |= ROBOT_ARM_FLAG_REINIT_GUESS;
+    return robot_arm_reinit_finish(s);
+}
+
+/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
+ * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
+ * of the iterate, every block recomputed (Gauss-Newton when the problem has it); when the
+ * model fails there, the OCP file's guess whole (robot_arm_reinit_at_guess). */
+static int robot_arm_reinit(robot_arm_solver *s)
+{
+    int rc;
+    if (!robot_arm_simulate(s, 1) && !robot_arm_simulate(s, 0)) {
+        robot_arm_guess_primal(s, 1);
+    }
+    rc = robot_arm_reinit_finish(s);
+    if (rc != ROBOT_ARM_OK) {
+        rc = robot_arm_reinit_at_guess(s);
+    }
     if (rc != ROBOT_ARM_OK) {
         s->qp_ready = 0;
         return rc;
@@ -1307,26 +1382,33 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
 
 /* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
  * failed (not by its iteration limit) or diverged; re-initialise from the measured state (x_0 = xhat0) and
- * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns the QP
- * status (ROBOT_ARM_QP_INVALID_INPUT when the re-initialisation failed). */
-static int robot_arm_feedback_recover(robot_arm_solver *s, int *retries)
+ * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns ROBOT_ARM_OK
+ * with the QP status in *qs, or the status of a re-initialisation that could not start from
+ * the measurement (the model failed there: ROBOT_ARM_ERR_NONFINITE_VALUE or ROBOT_ARM_ERR_FUNCTION;
+ * the iterate is then the OCP file's guess, prepared, when the model is finite there). */
+static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries)
 {
-    int i, qs, rc, n_failed = s->n_failed;
+    int i, rc, n_failed = s->n_failed;
     robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
     rc = robot_arm_reinit(s);
     s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
     s->shifted = 0;
+    if (rc == ROBOT_ARM_OK && (s->flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
+        /* the model failed at the measured state: no QP from it */
+        rc = ROBOT_ARM_ERR_NONFINITE_VALUE;
+    }
     if (rc != ROBOT_ARM_OK) {
-        return ROBOT_ARM_QP_INVALID_INPUT;
+        return rc;
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
-    qs = robot_arm_qp_attempt(s, 0);
-    return robot_arm_feedback_lm_retries(s, qs, retries);
+    *qs = robot_arm_qp_attempt(s, 0);
+    *qs = robot_arm_feedback_lm_retries(s, *qs, retries);
+    return ROBOT_ARM_OK;
 }
 
 /* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the
@@ -1372,7 +1454,8 @@ int robot_arm_prepare(robot_arm_solver *s)
     }
     robot_arm_clear_timings(s, ROBOT_ARM_PHASE_SHIFT, ROBOT_ARM_PHASE_ASSEMBLY);
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
-        s->mode == ROBOT_ARM_MODE_RECEDING) {
+        s->mode == ROBOT_ARM_MODE_RECEDING && !(s->flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
+        /* (not from the OCP file's guess: its plan is not the plant's) */
         robot_arm_predicted_step(s);
     }
     s->qp_ready = 0;

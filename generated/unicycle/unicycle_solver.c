@@ -31,6 +31,14 @@ static void unicycle_copy(unicycle_real *dst, const unicycle_real *src, int n)
     }
 }
 
+static void unicycle_zero(int n, unicycle_real *dst)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        dst[i] = UNICYCLE_R(0.0);
+    }
+}
+
 void unicycle_ensure_setup(unicycle_solver *s)
 {
     if (s->magic != UNICYCLE_MAGIC) {
@@ -959,7 +967,15 @@ static int unicycle_feedback_admit(unicycle_solver *s, const unicycle_real *xhat
         return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
-        /* counted as a failed instant: a prepare that keeps failing ends in a recovery */
+        /* counted as a failed instant: a prepare that keeps failing ends in a recovery, which
+         * starts from the newest measurement, so it is recorded all the same (algorithm.md
+         * section 9); the instant has passed: its prepare (the shift) is due */
+        unicycle_copy(s->xhat0, xhat0, UNICYCLE_NX);
+        s->xhat_fresh = 1;
+        if (s->mode == UNICYCLE_MODE_RECEDING) {
+            s->prepare_due = 1;
+            s->shifted = 0;
+        }
         return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NOT_PREPARED);
     }
     return UNICYCLE_OK;
@@ -1127,10 +1143,23 @@ static void unicycle_keep_plan(unicycle_solver *s, unicycle_real *u0, int lowere
     }
 }
 
-static int unicycle_feedback_recover(unicycle_solver *s, int *retries);
+static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries);
+
+/* 1 when the model is finite at the state xs with the next control of the last good plan (one
+ * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
+ * cannot start a re-initialisation: it is no measurement (algorithm.md section 9). */
+static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
+{
+    unicycle_real l = UNICYCLE_R(0.0), u[UNICYCLE_NU], xn[UNICYCLE_NX];
+    int j = s->plan_age > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->plan_age;
+    unicycle_clip_u(s->plan_u[j], u);
+    return unicycle_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+           unicycle_lai_vec_finite(UNICYCLE_NX, xn) && unicycle_lai_vec_finite(1, &l);
+}
 
 int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
+    unicycle_real xhat_prev[UNICYCLE_NX];
     double t0;
     int rc, qs, retries;
 
@@ -1142,6 +1171,7 @@ int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
     }
     s->timer.t[UNICYCLE_PHASE_FEEDBACK] = UNICYCLE_R(0.0);
     t0 = unicycle_timer_now(&s->timer);
+    unicycle_copy(xhat_prev, s->xhat0, UNICYCLE_NX);
     unicycle_feedback_measure(s, xhat0);
     qs = unicycle_feedback_qp(s);
     qs = unicycle_feedback_lm_retries(s, qs, &retries);
@@ -1151,9 +1181,20 @@ int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
     if (rc != UNICYCLE_OK && s->recovery && s->mode == UNICYCLE_MODE_RECEDING && qs != UNICYCLE_QP_MAX_ITER &&
         qs != UNICYCLE_QP_INVALID_INPUT) {
-        qs = unicycle_feedback_recover(s, &retries);
-        s->qp_status = qs;
-        rc = qs == UNICYCLE_QP_INVALID_INPUT ? UNICYCLE_ERR_QP : unicycle_feedback_check_step(s, qs);
+        if (!unicycle_model_finite_at(s, xhat0)) {
+            /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
+             * prepare takes the predicted step) */
+            unicycle_copy(s->xhat0, xhat_prev, UNICYCLE_NX);
+            s->xhat_fresh = 0;
+            s->flags |= UNICYCLE_FLAG_MEASUREMENT_UNUSABLE;
+            rc = UNICYCLE_ERR_NONFINITE_VALUE;
+        } else {
+            rc = unicycle_feedback_recover(s, &qs, &retries);
+            if (rc == UNICYCLE_OK) {
+                s->qp_status = qs;
+                rc = unicycle_feedback_check_step(s, qs);
+            }
+        }
     }
     if (rc != UNICYCLE_OK) {
         unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
@@ -1245,26 +1286,60 @@ static int unicycle_simulate(unicycle_solver *s, int use_plan)
     return unicycle_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
 }
 
-/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
- * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
- * of the iterate, every block recomputed (Gauss-Newton when the problem has it). */
-static int unicycle_reinit(unicycle_solver *s)
+/* The OCP file's guess states from node `first` on and its controls (clipped) into the iterate. */
+static void unicycle_guess_primal(unicycle_solver *s, int first)
 {
-    int k, rc, hessian;
-    if (!unicycle_simulate(s, 1) && !unicycle_simulate(s, 0)) {
-        for (k = 1; k <= UNICYCLE_N; ++k) {
-            unicycle_copy(s->x[k], unicycle_guess_x[k], UNICYCLE_NX);
-        }
-        for (k = 0; k < UNICYCLE_N; ++k) {
-            unicycle_clip_u(unicycle_guess_u[k], s->u[k]);
-        }
+    int k;
+    for (k = first; k <= UNICYCLE_N; ++k) {
+        unicycle_copy(s->x[k], unicycle_guess_x[k], UNICYCLE_NX);
     }
-    /* the blocks of the re-initialisation: Gauss-Newton when the problem has it (convex in
-     * the cost, whatever the multipliers); the next prepares re-linearise with the setting */
-    hessian = s->hessian;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        unicycle_clip_u(unicycle_guess_u[k], s->u[k]);
+    }
+}
+
+/* The linearisation of a re-initialisation: Gauss-Newton blocks when the problem has them
+ * (convex in the cost, whatever the multipliers); the next prepares use the setting. */
+static int unicycle_reinit_finish(unicycle_solver *s)
+{
+    int rc, hessian = s->hessian;
     s->hessian = UNICYCLE_HAS_GN ? UNICYCLE_HESSIAN_GAUSS_NEWTON : hessian;
     rc = unicycle_init_finish(s);
     s->hessian = hessian;
+    return rc;
+}
+
+/* The last resort of a re-initialisation whose model evaluation failed (the model is not
+ * finite at the measured or predicted state, e.g. an outlier of 1e6 rad/s): the OCP file's
+ * guess whole, x_0 included, with zero multipliers; the next feedback's QP steps from it to
+ * the measurement. Flag UNICYCLE_FLAG_REINIT_GUESS. */
+static int unicycle_reinit_at_guess(unicycle_solver *s)
+{
+    unicycle_guess_primal(s, 0);
+    unicycle_zero((UNICYCLE_N + 1) * UNICYCLE_NX, &s->lam[0][0]);
+    unicycle_zero(UNICYCLE_N * UNICYCLE_NW, &s->mu_b[0][0]);
+    unicycle_zero(UNICYCLE_NX, s->mu_bN);
+    unicycle_zero(UNICYCLE_N * UNICYCLE_DIM(UNICYCLE_NG), &s->mu_g[0][0]);
+    unicycle_zero(UNICYCLE_DIM(UNICYCLE_NR), s->mu_r);
+    unicycle_zero(UNICYCLE_DIM(UNICYCLE_NE), s->nu);
+    s->flags |= UNICYCLE_FLAG_REINIT_GUESS;
+    return unicycle_reinit_finish(s);
+}
+
+/* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
+ * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
+ * of the iterate, every block recomputed (Gauss-Newton when the problem has it); when the
+ * model fails there, the OCP file's guess whole (unicycle_reinit_at_guess). */
+static int unicycle_reinit(unicycle_solver *s)
+{
+    int rc;
+    if (!unicycle_simulate(s, 1) && !unicycle_simulate(s, 0)) {
+        unicycle_guess_primal(s, 1);
+    }
+    rc = unicycle_reinit_finish(s);
+    if (rc != UNICYCLE_OK) {
+        rc = unicycle_reinit_at_guess(s);
+    }
     if (rc != UNICYCLE_OK) {
         s->qp_ready = 0;
         return rc;
@@ -1307,26 +1382,33 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
 
 /* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
  * failed (not by its iteration limit) or diverged; re-initialise from the measured state (x_0 = xhat0) and
- * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns the QP
- * status (UNICYCLE_QP_INVALID_INPUT when the re-initialisation failed). */
-static int unicycle_feedback_recover(unicycle_solver *s, int *retries)
+ * solve the QP of the re-initialised iterate (cold, with the lm retries). Returns UNICYCLE_OK
+ * with the QP status in *qs, or the status of a re-initialisation that could not start from
+ * the measurement (the model failed there: UNICYCLE_ERR_NONFINITE_VALUE or UNICYCLE_ERR_FUNCTION;
+ * the iterate is then the OCP file's guess, prepared, when the model is finite there). */
+static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries)
 {
-    int i, qs, rc, n_failed = s->n_failed;
+    int i, rc, n_failed = s->n_failed;
     unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
     rc = unicycle_reinit(s);
     s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
     s->shifted = 0;
+    if (rc == UNICYCLE_OK && (s->flags & UNICYCLE_FLAG_REINIT_GUESS)) {
+        /* the model failed at the measured state: no QP from it */
+        rc = UNICYCLE_ERR_NONFINITE_VALUE;
+    }
     if (rc != UNICYCLE_OK) {
-        return UNICYCLE_QP_INVALID_INPUT;
+        return rc;
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
-    qs = unicycle_qp_attempt(s, 0);
-    return unicycle_feedback_lm_retries(s, qs, retries);
+    *qs = unicycle_qp_attempt(s, 0);
+    *qs = unicycle_feedback_lm_retries(s, *qs, retries);
+    return UNICYCLE_OK;
 }
 
 /* The predicted step (algorithm.md section 9): after a failed feedback whose QP is still the
@@ -1372,7 +1454,8 @@ int unicycle_prepare(unicycle_solver *s)
     }
     unicycle_clear_timings(s, UNICYCLE_PHASE_SHIFT, UNICYCLE_PHASE_ASSEMBLY);
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
-        s->mode == UNICYCLE_MODE_RECEDING) {
+        s->mode == UNICYCLE_MODE_RECEDING && !(s->flags & UNICYCLE_FLAG_REINIT_GUESS)) {
+        /* (not from the OCP file's guess: its plan is not the plant's) */
         unicycle_predicted_step(s);
     }
     s->qp_ready = 0;
