@@ -173,10 +173,10 @@ def test_lost_workers_are_replaced_or_the_campaign_stops_resumably(reference, tm
                                  f"{kept} of {runs} runs are in '{out}', the same command computes the others")
         assert timeout <= waited < 60
         assert read_results(out).malformed == []
-        worker()
+        worker()        # the campaign waits for it to join (up to --worker-timeout)
         res = _campaign(out, "--scheduler", address, "--worker-timeout", "60", runs=runs)
         assert res.exit_code == 0, res.output
-        assert f"{kept} already in '{out}', {runs - kept} to compute on 1 dask workers" in res.output
+        assert f"{kept} already in '{out}', {runs - kept} to compute on " in res.output
         assert _stripped(out) == _stripped(reference(runs))
     finally:
         if cmd is not None:
