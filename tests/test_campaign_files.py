@@ -23,7 +23,7 @@ from conftest import ROBOT_ARM_FILE
 from test_interrupt import Command
 
 from dopus_codegen.cli import main
-from dopus_codegen.studies.campaign import read_results
+from dopus_codegen.studies.campaign import FORMAT, read_results
 
 RUNS, DURATION = 3, 0.7
 ARGS = [str(ROBOT_ARM_FILE), "--duration", str(DURATION), "--no-progress"]
@@ -64,10 +64,10 @@ def _other_format(text):
 
 
 @pytest.mark.parametrize("damage, why", [
-    (_damaged_header, "line 1: not JSON"),
-    (_no_header, "line 1: no campaign fingerprint"),
-    (_other_format, "line 1: format 99, expected 1"),
-    (lambda text: "time,deviation\n0,0.1\n", "line 1: not JSON"),
+    (_damaged_header, "not JSON"),
+    (_no_header, "no campaign fingerprint"),
+    (_other_format, f"format 99, this version reads format {FORMAT}"),
+    (lambda text: "time,deviation\n0,0.1\n", "not JSON"),
 ])
 def test_a_damaged_header_is_refused_or_replaced_on_request(reference, tmp_path, damage, why):
     good = reference(RUNS)
@@ -76,8 +76,9 @@ def test_a_damaged_header_is_refused_or_replaced_on_request(reference, tmp_path,
     before = out.read_text()
     res = _campaign(out, "--workers", "0")
     assert res.exit_code == 2, res.output
-    assert (f"--out '{out}' is not a result file of dopus-gen campaign or its header is damaged ({why}), so it "
-            "cannot be resumed; give another file, or --overwrite to start a new campaign in it") in res.output
+    assert (f"--out '{out}' cannot be resumed: its first line is not a campaign header of this version (damaged, "
+            f"another file or another version: {why}); give another file, or --overwrite to start a new campaign "
+            "in it") in res.output
     assert out.read_text() == before                               # nothing merged, nothing written
     res = _campaign(out, "--workers", "0", "--overwrite")
     assert res.exit_code == 0, res.output

@@ -9,6 +9,7 @@ against independent numbers.
 """
 import importlib.util
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ from dopus_codegen.cli import main as cli_main
 from dopus_codegen.problem.derivatives import build_functions
 from dopus_codegen.reference.offline import solve_ocp
 from dopus_codegen.problem.ocp import Event
-from dopus_codegen.studies.sil import run_closed_loop, summarize
+from dopus_codegen.studies.sil import format_summary, run_closed_loop, summarize
 from test_plant import arm_rhs_numpy
 
 DEFAULT_LM = 1e-4  # examples/robot_arm.py: options(lm=1e-4)
@@ -178,10 +179,26 @@ def test_sil_events_and_summary():
                     (("deviation", "after second kick"), slice(13, 20))):
         assert segs[key]["max"] == pytest.approx(np.max(dev[sl]), rel=1e-12)
         assert segs[key]["rms"] == pytest.approx(np.sqrt(np.mean(dev[sl] ** 2)), rel=1e-12)
+    # a signal negative when all is well keeps its sign: min, max and RMS of the values as they are
+    signed = dict(run, signals=dict(run["signals"], over=list(dev - 0.02)))
+    segs = {(g["signal"], g["segment"]): g for g in summarize(signed, settle=0.03)["segments"]}
+    for key, sl in ((("over", "before kick"), slice(0, 5)), (("over", "after kick"), slice(5, 13))):
+        assert segs[key]["max"] == pytest.approx(np.max(dev[sl] - 0.02), rel=1e-12) and segs[key]["max"] < 0
+        assert segs[key]["min"] == pytest.approx(np.min(dev[sl] - 0.02), rel=1e-12)
+        assert segs[key]["rms"] == pytest.approx(np.sqrt(np.mean((dev[sl] - 0.02) ** 2)), rel=1e-12)
     kkt = np.array(run["kkt"])
     settled = [i for i in range(20) if i >= 3 and not (5 <= i < 8) and not (13 <= i < 16)]
     assert s["kkt_max_settled"] == pytest.approx(np.max(kkt[settled]), rel=1e-12)
     assert s["qp_failures"] == 0
+    # the table's recoveries column: the run's count of automatic re-initialisations, '-' where
+    # the backend does not count them (the reference backend here)
+    for count, shown in ((None, "-"), (3, "3")):
+        table = format_summary([summarize(dict(run, result=dict(run["result"], recoveries=count)))]).splitlines()
+        head = next(i for i, line in enumerate(table) if "recoveries" in line)
+        names = [c for c in re.split(r"\s{2,}", table[head].strip())]
+        values = re.split(r"\s{2,}", table[head + 2].strip())
+        assert dict(zip(names, values))["recoveries"] == shown
+        assert dict(zip(names, values))["QP fail"] == "0"
 
 
 def test_cli_sil(tmp_path):

@@ -10,8 +10,8 @@ uniform offsets to some states). The controller starts from the offline solution
 scenario's nominal initial state (solved once), as a deployed controller would.
 
 A run is **on the path** (``OnPath``) when the plant could be integrated to the end and the
-scalar signal named by the file (the robot arm: the distance of the tip to the circle) is at
-or below ``threshold`` at every sampling instant from ``settle`` seconds after the start and
+scalar signal named by the file (the robot arm: the distance of the tip to the circle), taken
+with its sign, is at or below ``threshold`` at every sampling instant from ``settle`` seconds after the start and
 after every push (the instants inside ``[t_push, t_push + settle)`` are not judged).
 
 The runs are distributed with dask.distributed (a LocalCluster, or the scheduler the caller
@@ -24,8 +24,8 @@ sorted by seed and run, so an interrupted and resumed campaign gives the same fi
 uninterrupted one, except the measured times (``"time"``) of each run.
 
 A run's line: ``run``, ``seed``, ``draw`` (``quantities``, ``x0``, ``pushes``: ``time`` and
-``kick``), ``on_path``, ``max_deviation`` (the largest ``|signal|`` over the judged instants),
-``max_deviation_all``, ``failed_instants`` (instants whose feedback failed: QP failures),
+``kick``), ``on_path``, ``max_deviation`` (the largest value of the signal, signed, over the
+judged instants), ``max_deviation_all`` (over all instants), ``failed_instants`` (instants whose feedback failed: QP failures),
 ``recoveries`` (re-initialisations of the runtime's automatic recovery), ``first_failure``,
 ``aborted``, ``instants``, ``instants_planned``, ``final_x``, ``signal`` (the on-path
 signal at every instant) and ``time`` (``median_us``, ``p99_us``, ``max_us`` of feedback +
@@ -52,8 +52,9 @@ from .records import json_ready
 __all__ = ["CampaignError", "Job", "draw", "run_one", "judge", "read_results", "run_campaign", "format_report",
            "campaign_plant", "campaign_events"]
 
-#: The version of the result file's layout (in its first line).
-FORMAT = 1
+#: The version of the result file's layout (in its first line). 2: the on-path signal is
+#: judged with its sign (1: its absolute value).
+FORMAT = 2
 #: Seconds without a dask worker after which a campaign stops (``--worker-timeout``).
 WORKER_TIMEOUT = 60.0
 
@@ -207,13 +208,23 @@ def run_one(job: Job, index: int, seed: int) -> dict:
     return condense(run, d, index, seed, job.on_path, wall)
 
 
+def _signed(signal) -> np.ndarray:
+    """The values of a scalar signal, signed; a missing or non-finite value counts as +inf
+    (never on the path)."""
+    v = np.asarray([np.inf if a is None else a for a in signal], dtype=float)
+    v[~np.isfinite(v)] = np.inf
+    return v
+
+
 def judge(t, signal, pushes, on_path, completed: bool) -> tuple:
-    """``(on the path, max |signal| over the judged instants)`` of a run: the instants from
-    ``settle`` s after the start and outside ``[t_push, t_push + settle)`` for every push."""
+    """``(on the path, max signal over the judged instants)`` of a run: the instants from
+    ``settle`` s after the start and outside ``[t_push, t_push + settle)`` for every push.
+    The signal is taken with its sign: ``OnPath`` asks it to stay at or below the threshold
+    (a distance is never negative; "temperature above its limit" is negative when all is
+    well)."""
     _, threshold, settle = on_path
     t = np.asarray(t, dtype=float)
-    v = np.abs(np.asarray([np.inf if a is None else a for a in signal], dtype=float))
-    v[~np.isfinite(v)] = np.inf
+    v = _signed(signal)
     tol = 1e-9
     judged = t >= settle - tol
     for tp in pushes:
@@ -229,7 +240,7 @@ def condense(run: dict, d: dict, index: int, seed: int, on_path: tuple, wall: fl
     completed = res["status"] == "completed" and res["instants"] == res["instants_planned"]
     pushes = [p["time"] for p in d["pushes"] if p["time"] < run["settings"]["duration"]]
     ok, worst = judge(run["t"], run["signals"][name], pushes, on_path, completed)
-    sig = np.abs(np.asarray([np.inf if a is None else a for a in run["signals"][name]], dtype=float))
+    sig = _signed(run["signals"][name])
     tot = np.asarray(run["timing_us"]["total"], dtype=float)
     fb = np.asarray(run["timing_us"]["feedback"], dtype=float)
     q = lambda a, p: float(np.percentile(a, p)) if a.size else None  # noqa: E731
@@ -308,7 +319,7 @@ def _header_problem(obj):
     if not isinstance(obj.get("campaign"), str) or not obj["campaign"]:
         return "no campaign fingerprint"
     if obj.get("format") != FORMAT or type(obj.get("format")) is not int:
-        return f"format {obj.get('format')!r}, expected {FORMAT}"
+        return f"format {obj.get('format')!r}, this version reads format {FORMAT}"
     return None
 
 
@@ -591,8 +602,8 @@ def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | Non
     lines = old.lines
     if old.header_problem is not None or (old.header is not None and old.header.get("campaign") != fp):
         if old.header_problem is not None:
-            why = (f"--out '{out}' is not a result file of dopus-gen campaign or its header is damaged (line 1: "
-                   f"{old.header_problem}), so it cannot be resumed")
+            why = (f"--out '{out}' cannot be resumed: its first line is not a campaign header of this version "
+                   f"(damaged, another file or another version: {old.header_problem})")
         else:
             why = (f"--out '{out}' holds the runs of another campaign (another OCP file or other settings: "
                    f"fingerprint {old.header.get('campaign')}, this one {fp})")
@@ -783,12 +794,16 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
     dev = np.asarray([r["max_deviation"] if r["max_deviation"] is not None else np.inf for r in lines], dtype=float)
     fig, axes = plt.subplots(2, 2, figsize=(10, 7))
     ax = axes[0, 0]
-    finite = dev[np.isfinite(dev) & (dev > 0)]
-    if finite.size:
+    finite = dev[np.isfinite(dev)]
+    log = bool(finite.size) and finite.min() > 0 and d["threshold"] > 0   # else a signed signal: linear axes
+    if finite.size and log:
         bins = np.logspace(np.log10(finite.min()), np.log10(max(finite.max(), d["threshold"] * 1.01)), 40)
         ax.hist(finite, bins=bins, color="C0")
         ax.set_xscale("log")
         _log_ticks(ax.xaxis)
+    elif finite.size:
+        ax.hist(finite, bins=np.linspace(min(finite.min(), d["threshold"]), max(finite.max(), d["threshold"]), 41),
+                color="C0")
     ax.axvline(d["threshold"], color="C3", ls="--", label=f"threshold {d['threshold']:g} {unit}")
     ax.set_xlabel(f"max {d['signal']} after settling [{unit}]")
     ax.set_ylabel("runs [-]")
@@ -817,8 +832,9 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
         rel = np.asarray([100 * (r["draw"]["quantities"][name] / nominal[name] - 1) for r in lines], dtype=float)
         ax.scatter(rel, np.where(np.isfinite(dev), dev, np.nan), s=6, color=f"C{k}", label=name, alpha=0.6)
     ax.axhline(d["threshold"], color="C3", ls="--")
-    ax.set_yscale("log")
-    _log_ticks(ax.yaxis)
+    if log:
+        ax.set_yscale("log")
+        _log_ticks(ax.yaxis)
     ax.set_xlabel("plant quantity against nominal [%]")
     ax.set_ylabel(f"max {d['signal']} after settling [{unit}]")
     if names:

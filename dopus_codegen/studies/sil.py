@@ -484,7 +484,10 @@ def summarize(run, settle: float = 0.2) -> dict:
     """Figures of the summary table for one run.
 
     ``settle``: seconds after the start and after each event during which the KKT measure is
-    not counted in "max KKT after settling".
+    not counted in "max KKT after settling". A scalar signal's ``min`` and ``max`` are its
+    signed extremes over a stretch (a signal that is negative when all is well, "temperature
+    above its limit", keeps its sign), ``rms`` its root mean square; ``recoveries`` the
+    runtime's automatic re-initialisations (None: the backend does not count them).
     """
     t = np.asarray(run["t"], dtype=float)
     out = {"label": run["label"], "segments": [], "aborted": run.get("aborted"),
@@ -494,8 +497,9 @@ def summarize(run, settle: float = 0.2) -> dict:
         if v.ndim != 1:
             continue
         for seg, mask in _segments(run):
-            vs = np.abs(v[mask])
+            vs = v[mask]
             out["segments"].append({"signal": name, "segment": seg,
+                                    "min": float(np.min(vs)) if vs.size else math.nan,
                                     "max": float(np.max(vs)) if vs.size else math.nan,
                                     "rms": float(np.sqrt(np.mean(vs ** 2))) if vs.size else math.nan})
     kkt = np.asarray([np.nan if a is None else a for a in run["kkt"]], dtype=float)
@@ -507,6 +511,7 @@ def summarize(run, settle: float = 0.2) -> dict:
     out["kkt_max_settled"] = float(np.max(ks)) if ks.size else math.nan
     out["kkt_nonfinite"] = int(np.count_nonzero(~np.isfinite(kkt)))
     out["qp_failures"] = int(np.count_nonzero(np.asarray(run["status"]) != 0))
+    out["recoveries"] = (run.get("result") or {}).get("recoveries")
     u = np.asarray(run["u"], dtype=float)
     lbu = np.asarray([-np.inf if a is None else a for a in run["settings"]["lbu"]], dtype=float)
     ubu = np.asarray([np.inf if a is None else a for a in run["settings"]["ubu"]], dtype=float)
@@ -523,7 +528,7 @@ def summarize(run, settle: float = 0.2) -> dict:
 def _num(v, fmt: str) -> str:
     """A number of the summary, or '-' right-aligned where there is none (no instant of a
     stretch, an aborted run)."""
-    width = int(fmt.split(".")[0])
+    width = int(fmt.split(".")[0].rstrip("d"))
     return f"{v:{fmt}}" if isinstance(v, (int, float)) and math.isfinite(v) else f"{'-':>{width}}"
 
 
@@ -535,18 +540,21 @@ def format_summary(summaries) -> str:
         w_run = max(len("run"), *(len(r) for r, _ in sig_rows))
         w_sig = max(len("signal"), *(len(seg["signal"]) for _, seg in sig_rows))
         w_seg = max(len("stretch"), *(len(seg["segment"]) for _, seg in sig_rows))
-        head = f"{'run':<{w_run}}  {'signal':<{w_sig}}  {'stretch':<{w_seg}}  {'max':>10}  {'RMS':>10}"
+        head = (f"{'run':<{w_run}}  {'signal':<{w_sig}}  {'stretch':<{w_seg}}  {'min':>10}  {'max':>10}  "
+                f"{'RMS':>10}")
         lines += [head, "-" * len(head)]
         for r, seg in sig_rows:
             lines.append(f"{r:<{w_run}}  {seg['signal']:<{w_sig}}  {seg['segment']:<{w_seg}}  "
-                         f"{_num(seg['max'], '10.3e')}  {_num(seg['rms'], '10.3e')}")
+                         f"{_num(seg['min'], '10.3e')}  {_num(seg['max'], '10.3e')}  {_num(seg['rms'], '10.3e')}")
+        lines.append("(min, max: the signal's signed extremes over the stretch; RMS: its root mean square)")
         lines.append("")
     w_run = max([len("run")] + [len(s["label"]) for s in summaries])
-    head = (f"{'run':<{w_run}}  {'max KKT settled':>15}  {'QP fail':>7}  {'u bound viol':>12}  "
+    head = (f"{'run':<{w_run}}  {'max KKT settled':>15}  {'QP fail':>7}  {'recoveries':>10}  {'u bound viol':>12}  "
             f"{'median it [us]':>14}  {'max it [us]':>11}  {'median fb [us]':>14}")
     lines += [head, "-" * len(head)]
     for s in summaries:
         lines.append(f"{s['label']:<{w_run}}  {_num(s['kkt_max_settled'], '15.3e')}  {s['qp_failures']:7d}  "
+                     f"{_num(s.get('recoveries'), '10d')}  "
                      f"{_num(s['bound_violation'], '12.2e')}  {_num(s['time_median_us'], '14.1f')}  "
                      f"{_num(s['time_max_us'], '11.1f')}  {_num(s['feedback_median_us'], '14.1f')}")
     if summaries:
