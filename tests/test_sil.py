@@ -216,6 +216,10 @@ def test_cli_sil(tmp_path):
         assert x.shape == (5, 5) and u.shape == (5, 3)
         assert np.max(np.abs(x - replay(ARM.initial_state(), u))) < 1e-6
         assert r["status"] == [0] * 5
+        # the automatic lm: the setting and the value it reached, not the value as if it were the setting
+        assert r["settings"]["lm_setting"] == "auto"
+        assert f"{r['label']}: " in res.output and f"lm auto (now {r['settings']['lm']:g}) (default)" in \
+            res.output.split(f"{r['label']}: hessian", 1)[1].splitlines()[0]
     for name in ("sil_signals.png", "sil_kkt.png", "sil_controls.png", "sil_recomputed.png", "sil_timing.png"):
         assert (plots / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

@@ -666,7 +666,10 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
     for r in runs:
         st = r["settings"]
         names = [k for k in settings.RUNTIME_SETTINGS if k in st and k in st["sources"]]
-        echo(f"{r['label']}: " + settings.describe({k: st[k] for k in names}, st["sources"]))
+        shown = {k: st[k] for k in names}
+        if "lm" in shown and st.get("lm_setting") == "auto":     # the setting, and the value it reached
+            shown["lm"] = f"auto (now {st['lm']:g})"
+        echo(f"{r['label']}: " + settings.describe(shown, st["sources"]))
     if json_out:
         write_json(runs, json_out)
         echo(f"JSON: {json_out}")
