@@ -237,3 +237,35 @@ def test_cli_sil_errors(tmp_path):
     assert "Traceback" not in res.output
     res = CliRunner().invoke(cli_main, ["sil", str(EXAMPLE), "--duration", "-1"])
     assert res.exit_code != 0 and "duration" in res.output
+
+
+def test_a_time_unit_of_the_scenario_is_shown(tmp_path, monkeypatch):
+    """scenario(units={"time": "min"}): a model whose time is in minutes (a slow process) is
+    shown in minutes: the run's line, the summary's footnote, the figures' time axes."""
+    from dopus_codegen.studies import plots
+
+    ocp_file = tmp_path / "slow.py"
+    ocp_file.write_text(
+        "import casadi as ca\nfrom dopus_codegen import Ocp, Event\n\n"
+        "def build():\n"
+        "    ocp = Ocp('slow')\n    x = ocp.state('x')\n    u = ocp.control('u', lb=-1, ub=1)\n"
+        "    ocp.dynamics(u - 0.1 * x)\n    ocp.stage_cost(x**2 + u**2)\n    ocp.horizon(N=5, dt=0.5)\n"
+        "    ocp.initial_state([1.0])\n"
+        "    ocp.scenario(duration=5.0, events=[Event(2.0, lambda x: x + 0.5, 'step')], signals={'level': x},\n"
+        "                 units={'time': 'min', 'level': 'm'})\n"
+        "    return ocp\n")
+    labels = []
+
+    def keep_labels(fig, path):
+        labels.extend(ax.get_xlabel() for ax in fig.axes if ax.get_xlabel())
+        plots.plt.close(fig)
+        return path
+
+    monkeypatch.setattr(plots, "_save", keep_labels)
+    res = CliRunner().invoke(cli_main, ["sil", str(ocp_file), "--backend", "reference", "--plot-dir",
+                                        str(tmp_path / "plots")])
+    assert res.exit_code == 0, res.output
+    assert "DOPUS M = 1: reference backend" in res.output and "5.0 min ..." in res.output
+    assert "excluding the first 0.2 min after the start" in res.output
+    time_axes = [label for label in labels if label.startswith("time")]
+    assert time_axes and set(time_axes) == {"time [min]"}

@@ -692,7 +692,9 @@ class Ocp:
         """Closed-loop scenario: ``duration`` seconds, state ``events``, recorded ``signals``
         (name -> expression of the declared symbols), ``plant`` xdot (None: the model),
         ``units``: the unit of a signal, state or control by name (``{"deviation": "m",
-        "tau": "N m"}``), written on the axes of the figures."""
+        "tau": "N m"}``), written on the axes of the figures; ``"time"``: the unit of the
+        model's time (of ``dt``, ``duration`` and the event times; default ``"s"``), written
+        wherever a time of the scenario is shown."""
         try:
             events = list(events)
         except TypeError:
@@ -962,8 +964,8 @@ class Ocp:
         known = {n for n, _ in signals} | {d.name for d in self._states + self._controls}
         units = []
         for key, unit in sc.get("units", {}).items():
-            if key not in known:
-                raise OcpError(f"scenario units: {key!r} is neither a signal nor a state or control; "
+            if key not in known and key != "time":
+                raise OcpError(f"scenario units: {key!r} is neither a signal nor a state or control (nor 'time'); "
                                f"the names are {sorted(known)}")
             if not isinstance(unit, str) or not unit.strip():
                 raise OcpError(f"scenario units: the unit of {key!r} must be a non-empty string, got {unit!r}")

@@ -721,6 +721,7 @@ def summarize(lines, job, camp, spec, wall=None, computed=0, workers="", errors=
         "pushes": {"count": list(cs.push_count), "window": list(cs.push_window)},
         "on_path_definition": {"signal": signal, "unit": dict(spec.scenario.closed_loop.units).get(signal),
                                "threshold": threshold, "settle": settle},
+        "time_unit": dict(spec.scenario.closed_loop.units).get("time", "s"),
         "on_path": on, "on_path_fraction": on / n if n else None,
         "aborted": sum(1 for r in lines if r["aborted"]),
         "runs_with_failed_instants": sum(1 for f in failed if f), "failed_instants": int(sum(failed)),
@@ -743,13 +744,14 @@ def format_report(rep: dict) -> str:
     mm = ", ".join(f"{k} +-{100 * v:g} %" for k, v in rep["mismatch"].items()) or "none"
     t = rep["time_per_iteration_us"]
     f = lambda v, fmt: "-" if v is None else format(v, fmt)  # noqa: E731
+    tu = rep.get("time_unit", "s")      # of the model's time (the wall time is in seconds)
     lines = [
-        f"campaign {rep['ocp']}: {rep['runs']} of {rep['runs_asked']} runs (seed {rep['seed']}), {rep['duration']:g} s "
-        f"each, M = {rep['solver']['M']}, {rep['backend']} backend; mismatch {mm}; "
+        f"campaign {rep['ocp']}: {rep['runs']} of {rep['runs_asked']} runs (seed {rep['seed']}), {rep['duration']:g} "
+        f"{tu} each, M = {rep['solver']['M']}, {rep['backend']} backend; mismatch {mm}; "
         f"{rep['pushes']['count'][0]}..{rep['pushes']['count'][1]} pushes in [{rep['pushes']['window'][0]:g}, "
-        f"{rep['pushes']['window'][1]:g}] s",
+        f"{rep['pushes']['window'][1]:g}] {tu}",
         f"on the path: {rep['on_path']} of {rep['runs']} ({f(100 * rep['on_path_fraction'] if rep['runs'] else None, '.1f')} %)"
-        f"  [{d['signal']} <= {d['threshold']:g}{unit} from {d['settle']:g} s after the start and after every push, "
+        f"  [{d['signal']} <= {d['threshold']:g}{unit} from {d['settle']:g} {tu} after the start and after every push, "
         "plant integrated to the end]",
         f"failed instants (QP failures): {rep['failed_instants']} in {rep['runs_with_failed_instants']} runs "
         f"(at most {rep['failed_instants_max']} in one run); recoveries: {rep['recoveries']} in "

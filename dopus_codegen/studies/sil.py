@@ -316,7 +316,8 @@ class _Loop:
                 elif bar is not None:
                     bar.update(1)
         except PlantError as err:
-            self.aborted = f"plant failed at t = {len(self.rec.t) * self.dt:.4g} s: {err}"
+            self.aborted = (f"plant failed at t = {len(self.rec.t) * self.dt:.4g} "
+                            f"{time_unit(self.disc.scenario.closed_loop.units)}: {err}")
             self.rec.drop_unfinished()
         finally:
             if bar is not None:
@@ -480,6 +481,12 @@ def _segments(run):
     return segs
 
 
+def time_unit(units) -> str:
+    """The unit of the model's time in a scenario's ``units`` (a mapping or pairs), else
+    ``"s"``."""
+    return dict(units or {}).get("time", "s")
+
+
 def summarize(run, settle: float = 0.2) -> dict:
     """Figures of the summary table for one run.
 
@@ -491,6 +498,7 @@ def summarize(run, settle: float = 0.2) -> dict:
     """
     t = np.asarray(run["t"], dtype=float)
     out = {"label": run["label"], "segments": [], "aborted": run.get("aborted"),
+           "time_unit": time_unit(run.get("settings", {}).get("units")),
            "first_failure": (run.get("result") or {}).get("first_failure")}
     for name, vals in run["signals"].items():
         v = np.asarray([np.nan if a is None else a for a in vals], dtype=float)
@@ -558,12 +566,13 @@ def format_summary(summaries) -> str:
                      f"{_num(s['bound_violation'], '12.2e')}  {_num(s['time_median_us'], '14.1f')}  "
                      f"{_num(s['time_max_us'], '11.1f')}  {_num(s['feedback_median_us'], '14.1f')}")
     if summaries:
-        lines.append(f"(max KKT settled: excluding the first {summaries[0]['settle']} s after the start "
+        lines.append(f"(max KKT settled: excluding the first {summaries[0]['settle']} {summaries[0]['time_unit']} "
+                     "after the start "
                      f"and after each event; it = feedback + prepare, fb = feedback alone)")
     for s in summaries:
         if s.get("first_failure"):
             ff = s["first_failure"]
-            lines.append(f"{s['label']}: first failed instant at t = {ff['t']:.4g} s: {ff['message']}")
+            lines.append(f"{s['label']}: first failed instant at t = {ff['t']:.4g} {s['time_unit']}: {ff['message']}")
         if s.get("aborted"):
             lines.append(f"{s['label']}: ABORTED: {s['aborted']}")
     return "\n".join(lines)
@@ -636,7 +645,8 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
         replay = dict(xhat0=d["x0"], events=campaign_events(d), plant=campaign_plant(disc, d))
         echo(f"campaign run {campaign_run} (seed {seed or 0}): plant quantities "
              + ", ".join(f"{k} = {v:.6g}" for k, v in d["quantities"].items())
-             + f"; {len(d['pushes'])} pushes at " + ", ".join(f"{p['time']:.4g} s" for p in d["pushes"]), err=True)
+             + f"; {len(d['pushes'])} pushes at " + ", ".join(f"{p['time']:.4g} {time_unit(spec.units)}"
+                                                              for p in d["pushes"]), err=True)
 
     from ..reference.offline import solve_ocp
     guess, info = solve_ocp(disc, x0)
@@ -654,7 +664,7 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
         name = label or ("full RTI" if min(m, N - 1) == N - 1 else f"DOPUS M = {m}")
         echo(f"{name}: {backend} backend, {values['hessian']} Hessian, regularization {values['regularization']}, "
              f"cost Hessian {values['cost_hessian']}, Levenberg-Marquardt {values['lm']}, "
-             f"{duration if duration is not None else spec.duration} s ...", err=True)
+             f"{duration if duration is not None else spec.duration} {time_unit(spec.units)} ...", err=True)
         run = run_closed_loop(disc, backend=backend, M=m, hessian=values["hessian"],
                               regularization=values["regularization"], reg_eps=values["reg_eps"],
                               cost_hessian=values["cost_hessian"], lm=values["lm"], duration=duration, guess=guess,
