@@ -263,3 +263,19 @@ def test_sil(tmp_path, when):
     figures = sorted(plots.iterdir()) if plots.exists() else []
     assert all(p.suffix == ".png" and _complete_png(p) for p in figures), [p.name for p in figures]
     assert {p.name for p in tmp_path.iterdir()} <= {"plots", "sil.json"}
+
+
+def test_converge_with_the_reference_backend(tmp_path):
+    """The reference backend solves every QP with IPOPT: Ctrl-C there is not a failed run."""
+    json_out = tmp_path / "converge.json"
+    cmd = Command(["converge", ROBOT_ARM_FILE, "--backend", "reference", "--iters", "40", "--M", "1,full",
+                   "--json", json_out, "--plot", tmp_path / "converge.png"], tmp_path)
+    try:
+        cmd.wait_for_line("DOPUS iterations")
+        cmd.signal(signal.SIGINT)
+        rc = cmd.finish()
+    finally:
+        cmd.kill()
+    _assert_interrupted(cmd, rc)
+    assert "failed" not in cmd.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

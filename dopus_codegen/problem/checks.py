@@ -26,6 +26,7 @@ from typing import List, Optional, Tuple
 import casadi as ca
 import numpy as np
 
+from .. import interrupt
 from .ocp import OcpError
 
 __all__ = ["NonSmoothWarning", "stage0_violations", "check_initial_state", "nonsmooth_terms", "warn_nonsmooth",
@@ -125,6 +126,7 @@ def _least_violating_control(gfun, x, p, lg, ug, lbu, ubu, u_start):
     s0 = np.maximum(0.0, np.maximum(np.nan_to_num(lg - g0, neginf=0.0, posinf=0.0),
                                     np.nan_to_num(g0 - ug, neginf=0.0, posinf=0.0)))
     res = solver(x0=np.concatenate([u_start, s0]), lbx=lbx, ubx=ubx, lbg=lo, ubg=hi)
+    interrupt.check()       # IPOPT ends a solve interrupted by Ctrl-C as a failed one
     ub = np.array(res["x"]).reshape(-1)[:nu]
     return np.clip(ub, lbu, ubu)
 

@@ -64,6 +64,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .. import interrupt
+
 __all__ = ["QPError", "QPInfeasibleError", "QPIterationLimitError", "free_initial_state", "solve_qp_reference",
            "qp_kkt_residual", "check_qp", "qp_infeasible_row", "qp_reduced_hessian_min_eig", "flatten_qp", "flatten_solution"]
 
@@ -381,6 +383,7 @@ def _solve_ipopt(q: dict, Hz, gz, rows: _Rows, max_iter=500):
     z0 = np.clip(np.zeros(Hz.shape[0]), rows.lbz, rows.ubz)
     z0 = np.where(np.isfinite(z0), z0, 0.0)
     res = solver(x0=z0, p=p, lbx=rows.lbz, ubx=rows.ubz, lbg=lbg, ubg=ubg)
+    interrupt.check()       # IPOPT ends a solve interrupted by Ctrl-C as a failed one
     stats = solver.stats()
     status = stats.get("return_status", "")
     z = np.array(res["x"]).reshape(-1)
