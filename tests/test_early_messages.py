@@ -11,6 +11,7 @@
 """
 from __future__ import annotations
 
+import os
 import subprocess
 from pathlib import Path
 
@@ -109,7 +110,9 @@ def _unwritable_caches(tmp_path):
 
 
 @pytest.mark.parametrize("verb", [["sil", "--duration", "0.1"], ["converge", "--backend", "c", "--iters", "2", "--start", "cold"]])
-def test_an_unwritable_cache_names_the_folder_and_the_option(tmp_path, verb):
+def test_an_unwritable_cache_names_the_folder_and_the_option(tmp_path, verb, monkeypatch):
+    # --cache-dir sets $DOPUS_CACHE_DIR for the process: restored after the test
+    monkeypatch.setenv("DOPUS_CACHE_DIR", os.environ.get("DOPUS_CACHE_DIR", ""))
     ocp_file = _ocp_file(tmp_path)
     for cache in _unwritable_caches(tmp_path):
         res = CliRunner().invoke(main, ["--cache-dir", str(cache), verb[0], str(ocp_file), *verb[1:]])
