@@ -12,6 +12,10 @@ after a CasADi call that can fail this way calls :func:`check`, which raises
 ``KeyboardInterrupt`` again when an interrupt was recorded, so the failure is reported as
 what it is; ``dopus-gen`` exits with :data:`EXIT_INTERRUPTED` and the line
 ``interrupted``. Outside :func:`handling`, :func:`check` does nothing.
+
+:func:`deferred` holds the ``KeyboardInterrupt`` of a SIGINT back to the end of a block: for
+calls that do not survive one raised in their middle (dask's client waits in its event
+loop; interrupted, it logs a traceback of its own).
 """
 from __future__ import annotations
 
@@ -20,17 +24,20 @@ import threading
 
 import contextlib
 
-__all__ = ["EXIT_INTERRUPTED", "handling", "interrupted", "check"]
+__all__ = ["EXIT_INTERRUPTED", "handling", "interrupted", "check", "deferred"]
 
 #: The exit code of a command stopped by SIGINT (128 + the signal number, as a shell gives).
 EXIT_INTERRUPTED = 128 + int(signal.SIGINT)
 
 _SEEN = threading.Event()
+_STATE = {"hits": 0, "deferring": 0}
 
 
 def _handler(signum, frame):
     _SEEN.set()
-    raise KeyboardInterrupt
+    _STATE["hits"] += 1
+    if not _STATE["deferring"]:
+        raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
@@ -58,4 +65,19 @@ def check() -> None:
     """Raise ``KeyboardInterrupt`` if a SIGINT arrived (one that CasADi caught and turned
     into a failure of its computation)."""
     if _SEEN.is_set():
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def deferred():
+    """Inside the block a SIGINT (under :func:`handling`) is recorded but its
+    ``KeyboardInterrupt`` raised only when the block ends, and only if it arrived inside
+    it (not while the block unwinds an exception)."""
+    hits = _STATE["hits"]
+    _STATE["deferring"] += 1
+    try:
+        yield
+    finally:
+        _STATE["deferring"] -= 1
+    if _STATE["hits"] != hits:
         raise KeyboardInterrupt

@@ -67,7 +67,10 @@ class Command:
         os.killpg(self.proc.pid, sig)
 
     def finish(self, timeout=120.0) -> int:
-        rc = self.proc.wait(timeout)
+        try:
+            rc = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"the command did not end within {timeout} s:\n{self.output}") from None
         self.reader.join(timeout)
         return rc
 

@@ -438,29 +438,43 @@ def _distributed(client, job, todo, seed, on_result, on_error, worker_timeout: f
     worker (or without an answer of the scheduler) :class:`_NoWorker` stops the campaign."""
     from dask.distributed import wait
 
-    futures = {client.submit(run_one, job, i, seed, key=f"dopus-campaign-{job.fingerprint}-{seed}-{i}", pure=False): i
-               for i in todo}
+    # every call of the client is made with Ctrl-C deferred to its end (interrupt.deferred):
+    # dask's client does not survive a KeyboardInterrupt raised while it waits
+    with interrupt.deferred():
+        futures = {client.submit(run_one, job, i, seed, key=f"dopus-campaign-{job.fingerprint}-{seed}-{i}",
+                                 pure=False): i for i in todo}
     pending = set(futures)
     alone_since = None
     try:
         while pending:
             try:
-                done, pending = wait(pending, timeout=poll, return_when="FIRST_COMPLETED")
+                with interrupt.deferred():
+                    done, pending = wait(pending, timeout=poll, return_when="FIRST_COMPLETED")
             except TimeoutError:
                 done = ()
             except Exception as exc:  # noqa: BLE001 - the scheduler cancelled the runs or went away
                 raise _NoWorker(f"the dask cluster stopped the runs ({type(exc).__name__}: {exc})") from None
+            got = 0
             for fut in done:
-                if fut.status == "error":
-                    on_error(futures[fut], fut.exception())
+                try:
+                    with interrupt.deferred():
+                        failed = fut.status == "error"
+                        value = fut.exception(timeout=poll) if failed else fut.result(timeout=poll)
+                        fut.release()
+                except TimeoutError:    # its result was on a worker lost since: the run is computed again
+                    pending.add(fut)
+                    continue
+                got += 1
+                if failed:
+                    on_error(futures[fut], value)
                 else:
-                    on_result(fut.result())
-                fut.release()
-            if done:
+                    on_result(value)
+            if got:
                 alone_since = None
                 continue
             try:
-                n_workers = len(client.nthreads())
+                with interrupt.deferred():
+                    n_workers = len(client.nthreads())
             except Exception:  # noqa: BLE001 - the scheduler does not answer
                 n_workers = 0
             if n_workers:
@@ -470,8 +484,8 @@ def _distributed(client, job, todo, seed, on_result, on_error, worker_timeout: f
             elif time.monotonic() - alone_since >= worker_timeout:
                 raise _NoWorker(f"the dask cluster has had no worker for {worker_timeout:g} s (--worker-timeout)")
     finally:
-        for fut in futures:
-            fut.cancel()
+        with interrupt.deferred():
+            client.cancel(list(futures))
 
 
 class _Progress:
@@ -618,9 +632,10 @@ def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | Non
     say(f"settings: {settings.describe(solver, s_src)}; {settings.describe(camp, c_src)}", err=True)
 
     client = cluster = None
-    if todo and workers != 0:
-        client, cluster = connect(workers, scheduler)
     try:
+        if todo and workers != 0:
+            with interrupt.deferred():      # Ctrl-C while the cluster starts: stopped once it runs
+                client, cluster = connect(workers, scheduler)
         from ..problem.derivatives import build_functions
         from ..reference.offline import solve_ocp
 
@@ -685,10 +700,11 @@ def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | Non
         wall = time.perf_counter() - t0
         _rewrite(out, header, lines)
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        with interrupt.deferred():
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
     chosen = [lines[(seed, i)] for i in range(runs) if (seed, i) in lines]
     report = summarize(chosen, job, camp, spec, wall=wall, computed=len(todo) - len(errors),
                        workers=where, errors=errors)
