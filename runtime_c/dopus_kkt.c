@@ -34,9 +34,10 @@ static dopus_real dopus_kkt_comp(dopus_real mu, dopus_real v, dopus_real lb, dop
 
 #if DOPUS_NSOFT > 0
 /* A row with soft weights w (w[0 .. 3 * stride]: L1 lower, L1 upper, L2 lower, L2 upper):
- * a hard side as above; a soft side with violation s = max(0, lb - v) needs its multiplier
- * m in [0, l1 + l2 s], m (v - lb)^+ = 0 and (l1 + l2 s - m) s = 0 (docs/algorithm.md
- * section 12), each violation into comp. */
+ * a hard side as above; a soft side with multiplier m at its best slack s = max(s0, (m - l1)
+ * / l2) (s0 = max(0, lb - v) the violation; s = s0 when l2 = 0), where the slack's
+ * stationarity l1 + l2 s - m = y must be >= 0, with the complementarity m (v - lb + s) and y s
+ * (docs/algorithm.md section 12), each into comp. */
 static void dopus_kkt_row(dopus_real v, dopus_real lb, dopus_real ub, dopus_real mu, const dopus_real *w,
                           int stride, dopus_real *ineq, dopus_real *comp)
 {
@@ -50,14 +51,18 @@ static void dopus_kkt_row(dopus_real v, dopus_real lb, dopus_real ub, dopus_real
     for (side = 0; side < 2; ++side) {
         const dopus_real m = dopus_kkt_max(side ? mu : -mu, DOPUS_R(0.0));
         const dopus_real gap = side ? ub - v : v - lb;
-        const dopus_real sl = dopus_kkt_max(DOPUS_R(0.0), -gap);
-        const dopus_real cap = w[side * stride] + w[(2 + side) * stride] * sl;
+        const dopus_real l1 = w[side * stride], l2 = w[(2 + side) * stride];
+        dopus_real sl = dopus_kkt_max(DOPUS_R(0.0), -gap), y;
         if (!(side ? sup : slo)) {
             continue;
         }
-        *comp = dopus_kkt_max(*comp, dopus_kkt_max(DOPUS_R(0.0), m - cap));
-        *comp = dopus_kkt_max(*comp, m * dopus_kkt_max(DOPUS_R(0.0), gap));
-        *comp = dopus_kkt_max(*comp, dopus_kkt_max(DOPUS_R(0.0), cap - m) * sl);
+        if (l2 > DOPUS_R(0.0)) {
+            sl = dopus_kkt_max(sl, (m - l1) / l2);
+        }
+        y = l1 + l2 * sl - m;
+        *comp = dopus_kkt_max(*comp, dopus_kkt_max(DOPUS_R(0.0), -y));
+        *comp = dopus_kkt_max(*comp, m * (gap + sl));
+        *comp = dopus_kkt_max(*comp, dopus_kkt_max(DOPUS_R(0.0), y) * sl);
     }
 }
 #define DOPUS_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \

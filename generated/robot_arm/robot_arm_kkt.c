@@ -34,9 +34,10 @@ static robot_arm_real robot_arm_kkt_comp(robot_arm_real mu, robot_arm_real v, ro
 
 #if ROBOT_ARM_NSOFT > 0
 /* A row with soft weights w (w[0 .. 3 * stride]: L1 lower, L1 upper, L2 lower, L2 upper):
- * a hard side as above; a soft side with violation s = max(0, lb - v) needs its multiplier
- * m in [0, l1 + l2 s], m (v - lb)^+ = 0 and (l1 + l2 s - m) s = 0 (docs/algorithm.md
- * section 12), each violation into comp. */
+ * a hard side as above; a soft side with multiplier m at its best slack s = max(s0, (m - l1)
+ * / l2) (s0 = max(0, lb - v) the violation; s = s0 when l2 = 0), where the slack's
+ * stationarity l1 + l2 s - m = y must be >= 0, with the complementarity m (v - lb + s) and y s
+ * (docs/algorithm.md section 12), each into comp. */
 static void robot_arm_kkt_row(robot_arm_real v, robot_arm_real lb, robot_arm_real ub, robot_arm_real mu, const robot_arm_real *w,
                           int stride, robot_arm_real *ineq, robot_arm_real *comp)
 {
@@ -50,14 +51,18 @@ static void robot_arm_kkt_row(robot_arm_real v, robot_arm_real lb, robot_arm_rea
     for (side = 0; side < 2; ++side) {
         const robot_arm_real m = robot_arm_kkt_max(side ? mu : -mu, ROBOT_ARM_R(0.0));
         const robot_arm_real gap = side ? ub - v : v - lb;
-        const robot_arm_real sl = robot_arm_kkt_max(ROBOT_ARM_R(0.0), -gap);
-        const robot_arm_real cap = w[side * stride] + w[(2 + side) * stride] * sl;
+        const robot_arm_real l1 = w[side * stride], l2 = w[(2 + side) * stride];
+        robot_arm_real sl = robot_arm_kkt_max(ROBOT_ARM_R(0.0), -gap), y;
         if (!(side ? sup : slo)) {
             continue;
         }
-        *comp = robot_arm_kkt_max(*comp, robot_arm_kkt_max(ROBOT_ARM_R(0.0), m - cap));
-        *comp = robot_arm_kkt_max(*comp, m * robot_arm_kkt_max(ROBOT_ARM_R(0.0), gap));
-        *comp = robot_arm_kkt_max(*comp, robot_arm_kkt_max(ROBOT_ARM_R(0.0), cap - m) * sl);
+        if (l2 > ROBOT_ARM_R(0.0)) {
+            sl = robot_arm_kkt_max(sl, (m - l1) / l2);
+        }
+        y = l1 + l2 * sl - m;
+        *comp = robot_arm_kkt_max(*comp, robot_arm_kkt_max(ROBOT_ARM_R(0.0), -y));
+        *comp = robot_arm_kkt_max(*comp, m * (gap + sl));
+        *comp = robot_arm_kkt_max(*comp, robot_arm_kkt_max(ROBOT_ARM_R(0.0), y) * sl);
     }
 }
 #define ROBOT_ARM_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \

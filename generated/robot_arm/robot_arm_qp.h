@@ -102,7 +102,8 @@
  * weight z/t becomes 1 / (t/z + 1/(Zl + y/s)) (y the multiplier of s >= 0), a series of the
  * row's and the slack's barrier. The returned multiplier of a soft side lies in [0, zl + Zl
  * s] (equal to the upper end when the side is violated), the slacks are max(0, lo - v) and
- * max(0, v - up) of the solution. A soft side never makes the QP infeasible: the
+ * max(0, v - up) of the solution. A soft side of a row of C_0 without u_0 is kept (its
+ * slack is then data, its multiplier zl + Zl s unique). A soft side never makes the QP infeasible: the
  * infeasibility certificates and robot_arm_qp_infeasible_row concern the hard sides only. With
  * ROBOT_ARM_NSOFT 0 (or undefined) the weights are not read and the solver compiles to the
  * loops of hard rows alone.

@@ -1258,12 +1258,40 @@ static void robot_arm_shift(robot_arm_solver *s)
     robot_arm_ring_advance(&s->ring);
 }
 
-/* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
+/* A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for the
+ * QP: its row of Ct is zero and the value g_new of step 2 lies outside that side's bound
+ * (0 dw >= lg - g_new > 0). Stage 0 is left out (the QP ignores its rows without u). */
+static int robot_arm_stale_stage(const robot_arm_solver *s, int k)
+{
+    const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
+    const robot_arm_real *g = s->mem.ev.Fn_g[k];
+    int i, j;
+    if (k == 0) {
+        return 0;
+    }
+    for (j = 0; j < ROBOT_ARM_NG; ++j) {
+        int hard_lo = 1, hard_up = 1, zero = 1;
+#if ROBOT_ARM_NSOFT > 0
+        hard_lo = !(robot_arm_soft_g[0][j] > ROBOT_ARM_R(0.0) || robot_arm_soft_g[2][j] > ROBOT_ARM_R(0.0));
+        hard_up = !(robot_arm_soft_g[1][j] > ROBOT_ARM_R(0.0) || robot_arm_soft_g[3][j] > ROBOT_ARM_R(0.0));
+#endif
+        for (i = 0; i < ROBOT_ARM_NW && zero; ++i) {
+            zero = slot->Ct[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NG)] == ROBOT_ARM_R(0.0);
+        }
+        if (zero && ((hard_lo && g[j] < robot_arm_lg[j]) || (hard_up && g[j] > robot_arm_ug[j]))) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Step 4: the stale stages (robot_arm_stale_stage), then the M stages among the other stages of
+ * 0..N-2 with the largest rho_k, ties to the lower index. */
 static void robot_arm_select(robot_arm_solver *s, int M)
 {
     int m, k, n = 0;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        s->selected[k] = 0;
+        s->selected[k] = k < ROBOT_ARM_N - 1 && ROBOT_ARM_NG > 0 && robot_arm_stale_stage(s, k);
     }
     for (m = 0; m < M; ++m) {
         int best = -1;

@@ -34,9 +34,10 @@ static unicycle_real unicycle_kkt_comp(unicycle_real mu, unicycle_real v, unicyc
 
 #if UNICYCLE_NSOFT > 0
 /* A row with soft weights w (w[0 .. 3 * stride]: L1 lower, L1 upper, L2 lower, L2 upper):
- * a hard side as above; a soft side with violation s = max(0, lb - v) needs its multiplier
- * m in [0, l1 + l2 s], m (v - lb)^+ = 0 and (l1 + l2 s - m) s = 0 (docs/algorithm.md
- * section 12), each violation into comp. */
+ * a hard side as above; a soft side with multiplier m at its best slack s = max(s0, (m - l1)
+ * / l2) (s0 = max(0, lb - v) the violation; s = s0 when l2 = 0), where the slack's
+ * stationarity l1 + l2 s - m = y must be >= 0, with the complementarity m (v - lb + s) and y s
+ * (docs/algorithm.md section 12), each into comp. */
 static void unicycle_kkt_row(unicycle_real v, unicycle_real lb, unicycle_real ub, unicycle_real mu, const unicycle_real *w,
                           int stride, unicycle_real *ineq, unicycle_real *comp)
 {
@@ -50,14 +51,18 @@ static void unicycle_kkt_row(unicycle_real v, unicycle_real lb, unicycle_real ub
     for (side = 0; side < 2; ++side) {
         const unicycle_real m = unicycle_kkt_max(side ? mu : -mu, UNICYCLE_R(0.0));
         const unicycle_real gap = side ? ub - v : v - lb;
-        const unicycle_real sl = unicycle_kkt_max(UNICYCLE_R(0.0), -gap);
-        const unicycle_real cap = w[side * stride] + w[(2 + side) * stride] * sl;
+        const unicycle_real l1 = w[side * stride], l2 = w[(2 + side) * stride];
+        unicycle_real sl = unicycle_kkt_max(UNICYCLE_R(0.0), -gap), y;
         if (!(side ? sup : slo)) {
             continue;
         }
-        *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), m - cap));
-        *comp = unicycle_kkt_max(*comp, m * unicycle_kkt_max(UNICYCLE_R(0.0), gap));
-        *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), cap - m) * sl);
+        if (l2 > UNICYCLE_R(0.0)) {
+            sl = unicycle_kkt_max(sl, (m - l1) / l2);
+        }
+        y = l1 + l2 * sl - m;
+        *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), -y));
+        *comp = unicycle_kkt_max(*comp, m * (gap + sl));
+        *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), y) * sl);
     }
 }
 #define UNICYCLE_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \

@@ -1258,12 +1258,40 @@ static void unicycle_shift(unicycle_solver *s)
     unicycle_ring_advance(&s->ring);
 }
 
-/* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
+/* A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for the
+ * QP: its row of Ct is zero and the value g_new of step 2 lies outside that side's bound
+ * (0 dw >= lg - g_new > 0). Stage 0 is left out (the QP ignores its rows without u). */
+static int unicycle_stale_stage(const unicycle_solver *s, int k)
+{
+    const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
+    const unicycle_real *g = s->mem.ev.Fn_g[k];
+    int i, j;
+    if (k == 0) {
+        return 0;
+    }
+    for (j = 0; j < UNICYCLE_NG; ++j) {
+        int hard_lo = 1, hard_up = 1, zero = 1;
+#if UNICYCLE_NSOFT > 0
+        hard_lo = !(unicycle_soft_g[0][j] > UNICYCLE_R(0.0) || unicycle_soft_g[2][j] > UNICYCLE_R(0.0));
+        hard_up = !(unicycle_soft_g[1][j] > UNICYCLE_R(0.0) || unicycle_soft_g[3][j] > UNICYCLE_R(0.0));
+#endif
+        for (i = 0; i < UNICYCLE_NW && zero; ++i) {
+            zero = slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] == UNICYCLE_R(0.0);
+        }
+        if (zero && ((hard_lo && g[j] < unicycle_lg[j]) || (hard_up && g[j] > unicycle_ug[j]))) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Step 4: the stale stages (unicycle_stale_stage), then the M stages among the other stages of
+ * 0..N-2 with the largest rho_k, ties to the lower index. */
 static void unicycle_select(unicycle_solver *s, int M)
 {
     int m, k, n = 0;
     for (k = 0; k < UNICYCLE_N; ++k) {
-        s->selected[k] = 0;
+        s->selected[k] = k < UNICYCLE_N - 1 && UNICYCLE_NG > 0 && unicycle_stale_stage(s, k);
     }
     for (m = 0; m < M; ++m) {
         int best = -1;
