@@ -1761,6 +1761,90 @@ static dopus_real dopus_side_bound(const dopus_real *lo, const dopus_real *up, i
     return side > 0 ? up[i] : lo[i];
 }
 
+#if DOPUS_NSOFT > 0
+/* The slack of the row value v against [lb, ub] on the sides with soft weights w (stride). */
+static dopus_real dopus_soft_slack(dopus_real v, dopus_real lb, dopus_real ub, const dopus_real *w,
+                                   int stride)
+{
+    dopus_real sl = DOPUS_R(0.0);
+    if ((w[0] > DOPUS_R(0.0) || w[2 * stride] > DOPUS_R(0.0)) && lb - v > sl) {
+        sl = lb - v;
+    }
+    if ((w[stride] > DOPUS_R(0.0) || w[3 * stride] > DOPUS_R(0.0)) && v - ub > sl) {
+        sl = v - ub;
+    }
+    return sl;
+}
+#endif
+
+dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopus_real *viol_g,
+                                 dopus_real *viol_r)
+{
+    dopus_real worst = DOPUS_R(0.0);
+    int k, i;
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NX && viol_x; ++i) {
+            viol_x[k * DOPUS_NX + i] = DOPUS_R(0.0);
+        }
+    }
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_DIM(DOPUS_NG) && viol_g; ++i) {
+            viol_g[k * DOPUS_DIM(DOPUS_NG) + i] = DOPUS_R(0.0);
+        }
+    }
+    for (i = 0; i < DOPUS_DIM(DOPUS_NR) && viol_r; ++i) {
+        viol_r[i] = DOPUS_R(0.0);
+    }
+#if DOPUS_NSOFT > 0
+    {
+        const dopus_qp_in *in = &s->qp_in;
+        const dopus_qp_sol *sol = &s->mem.qp.sol;
+        for (k = 1; k <= DOPUS_N; ++k) {
+            for (i = 0; i < DOPUS_NX; ++i) {
+                const dopus_real lb = k < DOPUS_N ? in->lbw[k][i] : in->lbxN[i];
+                const dopus_real ub = k < DOPUS_N ? in->ubw[k][i] : in->ubxN[i];
+                const dopus_real sl = dopus_soft_slack(sol->x[k][i], lb, ub, &dopus_soft_x[0][i], DOPUS_NX);
+                worst = sl > worst ? sl : worst;
+                if (viol_x) {
+                    viol_x[k * DOPUS_NX + i] = sl;
+                }
+            }
+        }
+        for (k = 0; k < DOPUS_N && DOPUS_NG > 0; ++k) {
+            for (i = 0; i < DOPUS_NG; ++i) {
+                dopus_real v = DOPUS_R(0.0), sl;
+                int c;
+                for (c = 0; c < DOPUS_NW; ++c) {
+                    v += in->C[k][i + c * DOPUS_DIM(DOPUS_NG)] *
+                         (c < DOPUS_NX ? sol->x[k][c] : sol->u[k][c - DOPUS_NX]);
+                }
+                sl =
+                    dopus_soft_slack(v, in->lg[k][i], in->ug[k][i], &dopus_soft_g[0][i], DOPUS_DIM(DOPUS_NG));
+                worst = sl > worst ? sl : worst;
+                if (viol_g) {
+                    viol_g[k * DOPUS_DIM(DOPUS_NG) + i] = sl;
+                }
+            }
+        }
+        for (i = 0; i < DOPUS_NR; ++i) {
+            dopus_real v = DOPUS_R(0.0), sl;
+            int c;
+            for (c = 0; c < DOPUS_NX; ++c) {
+                v += in->R[i + c * DOPUS_DIM(DOPUS_NR)] * sol->x[DOPUS_N][c];
+            }
+            sl = dopus_soft_slack(v, in->lr[i], in->ur[i], &dopus_soft_r[0][i], DOPUS_DIM(DOPUS_NR));
+            worst = sl > worst ? sl : worst;
+            if (viol_r) {
+                viol_r[i] = sl;
+            }
+        }
+    }
+#else
+    (void)s;
+#endif
+    return worst;
+}
+
 int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
 {
     int k, j, side;

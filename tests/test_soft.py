@@ -309,3 +309,63 @@ def test_soft_c_equals_reference_iterate_by_iterate(make):
         if it in (5, 15):
             xh = xh + np.array([0.3, 0.37])
     assert worst < 1e-9, worst
+
+
+def test_soft_slacks_reported_by_both_backends():
+    """dopus_get_soft_slacks: after a feedback that violates the soft speed limit, the slacks
+    of the C QP equal the reference's and the violation of the new iterate (the states of the
+    QP solution), node by node."""
+    from dopus_codegen.reference.dopus import ReferenceDopus
+    from dopus_codegen.runtime.solver import CSolver
+
+    disc = build_functions(reach_both())
+    xh = np.asarray(disc.x0, float)
+    c = CSolver(disc, M=1, hessian="gauss-newton", qp_tol=1e-12)
+    r = ReferenceDopus(disc, M=1, hessian="gauss-newton", qp_tol=1e-12)
+    c.init(xh)
+    r.init(xh)
+    c.feedback(xh)
+    r.feedback(xh)
+    sc, sr = c.soft_slacks(), r.soft_slacks()
+    assert sr["max"] > 0.1 and sr["r"][0] > 0.1
+    for key in ("x", "g", "r"):
+        np.testing.assert_allclose(sc[key], sr[key], atol=1e-8)
+    viol = np.maximum(0.0, c.x[:, 1] - disc.ubx[1])
+    viol[0] = 0.0
+    np.testing.assert_allclose(sc["x"][:, 1], viol, atol=1e-9)
+    np.testing.assert_allclose(sc["r"], np.abs(c.x[-1, 0] - 3.0), atol=1e-9)
+
+
+@pytest.mark.parametrize("make", [cart_l1, orbit_l2, reach_both])
+def test_offline_solver_with_soft_rows(make):
+    """reference/offline.py (the project's IPOPT, with its slack variables) equals the
+    independent transcription, and its multipliers pass the soft KKT measure."""
+    from dopus_codegen.reference.kkt import kkt_of_guess
+    from dopus_codegen.reference.offline import solve_ocp
+
+    disc = build_functions(make())
+    x, u, _ = ipopt_with_slacks(disc, disc.x0)
+    g, info = solve_ocp(disc, disc.x0)
+    assert info["success"]
+    assert np.max(np.abs(g.x - x)) < 1e-8 and np.max(np.abs(g.u - u)) < 1e-8
+    assert kkt_of_guess(disc, disc.x0, g)["kkt"] < 1e-9
+
+
+def test_sil_reports_the_largest_soft_violation():
+    """The closed loop of a soft OCP records the violation of each soft group at the measured
+    state and applied control, and summarize reports its maximum: equal to the violation
+    computed from the recorded states and controls."""
+    from dopus_codegen.studies.sil import format_summary, run_closed_loop, summarize
+
+    ocp = cart_l1()
+    ocp.path_constraint(ocp.x_sym()[1] + 0.1 * ocp.u_sym()[0], ub=0.25, soft=Soft(l1=3.0))
+    ocp.scenario(duration=1.0)
+    disc = build_functions(ocp)
+    run = run_closed_loop(disc, M=1, hessian="gauss-newton")
+    s = summarize(run)
+    x, u = np.asarray(run["x"]), np.asarray(run["u"])
+    assert s["soft_violation"]["state v"] == pytest.approx(max(0.0, float(np.max(np.abs(x[:, 1]) - 0.3))), abs=1e-15)
+    assert s["soft_violation"]["path 0"] == pytest.approx(max(0.0, float(np.max(x[:, 1] + 0.1 * u[:, 0] - 0.25))),
+                                                          rel=1e-12, abs=1e-15)
+    assert s["soft_violation"]["state v"] > 0.1
+    assert "largest violation of the soft rows" in format_summary([s])

@@ -1761,6 +1761,90 @@ static robot_arm_real robot_arm_side_bound(const robot_arm_real *lo, const robot
     return side > 0 ? up[i] : lo[i];
 }
 
+#if ROBOT_ARM_NSOFT > 0
+/* The slack of the row value v against [lb, ub] on the sides with soft weights w (stride). */
+static robot_arm_real robot_arm_soft_slack(robot_arm_real v, robot_arm_real lb, robot_arm_real ub, const robot_arm_real *w,
+                                   int stride)
+{
+    robot_arm_real sl = ROBOT_ARM_R(0.0);
+    if ((w[0] > ROBOT_ARM_R(0.0) || w[2 * stride] > ROBOT_ARM_R(0.0)) && lb - v > sl) {
+        sl = lb - v;
+    }
+    if ((w[stride] > ROBOT_ARM_R(0.0) || w[3 * stride] > ROBOT_ARM_R(0.0)) && v - ub > sl) {
+        sl = v - ub;
+    }
+    return sl;
+}
+#endif
+
+robot_arm_real robot_arm_get_soft_slacks(const robot_arm_solver *s, robot_arm_real *viol_x, robot_arm_real *viol_g,
+                                 robot_arm_real *viol_r)
+{
+    robot_arm_real worst = ROBOT_ARM_R(0.0);
+    int k, i;
+    for (k = 0; k <= ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NX && viol_x; ++i) {
+            viol_x[k * ROBOT_ARM_NX + i] = ROBOT_ARM_R(0.0);
+        }
+    }
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG) && viol_g; ++i) {
+            viol_g[k * ROBOT_ARM_DIM(ROBOT_ARM_NG) + i] = ROBOT_ARM_R(0.0);
+        }
+    }
+    for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NR) && viol_r; ++i) {
+        viol_r[i] = ROBOT_ARM_R(0.0);
+    }
+#if ROBOT_ARM_NSOFT > 0
+    {
+        const robot_arm_qp_in *in = &s->qp_in;
+        const robot_arm_qp_sol *sol = &s->mem.qp.sol;
+        for (k = 1; k <= ROBOT_ARM_N; ++k) {
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                const robot_arm_real lb = k < ROBOT_ARM_N ? in->lbw[k][i] : in->lbxN[i];
+                const robot_arm_real ub = k < ROBOT_ARM_N ? in->ubw[k][i] : in->ubxN[i];
+                const robot_arm_real sl = robot_arm_soft_slack(sol->x[k][i], lb, ub, &robot_arm_soft_x[0][i], ROBOT_ARM_NX);
+                worst = sl > worst ? sl : worst;
+                if (viol_x) {
+                    viol_x[k * ROBOT_ARM_NX + i] = sl;
+                }
+            }
+        }
+        for (k = 0; k < ROBOT_ARM_N && ROBOT_ARM_NG > 0; ++k) {
+            for (i = 0; i < ROBOT_ARM_NG; ++i) {
+                robot_arm_real v = ROBOT_ARM_R(0.0), sl;
+                int c;
+                for (c = 0; c < ROBOT_ARM_NW; ++c) {
+                    v += in->C[k][i + c * ROBOT_ARM_DIM(ROBOT_ARM_NG)] *
+                         (c < ROBOT_ARM_NX ? sol->x[k][c] : sol->u[k][c - ROBOT_ARM_NX]);
+                }
+                sl =
+                    robot_arm_soft_slack(v, in->lg[k][i], in->ug[k][i], &robot_arm_soft_g[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NG));
+                worst = sl > worst ? sl : worst;
+                if (viol_g) {
+                    viol_g[k * ROBOT_ARM_DIM(ROBOT_ARM_NG) + i] = sl;
+                }
+            }
+        }
+        for (i = 0; i < ROBOT_ARM_NR; ++i) {
+            robot_arm_real v = ROBOT_ARM_R(0.0), sl;
+            int c;
+            for (c = 0; c < ROBOT_ARM_NX; ++c) {
+                v += in->R[i + c * ROBOT_ARM_DIM(ROBOT_ARM_NR)] * sol->x[ROBOT_ARM_N][c];
+            }
+            sl = robot_arm_soft_slack(v, in->lr[i], in->ur[i], &robot_arm_soft_r[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NR));
+            worst = sl > worst ? sl : worst;
+            if (viol_r) {
+                viol_r[i] = sl;
+            }
+        }
+    }
+#else
+    (void)s;
+#endif
+    return worst;
+}
+
 int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_info *row)
 {
     int k, j, side;

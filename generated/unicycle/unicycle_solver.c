@@ -1761,6 +1761,90 @@ static unicycle_real unicycle_side_bound(const unicycle_real *lo, const unicycle
     return side > 0 ? up[i] : lo[i];
 }
 
+#if UNICYCLE_NSOFT > 0
+/* The slack of the row value v against [lb, ub] on the sides with soft weights w (stride). */
+static unicycle_real unicycle_soft_slack(unicycle_real v, unicycle_real lb, unicycle_real ub, const unicycle_real *w,
+                                   int stride)
+{
+    unicycle_real sl = UNICYCLE_R(0.0);
+    if ((w[0] > UNICYCLE_R(0.0) || w[2 * stride] > UNICYCLE_R(0.0)) && lb - v > sl) {
+        sl = lb - v;
+    }
+    if ((w[stride] > UNICYCLE_R(0.0) || w[3 * stride] > UNICYCLE_R(0.0)) && v - ub > sl) {
+        sl = v - ub;
+    }
+    return sl;
+}
+#endif
+
+unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *viol_x, unicycle_real *viol_g,
+                                 unicycle_real *viol_r)
+{
+    unicycle_real worst = UNICYCLE_R(0.0);
+    int k, i;
+    for (k = 0; k <= UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NX && viol_x; ++i) {
+            viol_x[k * UNICYCLE_NX + i] = UNICYCLE_R(0.0);
+        }
+    }
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG) && viol_g; ++i) {
+            viol_g[k * UNICYCLE_DIM(UNICYCLE_NG) + i] = UNICYCLE_R(0.0);
+        }
+    }
+    for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NR) && viol_r; ++i) {
+        viol_r[i] = UNICYCLE_R(0.0);
+    }
+#if UNICYCLE_NSOFT > 0
+    {
+        const unicycle_qp_in *in = &s->qp_in;
+        const unicycle_qp_sol *sol = &s->mem.qp.sol;
+        for (k = 1; k <= UNICYCLE_N; ++k) {
+            for (i = 0; i < UNICYCLE_NX; ++i) {
+                const unicycle_real lb = k < UNICYCLE_N ? in->lbw[k][i] : in->lbxN[i];
+                const unicycle_real ub = k < UNICYCLE_N ? in->ubw[k][i] : in->ubxN[i];
+                const unicycle_real sl = unicycle_soft_slack(sol->x[k][i], lb, ub, &unicycle_soft_x[0][i], UNICYCLE_NX);
+                worst = sl > worst ? sl : worst;
+                if (viol_x) {
+                    viol_x[k * UNICYCLE_NX + i] = sl;
+                }
+            }
+        }
+        for (k = 0; k < UNICYCLE_N && UNICYCLE_NG > 0; ++k) {
+            for (i = 0; i < UNICYCLE_NG; ++i) {
+                unicycle_real v = UNICYCLE_R(0.0), sl;
+                int c;
+                for (c = 0; c < UNICYCLE_NW; ++c) {
+                    v += in->C[k][i + c * UNICYCLE_DIM(UNICYCLE_NG)] *
+                         (c < UNICYCLE_NX ? sol->x[k][c] : sol->u[k][c - UNICYCLE_NX]);
+                }
+                sl =
+                    unicycle_soft_slack(v, in->lg[k][i], in->ug[k][i], &unicycle_soft_g[0][i], UNICYCLE_DIM(UNICYCLE_NG));
+                worst = sl > worst ? sl : worst;
+                if (viol_g) {
+                    viol_g[k * UNICYCLE_DIM(UNICYCLE_NG) + i] = sl;
+                }
+            }
+        }
+        for (i = 0; i < UNICYCLE_NR; ++i) {
+            unicycle_real v = UNICYCLE_R(0.0), sl;
+            int c;
+            for (c = 0; c < UNICYCLE_NX; ++c) {
+                v += in->R[i + c * UNICYCLE_DIM(UNICYCLE_NR)] * sol->x[UNICYCLE_N][c];
+            }
+            sl = unicycle_soft_slack(v, in->lr[i], in->ur[i], &unicycle_soft_r[0][i], UNICYCLE_DIM(UNICYCLE_NR));
+            worst = sl > worst ? sl : worst;
+            if (viol_r) {
+                viol_r[i] = sl;
+            }
+        }
+    }
+#else
+    (void)s;
+#endif
+    return worst;
+}
+
 int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *row)
 {
     int k, j, side;
