@@ -501,7 +501,7 @@ class ReferenceDopus:
     def soft_slacks(self) -> dict:
         """The slacks of the soft rows in the QP of the last feedback, as
         ``CSolver.soft_slacks`` (docs/algorithm.md section 12)."""
-        N, nx, ng, nr, nw = self.N, self.nx, self.ng, self.nr, self.nw
+        N, nx, ng, nr = self.N, self.nx, self.ng, self.nr
         out = {"x": np.zeros((N + 1, nx)), "g": np.zeros((N, ng)), "r": np.zeros(nr), "max": 0.0}
         q, sol = getattr(self, "last_qp", None), getattr(self, "last_qp_solution", None)
         if q is None or sol is None or not self.disc.has_soft:
