@@ -369,3 +369,17 @@ def test_sil_reports_the_largest_soft_violation():
                                                           rel=1e-12, abs=1e-15)
     assert s["soft_violation"]["state v"] > 0.1
     assert "largest violation of the soft rows" in format_summary([s])
+
+
+def test_generate_says_the_qp_is_always_feasible(tmp_path):
+    """`dopus-gen generate` of an OCP whose state-dependent rows are all soft says so."""
+    from click.testing import CliRunner
+
+    from dopus_codegen.cli import main
+
+    ocp_file = tmp_path / "all_soft.py"
+    ocp_file.write_text("import sys\nsys.path.insert(0, %r)\nfrom test_soft import _all_soft\n\n\n"
+                        "def build():\n    return _all_soft()\n" % str(__import__("pathlib").Path(__file__).parent))
+    res = CliRunner().invoke(main, ["generate", str(ocp_file), "-o", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    assert "soft rows: 4; the QP is always feasible (every state-dependent row is soft)" in res.output
