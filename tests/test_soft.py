@@ -39,6 +39,7 @@ def _base():
     (lambda o, x, u: o.state("y", 2, lb=0, soft=Soft(l1=(1.0, 2.0, 3.0))), "must be (lower, upper)"),
     (lambda o, x, u: o.state("y", 2, lb=0, soft=Soft(l1=math.inf)), "soft l1 must be finite"),
     (lambda o, x, u: o.state("y", 2, soft=Soft(l1=1.0)), "soft= on row 0, which has no finite bound"),
+    (lambda o, x, u: o.state("y", 2, ub=[1.0, math.inf], soft=Soft(l1=1.0)), "soft= on row 1, which has no finite bound"),
     (lambda o, x, u: o.state("y", 2, ub=1.0, soft=Soft(l1=(1.0, 0.0))), "soft weights are zero on every finite bound"),
     (lambda o, x, u: o.state("y", 2, lb=0, soft={"l1": 1}), "soft must be Soft(l1=..., l2=...)"),
     (lambda o, x, u: o.path_constraint(x[0] * u, soft=Soft(l1=1.0)), "path constraint 0: soft= on row 0"),
@@ -383,3 +384,28 @@ def test_generate_says_the_qp_is_always_feasible(tmp_path):
     res = CliRunner().invoke(main, ["generate", str(ocp_file), "-o", str(tmp_path / "out")])
     assert res.exit_code == 0, res.output
     assert "soft rows: 4; the QP is always feasible (every state-dependent row is soft)" in res.output
+
+
+def test_soft_state_limit_with_an_implicit_integrator():
+    """examples/stiff_motor.py (Radau IIA) with its current limit lowered to 1 A and made
+    soft (L1 and L2): the C full RTI equals IPOPT with explicit slacks, the limit exceeded."""
+    import importlib.util
+
+    from conftest import EXAMPLES
+    from dopus_codegen.runtime.solver import CSolver
+
+    spec = importlib.util.spec_from_file_location("stiff_motor_soft_test", EXAMPLES / "stiff_motor.py")
+    motor = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(motor)
+    disc = build_functions(motor.build(soft_current=Soft(l1=[0, 0, 0.05], l2=[0, 0, 0.1]), current_limit=1.0))
+    xh = np.asarray(disc.x0, float)
+    x_ref, u_ref, slack = ipopt_with_slacks(disc, xh)
+    assert slack["x"] > 0.1
+    s = CSolver(disc, M=disc.N - 1, mode="fixed", qp_tol=1e-12)
+    s.init(xh)
+    for _ in range(30):
+        s.feedback(xh)
+        s.prepare()
+    assert np.max(np.abs(s.x - x_ref)) < 1e-6
+    assert np.max(np.abs(s.u - u_ref)) < 1e-6
+    assert s.kkt(xh)["kkt"] < 1e-8

@@ -474,9 +474,10 @@ def _soft_weights(soft, n: int, lb: np.ndarray, ub: np.ndarray, what: str) -> Op
     w = np.vstack([l1lo, l1up, l2lo, l2up])
     if not np.any(w > 0):
         raise OcpError(f"{what}: soft weights are all zero (give l1 > 0 or l2 > 0)")
-    none = np.flatnonzero(~np.isfinite(lb) & ~np.isfinite(ub))
+    none = np.flatnonzero(~np.isfinite(lb) & ~np.isfinite(ub) & np.any(w > 0, axis=0))
     if none.size:
-        raise OcpError(f"{what}: soft= on row {int(none[0])}, which has no finite bound")
+        raise OcpError(f"{what}: soft= on row {int(none[0])}, which has no finite bound "
+                       "(give it the weight 0: one value per row)")
     w[[0, 2]] *= np.isfinite(lb)
     w[[1, 3]] *= np.isfinite(ub)
     if not np.any(w > 0):
