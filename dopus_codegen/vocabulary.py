@@ -159,7 +159,7 @@ def _read_enums(root: Path, name: str) -> Dict[str, Enum]:
 def runtime_enums(folder: Optional[str] = None) -> Dict[str, Enum]:
     """The enums of the runtime's headers (``folder``: the runtime_c folder, default the
     installed one), with the status texts of dopus_solver.c; parsed once."""
-    from .codegen.paths import runtime_c_dir
+    from .paths import runtime_c_dir
 
     return _read_enums(Path(folder) if folder is not None else runtime_c_dir(), "dopus")
 
@@ -210,6 +210,6 @@ def constants() -> Dict[str, float]:
     """The numeric constants of runtime_c/dopus_solver.h (the safety constants of
     docs/algorithm.md section 9 and the regularisation constants), shared by the reference
     backend: ``constants()["DIVERGENCE_BOX"]``."""
-    from .codegen.paths import runtime_c_dir
+    from .paths import runtime_c_dir
 
     return parse_constants((runtime_c_dir() / "dopus_solver.h").read_text())
