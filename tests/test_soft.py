@@ -4,6 +4,7 @@ active soft rows against an independent IPOPT transcription with explicit slacks
 backends), and the QP that cannot be infeasible."""
 from __future__ import annotations
 
+import json
 import math
 
 import casadi as ca
@@ -409,3 +410,33 @@ def test_soft_state_limit_with_an_implicit_integrator():
     assert np.max(np.abs(s.x - x_ref)) < 1e-6
     assert np.max(np.abs(s.u - u_ref)) < 1e-6
     assert s.kkt(xh)["kkt"] < 1e-8
+
+
+def test_campaign_reports_the_largest_soft_violation(tmp_path):
+    """A two-run campaign of the cart-pole (soft track ends): every result line carries the
+    largest violation of each soft group of its run, equal to the one computed from the run's
+    closed loop, and the report the largest over the runs."""
+    from conftest import EXAMPLES
+    from dopus_codegen.studies import campaign
+
+    runs = {}
+    real = campaign.condense
+
+    def keep(run, d, index, seed, *args):
+        runs[index] = run
+        return real(run, d, index, seed, *args)
+
+    campaign.condense = keep
+    try:
+        rep = campaign.run_campaign(str(EXAMPLES / "cartpole.py"), str(tmp_path / "c.jsonl"), workers=0, runs=2,
+                                    duration=0.5, progress=False, echo=lambda *a, **k: None)
+    finally:
+        campaign.condense = real
+    lines = [json.loads(s) for s in (tmp_path / "c.jsonl").read_text().splitlines()[1:]]
+    assert len(lines) == 2
+    for line in lines:
+        x = np.asarray(runs[line["run"]]["x"])
+        assert line["soft_violation"]["state p"] == pytest.approx(max(0.0, float(np.max(np.abs(x[:, 0]) - 1.0))),
+                                                                  abs=1e-15)
+    assert rep["soft_violation_max"]["state p"] == max(line["soft_violation"]["state p"] for line in lines)
+    assert "largest violation of the soft rows" in campaign.format_report(rep)
