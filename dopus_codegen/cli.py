@@ -326,6 +326,18 @@ def generate(ocp_file, out_dir, offline_guess, real):
     path = generate_file(ocp_file, out_dir, offline_guess=offline_guess, real=real)
     newest = max((p.stat().st_mtime for p in path.iterdir() if p.is_file()), default=0.0)
     click.echo(f"{'generated' if newest >= t0 else 'up to date'}: {path}")
+    _echo_soft_summary(path)
+
+
+def _echo_soft_summary(path) -> None:
+    """The soft rows of a generated folder (docs/algorithm.md section 12), from its meta file."""
+    from .codegen.folder import read_meta
+
+    meta = read_meta(path)
+    if meta.get("soft_rows"):
+        click.echo(f"soft rows: {meta['soft_rows']}; the QP is "
+                   + ("always feasible (every state-dependent row is soft)" if meta.get("qp_always_feasible")
+                      else "not always feasible (some state-dependent row is hard)"))
 
 
 @main.command()

@@ -102,6 +102,9 @@ def problem_hash(disc: Any, offline_guess: Optional[bool] = None, real: Optional
         put(key, repr(getattr(disc, key, None)).encode())
     for key in ("lbx", "ubx", "lbu", "ubu", "lg", "ug", "lr", "ur", "p0", "x0"):
         put(key, _array_bytes(getattr(disc, key, None)))
+    if getattr(disc, "has_soft", False):
+        for key in ("soft_x", "soft_g", "soft_r"):
+            put(key, _array_bytes(getattr(disc, key, None)))
     guess = getattr(disc, "initial_guess", None)
     put("guess_x", _array_bytes(getattr(guess, "x", None)))
     put("guess_u", _array_bytes(getattr(guess, "u", None)))

@@ -400,6 +400,19 @@ def bounded_row_counts(disc: Any, s: Dict[str, int]) -> Dict[str, int]:
             "nbg": count("lg", "ug", s["ng"]), "nbr": count("lr", "ur", s["nr"])}
 
 
+def soft_rows(disc: Any) -> Dict[str, Any]:
+    """The soft rows of the problem: ``nsoft`` (state components, path rows and terminal
+    rows with a soft side, the DOPUS_NSOFT of the sizes header; 0 when every row is hard)
+    and ``always_feasible`` (every row that depends on the state is soft: the QP is feasible
+    for every finite measurement)."""
+    data = disc.data
+    if not getattr(data, "has_soft", False):
+        return {"nsoft": 0, "always_feasible": False}
+    n = sum(int(np.count_nonzero(np.any(np.asarray(getattr(data, key)) > 0, axis=0)))
+            for key in ("soft_x", "soft_g", "soft_r"))
+    return {"nsoft": n, "always_feasible": bool(data.always_feasible)}
+
+
 def _default_parameters(disc: Any, s: Dict[str, int]) -> np.ndarray:
     """The one default parameter vector of dopus_problem.h (every node)."""
     p0 = _attr(disc.data, "p0")
@@ -471,6 +484,15 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
         "default_lm": c_double(settings.lm_code(_option(options, "lm", settings.DEFAULTS["lm"])), "lm"),
         "has_nominal": nominal is not None,
     }
+    soft = soft_rows(disc)
+    ctx["nsoft"] = soft["nsoft"]
+    if soft["nsoft"]:
+        d = disc.data
+        ctx["soft_x"] = [c_vector(row, nx, "soft_x") for row in np.asarray(d.soft_x)]
+        ctx["soft_g"] = [c_vector(_pad_vec(row, s["ng"]), max(1, s["ng"]), "soft_g")
+                         for row in np.asarray(d.soft_g).reshape(4, s["ng"])]
+        ctx["soft_r"] = [c_vector(_pad_vec(row, s["nr"]), max(1, s["nr"]), "soft_r")
+                         for row in np.asarray(d.soft_r).reshape(4, s["nr"])]
     try:
         settings.stages(ctx["default_M"], N, strict=True)
     except settings.SettingError as exc:
@@ -560,6 +582,8 @@ def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, ha
     for key, n in (("nbx", "nx"), ("nbu", "nu"), ("nbg", "ng"), ("nbr", "nr")):
         s.setdefault(key, s[n])
     s["nb"] = s["N"] * (s["nbx"] + s["nbu"] + s["nbg"]) + s["nbr"]
+    s.setdefault("nsoft", 0)
+    s.setdefault("always_feasible", 0)
     ctx = {"name": name, "NAME": name.upper(), "sizes": s, "has_gn": int(has_gn),
            "has_nominal": int(has_nominal), "header": header or f"Sizes of '{name}'",
            "casadi_version": casadi_version, "real_float": settings.REALS[settings.check_real(real)],
@@ -609,7 +633,10 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     ctx["has_nominal"] = int(ctx["has_nominal"])
 
     env = _templates()
-    files[f"{name}_sizes.h"] = render_sizes_header(name, dict(s, **bounded_row_counts(disc, s)), has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
+    soft = soft_rows(disc)
+    files[f"{name}_sizes.h"] = render_sizes_header(name, dict(s, **bounded_row_counts(disc, s), nsoft=soft["nsoft"],
+                                                               always_feasible=int(soft["always_feasible"])),
+                                                   has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
                                                    work=ctx["work"], header=header,
                                                    casadi_version=ca.__version__, real=real)
     files[f"{name}_problem.c"] = env.get_template("problem.c.j2").render(**ctx)
@@ -649,6 +676,9 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
         # `dopus-gen generate` of an unchanged problem finds both and writes nothing
         "sha256": {f: hashlib.sha256(files[f].encode("utf-8")).hexdigest() for f in sorted(files)},
     }
+    if soft["nsoft"]:
+        meta["soft_rows"] = soft["nsoft"]
+        meta["qp_always_feasible"] = soft["always_feasible"]
     if problem_hash is not None:
         meta["problem_hash"] = problem_hash
     files[meta_file] = json.dumps(meta, indent=2, sort_keys=True) + "\n"

@@ -585,6 +585,17 @@ class Solver:
                 "index": int(row.index), "side": {-1: "lower", 1: "upper"}.get(int(row.side), "lower above upper"),
                 "bound": float(row.bound)}
 
+    def soft_slacks(self) -> dict:
+        """The slacks of the soft rows in the QP of the last feedback (read it before the next
+        prepare; dopus_get_soft_slacks): ``{"x": (N+1, nx), "g": (N, ng), "r": (nr,), "max"}``,
+        zeros on hard rows (docs/algorithm.md section 12)."""
+        N, nx, ng, nr = self.N, self.nx, self.ng, self.nr
+        vx, vg, vr = np.zeros((N + 1, nx)), np.zeros((N, max(ng, 1))), np.zeros(max(nr, 1))
+        real = f"{self.name}_real[]"
+        worst = self._c("get_soft_slacks")(self._s, self._ffi.from_buffer(real, vx),
+                                            self._ffi.from_buffer(real, vg), self._ffi.from_buffer(real, vr))
+        return {"x": vx, "g": vg[:, :ng], "r": vr[:nr], "max": float(worst)}
+
     @property
     def timings(self) -> dict:
         phases = self.enums["dopus_phase"].names()

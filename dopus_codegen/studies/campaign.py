@@ -192,6 +192,7 @@ def condense(run: dict, d: dict, index: int, seed: int, on_path: tuple, wall: fl
             "first_failure": res.get("first_failure"), "aborted": run.get("aborted"),
             "instants": int(res["instants"]), "instants_planned": int(res["instants_planned"]),
             "final_x": run["x"][-1] if run["x"] else None, "signal": run["signals"][name],
+            "soft_violation": {k: float(max(v, default=0.0)) for k, v in (run.get("soft_violation") or {}).items()},
             "time": {"median_us": q(tot, 50), "p99_us": q(tot, 99), "max_us": float(np.max(tot)) if tot.size else None,
                      "feedback_median_us": q(fb, 50), "run_s": float(wall)}}
     return json_ready(line)
@@ -692,6 +693,8 @@ def summarize(lines, job, camp, spec, wall=None, computed=0, workers="", errors=
         "worst": [{"run": r["run"], "seed": r["seed"], "on_path": r["on_path"], "max_deviation": r["max_deviation"],
                    "failed_instants": r["failed_instants"], "recoveries": r["recoveries"], "aborted": r["aborted"]}
                   for r in order[:5]],
+        "soft_violation_max": {k: max(r["soft_violation"][k] for r in lines if k in (r.get("soft_violation") or {}))
+                               for k in sorted({k for r in lines for k in (r.get("soft_violation") or {})})},
         "wall_s": wall, "computed": computed, "workers": workers,
         "errors": [{"run": i, "message": m} for i, m in errors],
     }
@@ -722,6 +725,9 @@ def format_report(rep: dict) -> str:
                                    f"{'' if w['on_path'] else ' (off the path)'}, {w['failed_instants']} failed"
                                    for w in rep["worst"]),
     ]
+    if rep.get("soft_violation_max"):
+        lines.append("largest violation of the soft rows over the runs (measured state, applied control): "
+                     + ", ".join(f"{k} {v:.3g}" for k, v in rep["soft_violation_max"].items()))
     if rep["wall_s"] is not None:
         lines.append(f"wall time: {rep['wall_s']:.1f} s for {rep['computed']} runs computed {rep['workers']}".rstrip())
     for e in rep["errors"]:

@@ -229,6 +229,11 @@ class _Record:
         self.timing: dict[str, list] = {"feedback": [], "prepare": [], "total": []}
         self.phase_timing: dict[str, list] = {}  # the backend's own phase timers
         self.snap: dict = {}
+        from .soft import soft_groups
+
+        self.disc = disc
+        self.soft_groups = soft_groups(disc) if getattr(disc, "has_soft", False) else []
+        self.soft: dict[str, list] = {g[0]: [] for g in self.soft_groups}
 
     def measurement(self, t_i, xhat, u0, kkt, p):
         self.t.append(t_i)
@@ -238,6 +243,11 @@ class _Record:
         self.parts.append({k: float(kkt[k]) for k in ("stat", "eq", "ineq", "comp") if k in kkt})
         for name, fn in self.spec.signals.items():
             self.signals[name].append(_eval(fn, xhat, u0, p))
+        if self.soft_groups:
+            from .soft import violations
+
+            for label, v in violations(self.disc, self.soft_groups, xhat, u0, p).items():
+                self.soft[label].append(v)
 
     def instant_done(self, i, status, recomputed, t_fb, t_pr, phases):
         self.status.append(int(status))
@@ -252,6 +262,7 @@ class _Record:
         n = len(self.status)
         self.t, self.x, self.u, self.kkt, self.parts = (a[:n] for a in (self.t, self.x, self.u, self.kkt, self.parts))
         self.signals = {k: v[:n] for k, v in self.signals.items()}
+        self.soft = {k: v[:n] for k, v in self.soft.items()}
 
     def as_run(self, label, events, settings_rec, aborted) -> dict:
         return {
@@ -271,6 +282,9 @@ class _Record:
                           "total": self.timing["total"],
                           **{f"phase:{k}": v for k, v in self.phase_timing.items()}},
             "events": [{"time": float(ev.time), "label": str(ev.label)} for ev in events],
+            # soft rows (docs/algorithm.md section 12): the violation of each group at the
+            # measured state and the applied control, per instant
+            "soft_violation": {k: list(v) for k, v in self.soft.items()},
             "settings": settings_rec,
             "aborted": aborted,
         }
@@ -502,6 +516,7 @@ def summarize(run, settle: float = 0.2) -> dict:
     out["time_max_us"] = float(np.max(tot)) if tot.size else math.nan
     out["feedback_median_us"] = float(np.median(fb)) if fb.size else math.nan
     out["feedback_max_us"] = float(np.max(fb)) if fb.size else math.nan
+    out["soft_violation"] = {k: float(max(v, default=0.0)) for k, v in (run.get("soft_violation") or {}).items()}
     return out
 
 
@@ -541,6 +556,10 @@ def format_summary(summaries) -> str:
         lines.append(f"(max KKT settled: excluding the first {summaries[0]['settle']} {summaries[0]['time_unit']} "
                      "after the start "
                      f"and after each event; it = feedback + prepare, fb = feedback alone)")
+    for s in summaries:
+        if s.get("soft_violation"):
+            lines.append(f"{s['label']}: largest violation of the soft rows (measured state, applied control): "
+                         + ", ".join(f"{k} {v:.3g}" for k, v in s["soft_violation"].items()))
     for s in summaries:
         if s.get("first_failure"):
             ff = s["first_failure"]
