@@ -57,14 +57,18 @@ def _defects(disc, xhat0, x, u) -> float:
 X_TOL_DISTURBED, U_TOL_DISTURBED = 2e-5, 2e-4
 
 
-def test_gauss_newton_sqp_from_cold_guess_reaches_ipopt(acados_env, robot_export, robot_disc, robot_solution):
+@pytest.mark.parametrize("integrator, flags", [("ERK", "-O2"), ("DISCRETE", "-O3 -march=native")])
+def test_gauss_newton_sqp_from_cold_guess_reaches_ipopt(acados_env, robot_export, robot_disc, robot_solution,
+                                                        integrator, flags):
     """acados' Gauss-Newton SQP from the OCP file's cold guess reaches IPOPT's solution of
-    our NLP: the same dynamics (ERK 4 stages, 2 steps), cost (1/dt undone) and constraints
-    (terminal equality rows scaled)."""
+    our NLP: the same dynamics (ERK 4 stages, 2 steps, or the same RK4 map as discrete
+    dynamics with CasADi's derivatives), cost (1/dt undone) and constraints (terminal
+    equality rows scaled)."""
     ac, py, work = acados_env
     ref, info = robot_solution
     assert info["success"]
-    b = ac.build(py, robot_export, {"hessian": "gauss-newton", "nlp_solver": "SQP", "suffix": "_t_gn"}, work)
+    b = ac.build(py, robot_export, {"hessian": "gauss-newton", "nlp_solver": "SQP", "integrator": integrator,
+                                    "flags": flags, "suffix": f"_t_gn_{integrator.lower()}"}, work)
     g = robot_disc.initial_guess
     r = ac.solve(py, robot_export, b, robot_disc.x0, g.x, g.u)
     assert r["status"] == [0], r["status"]
@@ -110,18 +114,21 @@ def test_exact_sqp_from_nominal_at_disturbed_state_matches_ipopt_and_ours(acados
     np.testing.assert_allclose(r["u"], ours.u, atol=U_TOL_DISTURBED, rtol=0)
 
 
-def test_exact_rti_iterates_converge_to_the_same_solution(acados_env, robot_export, robot_disc, robot_solution):
+@pytest.mark.parametrize("integrator, flags", [("ERK", "-O2"), ("DISCRETE", "-O3 -march=native")])
+def test_exact_rti_iterates_converge_to_the_same_solution(acados_env, robot_export, robot_disc, robot_solution,
+                                                          integrator, flags):
     """acados' SQP_RTI with the exact Hessian and partial condensing (the setting that is
     timed), iterated at the disturbed state from the nominal solution, converges to IPOPT's
-    solution: the timed solver solves our problem."""
+    solution: the timed solver solves our problem, with acados' ERK and with the same RK4
+    map as discrete dynamics (its Hessian by CasADi)."""
     from dopus_codegen.reference.offline import solve_ocp
 
     ac, py, work = acados_env
     nominal, _ = robot_solution
     xd = _disturbed(robot_disc)
     ref, info = solve_ocp(robot_disc, xd, guess=nominal)
-    b = ac.build(py, robot_export, {"hessian": "exact", "nlp_solver": "SQP_RTI", "cond_N": 10,
-                                    "suffix": "_t_rti"}, work)
+    b = ac.build(py, robot_export, {"hessian": "exact", "nlp_solver": "SQP_RTI", "cond_N": 10, "integrator": integrator,
+                                    "flags": flags, "suffix": f"_t_rti_{integrator.lower()}"}, work)
     r = ac.solve(py, robot_export, b, xd, nominal.x, nominal.u, iterations=12)
     assert all(s == 0 for s in r["status"]), r["status"]
     assert abs(r["cost"] - info["objective"]) <= 1e-9 * abs(info["objective"])
