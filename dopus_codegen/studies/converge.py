@@ -309,7 +309,7 @@ def _cli_M_list(m_list, N: int, is_default: bool = False) -> list:
     """Resolve the CLI's M values. An explicit value above N-1 is an error; the default list
     (full,5,1,0) drops entries a short horizon cannot have."""
     if is_default:
-        m_list = [m for m in m_list if m == "full" or m <= N - 1]
+        m_list = [m for m in m_list if m == "full" or settings.stages(m, N) == m]
     out = []
     for m in m_list:
         M = _resolve_M(m, N)
