@@ -158,3 +158,43 @@ def test_translation_refuses_unsupported_input(acados_env, tmp_path):
         ac.build(py, ej, {"hessian": "gauss-newton", "suffix": "_gn"}, tmp_path)
     with pytest.raises(RuntimeError, match="unknown settings"):
         ac.build(py, ej, {"hessain": "exact"}, tmp_path)
+
+
+def test_timing_shift_and_qp_status_of_the_rti(acados_env, robot_export, robot_disc, robot_solution):
+    """The timing process's acados runner: the shift moves every stage of the iterate one
+    interval forward (read back through acados' getters), an RTI step with HPIPM's mode and
+    tolerance set at run time from the nominal solution at the initial state succeeds in
+    the iterations acados itself reports, and a QP iteration limit of 1 is a failure there
+    (acados' RTI returns success for a QP stopped at its limit)."""
+    from dopus_lab.timing import Acados, make_acados
+
+    ac, py, work = acados_env
+    nominal, _ = robot_solution
+    b = ac.build(py, robot_export, {"hessian": "gauss-newton", "integrator": "DISCRETE", "suffix": "_t_timing"}, work)
+    A = Acados(b["acados_lib_dir"], robot_disc.N, robot_disc.nx, robot_disc.nu)
+    r = make_acados(A, b, 10, 0.0, "gn", timers=False, qp={"mode": "SPEED", "tol": 1e-6, "ric_alg": 0})
+    r.start(robot_disc.x0, {"x": nominal.x, "u": nominal.u})
+    u, ok = r.feedback(robot_disc.x0)
+    assert ok and r.check()
+    status, iters = A.qp_stats(r.handle)
+    i = A.ct.c_int()
+    A.nlp_get(r.handle["config"], r.handle["solver"], b"qp_iter", A.ct.byref(i))
+    assert status == 0 and iters == i.value >= 1
+    np.testing.assert_allclose(u, nominal.u[0], atol=1e-4)
+    x0, u0 = (np.array(v) for v in A.traj(r.handle))
+    r.between()
+    x1, u1 = (np.array(v) for v in A.traj(r.handle))
+    np.testing.assert_array_equal(x1[:-1], x0[1:])
+    np.testing.assert_array_equal(x1[-1], x0[-1])
+    np.testing.assert_array_equal(u1[:-1], u0[1:])
+    np.testing.assert_array_equal(u1[-1], u0[-1])
+    A.free(r.handle)
+
+    b1 = dict(b, settings={**b["settings"], "qp_iter_max": 1})
+    r1 = make_acados(A, b1, 10, 0.0, "gn1", timers=False, qp={"mode": "BALANCE", "tol": 1e-10, "ric_alg": 0})
+    r1.start(robot_disc.x0, {"x": nominal.x, "u": nominal.u})
+    _u, ok_solve = r1.feedback(_disturbed(robot_disc))
+    assert ok_solve                        # acados' own status: success
+    status, iters = A.qp_stats(r1.handle)
+    assert iters == 1 and status != 0 and not r1.check()
+    A.free(r1.handle)
