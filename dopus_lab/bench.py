@@ -206,10 +206,10 @@ def acados_lm(prob, values, echo) -> float:
     (1e-5 times the Hessian scale, docs/algorithm.md section 10)."""
     if values["lm"] != st.LM_AUTO:
         return float(values["lm"])
-    from dopus_codegen.runtime.solver import CSolver
+    from dopus_codegen.runtime.solver import Solver
 
     disc = prob["disc"]
-    s = CSolver(disc, lib_dir=prob["spec"]["folder"], lm=st.LM_AUTO)
+    s = Solver.from_dir(prob["spec"]["folder"], disc, lm=st.LM_AUTO)
     s.init(np.asarray(disc.x0, float), prob["nominal"])
     lm = float(s.lm)
     echo(f"{disc.name}: acados has no automatic Levenberg-Marquardt term: its exact-Hessian settings are "

@@ -1,9 +1,10 @@
-"""One settings vocabulary: the OCP file is the source of every default of the commands.
+"""One settings value: the OCP file is the source of every default, wherever the solver runs.
 
-The acceptance case: an OCP file that declares Gauss-Newton and M = 3 gives a ``sil`` and a
-``converge`` run with Gauss-Newton and M = 3 (printed summary and JSON, source "ocp-file"),
-unless a flag overrides it (source "cli"); the runs are the same numbers as the library
-called with those settings directly.
+The acceptance case: an OCP file that declares Gauss-Newton and M = 3 gives Gauss-Newton
+and M = 3 in the handle built from the file, the handle opened on its generated folder, the
+generated main, and the ``sil`` and ``converge`` runs (printed summary and JSON, source
+"ocp-file"), unless a flag overrides it (source "cli"); the runs are the same numbers as the
+library called with those settings directly.
 """
 from __future__ import annotations
 

@@ -5,8 +5,8 @@ Location: ``--cache-dir`` of ``dopus-gen`` (any verb), else ``$DOPUS_CACHE_DIR``
 
 - ``objects/<key>.o``: compiled objects, keyed by the sha256 of the source file, every
   header of its folder, the compiler (its path and ``--version`` output) and the flags;
-  ``dopus-gen build``, ``CSolver`` and every folder share them, so a file is compiled once;
-- ``problems/<name>-<key>/``: the generated folders of the Python handle ``CSolver``,
+  ``dopus-gen build``, ``Solver`` and every folder share them, so a file is compiled once;
+- ``problems/<name>-<key>/``: the generated folders of the Python handle ``Solver``,
   keyed by :func:`problem_hash` (the problem's CasADi functions, data, runtime sources,
   templates and versions), so an unchanged problem is neither regenerated nor rebuilt.
 

@@ -117,7 +117,7 @@ class ReferenceDopus:
     Extra to the protocol: :meth:`qp_of_current` (the QP the next ``feedback`` solves,
     in the :mod:`dopus_codegen.reference.qp` format), ``last_qp`` / ``last_qp_solution`` (the
     QP solved by the last ``feedback`` and its solution), ``status`` and
-    ``qp_infeasible_row`` (the row that makes the last QP infeasible, as ``CSolver`` gives it).
+    ``qp_infeasible_row`` (the row that makes the last QP infeasible, as ``Solver`` gives it).
     """
 
     def __init__(self, disc, settings: Optional[Settings] = None, **changes):
@@ -414,7 +414,7 @@ class ReferenceDopus:
     def qp_infeasible_row(self):
         """When the last QP was infeasible: the row of the OCP with the largest multiplier of
         its infeasibility certificate (:func:`dopus_codegen.reference.qp.qp_infeasible_row`),
-        as ``CSolver.qp_infeasible_row`` gives it; else None."""
+        as ``Solver.qp_infeasible_row`` gives it; else None."""
         if self.qp_status != status_code_qp("primal_infeasible"):
             return None
         return getattr(self, "_infeasible_row", None)

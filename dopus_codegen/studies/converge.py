@@ -104,11 +104,11 @@ def backend_factory(backend: str) -> Callable:
         return ReferenceDopus
     if backend == "c":
         try:
-            from ..runtime.solver import CSolver
+            from ..runtime.solver import Solver
         except ImportError as exc:
-            raise RuntimeError("backend 'c' is not available: dopus_codegen.runtime.solver.CSolver "
+            raise RuntimeError("backend 'c' is not available: dopus_codegen.runtime.solver.Solver "
                                f"cannot be imported ({exc})") from None
-        return CSolver
+        return Solver
     raise ValueError(f"backend must be 'reference' or 'c', got {backend!r}")
 
 
