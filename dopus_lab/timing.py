@@ -781,7 +781,7 @@ def run_plan(plan, quiet_acados=True):
             if ours_tol is not None and math.isclose(tol, float(ours_tol)):
                 continue
             for run in plan["runs"]:
-                if run.get("matched_tol_ok", True) and run["M"] in (1, plan["acados"]["N"] - 1):
+                if run["M"] in (1, plan["acados"]["N"] - 1):
                     label = f"{run['label']} qp_tol {tol:g}"
                     if label not in matched:
                         matched[label] = {"of": run["label"], "qp_tol": tol}
