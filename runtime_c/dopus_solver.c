@@ -753,6 +753,25 @@ static void dopus_assemble(dopus_solver *s)
     for (i = 0; i < DOPUS_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
+#if DOPUS_NSOFT > 0
+    /* soft weights: the rows of a stage (x, u (hard), g) and the terminal rows (x_N, r) */
+    for (j = 0; j < 4; ++j) {
+        dopus_real *st = j == 0 ? in->zl : j == 1 ? in->zu : j == 2 ? in->Zl : in->Zu;
+        dopus_real *te = j == 0 ? in->zlN : j == 1 ? in->zuN : j == 2 ? in->ZlN : in->ZuN;
+        for (i = 0; i < DOPUS_NX; ++i) {
+            st[i] = te[i] = dopus_soft_x[j][i];
+        }
+        for (i = 0; i < DOPUS_NU; ++i) {
+            st[DOPUS_NX + i] = DOPUS_R(0.0);
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            st[DOPUS_NW + i] = dopus_soft_g[j][i];
+        }
+        for (i = 0; i < DOPUS_NR; ++i) {
+            te[DOPUS_NX + i] = dopus_soft_r[j][i];
+        }
+    }
+#endif
     dopus_timer_add(&s->timer, DOPUS_PHASE_ASSEMBLY, t0);
 }
 
@@ -1239,12 +1258,40 @@ static void dopus_shift(dopus_solver *s)
     dopus_ring_advance(&s->ring);
 }
 
-/* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
+/* A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for the
+ * QP: its row of Ct is zero and the value g_new of step 2 lies outside that side's bound
+ * (0 dw >= lg - g_new > 0). Stage 0 is left out (the QP ignores its rows without u). */
+static int dopus_stale_stage(const dopus_solver *s, int k)
+{
+    const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
+    const dopus_real *g = s->mem.ev.Fn_g[k];
+    int i, j;
+    if (k == 0) {
+        return 0;
+    }
+    for (j = 0; j < DOPUS_NG; ++j) {
+        int hard_lo = 1, hard_up = 1, zero = 1;
+#if DOPUS_NSOFT > 0
+        hard_lo = !(dopus_soft_g[0][j] > DOPUS_R(0.0) || dopus_soft_g[2][j] > DOPUS_R(0.0));
+        hard_up = !(dopus_soft_g[1][j] > DOPUS_R(0.0) || dopus_soft_g[3][j] > DOPUS_R(0.0));
+#endif
+        for (i = 0; i < DOPUS_NW && zero; ++i) {
+            zero = slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] == DOPUS_R(0.0);
+        }
+        if (zero && ((hard_lo && g[j] < dopus_lg[j]) || (hard_up && g[j] > dopus_ug[j]))) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Step 4: the stale stages (dopus_stale_stage), then the M stages among the other stages of
+ * 0..N-2 with the largest rho_k, ties to the lower index. */
 static void dopus_select(dopus_solver *s, int M)
 {
     int m, k, n = 0;
     for (k = 0; k < DOPUS_N; ++k) {
-        s->selected[k] = 0;
+        s->selected[k] = k < DOPUS_N - 1 && DOPUS_NG > 0 && dopus_stale_stage(s, k);
     }
     for (m = 0; m < M; ++m) {
         int best = -1;
@@ -1712,6 +1759,90 @@ int dopus_get_qp_status(const dopus_solver *s)
 static dopus_real dopus_side_bound(const dopus_real *lo, const dopus_real *up, int i, int side)
 {
     return side > 0 ? up[i] : lo[i];
+}
+
+#if DOPUS_NSOFT > 0
+/* The slack of the row value v against [lb, ub] on the sides with soft weights w (stride). */
+static dopus_real dopus_soft_slack(dopus_real v, dopus_real lb, dopus_real ub, const dopus_real *w,
+                                   int stride)
+{
+    dopus_real sl = DOPUS_R(0.0);
+    if ((w[0] > DOPUS_R(0.0) || w[2 * stride] > DOPUS_R(0.0)) && lb - v > sl) {
+        sl = lb - v;
+    }
+    if ((w[stride] > DOPUS_R(0.0) || w[3 * stride] > DOPUS_R(0.0)) && v - ub > sl) {
+        sl = v - ub;
+    }
+    return sl;
+}
+#endif
+
+dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopus_real *viol_g,
+                                 dopus_real *viol_r)
+{
+    dopus_real worst = DOPUS_R(0.0);
+    int k, i;
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NX && viol_x; ++i) {
+            viol_x[k * DOPUS_NX + i] = DOPUS_R(0.0);
+        }
+    }
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_DIM(DOPUS_NG) && viol_g; ++i) {
+            viol_g[k * DOPUS_DIM(DOPUS_NG) + i] = DOPUS_R(0.0);
+        }
+    }
+    for (i = 0; i < DOPUS_DIM(DOPUS_NR) && viol_r; ++i) {
+        viol_r[i] = DOPUS_R(0.0);
+    }
+#if DOPUS_NSOFT > 0
+    {
+        const dopus_qp_in *in = &s->qp_in;
+        const dopus_qp_sol *sol = &s->mem.qp.sol;
+        for (k = 1; k <= DOPUS_N; ++k) {
+            for (i = 0; i < DOPUS_NX; ++i) {
+                const dopus_real lb = k < DOPUS_N ? in->lbw[k][i] : in->lbxN[i];
+                const dopus_real ub = k < DOPUS_N ? in->ubw[k][i] : in->ubxN[i];
+                const dopus_real sl = dopus_soft_slack(sol->x[k][i], lb, ub, &dopus_soft_x[0][i], DOPUS_NX);
+                worst = sl > worst ? sl : worst;
+                if (viol_x) {
+                    viol_x[k * DOPUS_NX + i] = sl;
+                }
+            }
+        }
+        for (k = 0; k < DOPUS_N && DOPUS_NG > 0; ++k) {
+            for (i = 0; i < DOPUS_NG; ++i) {
+                dopus_real v = DOPUS_R(0.0), sl;
+                int c;
+                for (c = 0; c < DOPUS_NW; ++c) {
+                    v += in->C[k][i + c * DOPUS_DIM(DOPUS_NG)] *
+                         (c < DOPUS_NX ? sol->x[k][c] : sol->u[k][c - DOPUS_NX]);
+                }
+                sl =
+                    dopus_soft_slack(v, in->lg[k][i], in->ug[k][i], &dopus_soft_g[0][i], DOPUS_DIM(DOPUS_NG));
+                worst = sl > worst ? sl : worst;
+                if (viol_g) {
+                    viol_g[k * DOPUS_DIM(DOPUS_NG) + i] = sl;
+                }
+            }
+        }
+        for (i = 0; i < DOPUS_NR; ++i) {
+            dopus_real v = DOPUS_R(0.0), sl;
+            int c;
+            for (c = 0; c < DOPUS_NX; ++c) {
+                v += in->R[i + c * DOPUS_DIM(DOPUS_NR)] * sol->x[DOPUS_N][c];
+            }
+            sl = dopus_soft_slack(v, in->lr[i], in->ur[i], &dopus_soft_r[0][i], DOPUS_DIM(DOPUS_NR));
+            worst = sl > worst ? sl : worst;
+            if (viol_r) {
+                viol_r[i] = sl;
+            }
+        }
+    }
+#else
+    (void)s;
+#endif
+    return worst;
 }
 
 int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)

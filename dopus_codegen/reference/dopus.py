@@ -379,7 +379,12 @@ class ReferenceDopus:
         free_initial_state(nx, lower=lbw, upper=ubw)
         t = self.term
         gN = t["gL"] - t["R"].T @ self.mu_r - t["Req"].T @ self.nu
-        return {
+        soft = {}
+        if self.disc.has_soft:
+            ws, wt = self.disc.soft_stage(), self.disc.soft_terminal()
+            soft = dict(zip(("zl", "zu", "Zl", "Zu"), ws.copy()))
+            soft.update(zip(("zlN", "zuN", "ZlN", "ZuN"), wt.copy()))
+        return {**soft,
             "N": N, "nx": nx, "nu": nu, "ng": ng, "nr": nr, "ne": ne,
             "H": H, "g": gq, "Phi": Phi, "b": b, "x0": xhat0 - self.x[0],
             "HN": t["A"] + shift[:nx, :nx], "gN": gN, "lbw": lbw, "ubw": ubw,
@@ -504,6 +509,35 @@ class ReferenceDopus:
         t3 = time.perf_counter()
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
         return self.u0.copy()
+
+    def soft_slacks(self) -> dict:
+        """The slacks of the soft rows in the QP of the last feedback, as
+        ``CSolver.soft_slacks`` (docs/algorithm.md section 12)."""
+        N, nx, ng, nr = self.N, self.nx, self.ng, self.nr
+        out = {"x": np.zeros((N + 1, nx)), "g": np.zeros((N, ng)), "r": np.zeros(nr), "max": 0.0}
+        q, sol = getattr(self, "last_qp", None), getattr(self, "last_qp_solution", None)
+        if q is None or sol is None or not self.disc.has_soft:
+            return out
+
+        def slack(v, lo, up, w):
+            sl = np.zeros(np.shape(v))
+            with np.errstate(invalid="ignore"):
+                sl = np.where((w[0] > 0) | (w[2] > 0), np.maximum(sl, lo - v), sl)
+                sl = np.where((w[1] > 0) | (w[3] > 0), np.maximum(sl, v - up), sl)
+            return np.nan_to_num(sl, nan=0.0, posinf=0.0, neginf=0.0)
+
+        for k in range(1, N + 1):
+            lo = q["lbw"][k, :nx] if k < N else q["lbxN"]
+            up = q["ubw"][k, :nx] if k < N else q["ubxN"]
+            out["x"][k] = slack(sol["x"][k], lo, up, self.disc.soft_x)
+        for k in range(N):
+            if ng:
+                v = q["C"][k] @ np.concatenate([sol["x"][k], sol["u"][k]])
+                out["g"][k] = slack(v, q["lg"][k], q["ug"][k], self.disc.soft_g)
+        if nr:
+            out["r"] = slack(q["R"] @ sol["x"][N], q["lr"], q["ur"], self.disc.soft_r)
+        out["max"] = float(max(out["x"].max(initial=0.0), out["g"].max(initial=0.0), out["r"].max(initial=0.0)))
+        return out
 
     def _solve_with_retries(self, xhat0):
         """The QP of the current iterate for xhat0, solved again with lm raised while it is not
@@ -708,10 +742,24 @@ class ReferenceDopus:
                              "(last stage or terminal node)")
         return xN, term
 
+    def _stale(self, slots, k) -> bool:
+        """A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for
+        the QP: its row of Ct is zero and g (of step 2) lies outside that side's bound."""
+        if k == 0 or self.ng == 0:
+            return False
+        s = slots[self._slot(k)]
+        w = self.disc.soft_g
+        hard_lo = ~((w[0] > 0) | (w[2] > 0))
+        hard_up = ~((w[1] > 0) | (w[3] > 0))
+        zero = ~np.any(s.Ct != 0.0, axis=1)
+        return bool(np.any(zero & ((hard_lo & (s.g < self.lg)) | (hard_up & (s.g > self.ug)))))
+
     def _relinearise_worst(self, slots, rho) -> list:
-        """Step 4: fresh H for the M stages among 0..N-2 with the largest rho (ties: lower index)."""
-        order = sorted(range(self.N - 1), key=lambda i: (-rho[i], i))
-        chosen = order[:self.N - 1 if self._recovering > 0 else self.M]
+        """Step 4: fresh H for the stale stages (:meth:`_stale`), then for the M stages among
+        the other stages of 0..N-2 with the largest rho (ties: lower index)."""
+        stale = [k for k in range(self.N - 1) if self._stale(slots, k)]
+        order = sorted((k for k in range(self.N - 1) if k not in stale), key=lambda i: (-rho[i], i))
+        chosen = stale + order[:self.N - 1 if self._recovering > 0 else self.M]
         for i in chosen:
             si = slots[self._slot(i)]
             self._set_block(si, i, self.x, self.u, self.lam, self.mu_g)

@@ -91,9 +91,9 @@ def build_for(disc, cache_dir=None, echo=None, real: Optional[str] = None) -> Pa
     root = cache.cache_root(cache_dir)
     out = root / "problems" / f"{disc.name}-{cache.problem_hash(disc, None, real)[:20]}"
     if not (out / f"{disc.name}_meta.json").is_file():
-        say(f"dopus-codegen: generating C for '{disc.name}' into {out}")
         files = render_folder(disc, None, real=real)
-        out.parent.mkdir(parents=True, exist_ok=True)
+        cache.writable_folder("problems", cache_dir)
+        say(f"dopus-codegen: generating C for '{disc.name}' into {out}")
         tmp = Path(tempfile.mkdtemp(prefix=f".{disc.name}-", dir=str(out.parent)))
         write_folder(files, tmp)
         try:
@@ -102,7 +102,12 @@ def build_for(disc, cache_dir=None, echo=None, real: Optional[str] = None) -> Pa
             import shutil
 
             shutil.rmtree(tmp, ignore_errors=True)
-    build(out, cache_dir=cache_dir, echo=say)
+    try:
+        build(out, cache_dir=cache_dir, echo=say)
+    except OSError as exc:
+        if not str(exc.filename or "").startswith(str(root)):
+            raise
+        raise cache.cache_error(root, exc) from None    # the folder in the cache could not be written
     with _LOCK:
         _DISC_CACHE[key] = (disc, out)
     return out
@@ -579,6 +584,17 @@ class Solver:
         return {"stage": int(row.stage), "kind": self.enums["dopus_row_kind"].name(row.kind),
                 "index": int(row.index), "side": {-1: "lower", 1: "upper"}.get(int(row.side), "lower above upper"),
                 "bound": float(row.bound)}
+
+    def soft_slacks(self) -> dict:
+        """The slacks of the soft rows in the QP of the last feedback (read it before the next
+        prepare; dopus_get_soft_slacks): ``{"x": (N+1, nx), "g": (N, ng), "r": (nr,), "max"}``,
+        zeros on hard rows (docs/algorithm.md section 12)."""
+        N, nx, ng, nr = self.N, self.nx, self.ng, self.nr
+        vx, vg, vr = np.zeros((N + 1, nx)), np.zeros((N, max(ng, 1))), np.zeros(max(nr, 1))
+        real = f"{self.name}_real[]"
+        worst = self._c("get_soft_slacks")(self._s, self._ffi.from_buffer(real, vx),
+                                            self._ffi.from_buffer(real, vg), self._ffi.from_buffer(real, vr))
+        return {"x": vx, "g": vg[:, :ng], "r": vr[:nr], "max": float(worst)}
 
     @property
     def timings(self) -> dict:

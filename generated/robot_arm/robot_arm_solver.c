@@ -753,6 +753,25 @@ static void robot_arm_assemble(robot_arm_solver *s)
     for (i = 0; i < ROBOT_ARM_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
+#if ROBOT_ARM_NSOFT > 0
+    /* soft weights: the rows of a stage (x, u (hard), g) and the terminal rows (x_N, r) */
+    for (j = 0; j < 4; ++j) {
+        robot_arm_real *st = j == 0 ? in->zl : j == 1 ? in->zu : j == 2 ? in->Zl : in->Zu;
+        robot_arm_real *te = j == 0 ? in->zlN : j == 1 ? in->zuN : j == 2 ? in->ZlN : in->ZuN;
+        for (i = 0; i < ROBOT_ARM_NX; ++i) {
+            st[i] = te[i] = robot_arm_soft_x[j][i];
+        }
+        for (i = 0; i < ROBOT_ARM_NU; ++i) {
+            st[ROBOT_ARM_NX + i] = ROBOT_ARM_R(0.0);
+        }
+        for (i = 0; i < ROBOT_ARM_NG; ++i) {
+            st[ROBOT_ARM_NW + i] = robot_arm_soft_g[j][i];
+        }
+        for (i = 0; i < ROBOT_ARM_NR; ++i) {
+            te[ROBOT_ARM_NX + i] = robot_arm_soft_r[j][i];
+        }
+    }
+#endif
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_ASSEMBLY, t0);
 }
 
@@ -1239,12 +1258,40 @@ static void robot_arm_shift(robot_arm_solver *s)
     robot_arm_ring_advance(&s->ring);
 }
 
-/* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
+/* A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for the
+ * QP: its row of Ct is zero and the value g_new of step 2 lies outside that side's bound
+ * (0 dw >= lg - g_new > 0). Stage 0 is left out (the QP ignores its rows without u). */
+static int robot_arm_stale_stage(const robot_arm_solver *s, int k)
+{
+    const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
+    const robot_arm_real *g = s->mem.ev.Fn_g[k];
+    int i, j;
+    if (k == 0) {
+        return 0;
+    }
+    for (j = 0; j < ROBOT_ARM_NG; ++j) {
+        int hard_lo = 1, hard_up = 1, zero = 1;
+#if ROBOT_ARM_NSOFT > 0
+        hard_lo = !(robot_arm_soft_g[0][j] > ROBOT_ARM_R(0.0) || robot_arm_soft_g[2][j] > ROBOT_ARM_R(0.0));
+        hard_up = !(robot_arm_soft_g[1][j] > ROBOT_ARM_R(0.0) || robot_arm_soft_g[3][j] > ROBOT_ARM_R(0.0));
+#endif
+        for (i = 0; i < ROBOT_ARM_NW && zero; ++i) {
+            zero = slot->Ct[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NG)] == ROBOT_ARM_R(0.0);
+        }
+        if (zero && ((hard_lo && g[j] < robot_arm_lg[j]) || (hard_up && g[j] > robot_arm_ug[j]))) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Step 4: the stale stages (robot_arm_stale_stage), then the M stages among the other stages of
+ * 0..N-2 with the largest rho_k, ties to the lower index. */
 static void robot_arm_select(robot_arm_solver *s, int M)
 {
     int m, k, n = 0;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        s->selected[k] = 0;
+        s->selected[k] = k < ROBOT_ARM_N - 1 && ROBOT_ARM_NG > 0 && robot_arm_stale_stage(s, k);
     }
     for (m = 0; m < M; ++m) {
         int best = -1;
@@ -1712,6 +1759,90 @@ int robot_arm_get_qp_status(const robot_arm_solver *s)
 static robot_arm_real robot_arm_side_bound(const robot_arm_real *lo, const robot_arm_real *up, int i, int side)
 {
     return side > 0 ? up[i] : lo[i];
+}
+
+#if ROBOT_ARM_NSOFT > 0
+/* The slack of the row value v against [lb, ub] on the sides with soft weights w (stride). */
+static robot_arm_real robot_arm_soft_slack(robot_arm_real v, robot_arm_real lb, robot_arm_real ub, const robot_arm_real *w,
+                                   int stride)
+{
+    robot_arm_real sl = ROBOT_ARM_R(0.0);
+    if ((w[0] > ROBOT_ARM_R(0.0) || w[2 * stride] > ROBOT_ARM_R(0.0)) && lb - v > sl) {
+        sl = lb - v;
+    }
+    if ((w[stride] > ROBOT_ARM_R(0.0) || w[3 * stride] > ROBOT_ARM_R(0.0)) && v - ub > sl) {
+        sl = v - ub;
+    }
+    return sl;
+}
+#endif
+
+robot_arm_real robot_arm_get_soft_slacks(const robot_arm_solver *s, robot_arm_real *viol_x, robot_arm_real *viol_g,
+                                 robot_arm_real *viol_r)
+{
+    robot_arm_real worst = ROBOT_ARM_R(0.0);
+    int k, i;
+    for (k = 0; k <= ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NX && viol_x; ++i) {
+            viol_x[k * ROBOT_ARM_NX + i] = ROBOT_ARM_R(0.0);
+        }
+    }
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG) && viol_g; ++i) {
+            viol_g[k * ROBOT_ARM_DIM(ROBOT_ARM_NG) + i] = ROBOT_ARM_R(0.0);
+        }
+    }
+    for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NR) && viol_r; ++i) {
+        viol_r[i] = ROBOT_ARM_R(0.0);
+    }
+#if ROBOT_ARM_NSOFT > 0
+    {
+        const robot_arm_qp_in *in = &s->qp_in;
+        const robot_arm_qp_sol *sol = &s->mem.qp.sol;
+        for (k = 1; k <= ROBOT_ARM_N; ++k) {
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                const robot_arm_real lb = k < ROBOT_ARM_N ? in->lbw[k][i] : in->lbxN[i];
+                const robot_arm_real ub = k < ROBOT_ARM_N ? in->ubw[k][i] : in->ubxN[i];
+                const robot_arm_real sl = robot_arm_soft_slack(sol->x[k][i], lb, ub, &robot_arm_soft_x[0][i], ROBOT_ARM_NX);
+                worst = sl > worst ? sl : worst;
+                if (viol_x) {
+                    viol_x[k * ROBOT_ARM_NX + i] = sl;
+                }
+            }
+        }
+        for (k = 0; k < ROBOT_ARM_N && ROBOT_ARM_NG > 0; ++k) {
+            for (i = 0; i < ROBOT_ARM_NG; ++i) {
+                robot_arm_real v = ROBOT_ARM_R(0.0), sl;
+                int c;
+                for (c = 0; c < ROBOT_ARM_NW; ++c) {
+                    v += in->C[k][i + c * ROBOT_ARM_DIM(ROBOT_ARM_NG)] *
+                         (c < ROBOT_ARM_NX ? sol->x[k][c] : sol->u[k][c - ROBOT_ARM_NX]);
+                }
+                sl =
+                    robot_arm_soft_slack(v, in->lg[k][i], in->ug[k][i], &robot_arm_soft_g[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NG));
+                worst = sl > worst ? sl : worst;
+                if (viol_g) {
+                    viol_g[k * ROBOT_ARM_DIM(ROBOT_ARM_NG) + i] = sl;
+                }
+            }
+        }
+        for (i = 0; i < ROBOT_ARM_NR; ++i) {
+            robot_arm_real v = ROBOT_ARM_R(0.0), sl;
+            int c;
+            for (c = 0; c < ROBOT_ARM_NX; ++c) {
+                v += in->R[i + c * ROBOT_ARM_DIM(ROBOT_ARM_NR)] * sol->x[ROBOT_ARM_N][c];
+            }
+            sl = robot_arm_soft_slack(v, in->lr[i], in->ur[i], &robot_arm_soft_r[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NR));
+            worst = sl > worst ? sl : worst;
+            if (viol_r) {
+                viol_r[i] = sl;
+            }
+        }
+    }
+#else
+    (void)s;
+#endif
+    return worst;
 }
 
 int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_info *row)

@@ -163,6 +163,14 @@ typedef struct {
  * of the certificate (the bounds, dynamics and measured state) keep from being met; stages
  * are those of that QP's horizon. Returns 1 and writes *row, else returns 0. */
 int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *row);
+/* Soft rows (docs/algorithm.md section 12): the slacks of the QP of the last feedback, read
+ * after that feedback and before the next prepare: max(0, lb - v, v - ub) of every soft row
+ * at the QP's solution, v the state x_k + dx_k (viol_x, (N+1) x nx, node 0 zero), the
+ * linearised path row g_k + Ct_k dw_k (viol_g, N x max(ng, 1)) and the linearised terminal
+ * row r + R dx_N (viol_r, max(nr, 1)); 0 on hard rows. A pointer may be NULL. Returns the
+ * largest slack (0 without soft rows). */
+unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *viol_x, unicycle_real *viol_g,
+                                 unicycle_real *viol_r);
 /* Health of the controller (docs/algorithm.md section 9). Flags (UNICYCLE_FLAG_*) raised by
  * the last feedback and the prepare after it (feedback clears them): the returned u0 was
  * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control

@@ -753,6 +753,25 @@ static void unicycle_assemble(unicycle_solver *s)
     for (i = 0; i < UNICYCLE_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
+#if UNICYCLE_NSOFT > 0
+    /* soft weights: the rows of a stage (x, u (hard), g) and the terminal rows (x_N, r) */
+    for (j = 0; j < 4; ++j) {
+        unicycle_real *st = j == 0 ? in->zl : j == 1 ? in->zu : j == 2 ? in->Zl : in->Zu;
+        unicycle_real *te = j == 0 ? in->zlN : j == 1 ? in->zuN : j == 2 ? in->ZlN : in->ZuN;
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            st[i] = te[i] = unicycle_soft_x[j][i];
+        }
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            st[UNICYCLE_NX + i] = UNICYCLE_R(0.0);
+        }
+        for (i = 0; i < UNICYCLE_NG; ++i) {
+            st[UNICYCLE_NW + i] = unicycle_soft_g[j][i];
+        }
+        for (i = 0; i < UNICYCLE_NR; ++i) {
+            te[UNICYCLE_NX + i] = unicycle_soft_r[j][i];
+        }
+    }
+#endif
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_ASSEMBLY, t0);
 }
 
@@ -1239,12 +1258,40 @@ static void unicycle_shift(unicycle_solver *s)
     unicycle_ring_advance(&s->ring);
 }
 
-/* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
+/* A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for the
+ * QP: its row of Ct is zero and the value g_new of step 2 lies outside that side's bound
+ * (0 dw >= lg - g_new > 0). Stage 0 is left out (the QP ignores its rows without u). */
+static int unicycle_stale_stage(const unicycle_solver *s, int k)
+{
+    const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
+    const unicycle_real *g = s->mem.ev.Fn_g[k];
+    int i, j;
+    if (k == 0) {
+        return 0;
+    }
+    for (j = 0; j < UNICYCLE_NG; ++j) {
+        int hard_lo = 1, hard_up = 1, zero = 1;
+#if UNICYCLE_NSOFT > 0
+        hard_lo = !(unicycle_soft_g[0][j] > UNICYCLE_R(0.0) || unicycle_soft_g[2][j] > UNICYCLE_R(0.0));
+        hard_up = !(unicycle_soft_g[1][j] > UNICYCLE_R(0.0) || unicycle_soft_g[3][j] > UNICYCLE_R(0.0));
+#endif
+        for (i = 0; i < UNICYCLE_NW && zero; ++i) {
+            zero = slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] == UNICYCLE_R(0.0);
+        }
+        if (zero && ((hard_lo && g[j] < unicycle_lg[j]) || (hard_up && g[j] > unicycle_ug[j]))) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Step 4: the stale stages (unicycle_stale_stage), then the M stages among the other stages of
+ * 0..N-2 with the largest rho_k, ties to the lower index. */
 static void unicycle_select(unicycle_solver *s, int M)
 {
     int m, k, n = 0;
     for (k = 0; k < UNICYCLE_N; ++k) {
-        s->selected[k] = 0;
+        s->selected[k] = k < UNICYCLE_N - 1 && UNICYCLE_NG > 0 && unicycle_stale_stage(s, k);
     }
     for (m = 0; m < M; ++m) {
         int best = -1;
@@ -1712,6 +1759,90 @@ int unicycle_get_qp_status(const unicycle_solver *s)
 static unicycle_real unicycle_side_bound(const unicycle_real *lo, const unicycle_real *up, int i, int side)
 {
     return side > 0 ? up[i] : lo[i];
+}
+
+#if UNICYCLE_NSOFT > 0
+/* The slack of the row value v against [lb, ub] on the sides with soft weights w (stride). */
+static unicycle_real unicycle_soft_slack(unicycle_real v, unicycle_real lb, unicycle_real ub, const unicycle_real *w,
+                                   int stride)
+{
+    unicycle_real sl = UNICYCLE_R(0.0);
+    if ((w[0] > UNICYCLE_R(0.0) || w[2 * stride] > UNICYCLE_R(0.0)) && lb - v > sl) {
+        sl = lb - v;
+    }
+    if ((w[stride] > UNICYCLE_R(0.0) || w[3 * stride] > UNICYCLE_R(0.0)) && v - ub > sl) {
+        sl = v - ub;
+    }
+    return sl;
+}
+#endif
+
+unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *viol_x, unicycle_real *viol_g,
+                                 unicycle_real *viol_r)
+{
+    unicycle_real worst = UNICYCLE_R(0.0);
+    int k, i;
+    for (k = 0; k <= UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NX && viol_x; ++i) {
+            viol_x[k * UNICYCLE_NX + i] = UNICYCLE_R(0.0);
+        }
+    }
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG) && viol_g; ++i) {
+            viol_g[k * UNICYCLE_DIM(UNICYCLE_NG) + i] = UNICYCLE_R(0.0);
+        }
+    }
+    for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NR) && viol_r; ++i) {
+        viol_r[i] = UNICYCLE_R(0.0);
+    }
+#if UNICYCLE_NSOFT > 0
+    {
+        const unicycle_qp_in *in = &s->qp_in;
+        const unicycle_qp_sol *sol = &s->mem.qp.sol;
+        for (k = 1; k <= UNICYCLE_N; ++k) {
+            for (i = 0; i < UNICYCLE_NX; ++i) {
+                const unicycle_real lb = k < UNICYCLE_N ? in->lbw[k][i] : in->lbxN[i];
+                const unicycle_real ub = k < UNICYCLE_N ? in->ubw[k][i] : in->ubxN[i];
+                const unicycle_real sl = unicycle_soft_slack(sol->x[k][i], lb, ub, &unicycle_soft_x[0][i], UNICYCLE_NX);
+                worst = sl > worst ? sl : worst;
+                if (viol_x) {
+                    viol_x[k * UNICYCLE_NX + i] = sl;
+                }
+            }
+        }
+        for (k = 0; k < UNICYCLE_N && UNICYCLE_NG > 0; ++k) {
+            for (i = 0; i < UNICYCLE_NG; ++i) {
+                unicycle_real v = UNICYCLE_R(0.0), sl;
+                int c;
+                for (c = 0; c < UNICYCLE_NW; ++c) {
+                    v += in->C[k][i + c * UNICYCLE_DIM(UNICYCLE_NG)] *
+                         (c < UNICYCLE_NX ? sol->x[k][c] : sol->u[k][c - UNICYCLE_NX]);
+                }
+                sl =
+                    unicycle_soft_slack(v, in->lg[k][i], in->ug[k][i], &unicycle_soft_g[0][i], UNICYCLE_DIM(UNICYCLE_NG));
+                worst = sl > worst ? sl : worst;
+                if (viol_g) {
+                    viol_g[k * UNICYCLE_DIM(UNICYCLE_NG) + i] = sl;
+                }
+            }
+        }
+        for (i = 0; i < UNICYCLE_NR; ++i) {
+            unicycle_real v = UNICYCLE_R(0.0), sl;
+            int c;
+            for (c = 0; c < UNICYCLE_NX; ++c) {
+                v += in->R[i + c * UNICYCLE_DIM(UNICYCLE_NR)] * sol->x[UNICYCLE_N][c];
+            }
+            sl = unicycle_soft_slack(v, in->lr[i], in->ur[i], &unicycle_soft_r[0][i], UNICYCLE_DIM(UNICYCLE_NR));
+            worst = sl > worst ? sl : worst;
+            if (viol_r) {
+                viol_r[i] = sl;
+            }
+        }
+    }
+#else
+    (void)s;
+#endif
+    return worst;
 }
 
 int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *row)

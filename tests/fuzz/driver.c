@@ -161,7 +161,7 @@ int main(int argc, char **argv)
                 xhat[i] += push[i];
             }
         }
-        /* a failed feedback leaves u0 as it was: the previous control is held */
+        /* a failed feedback writes the fallback control to u0 (docs/algorithm.md section 9) */
         iterate("receding", k, xhat, u0);
         rc = API(eval_stage_eval)(xhat, u0, API(p_default), xnext, &l, g, &plant_work);
         if (rc != 0) {
