@@ -7,18 +7,28 @@
 typedef int (*dopus_casadi_fn)(const dopus_real **arg, dopus_real **res, int *iw, dopus_real *w, int mem);
 
 /* f on the inputs in[0..n_in-1] and outputs out[0..n_out-1], placed at the start of the work
- * struct's argument and result arrays (CasADi may use the entries after them as scratch). */
+ * struct's argument and result arrays (CasADi may use the entries after them as scratch);
+ * the pointer arrays are cleared afterwards. */
 static int dopus_call(dopus_casadi_fn f, const dopus_real *const *in, int n_in, dopus_real *const *out,
                       int n_out, dopus_fun_work *wk)
 {
-    int i;
+    int i, rc;
     for (i = 0; i < n_in; ++i) {
         wk->arg[i] = in[i];
     }
     for (i = 0; i < n_out; ++i) {
         wk->res[i] = out[i];
     }
-    return f(wk->arg, wk->res, wk->iw, wk->w, 0);
+    rc = f(wk->arg, wk->res, wk->iw, wk->w, 0);
+    /* no pointer stays behind in the work struct (the solver struct that holds it may be
+     * copied byte for byte, docs/design.md) */
+    for (i = 0; i < DOPUS_SZ_ARG; ++i) {
+        wk->arg[i] = 0;
+    }
+    for (i = 0; i < DOPUS_SZ_RES; ++i) {
+        wk->res[i] = 0;
+    }
+    return rc;
 }
 
 /* The stage function of the chosen Hessian; 0 for Gauss-Newton without a least-squares stage

@@ -42,8 +42,8 @@ static int report(const char *phase, int iter, int status, const dopus_real *u0,
  * next measurement is the model's prediction phi(x0, u0) */
 static int run(const char *phase, int mode)
 {
-    dopus_real xhat0[DOPUS_NX], xnext[DOPUS_NX], u0[DOPUS_NU], kkt4[4], l, g[DOPUS_DIM(DOPUS_NG)];
-    const dopus_real *p_plant = dopus_p_default[0];
+    dopus_real xhat0[DOPUS_NX], xnext[DOPUS_NX], u0[DOPUS_NU], kkt4[4];
+    dopus_settings settings;
     int i, k, status;
 
     for (i = 0; i < DOPUS_NX; ++i) {
@@ -52,8 +52,9 @@ static int run(const char *phase, int mode)
     for (i = 0; i < DOPUS_NU; ++i) {
         u0[i] = DOPUS_R(0.0);
     }
-    dopus_defaults(&solver);
-    status = dopus_set_mode(&solver, mode);
+    dopus_settings_default(&settings); /* the OCP file's options */
+    settings.mode = mode;
+    status = dopus_setup(&solver, &settings);
 #if DOPUS_HAS_NOMINAL
     if (status == DOPUS_OK) {
         status = dopus_init_nominal(&solver, xhat0);
@@ -73,15 +74,16 @@ static int run(const char *phase, int mode)
     for (k = 1; k <= ITERATIONS; ++k) {
         status = dopus_feedback(&solver, xhat0, u0);
         if (status == DOPUS_OK && mode == DOPUS_MODE_RECEDING) {
+            const dopus_real *p_plant = 0; /* the default parameters */
 #if DOPUS_HAS_P_SCHEDULE
-            /* the instant t = (k - 1) dt; the next horizon ends at k dt + N dt */
+            /* a moving reference: the instant t = (k - 1) dt; the next horizon ends at k dt + N dt */
             p_plant = dopus_p_schedule[k - 1];
             status = dopus_push_parameters(&solver, dopus_p_schedule[k + DOPUS_N]);
             if (status != DOPUS_OK) {
                 return report(phase, k, status, u0, kkt4);
             }
 #endif
-            if (dopus_eval_stage_eval(xhat0, u0, p_plant, xnext, &l, g, &plant_work)) {
+            if (dopus_simulate(xhat0, u0, p_plant, xnext, &plant_work) != DOPUS_OK) {
                 fprintf(stderr, "main_dopus: the model failed to evaluate\n");
                 return 1;
             }

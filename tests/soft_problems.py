@@ -45,7 +45,7 @@ def reach_both(N=20):
     (L1 and L2), and a soft upper speed bound (L1 and L2, different per side)."""
     ocp = Ocp("soft_reach_both")
     p = ocp.state("p")
-    v = ocp.state("v", ub=1.0, soft=Soft(l1=(0.0, 0.5), l2=(0.0, 4.0)))
+    v = ocp.state("v", ub=0.95, soft=Soft(l1=(0.0, 0.5), l2=(0.0, 4.0)))
     a = ocp.control("a", lb=-1.0, ub=1.0)
     ocp.dynamics(ca.vertcat(v, a), integrator=RK4(1))
     ocp.stage_least_squares(ca.vertcat(v, a), [0.1, 0.1])

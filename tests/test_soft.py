@@ -4,6 +4,7 @@ active soft rows against an independent IPOPT transcription with explicit slacks
 backends), and the QP that cannot be infeasible."""
 from __future__ import annotations
 
+import json
 import math
 
 import casadi as ca
@@ -39,6 +40,7 @@ def _base():
     (lambda o, x, u: o.state("y", 2, lb=0, soft=Soft(l1=(1.0, 2.0, 3.0))), "must be (lower, upper)"),
     (lambda o, x, u: o.state("y", 2, lb=0, soft=Soft(l1=math.inf)), "soft l1 must be finite"),
     (lambda o, x, u: o.state("y", 2, soft=Soft(l1=1.0)), "soft= on row 0, which has no finite bound"),
+    (lambda o, x, u: o.state("y", 2, ub=[1.0, math.inf], soft=Soft(l1=1.0)), "soft= on row 1, which has no finite bound"),
     (lambda o, x, u: o.state("y", 2, ub=1.0, soft=Soft(l1=(1.0, 0.0))), "soft weights are zero on every finite bound"),
     (lambda o, x, u: o.state("y", 2, lb=0, soft={"l1": 1}), "soft must be Soft(l1=..., l2=...)"),
     (lambda o, x, u: o.path_constraint(x[0] * u, soft=Soft(l1=1.0)), "path constraint 0: soft= on row 0"),
@@ -273,3 +275,168 @@ def test_stale_linearisation_is_relinearised(M, backend):
     assert s.kkt(xh)["kkt"] < 1e-9, (len(counts), s.kkt(xh))
     assert np.max(np.abs(s.x - x_ref)) < 1e-6
     assert np.max(np.abs(s.u - u_ref)) < 1e-6
+
+
+@pytest.mark.parametrize("make", [cart_l1, reach_both])
+def test_soft_c_equals_reference_iterate_by_iterate(make):
+    """Receding horizon, Gauss-Newton, M = 1, 30 instants on the discrete model with two
+    pushes that violate the soft rows: the C iterate (every primal and multiplier array)
+    equals the reference's to 1e-9 relative after every feedback, and the recomputed stages
+    are the same (tests/test_c_vs_reference.py's measure, QP tolerance 1e-14). (On
+    soft_problems.orbit_l2 the backends differ by up to 3e-8: path rows inactive by 1e-6
+    carry interior-point multipliers of complementarity over gap, as hard rows would. A push
+    of the speed by 0.4 instead of 0.37 makes the speed reach its bound exactly in the step
+    where the force is at its own bound: the two multipliers are then not unique.)"""
+    from dopus_codegen.reference.dopus import ReferenceDopus
+    from dopus_codegen.runtime.solver import CSolver
+
+    disc = build_functions(make())
+    xh = np.asarray(disc.x0, float)
+    c = CSolver(disc, M=1, hessian="gauss-newton", qp_tol=1e-14)
+    r = ReferenceDopus(disc, M=1, hessian="gauss-newton", qp_tol=1e-14)
+    c.init(xh)
+    r.init(xh)
+    worst = 0.0
+    for it in range(30):
+        c.feedback(xh)
+        u0 = r.feedback(xh)
+        for f in ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu"):
+            a, b = np.asarray(getattr(c, f)), np.asarray(getattr(r, f))
+            if b.size:
+                worst = max(worst, float(np.max(np.abs(a - b)) / max(1.0, float(np.max(np.abs(b))))))
+        c.prepare()
+        r.prepare()
+        assert c.recomputed == r.recomputed
+        xh = np.asarray(disc.stage_eval(xh, u0, disc.p0[0])[0], float).reshape(-1)
+        if it in (5, 15):
+            xh = xh + np.array([0.3, 0.37])
+    assert worst < 1e-9, worst
+
+
+def test_soft_slacks_reported_by_both_backends():
+    """dopus_get_soft_slacks: after a feedback that violates the soft speed limit, the slacks
+    of the C QP equal the reference's and the violation of the new iterate (the states of the
+    QP solution), node by node."""
+    from dopus_codegen.reference.dopus import ReferenceDopus
+    from dopus_codegen.runtime.solver import CSolver
+
+    disc = build_functions(reach_both())
+    xh = np.asarray(disc.x0, float)
+    c = CSolver(disc, M=1, hessian="gauss-newton", qp_tol=1e-12)
+    r = ReferenceDopus(disc, M=1, hessian="gauss-newton", qp_tol=1e-12)
+    c.init(xh)
+    r.init(xh)
+    c.feedback(xh)
+    r.feedback(xh)
+    sc, sr = c.soft_slacks(), r.soft_slacks()
+    assert sr["max"] > 0.1 and sr["r"][0] > 0.1
+    for key in ("x", "g", "r"):
+        np.testing.assert_allclose(sc[key], sr[key], atol=1e-8)
+    viol = np.maximum(0.0, c.x[:, 1] - disc.ubx[1])
+    viol[0] = 0.0
+    np.testing.assert_allclose(sc["x"][:, 1], viol, atol=1e-9)
+    np.testing.assert_allclose(sc["r"], np.abs(c.x[-1, 0] - 3.0), atol=1e-9)
+
+
+@pytest.mark.parametrize("make", [cart_l1, orbit_l2, reach_both])
+def test_offline_solver_with_soft_rows(make):
+    """reference/offline.py (the project's IPOPT, with its slack variables) equals the
+    independent transcription, and its multipliers pass the soft KKT measure."""
+    from dopus_codegen.reference.kkt import kkt_of_guess
+    from dopus_codegen.reference.offline import solve_ocp
+
+    disc = build_functions(make())
+    x, u, _ = ipopt_with_slacks(disc, disc.x0)
+    g, info = solve_ocp(disc, disc.x0)
+    assert info["success"]
+    assert np.max(np.abs(g.x - x)) < 1e-8 and np.max(np.abs(g.u - u)) < 1e-8
+    assert kkt_of_guess(disc, disc.x0, g)["kkt"] < 1e-9
+
+
+def test_sil_reports_the_largest_soft_violation():
+    """The closed loop of a soft OCP records the violation of each soft group at the measured
+    state and applied control, and summarize reports its maximum: equal to the violation
+    computed from the recorded states and controls."""
+    from dopus_codegen.studies.sil import format_summary, run_closed_loop, summarize
+
+    ocp = cart_l1()
+    ocp.path_constraint(ocp.x_sym()[1] + 0.1 * ocp.u_sym()[0], ub=0.25, soft=Soft(l1=3.0))
+    ocp.scenario(duration=1.0)
+    disc = build_functions(ocp)
+    run = run_closed_loop(disc, M=1, hessian="gauss-newton")
+    s = summarize(run)
+    x, u = np.asarray(run["x"]), np.asarray(run["u"])
+    assert s["soft_violation"]["state v"] == pytest.approx(max(0.0, float(np.max(np.abs(x[:, 1]) - 0.3))), abs=1e-15)
+    assert s["soft_violation"]["path 0"] == pytest.approx(max(0.0, float(np.max(x[:, 1] + 0.1 * u[:, 0] - 0.25))),
+                                                          rel=1e-12, abs=1e-15)
+    assert s["soft_violation"]["state v"] > 0.1
+    assert "largest violation of the soft rows" in format_summary([s])
+
+
+def test_generate_says_the_qp_is_always_feasible(tmp_path):
+    """`dopus-gen generate` of an OCP whose state-dependent rows are all soft says so."""
+    from click.testing import CliRunner
+
+    from dopus_codegen.cli import main
+
+    ocp_file = tmp_path / "all_soft.py"
+    ocp_file.write_text("import sys\nsys.path.insert(0, %r)\nfrom test_soft import _all_soft\n\n\n"
+                        "def build():\n    return _all_soft()\n" % str(__import__("pathlib").Path(__file__).parent))
+    res = CliRunner().invoke(main, ["generate", str(ocp_file), "-o", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    assert "soft rows: 4; the QP is always feasible (every state-dependent row is soft)" in res.output
+
+
+def test_soft_state_limit_with_an_implicit_integrator():
+    """examples/stiff_motor.py (Radau IIA) with its current limit lowered to 1 A and made
+    soft (L1 and L2): the C full RTI equals IPOPT with explicit slacks, the limit exceeded."""
+    import importlib.util
+
+    from conftest import EXAMPLES
+    from dopus_codegen.runtime.solver import CSolver
+
+    spec = importlib.util.spec_from_file_location("stiff_motor_soft_test", EXAMPLES / "stiff_motor.py")
+    motor = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(motor)
+    disc = build_functions(motor.build(soft_current=Soft(l1=[0, 0, 0.05], l2=[0, 0, 0.1]), current_limit=1.0))
+    xh = np.asarray(disc.x0, float)
+    x_ref, u_ref, slack = ipopt_with_slacks(disc, xh)
+    assert slack["x"] > 0.1
+    s = CSolver(disc, M=disc.N - 1, mode="fixed", qp_tol=1e-12)
+    s.init(xh)
+    for _ in range(30):
+        s.feedback(xh)
+        s.prepare()
+    assert np.max(np.abs(s.x - x_ref)) < 1e-6
+    assert np.max(np.abs(s.u - u_ref)) < 1e-6
+    assert s.kkt(xh)["kkt"] < 1e-8
+
+
+def test_campaign_reports_the_largest_soft_violation(tmp_path):
+    """A two-run campaign of the cart-pole (soft track ends): every result line carries the
+    largest violation of each soft group of its run, equal to the one computed from the run's
+    closed loop, and the report the largest over the runs."""
+    from conftest import EXAMPLES
+    from dopus_codegen.studies import campaign
+
+    runs = {}
+    real = campaign.condense
+
+    def keep(run, d, index, seed, *args):
+        runs[index] = run
+        return real(run, d, index, seed, *args)
+
+    campaign.condense = keep
+    try:
+        rep = campaign.run_campaign(str(EXAMPLES / "cartpole.py"), str(tmp_path / "c.jsonl"), workers=0, runs=2,
+                                    duration=0.5, progress=False, echo=lambda *a, **k: None)
+    finally:
+        campaign.condense = real
+    lines = [json.loads(s) for s in (tmp_path / "c.jsonl").read_text().splitlines()[1:]]
+    assert len(lines) == 2
+    for line in lines:
+        x = np.asarray(runs[line["run"]]["x"])
+        assert line["soft_violation"]["state p"] == pytest.approx(max(0.0, float(np.max(np.abs(x[:, 0]) - 1.0))),
+                                                                  abs=1e-15)
+    assert rep["soft_violation_max"]["state p"] == max(line["soft_violation"]["state p"] for line in lines)
+    assert "largest violation of the soft rows" in campaign.format_report(rep)

@@ -31,6 +31,7 @@ import numpy as np
 from .. import __version__
 from .. import settings
 from ..cnames import identifier_problem, rename_placeholder
+from ..outputs import write_bytes
 from . import flags
 from .flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
 from .folder import FUNCTION_SLOTS, CodegenError, find_meta, read_meta  # noqa: F401 - re-exported
@@ -284,6 +285,32 @@ def single_precision(source: str) -> str:
     return "\n".join(out)
 
 
+def _check_float_literals(source: str) -> None:
+    """A CodegenError naming the literals of CasADi's C that have no float (a number derived
+    from the problem's, e.g. a product of two small constants in a derivative): the C
+    compiler would refuse them ('floating constant truncated to zero')."""
+    from ..problem.checks import outside_float
+
+    bad, function = [], "?"
+    for line in source.split("\n"):
+        head = _FUNCTION_HEAD.match(line.strip())
+        if head:
+            function = head.group(1)
+        code = line.partition("/*")[0]
+        if code.lstrip().startswith("#"):
+            continue
+        for m in _FLOAT_LITERAL.finditer(code):
+            why = outside_float(float(m.group(1)))
+            if why and (function, f"{float(m.group(1)):g}", why) not in bad:
+                bad.append((function, f"{float(m.group(1)):g}", why))
+    if bad:
+        shown = "; ".join(f"{v} in {f} ({why} the range of float)" for f, v, why in bad[:3])
+        more = f"; and {len(bad) - 3} more" if len(bad) > 3 else ""
+        raise CodegenError(f"real float: the generated functions hold numbers a float cannot: {shown}{more}; "
+                           "they are derived from the problem's constants (a product in a derivative, say): "
+                           "rescale the problem or use real='double'")
+
+
 def casadi_sources(functions: Dict[str, ca.Function], name: str, real: str = "double") -> Dict[str, str]:
     """``<name>_casadi.c`` and ``.h`` from one CodeGenerator with explicit options."""
     opts = {"casadi_int": "int", "casadi_real": real, "mex": False, "with_header": True,
@@ -295,6 +322,8 @@ def casadi_sources(functions: Dict[str, ca.Function], name: str, real: str = "do
     with tempfile.TemporaryDirectory(prefix="dopus_cg_") as tmp:
         cg.generate(str(Path(tmp)) + "/")
         source = silence_unused_parameters((Path(tmp) / f"{base}.c").read_text())
+        if real == "float":
+            _check_float_literals(source)
         out = {f"{base}.c": single_precision(source) if real == "float" else source,
                f"{base}.h": (Path(tmp) / f"{base}.h").read_text()}
     _refuse_without_codegen(out[f"{base}.c"], functions)
@@ -574,11 +603,25 @@ def _templates() -> jinja2.Environment:
     )
 
 
+# runtime_c files that are not part of a generated solver: the linkable wrappers of the
+# inline linear algebra, for the tests of the kernels only
+TEST_ONLY_RUNTIME = ("dopus_linalg.c",)
+
+
+def unity_modules(solver_c: str) -> List[str]:
+    """The runtime's .c files that dopus_solver.c includes (its one translation unit): they
+    are shipped but not compiled on their own."""
+    return re.findall(r'^#include "(dopus_\w+\.c)"', solver_c, flags=re.M)
+
+
 def runtime_sources(name: str) -> Dict[str, str]:
-    """runtime_c/*.c|*.h with the prefix renamed, in file names and contents."""
+    """runtime_c/*.c|*.h with the prefix renamed, in file names and contents (without the
+    test-only files)."""
     root = runtime_c_dir()
     out: Dict[str, str] = {}
     for path in sorted(list(root.glob("*.c")) + list(root.glob("*.h"))):
+        if path.name in TEST_ONLY_RUNTIME:
+            continue
         out[rename_placeholder(path.name, name)] = rename_placeholder(path.read_text(), name)
     if f"{name}_solver.h" not in out:
         raise CodegenError(f"the runtime has no public header dopus_solver.h in {root}")
@@ -637,6 +680,10 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     name = check_name(_attr(disc.data, "name"))
     NAME = name.upper()
     real = real_of(disc, real)
+    if real == "float" and hasattr(disc, "spec"):
+        from ..problem.checks import check_float_range
+
+        check_float_range(disc)     # the problem's own numbers, named, before any code is generated
     s = problem_sizes(disc)
     functions = casadi_functions(disc, name, s)
     files: Dict[str, str] = {}
@@ -673,11 +720,12 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     files[f"{name}_cdef.h"] = (f"/* {header} */\n/* cffi declarations cut from {name}_solver.h */\n"
                                f"typedef {real} {name}_real;\n" + cdef)
 
-    c_sources = sorted(f for f in files if f.endswith(".c") and f != main_file)
+    modules = {rename_placeholder(f, name) for f in unity_modules((runtime_c_dir() / "dopus_solver.c").read_text())}
+    c_sources = sorted(f for f in files if f.endswith(".c") and f != main_file and f not in modules)
     headers = sorted(f for f in files if f.endswith(".h") and f != f"{name}_cdef.h")
     build_ctx = dict(ctx, casadi_source=f"{name}_casadi.c",
                      strict_sources=[f for f in c_sources if f != f"{name}_casadi.c"],
-                     lib_sources=c_sources, headers=headers)
+                     lib_sources=c_sources, headers=headers, modules=sorted(modules))
     files["Makefile"] = env.get_template("Makefile.j2").render(**build_ctx)
     files[f"{name}.cmake"] = env.get_template("cmake.j2").render(**build_ctx)
 
@@ -760,7 +808,7 @@ def write_folder(files: Dict[str, str], out_dir: Path) -> Path:
         data = files[fname].encode("utf-8")
         if path.is_file() and path.read_bytes() == data:
             continue
-        path.write_bytes(data)
+        write_bytes(path, data)
     return out_dir
 
 

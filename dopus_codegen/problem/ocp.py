@@ -501,9 +501,10 @@ def _soft_weights(soft, n: int, lb: np.ndarray, ub: np.ndarray, what: str) -> Op
     w = np.vstack([l1lo, l1up, l2lo, l2up])
     if not np.any(w > 0):
         raise OcpError(f"{what}: soft weights are all zero (give l1 > 0 or l2 > 0)")
-    none = np.flatnonzero(~np.isfinite(lb) & ~np.isfinite(ub))
+    none = np.flatnonzero(~np.isfinite(lb) & ~np.isfinite(ub) & np.any(w > 0, axis=0))
     if none.size:
-        raise OcpError(f"{what}: soft= on row {int(none[0])}, which has no finite bound")
+        raise OcpError(f"{what}: soft= on row {int(none[0])}, which has no finite bound "
+                       "(give it the weight 0: one value per row)")
     w[[0, 2]] *= np.isfinite(lb)
     w[[1, 3]] *= np.isfinite(ub)
     if not np.any(w > 0):
@@ -882,7 +883,9 @@ class Ocp:
         """Closed-loop scenario: ``duration`` seconds, state ``events``, recorded ``signals``
         (name -> expression of the declared symbols), ``plant`` xdot (None: the model),
         ``units``: the unit of a signal, state or control by name (``{"deviation": "m",
-        "tau": "N m"}``), written on the axes of the figures."""
+        "tau": "N m"}``), written on the axes of the figures; ``"time"``: the unit of the
+        model's time (of ``dt``, ``duration`` and the event times; default ``"s"``), written
+        wherever a time of the scenario is shown."""
         try:
             events = list(events)
         except TypeError:
@@ -1214,8 +1217,8 @@ class Ocp:
         known = {n for n, _ in signals} | {d.name for d in self._states + self._controls}
         units = []
         for key, unit in sc.get("units", {}).items():
-            if key not in known:
-                raise OcpError(f"scenario units: {key!r} is neither a signal nor a state or control; "
+            if key not in known and key != "time":
+                raise OcpError(f"scenario units: {key!r} is neither a signal nor a state or control (nor 'time'); "
                                f"the names are {sorted(known)}")
             if not isinstance(unit, str) or not unit.strip():
                 raise OcpError(f"scenario units: the unit of {key!r} must be a non-empty string, got {unit!r}")

@@ -598,6 +598,35 @@ class ReferenceDopus:
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
         return self.u0.copy()
 
+    def soft_slacks(self) -> dict:
+        """The slacks of the soft rows in the QP of the last feedback, as
+        ``CSolver.soft_slacks`` (docs/algorithm.md section 12)."""
+        N, nx, ng, nr = self.N, self.nx, self.ng, self.nr
+        out = {"x": np.zeros((N + 1, nx)), "g": np.zeros((N, ng)), "r": np.zeros(nr), "max": 0.0}
+        q, sol = getattr(self, "last_qp", None), getattr(self, "last_qp_solution", None)
+        if q is None or sol is None or not self.disc.has_soft:
+            return out
+
+        def slack(v, lo, up, w):
+            sl = np.zeros(np.shape(v))
+            with np.errstate(invalid="ignore"):
+                sl = np.where((w[0] > 0) | (w[2] > 0), np.maximum(sl, lo - v), sl)
+                sl = np.where((w[1] > 0) | (w[3] > 0), np.maximum(sl, v - up), sl)
+            return np.nan_to_num(sl, nan=0.0, posinf=0.0, neginf=0.0)
+
+        for k in range(1, N + 1):
+            lo = q["lbw"][k, :nx] if k < N else q["lbxN"]
+            up = q["ubw"][k, :nx] if k < N else q["ubxN"]
+            out["x"][k] = slack(sol["x"][k], lo, up, self.disc.soft_x)
+        for k in range(N):
+            if ng:
+                v = q["C"][k] @ np.concatenate([sol["x"][k], sol["u"][k]])
+                out["g"][k] = slack(v, q["lg"][k], q["ug"][k], self.disc.soft_g)
+        if nr:
+            out["r"] = slack(q["R"] @ sol["x"][N], q["lr"], q["ur"], self.disc.soft_r)
+        out["max"] = float(max(out["x"].max(initial=0.0), out["g"].max(initial=0.0), out["r"].max(initial=0.0)))
+        return out
+
     def _solve_with_retries(self, xhat0):
         """The QP of the current iterate for xhat0, solved again with lm raised while it is not
         solved (section 10). Returns (solution, failure, retries): failure None, a QPError,

@@ -77,6 +77,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .. import interrupt
+
 __all__ = ["QPError", "QPInfeasibleError", "QPIterationLimitError", "free_initial_state", "solve_qp_reference",
            "qp_kkt_residual", "check_qp", "qp_infeasible_row", "qp_reduced_hessian_min_eig", "flatten_qp", "flatten_solution"]
 
@@ -382,9 +384,12 @@ def _signed_pairs(v, lo, hi, mu):
 def row_check(v, lo, hi, mu, w):
     """``(ineq, comp, sign)`` of rows ``lo <= v <= hi`` with signed multipliers ``mu`` and
     soft weights ``w`` (4, n) (rows zl, zu, Zl, Zu; a side with both 0 is hard). A hard side
-    as in :func:`_signed_pairs`; a soft side with violation ``s`` (``max(0, lo - v)``) needs
-    its multiplier ``m`` in ``[0, zl + Zl s]``, ``m (v - lo)^+ = 0`` and ``(zl + Zl s - m) s =
-    0`` (the slack's own complementarity)."""
+    as in :func:`_signed_pairs`. A soft side with multiplier ``m`` is measured at its best
+    slack ``s = max(s0, (m - zl) / Zl)`` (``s0 = max(0, lo - v)`` the violation; ``s = s0``
+    when ``Zl = 0``), at which the slack's stationarity ``zl + Zl s - m = y >= 0`` holds
+    unless ``m > zl + Zl s0`` with ``Zl = 0`` (a sign violation): complementarity ``m (v - lo +
+    s)`` and ``y s``. (An interior point leaves a weakly inactive soft side with a multiplier
+    of complementarity over its gap, as on a hard side; the over-slack is what it means.)"""
     v = np.asarray(v, float).reshape(-1)
     lo = np.asarray(lo, float).reshape(-1)
     hi = np.asarray(hi, float).reshape(-1)
@@ -404,10 +409,13 @@ def row_check(v, lo, hi, mu, w):
             continue
         m = np.maximum(side * mu[flag], 0.0)
         gap = side * (bound[flag] - v[flag])    # >= 0 on the satisfied side
-        s_ = np.maximum(0.0, -gap)
-        cap = l1[flag] + l2[flag] * s_
-        sign = max(sign, float(np.max(np.maximum(0.0, m - cap))))
-        comp = max(comp, float(np.max(m * np.maximum(0.0, gap))), float(np.max(np.maximum(0.0, cap - m) * s_)))
+        s0 = np.maximum(0.0, -gap)
+        L1, L2 = l1[flag], l2[flag]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s_ = np.where(L2 > 0, np.maximum(s0, (m - L1) / np.where(L2 > 0, L2, 1.0)), s0)
+        y = L1 + L2 * s_ - m
+        sign = max(sign, float(np.max(np.maximum(0.0, -y))))
+        comp = max(comp, float(np.max(m * (gap + s_))), float(np.max(np.maximum(0.0, y) * s_)))
     return ineq, comp, sign
 
 
@@ -538,6 +546,7 @@ def _solve_ipopt(q: dict, Hz, gz, rows: _Rows, max_iter=500):
     z0 = np.clip(np.zeros(Hz.shape[0]), rows.lbz, rows.ubz)
     z0 = np.where(np.isfinite(z0), z0, 0.0)
     res = solver(x0=z0, p=p, lbx=rows.lbz, ubx=rows.ubz, lbg=lbg, ubg=ubg)
+    interrupt.check()       # IPOPT ends a solve interrupted by Ctrl-C as a failed one
     stats = solver.stats()
     status = stats.get("return_status", "")
     z = np.array(res["x"]).reshape(-1)

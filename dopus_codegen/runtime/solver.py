@@ -92,9 +92,9 @@ def build_for(disc, cache_dir=None, echo=None, real: Optional[str] = None) -> Pa
     root = cache.cache_root(cache_dir)
     out = root / "problems" / f"{disc.name}-{cache.problem_hash(disc, None, real)[:20]}"
     if not (out / f"{disc.name}_meta.json").is_file():
-        say(f"dopus-codegen: generating C for '{disc.name}' into {out}")
         files = render_folder(disc, None, real=real)
-        out.parent.mkdir(parents=True, exist_ok=True)
+        cache.writable_folder("problems", cache_dir)
+        say(f"dopus-codegen: generating C for '{disc.name}' into {out}")
         tmp = Path(tempfile.mkdtemp(prefix=f".{disc.name}-", dir=str(out.parent)))
         write_folder(files, tmp)
         try:
@@ -103,7 +103,12 @@ def build_for(disc, cache_dir=None, echo=None, real: Optional[str] = None) -> Pa
             import shutil
 
             shutil.rmtree(tmp, ignore_errors=True)
-    build(out, cache_dir=cache_dir, echo=say)
+    try:
+        build(out, cache_dir=cache_dir, echo=say)
+    except OSError as exc:
+        if not str(exc.filename or "").startswith(str(root)):
+            raise
+        raise cache.cache_error(root, exc) from None    # the folder in the cache could not be written
     with _LOCK:
         _DISC_CACHE[key] = (disc, out)
     return out
@@ -132,15 +137,20 @@ def load_library(folder) -> tuple:
     return ffi, lib, meta
 
 
-def _c_property(fname: str, kind=int, doc: Optional[str] = None) -> property:
-    """A read-only property: ``kind(<name>_<fname>(solver))``."""
-    return property(lambda self: kind(self._c(fname)(self._s)), doc=doc)
+def _info_property(field: str, kind=int, doc: Optional[str] = None) -> property:
+    """A read-only property: ``kind(info.field)`` of ``<name>_get_info``."""
+    return property(lambda self: kind(getattr(self._info(), field)), doc=doc)
+
+
+def _settings_property(field: str, kind=int, doc: Optional[str] = None) -> property:
+    """A read-only property: ``kind(settings.field)`` of ``<name>_get_settings``."""
+    return property(lambda self: kind(getattr(self._c_settings(), field)), doc=doc)
 
 
 def _setting_property(name: str) -> property:
-    """A read-only property: the value of the setting ``name`` (``<name>_get_<name>``) by
-    its name in :mod:`dopus_codegen.settings`."""
-    return property(lambda self: settings.value_of(name, self._c(f"get_{name}")(self._s)))
+    """A read-only property: the value of the setting ``name`` (a field of
+    ``<name>_settings``) by its name in :mod:`dopus_codegen.settings`."""
+    return property(lambda self: settings.value_of(name, getattr(self._c_settings(), name)))
 
 
 def _array_property(fname: str, shape, doc: Optional[str] = None) -> property:
@@ -207,10 +217,10 @@ class Solver:
         self.enums = vocabulary.generated_enums(str(self.lib_dir.resolve()), self.name)
         size = int(self._c("solver_sizeof")())
         self.sizeof = size
-        # doubles keep the struct 8-byte aligned; cffi zero-fills, the C side sets defaults
+        # doubles keep the struct 8-byte aligned; the C side's setup writes every field
         self._mem = self._ffi.new("double[]", (size + 7) // 8)
         self._s = self._ffi.cast(f"{self.name}_solver *", self._mem)
-        self._c("defaults")(self._s)
+        self._c("setup")(self._s, self._ffi.NULL)   # the generated settings (the OCP file's options)
         self.status = STATUS_OK
         if settings is None:
             settings = self._generated_settings() if opened_on_folder else settings_of_problem(disc)
@@ -258,7 +268,7 @@ class Solver:
         """The settings the solver runs with (``M`` as the runtime holds it: at most N-1)."""
         return Settings(M=self.M, hessian=self.hessian, regularization=self.regularization, reg_eps=self.reg_eps,
                         cost_hessian=self.cost_hessian, lm="auto" if self.lm_auto else self.lm, qp_tol=self.qp_tol,
-                        qp_max_iter=int(self._c("get_qp_max_iter")(self._s)), mode=self.mode)
+                        qp_max_iter=self.qp_max_iter, mode=self.mode)
 
     # ------------------------------------------------------------------ plumbing
     def _c(self, fname: str):
@@ -291,10 +301,10 @@ class Solver:
         qp_status = None
         msg = f"{self.name}: {what}: {self._status_text(status)} (status {status})"
         if status == STATUS_QP:
-            qp_status = int(self._c("get_qp_status")(self._s))
-            msg += "; " + qp_failure_text(self.enums["dopus_qp_status"].name(qp_status),
-                                          int(self._c("get_qp_iterations")(self._s)),
-                                          int(self._c("get_qp_max_iter")(self._s)), qp_status)
+            info = self._info()
+            qp_status = int(info.qp_status)
+            msg += "; " + qp_failure_text(self.enums["dopus_qp_status"].name(qp_status), int(info.qp_iterations),
+                                          self.qp_max_iter, qp_status)
             row = self.qp_infeasible_row
             if row is not None:
                 from ..problem.checks import describe_qp_row
@@ -369,66 +379,88 @@ class Solver:
         return self._setting(settings.positive, what, v)
 
     # ------------------------------------------------------------------ settings
+    def _c_settings(self):
+        """The C settings struct (``<name>_get_settings``), a fresh copy."""
+        st = self._ffi.new(f"{self.name}_settings *")
+        self._c("get_settings")(self._s, st)
+        return st
+
+    def _info(self):
+        """The C info struct (``<name>_get_info``), a fresh copy."""
+        info = self._ffi.new(f"{self.name}_info *")
+        self._c("get_info")(self._s, info)
+        return info
+
+    def update_settings_c(self, **fields) -> int:
+        """``<name>_update_settings`` with the current settings and ``fields`` changed, called
+        without the checks of the Python setters; returns the C status (for tests of the C
+        side's own checks)."""
+        st = self._c_settings()
+        for k, v in fields.items():
+            setattr(st, k, v)
+        return int(self._c("update_settings")(self._s, st))
+
+    def _update(self, what: str, **fields) -> None:
+        self._check(self.update_settings_c(**fields), what)
+
     def set_M(self, M: int) -> None:
         """Stages re-linearised per iteration; values above N-1 mean the full RTI (N-1),
         as in the reference (:func:`dopus_codegen.settings.stages`)."""
         stages = self._setting(settings.stages, M, self.N)
-        self._check(self._c("set_M")(self._s, stages), f"M={M!r}")
+        self._update(f"M={M!r}", M=stages)
 
     def set_mode(self, mode: str) -> None:
-        self._check(self._c("set_mode")(self._s, self._setting(settings.code, "mode", mode)), f"mode={mode!r}")
+        self._update(f"mode={mode!r}", mode=self._setting(settings.code, "mode", mode))
 
     def set_hessian(self, hessian: str) -> None:
         code = self._setting(settings.code, "hessian", hessian)
         if hessian == "gauss-newton" and not self.has_gn:
             self._bad("hessian='gauss-newton' needs a least-squares stage cost (the OCP declares no "
                       "stage_least_squares)")
-        self._check(self._c("set_hessian")(self._s, code), f"hessian={hessian!r}")
+        self._update(f"hessian={hessian!r}", hessian=code)
 
     def set_regularization(self, regularization: str, reg_eps: Optional[float] = None) -> None:
         code = self._setting(settings.code, "regularization", regularization)
         eps = self.reg_eps if reg_eps is None else self._positive(reg_eps, "reg_eps")
-        self._check(self._c("set_regularization")(self._s, code, eps),
-                    f"regularization={regularization!r}, reg_eps={reg_eps!r}")
+        self._update(f"regularization={regularization!r}, reg_eps={reg_eps!r}", regularization=code, reg_eps=eps)
 
     def set_cost_hessian(self, cost_hessian: str) -> None:
         """``"fresh"``: the stage-cost Hessian of every stage is refreshed in every prepare;
         ``"stored"``: the paper's literal algorithm (docs/algorithm.md section 4 step 5)."""
-        self._check(self._c("set_cost_hessian")(self._s, self._setting(settings.code, "cost_hessian", cost_hessian)),
-                    f"cost_hessian={cost_hessian!r}")
+        self._update(f"cost_hessian={cost_hessian!r}",
+                     cost_hessian=self._setting(settings.code, "cost_hessian", cost_hessian))
 
     def set_levenberg_marquardt(self, lm) -> None:
         """Levenberg-Marquardt term: the QP uses the Hessian blocks plus ``lm * I``
         (docs/algorithm.md section 3): ``"auto"`` for the automatic, adaptive term (section
-        10), or a fixed number >= 0."""
+        10; it restarts from 0), or a fixed number >= 0."""
         v = self._setting(settings.levenberg_marquardt, lm)
         if v == settings.LM_AUTO:
-            self._check(self._c("set_lm_auto")(self._s), "lm='auto'")
+            if self._c_settings().lm_auto:   # already on: restart it (off, then on)
+                self._update("lm='auto'", lm_auto=0, lm=0.0)
+            self._update("lm='auto'", lm_auto=1)
         else:
-            self._check(self._c("set_levenberg_marquardt")(self._s, v), f"lm={lm!r}")
+            self._update(f"lm={lm!r}", lm_auto=0, lm=v)
 
-    lm = _c_property("get_levenberg_marquardt", float,
-                     "The term of the next QP (fixed, or the current automatic value).")
-    lm_auto = _c_property("get_lm_auto", bool)
-    lm_scale = _c_property("get_lm_scale", float, "The Hessian scale of the automatic term (section 10).")
+    lm = _info_property("lm", float, "The term of the next QP (fixed, or the current automatic value).")
+    lm_auto = _settings_property("lm_auto", bool)
+    lm_scale = _info_property("lm_scale", float, "The Hessian scale of the automatic term (section 10).")
 
     def set_qp_tol(self, tol: float) -> None:
-        self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")
+        self._update("qp_tol", qp_tol=self._positive(tol, "qp_tol"))
 
     def set_qp_max_iter(self, max_iter: int) -> None:
-        self._check(self._c("set_qp_max_iter")(self._s, self._setting(settings.count, "qp_max_iter", max_iter, 1,
-                                                                      _INT_MAX)),
-                    "qp_max_iter")
+        self._update("qp_max_iter", qp_max_iter=self._setting(settings.count, "qp_max_iter", max_iter, 1, _INT_MAX))
 
     def set_qp_warm_start(self, on: bool) -> None:
         """Warm start of the QP in feedback (default on), with a cold retry when it fails."""
         if not isinstance(on, (bool, np.bool_)) and on not in (0, 1):
             self._bad(f"qp_warm_start must be True or False, got {on!r}")
-        self._check(self._c("set_qp_warm_start")(self._s, int(bool(on))), "qp_warm_start")
+        self._update("qp_warm_start", qp_warm_start=int(bool(on)))
 
-    qp_warm_start = _c_property("get_qp_warm_start", bool)
-    qp_cold_retry = _c_property("get_qp_cold_retry", bool,
-                                "True when the last feedback's warm-started QP failed and the cold retry ran.")
+    qp_warm_start = _settings_property("qp_warm_start", bool)
+    qp_cold_retry = _info_property("qp_cold_retry", bool,
+                                   "True when the last feedback's warm-started QP failed and the cold retry ran.")
 
     def _check_parameters(self, status: int, what: str) -> None:
         if int(status) == STATUS_ALREADY_PREPARED:
@@ -461,13 +493,14 @@ class Solver:
         a = self._array(pN, (self.np,), "parameters of the new last node")
         self._check_parameters(self._c("push_parameters")(self._s, self._ptr(a)), "push_parameters")
 
-    M = _c_property("get_M")
+    M = _settings_property("M")
     mode = _setting_property("mode")
     hessian = _setting_property("hessian")
     regularization = _setting_property("regularization")
     cost_hessian = _setting_property("cost_hessian")
-    reg_eps = _c_property("get_reg_eps", float)
-    qp_tol = _c_property("get_qp_tol", float)
+    reg_eps = _settings_property("reg_eps", float)
+    qp_tol = _settings_property("qp_tol", float)
+    qp_max_iter = _settings_property("qp_max_iter")
     p = _array_property("get_parameters", lambda s: (s.N + 1, s.np))
 
     # ------------------------------------------------------------------ the iteration
@@ -522,22 +555,22 @@ class Solver:
         k = self.recovery_failures if max_failures is None else max_failures
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= 2**31 - 1:
             self._bad(f"recovery max_failures must be an integer >= 1, got {max_failures!r}")
-        self._check(self._c("set_recovery")(self._s, int(bool(on)), int(k)), "set_recovery")
+        self._update("set_recovery", recovery=int(bool(on)), recovery_failures=int(k))
 
-    recovery = _c_property("get_recovery", bool)
-    recovery_failures = _c_property("get_recovery_failures")
+    recovery = _settings_property("recovery", bool)
+    recovery_failures = _settings_property("recovery_failures")
     u0 = _array_property("get_u0", lambda s: (s.n_u,), "The control returned by the last feedback (successful or not).")
 
     @property
     def flags(self) -> set:
         """The health flags of the last feedback and the prepare after it, by name:
         ``u0_clipped``, ``fallback``, ``diverged``, ``recovered``, ``predicted``."""
-        f = int(self._c("get_flags")(self._s))
+        f = int(self._info().flags)
         return {name for bit, name in FLAGS.items() if f & bit}
 
-    recoveries = _c_property("get_recoveries", int, "Re-initialisations by the automatic recovery since init.")
-    failed_feedbacks = _c_property("get_failed_feedbacks", int, "Consecutive failed feedbacks.")
-    kkt_proxy = _c_property("get_kkt_proxy", float, "The divergence measure of the last prepare or init (section 9).")
+    recoveries = _info_property("recoveries", int, "Re-initialisations by the automatic recovery since init.")
+    failed_feedbacks = _info_property("failed_feedbacks", int, "Consecutive failed feedbacks.")
+    kkt_proxy = _info_property("kkt_proxy", float, "The divergence measure of the last prepare or init (section 9).")
 
     @property
     def scales(self) -> tuple:
@@ -559,7 +592,7 @@ class Solver:
         return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
 
     # ------------------------------------------------------------------ read-only state
-    initialized = _c_property("is_initialized", bool)
+    initialized = _info_property("initialized", bool)
     x = _array_property("get_x", lambda s: (s.N + 1, s.nx))
     u = _array_property("get_u", lambda s: (s.N, s.n_u))
     lam = _array_property("get_lam", lambda s: (s.N + 1, s.nx))
@@ -576,9 +609,10 @@ class Solver:
         n = int(self._c("get_recomputed")(self._s, buf))
         return [int(buf[i]) for i in range(n)]
 
-    ring_head = _c_property("get_ring_head")
-    qp_iterations = _c_property("get_qp_iterations")
-    qp_status = _c_property("get_qp_status")
+    ring_head = _info_property("ring_head")
+    qp_iterations = _info_property("qp_iterations")
+    qp_status = _info_property("qp_status")
+    M_used = _info_property("M_used", int, "Stages the last prepare (or init) re-linearised besides stage N-1.")
 
     @property
     def qp_infeasible_row(self) -> Optional[dict]:
@@ -605,13 +639,27 @@ class Solver:
         p = self._c("row_name")(code, int(index))
         return None if p == self._ffi.NULL else self._ffi.string(p).decode()
 
+    def soft_slacks(self) -> dict:
+        """The slacks of the soft rows in the QP of the last feedback (read it before the next
+        prepare; dopus_get_soft_slacks): ``{"x": (N+1, nx), "g": (N, ng), "r": (nr,), "max"}``,
+        zeros on hard rows (docs/algorithm.md section 12)."""
+        N, nx, ng, nr = self.N, self.nx, self.ng, self.nr
+        vx, vg, vr = np.zeros((N + 1, nx)), np.zeros((N, max(ng, 1))), np.zeros(max(nr, 1))
+        real = f"{self.name}_real[]"
+        worst = self._c("get_soft_slacks")(self._s, self._ffi.from_buffer(real, vx),
+                                            self._ffi.from_buffer(real, vg), self._ffi.from_buffer(real, vr))
+        return {"x": vx, "g": vg[:, :ng], "r": vr[:nr], "max": float(worst)}
+
     @property
     def timings(self) -> dict:
+        """Seconds per phase of the last call that ran it (enum dopus_phase), plus
+        ``prepare`` = the sum of the phases of prepare, and the wall times of the last
+        feedback and prepare calls (``t_feedback``, ``t_prepare``)."""
         phases = self.enums["dopus_phase"].names()
-        t = np.zeros(len(phases))    # times are double in both precisions
-        self._c("get_timings")(self._s, self._ffi.from_buffer("double[]", t))
-        out = {name: float(v) for name, v in zip(phases, t)}
-        out["prepare"] = sum(out[k] for k in ("shift", "gradients", "rho", "hessians", "regularization", "assembly"))
+        info = self._info()
+        out = {name: float(info.timings[i]) for i, name in enumerate(phases)}   # double in both precisions
+        out["prepare"] = sum(v for k, v in out.items() if k not in ("feedback", "kkt"))
+        out["t_feedback"], out["t_prepare"] = float(info.t_feedback), float(info.t_prepare)
         return out
 
     def guess(self):
@@ -636,8 +684,8 @@ class Solver:
         self._clock_cb = cb
         self._c("set_clock")(self._s, cb, self._ffi.NULL)
 
-    has_clock = _c_property("has_clock", bool,
-                            "True if the timings measure time (False: no clock on this platform, they read 0).")
+    has_clock = _info_property("has_clock", bool,
+                               "True if the timings measure time (False: no clock on this platform, they read 0).")
 
     def __repr__(self) -> str:
         return (f"Solver({self.name!r}, N={self.N}, M={self.M}, mode={self.mode!r}, "

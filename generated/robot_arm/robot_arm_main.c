@@ -42,8 +42,8 @@ static int report(const char *phase, int iter, int status, const robot_arm_real 
  * next measurement is the model's prediction phi(x0, u0) */
 static int run(const char *phase, int mode)
 {
-    robot_arm_real xhat0[ROBOT_ARM_NX], xnext[ROBOT_ARM_NX], u0[ROBOT_ARM_NU], kkt4[4], l, g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-    const robot_arm_real *p_plant = robot_arm_p_default[0];
+    robot_arm_real xhat0[ROBOT_ARM_NX], xnext[ROBOT_ARM_NX], u0[ROBOT_ARM_NU], kkt4[4];
+    robot_arm_settings settings;
     int i, k, status;
 
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -52,8 +52,9 @@ static int run(const char *phase, int mode)
     for (i = 0; i < ROBOT_ARM_NU; ++i) {
         u0[i] = ROBOT_ARM_R(0.0);
     }
-    robot_arm_defaults(&solver);
-    status = robot_arm_set_mode(&solver, mode);
+    robot_arm_settings_default(&settings); /* the OCP file's options */
+    settings.mode = mode;
+    status = robot_arm_setup(&solver, &settings);
 #if ROBOT_ARM_HAS_NOMINAL
     if (status == ROBOT_ARM_OK) {
         status = robot_arm_init_nominal(&solver, xhat0);
@@ -73,15 +74,16 @@ static int run(const char *phase, int mode)
     for (k = 1; k <= ITERATIONS; ++k) {
         status = robot_arm_feedback(&solver, xhat0, u0);
         if (status == ROBOT_ARM_OK && mode == ROBOT_ARM_MODE_RECEDING) {
+            const robot_arm_real *p_plant = 0; /* the default parameters */
 #if ROBOT_ARM_HAS_P_SCHEDULE
-            /* the instant t = (k - 1) dt; the next horizon ends at k dt + N dt */
+            /* a moving reference: the instant t = (k - 1) dt; the next horizon ends at k dt + N dt */
             p_plant = robot_arm_p_schedule[k - 1];
             status = robot_arm_push_parameters(&solver, robot_arm_p_schedule[k + ROBOT_ARM_N]);
             if (status != ROBOT_ARM_OK) {
                 return report(phase, k, status, u0, kkt4);
             }
 #endif
-            if (robot_arm_eval_stage_eval(xhat0, u0, p_plant, xnext, &l, g, &plant_work)) {
+            if (robot_arm_simulate(xhat0, u0, p_plant, xnext, &plant_work) != ROBOT_ARM_OK) {
                 fprintf(stderr, "main_dopus: the model failed to evaluate\n");
                 return 1;
             }

@@ -1,5 +1,7 @@
-/* Problem data generated from the OCP file (robot_arm_problem.c): bounds, defaults, the initial
- * guess and, when the OCP asks for it, the offline primal-dual solution at the default x0.
+/* Problem data generated from the OCP file (robot_arm_problem.c), public and read-only: bounds,
+ * the default parameters and x0, the initial guess and, when the OCP asks for it, the
+ * offline primal-dual solution at the default x0. (The OCP file's options are the generated
+ * settings, robot_arm_settings_default of robot_arm_solver.h, also in robot_arm_problem.c.)
  *
  * Infinite bounds are INFINITY / -INFINITY; the runtime treats them as "no bound on that side"
  * (docs/algorithm.md section 1). Sizes of possibly empty arrays use ROBOT_ARM_DIM so that every
@@ -36,12 +38,6 @@ extern const char *const robot_arm_row_names_req[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
  * applied value of control robot_arm_memory_control[i] */
 extern const int robot_arm_memory_state[ROBOT_ARM_DIM(ROBOT_ARM_NMEM)];
 extern const int robot_arm_memory_control[ROBOT_ARM_DIM(ROBOT_ARM_NMEM)];
-extern const int robot_arm_default_M;
-extern const int robot_arm_default_hessian;        /* 0 exact, 1 gauss-newton */
-extern const int robot_arm_default_regularization; /* 0 none, 1 project, 2 mirror */
-extern const robot_arm_real robot_arm_default_reg_eps;
-extern const int robot_arm_default_cost_hessian; /* 1 fresh, 0 stored */
-extern const robot_arm_real robot_arm_default_lm;    /* Levenberg-Marquardt term, >= 0 */
 
 #if ROBOT_ARM_HAS_P_SCHEDULE
 /* the parameters at t = j dt, j = 0..ROBOT_ARM_P_SCHEDULE_NODES-1, from the OCP file's

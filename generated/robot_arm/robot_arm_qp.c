@@ -229,18 +229,23 @@ static int setup_bounds(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
              * stage 0 that do not involve u_0 (their value is data; a multiplier on them is
              * not unique, lam_0 absorbs any value, and a violation by round-off in x0 could
              * never be removed) */
-            int ignored = (i < NX), hl, hu;
-            robot_arm_real lo, up;
+            int ignored = (i < NX), data = 0, hl, hu;
+            robot_arm_real lo, up, w[4] = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
             if (NG > 0 && i >= NW && i < NW + NG) {
                 int c;
-                ignored = 1;
+                data = 1;
                 for (c = NX; c < NW; ++c)
                     if (in->C[0][(i - NW) + c * NG] != ROBOT_ARM_R(0.0))
-                        ignored = 0;
+                        data = 0;
+                ignored = data;
             }
+            if (SOFT)
+                soft_weights(in, i, w);
             row_bounds(in, i, &lo, &up);
-            hl = !ignored && isfinite(lo);
-            hu = !ignored && isfinite(up);
+            /* a soft side of such a data row stays: its slack takes up the violation and its
+             * multiplier, zl + Zl s, is unique */
+            hl = isfinite(lo) && (!ignored || (SOFT && data && (w[0] > ROBOT_ARM_R(0.0) || w[2] > ROBOT_ARM_R(0.0))));
+            hu = isfinite(up) && (!ignored || (SOFT && data && (w[1] > ROBOT_ARM_R(0.0) || w[3] > ROBOT_ARM_R(0.0))));
             if (!hl && !hu)
                 continue;
             if (nb >= ROBOT_ARM_QP_NB)
@@ -249,8 +254,6 @@ static int setup_bounds(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
             ws->has_lo[nb] = (unsigned char)hl;
             ws->has_up[nb] = (unsigned char)hu;
             if (SOFT) {
-                robot_arm_real w[4];
-                soft_weights(in, i, w);
                 ws->soft_lo[nb] = (unsigned char)(hl && (w[0] > ROBOT_ARM_R(0.0) || w[2] > ROBOT_ARM_R(0.0)));
                 ws->soft_up[nb] = (unsigned char)(hu && (w[1] > ROBOT_ARM_R(0.0) || w[3] > ROBOT_ARM_R(0.0)));
             }
@@ -405,6 +408,12 @@ static robot_arm_real soft_f(robot_arm_real q, robot_arm_real p, robot_arm_real 
     return (Z + p) / (Z + q + p);
 }
 
+/* p = y/s of a soft side (flag 1). */
+static robot_arm_real soft_p(unsigned char flag, robot_arm_real y, robot_arm_real sl)
+{
+    return flag == 1 ? y / sl : ROBOT_ARM_R(0.0);
+}
+
 static robot_arm_real soft_l2(const robot_arm_qp_in *in, const robot_arm_qp_workspace *ws, int b, int upper)
 {
     robot_arm_real w[4];
@@ -417,11 +426,15 @@ static robot_arm_real row_q(const robot_arm_qp_workspace *ws, const robot_arm_qp
     robot_arm_real q = ROBOT_ARM_R(0.0);
     if (ws->has_lo[b]) {
         const robot_arm_real ql = ws->z_lo[b] / ws->t_lo[b];
-        q += SOFT && ws->soft_lo[b] ? ql * soft_f(ql, ws->y_lo[b] / ws->s_lo[b], soft_l2(in, ws, b, 0)) : ql;
+        q += SOFT && ws->soft_lo[b]
+                 ? ql * soft_f(ql, soft_p(ws->soft_lo[b], ws->y_lo[b], ws->s_lo[b]), soft_l2(in, ws, b, 0))
+                 : ql;
     }
     if (ws->has_up[b]) {
         const robot_arm_real qu = ws->z_up[b] / ws->t_up[b];
-        q += SOFT && ws->soft_up[b] ? qu * soft_f(qu, ws->y_up[b] / ws->s_up[b], soft_l2(in, ws, b, 1)) : qu;
+        q += SOFT && ws->soft_up[b]
+                 ? qu * soft_f(qu, soft_p(ws->soft_up[b], ws->y_up[b], ws->s_up[b]), soft_l2(in, ws, b, 1))
+                 : qu;
     }
     return q;
 }
@@ -562,20 +575,24 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
                 if (ws->soft_lo[b]) {
                     ws->rs_lo[b] = w[2] * ws->s_lo[b] + w[0] - ws->z_lo[b] - ws->y_lo[b];
                     rs_max = dmax(rs_max, robot_arm_fabs(ws->rs_lo[b]));
-                    s_stat = dmax(s_stat, dmax(w[0], w[2] * ws->s_lo[b]));
-                    comp = dmax(comp, ws->s_lo[b] * ws->y_lo[b]);
-                    sum_c += ws->s_lo[b] * ws->y_lo[b];
-                    nz = dmax(nz, ws->y_lo[b]);
-                    ++m;
+                    s_stat = dmax(s_stat, dmax(w[0], w[2] * robot_arm_fabs(ws->s_lo[b])));
+                    if (ws->soft_lo[b] == 1) {
+                        comp = dmax(comp, ws->s_lo[b] * ws->y_lo[b]);
+                        sum_c += ws->s_lo[b] * ws->y_lo[b];
+                        nz = dmax(nz, ws->y_lo[b]);
+                        ++m;
+                    }
                 }
                 if (ws->soft_up[b]) {
                     ws->rs_up[b] = w[3] * ws->s_up[b] + w[1] - ws->z_up[b] - ws->y_up[b];
                     rs_max = dmax(rs_max, robot_arm_fabs(ws->rs_up[b]));
-                    s_stat = dmax(s_stat, dmax(w[1], w[3] * ws->s_up[b]));
-                    comp = dmax(comp, ws->s_up[b] * ws->y_up[b]);
-                    sum_c += ws->s_up[b] * ws->y_up[b];
-                    nz = dmax(nz, ws->y_up[b]);
-                    ++m;
+                    s_stat = dmax(s_stat, dmax(w[1], w[3] * robot_arm_fabs(ws->s_up[b])));
+                    if (ws->soft_up[b] == 1) {
+                        comp = dmax(comp, ws->s_up[b] * ws->y_up[b]);
+                        sum_c += ws->s_up[b] * ws->y_up[b];
+                        nz = dmax(nz, ws->y_up[b]);
+                        ++m;
+                    }
                 }
             }
             s_ineq = dmax(s_ineq, robot_arm_fabs(v));
@@ -1017,12 +1034,16 @@ static robot_arm_real rc_up(const robot_arm_qp_workspace *ws, int b, const qp_ce
     return rc;
 }
 
-/* rcs of the pair s y of a soft side, as rc_lo and rc_up for t z. */
+/* rcs of the pair s y of a soft side, as rc_lo and rc_up for t z but without Mehrotra's
+ * second-order term: with it, a two-sided soft row whose sides are both nearly active (a
+ * soft equality row met at the solution) made the corrector cycle between a long and a
+ * blocked step (a closed-loop QP of tests/test_soft.py at its iteration limit; without it
+ * 17 iterations). */
 static robot_arm_real rcs_lo(const robot_arm_qp_workspace *ws, int b, const qp_centring *cc)
 {
     robot_arm_real rc = ws->s_lo[b] * ws->y_lo[b];
     if (cc->corrector)
-        rc += cc->eta * ws->ds_lo[b] * ws->dy_lo[b] - cc->target;
+        rc -= cc->target;
     return rc;
 }
 
@@ -1030,7 +1051,7 @@ static robot_arm_real rcs_up(const robot_arm_qp_workspace *ws, int b, const qp_c
 {
     robot_arm_real rc = ws->s_up[b] * ws->y_up[b];
     if (cc->corrector)
-        rc += cc->eta * ws->ds_up[b] * ws->dy_up[b] - cc->target;
+        rc -= cc->target;
     return rc;
 }
 
@@ -1042,9 +1063,10 @@ static robot_arm_real side_rhs_lo(const robot_arm_qp_workspace *ws, const robot_
 {
     const robot_arm_real a = (rc_lo(ws, b, cc) + ws->z_lo[b] * r_lo(ws, b)) / ws->t_lo[b];
     if (SOFT && ws->soft_lo[b]) {
-        const robot_arm_real q = ws->z_lo[b] / ws->t_lo[b], p = ws->y_lo[b] / ws->s_lo[b];
+        const robot_arm_real q = ws->z_lo[b] / ws->t_lo[b], p = soft_p(ws->soft_lo[b], ws->y_lo[b], ws->s_lo[b]);
         const robot_arm_real Z = soft_l2(in, ws, b, 0);
-        return ((Z + p) * a - q * (ws->rs_lo[b] + rcs_lo(ws, b, cc) / ws->s_lo[b])) / (Z + q + p);
+        const robot_arm_real rcs = ws->soft_lo[b] == 1 ? rcs_lo(ws, b, cc) / ws->s_lo[b] : ROBOT_ARM_R(0.0);
+        return ((Z + p) * a - q * (ws->rs_lo[b] + rcs)) / (Z + q + p);
     }
     return a;
 }
@@ -1054,9 +1076,10 @@ static robot_arm_real side_rhs_up(const robot_arm_qp_workspace *ws, const robot_
 {
     const robot_arm_real a = (rc_up(ws, b, cc) + ws->z_up[b] * r_up(ws, b)) / ws->t_up[b];
     if (SOFT && ws->soft_up[b]) {
-        const robot_arm_real q = ws->z_up[b] / ws->t_up[b], p = ws->y_up[b] / ws->s_up[b];
+        const robot_arm_real q = ws->z_up[b] / ws->t_up[b], p = soft_p(ws->soft_up[b], ws->y_up[b], ws->s_up[b]);
         const robot_arm_real Z = soft_l2(in, ws, b, 1);
-        return ((Z + p) * a - q * (ws->rs_up[b] + rcs_up(ws, b, cc) / ws->s_up[b])) / (Z + q + p);
+        const robot_arm_real rcs = ws->soft_up[b] == 1 ? rcs_up(ws, b, cc) / ws->s_up[b] : ROBOT_ARM_R(0.0);
+        return ((Z + p) * a - q * (ws->rs_up[b] + rcs)) / (Z + q + p);
     }
     return a;
 }
@@ -1120,22 +1143,26 @@ static void newton_direction(robot_arm_qp_workspace *ws, const robot_arm_qp_in *
             /* rc from the previous (predictor) direction, before it is overwritten */
             const robot_arm_real rcl = ws->has_lo[b] ? rc_lo(ws, b, cc) : ROBOT_ARM_R(0.0);
             const robot_arm_real rcu = ws->has_up[b] ? rc_up(ws, b, cc) : ROBOT_ARM_R(0.0);
-            const robot_arm_real rcsl = SOFT && ws->soft_lo[b] ? rcs_lo(ws, b, cc) : ROBOT_ARM_R(0.0);
-            const robot_arm_real rcsu = SOFT && ws->soft_up[b] ? rcs_up(ws, b, cc) : ROBOT_ARM_R(0.0);
+            const robot_arm_real rcsl = SOFT && ws->soft_lo[b] == 1 ? rcs_lo(ws, b, cc) : ROBOT_ARM_R(0.0);
+            const robot_arm_real rcsu = SOFT && ws->soft_up[b] == 1 ? rcs_up(ws, b, cc) : ROBOT_ARM_R(0.0);
             ws->dv[b] = row_dot(in, k, j, ws->d_prim + k * NW);
             if (SOFT && ws->soft_lo[b]) {
-                const robot_arm_real q = ws->z_lo[b] / ws->t_lo[b], p = ws->y_lo[b] / ws->s_lo[b];
+                const robot_arm_real q = ws->z_lo[b] / ws->t_lo[b];
+                const robot_arm_real p = soft_p(ws->soft_lo[b], ws->y_lo[b], ws->s_lo[b]);
                 const robot_arm_real a = (rcl + ws->z_lo[b] * r_lo(ws, b)) / ws->t_lo[b];
-                ws->ds_lo[b] = -(ws->rs_lo[b] + rcsl / ws->s_lo[b] + a + q * ws->dv[b]) /
-                               (soft_l2(in, ws, b, 0) + q + p);
-                ws->dy_lo[b] = -(rcsl + ws->y_lo[b] * ws->ds_lo[b]) / ws->s_lo[b];
+                const robot_arm_real rcs = ws->soft_lo[b] == 1 ? rcsl / ws->s_lo[b] : ROBOT_ARM_R(0.0);
+                ws->ds_lo[b] = -(ws->rs_lo[b] + rcs + a + q * ws->dv[b]) / (soft_l2(in, ws, b, 0) + q + p);
+                ws->dy_lo[b] =
+                    ws->soft_lo[b] == 1 ? -(rcsl + ws->y_lo[b] * ws->ds_lo[b]) / ws->s_lo[b] : ROBOT_ARM_R(0.0);
             }
             if (SOFT && ws->soft_up[b]) {
-                const robot_arm_real q = ws->z_up[b] / ws->t_up[b], p = ws->y_up[b] / ws->s_up[b];
+                const robot_arm_real q = ws->z_up[b] / ws->t_up[b];
+                const robot_arm_real p = soft_p(ws->soft_up[b], ws->y_up[b], ws->s_up[b]);
                 const robot_arm_real a = (rcu + ws->z_up[b] * r_up(ws, b)) / ws->t_up[b];
-                ws->ds_up[b] = -(ws->rs_up[b] + rcsu / ws->s_up[b] + a - q * ws->dv[b]) /
-                               (soft_l2(in, ws, b, 1) + q + p);
-                ws->dy_up[b] = -(rcsu + ws->y_up[b] * ws->ds_up[b]) / ws->s_up[b];
+                const robot_arm_real rcs = ws->soft_up[b] == 1 ? rcsu / ws->s_up[b] : ROBOT_ARM_R(0.0);
+                ws->ds_up[b] = -(ws->rs_up[b] + rcs + a - q * ws->dv[b]) / (soft_l2(in, ws, b, 1) + q + p);
+                ws->dy_up[b] =
+                    ws->soft_up[b] == 1 ? -(rcsu + ws->y_up[b] * ws->ds_up[b]) / ws->s_up[b] : ROBOT_ARM_R(0.0);
             }
             if (ws->has_lo[b])
                 ws->dz_lo[b] = -(rcl + ws->z_lo[b] * dt_lo(ws, b)) / ws->t_lo[b];
@@ -1165,13 +1192,13 @@ static void max_steps(const robot_arm_qp_workspace *ws, robot_arm_real *ap, robo
             if (ws->dz_up[i] < ROBOT_ARM_R(0.0))
                 d = dmin(d, -ws->z_up[i] / ws->dz_up[i]);
         }
-        if (SOFT && ws->soft_lo[i]) {
+        if (SOFT && ws->soft_lo[i] == 1) {
             if (ws->ds_lo[i] < ROBOT_ARM_R(0.0))
                 a = dmin(a, -ws->s_lo[i] / ws->ds_lo[i]);
             if (ws->dy_lo[i] < ROBOT_ARM_R(0.0))
                 d = dmin(d, -ws->y_lo[i] / ws->dy_lo[i]);
         }
-        if (SOFT && ws->soft_up[i]) {
+        if (SOFT && ws->soft_up[i] == 1) {
             if (ws->ds_up[i] < ROBOT_ARM_R(0.0))
                 a = dmin(a, -ws->s_up[i] / ws->ds_up[i]);
             if (ws->dy_up[i] < ROBOT_ARM_R(0.0))
@@ -1478,9 +1505,10 @@ static void initial_point(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
                     robot_arm_real w[4];
                     soft_weights(in, ws->bidx[b], w);
                     ws->s_lo[b] = sl;
-                    ws->y_lo[b] = warm      ? dmax(w[0] + w[2] * sl - ws->z_lo[b], WARM_FLOOR_Z)
-                                  : centred ? floor_c / sl
-                                            : ROBOT_ARM_R(1.0);
+                    ws->y_lo[b] = ws->soft_lo[b] != 1 ? ROBOT_ARM_R(0.0)
+                                  : warm              ? dmax(w[0] + w[2] * sl - ws->z_lo[b], WARM_FLOOR_Z)
+                                  : centred           ? floor_c / sl
+                                                      : ROBOT_ARM_R(1.0);
                 }
             }
             if (ws->has_up[b]) {
@@ -1495,9 +1523,10 @@ static void initial_point(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
                     robot_arm_real w[4];
                     soft_weights(in, ws->bidx[b], w);
                     ws->s_up[b] = su;
-                    ws->y_up[b] = warm      ? dmax(w[1] + w[3] * su - ws->z_up[b], WARM_FLOOR_Z)
-                                  : centred ? floor_c / su
-                                            : ROBOT_ARM_R(1.0);
+                    ws->y_up[b] = ws->soft_up[b] != 1 ? ROBOT_ARM_R(0.0)
+                                  : warm              ? dmax(w[1] + w[3] * su - ws->z_up[b], WARM_FLOOR_Z)
+                                  : centred           ? floor_c / su
+                                                      : ROBOT_ARM_R(1.0);
                 }
             }
         }
@@ -1885,9 +1914,9 @@ static robot_arm_real qp_predictor(robot_arm_qp_workspace *ws, const robot_arm_q
             mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha_d * ws->dz_lo[i]);
         if (ws->has_up[i])
             mu_aff += (ws->t_up[i] + alpha * dt_up(ws, i)) * (ws->z_up[i] + alpha_d * ws->dz_up[i]);
-        if (SOFT && ws->soft_lo[i])
+        if (SOFT && ws->soft_lo[i] == 1)
             mu_aff += (ws->s_lo[i] + alpha * ws->ds_lo[i]) * (ws->y_lo[i] + alpha_d * ws->dy_lo[i]);
-        if (SOFT && ws->soft_up[i])
+        if (SOFT && ws->soft_up[i] == 1)
             mu_aff += (ws->s_up[i] + alpha * ws->ds_up[i]) * (ws->y_up[i] + alpha_d * ws->dy_up[i]);
     }
     return mu_aff / r->nsides;

@@ -4,8 +4,9 @@
 #include "unicycle_kkt.h"
 #include "unicycle_linalg.h"
 #include "unicycle_problem.h"
-#include "unicycle_solver.h"
-#include "unicycle_solver_internal.h"
+
+#define NG1 UNICYCLE_DIM(UNICYCLE_NG)
+#define NP1 UNICYCLE_DIM(UNICYCLE_NP)
 
 static unicycle_real unicycle_kkt_max(unicycle_real a, unicycle_real b)
 {
@@ -34,9 +35,10 @@ static unicycle_real unicycle_kkt_comp(unicycle_real mu, unicycle_real v, unicyc
 
 #if UNICYCLE_NSOFT > 0
 /* A row with soft weights w (w[0 .. 3 * stride]: L1 lower, L1 upper, L2 lower, L2 upper):
- * a hard side as above; a soft side with violation s = max(0, lb - v) needs its multiplier
- * m in [0, l1 + l2 s], m (v - lb)^+ = 0 and (l1 + l2 s - m) s = 0 (docs/algorithm.md
- * section 12), each violation into comp. */
+ * a hard side as above; a soft side with multiplier m at its best slack s = max(s0, (m - l1)
+ * / l2) (s0 = max(0, lb - v) the violation; s = s0 when l2 = 0), where the slack's
+ * stationarity l1 + l2 s - m = y must be >= 0, with the complementarity m (v - lb + s) and y s
+ * (docs/algorithm.md section 12), each into comp. */
 static void unicycle_kkt_row(unicycle_real v, unicycle_real lb, unicycle_real ub, unicycle_real mu, const unicycle_real *w,
                           int stride, unicycle_real *ineq, unicycle_real *comp)
 {
@@ -50,14 +52,18 @@ static void unicycle_kkt_row(unicycle_real v, unicycle_real lb, unicycle_real ub
     for (side = 0; side < 2; ++side) {
         const unicycle_real m = unicycle_kkt_max(side ? mu : -mu, UNICYCLE_R(0.0));
         const unicycle_real gap = side ? ub - v : v - lb;
-        const unicycle_real sl = unicycle_kkt_max(UNICYCLE_R(0.0), -gap);
-        const unicycle_real cap = w[side * stride] + w[(2 + side) * stride] * sl;
+        const unicycle_real l1 = w[side * stride], l2 = w[(2 + side) * stride];
+        unicycle_real sl = unicycle_kkt_max(UNICYCLE_R(0.0), -gap), y;
         if (!(side ? sup : slo)) {
             continue;
         }
-        *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), m - cap));
-        *comp = unicycle_kkt_max(*comp, m * unicycle_kkt_max(UNICYCLE_R(0.0), gap));
-        *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), cap - m) * sl);
+        if (l2 > UNICYCLE_R(0.0)) {
+            sl = unicycle_kkt_max(sl, (m - l1) / l2);
+        }
+        y = l1 + l2 * sl - m;
+        *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), -y));
+        *comp = unicycle_kkt_max(*comp, m * (gap + sl));
+        *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), y) * sl);
     }
 }
 #define UNICYCLE_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
@@ -70,73 +76,81 @@ static void unicycle_kkt_row(unicycle_real v, unicycle_real lb, unicycle_real ub
     } while (0)
 #endif
 
-int unicycle_kkt_measure(struct unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *parts)
+int unicycle_kkt_measure(const unicycle_real *x, const unicycle_real *u, const unicycle_real *lam, const unicycle_real *mu_g,
+                      const unicycle_real *mu_b, const unicycle_real *mu_bN, const unicycle_real *mu_r,
+                      const unicycle_real *nu, const unicycle_real *p, const unicycle_real *xhat0,
+                      unicycle_fun_work *work, unicycle_real *parts)
 {
     unicycle_real stat = UNICYCLE_R(0.0), eq = UNICYCLE_R(0.0), ineq = UNICYCLE_R(0.0), comp = UNICYCLE_R(0.0);
     unicycle_real gL[UNICYCLE_NW], phi[UNICYCLE_NX], g[UNICYCLE_DIM(UNICYCLE_NG)], l;
     unicycle_real gLN[UNICYCLE_NX], E, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
-    int k, i, rc;
+    int k, i;
 
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        eq = unicycle_kkt_max(eq, unicycle_fabs(s->x[0][i] - xhat0[i]));
+        eq = unicycle_kkt_max(eq, unicycle_fabs(x[i] - xhat0[i]));
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
-        if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
-                                  &s->mem.ev.fun_work) != 0) {
-            return UNICYCLE_ERR_FUNCTION;
+        if (unicycle_eval_stage_grad(x + k * UNICYCLE_NX, u + k * UNICYCLE_NU, p + k * NP1, lam + (k + 1) * UNICYCLE_NX,
+                                  mu_g + k * NG1, gL, phi, &l, g, work) != 0) {
+            return UNICYCLE_KKT_FUNCTION;
         }
         if (!unicycle_lai_vec_finite(UNICYCLE_NW, gL) || !unicycle_lai_vec_finite(UNICYCLE_NX, phi) ||
             !unicycle_lai_vec_finite(UNICYCLE_NG, g) || !isfinite(l)) {
-            return UNICYCLE_ERR_NONFINITE_VALUE;
+            return UNICYCLE_KKT_NONFINITE;
         }
         /* stationarity gL_k + mu_b_k + [lam_k; 0] */
         for (i = 0; i < UNICYCLE_NW; ++i) {
-            unicycle_real v = gL[i] + s->mu_b[k][i] + (i < UNICYCLE_NX ? s->lam[k][i] : UNICYCLE_R(0.0));
+            unicycle_real v =
+                gL[i] + mu_b[k * UNICYCLE_NW + i] + (i < UNICYCLE_NX ? lam[k * UNICYCLE_NX + i] : UNICYCLE_R(0.0));
             stat = unicycle_kkt_max(stat, unicycle_fabs(v));
         }
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            eq = unicycle_kkt_max(eq, unicycle_fabs(s->x[k + 1][i] - phi[i]));
+            eq = unicycle_kkt_max(eq, unicycle_fabs(x[(k + 1) * UNICYCLE_NX + i] - phi[i]));
         }
         for (i = 0; i < UNICYCLE_NG; ++i) {
-            UNICYCLE_KKT_ROW(g[i], unicycle_lg_k[k][i], unicycle_ug_k[k][i], s->mu_g[k][i], &unicycle_soft_g[0][i],
+            UNICYCLE_KKT_ROW(g[i], unicycle_lg_k[k][i], unicycle_ug_k[k][i], mu_g[k * NG1 + i], &unicycle_soft_g[0][i],
                           UNICYCLE_DIM(UNICYCLE_NG));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
          * sides and counts with its magnitude) */
-        if (!unicycle_x_bounded(k)) {
+        if (k == 0) {
             for (i = 0; i < UNICYCLE_NX; ++i) {
-                comp = unicycle_kkt_max(comp, unicycle_fabs(s->mu_b[0][i]));
+                comp = unicycle_kkt_max(comp, unicycle_fabs(mu_b[i]));
             }
         } else {
             for (i = 0; i < UNICYCLE_NX; ++i) {
-                UNICYCLE_KKT_ROW(s->x[k][i], unicycle_lbx[i], unicycle_ubx[i], s->mu_b[k][i], &unicycle_soft_x[0][i],
-                              UNICYCLE_NX);
+                UNICYCLE_KKT_ROW(x[k * UNICYCLE_NX + i], unicycle_lbx[i], unicycle_ubx[i], mu_b[k * UNICYCLE_NW + i],
+                              &unicycle_soft_x[0][i], UNICYCLE_NX);
             }
         }
         for (i = 0; i < UNICYCLE_NU; ++i) {
-            ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->u[k][i], unicycle_lbu[i], unicycle_ubu[i]));
-            comp = unicycle_kkt_max(
-                comp, unicycle_kkt_comp(s->mu_b[k][UNICYCLE_NX + i], s->u[k][i], unicycle_lbu[i], unicycle_ubu[i]));
+            ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(u[k * UNICYCLE_NU + i], unicycle_lbu[i], unicycle_ubu[i]));
+            comp = unicycle_kkt_max(comp, unicycle_kkt_comp(mu_b[k * UNICYCLE_NW + UNICYCLE_NX + i], u[k * UNICYCLE_NU + i],
+                                                      unicycle_lbu[i], unicycle_ubu[i]));
         }
     }
-    rc = unicycle_term_grad_checked(s, gLN, &E, r, r_eq);
-    if (rc != UNICYCLE_OK) {
-        return rc;
+    if (unicycle_eval_term_grad(x + UNICYCLE_N * UNICYCLE_NX, p + UNICYCLE_N * NP1, mu_r, nu, gLN, &E, r, r_eq, work) !=
+        0) {
+        return UNICYCLE_KKT_FUNCTION;
+    }
+    if (!unicycle_lai_vec_finite(UNICYCLE_NX, gLN) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NE, r_eq)) {
+        return UNICYCLE_KKT_NONFINITE;
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        stat = unicycle_kkt_max(stat, unicycle_fabs(gLN[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]));
-        UNICYCLE_KKT_ROW(s->x[UNICYCLE_N][i], unicycle_lbx[i], unicycle_ubx[i], s->mu_bN[i], &unicycle_soft_x[0][i],
+        stat = unicycle_kkt_max(stat, unicycle_fabs(gLN[i] + mu_bN[i] + lam[UNICYCLE_N * UNICYCLE_NX + i]));
+        UNICYCLE_KKT_ROW(x[UNICYCLE_N * UNICYCLE_NX + i], unicycle_lbx[i], unicycle_ubx[i], mu_bN[i], &unicycle_soft_x[0][i],
                       UNICYCLE_NX);
     }
     for (i = 0; i < UNICYCLE_NE; ++i) {
         eq = unicycle_kkt_max(eq, unicycle_fabs(r_eq[i]));
     }
     for (i = 0; i < UNICYCLE_NR; ++i) {
-        UNICYCLE_KKT_ROW(r[i], unicycle_lr[i], unicycle_ur[i], s->mu_r[i], &unicycle_soft_r[0][i], UNICYCLE_DIM(UNICYCLE_NR));
+        UNICYCLE_KKT_ROW(r[i], unicycle_lr[i], unicycle_ur[i], mu_r[i], &unicycle_soft_r[0][i], UNICYCLE_DIM(UNICYCLE_NR));
     }
     parts[0] = stat;
     parts[1] = eq;
     parts[2] = ineq;
     parts[3] = comp;
-    return UNICYCLE_OK;
+    return UNICYCLE_KKT_OK;
 }

@@ -42,8 +42,8 @@ static int report(const char *phase, int iter, int status, const unicycle_real *
  * next measurement is the model's prediction phi(x0, u0) */
 static int run(const char *phase, int mode)
 {
-    unicycle_real xhat0[UNICYCLE_NX], xnext[UNICYCLE_NX], u0[UNICYCLE_NU], kkt4[4], l, g[UNICYCLE_DIM(UNICYCLE_NG)];
-    const unicycle_real *p_plant = unicycle_p_default[0];
+    unicycle_real xhat0[UNICYCLE_NX], xnext[UNICYCLE_NX], u0[UNICYCLE_NU], kkt4[4];
+    unicycle_settings settings;
     int i, k, status;
 
     for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -52,8 +52,9 @@ static int run(const char *phase, int mode)
     for (i = 0; i < UNICYCLE_NU; ++i) {
         u0[i] = UNICYCLE_R(0.0);
     }
-    unicycle_defaults(&solver);
-    status = unicycle_set_mode(&solver, mode);
+    unicycle_settings_default(&settings); /* the OCP file's options */
+    settings.mode = mode;
+    status = unicycle_setup(&solver, &settings);
 #if UNICYCLE_HAS_NOMINAL
     if (status == UNICYCLE_OK) {
         status = unicycle_init_nominal(&solver, xhat0);
@@ -73,15 +74,16 @@ static int run(const char *phase, int mode)
     for (k = 1; k <= ITERATIONS; ++k) {
         status = unicycle_feedback(&solver, xhat0, u0);
         if (status == UNICYCLE_OK && mode == UNICYCLE_MODE_RECEDING) {
+            const unicycle_real *p_plant = 0; /* the default parameters */
 #if UNICYCLE_HAS_P_SCHEDULE
-            /* the instant t = (k - 1) dt; the next horizon ends at k dt + N dt */
+            /* a moving reference: the instant t = (k - 1) dt; the next horizon ends at k dt + N dt */
             p_plant = unicycle_p_schedule[k - 1];
             status = unicycle_push_parameters(&solver, unicycle_p_schedule[k + UNICYCLE_N]);
             if (status != UNICYCLE_OK) {
                 return report(phase, k, status, u0, kkt4);
             }
 #endif
-            if (unicycle_eval_stage_eval(xhat0, u0, p_plant, xnext, &l, g, &plant_work)) {
+            if (unicycle_simulate(xhat0, u0, p_plant, xnext, &plant_work) != UNICYCLE_OK) {
                 fprintf(stderr, "main_dopus: the model failed to evaluate\n");
                 return 1;
             }

@@ -1,5 +1,7 @@
-/* Problem data generated from the OCP file (unicycle_problem.c): bounds, defaults, the initial
- * guess and, when the OCP asks for it, the offline primal-dual solution at the default x0.
+/* Problem data generated from the OCP file (unicycle_problem.c), public and read-only: bounds,
+ * the default parameters and x0, the initial guess and, when the OCP asks for it, the
+ * offline primal-dual solution at the default x0. (The OCP file's options are the generated
+ * settings, unicycle_settings_default of unicycle_solver.h, also in unicycle_problem.c.)
  *
  * Infinite bounds are INFINITY / -INFINITY; the runtime treats them as "no bound on that side"
  * (docs/algorithm.md section 1). Sizes of possibly empty arrays use UNICYCLE_DIM so that every
@@ -36,12 +38,6 @@ extern const char *const unicycle_row_names_req[UNICYCLE_DIM(UNICYCLE_NE)];
  * applied value of control unicycle_memory_control[i] */
 extern const int unicycle_memory_state[UNICYCLE_DIM(UNICYCLE_NMEM)];
 extern const int unicycle_memory_control[UNICYCLE_DIM(UNICYCLE_NMEM)];
-extern const int unicycle_default_M;
-extern const int unicycle_default_hessian;        /* 0 exact, 1 gauss-newton */
-extern const int unicycle_default_regularization; /* 0 none, 1 project, 2 mirror */
-extern const unicycle_real unicycle_default_reg_eps;
-extern const int unicycle_default_cost_hessian; /* 1 fresh, 0 stored */
-extern const unicycle_real unicycle_default_lm;    /* Levenberg-Marquardt term, >= 0 */
 
 #if UNICYCLE_HAS_P_SCHEDULE
 /* the parameters at t = j dt, j = 0..UNICYCLE_P_SCHEDULE_NODES-1, from the OCP file's

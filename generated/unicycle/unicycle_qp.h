@@ -102,7 +102,8 @@
  * weight z/t becomes 1 / (t/z + 1/(Zl + y/s)) (y the multiplier of s >= 0), a series of the
  * row's and the slack's barrier. The returned multiplier of a soft side lies in [0, zl + Zl
  * s] (equal to the upper end when the side is violated), the slacks are max(0, lo - v) and
- * max(0, v - up) of the solution. A soft side never makes the QP infeasible: the
+ * max(0, v - up) of the solution. A soft side of a row of C_0 without u_0 is kept (its
+ * slack is then data, its multiplier zl + Zl s unique). A soft side never makes the QP infeasible: the
  * infeasibility certificates and unicycle_qp_infeasible_row concern the hard sides only. With
  * UNICYCLE_NSOFT 0 (or undefined) the weights are not read and the solver compiles to the
  * loops of hard rows alone.
@@ -336,17 +337,21 @@ typedef struct {
     unicycle_real scale_bounds;
 } unicycle_qp_workspace;
 
+#ifndef UNICYCLE_INTERNAL
+#define UNICYCLE_INTERNAL
+#endif
+
 /* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */
-void unicycle_qp_settings_default(unicycle_qp_settings *settings);
+UNICYCLE_INTERNAL void unicycle_qp_settings_default(unicycle_qp_settings *settings);
 
 /* sizeof(unicycle_qp_workspace), the memory bill of the solver. */
-unsigned long unicycle_qp_workspace_size(void);
+UNICYCLE_INTERNAL unsigned long unicycle_qp_workspace_size(void);
 
 /* Solve the QP. `sol` is read as the warm-start point when settings->warm_start is
  * nonzero and always written (best point found; zeros on invalid input). `info` may be
  * NULL. Returns the status (enum unicycle_qp_status). */
-int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const unicycle_qp_settings *settings,
-                   unicycle_qp_sol *sol, unicycle_qp_info *info);
+UNICYCLE_INTERNAL int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in,
+                                  const unicycle_qp_settings *settings, unicycle_qp_sol *sol, unicycle_qp_info *info);
 
 /* After unicycle_qp_solve returned UNICYCLE_QP_PRIMAL_INFEASIBLE (ws and in as they were then): the
  * row with the largest multiplier of the infeasibility certificate among the bounded rows
@@ -355,7 +360,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
  * header comment (w_k, then the rows of C_k; x_N, the rows of R, then those of Req); side:
  * -1 the lower bound, +1 the upper bound (an equality row: the sign of its multiplier), 0
  * lower above upper. Returns 1, or 0 when no row carries a multiplier. */
-int unicycle_qp_infeasible_row(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int *stage, int *row,
-                            int *side);
+UNICYCLE_INTERNAL int unicycle_qp_infeasible_row(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int *stage,
+                                           int *row, int *side);
 
 #endif /* UNICYCLE_QP_H */
