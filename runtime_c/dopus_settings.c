@@ -266,3 +266,104 @@ int dopus_has_clock(const dopus_solver *s)
     }
     return s->timer.clock != dopus_timer_default_clock || dopus_timer_has_default_clock();
 }
+
+/* ---- anytime budget (docs/algorithm.md section 12) ------------------------------------ */
+
+static int dopus_set_budget(dopus_solver *s, double budget, int unit)
+{
+    dopus_ensure_setup(s);
+    if (!(budget >= 0.0) || !(budget < INFINITY)) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->budget = budget;
+    s->budget_unit = budget > 0.0 ? unit : DOPUS_BUDGET_OFF;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_set_time_budget(dopus_solver *s, double seconds)
+{
+    dopus_ensure_setup(s);
+    if (seconds > 0.0 && !dopus_has_clock(s)) {
+        /* without a clock every time reads 0 and no budget could end */
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    return dopus_set_budget(s, seconds, DOPUS_BUDGET_TIME);
+}
+
+int dopus_set_work_budget(dopus_solver *s, double units)
+{
+    return dopus_set_budget(s, units, DOPUS_BUDGET_WORK);
+}
+
+int dopus_get_budget_unit(const dopus_solver *s)
+{
+    return s->budget_unit;
+}
+
+double dopus_get_budget(const dopus_solver *s)
+{
+    return s->budget;
+}
+
+int dopus_set_anytime_tol(dopus_solver *s, dopus_real tol)
+{
+    dopus_ensure_setup(s);
+    if (!(tol > DOPUS_R(0.0)) || !(tol < INFINITY)) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->anytime_tol = tol;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+dopus_real dopus_get_anytime_tol(const dopus_solver *s)
+{
+    return s->anytime_tol;
+}
+
+int dopus_set_M_adaptive(dopus_solver *s, int on, int M_min, int M_max, dopus_real eta)
+{
+    dopus_ensure_setup(s);
+    if ((on != 0 && on != 1) || M_min < 0 || M_max < M_min || M_max > DOPUS_N - 1 || !(eta > DOPUS_R(0.0)) ||
+        !(eta < INFINITY)) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    s->M_adaptive = on;
+    s->M_min = M_min;
+    s->M_max = M_max;
+    s->M_eta = eta;
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_get_M_adaptive(const dopus_solver *s, int *M_min, int *M_max, dopus_real *eta)
+{
+    if (M_min) {
+        *M_min = s->M_min;
+    }
+    if (M_max) {
+        *M_max = s->M_max;
+    }
+    if (eta) {
+        *eta = s->M_eta;
+    }
+    return s->M_adaptive;
+}
+
+int dopus_get_extra_iterations(const dopus_solver *s)
+{
+    return s->extra_iterations;
+}
+
+int dopus_get_instant_stages(const dopus_solver *s)
+{
+    return s->instant_stages;
+}
+
+double dopus_get_budget_used(const dopus_solver *s)
+{
+    return s->budget_used;
+}
+
+double dopus_get_work(const dopus_solver *s)
+{
+    return s->work;
+}

@@ -231,6 +231,38 @@ void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx);
 /* 1 if the timings measure time (a clock was installed, or the default clock exists on
  * this platform), 0 if they read 0 for want of a clock. */
 int dopus_has_clock(const dopus_solver *s);
+/* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
+ * from the start of dopus_feedback. In time (seconds of the solver's clock, dopus_set_clock:
+ * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
+ * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
+ * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a
+ * budget, prepare re-linearises stages beyond stage N-1 only while the budget allows, first
+ * the M (or adaptive M) stages, then further stages in rho order, and spends the rest on
+ * SQP iterations on the next instant's problem at the state the plan predicts (dx_0 = 0)
+ * while the KKT proxy exceeds the anytime tolerance; the next feedback starts from that
+ * iterate. The feedback's QP iterations are capped by the budget left (the fallback control
+ * when the cap stops it). */
+int dopus_set_time_budget(dopus_solver *s, double seconds);
+int dopus_set_work_budget(dopus_solver *s, double units);
+/* DOPUS_BUDGET_OFF, DOPUS_BUDGET_TIME or DOPUS_BUDGET_WORK, and the budget in its unit. */
+int dopus_get_budget_unit(const dopus_solver *s);
+double dopus_get_budget(const dopus_solver *s);
+/* KKT proxy (dopus_get_kkt_proxy) below which no further iteration is spent; > 0. */
+int dopus_set_anytime_tol(dopus_solver *s, dopus_real tol);
+dopus_real dopus_get_anytime_tol(const dopus_solver *s);
+/* Adaptive M (docs/algorithm.md section 12): each iteration re-linearises the stages whose
+ * secant residual rho_k |domega_k| exceeds eta times the KKT proxy, at least M_min and at
+ * most M_max of them (0 <= M_min <= M_max), the largest rho_k first. on = 0: the fixed M of
+ * dopus_set_M. eta > 0. */
+int dopus_set_M_adaptive(dopus_solver *s, int on, int M_min, int M_max, dopus_real eta);
+int dopus_get_M_adaptive(const dopus_solver *s, int *M_min, int *M_max, dopus_real *eta);
+/* The last instant: extra iterations after prepare, stages re-linearised over all its
+ * iterations (stage N-1 and the terminal node not counted), budget used (its unit). */
+int dopus_get_extra_iterations(const dopus_solver *s);
+int dopus_get_instant_stages(const dopus_solver *s);
+double dopus_get_budget_used(const dopus_solver *s);
+/* Work units counted since the solver was set up (the unit of dopus_set_work_budget). */
+double dopus_get_work(const dopus_solver *s);
 /* DOPUS_CDEF_END */
 
 /* Status codes returned by the functions above. */
@@ -298,6 +330,19 @@ enum dopus_mode {
 };
 
 enum dopus_hessian { DOPUS_HESSIAN_EXACT = 0, DOPUS_HESSIAN_GAUSS_NEWTON = 1 };
+
+/* Units of the anytime budget (docs/algorithm.md section 12). */
+enum dopus_budget_unit {
+    DOPUS_BUDGET_OFF = 0,  /* no budget: the plain real-time iteration */
+    DOPUS_BUDGET_TIME = 1, /* seconds of the solver's clock */
+    DOPUS_BUDGET_WORK = 2  /* work units: function evaluations 1, a QP solve N */
+};
+
+/* Anytime constants (docs/algorithm.md section 12). */
+#define DOPUS_ANYTIME_TOL DOPUS_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
+#define DOPUS_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
+#define DOPUS_ADAPTIVE_ETA DOPUS_R(0.1)          /* default eta of adaptive M */
+#define DOPUS_WORK_QP DOPUS_N                    /* work units of a QP solve */
 
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static dopus_solver s;`;
@@ -429,6 +474,24 @@ struct dopus_solver {
     dopus_real kkt[4];
 
     dopus_timer timer;
+
+    /* anytime budget (algorithm.md section 12) */
+    int budget_unit;         /* enum dopus_budget_unit */
+    double budget;           /* per instant, in its unit */
+    dopus_real anytime_tol;  /* no extra iteration below this KKT proxy */
+    int M_adaptive;          /* 1: adaptive M between M_min and M_max */
+    int M_min, M_max;
+    dopus_real M_eta;
+    double work;             /* work units counted since setup */
+    double instant_start;    /* budget clock at the start of the instant's feedback */
+    double cost_stage;       /* estimated cost of one stage re-linearisation */
+    double cost_qp;          /* cost of the last QP solve */
+    double cost_prepare;     /* cost of the last prepare iteration without its extension */
+    double cost_qp_iter;     /* cost of one QP iteration (the feedback's cap) */
+    double budget_used;      /* budget used by the last instant */
+    int qp_capped;           /* the feedback's QP iterations are capped by the budget */
+    int extra_iterations;    /* extra iterations of the last prepare */
+    int instant_stages;      /* stages re-linearised in the last instant */
 };
 
 #endif /* DOPUS_SOLVER_H */

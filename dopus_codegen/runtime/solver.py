@@ -379,6 +379,46 @@ class CSolver:
             self._bad(f"qp_warm_start must be True or False, got {on!r}")
         self._check(self._c("set_qp_warm_start")(self._s, int(bool(on))), "qp_warm_start")
 
+    # ------------------------------------------------------------------ anytime (section 12)
+    def set_time_budget(self, seconds) -> None:
+        """The budget per sampling instant in seconds of the solver's clock (0: off)."""
+        v = self._setting(settings.nonnegative, "time_budget", seconds)
+        self._check(self._c("set_time_budget")(self._s, v), "time_budget (needs a clock)")
+
+    def set_work_budget(self, units) -> None:
+        """The budget per sampling instant in work units (function evaluations 1, a QP solve
+        N; 0: off): deterministic, the unit the reference counts."""
+        v = self._setting(settings.nonnegative, "work_budget", units)
+        self._check(self._c("set_work_budget")(self._s, v), "work_budget")
+
+    def set_anytime_tol(self, tol) -> None:
+        self._check(self._c("set_anytime_tol")(self._s, self._positive(tol, "anytime_tol")), "anytime_tol")
+
+    def set_M_adaptive(self, on: bool = True, M_min: int = 0, M_max=None, eta=None) -> None:
+        """Adaptive M (section 12): the stages whose secant residual ``rho_k |domega_k|``
+        exceeds ``eta`` times the KKT proxy, between ``M_min`` and ``M_max``."""
+        from ..reference.dopus import check_adaptive_M
+
+        M_max = self.N - 1 if M_max is None else M_max
+        eta = float(vocabulary.constants()["ADAPTIVE_ETA"]) if eta is None else eta
+        on, M_min, M_max, eta = self._setting(check_adaptive_M, on, M_min, M_max, eta, self.N)
+        self._check(self._c("set_M_adaptive")(self._s, int(on), M_min, M_max, eta), "M_adaptive")
+
+    @property
+    def budget_unit(self) -> str:
+        return {0: "off", 1: "time", 2: "work"}[int(self._c("get_budget_unit")(self._s))]
+
+    @property
+    def M_adaptive(self) -> bool:
+        return bool(self._c("get_M_adaptive")(self._s, self._ffi.NULL, self._ffi.NULL, self._ffi.NULL))
+
+    budget = _c_property("get_budget", float)
+    anytime_tol = _c_property("get_anytime_tol", float)
+    extra_iterations = _c_property("get_extra_iterations", int, "Extra iterations of the last prepare.")
+    instant_stages = _c_property("get_instant_stages", int, "Stages re-linearised in the last instant.")
+    budget_used = _c_property("get_budget_used", float, "Budget used by the last instant (its unit).")
+    work = _c_property("get_work", float, "Work units counted since setup.")
+
     qp_warm_start = _c_property("get_qp_warm_start", bool)
     qp_cold_retry = _c_property("get_qp_cold_retry", bool,
                                 "True when the last feedback's warm-started QP failed and the cold retry ran.")
