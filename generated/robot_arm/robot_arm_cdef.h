@@ -196,3 +196,35 @@ void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), voi
 /* 1 if the timings measure time (a clock was installed, or the default clock exists on
  * this platform), 0 if they read 0 for want of a clock. */
 int robot_arm_has_clock(const robot_arm_solver *s);
+/* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
+ * from the start of robot_arm_feedback. In time (seconds of the solver's clock, robot_arm_set_clock:
+ * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
+ * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
+ * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a
+ * budget, prepare re-linearises stages beyond stage N-1 only while the budget allows, first
+ * the M (or adaptive M) stages, then further stages in rho order, and spends the rest on
+ * SQP iterations on the next instant's problem at the state the plan predicts (dx_0 = 0)
+ * while the KKT proxy exceeds the anytime tolerance; the next feedback starts from that
+ * iterate. The feedback's QP iterations are capped by the budget left (the fallback control
+ * when the cap stops it). */
+int robot_arm_set_time_budget(robot_arm_solver *s, double seconds);
+int robot_arm_set_work_budget(robot_arm_solver *s, double units);
+/* ROBOT_ARM_BUDGET_OFF, ROBOT_ARM_BUDGET_TIME or ROBOT_ARM_BUDGET_WORK, and the budget in its unit. */
+int robot_arm_get_budget_unit(const robot_arm_solver *s);
+double robot_arm_get_budget(const robot_arm_solver *s);
+/* KKT proxy (robot_arm_get_kkt_proxy) below which no further iteration is spent; > 0. */
+int robot_arm_set_anytime_tol(robot_arm_solver *s, robot_arm_real tol);
+robot_arm_real robot_arm_get_anytime_tol(const robot_arm_solver *s);
+/* Adaptive M (docs/algorithm.md section 12): each iteration re-linearises the stages whose
+ * secant residual rho_k |domega_k| exceeds eta times the KKT proxy, at least M_min and at
+ * most M_max of them (0 <= M_min <= M_max), the largest rho_k first. on = 0: the fixed M of
+ * robot_arm_set_M. eta > 0. */
+int robot_arm_set_M_adaptive(robot_arm_solver *s, int on, int M_min, int M_max, robot_arm_real eta);
+int robot_arm_get_M_adaptive(const robot_arm_solver *s, int *M_min, int *M_max, robot_arm_real *eta);
+/* The last instant: extra iterations after prepare, stages re-linearised over all its
+ * iterations (stage N-1 and the terminal node not counted), budget used (its unit). */
+int robot_arm_get_extra_iterations(const robot_arm_solver *s);
+int robot_arm_get_instant_stages(const robot_arm_solver *s);
+double robot_arm_get_budget_used(const robot_arm_solver *s);
+/* Work units counted since the solver was set up (the unit of robot_arm_set_work_budget). */
+double robot_arm_get_work(const robot_arm_solver *s);

@@ -266,3 +266,104 @@ int robot_arm_has_clock(const robot_arm_solver *s)
     }
     return s->timer.clock != robot_arm_timer_default_clock || robot_arm_timer_has_default_clock();
 }
+
+/* ---- anytime budget (docs/algorithm.md section 12) ------------------------------------ */
+
+static int robot_arm_set_budget(robot_arm_solver *s, double budget, int unit)
+{
+    robot_arm_ensure_setup(s);
+    if (!(budget >= 0.0) || !(budget < INFINITY)) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    s->budget = budget;
+    s->budget_unit = budget > 0.0 ? unit : ROBOT_ARM_BUDGET_OFF;
+    return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+int robot_arm_set_time_budget(robot_arm_solver *s, double seconds)
+{
+    robot_arm_ensure_setup(s);
+    if (seconds > 0.0 && !robot_arm_has_clock(s)) {
+        /* without a clock every time reads 0 and no budget could end */
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    return robot_arm_set_budget(s, seconds, ROBOT_ARM_BUDGET_TIME);
+}
+
+int robot_arm_set_work_budget(robot_arm_solver *s, double units)
+{
+    return robot_arm_set_budget(s, units, ROBOT_ARM_BUDGET_WORK);
+}
+
+int robot_arm_get_budget_unit(const robot_arm_solver *s)
+{
+    return s->budget_unit;
+}
+
+double robot_arm_get_budget(const robot_arm_solver *s)
+{
+    return s->budget;
+}
+
+int robot_arm_set_anytime_tol(robot_arm_solver *s, robot_arm_real tol)
+{
+    robot_arm_ensure_setup(s);
+    if (!(tol > ROBOT_ARM_R(0.0)) || !(tol < INFINITY)) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    s->anytime_tol = tol;
+    return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+robot_arm_real robot_arm_get_anytime_tol(const robot_arm_solver *s)
+{
+    return s->anytime_tol;
+}
+
+int robot_arm_set_M_adaptive(robot_arm_solver *s, int on, int M_min, int M_max, robot_arm_real eta)
+{
+    robot_arm_ensure_setup(s);
+    if ((on != 0 && on != 1) || M_min < 0 || M_max < M_min || M_max > ROBOT_ARM_N - 1 || !(eta > ROBOT_ARM_R(0.0)) ||
+        !(eta < INFINITY)) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    s->M_adaptive = on;
+    s->M_min = M_min;
+    s->M_max = M_max;
+    s->M_eta = eta;
+    return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+int robot_arm_get_M_adaptive(const robot_arm_solver *s, int *M_min, int *M_max, robot_arm_real *eta)
+{
+    if (M_min) {
+        *M_min = s->M_min;
+    }
+    if (M_max) {
+        *M_max = s->M_max;
+    }
+    if (eta) {
+        *eta = s->M_eta;
+    }
+    return s->M_adaptive;
+}
+
+int robot_arm_get_extra_iterations(const robot_arm_solver *s)
+{
+    return s->extra_iterations;
+}
+
+int robot_arm_get_instant_stages(const robot_arm_solver *s)
+{
+    return s->instant_stages;
+}
+
+double robot_arm_get_budget_used(const robot_arm_solver *s)
+{
+    return s->budget_used;
+}
+
+double robot_arm_get_work(const robot_arm_solver *s)
+{
+    return s->work;
+}

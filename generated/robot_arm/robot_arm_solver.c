@@ -552,6 +552,36 @@ void robot_arm_defaults(robot_arm_solver *s)
         s->kkt[i] = NAN;
     }
     robot_arm_timer_init(&s->timer);
+    s->budget_unit = ROBOT_ARM_BUDGET_OFF;
+    s->budget = 0.0;
+    s->anytime_tol = ROBOT_ARM_ANYTIME_TOL;
+    s->M_adaptive = 0;
+    s->M_min = 0;
+    s->M_max = ROBOT_ARM_N - 1;
+    s->M_eta = ROBOT_ARM_ADAPTIVE_ETA;
+    s->work = 0.0;
+    s->instant_start = 0.0;
+    s->cost_stage = 0.0;
+    s->cost_qp = 0.0;
+    s->cost_prepare = 0.0;
+    s->cost_qp_iter = 0.0;
+    s->budget_used = 0.0;
+    s->extra_iterations = 0;
+    s->instant_stages = 0;
+}
+
+/* ---- the budget clock (algorithm.md section 12) --------------------------------------- */
+
+/* Now on the budget's clock: the work counter (work units) or the solver's clock. */
+static double robot_arm_budget_now(const robot_arm_solver *s)
+{
+    return s->budget_unit == ROBOT_ARM_BUDGET_WORK ? s->work : robot_arm_timer_now(&s->timer);
+}
+
+/* 1 when no budget is set, or when `cost` more still fits in the instant's budget. */
+static int robot_arm_budget_fits(const robot_arm_solver *s, double cost)
+{
+    return s->budget_unit == ROBOT_ARM_BUDGET_OFF || robot_arm_budget_now(s) - s->instant_start + cost <= s->budget;
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */
@@ -561,6 +591,7 @@ static int robot_arm_stage_F(robot_arm_solver *s, int k)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0);
     int i;
+    s->work += 1.0;
     if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
@@ -611,6 +642,7 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
     robot_arm_stage_slot *slot;
     double t0 = robot_arm_timer_now(&s->timer);
     int rc, i;
+    s->work += 1.0;
     rc = robot_arm_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
                                s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_HESSIANS, t0);
@@ -659,7 +691,9 @@ int robot_arm_term_grad_checked(robot_arm_solver *s, robot_arm_real *gL, robot_a
 static int robot_arm_term_F(robot_arm_solver *s)
 {
     robot_arm_real gL[ROBOT_ARM_NX], E = ROBOT_ARM_R(0.0), r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
-    int rc = robot_arm_term_grad_checked(s, gL, &E, r, r_eq);
+    int rc;
+    s->work += 1.0;
+    rc = robot_arm_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
@@ -676,6 +710,7 @@ static int robot_arm_term_H(robot_arm_solver *s)
     robot_arm_real R[ROBOT_ARM_DIM(ROBOT_ARM_NR) * ROBOT_ARM_NX], R_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE) * ROBOT_ARM_NX];
     double t0 = robot_arm_timer_now(&s->timer);
     int rc;
+    s->work += 1.0;
     rc = robot_arm_eval_term_hess(s->hessian, s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
                               R_eq, &s->mem.ev.fun_work);
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_HESSIANS, t0);
@@ -1054,11 +1089,12 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
     s->qp_in.hess_shift = s->lm;
     s->qp_iterations = 0;
     s->qp_cold_retry = 0;
+    s->work += ROBOT_ARM_WORK_QP;
     if (s->qp_warm) {
         robot_arm_qp_warm_point(s);
     }
     qs = robot_arm_qp_attempt(s, s->qp_warm);
-    if (s->qp_warm && qs != ROBOT_ARM_QP_INVALID_INPUT &&
+    if (s->qp_warm && qs != ROBOT_ARM_QP_INVALID_INPUT && !(qs == ROBOT_ARM_QP_MAX_ITER && s->qp_capped) &&
         (!robot_arm_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = robot_arm_qp_attempt(s, 0);
@@ -1073,8 +1109,9 @@ static int robot_arm_feedback_lm_retries(robot_arm_solver *s, int qs, int *retri
 {
     *retries = 0;
     while (s->lm_auto && *retries < ROBOT_ARM_LM_RETRIES && s->lm < ROBOT_ARM_LM_MAX_REL * s->lm_scale &&
-           !robot_arm_qp_ok(s, qs) && qs != ROBOT_ARM_QP_INVALID_INPUT) {
+           !robot_arm_qp_ok(s, qs) && qs != ROBOT_ARM_QP_INVALID_INPUT && !(qs == ROBOT_ARM_QP_MAX_ITER && s->qp_capped)) {
         robot_arm_lm_raise(s);
+        s->work += ROBOT_ARM_WORK_QP;
         s->qp_in.hess_shift = s->lm;
         qs = robot_arm_qp_attempt(s, 0);
         *retries += 1;
@@ -1175,13 +1212,45 @@ static void robot_arm_keep_plan(robot_arm_solver *s, robot_arm_real *u0, int low
 
 static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries);
 
+/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
+ * capped by the budget of the instant over the cost of one QP iteration measured before; a
+ * QP stopped by the cap is not retried (the fallback control). Returns the setting's limit. */
+static int robot_arm_feedback_cap(robot_arm_solver *s)
+{
+    int max_iter = s->qp_settings.max_iter;
+    double left = s->budget - (robot_arm_budget_now(s) - s->instant_start), n;
+    s->qp_capped = 0;
+    if (s->budget_unit != ROBOT_ARM_BUDGET_TIME || !(s->cost_qp_iter > 0.0)) {
+        return max_iter;
+    }
+    n = left / s->cost_qp_iter;
+    n = n < 1.0 ? 1.0 : n;
+    if (n < (double)max_iter) {
+        s->qp_settings.max_iter = (int)n;
+        s->qp_capped = 1;
+    }
+    return max_iter;
+}
+
+/* The end of a feedback: the iteration limit of the setting back, the instant's cost so far. */
+static void robot_arm_feedback_end(robot_arm_solver *s, int max_iter, double t0)
+{
+    s->qp_settings.max_iter = max_iter;
+    s->qp_capped = 0;
+    s->budget_used = robot_arm_budget_now(s) - s->instant_start;
+    robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
+}
+
 int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
-    double t0;
-    int rc, qs, retries;
+    double t0, b0;
+    int rc, qs, retries, max_iter;
 
     robot_arm_ensure_setup(s);
     s->flags = 0;
+    s->instant_start = robot_arm_budget_now(s);
+    s->extra_iterations = 0;
+    s->instant_stages = 0;
     rc = robot_arm_feedback_admit(s, xhat0, u0);
     if (rc != ROBOT_ARM_OK) {
         return rc;
@@ -1189,8 +1258,14 @@ int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
     s->timer.t[ROBOT_ARM_PHASE_FEEDBACK] = ROBOT_ARM_R(0.0);
     t0 = robot_arm_timer_now(&s->timer);
     robot_arm_feedback_measure(s, xhat0);
+    max_iter = robot_arm_feedback_cap(s);
+    b0 = robot_arm_budget_now(s);
     qs = robot_arm_feedback_qp(s);
     qs = robot_arm_feedback_lm_retries(s, qs, &retries);
+    s->cost_qp = robot_arm_budget_now(s) - b0;
+    if (s->qp_iterations > 0 && s->budget_unit == ROBOT_ARM_BUDGET_TIME) {
+        s->cost_qp_iter = s->cost_qp / (double)s->qp_iterations;
+    }
     s->qp_status = qs;
     rc = robot_arm_feedback_check_step(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
@@ -1204,13 +1279,13 @@ int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
         }
     }
     if (rc != ROBOT_ARM_OK) {
-        robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
+        robot_arm_feedback_end(s, max_iter, t0);
         return robot_arm_feedback_failed(s, u0, rc);
     }
     robot_arm_store_domega(s);
     robot_arm_take_step(s);
     robot_arm_keep_plan(s, u0, retries == 0);
-    robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
+    robot_arm_feedback_end(s, max_iter, t0);
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
 
@@ -1246,32 +1321,99 @@ static void robot_arm_shift(robot_arm_solver *s)
     robot_arm_ring_advance(&s->ring);
 }
 
-/* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
-static void robot_arm_select(robot_arm_solver *s, int M)
+/* |domega_k| of stage k's slot (the denominator of rho_k). */
+static robot_arm_real robot_arm_step_norm(const robot_arm_solver *s, int k)
 {
-    int m, k, n = 0;
+    const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
+    robot_arm_real d2 = ROBOT_ARM_R(0.0);
+    int i;
+    for (i = 0; i < ROBOT_ARM_NW; ++i) {
+        d2 += slot->dw[i] * slot->dw[i] + slot->dmu_b[i] * slot->dmu_b[i];
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        d2 += slot->dlam[i] * slot->dlam[i];
+    }
+    for (i = 0; i < ROBOT_ARM_NG; ++i) {
+        d2 += slot->dmu_g[i] * slot->dmu_g[i];
+    }
+    return robot_arm_sqrt(d2);
+}
+
+/* The number of stages among 0..N-2 to re-linearise (before the budget): N-1 after a
+ * recovery, the fixed M, or adaptive M (algorithm.md section 12): the stages whose secant
+ * residual rho_k |domega_k| exceeds eta times the KKT proxy of the point before the step,
+ * between M_min and M_max. */
+static int robot_arm_M_now(const robot_arm_solver *s)
+{
+    robot_arm_real thr = s->M_eta * s->kkt_proxy;
+    int k, n = 0;
+    if (s->recovering > 0) {
+        return ROBOT_ARM_N - 1; /* after a recovery: every block fresh until it has settled */
+    }
+    if (!s->M_adaptive) {
+        return s->M < 0 ? 0 : (s->M > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->M);
+    }
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        if (s->rho[k] * robot_arm_step_norm(s, k) > thr) {
+            n += 1;
+        }
+    }
+    return n < s->M_min ? s->M_min : (n > s->M_max ? s->M_max : n);
+}
+
+/* The stage among 0..N-2 not selected yet with the largest rho_k, ties to the lower index. */
+static int robot_arm_next_worst(const robot_arm_solver *s)
+{
+    int k, best = -1;
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
+            best = k;
+        }
+    }
+    return best;
+}
+
+/* Step 4: re-linearise the stages with the largest rho_k: M of them (robot_arm_M_now), then, with
+ * a budget, further stages in rho order in the instant's prepare and in an extra iteration
+ * after which no further iteration fits (algorithm.md section 12); each only while the
+ * budget allows. The recomputed set (sorted, stage N-1 included) is recorded; the cost of
+ * the stages beyond M in *ext_cost. */
+static int robot_arm_relinearise(robot_arm_solver *s, int extra, double *ext_cost)
+{
+    int M = robot_arm_M_now(s), m, k, n = 0, rc = ROBOT_ARM_OK, extend;
+    double b0;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         s->selected[k] = 0;
     }
-    for (m = 0; m < M; ++m) {
-        int best = -1;
-        for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
-            if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
-                best = k;
-            }
-        }
-        if (best < 0) {
+    extend = s->budget_unit != ROBOT_ARM_BUDGET_OFF && (!extra || !robot_arm_budget_fits(s, s->cost_qp + s->cost_prepare));
+    *ext_cost = 0.0;
+    for (m = 0; m < ROBOT_ARM_N - 1; ++m) {
+        if ((m >= M && !extend) || !robot_arm_budget_fits(s, s->cost_stage)) {
             break;
         }
-        s->selected[best] = 1;
+        k = robot_arm_next_worst(s);
+        b0 = robot_arm_budget_now(s);
+        rc = robot_arm_stage_H(s, k);
+        if (rc != ROBOT_ARM_OK) {
+            break;
+        }
+        s->selected[k] = 1;
+        if (s->budget_unit != ROBOT_ARM_BUDGET_OFF) {
+            s->cost_stage = robot_arm_budget_now(s) - b0;
+            if (m >= M) {
+                *ext_cost += s->cost_stage;
+            }
+        }
     }
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         if (s->selected[k]) {
             s->recomputed[n++] = k;
         }
     }
+    s->instant_stages += n;
     s->recomputed[n++] = ROBOT_ARM_N - 1;
     s->n_recomputed = n;
+    return rc;
 }
 
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
@@ -1413,6 +1555,7 @@ static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
+    s->work += ROBOT_ARM_WORK_QP;
     *qs = robot_arm_qp_attempt(s, 0);
     *qs = robot_arm_feedback_lm_retries(s, *qs, retries);
     return ROBOT_ARM_OK;
@@ -1430,6 +1573,7 @@ static void robot_arm_predicted_step(robot_arm_solver *s)
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
+    s->work += ROBOT_ARM_WORK_QP;
     qs = robot_arm_qp_solve_bound(s);
     if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
         return;
@@ -1446,11 +1590,12 @@ static void robot_arm_predicted_step(robot_arm_solver *s)
     s->flags |= ROBOT_ARM_FLAG_PREDICTED;
 }
 
-static int robot_arm_prepare_iteration(robot_arm_solver *s);
+static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra);
+static int robot_arm_anytime(robot_arm_solver *s);
 
 int robot_arm_prepare(robot_arm_solver *s)
 {
-    int rc;
+    int rc, hessian;
     robot_arm_ensure_setup(s);
     if (!s->initialized) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
@@ -1460,6 +1605,8 @@ int robot_arm_prepare(robot_arm_solver *s)
         return robot_arm_ret(s, ROBOT_ARM_ERR_ALREADY_PREPARED);
     }
     robot_arm_clear_timings(s, ROBOT_ARM_PHASE_SHIFT, ROBOT_ARM_PHASE_ASSEMBLY);
+    s->extra_iterations = 0;
+    hessian = s->hessian;
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
         s->mode == ROBOT_ARM_MODE_RECEDING) {
         robot_arm_predicted_step(s);
@@ -1470,16 +1617,23 @@ int robot_arm_prepare(robot_arm_solver *s)
     }
     if (s->recover_pending && s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING) {
         rc = robot_arm_recover(s, 0);
-    } else if (s->recovering > 0 && ROBOT_ARM_HAS_GN) {
+    } else {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
          * multipliers), every block fresh */
-        int hessian = s->hessian;
-        s->hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
-        rc = robot_arm_prepare_iteration(s);
-        s->hessian = hessian;
-    } else {
-        rc = robot_arm_prepare_iteration(s);
+        if (s->recovering > 0 && ROBOT_ARM_HAS_GN) {
+            s->hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
+        }
+        rc = robot_arm_prepare_iteration(s, 0);
     }
+    if (rc == ROBOT_ARM_OK) {
+        /* the time left (algorithm.md section 12), with the Hessian of the recovery phase */
+        if (s->recovering > 0 && ROBOT_ARM_HAS_GN) {
+            s->hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
+        }
+        rc = robot_arm_anytime(s);
+    }
+    s->hessian = hessian;
+    s->budget_used = robot_arm_budget_now(s) - s->instant_start;
     if (rc == ROBOT_ARM_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
@@ -1488,12 +1642,13 @@ int robot_arm_prepare(robot_arm_solver *s)
     return robot_arm_ret(s, rc);
 }
 
-/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
-static int robot_arm_prepare_iteration(robot_arm_solver *s)
+/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
+ * anytime budget (section 12), without the shift, x_N kept. */
+static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 {
     robot_arm_real xN_saved[ROBOT_ARM_NX];
-    double t0;
-    int k, rc, M;
+    double t0, b_start = robot_arm_budget_now(s), ext_cost = 0.0;
+    int k, rc;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     t0 = robot_arm_timer_now(&s->timer);
@@ -1526,7 +1681,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
-    if (s->mode == ROBOT_ARM_MODE_RECEDING) {
+    if (s->mode == ROBOT_ARM_MODE_RECEDING && !extra) {
         robot_arm_copy(s->x[ROBOT_ARM_N], s->mem.ev.tmp_phi, ROBOT_ARM_NX);
     }
     robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, ROBOT_ARM_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
@@ -1542,18 +1697,9 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
         rc = robot_arm_term_H(s);
     }
 
-    /* 4. re-linearise the M stages with the largest rho_k */
+    /* 4. re-linearise the M stages with the largest rho_k (and more as the budget allows) */
     if (rc == ROBOT_ARM_OK) {
-        M = s->M < 0 ? 0 : (s->M > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->M);
-        if (s->recovering > 0) {
-            M = ROBOT_ARM_N - 1; /* after a recovery: every block fresh until it has settled */
-        }
-        robot_arm_select(s, M);
-        for (k = 0; k < ROBOT_ARM_N - 1 && rc == ROBOT_ARM_OK; ++k) {
-            if (s->selected[k]) {
-                rc = robot_arm_stage_H(s, k);
-            }
-        }
+        rc = robot_arm_relinearise(s, extra, &ext_cost);
     }
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
@@ -1593,6 +1739,9 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
     /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
     s->kkt_proxy = robot_arm_kkt_proxy_eval(s);
     robot_arm_lm_prepared(s); /* the automatic Levenberg-Marquardt term (section 10) */
+    if (s->budget_unit != ROBOT_ARM_BUDGET_OFF) {
+        s->cost_prepare = robot_arm_budget_now(s) - b_start - ext_cost;
+    }
     if (robot_arm_iterate_diverged(s)) {
         s->flags |= ROBOT_ARM_FLAG_DIVERGED;
         if (s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING) {
@@ -1600,6 +1749,56 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
         }
     }
     return ROBOT_ARM_OK;
+}
+
+/* ---- anytime (algorithm.md section 12) -------------------------------------------------- */
+
+/* One extra iteration on the next instant's problem: the prepared QP for the state the plan
+ * predicts (dx_0 = 0), its full step, then a prepare iteration without the shift. A QP not
+ * solved (or a step outside the box) changes nothing and returns ROBOT_ARM_ERR_QP. */
+static int robot_arm_extra_iteration(robot_arm_solver *s)
+{
+    robot_arm_real lm = s->lm;
+    double b0 = robot_arm_budget_now(s);
+    int i, qs;
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
+    }
+    robot_arm_lm_measured(s);
+    qs = robot_arm_feedback_qp(s);
+    if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
+        s->lm = lm;
+        s->lm_uncapped = -ROBOT_ARM_R(1.0);
+        return ROBOT_ARM_ERR_QP;
+    }
+    s->cost_qp = robot_arm_budget_now(s) - b0;
+    robot_arm_store_domega(s);
+    robot_arm_take_step(s);
+    robot_arm_lm_feedback(s, ROBOT_ARM_OK);
+    return robot_arm_prepare_iteration(s, 1);
+}
+
+/* The time left after prepare (algorithm.md section 12): extra iterations while the KKT proxy
+ * exceeds the tolerance and one more fits in the budget. The last feedback's QP figures are
+ * kept for robot_arm_get_qp_status and robot_arm_get_qp_iterations. */
+static int robot_arm_anytime(robot_arm_solver *s)
+{
+    int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = ROBOT_ARM_OK;
+    if (s->budget_unit == ROBOT_ARM_BUDGET_OFF) {
+        return ROBOT_ARM_OK;
+    }
+    while (s->extra_iterations < ROBOT_ARM_ANYTIME_MAX_ITER && s->qp_ready && s->kkt_proxy > s->anytime_tol &&
+           robot_arm_budget_fits(s, s->cost_qp + s->cost_prepare)) {
+        rc = robot_arm_extra_iteration(s);
+        if (rc != ROBOT_ARM_OK) {
+            break;
+        }
+        s->extra_iterations += 1;
+    }
+    s->qp_status = qp_status;
+    s->qp_iterations = qp_iterations;
+    s->qp_cold_retry = cold;
+    return rc == ROBOT_ARM_ERR_QP ? ROBOT_ARM_OK : rc;
 }
 
 /* ---- KKT ---------------------------------------------------------------------------- */

@@ -231,6 +231,38 @@ void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), voi
 /* 1 if the timings measure time (a clock was installed, or the default clock exists on
  * this platform), 0 if they read 0 for want of a clock. */
 int robot_arm_has_clock(const robot_arm_solver *s);
+/* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
+ * from the start of robot_arm_feedback. In time (seconds of the solver's clock, robot_arm_set_clock:
+ * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
+ * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
+ * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a
+ * budget, prepare re-linearises stages beyond stage N-1 only while the budget allows, first
+ * the M (or adaptive M) stages, then further stages in rho order, and spends the rest on
+ * SQP iterations on the next instant's problem at the state the plan predicts (dx_0 = 0)
+ * while the KKT proxy exceeds the anytime tolerance; the next feedback starts from that
+ * iterate. The feedback's QP iterations are capped by the budget left (the fallback control
+ * when the cap stops it). */
+int robot_arm_set_time_budget(robot_arm_solver *s, double seconds);
+int robot_arm_set_work_budget(robot_arm_solver *s, double units);
+/* ROBOT_ARM_BUDGET_OFF, ROBOT_ARM_BUDGET_TIME or ROBOT_ARM_BUDGET_WORK, and the budget in its unit. */
+int robot_arm_get_budget_unit(const robot_arm_solver *s);
+double robot_arm_get_budget(const robot_arm_solver *s);
+/* KKT proxy (robot_arm_get_kkt_proxy) below which no further iteration is spent; > 0. */
+int robot_arm_set_anytime_tol(robot_arm_solver *s, robot_arm_real tol);
+robot_arm_real robot_arm_get_anytime_tol(const robot_arm_solver *s);
+/* Adaptive M (docs/algorithm.md section 12): each iteration re-linearises the stages whose
+ * secant residual rho_k |domega_k| exceeds eta times the KKT proxy, at least M_min and at
+ * most M_max of them (0 <= M_min <= M_max), the largest rho_k first. on = 0: the fixed M of
+ * robot_arm_set_M. eta > 0. */
+int robot_arm_set_M_adaptive(robot_arm_solver *s, int on, int M_min, int M_max, robot_arm_real eta);
+int robot_arm_get_M_adaptive(const robot_arm_solver *s, int *M_min, int *M_max, robot_arm_real *eta);
+/* The last instant: extra iterations after prepare, stages re-linearised over all its
+ * iterations (stage N-1 and the terminal node not counted), budget used (its unit). */
+int robot_arm_get_extra_iterations(const robot_arm_solver *s);
+int robot_arm_get_instant_stages(const robot_arm_solver *s);
+double robot_arm_get_budget_used(const robot_arm_solver *s);
+/* Work units counted since the solver was set up (the unit of robot_arm_set_work_budget). */
+double robot_arm_get_work(const robot_arm_solver *s);
 /* ROBOT_ARM_CDEF_END */
 
 /* Status codes returned by the functions above. */
@@ -298,6 +330,19 @@ enum robot_arm_mode {
 };
 
 enum robot_arm_hessian { ROBOT_ARM_HESSIAN_EXACT = 0, ROBOT_ARM_HESSIAN_GAUSS_NEWTON = 1 };
+
+/* Units of the anytime budget (docs/algorithm.md section 12). */
+enum robot_arm_budget_unit {
+    ROBOT_ARM_BUDGET_OFF = 0,  /* no budget: the plain real-time iteration */
+    ROBOT_ARM_BUDGET_TIME = 1, /* seconds of the solver's clock */
+    ROBOT_ARM_BUDGET_WORK = 2  /* work units: function evaluations 1, a QP solve N */
+};
+
+/* Anytime constants (docs/algorithm.md section 12). */
+#define ROBOT_ARM_ANYTIME_TOL ROBOT_ARM_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
+#define ROBOT_ARM_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
+#define ROBOT_ARM_ADAPTIVE_ETA ROBOT_ARM_R(0.1)          /* default eta of adaptive M */
+#define ROBOT_ARM_WORK_QP ROBOT_ARM_N                    /* work units of a QP solve */
 
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static robot_arm_solver s;`;
@@ -429,6 +474,24 @@ struct robot_arm_solver {
     robot_arm_real kkt[4];
 
     robot_arm_timer timer;
+
+    /* anytime budget (algorithm.md section 12) */
+    int budget_unit;         /* enum robot_arm_budget_unit */
+    double budget;           /* per instant, in its unit */
+    robot_arm_real anytime_tol;  /* no extra iteration below this KKT proxy */
+    int M_adaptive;          /* 1: adaptive M between M_min and M_max */
+    int M_min, M_max;
+    robot_arm_real M_eta;
+    double work;             /* work units counted since setup */
+    double instant_start;    /* budget clock at the start of the instant's feedback */
+    double cost_stage;       /* estimated cost of one stage re-linearisation */
+    double cost_qp;          /* cost of the last QP solve */
+    double cost_prepare;     /* cost of the last prepare iteration without its extension */
+    double cost_qp_iter;     /* cost of one QP iteration (the feedback's cap) */
+    double budget_used;      /* budget used by the last instant */
+    int qp_capped;           /* the feedback's QP iterations are capped by the budget */
+    int extra_iterations;    /* extra iterations of the last prepare */
+    int instant_stages;      /* stages re-linearised in the last instant */
 };
 
 #endif /* ROBOT_ARM_SOLVER_H */

@@ -196,3 +196,35 @@ void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void 
 /* 1 if the timings measure time (a clock was installed, or the default clock exists on
  * this platform), 0 if they read 0 for want of a clock. */
 int unicycle_has_clock(const unicycle_solver *s);
+/* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
+ * from the start of unicycle_feedback. In time (seconds of the solver's clock, unicycle_set_clock:
+ * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
+ * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
+ * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a
+ * budget, prepare re-linearises stages beyond stage N-1 only while the budget allows, first
+ * the M (or adaptive M) stages, then further stages in rho order, and spends the rest on
+ * SQP iterations on the next instant's problem at the state the plan predicts (dx_0 = 0)
+ * while the KKT proxy exceeds the anytime tolerance; the next feedback starts from that
+ * iterate. The feedback's QP iterations are capped by the budget left (the fallback control
+ * when the cap stops it). */
+int unicycle_set_time_budget(unicycle_solver *s, double seconds);
+int unicycle_set_work_budget(unicycle_solver *s, double units);
+/* UNICYCLE_BUDGET_OFF, UNICYCLE_BUDGET_TIME or UNICYCLE_BUDGET_WORK, and the budget in its unit. */
+int unicycle_get_budget_unit(const unicycle_solver *s);
+double unicycle_get_budget(const unicycle_solver *s);
+/* KKT proxy (unicycle_get_kkt_proxy) below which no further iteration is spent; > 0. */
+int unicycle_set_anytime_tol(unicycle_solver *s, unicycle_real tol);
+unicycle_real unicycle_get_anytime_tol(const unicycle_solver *s);
+/* Adaptive M (docs/algorithm.md section 12): each iteration re-linearises the stages whose
+ * secant residual rho_k |domega_k| exceeds eta times the KKT proxy, at least M_min and at
+ * most M_max of them (0 <= M_min <= M_max), the largest rho_k first. on = 0: the fixed M of
+ * unicycle_set_M. eta > 0. */
+int unicycle_set_M_adaptive(unicycle_solver *s, int on, int M_min, int M_max, unicycle_real eta);
+int unicycle_get_M_adaptive(const unicycle_solver *s, int *M_min, int *M_max, unicycle_real *eta);
+/* The last instant: extra iterations after prepare, stages re-linearised over all its
+ * iterations (stage N-1 and the terminal node not counted), budget used (its unit). */
+int unicycle_get_extra_iterations(const unicycle_solver *s);
+int unicycle_get_instant_stages(const unicycle_solver *s);
+double unicycle_get_budget_used(const unicycle_solver *s);
+/* Work units counted since the solver was set up (the unit of unicycle_set_work_budget). */
+double unicycle_get_work(const unicycle_solver *s);

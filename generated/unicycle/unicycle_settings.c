@@ -266,3 +266,104 @@ int unicycle_has_clock(const unicycle_solver *s)
     }
     return s->timer.clock != unicycle_timer_default_clock || unicycle_timer_has_default_clock();
 }
+
+/* ---- anytime budget (docs/algorithm.md section 12) ------------------------------------ */
+
+static int unicycle_set_budget(unicycle_solver *s, double budget, int unit)
+{
+    unicycle_ensure_setup(s);
+    if (!(budget >= 0.0) || !(budget < INFINITY)) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    s->budget = budget;
+    s->budget_unit = budget > 0.0 ? unit : UNICYCLE_BUDGET_OFF;
+    return unicycle_ret(s, UNICYCLE_OK);
+}
+
+int unicycle_set_time_budget(unicycle_solver *s, double seconds)
+{
+    unicycle_ensure_setup(s);
+    if (seconds > 0.0 && !unicycle_has_clock(s)) {
+        /* without a clock every time reads 0 and no budget could end */
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    return unicycle_set_budget(s, seconds, UNICYCLE_BUDGET_TIME);
+}
+
+int unicycle_set_work_budget(unicycle_solver *s, double units)
+{
+    return unicycle_set_budget(s, units, UNICYCLE_BUDGET_WORK);
+}
+
+int unicycle_get_budget_unit(const unicycle_solver *s)
+{
+    return s->budget_unit;
+}
+
+double unicycle_get_budget(const unicycle_solver *s)
+{
+    return s->budget;
+}
+
+int unicycle_set_anytime_tol(unicycle_solver *s, unicycle_real tol)
+{
+    unicycle_ensure_setup(s);
+    if (!(tol > UNICYCLE_R(0.0)) || !(tol < INFINITY)) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    s->anytime_tol = tol;
+    return unicycle_ret(s, UNICYCLE_OK);
+}
+
+unicycle_real unicycle_get_anytime_tol(const unicycle_solver *s)
+{
+    return s->anytime_tol;
+}
+
+int unicycle_set_M_adaptive(unicycle_solver *s, int on, int M_min, int M_max, unicycle_real eta)
+{
+    unicycle_ensure_setup(s);
+    if ((on != 0 && on != 1) || M_min < 0 || M_max < M_min || M_max > UNICYCLE_N - 1 || !(eta > UNICYCLE_R(0.0)) ||
+        !(eta < INFINITY)) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    s->M_adaptive = on;
+    s->M_min = M_min;
+    s->M_max = M_max;
+    s->M_eta = eta;
+    return unicycle_ret(s, UNICYCLE_OK);
+}
+
+int unicycle_get_M_adaptive(const unicycle_solver *s, int *M_min, int *M_max, unicycle_real *eta)
+{
+    if (M_min) {
+        *M_min = s->M_min;
+    }
+    if (M_max) {
+        *M_max = s->M_max;
+    }
+    if (eta) {
+        *eta = s->M_eta;
+    }
+    return s->M_adaptive;
+}
+
+int unicycle_get_extra_iterations(const unicycle_solver *s)
+{
+    return s->extra_iterations;
+}
+
+int unicycle_get_instant_stages(const unicycle_solver *s)
+{
+    return s->instant_stages;
+}
+
+double unicycle_get_budget_used(const unicycle_solver *s)
+{
+    return s->budget_used;
+}
+
+double unicycle_get_work(const unicycle_solver *s)
+{
+    return s->work;
+}

@@ -552,6 +552,36 @@ void unicycle_defaults(unicycle_solver *s)
         s->kkt[i] = NAN;
     }
     unicycle_timer_init(&s->timer);
+    s->budget_unit = UNICYCLE_BUDGET_OFF;
+    s->budget = 0.0;
+    s->anytime_tol = UNICYCLE_ANYTIME_TOL;
+    s->M_adaptive = 0;
+    s->M_min = 0;
+    s->M_max = UNICYCLE_N - 1;
+    s->M_eta = UNICYCLE_ADAPTIVE_ETA;
+    s->work = 0.0;
+    s->instant_start = 0.0;
+    s->cost_stage = 0.0;
+    s->cost_qp = 0.0;
+    s->cost_prepare = 0.0;
+    s->cost_qp_iter = 0.0;
+    s->budget_used = 0.0;
+    s->extra_iterations = 0;
+    s->instant_stages = 0;
+}
+
+/* ---- the budget clock (algorithm.md section 12) --------------------------------------- */
+
+/* Now on the budget's clock: the work counter (work units) or the solver's clock. */
+static double unicycle_budget_now(const unicycle_solver *s)
+{
+    return s->budget_unit == UNICYCLE_BUDGET_WORK ? s->work : unicycle_timer_now(&s->timer);
+}
+
+/* 1 when no budget is set, or when `cost` more still fits in the instant's budget. */
+static int unicycle_budget_fits(const unicycle_solver *s, double cost)
+{
+    return s->budget_unit == UNICYCLE_BUDGET_OFF || unicycle_budget_now(s) - s->instant_start + cost <= s->budget;
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */
@@ -561,6 +591,7 @@ static int unicycle_stage_F(unicycle_solver *s, int k)
 {
     unicycle_real l = UNICYCLE_R(0.0);
     int i;
+    s->work += 1.0;
     if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
@@ -611,6 +642,7 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
     unicycle_stage_slot *slot;
     double t0 = unicycle_timer_now(&s->timer);
     int rc, i;
+    s->work += 1.0;
     rc = unicycle_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
                                s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
@@ -659,7 +691,9 @@ int unicycle_term_grad_checked(unicycle_solver *s, unicycle_real *gL, unicycle_r
 static int unicycle_term_F(unicycle_solver *s)
 {
     unicycle_real gL[UNICYCLE_NX], E = UNICYCLE_R(0.0), r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
-    int rc = unicycle_term_grad_checked(s, gL, &E, r, r_eq);
+    int rc;
+    s->work += 1.0;
+    rc = unicycle_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
@@ -676,6 +710,7 @@ static int unicycle_term_H(unicycle_solver *s)
     unicycle_real R[UNICYCLE_DIM(UNICYCLE_NR) * UNICYCLE_NX], R_eq[UNICYCLE_DIM(UNICYCLE_NE) * UNICYCLE_NX];
     double t0 = unicycle_timer_now(&s->timer);
     int rc;
+    s->work += 1.0;
     rc = unicycle_eval_term_hess(s->hessian, s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
                               R_eq, &s->mem.ev.fun_work);
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
@@ -1054,11 +1089,12 @@ static int unicycle_feedback_qp(unicycle_solver *s)
     s->qp_in.hess_shift = s->lm;
     s->qp_iterations = 0;
     s->qp_cold_retry = 0;
+    s->work += UNICYCLE_WORK_QP;
     if (s->qp_warm) {
         unicycle_qp_warm_point(s);
     }
     qs = unicycle_qp_attempt(s, s->qp_warm);
-    if (s->qp_warm && qs != UNICYCLE_QP_INVALID_INPUT &&
+    if (s->qp_warm && qs != UNICYCLE_QP_INVALID_INPUT && !(qs == UNICYCLE_QP_MAX_ITER && s->qp_capped) &&
         (!unicycle_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = unicycle_qp_attempt(s, 0);
@@ -1073,8 +1109,9 @@ static int unicycle_feedback_lm_retries(unicycle_solver *s, int qs, int *retries
 {
     *retries = 0;
     while (s->lm_auto && *retries < UNICYCLE_LM_RETRIES && s->lm < UNICYCLE_LM_MAX_REL * s->lm_scale &&
-           !unicycle_qp_ok(s, qs) && qs != UNICYCLE_QP_INVALID_INPUT) {
+           !unicycle_qp_ok(s, qs) && qs != UNICYCLE_QP_INVALID_INPUT && !(qs == UNICYCLE_QP_MAX_ITER && s->qp_capped)) {
         unicycle_lm_raise(s);
+        s->work += UNICYCLE_WORK_QP;
         s->qp_in.hess_shift = s->lm;
         qs = unicycle_qp_attempt(s, 0);
         *retries += 1;
@@ -1175,13 +1212,45 @@ static void unicycle_keep_plan(unicycle_solver *s, unicycle_real *u0, int lowere
 
 static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries);
 
+/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
+ * capped by the budget of the instant over the cost of one QP iteration measured before; a
+ * QP stopped by the cap is not retried (the fallback control). Returns the setting's limit. */
+static int unicycle_feedback_cap(unicycle_solver *s)
+{
+    int max_iter = s->qp_settings.max_iter;
+    double left = s->budget - (unicycle_budget_now(s) - s->instant_start), n;
+    s->qp_capped = 0;
+    if (s->budget_unit != UNICYCLE_BUDGET_TIME || !(s->cost_qp_iter > 0.0)) {
+        return max_iter;
+    }
+    n = left / s->cost_qp_iter;
+    n = n < 1.0 ? 1.0 : n;
+    if (n < (double)max_iter) {
+        s->qp_settings.max_iter = (int)n;
+        s->qp_capped = 1;
+    }
+    return max_iter;
+}
+
+/* The end of a feedback: the iteration limit of the setting back, the instant's cost so far. */
+static void unicycle_feedback_end(unicycle_solver *s, int max_iter, double t0)
+{
+    s->qp_settings.max_iter = max_iter;
+    s->qp_capped = 0;
+    s->budget_used = unicycle_budget_now(s) - s->instant_start;
+    unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
+}
+
 int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
-    double t0;
-    int rc, qs, retries;
+    double t0, b0;
+    int rc, qs, retries, max_iter;
 
     unicycle_ensure_setup(s);
     s->flags = 0;
+    s->instant_start = unicycle_budget_now(s);
+    s->extra_iterations = 0;
+    s->instant_stages = 0;
     rc = unicycle_feedback_admit(s, xhat0, u0);
     if (rc != UNICYCLE_OK) {
         return rc;
@@ -1189,8 +1258,14 @@ int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
     s->timer.t[UNICYCLE_PHASE_FEEDBACK] = UNICYCLE_R(0.0);
     t0 = unicycle_timer_now(&s->timer);
     unicycle_feedback_measure(s, xhat0);
+    max_iter = unicycle_feedback_cap(s);
+    b0 = unicycle_budget_now(s);
     qs = unicycle_feedback_qp(s);
     qs = unicycle_feedback_lm_retries(s, qs, &retries);
+    s->cost_qp = unicycle_budget_now(s) - b0;
+    if (s->qp_iterations > 0 && s->budget_unit == UNICYCLE_BUDGET_TIME) {
+        s->cost_qp_iter = s->cost_qp / (double)s->qp_iterations;
+    }
     s->qp_status = qs;
     rc = unicycle_feedback_check_step(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
@@ -1204,13 +1279,13 @@ int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
         }
     }
     if (rc != UNICYCLE_OK) {
-        unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
+        unicycle_feedback_end(s, max_iter, t0);
         return unicycle_feedback_failed(s, u0, rc);
     }
     unicycle_store_domega(s);
     unicycle_take_step(s);
     unicycle_keep_plan(s, u0, retries == 0);
-    unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
+    unicycle_feedback_end(s, max_iter, t0);
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
@@ -1246,32 +1321,99 @@ static void unicycle_shift(unicycle_solver *s)
     unicycle_ring_advance(&s->ring);
 }
 
-/* Step 4: the M stages among 0..N-2 with the largest rho_k, ties to the lower index. */
-static void unicycle_select(unicycle_solver *s, int M)
+/* |domega_k| of stage k's slot (the denominator of rho_k). */
+static unicycle_real unicycle_step_norm(const unicycle_solver *s, int k)
 {
-    int m, k, n = 0;
+    const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
+    unicycle_real d2 = UNICYCLE_R(0.0);
+    int i;
+    for (i = 0; i < UNICYCLE_NW; ++i) {
+        d2 += slot->dw[i] * slot->dw[i] + slot->dmu_b[i] * slot->dmu_b[i];
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        d2 += slot->dlam[i] * slot->dlam[i];
+    }
+    for (i = 0; i < UNICYCLE_NG; ++i) {
+        d2 += slot->dmu_g[i] * slot->dmu_g[i];
+    }
+    return unicycle_sqrt(d2);
+}
+
+/* The number of stages among 0..N-2 to re-linearise (before the budget): N-1 after a
+ * recovery, the fixed M, or adaptive M (algorithm.md section 12): the stages whose secant
+ * residual rho_k |domega_k| exceeds eta times the KKT proxy of the point before the step,
+ * between M_min and M_max. */
+static int unicycle_M_now(const unicycle_solver *s)
+{
+    unicycle_real thr = s->M_eta * s->kkt_proxy;
+    int k, n = 0;
+    if (s->recovering > 0) {
+        return UNICYCLE_N - 1; /* after a recovery: every block fresh until it has settled */
+    }
+    if (!s->M_adaptive) {
+        return s->M < 0 ? 0 : (s->M > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->M);
+    }
+    for (k = 0; k < UNICYCLE_N - 1; ++k) {
+        if (s->rho[k] * unicycle_step_norm(s, k) > thr) {
+            n += 1;
+        }
+    }
+    return n < s->M_min ? s->M_min : (n > s->M_max ? s->M_max : n);
+}
+
+/* The stage among 0..N-2 not selected yet with the largest rho_k, ties to the lower index. */
+static int unicycle_next_worst(const unicycle_solver *s)
+{
+    int k, best = -1;
+    for (k = 0; k < UNICYCLE_N - 1; ++k) {
+        if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
+            best = k;
+        }
+    }
+    return best;
+}
+
+/* Step 4: re-linearise the stages with the largest rho_k: M of them (unicycle_M_now), then, with
+ * a budget, further stages in rho order in the instant's prepare and in an extra iteration
+ * after which no further iteration fits (algorithm.md section 12); each only while the
+ * budget allows. The recomputed set (sorted, stage N-1 included) is recorded; the cost of
+ * the stages beyond M in *ext_cost. */
+static int unicycle_relinearise(unicycle_solver *s, int extra, double *ext_cost)
+{
+    int M = unicycle_M_now(s), m, k, n = 0, rc = UNICYCLE_OK, extend;
+    double b0;
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->selected[k] = 0;
     }
-    for (m = 0; m < M; ++m) {
-        int best = -1;
-        for (k = 0; k < UNICYCLE_N - 1; ++k) {
-            if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
-                best = k;
-            }
-        }
-        if (best < 0) {
+    extend = s->budget_unit != UNICYCLE_BUDGET_OFF && (!extra || !unicycle_budget_fits(s, s->cost_qp + s->cost_prepare));
+    *ext_cost = 0.0;
+    for (m = 0; m < UNICYCLE_N - 1; ++m) {
+        if ((m >= M && !extend) || !unicycle_budget_fits(s, s->cost_stage)) {
             break;
         }
-        s->selected[best] = 1;
+        k = unicycle_next_worst(s);
+        b0 = unicycle_budget_now(s);
+        rc = unicycle_stage_H(s, k);
+        if (rc != UNICYCLE_OK) {
+            break;
+        }
+        s->selected[k] = 1;
+        if (s->budget_unit != UNICYCLE_BUDGET_OFF) {
+            s->cost_stage = unicycle_budget_now(s) - b0;
+            if (m >= M) {
+                *ext_cost += s->cost_stage;
+            }
+        }
     }
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
         if (s->selected[k]) {
             s->recomputed[n++] = k;
         }
     }
+    s->instant_stages += n;
     s->recomputed[n++] = UNICYCLE_N - 1;
     s->n_recomputed = n;
+    return rc;
 }
 
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
@@ -1413,6 +1555,7 @@ static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries)
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
     s->qp_in.hess_shift = s->lm;
+    s->work += UNICYCLE_WORK_QP;
     *qs = unicycle_qp_attempt(s, 0);
     *qs = unicycle_feedback_lm_retries(s, *qs, retries);
     return UNICYCLE_OK;
@@ -1430,6 +1573,7 @@ static void unicycle_predicted_step(unicycle_solver *s)
     }
     s->qp_in.hess_shift = s->lm;
     s->qp_settings.warm_start = 0;
+    s->work += UNICYCLE_WORK_QP;
     qs = unicycle_qp_solve_bound(s);
     if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         return;
@@ -1446,11 +1590,12 @@ static void unicycle_predicted_step(unicycle_solver *s)
     s->flags |= UNICYCLE_FLAG_PREDICTED;
 }
 
-static int unicycle_prepare_iteration(unicycle_solver *s);
+static int unicycle_prepare_iteration(unicycle_solver *s, int extra);
+static int unicycle_anytime(unicycle_solver *s);
 
 int unicycle_prepare(unicycle_solver *s)
 {
-    int rc;
+    int rc, hessian;
     unicycle_ensure_setup(s);
     if (!s->initialized) {
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
@@ -1460,6 +1605,8 @@ int unicycle_prepare(unicycle_solver *s)
         return unicycle_ret(s, UNICYCLE_ERR_ALREADY_PREPARED);
     }
     unicycle_clear_timings(s, UNICYCLE_PHASE_SHIFT, UNICYCLE_PHASE_ASSEMBLY);
+    s->extra_iterations = 0;
+    hessian = s->hessian;
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
         s->mode == UNICYCLE_MODE_RECEDING) {
         unicycle_predicted_step(s);
@@ -1470,16 +1617,23 @@ int unicycle_prepare(unicycle_solver *s)
     }
     if (s->recover_pending && s->recovery && s->mode == UNICYCLE_MODE_RECEDING) {
         rc = unicycle_recover(s, 0);
-    } else if (s->recovering > 0 && UNICYCLE_HAS_GN) {
+    } else {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
          * multipliers), every block fresh */
-        int hessian = s->hessian;
-        s->hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
-        rc = unicycle_prepare_iteration(s);
-        s->hessian = hessian;
-    } else {
-        rc = unicycle_prepare_iteration(s);
+        if (s->recovering > 0 && UNICYCLE_HAS_GN) {
+            s->hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
+        }
+        rc = unicycle_prepare_iteration(s, 0);
     }
+    if (rc == UNICYCLE_OK) {
+        /* the time left (algorithm.md section 12), with the Hessian of the recovery phase */
+        if (s->recovering > 0 && UNICYCLE_HAS_GN) {
+            s->hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
+        }
+        rc = unicycle_anytime(s);
+    }
+    s->hessian = hessian;
+    s->budget_used = unicycle_budget_now(s) - s->instant_start;
     if (rc == UNICYCLE_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
@@ -1488,12 +1642,13 @@ int unicycle_prepare(unicycle_solver *s)
     return unicycle_ret(s, rc);
 }
 
-/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
-static int unicycle_prepare_iteration(unicycle_solver *s)
+/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
+ * anytime budget (section 12), without the shift, x_N kept. */
+static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 {
     unicycle_real xN_saved[UNICYCLE_NX];
-    double t0;
-    int k, rc, M;
+    double t0, b_start = unicycle_budget_now(s), ext_cost = 0.0;
+    int k, rc;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     t0 = unicycle_timer_now(&s->timer);
@@ -1526,7 +1681,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
     if (rc != UNICYCLE_OK) {
         return rc;
     }
-    if (s->mode == UNICYCLE_MODE_RECEDING) {
+    if (s->mode == UNICYCLE_MODE_RECEDING && !extra) {
         unicycle_copy(s->x[UNICYCLE_N], s->mem.ev.tmp_phi, UNICYCLE_NX);
     }
     unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
@@ -1542,18 +1697,9 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
         rc = unicycle_term_H(s);
     }
 
-    /* 4. re-linearise the M stages with the largest rho_k */
+    /* 4. re-linearise the M stages with the largest rho_k (and more as the budget allows) */
     if (rc == UNICYCLE_OK) {
-        M = s->M < 0 ? 0 : (s->M > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->M);
-        if (s->recovering > 0) {
-            M = UNICYCLE_N - 1; /* after a recovery: every block fresh until it has settled */
-        }
-        unicycle_select(s, M);
-        for (k = 0; k < UNICYCLE_N - 1 && rc == UNICYCLE_OK; ++k) {
-            if (s->selected[k]) {
-                rc = unicycle_stage_H(s, k);
-            }
-        }
+        rc = unicycle_relinearise(s, extra, &ext_cost);
     }
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
@@ -1593,6 +1739,9 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
     /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
     s->kkt_proxy = unicycle_kkt_proxy_eval(s);
     unicycle_lm_prepared(s); /* the automatic Levenberg-Marquardt term (section 10) */
+    if (s->budget_unit != UNICYCLE_BUDGET_OFF) {
+        s->cost_prepare = unicycle_budget_now(s) - b_start - ext_cost;
+    }
     if (unicycle_iterate_diverged(s)) {
         s->flags |= UNICYCLE_FLAG_DIVERGED;
         if (s->recovery && s->mode == UNICYCLE_MODE_RECEDING) {
@@ -1600,6 +1749,56 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
         }
     }
     return UNICYCLE_OK;
+}
+
+/* ---- anytime (algorithm.md section 12) -------------------------------------------------- */
+
+/* One extra iteration on the next instant's problem: the prepared QP for the state the plan
+ * predicts (dx_0 = 0), its full step, then a prepare iteration without the shift. A QP not
+ * solved (or a step outside the box) changes nothing and returns UNICYCLE_ERR_QP. */
+static int unicycle_extra_iteration(unicycle_solver *s)
+{
+    unicycle_real lm = s->lm;
+    double b0 = unicycle_budget_now(s);
+    int i, qs;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->qp_in.x0[i] = UNICYCLE_R(0.0);
+    }
+    unicycle_lm_measured(s);
+    qs = unicycle_feedback_qp(s);
+    if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
+        s->lm = lm;
+        s->lm_uncapped = -UNICYCLE_R(1.0);
+        return UNICYCLE_ERR_QP;
+    }
+    s->cost_qp = unicycle_budget_now(s) - b0;
+    unicycle_store_domega(s);
+    unicycle_take_step(s);
+    unicycle_lm_feedback(s, UNICYCLE_OK);
+    return unicycle_prepare_iteration(s, 1);
+}
+
+/* The time left after prepare (algorithm.md section 12): extra iterations while the KKT proxy
+ * exceeds the tolerance and one more fits in the budget. The last feedback's QP figures are
+ * kept for unicycle_get_qp_status and unicycle_get_qp_iterations. */
+static int unicycle_anytime(unicycle_solver *s)
+{
+    int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = UNICYCLE_OK;
+    if (s->budget_unit == UNICYCLE_BUDGET_OFF) {
+        return UNICYCLE_OK;
+    }
+    while (s->extra_iterations < UNICYCLE_ANYTIME_MAX_ITER && s->qp_ready && s->kkt_proxy > s->anytime_tol &&
+           unicycle_budget_fits(s, s->cost_qp + s->cost_prepare)) {
+        rc = unicycle_extra_iteration(s);
+        if (rc != UNICYCLE_OK) {
+            break;
+        }
+        s->extra_iterations += 1;
+    }
+    s->qp_status = qp_status;
+    s->qp_iterations = qp_iterations;
+    s->qp_cold_retry = cold;
+    return rc == UNICYCLE_ERR_QP ? UNICYCLE_OK : rc;
 }
 
 /* ---- KKT ---------------------------------------------------------------------------- */

@@ -231,6 +231,38 @@ void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void 
 /* 1 if the timings measure time (a clock was installed, or the default clock exists on
  * this platform), 0 if they read 0 for want of a clock. */
 int unicycle_has_clock(const unicycle_solver *s);
+/* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
+ * from the start of unicycle_feedback. In time (seconds of the solver's clock, unicycle_set_clock:
+ * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
+ * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
+ * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a
+ * budget, prepare re-linearises stages beyond stage N-1 only while the budget allows, first
+ * the M (or adaptive M) stages, then further stages in rho order, and spends the rest on
+ * SQP iterations on the next instant's problem at the state the plan predicts (dx_0 = 0)
+ * while the KKT proxy exceeds the anytime tolerance; the next feedback starts from that
+ * iterate. The feedback's QP iterations are capped by the budget left (the fallback control
+ * when the cap stops it). */
+int unicycle_set_time_budget(unicycle_solver *s, double seconds);
+int unicycle_set_work_budget(unicycle_solver *s, double units);
+/* UNICYCLE_BUDGET_OFF, UNICYCLE_BUDGET_TIME or UNICYCLE_BUDGET_WORK, and the budget in its unit. */
+int unicycle_get_budget_unit(const unicycle_solver *s);
+double unicycle_get_budget(const unicycle_solver *s);
+/* KKT proxy (unicycle_get_kkt_proxy) below which no further iteration is spent; > 0. */
+int unicycle_set_anytime_tol(unicycle_solver *s, unicycle_real tol);
+unicycle_real unicycle_get_anytime_tol(const unicycle_solver *s);
+/* Adaptive M (docs/algorithm.md section 12): each iteration re-linearises the stages whose
+ * secant residual rho_k |domega_k| exceeds eta times the KKT proxy, at least M_min and at
+ * most M_max of them (0 <= M_min <= M_max), the largest rho_k first. on = 0: the fixed M of
+ * unicycle_set_M. eta > 0. */
+int unicycle_set_M_adaptive(unicycle_solver *s, int on, int M_min, int M_max, unicycle_real eta);
+int unicycle_get_M_adaptive(const unicycle_solver *s, int *M_min, int *M_max, unicycle_real *eta);
+/* The last instant: extra iterations after prepare, stages re-linearised over all its
+ * iterations (stage N-1 and the terminal node not counted), budget used (its unit). */
+int unicycle_get_extra_iterations(const unicycle_solver *s);
+int unicycle_get_instant_stages(const unicycle_solver *s);
+double unicycle_get_budget_used(const unicycle_solver *s);
+/* Work units counted since the solver was set up (the unit of unicycle_set_work_budget). */
+double unicycle_get_work(const unicycle_solver *s);
 /* UNICYCLE_CDEF_END */
 
 /* Status codes returned by the functions above. */
@@ -298,6 +330,19 @@ enum unicycle_mode {
 };
 
 enum unicycle_hessian { UNICYCLE_HESSIAN_EXACT = 0, UNICYCLE_HESSIAN_GAUSS_NEWTON = 1 };
+
+/* Units of the anytime budget (docs/algorithm.md section 12). */
+enum unicycle_budget_unit {
+    UNICYCLE_BUDGET_OFF = 0,  /* no budget: the plain real-time iteration */
+    UNICYCLE_BUDGET_TIME = 1, /* seconds of the solver's clock */
+    UNICYCLE_BUDGET_WORK = 2  /* work units: function evaluations 1, a QP solve N */
+};
+
+/* Anytime constants (docs/algorithm.md section 12). */
+#define UNICYCLE_ANYTIME_TOL UNICYCLE_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
+#define UNICYCLE_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
+#define UNICYCLE_ADAPTIVE_ETA UNICYCLE_R(0.1)          /* default eta of adaptive M */
+#define UNICYCLE_WORK_QP UNICYCLE_N                    /* work units of a QP solve */
 
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static unicycle_solver s;`;
@@ -429,6 +474,24 @@ struct unicycle_solver {
     unicycle_real kkt[4];
 
     unicycle_timer timer;
+
+    /* anytime budget (algorithm.md section 12) */
+    int budget_unit;         /* enum unicycle_budget_unit */
+    double budget;           /* per instant, in its unit */
+    unicycle_real anytime_tol;  /* no extra iteration below this KKT proxy */
+    int M_adaptive;          /* 1: adaptive M between M_min and M_max */
+    int M_min, M_max;
+    unicycle_real M_eta;
+    double work;             /* work units counted since setup */
+    double instant_start;    /* budget clock at the start of the instant's feedback */
+    double cost_stage;       /* estimated cost of one stage re-linearisation */
+    double cost_qp;          /* cost of the last QP solve */
+    double cost_prepare;     /* cost of the last prepare iteration without its extension */
+    double cost_qp_iter;     /* cost of one QP iteration (the feedback's cap) */
+    double budget_used;      /* budget used by the last instant */
+    int qp_capped;           /* the feedback's QP iterations are capped by the budget */
+    int extra_iterations;    /* extra iterations of the last prepare */
+    int instant_stages;      /* stages re-linearised in the last instant */
 };
 
 #endif /* UNICYCLE_SOLVER_H */
