@@ -1109,7 +1109,8 @@ static int dopus_feedback_lm_retries(dopus_solver *s, int qs, int *retries)
 {
     *retries = 0;
     while (s->lm_auto && *retries < DOPUS_LM_RETRIES && s->lm < DOPUS_LM_MAX_REL * s->lm_scale &&
-           !dopus_qp_ok(s, qs) && qs != DOPUS_QP_INVALID_INPUT && !(qs == DOPUS_QP_MAX_ITER && s->qp_capped)) {
+           !dopus_qp_ok(s, qs) && qs != DOPUS_QP_INVALID_INPUT &&
+           !(qs == DOPUS_QP_MAX_ITER && s->qp_capped)) {
         dopus_lm_raise(s);
         s->work += DOPUS_WORK_QP;
         s->qp_in.hess_shift = s->lm;
@@ -1385,7 +1386,8 @@ static int dopus_relinearise(dopus_solver *s, int extra, double *ext_cost)
     for (k = 0; k < DOPUS_N; ++k) {
         s->selected[k] = 0;
     }
-    extend = s->budget_unit != DOPUS_BUDGET_OFF && (!extra || !dopus_budget_fits(s, s->cost_qp + s->cost_prepare));
+    extend =
+        s->budget_unit != DOPUS_BUDGET_OFF && (!extra || !dopus_budget_fits(s, s->cost_qp + s->cost_prepare));
     *ext_cost = 0.0;
     for (m = 0; m < DOPUS_N - 1; ++m) {
         if ((m >= M && !extend) || !dopus_budget_fits(s, s->cost_stage)) {

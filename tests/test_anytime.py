@@ -101,13 +101,14 @@ def test_budget_zero_is_the_real_time_iteration(robot_disc, robot_solution):
     zero.set_work_budget(0)
     assert zero.budget_unit == "off"
     xhat = np.array(robot_disc.x0, dtype=float)
-    p0 = np.asarray(robot_disc.p_default if hasattr(robot_disc, "p_default") else zero.p[0], dtype=float)
+    p0 = np.asarray(zero.p[0], dtype=float)
     for b in (plain, zero):
         b.init(xhat, robot_solution[0])
     for it in range(8):
         if it == 0:
             xhat = np.array(robot_disc.disturbance(xhat.copy()), dtype=float).reshape(-1)
         u1, u2 = plain.feedback(xhat), zero.feedback(xhat)
+        assert np.array_equal(u1, u2)
         plain.prepare()
         zero.prepare()
         assert zero.extra_iterations == 0

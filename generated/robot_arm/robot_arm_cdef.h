@@ -197,7 +197,7 @@ void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), voi
  * this platform), 0 if they read 0 for want of a clock. */
 int robot_arm_has_clock(const robot_arm_solver *s);
 /* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
- * from the start of robot_arm_feedback. In time (seconds of the solver's clock, robot_arm_set_clock:
+ * from the start of the instant's feedback. In time (seconds of the solver's clock, robot_arm_set_clock:
  * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
  * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
  * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a

@@ -1109,7 +1109,8 @@ static int robot_arm_feedback_lm_retries(robot_arm_solver *s, int qs, int *retri
 {
     *retries = 0;
     while (s->lm_auto && *retries < ROBOT_ARM_LM_RETRIES && s->lm < ROBOT_ARM_LM_MAX_REL * s->lm_scale &&
-           !robot_arm_qp_ok(s, qs) && qs != ROBOT_ARM_QP_INVALID_INPUT && !(qs == ROBOT_ARM_QP_MAX_ITER && s->qp_capped)) {
+           !robot_arm_qp_ok(s, qs) && qs != ROBOT_ARM_QP_INVALID_INPUT &&
+           !(qs == ROBOT_ARM_QP_MAX_ITER && s->qp_capped)) {
         robot_arm_lm_raise(s);
         s->work += ROBOT_ARM_WORK_QP;
         s->qp_in.hess_shift = s->lm;
@@ -1385,7 +1386,8 @@ static int robot_arm_relinearise(robot_arm_solver *s, int extra, double *ext_cos
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         s->selected[k] = 0;
     }
-    extend = s->budget_unit != ROBOT_ARM_BUDGET_OFF && (!extra || !robot_arm_budget_fits(s, s->cost_qp + s->cost_prepare));
+    extend =
+        s->budget_unit != ROBOT_ARM_BUDGET_OFF && (!extra || !robot_arm_budget_fits(s, s->cost_qp + s->cost_prepare));
     *ext_cost = 0.0;
     for (m = 0; m < ROBOT_ARM_N - 1; ++m) {
         if ((m >= M && !extend) || !robot_arm_budget_fits(s, s->cost_stage)) {

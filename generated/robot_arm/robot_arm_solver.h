@@ -232,7 +232,7 @@ void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), voi
  * this platform), 0 if they read 0 for want of a clock. */
 int robot_arm_has_clock(const robot_arm_solver *s);
 /* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
- * from the start of robot_arm_feedback. In time (seconds of the solver's clock, robot_arm_set_clock:
+ * from the start of the instant's feedback. In time (seconds of the solver's clock, robot_arm_set_clock:
  * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
  * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
  * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a
@@ -297,11 +297,11 @@ enum robot_arm_row_kind {
 
 /* Flags of robot_arm_get_flags (docs/algorithm.md section 9). */
 enum robot_arm_flag {
-    ROBOT_ARM_FLAG_U0_CLIPPED = 1, /* u0 was outside the control bounds and was clipped */
-    ROBOT_ARM_FLAG_FALLBACK = 2,   /* feedback failed: u0 is the next control of the last good plan */
-    ROBOT_ARM_FLAG_DIVERGED = 4,   /* the step or the prepared iterate failed the divergence test */
-    ROBOT_ARM_FLAG_RECOVERED = 8,  /* prepare or feedback re-initialised (automatic recovery) */
-    ROBOT_ARM_FLAG_PREDICTED = 16, /* prepare took the step of the QP for the predicted state */
+    ROBOT_ARM_FLAG_U0_CLIPPED = 1,   /* u0 was outside the control bounds and was clipped */
+    ROBOT_ARM_FLAG_FALLBACK = 2,     /* feedback failed: u0 is the next control of the last good plan */
+    ROBOT_ARM_FLAG_DIVERGED = 4,     /* the step or the prepared iterate failed the divergence test */
+    ROBOT_ARM_FLAG_RECOVERED = 8,    /* prepare or feedback re-initialised (automatic recovery) */
+    ROBOT_ARM_FLAG_PREDICTED = 16,   /* prepare took the step of the QP for the predicted state */
     ROBOT_ARM_FLAG_REINIT_GUESS = 32 /* a re-initialisation fell back to the OCP file's guess: the
                                     model was not finite at the measured or predicted state */
 };
@@ -476,22 +476,22 @@ struct robot_arm_solver {
     robot_arm_timer timer;
 
     /* anytime budget (algorithm.md section 12) */
-    int budget_unit;         /* enum robot_arm_budget_unit */
-    double budget;           /* per instant, in its unit */
-    robot_arm_real anytime_tol;  /* no extra iteration below this KKT proxy */
-    int M_adaptive;          /* 1: adaptive M between M_min and M_max */
+    int budget_unit;        /* enum robot_arm_budget_unit */
+    double budget;          /* per instant, in its unit */
+    robot_arm_real anytime_tol; /* no extra iteration below this KKT proxy */
+    int M_adaptive;         /* 1: adaptive M between M_min and M_max */
     int M_min, M_max;
     robot_arm_real M_eta;
-    double work;             /* work units counted since setup */
-    double instant_start;    /* budget clock at the start of the instant's feedback */
-    double cost_stage;       /* estimated cost of one stage re-linearisation */
-    double cost_qp;          /* cost of the last QP solve */
-    double cost_prepare;     /* cost of the last prepare iteration without its extension */
-    double cost_qp_iter;     /* cost of one QP iteration (the feedback's cap) */
-    double budget_used;      /* budget used by the last instant */
-    int qp_capped;           /* the feedback's QP iterations are capped by the budget */
-    int extra_iterations;    /* extra iterations of the last prepare */
-    int instant_stages;      /* stages re-linearised in the last instant */
+    double work;          /* work units counted since setup */
+    double instant_start; /* budget clock at the start of the instant's feedback */
+    double cost_stage;    /* estimated cost of one stage re-linearisation */
+    double cost_qp;       /* cost of the last QP solve */
+    double cost_prepare;  /* cost of the last prepare iteration without its extension */
+    double cost_qp_iter;  /* cost of one QP iteration (the feedback's cap) */
+    double budget_used;   /* budget used by the last instant */
+    int qp_capped;        /* the feedback's QP iterations are capped by the budget */
+    int extra_iterations; /* extra iterations of the last prepare */
+    int instant_stages;   /* stages re-linearised in the last instant */
 };
 
 #endif /* ROBOT_ARM_SOLVER_H */

@@ -197,7 +197,7 @@ void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void 
  * this platform), 0 if they read 0 for want of a clock. */
 int unicycle_has_clock(const unicycle_solver *s);
 /* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
- * from the start of unicycle_feedback. In time (seconds of the solver's clock, unicycle_set_clock:
+ * from the start of the instant's feedback. In time (seconds of the solver's clock, unicycle_set_clock:
  * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
  * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
  * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a

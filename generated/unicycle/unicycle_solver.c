@@ -1109,7 +1109,8 @@ static int unicycle_feedback_lm_retries(unicycle_solver *s, int qs, int *retries
 {
     *retries = 0;
     while (s->lm_auto && *retries < UNICYCLE_LM_RETRIES && s->lm < UNICYCLE_LM_MAX_REL * s->lm_scale &&
-           !unicycle_qp_ok(s, qs) && qs != UNICYCLE_QP_INVALID_INPUT && !(qs == UNICYCLE_QP_MAX_ITER && s->qp_capped)) {
+           !unicycle_qp_ok(s, qs) && qs != UNICYCLE_QP_INVALID_INPUT &&
+           !(qs == UNICYCLE_QP_MAX_ITER && s->qp_capped)) {
         unicycle_lm_raise(s);
         s->work += UNICYCLE_WORK_QP;
         s->qp_in.hess_shift = s->lm;
@@ -1385,7 +1386,8 @@ static int unicycle_relinearise(unicycle_solver *s, int extra, double *ext_cost)
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->selected[k] = 0;
     }
-    extend = s->budget_unit != UNICYCLE_BUDGET_OFF && (!extra || !unicycle_budget_fits(s, s->cost_qp + s->cost_prepare));
+    extend =
+        s->budget_unit != UNICYCLE_BUDGET_OFF && (!extra || !unicycle_budget_fits(s, s->cost_qp + s->cost_prepare));
     *ext_cost = 0.0;
     for (m = 0; m < UNICYCLE_N - 1; ++m) {
         if ((m >= M && !extend) || !unicycle_budget_fits(s, s->cost_stage)) {

@@ -232,7 +232,7 @@ void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void 
  * this platform), 0 if they read 0 for want of a clock. */
 int unicycle_has_clock(const unicycle_solver *s);
 /* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
- * from the start of unicycle_feedback. In time (seconds of the solver's clock, unicycle_set_clock:
+ * from the start of the instant's feedback. In time (seconds of the solver's clock, unicycle_set_clock:
  * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
  * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
  * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a
@@ -297,11 +297,11 @@ enum unicycle_row_kind {
 
 /* Flags of unicycle_get_flags (docs/algorithm.md section 9). */
 enum unicycle_flag {
-    UNICYCLE_FLAG_U0_CLIPPED = 1, /* u0 was outside the control bounds and was clipped */
-    UNICYCLE_FLAG_FALLBACK = 2,   /* feedback failed: u0 is the next control of the last good plan */
-    UNICYCLE_FLAG_DIVERGED = 4,   /* the step or the prepared iterate failed the divergence test */
-    UNICYCLE_FLAG_RECOVERED = 8,  /* prepare or feedback re-initialised (automatic recovery) */
-    UNICYCLE_FLAG_PREDICTED = 16, /* prepare took the step of the QP for the predicted state */
+    UNICYCLE_FLAG_U0_CLIPPED = 1,   /* u0 was outside the control bounds and was clipped */
+    UNICYCLE_FLAG_FALLBACK = 2,     /* feedback failed: u0 is the next control of the last good plan */
+    UNICYCLE_FLAG_DIVERGED = 4,     /* the step or the prepared iterate failed the divergence test */
+    UNICYCLE_FLAG_RECOVERED = 8,    /* prepare or feedback re-initialised (automatic recovery) */
+    UNICYCLE_FLAG_PREDICTED = 16,   /* prepare took the step of the QP for the predicted state */
     UNICYCLE_FLAG_REINIT_GUESS = 32 /* a re-initialisation fell back to the OCP file's guess: the
                                     model was not finite at the measured or predicted state */
 };
@@ -476,22 +476,22 @@ struct unicycle_solver {
     unicycle_timer timer;
 
     /* anytime budget (algorithm.md section 12) */
-    int budget_unit;         /* enum unicycle_budget_unit */
-    double budget;           /* per instant, in its unit */
-    unicycle_real anytime_tol;  /* no extra iteration below this KKT proxy */
-    int M_adaptive;          /* 1: adaptive M between M_min and M_max */
+    int budget_unit;        /* enum unicycle_budget_unit */
+    double budget;          /* per instant, in its unit */
+    unicycle_real anytime_tol; /* no extra iteration below this KKT proxy */
+    int M_adaptive;         /* 1: adaptive M between M_min and M_max */
     int M_min, M_max;
     unicycle_real M_eta;
-    double work;             /* work units counted since setup */
-    double instant_start;    /* budget clock at the start of the instant's feedback */
-    double cost_stage;       /* estimated cost of one stage re-linearisation */
-    double cost_qp;          /* cost of the last QP solve */
-    double cost_prepare;     /* cost of the last prepare iteration without its extension */
-    double cost_qp_iter;     /* cost of one QP iteration (the feedback's cap) */
-    double budget_used;      /* budget used by the last instant */
-    int qp_capped;           /* the feedback's QP iterations are capped by the budget */
-    int extra_iterations;    /* extra iterations of the last prepare */
-    int instant_stages;      /* stages re-linearised in the last instant */
+    double work;          /* work units counted since setup */
+    double instant_start; /* budget clock at the start of the instant's feedback */
+    double cost_stage;    /* estimated cost of one stage re-linearisation */
+    double cost_qp;       /* cost of the last QP solve */
+    double cost_prepare;  /* cost of the last prepare iteration without its extension */
+    double cost_qp_iter;  /* cost of one QP iteration (the feedback's cap) */
+    double budget_used;   /* budget used by the last instant */
+    int qp_capped;        /* the feedback's QP iterations are capped by the budget */
+    int extra_iterations; /* extra iterations of the last prepare */
+    int instant_stages;   /* stages re-linearised in the last instant */
 };
 
 #endif /* UNICYCLE_SOLVER_H */
