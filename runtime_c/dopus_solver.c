@@ -1242,8 +1242,21 @@ static void dopus_feedback_end(dopus_solver *s, int max_iter, double t0)
     dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
 }
 
+/* 1 when the model is finite at the state xs with the next control of the last good plan (one
+ * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
+ * cannot start a re-initialisation: it is no measurement (algorithm.md section 9). */
+static int dopus_model_finite_at(dopus_solver *s, const dopus_real *xs)
+{
+    dopus_real l = DOPUS_R(0.0), u[DOPUS_NU], xn[DOPUS_NX];
+    int j = s->plan_age > DOPUS_N - 1 ? DOPUS_N - 1 : s->plan_age;
+    dopus_clip_u(s->plan_u[j], u);
+    return dopus_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+           dopus_lai_vec_finite(DOPUS_NX, xn) && dopus_lai_vec_finite(1, &l);
+}
+
 int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
+    dopus_real xhat_prev[DOPUS_NX];
     double t0, b0;
     int rc, qs, retries, max_iter;
 
@@ -1258,6 +1271,7 @@ int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
     }
     s->timer.t[DOPUS_PHASE_FEEDBACK] = DOPUS_R(0.0);
     t0 = dopus_timer_now(&s->timer);
+    dopus_copy(xhat_prev, s->xhat0, DOPUS_NX);
     dopus_feedback_measure(s, xhat0);
     max_iter = dopus_feedback_cap(s);
     b0 = dopus_budget_now(s);
@@ -1273,10 +1287,19 @@ int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
     if (rc != DOPUS_OK && s->recovery && s->mode == DOPUS_MODE_RECEDING && qs != DOPUS_QP_MAX_ITER &&
         qs != DOPUS_QP_INVALID_INPUT) {
-        rc = dopus_feedback_recover(s, &qs, &retries);
-        if (rc == DOPUS_OK) {
-            s->qp_status = qs;
-            rc = dopus_feedback_check_step(s, qs);
+        if (!dopus_model_finite_at(s, xhat0)) {
+            /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
+             * prepare takes the predicted step) */
+            dopus_copy(s->xhat0, xhat_prev, DOPUS_NX);
+            s->xhat_fresh = 0;
+            s->flags |= DOPUS_FLAG_MEASUREMENT_UNUSABLE;
+            rc = DOPUS_ERR_NONFINITE_VALUE;
+        } else {
+            rc = dopus_feedback_recover(s, &qs, &retries);
+            if (rc == DOPUS_OK) {
+                s->qp_status = qs;
+                rc = dopus_feedback_check_step(s, qs);
+            }
         }
     }
     if (rc != DOPUS_OK) {
@@ -1610,7 +1633,8 @@ int dopus_prepare(dopus_solver *s)
     s->extra_iterations = 0;
     hessian = s->hessian;
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
-        s->mode == DOPUS_MODE_RECEDING) {
+        s->mode == DOPUS_MODE_RECEDING && !(s->flags & DOPUS_FLAG_REINIT_GUESS)) {
+        /* (not from the OCP file's guess: its plan is not the plant's) */
         dopus_predicted_step(s);
     }
     s->qp_ready = 0;

@@ -145,7 +145,9 @@ int dopus_get_qp_max_iter(dopus_solver *s);
  * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
  * re-initialises from that measurement and solves the new QP within the same call before it
  * gives up (DOPUS_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
- * retries). */
+ * retries); a measurement at which the model is not finite is handled as a missing one
+ * (DOPUS_ERR_NONFINITE_VALUE, DOPUS_FLAG_MEASUREMENT_UNUSABLE). A feedback refused for want of
+ * a prepared QP still records its measurement: the recovery starts from the newest one. */
 int dopus_set_recovery(dopus_solver *s, int on, int max_failures);
 int dopus_get_recovery(dopus_solver *s);
 int dopus_get_recovery_failures(dopus_solver *s);
@@ -297,13 +299,15 @@ enum dopus_row_kind {
 
 /* Flags of dopus_get_flags (docs/algorithm.md section 9). */
 enum dopus_flag {
-    DOPUS_FLAG_U0_CLIPPED = 1,   /* u0 was outside the control bounds and was clipped */
-    DOPUS_FLAG_FALLBACK = 2,     /* feedback failed: u0 is the next control of the last good plan */
-    DOPUS_FLAG_DIVERGED = 4,     /* the step or the prepared iterate failed the divergence test */
-    DOPUS_FLAG_RECOVERED = 8,    /* prepare or feedback re-initialised (automatic recovery) */
-    DOPUS_FLAG_PREDICTED = 16,   /* prepare took the step of the QP for the predicted state */
-    DOPUS_FLAG_REINIT_GUESS = 32 /* a re-initialisation fell back to the OCP file's guess: the
-                                    model was not finite at the measured or predicted state */
+    DOPUS_FLAG_U0_CLIPPED = 1,           /* u0 was outside the control bounds and was clipped */
+    DOPUS_FLAG_FALLBACK = 2,             /* feedback failed: u0 is the next control of the last good plan */
+    DOPUS_FLAG_DIVERGED = 4,             /* the step or the prepared iterate failed the divergence test */
+    DOPUS_FLAG_RECOVERED = 8,            /* prepare or feedback re-initialised (automatic recovery) */
+    DOPUS_FLAG_PREDICTED = 16,           /* prepare took the step of the QP for the predicted state */
+    DOPUS_FLAG_REINIT_GUESS = 32,        /* a re-initialisation fell back to the OCP file's guess: the
+                                     model was not finite at the re-initialised iterate */
+    DOPUS_FLAG_MEASUREMENT_UNUSABLE = 64 /* the model is not finite at the (finite) measurement:
+                                            handled as a missing one */
 };
 
 /* Safety constants (docs/algorithm.md section 9). */

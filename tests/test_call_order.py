@@ -132,7 +132,6 @@ def test_retry_after_a_failed_prepare_does_not_shift_again(second_disc, second_s
             b.prepare()
         assert ei.value.status == nonfinite
         assert np.array_equal(np.array(b.x)[:-1], shifted_x)     # the shift happened once
-        rejected(b, lambda b=b: b.feedback(xh), STATUS_NOT_PREPARED)
         b.set_parameters(p_good)
         b.prepare()                                           # retry: no second shift
         assert np.array_equal(np.array(b.x)[:-1], shifted_x)
@@ -142,6 +141,36 @@ def test_retry_after_a_failed_prepare_does_not_shift_again(second_disc, second_s
     uc, ur = c.feedback(xh), r.feedback(xh)
     assert np.max(np.abs(uc - ur)) <= REL_TOL * max(1.0, np.max(np.abs(ur)))
     assert_close(c, r, "one iteration after the retry")
+
+
+def test_a_refused_feedback_after_a_failed_prepare_is_an_instant(second_disc, second_solution):
+    """Prepare fails after its shift, the next feedback is refused (no prepared QP): that
+    sampling instant has passed all the same, so the next prepare shifts again (ring head 2),
+    and the refused feedback's measurement is the one a recovery would start from
+    (docs/algorithm.md section 9); both backends alike."""
+    d = second_disc
+    c = CSolver(d, M=1, mode="receding", qp_tol=QP_TOL)
+    r = ReferenceDopus(d, M=1, mode="receding", qp_tol=QP_TOL)
+    xh = np.asarray(d.disturbance(d.x0), dtype=float)
+    p_good = np.array(d.p0, dtype=float)
+    p_bad = p_good.copy()
+    p_bad[:, 0] = 1e200
+    for b, nonfinite in ((c, STATUS_NONFINITE_VALUE), (r, REF_NONFINITE)):
+        b.init(d.x0, second_solution[0])
+        b.feedback(xh)
+        x_before = np.array(b.x)
+        b.set_parameters(p_bad)
+        with pytest.raises((DopusError, RefError)) as ei:
+            b.prepare()
+        assert ei.value.status == nonfinite
+        rejected(b, lambda b=b: b.feedback(xh), STATUS_NOT_PREPARED)
+        b.set_parameters(p_good)
+        b.prepare()                                           # the next instant: shifted again
+        assert b.ring_head == 2
+        assert np.array_equal(np.array(b.x)[:-2], x_before[2:])
+    assert_close(c, r, "after the prepare of the next instant")
+    uc, ur = c.feedback(xh), r.feedback(xh)
+    assert np.max(np.abs(uc - ur)) <= REL_TOL * max(1.0, np.max(np.abs(ur)))
 
 
 def test_retry_after_a_failure_in_the_middle_of_the_gradients(second_disc, second_solution):

@@ -498,6 +498,7 @@ class ReferenceDopus:
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
         self._lm_measured(xhat0)
+        xhat_prev = self._xhat_last
         self._xhat_last = xhat0.copy()
         self._xhat_fresh = True
         # the QP is attempted: a prepare (with its shift) is due, whatever the outcome
@@ -511,6 +512,12 @@ class ReferenceDopus:
             # the recovery within the feedback (section 9): re-initialise from the measured
             # state and solve the QP of the re-initialised iterate; not for a QP stopped by
             # its iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid
+            if not self._model_finite_at(xhat0):
+                # no measurement: handled as a non-finite one (the iterate and its QP stay)
+                self._xhat_last, self._xhat_fresh = xhat_prev, False
+                self._flag("measurement_unusable")
+                raise self._feedback_failed("nonfinite_value", "feedback: the model is not finite at the measured "
+                                            f"state {xhat0}: handled as a missing measurement")
             sol, failure, retries = self._feedback_recover(xhat0)
         if isinstance(failure, DopusError):
             raise self._feedback_failed(failure.status_name, str(failure)) from None
@@ -638,7 +645,8 @@ class ReferenceDopus:
             raise self._fail("already_prepared", "prepare: already prepared (call feedback before the next prepare)")
         self.extra_iterations = 0
         if (self._qp_ready and self._n_failed > 0 and not self._recover_pending and self.recovery
-                and self.mode == "receding"):
+                and self.mode == "receding" and "reinit_guess" not in self.flags):
+            # (not from the OCP file's guess: its plan is not the plant's)
             self._predicted_step()
         self._qp_ready = False
         if self.mode == "receding" and self._plan_age < self.N:
@@ -991,6 +999,16 @@ class ReferenceDopus:
             if not np.all(np.isfinite(x[k + 1])):
                 return False
         return self._box_ok(x, u)
+
+    def _model_finite_at(self, xs) -> bool:
+        """Section 9: the model finite at the state xs with the next control of the last good
+        plan (one stage evaluation)."""
+        u = self._clip_u(self._plan_u[min(self._plan_age, self.N - 1)])[0]
+        try:
+            out = self.disc.stage_eval(xs, u, self.p[0])
+        except RuntimeError:
+            return False
+        return all(np.all(np.isfinite(np.asarray(v, float))) for v in out[:2])
 
     def _predicted_step(self) -> None:
         """Section 9: after a failed feedback whose QP is still the prepared one, the step of

@@ -255,7 +255,9 @@ class CSolver:
                 from ..problem.checks import describe_qp_row
 
                 msg += "; " + describe_qp_row(self.disc, row)
-        if what == "feedback" and status != STATUS_QP and "reinit_guess" in self.flags:
+        if what == "feedback" and "measurement_unusable" in self.flags:
+            msg += "; at the measured state: handled as a missing measurement"
+        elif what == "feedback" and status != STATUS_QP and "reinit_guess" in self.flags:
             msg += ("; at the measured state (the recovery's re-initialisation from it): the iterate is the "
                     "OCP file's guess, prepared for the next measurement")
         raise DopusError(msg, status, qp_status)

@@ -110,7 +110,9 @@ int robot_arm_get_qp_max_iter(robot_arm_solver *s);
  * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
  * re-initialises from that measurement and solves the new QP within the same call before it
  * gives up (ROBOT_ARM_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
- * retries). */
+ * retries); a measurement at which the model is not finite is handled as a missing one
+ * (ROBOT_ARM_ERR_NONFINITE_VALUE, ROBOT_ARM_FLAG_MEASUREMENT_UNUSABLE). A feedback refused for want of
+ * a prepared QP still records its measurement: the recovery starts from the newest one. */
 int robot_arm_set_recovery(robot_arm_solver *s, int on, int max_failures);
 int robot_arm_get_recovery(robot_arm_solver *s);
 int robot_arm_get_recovery_failures(robot_arm_solver *s);

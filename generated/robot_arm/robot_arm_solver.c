@@ -1242,8 +1242,21 @@ static void robot_arm_feedback_end(robot_arm_solver *s, int max_iter, double t0)
     robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
 }
 
+/* 1 when the model is finite at the state xs with the next control of the last good plan (one
+ * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
+ * cannot start a re-initialisation: it is no measurement (algorithm.md section 9). */
+static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *xs)
+{
+    robot_arm_real l = ROBOT_ARM_R(0.0), u[ROBOT_ARM_NU], xn[ROBOT_ARM_NX];
+    int j = s->plan_age > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->plan_age;
+    robot_arm_clip_u(s->plan_u[j], u);
+    return robot_arm_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+           robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn) && robot_arm_lai_vec_finite(1, &l);
+}
+
 int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
+    robot_arm_real xhat_prev[ROBOT_ARM_NX];
     double t0, b0;
     int rc, qs, retries, max_iter;
 
@@ -1258,6 +1271,7 @@ int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
     }
     s->timer.t[ROBOT_ARM_PHASE_FEEDBACK] = ROBOT_ARM_R(0.0);
     t0 = robot_arm_timer_now(&s->timer);
+    robot_arm_copy(xhat_prev, s->xhat0, ROBOT_ARM_NX);
     robot_arm_feedback_measure(s, xhat0);
     max_iter = robot_arm_feedback_cap(s);
     b0 = robot_arm_budget_now(s);
@@ -1273,10 +1287,19 @@ int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
     if (rc != ROBOT_ARM_OK && s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING && qs != ROBOT_ARM_QP_MAX_ITER &&
         qs != ROBOT_ARM_QP_INVALID_INPUT) {
-        rc = robot_arm_feedback_recover(s, &qs, &retries);
-        if (rc == ROBOT_ARM_OK) {
-            s->qp_status = qs;
-            rc = robot_arm_feedback_check_step(s, qs);
+        if (!robot_arm_model_finite_at(s, xhat0)) {
+            /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
+             * prepare takes the predicted step) */
+            robot_arm_copy(s->xhat0, xhat_prev, ROBOT_ARM_NX);
+            s->xhat_fresh = 0;
+            s->flags |= ROBOT_ARM_FLAG_MEASUREMENT_UNUSABLE;
+            rc = ROBOT_ARM_ERR_NONFINITE_VALUE;
+        } else {
+            rc = robot_arm_feedback_recover(s, &qs, &retries);
+            if (rc == ROBOT_ARM_OK) {
+                s->qp_status = qs;
+                rc = robot_arm_feedback_check_step(s, qs);
+            }
         }
     }
     if (rc != ROBOT_ARM_OK) {
@@ -1610,7 +1633,8 @@ int robot_arm_prepare(robot_arm_solver *s)
     s->extra_iterations = 0;
     hessian = s->hessian;
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
-        s->mode == ROBOT_ARM_MODE_RECEDING) {
+        s->mode == ROBOT_ARM_MODE_RECEDING && !(s->flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
+        /* (not from the OCP file's guess: its plan is not the plant's) */
         robot_arm_predicted_step(s);
     }
     s->qp_ready = 0;

@@ -145,7 +145,9 @@ int robot_arm_get_qp_max_iter(robot_arm_solver *s);
  * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
  * re-initialises from that measurement and solves the new QP within the same call before it
  * gives up (ROBOT_ARM_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
- * retries). */
+ * retries); a measurement at which the model is not finite is handled as a missing one
+ * (ROBOT_ARM_ERR_NONFINITE_VALUE, ROBOT_ARM_FLAG_MEASUREMENT_UNUSABLE). A feedback refused for want of
+ * a prepared QP still records its measurement: the recovery starts from the newest one. */
 int robot_arm_set_recovery(robot_arm_solver *s, int on, int max_failures);
 int robot_arm_get_recovery(robot_arm_solver *s);
 int robot_arm_get_recovery_failures(robot_arm_solver *s);
@@ -297,13 +299,15 @@ enum robot_arm_row_kind {
 
 /* Flags of robot_arm_get_flags (docs/algorithm.md section 9). */
 enum robot_arm_flag {
-    ROBOT_ARM_FLAG_U0_CLIPPED = 1,   /* u0 was outside the control bounds and was clipped */
-    ROBOT_ARM_FLAG_FALLBACK = 2,     /* feedback failed: u0 is the next control of the last good plan */
-    ROBOT_ARM_FLAG_DIVERGED = 4,     /* the step or the prepared iterate failed the divergence test */
-    ROBOT_ARM_FLAG_RECOVERED = 8,    /* prepare or feedback re-initialised (automatic recovery) */
-    ROBOT_ARM_FLAG_PREDICTED = 16,   /* prepare took the step of the QP for the predicted state */
-    ROBOT_ARM_FLAG_REINIT_GUESS = 32 /* a re-initialisation fell back to the OCP file's guess: the
-                                    model was not finite at the measured or predicted state */
+    ROBOT_ARM_FLAG_U0_CLIPPED = 1,           /* u0 was outside the control bounds and was clipped */
+    ROBOT_ARM_FLAG_FALLBACK = 2,             /* feedback failed: u0 is the next control of the last good plan */
+    ROBOT_ARM_FLAG_DIVERGED = 4,             /* the step or the prepared iterate failed the divergence test */
+    ROBOT_ARM_FLAG_RECOVERED = 8,            /* prepare or feedback re-initialised (automatic recovery) */
+    ROBOT_ARM_FLAG_PREDICTED = 16,           /* prepare took the step of the QP for the predicted state */
+    ROBOT_ARM_FLAG_REINIT_GUESS = 32,        /* a re-initialisation fell back to the OCP file's guess: the
+                                     model was not finite at the re-initialised iterate */
+    ROBOT_ARM_FLAG_MEASUREMENT_UNUSABLE = 64 /* the model is not finite at the (finite) measurement:
+                                            handled as a missing one */
 };
 
 /* Safety constants (docs/algorithm.md section 9). */

@@ -110,7 +110,9 @@ int unicycle_get_qp_max_iter(unicycle_solver *s);
  * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
  * re-initialises from that measurement and solves the new QP within the same call before it
  * gives up (UNICYCLE_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
- * retries). */
+ * retries); a measurement at which the model is not finite is handled as a missing one
+ * (UNICYCLE_ERR_NONFINITE_VALUE, UNICYCLE_FLAG_MEASUREMENT_UNUSABLE). A feedback refused for want of
+ * a prepared QP still records its measurement: the recovery starts from the newest one. */
 int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
 int unicycle_get_recovery(unicycle_solver *s);
 int unicycle_get_recovery_failures(unicycle_solver *s);

@@ -1242,8 +1242,21 @@ static void unicycle_feedback_end(unicycle_solver *s, int max_iter, double t0)
     unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
 }
 
+/* 1 when the model is finite at the state xs with the next control of the last good plan (one
+ * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
+ * cannot start a re-initialisation: it is no measurement (algorithm.md section 9). */
+static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
+{
+    unicycle_real l = UNICYCLE_R(0.0), u[UNICYCLE_NU], xn[UNICYCLE_NX];
+    int j = s->plan_age > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->plan_age;
+    unicycle_clip_u(s->plan_u[j], u);
+    return unicycle_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+           unicycle_lai_vec_finite(UNICYCLE_NX, xn) && unicycle_lai_vec_finite(1, &l);
+}
+
 int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
+    unicycle_real xhat_prev[UNICYCLE_NX];
     double t0, b0;
     int rc, qs, retries, max_iter;
 
@@ -1258,6 +1271,7 @@ int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
     }
     s->timer.t[UNICYCLE_PHASE_FEEDBACK] = UNICYCLE_R(0.0);
     t0 = unicycle_timer_now(&s->timer);
+    unicycle_copy(xhat_prev, s->xhat0, UNICYCLE_NX);
     unicycle_feedback_measure(s, xhat0);
     max_iter = unicycle_feedback_cap(s);
     b0 = unicycle_budget_now(s);
@@ -1273,10 +1287,19 @@ int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
     if (rc != UNICYCLE_OK && s->recovery && s->mode == UNICYCLE_MODE_RECEDING && qs != UNICYCLE_QP_MAX_ITER &&
         qs != UNICYCLE_QP_INVALID_INPUT) {
-        rc = unicycle_feedback_recover(s, &qs, &retries);
-        if (rc == UNICYCLE_OK) {
-            s->qp_status = qs;
-            rc = unicycle_feedback_check_step(s, qs);
+        if (!unicycle_model_finite_at(s, xhat0)) {
+            /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
+             * prepare takes the predicted step) */
+            unicycle_copy(s->xhat0, xhat_prev, UNICYCLE_NX);
+            s->xhat_fresh = 0;
+            s->flags |= UNICYCLE_FLAG_MEASUREMENT_UNUSABLE;
+            rc = UNICYCLE_ERR_NONFINITE_VALUE;
+        } else {
+            rc = unicycle_feedback_recover(s, &qs, &retries);
+            if (rc == UNICYCLE_OK) {
+                s->qp_status = qs;
+                rc = unicycle_feedback_check_step(s, qs);
+            }
         }
     }
     if (rc != UNICYCLE_OK) {
@@ -1610,7 +1633,8 @@ int unicycle_prepare(unicycle_solver *s)
     s->extra_iterations = 0;
     hessian = s->hessian;
     if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
-        s->mode == UNICYCLE_MODE_RECEDING) {
+        s->mode == UNICYCLE_MODE_RECEDING && !(s->flags & UNICYCLE_FLAG_REINIT_GUESS)) {
+        /* (not from the OCP file's guess: its plan is not the plant's) */
         unicycle_predicted_step(s);
     }
     s->qp_ready = 0;

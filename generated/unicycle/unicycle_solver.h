@@ -145,7 +145,9 @@ int unicycle_get_qp_max_iter(unicycle_solver *s);
  * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
  * re-initialises from that measurement and solves the new QP within the same call before it
  * gives up (UNICYCLE_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
- * retries). */
+ * retries); a measurement at which the model is not finite is handled as a missing one
+ * (UNICYCLE_ERR_NONFINITE_VALUE, UNICYCLE_FLAG_MEASUREMENT_UNUSABLE). A feedback refused for want of
+ * a prepared QP still records its measurement: the recovery starts from the newest one. */
 int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
 int unicycle_get_recovery(unicycle_solver *s);
 int unicycle_get_recovery_failures(unicycle_solver *s);
@@ -297,13 +299,15 @@ enum unicycle_row_kind {
 
 /* Flags of unicycle_get_flags (docs/algorithm.md section 9). */
 enum unicycle_flag {
-    UNICYCLE_FLAG_U0_CLIPPED = 1,   /* u0 was outside the control bounds and was clipped */
-    UNICYCLE_FLAG_FALLBACK = 2,     /* feedback failed: u0 is the next control of the last good plan */
-    UNICYCLE_FLAG_DIVERGED = 4,     /* the step or the prepared iterate failed the divergence test */
-    UNICYCLE_FLAG_RECOVERED = 8,    /* prepare or feedback re-initialised (automatic recovery) */
-    UNICYCLE_FLAG_PREDICTED = 16,   /* prepare took the step of the QP for the predicted state */
-    UNICYCLE_FLAG_REINIT_GUESS = 32 /* a re-initialisation fell back to the OCP file's guess: the
-                                    model was not finite at the measured or predicted state */
+    UNICYCLE_FLAG_U0_CLIPPED = 1,           /* u0 was outside the control bounds and was clipped */
+    UNICYCLE_FLAG_FALLBACK = 2,             /* feedback failed: u0 is the next control of the last good plan */
+    UNICYCLE_FLAG_DIVERGED = 4,             /* the step or the prepared iterate failed the divergence test */
+    UNICYCLE_FLAG_RECOVERED = 8,            /* prepare or feedback re-initialised (automatic recovery) */
+    UNICYCLE_FLAG_PREDICTED = 16,           /* prepare took the step of the QP for the predicted state */
+    UNICYCLE_FLAG_REINIT_GUESS = 32,        /* a re-initialisation fell back to the OCP file's guess: the
+                                     model was not finite at the re-initialised iterate */
+    UNICYCLE_FLAG_MEASUREMENT_UNUSABLE = 64 /* the model is not finite at the (finite) measurement:
+                                            handled as a missing one */
 };
 
 /* Safety constants (docs/algorithm.md section 9). */

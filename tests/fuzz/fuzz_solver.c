@@ -432,6 +432,10 @@ static void do_feedback(reader *r, double *xhat)
         }
     } else if (!m.qp_ready) {
         check(st == K(ERR_NOT_PREPARED), "feedback without a prepared QP");
+        if (m.mode == K(MODE_RECEDING)) {
+            m.prepare_due = 1; /* the instant has passed all the same: its prepare is due */
+            m.shifted = 0;
+        }
     } else {
         check(st == K(OK) || st == K(ERR_QP) || st == K(ERR_DIVERGED),
               "feedback returns OK, a QP failure or a rejected (diverged) step");

@@ -1,0 +1,78 @@
+"""The closed-loop fault suite of tests/test_faults.py as a table: robot arm, the model as the
+plant, faults of five kinds over K consecutive instants, DOPUS M = 1 and the full RTI.
+
+Per kind and M: the runs (K = 1..40 or the K given), the runs with a failed instant after the
+fault, the latest such instant, the runs back within 1 cm of the path within 150 instants,
+the median and largest instant at which they are back, the largest tip deviation after the
+fault. Writes bench/results/fault_suite.json.
+
+    .venv/bin/python bench/fault_suite.py [K ...]
+"""
+from __future__ import annotations
+
+import json
+import pathlib
+import sys
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from harness.faults import KINDS, model_plant, run_case  # noqa: E402
+
+from dopus_codegen import build_functions, load_ocp  # noqa: E402
+from dopus_codegen.reference.offline import solve_ocp  # noqa: E402
+from dopus_codegen.runtime.solver import CSolver  # noqa: E402
+
+
+class _Handle:
+    def __init__(self, arm, guess, M):
+        self.s, self.guess = CSolver(arm, lm=None, M=M), guess
+
+    def init(self, x):
+        self.s.init(x, self.guess)
+
+    def feedback(self, x):
+        return self.s.feedback(x)
+
+    def prepare(self):
+        self.s.prepare()
+
+    @property
+    def recoveries(self):
+        return self.s.recoveries
+
+
+def main(ks):
+    arm = build_functions(load_ocp(ROOT / "examples" / "robot_arm.py"))
+    guess, _ = solve_ocp(arm, arm.x0)
+    plant = model_plant(arm)
+    rows, table = [], []
+    print(f"{'M':>4} {'kind':>13} {'runs':>4} {'failed after':>12} {'latest':>6} {'back':>5} "
+          f"{'median':>6} {'max':>4} {'max dev [m]':>11}")
+    for M in (1, "full"):
+        m = arm.N - 1 if M == "full" else M
+        for kind in KINDS:
+            runs = [run_case(lambda: _Handle(arm, guess, m), plant, arm.x0, kind, K) for K in ks]
+            for r in runs:
+                r["M"] = M
+            rows += runs
+            back = [r["back"] for r in runs if r["back"] is not None]
+            row = {"M": M, "kind": kind, "runs": len(runs),
+                   "failed_after": sum(r["n_failed_after"] > 0 for r in runs),
+                   "latest_failed": max(r["last_failed_after"] for r in runs),
+                   "back": len(back), "back_median": float(np.median(back)) if back else None,
+                   "back_max": max(back) if back else None,
+                   "max_dev": max(r["max_dev_after"] for r in runs)}
+            table.append(row)
+            print(f"{str(M):>4} {kind:>13} {row['runs']:4d} {row['failed_after']:12d} {row['latest_failed']:6d} "
+                  f"{row['back']:5d} {str(row['back_median']):>6} {str(row['back_max']):>4} {row['max_dev']:11.3f}",
+                  flush=True)
+    out = ROOT / "bench" / "results"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "fault_suite.json").write_text(json.dumps({"table": table, "runs": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main([int(a) for a in sys.argv[1:]] or list(range(1, 41)))

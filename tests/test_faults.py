@@ -1,0 +1,112 @@
+"""The closed-loop fault suite (issue: never stuck): the robot arm with the model as the plant,
+faults of five kinds (velocity outliers of 30, 1e4 and 1e6 rad/s, a frozen sensor, NaN, a
+position glitch) over K = 1..40 consecutive instants, DOPUS M = 1 and the full RTI, the
+control the runtime returns applied whatever the status (tests/harness/faults.py).
+
+What every run must show: no failed instant during the settling, every returned control
+within its bounds, no failed instant later than FAILED_WITHIN instants after the fault ends
+(no lock-up: before the fix, two measurements with joint velocities (1e4, -1e4) made every
+later instant fail), and the last LAST_OK instants all successful. The return to the path
+within BACK_WITHIN instants holds for the two-outlier case of the issue; over the whole grid
+it does not yet (see test_every_run_back_on_the_path).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from harness.faults import AFTER, KINDS, model_plant, run_case
+
+from dopus_codegen.runtime.solver import CSolver
+
+KS = range(1, 41)
+# measured over the grid (bench/fault_suite.py): the last failed instant after the fault ends
+# at most 45 instants later (velocity outliers of 30 rad/s, K = 19, M = 1)
+FAILED_WITHIN = 50
+LAST_OK = AFTER - FAILED_WITHIN
+# the two-outlier case of the issue: back within 1 cm 25 instants after the fault (M = 1)
+BACK_WITHIN = 40
+
+
+@pytest.fixture(scope="module")
+def arm(robot_disc):
+    return robot_disc
+
+
+@pytest.fixture(scope="module")
+def plant(arm):
+    return model_plant(arm)
+
+
+class _Handle:
+    """The generated solver with the OCP file's settings but M, initialised at IPOPT's solution."""
+
+    def __init__(self, arm, guess, M):
+        self.s = CSolver(arm, lm=None, M=M)
+        self.guess = guess
+
+    def init(self, x):
+        self.s.init(x, self.guess)
+
+    def feedback(self, x):
+        return self.s.feedback(x)
+
+    def prepare(self):
+        self.s.prepare()
+
+    @property
+    def recoveries(self):
+        return self.s.recoveries
+
+
+_GRID = {}
+
+
+def _grid(arm, plant, robot_solution, M):
+    """Every kind and K for one M, computed once per session."""
+    if M not in _GRID:
+        m = arm.N - 1 if M == "full" else M
+        guess = robot_solution[0]
+        _GRID[M] = [run_case(lambda: _Handle(arm, guess, m), plant, arm.x0, kind, K) for kind in KINDS for K in KS]
+    return _GRID[M]
+
+
+@pytest.mark.parametrize("M", [1, "full"])
+def test_no_lock_up_after_any_fault(arm, plant, robot_solution, M):
+    runs = _grid(arm, plant, robot_solution, M)
+    lb, ub = np.asarray(arm.lbu, float), np.asarray(arm.ubu, float)
+    bad = []
+    for r in runs:
+        tag = (r["kind"], r["K"])
+        if r["failed_settle"]:
+            bad.append((tag, "failed while settling"))
+        if np.any(np.asarray(r["u_min"]) < lb) or np.any(np.asarray(r["u_max"]) > ub):
+            bad.append((tag, f"control outside its bounds: {r['u_min']} .. {r['u_max']}"))
+        if r["last_failed_after"] >= FAILED_WITHIN:
+            bad.append((tag, f"failed {r['last_failed_after']} instants after the fault"))
+        if not np.isfinite(r["max_dev_after"]):
+            bad.append((tag, "the plant state is not finite"))
+    assert not bad, bad
+    # the faults that cannot be taken for a plausible state fail during the fault
+    nan = [r for r in runs if r["kind"] == "nan"]
+    assert all(r["failed_during"] == r["K"] for r in nan)
+
+
+@pytest.mark.parametrize("M", [1, "full"])
+@pytest.mark.parametrize("v", ["velocity 1e4", "velocity 1e6"])
+def test_two_outliers_back_on_the_path(arm, plant, robot_solution, M, v):
+    """The issue's case: two consecutive measurements with joint velocities (v, -v), then exact
+    ones: no failed instant after them and the tip back within 1 cm of the path."""
+    r = next(r for r in _grid(arm, plant, robot_solution, M) if r["kind"] == v and r["K"] == 2)
+    assert r["n_failed_after"] == 0, r
+    assert r["back"] is not None and r["back"] <= BACK_WITHIN, r
+
+
+@pytest.mark.xfail(strict=True, reason="not every run is back within 1 cm within 150 instants: after long "
+                   "finite faults (30 rad/s outliers, a frozen sensor, 40 outliers of 1e6) the real-time iteration "
+                   "can settle on a plan that does not move (KKT proxy about 57, every status OK); see "
+                   "bench/fault_suite.py and docs/algorithm.md section 9")
+@pytest.mark.parametrize("M", [1, "full"])
+def test_every_run_back_on_the_path(arm, plant, robot_solution, M):
+    runs = _grid(arm, plant, robot_solution, M)
+    assert all(r["back"] is not None for r in runs), [(r["kind"], r["K"]) for r in runs if r["back"] is None]
