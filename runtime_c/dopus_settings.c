@@ -272,7 +272,7 @@ int dopus_has_clock(const dopus_solver *s)
 static int dopus_set_budget(dopus_solver *s, double budget, int unit)
 {
     dopus_ensure_setup(s);
-    if (!(budget >= 0.0) || !(budget < INFINITY)) {
+    if (!(budget >= 0.0) || !(budget < HUGE_VAL)) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
     s->budget = budget;

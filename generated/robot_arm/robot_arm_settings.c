@@ -272,7 +272,7 @@ int robot_arm_has_clock(const robot_arm_solver *s)
 static int robot_arm_set_budget(robot_arm_solver *s, double budget, int unit)
 {
     robot_arm_ensure_setup(s);
-    if (!(budget >= 0.0) || !(budget < INFINITY)) {
+    if (!(budget >= 0.0) || !(budget < HUGE_VAL)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
     }
     s->budget = budget;

@@ -272,7 +272,7 @@ int unicycle_has_clock(const unicycle_solver *s)
 static int unicycle_set_budget(unicycle_solver *s, double budget, int unit)
 {
     unicycle_ensure_setup(s);
-    if (!(budget >= 0.0) || !(budget < INFINITY)) {
+    if (!(budget >= 0.0) || !(budget < HUGE_VAL)) {
         return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
     }
     s->budget = budget;
