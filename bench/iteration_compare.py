@@ -196,8 +196,17 @@ class FolderHandle:
         self.sizeof = int(self._c("solver_sizeof")())
         self._mem = ffi.new("double[]", (self.sizeof + 7) // 8)
         self._s = ffi.cast(f"{name}_solver *", self._mem)
-        self._c("defaults")(self._s)
-        self._check(self._c("set_M")(self._s, int(min(M, self.N - 1))), "set_M")
+        # the settings struct and the info struct (setup, get_info) of the later runtimes;
+        # the one-setting functions (defaults, set_M, get_timings, ...) of the earlier ones
+        self._settings_api = re.search(rf"\b{name}_setup\s*\(", cdef) is not None
+        if self._settings_api:
+            st = ffi.new(f"{name}_settings *")
+            self._c("settings_default")(st)
+            st.M = int(min(M, self.N - 1))
+            self._check(self._c("setup")(self._s, st), "setup")
+        else:
+            self._c("defaults")(self._s)
+            self._check(self._c("set_M")(self._s, int(min(M, self.N - 1))), "set_M")
 
     def _c(self, fname: str):
         return getattr(self._lib, f"{self.name}_{fname}")
@@ -226,14 +235,24 @@ class FolderHandle:
     def prepare(self) -> None:
         self._check(self._c("prepare")(self._s), "prepare")
 
+    def _info(self):
+        info = self._ffi.new(f"{self.name}_info *")
+        self._c("get_info")(self._s, info)
+        return info
+
     @property
     def timings(self) -> dict:
+        if self._settings_api:
+            info = self._info()
+            return {p: float(info.timings[i]) for i, p in enumerate(self._phases)}
         t = np.zeros(len(self._phases))
         self._c("get_timings")(self._s, self._ptr(t))
         return dict(zip(self._phases, (float(v) for v in t)))
 
     @property
     def qp_iterations(self) -> int:
+        if self._settings_api:
+            return int(self._info().qp_iterations)
         return int(self._c("get_qp_iterations")(self._s))
 
     @property
@@ -244,6 +263,8 @@ class FolderHandle:
 
     @property
     def lm(self) -> float:
+        if self._settings_api:
+            return float(self._info().lm)
         return float(self._c("get_levenberg_marquardt")(self._s))
 
 

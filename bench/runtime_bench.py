@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-PHASES = ("feedback", "shift", "gradients", "rho", "hessians", "regularization", "assembly")
+PHASES = ("feedback", "shift", "gradients", "rho", "hessians", "regularization", "assembly", "lm", "recovery")
 
 
 def run(solver, disc, guess, setting, iters, repeat):

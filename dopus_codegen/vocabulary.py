@@ -190,7 +190,7 @@ def qp_status() -> Enum:
 
 
 def phases() -> Tuple[str, ...]:
-    """The timed phases in the order of ``enum dopus_phase`` (the index of dopus_get_timings)."""
+    """The timed phases in the order of ``enum dopus_phase`` (the index of the timings of dopus_get_info)."""
     return enum("dopus_phase").names()
 
 
@@ -207,9 +207,11 @@ def parse_constants(text: str, placeholder: str = "DOPUS_") -> Dict[str, float]:
 
 @lru_cache(maxsize=None)
 def constants() -> Dict[str, float]:
-    """The numeric constants of runtime_c/dopus_solver.h (the safety constants of
-    docs/algorithm.md section 9 and the regularisation constants), shared by the reference
+    """The numeric constants of runtime_c/dopus_solver.h, dopus_health.h and dopus_lm.h (the
+    safety constants of docs/algorithm.md section 9, the constants of the automatic lm of
+    section 10), shared by the reference
     backend: ``constants()["DIVERGENCE_BOX"]``."""
     from .codegen.paths import runtime_c_dir
 
-    return parse_constants((runtime_c_dir() / "dopus_solver.h").read_text())
+    return parse_constants("\n".join((runtime_c_dir() / f).read_text()
+                                     for f in ("dopus_solver.h", "dopus_health.h", "dopus_lm.h")))

@@ -29,7 +29,16 @@
 typedef FW(real) fw_real;
 
 static FW(solver) solver;
+static FW(settings) settings;
+static FW(info) info;
 static FW(fun_work) plant_work;
+
+/* QP iterations of the last feedback */
+static int qp_iterations(void)
+{
+    FW(get_info)(&solver, &info);
+    return info.qp_iterations;
+}
 
 /* ---- output without stdio: a line buffer, written at the end of the line ------------- */
 
@@ -173,14 +182,12 @@ static int fixed_study(int M)
     uint32_t t_fb = 0, t_prep = 0, stack = 0;
 
     memset(u0, 0, sizeof(u0));
-    FW(defaults)(&solver);
-    status = FW(set_mode)(&solver, FW_C(MODE_FIXED));
-    if (status == FW_C(OK)) {
-        status = FW(set_M)(&solver, M);
-    }
-    if (status == FW_C(OK)) {
-        status = FW(set_levenberg_marquardt)(&solver, FW_FIXED_LM);
-    }
+    FW(settings_default)(&settings);
+    settings.mode = FW_C(MODE_FIXED);
+    settings.M = M;
+    settings.lm_auto = 0;
+    settings.lm = FW_FIXED_LM;
+    status = FW(setup)(&solver, &settings);
     if (status == FW_C(OK)) {
         status = FW(init_nominal)(&solver, FW(x0_default));
     }
@@ -194,7 +201,7 @@ static int fixed_study(int M)
         put_str("fixed");
         put_field("M", M);
         put_field("iter", k);
-        put_iteration(status, k > 0 ? FW(get_qp_iterations)(&solver) : 0, t_fb, t_prep, stack, k4, u0);
+        put_iteration(status, k > 0 ? qp_iterations() : 0, t_fb, t_prep, stack, k4, u0);
         end_line();
         if (status != FW_C(OK)) {
             return status;
@@ -212,13 +219,14 @@ static int fixed_study(int M)
 
 static int closed_loop(void)
 {
-    fw_real xhat[FW_C(NX)], xnext[FW_C(NX)], u0[FW_C(NU)], k4[4], l;
-    fw_real g[FW_C(DIM)(FW_C(NG))];
+    fw_real xhat[FW_C(NX)], xnext[FW_C(NX)], u0[FW_C(NU)], k4[4];
     int i, k, status;
     uint32_t t_fb, t_prep, stack;
 
-    FW(defaults)(&solver);
-    status = FW(init_nominal)(&solver, FW(x0_default));
+    status = FW(setup)(&solver, NULL); /* the generated settings */
+    if (status == FW_C(OK)) {
+        status = FW(init_nominal)(&solver, FW(x0_default));
+    }
     for (i = 0; i < FW_C(NX); ++i) {
         xhat[i] = xhat_fixed[i];
     }
@@ -226,17 +234,17 @@ static int closed_loop(void)
         status = iteration(xhat, u0, &t_fb, &t_prep, &stack);
         /* the plant: the generated integrator from the measured state with the applied u0
          * (iteration() ran prepare already: the plant step does not touch the solver) */
-        if (status == FW_C(OK) &&
-            FW(eval_stage_eval)(xhat, u0, FW(p_default), xnext, &l, g, &plant_work) != 0) {
-            status = FW_C(ERR_FUNCTION);
+        if (status == FW_C(OK)) {
+            status = FW(simulate)(xhat, u0, NULL, xnext, &plant_work);
         }
         if (status == FW_C(OK)) {
             status = FW(kkt_eval)(&solver, xhat, k4);
         }
         put_str("loop");
-        put_field("M", FW(get_M)(&solver));
+        FW(get_settings)(&solver, &settings);
+        put_field("M", settings.M);
         put_field("step", k);
-        put_iteration(status, FW(get_qp_iterations)(&solver), t_fb, t_prep, stack, k4, u0);
+        put_iteration(status, qp_iterations(), t_fb, t_prep, stack, k4, u0);
         put_reals("xhat", xhat, FW_C(NX));
         end_line();
         for (i = 0; i < FW_C(NX); ++i) {
@@ -252,7 +260,8 @@ int main(void)
     int status = 0;
 
     fw_platform_init();
-    FW(defaults)(&solver);
+    FW(setup)(&solver, NULL);
+    FW(get_info)(&solver, &info);
     put_str("problem ");
     put_str(FW(name)());
     put_field("N", FW_C(N));
@@ -260,7 +269,7 @@ int main(void)
     put_field("nu", FW_C(NU));
     put_field("real_bytes", (long)sizeof(fw_real));
     put_field("solver_bytes", (long)FW(solver_sizeof)());
-    put_field("default_clock", FW(has_clock)(&solver));
+    put_field("default_clock", info.has_clock);
     put_field("ticks", fw_has_ticks());
     put_field("instructions_per_tick", (long)FW_INSTRUCTIONS_PER_TICK);
     put_field("calibration_instructions", (long)FW_CALIBRATION_INSTRUCTIONS);

@@ -4,8 +4,9 @@
 #include "dopus_kkt.h"
 #include "dopus_linalg.h"
 #include "dopus_problem.h"
-#include "dopus_solver.h"
-#include "dopus_solver_internal.h"
+
+#define NG1 DOPUS_DIM(DOPUS_NG)
+#define NP1 DOPUS_DIM(DOPUS_NP)
 
 static dopus_real dopus_kkt_max(dopus_real a, dopus_real b)
 {
@@ -32,75 +33,84 @@ static dopus_real dopus_kkt_comp(dopus_real mu, dopus_real v, dopus_real lb, dop
     return c;
 }
 
-int dopus_kkt_measure(struct dopus_solver *s, const dopus_real *xhat0, dopus_real *parts)
+int dopus_kkt_measure(const dopus_real *x, const dopus_real *u, const dopus_real *lam, const dopus_real *mu_g,
+                      const dopus_real *mu_b, const dopus_real *mu_bN, const dopus_real *mu_r,
+                      const dopus_real *nu, const dopus_real *p, const dopus_real *xhat0,
+                      dopus_fun_work *work, dopus_real *parts)
 {
     dopus_real stat = DOPUS_R(0.0), eq = DOPUS_R(0.0), ineq = DOPUS_R(0.0), comp = DOPUS_R(0.0);
     dopus_real gL[DOPUS_NW], phi[DOPUS_NX], g[DOPUS_DIM(DOPUS_NG)], l;
     dopus_real gLN[DOPUS_NX], E, r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
-    int k, i, rc;
+    int k, i;
 
     for (i = 0; i < DOPUS_NX; ++i) {
-        eq = dopus_kkt_max(eq, dopus_fabs(s->x[0][i] - xhat0[i]));
+        eq = dopus_kkt_max(eq, dopus_fabs(x[i] - xhat0[i]));
     }
     for (k = 0; k < DOPUS_N; ++k) {
-        if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
-                                  &s->mem.ev.fun_work) != 0) {
-            return DOPUS_ERR_FUNCTION;
+        if (dopus_eval_stage_grad(x + k * DOPUS_NX, u + k * DOPUS_NU, p + k * NP1, lam + (k + 1) * DOPUS_NX,
+                                  mu_g + k * NG1, gL, phi, &l, g, work) != 0) {
+            return DOPUS_KKT_FUNCTION;
         }
         if (!dopus_lai_vec_finite(DOPUS_NW, gL) || !dopus_lai_vec_finite(DOPUS_NX, phi) ||
             !dopus_lai_vec_finite(DOPUS_NG, g) || !isfinite(l)) {
-            return DOPUS_ERR_NONFINITE_VALUE;
+            return DOPUS_KKT_NONFINITE;
         }
         /* stationarity gL_k + mu_b_k + [lam_k; 0] */
         for (i = 0; i < DOPUS_NW; ++i) {
-            dopus_real v = gL[i] + s->mu_b[k][i] + (i < DOPUS_NX ? s->lam[k][i] : DOPUS_R(0.0));
+            dopus_real v =
+                gL[i] + mu_b[k * DOPUS_NW + i] + (i < DOPUS_NX ? lam[k * DOPUS_NX + i] : DOPUS_R(0.0));
             stat = dopus_kkt_max(stat, dopus_fabs(v));
         }
         for (i = 0; i < DOPUS_NX; ++i) {
-            eq = dopus_kkt_max(eq, dopus_fabs(s->x[k + 1][i] - phi[i]));
+            eq = dopus_kkt_max(eq, dopus_fabs(x[(k + 1) * DOPUS_NX + i] - phi[i]));
         }
         for (i = 0; i < DOPUS_NG; ++i) {
             ineq = dopus_kkt_max(ineq, dopus_kkt_viol(g[i], dopus_lg[i], dopus_ug[i]));
-            comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_g[k][i], g[i], dopus_lg[i], dopus_ug[i]));
+            comp = dopus_kkt_max(comp, dopus_kkt_comp(mu_g[k * NG1 + i], g[i], dopus_lg[i], dopus_ug[i]));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
          * sides and counts with its magnitude) */
-        if (!dopus_x_bounded(k)) {
+        if (k == 0) {
             for (i = 0; i < DOPUS_NX; ++i) {
-                comp = dopus_kkt_max(comp, dopus_fabs(s->mu_b[0][i]));
+                comp = dopus_kkt_max(comp, dopus_fabs(mu_b[i]));
             }
         } else {
             for (i = 0; i < DOPUS_NX; ++i) {
-                ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->x[k][i], dopus_lbx[i], dopus_ubx[i]));
-                comp = dopus_kkt_max(comp,
-                                     dopus_kkt_comp(s->mu_b[k][i], s->x[k][i], dopus_lbx[i], dopus_ubx[i]));
+                ineq = dopus_kkt_max(ineq, dopus_kkt_viol(x[k * DOPUS_NX + i], dopus_lbx[i], dopus_ubx[i]));
+                comp = dopus_kkt_max(comp, dopus_kkt_comp(mu_b[k * DOPUS_NW + i], x[k * DOPUS_NX + i],
+                                                          dopus_lbx[i], dopus_ubx[i]));
             }
         }
         for (i = 0; i < DOPUS_NU; ++i) {
-            ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->u[k][i], dopus_lbu[i], dopus_ubu[i]));
-            comp = dopus_kkt_max(
-                comp, dopus_kkt_comp(s->mu_b[k][DOPUS_NX + i], s->u[k][i], dopus_lbu[i], dopus_ubu[i]));
+            ineq = dopus_kkt_max(ineq, dopus_kkt_viol(u[k * DOPUS_NU + i], dopus_lbu[i], dopus_ubu[i]));
+            comp = dopus_kkt_max(comp, dopus_kkt_comp(mu_b[k * DOPUS_NW + DOPUS_NX + i], u[k * DOPUS_NU + i],
+                                                      dopus_lbu[i], dopus_ubu[i]));
         }
     }
-    rc = dopus_term_grad_checked(s, gLN, &E, r, r_eq);
-    if (rc != DOPUS_OK) {
-        return rc;
+    if (dopus_eval_term_grad(x + DOPUS_N * DOPUS_NX, p + DOPUS_N * NP1, mu_r, nu, gLN, &E, r, r_eq, work) !=
+        0) {
+        return DOPUS_KKT_FUNCTION;
+    }
+    if (!dopus_lai_vec_finite(DOPUS_NX, gLN) || !isfinite(E) || !dopus_lai_vec_finite(DOPUS_NR, r) ||
+        !dopus_lai_vec_finite(DOPUS_NE, r_eq)) {
+        return DOPUS_KKT_NONFINITE;
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        stat = dopus_kkt_max(stat, dopus_fabs(gLN[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]));
-        ineq = dopus_kkt_max(ineq, dopus_kkt_viol(s->x[DOPUS_N][i], dopus_lbx[i], dopus_ubx[i]));
-        comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_bN[i], s->x[DOPUS_N][i], dopus_lbx[i], dopus_ubx[i]));
+        stat = dopus_kkt_max(stat, dopus_fabs(gLN[i] + mu_bN[i] + lam[DOPUS_N * DOPUS_NX + i]));
+        ineq = dopus_kkt_max(ineq, dopus_kkt_viol(x[DOPUS_N * DOPUS_NX + i], dopus_lbx[i], dopus_ubx[i]));
+        comp = dopus_kkt_max(comp,
+                             dopus_kkt_comp(mu_bN[i], x[DOPUS_N * DOPUS_NX + i], dopus_lbx[i], dopus_ubx[i]));
     }
     for (i = 0; i < DOPUS_NE; ++i) {
         eq = dopus_kkt_max(eq, dopus_fabs(r_eq[i]));
     }
     for (i = 0; i < DOPUS_NR; ++i) {
         ineq = dopus_kkt_max(ineq, dopus_kkt_viol(r[i], dopus_lr[i], dopus_ur[i]));
-        comp = dopus_kkt_max(comp, dopus_kkt_comp(s->mu_r[i], r[i], dopus_lr[i], dopus_ur[i]));
+        comp = dopus_kkt_max(comp, dopus_kkt_comp(mu_r[i], r[i], dopus_lr[i], dopus_ur[i]));
     }
     parts[0] = stat;
     parts[1] = eq;
     parts[2] = ineq;
     parts[3] = comp;
-    return DOPUS_OK;
+    return DOPUS_KKT_OK;
 }

@@ -1,16 +1,29 @@
-/* KKT measure of the current iterate (docs/algorithm.md section 6): exact derivatives
- * (fresh stage_grad / term_grad at the current point with the current multipliers), never
- * the stored blocks. */
+/* KKT measure of an iterate (docs/algorithm.md section 6): exact derivatives (fresh
+ * stage_grad / term_grad at the given point with the given multipliers), never the stored
+ * blocks. The module has no state: the iterate, the parameters and the scratch of the
+ * generated functions are its arguments. */
 #ifndef DOPUS_KKT_H
 #define DOPUS_KKT_H
 
-#include "dopus_real.h"
+#include "dopus_funcs.h"
 
-struct dopus_solver;
+#ifndef DOPUS_INTERNAL
+#define DOPUS_INTERNAL
+#endif
 
-/* parts[0..3] = stat, eq, ineq, comp (infinity norms). Returns a status of enum
- * dopus_status (DOPUS_OK, DOPUS_ERR_FUNCTION or DOPUS_ERR_NONFINITE_VALUE). The iterate and
- * the stage slots are not touched; only the function scratch of the solver is used. */
-int dopus_kkt_measure(struct dopus_solver *s, const dopus_real *xhat0, dopus_real *parts);
+/* Outcome of dopus_kkt_measure. */
+enum dopus_kkt_result {
+    DOPUS_KKT_OK = 0,
+    DOPUS_KKT_FUNCTION = 1, /* a generated function reported failure */
+    DOPUS_KKT_NONFINITE = 2 /* a generated function returned NaN or Inf */
+};
+
+/* parts[0..3] = stat, eq, ineq, comp (infinity norms) of the iterate (shapes of
+ * dopus_solver.h: x (N+1) x nx, u N x nu, lam (N+1) x nx, mu_g N x DIM(ng), mu_b N x nw,
+ * mu_bN nx, mu_r DIM(nr), nu DIM(ne), p (N+1) x DIM(np)) for the initial state xhat0. */
+DOPUS_INTERNAL int dopus_kkt_measure(const dopus_real *x, const dopus_real *u, const dopus_real *lam,
+                                     const dopus_real *mu_g, const dopus_real *mu_b, const dopus_real *mu_bN,
+                                     const dopus_real *mu_r, const dopus_real *nu, const dopus_real *p,
+                                     const dopus_real *xhat0, dopus_fun_work *work, dopus_real *parts);
 
 #endif /* DOPUS_KKT_H */

@@ -40,7 +40,8 @@ static int report(const char *phase, int iter, int status, const dopus_real *u0,
  * next measurement is the model's prediction phi(x0, u0) */
 static int run(const char *phase, int mode)
 {
-    dopus_real xhat0[DOPUS_NX], xnext[DOPUS_NX], u0[DOPUS_NU], kkt4[4], l, g[DOPUS_DIM(DOPUS_NG)];
+    dopus_real xhat0[DOPUS_NX], xnext[DOPUS_NX], u0[DOPUS_NU], kkt4[4];
+    dopus_settings settings;
     int i, k, status;
 
     for (i = 0; i < DOPUS_NX; ++i) {
@@ -49,8 +50,9 @@ static int run(const char *phase, int mode)
     for (i = 0; i < DOPUS_NU; ++i) {
         u0[i] = DOPUS_R(0.0);
     }
-    dopus_defaults(&solver);
-    status = dopus_set_mode(&solver, mode);
+    dopus_settings_default(&settings); /* the OCP file's options */
+    settings.mode = mode;
+    status = dopus_setup(&solver, &settings);
 #if DOPUS_HAS_NOMINAL
     if (status == DOPUS_OK) {
         status = dopus_init_nominal(&solver, xhat0);
@@ -70,7 +72,7 @@ static int run(const char *phase, int mode)
     for (k = 1; k <= ITERATIONS; ++k) {
         status = dopus_feedback(&solver, xhat0, u0);
         if (status == DOPUS_OK && mode == DOPUS_MODE_RECEDING) {
-            if (dopus_eval_stage_eval(xhat0, u0, dopus_p_default, xnext, &l, g, &plant_work)) {
+            if (dopus_simulate(xhat0, u0, NULL, xnext, &plant_work) != DOPUS_OK) {
                 fprintf(stderr, "main_dopus: the model failed to evaluate\n");
                 return 1;
             }

@@ -1,5 +1,7 @@
-/* Problem data generated from the OCP file (dopus_problem.c): bounds, defaults, the initial
- * guess and, when the OCP asks for it, the offline primal-dual solution at the default x0.
+/* Problem data generated from the OCP file (dopus_problem.c), public and read-only: bounds,
+ * the default parameters and x0, the initial guess and, when the OCP asks for it, the
+ * offline primal-dual solution at the default x0. (The OCP file's options are the generated
+ * settings, dopus_settings_default of dopus_solver.h, also in dopus_problem.c.)
  *
  * Infinite bounds are INFINITY / -INFINITY; the runtime treats them as "no bound on that side"
  * (docs/algorithm.md section 1). Sizes of possibly empty arrays use DOPUS_DIM so that every
@@ -20,12 +22,6 @@ extern const dopus_real dopus_x0_default[DOPUS_NX];
 /* the OCP file's initial guess */
 extern const dopus_real dopus_guess_x[DOPUS_N + 1][DOPUS_NX];
 extern const dopus_real dopus_guess_u[DOPUS_N][DOPUS_NU];
-extern const int dopus_default_M;
-extern const int dopus_default_hessian;        /* 0 exact, 1 gauss-newton */
-extern const int dopus_default_regularization; /* 0 none, 1 project, 2 mirror */
-extern const dopus_real dopus_default_reg_eps;
-extern const int dopus_default_cost_hessian; /* 1 fresh, 0 stored */
-extern const dopus_real dopus_default_lm;    /* Levenberg-Marquardt term, >= 0 */
 
 #if DOPUS_HAS_NOMINAL
 /* offline primal-dual solution at dopus_x0_default (IPOPT at generation time), so the

@@ -287,17 +287,21 @@ typedef struct {
     dopus_real scale_bounds;
 } dopus_qp_workspace;
 
+#ifndef DOPUS_INTERNAL
+#define DOPUS_INTERNAL
+#endif
+
 /* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */
-void dopus_qp_settings_default(dopus_qp_settings *settings);
+DOPUS_INTERNAL void dopus_qp_settings_default(dopus_qp_settings *settings);
 
 /* sizeof(dopus_qp_workspace), the memory bill of the solver. */
-unsigned long dopus_qp_workspace_size(void);
+DOPUS_INTERNAL unsigned long dopus_qp_workspace_size(void);
 
 /* Solve the QP. `sol` is read as the warm-start point when settings->warm_start is
  * nonzero and always written (best point found; zeros on invalid input). `info` may be
  * NULL. Returns the status (enum dopus_qp_status). */
-int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_settings *settings,
-                   dopus_qp_sol *sol, dopus_qp_info *info);
+DOPUS_INTERNAL int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in,
+                                  const dopus_qp_settings *settings, dopus_qp_sol *sol, dopus_qp_info *info);
 
 /* After dopus_qp_solve returned DOPUS_QP_PRIMAL_INFEASIBLE (ws and in as they were then): the
  * row with the largest multiplier of the infeasibility certificate among the bounded rows
@@ -306,7 +310,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
  * header comment (w_k, then the rows of C_k; x_N, the rows of R, then those of Req); side:
  * -1 the lower bound, +1 the upper bound (an equality row: the sign of its multiplier), 0
  * lower above upper. Returns 1, or 0 when no row carries a multiplier. */
-int dopus_qp_infeasible_row(const dopus_qp_workspace *ws, const dopus_qp_in *in, int *stage, int *row,
-                            int *side);
+DOPUS_INTERNAL int dopus_qp_infeasible_row(const dopus_qp_workspace *ws, const dopus_qp_in *in, int *stage,
+                                           int *row, int *side);
 
 #endif /* DOPUS_QP_H */

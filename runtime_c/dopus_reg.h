@@ -13,14 +13,18 @@
 
 enum dopus_regularization { DOPUS_REG_NONE = 0, DOPUS_REG_PROJECT = 1, DOPUS_REG_MIRROR = 2 };
 
+#ifndef DOPUS_INTERNAL
+#define DOPUS_INTERNAL
+#endif
+
 /* Eigen-decomposition of the symmetric part of the n x n column-major matrix `a`.
  * On return the diagonal of `a` holds the eigenvalues (off-diagonals ~0) and `v` (n x n,
  * column-major) the orthonormal eigenvectors as columns. Returns the number of sweeps
  * used, or -1 if the off-diagonal mass did not fall to round-off within the sweep limit. */
-int dopus_reg_jacobi_eig(int n, dopus_real *a, dopus_real *v);
+DOPUS_INTERNAL int dopus_reg_jacobi_eig(int n, dopus_real *a, dopus_real *v);
 
 /* Regularise the n x n column-major block A in place. `work` holds at least 2*n*n doubles.
  * Returns 0 on success, -1 if the eigen-decomposition did not converge (A left as given). */
-int dopus_reg_apply(int n, dopus_real *A, int mode, dopus_real eps, dopus_real *work);
+DOPUS_INTERNAL int dopus_reg_apply(int n, dopus_real *A, int mode, dopus_real eps, dopus_real *work);
 
 #endif /* DOPUS_REG_H */

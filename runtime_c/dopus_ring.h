@@ -35,23 +35,27 @@ typedef struct {
     int ring_head;
 } dopus_ring;
 
+#ifndef DOPUS_INTERNAL
+#define DOPUS_INTERNAL
+#endif
+
 /* head = 0, every slot zero. */
-void dopus_ring_reset(dopus_ring *ring);
+DOPUS_INTERNAL void dopus_ring_reset(dopus_ring *ring);
 
 /* The slot of stage k (0 <= k < N). */
-dopus_stage_slot *dopus_ring_stage(dopus_ring *ring, int k);
-const dopus_stage_slot *dopus_ring_stage_const(const dopus_ring *ring, int k);
+DOPUS_INTERNAL dopus_stage_slot *dopus_ring_stage(dopus_ring *ring, int k);
+DOPUS_INTERNAL const dopus_stage_slot *dopus_ring_stage_const(const dopus_ring *ring, int k);
 
 /* One sampling interval: ring_head <- (ring_head + 1) mod N. */
-void dopus_ring_advance(dopus_ring *ring);
+DOPUS_INTERNAL void dopus_ring_advance(dopus_ring *ring);
 
 /* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
-void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const dopus_real *A);
+DOPUS_INTERNAL void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const dopus_real *A);
 /* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
-void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const dopus_real *A_l, dopus_real *A);
+DOPUS_INTERNAL void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const dopus_real *A_l, dopus_real *A);
 
 /* Zero the step domega of a slot. */
-void dopus_ring_clear_step(dopus_stage_slot *slot);
+DOPUS_INTERNAL void dopus_ring_clear_step(dopus_stage_slot *slot);
 
 /* Round-off floor of the secant residual (docs/algorithm.md section 4 step 2). */
 #define DOPUS_EPS_RHO DOPUS_PREC(1e-12, 1e-6)
@@ -62,11 +66,11 @@ void dopus_ring_clear_step(dopus_stage_slot *slot);
  *            g_old + Ct dw - g_new] |
  *   rho = num / |(dw, dlam, dmu_g, dmu_b)| (2-norms), 0 when the denominator is 0 or
  *   num <= DOPUS_EPS_RHO * (|(F_w_old, phi_old, g_old)| + |(F_w_new, phi_new, g_new)|). */
-dopus_real dopus_ring_secant(const dopus_stage_slot *slot, const dopus_real *F_w_new,
-                             const dopus_real *phi_new, const dopus_real *g_new);
+DOPUS_INTERNAL dopus_real dopus_ring_secant(const dopus_stage_slot *slot, const dopus_real *F_w_new,
+                                            const dopus_real *phi_new, const dopus_real *g_new);
 
 /* Store F_new as F_old. */
-void dopus_ring_store_F(dopus_stage_slot *slot, const dopus_real *F_w, const dopus_real *phi,
-                        const dopus_real *g);
+DOPUS_INTERNAL void dopus_ring_store_F(dopus_stage_slot *slot, const dopus_real *F_w, const dopus_real *phi,
+                                       const dopus_real *g);
 
 #endif /* DOPUS_RING_H */

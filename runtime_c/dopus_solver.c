@@ -1,4 +1,5 @@
-/* The DOPUS real-time iteration (docs/algorithm.md section 4; paper Algorithm 1).
+/* The DOPUS real-time iteration (docs/algorithm.md section 4; paper Algorithm 1), and the
+ * one translation unit of the runtime library.
  *
  * init: F and H of every stage at the guess. Per sampling instant:
  *   feedback: QP with the measured xhat0, full step, u_0 out;
@@ -9,17 +10,42 @@
  *             the adjoint-corrected gradient (eq. 12).
  * The order of operations is that of the contract, so that the Python reference and this
  * runtime produce the same iterates to round-off.
+ *
+ * The modules (the phase timers, the ring of stage slots, the regularisation, the wrappers
+ * of the generated functions, the automatic lm, the health predicates, the KKT measure, the
+ * QP) are included at the end of this file, as HPIPM's x_*.c files are, with
+ * DOPUS_INTERNAL = static: the library exports the public API of dopus_solver.h and the
+ * problem data of dopus_problem.h, nothing else. Each module compiles alone as well (the
+ * tests' builds), with external linkage. The modules call only modules below them (timer,
+ * ring, reg, funcs, linalg; lm and health read the ring; the QP reads linalg), never this
+ * file.
  */
+/* clock_gettime is POSIX, not C99: request it before any header (dopus_timer.c). */
+#ifndef _POSIX_C_SOURCE
+#define _POSIX_C_SOURCE 199309L
+#endif
+
+#if defined(__GNUC__)
+#define DOPUS_INTERNAL static __attribute__((unused))
+#else
+#define DOPUS_INTERNAL static
+#endif
+
 #include <math.h>
 
+#include "dopus_health.h"
 #include "dopus_kkt.h"
 #include "dopus_linalg.h"
+#include "dopus_lm.h"
 #include "dopus_problem.h"
 #include "dopus_solver.h"
-#include "dopus_solver_internal.h"
 
-#define DOPUS_MAGIC 0x444f5055 /* "DOPU" */
-#define DOPUS_DEFAULT_QP_TOL DOPUS_PREC(1e-10, 1e-5)
+/* dopus_info.timings is declared with the literal count of the phases (for cffi) */
+typedef char dopus_phase_count_check[(DOPUS_N_PHASES == 10) ? 1 : -1];
+
+/* The phases of prepare (every phase but feedback and kkt), as a bit mask. */
+#define DOPUS_PREPARE_PHASES                                                                                 \
+    (((1u << DOPUS_N_PHASES) - 1u) & ~(1u << DOPUS_PHASE_FEEDBACK) & ~(1u << DOPUS_PHASE_KKT))
 
 /* ---- small helpers ------------------------------------------------------------------ */
 
@@ -39,14 +65,16 @@ static void dopus_zero(int n, dopus_real *dst)
     }
 }
 
-void dopus_ensure_setup(dopus_solver *s)
+/* x_0 carries no bound (docs/algorithm.md section 1): it is fixed by the measurement, so
+ * the simple bounds of the states apply at nodes 1..N only (stage 0 passes infinite sides
+ * to the QP, the KKT measure counts a multiplier on x_0 with its magnitude) and the x part
+ * of mu_b_0 is 0 (dopus_clear_x0_multiplier). */
+static int dopus_x_bounded(int k)
 {
-    if (s->magic != DOPUS_MAGIC) {
-        dopus_defaults(s);
-    }
+    return k > 0;
 }
 
-void dopus_clear_x0_multiplier(dopus_solver *s)
+static void dopus_clear_x0_multiplier(dopus_solver *s)
 {
     int i;
     for (i = 0; i < DOPUS_NX; ++i) {
@@ -54,10 +82,42 @@ void dopus_clear_x0_multiplier(dopus_solver *s)
     }
 }
 
-int dopus_ret(dopus_solver *s, int status)
+/* Record status as the status of the last call and return it. */
+static int dopus_ret(dopus_solver *s, int status)
 {
     s->status = status;
     return status;
+}
+
+/* The phase of the timer from now on; returns the phase that ran (dopus_timer_switch). */
+static int dopus_phase(dopus_solver *s, int phase)
+{
+    return dopus_timer_switch(&s->timer, phase);
+}
+
+static int dopus_has_clock(const dopus_solver *s);
+
+/* ---- the anytime budget (algorithm.md section 12) --------------------------------------- */
+
+/* 1 when a budget is set (a time budget needs a clock). */
+static int dopus_budget_on(const dopus_solver *s)
+{
+    return s->settings.budget > 0.0 && (s->settings.budget_unit == DOPUS_BUDGET_WORK || dopus_has_clock(s));
+}
+
+/* Now on the budget's clock: the work counter (work units) or the solver's clock. */
+static double dopus_budget_now(const dopus_solver *s)
+{
+    if (s->settings.budget_unit == DOPUS_BUDGET_WORK) {
+        return s->anytime.work;
+    }
+    return s->timer.clock ? s->timer.clock(s->timer.ctx) : 0.0;
+}
+
+/* 1 without a budget, or when `cost` more still fits in the instant's budget. */
+static int dopus_budget_fits(const dopus_solver *s, double cost)
+{
+    return !dopus_budget_on(s) || dopus_budget_now(s) - s->anytime.instant_start + cost <= s->settings.budget;
 }
 
 /* ---- generic information ------------------------------------------------------------ */
@@ -118,470 +178,68 @@ const char *dopus_status_string(int status)
     }
 }
 
-/* ---- safety: scales, clipping, health (algorithm.md section 9) -------------------- */
+/* ---- health (algorithm.md section 9; the predicates are dopus_health.c) ------------- */
 
-static dopus_real dopus_absmax(dopus_real a, dopus_real b)
-{
-    dopus_real fa = dopus_fabs(a);
-    return isfinite(a) && fa > b ? fa : b;
-}
-
-/* The scale of each state and control: the largest magnitude among its finite bounds, the
- * OCP file's guess, the default x0 and 1. */
-static void dopus_compute_scales(dopus_solver *s)
-{
-    int k, i;
-    for (i = 0; i < DOPUS_NX; ++i) {
-        dopus_real v = DOPUS_R(1.0);
-        v = dopus_absmax(dopus_lbx[i], v);
-        v = dopus_absmax(dopus_ubx[i], v);
-        v = dopus_absmax(dopus_x0_default[i], v);
-        for (k = 0; k <= DOPUS_N; ++k) {
-            v = dopus_absmax(dopus_guess_x[k][i], v);
-        }
-        s->scale_x[i] = v;
-    }
-    for (i = 0; i < DOPUS_NU; ++i) {
-        dopus_real v = DOPUS_R(1.0);
-        v = dopus_absmax(dopus_lbu[i], v);
-        v = dopus_absmax(dopus_ubu[i], v);
-        for (k = 0; k < DOPUS_N; ++k) {
-            v = dopus_absmax(dopus_guess_u[k][i], v);
-        }
-        s->scale_u[i] = v;
-    }
-}
-
-/* Health state after init: no failure, the plan is the iterate's controls. */
+/* Health state after init: no failure, the plan is the iterate's controls (the OCP file's
+ * guess before the first init). */
 static void dopus_reset_health(dopus_solver *s)
 {
-    int k, i;
-    s->n_failed = 0;
-    s->recover_pending = 0;
-    s->flags = 0;
-    s->n_recoveries = 0;
-    s->recovering = 0;
-    s->xhat_fresh = 1;
-    s->plan_age = 0;
-    for (k = 0; k < DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NU; ++i) {
-            s->plan_u[k][i] = s->initialized ? s->u[k][i] : dopus_guess_u[k][i];
-        }
-    }
-    for (i = 0; i < DOPUS_NU; ++i) {
-        s->u0_out[i] = s->plan_u[0][i];
-    }
-    s->kkt_proxy = DOPUS_R(0.0);
-    s->kkt_proxy_ref = DOPUS_R(0.0);
-}
-
-/* u clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1 when
- * an entry changed. */
-static int dopus_clip_u(const dopus_real *u, dopus_real *out)
-{
-    int i, clipped = 0;
-    for (i = 0; i < DOPUS_NU; ++i) {
-        dopus_real v = isnan(u[i]) ? DOPUS_R(0.0) : u[i];
-        if (v < dopus_lbu[i]) {
-            v = dopus_lbu[i];
-        }
-        if (v > dopus_ubu[i]) {
-            v = dopus_ubu[i];
-        }
-        if (!(v == u[i])) {
-            clipped = 1;
-        }
-        out[i] = v;
-    }
-    return clipped;
-}
-
-/* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as the iterate
- * plus an optional step: every entry finite and |v_i| <= BOX scale_i + |xhat0_i| (states),
- * BOX scale_i (controls). Returns 1 when it passes. */
-static int dopus_box_ok(const dopus_solver *s, const dopus_real *x, const dopus_real *dx, int dx_stride,
-                        const dopus_real *u, const dopus_real *du, int du_stride)
-{
-    int k, i;
-    for (k = 0; k <= DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NX; ++i) {
-            dopus_real v = x[k * DOPUS_NX + i] + (dx ? dx[k * dx_stride + i] : DOPUS_R(0.0));
-            if (!(dopus_fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + dopus_fabs(s->xhat0[i]))) {
-                return 0;
-            }
-        }
-    }
-    for (k = 0; k < DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NU; ++i) {
-            dopus_real v = u[k * DOPUS_NU + i] + (du ? du[k * du_stride + i] : DOPUS_R(0.0));
-            if (!(dopus_fabs(v) <= DOPUS_DIVERGENCE_BOX * s->scale_u[i])) {
-                return 0;
-            }
-        }
-    }
-    return 1;
+    dopus_health_reset(&s->health, s->initialized ? &s->u[0][0] : &dopus_guess_u[0][0]);
 }
 
 /* The fallback control of a failed feedback: the next control of the last good plan. */
 static void dopus_fallback_u0(dopus_solver *s, dopus_real *u0)
 {
-    int j = s->mode == DOPUS_MODE_RECEDING ? s->plan_age : 0;
-    j = j > DOPUS_N - 1 ? DOPUS_N - 1 : j;
-    if (dopus_clip_u(s->plan_u[j], s->u0_out)) {
-        s->flags |= DOPUS_FLAG_U0_CLIPPED;
+    if (dopus_health_fallback(&s->health, s->settings.mode == DOPUS_MODE_RECEDING, u0)) {
+        s->health.flags |= DOPUS_FLAG_U0_CLIPPED;
     }
-    s->flags |= DOPUS_FLAG_FALLBACK;
-    if (u0) {
-        dopus_copy(u0, s->u0_out, DOPUS_NU);
-    }
+    s->health.flags |= DOPUS_FLAG_FALLBACK;
 }
 
 /* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
-static void dopus_lm_feedback(dopus_solver *s, int status);
-
 static int dopus_feedback_failed(dopus_solver *s, dopus_real *u0, int status)
 {
-    dopus_lm_feedback(s, status);
-    s->n_failed += 1;
-    if (s->recovery && s->mode == DOPUS_MODE_RECEDING && s->n_failed >= s->recovery_failures) {
-        s->recover_pending = 1;
+    if (status == DOPUS_ERR_QP || status == DOPUS_ERR_DIVERGED) {
+        dopus_lm_feedback(&s->lm, 0);
+    }
+    s->health.n_failed += 1;
+    if (s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING &&
+        s->health.n_failed >= s->settings.recovery_failures) {
+        s->health.recover_pending = 1;
     }
     if (status == DOPUS_ERR_DIVERGED) {
-        s->flags |= DOPUS_FLAG_DIVERGED;
+        s->health.flags |= DOPUS_FLAG_DIVERGED;
     }
     dopus_fallback_u0(s, u0);
     return dopus_ret(s, status);
 }
 
-/* Divergence measure at the current point from the F values in the slots and the terminal
- * node (after init or a prepare): max of |F_w,k + [lam_k; 0]|, |gL_N + mu_bN + lam_N|,
- * |phi_k - x_{k+1}|, |r_eq| (inf-norms). */
+/* Divergence measure at the current point (after init or a prepare). */
 static dopus_real dopus_kkt_proxy_eval(const dopus_solver *s)
 {
-    dopus_real m = DOPUS_R(0.0), v;
-    int k, i;
-    for (k = 0; k < DOPUS_N; ++k) {
-        const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
-        for (i = 0; i < DOPUS_NW; ++i) {
-            v = dopus_fabs(slot->F_w[i] + (i < DOPUS_NX ? s->lam[k][i] : DOPUS_R(0.0)));
-            m = (v > m || isnan(v)) ? v : m;
-        }
-        for (i = 0; i < DOPUS_NX; ++i) {
-            v = dopus_fabs(slot->phi[i] - s->x[k + 1][i]);
-            m = (v > m || isnan(v)) ? v : m;
-        }
-    }
-    for (i = 0; i < DOPUS_NX; ++i) {
-        v = dopus_fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[DOPUS_N][i]);
-        m = (v > m || isnan(v)) ? v : m;
-    }
-    for (i = 0; i < DOPUS_NE; ++i) {
-        v = dopus_fabs(s->r_eq[i]);
-        m = (v > m || isnan(v)) ? v : m;
-    }
-    return m;
+    return dopus_kkt_proxy(&s->ring, &s->x[0][0], &s->lam[0][0], s->gL_N, s->mu_bN, s->r_eq);
+}
+
+/* The box test of the iterate plus an optional step. */
+static int dopus_iterate_box_ok(const dopus_solver *s, const dopus_real *dx, int dx_stride,
+                                const dopus_real *du, int du_stride)
+{
+    return dopus_box_ok(&s->health, s->xhat0, &s->x[0][0], dx, dx_stride, &s->u[0][0], du, du_stride);
 }
 
 /* The divergence test of the prepared iterate: box, finite multipliers, KKT proxy bound. */
-static int dopus_iterate_diverged(dopus_solver *s)
+static int dopus_iterate_diverged(const dopus_solver *s)
 {
-    dopus_real ref = s->kkt_proxy_ref > DOPUS_R(1.0) ? s->kkt_proxy_ref : DOPUS_R(1.0);
-    if (!dopus_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0)) {
-        return 1;
-    }
-    if (!dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NX, &s->lam[0][0]) ||
-        !dopus_lai_vec_finite(DOPUS_N * DOPUS_NW, &s->mu_b[0][0]) ||
-        !dopus_lai_vec_finite(DOPUS_NX, s->mu_bN)) {
-        return 1;
-    }
-    return !(s->kkt_proxy <= DOPUS_DIVERGENCE_KKT * ref);
+    return dopus_diverged(&s->health, s->xhat0, &s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_b[0][0],
+                          s->mu_bN);
 }
 
-/* ---- automatic Levenberg-Marquardt term (algorithm.md section 10) ------------------- */
-
-/* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
-static dopus_real dopus_lm_hessian_scale(const dopus_solver *s)
+/* The automatic lm after init or a re-initialisation (QP assembled), in its phase. */
+static void dopus_lm_started(dopus_solver *s)
 {
-    dopus_real h = DOPUS_REAL_TINY, v;
-    int k, i;
-    for (k = 0; k < DOPUS_N; ++k) {
-        const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
-        for (i = 0; i < DOPUS_NW; ++i) {
-            v = dopus_fabs(slot->Ht[i + i * DOPUS_NW]);
-            h = v > h ? v : h;
-        }
-    }
-    for (i = 0; i < DOPUS_NX; ++i) {
-        v = dopus_fabs(s->A_N[i + i * DOPUS_NX]);
-        h = v > h ? v : h;
-    }
-    return h;
-}
-
-/* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
- * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
- * out) has control pivots above DOPUS_LM_PIVOT_REL h. */
-static int dopus_lm_convex(dopus_solver *s, dopus_real lm)
-{
-    const dopus_real tol = DOPUS_LM_PIVOT_REL * s->lm_scale;
-    dopus_real *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
-    dopus_real v;
-    int k, i, j, l;
-    for (j = 0; j < DOPUS_NX; ++j) {
-        for (i = 0; i < DOPUS_NX; ++i) {
-            P[i + j * DOPUS_NX] =
-                (i >= j ? s->A_N[i + j * DOPUS_NX] : s->A_N[j + i * DOPUS_NX]) + (i == j ? lm : DOPUS_R(0.0));
-        }
-    }
-    for (k = DOPUS_N - 1; k >= 0; --k) {
-        const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
-        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
-        for (j = 0; j < DOPUS_NW; ++j) {
-            for (i = 0; i < DOPUS_NX; ++i) {
-                v = DOPUS_R(0.0);
-                for (l = 0; l < DOPUS_NX; ++l) {
-                    v += P[i + l * DOPUS_NX] * slot->Phit[l + j * DOPUS_NX];
-                }
-                PA[i + j * DOPUS_NX] = v;
-            }
-        }
-        for (j = 0; j < DOPUS_NW; ++j) {
-            for (i = 0; i < DOPUS_NW; ++i) {
-                v = (i >= j ? slot->Ht[i + j * DOPUS_NW] : slot->Ht[j + i * DOPUS_NW]) +
-                    (i == j ? lm : DOPUS_R(0.0));
-                for (l = 0; l < DOPUS_NX; ++l) {
-                    v += slot->Phit[l + i * DOPUS_NX] * PA[l + j * DOPUS_NX];
-                }
-                Z[i + j * DOPUS_NW] = v;
-            }
-        }
-        /* Cholesky of the control block Z_uu in place (lower triangle) */
-        for (j = DOPUS_NX; j < DOPUS_NW; ++j) {
-            dopus_real d = Z[j + j * DOPUS_NW];
-            for (l = DOPUS_NX; l < j; ++l) {
-                d -= Z[j + l * DOPUS_NW] * Z[j + l * DOPUS_NW];
-            }
-            if (!(d > tol)) {
-                return 0;
-            }
-            d = dopus_sqrt(d);
-            Z[j + j * DOPUS_NW] = d;
-            for (i = j + 1; i < DOPUS_NW; ++i) {
-                v = Z[i + j * DOPUS_NW];
-                for (l = DOPUS_NX; l < j; ++l) {
-                    v -= Z[i + l * DOPUS_NW] * Z[j + l * DOPUS_NW];
-                }
-                Z[i + j * DOPUS_NW] = v / d;
-            }
-        }
-        if (k == 0) {
-            break; /* x_0 is fixed: P_0 is not needed */
-        }
-        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
-        for (j = 0; j < DOPUS_NX; ++j) {
-            for (i = DOPUS_NX; i < DOPUS_NW; ++i) {
-                v = Z[i + j * DOPUS_NW];
-                for (l = DOPUS_NX; l < i; ++l) {
-                    v -= Z[i + l * DOPUS_NW] * Z[l + j * DOPUS_NW];
-                }
-                Z[i + j * DOPUS_NW] = v / Z[i + i * DOPUS_NW];
-            }
-        }
-        for (j = 0; j < DOPUS_NX; ++j) {
-            for (i = 0; i < DOPUS_NX; ++i) {
-                v = DOPUS_R(0.5) * (Z[i + j * DOPUS_NW] + Z[j + i * DOPUS_NW]);
-                for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
-                    v -= Z[l + i * DOPUS_NW] * Z[l + j * DOPUS_NW];
-                }
-                P[i + j * DOPUS_NX] = v;
-            }
-        }
-    }
-    return 1;
-}
-
-/* One raise: from below the minimum to the minimum, else times DOPUS_LM_RAISE, at most the
- * maximum. */
-static void dopus_lm_raise(dopus_solver *s)
-{
-    dopus_real lo = DOPUS_LM_MIN_REL * s->lm_scale, hi = DOPUS_LM_MAX_REL * s->lm_scale;
-    if (s->lm_uncapped > s->lm) {
-        /* the first raise after the cap of dopus_lm_measured restores the term it capped */
-        s->lm = s->lm_uncapped;
-        s->lm_uncapped = -DOPUS_R(1.0);
-        return;
-    }
-    s->lm = s->lm < lo ? lo : s->lm * DOPUS_LM_RAISE;
-    s->lm = s->lm > hi ? hi : s->lm;
-}
-
-/* Raise until the QP is convex on the dynamics or the term is at its maximum. */
-static void dopus_lm_convexify(dopus_solver *s)
-{
-    dopus_real hi = DOPUS_LM_MAX_REL * s->lm_scale;
-    while (!dopus_lm_convex(s, s->lm) && s->lm < hi) {
-        dopus_lm_raise(s);
-    }
-}
-
-/* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
-void dopus_lm_start(dopus_solver *s)
-{
-    if (!s->lm_auto) {
-        return;
-    }
-    s->lm_scale = dopus_lm_hessian_scale(s);
-    s->lm = DOPUS_R(0.0);
-    s->lm_kkt_prev = -DOPUS_R(1.0);
-    s->lm_uncapped = -DOPUS_R(1.0);
-    dopus_lm_convexify(s);
-}
-
-/* After a prepare (QP assembled, KKT proxy evaluated): the scale, a raise when the proxy
- * grew DOPUS_LM_KKT_GROWTH times, then convex. */
-static void dopus_lm_prepared(dopus_solver *s)
-{
-    dopus_real floor_ =
-        DOPUS_PREC(1e-8, 1e-5) * (s->kkt_proxy_ref > DOPUS_R(1.0) ? s->kkt_proxy_ref : DOPUS_R(1.0));
-    dopus_real prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
-    if (!s->lm_auto) {
-        return;
-    }
-    s->lm_scale = dopus_lm_hessian_scale(s);
-    s->lm_uncapped = -DOPUS_R(1.0);
-    if (s->lm_kkt_prev >= DOPUS_R(0.0) && !(s->kkt_proxy <= DOPUS_LM_KKT_GROWTH * prev)) {
-        dopus_lm_raise(s);
-    }
-    s->lm_kkt_prev = s->kkt_proxy;
-    dopus_lm_convexify(s);
-}
-
-/* Feedback, once the measurement is in the QP: the term capped by the distance from the
- * solution, DOPUS_LM_KKT_REL h d^2 with d = max(proxy, max_i |dx0_i| / scale_x_i) (0 below
- * DOPUS_LM_MIN_REL h), so that it vanishes where the iterate converges. */
-static void dopus_lm_measured(dopus_solver *s)
-{
-    dopus_real d = s->kkt_proxy, cap, v;
-    int i;
-    s->lm_uncapped = -DOPUS_R(1.0);
-    if (!s->lm_auto) {
-        return;
-    }
-    for (i = 0; i < DOPUS_NX; ++i) {
-        v = dopus_fabs(s->qp_in.x0[i]) / s->scale_x[i];
-        d = v > d ? v : d;
-    }
-    cap = DOPUS_LM_KKT_REL * s->lm_scale * d * d;
-    if (!(s->lm <= cap)) {
-        s->lm_uncapped = s->lm;
-        s->lm = cap < DOPUS_LM_MIN_REL * s->lm_scale ? DOPUS_R(0.0) : cap;
-    }
-}
-
-/* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
-static void dopus_lm_feedback(dopus_solver *s, int status)
-{
-    if (!s->lm_auto) {
-        return;
-    }
-    if (status == DOPUS_OK) {
-        s->lm *= DOPUS_LM_LOWER;
-        if (s->lm < DOPUS_LM_MIN_REL * s->lm_scale) {
-            s->lm = DOPUS_R(0.0);
-        }
-    } else if (status == DOPUS_ERR_QP || status == DOPUS_ERR_DIVERGED) {
-        dopus_lm_raise(s);
-    }
-}
-
-void dopus_defaults(dopus_solver *s)
-{
-    int k, i;
-    s->magic = DOPUS_MAGIC;
-    s->initialized = 0;
-    s->qp_ready = 0;
-    s->prepare_due = 0;
-    s->shifted = 0;
-    s->status = DOPUS_OK;
-    s->M = dopus_default_M < 0 ? 0 : (dopus_default_M > DOPUS_N - 1 ? DOPUS_N - 1 : dopus_default_M);
-    s->mode = DOPUS_MODE_RECEDING;
-    s->hessian = (dopus_default_hessian == DOPUS_HESSIAN_GAUSS_NEWTON && DOPUS_HAS_GN)
-                     ? DOPUS_HESSIAN_GAUSS_NEWTON
-                     : DOPUS_HESSIAN_EXACT;
-    s->regularization = dopus_default_regularization;
-    s->reg_eps = dopus_default_reg_eps;
-    s->cost_hessian = dopus_default_cost_hessian ? 1 : 0;
-    /* a negative generated default: the automatic term (algorithm.md section 10) */
-    s->lm_auto = !(dopus_default_lm >= DOPUS_R(0.0));
-    s->lm =
-        (dopus_default_lm >= DOPUS_R(0.0) && dopus_default_lm < INFINITY) ? dopus_default_lm : DOPUS_R(0.0);
-    s->lm_scale = DOPUS_R(1.0);
-    s->lm_kkt_prev = -DOPUS_R(1.0);
-    s->lm_uncapped = -DOPUS_R(1.0);
-    for (k = 0; k < DOPUS_N; ++k) { /* set only during a QP solve (dopus_qp_solve_bound) */
-        s->qp_in.H[k] = 0;
-        s->qp_in.Phi[k] = 0;
-        s->qp_in.C[k] = 0;
-    }
-    s->qp_in.HN = 0;
-    s->qp_in.R = 0;
-    s->qp_in.Req = 0;
-    dopus_qp_settings_default(&s->qp_settings);
-    s->qp_settings.tol = DOPUS_DEFAULT_QP_TOL;
-    s->qp_warm = 1;
-    s->qp_cold_retry = 0;
-    for (k = 0; k <= DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NP; ++i) {
-            s->p[k][i] = dopus_p_default[i];
-        }
-    }
-    for (i = 0; i < DOPUS_NX; ++i) {
-        s->xhat0[i] = dopus_x0_default[i];
-    }
-    s->n_recomputed = 0;
-    s->qp_status = 0;
-    s->qp_iterations = 0;
-    for (k = 0; k < DOPUS_N; ++k) {
-        s->rho[k] = DOPUS_R(0.0);
-    }
-    s->recovery = 1;
-    s->recovery_failures = DOPUS_RECOVERY_FAILURES;
-    dopus_compute_scales(s);
-    dopus_reset_health(s);
-    for (i = 0; i < 4; ++i) {
-        s->kkt[i] = NAN;
-    }
-    dopus_timer_init(&s->timer);
-    s->budget_unit = DOPUS_BUDGET_OFF;
-    s->budget = 0.0;
-    s->anytime_tol = DOPUS_ANYTIME_TOL;
-    s->M_adaptive = 0;
-    s->M_min = 0;
-    s->M_max = DOPUS_N - 1;
-    s->M_eta = DOPUS_ADAPTIVE_ETA;
-    s->work = 0.0;
-    s->instant_start = 0.0;
-    s->cost_stage = 0.0;
-    s->cost_qp = 0.0;
-    s->cost_prepare = 0.0;
-    s->cost_qp_iter = 0.0;
-    s->budget_used = 0.0;
-    s->extra_iterations = 0;
-    s->instant_stages = 0;
-}
-
-/* ---- the budget clock (algorithm.md section 12) --------------------------------------- */
-
-/* Now on the budget's clock: the work counter (work units) or the solver's clock. */
-static double dopus_budget_now(const dopus_solver *s)
-{
-    return s->budget_unit == DOPUS_BUDGET_WORK ? s->work : dopus_timer_now(&s->timer);
-}
-
-/* 1 when no budget is set, or when `cost` more still fits in the instant's budget. */
-static int dopus_budget_fits(const dopus_solver *s, double cost)
-{
-    return s->budget_unit == DOPUS_BUDGET_OFF || dopus_budget_now(s) - s->instant_start + cost <= s->budget;
+    int prev = dopus_phase(s, DOPUS_PHASE_LM);
+    dopus_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
+    dopus_phase(s, prev);
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */
@@ -591,7 +249,7 @@ static int dopus_stage_F(dopus_solver *s, int k)
 {
     dopus_real l = DOPUS_R(0.0);
     int i;
-    s->work += 1.0;
+    s->anytime.work += 1.0;
     if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
@@ -610,42 +268,38 @@ static int dopus_stage_F(dopus_solver *s, int k)
 /* Regularise a fresh A block (algorithm.md section 5), timed as its own phase. */
 static int dopus_regularize(dopus_solver *s, int n, dopus_real *A)
 {
-    double t0;
-    int rc;
-    if (s->regularization == DOPUS_REG_NONE) {
+    int rc, prev;
+    if (s->settings.regularization == DOPUS_REG_NONE) {
         return DOPUS_OK;
     }
-    t0 = dopus_timer_now(&s->timer);
-    rc = dopus_reg_apply(n, A, s->regularization, s->reg_eps, s->mem.ev.reg_work);
-    dopus_timer_add(&s->timer, DOPUS_PHASE_REGULARIZATION, t0);
+    prev = dopus_phase(s, DOPUS_PHASE_REGULARIZATION);
+    rc = dopus_reg_apply(n, A, s->settings.regularization, s->settings.reg_eps, s->mem.ev.reg_work);
+    dopus_phase(s, prev);
     return rc == 0 ? DOPUS_OK : DOPUS_ERR_REGULARIZATION;
 }
 
 /* The stage-cost Hessian A_l of stage k at the current point into s->mem.ev.tmp_Al. */
 static int dopus_stage_Al(dopus_solver *s, int k)
 {
-    double t0 = dopus_timer_now(&s->timer);
-    int rc = dopus_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->mem.ev.tmp_Al,
+    int prev = dopus_phase(s, DOPUS_PHASE_HESSIANS);
+    int rc = dopus_eval_stage_hess_cost(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->mem.ev.tmp_Al,
                                         &s->mem.ev.fun_work);
-    dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
-    if (rc != 0) {
-        return DOPUS_ERR_FUNCTION;
-    }
-    return dopus_lai_vec_finite(DOPUS_NW * DOPUS_NW, s->mem.ev.tmp_Al) ? DOPUS_OK : DOPUS_ERR_NONFINITE_VALUE;
+    rc = rc != 0 ? DOPUS_ERR_FUNCTION
+                 : (dopus_lai_vec_finite(DOPUS_NW * DOPUS_NW, s->mem.ev.tmp_Al) ? DOPUS_OK
+                                                                                : DOPUS_ERR_NONFINITE_VALUE);
+    dopus_phase(s, prev);
+    return rc;
 }
 
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
  * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
  * leaves the slot as it was. */
-static int dopus_stage_H(dopus_solver *s, int k)
+static int dopus_stage_H_eval(dopus_solver *s, int k)
 {
     dopus_stage_slot *slot;
-    double t0 = dopus_timer_now(&s->timer);
     int rc, i;
-    s->work += 1.0;
-    rc = dopus_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+    rc = dopus_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
                                s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
-    dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return DOPUS_ERR_FUNCTION;
     }
@@ -674,7 +328,22 @@ static int dopus_stage_H(dopus_solver *s, int k)
     return DOPUS_OK;
 }
 
-int dopus_term_grad_checked(dopus_solver *s, dopus_real *gL, dopus_real *E, dopus_real *r, dopus_real *r_eq)
+/* dopus_stage_H_eval in the phase "hessians" (its regularisation in its own). */
+static int dopus_stage_H(dopus_solver *s, int k)
+{
+    int prev = dopus_phase(s, DOPUS_PHASE_HESSIANS);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = dopus_stage_H_eval(s, k);
+    dopus_phase(s, prev);
+    return rc;
+}
+
+/* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
+ * DOPUS_ERR_FUNCTION when the function fails, DOPUS_ERR_NONFINITE_VALUE when a value is not
+ * finite, else DOPUS_OK. */
+static int dopus_term_grad_checked(dopus_solver *s, dopus_real *gL, dopus_real *E, dopus_real *r,
+                                   dopus_real *r_eq)
 {
     if (dopus_eval_term_grad(s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, gL, E, r, r_eq,
                              &s->mem.ev.fun_work) != 0) {
@@ -692,7 +361,7 @@ static int dopus_term_F(dopus_solver *s)
 {
     dopus_real gL[DOPUS_NX], E = DOPUS_R(0.0), r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
     int rc;
-    s->work += 1.0;
+    s->anytime.work += 1.0;
     rc = dopus_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != DOPUS_OK) {
         return rc;
@@ -705,15 +374,12 @@ static int dopus_term_F(dopus_solver *s)
 }
 
 /* Terminal H: A_N (regularised), R, R_eq. */
-static int dopus_term_H(dopus_solver *s)
+static int dopus_term_H_eval(dopus_solver *s)
 {
     dopus_real R[DOPUS_DIM(DOPUS_NR) * DOPUS_NX], R_eq[DOPUS_DIM(DOPUS_NE) * DOPUS_NX];
-    double t0 = dopus_timer_now(&s->timer);
     int rc;
-    s->work += 1.0;
-    rc = dopus_eval_term_hess(s->hessian, s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
-                              R_eq, &s->mem.ev.fun_work);
-    dopus_timer_add(&s->timer, DOPUS_PHASE_HESSIANS, t0);
+    rc = dopus_eval_term_hess(s->settings.hessian, s->x[DOPUS_N], s->p[DOPUS_N], s->mu_r, s->nu,
+                              s->mem.ev.tmp_A, R, R_eq, &s->mem.ev.fun_work);
     if (rc != 0) {
         return DOPUS_ERR_FUNCTION;
     }
@@ -731,13 +397,22 @@ static int dopus_term_H(dopus_solver *s)
     return DOPUS_OK;
 }
 
+static int dopus_term_H(dopus_solver *s)
+{
+    int prev = dopus_phase(s, DOPUS_PHASE_HESSIANS);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = dopus_term_H_eval(s);
+    dopus_phase(s, prev);
+    return rc;
+}
+
 /* ---- QP assembly (algorithm.md section 3) ------------------------------------------- */
 
 static void dopus_assemble(dopus_solver *s)
 {
     dopus_qp_in *in = &s->qp_in;
-    int k, i, j;
-    double t0 = dopus_timer_now(&s->timer);
+    int k, i, j, prev = dopus_phase(s, DOPUS_PHASE_ASSEMBLY);
 
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
@@ -789,28 +464,17 @@ static void dopus_assemble(dopus_solver *s)
     for (i = 0; i < DOPUS_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
-    dopus_timer_add(&s->timer, DOPUS_PHASE_ASSEMBLY, t0);
+    dopus_phase(s, prev);
 }
 
 /* ---- init --------------------------------------------------------------------------- */
 
-static void dopus_clear_timings(dopus_solver *s, int first, int last)
-{
-    int i;
-    for (i = first; i <= last; ++i) {
-        s->timer.t[i] = DOPUS_R(0.0);
-    }
-}
-
 /* F (stored as F_old) and H of every stage, terminal F and H, at the current iterate. */
-static int dopus_linearize_all(dopus_solver *s)
+static int dopus_linearize_all_eval(dopus_solver *s)
 {
-    double t0;
     int k, rc;
     for (k = 0; k < DOPUS_N; ++k) {
-        t0 = dopus_timer_now(&s->timer);
         rc = dopus_stage_F(s, k);
-        dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
         if (rc != DOPUS_OK) {
             return rc;
         }
@@ -821,13 +485,20 @@ static int dopus_linearize_all(dopus_solver *s)
             return rc;
         }
     }
-    t0 = dopus_timer_now(&s->timer);
     rc = dopus_term_F(s);
-    dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
     if (rc != DOPUS_OK) {
         return rc;
     }
     return dopus_term_H(s);
+}
+
+/* dopus_linearize_all_eval in the phase "gradients" (the blocks in theirs). */
+static int dopus_linearize_all(dopus_solver *s)
+{
+    int prev = dopus_phase(s, DOPUS_PHASE_GRADIENTS);
+    int rc = dopus_linearize_all_eval(s);
+    dopus_phase(s, prev);
+    return rc;
 }
 
 /* The second half of init with the iterate in place: ring reset, F and H of every stage and
@@ -838,10 +509,8 @@ static int dopus_init_finish(dopus_solver *s)
     dopus_ring_reset(&s->ring);
     for (k = 0; k < DOPUS_N; ++k) {
         s->rho[k] = DOPUS_R(0.0);
-        s->recomputed[k] = k;
-        s->selected[k] = 0;
+        s->selected[k] = 1; /* every stage is fresh */
     }
-    s->n_recomputed = DOPUS_N;
     s->qp_status = 0;
     s->qp_iterations = 0;
 
@@ -854,7 +523,7 @@ static int dopus_init_finish(dopus_solver *s)
     s->qp_ready = 1;
     s->prepare_due = 0;
     s->shifted = 0;
-    dopus_lm_start(s);
+    dopus_lm_started(s);
     return DOPUS_OK;
 }
 
@@ -864,7 +533,9 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
 {
     int k, i, rc;
 
-    dopus_ensure_setup(s);
+    if (!s->set_up) {
+        return DOPUS_ERR_NOT_INITIALIZED;
+    }
     s->initialized = 0;
     dopus_reset_health(s);
     s->qp_ready = 0;
@@ -878,7 +549,7 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
         (mu_r && !dopus_lai_vec_finite(DOPUS_NR, mu_r)) || (nu && !dopus_lai_vec_finite(DOPUS_NE, nu))) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
-    dopus_clear_timings(s, 0, DOPUS_N_PHASES - 1);
+    dopus_timer_begin(&s->timer, (1u << DOPUS_N_PHASES) - 1u, DOPUS_PHASE_GRADIENTS);
 
     for (i = 0; i < DOPUS_NX; ++i) {
         s->xhat0[i] = xhat0 ? xhat0[i] : dopus_x0_default[i];
@@ -912,13 +583,13 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
     }
 
     rc = dopus_init_finish(s);
-    if (rc != DOPUS_OK) {
-        return dopus_ret(s, rc);
+    if (rc == DOPUS_OK) {
+        dopus_reset_health(s);
+        s->health.kkt_proxy = dopus_kkt_proxy_eval(s);
+        s->health.kkt_proxy_ref = s->health.kkt_proxy;
     }
-    dopus_reset_health(s);
-    s->kkt_proxy = dopus_kkt_proxy_eval(s);
-    s->kkt_proxy_ref = s->kkt_proxy;
-    return dopus_ret(s, DOPUS_OK);
+    dopus_timer_end(&s->timer, -1, 0.0);
+    return dopus_ret(s, rc);
 }
 
 int dopus_init_nominal(dopus_solver *s, const dopus_real *xhat0)
@@ -930,7 +601,9 @@ int dopus_init_nominal(dopus_solver *s, const dopus_real *xhat0)
                       DOPUS_NE > 0 ? dopus_nominal_nu : 0);
 #else
     (void)xhat0;
-    dopus_ensure_setup(s);
+    if (!s->set_up) {
+        return DOPUS_ERR_NOT_INITIALIZED;
+    }
     return dopus_ret(s, DOPUS_ERR_NO_NOMINAL);
 #endif
 }
@@ -994,8 +667,8 @@ static int dopus_feedback_admit(dopus_solver *s, const dopus_real *xhat0, dopus_
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
     }
     if (xhat0 == 0 || !dopus_lai_vec_finite(DOPUS_NX, xhat0)) {
-        s->xhat_fresh = 0;
-        if (s->mode == DOPUS_MODE_RECEDING) {
+        s->health.xhat_fresh = 0;
+        if (s->settings.mode == DOPUS_MODE_RECEDING) {
             /* the sampling instant has passed all the same: its prepare (the shift) is due */
             s->prepare_due = 1;
             s->shifted = 0;
@@ -1007,8 +680,8 @@ static int dopus_feedback_admit(dopus_solver *s, const dopus_real *xhat0, dopus_
          * starts from the newest measurement, so it is recorded all the same (algorithm.md
          * section 9); the instant has passed: its prepare (the shift) is due */
         dopus_copy(s->xhat0, xhat0, DOPUS_NX);
-        s->xhat_fresh = 1;
-        if (s->mode == DOPUS_MODE_RECEDING) {
+        s->health.xhat_fresh = 1;
+        if (s->settings.mode == DOPUS_MODE_RECEDING) {
             s->prepare_due = 1;
             s->shifted = 0;
         }
@@ -1025,8 +698,8 @@ static void dopus_feedback_measure(dopus_solver *s, const dopus_real *xhat0)
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
-    s->xhat_fresh = 1;
-    dopus_lm_measured(s);
+    s->health.xhat_fresh = 1;
+    dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -1036,10 +709,18 @@ static void dopus_feedback_measure(dopus_solver *s, const dopus_real *xhat0)
  * ring slots in place and the terminal blocks. They are set just before each solve and
  * cleared after it, so the struct holds no pointer into itself between calls and a byte
  * copy (memcpy, struct assignment) is a complete, independent solver. */
-static int dopus_qp_solve_bound(dopus_solver *s)
+static int dopus_qp_solve_bound(dopus_solver *s, int warm)
 {
     dopus_qp_in *in = &s->qp_in;
+    dopus_qp_settings settings;
     int k, qs;
+    dopus_qp_settings_default(&settings);
+    settings.tol = s->settings.qp_tol;
+    settings.max_iter = s->settings.qp_max_iter;
+    if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 12) */
+    }
+    settings.warm_start = warm;
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
         in->H[k] = slot->Ht;
@@ -1049,7 +730,7 @@ static int dopus_qp_solve_bound(dopus_solver *s)
     in->HN = s->A_N;
     in->R = DOPUS_NR > 0 ? s->R : 0;
     in->Req = DOPUS_NE > 0 ? s->R_eq : 0;
-    qs = dopus_qp_solve(&s->mem.qp.work, in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    qs = dopus_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
     for (k = 0; k < DOPUS_N; ++k) {
         in->H[k] = 0;
         in->Phi[k] = 0;
@@ -1072,8 +753,7 @@ static int dopus_qp_ok(const dopus_solver *s, int qs)
 static int dopus_qp_attempt(dopus_solver *s, int warm)
 {
     int qs;
-    s->qp_settings.warm_start = warm;
-    qs = dopus_qp_solve_bound(s);
+    qs = dopus_qp_solve_bound(s, warm);
     s->qp_iterations += s->qp_info.iterations;
     return qs;
 }
@@ -1086,15 +766,16 @@ static int dopus_qp_attempt(dopus_solver *s, int warm)
 static int dopus_feedback_qp(dopus_solver *s)
 {
     int qs;
-    s->qp_in.hess_shift = s->lm;
+    s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_cold_retry = 0;
-    s->work += DOPUS_WORK_QP;
-    if (s->qp_warm) {
+    s->anytime.work += DOPUS_WORK_QP;
+    if (s->settings.qp_warm_start) {
         dopus_qp_warm_point(s);
     }
-    qs = dopus_qp_attempt(s, s->qp_warm);
-    if (s->qp_warm && qs != DOPUS_QP_INVALID_INPUT && !(qs == DOPUS_QP_MAX_ITER && s->qp_capped) &&
+    qs = dopus_qp_attempt(s, s->settings.qp_warm_start);
+    if (s->settings.qp_warm_start && qs != DOPUS_QP_INVALID_INPUT &&
+        !(qs == DOPUS_QP_MAX_ITER && s->anytime.qp_cap > 0) &&
         (!dopus_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = dopus_qp_attempt(s, 0);
@@ -1108,12 +789,11 @@ static int dopus_feedback_qp(dopus_solver *s)
 static int dopus_feedback_lm_retries(dopus_solver *s, int qs, int *retries)
 {
     *retries = 0;
-    while (s->lm_auto && *retries < DOPUS_LM_RETRIES && s->lm < DOPUS_LM_MAX_REL * s->lm_scale &&
-           !dopus_qp_ok(s, qs) && qs != DOPUS_QP_INVALID_INPUT &&
-           !(qs == DOPUS_QP_MAX_ITER && s->qp_capped)) {
-        dopus_lm_raise(s);
-        s->work += DOPUS_WORK_QP;
-        s->qp_in.hess_shift = s->lm;
+    while (*retries < DOPUS_LM_RETRIES && dopus_lm_can_raise(&s->lm) && !dopus_qp_ok(s, qs) &&
+           qs != DOPUS_QP_INVALID_INPUT && !(qs == DOPUS_QP_MAX_ITER && s->anytime.qp_cap > 0)) {
+        dopus_lm_raise(&s->lm);
+        s->anytime.work += DOPUS_WORK_QP;
+        s->qp_in.hess_shift = s->lm.lm;
         qs = dopus_qp_attempt(s, 0);
         *retries += 1;
     }
@@ -1128,7 +808,7 @@ static int dopus_feedback_check_step(const dopus_solver *s, int qs)
     if (!dopus_qp_ok(s, qs)) {
         return DOPUS_ERR_QP;
     }
-    if (!dopus_box_ok(s, &s->x[0][0], &sol->x[0][0], DOPUS_NX, &s->u[0][0], &sol->u[0][0], DOPUS_QP_NU1)) {
+    if (!dopus_iterate_box_ok(s, &sol->x[0][0], DOPUS_NX, &sol->u[0][0], DOPUS_QP_NU1)) {
         return DOPUS_ERR_DIVERGED;
     }
     return DOPUS_OK;
@@ -1196,51 +876,15 @@ static void dopus_take_step(dopus_solver *s)
  * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
 static void dopus_keep_plan(dopus_solver *s, dopus_real *u0, int lowered)
 {
-    s->n_failed = 0;
-    s->plan_age = 0;
-    s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
     if (lowered) {
-        dopus_lm_feedback(s, DOPUS_OK);
+        dopus_lm_feedback(&s->lm, 1);
     }
-    dopus_copy(&s->plan_u[0][0], &s->u[0][0], DOPUS_N * DOPUS_NU);
-    if (dopus_clip_u(s->u[0], s->u0_out)) {
-        s->flags |= DOPUS_FLAG_U0_CLIPPED;
-    }
-    if (u0) {
-        dopus_copy(u0, s->u0_out, DOPUS_NU);
+    if (dopus_health_keep_plan(&s->health, &s->u[0][0], u0)) {
+        s->health.flags |= DOPUS_FLAG_U0_CLIPPED;
     }
 }
 
 static int dopus_feedback_recover(dopus_solver *s, int *qs, int *retries);
-
-/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
- * capped by the budget of the instant over the cost of one QP iteration measured before; a
- * QP stopped by the cap is not retried (the fallback control). Returns the setting's limit. */
-static int dopus_feedback_cap(dopus_solver *s)
-{
-    int max_iter = s->qp_settings.max_iter;
-    double left = s->budget - (dopus_budget_now(s) - s->instant_start), n;
-    s->qp_capped = 0;
-    if (s->budget_unit != DOPUS_BUDGET_TIME || !(s->cost_qp_iter > 0.0)) {
-        return max_iter;
-    }
-    n = left / s->cost_qp_iter;
-    n = n < 1.0 ? 1.0 : n;
-    if (n < (double)max_iter) {
-        s->qp_settings.max_iter = (int)n;
-        s->qp_capped = 1;
-    }
-    return max_iter;
-}
-
-/* The end of a feedback: the iteration limit of the setting back, the instant's cost so far. */
-static void dopus_feedback_end(dopus_solver *s, int max_iter, double t0)
-{
-    s->qp_settings.max_iter = max_iter;
-    s->qp_capped = 0;
-    s->budget_used = dopus_budget_now(s) - s->instant_start;
-    dopus_timer_add(&s->timer, DOPUS_PHASE_FEEDBACK, t0);
-}
 
 /* 1 when the model is finite at the state xs with the next control of the last good plan (one
  * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
@@ -1248,51 +892,59 @@ static void dopus_feedback_end(dopus_solver *s, int max_iter, double t0)
 static int dopus_model_finite_at(dopus_solver *s, const dopus_real *xs)
 {
     dopus_real l = DOPUS_R(0.0), u[DOPUS_NU], xn[DOPUS_NX];
-    int j = s->plan_age > DOPUS_N - 1 ? DOPUS_N - 1 : s->plan_age;
-    dopus_clip_u(s->plan_u[j], u);
+    int j = s->health.plan_age > DOPUS_N - 1 ? DOPUS_N - 1 : s->health.plan_age;
+    dopus_clip_u(s->health.plan_u[j], u);
     return dopus_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
            dopus_lai_vec_finite(DOPUS_NX, xn) && dopus_lai_vec_finite(1, &l);
 }
 
-int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
+/* Feedback once admitted (steps 2 to 8). */
+/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
+ * capped at the budget left over the cost of one QP iteration of the last feedback (at least
+ * 1); a QP stopped by the cap is not retried (the fallback control). */
+static void dopus_feedback_cap(dopus_solver *s)
+{
+    double n;
+    s->anytime.qp_cap = 0;
+    if (!dopus_budget_on(s) || s->settings.budget_unit != DOPUS_BUDGET_TIME ||
+        !(s->anytime.cost_qp_iter > 0.0)) {
+        return;
+    }
+    n = (s->settings.budget - (dopus_budget_now(s) - s->anytime.instant_start)) / s->anytime.cost_qp_iter;
+    n = n < 1.0 ? 1.0 : n;
+    if (n < (double)s->settings.qp_max_iter) {
+        s->anytime.qp_cap = (int)n;
+    }
+}
+
+static int dopus_feedback_run(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
     dopus_real xhat_prev[DOPUS_NX];
-    double t0, b0;
-    int rc, qs, retries, max_iter;
+    double b0;
+    int rc, qs, retries;
 
-    dopus_ensure_setup(s);
-    s->flags = 0;
-    s->instant_start = dopus_budget_now(s);
-    s->extra_iterations = 0;
-    s->instant_stages = 0;
-    rc = dopus_feedback_admit(s, xhat0, u0);
-    if (rc != DOPUS_OK) {
-        return rc;
-    }
-    s->timer.t[DOPUS_PHASE_FEEDBACK] = DOPUS_R(0.0);
-    t0 = dopus_timer_now(&s->timer);
     dopus_copy(xhat_prev, s->xhat0, DOPUS_NX);
     dopus_feedback_measure(s, xhat0);
-    max_iter = dopus_feedback_cap(s);
+    dopus_feedback_cap(s);
     b0 = dopus_budget_now(s);
     qs = dopus_feedback_qp(s);
     qs = dopus_feedback_lm_retries(s, qs, &retries);
-    s->cost_qp = dopus_budget_now(s) - b0;
-    if (s->qp_iterations > 0 && s->budget_unit == DOPUS_BUDGET_TIME) {
-        s->cost_qp_iter = s->cost_qp / (double)s->qp_iterations;
+    s->anytime.cost_qp = dopus_budget_now(s) - b0;
+    if (s->qp_iterations > 0 && s->settings.budget_unit == DOPUS_BUDGET_TIME) {
+        s->anytime.cost_qp_iter = s->anytime.cost_qp / (double)s->qp_iterations;
     }
     s->qp_status = qs;
     rc = dopus_feedback_check_step(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
-    if (rc != DOPUS_OK && s->recovery && s->mode == DOPUS_MODE_RECEDING && qs != DOPUS_QP_MAX_ITER &&
-        qs != DOPUS_QP_INVALID_INPUT) {
+    if (rc != DOPUS_OK && s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING &&
+        qs != DOPUS_QP_MAX_ITER && qs != DOPUS_QP_INVALID_INPUT) {
         if (!dopus_model_finite_at(s, xhat0)) {
             /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
              * prepare takes the predicted step) */
             dopus_copy(s->xhat0, xhat_prev, DOPUS_NX);
-            s->xhat_fresh = 0;
-            s->flags |= DOPUS_FLAG_MEASUREMENT_UNUSABLE;
+            s->health.xhat_fresh = 0;
+            s->health.flags |= DOPUS_FLAG_MEASUREMENT_UNUSABLE;
             rc = DOPUS_ERR_NONFINITE_VALUE;
         } else {
             rc = dopus_feedback_recover(s, &qs, &retries);
@@ -1303,14 +955,39 @@ int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
         }
     }
     if (rc != DOPUS_OK) {
-        dopus_feedback_end(s, max_iter, t0);
         return dopus_feedback_failed(s, u0, rc);
     }
     dopus_store_domega(s);
     dopus_take_step(s);
     dopus_keep_plan(s, u0, retries == 0);
-    dopus_feedback_end(s, max_iter, t0);
     return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
+{
+    double start;
+    int rc;
+
+    if (!s->set_up) {
+        return DOPUS_ERR_NOT_INITIALIZED;
+    }
+    /* the whole call is the phase "feedback" (a recovery within it included) */
+    dopus_timer_begin(&s->timer, 1u << DOPUS_PHASE_FEEDBACK, DOPUS_PHASE_FEEDBACK);
+    s->timer.locked = 1;
+    start = s->timer.mark;
+    s->health.flags = 0;
+    s->anytime.instant_start = dopus_budget_now(s);
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
+    rc = dopus_feedback_admit(s, xhat0, u0);
+    if (rc == DOPUS_OK) {
+        rc = dopus_feedback_run(s, xhat0, u0);
+    }
+    s->anytime.qp_cap = 0;
+    s->anytime.used = dopus_budget_now(s) - s->anytime.instant_start;
+    s->timer.locked = 0;
+    dopus_timer_end(&s->timer, 0, start);
+    return rc;
 }
 
 /* ---- prepare ------------------------------------------------------------------------ */
@@ -1369,20 +1046,21 @@ static dopus_real dopus_step_norm(const dopus_solver *s, int k)
  * between M_min and M_max. */
 static int dopus_M_now(const dopus_solver *s)
 {
-    dopus_real thr = s->M_eta * s->kkt_proxy;
+    const dopus_settings *st = &s->settings;
+    dopus_real thr = st->M_eta * s->health.kkt_proxy;
     int k, n = 0;
-    if (s->recovering > 0) {
+    if (s->health.recovering > 0) {
         return DOPUS_N - 1; /* after a recovery: every block fresh until it has settled */
     }
-    if (!s->M_adaptive) {
-        return s->M < 0 ? 0 : (s->M > DOPUS_N - 1 ? DOPUS_N - 1 : s->M);
+    if (!st->M_adaptive) {
+        return st->M < 0 ? 0 : (st->M > DOPUS_N - 1 ? DOPUS_N - 1 : st->M);
     }
     for (k = 0; k < DOPUS_N - 1; ++k) {
         if (s->rho[k] * dopus_step_norm(s, k) > thr) {
             n += 1;
         }
     }
-    return n < s->M_min ? s->M_min : (n > s->M_max ? s->M_max : n);
+    return n < st->M_min ? st->M_min : (n > st->M_max ? st->M_max : n);
 }
 
 /* The stage among 0..N-2 not selected yet with the largest rho_k, ties to the lower index. */
@@ -1400,8 +1078,7 @@ static int dopus_next_worst(const dopus_solver *s)
 /* Step 4: re-linearise the stages with the largest rho_k: M of them (dopus_M_now), then, with
  * a budget, further stages in rho order in the instant's prepare and in an extra iteration
  * after which no further iteration fits (algorithm.md section 12); each only while the
- * budget allows. The recomputed set (sorted, stage N-1 included) is recorded; the cost of
- * the stages beyond M in *ext_cost. */
+ * budget allows. The cost of the stages beyond M goes to *ext_cost. */
 static int dopus_relinearise(dopus_solver *s, int extra, double *ext_cost)
 {
     int M = dopus_M_now(s), m, k, n = 0, rc = DOPUS_OK, extend;
@@ -1410,10 +1087,10 @@ static int dopus_relinearise(dopus_solver *s, int extra, double *ext_cost)
         s->selected[k] = 0;
     }
     extend =
-        s->budget_unit != DOPUS_BUDGET_OFF && (!extra || !dopus_budget_fits(s, s->cost_qp + s->cost_prepare));
+        dopus_budget_on(s) && (!extra || !dopus_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare));
     *ext_cost = 0.0;
     for (m = 0; m < DOPUS_N - 1; ++m) {
-        if ((m >= M && !extend) || !dopus_budget_fits(s, s->cost_stage)) {
+        if ((m >= M && !extend) || !dopus_budget_fits(s, s->anytime.cost_stage)) {
             break;
         }
         k = dopus_next_worst(s);
@@ -1423,41 +1100,35 @@ static int dopus_relinearise(dopus_solver *s, int extra, double *ext_cost)
             break;
         }
         s->selected[k] = 1;
-        if (s->budget_unit != DOPUS_BUDGET_OFF) {
-            s->cost_stage = dopus_budget_now(s) - b0;
+        n += 1;
+        if (dopus_budget_on(s)) {
+            s->anytime.cost_stage = dopus_budget_now(s) - b0;
             if (m >= M) {
-                *ext_cost += s->cost_stage;
+                *ext_cost += s->anytime.cost_stage;
             }
         }
     }
-    for (k = 0; k < DOPUS_N - 1; ++k) {
-        if (s->selected[k]) {
-            s->recomputed[n++] = k;
-        }
-    }
-    s->instant_stages += n;
-    s->recomputed[n++] = DOPUS_N - 1;
-    s->n_recomputed = n;
+    s->anytime.instant_stages += n;
     return rc;
 }
 
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
  * on (use_plan) or the OCP file's guess, clipped to the bounds, into the iterate. Returns 1
  * when every node is finite and inside the box. */
-static int dopus_simulate(dopus_solver *s, int use_plan)
+static int dopus_simulate_plan(dopus_solver *s, int use_plan)
 {
     dopus_real l = DOPUS_R(0.0);
     int k, j;
     for (k = 0; k < DOPUS_N; ++k) {
-        j = s->plan_age + k > DOPUS_N - 1 ? DOPUS_N - 1 : s->plan_age + k;
-        dopus_clip_u(use_plan ? s->plan_u[j] : dopus_guess_u[k], s->u[k]);
+        j = s->health.plan_age + k > DOPUS_N - 1 ? DOPUS_N - 1 : s->health.plan_age + k;
+        dopus_clip_u(use_plan ? s->health.plan_u[j] : dopus_guess_u[k], s->u[k]);
         if (dopus_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->mem.ev.tmp_g,
                                   &s->mem.ev.fun_work) != 0 ||
             !dopus_lai_vec_finite(DOPUS_NX, s->x[k + 1])) {
             return 0;
         }
     }
-    return dopus_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
+    return dopus_iterate_box_ok(s, 0, 0, 0, 0);
 }
 
 /* The OCP file's guess states from node `first` on and its controls (clipped) into the iterate. */
@@ -1476,10 +1147,10 @@ static void dopus_guess_primal(dopus_solver *s, int first)
  * (convex in the cost, whatever the multipliers); the next prepares use the setting. */
 static int dopus_reinit_finish(dopus_solver *s)
 {
-    int rc, hessian = s->hessian;
-    s->hessian = DOPUS_HAS_GN ? DOPUS_HESSIAN_GAUSS_NEWTON : hessian;
+    int rc, hessian = s->settings.hessian;
+    s->settings.hessian = DOPUS_HAS_GN ? DOPUS_HESSIAN_GAUSS_NEWTON : hessian;
     rc = dopus_init_finish(s);
-    s->hessian = hessian;
+    s->settings.hessian = hessian;
     return rc;
 }
 
@@ -1496,7 +1167,7 @@ static int dopus_reinit_at_guess(dopus_solver *s)
     dopus_zero(DOPUS_N * DOPUS_DIM(DOPUS_NG), &s->mu_g[0][0]);
     dopus_zero(DOPUS_DIM(DOPUS_NR), s->mu_r);
     dopus_zero(DOPUS_DIM(DOPUS_NE), s->nu);
-    s->flags |= DOPUS_FLAG_REINIT_GUESS;
+    s->health.flags |= DOPUS_FLAG_REINIT_GUESS;
     return dopus_reinit_finish(s);
 }
 
@@ -1507,7 +1178,7 @@ static int dopus_reinit_at_guess(dopus_solver *s)
 static int dopus_reinit(dopus_solver *s)
 {
     int rc;
-    if (!dopus_simulate(s, 1) && !dopus_simulate(s, 0)) {
+    if (!dopus_simulate_plan(s, 1) && !dopus_simulate_plan(s, 0)) {
         dopus_guess_primal(s, 1);
     }
     rc = dopus_reinit_finish(s);
@@ -1518,13 +1189,13 @@ static int dopus_reinit(dopus_solver *s)
         s->qp_ready = 0;
         return rc;
     }
-    s->kkt_proxy = dopus_kkt_proxy_eval(s);
-    s->kkt_proxy_ref = s->kkt_proxy;
-    s->n_failed = 0;
-    s->recover_pending = 0;
-    s->n_recoveries += 1;
-    s->recovering = DOPUS_RECOVERY_FULL_RTI;
-    s->flags |= DOPUS_FLAG_RECOVERED;
+    s->health.kkt_proxy = dopus_kkt_proxy_eval(s);
+    s->health.kkt_proxy_ref = s->health.kkt_proxy;
+    s->health.n_failed = 0;
+    s->health.recover_pending = 0;
+    s->health.n_recoveries += 1;
+    s->health.recovering = DOPUS_RECOVERY_FULL_RTI;
+    s->health.flags |= DOPUS_FLAG_RECOVERED;
     return DOPUS_OK;
 }
 
@@ -1536,17 +1207,18 @@ static int dopus_recover(dopus_solver *s, int shifted)
     int i;
     /* x_0: the state predicted for this instant from the last measurement and control; when
      * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
-    if (!s->xhat_fresh) {
+    if (!s->health.xhat_fresh) {
         if (!shifted) {
             dopus_copy(s->x[0], s->x[1], DOPUS_NX);
         }
-    } else if (dopus_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+    } else if (dopus_eval_stage_eval(s->xhat0, s->health.u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
                                      &s->mem.ev.fun_work) != 0 ||
                !dopus_lai_vec_finite(DOPUS_NX, s->x[0])) {
         dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        if (!(dopus_fabs(s->x[0][i]) <= DOPUS_DIVERGENCE_BOX * s->scale_x[i] + dopus_fabs(s->xhat0[i]))) {
+        if (!(dopus_fabs(s->x[0][i]) <=
+              DOPUS_DIVERGENCE_BOX * s->health.scale_x[i] + dopus_fabs(s->xhat0[i]))) {
             dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
             break;
         }
@@ -1562,14 +1234,14 @@ static int dopus_recover(dopus_solver *s, int shifted)
  * the iterate is then the OCP file's guess, prepared, when the model is finite there). */
 static int dopus_feedback_recover(dopus_solver *s, int *qs, int *retries)
 {
-    int i, rc, n_failed = s->n_failed;
+    int i, rc, n_failed = s->health.n_failed;
     dopus_copy(s->x[0], s->xhat0, DOPUS_NX);
     rc = dopus_reinit(s);
-    s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
+    s->health.n_failed = n_failed; /* still the count of consecutive failed feedbacks */
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
     s->shifted = 0;
-    if (rc == DOPUS_OK && (s->flags & DOPUS_FLAG_REINIT_GUESS)) {
+    if (rc == DOPUS_OK && (s->health.flags & DOPUS_FLAG_REINIT_GUESS)) {
         /* the model failed at the measured state: no QP from it */
         rc = DOPUS_ERR_NONFINITE_VALUE;
     }
@@ -1579,8 +1251,8 @@ static int dopus_feedback_recover(dopus_solver *s, int *qs, int *retries)
     for (i = 0; i < DOPUS_NX; ++i) {
         s->qp_in.x0[i] = DOPUS_R(0.0);
     }
-    s->qp_in.hess_shift = s->lm;
-    s->work += DOPUS_WORK_QP;
+    s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += DOPUS_WORK_QP;
     *qs = dopus_qp_attempt(s, 0);
     *qs = dopus_feedback_lm_retries(s, *qs, retries);
     return DOPUS_OK;
@@ -1596,32 +1268,34 @@ static void dopus_predicted_step(dopus_solver *s)
     for (i = 0; i < DOPUS_NX; ++i) {
         s->qp_in.x0[i] = DOPUS_R(0.0);
     }
-    s->qp_in.hess_shift = s->lm;
-    s->qp_settings.warm_start = 0;
-    s->work += DOPUS_WORK_QP;
-    qs = dopus_qp_solve_bound(s);
+    s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += DOPUS_WORK_QP;
+    qs = dopus_qp_solve_bound(s, 0);
     if (dopus_feedback_check_step(s, qs) != DOPUS_OK) {
         return;
     }
     dopus_store_domega(s);
     dopus_take_step(s);
-    dopus_copy(&s->plan_u[0][0], &s->u[0][0], DOPUS_N * DOPUS_NU);
-    s->plan_age = 0;
-    if (!s->xhat_fresh) {
+    dopus_copy(&s->health.plan_u[0][0], &s->u[0][0], DOPUS_N * DOPUS_NU);
+    s->health.plan_age = 0;
+    if (!s->health.xhat_fresh) {
         /* no measurement to distrust: the model's prediction carries the loop */
-        s->n_failed = 0;
-        s->recover_pending = 0;
+        s->health.n_failed = 0;
+        s->health.recover_pending = 0;
     }
-    s->flags |= DOPUS_FLAG_PREDICTED;
+    s->health.flags |= DOPUS_FLAG_PREDICTED;
 }
 
 static int dopus_prepare_iteration(dopus_solver *s, int extra);
-static int dopus_anytime(dopus_solver *s);
+static int dopus_anytime_run(dopus_solver *s);
 
 int dopus_prepare(dopus_solver *s)
 {
+    double start;
     int rc, hessian;
-    dopus_ensure_setup(s);
+    if (!s->set_up) {
+        return DOPUS_ERR_NOT_INITIALIZED;
+    }
     if (!s->initialized) {
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
     }
@@ -1629,42 +1303,44 @@ int dopus_prepare(dopus_solver *s)
         /* a second prepare would shift the horizon twice */
         return dopus_ret(s, DOPUS_ERR_ALREADY_PREPARED);
     }
-    dopus_clear_timings(s, DOPUS_PHASE_SHIFT, DOPUS_PHASE_ASSEMBLY);
-    s->extra_iterations = 0;
-    hessian = s->hessian;
-    if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
-        s->mode == DOPUS_MODE_RECEDING && !(s->flags & DOPUS_FLAG_REINIT_GUESS)) {
+    dopus_timer_begin(&s->timer, DOPUS_PREPARE_PHASES, DOPUS_PHASE_RECOVERY);
+    start = s->timer.mark;
+    s->anytime.extra_iterations = 0;
+    hessian = s->settings.hessian;
+    if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
+        s->settings.mode == DOPUS_MODE_RECEDING && !(s->health.flags & DOPUS_FLAG_REINIT_GUESS)) {
         /* (not from the OCP file's guess: its plan is not the plant's) */
         dopus_predicted_step(s);
     }
     s->qp_ready = 0;
-    if (s->mode == DOPUS_MODE_RECEDING && s->plan_age < DOPUS_N) {
-        s->plan_age += 1;
+    if (s->settings.mode == DOPUS_MODE_RECEDING && s->health.plan_age < DOPUS_N) {
+        s->health.plan_age += 1;
     }
-    if (s->recover_pending && s->recovery && s->mode == DOPUS_MODE_RECEDING) {
+    if (s->health.recover_pending && s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING) {
         rc = dopus_recover(s, 0);
     } else {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
          * multipliers), every block fresh */
-        if (s->recovering > 0 && DOPUS_HAS_GN) {
-            s->hessian = DOPUS_HESSIAN_GAUSS_NEWTON;
+        if (s->health.recovering > 0 && DOPUS_HAS_GN) {
+            s->settings.hessian = DOPUS_HESSIAN_GAUSS_NEWTON;
         }
         rc = dopus_prepare_iteration(s, 0);
     }
     if (rc == DOPUS_OK) {
-        /* the time left (algorithm.md section 12), with the Hessian of the recovery phase */
-        if (s->recovering > 0 && DOPUS_HAS_GN) {
-            s->hessian = DOPUS_HESSIAN_GAUSS_NEWTON;
+        /* the budget left (algorithm.md section 12), with the Hessian of the recovery phase */
+        if (s->health.recovering > 0 && DOPUS_HAS_GN) {
+            s->settings.hessian = DOPUS_HESSIAN_GAUSS_NEWTON;
         }
-        rc = dopus_anytime(s);
+        rc = dopus_anytime_run(s);
     }
-    s->hessian = hessian;
-    s->budget_used = dopus_budget_now(s) - s->instant_start;
+    s->settings.hessian = hessian;
+    s->anytime.used = dopus_budget_now(s) - s->anytime.instant_start;
     if (rc == DOPUS_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
         s->shifted = 0;
     }
+    dopus_timer_end(&s->timer, 1, start);
     return dopus_ret(s, rc);
 }
 
@@ -1673,41 +1349,40 @@ int dopus_prepare(dopus_solver *s)
 static int dopus_prepare_iteration(dopus_solver *s, int extra)
 {
     dopus_real xN_saved[DOPUS_NX];
-    double t0, b_start = dopus_budget_now(s), ext_cost = 0.0;
+    double b_start = dopus_budget_now(s), ext_cost = 0.0;
     int k, rc;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
-    t0 = dopus_timer_now(&s->timer);
-    if (s->mode == DOPUS_MODE_RECEDING && !s->shifted) {
+    dopus_phase(s, DOPUS_PHASE_SHIFT);
+    if (s->settings.mode == DOPUS_MODE_RECEDING && !s->shifted && !extra) {
         dopus_shift(s);
         s->shifted = 1;
     }
-    t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_SHIFT, t0);
     dopus_copy(xN_saved, s->x[DOPUS_N], DOPUS_NX);
 
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < DOPUS_N - 1; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
+        dopus_phase(s, DOPUS_PHASE_GRADIENTS);
         rc = dopus_stage_F(s, k);
-        t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
         if (rc != DOPUS_OK) {
             return rc;
         }
+        dopus_phase(s, DOPUS_PHASE_RHO);
         s->rho[k] = dopus_ring_secant(slot, s->mem.ev.tmp_F, s->mem.ev.tmp_phi, s->mem.ev.tmp_g);
         /* stored as F_old in step 6, once nothing can fail */
         dopus_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, DOPUS_NW);
         dopus_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, DOPUS_NX);
         dopus_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, DOPUS_NG);
-        t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_RHO, t0);
     }
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
+    dopus_phase(s, DOPUS_PHASE_GRADIENTS);
     rc = dopus_stage_F(s, DOPUS_N - 1);
-    t0 = dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
     if (rc != DOPUS_OK) {
         return rc;
     }
-    if (s->mode == DOPUS_MODE_RECEDING && !extra) {
+    if (s->settings.mode == DOPUS_MODE_RECEDING && !extra) {
         dopus_copy(s->x[DOPUS_N], s->mem.ev.tmp_phi, DOPUS_NX);
     }
     dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
@@ -1715,22 +1390,22 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     s->rho[DOPUS_N - 1] = DOPUS_R(0.0);
     rc = dopus_stage_H(s, DOPUS_N - 1);
     if (rc == DOPUS_OK) {
-        t0 = dopus_timer_now(&s->timer);
         rc = dopus_term_F(s);
-        dopus_timer_add(&s->timer, DOPUS_PHASE_GRADIENTS, t0);
     }
     if (rc == DOPUS_OK) {
         rc = dopus_term_H(s);
     }
 
-    /* 4. re-linearise the M stages with the largest rho_k (and more as the budget allows) */
+    /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == DOPUS_OK) {
+        dopus_phase(s, DOPUS_PHASE_RHO);
         rc = dopus_relinearise(s, extra, &ext_cost);
     }
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
      *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept) */
-    if (rc == DOPUS_OK && s->cost_hessian) {
+    if (rc == DOPUS_OK && s->settings.cost_hessian) {
+        dopus_phase(s, DOPUS_PHASE_HESSIANS);
         for (k = 0; k < DOPUS_N - 1 && rc == DOPUS_OK; ++k) {
             dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
             if (s->selected[k]) {
@@ -1755,6 +1430,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
 
     /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
      *    when stored) */
+    dopus_phase(s, DOPUS_PHASE_GRADIENTS);
     for (k = 0; k < DOPUS_N - 1; ++k) {
         dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k],
                            s->mem.ev.Fn_g[k]);
@@ -1762,15 +1438,20 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_assemble(s);
     s->qp_ready = 1;
 
-    /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
-    s->kkt_proxy = dopus_kkt_proxy_eval(s);
-    dopus_lm_prepared(s); /* the automatic Levenberg-Marquardt term (section 10) */
-    if (s->budget_unit != DOPUS_BUDGET_OFF) {
-        s->cost_prepare = dopus_budget_now(s) - b_start - ext_cost;
+    /* 7. the divergence test of the prepared iterate (algorithm.md section 9) and the
+     *    automatic Levenberg-Marquardt term (section 10) */
+    dopus_phase(s, DOPUS_PHASE_RECOVERY);
+    s->health.kkt_proxy = dopus_kkt_proxy_eval(s);
+    dopus_phase(s, DOPUS_PHASE_LM);
+    dopus_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
+                      s->mem.ev.lm_work);
+    dopus_phase(s, DOPUS_PHASE_RECOVERY);
+    if (dopus_budget_on(s)) {
+        s->anytime.cost_prepare = dopus_budget_now(s) - b_start - ext_cost;
     }
     if (dopus_iterate_diverged(s)) {
-        s->flags |= DOPUS_FLAG_DIVERGED;
-        if (s->recovery && s->mode == DOPUS_MODE_RECEDING) {
+        s->health.flags |= DOPUS_FLAG_DIVERGED;
+        if (s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING) {
             return dopus_recover(s, 1);
         }
     }
@@ -1784,42 +1465,42 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
  * solved (or a step outside the box) changes nothing and returns DOPUS_ERR_QP. */
 static int dopus_extra_iteration(dopus_solver *s)
 {
-    dopus_real lm = s->lm;
+    dopus_lm lm = s->lm;
     double b0 = dopus_budget_now(s);
     int i, qs;
     for (i = 0; i < DOPUS_NX; ++i) {
         s->qp_in.x0[i] = DOPUS_R(0.0);
     }
-    dopus_lm_measured(s);
+    dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     qs = dopus_feedback_qp(s);
     if (dopus_feedback_check_step(s, qs) != DOPUS_OK) {
         s->lm = lm;
-        s->lm_uncapped = -DOPUS_R(1.0);
         return DOPUS_ERR_QP;
     }
-    s->cost_qp = dopus_budget_now(s) - b0;
+    s->anytime.cost_qp = dopus_budget_now(s) - b0;
     dopus_store_domega(s);
     dopus_take_step(s);
-    dopus_lm_feedback(s, DOPUS_OK);
+    dopus_lm_feedback(&s->lm, 1);
     return dopus_prepare_iteration(s, 1);
 }
 
-/* The time left after prepare (algorithm.md section 12): extra iterations while the KKT proxy
- * exceeds the tolerance and one more fits in the budget. The last feedback's QP figures are
- * kept for dopus_get_qp_status and dopus_get_qp_iterations. */
-static int dopus_anytime(dopus_solver *s)
+/* The budget left after prepare (algorithm.md section 12): extra iterations while the KKT
+ * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
+ * of dopus_info. */
+static int dopus_anytime_run(dopus_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = DOPUS_OK;
-    if (s->budget_unit == DOPUS_BUDGET_OFF) {
+    if (!dopus_budget_on(s)) {
         return DOPUS_OK;
     }
-    while (s->extra_iterations < DOPUS_ANYTIME_MAX_ITER && s->qp_ready && s->kkt_proxy > s->anytime_tol &&
-           dopus_budget_fits(s, s->cost_qp + s->cost_prepare)) {
+    while (s->anytime.extra_iterations < DOPUS_ANYTIME_MAX_ITER && s->qp_ready &&
+           s->health.kkt_proxy > s->settings.anytime_tol &&
+           dopus_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
         rc = dopus_extra_iteration(s);
         if (rc != DOPUS_OK) {
             break;
         }
-        s->extra_iterations += 1;
+        s->anytime.extra_iterations += 1;
     }
     s->qp_status = qp_status;
     s->qp_iterations = qp_iterations;
@@ -1832,22 +1513,23 @@ static int dopus_anytime(dopus_solver *s)
 int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
 {
     dopus_real parts[4];
-    double t0;
     int i, rc;
 
-    dopus_ensure_setup(s);
+    if (!s->set_up) {
+        return DOPUS_ERR_NOT_INITIALIZED;
+    }
     if (!s->initialized) {
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
     }
     if (xhat0 && !dopus_lai_vec_finite(DOPUS_NX, xhat0)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
-    s->timer.t[DOPUS_PHASE_KKT] = DOPUS_R(0.0);
-    t0 = dopus_timer_now(&s->timer);
-    rc = dopus_kkt_measure(s, xhat0 ? xhat0 : s->xhat0, parts);
-    dopus_timer_add(&s->timer, DOPUS_PHASE_KKT, t0);
-    if (rc != DOPUS_OK) {
-        return dopus_ret(s, rc);
+    dopus_timer_begin(&s->timer, 1u << DOPUS_PHASE_KKT, DOPUS_PHASE_KKT);
+    rc = dopus_kkt_measure(&s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0], &s->mu_b[0][0], s->mu_bN,
+                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->mem.ev.fun_work, parts);
+    dopus_timer_end(&s->timer, -1, 0.0);
+    if (rc != DOPUS_KKT_OK) {
+        return dopus_ret(s, rc == DOPUS_KKT_FUNCTION ? DOPUS_ERR_FUNCTION : DOPUS_ERR_NONFINITE_VALUE);
     }
     for (i = 0; i < 4; ++i) {
         s->kkt[i] = parts[i];
@@ -1856,16 +1538,6 @@ int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
         }
     }
     return dopus_ret(s, DOPUS_OK);
-}
-
-dopus_real dopus_get_kkt(const dopus_solver *s)
-{
-    dopus_real m = s->kkt[0];
-    int i;
-    for (i = 1; i < 4; ++i) {
-        m = s->kkt[i] > m ? s->kkt[i] : m;
-    }
-    return m;
 }
 
 /* ---- getters ------------------------------------------------------------------------ */
@@ -1922,21 +1594,14 @@ void dopus_get_rho(const dopus_solver *s, dopus_real *rho)
 
 int dopus_get_recomputed(const dopus_solver *s, int *stages)
 {
-    int i;
-    for (i = 0; i < s->n_recomputed; ++i) {
-        stages[i] = s->recomputed[i];
+    int k, n = 0;
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        if (s->selected[k]) {
+            stages[n++] = k;
+        }
     }
-    return s->n_recomputed;
-}
-
-int dopus_get_qp_iterations(const dopus_solver *s)
-{
-    return s->qp_iterations;
-}
-
-int dopus_get_qp_status(const dopus_solver *s)
-{
-    return s->qp_status;
+    stages[n++] = DOPUS_N - 1;
+    return n;
 }
 
 /* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
@@ -1978,65 +1643,259 @@ int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
     return 1;
 }
 
-int dopus_get_flags(const dopus_solver *s)
-{
-    return s->flags;
-}
-
 void dopus_get_u0(const dopus_solver *s, dopus_real *u0)
 {
-    dopus_copy(u0, s->u0_out, DOPUS_NU);
-}
-
-int dopus_get_recoveries(const dopus_solver *s)
-{
-    return s->n_recoveries;
-}
-
-int dopus_get_failed_feedbacks(const dopus_solver *s)
-{
-    return s->n_failed;
-}
-
-dopus_real dopus_get_kkt_proxy(const dopus_solver *s)
-{
-    return s->kkt_proxy;
+    dopus_copy(u0, s->health.u0_out, DOPUS_NU);
 }
 
 void dopus_get_scales(const dopus_solver *s, dopus_real *scale_x, dopus_real *scale_u)
 {
     if (scale_x) {
-        dopus_copy(scale_x, s->scale_x, DOPUS_NX);
+        dopus_copy(scale_x, s->health.scale_x, DOPUS_NX);
     }
     if (scale_u) {
-        dopus_copy(scale_u, s->scale_u, DOPUS_NU);
+        dopus_copy(scale_u, s->health.scale_u, DOPUS_NU);
     }
 }
 
-int dopus_get_qp_cold_retry(const dopus_solver *s)
+static int dopus_has_clock(const dopus_solver *s)
 {
-    return s->qp_cold_retry;
+    if (s->timer.clock == 0) {
+        return 0;
+    }
+    return s->timer.clock != dopus_timer_default_clock || dopus_timer_has_default_clock();
 }
 
-int dopus_get_status(const dopus_solver *s)
+void dopus_get_info(const dopus_solver *s, dopus_info *info)
 {
-    return s->status;
+    int k, i;
+    info->status = s->status;
+    info->initialized = s->set_up && s->initialized;
+    info->qp_status = s->qp_status;
+    info->qp_iterations = s->qp_iterations;
+    info->qp_cold_retry = s->qp_cold_retry;
+    info->flags = s->health.flags;
+    info->recoveries = s->health.n_recoveries;
+    info->failed_feedbacks = s->health.n_failed;
+    info->M_used = 0;
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        info->M_used += s->selected[k] ? 1 : 0;
+    }
+    info->ring_head = s->ring.ring_head;
+    info->has_clock = dopus_has_clock(s);
+    info->lm = s->lm.lm;
+    info->lm_scale = s->lm.scale;
+    info->kkt_proxy = s->health.kkt_proxy;
+    info->kkt_max = s->kkt[0];
+    for (i = 0; i < 4; ++i) {
+        info->kkt[i] = s->kkt[i];
+        info->kkt_max = s->kkt[i] > info->kkt_max ? s->kkt[i] : info->kkt_max;
+    }
+    for (i = 0; i < DOPUS_N_PHASES; ++i) { /* times are double in both precisions */
+        info->timings[i] = s->timer.t[i];
+    }
+    info->t_feedback = s->timer.t_call[0];
+    info->t_prepare = s->timer.t_call[1];
+    info->extra_iterations = s->anytime.extra_iterations;
+    info->instant_stages = s->anytime.instant_stages;
+    info->budget_used = s->anytime.used;
+    info->work = s->anytime.work;
 }
 
-int dopus_is_initialized(const dopus_solver *s)
+/* ---- settings, setup, parameters, clock ---------------------------------------------- */
+
+/* DOPUS_OK when every setting is in range, else DOPUS_ERR_INVALID_ARGUMENT. */
+static int dopus_settings_check(const dopus_settings *st)
 {
-    return s->magic == DOPUS_MAGIC && s->initialized;
+    int reg = st->regularization;
+    if (st->M < 0 || st->M > DOPUS_N - 1 ||
+        (st->mode != DOPUS_MODE_RECEDING && st->mode != DOPUS_MODE_FIXED) ||
+        (st->hessian != DOPUS_HESSIAN_EXACT &&
+         !(st->hessian == DOPUS_HESSIAN_GAUSS_NEWTON && DOPUS_HAS_GN)) ||
+        (reg != DOPUS_REG_NONE && reg != DOPUS_REG_PROJECT && reg != DOPUS_REG_MIRROR) ||
+        !isfinite(st->reg_eps) || !(st->reg_eps > DOPUS_R(0.0)) ||
+        (st->cost_hessian != 0 && st->cost_hessian != 1) || (st->lm_auto != 0 && st->lm_auto != 1) ||
+        !isfinite(st->lm) || !(st->lm >= DOPUS_R(0.0)) || !isfinite(st->qp_tol) ||
+        !(st->qp_tol > DOPUS_R(0.0)) || st->qp_tol > DOPUS_QP_TOL_MAX || st->qp_max_iter < 1 ||
+        (st->qp_warm_start != 0 && st->qp_warm_start != 1) || (st->recovery != 0 && st->recovery != 1) ||
+        st->recovery_failures < 1 || !(st->budget >= 0.0) || !(st->budget < HUGE_VAL) ||
+        (st->budget_unit != DOPUS_BUDGET_TIME && st->budget_unit != DOPUS_BUDGET_WORK) ||
+        !isfinite(st->anytime_tol) || !(st->anytime_tol > DOPUS_R(0.0)) ||
+        (st->M_adaptive != 0 && st->M_adaptive != 1) || st->M_min < 0 || st->M_max < st->M_min ||
+        st->M_max > DOPUS_N - 1 || !isfinite(st->M_eta) || !(st->M_eta > DOPUS_R(0.0))) {
+        return DOPUS_ERR_INVALID_ARGUMENT;
+    }
+    return DOPUS_OK;
 }
 
-int dopus_get_ring_head(const dopus_solver *s)
+int dopus_setup(dopus_solver *s, const dopus_settings *st)
 {
-    return s->ring.ring_head;
+    dopus_settings defaults;
+    int k, i, rc;
+    dopus_settings_default(&defaults);
+    rc = st ? dopus_settings_check(st) : DOPUS_OK;
+    s->settings = (st && rc == DOPUS_OK) ? *st : defaults;
+    s->set_up = 1;
+    s->initialized = 0;
+    s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
+    s->status = DOPUS_OK;
+    dopus_lm_reset(&s->lm, s->settings.lm_auto, s->settings.lm);
+    s->lm.scale = DOPUS_R(1.0);
+    for (k = 0; k < DOPUS_N; ++k) { /* set only during a QP solve (dopus_qp_solve_bound) */
+        s->qp_in.H[k] = 0;
+        s->qp_in.Phi[k] = 0;
+        s->qp_in.C[k] = 0;
+    }
+    s->qp_in.HN = 0;
+    s->qp_in.R = 0;
+    s->qp_in.Req = 0;
+    s->qp_cold_retry = 0;
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NP; ++i) {
+            s->p[k][i] = dopus_p_default[i];
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->xhat0[i] = dopus_x0_default[i];
+    }
+    s->qp_status = 0;
+    s->qp_iterations = 0;
+    for (k = 0; k < DOPUS_N; ++k) {
+        s->rho[k] = DOPUS_R(0.0);
+        s->selected[k] = 0;
+    }
+    dopus_health_scales(&s->health);
+    dopus_reset_health(s);
+    for (i = 0; i < 4; ++i) {
+        s->kkt[i] = NAN;
+    }
+    dopus_timer_init(&s->timer);
+    s->anytime.work = 0.0;
+    s->anytime.instant_start = 0.0;
+    s->anytime.cost_stage = 0.0;
+    s->anytime.cost_qp = 0.0;
+    s->anytime.cost_prepare = 0.0;
+    s->anytime.cost_qp_iter = 0.0;
+    s->anytime.used = 0.0;
+    s->anytime.qp_cap = 0;
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
+    return dopus_ret(s, rc);
 }
 
-void dopus_get_timings(const dopus_solver *s, double *t)
+int dopus_update_settings(dopus_solver *s, const dopus_settings *st)
+{
+    dopus_settings old;
+    if (!s->set_up) {
+        return DOPUS_ERR_NOT_INITIALIZED;
+    }
+    if (st == 0 || dopus_settings_check(st) != DOPUS_OK) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    old = s->settings;
+    s->settings = *st;
+    if (st->lm_auto && !old.lm_auto) {
+        /* the automatic term restarts: from 0, raised until the prepared QP is convex */
+        dopus_lm_reset(&s->lm, 1, DOPUS_R(0.0));
+        if (s->initialized && s->qp_ready) {
+            dopus_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
+        }
+    } else if (!st->lm_auto) {
+        dopus_lm_reset(&s->lm, 0, st->lm);
+    }
+    if (!st->recovery) {
+        s->health.recover_pending = 0;
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+void dopus_get_settings(const dopus_solver *s, dopus_settings *st)
+{
+    *st = s->settings;
+}
+
+int dopus_set_parameters(dopus_solver *s, const dopus_real *p)
+{
+    int k, i;
+    if (!s->set_up) {
+        return DOPUS_ERR_NOT_INITIALIZED;
+    }
+    if (DOPUS_NP == 0) {
+        return dopus_ret(s, DOPUS_OK);
+    }
+    if (p == 0) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (!dopus_lai_vec_finite((DOPUS_N + 1) * DOPUS_NP, p)) {
+        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NP; ++i) {
+            s->p[k][i] = p[k * DOPUS_NP + i];
+        }
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+int dopus_set_parameters_node(dopus_solver *s, int k, const dopus_real *pk)
 {
     int i;
-    for (i = 0; i < DOPUS_N_PHASES; ++i) { /* times are double in both precisions */
-        t[i] = s->timer.t[i];
+    if (!s->set_up) {
+        return DOPUS_ERR_NOT_INITIALIZED;
+    }
+    if (k < 0 || k > DOPUS_N) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (DOPUS_NP == 0) {
+        return dopus_ret(s, DOPUS_OK);
+    }
+    if (pk == 0) {
+        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
+    }
+    if (!dopus_lai_vec_finite(DOPUS_NP, pk)) {
+        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
+    }
+    for (i = 0; i < DOPUS_NP; ++i) {
+        s->p[k][i] = pk[i];
+    }
+    return dopus_ret(s, DOPUS_OK);
+}
+
+void dopus_get_parameters(const dopus_solver *s, dopus_real *p)
+{
+    int k, i;
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NP; ++i) {
+            p[k * DOPUS_NP + i] = s->p[k][i];
+        }
     }
 }
+
+void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx)
+{
+    s->timer.clock = clock_fn ? clock_fn : dopus_timer_default_clock;
+    s->timer.ctx = clock_fn ? ctx : 0;
+}
+
+int dopus_simulate(const dopus_real *x, const dopus_real *u, const dopus_real *p, dopus_real *x_next,
+                   struct dopus_fun_work_s *work)
+{
+    dopus_real l = DOPUS_R(0.0), g[DOPUS_DIM(DOPUS_NG)];
+    if (dopus_eval_stage_eval(x, u, p ? p : dopus_p_default, x_next, &l, g, work) != 0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    return dopus_lai_vec_finite(DOPUS_NX, x_next) ? DOPUS_OK : DOPUS_ERR_NONFINITE_VALUE;
+}
+
+/* ---- the modules (one translation unit; DOPUS_INTERNAL functions are static) --------- */
+
+#include "dopus_timer.c"
+#include "dopus_ring.c"
+#include "dopus_reg.c"
+#include "dopus_funcs.c"
+#include "dopus_lm.c"
+#include "dopus_health.c"
+#include "dopus_kkt.c"
+#include "dopus_qp.c" /* last: its short macros (N, NX, ...) stay inside it */

@@ -9,13 +9,16 @@
  *
  * Usage (receding horizon):
  *     static dopus_solver s;
+ *     dopus_settings st;
+ *     dopus_settings_default(&st);          the OCP file's options; change fields here
+ *     dopus_setup(&s, &st);
  *     dopus_init(&s, xhat0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL);
  *     loop: dopus_feedback(&s, xhat0, u0); apply u0; dopus_prepare(&s);
- * The memory is one struct (sizeof is the memory bill; no malloc anywhere). It holds no
+ * The memory is one struct (sizeof is the memory bill; no malloc anywhere). dopus_setup
+ * must run before any other call on it (on a zero-filled struct that was not set up, every
+ * call returns DOPUS_ERR_NOT_INITIALIZED; uninitialised memory is not valid). It holds no
  * pointer into itself between calls, so a byte copy (memcpy, struct assignment: a snapshot,
- * a double buffer) is a complete solver, independent of the original. Settings may be
- * changed before dopus_init; a struct that was never set up (zeroed or uninitialised
- * memory) gets the generated defaults on its first use.
+ * a double buffer) is a complete solver, independent of the original.
  *
  * Array conventions: every array argument is a flat, C-contiguous (row-major) array of
  * doubles, node by node: x is (N+1) x nx (x + k*nx is node k), u is N x nu, lam (N+1) x nx,
@@ -40,10 +43,6 @@ typedef struct dopus_solver dopus_solver;
 
 /* Size of struct dopus_solver in bytes (for callers that allocate it as raw memory). */
 size_t dopus_solver_sizeof(void);
-/* Reset every setting to the generated defaults (M, Hessian, regularisation, eps from the
- * OCP file, receding mode, QP tolerance 1e-10, parameters p_default at every node, default
- * clock) and mark the solver uninitialised. */
-void dopus_defaults(dopus_solver *s);
 /* Dimensions of the generated problem (nw = nx + nu); has_gn: a Gauss-Newton Hessian is
  * available (least-squares stage cost); has_nominal: dopus_init_nominal has data. */
 typedef struct {
@@ -54,6 +53,81 @@ void dopus_get_dims(dopus_dims *dims);
 const char *dopus_name(void);
 /* A short English description of a status code. */
 const char *dopus_status_string(int status);
+
+/* Settings (docs/algorithm.md). M: stages re-linearised per iteration besides stage N-1,
+ * 0 <= M <= N-1 (N-1 is the full RTI). mode: DOPUS_MODE_RECEDING or DOPUS_MODE_FIXED.
+ * hessian: DOPUS_HESSIAN_EXACT or DOPUS_HESSIAN_GAUSS_NEWTON (only with a least-squares
+ * stage cost). regularization: DOPUS_REG_NONE, DOPUS_REG_PROJECT or DOPUS_REG_MIRROR with
+ * reg_eps > 0. cost_hessian (algorithm.md section 4 step 5): 1 refreshes the cost part A_l of
+ * the Hessian block of every stage in every prepare (only the curvature of dynamics and
+ * constraints is partially updated); 0 is the paper's literal algorithm (the whole A moves
+ * with its slot). lm_auto 1: the automatic Levenberg-Marquardt term (section 10: raised
+ * until the QP is convex on the dynamics, after a failed feedback and when the KKT proxy
+ * grows; lowered after every successful feedback); 0: the fixed term lm >= 0 (section 3: the
+ * QP minimises with the blocks A~_k + lm I, A~_N + lm I; the stored blocks, the secant
+ * criterion and the fixed point are those of lm = 0). qp_tol: 0 < tol <= DOPUS_QP_TOL_MAX
+ * (a larger one would let the QP return steps that violate the bounds by that much);
+ * qp_max_iter >= 1. qp_warm_start 1: the QP of feedback starts from the previous solution
+ * shifted with the horizon, and retries cold in the same call when that fails; 0: always
+ * cold. recovery (section 9, receding mode only) 1: after recovery_failures >= 1
+ * consecutive failed feedbacks the next prepare re-initialises, a detected divergence
+ * re-initialises at once, the prepare after a failed feedback first takes the step of that
+ * instant's QP for the predicted state (DOPUS_FLAG_PREDICTED), and a feedback whose QP fails
+ * (not by its iteration limit) or diverges re-initialises from the measurement and solves
+ * again within the call (DOPUS_FLAG_RECOVERED); a measurement at which the model is not
+ * finite is handled as a missing one (DOPUS_ERR_NONFINITE_VALUE,
+ * DOPUS_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
+ * records its measurement, so the recovery starts from the newest one; 0: off.
+ * Anytime DOPUS (section 12): budget > 0 per sampling instant, counted from the start of
+ * the instant's feedback, in budget_unit DOPUS_BUDGET_TIME (seconds of the solver's clock,
+ * dopus_set_clock: on firmware an instruction or cycle counter; without a clock the budget
+ * is off) or DOPUS_BUDGET_WORK (work units: stage_grad, stage_hess, term_grad and term_hess
+ * evaluations 1 each, a QP solve N; deterministic, the unit of the Python reference);
+ * budget 0: off, the plain real-time iteration. With a budget, prepare re-linearises stages
+ * only while the budget allows (the M of the setting first, then further stages in rho
+ * order), then takes SQP iterations on the next instant's problem at the state the plan
+ * predicts (dx_0 = 0) while the KKT proxy exceeds anytime_tol > 0 and one more fits; a time
+ * budget caps the feedback QP's iterations. M_adaptive 1: each iteration re-linearises the
+ * stages whose secant residual rho_k |domega_k| exceeds M_eta > 0 times the KKT proxy, at
+ * least M_min and at most M_max (0 <= M_min <= M_max <= N-1), the largest rho_k first;
+ * 0: the fixed M. */
+typedef struct {
+    int M;
+    int mode;
+    int hessian;
+    int regularization;
+    dopus_real reg_eps;
+    int cost_hessian;
+    int lm_auto;
+    dopus_real lm;
+    dopus_real qp_tol;
+    int qp_max_iter;
+    int qp_warm_start;
+    int recovery;
+    int recovery_failures;
+    double budget;
+    int budget_unit;
+    dopus_real anytime_tol;
+    int M_adaptive;
+    int M_min;
+    int M_max;
+    dopus_real M_eta;
+} dopus_settings;
+/* The generated defaults: M, Hessian, regularisation, eps, cost Hessian and lm from the OCP
+ * file's options; receding mode, QP tolerance DOPUS_QP_TOL_DEFAULT, 100 QP iterations, warm
+ * start and recovery on (K = DOPUS_RECOVERY_FAILURES). */
+void dopus_settings_default(dopus_settings *st);
+/* Set up a solver: every field of the struct written (settings st, NULL: the generated
+ * defaults; parameters p_default at every node; the default clock; not initialised).
+ * DOPUS_ERR_INVALID_ARGUMENT when a setting is out of range (the solver is then set up
+ * with the generated defaults). */
+int dopus_setup(dopus_solver *s, const dopus_settings *st);
+/* Change the settings of a set-up solver, at any time between calls (they apply from the
+ * next call on): all of them, or none and DOPUS_ERR_INVALID_ARGUMENT when one is out of
+ * range. Switching the automatic lm on restarts it (from 0, raised until the prepared QP is
+ * convex); switching the recovery off drops a pending one. */
+int dopus_update_settings(dopus_solver *s, const dopus_settings *st);
+void dopus_get_settings(const dopus_solver *s, dopus_settings *st);
 
 /* Initialisation (algorithm.md section 4, init): the iterate is the given guess; NULL x or
  * u: the OCP file's initial guess; NULL multipliers: zeros. F and H of every stage and of
@@ -69,11 +143,12 @@ int dopus_init_nominal(dopus_solver *s, const dopus_real *xhat0);
 
 /* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
  * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: DOPUS_ERR_NONFINITE_INPUT,
- * nothing changes. QP failure: DOPUS_ERR_QP, no step (dopus_get_qp_status tells why). */
+ * nothing changes. QP failure: DOPUS_ERR_QP, no step (dopus_info.qp_status tells why). On
+ * every failure u0 is the fallback control (docs/algorithm.md section 9). */
 int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
  * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
- * stage-cost Hessian of the other stages (dopus_set_cost_hessian), assemble the QP. Must
+ * stage-cost Hessian of the other stages (settings.cost_hessian), assemble the QP. Must
  * run between two feedback calls.
  * Calling order: one prepare per feedback on an initialised solver that reached the QP
  * (solved or not) and, in receding mode, also per feedback whose measurement was rejected
@@ -91,77 +166,24 @@ int dopus_prepare(dopus_solver *s);
  * The parts are >= 0 and never NaN; a part is +Inf when it overflows (an iterate or
  * multipliers near DBL_MAX, e.g. from an init guess: |mu| * |ub - v| > DBL_MAX). */
 int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4);
-/* The largest of the four parts of the last dopus_kkt_eval (NaN before the first). */
-dopus_real dopus_get_kkt(const dopus_solver *s);
 
-/* Settings. M: stages re-linearised per iteration besides stage N-1, 0 <= M <= N-1
- * (N-1 is the full RTI). mode: DOPUS_MODE_RECEDING or DOPUS_MODE_FIXED. hessian:
- * DOPUS_HESSIAN_EXACT or DOPUS_HESSIAN_GAUSS_NEWTON (only with a least-squares stage cost).
- * regularization: DOPUS_REG_NONE, DOPUS_REG_PROJECT or DOPUS_REG_MIRROR with eps > 0.
- * The QP tolerance (> 0) and iteration limit (>= 1) are those of dopus_qp_solve. */
-int dopus_set_M(dopus_solver *s, int M);
-int dopus_get_M(dopus_solver *s);
-int dopus_set_mode(dopus_solver *s, int mode);
-int dopus_get_mode(dopus_solver *s);
-int dopus_set_hessian(dopus_solver *s, int hessian);
-int dopus_get_hessian(dopus_solver *s);
-int dopus_set_regularization(dopus_solver *s, int regularization, dopus_real eps);
-int dopus_get_regularization(dopus_solver *s);
-dopus_real dopus_get_reg_eps(dopus_solver *s);
-/* Stage-cost Hessian (algorithm.md section 4 step 5): fresh = 1 (the default) refreshes the
- * cost part A_l of the Hessian block of every stage in every prepare (only the curvature of
- * dynamics and constraints is partially updated); fresh = 0 is the paper's literal
- * algorithm (the whole A moves with its slot). The slots always carry A_dyn = A - A_l, so
- * the setting may change between any two calls. */
-int dopus_set_cost_hessian(dopus_solver *s, int fresh);
-int dopus_get_cost_hessian(dopus_solver *s);
-/* Levenberg-Marquardt term (algorithm.md section 3): the QP minimises with the Hessian
- * blocks A~_k + lm I and A~_N + lm I (the stored blocks are not changed, so the secant
- * criterion and the fixed point are those of lm = 0). lm finite and >= 0: a fixed term
- * (the automatic one is switched off); default: the OCP file's options(lm=...), else the
- * automatic term. */
-int dopus_set_levenberg_marquardt(dopus_solver *s, dopus_real lm);
-/* The term of the next QP (fixed, or the current automatic value). */
-dopus_real dopus_get_levenberg_marquardt(dopus_solver *s);
-/* The automatic, scale-aware, adaptive term (docs/algorithm.md section 10): lm is raised
- * until the QP is convex on the dynamics (Riccati pivots positive definite), after a
- * failed feedback and when the KKT proxy grows; lowered after every successful feedback. */
-int dopus_set_lm_auto(dopus_solver *s);
-int dopus_get_lm_auto(dopus_solver *s);
-/* The Hessian scale of the automatic term (largest diagonal entry of the QP blocks). */
-dopus_real dopus_get_lm_scale(dopus_solver *s);
-/* QP tolerance: 0 < tol <= DOPUS_QP_TOL_MAX (1e-2); a larger one would let the QP return
- * steps that violate the bounds by that much, so it is refused (DOPUS_ERR_INVALID_ARGUMENT). */
-int dopus_set_qp_tol(dopus_solver *s, dopus_real tol);
-dopus_real dopus_get_qp_tol(dopus_solver *s);
-int dopus_set_qp_max_iter(dopus_solver *s, int max_iter);
-int dopus_get_qp_max_iter(dopus_solver *s);
-/* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
- * or off (0), and K >= 1, the number of consecutive failed feedbacks after which the next
- * prepare re-initialises (default DOPUS_RECOVERY_FAILURES). A detected divergence
- * re-initialises at once. While on, the prepare after a failed feedback first takes the step
- * of that instant's QP for the state the iterate predicts (DOPUS_FLAG_PREDICTED): the plan of
- * the next fallbacks stays current; after a non-finite measurement it clears the count. A
- * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
- * re-initialises from that measurement and solves the new QP within the same call before it
- * gives up (DOPUS_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
- * retries); a measurement at which the model is not finite is handled as a missing one
- * (DOPUS_ERR_NONFINITE_VALUE, DOPUS_FLAG_MEASUREMENT_UNUSABLE). A feedback refused for want of
- * a prepared QP still records its measurement: the recovery starts from the newest one. */
-int dopus_set_recovery(dopus_solver *s, int on, int max_failures);
-int dopus_get_recovery(dopus_solver *s);
-int dopus_get_recovery_failures(dopus_solver *s);
-/* QP warm start in feedback (1, the default): start from the previous QP solution shifted
- * with the horizon (a zero step from the shifted iterate, the iterate's multipliers); when
- * that QP is not solved, feedback retries from the cold starting point in the same call.
- * 0: always cold. */
-int dopus_set_qp_warm_start(dopus_solver *s, int on);
-int dopus_get_qp_warm_start(dopus_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int dopus_set_parameters(dopus_solver *s, const dopus_real *p);
 int dopus_set_parameters_node(dopus_solver *s, int k, const dopus_real *pk);
-void dopus_get_parameters(dopus_solver *s, dopus_real *p);
+void dopus_get_parameters(const dopus_solver *s, dopus_real *p);
+/* Replace the clock (seconds, any origin); NULL restores the default clock. The default
+ * clock is CLOCK_MONOTONIC where the platform has POSIX timers; on bare metal there is none
+ * and every timing reads 0 until a clock is installed (dopus_timer.h). */
+void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx);
+
+/* The discrete model (the OCP file's integrator): x_next = phi(x, u, p) (p NULL: the
+ * default parameters), with the caller's scratch of the generated functions (a plant for
+ * tests and examples; the solver's own is not touched). Returns DOPUS_OK,
+ * DOPUS_ERR_FUNCTION or DOPUS_ERR_NONFINITE_VALUE. */
+struct dopus_fun_work_s; /* dopus_fun_work of dopus_funcs.h */
+int dopus_simulate(const dopus_real *x, const dopus_real *u, const dopus_real *p, dopus_real *x_next,
+                   struct dopus_fun_work_s *work);
 
 /* The iterate (shapes in the header comment). */
 void dopus_get_x(const dopus_solver *s, dopus_real *x);
@@ -178,9 +200,50 @@ void dopus_get_rho(const dopus_solver *s, dopus_real *rho);
 /* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
  * N-1 included; writes up to N ints and returns their count. */
 int dopus_get_recomputed(const dopus_solver *s, int *stages);
-/* The last QP: iterations, status (enum dopus_qp_status of dopus_qp.h). */
-int dopus_get_qp_iterations(const dopus_solver *s);
-int dopus_get_qp_status(const dopus_solver *s);
+/* The control returned by the last feedback (nu), successful or not; within the bounds. */
+void dopus_get_u0(const dopus_solver *s, dopus_real *u0);
+/* The scale of the box test of the divergence test: state (nx) and control (nu) scales
+ * (either may be NULL). */
+void dopus_get_scales(const dopus_solver *s, dopus_real *scale_x, dopus_real *scale_u);
+
+/* What the last calls did, read in one call (docs/algorithm.md sections 4, 9, 10). */
+typedef struct {
+    int status;           /* status of the last call that returns one */
+    int initialized;      /* a successful init happened */
+    int qp_status;        /* enum dopus_qp_status of the last feedback's QP */
+    int qp_iterations;    /* its iterations (the sum over the solves of the call) */
+    int qp_cold_retry;    /* 1 when its warm-started QP failed and the cold retry ran */
+    int flags;            /* DOPUS_FLAG_* raised by the last feedback and the prepare after it:
+                            u0 clipped, fallback control, divergence, recovery, ... */
+    int recoveries;       /* re-initialisations by the automatic recovery since init */
+    int failed_feedbacks; /* consecutive failed feedbacks */
+    int M_used;           /* stages the last prepare (or init) re-linearised besides stage N-1
+                            (M, or N-1 after a recovery and at init) */
+    int ring_head;        /* stage k lives in slot (ring_head + k) mod N */
+    int has_clock;        /* 1 if the timings measure time (a clock was installed, or the
+                            default clock exists on this platform), 0 if they read 0 */
+    dopus_real lm;        /* the Levenberg-Marquardt term of the next QP (fixed or automatic) */
+    dopus_real lm_scale;  /* the Hessian scale of the automatic term */
+    dopus_real kkt_proxy; /* divergence measure of the last prepare or init: the stationarity
+                            and equality parts of the KKT measure at the prepared point */
+    dopus_real kkt[4];    /* stat, eq, ineq, comp of the last dopus_kkt_eval (NaN before) */
+    dopus_real kkt_max;   /* their largest */
+    /* seconds per phase of the last call that ran it (enum dopus_phase: feedback, shift,
+     * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
+     * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback
+     * (t_prepare), the wall time of that call */
+    double timings[10];
+    double t_feedback;
+    double t_prepare;
+    /* anytime DOPUS (section 12), the last instant: extra iterations after prepare, stages
+     * re-linearised over all its iterations (stage N-1 not counted), budget used (its unit);
+     * the work units counted since setup */
+    int extra_iterations;
+    int instant_stages;
+    double budget_used;
+    double work;
+} dopus_info;
+void dopus_get_info(const dopus_solver *s, dopus_info *info);
 /* A constraint row of the OCP at one stage of the horizon. */
 typedef struct {
     int stage;        /* 0..N-1; N: the terminal node */
@@ -193,90 +256,25 @@ typedef struct {
     dopus_real bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
                      function is the declared row minus its value) */
 } dopus_row_info;
-/* When the last QP was infeasible (dopus_get_qp_status DOPUS_QP_PRIMAL_INFEASIBLE): the row
- * with the largest multiplier of its infeasibility certificate, the row that the other rows
- * of the certificate (the bounds, dynamics and measured state) keep from being met; stages
- * are those of that QP's horizon. Returns 1 and writes *row, else returns 0. */
+/* When the last QP was infeasible (dopus_info.qp_status DOPUS_QP_PRIMAL_INFEASIBLE, until the
+ * next prepare): the row with the largest multiplier of its infeasibility certificate, the
+ * row that the other rows of the certificate (the bounds, dynamics and measured state) keep
+ * from being met; stages are those of that QP's horizon. Returns 1 and writes *row, else
+ * returns 0. */
 int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row);
-/* Health of the controller (docs/algorithm.md section 9). Flags (DOPUS_FLAG_*) raised by
- * the last feedback and the prepare after it (feedback clears them): the returned u0 was
- * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control
- * of the last good plan), a divergence was detected, the prepare re-initialised. */
-int dopus_get_flags(const dopus_solver *s);
-/* The control returned by the last feedback (nu), successful or not; within the bounds. */
-void dopus_get_u0(const dopus_solver *s, dopus_real *u0);
-/* Re-initialisations by the automatic recovery since init; consecutive failed feedbacks. */
-int dopus_get_recoveries(const dopus_solver *s);
-int dopus_get_failed_feedbacks(const dopus_solver *s);
-/* The divergence measure of the last prepare or init: the stationarity and equality parts of
- * the KKT measure at the prepared point (max |F_w,k + [lam_k; 0]|, |phi_k - x_{k+1}|, ...);
- * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
-dopus_real dopus_get_kkt_proxy(const dopus_solver *s);
-void dopus_get_scales(const dopus_solver *s, dopus_real *scale_x, dopus_real *scale_u);
-/* 1 when the last feedback's warm-started QP failed and the cold retry ran (the
- * iterations above are then the sum of both solves), else 0. */
-int dopus_get_qp_cold_retry(const dopus_solver *s);
-/* Status of the last call that returns a status. */
-int dopus_get_status(const dopus_solver *s);
-int dopus_is_initialized(const dopus_solver *s);
-/* ring_head (stage k lives in slot (ring_head + k) mod N). */
-int dopus_get_ring_head(const dopus_solver *s);
-
-/* Seconds per phase of the last call that ran it (t[0..7] = feedback, shift, gradients,
- * rho, hessians, regularization, assembly, kkt; indices of enum dopus_phase). init fills
- * the phases it runs too. "hessians" includes the stage-cost Hessians A_l. */
-void dopus_get_timings(const dopus_solver *s, double *t);
-/* Replace the clock (seconds, any origin); NULL restores the default clock. The default
- * clock is CLOCK_MONOTONIC where the platform has POSIX timers; on bare metal there is none
- * and every timing reads 0 until a clock is installed (dopus_timer.h). */
-void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx);
-/* 1 if the timings measure time (a clock was installed, or the default clock exists on
- * this platform), 0 if they read 0 for want of a clock. */
-int dopus_has_clock(const dopus_solver *s);
-/* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
- * from the start of the instant's feedback. In time (seconds of the solver's clock, dopus_set_clock:
- * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
- * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
- * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a
- * budget, prepare re-linearises stages beyond stage N-1 only while the budget allows, first
- * the M (or adaptive M) stages, then further stages in rho order, and spends the rest on
- * SQP iterations on the next instant's problem at the state the plan predicts (dx_0 = 0)
- * while the KKT proxy exceeds the anytime tolerance; the next feedback starts from that
- * iterate. The feedback's QP iterations are capped by the budget left (the fallback control
- * when the cap stops it). */
-int dopus_set_time_budget(dopus_solver *s, double seconds);
-int dopus_set_work_budget(dopus_solver *s, double units);
-/* DOPUS_BUDGET_OFF, DOPUS_BUDGET_TIME or DOPUS_BUDGET_WORK, and the budget in its unit. */
-int dopus_get_budget_unit(const dopus_solver *s);
-double dopus_get_budget(const dopus_solver *s);
-/* KKT proxy (dopus_get_kkt_proxy) below which no further iteration is spent; > 0. */
-int dopus_set_anytime_tol(dopus_solver *s, dopus_real tol);
-dopus_real dopus_get_anytime_tol(const dopus_solver *s);
-/* Adaptive M (docs/algorithm.md section 12): each iteration re-linearises the stages whose
- * secant residual rho_k |domega_k| exceeds eta times the KKT proxy, at least M_min and at
- * most M_max of them (0 <= M_min <= M_max), the largest rho_k first. on = 0: the fixed M of
- * dopus_set_M. eta > 0. */
-int dopus_set_M_adaptive(dopus_solver *s, int on, int M_min, int M_max, dopus_real eta);
-int dopus_get_M_adaptive(const dopus_solver *s, int *M_min, int *M_max, dopus_real *eta);
-/* The last instant: extra iterations after prepare, stages re-linearised over all its
- * iterations (stage N-1 and the terminal node not counted), budget used (its unit). */
-int dopus_get_extra_iterations(const dopus_solver *s);
-int dopus_get_instant_stages(const dopus_solver *s);
-double dopus_get_budget_used(const dopus_solver *s);
-/* Work units counted since the solver was set up (the unit of dopus_set_work_budget). */
-double dopus_get_work(const dopus_solver *s);
 /* DOPUS_CDEF_END */
 
 /* Status codes returned by the functions above. */
 enum dopus_status {
     DOPUS_OK = 0,
-    DOPUS_ERR_QP = 1,                /* QP not solved; no step; see dopus_get_qp_status */
+    DOPUS_ERR_QP = 1,                /* QP not solved; no step; see dopus_info.qp_status */
     DOPUS_ERR_NONFINITE_INPUT = 2,   /* NaN or Inf in an input array */
     DOPUS_ERR_NONFINITE_VALUE = 3,   /* a generated function returned NaN or Inf */
     DOPUS_ERR_FUNCTION = 4,          /* a generated function reported failure */
     DOPUS_ERR_INVALID_ARGUMENT = 5,  /* M out of range, bad mode/Hessian/regularisation,
                                         Gauss-Newton without least squares, bad node index */
-    DOPUS_ERR_NOT_INITIALIZED = 6,   /* feedback/prepare/kkt before a successful init */
+    DOPUS_ERR_NOT_INITIALIZED = 6,   /* a call before dopus_setup, or feedback/prepare/kkt
+                                        before a successful init */
     DOPUS_ERR_NOT_PREPARED = 7,      /* feedback without a successful prepare since the last
                                         step (the QP would be stale) */
     DOPUS_ERR_NO_NOMINAL = 8,        /* dopus_init_nominal without DOPUS_HAS_NOMINAL */
@@ -297,7 +295,7 @@ enum dopus_row_kind {
     DOPUS_ROW_TERMINAL_EQ = 4 /* a terminal equality row (lb == ub) */
 };
 
-/* Flags of dopus_get_flags (docs/algorithm.md section 9). */
+/* Flags of dopus_info.flags (docs/algorithm.md section 9). */
 enum dopus_flag {
     DOPUS_FLAG_U0_CLIPPED = 1,           /* u0 was outside the control bounds and was clipped */
     DOPUS_FLAG_FALLBACK = 2,             /* feedback failed: u0 is the next control of the last good plan */
@@ -305,28 +303,18 @@ enum dopus_flag {
     DOPUS_FLAG_RECOVERED = 8,            /* prepare or feedback re-initialised (automatic recovery) */
     DOPUS_FLAG_PREDICTED = 16,           /* prepare took the step of the QP for the predicted state */
     DOPUS_FLAG_REINIT_GUESS = 32,        /* a re-initialisation fell back to the OCP file's guess: the
-                                     model was not finite at the re-initialised iterate */
+                                            model was not finite at the re-initialised iterate */
     DOPUS_FLAG_MEASUREMENT_UNUSABLE = 64 /* the model is not finite at the (finite) measurement:
                                             handled as a missing one */
 };
 
-/* Safety constants (docs/algorithm.md section 9). */
-#define DOPUS_QP_TOL_MAX DOPUS_R(1e-2)    /* largest accepted QP tolerance */
-#define DOPUS_RECOVERY_FAILURES 2         /* default K: consecutive failures before recovery */
-#define DOPUS_RECOVERY_FULL_RTI 10        /* successful feedbacks with every block fresh after a recovery */
-#define DOPUS_DIVERGENCE_BOX DOPUS_R(1e3) /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
-#define DOPUS_DIVERGENCE_KKT DOPUS_R(1e6) /* kkt proxy <= 1e6 max(1, proxy at the last init) */
-
-/* Automatic Levenberg-Marquardt term (docs/algorithm.md section 10), relative to the
- * Hessian scale h = max(1e-300, largest |diagonal entry| of the QP's blocks). */
-#define DOPUS_LM_MIN_REL DOPUS_R(1e-8)    /* smallest nonzero term: 1e-8 h (below: 0) */
-#define DOPUS_LM_MAX_REL DOPUS_R(1e2)     /* largest term: 1e2 h */
-#define DOPUS_LM_RAISE DOPUS_R(10.0)      /* factor of a raise */
-#define DOPUS_LM_LOWER DOPUS_R(0.1)       /* factor after a successful feedback */
-#define DOPUS_LM_PIVOT_REL DOPUS_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
-#define DOPUS_LM_KKT_GROWTH DOPUS_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
-#define DOPUS_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
-#define DOPUS_LM_KKT_REL DOPUS_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
+/* Safety constants (docs/algorithm.md section 9; the divergence box and KKT bound are in
+ * dopus_health.h, the constants of the automatic lm in dopus_lm.h). */
+#define DOPUS_QP_TOL_MAX DOPUS_R(1e-2)               /* largest accepted QP tolerance */
+#define DOPUS_QP_TOL_DEFAULT DOPUS_PREC(1e-10, 1e-5) /* the QP tolerance of the defaults */
+#define DOPUS_QP_MAX_ITER_DEFAULT 100                /* the QP iteration limit of the defaults */
+#define DOPUS_RECOVERY_FAILURES 2                    /* default K: consecutive failures before recovery */
+#define DOPUS_RECOVERY_FULL_RTI 10 /* successful feedbacks with every block fresh after a recovery */
 
 enum dopus_mode {
     DOPUS_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
@@ -337,7 +325,6 @@ enum dopus_hessian { DOPUS_HESSIAN_EXACT = 0, DOPUS_HESSIAN_GAUSS_NEWTON = 1 };
 
 /* Units of the anytime budget (docs/algorithm.md section 12). */
 enum dopus_budget_unit {
-    DOPUS_BUDGET_OFF = 0,  /* no budget: the plain real-time iteration */
     DOPUS_BUDGET_TIME = 1, /* seconds of the solver's clock */
     DOPUS_BUDGET_WORK = 2  /* work units: function evaluations 1, a QP solve N */
 };
@@ -354,6 +341,8 @@ enum dopus_budget_unit {
 
 #include "dopus_sizes.h"
 #include "dopus_funcs.h"
+#include "dopus_health.h"
+#include "dopus_lm.h"
 #include "dopus_qp.h"
 #include "dopus_reg.h"
 #include "dopus_ring.h"
@@ -384,35 +373,35 @@ typedef union {
         dopus_real tmp_phi[DOPUS_NX];
         dopus_real tmp_g[DOPUS_DIM(DOPUS_NG)];
         dopus_real reg_work[2 * DOPUS_NW * DOPUS_NW];
-        /* Riccati workspace of the convexity test of the automatic lm */
-        dopus_real lm_P[DOPUS_NX * DOPUS_NX];
-        dopus_real lm_PA[DOPUS_NX * DOPUS_NW];
-        dopus_real lm_G[DOPUS_NW * DOPUS_NW];
+        dopus_real lm_work[DOPUS_LM_WORK]; /* the convexity test of the automatic lm */
     } ev;
 } dopus_solver_mem;
 
+/* The bookkeeping of the anytime budget (algorithm.md section 12); costs in the budget's unit. */
+typedef struct {
+    double work;          /* work units counted since setup */
+    double instant_start; /* the budget clock at the start of the instant's feedback */
+    double cost_stage;    /* one stage re-linearisation (the last) */
+    double cost_qp;       /* the last QP solve */
+    double cost_prepare;  /* the last prepare iteration without the stages beyond M */
+    double cost_qp_iter;  /* one QP iteration of the last feedback (time budget) */
+    double used;          /* budget used by the last instant */
+    int qp_cap;           /* > 0: the feedback QP's iteration cap of a time budget */
+    int extra_iterations; /* extra iterations of the last prepare */
+    int instant_stages;   /* stages re-linearised in the last instant */
+} dopus_anytime;
+
+/* One object per concept: lifecycle, settings, iterate, stage slots, terminal node, secant
+ * selection, QP data, shared scratch, health and recovery, the automatic lm, KKT, timers. */
 struct dopus_solver {
-    int magic;       /* DOPUS_MAGIC once the settings hold valid values */
+    int set_up;      /* dopus_setup ran */
     int initialized; /* a successful init happened */
     int qp_ready;    /* QP assembled at the current iterate (prepare or init succeeded) */
     int prepare_due; /* a feedback reached the QP since the last successful init/prepare */
     int shifted;     /* the shift of this sampling instant is done (a prepare failed after it) */
     int status;      /* status of the last call */
 
-    /* settings */
-    int M;
-    int mode;
-    int hessian;
-    int regularization;
-    dopus_real reg_eps;
-    int cost_hessian;       /* 1: fresh stage-cost Hessian in every prepare, 0: stored */
-    dopus_real lm;          /* Levenberg-Marquardt term of the QP Hessian (fixed, or the
-                           current automatic value) */
-    int lm_auto;            /* 1: automatic term (section 10) */
-    dopus_real lm_scale;    /* Hessian scale h of the automatic term */
-    dopus_real lm_kkt_prev; /* KKT proxy of the previous prepare (< 0: none since init) */
-    dopus_real lm_uncapped; /* the term before the cap of this feedback (< 0: not capped) */
-    dopus_qp_settings qp_settings;
+    dopus_settings settings;
 
     /* iterate (algorithm.md section 1) */
     dopus_real x[DOPUS_N + 1][DOPUS_NX];
@@ -438,10 +427,9 @@ struct dopus_solver {
     dopus_real r[DOPUS_DIM(DOPUS_NR)];
     dopus_real r_eq[DOPUS_DIM(DOPUS_NE)];
 
-    /* secant criterion and the recomputed set of the last prepare */
+    /* secant criterion and the stages re-linearised by the last prepare (stage N-1 always;
+     * every stage after init) */
     dopus_real rho[DOPUS_N];
-    int recomputed[DOPUS_N];
-    int n_recomputed;
     unsigned char selected[DOPUS_N];
 
     /* QP data: the vectors; the matrix pointers are set to the ring slots and the terminal
@@ -450,52 +438,17 @@ struct dopus_solver {
     dopus_qp_info qp_info;
     int qp_status;
     int qp_iterations;
-    int qp_warm;       /* warm start in feedback (dopus_set_qp_warm_start) */
     int qp_cold_retry; /* the last feedback needed the cold retry */
 
     /* the QP's workspace and solution, live only inside feedback, share their memory with
      * the scratch of the function evaluations, live only outside it (dopus_solver_mem) */
     dopus_solver_mem mem;
 
-    /* safe outputs, divergence test and recovery (algorithm.md section 9) */
-    int recovery;          /* automatic recovery on */
-    int recovery_failures; /* K */
-    int n_failed;          /* consecutive failed feedbacks */
-    int recover_pending;   /* the next prepare re-initialises */
-    int flags;             /* DOPUS_FLAG_* of the last feedback + prepare */
-    int n_recoveries;
-    int recovering;                       /* full-RTI prepares left after a recovery */
-    int xhat_fresh;                       /* the last feedback had a finite measurement */
-    int plan_age;                         /* receding shifts since the last good plan */
-    dopus_real plan_u[DOPUS_N][DOPUS_NU]; /* controls of the last good plan */
-    dopus_real u0_out[DOPUS_NU];          /* the control returned by the last feedback */
-    dopus_real scale_x[DOPUS_NX];
-    dopus_real scale_u[DOPUS_NU];
-    dopus_real kkt_proxy;
-    dopus_real kkt_proxy_ref;
-
-    /* KKT parts of the last dopus_kkt_eval: stat, eq, ineq, comp */
-    dopus_real kkt[4];
-
+    dopus_health health; /* safe outputs, divergence test and recovery (section 9) */
+    dopus_lm lm;         /* the Levenberg-Marquardt term (sections 3 and 10) */
+    dopus_real kkt[4];   /* KKT parts of the last dopus_kkt_eval: stat, eq, ineq, comp */
     dopus_timer timer;
-
-    /* anytime budget (algorithm.md section 12) */
-    int budget_unit;        /* enum dopus_budget_unit */
-    double budget;          /* per instant, in its unit */
-    dopus_real anytime_tol; /* no extra iteration below this KKT proxy */
-    int M_adaptive;         /* 1: adaptive M between M_min and M_max */
-    int M_min, M_max;
-    dopus_real M_eta;
-    double work;          /* work units counted since setup */
-    double instant_start; /* budget clock at the start of the instant's feedback */
-    double cost_stage;    /* estimated cost of one stage re-linearisation */
-    double cost_qp;       /* cost of the last QP solve */
-    double cost_prepare;  /* cost of the last prepare iteration without its extension */
-    double cost_qp_iter;  /* cost of one QP iteration (the feedback's cap) */
-    double budget_used;   /* budget used by the last instant */
-    int qp_capped;        /* the feedback's QP iterations are capped by the budget */
-    int extra_iterations; /* extra iterations of the last prepare */
-    int instant_stages;   /* stages re-linearised in the last instant */
+    dopus_anytime anytime; /* the budget's bookkeeping (section 12) */
 };
 
 #endif /* DOPUS_SOLVER_H */

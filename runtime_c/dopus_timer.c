@@ -53,18 +53,51 @@ void dopus_timer_init(dopus_timer *tm)
     for (i = 0; i < DOPUS_N_PHASES; ++i) {
         tm->t[i] = 0.0;
     }
+    tm->t_call[0] = tm->t_call[1] = 0.0;
+    tm->mark = 0.0;
+    tm->phase = -1;
+    tm->locked = 0;
 }
 
-double dopus_timer_now(const dopus_timer *tm)
+static double dopus_timer_now(const dopus_timer *tm)
 {
     return tm->clock ? tm->clock(tm->ctx) : 0.0;
 }
 
-double dopus_timer_add(dopus_timer *tm, int phase, double since)
+void dopus_timer_begin(dopus_timer *tm, unsigned clear, int phase)
 {
-    double now = dopus_timer_now(tm);
-    if (phase >= 0 && phase < DOPUS_N_PHASES) {
-        tm->t[phase] += now - since;
+    int i;
+    for (i = 0; i < DOPUS_N_PHASES; ++i) {
+        if (clear & (1u << i)) {
+            tm->t[i] = 0.0;
+        }
     }
-    return now;
+    tm->locked = 0;
+    tm->phase = phase;
+    tm->mark = dopus_timer_now(tm);
+}
+
+int dopus_timer_switch(dopus_timer *tm, int phase)
+{
+    double now;
+    int prev = tm->phase;
+    if (tm->locked) {
+        return phase;
+    }
+    now = dopus_timer_now(tm);
+    if (prev >= 0 && prev < DOPUS_N_PHASES) {
+        tm->t[prev] += now - tm->mark;
+    }
+    tm->mark = now;
+    tm->phase = phase;
+    return prev;
+}
+
+void dopus_timer_end(dopus_timer *tm, int call, double start)
+{
+    tm->locked = 0;
+    dopus_timer_switch(tm, -1);
+    if (call >= 0 && call < 2) {
+        tm->t_call[call] = tm->mark - start;
+    }
 }

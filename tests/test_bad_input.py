@@ -184,6 +184,27 @@ def test_c_api_bad_inputs(second_disc, second_solution):
     nan_x[0] = np.nan
     u0 = np.zeros(d.nu)
     NULL = ffi.NULL
+
+    def update(**fields):
+        """update_settings with the current settings and ``fields`` changed."""
+        st = ffi.new(f"{name}_settings *")
+        fn("get_settings")(s, st)
+        for k, v in fields.items():
+            setattr(st, k, v)
+        return fn("update_settings")(s, st)
+
+    def info():
+        out = ffi.new(f"{name}_info *")
+        fn("get_info")(s, out)
+        return out
+
+    # zeroed memory that was not set up refuses every call
+    refused = (("init", lambda: fn("init")(s, dbl(x0), *[NULL] * 8)),
+               ("feedback", lambda: fn("feedback")(s, dbl(x0), NULL)), ("prepare", lambda: fn("prepare")(s)),
+               ("kkt", lambda: fn("kkt_eval")(s, NULL, NULL)), ("update_settings", lambda: update(M=0)),
+               ("set_parameters", lambda: fn("set_parameters")(s, NULL)))
+    for label, call in refused:
+        assert int(call()) == NOT_INIT, f"{label} on a struct that was not set up"
     cases = [
         ("feedback before init", lambda: fn("feedback")(s, dbl(x0), dbl(u0)), NOT_INIT),
         ("prepare before init", lambda: fn("prepare")(s), NOT_INIT),
@@ -192,25 +213,31 @@ def test_c_api_bad_inputs(second_disc, second_solution):
          NONFINITE_INPUT),
         ("init_nominal without a generated nominal guess",
          lambda: fn("init_nominal")(s, dbl(x0)), OK if meta.get("has_nominal", c.has_nominal) else 8),
-        ("set_M N", lambda: fn("set_M")(s, N), INVALID),
-        ("set_M -2147483648", lambda: fn("set_M")(s, -2**31), INVALID),
-        ("set_mode -1", lambda: fn("set_mode")(s, -1), INVALID),
-        ("set_hessian 2", lambda: fn("set_hessian")(s, 2), INVALID),
-        ("set_regularization eps -inf", lambda: fn("set_regularization")(s, 1, -np.inf), INVALID),
-        ("set_cost_hessian -1", lambda: fn("set_cost_hessian")(s, -1), INVALID),
-        ("set_levenberg_marquardt nan", lambda: fn("set_levenberg_marquardt")(s, np.nan), INVALID),
-        ("set_qp_tol -inf", lambda: fn("set_qp_tol")(s, -np.inf), INVALID),
-        ("set_qp_tol inf", lambda: fn("set_qp_tol")(s, np.inf), INVALID),
-        ("set_qp_max_iter -1", lambda: fn("set_qp_max_iter")(s, -1), INVALID),
+        ("M N", lambda: update(M=N), INVALID),
+        ("M -2147483648", lambda: update(M=-2**31), INVALID),
+        ("mode -1", lambda: update(mode=-1), INVALID),
+        ("hessian 2", lambda: update(hessian=2), INVALID),
+        ("reg_eps -inf", lambda: update(regularization=1, reg_eps=-np.inf), INVALID),
+        ("cost_hessian -1", lambda: update(cost_hessian=-1), INVALID),
+        ("lm nan", lambda: update(lm_auto=0, lm=np.nan), INVALID),
+        ("lm_auto 2", lambda: update(lm_auto=2), INVALID),
+        ("qp_tol -inf", lambda: update(qp_tol=-np.inf), INVALID),
+        ("qp_tol inf", lambda: update(qp_tol=np.inf), INVALID),
+        ("qp_tol above DOPUS_QP_TOL_MAX", lambda: update(qp_tol=0.1), INVALID),
+        ("qp_max_iter -1", lambda: update(qp_max_iter=-1), INVALID),
+        ("qp_warm_start 2", lambda: update(qp_warm_start=2), INVALID),
+        ("recovery_failures 0", lambda: update(recovery_failures=0), INVALID),
         ("set_parameters NULL", lambda: fn("set_parameters")(s, NULL), INVALID),
         ("set_parameters Inf", lambda: fn("set_parameters")(s, dbl(np.full((N + 1) * np_, np.inf))), NONFINITE_INPUT),
         ("set_parameters_node N+1", lambda: fn("set_parameters_node")(s, N + 1, dbl(np.zeros(np_))), INVALID),
         ("set_parameters_node NULL", lambda: fn("set_parameters_node")(s, 0, NULL), INVALID),
     ]
     def settings():
-        return tuple(float(fn(f"get_{g}")(s)) for g in ("M", "mode", "hessian", "regularization", "reg_eps",
-                                                         "cost_hessian", "levenberg_marquardt", "qp_tol",
-                                                         "qp_max_iter"))
+        st = ffi.new(f"{name}_settings *")
+        fn("get_settings")(s, st)
+        return tuple(float(getattr(st, g)) for g in ("M", "mode", "hessian", "regularization", "reg_eps", "cost_hessian",
+                                                     "lm_auto", "lm", "qp_tol", "qp_max_iter", "qp_warm_start",
+                                                     "recovery", "recovery_failures"))
 
     def get(f, n):
         out = np.zeros(n)
@@ -224,12 +251,12 @@ def test_c_api_bad_inputs(second_disc, second_solution):
         return int(fn("init")(s, dbl(x0), dbl(np.ravel(guess.x)), dbl(np.ravel(guess.u)), NULL, NULL, NULL, NULL,
                               NULL, NULL))
 
-    fn("defaults")(s)
+    assert int(fn("setup")(s, NULL)) == OK
     before, p_before = settings(), get("parameters", (N + 1) * np_)
     for label, call, status in cases:
         got = int(call())
         assert got == status, f"{label}: status {got}, documented {status}"
-        assert int(fn("get_status")(s)) == status
+        assert int(info().status) == status
     assert settings() == before
     assert np.array_equal(get("parameters", (N + 1) * np_), p_before)
     # initialised: the order and input cases
@@ -247,7 +274,7 @@ def test_c_api_bad_inputs(second_disc, second_solution):
         got = int(call())
         assert got == status, f"{label}: status {got}, documented {status}"
     # init rejected for its input leaves the solver uninitialised but the iterate unchanged
-    assert np.array_equal(get("x", (N + 1) * nx), x_init) and not fn("is_initialized")(s)
+    assert np.array_equal(get("x", (N + 1) * nx), x_init) and not info().initialized
     assert init() == OK
     assert int(fn("feedback")(s, dbl(x0), NULL)) == OK
     assert int(fn("feedback")(s, dbl(x0), NULL)) == NOT_PREPARED

@@ -186,7 +186,7 @@ def test_cost_hessian_setting(robot_disc):
     assert c.cost_hessian == "stored"
     with pytest.raises(DopusError, match="cost_hessian"):
         c.set_cost_hessian("always")
-    assert c.call_c("set_cost_hessian", 2) == 5   # DOPUS_ERR_INVALID_ARGUMENT
+    assert c.update_settings_c(cost_hessian=2) == 5   # DOPUS_ERR_INVALID_ARGUMENT
     assert c.cost_hessian == "stored"
 
 

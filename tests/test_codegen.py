@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from dopus_codegen.codegen.flags import DEFAULT_OPT, STRICT_CFLAGS
+from dopus_codegen.codegen.flags import DEFAULT_OPT, PIC, STRICT_CFLAGS
 
 from dopus_codegen.codegen.build import BuildError, build
 from dopus_codegen.cli import main as cli_main
@@ -80,6 +80,7 @@ def _glue_cdef(folder: Path, name: str) -> str:
     text = (folder / f"{name}_funcs.h").read_text() + (folder / f"{name}_problem.h").read_text()
     text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
     text = "\n".join(ln for ln in text.splitlines() if not ln.strip().startswith("#"))
+    text = text.replace(f"{NAME}_INTERNAL ", "")
     text = text.replace("extern const ", "extern ")  # cffi reads `const` scalars as constants
     for key in sorted(consts, key=len, reverse=True):
         text = text.replace(key, str(consts[key]))
@@ -87,6 +88,15 @@ def _glue_cdef(folder: Path, name: str) -> str:
     text = re.sub(r"\[([\d +]+)\]", lambda m: f"[{sum(int(t) for t in m.group(1).split('+'))}]", text)
     real = "float" if consts.get(f"{NAME}_REAL_FLOAT") == 1 else "double"
     return f"typedef {real} {name}_real;\n" + text
+
+
+def _funcs_library(folder: Path, name: str, out_dir: Path) -> Path:
+    """The module of the function wrappers (<name>_funcs.c, static in the solver library)
+    compiled alone with CasADi's file into a shared library, for the tests of the wrappers."""
+    lib = out_dir / f"lib{name}_funcs.so"
+    subprocess.run(["cc", DEFAULT_OPT, PIC, "-shared", *STRICT_CFLAGS, f"-I{folder}", str(folder / f"{name}_funcs.c"),
+                    str(folder / f"{name}_casadi.c"), "-o", str(lib), "-lm"], check=True)
+    return lib
 
 
 def _load_glue(folder: Path, name: str, shared_lib: Path):
@@ -144,9 +154,9 @@ def _colmajor(buf, rows, cols):
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_generated_functions_match_casadi(name, generated, built):
+def test_generated_functions_match_casadi(name, generated, tmp_path):
     disc, folder = generated[name]
-    ffi, lib = _load_glue(folder, name, built[name].shared_lib)
+    ffi, lib = _load_glue(folder, name, _funcs_library(folder, name, tmp_path))
     N, nx, nu, nw, npar, ng, nr, ne = (disc.N, disc.nx, disc.nu, disc.nw, disc.np, disc.ng, disc.nr, disc.ne)
     rng = np.random.default_rng(7)
     wk = ffi.new(f"{name}_fun_work *")
@@ -247,11 +257,20 @@ def test_generated_data_is_the_problem(name, generated, built, request):
     np.testing.assert_array_equal(read("guess_x", (N + 1) * nx), np.asarray(disc.initial_guess.x).reshape(-1))
     np.testing.assert_array_equal(read("guess_u", N * nu), np.asarray(disc.initial_guess.u).reshape(-1))
     assert getattr(lib, f"{name}_dt") == disc.dt
-    assert getattr(lib, f"{name}_default_M") == disc.options["M"]
-    assert getattr(lib, f"{name}_default_hessian") == {"exact": 0, "gauss-newton": 1}[disc.options["hessian"]]
-    assert getattr(lib, f"{name}_default_regularization") == \
-        {"none": 0, "project": 1, "mirror": 2}[disc.options["regularization"]]
-    assert getattr(lib, f"{name}_default_reg_eps") == disc.options.get("reg_eps", 1e-4)
+    # the generated settings are the OCP file's options
+    import cffi
+
+    sffi = cffi.FFI()
+    sffi.cdef((folder / f"{name}_cdef.h").read_text())
+    slib = sffi.dlopen(str(built[name].shared_lib))
+    st = sffi.new(f"{name}_settings *")
+    getattr(slib, f"{name}_settings_default")(st)
+    assert st.M == disc.options["M"]
+    assert st.hessian == {"exact": 0, "gauss-newton": 1}[disc.options["hessian"]]
+    assert st.regularization == {"none": 0, "project": 1, "mirror": 2}[disc.options["regularization"]]
+    assert st.reg_eps == disc.options.get("reg_eps", 1e-4)
+    lm = disc.options.get("lm", "auto")
+    assert (st.lm_auto, st.lm) == ((1, 0.0) if lm == "auto" else (0, float(lm)))
 
     meta = _meta(folder)
     assert meta["has_nominal"] == _wants_nominal(disc)
@@ -406,6 +425,26 @@ def test_static_library_has_no_allocator(name, built):
     assert any(sym in ("sin", "cos", "sincos") for _, sym in syms)
 
 
+@pytest.mark.parametrize("name", NAMES)
+def test_static_library_exports_only_the_api(name, generated, built):
+    """Defined global symbols of lib<name>.a: the functions of the public header (its cffi
+    part), the problem data of <name>_problem.h and CasADi's functions; no runtime internal
+    (the modules are static in the one translation unit of <name>_solver.c)."""
+    folder = generated[name][1]
+    proc = subprocess.run(["nm", "-g", "--defined-only", str(built[name].static_lib)], capture_output=True, text=True,
+                          check=True)
+    exported = {ln.split()[-1].lstrip("_") for ln in proc.stdout.splitlines() if re.match(r"^[0-9a-fA-F]+\s+[A-Z]\s", ln)}
+    cdef = (folder / f"{name}_cdef.h").read_text()
+    api = set(re.findall(rf"\b({name}_\w+)\s*\(", cdef))
+    data = {sym for ln in (folder / f"{name}_problem.h").read_text().splitlines() if ln.startswith("extern const")
+            for sym in re.findall(rf"\b({name}_\w+)\s*(?:\[|;)", ln)}
+    casadi = set(re.findall(rf"\b({name}_\w+)\s*\(", (folder / f"{name}_casadi.h").read_text()))
+    casadi |= {sym for sym in exported if sym.startswith(f"{name}_casadi_")}   # CasADi's helpers
+    leaked = sorted(exported - api - data - casadi)
+    assert not leaked, f"lib{name}.a exports runtime internals: {leaked}"
+    assert api <= exported and len(api) <= 40, (len(api), sorted(api - exported))
+
+
 # ----------------------------------------------------------------------------------------
 # 5. two generated problems in one program, side by side
 
@@ -435,11 +474,14 @@ static void show(const char *name, int k, int status, const double *u0, int nu, 
 int main(void)
 {
     double ua[ROBOT_ARM_NU] = {0}, ub[UNICYCLE_NU] = {0}, ka[4], kb[4];
+    robot_arm_settings sta;
+    unicycle_settings stb;
     int k, sa, sb;
-    robot_arm_defaults(&a);
-    unicycle_defaults(&b);
-    robot_arm_set_mode(&a, ROBOT_ARM_MODE_FIXED);
-    unicycle_set_mode(&b, UNICYCLE_MODE_FIXED);
+    robot_arm_settings_default(&sta);
+    unicycle_settings_default(&stb);
+    sta.mode = ROBOT_ARM_MODE_FIXED;
+    stb.mode = UNICYCLE_MODE_FIXED;
+    if (robot_arm_setup(&a, &sta) || unicycle_setup(&b, &stb)) return 1;
 #if ROBOT_ARM_HAS_NOMINAL
     sa = robot_arm_init_nominal(&a, robot_arm_x0_default);
 #else

@@ -157,7 +157,11 @@ def build(out_dir, cc: str = "cc", opt: str | None = None, *, force: bool = Fals
             pass
 
     root = cache.cache_root(cache_dir)
-    headers = {f: (out_dir / f).read_bytes() for f in listed if f.endswith(".h")}
+    # what an object depends on besides its source: the headers, and the module .c files that
+    # the runtime's translation unit includes (every .c file that is not compiled on its own)
+    compiled_alone = set(strict) | {casadi_src, meta["sources"].get("main")}
+    headers = {f: (out_dir / f).read_bytes() for f in listed
+               if f.endswith(".h") or (f.endswith(".c") and f not in compiled_alone)}
     objdir_final = bdir / "obj"
     objdir_final.mkdir(parents=True, exist_ok=True)
     tmpdir = Path(tempfile.mkdtemp(prefix="tmp_", dir=str(bdir)))

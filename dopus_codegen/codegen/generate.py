@@ -504,11 +504,25 @@ def _templates() -> jinja2.Environment:
     )
 
 
+# runtime_c files that are not part of a generated solver: the linkable wrappers of the
+# inline linear algebra, for the tests of the kernels only
+TEST_ONLY_RUNTIME = ("dopus_linalg.c",)
+
+
+def unity_modules(solver_c: str) -> List[str]:
+    """The runtime's .c files that dopus_solver.c includes (its one translation unit): they
+    are shipped but not compiled on their own."""
+    return re.findall(r'^#include "(dopus_\w+\.c)"', solver_c, flags=re.M)
+
+
 def runtime_sources(name: str) -> Dict[str, str]:
-    """runtime_c/*.c|*.h with the prefix renamed, in file names and contents."""
+    """runtime_c/*.c|*.h with the prefix renamed, in file names and contents (without the
+    test-only files)."""
     root = runtime_c_dir()
     out: Dict[str, str] = {}
     for path in sorted(list(root.glob("*.c")) + list(root.glob("*.h"))):
+        if path.name in TEST_ONLY_RUNTIME:
+            continue
         out[rename_placeholder(path.name, name)] = rename_placeholder(path.read_text(), name)
     if f"{name}_solver.h" not in out:
         raise CodegenError(f"the runtime has no public header dopus_solver.h in {root}")
@@ -595,11 +609,12 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     files[f"{name}_cdef.h"] = (f"/* {header} */\n/* cffi declarations cut from {name}_solver.h */\n"
                                f"typedef {real} {name}_real;\n" + cdef)
 
-    c_sources = sorted(f for f in files if f.endswith(".c") and f != main_file)
+    modules = {rename_placeholder(f, name) for f in unity_modules((runtime_c_dir() / "dopus_solver.c").read_text())}
+    c_sources = sorted(f for f in files if f.endswith(".c") and f != main_file and f not in modules)
     headers = sorted(f for f in files if f.endswith(".h") and f != f"{name}_cdef.h")
     build_ctx = dict(ctx, casadi_source=f"{name}_casadi.c",
                      strict_sources=[f for f in c_sources if f != f"{name}_casadi.c"],
-                     lib_sources=c_sources, headers=headers)
+                     lib_sources=c_sources, headers=headers, modules=sorted(modules))
     files["Makefile"] = env.get_template("Makefile.j2").render(**build_ctx)
     files[f"{name}.cmake"] = env.get_template("cmake.j2").render(**build_ctx)
 

@@ -124,15 +124,24 @@ def load_library(folder) -> tuple:
     return ffi, lib, meta
 
 
-def _c_property(fname: str, kind=int, doc: Optional[str] = None) -> property:
-    """A read-only property: ``kind(<name>_<fname>(solver))``."""
-    return property(lambda self: kind(self._c(fname)(self._s)), doc=doc)
+#: enum dopus_budget_unit (runtime_c/dopus_solver.h, docs/algorithm.md section 12)
+BUDGET_UNITS = {"time": 1, "work": 2}
+
+
+def _info_property(field: str, kind=int, doc: Optional[str] = None) -> property:
+    """A read-only property: ``kind(info.field)`` of ``<name>_get_info``."""
+    return property(lambda self: kind(getattr(self._info(), field)), doc=doc)
+
+
+def _settings_property(field: str, kind=int, doc: Optional[str] = None) -> property:
+    """A read-only property: ``kind(settings.field)`` of ``<name>_get_settings``."""
+    return property(lambda self: kind(getattr(self._settings(), field)), doc=doc)
 
 
 def _setting_property(name: str) -> property:
-    """A read-only property: the value of the setting ``name`` (``<name>_get_<name>``) by
-    its name in :mod:`dopus_codegen.settings`."""
-    return property(lambda self: settings.value_of(name, self._c(f"get_{name}")(self._s)))
+    """A read-only property: the value of the setting ``name`` (a field of
+    ``<name>_settings``) by its name in :mod:`dopus_codegen.settings`."""
+    return property(lambda self: settings.value_of(name, getattr(self._settings(), name)))
 
 
 def _array_property(fname: str, shape, doc: Optional[str] = None) -> property:
@@ -191,13 +200,13 @@ class CSolver:
         self.enums = vocabulary.generated_enums(str(self.lib_dir.resolve()), self.name)
         size = int(self._c("solver_sizeof")())
         self.sizeof = size
-        # doubles keep the struct 8-byte aligned; cffi zero-fills, the C side sets defaults
+        # doubles keep the struct 8-byte aligned; the C side's setup writes every field
         self._mem = self._ffi.new("double[]", (size + 7) // 8)
         self._s = self._ffi.cast(f"{self.name}_solver *", self._mem)
-        self._c("defaults")(self._s)
+        self._c("setup")(self._s, self._ffi.NULL)   # the generated settings (the OCP file's options)
         self.status = STATUS_OK
         if qp_tol is not None:  # None: the generated default of the real type (settings.QP_TOL_DEFAULT)
-            self._check(self._c("set_qp_tol")(self._s, self._positive(qp_tol, "qp_tol")), "qp_tol")
+            self.set_qp_tol(qp_tol)
         if qp_max_iter is not None:
             self.set_qp_max_iter(qp_max_iter)
         self.set_M(M)
@@ -246,10 +255,10 @@ class CSolver:
         qp_status = None
         msg = f"{self.name}: {what}: {self._status_text(status)} (status {status})"
         if status == STATUS_QP:
-            qp_status = int(self._c("get_qp_status")(self._s))
-            msg += "; " + qp_failure_text(self.enums["dopus_qp_status"].name(qp_status),
-                                          int(self._c("get_qp_iterations")(self._s)),
-                                          int(self._c("get_qp_max_iter")(self._s)), qp_status)
+            info = self._info()
+            qp_status = int(info.qp_status)
+            msg += "; " + qp_failure_text(self.enums["dopus_qp_status"].name(qp_status), int(info.qp_iterations),
+                                          int(self._settings().qp_max_iter), qp_status)
             row = self.qp_infeasible_row
             if row is not None:
                 from ..problem.checks import describe_qp_row
@@ -324,77 +333,99 @@ class CSolver:
         return self._setting(settings.positive, what, v)
 
     # ------------------------------------------------------------------ settings
+    def _settings(self):
+        """The C settings struct (``<name>_get_settings``), a fresh copy."""
+        st = self._ffi.new(f"{self.name}_settings *")
+        self._c("get_settings")(self._s, st)
+        return st
+
+    def _info(self):
+        """The C info struct (``<name>_get_info``), a fresh copy."""
+        info = self._ffi.new(f"{self.name}_info *")
+        self._c("get_info")(self._s, info)
+        return info
+
+    def update_settings_c(self, **fields) -> int:
+        """``<name>_update_settings`` with the current settings and ``fields`` changed, called
+        without the checks of the Python setters; returns the C status (for tests of the C
+        side's own checks)."""
+        st = self._settings()
+        for k, v in fields.items():
+            setattr(st, k, v)
+        return int(self._c("update_settings")(self._s, st))
+
+    def _update(self, what: str, **fields) -> None:
+        self._check(self.update_settings_c(**fields), what)
+
     def set_M(self, M: int) -> None:
         """Stages re-linearised per iteration; values above N-1 mean the full RTI (N-1),
         as in the reference."""
         M = self._setting(settings.count, "M", M)
-        self._check(self._c("set_M")(self._s, int(min(M, self.N - 1))), f"M={M!r}")
+        self._update(f"M={M!r}", M=int(min(M, self.N - 1)))
 
     def set_mode(self, mode: str) -> None:
-        self._check(self._c("set_mode")(self._s, self._setting(settings.code, "mode", mode)), f"mode={mode!r}")
+        self._update(f"mode={mode!r}", mode=self._setting(settings.code, "mode", mode))
 
     def set_hessian(self, hessian: str) -> None:
         code = self._setting(settings.code, "hessian", hessian)
         if hessian == "gauss-newton" and not self.has_gn:
             self._bad("hessian='gauss-newton' needs a least-squares stage cost (the OCP declares no "
                       "stage_least_squares)")
-        self._check(self._c("set_hessian")(self._s, code), f"hessian={hessian!r}")
+        self._update(f"hessian={hessian!r}", hessian=code)
 
     def set_regularization(self, regularization: str, reg_eps: Optional[float] = None) -> None:
         code = self._setting(settings.code, "regularization", regularization)
         eps = self.reg_eps if reg_eps is None else self._positive(reg_eps, "reg_eps")
-        self._check(self._c("set_regularization")(self._s, code, eps),
-                    f"regularization={regularization!r}, reg_eps={reg_eps!r}")
+        self._update(f"regularization={regularization!r}, reg_eps={reg_eps!r}", regularization=code, reg_eps=eps)
 
     def set_cost_hessian(self, cost_hessian: str) -> None:
         """``"fresh"``: the stage-cost Hessian of every stage is refreshed in every prepare;
         ``"stored"``: the paper's literal algorithm (docs/algorithm.md section 4 step 5)."""
-        self._check(self._c("set_cost_hessian")(self._s, self._setting(settings.code, "cost_hessian", cost_hessian)),
-                    f"cost_hessian={cost_hessian!r}")
+        self._update(f"cost_hessian={cost_hessian!r}",
+                     cost_hessian=self._setting(settings.code, "cost_hessian", cost_hessian))
 
     def set_levenberg_marquardt(self, lm) -> None:
         """Levenberg-Marquardt term: the QP uses the Hessian blocks plus ``lm * I``
         (docs/algorithm.md section 3): ``"auto"`` for the automatic, adaptive term (section
-        10), or a fixed number >= 0."""
+        10; it restarts from 0), or a fixed number >= 0."""
         v = self._setting(settings.levenberg_marquardt, lm)
         if v == settings.LM_AUTO:
-            self._check(self._c("set_lm_auto")(self._s), "lm='auto'")
+            if self._settings().lm_auto:   # already on: restart it (off, then on)
+                self._update("lm='auto'", lm_auto=0, lm=0.0)
+            self._update("lm='auto'", lm_auto=1)
         else:
-            self._check(self._c("set_levenberg_marquardt")(self._s, v), f"lm={lm!r}")
+            self._update(f"lm={lm!r}", lm_auto=0, lm=v)
 
-    lm = _c_property("get_levenberg_marquardt", float,
-                     "The term of the next QP (fixed, or the current automatic value).")
-    lm_auto = _c_property("get_lm_auto", bool)
-    lm_scale = _c_property("get_lm_scale", float, "The Hessian scale of the automatic term (section 10).")
+    lm = _info_property("lm", float, "The term of the next QP (fixed, or the current automatic value).")
+    lm_auto = _settings_property("lm_auto", bool)
+    lm_scale = _info_property("lm_scale", float, "The Hessian scale of the automatic term (section 10).")
 
     def set_qp_tol(self, tol: float) -> None:
-        self._check(self._c("set_qp_tol")(self._s, self._positive(tol, "qp_tol")), "qp_tol")
+        self._update("qp_tol", qp_tol=self._positive(tol, "qp_tol"))
 
     def set_qp_max_iter(self, max_iter: int) -> None:
-        self._check(self._c("set_qp_max_iter")(self._s, self._setting(settings.count, "qp_max_iter", max_iter, 1,
-                                                                      _INT_MAX)),
-                    "qp_max_iter")
+        self._update("qp_max_iter", qp_max_iter=self._setting(settings.count, "qp_max_iter", max_iter, 1, _INT_MAX))
 
     def set_qp_warm_start(self, on: bool) -> None:
         """Warm start of the QP in feedback (default on), with a cold retry when it fails."""
         if not isinstance(on, (bool, np.bool_)) and on not in (0, 1):
             self._bad(f"qp_warm_start must be True or False, got {on!r}")
-        self._check(self._c("set_qp_warm_start")(self._s, int(bool(on))), "qp_warm_start")
+        self._update("qp_warm_start", qp_warm_start=int(bool(on)))
 
     # ------------------------------------------------------------------ anytime (section 12)
     def set_time_budget(self, seconds) -> None:
         """The budget per sampling instant in seconds of the solver's clock (0: off)."""
         v = self._setting(settings.nonnegative, "time_budget", seconds)
-        self._check(self._c("set_time_budget")(self._s, v), "time_budget (needs a clock)")
+        self._update("time_budget", budget=v, budget_unit=BUDGET_UNITS["time"])
 
     def set_work_budget(self, units) -> None:
         """The budget per sampling instant in work units (function evaluations 1, a QP solve
         N; 0: off): deterministic, the unit the reference counts."""
         v = self._setting(settings.nonnegative, "work_budget", units)
-        self._check(self._c("set_work_budget")(self._s, v), "work_budget")
+        self._update("work_budget", budget=v, budget_unit=BUDGET_UNITS["work"])
 
     def set_anytime_tol(self, tol) -> None:
-        self._check(self._c("set_anytime_tol")(self._s, self._positive(tol, "anytime_tol")), "anytime_tol")
+        self._update("anytime_tol", anytime_tol=self._positive(tol, "anytime_tol"))
 
     def set_M_adaptive(self, on: bool = True, M_min: int = 0, M_max=None, eta=None) -> None:
         """Adaptive M (section 12): the stages whose secant residual ``rho_k |domega_k|``
@@ -404,26 +435,27 @@ class CSolver:
         M_max = self.N - 1 if M_max is None else M_max
         eta = float(vocabulary.constants()["ADAPTIVE_ETA"]) if eta is None else eta
         on, M_min, M_max, eta = self._setting(check_adaptive_M, on, M_min, M_max, eta, self.N)
-        self._check(self._c("set_M_adaptive")(self._s, int(on), M_min, M_max, eta), "M_adaptive")
+        self._update("M_adaptive", M_adaptive=int(on), M_min=M_min, M_max=M_max, M_eta=eta)
 
     @property
     def budget_unit(self) -> str:
-        return {0: "off", 1: "time", 2: "work"}[int(self._c("get_budget_unit")(self._s))]
+        """``"off"``, ``"time"`` or ``"work"``."""
+        st = self._settings()
+        if not st.budget > 0:
+            return "off"
+        return {v: k for k, v in BUDGET_UNITS.items()}[int(st.budget_unit)]
 
-    @property
-    def M_adaptive(self) -> bool:
-        return bool(self._c("get_M_adaptive")(self._s, self._ffi.NULL, self._ffi.NULL, self._ffi.NULL))
+    budget = _settings_property("budget", float)
+    anytime_tol = _settings_property("anytime_tol", float)
+    M_adaptive = _settings_property("M_adaptive", bool)
+    extra_iterations = _info_property("extra_iterations", int, "Extra iterations of the last prepare.")
+    instant_stages = _info_property("instant_stages", int, "Stages re-linearised in the last instant.")
+    budget_used = _info_property("budget_used", float, "Budget used by the last instant (its unit).")
+    work = _info_property("work", float, "Work units counted since setup.")
 
-    budget = _c_property("get_budget", float)
-    anytime_tol = _c_property("get_anytime_tol", float)
-    extra_iterations = _c_property("get_extra_iterations", int, "Extra iterations of the last prepare.")
-    instant_stages = _c_property("get_instant_stages", int, "Stages re-linearised in the last instant.")
-    budget_used = _c_property("get_budget_used", float, "Budget used by the last instant (its unit).")
-    work = _c_property("get_work", float, "Work units counted since setup.")
-
-    qp_warm_start = _c_property("get_qp_warm_start", bool)
-    qp_cold_retry = _c_property("get_qp_cold_retry", bool,
-                                "True when the last feedback's warm-started QP failed and the cold retry ran.")
+    qp_warm_start = _settings_property("qp_warm_start", bool)
+    qp_cold_retry = _info_property("qp_cold_retry", bool,
+                                   "True when the last feedback's warm-started QP failed and the cold retry ran.")
 
     def set_parameters(self, p) -> None:
         """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
@@ -439,13 +471,14 @@ class CSolver:
         a = self._array(pk, (self.np,), f"parameters of node {k}")
         self._check(self._c("set_parameters_node")(self._s, int(k), self._ptr(a)), "set_parameters_node")
 
-    M = _c_property("get_M")
+    M = _settings_property("M")
     mode = _setting_property("mode")
     hessian = _setting_property("hessian")
     regularization = _setting_property("regularization")
     cost_hessian = _setting_property("cost_hessian")
-    reg_eps = _c_property("get_reg_eps", float)
-    qp_tol = _c_property("get_qp_tol", float)
+    reg_eps = _settings_property("reg_eps", float)
+    qp_tol = _settings_property("qp_tol", float)
+    qp_max_iter = _settings_property("qp_max_iter")
     p = _array_property("get_parameters", lambda s: (s.N + 1, s.np))
 
     # ------------------------------------------------------------------ the iteration
@@ -500,22 +533,22 @@ class CSolver:
         k = self.recovery_failures if max_failures is None else max_failures
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= 2**31 - 1:
             self._bad(f"recovery max_failures must be an integer >= 1, got {max_failures!r}")
-        self._check(self._c("set_recovery")(self._s, int(bool(on)), int(k)), "set_recovery")
+        self._update("set_recovery", recovery=int(bool(on)), recovery_failures=int(k))
 
-    recovery = _c_property("get_recovery", bool)
-    recovery_failures = _c_property("get_recovery_failures")
+    recovery = _settings_property("recovery", bool)
+    recovery_failures = _settings_property("recovery_failures")
     u0 = _array_property("get_u0", lambda s: (s.n_u,), "The control returned by the last feedback (successful or not).")
 
     @property
     def flags(self) -> set:
         """The health flags of the last feedback and the prepare after it, by name:
         ``u0_clipped``, ``fallback``, ``diverged``, ``recovered``, ``predicted``."""
-        f = int(self._c("get_flags")(self._s))
+        f = int(self._info().flags)
         return {name for bit, name in FLAGS.items() if f & bit}
 
-    recoveries = _c_property("get_recoveries", int, "Re-initialisations by the automatic recovery since init.")
-    failed_feedbacks = _c_property("get_failed_feedbacks", int, "Consecutive failed feedbacks.")
-    kkt_proxy = _c_property("get_kkt_proxy", float, "The divergence measure of the last prepare or init (section 9).")
+    recoveries = _info_property("recoveries", int, "Re-initialisations by the automatic recovery since init.")
+    failed_feedbacks = _info_property("failed_feedbacks", int, "Consecutive failed feedbacks.")
+    kkt_proxy = _info_property("kkt_proxy", float, "The divergence measure of the last prepare or init (section 9).")
 
     @property
     def scales(self) -> tuple:
@@ -537,7 +570,7 @@ class CSolver:
         return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
 
     # ------------------------------------------------------------------ read-only state
-    initialized = _c_property("is_initialized", bool)
+    initialized = _info_property("initialized", bool)
     x = _array_property("get_x", lambda s: (s.N + 1, s.nx))
     u = _array_property("get_u", lambda s: (s.N, s.n_u))
     lam = _array_property("get_lam", lambda s: (s.N + 1, s.nx))
@@ -554,9 +587,10 @@ class CSolver:
         n = int(self._c("get_recomputed")(self._s, buf))
         return [int(buf[i]) for i in range(n)]
 
-    ring_head = _c_property("get_ring_head")
-    qp_iterations = _c_property("get_qp_iterations")
-    qp_status = _c_property("get_qp_status")
+    ring_head = _info_property("ring_head")
+    qp_iterations = _info_property("qp_iterations")
+    qp_status = _info_property("qp_status")
+    M_used = _info_property("M_used", int, "Stages the last prepare (or init) re-linearised besides stage N-1.")
 
     @property
     def qp_infeasible_row(self) -> Optional[dict]:
@@ -578,11 +612,14 @@ class CSolver:
 
     @property
     def timings(self) -> dict:
+        """Seconds per phase of the last call that ran it (enum dopus_phase), plus
+        ``prepare`` = the sum of the phases of prepare, and the wall times of the last
+        feedback and prepare calls (``t_feedback``, ``t_prepare``)."""
         phases = self.enums["dopus_phase"].names()
-        t = np.zeros(len(phases))    # times are double in both precisions
-        self._c("get_timings")(self._s, self._ffi.from_buffer("double[]", t))
-        out = {name: float(v) for name, v in zip(phases, t)}
-        out["prepare"] = sum(out[k] for k in ("shift", "gradients", "rho", "hessians", "regularization", "assembly"))
+        info = self._info()
+        out = {name: float(info.timings[i]) for i, name in enumerate(phases)}   # double in both precisions
+        out["prepare"] = sum(v for k, v in out.items() if k not in ("feedback", "kkt"))
+        out["t_feedback"], out["t_prepare"] = float(info.t_feedback), float(info.t_prepare)
         return out
 
     def guess(self):
@@ -607,8 +644,8 @@ class CSolver:
         self._clock_cb = cb
         self._c("set_clock")(self._s, cb, self._ffi.NULL)
 
-    has_clock = _c_property("has_clock", bool,
-                            "True if the timings measure time (False: no clock on this platform, they read 0).")
+    has_clock = _info_property("has_clock", bool,
+                               "True if the timings measure time (False: no clock on this platform, they read 0).")
 
     def __repr__(self) -> str:
         return (f"CSolver({self.name!r}, N={self.N}, M={self.M}, mode={self.mode!r}, "

@@ -19,8 +19,8 @@ all settings alike. Timed:
 
 Per setting and phase: feedback (from the measured state to u_0: the QP and the step;
 wall clock of the call and the runtime's ``feedback`` timer), preparation (wall clock and
-the runtime's timers, ``dopus_get_timings``: shift, gradients, rho, hessians,
-regularization, assembly), total = feedback + preparation (wall clock); medians and the
+the runtime's timers, ``timings`` of ``dopus_get_info``: shift, gradients, rho, hessians,
+regularization, assembly, lm, recovery), total = feedback + preparation (wall clock); medians and the
 10/90 percentiles; ratios to our full RTI (ratio of the medians, and the median of the
 per-step ratios of the interleaved run); the CPU model and the load before and after.
 
@@ -467,7 +467,7 @@ def format_table(result: dict) -> str:
     lines = [f"{result['problem']}: N={result['N']}, nx={result['nx']}, nu={result['nu']}; "
              + ", ".join(f"{k} {v}" for k, v in result.get("settings", {}).items()),
              f"CPU {m.get('cpu')}, {m.get('cores')} cores, load {m.get('loadavg')} before, {ma.get('loadavg')} after"]
-    prep_keys = ("shift", "gradients", "rho", "hessians", "regularization", "assembly")
+    prep_keys = ("shift", "gradients", "rho", "hessians", "regularization", "assembly", "lm", "recovery")
     for phase, t in result.get("timed", {}).items():
         lines.append(f"\n{phase} (us per iteration: median [p10, p90]; ratio to our full RTI: of the medians / "
                      f"median of the per-step ratios)")

@@ -66,7 +66,6 @@ class Ours:
         self._res = self.ffi.new("double*[]", max(n_out, sz[1][0], 1))
         self._phi = self.ffi.new("double[]", self.nx)
         self.u0 = self.ffi.new("double[]", self.nu)
-        self._t = self.ffi.new("double[]", max(1, len(self.phase_names)))
         p0 = np.array(spec.get("p0") or [], float).reshape(-1)
         self.p0 = np.ascontiguousarray(p0)
 
@@ -79,25 +78,31 @@ class Ours:
         mem = self.ffi.new("double[]", (int(self.c("solver_sizeof")()) + 7) // 8)
         self._mem.append(mem)
         s = self.ffi.cast(f"{self.name}_solver *", mem)
-        self.c("defaults")(s)
-        checks = [("set_M", (int(M),)), ("set_mode", (int(mode),))]
+        st = self.ffi.new(f"{self.name}_settings *")
+        self.c("settings_default")(st)
+        st.M, st.mode = int(M), int(mode)
         if "hessian" in settings:
-            checks.append(("set_hessian", (int(settings["hessian"]),)))
+            st.hessian = int(settings["hessian"])
         if "regularization" in settings:
-            checks.append(("set_regularization", (int(settings["regularization"]), float(settings["reg_eps"]))))
+            st.regularization, st.reg_eps = int(settings["regularization"]), float(settings["reg_eps"])
         if "cost_hessian" in settings:
-            checks.append(("set_cost_hessian", (int(settings["cost_hessian"]),)))
+            st.cost_hessian = int(settings["cost_hessian"])
         if settings.get("lm") == "auto":
-            checks.append(("set_lm_auto", ()))
+            st.lm_auto, st.lm = 1, 0.0
         elif "lm" in settings:
-            checks.append(("set_levenberg_marquardt", (float(settings["lm"]),)))
+            st.lm_auto, st.lm = 0, float(settings["lm"])
         if "qp_tol" in settings:
-            checks.append(("set_qp_tol", (float(settings["qp_tol"]),)))
-        for f, args in checks:
-            st = int(self.c(f)(s, *args))
-            if st != 0:
-                raise RuntimeError(f"{self.name}_{f}{args} returned status {st}")
+            st.qp_tol = float(settings["qp_tol"])
+        rc = int(self.c("setup")(s, st))
+        if rc != 0:
+            raise RuntimeError(f"{self.name}_setup{dict(settings, M=M, mode=mode)} returned status {rc}")
         return s
+
+    def info(self, s):
+        """The C info struct of the solver ``s``."""
+        info = self.ffi.new(f"{self.name}_info *")
+        self.c("get_info")(s, info)
+        return info
 
     def _p(self, a):
         return self.ffi.cast("double *", a.ctypes.data) if a.size else self.ffi.NULL
@@ -129,8 +134,8 @@ class Ours:
 
     def timings(self, s):
         """The C phase timers of the last iteration (seconds), by phase name."""
-        self.c("get_timings")(s, self._t)
-        return {k: float(self._t[i]) for i, k in enumerate(self.phase_names)}
+        info = self.info(s)
+        return {k: float(info.timings[i]) for i, k in enumerate(self.phase_names)}
 
     def plant(self, x, u):
         """One step of the generated discrete model phi(x, u, p0)."""
@@ -284,7 +289,7 @@ def make_ours(ours: Ours, M, mode, settings, label):
             raise RuntimeError(f"{label}: {ours.name}_init returned status {st}")
 
     def extra():
-        return {"qp_iterations": int(ours.c("get_qp_iterations")(s))}
+        return {"qp_iterations": int(ours.info(s).qp_iterations)}
 
     r = Runner(label, "ours", feedback, prepare, start, phases=lambda: ours.timings(s), extra=extra)
     r.solver, r.ours, r.M = s, ours, M

@@ -4,21 +4,13 @@
 # link it with target_link_libraries(<your target> PRIVATE robot_arm).
 # Cross-compiling for firmware (a CMake toolchain file for arm-none-eabi-gcc) needs nothing
 # else: no macro, no allocator. The phase timings have no default clock on bare metal
-# (they read 0 and robot_arm_has_clock() says so): install one with robot_arm_set_clock().
+# (they read 0 and has_clock of robot_arm_get_info says so): install one with robot_arm_set_clock().
 set(ROBOT_ARM_DIR "${CMAKE_CURRENT_LIST_DIR}")
 
 add_library(robot_arm STATIC
     "${ROBOT_ARM_DIR}/robot_arm_casadi.c"
-    "${ROBOT_ARM_DIR}/robot_arm_funcs.c"
-    "${ROBOT_ARM_DIR}/robot_arm_kkt.c"
-    "${ROBOT_ARM_DIR}/robot_arm_linalg.c"
     "${ROBOT_ARM_DIR}/robot_arm_problem.c"
-    "${ROBOT_ARM_DIR}/robot_arm_qp.c"
-    "${ROBOT_ARM_DIR}/robot_arm_reg.c"
-    "${ROBOT_ARM_DIR}/robot_arm_ring.c"
-    "${ROBOT_ARM_DIR}/robot_arm_settings.c"
     "${ROBOT_ARM_DIR}/robot_arm_solver.c"
-    "${ROBOT_ARM_DIR}/robot_arm_timer.c"
 )
 target_include_directories(robot_arm PUBLIC "${ROBOT_ARM_DIR}")
 set_target_properties(robot_arm PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON C_EXTENSIONS OFF)

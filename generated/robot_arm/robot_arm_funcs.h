@@ -14,50 +14,55 @@
 
 #include "robot_arm_sizes.h"
 
-typedef struct {
+typedef struct robot_arm_fun_work_s {
     int iw[ROBOT_ARM_SZ_IW];
     robot_arm_real w[ROBOT_ARM_SZ_W];
     const robot_arm_real *arg[ROBOT_ARM_SZ_ARG];
     robot_arm_real *res[ROBOT_ARM_SZ_RES];
 } robot_arm_fun_work;
 
+#ifndef ROBOT_ARM_INTERNAL
+#define ROBOT_ARM_INTERNAL
+#endif
+
 /* stage_eval: phi (nx), l (1), g (ng) */
-int robot_arm_eval_stage_eval(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p, robot_arm_real *phi,
-                          robot_arm_real *l, robot_arm_real *g, robot_arm_fun_work *wk);
+ROBOT_ARM_INTERNAL int robot_arm_eval_stage_eval(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p,
+                                         robot_arm_real *phi, robot_arm_real *l, robot_arm_real *g, robot_arm_fun_work *wk);
 
 /* stage_grad, F_k of eq. 14: gL = grad_w l - Phi' lam_next + C' mu_g, plus phi, l, g */
-int robot_arm_eval_stage_grad(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p,
-                          const robot_arm_real *lam_next, const robot_arm_real *mu_g, robot_arm_real *gL, robot_arm_real *phi,
-                          robot_arm_real *l, robot_arm_real *g, robot_arm_fun_work *wk);
+ROBOT_ARM_INTERNAL int robot_arm_eval_stage_grad(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p,
+                                         const robot_arm_real *lam_next, const robot_arm_real *mu_g, robot_arm_real *gL,
+                                         robot_arm_real *phi, robot_arm_real *l, robot_arm_real *g, robot_arm_fun_work *wk);
 
 /* stage_hess, H_k of eq. 15: A (nw x nw), Phi (nx x nw), C (ng x nw).
  * gauss_newton != 0 selects the Gauss-Newton A; nonzero return if !ROBOT_ARM_HAS_GN then. */
-int robot_arm_eval_stage_hess(int gauss_newton, const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p,
-                          const robot_arm_real *lam_next, const robot_arm_real *mu_g, robot_arm_real *A, robot_arm_real *Phi,
-                          robot_arm_real *C, robot_arm_fun_work *wk);
+ROBOT_ARM_INTERNAL int robot_arm_eval_stage_hess(int gauss_newton, const robot_arm_real *x, const robot_arm_real *u,
+                                         const robot_arm_real *p, const robot_arm_real *lam_next,
+                                         const robot_arm_real *mu_g, robot_arm_real *A, robot_arm_real *Phi,
+                                         robot_arm_real *C, robot_arm_fun_work *wk);
 
 /* stage_hess_cost: A_l (nw x nw), the stage-cost part of A (docs/algorithm.md section 4
  * step 5): exact hess_w l, or with gauss_newton != 0 J' W J + hess_w l_extra (nonzero
  * return if !ROBOT_ARM_HAS_GN then). No integrator: l is evaluated at the node. */
-int robot_arm_eval_stage_hess_cost(int gauss_newton, const robot_arm_real *x, const robot_arm_real *u,
-                               const robot_arm_real *p, robot_arm_real *A_l, robot_arm_fun_work *wk);
+ROBOT_ARM_INTERNAL int robot_arm_eval_stage_hess_cost(int gauss_newton, const robot_arm_real *x, const robot_arm_real *u,
+                                              const robot_arm_real *p, robot_arm_real *A_l, robot_arm_fun_work *wk);
 
 /* term_eval: E (1), r (nr), r_eq (ne) */
-int robot_arm_eval_term_eval(const robot_arm_real *x, const robot_arm_real *p, robot_arm_real *E, robot_arm_real *r,
-                         robot_arm_real *r_eq, robot_arm_fun_work *wk);
+ROBOT_ARM_INTERNAL int robot_arm_eval_term_eval(const robot_arm_real *x, const robot_arm_real *p, robot_arm_real *E,
+                                        robot_arm_real *r, robot_arm_real *r_eq, robot_arm_fun_work *wk);
 
 /* term_grad: gL = grad E + R' mu_r + R_eq' nu, plus E, r, r_eq */
-int robot_arm_eval_term_grad(const robot_arm_real *x, const robot_arm_real *p, const robot_arm_real *mu_r,
-                         const robot_arm_real *nu, robot_arm_real *gL, robot_arm_real *E, robot_arm_real *r, robot_arm_real *r_eq,
-                         robot_arm_fun_work *wk);
+ROBOT_ARM_INTERNAL int robot_arm_eval_term_grad(const robot_arm_real *x, const robot_arm_real *p, const robot_arm_real *mu_r,
+                                        const robot_arm_real *nu, robot_arm_real *gL, robot_arm_real *E, robot_arm_real *r,
+                                        robot_arm_real *r_eq, robot_arm_fun_work *wk);
 
 /* term_hess: A (nx x nx), R (nr x nx), R_eq (ne x nx); always available (no GN restriction) */
-int robot_arm_eval_term_hess(int gauss_newton, const robot_arm_real *x, const robot_arm_real *p, const robot_arm_real *mu_r,
-                         const robot_arm_real *nu, robot_arm_real *A, robot_arm_real *R, robot_arm_real *R_eq,
-                         robot_arm_fun_work *wk);
+ROBOT_ARM_INTERNAL int robot_arm_eval_term_hess(int gauss_newton, const robot_arm_real *x, const robot_arm_real *p,
+                                        const robot_arm_real *mu_r, const robot_arm_real *nu, robot_arm_real *A,
+                                        robot_arm_real *R, robot_arm_real *R_eq, robot_arm_fun_work *wk);
 
 /* ode: continuous model xdot = f(x, u, p) */
-int robot_arm_eval_ode(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p, robot_arm_real *xdot,
-                   robot_arm_fun_work *wk);
+ROBOT_ARM_INTERNAL int robot_arm_eval_ode(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p,
+                                  robot_arm_real *xdot, robot_arm_fun_work *wk);
 
 #endif /* ROBOT_ARM_FUNCS_H */

@@ -4,8 +4,9 @@
 #include "robot_arm_kkt.h"
 #include "robot_arm_linalg.h"
 #include "robot_arm_problem.h"
-#include "robot_arm_solver.h"
-#include "robot_arm_solver_internal.h"
+
+#define NG1 ROBOT_ARM_DIM(ROBOT_ARM_NG)
+#define NP1 ROBOT_ARM_DIM(ROBOT_ARM_NP)
 
 static robot_arm_real robot_arm_kkt_max(robot_arm_real a, robot_arm_real b)
 {
@@ -32,75 +33,84 @@ static robot_arm_real robot_arm_kkt_comp(robot_arm_real mu, robot_arm_real v, ro
     return c;
 }
 
-int robot_arm_kkt_measure(struct robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *parts)
+int robot_arm_kkt_measure(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *lam, const robot_arm_real *mu_g,
+                      const robot_arm_real *mu_b, const robot_arm_real *mu_bN, const robot_arm_real *mu_r,
+                      const robot_arm_real *nu, const robot_arm_real *p, const robot_arm_real *xhat0,
+                      robot_arm_fun_work *work, robot_arm_real *parts)
 {
     robot_arm_real stat = ROBOT_ARM_R(0.0), eq = ROBOT_ARM_R(0.0), ineq = ROBOT_ARM_R(0.0), comp = ROBOT_ARM_R(0.0);
     robot_arm_real gL[ROBOT_ARM_NW], phi[ROBOT_ARM_NX], g[ROBOT_ARM_DIM(ROBOT_ARM_NG)], l;
     robot_arm_real gLN[ROBOT_ARM_NX], E, r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
-    int k, i, rc;
+    int k, i;
 
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        eq = robot_arm_kkt_max(eq, robot_arm_fabs(s->x[0][i] - xhat0[i]));
+        eq = robot_arm_kkt_max(eq, robot_arm_fabs(x[i] - xhat0[i]));
     }
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
-                                  &s->mem.ev.fun_work) != 0) {
-            return ROBOT_ARM_ERR_FUNCTION;
+        if (robot_arm_eval_stage_grad(x + k * ROBOT_ARM_NX, u + k * ROBOT_ARM_NU, p + k * NP1, lam + (k + 1) * ROBOT_ARM_NX,
+                                  mu_g + k * NG1, gL, phi, &l, g, work) != 0) {
+            return ROBOT_ARM_KKT_FUNCTION;
         }
         if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW, gL) || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, phi) ||
             !robot_arm_lai_vec_finite(ROBOT_ARM_NG, g) || !isfinite(l)) {
-            return ROBOT_ARM_ERR_NONFINITE_VALUE;
+            return ROBOT_ARM_KKT_NONFINITE;
         }
         /* stationarity gL_k + mu_b_k + [lam_k; 0] */
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            robot_arm_real v = gL[i] + s->mu_b[k][i] + (i < ROBOT_ARM_NX ? s->lam[k][i] : ROBOT_ARM_R(0.0));
+            robot_arm_real v =
+                gL[i] + mu_b[k * ROBOT_ARM_NW + i] + (i < ROBOT_ARM_NX ? lam[k * ROBOT_ARM_NX + i] : ROBOT_ARM_R(0.0));
             stat = robot_arm_kkt_max(stat, robot_arm_fabs(v));
         }
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            eq = robot_arm_kkt_max(eq, robot_arm_fabs(s->x[k + 1][i] - phi[i]));
+            eq = robot_arm_kkt_max(eq, robot_arm_fabs(x[(k + 1) * ROBOT_ARM_NX + i] - phi[i]));
         }
         for (i = 0; i < ROBOT_ARM_NG; ++i) {
             ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(g[i], robot_arm_lg[i], robot_arm_ug[i]));
-            comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_g[k][i], g[i], robot_arm_lg[i], robot_arm_ug[i]));
+            comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(mu_g[k * NG1 + i], g[i], robot_arm_lg[i], robot_arm_ug[i]));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
          * sides and counts with its magnitude) */
-        if (!robot_arm_x_bounded(k)) {
+        if (k == 0) {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                comp = robot_arm_kkt_max(comp, robot_arm_fabs(s->mu_b[0][i]));
+                comp = robot_arm_kkt_max(comp, robot_arm_fabs(mu_b[i]));
             }
         } else {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(s->x[k][i], robot_arm_lbx[i], robot_arm_ubx[i]));
-                comp = robot_arm_kkt_max(comp,
-                                     robot_arm_kkt_comp(s->mu_b[k][i], s->x[k][i], robot_arm_lbx[i], robot_arm_ubx[i]));
+                ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(x[k * ROBOT_ARM_NX + i], robot_arm_lbx[i], robot_arm_ubx[i]));
+                comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(mu_b[k * ROBOT_ARM_NW + i], x[k * ROBOT_ARM_NX + i],
+                                                          robot_arm_lbx[i], robot_arm_ubx[i]));
             }
         }
         for (i = 0; i < ROBOT_ARM_NU; ++i) {
-            ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(s->u[k][i], robot_arm_lbu[i], robot_arm_ubu[i]));
-            comp = robot_arm_kkt_max(
-                comp, robot_arm_kkt_comp(s->mu_b[k][ROBOT_ARM_NX + i], s->u[k][i], robot_arm_lbu[i], robot_arm_ubu[i]));
+            ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(u[k * ROBOT_ARM_NU + i], robot_arm_lbu[i], robot_arm_ubu[i]));
+            comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(mu_b[k * ROBOT_ARM_NW + ROBOT_ARM_NX + i], u[k * ROBOT_ARM_NU + i],
+                                                      robot_arm_lbu[i], robot_arm_ubu[i]));
         }
     }
-    rc = robot_arm_term_grad_checked(s, gLN, &E, r, r_eq);
-    if (rc != ROBOT_ARM_OK) {
-        return rc;
+    if (robot_arm_eval_term_grad(x + ROBOT_ARM_N * ROBOT_ARM_NX, p + ROBOT_ARM_N * NP1, mu_r, nu, gLN, &E, r, r_eq, work) !=
+        0) {
+        return ROBOT_ARM_KKT_FUNCTION;
+    }
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NX, gLN) || !isfinite(E) || !robot_arm_lai_vec_finite(ROBOT_ARM_NR, r) ||
+        !robot_arm_lai_vec_finite(ROBOT_ARM_NE, r_eq)) {
+        return ROBOT_ARM_KKT_NONFINITE;
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        stat = robot_arm_kkt_max(stat, robot_arm_fabs(gLN[i] + s->mu_bN[i] + s->lam[ROBOT_ARM_N][i]));
-        ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(s->x[ROBOT_ARM_N][i], robot_arm_lbx[i], robot_arm_ubx[i]));
-        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_bN[i], s->x[ROBOT_ARM_N][i], robot_arm_lbx[i], robot_arm_ubx[i]));
+        stat = robot_arm_kkt_max(stat, robot_arm_fabs(gLN[i] + mu_bN[i] + lam[ROBOT_ARM_N * ROBOT_ARM_NX + i]));
+        ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(x[ROBOT_ARM_N * ROBOT_ARM_NX + i], robot_arm_lbx[i], robot_arm_ubx[i]));
+        comp = robot_arm_kkt_max(comp,
+                             robot_arm_kkt_comp(mu_bN[i], x[ROBOT_ARM_N * ROBOT_ARM_NX + i], robot_arm_lbx[i], robot_arm_ubx[i]));
     }
     for (i = 0; i < ROBOT_ARM_NE; ++i) {
         eq = robot_arm_kkt_max(eq, robot_arm_fabs(r_eq[i]));
     }
     for (i = 0; i < ROBOT_ARM_NR; ++i) {
         ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(r[i], robot_arm_lr[i], robot_arm_ur[i]));
-        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(s->mu_r[i], r[i], robot_arm_lr[i], robot_arm_ur[i]));
+        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(mu_r[i], r[i], robot_arm_lr[i], robot_arm_ur[i]));
     }
     parts[0] = stat;
     parts[1] = eq;
     parts[2] = ineq;
     parts[3] = comp;
-    return ROBOT_ARM_OK;
+    return ROBOT_ARM_KKT_OK;
 }

@@ -40,7 +40,8 @@ static int report(const char *phase, int iter, int status, const robot_arm_real 
  * next measurement is the model's prediction phi(x0, u0) */
 static int run(const char *phase, int mode)
 {
-    robot_arm_real xhat0[ROBOT_ARM_NX], xnext[ROBOT_ARM_NX], u0[ROBOT_ARM_NU], kkt4[4], l, g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    robot_arm_real xhat0[ROBOT_ARM_NX], xnext[ROBOT_ARM_NX], u0[ROBOT_ARM_NU], kkt4[4];
+    robot_arm_settings settings;
     int i, k, status;
 
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -49,8 +50,9 @@ static int run(const char *phase, int mode)
     for (i = 0; i < ROBOT_ARM_NU; ++i) {
         u0[i] = ROBOT_ARM_R(0.0);
     }
-    robot_arm_defaults(&solver);
-    status = robot_arm_set_mode(&solver, mode);
+    robot_arm_settings_default(&settings); /* the OCP file's options */
+    settings.mode = mode;
+    status = robot_arm_setup(&solver, &settings);
 #if ROBOT_ARM_HAS_NOMINAL
     if (status == ROBOT_ARM_OK) {
         status = robot_arm_init_nominal(&solver, xhat0);
@@ -70,7 +72,7 @@ static int run(const char *phase, int mode)
     for (k = 1; k <= ITERATIONS; ++k) {
         status = robot_arm_feedback(&solver, xhat0, u0);
         if (status == ROBOT_ARM_OK && mode == ROBOT_ARM_MODE_RECEDING) {
-            if (robot_arm_eval_stage_eval(xhat0, u0, robot_arm_p_default, xnext, &l, g, &plant_work)) {
+            if (robot_arm_simulate(xhat0, u0, NULL, xnext, &plant_work) != ROBOT_ARM_OK) {
                 fprintf(stderr, "main_dopus: the model failed to evaluate\n");
                 return 1;
             }

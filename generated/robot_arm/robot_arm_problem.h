@@ -1,5 +1,7 @@
-/* Problem data generated from the OCP file (robot_arm_problem.c): bounds, defaults, the initial
- * guess and, when the OCP asks for it, the offline primal-dual solution at the default x0.
+/* Problem data generated from the OCP file (robot_arm_problem.c), public and read-only: bounds,
+ * the default parameters and x0, the initial guess and, when the OCP asks for it, the
+ * offline primal-dual solution at the default x0. (The OCP file's options are the generated
+ * settings, robot_arm_settings_default of robot_arm_solver.h, also in robot_arm_problem.c.)
  *
  * Infinite bounds are INFINITY / -INFINITY; the runtime treats them as "no bound on that side"
  * (docs/algorithm.md section 1). Sizes of possibly empty arrays use ROBOT_ARM_DIM so that every
@@ -20,12 +22,6 @@ extern const robot_arm_real robot_arm_x0_default[ROBOT_ARM_NX];
 /* the OCP file's initial guess */
 extern const robot_arm_real robot_arm_guess_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
 extern const robot_arm_real robot_arm_guess_u[ROBOT_ARM_N][ROBOT_ARM_NU];
-extern const int robot_arm_default_M;
-extern const int robot_arm_default_hessian;        /* 0 exact, 1 gauss-newton */
-extern const int robot_arm_default_regularization; /* 0 none, 1 project, 2 mirror */
-extern const robot_arm_real robot_arm_default_reg_eps;
-extern const int robot_arm_default_cost_hessian; /* 1 fresh, 0 stored */
-extern const robot_arm_real robot_arm_default_lm;    /* Levenberg-Marquardt term, >= 0 */
 
 #if ROBOT_ARM_HAS_NOMINAL
 /* offline primal-dual solution at robot_arm_x0_default (IPOPT at generation time), so the

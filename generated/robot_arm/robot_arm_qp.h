@@ -287,17 +287,21 @@ typedef struct {
     robot_arm_real scale_bounds;
 } robot_arm_qp_workspace;
 
+#ifndef ROBOT_ARM_INTERNAL
+#define ROBOT_ARM_INTERNAL
+#endif
+
 /* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */
-void robot_arm_qp_settings_default(robot_arm_qp_settings *settings);
+ROBOT_ARM_INTERNAL void robot_arm_qp_settings_default(robot_arm_qp_settings *settings);
 
 /* sizeof(robot_arm_qp_workspace), the memory bill of the solver. */
-unsigned long robot_arm_qp_workspace_size(void);
+ROBOT_ARM_INTERNAL unsigned long robot_arm_qp_workspace_size(void);
 
 /* Solve the QP. `sol` is read as the warm-start point when settings->warm_start is
  * nonzero and always written (best point found; zeros on invalid input). `info` may be
  * NULL. Returns the status (enum robot_arm_qp_status). */
-int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const robot_arm_qp_settings *settings,
-                   robot_arm_qp_sol *sol, robot_arm_qp_info *info);
+ROBOT_ARM_INTERNAL int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
+                                  const robot_arm_qp_settings *settings, robot_arm_qp_sol *sol, robot_arm_qp_info *info);
 
 /* After robot_arm_qp_solve returned ROBOT_ARM_QP_PRIMAL_INFEASIBLE (ws and in as they were then): the
  * row with the largest multiplier of the infeasibility certificate among the bounded rows
@@ -306,7 +310,7 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
  * header comment (w_k, then the rows of C_k; x_N, the rows of R, then those of Req); side:
  * -1 the lower bound, +1 the upper bound (an equality row: the sign of its multiplier), 0
  * lower above upper. Returns 1, or 0 when no row carries a multiplier. */
-int robot_arm_qp_infeasible_row(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int *stage, int *row,
-                            int *side);
+ROBOT_ARM_INTERNAL int robot_arm_qp_infeasible_row(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int *stage,
+                                           int *row, int *side);
 
 #endif /* ROBOT_ARM_QP_H */

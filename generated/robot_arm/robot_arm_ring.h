@@ -35,23 +35,27 @@ typedef struct {
     int ring_head;
 } robot_arm_ring;
 
+#ifndef ROBOT_ARM_INTERNAL
+#define ROBOT_ARM_INTERNAL
+#endif
+
 /* head = 0, every slot zero. */
-void robot_arm_ring_reset(robot_arm_ring *ring);
+ROBOT_ARM_INTERNAL void robot_arm_ring_reset(robot_arm_ring *ring);
 
 /* The slot of stage k (0 <= k < N). */
-robot_arm_stage_slot *robot_arm_ring_stage(robot_arm_ring *ring, int k);
-const robot_arm_stage_slot *robot_arm_ring_stage_const(const robot_arm_ring *ring, int k);
+ROBOT_ARM_INTERNAL robot_arm_stage_slot *robot_arm_ring_stage(robot_arm_ring *ring, int k);
+ROBOT_ARM_INTERNAL const robot_arm_stage_slot *robot_arm_ring_stage_const(const robot_arm_ring *ring, int k);
 
 /* One sampling interval: ring_head <- (ring_head + 1) mod N. */
-void robot_arm_ring_advance(robot_arm_ring *ring);
+ROBOT_ARM_INTERNAL void robot_arm_ring_advance(robot_arm_ring *ring);
 
 /* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
-void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A);
+ROBOT_ARM_INTERNAL void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A);
 /* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
-void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const robot_arm_real *A_l, robot_arm_real *A);
+ROBOT_ARM_INTERNAL void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const robot_arm_real *A_l, robot_arm_real *A);
 
 /* Zero the step domega of a slot. */
-void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);
+ROBOT_ARM_INTERNAL void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);
 
 /* Round-off floor of the secant residual (docs/algorithm.md section 4 step 2). */
 #define ROBOT_ARM_EPS_RHO ROBOT_ARM_PREC(1e-12, 1e-6)
@@ -62,11 +66,11 @@ void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);
  *            g_old + Ct dw - g_new] |
  *   rho = num / |(dw, dlam, dmu_g, dmu_b)| (2-norms), 0 when the denominator is 0 or
  *   num <= ROBOT_ARM_EPS_RHO * (|(F_w_old, phi_old, g_old)| + |(F_w_new, phi_new, g_new)|). */
-robot_arm_real robot_arm_ring_secant(const robot_arm_stage_slot *slot, const robot_arm_real *F_w_new,
-                             const robot_arm_real *phi_new, const robot_arm_real *g_new);
+ROBOT_ARM_INTERNAL robot_arm_real robot_arm_ring_secant(const robot_arm_stage_slot *slot, const robot_arm_real *F_w_new,
+                                            const robot_arm_real *phi_new, const robot_arm_real *g_new);
 
 /* Store F_new as F_old. */
-void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const robot_arm_real *F_w, const robot_arm_real *phi,
-                        const robot_arm_real *g);
+ROBOT_ARM_INTERNAL void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const robot_arm_real *F_w, const robot_arm_real *phi,
+                                       const robot_arm_real *g);
 
 #endif /* ROBOT_ARM_RING_H */

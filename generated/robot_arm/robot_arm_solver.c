@@ -1,4 +1,5 @@
-/* The DOPUS real-time iteration (docs/algorithm.md section 4; paper Algorithm 1).
+/* The DOPUS real-time iteration (docs/algorithm.md section 4; paper Algorithm 1), and the
+ * one translation unit of the runtime library.
  *
  * init: F and H of every stage at the guess. Per sampling instant:
  *   feedback: QP with the measured xhat0, full step, u_0 out;
@@ -9,17 +10,42 @@
  *             the adjoint-corrected gradient (eq. 12).
  * The order of operations is that of the contract, so that the Python reference and this
  * runtime produce the same iterates to round-off.
+ *
+ * The modules (the phase timers, the ring of stage slots, the regularisation, the wrappers
+ * of the generated functions, the automatic lm, the health predicates, the KKT measure, the
+ * QP) are included at the end of this file, as HPIPM's x_*.c files are, with
+ * ROBOT_ARM_INTERNAL = static: the library exports the public API of robot_arm_solver.h and the
+ * problem data of robot_arm_problem.h, nothing else. Each module compiles alone as well (the
+ * tests' builds), with external linkage. The modules call only modules below them (timer,
+ * ring, reg, funcs, linalg; lm and health read the ring; the QP reads linalg), never this
+ * file.
  */
+/* clock_gettime is POSIX, not C99: request it before any header (robot_arm_timer.c). */
+#ifndef _POSIX_C_SOURCE
+#define _POSIX_C_SOURCE 199309L
+#endif
+
+#if defined(__GNUC__)
+#define ROBOT_ARM_INTERNAL static __attribute__((unused))
+#else
+#define ROBOT_ARM_INTERNAL static
+#endif
+
 #include <math.h>
 
+#include "robot_arm_health.h"
 #include "robot_arm_kkt.h"
 #include "robot_arm_linalg.h"
+#include "robot_arm_lm.h"
 #include "robot_arm_problem.h"
 #include "robot_arm_solver.h"
-#include "robot_arm_solver_internal.h"
 
-#define ROBOT_ARM_MAGIC 0x444f5055 /* "DOPU" */
-#define ROBOT_ARM_DEFAULT_QP_TOL ROBOT_ARM_PREC(1e-10, 1e-5)
+/* robot_arm_info.timings is declared with the literal count of the phases (for cffi) */
+typedef char robot_arm_phase_count_check[(ROBOT_ARM_N_PHASES == 10) ? 1 : -1];
+
+/* The phases of prepare (every phase but feedback and kkt), as a bit mask. */
+#define ROBOT_ARM_PREPARE_PHASES                                                                                 \
+    (((1u << ROBOT_ARM_N_PHASES) - 1u) & ~(1u << ROBOT_ARM_PHASE_FEEDBACK) & ~(1u << ROBOT_ARM_PHASE_KKT))
 
 /* ---- small helpers ------------------------------------------------------------------ */
 
@@ -39,14 +65,16 @@ static void robot_arm_zero(int n, robot_arm_real *dst)
     }
 }
 
-void robot_arm_ensure_setup(robot_arm_solver *s)
+/* x_0 carries no bound (docs/algorithm.md section 1): it is fixed by the measurement, so
+ * the simple bounds of the states apply at nodes 1..N only (stage 0 passes infinite sides
+ * to the QP, the KKT measure counts a multiplier on x_0 with its magnitude) and the x part
+ * of mu_b_0 is 0 (robot_arm_clear_x0_multiplier). */
+static int robot_arm_x_bounded(int k)
 {
-    if (s->magic != ROBOT_ARM_MAGIC) {
-        robot_arm_defaults(s);
-    }
+    return k > 0;
 }
 
-void robot_arm_clear_x0_multiplier(robot_arm_solver *s)
+static void robot_arm_clear_x0_multiplier(robot_arm_solver *s)
 {
     int i;
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
@@ -54,10 +82,42 @@ void robot_arm_clear_x0_multiplier(robot_arm_solver *s)
     }
 }
 
-int robot_arm_ret(robot_arm_solver *s, int status)
+/* Record status as the status of the last call and return it. */
+static int robot_arm_ret(robot_arm_solver *s, int status)
 {
     s->status = status;
     return status;
+}
+
+/* The phase of the timer from now on; returns the phase that ran (robot_arm_timer_switch). */
+static int robot_arm_phase(robot_arm_solver *s, int phase)
+{
+    return robot_arm_timer_switch(&s->timer, phase);
+}
+
+static int robot_arm_has_clock(const robot_arm_solver *s);
+
+/* ---- the anytime budget (algorithm.md section 12) --------------------------------------- */
+
+/* 1 when a budget is set (a time budget needs a clock). */
+static int robot_arm_budget_on(const robot_arm_solver *s)
+{
+    return s->settings.budget > 0.0 && (s->settings.budget_unit == ROBOT_ARM_BUDGET_WORK || robot_arm_has_clock(s));
+}
+
+/* Now on the budget's clock: the work counter (work units) or the solver's clock. */
+static double robot_arm_budget_now(const robot_arm_solver *s)
+{
+    if (s->settings.budget_unit == ROBOT_ARM_BUDGET_WORK) {
+        return s->anytime.work;
+    }
+    return s->timer.clock ? s->timer.clock(s->timer.ctx) : 0.0;
+}
+
+/* 1 without a budget, or when `cost` more still fits in the instant's budget. */
+static int robot_arm_budget_fits(const robot_arm_solver *s, double cost)
+{
+    return !robot_arm_budget_on(s) || robot_arm_budget_now(s) - s->anytime.instant_start + cost <= s->settings.budget;
 }
 
 /* ---- generic information ------------------------------------------------------------ */
@@ -118,470 +178,68 @@ const char *robot_arm_status_string(int status)
     }
 }
 
-/* ---- safety: scales, clipping, health (algorithm.md section 9) -------------------- */
+/* ---- health (algorithm.md section 9; the predicates are robot_arm_health.c) ------------- */
 
-static robot_arm_real robot_arm_absmax(robot_arm_real a, robot_arm_real b)
-{
-    robot_arm_real fa = robot_arm_fabs(a);
-    return isfinite(a) && fa > b ? fa : b;
-}
-
-/* The scale of each state and control: the largest magnitude among its finite bounds, the
- * OCP file's guess, the default x0 and 1. */
-static void robot_arm_compute_scales(robot_arm_solver *s)
-{
-    int k, i;
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        robot_arm_real v = ROBOT_ARM_R(1.0);
-        v = robot_arm_absmax(robot_arm_lbx[i], v);
-        v = robot_arm_absmax(robot_arm_ubx[i], v);
-        v = robot_arm_absmax(robot_arm_x0_default[i], v);
-        for (k = 0; k <= ROBOT_ARM_N; ++k) {
-            v = robot_arm_absmax(robot_arm_guess_x[k][i], v);
-        }
-        s->scale_x[i] = v;
-    }
-    for (i = 0; i < ROBOT_ARM_NU; ++i) {
-        robot_arm_real v = ROBOT_ARM_R(1.0);
-        v = robot_arm_absmax(robot_arm_lbu[i], v);
-        v = robot_arm_absmax(robot_arm_ubu[i], v);
-        for (k = 0; k < ROBOT_ARM_N; ++k) {
-            v = robot_arm_absmax(robot_arm_guess_u[k][i], v);
-        }
-        s->scale_u[i] = v;
-    }
-}
-
-/* Health state after init: no failure, the plan is the iterate's controls. */
+/* Health state after init: no failure, the plan is the iterate's controls (the OCP file's
+ * guess before the first init). */
 static void robot_arm_reset_health(robot_arm_solver *s)
 {
-    int k, i;
-    s->n_failed = 0;
-    s->recover_pending = 0;
-    s->flags = 0;
-    s->n_recoveries = 0;
-    s->recovering = 0;
-    s->xhat_fresh = 1;
-    s->plan_age = 0;
-    for (k = 0; k < ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NU; ++i) {
-            s->plan_u[k][i] = s->initialized ? s->u[k][i] : robot_arm_guess_u[k][i];
-        }
-    }
-    for (i = 0; i < ROBOT_ARM_NU; ++i) {
-        s->u0_out[i] = s->plan_u[0][i];
-    }
-    s->kkt_proxy = ROBOT_ARM_R(0.0);
-    s->kkt_proxy_ref = ROBOT_ARM_R(0.0);
-}
-
-/* u clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1 when
- * an entry changed. */
-static int robot_arm_clip_u(const robot_arm_real *u, robot_arm_real *out)
-{
-    int i, clipped = 0;
-    for (i = 0; i < ROBOT_ARM_NU; ++i) {
-        robot_arm_real v = isnan(u[i]) ? ROBOT_ARM_R(0.0) : u[i];
-        if (v < robot_arm_lbu[i]) {
-            v = robot_arm_lbu[i];
-        }
-        if (v > robot_arm_ubu[i]) {
-            v = robot_arm_ubu[i];
-        }
-        if (!(v == u[i])) {
-            clipped = 1;
-        }
-        out[i] = v;
-    }
-    return clipped;
-}
-
-/* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as the iterate
- * plus an optional step: every entry finite and |v_i| <= BOX scale_i + |xhat0_i| (states),
- * BOX scale_i (controls). Returns 1 when it passes. */
-static int robot_arm_box_ok(const robot_arm_solver *s, const robot_arm_real *x, const robot_arm_real *dx, int dx_stride,
-                        const robot_arm_real *u, const robot_arm_real *du, int du_stride)
-{
-    int k, i;
-    for (k = 0; k <= ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            robot_arm_real v = x[k * ROBOT_ARM_NX + i] + (dx ? dx[k * dx_stride + i] : ROBOT_ARM_R(0.0));
-            if (!(robot_arm_fabs(v) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_x[i] + robot_arm_fabs(s->xhat0[i]))) {
-                return 0;
-            }
-        }
-    }
-    for (k = 0; k < ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NU; ++i) {
-            robot_arm_real v = u[k * ROBOT_ARM_NU + i] + (du ? du[k * du_stride + i] : ROBOT_ARM_R(0.0));
-            if (!(robot_arm_fabs(v) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_u[i])) {
-                return 0;
-            }
-        }
-    }
-    return 1;
+    robot_arm_health_reset(&s->health, s->initialized ? &s->u[0][0] : &robot_arm_guess_u[0][0]);
 }
 
 /* The fallback control of a failed feedback: the next control of the last good plan. */
 static void robot_arm_fallback_u0(robot_arm_solver *s, robot_arm_real *u0)
 {
-    int j = s->mode == ROBOT_ARM_MODE_RECEDING ? s->plan_age : 0;
-    j = j > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : j;
-    if (robot_arm_clip_u(s->plan_u[j], s->u0_out)) {
-        s->flags |= ROBOT_ARM_FLAG_U0_CLIPPED;
+    if (robot_arm_health_fallback(&s->health, s->settings.mode == ROBOT_ARM_MODE_RECEDING, u0)) {
+        s->health.flags |= ROBOT_ARM_FLAG_U0_CLIPPED;
     }
-    s->flags |= ROBOT_ARM_FLAG_FALLBACK;
-    if (u0) {
-        robot_arm_copy(u0, s->u0_out, ROBOT_ARM_NU);
-    }
+    s->health.flags |= ROBOT_ARM_FLAG_FALLBACK;
 }
 
 /* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
-static void robot_arm_lm_feedback(robot_arm_solver *s, int status);
-
 static int robot_arm_feedback_failed(robot_arm_solver *s, robot_arm_real *u0, int status)
 {
-    robot_arm_lm_feedback(s, status);
-    s->n_failed += 1;
-    if (s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING && s->n_failed >= s->recovery_failures) {
-        s->recover_pending = 1;
+    if (status == ROBOT_ARM_ERR_QP || status == ROBOT_ARM_ERR_DIVERGED) {
+        robot_arm_lm_feedback(&s->lm, 0);
+    }
+    s->health.n_failed += 1;
+    if (s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING &&
+        s->health.n_failed >= s->settings.recovery_failures) {
+        s->health.recover_pending = 1;
     }
     if (status == ROBOT_ARM_ERR_DIVERGED) {
-        s->flags |= ROBOT_ARM_FLAG_DIVERGED;
+        s->health.flags |= ROBOT_ARM_FLAG_DIVERGED;
     }
     robot_arm_fallback_u0(s, u0);
     return robot_arm_ret(s, status);
 }
 
-/* Divergence measure at the current point from the F values in the slots and the terminal
- * node (after init or a prepare): max of |F_w,k + [lam_k; 0]|, |gL_N + mu_bN + lam_N|,
- * |phi_k - x_{k+1}|, |r_eq| (inf-norms). */
+/* Divergence measure at the current point (after init or a prepare). */
 static robot_arm_real robot_arm_kkt_proxy_eval(const robot_arm_solver *s)
 {
-    robot_arm_real m = ROBOT_ARM_R(0.0), v;
-    int k, i;
-    for (k = 0; k < ROBOT_ARM_N; ++k) {
-        const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
-        for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            v = robot_arm_fabs(slot->F_w[i] + (i < ROBOT_ARM_NX ? s->lam[k][i] : ROBOT_ARM_R(0.0)));
-            m = (v > m || isnan(v)) ? v : m;
-        }
-        for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            v = robot_arm_fabs(slot->phi[i] - s->x[k + 1][i]);
-            m = (v > m || isnan(v)) ? v : m;
-        }
-    }
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        v = robot_arm_fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[ROBOT_ARM_N][i]);
-        m = (v > m || isnan(v)) ? v : m;
-    }
-    for (i = 0; i < ROBOT_ARM_NE; ++i) {
-        v = robot_arm_fabs(s->r_eq[i]);
-        m = (v > m || isnan(v)) ? v : m;
-    }
-    return m;
+    return robot_arm_kkt_proxy(&s->ring, &s->x[0][0], &s->lam[0][0], s->gL_N, s->mu_bN, s->r_eq);
+}
+
+/* The box test of the iterate plus an optional step. */
+static int robot_arm_iterate_box_ok(const robot_arm_solver *s, const robot_arm_real *dx, int dx_stride,
+                                const robot_arm_real *du, int du_stride)
+{
+    return robot_arm_box_ok(&s->health, s->xhat0, &s->x[0][0], dx, dx_stride, &s->u[0][0], du, du_stride);
 }
 
 /* The divergence test of the prepared iterate: box, finite multipliers, KKT proxy bound. */
-static int robot_arm_iterate_diverged(robot_arm_solver *s)
+static int robot_arm_iterate_diverged(const robot_arm_solver *s)
 {
-    robot_arm_real ref = s->kkt_proxy_ref > ROBOT_ARM_R(1.0) ? s->kkt_proxy_ref : ROBOT_ARM_R(1.0);
-    if (!robot_arm_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0)) {
-        return 1;
-    }
-    if (!robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NX, &s->lam[0][0]) ||
-        !robot_arm_lai_vec_finite(ROBOT_ARM_N * ROBOT_ARM_NW, &s->mu_b[0][0]) ||
-        !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->mu_bN)) {
-        return 1;
-    }
-    return !(s->kkt_proxy <= ROBOT_ARM_DIVERGENCE_KKT * ref);
+    return robot_arm_diverged(&s->health, s->xhat0, &s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_b[0][0],
+                          s->mu_bN);
 }
 
-/* ---- automatic Levenberg-Marquardt term (algorithm.md section 10) ------------------- */
-
-/* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
-static robot_arm_real robot_arm_lm_hessian_scale(const robot_arm_solver *s)
+/* The automatic lm after init or a re-initialisation (QP assembled), in its phase. */
+static void robot_arm_lm_started(robot_arm_solver *s)
 {
-    robot_arm_real h = ROBOT_ARM_REAL_TINY, v;
-    int k, i;
-    for (k = 0; k < ROBOT_ARM_N; ++k) {
-        const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
-        for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            v = robot_arm_fabs(slot->Ht[i + i * ROBOT_ARM_NW]);
-            h = v > h ? v : h;
-        }
-    }
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        v = robot_arm_fabs(s->A_N[i + i * ROBOT_ARM_NX]);
-        h = v > h ? v : h;
-    }
-    return h;
-}
-
-/* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
- * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
- * out) has control pivots above ROBOT_ARM_LM_PIVOT_REL h. */
-static int robot_arm_lm_convex(robot_arm_solver *s, robot_arm_real lm)
-{
-    const robot_arm_real tol = ROBOT_ARM_LM_PIVOT_REL * s->lm_scale;
-    robot_arm_real *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
-    robot_arm_real v;
-    int k, i, j, l;
-    for (j = 0; j < ROBOT_ARM_NX; ++j) {
-        for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            P[i + j * ROBOT_ARM_NX] =
-                (i >= j ? s->A_N[i + j * ROBOT_ARM_NX] : s->A_N[j + i * ROBOT_ARM_NX]) + (i == j ? lm : ROBOT_ARM_R(0.0));
-        }
-    }
-    for (k = ROBOT_ARM_N - 1; k >= 0; --k) {
-        const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
-        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
-        for (j = 0; j < ROBOT_ARM_NW; ++j) {
-            for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                v = ROBOT_ARM_R(0.0);
-                for (l = 0; l < ROBOT_ARM_NX; ++l) {
-                    v += P[i + l * ROBOT_ARM_NX] * slot->Phit[l + j * ROBOT_ARM_NX];
-                }
-                PA[i + j * ROBOT_ARM_NX] = v;
-            }
-        }
-        for (j = 0; j < ROBOT_ARM_NW; ++j) {
-            for (i = 0; i < ROBOT_ARM_NW; ++i) {
-                v = (i >= j ? slot->Ht[i + j * ROBOT_ARM_NW] : slot->Ht[j + i * ROBOT_ARM_NW]) +
-                    (i == j ? lm : ROBOT_ARM_R(0.0));
-                for (l = 0; l < ROBOT_ARM_NX; ++l) {
-                    v += slot->Phit[l + i * ROBOT_ARM_NX] * PA[l + j * ROBOT_ARM_NX];
-                }
-                Z[i + j * ROBOT_ARM_NW] = v;
-            }
-        }
-        /* Cholesky of the control block Z_uu in place (lower triangle) */
-        for (j = ROBOT_ARM_NX; j < ROBOT_ARM_NW; ++j) {
-            robot_arm_real d = Z[j + j * ROBOT_ARM_NW];
-            for (l = ROBOT_ARM_NX; l < j; ++l) {
-                d -= Z[j + l * ROBOT_ARM_NW] * Z[j + l * ROBOT_ARM_NW];
-            }
-            if (!(d > tol)) {
-                return 0;
-            }
-            d = robot_arm_sqrt(d);
-            Z[j + j * ROBOT_ARM_NW] = d;
-            for (i = j + 1; i < ROBOT_ARM_NW; ++i) {
-                v = Z[i + j * ROBOT_ARM_NW];
-                for (l = ROBOT_ARM_NX; l < j; ++l) {
-                    v -= Z[i + l * ROBOT_ARM_NW] * Z[j + l * ROBOT_ARM_NW];
-                }
-                Z[i + j * ROBOT_ARM_NW] = v / d;
-            }
-        }
-        if (k == 0) {
-            break; /* x_0 is fixed: P_0 is not needed */
-        }
-        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
-        for (j = 0; j < ROBOT_ARM_NX; ++j) {
-            for (i = ROBOT_ARM_NX; i < ROBOT_ARM_NW; ++i) {
-                v = Z[i + j * ROBOT_ARM_NW];
-                for (l = ROBOT_ARM_NX; l < i; ++l) {
-                    v -= Z[i + l * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
-                }
-                Z[i + j * ROBOT_ARM_NW] = v / Z[i + i * ROBOT_ARM_NW];
-            }
-        }
-        for (j = 0; j < ROBOT_ARM_NX; ++j) {
-            for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                v = ROBOT_ARM_R(0.5) * (Z[i + j * ROBOT_ARM_NW] + Z[j + i * ROBOT_ARM_NW]);
-                for (l = ROBOT_ARM_NX; l < ROBOT_ARM_NW; ++l) {
-                    v -= Z[l + i * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
-                }
-                P[i + j * ROBOT_ARM_NX] = v;
-            }
-        }
-    }
-    return 1;
-}
-
-/* One raise: from below the minimum to the minimum, else times ROBOT_ARM_LM_RAISE, at most the
- * maximum. */
-static void robot_arm_lm_raise(robot_arm_solver *s)
-{
-    robot_arm_real lo = ROBOT_ARM_LM_MIN_REL * s->lm_scale, hi = ROBOT_ARM_LM_MAX_REL * s->lm_scale;
-    if (s->lm_uncapped > s->lm) {
-        /* the first raise after the cap of robot_arm_lm_measured restores the term it capped */
-        s->lm = s->lm_uncapped;
-        s->lm_uncapped = -ROBOT_ARM_R(1.0);
-        return;
-    }
-    s->lm = s->lm < lo ? lo : s->lm * ROBOT_ARM_LM_RAISE;
-    s->lm = s->lm > hi ? hi : s->lm;
-}
-
-/* Raise until the QP is convex on the dynamics or the term is at its maximum. */
-static void robot_arm_lm_convexify(robot_arm_solver *s)
-{
-    robot_arm_real hi = ROBOT_ARM_LM_MAX_REL * s->lm_scale;
-    while (!robot_arm_lm_convex(s, s->lm) && s->lm < hi) {
-        robot_arm_lm_raise(s);
-    }
-}
-
-/* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
-void robot_arm_lm_start(robot_arm_solver *s)
-{
-    if (!s->lm_auto) {
-        return;
-    }
-    s->lm_scale = robot_arm_lm_hessian_scale(s);
-    s->lm = ROBOT_ARM_R(0.0);
-    s->lm_kkt_prev = -ROBOT_ARM_R(1.0);
-    s->lm_uncapped = -ROBOT_ARM_R(1.0);
-    robot_arm_lm_convexify(s);
-}
-
-/* After a prepare (QP assembled, KKT proxy evaluated): the scale, a raise when the proxy
- * grew ROBOT_ARM_LM_KKT_GROWTH times, then convex. */
-static void robot_arm_lm_prepared(robot_arm_solver *s)
-{
-    robot_arm_real floor_ =
-        ROBOT_ARM_PREC(1e-8, 1e-5) * (s->kkt_proxy_ref > ROBOT_ARM_R(1.0) ? s->kkt_proxy_ref : ROBOT_ARM_R(1.0));
-    robot_arm_real prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
-    if (!s->lm_auto) {
-        return;
-    }
-    s->lm_scale = robot_arm_lm_hessian_scale(s);
-    s->lm_uncapped = -ROBOT_ARM_R(1.0);
-    if (s->lm_kkt_prev >= ROBOT_ARM_R(0.0) && !(s->kkt_proxy <= ROBOT_ARM_LM_KKT_GROWTH * prev)) {
-        robot_arm_lm_raise(s);
-    }
-    s->lm_kkt_prev = s->kkt_proxy;
-    robot_arm_lm_convexify(s);
-}
-
-/* Feedback, once the measurement is in the QP: the term capped by the distance from the
- * solution, ROBOT_ARM_LM_KKT_REL h d^2 with d = max(proxy, max_i |dx0_i| / scale_x_i) (0 below
- * ROBOT_ARM_LM_MIN_REL h), so that it vanishes where the iterate converges. */
-static void robot_arm_lm_measured(robot_arm_solver *s)
-{
-    robot_arm_real d = s->kkt_proxy, cap, v;
-    int i;
-    s->lm_uncapped = -ROBOT_ARM_R(1.0);
-    if (!s->lm_auto) {
-        return;
-    }
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        v = robot_arm_fabs(s->qp_in.x0[i]) / s->scale_x[i];
-        d = v > d ? v : d;
-    }
-    cap = ROBOT_ARM_LM_KKT_REL * s->lm_scale * d * d;
-    if (!(s->lm <= cap)) {
-        s->lm_uncapped = s->lm;
-        s->lm = cap < ROBOT_ARM_LM_MIN_REL * s->lm_scale ? ROBOT_ARM_R(0.0) : cap;
-    }
-}
-
-/* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
-static void robot_arm_lm_feedback(robot_arm_solver *s, int status)
-{
-    if (!s->lm_auto) {
-        return;
-    }
-    if (status == ROBOT_ARM_OK) {
-        s->lm *= ROBOT_ARM_LM_LOWER;
-        if (s->lm < ROBOT_ARM_LM_MIN_REL * s->lm_scale) {
-            s->lm = ROBOT_ARM_R(0.0);
-        }
-    } else if (status == ROBOT_ARM_ERR_QP || status == ROBOT_ARM_ERR_DIVERGED) {
-        robot_arm_lm_raise(s);
-    }
-}
-
-void robot_arm_defaults(robot_arm_solver *s)
-{
-    int k, i;
-    s->magic = ROBOT_ARM_MAGIC;
-    s->initialized = 0;
-    s->qp_ready = 0;
-    s->prepare_due = 0;
-    s->shifted = 0;
-    s->status = ROBOT_ARM_OK;
-    s->M = robot_arm_default_M < 0 ? 0 : (robot_arm_default_M > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : robot_arm_default_M);
-    s->mode = ROBOT_ARM_MODE_RECEDING;
-    s->hessian = (robot_arm_default_hessian == ROBOT_ARM_HESSIAN_GAUSS_NEWTON && ROBOT_ARM_HAS_GN)
-                     ? ROBOT_ARM_HESSIAN_GAUSS_NEWTON
-                     : ROBOT_ARM_HESSIAN_EXACT;
-    s->regularization = robot_arm_default_regularization;
-    s->reg_eps = robot_arm_default_reg_eps;
-    s->cost_hessian = robot_arm_default_cost_hessian ? 1 : 0;
-    /* a negative generated default: the automatic term (algorithm.md section 10) */
-    s->lm_auto = !(robot_arm_default_lm >= ROBOT_ARM_R(0.0));
-    s->lm =
-        (robot_arm_default_lm >= ROBOT_ARM_R(0.0) && robot_arm_default_lm < INFINITY) ? robot_arm_default_lm : ROBOT_ARM_R(0.0);
-    s->lm_scale = ROBOT_ARM_R(1.0);
-    s->lm_kkt_prev = -ROBOT_ARM_R(1.0);
-    s->lm_uncapped = -ROBOT_ARM_R(1.0);
-    for (k = 0; k < ROBOT_ARM_N; ++k) { /* set only during a QP solve (robot_arm_qp_solve_bound) */
-        s->qp_in.H[k] = 0;
-        s->qp_in.Phi[k] = 0;
-        s->qp_in.C[k] = 0;
-    }
-    s->qp_in.HN = 0;
-    s->qp_in.R = 0;
-    s->qp_in.Req = 0;
-    robot_arm_qp_settings_default(&s->qp_settings);
-    s->qp_settings.tol = ROBOT_ARM_DEFAULT_QP_TOL;
-    s->qp_warm = 1;
-    s->qp_cold_retry = 0;
-    for (k = 0; k <= ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NP; ++i) {
-            s->p[k][i] = robot_arm_p_default[i];
-        }
-    }
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->xhat0[i] = robot_arm_x0_default[i];
-    }
-    s->n_recomputed = 0;
-    s->qp_status = 0;
-    s->qp_iterations = 0;
-    for (k = 0; k < ROBOT_ARM_N; ++k) {
-        s->rho[k] = ROBOT_ARM_R(0.0);
-    }
-    s->recovery = 1;
-    s->recovery_failures = ROBOT_ARM_RECOVERY_FAILURES;
-    robot_arm_compute_scales(s);
-    robot_arm_reset_health(s);
-    for (i = 0; i < 4; ++i) {
-        s->kkt[i] = NAN;
-    }
-    robot_arm_timer_init(&s->timer);
-    s->budget_unit = ROBOT_ARM_BUDGET_OFF;
-    s->budget = 0.0;
-    s->anytime_tol = ROBOT_ARM_ANYTIME_TOL;
-    s->M_adaptive = 0;
-    s->M_min = 0;
-    s->M_max = ROBOT_ARM_N - 1;
-    s->M_eta = ROBOT_ARM_ADAPTIVE_ETA;
-    s->work = 0.0;
-    s->instant_start = 0.0;
-    s->cost_stage = 0.0;
-    s->cost_qp = 0.0;
-    s->cost_prepare = 0.0;
-    s->cost_qp_iter = 0.0;
-    s->budget_used = 0.0;
-    s->extra_iterations = 0;
-    s->instant_stages = 0;
-}
-
-/* ---- the budget clock (algorithm.md section 12) --------------------------------------- */
-
-/* Now on the budget's clock: the work counter (work units) or the solver's clock. */
-static double robot_arm_budget_now(const robot_arm_solver *s)
-{
-    return s->budget_unit == ROBOT_ARM_BUDGET_WORK ? s->work : robot_arm_timer_now(&s->timer);
-}
-
-/* 1 when no budget is set, or when `cost` more still fits in the instant's budget. */
-static int robot_arm_budget_fits(const robot_arm_solver *s, double cost)
-{
-    return s->budget_unit == ROBOT_ARM_BUDGET_OFF || robot_arm_budget_now(s) - s->instant_start + cost <= s->budget;
+    int prev = robot_arm_phase(s, ROBOT_ARM_PHASE_LM);
+    robot_arm_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
+    robot_arm_phase(s, prev);
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */
@@ -591,7 +249,7 @@ static int robot_arm_stage_F(robot_arm_solver *s, int k)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0);
     int i;
-    s->work += 1.0;
+    s->anytime.work += 1.0;
     if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
@@ -610,42 +268,38 @@ static int robot_arm_stage_F(robot_arm_solver *s, int k)
 /* Regularise a fresh A block (algorithm.md section 5), timed as its own phase. */
 static int robot_arm_regularize(robot_arm_solver *s, int n, robot_arm_real *A)
 {
-    double t0;
-    int rc;
-    if (s->regularization == ROBOT_ARM_REG_NONE) {
+    int rc, prev;
+    if (s->settings.regularization == ROBOT_ARM_REG_NONE) {
         return ROBOT_ARM_OK;
     }
-    t0 = robot_arm_timer_now(&s->timer);
-    rc = robot_arm_reg_apply(n, A, s->regularization, s->reg_eps, s->mem.ev.reg_work);
-    robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_REGULARIZATION, t0);
+    prev = robot_arm_phase(s, ROBOT_ARM_PHASE_REGULARIZATION);
+    rc = robot_arm_reg_apply(n, A, s->settings.regularization, s->settings.reg_eps, s->mem.ev.reg_work);
+    robot_arm_phase(s, prev);
     return rc == 0 ? ROBOT_ARM_OK : ROBOT_ARM_ERR_REGULARIZATION;
 }
 
 /* The stage-cost Hessian A_l of stage k at the current point into s->mem.ev.tmp_Al. */
 static int robot_arm_stage_Al(robot_arm_solver *s, int k)
 {
-    double t0 = robot_arm_timer_now(&s->timer);
-    int rc = robot_arm_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->mem.ev.tmp_Al,
+    int prev = robot_arm_phase(s, ROBOT_ARM_PHASE_HESSIANS);
+    int rc = robot_arm_eval_stage_hess_cost(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->mem.ev.tmp_Al,
                                         &s->mem.ev.fun_work);
-    robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_HESSIANS, t0);
-    if (rc != 0) {
-        return ROBOT_ARM_ERR_FUNCTION;
-    }
-    return robot_arm_lai_vec_finite(ROBOT_ARM_NW * ROBOT_ARM_NW, s->mem.ev.tmp_Al) ? ROBOT_ARM_OK : ROBOT_ARM_ERR_NONFINITE_VALUE;
+    rc = rc != 0 ? ROBOT_ARM_ERR_FUNCTION
+                 : (robot_arm_lai_vec_finite(ROBOT_ARM_NW * ROBOT_ARM_NW, s->mem.ev.tmp_Al) ? ROBOT_ARM_OK
+                                                                                : ROBOT_ARM_ERR_NONFINITE_VALUE);
+    robot_arm_phase(s, prev);
+    return rc;
 }
 
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
  * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
  * leaves the slot as it was. */
-static int robot_arm_stage_H(robot_arm_solver *s, int k)
+static int robot_arm_stage_H_eval(robot_arm_solver *s, int k)
 {
     robot_arm_stage_slot *slot;
-    double t0 = robot_arm_timer_now(&s->timer);
     int rc, i;
-    s->work += 1.0;
-    rc = robot_arm_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+    rc = robot_arm_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
                                s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
-    robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
@@ -674,7 +328,22 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
     return ROBOT_ARM_OK;
 }
 
-int robot_arm_term_grad_checked(robot_arm_solver *s, robot_arm_real *gL, robot_arm_real *E, robot_arm_real *r, robot_arm_real *r_eq)
+/* robot_arm_stage_H_eval in the phase "hessians" (its regularisation in its own). */
+static int robot_arm_stage_H(robot_arm_solver *s, int k)
+{
+    int prev = robot_arm_phase(s, ROBOT_ARM_PHASE_HESSIANS);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = robot_arm_stage_H_eval(s, k);
+    robot_arm_phase(s, prev);
+    return rc;
+}
+
+/* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
+ * ROBOT_ARM_ERR_FUNCTION when the function fails, ROBOT_ARM_ERR_NONFINITE_VALUE when a value is not
+ * finite, else ROBOT_ARM_OK. */
+static int robot_arm_term_grad_checked(robot_arm_solver *s, robot_arm_real *gL, robot_arm_real *E, robot_arm_real *r,
+                                   robot_arm_real *r_eq)
 {
     if (robot_arm_eval_term_grad(s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, gL, E, r, r_eq,
                              &s->mem.ev.fun_work) != 0) {
@@ -692,7 +361,7 @@ static int robot_arm_term_F(robot_arm_solver *s)
 {
     robot_arm_real gL[ROBOT_ARM_NX], E = ROBOT_ARM_R(0.0), r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
     int rc;
-    s->work += 1.0;
+    s->anytime.work += 1.0;
     rc = robot_arm_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != ROBOT_ARM_OK) {
         return rc;
@@ -705,15 +374,12 @@ static int robot_arm_term_F(robot_arm_solver *s)
 }
 
 /* Terminal H: A_N (regularised), R, R_eq. */
-static int robot_arm_term_H(robot_arm_solver *s)
+static int robot_arm_term_H_eval(robot_arm_solver *s)
 {
     robot_arm_real R[ROBOT_ARM_DIM(ROBOT_ARM_NR) * ROBOT_ARM_NX], R_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE) * ROBOT_ARM_NX];
-    double t0 = robot_arm_timer_now(&s->timer);
     int rc;
-    s->work += 1.0;
-    rc = robot_arm_eval_term_hess(s->hessian, s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
-                              R_eq, &s->mem.ev.fun_work);
-    robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_HESSIANS, t0);
+    rc = robot_arm_eval_term_hess(s->settings.hessian, s->x[ROBOT_ARM_N], s->p[ROBOT_ARM_N], s->mu_r, s->nu,
+                              s->mem.ev.tmp_A, R, R_eq, &s->mem.ev.fun_work);
     if (rc != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
@@ -731,13 +397,22 @@ static int robot_arm_term_H(robot_arm_solver *s)
     return ROBOT_ARM_OK;
 }
 
+static int robot_arm_term_H(robot_arm_solver *s)
+{
+    int prev = robot_arm_phase(s, ROBOT_ARM_PHASE_HESSIANS);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = robot_arm_term_H_eval(s);
+    robot_arm_phase(s, prev);
+    return rc;
+}
+
 /* ---- QP assembly (algorithm.md section 3) ------------------------------------------- */
 
 static void robot_arm_assemble(robot_arm_solver *s)
 {
     robot_arm_qp_in *in = &s->qp_in;
-    int k, i, j;
-    double t0 = robot_arm_timer_now(&s->timer);
+    int k, i, j, prev = robot_arm_phase(s, ROBOT_ARM_PHASE_ASSEMBLY);
 
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
@@ -789,28 +464,17 @@ static void robot_arm_assemble(robot_arm_solver *s)
     for (i = 0; i < ROBOT_ARM_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
-    robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_ASSEMBLY, t0);
+    robot_arm_phase(s, prev);
 }
 
 /* ---- init --------------------------------------------------------------------------- */
 
-static void robot_arm_clear_timings(robot_arm_solver *s, int first, int last)
-{
-    int i;
-    for (i = first; i <= last; ++i) {
-        s->timer.t[i] = ROBOT_ARM_R(0.0);
-    }
-}
-
 /* F (stored as F_old) and H of every stage, terminal F and H, at the current iterate. */
-static int robot_arm_linearize_all(robot_arm_solver *s)
+static int robot_arm_linearize_all_eval(robot_arm_solver *s)
 {
-    double t0;
     int k, rc;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        t0 = robot_arm_timer_now(&s->timer);
         rc = robot_arm_stage_F(s, k);
-        robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_GRADIENTS, t0);
         if (rc != ROBOT_ARM_OK) {
             return rc;
         }
@@ -821,13 +485,20 @@ static int robot_arm_linearize_all(robot_arm_solver *s)
             return rc;
         }
     }
-    t0 = robot_arm_timer_now(&s->timer);
     rc = robot_arm_term_F(s);
-    robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_GRADIENTS, t0);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
     return robot_arm_term_H(s);
+}
+
+/* robot_arm_linearize_all_eval in the phase "gradients" (the blocks in theirs). */
+static int robot_arm_linearize_all(robot_arm_solver *s)
+{
+    int prev = robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
+    int rc = robot_arm_linearize_all_eval(s);
+    robot_arm_phase(s, prev);
+    return rc;
 }
 
 /* The second half of init with the iterate in place: ring reset, F and H of every stage and
@@ -838,10 +509,8 @@ static int robot_arm_init_finish(robot_arm_solver *s)
     robot_arm_ring_reset(&s->ring);
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         s->rho[k] = ROBOT_ARM_R(0.0);
-        s->recomputed[k] = k;
-        s->selected[k] = 0;
+        s->selected[k] = 1; /* every stage is fresh */
     }
-    s->n_recomputed = ROBOT_ARM_N;
     s->qp_status = 0;
     s->qp_iterations = 0;
 
@@ -854,7 +523,7 @@ static int robot_arm_init_finish(robot_arm_solver *s)
     s->qp_ready = 1;
     s->prepare_due = 0;
     s->shifted = 0;
-    robot_arm_lm_start(s);
+    robot_arm_lm_started(s);
     return ROBOT_ARM_OK;
 }
 
@@ -864,7 +533,9 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
 {
     int k, i, rc;
 
-    robot_arm_ensure_setup(s);
+    if (!s->set_up) {
+        return ROBOT_ARM_ERR_NOT_INITIALIZED;
+    }
     s->initialized = 0;
     robot_arm_reset_health(s);
     s->qp_ready = 0;
@@ -878,7 +549,7 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
         (mu_r && !robot_arm_lai_vec_finite(ROBOT_ARM_NR, mu_r)) || (nu && !robot_arm_lai_vec_finite(ROBOT_ARM_NE, nu))) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
-    robot_arm_clear_timings(s, 0, ROBOT_ARM_N_PHASES - 1);
+    robot_arm_timer_begin(&s->timer, (1u << ROBOT_ARM_N_PHASES) - 1u, ROBOT_ARM_PHASE_GRADIENTS);
 
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->xhat0[i] = xhat0 ? xhat0[i] : robot_arm_x0_default[i];
@@ -912,13 +583,13 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
     }
 
     rc = robot_arm_init_finish(s);
-    if (rc != ROBOT_ARM_OK) {
-        return robot_arm_ret(s, rc);
+    if (rc == ROBOT_ARM_OK) {
+        robot_arm_reset_health(s);
+        s->health.kkt_proxy = robot_arm_kkt_proxy_eval(s);
+        s->health.kkt_proxy_ref = s->health.kkt_proxy;
     }
-    robot_arm_reset_health(s);
-    s->kkt_proxy = robot_arm_kkt_proxy_eval(s);
-    s->kkt_proxy_ref = s->kkt_proxy;
-    return robot_arm_ret(s, ROBOT_ARM_OK);
+    robot_arm_timer_end(&s->timer, -1, 0.0);
+    return robot_arm_ret(s, rc);
 }
 
 int robot_arm_init_nominal(robot_arm_solver *s, const robot_arm_real *xhat0)
@@ -930,7 +601,9 @@ int robot_arm_init_nominal(robot_arm_solver *s, const robot_arm_real *xhat0)
                       ROBOT_ARM_NE > 0 ? robot_arm_nominal_nu : 0);
 #else
     (void)xhat0;
-    robot_arm_ensure_setup(s);
+    if (!s->set_up) {
+        return ROBOT_ARM_ERR_NOT_INITIALIZED;
+    }
     return robot_arm_ret(s, ROBOT_ARM_ERR_NO_NOMINAL);
 #endif
 }
@@ -994,8 +667,8 @@ static int robot_arm_feedback_admit(robot_arm_solver *s, const robot_arm_real *x
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
     }
     if (xhat0 == 0 || !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) {
-        s->xhat_fresh = 0;
-        if (s->mode == ROBOT_ARM_MODE_RECEDING) {
+        s->health.xhat_fresh = 0;
+        if (s->settings.mode == ROBOT_ARM_MODE_RECEDING) {
             /* the sampling instant has passed all the same: its prepare (the shift) is due */
             s->prepare_due = 1;
             s->shifted = 0;
@@ -1007,8 +680,8 @@ static int robot_arm_feedback_admit(robot_arm_solver *s, const robot_arm_real *x
          * starts from the newest measurement, so it is recorded all the same (algorithm.md
          * section 9); the instant has passed: its prepare (the shift) is due */
         robot_arm_copy(s->xhat0, xhat0, ROBOT_ARM_NX);
-        s->xhat_fresh = 1;
-        if (s->mode == ROBOT_ARM_MODE_RECEDING) {
+        s->health.xhat_fresh = 1;
+        if (s->settings.mode == ROBOT_ARM_MODE_RECEDING) {
             s->prepare_due = 1;
             s->shifted = 0;
         }
@@ -1025,8 +698,8 @@ static void robot_arm_feedback_measure(robot_arm_solver *s, const robot_arm_real
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
-    s->xhat_fresh = 1;
-    robot_arm_lm_measured(s);
+    s->health.xhat_fresh = 1;
+    robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -1036,10 +709,18 @@ static void robot_arm_feedback_measure(robot_arm_solver *s, const robot_arm_real
  * ring slots in place and the terminal blocks. They are set just before each solve and
  * cleared after it, so the struct holds no pointer into itself between calls and a byte
  * copy (memcpy, struct assignment) is a complete, independent solver. */
-static int robot_arm_qp_solve_bound(robot_arm_solver *s)
+static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm)
 {
     robot_arm_qp_in *in = &s->qp_in;
+    robot_arm_qp_settings settings;
     int k, qs;
+    robot_arm_qp_settings_default(&settings);
+    settings.tol = s->settings.qp_tol;
+    settings.max_iter = s->settings.qp_max_iter;
+    if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 12) */
+    }
+    settings.warm_start = warm;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
         in->H[k] = slot->Ht;
@@ -1049,7 +730,7 @@ static int robot_arm_qp_solve_bound(robot_arm_solver *s)
     in->HN = s->A_N;
     in->R = ROBOT_ARM_NR > 0 ? s->R : 0;
     in->Req = ROBOT_ARM_NE > 0 ? s->R_eq : 0;
-    qs = robot_arm_qp_solve(&s->mem.qp.work, in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    qs = robot_arm_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         in->H[k] = 0;
         in->Phi[k] = 0;
@@ -1072,8 +753,7 @@ static int robot_arm_qp_ok(const robot_arm_solver *s, int qs)
 static int robot_arm_qp_attempt(robot_arm_solver *s, int warm)
 {
     int qs;
-    s->qp_settings.warm_start = warm;
-    qs = robot_arm_qp_solve_bound(s);
+    qs = robot_arm_qp_solve_bound(s, warm);
     s->qp_iterations += s->qp_info.iterations;
     return qs;
 }
@@ -1086,15 +766,16 @@ static int robot_arm_qp_attempt(robot_arm_solver *s, int warm)
 static int robot_arm_feedback_qp(robot_arm_solver *s)
 {
     int qs;
-    s->qp_in.hess_shift = s->lm;
+    s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_cold_retry = 0;
-    s->work += ROBOT_ARM_WORK_QP;
-    if (s->qp_warm) {
+    s->anytime.work += ROBOT_ARM_WORK_QP;
+    if (s->settings.qp_warm_start) {
         robot_arm_qp_warm_point(s);
     }
-    qs = robot_arm_qp_attempt(s, s->qp_warm);
-    if (s->qp_warm && qs != ROBOT_ARM_QP_INVALID_INPUT && !(qs == ROBOT_ARM_QP_MAX_ITER && s->qp_capped) &&
+    qs = robot_arm_qp_attempt(s, s->settings.qp_warm_start);
+    if (s->settings.qp_warm_start && qs != ROBOT_ARM_QP_INVALID_INPUT &&
+        !(qs == ROBOT_ARM_QP_MAX_ITER && s->anytime.qp_cap > 0) &&
         (!robot_arm_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = robot_arm_qp_attempt(s, 0);
@@ -1108,12 +789,11 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
 static int robot_arm_feedback_lm_retries(robot_arm_solver *s, int qs, int *retries)
 {
     *retries = 0;
-    while (s->lm_auto && *retries < ROBOT_ARM_LM_RETRIES && s->lm < ROBOT_ARM_LM_MAX_REL * s->lm_scale &&
-           !robot_arm_qp_ok(s, qs) && qs != ROBOT_ARM_QP_INVALID_INPUT &&
-           !(qs == ROBOT_ARM_QP_MAX_ITER && s->qp_capped)) {
-        robot_arm_lm_raise(s);
-        s->work += ROBOT_ARM_WORK_QP;
-        s->qp_in.hess_shift = s->lm;
+    while (*retries < ROBOT_ARM_LM_RETRIES && robot_arm_lm_can_raise(&s->lm) && !robot_arm_qp_ok(s, qs) &&
+           qs != ROBOT_ARM_QP_INVALID_INPUT && !(qs == ROBOT_ARM_QP_MAX_ITER && s->anytime.qp_cap > 0)) {
+        robot_arm_lm_raise(&s->lm);
+        s->anytime.work += ROBOT_ARM_WORK_QP;
+        s->qp_in.hess_shift = s->lm.lm;
         qs = robot_arm_qp_attempt(s, 0);
         *retries += 1;
     }
@@ -1128,7 +808,7 @@ static int robot_arm_feedback_check_step(const robot_arm_solver *s, int qs)
     if (!robot_arm_qp_ok(s, qs)) {
         return ROBOT_ARM_ERR_QP;
     }
-    if (!robot_arm_box_ok(s, &s->x[0][0], &sol->x[0][0], ROBOT_ARM_NX, &s->u[0][0], &sol->u[0][0], ROBOT_ARM_QP_NU1)) {
+    if (!robot_arm_iterate_box_ok(s, &sol->x[0][0], ROBOT_ARM_NX, &sol->u[0][0], ROBOT_ARM_QP_NU1)) {
         return ROBOT_ARM_ERR_DIVERGED;
     }
     return ROBOT_ARM_OK;
@@ -1196,51 +876,15 @@ static void robot_arm_take_step(robot_arm_solver *s)
  * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
 static void robot_arm_keep_plan(robot_arm_solver *s, robot_arm_real *u0, int lowered)
 {
-    s->n_failed = 0;
-    s->plan_age = 0;
-    s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
     if (lowered) {
-        robot_arm_lm_feedback(s, ROBOT_ARM_OK);
+        robot_arm_lm_feedback(&s->lm, 1);
     }
-    robot_arm_copy(&s->plan_u[0][0], &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
-    if (robot_arm_clip_u(s->u[0], s->u0_out)) {
-        s->flags |= ROBOT_ARM_FLAG_U0_CLIPPED;
-    }
-    if (u0) {
-        robot_arm_copy(u0, s->u0_out, ROBOT_ARM_NU);
+    if (robot_arm_health_keep_plan(&s->health, &s->u[0][0], u0)) {
+        s->health.flags |= ROBOT_ARM_FLAG_U0_CLIPPED;
     }
 }
 
 static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries);
-
-/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
- * capped by the budget of the instant over the cost of one QP iteration measured before; a
- * QP stopped by the cap is not retried (the fallback control). Returns the setting's limit. */
-static int robot_arm_feedback_cap(robot_arm_solver *s)
-{
-    int max_iter = s->qp_settings.max_iter;
-    double left = s->budget - (robot_arm_budget_now(s) - s->instant_start), n;
-    s->qp_capped = 0;
-    if (s->budget_unit != ROBOT_ARM_BUDGET_TIME || !(s->cost_qp_iter > 0.0)) {
-        return max_iter;
-    }
-    n = left / s->cost_qp_iter;
-    n = n < 1.0 ? 1.0 : n;
-    if (n < (double)max_iter) {
-        s->qp_settings.max_iter = (int)n;
-        s->qp_capped = 1;
-    }
-    return max_iter;
-}
-
-/* The end of a feedback: the iteration limit of the setting back, the instant's cost so far. */
-static void robot_arm_feedback_end(robot_arm_solver *s, int max_iter, double t0)
-{
-    s->qp_settings.max_iter = max_iter;
-    s->qp_capped = 0;
-    s->budget_used = robot_arm_budget_now(s) - s->instant_start;
-    robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_FEEDBACK, t0);
-}
 
 /* 1 when the model is finite at the state xs with the next control of the last good plan (one
  * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
@@ -1248,51 +892,59 @@ static void robot_arm_feedback_end(robot_arm_solver *s, int max_iter, double t0)
 static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *xs)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0), u[ROBOT_ARM_NU], xn[ROBOT_ARM_NX];
-    int j = s->plan_age > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->plan_age;
-    robot_arm_clip_u(s->plan_u[j], u);
+    int j = s->health.plan_age > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->health.plan_age;
+    robot_arm_clip_u(s->health.plan_u[j], u);
     return robot_arm_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
            robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn) && robot_arm_lai_vec_finite(1, &l);
 }
 
-int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
+/* Feedback once admitted (steps 2 to 8). */
+/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
+ * capped at the budget left over the cost of one QP iteration of the last feedback (at least
+ * 1); a QP stopped by the cap is not retried (the fallback control). */
+static void robot_arm_feedback_cap(robot_arm_solver *s)
+{
+    double n;
+    s->anytime.qp_cap = 0;
+    if (!robot_arm_budget_on(s) || s->settings.budget_unit != ROBOT_ARM_BUDGET_TIME ||
+        !(s->anytime.cost_qp_iter > 0.0)) {
+        return;
+    }
+    n = (s->settings.budget - (robot_arm_budget_now(s) - s->anytime.instant_start)) / s->anytime.cost_qp_iter;
+    n = n < 1.0 ? 1.0 : n;
+    if (n < (double)s->settings.qp_max_iter) {
+        s->anytime.qp_cap = (int)n;
+    }
+}
+
+static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
     robot_arm_real xhat_prev[ROBOT_ARM_NX];
-    double t0, b0;
-    int rc, qs, retries, max_iter;
+    double b0;
+    int rc, qs, retries;
 
-    robot_arm_ensure_setup(s);
-    s->flags = 0;
-    s->instant_start = robot_arm_budget_now(s);
-    s->extra_iterations = 0;
-    s->instant_stages = 0;
-    rc = robot_arm_feedback_admit(s, xhat0, u0);
-    if (rc != ROBOT_ARM_OK) {
-        return rc;
-    }
-    s->timer.t[ROBOT_ARM_PHASE_FEEDBACK] = ROBOT_ARM_R(0.0);
-    t0 = robot_arm_timer_now(&s->timer);
     robot_arm_copy(xhat_prev, s->xhat0, ROBOT_ARM_NX);
     robot_arm_feedback_measure(s, xhat0);
-    max_iter = robot_arm_feedback_cap(s);
+    robot_arm_feedback_cap(s);
     b0 = robot_arm_budget_now(s);
     qs = robot_arm_feedback_qp(s);
     qs = robot_arm_feedback_lm_retries(s, qs, &retries);
-    s->cost_qp = robot_arm_budget_now(s) - b0;
-    if (s->qp_iterations > 0 && s->budget_unit == ROBOT_ARM_BUDGET_TIME) {
-        s->cost_qp_iter = s->cost_qp / (double)s->qp_iterations;
+    s->anytime.cost_qp = robot_arm_budget_now(s) - b0;
+    if (s->qp_iterations > 0 && s->settings.budget_unit == ROBOT_ARM_BUDGET_TIME) {
+        s->anytime.cost_qp_iter = s->anytime.cost_qp / (double)s->qp_iterations;
     }
     s->qp_status = qs;
     rc = robot_arm_feedback_check_step(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
-    if (rc != ROBOT_ARM_OK && s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING && qs != ROBOT_ARM_QP_MAX_ITER &&
-        qs != ROBOT_ARM_QP_INVALID_INPUT) {
+    if (rc != ROBOT_ARM_OK && s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING &&
+        qs != ROBOT_ARM_QP_MAX_ITER && qs != ROBOT_ARM_QP_INVALID_INPUT) {
         if (!robot_arm_model_finite_at(s, xhat0)) {
             /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
              * prepare takes the predicted step) */
             robot_arm_copy(s->xhat0, xhat_prev, ROBOT_ARM_NX);
-            s->xhat_fresh = 0;
-            s->flags |= ROBOT_ARM_FLAG_MEASUREMENT_UNUSABLE;
+            s->health.xhat_fresh = 0;
+            s->health.flags |= ROBOT_ARM_FLAG_MEASUREMENT_UNUSABLE;
             rc = ROBOT_ARM_ERR_NONFINITE_VALUE;
         } else {
             rc = robot_arm_feedback_recover(s, &qs, &retries);
@@ -1303,14 +955,39 @@ int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
         }
     }
     if (rc != ROBOT_ARM_OK) {
-        robot_arm_feedback_end(s, max_iter, t0);
         return robot_arm_feedback_failed(s, u0, rc);
     }
     robot_arm_store_domega(s);
     robot_arm_take_step(s);
     robot_arm_keep_plan(s, u0, retries == 0);
-    robot_arm_feedback_end(s, max_iter, t0);
     return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
+{
+    double start;
+    int rc;
+
+    if (!s->set_up) {
+        return ROBOT_ARM_ERR_NOT_INITIALIZED;
+    }
+    /* the whole call is the phase "feedback" (a recovery within it included) */
+    robot_arm_timer_begin(&s->timer, 1u << ROBOT_ARM_PHASE_FEEDBACK, ROBOT_ARM_PHASE_FEEDBACK);
+    s->timer.locked = 1;
+    start = s->timer.mark;
+    s->health.flags = 0;
+    s->anytime.instant_start = robot_arm_budget_now(s);
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
+    rc = robot_arm_feedback_admit(s, xhat0, u0);
+    if (rc == ROBOT_ARM_OK) {
+        rc = robot_arm_feedback_run(s, xhat0, u0);
+    }
+    s->anytime.qp_cap = 0;
+    s->anytime.used = robot_arm_budget_now(s) - s->anytime.instant_start;
+    s->timer.locked = 0;
+    robot_arm_timer_end(&s->timer, 0, start);
+    return rc;
 }
 
 /* ---- prepare ------------------------------------------------------------------------ */
@@ -1369,20 +1046,21 @@ static robot_arm_real robot_arm_step_norm(const robot_arm_solver *s, int k)
  * between M_min and M_max. */
 static int robot_arm_M_now(const robot_arm_solver *s)
 {
-    robot_arm_real thr = s->M_eta * s->kkt_proxy;
+    const robot_arm_settings *st = &s->settings;
+    robot_arm_real thr = st->M_eta * s->health.kkt_proxy;
     int k, n = 0;
-    if (s->recovering > 0) {
+    if (s->health.recovering > 0) {
         return ROBOT_ARM_N - 1; /* after a recovery: every block fresh until it has settled */
     }
-    if (!s->M_adaptive) {
-        return s->M < 0 ? 0 : (s->M > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->M);
+    if (!st->M_adaptive) {
+        return st->M < 0 ? 0 : (st->M > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : st->M);
     }
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         if (s->rho[k] * robot_arm_step_norm(s, k) > thr) {
             n += 1;
         }
     }
-    return n < s->M_min ? s->M_min : (n > s->M_max ? s->M_max : n);
+    return n < st->M_min ? st->M_min : (n > st->M_max ? st->M_max : n);
 }
 
 /* The stage among 0..N-2 not selected yet with the largest rho_k, ties to the lower index. */
@@ -1400,8 +1078,7 @@ static int robot_arm_next_worst(const robot_arm_solver *s)
 /* Step 4: re-linearise the stages with the largest rho_k: M of them (robot_arm_M_now), then, with
  * a budget, further stages in rho order in the instant's prepare and in an extra iteration
  * after which no further iteration fits (algorithm.md section 12); each only while the
- * budget allows. The recomputed set (sorted, stage N-1 included) is recorded; the cost of
- * the stages beyond M in *ext_cost. */
+ * budget allows. The cost of the stages beyond M goes to *ext_cost. */
 static int robot_arm_relinearise(robot_arm_solver *s, int extra, double *ext_cost)
 {
     int M = robot_arm_M_now(s), m, k, n = 0, rc = ROBOT_ARM_OK, extend;
@@ -1410,10 +1087,10 @@ static int robot_arm_relinearise(robot_arm_solver *s, int extra, double *ext_cos
         s->selected[k] = 0;
     }
     extend =
-        s->budget_unit != ROBOT_ARM_BUDGET_OFF && (!extra || !robot_arm_budget_fits(s, s->cost_qp + s->cost_prepare));
+        robot_arm_budget_on(s) && (!extra || !robot_arm_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare));
     *ext_cost = 0.0;
     for (m = 0; m < ROBOT_ARM_N - 1; ++m) {
-        if ((m >= M && !extend) || !robot_arm_budget_fits(s, s->cost_stage)) {
+        if ((m >= M && !extend) || !robot_arm_budget_fits(s, s->anytime.cost_stage)) {
             break;
         }
         k = robot_arm_next_worst(s);
@@ -1423,41 +1100,35 @@ static int robot_arm_relinearise(robot_arm_solver *s, int extra, double *ext_cos
             break;
         }
         s->selected[k] = 1;
-        if (s->budget_unit != ROBOT_ARM_BUDGET_OFF) {
-            s->cost_stage = robot_arm_budget_now(s) - b0;
+        n += 1;
+        if (robot_arm_budget_on(s)) {
+            s->anytime.cost_stage = robot_arm_budget_now(s) - b0;
             if (m >= M) {
-                *ext_cost += s->cost_stage;
+                *ext_cost += s->anytime.cost_stage;
             }
         }
     }
-    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
-        if (s->selected[k]) {
-            s->recomputed[n++] = k;
-        }
-    }
-    s->instant_stages += n;
-    s->recomputed[n++] = ROBOT_ARM_N - 1;
-    s->n_recomputed = n;
+    s->anytime.instant_stages += n;
     return rc;
 }
 
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
  * on (use_plan) or the OCP file's guess, clipped to the bounds, into the iterate. Returns 1
  * when every node is finite and inside the box. */
-static int robot_arm_simulate(robot_arm_solver *s, int use_plan)
+static int robot_arm_simulate_plan(robot_arm_solver *s, int use_plan)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0);
     int k, j;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        j = s->plan_age + k > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->plan_age + k;
-        robot_arm_clip_u(use_plan ? s->plan_u[j] : robot_arm_guess_u[k], s->u[k]);
+        j = s->health.plan_age + k > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->health.plan_age + k;
+        robot_arm_clip_u(use_plan ? s->health.plan_u[j] : robot_arm_guess_u[k], s->u[k]);
         if (robot_arm_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->mem.ev.tmp_g,
                                   &s->mem.ev.fun_work) != 0 ||
             !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->x[k + 1])) {
             return 0;
         }
     }
-    return robot_arm_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
+    return robot_arm_iterate_box_ok(s, 0, 0, 0, 0);
 }
 
 /* The OCP file's guess states from node `first` on and its controls (clipped) into the iterate. */
@@ -1476,10 +1147,10 @@ static void robot_arm_guess_primal(robot_arm_solver *s, int first)
  * (convex in the cost, whatever the multipliers); the next prepares use the setting. */
 static int robot_arm_reinit_finish(robot_arm_solver *s)
 {
-    int rc, hessian = s->hessian;
-    s->hessian = ROBOT_ARM_HAS_GN ? ROBOT_ARM_HESSIAN_GAUSS_NEWTON : hessian;
+    int rc, hessian = s->settings.hessian;
+    s->settings.hessian = ROBOT_ARM_HAS_GN ? ROBOT_ARM_HESSIAN_GAUSS_NEWTON : hessian;
     rc = robot_arm_init_finish(s);
-    s->hessian = hessian;
+    s->settings.hessian = hessian;
     return rc;
 }
 
@@ -1496,7 +1167,7 @@ static int robot_arm_reinit_at_guess(robot_arm_solver *s)
     robot_arm_zero(ROBOT_ARM_N * ROBOT_ARM_DIM(ROBOT_ARM_NG), &s->mu_g[0][0]);
     robot_arm_zero(ROBOT_ARM_DIM(ROBOT_ARM_NR), s->mu_r);
     robot_arm_zero(ROBOT_ARM_DIM(ROBOT_ARM_NE), s->nu);
-    s->flags |= ROBOT_ARM_FLAG_REINIT_GUESS;
+    s->health.flags |= ROBOT_ARM_FLAG_REINIT_GUESS;
     return robot_arm_reinit_finish(s);
 }
 
@@ -1507,7 +1178,7 @@ static int robot_arm_reinit_at_guess(robot_arm_solver *s)
 static int robot_arm_reinit(robot_arm_solver *s)
 {
     int rc;
-    if (!robot_arm_simulate(s, 1) && !robot_arm_simulate(s, 0)) {
+    if (!robot_arm_simulate_plan(s, 1) && !robot_arm_simulate_plan(s, 0)) {
         robot_arm_guess_primal(s, 1);
     }
     rc = robot_arm_reinit_finish(s);
@@ -1518,13 +1189,13 @@ static int robot_arm_reinit(robot_arm_solver *s)
         s->qp_ready = 0;
         return rc;
     }
-    s->kkt_proxy = robot_arm_kkt_proxy_eval(s);
-    s->kkt_proxy_ref = s->kkt_proxy;
-    s->n_failed = 0;
-    s->recover_pending = 0;
-    s->n_recoveries += 1;
-    s->recovering = ROBOT_ARM_RECOVERY_FULL_RTI;
-    s->flags |= ROBOT_ARM_FLAG_RECOVERED;
+    s->health.kkt_proxy = robot_arm_kkt_proxy_eval(s);
+    s->health.kkt_proxy_ref = s->health.kkt_proxy;
+    s->health.n_failed = 0;
+    s->health.recover_pending = 0;
+    s->health.n_recoveries += 1;
+    s->health.recovering = ROBOT_ARM_RECOVERY_FULL_RTI;
+    s->health.flags |= ROBOT_ARM_FLAG_RECOVERED;
     return ROBOT_ARM_OK;
 }
 
@@ -1536,17 +1207,18 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
     int i;
     /* x_0: the state predicted for this instant from the last measurement and control; when
      * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
-    if (!s->xhat_fresh) {
+    if (!s->health.xhat_fresh) {
         if (!shifted) {
             robot_arm_copy(s->x[0], s->x[1], ROBOT_ARM_NX);
         }
-    } else if (robot_arm_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+    } else if (robot_arm_eval_stage_eval(s->xhat0, s->health.u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
                                      &s->mem.ev.fun_work) != 0 ||
                !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->x[0])) {
         robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        if (!(robot_arm_fabs(s->x[0][i]) <= ROBOT_ARM_DIVERGENCE_BOX * s->scale_x[i] + robot_arm_fabs(s->xhat0[i]))) {
+        if (!(robot_arm_fabs(s->x[0][i]) <=
+              ROBOT_ARM_DIVERGENCE_BOX * s->health.scale_x[i] + robot_arm_fabs(s->xhat0[i]))) {
             robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
             break;
         }
@@ -1562,14 +1234,14 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
  * the iterate is then the OCP file's guess, prepared, when the model is finite there). */
 static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries)
 {
-    int i, rc, n_failed = s->n_failed;
+    int i, rc, n_failed = s->health.n_failed;
     robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
     rc = robot_arm_reinit(s);
-    s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
+    s->health.n_failed = n_failed; /* still the count of consecutive failed feedbacks */
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
     s->shifted = 0;
-    if (rc == ROBOT_ARM_OK && (s->flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
+    if (rc == ROBOT_ARM_OK && (s->health.flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
         /* the model failed at the measured state: no QP from it */
         rc = ROBOT_ARM_ERR_NONFINITE_VALUE;
     }
@@ -1579,8 +1251,8 @@ static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
-    s->qp_in.hess_shift = s->lm;
-    s->work += ROBOT_ARM_WORK_QP;
+    s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += ROBOT_ARM_WORK_QP;
     *qs = robot_arm_qp_attempt(s, 0);
     *qs = robot_arm_feedback_lm_retries(s, *qs, retries);
     return ROBOT_ARM_OK;
@@ -1596,32 +1268,34 @@ static void robot_arm_predicted_step(robot_arm_solver *s)
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
-    s->qp_in.hess_shift = s->lm;
-    s->qp_settings.warm_start = 0;
-    s->work += ROBOT_ARM_WORK_QP;
-    qs = robot_arm_qp_solve_bound(s);
+    s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += ROBOT_ARM_WORK_QP;
+    qs = robot_arm_qp_solve_bound(s, 0);
     if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
         return;
     }
     robot_arm_store_domega(s);
     robot_arm_take_step(s);
-    robot_arm_copy(&s->plan_u[0][0], &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
-    s->plan_age = 0;
-    if (!s->xhat_fresh) {
+    robot_arm_copy(&s->health.plan_u[0][0], &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
+    s->health.plan_age = 0;
+    if (!s->health.xhat_fresh) {
         /* no measurement to distrust: the model's prediction carries the loop */
-        s->n_failed = 0;
-        s->recover_pending = 0;
+        s->health.n_failed = 0;
+        s->health.recover_pending = 0;
     }
-    s->flags |= ROBOT_ARM_FLAG_PREDICTED;
+    s->health.flags |= ROBOT_ARM_FLAG_PREDICTED;
 }
 
 static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra);
-static int robot_arm_anytime(robot_arm_solver *s);
+static int robot_arm_anytime_run(robot_arm_solver *s);
 
 int robot_arm_prepare(robot_arm_solver *s)
 {
+    double start;
     int rc, hessian;
-    robot_arm_ensure_setup(s);
+    if (!s->set_up) {
+        return ROBOT_ARM_ERR_NOT_INITIALIZED;
+    }
     if (!s->initialized) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
     }
@@ -1629,42 +1303,44 @@ int robot_arm_prepare(robot_arm_solver *s)
         /* a second prepare would shift the horizon twice */
         return robot_arm_ret(s, ROBOT_ARM_ERR_ALREADY_PREPARED);
     }
-    robot_arm_clear_timings(s, ROBOT_ARM_PHASE_SHIFT, ROBOT_ARM_PHASE_ASSEMBLY);
-    s->extra_iterations = 0;
-    hessian = s->hessian;
-    if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
-        s->mode == ROBOT_ARM_MODE_RECEDING && !(s->flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
+    robot_arm_timer_begin(&s->timer, ROBOT_ARM_PREPARE_PHASES, ROBOT_ARM_PHASE_RECOVERY);
+    start = s->timer.mark;
+    s->anytime.extra_iterations = 0;
+    hessian = s->settings.hessian;
+    if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
+        s->settings.mode == ROBOT_ARM_MODE_RECEDING && !(s->health.flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
         /* (not from the OCP file's guess: its plan is not the plant's) */
         robot_arm_predicted_step(s);
     }
     s->qp_ready = 0;
-    if (s->mode == ROBOT_ARM_MODE_RECEDING && s->plan_age < ROBOT_ARM_N) {
-        s->plan_age += 1;
+    if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && s->health.plan_age < ROBOT_ARM_N) {
+        s->health.plan_age += 1;
     }
-    if (s->recover_pending && s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING) {
+    if (s->health.recover_pending && s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING) {
         rc = robot_arm_recover(s, 0);
     } else {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
          * multipliers), every block fresh */
-        if (s->recovering > 0 && ROBOT_ARM_HAS_GN) {
-            s->hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
+        if (s->health.recovering > 0 && ROBOT_ARM_HAS_GN) {
+            s->settings.hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
         }
         rc = robot_arm_prepare_iteration(s, 0);
     }
     if (rc == ROBOT_ARM_OK) {
-        /* the time left (algorithm.md section 12), with the Hessian of the recovery phase */
-        if (s->recovering > 0 && ROBOT_ARM_HAS_GN) {
-            s->hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
+        /* the budget left (algorithm.md section 12), with the Hessian of the recovery phase */
+        if (s->health.recovering > 0 && ROBOT_ARM_HAS_GN) {
+            s->settings.hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
         }
-        rc = robot_arm_anytime(s);
+        rc = robot_arm_anytime_run(s);
     }
-    s->hessian = hessian;
-    s->budget_used = robot_arm_budget_now(s) - s->instant_start;
+    s->settings.hessian = hessian;
+    s->anytime.used = robot_arm_budget_now(s) - s->anytime.instant_start;
     if (rc == ROBOT_ARM_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
         s->shifted = 0;
     }
+    robot_arm_timer_end(&s->timer, 1, start);
     return robot_arm_ret(s, rc);
 }
 
@@ -1673,41 +1349,40 @@ int robot_arm_prepare(robot_arm_solver *s)
 static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 {
     robot_arm_real xN_saved[ROBOT_ARM_NX];
-    double t0, b_start = robot_arm_budget_now(s), ext_cost = 0.0;
+    double b_start = robot_arm_budget_now(s), ext_cost = 0.0;
     int k, rc;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
-    t0 = robot_arm_timer_now(&s->timer);
-    if (s->mode == ROBOT_ARM_MODE_RECEDING && !s->shifted) {
+    robot_arm_phase(s, ROBOT_ARM_PHASE_SHIFT);
+    if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && !s->shifted && !extra) {
         robot_arm_shift(s);
         s->shifted = 1;
     }
-    t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_SHIFT, t0);
     robot_arm_copy(xN_saved, s->x[ROBOT_ARM_N], ROBOT_ARM_NX);
 
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
+        robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
         rc = robot_arm_stage_F(s, k);
-        t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_GRADIENTS, t0);
         if (rc != ROBOT_ARM_OK) {
             return rc;
         }
+        robot_arm_phase(s, ROBOT_ARM_PHASE_RHO);
         s->rho[k] = robot_arm_ring_secant(slot, s->mem.ev.tmp_F, s->mem.ev.tmp_phi, s->mem.ev.tmp_g);
         /* stored as F_old in step 6, once nothing can fail */
         robot_arm_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, ROBOT_ARM_NW);
         robot_arm_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, ROBOT_ARM_NX);
         robot_arm_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, ROBOT_ARM_NG);
-        t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_RHO, t0);
     }
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
+    robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
     rc = robot_arm_stage_F(s, ROBOT_ARM_N - 1);
-    t0 = robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_GRADIENTS, t0);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
-    if (s->mode == ROBOT_ARM_MODE_RECEDING && !extra) {
+    if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && !extra) {
         robot_arm_copy(s->x[ROBOT_ARM_N], s->mem.ev.tmp_phi, ROBOT_ARM_NX);
     }
     robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, ROBOT_ARM_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
@@ -1715,22 +1390,22 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     s->rho[ROBOT_ARM_N - 1] = ROBOT_ARM_R(0.0);
     rc = robot_arm_stage_H(s, ROBOT_ARM_N - 1);
     if (rc == ROBOT_ARM_OK) {
-        t0 = robot_arm_timer_now(&s->timer);
         rc = robot_arm_term_F(s);
-        robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_GRADIENTS, t0);
     }
     if (rc == ROBOT_ARM_OK) {
         rc = robot_arm_term_H(s);
     }
 
-    /* 4. re-linearise the M stages with the largest rho_k (and more as the budget allows) */
+    /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == ROBOT_ARM_OK) {
+        robot_arm_phase(s, ROBOT_ARM_PHASE_RHO);
         rc = robot_arm_relinearise(s, extra, &ext_cost);
     }
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
      *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept) */
-    if (rc == ROBOT_ARM_OK && s->cost_hessian) {
+    if (rc == ROBOT_ARM_OK && s->settings.cost_hessian) {
+        robot_arm_phase(s, ROBOT_ARM_PHASE_HESSIANS);
         for (k = 0; k < ROBOT_ARM_N - 1 && rc == ROBOT_ARM_OK; ++k) {
             robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
             if (s->selected[k]) {
@@ -1755,6 +1430,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 
     /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
      *    when stored) */
+    robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k],
                            s->mem.ev.Fn_g[k]);
@@ -1762,15 +1438,20 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     robot_arm_assemble(s);
     s->qp_ready = 1;
 
-    /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
-    s->kkt_proxy = robot_arm_kkt_proxy_eval(s);
-    robot_arm_lm_prepared(s); /* the automatic Levenberg-Marquardt term (section 10) */
-    if (s->budget_unit != ROBOT_ARM_BUDGET_OFF) {
-        s->cost_prepare = robot_arm_budget_now(s) - b_start - ext_cost;
+    /* 7. the divergence test of the prepared iterate (algorithm.md section 9) and the
+     *    automatic Levenberg-Marquardt term (section 10) */
+    robot_arm_phase(s, ROBOT_ARM_PHASE_RECOVERY);
+    s->health.kkt_proxy = robot_arm_kkt_proxy_eval(s);
+    robot_arm_phase(s, ROBOT_ARM_PHASE_LM);
+    robot_arm_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
+                      s->mem.ev.lm_work);
+    robot_arm_phase(s, ROBOT_ARM_PHASE_RECOVERY);
+    if (robot_arm_budget_on(s)) {
+        s->anytime.cost_prepare = robot_arm_budget_now(s) - b_start - ext_cost;
     }
     if (robot_arm_iterate_diverged(s)) {
-        s->flags |= ROBOT_ARM_FLAG_DIVERGED;
-        if (s->recovery && s->mode == ROBOT_ARM_MODE_RECEDING) {
+        s->health.flags |= ROBOT_ARM_FLAG_DIVERGED;
+        if (s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING) {
             return robot_arm_recover(s, 1);
         }
     }
@@ -1784,42 +1465,42 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
  * solved (or a step outside the box) changes nothing and returns ROBOT_ARM_ERR_QP. */
 static int robot_arm_extra_iteration(robot_arm_solver *s)
 {
-    robot_arm_real lm = s->lm;
+    robot_arm_lm lm = s->lm;
     double b0 = robot_arm_budget_now(s);
     int i, qs;
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
-    robot_arm_lm_measured(s);
+    robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     qs = robot_arm_feedback_qp(s);
     if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
         s->lm = lm;
-        s->lm_uncapped = -ROBOT_ARM_R(1.0);
         return ROBOT_ARM_ERR_QP;
     }
-    s->cost_qp = robot_arm_budget_now(s) - b0;
+    s->anytime.cost_qp = robot_arm_budget_now(s) - b0;
     robot_arm_store_domega(s);
     robot_arm_take_step(s);
-    robot_arm_lm_feedback(s, ROBOT_ARM_OK);
+    robot_arm_lm_feedback(&s->lm, 1);
     return robot_arm_prepare_iteration(s, 1);
 }
 
-/* The time left after prepare (algorithm.md section 12): extra iterations while the KKT proxy
- * exceeds the tolerance and one more fits in the budget. The last feedback's QP figures are
- * kept for robot_arm_get_qp_status and robot_arm_get_qp_iterations. */
-static int robot_arm_anytime(robot_arm_solver *s)
+/* The budget left after prepare (algorithm.md section 12): extra iterations while the KKT
+ * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
+ * of robot_arm_info. */
+static int robot_arm_anytime_run(robot_arm_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = ROBOT_ARM_OK;
-    if (s->budget_unit == ROBOT_ARM_BUDGET_OFF) {
+    if (!robot_arm_budget_on(s)) {
         return ROBOT_ARM_OK;
     }
-    while (s->extra_iterations < ROBOT_ARM_ANYTIME_MAX_ITER && s->qp_ready && s->kkt_proxy > s->anytime_tol &&
-           robot_arm_budget_fits(s, s->cost_qp + s->cost_prepare)) {
+    while (s->anytime.extra_iterations < ROBOT_ARM_ANYTIME_MAX_ITER && s->qp_ready &&
+           s->health.kkt_proxy > s->settings.anytime_tol &&
+           robot_arm_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
         rc = robot_arm_extra_iteration(s);
         if (rc != ROBOT_ARM_OK) {
             break;
         }
-        s->extra_iterations += 1;
+        s->anytime.extra_iterations += 1;
     }
     s->qp_status = qp_status;
     s->qp_iterations = qp_iterations;
@@ -1832,22 +1513,23 @@ static int robot_arm_anytime(robot_arm_solver *s)
 int robot_arm_kkt_eval(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *kkt4)
 {
     robot_arm_real parts[4];
-    double t0;
     int i, rc;
 
-    robot_arm_ensure_setup(s);
+    if (!s->set_up) {
+        return ROBOT_ARM_ERR_NOT_INITIALIZED;
+    }
     if (!s->initialized) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
     }
     if (xhat0 && !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
-    s->timer.t[ROBOT_ARM_PHASE_KKT] = ROBOT_ARM_R(0.0);
-    t0 = robot_arm_timer_now(&s->timer);
-    rc = robot_arm_kkt_measure(s, xhat0 ? xhat0 : s->xhat0, parts);
-    robot_arm_timer_add(&s->timer, ROBOT_ARM_PHASE_KKT, t0);
-    if (rc != ROBOT_ARM_OK) {
-        return robot_arm_ret(s, rc);
+    robot_arm_timer_begin(&s->timer, 1u << ROBOT_ARM_PHASE_KKT, ROBOT_ARM_PHASE_KKT);
+    rc = robot_arm_kkt_measure(&s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0], &s->mu_b[0][0], s->mu_bN,
+                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->mem.ev.fun_work, parts);
+    robot_arm_timer_end(&s->timer, -1, 0.0);
+    if (rc != ROBOT_ARM_KKT_OK) {
+        return robot_arm_ret(s, rc == ROBOT_ARM_KKT_FUNCTION ? ROBOT_ARM_ERR_FUNCTION : ROBOT_ARM_ERR_NONFINITE_VALUE);
     }
     for (i = 0; i < 4; ++i) {
         s->kkt[i] = parts[i];
@@ -1856,16 +1538,6 @@ int robot_arm_kkt_eval(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
         }
     }
     return robot_arm_ret(s, ROBOT_ARM_OK);
-}
-
-robot_arm_real robot_arm_get_kkt(const robot_arm_solver *s)
-{
-    robot_arm_real m = s->kkt[0];
-    int i;
-    for (i = 1; i < 4; ++i) {
-        m = s->kkt[i] > m ? s->kkt[i] : m;
-    }
-    return m;
 }
 
 /* ---- getters ------------------------------------------------------------------------ */
@@ -1922,21 +1594,14 @@ void robot_arm_get_rho(const robot_arm_solver *s, robot_arm_real *rho)
 
 int robot_arm_get_recomputed(const robot_arm_solver *s, int *stages)
 {
-    int i;
-    for (i = 0; i < s->n_recomputed; ++i) {
-        stages[i] = s->recomputed[i];
+    int k, n = 0;
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        if (s->selected[k]) {
+            stages[n++] = k;
+        }
     }
-    return s->n_recomputed;
-}
-
-int robot_arm_get_qp_iterations(const robot_arm_solver *s)
-{
-    return s->qp_iterations;
-}
-
-int robot_arm_get_qp_status(const robot_arm_solver *s)
-{
-    return s->qp_status;
+    stages[n++] = ROBOT_ARM_N - 1;
+    return n;
 }
 
 /* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
@@ -1978,65 +1643,259 @@ int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_inf
     return 1;
 }
 
-int robot_arm_get_flags(const robot_arm_solver *s)
-{
-    return s->flags;
-}
-
 void robot_arm_get_u0(const robot_arm_solver *s, robot_arm_real *u0)
 {
-    robot_arm_copy(u0, s->u0_out, ROBOT_ARM_NU);
-}
-
-int robot_arm_get_recoveries(const robot_arm_solver *s)
-{
-    return s->n_recoveries;
-}
-
-int robot_arm_get_failed_feedbacks(const robot_arm_solver *s)
-{
-    return s->n_failed;
-}
-
-robot_arm_real robot_arm_get_kkt_proxy(const robot_arm_solver *s)
-{
-    return s->kkt_proxy;
+    robot_arm_copy(u0, s->health.u0_out, ROBOT_ARM_NU);
 }
 
 void robot_arm_get_scales(const robot_arm_solver *s, robot_arm_real *scale_x, robot_arm_real *scale_u)
 {
     if (scale_x) {
-        robot_arm_copy(scale_x, s->scale_x, ROBOT_ARM_NX);
+        robot_arm_copy(scale_x, s->health.scale_x, ROBOT_ARM_NX);
     }
     if (scale_u) {
-        robot_arm_copy(scale_u, s->scale_u, ROBOT_ARM_NU);
+        robot_arm_copy(scale_u, s->health.scale_u, ROBOT_ARM_NU);
     }
 }
 
-int robot_arm_get_qp_cold_retry(const robot_arm_solver *s)
+static int robot_arm_has_clock(const robot_arm_solver *s)
 {
-    return s->qp_cold_retry;
+    if (s->timer.clock == 0) {
+        return 0;
+    }
+    return s->timer.clock != robot_arm_timer_default_clock || robot_arm_timer_has_default_clock();
 }
 
-int robot_arm_get_status(const robot_arm_solver *s)
+void robot_arm_get_info(const robot_arm_solver *s, robot_arm_info *info)
 {
-    return s->status;
+    int k, i;
+    info->status = s->status;
+    info->initialized = s->set_up && s->initialized;
+    info->qp_status = s->qp_status;
+    info->qp_iterations = s->qp_iterations;
+    info->qp_cold_retry = s->qp_cold_retry;
+    info->flags = s->health.flags;
+    info->recoveries = s->health.n_recoveries;
+    info->failed_feedbacks = s->health.n_failed;
+    info->M_used = 0;
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        info->M_used += s->selected[k] ? 1 : 0;
+    }
+    info->ring_head = s->ring.ring_head;
+    info->has_clock = robot_arm_has_clock(s);
+    info->lm = s->lm.lm;
+    info->lm_scale = s->lm.scale;
+    info->kkt_proxy = s->health.kkt_proxy;
+    info->kkt_max = s->kkt[0];
+    for (i = 0; i < 4; ++i) {
+        info->kkt[i] = s->kkt[i];
+        info->kkt_max = s->kkt[i] > info->kkt_max ? s->kkt[i] : info->kkt_max;
+    }
+    for (i = 0; i < ROBOT_ARM_N_PHASES; ++i) { /* times are double in both precisions */
+        info->timings[i] = s->timer.t[i];
+    }
+    info->t_feedback = s->timer.t_call[0];
+    info->t_prepare = s->timer.t_call[1];
+    info->extra_iterations = s->anytime.extra_iterations;
+    info->instant_stages = s->anytime.instant_stages;
+    info->budget_used = s->anytime.used;
+    info->work = s->anytime.work;
 }
 
-int robot_arm_is_initialized(const robot_arm_solver *s)
+/* ---- settings, setup, parameters, clock ---------------------------------------------- */
+
+/* ROBOT_ARM_OK when every setting is in range, else ROBOT_ARM_ERR_INVALID_ARGUMENT. */
+static int robot_arm_settings_check(const robot_arm_settings *st)
 {
-    return s->magic == ROBOT_ARM_MAGIC && s->initialized;
+    int reg = st->regularization;
+    if (st->M < 0 || st->M > ROBOT_ARM_N - 1 ||
+        (st->mode != ROBOT_ARM_MODE_RECEDING && st->mode != ROBOT_ARM_MODE_FIXED) ||
+        (st->hessian != ROBOT_ARM_HESSIAN_EXACT &&
+         !(st->hessian == ROBOT_ARM_HESSIAN_GAUSS_NEWTON && ROBOT_ARM_HAS_GN)) ||
+        (reg != ROBOT_ARM_REG_NONE && reg != ROBOT_ARM_REG_PROJECT && reg != ROBOT_ARM_REG_MIRROR) ||
+        !isfinite(st->reg_eps) || !(st->reg_eps > ROBOT_ARM_R(0.0)) ||
+        (st->cost_hessian != 0 && st->cost_hessian != 1) || (st->lm_auto != 0 && st->lm_auto != 1) ||
+        !isfinite(st->lm) || !(st->lm >= ROBOT_ARM_R(0.0)) || !isfinite(st->qp_tol) ||
+        !(st->qp_tol > ROBOT_ARM_R(0.0)) || st->qp_tol > ROBOT_ARM_QP_TOL_MAX || st->qp_max_iter < 1 ||
+        (st->qp_warm_start != 0 && st->qp_warm_start != 1) || (st->recovery != 0 && st->recovery != 1) ||
+        st->recovery_failures < 1 || !(st->budget >= 0.0) || !(st->budget < HUGE_VAL) ||
+        (st->budget_unit != ROBOT_ARM_BUDGET_TIME && st->budget_unit != ROBOT_ARM_BUDGET_WORK) ||
+        !isfinite(st->anytime_tol) || !(st->anytime_tol > ROBOT_ARM_R(0.0)) ||
+        (st->M_adaptive != 0 && st->M_adaptive != 1) || st->M_min < 0 || st->M_max < st->M_min ||
+        st->M_max > ROBOT_ARM_N - 1 || !isfinite(st->M_eta) || !(st->M_eta > ROBOT_ARM_R(0.0))) {
+        return ROBOT_ARM_ERR_INVALID_ARGUMENT;
+    }
+    return ROBOT_ARM_OK;
 }
 
-int robot_arm_get_ring_head(const robot_arm_solver *s)
+int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
 {
-    return s->ring.ring_head;
+    robot_arm_settings defaults;
+    int k, i, rc;
+    robot_arm_settings_default(&defaults);
+    rc = st ? robot_arm_settings_check(st) : ROBOT_ARM_OK;
+    s->settings = (st && rc == ROBOT_ARM_OK) ? *st : defaults;
+    s->set_up = 1;
+    s->initialized = 0;
+    s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
+    s->status = ROBOT_ARM_OK;
+    robot_arm_lm_reset(&s->lm, s->settings.lm_auto, s->settings.lm);
+    s->lm.scale = ROBOT_ARM_R(1.0);
+    for (k = 0; k < ROBOT_ARM_N; ++k) { /* set only during a QP solve (robot_arm_qp_solve_bound) */
+        s->qp_in.H[k] = 0;
+        s->qp_in.Phi[k] = 0;
+        s->qp_in.C[k] = 0;
+    }
+    s->qp_in.HN = 0;
+    s->qp_in.R = 0;
+    s->qp_in.Req = 0;
+    s->qp_cold_retry = 0;
+    for (k = 0; k <= ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NP; ++i) {
+            s->p[k][i] = robot_arm_p_default[i];
+        }
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        s->xhat0[i] = robot_arm_x0_default[i];
+    }
+    s->qp_status = 0;
+    s->qp_iterations = 0;
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        s->rho[k] = ROBOT_ARM_R(0.0);
+        s->selected[k] = 0;
+    }
+    robot_arm_health_scales(&s->health);
+    robot_arm_reset_health(s);
+    for (i = 0; i < 4; ++i) {
+        s->kkt[i] = NAN;
+    }
+    robot_arm_timer_init(&s->timer);
+    s->anytime.work = 0.0;
+    s->anytime.instant_start = 0.0;
+    s->anytime.cost_stage = 0.0;
+    s->anytime.cost_qp = 0.0;
+    s->anytime.cost_prepare = 0.0;
+    s->anytime.cost_qp_iter = 0.0;
+    s->anytime.used = 0.0;
+    s->anytime.qp_cap = 0;
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
+    return robot_arm_ret(s, rc);
 }
 
-void robot_arm_get_timings(const robot_arm_solver *s, double *t)
+int robot_arm_update_settings(robot_arm_solver *s, const robot_arm_settings *st)
+{
+    robot_arm_settings old;
+    if (!s->set_up) {
+        return ROBOT_ARM_ERR_NOT_INITIALIZED;
+    }
+    if (st == 0 || robot_arm_settings_check(st) != ROBOT_ARM_OK) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    old = s->settings;
+    s->settings = *st;
+    if (st->lm_auto && !old.lm_auto) {
+        /* the automatic term restarts: from 0, raised until the prepared QP is convex */
+        robot_arm_lm_reset(&s->lm, 1, ROBOT_ARM_R(0.0));
+        if (s->initialized && s->qp_ready) {
+            robot_arm_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
+        }
+    } else if (!st->lm_auto) {
+        robot_arm_lm_reset(&s->lm, 0, st->lm);
+    }
+    if (!st->recovery) {
+        s->health.recover_pending = 0;
+    }
+    return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+void robot_arm_get_settings(const robot_arm_solver *s, robot_arm_settings *st)
+{
+    *st = s->settings;
+}
+
+int robot_arm_set_parameters(robot_arm_solver *s, const robot_arm_real *p)
+{
+    int k, i;
+    if (!s->set_up) {
+        return ROBOT_ARM_ERR_NOT_INITIALIZED;
+    }
+    if (ROBOT_ARM_NP == 0) {
+        return robot_arm_ret(s, ROBOT_ARM_OK);
+    }
+    if (p == 0) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    if (!robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NP, p)) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
+    }
+    for (k = 0; k <= ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NP; ++i) {
+            s->p[k][i] = p[k * ROBOT_ARM_NP + i];
+        }
+    }
+    return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const robot_arm_real *pk)
 {
     int i;
-    for (i = 0; i < ROBOT_ARM_N_PHASES; ++i) { /* times are double in both precisions */
-        t[i] = s->timer.t[i];
+    if (!s->set_up) {
+        return ROBOT_ARM_ERR_NOT_INITIALIZED;
+    }
+    if (k < 0 || k > ROBOT_ARM_N) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    if (ROBOT_ARM_NP == 0) {
+        return robot_arm_ret(s, ROBOT_ARM_OK);
+    }
+    if (pk == 0) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
+    }
+    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NP, pk)) {
+        return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
+    }
+    for (i = 0; i < ROBOT_ARM_NP; ++i) {
+        s->p[k][i] = pk[i];
+    }
+    return robot_arm_ret(s, ROBOT_ARM_OK);
+}
+
+void robot_arm_get_parameters(const robot_arm_solver *s, robot_arm_real *p)
+{
+    int k, i;
+    for (k = 0; k <= ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NP; ++i) {
+            p[k * ROBOT_ARM_NP + i] = s->p[k][i];
+        }
     }
 }
+
+void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), void *ctx)
+{
+    s->timer.clock = clock_fn ? clock_fn : robot_arm_timer_default_clock;
+    s->timer.ctx = clock_fn ? ctx : 0;
+}
+
+int robot_arm_simulate(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p, robot_arm_real *x_next,
+                   struct robot_arm_fun_work_s *work)
+{
+    robot_arm_real l = ROBOT_ARM_R(0.0), g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    if (robot_arm_eval_stage_eval(x, u, p ? p : robot_arm_p_default, x_next, &l, g, work) != 0) {
+        return ROBOT_ARM_ERR_FUNCTION;
+    }
+    return robot_arm_lai_vec_finite(ROBOT_ARM_NX, x_next) ? ROBOT_ARM_OK : ROBOT_ARM_ERR_NONFINITE_VALUE;
+}
+
+/* ---- the modules (one translation unit; ROBOT_ARM_INTERNAL functions are static) --------- */
+
+#include "robot_arm_timer.c"
+#include "robot_arm_ring.c"
+#include "robot_arm_reg.c"
+#include "robot_arm_funcs.c"
+#include "robot_arm_lm.c"
+#include "robot_arm_health.c"
+#include "robot_arm_kkt.c"
+#include "robot_arm_qp.c" /* last: its short macros (N, NX, ...) stay inside it */

@@ -53,18 +53,51 @@ void robot_arm_timer_init(robot_arm_timer *tm)
     for (i = 0; i < ROBOT_ARM_N_PHASES; ++i) {
         tm->t[i] = 0.0;
     }
+    tm->t_call[0] = tm->t_call[1] = 0.0;
+    tm->mark = 0.0;
+    tm->phase = -1;
+    tm->locked = 0;
 }
 
-double robot_arm_timer_now(const robot_arm_timer *tm)
+static double robot_arm_timer_now(const robot_arm_timer *tm)
 {
     return tm->clock ? tm->clock(tm->ctx) : 0.0;
 }
 
-double robot_arm_timer_add(robot_arm_timer *tm, int phase, double since)
+void robot_arm_timer_begin(robot_arm_timer *tm, unsigned clear, int phase)
 {
-    double now = robot_arm_timer_now(tm);
-    if (phase >= 0 && phase < ROBOT_ARM_N_PHASES) {
-        tm->t[phase] += now - since;
+    int i;
+    for (i = 0; i < ROBOT_ARM_N_PHASES; ++i) {
+        if (clear & (1u << i)) {
+            tm->t[i] = 0.0;
+        }
     }
-    return now;
+    tm->locked = 0;
+    tm->phase = phase;
+    tm->mark = robot_arm_timer_now(tm);
+}
+
+int robot_arm_timer_switch(robot_arm_timer *tm, int phase)
+{
+    double now;
+    int prev = tm->phase;
+    if (tm->locked) {
+        return phase;
+    }
+    now = robot_arm_timer_now(tm);
+    if (prev >= 0 && prev < ROBOT_ARM_N_PHASES) {
+        tm->t[prev] += now - tm->mark;
+    }
+    tm->mark = now;
+    tm->phase = phase;
+    return prev;
+}
+
+void robot_arm_timer_end(robot_arm_timer *tm, int call, double start)
+{
+    tm->locked = 0;
+    robot_arm_timer_switch(tm, -1);
+    if (call >= 0 && call < 2) {
+        tm->t_call[call] = tm->mark - start;
+    }
 }

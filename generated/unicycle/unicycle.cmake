@@ -4,21 +4,13 @@
 # link it with target_link_libraries(<your target> PRIVATE unicycle).
 # Cross-compiling for firmware (a CMake toolchain file for arm-none-eabi-gcc) needs nothing
 # else: no macro, no allocator. The phase timings have no default clock on bare metal
-# (they read 0 and unicycle_has_clock() says so): install one with unicycle_set_clock().
+# (they read 0 and has_clock of unicycle_get_info says so): install one with unicycle_set_clock().
 set(UNICYCLE_DIR "${CMAKE_CURRENT_LIST_DIR}")
 
 add_library(unicycle STATIC
     "${UNICYCLE_DIR}/unicycle_casadi.c"
-    "${UNICYCLE_DIR}/unicycle_funcs.c"
-    "${UNICYCLE_DIR}/unicycle_kkt.c"
-    "${UNICYCLE_DIR}/unicycle_linalg.c"
     "${UNICYCLE_DIR}/unicycle_problem.c"
-    "${UNICYCLE_DIR}/unicycle_qp.c"
-    "${UNICYCLE_DIR}/unicycle_reg.c"
-    "${UNICYCLE_DIR}/unicycle_ring.c"
-    "${UNICYCLE_DIR}/unicycle_settings.c"
     "${UNICYCLE_DIR}/unicycle_solver.c"
-    "${UNICYCLE_DIR}/unicycle_timer.c"
 )
 target_include_directories(unicycle PUBLIC "${UNICYCLE_DIR}")
 set_target_properties(unicycle PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON C_EXTENSIONS OFF)

@@ -5,10 +5,6 @@ typedef struct unicycle_solver unicycle_solver;
 
 /* Size of struct unicycle_solver in bytes (for callers that allocate it as raw memory). */
 size_t unicycle_solver_sizeof(void);
-/* Reset every setting to the generated defaults (M, Hessian, regularisation, eps from the
- * OCP file, receding mode, QP tolerance 1e-10, parameters p_default at every node, default
- * clock) and mark the solver uninitialised. */
-void unicycle_defaults(unicycle_solver *s);
 /* Dimensions of the generated problem (nw = nx + nu); has_gn: a Gauss-Newton Hessian is
  * available (least-squares stage cost); has_nominal: unicycle_init_nominal has data. */
 typedef struct {
@@ -19,6 +15,81 @@ void unicycle_get_dims(unicycle_dims *dims);
 const char *unicycle_name(void);
 /* A short English description of a status code. */
 const char *unicycle_status_string(int status);
+
+/* Settings (docs/algorithm.md). M: stages re-linearised per iteration besides stage N-1,
+ * 0 <= M <= N-1 (N-1 is the full RTI). mode: UNICYCLE_MODE_RECEDING or UNICYCLE_MODE_FIXED.
+ * hessian: UNICYCLE_HESSIAN_EXACT or UNICYCLE_HESSIAN_GAUSS_NEWTON (only with a least-squares
+ * stage cost). regularization: UNICYCLE_REG_NONE, UNICYCLE_REG_PROJECT or UNICYCLE_REG_MIRROR with
+ * reg_eps > 0. cost_hessian (algorithm.md section 4 step 5): 1 refreshes the cost part A_l of
+ * the Hessian block of every stage in every prepare (only the curvature of dynamics and
+ * constraints is partially updated); 0 is the paper's literal algorithm (the whole A moves
+ * with its slot). lm_auto 1: the automatic Levenberg-Marquardt term (section 10: raised
+ * until the QP is convex on the dynamics, after a failed feedback and when the KKT proxy
+ * grows; lowered after every successful feedback); 0: the fixed term lm >= 0 (section 3: the
+ * QP minimises with the blocks A~_k + lm I, A~_N + lm I; the stored blocks, the secant
+ * criterion and the fixed point are those of lm = 0). qp_tol: 0 < tol <= UNICYCLE_QP_TOL_MAX
+ * (a larger one would let the QP return steps that violate the bounds by that much);
+ * qp_max_iter >= 1. qp_warm_start 1: the QP of feedback starts from the previous solution
+ * shifted with the horizon, and retries cold in the same call when that fails; 0: always
+ * cold. recovery (section 9, receding mode only) 1: after recovery_failures >= 1
+ * consecutive failed feedbacks the next prepare re-initialises, a detected divergence
+ * re-initialises at once, the prepare after a failed feedback first takes the step of that
+ * instant's QP for the predicted state (UNICYCLE_FLAG_PREDICTED), and a feedback whose QP fails
+ * (not by its iteration limit) or diverges re-initialises from the measurement and solves
+ * again within the call (UNICYCLE_FLAG_RECOVERED); a measurement at which the model is not
+ * finite is handled as a missing one (UNICYCLE_ERR_NONFINITE_VALUE,
+ * UNICYCLE_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
+ * records its measurement, so the recovery starts from the newest one; 0: off.
+ * Anytime DOPUS (section 12): budget > 0 per sampling instant, counted from the start of
+ * the instant's feedback, in budget_unit UNICYCLE_BUDGET_TIME (seconds of the solver's clock,
+ * unicycle_set_clock: on firmware an instruction or cycle counter; without a clock the budget
+ * is off) or UNICYCLE_BUDGET_WORK (work units: stage_grad, stage_hess, term_grad and term_hess
+ * evaluations 1 each, a QP solve N; deterministic, the unit of the Python reference);
+ * budget 0: off, the plain real-time iteration. With a budget, prepare re-linearises stages
+ * only while the budget allows (the M of the setting first, then further stages in rho
+ * order), then takes SQP iterations on the next instant's problem at the state the plan
+ * predicts (dx_0 = 0) while the KKT proxy exceeds anytime_tol > 0 and one more fits; a time
+ * budget caps the feedback QP's iterations. M_adaptive 1: each iteration re-linearises the
+ * stages whose secant residual rho_k |domega_k| exceeds M_eta > 0 times the KKT proxy, at
+ * least M_min and at most M_max (0 <= M_min <= M_max <= N-1), the largest rho_k first;
+ * 0: the fixed M. */
+typedef struct {
+    int M;
+    int mode;
+    int hessian;
+    int regularization;
+    unicycle_real reg_eps;
+    int cost_hessian;
+    int lm_auto;
+    unicycle_real lm;
+    unicycle_real qp_tol;
+    int qp_max_iter;
+    int qp_warm_start;
+    int recovery;
+    int recovery_failures;
+    double budget;
+    int budget_unit;
+    unicycle_real anytime_tol;
+    int M_adaptive;
+    int M_min;
+    int M_max;
+    unicycle_real M_eta;
+} unicycle_settings;
+/* The generated defaults: M, Hessian, regularisation, eps, cost Hessian and lm from the OCP
+ * file's options; receding mode, QP tolerance UNICYCLE_QP_TOL_DEFAULT, 100 QP iterations, warm
+ * start and recovery on (K = UNICYCLE_RECOVERY_FAILURES). */
+void unicycle_settings_default(unicycle_settings *st);
+/* Set up a solver: every field of the struct written (settings st, NULL: the generated
+ * defaults; parameters p_default at every node; the default clock; not initialised).
+ * UNICYCLE_ERR_INVALID_ARGUMENT when a setting is out of range (the solver is then set up
+ * with the generated defaults). */
+int unicycle_setup(unicycle_solver *s, const unicycle_settings *st);
+/* Change the settings of a set-up solver, at any time between calls (they apply from the
+ * next call on): all of them, or none and UNICYCLE_ERR_INVALID_ARGUMENT when one is out of
+ * range. Switching the automatic lm on restarts it (from 0, raised until the prepared QP is
+ * convex); switching the recovery off drops a pending one. */
+int unicycle_update_settings(unicycle_solver *s, const unicycle_settings *st);
+void unicycle_get_settings(const unicycle_solver *s, unicycle_settings *st);
 
 /* Initialisation (algorithm.md section 4, init): the iterate is the given guess; NULL x or
  * u: the OCP file's initial guess; NULL multipliers: zeros. F and H of every stage and of
@@ -34,11 +105,12 @@ int unicycle_init_nominal(unicycle_solver *s, const unicycle_real *xhat0);
 
 /* Feedback phase: solve the prepared QP for the measured state xhat0 (nx), take the full
  * step and write u_0 (nu) into u0 (may be NULL). Non-finite xhat0: UNICYCLE_ERR_NONFINITE_INPUT,
- * nothing changes. QP failure: UNICYCLE_ERR_QP, no step (unicycle_get_qp_status tells why). */
+ * nothing changes. QP failure: UNICYCLE_ERR_QP, no step (unicycle_info.qp_status tells why). On
+ * every failure u0 is the fallback control (docs/algorithm.md section 9). */
 int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0);
 /* Preparation phase: shift (receding mode), gradients and rho_k of every stage, fresh last
  * stage and terminal node, re-linearise the M stages with the largest rho_k, refresh the
- * stage-cost Hessian of the other stages (unicycle_set_cost_hessian), assemble the QP. Must
+ * stage-cost Hessian of the other stages (settings.cost_hessian), assemble the QP. Must
  * run between two feedback calls.
  * Calling order: one prepare per feedback on an initialised solver that reached the QP
  * (solved or not) and, in receding mode, also per feedback whose measurement was rejected
@@ -56,77 +128,24 @@ int unicycle_prepare(unicycle_solver *s);
  * The parts are >= 0 and never NaN; a part is +Inf when it overflows (an iterate or
  * multipliers near DBL_MAX, e.g. from an init guess: |mu| * |ub - v| > DBL_MAX). */
 int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *kkt4);
-/* The largest of the four parts of the last unicycle_kkt_eval (NaN before the first). */
-unicycle_real unicycle_get_kkt(const unicycle_solver *s);
 
-/* Settings. M: stages re-linearised per iteration besides stage N-1, 0 <= M <= N-1
- * (N-1 is the full RTI). mode: UNICYCLE_MODE_RECEDING or UNICYCLE_MODE_FIXED. hessian:
- * UNICYCLE_HESSIAN_EXACT or UNICYCLE_HESSIAN_GAUSS_NEWTON (only with a least-squares stage cost).
- * regularization: UNICYCLE_REG_NONE, UNICYCLE_REG_PROJECT or UNICYCLE_REG_MIRROR with eps > 0.
- * The QP tolerance (> 0) and iteration limit (>= 1) are those of unicycle_qp_solve. */
-int unicycle_set_M(unicycle_solver *s, int M);
-int unicycle_get_M(unicycle_solver *s);
-int unicycle_set_mode(unicycle_solver *s, int mode);
-int unicycle_get_mode(unicycle_solver *s);
-int unicycle_set_hessian(unicycle_solver *s, int hessian);
-int unicycle_get_hessian(unicycle_solver *s);
-int unicycle_set_regularization(unicycle_solver *s, int regularization, unicycle_real eps);
-int unicycle_get_regularization(unicycle_solver *s);
-unicycle_real unicycle_get_reg_eps(unicycle_solver *s);
-/* Stage-cost Hessian (algorithm.md section 4 step 5): fresh = 1 (the default) refreshes the
- * cost part A_l of the Hessian block of every stage in every prepare (only the curvature of
- * dynamics and constraints is partially updated); fresh = 0 is the paper's literal
- * algorithm (the whole A moves with its slot). The slots always carry A_dyn = A - A_l, so
- * the setting may change between any two calls. */
-int unicycle_set_cost_hessian(unicycle_solver *s, int fresh);
-int unicycle_get_cost_hessian(unicycle_solver *s);
-/* Levenberg-Marquardt term (algorithm.md section 3): the QP minimises with the Hessian
- * blocks A~_k + lm I and A~_N + lm I (the stored blocks are not changed, so the secant
- * criterion and the fixed point are those of lm = 0). lm finite and >= 0: a fixed term
- * (the automatic one is switched off); default: the OCP file's options(lm=...), else the
- * automatic term. */
-int unicycle_set_levenberg_marquardt(unicycle_solver *s, unicycle_real lm);
-/* The term of the next QP (fixed, or the current automatic value). */
-unicycle_real unicycle_get_levenberg_marquardt(unicycle_solver *s);
-/* The automatic, scale-aware, adaptive term (docs/algorithm.md section 10): lm is raised
- * until the QP is convex on the dynamics (Riccati pivots positive definite), after a
- * failed feedback and when the KKT proxy grows; lowered after every successful feedback. */
-int unicycle_set_lm_auto(unicycle_solver *s);
-int unicycle_get_lm_auto(unicycle_solver *s);
-/* The Hessian scale of the automatic term (largest diagonal entry of the QP blocks). */
-unicycle_real unicycle_get_lm_scale(unicycle_solver *s);
-/* QP tolerance: 0 < tol <= UNICYCLE_QP_TOL_MAX (1e-2); a larger one would let the QP return
- * steps that violate the bounds by that much, so it is refused (UNICYCLE_ERR_INVALID_ARGUMENT). */
-int unicycle_set_qp_tol(unicycle_solver *s, unicycle_real tol);
-unicycle_real unicycle_get_qp_tol(unicycle_solver *s);
-int unicycle_set_qp_max_iter(unicycle_solver *s, int max_iter);
-int unicycle_get_qp_max_iter(unicycle_solver *s);
-/* Automatic recovery (docs/algorithm.md section 9), receding mode only: on (1, the default)
- * or off (0), and K >= 1, the number of consecutive failed feedbacks after which the next
- * prepare re-initialises (default UNICYCLE_RECOVERY_FAILURES). A detected divergence
- * re-initialises at once. While on, the prepare after a failed feedback first takes the step
- * of that instant's QP for the state the iterate predicts (UNICYCLE_FLAG_PREDICTED): the plan of
- * the next fallbacks stays current; after a non-finite measurement it clears the count. A
- * feedback whose QP fails (not by its iteration limit) or diverges on a finite measurement
- * re-initialises from that measurement and solves the new QP within the same call before it
- * gives up (UNICYCLE_FLAG_RECOVERED; at most one re-initialisation and one QP with its lm
- * retries); a measurement at which the model is not finite is handled as a missing one
- * (UNICYCLE_ERR_NONFINITE_VALUE, UNICYCLE_FLAG_MEASUREMENT_UNUSABLE). A feedback refused for want of
- * a prepared QP still records its measurement: the recovery starts from the newest one. */
-int unicycle_set_recovery(unicycle_solver *s, int on, int max_failures);
-int unicycle_get_recovery(unicycle_solver *s);
-int unicycle_get_recovery_failures(unicycle_solver *s);
-/* QP warm start in feedback (1, the default): start from the previous QP solution shifted
- * with the horizon (a zero step from the shifted iterate, the iterate's multipliers); when
- * that QP is not solved, feedback retries from the cold starting point in the same call.
- * 0: always cold. */
-int unicycle_set_qp_warm_start(unicycle_solver *s, int on);
-int unicycle_get_qp_warm_start(unicycle_solver *s);
 /* Runtime parameters: all nodes ((N+1) x np) or node k (np); used from the next function
  * evaluation on (prepare, kkt). */
 int unicycle_set_parameters(unicycle_solver *s, const unicycle_real *p);
 int unicycle_set_parameters_node(unicycle_solver *s, int k, const unicycle_real *pk);
-void unicycle_get_parameters(unicycle_solver *s, unicycle_real *p);
+void unicycle_get_parameters(const unicycle_solver *s, unicycle_real *p);
+/* Replace the clock (seconds, any origin); NULL restores the default clock. The default
+ * clock is CLOCK_MONOTONIC where the platform has POSIX timers; on bare metal there is none
+ * and every timing reads 0 until a clock is installed (unicycle_timer.h). */
+void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void *ctx);
+
+/* The discrete model (the OCP file's integrator): x_next = phi(x, u, p) (p NULL: the
+ * default parameters), with the caller's scratch of the generated functions (a plant for
+ * tests and examples; the solver's own is not touched). Returns UNICYCLE_OK,
+ * UNICYCLE_ERR_FUNCTION or UNICYCLE_ERR_NONFINITE_VALUE. */
+struct unicycle_fun_work_s; /* unicycle_fun_work of unicycle_funcs.h */
+int unicycle_simulate(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p, unicycle_real *x_next,
+                   struct unicycle_fun_work_s *work);
 
 /* The iterate (shapes in the header comment). */
 void unicycle_get_x(const unicycle_solver *s, unicycle_real *x);
@@ -143,9 +162,50 @@ void unicycle_get_rho(const unicycle_solver *s, unicycle_real *rho);
 /* Stages whose H was computed fresh by the last prepare (or init), sorted ascending, stage
  * N-1 included; writes up to N ints and returns their count. */
 int unicycle_get_recomputed(const unicycle_solver *s, int *stages);
-/* The last QP: iterations, status (enum unicycle_qp_status of unicycle_qp.h). */
-int unicycle_get_qp_iterations(const unicycle_solver *s);
-int unicycle_get_qp_status(const unicycle_solver *s);
+/* The control returned by the last feedback (nu), successful or not; within the bounds. */
+void unicycle_get_u0(const unicycle_solver *s, unicycle_real *u0);
+/* The scale of the box test of the divergence test: state (nx) and control (nu) scales
+ * (either may be NULL). */
+void unicycle_get_scales(const unicycle_solver *s, unicycle_real *scale_x, unicycle_real *scale_u);
+
+/* What the last calls did, read in one call (docs/algorithm.md sections 4, 9, 10). */
+typedef struct {
+    int status;           /* status of the last call that returns one */
+    int initialized;      /* a successful init happened */
+    int qp_status;        /* enum unicycle_qp_status of the last feedback's QP */
+    int qp_iterations;    /* its iterations (the sum over the solves of the call) */
+    int qp_cold_retry;    /* 1 when its warm-started QP failed and the cold retry ran */
+    int flags;            /* UNICYCLE_FLAG_* raised by the last feedback and the prepare after it:
+                            u0 clipped, fallback control, divergence, recovery, ... */
+    int recoveries;       /* re-initialisations by the automatic recovery since init */
+    int failed_feedbacks; /* consecutive failed feedbacks */
+    int M_used;           /* stages the last prepare (or init) re-linearised besides stage N-1
+                            (M, or N-1 after a recovery and at init) */
+    int ring_head;        /* stage k lives in slot (ring_head + k) mod N */
+    int has_clock;        /* 1 if the timings measure time (a clock was installed, or the
+                            default clock exists on this platform), 0 if they read 0 */
+    unicycle_real lm;        /* the Levenberg-Marquardt term of the next QP (fixed or automatic) */
+    unicycle_real lm_scale;  /* the Hessian scale of the automatic term */
+    unicycle_real kkt_proxy; /* divergence measure of the last prepare or init: the stationarity
+                            and equality parts of the KKT measure at the prepared point */
+    unicycle_real kkt[4];    /* stat, eq, ineq, comp of the last unicycle_kkt_eval (NaN before) */
+    unicycle_real kkt_max;   /* their largest */
+    /* seconds per phase of the last call that ran it (enum unicycle_phase: feedback, shift,
+     * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
+     * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback
+     * (t_prepare), the wall time of that call */
+    double timings[10];
+    double t_feedback;
+    double t_prepare;
+    /* anytime DOPUS (section 12), the last instant: extra iterations after prepare, stages
+     * re-linearised over all its iterations (stage N-1 not counted), budget used (its unit);
+     * the work units counted since setup */
+    int extra_iterations;
+    int instant_stages;
+    double budget_used;
+    double work;
+} unicycle_info;
+void unicycle_get_info(const unicycle_solver *s, unicycle_info *info);
 /* A constraint row of the OCP at one stage of the horizon. */
 typedef struct {
     int stage;        /* 0..N-1; N: the terminal node */
@@ -158,75 +218,9 @@ typedef struct {
     unicycle_real bound; /* the bound's value (the lower one for side 0; 0 for an equality row, whose
                      function is the declared row minus its value) */
 } unicycle_row_info;
-/* When the last QP was infeasible (unicycle_get_qp_status UNICYCLE_QP_PRIMAL_INFEASIBLE): the row
- * with the largest multiplier of its infeasibility certificate, the row that the other rows
- * of the certificate (the bounds, dynamics and measured state) keep from being met; stages
- * are those of that QP's horizon. Returns 1 and writes *row, else returns 0. */
+/* When the last QP was infeasible (unicycle_info.qp_status UNICYCLE_QP_PRIMAL_INFEASIBLE, until the
+ * next prepare): the row with the largest multiplier of its infeasibility certificate, the
+ * row that the other rows of the certificate (the bounds, dynamics and measured state) keep
+ * from being met; stages are those of that QP's horizon. Returns 1 and writes *row, else
+ * returns 0. */
 int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *row);
-/* Health of the controller (docs/algorithm.md section 9). Flags (UNICYCLE_FLAG_*) raised by
- * the last feedback and the prepare after it (feedback clears them): the returned u0 was
- * clipped to the control bounds, u0 is the fallback of a failed feedback (the next control
- * of the last good plan), a divergence was detected, the prepare re-initialised. */
-int unicycle_get_flags(const unicycle_solver *s);
-/* The control returned by the last feedback (nu), successful or not; within the bounds. */
-void unicycle_get_u0(const unicycle_solver *s, unicycle_real *u0);
-/* Re-initialisations by the automatic recovery since init; consecutive failed feedbacks. */
-int unicycle_get_recoveries(const unicycle_solver *s);
-int unicycle_get_failed_feedbacks(const unicycle_solver *s);
-/* The divergence measure of the last prepare or init: the stationarity and equality parts of
- * the KKT measure at the prepared point (max |F_w,k + [lam_k; 0]|, |phi_k - x_{k+1}|, ...);
- * and the scale of the box test of the iterate: state (nx) and control (nu) scales. */
-unicycle_real unicycle_get_kkt_proxy(const unicycle_solver *s);
-void unicycle_get_scales(const unicycle_solver *s, unicycle_real *scale_x, unicycle_real *scale_u);
-/* 1 when the last feedback's warm-started QP failed and the cold retry ran (the
- * iterations above are then the sum of both solves), else 0. */
-int unicycle_get_qp_cold_retry(const unicycle_solver *s);
-/* Status of the last call that returns a status. */
-int unicycle_get_status(const unicycle_solver *s);
-int unicycle_is_initialized(const unicycle_solver *s);
-/* ring_head (stage k lives in slot (ring_head + k) mod N). */
-int unicycle_get_ring_head(const unicycle_solver *s);
-
-/* Seconds per phase of the last call that ran it (t[0..7] = feedback, shift, gradients,
- * rho, hessians, regularization, assembly, kkt; indices of enum unicycle_phase). init fills
- * the phases it runs too. "hessians" includes the stage-cost Hessians A_l. */
-void unicycle_get_timings(const unicycle_solver *s, double *t);
-/* Replace the clock (seconds, any origin); NULL restores the default clock. The default
- * clock is CLOCK_MONOTONIC where the platform has POSIX timers; on bare metal there is none
- * and every timing reads 0 until a clock is installed (unicycle_timer.h). */
-void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void *ctx);
-/* 1 if the timings measure time (a clock was installed, or the default clock exists on
- * this platform), 0 if they read 0 for want of a clock. */
-int unicycle_has_clock(const unicycle_solver *s);
-/* Anytime DOPUS (docs/algorithm.md section 12): a budget per sampling instant, counted
- * from the start of the instant's feedback. In time (seconds of the solver's clock, unicycle_set_clock:
- * on firmware an instruction or cycle counter) or in work units (stage_grad, stage_hess,
- * term_grad and term_hess evaluations count 1 each, a QP solve counts N; deterministic, the
- * unit of the Python reference). 0 switches it off (the plain real-time iteration). With a
- * budget, prepare re-linearises stages beyond stage N-1 only while the budget allows, first
- * the M (or adaptive M) stages, then further stages in rho order, and spends the rest on
- * SQP iterations on the next instant's problem at the state the plan predicts (dx_0 = 0)
- * while the KKT proxy exceeds the anytime tolerance; the next feedback starts from that
- * iterate. The feedback's QP iterations are capped by the budget left (the fallback control
- * when the cap stops it). */
-int unicycle_set_time_budget(unicycle_solver *s, double seconds);
-int unicycle_set_work_budget(unicycle_solver *s, double units);
-/* UNICYCLE_BUDGET_OFF, UNICYCLE_BUDGET_TIME or UNICYCLE_BUDGET_WORK, and the budget in its unit. */
-int unicycle_get_budget_unit(const unicycle_solver *s);
-double unicycle_get_budget(const unicycle_solver *s);
-/* KKT proxy (unicycle_get_kkt_proxy) below which no further iteration is spent; > 0. */
-int unicycle_set_anytime_tol(unicycle_solver *s, unicycle_real tol);
-unicycle_real unicycle_get_anytime_tol(const unicycle_solver *s);
-/* Adaptive M (docs/algorithm.md section 12): each iteration re-linearises the stages whose
- * secant residual rho_k |domega_k| exceeds eta times the KKT proxy, at least M_min and at
- * most M_max of them (0 <= M_min <= M_max), the largest rho_k first. on = 0: the fixed M of
- * unicycle_set_M. eta > 0. */
-int unicycle_set_M_adaptive(unicycle_solver *s, int on, int M_min, int M_max, unicycle_real eta);
-int unicycle_get_M_adaptive(const unicycle_solver *s, int *M_min, int *M_max, unicycle_real *eta);
-/* The last instant: extra iterations after prepare, stages re-linearised over all its
- * iterations (stage N-1 and the terminal node not counted), budget used (its unit). */
-int unicycle_get_extra_iterations(const unicycle_solver *s);
-int unicycle_get_instant_stages(const unicycle_solver *s);
-double unicycle_get_budget_used(const unicycle_solver *s);
-/* Work units counted since the solver was set up (the unit of unicycle_set_work_budget). */
-double unicycle_get_work(const unicycle_solver *s);

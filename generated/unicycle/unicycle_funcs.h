@@ -14,50 +14,55 @@
 
 #include "unicycle_sizes.h"
 
-typedef struct {
+typedef struct unicycle_fun_work_s {
     int iw[UNICYCLE_SZ_IW];
     unicycle_real w[UNICYCLE_SZ_W];
     const unicycle_real *arg[UNICYCLE_SZ_ARG];
     unicycle_real *res[UNICYCLE_SZ_RES];
 } unicycle_fun_work;
 
+#ifndef UNICYCLE_INTERNAL
+#define UNICYCLE_INTERNAL
+#endif
+
 /* stage_eval: phi (nx), l (1), g (ng) */
-int unicycle_eval_stage_eval(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p, unicycle_real *phi,
-                          unicycle_real *l, unicycle_real *g, unicycle_fun_work *wk);
+UNICYCLE_INTERNAL int unicycle_eval_stage_eval(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
+                                         unicycle_real *phi, unicycle_real *l, unicycle_real *g, unicycle_fun_work *wk);
 
 /* stage_grad, F_k of eq. 14: gL = grad_w l - Phi' lam_next + C' mu_g, plus phi, l, g */
-int unicycle_eval_stage_grad(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
-                          const unicycle_real *lam_next, const unicycle_real *mu_g, unicycle_real *gL, unicycle_real *phi,
-                          unicycle_real *l, unicycle_real *g, unicycle_fun_work *wk);
+UNICYCLE_INTERNAL int unicycle_eval_stage_grad(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
+                                         const unicycle_real *lam_next, const unicycle_real *mu_g, unicycle_real *gL,
+                                         unicycle_real *phi, unicycle_real *l, unicycle_real *g, unicycle_fun_work *wk);
 
 /* stage_hess, H_k of eq. 15: A (nw x nw), Phi (nx x nw), C (ng x nw).
  * gauss_newton != 0 selects the Gauss-Newton A; nonzero return if !UNICYCLE_HAS_GN then. */
-int unicycle_eval_stage_hess(int gauss_newton, const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
-                          const unicycle_real *lam_next, const unicycle_real *mu_g, unicycle_real *A, unicycle_real *Phi,
-                          unicycle_real *C, unicycle_fun_work *wk);
+UNICYCLE_INTERNAL int unicycle_eval_stage_hess(int gauss_newton, const unicycle_real *x, const unicycle_real *u,
+                                         const unicycle_real *p, const unicycle_real *lam_next,
+                                         const unicycle_real *mu_g, unicycle_real *A, unicycle_real *Phi,
+                                         unicycle_real *C, unicycle_fun_work *wk);
 
 /* stage_hess_cost: A_l (nw x nw), the stage-cost part of A (docs/algorithm.md section 4
  * step 5): exact hess_w l, or with gauss_newton != 0 J' W J + hess_w l_extra (nonzero
  * return if !UNICYCLE_HAS_GN then). No integrator: l is evaluated at the node. */
-int unicycle_eval_stage_hess_cost(int gauss_newton, const unicycle_real *x, const unicycle_real *u,
-                               const unicycle_real *p, unicycle_real *A_l, unicycle_fun_work *wk);
+UNICYCLE_INTERNAL int unicycle_eval_stage_hess_cost(int gauss_newton, const unicycle_real *x, const unicycle_real *u,
+                                              const unicycle_real *p, unicycle_real *A_l, unicycle_fun_work *wk);
 
 /* term_eval: E (1), r (nr), r_eq (ne) */
-int unicycle_eval_term_eval(const unicycle_real *x, const unicycle_real *p, unicycle_real *E, unicycle_real *r,
-                         unicycle_real *r_eq, unicycle_fun_work *wk);
+UNICYCLE_INTERNAL int unicycle_eval_term_eval(const unicycle_real *x, const unicycle_real *p, unicycle_real *E,
+                                        unicycle_real *r, unicycle_real *r_eq, unicycle_fun_work *wk);
 
 /* term_grad: gL = grad E + R' mu_r + R_eq' nu, plus E, r, r_eq */
-int unicycle_eval_term_grad(const unicycle_real *x, const unicycle_real *p, const unicycle_real *mu_r,
-                         const unicycle_real *nu, unicycle_real *gL, unicycle_real *E, unicycle_real *r, unicycle_real *r_eq,
-                         unicycle_fun_work *wk);
+UNICYCLE_INTERNAL int unicycle_eval_term_grad(const unicycle_real *x, const unicycle_real *p, const unicycle_real *mu_r,
+                                        const unicycle_real *nu, unicycle_real *gL, unicycle_real *E, unicycle_real *r,
+                                        unicycle_real *r_eq, unicycle_fun_work *wk);
 
 /* term_hess: A (nx x nx), R (nr x nx), R_eq (ne x nx); always available (no GN restriction) */
-int unicycle_eval_term_hess(int gauss_newton, const unicycle_real *x, const unicycle_real *p, const unicycle_real *mu_r,
-                         const unicycle_real *nu, unicycle_real *A, unicycle_real *R, unicycle_real *R_eq,
-                         unicycle_fun_work *wk);
+UNICYCLE_INTERNAL int unicycle_eval_term_hess(int gauss_newton, const unicycle_real *x, const unicycle_real *p,
+                                        const unicycle_real *mu_r, const unicycle_real *nu, unicycle_real *A,
+                                        unicycle_real *R, unicycle_real *R_eq, unicycle_fun_work *wk);
 
 /* ode: continuous model xdot = f(x, u, p) */
-int unicycle_eval_ode(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p, unicycle_real *xdot,
-                   unicycle_fun_work *wk);
+UNICYCLE_INTERNAL int unicycle_eval_ode(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
+                                  unicycle_real *xdot, unicycle_fun_work *wk);
 
 #endif /* UNICYCLE_FUNCS_H */

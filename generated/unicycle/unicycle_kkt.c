@@ -4,8 +4,9 @@
 #include "unicycle_kkt.h"
 #include "unicycle_linalg.h"
 #include "unicycle_problem.h"
-#include "unicycle_solver.h"
-#include "unicycle_solver_internal.h"
+
+#define NG1 UNICYCLE_DIM(UNICYCLE_NG)
+#define NP1 UNICYCLE_DIM(UNICYCLE_NP)
 
 static unicycle_real unicycle_kkt_max(unicycle_real a, unicycle_real b)
 {
@@ -32,75 +33,84 @@ static unicycle_real unicycle_kkt_comp(unicycle_real mu, unicycle_real v, unicyc
     return c;
 }
 
-int unicycle_kkt_measure(struct unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *parts)
+int unicycle_kkt_measure(const unicycle_real *x, const unicycle_real *u, const unicycle_real *lam, const unicycle_real *mu_g,
+                      const unicycle_real *mu_b, const unicycle_real *mu_bN, const unicycle_real *mu_r,
+                      const unicycle_real *nu, const unicycle_real *p, const unicycle_real *xhat0,
+                      unicycle_fun_work *work, unicycle_real *parts)
 {
     unicycle_real stat = UNICYCLE_R(0.0), eq = UNICYCLE_R(0.0), ineq = UNICYCLE_R(0.0), comp = UNICYCLE_R(0.0);
     unicycle_real gL[UNICYCLE_NW], phi[UNICYCLE_NX], g[UNICYCLE_DIM(UNICYCLE_NG)], l;
     unicycle_real gLN[UNICYCLE_NX], E, r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
-    int k, i, rc;
+    int k, i;
 
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        eq = unicycle_kkt_max(eq, unicycle_fabs(s->x[0][i] - xhat0[i]));
+        eq = unicycle_kkt_max(eq, unicycle_fabs(x[i] - xhat0[i]));
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
-        if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi, &l, g,
-                                  &s->mem.ev.fun_work) != 0) {
-            return UNICYCLE_ERR_FUNCTION;
+        if (unicycle_eval_stage_grad(x + k * UNICYCLE_NX, u + k * UNICYCLE_NU, p + k * NP1, lam + (k + 1) * UNICYCLE_NX,
+                                  mu_g + k * NG1, gL, phi, &l, g, work) != 0) {
+            return UNICYCLE_KKT_FUNCTION;
         }
         if (!unicycle_lai_vec_finite(UNICYCLE_NW, gL) || !unicycle_lai_vec_finite(UNICYCLE_NX, phi) ||
             !unicycle_lai_vec_finite(UNICYCLE_NG, g) || !isfinite(l)) {
-            return UNICYCLE_ERR_NONFINITE_VALUE;
+            return UNICYCLE_KKT_NONFINITE;
         }
         /* stationarity gL_k + mu_b_k + [lam_k; 0] */
         for (i = 0; i < UNICYCLE_NW; ++i) {
-            unicycle_real v = gL[i] + s->mu_b[k][i] + (i < UNICYCLE_NX ? s->lam[k][i] : UNICYCLE_R(0.0));
+            unicycle_real v =
+                gL[i] + mu_b[k * UNICYCLE_NW + i] + (i < UNICYCLE_NX ? lam[k * UNICYCLE_NX + i] : UNICYCLE_R(0.0));
             stat = unicycle_kkt_max(stat, unicycle_fabs(v));
         }
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            eq = unicycle_kkt_max(eq, unicycle_fabs(s->x[k + 1][i] - phi[i]));
+            eq = unicycle_kkt_max(eq, unicycle_fabs(x[(k + 1) * UNICYCLE_NX + i] - phi[i]));
         }
         for (i = 0; i < UNICYCLE_NG; ++i) {
             ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(g[i], unicycle_lg[i], unicycle_ug[i]));
-            comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_g[k][i], g[i], unicycle_lg[i], unicycle_ug[i]));
+            comp = unicycle_kkt_max(comp, unicycle_kkt_comp(mu_g[k * NG1 + i], g[i], unicycle_lg[i], unicycle_ug[i]));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
          * sides and counts with its magnitude) */
-        if (!unicycle_x_bounded(k)) {
+        if (k == 0) {
             for (i = 0; i < UNICYCLE_NX; ++i) {
-                comp = unicycle_kkt_max(comp, unicycle_fabs(s->mu_b[0][i]));
+                comp = unicycle_kkt_max(comp, unicycle_fabs(mu_b[i]));
             }
         } else {
             for (i = 0; i < UNICYCLE_NX; ++i) {
-                ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->x[k][i], unicycle_lbx[i], unicycle_ubx[i]));
-                comp = unicycle_kkt_max(comp,
-                                     unicycle_kkt_comp(s->mu_b[k][i], s->x[k][i], unicycle_lbx[i], unicycle_ubx[i]));
+                ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(x[k * UNICYCLE_NX + i], unicycle_lbx[i], unicycle_ubx[i]));
+                comp = unicycle_kkt_max(comp, unicycle_kkt_comp(mu_b[k * UNICYCLE_NW + i], x[k * UNICYCLE_NX + i],
+                                                          unicycle_lbx[i], unicycle_ubx[i]));
             }
         }
         for (i = 0; i < UNICYCLE_NU; ++i) {
-            ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->u[k][i], unicycle_lbu[i], unicycle_ubu[i]));
-            comp = unicycle_kkt_max(
-                comp, unicycle_kkt_comp(s->mu_b[k][UNICYCLE_NX + i], s->u[k][i], unicycle_lbu[i], unicycle_ubu[i]));
+            ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(u[k * UNICYCLE_NU + i], unicycle_lbu[i], unicycle_ubu[i]));
+            comp = unicycle_kkt_max(comp, unicycle_kkt_comp(mu_b[k * UNICYCLE_NW + UNICYCLE_NX + i], u[k * UNICYCLE_NU + i],
+                                                      unicycle_lbu[i], unicycle_ubu[i]));
         }
     }
-    rc = unicycle_term_grad_checked(s, gLN, &E, r, r_eq);
-    if (rc != UNICYCLE_OK) {
-        return rc;
+    if (unicycle_eval_term_grad(x + UNICYCLE_N * UNICYCLE_NX, p + UNICYCLE_N * NP1, mu_r, nu, gLN, &E, r, r_eq, work) !=
+        0) {
+        return UNICYCLE_KKT_FUNCTION;
+    }
+    if (!unicycle_lai_vec_finite(UNICYCLE_NX, gLN) || !isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) ||
+        !unicycle_lai_vec_finite(UNICYCLE_NE, r_eq)) {
+        return UNICYCLE_KKT_NONFINITE;
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        stat = unicycle_kkt_max(stat, unicycle_fabs(gLN[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]));
-        ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(s->x[UNICYCLE_N][i], unicycle_lbx[i], unicycle_ubx[i]));
-        comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_bN[i], s->x[UNICYCLE_N][i], unicycle_lbx[i], unicycle_ubx[i]));
+        stat = unicycle_kkt_max(stat, unicycle_fabs(gLN[i] + mu_bN[i] + lam[UNICYCLE_N * UNICYCLE_NX + i]));
+        ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(x[UNICYCLE_N * UNICYCLE_NX + i], unicycle_lbx[i], unicycle_ubx[i]));
+        comp = unicycle_kkt_max(comp,
+                             unicycle_kkt_comp(mu_bN[i], x[UNICYCLE_N * UNICYCLE_NX + i], unicycle_lbx[i], unicycle_ubx[i]));
     }
     for (i = 0; i < UNICYCLE_NE; ++i) {
         eq = unicycle_kkt_max(eq, unicycle_fabs(r_eq[i]));
     }
     for (i = 0; i < UNICYCLE_NR; ++i) {
         ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(r[i], unicycle_lr[i], unicycle_ur[i]));
-        comp = unicycle_kkt_max(comp, unicycle_kkt_comp(s->mu_r[i], r[i], unicycle_lr[i], unicycle_ur[i]));
+        comp = unicycle_kkt_max(comp, unicycle_kkt_comp(mu_r[i], r[i], unicycle_lr[i], unicycle_ur[i]));
     }
     parts[0] = stat;
     parts[1] = eq;
     parts[2] = ineq;
     parts[3] = comp;
-    return UNICYCLE_OK;
+    return UNICYCLE_KKT_OK;
 }

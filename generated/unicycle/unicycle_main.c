@@ -40,7 +40,8 @@ static int report(const char *phase, int iter, int status, const unicycle_real *
  * next measurement is the model's prediction phi(x0, u0) */
 static int run(const char *phase, int mode)
 {
-    unicycle_real xhat0[UNICYCLE_NX], xnext[UNICYCLE_NX], u0[UNICYCLE_NU], kkt4[4], l, g[UNICYCLE_DIM(UNICYCLE_NG)];
+    unicycle_real xhat0[UNICYCLE_NX], xnext[UNICYCLE_NX], u0[UNICYCLE_NU], kkt4[4];
+    unicycle_settings settings;
     int i, k, status;
 
     for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -49,8 +50,9 @@ static int run(const char *phase, int mode)
     for (i = 0; i < UNICYCLE_NU; ++i) {
         u0[i] = UNICYCLE_R(0.0);
     }
-    unicycle_defaults(&solver);
-    status = unicycle_set_mode(&solver, mode);
+    unicycle_settings_default(&settings); /* the OCP file's options */
+    settings.mode = mode;
+    status = unicycle_setup(&solver, &settings);
 #if UNICYCLE_HAS_NOMINAL
     if (status == UNICYCLE_OK) {
         status = unicycle_init_nominal(&solver, xhat0);
@@ -70,7 +72,7 @@ static int run(const char *phase, int mode)
     for (k = 1; k <= ITERATIONS; ++k) {
         status = unicycle_feedback(&solver, xhat0, u0);
         if (status == UNICYCLE_OK && mode == UNICYCLE_MODE_RECEDING) {
-            if (unicycle_eval_stage_eval(xhat0, u0, unicycle_p_default, xnext, &l, g, &plant_work)) {
+            if (unicycle_simulate(xhat0, u0, NULL, xnext, &plant_work) != UNICYCLE_OK) {
                 fprintf(stderr, "main_dopus: the model failed to evaluate\n");
                 return 1;
             }

@@ -1,5 +1,7 @@
-/* Problem data generated from the OCP file (unicycle_problem.c): bounds, defaults, the initial
- * guess and, when the OCP asks for it, the offline primal-dual solution at the default x0.
+/* Problem data generated from the OCP file (unicycle_problem.c), public and read-only: bounds,
+ * the default parameters and x0, the initial guess and, when the OCP asks for it, the
+ * offline primal-dual solution at the default x0. (The OCP file's options are the generated
+ * settings, unicycle_settings_default of unicycle_solver.h, also in unicycle_problem.c.)
  *
  * Infinite bounds are INFINITY / -INFINITY; the runtime treats them as "no bound on that side"
  * (docs/algorithm.md section 1). Sizes of possibly empty arrays use UNICYCLE_DIM so that every
@@ -20,12 +22,6 @@ extern const unicycle_real unicycle_x0_default[UNICYCLE_NX];
 /* the OCP file's initial guess */
 extern const unicycle_real unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX];
 extern const unicycle_real unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU];
-extern const int unicycle_default_M;
-extern const int unicycle_default_hessian;        /* 0 exact, 1 gauss-newton */
-extern const int unicycle_default_regularization; /* 0 none, 1 project, 2 mirror */
-extern const unicycle_real unicycle_default_reg_eps;
-extern const int unicycle_default_cost_hessian; /* 1 fresh, 0 stored */
-extern const unicycle_real unicycle_default_lm;    /* Levenberg-Marquardt term, >= 0 */
 
 #if UNICYCLE_HAS_NOMINAL
 /* offline primal-dual solution at unicycle_x0_default (IPOPT at generation time), so the

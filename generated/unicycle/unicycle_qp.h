@@ -287,17 +287,21 @@ typedef struct {
     unicycle_real scale_bounds;
 } unicycle_qp_workspace;
 
+#ifndef UNICYCLE_INTERNAL
+#define UNICYCLE_INTERNAL
+#endif
+
 /* Default settings: tol 1e-8, max_iter 100, cold start, one refinement step. */
-void unicycle_qp_settings_default(unicycle_qp_settings *settings);
+UNICYCLE_INTERNAL void unicycle_qp_settings_default(unicycle_qp_settings *settings);
 
 /* sizeof(unicycle_qp_workspace), the memory bill of the solver. */
-unsigned long unicycle_qp_workspace_size(void);
+UNICYCLE_INTERNAL unsigned long unicycle_qp_workspace_size(void);
 
 /* Solve the QP. `sol` is read as the warm-start point when settings->warm_start is
  * nonzero and always written (best point found; zeros on invalid input). `info` may be
  * NULL. Returns the status (enum unicycle_qp_status). */
-int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const unicycle_qp_settings *settings,
-                   unicycle_qp_sol *sol, unicycle_qp_info *info);
+UNICYCLE_INTERNAL int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in,
+                                  const unicycle_qp_settings *settings, unicycle_qp_sol *sol, unicycle_qp_info *info);
 
 /* After unicycle_qp_solve returned UNICYCLE_QP_PRIMAL_INFEASIBLE (ws and in as they were then): the
  * row with the largest multiplier of the infeasibility certificate among the bounded rows
@@ -306,7 +310,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
  * header comment (w_k, then the rows of C_k; x_N, the rows of R, then those of Req); side:
  * -1 the lower bound, +1 the upper bound (an equality row: the sign of its multiplier), 0
  * lower above upper. Returns 1, or 0 when no row carries a multiplier. */
-int unicycle_qp_infeasible_row(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int *stage, int *row,
-                            int *side);
+UNICYCLE_INTERNAL int unicycle_qp_infeasible_row(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int *stage,
+                                           int *row, int *side);
 
 #endif /* UNICYCLE_QP_H */

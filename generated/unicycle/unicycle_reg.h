@@ -13,14 +13,18 @@
 
 enum unicycle_regularization { UNICYCLE_REG_NONE = 0, UNICYCLE_REG_PROJECT = 1, UNICYCLE_REG_MIRROR = 2 };
 
+#ifndef UNICYCLE_INTERNAL
+#define UNICYCLE_INTERNAL
+#endif
+
 /* Eigen-decomposition of the symmetric part of the n x n column-major matrix `a`.
  * On return the diagonal of `a` holds the eigenvalues (off-diagonals ~0) and `v` (n x n,
  * column-major) the orthonormal eigenvectors as columns. Returns the number of sweeps
  * used, or -1 if the off-diagonal mass did not fall to round-off within the sweep limit. */
-int unicycle_reg_jacobi_eig(int n, unicycle_real *a, unicycle_real *v);
+UNICYCLE_INTERNAL int unicycle_reg_jacobi_eig(int n, unicycle_real *a, unicycle_real *v);
 
 /* Regularise the n x n column-major block A in place. `work` holds at least 2*n*n doubles.
  * Returns 0 on success, -1 if the eigen-decomposition did not converge (A left as given). */
-int unicycle_reg_apply(int n, unicycle_real *A, int mode, unicycle_real eps, unicycle_real *work);
+UNICYCLE_INTERNAL int unicycle_reg_apply(int n, unicycle_real *A, int mode, unicycle_real eps, unicycle_real *work);
 
 #endif /* UNICYCLE_REG_H */

@@ -35,23 +35,27 @@ typedef struct {
     int ring_head;
 } unicycle_ring;
 
+#ifndef UNICYCLE_INTERNAL
+#define UNICYCLE_INTERNAL
+#endif
+
 /* head = 0, every slot zero. */
-void unicycle_ring_reset(unicycle_ring *ring);
+UNICYCLE_INTERNAL void unicycle_ring_reset(unicycle_ring *ring);
 
 /* The slot of stage k (0 <= k < N). */
-unicycle_stage_slot *unicycle_ring_stage(unicycle_ring *ring, int k);
-const unicycle_stage_slot *unicycle_ring_stage_const(const unicycle_ring *ring, int k);
+UNICYCLE_INTERNAL unicycle_stage_slot *unicycle_ring_stage(unicycle_ring *ring, int k);
+UNICYCLE_INTERNAL const unicycle_stage_slot *unicycle_ring_stage_const(const unicycle_ring *ring, int k);
 
 /* One sampling interval: ring_head <- (ring_head + 1) mod N. */
-void unicycle_ring_advance(unicycle_ring *ring);
+UNICYCLE_INTERNAL void unicycle_ring_advance(unicycle_ring *ring);
 
 /* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
-void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A);
+UNICYCLE_INTERNAL void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A);
 /* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
-void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const unicycle_real *A_l, unicycle_real *A);
+UNICYCLE_INTERNAL void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const unicycle_real *A_l, unicycle_real *A);
 
 /* Zero the step domega of a slot. */
-void unicycle_ring_clear_step(unicycle_stage_slot *slot);
+UNICYCLE_INTERNAL void unicycle_ring_clear_step(unicycle_stage_slot *slot);
 
 /* Round-off floor of the secant residual (docs/algorithm.md section 4 step 2). */
 #define UNICYCLE_EPS_RHO UNICYCLE_PREC(1e-12, 1e-6)
@@ -62,11 +66,11 @@ void unicycle_ring_clear_step(unicycle_stage_slot *slot);
  *            g_old + Ct dw - g_new] |
  *   rho = num / |(dw, dlam, dmu_g, dmu_b)| (2-norms), 0 when the denominator is 0 or
  *   num <= UNICYCLE_EPS_RHO * (|(F_w_old, phi_old, g_old)| + |(F_w_new, phi_new, g_new)|). */
-unicycle_real unicycle_ring_secant(const unicycle_stage_slot *slot, const unicycle_real *F_w_new,
-                             const unicycle_real *phi_new, const unicycle_real *g_new);
+UNICYCLE_INTERNAL unicycle_real unicycle_ring_secant(const unicycle_stage_slot *slot, const unicycle_real *F_w_new,
+                                            const unicycle_real *phi_new, const unicycle_real *g_new);
 
 /* Store F_new as F_old. */
-void unicycle_ring_store_F(unicycle_stage_slot *slot, const unicycle_real *F_w, const unicycle_real *phi,
-                        const unicycle_real *g);
+UNICYCLE_INTERNAL void unicycle_ring_store_F(unicycle_stage_slot *slot, const unicycle_real *F_w, const unicycle_real *phi,
+                                       const unicycle_real *g);
 
 #endif /* UNICYCLE_RING_H */

@@ -1,4 +1,5 @@
-/* The DOPUS real-time iteration (docs/algorithm.md section 4; paper Algorithm 1).
+/* The DOPUS real-time iteration (docs/algorithm.md section 4; paper Algorithm 1), and the
+ * one translation unit of the runtime library.
  *
  * init: F and H of every stage at the guess. Per sampling instant:
  *   feedback: QP with the measured xhat0, full step, u_0 out;
@@ -9,17 +10,42 @@
  *             the adjoint-corrected gradient (eq. 12).
  * The order of operations is that of the contract, so that the Python reference and this
  * runtime produce the same iterates to round-off.
+ *
+ * The modules (the phase timers, the ring of stage slots, the regularisation, the wrappers
+ * of the generated functions, the automatic lm, the health predicates, the KKT measure, the
+ * QP) are included at the end of this file, as HPIPM's x_*.c files are, with
+ * UNICYCLE_INTERNAL = static: the library exports the public API of unicycle_solver.h and the
+ * problem data of unicycle_problem.h, nothing else. Each module compiles alone as well (the
+ * tests' builds), with external linkage. The modules call only modules below them (timer,
+ * ring, reg, funcs, linalg; lm and health read the ring; the QP reads linalg), never this
+ * file.
  */
+/* clock_gettime is POSIX, not C99: request it before any header (unicycle_timer.c). */
+#ifndef _POSIX_C_SOURCE
+#define _POSIX_C_SOURCE 199309L
+#endif
+
+#if defined(__GNUC__)
+#define UNICYCLE_INTERNAL static __attribute__((unused))
+#else
+#define UNICYCLE_INTERNAL static
+#endif
+
 #include <math.h>
 
+#include "unicycle_health.h"
 #include "unicycle_kkt.h"
 #include "unicycle_linalg.h"
+#include "unicycle_lm.h"
 #include "unicycle_problem.h"
 #include "unicycle_solver.h"
-#include "unicycle_solver_internal.h"
 
-#define UNICYCLE_MAGIC 0x444f5055 /* "DOPU" */
-#define UNICYCLE_DEFAULT_QP_TOL UNICYCLE_PREC(1e-10, 1e-5)
+/* unicycle_info.timings is declared with the literal count of the phases (for cffi) */
+typedef char unicycle_phase_count_check[(UNICYCLE_N_PHASES == 10) ? 1 : -1];
+
+/* The phases of prepare (every phase but feedback and kkt), as a bit mask. */
+#define UNICYCLE_PREPARE_PHASES                                                                                 \
+    (((1u << UNICYCLE_N_PHASES) - 1u) & ~(1u << UNICYCLE_PHASE_FEEDBACK) & ~(1u << UNICYCLE_PHASE_KKT))
 
 /* ---- small helpers ------------------------------------------------------------------ */
 
@@ -39,14 +65,16 @@ static void unicycle_zero(int n, unicycle_real *dst)
     }
 }
 
-void unicycle_ensure_setup(unicycle_solver *s)
+/* x_0 carries no bound (docs/algorithm.md section 1): it is fixed by the measurement, so
+ * the simple bounds of the states apply at nodes 1..N only (stage 0 passes infinite sides
+ * to the QP, the KKT measure counts a multiplier on x_0 with its magnitude) and the x part
+ * of mu_b_0 is 0 (unicycle_clear_x0_multiplier). */
+static int unicycle_x_bounded(int k)
 {
-    if (s->magic != UNICYCLE_MAGIC) {
-        unicycle_defaults(s);
-    }
+    return k > 0;
 }
 
-void unicycle_clear_x0_multiplier(unicycle_solver *s)
+static void unicycle_clear_x0_multiplier(unicycle_solver *s)
 {
     int i;
     for (i = 0; i < UNICYCLE_NX; ++i) {
@@ -54,10 +82,42 @@ void unicycle_clear_x0_multiplier(unicycle_solver *s)
     }
 }
 
-int unicycle_ret(unicycle_solver *s, int status)
+/* Record status as the status of the last call and return it. */
+static int unicycle_ret(unicycle_solver *s, int status)
 {
     s->status = status;
     return status;
+}
+
+/* The phase of the timer from now on; returns the phase that ran (unicycle_timer_switch). */
+static int unicycle_phase(unicycle_solver *s, int phase)
+{
+    return unicycle_timer_switch(&s->timer, phase);
+}
+
+static int unicycle_has_clock(const unicycle_solver *s);
+
+/* ---- the anytime budget (algorithm.md section 12) --------------------------------------- */
+
+/* 1 when a budget is set (a time budget needs a clock). */
+static int unicycle_budget_on(const unicycle_solver *s)
+{
+    return s->settings.budget > 0.0 && (s->settings.budget_unit == UNICYCLE_BUDGET_WORK || unicycle_has_clock(s));
+}
+
+/* Now on the budget's clock: the work counter (work units) or the solver's clock. */
+static double unicycle_budget_now(const unicycle_solver *s)
+{
+    if (s->settings.budget_unit == UNICYCLE_BUDGET_WORK) {
+        return s->anytime.work;
+    }
+    return s->timer.clock ? s->timer.clock(s->timer.ctx) : 0.0;
+}
+
+/* 1 without a budget, or when `cost` more still fits in the instant's budget. */
+static int unicycle_budget_fits(const unicycle_solver *s, double cost)
+{
+    return !unicycle_budget_on(s) || unicycle_budget_now(s) - s->anytime.instant_start + cost <= s->settings.budget;
 }
 
 /* ---- generic information ------------------------------------------------------------ */
@@ -118,470 +178,68 @@ const char *unicycle_status_string(int status)
     }
 }
 
-/* ---- safety: scales, clipping, health (algorithm.md section 9) -------------------- */
+/* ---- health (algorithm.md section 9; the predicates are unicycle_health.c) ------------- */
 
-static unicycle_real unicycle_absmax(unicycle_real a, unicycle_real b)
-{
-    unicycle_real fa = unicycle_fabs(a);
-    return isfinite(a) && fa > b ? fa : b;
-}
-
-/* The scale of each state and control: the largest magnitude among its finite bounds, the
- * OCP file's guess, the default x0 and 1. */
-static void unicycle_compute_scales(unicycle_solver *s)
-{
-    int k, i;
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        unicycle_real v = UNICYCLE_R(1.0);
-        v = unicycle_absmax(unicycle_lbx[i], v);
-        v = unicycle_absmax(unicycle_ubx[i], v);
-        v = unicycle_absmax(unicycle_x0_default[i], v);
-        for (k = 0; k <= UNICYCLE_N; ++k) {
-            v = unicycle_absmax(unicycle_guess_x[k][i], v);
-        }
-        s->scale_x[i] = v;
-    }
-    for (i = 0; i < UNICYCLE_NU; ++i) {
-        unicycle_real v = UNICYCLE_R(1.0);
-        v = unicycle_absmax(unicycle_lbu[i], v);
-        v = unicycle_absmax(unicycle_ubu[i], v);
-        for (k = 0; k < UNICYCLE_N; ++k) {
-            v = unicycle_absmax(unicycle_guess_u[k][i], v);
-        }
-        s->scale_u[i] = v;
-    }
-}
-
-/* Health state after init: no failure, the plan is the iterate's controls. */
+/* Health state after init: no failure, the plan is the iterate's controls (the OCP file's
+ * guess before the first init). */
 static void unicycle_reset_health(unicycle_solver *s)
 {
-    int k, i;
-    s->n_failed = 0;
-    s->recover_pending = 0;
-    s->flags = 0;
-    s->n_recoveries = 0;
-    s->recovering = 0;
-    s->xhat_fresh = 1;
-    s->plan_age = 0;
-    for (k = 0; k < UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NU; ++i) {
-            s->plan_u[k][i] = s->initialized ? s->u[k][i] : unicycle_guess_u[k][i];
-        }
-    }
-    for (i = 0; i < UNICYCLE_NU; ++i) {
-        s->u0_out[i] = s->plan_u[0][i];
-    }
-    s->kkt_proxy = UNICYCLE_R(0.0);
-    s->kkt_proxy_ref = UNICYCLE_R(0.0);
-}
-
-/* u clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1 when
- * an entry changed. */
-static int unicycle_clip_u(const unicycle_real *u, unicycle_real *out)
-{
-    int i, clipped = 0;
-    for (i = 0; i < UNICYCLE_NU; ++i) {
-        unicycle_real v = isnan(u[i]) ? UNICYCLE_R(0.0) : u[i];
-        if (v < unicycle_lbu[i]) {
-            v = unicycle_lbu[i];
-        }
-        if (v > unicycle_ubu[i]) {
-            v = unicycle_ubu[i];
-        }
-        if (!(v == u[i])) {
-            clipped = 1;
-        }
-        out[i] = v;
-    }
-    return clipped;
-}
-
-/* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as the iterate
- * plus an optional step: every entry finite and |v_i| <= BOX scale_i + |xhat0_i| (states),
- * BOX scale_i (controls). Returns 1 when it passes. */
-static int unicycle_box_ok(const unicycle_solver *s, const unicycle_real *x, const unicycle_real *dx, int dx_stride,
-                        const unicycle_real *u, const unicycle_real *du, int du_stride)
-{
-    int k, i;
-    for (k = 0; k <= UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            unicycle_real v = x[k * UNICYCLE_NX + i] + (dx ? dx[k * dx_stride + i] : UNICYCLE_R(0.0));
-            if (!(unicycle_fabs(v) <= UNICYCLE_DIVERGENCE_BOX * s->scale_x[i] + unicycle_fabs(s->xhat0[i]))) {
-                return 0;
-            }
-        }
-    }
-    for (k = 0; k < UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NU; ++i) {
-            unicycle_real v = u[k * UNICYCLE_NU + i] + (du ? du[k * du_stride + i] : UNICYCLE_R(0.0));
-            if (!(unicycle_fabs(v) <= UNICYCLE_DIVERGENCE_BOX * s->scale_u[i])) {
-                return 0;
-            }
-        }
-    }
-    return 1;
+    unicycle_health_reset(&s->health, s->initialized ? &s->u[0][0] : &unicycle_guess_u[0][0]);
 }
 
 /* The fallback control of a failed feedback: the next control of the last good plan. */
 static void unicycle_fallback_u0(unicycle_solver *s, unicycle_real *u0)
 {
-    int j = s->mode == UNICYCLE_MODE_RECEDING ? s->plan_age : 0;
-    j = j > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : j;
-    if (unicycle_clip_u(s->plan_u[j], s->u0_out)) {
-        s->flags |= UNICYCLE_FLAG_U0_CLIPPED;
+    if (unicycle_health_fallback(&s->health, s->settings.mode == UNICYCLE_MODE_RECEDING, u0)) {
+        s->health.flags |= UNICYCLE_FLAG_U0_CLIPPED;
     }
-    s->flags |= UNICYCLE_FLAG_FALLBACK;
-    if (u0) {
-        unicycle_copy(u0, s->u0_out, UNICYCLE_NU);
-    }
+    s->health.flags |= UNICYCLE_FLAG_FALLBACK;
 }
 
 /* A failed feedback: count it, schedule the recovery after K of them, return the fallback. */
-static void unicycle_lm_feedback(unicycle_solver *s, int status);
-
 static int unicycle_feedback_failed(unicycle_solver *s, unicycle_real *u0, int status)
 {
-    unicycle_lm_feedback(s, status);
-    s->n_failed += 1;
-    if (s->recovery && s->mode == UNICYCLE_MODE_RECEDING && s->n_failed >= s->recovery_failures) {
-        s->recover_pending = 1;
+    if (status == UNICYCLE_ERR_QP || status == UNICYCLE_ERR_DIVERGED) {
+        unicycle_lm_feedback(&s->lm, 0);
+    }
+    s->health.n_failed += 1;
+    if (s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING &&
+        s->health.n_failed >= s->settings.recovery_failures) {
+        s->health.recover_pending = 1;
     }
     if (status == UNICYCLE_ERR_DIVERGED) {
-        s->flags |= UNICYCLE_FLAG_DIVERGED;
+        s->health.flags |= UNICYCLE_FLAG_DIVERGED;
     }
     unicycle_fallback_u0(s, u0);
     return unicycle_ret(s, status);
 }
 
-/* Divergence measure at the current point from the F values in the slots and the terminal
- * node (after init or a prepare): max of |F_w,k + [lam_k; 0]|, |gL_N + mu_bN + lam_N|,
- * |phi_k - x_{k+1}|, |r_eq| (inf-norms). */
+/* Divergence measure at the current point (after init or a prepare). */
 static unicycle_real unicycle_kkt_proxy_eval(const unicycle_solver *s)
 {
-    unicycle_real m = UNICYCLE_R(0.0), v;
-    int k, i;
-    for (k = 0; k < UNICYCLE_N; ++k) {
-        const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
-        for (i = 0; i < UNICYCLE_NW; ++i) {
-            v = unicycle_fabs(slot->F_w[i] + (i < UNICYCLE_NX ? s->lam[k][i] : UNICYCLE_R(0.0)));
-            m = (v > m || isnan(v)) ? v : m;
-        }
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            v = unicycle_fabs(slot->phi[i] - s->x[k + 1][i]);
-            m = (v > m || isnan(v)) ? v : m;
-        }
-    }
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        v = unicycle_fabs(s->gL_N[i] + s->mu_bN[i] + s->lam[UNICYCLE_N][i]);
-        m = (v > m || isnan(v)) ? v : m;
-    }
-    for (i = 0; i < UNICYCLE_NE; ++i) {
-        v = unicycle_fabs(s->r_eq[i]);
-        m = (v > m || isnan(v)) ? v : m;
-    }
-    return m;
+    return unicycle_kkt_proxy(&s->ring, &s->x[0][0], &s->lam[0][0], s->gL_N, s->mu_bN, s->r_eq);
+}
+
+/* The box test of the iterate plus an optional step. */
+static int unicycle_iterate_box_ok(const unicycle_solver *s, const unicycle_real *dx, int dx_stride,
+                                const unicycle_real *du, int du_stride)
+{
+    return unicycle_box_ok(&s->health, s->xhat0, &s->x[0][0], dx, dx_stride, &s->u[0][0], du, du_stride);
 }
 
 /* The divergence test of the prepared iterate: box, finite multipliers, KKT proxy bound. */
-static int unicycle_iterate_diverged(unicycle_solver *s)
+static int unicycle_iterate_diverged(const unicycle_solver *s)
 {
-    unicycle_real ref = s->kkt_proxy_ref > UNICYCLE_R(1.0) ? s->kkt_proxy_ref : UNICYCLE_R(1.0);
-    if (!unicycle_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0)) {
-        return 1;
-    }
-    if (!unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NX, &s->lam[0][0]) ||
-        !unicycle_lai_vec_finite(UNICYCLE_N * UNICYCLE_NW, &s->mu_b[0][0]) ||
-        !unicycle_lai_vec_finite(UNICYCLE_NX, s->mu_bN)) {
-        return 1;
-    }
-    return !(s->kkt_proxy <= UNICYCLE_DIVERGENCE_KKT * ref);
+    return unicycle_diverged(&s->health, s->xhat0, &s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_b[0][0],
+                          s->mu_bN);
 }
 
-/* ---- automatic Levenberg-Marquardt term (algorithm.md section 10) ------------------- */
-
-/* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
-static unicycle_real unicycle_lm_hessian_scale(const unicycle_solver *s)
+/* The automatic lm after init or a re-initialisation (QP assembled), in its phase. */
+static void unicycle_lm_started(unicycle_solver *s)
 {
-    unicycle_real h = UNICYCLE_REAL_TINY, v;
-    int k, i;
-    for (k = 0; k < UNICYCLE_N; ++k) {
-        const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
-        for (i = 0; i < UNICYCLE_NW; ++i) {
-            v = unicycle_fabs(slot->Ht[i + i * UNICYCLE_NW]);
-            h = v > h ? v : h;
-        }
-    }
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        v = unicycle_fabs(s->A_N[i + i * UNICYCLE_NX]);
-        h = v > h ? v : h;
-    }
-    return h;
-}
-
-/* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
- * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
- * out) has control pivots above UNICYCLE_LM_PIVOT_REL h. */
-static int unicycle_lm_convex(unicycle_solver *s, unicycle_real lm)
-{
-    const unicycle_real tol = UNICYCLE_LM_PIVOT_REL * s->lm_scale;
-    unicycle_real *P = s->mem.ev.lm_P, *PA = s->mem.ev.lm_PA, *Z = s->mem.ev.lm_G;
-    unicycle_real v;
-    int k, i, j, l;
-    for (j = 0; j < UNICYCLE_NX; ++j) {
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            P[i + j * UNICYCLE_NX] =
-                (i >= j ? s->A_N[i + j * UNICYCLE_NX] : s->A_N[j + i * UNICYCLE_NX]) + (i == j ? lm : UNICYCLE_R(0.0));
-        }
-    }
-    for (k = UNICYCLE_N - 1; k >= 0; --k) {
-        const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
-        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
-        for (j = 0; j < UNICYCLE_NW; ++j) {
-            for (i = 0; i < UNICYCLE_NX; ++i) {
-                v = UNICYCLE_R(0.0);
-                for (l = 0; l < UNICYCLE_NX; ++l) {
-                    v += P[i + l * UNICYCLE_NX] * slot->Phit[l + j * UNICYCLE_NX];
-                }
-                PA[i + j * UNICYCLE_NX] = v;
-            }
-        }
-        for (j = 0; j < UNICYCLE_NW; ++j) {
-            for (i = 0; i < UNICYCLE_NW; ++i) {
-                v = (i >= j ? slot->Ht[i + j * UNICYCLE_NW] : slot->Ht[j + i * UNICYCLE_NW]) +
-                    (i == j ? lm : UNICYCLE_R(0.0));
-                for (l = 0; l < UNICYCLE_NX; ++l) {
-                    v += slot->Phit[l + i * UNICYCLE_NX] * PA[l + j * UNICYCLE_NX];
-                }
-                Z[i + j * UNICYCLE_NW] = v;
-            }
-        }
-        /* Cholesky of the control block Z_uu in place (lower triangle) */
-        for (j = UNICYCLE_NX; j < UNICYCLE_NW; ++j) {
-            unicycle_real d = Z[j + j * UNICYCLE_NW];
-            for (l = UNICYCLE_NX; l < j; ++l) {
-                d -= Z[j + l * UNICYCLE_NW] * Z[j + l * UNICYCLE_NW];
-            }
-            if (!(d > tol)) {
-                return 0;
-            }
-            d = unicycle_sqrt(d);
-            Z[j + j * UNICYCLE_NW] = d;
-            for (i = j + 1; i < UNICYCLE_NW; ++i) {
-                v = Z[i + j * UNICYCLE_NW];
-                for (l = UNICYCLE_NX; l < j; ++l) {
-                    v -= Z[i + l * UNICYCLE_NW] * Z[j + l * UNICYCLE_NW];
-                }
-                Z[i + j * UNICYCLE_NW] = v / d;
-            }
-        }
-        if (k == 0) {
-            break; /* x_0 is fixed: P_0 is not needed */
-        }
-        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
-        for (j = 0; j < UNICYCLE_NX; ++j) {
-            for (i = UNICYCLE_NX; i < UNICYCLE_NW; ++i) {
-                v = Z[i + j * UNICYCLE_NW];
-                for (l = UNICYCLE_NX; l < i; ++l) {
-                    v -= Z[i + l * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
-                }
-                Z[i + j * UNICYCLE_NW] = v / Z[i + i * UNICYCLE_NW];
-            }
-        }
-        for (j = 0; j < UNICYCLE_NX; ++j) {
-            for (i = 0; i < UNICYCLE_NX; ++i) {
-                v = UNICYCLE_R(0.5) * (Z[i + j * UNICYCLE_NW] + Z[j + i * UNICYCLE_NW]);
-                for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
-                    v -= Z[l + i * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
-                }
-                P[i + j * UNICYCLE_NX] = v;
-            }
-        }
-    }
-    return 1;
-}
-
-/* One raise: from below the minimum to the minimum, else times UNICYCLE_LM_RAISE, at most the
- * maximum. */
-static void unicycle_lm_raise(unicycle_solver *s)
-{
-    unicycle_real lo = UNICYCLE_LM_MIN_REL * s->lm_scale, hi = UNICYCLE_LM_MAX_REL * s->lm_scale;
-    if (s->lm_uncapped > s->lm) {
-        /* the first raise after the cap of unicycle_lm_measured restores the term it capped */
-        s->lm = s->lm_uncapped;
-        s->lm_uncapped = -UNICYCLE_R(1.0);
-        return;
-    }
-    s->lm = s->lm < lo ? lo : s->lm * UNICYCLE_LM_RAISE;
-    s->lm = s->lm > hi ? hi : s->lm;
-}
-
-/* Raise until the QP is convex on the dynamics or the term is at its maximum. */
-static void unicycle_lm_convexify(unicycle_solver *s)
-{
-    unicycle_real hi = UNICYCLE_LM_MAX_REL * s->lm_scale;
-    while (!unicycle_lm_convex(s, s->lm) && s->lm < hi) {
-        unicycle_lm_raise(s);
-    }
-}
-
-/* After init or a re-initialisation (QP assembled): the scale, lm from 0. */
-void unicycle_lm_start(unicycle_solver *s)
-{
-    if (!s->lm_auto) {
-        return;
-    }
-    s->lm_scale = unicycle_lm_hessian_scale(s);
-    s->lm = UNICYCLE_R(0.0);
-    s->lm_kkt_prev = -UNICYCLE_R(1.0);
-    s->lm_uncapped = -UNICYCLE_R(1.0);
-    unicycle_lm_convexify(s);
-}
-
-/* After a prepare (QP assembled, KKT proxy evaluated): the scale, a raise when the proxy
- * grew UNICYCLE_LM_KKT_GROWTH times, then convex. */
-static void unicycle_lm_prepared(unicycle_solver *s)
-{
-    unicycle_real floor_ =
-        UNICYCLE_PREC(1e-8, 1e-5) * (s->kkt_proxy_ref > UNICYCLE_R(1.0) ? s->kkt_proxy_ref : UNICYCLE_R(1.0));
-    unicycle_real prev = s->lm_kkt_prev > floor_ ? s->lm_kkt_prev : floor_;
-    if (!s->lm_auto) {
-        return;
-    }
-    s->lm_scale = unicycle_lm_hessian_scale(s);
-    s->lm_uncapped = -UNICYCLE_R(1.0);
-    if (s->lm_kkt_prev >= UNICYCLE_R(0.0) && !(s->kkt_proxy <= UNICYCLE_LM_KKT_GROWTH * prev)) {
-        unicycle_lm_raise(s);
-    }
-    s->lm_kkt_prev = s->kkt_proxy;
-    unicycle_lm_convexify(s);
-}
-
-/* Feedback, once the measurement is in the QP: the term capped by the distance from the
- * solution, UNICYCLE_LM_KKT_REL h d^2 with d = max(proxy, max_i |dx0_i| / scale_x_i) (0 below
- * UNICYCLE_LM_MIN_REL h), so that it vanishes where the iterate converges. */
-static void unicycle_lm_measured(unicycle_solver *s)
-{
-    unicycle_real d = s->kkt_proxy, cap, v;
-    int i;
-    s->lm_uncapped = -UNICYCLE_R(1.0);
-    if (!s->lm_auto) {
-        return;
-    }
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        v = unicycle_fabs(s->qp_in.x0[i]) / s->scale_x[i];
-        d = v > d ? v : d;
-    }
-    cap = UNICYCLE_LM_KKT_REL * s->lm_scale * d * d;
-    if (!(s->lm <= cap)) {
-        s->lm_uncapped = s->lm;
-        s->lm = cap < UNICYCLE_LM_MIN_REL * s->lm_scale ? UNICYCLE_R(0.0) : cap;
-    }
-}
-
-/* After a feedback: lowered after a step, raised after a failed QP or a divergence. */
-static void unicycle_lm_feedback(unicycle_solver *s, int status)
-{
-    if (!s->lm_auto) {
-        return;
-    }
-    if (status == UNICYCLE_OK) {
-        s->lm *= UNICYCLE_LM_LOWER;
-        if (s->lm < UNICYCLE_LM_MIN_REL * s->lm_scale) {
-            s->lm = UNICYCLE_R(0.0);
-        }
-    } else if (status == UNICYCLE_ERR_QP || status == UNICYCLE_ERR_DIVERGED) {
-        unicycle_lm_raise(s);
-    }
-}
-
-void unicycle_defaults(unicycle_solver *s)
-{
-    int k, i;
-    s->magic = UNICYCLE_MAGIC;
-    s->initialized = 0;
-    s->qp_ready = 0;
-    s->prepare_due = 0;
-    s->shifted = 0;
-    s->status = UNICYCLE_OK;
-    s->M = unicycle_default_M < 0 ? 0 : (unicycle_default_M > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : unicycle_default_M);
-    s->mode = UNICYCLE_MODE_RECEDING;
-    s->hessian = (unicycle_default_hessian == UNICYCLE_HESSIAN_GAUSS_NEWTON && UNICYCLE_HAS_GN)
-                     ? UNICYCLE_HESSIAN_GAUSS_NEWTON
-                     : UNICYCLE_HESSIAN_EXACT;
-    s->regularization = unicycle_default_regularization;
-    s->reg_eps = unicycle_default_reg_eps;
-    s->cost_hessian = unicycle_default_cost_hessian ? 1 : 0;
-    /* a negative generated default: the automatic term (algorithm.md section 10) */
-    s->lm_auto = !(unicycle_default_lm >= UNICYCLE_R(0.0));
-    s->lm =
-        (unicycle_default_lm >= UNICYCLE_R(0.0) && unicycle_default_lm < INFINITY) ? unicycle_default_lm : UNICYCLE_R(0.0);
-    s->lm_scale = UNICYCLE_R(1.0);
-    s->lm_kkt_prev = -UNICYCLE_R(1.0);
-    s->lm_uncapped = -UNICYCLE_R(1.0);
-    for (k = 0; k < UNICYCLE_N; ++k) { /* set only during a QP solve (unicycle_qp_solve_bound) */
-        s->qp_in.H[k] = 0;
-        s->qp_in.Phi[k] = 0;
-        s->qp_in.C[k] = 0;
-    }
-    s->qp_in.HN = 0;
-    s->qp_in.R = 0;
-    s->qp_in.Req = 0;
-    unicycle_qp_settings_default(&s->qp_settings);
-    s->qp_settings.tol = UNICYCLE_DEFAULT_QP_TOL;
-    s->qp_warm = 1;
-    s->qp_cold_retry = 0;
-    for (k = 0; k <= UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NP; ++i) {
-            s->p[k][i] = unicycle_p_default[i];
-        }
-    }
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->xhat0[i] = unicycle_x0_default[i];
-    }
-    s->n_recomputed = 0;
-    s->qp_status = 0;
-    s->qp_iterations = 0;
-    for (k = 0; k < UNICYCLE_N; ++k) {
-        s->rho[k] = UNICYCLE_R(0.0);
-    }
-    s->recovery = 1;
-    s->recovery_failures = UNICYCLE_RECOVERY_FAILURES;
-    unicycle_compute_scales(s);
-    unicycle_reset_health(s);
-    for (i = 0; i < 4; ++i) {
-        s->kkt[i] = NAN;
-    }
-    unicycle_timer_init(&s->timer);
-    s->budget_unit = UNICYCLE_BUDGET_OFF;
-    s->budget = 0.0;
-    s->anytime_tol = UNICYCLE_ANYTIME_TOL;
-    s->M_adaptive = 0;
-    s->M_min = 0;
-    s->M_max = UNICYCLE_N - 1;
-    s->M_eta = UNICYCLE_ADAPTIVE_ETA;
-    s->work = 0.0;
-    s->instant_start = 0.0;
-    s->cost_stage = 0.0;
-    s->cost_qp = 0.0;
-    s->cost_prepare = 0.0;
-    s->cost_qp_iter = 0.0;
-    s->budget_used = 0.0;
-    s->extra_iterations = 0;
-    s->instant_stages = 0;
-}
-
-/* ---- the budget clock (algorithm.md section 12) --------------------------------------- */
-
-/* Now on the budget's clock: the work counter (work units) or the solver's clock. */
-static double unicycle_budget_now(const unicycle_solver *s)
-{
-    return s->budget_unit == UNICYCLE_BUDGET_WORK ? s->work : unicycle_timer_now(&s->timer);
-}
-
-/* 1 when no budget is set, or when `cost` more still fits in the instant's budget. */
-static int unicycle_budget_fits(const unicycle_solver *s, double cost)
-{
-    return s->budget_unit == UNICYCLE_BUDGET_OFF || unicycle_budget_now(s) - s->instant_start + cost <= s->budget;
+    int prev = unicycle_phase(s, UNICYCLE_PHASE_LM);
+    unicycle_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
+    unicycle_phase(s, prev);
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */
@@ -591,7 +249,7 @@ static int unicycle_stage_F(unicycle_solver *s, int k)
 {
     unicycle_real l = UNICYCLE_R(0.0);
     int i;
-    s->work += 1.0;
+    s->anytime.work += 1.0;
     if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
@@ -610,42 +268,38 @@ static int unicycle_stage_F(unicycle_solver *s, int k)
 /* Regularise a fresh A block (algorithm.md section 5), timed as its own phase. */
 static int unicycle_regularize(unicycle_solver *s, int n, unicycle_real *A)
 {
-    double t0;
-    int rc;
-    if (s->regularization == UNICYCLE_REG_NONE) {
+    int rc, prev;
+    if (s->settings.regularization == UNICYCLE_REG_NONE) {
         return UNICYCLE_OK;
     }
-    t0 = unicycle_timer_now(&s->timer);
-    rc = unicycle_reg_apply(n, A, s->regularization, s->reg_eps, s->mem.ev.reg_work);
-    unicycle_timer_add(&s->timer, UNICYCLE_PHASE_REGULARIZATION, t0);
+    prev = unicycle_phase(s, UNICYCLE_PHASE_REGULARIZATION);
+    rc = unicycle_reg_apply(n, A, s->settings.regularization, s->settings.reg_eps, s->mem.ev.reg_work);
+    unicycle_phase(s, prev);
     return rc == 0 ? UNICYCLE_OK : UNICYCLE_ERR_REGULARIZATION;
 }
 
 /* The stage-cost Hessian A_l of stage k at the current point into s->mem.ev.tmp_Al. */
 static int unicycle_stage_Al(unicycle_solver *s, int k)
 {
-    double t0 = unicycle_timer_now(&s->timer);
-    int rc = unicycle_eval_stage_hess_cost(s->hessian, s->x[k], s->u[k], s->p[k], s->mem.ev.tmp_Al,
+    int prev = unicycle_phase(s, UNICYCLE_PHASE_HESSIANS);
+    int rc = unicycle_eval_stage_hess_cost(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->mem.ev.tmp_Al,
                                         &s->mem.ev.fun_work);
-    unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
-    if (rc != 0) {
-        return UNICYCLE_ERR_FUNCTION;
-    }
-    return unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->mem.ev.tmp_Al) ? UNICYCLE_OK : UNICYCLE_ERR_NONFINITE_VALUE;
+    rc = rc != 0 ? UNICYCLE_ERR_FUNCTION
+                 : (unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->mem.ev.tmp_Al) ? UNICYCLE_OK
+                                                                                : UNICYCLE_ERR_NONFINITE_VALUE);
+    unicycle_phase(s, prev);
+    return rc;
 }
 
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
  * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
  * leaves the slot as it was. */
-static int unicycle_stage_H(unicycle_solver *s, int k)
+static int unicycle_stage_H_eval(unicycle_solver *s, int k)
 {
     unicycle_stage_slot *slot;
-    double t0 = unicycle_timer_now(&s->timer);
     int rc, i;
-    s->work += 1.0;
-    rc = unicycle_eval_stage_hess(s->hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+    rc = unicycle_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
                                s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
-    unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
@@ -674,7 +328,22 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
     return UNICYCLE_OK;
 }
 
-int unicycle_term_grad_checked(unicycle_solver *s, unicycle_real *gL, unicycle_real *E, unicycle_real *r, unicycle_real *r_eq)
+/* unicycle_stage_H_eval in the phase "hessians" (its regularisation in its own). */
+static int unicycle_stage_H(unicycle_solver *s, int k)
+{
+    int prev = unicycle_phase(s, UNICYCLE_PHASE_HESSIANS);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = unicycle_stage_H_eval(s, k);
+    unicycle_phase(s, prev);
+    return rc;
+}
+
+/* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
+ * UNICYCLE_ERR_FUNCTION when the function fails, UNICYCLE_ERR_NONFINITE_VALUE when a value is not
+ * finite, else UNICYCLE_OK. */
+static int unicycle_term_grad_checked(unicycle_solver *s, unicycle_real *gL, unicycle_real *E, unicycle_real *r,
+                                   unicycle_real *r_eq)
 {
     if (unicycle_eval_term_grad(s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, gL, E, r, r_eq,
                              &s->mem.ev.fun_work) != 0) {
@@ -692,7 +361,7 @@ static int unicycle_term_F(unicycle_solver *s)
 {
     unicycle_real gL[UNICYCLE_NX], E = UNICYCLE_R(0.0), r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
     int rc;
-    s->work += 1.0;
+    s->anytime.work += 1.0;
     rc = unicycle_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != UNICYCLE_OK) {
         return rc;
@@ -705,15 +374,12 @@ static int unicycle_term_F(unicycle_solver *s)
 }
 
 /* Terminal H: A_N (regularised), R, R_eq. */
-static int unicycle_term_H(unicycle_solver *s)
+static int unicycle_term_H_eval(unicycle_solver *s)
 {
     unicycle_real R[UNICYCLE_DIM(UNICYCLE_NR) * UNICYCLE_NX], R_eq[UNICYCLE_DIM(UNICYCLE_NE) * UNICYCLE_NX];
-    double t0 = unicycle_timer_now(&s->timer);
     int rc;
-    s->work += 1.0;
-    rc = unicycle_eval_term_hess(s->hessian, s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu, s->mem.ev.tmp_A, R,
-                              R_eq, &s->mem.ev.fun_work);
-    unicycle_timer_add(&s->timer, UNICYCLE_PHASE_HESSIANS, t0);
+    rc = unicycle_eval_term_hess(s->settings.hessian, s->x[UNICYCLE_N], s->p[UNICYCLE_N], s->mu_r, s->nu,
+                              s->mem.ev.tmp_A, R, R_eq, &s->mem.ev.fun_work);
     if (rc != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
@@ -731,13 +397,22 @@ static int unicycle_term_H(unicycle_solver *s)
     return UNICYCLE_OK;
 }
 
+static int unicycle_term_H(unicycle_solver *s)
+{
+    int prev = unicycle_phase(s, UNICYCLE_PHASE_HESSIANS);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = unicycle_term_H_eval(s);
+    unicycle_phase(s, prev);
+    return rc;
+}
+
 /* ---- QP assembly (algorithm.md section 3) ------------------------------------------- */
 
 static void unicycle_assemble(unicycle_solver *s)
 {
     unicycle_qp_in *in = &s->qp_in;
-    int k, i, j;
-    double t0 = unicycle_timer_now(&s->timer);
+    int k, i, j, prev = unicycle_phase(s, UNICYCLE_PHASE_ASSEMBLY);
 
     for (k = 0; k < UNICYCLE_N; ++k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
@@ -789,28 +464,17 @@ static void unicycle_assemble(unicycle_solver *s)
     for (i = 0; i < UNICYCLE_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
-    unicycle_timer_add(&s->timer, UNICYCLE_PHASE_ASSEMBLY, t0);
+    unicycle_phase(s, prev);
 }
 
 /* ---- init --------------------------------------------------------------------------- */
 
-static void unicycle_clear_timings(unicycle_solver *s, int first, int last)
-{
-    int i;
-    for (i = first; i <= last; ++i) {
-        s->timer.t[i] = UNICYCLE_R(0.0);
-    }
-}
-
 /* F (stored as F_old) and H of every stage, terminal F and H, at the current iterate. */
-static int unicycle_linearize_all(unicycle_solver *s)
+static int unicycle_linearize_all_eval(unicycle_solver *s)
 {
-    double t0;
     int k, rc;
     for (k = 0; k < UNICYCLE_N; ++k) {
-        t0 = unicycle_timer_now(&s->timer);
         rc = unicycle_stage_F(s, k);
-        unicycle_timer_add(&s->timer, UNICYCLE_PHASE_GRADIENTS, t0);
         if (rc != UNICYCLE_OK) {
             return rc;
         }
@@ -821,13 +485,20 @@ static int unicycle_linearize_all(unicycle_solver *s)
             return rc;
         }
     }
-    t0 = unicycle_timer_now(&s->timer);
     rc = unicycle_term_F(s);
-    unicycle_timer_add(&s->timer, UNICYCLE_PHASE_GRADIENTS, t0);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
     return unicycle_term_H(s);
+}
+
+/* unicycle_linearize_all_eval in the phase "gradients" (the blocks in theirs). */
+static int unicycle_linearize_all(unicycle_solver *s)
+{
+    int prev = unicycle_phase(s, UNICYCLE_PHASE_GRADIENTS);
+    int rc = unicycle_linearize_all_eval(s);
+    unicycle_phase(s, prev);
+    return rc;
 }
 
 /* The second half of init with the iterate in place: ring reset, F and H of every stage and
@@ -838,10 +509,8 @@ static int unicycle_init_finish(unicycle_solver *s)
     unicycle_ring_reset(&s->ring);
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->rho[k] = UNICYCLE_R(0.0);
-        s->recomputed[k] = k;
-        s->selected[k] = 0;
+        s->selected[k] = 1; /* every stage is fresh */
     }
-    s->n_recomputed = UNICYCLE_N;
     s->qp_status = 0;
     s->qp_iterations = 0;
 
@@ -854,7 +523,7 @@ static int unicycle_init_finish(unicycle_solver *s)
     s->qp_ready = 1;
     s->prepare_due = 0;
     s->shifted = 0;
-    unicycle_lm_start(s);
+    unicycle_lm_started(s);
     return UNICYCLE_OK;
 }
 
@@ -864,7 +533,9 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
 {
     int k, i, rc;
 
-    unicycle_ensure_setup(s);
+    if (!s->set_up) {
+        return UNICYCLE_ERR_NOT_INITIALIZED;
+    }
     s->initialized = 0;
     unicycle_reset_health(s);
     s->qp_ready = 0;
@@ -878,7 +549,7 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
         (mu_r && !unicycle_lai_vec_finite(UNICYCLE_NR, mu_r)) || (nu && !unicycle_lai_vec_finite(UNICYCLE_NE, nu))) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
-    unicycle_clear_timings(s, 0, UNICYCLE_N_PHASES - 1);
+    unicycle_timer_begin(&s->timer, (1u << UNICYCLE_N_PHASES) - 1u, UNICYCLE_PHASE_GRADIENTS);
 
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->xhat0[i] = xhat0 ? xhat0[i] : unicycle_x0_default[i];
@@ -912,13 +583,13 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
     }
 
     rc = unicycle_init_finish(s);
-    if (rc != UNICYCLE_OK) {
-        return unicycle_ret(s, rc);
+    if (rc == UNICYCLE_OK) {
+        unicycle_reset_health(s);
+        s->health.kkt_proxy = unicycle_kkt_proxy_eval(s);
+        s->health.kkt_proxy_ref = s->health.kkt_proxy;
     }
-    unicycle_reset_health(s);
-    s->kkt_proxy = unicycle_kkt_proxy_eval(s);
-    s->kkt_proxy_ref = s->kkt_proxy;
-    return unicycle_ret(s, UNICYCLE_OK);
+    unicycle_timer_end(&s->timer, -1, 0.0);
+    return unicycle_ret(s, rc);
 }
 
 int unicycle_init_nominal(unicycle_solver *s, const unicycle_real *xhat0)
@@ -930,7 +601,9 @@ int unicycle_init_nominal(unicycle_solver *s, const unicycle_real *xhat0)
                       UNICYCLE_NE > 0 ? unicycle_nominal_nu : 0);
 #else
     (void)xhat0;
-    unicycle_ensure_setup(s);
+    if (!s->set_up) {
+        return UNICYCLE_ERR_NOT_INITIALIZED;
+    }
     return unicycle_ret(s, UNICYCLE_ERR_NO_NOMINAL);
 #endif
 }
@@ -994,8 +667,8 @@ static int unicycle_feedback_admit(unicycle_solver *s, const unicycle_real *xhat
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
     }
     if (xhat0 == 0 || !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) {
-        s->xhat_fresh = 0;
-        if (s->mode == UNICYCLE_MODE_RECEDING) {
+        s->health.xhat_fresh = 0;
+        if (s->settings.mode == UNICYCLE_MODE_RECEDING) {
             /* the sampling instant has passed all the same: its prepare (the shift) is due */
             s->prepare_due = 1;
             s->shifted = 0;
@@ -1007,8 +680,8 @@ static int unicycle_feedback_admit(unicycle_solver *s, const unicycle_real *xhat
          * starts from the newest measurement, so it is recorded all the same (algorithm.md
          * section 9); the instant has passed: its prepare (the shift) is due */
         unicycle_copy(s->xhat0, xhat0, UNICYCLE_NX);
-        s->xhat_fresh = 1;
-        if (s->mode == UNICYCLE_MODE_RECEDING) {
+        s->health.xhat_fresh = 1;
+        if (s->settings.mode == UNICYCLE_MODE_RECEDING) {
             s->prepare_due = 1;
             s->shifted = 0;
         }
@@ -1025,8 +698,8 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
         s->xhat0[i] = xhat0[i];
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
-    s->xhat_fresh = 1;
-    unicycle_lm_measured(s);
+    s->health.xhat_fresh = 1;
+    unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -1036,10 +709,18 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
  * ring slots in place and the terminal blocks. They are set just before each solve and
  * cleared after it, so the struct holds no pointer into itself between calls and a byte
  * copy (memcpy, struct assignment) is a complete, independent solver. */
-static int unicycle_qp_solve_bound(unicycle_solver *s)
+static int unicycle_qp_solve_bound(unicycle_solver *s, int warm)
 {
     unicycle_qp_in *in = &s->qp_in;
+    unicycle_qp_settings settings;
     int k, qs;
+    unicycle_qp_settings_default(&settings);
+    settings.tol = s->settings.qp_tol;
+    settings.max_iter = s->settings.qp_max_iter;
+    if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 12) */
+    }
+    settings.warm_start = warm;
     for (k = 0; k < UNICYCLE_N; ++k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
         in->H[k] = slot->Ht;
@@ -1049,7 +730,7 @@ static int unicycle_qp_solve_bound(unicycle_solver *s)
     in->HN = s->A_N;
     in->R = UNICYCLE_NR > 0 ? s->R : 0;
     in->Req = UNICYCLE_NE > 0 ? s->R_eq : 0;
-    qs = unicycle_qp_solve(&s->mem.qp.work, in, &s->qp_settings, &s->mem.qp.sol, &s->qp_info);
+    qs = unicycle_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
     for (k = 0; k < UNICYCLE_N; ++k) {
         in->H[k] = 0;
         in->Phi[k] = 0;
@@ -1072,8 +753,7 @@ static int unicycle_qp_ok(const unicycle_solver *s, int qs)
 static int unicycle_qp_attempt(unicycle_solver *s, int warm)
 {
     int qs;
-    s->qp_settings.warm_start = warm;
-    qs = unicycle_qp_solve_bound(s);
+    qs = unicycle_qp_solve_bound(s, warm);
     s->qp_iterations += s->qp_info.iterations;
     return qs;
 }
@@ -1086,15 +766,16 @@ static int unicycle_qp_attempt(unicycle_solver *s, int warm)
 static int unicycle_feedback_qp(unicycle_solver *s)
 {
     int qs;
-    s->qp_in.hess_shift = s->lm;
+    s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_cold_retry = 0;
-    s->work += UNICYCLE_WORK_QP;
-    if (s->qp_warm) {
+    s->anytime.work += UNICYCLE_WORK_QP;
+    if (s->settings.qp_warm_start) {
         unicycle_qp_warm_point(s);
     }
-    qs = unicycle_qp_attempt(s, s->qp_warm);
-    if (s->qp_warm && qs != UNICYCLE_QP_INVALID_INPUT && !(qs == UNICYCLE_QP_MAX_ITER && s->qp_capped) &&
+    qs = unicycle_qp_attempt(s, s->settings.qp_warm_start);
+    if (s->settings.qp_warm_start && qs != UNICYCLE_QP_INVALID_INPUT &&
+        !(qs == UNICYCLE_QP_MAX_ITER && s->anytime.qp_cap > 0) &&
         (!unicycle_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = unicycle_qp_attempt(s, 0);
@@ -1108,12 +789,11 @@ static int unicycle_feedback_qp(unicycle_solver *s)
 static int unicycle_feedback_lm_retries(unicycle_solver *s, int qs, int *retries)
 {
     *retries = 0;
-    while (s->lm_auto && *retries < UNICYCLE_LM_RETRIES && s->lm < UNICYCLE_LM_MAX_REL * s->lm_scale &&
-           !unicycle_qp_ok(s, qs) && qs != UNICYCLE_QP_INVALID_INPUT &&
-           !(qs == UNICYCLE_QP_MAX_ITER && s->qp_capped)) {
-        unicycle_lm_raise(s);
-        s->work += UNICYCLE_WORK_QP;
-        s->qp_in.hess_shift = s->lm;
+    while (*retries < UNICYCLE_LM_RETRIES && unicycle_lm_can_raise(&s->lm) && !unicycle_qp_ok(s, qs) &&
+           qs != UNICYCLE_QP_INVALID_INPUT && !(qs == UNICYCLE_QP_MAX_ITER && s->anytime.qp_cap > 0)) {
+        unicycle_lm_raise(&s->lm);
+        s->anytime.work += UNICYCLE_WORK_QP;
+        s->qp_in.hess_shift = s->lm.lm;
         qs = unicycle_qp_attempt(s, 0);
         *retries += 1;
     }
@@ -1128,7 +808,7 @@ static int unicycle_feedback_check_step(const unicycle_solver *s, int qs)
     if (!unicycle_qp_ok(s, qs)) {
         return UNICYCLE_ERR_QP;
     }
-    if (!unicycle_box_ok(s, &s->x[0][0], &sol->x[0][0], UNICYCLE_NX, &s->u[0][0], &sol->u[0][0], UNICYCLE_QP_NU1)) {
+    if (!unicycle_iterate_box_ok(s, &sol->x[0][0], UNICYCLE_NX, &sol->u[0][0], UNICYCLE_QP_NU1)) {
         return UNICYCLE_ERR_DIVERGED;
     }
     return UNICYCLE_OK;
@@ -1196,51 +876,15 @@ static void unicycle_take_step(unicycle_solver *s)
  * this QP needed a raise (lowered = 1); u0 clipped to the control bounds. */
 static void unicycle_keep_plan(unicycle_solver *s, unicycle_real *u0, int lowered)
 {
-    s->n_failed = 0;
-    s->plan_age = 0;
-    s->recovering = s->recovering > 0 ? s->recovering - 1 : 0;
     if (lowered) {
-        unicycle_lm_feedback(s, UNICYCLE_OK);
+        unicycle_lm_feedback(&s->lm, 1);
     }
-    unicycle_copy(&s->plan_u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
-    if (unicycle_clip_u(s->u[0], s->u0_out)) {
-        s->flags |= UNICYCLE_FLAG_U0_CLIPPED;
-    }
-    if (u0) {
-        unicycle_copy(u0, s->u0_out, UNICYCLE_NU);
+    if (unicycle_health_keep_plan(&s->health, &s->u[0][0], u0)) {
+        s->health.flags |= UNICYCLE_FLAG_U0_CLIPPED;
     }
 }
 
 static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries);
-
-/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
- * capped by the budget of the instant over the cost of one QP iteration measured before; a
- * QP stopped by the cap is not retried (the fallback control). Returns the setting's limit. */
-static int unicycle_feedback_cap(unicycle_solver *s)
-{
-    int max_iter = s->qp_settings.max_iter;
-    double left = s->budget - (unicycle_budget_now(s) - s->instant_start), n;
-    s->qp_capped = 0;
-    if (s->budget_unit != UNICYCLE_BUDGET_TIME || !(s->cost_qp_iter > 0.0)) {
-        return max_iter;
-    }
-    n = left / s->cost_qp_iter;
-    n = n < 1.0 ? 1.0 : n;
-    if (n < (double)max_iter) {
-        s->qp_settings.max_iter = (int)n;
-        s->qp_capped = 1;
-    }
-    return max_iter;
-}
-
-/* The end of a feedback: the iteration limit of the setting back, the instant's cost so far. */
-static void unicycle_feedback_end(unicycle_solver *s, int max_iter, double t0)
-{
-    s->qp_settings.max_iter = max_iter;
-    s->qp_capped = 0;
-    s->budget_used = unicycle_budget_now(s) - s->instant_start;
-    unicycle_timer_add(&s->timer, UNICYCLE_PHASE_FEEDBACK, t0);
-}
 
 /* 1 when the model is finite at the state xs with the next control of the last good plan (one
  * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
@@ -1248,51 +892,59 @@ static void unicycle_feedback_end(unicycle_solver *s, int max_iter, double t0)
 static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
 {
     unicycle_real l = UNICYCLE_R(0.0), u[UNICYCLE_NU], xn[UNICYCLE_NX];
-    int j = s->plan_age > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->plan_age;
-    unicycle_clip_u(s->plan_u[j], u);
+    int j = s->health.plan_age > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->health.plan_age;
+    unicycle_clip_u(s->health.plan_u[j], u);
     return unicycle_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
            unicycle_lai_vec_finite(UNICYCLE_NX, xn) && unicycle_lai_vec_finite(1, &l);
 }
 
-int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
+/* Feedback once admitted (steps 2 to 8). */
+/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
+ * capped at the budget left over the cost of one QP iteration of the last feedback (at least
+ * 1); a QP stopped by the cap is not retried (the fallback control). */
+static void unicycle_feedback_cap(unicycle_solver *s)
+{
+    double n;
+    s->anytime.qp_cap = 0;
+    if (!unicycle_budget_on(s) || s->settings.budget_unit != UNICYCLE_BUDGET_TIME ||
+        !(s->anytime.cost_qp_iter > 0.0)) {
+        return;
+    }
+    n = (s->settings.budget - (unicycle_budget_now(s) - s->anytime.instant_start)) / s->anytime.cost_qp_iter;
+    n = n < 1.0 ? 1.0 : n;
+    if (n < (double)s->settings.qp_max_iter) {
+        s->anytime.qp_cap = (int)n;
+    }
+}
+
+static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
     unicycle_real xhat_prev[UNICYCLE_NX];
-    double t0, b0;
-    int rc, qs, retries, max_iter;
+    double b0;
+    int rc, qs, retries;
 
-    unicycle_ensure_setup(s);
-    s->flags = 0;
-    s->instant_start = unicycle_budget_now(s);
-    s->extra_iterations = 0;
-    s->instant_stages = 0;
-    rc = unicycle_feedback_admit(s, xhat0, u0);
-    if (rc != UNICYCLE_OK) {
-        return rc;
-    }
-    s->timer.t[UNICYCLE_PHASE_FEEDBACK] = UNICYCLE_R(0.0);
-    t0 = unicycle_timer_now(&s->timer);
     unicycle_copy(xhat_prev, s->xhat0, UNICYCLE_NX);
     unicycle_feedback_measure(s, xhat0);
-    max_iter = unicycle_feedback_cap(s);
+    unicycle_feedback_cap(s);
     b0 = unicycle_budget_now(s);
     qs = unicycle_feedback_qp(s);
     qs = unicycle_feedback_lm_retries(s, qs, &retries);
-    s->cost_qp = unicycle_budget_now(s) - b0;
-    if (s->qp_iterations > 0 && s->budget_unit == UNICYCLE_BUDGET_TIME) {
-        s->cost_qp_iter = s->cost_qp / (double)s->qp_iterations;
+    s->anytime.cost_qp = unicycle_budget_now(s) - b0;
+    if (s->qp_iterations > 0 && s->settings.budget_unit == UNICYCLE_BUDGET_TIME) {
+        s->anytime.cost_qp_iter = s->anytime.cost_qp / (double)s->qp_iterations;
     }
     s->qp_status = qs;
     rc = unicycle_feedback_check_step(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
-    if (rc != UNICYCLE_OK && s->recovery && s->mode == UNICYCLE_MODE_RECEDING && qs != UNICYCLE_QP_MAX_ITER &&
-        qs != UNICYCLE_QP_INVALID_INPUT) {
+    if (rc != UNICYCLE_OK && s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING &&
+        qs != UNICYCLE_QP_MAX_ITER && qs != UNICYCLE_QP_INVALID_INPUT) {
         if (!unicycle_model_finite_at(s, xhat0)) {
             /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
              * prepare takes the predicted step) */
             unicycle_copy(s->xhat0, xhat_prev, UNICYCLE_NX);
-            s->xhat_fresh = 0;
-            s->flags |= UNICYCLE_FLAG_MEASUREMENT_UNUSABLE;
+            s->health.xhat_fresh = 0;
+            s->health.flags |= UNICYCLE_FLAG_MEASUREMENT_UNUSABLE;
             rc = UNICYCLE_ERR_NONFINITE_VALUE;
         } else {
             rc = unicycle_feedback_recover(s, &qs, &retries);
@@ -1303,14 +955,39 @@ int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
         }
     }
     if (rc != UNICYCLE_OK) {
-        unicycle_feedback_end(s, max_iter, t0);
         return unicycle_feedback_failed(s, u0, rc);
     }
     unicycle_store_domega(s);
     unicycle_take_step(s);
     unicycle_keep_plan(s, u0, retries == 0);
-    unicycle_feedback_end(s, max_iter, t0);
     return unicycle_ret(s, UNICYCLE_OK);
+}
+
+int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
+{
+    double start;
+    int rc;
+
+    if (!s->set_up) {
+        return UNICYCLE_ERR_NOT_INITIALIZED;
+    }
+    /* the whole call is the phase "feedback" (a recovery within it included) */
+    unicycle_timer_begin(&s->timer, 1u << UNICYCLE_PHASE_FEEDBACK, UNICYCLE_PHASE_FEEDBACK);
+    s->timer.locked = 1;
+    start = s->timer.mark;
+    s->health.flags = 0;
+    s->anytime.instant_start = unicycle_budget_now(s);
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
+    rc = unicycle_feedback_admit(s, xhat0, u0);
+    if (rc == UNICYCLE_OK) {
+        rc = unicycle_feedback_run(s, xhat0, u0);
+    }
+    s->anytime.qp_cap = 0;
+    s->anytime.used = unicycle_budget_now(s) - s->anytime.instant_start;
+    s->timer.locked = 0;
+    unicycle_timer_end(&s->timer, 0, start);
+    return rc;
 }
 
 /* ---- prepare ------------------------------------------------------------------------ */
@@ -1369,20 +1046,21 @@ static unicycle_real unicycle_step_norm(const unicycle_solver *s, int k)
  * between M_min and M_max. */
 static int unicycle_M_now(const unicycle_solver *s)
 {
-    unicycle_real thr = s->M_eta * s->kkt_proxy;
+    const unicycle_settings *st = &s->settings;
+    unicycle_real thr = st->M_eta * s->health.kkt_proxy;
     int k, n = 0;
-    if (s->recovering > 0) {
+    if (s->health.recovering > 0) {
         return UNICYCLE_N - 1; /* after a recovery: every block fresh until it has settled */
     }
-    if (!s->M_adaptive) {
-        return s->M < 0 ? 0 : (s->M > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->M);
+    if (!st->M_adaptive) {
+        return st->M < 0 ? 0 : (st->M > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : st->M);
     }
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
         if (s->rho[k] * unicycle_step_norm(s, k) > thr) {
             n += 1;
         }
     }
-    return n < s->M_min ? s->M_min : (n > s->M_max ? s->M_max : n);
+    return n < st->M_min ? st->M_min : (n > st->M_max ? st->M_max : n);
 }
 
 /* The stage among 0..N-2 not selected yet with the largest rho_k, ties to the lower index. */
@@ -1400,8 +1078,7 @@ static int unicycle_next_worst(const unicycle_solver *s)
 /* Step 4: re-linearise the stages with the largest rho_k: M of them (unicycle_M_now), then, with
  * a budget, further stages in rho order in the instant's prepare and in an extra iteration
  * after which no further iteration fits (algorithm.md section 12); each only while the
- * budget allows. The recomputed set (sorted, stage N-1 included) is recorded; the cost of
- * the stages beyond M in *ext_cost. */
+ * budget allows. The cost of the stages beyond M goes to *ext_cost. */
 static int unicycle_relinearise(unicycle_solver *s, int extra, double *ext_cost)
 {
     int M = unicycle_M_now(s), m, k, n = 0, rc = UNICYCLE_OK, extend;
@@ -1410,10 +1087,10 @@ static int unicycle_relinearise(unicycle_solver *s, int extra, double *ext_cost)
         s->selected[k] = 0;
     }
     extend =
-        s->budget_unit != UNICYCLE_BUDGET_OFF && (!extra || !unicycle_budget_fits(s, s->cost_qp + s->cost_prepare));
+        unicycle_budget_on(s) && (!extra || !unicycle_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare));
     *ext_cost = 0.0;
     for (m = 0; m < UNICYCLE_N - 1; ++m) {
-        if ((m >= M && !extend) || !unicycle_budget_fits(s, s->cost_stage)) {
+        if ((m >= M && !extend) || !unicycle_budget_fits(s, s->anytime.cost_stage)) {
             break;
         }
         k = unicycle_next_worst(s);
@@ -1423,41 +1100,35 @@ static int unicycle_relinearise(unicycle_solver *s, int extra, double *ext_cost)
             break;
         }
         s->selected[k] = 1;
-        if (s->budget_unit != UNICYCLE_BUDGET_OFF) {
-            s->cost_stage = unicycle_budget_now(s) - b0;
+        n += 1;
+        if (unicycle_budget_on(s)) {
+            s->anytime.cost_stage = unicycle_budget_now(s) - b0;
             if (m >= M) {
-                *ext_cost += s->cost_stage;
+                *ext_cost += s->anytime.cost_stage;
             }
         }
     }
-    for (k = 0; k < UNICYCLE_N - 1; ++k) {
-        if (s->selected[k]) {
-            s->recomputed[n++] = k;
-        }
-    }
-    s->instant_stages += n;
-    s->recomputed[n++] = UNICYCLE_N - 1;
-    s->n_recomputed = n;
+    s->anytime.instant_stages += n;
     return rc;
 }
 
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
  * on (use_plan) or the OCP file's guess, clipped to the bounds, into the iterate. Returns 1
  * when every node is finite and inside the box. */
-static int unicycle_simulate(unicycle_solver *s, int use_plan)
+static int unicycle_simulate_plan(unicycle_solver *s, int use_plan)
 {
     unicycle_real l = UNICYCLE_R(0.0);
     int k, j;
     for (k = 0; k < UNICYCLE_N; ++k) {
-        j = s->plan_age + k > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->plan_age + k;
-        unicycle_clip_u(use_plan ? s->plan_u[j] : unicycle_guess_u[k], s->u[k]);
+        j = s->health.plan_age + k > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->health.plan_age + k;
+        unicycle_clip_u(use_plan ? s->health.plan_u[j] : unicycle_guess_u[k], s->u[k]);
         if (unicycle_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->mem.ev.tmp_g,
                                   &s->mem.ev.fun_work) != 0 ||
             !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[k + 1])) {
             return 0;
         }
     }
-    return unicycle_box_ok(s, &s->x[0][0], 0, 0, &s->u[0][0], 0, 0);
+    return unicycle_iterate_box_ok(s, 0, 0, 0, 0);
 }
 
 /* The OCP file's guess states from node `first` on and its controls (clipped) into the iterate. */
@@ -1476,10 +1147,10 @@ static void unicycle_guess_primal(unicycle_solver *s, int first)
  * (convex in the cost, whatever the multipliers); the next prepares use the setting. */
 static int unicycle_reinit_finish(unicycle_solver *s)
 {
-    int rc, hessian = s->hessian;
-    s->hessian = UNICYCLE_HAS_GN ? UNICYCLE_HESSIAN_GAUSS_NEWTON : hessian;
+    int rc, hessian = s->settings.hessian;
+    s->settings.hessian = UNICYCLE_HAS_GN ? UNICYCLE_HESSIAN_GAUSS_NEWTON : hessian;
     rc = unicycle_init_finish(s);
-    s->hessian = hessian;
+    s->settings.hessian = hessian;
     return rc;
 }
 
@@ -1496,7 +1167,7 @@ static int unicycle_reinit_at_guess(unicycle_solver *s)
     unicycle_zero(UNICYCLE_N * UNICYCLE_DIM(UNICYCLE_NG), &s->mu_g[0][0]);
     unicycle_zero(UNICYCLE_DIM(UNICYCLE_NR), s->mu_r);
     unicycle_zero(UNICYCLE_DIM(UNICYCLE_NE), s->nu);
-    s->flags |= UNICYCLE_FLAG_REINIT_GUESS;
+    s->health.flags |= UNICYCLE_FLAG_REINIT_GUESS;
     return unicycle_reinit_finish(s);
 }
 
@@ -1507,7 +1178,7 @@ static int unicycle_reinit_at_guess(unicycle_solver *s)
 static int unicycle_reinit(unicycle_solver *s)
 {
     int rc;
-    if (!unicycle_simulate(s, 1) && !unicycle_simulate(s, 0)) {
+    if (!unicycle_simulate_plan(s, 1) && !unicycle_simulate_plan(s, 0)) {
         unicycle_guess_primal(s, 1);
     }
     rc = unicycle_reinit_finish(s);
@@ -1518,13 +1189,13 @@ static int unicycle_reinit(unicycle_solver *s)
         s->qp_ready = 0;
         return rc;
     }
-    s->kkt_proxy = unicycle_kkt_proxy_eval(s);
-    s->kkt_proxy_ref = s->kkt_proxy;
-    s->n_failed = 0;
-    s->recover_pending = 0;
-    s->n_recoveries += 1;
-    s->recovering = UNICYCLE_RECOVERY_FULL_RTI;
-    s->flags |= UNICYCLE_FLAG_RECOVERED;
+    s->health.kkt_proxy = unicycle_kkt_proxy_eval(s);
+    s->health.kkt_proxy_ref = s->health.kkt_proxy;
+    s->health.n_failed = 0;
+    s->health.recover_pending = 0;
+    s->health.n_recoveries += 1;
+    s->health.recovering = UNICYCLE_RECOVERY_FULL_RTI;
+    s->health.flags |= UNICYCLE_FLAG_RECOVERED;
     return UNICYCLE_OK;
 }
 
@@ -1536,17 +1207,18 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
     int i;
     /* x_0: the state predicted for this instant from the last measurement and control; when
      * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
-    if (!s->xhat_fresh) {
+    if (!s->health.xhat_fresh) {
         if (!shifted) {
             unicycle_copy(s->x[0], s->x[1], UNICYCLE_NX);
         }
-    } else if (unicycle_eval_stage_eval(s->xhat0, s->u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+    } else if (unicycle_eval_stage_eval(s->xhat0, s->health.u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
                                      &s->mem.ev.fun_work) != 0 ||
                !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[0])) {
         unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        if (!(unicycle_fabs(s->x[0][i]) <= UNICYCLE_DIVERGENCE_BOX * s->scale_x[i] + unicycle_fabs(s->xhat0[i]))) {
+        if (!(unicycle_fabs(s->x[0][i]) <=
+              UNICYCLE_DIVERGENCE_BOX * s->health.scale_x[i] + unicycle_fabs(s->xhat0[i]))) {
             unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
             break;
         }
@@ -1562,14 +1234,14 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
  * the iterate is then the OCP file's guess, prepared, when the model is finite there). */
 static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries)
 {
-    int i, rc, n_failed = s->n_failed;
+    int i, rc, n_failed = s->health.n_failed;
     unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
     rc = unicycle_reinit(s);
-    s->n_failed = n_failed; /* still the count of consecutive failed feedbacks */
+    s->health.n_failed = n_failed; /* still the count of consecutive failed feedbacks */
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
     s->shifted = 0;
-    if (rc == UNICYCLE_OK && (s->flags & UNICYCLE_FLAG_REINIT_GUESS)) {
+    if (rc == UNICYCLE_OK && (s->health.flags & UNICYCLE_FLAG_REINIT_GUESS)) {
         /* the model failed at the measured state: no QP from it */
         rc = UNICYCLE_ERR_NONFINITE_VALUE;
     }
@@ -1579,8 +1251,8 @@ static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries)
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
-    s->qp_in.hess_shift = s->lm;
-    s->work += UNICYCLE_WORK_QP;
+    s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += UNICYCLE_WORK_QP;
     *qs = unicycle_qp_attempt(s, 0);
     *qs = unicycle_feedback_lm_retries(s, *qs, retries);
     return UNICYCLE_OK;
@@ -1596,32 +1268,34 @@ static void unicycle_predicted_step(unicycle_solver *s)
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
-    s->qp_in.hess_shift = s->lm;
-    s->qp_settings.warm_start = 0;
-    s->work += UNICYCLE_WORK_QP;
-    qs = unicycle_qp_solve_bound(s);
+    s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += UNICYCLE_WORK_QP;
+    qs = unicycle_qp_solve_bound(s, 0);
     if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         return;
     }
     unicycle_store_domega(s);
     unicycle_take_step(s);
-    unicycle_copy(&s->plan_u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
-    s->plan_age = 0;
-    if (!s->xhat_fresh) {
+    unicycle_copy(&s->health.plan_u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
+    s->health.plan_age = 0;
+    if (!s->health.xhat_fresh) {
         /* no measurement to distrust: the model's prediction carries the loop */
-        s->n_failed = 0;
-        s->recover_pending = 0;
+        s->health.n_failed = 0;
+        s->health.recover_pending = 0;
     }
-    s->flags |= UNICYCLE_FLAG_PREDICTED;
+    s->health.flags |= UNICYCLE_FLAG_PREDICTED;
 }
 
 static int unicycle_prepare_iteration(unicycle_solver *s, int extra);
-static int unicycle_anytime(unicycle_solver *s);
+static int unicycle_anytime_run(unicycle_solver *s);
 
 int unicycle_prepare(unicycle_solver *s)
 {
+    double start;
     int rc, hessian;
-    unicycle_ensure_setup(s);
+    if (!s->set_up) {
+        return UNICYCLE_ERR_NOT_INITIALIZED;
+    }
     if (!s->initialized) {
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
     }
@@ -1629,42 +1303,44 @@ int unicycle_prepare(unicycle_solver *s)
         /* a second prepare would shift the horizon twice */
         return unicycle_ret(s, UNICYCLE_ERR_ALREADY_PREPARED);
     }
-    unicycle_clear_timings(s, UNICYCLE_PHASE_SHIFT, UNICYCLE_PHASE_ASSEMBLY);
-    s->extra_iterations = 0;
-    hessian = s->hessian;
-    if (s->qp_ready && s->n_failed > 0 && !s->recover_pending && s->recovery &&
-        s->mode == UNICYCLE_MODE_RECEDING && !(s->flags & UNICYCLE_FLAG_REINIT_GUESS)) {
+    unicycle_timer_begin(&s->timer, UNICYCLE_PREPARE_PHASES, UNICYCLE_PHASE_RECOVERY);
+    start = s->timer.mark;
+    s->anytime.extra_iterations = 0;
+    hessian = s->settings.hessian;
+    if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
+        s->settings.mode == UNICYCLE_MODE_RECEDING && !(s->health.flags & UNICYCLE_FLAG_REINIT_GUESS)) {
         /* (not from the OCP file's guess: its plan is not the plant's) */
         unicycle_predicted_step(s);
     }
     s->qp_ready = 0;
-    if (s->mode == UNICYCLE_MODE_RECEDING && s->plan_age < UNICYCLE_N) {
-        s->plan_age += 1;
+    if (s->settings.mode == UNICYCLE_MODE_RECEDING && s->health.plan_age < UNICYCLE_N) {
+        s->health.plan_age += 1;
     }
-    if (s->recover_pending && s->recovery && s->mode == UNICYCLE_MODE_RECEDING) {
+    if (s->health.recover_pending && s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING) {
         rc = unicycle_recover(s, 0);
     } else {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
          * multipliers), every block fresh */
-        if (s->recovering > 0 && UNICYCLE_HAS_GN) {
-            s->hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
+        if (s->health.recovering > 0 && UNICYCLE_HAS_GN) {
+            s->settings.hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
         }
         rc = unicycle_prepare_iteration(s, 0);
     }
     if (rc == UNICYCLE_OK) {
-        /* the time left (algorithm.md section 12), with the Hessian of the recovery phase */
-        if (s->recovering > 0 && UNICYCLE_HAS_GN) {
-            s->hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
+        /* the budget left (algorithm.md section 12), with the Hessian of the recovery phase */
+        if (s->health.recovering > 0 && UNICYCLE_HAS_GN) {
+            s->settings.hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
         }
-        rc = unicycle_anytime(s);
+        rc = unicycle_anytime_run(s);
     }
-    s->hessian = hessian;
-    s->budget_used = unicycle_budget_now(s) - s->instant_start;
+    s->settings.hessian = hessian;
+    s->anytime.used = unicycle_budget_now(s) - s->anytime.instant_start;
     if (rc == UNICYCLE_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
         s->shifted = 0;
     }
+    unicycle_timer_end(&s->timer, 1, start);
     return unicycle_ret(s, rc);
 }
 
@@ -1673,41 +1349,40 @@ int unicycle_prepare(unicycle_solver *s)
 static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 {
     unicycle_real xN_saved[UNICYCLE_NX];
-    double t0, b_start = unicycle_budget_now(s), ext_cost = 0.0;
+    double b_start = unicycle_budget_now(s), ext_cost = 0.0;
     int k, rc;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
-    t0 = unicycle_timer_now(&s->timer);
-    if (s->mode == UNICYCLE_MODE_RECEDING && !s->shifted) {
+    unicycle_phase(s, UNICYCLE_PHASE_SHIFT);
+    if (s->settings.mode == UNICYCLE_MODE_RECEDING && !s->shifted && !extra) {
         unicycle_shift(s);
         s->shifted = 1;
     }
-    t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_SHIFT, t0);
     unicycle_copy(xN_saved, s->x[UNICYCLE_N], UNICYCLE_NX);
 
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
         unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
+        unicycle_phase(s, UNICYCLE_PHASE_GRADIENTS);
         rc = unicycle_stage_F(s, k);
-        t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_GRADIENTS, t0);
         if (rc != UNICYCLE_OK) {
             return rc;
         }
+        unicycle_phase(s, UNICYCLE_PHASE_RHO);
         s->rho[k] = unicycle_ring_secant(slot, s->mem.ev.tmp_F, s->mem.ev.tmp_phi, s->mem.ev.tmp_g);
         /* stored as F_old in step 6, once nothing can fail */
         unicycle_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, UNICYCLE_NW);
         unicycle_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, UNICYCLE_NX);
         unicycle_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, UNICYCLE_NG);
-        t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_RHO, t0);
     }
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
+    unicycle_phase(s, UNICYCLE_PHASE_GRADIENTS);
     rc = unicycle_stage_F(s, UNICYCLE_N - 1);
-    t0 = unicycle_timer_add(&s->timer, UNICYCLE_PHASE_GRADIENTS, t0);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
-    if (s->mode == UNICYCLE_MODE_RECEDING && !extra) {
+    if (s->settings.mode == UNICYCLE_MODE_RECEDING && !extra) {
         unicycle_copy(s->x[UNICYCLE_N], s->mem.ev.tmp_phi, UNICYCLE_NX);
     }
     unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
@@ -1715,22 +1390,22 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     s->rho[UNICYCLE_N - 1] = UNICYCLE_R(0.0);
     rc = unicycle_stage_H(s, UNICYCLE_N - 1);
     if (rc == UNICYCLE_OK) {
-        t0 = unicycle_timer_now(&s->timer);
         rc = unicycle_term_F(s);
-        unicycle_timer_add(&s->timer, UNICYCLE_PHASE_GRADIENTS, t0);
     }
     if (rc == UNICYCLE_OK) {
         rc = unicycle_term_H(s);
     }
 
-    /* 4. re-linearise the M stages with the largest rho_k (and more as the budget allows) */
+    /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == UNICYCLE_OK) {
+        unicycle_phase(s, UNICYCLE_PHASE_RHO);
         rc = unicycle_relinearise(s, extra, &ext_cost);
     }
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
      *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept) */
-    if (rc == UNICYCLE_OK && s->cost_hessian) {
+    if (rc == UNICYCLE_OK && s->settings.cost_hessian) {
+        unicycle_phase(s, UNICYCLE_PHASE_HESSIANS);
         for (k = 0; k < UNICYCLE_N - 1 && rc == UNICYCLE_OK; ++k) {
             unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
             if (s->selected[k]) {
@@ -1755,6 +1430,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 
     /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
      *    when stored) */
+    unicycle_phase(s, UNICYCLE_PHASE_GRADIENTS);
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
         unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k],
                            s->mem.ev.Fn_g[k]);
@@ -1762,15 +1438,20 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_assemble(s);
     s->qp_ready = 1;
 
-    /* 7. the divergence test of the prepared iterate (algorithm.md section 9) */
-    s->kkt_proxy = unicycle_kkt_proxy_eval(s);
-    unicycle_lm_prepared(s); /* the automatic Levenberg-Marquardt term (section 10) */
-    if (s->budget_unit != UNICYCLE_BUDGET_OFF) {
-        s->cost_prepare = unicycle_budget_now(s) - b_start - ext_cost;
+    /* 7. the divergence test of the prepared iterate (algorithm.md section 9) and the
+     *    automatic Levenberg-Marquardt term (section 10) */
+    unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
+    s->health.kkt_proxy = unicycle_kkt_proxy_eval(s);
+    unicycle_phase(s, UNICYCLE_PHASE_LM);
+    unicycle_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
+                      s->mem.ev.lm_work);
+    unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
+    if (unicycle_budget_on(s)) {
+        s->anytime.cost_prepare = unicycle_budget_now(s) - b_start - ext_cost;
     }
     if (unicycle_iterate_diverged(s)) {
-        s->flags |= UNICYCLE_FLAG_DIVERGED;
-        if (s->recovery && s->mode == UNICYCLE_MODE_RECEDING) {
+        s->health.flags |= UNICYCLE_FLAG_DIVERGED;
+        if (s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING) {
             return unicycle_recover(s, 1);
         }
     }
@@ -1784,42 +1465,42 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
  * solved (or a step outside the box) changes nothing and returns UNICYCLE_ERR_QP. */
 static int unicycle_extra_iteration(unicycle_solver *s)
 {
-    unicycle_real lm = s->lm;
+    unicycle_lm lm = s->lm;
     double b0 = unicycle_budget_now(s);
     int i, qs;
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
-    unicycle_lm_measured(s);
+    unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     qs = unicycle_feedback_qp(s);
     if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         s->lm = lm;
-        s->lm_uncapped = -UNICYCLE_R(1.0);
         return UNICYCLE_ERR_QP;
     }
-    s->cost_qp = unicycle_budget_now(s) - b0;
+    s->anytime.cost_qp = unicycle_budget_now(s) - b0;
     unicycle_store_domega(s);
     unicycle_take_step(s);
-    unicycle_lm_feedback(s, UNICYCLE_OK);
+    unicycle_lm_feedback(&s->lm, 1);
     return unicycle_prepare_iteration(s, 1);
 }
 
-/* The time left after prepare (algorithm.md section 12): extra iterations while the KKT proxy
- * exceeds the tolerance and one more fits in the budget. The last feedback's QP figures are
- * kept for unicycle_get_qp_status and unicycle_get_qp_iterations. */
-static int unicycle_anytime(unicycle_solver *s)
+/* The budget left after prepare (algorithm.md section 12): extra iterations while the KKT
+ * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
+ * of unicycle_info. */
+static int unicycle_anytime_run(unicycle_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = UNICYCLE_OK;
-    if (s->budget_unit == UNICYCLE_BUDGET_OFF) {
+    if (!unicycle_budget_on(s)) {
         return UNICYCLE_OK;
     }
-    while (s->extra_iterations < UNICYCLE_ANYTIME_MAX_ITER && s->qp_ready && s->kkt_proxy > s->anytime_tol &&
-           unicycle_budget_fits(s, s->cost_qp + s->cost_prepare)) {
+    while (s->anytime.extra_iterations < UNICYCLE_ANYTIME_MAX_ITER && s->qp_ready &&
+           s->health.kkt_proxy > s->settings.anytime_tol &&
+           unicycle_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
         rc = unicycle_extra_iteration(s);
         if (rc != UNICYCLE_OK) {
             break;
         }
-        s->extra_iterations += 1;
+        s->anytime.extra_iterations += 1;
     }
     s->qp_status = qp_status;
     s->qp_iterations = qp_iterations;
@@ -1832,22 +1513,23 @@ static int unicycle_anytime(unicycle_solver *s)
 int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *kkt4)
 {
     unicycle_real parts[4];
-    double t0;
     int i, rc;
 
-    unicycle_ensure_setup(s);
+    if (!s->set_up) {
+        return UNICYCLE_ERR_NOT_INITIALIZED;
+    }
     if (!s->initialized) {
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
     }
     if (xhat0 && !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
-    s->timer.t[UNICYCLE_PHASE_KKT] = UNICYCLE_R(0.0);
-    t0 = unicycle_timer_now(&s->timer);
-    rc = unicycle_kkt_measure(s, xhat0 ? xhat0 : s->xhat0, parts);
-    unicycle_timer_add(&s->timer, UNICYCLE_PHASE_KKT, t0);
-    if (rc != UNICYCLE_OK) {
-        return unicycle_ret(s, rc);
+    unicycle_timer_begin(&s->timer, 1u << UNICYCLE_PHASE_KKT, UNICYCLE_PHASE_KKT);
+    rc = unicycle_kkt_measure(&s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0], &s->mu_b[0][0], s->mu_bN,
+                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->mem.ev.fun_work, parts);
+    unicycle_timer_end(&s->timer, -1, 0.0);
+    if (rc != UNICYCLE_KKT_OK) {
+        return unicycle_ret(s, rc == UNICYCLE_KKT_FUNCTION ? UNICYCLE_ERR_FUNCTION : UNICYCLE_ERR_NONFINITE_VALUE);
     }
     for (i = 0; i < 4; ++i) {
         s->kkt[i] = parts[i];
@@ -1856,16 +1538,6 @@ int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
         }
     }
     return unicycle_ret(s, UNICYCLE_OK);
-}
-
-unicycle_real unicycle_get_kkt(const unicycle_solver *s)
-{
-    unicycle_real m = s->kkt[0];
-    int i;
-    for (i = 1; i < 4; ++i) {
-        m = s->kkt[i] > m ? s->kkt[i] : m;
-    }
-    return m;
 }
 
 /* ---- getters ------------------------------------------------------------------------ */
@@ -1922,21 +1594,14 @@ void unicycle_get_rho(const unicycle_solver *s, unicycle_real *rho)
 
 int unicycle_get_recomputed(const unicycle_solver *s, int *stages)
 {
-    int i;
-    for (i = 0; i < s->n_recomputed; ++i) {
-        stages[i] = s->recomputed[i];
+    int k, n = 0;
+    for (k = 0; k < UNICYCLE_N - 1; ++k) {
+        if (s->selected[k]) {
+            stages[n++] = k;
+        }
     }
-    return s->n_recomputed;
-}
-
-int unicycle_get_qp_iterations(const unicycle_solver *s)
-{
-    return s->qp_iterations;
-}
-
-int unicycle_get_qp_status(const unicycle_solver *s)
-{
-    return s->qp_status;
+    stages[n++] = UNICYCLE_N - 1;
+    return n;
 }
 
 /* The bound of side (-1 lower, else upper) from the arrays lo, up at entry i. */
@@ -1978,65 +1643,259 @@ int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *
     return 1;
 }
 
-int unicycle_get_flags(const unicycle_solver *s)
-{
-    return s->flags;
-}
-
 void unicycle_get_u0(const unicycle_solver *s, unicycle_real *u0)
 {
-    unicycle_copy(u0, s->u0_out, UNICYCLE_NU);
-}
-
-int unicycle_get_recoveries(const unicycle_solver *s)
-{
-    return s->n_recoveries;
-}
-
-int unicycle_get_failed_feedbacks(const unicycle_solver *s)
-{
-    return s->n_failed;
-}
-
-unicycle_real unicycle_get_kkt_proxy(const unicycle_solver *s)
-{
-    return s->kkt_proxy;
+    unicycle_copy(u0, s->health.u0_out, UNICYCLE_NU);
 }
 
 void unicycle_get_scales(const unicycle_solver *s, unicycle_real *scale_x, unicycle_real *scale_u)
 {
     if (scale_x) {
-        unicycle_copy(scale_x, s->scale_x, UNICYCLE_NX);
+        unicycle_copy(scale_x, s->health.scale_x, UNICYCLE_NX);
     }
     if (scale_u) {
-        unicycle_copy(scale_u, s->scale_u, UNICYCLE_NU);
+        unicycle_copy(scale_u, s->health.scale_u, UNICYCLE_NU);
     }
 }
 
-int unicycle_get_qp_cold_retry(const unicycle_solver *s)
+static int unicycle_has_clock(const unicycle_solver *s)
 {
-    return s->qp_cold_retry;
+    if (s->timer.clock == 0) {
+        return 0;
+    }
+    return s->timer.clock != unicycle_timer_default_clock || unicycle_timer_has_default_clock();
 }
 
-int unicycle_get_status(const unicycle_solver *s)
+void unicycle_get_info(const unicycle_solver *s, unicycle_info *info)
 {
-    return s->status;
+    int k, i;
+    info->status = s->status;
+    info->initialized = s->set_up && s->initialized;
+    info->qp_status = s->qp_status;
+    info->qp_iterations = s->qp_iterations;
+    info->qp_cold_retry = s->qp_cold_retry;
+    info->flags = s->health.flags;
+    info->recoveries = s->health.n_recoveries;
+    info->failed_feedbacks = s->health.n_failed;
+    info->M_used = 0;
+    for (k = 0; k < UNICYCLE_N - 1; ++k) {
+        info->M_used += s->selected[k] ? 1 : 0;
+    }
+    info->ring_head = s->ring.ring_head;
+    info->has_clock = unicycle_has_clock(s);
+    info->lm = s->lm.lm;
+    info->lm_scale = s->lm.scale;
+    info->kkt_proxy = s->health.kkt_proxy;
+    info->kkt_max = s->kkt[0];
+    for (i = 0; i < 4; ++i) {
+        info->kkt[i] = s->kkt[i];
+        info->kkt_max = s->kkt[i] > info->kkt_max ? s->kkt[i] : info->kkt_max;
+    }
+    for (i = 0; i < UNICYCLE_N_PHASES; ++i) { /* times are double in both precisions */
+        info->timings[i] = s->timer.t[i];
+    }
+    info->t_feedback = s->timer.t_call[0];
+    info->t_prepare = s->timer.t_call[1];
+    info->extra_iterations = s->anytime.extra_iterations;
+    info->instant_stages = s->anytime.instant_stages;
+    info->budget_used = s->anytime.used;
+    info->work = s->anytime.work;
 }
 
-int unicycle_is_initialized(const unicycle_solver *s)
+/* ---- settings, setup, parameters, clock ---------------------------------------------- */
+
+/* UNICYCLE_OK when every setting is in range, else UNICYCLE_ERR_INVALID_ARGUMENT. */
+static int unicycle_settings_check(const unicycle_settings *st)
 {
-    return s->magic == UNICYCLE_MAGIC && s->initialized;
+    int reg = st->regularization;
+    if (st->M < 0 || st->M > UNICYCLE_N - 1 ||
+        (st->mode != UNICYCLE_MODE_RECEDING && st->mode != UNICYCLE_MODE_FIXED) ||
+        (st->hessian != UNICYCLE_HESSIAN_EXACT &&
+         !(st->hessian == UNICYCLE_HESSIAN_GAUSS_NEWTON && UNICYCLE_HAS_GN)) ||
+        (reg != UNICYCLE_REG_NONE && reg != UNICYCLE_REG_PROJECT && reg != UNICYCLE_REG_MIRROR) ||
+        !isfinite(st->reg_eps) || !(st->reg_eps > UNICYCLE_R(0.0)) ||
+        (st->cost_hessian != 0 && st->cost_hessian != 1) || (st->lm_auto != 0 && st->lm_auto != 1) ||
+        !isfinite(st->lm) || !(st->lm >= UNICYCLE_R(0.0)) || !isfinite(st->qp_tol) ||
+        !(st->qp_tol > UNICYCLE_R(0.0)) || st->qp_tol > UNICYCLE_QP_TOL_MAX || st->qp_max_iter < 1 ||
+        (st->qp_warm_start != 0 && st->qp_warm_start != 1) || (st->recovery != 0 && st->recovery != 1) ||
+        st->recovery_failures < 1 || !(st->budget >= 0.0) || !(st->budget < HUGE_VAL) ||
+        (st->budget_unit != UNICYCLE_BUDGET_TIME && st->budget_unit != UNICYCLE_BUDGET_WORK) ||
+        !isfinite(st->anytime_tol) || !(st->anytime_tol > UNICYCLE_R(0.0)) ||
+        (st->M_adaptive != 0 && st->M_adaptive != 1) || st->M_min < 0 || st->M_max < st->M_min ||
+        st->M_max > UNICYCLE_N - 1 || !isfinite(st->M_eta) || !(st->M_eta > UNICYCLE_R(0.0))) {
+        return UNICYCLE_ERR_INVALID_ARGUMENT;
+    }
+    return UNICYCLE_OK;
 }
 
-int unicycle_get_ring_head(const unicycle_solver *s)
+int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
 {
-    return s->ring.ring_head;
+    unicycle_settings defaults;
+    int k, i, rc;
+    unicycle_settings_default(&defaults);
+    rc = st ? unicycle_settings_check(st) : UNICYCLE_OK;
+    s->settings = (st && rc == UNICYCLE_OK) ? *st : defaults;
+    s->set_up = 1;
+    s->initialized = 0;
+    s->qp_ready = 0;
+    s->prepare_due = 0;
+    s->shifted = 0;
+    s->status = UNICYCLE_OK;
+    unicycle_lm_reset(&s->lm, s->settings.lm_auto, s->settings.lm);
+    s->lm.scale = UNICYCLE_R(1.0);
+    for (k = 0; k < UNICYCLE_N; ++k) { /* set only during a QP solve (unicycle_qp_solve_bound) */
+        s->qp_in.H[k] = 0;
+        s->qp_in.Phi[k] = 0;
+        s->qp_in.C[k] = 0;
+    }
+    s->qp_in.HN = 0;
+    s->qp_in.R = 0;
+    s->qp_in.Req = 0;
+    s->qp_cold_retry = 0;
+    for (k = 0; k <= UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NP; ++i) {
+            s->p[k][i] = unicycle_p_default[i];
+        }
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->xhat0[i] = unicycle_x0_default[i];
+    }
+    s->qp_status = 0;
+    s->qp_iterations = 0;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        s->rho[k] = UNICYCLE_R(0.0);
+        s->selected[k] = 0;
+    }
+    unicycle_health_scales(&s->health);
+    unicycle_reset_health(s);
+    for (i = 0; i < 4; ++i) {
+        s->kkt[i] = NAN;
+    }
+    unicycle_timer_init(&s->timer);
+    s->anytime.work = 0.0;
+    s->anytime.instant_start = 0.0;
+    s->anytime.cost_stage = 0.0;
+    s->anytime.cost_qp = 0.0;
+    s->anytime.cost_prepare = 0.0;
+    s->anytime.cost_qp_iter = 0.0;
+    s->anytime.used = 0.0;
+    s->anytime.qp_cap = 0;
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
+    return unicycle_ret(s, rc);
 }
 
-void unicycle_get_timings(const unicycle_solver *s, double *t)
+int unicycle_update_settings(unicycle_solver *s, const unicycle_settings *st)
+{
+    unicycle_settings old;
+    if (!s->set_up) {
+        return UNICYCLE_ERR_NOT_INITIALIZED;
+    }
+    if (st == 0 || unicycle_settings_check(st) != UNICYCLE_OK) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    old = s->settings;
+    s->settings = *st;
+    if (st->lm_auto && !old.lm_auto) {
+        /* the automatic term restarts: from 0, raised until the prepared QP is convex */
+        unicycle_lm_reset(&s->lm, 1, UNICYCLE_R(0.0));
+        if (s->initialized && s->qp_ready) {
+            unicycle_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
+        }
+    } else if (!st->lm_auto) {
+        unicycle_lm_reset(&s->lm, 0, st->lm);
+    }
+    if (!st->recovery) {
+        s->health.recover_pending = 0;
+    }
+    return unicycle_ret(s, UNICYCLE_OK);
+}
+
+void unicycle_get_settings(const unicycle_solver *s, unicycle_settings *st)
+{
+    *st = s->settings;
+}
+
+int unicycle_set_parameters(unicycle_solver *s, const unicycle_real *p)
+{
+    int k, i;
+    if (!s->set_up) {
+        return UNICYCLE_ERR_NOT_INITIALIZED;
+    }
+    if (UNICYCLE_NP == 0) {
+        return unicycle_ret(s, UNICYCLE_OK);
+    }
+    if (p == 0) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    if (!unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NP, p)) {
+        return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
+    }
+    for (k = 0; k <= UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NP; ++i) {
+            s->p[k][i] = p[k * UNICYCLE_NP + i];
+        }
+    }
+    return unicycle_ret(s, UNICYCLE_OK);
+}
+
+int unicycle_set_parameters_node(unicycle_solver *s, int k, const unicycle_real *pk)
 {
     int i;
-    for (i = 0; i < UNICYCLE_N_PHASES; ++i) { /* times are double in both precisions */
-        t[i] = s->timer.t[i];
+    if (!s->set_up) {
+        return UNICYCLE_ERR_NOT_INITIALIZED;
+    }
+    if (k < 0 || k > UNICYCLE_N) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    if (UNICYCLE_NP == 0) {
+        return unicycle_ret(s, UNICYCLE_OK);
+    }
+    if (pk == 0) {
+        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
+    }
+    if (!unicycle_lai_vec_finite(UNICYCLE_NP, pk)) {
+        return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
+    }
+    for (i = 0; i < UNICYCLE_NP; ++i) {
+        s->p[k][i] = pk[i];
+    }
+    return unicycle_ret(s, UNICYCLE_OK);
+}
+
+void unicycle_get_parameters(const unicycle_solver *s, unicycle_real *p)
+{
+    int k, i;
+    for (k = 0; k <= UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NP; ++i) {
+            p[k * UNICYCLE_NP + i] = s->p[k][i];
+        }
     }
 }
+
+void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void *ctx)
+{
+    s->timer.clock = clock_fn ? clock_fn : unicycle_timer_default_clock;
+    s->timer.ctx = clock_fn ? ctx : 0;
+}
+
+int unicycle_simulate(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p, unicycle_real *x_next,
+                   struct unicycle_fun_work_s *work)
+{
+    unicycle_real l = UNICYCLE_R(0.0), g[UNICYCLE_DIM(UNICYCLE_NG)];
+    if (unicycle_eval_stage_eval(x, u, p ? p : unicycle_p_default, x_next, &l, g, work) != 0) {
+        return UNICYCLE_ERR_FUNCTION;
+    }
+    return unicycle_lai_vec_finite(UNICYCLE_NX, x_next) ? UNICYCLE_OK : UNICYCLE_ERR_NONFINITE_VALUE;
+}
+
+/* ---- the modules (one translation unit; UNICYCLE_INTERNAL functions are static) --------- */
+
+#include "unicycle_timer.c"
+#include "unicycle_ring.c"
+#include "unicycle_reg.c"
+#include "unicycle_funcs.c"
+#include "unicycle_lm.c"
+#include "unicycle_health.c"
+#include "unicycle_kkt.c"
+#include "unicycle_qp.c" /* last: its short macros (N, NX, ...) stay inside it */

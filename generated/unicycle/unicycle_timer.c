@@ -53,18 +53,51 @@ void unicycle_timer_init(unicycle_timer *tm)
     for (i = 0; i < UNICYCLE_N_PHASES; ++i) {
         tm->t[i] = 0.0;
     }
+    tm->t_call[0] = tm->t_call[1] = 0.0;
+    tm->mark = 0.0;
+    tm->phase = -1;
+    tm->locked = 0;
 }
 
-double unicycle_timer_now(const unicycle_timer *tm)
+static double unicycle_timer_now(const unicycle_timer *tm)
 {
     return tm->clock ? tm->clock(tm->ctx) : 0.0;
 }
 
-double unicycle_timer_add(unicycle_timer *tm, int phase, double since)
+void unicycle_timer_begin(unicycle_timer *tm, unsigned clear, int phase)
 {
-    double now = unicycle_timer_now(tm);
-    if (phase >= 0 && phase < UNICYCLE_N_PHASES) {
-        tm->t[phase] += now - since;
+    int i;
+    for (i = 0; i < UNICYCLE_N_PHASES; ++i) {
+        if (clear & (1u << i)) {
+            tm->t[i] = 0.0;
+        }
     }
-    return now;
+    tm->locked = 0;
+    tm->phase = phase;
+    tm->mark = unicycle_timer_now(tm);
+}
+
+int unicycle_timer_switch(unicycle_timer *tm, int phase)
+{
+    double now;
+    int prev = tm->phase;
+    if (tm->locked) {
+        return phase;
+    }
+    now = unicycle_timer_now(tm);
+    if (prev >= 0 && prev < UNICYCLE_N_PHASES) {
+        tm->t[prev] += now - tm->mark;
+    }
+    tm->mark = now;
+    tm->phase = phase;
+    return prev;
+}
+
+void unicycle_timer_end(unicycle_timer *tm, int call, double start)
+{
+    tm->locked = 0;
+    unicycle_timer_switch(tm, -1);
+    if (call >= 0 && call < 2) {
+        tm->t_call[call] = tm->mark - start;
+    }
 }

@@ -13,18 +13,24 @@
 #ifndef UNICYCLE_TIMER_H
 #define UNICYCLE_TIMER_H
 
-/* Phases timed per call (seconds of the last call that ran the phase). */
+/* Phases timed per call (seconds of the last call that ran the phase). Every part of
+ * feedback and prepare runs inside one of them, so the phases of a call add up to its wall
+ * time (unicycle_info.t_feedback, t_prepare). */
 enum unicycle_phase {
-    UNICYCLE_PHASE_FEEDBACK = 0,       /* unicycle_feedback: QP solve + step */
+    UNICYCLE_PHASE_FEEDBACK = 0,       /* unicycle_feedback, the whole call: QP solve + step */
     UNICYCLE_PHASE_SHIFT = 1,          /* prepare step 1: shift, ring head */
-    UNICYCLE_PHASE_GRADIENTS = 2,      /* prepare steps 2-3: stage_grad / term_grad (F_k) */
-    UNICYCLE_PHASE_RHO = 3,            /* prepare step 2: secant criterion eq. 16 */
+    UNICYCLE_PHASE_GRADIENTS = 2,      /* prepare steps 2-3: stage_grad / term_grad (F_k), F_old stored */
+    UNICYCLE_PHASE_RHO = 3,            /* prepare steps 2 and 4: secant criterion eq. 16, selection */
     UNICYCLE_PHASE_HESSIANS = 4,       /* stage_hess / term_hess (H_k) and stage_hess_cost (A_l),
                                       without regularisation */
     UNICYCLE_PHASE_REGULARIZATION = 5, /* eigenvalue regularisation of fresh A blocks */
     UNICYCLE_PHASE_ASSEMBLY = 6,       /* QP vectors a_k, b_k, bounds */
     UNICYCLE_PHASE_KKT = 7,            /* unicycle_kkt_eval */
-    UNICYCLE_N_PHASES = 8
+    UNICYCLE_PHASE_LM = 8,             /* the automatic Levenberg-Marquardt term: Hessian scale and
+                                      convexity test (prepare, init) */
+    UNICYCLE_PHASE_RECOVERY = 9,       /* prepare: the predicted step after a failed feedback, the
+                                      divergence test, the simulation of a re-initialisation */
+    UNICYCLE_N_PHASES = 10
 };
 
 typedef double (*unicycle_clock_fn)(void *ctx);
@@ -33,16 +39,32 @@ typedef struct {
     unicycle_clock_fn clock;
     void *ctx;
     double t[UNICYCLE_N_PHASES];
+    double t_call[2]; /* wall time of the last feedback [0] and prepare [1] */
+    double mark;      /* clock reading at the last phase change */
+    int phase;        /* the running phase (-1: none) */
+    int locked;       /* 1: the running phase stays (unicycle_timer_switch changes nothing) */
 } unicycle_timer;
 
-/* The default clock: CLOCK_MONOTONIC in seconds where POSIX timers exist, else 0. */
-double unicycle_timer_default_clock(void *ctx);
-/* 1 if the default clock measures time on this platform (POSIX timers), 0 if it reads 0. */
-int unicycle_timer_has_default_clock(void);
+#ifndef UNICYCLE_INTERNAL
+#define UNICYCLE_INTERNAL
+#endif
 
-void unicycle_timer_init(unicycle_timer *tm);
-double unicycle_timer_now(const unicycle_timer *tm);
-/* t[phase] += now - since; returns now so consecutive phases chain without a second read. */
-double unicycle_timer_add(unicycle_timer *tm, int phase, double since);
+/* The default clock: CLOCK_MONOTONIC in seconds where POSIX timers exist, else 0. */
+UNICYCLE_INTERNAL double unicycle_timer_default_clock(void *ctx);
+/* 1 if the default clock measures time on this platform (POSIX timers), 0 if it reads 0. */
+UNICYCLE_INTERNAL int unicycle_timer_has_default_clock(void);
+
+UNICYCLE_INTERNAL void unicycle_timer_init(unicycle_timer *tm);
+/* Start timing a call: the phases of the bit mask `clear` (bit p: phase p) read 0, `phase`
+ * runs from now. */
+UNICYCLE_INTERNAL void unicycle_timer_begin(unicycle_timer *tm, unsigned clear, int phase);
+/* The time since the last phase change goes to the running phase; `phase` runs from now.
+ * Returns the phase that ran (to switch back after a nested phase). While locked, nothing
+ * changes (returns `phase`). */
+UNICYCLE_INTERNAL int unicycle_timer_switch(unicycle_timer *tm, int phase);
+/* End the call begun at `start` (the clock reading of unicycle_timer_begin, tm->mark then): the
+ * running phase gets its time; t_call[call] = the wall time of the call (call 0 feedback,
+ * 1 prepare, -1 none). */
+UNICYCLE_INTERNAL void unicycle_timer_end(unicycle_timer *tm, int call, double start);
 
 #endif /* UNICYCLE_TIMER_H */

@@ -28,7 +28,20 @@
 #define PUSH_STEP 5
 
 static solver_t s;
+static API(settings) st;
 static API(fun_work) plant_work;
+
+/* update_settings with one or two fields changed from the current settings */
+#define UPDATE(field, value) (API(get_settings)(&s, &st), st.field = (value), API(update_settings)(&s, &st))
+#define UPDATE2(f1, v1, f2, v2)                                                                              \
+    (API(get_settings)(&s, &st), st.f1 = (v1), st.f2 = (v2), API(update_settings)(&s, &st))
+
+static int info_int(int which)
+{
+    API(info) info;
+    API(get_info)(&s, &info);
+    return which == 0 ? info.qp_status : info.ring_head;
+}
 
 static void print_vec(const char *label, const double *v, int n)
 {
@@ -88,7 +101,7 @@ static int iterate(const char *phase, int it, const double *xhat0, double *u0)
     if (pr == K(OK)) {
         kk = API(kkt_eval)(&s, xhat0, kkt4);
     }
-    printf("%s %d status %d %d %d qp %d", phase, it, fb, pr, kk, API(get_qp_status)(&s));
+    printf("%s %d status %d %d %d qp %d", phase, it, fb, pr, kk, info_int(0));
     print_vec(" u0", u0, NU);
     print_vec(" kkt", kkt4, 4);
     n = API(get_recomputed)(&s, recomputed);
@@ -96,7 +109,7 @@ static int iterate(const char *phase, int it, const double *xhat0, double *u0)
     for (i = 0; i < n; ++i) {
         printf(" %d", recomputed[i]);
     }
-    printf(" head %d\n", API(get_ring_head)(&s));
+    printf(" head %d\n", info_int(1));
     return fb;
 }
 
@@ -107,7 +120,7 @@ static void bad(const char *label, int status)
 
 int main(int argc, char **argv)
 {
-    double xfixed[NX], push[NX], x0[NX], xhat[NX], xnext[NX], u0[NU], l, g[D(NG)];
+    double xfixed[NX], push[NX], x0[NX], xhat[NX], xnext[NX], u0[NU];
     static double guess_x[(N_ + 1) * NX], big[(N_ + 1) * D(NP)];
     double nan = NAN, inf = INFINITY, kkt4[4];
     int i, k, rc;
@@ -125,10 +138,11 @@ int main(int argc, char **argv)
     memset(u0, 0, sizeof u0);
 
     /* 1. fixed xhat0, warm start */
-    API(defaults)(&s);
-    must(API(set_mode)(&s, K(MODE_FIXED)), "set_mode");
-    must(API(set_M)(&s, 1), "set_M");
-    must(API(set_qp_tol)(&s, 1e-12), "set_qp_tol");
+    API(settings_default)(&st);
+    st.mode = K(MODE_FIXED);
+    st.M = 1;
+    st.qp_tol = 1e-12;
+    must(API(setup)(&s, &st), "setup");
     must(init_warm(x0), "init");
     for (k = 1; k <= ITER_FIXED; ++k) {
         iterate("fixed", k, xfixed, u0);
@@ -136,13 +150,15 @@ int main(int argc, char **argv)
     print_iterate("fixed");
 
     /* 2. Gauss-Newton (when the cost is least squares), projected, from the OCP file's guess */
-    API(defaults)(&s);
-    must(API(set_mode)(&s, K(MODE_FIXED)), "set_mode");
+    API(settings_default)(&st);
+    st.mode = K(MODE_FIXED);
     if (K(HAS_GN)) {
-        must(API(set_hessian)(&s, K(HESSIAN_GAUSS_NEWTON)), "set_hessian");
+        st.hessian = K(HESSIAN_GAUSS_NEWTON);
     }
-    must(API(set_regularization)(&s, K(REG_PROJECT), 1e-4), "set_regularization");
-    must(API(set_M)(&s, N_ - 1), "set_M");
+    st.regularization = K(REG_PROJECT);
+    st.reg_eps = 1e-4;
+    st.M = N_ - 1;
+    must(API(setup)(&s, &st), "setup");
     must(API(init)(&s, x0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL), "init");
     for (k = 1; k <= ITER_GN; ++k) {
         iterate("gn", k, x0, u0);
@@ -150,7 +166,7 @@ int main(int argc, char **argv)
     print_iterate("gn");
 
     /* 3. receding horizon against the discrete model, one push */
-    API(defaults)(&s);
+    must(API(setup)(&s, NULL), "setup");
     must(init_warm(x0), "init");
     for (i = 0; i < NX; ++i) {
         xhat[i] = x0[i];
@@ -163,8 +179,8 @@ int main(int argc, char **argv)
         }
         /* a failed feedback leaves u0 as it was: the previous control is held */
         iterate("receding", k, xhat, u0);
-        rc = API(eval_stage_eval)(xhat, u0, API(p_default), xnext, &l, g, &plant_work);
-        if (rc != 0) {
+        rc = API(simulate)(xhat, u0, NULL, xnext, &plant_work);
+        if (rc != K(OK)) {
             fprintf(stderr, "driver: the model failed to evaluate\n");
             return 2;
         }
@@ -175,7 +191,7 @@ int main(int argc, char **argv)
     print_iterate("receding");
 
     /* 4. bad inputs: statuses only (the iterate is compared above and by the fuzz harness) */
-    API(defaults)(&s);
+    must(API(setup)(&s, NULL), "setup");
     bad("feedback_before_init", API(feedback)(&s, x0, u0));
     bad("prepare_before_init", API(prepare)(&s));
     bad("kkt_before_init", API(kkt_eval)(&s, x0, kkt4));
@@ -202,21 +218,21 @@ int main(int argc, char **argv)
     bad("feedback_twice", API(feedback)(&s, x0, u0));
     bad("prepare", API(prepare)(&s));
     bad("prepare_twice", API(prepare)(&s));
-    bad("set_M_negative", API(set_M)(&s, -1));
-    bad("set_M_N", API(set_M)(&s, N_));
-    bad("set_M_int_max", API(set_M)(&s, INT_MAX));
-    bad("set_mode_2", API(set_mode)(&s, 2));
-    bad("set_hessian_minus_1", API(set_hessian)(&s, -1));
-    bad("set_regularization_3", API(set_regularization)(&s, 3, 1e-4));
-    bad("set_regularization_eps_0", API(set_regularization)(&s, K(REG_MIRROR), 0.0));
-    bad("set_regularization_eps_nan", API(set_regularization)(&s, K(REG_MIRROR), nan));
-    bad("set_cost_hessian_2", API(set_cost_hessian)(&s, 2));
-    bad("set_lm_negative", API(set_levenberg_marquardt)(&s, -1e-3));
-    bad("set_lm_inf", API(set_levenberg_marquardt)(&s, inf));
-    bad("set_qp_tol_0", API(set_qp_tol)(&s, 0.0));
-    bad("set_qp_tol_nan", API(set_qp_tol)(&s, nan));
-    bad("set_qp_max_iter_0", API(set_qp_max_iter)(&s, 0));
-    bad("set_qp_max_iter_int_min", API(set_qp_max_iter)(&s, INT_MIN));
+    bad("set_M_negative", UPDATE(M, -1));
+    bad("set_M_N", UPDATE(M, N_));
+    bad("set_M_int_max", UPDATE(M, INT_MAX));
+    bad("set_mode_2", UPDATE(mode, 2));
+    bad("set_hessian_minus_1", UPDATE(hessian, -1));
+    bad("set_regularization_3", UPDATE2(regularization, 3, reg_eps, 1e-4));
+    bad("set_regularization_eps_0", UPDATE2(regularization, K(REG_MIRROR), reg_eps, 0.0));
+    bad("set_regularization_eps_nan", UPDATE2(regularization, K(REG_MIRROR), reg_eps, nan));
+    bad("set_cost_hessian_2", UPDATE(cost_hessian, 2));
+    bad("set_lm_negative", UPDATE2(lm_auto, 0, lm, -1e-3));
+    bad("set_lm_inf", UPDATE2(lm_auto, 0, lm, inf));
+    bad("set_qp_tol_0", UPDATE(qp_tol, 0.0));
+    bad("set_qp_tol_nan", UPDATE(qp_tol, nan));
+    bad("set_qp_max_iter_0", UPDATE(qp_max_iter, 0));
+    bad("set_qp_max_iter_int_min", UPDATE(qp_max_iter, INT_MIN));
     bad("set_parameters_node_minus_1", API(set_parameters_node)(&s, -1, big));
     bad("set_parameters_node_N_plus_1", API(set_parameters_node)(&s, N_ + 1, big));
     for (i = 0; i < (N_ + 1) * D(NP); ++i) {

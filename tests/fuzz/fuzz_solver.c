@@ -2,11 +2,11 @@
  *
  * The input is decoded into a sequence of calls in arbitrary order (init, init_nominal,
  * feedback with measurements that may hold NaN, Inf or huge values, prepare, kkt_eval,
- * every setter with arbitrary values, parameters, defaults, a zeroed struct) and the
+ * every setting with arbitrary values, parameters, setup, a zeroed struct) and the
  * documented contracts are checked after every call; a violation aborts (a "crash" for
  * libFuzzer), and so does any AddressSanitizer / UndefinedBehaviorSanitizer report:
  *
- *  - every status is a code of enum <name>_status and equals get_status();
+ *  - every status is a code of enum <name>_status and equals the info's status;
  *  - the statuses the API defines exactly are predicted by a model of the calling order
  *    and of the argument checks (not initialised, not prepared, already prepared, invalid
  *    argument, non-finite input) and must be returned;
@@ -176,6 +176,68 @@ static void rd_array(reader *r, double *a, const double *base, int n)
 
 static solver_t s;
 
+/* One setting at a time through the settings API (<name>_get_settings, <name>_update_settings)
+ * and the info struct (<name>_get_info), so the harness drives every setting by itself. */
+static API(settings) settings_now(void)
+{
+    API(settings) st;
+    API(get_settings)(&s, &st);
+    return st;
+}
+
+static API(info) info_now(void)
+{
+    API(info) info;
+    API(get_info)(&s, &info);
+    return info;
+}
+
+#define SETTER_INT(fn, field)                                                                                \
+    static int fn(solver_t *sv, int v)                                                                       \
+    {                                                                                                        \
+        API(settings) st = settings_now();                                                                   \
+        st.field = v;                                                                                        \
+        return API(update_settings)(sv, &st);                                                                \
+    }
+#define SETTER_DOUBLE(fn, field)                                                                             \
+    static int fn(solver_t *sv, double v)                                                                    \
+    {                                                                                                        \
+        API(settings) st = settings_now();                                                                   \
+        st.field = v;                                                                                        \
+        return API(update_settings)(sv, &st);                                                                \
+    }
+SETTER_INT(set_M, M)
+SETTER_INT(set_mode, mode)
+SETTER_INT(set_hessian, hessian)
+SETTER_INT(set_cost_hessian, cost_hessian)
+SETTER_INT(set_qp_max_iter, qp_max_iter)
+SETTER_DOUBLE(set_qp_tol, qp_tol)
+
+static int set_regularization(solver_t *sv, int v, double eps)
+{
+    API(settings) st = settings_now();
+    st.regularization = v;
+    st.reg_eps = eps;
+    return API(update_settings)(sv, &st);
+}
+
+/* a fixed Levenberg-Marquardt term */
+static int set_levenberg_marquardt(solver_t *sv, double lm)
+{
+    API(settings) st = settings_now();
+    st.lm_auto = 0;
+    st.lm = lm;
+    return API(update_settings)(sv, &st);
+}
+
+static int set_recovery(solver_t *sv, int on, int failures)
+{
+    API(settings) st = settings_now();
+    st.recovery = on;
+    st.recovery_failures = failures;
+    return API(update_settings)(sv, &st);
+}
+
 typedef struct {
     int initialized, qp_ready, prepare_due, shifted;
     int M, mode, hessian, regularization, cost_hessian, max_iter;
@@ -218,7 +280,7 @@ static void read_iterate(iterate *it)
     API(get_mu_bN)(&s, it->mu_bN);
     API(get_mu_r)(&s, it->mu_r);
     API(get_nu)(&s, it->nu);
-    it->head = API(get_ring_head)(&s);
+    it->head = info_now().ring_head;
 }
 
 static int same_bits(const iterate *a, const iterate *b)
@@ -276,16 +338,18 @@ static int is_shift_of(const iterate *a, const iterate *b)
 static void check_settings(void)
 {
     double p[(N_ + 1) * D(NP)];
-    check(API(get_M)(&s) == m.M, "M reads back");
-    check(API(get_mode)(&s) == m.mode, "mode reads back");
-    check(API(get_hessian)(&s) == m.hessian, "hessian reads back");
-    check(API(get_regularization)(&s) == m.regularization, "regularization reads back");
-    check(API(get_reg_eps)(&s) == m.reg_eps, "reg_eps reads back");
-    check(API(get_cost_hessian)(&s) == m.cost_hessian, "cost_hessian reads back");
-    check(API(get_levenberg_marquardt)(&s) == m.lm, "lm reads back");
-    check(API(get_qp_tol)(&s) == m.tol, "qp_tol reads back");
-    check(API(get_qp_max_iter)(&s) == m.max_iter, "qp_max_iter reads back");
-    check(API(is_initialized)(&s) == m.initialized, "is_initialized follows the calling-order model");
+    API(settings) st = settings_now();
+    API(info) info = info_now();
+    check(st.M == m.M, "M reads back");
+    check(st.mode == m.mode, "mode reads back");
+    check(st.hessian == m.hessian, "hessian reads back");
+    check(st.regularization == m.regularization, "regularization reads back");
+    check(st.reg_eps == m.reg_eps, "reg_eps reads back");
+    check(st.cost_hessian == m.cost_hessian, "cost_hessian reads back");
+    check(!st.lm_auto && st.lm == m.lm && info.lm == m.lm, "lm reads back");
+    check(st.qp_tol == m.tol, "qp_tol reads back");
+    check(st.qp_max_iter == m.max_iter, "qp_max_iter reads back");
+    check(info.initialized == m.initialized, "initialized follows the calling-order model");
     if (NP > 0) {
         API(get_parameters)(&s, p);
         check(memcmp(p, m.p, (N_ + 1) * NP * sizeof(double)) == 0, "parameters read back");
@@ -297,21 +361,22 @@ static void check_settings(void)
  * both are switched off after every reset of the settings. */
 static void pin_automatic_features(void)
 {
-    API(set_recovery)(&s, 0, 2);
-    API(set_levenberg_marquardt)(&s, 1e-4);
+    set_recovery(&s, 0, 2);
+    set_levenberg_marquardt(&s, 1e-4);
 }
 
 static void model_from_solver(void)
 {
-    m.M = API(get_M)(&s);
-    m.mode = API(get_mode)(&s);
-    m.hessian = API(get_hessian)(&s);
-    m.regularization = API(get_regularization)(&s);
-    m.reg_eps = API(get_reg_eps)(&s);
-    m.cost_hessian = API(get_cost_hessian)(&s);
-    m.lm = API(get_levenberg_marquardt)(&s);
-    m.tol = API(get_qp_tol)(&s);
-    m.max_iter = API(get_qp_max_iter)(&s);
+    API(settings) st = settings_now();
+    m.M = st.M;
+    m.mode = st.mode;
+    m.hessian = st.hessian;
+    m.regularization = st.regularization;
+    m.reg_eps = st.reg_eps;
+    m.cost_hessian = st.cost_hessian;
+    m.lm = st.lm;
+    m.tol = st.qp_tol;
+    m.max_iter = st.qp_max_iter;
     m.initialized = m.qp_ready = m.prepare_due = m.shifted = 0;
     if (NP > 0) {
         API(get_parameters)(&s, m.p);
@@ -325,7 +390,7 @@ static void check_status(int st)
         fprintf(stderr, "call %d %s -> status %d\n", call_index, call_name, st);
     }
     check(st >= 0 && st <= STATUS_MAX, "status is a code of the enum");
-    check(API(get_status)(&s) == st, "get_status returns the status of the last call");
+    check(info_now().status == st, "the info's status is the status of the last call");
     check(API(status_string)(st) != NULL, "status string");
 }
 
@@ -554,7 +619,8 @@ static void do_kkt(reader *r, double *xhat)
             /* +Inf is the overflow of a far-off iterate (documented), NaN never */
             check(!isnan(kkt4[i]) && kkt4[i] >= 0.0, "KKT parts >= 0, not NaN");
         }
-        check(API(get_kkt)(&s) == fmax(fmax(kkt4[0], kkt4[1]), fmax(kkt4[2], kkt4[3])), "get_kkt is the max");
+        check(info_now().kkt_max == fmax(fmax(kkt4[0], kkt4[1]), fmax(kkt4[2], kkt4[3])),
+              "kkt_max is the max");
     }
     check_settings();
 }
@@ -597,15 +663,15 @@ static void do_setter(unsigned op, reader *r)
     switch (op) {
     case 0:
         v = rd_int(r);
-        int_setter("set_M", API(set_M), v, v >= 0 && v <= N_ - 1, &m.M);
+        int_setter("set_M", set_M, v, v >= 0 && v <= N_ - 1, &m.M);
         break;
     case 1:
         v = rd_int(r);
-        int_setter("set_mode", API(set_mode), v, v == K(MODE_RECEDING) || v == K(MODE_FIXED), &m.mode);
+        int_setter("set_mode", set_mode, v, v == K(MODE_RECEDING) || v == K(MODE_FIXED), &m.mode);
         break;
     case 2:
         v = rd_int(r);
-        int_setter("set_hessian", API(set_hessian), v,
+        int_setter("set_hessian", set_hessian, v,
                    v == K(HESSIAN_EXACT) || (v == K(HESSIAN_GAUSS_NEWTON) && K(HAS_GN)), &m.hessian);
         break;
     case 3:
@@ -613,7 +679,7 @@ static void do_setter(unsigned op, reader *r)
         d = rd_double(r);
         call_name = "set_regularization";
         valid = (v == K(REG_NONE) || v == K(REG_PROJECT) || v == K(REG_MIRROR)) && isfinite(d) && d > 0.0;
-        st = API(set_regularization)(&s, v, d);
+        st = set_regularization(&s, v, d);
         after_setter(st, valid);
         if (valid) {
             m.regularization = v;
@@ -622,20 +688,19 @@ static void do_setter(unsigned op, reader *r)
         break;
     case 4:
         v = rd_int(r);
-        int_setter("set_cost_hessian", API(set_cost_hessian), v, v == 0 || v == 1, &m.cost_hessian);
+        int_setter("set_cost_hessian", set_cost_hessian, v, v == 0 || v == 1, &m.cost_hessian);
         break;
     case 5:
         d = rd_double(r);
-        double_setter("set_levenberg_marquardt", API(set_levenberg_marquardt), d, isfinite(d) && d >= 0.0,
-                      &m.lm);
+        double_setter("set_levenberg_marquardt", set_levenberg_marquardt, d, isfinite(d) && d >= 0.0, &m.lm);
         break;
     case 6:
         d = rd_double(r);
-        double_setter("set_qp_tol", API(set_qp_tol), d, isfinite(d) && d > 0.0 && d <= K(QP_TOL_MAX), &m.tol);
+        double_setter("set_qp_tol", set_qp_tol, d, isfinite(d) && d > 0.0 && d <= K(QP_TOL_MAX), &m.tol);
         break;
     case 7:
         v = rd_int(r);
-        int_setter("set_qp_max_iter", API(set_qp_max_iter), v, v >= 1, &m.max_iter);
+        int_setter("set_qp_max_iter", set_qp_max_iter, v, v >= 1, &m.max_iter);
         break;
     case 8: {
         unsigned null = rd_u8(r) & 1u;
@@ -699,9 +764,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (trace < 0) {
         trace = getenv("FUZZ_TRACE") != NULL;
     }
-    /* a fresh struct per input: zeroed memory gets the defaults on its first use */
+    /* a fresh struct per input, set up with the generated defaults */
     memset(&s, 0, sizeof s);
-    API(defaults)(&s);
+    API(setup)(&s, NULL);
     pin_automatic_features();
     model_from_solver();
     check(m.M >= 0 && m.M <= N_ - 1 && m.tol > 0.0 && m.max_iter >= 1, "defaults are valid settings");
@@ -734,17 +799,22 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             do_prepare();
             break;
         case 7:
-            call_name = "defaults";
-            API(defaults)(&s);
+            call_name = "setup";
+            API(setup)(&s, NULL);
             pin_automatic_features();
             model_from_solver();
             break;
         case 8:
             call_name = "zeroed struct";
             memset(&s, 0, sizeof s);
-            check(API(get_M)(&s) >= 0, "a zeroed struct gets the defaults");
-            model_from_solver();
-            check(!API(is_initialized)(&s), "a zeroed struct is not initialised");
+            /* not set up: every call is refused, nothing is written */
+            check(API(init)(&s, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL) ==
+                          K(ERR_NOT_INITIALIZED) &&
+                      API(feedback)(&s, API(x0_default), NULL) == K(ERR_NOT_INITIALIZED) &&
+                      API(prepare)(&s) == K(ERR_NOT_INITIALIZED) && set_M(&s, 0) == K(ERR_NOT_INITIALIZED),
+                  "a zeroed struct that is not set up refuses every call");
+            check(!info_now().initialized, "a zeroed struct is not initialised");
+            API(setup)(&s, NULL);
             pin_automatic_features();
             model_from_solver();
             break;

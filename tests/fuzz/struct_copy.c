@@ -52,7 +52,9 @@ static int instant(solver_t *s, double *xhat, double *u0, int k)
 
 static int setup(solver_t *s)
 {
-    API(defaults)(s);
+    if (API(setup)(s, NULL) != K(OK)) {
+        return -1;
+    }
 #if K(HAS_NOMINAL)
     return API(init_nominal)(s, API(x0_default));
 #else
@@ -140,7 +142,8 @@ static int run(int after_feedback)
         printf("\n");
         if (sr != sa || sr != sm || !same(ur, ua, NU) || !same(ur, um, NU) || !same(xr, xa, NX) ||
             !same(xr, xm, NX)) {
-            fprintf(stderr, "struct_copy: %s: the copies differ from the reference at instant %d\n", where, k);
+            fprintf(stderr, "struct_copy: %s: the copies differ from the reference at instant %d\n", where,
+                    k);
             ok = 0;
         }
     }

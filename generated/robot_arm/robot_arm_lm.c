@@ -1,0 +1,206 @@
+/* The automatic Levenberg-Marquardt term (robot_arm_lm.h, docs/algorithm.md section 10). */
+#include "robot_arm_lm.h"
+
+#include <math.h>
+
+void robot_arm_lm_reset(robot_arm_lm *lm, int on, robot_arm_real fixed)
+{
+    lm->on = on;
+    lm->lm = on ? ROBOT_ARM_R(0.0) : fixed;
+    lm->kkt_prev = -ROBOT_ARM_R(1.0);
+    lm->uncapped = -ROBOT_ARM_R(1.0);
+}
+
+/* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
+static robot_arm_real robot_arm_lm_hessian_scale(const robot_arm_ring *ring, const robot_arm_real *A_N)
+{
+    robot_arm_real h = ROBOT_ARM_REAL_TINY, v;
+    int k, i;
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(ring, k);
+        for (i = 0; i < ROBOT_ARM_NW; ++i) {
+            v = robot_arm_fabs(slot->Ht[i + i * ROBOT_ARM_NW]);
+            h = v > h ? v : h;
+        }
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        v = robot_arm_fabs(A_N[i + i * ROBOT_ARM_NX]);
+        h = v > h ? v : h;
+    }
+    return h;
+}
+
+/* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
+ * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
+ * out) has control pivots above ROBOT_ARM_LM_PIVOT_REL h. */
+static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *ring, const robot_arm_real *A_N, robot_arm_real lm,
+                           robot_arm_real *work)
+{
+    const robot_arm_real tol = ROBOT_ARM_LM_PIVOT_REL * st->scale;
+    robot_arm_real *P = work, *PA = work + ROBOT_ARM_NX * ROBOT_ARM_NX, *Z = PA + ROBOT_ARM_NX * ROBOT_ARM_NW;
+    robot_arm_real v;
+    int k, i, j, l;
+    for (j = 0; j < ROBOT_ARM_NX; ++j) {
+        for (i = 0; i < ROBOT_ARM_NX; ++i) {
+            P[i + j * ROBOT_ARM_NX] =
+                (i >= j ? A_N[i + j * ROBOT_ARM_NX] : A_N[j + i * ROBOT_ARM_NX]) + (i == j ? lm : ROBOT_ARM_R(0.0));
+        }
+    }
+    for (k = ROBOT_ARM_N - 1; k >= 0; --k) {
+        const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(ring, k);
+        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
+        for (j = 0; j < ROBOT_ARM_NW; ++j) {
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                v = ROBOT_ARM_R(0.0);
+                for (l = 0; l < ROBOT_ARM_NX; ++l) {
+                    v += P[i + l * ROBOT_ARM_NX] * slot->Phit[l + j * ROBOT_ARM_NX];
+                }
+                PA[i + j * ROBOT_ARM_NX] = v;
+            }
+        }
+        for (j = 0; j < ROBOT_ARM_NW; ++j) {
+            for (i = 0; i < ROBOT_ARM_NW; ++i) {
+                v = (i >= j ? slot->Ht[i + j * ROBOT_ARM_NW] : slot->Ht[j + i * ROBOT_ARM_NW]) +
+                    (i == j ? lm : ROBOT_ARM_R(0.0));
+                for (l = 0; l < ROBOT_ARM_NX; ++l) {
+                    v += slot->Phit[l + i * ROBOT_ARM_NX] * PA[l + j * ROBOT_ARM_NX];
+                }
+                Z[i + j * ROBOT_ARM_NW] = v;
+            }
+        }
+        /* Cholesky of the control block Z_uu in place (lower triangle) */
+        for (j = ROBOT_ARM_NX; j < ROBOT_ARM_NW; ++j) {
+            robot_arm_real d = Z[j + j * ROBOT_ARM_NW];
+            for (l = ROBOT_ARM_NX; l < j; ++l) {
+                d -= Z[j + l * ROBOT_ARM_NW] * Z[j + l * ROBOT_ARM_NW];
+            }
+            if (!(d > tol)) {
+                return 0;
+            }
+            d = robot_arm_sqrt(d);
+            Z[j + j * ROBOT_ARM_NW] = d;
+            for (i = j + 1; i < ROBOT_ARM_NW; ++i) {
+                v = Z[i + j * ROBOT_ARM_NW];
+                for (l = ROBOT_ARM_NX; l < j; ++l) {
+                    v -= Z[i + l * ROBOT_ARM_NW] * Z[j + l * ROBOT_ARM_NW];
+                }
+                Z[i + j * ROBOT_ARM_NW] = v / d;
+            }
+        }
+        if (k == 0) {
+            break; /* x_0 is fixed: P_0 is not needed */
+        }
+        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
+        for (j = 0; j < ROBOT_ARM_NX; ++j) {
+            for (i = ROBOT_ARM_NX; i < ROBOT_ARM_NW; ++i) {
+                v = Z[i + j * ROBOT_ARM_NW];
+                for (l = ROBOT_ARM_NX; l < i; ++l) {
+                    v -= Z[i + l * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
+                }
+                Z[i + j * ROBOT_ARM_NW] = v / Z[i + i * ROBOT_ARM_NW];
+            }
+        }
+        for (j = 0; j < ROBOT_ARM_NX; ++j) {
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                v = ROBOT_ARM_R(0.5) * (Z[i + j * ROBOT_ARM_NW] + Z[j + i * ROBOT_ARM_NW]);
+                for (l = ROBOT_ARM_NX; l < ROBOT_ARM_NW; ++l) {
+                    v -= Z[l + i * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
+                }
+                P[i + j * ROBOT_ARM_NX] = v;
+            }
+        }
+    }
+    return 1;
+}
+
+/* One raise: from below the minimum to the minimum, else times ROBOT_ARM_LM_RAISE, at most the
+ * maximum. */
+void robot_arm_lm_raise(robot_arm_lm *st)
+{
+    robot_arm_real lo = ROBOT_ARM_LM_MIN_REL * st->scale, hi = ROBOT_ARM_LM_MAX_REL * st->scale;
+    if (st->uncapped > st->lm) {
+        /* the first raise after the cap of robot_arm_lm_measured restores the term it capped */
+        st->lm = st->uncapped;
+        st->uncapped = -ROBOT_ARM_R(1.0);
+        return;
+    }
+    st->lm = st->lm < lo ? lo : st->lm * ROBOT_ARM_LM_RAISE;
+    st->lm = st->lm > hi ? hi : st->lm;
+}
+
+int robot_arm_lm_can_raise(const robot_arm_lm *st)
+{
+    return st->on && st->lm < ROBOT_ARM_LM_MAX_REL * st->scale;
+}
+
+/* Raise until the QP is convex on the dynamics or the term is at its maximum. */
+static void robot_arm_lm_convexify(robot_arm_lm *st, const robot_arm_ring *ring, const robot_arm_real *A_N, robot_arm_real *work)
+{
+    robot_arm_real hi = ROBOT_ARM_LM_MAX_REL * st->scale;
+    while (!robot_arm_lm_convex(st, ring, A_N, st->lm, work) && st->lm < hi) {
+        robot_arm_lm_raise(st);
+    }
+}
+
+void robot_arm_lm_start(robot_arm_lm *st, const robot_arm_ring *ring, const robot_arm_real *A_N, robot_arm_real *work)
+{
+    if (!st->on) {
+        return;
+    }
+    st->scale = robot_arm_lm_hessian_scale(ring, A_N);
+    st->lm = ROBOT_ARM_R(0.0);
+    st->kkt_prev = -ROBOT_ARM_R(1.0);
+    st->uncapped = -ROBOT_ARM_R(1.0);
+    robot_arm_lm_convexify(st, ring, A_N, work);
+}
+
+void robot_arm_lm_prepared(robot_arm_lm *st, const robot_arm_ring *ring, const robot_arm_real *A_N, robot_arm_real kkt_proxy,
+                       robot_arm_real proxy_ref, robot_arm_real *work)
+{
+    robot_arm_real floor_ = ROBOT_ARM_PREC(1e-8, 1e-5) * (proxy_ref > ROBOT_ARM_R(1.0) ? proxy_ref : ROBOT_ARM_R(1.0));
+    robot_arm_real prev = st->kkt_prev > floor_ ? st->kkt_prev : floor_;
+    if (!st->on) {
+        return;
+    }
+    st->scale = robot_arm_lm_hessian_scale(ring, A_N);
+    st->uncapped = -ROBOT_ARM_R(1.0);
+    if (st->kkt_prev >= ROBOT_ARM_R(0.0) && !(kkt_proxy <= ROBOT_ARM_LM_KKT_GROWTH * prev)) {
+        robot_arm_lm_raise(st);
+    }
+    st->kkt_prev = kkt_proxy;
+    robot_arm_lm_convexify(st, ring, A_N, work);
+}
+
+void robot_arm_lm_measured(robot_arm_lm *st, const robot_arm_real *dx0, const robot_arm_real *scale_x, robot_arm_real kkt_proxy)
+{
+    robot_arm_real d = kkt_proxy, cap, v;
+    int i;
+    st->uncapped = -ROBOT_ARM_R(1.0);
+    if (!st->on) {
+        return;
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        v = robot_arm_fabs(dx0[i]) / scale_x[i];
+        d = v > d ? v : d;
+    }
+    cap = ROBOT_ARM_LM_KKT_REL * st->scale * d * d;
+    if (!(st->lm <= cap)) {
+        st->uncapped = st->lm;
+        st->lm = cap < ROBOT_ARM_LM_MIN_REL * st->scale ? ROBOT_ARM_R(0.0) : cap;
+    }
+}
+
+void robot_arm_lm_feedback(robot_arm_lm *st, int solved)
+{
+    if (!st->on) {
+        return;
+    }
+    if (solved) {
+        st->lm *= ROBOT_ARM_LM_LOWER;
+        if (st->lm < ROBOT_ARM_LM_MIN_REL * st->scale) {
+            st->lm = ROBOT_ARM_R(0.0);
+        }
+    } else {
+        robot_arm_lm_raise(st);
+    }
+}

@@ -1,0 +1,175 @@
+/* Health of the controller (unicycle_health.h, docs/algorithm.md section 9). */
+#include "unicycle_health.h"
+
+#include <math.h>
+
+#include "unicycle_linalg.h"
+#include "unicycle_problem.h"
+
+static unicycle_real unicycle_absmax(unicycle_real a, unicycle_real b)
+{
+    unicycle_real fa = unicycle_fabs(a);
+    return isfinite(a) && fa > b ? fa : b;
+}
+
+void unicycle_health_scales(unicycle_health *h)
+{
+    int k, i;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        unicycle_real v = UNICYCLE_R(1.0);
+        v = unicycle_absmax(unicycle_lbx[i], v);
+        v = unicycle_absmax(unicycle_ubx[i], v);
+        v = unicycle_absmax(unicycle_x0_default[i], v);
+        for (k = 0; k <= UNICYCLE_N; ++k) {
+            v = unicycle_absmax(unicycle_guess_x[k][i], v);
+        }
+        h->scale_x[i] = v;
+    }
+    for (i = 0; i < UNICYCLE_NU; ++i) {
+        unicycle_real v = UNICYCLE_R(1.0);
+        v = unicycle_absmax(unicycle_lbu[i], v);
+        v = unicycle_absmax(unicycle_ubu[i], v);
+        for (k = 0; k < UNICYCLE_N; ++k) {
+            v = unicycle_absmax(unicycle_guess_u[k][i], v);
+        }
+        h->scale_u[i] = v;
+    }
+}
+
+void unicycle_health_reset(unicycle_health *h, const unicycle_real *u)
+{
+    int k, i;
+    h->n_failed = 0;
+    h->recover_pending = 0;
+    h->flags = 0;
+    h->n_recoveries = 0;
+    h->recovering = 0;
+    h->xhat_fresh = 1;
+    h->plan_age = 0;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            h->plan_u[k][i] = u[k * UNICYCLE_NU + i];
+        }
+    }
+    for (i = 0; i < UNICYCLE_NU; ++i) {
+        h->u0_out[i] = h->plan_u[0][i];
+    }
+    h->kkt_proxy = UNICYCLE_R(0.0);
+    h->kkt_proxy_ref = UNICYCLE_R(0.0);
+}
+
+int unicycle_clip_u(const unicycle_real *u, unicycle_real *out)
+{
+    int i, clipped = 0;
+    for (i = 0; i < UNICYCLE_NU; ++i) {
+        unicycle_real v = isnan(u[i]) ? UNICYCLE_R(0.0) : u[i];
+        if (v < unicycle_lbu[i]) {
+            v = unicycle_lbu[i];
+        }
+        if (v > unicycle_ubu[i]) {
+            v = unicycle_ubu[i];
+        }
+        if (!(v == u[i])) {
+            clipped = 1;
+        }
+        out[i] = v;
+    }
+    return clipped;
+}
+
+int unicycle_box_ok(const unicycle_health *h, const unicycle_real *xhat0, const unicycle_real *x, const unicycle_real *dx,
+                 int dx_stride, const unicycle_real *u, const unicycle_real *du, int du_stride)
+{
+    int k, i;
+    for (k = 0; k <= UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            unicycle_real v = x[k * UNICYCLE_NX + i] + (dx ? dx[k * dx_stride + i] : UNICYCLE_R(0.0));
+            if (!(unicycle_fabs(v) <= UNICYCLE_DIVERGENCE_BOX * h->scale_x[i] + unicycle_fabs(xhat0[i]))) {
+                return 0;
+            }
+        }
+    }
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            unicycle_real v = u[k * UNICYCLE_NU + i] + (du ? du[k * du_stride + i] : UNICYCLE_R(0.0));
+            if (!(unicycle_fabs(v) <= UNICYCLE_DIVERGENCE_BOX * h->scale_u[i])) {
+                return 0;
+            }
+        }
+    }
+    return 1;
+}
+
+unicycle_real unicycle_kkt_proxy(const unicycle_ring *ring, const unicycle_real *x, const unicycle_real *lam,
+                           const unicycle_real *gL_N, const unicycle_real *mu_bN, const unicycle_real *r_eq)
+{
+    unicycle_real m = UNICYCLE_R(0.0), v;
+    int k, i;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        const unicycle_stage_slot *slot = unicycle_ring_stage_const(ring, k);
+        for (i = 0; i < UNICYCLE_NW; ++i) {
+            v = unicycle_fabs(slot->F_w[i] + (i < UNICYCLE_NX ? lam[k * UNICYCLE_NX + i] : UNICYCLE_R(0.0)));
+            m = (v > m || isnan(v)) ? v : m;
+        }
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            v = unicycle_fabs(slot->phi[i] - x[(k + 1) * UNICYCLE_NX + i]);
+            m = (v > m || isnan(v)) ? v : m;
+        }
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        v = unicycle_fabs(gL_N[i] + mu_bN[i] + lam[UNICYCLE_N * UNICYCLE_NX + i]);
+        m = (v > m || isnan(v)) ? v : m;
+    }
+    for (i = 0; i < UNICYCLE_NE; ++i) {
+        v = unicycle_fabs(r_eq[i]);
+        m = (v > m || isnan(v)) ? v : m;
+    }
+    return m;
+}
+
+int unicycle_diverged(const unicycle_health *h, const unicycle_real *xhat0, const unicycle_real *x, const unicycle_real *u,
+                   const unicycle_real *lam, const unicycle_real *mu_b, const unicycle_real *mu_bN)
+{
+    unicycle_real ref = h->kkt_proxy_ref > UNICYCLE_R(1.0) ? h->kkt_proxy_ref : UNICYCLE_R(1.0);
+    if (!unicycle_box_ok(h, xhat0, x, 0, 0, u, 0, 0)) {
+        return 1;
+    }
+    if (!unicycle_lai_vec_finite((UNICYCLE_N + 1) * UNICYCLE_NX, lam) ||
+        !unicycle_lai_vec_finite(UNICYCLE_N * UNICYCLE_NW, mu_b) || !unicycle_lai_vec_finite(UNICYCLE_NX, mu_bN)) {
+        return 1;
+    }
+    return !(h->kkt_proxy <= UNICYCLE_DIVERGENCE_KKT * ref);
+}
+
+int unicycle_health_fallback(unicycle_health *h, int receding, unicycle_real *u0)
+{
+    int i, clipped, j = receding ? h->plan_age : 0;
+    j = j > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : j;
+    clipped = unicycle_clip_u(h->plan_u[j], h->u0_out);
+    if (u0) {
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            u0[i] = h->u0_out[i];
+        }
+    }
+    return clipped;
+}
+
+int unicycle_health_keep_plan(unicycle_health *h, const unicycle_real *u, unicycle_real *u0)
+{
+    int k, i, clipped;
+    h->n_failed = 0;
+    h->plan_age = 0;
+    h->recovering = h->recovering > 0 ? h->recovering - 1 : 0;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            h->plan_u[k][i] = u[k * UNICYCLE_NU + i];
+        }
+    }
+    clipped = unicycle_clip_u(h->plan_u[0], h->u0_out);
+    if (u0) {
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            u0[i] = h->u0_out[i];
+        }
+    }
+    return clipped;
+}

@@ -1,0 +1,70 @@
+/* Health of the controller (docs/algorithm.md section 9): the scales of the divergence test,
+ * the box test and the KKT proxy of an iterate, the control clipped to its bounds, and the
+ * state of the safe outputs and the automatic recovery (the last good plan, the fallback
+ * control, the count of failed feedbacks). The predicates take the iterate and the blocks
+ * as arguments; the solver decides what to do with their answers.
+ */
+#ifndef DOPUS_HEALTH_H
+#define DOPUS_HEALTH_H
+
+#include "dopus_ring.h"
+
+/* Constants (docs/algorithm.md section 9). */
+#define DOPUS_DIVERGENCE_BOX DOPUS_R(1e3) /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
+#define DOPUS_DIVERGENCE_KKT DOPUS_R(1e6) /* kkt proxy <= 1e6 max(1, proxy at the last init) */
+
+typedef struct {
+    int n_failed;                         /* consecutive failed feedbacks */
+    int recover_pending;                  /* the next prepare re-initialises */
+    int flags;                            /* DOPUS_FLAG_* of the last feedback + prepare */
+    int n_recoveries;                     /* re-initialisations since init */
+    int recovering;                       /* full-RTI prepares left after a recovery */
+    int xhat_fresh;                       /* the last feedback had a finite measurement */
+    int plan_age;                         /* receding shifts since the last good plan */
+    dopus_real plan_u[DOPUS_N][DOPUS_NU]; /* controls of the last good plan */
+    dopus_real u0_out[DOPUS_NU];          /* the control returned by the last feedback */
+    dopus_real scale_x[DOPUS_NX];         /* scales of the box test */
+    dopus_real scale_u[DOPUS_NU];
+    dopus_real kkt_proxy;     /* divergence measure of the last prepare or init */
+    dopus_real kkt_proxy_ref; /* ... at the last init or re-initialisation */
+} dopus_health;
+
+#ifndef DOPUS_INTERNAL
+#define DOPUS_INTERNAL
+#endif
+
+/* The scale of each state and control: the largest magnitude among its finite bounds, the
+ * OCP file's guess, the default x0 and 1. */
+DOPUS_INTERNAL void dopus_health_scales(dopus_health *h);
+/* No failure, no flag; the plan is u (N x nu) and u0 its first control. */
+DOPUS_INTERNAL void dopus_health_reset(dopus_health *h, const dopus_real *u);
+/* u (nu) clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1
+ * when an entry changed. */
+DOPUS_INTERNAL int dopus_clip_u(const dopus_real *u, dopus_real *out);
+/* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as x, u plus an
+ * optional step (dx with row stride dx_stride, du with du_stride; NULL: none): every entry
+ * finite and |v_i| <= BOX scale_x_i + |xhat0_i| (states), BOX scale_u_i (controls). Returns 1
+ * when it passes. */
+DOPUS_INTERNAL int dopus_box_ok(const dopus_health *h, const dopus_real *xhat0, const dopus_real *x,
+                                const dopus_real *dx, int dx_stride, const dopus_real *u,
+                                const dopus_real *du, int du_stride);
+/* Divergence measure of a point from the F values in the slots and the terminal node:
+ * max of |F_w,k + [lam_k; 0]|, |gL_N + mu_bN + lam_N|, |phi_k - x_{k+1}|, |r_eq| (inf-norms;
+ * NaN propagates). */
+DOPUS_INTERNAL dopus_real dopus_kkt_proxy(const dopus_ring *ring, const dopus_real *x, const dopus_real *lam,
+                                          const dopus_real *gL_N, const dopus_real *mu_bN,
+                                          const dopus_real *r_eq);
+/* The divergence test of a prepared iterate: the box, finite multipliers, h->kkt_proxy
+ * <= DIVERGENCE_KKT max(1, h->kkt_proxy_ref). Returns 1 when it diverged. */
+DOPUS_INTERNAL int dopus_diverged(const dopus_health *h, const dopus_real *xhat0, const dopus_real *x,
+                                  const dopus_real *u, const dopus_real *lam, const dopus_real *mu_b,
+                                  const dopus_real *mu_bN);
+/* The fallback control of a failed feedback: the control of the last good plan for this
+ * instant (plan_age shifts on in receding mode, else the first), clipped, into u0_out and
+ * u0 (may be NULL). Returns 1 when it was clipped. */
+DOPUS_INTERNAL int dopus_health_fallback(dopus_health *h, int receding, dopus_real *u0);
+/* A good step: no failure, the plan is u (N x nu), u0_out its first control clipped, copied
+ * to u0 (may be NULL). Returns 1 when it was clipped. */
+DOPUS_INTERNAL int dopus_health_keep_plan(dopus_health *h, const dopus_real *u, dopus_real *u0);
+
+#endif /* DOPUS_HEALTH_H */

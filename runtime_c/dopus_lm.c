@@ -1,0 +1,206 @@
+/* The automatic Levenberg-Marquardt term (dopus_lm.h, docs/algorithm.md section 10). */
+#include "dopus_lm.h"
+
+#include <math.h>
+
+void dopus_lm_reset(dopus_lm *lm, int on, dopus_real fixed)
+{
+    lm->on = on;
+    lm->lm = on ? DOPUS_R(0.0) : fixed;
+    lm->kkt_prev = -DOPUS_R(1.0);
+    lm->uncapped = -DOPUS_R(1.0);
+}
+
+/* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
+static dopus_real dopus_lm_hessian_scale(const dopus_ring *ring, const dopus_real *A_N)
+{
+    dopus_real h = DOPUS_REAL_TINY, v;
+    int k, i;
+    for (k = 0; k < DOPUS_N; ++k) {
+        const dopus_stage_slot *slot = dopus_ring_stage_const(ring, k);
+        for (i = 0; i < DOPUS_NW; ++i) {
+            v = dopus_fabs(slot->Ht[i + i * DOPUS_NW]);
+            h = v > h ? v : h;
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        v = dopus_fabs(A_N[i + i * DOPUS_NX]);
+        h = v > h ? v : h;
+    }
+    return h;
+}
+
+/* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
+ * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
+ * out) has control pivots above DOPUS_LM_PIVOT_REL h. */
+static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dopus_real *A_N, dopus_real lm,
+                           dopus_real *work)
+{
+    const dopus_real tol = DOPUS_LM_PIVOT_REL * st->scale;
+    dopus_real *P = work, *PA = work + DOPUS_NX * DOPUS_NX, *Z = PA + DOPUS_NX * DOPUS_NW;
+    dopus_real v;
+    int k, i, j, l;
+    for (j = 0; j < DOPUS_NX; ++j) {
+        for (i = 0; i < DOPUS_NX; ++i) {
+            P[i + j * DOPUS_NX] =
+                (i >= j ? A_N[i + j * DOPUS_NX] : A_N[j + i * DOPUS_NX]) + (i == j ? lm : DOPUS_R(0.0));
+        }
+    }
+    for (k = DOPUS_N - 1; k >= 0; --k) {
+        const dopus_stage_slot *slot = dopus_ring_stage_const(ring, k);
+        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
+        for (j = 0; j < DOPUS_NW; ++j) {
+            for (i = 0; i < DOPUS_NX; ++i) {
+                v = DOPUS_R(0.0);
+                for (l = 0; l < DOPUS_NX; ++l) {
+                    v += P[i + l * DOPUS_NX] * slot->Phit[l + j * DOPUS_NX];
+                }
+                PA[i + j * DOPUS_NX] = v;
+            }
+        }
+        for (j = 0; j < DOPUS_NW; ++j) {
+            for (i = 0; i < DOPUS_NW; ++i) {
+                v = (i >= j ? slot->Ht[i + j * DOPUS_NW] : slot->Ht[j + i * DOPUS_NW]) +
+                    (i == j ? lm : DOPUS_R(0.0));
+                for (l = 0; l < DOPUS_NX; ++l) {
+                    v += slot->Phit[l + i * DOPUS_NX] * PA[l + j * DOPUS_NX];
+                }
+                Z[i + j * DOPUS_NW] = v;
+            }
+        }
+        /* Cholesky of the control block Z_uu in place (lower triangle) */
+        for (j = DOPUS_NX; j < DOPUS_NW; ++j) {
+            dopus_real d = Z[j + j * DOPUS_NW];
+            for (l = DOPUS_NX; l < j; ++l) {
+                d -= Z[j + l * DOPUS_NW] * Z[j + l * DOPUS_NW];
+            }
+            if (!(d > tol)) {
+                return 0;
+            }
+            d = dopus_sqrt(d);
+            Z[j + j * DOPUS_NW] = d;
+            for (i = j + 1; i < DOPUS_NW; ++i) {
+                v = Z[i + j * DOPUS_NW];
+                for (l = DOPUS_NX; l < j; ++l) {
+                    v -= Z[i + l * DOPUS_NW] * Z[j + l * DOPUS_NW];
+                }
+                Z[i + j * DOPUS_NW] = v / d;
+            }
+        }
+        if (k == 0) {
+            break; /* x_0 is fixed: P_0 is not needed */
+        }
+        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
+        for (j = 0; j < DOPUS_NX; ++j) {
+            for (i = DOPUS_NX; i < DOPUS_NW; ++i) {
+                v = Z[i + j * DOPUS_NW];
+                for (l = DOPUS_NX; l < i; ++l) {
+                    v -= Z[i + l * DOPUS_NW] * Z[l + j * DOPUS_NW];
+                }
+                Z[i + j * DOPUS_NW] = v / Z[i + i * DOPUS_NW];
+            }
+        }
+        for (j = 0; j < DOPUS_NX; ++j) {
+            for (i = 0; i < DOPUS_NX; ++i) {
+                v = DOPUS_R(0.5) * (Z[i + j * DOPUS_NW] + Z[j + i * DOPUS_NW]);
+                for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
+                    v -= Z[l + i * DOPUS_NW] * Z[l + j * DOPUS_NW];
+                }
+                P[i + j * DOPUS_NX] = v;
+            }
+        }
+    }
+    return 1;
+}
+
+/* One raise: from below the minimum to the minimum, else times DOPUS_LM_RAISE, at most the
+ * maximum. */
+void dopus_lm_raise(dopus_lm *st)
+{
+    dopus_real lo = DOPUS_LM_MIN_REL * st->scale, hi = DOPUS_LM_MAX_REL * st->scale;
+    if (st->uncapped > st->lm) {
+        /* the first raise after the cap of dopus_lm_measured restores the term it capped */
+        st->lm = st->uncapped;
+        st->uncapped = -DOPUS_R(1.0);
+        return;
+    }
+    st->lm = st->lm < lo ? lo : st->lm * DOPUS_LM_RAISE;
+    st->lm = st->lm > hi ? hi : st->lm;
+}
+
+int dopus_lm_can_raise(const dopus_lm *st)
+{
+    return st->on && st->lm < DOPUS_LM_MAX_REL * st->scale;
+}
+
+/* Raise until the QP is convex on the dynamics or the term is at its maximum. */
+static void dopus_lm_convexify(dopus_lm *st, const dopus_ring *ring, const dopus_real *A_N, dopus_real *work)
+{
+    dopus_real hi = DOPUS_LM_MAX_REL * st->scale;
+    while (!dopus_lm_convex(st, ring, A_N, st->lm, work) && st->lm < hi) {
+        dopus_lm_raise(st);
+    }
+}
+
+void dopus_lm_start(dopus_lm *st, const dopus_ring *ring, const dopus_real *A_N, dopus_real *work)
+{
+    if (!st->on) {
+        return;
+    }
+    st->scale = dopus_lm_hessian_scale(ring, A_N);
+    st->lm = DOPUS_R(0.0);
+    st->kkt_prev = -DOPUS_R(1.0);
+    st->uncapped = -DOPUS_R(1.0);
+    dopus_lm_convexify(st, ring, A_N, work);
+}
+
+void dopus_lm_prepared(dopus_lm *st, const dopus_ring *ring, const dopus_real *A_N, dopus_real kkt_proxy,
+                       dopus_real proxy_ref, dopus_real *work)
+{
+    dopus_real floor_ = DOPUS_PREC(1e-8, 1e-5) * (proxy_ref > DOPUS_R(1.0) ? proxy_ref : DOPUS_R(1.0));
+    dopus_real prev = st->kkt_prev > floor_ ? st->kkt_prev : floor_;
+    if (!st->on) {
+        return;
+    }
+    st->scale = dopus_lm_hessian_scale(ring, A_N);
+    st->uncapped = -DOPUS_R(1.0);
+    if (st->kkt_prev >= DOPUS_R(0.0) && !(kkt_proxy <= DOPUS_LM_KKT_GROWTH * prev)) {
+        dopus_lm_raise(st);
+    }
+    st->kkt_prev = kkt_proxy;
+    dopus_lm_convexify(st, ring, A_N, work);
+}
+
+void dopus_lm_measured(dopus_lm *st, const dopus_real *dx0, const dopus_real *scale_x, dopus_real kkt_proxy)
+{
+    dopus_real d = kkt_proxy, cap, v;
+    int i;
+    st->uncapped = -DOPUS_R(1.0);
+    if (!st->on) {
+        return;
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        v = dopus_fabs(dx0[i]) / scale_x[i];
+        d = v > d ? v : d;
+    }
+    cap = DOPUS_LM_KKT_REL * st->scale * d * d;
+    if (!(st->lm <= cap)) {
+        st->uncapped = st->lm;
+        st->lm = cap < DOPUS_LM_MIN_REL * st->scale ? DOPUS_R(0.0) : cap;
+    }
+}
+
+void dopus_lm_feedback(dopus_lm *st, int solved)
+{
+    if (!st->on) {
+        return;
+    }
+    if (solved) {
+        st->lm *= DOPUS_LM_LOWER;
+        if (st->lm < DOPUS_LM_MIN_REL * st->scale) {
+            st->lm = DOPUS_R(0.0);
+        }
+    } else {
+        dopus_lm_raise(st);
+    }
+}
