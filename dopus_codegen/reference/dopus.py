@@ -470,12 +470,18 @@ class ReferenceDopus:
     # ------------------------------------------------------------------ feedback
     def feedback(self, xhat0) -> np.ndarray:
         """Solve the QP for ``xhat0``, store ``domega`` per slot, full step; return ``u_0``."""
+        self._instant_start = self._budget_now()
+        try:
+            return self._feedback(xhat0)
+        finally:
+            self.budget_used = self._budget_now() - self._instant_start
+
+    def _feedback(self, xhat0) -> np.ndarray:
         t0 = time.perf_counter()
         xhat0 = np.array(xhat0, dtype=float).reshape(-1)
         if xhat0.size != self.nx:
             raise self._fail("invalid_argument", f"feedback: xhat0 must be {self.nx} numbers, got {xhat0.size}")
         self._flags = 0
-        self._instant_start = self._budget_now()
         self.extra_iterations = self.instant_stages = 0
         if not self._initialised:
             err = self._fail("not_initialized", "call init(xhat0, guess) first")
@@ -644,6 +650,8 @@ class ReferenceDopus:
         if not self._prepare_due:
             raise self._fail("already_prepared", "prepare: already prepared (call feedback before the next prepare)")
         self.extra_iterations = 0
+        # the instant's budget counts the solver's own calls, not the caller's time between them
+        self._instant_start = self._budget_now() - self.budget_used
         if (self._qp_ready and self._n_failed > 0 and not self._recover_pending and self.recovery
                 and self.mode == "receding" and "reinit_guess" not in self.flags):
             # (not from the OCP file's guess: its plan is not the plant's)
@@ -827,8 +835,10 @@ class ReferenceDopus:
         extend = self.budget_unit != "off" and (not extra or not self._budget_fits(self._cost_qp
                                                                                    + self._cost_prepare))
         chosen, ext_cost = [], 0.0
+        # the instant's prepare keeps room for one extra iteration when it extends
+        reserve = 0.0 if extra else self._cost_qp + self._cost_prepare
         for m, i in enumerate(order):
-            if (m >= M and not extend) or not self._budget_fits(self._cost_stage):
+            if (m >= M and not extend) or not self._budget_fits(self._cost_stage + (reserve if m >= M else 0.0)):
                 break
             b0 = self._budget_now()
             si = slots[self._slot(i)]

@@ -114,6 +114,18 @@ static double unicycle_budget_now(const unicycle_solver *s)
     return s->timer.clock ? s->timer.clock(s->timer.ctx) : 0.0;
 }
 
+/* A cost measured now against the last estimate: in time, a reading above 1.1 times the
+ * estimate raises it by 10 % only (a reading taken while the process was descheduled is not
+ * the cost of the work; one such reading would otherwise cut the next QPs and stages); in
+ * work units the reading itself (exact). */
+static double unicycle_cost(const unicycle_solver *s, double estimate, double reading)
+{
+    if (s->settings.budget_unit == UNICYCLE_BUDGET_TIME && estimate > 0.0 && reading > 1.1 * estimate) {
+        return 1.1 * estimate;
+    }
+    return reading;
+}
+
 /* 1 without a budget, or when `cost` more still fits in the instant's budget. */
 static int unicycle_budget_fits(const unicycle_solver *s, double cost)
 {
@@ -929,9 +941,10 @@ static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0,
     b0 = unicycle_budget_now(s);
     qs = unicycle_feedback_qp(s);
     qs = unicycle_feedback_lm_retries(s, qs, &retries);
-    s->anytime.cost_qp = unicycle_budget_now(s) - b0;
+    s->anytime.cost_qp = unicycle_cost(s, s->anytime.cost_qp, unicycle_budget_now(s) - b0);
     if (s->qp_iterations > 0 && s->settings.budget_unit == UNICYCLE_BUDGET_TIME) {
-        s->anytime.cost_qp_iter = s->anytime.cost_qp / (double)s->qp_iterations;
+        s->anytime.cost_qp_iter =
+            unicycle_cost(s, s->anytime.cost_qp_iter, s->anytime.cost_qp / (double)s->qp_iterations);
     }
     s->qp_status = qs;
     rc = unicycle_feedback_check_step(s, qs);
@@ -1076,21 +1089,23 @@ static int unicycle_next_worst(const unicycle_solver *s)
 }
 
 /* Step 4: re-linearise the stages with the largest rho_k: M of them (unicycle_M_now), then, with
- * a budget, further stages in rho order in the instant's prepare and in an extra iteration
- * after which no further iteration fits (algorithm.md section 12); each only while the
- * budget allows. The cost of the stages beyond M goes to *ext_cost. */
+ * a budget, further stages in rho order in the instant's prepare (while one extra iteration
+ * still fits after them) and in an extra iteration after which no further iteration fits
+ * (algorithm.md section 12); each only while the budget allows. The cost of the stages beyond M goes to *ext_cost. */
 static int unicycle_relinearise(unicycle_solver *s, int extra, double *ext_cost)
 {
     int M = unicycle_M_now(s), m, k, n = 0, rc = UNICYCLE_OK, extend;
-    double b0;
+    double b0, reserve;
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->selected[k] = 0;
     }
     extend =
         unicycle_budget_on(s) && (!extra || !unicycle_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare));
     *ext_cost = 0.0;
+    /* the instant's prepare keeps room for one extra iteration when it extends */
+    reserve = extra ? 0.0 : s->anytime.cost_qp + s->anytime.cost_prepare;
     for (m = 0; m < UNICYCLE_N - 1; ++m) {
-        if ((m >= M && !extend) || !unicycle_budget_fits(s, s->anytime.cost_stage)) {
+        if ((m >= M && !extend) || !unicycle_budget_fits(s, s->anytime.cost_stage + (m >= M ? reserve : 0.0))) {
             break;
         }
         k = unicycle_next_worst(s);
@@ -1102,7 +1117,7 @@ static int unicycle_relinearise(unicycle_solver *s, int extra, double *ext_cost)
         s->selected[k] = 1;
         n += 1;
         if (unicycle_budget_on(s)) {
-            s->anytime.cost_stage = unicycle_budget_now(s) - b0;
+            s->anytime.cost_stage = unicycle_cost(s, s->anytime.cost_stage, unicycle_budget_now(s) - b0);
             if (m >= M) {
                 *ext_cost += s->anytime.cost_stage;
             }
@@ -1306,6 +1321,9 @@ int unicycle_prepare(unicycle_solver *s)
     unicycle_timer_begin(&s->timer, UNICYCLE_PREPARE_PHASES, UNICYCLE_PHASE_RECOVERY);
     start = s->timer.mark;
     s->anytime.extra_iterations = 0;
+    /* the instant's budget counts the solver's own calls: the feedback's part (used) and
+     * this prepare from now, not the caller's time between them */
+    s->anytime.instant_start = unicycle_budget_now(s) - s->anytime.used;
     hessian = s->settings.hessian;
     if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
         s->settings.mode == UNICYCLE_MODE_RECEDING && !(s->health.flags & UNICYCLE_FLAG_REINIT_GUESS)) {
@@ -1447,7 +1465,8 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
                       s->mem.ev.lm_work);
     unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
     if (unicycle_budget_on(s)) {
-        s->anytime.cost_prepare = unicycle_budget_now(s) - b_start - ext_cost;
+        s->anytime.cost_prepare =
+            unicycle_cost(s, s->anytime.cost_prepare, unicycle_budget_now(s) - b_start - ext_cost);
     }
     if (unicycle_iterate_diverged(s)) {
         s->health.flags |= UNICYCLE_FLAG_DIVERGED;
@@ -1477,7 +1496,7 @@ static int unicycle_extra_iteration(unicycle_solver *s)
         s->lm = lm;
         return UNICYCLE_ERR_QP;
     }
-    s->anytime.cost_qp = unicycle_budget_now(s) - b0;
+    s->anytime.cost_qp = unicycle_cost(s, s->anytime.cost_qp, unicycle_budget_now(s) - b0);
     unicycle_store_domega(s);
     unicycle_take_step(s);
     unicycle_lm_feedback(&s->lm, 1);
