@@ -518,6 +518,7 @@ static int dopus_linearize_all(dopus_solver *s)
 static int dopus_init_finish(dopus_solver *s)
 {
     int k, rc;
+    s->anytime.prepared_extra = 0;
     dopus_ring_reset(&s->ring);
     for (k = 0; k < DOPUS_N; ++k) {
         s->rho[k] = DOPUS_R(0.0);
@@ -711,7 +712,12 @@ static void dopus_feedback_measure(dopus_solver *s, const dopus_real *xhat0)
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->health.xhat_fresh = 1;
-    dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    if (!s->anytime.prepared_extra) {
+        /* (after extra iterations the term the prepare convexified stays: the iterate has
+         * converged at the predicted state and the capped term, 0 there, left QPs that are
+         * convex only on the active bounds; algorithm.md section 12) */
+        dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -1089,21 +1095,20 @@ static int dopus_next_worst(const dopus_solver *s)
 }
 
 /* Step 4: re-linearise the stages with the largest rho_k: M of them (dopus_M_now), then, with
- * a budget, further stages in rho order in the instant's prepare (while one extra iteration
- * still fits after them) and in an extra iteration after which no further iteration fits
- * (algorithm.md section 12); each only while the budget allows. The cost of the stages beyond M goes to *ext_cost. */
-static int dopus_relinearise(dopus_solver *s, int extra, double *ext_cost)
+ * a budget, further stages in rho order while one more iteration still fits after them
+ * (algorithm.md section 12); each only while the budget allows. The cost of the stages
+ * beyond M goes to *ext_cost. */
+static int dopus_relinearise(dopus_solver *s, double *ext_cost)
 {
     int M = dopus_M_now(s), m, k, n = 0, rc = DOPUS_OK, extend;
     double b0, reserve;
     for (k = 0; k < DOPUS_N; ++k) {
         s->selected[k] = 0;
     }
-    extend =
-        dopus_budget_on(s) && (!extra || !dopus_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare));
+    extend = dopus_budget_on(s);
     *ext_cost = 0.0;
-    /* the instant's prepare keeps room for one extra iteration when it extends */
-    reserve = extra ? 0.0 : s->anytime.cost_qp + s->anytime.cost_prepare;
+    /* the stages beyond M keep room for one more iteration after this one */
+    reserve = s->anytime.cost_qp + s->anytime.cost_prepare;
     for (m = 0; m < DOPUS_N - 1; ++m) {
         if ((m >= M && !extend) || !dopus_budget_fits(s, s->anytime.cost_stage + (m >= M ? reserve : 0.0))) {
             break;
@@ -1321,6 +1326,7 @@ int dopus_prepare(dopus_solver *s)
     dopus_timer_begin(&s->timer, DOPUS_PREPARE_PHASES, DOPUS_PHASE_RECOVERY);
     start = s->timer.mark;
     s->anytime.extra_iterations = 0;
+    s->anytime.prepared_extra = 0;
     /* the instant's budget counts the solver's own calls: the feedback's part (used) and
      * this prepare from now, not the caller's time between them */
     s->anytime.instant_start = dopus_budget_now(s) - s->anytime.used;
@@ -1417,7 +1423,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == DOPUS_OK) {
         dopus_phase(s, DOPUS_PHASE_RHO);
-        rc = dopus_relinearise(s, extra, &ext_cost);
+        rc = dopus_relinearise(s, &ext_cost);
     }
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
@@ -1524,6 +1530,7 @@ static int dopus_anytime_run(dopus_solver *s)
     s->qp_status = qp_status;
     s->qp_iterations = qp_iterations;
     s->qp_cold_retry = cold;
+    s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
     return rc == DOPUS_ERR_QP ? DOPUS_OK : rc;
 }
 
@@ -1801,6 +1808,7 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     s->anytime.qp_cap = 0;
     s->anytime.extra_iterations = 0;
     s->anytime.instant_stages = 0;
+    s->anytime.prepared_extra = 0;
     return dopus_ret(s, rc);
 }
 

@@ -194,6 +194,7 @@ class ReferenceDopus:
         self._instant_start = 0.0
         self._cost_stage = self._cost_qp = self._cost_prepare = 0.0
         self.budget_used = 0.0
+        self._prepared_extra = False
         self.extra_iterations = 0
         self.instant_stages = 0
 
@@ -357,6 +358,7 @@ class ReferenceDopus:
         """Every stage and the terminal node evaluated fresh at the given iterate (init and
         the re-initialisation of section 9); the state changes only on success."""
         N, nx, nu_, ng = self.N, self.nx, self.n_u, self.ng
+        self._prepared_extra = False
         slots = [_Slot(nx, nu_, ng) for _ in range(N)]
         self.work += N
         gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
@@ -503,7 +505,9 @@ class ReferenceDopus:
                 self._prepare_due, self._shifted = True, False
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
-        self._lm_measured(xhat0)
+        if not self._prepared_extra:
+            # after extra iterations the term the prepare convexified stays (section 12)
+            self._lm_measured(xhat0)
         xhat_prev = self._xhat_last
         self._xhat_last = xhat0.copy()
         self._xhat_fresh = True
@@ -650,6 +654,7 @@ class ReferenceDopus:
         if not self._prepare_due:
             raise self._fail("already_prepared", "prepare: already prepared (call feedback before the next prepare)")
         self.extra_iterations = 0
+        self._prepared_extra = False
         # the instant's budget counts the solver's own calls, not the caller's time between them
         self._instant_start = self._budget_now() - self.budget_used
         if (self._qp_ready and self._n_failed > 0 and not self._recover_pending and self.recovery
@@ -706,6 +711,7 @@ class ReferenceDopus:
             if not self._extra_iteration():
                 break
             self.extra_iterations += 1
+        self._prepared_extra = self.extra_iterations > 0 and self._qp_ready
 
     def _prepare_iteration(self, extra: bool = False) -> None:
         t0 = time.perf_counter()
@@ -720,7 +726,7 @@ class ReferenceDopus:
         rho = self._secant_criterion(slots, stage_values)
         t2 = time.perf_counter()
         xN, term = self._fresh_last_stage(slots, stage_values, extra)
-        chosen, ext_cost = self._relinearise_worst(slots, rho, extra)
+        chosen, ext_cost = self._relinearise_worst(slots, rho)
         t3 = time.perf_counter()
         if self.cost_hessian == "fresh":
             self._refresh_cost_hessians(slots, set(chosen) | {self.N - 1})
@@ -825,18 +831,17 @@ class ReferenceDopus:
                 n += 1
         return min(max(n, self.M_min), self.M_max)
 
-    def _relinearise_worst(self, slots, rho, extra=False):
+    def _relinearise_worst(self, slots, rho):
         """Step 4: fresh H for the M stages among 0..N-2 with the largest rho (ties: lower
-        index), then with a budget further stages in rho order (the instant's prepare, or an
-        extra iteration after which no further one fits), each while the budget allows
-        (section 12). Returns the stages and the cost of those beyond M."""
+        index), then with a budget further stages in rho order while one more iteration still
+        fits after them, each while the budget allows (section 12). Returns the stages and the
+        cost of those beyond M."""
         order = sorted(range(self.N - 1), key=lambda i: (-rho[i], i))
         M = self._M_now(slots, rho)
-        extend = self.budget_unit != "off" and (not extra or not self._budget_fits(self._cost_qp
-                                                                                   + self._cost_prepare))
+        extend = self.budget_unit != "off"
         chosen, ext_cost = [], 0.0
-        # the instant's prepare keeps room for one extra iteration when it extends
-        reserve = 0.0 if extra else self._cost_qp + self._cost_prepare
+        # the stages beyond M keep room for one more iteration after this one
+        reserve = self._cost_qp + self._cost_prepare
         for m, i in enumerate(order):
             if (m >= M and not extend) or not self._budget_fits(self._cost_stage + (reserve if m >= M else 0.0)):
                 break

@@ -389,6 +389,7 @@ typedef struct {
     int qp_cap;           /* > 0: the feedback QP's iteration cap of a time budget */
     int extra_iterations; /* extra iterations of the last prepare */
     int instant_stages;   /* stages re-linearised in the last instant */
+    int prepared_extra;   /* the prepared QP comes from extra iterations (the feedback keeps lm) */
 } robot_arm_anytime;
 
 /* One object per concept: lifecycle, settings, iterate, stage slots, terminal node, secant

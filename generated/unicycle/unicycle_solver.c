@@ -518,6 +518,7 @@ static int unicycle_linearize_all(unicycle_solver *s)
 static int unicycle_init_finish(unicycle_solver *s)
 {
     int k, rc;
+    s->anytime.prepared_extra = 0;
     unicycle_ring_reset(&s->ring);
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->rho[k] = UNICYCLE_R(0.0);
@@ -711,7 +712,12 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->health.xhat_fresh = 1;
-    unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    if (!s->anytime.prepared_extra) {
+        /* (after extra iterations the term the prepare convexified stays: the iterate has
+         * converged at the predicted state and the capped term, 0 there, left QPs that are
+         * convex only on the active bounds; algorithm.md section 12) */
+        unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -1089,21 +1095,20 @@ static int unicycle_next_worst(const unicycle_solver *s)
 }
 
 /* Step 4: re-linearise the stages with the largest rho_k: M of them (unicycle_M_now), then, with
- * a budget, further stages in rho order in the instant's prepare (while one extra iteration
- * still fits after them) and in an extra iteration after which no further iteration fits
- * (algorithm.md section 12); each only while the budget allows. The cost of the stages beyond M goes to *ext_cost. */
-static int unicycle_relinearise(unicycle_solver *s, int extra, double *ext_cost)
+ * a budget, further stages in rho order while one more iteration still fits after them
+ * (algorithm.md section 12); each only while the budget allows. The cost of the stages
+ * beyond M goes to *ext_cost. */
+static int unicycle_relinearise(unicycle_solver *s, double *ext_cost)
 {
     int M = unicycle_M_now(s), m, k, n = 0, rc = UNICYCLE_OK, extend;
     double b0, reserve;
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->selected[k] = 0;
     }
-    extend =
-        unicycle_budget_on(s) && (!extra || !unicycle_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare));
+    extend = unicycle_budget_on(s);
     *ext_cost = 0.0;
-    /* the instant's prepare keeps room for one extra iteration when it extends */
-    reserve = extra ? 0.0 : s->anytime.cost_qp + s->anytime.cost_prepare;
+    /* the stages beyond M keep room for one more iteration after this one */
+    reserve = s->anytime.cost_qp + s->anytime.cost_prepare;
     for (m = 0; m < UNICYCLE_N - 1; ++m) {
         if ((m >= M && !extend) || !unicycle_budget_fits(s, s->anytime.cost_stage + (m >= M ? reserve : 0.0))) {
             break;
@@ -1321,6 +1326,7 @@ int unicycle_prepare(unicycle_solver *s)
     unicycle_timer_begin(&s->timer, UNICYCLE_PREPARE_PHASES, UNICYCLE_PHASE_RECOVERY);
     start = s->timer.mark;
     s->anytime.extra_iterations = 0;
+    s->anytime.prepared_extra = 0;
     /* the instant's budget counts the solver's own calls: the feedback's part (used) and
      * this prepare from now, not the caller's time between them */
     s->anytime.instant_start = unicycle_budget_now(s) - s->anytime.used;
@@ -1417,7 +1423,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == UNICYCLE_OK) {
         unicycle_phase(s, UNICYCLE_PHASE_RHO);
-        rc = unicycle_relinearise(s, extra, &ext_cost);
+        rc = unicycle_relinearise(s, &ext_cost);
     }
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
@@ -1524,6 +1530,7 @@ static int unicycle_anytime_run(unicycle_solver *s)
     s->qp_status = qp_status;
     s->qp_iterations = qp_iterations;
     s->qp_cold_retry = cold;
+    s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
     return rc == UNICYCLE_ERR_QP ? UNICYCLE_OK : rc;
 }
 
@@ -1801,6 +1808,7 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     s->anytime.qp_cap = 0;
     s->anytime.extra_iterations = 0;
     s->anytime.instant_stages = 0;
+    s->anytime.prepared_extra = 0;
     return unicycle_ret(s, rc);
 }
 
