@@ -153,3 +153,37 @@ def test_bad_budget_settings_are_refused(robot_disc, backend):
         with pytest.raises(DopusError, match="M_m|eta"):
             b.set_M_adaptive(*args)
     assert b.budget_unit == "off"
+
+
+def test_work_budget_bounds_every_instant(robot_disc, robot_solution):
+    """The worst case of a budget (docs/algorithm.md section 12): with a fixed M every instant
+    of a disturbed closed loop stays within its work budget (the feedback's QP, the instant's
+    prepare and its extra iterations), and the budget is spent: a larger budget takes more
+    extra iterations. One M = 1 iteration (84 units on the robot arm) is the plain iteration,
+    bit for bit."""
+    N = robot_disc.N
+    one = N + N + 3 + 1          # the QP, N gradients, stage N-1, the terminal node, M = 1 stage
+    runs = {}
+    for budget in (0, one, 300, 800):
+        c = CSolver(robot_disc, M=1)
+        c.set_work_budget(budget)
+        xhat = np.array(robot_disc.x0, dtype=float)
+        p0 = np.asarray(c.p[0], dtype=float)
+        c.init(xhat, robot_solution[0])
+        used, extras, xs = [], [], []
+        for it in range(25):
+            if it == 0:
+                xhat = np.array(robot_disc.disturbance(xhat.copy()), dtype=float).reshape(-1)
+            u0 = c.feedback(xhat)
+            c.prepare()
+            used.append(c.budget_used)
+            extras.append(c.extra_iterations)
+            xs.append(np.concatenate([c.x.ravel(), c.u.ravel(), c.lam.ravel()]))
+            xhat = np.array(robot_disc.stage_eval(xhat, u0, p0)[0], dtype=float).reshape(-1)
+        runs[budget] = (used, extras, np.array(xs))
+        if budget:
+            assert max(used) <= budget, (budget, used)
+    assert runs[one][0] == [one] * 25 and sum(runs[one][1]) == 0
+    assert np.array_equal(runs[one][2], runs[0][2])
+    assert sum(runs[800][1]) > sum(runs[300][1]) > 0
+    print("extra iterations per instant: 300 units", runs[300][1], "; 800 units", runs[800][1])
