@@ -1496,7 +1496,7 @@ static int dopus_extra_iteration(dopus_solver *s)
     for (i = 0; i < DOPUS_NX; ++i) {
         s->qp_in.x0[i] = DOPUS_R(0.0);
     }
-    dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    /* the term the prepare convexified, not capped (algorithm.md section 12) */
     qs = dopus_feedback_qp(s);
     if (dopus_feedback_check_step(s, qs) != DOPUS_OK) {
         s->lm = lm;

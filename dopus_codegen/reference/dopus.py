@@ -685,7 +685,7 @@ class ReferenceDopus:
         step, a prepare iteration without the shift. False (nothing changed) when the QP is
         not solved or its step leaves the box."""
         lm, b0 = self.lm, self._budget_now()
-        self._lm_measured(self.x[0])
+        self._lm_uncapped = -1.0     # the term the prepare convexified, not capped
         self.work += self.N
         try:
             sol = solve_qp_reference(self.qp_of_current(self.x[0]), tol=self.qp_tol, max_iter=self.qp_max_iter)

@@ -1496,7 +1496,7 @@ static int robot_arm_extra_iteration(robot_arm_solver *s)
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
-    robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    /* the term the prepare convexified, not capped (algorithm.md section 12) */
     qs = robot_arm_feedback_qp(s);
     if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
         s->lm = lm;

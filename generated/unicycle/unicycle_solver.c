@@ -1496,7 +1496,7 @@ static int unicycle_extra_iteration(unicycle_solver *s)
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
-    unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    /* the term the prepare convexified, not capped (algorithm.md section 12) */
     qs = unicycle_feedback_qp(s);
     if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         s->lm = lm;
