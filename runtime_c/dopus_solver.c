@@ -1491,12 +1491,17 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
 static int dopus_extra_iteration(dopus_solver *s)
 {
     dopus_lm lm = s->lm;
+    dopus_real proxy = s->health.kkt_proxy;
     double b0 = dopus_budget_now(s);
-    int i, qs;
+    int i, qs, rc;
     for (i = 0; i < DOPUS_NX; ++i) {
         s->qp_in.x0[i] = DOPUS_R(0.0);
     }
-    /* the term the prepare convexified, not capped (algorithm.md section 12) */
+    /* the cap of the term while the extra iterations make progress; after one of them raised
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 12) */
+    if (!s->anytime.uncapped) {
+        dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
     qs = dopus_feedback_qp(s);
     if (dopus_feedback_check_step(s, qs) != DOPUS_OK) {
         s->lm = lm;
@@ -1506,7 +1511,11 @@ static int dopus_extra_iteration(dopus_solver *s)
     dopus_store_domega(s);
     dopus_take_step(s);
     dopus_lm_feedback(&s->lm, 1);
-    return dopus_prepare_iteration(s, 1);
+    rc = dopus_prepare_iteration(s, 1);
+    if (!(s->health.kkt_proxy < proxy)) {
+        s->anytime.uncapped = 1;
+    }
+    return rc;
 }
 
 /* The budget left after prepare (algorithm.md section 12): extra iterations while the KKT
@@ -1518,6 +1527,7 @@ static int dopus_anytime_run(dopus_solver *s)
     if (!dopus_budget_on(s)) {
         return DOPUS_OK;
     }
+    s->anytime.uncapped = 0;
     while (s->anytime.extra_iterations < DOPUS_ANYTIME_MAX_ITER && s->qp_ready &&
            s->health.kkt_proxy > s->settings.anytime_tol &&
            dopus_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
@@ -1809,6 +1819,7 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     s->anytime.extra_iterations = 0;
     s->anytime.instant_stages = 0;
     s->anytime.prepared_extra = 0;
+    s->anytime.uncapped = 0;
     return dopus_ret(s, rc);
 }
 

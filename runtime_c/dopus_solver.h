@@ -390,6 +390,7 @@ typedef struct {
     int extra_iterations; /* extra iterations of the last prepare */
     int instant_stages;   /* stages re-linearised in the last instant */
     int prepared_extra;   /* the prepared QP comes from extra iterations (the feedback keeps lm) */
+    int uncapped;         /* an extra iteration of this instant raised the KKT proxy */
 } dopus_anytime;
 
 /* One object per concept: lifecycle, settings, iterate, stage slots, terminal node, secant

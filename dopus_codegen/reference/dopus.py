@@ -684,8 +684,11 @@ class ReferenceDopus:
         """Section 12: the prepared QP for the state the plan predicts (dx_0 = 0), its full
         step, a prepare iteration without the shift. False (nothing changed) when the QP is
         not solved or its step leaves the box."""
-        lm, b0 = self.lm, self._budget_now()
-        self._lm_uncapped = -1.0     # the term the prepare convexified, not capped
+        lm, b0, proxy = self.lm, self._budget_now(), self.kkt_proxy
+        # the cap of the term while the extra iterations make progress; after one of them
+        # raised the KKT proxy, the term the prepare convexified
+        if not self._uncapped:
+            self._lm_measured(self.x[0])
         self.work += self.N
         try:
             sol = solve_qp_reference(self.qp_of_current(self.x[0]), tol=self.qp_tol, max_iter=self.qp_max_iter)
@@ -699,6 +702,8 @@ class ReferenceDopus:
         self._take_step(sol)
         self._lm_feedback("ok")
         self._prepare_iteration(extra=True)
+        if not self.kkt_proxy < proxy:
+            self._uncapped = True
         return True
 
     def _anytime(self) -> None:
@@ -706,6 +711,7 @@ class ReferenceDopus:
         fits in the budget."""
         if self.budget_unit == "off":
             return
+        self._uncapped = False
         while (self.extra_iterations < _SAFETY["ANYTIME_MAX_ITER"] and self._qp_ready
                and self.kkt_proxy > self.anytime_tol and self._budget_fits(self._cost_qp + self._cost_prepare)):
             if not self._extra_iteration():

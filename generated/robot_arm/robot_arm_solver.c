@@ -1491,12 +1491,17 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 static int robot_arm_extra_iteration(robot_arm_solver *s)
 {
     robot_arm_lm lm = s->lm;
+    robot_arm_real proxy = s->health.kkt_proxy;
     double b0 = robot_arm_budget_now(s);
-    int i, qs;
+    int i, qs, rc;
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
-    /* the term the prepare convexified, not capped (algorithm.md section 12) */
+    /* the cap of the term while the extra iterations make progress; after one of them raised
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 12) */
+    if (!s->anytime.uncapped) {
+        robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
     qs = robot_arm_feedback_qp(s);
     if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
         s->lm = lm;
@@ -1506,7 +1511,11 @@ static int robot_arm_extra_iteration(robot_arm_solver *s)
     robot_arm_store_domega(s);
     robot_arm_take_step(s);
     robot_arm_lm_feedback(&s->lm, 1);
-    return robot_arm_prepare_iteration(s, 1);
+    rc = robot_arm_prepare_iteration(s, 1);
+    if (!(s->health.kkt_proxy < proxy)) {
+        s->anytime.uncapped = 1;
+    }
+    return rc;
 }
 
 /* The budget left after prepare (algorithm.md section 12): extra iterations while the KKT
@@ -1518,6 +1527,7 @@ static int robot_arm_anytime_run(robot_arm_solver *s)
     if (!robot_arm_budget_on(s)) {
         return ROBOT_ARM_OK;
     }
+    s->anytime.uncapped = 0;
     while (s->anytime.extra_iterations < ROBOT_ARM_ANYTIME_MAX_ITER && s->qp_ready &&
            s->health.kkt_proxy > s->settings.anytime_tol &&
            robot_arm_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
@@ -1809,6 +1819,7 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
     s->anytime.extra_iterations = 0;
     s->anytime.instant_stages = 0;
     s->anytime.prepared_extra = 0;
+    s->anytime.uncapped = 0;
     return robot_arm_ret(s, rc);
 }
 

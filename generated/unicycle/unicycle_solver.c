@@ -1491,12 +1491,17 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 static int unicycle_extra_iteration(unicycle_solver *s)
 {
     unicycle_lm lm = s->lm;
+    unicycle_real proxy = s->health.kkt_proxy;
     double b0 = unicycle_budget_now(s);
-    int i, qs;
+    int i, qs, rc;
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
-    /* the term the prepare convexified, not capped (algorithm.md section 12) */
+    /* the cap of the term while the extra iterations make progress; after one of them raised
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 12) */
+    if (!s->anytime.uncapped) {
+        unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
     qs = unicycle_feedback_qp(s);
     if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         s->lm = lm;
@@ -1506,7 +1511,11 @@ static int unicycle_extra_iteration(unicycle_solver *s)
     unicycle_store_domega(s);
     unicycle_take_step(s);
     unicycle_lm_feedback(&s->lm, 1);
-    return unicycle_prepare_iteration(s, 1);
+    rc = unicycle_prepare_iteration(s, 1);
+    if (!(s->health.kkt_proxy < proxy)) {
+        s->anytime.uncapped = 1;
+    }
+    return rc;
 }
 
 /* The budget left after prepare (algorithm.md section 12): extra iterations while the KKT
@@ -1518,6 +1527,7 @@ static int unicycle_anytime_run(unicycle_solver *s)
     if (!unicycle_budget_on(s)) {
         return UNICYCLE_OK;
     }
+    s->anytime.uncapped = 0;
     while (s->anytime.extra_iterations < UNICYCLE_ANYTIME_MAX_ITER && s->qp_ready &&
            s->health.kkt_proxy > s->settings.anytime_tol &&
            unicycle_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
@@ -1809,6 +1819,7 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     s->anytime.extra_iterations = 0;
     s->anytime.instant_stages = 0;
     s->anytime.prepared_extra = 0;
+    s->anytime.uncapped = 0;
     return unicycle_ret(s, rc);
 }
 
