@@ -105,9 +105,13 @@ static int unicycle_budget_on(const unicycle_solver *s)
     return s->settings.budget > 0.0 && (s->settings.budget_unit == UNICYCLE_BUDGET_WORK || unicycle_has_clock(s));
 }
 
-/* Now on the budget's clock: the work counter (work units) or the solver's clock. */
+/* Now on the budget's clock: the work counter (work units) or the solver's clock; 0 without
+ * a budget (the clock is not read: the phase timers' reads stay theirs). */
 static double unicycle_budget_now(const unicycle_solver *s)
 {
+    if (!unicycle_budget_on(s)) {
+        return 0.0;
+    }
     if (s->settings.budget_unit == UNICYCLE_BUDGET_WORK) {
         return s->anytime.work;
     }
