@@ -149,6 +149,7 @@ def main(parts):
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
+        import matplotlib.ticker
     except ImportError:
         return
     parts_done = [p for p in ("work", "time") if p in out]
@@ -165,6 +166,12 @@ def main(parts):
             base = [r for r in out[part] if r["kind"] == kind and not r["budget"]]
             if base:
                 ax[row][1].axhline(base[0]["kkt_max_settled"], ls=":", color=ax[row][1].lines[-1].get_color())
+        ticks = sorted({_units(r["budget"]) for r in out[part] if r["budget"]})
+        for a in ax[row]:
+            a.set_xticks(ticks)
+            a.set_xticklabels([f"{v:g}" for v in ticks])
+            a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax[row][0].set_yscale("log")
         ax[row][0].set_xlabel(f"budget per instant [{unit}]")
         ax[row][0].set_ylabel("tracking RMS after the disturbance [mm]")
         ax[row][1].set_xlabel(f"budget per instant [{unit}]")
