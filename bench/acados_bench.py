@@ -3,8 +3,8 @@
     .venv/bin/python bench/acados_bench.py [OCP_FILE] [--json OUT] [--quick] [--cond 40,20,10,8,5,4,2,1]
 
 The same as ``dopus-gen bench OCP_FILE --M 1,full --against acados`` (the work lives in
-``dopus_codegen/studies/bench.py``, which prepares in the project's environment, and
-``dopus_codegen/studies/timing.py``, the timing process that loads only the compiled
+``dopus_lab/bench.py``, which prepares in the project's environment, and
+``dopus_lab/timing.py``, the timing process that loads only the compiled
 libraries, never CasADi). docs/acados.md describes the translation, the screening of
 acados' settings and the timing process.
 """

@@ -61,17 +61,16 @@ def run_grid(ocp_file, n_list=None, m_list=("1", "2", "5", "full"), cli=None, si
         ocp = load_ocp(ocp_file)
         ocp.horizon(N=N, dt=hz.dt)
         ocp.name = f"{ocp.name}_N{N}" if N != hz.N else ocp.name
-        values, sources = settings.resolve(ocp.declared_options(), cli or {})
+        base_settings, sources = settings.Settings.resolve(ocp.declared_options(), cli or {})
+        values = base_settings.as_dict()
         disc = build_functions(ocp)
         guess, info = solve_ocp(disc, disc.x0)
         if not info.get("success", False):
             raise SystemExit(f"{disc.name}: IPOPT did not solve the OCP at its initial state")
         rows = []
         for m in m_list:
-            M = N - 1 if m == "full" else min(int(m), N - 1)
-            run = run_closed_loop(disc, backend="c", M=M, hessian=values["hessian"],
-                                  regularization=values["regularization"], reg_eps=values["reg_eps"],
-                                  cost_hessian=values["cost_hessian"], lm=values["lm"], guess=guess)
+            M = settings.stages(m if m == "full" else int(m), N)
+            run = run_closed_loop(disc, backend="c", settings=base_settings.replace(M=M), guess=guess)
             s = summarize(run)
             signal, rms = tracking_rms(run, signal)
             rows.append({"N": N, "M": M, "full": M == N - 1, "failed": s["qp_failures"],

@@ -9,6 +9,7 @@ _EXPORTS = {
     "ScenarioSpec": "problem.ocp", "load_ocp": "problem.ocp", "OcpSpec": "problem.spec",
     "Discretized": "problem.derivatives", "build_functions": "problem.derivatives",
     "solve_ocp": "reference.offline",
+    "Solver": "runtime.solver", "Settings": "settings", "DopusError": "errors",
 }
 
 __all__ = ["__version__", *_EXPORTS]

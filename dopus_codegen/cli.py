@@ -6,42 +6,12 @@ body, imported lazily so that ``dopus-gen --help`` stays fast.
 from __future__ import annotations
 
 import click
-from pathlib import Path
 
 from . import __version__
 from .codegen.flags import DEFAULT_OPT
-from .settings import choices
-
-_FROM_FILE = "[default: the OCP file's options(...), else {}]"
-
-#: Exit codes: 0 done; 1 the verb ran and what it was asked to do failed (a run of the
-#: study failed, the plant of a closed loop could not be integrated); 2 bad input or an
-#: environment that does not allow the work (a message names the problem), also click's
-#: usage errors.
-EXIT_FAILED, EXIT_BAD_INPUT = 1, 2
-
-
-class RunFailed(click.ClickException):
-    """The verb ran, but what it was asked to do failed (exit code 1)."""
-    exit_code = EXIT_FAILED
-
-
-class BadInput(click.ClickException):
-    """Bad input or an environment that does not allow the work (exit code 2)."""
-    exit_code = EXIT_BAD_INPUT
-
-
-def one_line(exc: BaseException) -> str:
-    """The message of an exception on one line (CasADi's source locations dropped)."""
-    from .problem.ocp import casadi_message
-
-    # CasADi raises plain RuntimeErrors; the project's own errors (a failed compile names
-    # the CasADi file and must keep the compiler's diagnostic) are shown whole
-    text = casadi_message(exc) if type(exc) is RuntimeError else str(exc).strip()
-    if isinstance(exc, OSError) and exc.filename is not None:
-        text = f"{exc.strerror or text}: '{exc.filename}'"
-    text = " ".join(part.strip() for part in text.splitlines() if part.strip())
-    return text or type(exc).__name__
+from .verbs import (EXIT_BAD_INPUT, EXIT_FAILED, BadInput, RunFailed, one_line,  # noqa: F401 - re-exported
+                    FROM_FILE as _FROM_FILE, real_option as _real_option, runtime_values as _runtime_values,
+                    setting_callback as _setting_callback, solver_options as _solver_options)
 
 
 class _Group(click.Group):
@@ -66,8 +36,7 @@ class _Group(click.Group):
 def _known_errors() -> tuple:
     """Errors that describe bad input or the environment (their message is the report)."""
     from .codegen.build import BuildError
-    from .codegen.firmware import FirmwareError
-    from .codegen.generate import CodegenError
+    from .codegen.folder import CodegenError
     from .errors import DopusError
     from .problem.ocp import OcpError
     from .settings import SettingError
@@ -75,7 +44,7 @@ def _known_errors() -> tuple:
     from .studies.plant import PlantError
     from .studies.sil import SilError
 
-    return (OcpError, CodegenError, BuildError, FirmwareError, SettingError, DopusError, SilError, PlantError,
+    return (OcpError, CodegenError, BuildError, SettingError, DopusError, SilError, PlantError,
             CampaignError, ValueError, OSError)
 
 
@@ -91,71 +60,6 @@ def _show_warnings(ctx) -> None:
         click.echo(f"warning: {message}", err=True)
 
     warnings.showwarning = show
-
-
-def _setting_callback(name):
-    def callback(ctx, param, value):
-        if value is None:
-            return None
-        from .settings import SettingError, validate
-
-        try:
-            return validate(name, value)
-        except SettingError as exc:
-            raise click.BadParameter(str(exc)) from None
-    return callback
-
-
-def _setting_option(name: str, note: str = ""):
-    """The flag of one runtime setting of dopus_codegen.settings (type, check and help from there)."""
-    from . import settings
-
-    flag = "--" + name.replace("_", "-")
-    kind = settings.kind(name)
-    default = settings.DEFAULTS.get(name)
-    if name in settings.SOLVER_SETTINGS:
-        where = _FROM_FILE.format(default if not isinstance(default, float) else f"{default:g}")
-    elif default is None:
-        where = "[default: the QP solver's own]"
-    else:
-        where = f"[default: {default:g}]" if isinstance(default, float) else f"[default: {default}]"
-    help_text = " ".join(t for t in (settings.HELP[name], note, where) if t)
-    if kind == "choice":
-        return click.option(flag, name, type=click.Choice(choices(name)), default=None, help=help_text)
-    ptype = {"positive": float, "nonnegative": float, "lm": str, "count": int}[kind]
-    return click.option(flag, name, type=ptype, default=None, callback=_setting_callback(name), help=help_text)
-
-
-def _solver_options(lm_note: str, names=None):
-    """The runtime settings of dopus_codegen.settings (``names``, default RUNTIME_SETTINGS) as
-    flags of a verb that runs the solver; the solver settings default to the OCP file's
-    options(...)."""
-    from . import settings
-
-    names = settings.RUNTIME_SETTINGS if names is None else names
-    opts = [_setting_option(name, lm_note if name == "lm" else "") for name in names]
-
-    def apply(fn):
-        for opt in reversed(opts):
-            fn = opt(fn)
-        return fn
-    return apply
-
-
-def _real_option(what: str):
-    """``--real``: the real-number type of the generated C (dopus_codegen.settings.REALS)."""
-    from . import settings
-
-    return click.option("--real", "real", type=click.Choice(list(settings.REALS)), default=None,
-                        help=f"{settings.HELP['real']} {what} [default: the OCP file's options(real=...), "
-                             f"else {settings.DEFAULTS['real']}]")
-
-
-def _runtime_values(kwargs: dict) -> dict:
-    """The runtime settings of a verb's keyword arguments (None: not given)."""
-    from . import settings
-
-    return {name: kwargs.pop(name) for name in settings.RUNTIME_SETTINGS}
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -248,8 +152,7 @@ def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, r
 @click.option("--plot-dir", type=click.Path(file_okay=False), default=None, help="Write the PNG figures here.")
 @click.option("--compare", type=click.Choice(["none", "full"]), default="none", show_default=True,
               help="full: also run the full RTI (M = N-1) on the same scenario.")
-@_solver_options("0: the paper's literal QP; keeps the fixed point, see README, Closed loop; the robot arm "
-                 "declares 1e-4")
+@_solver_options("0: the paper's literal QP; keeps the fixed point, see docs/results.md, Closed loop.")
 @_real_option("The closed loop runs the solver generated in that type (float: see what single precision "
               "costs); the default --qp-tol follows it.")
 @click.option("--backend", type=click.Choice(["c", "reference"]), default="c", show_default=True)
@@ -353,73 +256,6 @@ def campaign(ocp_file, out, runs, seed, duration, threshold, settle, mismatch, w
 
 @main.command()
 @click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
-@click.option("--M", "m_list", default="1,5,full", show_default=True,
-              help="Comma-separated values of M; 'full' is the full RTI (M = N-1, always timed: the reference of "
-                   "the ratios).")
-@click.option("--against", type=click.Choice(["none", "acados"]), default="none", show_default=True,
-              help="acados: also time acados (SQP_RTI) on the same OCP file: the fastest working exact-Hessian and "
-                   "Gauss-Newton settings (screened), in the same process (needs scripts/setup_acados.sh).")
-@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the results as JSON.")
-@click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None,
-              help="Write a bar chart of the phases (PNG).")
-@click.option("--reps", default=300, show_default=True, type=click.IntRange(1, 10**6),
-              help="Timed steps at the operating point (and per N with --scaling).")
-@click.option("--settle", default=100, show_default=True, type=click.IntRange(0, 10**6),
-              help="Untimed closed-loop steps before the operating point is timed.")
-@click.option("--steps", default=300, show_default=True, type=click.IntRange(1, 10**6),
-              help="Timed steps of the closed loop from the disturbed state.")
-@click.option("--kkt-iters", default=60, show_default=True, type=click.IntRange(1, 100000),
-              help="Iterations of the fixed-xhat_0 study (iterations to KKT 1e-6 and 1e-8 per M).")
-@click.option("--scaling", "scaling", default=None,
-              help="Comma-separated horizon lengths N (e.g. 20,40,80,160): time per iteration against N at the "
-                   "same interval, fitted exponent; replaces the other studies.")
-@click.option("--cond", default="40,20,10,8,5,4,2,1", show_default=True,
-              help="acados partial-condensing horizons to screen (with --against acados).")
-@click.option("--quick", is_flag=True, help="acados: fewer settings and closed-loop steps (a smoke run).")
-@click.option("--work", type=click.Path(file_okay=False), default=None,
-              help="Folder for the plan, acados' builds and the export [default: a folder in the temp dir].")
-@_solver_options("0: the paper's literal QP",
-                 names=("hessian", "regularization", "reg_eps", "cost_hessian", "lm"))
-def bench(ocp_file, m_list, against, json_out, plot_out, reps, settle, steps, kkt_iters, scaling, cond, quick, work,
-          hessian, regularization, reg_eps, cost_hessian, lm):
-    """Time per iteration of the generated solver on OCP_FILE, by phase, for several M.
-
-    Both at the operating point (the closed loop from the nominal solution, after it has
-    settled) and along the closed loop from the disturbed state, every setting interleaved
-    step by step in one process that loads only the compiled libraries: feedback latency
-    (QP + step), preparation split by the runtime's timers, medians and 10/90 percentiles,
-    ratios to our full RTI, the CPU model and the load; and the fixed-xhat_0 iterations to
-    KKT 1e-6 and 1e-8 per M. Progress goes to stderr, the table to stdout.
-    """
-    from .problem.ocp import OcpError
-    from .settings import SettingError
-    from .studies.bench import BenchError, format_scaling, format_table, run_bench, run_scaling
-
-    cli = dict(hessian=hessian, regularization=regularization, reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm)
-    echo = lambda text: click.echo(text, err=True)  # noqa: E731
-    try:
-        if scaling:
-            res = run_scaling(ocp_file, scaling, m_list=m_list if m_list != "1,5,full" else "1,full",
-                              json_out=json_out, plot_out=plot_out, reps=reps, settle=settle, work=work,
-                              echo=echo, **cli)
-            click.echo(format_scaling(res))
-            return
-        try:
-            cond_list = [int(c) for c in cond.split(",")]
-        except ValueError:
-            raise BenchError(f"--cond: expected comma-separated integers, got {cond!r}") from None
-        res = run_bench(ocp_file, m_list=m_list, against=None if against == "none" else against, json_out=json_out,
-                        plot_out=plot_out, reps=reps, steps=steps, settle=settle, kkt_iters=kkt_iters,
-                        cond_list=cond_list, quick=quick, work=work, echo=echo, **cli)
-    except (OcpError, SettingError) as exc:
-        raise BadInput(str(exc)) from None
-    except (BenchError, ValueError) as exc:
-        raise click.ClickException(str(exc)) from None
-    click.echo(format_table(res))
-
-
-@main.command()
-@click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
 @click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Output folder (default: generated/<name> under the current directory). An existing "
                    "folder is replaced only if dopus-gen generated it.")
@@ -470,45 +306,18 @@ def build(folder, cc, opt, force):
         click.echo(f"compiled {len(res.compiled)} file(s), the others came from the build cache")
 
 
-@main.command("firmware-report")
-@click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
-@click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False), default="out/firmware",
-              show_default=True, help="Folder of the generated code, the builds and the images.")
-@click.option("--target", "targets", default="m7-double", show_default=True,
-              help="Comma-separated targets: m7-double, m7-float (QEMU mps2-an500), m4f-float (mps2-an386, "
-                   "single-precision FPU); a float target runs the folder generated with real='float'.")
-@click.option("--iters", default=12, show_default=True, type=click.IntRange(1, 1000),
-              help="Iterations of the fixed-xhat_0 study per M (M = 1 and the full RTI).")
-@click.option("--steps", default=20, show_default=True, type=click.IntRange(1, 10000),
-              help="Steps of the closed loop against the generated integrator.")
-@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None,
-              help="Write the report as JSON (default: OUTPUT/firmware_report.json).")
-def firmware_report(ocp_file, out_dir, targets, iters, steps, json_out):
-    """Run the generated solver of OCP_FILE on emulated Cortex-M cores and report sizes and counts.
+def _add_verbs_of_other_packages() -> None:
+    """The verbs other installed packages add to dopus-gen: the entry points of the group
+    ``dopus_codegen.verbs`` (the lab's ``bench`` and ``firmware-report``, dopus_lab/cli.py).
+    The product itself never imports them."""
+    from importlib.metadata import entry_points
 
-    Builds the firmware program of firmware/ (bare metal, no heap, semihosting output) with
-    arm-none-eabi-gcc, runs it under qemu-system-arm with instruction counting and the same
-    program on the host, and prints flash, RAM (data + bss + the stack of one iteration),
-    instructions per DOPUS iteration (M = 1, full RTI) and the difference to the host build.
-    Installs the Debian packages it needs when root (scripts/setup_firmware.sh).
-    """
-    from .codegen.firmware import firmware_report as report_fn, format_table
-    from .outputs import check_output_dir, check_output_file
+    for ep in entry_points(group="dopus_codegen.verbs"):
+        if ep.name not in main.commands:
+            main.add_command(ep.load(), ep.name)
 
-    tlist = [t.strip() for t in targets.split(",") if t.strip()]
-    check_output_dir(out_dir, "--output")
-    if json_out is None:
-        json_out = str(Path(out_dir) / "firmware_report.json")
-    elif Path(json_out).parent != Path(out_dir):
-        check_output_file(json_out, "--json")
-    rep = report_fn(ocp_file, out_dir, targets=tlist, fixed_iters=iters, loop_steps=steps,
-                    json_out=json_out, progress=click.echo)
-    click.echo(format_table(rep))
-    click.echo(f"JSON: {json_out}")
-    bad = {t: v["end_status"] for t, v in rep["targets"].items() if v.get("end_status") not in (0, None)}
-    if bad:
-        raise RunFailed("the firmware program ended with a non-zero solver status on "
-                        + ", ".join(f"{t} (status {st})" for t, st in bad.items()))
+
+_add_verbs_of_other_packages()
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -3,7 +3,7 @@
 :class:`DopusError` carries ``status``, a code of ``enum dopus_status`` (read from
 runtime_c/dopus_solver.h by :mod:`dopus_codegen.vocabulary`), and for a failed QP
 ``qp_status``, a code of ``enum dopus_qp_status``. The generated C solver
-(:class:`~dopus_codegen.runtime.solver.CSolver`) and the numpy reference
+(:class:`~dopus_codegen.runtime.solver.Solver`) and the numpy reference
 (:class:`~dopus_codegen.reference.dopus.ReferenceDopus`) raise it with the same codes for
 the same failure. It is a ``RuntimeError`` (a call failed) and a ``ValueError`` (most
 failures are bad input).

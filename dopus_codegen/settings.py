@@ -1,27 +1,37 @@
-"""The solver settings: names, allowed values, defaults, validation and where a value came from.
+"""The solver settings: one table, one settings value, and where a value came from.
 
-One table for the OCP file's ``options(...)``, the command line, both backends and code
-generation. The values of the enumerated settings are those of the C enums (read by
+:data:`TABLE` has one row per setting (name, how its value is written, its check, its
+default, its help line, and where it belongs). Everything else is derived from it: the
+frozen :class:`Settings` value that the OCP file's ``options(...)``, the command line, both
+backends and code generation share (its fields are the table's ``solver`` rows), the flags
+of the commands, their help texts, the defaults and the validation.
+
+The values of the enumerated settings are those of the C enums (read by
 :mod:`dopus_codegen.vocabulary`): ``hessian`` from ``enum dopus_hessian``, ``regularization``
 from ``enum dopus_regularization``, ``mode`` from ``enum dopus_mode``, spelled with ``-``
 for ``_`` (``"gauss-newton"``). Every setting has exactly one spelling per value; there are
 no aliases. ``cost_hessian`` is the flag of ``dopus_set_cost_hessian`` (1 = ``"fresh"``).
 
-Precedence (:func:`resolve`): a command-line flag beats the OCP file's ``options(...)``,
-which beats the default here; :func:`resolve` also says which of the three each value came
-from (``"cli"``, ``"ocp-file"``, ``"default"``).
+Precedence (:func:`resolve`, :meth:`Settings.resolve`): a command-line flag beats the OCP
+file's ``options(...)``, which beats the default of the table; both also say which of the
+three each value came from (``"cli"``, ``"ocp-file"``, ``"default"``).
+
+The rule on ``M`` (stages re-linearised per iteration, ``0 <= M <= N-1``, above ``N-1``
+the full RTI) is :func:`stages`, and nowhere else.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Callable, Dict, Mapping, Optional, Tuple
 
 from . import vocabulary
 
-__all__ = ["SettingError", "DEFAULTS", "SOLVER_SETTINGS", "choices", "code", "value_of", "check",
-           "positive", "nonnegative", "count", "resolve", "RUNTIME_SETTINGS", "HELP", "kind", "validate",
-           "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT", "parse_m_list", "CAMPAIGN_SETTINGS", "mismatch_table",
-           "REALS", "QP_TOL_DEFAULT", "qp_tol_default", "check_real", "KKT_TOL_DEFAULT"]
+__all__ = ["SettingError", "Setting", "TABLE", "Settings", "of_problem", "DEFAULTS", "SOLVER_SETTINGS", "FILE_SETTINGS",
+           "choices", "code", "value_of", "check", "positive", "nonnegative", "count", "resolve", "stages",
+           "RUNTIME_SETTINGS", "HELP", "kind", "validate", "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT",
+           "parse_m_list", "CAMPAIGN_SETTINGS", "mismatch_table", "REALS", "QP_TOL_DEFAULT", "qp_tol_default",
+           "check_real", "KKT_TOL_DEFAULT"]
 
 SOURCE_CLI, SOURCE_FILE, SOURCE_DEFAULT = "cli", "ocp-file", "default"
 
@@ -29,23 +39,6 @@ SOURCE_CLI, SOURCE_FILE, SOURCE_DEFAULT = "cli", "ocp-file", "default"
 class SettingError(ValueError):
     """A setting has a value it cannot take; the message names the setting and the value."""
 
-
-#: Defaults of every setting (the generated runtime's defaults come from the OCP file,
-#: which starts from these).
-DEFAULTS: Dict[str, Any] = {
-    "M": 1,
-    "hessian": "exact",
-    "regularization": "none",
-    "reg_eps": 1e-4,
-    "cost_hessian": "fresh",
-    "lm": "auto",
-    "mode": "receding",
-    "qp_tol": 1e-10,
-    "offline_guess": False,
-    "real": "double",
-    "runs": 100,
-    "seed": 0,
-}
 
 #: The real-number types a solver can be generated in (``options(real=...)``,
 #: ``--real``), with the value of the generated macro ``<NAME>_REAL_FLOAT``.
@@ -71,9 +64,6 @@ def check_real(value: Any) -> str:
     if not isinstance(value, str) or value not in REALS:
         raise SettingError(f"real must be {_quote_list(list(REALS))}, got {value!r}")
     return value
-
-#: The settings of a DOPUS backend that an OCP file and the commands share.
-SOLVER_SETTINGS = ("M", "hessian", "regularization", "reg_eps", "cost_hessian", "lm")
 
 _ENUMS = {"hessian": "dopus_hessian", "regularization": "dopus_regularization", "mode": "dopus_mode"}
 _COST_HESSIAN = {"stored": 0, "fresh": 1}
@@ -192,9 +182,6 @@ def count(setting: str, value: Any, minimum: int = 0, maximum: Any = None) -> in
     return int(value)
 
 
-_C_INT_MAX = 2**31 - 1
-
-
 def mismatch_table(value: Any) -> Dict[str, float]:
     """The plant mismatch of a campaign: plant quantity -> relative half-width in [0, 1).
     Written ``"m1=0.1,m2=0.1"`` on the command line (``"none"``: no mismatch), a dict (or
@@ -226,6 +213,9 @@ def mismatch_table(value: Any) -> Dict[str, float]:
     return out
 
 
+_C_INT_MAX = 2**31 - 1
+
+
 def _c_int(setting: str, value: int) -> int:
     """``value`` if a C int holds it (the runtime's setters take int)."""
     if value > _C_INT_MAX:
@@ -233,91 +223,199 @@ def _c_int(setting: str, value: int) -> int:
     return value
 
 
-_CHECKS = {
-    "M": lambda v: count("M", v),
-    "hessian": lambda v: check("hessian", v),
-    "regularization": lambda v: check("regularization", v),
-    "mode": lambda v: check("mode", v),
-    "cost_hessian": lambda v: check("cost_hessian", v),
-    "reg_eps": lambda v: positive("reg_eps", v),
-    "qp_tol": lambda v: qp_tolerance(v),
-    "lm": lambda v: levenberg_marquardt(v),
-    "qp_max_iter": lambda v: _c_int("qp_max_iter", count("qp_max_iter", v, 1)),
-    "real": lambda v: check_real(v),
-    "runs": lambda v: count("runs", v, 1),
-    "seed": lambda v: count("seed", v, 0, 2**63 - 1),
-    "duration": lambda v: positive("duration", v),
-    "threshold": lambda v: positive("threshold", v),
-    "settle": lambda v: nonnegative("settle", v),
-    "mismatch": mismatch_table,
-}
+def _flag(setting: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise SettingError(f"{setting} must be True or False, got {value!r}")
+    return value
 
-#: The settings of ``dopus-gen campaign`` beyond the solver's, in the order of ``--help``;
-#: the OCP file's ``campaign(...)`` (``on_path`` for ``threshold`` and ``settle``) gives
-#: their defaults, flags override them. ``duration`` not given is the scenario's.
-CAMPAIGN_SETTINGS = ("runs", "seed", "duration", "threshold", "settle", "mismatch")
 
-#: The settings a verb that runs the solver takes as flags (``--qp-tol`` for ``qp_tol``),
-#: in the order of ``--help``. ``M`` has a verb-specific form (a list for ``converge``),
-#: ``mode`` is the verb's (``converge``: fixed, ``sil``: receding) and ``offline_guess`` is
-#: a flag of ``generate``. ``qp_max_iter`` has no entry in :data:`DEFAULTS`: not given, it is
-#: the QP solver's own limit of the backend.
-RUNTIME_SETTINGS = ("hessian", "regularization", "reg_eps", "cost_hessian", "lm", "qp_tol", "qp_max_iter")
+# --------------------------------------------------------------------------- the table
+@dataclasses.dataclass(frozen=True)
+class Setting:
+    """One row of :data:`TABLE`.
 
+    ``kind``: how the value is written (``choice``, ``positive``, ``nonnegative``, ``lm``,
+    ``count``, ``flag``, ``mismatch``); ``check``: the value -> its checked, normalised
+    form (:class:`SettingError` otherwise); ``default``: None where the default is not a
+    constant (``qp_tol``: the real type's, ``qp_max_iter``: the QP solver's own, ``duration``:
+    the scenario's); ``scope``: ``solver`` (a field of :class:`Settings`, set on a backend),
+    ``generation`` (code generation) or ``campaign`` (``dopus-gen campaign``); ``file``:
+    the OCP file's ``options(...)`` takes it; ``flag``: the verbs that run the solver take
+    it as ``--name`` (``M`` has a verb-specific flag, ``mode`` is the verb's own).
+    """
+    name: str
+    kind: str
+    check: Callable[[Any], Any]
+    default: Any
+    help: str
+    scope: str = "solver"
+    file: bool = False
+    flag: bool = False
+
+
+#: Every setting, one row each; the order is that of ``--help``.
+TABLE: Tuple[Setting, ...] = (
+    Setting("M", "count", lambda v: count("M", v), 1,
+            "Stages re-linearised per iteration (M = N-1 is the full RTI).", file=True),
+    Setting("hessian", "choice", lambda v: check("hessian", v), "exact",
+            "Hessian of the stage Lagrangians: exact, or Gauss-Newton (needs a least-squares stage cost).",
+            file=True, flag=True),
+    Setting("regularization", "choice", lambda v: check("regularization", v), "none",
+            "Regularisation of the stage Hessian blocks: none, project (eigenvalues floored at reg_eps) or "
+            "mirror (absolute values floored at reg_eps).", file=True, flag=True),
+    Setting("reg_eps", "positive", lambda v: positive("reg_eps", v), 1e-4,
+            "Eigenvalue floor of the regularisation.", file=True, flag=True),
+    Setting("cost_hessian", "choice", lambda v: check("cost_hessian", v), "fresh",
+            "fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the paper's "
+            "literal algorithm (the whole Hessian block moves with its slot; figure 1).", file=True, flag=True),
+    Setting("lm", "lm", lambda v: levenberg_marquardt(v), "auto",
+            "Levenberg-Marquardt term added to every Hessian block of the QP.", file=True, flag=True),
+    Setting("qp_tol", "positive", lambda v: qp_tolerance(v), None,
+            "Tolerance of the QP solver on its scaled KKT residuals.", flag=True),
+    Setting("qp_max_iter", "count", lambda v: _c_int("qp_max_iter", count("qp_max_iter", v, 1)), None,
+            "Iteration limit of the QP solver; reaching it fails the feedback (QP status max_iter). "
+            "Not given: the QP solver's own limit.", flag=True),
+    Setting("mode", "choice", lambda v: check("mode", v), "receding",
+            "receding: shift by one sampling interval in every prepare; fixed: no shift."),
+    Setting("real", "choice", lambda v: check_real(v), "double",
+            "Real-number type of the generated C (runtime, glue and CasADi functions): double or float.",
+            scope="generation", file=True),
+    Setting("offline_guess", "flag", lambda v: _flag("offline_guess", v), False,
+            "Solve the OCP with IPOPT at its initial state at generation and carry the solution.",
+            scope="generation", file=True),
+    Setting("runs", "count", lambda v: count("runs", v, 1), 100,
+            "Closed-loop runs of the campaign (run i uses the random draw of (seed, i)).", scope="campaign"),
+    Setting("seed", "count", lambda v: count("seed", v, 0, 2**63 - 1), 0,
+            "Seed of the campaign's random draws.", scope="campaign"),
+    Setting("duration", "positive", lambda v: positive("duration", v), None,
+            "Simulated seconds per run.", scope="campaign"),
+    Setting("threshold", "positive", lambda v: positive("threshold", v), None,
+            "A run is on the path when its on-path signal stays at or below this (the signal's unit) ...",
+            scope="campaign"),
+    Setting("settle", "nonnegative", lambda v: nonnegative("settle", v), None,
+            "... from this many seconds after the start and after every push.", scope="campaign"),
+    Setting("mismatch", "mismatch", mismatch_table, None,
+            "Plant mismatch: quantity=relative half-width pairs, e.g. m1=0.1,m2=0.1 (+-10 %), or none.",
+            scope="campaign"),
+)
+
+ROWS: Dict[str, Setting] = {row.name: row for row in TABLE}
+
+#: Defaults of every setting (None: not a constant, see :class:`Setting`). The generated
+#: runtime's defaults are the OCP file's options, which start from these.
+DEFAULTS: Dict[str, Any] = {row.name: row.default for row in TABLE}
 #: One line of help per setting (the command line's ``--help``).
-HELP: Dict[str, str] = {
-    "M": "Stages re-linearised per iteration (M = N-1 is the full RTI).",
-    "hessian": "Hessian of the stage Lagrangians: exact, or Gauss-Newton (needs a least-squares stage cost).",
-    "regularization": "Regularisation of the stage Hessian blocks: none, project (eigenvalues floored at "
-                      "reg_eps) or mirror (absolute values floored at reg_eps).",
-    "reg_eps": "Eigenvalue floor of the regularisation.",
-    "cost_hessian": "fresh: the stage-cost Hessian of every stage is recomputed in every iteration; stored: the "
-                    "paper's literal algorithm (the whole Hessian block moves with its slot; figure 1).",
-    "lm": "Levenberg-Marquardt term added to every Hessian block of the QP.",
-    "mode": "receding: shift by one sampling interval in every prepare; fixed: no shift.",
-    "qp_tol": "Tolerance of the QP solver on its scaled KKT residuals.",
-    "qp_max_iter": "Iteration limit of the QP solver; reaching it fails the feedback (QP status max_iter). "
-                   "Not given: the QP solver's own limit.",
-    "real": "Real-number type of the generated C (runtime, glue and CasADi functions): double or float.",
-    "offline_guess": "Solve the OCP with IPOPT at its initial state at generation and carry the solution.",
-    "runs": "Closed-loop runs of the campaign (run i uses the random draw of (seed, i)).",
-    "seed": "Seed of the campaign's random draws.",
-    "duration": "Simulated seconds per run.",
-    "threshold": "A run is on the path when its on-path signal stays at or below this (the signal's unit) ...",
-    "settle": "... from this many seconds after the start and after every push.",
-    "mismatch": "Plant mismatch: quantity=relative half-width pairs, e.g. m1=0.1,m2=0.1 (+-10 %), or none.",
-}
+HELP: Dict[str, str] = {row.name: row.help for row in TABLE}
+#: The fields of :class:`Settings`: what a backend is set to.
+SOLVER_SETTINGS = tuple(row.name for row in TABLE if row.scope == "solver")
+#: What the OCP file's ``options(...)`` takes.
+FILE_SETTINGS = tuple(row.name for row in TABLE if row.file)
+#: The settings a verb that runs the solver takes as flags (``--qp-tol`` for ``qp_tol``).
+RUNTIME_SETTINGS = tuple(row.name for row in TABLE if row.flag)
+#: The settings of ``dopus-gen campaign`` beyond the solver's; the OCP file's ``campaign(...)``
+#: (``on_path`` for ``threshold`` and ``settle``) gives their defaults, flags override them.
+CAMPAIGN_SETTINGS = tuple(row.name for row in TABLE if row.scope == "campaign")
+
+
+def _row(setting: str) -> Setting:
+    row = ROWS.get(setting)
+    if row is None:
+        raise SettingError(f"unknown setting {setting!r}; the settings are {sorted(ROWS)}")
+    return row
 
 
 def kind(setting: str) -> str:
-    """How a setting's value is written: ``"choice"``, ``"positive"``, ``"lm"`` (``auto`` or a
-    number >= 0), ``"count"`` or ``"flag"``."""
-    if setting in ("hessian", "regularization", "mode", "cost_hessian", "real"):
-        return "choice"
-    if setting in ("reg_eps", "qp_tol", "duration", "threshold"):
-        return "positive"
-    if setting == "settle":
-        return "nonnegative"
-    if setting == "lm":
-        return "lm"
-    if setting == "mismatch":
-        return "mismatch"
-    if setting in ("M", "qp_max_iter", "runs", "seed"):
-        return "count"
-    if setting == "offline_guess":
-        return "flag"
-    raise SettingError(f"unknown setting {setting!r}; the settings are {sorted(_CHECKS)}")
+    """How a setting's value is written: ``"choice"``, ``"positive"``, ``"nonnegative"``,
+    ``"lm"`` (``auto`` or a number >= 0), ``"count"``, ``"flag"`` or ``"mismatch"``."""
+    return _row(setting).kind
 
 
 def validate(setting: str, value: Any) -> Any:
-    """The checked (normalised) value of any setting of :data:`DEFAULTS`."""
-    if setting == "offline_guess":
-        if not isinstance(value, bool):
-            raise SettingError(f"offline_guess must be True or False, got {value!r}")
-        return value
-    if setting not in _CHECKS:
-        raise SettingError(f"unknown setting {setting!r}; the settings are {sorted(_CHECKS)}")
-    return _CHECKS[setting](value)
+    """The checked (normalised) value of any setting of :data:`TABLE`."""
+    return _row(setting).check(value)
+
+
+def stages(M: Any, N: int, strict: bool = False) -> int:
+    """The stages re-linearised per iteration on a horizon of ``N`` intervals: ``M``
+    (an integer >= 0, or ``"full"`` for the full RTI) bounded by ``N-1``. A larger ``M``
+    is the full RTI, or with ``strict`` a :class:`SettingError`."""
+    if M == "full":
+        return int(N) - 1
+    M = count("M", M)
+    if M > int(N) - 1:
+        if strict:
+            raise SettingError(f"M = {M} exceeds N-1 = {int(N) - 1} (use 'full' for the full RTI)")
+        return int(N) - 1
+    return M
+
+
+# --------------------------------------------------------------------------- the value
+class _SettingsValue:
+    """The behaviour of :class:`Settings` (its fields come from :data:`TABLE`)."""
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if v is not None or ROWS[f.name].default is not None:
+                object.__setattr__(self, f.name, ROWS[f.name].check(v))
+
+    def replace(self, **changes) -> "Settings":
+        """A copy with ``changes`` (checked); a change given as None is not given."""
+        given = {k: v for k, v in changes.items() if v is not None}
+        for name in given:
+            if name not in SOLVER_SETTINGS:
+                raise SettingError(f"unknown setting {name!r}; the settings of a solver are {list(SOLVER_SETTINGS)}")
+        return dataclasses.replace(self, **given) if given else self
+
+    def as_dict(self) -> Dict[str, Any]:
+        return {name: getattr(self, name) for name in SOLVER_SETTINGS}
+
+    def stages(self, N: int) -> int:
+        """``M`` on a horizon of ``N`` intervals (:func:`stages`)."""
+        return stages(self.M, N)
+
+    def qp_tol_of(self, real: str = "double") -> float:
+        """The QP tolerance: the one set, else the default of the real type."""
+        return qp_tol_default(real) if self.qp_tol is None else self.qp_tol
+
+    @classmethod
+    def of(cls, values: Optional[Mapping[str, Any]] = None) -> "Settings":
+        """The settings of ``values`` (a mapping of any settings; those of other scopes are
+        ignored), the defaults for the rest."""
+        return cls(**{k: v for k, v in dict(values or {}).items() if k in SOLVER_SETTINGS and v is not None})
+
+    @classmethod
+    def resolve(cls, declared: Optional[Mapping[str, Any]], flags: Optional[Mapping[str, Any]],
+                real: Optional[str] = None) -> Tuple["Settings", Dict[str, str]]:
+        """The settings of a command: its ``flags`` (None: not given) over the OCP file's
+        ``declared`` options over the defaults, and where each came from. A QP tolerance
+        not given is the default of ``real``."""
+        values, sources = resolve(declared, {k: v for k, v in dict(flags or {}).items() if k in SOLVER_SETTINGS},
+                                  names=SOLVER_SETTINGS)
+        if sources["qp_tol"] == SOURCE_DEFAULT and real is not None:
+            values["qp_tol"] = qp_tol_default(real)
+        return cls(**values), sources
+
+    def __str__(self) -> str:
+        return describe(self.as_dict())
+
+
+Settings = dataclasses.make_dataclass(
+    "Settings", [(row.name, Any, dataclasses.field(default=row.default)) for row in TABLE if row.scope == "solver"],
+    bases=(_SettingsValue,), frozen=True, namespace={"__module__": __name__})
+
+
+def of_problem(disc: Any) -> "Settings":
+    """The settings of the OCP file's ``options(...)`` of a problem (a ``Discretized``);
+    the defaults for an object without options."""
+    options = getattr(getattr(disc, "spec", None), "options", None)
+    return options.settings if options is not None else Settings()
+
+
+Settings.__doc__ = """The settings of a solver, one frozen value (fields: :data:`SOLVER_SETTINGS`, the
+``solver`` rows of :data:`TABLE`, checked on construction). ``qp_tol`` None: the default of
+the real type the solver is generated in; ``qp_max_iter`` None: the QP solver's own limit.
+``Settings(hessian="gauss-newton", M=3)``; ``s.replace(M=1)``."""
 
 
 def resolve(file_options: Optional[Mapping[str, Any]], cli: Optional[Mapping[str, Any]],
@@ -346,13 +444,15 @@ def resolve(file_options: Optional[Mapping[str, Any]], cli: Optional[Mapping[str
     return values, sources
 
 
-def describe(values: Mapping[str, Any], sources: Mapping[str, str]) -> str:
-    """One line: ``hessian gauss-newton (ocp-file), M 3 (cli), ...``."""
+def describe(values: Mapping[str, Any], sources: Optional[Mapping[str, str]] = None) -> str:
+    """One line: ``hessian gauss-newton (ocp-file), M 3 (cli), ...`` (without the sources
+    when none are given)."""
     def text(k):
         v = values[k]
+        src = f" ({sources[k]})" if sources is not None else ""
         if v is None:
-            return f"{k} the solver's own ({sources[k]})"
-        return f"{k} {v:g} ({sources[k]})" if isinstance(v, float) else f"{k} {v} ({sources[k]})"
+            return f"{k} the solver's own{src}"
+        return f"{k} {v:g}{src}" if isinstance(v, float) else f"{k} {v}{src}"
     return ", ".join(text(k) for k in values)
 
 

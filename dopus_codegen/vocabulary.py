@@ -159,7 +159,7 @@ def _read_enums(root: Path, name: str) -> Dict[str, Enum]:
 def runtime_enums(folder: Optional[str] = None) -> Dict[str, Enum]:
     """The enums of the runtime's headers (``folder``: the runtime_c folder, default the
     installed one), with the status texts of dopus_solver.c; parsed once."""
-    from .codegen.paths import runtime_c_dir
+    from .paths import runtime_c_dir
 
     return _read_enums(Path(folder) if folder is not None else runtime_c_dir(), "dopus")
 
@@ -211,7 +211,7 @@ def constants() -> Dict[str, float]:
     safety constants of docs/algorithm.md section 9, the constants of the automatic lm of
     section 10), shared by the reference
     backend: ``constants()["DIVERGENCE_BOX"]``."""
-    from .codegen.paths import runtime_c_dir
+    from .paths import runtime_c_dir
 
     return parse_constants("\n".join((runtime_c_dir() / f).read_text()
                                      for f in ("dopus_solver.h", "dopus_health.h", "dopus_lm.h")))

@@ -8,8 +8,8 @@ States: angle ``theta`` (rad), angular speed ``omega`` (rad/s) and the motor cur
 drives the pendulum ``J domega/dt = K i - b omega - m g l sin(theta)``. With intervals of
 50 ms an explicit scheme must resolve the 1 ms mode to stay stable (RK4: h * 1000 < 2.8,
 at least 18 substeps per interval) although the current just follows its quasi-steady
-state; Radau IIA (L-stable) is stable with any step. The accuracy table of README "Implicit
-integrators" compares them against a converged reference.
+state; Radau IIA (L-stable) is stable with any step. The accuracy table of docs/usage.md ("Integrators
+and the size of the derivative code") compares them against a converged reference.
 
 Task: swing the pendulum from rest at 0 to ``TARGET`` rad and hold it, with voltage and
 current limits. The OCP file's integrator is Radau IIA with 2 stages and 4 substeps;

@@ -1,7 +1,7 @@
 /* The firmware program: the generated solver on a bare-metal target (and, compiled for the
  * host, the reference its output is compared with).
  *
- * fw_problem.h (written by `dopus-gen firmware-report`, dopus_codegen/firmware.py) names the
+ * fw_problem.h (written by `dopus-gen firmware-report`, dopus_lab/firmware.py) names the
  * problem: FW(name) is the generated symbol <problem>_name, FW_C(NAME) the macro
  * <PROBLEM>_NAME, and it carries the scenario: the disturbed state FW_XHAT_FIXED, the
  * values of M of the fixed-xhat_0 study, the iteration and step counts.
@@ -14,7 +14,8 @@
  *    at the end the whole primal solution.
  * 2. Closed loop: receding mode with the generated defaults, solver at the nominal solution,
  *    plant state at xhat_fixed; the plant is the generated integrator (the discrete model
- *    phi); FW_LOOP_STEPS steps of feedback, plant step, prepare.
+ *    phi); FW_LOOP_STEPS steps of feedback, plant step with the returned u0 whatever the
+ *    status (the closed-loop instant of sil and campaign), prepare.
  *
  * Every real number is printed as the hexadecimal bit pattern of its IEEE representation
  * (16 digits for double, 8 for float): exact, and printed without newlib's printf, whose
@@ -142,15 +143,19 @@ static fw_real kkt_max(const fw_real *k4)
     return m;
 }
 
-/* feedback + prepare with ticks and stack; returns the status */
+/* feedback + prepare with ticks and stack; returns the status (the feedback's, else the
+ * prepare's). u0 is the control the runtime returned, whatever the status: after a failed
+ * feedback its safe control, and prepare runs after it as after any other. */
 static int iteration(const fw_real *xhat, fw_real *u0, uint32_t *t_fb, uint32_t *t_prep, uint32_t *stack)
 {
     uint32_t sp = fw_stack_paint();
     uint32_t t0 = fw_ticks(), t1, t2;
     int status = FW(feedback)(&solver, xhat, u0);
+    int prepared;
     t1 = fw_ticks();
+    prepared = FW(prepare)(&solver);
     if (status == FW_C(OK)) {
-        status = FW(prepare)(&solver);
+        status = prepared;
     }
     t2 = fw_ticks();
     *t_fb = t1 - t0;
@@ -220,25 +225,35 @@ static int fixed_study(int M)
 static int closed_loop(void)
 {
     fw_real xhat[FW_C(NX)], xnext[FW_C(NX)], u0[FW_C(NU)], k4[4];
-    int i, k, status;
+    int i, k, status, plant_ok = 1, first_failure = FW_C(OK);
     uint32_t t_fb, t_prep, stack;
 
     status = FW(setup)(&solver, NULL); /* the generated settings */
     if (status == FW_C(OK)) {
         status = FW(init_nominal)(&solver, FW(x0_default));
     }
+    if (status != FW_C(OK)) {
+        return status;
+    }
     for (i = 0; i < FW_C(NX); ++i) {
         xhat[i] = xhat_fixed[i];
     }
-    for (k = 1; k <= FW_LOOP_STEPS && status == FW_C(OK); ++k) {
+    /* The closed-loop instant of the package (dopus_codegen/studies/loops.py): the
+     * measurement in, the returned u0 applied whatever the status; a failed instant is
+     * reported and the loop goes on. */
+    for (k = 1; k <= FW_LOOP_STEPS && plant_ok; ++k) {
         status = iteration(xhat, u0, &t_fb, &t_prep, &stack);
         /* the plant: the generated integrator from the measured state with the applied u0
          * (iteration() ran prepare already: the plant step does not touch the solver) */
-        if (status == FW_C(OK)) {
-            status = FW(simulate)(xhat, u0, NULL, xnext, &plant_work);
+        if (FW(simulate)(xhat, u0, NULL, xnext, &plant_work) != FW_C(OK)) {
+            plant_ok = 0;
+            status = FW_C(ERR_FUNCTION);
         }
         if (status == FW_C(OK)) {
             status = FW(kkt_eval)(&solver, xhat, k4);
+        }
+        if (first_failure == FW_C(OK)) {
+            first_failure = status;
         }
         put_str("loop");
         FW(get_settings)(&solver, &settings);
@@ -251,7 +266,7 @@ static int closed_loop(void)
             xhat[i] = xnext[i];
         }
     }
-    return status;
+    return first_failure;
 }
 
 int main(void)

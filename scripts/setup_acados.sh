@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Create acados' own virtual environment for the comparison with acados
-# (dopus_codegen/studies/acados_*.py, bench/acados_bench.py).
+# (dopus_lab/acados_*.py, bench/acados_bench.py).
 #
 # The PyPI wheel comma-deps-acados ships compiled acados, HPIPM, BLASFEO and qpOASES
 # (acados/install/lib), their headers (acados/install/include), acados' template renderer
@@ -8,7 +8,7 @@
 # slimmed CasADi built for CPython 3.12 only. That CasADi replaces the project's, so the
 # wheel lives in its own environment (default .venv-acados) and the two never meet in one
 # process. acados' template finds its libraries, headers and renderer through
-# ACADOS_SOURCE_DIR = <site-packages>/acados/install, which dopus_codegen/studies/acados_ocp.py
+# ACADOS_SOURCE_DIR = <site-packages>/acados/install, which dopus_lab/acados_ocp.py
 # sets itself (python -c 'import acados; print(acados.DIR)' prints it).
 #
 # Usage:  bash scripts/setup_acados.sh          (idempotent; prints the environment's python)

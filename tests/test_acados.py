@@ -16,7 +16,7 @@ pytestmark = pytest.mark.acados
 
 @pytest.fixture(scope="module")
 def acados_env(tmp_path_factory):
-    from dopus_codegen.studies import acados_compare as ac
+    from dopus_lab import acados_compare as ac
 
     try:
         py = ac.acados_python()

@@ -156,7 +156,7 @@ def test_python_handle_before_init(second_disc):
 
 
 def test_python_handle_bad_construction(second_disc, tmp_path):
-    with pytest.raises(ValueError, match="CSolver needs a Discretized problem or lib_dir"):
+    with pytest.raises(ValueError, match="Solver needs a Discretized problem or lib_dir"):
         CSolver(None)
     with pytest.raises(DopusError, match="qp_max_iter must be at most 2147483647"):
         CSolver(second_disc, qp_max_iter=2**31)

@@ -20,7 +20,7 @@ PREP = ("shift", "gradients", "rho", "hessians", "regularization", "assembly")
 
 @pytest.fixture(scope="module")
 def bench_result(tmp_path_factory):
-    from dopus_codegen.studies.bench import run_bench
+    from dopus_lab.bench import run_bench
 
     work = tmp_path_factory.mktemp("bench")
     return run_bench(SECOND_FILE, m_list="1,full", reps=25, settle=10, steps=25, kkt_iters=20, work=work,
@@ -175,7 +175,7 @@ def test_acados_gets_the_starting_value_of_the_automatic_lm(robot_disc, robot_so
     numeric lm is passed as it is (before, the default 'auto' stopped `make bench-acados`)."""
     from dopus_codegen.reference.dopus import ReferenceDopus
     from dopus_codegen.runtime.solver import build_for
-    from dopus_codegen.studies.bench import acados_lm
+    from dopus_lab.bench import acados_lm
 
     nominal, _ = robot_solution
     prob = {"disc": robot_disc, "spec": {"folder": str(build_for(robot_disc))}, "nominal": nominal}

@@ -17,7 +17,7 @@ from dopus_codegen.codegen.flags import DEFAULT_OPT, PIC, STRICT_CFLAGS
 from dopus_codegen import Ocp, RK4, build_functions
 from dopus_codegen.studies.converge import make_start
 from dopus_codegen.reference.kkt import kkt_measure
-from dopus_codegen.codegen.paths import runtime_c_dir
+from dopus_codegen.paths import runtime_c_dir
 from dopus_codegen.reference.dopus import ReferenceDopus
 from dopus_codegen.runtime.solver import CSolver, DopusError
 

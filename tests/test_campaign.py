@@ -207,3 +207,33 @@ def test_the_campaign_declaration_is_checked():
     with pytest.raises(OcpError, match="may only depend on|not a declared"):
         ocp.dynamics(ca.vertcat(*[q] * 5))         # a plant quantity is not part of the model
         ocp.validate()
+
+
+def test_sil_and_campaign_apply_the_same_controls_through_failures(tmp_path, monkeypatch):
+    """One closed-loop instant: with a QP iteration limit that fails many feedbacks, the
+    campaign's runs and their `sil --campaign-run` replays apply the same controls, bit for
+    bit, failed instants included (both apply the runtime's returned control whatever the
+    status: after a failure its safe control)."""
+    from dopus_codegen.studies import campaign
+
+    captured, real = {}, campaign.condense
+
+    def keep(run, d, index, seed, *args):
+        captured[index] = run
+        return real(run, d, index, seed, *args)
+
+    monkeypatch.setattr(campaign, "condense", keep)
+    campaign.run_campaign(str(ROBOT_ARM_FILE), str(tmp_path / "c.jsonl"), workers=0, runs=2, duration=0.3,
+                          qp_max_iter=4, progress=False, echo=lambda *a, **k: None)
+    monkeypatch.undo()
+    failed = 0
+    for index, run in sorted(captured.items()):
+        out = tmp_path / f"sil{index}.json"
+        res = CliRunner().invoke(main, ["sil", str(ROBOT_ARM_FILE), "--campaign-run", str(index), "--seed", "0",
+                                        "--duration", "0.3", "--qp-max-iter", "4", "--json", str(out)])
+        assert res.exit_code == 0, res.output
+        rec = json.loads(out.read_text())["runs"][0]
+        assert rec["status"] == run["status"]
+        np.testing.assert_array_equal(np.array(rec["u"]), np.array(run["u"]))
+        failed += sum(1 for st in run["status"] if st != 0)
+    assert failed > 0, "the QP iteration limit failed no feedback: the test sees no failure"

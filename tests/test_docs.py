@@ -6,8 +6,11 @@
   tracked file or folder, and every "docs/<file>.md section N" names a section that file
   has.
 - Every repository path the README and the docs name is tracked, the README's layout tree
-  included, and every ``dopus_codegen.<module>[.<name>]`` named in any tracked file
-  resolves to a module or an attribute of one.
+  included, and every ``dopus_codegen.<module>[.<name>]`` (and ``dopus_lab.<module>...``)
+  named in any tracked file resolves to a module or an attribute of one.
+- The README is a newcomer's page (at most about 200 lines: what it is, the two commands,
+  a minimal OCP file, the verbs, the map of the code, links); usage details live in
+  docs/usage.md and results in docs/results.md, and its OCP file generates and runs.
 
 Each scanner is first run on planted text with known findings, so that a scanner that finds
 nothing cannot pass for a clean tree. The planted text is written with "@" inside every
@@ -216,7 +219,7 @@ def test_readme_layout_names_exist():
     paths = layout_tree(readme)
     # the tree is parsed as a tree: nested names carry their parents
     for expect in ("dopus_codegen/problem/ocp.py", "dopus_codegen/runtime/solver.py",
-                   "dopus_codegen/reference/offline.py", "dopus_codegen/studies",
+                   "dopus_codegen/reference/offline.py", "dopus_codegen/studies", "dopus_lab",
                    "runtime_c", "templates", "tests/harness", "docs", "pyproject.toml"):
         assert expect in paths, (expect, paths)
     missing = [p for p in paths if not is_tracked(p)]
@@ -238,7 +241,7 @@ def test_readme_layout_names_exist():
 
 
 # ------------------------------------------------------------------ module names
-_MODULE = re.compile(r"(?<![\w.])dopus_codegen(?:\.[A-Za-z_]\w*)+")
+_MODULE = re.compile(r"(?<![\w.])(?:dopus_codegen|dopus_lab)(?:\.[A-Za-z_]\w*)+")
 
 
 @lru_cache(maxsize=None)
@@ -270,6 +273,7 @@ def test_module_names_resolve():
     assert resolves("dopus_codegen.Ocp") and resolves("dopus_codegen.runtime_c")
     assert not resolves(planted("dopus_codegen@.qpref.solve_qp_reference"))
     assert not resolves(planted("dopus_codegen@.reference.ReferenceDopus"))
+    assert resolves("dopus_lab.bench.run_bench") and not resolves(planted("dopus_lab@.studies.bench"))
     found = []
     for rel, text in text_files():
         if rel.startswith("generated/"):
@@ -278,3 +282,44 @@ def test_module_names_resolve():
             if not resolves(m.group(0)):
                 found.append(f"{rel}:{line_of(text, m.start())}: {m.group(0)}")
     assert not found, "module names that do not resolve:\n" + "\n".join(found)
+
+
+# ------------------------------------------------------------------ the README, a newcomer's page
+def test_readme_is_a_newcomers_page():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(readme.splitlines()) <= 200
+    for heading in ("## Two commands on a fresh machine", "## Install and the verbs", "## A minimal OCP file",
+                    "## Layout", "## Further reading"):
+        assert heading in readme, heading
+    assert "make demo" in readme and "make test" in readme
+    # the verbs the command line has are all in the README, and the details are in docs/
+    from click.testing import CliRunner
+
+    from dopus_codegen.cli import main
+
+    verbs = set(main.commands)
+    assert {"generate", "build", "converge", "sil", "campaign", "bench", "firmware-report"} <= verbs
+    assert not [v for v in verbs if f"dopus-gen {v}" not in readme]
+    assert CliRunner().invoke(main, ["--help"]).exit_code == 0
+    for doc in ("docs/usage.md", "docs/results.md"):
+        assert is_tracked(doc) and doc in readme
+
+
+def test_readme_ocp_file_generates_and_runs(tmp_path):
+    """The README's OCP file is a working one: it generates and builds, the handle opened on
+    its folder runs its options (Gauss-Newton, M = 3), and its scenario runs in sil."""
+    from click.testing import CliRunner
+
+    from dopus_codegen import Solver
+    from dopus_codegen.cli import main
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    code = readme.split("## A minimal OCP file", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    path = tmp_path / "pendulum.py"
+    path.write_text(code)
+    res = CliRunner().invoke(main, ["generate", str(path), "-o", str(tmp_path / "pendulum")])
+    assert res.exit_code == 0, res.output
+    solver = Solver.load(tmp_path / "pendulum")
+    assert (solver.settings.hessian, solver.settings.M) == ("gauss-newton", 3)
+    res = CliRunner().invoke(main, ["sil", str(path), "--duration", "0.5", "--json", str(tmp_path / "sil.json")])
+    assert res.exit_code == 0, res.output

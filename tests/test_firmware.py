@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dopus_codegen.codegen import firmware as fwm
+from dopus_lab import firmware as fwm
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "examples" / "robot_arm.py"
@@ -88,7 +88,7 @@ def test_emulated_full_rti_reaches_ipopt_solution(report, robot_disc):
     N = robot_disc.N
     x = np.array(s["solution"][str(N - 1)]["x"]).reshape(N + 1, -1)
     u = np.array(s["solution"][str(N - 1)]["u"]).reshape(N, -1)
-    # KKT 5e-11 and the weakest reduced curvature of the robot arm (about 2e-5, README)
+    # KKT 5e-11 and the weakest reduced curvature of the robot arm (about 2e-5, docs/design.md section 8)
     # bound the primal error by about 2.5e-6; the interior-point QP (tolerance 1e-10) keeps
     # active torques 1e-8 inside their bounds
     tol = 1e-5

@@ -16,7 +16,7 @@ Float tolerances (docs/algorithm.md, "Real type"):
   such roundings.
 - Solution: within ``SOL_FLOAT = 5e-3`` of IPOPT's, relative to the largest entry. The
   error is largest in the weakest direction of the reduced Hessian (the terminal joint
-  velocities; curvature about 2e-5 relative, README), where a KKT residual on float's
+  velocities; curvature about 2e-5 relative, docs/design.md section 8), where a KKT residual on float's
   floor moves the solution most; measured: 1.3e-3 (0.014 on a largest entry of 10.8),
   against 1e-6 for the double build.
 """

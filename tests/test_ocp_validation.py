@@ -197,6 +197,8 @@ def test_bad_options():
     raises(lambda: ocp.options(M=-1), "options: M must be an integer >= 0")
     raises(lambda: ocp.options(reg_eps=0), "options: reg_eps must be positive")
     raises(lambda: ocp.options(offline_guess="yes"), "options: offline_guess must be True or False")
+    raises(lambda: ocp.options(hesian="exact"), "options: unknown option 'hesian'; the options are M, hessian")
+    raises(lambda: ocp.options(mode="fixed"), "options: unknown option 'mode'")   # the verb's, not the file's
 
 
 def test_options_update_only_what_is_given():

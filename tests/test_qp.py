@@ -569,7 +569,7 @@ def test_linalg_kernels_match_numpy(tmp_path):
     leading dimensions larger than the matrices."""
     import cffi
 
-    from dopus_codegen.codegen.paths import runtime_c_dir
+    from dopus_codegen.paths import runtime_c_dir
 
     rc = runtime_c_dir()
     lib_path = tmp_path / "liblinalg.so"

@@ -1,9 +1,10 @@
-"""One settings vocabulary: the OCP file is the source of every default of the commands.
+"""One settings value: the OCP file is the source of every default, wherever the solver runs.
 
-The acceptance case: an OCP file that declares Gauss-Newton and M = 3 gives a ``sil`` and a
-``converge`` run with Gauss-Newton and M = 3 (printed summary and JSON, source "ocp-file"),
-unless a flag overrides it (source "cli"); the runs are the same numbers as the library
-called with those settings directly.
+The acceptance case: an OCP file that declares Gauss-Newton and M = 3 gives Gauss-Newton
+and M = 3 in the handle built from the file, the handle opened on its generated folder, the
+generated main, and the ``sil`` and ``converge`` runs (printed summary and JSON, source
+"ocp-file"), unless a flag overrides it (source "cli"); the runs are the same numbers as the
+library called with those settings directly.
 """
 from __future__ import annotations
 
@@ -147,3 +148,77 @@ def test_converge_starts_from_the_ocp_file(ocp_file, tmp_path):
     res, study = _converge(ocp_file, tmp_path, "--iters", "2", "--M", "1", "--hessian", "exact")
     assert study["hessian"] == "exact" and [r["M"] for r in study["runs"]] == [1]
     assert study["sources"]["hessian"] == "cli" and study["sources"]["M"] == "cli"
+
+
+def _c_run(solver, x0, iters):
+    """``iters`` fixed-mode iterations from the OCP file's guess at ``x0``: (u0, KKT) per iteration."""
+    solver.init(x0)
+    out = []
+    for _ in range(iters):
+        u0 = solver.feedback(x0)
+        solver.prepare()
+        out.append((*u0, solver.kkt(x0)["kkt"]))
+    return np.array(out)
+
+
+def test_one_settings_value_from_the_file_to_every_handle(ocp_file, tmp_path):
+    """The acceptance case of the one settings value: options(hessian="gauss-newton", M=3)
+    gives Gauss-Newton and M = 3 in the handle built from the file, the handle opened on its
+    generated folder, the generated main, and `sil` and `converge` on the C backend; the
+    numbers are those of a handle given Gauss-Newton and M = 3 explicitly, and not those of
+    the exact Hessian."""
+    import re
+    import subprocess
+
+    from dopus_codegen import Settings, Solver, build_functions, load_ocp
+
+    disc = build_functions(load_ocp(ocp_file))
+    from_file = Solver(disc)
+    assert (from_file.settings.hessian, from_file.settings.M) == ("gauss-newton", 3)
+    folder = tmp_path / "gn_three"
+    res = CliRunner().invoke(cli_main, ["generate", str(ocp_file), "-o", str(folder)])
+    assert res.exit_code == 0, res.output
+    opened = Solver.load(folder)
+    assert (opened.settings.hessian, opened.settings.M) == ("gauss-newton", 3)
+    assert opened.settings == from_file.settings
+
+    # the same numbers as a handle told Gauss-Newton and M = 3, other ones than the exact Hessian
+    x0 = np.array(disc.x0, dtype=float)
+    told = _c_run(Solver(disc, Settings(hessian="gauss-newton", M=3, mode="fixed")), x0, 6)
+    np.testing.assert_array_equal(_c_run(Solver.load(folder, mode="fixed"), x0, 6), told)
+    np.testing.assert_array_equal(_c_run(Solver(disc, mode="fixed"), x0, 6), told)
+    # the setting matters: the runs are deterministic (equal settings, equal bits), and the
+    # exact Hessian (on this nearly linear model close to Gauss-Newton) or the defaults differ
+    for other in (Settings(hessian="exact", M=3, mode="fixed"), Settings(mode="fixed")):
+        assert not np.array_equal(_c_run(Solver(disc, other), x0, 6), told)
+
+    # the generated main (make alone) runs the generated defaults: its fixed-mode run from the
+    # OCP file's guess is the handle's with Gauss-Newton and M = 3
+    proc = subprocess.run(["make", "-s", "-C", str(folder), "run"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rows = [line.split() for line in proc.stdout.splitlines() if re.match(r"fixed [1-9]\d* status 0", line)]
+    main = np.array([[float(v) for v in r[r.index("u0") + 1:r.index("kkt")]] + [float(r[r.index("kkt") + 1])]
+                     for r in rows])
+    assert len(main) >= 6          # the same objects (the build cache): the same bits, printed round-trip
+    np.testing.assert_array_equal(main[:6], told)
+
+    # sil and converge on the C backend
+    out = tmp_path / "sil_c.json"
+    res = CliRunner().invoke(cli_main, ["sil", str(ocp_file), "--backend", "c", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    run = json.loads(out.read_text())["runs"][0]
+    assert (run["settings"]["hessian"], run["settings"]["M"]) == ("gauss-newton", 3)
+    from dopus_codegen.reference.offline import solve_ocp
+    from dopus_codegen.studies.sil import run_closed_loop
+
+    guess, _ = solve_ocp(disc, disc.x0)
+    direct = run_closed_loop(disc, backend="c", settings=Settings(hessian="gauss-newton", M=3), guess=guess)
+    np.testing.assert_array_equal(np.array(run["u"]), np.array(direct["u"]))
+    out = tmp_path / "conv_c.json"
+    res = CliRunner().invoke(cli_main, ["converge", str(ocp_file), "--backend", "c", "--start", "cold",
+                                        "--iters", "4", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    study = json.loads(out.read_text())
+    assert study["hessian"] == "gauss-newton" and [r["M"] for r in study["runs"]] == [3]
+    kkt = [k for k in told[:4, -1]]
+    np.testing.assert_allclose(study["runs"][0]["kkt"][1:], kkt, rtol=1e-12, atol=0)

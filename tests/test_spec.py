@@ -84,8 +84,8 @@ def test_spec_is_immutable():
     assert isinstance(spec, OcpSpec)
     n_dc, n_arr = assert_frozen(spec, "spec")
     # model, its 3 variables, cost, 2 least-squares terms, constraints, 2 row blocks,
-    # horizon, options, guess, scenario, closed loop, the event and the spec itself
-    assert n_dc == 17 and n_arr >= 15
+    # horizon, options and their settings, guess, scenario, closed loop, the event and the spec itself
+    assert n_dc == 18 and n_arr >= 15
     # mutating through the integrator copy does not reach the declared one
     assert spec.model.integrator.substeps == 2
 

@@ -29,7 +29,7 @@ from typing import Callable, List, Optional, Sequence
 
 from . import cache
 from .flags import CASADI_CFLAGS, DEFAULT_OPT, PIC, STRICT_CFLAGS
-from .generate import CodegenError, read_meta
+from .folder import CodegenError, read_meta
 
 BUILD_SUBDIR = Path("build")
 

@@ -5,8 +5,8 @@ Location: ``--cache-dir`` of ``dopus-gen`` (any verb), else ``$DOPUS_CACHE_DIR``
 
 - ``objects/<key>.o``: compiled objects, keyed by the sha256 of the source file, every
   header of its folder, the compiler (its path and ``--version`` output) and the flags;
-  ``dopus-gen build``, ``CSolver`` and every folder share them, so a file is compiled once;
-- ``problems/<name>-<key>/``: the generated folders of the Python handle ``CSolver``,
+  ``dopus-gen build``, ``Solver`` and every folder share them, so a file is compiled once;
+- ``problems/<name>-<key>/``: the generated folders of the Python handle ``Solver``,
   keyed by :func:`problem_hash` (the problem's CasADi functions, data, runtime sources,
   templates and versions), so an unchanged problem is neither regenerated nor rebuilt.
 
@@ -24,11 +24,11 @@ import tempfile
 from pathlib import Path
 from typing import Any, Dict, Optional, Sequence
 
-import casadi as ca
 import numpy as np
 
 from .. import __version__
-from .paths import runtime_c_dir, templates_dir
+from .folder import FUNCTION_SLOTS
+from ..paths import runtime_c_dir, templates_dir
 
 __all__ = ["cache_root", "problem_hash", "object_key", "cached_object", "store_object"]
 
@@ -53,12 +53,12 @@ def _array_bytes(v) -> bytes:
 def problem_hash(disc: Any, offline_guess: Optional[bool] = None, real: Optional[str] = None) -> str:
     """A stable sha256 of everything the generated folder of ``disc`` depends on (its
     functions and data, the runtime sources, the templates and the emitter generate.py)."""
-    from .generate import FUNCTION_SLOTS
-
     h = hashlib.sha256()
 
     def put(tag: str, data: bytes) -> None:
         h.update(tag.encode() + b"\0" + data + b"\0")
+
+    import casadi as ca     # here only: building and loading a generated folder needs no CasADi
 
     put("versions", f"{__version__} {ca.__version__}".encode())
     put("offline_guess", repr(offline_guess).encode())
@@ -79,7 +79,8 @@ def problem_hash(disc: Any, offline_guess: Optional[bool] = None, real: Optional
             if path.is_file() and path.suffix in (".c", ".h", ".j2"):
                 put(path.name, path.read_bytes())
     # the emitter itself: a change of how the functions are written out regenerates
-    put("generate.py", (Path(__file__).parent / "generate.py").read_bytes())
+    for emitter in ("generate.py", "folder.py"):
+        put(emitter, (Path(__file__).parent / emitter).read_bytes())
     return h.hexdigest()
 
 

@@ -20,7 +20,7 @@ from typing import List, Optional, Tuple
 import casadi as ca
 import numpy as np
 
-from .ocp import OcpError
+from .spec import OcpError
 
 __all__ = ["NonSmoothWarning", "stage0_violations", "check_initial_state", "nonsmooth_terms", "warn_nonsmooth",
            "describe_qp_row"]
@@ -225,7 +225,7 @@ def _terminal_rows(spec, equality: bool) -> List[Tuple[str, ca.SX, float, float]
 
 def describe_qp_row(problem, row: dict) -> str:
     """The row of an infeasible QP (``row``: stage, kind, index, side, bound, as
-    ``CSolver.qp_infeasible_row`` gives it) in the OCP's words: ``infeasible at stage 3: path
+    ``Solver.qp_infeasible_row`` gives it) in the OCP's words: ``infeasible at stage 3: path
     constraint 0 ((x-p)) >= lb 0``; ``problem`` (a spec or a discretised problem, or None)
     supplies the names and expressions."""
     spec = None if problem is None else _spec(problem)

@@ -47,24 +47,20 @@ import traceback
 import types
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, Optional, Union
+from typing import Callable, Mapping, Optional
 
 import casadi as ca
 import numpy as np
 
 from ..cnames import identifier_problem
 from .spec import (CampaignSpec, ClosedLoopSpec, ConstraintSpec, CostSpec, GuessSpec, HorizonSpec, LeastSquares,
-                   ModelSpec, OcpSpec, OptionsSpec, Rows, ScenarioPart, Variable, readonly)
+                   ModelSpec, OcpError, OcpSpec, OptionsSpec, Rows, ScenarioPart, Variable, readonly)
 
 __all__ = [
     "OcpError", "Integrator", "RK4", "GaussLegendre", "RadauIIA", "Event", "Pushes", "OnPath", "Guess", "ScenarioSpec",
     "Ocp", "load_ocp",
 ]
 
-
-
-class OcpError(ValueError):
-    """A mistake in the OCP description; the message names the offending item."""
 
 
 # --------------------------------------------------------------------------- integrators
@@ -488,10 +484,9 @@ class Ocp:
         self._x0 = None
         self._guess_x = None
         self._guess_u = None
-        from ..settings import DEFAULTS
+        from ..settings import DEFAULTS, FILE_SETTINGS
 
-        self._options = {k: DEFAULTS[k] for k in ("hessian", "regularization", "reg_eps", "M",
-                                                  "offline_guess", "lm", "cost_hessian", "real")}
+        self._options = {k: DEFAULTS[k] for k in FILE_SETTINGS}
         self._declared: set = set()
         self._disturbance = None
         self._scenario = None
@@ -638,14 +633,14 @@ class Ocp:
         self._guess_x, self._guess_u = _snapshot(x), _snapshot(u)
 
     @_declaration
-    def options(self, hessian: Optional[str] = None, regularization: Optional[str] = None,
-                reg_eps: Optional[float] = None, M: Optional[int] = None,
-                offline_guess: Optional[bool] = None, lm: Optional[Union[float, str]] = None,
-                cost_hessian: Optional[str] = None, real: Optional[str] = None) -> None:
-        """Solver defaults (the generated solver and the CLI can override them); only the
-        options given change. Names, allowed values and defaults are those of
-        :mod:`dopus_codegen.settings`: ``hessian="exact"``, ``regularization="none"``,
-        ``reg_eps=1e-4``, ``M=1``, ``offline_guess=False``, ``lm="auto"``, ``cost_hessian="fresh"``, ``real="double"``.
+    def options(self, **values) -> None:
+        """Solver defaults: the generated solver's, and those of every command and handle
+        built from this file (a command-line flag overrides them); only the options given
+        change. The options are the rows of :data:`dopus_codegen.settings.TABLE` that the
+        file may give (:data:`~dopus_codegen.settings.FILE_SETTINGS`), with their checks
+        and defaults: ``hessian="exact"``, ``regularization="none"``, ``reg_eps=1e-4``,
+        ``M=1``, ``lm="auto"``, ``cost_hessian="fresh"``, ``real="double"``,
+        ``offline_guess=False``.
 
         ``real``: the real-number type of the generated C, ``"double"`` or ``"float"``
         (single precision, for microcontrollers with a single-precision FPU); the default
@@ -653,20 +648,19 @@ class Ocp:
 
         ``lm``: the Levenberg-Marquardt term of the QP (docs/algorithm.md sections 3 and
         10): ``"auto"`` (the default: scale-aware and adaptive, nothing to tune) or a fixed
-        number >= 0 (``0`` is the paper's literal algorithm); the default of the generated
-        runtime and of ``dopus-gen sil`` and ``converge``.
+        number >= 0 (``0`` is the paper's literal algorithm).
 
         ``offline_guess=True``: the code generator solves the NLP at the initial state
         offline (IPOPT) and carries the primal-dual solution as static data, so the
         controller can start warm; ``initial_guess`` stays the declared (cold) guess.
         """
-        from ..settings import SettingError, validate
+        from ..settings import FILE_SETTINGS, SettingError, validate
 
-        given = dict(hessian=hessian, regularization=regularization, reg_eps=reg_eps, M=M,
-                     offline_guess=offline_guess, lm=lm, cost_hessian=cost_hessian, real=real)
         opts = dict(self._options)
         declared = set(self._declared)
-        for name, value in given.items():
+        for name, value in values.items():
+            if name not in FILE_SETTINGS:
+                raise OcpError(f"options: unknown option {name!r}; the options are {', '.join(FILE_SETTINGS)}")
             if value is None:
                 continue
             try:
@@ -870,7 +864,7 @@ class Ocp:
             terminal=tuple(Rows(r, readonly(lb), readonly(ub)) for r, lb, ub in self._term_con))
         return OcpSpec(name=self.name, model=model, cost=cost, constraints=constraints,
                        horizon=HorizonSpec(N=self._N, dt=self._dt),
-                       options=OptionsSpec(**self._options), x0=readonly(x0),
+                       options=OptionsSpec.of(self._options, self._declared), x0=readonly(x0),
                        guess=GuessSpec(x=readonly(gx), u=readonly(gu)),
                        scenario=ScenarioPart(disturbance=self._disturbance, closed_loop=closed_loop))
 

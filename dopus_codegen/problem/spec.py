@@ -18,10 +18,16 @@ path constraints on stages ``0..N-1``; a terminal row with ``lb == ub`` is an eq
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, Optional, Tuple, Union
+from typing import Any, Callable, Dict, Optional, Tuple
 
 import casadi as ca
 import numpy as np
+
+from ..settings import DEFAULTS, FILE_SETTINGS, Settings
+
+
+class OcpError(ValueError):
+    """A mistake in the OCP description; the message names the offending item."""
 
 __all__ = [
     "readonly", "Variable", "ModelSpec", "LeastSquares", "CostSpec", "Rows", "ConstraintSpec",
@@ -174,21 +180,25 @@ class HorizonSpec:
 
 @dataclass(frozen=True)
 class OptionsSpec:
-    """The solver defaults declared by ``Ocp.options`` (the generated solver and the
-    commands start from them)."""
-    hessian: str
-    regularization: str
-    reg_eps: float
-    M: int
-    offline_guess: bool
-    lm: Union[float, str]       # a fixed term >= 0 or "auto" (docs/algorithm.md section 10)
-    cost_hessian: str = "fresh"
+    """The OCP file's ``options(...)``: the settings of its solver (one
+    :class:`~dopus_codegen.settings.Settings`: the generated solver's defaults, and those of
+    every command and handle built from the file), the generation options ``real`` and
+    ``offline_guess``, and the names the file gave (the rest are defaults)."""
+    settings: Settings
     real: str = "double"        # real-number type of the generated C: "double" or "float"
+    offline_guess: bool = False
+    declared: frozenset = frozenset()
+
+    @classmethod
+    def of(cls, values: Dict[str, Any], declared=()) -> "OptionsSpec":
+        """The options of ``values`` (checked, any of :data:`~dopus_codegen.settings.FILE_SETTINGS`)."""
+        return cls(settings=Settings.of(values), real=values.get("real", DEFAULTS["real"]),
+                   offline_guess=values.get("offline_guess", DEFAULTS["offline_guess"]), declared=frozenset(declared))
 
     def as_dict(self) -> Dict[str, Any]:
-        return {"hessian": self.hessian, "regularization": self.regularization,
-                "reg_eps": self.reg_eps, "M": self.M, "offline_guess": self.offline_guess,
-                "lm": self.lm, "cost_hessian": self.cost_hessian, "real": self.real}
+        """Every option of the file by name (declared or default)."""
+        solver = self.settings.as_dict()
+        return {name: solver[name] if name in solver else getattr(self, name) for name in FILE_SETTINGS}
 
 
 @dataclass(frozen=True)

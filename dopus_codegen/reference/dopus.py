@@ -27,12 +27,13 @@ Usage (the backend protocol of section 7)::
 from __future__ import annotations
 
 import time
+from typing import Optional
 
 import numpy as np
 
 from .. import settings, vocabulary
 from ..errors import DopusError, qp_status_code as status_code_qp, status_code
-from ..settings import SettingError
+from ..settings import SettingError, Settings, of_problem as settings_of_problem
 from .kkt import eval_stages, kkt_measure, node_parameters
 from ..problem.checks import describe_qp_row
 from .qp import QPError, free_initial_state, solve_qp_reference
@@ -115,11 +116,11 @@ def _arr(v, shape, what):
     return a.reshape(shape)
 
 
-def _setting(check, *args):
+def _setting(check, *args, **kwargs):
     """A value checked by :mod:`dopus_codegen.settings`; a bad one is DopusError (invalid
     argument), as the C backend reports it."""
     try:
-        return check(*args)
+        return check(*args, **kwargs)
     except SettingError as exc:
         raise DopusError.of("invalid_argument", str(exc)) from None
 
@@ -130,41 +131,44 @@ class ReferenceDopus:
     Extra to the protocol: :meth:`qp_of_current` (the QP the next ``feedback`` solves,
     in the :mod:`dopus_codegen.reference.qp` format), ``last_qp`` / ``last_qp_solution`` (the
     QP solved by the last ``feedback`` and its solution), ``status`` and
-    ``qp_infeasible_row`` (the row that makes the last QP infeasible, as ``CSolver`` gives it).
+    ``qp_infeasible_row`` (the row that makes the last QP infeasible, as ``Solver`` gives it).
     """
 
-    def __init__(self, disc, M: int = settings.DEFAULTS["M"], mode: str = settings.DEFAULTS["mode"],
-                 hessian: str = settings.DEFAULTS["hessian"],
-                 regularization: str = settings.DEFAULTS["regularization"],
-                 reg_eps: float = settings.DEFAULTS["reg_eps"], qp_tol: float = settings.DEFAULTS["qp_tol"],
-                 cost_hessian: str = settings.DEFAULTS["cost_hessian"], lm: float = settings.DEFAULTS["lm"],
-                 qp_max_iter=None):
+    def __init__(self, disc, settings: Optional[Settings] = None, **changes):
+        """``settings``: the solver's settings (None: the OCP file's ``options(...)`` of
+        ``disc``); ``changes``: settings changed from them by name (``M=3``; None: not given).
+        A QP tolerance of None is that of double precision."""
         self.disc = disc
-        self.cost_hessian = _setting(settings.check, "cost_hessian", cost_hessian)
+        if settings is None:
+            settings = settings_of_problem(disc)
+        elif not isinstance(settings, Settings):
+            raise DopusError.of("invalid_argument", f"settings must be a Settings, got {settings!r}")
+        s = _setting(settings.replace, **changes)
+        self.cost_hessian = s.cost_hessian
         self.N, self.nx, self.n_u, self.ng = disc.N, disc.nx, disc.nu, disc.ng
         self.nr, self.ne, self.np = disc.nr, disc.ne, disc.np
         self.nw = self.nx + self.n_u
-        self.hessian = _setting(settings.check, "hessian", hessian)
+        self.hessian = s.hessian
         self.has_gn = (getattr(disc, "stage_hess_gn", None) is not None
                        and getattr(disc, "term_hess_gn", None) is not None)
         if self.hessian != "exact" and not self.has_gn:
             raise DopusError.of("invalid_argument", "hessian='gauss-newton' needs a least-squares stage cost "
                                 "(the OCP declares no stage_least_squares)")
-        if cost_hessian == "fresh" and self._stage_hess_cost is None:
+        if s.cost_hessian == "fresh" and self._stage_hess_cost is None:
             raise DopusError.of("invalid_argument", "cost_hessian='fresh' needs the stage-cost Hessian function "
                                 "of the problem (Discretized.stage_hess_cost); use cost_hessian='stored'")
-        self.regularization = _setting(settings.check, "regularization", regularization)
-        self.reg_eps = _setting(settings.positive, "reg_eps", reg_eps)
-        self.qp_tol = _setting(settings.qp_tolerance, qp_tol)
+        self.regularization = s.regularization
+        self.reg_eps = s.reg_eps
+        self.qp_tol = s.qp_tol_of("double")
         self.lm, self.lm_auto, self.lm_scale, self._lm_kkt_prev = 0.0, False, 1.0, -1.0
         self._lm_uncapped = -1.0
-        self.set_levenberg_marquardt(lm)
+        self.set_levenberg_marquardt(s.lm)
         self.qp_max_iter = None
-        if qp_max_iter is not None:
-            self.set_qp_max_iter(qp_max_iter)
+        if s.qp_max_iter is not None:
+            self.set_qp_max_iter(s.qp_max_iter)
         self.qp_status = 0
-        self.set_M(M)
-        self.set_mode(mode)
+        self.set_M(s.M)
+        self.set_mode(s.mode)
         self.lbx, self.ubx = np.asarray(disc.lbx, float), np.asarray(disc.ubx, float)
         self.lbu, self.ubu = np.asarray(disc.lbu, float), np.asarray(disc.ubu, float)
         self.lg, self.ug = np.asarray(disc.lg, float).reshape(self.ng), np.asarray(disc.ug, float).reshape(self.ng)
@@ -221,9 +225,17 @@ class ReferenceDopus:
         return self._fns()[2]
 
     # ------------------------------------------------------------------ settings
+    @property
+    def settings(self) -> Settings:
+        """The settings it runs with (``M`` at most N-1)."""
+        return Settings(M=self.M, hessian=self.hessian, regularization=self.regularization, reg_eps=self.reg_eps,
+                        cost_hessian=self.cost_hessian, lm="auto" if self.lm_auto else self.lm, qp_tol=self.qp_tol,
+                        qp_max_iter=self.qp_max_iter, mode=self.mode)
+
     def set_M(self, M: int) -> None:
-        """Values above N-1 mean the full RTI (N-1), as in the C runtime."""
-        self.M = min(_setting(settings.count, "M", M), self.N - 1)
+        """Values above N-1 mean the full RTI (N-1), as in the C runtime
+        (:func:`dopus_codegen.settings.stages`)."""
+        self.M = _setting(settings.stages, M, self.N)
 
     def set_levenberg_marquardt(self, lm) -> None:
         """``"auto"``: the automatic, adaptive term of section 10; a number >= 0: fixed."""
@@ -464,7 +476,7 @@ class ReferenceDopus:
     def qp_infeasible_row(self):
         """When the last QP was infeasible: the row of the OCP with the largest multiplier of
         its infeasibility certificate (:func:`dopus_codegen.reference.qp.qp_infeasible_row`),
-        as ``CSolver.qp_infeasible_row`` gives it; else None."""
+        as ``Solver.qp_infeasible_row`` gives it; else None."""
         if self.qp_status != status_code_qp("primal_infeasible"):
             return None
         return getattr(self, "_infeasible_row", None)

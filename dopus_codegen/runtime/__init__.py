@@ -1,1 +1,1 @@
-"""The Python handle of a generated solver (cffi): CSolver."""
+"""The Python handle of a generated solver (cffi): Solver."""

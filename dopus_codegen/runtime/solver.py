@@ -1,18 +1,25 @@
-"""The Python handle of a generated C solver (cffi, ABI mode).
+"""The Python handle of a generated C solver (cffi, ABI mode): :class:`Solver`.
 
-:class:`CSolver` implements the backend protocol of docs/algorithm.md section 7, so the
-convergence study (``dopus-gen converge --backend c``) and the software-in-the-loop runs
-drive the generated C exactly as they drive :class:`~dopus_codegen.reference.dopus.ReferenceDopus`::
+The way to drive a generated solver from Python. :class:`Solver` implements the backend
+protocol of docs/algorithm.md section 7, so the convergence study (``dopus-gen converge
+--backend c``) and the software-in-the-loop runs drive the generated C exactly as they
+drive :class:`~dopus_codegen.reference.dopus.ReferenceDopus`::
 
-    solver = CSolver(disc, M=1)                 # generate + build into a cache, then load
-    solver.init(xhat0)                          # the OCP file's guess
+    from dopus_codegen import Solver
+
+    solver = Solver.load("out/robot_arm")       # a generated folder: its generated defaults
+    solver.init_nominal(xhat0)                  # or init(xhat0, guess)
     u0 = solver.feedback(xhat0); solver.prepare()
 
-``CSolver(disc, lib_dir=...)`` or :meth:`CSolver.from_dir` load an already generated folder
-(``dopus-gen generate`` + ``dopus-gen build``). Without ``lib_dir`` the folder is generated
-into the build cache (:mod:`dopus_codegen.codegen.cache`: ``$DOPUS_CACHE_DIR``, default
-``~/.cache/dopus-codegen``) keyed by a hash of the problem, so an unchanged problem is
-neither regenerated nor recompiled; it says on stderr when it generates or compiles.
+:meth:`Solver.load` opens a folder of ``dopus-gen generate`` (built first if needed) with
+the settings generated into it (the OCP file's ``options(...)``, recorded in the folder's
+``<name>_meta.json``); ``Solver(disc)`` generates and builds the problem of an OCP file into
+the build cache (:mod:`dopus_codegen.codegen.cache`: ``$DOPUS_CACHE_DIR``, default
+``~/.cache/dopus-codegen``, keyed by a hash of the problem, so an unchanged problem is
+neither regenerated nor recompiled; it says on stderr when it generates or compiles) with
+the file's settings. Either takes a :class:`~dopus_codegen.settings.Settings` instead, and
+settings changed by name: ``Solver.load(folder, M=3)``; :attr:`Solver.settings` reads them
+back.
 
 numpy in, numpy out: every array is checked for shape, dtype and finiteness before it
 reaches C; a bad input raises :class:`DopusError` (which is also a ``ValueError``) naming
@@ -31,9 +38,9 @@ import numpy as np
 
 from .. import settings, vocabulary
 from ..errors import DopusError, status_code, qp_failure_text
-from ..settings import SettingError
+from ..settings import SettingError, Settings, of_problem as settings_of_problem
 
-__all__ = ["CSolver", "DopusError", "STATUS", "QP_STATUS", "PHASES", "load_library", "build_for"]
+__all__ = ["Solver", "CSolver", "DopusError", "STATUS", "QP_STATUS", "PHASES", "load_library", "build_for"]
 
 #: C status codes by name (enum dopus_status of runtime_c/dopus_solver.h).
 STATUS = vocabulary.status().codes
@@ -106,7 +113,7 @@ def load_library(folder) -> tuple:
     import cffi
 
     from ..codegen.build import build
-    from ..codegen.generate import read_meta
+    from ..codegen.folder import read_meta
 
     folder = Path(folder)
     res = build(folder)
@@ -135,13 +142,13 @@ def _info_property(field: str, kind=int, doc: Optional[str] = None) -> property:
 
 def _settings_property(field: str, kind=int, doc: Optional[str] = None) -> property:
     """A read-only property: ``kind(settings.field)`` of ``<name>_get_settings``."""
-    return property(lambda self: kind(getattr(self._settings(), field)), doc=doc)
+    return property(lambda self: kind(getattr(self._c_settings(), field)), doc=doc)
 
 
 def _setting_property(name: str) -> property:
     """A read-only property: the value of the setting ``name`` (a field of
     ``<name>_settings``) by its name in :mod:`dopus_codegen.settings`."""
-    return property(lambda self: settings.value_of(name, getattr(self._settings(), name)))
+    return property(lambda self: settings.value_of(name, getattr(self._c_settings(), name)))
 
 
 def _array_property(fname: str, shape, doc: Optional[str] = None) -> property:
@@ -151,27 +158,35 @@ def _array_property(fname: str, shape, doc: Optional[str] = None) -> property:
 
 
 # ---------------------------------------------------------------------------------- handle
-class CSolver:
+class Solver:
     """The generated C solver behind the backend protocol of docs/algorithm.md section 7.
+
+    ``Solver(disc)``: the problem of an OCP file (``build_functions(load_ocp(path))``),
+    generated and built into the build cache, with the file's settings;
+    ``Solver.load(folder)``: a generated folder, with its generated settings. ``settings``
+    replaces those settings whole, ``changes`` change some by name (``M=3``; None: not
+    given); a bad value raises :class:`DopusError` (invalid argument) naming the setting.
 
     Read-only state after each call: ``x (N+1,nx)``, ``u (N,nu)``, ``lam (N+1,nx)``,
     ``mu_g (N,ng)``, ``mu_b (N,nw)``, ``mu_bN (nx,)``, ``mu_r (nr,)``, ``nu (ne,)``,
     ``rho (N,)``, ``recomputed`` (sorted stage list), ``qp_iterations``, ``qp_status``,
     ``status``, ``timings`` (seconds per phase of the last call that ran it, see
-    :data:`PHASES`, plus ``prepare`` = the sum of its phases), ``ring_head``.
+    :data:`PHASES`, plus ``prepare`` = the sum of its phases), ``ring_head``, ``settings``.
     """
 
-    def __init__(self, disc=None, M: int = settings.DEFAULTS["M"], mode: str = settings.DEFAULTS["mode"],
-                 hessian: str = settings.DEFAULTS["hessian"],
-                 regularization: str = settings.DEFAULTS["regularization"],
-                 reg_eps: float = settings.DEFAULTS["reg_eps"], qp_tol: Optional[float] = None,
-                 lib_dir=None, qp_max_iter: Optional[int] = None,
-                 cost_hessian: str = settings.DEFAULTS["cost_hessian"],
-                 lm: Optional[float] = settings.DEFAULTS["lm"], qp_warm_start: Optional[bool] = None,
-                 real: Optional[str] = None):
+    def __init__(self, disc=None, settings: Optional[Settings] = None, *, lib_dir=None,
+                 real: Optional[str] = None, qp_warm_start: Optional[bool] = None, **changes):
+        what = getattr(disc, "name", None) or "solver"
+        if settings is not None and not isinstance(settings, Settings):
+            raise DopusError.of("invalid_argument", f"{what}: settings must be a Settings, got {settings!r}")
+        try:
+            Settings().replace(**changes)        # a bad name or value fails before any build
+        except SettingError as exc:
+            raise DopusError.of("invalid_argument", f"{what}: {exc}") from None
+        opened_on_folder = lib_dir is not None
         if lib_dir is None:
             if disc is None:
-                raise ValueError("CSolver needs a Discretized problem or lib_dir (a generated folder)")
+                raise ValueError("Solver needs a Discretized problem or lib_dir (a generated folder)")
             lib_dir = build_for(disc, real=real)
         self.lib_dir = Path(lib_dir)
         self._ffi, self._lib, self.meta = load_library(self.lib_dir)
@@ -205,24 +220,53 @@ class CSolver:
         self._s = self._ffi.cast(f"{self.name}_solver *", self._mem)
         self._c("setup")(self._s, self._ffi.NULL)   # the generated settings (the OCP file's options)
         self.status = STATUS_OK
-        if qp_tol is not None:  # None: the generated default of the real type (settings.QP_TOL_DEFAULT)
-            self.set_qp_tol(qp_tol)
-        if qp_max_iter is not None:
-            self.set_qp_max_iter(qp_max_iter)
-        self.set_M(M)
-        self.set_mode(mode)
-        self.set_hessian(hessian)
-        self.set_regularization(regularization, reg_eps)
-        self.set_cost_hessian(cost_hessian)
-        if lm is not None:  # None: the generated default (the OCP file's options(lm=...))
-            self.set_levenberg_marquardt(lm)
+        if settings is None:
+            settings = self._generated_settings() if opened_on_folder else settings_of_problem(disc)
+        self.set_settings(settings.replace(**changes))
         if qp_warm_start is not None:  # None: the runtime's default (on)
             self.set_qp_warm_start(qp_warm_start)
 
     @classmethod
-    def from_dir(cls, path, disc=None, **settings) -> "CSolver":
-        """Load an already generated (and built, or buildable) folder."""
-        return cls(disc, lib_dir=path, **settings)
+    def load(cls, folder, settings: Optional[Settings] = None, **changes) -> "Solver":
+        """The solver of a folder generated by ``dopus-gen generate`` (built first if
+        needed), with the settings generated into it (the OCP file's ``options(...)``),
+        ``settings`` instead, or those changed by name (``M=3``)."""
+        return cls(None, settings, lib_dir=folder, **changes)
+
+    @classmethod
+    def from_dir(cls, path, disc=None, settings: Optional[Settings] = None, **changes) -> "Solver":
+        """Load an already generated (and built, or buildable) folder; ``disc`` (the problem
+        it was generated from) names the rows of an infeasible QP."""
+        return cls(disc, settings, lib_dir=path, **changes)
+
+    def _generated_settings(self) -> Settings:
+        """The folder's generated settings: its meta file's record of the OCP file's
+        options, else (a folder generated before the record) the runtime's defaults."""
+        recorded = self.meta.get("settings")
+        return Settings.of(recorded) if recorded is not None else self.settings
+
+    def set_settings(self, s: Settings) -> None:
+        """Set every setting of ``s`` (a QP tolerance or iteration limit of None keeps the
+        solver's own)."""
+        if not isinstance(s, Settings):
+            self._bad(f"settings must be a Settings, got {s!r}")
+        if s.qp_tol is not None:
+            self.set_qp_tol(s.qp_tol)
+        if s.qp_max_iter is not None:
+            self.set_qp_max_iter(s.qp_max_iter)
+        self.set_M(s.M)
+        self.set_mode(s.mode)
+        self.set_hessian(s.hessian)
+        self.set_regularization(s.regularization, s.reg_eps)
+        self.set_cost_hessian(s.cost_hessian)
+        self.set_levenberg_marquardt(s.lm)
+
+    @property
+    def settings(self) -> Settings:
+        """The settings the solver runs with (``M`` as the runtime holds it: at most N-1)."""
+        return Settings(M=self.M, hessian=self.hessian, regularization=self.regularization, reg_eps=self.reg_eps,
+                        cost_hessian=self.cost_hessian, lm="auto" if self.lm_auto else self.lm, qp_tol=self.qp_tol,
+                        qp_max_iter=self.qp_max_iter, mode=self.mode)
 
     # ------------------------------------------------------------------ plumbing
     def _c(self, fname: str):
@@ -237,7 +281,7 @@ class CSolver:
         """A copy of the whole solver struct (settings and iterate included)."""
         return bytes(self._ffi.buffer(self._mem, self.sizeof))
 
-    def copy_state_from(self, other: "CSolver") -> None:
+    def copy_state_from(self, other: "Solver") -> None:
         """Copy the whole solver state of another handle on the same library, settings and
         iterate included (the two then face the same QP)."""
         if other.lib_dir != self.lib_dir or other.sizeof != self.sizeof:
@@ -258,7 +302,7 @@ class CSolver:
             info = self._info()
             qp_status = int(info.qp_status)
             msg += "; " + qp_failure_text(self.enums["dopus_qp_status"].name(qp_status), int(info.qp_iterations),
-                                          int(self._settings().qp_max_iter), qp_status)
+                                          self.qp_max_iter, qp_status)
             row = self.qp_infeasible_row
             if row is not None:
                 from ..problem.checks import describe_qp_row
@@ -333,7 +377,7 @@ class CSolver:
         return self._setting(settings.positive, what, v)
 
     # ------------------------------------------------------------------ settings
-    def _settings(self):
+    def _c_settings(self):
         """The C settings struct (``<name>_get_settings``), a fresh copy."""
         st = self._ffi.new(f"{self.name}_settings *")
         self._c("get_settings")(self._s, st)
@@ -349,7 +393,7 @@ class CSolver:
         """``<name>_update_settings`` with the current settings and ``fields`` changed, called
         without the checks of the Python setters; returns the C status (for tests of the C
         side's own checks)."""
-        st = self._settings()
+        st = self._c_settings()
         for k, v in fields.items():
             setattr(st, k, v)
         return int(self._c("update_settings")(self._s, st))
@@ -359,9 +403,9 @@ class CSolver:
 
     def set_M(self, M: int) -> None:
         """Stages re-linearised per iteration; values above N-1 mean the full RTI (N-1),
-        as in the reference."""
-        M = self._setting(settings.count, "M", M)
-        self._update(f"M={M!r}", M=int(min(M, self.N - 1)))
+        as in the reference (:func:`dopus_codegen.settings.stages`)."""
+        stages = self._setting(settings.stages, M, self.N)
+        self._update(f"M={M!r}", M=stages)
 
     def set_mode(self, mode: str) -> None:
         self._update(f"mode={mode!r}", mode=self._setting(settings.code, "mode", mode))
@@ -390,7 +434,7 @@ class CSolver:
         10; it restarts from 0), or a fixed number >= 0."""
         v = self._setting(settings.levenberg_marquardt, lm)
         if v == settings.LM_AUTO:
-            if self._settings().lm_auto:   # already on: restart it (off, then on)
+            if self._c_settings().lm_auto:   # already on: restart it (off, then on)
                 self._update("lm='auto'", lm_auto=0, lm=0.0)
             self._update("lm='auto'", lm_auto=1)
         else:
@@ -648,5 +692,9 @@ class CSolver:
                                "True if the timings measure time (False: no clock on this platform, they read 0).")
 
     def __repr__(self) -> str:
-        return (f"CSolver({self.name!r}, N={self.N}, M={self.M}, mode={self.mode!r}, "
+        return (f"Solver({self.name!r}, N={self.N}, M={self.M}, mode={self.mode!r}, "
                 f"hessian={self.hessian!r}, regularization={self.regularization!r}, lib_dir='{self.lib_dir}')")
+
+
+#: The name the handle had before it was public; the same class.
+CSolver = Solver

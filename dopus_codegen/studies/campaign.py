@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import settings
+from .draws import campaign_events, campaign_plant, draw
 from .records import json_ready
 
 __all__ = ["CampaignError", "Job", "draw", "run_one", "judge", "read_results", "run_campaign", "format_report",
@@ -92,64 +93,6 @@ def _fingerprint(ocp_text: str, backend: str, solver: dict, duration: float, mis
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 
-# --------------------------------------------------------------------------- the draw of a run
-def draw(closed_loop, mismatch: dict, index: int, seed: int) -> dict:
-    """The random draw of run ``index`` for ``seed`` (a pure function of both): the plant
-    quantities, the initial state and the pushes (time, state offsets). The random stream is
-    ``numpy.random.default_rng([seed, index])``; one number is drawn per declared plant
-    quantity whether it is mismatched or not, so the draws of the other quantities do not
-    depend on which ones are."""
-    cs = closed_loop.campaign
-    rng = np.random.default_rng([int(seed), int(index)])
-    quantities = {}
-    for name, nominal in closed_loop.quantities.items():
-        u = rng.uniform(-1.0, 1.0)
-        quantities[name] = float(nominal) * (1.0 + float(mismatch.get(name, 0.0)) * u)
-    x0 = np.array(closed_loop.x0, dtype=float).reshape(-1)
-    for rows, widths in cs.initial:
-        x0[list(rows)] += np.asarray(widths) * rng.uniform(-1.0, 1.0, len(rows))
-    n = int(rng.integers(cs.push_count[0], cs.push_count[1] + 1))
-    times = np.sort(rng.uniform(cs.push_window[0], cs.push_window[1], n))
-    pushes = []
-    for t in times:
-        kick = np.zeros(x0.size)
-        for rows, widths in cs.push_kick:
-            kick[list(rows)] += np.asarray(widths) * rng.uniform(-1.0, 1.0, len(rows))
-        pushes.append({"time": float(t), "kick": kick.tolist()})
-    return {"quantities": quantities, "x0": x0.tolist(), "pushes": pushes}
-
-
-class _Kick:
-    """The state map of a push: x + kick (a picklable callable for :class:`Event`)."""
-
-    def __init__(self, kick):
-        self.kick = np.asarray(kick, dtype=float)
-
-    def __call__(self, x):
-        return np.asarray(x, dtype=float) + self.kick
-
-
-def campaign_events(d: dict) -> list:
-    """The pushes of a draw as scenario events."""
-    from ..problem.ocp import Event
-
-    return [Event(p["time"], _Kick(p["kick"]), f"push {k + 1}") for k, p in enumerate(d["pushes"])]
-
-
-def campaign_plant(disc, d: dict):
-    """``(Plant, parameters)`` of a draw: the scenario's plant with the drawn quantities."""
-    from .plant import Plant
-
-    spec = disc.scenario.closed_loop
-    n_p = int(disc.np)      # the parameters of node 0, as the closed loop of sil uses them
-    p = np.asarray(disc.p0, dtype=float).reshape(-1, n_p)[0].copy() if n_p else np.zeros(0)
-    if spec.plant_ode_q is None:
-        return Plant(spec.plant_ode, float(disc.dt), p.size, reltol=1e-10, abstol=1e-10), p
-    q = np.array([d["quantities"][n] for n in spec.quantities], dtype=float)
-    return Plant(spec.plant_ode_q, float(disc.dt), p.size + q.size, reltol=1e-10, abstol=1e-10), \
-        np.concatenate([p, q])
-
-
 # --------------------------------------------------------------------------- one run (in a worker)
 _STATE: dict = {}
 _GUESS: dict = {}       # the offline solution of the last OCP file, in the calling process
@@ -178,14 +121,13 @@ def _worker_state(job: Job):
 def _backend(job: Job, disc):
     from .sil import make_backend
 
-    kw = dict(job.solver)
+    s = settings.Settings.of(job.solver)
     if job.backend == "c":
-        from ..runtime.solver import CSolver, build_for
+        from ..runtime.solver import Solver, build_for
 
         lib = Path(job.lib_dir) if job.lib_dir and Path(job.lib_dir).is_dir() else build_for(disc)
-        kw = {k: v for k, v in kw.items() if v is not None}
-        return CSolver(disc, lib_dir=lib, mode="receding", **kw)
-    return make_backend(disc, job.backend, **kw)
+        return Solver(disc, s.replace(mode="receding"), lib_dir=lib)
+    return make_backend(disc, job.backend, s)
 
 
 def run_one(job: Job, index: int, seed: int) -> dict:
@@ -199,7 +141,7 @@ def run_one(job: Job, index: int, seed: int) -> dict:
     t0 = time.perf_counter()
     run = run_closed_loop(disc, backend=job.backend, backend_obj=st["backend"], guess=job.guess,
                           duration=job.duration, xhat0=d["x0"], events=campaign_events(d),
-                          plant=campaign_plant(disc, d), M=job.solver["M"], label=f"run {index}")
+                          plant=campaign_plant(disc, d), settings=settings.Settings.of(job.solver), label=f"run {index}")
     wall = time.perf_counter() - t0
     return condense(run, d, index, seed, job.on_path, wall)
 
@@ -304,7 +246,8 @@ def connect(workers: int | None, scheduler: str | None, timeout: float = 5.0):
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - a dependency of the package
-        raise CampaignError(f"dask.distributed is not installed ({exc}); pip install 'dask[distributed]'") from None
+        raise CampaignError(f"dask.distributed is not installed ({exc}): pip install 'dopus-codegen[campaign]', "
+                            "or run the campaign in this process with --workers 0") from None
     if scheduler:
         try:
             return Client(scheduler, timeout=f"{timeout}s"), None
@@ -379,8 +322,8 @@ class _Progress:
 def _resolve(ocp, cli: dict):
     """Solver and campaign settings: the flags, else the OCP file, else the defaults."""
     declared = ocp.declared_options()
-    names = settings.SOLVER_SETTINGS + ("qp_tol", "qp_max_iter")
-    solver, s_src = settings.resolve(declared, {k: cli.get(k) for k in names}, names=names)
+    s, s_src = settings.Settings.resolve(declared, {k: cli.get(k) for k in settings.SOLVER_SETTINGS})
+    solver = {k: v for k, v in s.as_dict().items() if k != "mode"}
     spec = ocp.validate()
     sc = spec.scenario.closed_loop
     if sc is None:
@@ -688,7 +631,7 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
             dr = draw(disc.scenario.closed_loop, job.mismatch, r["run"], r["seed"])
             runs.append(run_closed_loop(disc, backend=job.backend, backend_obj=st["backend"], guess=job.guess,
                                         duration=job.duration, xhat0=dr["x0"], events=campaign_events(dr),
-                                        plant=campaign_plant(disc, dr), M=job.solver["M"],
+                                        plant=campaign_plant(disc, dr), settings=settings.Settings.of(job.solver),
                                         label=f"run {r['run']}"))
         title = f"{rep['ocp']}: the {len(runs)} worst runs of the campaign"
         for name, fn in (("campaign_worst_signals.png", plot_signals), ("campaign_worst_plane.png", plot_plane)):

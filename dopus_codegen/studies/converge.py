@@ -49,6 +49,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from .. import settings
+from .. import settings as settings_mod
 from .records import json_ready
 
 __all__ = ["StartPoint", "make_start", "run_study", "run_converge_cli", "backend_factory",
@@ -103,22 +104,20 @@ def backend_factory(backend: str) -> Callable:
         return ReferenceDopus
     if backend == "c":
         try:
-            from ..runtime.solver import CSolver
+            from ..runtime.solver import Solver
         except ImportError as exc:
-            raise RuntimeError("backend 'c' is not available: dopus_codegen.runtime.solver.CSolver "
+            raise RuntimeError("backend 'c' is not available: dopus_codegen.runtime.solver.Solver "
                                f"cannot be imported ({exc})") from None
-        return CSolver
+        return Solver
     raise ValueError(f"backend must be 'reference' or 'c', got {backend!r}")
 
 
 def _resolve_M(m, N: int) -> int:
-    if m == "full":
-        return N - 1
-    if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 0:
-        raise ValueError(f"M must be a non-negative integer or 'full', got {m!r}")
-    if m > N - 1:
-        raise ValueError(f"M = {m} exceeds N-1 = {N - 1} (use 'full' for the full RTI)")
-    return int(m)
+    """An M of the study's list: ``"full"`` is N-1, a value above N-1 is an error."""
+    try:
+        return settings.stages(m, N, strict=True)
+    except settings.SettingError as exc:
+        raise ValueError(str(exc)) from None
 
 
 def objective(disc, x, u, p=None) -> float:
@@ -140,23 +139,24 @@ def iterations_to(kkt: list, tol: float) -> Optional[int]:
     return None
 
 
-def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regularization: str = "none",
-              reg_eps: float = 1e-4, backend_factory: Optional[Callable] = None,
-              backend_name: Optional[str] = None, progress: Optional[Callable] = None,
-              cost_hessian: str = "fresh", lm="auto", qp_tol: Optional[float] = None,
-              qp_max_iter: Optional[int] = None, tol: float = 1e-8) -> dict:
+def run_study(disc, m_list, iters: int, start, settings: Optional["settings_mod.Settings"] = None,
+              backend_factory: Optional[Callable] = None, backend_name: Optional[str] = None,
+              progress: Optional[Callable] = None, tol: float = 1e-8, **changes) -> dict:
     """Run the study; return the JSON structure of the module docstring.
 
     ``start``: a :class:`StartPoint` or ``"cold"`` / ``"warm"`` (see :func:`make_start`).
-    ``backend_factory(disc, M=, mode="fixed", hessian=, regularization=, reg_eps=,
-    cost_hessian=)`` builds a backend (default: :class:`~dopus_codegen.reference.dopus.ReferenceDopus`).
+    ``settings``: the solver's settings (None: the OCP file's ``options(...)`` of ``disc``),
+    ``changes``: settings changed from them by name (``hessian="exact"``; None: not given);
+    every run takes them with its ``M`` in fixed mode.
+    ``backend_factory(disc, settings=...)`` builds a backend (default:
+    :class:`~dopus_codegen.reference.dopus.ReferenceDopus`).
     ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
-    ``qp_tol``, ``qp_max_iter``: settings of the backend's QP solver (None: its own).
     ``tol``: the KKT measure at which a run counts as converged.
     """
     from ..errors import DopusError
     from ..reference.dopus import ReferenceDopus
 
+    s = (settings_mod.of_problem(disc) if settings is None else settings).replace(**changes)
     if isinstance(start, str):
         start = make_start(disc, start)
     if backend_factory is None:
@@ -164,15 +164,13 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
         backend_name = backend_name or "reference"
     if isinstance(iters, bool) or not isinstance(iters, (int, np.integer)) or iters < 1:
         raise ValueError(f"iters must be a positive integer, got {iters!r}")
-    settings.check("cost_hessian", cost_hessian)
     Ms = [_resolve_M(m, disc.N) for m in m_list]
     if not Ms:
         raise ValueError("the list of M values is empty")
     runs = []
     last_iterates = {}
     for run_index, M in enumerate(Ms):
-        be = backend_factory(disc, M=M, mode="fixed", hessian=hessian, regularization=regularization,
-                             reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm, **_qp_kwargs(qp_tol, qp_max_iter))
+        be = backend_factory(disc, settings=s.replace(M=M, mode="fixed"))
         rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "status": None, "message": None}
 
         def record():
@@ -208,8 +206,9 @@ def run_study(disc, m_list, iters: int, start, hessian: str = "exact", regulariz
         last_iterates[M] = (np.array(be.x, dtype=float), np.array(be.u, dtype=float))
     return {
         "problem": disc.name, "N": int(disc.N), "backend": backend_name or getattr(backend_factory, "__name__", "custom"),
-        "start": start.label, "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
-        "cost_hessian": cost_hessian, "lm": lm if isinstance(lm, str) else float(lm), "qp_tol": qp_tol, "qp_max_iter": qp_max_iter,
+        "start": start.label, "hessian": s.hessian, "regularization": s.regularization, "reg_eps": float(s.reg_eps),
+        "cost_hessian": s.cost_hessian, "lm": s.lm if isinstance(s.lm, str) else float(s.lm), "qp_tol": s.qp_tol,
+        "qp_max_iter": s.qp_max_iter,
         "tol": float(tol), "runs": runs,
         "solution": _solution(disc, runs, last_iterates),
     }
@@ -223,15 +222,6 @@ CONVERGED, NOT_CONVERGED, FAILED = "converged", "not converged", "failed"
 def failed_runs(study: dict) -> list:
     """The runs of a study whose status is ``failed``."""
     return [r for r in study["runs"] if r["status"] == FAILED]
-
-
-def _qp_kwargs(qp_tol, qp_max_iter) -> dict:
-    out = {}
-    if qp_tol is not None:
-        out["qp_tol"] = qp_tol
-    if qp_max_iter is not None:
-        out["qp_max_iter"] = qp_max_iter
-    return out
 
 
 def _infeasibility_note(disc, exc, xhat) -> str:
@@ -319,7 +309,7 @@ def _cli_M_list(m_list, N: int, is_default: bool = False) -> list:
     """Resolve the CLI's M values. An explicit value above N-1 is an error; the default list
     (full,5,1,0) drops entries a short horizon cannot have."""
     if is_default:
-        m_list = [m for m in m_list if m == "full" or m <= N - 1]
+        m_list = [m for m in m_list if m == "full" or settings.stages(m, N) == m]
     out = []
     for m in m_list:
         M = _resolve_M(m, N)
@@ -328,31 +318,30 @@ def _cli_M_list(m_list, N: int, is_default: bool = False) -> list:
     return out
 
 
-def effective_settings(declared: dict, m_list, **cli):
-    """The settings of a study: the command line's (``cli``, None = not given) over the OCP
-    file's ``declared`` options over the defaults; the M list is the command line's, else
-    the file's M, else :data:`DEFAULT_M_LIST`. Returns ``(values, sources, m_list,
-    m_is_default)``."""
-    values, sources = settings.resolve(declared, dict(cli, M=None),
-                                       names=settings.SOLVER_SETTINGS + ("qp_tol", "qp_max_iter", "real"))
+def effective_settings(declared: dict, m_list, real: str = "double", **flags):
+    """The settings of a study: the command line's ``flags`` (None = not given) over the OCP
+    file's ``declared`` options over the defaults (a QP tolerance not given: that of
+    ``real``); the M list is the command line's, else the file's M, else
+    :data:`DEFAULT_M_LIST`. Returns ``(settings, sources, m_list, m_is_default)``."""
+    s, sources = settings.Settings.resolve(declared, dict(flags, M=None), real=real)
     if m_list is not None:
         sources["M"] = settings.SOURCE_CLI
-        return values, sources, list(m_list), False
+        return s, sources, list(m_list), False
     if "M" in declared:
         sources["M"] = settings.SOURCE_FILE
-        return values, sources, [int(declared["M"])], False
+        return s, sources, [int(declared["M"])], False
     sources["M"] = settings.SOURCE_DEFAULT
-    return values, sources, list(DEFAULT_M_LIST), True
+    return s, sources, list(DEFAULT_M_LIST), True
 
 
-def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularization=None, reg_eps=None,
-                     backend="reference", json_out=None, plot_out=None, cost_hessian=None, lm=None,
-                     qp_tol=None, qp_max_iter=None, tol=None, real=None) -> dict:
+def run_converge_cli(ocp_file, m_list, iters, start, backend="reference", json_out=None, plot_out=None, tol=None,
+                     real=None, **flags) -> dict:
     """The body of ``dopus-gen converge`` (bad input raises OcpError, ValueError or
-    RuntimeError with a message; the command line turns them into one line). A setting given
-    as None comes from the OCP file's ``options(...)``, else from the defaults of
-    :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from. The
-    output paths are checked before the study runs."""
+    RuntimeError with a message; the command line turns them into one line). ``flags``: the
+    settings given on the command line (:data:`dopus_codegen.settings.RUNTIME_SETTINGS`,
+    None: not given); the others come from the OCP file's ``options(...)``, else from the
+    defaults of :mod:`dopus_codegen.settings`; the summary and the JSON say where each came
+    from. The output paths are checked before the study runs."""
     import click
 
     from ..outputs import check_output_file
@@ -366,29 +355,29 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularizatio
         check_output_file(plot_out, "--plot")
     factory = backend_factory(backend)
     ocp = load_ocp(ocp_file)
-    values, sources, m_list, m_default = effective_settings(
-        ocp.declared_options(), m_list, hessian=hessian, regularization=regularization, reg_eps=reg_eps,
-        cost_hessian=cost_hessian, lm=lm, qp_tol=qp_tol, qp_max_iter=qp_max_iter, real=real)
-    if values["real"] != settings.DEFAULTS["real"] and backend != "c":
-        raise ValueError(f"--real {values['real']} needs --backend c (the reference backend computes in double)")
-    ocp.options(real=values["real"])    # the C backend is generated in this type
+    declared = ocp.declared_options()
+    real_values, real_sources = settings.resolve(declared, {"real": real}, names=("real",))
+    real = real_values["real"]
+    s, sources, m_list, m_default = effective_settings(declared, m_list, real=real, **flags)
+    sources["real"] = real_sources["real"]
+    if real != settings.DEFAULTS["real"] and backend != "c":
+        raise ValueError(f"--real {real} needs --backend c (the reference backend computes in double)")
+    ocp.options(real=real)    # the C backend is generated in this type
     if tol is None:
-        tol = settings.KKT_TOL_DEFAULT[values["real"]]
+        tol = settings.KKT_TOL_DEFAULT[real]
     disc = build_functions(ocp)
-    if values["hessian"] == "gauss-newton" and disc.stage_hess_gn is None:
+    if s.hessian == "gauss-newton" and disc.stage_hess_gn is None:
         raise ValueError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
                          f"(ocp.stage_least_squares)")
     Ms = _cli_M_list(m_list, disc.N, m_default)
+    shown = {k: v for k, v in s.as_dict().items() if k not in ("M", "mode")}
     click.echo(f"{disc.name}: settings: M {','.join(str(m) for m in Ms)} ({sources['M']}), "
-               + settings.describe({k: v for k, v in values.items() if k != "M"}, sources), err=True)
+               + settings.describe(dict(shown, real=real), sources), err=True)
     check_initial_state(disc, disc.x0, "the initial state")
     click.echo(f"{disc.name}: preparing the {start} start ...", err=True)
     sp = make_start(disc, start)
     if start == "warm":
         check_initial_state(disc, sp.xhat_fixed, "the disturbed initial state (--start warm)")
-    hessian, regularization, reg_eps = values["hessian"], values["regularization"], values["reg_eps"]
-    qp_tol, qp_max_iter = values["qp_tol"], values["qp_max_iter"]
-    cost_hessian, lm = values["cost_hessian"], values["lm"]
 
     total = len(Ms) * iters
     with click.progressbar(length=total, label="DOPUS iterations", file=sys.stderr,
@@ -402,12 +391,10 @@ def run_converge_cli(ocp_file, m_list, iters, start, hessian=None, regularizatio
                 bar.update(target - done["n"])
                 done["n"] = target
 
-        study = run_study(disc, Ms, iters, sp, hessian=hessian, regularization=regularization,
-                          reg_eps=reg_eps, backend_factory=factory, backend_name=backend,
-                          progress=progress, cost_hessian=cost_hessian, lm=lm, qp_tol=qp_tol,
-                          qp_max_iter=qp_max_iter, tol=tol)
+        study = run_study(disc, Ms, iters, sp, s, backend_factory=factory, backend_name=backend,
+                          progress=progress, tol=tol)
     study["sources"] = {k: sources[k] for k in ("M", *settings.RUNTIME_SETTINGS, "real") if k in sources}
-    study["real"] = values["real"]
+    study["real"] = real
     click.echo(format_table(study))
     if json_out:
         with open(json_out, "w") as fh:

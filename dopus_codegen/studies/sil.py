@@ -12,9 +12,10 @@ instant ``t_i = i dt``::
                              interval split the step)
                       prepare()                      (timed)
 
-An instant whose feedback fails (QP failure, non-finite input) applies the first control of
-the current, already shifted plan, as a controller in the field would, and records the
-status; the loop goes on. A plant failure (CVODES cannot integrate, state not finite) ends
+Every instant applies the control the runtime returns, whatever the status
+(:mod:`.loops`: the one closed-loop instant of the package, the firmware's too): after a
+failed feedback (QP failure, non-finite input) that is the runtime's safe control; the
+status is recorded and the loop goes on. A plant failure (CVODES cannot integrate, state not finite) ends
 the run and is recorded in ``run["aborted"]``.
 
 A run is a plain JSON-ready dict (see :func:`run_closed_loop`); :func:`summarize` condenses it
@@ -32,6 +33,7 @@ import numpy as np
 
 from .. import settings
 from ..errors import DopusError
+from . import loops
 from .plant import Plant, PlantError
 from .records import json_ready
 
@@ -44,36 +46,30 @@ _ON_GRID = 1e-9
 _PROGRESS_AFTER = 2.0
 
 
-def default_lm(disc):
-    """The Levenberg-Marquardt term of the closed loop when none is given: the OCP file's
-    ``options(lm=...)``, else ``"auto"`` (docs/algorithm.md sections 3 and 10)."""
-    lm = disc.spec.options.lm
-    return lm if isinstance(lm, str) else float(lm)
-
-
 class SilError(RuntimeError):
     """A closed-loop run could not be set up (bad scenario, bad settings)."""
 
 
 # --------------------------------------------------------------------------- backends
-def make_backend(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
-                 regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
-                 lm="auto", qp_tol: float | None = None, qp_max_iter: int | None = None):
-    """A receding-horizon backend (docs/algorithm.md section 7) by name: 'c' or 'reference'.
-    ``qp_tol``, ``qp_max_iter``: None keeps the backend's own; ``lm``: 'auto' or a number."""
-    kwargs = dict(M=M, mode="receding", hessian=hessian, regularization=regularization, reg_eps=reg_eps,
-                  cost_hessian=cost_hessian, lm=lm)
-    if qp_tol is not None:
-        kwargs["qp_tol"] = qp_tol
-    if qp_max_iter is not None:
-        kwargs["qp_max_iter"] = qp_max_iter
+def make_backend(disc, backend: str = "c", settings=None, **changes):
+    """A receding-horizon backend (docs/algorithm.md section 7) by name: 'c' or 'reference',
+    with ``settings`` (None: the OCP file's ``options(...)``) and ``changes`` by name."""
+    s = _settings_of(disc, settings, changes).replace(mode="receding")
     if backend == "reference":
         from ..reference.dopus import ReferenceDopus
-        return ReferenceDopus(disc, **kwargs)
+        return ReferenceDopus(disc, s)
     if backend == "c":
-        from ..runtime.solver import CSolver
-        return CSolver(disc, **kwargs)
+        from ..runtime.solver import Solver
+        return Solver(disc, s)
     raise SilError(f"unknown backend {backend!r}: expected 'c' or 'reference'")
+
+
+def _settings_of(disc, s, changes) -> "settings.Settings":
+    """``s`` (None: the OCP file's settings of ``disc``) with ``changes`` by name."""
+    try:
+        return (settings.of_problem(disc) if s is None else s).replace(**changes)
+    except settings.SettingError as exc:
+        raise SilError(str(exc)) from None
 
 
 def _status_of(err) -> int:
@@ -83,10 +79,6 @@ def _status_of(err) -> int:
     except (TypeError, ValueError):
         status = -1
     return status if status != 0 else -1
-
-
-def _is_dopus_error(err) -> bool:
-    return isinstance(err, DopusError)
 
 
 # --------------------------------------------------------------------------- scenario
@@ -115,21 +107,20 @@ def _apply_event(ev, x: np.ndarray, nx: int) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- the loop
-def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact",
-                    regularization: str = "none", reg_eps: float = 1e-4, cost_hessian: str = "fresh",
-                    lm: float | None = None, duration: float | None = None,
+def run_closed_loop(disc, backend: str = "c", settings=None, duration: float | None = None,
                     guess=None, xhat0=None, progress: bool = False, label: str | None = None,
-                    backend_obj=None, sources: dict | None = None, qp_tol: float | None = None,
-                    qp_max_iter: int | None = None, events=None, plant=None) -> dict:
+                    backend_obj=None, sources: dict | None = None, events=None, plant=None, **changes) -> dict:
     """Run the closed loop of the OCP's scenario and return the record of the run.
 
-    ``guess``: the initialisation of the controller (default: the offline solve at the
-    initial state, ``offline.solve_ocp``). ``backend_obj``: an already constructed backend
-    (then ``backend``, ``M``, ``hessian``, ... only label the run). ``sources``: where each
-    setting came from (``settings.resolve``), recorded with the settings. ``xhat0``: the
-    initial plant state (default: the scenario's); ``events``: the events of the run instead
-    of the scenario's; ``plant``: ``(Plant, parameters)``, the plant and its parameter vector
-    instead of the scenario's plant (a campaign run's mismatched plant).
+    ``settings``: the controller's settings (None: the OCP file's ``options(...)``), with
+    ``changes`` by name (``M=3``; None: not given). ``guess``: the initialisation of the
+    controller (default: the offline solve at the initial state, ``offline.solve_ocp``).
+    ``backend_obj``: an already constructed backend with these settings (then ``backend``
+    only labels the run). ``sources``: where each setting came from
+    (``Settings.resolve``), recorded with the settings. ``xhat0``: the initial plant state
+    (default: the scenario's); ``events``: the events of the run instead of the scenario's;
+    ``plant``: ``(Plant, parameters)``, the plant and its parameter vector instead of the
+    scenario's plant (a campaign run's mismatched plant).
 
     The record: ``t, x, u, kkt, kkt_parts, status, signals, recomputed, timing_us, settings,
     events`` (one entry per sampling instant; ``x`` is the measured state, ``u`` the applied
@@ -139,9 +130,8 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
     "first_failure": None or {"t", "message"} of the first failed feedback (for an infeasible
     QP with the stage-0 rows the measured state violates)}``.
     """
-    spec, duration, n_steps, M_eff, label = _scenario_of(disc, duration, M, label)
-    if lm is None:
-        lm = default_lm(disc)
+    s = _settings_of(disc, settings, changes)
+    spec, duration, n_steps, M_eff, label = _scenario_of(disc, duration, s, label)
     p = _default_parameters(disc)
     if xhat0 is None:
         xhat0 = spec.x0 if spec.x0 is not None else disc.x0
@@ -159,22 +149,21 @@ def run_closed_loop(disc, backend: str = "c", M: int = 1, hessian: str = "exact"
         from ..reference.offline import solve_ocp
         guess, _info = solve_ocp(disc, x)
     if backend_obj is None:
-        backend_obj = _make_backend_for_run(disc, backend, M=M_eff, hessian=hessian, regularization=regularization,
-                                            reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm,
-                                            qp_tol=qp_tol, qp_max_iter=qp_max_iter)
+        backend_obj = _make_backend_for_run(disc, backend, s)
     backend_obj.init(x, guess)
     rec = _Record(spec, disc)
     rec.snap = dict(getattr(backend_obj, "timings", {}) or {})
     loop = _Loop(disc, backend_obj, plant, events, p, rec, plant_p=plant_p)
     loop.run(x, n_steps, progress, label)
+    used = getattr(backend_obj, "settings", s)     # the settings the backend runs with
     settings_rec = {"M": M_eff, "N": int(disc.N), "dt": float(disc.dt), "duration": n_steps * float(disc.dt),
-                    "hessian": hessian, "regularization": regularization, "reg_eps": float(reg_eps),
+                    "hessian": used.hessian, "regularization": used.regularization, "reg_eps": float(used.reg_eps),
                     "backend": backend, "real": str(getattr(backend_obj, "real", "double")),
-                    "cost_hessian": str(getattr(backend_obj, "cost_hessian", cost_hessian)),
-                    "lm": float(getattr(backend_obj, "lm", 0.0 if isinstance(lm, str) else lm)),
-                    "lm_setting": lm if isinstance(lm, str) else float(lm),
-                    "qp_tol": float(getattr(backend_obj, "qp_tol", qp_tol)),
-                    "qp_max_iter": qp_max_iter,
+                    "cost_hessian": used.cost_hessian,
+                    "lm": float(getattr(backend_obj, "lm", 0.0 if isinstance(used.lm, str) else used.lm)),
+                    "lm_setting": used.lm if isinstance(used.lm, str) else float(used.lm),
+                    "qp_tol": float(used.qp_tol_of()),
+                    "qp_max_iter": s.qp_max_iter,
                     "plant": "CVODES (Adams, reltol = abstol = 1e-10)",
                     "lbu": list(loop.lbu), "ubu": list(loop.ubu),
                     "u_labels": list(disc.data.control_names) or None,
@@ -199,7 +188,7 @@ def _recoveries(backend_obj):
     return None if n is None else int(n)
 
 
-def _scenario_of(disc, duration, M, label):
+def _scenario_of(disc, duration, s, label):
     """The scenario, the duration, the number of sampling instants, the effective M and the
     run's label."""
     spec = disc.scenario.closed_loop
@@ -213,15 +202,15 @@ def _scenario_of(disc, duration, M, label):
     n_steps = int(round(duration / dt))
     if n_steps < 1:
         raise SilError(f"duration {duration} s is shorter than one sampling interval ({dt} s)")
-    M_eff = max(0, min(int(M), N - 1))
+    M_eff = s.stages(N)
     if label is None:
         label = "full RTI" if M_eff == N - 1 else f"DOPUS M = {M_eff}"
     return spec, duration, n_steps, M_eff, label
 
 
-def _make_backend_for_run(disc, backend, **kwargs):
+def _make_backend_for_run(disc, backend, s):
     try:
-        return make_backend(disc, backend, **kwargs)
+        return make_backend(disc, backend, s)
     except SilError:
         raise
     except Exception as exc:  # noqa: BLE001 - settings rejected, C build failed, ...
@@ -353,22 +342,11 @@ class _Loop:
         return x
 
     def feedback(self, xhat):
-        """u0 of the controller (timed); a failed feedback applies the first control of the
-        current plan and records the status."""
-        status = 0
-        self.last_error = None
-        t0 = time.perf_counter()
-        try:
-            u0 = np.asarray(self.ctrl.feedback(xhat), dtype=float).reshape(-1)
-        except DopusError as err:
-            self.last_error = err
-            status = _status_of(err)
-            u0 = np.asarray(self.ctrl.u, dtype=float)[0].copy()
-        t_fb = time.perf_counter() - t0
-        if not np.all(np.isfinite(u0)):
-            u0 = np.clip(np.nan_to_num(np.asarray(self.ctrl.u, dtype=float)[0]), self.lbu, self.ubu)
-            status = status or -1
-        return u0, status, t_fb
+        """The control of the instant (timed): the runtime's returned control whatever the
+        status (:func:`.loops.feedback`); a failure is recorded, the loop goes on."""
+        fb = loops.feedback(self.ctrl, xhat)
+        self.last_error = fb.error
+        return fb.u0, fb.status, fb.seconds
 
     def _failure_text(self, xhat) -> str:
         """Why the feedback of an instant failed; for an infeasible QP, with the stage-0 rows
@@ -407,14 +385,8 @@ class _Loop:
         return self.plant.step(x, u0, self.plant_p, duration=t_next - t_cur)
 
     def prepare(self, status):
-        t0 = time.perf_counter()
-        prepared = True
-        try:
-            self.ctrl.prepare()
-        except DopusError as err:
-            status = status or _status_of(err)
-            prepared = False
-        return status, prepared, time.perf_counter() - t0
+        st, seconds = loops.prepare(self.ctrl)
+        return status or st, st == 0, seconds
 
 
 def _changed(before: dict, after: dict) -> dict:
@@ -571,11 +543,11 @@ def write_json(runs, path) -> None:
 
 
 # --------------------------------------------------------------------------- CLI
-def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, compare="none", hessian=None,
-                regularization=None, reg_eps=None, backend="c", cost_hessian=None, echo=None, progress=True,
-                lm=None, qp_tol=None, qp_max_iter=None, real=None, campaign_run=None, seed=None) -> list:
-    """The ``dopus-gen sil`` command: runs, summary table, JSON and plots. A setting given as
-    None comes from the OCP file's ``options(...)``, else from the defaults of
+def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, compare="none", backend="c",
+                echo=None, progress=True, real=None, campaign_run=None, seed=None, **flags) -> list:
+    """The ``dopus-gen sil`` command: runs, summary table, JSON and plots. ``M`` and
+    ``flags`` are the settings given on the command line (None: not given); the others come
+    from the OCP file's ``options(...)``, else from the defaults of
     :mod:`dopus_codegen.settings`; the summary and the JSON say where each came from. The
     output paths and the scenario's initial state are checked before any run starts.
 
@@ -598,20 +570,21 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
         echo = click.echo
 
     ocp = load_ocp(ocp_file)
+    declared = ocp.declared_options()
     try:
-        values, sources = settings.resolve(ocp.declared_options(), dict(
-            M=M, hessian=hessian, regularization=regularization, reg_eps=reg_eps, cost_hessian=cost_hessian, lm=lm,
-            qp_tol=qp_tol, qp_max_iter=qp_max_iter, real=real),
-            names=settings.SOLVER_SETTINGS + ("qp_tol", "qp_max_iter", "real"))
+        real_value, real_source = settings.resolve(declared, {"real": real}, names=("real",))
+        s, sources = settings.Settings.resolve(declared, dict(flags, M=M), real=real_value["real"])
     except settings.SettingError as exc:
         raise SilError(f"{ocp_file}: {exc}") from None
+    values = dict({k: v for k, v in s.as_dict().items() if k != "mode"}, **real_value)
+    sources.update(real_source)
     if values["real"] != settings.DEFAULTS["real"] and backend != "c":
         raise SilError(f"--real {values['real']} needs --backend c (the reference backend computes in double)")
     ocp.options(real=values["real"])    # the C backend is generated in this type
     disc = build_functions(ocp)
     if disc.scenario.closed_loop is None:
         raise SilError(f"{ocp_file}: the OCP declares no closed-loop scenario (ocp.scenario(...))")
-    if values["hessian"] == "gauss-newton" and not disc.functions.has_gn:
+    if s.hessian == "gauss-newton" and not disc.functions.has_gn:
         raise SilError(f"{ocp_file}: --hessian gauss-newton needs a least-squares stage cost "
                        "(ocp.stage_least_squares)")
     spec = disc.scenario.closed_loop
@@ -620,7 +593,7 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
     check_initial_state(disc, x0, "the scenario's initial state")
     replay = {}
     if campaign_run is not None:
-        from .campaign import campaign_events, campaign_plant, draw
+        from .draws import campaign_events, campaign_plant, draw
 
         if spec.campaign is None:
             raise SilError(f"{ocp_file}: --campaign-run needs a campaign declared in the OCP file (ocp.campaign(...))")
@@ -637,21 +610,18 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
              "the controller starts from its last iterate", err=True)
 
     N = int(disc.N)
-    M = values["M"]
-    configs = [(M, None, sources)]
-    if compare == "full" and min(M, N - 1) != N - 1:
-        configs.append((N - 1, "full RTI", dict(sources, M=settings.SOURCE_CLI)))  # --compare full
+    configs = [(s, None, sources)]
+    if compare == "full" and s.stages(N) != N - 1:
+        configs.append((s.replace(M=N - 1), "full RTI", dict(sources, M=settings.SOURCE_CLI)))  # --compare full
     runs = []
-    for m, label, src in configs:
-        name = label or ("full RTI" if min(m, N - 1) == N - 1 else f"DOPUS M = {m}")
-        echo(f"{name}: {backend} backend, {values['hessian']} Hessian, regularization {values['regularization']}, "
-             f"cost Hessian {values['cost_hessian']}, Levenberg-Marquardt {values['lm']}, "
+    for run_settings, label, src in configs:
+        m = run_settings.stages(N)
+        name = label or ("full RTI" if m == N - 1 else f"DOPUS M = {m}")
+        echo(f"{name}: {backend} backend, {s.hessian} Hessian, regularization {s.regularization}, "
+             f"cost Hessian {s.cost_hessian}, Levenberg-Marquardt {s.lm}, "
              f"{duration if duration is not None else spec.duration} s ...", err=True)
-        run = run_closed_loop(disc, backend=backend, M=m, hessian=values["hessian"],
-                              regularization=values["regularization"], reg_eps=values["reg_eps"],
-                              cost_hessian=values["cost_hessian"], lm=values["lm"], duration=duration, guess=guess,
-                              progress=progress, label=label, sources=src, qp_tol=values["qp_tol"],
-                              qp_max_iter=values["qp_max_iter"], **replay)
+        run = run_closed_loop(disc, backend=backend, settings=run_settings, duration=duration, guess=guess,
+                              progress=progress, label=label, sources=src, **replay)
         runs.append(run)
     summaries = [summarize(r) for r in runs]
     echo(format_summary(summaries))

@@ -13,7 +13,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from dopus_codegen.errors import DopusError
+from dopus_codegen.studies import loops
 
 SETTLE = 50
 AFTER = 150
@@ -72,18 +72,13 @@ def tip_deviation(xs):
 
 
 def instant(solver, plant, x, xm):
-    """One closed-loop instant: feedback on the measurement xm, the returned control applied
-    whatever the status, prepare. Returns (next state, u0, status)."""
-    try:
-        u0, st = solver.feedback(xm), 0
-    except DopusError as err:
-        u0, st = err.u0, err.status
-    x = plant(x, u0)
-    try:
-        solver.prepare()
-    except DopusError as err:
-        st = st or err.status
-    return x, np.asarray(u0, float), st
+    """One closed-loop instant of the package (dopus_codegen.studies.loops): feedback on the
+    measurement xm, the returned control applied whatever the status, prepare. Returns
+    (next state, u0, status)."""
+    fb = loops.feedback(solver, xm)
+    x = plant(x, fb.u0)
+    st, _ = loops.prepare(solver)
+    return x, fb.u0, fb.status or st
 
 
 def run_case(make_solver, plant, x0, kind: str, K: int, after: int = AFTER, tol: float = 1e-2):

@@ -28,7 +28,7 @@ import numpy as np
 
 from dopus_codegen import vocabulary
 from dopus_codegen.codegen.generate import render_sizes_header
-from dopus_codegen.codegen.paths import runtime_c_dir
+from dopus_codegen.paths import runtime_c_dir
 
 from dopus_codegen.codegen.flags import DEFAULT_OPT, PIC, QP_HARNESS_OPT, STRICT_CFLAGS as _STRICT
 

@@ -3,10 +3,11 @@
 ``dopus-gen bench`` and ``bench/acados_bench.py`` prepare everything in the project's
 environment (generated and built libraries, IPOPT's nominal solution, acados' builds) and
 write a *plan* (JSON). This module runs the plan in a second process that loads only the
-compiled shared libraries: ours through cffi with the generated cdef header, acados'
-generated solver and libacados through ctypes and acados' C API. It imports numpy and
-cffi, never CasADi (nor any module of the package that would), so the two CasADi versions
-of the acados comparison never meet; :func:`assert_no_casadi` checks it.
+compiled shared libraries: ours through the package's one cffi binding of a generated
+folder (:func:`dopus_codegen.runtime.solver.load_library`, which needs no CasADi), acados'
+generated solver and libacados through ctypes and acados' C API. It never imports CasADi,
+so the two CasADi versions of the acados comparison never meet; :func:`assert_no_casadi`
+checks it.
 
 Every controller is a :class:`Runner`: ``start(xhat0, guess)``, ``feedback(xhat) -> (u, ok)``
 (from the measured state to ``u_0``: our ``<name>_feedback``, acados' RTI phase 2, QP and
@@ -16,7 +17,7 @@ runners in their own closed loops against the same plant (our generated discrete
 ``<name>_stage_eval``), alternating one sampling step of each, so that load from other
 processes on the machine hits all of them alike.
 
-    python -m dopus_codegen.studies.timing PLAN.json OUT.json     # the bench verb's worker
+    python -m dopus_lab.timing PLAN.json OUT.json     # the bench verb's worker
 """
 from __future__ import annotations
 
@@ -43,19 +44,18 @@ class Ours:
     the names of enum dopus_phase in index order, read by the preparing process)."""
 
     def __init__(self, spec):
-        import cffi
+        # the package's one binding of a generated folder (CasADi-free)
+        from dopus_codegen.runtime.solver import load_library
 
         self.spec = spec
         self.name, self.N, self.nx, self.nu = spec["name"], spec["N"], spec["nx"], spec["nu"]
         self.phase_names = list(spec.get("phases", []))
-        self.ffi = cffi.FFI()
+        self.ffi, self.lib, _meta = load_library(spec["folder"])
         n = self.name
-        self.ffi.cdef(Path(spec["cdef"]).read_text())
         # the plant: the generated discrete model phi (the OCP file's integrator and substeps)
         self.ffi.cdef(f"int {n}_stage_eval(const double** arg, double** res, int* iw, double* w, int mem);"
                       f"int {n}_stage_eval_work(int *sz_arg, int* sz_res, int *sz_iw, int *sz_w);"
-                      f"int {n}_stage_eval_n_out(void);")
-        self.lib = self.ffi.dlopen(spec["lib"])
+                      f"int {n}_stage_eval_n_out(void);", override=True)
         self._mem = []
         sz = [self.ffi.new("int*") for _ in range(4)]
         self.c("stage_eval_work")(*sz)
@@ -430,25 +430,23 @@ def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x
     """Each runner in its own closed loop against ``plant(x, u) -> x+``, alternating one
     sampling step of each. ``starts[label]`` (or ``starts`` itself, a dict with x, u, ...)
     is the guess of ``start(x0_init or x_start, guess)``. The first ``skip`` steps are not
-    recorded (the closed loop settles). A failed step applies the previous ``u_0``.
-    Returns per label: ``fail``, ``feedback``/``prepare`` (us per recorded step), ``phases``
-    (the solver's own timers, us), ``x`` (the plant states, steps+1 rows)."""
+    recorded (the closed loop settles). Every step applies the control the solver returned,
+    whatever its status (the closed-loop instant of dopus_codegen/studies/loops.py: ours
+    returns its safe control after a failure; a step of acados that fails counts in ``fail``
+    and a plant that diverges on its control is reset). Returns per label: ``fail``,
+    ``feedback``/``prepare`` (us per recorded step), ``phases`` (the solver's own timers, us),
+    ``x`` (the plant states, steps+1 rows)."""
     out = {r.label: _new_record() for r in runners}
     xs = {r.label: np.array(x_start, float) for r in runners}
-    u_last = {}
     for r in runners:
         guess = _guess_for(starts, r.label)
         r.start(np.array(x_start if x0_init is None else x0_init, float), guess)
-        u_last[r.label] = np.array(guess["u"][0], float)
         out[r.label]["x"] = [xs[r.label].tolist()]
     total = steps + skip
     for i in range(total):
         for r in runners:
             rec = out[r.label]
-            u, failed = _step(r, xs[r.label], rec, i >= skip)
-            if failed:
-                u = u_last[r.label]
-            u_last[r.label] = np.array(u, float)
+            u, _failed = _step(r, xs[r.label], rec, i >= skip)
             xn = plant(xs[r.label], u)
             if not (np.all(np.isfinite(xn)) and np.abs(xn).max() < 1e8):
                 rec["diverged_at"] = rec.get("diverged_at", i)
@@ -574,7 +572,7 @@ def _runners_ours(libs, plan, mode):
 
 
 def run_plan(plan, quiet_acados=True):
-    """Run a plan of ``dopus_codegen.studies.bench`` (see there); return the result dict."""
+    """Run a plan of ``dopus_lab.bench`` (see there); return the result dict."""
     libs = {k: Ours(v) for k, v in plan["libs"].items()}
     ac = None
     if plan.get("acados"):
@@ -662,7 +660,7 @@ def _finite(v):
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 2:
-        print("usage: python -m dopus_codegen.studies.timing PLAN.json OUT.json", file=sys.stderr)
+        print("usage: python -m dopus_lab.timing PLAN.json OUT.json", file=sys.stderr)
         return 2
     plan = json.loads(Path(argv[0]).read_text())
     res = run_plan(plan)

@@ -4,8 +4,8 @@ This file runs **inside acados' own virtual environment** (``scripts/setup_acado
 ``.venv-acados``): it imports acados' Python template and the CasADi shipped with it,
 never the project's package, and is started as a script by path::
 
-    .venv-acados/bin/python dopus_codegen/studies/acados_ocp.py build EXPORT.json OUT_DIR SETTINGS.json
-    .venv-acados/bin/python dopus_codegen/studies/acados_ocp.py solve EXPORT.json OUT_DIR START.json RESULT.json
+    .venv-acados/bin/python dopus_lab/acados_ocp.py build EXPORT.json OUT_DIR SETTINGS.json
+    .venv-acados/bin/python dopus_lab/acados_ocp.py solve EXPORT.json OUT_DIR START.json RESULT.json
 
 The translation keeps the problem exactly the same NLP as ours (docs/algorithm.md section 1):
 

@@ -18,12 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from .acados_export import write_export
+from .paths import ROOT, checkout_script
 
 __all__ = ["AcadosUnavailable", "acados_python", "export", "build", "solve", "ROOT", "TRANSLATOR"]
 
-ROOT = Path(__file__).resolve().parents[2]
 TRANSLATOR = Path(__file__).resolve().with_name("acados_ocp.py")
-SETUP = ROOT / "scripts" / "setup_acados.sh"
+SETUP = checkout_script("setup_acados.sh")
 
 
 class AcadosUnavailable(RuntimeError):
@@ -32,8 +32,9 @@ class AcadosUnavailable(RuntimeError):
 
 def acados_python() -> Path:
     """The Python of acados' environment, created by ``scripts/setup_acados.sh`` if needed."""
-    if not SETUP.is_file():
-        raise AcadosUnavailable(f"{SETUP} is missing")
+    if SETUP is None:
+        raise AcadosUnavailable("acados' environment is made by scripts/setup_acados.sh of a checkout of "
+                                "dopus-codegen (make bench-acados there); this installation has none")
     proc = subprocess.run(["bash", str(SETUP)], cwd=str(ROOT), stdout=subprocess.PIPE,
                           stderr=subprocess.PIPE, text=True, check=False)
     if proc.returncode != 0:

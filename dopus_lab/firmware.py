@@ -43,9 +43,9 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from .flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
-from .generate import read_meta
-from .paths import firmware_dir
+from dopus_codegen.codegen.flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
+from dopus_codegen.codegen.folder import read_meta
+from .paths import checkout_script, firmware_dir
 
 __all__ = ["TARGETS", "FirmwareError", "firmware_dir", "toolchain_missing", "setup_toolchain",
            "write_problem_header", "build_target", "link_image", "build_host", "run_qemu", "run_host", "parse_output",
@@ -85,8 +85,7 @@ OPT = DEFAULT_OPT
 
 
 def _repo_script() -> Optional[Path]:
-    path = Path(__file__).resolve().parents[2] / "scripts" / "setup_firmware.sh"
-    return path if path.is_file() else None
+    return checkout_script("setup_firmware.sh")
 
 
 def toolchain_missing() -> List[str]:
@@ -130,7 +129,7 @@ def write_problem_header(build_dir: Path, name: str, xhat_fixed: Sequence[float]
     """``fw_problem.h``: the problem's prefix for fw_main.c and the scenario."""
     up = name.upper()
     text = "\n".join([
-        "/* The problem and scenario of the firmware program (dopus_codegen/firmware.py). */",
+        "/* The problem and scenario of the firmware program (dopus_lab/firmware.py). */",
         "#ifndef FW_PROBLEM_H", "#define FW_PROBLEM_H",
         f'#include "{name}_solver.h"', f'#include "{name}_problem.h"', f'#include "{name}_funcs.h"',
         f"#define FW(name) {name}_##name", f"#define FW_C(name) {up}_##name",
@@ -378,7 +377,7 @@ def _loop_deviation(run: Dict[str, Any], ref: Dict[str, Any]) -> float:
     return max(float(np.max(np.abs(np.subtract(a["xhat"], b["xhat"])))) for a, b in zip(run["loop"], ref["loop"]))
 
 
-# Tolerances of the comparisons with the host build (docs in README "Firmware").
+# Tolerances of the comparisons with the host build (docs/results.md, "The firmware report").
 TOL_DOUBLE = 1e-8     # relative; newlib's sin/cos differ from glibc's in the last bit
 KKT_FLOOR_DOUBLE = 1.0   # the KKT measure is a residual: its rounding error is absolute
 
@@ -387,9 +386,9 @@ def firmware_report(ocp_file, out_dir, targets: Sequence[str] = ("m7-double",),
                     fixed_iters: int = 12, loop_steps: int = 20, m_list: Optional[Sequence] = None,
                     json_out=None, progress=print) -> Dict[str, Any]:
     """Generate, build, run under QEMU and on the host; return (and write) the report."""
-    from . import generate as codegen
-    from ..problem.derivatives import build_functions
-    from ..problem.ocp import load_ocp
+    from dopus_codegen.codegen import generate as codegen
+    from dopus_codegen.problem.derivatives import build_functions
+    from dopus_codegen.problem.ocp import load_ocp
 
     for t in targets:
         if t not in TARGETS:

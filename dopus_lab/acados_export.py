@@ -15,7 +15,7 @@ The exported pieces are the ones of ``discretize`` (docs/algorithm.md section 1)
 - ``terminal(x, p) -> (res_N, E_extra, r, r_eq)``;
 - ``W``, ``W_N``: the least-squares weights (stage cost ``0.5 res' W res + l_extra``).
 
-Run ``python -m dopus_codegen.studies.acados_export OCP_FILE OUT.json``.
+Run ``python -m dopus_lab.acados_export OCP_FILE OUT.json``.
 """
 from __future__ import annotations
 
@@ -27,9 +27,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..problem.derivatives import build_functions
-from ..problem.discretize import discretize
-from ..problem.ocp import RK4, Ocp, OcpError, load_ocp
+from dopus_codegen.problem.derivatives import build_functions
+from dopus_codegen.problem.discretize import discretize
+from dopus_codegen.problem.ocp import RK4, Ocp, OcpError, load_ocp
 
 __all__ = ["FORMAT", "export_function", "export_ocp", "write_export"]
 
@@ -141,7 +141,7 @@ def write_export(ocp_or_path, out) -> Path:
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if len(argv) != 2:
-        print("usage: python -m dopus_codegen.studies.acados_export OCP_FILE OUT.json", file=sys.stderr)
+        print("usage: python -m dopus_lab.acados_export OCP_FILE OUT.json", file=sys.stderr)
         return 2
     try:
         write_export(argv[0], argv[1])

@@ -16,7 +16,7 @@ def _package_dir(name: str, fallback: str) -> Path:
         for loc in spec.submodule_search_locations:
             if Path(loc).is_dir():
                 return Path(loc)
-    path = Path(__file__).resolve().parents[2] / fallback
+    path = Path(__file__).resolve().parents[1] / fallback
     if path.is_dir():
         return path
     raise FileNotFoundError(f"dopus_codegen: cannot locate the '{fallback}' folder of the installation")
@@ -31,7 +31,3 @@ def runtime_c_dir() -> Path:
     """Folder holding the hand-written C runtime sources."""
     return _package_dir("dopus_codegen.runtime_c", "runtime_c")
 
-
-def firmware_dir() -> Path:
-    """Folder holding the bare-metal target (start-up code, linker script, the program)."""
-    return _package_dir("dopus_codegen.firmware_c", "firmware")

@@ -6,8 +6,8 @@ generated and built library (the build cache of :func:`dopus_codegen.runtime.sol
 IPOPT's nominal solution at the initial state, the fixed-xhat_0 convergence study of
 ``dopus-gen converge --start warm --backend c`` (iterations to KKT 1e-6 and 1e-8 per M)
 and, with ``--against acados``, acados' solvers (built in acados' own environment by
-:mod:`dopus_codegen.studies.acados_compare`). It writes a plan; the timing process
-(:mod:`dopus_codegen.studies.timing`) loads only the compiled libraries, never CasADi, and
+:mod:`dopus_lab.acados_compare`). It writes a plan; the timing process
+(:mod:`dopus_lab.timing`) loads only the compiled libraries, never CasADi, and
 alternates one sampling step of every setting, so that load from other processes hits
 all settings alike. Timed:
 
@@ -41,8 +41,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .. import settings as st
-from .records import json_ready
+from dopus_codegen import settings as st
+from dopus_codegen.studies.records import json_ready
 
 __all__ = ["BenchError", "run_bench", "run_scaling", "format_table", "format_scaling", "plot_bench",
            "fit_exponent", "parse_m_list", "parse_n_list"]
@@ -82,12 +82,10 @@ def parse_n_list(text: str) -> list:
 def _resolve_Ms(m_list, N: int) -> list:
     Ms = []
     for m in m_list:
-        if m == "full":
-            M = N - 1
-        elif m > N - 1:
-            raise BenchError(f"--M: M = {m} exceeds N-1 = {N - 1} (use 'full' for the full RTI)")
-        else:
-            M = int(m)
+        try:
+            M = st.stages(m, N, strict=True)
+        except st.SettingError as exc:
+            raise BenchError(f"--M: {exc}") from None
         if M not in Ms:
             Ms.append(M)
     if N - 1 not in Ms:
@@ -112,11 +110,11 @@ def _guess_dict(g) -> dict:
 def _problem(ocp, echo) -> dict:
     """Discretise, generate and build (cached), IPOPT's nominal solution; the library spec
     of the timing process."""
-    from .. import vocabulary
-    from ..codegen.build import build
-    from ..problem.derivatives import build_functions
-    from ..reference.offline import solve_ocp
-    from ..runtime.solver import build_for
+    from dopus_codegen import vocabulary
+    from dopus_codegen.codegen.build import build
+    from dopus_codegen.problem.derivatives import build_functions
+    from dopus_codegen.reference.offline import solve_ocp
+    from dopus_codegen.runtime.solver import build_for
 
     disc = build_functions(ocp)
     echo(f"{disc.name}: N={disc.N}, nx={disc.nx}, nu={disc.nu}: generating and building ...")
@@ -149,13 +147,13 @@ def _settings_codes(values: dict) -> dict:
             "regularization": st.code("regularization", values["regularization"]),
             "reg_eps": float(values["reg_eps"]), "cost_hessian": st.code("cost_hessian", values["cost_hessian"]),
             "lm": values["lm"] if values["lm"] == st.LM_AUTO else float(values["lm"]),
-            "qp_tol": float(st.DEFAULTS["qp_tol"])}
+            "qp_tol": st.qp_tol_default("double")}
 
 
 def _kkt_study(prob, Ms, values, iters, echo) -> dict:
     """The fixed-xhat_0 study of ``dopus-gen converge --start warm --backend c`` (cold start
     without a disturbance map): iterations to KKT 1e-6 and 1e-8 per M."""
-    from .converge import StartPoint, backend_factory, iterations_to, run_study
+    from dopus_codegen.studies.converge import StartPoint, backend_factory, iterations_to, run_study
 
     disc = prob["disc"]
     xd = _disturbed(disc)
@@ -164,9 +162,8 @@ def _kkt_study(prob, Ms, values, iters, echo) -> dict:
     else:
         start = StartPoint("warm", np.array(disc.x0, float), prob["nominal"], xd)
     echo(f"{disc.name}: fixed-xhat_0 study ({start.label} start), {len(Ms)} x {iters} iterations ...")
-    study = run_study(disc, Ms, iters, start, hessian=values["hessian"], regularization=values["regularization"],
-                      reg_eps=values["reg_eps"], backend_factory=backend_factory("c"), backend_name="c",
-                      cost_hessian=values["cost_hessian"], lm=values["lm"])
+    study = run_study(disc, Ms, iters, start, st.Settings.of(values), backend_factory=backend_factory("c"),
+                      backend_name="c")
     rows = []
     for r in study["runs"]:
         rows.append({"M": r["M"], "label": _label(r["M"], disc.N), "iters_to_1e-6": iterations_to(r["kkt"], 1e-6),
@@ -181,10 +178,10 @@ def _run_worker(plan: dict, work: Path) -> dict:
     os.close(fd)
     out_path = plan_path.replace("plan-", "result-")
     Path(plan_path).write_text(json.dumps(json_ready(plan)))
-    root = str(Path(__file__).resolve().parents[2])
+    root = str(Path(__file__).resolve().parents[1])
     env = dict(os.environ)
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    proc = subprocess.run([sys.executable, "-m", "dopus_codegen.studies.timing", plan_path, out_path],
+    proc = subprocess.run([sys.executable, "-m", "dopus_lab.timing", plan_path, out_path],
                           env=env, check=False)
     if proc.returncode != 0:
         raise BenchError(f"the timing process failed (exit {proc.returncode}); plan: {plan_path}")
@@ -204,10 +201,10 @@ def acados_lm(prob, values, echo) -> float:
     (1e-5 times the Hessian scale, docs/algorithm.md section 10)."""
     if values["lm"] != st.LM_AUTO:
         return float(values["lm"])
-    from ..runtime.solver import CSolver
+    from dopus_codegen.runtime.solver import Solver
 
     disc = prob["disc"]
-    s = CSolver(disc, lib_dir=prob["spec"]["folder"], lm=st.LM_AUTO)
+    s = Solver.from_dir(prob["spec"]["folder"], disc, lm=st.LM_AUTO)
     s.init(np.asarray(disc.x0, float), prob["nominal"])
     lm = float(s.lm)
     echo(f"{disc.name}: acados has no automatic Levenberg-Marquardt term: its exact-Hessian settings are "
@@ -279,7 +276,7 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
               cond_list=(40, 20, 10, 8, 5, 4, 2, 1), quick: bool = False, work=None,
               echo: Callable = None, keep_samples: bool = False, **cli) -> dict:
     """The body of ``dopus-gen bench OCP_FILE``; returns the result (also written as JSON)."""
-    from ..problem.ocp import load_ocp
+    from dopus_codegen.problem.ocp import load_ocp
 
     echo = echo or (lambda t: print(t, file=sys.stderr))
     if against not in (None, "none", "acados"):
@@ -378,7 +375,7 @@ def run_scaling(ocp_file, n_list, m_list=("1", "full"), json_out=None, plot_out=
     """Time per iteration against N (same interval dt): the OCP file with ``horizon(N, dt)``
     for each N, M = 1 and the full RTI of every N interleaved in one timing process, at the
     operating point (the settled closed loop)."""
-    from ..problem.ocp import OcpError, load_ocp
+    from dopus_codegen.problem.ocp import OcpError, load_ocp
 
     echo = echo or (lambda t: print(t, file=sys.stderr))
     n_list = parse_n_list(n_list) if isinstance(n_list, str) else list(n_list)
@@ -540,7 +537,7 @@ def format_scaling(result: dict) -> str:
 
 def plot_bench(result: dict, path) -> None:
     """Stacked bars (feedback, preparation) per setting and timed phase."""
-    from .plots import plt
+    from dopus_codegen.studies.plots import plt
 
     phases = list(result.get("timed", {}))
     fig, axes = plt.subplots(1, max(1, len(phases)), figsize=(6 * max(1, len(phases)), 0.5 * 8 + 1.5), squeeze=False)
@@ -565,7 +562,7 @@ def plot_bench(result: dict, path) -> None:
 
 
 def plot_scaling(result: dict, path) -> None:
-    from .plots import plt
+    from dopus_codegen.studies.plots import plt
 
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for phase, fits in result["scaling"].items():
