@@ -191,9 +191,9 @@ class ReferenceDopus:
         self._xhat_last = np.asarray(disc.x0, float).reshape(self.nx).copy()
         self._reset_health(np.asarray(disc.initial_guess.u, float).reshape(self.N, self.n_u))
         # section 12: the anytime budget (off), adaptive M (off), the work counter
-        self.budget_unit, self.budget = "off", 0.0
-        self.anytime_tol = ANYTIME_TOL
-        self.M_adaptive, self.M_min, self.M_max, self.M_eta = False, 0, self.N - 1, float(_SAFETY["ADAPTIVE_ETA"])
+        self.budget_unit, self.budget = s.budget_unit, s.budget
+        self.anytime_tol = ANYTIME_TOL if s.anytime_tol is None else s.anytime_tol
+        self.set_M_adaptive(s.M_adaptive, s.M_min, s.M_max, s.M_eta)
         self.work = 0.0
         self._instant_start = 0.0
         self._cost_stage = self._cost_qp = self._cost_prepare = 0.0
@@ -230,7 +230,9 @@ class ReferenceDopus:
         """The settings it runs with (``M`` at most N-1)."""
         return Settings(M=self.M, hessian=self.hessian, regularization=self.regularization, reg_eps=self.reg_eps,
                         cost_hessian=self.cost_hessian, lm="auto" if self.lm_auto else self.lm, qp_tol=self.qp_tol,
-                        qp_max_iter=self.qp_max_iter, mode=self.mode)
+                        qp_max_iter=self.qp_max_iter, mode=self.mode, budget=self.budget,
+                        budget_unit=self.budget_unit, anytime_tol=self.anytime_tol, M_adaptive=self.M_adaptive,
+                        M_min=self.M_min, M_max=self.M_max, M_eta=self.M_eta)
 
     def set_M(self, M: int) -> None:
         """Values above N-1 mean the full RTI (N-1), as in the C runtime
@@ -276,7 +278,7 @@ class ReferenceDopus:
     def _set_budget(self, value, unit) -> None:
         v = _setting(settings.nonnegative, f"{unit}_budget", value)
         self.budget = v
-        self.budget_unit = unit if v > 0 else "off"
+        self.budget_unit = unit
 
     def set_anytime_tol(self, tol) -> None:
         self.anytime_tol = _setting(settings.positive, "anytime_tol", tol)
@@ -289,11 +291,17 @@ class ReferenceDopus:
         self.M_adaptive, self.M_min, self.M_max, self.M_eta = _setting(check_adaptive_M, on, M_min, M_max, eta,
                                                                        self.N)
 
+    def _budget_on(self) -> bool:
+        return self.budget > 0
+
     def _budget_now(self) -> float:
+        """Now on the budget's clock (0 without a budget, as in the C runtime)."""
+        if not self._budget_on():
+            return 0.0
         return self.work if self.budget_unit == "work" else time.perf_counter()
 
     def _budget_fits(self, cost) -> bool:
-        return self.budget_unit == "off" or self._budget_now() - self._instant_start + cost <= self.budget
+        return not self._budget_on() or self._budget_now() - self._instant_start + cost <= self.budget
 
     # ------------------------------------------------------------------ evaluations
     def _slot(self, k: int) -> int:
@@ -721,7 +729,7 @@ class ReferenceDopus:
     def _anytime(self) -> None:
         """Section 12: extra iterations while the KKT proxy exceeds the tolerance and one more
         fits in the budget."""
-        if self.budget_unit == "off":
+        if not self._budget_on():
             return
         self._uncapped = False
         while (self.extra_iterations < _SAFETY["ANYTIME_MAX_ITER"] and self._qp_ready
@@ -756,7 +764,7 @@ class ReferenceDopus:
         # 7. the divergence test of the prepared iterate (section 9)
         self.kkt_proxy = self._kkt_proxy_eval()
         self._lm_prepared()   # the automatic Levenberg-Marquardt term (section 10)
-        if self.budget_unit != "off":
+        if self._budget_on():
             self._cost_prepare = self._budget_now() - b_start - ext_cost
         if self._iterate_diverged():
             self._flag("diverged")
@@ -856,7 +864,7 @@ class ReferenceDopus:
         cost of those beyond M."""
         order = sorted(range(self.N - 1), key=lambda i: (-rho[i], i))
         M = self._M_now(slots, rho)
-        extend = self.budget_unit != "off"
+        extend = self._budget_on()
         chosen, ext_cost = [], 0.0
         # the stages beyond M keep room for one more iteration after this one
         reserve = self._cost_qp + self._cost_prepare
@@ -869,7 +877,7 @@ class ReferenceDopus:
             if not self._finite(si.Ht, si.A_dyn, si.Phit, si.Ct):
                 raise self._fail("nonfinite_value", f"prepare: stage_hess returned a non-finite value at stage {i}")
             chosen.append(i)
-            if self.budget_unit != "off":
+            if self._budget_on():
                 self._cost_stage = self._budget_now() - b0
                 if m >= M:
                     ext_cost += self._cost_stage

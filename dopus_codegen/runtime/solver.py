@@ -260,13 +260,20 @@ class Solver:
         self.set_regularization(s.regularization, s.reg_eps)
         self.set_cost_hessian(s.cost_hessian)
         self.set_levenberg_marquardt(s.lm)
+        self._update("budget", budget=s.budget, budget_unit=BUDGET_UNITS[s.budget_unit])
+        if s.anytime_tol is not None:
+            self.set_anytime_tol(s.anytime_tol)
+        self.set_M_adaptive(s.M_adaptive, s.M_min, s.M_max, s.M_eta)
 
     @property
     def settings(self) -> Settings:
         """The settings the solver runs with (``M`` as the runtime holds it: at most N-1)."""
+        st = self._c_settings()
         return Settings(M=self.M, hessian=self.hessian, regularization=self.regularization, reg_eps=self.reg_eps,
                         cost_hessian=self.cost_hessian, lm="auto" if self.lm_auto else self.lm, qp_tol=self.qp_tol,
-                        qp_max_iter=self.qp_max_iter, mode=self.mode)
+                        qp_max_iter=self.qp_max_iter, mode=self.mode, budget=float(st.budget),
+                        budget_unit=self.budget_unit, anytime_tol=float(st.anytime_tol),
+                        M_adaptive=bool(st.M_adaptive), M_min=int(st.M_min), M_max=int(st.M_max), M_eta=float(st.M_eta))
 
     # ------------------------------------------------------------------ plumbing
     def _c(self, fname: str):
@@ -483,11 +490,8 @@ class Solver:
 
     @property
     def budget_unit(self) -> str:
-        """``"off"``, ``"time"`` or ``"work"``."""
-        st = self._settings()
-        if not st.budget > 0:
-            return "off"
-        return {v: k for k, v in BUDGET_UNITS.items()}[int(st.budget_unit)]
+        """``"time"`` or ``"work"`` (the budget is off when it is 0)."""
+        return {v: k for k, v in BUDGET_UNITS.items()}[int(self._c_settings().budget_unit)]
 
     budget = _settings_property("budget", float)
     anytime_tol = _settings_property("anytime_tol", float)
