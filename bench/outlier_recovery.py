@@ -7,7 +7,12 @@ initialised solver (IPOPT at the state where the good measurements return) run i
 loop from the same plant state. docs/algorithm.md section 9. Prints a table and writes
 bench/results/outlier_recovery.json.
 
-    .venv/bin/python bench/outlier_recovery.py [K ...]
+    .venv/bin/python bench/outlier_recovery.py [--soft L1] [K ...]
+
+``--soft L1``: the robot arm with its terminal rows soft, ``Soft(l1=L1)`` (examples/robot_arm.py
+``build(soft_terminal=...)``; the hard IPOPT solution is its solution for L1 above the terminal
+multipliers), started from the hard solution; the fresh solver is the soft one too. Writes
+bench/results/outlier_recovery_soft.json.
 """
 from __future__ import annotations
 
@@ -44,9 +49,25 @@ def outlier(x):
     return xm
 
 
-def main(ks):
-    arm = build_functions(load_ocp(ROOT / "examples" / "robot_arm.py"))
-    guess, _ = solve_ocp(arm, arm.x0)
+def soft_arm(l1):
+    """The soft variant of the robot arm and a function mapping a hard solution (Guess) to
+    its start (the terminal equality multipliers become those of the soft inequality rows)."""
+    import dataclasses
+    import importlib.util
+
+    from dopus_codegen import Soft
+
+    spec = importlib.util.spec_from_file_location("robot_arm_soft", ROOT / "examples" / "robot_arm.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    disc = build_functions(mod.build(soft_terminal=Soft(l1=l1)))
+    return disc, lambda g: dataclasses.replace(g, mu_r=g.nu, nu=None)
+
+
+def main(ks, soft=None):
+    hard = build_functions(load_ocp(ROOT / "examples" / "robot_arm.py"))
+    arm, start = (hard, lambda g: g) if soft is None else soft_arm(soft)
+    guess = start(solve_ocp(hard, hard.x0)[0])
     rows = []
     print(f"{'K':>3} {'failed during':>13} {'failed after':>12} {'recoveries':>10} {'on path':>8} {'fresh':>6}")
     for k in ks:
@@ -58,7 +79,7 @@ def main(ks):
         _, st_bad, x = run_instants(s, plant, x, k, measure=lambda i, x: outlier(x))
         xs_rec, st_rec, _ = run_instants(s, plant, x.copy(), N_AFTER)
         fresh = CSolver(arm, lm=None)
-        fresh.init(x, solve_ocp(arm, x)[0])
+        fresh.init(x, start(solve_ocp(hard, x)[0]))
         xs_fresh, st_fresh, _ = run_instants(fresh, plant, x.copy(), N_AFTER)
         row = {"K": k, "failed_during": sum(v != 0 for v in st_bad), "failed_after": sum(v != 0 for v in st_rec),
                "recoveries": s.recoveries, "on_path": on_path(tracking(xs_rec)),
@@ -68,8 +89,13 @@ def main(ks):
               f"{str(row['on_path']):>8} {str(row['on_path_fresh']):>6}", flush=True)
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "outlier_recovery.json").write_text(json.dumps(rows, indent=1))
+    name = "outlier_recovery.json" if soft is None else "outlier_recovery_soft.json"
+    (out / name).write_text(json.dumps({"soft_l1": soft, "rows": rows} if soft is not None else rows, indent=1))
 
 
 if __name__ == "__main__":
-    main([int(a) for a in sys.argv[1:]] or [5, 10, 20, 40])
+    args = sys.argv[1:]
+    soft = None
+    if args[:1] == ["--soft"]:
+        soft, args = float(args[1]), args[2:]
+    main([int(a) for a in args] or [5, 10, 20, 40], soft)

@@ -5,7 +5,7 @@ __version__ = "0.1.0"
 _EXPORTS = {
     "Ocp": "problem.ocp", "OcpError": "problem.ocp", "Integrator": "problem.ocp",
     "RK4": "problem.ocp", "GaussLegendre": "problem.ocp", "RadauIIA": "problem.ocp",
-    "Event": "problem.ocp", "Pushes": "problem.ocp", "OnPath": "problem.ocp", "Guess": "problem.ocp",
+    "Event": "problem.ocp", "Pushes": "problem.ocp", "OnPath": "problem.ocp", "Guess": "problem.ocp", "Soft": "problem.ocp",
     "ScenarioSpec": "problem.ocp", "load_ocp": "problem.ocp", "OcpSpec": "problem.spec",
     "Discretized": "problem.derivatives", "build_functions": "problem.derivatives",
     "solve_ocp": "reference.offline",

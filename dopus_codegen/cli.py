@@ -9,28 +9,65 @@ import click
 
 from . import __version__
 from .codegen.flags import DEFAULT_OPT
+from .interrupt import EXIT_INTERRUPTED
 from .verbs import (EXIT_BAD_INPUT, EXIT_FAILED, BadInput, RunFailed, one_line,  # noqa: F401 - re-exported
                     FROM_FILE as _FROM_FILE, real_option as _real_option, runtime_values as _runtime_values,
                     setting_callback as _setting_callback, solver_options as _solver_options)
 
 
+class Interrupted(click.ClickException):
+    """Stopped by Ctrl-C (SIGINT): one line ``interrupted[: what was kept]`` on stderr,
+    exit code 130 (EXIT_INTERRUPTED)."""
+    exit_code = EXIT_INTERRUPTED
+
+    def show(self, file=None):
+        click.echo(self.format_message(), err=True)
+
+
+def _interrupted_text(exc: BaseException) -> str:
+    detail = str(exc).strip() if isinstance(exc, KeyboardInterrupt) else ""
+    return f"interrupted: {detail}" if detail else "interrupted"
+
+
 class _Group(click.Group):
     """Every exception of a verb becomes a one-line message and exit code 2, unless the
-    global ``--debug`` asks for the traceback."""
+    global ``--debug`` asks for the traceback. Ctrl-C (SIGINT) stops every verb with exit
+    code 130 and the line ``interrupted``, also where CasADi caught it and reported a
+    failure of its computation instead (:mod:`dopus_codegen.interrupt`)."""
 
     def invoke(self, ctx):
+        from .interrupt import handling
+
+        with handling():
+            return self._invoke(ctx)
+
+    def _invoke(self, ctx):
+        from .interrupt import interrupted
+
+        def debug():
+            return (ctx.obj or {}).get("debug")
+
         try:
-            return super().invoke(ctx)
-        except (click.exceptions.Exit, click.Abort, click.ClickException, KeyboardInterrupt, SystemExit):
-            raise
-        except Exception as exc:  # noqa: BLE001 - the one place that turns errors into messages
-            if (ctx.obj or {}).get("debug"):
+            result = super().invoke(ctx)
+        except KeyboardInterrupt as exc:
+            if debug():
+                raise
+            raise Interrupted(_interrupted_text(exc)) from None
+        except (click.exceptions.Exit, click.Abort, click.ClickException, SystemExit, Exception) as exc:
+            if interrupted() and not debug():
+                raise Interrupted("interrupted") from None
+            if isinstance(exc, (click.exceptions.Exit, click.Abort, click.ClickException, SystemExit)):
+                raise
+            if debug():
                 raise
             known = _known_errors()
             if isinstance(exc, known):
                 raise BadInput(one_line(exc)) from None
             raise BadInput(f"internal error ({type(exc).__name__}): {one_line(exc)} "
                            "(run 'dopus-gen --debug ...' for the traceback)") from None
+        if interrupted():   # caught and reported as a failure by CasADi, and the verb went on
+            raise Interrupted("interrupted")
+        return result
 
 
 def _known_errors() -> tuple:
@@ -80,7 +117,7 @@ def main(ctx, cache_dir, debug) -> None:
 
     Exit codes: 0 done; 1 the work ran and failed (a run of converge failed, the
     plant of sil could not be integrated); 2 bad input (a message names the problem;
-    --debug shows the traceback instead).
+    --debug shows the traceback instead); 130 interrupted (Ctrl-C).
     """
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
@@ -204,7 +241,11 @@ def _campaign_option(name: str, flag_type):
 @click.argument("ocp_file", type=click.Path(exists=True, dir_okay=False))
 @click.option("--out", "out", type=click.Path(dir_okay=False), required=True,
               help="The result file (JSON lines, one per run, keyed by run and seed). An existing file of the "
-                   "same campaign is resumed: only the runs it lacks are computed.")
+                   "same campaign (its header's fingerprint) is resumed: only the runs it lacks are computed; "
+                   "malformed lines are reported and computed again.")
+@click.option("--overwrite", is_flag=True,
+              help="Start a new campaign in --out when it cannot be resumed (a damaged header, another "
+                   "campaign's runs) instead of refusing it.")
 @_campaign_option("runs", int)
 @_campaign_option("seed", int)
 @_campaign_option("duration", float)
@@ -217,6 +258,9 @@ def _campaign_option(name: str, flag_type):
 @click.option("--scheduler", default=None,
               help="Address of an existing dask scheduler (tcp://host:port) to run on instead of a local cluster; "
                    "its workers need dopus-codegen installed.")
+@click.option("--worker-timeout", default=60.0, show_default=True, type=click.FloatRange(min=0, min_open=True),
+              help="Seconds without any dask worker after which the campaign stops (resumable); the runs of a "
+                   "lost worker are re-submitted to the others.")
 @click.option("--M", "m", default=None, type=click.IntRange(0),
               help="Stages re-linearised per iteration (clamped to N-1, the full RTI). " + _FROM_FILE.format("1"))
 @_solver_options("0: the paper's literal QP")
@@ -227,8 +271,8 @@ def _campaign_option(name: str, flag_type):
 @click.option("--worst", default=4, show_default=True, type=click.IntRange(0, 20),
               help="Runs in the worst-runs figures (simulated again in this process).")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress display on stderr.")
-def campaign(ocp_file, out, runs, seed, duration, threshold, settle, mismatch, workers, scheduler, m, backend,
-             json_out, plot_dir, worst, progress, **kwargs):
+def campaign(ocp_file, out, overwrite, runs, seed, duration, threshold, settle, mismatch, workers, scheduler,
+             worker_timeout, m, backend, json_out, plot_dir, worst, progress, **kwargs):
     """Monte Carlo campaign: many closed-loop runs with random starts, pushes and plant mismatch.
 
     Run i (with --seed s) is the closed loop of `dopus-gen sil` with the random draw of (s, i):
@@ -238,7 +282,8 @@ def campaign(ocp_file, out, runs, seed, duration, threshold, settle, mismatch, w
     failed instants, recoveries and the time per iteration. Runs on dask.distributed: a local
     cluster (--workers), or an existing scheduler (--scheduler). `dopus-gen sil --campaign-run
     I --seed S` replays one run. Exits with 1 when a run raised an error (the others are
-    kept in --out).
+    kept in --out). Ctrl-C, or a dask cluster left without workers (--worker-timeout),
+    stops the campaign with the finished runs in --out: the same command computes the others.
     """
     from .studies.campaign import run_campaign
 
@@ -246,7 +291,8 @@ def campaign(ocp_file, out, runs, seed, duration, threshold, settle, mismatch, w
     if scheduler is not None and workers is not None:
         raise BadInput("--workers and --scheduler exclude each other (the scheduler has its own workers)")
     rep = run_campaign(ocp_file, out, workers=workers, scheduler=scheduler, backend=backend, json_out=json_out,
-                       plot_dir=plot_dir, echo=click.echo, progress=progress, worst=worst, M=m, runs=runs, seed=seed,
+                       plot_dir=plot_dir, echo=click.echo, progress=progress, worst=worst, overwrite=overwrite,
+                       worker_timeout=worker_timeout, M=m, runs=runs, seed=seed,
                        duration=duration, threshold=threshold, settle=settle, mismatch=mismatch,
                        **_runtime_values(kwargs))
     if rep["errors"]:
@@ -280,6 +326,18 @@ def generate(ocp_file, out_dir, offline_guess, real):
     path = generate_file(ocp_file, out_dir, offline_guess=offline_guess, real=real)
     newest = max((p.stat().st_mtime for p in path.iterdir() if p.is_file()), default=0.0)
     click.echo(f"{'generated' if newest >= t0 else 'up to date'}: {path}")
+    _echo_soft_summary(path)
+
+
+def _echo_soft_summary(path) -> None:
+    """The soft rows of a generated folder (docs/algorithm.md section 12), from its meta file."""
+    from .codegen.folder import read_meta
+
+    meta = read_meta(path)
+    if meta.get("soft_rows"):
+        click.echo(f"soft rows: {meta['soft_rows']}; the QP is "
+                   + ("always feasible (every state-dependent row is soft)" if meta.get("qp_always_feasible")
+                      else "not always feasible (some state-dependent row is hard)"))
 
 
 @main.command()

@@ -11,14 +11,21 @@ checks the path first, so that a typo costs a second, not a finished study:
 
 "Accepts" is tested by creating and removing a temporary entry, which holds for any user
 (permission bits, read-only file systems, ``/proc``), root included.
+
+Every output file is written atomically (:func:`atomic_file`, :func:`write_text`,
+:func:`save_figure`): into a temporary file of the same folder, renamed over the target
+when complete, so an interrupted command (Ctrl-C, a crash) leaves either the old file or
+the new one, never a half-written one.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["OutputPathError", "check_output_file", "check_output_dir"]
+__all__ = ["OutputPathError", "check_output_file", "check_output_dir", "atomic_file", "write_text", "write_bytes",
+           "save_figure"]
 
 
 class OutputPathError(ValueError):
@@ -70,3 +77,51 @@ def check_output_dir(path, what: str) -> Path:
         raise OutputPathError(f"{what} '{path}': '{anc}' is a file, not a folder")
     _probe(anc, what, path)
     return p
+
+
+def _file_mode(path: Path) -> int:
+    """The permission bits a new file at ``path`` gets (those of the file it replaces)."""
+    try:
+        return path.stat().st_mode & 0o7777
+    except OSError:
+        mask = os.umask(0)
+        os.umask(mask)
+        return 0o666 & ~mask
+
+
+@contextlib.contextmanager
+def atomic_file(path, mode: str = "w"):
+    """An open temporary file in the folder of ``path`` (``mode`` ``"w"`` or ``"wb"``),
+    renamed to ``path`` when the block ends normally and removed when it raises (also on
+    ``KeyboardInterrupt``)."""
+    p = Path(path)
+    folder = p.parent if str(p.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=folder)
+    try:
+        with os.fdopen(fd, mode) as fh:
+            yield fh
+        os.chmod(tmp, _file_mode(p))
+        os.replace(tmp, p)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def write_text(path, text: str) -> None:
+    """``text`` into ``path``, atomically."""
+    with atomic_file(path) as fh:
+        fh.write(text)
+
+
+def write_bytes(path, data: bytes) -> None:
+    """``data`` into ``path``, atomically."""
+    with atomic_file(path, "wb") as fh:
+        fh.write(data)
+
+
+def save_figure(fig, path, **kwargs) -> None:
+    """``fig.savefig(path, **kwargs)``, atomically (the format from the file's suffix)."""
+    fmt = kwargs.pop("format", None) or (Path(path).suffix.lstrip(".").lower() or "png")
+    with atomic_file(path, "wb") as fh:
+        fig.savefig(fh, format=fmt, **kwargs)

@@ -20,7 +20,7 @@ FROM_FILE = "[default: the OCP file's options(...), else {}]"
 #: Exit codes: 0 done; 1 the verb ran and what it was asked to do failed (a run of the
 #: study failed, the plant of a closed loop could not be integrated); 2 bad input or an
 #: environment that does not allow the work (a message names the problem), also click's
-#: usage errors.
+#: usage errors; 130 (interrupt.EXIT_INTERRUPTED) stopped by Ctrl-C (SIGINT), any verb.
 EXIT_FAILED, EXIT_BAD_INPUT = 1, 2
 
 

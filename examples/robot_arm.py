@@ -3,6 +3,13 @@
 Every number is the one of the project's robot-arm reference problem (docs/robot_arm.md):
 a two-link arm in the vertical plane follows the circle p(theta) and is rewarded for progress
 theta_N; the tip must end on the path (two terminal equality rows).
+
+The soft variant: ``build(soft_terminal=Soft(l1=...))`` makes the two terminal rows soft (the
+tip may end off the path at the price ``l1 |tip_N - p|_1``). With ``l1`` above the terminal
+multipliers of the hard problem (about 5 at the initial state; ``solve_ocp(...).nu``) it is
+an exact penalty: the solution is the hard one wherever the hard problem is feasible
+(tests/test_soft.py reproduces the hard IPOPT solution with ``l1 = 20``), and a QP after an
+outlier measurement can no longer be infeasible in its terminal rows.
 """
 import math
 
@@ -78,7 +85,9 @@ def disturb(x):
     return x
 
 
-def build():
+def build(soft_terminal=None):
+    """The paper's problem; ``soft_terminal``: a :class:`~dopus_codegen.Soft` for the terminal
+    rows (None: hard equality rows, the paper's)."""
     ocp = Ocp("robot_arm")
     q = ocp.state("q", 2)
     dq = ocp.state("dq", 2)
@@ -91,7 +100,7 @@ def build():
     ocp.stage_least_squares(ca.vertcat(tip(q) - path(theta), tau, dtheta),
                             weights=2 * DT * np.array([W_PATH, W_PATH, W_TAU, W_TAU, W_DTHETA]))
     ocp.terminal_cost(-theta)
-    ocp.terminal_constraint(tip(q) - path(theta), lb=0, ub=0)
+    ocp.terminal_constraint(tip(q) - path(theta), lb=0, ub=0, soft=soft_terminal)
     ocp.horizon(N=N, dt=DT)
 
     x0 = initial_state()

@@ -14,6 +14,12 @@ and the size of the derivative code") compares them against a converged referenc
 Task: swing the pendulum from rest at 0 to ``TARGET`` rad and hold it, with voltage and
 current limits. The OCP file's integrator is Radau IIA with 2 stages and 4 substeps;
 ``build(integrator)`` takes another one (the tests and the accuracy table use it).
+
+``build(soft_current=Soft(l1=[0, 0, l1], l2=[0, 0, l2]), current_limit=...)`` makes the
+current limit soft (a limit the motor may exceed briefly at a price; one weight per state
+component, 0 on the unbounded angle and speed); tests/test_soft.py checks the soft variant,
+with its implicit integrator and the limit lowered to 1 A so that it is active, against
+IPOPT with explicit slacks.
 """
 import casadi as ca
 import numpy as np
@@ -40,9 +46,10 @@ def push(x):
     return x
 
 
-def build(integrator=None):
+def build(integrator=None, soft_current=None, current_limit=I_MAX):
     ocp = Ocp("stiff_motor")
-    x = ocp.state("x", 3, lb=[-np.inf, -np.inf, -I_MAX], ub=[np.inf, np.inf, I_MAX])
+    x = ocp.state("x", 3, lb=[-np.inf, -np.inf, -current_limit], ub=[np.inf, np.inf, current_limit],
+                  soft=soft_current)
     v = ocp.control("v", lb=-V_MAX, ub=V_MAX)
     ocp.dynamics(motor_ode(x, v), integrator=integrator or RadauIIA(stages=2, substeps=4, newton_iters=2))
     ocp.stage_least_squares(ca.vertcat(x[0] - TARGET, x[1], v), weights=DT * np.array([100.0, 1.0, 0.01]))

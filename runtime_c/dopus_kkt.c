@@ -33,6 +33,49 @@ static dopus_real dopus_kkt_comp(dopus_real mu, dopus_real v, dopus_real lb, dop
     return c;
 }
 
+#if DOPUS_NSOFT > 0
+/* A row with soft weights w (w[0 .. 3 * stride]: L1 lower, L1 upper, L2 lower, L2 upper):
+ * a hard side as above; a soft side with multiplier m at its best slack s = max(s0, (m - l1)
+ * / l2) (s0 = max(0, lb - v) the violation; s = s0 when l2 = 0), where the slack's
+ * stationarity l1 + l2 s - m = y must be >= 0, with the complementarity m (v - lb + s) and y s
+ * (docs/algorithm.md section 12), each into comp. */
+static void dopus_kkt_row(dopus_real v, dopus_real lb, dopus_real ub, dopus_real mu, const dopus_real *w,
+                          int stride, dopus_real *ineq, dopus_real *comp)
+{
+    const int slo = isfinite(lb) && (w[0] > DOPUS_R(0.0) || w[2 * stride] > DOPUS_R(0.0));
+    const int sup = isfinite(ub) && (w[stride] > DOPUS_R(0.0) || w[3 * stride] > DOPUS_R(0.0));
+    const dopus_real lbh = slo ? -INFINITY : lb, ubh = sup ? INFINITY : ub;
+    const dopus_real muh = ((mu > DOPUS_R(0.0) && sup) || (mu < DOPUS_R(0.0) && slo)) ? DOPUS_R(0.0) : mu;
+    int side;
+    *ineq = dopus_kkt_max(*ineq, dopus_kkt_viol(v, lbh, ubh));
+    *comp = dopus_kkt_max(*comp, dopus_kkt_comp(muh, v, lbh, ubh));
+    for (side = 0; side < 2; ++side) {
+        const dopus_real m = dopus_kkt_max(side ? mu : -mu, DOPUS_R(0.0));
+        const dopus_real gap = side ? ub - v : v - lb;
+        const dopus_real l1 = w[side * stride], l2 = w[(2 + side) * stride];
+        dopus_real sl = dopus_kkt_max(DOPUS_R(0.0), -gap), y;
+        if (!(side ? sup : slo)) {
+            continue;
+        }
+        if (l2 > DOPUS_R(0.0)) {
+            sl = dopus_kkt_max(sl, (m - l1) / l2);
+        }
+        y = l1 + l2 * sl - m;
+        *comp = dopus_kkt_max(*comp, dopus_kkt_max(DOPUS_R(0.0), -y));
+        *comp = dopus_kkt_max(*comp, m * (gap + sl));
+        *comp = dopus_kkt_max(*comp, dopus_kkt_max(DOPUS_R(0.0), y) * sl);
+    }
+}
+#define DOPUS_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
+    dopus_kkt_row((v), (lb), (ub), (mu), (w), (stride), &ineq, &comp)
+#else
+#define DOPUS_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
+    do {                                                                                                     \
+        ineq = dopus_kkt_max(ineq, dopus_kkt_viol((v), (lb), (ub)));                                         \
+        comp = dopus_kkt_max(comp, dopus_kkt_comp((mu), (v), (lb), (ub)));                                   \
+    } while (0)
+#endif
+
 int dopus_kkt_measure(const dopus_real *x, const dopus_real *u, const dopus_real *lam, const dopus_real *mu_g,
                       const dopus_real *mu_b, const dopus_real *mu_bN, const dopus_real *mu_r,
                       const dopus_real *nu, const dopus_real *p, const dopus_real *xhat0,
@@ -65,8 +108,8 @@ int dopus_kkt_measure(const dopus_real *x, const dopus_real *u, const dopus_real
             eq = dopus_kkt_max(eq, dopus_fabs(x[(k + 1) * DOPUS_NX + i] - phi[i]));
         }
         for (i = 0; i < DOPUS_NG; ++i) {
-            ineq = dopus_kkt_max(ineq, dopus_kkt_viol(g[i], dopus_lg[i], dopus_ug[i]));
-            comp = dopus_kkt_max(comp, dopus_kkt_comp(mu_g[k * NG1 + i], g[i], dopus_lg[i], dopus_ug[i]));
+            DOPUS_KKT_ROW(g[i], dopus_lg[i], dopus_ug[i], mu_g[k * NG1 + i], &dopus_soft_g[0][i],
+                          DOPUS_DIM(DOPUS_NG));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
          * sides and counts with its magnitude) */
@@ -76,9 +119,8 @@ int dopus_kkt_measure(const dopus_real *x, const dopus_real *u, const dopus_real
             }
         } else {
             for (i = 0; i < DOPUS_NX; ++i) {
-                ineq = dopus_kkt_max(ineq, dopus_kkt_viol(x[k * DOPUS_NX + i], dopus_lbx[i], dopus_ubx[i]));
-                comp = dopus_kkt_max(comp, dopus_kkt_comp(mu_b[k * DOPUS_NW + i], x[k * DOPUS_NX + i],
-                                                          dopus_lbx[i], dopus_ubx[i]));
+                DOPUS_KKT_ROW(x[k * DOPUS_NX + i], dopus_lbx[i], dopus_ubx[i], mu_b[k * DOPUS_NW + i],
+                              &dopus_soft_x[0][i], DOPUS_NX);
             }
         }
         for (i = 0; i < DOPUS_NU; ++i) {
@@ -97,16 +139,14 @@ int dopus_kkt_measure(const dopus_real *x, const dopus_real *u, const dopus_real
     }
     for (i = 0; i < DOPUS_NX; ++i) {
         stat = dopus_kkt_max(stat, dopus_fabs(gLN[i] + mu_bN[i] + lam[DOPUS_N * DOPUS_NX + i]));
-        ineq = dopus_kkt_max(ineq, dopus_kkt_viol(x[DOPUS_N * DOPUS_NX + i], dopus_lbx[i], dopus_ubx[i]));
-        comp = dopus_kkt_max(comp,
-                             dopus_kkt_comp(mu_bN[i], x[DOPUS_N * DOPUS_NX + i], dopus_lbx[i], dopus_ubx[i]));
+        DOPUS_KKT_ROW(x[DOPUS_N * DOPUS_NX + i], dopus_lbx[i], dopus_ubx[i], mu_bN[i], &dopus_soft_x[0][i],
+                      DOPUS_NX);
     }
     for (i = 0; i < DOPUS_NE; ++i) {
         eq = dopus_kkt_max(eq, dopus_fabs(r_eq[i]));
     }
     for (i = 0; i < DOPUS_NR; ++i) {
-        ineq = dopus_kkt_max(ineq, dopus_kkt_viol(r[i], dopus_lr[i], dopus_ur[i]));
-        comp = dopus_kkt_max(comp, dopus_kkt_comp(mu_r[i], r[i], dopus_lr[i], dopus_ur[i]));
+        DOPUS_KKT_ROW(r[i], dopus_lr[i], dopus_ur[i], mu_r[i], &dopus_soft_r[0][i], DOPUS_DIM(DOPUS_NR));
     }
     parts[0] = stat;
     parts[1] = eq;

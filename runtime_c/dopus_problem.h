@@ -23,6 +23,14 @@ extern const dopus_real dopus_x0_default[DOPUS_NX];
 extern const dopus_real dopus_guess_x[DOPUS_N + 1][DOPUS_NX];
 extern const dopus_real dopus_guess_u[DOPUS_N][DOPUS_NU];
 
+#if DOPUS_NSOFT > 0
+/* soft weights of the state bounds (nodes 1..N), path rows and terminal inequality rows;
+ * rows: L1 lower, L1 upper, L2 lower, L2 upper (docs/algorithm.md section 12) */
+extern const dopus_real dopus_soft_x[4][DOPUS_NX];
+extern const dopus_real dopus_soft_g[4][DOPUS_DIM(DOPUS_NG)];
+extern const dopus_real dopus_soft_r[4][DOPUS_DIM(DOPUS_NR)];
+#endif
+
 #if DOPUS_HAS_NOMINAL
 /* offline primal-dual solution at dopus_x0_default (IPOPT at generation time), so the
  * controller starts warm (docs/design.md section 8) */

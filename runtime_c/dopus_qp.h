@@ -92,8 +92,24 @@
  * two solves (predictor, corrector), plus one residual/solve pair per refinement step once
  * the residuals are below 1e-6; the flop count is tabulated in bench/README.md.
  *
+ * Soft rows (DOPUS_NSOFT > 0 in dopus_sizes.h): a side of an inequality row whose weights
+ * zl, Zl (lower) or zu, Zu (upper) in dopus_qp_in are not both 0 may be violated by a slack
+ * s >= 0, lo - s_lo <= v <= up + s_up, at the price zl s_lo + Zl s_lo^2 / 2 (zu, Zu for
+ * s_up) added to the objective. The weights are those of a row of every stage (zl[j] for
+ * row j of a stage, as in the layout above) and of the terminal rows (zlN). The slacks are
+ * eliminated row by row inside the interior point (their Newton equations are scalar), so
+ * the Riccati recursion keeps the size of the problem without slacks: a soft side's barrier
+ * weight z/t becomes 1 / (t/z + 1/(Zl + y/s)) (y the multiplier of s >= 0), a series of the
+ * row's and the slack's barrier. The returned multiplier of a soft side lies in [0, zl + Zl
+ * s] (equal to the upper end when the side is violated), the slacks are max(0, lo - v) and
+ * max(0, v - up) of the solution. A soft side of a row of C_0 without u_0 is kept (its
+ * slack is then data, its multiplier zl + Zl s unique). A soft side never makes the QP infeasible: the
+ * infeasibility certificates and dopus_qp_infeasible_row concern the hard sides only. With
+ * DOPUS_NSOFT 0 (or undefined) the weights are not read and the solver compiles to the
+ * loops of hard rows alone.
+ *
  * Sizes come from dopus_sizes.h: DOPUS_N, DOPUS_NX, DOPUS_NU, DOPUS_NG, DOPUS_NR, DOPUS_NE
- * (NG, NR, NE may be 0). No malloc, no VLAs, no recursion, no state outside the workspace.
+ * (NG, NR, NE may be 0), DOPUS_NSOFT (optional, 0 without soft rows). No malloc, no VLAs, no recursion, no state outside the workspace.
  * Compile with -O3 where possible: the linear algebra is inlined with compile-time sizes
  * and -O3 vectorises it (about 1.8x faster than -O2 on the robot-arm QPs).
  */
@@ -130,6 +146,15 @@
 #else
 #define DOPUS_QP_NB DOPUS_QP_MAX1(DOPUS_QP_NINEQ)
 #endif
+/* Soft rows: on (1) when dopus_sizes.h declares DOPUS_NSOFT > 0; the sizes of the soft
+ * weights (rows of a stage, terminal rows) and of the per-row slack arrays, 1 when off. */
+#ifndef DOPUS_NSOFT
+#define DOPUS_NSOFT 0
+#endif
+#define DOPUS_QP_SOFT (DOPUS_NSOFT > 0)
+#define DOPUS_QP_NSS (DOPUS_QP_SOFT * DOPUS_QP_NSTAGEINEQ + 1 - DOPUS_QP_SOFT)
+#define DOPUS_QP_NST (DOPUS_QP_SOFT * (DOPUS_NX + DOPUS_NR) + 1 - DOPUS_QP_SOFT)
+#define DOPUS_QP_NBS (DOPUS_QP_SOFT * DOPUS_QP_NB + 1 - DOPUS_QP_SOFT)
 /* A lower triangular nu x nu matrix packed by lower columns. */
 #define DOPUS_QP_NUP (DOPUS_QP_NU1 * (DOPUS_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
@@ -194,6 +219,17 @@ typedef struct {
      * HN + hess_shift I instead of H_k and HN; 0 (the value of a zero-filled struct)
      * leaves the QP as given; must be finite and >= 0 */
     dopus_real hess_shift;
+    /* soft weights (read only when DOPUS_NSOFT > 0; see the header comment): L1 (zl, zu)
+     * and L2 (Zl, Zu) of the lower and upper side of row j of every stage (j = 0..nw+ng-1)
+     * and of the terminal rows (j = 0..nx+nr-1: x_N, then R); finite and >= 0 */
+    dopus_real zl[DOPUS_QP_NSS];
+    dopus_real zu[DOPUS_QP_NSS];
+    dopus_real Zl[DOPUS_QP_NSS];
+    dopus_real Zu[DOPUS_QP_NSS];
+    dopus_real zlN[DOPUS_QP_NST];
+    dopus_real zuN[DOPUS_QP_NST];
+    dopus_real ZlN[DOPUS_QP_NST];
+    dopus_real ZuN[DOPUS_QP_NST];
 } dopus_qp_in;
 
 /* Primal-dual solution (output; also the warm-start point when settings.warm_start). */
@@ -249,6 +285,20 @@ typedef struct {
     dopus_real t_up[DOPUS_QP_NB];
     dopus_real z_lo[DOPUS_QP_NB];
     dopus_real z_up[DOPUS_QP_NB];
+    /* soft sides (DOPUS_NSOFT > 0): flags, slacks s >= 0 and their multipliers y, the
+     * residual of the slack's stationarity (Z s + z_soft - z - y) and the steps */
+    unsigned char soft_lo[DOPUS_QP_NBS];
+    unsigned char soft_up[DOPUS_QP_NBS];
+    dopus_real s_lo[DOPUS_QP_NBS];
+    dopus_real s_up[DOPUS_QP_NBS];
+    dopus_real y_lo[DOPUS_QP_NBS];
+    dopus_real y_up[DOPUS_QP_NBS];
+    dopus_real rs_lo[DOPUS_QP_NBS];
+    dopus_real rs_up[DOPUS_QP_NBS];
+    dopus_real ds_lo[DOPUS_QP_NBS];
+    dopus_real ds_up[DOPUS_QP_NBS];
+    dopus_real dy_lo[DOPUS_QP_NBS];
+    dopus_real dy_up[DOPUS_QP_NBS];
     /* residuals */
     dopus_real r_stat[DOPUS_QP_NPRIM];
     dopus_real r_dyn[(DOPUS_N + 1) * DOPUS_NX];

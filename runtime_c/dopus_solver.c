@@ -97,7 +97,7 @@ static int dopus_phase(dopus_solver *s, int phase)
 
 static int dopus_has_clock(const dopus_solver *s);
 
-/* ---- the anytime budget (algorithm.md section 12) --------------------------------------- */
+/* ---- the anytime budget (algorithm.md section 13) --------------------------------------- */
 
 /* 1 when a budget is set (a time budget needs a clock). */
 static int dopus_budget_on(const dopus_solver *s)
@@ -480,6 +480,25 @@ static void dopus_assemble(dopus_solver *s)
     for (i = 0; i < DOPUS_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
+#if DOPUS_NSOFT > 0
+    /* soft weights: the rows of a stage (x, u (hard), g) and the terminal rows (x_N, r) */
+    for (j = 0; j < 4; ++j) {
+        dopus_real *st = j == 0 ? in->zl : j == 1 ? in->zu : j == 2 ? in->Zl : in->Zu;
+        dopus_real *te = j == 0 ? in->zlN : j == 1 ? in->zuN : j == 2 ? in->ZlN : in->ZuN;
+        for (i = 0; i < DOPUS_NX; ++i) {
+            st[i] = te[i] = dopus_soft_x[j][i];
+        }
+        for (i = 0; i < DOPUS_NU; ++i) {
+            st[DOPUS_NX + i] = DOPUS_R(0.0);
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            st[DOPUS_NW + i] = dopus_soft_g[j][i];
+        }
+        for (i = 0; i < DOPUS_NR; ++i) {
+            te[DOPUS_NX + i] = dopus_soft_r[j][i];
+        }
+    }
+#endif
     dopus_phase(s, prev);
 }
 
@@ -719,7 +738,7 @@ static void dopus_feedback_measure(dopus_solver *s, const dopus_real *xhat0)
     if (!s->anytime.prepared_extra) {
         /* (after extra iterations the term the prepare convexified stays: the iterate has
          * converged at the predicted state and the capped term, 0 there, left QPs that are
-         * convex only on the active bounds; algorithm.md section 12) */
+         * convex only on the active bounds; algorithm.md section 13) */
         dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
@@ -740,7 +759,7 @@ static int dopus_qp_solve_bound(dopus_solver *s, int warm)
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
     if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
-        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 12) */
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 13) */
     }
     settings.warm_start = warm;
     for (k = 0; k < DOPUS_N; ++k) {
@@ -921,7 +940,7 @@ static int dopus_model_finite_at(dopus_solver *s, const dopus_real *xs)
 }
 
 /* Feedback once admitted (steps 2 to 8). */
-/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
+/* The bounded latency of a time budget (algorithm.md section 13): the QP's iterations are
  * capped at the budget left over the cost of one QP iteration of the last feedback (at least
  * 1); a QP stopped by the cap is not retried (the fallback control). */
 static void dopus_feedback_cap(dopus_solver *s)
@@ -1045,6 +1064,33 @@ static void dopus_shift(dopus_solver *s)
     dopus_ring_advance(&s->ring);
 }
 
+/* A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for the
+ * QP: its row of Ct is zero and the value g_new of step 2 lies outside that side's bound
+ * (0 dw >= lg - g_new > 0). Stage 0 is left out (the QP ignores its rows without u). */
+static int dopus_stale_stage(const dopus_solver *s, int k)
+{
+    const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
+    const dopus_real *g = s->mem.ev.Fn_g[k];
+    int i, j;
+    if (k == 0) {
+        return 0;
+    }
+    for (j = 0; j < DOPUS_NG; ++j) {
+        int hard_lo = 1, hard_up = 1, zero = 1;
+#if DOPUS_NSOFT > 0
+        hard_lo = !(dopus_soft_g[0][j] > DOPUS_R(0.0) || dopus_soft_g[2][j] > DOPUS_R(0.0));
+        hard_up = !(dopus_soft_g[1][j] > DOPUS_R(0.0) || dopus_soft_g[3][j] > DOPUS_R(0.0));
+#endif
+        for (i = 0; i < DOPUS_NW && zero; ++i) {
+            zero = slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] == DOPUS_R(0.0);
+        }
+        if (zero && ((hard_lo && g[j] < dopus_lg[j]) || (hard_up && g[j] > dopus_ug[j]))) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
 /* |domega_k| of stage k's slot (the denominator of rho_k). */
 static dopus_real dopus_step_norm(const dopus_solver *s, int k)
 {
@@ -1064,7 +1110,7 @@ static dopus_real dopus_step_norm(const dopus_solver *s, int k)
 }
 
 /* The number of stages among 0..N-2 to re-linearise (before the budget): N-1 after a
- * recovery, the fixed M, or adaptive M (algorithm.md section 12): the stages whose secant
+ * recovery, the fixed M, or adaptive M (algorithm.md section 13): the stages whose secant
  * residual rho_k |domega_k| exceeds eta times the KKT proxy of the point before the step,
  * between M_min and M_max. */
 static int dopus_M_now(const dopus_solver *s)
@@ -1098,9 +1144,10 @@ static int dopus_next_worst(const dopus_solver *s)
     return best;
 }
 
-/* Step 4: re-linearise the stages with the largest rho_k: M of them (dopus_M_now), then, with
- * a budget, further stages in rho order while one more iteration still fits after them
- * (algorithm.md section 12); each only while the budget allows. The cost of the stages
+/* Step 4: re-linearise the stale stages (dopus_stale_stage), then among the other stages of
+ * 0..N-2 those with the largest rho_k: M of them (dopus_M_now), then, with a budget,
+ * further stages in rho order while one more iteration still fits after them
+ * (algorithm.md section 13); each only while the budget allows. The cost of the stages
  * beyond M goes to *ext_cost. */
 static int dopus_relinearise(dopus_solver *s, double *ext_cost)
 {
@@ -1108,6 +1155,18 @@ static int dopus_relinearise(dopus_solver *s, double *ext_cost)
     double b0, reserve;
     for (k = 0; k < DOPUS_N; ++k) {
         s->selected[k] = 0;
+    }
+    /* the stale stages first, whatever the budget: without them the QP is infeasible */
+    for (k = 0; k < DOPUS_N - 1 && DOPUS_NG > 0; ++k) {
+        if (dopus_stale_stage(s, k)) {
+            rc = dopus_stage_H(s, k);
+            if (rc != DOPUS_OK) {
+                s->anytime.instant_stages += n;
+                return rc;
+            }
+            s->selected[k] = 1;
+            n += 1;
+        }
     }
     extend = dopus_budget_on(s);
     *ext_cost = 0.0;
@@ -1118,6 +1177,9 @@ static int dopus_relinearise(dopus_solver *s, double *ext_cost)
             break;
         }
         k = dopus_next_worst(s);
+        if (k < 0) {
+            break;
+        }
         b0 = dopus_budget_now(s);
         rc = dopus_stage_H(s, k);
         if (rc != DOPUS_OK) {
@@ -1355,7 +1417,7 @@ int dopus_prepare(dopus_solver *s)
         rc = dopus_prepare_iteration(s, 0);
     }
     if (rc == DOPUS_OK) {
-        /* the budget left (algorithm.md section 12), with the Hessian of the recovery phase */
+        /* the budget left (algorithm.md section 13), with the Hessian of the recovery phase */
         if (s->health.recovering > 0 && DOPUS_HAS_GN) {
             s->settings.hessian = DOPUS_HESSIAN_GAUSS_NEWTON;
         }
@@ -1373,7 +1435,7 @@ int dopus_prepare(dopus_solver *s)
 }
 
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
- * anytime budget (section 12), without the shift, x_N kept. */
+ * anytime budget (section 13), without the shift, x_N kept. */
 static int dopus_prepare_iteration(dopus_solver *s, int extra)
 {
     dopus_real xN_saved[DOPUS_NX];
@@ -1487,7 +1549,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     return DOPUS_OK;
 }
 
-/* ---- anytime (algorithm.md section 12) -------------------------------------------------- */
+/* ---- anytime (algorithm.md section 13) -------------------------------------------------- */
 
 /* One extra iteration on the next instant's problem: the prepared QP for the state the plan
  * predicts (dx_0 = 0), its full step, then a prepare iteration without the shift. A QP not
@@ -1502,7 +1564,7 @@ static int dopus_extra_iteration(dopus_solver *s)
         s->qp_in.x0[i] = DOPUS_R(0.0);
     }
     /* the cap of the term while the extra iterations make progress; after one of them raised
-     * the KKT proxy, the term the prepare convexified (algorithm.md section 12) */
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 13) */
     if (!s->anytime.uncapped) {
         dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
@@ -1522,7 +1584,7 @@ static int dopus_extra_iteration(dopus_solver *s)
     return rc;
 }
 
-/* The budget left after prepare (algorithm.md section 12): extra iterations while the KKT
+/* The budget left after prepare (algorithm.md section 13): extra iterations while the KKT
  * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
  * of dopus_info. */
 static int dopus_anytime_run(dopus_solver *s)
@@ -1648,6 +1710,92 @@ int dopus_get_recomputed(const dopus_solver *s, int *stages)
 static dopus_real dopus_side_bound(const dopus_real *lo, const dopus_real *up, int i, int side)
 {
     return side > 0 ? up[i] : lo[i];
+}
+
+#if DOPUS_NSOFT > 0
+/* The slack of the row value v against [lb, ub] on the sides with soft weights w (stride). */
+static dopus_real dopus_soft_slack(dopus_real v, dopus_real lb, dopus_real ub, const dopus_real *w,
+                                   int stride)
+{
+    dopus_real sl = DOPUS_R(0.0);
+    if ((w[0] > DOPUS_R(0.0) || w[2 * stride] > DOPUS_R(0.0)) && lb - v > sl) {
+        sl = lb - v;
+    }
+    if ((w[stride] > DOPUS_R(0.0) || w[3 * stride] > DOPUS_R(0.0)) && v - ub > sl) {
+        sl = v - ub;
+    }
+    return sl;
+}
+#endif
+
+dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopus_real *viol_g,
+                                 dopus_real *viol_r)
+{
+    dopus_real worst = DOPUS_R(0.0);
+    int k, i;
+    for (k = 0; k <= DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NX && viol_x; ++i) {
+            viol_x[k * DOPUS_NX + i] = DOPUS_R(0.0);
+        }
+    }
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_DIM(DOPUS_NG) && viol_g; ++i) {
+            viol_g[k * DOPUS_DIM(DOPUS_NG) + i] = DOPUS_R(0.0);
+        }
+    }
+    for (i = 0; i < DOPUS_DIM(DOPUS_NR) && viol_r; ++i) {
+        viol_r[i] = DOPUS_R(0.0);
+    }
+#if DOPUS_NSOFT > 0
+    {
+        const dopus_qp_in *in = &s->qp_in;
+        const dopus_qp_sol *sol = &s->mem.qp.sol;
+        /* the QP's matrices are not pointed to between calls: the slots of the horizon of the
+         * last feedback (no shift since) and the terminal R */
+        for (k = 1; k <= DOPUS_N; ++k) {
+            for (i = 0; i < DOPUS_NX; ++i) {
+                const dopus_real lb = k < DOPUS_N ? in->lbw[k][i] : in->lbxN[i];
+                const dopus_real ub = k < DOPUS_N ? in->ubw[k][i] : in->ubxN[i];
+                const dopus_real sl = dopus_soft_slack(sol->x[k][i], lb, ub, &dopus_soft_x[0][i], DOPUS_NX);
+                worst = sl > worst ? sl : worst;
+                if (viol_x) {
+                    viol_x[k * DOPUS_NX + i] = sl;
+                }
+            }
+        }
+        for (k = 0; k < DOPUS_N && DOPUS_NG > 0; ++k) {
+            for (i = 0; i < DOPUS_NG; ++i) {
+                dopus_real v = DOPUS_R(0.0), sl;
+                int c;
+                for (c = 0; c < DOPUS_NW; ++c) {
+                    v += dopus_ring_stage_const(&s->ring, k)->Ct[i + c * DOPUS_DIM(DOPUS_NG)] *
+                         (c < DOPUS_NX ? sol->x[k][c] : sol->u[k][c - DOPUS_NX]);
+                }
+                sl =
+                    dopus_soft_slack(v, in->lg[k][i], in->ug[k][i], &dopus_soft_g[0][i], DOPUS_DIM(DOPUS_NG));
+                worst = sl > worst ? sl : worst;
+                if (viol_g) {
+                    viol_g[k * DOPUS_DIM(DOPUS_NG) + i] = sl;
+                }
+            }
+        }
+        for (i = 0; i < DOPUS_NR; ++i) {
+            dopus_real v = DOPUS_R(0.0), sl;
+            int c;
+            for (c = 0; c < DOPUS_NX; ++c) {
+                v += s->R[i + c * DOPUS_DIM(DOPUS_NR)] * sol->x[DOPUS_N][c];
+            }
+            sl = dopus_soft_slack(v, in->lr[i], in->ur[i], &dopus_soft_r[0][i], DOPUS_DIM(DOPUS_NR));
+            worst = sl > worst ? sl : worst;
+            if (viol_r) {
+                viol_r[i] = sl;
+            }
+        }
+    }
+#else
+    (void)s;
+#endif
+    return worst;
 }
 
 int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)

@@ -237,3 +237,30 @@ def test_sil_and_campaign_apply_the_same_controls_through_failures(tmp_path, mon
         np.testing.assert_array_equal(np.array(rec["u"]), np.array(run["u"]))
         failed += sum(1 for st in run["status"] if st != 0)
     assert failed > 0, "the QP iteration limit failed no feedback: the test sees no failure"
+
+
+def test_a_signed_on_path_signal_keeps_its_sign(in_process, tmp_path):
+    """OnPath asks the signal to stay at or below the threshold, with its sign: the robot arm
+    with the signal 'over' = deviation - 2 cm (negative while the tip is within 2 cm) and the
+    threshold 1 mm puts on the path the runs whose deviation stays at or below 2.1 cm, with
+    the largest 'over' equal to the largest deviation - 2 cm (judged by its absolute value,
+    no run was on the path: that asks 1.9 cm <= deviation <= 2.1 cm)."""
+    text = ROBOT_ARM_FILE.read_text()
+    old_signal = 'signals={"deviation": ca.norm_2(tip(q) - path(theta)),'
+    old_on_path = 'on_path=OnPath(signal="deviation", threshold=0.02, settle=0.4)'
+    assert old_signal in text and old_on_path in text
+    ocp_file = tmp_path / "robot_arm_over.py"
+    ocp_file.write_text(text.replace(old_signal, old_signal + ' "over": ca.norm_2(tip(q) - path(theta)) - 0.02,')
+                        .replace(old_on_path, 'on_path=OnPath(signal="over", threshold=0.001, settle=0.4)'))
+    out = tmp_path / "over.jsonl"
+    res = CliRunner().invoke(main, ["campaign", str(ocp_file), *ARGS[1:], "--out", str(out), "--workers", "0"])
+    assert res.exit_code == 0, res.output
+    _, ref = _lines(in_process)
+    _, over = _lines(out)
+    assert sorted(over) == sorted(ref)
+    for key, r in over.items():
+        assert r["on_path"] == (ref[key]["aborted"] is None and ref[key]["max_deviation"] <= 0.021)
+        assert r["max_deviation"] == pytest.approx(ref[key]["max_deviation"] - 0.02, abs=1e-15)
+        assert r["max_deviation"] < 0 and r["signal"] == pytest.approx(np.asarray(ref[key]["signal"]) - 0.02,
+                                                                       abs=1e-15)
+    assert sum(r["on_path"] for r in over.values()) == RUNS

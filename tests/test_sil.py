@@ -9,6 +9,7 @@ against independent numbers.
 """
 import importlib.util
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ from dopus_codegen.cli import main as cli_main
 from dopus_codegen.problem.derivatives import build_functions
 from dopus_codegen.reference.offline import solve_ocp
 from dopus_codegen.problem.ocp import Event
-from dopus_codegen.studies.sil import run_closed_loop, summarize
+from dopus_codegen.studies.sil import format_summary, run_closed_loop, summarize
 from test_plant import arm_rhs_numpy
 
 DEFAULT_LM = 1e-4  # examples/robot_arm.py: options(lm=1e-4)
@@ -178,10 +179,26 @@ def test_sil_events_and_summary():
                     (("deviation", "after second kick"), slice(13, 20))):
         assert segs[key]["max"] == pytest.approx(np.max(dev[sl]), rel=1e-12)
         assert segs[key]["rms"] == pytest.approx(np.sqrt(np.mean(dev[sl] ** 2)), rel=1e-12)
+    # a signal negative when all is well keeps its sign: min, max and RMS of the values as they are
+    signed = dict(run, signals=dict(run["signals"], over=list(dev - 0.02)))
+    segs = {(g["signal"], g["segment"]): g for g in summarize(signed, settle=0.03)["segments"]}
+    for key, sl in ((("over", "before kick"), slice(0, 5)), (("over", "after kick"), slice(5, 13))):
+        assert segs[key]["max"] == pytest.approx(np.max(dev[sl] - 0.02), rel=1e-12) and segs[key]["max"] < 0
+        assert segs[key]["min"] == pytest.approx(np.min(dev[sl] - 0.02), rel=1e-12)
+        assert segs[key]["rms"] == pytest.approx(np.sqrt(np.mean((dev[sl] - 0.02) ** 2)), rel=1e-12)
     kkt = np.array(run["kkt"])
     settled = [i for i in range(20) if i >= 3 and not (5 <= i < 8) and not (13 <= i < 16)]
     assert s["kkt_max_settled"] == pytest.approx(np.max(kkt[settled]), rel=1e-12)
     assert s["qp_failures"] == 0
+    # the table's recoveries column: the run's count of automatic re-initialisations, '-' where
+    # the backend does not count them (the reference backend here)
+    for count, shown in ((None, "-"), (3, "3")):
+        table = format_summary([summarize(dict(run, result=dict(run["result"], recoveries=count)))]).splitlines()
+        head = next(i for i, line in enumerate(table) if "recoveries" in line)
+        names = [c for c in re.split(r"\s{2,}", table[head].strip())]
+        values = re.split(r"\s{2,}", table[head + 2].strip())
+        assert dict(zip(names, values))["recoveries"] == shown
+        assert dict(zip(names, values))["QP fail"] == "0"
 
 
 def test_cli_sil(tmp_path):
@@ -199,6 +216,10 @@ def test_cli_sil(tmp_path):
         assert x.shape == (5, 5) and u.shape == (5, 3)
         assert np.max(np.abs(x - replay(ARM.initial_state(), u))) < 1e-6
         assert r["status"] == [0] * 5
+        # the automatic lm: the setting and the value it reached, not the value as if it were the setting
+        assert r["settings"]["lm_setting"] == "auto"
+        assert f"{r['label']}: " in res.output and f"lm auto (now {r['settings']['lm']:g}) (default)" in \
+            res.output.split(f"{r['label']}: hessian", 1)[1].splitlines()[0]
     for name in ("sil_signals.png", "sil_kkt.png", "sil_controls.png", "sil_recomputed.png", "sil_timing.png"):
         assert (plots / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -216,3 +237,35 @@ def test_cli_sil_errors(tmp_path):
     assert "Traceback" not in res.output
     res = CliRunner().invoke(cli_main, ["sil", str(EXAMPLE), "--duration", "-1"])
     assert res.exit_code != 0 and "duration" in res.output
+
+
+def test_a_time_unit_of_the_scenario_is_shown(tmp_path, monkeypatch):
+    """scenario(units={"time": "min"}): a model whose time is in minutes (a slow process) is
+    shown in minutes: the run's line, the summary's footnote, the figures' time axes."""
+    from dopus_codegen.studies import plots
+
+    ocp_file = tmp_path / "slow.py"
+    ocp_file.write_text(
+        "import casadi as ca\nfrom dopus_codegen import Ocp, Event\n\n"
+        "def build():\n"
+        "    ocp = Ocp('slow')\n    x = ocp.state('x')\n    u = ocp.control('u', lb=-1, ub=1)\n"
+        "    ocp.dynamics(u - 0.1 * x)\n    ocp.stage_cost(x**2 + u**2)\n    ocp.horizon(N=5, dt=0.5)\n"
+        "    ocp.initial_state([1.0])\n"
+        "    ocp.scenario(duration=5.0, events=[Event(2.0, lambda x: x + 0.5, 'step')], signals={'level': x},\n"
+        "                 units={'time': 'min', 'level': 'm'})\n"
+        "    return ocp\n")
+    labels = []
+
+    def keep_labels(fig, path):
+        labels.extend(ax.get_xlabel() for ax in fig.axes if ax.get_xlabel())
+        plots.plt.close(fig)
+        return path
+
+    monkeypatch.setattr(plots, "_save", keep_labels)
+    res = CliRunner().invoke(cli_main, ["sil", str(ocp_file), "--backend", "reference", "--plot-dir",
+                                        str(tmp_path / "plots")])
+    assert res.exit_code == 0, res.output
+    assert "DOPUS M = 1: reference backend" in res.output and "5.0 min ..." in res.output
+    assert "excluding the first 0.2 min after the start" in res.output
+    time_axes = [label for label in labels if label.startswith("time")]
+    assert time_axes and set(time_axes) == {"time [min]"}

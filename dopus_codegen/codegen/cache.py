@@ -11,7 +11,10 @@ Location: ``--cache-dir`` of ``dopus-gen`` (any verb), else ``$DOPUS_CACHE_DIR``
   templates and versions), so an unchanged problem is neither regenerated nor rebuilt.
 
 Entries are written under temporary names and renamed, so concurrent users never see a
-half-written file. Deleting the folder is always safe.
+half-written file. Deleting the folder is always safe. A folder that cannot be written
+(read-only, on a read-only file system, a file in its place) is named in a
+:class:`CacheError` that points to ``--cache-dir`` where a command needs to write there
+(:func:`writable_folder`); ``dopus-gen build`` works without writing to it.
 """
 from __future__ import annotations
 
@@ -30,7 +33,8 @@ from .. import __version__
 from .folder import FUNCTION_SLOTS
 from ..paths import runtime_c_dir, templates_dir
 
-__all__ = ["cache_root", "problem_hash", "object_key", "cached_object", "store_object"]
+__all__ = ["cache_root", "problem_hash", "object_key", "cached_object", "store_object", "CacheError", "cache_error",
+           "writable_folder"]
 
 ENV_VAR = "DOPUS_CACHE_DIR"
 
@@ -41,6 +45,34 @@ def cache_root(cache_dir=None) -> Path:
         return Path(cache_dir)
     env = os.environ.get(ENV_VAR)
     return Path(env) if env else Path.home() / ".cache" / "dopus-codegen"
+
+
+class CacheError(OSError):
+    """The build cache folder cannot be written; the message names it and ``--cache-dir``."""
+
+
+def cache_error(root, exc: OSError) -> CacheError:
+    """The :class:`CacheError` of the cache folder ``root`` for the failure ``exc``."""
+    why = exc.strerror or str(exc)
+    if exc.filename is not None:
+        why += f": '{exc.filename}'"
+    return CacheError(f"the build cache folder '{root}' cannot be written ({why}); give a writable folder with "
+                      f"--cache-dir (or ${ENV_VAR})")
+
+
+def writable_folder(sub: str, cache_dir=None) -> Path:
+    """The folder ``sub`` of the cache, created if needed and checked writable (by creating
+    and removing a file, which holds for root too), else :class:`CacheError`."""
+    root = cache_root(cache_dir)
+    folder = root / sub
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".probe-", dir=str(folder))
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise cache_error(root, exc) from None
+    return folder
 
 
 def _array_bytes(v) -> bytes:
@@ -70,6 +102,9 @@ def problem_hash(disc: Any, offline_guess: Optional[bool] = None, real: Optional
         put(key, repr(getattr(disc, key, None)).encode())
     for key in ("lbx", "ubx", "lbu", "ubu", "lg", "ug", "lr", "ur", "p0", "x0"):
         put(key, _array_bytes(getattr(disc, key, None)))
+    if getattr(disc, "has_soft", False):
+        for key in ("soft_x", "soft_g", "soft_r"):
+            put(key, _array_bytes(getattr(disc, key, None)))
     guess = getattr(disc, "initial_guess", None)
     put("guess_x", _array_bytes(getattr(guess, "x", None)))
     put("guess_u", _array_bytes(getattr(guess, "u", None)))

@@ -31,6 +31,7 @@ import numpy as np
 from .. import __version__
 from .. import settings
 from ..cnames import identifier_problem, rename_placeholder
+from ..outputs import write_bytes
 from . import flags
 from .flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
 from .folder import FUNCTION_SLOTS, CodegenError, find_meta, read_meta  # noqa: F401 - re-exported
@@ -284,6 +285,32 @@ def single_precision(source: str) -> str:
     return "\n".join(out)
 
 
+def _check_float_literals(source: str) -> None:
+    """A CodegenError naming the literals of CasADi's C that have no float (a number derived
+    from the problem's, e.g. a product of two small constants in a derivative): the C
+    compiler would refuse them ('floating constant truncated to zero')."""
+    from ..problem.checks import outside_float
+
+    bad, function = [], "?"
+    for line in source.split("\n"):
+        head = _FUNCTION_HEAD.match(line.strip())
+        if head:
+            function = head.group(1)
+        code = line.partition("/*")[0]
+        if code.lstrip().startswith("#"):
+            continue
+        for m in _FLOAT_LITERAL.finditer(code):
+            why = outside_float(float(m.group(1)))
+            if why and (function, f"{float(m.group(1)):g}", why) not in bad:
+                bad.append((function, f"{float(m.group(1)):g}", why))
+    if bad:
+        shown = "; ".join(f"{v} in {f} ({why} the range of float)" for f, v, why in bad[:3])
+        more = f"; and {len(bad) - 3} more" if len(bad) > 3 else ""
+        raise CodegenError(f"real float: the generated functions hold numbers a float cannot: {shown}{more}; "
+                           "they are derived from the problem's constants (a product in a derivative, say): "
+                           "rescale the problem or use real='double'")
+
+
 def casadi_sources(functions: Dict[str, ca.Function], name: str, real: str = "double") -> Dict[str, str]:
     """``<name>_casadi.c`` and ``.h`` from one CodeGenerator with explicit options."""
     opts = {"casadi_int": "int", "casadi_real": real, "mex": False, "with_header": True,
@@ -295,6 +322,8 @@ def casadi_sources(functions: Dict[str, ca.Function], name: str, real: str = "do
     with tempfile.TemporaryDirectory(prefix="dopus_cg_") as tmp:
         cg.generate(str(Path(tmp)) + "/")
         source = silence_unused_parameters((Path(tmp) / f"{base}.c").read_text())
+        if real == "float":
+            _check_float_literals(source)
         out = {f"{base}.c": single_precision(source) if real == "float" else source,
                f"{base}.h": (Path(tmp) / f"{base}.h").read_text()}
     _refuse_without_codegen(out[f"{base}.c"], functions)
@@ -371,6 +400,19 @@ def bounded_row_counts(disc: Any, s: Dict[str, int]) -> Dict[str, int]:
             "nbg": count("lg", "ug", s["ng"]), "nbr": count("lr", "ur", s["nr"])}
 
 
+def soft_rows(disc: Any) -> Dict[str, Any]:
+    """The soft rows of the problem: ``nsoft`` (state components, path rows and terminal
+    rows with a soft side, the DOPUS_NSOFT of the sizes header; 0 when every row is hard)
+    and ``always_feasible`` (every row that depends on the state is soft: the QP is feasible
+    for every finite measurement)."""
+    data = disc.data
+    if not getattr(data, "has_soft", False):
+        return {"nsoft": 0, "always_feasible": False}
+    n = sum(int(np.count_nonzero(np.any(np.asarray(getattr(data, key)) > 0, axis=0)))
+            for key in ("soft_x", "soft_g", "soft_r"))
+    return {"nsoft": n, "always_feasible": bool(data.always_feasible)}
+
+
 def _default_parameters(disc: Any, s: Dict[str, int]) -> np.ndarray:
     """The one default parameter vector of dopus_problem.h (every node)."""
     p0 = _attr(disc.data, "p0")
@@ -442,6 +484,15 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
         "default_lm": c_double(settings.lm_code(_option(options, "lm", settings.DEFAULTS["lm"])), "lm"),
         "has_nominal": nominal is not None,
     }
+    soft = soft_rows(disc)
+    ctx["nsoft"] = soft["nsoft"]
+    if soft["nsoft"]:
+        d = disc.data
+        ctx["soft_x"] = [c_vector(row, nx, "soft_x") for row in np.asarray(d.soft_x)]
+        ctx["soft_g"] = [c_vector(_pad_vec(row, s["ng"]), max(1, s["ng"]), "soft_g")
+                         for row in np.asarray(d.soft_g).reshape(4, s["ng"])]
+        ctx["soft_r"] = [c_vector(_pad_vec(row, s["nr"]), max(1, s["nr"]), "soft_r")
+                         for row in np.asarray(d.soft_r).reshape(4, s["nr"])]
     try:
         settings.stages(ctx["default_M"], N, strict=True)
     except settings.SettingError as exc:
@@ -545,6 +596,8 @@ def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, ha
     for key, n in (("nbx", "nx"), ("nbu", "nu"), ("nbg", "ng"), ("nbr", "nr")):
         s.setdefault(key, s[n])
     s["nb"] = s["N"] * (s["nbx"] + s["nbu"] + s["nbg"]) + s["nbr"]
+    s.setdefault("nsoft", 0)
+    s.setdefault("always_feasible", 0)
     ctx = {"name": name, "NAME": name.upper(), "sizes": s, "has_gn": int(has_gn),
            "has_nominal": int(has_nominal), "header": header or f"Sizes of '{name}'",
            "casadi_version": casadi_version, "real_float": settings.REALS[settings.check_real(real)],
@@ -568,6 +621,10 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     name = check_name(_attr(disc.data, "name"))
     NAME = name.upper()
     real = real_of(disc, real)
+    if real == "float" and hasattr(disc, "spec"):
+        from ..problem.checks import check_float_range
+
+        check_float_range(disc)     # the problem's own numbers, named, before any code is generated
     s = problem_sizes(disc)
     functions = casadi_functions(disc, name, s)
     files: Dict[str, str] = {}
@@ -590,7 +647,10 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     ctx["has_nominal"] = int(ctx["has_nominal"])
 
     env = _templates()
-    files[f"{name}_sizes.h"] = render_sizes_header(name, dict(s, **bounded_row_counts(disc, s)), has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
+    soft = soft_rows(disc)
+    files[f"{name}_sizes.h"] = render_sizes_header(name, dict(s, **bounded_row_counts(disc, s), nsoft=soft["nsoft"],
+                                                               always_feasible=int(soft["always_feasible"])),
+                                                   has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
                                                    work=ctx["work"], header=header,
                                                    casadi_version=ca.__version__, real=real)
     files[f"{name}_problem.c"] = env.get_template("problem.c.j2").render(**ctx)
@@ -631,6 +691,9 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
         # `dopus-gen generate` of an unchanged problem finds both and writes nothing
         "sha256": {f: hashlib.sha256(files[f].encode("utf-8")).hexdigest() for f in sorted(files)},
     }
+    if soft["nsoft"]:
+        meta["soft_rows"] = soft["nsoft"]
+        meta["qp_always_feasible"] = soft["always_feasible"]
     if problem_hash is not None:
         meta["problem_hash"] = problem_hash
     files[meta_file] = json.dumps(meta, indent=2, sort_keys=True) + "\n"
@@ -684,7 +747,7 @@ def write_folder(files: Dict[str, str], out_dir: Path) -> Path:
         data = files[fname].encode("utf-8")
         if path.is_file() and path.read_bytes() == data:
             continue
-        path.write_bytes(data)
+        write_bytes(path, data)
     return out_dir
 
 

@@ -10,6 +10,12 @@
   derivatives of every function; ``fabs``, ``fmax``/``fmin``, ``if_else`` and comparisons,
   ``sign``, ``floor``, ``ceil``, ``fmod`` have kinks or jumps where those derivatives are
   wrong or undefined. They are reported as a warning naming the expression.
+- :func:`float_range_problems` / :func:`check_float_range`: a build in single precision
+  (``options(real="float")``) holds every number of the problem in a C ``float``; a
+  constant of an expression, a weight, a bound or a parameter whose magnitude is below
+  float's smallest (about 1.4e-45: it would become 0, and the compiler refuses such a
+  literal) or above its largest (about 3.4e38) is named before anything is generated. A
+  bound beyond the largest float is no bound (it becomes an infinity) and is not reported.
 """
 from __future__ import annotations
 
@@ -20,10 +26,11 @@ from typing import List, Optional, Tuple
 import casadi as ca
 import numpy as np
 
+from .. import interrupt
 from .spec import OcpError
 
 __all__ = ["NonSmoothWarning", "stage0_violations", "check_initial_state", "nonsmooth_terms", "warn_nonsmooth",
-           "describe_qp_row"]
+           "describe_qp_row", "outside_float", "float_range_problems", "check_float_range"]
 
 #: Violations above this (absolute, and relative to the bound) count.
 FEASIBILITY_TOL = 1e-7
@@ -119,6 +126,7 @@ def _least_violating_control(gfun, x, p, lg, ug, lbu, ubu, u_start):
     s0 = np.maximum(0.0, np.maximum(np.nan_to_num(lg - g0, neginf=0.0, posinf=0.0),
                                     np.nan_to_num(g0 - ug, neginf=0.0, posinf=0.0)))
     res = solver(x0=np.concatenate([u_start, s0]), lbx=lbx, ubx=ubx, lbg=lo, ubg=hi)
+    interrupt.check()       # IPOPT ends a solve interrupted by Ctrl-C as a failed one
     ub = np.array(res["x"]).reshape(-1)[:nu]
     return np.clip(ub, lbu, ubu)
 
@@ -248,3 +256,82 @@ def describe_qp_row(problem, row: dict) -> str:
         if kind == "terminal_eq":
             rel = "= its value"
     return f"infeasible at {where}: {what} {rel}"
+
+
+# --------------------------------------------------------------------------- float range
+_FLT_MAX = float(np.finfo(np.float32).max)
+
+
+def outside_float(v: float, infinite_ok: bool = False) -> Optional[str]:
+    """Why the finite number ``v`` has no C ``float``, or None: ``"below"`` (not zero, but
+    it rounds to zero in float) or ``"above"`` (beyond the largest float; None with
+    ``infinite_ok``, where it is meant as no bound)."""
+    v = float(v)
+    if v == 0.0 or not math.isfinite(v):
+        return None
+    with np.errstate(over="ignore", under="ignore"):
+        f = float(np.float32(v))
+    if f == 0.0:
+        return "below"
+    if not math.isfinite(f):
+        return None if infinite_ok else "above"
+    return None
+
+
+def _constants(expr) -> List[float]:
+    """The numeric constants of the SX expression ``expr`` (in evaluation order)."""
+    expr = ca.SX(expr)
+    if expr.numel() == 0:
+        return []
+    f = ca.Function("constants", ca.symvar(expr), [expr])
+    return [float(f.instruction_constant(k)) for k in range(f.n_instructions()) if f.instruction_id(k) == ca.OP_CONST]
+
+
+def float_range_problems(problem) -> List[str]:
+    """Every number of the problem (a spec or a discretised problem) that a float build
+    cannot hold, named: ``"the constant 1e-50 in the model (ocp.dynamics) row 1"``."""
+    spec = _spec(problem)
+    out: List[str] = []
+
+    def numbers(template: str, values, infinite_ok: bool = False):
+        for v in np.asarray(values, dtype=float).reshape(-1):
+            why = outside_float(v, infinite_ok)
+            if why:
+                out.append(template.format(f"{v:g}") + f" ({why} the range of float)")
+
+    def expressions(what: str, expr) -> None:
+        expr = ca.SX(expr)
+        n = expr.size1() if expr.size2() == 1 else 1
+        for r in range(n):
+            row = expr[r] if n > 1 else expr
+            numbers("the constant {} in " + what + (f" row {r}" if n > 1 else ""), _constants(row))
+
+    m, c, k = spec.model, spec.cost, spec.constraints
+    expressions("the model (ocp.dynamics)", m.xdot)
+    numbers("the parameter value {} (ocp.parameter)", m.p_default)
+    numbers("the interval dt {} (ocp.horizon)", [spec.horizon.dt])
+    for i, term in enumerate(c.stage_terms):
+        expressions(f"stage cost term {i}", term)
+    for i, term in enumerate(c.terminal_terms):
+        expressions(f"terminal cost term {i}", term)
+    for kind, terms in (("stage", c.stage_least_squares), ("terminal", c.terminal_least_squares)):
+        for i, ls in enumerate(terms):
+            expressions(f"the residual of {kind} least-squares term {i}", ls.residual)
+            numbers(f"the weight {{}} of {kind} least-squares term {i}", ls.weights)
+    for name, values in (("state", (k.lbx, k.ubx)), ("control", (k.lbu, k.ubu))):
+        numbers(f"the {name} bound {{}}", values, infinite_ok=True)
+    for kind, blocks in (("path", k.path), ("terminal", k.terminal)):
+        for i, rows in enumerate(blocks):
+            expressions(f"{kind} constraint {i}", rows.expr)
+            numbers(f"the bound {{}} of {kind} constraint {i}", (rows.lb, rows.ub), infinite_ok=True)
+    return out
+
+
+def check_float_range(problem) -> None:
+    """:class:`OcpError` naming the numbers a float build cannot hold (:func:`float_range_problems`)."""
+    bad = float_range_problems(problem)
+    if bad:
+        more = f"; and {len(bad) - 3} more" if len(bad) > 3 else ""
+        raise OcpError("real float: " + "; ".join(bad[:3]) + more + f" (float holds magnitudes from "
+                       f"{float(np.finfo(np.float32).smallest_subnormal):.2g} to {_FLT_MAX:.2g}); rescale the "
+                       "problem or use real='double'")

@@ -77,6 +77,49 @@ class ProblemData:
     integrator: str
     W: numpy.ndarray
     WN: numpy.ndarray
+    #: soft weights ``(4, n)``, rows ``(l1 lower, l1 upper, l2 lower, l2 upper)``, zeros on
+    #: hard sides: state bounds (nodes 1..N), path rows, terminal inequality rows
+    soft_x: numpy.ndarray = None
+    soft_g: numpy.ndarray = None
+    soft_r: numpy.ndarray = None
+
+    @property
+    def has_soft(self) -> bool:
+        """True when some row has a soft side."""
+        return any(a is not None and bool(numpy.any(a > 0)) for a in (self.soft_x, self.soft_g, self.soft_r))
+
+    @property
+    def always_feasible(self) -> bool:
+        """True when every row that depends on the state is soft on each of its finite
+        sides (state bounds, path rows, terminal rows; no terminal equality row): the QP
+        is then feasible for every finite measurement (control bounds are hard and always
+        satisfiable on their own). A path row that involves only the controls does not
+        depend on the state, but it is counted here as well (a conservative answer)."""
+        def all_soft(lo, up, w):
+            lo, up = numpy.asarray(lo, float), numpy.asarray(up, float)
+            if lo.size == 0:
+                return True
+            w = numpy.zeros((4, lo.size)) if w is None else numpy.asarray(w)
+            ok_lo = ~numpy.isfinite(lo) | (w[0] > 0) | (w[2] > 0)
+            ok_up = ~numpy.isfinite(up) | (w[1] > 0) | (w[3] > 0)
+            return bool(numpy.all(ok_lo & ok_up))
+        if self.ne > 0:
+            return False
+        return (all_soft(self.lbx, self.ubx, self.soft_x) and all_soft(self.lg, self.ug, self.soft_g)
+                and all_soft(self.lr, self.ur, self.soft_r))
+
+    def soft_stage(self) -> numpy.ndarray:
+        """The ``(4, nw + ng)`` soft weights of the rows of one stage (state bounds, control
+        bounds (hard), path rows), in the row order of the QP (dopus_qp.h)."""
+        sx = numpy.zeros((4, self.nx)) if self.soft_x is None else self.soft_x
+        sg = numpy.zeros((4, self.ng)) if self.soft_g is None else self.soft_g
+        return numpy.hstack([sx, numpy.zeros((4, self.nu)), sg])
+
+    def soft_terminal(self) -> numpy.ndarray:
+        """The ``(4, nx + nr)`` soft weights of the terminal rows (x_N bounds, then r)."""
+        sx = numpy.zeros((4, self.nx)) if self.soft_x is None else self.soft_x
+        sr = numpy.zeros((4, self.nr)) if self.soft_r is None else self.soft_r
+        return numpy.hstack([sx, sr])
 
     @property
     def initial_guess(self) -> Guess:
@@ -231,7 +274,8 @@ def _shortcuts(part: str, names) -> None:
 
 
 _shortcuts("data", ("name", "N", "dt", "nx", "nu", "nw", "np", "ng", "nr", "ne", "lbx", "ubx", "lbu",
-                    "ubu", "lg", "ug", "lr", "ur", "p0", "x0", "p_default", "lbw", "ubw", "integrator"))
+                    "ubu", "lg", "ug", "lr", "ur", "p0", "x0", "p_default", "lbw", "ubw", "integrator",
+                    "soft_x", "soft_g", "soft_r", "has_soft", "always_feasible", "soft_stage", "soft_terminal"))
 _shortcuts("functions", ("stage_eval", "stage_grad", "stage_hess_exact", "stage_hess_gn",
                          "stage_hess_cost_exact", "stage_hess_cost_gn", "term_eval", "term_grad",
                          "term_hess_exact", "term_hess_gn", "ode", "stage_residual", "term_residual",
@@ -547,7 +591,9 @@ def build_functions(problem: Union[Ocp, OcpSpec]) -> Discretized:
         p0=readonly(numpy.tile(model.p_default, (N + 1, 1)), (N + 1, np_)), x0=spec.x0,
         guess_x=spec.guess.x, guess_u=spec.guess.u, state_names=model.state_names,
         control_names=model.control_names, parameter_names=model.parameter_names,
-        integrator=model.integrator.describe(), W=readonly(m.W), WN=readonly(m.WN))
+        integrator=model.integrator.describe(), W=readonly(m.W), WN=readonly(m.WN),
+        soft_x=readonly(con.soft_x if con.soft_x is not None else numpy.zeros((4, nx))),
+        soft_g=readonly(m.soft_g), soft_r=readonly(m.soft_r))
     disc = Discretized(spec=spec, data=data, functions=functions, scenario=_scenario(spec, m, ode))
     _check_finite_at_guess(disc)
     return disc

@@ -46,6 +46,8 @@ class StageModel:
     ur: np.ndarray
     r_eq: ca.SX           # terminal equality rows, r_eq = r_row - value
     has_stage_ls: bool
+    soft_g: np.ndarray = None   # (4, ng) soft weights of the path rows (zeros: hard)
+    soft_r: np.ndarray = None   # (4, nr) soft weights of the terminal inequality rows
 
 
 def _stack(items, what: str):
@@ -115,6 +117,7 @@ def discretize(spec: OcpSpec) -> StageModel:
     l_extra = _sum(cost.stage_terms)
     l = l_ls + l_extra
     g, lg, ug = _stack(con.path, "path constraints")
+    soft_g = np.hstack([b.soft_weights() for b in con.path]) if con.path else np.zeros((4, 0))
 
     resN, WN, E_ls = _least_squares(cost.terminal_least_squares, "terminal least squares")
     E_extra = _sum(cost.terminal_terms)
@@ -126,8 +129,9 @@ def discretize(spec: OcpSpec) -> StageModel:
     eq = np.flatnonzero(is_eq)
     r = rows[ineq.tolist()] if ineq.size else ca.SX(0, 1)
     r_eq = rows[eq.tolist()] - ca.DM(lbs[eq]) if eq.size else ca.SX(0, 1)
+    soft_rows = np.hstack([b.soft_weights() for b in con.terminal]) if con.terminal else np.zeros((4, 0))
 
     return StageModel(x=x, u=u, p=p, w=w, xdot=xdot, substep=substep, n_substeps=n_substeps, l=l, res=res, W=W, l_extra=l_extra,
                       g=g, lg=lg, ug=ug, E=E, resN=resN, WN=WN, E_extra=E_extra,
                       r=r, lr=lbs[ineq], ur=ubs[ineq], r_eq=r_eq,
-                      has_stage_ls=cost.has_stage_least_squares)
+                      has_stage_ls=cost.has_stage_least_squares, soft_g=soft_g, soft_r=soft_rows[:, ineq])

@@ -58,7 +58,7 @@ from .spec import (CampaignSpec, ClosedLoopSpec, ConstraintSpec, CostSpec, Guess
 
 __all__ = [
     "OcpError", "Integrator", "RK4", "GaussLegendre", "RadauIIA", "Event", "Pushes", "OnPath", "Guess", "ScenarioSpec",
-    "Ocp", "load_ocp",
+    "Ocp", "Soft", "load_ocp",
 ]
 
 
@@ -362,6 +362,7 @@ class _Decl:
     lb: np.ndarray
     ub: np.ndarray
     value: Optional[np.ndarray] = None
+    soft: Optional[np.ndarray] = None
 
 
 # --------------------------------------------------------------------------- helpers
@@ -421,6 +422,65 @@ def _check_bounds(lb: np.ndarray, ub: np.ndarray, what: str) -> None:
         raise OcpError(f"{what}: lb > ub at row {i} ({lb[i]} > {ub[i]})")
 
 
+@dataclass(frozen=True)
+class Soft:
+    """Soft rows: the rows may be violated at a price (docs/algorithm.md section 12).
+
+    The penalty of a row and side is ``l1 * s + 0.5 * l2 * s**2`` with ``s >= 0`` its
+    violation (``lb - s_lo <= g <= ub + s_up``), added at every node where the row applies,
+    with no implicit ``dt``. ``l1``, ``l2``: a non-negative number (every row, both sides),
+    a list or array of one value per row, or a tuple ``(lower, upper)`` of two such values
+    (one per side). A side with ``l1 = l2 = 0`` stays hard; at least one weight must be
+    positive. With ``l1`` above the multiplier the hard problem has on the row (an exact
+    penalty), the soft solution is the hard one whenever the hard problem is feasible."""
+    l1: object = 0.0
+    l2: object = 0.0
+
+
+def _soft_weights(soft, n: int, lb: np.ndarray, ub: np.ndarray, what: str) -> Optional[np.ndarray]:
+    """The weights of ``soft`` for ``n`` rows with bounds ``lb, ub``: a read-only ``(4, n)``
+    array with rows ``(l1 lower, l1 upper, l2 lower, l2 upper)``, zero on the sides without a
+    finite bound; None for ``soft=None``."""
+    if soft is None:
+        return None
+    if not isinstance(soft, Soft):
+        raise OcpError(f"{what}: soft must be Soft(l1=..., l2=...), got {type(soft).__name__}")
+
+    def sides(value, name):
+        if isinstance(value, tuple):
+            if len(value) != 2:
+                raise OcpError(f"{what}: soft {name} as a tuple must be (lower, upper), got {len(value)} values")
+            pair = value
+        else:
+            pair = (value, value)
+        out = []
+        for side, v in zip(("lower", "upper"), pair):
+            a = _vector(v, n, f"{what}: soft {name} ({side} side)")
+            if np.any(np.isinf(a)):
+                raise OcpError(f"{what}: soft {name} must be finite, got {a[np.isinf(a)][0]} at row "
+                               f"{int(np.flatnonzero(np.isinf(a))[0])}")
+            if np.any(a < 0):
+                i = int(np.flatnonzero(a < 0)[0])
+                raise OcpError(f"{what}: soft {name} must be >= 0, got {a[i]} at row {i}")
+            out.append(a)
+        return out
+
+    l1lo, l1up = sides(soft.l1, "l1")
+    l2lo, l2up = sides(soft.l2, "l2")
+    w = np.vstack([l1lo, l1up, l2lo, l2up])
+    if not np.any(w > 0):
+        raise OcpError(f"{what}: soft weights are all zero (give l1 > 0 or l2 > 0)")
+    none = np.flatnonzero(~np.isfinite(lb) & ~np.isfinite(ub) & np.any(w > 0, axis=0))
+    if none.size:
+        raise OcpError(f"{what}: soft= on row {int(none[0])}, which has no finite bound "
+                       "(give it the weight 0: one value per row)")
+    w[[0, 2]] *= np.isfinite(lb)
+    w[[1, 3]] *= np.isfinite(ub)
+    if not np.any(w > 0):
+        raise OcpError(f"{what}: soft weights are zero on every finite bound")
+    return readonly(w)
+
+
 def casadi_message(exc: BaseException) -> str:
     """The user-relevant part of an exception message: CasADi prefixes its messages with
     source locations of its own C++ code, which say nothing about the OCP."""
@@ -477,8 +537,8 @@ class Ocp:
         self._stage_ls: list[tuple[ca.SX, np.ndarray]] = []
         self._term_costs: list[ca.SX] = []
         self._term_ls: list[tuple[ca.SX, np.ndarray]] = []
-        self._path: list[tuple[ca.SX, np.ndarray, np.ndarray]] = []
-        self._term_con: list[tuple[ca.SX, np.ndarray, np.ndarray]] = []
+        self._path: list[tuple] = []      # (expr, lb, ub, soft weights or None)
+        self._term_con: list[tuple] = []
         self._N = None
         self._dt = None
         self._x0 = None
@@ -499,7 +559,7 @@ class Ocp:
         object.__setattr__(self, key, value)
 
     # ------------------------------------------------------------------ declarations
-    def _declare(self, kind: str, store: list, name, size, lb, ub, value=None) -> ca.SX:
+    def _declare(self, kind: str, store: list, name, size, lb, ub, value=None, soft=None) -> ca.SX:
         _check_identifier(name, f"{kind} name")
         for decl in self._states + self._controls + self._params:
             if decl.name == name:
@@ -513,14 +573,16 @@ class Ocp:
         val = None
         if value is not None:
             val = _vector(value, size, f"{kind} '{name}' value", allow_inf=False)
+        weights = _soft_weights(soft, size, lbv, ubv, f"{kind} '{name}'")
         sym = ca.SX.sym(name, size)
-        store.append(_Decl(name, sym, size, lbv, ubv, val))
+        store.append(_Decl(name, sym, size, lbv, ubv, val, weights))
         return sym
 
     @_declaration
-    def state(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf) -> ca.SX:
-        """Declare a state vector; bounds hold on nodes 1..N."""
-        return self._declare("state", self._states, name, size, lb, ub)
+    def state(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None) -> ca.SX:
+        """Declare a state vector; bounds hold on nodes 1..N. ``soft``: :class:`Soft`
+        weights that make the bounds soft (control bounds are always hard)."""
+        return self._declare("state", self._states, name, size, lb, ub, soft=soft)
 
     @_declaration
     def control(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf) -> ca.SX:
@@ -592,19 +654,24 @@ class Ocp:
         self._term_ls.append((res, self._weights(weights, res.size1(), what)))
 
     @_declaration
-    def path_constraint(self, expr, lb=-math.inf, ub=math.inf) -> None:
-        """``lb <= g(x, u, p) <= ub`` on stages 0..N-1 (several calls stack)."""
-        self._path.append(_rows(expr, lb, ub, f"path constraint {len(self._path)}"))
+    def path_constraint(self, expr, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None) -> None:
+        """``lb <= g(x, u, p) <= ub`` on stages 0..N-1 (several calls stack); ``soft``:
+        :class:`Soft` weights that make the rows soft."""
+        what = f"path constraint {len(self._path)}"
+        g, lbv, ubv = _rows(expr, lb, ub, what)
+        self._path.append((g, lbv, ubv, _soft_weights(soft, g.size1(), lbv, ubv, what)))
 
     @_declaration
-    def terminal_constraint(self, expr, lb=-math.inf, ub=math.inf) -> None:
-        """``lb <= r(x_N, p) <= ub``; rows with ``lb == ub`` become equality rows."""
+    def terminal_constraint(self, expr, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None) -> None:
+        """``lb <= r(x_N, p) <= ub``; hard rows with ``lb == ub`` become equality rows;
+        ``soft``: :class:`Soft` weights that make the rows soft (a soft row with ``lb ==
+        ub`` stays a two-sided inequality row whose sides may be violated at a price)."""
         what = f"terminal constraint {len(self._term_con)}"
         r, lbv, ubv = _rows(expr, lb, ub, what)
         eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
         if eq.size:
             raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")
-        self._term_con.append((r, lbv, ubv))
+        self._term_con.append((r, lbv, ubv, _soft_weights(soft, r.size1(), lbv, ubv, what)))
 
     # ------------------------------------------------------------------ horizon and data
     @_declaration
@@ -686,7 +753,9 @@ class Ocp:
         """Closed-loop scenario: ``duration`` seconds, state ``events``, recorded ``signals``
         (name -> expression of the declared symbols), ``plant`` xdot (None: the model),
         ``units``: the unit of a signal, state or control by name (``{"deviation": "m",
-        "tau": "N m"}``), written on the axes of the figures."""
+        "tau": "N m"}``), written on the axes of the figures; ``"time"``: the unit of the
+        model's time (of ``dt``, ``duration`` and the event times; default ``"s"``), written
+        wherever a time of the scenario is shown."""
         try:
             events = list(events)
         except TypeError:
@@ -826,9 +895,9 @@ class Ocp:
             self._check_symbols(c, "terminal cost" if len(self._term_costs) == 1 else f"terminal cost {i}", "xp")
         for i, (res, _) in enumerate(self._term_ls):
             self._check_symbols(res, f"terminal least squares {i}", "xp")
-        for i, (g, _, _) in enumerate(self._path):
+        for i, (g, *_) in enumerate(self._path):
             self._check_symbols(g, f"path constraint {i}", "xup")
-        for i, (r, _, _) in enumerate(self._term_con):
+        for i, (r, *_) in enumerate(self._term_con):
             self._check_symbols(r, f"terminal constraint {i}", "xp")
         if self._options["hessian"] == "gauss-newton" and not self._stage_ls:
             raise OcpError("options: hessian='gauss-newton' needs stage_least_squares")
@@ -848,6 +917,8 @@ class Ocp:
         def bounds(decls, which):
             return readonly(np.concatenate([getattr(d, which) for d in decls]))
 
+        soft_x = np.hstack([d.soft if d.soft is not None else np.zeros((4, d.size)) for d in self._states])
+
         p_default = np.concatenate([d.value for d in self._params]) if self._params else np.zeros(0)
         model = ModelSpec(states=variables(self._states), controls=variables(self._controls),
                           parameters=variables(self._params), xdot=self._xdot,
@@ -860,8 +931,9 @@ class Ocp:
         constraints = ConstraintSpec(
             lbx=bounds(self._states, "lb"), ubx=bounds(self._states, "ub"),
             lbu=bounds(self._controls, "lb"), ubu=bounds(self._controls, "ub"),
-            path=tuple(Rows(g, readonly(lb), readonly(ub)) for g, lb, ub in self._path),
-            terminal=tuple(Rows(r, readonly(lb), readonly(ub)) for r, lb, ub in self._term_con))
+            path=tuple(Rows(g, readonly(lb), readonly(ub), sw) for g, lb, ub, sw in self._path),
+            terminal=tuple(Rows(r, readonly(lb), readonly(ub), sw) for r, lb, ub, sw in self._term_con),
+            soft_x=readonly(soft_x))
         return OcpSpec(name=self.name, model=model, cost=cost, constraints=constraints,
                        horizon=HorizonSpec(N=self._N, dt=self._dt),
                        options=OptionsSpec.of(self._options, self._declared), x0=readonly(x0),
@@ -956,8 +1028,8 @@ class Ocp:
         known = {n for n, _ in signals} | {d.name for d in self._states + self._controls}
         units = []
         for key, unit in sc.get("units", {}).items():
-            if key not in known:
-                raise OcpError(f"scenario units: {key!r} is neither a signal nor a state or control; "
+            if key not in known and key != "time":
+                raise OcpError(f"scenario units: {key!r} is neither a signal nor a state or control (nor 'time'); "
                                f"the names are {sorted(known)}")
             if not isinstance(unit, str) or not unit.strip():
                 raise OcpError(f"scenario units: the unit of {key!r} must be a non-empty string, got {unit!r}")

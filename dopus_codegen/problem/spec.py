@@ -141,31 +141,43 @@ class CostSpec:
 # --------------------------------------------------------------------------- constraints
 @dataclass(frozen=True)
 class Rows:
-    """Constraint rows ``lb <= expr <= ub`` (infinite entries allowed)."""
+    """Constraint rows ``lb <= expr <= ub`` (infinite entries allowed); ``soft``: None (hard
+    rows) or the ``(4, n)`` weights ``(l1 lower, l1 upper, l2 lower, l2 upper)`` of soft rows
+    (a side with both weights 0 is hard)."""
     expr: ca.SX
     lb: np.ndarray
     ub: np.ndarray
+    soft: Optional[np.ndarray] = None
+
+    def soft_weights(self) -> np.ndarray:
+        """The ``(4, n)`` weights, zeros for hard rows."""
+        return self.soft if self.soft is not None else np.zeros((4, self.lb.size))
 
 
 @dataclass(frozen=True)
 class ConstraintSpec:
     """Simple bounds ``lbx, ubx (nx,)`` (nodes 1..N), ``lbu, ubu (nu,)`` (stages 0..N-1),
     path rows ``g(x, u, p)`` (stages 0..N-1) and terminal rows ``r(x_N, p)``, each block in
-    declaration order."""
+    declaration order. ``soft_x (4, nx)``: the soft weights of the state bounds (zeros: hard;
+    rows as in :class:`Rows`)."""
     lbx: np.ndarray
     ubx: np.ndarray
     lbu: np.ndarray
     ubu: np.ndarray
     path: Tuple[Rows, ...]
     terminal: Tuple[Rows, ...]
+    soft_x: Optional[np.ndarray] = None
 
     @property
     def terminal_equality(self) -> np.ndarray:
-        """Over the stacked terminal rows: True where ``lb == ub`` (an equality row)."""
+        """Over the stacked terminal rows: True where ``lb == ub`` and the row is hard (an
+        equality row; a soft row with ``lb == ub`` stays an inequality row)."""
         if not self.terminal:
             eq = np.zeros(0, dtype=bool)
         else:
             eq = np.concatenate([b.lb for b in self.terminal]) == np.concatenate([b.ub for b in self.terminal])
+            soft = np.concatenate([np.any(b.soft_weights() > 0, axis=0) for b in self.terminal])
+            eq = eq & ~soft
         eq.setflags(write=False)
         return eq
 

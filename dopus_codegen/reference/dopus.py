@@ -190,7 +190,7 @@ class ReferenceDopus:
         self.scales = self._compute_scales()
         self._xhat_last = np.asarray(disc.x0, float).reshape(self.nx).copy()
         self._reset_health(np.asarray(disc.initial_guess.u, float).reshape(self.N, self.n_u))
-        # section 12: the anytime budget (off), adaptive M (off), the work counter
+        # section 13: the anytime budget (off), adaptive M (off), the work counter
         self.budget_unit, self.budget = s.budget_unit, s.budget
         self.anytime_tol = ANYTIME_TOL if s.anytime_tol is None else s.anytime_tol
         self.set_M_adaptive(s.M_adaptive, s.M_min, s.M_max, s.M_eta)
@@ -264,7 +264,7 @@ class ReferenceDopus:
         """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
         self.p = node_parameters(self.disc, p)
 
-    # ------------------------------------------------------------------ section 12: anytime
+    # ------------------------------------------------------------------ section 13: anytime
     def set_work_budget(self, units) -> None:
         """The budget per sampling instant in work units (function evaluations 1, a QP solve
         N); 0 switches it off."""
@@ -284,7 +284,7 @@ class ReferenceDopus:
         self.anytime_tol = _setting(settings.positive, "anytime_tol", tol)
 
     def set_M_adaptive(self, on: bool = True, M_min: int = 0, M_max=None, eta=None) -> None:
-        """Adaptive M (section 12): the stages whose secant residual ``rho_k |domega_k|``
+        """Adaptive M (section 13): the stages whose secant residual ``rho_k |domega_k|``
         exceeds ``eta`` times the KKT proxy, between ``M_min`` and ``M_max``."""
         M_max = self.N - 1 if M_max is None else M_max
         eta = float(_SAFETY["ADAPTIVE_ETA"]) if eta is None else eta
@@ -449,7 +449,12 @@ class ReferenceDopus:
         free_initial_state(nx, lower=lbw, upper=ubw)
         t = self.term
         gN = t["gL"] - t["R"].T @ self.mu_r - t["Req"].T @ self.nu
-        return {
+        soft = {}
+        if self.disc.has_soft:
+            ws, wt = self.disc.soft_stage(), self.disc.soft_terminal()
+            soft = dict(zip(("zl", "zu", "Zl", "Zu"), ws.copy()))
+            soft.update(zip(("zlN", "zuN", "ZlN", "ZuN"), wt.copy()))
+        return {**soft,
             "N": N, "nx": nx, "nu": nu, "ng": ng, "nr": nr, "ne": ne,
             "H": H, "g": gq, "Phi": Phi, "b": b, "x0": xhat0 - self.x[0],
             "HN": t["A"] + shift[:nx, :nx], "gN": gN, "lbw": lbw, "ubw": ubw,
@@ -526,7 +531,7 @@ class ReferenceDopus:
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
         if not self._prepared_extra:
-            # after extra iterations the term the prepare convexified stays (section 12)
+            # after extra iterations the term the prepare convexified stays (section 13)
             self._lm_measured(xhat0)
         xhat_prev = self._xhat_last
         self._xhat_last = xhat0.copy()
@@ -586,6 +591,35 @@ class ReferenceDopus:
         t3 = time.perf_counter()
         self.timings.update({"feedback": t3 - t0, "qp": t2 - t1})
         return self.u0.copy()
+
+    def soft_slacks(self) -> dict:
+        """The slacks of the soft rows in the QP of the last feedback, as
+        ``CSolver.soft_slacks`` (docs/algorithm.md section 12)."""
+        N, nx, ng, nr = self.N, self.nx, self.ng, self.nr
+        out = {"x": np.zeros((N + 1, nx)), "g": np.zeros((N, ng)), "r": np.zeros(nr), "max": 0.0}
+        q, sol = getattr(self, "last_qp", None), getattr(self, "last_qp_solution", None)
+        if q is None or sol is None or not self.disc.has_soft:
+            return out
+
+        def slack(v, lo, up, w):
+            sl = np.zeros(np.shape(v))
+            with np.errstate(invalid="ignore"):
+                sl = np.where((w[0] > 0) | (w[2] > 0), np.maximum(sl, lo - v), sl)
+                sl = np.where((w[1] > 0) | (w[3] > 0), np.maximum(sl, v - up), sl)
+            return np.nan_to_num(sl, nan=0.0, posinf=0.0, neginf=0.0)
+
+        for k in range(1, N + 1):
+            lo = q["lbw"][k, :nx] if k < N else q["lbxN"]
+            up = q["ubw"][k, :nx] if k < N else q["ubxN"]
+            out["x"][k] = slack(sol["x"][k], lo, up, self.disc.soft_x)
+        for k in range(N):
+            if ng:
+                v = q["C"][k] @ np.concatenate([sol["x"][k], sol["u"][k]])
+                out["g"][k] = slack(v, q["lg"][k], q["ug"][k], self.disc.soft_g)
+        if nr:
+            out["r"] = slack(q["R"] @ sol["x"][N], q["lr"], q["ur"], self.disc.soft_r)
+        out["max"] = float(max(out["x"].max(initial=0.0), out["g"].max(initial=0.0), out["r"].max(initial=0.0)))
+        return out
 
     def _solve_with_retries(self, xhat0):
         """The QP of the current iterate for xhat0, solved again with lm raised while it is not
@@ -843,7 +877,7 @@ class ReferenceDopus:
 
     def _M_now(self, slots, rho) -> int:
         """The number of stages to re-linearise before the budget: N-1 after a recovery, the
-        fixed M, or adaptive M (section 12)."""
+        fixed M, or adaptive M (section 13)."""
         if self._recovering > 0:
             return self.N - 1
         if not self.M_adaptive:
@@ -857,25 +891,38 @@ class ReferenceDopus:
                 n += 1
         return min(max(n, self.M_min), self.M_max)
 
+    def _stale(self, slots, k) -> bool:
+        """A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for
+        the QP: its row of Ct is zero and g (of step 2) lies outside that side's bound."""
+        if k == 0 or self.ng == 0:
+            return False
+        s = slots[self._slot(k)]
+        w = self.disc.soft_g
+        hard_lo = ~((w[0] > 0) | (w[2] > 0))
+        hard_up = ~((w[1] > 0) | (w[3] > 0))
+        zero = ~np.any(s.Ct != 0.0, axis=1)
+        return bool(np.any(zero & ((hard_lo & (s.g < self.lg)) | (hard_up & (s.g > self.ug)))))
+
     def _relinearise_worst(self, slots, rho):
-        """Step 4: fresh H for the M stages among 0..N-2 with the largest rho (ties: lower
-        index), then with a budget further stages in rho order while one more iteration still
-        fits after them, each while the budget allows (section 12). Returns the stages and the
-        cost of those beyond M."""
-        order = sorted(range(self.N - 1), key=lambda i: (-rho[i], i))
+        """Step 4: fresh H for the stale stages (:meth:`_stale`), then among the other stages
+        of 0..N-2 for the M with the largest rho (ties: lower index), then with a budget for
+        further stages in rho order while one more iteration still fits after them, each while
+        the budget allows (section 13). Returns the stages and the cost of those beyond M."""
+        stale = [k for k in range(self.N - 1) if self._stale(slots, k)]
+        order = sorted((k for k in range(self.N - 1) if k not in stale), key=lambda i: (-rho[i], i))
         M = self._M_now(slots, rho)
         extend = self._budget_on()
         chosen, ext_cost = [], 0.0
+        for i in stale:      # whatever the budget: without them the QP is infeasible
+            self._relinearise_stage(slots, i)
+            chosen.append(i)
         # the stages beyond M keep room for one more iteration after this one
         reserve = self._cost_qp + self._cost_prepare
         for m, i in enumerate(order):
             if (m >= M and not extend) or not self._budget_fits(self._cost_stage + (reserve if m >= M else 0.0)):
                 break
             b0 = self._budget_now()
-            si = slots[self._slot(i)]
-            self._set_block(si, i, self.x, self.u, self.lam, self.mu_g)
-            if not self._finite(si.Ht, si.A_dyn, si.Phit, si.Ct):
-                raise self._fail("nonfinite_value", f"prepare: stage_hess returned a non-finite value at stage {i}")
+            self._relinearise_stage(slots, i)
             chosen.append(i)
             if self._budget_on():
                 self._cost_stage = self._budget_now() - b0
@@ -883,6 +930,12 @@ class ReferenceDopus:
                     ext_cost += self._cost_stage
         self.instant_stages += len(chosen)
         return chosen, ext_cost
+
+    def _relinearise_stage(self, slots, i) -> None:
+        si = slots[self._slot(i)]
+        self._set_block(si, i, self.x, self.u, self.lam, self.mu_g)
+        if not self._finite(si.Ht, si.A_dyn, si.Phit, si.Ct):
+            raise self._fail("nonfinite_value", f"prepare: stage_hess returned a non-finite value at stage {i}")
 
     def _refresh_cost_hessians(self, slots, fresh) -> None:
         """Step 5: the cost part of every A_k at the current point (no integrator); the other

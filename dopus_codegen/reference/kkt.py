@@ -130,6 +130,8 @@ def kkt_measure(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p=None) -> 
     if nr:
         ineq = max(ineq, _viol(r, disc.lr, disc.ur))
 
+    if getattr(disc, "has_soft", False):
+        return _soft_kkt(disc, stat, eq, x, u, g, r, mu_g, mu_b, mu_bN, mu_r)
     # x_0 carries no bound: the x part of mu_b[0] (always 0, section 1) has no pair
     lbw = np.tile(np.concatenate([lbx, lbu]), (N, 1))
     ubw = np.tile(np.concatenate([ubx, ubu]), (N, 1))
@@ -141,6 +143,35 @@ def kkt_measure(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p=None) -> 
         comp = max(comp, signed_comp(g, np.tile(disc.lg, N), np.tile(disc.ug, N), mu_g))
     if nr:
         comp = max(comp, signed_comp(r, disc.lr, disc.ur, mu_r))
+    return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
+
+
+def _soft_kkt(disc, stat, eq, x, u, g, r, mu_g, mu_b, mu_bN, mu_r) -> dict:
+    """``ineq`` and ``comp`` of a problem with soft rows (docs/algorithm.md section 12): a
+    soft side has no violation but its multiplier must lie in ``[0, l1 + l2 s]`` with the
+    complementarity of the side and of its slack ``s`` (both into ``comp``)."""
+    from .qp import row_check
+
+    N, nx = disc.N, disc.nx
+    lbx, ubx = np.asarray(disc.lbx, float), np.asarray(disc.ubx, float)
+    ineq = comp = 0.0
+
+    def add(v, lo, hi, mu, w):
+        nonlocal ineq, comp
+        i_, c_, s_ = row_check(v, lo, hi, mu, w)
+        ineq, comp = max(ineq, i_), max(comp, c_, s_)
+
+    mu_b0 = mu_b[0, :nx]
+    comp = max(comp, float(np.max(np.abs(mu_b0)))) if mu_b0.size else comp
+    for k in range(N):
+        if k > 0:
+            add(x[k], lbx, ubx, mu_b[k, :nx], disc.soft_x)
+        add(u[k], disc.lbu, disc.ubu, mu_b[k, nx:], None)
+        if disc.ng:
+            add(g[k], disc.lg, disc.ug, mu_g[k], disc.soft_g)
+    add(x[N], lbx, ubx, mu_bN, disc.soft_x)
+    if disc.nr:
+        add(r, disc.lr, disc.ur, mu_r, disc.soft_r)
     return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
 
 

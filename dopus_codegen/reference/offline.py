@@ -14,6 +14,13 @@ is term by term the Lagrangian of algorithm.md section 1 (``lam_0'(x_0 - xhat_0)
 ``lam_{k+1}'(x_{k+1} - phi_k)``, ``mu_g' g``, ``mu_r' r``, ``nu' r_eq``, ``mu_b' w``),
 so the IPOPT multipliers are the signed multipliers of the project without any sign
 flip. ``tests/test_offline.py`` checks this through the KKT measure.
+
+Soft rows (docs/algorithm.md section 12) get explicit slack variables ``s >= 0`` appended to
+``V``: a soft path or terminal row becomes ``lg <= g + s_lo - s_up <= ug`` (``s_lo`` only on
+a soft lower side, ``s_up`` on a soft upper one), a state component with a soft bound leaves
+the variable bounds for the row ``lbx <= x + s_lo - s_up <= ubx`` (appended after the rows
+above), and the objective gains ``l1 s + 0.5 l2 s^2`` per slack. The rows' multipliers are
+the signed multipliers of the project as before.
 """
 from __future__ import annotations
 
@@ -22,6 +29,7 @@ import weakref
 import numpy as np
 import casadi as ca
 
+from .. import interrupt
 from ..problem.ocp import Guess
 from .qp import free_initial_state
 
@@ -49,13 +57,56 @@ def nlp_layout(disc):
     return ix, iu, ig_dyn, ig_path, ig_r, ig_eq
 
 
+def soft_layout(disc):
+    """The slacks of the soft rows: ``(slacks, state_rows)``; ``slacks`` a list of
+    ``(kind, k, i, side, l1, l2)`` (kind "x" node k = 1..N, "g" stage k, "r"; side -1 lower,
+    +1 upper), one slack variable each in this order; ``state_rows`` the ``(k, i)`` of the
+    state components whose bounds became rows. Empty without soft rows."""
+    if not getattr(disc, "has_soft", False):
+        return [], []
+    N, nx, ng, nr = disc.N, disc.nx, disc.ng, disc.nr
+    slacks, state_rows = [], []
+
+    def sides(kind, k, i, lo, up, w):
+        out = []
+        for side, bound, l1, l2 in ((-1, lo, w[0], w[2]), (1, up, w[1], w[3])):
+            if np.isfinite(bound) and (l1 > 0 or l2 > 0):
+                out.append((kind, k, i, side, float(l1), float(l2)))
+        return out
+
+    sx, sg, sr = np.asarray(disc.soft_x), np.asarray(disc.soft_g), np.asarray(disc.soft_r)
+    for k in range(1, N + 1):
+        for i in range(nx):
+            new = sides("x", k, i, disc.lbx[i], disc.ubx[i], sx[:, i])
+            if new:
+                state_rows.append((k, i))
+                slacks += new
+    for k in range(N):
+        for i in range(ng):
+            slacks += sides("g", k, i, disc.lg[i], disc.ug[i], sg[:, i])
+    for i in range(nr):
+        slacks += sides("r", 0, i, disc.lr[i], disc.ur[i], sr[:, i])
+    return slacks, state_rows
+
+
+def _slack_sum(T, S, slacks, kind, k, n):
+    """``s_lo - s_up`` of the ``n`` rows of ``kind`` at ``k`` (zeros where hard)."""
+    out = [T(0) for _ in range(n)]
+    for j, (kd, kk, i, side, _, _) in enumerate(slacks):
+        if kd == kind and kk == k:
+            out[i] = out[i] - side * S[j]
+    return ca.vertcat(*out) if n else T(0, 1)
+
+
 def _build_solver(disc, hessian: str, tol: float, max_iter: int):
     N, nx, nu, npar = disc.N, disc.nx, disc.nu, disc.np
     nw = nx + nu
     # SX when every function can be evaluated symbolically in SX; an implicit integrator
     # (a rootfinder inside the stage functions) needs MX
     T = ca.SX if _sx_ok(disc) else ca.MX
-    V = T.sym("V", N * nw + nx)
+    slacks, state_rows = soft_layout(disc)
+    V = T.sym("V", N * nw + nx + len(slacks))
+    S = V[N * nw + nx:]
     P = T.sym("P", nx + (N + 1) * npar)     # (xhat_0, p_0, ..., p_N)
     xhat0 = P[:nx]
 
@@ -69,14 +120,22 @@ def _build_solver(disc, hessian: str, tol: float, max_iter: int):
         return P[nx + k * npar:nx + (k + 1) * npar]
 
     f = 0
+    for j, (_, _, _, _, l1, l2) in enumerate(slacks):
+        f = f + l1 * S[j] + 0.5 * l2 * S[j] ** 2
     g = [xk(0) - xhat0]
     for k in range(N):
         phi, l, gk = disc.stage_eval(xk(k), uk(k), pk(k))
         f = f + l
+        if slacks and disc.ng:
+            gk = gk + _slack_sum(T, S, slacks, "g", k, disc.ng)
         g += [xk(k + 1) - phi, gk]
     E, r, r_eq = disc.term_eval(xk(N), pk(N))
     f = f + E
+    if slacks and disc.nr:
+        r = r + _slack_sum(T, S, slacks, "r", 0, disc.nr)
     g += [r, r_eq]
+    for k, i in state_rows:
+        g.append(xk(k)[i] + _slack_sum(T, S, slacks, "x", k, nx)[i])
     nlp = {"x": V, "p": P, "f": f, "g": ca.vertcat(*g)}
     opts = {
         "print_time": False,
@@ -119,6 +178,9 @@ def _gn_hess_lag(disc, V, P, ng_total, xk, uk, pk):
         blocks.append(lam_f * A)
     AN = disc.term_hess_gn(xk(N), pk(N), T.zeros(disc.nr), T.zeros(disc.ne))[0]
     blocks.append(lam_f * AN)
+    slacks, _ = soft_layout(disc)
+    if slacks:
+        blocks.append(lam_f * T(ca.diag(ca.DM([l2 for *_, l2 in slacks]))))
     H = ca.diagcat(*blocks)
     return ca.Function("hess_lag", [V, P, lam_f, lam_g], [ca.triu(H)],
                        ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
@@ -164,7 +226,8 @@ def solve_ocp(disc, xhat0, guess: Guess | None = None, tol: float = 1e-12, hessi
     guess = disc.initial_guess if guess is None else guess
     ix, iu, ig_dyn, ig_path, ig_r, ig_eq = nlp_layout(disc)
 
-    v0 = np.zeros(N * nw + nx)
+    slacks, state_rows = soft_layout(disc)
+    v0 = np.zeros(N * nw + nx + len(slacks))
     v0[ix] = np.asarray(guess.x, float).reshape(N + 1, nx)
     v0[iu] = np.asarray(guess.u, float).reshape(N, nu)
     lbv = np.full(v0.size, -np.inf)
@@ -173,22 +236,41 @@ def solve_ocp(disc, xhat0, guess: Guess | None = None, tol: float = 1e-12, hessi
     ubv[ix[1:]] = disc.ubx
     lbv[iu] = disc.lbu
     ubv[iu] = disc.ubu
+    ns = len(slacks)
+    lbv[N * nw + nx:] = 0.0
     ngt = nx + N * (nx + disc.ng) + disc.nr + disc.ne
-    lbg = np.zeros(ngt)
-    ubg = np.zeros(ngt)
+    lbg = np.zeros(ngt + len(state_rows))
+    ubg = np.zeros(ngt + len(state_rows))
     if disc.ng:
         lbg[ig_path] = disc.lg
         ubg[ig_path] = disc.ug
     lbg[ig_r] = disc.lr
     ubg[ig_r] = disc.ur
+    # soft state bounds: rows instead of variable bounds (section 12)
+    ig_state = ngt + np.arange(len(state_rows), dtype=int)
+    for row, (k, i) in zip(ig_state, state_rows):
+        lbv[ix[k, i]], ubv[ix[k, i]] = -np.inf, np.inf
+        lbg[row], ubg[row] = disc.lbx[i], disc.ubx[i]
+    if ns:
+        # the slacks start at the violation of the guess
+        for j, (kind, k, i, side, _, _) in enumerate(slacks):
+            if kind == "x":
+                v, lo, up = v0[ix[k, i]], disc.lbx[i], disc.ubx[i]
+            else:
+                continue
+            v0[N * nw + nx + j] = max(0.0, lo - v) if side < 0 else max(0.0, v - up)
 
     solver = _solver(disc, hessian, tol, max_iter)
     sol = solver(x0=v0, p=np.concatenate([xhat0, P.reshape(-1)]), lbx=lbv, ubx=ubv, lbg=lbg, ubg=ubg)
+    interrupt.check()       # IPOPT ends a solve interrupted by Ctrl-C as a failed one
     stats = solver.stats()
     V = np.array(sol["x"]).reshape(-1)
     lg_ = np.array(sol["lam_g"]).reshape(-1)
     lx_ = np.array(sol["lam_x"]).reshape(-1)
 
+    lx_ = lx_.copy()
+    for row, (k, i) in zip(ig_state, state_rows):
+        lx_[ix[k, i]] += lg_[row]
     mu_b = np.hstack([lx_[ix[:N]], lx_[iu]])
     free_initial_state(nx, mu_b=mu_b)
     out = Guess(x=V[ix].copy(), u=V[iu].copy(), lam=lg_[ig_dyn].copy(),

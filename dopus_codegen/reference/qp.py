@@ -22,7 +22,19 @@ lg, ug     (N, ng)
 R          (nr, nx)         ``lr <= R x_N <= ur``
 lr, ur     (nr,)
 Req, req   (ne, nx), (ne,)  ``Req x_N = req``
+zl, zu,    (nw+ng,)         optional soft weights of the stage rows (the nw box rows of
+Zl, Zu                      ``w_k``, then the ng rows of ``C_k``; the same at every
+                            stage): L1 ``zl``/``zu`` and L2 ``Zl``/``Zu`` of the lower
+                            and upper side; a side with both weights 0 is hard
+zlN, zuN,  (nx+nr,)         optional soft weights of the terminal rows (``x_N``, then
+ZlN, ZuN                    the rows of ``R``)
 =========  ===============  =====================================================
+
+A soft side admits a violation ``s >= 0`` (``lo - s_lo <= v <= up + s_up``) at the price
+``zl s + 0.5 Zl s^2`` added to the objective. The reference solves the QP with the
+slacks as explicit variables; the solution dict has the primal and the multipliers of the
+rows as above (the multiplier of a soft side lies in ``[0, zl + Zl s]``, equal to the
+upper end where the side is violated); the slacks are ``max(0, lo - v)``, ``max(0, v - up)``.
 
 Problem::
 
@@ -59,10 +71,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+
+from .. import interrupt
 
 __all__ = ["QPError", "QPInfeasibleError", "QPIterationLimitError", "free_initial_state", "solve_qp_reference",
            "qp_kkt_residual", "check_qp", "qp_infeasible_row", "qp_reduced_hessian_min_eig", "flatten_qp", "flatten_solution"]
@@ -101,6 +116,32 @@ def free_initial_state(nx: int, mu_b=None, lower=None, upper=None) -> None:
 
 
 _INT_KEYS = ("N", "nx", "nu", "ng", "nr", "ne")
+_SOFT_STAGE = ("zl", "zu", "Zl", "Zu")
+_SOFT_TERM = ("zlN", "zuN", "ZlN", "ZuN")
+
+
+def soft_weights(q: dict):
+    """``(stage, terminal)`` soft weights of a QP dict: ``(4, nw+ng)`` and ``(4, nx+nr)``
+    arrays with rows ``(zl, zu, Zl, Zu)`` (zeros where a key is missing)."""
+    N, nx, nu, ng, nr, ne = (int(q[k]) for k in _INT_KEYS)
+    out = []
+    for keys, n in ((_SOFT_STAGE, nx + nu + ng), (_SOFT_TERM, nx + nr)):
+        rows = []
+        for key in keys:
+            a = np.zeros(n) if q.get(key) is None else np.array(q[key], dtype=float).reshape(-1)
+            if a.shape != (n,):
+                raise ValueError(f"QP entry '{key}' has {a.size} values, expected {n}")
+            if not np.all(np.isfinite(a)) or np.any(a < 0):
+                raise ValueError(f"QP entry '{key}' must be finite and >= 0")
+            rows.append(a)
+        out.append(np.vstack(rows))
+    return out[0], out[1]
+
+
+def has_soft(q: dict) -> bool:
+    """True when the QP dict has a soft side."""
+    ws, wt = soft_weights(q)
+    return bool(np.any(ws > 0) or np.any(wt > 0))
 
 
 def _shapes(N, nx, nu, ng, nr, ne):
@@ -137,8 +178,15 @@ def check_qp(qp: dict) -> dict:
         if np.any(np.isnan(arr)):
             raise ValueError(f"QP entry '{key}' has NaN values")
         out[key] = arr
-    for lo, hi in (("lbw", "ubw"), ("lbxN", "ubxN"), ("lg", "ug"), ("lr", "ur")):
-        if np.any(out[lo] > out[hi]):
+    ws, wt = soft_weights(qp)
+    for key, a in zip(_SOFT_STAGE + _SOFT_TERM, list(ws) + list(wt)):
+        out[key] = a
+    nw = sizes["nx"] + sizes["nu"]
+    soft_st = np.any(ws > 0, axis=0)
+    soft_t = np.any(wt > 0, axis=0)
+    for lo, hi, soft in (("lbw", "ubw", soft_st[:nw]), ("lbxN", "ubxN", soft_t[:sizes["nx"]]),
+                         ("lg", "ug", soft_st[nw:]), ("lr", "ur", soft_t[sizes["nx"]:])):
+        if np.any((out[lo] > out[hi]) & ~soft):
             raise QPInfeasibleError(f"QP is infeasible: some entry of '{lo}' exceeds '{hi}'")
     return out
 
@@ -157,6 +205,9 @@ class _Rows:
     u_in: np.ndarray
     lbz: np.ndarray
     ubz: np.ndarray
+    moved: Optional[list] = None  # soft QPs (_with_slacks): (column, row) of the moved box rows
+    nz: int = 0                   # soft QPs: the size of z without the slacks
+    m_in: int = 0                 # soft QPs: the rows of A_in without the moved box rows
 
 
 def flatten_qp(q: dict):
@@ -200,12 +251,86 @@ def flatten_qp(q: dict):
     lbz = np.concatenate([q["lbw"].reshape(-1), q["lbxN"]])
     ubz = np.concatenate([q["ubw"].reshape(-1), q["ubxN"]])
     free_initial_state(nx, lower=lbz, upper=ubz)
-    return Hz, gz, _Rows(A_eq, b_eq, A_in, l_in, u_in, lbz, ubz)
+    rows_ = _Rows(A_eq, b_eq, A_in, l_in, u_in, lbz, ubz)
+    if has_soft(q):
+        return _with_slacks(q, Hz, gz, rows_)
+    return Hz, gz, rows_
 
 
-def _unflatten(q: dict, z, y_eq, y_in, mu_z) -> dict:
+def _with_slacks(q: dict, Hz, gz, rows: _Rows):
+    """The flattened QP with one explicit slack variable per soft side (appended to ``z``):
+    a soft box row moves from the bounds of ``z`` to a row of ``A_in``, and each soft side
+    of a row adds ``+s`` (lower) or ``-s`` (upper) to it, ``s >= 0`` at the price ``zl s +
+    0.5 Zl s^2``. ``rows.moved`` lists ``(column, row)`` of the moved box rows and
+    ``rows.nz`` the size of the original ``z`` (see :func:`_unflatten`)."""
+    N, nx, nu, ng, nr = (q[k] for k in _INT_KEYS[:5])
+    nw = nx + nu
+    nz = Hz.shape[0]
+    ws, wt = soft_weights(q)
+    A_in = sp.lil_matrix(rows.A_in)
+    l_in, u_in = list(rows.l_in), list(rows.u_in)
+    lbz, ubz = rows.lbz.copy(), rows.ubz.copy()
+    extra_rows = []           # new rows of A_in: (column,)
+    moved = []
+    slack_cols = []           # (row of A_in, sign, l1, l2)
+
+    def soften(k, j, w, col=None, row=None):
+        if not np.any(w > 0):
+            return
+        if col is not None:
+            lo, up = lbz[col], ubz[col]
+            if not (np.isfinite(lo) or np.isfinite(up)):
+                return
+            row = A_in.shape[0] + len(extra_rows)
+            extra_rows.append(col)
+            l_in.append(lo)
+            u_in.append(up)
+            lbz[col], ubz[col] = -np.inf, np.inf
+            moved.append((col, row))
+        lo, up = l_in[row], u_in[row]
+        if np.isfinite(lo) and (w[0] > 0 or w[2] > 0):
+            slack_cols.append((row, 1.0, w[0], w[2]))
+        if np.isfinite(up) and (w[1] > 0 or w[3] > 0):
+            slack_cols.append((row, -1.0, w[1], w[3]))
+
+    for k in range(N):
+        for j in range(nx if k == 0 else 0, nw):
+            soften(k, j, ws[:, j], col=k * nw + j)
+        for i in range(ng):
+            soften(k, nw + i, ws[:, nw + i], row=k * ng + i)
+    for j in range(nx):
+        soften(N, j, wt[:, j], col=N * nw + j)
+    for i in range(nr):
+        soften(N, nx + i, wt[:, nx + i], row=N * ng + i)
+    ns = len(slack_cols)
+    m0 = A_in.shape[0]
+    m = m0 + len(extra_rows)
+    A = sp.lil_matrix((m, nz + ns))
+    A[:m0, :nz] = A_in
+    for r, col in enumerate(extra_rows):
+        A[m0 + r, col] = 1.0
+    for c, (row, sign, _, _) in enumerate(slack_cols):
+        A[row, nz + c] = sign
+    Hs = sp.diags([l2 for _, _, _, l2 in slack_cols], format="csc") if ns else sp.csc_matrix((0, 0))
+    Hx = sp.block_diag([Hz, Hs], format="csc")
+    gx = np.concatenate([gz, [l1 for _, _, l1, _ in slack_cols]])
+    A_eq = sp.hstack([rows.A_eq, sp.csr_matrix((rows.A_eq.shape[0], ns))], format="csr")
+    out = _Rows(A_eq, rows.b_eq, A.tocsr(), np.array(l_in), np.array(u_in),
+                np.concatenate([lbz, np.zeros(ns)]), np.concatenate([ubz, np.full(ns, np.inf)]),
+                moved=moved, nz=nz, m_in=m0)
+    return Hx, gx, out
+
+
+def _unflatten(q: dict, z, y_eq, y_in, mu_z, rows=None) -> dict:
     N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
     nw = nx + nu
+    if rows is not None and getattr(rows, "moved", None) is not None:
+        # the soft problem of _with_slacks: drop the slacks, the moved box rows' multipliers
+        # go back to their variables
+        mu_z = np.array(mu_z[:rows.nz], dtype=float)
+        for col, row in rows.moved:
+            mu_z[col] += y_in[row]
+        z, y_in = z[:rows.nz], y_in[:rows.m_in]
     W = z[: N * nw].reshape(N, nw)
     x = np.vstack([W[:, :nx], z[N * nw:][None, :]])
     mu_b = mu_z[: N * nw].reshape(N, nw).copy()
@@ -256,6 +381,44 @@ def _signed_pairs(v, lo, hi, mu):
     return comp, sign
 
 
+def row_check(v, lo, hi, mu, w):
+    """``(ineq, comp, sign)`` of rows ``lo <= v <= hi`` with signed multipliers ``mu`` and
+    soft weights ``w`` (4, n) (rows zl, zu, Zl, Zu; a side with both 0 is hard). A hard side
+    as in :func:`_signed_pairs`. A soft side with multiplier ``m`` is measured at its best
+    slack ``s = max(s0, (m - zl) / Zl)`` (``s0 = max(0, lo - v)`` the violation; ``s = s0``
+    when ``Zl = 0``), at which the slack's stationarity ``zl + Zl s - m = y >= 0`` holds
+    unless ``m > zl + Zl s0`` with ``Zl = 0`` (a sign violation): complementarity ``m (v - lo +
+    s)`` and ``y s``. (An interior point leaves a weakly inactive soft side with a multiplier
+    of complementarity over its gap, as on a hard side; the over-slack is what it means.)"""
+    v = np.asarray(v, float).reshape(-1)
+    lo = np.asarray(lo, float).reshape(-1)
+    hi = np.asarray(hi, float).reshape(-1)
+    mu = np.asarray(mu, float).reshape(-1)
+    if v.size == 0:
+        return 0.0, 0.0, 0.0
+    w = np.zeros((4, v.size)) if w is None else np.asarray(w, float).reshape(4, v.size)
+    soft_lo = ((w[0] > 0) | (w[2] > 0)) & np.isfinite(lo)
+    soft_up = ((w[1] > 0) | (w[3] > 0)) & np.isfinite(hi)
+    lo_h = np.where(soft_lo, -np.inf, lo)
+    hi_h = np.where(soft_up, np.inf, hi)
+    mu_h = np.where(((mu > 0) & soft_up) | ((mu < 0) & soft_lo), 0.0, mu)
+    ineq = float(np.max(np.maximum(0.0, np.maximum(v - hi_h, lo_h - v))))
+    comp, sign = _signed_pairs(v, lo_h, hi_h, mu_h)
+    for side, flag, bound, l1, l2 in ((-1, soft_lo, lo, w[0], w[2]), (1, soft_up, hi, w[1], w[3])):
+        if not np.any(flag):
+            continue
+        m = np.maximum(side * mu[flag], 0.0)
+        gap = side * (bound[flag] - v[flag])    # >= 0 on the satisfied side
+        s0 = np.maximum(0.0, -gap)
+        L1, L2 = l1[flag], l2[flag]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s_ = np.where(L2 > 0, np.maximum(s0, (m - L1) / np.where(L2 > 0, L2, 1.0)), s0)
+        y = L1 + L2 * s_ - m
+        sign = max(sign, float(np.max(np.maximum(0.0, -y))))
+        comp = max(comp, float(np.max(m * (gap + s_))), float(np.max(np.maximum(0.0, y) * s_)))
+    return ineq, comp, sign
+
+
 def qp_kkt_residual(qp: dict, sol: dict) -> dict:
     """Inf-norm KKT residuals of ``sol`` for ``qp``.
 
@@ -264,10 +427,13 @@ def qp_kkt_residual(qp: dict, sol: dict) -> dict:
     (initial value, dynamics, Req rows), inequality violation (bounds, C, R rows),
     complementarity ``max(mu,0)|ub - v|`` / ``max(-mu,0)|v - lb|`` on finite sides,
     and dual sign (the size of a multiplier pushing on an infinite side, including
-    a nonzero x part of ``mu_b[0]``); ``kkt`` is their maximum.
+    a nonzero x part of ``mu_b[0]``); ``kkt`` is their maximum. Soft sides: no
+    inequality violation, the conditions of :func:`row_check` instead.
     """
     q = check_qp(qp)
     N, nx, nu, ng, nr, ne = (q[k] for k in _INT_KEYS)
+    nw = nx + nu
+    ws, wt = soft_weights(q)
     x = np.asarray(sol["x"], float); u = np.asarray(sol["u"], float)
     lam = np.asarray(sol["lam"], float)
     mu_b = np.asarray(sol["mu_b"], float).reshape(N, nx + nu)
@@ -280,6 +446,11 @@ def qp_kkt_residual(qp: dict, sol: dict) -> dict:
     ineq = 0.0
     comp = 0.0
     sign = 0.0
+
+    def add(check):
+        nonlocal ineq, comp, sign
+        ineq, comp, sign = max(ineq, check[0]), max(comp, check[1]), max(sign, check[2])
+
     for k in range(N):
         w = np.concatenate([x[k], u[k]])
         r = q["H"][k] @ w + q["g"][k] - q["Phi"][k].T @ lam[k + 1] + q["C"][k].T @ mu_g[k] + mu_b[k]
@@ -289,23 +460,17 @@ def qp_kkt_residual(qp: dict, sol: dict) -> dict:
         lo = q["lbw"][k].copy(); hi = q["ubw"][k].copy()
         if k == 0:
             lo[:nx] = -np.inf; hi[:nx] = np.inf
-        ineq = max(ineq, float(np.max(np.maximum(0.0, np.maximum(w - hi, lo - w)))))
-        c, s = _signed_pairs(w, lo, hi, mu_b[k]); comp = max(comp, c); sign = max(sign, s)
+        add(row_check(w, lo, hi, mu_b[k], ws[:, :nw]))
         if ng:
-            cw = q["C"][k] @ w
-            ineq = max(ineq, float(np.max(np.maximum(0.0, np.maximum(cw - q["ug"][k], q["lg"][k] - cw)))))
-            c, s = _signed_pairs(cw, q["lg"][k], q["ug"][k], mu_g[k]); comp = max(comp, c); sign = max(sign, s)
+            add(row_check(q["C"][k] @ w, q["lg"][k], q["ug"][k], mu_g[k], ws[:, nw:]))
     xN = x[N]
     r = q["HN"] @ xN + q["gN"] + lam[N] + q["R"].T @ mu_r + q["Req"].T @ nu_ + mu_bN
     stat = max(stat, float(np.max(np.abs(r))))
     if ne:
         eq = max(eq, float(np.max(np.abs(q["Req"] @ xN - q["req"]))))
-    ineq = max(ineq, float(np.max(np.maximum(0.0, np.maximum(xN - q["ubxN"], q["lbxN"] - xN)))))
-    c, s = _signed_pairs(xN, q["lbxN"], q["ubxN"], mu_bN); comp = max(comp, c); sign = max(sign, s)
+    add(row_check(xN, q["lbxN"], q["ubxN"], mu_bN, wt[:, :nx]))
     if nr:
-        rx = q["R"] @ xN
-        ineq = max(ineq, float(np.max(np.maximum(0.0, np.maximum(rx - q["ur"], q["lr"] - rx)))))
-        c, s = _signed_pairs(rx, q["lr"], q["ur"], mu_r); comp = max(comp, c); sign = max(sign, s)
+        add(row_check(q["R"] @ xN, q["lr"], q["ur"], mu_r, wt[:, nx:]))
     return {"stat": stat, "eq": eq, "ineq": ineq, "comp": comp, "sign": sign,
             "kkt": max(stat, eq, ineq, comp, sign)}
 
@@ -381,6 +546,7 @@ def _solve_ipopt(q: dict, Hz, gz, rows: _Rows, max_iter=500):
     z0 = np.clip(np.zeros(Hz.shape[0]), rows.lbz, rows.ubz)
     z0 = np.where(np.isfinite(z0), z0, 0.0)
     res = solver(x0=z0, p=p, lbx=rows.lbz, ubx=rows.ubz, lbg=lbg, ubg=ubg)
+    interrupt.check()       # IPOPT ends a solve interrupted by Ctrl-C as a failed one
     stats = solver.stats()
     status = stats.get("return_status", "")
     z = np.array(res["x"]).reshape(-1)
@@ -388,6 +554,40 @@ def _solve_ipopt(q: dict, Hz, gz, rows: _Rows, max_iter=500):
     lam_x = np.array(res["lam_x"]).reshape(-1)
     neq = rows.A_eq.shape[0]
     return z, lam_g[:neq], lam_g[neq:], lam_x, status, int(stats.get("iter_count", -1))
+
+
+def _solve_ipopt_flat(Hz, gz, rows: _Rows, max_iter=500):
+    """IPOPT on the flattened QP itself (the soft QPs, whose slack columns the stage-wise
+    parametric NLP of :func:`_ipopt_solver` does not have); built for each call."""
+    import casadi as ca
+
+    nz = Hz.shape[0]
+    z = ca.SX.sym("z", nz)
+    H = ca.DM(sp.csc_matrix(Hz))
+    A = ca.DM(sp.csc_matrix(sp.vstack([rows.A_eq, rows.A_in])))
+    f = 0.5 * ca.dot(z, ca.mtimes(H, z)) + ca.dot(ca.DM(gz), z)
+    opts = {
+        "print_time": False,
+        "ipopt": {
+            "print_level": 0, "sb": "yes", "tol": 1e-12, "acceptable_iter": 0,
+            "bound_relax_factor": 0.0, "honor_original_bounds": "yes",
+            "mu_strategy": "adaptive", "max_iter": int(max_iter),
+            "hessian_constant": "yes", "jac_c_constant": "yes", "jac_d_constant": "yes",
+        },
+    }
+    solver = ca.nlpsol("qpref_ipopt_flat", "ipopt", {"x": z, "f": f, "g": ca.mtimes(A, z)}, opts)
+    lbg = np.concatenate([rows.b_eq, rows.l_in])
+    ubg = np.concatenate([rows.b_eq, rows.u_in])
+    z0 = np.clip(np.zeros(nz), rows.lbz, rows.ubz)
+    z0 = np.where(np.isfinite(z0), z0, 0.0)
+    res = solver(x0=z0, lbx=rows.lbz, ubx=rows.ubz, lbg=lbg, ubg=ubg)
+    stats = solver.stats()
+    status = stats.get("return_status", "")
+    zz = np.array(res["x"]).reshape(-1)
+    lam_g = np.array(res["lam_g"]).reshape(-1)
+    lam_x = np.array(res["lam_x"]).reshape(-1)
+    neq = rows.A_eq.shape[0]
+    return zz, lam_g[:neq], lam_g[neq:], lam_x, status, int(stats.get("iter_count", -1))
 
 
 # ---------------------------------------------------------------------------
@@ -480,7 +680,8 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
         exc.row = qp_infeasible_row(qp)
         raise
     Hz, gz, rows = flatten_qp(q)
-    z, y_eq, y_in, mu_z, status, iters = _solve_ipopt(q, Hz, gz, rows, 500 if max_iter is None else max_iter)
+    solve = _solve_ipopt_flat if rows.moved is not None else (lambda *a: _solve_ipopt(q, *a))
+    z, y_eq, y_in, mu_z, status, iters = solve(Hz, gz, rows, 500 if max_iter is None else max_iter)
     if status in ("Infeasible_Problem_Detected", "Restoration_Failed"):
         exc = QPInfeasibleError(f"QP is infeasible (IPOPT: {status})")
         exc.row = qp_infeasible_row(q)
@@ -494,7 +695,7 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
         ftol = max(float(tol), 1e-12)
         pol = _polish(Hz, gz, rows, z, y_in, mu_z, ftol)
         if pol is not None:
-            sol = _unflatten(q, *pol)
+            sol = _unflatten(q, *pol, rows=rows)
             res = qp_kkt_residual(q, sol)
             scale = max(1.0, float(np.max(np.abs(gz))), float(np.max(np.abs(Hz.data))) if Hz.nnz else 1.0)
             if res["ineq"] <= ftol and res["sign"] <= ftol and max(res["stat"], res["eq"]) <= 1e-9 * scale:
@@ -503,7 +704,7 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
     if out is None:
         if not ok_status:
             raise QPError(f"reference QP solver failed (IPOPT: {status})")
-        out = _unflatten(q, z, y_eq, y_in, mu_z)
+        out = _unflatten(q, z, y_eq, y_in, mu_z, rows=rows)
         out["polished"] = False
     out["iterations"] = iters
     out["status"] = status
@@ -600,9 +801,26 @@ def qp_infeasible_row(qp: dict):
     As in the C solver, the path rows of stage 0 that do not involve ``u_0`` take no part;
     only when the other rows are feasible (this QP keeps those rows, the C solver's drops
     them) is the certificate sought with them."""
-    q = _shaped(qp)
+    q = _hardened(_shaped(qp))
     row = _certificate_row(q, data_rows=False)
     return row if row is not None else _certificate_row(q, data_rows=True)
+
+
+def _hardened(q: dict) -> dict:
+    """The QP dict with its soft sides dropped (set to infinite bounds): a soft side never
+    makes a QP infeasible, the certificates are those of the hard rows."""
+    if not has_soft(q):
+        return q
+    q = dict(q)
+    ws, wt = soft_weights(q)
+    nx, nw = q["nx"], q["nx"] + q["nu"]
+    for lo_key, up_key, w in (("lbw", "ubw", ws[:, :nw]), ("lg", "ug", ws[:, nw:]),
+                              ("lbxN", "ubxN", wt[:, :nx]), ("lr", "ur", wt[:, nx:])):
+        lo, up = np.array(q[lo_key], float), np.array(q[up_key], float)
+        lo[..., (w[0] > 0) | (w[2] > 0)] = -np.inf
+        up[..., (w[1] > 0) | (w[3] > 0)] = np.inf
+        q[lo_key], q[up_key] = lo, up
+    return q
 
 
 def qp_row_in_certificate(qp: dict, row) -> float:
@@ -612,7 +830,7 @@ def qp_row_in_certificate(qp: dict, row) -> float:
     thousandth of the largest); 0 when no certificate uses it. A QP with several
     infeasible subsets of rows has several valid certificates, and a solver may single out
     any of them: a row named by a solver is valid when this is positive."""
-    q = _shaped(qp)
+    q = _hardened(_shaped(qp))
     best = 0.0
     for data_rows in (False, True):
         share = _certificate_row(q, data_rows, weigh=tuple(row))

@@ -91,9 +91,9 @@ def build_for(disc, cache_dir=None, echo=None, real: Optional[str] = None) -> Pa
     root = cache.cache_root(cache_dir)
     out = root / "problems" / f"{disc.name}-{cache.problem_hash(disc, None, real)[:20]}"
     if not (out / f"{disc.name}_meta.json").is_file():
-        say(f"dopus-codegen: generating C for '{disc.name}' into {out}")
         files = render_folder(disc, None, real=real)
-        out.parent.mkdir(parents=True, exist_ok=True)
+        cache.writable_folder("problems", cache_dir)
+        say(f"dopus-codegen: generating C for '{disc.name}' into {out}")
         tmp = Path(tempfile.mkdtemp(prefix=f".{disc.name}-", dir=str(out.parent)))
         write_folder(files, tmp)
         try:
@@ -102,7 +102,12 @@ def build_for(disc, cache_dir=None, echo=None, real: Optional[str] = None) -> Pa
             import shutil
 
             shutil.rmtree(tmp, ignore_errors=True)
-    build(out, cache_dir=cache_dir, echo=say)
+    try:
+        build(out, cache_dir=cache_dir, echo=say)
+    except OSError as exc:
+        if not str(exc.filename or "").startswith(str(root)):
+            raise
+        raise cache.cache_error(root, exc) from None    # the folder in the cache could not be written
     with _LOCK:
         _DISC_CACHE[key] = (disc, out)
     return out
@@ -131,7 +136,7 @@ def load_library(folder) -> tuple:
     return ffi, lib, meta
 
 
-#: enum dopus_budget_unit (runtime_c/dopus_solver.h, docs/algorithm.md section 12)
+#: enum dopus_budget_unit (runtime_c/dopus_solver.h, docs/algorithm.md section 13)
 BUDGET_UNITS = {"time": 1, "work": 2}
 
 
@@ -463,7 +468,7 @@ class Solver:
             self._bad(f"qp_warm_start must be True or False, got {on!r}")
         self._update("qp_warm_start", qp_warm_start=int(bool(on)))
 
-    # ------------------------------------------------------------------ anytime (section 12)
+    # ------------------------------------------------------------------ anytime (section 13)
     def set_time_budget(self, seconds) -> None:
         """The budget per sampling instant in seconds of the solver's clock (0: off)."""
         v = self._setting(settings.nonnegative, "time_budget", seconds)
@@ -479,7 +484,7 @@ class Solver:
         self._update("anytime_tol", anytime_tol=self._positive(tol, "anytime_tol"))
 
     def set_M_adaptive(self, on: bool = True, M_min: int = 0, M_max=None, eta=None) -> None:
-        """Adaptive M (section 12): the stages whose secant residual ``rho_k |domega_k|``
+        """Adaptive M (section 13): the stages whose secant residual ``rho_k |domega_k|``
         exceeds ``eta`` times the KKT proxy, between ``M_min`` and ``M_max``."""
         from ..reference.dopus import check_adaptive_M
 
@@ -657,6 +662,17 @@ class Solver:
         return {"stage": int(row.stage), "kind": self.enums["dopus_row_kind"].name(row.kind),
                 "index": int(row.index), "side": {-1: "lower", 1: "upper"}.get(int(row.side), "lower above upper"),
                 "bound": float(row.bound)}
+
+    def soft_slacks(self) -> dict:
+        """The slacks of the soft rows in the QP of the last feedback (read it before the next
+        prepare; dopus_get_soft_slacks): ``{"x": (N+1, nx), "g": (N, ng), "r": (nr,), "max"}``,
+        zeros on hard rows (docs/algorithm.md section 12)."""
+        N, nx, ng, nr = self.N, self.nx, self.ng, self.nr
+        vx, vg, vr = np.zeros((N + 1, nx)), np.zeros((N, max(ng, 1))), np.zeros(max(nr, 1))
+        real = f"{self.name}_real[]"
+        worst = self._c("get_soft_slacks")(self._s, self._ffi.from_buffer(real, vx),
+                                            self._ffi.from_buffer(real, vg), self._ffi.from_buffer(real, vr))
+        return {"x": vx, "g": vg[:, :ng], "r": vr[:nr], "max": float(worst)}
 
     @property
     def timings(self) -> dict:

@@ -10,8 +10,8 @@ uniform offsets to some states). The controller starts from the offline solution
 scenario's nominal initial state (solved once), as a deployed controller would.
 
 A run is **on the path** (``OnPath``) when the plant could be integrated to the end and the
-scalar signal named by the file (the robot arm: the distance of the tip to the circle) is at
-or below ``threshold`` at every sampling instant from ``settle`` seconds after the start and
+scalar signal named by the file (the robot arm: the distance of the tip to the circle), taken
+with its sign, is at or below ``threshold`` at every sampling instant from ``settle`` seconds after the start and
 after every push (the instants inside ``[t_push, t_push + settle)`` are not judged).
 
 The runs are distributed with dask.distributed (a LocalCluster, or the scheduler the caller
@@ -24,8 +24,8 @@ sorted by seed and run, so an interrupted and resumed campaign gives the same fi
 uninterrupted one, except the measured times (``"time"``) of each run.
 
 A run's line: ``run``, ``seed``, ``draw`` (``quantities``, ``x0``, ``pushes``: ``time`` and
-``kick``), ``on_path``, ``max_deviation`` (the largest ``|signal|`` over the judged instants),
-``max_deviation_all``, ``failed_instants`` (instants whose feedback failed: QP failures),
+``kick``), ``on_path``, ``max_deviation`` (the largest value of the signal, signed, over the
+judged instants), ``max_deviation_all`` (over all instants), ``failed_instants`` (instants whose feedback failed: QP failures),
 ``recoveries`` (re-initialisations of the runtime's automatic recovery), ``first_failure``,
 ``aborted``, ``instants``, ``instants_planned``, ``final_x``, ``signal`` (the on-path
 signal at every instant) and ``time`` (``median_us``, ``p99_us``, ``max_us`` of feedback +
@@ -45,15 +45,19 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import settings
+from .. import interrupt, settings
+from ..outputs import atomic_file, save_figure, write_text
 from .draws import campaign_events, campaign_plant, draw
 from .records import json_ready
 
 __all__ = ["CampaignError", "Job", "draw", "run_one", "judge", "read_results", "run_campaign", "format_report",
            "campaign_plant", "campaign_events"]
 
-#: The version of the result file's layout (in its first line).
-FORMAT = 1
+#: The version of the result file's layout (in its first line). 2: the on-path signal is
+#: judged with its sign (1: its absolute value).
+FORMAT = 2
+#: Seconds without a dask worker after which a campaign stops (``--worker-timeout``).
+WORKER_TIMEOUT = 60.0
 
 
 class CampaignError(RuntimeError):
@@ -146,13 +150,23 @@ def run_one(job: Job, index: int, seed: int) -> dict:
     return condense(run, d, index, seed, job.on_path, wall)
 
 
+def _signed(signal) -> np.ndarray:
+    """The values of a scalar signal, signed; a missing or non-finite value counts as +inf
+    (never on the path)."""
+    v = np.asarray([np.inf if a is None else a for a in signal], dtype=float)
+    v[~np.isfinite(v)] = np.inf
+    return v
+
+
 def judge(t, signal, pushes, on_path, completed: bool) -> tuple:
-    """``(on the path, max |signal| over the judged instants)`` of a run: the instants from
-    ``settle`` s after the start and outside ``[t_push, t_push + settle)`` for every push."""
+    """``(on the path, max signal over the judged instants)`` of a run: the instants from
+    ``settle`` s after the start and outside ``[t_push, t_push + settle)`` for every push.
+    The signal is taken with its sign: ``OnPath`` asks it to stay at or below the threshold
+    (a distance is never negative; "temperature above its limit" is negative when all is
+    well)."""
     _, threshold, settle = on_path
     t = np.asarray(t, dtype=float)
-    v = np.abs(np.asarray([np.inf if a is None else a for a in signal], dtype=float))
-    v[~np.isfinite(v)] = np.inf
+    v = _signed(signal)
     tol = 1e-9
     judged = t >= settle - tol
     for tp in pushes:
@@ -168,7 +182,7 @@ def condense(run: dict, d: dict, index: int, seed: int, on_path: tuple, wall: fl
     completed = res["status"] == "completed" and res["instants"] == res["instants_planned"]
     pushes = [p["time"] for p in d["pushes"] if p["time"] < run["settings"]["duration"]]
     ok, worst = judge(run["t"], run["signals"][name], pushes, on_path, completed)
-    sig = np.abs(np.asarray([np.inf if a is None else a for a in run["signals"][name]], dtype=float))
+    sig = _signed(run["signals"][name])
     tot = np.asarray(run["timing_us"]["total"], dtype=float)
     fb = np.asarray(run["timing_us"]["feedback"], dtype=float)
     q = lambda a, p: float(np.percentile(a, p)) if a.size else None  # noqa: E731
@@ -178,6 +192,7 @@ def condense(run: dict, d: dict, index: int, seed: int, on_path: tuple, wall: fl
             "first_failure": res.get("first_failure"), "aborted": run.get("aborted"),
             "instants": int(res["instants"]), "instants_planned": int(res["instants_planned"]),
             "final_x": run["x"][-1] if run["x"] else None, "signal": run["signals"][name],
+            "soft_violation": {k: float(max(v, default=0.0)) for k, v in (run.get("soft_violation") or {}).items()},
             "time": {"median_us": q(tot, 50), "p99_us": q(tot, 99), "max_us": float(np.max(tot)) if tot.size else None,
                      "feedback_median_us": q(fb, 50), "run_s": float(wall)}}
     return json_ready(line)
@@ -190,43 +205,130 @@ def _header(job: Job, name: str) -> dict:
             "on_path": {"signal": job.on_path[0], "threshold": job.on_path[1], "settle": job.on_path[2]}}
 
 
-def read_results(path) -> tuple:
-    """``(header, {(seed, run): line})`` of a result file; a line cut short by an interrupted
-    write is dropped. ``(None, {})`` for a missing or empty file."""
+_NUMBER, _INT, _TEXT, _NULL = "number", "integer", "text", "null"
+#: The fields of a run's line: the JSON types each may have.
+_LINE_FIELDS = {
+    "run": (_INT,), "seed": (_INT,), "draw": (dict,), "on_path": (bool,), "max_deviation": (_NUMBER, _NULL),
+    "max_deviation_all": (_NUMBER, _NULL), "failed_instants": (_INT,), "recoveries": (_INT, _NULL),
+    "first_failure": (dict, _NULL), "aborted": (_TEXT, _NULL), "instants": (_INT,), "instants_planned": (_INT,),
+    "final_x": (list, _NULL), "signal": (list,), "time": (dict,),
+}
+_TIME_FIELDS = {"median_us": (_NUMBER, _NULL), "p99_us": (_NUMBER, _NULL), "max_us": (_NUMBER, _NULL),
+                "feedback_median_us": (_NUMBER, _NULL), "run_s": (_NUMBER,)}
+_DRAW_FIELDS = {"quantities": (dict,), "x0": (list,), "pushes": (list,)}
+
+
+def _is(value, kinds) -> bool:
+    for kind in kinds:
+        if kind == _NULL and value is None:
+            return True
+        if kind == _INT and type(value) is int and value >= 0:
+            return True
+        if kind == _NUMBER and type(value) in (int, float):
+            return True
+        if kind == _TEXT and isinstance(value, str):
+            return True
+        if isinstance(kind, type) and type(value) is kind:
+            return True
+    return False
+
+
+def _fields_problem(obj, fields: dict, where: str = ""):
+    for name, kinds in fields.items():
+        if name not in obj:
+            return f"no field '{where}{name}'"
+        if not _is(obj[name], kinds):
+            return f"field '{where}{name}' is {json.dumps(obj[name])[:40]}"
+    return None
+
+
+def line_problem(obj):
+    """Why ``obj`` (a parsed line of the result file) is not a run's line, or None."""
+    if not isinstance(obj, dict):
+        return "not a JSON object"
+    why = _fields_problem(obj, _LINE_FIELDS) or _fields_problem(obj["time"], _TIME_FIELDS, "time.") \
+        or _fields_problem(obj["draw"], _DRAW_FIELDS, "draw.")
+    if why is None and obj["instants"] > obj["instants_planned"]:
+        why = "more instants than planned"
+    if why is None and not all(type(v) in (int, float) for v in obj["draw"]["quantities"].values()):
+        why = "field 'draw.quantities' holds a value that is not a number"
+    return why
+
+
+def _header_problem(obj):
+    """Why ``obj`` (the parsed first line) is not the header of a result file, or None."""
+    if not isinstance(obj, dict):
+        return "not a JSON object"
+    if not isinstance(obj.get("campaign"), str) or not obj["campaign"]:
+        return "no campaign fingerprint"
+    if obj.get("format") != FORMAT or type(obj.get("format")) is not int:
+        return f"format {obj.get('format')!r}, this version reads format {FORMAT}"
+    return None
+
+
+@dataclass
+class Results:
+    """A result file as read: ``header`` (None for a missing or empty file, or a damaged
+    header: ``header_problem`` says why), ``lines`` ``{(seed, run): line}``, ``malformed``
+    ``[(line number, why)]``: the lines that are not a run's line (cut short by an
+    interruption, missing or mistyped fields); they are dropped, so their runs are
+    computed again."""
+    header: object = None
+    lines: dict = field(default_factory=dict)
+    malformed: list = field(default_factory=list)
+    header_problem: object = None
+
+
+def read_results(path) -> Results:
+    """The result file at ``path`` (:class:`Results`; empty for a missing or empty file)."""
     p = Path(path)
+    res = Results()
     if not p.exists() or p.stat().st_size == 0:
-        return None, {}
-    header, lines = None, {}
-    with open(p) as fh:
-        for k, text in enumerate(fh):
+        return res
+    with open(p, "rb") as fh:
+        for k, raw in enumerate(fh):
             try:
-                obj = json.loads(text)
+                obj = json.loads(raw.decode("utf-8"))
             except ValueError:
-                continue
+                obj, why = None, "cut short" if not raw.endswith(b"\n") else "not JSON"
+            else:
+                why = None
             if k == 0:
-                if not isinstance(obj, dict) or "campaign" not in obj:
-                    raise CampaignError(f"'{path}' is not a campaign result file (its first line is not a "
-                                        "campaign header)")
-                header = obj
+                res.header_problem = why or _header_problem(obj)
+                res.header = obj if res.header_problem is None else None
                 continue
-            if isinstance(obj, dict) and "run" in obj and "seed" in obj:
-                lines.setdefault((int(obj["seed"]), int(obj["run"])), obj)
-    return header, lines
+            why = why or line_problem(obj)
+            if why is not None:
+                res.malformed.append((k + 1, why))
+                continue
+            res.lines.setdefault((obj["seed"], obj["run"]), obj)
+    return res
+
+
+def _malformed_text(path, malformed: list) -> str:
+    shown = "; ".join(f"line {n}: {why}" for n, why in malformed[:5])
+    more = f"; and {len(malformed) - 5} more" if len(malformed) > 5 else ""
+    return (f"warning: '{path}' has {len(malformed)} malformed line{'s' if len(malformed) > 1 else ''} "
+            f"({shown}{more}); dropped, their runs are computed again")
 
 
 def _dump(obj) -> str:
     return json.dumps(obj, sort_keys=True, allow_nan=False)
 
 
+def _append(fd: int, text: str) -> None:
+    """One complete line at the end of the file open at ``fd`` (O_APPEND)."""
+    data = text.encode("utf-8")
+    while data:
+        data = data[os.write(fd, data):]
+
+
 def _rewrite(path, header: dict, lines: dict) -> None:
     """The result file with ``header`` and ``lines`` sorted by (seed, run), replaced atomically."""
-    p = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", dir=p.parent if str(p.parent) else ".")
-    with os.fdopen(fd, "w") as fh:
+    with atomic_file(path) as fh:
         fh.write(_dump(header) + "\n")
         for key in sorted(lines):
             fh.write(_dump(lines[key]) + "\n")
-    os.replace(tmp, p)
 
 
 # --------------------------------------------------------------------------- distribution
@@ -255,25 +357,79 @@ def connect(workers: int | None, scheduler: str | None, timeout: float = 5.0):
             raise CampaignError(f"cannot reach the dask scheduler at '{scheduler}': {exc}") from None
     n = workers or os.cpu_count() or 1
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=logging.ERROR)
+                           silence_logs=logging.ERROR, preload=[__name__])
     return Client(cluster), cluster
 
 
-def _distributed(client, job, todo, seed, on_result, on_error):
-    from dask.distributed import as_completed
+def dask_setup(worker) -> None:
+    """The preload of the local cluster's workers: they ignore Ctrl-C, which a terminal
+    sends to the whole process group; the campaign stops them."""
+    import signal
 
-    futures = {client.submit(run_one, job, i, seed, key=f"dopus-campaign-{job.fingerprint}-{seed}-{i}", pure=False): i
-               for i in todo}
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class _NoWorker(Exception):
+    """The dask cluster lost its workers (or its scheduler) for longer than allowed."""
+
+
+def _distributed(client, job, todo, seed, on_result, on_error, worker_timeout: float = WORKER_TIMEOUT,
+                 poll: float = 1.0):
+    """The runs ``todo`` on the dask cluster of ``client``. The scheduler re-submits the
+    runs of a worker it loses to the others (a run that killed its workers three times
+    fails with ``KilledWorker``, reported by ``on_error``); while no worker is left, the
+    cluster is asked every ``poll`` seconds, and after ``worker_timeout`` seconds without a
+    worker (or without an answer of the scheduler) :class:`_NoWorker` stops the campaign."""
+    from dask.distributed import wait
+
+    # every call of the client is made with Ctrl-C deferred to its end (interrupt.deferred):
+    # dask's client does not survive a KeyboardInterrupt raised while it waits
+    with interrupt.deferred():
+        futures = {client.submit(run_one, job, i, seed, key=f"dopus-campaign-{job.fingerprint}-{seed}-{i}",
+                                 pure=False): i for i in todo}
+    pending = set(futures)
+    alone_since = None
     try:
-        for fut in as_completed(list(futures)):
-            if fut.status == "error":
-                on_error(futures[fut], fut.exception())
-            else:
-                on_result(fut.result())
-            fut.release()
+        while pending:
+            try:
+                with interrupt.deferred():
+                    done, pending = wait(pending, timeout=poll, return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                done = ()
+            except Exception as exc:  # noqa: BLE001 - the scheduler cancelled the runs or went away
+                raise _NoWorker(f"the dask cluster stopped the runs ({type(exc).__name__}: {exc})") from None
+            got = 0
+            for fut in done:
+                try:
+                    with interrupt.deferred():
+                        failed = fut.status == "error"
+                        value = fut.exception(timeout=poll) if failed else fut.result(timeout=poll)
+                        fut.release()
+                except TimeoutError:    # its result was on a worker lost since: the run is computed again
+                    pending.add(fut)
+                    continue
+                got += 1
+                if failed:
+                    on_error(futures[fut], value)
+                else:
+                    on_result(value)
+            if got:
+                alone_since = None
+                continue
+            try:
+                with interrupt.deferred():
+                    n_workers = len(client.nthreads())
+            except Exception:  # noqa: BLE001 - the scheduler does not answer
+                n_workers = 0
+            if n_workers:
+                alone_since = None
+            elif alone_since is None:
+                alone_since = time.monotonic()
+            elif time.monotonic() - alone_since >= worker_timeout:
+                raise _NoWorker(f"the dask cluster has had no worker for {worker_timeout:g} s (--worker-timeout)")
     finally:
-        for fut in futures:
-            fut.cancel()
+        with interrupt.deferred():
+            client.cancel(list(futures))
 
 
 class _Progress:
@@ -363,13 +519,21 @@ def _resolve(ocp, cli: dict):
 
 
 def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | None = None, backend: str = "c",
-                 json_out=None, plot_dir=None, echo=None, progress: bool = True, worst: int = 4, **cli) -> dict:
+                 json_out=None, plot_dir=None, echo=None, progress: bool = True, worst: int = 4,
+                 overwrite: bool = False, worker_timeout: float = WORKER_TIMEOUT, **cli) -> dict:
     """The ``dopus-gen campaign`` command; returns the report (:func:`format_report`).
 
     ``workers``: None = one LocalCluster worker per core; 0 = the runs one by one in this
     process (no dask); ``scheduler``: the address of an existing dask scheduler. ``cli``:
     the solver settings and :data:`settings.CAMPAIGN_SETTINGS` given as flags (None: not
-    given). The output paths, the settings and the scheduler are checked before any run."""
+    given). The output paths, the settings and the scheduler are checked before any run.
+
+    ``out`` is resumed only when its header carries this campaign's fingerprint; a damaged
+    header or another campaign's is refused (:class:`CampaignError`), or with ``overwrite``
+    replaced by a new file. Malformed run lines are reported and computed again. A
+    ``KeyboardInterrupt`` (Ctrl-C) stops the campaign with the finished runs in ``out`` and
+    records no interrupted run; the dask cluster without a worker for ``worker_timeout``
+    seconds stops it the same way, with :class:`CampaignError`."""
     from ..outputs import check_output_dir, check_output_file
     from ..problem.ocp import load_ocp
 
@@ -390,18 +554,32 @@ def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | Non
     spec = ocp.validate()
     fp = _fingerprint(ocp_text, backend, solver, camp["duration"], camp["mismatch"], on_path,
                       spec.scenario.closed_loop.campaign)
-    header_old, lines = read_results(out)
-    if header_old is not None and header_old.get("campaign") != fp:
-        raise CampaignError(f"--out '{out}' holds the runs of another campaign (another OCP file or other settings: "
-                            f"fingerprint {header_old.get('campaign')}, this one {fp}); give another file")
+    if not (worker_timeout > 0):
+        raise CampaignError(f"--worker-timeout must be > 0 s, got {worker_timeout}")
+    old = read_results(out)
+    lines = old.lines
+    if old.header_problem is not None or (old.header is not None and old.header.get("campaign") != fp):
+        if old.header_problem is not None:
+            why = (f"--out '{out}' cannot be resumed: its first line is not a campaign header of this version "
+                   f"(damaged, another file or another version: {old.header_problem})")
+        else:
+            why = (f"--out '{out}' holds the runs of another campaign (another OCP file or other settings: "
+                   f"fingerprint {old.header.get('campaign')}, this one {fp})")
+        if not overwrite:
+            raise CampaignError(f"{why}; give another file, or --overwrite to start a new campaign in it")
+        say(f"warning: {why}; --overwrite: a new campaign replaces it", err=True)
+        lines = {}
+    elif old.malformed:
+        say(_malformed_text(out, old.malformed), err=True)
     runs, seed = camp["runs"], camp["seed"]
     todo = [i for i in range(runs) if (seed, i) not in lines]
     say(f"settings: {settings.describe(solver, s_src)}; {settings.describe(camp, c_src)}", err=True)
 
     client = cluster = None
-    if todo and workers != 0:
-        client, cluster = connect(workers, scheduler)
     try:
+        if todo and workers != 0:
+            with interrupt.deferred():      # Ctrl-C while the cluster starts: stopped once it runs
+                client, cluster = connect(workers, scheduler)
         from ..problem.derivatives import build_functions
         from ..reference.offline import solve_ocp
 
@@ -435,46 +613,48 @@ def run_campaign(ocp_file, out, workers: int | None = None, scheduler: str | Non
         prog = _Progress(runs, runs - len(todo), progress)
         t0 = time.perf_counter()
 
-        with open(out, "a") as fh:
-            def on_result(line):
-                lines[(line["seed"], line["run"])] = line
-                fh.write(_dump(line) + "\n")
-                fh.flush()
-                prog.add(line)
+        fd = os.open(out, os.O_WRONLY | os.O_APPEND)
 
-            def on_error(i, exc):
-                errors.append((i, f"{type(exc).__name__}: {exc}"))
+        def on_result(line):
+            interrupt.check()       # a run that ended with Ctrl-C is not a result
+            _append(fd, _dump(line) + "\n")
+            lines[(line["seed"], line["run"])] = line
+            prog.add(line)
 
-            try:
-                if not todo:
-                    pass
-                elif workers == 0:
-                    _in_process(job, todo, seed, on_result, on_error)
-                else:
-                    _distributed(client, job, todo, seed, on_result, on_error)
-            except KeyboardInterrupt:
-                prog.close()
-                done = sum(1 for i in range(runs) if (seed, i) in lines)
-                say(f"interrupted: {done} of {runs} runs are in '{out}'; the same command computes the others",
-                    err=True)
-                raise
-            finally:
-                prog.close()
+        def on_error(i, exc):
+            errors.append((i, f"{type(exc).__name__}: {exc}"))
+
+        def kept():
+            return f"{sum(1 for i in range(runs) if (seed, i) in lines)} of {runs} runs are in '{out}'"
+
+        try:
+            if not todo:
+                pass
+            elif workers == 0:
+                _in_process(job, todo, seed, on_result, on_error)
+            else:
+                _distributed(client, job, todo, seed, on_result, on_error, worker_timeout)
+        except KeyboardInterrupt:
+            raise KeyboardInterrupt(f"{kept()}; the same command computes the others") from None
+        except _NoWorker as exc:
+            raise CampaignError(f"{exc}; {kept()}, the same command computes the others") from None
+        finally:
+            prog.close()
+            os.close(fd)
         wall = time.perf_counter() - t0
         _rewrite(out, header, lines)
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        with interrupt.deferred():
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
     chosen = [lines[(seed, i)] for i in range(runs) if (seed, i) in lines]
     report = summarize(chosen, job, camp, spec, wall=wall, computed=len(todo) - len(errors),
                        workers=where, errors=errors)
     say(format_report(report))
     if json_out:
-        with open(json_out, "w") as fh:
-            json.dump(json_ready(report), fh, indent=1, allow_nan=False)
-            fh.write("\n")
+        write_text(json_out, json.dumps(json_ready(report), indent=1, allow_nan=False) + "\n")
         say(f"JSON: {json_out}")
     if plot_dir and chosen:
         files = plot_campaign(report, chosen, disc, job, plot_dir, worst=worst)
@@ -501,6 +681,7 @@ def summarize(lines, job, camp, spec, wall=None, computed=0, workers="", errors=
         "pushes": {"count": list(cs.push_count), "window": list(cs.push_window)},
         "on_path_definition": {"signal": signal, "unit": dict(spec.scenario.closed_loop.units).get(signal),
                                "threshold": threshold, "settle": settle},
+        "time_unit": dict(spec.scenario.closed_loop.units).get("time", "s"),
         "on_path": on, "on_path_fraction": on / n if n else None,
         "aborted": sum(1 for r in lines if r["aborted"]),
         "runs_with_failed_instants": sum(1 for f in failed if f), "failed_instants": int(sum(failed)),
@@ -512,6 +693,8 @@ def summarize(lines, job, camp, spec, wall=None, computed=0, workers="", errors=
         "worst": [{"run": r["run"], "seed": r["seed"], "on_path": r["on_path"], "max_deviation": r["max_deviation"],
                    "failed_instants": r["failed_instants"], "recoveries": r["recoveries"], "aborted": r["aborted"]}
                   for r in order[:5]],
+        "soft_violation_max": {k: max(r["soft_violation"][k] for r in lines if k in (r.get("soft_violation") or {}))
+                               for k in sorted({k for r in lines for k in (r.get("soft_violation") or {})})},
         "wall_s": wall, "computed": computed, "workers": workers,
         "errors": [{"run": i, "message": m} for i, m in errors],
     }
@@ -523,13 +706,14 @@ def format_report(rep: dict) -> str:
     mm = ", ".join(f"{k} +-{100 * v:g} %" for k, v in rep["mismatch"].items()) or "none"
     t = rep["time_per_iteration_us"]
     f = lambda v, fmt: "-" if v is None else format(v, fmt)  # noqa: E731
+    tu = rep.get("time_unit", "s")      # of the model's time (the wall time is in seconds)
     lines = [
-        f"campaign {rep['ocp']}: {rep['runs']} of {rep['runs_asked']} runs (seed {rep['seed']}), {rep['duration']:g} s "
-        f"each, M = {rep['solver']['M']}, {rep['backend']} backend; mismatch {mm}; "
+        f"campaign {rep['ocp']}: {rep['runs']} of {rep['runs_asked']} runs (seed {rep['seed']}), {rep['duration']:g} "
+        f"{tu} each, M = {rep['solver']['M']}, {rep['backend']} backend; mismatch {mm}; "
         f"{rep['pushes']['count'][0]}..{rep['pushes']['count'][1]} pushes in [{rep['pushes']['window'][0]:g}, "
-        f"{rep['pushes']['window'][1]:g}] s",
+        f"{rep['pushes']['window'][1]:g}] {tu}",
         f"on the path: {rep['on_path']} of {rep['runs']} ({f(100 * rep['on_path_fraction'] if rep['runs'] else None, '.1f')} %)"
-        f"  [{d['signal']} <= {d['threshold']:g}{unit} from {d['settle']:g} s after the start and after every push, "
+        f"  [{d['signal']} <= {d['threshold']:g}{unit} from {d['settle']:g} {tu} after the start and after every push, "
         "plant integrated to the end]",
         f"failed instants (QP failures): {rep['failed_instants']} in {rep['runs_with_failed_instants']} runs "
         f"(at most {rep['failed_instants_max']} in one run); recoveries: {rep['recoveries']} in "
@@ -541,6 +725,9 @@ def format_report(rep: dict) -> str:
                                    f"{'' if w['on_path'] else ' (off the path)'}, {w['failed_instants']} failed"
                                    for w in rep["worst"]),
     ]
+    if rep.get("soft_violation_max"):
+        lines.append("largest violation of the soft rows over the runs (measured state, applied control): "
+                     + ", ".join(f"{k} {v:.3g}" for k, v in rep["soft_violation_max"].items()))
     if rep["wall_s"] is not None:
         lines.append(f"wall time: {rep['wall_s']:.1f} s for {rep['computed']} runs computed {rep['workers']}".rstrip())
     for e in rep["errors"]:
@@ -574,12 +761,16 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
     dev = np.asarray([r["max_deviation"] if r["max_deviation"] is not None else np.inf for r in lines], dtype=float)
     fig, axes = plt.subplots(2, 2, figsize=(10, 7))
     ax = axes[0, 0]
-    finite = dev[np.isfinite(dev) & (dev > 0)]
-    if finite.size:
+    finite = dev[np.isfinite(dev)]
+    log = bool(finite.size) and finite.min() > 0 and d["threshold"] > 0   # else a signed signal: linear axes
+    if finite.size and log:
         bins = np.logspace(np.log10(finite.min()), np.log10(max(finite.max(), d["threshold"] * 1.01)), 40)
         ax.hist(finite, bins=bins, color="C0")
         ax.set_xscale("log")
         _log_ticks(ax.xaxis)
+    elif finite.size:
+        ax.hist(finite, bins=np.linspace(min(finite.min(), d["threshold"]), max(finite.max(), d["threshold"]), 41),
+                color="C0")
     ax.axvline(d["threshold"], color="C3", ls="--", label=f"threshold {d['threshold']:g} {unit}")
     ax.set_xlabel(f"max {d['signal']} after settling [{unit}]")
     ax.set_ylabel("runs [-]")
@@ -608,8 +799,9 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
         rel = np.asarray([100 * (r["draw"]["quantities"][name] / nominal[name] - 1) for r in lines], dtype=float)
         ax.scatter(rel, np.where(np.isfinite(dev), dev, np.nan), s=6, color=f"C{k}", label=name, alpha=0.6)
     ax.axhline(d["threshold"], color="C3", ls="--")
-    ax.set_yscale("log")
-    _log_ticks(ax.yaxis)
+    if log:
+        ax.set_yscale("log")
+        _log_ticks(ax.yaxis)
     ax.set_xlabel("plant quantity against nominal [%]")
     ax.set_ylabel(f"max {d['signal']} after settling [{unit}]")
     if names:
@@ -617,7 +809,7 @@ def plot_campaign(rep, lines, disc, job, plot_dir, worst: int = 4) -> list:
     fig.suptitle(f"{rep['ocp']}: campaign of {rep['runs']} runs, {rep['on_path']} on the path")
     fig.tight_layout()
     path = out / "campaign_histograms.png"
-    fig.savefig(path, dpi=130)
+    save_figure(fig, path, dpi=130)
     plt.close(fig)
     files.append(path)
     if worst > 0 and lines:

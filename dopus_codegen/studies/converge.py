@@ -297,7 +297,9 @@ def plot_study(study: dict, path: str) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    from ..outputs import save_figure
+
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 
@@ -397,8 +399,9 @@ def run_converge_cli(ocp_file, m_list, iters, start, backend="reference", json_o
     study["real"] = real
     click.echo(format_table(study))
     if json_out:
-        with open(json_out, "w") as fh:
-            json.dump(json_ready(study), fh, indent=1, allow_nan=False)
+        from ..outputs import write_text
+
+        write_text(json_out, json.dumps(json_ready(study), indent=1, allow_nan=False))
         click.echo(f"wrote {json_out}", err=True)
     if plot_out:
         plot_study(study, plot_out)

@@ -15,6 +15,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .. import interrupt
+
 
 class PlantError(RuntimeError):
     """The plant could not be integrated (bad input, or CVODES failed)."""
@@ -108,6 +110,7 @@ class Plant:
         try:
             res = self._integrator(x0=x, p=np.concatenate([u, p, [h]]))
         except RuntimeError as err:  # CVODES failure (too many steps, convergence failure, ...)
+            interrupt.check()        # or CasADi's report of a Ctrl-C
             raise PlantError(f"Plant: CVODES failed over a step of {h} s from x = {x}, u = {u}: "
                              f"{str(err).splitlines()[-1] if str(err) else err}") from None
         xf = np.asarray(res["xf"], dtype=float).reshape(-1)

@@ -72,6 +72,11 @@ NO_UNIT = "unit not declared"
 KKT_LABEL = "KKT measure (inf-norm) [mixed units]"
 
 
+def _time_unit(runs) -> str:
+    """The unit of the model's time (``scenario(units={"time": ...})``), else seconds."""
+    return _unit_of(runs, "time") or "s"
+
+
 def _unit_of(runs, name: str):
     """The declared unit of a signal, state or control (``name`` or ``name[i]``), else None."""
     base = re.sub(r"\[\d+\]$", "", name)
@@ -113,7 +118,9 @@ def _suptitle(fig, title, what):
 
 
 def _save(fig, path):
-    fig.savefig(path, dpi=_DPI)
+    from ..outputs import save_figure
+
+    save_figure(fig, path, dpi=_DPI)
     plt.close(fig)
     return str(path)
 
@@ -158,7 +165,7 @@ def plot_signals(runs, path, title=None, log=None):
         ax.grid(True, which="both", alpha=0.3)
         _mark_events(ax, runs)
         _legend_above(ax)
-    axes[-1, 0].set_xlabel("time [s]")
+    axes[-1, 0].set_xlabel(f"time [{_time_unit(runs)}]")
     _suptitle(fig, title, "closed-loop signals (CVODES plant)")
     fig.tight_layout()
     return _save(fig, path)
@@ -188,7 +195,7 @@ def plot_kkt(runs, path, title=None, cap=1e4):
     if clipped:
         lo = ax.get_ylim()[0]
         ax.set_ylim(lo, cap * 3)
-    ax.set_xlabel("time [s]")
+    ax.set_xlabel(f"time [{_time_unit(runs)}]")
     ax.set_ylabel(KKT_LABEL)
     ax.grid(True, which="both", alpha=0.3)
     _mark_events(ax, runs)
@@ -229,7 +236,7 @@ def plot_controls(runs, path, title=None, names=None):
         _mark_events(ax, runs, text=(j == 0))
         if j == 0:
             _legend_above(ax)
-    axes[-1, 0].set_xlabel("time [s]")
+    axes[-1, 0].set_xlabel(f"time [{_time_unit(runs)}]")
     _suptitle(fig, title, "applied controls (dashed black: bounds)")
     fig.tight_layout()
     return _save(fig, path)
@@ -253,7 +260,7 @@ def plot_plane(runs, path, title=None, plane=None):
             if k < len(t):
                 ax.plot(xy[k, 0], xy[k, 1], "o", mfc="none", mec=_style(i)["color"], ms=9)
                 if i == 0:
-                    ax.annotate(f"{ev['label']} (t = {ev['time']:g} s)", xy=(xy[k, 0], xy[k, 1]),
+                    ax.annotate(f"{ev['label']} (t = {ev['time']:g} {_time_unit(runs)})", xy=(xy[k, 0], xy[k, 1]),
                                 xytext=(8, 8), textcoords="offset points", fontsize=8)
     ax.plot(ref[0, 0], ref[0, 1], "k^", ms=7, label="start")
     ax.set_aspect("equal", adjustable="datalim")
@@ -284,7 +291,7 @@ def plot_recomputed(runs, path, title=None):
         ax.set_title(f"{run['label']}: {np.mean(counts):.2f} stages per instant on average "
                      f"(stage N-1 = {N - 1} is always fresh)", fontsize=9)
         _mark_events(ax, runs)
-    axes[-1, 0].set_xlabel("time [s]")
+    axes[-1, 0].set_xlabel(f"time [{_time_unit(runs)}]")
     _suptitle(fig, title, "stages with recomputed Hessian and Jacobians (black)")
     fig.tight_layout()
     return _save(fig, path)
@@ -338,7 +345,7 @@ def plot_timing(runs, path, title=None):
                       label=f"{run['label']}: feedback + prepare")
         ax_t.axhline(np.nanmedian(tot), color=_style(i)["color"], ls=_style(i)["ls"], lw=1.2,
                      label=f"{run['label']}: median {np.nanmedian(tot):.0f} us")
-    ax_t.set_xlabel("time [s]")
+    ax_t.set_xlabel(f"time [{_time_unit(runs)}]")
     ax_t.set_ylabel("wall-clock time per iteration [us]")
     ax_t.set_title("every iteration (wall clock, Python call included)", fontsize=9)
     ax_t.grid(True, which="both", alpha=0.3)

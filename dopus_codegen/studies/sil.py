@@ -229,6 +229,11 @@ class _Record:
         self.timing: dict[str, list] = {"feedback": [], "prepare": [], "total": []}
         self.phase_timing: dict[str, list] = {}  # the backend's own phase timers
         self.snap: dict = {}
+        from .soft import soft_groups
+
+        self.disc = disc
+        self.soft_groups = soft_groups(disc) if getattr(disc, "has_soft", False) else []
+        self.soft: dict[str, list] = {g[0]: [] for g in self.soft_groups}
 
     def measurement(self, t_i, xhat, u0, kkt, p):
         self.t.append(t_i)
@@ -238,6 +243,11 @@ class _Record:
         self.parts.append({k: float(kkt[k]) for k in ("stat", "eq", "ineq", "comp") if k in kkt})
         for name, fn in self.spec.signals.items():
             self.signals[name].append(_eval(fn, xhat, u0, p))
+        if self.soft_groups:
+            from .soft import violations
+
+            for label, v in violations(self.disc, self.soft_groups, xhat, u0, p).items():
+                self.soft[label].append(v)
 
     def instant_done(self, i, status, recomputed, t_fb, t_pr, phases):
         self.status.append(int(status))
@@ -252,6 +262,7 @@ class _Record:
         n = len(self.status)
         self.t, self.x, self.u, self.kkt, self.parts = (a[:n] for a in (self.t, self.x, self.u, self.kkt, self.parts))
         self.signals = {k: v[:n] for k, v in self.signals.items()}
+        self.soft = {k: v[:n] for k, v in self.soft.items()}
 
     def as_run(self, label, events, settings_rec, aborted) -> dict:
         return {
@@ -271,6 +282,9 @@ class _Record:
                           "total": self.timing["total"],
                           **{f"phase:{k}": v for k, v in self.phase_timing.items()}},
             "events": [{"time": float(ev.time), "label": str(ev.label)} for ev in events],
+            # soft rows (docs/algorithm.md section 12): the violation of each group at the
+            # measured state and the applied control, per instant
+            "soft_violation": {k: list(v) for k, v in self.soft.items()},
             "settings": settings_rec,
             "aborted": aborted,
         }
@@ -305,7 +319,8 @@ class _Loop:
                 elif bar is not None:
                     bar.update(1)
         except PlantError as err:
-            self.aborted = f"plant failed at t = {len(self.rec.t) * self.dt:.4g} s: {err}"
+            self.aborted = (f"plant failed at t = {len(self.rec.t) * self.dt:.4g} "
+                            f"{time_unit(self.disc.scenario.closed_loop.units)}: {err}")
             self.rec.drop_unfinished()
         finally:
             if bar is not None:
@@ -452,22 +467,33 @@ def _segments(run):
     return segs
 
 
+def time_unit(units) -> str:
+    """The unit of the model's time in a scenario's ``units`` (a mapping or pairs), else
+    ``"s"``."""
+    return dict(units or {}).get("time", "s")
+
+
 def summarize(run, settle: float = 0.2) -> dict:
     """Figures of the summary table for one run.
 
     ``settle``: seconds after the start and after each event during which the KKT measure is
-    not counted in "max KKT after settling".
+    not counted in "max KKT after settling". A scalar signal's ``min`` and ``max`` are its
+    signed extremes over a stretch (a signal that is negative when all is well, "temperature
+    above its limit", keeps its sign), ``rms`` its root mean square; ``recoveries`` the
+    runtime's automatic re-initialisations (None: the backend does not count them).
     """
     t = np.asarray(run["t"], dtype=float)
     out = {"label": run["label"], "segments": [], "aborted": run.get("aborted"),
+           "time_unit": time_unit(run.get("settings", {}).get("units")),
            "first_failure": (run.get("result") or {}).get("first_failure")}
     for name, vals in run["signals"].items():
         v = np.asarray([np.nan if a is None else a for a in vals], dtype=float)
         if v.ndim != 1:
             continue
         for seg, mask in _segments(run):
-            vs = np.abs(v[mask])
+            vs = v[mask]
             out["segments"].append({"signal": name, "segment": seg,
+                                    "min": float(np.min(vs)) if vs.size else math.nan,
                                     "max": float(np.max(vs)) if vs.size else math.nan,
                                     "rms": float(np.sqrt(np.mean(vs ** 2))) if vs.size else math.nan})
     kkt = np.asarray([np.nan if a is None else a for a in run["kkt"]], dtype=float)
@@ -479,6 +505,7 @@ def summarize(run, settle: float = 0.2) -> dict:
     out["kkt_max_settled"] = float(np.max(ks)) if ks.size else math.nan
     out["kkt_nonfinite"] = int(np.count_nonzero(~np.isfinite(kkt)))
     out["qp_failures"] = int(np.count_nonzero(np.asarray(run["status"]) != 0))
+    out["recoveries"] = (run.get("result") or {}).get("recoveries")
     u = np.asarray(run["u"], dtype=float)
     lbu = np.asarray([-np.inf if a is None else a for a in run["settings"]["lbu"]], dtype=float)
     ubu = np.asarray([np.inf if a is None else a for a in run["settings"]["ubu"]], dtype=float)
@@ -489,13 +516,14 @@ def summarize(run, settle: float = 0.2) -> dict:
     out["time_max_us"] = float(np.max(tot)) if tot.size else math.nan
     out["feedback_median_us"] = float(np.median(fb)) if fb.size else math.nan
     out["feedback_max_us"] = float(np.max(fb)) if fb.size else math.nan
+    out["soft_violation"] = {k: float(max(v, default=0.0)) for k, v in (run.get("soft_violation") or {}).items()}
     return out
 
 
 def _num(v, fmt: str) -> str:
     """A number of the summary, or '-' right-aligned where there is none (no instant of a
     stretch, an aborted run)."""
-    width = int(fmt.split(".")[0])
+    width = int(fmt.split(".")[0].rstrip("d"))
     return f"{v:{fmt}}" if isinstance(v, (int, float)) and math.isfinite(v) else f"{'-':>{width}}"
 
 
@@ -507,27 +535,35 @@ def format_summary(summaries) -> str:
         w_run = max(len("run"), *(len(r) for r, _ in sig_rows))
         w_sig = max(len("signal"), *(len(seg["signal"]) for _, seg in sig_rows))
         w_seg = max(len("stretch"), *(len(seg["segment"]) for _, seg in sig_rows))
-        head = f"{'run':<{w_run}}  {'signal':<{w_sig}}  {'stretch':<{w_seg}}  {'max':>10}  {'RMS':>10}"
+        head = (f"{'run':<{w_run}}  {'signal':<{w_sig}}  {'stretch':<{w_seg}}  {'min':>10}  {'max':>10}  "
+                f"{'RMS':>10}")
         lines += [head, "-" * len(head)]
         for r, seg in sig_rows:
             lines.append(f"{r:<{w_run}}  {seg['signal']:<{w_sig}}  {seg['segment']:<{w_seg}}  "
-                         f"{_num(seg['max'], '10.3e')}  {_num(seg['rms'], '10.3e')}")
+                         f"{_num(seg['min'], '10.3e')}  {_num(seg['max'], '10.3e')}  {_num(seg['rms'], '10.3e')}")
+        lines.append("(min, max: the signal's signed extremes over the stretch; RMS: its root mean square)")
         lines.append("")
     w_run = max([len("run")] + [len(s["label"]) for s in summaries])
-    head = (f"{'run':<{w_run}}  {'max KKT settled':>15}  {'QP fail':>7}  {'u bound viol':>12}  "
+    head = (f"{'run':<{w_run}}  {'max KKT settled':>15}  {'QP fail':>7}  {'recoveries':>10}  {'u bound viol':>12}  "
             f"{'median it [us]':>14}  {'max it [us]':>11}  {'median fb [us]':>14}")
     lines += [head, "-" * len(head)]
     for s in summaries:
         lines.append(f"{s['label']:<{w_run}}  {_num(s['kkt_max_settled'], '15.3e')}  {s['qp_failures']:7d}  "
+                     f"{_num(s.get('recoveries'), '10d')}  "
                      f"{_num(s['bound_violation'], '12.2e')}  {_num(s['time_median_us'], '14.1f')}  "
                      f"{_num(s['time_max_us'], '11.1f')}  {_num(s['feedback_median_us'], '14.1f')}")
     if summaries:
-        lines.append(f"(max KKT settled: excluding the first {summaries[0]['settle']} s after the start "
+        lines.append(f"(max KKT settled: excluding the first {summaries[0]['settle']} {summaries[0]['time_unit']} "
+                     "after the start "
                      f"and after each event; it = feedback + prepare, fb = feedback alone)")
+    for s in summaries:
+        if s.get("soft_violation"):
+            lines.append(f"{s['label']}: largest violation of the soft rows (measured state, applied control): "
+                         + ", ".join(f"{k} {v:.3g}" for k, v in s["soft_violation"].items()))
     for s in summaries:
         if s.get("first_failure"):
             ff = s["first_failure"]
-            lines.append(f"{s['label']}: first failed instant at t = {ff['t']:.4g} s: {ff['message']}")
+            lines.append(f"{s['label']}: first failed instant at t = {ff['t']:.4g} {s['time_unit']}: {ff['message']}")
         if s.get("aborted"):
             lines.append(f"{s['label']}: ABORTED: {s['aborted']}")
     return "\n".join(lines)
@@ -537,9 +573,9 @@ def write_json(runs, path) -> None:
     path = Path(path)
     if path.parent and not path.parent.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w") as fh:
-        json.dump({"runs": runs}, fh, allow_nan=False)
-        fh.write("\n")
+    from ..outputs import write_text
+
+    write_text(path, json.dumps({"runs": runs}, allow_nan=False) + "\n")
 
 
 # --------------------------------------------------------------------------- CLI
@@ -601,7 +637,8 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
         replay = dict(xhat0=d["x0"], events=campaign_events(d), plant=campaign_plant(disc, d))
         echo(f"campaign run {campaign_run} (seed {seed or 0}): plant quantities "
              + ", ".join(f"{k} = {v:.6g}" for k, v in d["quantities"].items())
-             + f"; {len(d['pushes'])} pushes at " + ", ".join(f"{p['time']:.4g} s" for p in d["pushes"]), err=True)
+             + f"; {len(d['pushes'])} pushes at " + ", ".join(f"{p['time']:.4g} {time_unit(spec.units)}"
+                                                              for p in d["pushes"]), err=True)
 
     from ..reference.offline import solve_ocp
     guess, info = solve_ocp(disc, x0)
@@ -619,7 +656,7 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
         name = label or ("full RTI" if m == N - 1 else f"DOPUS M = {m}")
         echo(f"{name}: {backend} backend, {s.hessian} Hessian, regularization {s.regularization}, "
              f"cost Hessian {s.cost_hessian}, Levenberg-Marquardt {s.lm}, "
-             f"{duration if duration is not None else spec.duration} s ...", err=True)
+             f"{duration if duration is not None else spec.duration} {time_unit(spec.units)} ...", err=True)
         run = run_closed_loop(disc, backend=backend, settings=run_settings, duration=duration, guess=guess,
                               progress=progress, label=label, sources=src, **replay)
         runs.append(run)
@@ -628,7 +665,10 @@ def run_sil_cli(ocp_file, M=None, duration=None, json_out=None, plot_dir=None, c
     for r in runs:
         st = r["settings"]
         names = [k for k in settings.RUNTIME_SETTINGS if k in st and k in st["sources"]]
-        echo(f"{r['label']}: " + settings.describe({k: st[k] for k in names}, st["sources"]))
+        shown = {k: st[k] for k in names}
+        if "lm" in shown and st.get("lm_setting") == "auto":     # the setting, and the value it reached
+            shown["lm"] = f"auto (now {st['lm']:g})"
+        echo(f"{r['label']}: " + settings.describe(shown, st["sources"]))
     if json_out:
         write_json(runs, json_out)
         echo(f"JSON: {json_out}")

@@ -33,6 +33,49 @@ static robot_arm_real robot_arm_kkt_comp(robot_arm_real mu, robot_arm_real v, ro
     return c;
 }
 
+#if ROBOT_ARM_NSOFT > 0
+/* A row with soft weights w (w[0 .. 3 * stride]: L1 lower, L1 upper, L2 lower, L2 upper):
+ * a hard side as above; a soft side with multiplier m at its best slack s = max(s0, (m - l1)
+ * / l2) (s0 = max(0, lb - v) the violation; s = s0 when l2 = 0), where the slack's
+ * stationarity l1 + l2 s - m = y must be >= 0, with the complementarity m (v - lb + s) and y s
+ * (docs/algorithm.md section 12), each into comp. */
+static void robot_arm_kkt_row(robot_arm_real v, robot_arm_real lb, robot_arm_real ub, robot_arm_real mu, const robot_arm_real *w,
+                          int stride, robot_arm_real *ineq, robot_arm_real *comp)
+{
+    const int slo = isfinite(lb) && (w[0] > ROBOT_ARM_R(0.0) || w[2 * stride] > ROBOT_ARM_R(0.0));
+    const int sup = isfinite(ub) && (w[stride] > ROBOT_ARM_R(0.0) || w[3 * stride] > ROBOT_ARM_R(0.0));
+    const robot_arm_real lbh = slo ? -INFINITY : lb, ubh = sup ? INFINITY : ub;
+    const robot_arm_real muh = ((mu > ROBOT_ARM_R(0.0) && sup) || (mu < ROBOT_ARM_R(0.0) && slo)) ? ROBOT_ARM_R(0.0) : mu;
+    int side;
+    *ineq = robot_arm_kkt_max(*ineq, robot_arm_kkt_viol(v, lbh, ubh));
+    *comp = robot_arm_kkt_max(*comp, robot_arm_kkt_comp(muh, v, lbh, ubh));
+    for (side = 0; side < 2; ++side) {
+        const robot_arm_real m = robot_arm_kkt_max(side ? mu : -mu, ROBOT_ARM_R(0.0));
+        const robot_arm_real gap = side ? ub - v : v - lb;
+        const robot_arm_real l1 = w[side * stride], l2 = w[(2 + side) * stride];
+        robot_arm_real sl = robot_arm_kkt_max(ROBOT_ARM_R(0.0), -gap), y;
+        if (!(side ? sup : slo)) {
+            continue;
+        }
+        if (l2 > ROBOT_ARM_R(0.0)) {
+            sl = robot_arm_kkt_max(sl, (m - l1) / l2);
+        }
+        y = l1 + l2 * sl - m;
+        *comp = robot_arm_kkt_max(*comp, robot_arm_kkt_max(ROBOT_ARM_R(0.0), -y));
+        *comp = robot_arm_kkt_max(*comp, m * (gap + sl));
+        *comp = robot_arm_kkt_max(*comp, robot_arm_kkt_max(ROBOT_ARM_R(0.0), y) * sl);
+    }
+}
+#define ROBOT_ARM_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
+    robot_arm_kkt_row((v), (lb), (ub), (mu), (w), (stride), &ineq, &comp)
+#else
+#define ROBOT_ARM_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
+    do {                                                                                                     \
+        ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol((v), (lb), (ub)));                                         \
+        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp((mu), (v), (lb), (ub)));                                   \
+    } while (0)
+#endif
+
 int robot_arm_kkt_measure(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *lam, const robot_arm_real *mu_g,
                       const robot_arm_real *mu_b, const robot_arm_real *mu_bN, const robot_arm_real *mu_r,
                       const robot_arm_real *nu, const robot_arm_real *p, const robot_arm_real *xhat0,
@@ -65,8 +108,8 @@ int robot_arm_kkt_measure(const robot_arm_real *x, const robot_arm_real *u, cons
             eq = robot_arm_kkt_max(eq, robot_arm_fabs(x[(k + 1) * ROBOT_ARM_NX + i] - phi[i]));
         }
         for (i = 0; i < ROBOT_ARM_NG; ++i) {
-            ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(g[i], robot_arm_lg[i], robot_arm_ug[i]));
-            comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(mu_g[k * NG1 + i], g[i], robot_arm_lg[i], robot_arm_ug[i]));
+            ROBOT_ARM_KKT_ROW(g[i], robot_arm_lg[i], robot_arm_ug[i], mu_g[k * NG1 + i], &robot_arm_soft_g[0][i],
+                          ROBOT_ARM_DIM(ROBOT_ARM_NG));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
          * sides and counts with its magnitude) */
@@ -76,9 +119,8 @@ int robot_arm_kkt_measure(const robot_arm_real *x, const robot_arm_real *u, cons
             }
         } else {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(x[k * ROBOT_ARM_NX + i], robot_arm_lbx[i], robot_arm_ubx[i]));
-                comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(mu_b[k * ROBOT_ARM_NW + i], x[k * ROBOT_ARM_NX + i],
-                                                          robot_arm_lbx[i], robot_arm_ubx[i]));
+                ROBOT_ARM_KKT_ROW(x[k * ROBOT_ARM_NX + i], robot_arm_lbx[i], robot_arm_ubx[i], mu_b[k * ROBOT_ARM_NW + i],
+                              &robot_arm_soft_x[0][i], ROBOT_ARM_NX);
             }
         }
         for (i = 0; i < ROBOT_ARM_NU; ++i) {
@@ -97,16 +139,14 @@ int robot_arm_kkt_measure(const robot_arm_real *x, const robot_arm_real *u, cons
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         stat = robot_arm_kkt_max(stat, robot_arm_fabs(gLN[i] + mu_bN[i] + lam[ROBOT_ARM_N * ROBOT_ARM_NX + i]));
-        ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(x[ROBOT_ARM_N * ROBOT_ARM_NX + i], robot_arm_lbx[i], robot_arm_ubx[i]));
-        comp = robot_arm_kkt_max(comp,
-                             robot_arm_kkt_comp(mu_bN[i], x[ROBOT_ARM_N * ROBOT_ARM_NX + i], robot_arm_lbx[i], robot_arm_ubx[i]));
+        ROBOT_ARM_KKT_ROW(x[ROBOT_ARM_N * ROBOT_ARM_NX + i], robot_arm_lbx[i], robot_arm_ubx[i], mu_bN[i], &robot_arm_soft_x[0][i],
+                      ROBOT_ARM_NX);
     }
     for (i = 0; i < ROBOT_ARM_NE; ++i) {
         eq = robot_arm_kkt_max(eq, robot_arm_fabs(r_eq[i]));
     }
     for (i = 0; i < ROBOT_ARM_NR; ++i) {
-        ineq = robot_arm_kkt_max(ineq, robot_arm_kkt_viol(r[i], robot_arm_lr[i], robot_arm_ur[i]));
-        comp = robot_arm_kkt_max(comp, robot_arm_kkt_comp(mu_r[i], r[i], robot_arm_lr[i], robot_arm_ur[i]));
+        ROBOT_ARM_KKT_ROW(r[i], robot_arm_lr[i], robot_arm_ur[i], mu_r[i], &robot_arm_soft_r[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NR));
     }
     parts[0] = stat;
     parts[1] = eq;

@@ -23,6 +23,14 @@ extern const robot_arm_real robot_arm_x0_default[ROBOT_ARM_NX];
 extern const robot_arm_real robot_arm_guess_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
 extern const robot_arm_real robot_arm_guess_u[ROBOT_ARM_N][ROBOT_ARM_NU];
 
+#if ROBOT_ARM_NSOFT > 0
+/* soft weights of the state bounds (nodes 1..N), path rows and terminal inequality rows;
+ * rows: L1 lower, L1 upper, L2 lower, L2 upper (docs/algorithm.md section 12) */
+extern const robot_arm_real robot_arm_soft_x[4][ROBOT_ARM_NX];
+extern const robot_arm_real robot_arm_soft_g[4][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+extern const robot_arm_real robot_arm_soft_r[4][ROBOT_ARM_DIM(ROBOT_ARM_NR)];
+#endif
+
 #if ROBOT_ARM_HAS_NOMINAL
 /* offline primal-dual solution at robot_arm_x0_default (IPOPT at generation time), so the
  * controller starts warm (docs/design.md section 8) */

@@ -92,8 +92,24 @@
  * two solves (predictor, corrector), plus one residual/solve pair per refinement step once
  * the residuals are below 1e-6; the flop count is tabulated in bench/README.md.
  *
+ * Soft rows (ROBOT_ARM_NSOFT > 0 in robot_arm_sizes.h): a side of an inequality row whose weights
+ * zl, Zl (lower) or zu, Zu (upper) in robot_arm_qp_in are not both 0 may be violated by a slack
+ * s >= 0, lo - s_lo <= v <= up + s_up, at the price zl s_lo + Zl s_lo^2 / 2 (zu, Zu for
+ * s_up) added to the objective. The weights are those of a row of every stage (zl[j] for
+ * row j of a stage, as in the layout above) and of the terminal rows (zlN). The slacks are
+ * eliminated row by row inside the interior point (their Newton equations are scalar), so
+ * the Riccati recursion keeps the size of the problem without slacks: a soft side's barrier
+ * weight z/t becomes 1 / (t/z + 1/(Zl + y/s)) (y the multiplier of s >= 0), a series of the
+ * row's and the slack's barrier. The returned multiplier of a soft side lies in [0, zl + Zl
+ * s] (equal to the upper end when the side is violated), the slacks are max(0, lo - v) and
+ * max(0, v - up) of the solution. A soft side of a row of C_0 without u_0 is kept (its
+ * slack is then data, its multiplier zl + Zl s unique). A soft side never makes the QP infeasible: the
+ * infeasibility certificates and robot_arm_qp_infeasible_row concern the hard sides only. With
+ * ROBOT_ARM_NSOFT 0 (or undefined) the weights are not read and the solver compiles to the
+ * loops of hard rows alone.
+ *
  * Sizes come from robot_arm_sizes.h: ROBOT_ARM_N, ROBOT_ARM_NX, ROBOT_ARM_NU, ROBOT_ARM_NG, ROBOT_ARM_NR, ROBOT_ARM_NE
- * (NG, NR, NE may be 0). No malloc, no VLAs, no recursion, no state outside the workspace.
+ * (NG, NR, NE may be 0), ROBOT_ARM_NSOFT (optional, 0 without soft rows). No malloc, no VLAs, no recursion, no state outside the workspace.
  * Compile with -O3 where possible: the linear algebra is inlined with compile-time sizes
  * and -O3 vectorises it (about 1.8x faster than -O2 on the robot-arm QPs).
  */
@@ -130,6 +146,15 @@
 #else
 #define ROBOT_ARM_QP_NB ROBOT_ARM_QP_MAX1(ROBOT_ARM_QP_NINEQ)
 #endif
+/* Soft rows: on (1) when robot_arm_sizes.h declares ROBOT_ARM_NSOFT > 0; the sizes of the soft
+ * weights (rows of a stage, terminal rows) and of the per-row slack arrays, 1 when off. */
+#ifndef ROBOT_ARM_NSOFT
+#define ROBOT_ARM_NSOFT 0
+#endif
+#define ROBOT_ARM_QP_SOFT (ROBOT_ARM_NSOFT > 0)
+#define ROBOT_ARM_QP_NSS (ROBOT_ARM_QP_SOFT * ROBOT_ARM_QP_NSTAGEINEQ + 1 - ROBOT_ARM_QP_SOFT)
+#define ROBOT_ARM_QP_NST (ROBOT_ARM_QP_SOFT * (ROBOT_ARM_NX + ROBOT_ARM_NR) + 1 - ROBOT_ARM_QP_SOFT)
+#define ROBOT_ARM_QP_NBS (ROBOT_ARM_QP_SOFT * ROBOT_ARM_QP_NB + 1 - ROBOT_ARM_QP_SOFT)
 /* A lower triangular nu x nu matrix packed by lower columns. */
 #define ROBOT_ARM_QP_NUP (ROBOT_ARM_QP_NU1 * (ROBOT_ARM_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
@@ -194,6 +219,17 @@ typedef struct {
      * HN + hess_shift I instead of H_k and HN; 0 (the value of a zero-filled struct)
      * leaves the QP as given; must be finite and >= 0 */
     robot_arm_real hess_shift;
+    /* soft weights (read only when ROBOT_ARM_NSOFT > 0; see the header comment): L1 (zl, zu)
+     * and L2 (Zl, Zu) of the lower and upper side of row j of every stage (j = 0..nw+ng-1)
+     * and of the terminal rows (j = 0..nx+nr-1: x_N, then R); finite and >= 0 */
+    robot_arm_real zl[ROBOT_ARM_QP_NSS];
+    robot_arm_real zu[ROBOT_ARM_QP_NSS];
+    robot_arm_real Zl[ROBOT_ARM_QP_NSS];
+    robot_arm_real Zu[ROBOT_ARM_QP_NSS];
+    robot_arm_real zlN[ROBOT_ARM_QP_NST];
+    robot_arm_real zuN[ROBOT_ARM_QP_NST];
+    robot_arm_real ZlN[ROBOT_ARM_QP_NST];
+    robot_arm_real ZuN[ROBOT_ARM_QP_NST];
 } robot_arm_qp_in;
 
 /* Primal-dual solution (output; also the warm-start point when settings.warm_start). */
@@ -249,6 +285,20 @@ typedef struct {
     robot_arm_real t_up[ROBOT_ARM_QP_NB];
     robot_arm_real z_lo[ROBOT_ARM_QP_NB];
     robot_arm_real z_up[ROBOT_ARM_QP_NB];
+    /* soft sides (ROBOT_ARM_NSOFT > 0): flags, slacks s >= 0 and their multipliers y, the
+     * residual of the slack's stationarity (Z s + z_soft - z - y) and the steps */
+    unsigned char soft_lo[ROBOT_ARM_QP_NBS];
+    unsigned char soft_up[ROBOT_ARM_QP_NBS];
+    robot_arm_real s_lo[ROBOT_ARM_QP_NBS];
+    robot_arm_real s_up[ROBOT_ARM_QP_NBS];
+    robot_arm_real y_lo[ROBOT_ARM_QP_NBS];
+    robot_arm_real y_up[ROBOT_ARM_QP_NBS];
+    robot_arm_real rs_lo[ROBOT_ARM_QP_NBS];
+    robot_arm_real rs_up[ROBOT_ARM_QP_NBS];
+    robot_arm_real ds_lo[ROBOT_ARM_QP_NBS];
+    robot_arm_real ds_up[ROBOT_ARM_QP_NBS];
+    robot_arm_real dy_lo[ROBOT_ARM_QP_NBS];
+    robot_arm_real dy_up[ROBOT_ARM_QP_NBS];
     /* residuals */
     robot_arm_real r_stat[ROBOT_ARM_QP_NPRIM];
     robot_arm_real r_dyn[(ROBOT_ARM_N + 1) * ROBOT_ARM_NX];

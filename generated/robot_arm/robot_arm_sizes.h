@@ -23,6 +23,12 @@
 #define ROBOT_ARM_NBG 0
 #define ROBOT_ARM_NBR 0
 #define ROBOT_ARM_NB 120 /* N (NBX + NBU + NBG) + NBR */
+/* Soft rows (docs/algorithm.md section 12): state components, path rows and terminal rows
+ * with a soft side; 0: none, and the QP compiles without the slack machinery */
+#define ROBOT_ARM_NSOFT 0
+/* 1 when every row that depends on the state is soft: the QP is feasible for every finite
+ * measurement (only the control bounds are hard) */
+#define ROBOT_ARM_QP_ALWAYS_FEASIBLE 0
 
 /* 1 if the OCP has a least-squares stage cost, so the Gauss-Newton Hessian exists */
 #define ROBOT_ARM_HAS_GN 1

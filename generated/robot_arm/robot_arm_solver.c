@@ -97,7 +97,7 @@ static int robot_arm_phase(robot_arm_solver *s, int phase)
 
 static int robot_arm_has_clock(const robot_arm_solver *s);
 
-/* ---- the anytime budget (algorithm.md section 12) --------------------------------------- */
+/* ---- the anytime budget (algorithm.md section 13) --------------------------------------- */
 
 /* 1 when a budget is set (a time budget needs a clock). */
 static int robot_arm_budget_on(const robot_arm_solver *s)
@@ -480,6 +480,25 @@ static void robot_arm_assemble(robot_arm_solver *s)
     for (i = 0; i < ROBOT_ARM_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
+#if ROBOT_ARM_NSOFT > 0
+    /* soft weights: the rows of a stage (x, u (hard), g) and the terminal rows (x_N, r) */
+    for (j = 0; j < 4; ++j) {
+        robot_arm_real *st = j == 0 ? in->zl : j == 1 ? in->zu : j == 2 ? in->Zl : in->Zu;
+        robot_arm_real *te = j == 0 ? in->zlN : j == 1 ? in->zuN : j == 2 ? in->ZlN : in->ZuN;
+        for (i = 0; i < ROBOT_ARM_NX; ++i) {
+            st[i] = te[i] = robot_arm_soft_x[j][i];
+        }
+        for (i = 0; i < ROBOT_ARM_NU; ++i) {
+            st[ROBOT_ARM_NX + i] = ROBOT_ARM_R(0.0);
+        }
+        for (i = 0; i < ROBOT_ARM_NG; ++i) {
+            st[ROBOT_ARM_NW + i] = robot_arm_soft_g[j][i];
+        }
+        for (i = 0; i < ROBOT_ARM_NR; ++i) {
+            te[ROBOT_ARM_NX + i] = robot_arm_soft_r[j][i];
+        }
+    }
+#endif
     robot_arm_phase(s, prev);
 }
 
@@ -719,7 +738,7 @@ static void robot_arm_feedback_measure(robot_arm_solver *s, const robot_arm_real
     if (!s->anytime.prepared_extra) {
         /* (after extra iterations the term the prepare convexified stays: the iterate has
          * converged at the predicted state and the capped term, 0 there, left QPs that are
-         * convex only on the active bounds; algorithm.md section 12) */
+         * convex only on the active bounds; algorithm.md section 13) */
         robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
@@ -740,7 +759,7 @@ static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm)
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
     if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
-        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 12) */
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 13) */
     }
     settings.warm_start = warm;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
@@ -921,7 +940,7 @@ static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *
 }
 
 /* Feedback once admitted (steps 2 to 8). */
-/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
+/* The bounded latency of a time budget (algorithm.md section 13): the QP's iterations are
  * capped at the budget left over the cost of one QP iteration of the last feedback (at least
  * 1); a QP stopped by the cap is not retried (the fallback control). */
 static void robot_arm_feedback_cap(robot_arm_solver *s)
@@ -1045,6 +1064,33 @@ static void robot_arm_shift(robot_arm_solver *s)
     robot_arm_ring_advance(&s->ring);
 }
 
+/* A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for the
+ * QP: its row of Ct is zero and the value g_new of step 2 lies outside that side's bound
+ * (0 dw >= lg - g_new > 0). Stage 0 is left out (the QP ignores its rows without u). */
+static int robot_arm_stale_stage(const robot_arm_solver *s, int k)
+{
+    const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
+    const robot_arm_real *g = s->mem.ev.Fn_g[k];
+    int i, j;
+    if (k == 0) {
+        return 0;
+    }
+    for (j = 0; j < ROBOT_ARM_NG; ++j) {
+        int hard_lo = 1, hard_up = 1, zero = 1;
+#if ROBOT_ARM_NSOFT > 0
+        hard_lo = !(robot_arm_soft_g[0][j] > ROBOT_ARM_R(0.0) || robot_arm_soft_g[2][j] > ROBOT_ARM_R(0.0));
+        hard_up = !(robot_arm_soft_g[1][j] > ROBOT_ARM_R(0.0) || robot_arm_soft_g[3][j] > ROBOT_ARM_R(0.0));
+#endif
+        for (i = 0; i < ROBOT_ARM_NW && zero; ++i) {
+            zero = slot->Ct[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NG)] == ROBOT_ARM_R(0.0);
+        }
+        if (zero && ((hard_lo && g[j] < robot_arm_lg[j]) || (hard_up && g[j] > robot_arm_ug[j]))) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
 /* |domega_k| of stage k's slot (the denominator of rho_k). */
 static robot_arm_real robot_arm_step_norm(const robot_arm_solver *s, int k)
 {
@@ -1064,7 +1110,7 @@ static robot_arm_real robot_arm_step_norm(const robot_arm_solver *s, int k)
 }
 
 /* The number of stages among 0..N-2 to re-linearise (before the budget): N-1 after a
- * recovery, the fixed M, or adaptive M (algorithm.md section 12): the stages whose secant
+ * recovery, the fixed M, or adaptive M (algorithm.md section 13): the stages whose secant
  * residual rho_k |domega_k| exceeds eta times the KKT proxy of the point before the step,
  * between M_min and M_max. */
 static int robot_arm_M_now(const robot_arm_solver *s)
@@ -1098,9 +1144,10 @@ static int robot_arm_next_worst(const robot_arm_solver *s)
     return best;
 }
 
-/* Step 4: re-linearise the stages with the largest rho_k: M of them (robot_arm_M_now), then, with
- * a budget, further stages in rho order while one more iteration still fits after them
- * (algorithm.md section 12); each only while the budget allows. The cost of the stages
+/* Step 4: re-linearise the stale stages (robot_arm_stale_stage), then among the other stages of
+ * 0..N-2 those with the largest rho_k: M of them (robot_arm_M_now), then, with a budget,
+ * further stages in rho order while one more iteration still fits after them
+ * (algorithm.md section 13); each only while the budget allows. The cost of the stages
  * beyond M goes to *ext_cost. */
 static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost)
 {
@@ -1108,6 +1155,18 @@ static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost)
     double b0, reserve;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         s->selected[k] = 0;
+    }
+    /* the stale stages first, whatever the budget: without them the QP is infeasible */
+    for (k = 0; k < ROBOT_ARM_N - 1 && ROBOT_ARM_NG > 0; ++k) {
+        if (robot_arm_stale_stage(s, k)) {
+            rc = robot_arm_stage_H(s, k);
+            if (rc != ROBOT_ARM_OK) {
+                s->anytime.instant_stages += n;
+                return rc;
+            }
+            s->selected[k] = 1;
+            n += 1;
+        }
     }
     extend = robot_arm_budget_on(s);
     *ext_cost = 0.0;
@@ -1118,6 +1177,9 @@ static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost)
             break;
         }
         k = robot_arm_next_worst(s);
+        if (k < 0) {
+            break;
+        }
         b0 = robot_arm_budget_now(s);
         rc = robot_arm_stage_H(s, k);
         if (rc != ROBOT_ARM_OK) {
@@ -1355,7 +1417,7 @@ int robot_arm_prepare(robot_arm_solver *s)
         rc = robot_arm_prepare_iteration(s, 0);
     }
     if (rc == ROBOT_ARM_OK) {
-        /* the budget left (algorithm.md section 12), with the Hessian of the recovery phase */
+        /* the budget left (algorithm.md section 13), with the Hessian of the recovery phase */
         if (s->health.recovering > 0 && ROBOT_ARM_HAS_GN) {
             s->settings.hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
         }
@@ -1373,7 +1435,7 @@ int robot_arm_prepare(robot_arm_solver *s)
 }
 
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
- * anytime budget (section 12), without the shift, x_N kept. */
+ * anytime budget (section 13), without the shift, x_N kept. */
 static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 {
     robot_arm_real xN_saved[ROBOT_ARM_NX];
@@ -1487,7 +1549,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     return ROBOT_ARM_OK;
 }
 
-/* ---- anytime (algorithm.md section 12) -------------------------------------------------- */
+/* ---- anytime (algorithm.md section 13) -------------------------------------------------- */
 
 /* One extra iteration on the next instant's problem: the prepared QP for the state the plan
  * predicts (dx_0 = 0), its full step, then a prepare iteration without the shift. A QP not
@@ -1502,7 +1564,7 @@ static int robot_arm_extra_iteration(robot_arm_solver *s)
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
     /* the cap of the term while the extra iterations make progress; after one of them raised
-     * the KKT proxy, the term the prepare convexified (algorithm.md section 12) */
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 13) */
     if (!s->anytime.uncapped) {
         robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
@@ -1522,7 +1584,7 @@ static int robot_arm_extra_iteration(robot_arm_solver *s)
     return rc;
 }
 
-/* The budget left after prepare (algorithm.md section 12): extra iterations while the KKT
+/* The budget left after prepare (algorithm.md section 13): extra iterations while the KKT
  * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
  * of robot_arm_info. */
 static int robot_arm_anytime_run(robot_arm_solver *s)
@@ -1648,6 +1710,92 @@ int robot_arm_get_recomputed(const robot_arm_solver *s, int *stages)
 static robot_arm_real robot_arm_side_bound(const robot_arm_real *lo, const robot_arm_real *up, int i, int side)
 {
     return side > 0 ? up[i] : lo[i];
+}
+
+#if ROBOT_ARM_NSOFT > 0
+/* The slack of the row value v against [lb, ub] on the sides with soft weights w (stride). */
+static robot_arm_real robot_arm_soft_slack(robot_arm_real v, robot_arm_real lb, robot_arm_real ub, const robot_arm_real *w,
+                                   int stride)
+{
+    robot_arm_real sl = ROBOT_ARM_R(0.0);
+    if ((w[0] > ROBOT_ARM_R(0.0) || w[2 * stride] > ROBOT_ARM_R(0.0)) && lb - v > sl) {
+        sl = lb - v;
+    }
+    if ((w[stride] > ROBOT_ARM_R(0.0) || w[3 * stride] > ROBOT_ARM_R(0.0)) && v - ub > sl) {
+        sl = v - ub;
+    }
+    return sl;
+}
+#endif
+
+robot_arm_real robot_arm_get_soft_slacks(const robot_arm_solver *s, robot_arm_real *viol_x, robot_arm_real *viol_g,
+                                 robot_arm_real *viol_r)
+{
+    robot_arm_real worst = ROBOT_ARM_R(0.0);
+    int k, i;
+    for (k = 0; k <= ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NX && viol_x; ++i) {
+            viol_x[k * ROBOT_ARM_NX + i] = ROBOT_ARM_R(0.0);
+        }
+    }
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG) && viol_g; ++i) {
+            viol_g[k * ROBOT_ARM_DIM(ROBOT_ARM_NG) + i] = ROBOT_ARM_R(0.0);
+        }
+    }
+    for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NR) && viol_r; ++i) {
+        viol_r[i] = ROBOT_ARM_R(0.0);
+    }
+#if ROBOT_ARM_NSOFT > 0
+    {
+        const robot_arm_qp_in *in = &s->qp_in;
+        const robot_arm_qp_sol *sol = &s->mem.qp.sol;
+        /* the QP's matrices are not pointed to between calls: the slots of the horizon of the
+         * last feedback (no shift since) and the terminal R */
+        for (k = 1; k <= ROBOT_ARM_N; ++k) {
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                const robot_arm_real lb = k < ROBOT_ARM_N ? in->lbw[k][i] : in->lbxN[i];
+                const robot_arm_real ub = k < ROBOT_ARM_N ? in->ubw[k][i] : in->ubxN[i];
+                const robot_arm_real sl = robot_arm_soft_slack(sol->x[k][i], lb, ub, &robot_arm_soft_x[0][i], ROBOT_ARM_NX);
+                worst = sl > worst ? sl : worst;
+                if (viol_x) {
+                    viol_x[k * ROBOT_ARM_NX + i] = sl;
+                }
+            }
+        }
+        for (k = 0; k < ROBOT_ARM_N && ROBOT_ARM_NG > 0; ++k) {
+            for (i = 0; i < ROBOT_ARM_NG; ++i) {
+                robot_arm_real v = ROBOT_ARM_R(0.0), sl;
+                int c;
+                for (c = 0; c < ROBOT_ARM_NW; ++c) {
+                    v += robot_arm_ring_stage_const(&s->ring, k)->Ct[i + c * ROBOT_ARM_DIM(ROBOT_ARM_NG)] *
+                         (c < ROBOT_ARM_NX ? sol->x[k][c] : sol->u[k][c - ROBOT_ARM_NX]);
+                }
+                sl =
+                    robot_arm_soft_slack(v, in->lg[k][i], in->ug[k][i], &robot_arm_soft_g[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NG));
+                worst = sl > worst ? sl : worst;
+                if (viol_g) {
+                    viol_g[k * ROBOT_ARM_DIM(ROBOT_ARM_NG) + i] = sl;
+                }
+            }
+        }
+        for (i = 0; i < ROBOT_ARM_NR; ++i) {
+            robot_arm_real v = ROBOT_ARM_R(0.0), sl;
+            int c;
+            for (c = 0; c < ROBOT_ARM_NX; ++c) {
+                v += s->R[i + c * ROBOT_ARM_DIM(ROBOT_ARM_NR)] * sol->x[ROBOT_ARM_N][c];
+            }
+            sl = robot_arm_soft_slack(v, in->lr[i], in->ur[i], &robot_arm_soft_r[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NR));
+            worst = sl > worst ? sl : worst;
+            if (viol_r) {
+                viol_r[i] = sl;
+            }
+        }
+    }
+#else
+    (void)s;
+#endif
+    return worst;
 }
 
 int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_info *row)

@@ -40,7 +40,7 @@ const char *unicycle_status_string(int status);
  * finite is handled as a missing one (UNICYCLE_ERR_NONFINITE_VALUE,
  * UNICYCLE_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
  * records its measurement, so the recovery starts from the newest one; 0: off.
- * Anytime DOPUS (section 12): budget > 0 per sampling instant, counted from the start of
+ * Anytime DOPUS (section 13): budget > 0 per sampling instant, counted from the start of
  * the instant's feedback, in budget_unit UNICYCLE_BUDGET_TIME (seconds of the solver's clock,
  * unicycle_set_clock: on firmware an instruction or cycle counter; without a clock the budget
  * is off) or UNICYCLE_BUDGET_WORK (work units: stage_grad, stage_hess, term_grad and term_hess
@@ -197,7 +197,7 @@ typedef struct {
     double timings[10];
     double t_feedback;
     double t_prepare;
-    /* anytime DOPUS (section 12), the last instant: extra iterations after prepare, stages
+    /* anytime DOPUS (section 13), the last instant: extra iterations after prepare, stages
      * re-linearised over all its iterations (stage N-1 not counted), budget used (its unit);
      * the work units counted since setup */
     int extra_iterations;
@@ -224,3 +224,11 @@ typedef struct {
  * from being met; stages are those of that QP's horizon. Returns 1 and writes *row, else
  * returns 0. */
 int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *row);
+/* Soft rows (docs/algorithm.md section 12): the slacks of the QP of the last feedback, read
+ * after that feedback and before the next prepare: max(0, lb - v, v - ub) of every soft row
+ * at the QP's solution, v the state x_k + dx_k (viol_x, (N+1) x nx, node 0 zero), the
+ * linearised path row g_k + Ct_k dw_k (viol_g, N x max(ng, 1)) and the linearised terminal
+ * row r + R dx_N (viol_r, max(nr, 1)); 0 on hard rows. A pointer may be NULL. Returns the
+ * largest slack (0 without soft rows). */
+unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *viol_x, unicycle_real *viol_g,
+                                 unicycle_real *viol_r);

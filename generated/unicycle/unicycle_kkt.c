@@ -33,6 +33,49 @@ static unicycle_real unicycle_kkt_comp(unicycle_real mu, unicycle_real v, unicyc
     return c;
 }
 
+#if UNICYCLE_NSOFT > 0
+/* A row with soft weights w (w[0 .. 3 * stride]: L1 lower, L1 upper, L2 lower, L2 upper):
+ * a hard side as above; a soft side with multiplier m at its best slack s = max(s0, (m - l1)
+ * / l2) (s0 = max(0, lb - v) the violation; s = s0 when l2 = 0), where the slack's
+ * stationarity l1 + l2 s - m = y must be >= 0, with the complementarity m (v - lb + s) and y s
+ * (docs/algorithm.md section 12), each into comp. */
+static void unicycle_kkt_row(unicycle_real v, unicycle_real lb, unicycle_real ub, unicycle_real mu, const unicycle_real *w,
+                          int stride, unicycle_real *ineq, unicycle_real *comp)
+{
+    const int slo = isfinite(lb) && (w[0] > UNICYCLE_R(0.0) || w[2 * stride] > UNICYCLE_R(0.0));
+    const int sup = isfinite(ub) && (w[stride] > UNICYCLE_R(0.0) || w[3 * stride] > UNICYCLE_R(0.0));
+    const unicycle_real lbh = slo ? -INFINITY : lb, ubh = sup ? INFINITY : ub;
+    const unicycle_real muh = ((mu > UNICYCLE_R(0.0) && sup) || (mu < UNICYCLE_R(0.0) && slo)) ? UNICYCLE_R(0.0) : mu;
+    int side;
+    *ineq = unicycle_kkt_max(*ineq, unicycle_kkt_viol(v, lbh, ubh));
+    *comp = unicycle_kkt_max(*comp, unicycle_kkt_comp(muh, v, lbh, ubh));
+    for (side = 0; side < 2; ++side) {
+        const unicycle_real m = unicycle_kkt_max(side ? mu : -mu, UNICYCLE_R(0.0));
+        const unicycle_real gap = side ? ub - v : v - lb;
+        const unicycle_real l1 = w[side * stride], l2 = w[(2 + side) * stride];
+        unicycle_real sl = unicycle_kkt_max(UNICYCLE_R(0.0), -gap), y;
+        if (!(side ? sup : slo)) {
+            continue;
+        }
+        if (l2 > UNICYCLE_R(0.0)) {
+            sl = unicycle_kkt_max(sl, (m - l1) / l2);
+        }
+        y = l1 + l2 * sl - m;
+        *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), -y));
+        *comp = unicycle_kkt_max(*comp, m * (gap + sl));
+        *comp = unicycle_kkt_max(*comp, unicycle_kkt_max(UNICYCLE_R(0.0), y) * sl);
+    }
+}
+#define UNICYCLE_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
+    unicycle_kkt_row((v), (lb), (ub), (mu), (w), (stride), &ineq, &comp)
+#else
+#define UNICYCLE_KKT_ROW(v, lb, ub, mu, w, stride)                                                              \
+    do {                                                                                                     \
+        ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol((v), (lb), (ub)));                                         \
+        comp = unicycle_kkt_max(comp, unicycle_kkt_comp((mu), (v), (lb), (ub)));                                   \
+    } while (0)
+#endif
+
 int unicycle_kkt_measure(const unicycle_real *x, const unicycle_real *u, const unicycle_real *lam, const unicycle_real *mu_g,
                       const unicycle_real *mu_b, const unicycle_real *mu_bN, const unicycle_real *mu_r,
                       const unicycle_real *nu, const unicycle_real *p, const unicycle_real *xhat0,
@@ -65,8 +108,8 @@ int unicycle_kkt_measure(const unicycle_real *x, const unicycle_real *u, const u
             eq = unicycle_kkt_max(eq, unicycle_fabs(x[(k + 1) * UNICYCLE_NX + i] - phi[i]));
         }
         for (i = 0; i < UNICYCLE_NG; ++i) {
-            ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(g[i], unicycle_lg[i], unicycle_ug[i]));
-            comp = unicycle_kkt_max(comp, unicycle_kkt_comp(mu_g[k * NG1 + i], g[i], unicycle_lg[i], unicycle_ug[i]));
+            UNICYCLE_KKT_ROW(g[i], unicycle_lg[i], unicycle_ug[i], mu_g[k * NG1 + i], &unicycle_soft_g[0][i],
+                          UNICYCLE_DIM(UNICYCLE_NG));
         }
         /* simple bounds of x_k: none at stage 0 (a multiplier there pairs with infinite
          * sides and counts with its magnitude) */
@@ -76,9 +119,8 @@ int unicycle_kkt_measure(const unicycle_real *x, const unicycle_real *u, const u
             }
         } else {
             for (i = 0; i < UNICYCLE_NX; ++i) {
-                ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(x[k * UNICYCLE_NX + i], unicycle_lbx[i], unicycle_ubx[i]));
-                comp = unicycle_kkt_max(comp, unicycle_kkt_comp(mu_b[k * UNICYCLE_NW + i], x[k * UNICYCLE_NX + i],
-                                                          unicycle_lbx[i], unicycle_ubx[i]));
+                UNICYCLE_KKT_ROW(x[k * UNICYCLE_NX + i], unicycle_lbx[i], unicycle_ubx[i], mu_b[k * UNICYCLE_NW + i],
+                              &unicycle_soft_x[0][i], UNICYCLE_NX);
             }
         }
         for (i = 0; i < UNICYCLE_NU; ++i) {
@@ -97,16 +139,14 @@ int unicycle_kkt_measure(const unicycle_real *x, const unicycle_real *u, const u
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
         stat = unicycle_kkt_max(stat, unicycle_fabs(gLN[i] + mu_bN[i] + lam[UNICYCLE_N * UNICYCLE_NX + i]));
-        ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(x[UNICYCLE_N * UNICYCLE_NX + i], unicycle_lbx[i], unicycle_ubx[i]));
-        comp = unicycle_kkt_max(comp,
-                             unicycle_kkt_comp(mu_bN[i], x[UNICYCLE_N * UNICYCLE_NX + i], unicycle_lbx[i], unicycle_ubx[i]));
+        UNICYCLE_KKT_ROW(x[UNICYCLE_N * UNICYCLE_NX + i], unicycle_lbx[i], unicycle_ubx[i], mu_bN[i], &unicycle_soft_x[0][i],
+                      UNICYCLE_NX);
     }
     for (i = 0; i < UNICYCLE_NE; ++i) {
         eq = unicycle_kkt_max(eq, unicycle_fabs(r_eq[i]));
     }
     for (i = 0; i < UNICYCLE_NR; ++i) {
-        ineq = unicycle_kkt_max(ineq, unicycle_kkt_viol(r[i], unicycle_lr[i], unicycle_ur[i]));
-        comp = unicycle_kkt_max(comp, unicycle_kkt_comp(mu_r[i], r[i], unicycle_lr[i], unicycle_ur[i]));
+        UNICYCLE_KKT_ROW(r[i], unicycle_lr[i], unicycle_ur[i], mu_r[i], &unicycle_soft_r[0][i], UNICYCLE_DIM(UNICYCLE_NR));
     }
     parts[0] = stat;
     parts[1] = eq;

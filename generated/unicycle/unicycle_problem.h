@@ -23,6 +23,14 @@ extern const unicycle_real unicycle_x0_default[UNICYCLE_NX];
 extern const unicycle_real unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX];
 extern const unicycle_real unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU];
 
+#if UNICYCLE_NSOFT > 0
+/* soft weights of the state bounds (nodes 1..N), path rows and terminal inequality rows;
+ * rows: L1 lower, L1 upper, L2 lower, L2 upper (docs/algorithm.md section 12) */
+extern const unicycle_real unicycle_soft_x[4][UNICYCLE_NX];
+extern const unicycle_real unicycle_soft_g[4][UNICYCLE_DIM(UNICYCLE_NG)];
+extern const unicycle_real unicycle_soft_r[4][UNICYCLE_DIM(UNICYCLE_NR)];
+#endif
+
 #if UNICYCLE_HAS_NOMINAL
 /* offline primal-dual solution at unicycle_x0_default (IPOPT at generation time), so the
  * controller starts warm (docs/design.md section 8) */

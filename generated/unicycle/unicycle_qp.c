@@ -46,6 +46,7 @@
 #define NE1 UNICYCLE_QP_NE1
 #define NU1 UNICYCLE_QP_NU1
 #define TOFF (N * NSI) /* first terminal inequality row */
+#define SOFT UNICYCLE_QP_SOFT
 /* The bounded rows of stage k (k = N: the terminal rows): b runs over them, j is the row
  * within the stage (a component of w_k or a row of C_k; of x_N or of R). */
 #define FOR_STAGE_ROWS(ws, k, b, j)                                                                          \
@@ -161,7 +162,37 @@ static int check_input(const unicycle_qp_in *in)
         if (in->lr[i] != in->lr[i] || in->ur[i] != in->ur[i] || in->lr[i] == INFINITY ||
             in->ur[i] == -INFINITY)
             return 0;
+    if (SOFT) {
+        for (i = 0; i < UNICYCLE_QP_NSS; ++i)
+            if (!(in->zl[i] >= UNICYCLE_R(0.0) && in->zl[i] < INFINITY && in->zu[i] >= UNICYCLE_R(0.0) &&
+                  in->zu[i] < INFINITY && in->Zl[i] >= UNICYCLE_R(0.0) && in->Zl[i] < INFINITY &&
+                  in->Zu[i] >= UNICYCLE_R(0.0) && in->Zu[i] < INFINITY))
+                return 0;
+        for (i = 0; i < UNICYCLE_QP_NST; ++i)
+            if (!(in->zlN[i] >= UNICYCLE_R(0.0) && in->zlN[i] < INFINITY && in->zuN[i] >= UNICYCLE_R(0.0) &&
+                  in->zuN[i] < INFINITY && in->ZlN[i] >= UNICYCLE_R(0.0) && in->ZlN[i] < INFINITY &&
+                  in->ZuN[i] >= UNICYCLE_R(0.0) && in->ZuN[i] < INFINITY))
+                return 0;
+    }
     return 1;
+}
+
+/* The soft weights of inequality row i (flat layout): w = (zl, zu, Zl, Zu). */
+static void soft_weights(const unicycle_qp_in *in, int i, unicycle_real *w)
+{
+    if (i < TOFF) {
+        const int j = i - (i / NSI) * NSI;
+        w[0] = in->zl[j];
+        w[1] = in->zu[j];
+        w[2] = in->Zl[j];
+        w[3] = in->Zu[j];
+    } else {
+        const int j = i - TOFF;
+        w[0] = in->zlN[j];
+        w[1] = in->zuN[j];
+        w[2] = in->ZlN[j];
+        w[3] = in->ZuN[j];
+    }
 }
 
 /* Lower and upper bound of inequality row i (flat row layout of unicycle_qp.h). */
@@ -198,18 +229,23 @@ static int setup_bounds(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
              * stage 0 that do not involve u_0 (their value is data; a multiplier on them is
              * not unique, lam_0 absorbs any value, and a violation by round-off in x0 could
              * never be removed) */
-            int ignored = (i < NX), hl, hu;
-            unicycle_real lo, up;
+            int ignored = (i < NX), data = 0, hl, hu;
+            unicycle_real lo, up, w[4] = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
             if (NG > 0 && i >= NW && i < NW + NG) {
                 int c;
-                ignored = 1;
+                data = 1;
                 for (c = NX; c < NW; ++c)
                     if (in->C[0][(i - NW) + c * NG] != UNICYCLE_R(0.0))
-                        ignored = 0;
+                        data = 0;
+                ignored = data;
             }
+            if (SOFT)
+                soft_weights(in, i, w);
             row_bounds(in, i, &lo, &up);
-            hl = !ignored && isfinite(lo);
-            hu = !ignored && isfinite(up);
+            /* a soft side of such a data row stays: its slack takes up the violation and its
+             * multiplier, zl + Zl s, is unique */
+            hl = isfinite(lo) && (!ignored || (SOFT && data && (w[0] > UNICYCLE_R(0.0) || w[2] > UNICYCLE_R(0.0))));
+            hu = isfinite(up) && (!ignored || (SOFT && data && (w[1] > UNICYCLE_R(0.0) || w[3] > UNICYCLE_R(0.0))));
             if (!hl && !hu)
                 continue;
             if (nb >= UNICYCLE_QP_NB)
@@ -217,7 +253,12 @@ static int setup_bounds(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             ws->bidx[nb] = (unicycle_qp_row)i;
             ws->has_lo[nb] = (unsigned char)hl;
             ws->has_up[nb] = (unsigned char)hu;
-            if (hl && hu && lo > up)
+            if (SOFT) {
+                ws->soft_lo[nb] = (unsigned char)(hl && (w[0] > UNICYCLE_R(0.0) || w[2] > UNICYCLE_R(0.0)));
+                ws->soft_up[nb] = (unsigned char)(hu && (w[1] > UNICYCLE_R(0.0) || w[3] > UNICYCLE_R(0.0)));
+            }
+            /* lo > up: no point meets a hard row (a soft side can give way) */
+            if (hl && hu && lo > up && !(SOFT && (ws->soft_lo[nb] || ws->soft_up[nb])))
                 ok = 1;
             ++nb;
         }
@@ -339,28 +380,62 @@ static inline void lu_solve_t(const unicycle_real *restrict Lp, unicycle_real *r
  * where they are used rather than stored. */
 static unicycle_real r_lo(const unicycle_qp_workspace *ws, int b)
 {
-    return ws->vl[b] - ws->t_lo[b];
+    return SOFT && ws->soft_lo[b] ? ws->vl[b] + ws->s_lo[b] - ws->t_lo[b] : ws->vl[b] - ws->t_lo[b];
 }
 static unicycle_real r_up(const unicycle_qp_workspace *ws, int b)
 {
-    return ws->uv[b] - ws->t_up[b];
+    return SOFT && ws->soft_up[b] ? ws->uv[b] + ws->s_up[b] - ws->t_up[b] : ws->uv[b] - ws->t_up[b];
 }
+/* A soft side's slack step ds enters its row's slack step: dt_lo = dv + ds_lo + r_lo. */
 static unicycle_real dt_lo(const unicycle_qp_workspace *ws, int b)
 {
-    return ws->dv[b] + r_lo(ws, b);
+    return SOFT && ws->soft_lo[b] ? ws->dv[b] + ws->ds_lo[b] + r_lo(ws, b) : ws->dv[b] + r_lo(ws, b);
 }
 static unicycle_real dt_up(const unicycle_qp_workspace *ws, int b)
 {
-    return r_up(ws, b) - ws->dv[b];
+    return SOFT && ws->soft_up[b] ? r_up(ws, b) - ws->dv[b] + ws->ds_up[b] : r_up(ws, b) - ws->dv[b];
 }
 
-static unicycle_real row_q(const unicycle_qp_workspace *ws, int b)
+/* The elimination of a soft side's slack (see unicycle_qp.h). With q = z/t, p = y/s and Z the
+ * L2 weight, the slack's Newton equation Z ds - dz - dy = -rs (rs = Z s + zsoft - z - y)
+ * gives ds = -(rs + rcs/s + a + q dvs) / (Z + q + p), dvs = dv (lower side) or -dv (upper),
+ * a = (rc + z r)/t the right-hand side term of a hard side, rcs the barrier right-hand side
+ * of the pair s y. Substituted, the side acts on the row as a hard side with the barrier
+ * weight q f and the right-hand side term f a - (q / (Z + q + p)) (rs + rcs/s), f = (Z + p)
+ * / (Z + q + p). */
+static unicycle_real soft_f(unicycle_real q, unicycle_real p, unicycle_real Z)
+{
+    return (Z + p) / (Z + q + p);
+}
+
+/* p = y/s of a soft side (flag 1). */
+static unicycle_real soft_p(unsigned char flag, unicycle_real y, unicycle_real sl)
+{
+    return flag == 1 ? y / sl : UNICYCLE_R(0.0);
+}
+
+static unicycle_real soft_l2(const unicycle_qp_in *in, const unicycle_qp_workspace *ws, int b, int upper)
+{
+    unicycle_real w[4];
+    soft_weights(in, ws->bidx[b], w);
+    return upper ? w[3] : w[2];
+}
+
+static unicycle_real row_q(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int b)
 {
     unicycle_real q = UNICYCLE_R(0.0);
-    if (ws->has_lo[b])
-        q += ws->z_lo[b] / ws->t_lo[b];
-    if (ws->has_up[b])
-        q += ws->z_up[b] / ws->t_up[b];
+    if (ws->has_lo[b]) {
+        const unicycle_real ql = ws->z_lo[b] / ws->t_lo[b];
+        q += SOFT && ws->soft_lo[b]
+                 ? ql * soft_f(ql, soft_p(ws->soft_lo[b], ws->y_lo[b], ws->s_lo[b]), soft_l2(in, ws, b, 0))
+                 : ql;
+    }
+    if (ws->has_up[b]) {
+        const unicycle_real qu = ws->z_up[b] / ws->t_up[b];
+        q += SOFT && ws->soft_up[b]
+                 ? qu * soft_f(qu, soft_p(ws->soft_up[b], ws->y_up[b], ws->s_up[b]), soft_l2(in, ws, b, 1))
+                 : qu;
+    }
     return q;
 }
 
@@ -418,7 +493,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     int k, i, b, j;
     unicycle_real s_stat = UNICYCLE_R(1.0), s_eq = UNICYCLE_R(1.0), s_ineq = UNICYCLE_R(1.0), nz = UNICYCLE_R(0.0),
                comp = UNICYCLE_R(0.0), ineq = UNICYCLE_R(0.0);
-    unicycle_real sum_c = UNICYCLE_R(0.0), naty, nlam;
+    unicycle_real sum_c = UNICYCLE_R(0.0), naty, nlam, rs_max = UNICYCLE_R(0.0);
     /* entry-wise maxima over the stages: |Hw|, |A'y|, |w|, |Phi w| and |lam| */
     unicycle_real m_h[NW], m_a[NW], m_w[NW], m_pw[NX], m_lam[NX];
     int m = 0;
@@ -481,17 +556,44 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
             /* vl, uv (and the directions) are only defined on the bounded sides */
             if (ws->has_lo[b]) {
                 ws->vl[b] = v - lo;
-                ineq = dmax(ineq, lo - v);
+                ineq = dmax(ineq, SOFT && ws->soft_lo[b] ? lo - v - ws->s_lo[b] : lo - v);
                 comp = dmax(comp, ws->t_lo[b] * ws->z_lo[b]);
                 sum_c += ws->t_lo[b] * ws->z_lo[b];
                 ++m;
             }
             if (ws->has_up[b]) {
                 ws->uv[b] = up - v;
-                ineq = dmax(ineq, v - up);
+                ineq = dmax(ineq, SOFT && ws->soft_up[b] ? v - up - ws->s_up[b] : v - up);
                 comp = dmax(comp, ws->t_up[b] * ws->z_up[b]);
                 sum_c += ws->t_up[b] * ws->z_up[b];
                 ++m;
+            }
+            if (SOFT && (ws->soft_lo[b] || ws->soft_up[b])) {
+                /* the slacks: stationarity Z s + zsoft - z - y, complementarity s y */
+                unicycle_real w[4];
+                soft_weights(in, ws->bidx[b], w);
+                if (ws->soft_lo[b]) {
+                    ws->rs_lo[b] = w[2] * ws->s_lo[b] + w[0] - ws->z_lo[b] - ws->y_lo[b];
+                    rs_max = dmax(rs_max, unicycle_fabs(ws->rs_lo[b]));
+                    s_stat = dmax(s_stat, dmax(w[0], w[2] * unicycle_fabs(ws->s_lo[b])));
+                    if (ws->soft_lo[b] == 1) {
+                        comp = dmax(comp, ws->s_lo[b] * ws->y_lo[b]);
+                        sum_c += ws->s_lo[b] * ws->y_lo[b];
+                        nz = dmax(nz, ws->y_lo[b]);
+                        ++m;
+                    }
+                }
+                if (ws->soft_up[b]) {
+                    ws->rs_up[b] = w[3] * ws->s_up[b] + w[1] - ws->z_up[b] - ws->y_up[b];
+                    rs_max = dmax(rs_max, unicycle_fabs(ws->rs_up[b]));
+                    s_stat = dmax(s_stat, dmax(w[1], w[3] * unicycle_fabs(ws->s_up[b])));
+                    if (ws->soft_up[b] == 1) {
+                        comp = dmax(comp, ws->s_up[b] * ws->y_up[b]);
+                        sum_c += ws->s_up[b] * ws->y_up[b];
+                        nz = dmax(nz, ws->y_up[b]);
+                        ++m;
+                    }
+                }
             }
             s_ineq = dmax(s_ineq, unicycle_fabs(v));
         }
@@ -514,6 +616,8 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
     r->nsides = m;
     r->mu = m > 0 ? sum_c / m : UNICYCLE_R(0.0);
     r->stat = unicycle_lai_norm_inf(NP, ws->r_stat);
+    if (SOFT)
+        r->stat = dmax(r->stat, rs_max);
     r->eq = dmax(unicycle_lai_norm_inf((N + 1) * NX, ws->r_dyn),
                  NE > 0 ? unicycle_lai_norm_inf(NE, ws->r_eqN) : UNICYCLE_R(0.0));
     r->ineq = ineq;
@@ -613,12 +717,12 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             dq[i] = UNICYCLE_R(0.0);
         for (b = ws->bstart[N]; b < ws->bstart[N + 1]; ++b)
             if (NR == 0 || ws->bidx[b] - TOFF < NX)
-                dq[ws->bidx[b] - TOFF] = row_q(ws, b);
+                dq[ws->bidx[b] - TOFF] = row_q(ws, in, b);
         for (i = 0; i < NX; ++i)
             P[i + i * NX] += dq[i] + delta + in->hess_shift;
         for (b = ws->bstart[N]; b < ws->bstart[N + 1]; ++b) {
             const int r = ws->bidx[b] - TOFF;
-            const unicycle_real qr = row_q(ws, b);
+            const unicycle_real qr = row_q(ws, in, b);
             if (NR > 0 && r >= NX && qr != UNICYCLE_R(0.0))
                 for (j = 0; j < NX; ++j)
                     for (i = 0; i < NX; ++i)
@@ -661,7 +765,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         for (i = 0; i < NSI; ++i)
             q[i] = UNICYCLE_R(0.0);
         for (b = ws->bstart[k]; b < ws->bstart[k + 1]; ++b)
-            q[ws->bidx[b] - k * NSI] = row_q(ws, b);
+            q[ws->bidx[b] - k * NSI] = row_q(ws, in, b);
 
         /* dg = the diagonal of H_k + D'QD + delta I (the terms before Phi' P Phi: the
          * round-off estimates below are taken from them) */
@@ -873,7 +977,7 @@ static void newton_residual(unicycle_qp_workspace *ws, const unicycle_qp_in *in,
         os[i] = rhs_stat[i] - (ws->delta + in->hess_shift) * sp[i];
     for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
-    row_axpy(in, k, j, row_dot(in, k, j, sp + k * NW) * -row_q(ws, b), os + k * NW);
+    row_axpy(in, k, j, row_dot(in, k, j, sp + k * NW) * -row_q(ws, in, b), os + k * NW);
     for (k = 0; k < N; ++k) {
         unicycle_real *o = os + k * NW;
         unicycle_lai_symv_l(NW, -UNICYCLE_R(1.0), in->H[k], NW, sp + k * NW, UNICYCLE_R(1.0), o);
@@ -930,6 +1034,56 @@ static unicycle_real rc_up(const unicycle_qp_workspace *ws, int b, const qp_cent
     return rc;
 }
 
+/* rcs of the pair s y of a soft side, as rc_lo and rc_up for t z but without Mehrotra's
+ * second-order term: with it, a two-sided soft row whose sides are both nearly active (a
+ * soft equality row met at the solution) made the corrector cycle between a long and a
+ * blocked step (a closed-loop QP of tests/test_soft.py at its iteration limit; without it
+ * 17 iterations). */
+static unicycle_real rcs_lo(const unicycle_qp_workspace *ws, int b, const qp_centring *cc)
+{
+    unicycle_real rc = ws->s_lo[b] * ws->y_lo[b];
+    if (cc->corrector)
+        rc -= cc->target;
+    return rc;
+}
+
+static unicycle_real rcs_up(const unicycle_qp_workspace *ws, int b, const qp_centring *cc)
+{
+    unicycle_real rc = ws->s_up[b] * ws->y_up[b];
+    if (cc->corrector)
+        rc -= cc->target;
+    return rc;
+}
+
+/* The right-hand side term of the lower (side_rhs_lo) and the upper side (side_rhs_up) of
+ * bounded row b in the condensed Newton system: (rc + z r) / t for a hard side, the same with
+ * the slack eliminated for a soft one (soft_f). */
+static unicycle_real side_rhs_lo(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int b,
+                              const qp_centring *cc)
+{
+    const unicycle_real a = (rc_lo(ws, b, cc) + ws->z_lo[b] * r_lo(ws, b)) / ws->t_lo[b];
+    if (SOFT && ws->soft_lo[b]) {
+        const unicycle_real q = ws->z_lo[b] / ws->t_lo[b], p = soft_p(ws->soft_lo[b], ws->y_lo[b], ws->s_lo[b]);
+        const unicycle_real Z = soft_l2(in, ws, b, 0);
+        const unicycle_real rcs = ws->soft_lo[b] == 1 ? rcs_lo(ws, b, cc) / ws->s_lo[b] : UNICYCLE_R(0.0);
+        return ((Z + p) * a - q * (ws->rs_lo[b] + rcs)) / (Z + q + p);
+    }
+    return a;
+}
+
+static unicycle_real side_rhs_up(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int b,
+                              const qp_centring *cc)
+{
+    const unicycle_real a = (rc_up(ws, b, cc) + ws->z_up[b] * r_up(ws, b)) / ws->t_up[b];
+    if (SOFT && ws->soft_up[b]) {
+        const unicycle_real q = ws->z_up[b] / ws->t_up[b], p = soft_p(ws->soft_up[b], ws->y_up[b], ws->s_up[b]);
+        const unicycle_real Z = soft_l2(in, ws, b, 1);
+        const unicycle_real rcs = ws->soft_up[b] == 1 ? rcs_up(ws, b, cc) / ws->s_up[b] : UNICYCLE_R(0.0);
+        return ((Z + p) * a - q * (ws->rs_up[b] + rcs)) / (Z + q + p);
+    }
+    return a;
+}
+
 /* Newton right-hand side for the barrier right-hand side rc (t z - target per side) into
  * (os, od, oe): -r_stat + D'y, -r_dyn, -r_eqN (os may be r_stat itself, and so on). */
 static void newton_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const qp_centring *cc, unicycle_real *os,
@@ -943,9 +1097,9 @@ static void newton_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, cons
         {
             unicycle_real s = UNICYCLE_R(0.0);
             if (ws->has_lo[b])
-                s += (rc_lo(ws, b, cc) + ws->z_lo[b] * r_lo(ws, b)) / ws->t_lo[b];
+                s += side_rhs_lo(ws, in, b, cc);
             if (ws->has_up[b])
-                s -= (rc_up(ws, b, cc) + ws->z_up[b] * r_up(ws, b)) / ws->t_up[b];
+                s -= side_rhs_up(ws, in, b, cc);
             row_axpy(in, k, j, -s, os + k * NW);
         }
     for (i = 0; i < (N + 1) * NX; ++i)
@@ -981,14 +1135,35 @@ static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in
         unicycle_lai_axpy(NE, UNICYCLE_R(1.0), ws->r_eqN, ws->d_nu);
     }
 
-    /* dv = D dw (dt_lo = dv + r_lo, dt_up = r_up - dv), dz = -(rc + z dt) / t */
+    /* dv = D dw (dt_lo = dv + r_lo, dt_up = r_up - dv; a soft side adds its ds, soft_f),
+     * dz = -(rc + z dt) / t, dy = -(rcs + y ds) / s */
     for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
         {
             /* rc from the previous (predictor) direction, before it is overwritten */
             const unicycle_real rcl = ws->has_lo[b] ? rc_lo(ws, b, cc) : UNICYCLE_R(0.0);
             const unicycle_real rcu = ws->has_up[b] ? rc_up(ws, b, cc) : UNICYCLE_R(0.0);
+            const unicycle_real rcsl = SOFT && ws->soft_lo[b] == 1 ? rcs_lo(ws, b, cc) : UNICYCLE_R(0.0);
+            const unicycle_real rcsu = SOFT && ws->soft_up[b] == 1 ? rcs_up(ws, b, cc) : UNICYCLE_R(0.0);
             ws->dv[b] = row_dot(in, k, j, ws->d_prim + k * NW);
+            if (SOFT && ws->soft_lo[b]) {
+                const unicycle_real q = ws->z_lo[b] / ws->t_lo[b];
+                const unicycle_real p = soft_p(ws->soft_lo[b], ws->y_lo[b], ws->s_lo[b]);
+                const unicycle_real a = (rcl + ws->z_lo[b] * r_lo(ws, b)) / ws->t_lo[b];
+                const unicycle_real rcs = ws->soft_lo[b] == 1 ? rcsl / ws->s_lo[b] : UNICYCLE_R(0.0);
+                ws->ds_lo[b] = -(ws->rs_lo[b] + rcs + a + q * ws->dv[b]) / (soft_l2(in, ws, b, 0) + q + p);
+                ws->dy_lo[b] =
+                    ws->soft_lo[b] == 1 ? -(rcsl + ws->y_lo[b] * ws->ds_lo[b]) / ws->s_lo[b] : UNICYCLE_R(0.0);
+            }
+            if (SOFT && ws->soft_up[b]) {
+                const unicycle_real q = ws->z_up[b] / ws->t_up[b];
+                const unicycle_real p = soft_p(ws->soft_up[b], ws->y_up[b], ws->s_up[b]);
+                const unicycle_real a = (rcu + ws->z_up[b] * r_up(ws, b)) / ws->t_up[b];
+                const unicycle_real rcs = ws->soft_up[b] == 1 ? rcsu / ws->s_up[b] : UNICYCLE_R(0.0);
+                ws->ds_up[b] = -(ws->rs_up[b] + rcs + a - q * ws->dv[b]) / (soft_l2(in, ws, b, 1) + q + p);
+                ws->dy_up[b] =
+                    ws->soft_up[b] == 1 ? -(rcsu + ws->y_up[b] * ws->ds_up[b]) / ws->s_up[b] : UNICYCLE_R(0.0);
+            }
             if (ws->has_lo[b])
                 ws->dz_lo[b] = -(rcl + ws->z_lo[b] * dt_lo(ws, b)) / ws->t_lo[b];
             if (ws->has_up[b])
@@ -1016,6 +1191,18 @@ static void max_steps(const unicycle_qp_workspace *ws, unicycle_real *ap, unicyc
                 a = dmin(a, -ws->t_up[i] / dt);
             if (ws->dz_up[i] < UNICYCLE_R(0.0))
                 d = dmin(d, -ws->z_up[i] / ws->dz_up[i]);
+        }
+        if (SOFT && ws->soft_lo[i] == 1) {
+            if (ws->ds_lo[i] < UNICYCLE_R(0.0))
+                a = dmin(a, -ws->s_lo[i] / ws->ds_lo[i]);
+            if (ws->dy_lo[i] < UNICYCLE_R(0.0))
+                d = dmin(d, -ws->y_lo[i] / ws->dy_lo[i]);
+        }
+        if (SOFT && ws->soft_up[i] == 1) {
+            if (ws->ds_up[i] < UNICYCLE_R(0.0))
+                a = dmin(a, -ws->s_up[i] / ws->ds_up[i]);
+            if (ws->dy_up[i] < UNICYCLE_R(0.0))
+                d = dmin(d, -ws->y_up[i] / ws->dy_up[i]);
         }
     }
     full[0] = a > UNICYCLE_R(1.0);
@@ -1062,12 +1249,13 @@ static unicycle_real farkas_separation(const unicycle_qp_workspace *ws, const un
     for (i = 0; i < ws->nb; ++i) {
         unicycle_real lo, up;
         row_bounds(in, ws->bidx[i], &lo, &up);
-        if (ws->has_lo[i]) {
+        /* a soft side takes no part in a certificate (its multiplier stays bounded) */
+        if (ws->has_lo[i] && !(SOFT && ws->soft_lo[i])) {
             bty += lo * ws->z_lo[i];
             bs = dmax(bs, unicycle_fabs(lo));
             n1 += ws->z_lo[i];
         }
-        if (ws->has_up[i]) {
+        if (ws->has_up[i] && !(SOFT && ws->soft_up[i])) {
             bty -= up * ws->z_up[i];
             bs = dmax(bs, unicycle_fabs(up));
             n1 += ws->z_up[i];
@@ -1306,17 +1494,40 @@ static void initial_point(unicycle_qp_workspace *ws, const unicycle_qp_in *in, c
             ws->z_lo[b] = ws->z_up[b] = UNICYCLE_R(0.0);
             if (ws->has_lo[b]) {
                 const unicycle_real floor_t = warm ? WARM_FLOOR_T * dmax(UNICYCLE_R(1.0), unicycle_fabs(lo)) : floor_c;
-                ws->t_lo[b] = dmax(v - lo, floor_t);
+                /* a soft side: the slack takes up the violation, s = max(lo - v, 0) + floor */
+                const unicycle_real sl =
+                    SOFT && ws->soft_lo[b] ? dmax(lo - v, UNICYCLE_R(0.0)) + floor_t : UNICYCLE_R(0.0);
+                ws->t_lo[b] = dmax(v - lo + sl, floor_t);
                 ws->z_lo[b] = warm      ? dmax(-mu_signed, WARM_FLOOR_Z)
                               : centred ? floor_c / ws->t_lo[b]
                                         : UNICYCLE_R(1.0);
+                if (SOFT && ws->soft_lo[b]) {
+                    unicycle_real w[4];
+                    soft_weights(in, ws->bidx[b], w);
+                    ws->s_lo[b] = sl;
+                    ws->y_lo[b] = ws->soft_lo[b] != 1 ? UNICYCLE_R(0.0)
+                                  : warm              ? dmax(w[0] + w[2] * sl - ws->z_lo[b], WARM_FLOOR_Z)
+                                  : centred           ? floor_c / sl
+                                                      : UNICYCLE_R(1.0);
+                }
             }
             if (ws->has_up[b]) {
                 const unicycle_real floor_t = warm ? WARM_FLOOR_T * dmax(UNICYCLE_R(1.0), unicycle_fabs(up)) : floor_c;
-                ws->t_up[b] = dmax(up - v, floor_t);
+                const unicycle_real su =
+                    SOFT && ws->soft_up[b] ? dmax(v - up, UNICYCLE_R(0.0)) + floor_t : UNICYCLE_R(0.0);
+                ws->t_up[b] = dmax(up - v + su, floor_t);
                 ws->z_up[b] = warm      ? dmax(mu_signed, WARM_FLOOR_Z)
                               : centred ? floor_c / ws->t_up[b]
                                         : UNICYCLE_R(1.0);
+                if (SOFT && ws->soft_up[b]) {
+                    unicycle_real w[4];
+                    soft_weights(in, ws->bidx[b], w);
+                    ws->s_up[b] = su;
+                    ws->y_up[b] = ws->soft_up[b] != 1 ? UNICYCLE_R(0.0)
+                                  : warm              ? dmax(w[1] + w[3] * su - ws->z_up[b], WARM_FLOOR_Z)
+                                  : centred           ? floor_c / su
+                                                      : UNICYCLE_R(1.0);
+                }
             }
         }
 }
@@ -1590,18 +1801,18 @@ static int qp_stopping_tests(qp_loop *L, unicycle_qp_workspace *ws, const unicyc
 
 #ifdef UNICYCLE_QP_TRACE
 /* barrier weights of every row, for an inertia analysis of H + D'QD offline */
-static void trace_barrier_weights(const unicycle_qp_workspace *ws, int iter)
+static void trace_barrier_weights(const unicycle_qp_workspace *ws, const unicycle_qp_in *in, int iter)
 {
     int kk, b2 = 0;
     QP_TRACE("QD %d", iter);
     for (kk = 0; kk < NI; ++kk) {
-        const unicycle_real qk = (b2 < ws->nb && ws->bidx[b2] == kk) ? row_q(ws, b2++) : UNICYCLE_R(0.0);
+        const unicycle_real qk = (b2 < ws->nb && ws->bidx[b2] == kk) ? row_q(ws, in, b2++) : UNICYCLE_R(0.0);
         QP_TRACE(" %.17g", qk);
     }
     QP_TRACE("\n");
 }
 #else
-#define trace_barrier_weights(ws, iter) ((void)0)
+#define trace_barrier_weights(ws, in, iter) ((void)0)
 #endif
 
 /* ---------------------------------------------------------------- factorisation */
@@ -1703,6 +1914,10 @@ static unicycle_real qp_predictor(unicycle_qp_workspace *ws, const unicycle_qp_i
             mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha_d * ws->dz_lo[i]);
         if (ws->has_up[i])
             mu_aff += (ws->t_up[i] + alpha * dt_up(ws, i)) * (ws->z_up[i] + alpha_d * ws->dz_up[i]);
+        if (SOFT && ws->soft_lo[i] == 1)
+            mu_aff += (ws->s_lo[i] + alpha * ws->ds_lo[i]) * (ws->y_lo[i] + alpha_d * ws->dy_lo[i]);
+        if (SOFT && ws->soft_up[i] == 1)
+            mu_aff += (ws->s_up[i] + alpha * ws->ds_up[i]) * (ws->y_up[i] + alpha_d * ws->dy_up[i]);
     }
     return mu_aff / r->nsides;
 }
@@ -1768,6 +1983,15 @@ static void qp_take_step(unicycle_qp_workspace *ws, unicycle_real alpha, unicycl
         if (ws->has_up[i]) {
             ws->t_up[i] += alpha * dt_up(ws, i);
             ws->z_up[i] += alpha_d * ws->dz_up[i];
+        }
+        /* after t: its step reads s */
+        if (SOFT && ws->soft_lo[i]) {
+            ws->s_lo[i] += alpha * ws->ds_lo[i];
+            ws->y_lo[i] += alpha_d * ws->dy_lo[i];
+        }
+        if (SOFT && ws->soft_up[i]) {
+            ws->s_up[i] += alpha * ws->ds_up[i];
+            ws->y_up[i] += alpha_d * ws->dy_up[i];
         }
     }
 }
@@ -1840,7 +2064,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             continue;
         if (status != QP_GO_ON)
             break;
-        trace_barrier_weights(ws, iter);
+        trace_barrier_weights(ws, in, iter);
 
         floors_before = ws->pivot_floors;
         if (qp_factor_with_correction(&L, ws, in) != 0) {
@@ -1873,18 +2097,18 @@ int unicycle_qp_infeasible_row(const unicycle_qp_workspace *ws, const unicycle_q
     unicycle_real lo, up, zmax = UNICYCLE_R(0.0);
     for (i = 0; i < ws->nb; ++i) {
         row_bounds(in, ws->bidx[i], &lo, &up);
-        if (ws->has_lo[i] && ws->has_up[i] && lo > up) {
+        if (ws->has_lo[i] && ws->has_up[i] && lo > up && !(SOFT && (ws->soft_lo[i] || ws->soft_up[i]))) {
             zmax = INFINITY; /* the solve stopped before forming a certificate */
             flat = ws->bidx[i];
             s = 0;
             break;
         }
-        if (ws->has_lo[i] && ws->z_lo[i] > zmax) {
+        if (ws->has_lo[i] && !(SOFT && ws->soft_lo[i]) && ws->z_lo[i] > zmax) {
             zmax = ws->z_lo[i];
             flat = ws->bidx[i];
             s = -1;
         }
-        if (ws->has_up[i] && ws->z_up[i] > zmax) {
+        if (ws->has_up[i] && !(SOFT && ws->soft_up[i]) && ws->z_up[i] > zmax) {
             zmax = ws->z_up[i];
             flat = ws->bidx[i];
             s = 1;

@@ -92,8 +92,24 @@
  * two solves (predictor, corrector), plus one residual/solve pair per refinement step once
  * the residuals are below 1e-6; the flop count is tabulated in bench/README.md.
  *
+ * Soft rows (UNICYCLE_NSOFT > 0 in unicycle_sizes.h): a side of an inequality row whose weights
+ * zl, Zl (lower) or zu, Zu (upper) in unicycle_qp_in are not both 0 may be violated by a slack
+ * s >= 0, lo - s_lo <= v <= up + s_up, at the price zl s_lo + Zl s_lo^2 / 2 (zu, Zu for
+ * s_up) added to the objective. The weights are those of a row of every stage (zl[j] for
+ * row j of a stage, as in the layout above) and of the terminal rows (zlN). The slacks are
+ * eliminated row by row inside the interior point (their Newton equations are scalar), so
+ * the Riccati recursion keeps the size of the problem without slacks: a soft side's barrier
+ * weight z/t becomes 1 / (t/z + 1/(Zl + y/s)) (y the multiplier of s >= 0), a series of the
+ * row's and the slack's barrier. The returned multiplier of a soft side lies in [0, zl + Zl
+ * s] (equal to the upper end when the side is violated), the slacks are max(0, lo - v) and
+ * max(0, v - up) of the solution. A soft side of a row of C_0 without u_0 is kept (its
+ * slack is then data, its multiplier zl + Zl s unique). A soft side never makes the QP infeasible: the
+ * infeasibility certificates and unicycle_qp_infeasible_row concern the hard sides only. With
+ * UNICYCLE_NSOFT 0 (or undefined) the weights are not read and the solver compiles to the
+ * loops of hard rows alone.
+ *
  * Sizes come from unicycle_sizes.h: UNICYCLE_N, UNICYCLE_NX, UNICYCLE_NU, UNICYCLE_NG, UNICYCLE_NR, UNICYCLE_NE
- * (NG, NR, NE may be 0). No malloc, no VLAs, no recursion, no state outside the workspace.
+ * (NG, NR, NE may be 0), UNICYCLE_NSOFT (optional, 0 without soft rows). No malloc, no VLAs, no recursion, no state outside the workspace.
  * Compile with -O3 where possible: the linear algebra is inlined with compile-time sizes
  * and -O3 vectorises it (about 1.8x faster than -O2 on the robot-arm QPs).
  */
@@ -130,6 +146,15 @@
 #else
 #define UNICYCLE_QP_NB UNICYCLE_QP_MAX1(UNICYCLE_QP_NINEQ)
 #endif
+/* Soft rows: on (1) when unicycle_sizes.h declares UNICYCLE_NSOFT > 0; the sizes of the soft
+ * weights (rows of a stage, terminal rows) and of the per-row slack arrays, 1 when off. */
+#ifndef UNICYCLE_NSOFT
+#define UNICYCLE_NSOFT 0
+#endif
+#define UNICYCLE_QP_SOFT (UNICYCLE_NSOFT > 0)
+#define UNICYCLE_QP_NSS (UNICYCLE_QP_SOFT * UNICYCLE_QP_NSTAGEINEQ + 1 - UNICYCLE_QP_SOFT)
+#define UNICYCLE_QP_NST (UNICYCLE_QP_SOFT * (UNICYCLE_NX + UNICYCLE_NR) + 1 - UNICYCLE_QP_SOFT)
+#define UNICYCLE_QP_NBS (UNICYCLE_QP_SOFT * UNICYCLE_QP_NB + 1 - UNICYCLE_QP_SOFT)
 /* A lower triangular nu x nu matrix packed by lower columns. */
 #define UNICYCLE_QP_NUP (UNICYCLE_QP_NU1 * (UNICYCLE_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
@@ -194,6 +219,17 @@ typedef struct {
      * HN + hess_shift I instead of H_k and HN; 0 (the value of a zero-filled struct)
      * leaves the QP as given; must be finite and >= 0 */
     unicycle_real hess_shift;
+    /* soft weights (read only when UNICYCLE_NSOFT > 0; see the header comment): L1 (zl, zu)
+     * and L2 (Zl, Zu) of the lower and upper side of row j of every stage (j = 0..nw+ng-1)
+     * and of the terminal rows (j = 0..nx+nr-1: x_N, then R); finite and >= 0 */
+    unicycle_real zl[UNICYCLE_QP_NSS];
+    unicycle_real zu[UNICYCLE_QP_NSS];
+    unicycle_real Zl[UNICYCLE_QP_NSS];
+    unicycle_real Zu[UNICYCLE_QP_NSS];
+    unicycle_real zlN[UNICYCLE_QP_NST];
+    unicycle_real zuN[UNICYCLE_QP_NST];
+    unicycle_real ZlN[UNICYCLE_QP_NST];
+    unicycle_real ZuN[UNICYCLE_QP_NST];
 } unicycle_qp_in;
 
 /* Primal-dual solution (output; also the warm-start point when settings.warm_start). */
@@ -249,6 +285,20 @@ typedef struct {
     unicycle_real t_up[UNICYCLE_QP_NB];
     unicycle_real z_lo[UNICYCLE_QP_NB];
     unicycle_real z_up[UNICYCLE_QP_NB];
+    /* soft sides (UNICYCLE_NSOFT > 0): flags, slacks s >= 0 and their multipliers y, the
+     * residual of the slack's stationarity (Z s + z_soft - z - y) and the steps */
+    unsigned char soft_lo[UNICYCLE_QP_NBS];
+    unsigned char soft_up[UNICYCLE_QP_NBS];
+    unicycle_real s_lo[UNICYCLE_QP_NBS];
+    unicycle_real s_up[UNICYCLE_QP_NBS];
+    unicycle_real y_lo[UNICYCLE_QP_NBS];
+    unicycle_real y_up[UNICYCLE_QP_NBS];
+    unicycle_real rs_lo[UNICYCLE_QP_NBS];
+    unicycle_real rs_up[UNICYCLE_QP_NBS];
+    unicycle_real ds_lo[UNICYCLE_QP_NBS];
+    unicycle_real ds_up[UNICYCLE_QP_NBS];
+    unicycle_real dy_lo[UNICYCLE_QP_NBS];
+    unicycle_real dy_up[UNICYCLE_QP_NBS];
     /* residuals */
     unicycle_real r_stat[UNICYCLE_QP_NPRIM];
     unicycle_real r_dyn[(UNICYCLE_N + 1) * UNICYCLE_NX];

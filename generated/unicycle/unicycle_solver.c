@@ -97,7 +97,7 @@ static int unicycle_phase(unicycle_solver *s, int phase)
 
 static int unicycle_has_clock(const unicycle_solver *s);
 
-/* ---- the anytime budget (algorithm.md section 12) --------------------------------------- */
+/* ---- the anytime budget (algorithm.md section 13) --------------------------------------- */
 
 /* 1 when a budget is set (a time budget needs a clock). */
 static int unicycle_budget_on(const unicycle_solver *s)
@@ -480,6 +480,25 @@ static void unicycle_assemble(unicycle_solver *s)
     for (i = 0; i < UNICYCLE_NE; ++i) {
         in->req[i] = -s->r_eq[i];
     }
+#if UNICYCLE_NSOFT > 0
+    /* soft weights: the rows of a stage (x, u (hard), g) and the terminal rows (x_N, r) */
+    for (j = 0; j < 4; ++j) {
+        unicycle_real *st = j == 0 ? in->zl : j == 1 ? in->zu : j == 2 ? in->Zl : in->Zu;
+        unicycle_real *te = j == 0 ? in->zlN : j == 1 ? in->zuN : j == 2 ? in->ZlN : in->ZuN;
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            st[i] = te[i] = unicycle_soft_x[j][i];
+        }
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            st[UNICYCLE_NX + i] = UNICYCLE_R(0.0);
+        }
+        for (i = 0; i < UNICYCLE_NG; ++i) {
+            st[UNICYCLE_NW + i] = unicycle_soft_g[j][i];
+        }
+        for (i = 0; i < UNICYCLE_NR; ++i) {
+            te[UNICYCLE_NX + i] = unicycle_soft_r[j][i];
+        }
+    }
+#endif
     unicycle_phase(s, prev);
 }
 
@@ -719,7 +738,7 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
     if (!s->anytime.prepared_extra) {
         /* (after extra iterations the term the prepare convexified stays: the iterate has
          * converged at the predicted state and the capped term, 0 there, left QPs that are
-         * convex only on the active bounds; algorithm.md section 12) */
+         * convex only on the active bounds; algorithm.md section 13) */
         unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
@@ -740,7 +759,7 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm)
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
     if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
-        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 12) */
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 13) */
     }
     settings.warm_start = warm;
     for (k = 0; k < UNICYCLE_N; ++k) {
@@ -921,7 +940,7 @@ static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
 }
 
 /* Feedback once admitted (steps 2 to 8). */
-/* The bounded latency of a time budget (algorithm.md section 12): the QP's iterations are
+/* The bounded latency of a time budget (algorithm.md section 13): the QP's iterations are
  * capped at the budget left over the cost of one QP iteration of the last feedback (at least
  * 1); a QP stopped by the cap is not retried (the fallback control). */
 static void unicycle_feedback_cap(unicycle_solver *s)
@@ -1045,6 +1064,33 @@ static void unicycle_shift(unicycle_solver *s)
     unicycle_ring_advance(&s->ring);
 }
 
+/* A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for the
+ * QP: its row of Ct is zero and the value g_new of step 2 lies outside that side's bound
+ * (0 dw >= lg - g_new > 0). Stage 0 is left out (the QP ignores its rows without u). */
+static int unicycle_stale_stage(const unicycle_solver *s, int k)
+{
+    const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
+    const unicycle_real *g = s->mem.ev.Fn_g[k];
+    int i, j;
+    if (k == 0) {
+        return 0;
+    }
+    for (j = 0; j < UNICYCLE_NG; ++j) {
+        int hard_lo = 1, hard_up = 1, zero = 1;
+#if UNICYCLE_NSOFT > 0
+        hard_lo = !(unicycle_soft_g[0][j] > UNICYCLE_R(0.0) || unicycle_soft_g[2][j] > UNICYCLE_R(0.0));
+        hard_up = !(unicycle_soft_g[1][j] > UNICYCLE_R(0.0) || unicycle_soft_g[3][j] > UNICYCLE_R(0.0));
+#endif
+        for (i = 0; i < UNICYCLE_NW && zero; ++i) {
+            zero = slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] == UNICYCLE_R(0.0);
+        }
+        if (zero && ((hard_lo && g[j] < unicycle_lg[j]) || (hard_up && g[j] > unicycle_ug[j]))) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
 /* |domega_k| of stage k's slot (the denominator of rho_k). */
 static unicycle_real unicycle_step_norm(const unicycle_solver *s, int k)
 {
@@ -1064,7 +1110,7 @@ static unicycle_real unicycle_step_norm(const unicycle_solver *s, int k)
 }
 
 /* The number of stages among 0..N-2 to re-linearise (before the budget): N-1 after a
- * recovery, the fixed M, or adaptive M (algorithm.md section 12): the stages whose secant
+ * recovery, the fixed M, or adaptive M (algorithm.md section 13): the stages whose secant
  * residual rho_k |domega_k| exceeds eta times the KKT proxy of the point before the step,
  * between M_min and M_max. */
 static int unicycle_M_now(const unicycle_solver *s)
@@ -1098,9 +1144,10 @@ static int unicycle_next_worst(const unicycle_solver *s)
     return best;
 }
 
-/* Step 4: re-linearise the stages with the largest rho_k: M of them (unicycle_M_now), then, with
- * a budget, further stages in rho order while one more iteration still fits after them
- * (algorithm.md section 12); each only while the budget allows. The cost of the stages
+/* Step 4: re-linearise the stale stages (unicycle_stale_stage), then among the other stages of
+ * 0..N-2 those with the largest rho_k: M of them (unicycle_M_now), then, with a budget,
+ * further stages in rho order while one more iteration still fits after them
+ * (algorithm.md section 13); each only while the budget allows. The cost of the stages
  * beyond M goes to *ext_cost. */
 static int unicycle_relinearise(unicycle_solver *s, double *ext_cost)
 {
@@ -1108,6 +1155,18 @@ static int unicycle_relinearise(unicycle_solver *s, double *ext_cost)
     double b0, reserve;
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->selected[k] = 0;
+    }
+    /* the stale stages first, whatever the budget: without them the QP is infeasible */
+    for (k = 0; k < UNICYCLE_N - 1 && UNICYCLE_NG > 0; ++k) {
+        if (unicycle_stale_stage(s, k)) {
+            rc = unicycle_stage_H(s, k);
+            if (rc != UNICYCLE_OK) {
+                s->anytime.instant_stages += n;
+                return rc;
+            }
+            s->selected[k] = 1;
+            n += 1;
+        }
     }
     extend = unicycle_budget_on(s);
     *ext_cost = 0.0;
@@ -1118,6 +1177,9 @@ static int unicycle_relinearise(unicycle_solver *s, double *ext_cost)
             break;
         }
         k = unicycle_next_worst(s);
+        if (k < 0) {
+            break;
+        }
         b0 = unicycle_budget_now(s);
         rc = unicycle_stage_H(s, k);
         if (rc != UNICYCLE_OK) {
@@ -1355,7 +1417,7 @@ int unicycle_prepare(unicycle_solver *s)
         rc = unicycle_prepare_iteration(s, 0);
     }
     if (rc == UNICYCLE_OK) {
-        /* the budget left (algorithm.md section 12), with the Hessian of the recovery phase */
+        /* the budget left (algorithm.md section 13), with the Hessian of the recovery phase */
         if (s->health.recovering > 0 && UNICYCLE_HAS_GN) {
             s->settings.hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
         }
@@ -1373,7 +1435,7 @@ int unicycle_prepare(unicycle_solver *s)
 }
 
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
- * anytime budget (section 12), without the shift, x_N kept. */
+ * anytime budget (section 13), without the shift, x_N kept. */
 static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 {
     unicycle_real xN_saved[UNICYCLE_NX];
@@ -1487,7 +1549,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     return UNICYCLE_OK;
 }
 
-/* ---- anytime (algorithm.md section 12) -------------------------------------------------- */
+/* ---- anytime (algorithm.md section 13) -------------------------------------------------- */
 
 /* One extra iteration on the next instant's problem: the prepared QP for the state the plan
  * predicts (dx_0 = 0), its full step, then a prepare iteration without the shift. A QP not
@@ -1502,7 +1564,7 @@ static int unicycle_extra_iteration(unicycle_solver *s)
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
     /* the cap of the term while the extra iterations make progress; after one of them raised
-     * the KKT proxy, the term the prepare convexified (algorithm.md section 12) */
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 13) */
     if (!s->anytime.uncapped) {
         unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
@@ -1522,7 +1584,7 @@ static int unicycle_extra_iteration(unicycle_solver *s)
     return rc;
 }
 
-/* The budget left after prepare (algorithm.md section 12): extra iterations while the KKT
+/* The budget left after prepare (algorithm.md section 13): extra iterations while the KKT
  * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
  * of unicycle_info. */
 static int unicycle_anytime_run(unicycle_solver *s)
@@ -1648,6 +1710,92 @@ int unicycle_get_recomputed(const unicycle_solver *s, int *stages)
 static unicycle_real unicycle_side_bound(const unicycle_real *lo, const unicycle_real *up, int i, int side)
 {
     return side > 0 ? up[i] : lo[i];
+}
+
+#if UNICYCLE_NSOFT > 0
+/* The slack of the row value v against [lb, ub] on the sides with soft weights w (stride). */
+static unicycle_real unicycle_soft_slack(unicycle_real v, unicycle_real lb, unicycle_real ub, const unicycle_real *w,
+                                   int stride)
+{
+    unicycle_real sl = UNICYCLE_R(0.0);
+    if ((w[0] > UNICYCLE_R(0.0) || w[2 * stride] > UNICYCLE_R(0.0)) && lb - v > sl) {
+        sl = lb - v;
+    }
+    if ((w[stride] > UNICYCLE_R(0.0) || w[3 * stride] > UNICYCLE_R(0.0)) && v - ub > sl) {
+        sl = v - ub;
+    }
+    return sl;
+}
+#endif
+
+unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *viol_x, unicycle_real *viol_g,
+                                 unicycle_real *viol_r)
+{
+    unicycle_real worst = UNICYCLE_R(0.0);
+    int k, i;
+    for (k = 0; k <= UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NX && viol_x; ++i) {
+            viol_x[k * UNICYCLE_NX + i] = UNICYCLE_R(0.0);
+        }
+    }
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG) && viol_g; ++i) {
+            viol_g[k * UNICYCLE_DIM(UNICYCLE_NG) + i] = UNICYCLE_R(0.0);
+        }
+    }
+    for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NR) && viol_r; ++i) {
+        viol_r[i] = UNICYCLE_R(0.0);
+    }
+#if UNICYCLE_NSOFT > 0
+    {
+        const unicycle_qp_in *in = &s->qp_in;
+        const unicycle_qp_sol *sol = &s->mem.qp.sol;
+        /* the QP's matrices are not pointed to between calls: the slots of the horizon of the
+         * last feedback (no shift since) and the terminal R */
+        for (k = 1; k <= UNICYCLE_N; ++k) {
+            for (i = 0; i < UNICYCLE_NX; ++i) {
+                const unicycle_real lb = k < UNICYCLE_N ? in->lbw[k][i] : in->lbxN[i];
+                const unicycle_real ub = k < UNICYCLE_N ? in->ubw[k][i] : in->ubxN[i];
+                const unicycle_real sl = unicycle_soft_slack(sol->x[k][i], lb, ub, &unicycle_soft_x[0][i], UNICYCLE_NX);
+                worst = sl > worst ? sl : worst;
+                if (viol_x) {
+                    viol_x[k * UNICYCLE_NX + i] = sl;
+                }
+            }
+        }
+        for (k = 0; k < UNICYCLE_N && UNICYCLE_NG > 0; ++k) {
+            for (i = 0; i < UNICYCLE_NG; ++i) {
+                unicycle_real v = UNICYCLE_R(0.0), sl;
+                int c;
+                for (c = 0; c < UNICYCLE_NW; ++c) {
+                    v += unicycle_ring_stage_const(&s->ring, k)->Ct[i + c * UNICYCLE_DIM(UNICYCLE_NG)] *
+                         (c < UNICYCLE_NX ? sol->x[k][c] : sol->u[k][c - UNICYCLE_NX]);
+                }
+                sl =
+                    unicycle_soft_slack(v, in->lg[k][i], in->ug[k][i], &unicycle_soft_g[0][i], UNICYCLE_DIM(UNICYCLE_NG));
+                worst = sl > worst ? sl : worst;
+                if (viol_g) {
+                    viol_g[k * UNICYCLE_DIM(UNICYCLE_NG) + i] = sl;
+                }
+            }
+        }
+        for (i = 0; i < UNICYCLE_NR; ++i) {
+            unicycle_real v = UNICYCLE_R(0.0), sl;
+            int c;
+            for (c = 0; c < UNICYCLE_NX; ++c) {
+                v += s->R[i + c * UNICYCLE_DIM(UNICYCLE_NR)] * sol->x[UNICYCLE_N][c];
+            }
+            sl = unicycle_soft_slack(v, in->lr[i], in->ur[i], &unicycle_soft_r[0][i], UNICYCLE_DIM(UNICYCLE_NR));
+            worst = sl > worst ? sl : worst;
+            if (viol_r) {
+                viol_r[i] = sl;
+            }
+        }
+    }
+#else
+    (void)s;
+#endif
+    return worst;
 }
 
 int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *row)

@@ -177,7 +177,7 @@ int main(int argc, char **argv)
                 xhat[i] += push[i];
             }
         }
-        /* a failed feedback leaves u0 as it was: the previous control is held */
+        /* a failed feedback writes the fallback control to u0 (docs/algorithm.md section 9) */
         iterate("receding", k, xhat, u0);
         rc = API(simulate)(xhat, u0, NULL, xnext, &plant_work);
         if (rc != K(OK)) {

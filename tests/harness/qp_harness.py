@@ -48,9 +48,10 @@ def _cc() -> str:
     return os.environ.get("CC", "cc")
 
 
-def sizes_header(N: int, nx: int, nu: int, ng: int, nr: int, ne: int) -> str:
-    """The runtime's sizes header (templates/sizes.h.j2) for a QP of these sizes."""
-    return render_sizes_header("dopus", dict(N=N, nx=nx, nu=nu, ng=ng, nr=nr, ne=ne),
+def sizes_header(N: int, nx: int, nu: int, ng: int, nr: int, ne: int, soft: int = 0) -> str:
+    """The runtime's sizes header (templates/sizes.h.j2) for a QP of these sizes (``soft``:
+    1 for a solver that reads the soft weights, DOPUS_NSOFT > 0)."""
+    return render_sizes_header("dopus", dict(N=N, nx=nx, nu=nu, ng=ng, nr=nr, ne=ne, nsoft=int(soft)),
                                header="QP sizes for the dopus_qp test harness")
 
 
@@ -102,8 +103,10 @@ def default_workdir() -> Path:
 
 
 def build_qp_solver(N: int, nx: int, nu: int, ng: int = 0, nr: int = 0, ne: int = 0,
-                    workdir: str | os.PathLike | None = None) -> "QPSolverHandle":
-    """Compile the QP solver for these sizes (cached) and return a handle."""
+                    workdir: str | os.PathLike | None = None, soft: bool = False) -> "QPSolverHandle":
+    """Compile the QP solver for these sizes (cached) and return a handle; ``soft``: with
+    the soft rows compiled in (the weights of the QP dict are read, see
+    :mod:`dopus_codegen.reference.qp`)."""
     sizes = tuple(int(v) for v in (N, nx, nu, ng, nr, ne))
     N, nx, nu, ng, nr, ne = sizes
     if N < 1 or nx < 1 or nu < 0 or ng < 0 or nr < 0 or ne < 0:
@@ -111,13 +114,13 @@ def build_qp_solver(N: int, nx: int, nu: int, ng: int = 0, nr: int = 0, ne: int 
                              "need N >= 1, nx >= 1 and nu, ng, nr, ne >= 0")
     workdir = Path(workdir) if workdir is not None else default_workdir()
     workdir.mkdir(parents=True, exist_ok=True)
-    key = f"qp_{N}_{nx}_{nu}_{ng}_{nr}_{ne}_{_source_hash(sizes)}"
+    key = f"qp_{N}_{nx}_{nu}_{ng}_{nr}_{ne}{'_soft' if soft else ''}_{_source_hash(sizes)}"
     final = workdir / key
     modname = f"_dopus_qp_{key}"
     if not (final / "done").exists():
         tmp = Path(tempfile.mkdtemp(prefix=key + ".", dir=workdir))
         try:
-            _build(tmp, sizes, modname)
+            _build(tmp, sizes, modname, int(bool(soft)))
             (tmp / "done").write_text("ok\n")
             try:
                 os.replace(tmp, final)
@@ -127,14 +130,16 @@ def build_qp_solver(N: int, nx: int, nu: int, ng: int = 0, nr: int = 0, ne: int 
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
-    return QPSolverHandle(final, modname, sizes)
+    handle = QPSolverHandle(final, modname, sizes)
+    handle.soft = bool(soft)
+    return handle
 
 
-def _build(build_dir: Path, sizes: tuple, modname: str) -> None:
+def _build(build_dir: Path, sizes: tuple, modname: str, soft: int = 0) -> None:
     import cffi
 
     rc = runtime_c_dir()
-    (build_dir / "dopus_sizes.h").write_text(sizes_header(*sizes))
+    (build_dir / "dopus_sizes.h").write_text(sizes_header(*sizes, soft=soft))
     objs = []
     for name in ("dopus_qp.c", "dopus_linalg.c"):
         obj = build_dir / (name[:-2] + ".o")
@@ -192,6 +197,7 @@ class QPSolverHandle:
         self._info = self.ffi.new("dopus_qp_info *")
         self._set = self.ffi.new("dopus_qp_settings *")
         self._keep = []
+        self.soft = False
 
     @property
     def objects(self) -> list:
@@ -275,6 +281,20 @@ class QPSolverHandle:
         self._set_vec("ur", ur[None, :], nr)
         self._set_vec("req", req[None, :], ne)
         inp.hess_shift = float(hess_shift)
+        if self.soft:
+            from dopus_codegen.reference.qp import soft_weights
+
+            ws, wt = soft_weights(qp)
+            for name, row in zip(("zl", "zu", "Zl", "Zu"), ws):
+                self._set_vec(name, row[None, :], nw + ng)
+            for name, row in zip(("zlN", "zuN", "ZlN", "ZuN"), wt):
+                self._set_vec(name, row[None, :], nx + nr)
+        else:
+            from dopus_codegen.reference.qp import has_soft
+
+            if has_soft(qp):
+                raise QPHarnessError("QP dict has soft weights but the solver was built without soft rows "
+                                     "(build_qp_solver(..., soft=True))")
 
         st = self._set
         self.lib.dopus_qp_settings_default(st)

@@ -574,3 +574,106 @@ def solve_independent(qp):
     if st2 == "Solved":
         return "solved", sol2
     return f"{st} / {st2}", sol
+
+
+def soft_row_weights(qp):
+    """The soft weights of the rows of ``stacked`` (4, rows): rows (zl, zu, Zl, Zu); zero on
+    the sides without a finite bound."""
+    from dopus_codegen.reference.qp import soft_weights
+
+    N = int(qp["N"])
+    ws, wt = soft_weights(qp)
+    return np.hstack([ws] * N + [wt])
+
+
+def solve_clarabel_soft(qp, tol=1e-11):
+    """Clarabel on the QP with its soft sides as explicit slack variables ``s >= 0``
+    (``lo - s <= D z``, ``D z <= up + s``, cost ``zl s + 0.5 Zl s^2``); returns (status,
+    solution dict in dopus_qp.h signs, slacks of the lower and upper sides per row)."""
+    import clarabel
+
+    P, q, Aeq, beq, D, lo, up = stacked(qp)
+    W = soft_row_weights(qp)
+    n, m = P.shape[0], D.shape[0]
+    soft_lo = np.isfinite(lo) & ((W[0] > 0) | (W[2] > 0))
+    soft_up = np.isfinite(up) & ((W[1] > 0) | (W[3] > 0))
+    il, iu = np.flatnonzero(soft_lo), np.flatnonzero(soft_up)
+    ns = il.size + iu.size
+    Pz = np.zeros((n + ns, n + ns))
+    Pz[:n, :n] = P
+    Pz[n + np.arange(ns), n + np.arange(ns)] = np.concatenate([W[2, il], W[3, iu]])
+    qz = np.concatenate([q, W[0, il], W[1, iu]])
+    Aeqz = np.hstack([Aeq, np.zeros((Aeq.shape[0], ns))])
+    # columns of the slacks per row and side
+    Sl = np.zeros((m, ns))
+    Sl[il, np.arange(il.size)] = 1.0
+    Su = np.zeros((m, ns))
+    Su[iu, il.size + np.arange(iu.size)] = 1.0
+    hasu, hasl = np.isfinite(up), np.isfinite(lo)
+    Dz = np.hstack([D, np.zeros((m, ns))])
+    A = np.vstack([Aeqz, (Dz - np.hstack([np.zeros((m, n)), Su]))[hasu],
+                   (-Dz - np.hstack([np.zeros((m, n)), Sl]))[hasl],
+                   np.hstack([np.zeros((ns, n)), -np.eye(ns)])])
+    bvec = np.concatenate([beq, up[hasu], -lo[hasl], np.zeros(ns)])
+    cones = [clarabel.ZeroConeT(Aeq.shape[0])]
+    nin = int(hasu.sum() + hasl.sum()) + ns
+    if nin:
+        cones.append(clarabel.NonnegativeConeT(nin))
+    st = clarabel.DefaultSettings()
+    st.verbose = False
+    st.tol_gap_abs = tol
+    st.tol_gap_rel = tol
+    st.tol_feas = tol
+    st.tol_ktratio = 1e-8
+    st.max_iter = 500
+    solver = clarabel.DefaultSolver(sp.csc_matrix(np.triu(Pz)), qz, sp.csc_matrix(A), bvec, cones, st)
+    res = solver.solve()
+    y = np.array(res.z)
+    ne_rows = Aeq.shape[0]
+    yi = np.zeros(m)
+    yi[hasu] += y[ne_rows:ne_rows + hasu.sum()]
+    yi[hasl] -= y[ne_rows + hasu.sum():ne_rows + hasu.sum() + hasl.sum()]
+    zz = np.array(res.x)
+    s_lo, s_up = np.zeros(m), np.zeros(m)
+    s_lo[il] = zz[n:n + il.size]
+    s_up[iu] = zz[n + il.size:]
+    return str(res.status), unstack(qp, zz[:n], y[:ne_rows], yi), (s_lo, s_up)
+
+
+def make_soft_qp(rng, N, nx, nu, ng=0, nr=0, ne=0, *, l1=True, l2=True, frac=0.5):
+    """A random convex QP (``make_qp``) with soft weights on a random part (``frac``) of its
+    state, path and terminal rows, and the bounds of those rows moved inwards so that the
+    solution of the hard problem would violate many of them (the soft rows are active).
+    ``l1``/``l2``: which penalty terms the weights have."""
+    qp, sol = make_qp(rng, N, nx, nu, ng, nr, ne, p_active=0.3)
+    nw = nx + nu
+    ws = np.zeros((4, nw + ng))
+    wt = np.zeros((4, nx + nr))
+    for w, idx in ((ws, list(range(nx)) + list(range(nw, nw + ng))), (wt, list(range(nx + nr)))):
+        for i in idx:
+            if rng.uniform() < frac:
+                w[0:2, i] = rng.uniform(0.1, 3.0, 2) if l1 else 0.0
+                w[2:4, i] = rng.uniform(0.1, 10.0, 2) if l2 else 0.0
+    qp.update(zl=ws[0], zu=ws[1], Zl=ws[2], Zu=ws[3], zlN=wt[0], zuN=wt[1], ZlN=wt[2], ZuN=wt[3])
+    # move the finite bounds of the soft rows inwards by a random amount
+    for k in range(N):
+        for i in range(nx):
+            if ws[0, i] + ws[2, i] > 0 and k > 0:
+                c = sol["x"][k, i]
+                qp["lbw"][k, i] = c + rng.uniform(-0.5, 0.5)
+                qp["ubw"][k, i] = qp["lbw"][k, i] + rng.uniform(0.0, 0.5)
+        for j in range(ng):
+            if ws[0, nw + j] + ws[2, nw + j] > 0:
+                c = qp["C"][k, j] @ np.concatenate([sol["x"][k], sol["u"][k]])
+                qp["lg"][k, j] = c + rng.uniform(-0.5, 0.5)
+                qp["ug"][k, j] = qp["lg"][k, j] + rng.uniform(0.0, 0.5)
+    for i in range(nx):
+        if wt[0, i] + wt[2, i] > 0:
+            qp["lbxN"][i] = sol["x"][N, i] + rng.uniform(-0.5, 0.5)
+            qp["ubxN"][i] = qp["lbxN"][i] + rng.uniform(0.0, 0.5)
+    for j in range(nr):
+        if wt[0, nx + j] + wt[2, nx + j] > 0:
+            c = qp["R"][j] @ sol["x"][N]
+            qp["lr"][j] = c + rng.uniform(-0.5, 0.5)
+            qp["ur"][j] = qp["lr"][j] + (rng.uniform(0.0, 0.5) if rng.uniform() < 0.7 else 0.0)
+    return qp
