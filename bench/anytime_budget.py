@@ -1,5 +1,5 @@
 """Anytime DOPUS on the robot arm: closed-loop quality against the budget per instant
-(docs/algorithm.md section 13).
+(docs/algorithm.md section 14).
 
 1. Outliers (the acceptance of the budget): the model as plant (RK4, 20 substeps), K
    measurements with joint velocities (30, -30) from t = 1 s, then exact ones. Per setting:

@@ -74,11 +74,20 @@ HPIPM_CONFIGS = {
                      "what": "as hpipm in mode robust"},
     "hpipm_speed_abs": {"mode": "speed_abs", "eq_mask": 0, "eq_scale": False, "ric_alg": -1,
                         "what": "as hpipm in mode speed_abs (exits on the duality measure only)"},
+    "hpipm_speed": {"mode": "speed", "eq_mask": 0, "eq_scale": False, "ric_alg": -1,
+                    "what": "as hpipm in mode speed"},
     "hpipm_classic": {"mode": "balance", "eq_mask": 0, "eq_scale": False, "ric_alg": 0, "robot_only": True,
                       "what": "as hpipm with the classic Riccati recursion, equality rows as stated"},
     "hpipm_scaled": {"mode": "balance", "eq_mask": 0, "eq_scale": True, "ric_alg": 0, "robot_only": True,
                      "what": "RESCALED BY HAND: terminal equality rows divided by eq_scale * max|row|, "
                              "classic Riccati; the configuration found to converge on the robot-arm QPs"},
+    # the same rescaled rows and classic recursion in HPIPM's other modes (acados at its best)
+    "hpipm_speed_abs_scaled": {"mode": "speed_abs", "eq_mask": 0, "eq_scale": True, "ric_alg": 0, "robot_only": True,
+                               "what": "as hpipm_scaled in mode speed_abs"},
+    "hpipm_speed_scaled": {"mode": "speed", "eq_mask": 0, "eq_scale": True, "ric_alg": 0, "robot_only": True,
+                           "what": "as hpipm_scaled in mode speed"},
+    "hpipm_robust_scaled": {"mode": "robust", "eq_mask": 0, "eq_scale": True, "ric_alg": 0, "robot_only": True,
+                            "what": "as hpipm_scaled in mode robust"},
 }
 # ratio columns (numerator, denominator)
 RANDOM_RATIOS = [("ours", "hpipm"), ("ours", "hpipm_best"), ("ours_alt", "hpipm_best")]
@@ -389,6 +398,48 @@ def add_hpipm_best(entries: list, tol: float) -> None:
                                           "err_vs_reference": None, "config": None}
 
 
+def converging_modes(entries: list, tol: float) -> dict:
+    """Per HPIPM configuration of the anchor build: on how many of the QPs it converged to
+    the tolerance by its own measure (status 0, every residual <= tol), its median time per
+    QP and per IPM iteration, and ours against it (medians of the per-QP ratios, per QP and
+    per iteration). ``best`` is the fastest configuration (median per QP) that converged on
+    every QP: HPIPM's best converging mode."""
+    out = {}
+    for n in entries[0]["solvers"]:
+        if not n.startswith("hpipm") or n.startswith("hpipm_casadi") or n == "hpipm_best":
+            continue
+        ok = [e for e in entries if e["solvers"][n]["status"] == 0
+              and max(e["solvers"][n].get("residuals") or [np.inf]) <= tol]
+        row = {"converged": len(ok), "of": len(entries),
+               "t_median": med([e["solvers"][n]["t_median"] for e in entries]),
+               "time_per_iter_median": med([e["solvers"][n]["time_per_iter"] for e in entries]),
+               "iterations_median": med([e["solvers"][n]["iterations"] for e in entries])}
+        for ours in ("ours", "ours_alt"):
+            if ours in entries[0]["solvers"]:
+                row[f"{ours}/qp"] = med([e["solvers"][ours]["t_median"] / e["solvers"][n]["t_median"]
+                                         for e in entries if e["solvers"][n]["t_median"]])
+                row[f"{ours}/iter"] = med([e["solvers"][ours]["time_per_iter"] / e["solvers"][n]["time_per_iter"]
+                                           for e in entries if e["solvers"][n]["time_per_iter"]
+                                           and e["solvers"][ours]["time_per_iter"]])
+        out[n] = row
+    full = [n for n, r in out.items() if r["converged"] == r["of"]]
+    return {"configs": out, "best": min(full, key=lambda n: out[n]["t_median"]) if full else None}
+
+
+def print_modes(title: str, modes: dict, log=print) -> None:
+    log(f"\n{title}: HPIPM configurations, converged QPs (own residuals <= tol), medians, ours against each "
+        f"(medians of the per-QP ratios)")
+    log(f"{'config':24s} {'conv':>6s} {'us/QP':>8s} {'iters':>6s} {'us/iter':>8s} {'ours/QP':>8s} {'ours/it':>8s} "
+        f"{'alt/QP':>7s} {'alt/it':>7s}")
+    for n, r in modes["configs"].items():
+        f = lambda v, w=8, d=2: f"{v:{w}.{d}f}" if v is not None else " " * (w - 1) + "-"  # noqa: E731
+        log(f"{n:24s} {r['converged']:3d}/{r['of']:<2d} {f(1e6 * r['t_median'] if r['t_median'] else None, 8, 1)} "
+            f"{f(r['iterations_median'], 6, 1)} "
+            f"{f(1e6 * r['time_per_iter_median'] if r['time_per_iter_median'] else None, 8, 1)} "
+            f"{f(r.get('ours/qp'))} {f(r.get('ours/iter'))} {f(r.get('ours_alt/qp'), 7)} {f(r.get('ours_alt/iter'), 7)}"
+            + ("   <- best converging" if n == modes["best"] else ""))
+
+
 def med(vals):
     vals = [v for v in vals if v is not None and np.isfinite(v)]
     return float(np.median(vals)) if vals else None
@@ -472,7 +523,9 @@ def markdown_table(summary: dict, cols: list, ratios: list) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--tol", type=float, default=1e-8, help="tolerance of every solver (default %(default)s)")
+    ap.add_argument("--tol", default="1e-8", help="tolerance of every solver (default %(default)s); several "
+                    "comma-separated (e.g. 1e-6,1e-8,1e-10) run the whole bench once per tolerance, one JSON each "
+                    "(qp_bench_tol<tol>.json) and a summary of the robot-arm QPs per tolerance")
     ap.add_argument("--reps", type=int, default=200, help="timed repetitions per QP and solver")
     ap.add_argument("--warmup", type=int, default=20, help="untimed repetitions first")
     ap.add_argument("--budget", type=float, default=1.5,
@@ -500,6 +553,13 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=RESULTS / "qp_bench.json")
     args = ap.parse_args(argv)
+    try:
+        tols = [float(t) for t in str(args.tol).split(",")]
+    except ValueError:
+        ap.error(f"--tol: expected numbers, got {args.tol!r}")
+    if len(tols) > 1:
+        return _several_tolerances(argv, tols, args.json)
+    args.tol = tols[0]
     if args.quick:
         args.reps, args.warmup, args.random_per_n, args.gn_iters, args.exact_iters = 10, 2, 2, 4, 3
         args.min_reps = min(args.min_reps, args.reps)
@@ -617,13 +677,14 @@ def main(argv=None) -> int:
         groups = {"robot cold GN": [e for e in entries if e["tag"].startswith("cold_gn")],
                   "robot warm exact": [e for e in entries if e["tag"].startswith("warm_exact")],
                   "robot all": entries}
-        report["robot_arm"] = {"qps": entries, "summary": table(
+        report["robot_arm"] = {"modes": converging_modes(entries, args.tol), "qps": entries, "summary": table(
             "Robot-arm QPs (N=40), medians; hpipm/hpipm_eqmask: equality as stated; hpipm_scaled: rows rescaled "
             "by hand", groups, names, ROBOT_RATIOS, log, shown), "commands": cmds}
         st = {n: sorted({HPIPM_STATUS.get(e['solvers'][n]['status'], str(e['solvers'][n]['status']))
                          if n.startswith("hpipm") else DOPUS_STATUS.get(e['solvers'][n]['status'], '?')
                          for e in entries}) for n in names if n != "hpipm_best"}
         log("statuses on the robot-arm QPs: " + "; ".join(f"{n}: {', '.join(v)}" for n, v in st.items()))
+        print_modes(f"robot-arm QPs, tolerance {args.tol:g}", report["robot_arm"]["modes"], log)
 
     if args.markdown is not None:
         md = [f"tolerance {args.tol:g}, commit {report['config']['git_head']}, "
@@ -643,6 +704,47 @@ def main(argv=None) -> int:
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(report, indent=1, default=_json_default))
     log(f"\nwrote {args.json}")
+    return 0
+
+
+def _several_tolerances(argv, tols, json_path: Path) -> int:
+    """The bench once per tolerance (same arguments otherwise), then the robot-arm summary:
+    per tolerance HPIPM's best converging configuration and ours against it."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    rest, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+            continue
+        if a == "--tol" or a == "--json":
+            skip = True
+            continue
+        if a.startswith("--tol=") or a.startswith("--json="):
+            continue
+        rest.append(a)
+    summary = {}
+    for tol in tols:
+        out = json_path.with_name(f"{json_path.stem}_tol{tol:g}{json_path.suffix}")
+        rc = main([*rest, "--tol", repr(tol), "--json", str(out)])
+        if rc != 0:
+            return rc
+        rep = json.loads(out.read_text())
+        if "robot_arm" in rep:
+            summary[f"{tol:g}"] = rep["robot_arm"]["modes"]
+    print("\nrobot-arm QPs per tolerance: HPIPM's best converging configuration and ours against it "
+          "(medians of the per-QP ratios)")
+    for tol, m in summary.items():
+        b = m["best"]
+        if b is None:
+            print(f"  tol {tol}: no HPIPM configuration converged on every QP")
+            continue
+        r = m["configs"][b]
+        print(f"  tol {tol}: {b} ({r['converged']}/{r['of']}, {1e6 * r['t_median']:.1f} us/QP, "
+              f"{r['iterations_median']:g} iterations): ours/QP {r.get('ours/qp', float('nan')):.2f}, "
+              f"ours/iter {r.get('ours/iter', float('nan')):.2f}; ours_alt {r.get('ours_alt/qp', float('nan')):.2f} / "
+              f"{r.get('ours_alt/iter', float('nan')):.2f}")
+    json_path.parent.mkdir(parents=True, exist_ok=True)
+    json_path.write_text(json.dumps({"tolerances": summary}, indent=1, default=_json_default))
     return 0
 
 

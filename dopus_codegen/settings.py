@@ -279,7 +279,7 @@ TABLE: Tuple[Setting, ...] = (
             "receding: shift by one sampling interval in every prepare; fixed: no shift."),
     Setting("budget", "nonnegative", lambda v: nonnegative("budget", v), 0.0,
             "Anytime budget per sampling instant (0: none): the time left after prepare goes to more "
-            "re-linearised stages and SQP iterations at the predicted state (docs/algorithm.md section 13).",
+            "re-linearised stages and SQP iterations at the predicted state (docs/algorithm.md section 14).",
             flag=True),
     Setting("budget_unit", "choice", lambda v: check("budget_unit", v), "time",
             "Unit of the budget: time (seconds of the solver's clock) or work (a function evaluation 1, a QP "
@@ -289,7 +289,7 @@ TABLE: Tuple[Setting, ...] = (
             "2e-5).", flag=True),
     Setting("M_adaptive", "flag", lambda v: _flag("M_adaptive", v), False,
             "Adaptive M: each iteration re-linearises the stages whose secant residual exceeds M_eta times the "
-            "KKT proxy, between M_min and M_max (docs/algorithm.md section 13)."),
+            "KKT proxy, between M_min and M_max (docs/algorithm.md section 14)."),
     Setting("M_min", "count", lambda v: count("M_min", v), 0, "Fewest stages of adaptive M."),
     Setting("M_max", "count", lambda v: count("M_max", v), None, "Most stages of adaptive M (not given: N-1)."),
     Setting("M_eta", "positive", lambda v: positive("M_eta", v), 0.1, "Threshold of adaptive M."),

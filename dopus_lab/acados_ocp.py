@@ -9,8 +9,14 @@ never the project's package, and is started as a script by path::
 
 The translation keeps the problem exactly the same NLP as ours (docs/algorithm.md section 1):
 
-- Dynamics: acados' explicit Runge-Kutta with 4 stages (the classical RK4 tableau) and as
-  many steps per interval as our ``RK4(substeps)``, interval ``dt``.
+- Dynamics (setting ``integrator``): ``"ERK"``, acados' explicit Runge-Kutta with 4 stages
+  (the classical RK4 tableau) and as many steps per interval as our ``RK4(substeps)``,
+  interval ``dt``, its derivatives by acados' own forward (and adjoint) sensitivities; or
+  ``"DISCRETE"``, the same RK4 map written out as a CasADi expression
+  (``disc_dyn_expr``), its Jacobians and Hessians by CasADi, as our generated code does.
+- Compile flags (setting ``flags``) of the generated C (model functions and solver): acados'
+  default ``-O2``, or ours (``-O3``, ``-O3 -march=native``). The wheel's acados, HPIPM and
+  BLASFEO libraries are prebuilt (BLASFEO for ``X64_INTEL_HASWELL``).
 - Cost: acados multiplies every stage cost by the interval length (its costs are
   integrals); our stage cost is the cost of one interval as written, so the translation
   divides the stage cost by ``dt`` (``l / dt`` for the external cost, ``W / dt`` for
@@ -84,6 +90,9 @@ DEFAULT_SETTINGS = {
     "qp_tol": 1e-10,
     "nlp_max_iter": 200,
     "nlp_tol": 1e-10,
+    "integrator": "ERK",           # or "DISCRETE": the same RK4 map as discrete dynamics (CasADi derivatives)
+    "flags": "-O2",                # compile flags of the generated C (acados' default)
+    "hpipm_mode": "BALANCE",       # SPEED_ABS, SPEED, ROBUST (the timing process sets it at run time too)
     "suffix": "",                  # appended to the model name (one library per setting)
 }
 
@@ -147,6 +156,21 @@ def _bounds(lb, ub):
     return np.array(idx, dtype=int), lo, hi
 
 
+def rk4_map(xdot, x, u, p, dt: float, substeps: int):
+    """The classical RK4 map over one interval ``dt`` in ``substeps`` steps (our
+    ``RK4(substeps)``, docs/algorithm.md section 1) as an expression in ``x, u, p``."""
+    f = ca.Function("f", [x, u, p], [xdot])
+    h = dt / substeps
+    xk = x
+    for _ in range(substeps):
+        k1 = f(xk, u, p)
+        k2 = f(xk + h / 2 * k1, u, p)
+        k3 = f(xk + h / 2 * k2, u, p)
+        k4 = f(xk + h * k3, u, p)
+        xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return xk
+
+
 def model_name(data: dict, settings: dict) -> str:
     return f"{data['name']}{settings.get('suffix', '')}"
 
@@ -173,9 +197,14 @@ def translate(data: dict, settings: dict):
     model = AcadosModel()
     model.name = model_name(data, s)
     model.x, model.u = x, u
-    model.xdot = ca.SX.sym("xdot", nx)
-    model.f_expl_expr = xdot
-    model.f_impl_expr = model.xdot - xdot
+    if s["integrator"] == "ERK":
+        model.xdot = ca.SX.sym("xdot", nx)
+        model.f_expl_expr = xdot
+        model.f_impl_expr = model.xdot - xdot
+    elif s["integrator"] == "DISCRETE":
+        model.disc_dyn_expr = rk4_map(xdot, x, u, p, dt, int(data["integrator"]["substeps"]))
+    else:
+        raise TranslationError(f"integrator must be 'ERK' or 'DISCRETE', got {s['integrator']!r}")
     if npar:
         model.p = p
 
@@ -236,12 +265,14 @@ def translate(data: dict, settings: dict):
 
     o = ocp.solver_options
     o.tf = N * dt
-    o.integrator_type = "ERK"
-    o.sim_method_num_stages = 4
-    o.sim_method_num_steps = int(data["integrator"]["substeps"])
+    o.integrator_type = s["integrator"]
+    if s["integrator"] == "ERK":
+        o.sim_method_num_stages = 4
+        o.sim_method_num_steps = int(data["integrator"]["substeps"])
     o.hessian_approx = "EXACT" if s["hessian"] == "exact" else "GAUSS_NEWTON"
     o.nlp_solver_type = s["nlp_solver"]
     o.qp_solver = "PARTIAL_CONDENSING_HPIPM"
+    o.hpipm_mode = str(s["hpipm_mode"])
     o.qp_solver_cond_N = int(s["cond_N"] or N)
     o.qp_solver_ric_alg = int(s["ric_alg"])
     o.qp_solver_cond_ric_alg = int(s["cond_ric_alg"])
@@ -253,7 +284,7 @@ def translate(data: dict, settings: dict):
     o.nlp_solver_max_iter = int(s["nlp_max_iter"])
     o.tol = float(s["nlp_tol"])
     o.print_level = 0
-    o.ext_fun_compile_flags = "-O2"
+    o.ext_fun_compile_flags = str(s["flags"])
     return ocp
 
 

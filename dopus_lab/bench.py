@@ -47,10 +47,15 @@ from dopus_codegen.studies.records import json_ready
 __all__ = ["BenchError", "run_bench", "run_scaling", "format_table", "format_scaling", "plot_bench",
            "fit_exponent", "parse_m_list", "parse_n_list"]
 
-#: acados settings quoted in the project's notes, timed where they are built.
-QUOTED = (("acados exact pc10 noreg", "exact", "NO_REGULARIZE", 10),
-          ("acados GN pc10", "gauss-newton", "NO_REGULARIZE", 10),
-          ("acados GN pc5", "gauss-newton", "NO_REGULARIZE", 5))
+#: What the acados screening varies (docs/results.md): HPIPM's modes, the QP tolerances
+#: (besides ours), the Riccati recursions (0 classic, 1 square-root), the build variants
+#: (integrator, compile flags of the generated C; ``-O3 -march=native`` as ours where we use it).
+ACADOS_MODES = ("SPEED_ABS", "SPEED", "BALANCE", "ROBUST")
+ACADOS_TOLS = (1e-6, 1e-8)
+ACADOS_RIC = (0, 1)
+ACADOS_VARIANTS = (("ERK", "-O2"), ("ERK", "-O3 -march=native"), ("DISCRETE", "-O2"),
+                   ("DISCRETE", "-O3 -march=native"))
+ACADOS_EXACT_REGS = ("MIRROR", "PROJECT", "NO_REGULARIZE", "CONVEXIFY")
 
 
 class BenchError(RuntimeError):
@@ -220,31 +225,42 @@ def _acados_plan(ocp, prob, values, cond_list, quick, work: Path, echo) -> dict:
         py = ac.acados_python()
     except ac.AcadosUnavailable as exc:
         raise BenchError(f"--against acados: acados' environment is not available: {exc}") from None
-    echo(f"{disc.name}: translating to acados and building its solvers (acados' environment) ...")
+    echo(f"{disc.name}: translating to acados and building its solvers (acados' environment; each build "
+         f"variant once, cached in {work}) ...")
     ej = ac.export(ocp, work)
     libs = []
-    regs = ["NO_REGULARIZE"] if quick else ["NO_REGULARIZE", "MIRROR", "PROJECT", "CONVEXIFY"]
-    hess = values["hessian"]
-    for reg in regs:
-        b = ac.build(py, ej, {"hessian": "exact", "regularize": reg, "suffix": f"_ex_{reg.lower()[:4]}"}, work)
-        libs.append({"hessian": "exact", "regularize": reg, **b})
-    if disc.has_gn:
-        try:
-            b = ac.build(py, ej, {"hessian": "gauss-newton", "suffix": "_gn"}, work)
-            libs.append({"hessian": "gauss-newton", "regularize": "NO_REGULARIZE", **b})
-        except RuntimeError as exc:
-            echo(f"acados Gauss-Newton not built: {str(exc).splitlines()[-1]}")
-    del hess
+    regs = ("MIRROR",) if quick else ACADOS_EXACT_REGS
+    variants = (ACADOS_VARIANTS[0], ACADOS_VARIANTS[-1]) if quick else ACADOS_VARIANTS
+    kinds = [("exact", reg) for reg in regs] + ([("gauss-newton", "NO_REGULARIZE")] if disc.has_gn else [])
+    for hess, reg in kinds:
+        for integ, flags in variants:
+            tag = (f"_{'ex_' + reg.lower()[:4] if hess == 'exact' else 'gn'}_{integ.lower()[:4]}_"
+                   f"{''.join(w.strip('-').replace('march=native', 'n') for w in flags.split())}")
+            settings = {"hessian": hess, "regularize": reg, "integrator": integ, "flags": flags, "suffix": tag}
+            try:
+                b = ac.build(py, ej, settings, work)
+            except RuntimeError as exc:
+                echo(f"acados {hess} {reg} {integ} {flags} not built: {str(exc).splitlines()[-1]}")
+                continue
+            libs.append({"hessian": hess, "regularize": reg, "integrator": integ, "flags": flags, **b})
+    if not libs:
+        raise BenchError("--against acados: no acados solver could be built")
     xd = _disturbed(disc)
     g = disc.initial_guess
+    ours_tol = st.qp_tol_default("double") if values.get("qp_tol") is None else float(values["qp_tol"])
+    tols = sorted({*ACADOS_TOLS, ours_tol}, reverse=True)
     return {"lib_dir": libs[0]["acados_lib_dir"], "N": int(disc.N), "nx": int(disc.nx), "nu": int(disc.nu),
             "libs": libs, "cond_list": [c for c in cond_list if c <= disc.N], "lm": acados_lm(prob, values, echo),
+            "modes": ["SPEED_ABS", "BALANCE"] if quick else list(ACADOS_MODES),
+            "tols": [tols[0], ours_tol] if quick else tols, "ric_algs": [0] if quick else list(ACADOS_RIC),
+            "variant_qp": {"mode": "BALANCE", "tol": 1e-6, "ric_alg": 0}, "variant_cond": 10,
+            "variant_reps": 60 if quick else 200,
             "plant_lib": "main", "x0": np.asarray(disc.x0, float).tolist(),
             "x_disturbed": (xd if xd is not None else np.asarray(disc.x0, float)).tolist(),
             "nominal": _guess_dict(prob["nominal"]), "cold": {"x": np.asarray(g.x, float).tolist(),
                                                                "u": np.asarray(g.u, float).tolist()},
-            "steps_warm": 100 if quick else 300, "steps_cold": 60 if quick else 200,
-            "select_reps": 100 if quick else 300, "quoted": [list(q) for q in QUOTED]}
+            "steps_warm": 100 if quick else 200, "steps_cold": 60 if quick else 150,
+            "select_reps": 100 if quick else 300, "select_settle": 50}
 
 
 def _resolve_settings(ocp, cli: dict):
@@ -273,7 +289,7 @@ def _write_outputs(result: dict, json_out, plot_out, plot, echo) -> dict:
 
 def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None, json_out=None, plot_out=None,
               reps: int = 300, steps: int = 300, settle: int = 100, kkt_iters: int = 60,
-              cond_list=(40, 20, 10, 8, 5, 4, 2, 1), quick: bool = False, work=None,
+              cond_list=(40, 20, 10, 8, 5, 4, 2), quick: bool = False, work=None,
               echo: Callable = None, keep_samples: bool = False, **cli) -> dict:
     """The body of ``dopus-gen bench OCP_FILE``; returns the result (also written as JSON)."""
     from dopus_codegen.problem.ocp import load_ocp
@@ -322,40 +338,99 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
               "nominal_objective": float(prob["nominal_info"].get("objective", float("nan"))),
               "kkt": kkt, **res}
     result["machine"] = res.get("machine_before")
+    result["tracking"] = tracking(disc, result)
+    if not keep_samples:
+        result.pop("trajectories", None)
     result["headline"] = headline(result)
     return _write_outputs(result, json_out, plot_out, plot_bench, echo)
 
 
+def tracking(disc, result: dict) -> dict:
+    """Per closed-loop phase and setting: RMS and max of the scenario's first scalar signal
+    over the timed steps of that setting's closed loop (equal tracking is the condition of
+    a fair time ratio)."""
+    from dopus_codegen.studies.sil import _default_parameters, _eval
+
+    spec = getattr(getattr(disc, "scenario", None), "closed_loop", None)
+    if spec is None or not spec.signals:
+        return {}
+    p = _default_parameters(disc)
+    out = {}
+    for phase, runs in (result.get("trajectories") or {}).items():
+        rows = {}
+        for label, tr in runs.items():
+            x, u, skip = np.asarray(tr["x"], float), np.asarray(tr["u"], float), int(tr.get("skip", 0))
+            n = min(len(u), len(x) - 1)
+            for name, fn in spec.signals.items():
+                vals = [_eval(fn, x[i], u[i], p) for i in range(skip, n)]
+                if vals and np.asarray(vals[0]).size == 1:
+                    v = np.abs(np.array([float(np.asarray(a).reshape(-1)[0]) for a in vals]))
+                    rows[label] = {"signal": name, "rms": float(np.sqrt(np.mean(v ** 2))), "max": float(v.max())}
+                    break
+        out[phase] = rows
+    return out
+
+
+def _failures(result: dict, label: str) -> int:
+    """QP failures of a setting over every timed phase, the settling steps included."""
+    return sum(int(t[label]["qp_failures"]) for t in result.get("timed", {}).values() if label in t)
+
+
 def headline(result: dict) -> dict:
     """The ratios the project steers by, per timed phase: ratio of the medians of the total
-    and the median of the per-step ratios (same interleaved run). ``acados fastest working``
-    is the faster (at that phase) of the fastest working exact-Hessian and Gauss-Newton
-    settings."""
+    and the median of the per-step ratios (same interleaved run), with the tracking (RMS,
+    max) of both settings beside them. A pair where either setting failed a QP in any
+    timed phase (settling included) gets no ratio, only the failures. Against acados:
+    ours at its defaults, and ours at the QP tolerance of acados' pick (equal tolerance);
+    ``acados fastest working`` is the faster (at that phase) of the fastest working
+    exact-Hessian and Gauss-Newton settings."""
     out = {}
     N = result["N"]
     m1, full = _label(1, N), _label(N - 1, N)
+    picks = result.get("acados_picks") or {}
+    matched = result.get("matched_runs") or {}
+
+    def at_tol(label, tol):
+        for k, v in matched.items():
+            if v["of"] == label and math.isclose(v["qp_tol"], tol):
+                return k
+        return label            # acados' tolerance is ours
+
     for phase, t in result.get("timed", {}).items():
         paired = (result.get("paired_ratios") or {}).get(phase, {})
+        track = (result.get("tracking") or {}).get(phase, {})
         med = {k: v["total_us"]["median"] for k, v in t.items()}
         rows = {}
 
-        def pair(a, b, name):
-            if a in med and b in med and med[a] and med[b]:
-                rows[name] = {"a": a, "b": b, "ratio": med[a] / med[b],
-                              "paired_ratio": (paired.get(a) or {}).get(b)}
+        def pair(a, b, name, extra=None):
+            if a not in med or b not in med:
+                return
+            row = {"a": a, "b": b, **(extra or {})}
+            fails = {k: _failures(result, k) for k in (a, b)}
+            if any(fails.values()):
+                row["failed"] = fails
+            elif med[a] and med[b]:
+                row.update(ratio=med[a] / med[b], paired_ratio=(paired.get(a) or {}).get(b))
+            if a in track and b in track:
+                row["tracking"] = {a: track[a], b: track[b]}
+            rows[name] = row
 
         pair(m1, full, "M=1 / our full RTI")
         for k in t:
-            if k.startswith("M=") and k != m1:
+            if k.startswith("M=") and k != m1 and " qp_tol " not in k:
                 pair(k, full, f"{k} / our full RTI")
         work = [k for k in ("acados exact fastest working", "acados GN fastest working") if k in med]
         if work:
             fastest = min(work, key=lambda k: med[k])
-            pair(m1, fastest, "M=1 / acados fastest working RTI")
-            if "M=1 / acados fastest working RTI" in rows:
-                pick = (result.get("acados_picks") or {}).get(fastest, {})
-                rows["M=1 / acados fastest working RTI"]["acados_setting"] = pick.get("label", fastest)
-        pair(full, "acados exact fastest working", "our full RTI / acados exact-Hessian RTI")
+            pair(m1, fastest, "M=1 / acados fastest working RTI", {"acados_setting": picks.get(fastest, {}).get("label")})
+        for key, ours, name in (("acados GN fastest working", m1, "M=1 / acados fastest working GN RTI"),
+                                ("acados exact fastest working", full, "our full RTI / acados fastest working exact RTI")):
+            if key not in picks:
+                continue
+            tol = float(picks[key]["qp"]["tol"])
+            extra = {"acados_setting": picks[key]["label"], "acados_qp_tol": tol}
+            pair(ours, key, f"{name} (each at its defaults)", extra)
+            pair(at_tol(ours, tol), key, f"{name} (equal QP tolerance {tol:g})", extra)
         fb = {k: v["feedback_us"]["median"] for k, v in t.items()}
         rows["feedback latency (us, median)"] = fb
         out[phase] = rows
@@ -501,17 +576,30 @@ def format_table(result: dict) -> str:
                          f"{str(r['iters_to_1e-8'] if r['iters_to_1e-8'] is not None else '-'):>6s} "
                          f"{_f(r['last_kkt'], '10.2e')}  {r['status'] if r['status'] != 'ok' else ''}")
     for phase, rows in (result.get("headline") or {}).items():
-        lines.append(f"\nheadline ratios, {phase} (ratio of the medians / median of the per-step ratios):")
+        lines.append(f"\nheadline ratios, {phase} (ratio of the medians / median of the per-step ratios; "
+                     f"tracking RMS / max of both, a / b):")
         for name, r in rows.items():
-            if "ratio" in r:
-                extra = f" ({r['acados_setting']})" if r.get("acados_setting") else ""
-                lines.append(f"  {name:45s} {r['ratio']:6.2f} / {_f(r.get('paired_ratio'), '5.2f')}{extra}")
+            if "a" not in r:
+                continue
+            tr = r.get("tracking") or {}
+            track = ""
+            if r["a"] in tr and r["b"] in tr:
+                ta, tb = tr[r["a"]], tr[r["b"]]
+                track = (f"  [{ta['signal']} RMS {ta['rms']:.4e} / {tb['rms']:.4e}, max {ta['max']:.4e} / "
+                         f"{tb['max']:.4e}]")
+            if "failed" in r:
+                lines.append(f"  {name:62s} no ratio: QP failures " + ", ".join(f"{k} {v}" for k, v in
+                                                                            r["failed"].items()))
+            elif "ratio" in r:
+                lines.append(f"  {name:62s} {r['ratio']:6.2f} / {_f(r.get('paired_ratio'), '5.2f')}{track}")
     if result.get("acados_picks"):
         lines.append("\nacados settings timed: " + "; ".join(f"{k} = {v['label']}"
                                                                for k, v in result["acados_picks"].items()))
+        for k, v in (result.get("acados_variants") or {}).items():
+            lines.append(f"acados build variant of {k}: {v['chosen']}")
         n_ok = sum(1 for r in result.get("acados_screen", []) if r["works"])
         lines.append(f"acados screening: {n_ok} of {len(result.get('acados_screen', []))} settings work "
-                     f"(no QP failure from the disturbed nominal and from the cold guess)")
+                     f"(no QP failure from the disturbed nominal and from the cold guess, the iterate shifted)")
     return "\n".join(lines)
 
 

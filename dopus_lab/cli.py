@@ -37,8 +37,10 @@ __all__ = ["bench", "firmware_report"]
 @click.option("--scaling", "scaling", default=None,
               help="Comma-separated horizon lengths N (e.g. 20,40,80,160): time per iteration against N at the "
                    "same interval, fitted exponent; replaces the other studies.")
-@click.option("--cond", default="40,20,10,8,5,4,2,1", show_default=True,
-              help="acados partial-condensing horizons to screen (with --against acados).")
+@click.option("--cond", default="40,20,10,8,5,4,2", show_default=True,
+              help="acados partial-condensing horizons to screen (with --against acados; with HPIPM's four modes, "
+                   "QP tolerances 1e-6, 1e-8 and ours, both Riccati recursions, ERK or the same RK4 map as "
+                   "discrete dynamics, -O2 or -O3 -march=native).")
 @click.option("--quick", is_flag=True, help="acados: fewer settings and closed-loop steps (a smoke run).")
 @click.option("--work", type=click.Path(file_okay=False), default=None,
               help="Folder for the plan, acados' builds and the export [default: a folder in the temp dir].")

@@ -370,7 +370,7 @@ def summarize(target: str, build: Dict[str, Any], run: Dict[str, Any], N: int) -
         res["kkt"][label] = [r["kkt"] for r in recs]
     res["instructions"]["loop_M1"] = _instructions([dict(r, iter=r["step"]) for r in run["loop"]], per_tick)
     res["loop"] = [{"step": r["step"], "kkt": r["kkt"], "u0": r["u0"], "xhat": r["xhat"]} for r in run["loop"]]
-    # the budgeted closed loops (docs/algorithm.md section 13): instructions per instant
+    # the budgeted closed loops (docs/algorithm.md section 14): instructions per instant
     res["budget"] = {}
     for b in sorted({r["instructions"] for r in run.get("budget", [])}):
         recs = [r for r in run["budget"] if r["instructions"] == b]

@@ -22,6 +22,7 @@ processes on the machine hits all of them alike.
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import sys
@@ -178,11 +179,15 @@ class Acados:
         self.opts_set.argtypes = [vp, vp, cp, dp]
         self.nlp_get = acados.ocp_nlp_get
         self.nlp_get.argtypes = [vp, vp, cp, dp]
+        self.dims_get = acados.ocp_nlp_dims_get_from_attr
+        self.dims_get.argtypes = [vp, vp, vp, ip, cp]
+        self.dims_get.restype = ct.c_int
         self.libs = {}
         self.u0 = (ct.c_double * self.nu)()
         self.xbuf = (ct.c_double * self.nx)()
         self.dbl = ct.c_double()
         self.int1 = ct.c_int()
+        self._stat = (ct.c_double * 64)()
 
     def lib(self, info):
         ct = self.ct
@@ -194,7 +199,7 @@ class Acados:
                 fn = getattr(lib, f"{name}_{f}")
                 fn.restype = ct.c_void_p
                 fn.argtypes = [] if f == "acados_create_capsule" else [ct.c_void_p]
-            for f in ("acados_create", "acados_solve"):
+            for f in ("acados_create", "acados_solve", "acados_free", "acados_free_capsule"):
                 fn = getattr(lib, f"{name}_{f}")
                 fn.argtypes, fn.restype = [ct.c_void_p], ct.c_int
             fn = getattr(lib, f"{name}_acados_update_qp_solver_cond_N")
@@ -202,21 +207,71 @@ class Acados:
             self.libs[name] = lib
         return self.libs[name]
 
-    def new(self, info, cond_N, lm):
+    def new(self, info, cond_N, lm, qp=None):
+        """A fresh solver of the built library ``info`` with partial condensing ``cond_N``,
+        Levenberg-Marquardt term ``lm`` and the QP options ``qp`` (``mode``: HPIPM's mode,
+        ``tol``: its four tolerances, ``ric_alg``: 0 classic, 1 square-root Riccati; None:
+        those of the build). HPIPM's mode resets all its options to the mode's defaults, so
+        it is set first and the others after it; the solver is then re-created
+        (``update_qp_solver_cond_N``) so that its memory is sized with the final options."""
         ct = self.ct
         name = info["model_name"]
         lib = self.lib(info)
         cap = getattr(lib, f"{name}_acados_create_capsule")()
         if getattr(lib, f"{name}_acados_create")(cap) != 0:
             raise RuntimeError(f"{name}_acados_create failed")
-        if cond_N != self.N and getattr(lib, f"{name}_acados_update_qp_solver_cond_N")(cap, int(cond_N)) != 0:
+        getter = {k: getattr(lib, f"{name}_acados_get_nlp_{k}") for k in ("config", "dims", "in", "out", "solver",
+                                                                           "opts")}
+        config, opts = getter["config"](cap), getter["opts"](cap)
+        if qp:
+            built = info.get("settings", {})
+            self.opts_set(config, opts, b"qp_hpipm_mode", ct.c_char_p(str(qp["mode"]).encode()))
+            it = ct.c_int(int(built.get("qp_iter_max", 100)))
+            self.opts_set(config, opts, b"qp_iter_max", ct.byref(it))
+            tol = ct.c_double(float(qp["tol"]))
+            for f in (b"qp_tol_stat", b"qp_tol_eq", b"qp_tol_ineq", b"qp_tol_comp"):
+                self.opts_set(config, opts, f, ct.byref(tol))
+            ric = ct.c_int(int(qp["ric_alg"]))
+            self.opts_set(config, opts, b"qp_ric_alg", ct.byref(ric))
+            cric = ct.c_int(int(built.get("cond_ric_alg", 0)))
+            self.opts_set(config, opts, b"qp_cond_ric_alg", ct.byref(cric))
+            ws = ct.c_int(0)
+            self.opts_set(config, opts, b"qp_warm_start", ct.byref(ws))
+        if (qp or cond_N != self.N) and getattr(lib, f"{name}_acados_update_qp_solver_cond_N")(cap, int(cond_N)) != 0:
             raise RuntimeError(f"{name}_acados_update_qp_solver_cond_N({cond_N}) failed")
-        h = {"cap": cap, "solve": getattr(lib, f"{name}_acados_solve")}
-        for k in ("config", "dims", "in", "out", "solver", "opts"):
-            h[k] = getattr(lib, f"{name}_acados_get_nlp_{k}")(cap)
+        h = {"cap": cap, "solve": getattr(lib, f"{name}_acados_solve"), "lib": lib, "name": name}
+        for k, g in getter.items():
+            h[k] = g(cap)
         v = ct.c_double(lm)
         self.opts_set(h["config"], h["opts"], b"levenberg_marquardt", ct.byref(v))
         return h
+
+    def shifter(self, h):
+        """The shift of the iterate by one interval, as ours shifts in every receding-horizon
+        prepare: ``x_k <- x_{k+1}`` (k < N), ``u_k <- u_{k+1}`` and the dynamics multipliers
+        ``pi_k <- pi_{k+1}`` (k < N-1), the constraint multipliers ``lam_k <- lam_{k+1}`` on
+        the stages of equal layout (1 <= k < N-1); the last entries are kept."""
+        ct = self.ct
+        N = self.N
+        cfg, dims, out = h["config"], h["dims"], h["out"]
+        lam_n = [int(self.dims_get(cfg, dims, out, k, b"lam")) for k in range(N + 1)]
+        buf = (ct.c_double * max([self.nx, self.nu, *lam_n, 1]))()
+        plan = [(k, b"x") for k in range(N)] + [(k, f) for k in range(N - 1) for f in (b"u", b"pi")]
+        plan += [(k, b"lam") for k in range(1, N - 1) if lam_n[k] == lam_n[k + 1]]
+        get, put = self.out_get, self.out_set
+
+        def shift():
+            for k, f in plan:
+                get(cfg, dims, out, k + 1, f, buf)
+                put(cfg, dims, out, k, f, buf)
+
+        return shift
+
+    def free(self, h):
+        """Free a solver made by :meth:`new`."""
+        lib, name = h["lib"], h["name"]
+        getattr(lib, f"{name}_acados_free")(h["cap"])
+        getattr(lib, f"{name}_acados_free_capsule")(h["cap"])
 
     def set_phase(self, h, phase):
         self.int1.value = phase
@@ -236,6 +291,21 @@ class Acados:
             self.xbuf[i] = v
         self.model_set(h["config"], h["dims"], h["in"], 0, b"lbx", self.xbuf)
         self.model_set(h["config"], h["dims"], h["in"], 0, b"ubx", self.xbuf)
+
+    def qp_stats(self, h):
+        """(status, iterations) of the QP of the last RTI phase 2: the last column of
+        acados' statistics (rows: iteration, QP status, QP iterations)."""
+        ct = self.ct
+        self.nlp_get(h["config"], h["solver"], b"stat_n", ct.byref(self.int1))
+        n = self.int1.value
+        self.nlp_get(h["config"], h["solver"], b"stat_m", ct.byref(self.int1))
+        m = self.int1.value
+        self.nlp_get(h["config"], h["solver"], b"sqp_iter", ct.byref(self.int1))
+        cols = min(m, self.int1.value + 1)
+        if len(self._stat) < (n + 1) * cols:
+            self._stat = (ct.c_double * ((n + 1) * cols))()
+        self.nlp_get(h["config"], h["solver"], b"statistics", self._stat)
+        return int(self._stat[cols + cols - 1]), int(self._stat[2 * cols + cols - 1])
 
     def get(self, h, field):
         self.nlp_get(h["config"], h["solver"], field, self.ct.byref(self.dbl))
@@ -263,11 +333,13 @@ class Acados:
 class Runner:
     """One controller behind a common step interface (see the module docstring)."""
 
-    def __init__(self, label, kind, feedback, prepare, start, phases=None, extra=None):
+    def __init__(self, label, kind, feedback, prepare, start, phases=None, extra=None, between=None, check=None):
         self.label, self.kind = label, kind
         self.feedback, self.prepare, self.start = feedback, prepare, start
         self.phases = phases or (lambda: {})
         self.extra = extra or (lambda: {})
+        self.between = between        # untimed, after feedback and before prepare (acados' shift)
+        self.check = check            # untimed, after feedback: False when its QP failed (acados' QP status)
 
 
 def make_ours(ours: Ours, M, mode, settings, label):
@@ -296,8 +368,12 @@ def make_ours(ours: Ours, M, mode, settings, label):
     return r
 
 
-def make_acados(ac: Acados, info, cond_N, lm, label, timers=True):
-    h = ac.new(info, cond_N, lm)
+def make_acados(ac: Acados, info, cond_N, lm, label, timers=True, qp=None, shift=True):
+    """acados' RTI as a runner: feedback = RTI phase 2 (the QP and the step), prepare =
+    phase 1 (linearisation, condensing). With ``shift`` the iterate is shifted by one
+    interval between the two (untimed: it goes through acados' setters one stage at a time
+    from Python), as ours shifts in its (timed) prepare."""
+    h = ac.new(info, cond_N, lm, qp=qp)
     last = {}
 
     def feedback(xhat):
@@ -320,7 +396,16 @@ def make_acados(ac: Acados, info, cond_N, lm, label, timers=True):
         ac.set_x0(h, xhat0)
         prepare()
 
-    r = Runner(label, "acados", feedback, prepare, start, phases=lambda: dict(last))
+    it = {}
+
+    def check():
+        """acados' RTI accepts a QP stopped at its iteration limit (status ACADOS_MAXITER) as
+        a success; here, as for ours, any QP status but success is a failure."""
+        qp_status, it["qp_iterations"] = ac.qp_stats(h)
+        return qp_status == 0
+
+    r = Runner(label, "acados", feedback, prepare, start, phases=lambda: dict(last),
+               between=ac.shifter(h) if shift else None, check=check, extra=lambda: dict(it))
     r.handle = h
     return r
 
@@ -404,10 +489,17 @@ def _new_record():
     return {"fail": 0, "feedback": [], "prepare": [], "phases": [], "extra": []}
 
 
-def _step(r, x, rec, record):
+def _step(r, x, rec, record, shift=True):
+    """One sampling step of a runner: feedback (timed), its check and the shift of an
+    acados iterate (untimed), prepare (timed)."""
     t0 = time.perf_counter_ns()
     u, ok = r.feedback(x)
     t1 = time.perf_counter_ns()
+    if r.check is not None:
+        ok = r.check() and ok
+    if r.between is not None and shift:
+        r.between()
+    tp = time.perf_counter_ns()
     okp = r.prepare()
     t2 = time.perf_counter_ns()
     failed = (not ok) or (not okp) or (not np.all(np.isfinite(u)))
@@ -415,7 +507,7 @@ def _step(r, x, rec, record):
         rec["fail"] += 1
     if record:
         rec["feedback"].append((t1 - t0) * 1e-3)
-        rec["prepare"].append((t2 - t1) * 1e-3)
+        rec["prepare"].append((t2 - tp) * 1e-3)
         rec["phases"].append({k: v * 1e6 for k, v in r.phases().items()})
         rec["extra"].append(r.extra())
     return u, failed
@@ -426,7 +518,7 @@ def _guess_for(starts, label):
     return starts[label] if "x" not in starts and label in starts else starts
 
 
-def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x0_init=None):
+def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x0_init=None, stop_on_fail=False):
     """Each runner in its own closed loop against ``plant(x, u) -> x+``, alternating one
     sampling step of each. ``starts[label]`` (or ``starts`` itself, a dict with x, u, ...)
     is the guess of ``start(x0_init or x_start, guess)``. The first ``skip`` steps are not
@@ -435,18 +527,26 @@ def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x
     returns its safe control after a failure; a step of acados that fails counts in ``fail``
     and a plant that diverges on its control is reset). Returns per label: ``fail``,
     ``feedback``/``prepare`` (us per recorded step), ``phases`` (the solver's own timers, us),
-    ``x`` (the plant states, steps+1 rows)."""
+    ``x`` (the plant states, steps+1 rows), ``u`` (the applied controls). ``stop_on_fail``:
+    a runner's loop ends at its first failure (the screening only asks whether one fails)."""
     out = {r.label: _new_record() for r in runners}
     xs = {r.label: np.array(x_start, float) for r in runners}
     for r in runners:
         guess = _guess_for(starts, r.label)
         r.start(np.array(x_start if x0_init is None else x0_init, float), guess)
         out[r.label]["x"] = [xs[r.label].tolist()]
+        out[r.label]["u"] = []
     total = steps + skip
+    stopped = set()
     for i in range(total):
         for r in runners:
+            if r.label in stopped:
+                continue
             rec = out[r.label]
-            u, _failed = _step(r, xs[r.label], rec, i >= skip)
+            u, failed = _step(r, xs[r.label], rec, i >= skip)
+            rec["u"].append(np.asarray(u, float).tolist())
+            if failed and stop_on_fail:
+                stopped.add(r.label)
             xn = plant(xs[r.label], u)
             if not (np.all(np.isfinite(xn)) and np.abs(xn).max() < 1e8):
                 rec["diverged_at"] = rec.get("diverged_at", i)
@@ -466,7 +566,7 @@ def operating_point(runners, xhat, guess, reps, warmup=0, progress=None):
         r.start(np.array(xhat, float), _guess_for(guess, r.label))
     for i in range(warmup + reps):
         for r in runners:
-            _step(r, xhat, out[r.label], i >= warmup)
+            _step(r, xhat, out[r.label], i >= warmup, shift=False)
         if progress is not None:
             progress.update(i + 1)
     return out
@@ -495,64 +595,141 @@ def summarize(rec, ref=None):
 
 
 # ===================================================================== acados: which settings work
-def screen_acados(ac: Acados, plant, acd, x0, x_disturbed, nominal, cold, steps_warm, steps_cold, echo=None):
-    """Every acados setting of ``acd["libs"]`` (exact Hessian under each regularisation, with
-    and without the Levenberg-Marquardt term ``acd["lm"]``; Gauss-Newton) and partial
-    condensing horizon of ``acd["cond_list"]`` runs two closed loops: from the nominal
-    solution with the disturbed initial state (``steps_warm``) and from the cold guess
-    (``steps_cold``). A setting works when no QP fails in either. Returns the rows."""
-    N, lm = acd["N"], acd["lm"]
-    settings = []
+def _short_flags(flags: str) -> str:
+    return "".join(w.lstrip("-").replace("march=native", "native") for w in str(flags).split())
+
+
+def variant_label(info) -> str:
+    """``ERK O2``, ``DISCRETE O3native``: the build variant of an acados library."""
+    return f"{info.get('integrator', 'ERK')} {_short_flags(info.get('flags', '-O2'))}"
+
+
+def setting_label(info, cond, lm, qp) -> str:
+    hess = "exact" if info["hessian"] == "exact" else "GN"
+    reg = "" if info["hessian"] != "exact" else " " + {"NO_REGULARIZE": "noreg"}.get(info["regularize"],
+                                                                                    info["regularize"])
+    return (f"acados {hess}{reg} {variant_label(info)} pc{cond} {qp['mode']} tol{qp['tol']:g} "
+            f"ric{qp['ric_alg']}" + (f" lm{lm:g}" if lm else ""))
+
+
+def _screen_space(acd, info):
+    lm = acd["lm"]
+    lms = [0.0] if info["hessian"] == "gauss-newton" or info["regularize"] != "NO_REGULARIZE" or not lm > 0 \
+        else [0.0, lm]
+    out = []
+    for cond in acd["cond_list"]:
+        if cond > acd["N"]:
+            continue
+        for mode in acd["modes"]:
+            for tol in acd["tols"]:
+                for ric in acd["ric_algs"]:
+                    for lmv in lms:
+                        out.append((cond, lmv, {"mode": mode, "tol": float(tol), "ric_alg": int(ric)}))
+    return out
+
+
+def choose_variants(ac: Acados, acd, x0, nominal, echo=None):
+    """Per kind of acados setting (Hessian, regularisation), the fastest build variant
+    (integrator ERK or the same RK4 map as discrete dynamics, compile flags): the variants,
+    which solve the same QPs, timed interleaved at the converged operating point (fixed
+    initial state, nominal solution) with one QP setting (``acd["variant_qp"]``, partial
+    condensing ``acd["variant_cond"]``). Returns ``{(hessian, regularize): {"info", "medians"}}``."""
+    groups = {}
     for info in acd["libs"]:
-        lms = [0.0] if info["hessian"] == "gauss-newton" else ([0.0, lm] if lm > 0 else [0.0])
-        for cond in acd["cond_list"]:
-            if cond > N:
-                continue
-            for lmv in lms:
-                settings.append((info, cond, lmv))
+        groups.setdefault((info["hessian"], info["regularize"]), []).append(info)
+    out = {}
+    cond = min(int(acd.get("variant_cond", 10)), acd["N"])
+    for key, infos in groups.items():
+        if len(infos) == 1:
+            out[key] = {"info": infos[0], "medians": {}}
+            continue
+        cand = [make_acados(ac, info, cond, 0.0, variant_label(info), timers=False, qp=acd["variant_qp"], shift=False)
+                for info in infos]
+        t = operating_point(cand, x0, nominal, int(acd.get("variant_reps", 200)), warmup=10)
+        med = {k: stats(np.array(v["feedback"]) + np.array(v["prepare"]))["median"] for k, v in t.items()}
+        for r in cand:
+            ac.free(r.handle)
+        best = min(infos, key=lambda info: med[variant_label(info)])
+        out[key] = {"info": best, "medians": med}
+        if echo is not None:
+            echo(f"  acados {key[0]} {key[1]}: build variants (us, medians at the operating point): "
+                 + ", ".join(f"{k} {v:.1f}" for k, v in sorted(med.items(), key=lambda kv: kv[1]))
+                 + f" -> {variant_label(best)}")
+    return out
+
+
+def screen_acados(ac: Acados, plant, acd, x0, x_disturbed, nominal, cold, steps_warm, steps_cold, echo=None,
+                  variants=None):
+    """Every acados setting: per kind (Hessian, regularisation; its fastest build variant of
+    :func:`choose_variants`) every partial condensing horizon of ``acd["cond_list"]``, HPIPM
+    mode of ``acd["modes"]``, QP tolerance of ``acd["tols"]``, Riccati recursion of
+    ``acd["ric_algs"]`` (and, exact Hessian without regularisation, with and without the
+    Levenberg-Marquardt term ``acd["lm"]``), the iterate shifted as ours. Each runs two
+    closed loops: from the nominal solution with the disturbed initial state (``steps_warm``)
+    and from the cold guess (``steps_cold``); a loop ends at the first failure. A setting
+    works when no QP fails in either. Returns the rows."""
+    variants = variants or choose_variants(ac, acd, x0, nominal)
+    settings = [(v["info"], cond, lmv, qp) for v in variants.values() for cond, lmv, qp in _screen_space(acd, v["info"])]
     rows = []
-    pg = Progress(f"acados screening: {len(settings)} settings x ({steps_warm} warm + {steps_cold} cold steps)",
+    pg = Progress(f"acados screening: {len(settings)} settings x ({steps_warm} disturbed + {steps_cold} cold steps)",
                   len(settings))
-    for i, (info, cond, lmv) in enumerate(settings):
-        label = f"acados {info['hessian']} {info['regularize']} pc{cond}" + (f" lm{lmv:g}" if lmv else "")
-        r = make_acados(ac, info, cond, lmv, label, timers=False)
-        warm = closed_loop([r], plant, x_disturbed, nominal, steps_warm, x0_init=x0)[label]
-        r2 = make_acados(ac, info, cond, lmv, label, timers=False)
-        coldr = closed_loop([r2], plant, x0, cold, steps_cold)[label]
-        row = {"label": label, "hessian": info["hessian"], "regularize": info["regularize"], "cond_N": cond,
-               "lm": lmv, "fail_warm": warm["fail"], "fail_cold": coldr["fail"],
-               "works": warm["fail"] == 0 and coldr["fail"] == 0 and "diverged_at" not in warm
-               and "diverged_at" not in coldr,
+    for i, (info, cond, lmv, qp) in enumerate(settings):
+        label = setting_label(info, cond, lmv, qp)
+        r = make_acados(ac, info, cond, lmv, label, timers=False, qp=qp)
+        warm = closed_loop([r], plant, x_disturbed, nominal, steps_warm, x0_init=x0, stop_on_fail=True)[label]
+        ac.free(r.handle)
+        ok_warm = warm["fail"] == 0 and "diverged_at" not in warm
+        coldr = {"fail": None}
+        if ok_warm:
+            r2 = make_acados(ac, info, cond, lmv, label, timers=False, qp=qp)
+            coldr = closed_loop([r2], plant, x0, cold, steps_cold, stop_on_fail=True)[label]
+            ac.free(r2.handle)
+        works = ok_warm and coldr["fail"] == 0 and "diverged_at" not in coldr
+        row = {"label": label, "hessian": info["hessian"], "regularize": info["regularize"],
+               "integrator": info.get("integrator", "ERK"), "flags": info.get("flags", "-O2"), "cond_N": cond,
+               "lm": lmv, "qp": dict(qp), "fail_warm": warm["fail"], "fail_cold": coldr["fail"], "works": works,
                "median_us_warm": stats(np.array(warm["feedback"]) + np.array(warm["prepare"]))["median"],
                "info": info}
         rows.append(row)
-        if echo is not None:
-            echo(f"  {label:44s} QP failures: warm {warm['fail']:4d}/{steps_warm}, cold {coldr['fail']:4d}/"
-                 f"{steps_cold}; median {row['median_us_warm']:8.1f} us")
         pg.update(i + 1)
+    if echo is not None:
+        for key in sorted({(r["hessian"], r["regularize"]) for r in rows}):
+            rs = [r for r in rows if (r["hessian"], r["regularize"]) == key]
+            ok = sorted((r for r in rs if r["works"]), key=lambda r: r["median_us_warm"])
+            echo(f"  acados {key[0]} {key[1]}: {len(ok)} of {len(rs)} settings work"
+                 + (f"; fastest {ok[0]['label']} ({ok[0]['median_us_warm']:.1f} us)" if ok else ""))
     return rows
 
 
-def pick_acados(ac: Acados, rows, x0, nominal, reps, quoted=()):
-    """The fastest working setting of each kind: the (up to) four fastest in the screening
-    (separate runs) are timed again interleaved at the converged operating point. Also the
-    ``quoted`` settings ``(key, hessian, regularize, cond_N)`` where built. Returns
-    ``(picks, selection)``: ``picks[key]`` a screening row."""
+def pick_acados(ac: Acados, rows, plant, x0, nominal, reps, settle, echo=None):
+    """The fastest working setting of each Hessian: the working settings in the order of
+    their screening times, four at a time, run interleaved in the closed loop from the
+    nominal solution (``settle`` untimed steps, then ``reps`` timed ones); one with a QP
+    failure there does not count. Returns ``(picks, selection)``: ``picks[key]`` a screening
+    row, ``selection[hessian]`` the medians (us) of the candidates and their failures."""
     picks, selection = {}, {}
     for key, hess in (("acados exact fastest working", "exact"), ("acados GN fastest working", "gauss-newton")):
-        ok = sorted((r for r in rows if r["hessian"] == hess and r["works"]), key=lambda r: r["median_us_warm"])[:4]
-        if len(ok) == 1:
-            picks[key] = ok[0]
-        elif ok:
-            cand = [make_acados(ac, r["info"], r["cond_N"], r["lm"], r["label"], timers=False) for r in ok]
-            t = operating_point(cand, x0, nominal, reps, warmup=10)
-            med = {k: stats(np.array(v["feedback"]) + np.array(v["prepare"]))["median"] for k, v in t.items()}
-            selection[hess] = med
-            picks[key] = min(ok, key=lambda r: med[r["label"]])
-    for key, hess, reg, cond in quoted:
-        for r in rows:
-            if r["hessian"] == hess and r["regularize"] == reg and r["cond_N"] == cond and r["lm"] == 0.0:
-                picks.setdefault(key, r)
+        ok = sorted((r for r in rows if r["hessian"] == hess and r["works"]), key=lambda r: r["median_us_warm"])
+        sel = {}
+        for start in range(0, min(len(ok), 12), 4):
+            chunk = ok[start:start + 4]
+            cand = [make_acados(ac, r["info"], r["cond_N"], r["lm"], r["label"], timers=False, qp=r["qp"])
+                    for r in chunk]
+            t = closed_loop(cand, plant, x0, nominal, reps, skip=settle)
+            for r in cand:
+                ac.free(r.handle)
+            for r in chunk:
+                v = t[r["label"]]
+                sel[r["label"]] = {"median_us": stats(np.array(v["feedback"]) + np.array(v["prepare"]))["median"],
+                                   "fail": v["fail"]}
+            good = [r for r in chunk if sel[r["label"]]["fail"] == 0]
+            if good:
+                picks[key] = min(good, key=lambda r: sel[r["label"]]["median_us"])
+                break
+        selection[hess] = sel
+        if echo is not None:
+            echo(f"  {key}: " + (picks[key]["label"] if key in picks else "none")
+                 + f" ({len(sel)} candidates timed in the steady loop)")
     return picks, selection
 
 
@@ -563,9 +740,9 @@ def _settings_of(plan, run):
     return s
 
 
-def _runners_ours(libs, plan, mode):
+def _runners_ours(libs, plan, mode, extra_runs=()):
     rs = []
-    for run in plan["runs"]:
+    for run in [*plan["runs"], *extra_runs]:
         ours = libs[run["lib"]]
         rs.append(make_ours(ours, run["M"], mode, _settings_of(plan, run), run["label"]))
     return rs
@@ -583,25 +760,44 @@ def run_plan(plan, quiet_acados=True):
     acados_settings = []
     quiet = Quiet() if (ac is not None and quiet_acados) else None
     echo = quiet.show if quiet is not None else (lambda t: print(t, file=sys.stderr))
+    extra_runs = []
     if ac is not None:
         a = plan["acados"]
         plant = libs[a["plant_lib"]].plant
         if quiet is not None:
-            quiet.show("acados: screening which settings work (QP failures in the closed loop)")
+            quiet.show("acados: the build variants, then which settings work (QP failures in the closed loop)")
+        variants = choose_variants(ac, a, a["x0"], a["nominal"], echo=echo)
         rows = screen_acados(ac, plant, a, a["x0"], a["x_disturbed"], a["nominal"], a["cold"],
-                             a["steps_warm"], a["steps_cold"], echo=echo)
-        picks, selection = pick_acados(ac, rows, a["x0"], a["nominal"], a["select_reps"],
-                                       quoted=[tuple(q) for q in a.get("quoted", [])])
+                             a["steps_warm"], a["steps_cold"], echo=echo, variants=variants)
+        picks, selection = pick_acados(ac, rows, plant, a["x0"], a["nominal"], a["select_reps"],
+                                       a.get("select_settle", 50), echo=echo)
+        result["acados_variants"] = {f"{k[0]} {k[1]}": {"chosen": variant_label(v["info"]), "medians": v["medians"]}
+                                     for k, v in variants.items()}
         result["acados_screen"] = [{k: v for k, v in r.items() if k != "info"} for r in rows]
         result["acados_selection"] = selection
         result["acados_picks"] = {k: {kk: vv for kk, vv in v.items() if kk != "info"} for k, v in picks.items()}
-        acados_settings = [{"info": v["info"], "cond_N": v["cond_N"], "lm": v["lm"], "label": k}
+        acados_settings = [{"info": v["info"], "cond_N": v["cond_N"], "lm": v["lm"], "qp": v["qp"], "label": k}
                            for k, v in picks.items()]
+        # ours at acados' tolerance too (the headline at equal QP tolerance)
+        ours_tol = plan["settings_codes"].get("qp_tol")
+        matched = {}
+        for v in picks.values():
+            tol = float(v["qp"]["tol"])
+            if ours_tol is not None and math.isclose(tol, float(ours_tol)):
+                continue
+            for run in plan["runs"]:
+                if run["M"] in (1, plan["acados"]["N"] - 1):
+                    label = f"{run['label']} qp_tol {tol:g}"
+                    if label not in matched:
+                        matched[label] = {"of": run["label"], "qp_tol": tol}
+                        extra_runs.append({**run, "label": label,
+                                           "settings_codes": {**run.get("settings_codes", {}), "qp_tol": tol}})
+        result["matched_runs"] = matched
 
     def runners(mode):
-        rs = _runners_ours(libs, plan, mode)
+        rs = _runners_ours(libs, plan, mode, extra_runs)
         for s in acados_settings:
-            rs.append(make_acados(ac, s["info"], s["cond_N"], s["lm"], s["label"]))
+            rs.append(make_acados(ac, s["info"], s["cond_N"], s["lm"], s["label"], qp=s["qp"]))
         return rs
 
     ref_label = plan.get("ref_label")
@@ -631,6 +827,10 @@ def run_plan(plan, quiet_acados=True):
             result["timed"][phase["name"]] = {
                 k: dict(summarize(v, ref), **({"x_end": v["x"][-1]} if "x" in v else {}))
                 for k, v in rec.items()}
+            if phase["kind"] == "loop":
+                # the closed-loop trajectories (the tracking beside the times)
+                result.setdefault("trajectories", {})[phase["name"]] = {
+                    k: {"x": v["x"], "u": v["u"], "skip": phase.get("skip", 0)} for k, v in rec.items()}
             if plan.get("keep_samples"):
                 result.setdefault("samples", {})[phase["name"]] = {
                     k: {"feedback": v["feedback"], "prepare": v["prepare"], "phases": v["phases"],

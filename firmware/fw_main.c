@@ -16,7 +16,7 @@
  *    plant state at xhat_fixed; the plant is the generated integrator (the discrete model
  *    phi); FW_LOOP_STEPS steps of feedback, plant step with the returned u0 whatever the
  *    status (the closed-loop instant of sil and campaign), prepare.
- * 3. The same closed loop with an anytime budget per instant (docs/algorithm.md section 13)
+ * 3. The same closed loop with an anytime budget per instant (docs/algorithm.md section 14)
  *    of FW_BUDGETS instructions on the instruction clock.
  *
  * Every real number is printed as the hexadecimal bit pattern of its IEEE representation
@@ -271,7 +271,7 @@ static int closed_loop(void)
     return first_failure;
 }
 
-/* ---- the anytime budget (docs/algorithm.md section 13) on the firmware clock ------------ */
+/* ---- the anytime budget (docs/algorithm.md section 14) on the firmware clock ------------ */
 
 /* The budgets of the budgeted closed loops, in instructions (0 ends the list). */
 #ifndef FW_BUDGETS

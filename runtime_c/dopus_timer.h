@@ -6,7 +6,7 @@
  *   _POSIX_TIMERS > 0 and _POSIX_MONOTONIC_CLOCK), it is clock_gettime(CLOCK_MONOTONIC);
  * - anywhere else (bare-metal toolchains such as arm-none-eabi with newlib) there is no
  *   default clock: it reads 0, every phase time reads 0, and dopus_timer_has_default_clock()
- *   and dopus_has_clock() say so. Firmware installs its own clock (a cycle counter, a
+ *   and has_clock of dopus_get_info say so. Firmware installs its own clock (a cycle counter, a
  *   hardware timer) with dopus_set_clock().
  * -DDOPUS_CLOCK_POSIX=0 forces the no-clock default, -DDOPUS_CLOCK_POSIX=1 forces POSIX.
  */

@@ -57,14 +57,18 @@ def _defects(disc, xhat0, x, u) -> float:
 X_TOL_DISTURBED, U_TOL_DISTURBED = 2e-5, 2e-4
 
 
-def test_gauss_newton_sqp_from_cold_guess_reaches_ipopt(acados_env, robot_export, robot_disc, robot_solution):
+@pytest.mark.parametrize("integrator, flags", [("ERK", "-O2"), ("DISCRETE", "-O3 -march=native")])
+def test_gauss_newton_sqp_from_cold_guess_reaches_ipopt(acados_env, robot_export, robot_disc, robot_solution,
+                                                        integrator, flags):
     """acados' Gauss-Newton SQP from the OCP file's cold guess reaches IPOPT's solution of
-    our NLP: the same dynamics (ERK 4 stages, 2 steps), cost (1/dt undone) and constraints
-    (terminal equality rows scaled)."""
+    our NLP: the same dynamics (ERK 4 stages, 2 steps, or the same RK4 map as discrete
+    dynamics with CasADi's derivatives), cost (1/dt undone) and constraints (terminal
+    equality rows scaled)."""
     ac, py, work = acados_env
     ref, info = robot_solution
     assert info["success"]
-    b = ac.build(py, robot_export, {"hessian": "gauss-newton", "nlp_solver": "SQP", "suffix": "_t_gn"}, work)
+    b = ac.build(py, robot_export, {"hessian": "gauss-newton", "nlp_solver": "SQP", "integrator": integrator,
+                                    "flags": flags, "suffix": f"_t_gn_{integrator.lower()}"}, work)
     g = robot_disc.initial_guess
     r = ac.solve(py, robot_export, b, robot_disc.x0, g.x, g.u)
     assert r["status"] == [0], r["status"]
@@ -110,18 +114,21 @@ def test_exact_sqp_from_nominal_at_disturbed_state_matches_ipopt_and_ours(acados
     np.testing.assert_allclose(r["u"], ours.u, atol=U_TOL_DISTURBED, rtol=0)
 
 
-def test_exact_rti_iterates_converge_to_the_same_solution(acados_env, robot_export, robot_disc, robot_solution):
+@pytest.mark.parametrize("integrator, flags", [("ERK", "-O2"), ("DISCRETE", "-O3 -march=native")])
+def test_exact_rti_iterates_converge_to_the_same_solution(acados_env, robot_export, robot_disc, robot_solution,
+                                                          integrator, flags):
     """acados' SQP_RTI with the exact Hessian and partial condensing (the setting that is
     timed), iterated at the disturbed state from the nominal solution, converges to IPOPT's
-    solution: the timed solver solves our problem."""
+    solution: the timed solver solves our problem, with acados' ERK and with the same RK4
+    map as discrete dynamics (its Hessian by CasADi)."""
     from dopus_codegen.reference.offline import solve_ocp
 
     ac, py, work = acados_env
     nominal, _ = robot_solution
     xd = _disturbed(robot_disc)
     ref, info = solve_ocp(robot_disc, xd, guess=nominal)
-    b = ac.build(py, robot_export, {"hessian": "exact", "nlp_solver": "SQP_RTI", "cond_N": 10,
-                                    "suffix": "_t_rti"}, work)
+    b = ac.build(py, robot_export, {"hessian": "exact", "nlp_solver": "SQP_RTI", "cond_N": 10, "integrator": integrator,
+                                    "flags": flags, "suffix": f"_t_rti_{integrator.lower()}"}, work)
     r = ac.solve(py, robot_export, b, xd, nominal.x, nominal.u, iterations=12)
     assert all(s == 0 for s in r["status"]), r["status"]
     assert abs(r["cost"] - info["objective"]) <= 1e-9 * abs(info["objective"])
@@ -151,3 +158,43 @@ def test_translation_refuses_unsupported_input(acados_env, tmp_path):
         ac.build(py, ej, {"hessian": "gauss-newton", "suffix": "_gn"}, tmp_path)
     with pytest.raises(RuntimeError, match="unknown settings"):
         ac.build(py, ej, {"hessain": "exact"}, tmp_path)
+
+
+def test_timing_shift_and_qp_status_of_the_rti(acados_env, robot_export, robot_disc, robot_solution):
+    """The timing process's acados runner: the shift moves every stage of the iterate one
+    interval forward (read back through acados' getters), an RTI step with HPIPM's mode and
+    tolerance set at run time from the nominal solution at the initial state succeeds in
+    the iterations acados itself reports, and a QP iteration limit of 1 is a failure there
+    (acados' RTI returns success for a QP stopped at its limit)."""
+    from dopus_lab.timing import Acados, make_acados
+
+    ac, py, work = acados_env
+    nominal, _ = robot_solution
+    b = ac.build(py, robot_export, {"hessian": "gauss-newton", "integrator": "DISCRETE", "suffix": "_t_timing"}, work)
+    A = Acados(b["acados_lib_dir"], robot_disc.N, robot_disc.nx, robot_disc.nu)
+    r = make_acados(A, b, 10, 0.0, "gn", timers=False, qp={"mode": "SPEED", "tol": 1e-6, "ric_alg": 0})
+    r.start(robot_disc.x0, {"x": nominal.x, "u": nominal.u})
+    u, ok = r.feedback(robot_disc.x0)
+    assert ok and r.check()
+    status, iters = A.qp_stats(r.handle)
+    i = A.ct.c_int()
+    A.nlp_get(r.handle["config"], r.handle["solver"], b"qp_iter", A.ct.byref(i))
+    assert status == 0 and iters == i.value >= 1
+    np.testing.assert_allclose(u, nominal.u[0], atol=1e-4)
+    x0, u0 = (np.array(v) for v in A.traj(r.handle))
+    r.between()
+    x1, u1 = (np.array(v) for v in A.traj(r.handle))
+    np.testing.assert_array_equal(x1[:-1], x0[1:])
+    np.testing.assert_array_equal(x1[-1], x0[-1])
+    np.testing.assert_array_equal(u1[:-1], u0[1:])
+    np.testing.assert_array_equal(u1[-1], u0[-1])
+    A.free(r.handle)
+
+    b1 = dict(b, settings={**b["settings"], "qp_iter_max": 1})
+    r1 = make_acados(A, b1, 10, 0.0, "gn1", timers=False, qp={"mode": "BALANCE", "tol": 1e-10, "ric_alg": 0})
+    r1.start(robot_disc.x0, {"x": nominal.x, "u": nominal.u})
+    _u, ok_solve = r1.feedback(_disturbed(robot_disc))
+    assert ok_solve                        # acados' own status: success
+    status, iters = A.qp_stats(r1.handle)
+    assert iters == 1 and status != 0 and not r1.check()
+    A.free(r1.handle)

@@ -1,4 +1,4 @@
-"""Anytime DOPUS (docs/algorithm.md section 13): a budget per sampling instant.
+"""Anytime DOPUS (docs/algorithm.md section 14): a budget per sampling instant.
 
 - The C runtime against the Python reference with the same work budget (the deterministic
   unit: function evaluations 1, a QP solve N): the same extra iterations, the same stages,
@@ -156,7 +156,7 @@ def test_bad_budget_settings_are_refused(robot_disc, backend):
 
 
 def test_work_budget_bounds_every_instant(robot_disc, robot_solution):
-    """The worst case of a budget (docs/algorithm.md section 13): with a fixed M every instant
+    """The worst case of a budget (docs/algorithm.md section 14): with a fixed M every instant
     of a disturbed closed loop stays within its work budget (the feedback's QP, the instant's
     prepare and its extra iterations), and the budget is spent: a larger budget takes more
     extra iterations. One M = 1 iteration (84 units on the robot arm) is the plain iteration,

@@ -186,3 +186,61 @@ def test_acados_gets_the_starting_value_of_the_automatic_lm(robot_disc, robot_so
     assert lm > 0 and lm == pytest.approx(ref.lm, rel=1e-12)
     assert "no automatic Levenberg-Marquardt term" in said[0]
     assert acados_lm(prob, {"lm": 3e-4}, said.append) == 3e-4
+
+
+def test_bench_tracking_is_the_scenario_signal_of_each_loop(bench_result, second_disc):
+    """The tracking beside the headline ratios is the scenario's first scalar signal over
+    the timed steps of each setting's own closed loop: recomputed here from the kept states
+    and controls, which are the plant's (each state the generated model's step from the
+    one before under the control that was applied)."""
+    res, _work = bench_result
+    d = second_disc
+    name, fn = next(iter(d.scenario.closed_loop.signals.items()))
+    p = np.asarray(d.p0, float).reshape(-1, d.np)[0] if d.np else np.zeros(0)
+    for phase, runs in res["trajectories"].items():
+        for label, tr in runs.items():
+            x, u, skip = np.array(tr["x"]), np.array(tr["u"]), tr["skip"]
+            assert len(u) == len(x) - 1 == skip + 25
+            for i in range(len(u)):
+                phi = np.array(d.stage_eval(x[i], u[i], p)[0]).reshape(-1)
+                np.testing.assert_allclose(x[i + 1], phi, rtol=1e-12, atol=1e-12)
+            v = np.abs([float(np.asarray(fn(x[i], u[i], p)).reshape(-1)[0]) for i in range(skip, len(u))])
+            rec = res["tracking"][phase][label]
+            assert rec["signal"] == name
+            assert rec["rms"] == pytest.approx(float(np.sqrt(np.mean(v ** 2))), rel=1e-12)
+            assert rec["max"] == pytest.approx(float(v.max()), rel=1e-12)
+        head = res["headline"][phase]["M=1 / our full RTI"]["tracking"]
+        assert head == {"M=1": res["tracking"][phase]["M=1"], "full RTI": res["tracking"][phase]["full RTI"]}
+
+
+def test_headline_gives_no_ratio_for_a_pair_with_a_qp_failure():
+    """A ratio only between settings without a QP failure in any timed phase; ours at its
+    default tolerance and at acados' (the matched runs)."""
+    from dopus_lab.bench import headline
+
+    def rec(med, fails):
+        return {"total_us": {"median": med}, "feedback_us": {"median": med / 2}, "qp_failures": fails}
+
+    result = {"N": 10, "timed": {
+        "operating point": {"M=1": rec(100.0, 0), "full RTI": rec(200.0, 0), "M=1 qp_tol 1e-06": rec(80.0, 0),
+                            "full RTI qp_tol 1e-06": rec(150.0, 0), "acados GN fastest working": rec(400.0, 0),
+                            "acados exact fastest working": rec(300.0, 0)},
+        "closed loop": {"M=1": rec(110.0, 0), "full RTI": rec(220.0, 0), "M=1 qp_tol 1e-06": rec(88.0, 0),
+                        "full RTI qp_tol 1e-06": rec(165.0, 0), "acados GN fastest working": rec(440.0, 0),
+                        "acados exact fastest working": rec(330.0, 1)}},
+        "acados_picks": {"acados GN fastest working": {"label": "GN", "qp": {"tol": 1e-6}},
+                         "acados exact fastest working": {"label": "exact", "qp": {"tol": 1e-6}}},
+        "matched_runs": {"M=1 qp_tol 1e-06": {"of": "M=1", "qp_tol": 1e-6},
+                         "full RTI qp_tol 1e-06": {"of": "full RTI", "qp_tol": 1e-6}}}
+    for phase, scale in (("operating point", 1.0), ("closed loop", 1.1)):
+        h = headline(result)[phase]
+        assert h["M=1 / our full RTI"]["ratio"] == pytest.approx(0.5)
+        assert h["M=1 / acados fastest working GN RTI (each at its defaults)"]["ratio"] == pytest.approx(0.25)
+        assert h["M=1 / acados fastest working GN RTI (equal QP tolerance 1e-06)"]["ratio"] == pytest.approx(0.2)
+        for name in ("our full RTI / acados fastest working exact RTI (each at its defaults)",
+                     "our full RTI / acados fastest working exact RTI (equal QP tolerance 1e-06)",
+                     "M=1 / acados fastest working RTI"):
+            row = h[name]
+            # the exact-Hessian setting failed a QP in the closed loop: no ratio in any phase
+            assert "ratio" not in row and row["failed"]["acados exact fastest working"] == 1, (phase, name)
+        assert h["feedback latency (us, median)"]["M=1"] == pytest.approx(50.0 * scale)

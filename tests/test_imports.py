@@ -15,7 +15,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 #: The layers of the product, bottom up; a module may import its own layer and those below.
 LAYERS = (
-    ("dopus_codegen/__init__.py", "dopus_codegen/paths.py", "dopus_codegen/cnames.py", "dopus_codegen/outputs.py"),
+    ("dopus_codegen/__init__.py", "dopus_codegen/paths.py", "dopus_codegen/cnames.py", "dopus_codegen/outputs.py",
+     "dopus_codegen/interrupt.py"),
     ("dopus_codegen/vocabulary.py",),
     ("dopus_codegen/errors.py", "dopus_codegen/settings.py"),
     ("dopus_codegen/problem/",),

@@ -190,7 +190,7 @@ class ReferenceDopus:
         self.scales = self._compute_scales()
         self._xhat_last = np.asarray(disc.x0, float).reshape(self.nx).copy()
         self._reset_health(np.asarray(disc.initial_guess.u, float).reshape(self.N, self.n_u))
-        # section 13: the anytime budget (off), adaptive M (off), the work counter
+        # section 14: the anytime budget (off), adaptive M (off), the work counter
         self.budget_unit, self.budget = s.budget_unit, s.budget
         self.anytime_tol = ANYTIME_TOL if s.anytime_tol is None else s.anytime_tol
         self.set_M_adaptive(s.M_adaptive, s.M_min, s.M_max, s.M_eta)
@@ -264,7 +264,7 @@ class ReferenceDopus:
         """``(np,)`` for every node or ``(N+1, np)``; used from the next evaluation on."""
         self.p = node_parameters(self.disc, p)
 
-    # ------------------------------------------------------------------ section 13: anytime
+    # ------------------------------------------------------------------ section 14: anytime
     def set_work_budget(self, units) -> None:
         """The budget per sampling instant in work units (function evaluations 1, a QP solve
         N); 0 switches it off."""
@@ -284,7 +284,7 @@ class ReferenceDopus:
         self.anytime_tol = _setting(settings.positive, "anytime_tol", tol)
 
     def set_M_adaptive(self, on: bool = True, M_min: int = 0, M_max=None, eta=None) -> None:
-        """Adaptive M (section 13): the stages whose secant residual ``rho_k |domega_k|``
+        """Adaptive M (section 14): the stages whose secant residual ``rho_k |domega_k|``
         exceeds ``eta`` times the KKT proxy, between ``M_min`` and ``M_max``."""
         M_max = self.N - 1 if M_max is None else M_max
         eta = float(_SAFETY["ADAPTIVE_ETA"]) if eta is None else eta
@@ -531,7 +531,7 @@ class ReferenceDopus:
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
         if not self._prepared_extra:
-            # after extra iterations the term the prepare convexified stays (section 13)
+            # after extra iterations the term the prepare convexified stays (section 14)
             self._lm_measured(xhat0)
         xhat_prev = self._xhat_last
         self._xhat_last = xhat0.copy()
@@ -877,7 +877,7 @@ class ReferenceDopus:
 
     def _M_now(self, slots, rho) -> int:
         """The number of stages to re-linearise before the budget: N-1 after a recovery, the
-        fixed M, or adaptive M (section 13)."""
+        fixed M, or adaptive M (section 14)."""
         if self._recovering > 0:
             return self.N - 1
         if not self.M_adaptive:
@@ -907,7 +907,7 @@ class ReferenceDopus:
         """Step 4: fresh H for the stale stages (:meth:`_stale`), then among the other stages
         of 0..N-2 for the M with the largest rho (ties: lower index), then with a budget for
         further stages in rho order while one more iteration still fits after them, each while
-        the budget allows (section 13). Returns the stages and the cost of those beyond M."""
+        the budget allows (section 14). Returns the stages and the cost of those beyond M."""
         stale = [k for k in range(self.N - 1) if self._stale(slots, k)]
         order = sorted((k for k in range(self.N - 1) if k not in stale), key=lambda i: (-rho[i], i))
         M = self._M_now(slots, rho)

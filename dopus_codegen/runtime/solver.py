@@ -136,7 +136,7 @@ def load_library(folder) -> tuple:
     return ffi, lib, meta
 
 
-#: enum dopus_budget_unit (runtime_c/dopus_solver.h, docs/algorithm.md section 13)
+#: enum dopus_budget_unit (runtime_c/dopus_solver.h, docs/algorithm.md section 14)
 BUDGET_UNITS = {"time": 1, "work": 2}
 
 
@@ -468,7 +468,7 @@ class Solver:
             self._bad(f"qp_warm_start must be True or False, got {on!r}")
         self._update("qp_warm_start", qp_warm_start=int(bool(on)))
 
-    # ------------------------------------------------------------------ anytime (section 13)
+    # ------------------------------------------------------------------ anytime (section 14)
     def set_time_budget(self, seconds) -> None:
         """The budget per sampling instant in seconds of the solver's clock (0: off)."""
         v = self._setting(settings.nonnegative, "time_budget", seconds)
@@ -484,7 +484,7 @@ class Solver:
         self._update("anytime_tol", anytime_tol=self._positive(tol, "anytime_tol"))
 
     def set_M_adaptive(self, on: bool = True, M_min: int = 0, M_max=None, eta=None) -> None:
-        """Adaptive M (section 13): the stages whose secant residual ``rho_k |domega_k|``
+        """Adaptive M (section 14): the stages whose secant residual ``rho_k |domega_k|``
         exceeds ``eta`` times the KKT proxy, between ``M_min`` and ``M_max``."""
         from ..reference.dopus import check_adaptive_M
 

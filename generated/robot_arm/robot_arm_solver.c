@@ -97,7 +97,7 @@ static int robot_arm_phase(robot_arm_solver *s, int phase)
 
 static int robot_arm_has_clock(const robot_arm_solver *s);
 
-/* ---- the anytime budget (algorithm.md section 13) --------------------------------------- */
+/* ---- the anytime budget (algorithm.md section 14) --------------------------------------- */
 
 /* 1 when a budget is set (a time budget needs a clock). */
 static int robot_arm_budget_on(const robot_arm_solver *s)
@@ -738,7 +738,7 @@ static void robot_arm_feedback_measure(robot_arm_solver *s, const robot_arm_real
     if (!s->anytime.prepared_extra) {
         /* (after extra iterations the term the prepare convexified stays: the iterate has
          * converged at the predicted state and the capped term, 0 there, left QPs that are
-         * convex only on the active bounds; algorithm.md section 13) */
+         * convex only on the active bounds; algorithm.md section 14) */
         robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
@@ -759,7 +759,7 @@ static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm)
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
     if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
-        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 13) */
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 14) */
     }
     settings.warm_start = warm;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
@@ -940,7 +940,7 @@ static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *
 }
 
 /* Feedback once admitted (steps 2 to 8). */
-/* The bounded latency of a time budget (algorithm.md section 13): the QP's iterations are
+/* The bounded latency of a time budget (algorithm.md section 14): the QP's iterations are
  * capped at the budget left over the cost of one QP iteration of the last feedback (at least
  * 1); a QP stopped by the cap is not retried (the fallback control). */
 static void robot_arm_feedback_cap(robot_arm_solver *s)
@@ -1110,7 +1110,7 @@ static robot_arm_real robot_arm_step_norm(const robot_arm_solver *s, int k)
 }
 
 /* The number of stages among 0..N-2 to re-linearise (before the budget): N-1 after a
- * recovery, the fixed M, or adaptive M (algorithm.md section 13): the stages whose secant
+ * recovery, the fixed M, or adaptive M (algorithm.md section 14): the stages whose secant
  * residual rho_k |domega_k| exceeds eta times the KKT proxy of the point before the step,
  * between M_min and M_max. */
 static int robot_arm_M_now(const robot_arm_solver *s)
@@ -1147,7 +1147,7 @@ static int robot_arm_next_worst(const robot_arm_solver *s)
 /* Step 4: re-linearise the stale stages (robot_arm_stale_stage), then among the other stages of
  * 0..N-2 those with the largest rho_k: M of them (robot_arm_M_now), then, with a budget,
  * further stages in rho order while one more iteration still fits after them
- * (algorithm.md section 13); each only while the budget allows. The cost of the stages
+ * (algorithm.md section 14); each only while the budget allows. The cost of the stages
  * beyond M goes to *ext_cost. */
 static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost)
 {
@@ -1417,7 +1417,7 @@ int robot_arm_prepare(robot_arm_solver *s)
         rc = robot_arm_prepare_iteration(s, 0);
     }
     if (rc == ROBOT_ARM_OK) {
-        /* the budget left (algorithm.md section 13), with the Hessian of the recovery phase */
+        /* the budget left (algorithm.md section 14), with the Hessian of the recovery phase */
         if (s->health.recovering > 0 && ROBOT_ARM_HAS_GN) {
             s->settings.hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
         }
@@ -1435,7 +1435,7 @@ int robot_arm_prepare(robot_arm_solver *s)
 }
 
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
- * anytime budget (section 13), without the shift, x_N kept. */
+ * anytime budget (section 14), without the shift, x_N kept. */
 static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 {
     robot_arm_real xN_saved[ROBOT_ARM_NX];
@@ -1549,7 +1549,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     return ROBOT_ARM_OK;
 }
 
-/* ---- anytime (algorithm.md section 13) -------------------------------------------------- */
+/* ---- anytime (algorithm.md section 14) -------------------------------------------------- */
 
 /* One extra iteration on the next instant's problem: the prepared QP for the state the plan
  * predicts (dx_0 = 0), its full step, then a prepare iteration without the shift. A QP not
@@ -1564,7 +1564,7 @@ static int robot_arm_extra_iteration(robot_arm_solver *s)
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
     /* the cap of the term while the extra iterations make progress; after one of them raised
-     * the KKT proxy, the term the prepare convexified (algorithm.md section 13) */
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 14) */
     if (!s->anytime.uncapped) {
         robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
@@ -1584,7 +1584,7 @@ static int robot_arm_extra_iteration(robot_arm_solver *s)
     return rc;
 }
 
-/* The budget left after prepare (algorithm.md section 13): extra iterations while the KKT
+/* The budget left after prepare (algorithm.md section 14): extra iterations while the KKT
  * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
  * of robot_arm_info. */
 static int robot_arm_anytime_run(robot_arm_solver *s)

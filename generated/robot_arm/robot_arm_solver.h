@@ -78,7 +78,7 @@ const char *robot_arm_status_string(int status);
  * finite is handled as a missing one (ROBOT_ARM_ERR_NONFINITE_VALUE,
  * ROBOT_ARM_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
  * records its measurement, so the recovery starts from the newest one; 0: off.
- * Anytime DOPUS (section 13): budget > 0 per sampling instant, counted from the start of
+ * Anytime DOPUS (section 14): budget > 0 per sampling instant, counted from the start of
  * the instant's feedback, in budget_unit ROBOT_ARM_BUDGET_TIME (seconds of the solver's clock,
  * robot_arm_set_clock: on firmware an instruction or cycle counter; without a clock the budget
  * is off) or ROBOT_ARM_BUDGET_WORK (work units: stage_grad, stage_hess, term_grad and term_hess
@@ -235,7 +235,7 @@ typedef struct {
     double timings[10];
     double t_feedback;
     double t_prepare;
-    /* anytime DOPUS (section 13), the last instant: extra iterations after prepare, stages
+    /* anytime DOPUS (section 14), the last instant: extra iterations after prepare, stages
      * re-linearised over all its iterations (stage N-1 not counted), budget used (its unit);
      * the work units counted since setup */
     int extra_iterations;
@@ -331,13 +331,13 @@ enum robot_arm_mode {
 
 enum robot_arm_hessian { ROBOT_ARM_HESSIAN_EXACT = 0, ROBOT_ARM_HESSIAN_GAUSS_NEWTON = 1 };
 
-/* Units of the anytime budget (docs/algorithm.md section 13). */
+/* Units of the anytime budget (docs/algorithm.md section 14). */
 enum robot_arm_budget_unit {
     ROBOT_ARM_BUDGET_TIME = 1, /* seconds of the solver's clock */
     ROBOT_ARM_BUDGET_WORK = 2  /* work units: function evaluations 1, a QP solve N */
 };
 
-/* Anytime constants (docs/algorithm.md section 13). */
+/* Anytime constants (docs/algorithm.md section 14). */
 #define ROBOT_ARM_ANYTIME_TOL ROBOT_ARM_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
 #define ROBOT_ARM_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
 #define ROBOT_ARM_ADAPTIVE_ETA ROBOT_ARM_R(0.1)          /* default eta of adaptive M */
@@ -385,7 +385,7 @@ typedef union {
     } ev;
 } robot_arm_solver_mem;
 
-/* The bookkeeping of the anytime budget (algorithm.md section 13); costs in the budget's unit. */
+/* The bookkeeping of the anytime budget (algorithm.md section 14); costs in the budget's unit. */
 typedef struct {
     double work;          /* work units counted since setup */
     double instant_start; /* the budget clock at the start of the instant's feedback */
@@ -458,7 +458,7 @@ struct robot_arm_solver {
     robot_arm_lm lm;         /* the Levenberg-Marquardt term (sections 3 and 10) */
     robot_arm_real kkt[4];   /* KKT parts of the last robot_arm_kkt_eval: stat, eq, ineq, comp */
     robot_arm_timer timer;
-    robot_arm_anytime anytime; /* the budget's bookkeeping (section 13) */
+    robot_arm_anytime anytime; /* the budget's bookkeeping (section 14) */
 };
 
 #endif /* ROBOT_ARM_SOLVER_H */

@@ -40,7 +40,7 @@ const char *unicycle_status_string(int status);
  * finite is handled as a missing one (UNICYCLE_ERR_NONFINITE_VALUE,
  * UNICYCLE_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
  * records its measurement, so the recovery starts from the newest one; 0: off.
- * Anytime DOPUS (section 13): budget > 0 per sampling instant, counted from the start of
+ * Anytime DOPUS (section 14): budget > 0 per sampling instant, counted from the start of
  * the instant's feedback, in budget_unit UNICYCLE_BUDGET_TIME (seconds of the solver's clock,
  * unicycle_set_clock: on firmware an instruction or cycle counter; without a clock the budget
  * is off) or UNICYCLE_BUDGET_WORK (work units: stage_grad, stage_hess, term_grad and term_hess
@@ -197,7 +197,7 @@ typedef struct {
     double timings[10];
     double t_feedback;
     double t_prepare;
-    /* anytime DOPUS (section 13), the last instant: extra iterations after prepare, stages
+    /* anytime DOPUS (section 14), the last instant: extra iterations after prepare, stages
      * re-linearised over all its iterations (stage N-1 not counted), budget used (its unit);
      * the work units counted since setup */
     int extra_iterations;

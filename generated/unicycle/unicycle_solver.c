@@ -97,7 +97,7 @@ static int unicycle_phase(unicycle_solver *s, int phase)
 
 static int unicycle_has_clock(const unicycle_solver *s);
 
-/* ---- the anytime budget (algorithm.md section 13) --------------------------------------- */
+/* ---- the anytime budget (algorithm.md section 14) --------------------------------------- */
 
 /* 1 when a budget is set (a time budget needs a clock). */
 static int unicycle_budget_on(const unicycle_solver *s)
@@ -738,7 +738,7 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
     if (!s->anytime.prepared_extra) {
         /* (after extra iterations the term the prepare convexified stays: the iterate has
          * converged at the predicted state and the capped term, 0 there, left QPs that are
-         * convex only on the active bounds; algorithm.md section 13) */
+         * convex only on the active bounds; algorithm.md section 14) */
         unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
@@ -759,7 +759,7 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm)
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
     if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
-        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 13) */
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 14) */
     }
     settings.warm_start = warm;
     for (k = 0; k < UNICYCLE_N; ++k) {
@@ -940,7 +940,7 @@ static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
 }
 
 /* Feedback once admitted (steps 2 to 8). */
-/* The bounded latency of a time budget (algorithm.md section 13): the QP's iterations are
+/* The bounded latency of a time budget (algorithm.md section 14): the QP's iterations are
  * capped at the budget left over the cost of one QP iteration of the last feedback (at least
  * 1); a QP stopped by the cap is not retried (the fallback control). */
 static void unicycle_feedback_cap(unicycle_solver *s)
@@ -1110,7 +1110,7 @@ static unicycle_real unicycle_step_norm(const unicycle_solver *s, int k)
 }
 
 /* The number of stages among 0..N-2 to re-linearise (before the budget): N-1 after a
- * recovery, the fixed M, or adaptive M (algorithm.md section 13): the stages whose secant
+ * recovery, the fixed M, or adaptive M (algorithm.md section 14): the stages whose secant
  * residual rho_k |domega_k| exceeds eta times the KKT proxy of the point before the step,
  * between M_min and M_max. */
 static int unicycle_M_now(const unicycle_solver *s)
@@ -1147,7 +1147,7 @@ static int unicycle_next_worst(const unicycle_solver *s)
 /* Step 4: re-linearise the stale stages (unicycle_stale_stage), then among the other stages of
  * 0..N-2 those with the largest rho_k: M of them (unicycle_M_now), then, with a budget,
  * further stages in rho order while one more iteration still fits after them
- * (algorithm.md section 13); each only while the budget allows. The cost of the stages
+ * (algorithm.md section 14); each only while the budget allows. The cost of the stages
  * beyond M goes to *ext_cost. */
 static int unicycle_relinearise(unicycle_solver *s, double *ext_cost)
 {
@@ -1417,7 +1417,7 @@ int unicycle_prepare(unicycle_solver *s)
         rc = unicycle_prepare_iteration(s, 0);
     }
     if (rc == UNICYCLE_OK) {
-        /* the budget left (algorithm.md section 13), with the Hessian of the recovery phase */
+        /* the budget left (algorithm.md section 14), with the Hessian of the recovery phase */
         if (s->health.recovering > 0 && UNICYCLE_HAS_GN) {
             s->settings.hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
         }
@@ -1435,7 +1435,7 @@ int unicycle_prepare(unicycle_solver *s)
 }
 
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
- * anytime budget (section 13), without the shift, x_N kept. */
+ * anytime budget (section 14), without the shift, x_N kept. */
 static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 {
     unicycle_real xN_saved[UNICYCLE_NX];
@@ -1549,7 +1549,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     return UNICYCLE_OK;
 }
 
-/* ---- anytime (algorithm.md section 13) -------------------------------------------------- */
+/* ---- anytime (algorithm.md section 14) -------------------------------------------------- */
 
 /* One extra iteration on the next instant's problem: the prepared QP for the state the plan
  * predicts (dx_0 = 0), its full step, then a prepare iteration without the shift. A QP not
@@ -1564,7 +1564,7 @@ static int unicycle_extra_iteration(unicycle_solver *s)
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
     /* the cap of the term while the extra iterations make progress; after one of them raised
-     * the KKT proxy, the term the prepare convexified (algorithm.md section 13) */
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 14) */
     if (!s->anytime.uncapped) {
         unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
@@ -1584,7 +1584,7 @@ static int unicycle_extra_iteration(unicycle_solver *s)
     return rc;
 }
 
-/* The budget left after prepare (algorithm.md section 13): extra iterations while the KKT
+/* The budget left after prepare (algorithm.md section 14): extra iterations while the KKT
  * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
  * of unicycle_info. */
 static int unicycle_anytime_run(unicycle_solver *s)
