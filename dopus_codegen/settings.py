@@ -27,7 +27,7 @@ from typing import Any, Callable, Dict, Mapping, Optional, Tuple
 
 from . import vocabulary
 
-__all__ = ["SettingError", "Setting", "TABLE", "Settings", "of_problem", "DEFAULTS", "SOLVER_SETTINGS", "FILE_SETTINGS",
+__all__ = ["SettingError", "Setting", "check_adaptive_M", "TABLE", "Settings", "of_problem", "DEFAULTS", "SOLVER_SETTINGS", "FILE_SETTINGS",
            "choices", "code", "value_of", "check", "positive", "nonnegative", "count", "resolve", "stages",
            "RUNTIME_SETTINGS", "HELP", "kind", "validate", "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT",
            "parse_m_list", "CAMPAIGN_SETTINGS", "mismatch_table", "REALS", "QP_TOL_DEFAULT", "qp_tol_default",
@@ -485,3 +485,13 @@ def parse_m_list(text: Any) -> list:
         else:
             raise SettingError(f"'{item}' is neither a non-negative integer nor 'full'")
     return out
+
+
+def check_adaptive_M(on, M_min, M_max, eta, N):
+    """(on, M_min, M_max, eta) of adaptive M, checked: 0 <= M_min <= M_max <= N-1, eta > 0
+    (:class:`SettingError` otherwise); shared by both backends."""
+    if not isinstance(on, bool) and on not in (0, 1):
+        raise SettingError(f"adaptive M: on must be True or False, got {on!r}")
+    M_min = count("M_min", M_min)
+    M_max = count("M_max", M_max, M_min, N - 1)
+    return bool(on), M_min, M_max, positive("eta", eta)

@@ -33,7 +33,7 @@ import numpy as np
 
 from .. import settings, vocabulary
 from ..errors import DopusError, qp_status_code as status_code_qp, status_code
-from ..settings import SettingError, Settings, of_problem as settings_of_problem
+from ..settings import SettingError, Settings, check_adaptive_M, of_problem as settings_of_problem
 from .kkt import eval_stages, kkt_measure, node_parameters
 from ..problem.checks import describe_qp_row
 from .qp import QPError, free_initial_state, solve_qp_reference
@@ -51,16 +51,6 @@ _SAFETY = vocabulary.constants()
 
 #: Default KKT-proxy target of the anytime iterations (DOPUS_ANYTIME_TOL, double).
 ANYTIME_TOL = float(_SAFETY["ANYTIME_TOL"])
-
-
-def check_adaptive_M(on, M_min, M_max, eta, N):
-    """(on, M_min, M_max, eta) of adaptive M, checked: 0 <= M_min <= M_max <= N-1, eta > 0
-    (:class:`SettingError` otherwise); shared by both backends."""
-    if not isinstance(on, (bool, np.bool_)) and on not in (0, 1):
-        raise SettingError(f"adaptive M: on must be True or False, got {on!r}")
-    M_min = settings.count("M_min", M_min)
-    M_max = settings.count("M_max", M_max, M_min, N - 1)
-    return bool(on), M_min, M_max, settings.positive("eta", eta)
 
 
 # Round-off floor of the secant residual (docs/algorithm.md section 4 step 2): rho_k = 0

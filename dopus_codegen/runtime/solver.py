@@ -486,11 +486,10 @@ class Solver:
     def set_M_adaptive(self, on: bool = True, M_min: int = 0, M_max=None, eta=None) -> None:
         """Adaptive M (section 14): the stages whose secant residual ``rho_k |domega_k|``
         exceeds ``eta`` times the KKT proxy, between ``M_min`` and ``M_max``."""
-        from ..reference.dopus import check_adaptive_M
 
         M_max = self.N - 1 if M_max is None else M_max
         eta = float(vocabulary.constants()["ADAPTIVE_ETA"]) if eta is None else eta
-        on, M_min, M_max, eta = self._setting(check_adaptive_M, on, M_min, M_max, eta, self.N)
+        on, M_min, M_max, eta = self._setting(settings.check_adaptive_M, on, M_min, M_max, eta, self.N)
         self._update("M_adaptive", M_adaptive=int(on), M_min=M_min, M_max=M_max, M_eta=eta)
 
     @property
