@@ -21,31 +21,10 @@ import numpy as np
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from harness.faults import KINDS, model_plant, run_case  # noqa: E402
+from harness.faults import KINDS, Handle, model_plant, run_case  # noqa: E402
 
 from dopus_codegen import build_functions, load_ocp  # noqa: E402
 from dopus_codegen.reference.offline import solve_ocp  # noqa: E402
-from dopus_codegen.runtime.solver import CSolver  # noqa: E402
-
-
-class _Handle:
-    def __init__(self, arm, guess, M, budget=0.0):
-        self.s, self.guess = CSolver(arm, lm=None, M=M), guess
-        if budget > 0:
-            self.s.set_work_budget(budget)
-
-    def init(self, x):
-        self.s.init(x, self.guess)
-
-    def feedback(self, x):
-        return self.s.feedback(x)
-
-    def prepare(self):
-        self.s.prepare()
-
-    @property
-    def recoveries(self):
-        return self.s.recoveries
 
 
 def main(ks, Ms=(1, "full"), budget=0.0):
@@ -58,7 +37,7 @@ def main(ks, Ms=(1, "full"), budget=0.0):
     for M in Ms:
         m = arm.N - 1 if M == "full" else M
         for kind in KINDS:
-            runs = [run_case(lambda: _Handle(arm, guess, m, budget), plant, arm.x0, kind, K) for K in ks]
+            runs = [run_case(lambda: Handle(arm, guess, m, budget), plant, arm.x0, kind, K) for K in ks]
             for r in runs:
                 r["M"] = M
             rows += runs
