@@ -6,7 +6,9 @@ fault, the latest such instant, the runs back within 1 cm of the path within 150
 the median and largest instant at which they are back, the largest tip deviation after the
 fault. Writes bench/results/fault_suite.json.
 
-    .venv/bin/python bench/fault_suite.py [K ...]
+    .venv/bin/python bench/fault_suite.py [--M 1,full] [--budget UNITS] [K ...]
+
+--budget: a work budget per instant (anytime DOPUS, docs/algorithm.md section 14; 0: none).
 """
 from __future__ import annotations
 
@@ -19,47 +21,28 @@ import numpy as np
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from harness.faults import KINDS, model_plant, run_case  # noqa: E402
+from harness.faults import KINDS, Handle, model_plant, run_case  # noqa: E402
 
 from dopus_codegen import build_functions, load_ocp  # noqa: E402
 from dopus_codegen.reference.offline import solve_ocp  # noqa: E402
-from dopus_codegen.runtime.solver import CSolver  # noqa: E402
 
 
-class _Handle:
-    def __init__(self, arm, guess, M):
-        self.s, self.guess = CSolver(arm, lm=None, M=M), guess
-
-    def init(self, x):
-        self.s.init(x, self.guess)
-
-    def feedback(self, x):
-        return self.s.feedback(x)
-
-    def prepare(self):
-        self.s.prepare()
-
-    @property
-    def recoveries(self):
-        return self.s.recoveries
-
-
-def main(ks):
+def main(ks, Ms=(1, "full"), budget=0.0):
     arm = build_functions(load_ocp(ROOT / "examples" / "robot_arm.py"))
     guess, _ = solve_ocp(arm, arm.x0)
     plant = model_plant(arm)
     rows, table = [], []
     print(f"{'M':>4} {'kind':>13} {'runs':>4} {'failed after':>12} {'latest':>6} {'back':>5} "
           f"{'median':>6} {'max':>4} {'max dev [m]':>11}")
-    for M in (1, "full"):
+    for M in Ms:
         m = arm.N - 1 if M == "full" else M
         for kind in KINDS:
-            runs = [run_case(lambda: _Handle(arm, guess, m), plant, arm.x0, kind, K) for K in ks]
+            runs = [run_case(lambda: Handle(arm, guess, m, budget), plant, arm.x0, kind, K) for K in ks]
             for r in runs:
                 r["M"] = M
             rows += runs
             back = [r["back"] for r in runs if r["back"] is not None]
-            row = {"M": M, "kind": kind, "runs": len(runs),
+            row = {"M": M, "budget": budget, "kind": kind, "runs": len(runs),
                    "failed_after": sum(r["n_failed_after"] > 0 for r in runs),
                    "latest_failed": max(r["last_failed_after"] for r in runs),
                    "back": len(back), "back_median": float(np.median(back)) if back else None,
@@ -75,4 +58,11 @@ def main(ks):
 
 
 if __name__ == "__main__":
-    main([int(a) for a in sys.argv[1:]] or list(range(1, 41)))
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--M", default="1,full", help="comma-separated M values (an integer or 'full')")
+    ap.add_argument("--budget", type=float, default=0.0, help="work units per instant (0: no budget)")
+    ap.add_argument("K", nargs="*", type=int, help="numbers of consecutive faulty instants (default 1..40)")
+    a = ap.parse_args()
+    main(a.K or list(range(1, 41)), [m if m == "full" else int(m) for m in a.M.split(",")], a.budget)

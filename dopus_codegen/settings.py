@@ -27,7 +27,7 @@ from typing import Any, Callable, Dict, Mapping, Optional, Tuple
 
 from . import vocabulary
 
-__all__ = ["SettingError", "Setting", "TABLE", "Settings", "of_problem", "DEFAULTS", "SOLVER_SETTINGS", "FILE_SETTINGS",
+__all__ = ["SettingError", "Setting", "check_adaptive_M", "TABLE", "Settings", "of_problem", "DEFAULTS", "SOLVER_SETTINGS", "FILE_SETTINGS",
            "choices", "code", "value_of", "check", "positive", "nonnegative", "count", "resolve", "stages",
            "RUNTIME_SETTINGS", "HELP", "kind", "validate", "SOURCE_CLI", "SOURCE_FILE", "SOURCE_DEFAULT",
            "parse_m_list", "CAMPAIGN_SETTINGS", "mismatch_table", "REALS", "QP_TOL_DEFAULT", "qp_tol_default",
@@ -65,7 +65,7 @@ def check_real(value: Any) -> str:
         raise SettingError(f"real must be {_quote_list(list(REALS))}, got {value!r}")
     return value
 
-_ENUMS = {"hessian": "dopus_hessian", "regularization": "dopus_regularization", "mode": "dopus_mode"}
+_ENUMS = {"budget_unit": "dopus_budget_unit", "hessian": "dopus_hessian", "regularization": "dopus_regularization", "mode": "dopus_mode"}
 _COST_HESSIAN = {"stored": 0, "fresh": 1}
 
 
@@ -277,6 +277,22 @@ TABLE: Tuple[Setting, ...] = (
             "Not given: the QP solver's own limit.", flag=True),
     Setting("mode", "choice", lambda v: check("mode", v), "receding",
             "receding: shift by one sampling interval in every prepare; fixed: no shift."),
+    Setting("budget", "nonnegative", lambda v: nonnegative("budget", v), 0.0,
+            "Anytime budget per sampling instant (0: none): the time left after prepare goes to more "
+            "re-linearised stages and SQP iterations at the predicted state (docs/algorithm.md section 14).",
+            flag=True),
+    Setting("budget_unit", "choice", lambda v: check("budget_unit", v), "time",
+            "Unit of the budget: time (seconds of the solver's clock) or work (a function evaluation 1, a QP "
+            "solve N; deterministic).", flag=True),
+    Setting("anytime_tol", "positive", lambda v: positive("anytime_tol", v), None,
+            "KKT proxy below which the budget takes no further iteration. Not given: the runtime's (1e-8, float "
+            "2e-5).", flag=True),
+    Setting("M_adaptive", "flag", lambda v: _flag("M_adaptive", v), False,
+            "Adaptive M: each iteration re-linearises the stages whose secant residual exceeds M_eta times the "
+            "KKT proxy, between M_min and M_max (docs/algorithm.md section 14)."),
+    Setting("M_min", "count", lambda v: count("M_min", v), 0, "Fewest stages of adaptive M."),
+    Setting("M_max", "count", lambda v: count("M_max", v), None, "Most stages of adaptive M (not given: N-1)."),
+    Setting("M_eta", "positive", lambda v: positive("M_eta", v), 0.1, "Threshold of adaptive M."),
     Setting("real", "choice", lambda v: check_real(v), "double",
             "Real-number type of the generated C (runtime, glue and CasADi functions): double or float.",
             scope="generation", file=True),
@@ -469,3 +485,13 @@ def parse_m_list(text: Any) -> list:
         else:
             raise SettingError(f"'{item}' is neither a non-negative integer nor 'full'")
     return out
+
+
+def check_adaptive_M(on, M_min, M_max, eta, N):
+    """(on, M_min, M_max, eta) of adaptive M, checked: 0 <= M_min <= M_max <= N-1, eta > 0
+    (:class:`SettingError` otherwise); shared by both backends."""
+    if not isinstance(on, bool) and on not in (0, 1):
+        raise SettingError(f"adaptive M: on must be True or False, got {on!r}")
+    M_min = count("M_min", M_min)
+    M_max = count("M_max", M_max, M_min, N - 1)
+    return bool(on), M_min, M_max, positive("eta", eta)

@@ -251,7 +251,7 @@ def _real(tok: str) -> float:
     raise FirmwareError(f"a real has 8 or 16 hexadecimal digits, got {tok!r}")
 
 
-_INT_FIELDS = ("M", "iter", "step", "status", "qp_iters", "ticks_feedback", "ticks_prepare", "stack")
+_INT_FIELDS = ("instructions", "extra", "stages", "M", "iter", "step", "status", "qp_iters", "ticks_feedback", "ticks_prepare", "stack")
 
 
 def _parse_record(tokens: List[str]) -> Dict[str, Any]:
@@ -279,7 +279,7 @@ def _parse_record(tokens: List[str]) -> Dict[str, Any]:
 
 def parse_output(text: str) -> Dict[str, Any]:
     """The records printed by fw_main.c: header, fixed runs per M, solutions, loop steps."""
-    out: Dict[str, Any] = {"fixed": {}, "solution": {}, "loop": [], "end": None}
+    out: Dict[str, Any] = {"fixed": {}, "solution": {}, "loop": [], "budget": [], "end": None}
     for line in text.splitlines():
         tokens = line.split()
         if not tokens:
@@ -295,6 +295,8 @@ def parse_output(text: str) -> Dict[str, Any]:
             out["solution"][rec["M"]] = rec
         elif kind == "loop":
             out["loop"].append(_parse_record(rest))
+        elif kind == "budget":
+            out["budget"].append(_parse_record(rest))
         elif kind == "end":
             out["end"] = _parse_record(rest)["status"]
         elif kind.startswith("firmware:"):
@@ -368,6 +370,16 @@ def summarize(target: str, build: Dict[str, Any], run: Dict[str, Any], N: int) -
         res["kkt"][label] = [r["kkt"] for r in recs]
     res["instructions"]["loop_M1"] = _instructions([dict(r, iter=r["step"]) for r in run["loop"]], per_tick)
     res["loop"] = [{"step": r["step"], "kkt": r["kkt"], "u0": r["u0"], "xhat": r["xhat"]} for r in run["loop"]]
+    # the budgeted closed loops (docs/algorithm.md section 14): instructions per instant
+    res["budget"] = {}
+    for b in sorted({r["instructions"] for r in run.get("budget", [])}):
+        recs = [r for r in run["budget"] if r["instructions"] == b]
+        tot = [(r["ticks_feedback"] + r["ticks_prepare"]) * per_tick for r in recs]
+        res["budget"][str(b)] = {"instant_median": statistics.median(tot), "instant_max": max(tot),
+                                 "extra_iterations": [r["extra"] for r in recs],
+                                 "failed": sum(1 for r in recs if r["status"] != 0),
+                                 "kkt_max": max(r["kkt"] for r in recs),
+                                 "xhat": [r["xhat"] for r in recs]}
     res["solution"] = {str(M): {"x": s["x"], "u": s["u"]} for M, s in run["solution"].items()}
     return res
 

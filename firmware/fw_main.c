@@ -16,6 +16,8 @@
  *    plant state at xhat_fixed; the plant is the generated integrator (the discrete model
  *    phi); FW_LOOP_STEPS steps of feedback, plant step with the returned u0 whatever the
  *    status (the closed-loop instant of sil and campaign), prepare.
+ * 3. The same closed loop with an anytime budget per instant (docs/algorithm.md section 14)
+ *    of FW_BUDGETS instructions on the instruction clock.
  *
  * Every real number is printed as the hexadecimal bit pattern of its IEEE representation
  * (16 digits for double, 8 for float): exact, and printed without newlib's printf, whose
@@ -269,6 +271,70 @@ static int closed_loop(void)
     return first_failure;
 }
 
+/* ---- the anytime budget (docs/algorithm.md section 14) on the firmware clock ------------ */
+
+/* The budgets of the budgeted closed loops, in instructions (0 ends the list). */
+#ifndef FW_BUDGETS
+#define FW_BUDGETS 10000000.0, 20000000.0, 0.0
+#endif
+static const double budgets[] = {FW_BUDGETS};
+
+/* The solver's clock on the firmware: the instructions executed (ticks of the board's
+ * timer times the instructions per tick under QEMU's -icount); on the host build, which has
+ * no ticks, it reads 0 (every budget then lasts: the host run is not compared). */
+static double instruction_clock(void *ctx)
+{
+    (void)ctx;
+    return (double)fw_ticks() * (double)FW_INSTRUCTIONS_PER_TICK;
+}
+
+/* The closed loop of closed_loop() with a time budget of `budget` instructions per instant
+ * on the instruction clock; lines "budget" with the extra iterations of each instant. */
+static int closed_loop_budget(double budget)
+{
+    fw_real xhat[FW_C(NX)], xnext[FW_C(NX)], u0[FW_C(NU)], k4[4];
+    int i, k, status, plant_ok = 1;
+    uint32_t t_fb, t_prep, stack;
+
+    FW(settings_default)(&settings);
+    settings.budget = budget;
+    settings.budget_unit = FW_C(BUDGET_TIME);
+    status = FW(setup)(&solver, &settings);
+    FW(set_clock)(&solver, instruction_clock, 0);
+    if (status == FW_C(OK)) {
+        status = FW(init_nominal)(&solver, FW(x0_default));
+    }
+    if (status != FW_C(OK)) {
+        return status;
+    }
+    for (i = 0; i < FW_C(NX); ++i) {
+        xhat[i] = xhat_fixed[i];
+    }
+    for (k = 1; k <= FW_LOOP_STEPS && plant_ok; ++k) {
+        status = iteration(xhat, u0, &t_fb, &t_prep, &stack);
+        if (FW(simulate)(xhat, u0, NULL, xnext, &plant_work) != FW_C(OK)) {
+            plant_ok = 0;
+            status = FW_C(ERR_FUNCTION);
+        }
+        if (status == FW_C(OK)) {
+            status = FW(kkt_eval)(&solver, xhat, k4);
+        }
+        FW(get_info)(&solver, &info);
+        put_str("budget");
+        put_field("instructions", (long)budget);
+        put_field("step", k);
+        put_field("extra", info.extra_iterations);
+        put_field("stages", info.instant_stages);
+        put_iteration(status, info.qp_iterations, t_fb, t_prep, stack, k4, u0);
+        put_reals("xhat", xhat, FW_C(NX));
+        end_line();
+        for (i = 0; i < FW_C(NX); ++i) {
+            xhat[i] = xnext[i];
+        }
+    }
+    return FW_C(OK);
+}
+
 int main(void)
 {
     unsigned i;
@@ -295,6 +361,9 @@ int main(void)
     }
     if (status == 0) {
         status = closed_loop();
+    }
+    for (i = 0; budgets[i] > 0.0 && status == 0; ++i) {
+        status = closed_loop_budget(budgets[i]);
     }
     put_str("end");
     put_field("status", status);

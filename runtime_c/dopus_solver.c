@@ -95,6 +95,47 @@ static int dopus_phase(dopus_solver *s, int phase)
     return dopus_timer_switch(&s->timer, phase);
 }
 
+static int dopus_has_clock(const dopus_solver *s);
+
+/* ---- the anytime budget (algorithm.md section 14) --------------------------------------- */
+
+/* 1 when a budget is set (a time budget needs a clock). */
+static int dopus_budget_on(const dopus_solver *s)
+{
+    return s->settings.budget > 0.0 && (s->settings.budget_unit == DOPUS_BUDGET_WORK || dopus_has_clock(s));
+}
+
+/* Now on the budget's clock: the work counter (work units) or the solver's clock; 0 without
+ * a budget (the clock is not read: the phase timers' reads stay theirs). */
+static double dopus_budget_now(const dopus_solver *s)
+{
+    if (!dopus_budget_on(s)) {
+        return 0.0;
+    }
+    if (s->settings.budget_unit == DOPUS_BUDGET_WORK) {
+        return s->anytime.work;
+    }
+    return s->timer.clock ? s->timer.clock(s->timer.ctx) : 0.0;
+}
+
+/* A cost measured now against the last estimate: in time, a reading above 1.1 times the
+ * estimate raises it by 10 % only (a reading taken while the process was descheduled is not
+ * the cost of the work; one such reading would otherwise cut the next QPs and stages); in
+ * work units the reading itself (exact). */
+static double dopus_cost(const dopus_solver *s, double estimate, double reading)
+{
+    if (s->settings.budget_unit == DOPUS_BUDGET_TIME && estimate > 0.0 && reading > 1.1 * estimate) {
+        return 1.1 * estimate;
+    }
+    return reading;
+}
+
+/* 1 without a budget, or when `cost` more still fits in the instant's budget. */
+static int dopus_budget_fits(const dopus_solver *s, double cost)
+{
+    return !dopus_budget_on(s) || dopus_budget_now(s) - s->anytime.instant_start + cost <= s->settings.budget;
+}
+
 /* ---- generic information ------------------------------------------------------------ */
 
 size_t dopus_solver_sizeof(void)
@@ -224,6 +265,7 @@ static int dopus_stage_F(dopus_solver *s, int k)
 {
     dopus_real l = DOPUS_R(0.0);
     int i;
+    s->anytime.work += 1.0;
     if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
@@ -306,7 +348,9 @@ static int dopus_stage_H_eval(dopus_solver *s, int k)
 static int dopus_stage_H(dopus_solver *s, int k)
 {
     int prev = dopus_phase(s, DOPUS_PHASE_HESSIANS);
-    int rc = dopus_stage_H_eval(s, k);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = dopus_stage_H_eval(s, k);
     dopus_phase(s, prev);
     return rc;
 }
@@ -332,7 +376,9 @@ static int dopus_term_grad_checked(dopus_solver *s, dopus_real *gL, dopus_real *
 static int dopus_term_F(dopus_solver *s)
 {
     dopus_real gL[DOPUS_NX], E = DOPUS_R(0.0), r[DOPUS_DIM(DOPUS_NR)], r_eq[DOPUS_DIM(DOPUS_NE)];
-    int rc = dopus_term_grad_checked(s, gL, &E, r, r_eq);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = dopus_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != DOPUS_OK) {
         return rc;
     }
@@ -370,7 +416,9 @@ static int dopus_term_H_eval(dopus_solver *s)
 static int dopus_term_H(dopus_solver *s)
 {
     int prev = dopus_phase(s, DOPUS_PHASE_HESSIANS);
-    int rc = dopus_term_H_eval(s);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = dopus_term_H_eval(s);
     dopus_phase(s, prev);
     return rc;
 }
@@ -493,6 +541,7 @@ static int dopus_linearize_all(dopus_solver *s)
 static int dopus_init_finish(dopus_solver *s)
 {
     int k, rc;
+    s->anytime.prepared_extra = 0;
     dopus_ring_reset(&s->ring);
     for (k = 0; k < DOPUS_N; ++k) {
         s->rho[k] = DOPUS_R(0.0);
@@ -694,7 +743,12 @@ static void dopus_feedback_measure(dopus_solver *s, const dopus_real *xhat0)
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->health.xhat_fresh = 1;
-    dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    if (!s->anytime.prepared_extra) {
+        /* (after extra iterations the term the prepare convexified stays: the iterate has
+         * converged at the predicted state and the capped term, 0 there, left QPs that are
+         * convex only on the active bounds; algorithm.md section 14) */
+        dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -712,6 +766,9 @@ static int dopus_qp_solve_bound(dopus_solver *s, int warm)
     dopus_qp_settings_default(&settings);
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
+    if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 14) */
+    }
     settings.warm_start = warm;
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
@@ -761,11 +818,13 @@ static int dopus_feedback_qp(dopus_solver *s)
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_cold_retry = 0;
+    s->anytime.work += DOPUS_WORK_QP;
     if (s->settings.qp_warm_start) {
         dopus_qp_warm_point(s);
     }
     qs = dopus_qp_attempt(s, s->settings.qp_warm_start);
     if (s->settings.qp_warm_start && qs != DOPUS_QP_INVALID_INPUT &&
+        !(qs == DOPUS_QP_MAX_ITER && s->anytime.qp_cap > 0) &&
         (!dopus_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = dopus_qp_attempt(s, 0);
@@ -780,8 +839,9 @@ static int dopus_feedback_lm_retries(dopus_solver *s, int qs, int *retries)
 {
     *retries = 0;
     while (*retries < DOPUS_LM_RETRIES && dopus_lm_can_raise(&s->lm) && !dopus_qp_ok(s, qs) &&
-           qs != DOPUS_QP_INVALID_INPUT) {
+           qs != DOPUS_QP_INVALID_INPUT && !(qs == DOPUS_QP_MAX_ITER && s->anytime.qp_cap > 0)) {
         dopus_lm_raise(&s->lm);
+        s->anytime.work += DOPUS_WORK_QP;
         s->qp_in.hess_shift = s->lm.lm;
         qs = dopus_qp_attempt(s, 0);
         *retries += 1;
@@ -888,15 +948,41 @@ static int dopus_model_finite_at(dopus_solver *s, const dopus_real *xs)
 }
 
 /* Feedback once admitted (steps 2 to 8). */
+/* The bounded latency of a time budget (algorithm.md section 14): the QP's iterations are
+ * capped at the budget left over the cost of one QP iteration of the last feedback (at least
+ * 1); a QP stopped by the cap is not retried (the fallback control). */
+static void dopus_feedback_cap(dopus_solver *s)
+{
+    double n;
+    s->anytime.qp_cap = 0;
+    if (!dopus_budget_on(s) || s->settings.budget_unit != DOPUS_BUDGET_TIME ||
+        !(s->anytime.cost_qp_iter > 0.0)) {
+        return;
+    }
+    n = (s->settings.budget - (dopus_budget_now(s) - s->anytime.instant_start)) / s->anytime.cost_qp_iter;
+    n = n < 1.0 ? 1.0 : n;
+    if (n < (double)s->settings.qp_max_iter) {
+        s->anytime.qp_cap = (int)n;
+    }
+}
+
 static int dopus_feedback_run(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
     dopus_real xhat_prev[DOPUS_NX];
+    double b0;
     int rc, qs, retries;
 
     dopus_copy(xhat_prev, s->xhat0, DOPUS_NX);
     dopus_feedback_measure(s, xhat0);
+    dopus_feedback_cap(s);
+    b0 = dopus_budget_now(s);
     qs = dopus_feedback_qp(s);
     qs = dopus_feedback_lm_retries(s, qs, &retries);
+    s->anytime.cost_qp = dopus_cost(s, s->anytime.cost_qp, dopus_budget_now(s) - b0);
+    if (s->qp_iterations > 0 && s->settings.budget_unit == DOPUS_BUDGET_TIME) {
+        s->anytime.cost_qp_iter =
+            dopus_cost(s, s->anytime.cost_qp_iter, s->anytime.cost_qp / (double)s->qp_iterations);
+    }
     s->qp_status = qs;
     rc = dopus_feedback_check_step(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
@@ -970,10 +1056,15 @@ static int dopus_feedback_call(dopus_solver *s, const dopus_real *xhat0, dopus_r
     s->timer.locked = 1;
     start = s->timer.mark;
     s->health.flags = 0;
+    s->anytime.instant_start = dopus_budget_now(s);
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
     rc = dopus_feedback_admit(s, xhat0, u0);
     if (rc == DOPUS_OK) {
         rc = dopus_feedback_run(s, xhat0, u0);
     }
+    s->anytime.qp_cap = 0;
+    s->anytime.used = dopus_budget_now(s) - s->anytime.instant_start;
     s->timer.locked = 0;
     dopus_timer_end(&s->timer, 0, start);
     return rc;
@@ -1038,26 +1129,111 @@ static int dopus_stale_stage(const dopus_solver *s, int k)
     return 0;
 }
 
-/* Step 4: the stale stages (dopus_stale_stage), then the M stages among the other stages of
- * 0..N-2 with the largest rho_k, ties to the lower index. */
-static void dopus_select(dopus_solver *s, int M)
+/* |domega_k| of stage k's slot (the denominator of rho_k). */
+static dopus_real dopus_step_norm(const dopus_solver *s, int k)
 {
-    int m, k;
-    for (k = 0; k < DOPUS_N; ++k) {
-        s->selected[k] = k < DOPUS_N - 1 && DOPUS_NG > 0 && dopus_stale_stage(s, k);
+    const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
+    dopus_real d2 = DOPUS_R(0.0);
+    int i;
+    for (i = 0; i < DOPUS_NW; ++i) {
+        d2 += slot->dw[i] * slot->dw[i] + slot->dmu_b[i] * slot->dmu_b[i];
     }
-    for (m = 0; m < M; ++m) {
-        int best = -1;
-        for (k = 0; k < DOPUS_N - 1; ++k) {
-            if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
-                best = k;
-            }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        d2 += slot->dlam[i] * slot->dlam[i];
+    }
+    for (i = 0; i < DOPUS_NG; ++i) {
+        d2 += slot->dmu_g[i] * slot->dmu_g[i];
+    }
+    return dopus_sqrt(d2);
+}
+
+/* The number of stages among 0..N-2 to re-linearise (before the budget): N-1 after a
+ * recovery, the fixed M, or adaptive M (algorithm.md section 14): the stages whose secant
+ * residual rho_k |domega_k| exceeds eta times the KKT proxy of the point before the step,
+ * between M_min and M_max. */
+static int dopus_M_now(const dopus_solver *s)
+{
+    const dopus_settings *st = &s->settings;
+    dopus_real thr = st->M_eta * s->health.kkt_proxy;
+    int k, n = 0;
+    if (s->health.recovering > 0) {
+        return DOPUS_N - 1; /* after a recovery: every block fresh until it has settled */
+    }
+    if (!st->M_adaptive) {
+        return st->M < 0 ? 0 : (st->M > DOPUS_N - 1 ? DOPUS_N - 1 : st->M);
+    }
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        if (s->rho[k] * dopus_step_norm(s, k) > thr) {
+            n += 1;
         }
-        if (best < 0) {
+    }
+    return n < st->M_min ? st->M_min : (n > st->M_max ? st->M_max : n);
+}
+
+/* The stage among 0..N-2 not selected yet with the largest rho_k, ties to the lower index. */
+static int dopus_next_worst(const dopus_solver *s)
+{
+    int k, best = -1;
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
+            best = k;
+        }
+    }
+    return best;
+}
+
+/* Step 4: re-linearise the stale stages (dopus_stale_stage), then among the other stages of
+ * 0..N-2 those with the largest rho_k: M of them (dopus_M_now), then, with a budget,
+ * further stages in rho order while one more iteration still fits after them
+ * (algorithm.md section 14); each only while the budget allows. The cost of the stages
+ * beyond M goes to *ext_cost. */
+static int dopus_relinearise(dopus_solver *s, double *ext_cost)
+{
+    int M = dopus_M_now(s), m, k, n = 0, rc = DOPUS_OK, extend;
+    double b0, reserve;
+    for (k = 0; k < DOPUS_N; ++k) {
+        s->selected[k] = 0;
+    }
+    /* the stale stages first, whatever the budget: without them the QP is infeasible */
+    for (k = 0; k < DOPUS_N - 1 && DOPUS_NG > 0; ++k) {
+        if (dopus_stale_stage(s, k)) {
+            rc = dopus_stage_H(s, k);
+            if (rc != DOPUS_OK) {
+                s->anytime.instant_stages += n;
+                return rc;
+            }
+            s->selected[k] = 1;
+            n += 1;
+        }
+    }
+    extend = dopus_budget_on(s);
+    *ext_cost = 0.0;
+    /* the stages beyond M keep room for one more iteration after this one */
+    reserve = s->anytime.cost_qp + s->anytime.cost_prepare;
+    for (m = 0; m < DOPUS_N - 1; ++m) {
+        if ((m >= M && !extend) || !dopus_budget_fits(s, s->anytime.cost_stage + (m >= M ? reserve : 0.0))) {
             break;
         }
-        s->selected[best] = 1;
+        k = dopus_next_worst(s);
+        if (k < 0) {
+            break;
+        }
+        b0 = dopus_budget_now(s);
+        rc = dopus_stage_H(s, k);
+        if (rc != DOPUS_OK) {
+            break;
+        }
+        s->selected[k] = 1;
+        n += 1;
+        if (dopus_budget_on(s)) {
+            s->anytime.cost_stage = dopus_cost(s, s->anytime.cost_stage, dopus_budget_now(s) - b0);
+            if (m >= M) {
+                *ext_cost += s->anytime.cost_stage;
+            }
+        }
     }
+    s->anytime.instant_stages += n;
+    return rc;
 }
 
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
@@ -1200,6 +1376,7 @@ static int dopus_feedback_recover(dopus_solver *s, int *qs, int *retries)
         s->qp_in.x0[i] = DOPUS_R(0.0);
     }
     s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += DOPUS_WORK_QP;
     *qs = dopus_qp_attempt(s, 0);
     *qs = dopus_feedback_lm_retries(s, *qs, retries);
     return DOPUS_OK;
@@ -1216,6 +1393,7 @@ static void dopus_predicted_step(dopus_solver *s)
         s->qp_in.x0[i] = DOPUS_R(0.0);
     }
     s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += DOPUS_WORK_QP;
     qs = dopus_qp_solve_bound(s, 0);
     if (dopus_feedback_check_step(s, qs) != DOPUS_OK) {
         return;
@@ -1232,7 +1410,8 @@ static void dopus_predicted_step(dopus_solver *s)
     s->health.flags |= DOPUS_FLAG_PREDICTED;
 }
 
-static int dopus_prepare_iteration(dopus_solver *s);
+static int dopus_prepare_iteration(dopus_solver *s, int extra);
+static int dopus_anytime_run(dopus_solver *s);
 
 /* Step 1 for the parameters (receding mode, once per sampling instant): p_k <- p_{k+1}, p_N
  * kept (a push replaces it). */
@@ -1270,7 +1449,7 @@ static int dopus_parameters_writable(dopus_solver *s)
 int dopus_prepare(dopus_solver *s)
 {
     double start;
-    int rc;
+    int rc, hessian;
     if (!s->set_up) {
         return DOPUS_ERR_NOT_INITIALIZED;
     }
@@ -1284,6 +1463,12 @@ int dopus_prepare(dopus_solver *s)
     dopus_timer_begin(&s->timer, DOPUS_PREPARE_PHASES, DOPUS_PHASE_RECOVERY);
     start = s->timer.mark;
     dopus_shift_parameters(s);
+    s->anytime.extra_iterations = 0;
+    s->anytime.prepared_extra = 0;
+    /* the instant's budget counts the solver's own calls: the feedback's part (used) and
+     * this prepare from now, not the caller's time between them */
+    s->anytime.instant_start = dopus_budget_now(s) - s->anytime.used;
+    hessian = s->settings.hessian;
     if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
         s->settings.mode == DOPUS_MODE_RECEDING && !(s->health.flags & DOPUS_FLAG_REINIT_GUESS)) {
         /* (not from the OCP file's guess: its plan is not the plant's) */
@@ -1295,16 +1480,23 @@ int dopus_prepare(dopus_solver *s)
     }
     if (s->health.recover_pending && s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING) {
         rc = dopus_recover(s, 0);
-    } else if (s->health.recovering > 0 && DOPUS_HAS_GN) {
+    } else {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
          * multipliers), every block fresh */
-        int hessian = s->settings.hessian;
-        s->settings.hessian = DOPUS_HESSIAN_GAUSS_NEWTON;
-        rc = dopus_prepare_iteration(s);
-        s->settings.hessian = hessian;
-    } else {
-        rc = dopus_prepare_iteration(s);
+        if (s->health.recovering > 0 && DOPUS_HAS_GN) {
+            s->settings.hessian = DOPUS_HESSIAN_GAUSS_NEWTON;
+        }
+        rc = dopus_prepare_iteration(s, 0);
     }
+    if (rc == DOPUS_OK) {
+        /* the budget left (algorithm.md section 14), with the Hessian of the recovery phase */
+        if (s->health.recovering > 0 && DOPUS_HAS_GN) {
+            s->settings.hessian = DOPUS_HESSIAN_GAUSS_NEWTON;
+        }
+        rc = dopus_anytime_run(s);
+    }
+    s->settings.hessian = hessian;
+    s->anytime.used = dopus_budget_now(s) - s->anytime.instant_start;
     if (rc == DOPUS_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
@@ -1315,15 +1507,17 @@ int dopus_prepare(dopus_solver *s)
     return dopus_ret(s, rc);
 }
 
-/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
-static int dopus_prepare_iteration(dopus_solver *s)
+/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
+ * anytime budget (section 14), without the shift, x_N kept. */
+static int dopus_prepare_iteration(dopus_solver *s, int extra)
 {
     dopus_real xN_saved[DOPUS_NX];
-    int k, rc, M;
+    double b_start = dopus_budget_now(s), ext_cost = 0.0;
+    int k, rc;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     dopus_phase(s, DOPUS_PHASE_SHIFT);
-    if (s->settings.mode == DOPUS_MODE_RECEDING && !s->shifted) {
+    if (s->settings.mode == DOPUS_MODE_RECEDING && !s->shifted && !extra) {
         dopus_shift(s);
         s->shifted = 1;
     }
@@ -1351,7 +1545,7 @@ static int dopus_prepare_iteration(dopus_solver *s)
     if (rc != DOPUS_OK) {
         return rc;
     }
-    if (s->settings.mode == DOPUS_MODE_RECEDING) {
+    if (s->settings.mode == DOPUS_MODE_RECEDING && !extra) {
         dopus_copy(s->x[DOPUS_N], s->mem.ev.tmp_phi, DOPUS_NX);
     }
     dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
@@ -1365,19 +1559,10 @@ static int dopus_prepare_iteration(dopus_solver *s)
         rc = dopus_term_H(s);
     }
 
-    /* 4. re-linearise the M stages with the largest rho_k */
+    /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == DOPUS_OK) {
-        M = s->settings.M < 0 ? 0 : (s->settings.M > DOPUS_N - 1 ? DOPUS_N - 1 : s->settings.M);
-        if (s->health.recovering > 0) {
-            M = DOPUS_N - 1; /* after a recovery: every block fresh until it has settled */
-        }
         dopus_phase(s, DOPUS_PHASE_RHO);
-        dopus_select(s, M);
-        for (k = 0; k < DOPUS_N - 1 && rc == DOPUS_OK; ++k) {
-            if (s->selected[k]) {
-                rc = dopus_stage_H(s, k);
-            }
-        }
+        rc = dopus_relinearise(s, &ext_cost);
     }
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
@@ -1424,6 +1609,10 @@ static int dopus_prepare_iteration(dopus_solver *s)
     dopus_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
     dopus_phase(s, DOPUS_PHASE_RECOVERY);
+    if (dopus_budget_on(s)) {
+        s->anytime.cost_prepare =
+            dopus_cost(s, s->anytime.cost_prepare, dopus_budget_now(s) - b_start - ext_cost);
+    }
     if (dopus_iterate_diverged(s)) {
         s->health.flags |= DOPUS_FLAG_DIVERGED;
         if (s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING) {
@@ -1431,6 +1620,67 @@ static int dopus_prepare_iteration(dopus_solver *s)
         }
     }
     return DOPUS_OK;
+}
+
+/* ---- anytime (algorithm.md section 14) -------------------------------------------------- */
+
+/* One extra iteration on the next instant's problem: the prepared QP for the state the plan
+ * predicts (dx_0 = 0), its full step, then a prepare iteration without the shift. A QP not
+ * solved (or a step outside the box) changes nothing and returns DOPUS_ERR_QP. */
+static int dopus_extra_iteration(dopus_solver *s)
+{
+    dopus_lm lm = s->lm;
+    dopus_real proxy = s->health.kkt_proxy;
+    double b0 = dopus_budget_now(s);
+    int i, qs, rc;
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->qp_in.x0[i] = DOPUS_R(0.0);
+    }
+    /* the cap of the term while the extra iterations make progress; after one of them raised
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 14) */
+    if (!s->anytime.uncapped) {
+        dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
+    qs = dopus_feedback_qp(s);
+    if (dopus_feedback_check_step(s, qs) != DOPUS_OK) {
+        s->lm = lm;
+        return DOPUS_ERR_QP;
+    }
+    s->anytime.cost_qp = dopus_cost(s, s->anytime.cost_qp, dopus_budget_now(s) - b0);
+    dopus_store_domega(s);
+    dopus_take_step(s);
+    dopus_lm_feedback(&s->lm, 1);
+    rc = dopus_prepare_iteration(s, 1);
+    if (!(s->health.kkt_proxy < proxy)) {
+        s->anytime.uncapped = 1;
+    }
+    return rc;
+}
+
+/* The budget left after prepare (algorithm.md section 14): extra iterations while the KKT
+ * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
+ * of dopus_info. */
+static int dopus_anytime_run(dopus_solver *s)
+{
+    int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = DOPUS_OK;
+    if (!dopus_budget_on(s)) {
+        return DOPUS_OK;
+    }
+    s->anytime.uncapped = 0;
+    while (s->anytime.extra_iterations < DOPUS_ANYTIME_MAX_ITER && s->qp_ready &&
+           s->health.kkt_proxy > s->settings.anytime_tol &&
+           dopus_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
+        rc = dopus_extra_iteration(s);
+        if (rc != DOPUS_OK) {
+            break;
+        }
+        s->anytime.extra_iterations += 1;
+    }
+    s->qp_status = qp_status;
+    s->qp_iterations = qp_iterations;
+    s->qp_cold_retry = cold;
+    s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
+    return rc == DOPUS_ERR_QP ? DOPUS_OK : rc;
 }
 
 /* ---- KKT ---------------------------------------------------------------------------- */
@@ -1708,6 +1958,10 @@ void dopus_get_info(const dopus_solver *s, dopus_info *info)
     }
     info->t_feedback = s->timer.t_call[0];
     info->t_prepare = s->timer.t_call[1];
+    info->extra_iterations = s->anytime.extra_iterations;
+    info->instant_stages = s->anytime.instant_stages;
+    info->budget_used = s->anytime.used;
+    info->work = s->anytime.work;
 }
 
 /* ---- settings, setup, parameters, clock ---------------------------------------------- */
@@ -1726,7 +1980,11 @@ static int dopus_settings_check(const dopus_settings *st)
         !isfinite(st->lm) || !(st->lm >= DOPUS_R(0.0)) || !isfinite(st->qp_tol) ||
         !(st->qp_tol > DOPUS_R(0.0)) || st->qp_tol > DOPUS_QP_TOL_MAX || st->qp_max_iter < 1 ||
         (st->qp_warm_start != 0 && st->qp_warm_start != 1) || (st->recovery != 0 && st->recovery != 1) ||
-        st->recovery_failures < 1) {
+        st->recovery_failures < 1 || !(st->budget >= 0.0) || !(st->budget < HUGE_VAL) ||
+        (st->budget_unit != DOPUS_BUDGET_TIME && st->budget_unit != DOPUS_BUDGET_WORK) ||
+        !isfinite(st->anytime_tol) || !(st->anytime_tol > DOPUS_R(0.0)) ||
+        (st->M_adaptive != 0 && st->M_adaptive != 1) || st->M_min < 0 || st->M_max < st->M_min ||
+        st->M_max > DOPUS_N - 1 || !isfinite(st->M_eta) || !(st->M_eta > DOPUS_R(0.0))) {
         return DOPUS_ERR_INVALID_ARGUMENT;
     }
     return DOPUS_OK;
@@ -1780,6 +2038,18 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
         s->kkt[i] = NAN;
     }
     dopus_timer_init(&s->timer);
+    s->anytime.work = 0.0;
+    s->anytime.instant_start = 0.0;
+    s->anytime.cost_stage = 0.0;
+    s->anytime.cost_qp = 0.0;
+    s->anytime.cost_prepare = 0.0;
+    s->anytime.cost_qp_iter = 0.0;
+    s->anytime.used = 0.0;
+    s->anytime.qp_cap = 0;
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
+    s->anytime.prepared_extra = 0;
+    s->anytime.uncapped = 0;
     return dopus_ret(s, rc);
 }
 

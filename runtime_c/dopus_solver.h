@@ -80,7 +80,20 @@ const char *dopus_status_string(int status);
  * again within the call (DOPUS_FLAG_RECOVERED); a measurement at which the model is not
  * finite is handled as a missing one (DOPUS_ERR_NONFINITE_VALUE,
  * DOPUS_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
- * records its measurement, so the recovery starts from the newest one; 0: off. */
+ * records its measurement, so the recovery starts from the newest one; 0: off.
+ * Anytime DOPUS (section 14): budget > 0 per sampling instant, counted from the start of
+ * the instant's feedback, in budget_unit DOPUS_BUDGET_TIME (seconds of the solver's clock,
+ * dopus_set_clock: on firmware an instruction or cycle counter; without a clock the budget
+ * is off) or DOPUS_BUDGET_WORK (work units: stage_grad, stage_hess, term_grad and term_hess
+ * evaluations 1 each, a QP solve N; deterministic, the unit of the Python reference);
+ * budget 0: off, the plain real-time iteration. With a budget, prepare re-linearises stages
+ * only while the budget allows (the M of the setting first, then further stages in rho
+ * order), then takes SQP iterations on the next instant's problem at the state the plan
+ * predicts (dx_0 = 0) while the KKT proxy exceeds anytime_tol > 0 and one more fits; a time
+ * budget caps the feedback QP's iterations. M_adaptive 1: each iteration re-linearises the
+ * stages whose secant residual rho_k |domega_k| exceeds M_eta > 0 times the KKT proxy, at
+ * least M_min and at most M_max (0 <= M_min <= M_max <= N-1), the largest rho_k first;
+ * 0: the fixed M. */
 typedef struct {
     int M;
     int mode;
@@ -95,6 +108,13 @@ typedef struct {
     int qp_warm_start;
     int recovery;
     int recovery_failures;
+    double budget;
+    int budget_unit;
+    dopus_real anytime_tol;
+    int M_adaptive;
+    int M_min;
+    int M_max;
+    dopus_real M_eta;
 } dopus_settings;
 /* The generated defaults: M, Hessian, regularisation, eps, cost Hessian and lm from the OCP
  * file's options; receding mode, QP tolerance DOPUS_QP_TOL_DEFAULT, 100 QP iterations, warm
@@ -238,6 +258,13 @@ typedef struct {
     double timings[10];
     double t_feedback;
     double t_prepare;
+    /* anytime DOPUS (section 14), the last instant: extra iterations after prepare, stages
+     * re-linearised over all its iterations (stage N-1 not counted), budget used (its unit);
+     * the work units counted since setup */
+    int extra_iterations;
+    int instant_stages;
+    double budget_used;
+    double work;
 } dopus_info;
 void dopus_get_info(const dopus_solver *s, dopus_info *info);
 /* A constraint row of the OCP at one stage of the horizon. */
@@ -332,6 +359,18 @@ enum dopus_mode {
 
 enum dopus_hessian { DOPUS_HESSIAN_EXACT = 0, DOPUS_HESSIAN_GAUSS_NEWTON = 1 };
 
+/* Units of the anytime budget (docs/algorithm.md section 14). */
+enum dopus_budget_unit {
+    DOPUS_BUDGET_TIME = 1, /* seconds of the solver's clock */
+    DOPUS_BUDGET_WORK = 2  /* work units: function evaluations 1, a QP solve N */
+};
+
+/* Anytime constants (docs/algorithm.md section 14). */
+#define DOPUS_ANYTIME_TOL DOPUS_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
+#define DOPUS_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
+#define DOPUS_ADAPTIVE_ETA DOPUS_R(0.1)          /* default eta of adaptive M */
+#define DOPUS_WORK_QP DOPUS_N                    /* work units of a QP solve */
+
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static dopus_solver s;`;
  * the fields are internal (use the functions above). */
@@ -373,6 +412,22 @@ typedef union {
         dopus_real lm_work[DOPUS_LM_WORK]; /* the convexity test of the automatic lm */
     } ev;
 } dopus_solver_mem;
+
+/* The bookkeeping of the anytime budget (algorithm.md section 14); costs in the budget's unit. */
+typedef struct {
+    double work;          /* work units counted since setup */
+    double instant_start; /* the budget clock at the start of the instant's feedback */
+    double cost_stage;    /* one stage re-linearisation (the last) */
+    double cost_qp;       /* the last QP solve */
+    double cost_prepare;  /* the last prepare iteration without the stages beyond M */
+    double cost_qp_iter;  /* one QP iteration of the last feedback (time budget) */
+    double used;          /* budget used by the last instant */
+    int qp_cap;           /* > 0: the feedback QP's iteration cap of a time budget */
+    int extra_iterations; /* extra iterations of the last prepare */
+    int instant_stages;   /* stages re-linearised in the last instant */
+    int prepared_extra;   /* the prepared QP comes from extra iterations (the feedback keeps lm) */
+    int uncapped;         /* an extra iteration of this instant raised the KKT proxy */
+} dopus_anytime;
 
 /* One object per concept: lifecycle, settings, iterate, stage slots, terminal node, secant
  * selection, QP data, shared scratch, health and recovery, the automatic lm, KKT, timers. */
@@ -435,6 +490,7 @@ struct dopus_solver {
     dopus_lm lm;         /* the Levenberg-Marquardt term (sections 3 and 10) */
     dopus_real kkt[4];   /* KKT parts of the last dopus_kkt_eval: stat, eq, ineq, comp */
     dopus_timer timer;
+    dopus_anytime anytime; /* the budget's bookkeeping (section 14) */
 };
 
 #endif /* DOPUS_SOLVER_H */

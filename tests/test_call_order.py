@@ -112,17 +112,24 @@ def test_failed_feedback_still_allows_one_prepare(second_disc, second_solution):
     rejected(c, c.prepare, STATUS_ALREADY_PREPARED)
 
 
-def test_retry_after_a_failed_prepare_does_not_shift_again(second_disc, second_solution):
-    """A parameter of 1e200 makes the stage cost overflow, so prepare fails after its shift;
-    with the parameter restored the next prepare is a retry: no second shift, and the result
-    equals the reference's (which follows the same rule)."""
-    d = second_disc
+def _both_backends_and_an_overflowing_parameter(d):
+    """Both backends (M = 1, receding), a measurement, the default parameters and parameters
+    whose first entry (1e200) makes the stage cost overflow."""
     c = CSolver(d, M=1, mode="receding", qp_tol=QP_TOL)
     r = ReferenceDopus(d, M=1, mode="receding", qp_tol=QP_TOL)
     xh = np.asarray(d.disturbance(d.x0), dtype=float)
     p_good = np.array(d.p0, dtype=float)
     p_bad = p_good.copy()
     p_bad[:, 0] = 1e200
+    return c, r, xh, p_good, p_bad
+
+
+def test_retry_after_a_failed_prepare_does_not_shift_again(second_disc, second_solution):
+    """A parameter of 1e200 makes the stage cost overflow, so prepare fails after its shift;
+    with the parameter restored the next prepare is a retry: no second shift, and the result
+    equals the reference's (which follows the same rule)."""
+    d = second_disc
+    c, r, xh, p_good, p_bad = _both_backends_and_an_overflowing_parameter(d)
     for b, nonfinite in ((c, STATUS_NONFINITE_VALUE), (r, REF_NONFINITE)):
         b.init(d.x0, second_solution[0])
         b.feedback(xh)
@@ -149,12 +156,7 @@ def test_a_refused_feedback_after_a_failed_prepare_is_an_instant(second_disc, se
     and the refused feedback's measurement is the one a recovery would start from
     (docs/algorithm.md section 9); both backends alike."""
     d = second_disc
-    c = CSolver(d, M=1, mode="receding", qp_tol=QP_TOL)
-    r = ReferenceDopus(d, M=1, mode="receding", qp_tol=QP_TOL)
-    xh = np.asarray(d.disturbance(d.x0), dtype=float)
-    p_good = np.array(d.p0, dtype=float)
-    p_bad = p_good.copy()
-    p_bad[:, 0] = 1e200
+    c, r, xh, p_good, p_bad = _both_backends_and_an_overflowing_parameter(d)
     for b, nonfinite in ((c, STATUS_NONFINITE_VALUE), (r, REF_NONFINITE)):
         b.init(d.x0, second_solution[0])
         b.feedback(xh)

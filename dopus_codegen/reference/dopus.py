@@ -33,7 +33,7 @@ import numpy as np
 
 from .. import settings, vocabulary
 from ..errors import PARAMETER_ORDER, DopusError, qp_status_code as status_code_qp, status_code
-from ..settings import SettingError, Settings, of_problem as settings_of_problem
+from ..settings import SettingError, Settings, check_adaptive_M, of_problem as settings_of_problem
 from .kkt import eval_stages, kkt_measure, node_parameters
 from ..problem.checks import describe_qp_row
 from .qp import QPError, free_initial_state, solve_qp_reference
@@ -48,6 +48,10 @@ FLAGS = {bit: name for name, bit in vocabulary.enum("dopus_flag").codes.items()}
 _FLAG = vocabulary.enum("dopus_flag").codes
 #: The safety constants of runtime_c/dopus_solver.h (docs/algorithm.md section 9).
 _SAFETY = vocabulary.constants()
+
+#: Default KKT-proxy target of the anytime iterations (DOPUS_ANYTIME_TOL, double).
+ANYTIME_TOL = float(_SAFETY["ANYTIME_TOL"])
+
 
 # Round-off floor of the secant residual (docs/algorithm.md section 4 step 2): rho_k = 0
 # when num_k <= EPS_RHO * (|F_old| + |F_new|), i.e. when the linear model of the stage is
@@ -188,6 +192,17 @@ class ReferenceDopus:
         self.scales = self._compute_scales()
         self._xhat_last = np.asarray(disc.x0, float).reshape(self.nx).copy()
         self._reset_health(np.asarray(disc.initial_guess.u, float).reshape(self.N, self.n_u))
+        # section 14: the anytime budget (off), adaptive M (off), the work counter
+        self.budget_unit, self.budget = s.budget_unit, s.budget
+        self.anytime_tol = ANYTIME_TOL if s.anytime_tol is None else s.anytime_tol
+        self.set_M_adaptive(s.M_adaptive, s.M_min, s.M_max, s.M_eta)
+        self.work = 0.0
+        self._instant_start = 0.0
+        self._cost_stage = self._cost_qp = self._cost_prepare = 0.0
+        self.budget_used = 0.0
+        self._prepared_extra = False
+        self.extra_iterations = 0
+        self.instant_stages = 0
 
     # ------------------------------------------------------------------ the Hessian in use
     def _fns(self):
@@ -217,7 +232,9 @@ class ReferenceDopus:
         """The settings it runs with (``M`` at most N-1)."""
         return Settings(M=self.M, hessian=self.hessian, regularization=self.regularization, reg_eps=self.reg_eps,
                         cost_hessian=self.cost_hessian, lm="auto" if self.lm_auto else self.lm, qp_tol=self.qp_tol,
-                        qp_max_iter=self.qp_max_iter, mode=self.mode)
+                        qp_max_iter=self.qp_max_iter, mode=self.mode, budget=self.budget,
+                        budget_unit=self.budget_unit, anytime_tol=self.anytime_tol, M_adaptive=self.M_adaptive,
+                        M_min=self.M_min, M_max=self.M_max, M_eta=self.M_eta)
 
     def set_M(self, M: int) -> None:
         """Values above N-1 mean the full RTI (N-1), as in the C runtime
@@ -298,6 +315,45 @@ class ReferenceDopus:
         p[self.N] = v
         self.p = p
 
+    # ------------------------------------------------------------------ section 14: anytime
+    def set_work_budget(self, units) -> None:
+        """The budget per sampling instant in work units (function evaluations 1, a QP solve
+        N); 0 switches it off."""
+        self._set_budget(units, "work")
+
+    def set_time_budget(self, seconds) -> None:
+        """The budget per sampling instant in seconds (time.perf_counter); 0 switches it off.
+        Only the work budget makes the iterates comparable with the C runtime."""
+        self._set_budget(seconds, "time")
+
+    def _set_budget(self, value, unit) -> None:
+        v = _setting(settings.nonnegative, f"{unit}_budget", value)
+        self.budget = v
+        self.budget_unit = unit
+
+    def set_anytime_tol(self, tol) -> None:
+        self.anytime_tol = _setting(settings.positive, "anytime_tol", tol)
+
+    def set_M_adaptive(self, on: bool = True, M_min: int = 0, M_max=None, eta=None) -> None:
+        """Adaptive M (section 14): the stages whose secant residual ``rho_k |domega_k|``
+        exceeds ``eta`` times the KKT proxy, between ``M_min`` and ``M_max``."""
+        M_max = self.N - 1 if M_max is None else M_max
+        eta = float(_SAFETY["ADAPTIVE_ETA"]) if eta is None else eta
+        self.M_adaptive, self.M_min, self.M_max, self.M_eta = _setting(check_adaptive_M, on, M_min, M_max, eta,
+                                                                       self.N)
+
+    def _budget_on(self) -> bool:
+        return self.budget > 0
+
+    def _budget_now(self) -> float:
+        """Now on the budget's clock (0 without a budget, as in the C runtime)."""
+        if not self._budget_on():
+            return 0.0
+        return self.work if self.budget_unit == "work" else time.perf_counter()
+
+    def _budget_fits(self, cost) -> bool:
+        return not self._budget_on() or self._budget_now() - self._instant_start + cost <= self.budget
+
     # ------------------------------------------------------------------ evaluations
     def _slot(self, k: int) -> int:
         return (self.ring_head + k) % self.N
@@ -321,12 +377,14 @@ class ReferenceDopus:
         """Fresh H of stage k into slot s: ``A_dyn = A - A_l`` (the curvature of dynamics and
         path constraints, used by step 5 with ``cost_hessian='fresh'``; kept under both
         settings, as in the C slots), ``Ht = reg(A)``."""
+        self.work += 1
         A, s.Phit, s.Ct = self._stage_hess_eval(k, x, u, lam, mu_g)
         s.A_dyn = A - self._cost_hess_eval(k, x, u) if self._stage_hess_cost is not None else A
         s.Ht = regularize(A, self.regularization, self.reg_eps)
         return s
 
     def _term_eval(self, xN, mu_r, nu):
+        self.work += 2
         gL, _E, r, r_eq = self.disc.term_grad(xN, self.p[self.N], mu_r, nu)
         A, R, Req = self._term_hess(xN, self.p[self.N], mu_r, nu)
         t = {
@@ -375,7 +433,9 @@ class ReferenceDopus:
         """Every stage and the terminal node evaluated fresh at the given iterate (init and
         the re-initialisation of section 9); the state changes only on success."""
         N, nx, nu_, ng = self.N, self.nx, self.n_u, self.ng
+        self._prepared_extra = False
         slots = [_Slot(nx, nu_, ng) for _ in range(N)]
+        self.work += N
         gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
         for k in range(N):
             s = slots[k]
@@ -515,11 +575,19 @@ class ReferenceDopus:
 
     def _feedback_step(self, xhat0) -> np.ndarray:
         """Solve the QP for ``xhat0``, store ``domega`` per slot, full step; return ``u_0``."""
+        self._instant_start = self._budget_now()
+        try:
+            return self._feedback(xhat0)
+        finally:
+            self.budget_used = self._budget_now() - self._instant_start
+
+    def _feedback(self, xhat0) -> np.ndarray:
         t0 = time.perf_counter()
         xhat0 = np.array(xhat0, dtype=float).reshape(-1)
         if xhat0.size != self.nx:
             raise self._fail("invalid_argument", f"feedback: xhat0 must be {self.nx} numbers, got {xhat0.size}")
         self._flags = 0
+        self.extra_iterations = self.instant_stages = 0
         if not self._initialised:
             err = self._fail("not_initialized", "call init(xhat0, guess) first")
             err.u0 = self._fallback_u0()
@@ -540,14 +608,18 @@ class ReferenceDopus:
                 self._prepare_due, self._shifted = True, False
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
-        self._lm_measured(xhat0)
+        if not self._prepared_extra:
+            # after extra iterations the term the prepare convexified stays (section 14)
+            self._lm_measured(xhat0)
         xhat_prev = self._xhat_last
         self._xhat_last = xhat0.copy()
         self._xhat_fresh = True
         # the QP is attempted: a prepare (with its shift) is due, whatever the outcome
         self._prepare_due, self._shifted = True, False
         t1 = time.perf_counter()
+        b0 = self._budget_now()
         sol, failure, retries = self._solve_with_retries(xhat0)
+        self._cost_qp = self._budget_now() - b0
         if (failure is not None and self.recovery and self.mode == "receding"
                 and getattr(failure, "qp_status", None) not in ("max_iter", "invalid_input")):
             # the recovery within the feedback (section 9): re-initialise from the measured
@@ -635,6 +707,7 @@ class ReferenceDopus:
         retries = 0
         while True:
             sol = None
+            self.work += self.N
             try:
                 sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter)
                 failure = None if self._finite(*(sol[k] for k in FIELDS_QP)) else "nonfinite"
@@ -713,6 +786,10 @@ class ReferenceDopus:
         if not self._prepare_due:
             raise self._fail("already_prepared", "prepare: already prepared (call feedback before the next prepare)")
         self._shift_parameters()
+        self.extra_iterations = 0
+        self._prepared_extra = False
+        # the instant's budget counts the solver's own calls, not the caller's time between them
+        self._instant_start = self._budget_now() - self.budget_used
         if (self._qp_ready and self._n_failed > 0 and not self._recover_pending and self.recovery
                 and self.mode == "receding" and "reinit_guess" not in self.flags):
             # (not from the OCP file's guess: its plan is not the plant's)
@@ -720,23 +797,66 @@ class ReferenceDopus:
         self._qp_ready = False
         if self.mode == "receding" and self._plan_age < self.N:
             self._plan_age += 1
-        if self._recover_pending and self.recovery and self.mode == "receding":
-            self._recover(shifted=False)
-            return
-        if self._recovering > 0 and self.has_gn:
-            # the recovery phase (section 9): Gauss-Newton blocks, every block fresh
-            hessian, self.hessian = self.hessian, "gauss-newton"
-            try:
+        hessian = self.hessian
+        try:
+            if self._recover_pending and self.recovery and self.mode == "receding":
+                self._recover(shifted=False)
+            else:
+                if self._recovering > 0 and self.has_gn:
+                    # the recovery phase (section 9): Gauss-Newton blocks, every block fresh
+                    self.hessian = "gauss-newton"
                 self._prepare_iteration()
-            finally:
-                self.hessian = hessian
-            return
-        self._prepare_iteration()
+            if self._recovering > 0 and self.has_gn:
+                self.hessian = "gauss-newton"
+            self._anytime()
+        finally:
+            self.hessian = hessian
+            self.budget_used = self._budget_now() - self._instant_start
 
-    def _prepare_iteration(self) -> None:
+    def _extra_iteration(self) -> bool:
+        """Section 12: the prepared QP for the state the plan predicts (dx_0 = 0), its full
+        step, a prepare iteration without the shift. False (nothing changed) when the QP is
+        not solved or its step leaves the box."""
+        lm, b0, proxy = self.lm, self._budget_now(), self.kkt_proxy
+        # the cap of the term while the extra iterations make progress; after one of them
+        # raised the KKT proxy, the term the prepare convexified
+        if not self._uncapped:
+            self._lm_measured(self.x[0])
+        self.work += self.N
+        try:
+            sol = solve_qp_reference(self.qp_of_current(self.x[0]), tol=self.qp_tol, max_iter=self.qp_max_iter)
+        except QPError:
+            sol = None
+        if (sol is None or not self._finite(*(sol[k] for k in FIELDS_QP))
+                or not self._box_ok(self.x + sol["x"], self.u + sol["u"])):
+            self.lm, self._lm_uncapped = lm, -1.0
+            return False
+        self._cost_qp = self._budget_now() - b0
+        self._take_step(sol)
+        self._lm_feedback("ok")
+        self._prepare_iteration(extra=True)
+        if not self.kkt_proxy < proxy:
+            self._uncapped = True
+        return True
+
+    def _anytime(self) -> None:
+        """Section 12: extra iterations while the KKT proxy exceeds the tolerance and one more
+        fits in the budget."""
+        if not self._budget_on():
+            return
+        self._uncapped = False
+        while (self.extra_iterations < _SAFETY["ANYTIME_MAX_ITER"] and self._qp_ready
+               and self.kkt_proxy > self.anytime_tol and self._budget_fits(self._cost_qp + self._cost_prepare)):
+            if not self._extra_iteration():
+                break
+            self.extra_iterations += 1
+        self._prepared_extra = self.extra_iterations > 0 and self._qp_ready
+
+    def _prepare_iteration(self, extra: bool = False) -> None:
         t0 = time.perf_counter()
+        b_start = self._budget_now()
         self._qp_ready = False
-        if not self._shifted:        # a retry after a failed prepare does not shift again
+        if not self._shifted and not extra:   # a retry after a failed prepare does not shift again
             self._shift()
             self._shifted = self.mode == "receding"
         t1 = time.perf_counter()
@@ -744,8 +864,8 @@ class ReferenceDopus:
         stage_values = self._stage_gradients()
         rho = self._secant_criterion(slots, stage_values)
         t2 = time.perf_counter()
-        xN, term = self._fresh_last_stage(slots, stage_values)
-        chosen = self._relinearise_worst(slots, rho)
+        xN, term = self._fresh_last_stage(slots, stage_values, extra)
+        chosen, ext_cost = self._relinearise_worst(slots, rho)
         t3 = time.perf_counter()
         if self.cost_hessian == "fresh":
             self._refresh_cost_hessians(slots, set(chosen) | {self.N - 1})
@@ -757,6 +877,8 @@ class ReferenceDopus:
         # 7. the divergence test of the prepared iterate (section 9)
         self.kkt_proxy = self._kkt_proxy_eval()
         self._lm_prepared()   # the automatic Levenberg-Marquardt term (section 10)
+        if self._budget_on():
+            self._cost_prepare = self._budget_now() - b_start - ext_cost
         if self._iterate_diverged():
             self._flag("diverged")
             if self.recovery and self.mode == "receding":
@@ -781,6 +903,7 @@ class ReferenceDopus:
 
     def _stage_gradients(self):
         """``(gL, phi, g)`` of every stage at the current iterate (stage_grad)."""
+        self.work += self.N
         gL, phi, lv, gv = eval_stages(self.disc.stage_grad, self.N, self.x[:self.N], self.u, self.p[:self.N],
                                       self.lam[1:], self.mu_g)
         # every output of a function is checked, the stage cost l too (as the C runtime does)
@@ -815,7 +938,7 @@ class ReferenceDopus:
             s.g = gv[k].copy()
         return rho
 
-    def _fresh_last_stage(self, slots, stage_values):
+    def _fresh_last_stage(self, slots, stage_values, extra=False):
         """Step 3: stage N-1 and the terminal node, always fresh. Returns ``(x_N, term)``."""
         gL, phi, gv = stage_values
         k = self.N - 1
@@ -824,12 +947,28 @@ class ReferenceDopus:
         s.phi = phi[k].copy()
         s.g = gv[k].copy()
         self._set_block(s, k, self.x, self.u, self.lam, self.mu_g)
-        xN = phi[k].copy() if self.mode == "receding" else self.x[self.N].copy()
+        xN = phi[k].copy() if self.mode == "receding" and not extra else self.x[self.N].copy()
         term = self._term_eval(xN, self.mu_r, self.nu)
         if not self._finite(s.Ht, s.A_dyn, s.Phit, s.Ct, *term.values()):
             raise self._fail("nonfinite_value", "prepare: a derivative function returned a non-finite value "
                              "(last stage or terminal node)")
         return xN, term
+
+    def _M_now(self, slots, rho) -> int:
+        """The number of stages to re-linearise before the budget: N-1 after a recovery, the
+        fixed M, or adaptive M (section 14)."""
+        if self._recovering > 0:
+            return self.N - 1
+        if not self.M_adaptive:
+            return self.M
+        thr = self.M_eta * self.kkt_proxy
+        n = 0
+        for k in range(self.N - 1):
+            s = slots[self._slot(k)]
+            den = np.linalg.norm(np.concatenate([s.dw, s.dlam, s.dmu_g, s.dmu_b]))
+            if rho[k] * den > thr:
+                n += 1
+        return min(max(n, self.M_min), self.M_max)
 
     def _stale(self, slots, k) -> bool:
         """A stage 1..N-2 whose stored linearisation makes a hard path row unsatisfiable for
@@ -843,18 +982,39 @@ class ReferenceDopus:
         zero = ~np.any(s.Ct != 0.0, axis=1)
         return bool(np.any(zero & ((hard_lo & (s.g < self.lg_k[k])) | (hard_up & (s.g > self.ug_k[k])))))
 
-    def _relinearise_worst(self, slots, rho) -> list:
-        """Step 4: fresh H for the stale stages (:meth:`_stale`), then for the M stages among
-        the other stages of 0..N-2 with the largest rho (ties: lower index)."""
+    def _relinearise_worst(self, slots, rho):
+        """Step 4: fresh H for the stale stages (:meth:`_stale`), then among the other stages
+        of 0..N-2 for the M with the largest rho (ties: lower index), then with a budget for
+        further stages in rho order while one more iteration still fits after them, each while
+        the budget allows (section 14). Returns the stages and the cost of those beyond M."""
         stale = [k for k in range(self.N - 1) if self._stale(slots, k)]
         order = sorted((k for k in range(self.N - 1) if k not in stale), key=lambda i: (-rho[i], i))
-        chosen = stale + order[:self.N - 1 if self._recovering > 0 else self.M]
-        for i in chosen:
-            si = slots[self._slot(i)]
-            self._set_block(si, i, self.x, self.u, self.lam, self.mu_g)
-            if not self._finite(si.Ht, si.A_dyn, si.Phit, si.Ct):
-                raise self._fail("nonfinite_value", f"prepare: stage_hess returned a non-finite value at stage {i}")
-        return chosen
+        M = self._M_now(slots, rho)
+        extend = self._budget_on()
+        chosen, ext_cost = [], 0.0
+        for i in stale:      # whatever the budget: without them the QP is infeasible
+            self._relinearise_stage(slots, i)
+            chosen.append(i)
+        # the stages beyond M keep room for one more iteration after this one
+        reserve = self._cost_qp + self._cost_prepare
+        for m, i in enumerate(order):
+            if (m >= M and not extend) or not self._budget_fits(self._cost_stage + (reserve if m >= M else 0.0)):
+                break
+            b0 = self._budget_now()
+            self._relinearise_stage(slots, i)
+            chosen.append(i)
+            if self._budget_on():
+                self._cost_stage = self._budget_now() - b0
+                if m >= M:
+                    ext_cost += self._cost_stage
+        self.instant_stages += len(chosen)
+        return chosen, ext_cost
+
+    def _relinearise_stage(self, slots, i) -> None:
+        si = slots[self._slot(i)]
+        self._set_block(si, i, self.x, self.u, self.lam, self.mu_g)
+        if not self._finite(si.Ht, si.A_dyn, si.Phit, si.Ct):
+            raise self._fail("nonfinite_value", f"prepare: stage_hess returned a non-finite value at stage {i}")
 
     def _refresh_cost_hessians(self, slots, fresh) -> None:
         """Step 5: the cost part of every A_k at the current point (no integrator); the other
@@ -1028,6 +1188,7 @@ class ReferenceDopus:
         """Section 9: after a failed feedback whose QP is still the prepared one, the step of
         that QP for the state the iterate predicts for this instant (dx_0 = 0); its controls
         become the plan of the next fallbacks. A failure of this QP changes nothing."""
+        self.work += self.N
         try:
             sol = solve_qp_reference(self.qp_of_current(self.x[0]), tol=self.qp_tol, max_iter=self.qp_max_iter)
         except QPError:

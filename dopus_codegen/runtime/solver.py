@@ -137,6 +137,10 @@ def load_library(folder) -> tuple:
     return ffi, lib, meta
 
 
+#: enum dopus_budget_unit (runtime_c/dopus_solver.h, docs/algorithm.md section 14)
+BUDGET_UNITS = {"time": 1, "work": 2}
+
+
 def _info_property(field: str, kind=int, doc: Optional[str] = None) -> property:
     """A read-only property: ``kind(info.field)`` of ``<name>_get_info``."""
     return property(lambda self: kind(getattr(self._info(), field)), doc=doc)
@@ -262,13 +266,20 @@ class Solver:
         self.set_regularization(s.regularization, s.reg_eps)
         self.set_cost_hessian(s.cost_hessian)
         self.set_levenberg_marquardt(s.lm)
+        self._update("budget", budget=s.budget, budget_unit=BUDGET_UNITS[s.budget_unit])
+        if s.anytime_tol is not None:
+            self.set_anytime_tol(s.anytime_tol)
+        self.set_M_adaptive(s.M_adaptive, s.M_min, s.M_max, s.M_eta)
 
     @property
     def settings(self) -> Settings:
         """The settings the solver runs with (``M`` as the runtime holds it: at most N-1)."""
+        st = self._c_settings()
         return Settings(M=self.M, hessian=self.hessian, regularization=self.regularization, reg_eps=self.reg_eps,
                         cost_hessian=self.cost_hessian, lm="auto" if self.lm_auto else self.lm, qp_tol=self.qp_tol,
-                        qp_max_iter=self.qp_max_iter, mode=self.mode)
+                        qp_max_iter=self.qp_max_iter, mode=self.mode, budget=float(st.budget),
+                        budget_unit=self.budget_unit, anytime_tol=float(st.anytime_tol),
+                        M_adaptive=bool(st.M_adaptive), M_min=int(st.M_min), M_max=int(st.M_max), M_eta=float(st.M_eta))
 
     # ------------------------------------------------------------------ plumbing
     def _c(self, fname: str):
@@ -457,6 +468,43 @@ class Solver:
         if not isinstance(on, (bool, np.bool_)) and on not in (0, 1):
             self._bad(f"qp_warm_start must be True or False, got {on!r}")
         self._update("qp_warm_start", qp_warm_start=int(bool(on)))
+
+    # ------------------------------------------------------------------ anytime (section 14)
+    def set_time_budget(self, seconds) -> None:
+        """The budget per sampling instant in seconds of the solver's clock (0: off)."""
+        v = self._setting(settings.nonnegative, "time_budget", seconds)
+        self._update("time_budget", budget=v, budget_unit=BUDGET_UNITS["time"])
+
+    def set_work_budget(self, units) -> None:
+        """The budget per sampling instant in work units (function evaluations 1, a QP solve
+        N; 0: off): deterministic, the unit the reference counts."""
+        v = self._setting(settings.nonnegative, "work_budget", units)
+        self._update("work_budget", budget=v, budget_unit=BUDGET_UNITS["work"])
+
+    def set_anytime_tol(self, tol) -> None:
+        self._update("anytime_tol", anytime_tol=self._positive(tol, "anytime_tol"))
+
+    def set_M_adaptive(self, on: bool = True, M_min: int = 0, M_max=None, eta=None) -> None:
+        """Adaptive M (section 14): the stages whose secant residual ``rho_k |domega_k|``
+        exceeds ``eta`` times the KKT proxy, between ``M_min`` and ``M_max``."""
+
+        M_max = self.N - 1 if M_max is None else M_max
+        eta = float(vocabulary.constants()["ADAPTIVE_ETA"]) if eta is None else eta
+        on, M_min, M_max, eta = self._setting(settings.check_adaptive_M, on, M_min, M_max, eta, self.N)
+        self._update("M_adaptive", M_adaptive=int(on), M_min=M_min, M_max=M_max, M_eta=eta)
+
+    @property
+    def budget_unit(self) -> str:
+        """``"time"`` or ``"work"`` (the budget is off when it is 0)."""
+        return {v: k for k, v in BUDGET_UNITS.items()}[int(self._c_settings().budget_unit)]
+
+    budget = _settings_property("budget", float)
+    anytime_tol = _settings_property("anytime_tol", float)
+    M_adaptive = _settings_property("M_adaptive", bool)
+    extra_iterations = _info_property("extra_iterations", int, "Extra iterations of the last prepare.")
+    instant_stages = _info_property("instant_stages", int, "Stages re-linearised in the last instant.")
+    budget_used = _info_property("budget_used", float, "Budget used by the last instant (its unit).")
+    work = _info_property("work", float, "Work units counted since setup.")
 
     qp_warm_start = _settings_property("qp_warm_start", bool)
     qp_cold_retry = _info_property("qp_cold_retry", bool,

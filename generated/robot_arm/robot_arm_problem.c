@@ -255,6 +255,13 @@ void robot_arm_settings_default(robot_arm_settings *st)
     st->qp_warm_start = 1;
     st->recovery = 1;
     st->recovery_failures = ROBOT_ARM_RECOVERY_FAILURES;
+    st->budget = 0.0;
+    st->budget_unit = ROBOT_ARM_BUDGET_TIME;
+    st->anytime_tol = ROBOT_ARM_ANYTIME_TOL;
+    st->M_adaptive = 0;
+    st->M_min = 0;
+    st->M_max = ROBOT_ARM_N - 1;
+    st->M_eta = ROBOT_ARM_ADAPTIVE_ETA;
 }
 
 /* offline primal-dual solution at robot_arm_x0_default */

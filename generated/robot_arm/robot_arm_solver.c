@@ -95,6 +95,47 @@ static int robot_arm_phase(robot_arm_solver *s, int phase)
     return robot_arm_timer_switch(&s->timer, phase);
 }
 
+static int robot_arm_has_clock(const robot_arm_solver *s);
+
+/* ---- the anytime budget (algorithm.md section 14) --------------------------------------- */
+
+/* 1 when a budget is set (a time budget needs a clock). */
+static int robot_arm_budget_on(const robot_arm_solver *s)
+{
+    return s->settings.budget > 0.0 && (s->settings.budget_unit == ROBOT_ARM_BUDGET_WORK || robot_arm_has_clock(s));
+}
+
+/* Now on the budget's clock: the work counter (work units) or the solver's clock; 0 without
+ * a budget (the clock is not read: the phase timers' reads stay theirs). */
+static double robot_arm_budget_now(const robot_arm_solver *s)
+{
+    if (!robot_arm_budget_on(s)) {
+        return 0.0;
+    }
+    if (s->settings.budget_unit == ROBOT_ARM_BUDGET_WORK) {
+        return s->anytime.work;
+    }
+    return s->timer.clock ? s->timer.clock(s->timer.ctx) : 0.0;
+}
+
+/* A cost measured now against the last estimate: in time, a reading above 1.1 times the
+ * estimate raises it by 10 % only (a reading taken while the process was descheduled is not
+ * the cost of the work; one such reading would otherwise cut the next QPs and stages); in
+ * work units the reading itself (exact). */
+static double robot_arm_cost(const robot_arm_solver *s, double estimate, double reading)
+{
+    if (s->settings.budget_unit == ROBOT_ARM_BUDGET_TIME && estimate > 0.0 && reading > 1.1 * estimate) {
+        return 1.1 * estimate;
+    }
+    return reading;
+}
+
+/* 1 without a budget, or when `cost` more still fits in the instant's budget. */
+static int robot_arm_budget_fits(const robot_arm_solver *s, double cost)
+{
+    return !robot_arm_budget_on(s) || robot_arm_budget_now(s) - s->anytime.instant_start + cost <= s->settings.budget;
+}
+
 /* ---- generic information ------------------------------------------------------------ */
 
 size_t robot_arm_solver_sizeof(void)
@@ -224,6 +265,7 @@ static int robot_arm_stage_F(robot_arm_solver *s, int k)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0);
     int i;
+    s->anytime.work += 1.0;
     if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
@@ -306,7 +348,9 @@ static int robot_arm_stage_H_eval(robot_arm_solver *s, int k)
 static int robot_arm_stage_H(robot_arm_solver *s, int k)
 {
     int prev = robot_arm_phase(s, ROBOT_ARM_PHASE_HESSIANS);
-    int rc = robot_arm_stage_H_eval(s, k);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = robot_arm_stage_H_eval(s, k);
     robot_arm_phase(s, prev);
     return rc;
 }
@@ -332,7 +376,9 @@ static int robot_arm_term_grad_checked(robot_arm_solver *s, robot_arm_real *gL, 
 static int robot_arm_term_F(robot_arm_solver *s)
 {
     robot_arm_real gL[ROBOT_ARM_NX], E = ROBOT_ARM_R(0.0), r[ROBOT_ARM_DIM(ROBOT_ARM_NR)], r_eq[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
-    int rc = robot_arm_term_grad_checked(s, gL, &E, r, r_eq);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = robot_arm_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
@@ -370,7 +416,9 @@ static int robot_arm_term_H_eval(robot_arm_solver *s)
 static int robot_arm_term_H(robot_arm_solver *s)
 {
     int prev = robot_arm_phase(s, ROBOT_ARM_PHASE_HESSIANS);
-    int rc = robot_arm_term_H_eval(s);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = robot_arm_term_H_eval(s);
     robot_arm_phase(s, prev);
     return rc;
 }
@@ -493,6 +541,7 @@ static int robot_arm_linearize_all(robot_arm_solver *s)
 static int robot_arm_init_finish(robot_arm_solver *s)
 {
     int k, rc;
+    s->anytime.prepared_extra = 0;
     robot_arm_ring_reset(&s->ring);
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         s->rho[k] = ROBOT_ARM_R(0.0);
@@ -694,7 +743,12 @@ static void robot_arm_feedback_measure(robot_arm_solver *s, const robot_arm_real
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->health.xhat_fresh = 1;
-    robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    if (!s->anytime.prepared_extra) {
+        /* (after extra iterations the term the prepare convexified stays: the iterate has
+         * converged at the predicted state and the capped term, 0 there, left QPs that are
+         * convex only on the active bounds; algorithm.md section 14) */
+        robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -712,6 +766,9 @@ static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm)
     robot_arm_qp_settings_default(&settings);
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
+    if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 14) */
+    }
     settings.warm_start = warm;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
@@ -761,11 +818,13 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_cold_retry = 0;
+    s->anytime.work += ROBOT_ARM_WORK_QP;
     if (s->settings.qp_warm_start) {
         robot_arm_qp_warm_point(s);
     }
     qs = robot_arm_qp_attempt(s, s->settings.qp_warm_start);
     if (s->settings.qp_warm_start && qs != ROBOT_ARM_QP_INVALID_INPUT &&
+        !(qs == ROBOT_ARM_QP_MAX_ITER && s->anytime.qp_cap > 0) &&
         (!robot_arm_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = robot_arm_qp_attempt(s, 0);
@@ -780,8 +839,9 @@ static int robot_arm_feedback_lm_retries(robot_arm_solver *s, int qs, int *retri
 {
     *retries = 0;
     while (*retries < ROBOT_ARM_LM_RETRIES && robot_arm_lm_can_raise(&s->lm) && !robot_arm_qp_ok(s, qs) &&
-           qs != ROBOT_ARM_QP_INVALID_INPUT) {
+           qs != ROBOT_ARM_QP_INVALID_INPUT && !(qs == ROBOT_ARM_QP_MAX_ITER && s->anytime.qp_cap > 0)) {
         robot_arm_lm_raise(&s->lm);
+        s->anytime.work += ROBOT_ARM_WORK_QP;
         s->qp_in.hess_shift = s->lm.lm;
         qs = robot_arm_qp_attempt(s, 0);
         *retries += 1;
@@ -888,15 +948,41 @@ static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *
 }
 
 /* Feedback once admitted (steps 2 to 8). */
+/* The bounded latency of a time budget (algorithm.md section 14): the QP's iterations are
+ * capped at the budget left over the cost of one QP iteration of the last feedback (at least
+ * 1); a QP stopped by the cap is not retried (the fallback control). */
+static void robot_arm_feedback_cap(robot_arm_solver *s)
+{
+    double n;
+    s->anytime.qp_cap = 0;
+    if (!robot_arm_budget_on(s) || s->settings.budget_unit != ROBOT_ARM_BUDGET_TIME ||
+        !(s->anytime.cost_qp_iter > 0.0)) {
+        return;
+    }
+    n = (s->settings.budget - (robot_arm_budget_now(s) - s->anytime.instant_start)) / s->anytime.cost_qp_iter;
+    n = n < 1.0 ? 1.0 : n;
+    if (n < (double)s->settings.qp_max_iter) {
+        s->anytime.qp_cap = (int)n;
+    }
+}
+
 static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
     robot_arm_real xhat_prev[ROBOT_ARM_NX];
+    double b0;
     int rc, qs, retries;
 
     robot_arm_copy(xhat_prev, s->xhat0, ROBOT_ARM_NX);
     robot_arm_feedback_measure(s, xhat0);
+    robot_arm_feedback_cap(s);
+    b0 = robot_arm_budget_now(s);
     qs = robot_arm_feedback_qp(s);
     qs = robot_arm_feedback_lm_retries(s, qs, &retries);
+    s->anytime.cost_qp = robot_arm_cost(s, s->anytime.cost_qp, robot_arm_budget_now(s) - b0);
+    if (s->qp_iterations > 0 && s->settings.budget_unit == ROBOT_ARM_BUDGET_TIME) {
+        s->anytime.cost_qp_iter =
+            robot_arm_cost(s, s->anytime.cost_qp_iter, s->anytime.cost_qp / (double)s->qp_iterations);
+    }
     s->qp_status = qs;
     rc = robot_arm_feedback_check_step(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
@@ -970,10 +1056,15 @@ static int robot_arm_feedback_call(robot_arm_solver *s, const robot_arm_real *xh
     s->timer.locked = 1;
     start = s->timer.mark;
     s->health.flags = 0;
+    s->anytime.instant_start = robot_arm_budget_now(s);
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
     rc = robot_arm_feedback_admit(s, xhat0, u0);
     if (rc == ROBOT_ARM_OK) {
         rc = robot_arm_feedback_run(s, xhat0, u0);
     }
+    s->anytime.qp_cap = 0;
+    s->anytime.used = robot_arm_budget_now(s) - s->anytime.instant_start;
     s->timer.locked = 0;
     robot_arm_timer_end(&s->timer, 0, start);
     return rc;
@@ -1038,26 +1129,111 @@ static int robot_arm_stale_stage(const robot_arm_solver *s, int k)
     return 0;
 }
 
-/* Step 4: the stale stages (robot_arm_stale_stage), then the M stages among the other stages of
- * 0..N-2 with the largest rho_k, ties to the lower index. */
-static void robot_arm_select(robot_arm_solver *s, int M)
+/* |domega_k| of stage k's slot (the denominator of rho_k). */
+static robot_arm_real robot_arm_step_norm(const robot_arm_solver *s, int k)
 {
-    int m, k;
-    for (k = 0; k < ROBOT_ARM_N; ++k) {
-        s->selected[k] = k < ROBOT_ARM_N - 1 && ROBOT_ARM_NG > 0 && robot_arm_stale_stage(s, k);
+    const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
+    robot_arm_real d2 = ROBOT_ARM_R(0.0);
+    int i;
+    for (i = 0; i < ROBOT_ARM_NW; ++i) {
+        d2 += slot->dw[i] * slot->dw[i] + slot->dmu_b[i] * slot->dmu_b[i];
     }
-    for (m = 0; m < M; ++m) {
-        int best = -1;
-        for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
-            if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
-                best = k;
-            }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        d2 += slot->dlam[i] * slot->dlam[i];
+    }
+    for (i = 0; i < ROBOT_ARM_NG; ++i) {
+        d2 += slot->dmu_g[i] * slot->dmu_g[i];
+    }
+    return robot_arm_sqrt(d2);
+}
+
+/* The number of stages among 0..N-2 to re-linearise (before the budget): N-1 after a
+ * recovery, the fixed M, or adaptive M (algorithm.md section 14): the stages whose secant
+ * residual rho_k |domega_k| exceeds eta times the KKT proxy of the point before the step,
+ * between M_min and M_max. */
+static int robot_arm_M_now(const robot_arm_solver *s)
+{
+    const robot_arm_settings *st = &s->settings;
+    robot_arm_real thr = st->M_eta * s->health.kkt_proxy;
+    int k, n = 0;
+    if (s->health.recovering > 0) {
+        return ROBOT_ARM_N - 1; /* after a recovery: every block fresh until it has settled */
+    }
+    if (!st->M_adaptive) {
+        return st->M < 0 ? 0 : (st->M > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : st->M);
+    }
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        if (s->rho[k] * robot_arm_step_norm(s, k) > thr) {
+            n += 1;
         }
-        if (best < 0) {
+    }
+    return n < st->M_min ? st->M_min : (n > st->M_max ? st->M_max : n);
+}
+
+/* The stage among 0..N-2 not selected yet with the largest rho_k, ties to the lower index. */
+static int robot_arm_next_worst(const robot_arm_solver *s)
+{
+    int k, best = -1;
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
+            best = k;
+        }
+    }
+    return best;
+}
+
+/* Step 4: re-linearise the stale stages (robot_arm_stale_stage), then among the other stages of
+ * 0..N-2 those with the largest rho_k: M of them (robot_arm_M_now), then, with a budget,
+ * further stages in rho order while one more iteration still fits after them
+ * (algorithm.md section 14); each only while the budget allows. The cost of the stages
+ * beyond M goes to *ext_cost. */
+static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost)
+{
+    int M = robot_arm_M_now(s), m, k, n = 0, rc = ROBOT_ARM_OK, extend;
+    double b0, reserve;
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        s->selected[k] = 0;
+    }
+    /* the stale stages first, whatever the budget: without them the QP is infeasible */
+    for (k = 0; k < ROBOT_ARM_N - 1 && ROBOT_ARM_NG > 0; ++k) {
+        if (robot_arm_stale_stage(s, k)) {
+            rc = robot_arm_stage_H(s, k);
+            if (rc != ROBOT_ARM_OK) {
+                s->anytime.instant_stages += n;
+                return rc;
+            }
+            s->selected[k] = 1;
+            n += 1;
+        }
+    }
+    extend = robot_arm_budget_on(s);
+    *ext_cost = 0.0;
+    /* the stages beyond M keep room for one more iteration after this one */
+    reserve = s->anytime.cost_qp + s->anytime.cost_prepare;
+    for (m = 0; m < ROBOT_ARM_N - 1; ++m) {
+        if ((m >= M && !extend) || !robot_arm_budget_fits(s, s->anytime.cost_stage + (m >= M ? reserve : 0.0))) {
             break;
         }
-        s->selected[best] = 1;
+        k = robot_arm_next_worst(s);
+        if (k < 0) {
+            break;
+        }
+        b0 = robot_arm_budget_now(s);
+        rc = robot_arm_stage_H(s, k);
+        if (rc != ROBOT_ARM_OK) {
+            break;
+        }
+        s->selected[k] = 1;
+        n += 1;
+        if (robot_arm_budget_on(s)) {
+            s->anytime.cost_stage = robot_arm_cost(s, s->anytime.cost_stage, robot_arm_budget_now(s) - b0);
+            if (m >= M) {
+                *ext_cost += s->anytime.cost_stage;
+            }
+        }
     }
+    s->anytime.instant_stages += n;
+    return rc;
 }
 
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
@@ -1200,6 +1376,7 @@ static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
     s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += ROBOT_ARM_WORK_QP;
     *qs = robot_arm_qp_attempt(s, 0);
     *qs = robot_arm_feedback_lm_retries(s, *qs, retries);
     return ROBOT_ARM_OK;
@@ -1216,6 +1393,7 @@ static void robot_arm_predicted_step(robot_arm_solver *s)
         s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
     }
     s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += ROBOT_ARM_WORK_QP;
     qs = robot_arm_qp_solve_bound(s, 0);
     if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
         return;
@@ -1232,7 +1410,8 @@ static void robot_arm_predicted_step(robot_arm_solver *s)
     s->health.flags |= ROBOT_ARM_FLAG_PREDICTED;
 }
 
-static int robot_arm_prepare_iteration(robot_arm_solver *s);
+static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra);
+static int robot_arm_anytime_run(robot_arm_solver *s);
 
 /* Step 1 for the parameters (receding mode, once per sampling instant): p_k <- p_{k+1}, p_N
  * kept (a push replaces it). */
@@ -1270,7 +1449,7 @@ static int robot_arm_parameters_writable(robot_arm_solver *s)
 int robot_arm_prepare(robot_arm_solver *s)
 {
     double start;
-    int rc;
+    int rc, hessian;
     if (!s->set_up) {
         return ROBOT_ARM_ERR_NOT_INITIALIZED;
     }
@@ -1284,6 +1463,12 @@ int robot_arm_prepare(robot_arm_solver *s)
     robot_arm_timer_begin(&s->timer, ROBOT_ARM_PREPARE_PHASES, ROBOT_ARM_PHASE_RECOVERY);
     start = s->timer.mark;
     robot_arm_shift_parameters(s);
+    s->anytime.extra_iterations = 0;
+    s->anytime.prepared_extra = 0;
+    /* the instant's budget counts the solver's own calls: the feedback's part (used) and
+     * this prepare from now, not the caller's time between them */
+    s->anytime.instant_start = robot_arm_budget_now(s) - s->anytime.used;
+    hessian = s->settings.hessian;
     if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
         s->settings.mode == ROBOT_ARM_MODE_RECEDING && !(s->health.flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
         /* (not from the OCP file's guess: its plan is not the plant's) */
@@ -1295,16 +1480,23 @@ int robot_arm_prepare(robot_arm_solver *s)
     }
     if (s->health.recover_pending && s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING) {
         rc = robot_arm_recover(s, 0);
-    } else if (s->health.recovering > 0 && ROBOT_ARM_HAS_GN) {
+    } else {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
          * multipliers), every block fresh */
-        int hessian = s->settings.hessian;
-        s->settings.hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
-        rc = robot_arm_prepare_iteration(s);
-        s->settings.hessian = hessian;
-    } else {
-        rc = robot_arm_prepare_iteration(s);
+        if (s->health.recovering > 0 && ROBOT_ARM_HAS_GN) {
+            s->settings.hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
+        }
+        rc = robot_arm_prepare_iteration(s, 0);
     }
+    if (rc == ROBOT_ARM_OK) {
+        /* the budget left (algorithm.md section 14), with the Hessian of the recovery phase */
+        if (s->health.recovering > 0 && ROBOT_ARM_HAS_GN) {
+            s->settings.hessian = ROBOT_ARM_HESSIAN_GAUSS_NEWTON;
+        }
+        rc = robot_arm_anytime_run(s);
+    }
+    s->settings.hessian = hessian;
+    s->anytime.used = robot_arm_budget_now(s) - s->anytime.instant_start;
     if (rc == ROBOT_ARM_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
@@ -1315,15 +1507,17 @@ int robot_arm_prepare(robot_arm_solver *s)
     return robot_arm_ret(s, rc);
 }
 
-/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
-static int robot_arm_prepare_iteration(robot_arm_solver *s)
+/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
+ * anytime budget (section 14), without the shift, x_N kept. */
+static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 {
     robot_arm_real xN_saved[ROBOT_ARM_NX];
-    int k, rc, M;
+    double b_start = robot_arm_budget_now(s), ext_cost = 0.0;
+    int k, rc;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     robot_arm_phase(s, ROBOT_ARM_PHASE_SHIFT);
-    if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && !s->shifted) {
+    if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && !s->shifted && !extra) {
         robot_arm_shift(s);
         s->shifted = 1;
     }
@@ -1351,7 +1545,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
-    if (s->settings.mode == ROBOT_ARM_MODE_RECEDING) {
+    if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && !extra) {
         robot_arm_copy(s->x[ROBOT_ARM_N], s->mem.ev.tmp_phi, ROBOT_ARM_NX);
     }
     robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, ROBOT_ARM_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
@@ -1365,19 +1559,10 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
         rc = robot_arm_term_H(s);
     }
 
-    /* 4. re-linearise the M stages with the largest rho_k */
+    /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == ROBOT_ARM_OK) {
-        M = s->settings.M < 0 ? 0 : (s->settings.M > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->settings.M);
-        if (s->health.recovering > 0) {
-            M = ROBOT_ARM_N - 1; /* after a recovery: every block fresh until it has settled */
-        }
         robot_arm_phase(s, ROBOT_ARM_PHASE_RHO);
-        robot_arm_select(s, M);
-        for (k = 0; k < ROBOT_ARM_N - 1 && rc == ROBOT_ARM_OK; ++k) {
-            if (s->selected[k]) {
-                rc = robot_arm_stage_H(s, k);
-            }
-        }
+        rc = robot_arm_relinearise(s, &ext_cost);
     }
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
@@ -1424,6 +1609,10 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
     robot_arm_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
     robot_arm_phase(s, ROBOT_ARM_PHASE_RECOVERY);
+    if (robot_arm_budget_on(s)) {
+        s->anytime.cost_prepare =
+            robot_arm_cost(s, s->anytime.cost_prepare, robot_arm_budget_now(s) - b_start - ext_cost);
+    }
     if (robot_arm_iterate_diverged(s)) {
         s->health.flags |= ROBOT_ARM_FLAG_DIVERGED;
         if (s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING) {
@@ -1431,6 +1620,67 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s)
         }
     }
     return ROBOT_ARM_OK;
+}
+
+/* ---- anytime (algorithm.md section 14) -------------------------------------------------- */
+
+/* One extra iteration on the next instant's problem: the prepared QP for the state the plan
+ * predicts (dx_0 = 0), its full step, then a prepare iteration without the shift. A QP not
+ * solved (or a step outside the box) changes nothing and returns ROBOT_ARM_ERR_QP. */
+static int robot_arm_extra_iteration(robot_arm_solver *s)
+{
+    robot_arm_lm lm = s->lm;
+    robot_arm_real proxy = s->health.kkt_proxy;
+    double b0 = robot_arm_budget_now(s);
+    int i, qs, rc;
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        s->qp_in.x0[i] = ROBOT_ARM_R(0.0);
+    }
+    /* the cap of the term while the extra iterations make progress; after one of them raised
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 14) */
+    if (!s->anytime.uncapped) {
+        robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
+    qs = robot_arm_feedback_qp(s);
+    if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
+        s->lm = lm;
+        return ROBOT_ARM_ERR_QP;
+    }
+    s->anytime.cost_qp = robot_arm_cost(s, s->anytime.cost_qp, robot_arm_budget_now(s) - b0);
+    robot_arm_store_domega(s);
+    robot_arm_take_step(s);
+    robot_arm_lm_feedback(&s->lm, 1);
+    rc = robot_arm_prepare_iteration(s, 1);
+    if (!(s->health.kkt_proxy < proxy)) {
+        s->anytime.uncapped = 1;
+    }
+    return rc;
+}
+
+/* The budget left after prepare (algorithm.md section 14): extra iterations while the KKT
+ * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
+ * of robot_arm_info. */
+static int robot_arm_anytime_run(robot_arm_solver *s)
+{
+    int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = ROBOT_ARM_OK;
+    if (!robot_arm_budget_on(s)) {
+        return ROBOT_ARM_OK;
+    }
+    s->anytime.uncapped = 0;
+    while (s->anytime.extra_iterations < ROBOT_ARM_ANYTIME_MAX_ITER && s->qp_ready &&
+           s->health.kkt_proxy > s->settings.anytime_tol &&
+           robot_arm_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
+        rc = robot_arm_extra_iteration(s);
+        if (rc != ROBOT_ARM_OK) {
+            break;
+        }
+        s->anytime.extra_iterations += 1;
+    }
+    s->qp_status = qp_status;
+    s->qp_iterations = qp_iterations;
+    s->qp_cold_retry = cold;
+    s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
+    return rc == ROBOT_ARM_ERR_QP ? ROBOT_ARM_OK : rc;
 }
 
 /* ---- KKT ---------------------------------------------------------------------------- */
@@ -1708,6 +1958,10 @@ void robot_arm_get_info(const robot_arm_solver *s, robot_arm_info *info)
     }
     info->t_feedback = s->timer.t_call[0];
     info->t_prepare = s->timer.t_call[1];
+    info->extra_iterations = s->anytime.extra_iterations;
+    info->instant_stages = s->anytime.instant_stages;
+    info->budget_used = s->anytime.used;
+    info->work = s->anytime.work;
 }
 
 /* ---- settings, setup, parameters, clock ---------------------------------------------- */
@@ -1726,7 +1980,11 @@ static int robot_arm_settings_check(const robot_arm_settings *st)
         !isfinite(st->lm) || !(st->lm >= ROBOT_ARM_R(0.0)) || !isfinite(st->qp_tol) ||
         !(st->qp_tol > ROBOT_ARM_R(0.0)) || st->qp_tol > ROBOT_ARM_QP_TOL_MAX || st->qp_max_iter < 1 ||
         (st->qp_warm_start != 0 && st->qp_warm_start != 1) || (st->recovery != 0 && st->recovery != 1) ||
-        st->recovery_failures < 1) {
+        st->recovery_failures < 1 || !(st->budget >= 0.0) || !(st->budget < HUGE_VAL) ||
+        (st->budget_unit != ROBOT_ARM_BUDGET_TIME && st->budget_unit != ROBOT_ARM_BUDGET_WORK) ||
+        !isfinite(st->anytime_tol) || !(st->anytime_tol > ROBOT_ARM_R(0.0)) ||
+        (st->M_adaptive != 0 && st->M_adaptive != 1) || st->M_min < 0 || st->M_max < st->M_min ||
+        st->M_max > ROBOT_ARM_N - 1 || !isfinite(st->M_eta) || !(st->M_eta > ROBOT_ARM_R(0.0))) {
         return ROBOT_ARM_ERR_INVALID_ARGUMENT;
     }
     return ROBOT_ARM_OK;
@@ -1780,6 +2038,18 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
         s->kkt[i] = NAN;
     }
     robot_arm_timer_init(&s->timer);
+    s->anytime.work = 0.0;
+    s->anytime.instant_start = 0.0;
+    s->anytime.cost_stage = 0.0;
+    s->anytime.cost_qp = 0.0;
+    s->anytime.cost_prepare = 0.0;
+    s->anytime.cost_qp_iter = 0.0;
+    s->anytime.used = 0.0;
+    s->anytime.qp_cap = 0;
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
+    s->anytime.prepared_extra = 0;
+    s->anytime.uncapped = 0;
     return robot_arm_ret(s, rc);
 }
 

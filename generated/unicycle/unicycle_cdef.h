@@ -39,7 +39,20 @@ const char *unicycle_status_string(int status);
  * again within the call (UNICYCLE_FLAG_RECOVERED); a measurement at which the model is not
  * finite is handled as a missing one (UNICYCLE_ERR_NONFINITE_VALUE,
  * UNICYCLE_FLAG_MEASUREMENT_UNUSABLE); a feedback refused for want of a prepared QP still
- * records its measurement, so the recovery starts from the newest one; 0: off. */
+ * records its measurement, so the recovery starts from the newest one; 0: off.
+ * Anytime DOPUS (section 14): budget > 0 per sampling instant, counted from the start of
+ * the instant's feedback, in budget_unit UNICYCLE_BUDGET_TIME (seconds of the solver's clock,
+ * unicycle_set_clock: on firmware an instruction or cycle counter; without a clock the budget
+ * is off) or UNICYCLE_BUDGET_WORK (work units: stage_grad, stage_hess, term_grad and term_hess
+ * evaluations 1 each, a QP solve N; deterministic, the unit of the Python reference);
+ * budget 0: off, the plain real-time iteration. With a budget, prepare re-linearises stages
+ * only while the budget allows (the M of the setting first, then further stages in rho
+ * order), then takes SQP iterations on the next instant's problem at the state the plan
+ * predicts (dx_0 = 0) while the KKT proxy exceeds anytime_tol > 0 and one more fits; a time
+ * budget caps the feedback QP's iterations. M_adaptive 1: each iteration re-linearises the
+ * stages whose secant residual rho_k |domega_k| exceeds M_eta > 0 times the KKT proxy, at
+ * least M_min and at most M_max (0 <= M_min <= M_max <= N-1), the largest rho_k first;
+ * 0: the fixed M. */
 typedef struct {
     int M;
     int mode;
@@ -54,6 +67,13 @@ typedef struct {
     int qp_warm_start;
     int recovery;
     int recovery_failures;
+    double budget;
+    int budget_unit;
+    unicycle_real anytime_tol;
+    int M_adaptive;
+    int M_min;
+    int M_max;
+    unicycle_real M_eta;
 } unicycle_settings;
 /* The generated defaults: M, Hessian, regularisation, eps, cost Hessian and lm from the OCP
  * file's options; receding mode, QP tolerance UNICYCLE_QP_TOL_DEFAULT, 100 QP iterations, warm
@@ -197,6 +217,13 @@ typedef struct {
     double timings[10];
     double t_feedback;
     double t_prepare;
+    /* anytime DOPUS (section 14), the last instant: extra iterations after prepare, stages
+     * re-linearised over all its iterations (stage N-1 not counted), budget used (its unit);
+     * the work units counted since setup */
+    int extra_iterations;
+    int instant_stages;
+    double budget_used;
+    double work;
 } unicycle_info;
 void unicycle_get_info(const unicycle_solver *s, unicycle_info *info);
 /* A constraint row of the OCP at one stage of the horizon. */

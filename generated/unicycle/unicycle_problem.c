@@ -155,6 +155,13 @@ void unicycle_settings_default(unicycle_settings *st)
     st->qp_warm_start = 1;
     st->recovery = 1;
     st->recovery_failures = UNICYCLE_RECOVERY_FAILURES;
+    st->budget = 0.0;
+    st->budget_unit = UNICYCLE_BUDGET_TIME;
+    st->anytime_tol = UNICYCLE_ANYTIME_TOL;
+    st->M_adaptive = 0;
+    st->M_min = 0;
+    st->M_max = UNICYCLE_N - 1;
+    st->M_eta = UNICYCLE_ADAPTIVE_ETA;
 }
 
 /* offline primal-dual solution at unicycle_x0_default */

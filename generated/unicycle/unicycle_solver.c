@@ -95,6 +95,47 @@ static int unicycle_phase(unicycle_solver *s, int phase)
     return unicycle_timer_switch(&s->timer, phase);
 }
 
+static int unicycle_has_clock(const unicycle_solver *s);
+
+/* ---- the anytime budget (algorithm.md section 14) --------------------------------------- */
+
+/* 1 when a budget is set (a time budget needs a clock). */
+static int unicycle_budget_on(const unicycle_solver *s)
+{
+    return s->settings.budget > 0.0 && (s->settings.budget_unit == UNICYCLE_BUDGET_WORK || unicycle_has_clock(s));
+}
+
+/* Now on the budget's clock: the work counter (work units) or the solver's clock; 0 without
+ * a budget (the clock is not read: the phase timers' reads stay theirs). */
+static double unicycle_budget_now(const unicycle_solver *s)
+{
+    if (!unicycle_budget_on(s)) {
+        return 0.0;
+    }
+    if (s->settings.budget_unit == UNICYCLE_BUDGET_WORK) {
+        return s->anytime.work;
+    }
+    return s->timer.clock ? s->timer.clock(s->timer.ctx) : 0.0;
+}
+
+/* A cost measured now against the last estimate: in time, a reading above 1.1 times the
+ * estimate raises it by 10 % only (a reading taken while the process was descheduled is not
+ * the cost of the work; one such reading would otherwise cut the next QPs and stages); in
+ * work units the reading itself (exact). */
+static double unicycle_cost(const unicycle_solver *s, double estimate, double reading)
+{
+    if (s->settings.budget_unit == UNICYCLE_BUDGET_TIME && estimate > 0.0 && reading > 1.1 * estimate) {
+        return 1.1 * estimate;
+    }
+    return reading;
+}
+
+/* 1 without a budget, or when `cost` more still fits in the instant's budget. */
+static int unicycle_budget_fits(const unicycle_solver *s, double cost)
+{
+    return !unicycle_budget_on(s) || unicycle_budget_now(s) - s->anytime.instant_start + cost <= s->settings.budget;
+}
+
 /* ---- generic information ------------------------------------------------------------ */
 
 size_t unicycle_solver_sizeof(void)
@@ -224,6 +265,7 @@ static int unicycle_stage_F(unicycle_solver *s, int k)
 {
     unicycle_real l = UNICYCLE_R(0.0);
     int i;
+    s->anytime.work += 1.0;
     if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
@@ -306,7 +348,9 @@ static int unicycle_stage_H_eval(unicycle_solver *s, int k)
 static int unicycle_stage_H(unicycle_solver *s, int k)
 {
     int prev = unicycle_phase(s, UNICYCLE_PHASE_HESSIANS);
-    int rc = unicycle_stage_H_eval(s, k);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = unicycle_stage_H_eval(s, k);
     unicycle_phase(s, prev);
     return rc;
 }
@@ -332,7 +376,9 @@ static int unicycle_term_grad_checked(unicycle_solver *s, unicycle_real *gL, uni
 static int unicycle_term_F(unicycle_solver *s)
 {
     unicycle_real gL[UNICYCLE_NX], E = UNICYCLE_R(0.0), r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
-    int rc = unicycle_term_grad_checked(s, gL, &E, r, r_eq);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = unicycle_term_grad_checked(s, gL, &E, r, r_eq);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
@@ -370,7 +416,9 @@ static int unicycle_term_H_eval(unicycle_solver *s)
 static int unicycle_term_H(unicycle_solver *s)
 {
     int prev = unicycle_phase(s, UNICYCLE_PHASE_HESSIANS);
-    int rc = unicycle_term_H_eval(s);
+    int rc;
+    s->anytime.work += 1.0;
+    rc = unicycle_term_H_eval(s);
     unicycle_phase(s, prev);
     return rc;
 }
@@ -493,6 +541,7 @@ static int unicycle_linearize_all(unicycle_solver *s)
 static int unicycle_init_finish(unicycle_solver *s)
 {
     int k, rc;
+    s->anytime.prepared_extra = 0;
     unicycle_ring_reset(&s->ring);
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->rho[k] = UNICYCLE_R(0.0);
@@ -694,7 +743,12 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
         s->qp_in.x0[i] = xhat0[i] - s->x[0][i];
     }
     s->health.xhat_fresh = 1;
-    unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    if (!s->anytime.prepared_extra) {
+        /* (after extra iterations the term the prepare convexified stays: the iterate has
+         * converged at the predicted state and the capped term, 0 there, left QPs that are
+         * convex only on the active bounds; algorithm.md section 14) */
+        unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
     /* the QP is attempted: a prepare (with its shift) is due, whatever the outcome */
     s->prepare_due = 1;
     s->shifted = 0;
@@ -712,6 +766,9 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm)
     unicycle_qp_settings_default(&settings);
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
+    if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
+        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 14) */
+    }
     settings.warm_start = warm;
     for (k = 0; k < UNICYCLE_N; ++k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
@@ -761,11 +818,13 @@ static int unicycle_feedback_qp(unicycle_solver *s)
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_cold_retry = 0;
+    s->anytime.work += UNICYCLE_WORK_QP;
     if (s->settings.qp_warm_start) {
         unicycle_qp_warm_point(s);
     }
     qs = unicycle_qp_attempt(s, s->settings.qp_warm_start);
     if (s->settings.qp_warm_start && qs != UNICYCLE_QP_INVALID_INPUT &&
+        !(qs == UNICYCLE_QP_MAX_ITER && s->anytime.qp_cap > 0) &&
         (!unicycle_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = unicycle_qp_attempt(s, 0);
@@ -780,8 +839,9 @@ static int unicycle_feedback_lm_retries(unicycle_solver *s, int qs, int *retries
 {
     *retries = 0;
     while (*retries < UNICYCLE_LM_RETRIES && unicycle_lm_can_raise(&s->lm) && !unicycle_qp_ok(s, qs) &&
-           qs != UNICYCLE_QP_INVALID_INPUT) {
+           qs != UNICYCLE_QP_INVALID_INPUT && !(qs == UNICYCLE_QP_MAX_ITER && s->anytime.qp_cap > 0)) {
         unicycle_lm_raise(&s->lm);
+        s->anytime.work += UNICYCLE_WORK_QP;
         s->qp_in.hess_shift = s->lm.lm;
         qs = unicycle_qp_attempt(s, 0);
         *retries += 1;
@@ -888,15 +948,41 @@ static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
 }
 
 /* Feedback once admitted (steps 2 to 8). */
+/* The bounded latency of a time budget (algorithm.md section 14): the QP's iterations are
+ * capped at the budget left over the cost of one QP iteration of the last feedback (at least
+ * 1); a QP stopped by the cap is not retried (the fallback control). */
+static void unicycle_feedback_cap(unicycle_solver *s)
+{
+    double n;
+    s->anytime.qp_cap = 0;
+    if (!unicycle_budget_on(s) || s->settings.budget_unit != UNICYCLE_BUDGET_TIME ||
+        !(s->anytime.cost_qp_iter > 0.0)) {
+        return;
+    }
+    n = (s->settings.budget - (unicycle_budget_now(s) - s->anytime.instant_start)) / s->anytime.cost_qp_iter;
+    n = n < 1.0 ? 1.0 : n;
+    if (n < (double)s->settings.qp_max_iter) {
+        s->anytime.qp_cap = (int)n;
+    }
+}
+
 static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
     unicycle_real xhat_prev[UNICYCLE_NX];
+    double b0;
     int rc, qs, retries;
 
     unicycle_copy(xhat_prev, s->xhat0, UNICYCLE_NX);
     unicycle_feedback_measure(s, xhat0);
+    unicycle_feedback_cap(s);
+    b0 = unicycle_budget_now(s);
     qs = unicycle_feedback_qp(s);
     qs = unicycle_feedback_lm_retries(s, qs, &retries);
+    s->anytime.cost_qp = unicycle_cost(s, s->anytime.cost_qp, unicycle_budget_now(s) - b0);
+    if (s->qp_iterations > 0 && s->settings.budget_unit == UNICYCLE_BUDGET_TIME) {
+        s->anytime.cost_qp_iter =
+            unicycle_cost(s, s->anytime.cost_qp_iter, s->anytime.cost_qp / (double)s->qp_iterations);
+    }
     s->qp_status = qs;
     rc = unicycle_feedback_check_step(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
@@ -970,10 +1056,15 @@ static int unicycle_feedback_call(unicycle_solver *s, const unicycle_real *xhat0
     s->timer.locked = 1;
     start = s->timer.mark;
     s->health.flags = 0;
+    s->anytime.instant_start = unicycle_budget_now(s);
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
     rc = unicycle_feedback_admit(s, xhat0, u0);
     if (rc == UNICYCLE_OK) {
         rc = unicycle_feedback_run(s, xhat0, u0);
     }
+    s->anytime.qp_cap = 0;
+    s->anytime.used = unicycle_budget_now(s) - s->anytime.instant_start;
     s->timer.locked = 0;
     unicycle_timer_end(&s->timer, 0, start);
     return rc;
@@ -1038,26 +1129,111 @@ static int unicycle_stale_stage(const unicycle_solver *s, int k)
     return 0;
 }
 
-/* Step 4: the stale stages (unicycle_stale_stage), then the M stages among the other stages of
- * 0..N-2 with the largest rho_k, ties to the lower index. */
-static void unicycle_select(unicycle_solver *s, int M)
+/* |domega_k| of stage k's slot (the denominator of rho_k). */
+static unicycle_real unicycle_step_norm(const unicycle_solver *s, int k)
 {
-    int m, k;
-    for (k = 0; k < UNICYCLE_N; ++k) {
-        s->selected[k] = k < UNICYCLE_N - 1 && UNICYCLE_NG > 0 && unicycle_stale_stage(s, k);
+    const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
+    unicycle_real d2 = UNICYCLE_R(0.0);
+    int i;
+    for (i = 0; i < UNICYCLE_NW; ++i) {
+        d2 += slot->dw[i] * slot->dw[i] + slot->dmu_b[i] * slot->dmu_b[i];
     }
-    for (m = 0; m < M; ++m) {
-        int best = -1;
-        for (k = 0; k < UNICYCLE_N - 1; ++k) {
-            if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
-                best = k;
-            }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        d2 += slot->dlam[i] * slot->dlam[i];
+    }
+    for (i = 0; i < UNICYCLE_NG; ++i) {
+        d2 += slot->dmu_g[i] * slot->dmu_g[i];
+    }
+    return unicycle_sqrt(d2);
+}
+
+/* The number of stages among 0..N-2 to re-linearise (before the budget): N-1 after a
+ * recovery, the fixed M, or adaptive M (algorithm.md section 14): the stages whose secant
+ * residual rho_k |domega_k| exceeds eta times the KKT proxy of the point before the step,
+ * between M_min and M_max. */
+static int unicycle_M_now(const unicycle_solver *s)
+{
+    const unicycle_settings *st = &s->settings;
+    unicycle_real thr = st->M_eta * s->health.kkt_proxy;
+    int k, n = 0;
+    if (s->health.recovering > 0) {
+        return UNICYCLE_N - 1; /* after a recovery: every block fresh until it has settled */
+    }
+    if (!st->M_adaptive) {
+        return st->M < 0 ? 0 : (st->M > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : st->M);
+    }
+    for (k = 0; k < UNICYCLE_N - 1; ++k) {
+        if (s->rho[k] * unicycle_step_norm(s, k) > thr) {
+            n += 1;
         }
-        if (best < 0) {
+    }
+    return n < st->M_min ? st->M_min : (n > st->M_max ? st->M_max : n);
+}
+
+/* The stage among 0..N-2 not selected yet with the largest rho_k, ties to the lower index. */
+static int unicycle_next_worst(const unicycle_solver *s)
+{
+    int k, best = -1;
+    for (k = 0; k < UNICYCLE_N - 1; ++k) {
+        if (!s->selected[k] && (best < 0 || s->rho[k] > s->rho[best])) {
+            best = k;
+        }
+    }
+    return best;
+}
+
+/* Step 4: re-linearise the stale stages (unicycle_stale_stage), then among the other stages of
+ * 0..N-2 those with the largest rho_k: M of them (unicycle_M_now), then, with a budget,
+ * further stages in rho order while one more iteration still fits after them
+ * (algorithm.md section 14); each only while the budget allows. The cost of the stages
+ * beyond M goes to *ext_cost. */
+static int unicycle_relinearise(unicycle_solver *s, double *ext_cost)
+{
+    int M = unicycle_M_now(s), m, k, n = 0, rc = UNICYCLE_OK, extend;
+    double b0, reserve;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        s->selected[k] = 0;
+    }
+    /* the stale stages first, whatever the budget: without them the QP is infeasible */
+    for (k = 0; k < UNICYCLE_N - 1 && UNICYCLE_NG > 0; ++k) {
+        if (unicycle_stale_stage(s, k)) {
+            rc = unicycle_stage_H(s, k);
+            if (rc != UNICYCLE_OK) {
+                s->anytime.instant_stages += n;
+                return rc;
+            }
+            s->selected[k] = 1;
+            n += 1;
+        }
+    }
+    extend = unicycle_budget_on(s);
+    *ext_cost = 0.0;
+    /* the stages beyond M keep room for one more iteration after this one */
+    reserve = s->anytime.cost_qp + s->anytime.cost_prepare;
+    for (m = 0; m < UNICYCLE_N - 1; ++m) {
+        if ((m >= M && !extend) || !unicycle_budget_fits(s, s->anytime.cost_stage + (m >= M ? reserve : 0.0))) {
             break;
         }
-        s->selected[best] = 1;
+        k = unicycle_next_worst(s);
+        if (k < 0) {
+            break;
+        }
+        b0 = unicycle_budget_now(s);
+        rc = unicycle_stage_H(s, k);
+        if (rc != UNICYCLE_OK) {
+            break;
+        }
+        s->selected[k] = 1;
+        n += 1;
+        if (unicycle_budget_on(s)) {
+            s->anytime.cost_stage = unicycle_cost(s, s->anytime.cost_stage, unicycle_budget_now(s) - b0);
+            if (m >= M) {
+                *ext_cost += s->anytime.cost_stage;
+            }
+        }
     }
+    s->anytime.instant_stages += n;
+    return rc;
 }
 
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
@@ -1200,6 +1376,7 @@ static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries)
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
     s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += UNICYCLE_WORK_QP;
     *qs = unicycle_qp_attempt(s, 0);
     *qs = unicycle_feedback_lm_retries(s, *qs, retries);
     return UNICYCLE_OK;
@@ -1216,6 +1393,7 @@ static void unicycle_predicted_step(unicycle_solver *s)
         s->qp_in.x0[i] = UNICYCLE_R(0.0);
     }
     s->qp_in.hess_shift = s->lm.lm;
+    s->anytime.work += UNICYCLE_WORK_QP;
     qs = unicycle_qp_solve_bound(s, 0);
     if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         return;
@@ -1232,7 +1410,8 @@ static void unicycle_predicted_step(unicycle_solver *s)
     s->health.flags |= UNICYCLE_FLAG_PREDICTED;
 }
 
-static int unicycle_prepare_iteration(unicycle_solver *s);
+static int unicycle_prepare_iteration(unicycle_solver *s, int extra);
+static int unicycle_anytime_run(unicycle_solver *s);
 
 /* Step 1 for the parameters (receding mode, once per sampling instant): p_k <- p_{k+1}, p_N
  * kept (a push replaces it). */
@@ -1270,7 +1449,7 @@ static int unicycle_parameters_writable(unicycle_solver *s)
 int unicycle_prepare(unicycle_solver *s)
 {
     double start;
-    int rc;
+    int rc, hessian;
     if (!s->set_up) {
         return UNICYCLE_ERR_NOT_INITIALIZED;
     }
@@ -1284,6 +1463,12 @@ int unicycle_prepare(unicycle_solver *s)
     unicycle_timer_begin(&s->timer, UNICYCLE_PREPARE_PHASES, UNICYCLE_PHASE_RECOVERY);
     start = s->timer.mark;
     unicycle_shift_parameters(s);
+    s->anytime.extra_iterations = 0;
+    s->anytime.prepared_extra = 0;
+    /* the instant's budget counts the solver's own calls: the feedback's part (used) and
+     * this prepare from now, not the caller's time between them */
+    s->anytime.instant_start = unicycle_budget_now(s) - s->anytime.used;
+    hessian = s->settings.hessian;
     if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
         s->settings.mode == UNICYCLE_MODE_RECEDING && !(s->health.flags & UNICYCLE_FLAG_REINIT_GUESS)) {
         /* (not from the OCP file's guess: its plan is not the plant's) */
@@ -1295,16 +1480,23 @@ int unicycle_prepare(unicycle_solver *s)
     }
     if (s->health.recover_pending && s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING) {
         rc = unicycle_recover(s, 0);
-    } else if (s->health.recovering > 0 && UNICYCLE_HAS_GN) {
+    } else {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
          * multipliers), every block fresh */
-        int hessian = s->settings.hessian;
-        s->settings.hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
-        rc = unicycle_prepare_iteration(s);
-        s->settings.hessian = hessian;
-    } else {
-        rc = unicycle_prepare_iteration(s);
+        if (s->health.recovering > 0 && UNICYCLE_HAS_GN) {
+            s->settings.hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
+        }
+        rc = unicycle_prepare_iteration(s, 0);
     }
+    if (rc == UNICYCLE_OK) {
+        /* the budget left (algorithm.md section 14), with the Hessian of the recovery phase */
+        if (s->health.recovering > 0 && UNICYCLE_HAS_GN) {
+            s->settings.hessian = UNICYCLE_HESSIAN_GAUSS_NEWTON;
+        }
+        rc = unicycle_anytime_run(s);
+    }
+    s->settings.hessian = hessian;
+    s->anytime.used = unicycle_budget_now(s) - s->anytime.instant_start;
     if (rc == UNICYCLE_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
@@ -1315,15 +1507,17 @@ int unicycle_prepare(unicycle_solver *s)
     return unicycle_ret(s, rc);
 }
 
-/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9). */
-static int unicycle_prepare_iteration(unicycle_solver *s)
+/* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
+ * anytime budget (section 14), without the shift, x_N kept. */
+static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 {
     unicycle_real xN_saved[UNICYCLE_NX];
-    int k, rc, M;
+    double b_start = unicycle_budget_now(s), ext_cost = 0.0;
+    int k, rc;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     unicycle_phase(s, UNICYCLE_PHASE_SHIFT);
-    if (s->settings.mode == UNICYCLE_MODE_RECEDING && !s->shifted) {
+    if (s->settings.mode == UNICYCLE_MODE_RECEDING && !s->shifted && !extra) {
         unicycle_shift(s);
         s->shifted = 1;
     }
@@ -1351,7 +1545,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
     if (rc != UNICYCLE_OK) {
         return rc;
     }
-    if (s->settings.mode == UNICYCLE_MODE_RECEDING) {
+    if (s->settings.mode == UNICYCLE_MODE_RECEDING && !extra) {
         unicycle_copy(s->x[UNICYCLE_N], s->mem.ev.tmp_phi, UNICYCLE_NX);
     }
     unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
@@ -1365,19 +1559,10 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
         rc = unicycle_term_H(s);
     }
 
-    /* 4. re-linearise the M stages with the largest rho_k */
+    /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == UNICYCLE_OK) {
-        M = s->settings.M < 0 ? 0 : (s->settings.M > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->settings.M);
-        if (s->health.recovering > 0) {
-            M = UNICYCLE_N - 1; /* after a recovery: every block fresh until it has settled */
-        }
         unicycle_phase(s, UNICYCLE_PHASE_RHO);
-        unicycle_select(s, M);
-        for (k = 0; k < UNICYCLE_N - 1 && rc == UNICYCLE_OK; ++k) {
-            if (s->selected[k]) {
-                rc = unicycle_stage_H(s, k);
-            }
-        }
+        rc = unicycle_relinearise(s, &ext_cost);
     }
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
@@ -1424,6 +1609,10 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
     unicycle_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
     unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
+    if (unicycle_budget_on(s)) {
+        s->anytime.cost_prepare =
+            unicycle_cost(s, s->anytime.cost_prepare, unicycle_budget_now(s) - b_start - ext_cost);
+    }
     if (unicycle_iterate_diverged(s)) {
         s->health.flags |= UNICYCLE_FLAG_DIVERGED;
         if (s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING) {
@@ -1431,6 +1620,67 @@ static int unicycle_prepare_iteration(unicycle_solver *s)
         }
     }
     return UNICYCLE_OK;
+}
+
+/* ---- anytime (algorithm.md section 14) -------------------------------------------------- */
+
+/* One extra iteration on the next instant's problem: the prepared QP for the state the plan
+ * predicts (dx_0 = 0), its full step, then a prepare iteration without the shift. A QP not
+ * solved (or a step outside the box) changes nothing and returns UNICYCLE_ERR_QP. */
+static int unicycle_extra_iteration(unicycle_solver *s)
+{
+    unicycle_lm lm = s->lm;
+    unicycle_real proxy = s->health.kkt_proxy;
+    double b0 = unicycle_budget_now(s);
+    int i, qs, rc;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->qp_in.x0[i] = UNICYCLE_R(0.0);
+    }
+    /* the cap of the term while the extra iterations make progress; after one of them raised
+     * the KKT proxy, the term the prepare convexified (algorithm.md section 14) */
+    if (!s->anytime.uncapped) {
+        unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
+    }
+    qs = unicycle_feedback_qp(s);
+    if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
+        s->lm = lm;
+        return UNICYCLE_ERR_QP;
+    }
+    s->anytime.cost_qp = unicycle_cost(s, s->anytime.cost_qp, unicycle_budget_now(s) - b0);
+    unicycle_store_domega(s);
+    unicycle_take_step(s);
+    unicycle_lm_feedback(&s->lm, 1);
+    rc = unicycle_prepare_iteration(s, 1);
+    if (!(s->health.kkt_proxy < proxy)) {
+        s->anytime.uncapped = 1;
+    }
+    return rc;
+}
+
+/* The budget left after prepare (algorithm.md section 14): extra iterations while the KKT
+ * proxy exceeds the tolerance and one more fits. The last feedback's QP figures stay those
+ * of unicycle_info. */
+static int unicycle_anytime_run(unicycle_solver *s)
+{
+    int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = UNICYCLE_OK;
+    if (!unicycle_budget_on(s)) {
+        return UNICYCLE_OK;
+    }
+    s->anytime.uncapped = 0;
+    while (s->anytime.extra_iterations < UNICYCLE_ANYTIME_MAX_ITER && s->qp_ready &&
+           s->health.kkt_proxy > s->settings.anytime_tol &&
+           unicycle_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
+        rc = unicycle_extra_iteration(s);
+        if (rc != UNICYCLE_OK) {
+            break;
+        }
+        s->anytime.extra_iterations += 1;
+    }
+    s->qp_status = qp_status;
+    s->qp_iterations = qp_iterations;
+    s->qp_cold_retry = cold;
+    s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
+    return rc == UNICYCLE_ERR_QP ? UNICYCLE_OK : rc;
 }
 
 /* ---- KKT ---------------------------------------------------------------------------- */
@@ -1708,6 +1958,10 @@ void unicycle_get_info(const unicycle_solver *s, unicycle_info *info)
     }
     info->t_feedback = s->timer.t_call[0];
     info->t_prepare = s->timer.t_call[1];
+    info->extra_iterations = s->anytime.extra_iterations;
+    info->instant_stages = s->anytime.instant_stages;
+    info->budget_used = s->anytime.used;
+    info->work = s->anytime.work;
 }
 
 /* ---- settings, setup, parameters, clock ---------------------------------------------- */
@@ -1726,7 +1980,11 @@ static int unicycle_settings_check(const unicycle_settings *st)
         !isfinite(st->lm) || !(st->lm >= UNICYCLE_R(0.0)) || !isfinite(st->qp_tol) ||
         !(st->qp_tol > UNICYCLE_R(0.0)) || st->qp_tol > UNICYCLE_QP_TOL_MAX || st->qp_max_iter < 1 ||
         (st->qp_warm_start != 0 && st->qp_warm_start != 1) || (st->recovery != 0 && st->recovery != 1) ||
-        st->recovery_failures < 1) {
+        st->recovery_failures < 1 || !(st->budget >= 0.0) || !(st->budget < HUGE_VAL) ||
+        (st->budget_unit != UNICYCLE_BUDGET_TIME && st->budget_unit != UNICYCLE_BUDGET_WORK) ||
+        !isfinite(st->anytime_tol) || !(st->anytime_tol > UNICYCLE_R(0.0)) ||
+        (st->M_adaptive != 0 && st->M_adaptive != 1) || st->M_min < 0 || st->M_max < st->M_min ||
+        st->M_max > UNICYCLE_N - 1 || !isfinite(st->M_eta) || !(st->M_eta > UNICYCLE_R(0.0))) {
         return UNICYCLE_ERR_INVALID_ARGUMENT;
     }
     return UNICYCLE_OK;
@@ -1780,6 +2038,18 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
         s->kkt[i] = NAN;
     }
     unicycle_timer_init(&s->timer);
+    s->anytime.work = 0.0;
+    s->anytime.instant_start = 0.0;
+    s->anytime.cost_stage = 0.0;
+    s->anytime.cost_qp = 0.0;
+    s->anytime.cost_prepare = 0.0;
+    s->anytime.cost_qp_iter = 0.0;
+    s->anytime.used = 0.0;
+    s->anytime.qp_cap = 0;
+    s->anytime.extra_iterations = 0;
+    s->anytime.instant_stages = 0;
+    s->anytime.prepared_extra = 0;
+    s->anytime.uncapped = 0;
     return unicycle_ret(s, rc);
 }
 

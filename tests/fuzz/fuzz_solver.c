@@ -565,7 +565,14 @@ static void do_feedback(reader *r, double *xhat)
             check(after.u[i] >= API(lbu)[i] - slack && after.u[i] <= API(ubu)[i] + slack,
                   "u0 within the control bounds");
             if (!(flags & 2u)) {
-                check(u0[i] == after.u[i], "u0 is u_0 of the iterate");
+                /* docs/algorithm.md section 9: u0 is u_0 of the iterate clipped to the bounds
+                 * (the QP meets the bounds to its tolerance only) */
+                double clipped = fmin(fmax(after.u[i], API(lbu)[i]), API(ubu)[i]);
+                if (!(u0[i] == clipped)) {
+                    fprintf(stderr, "u0[%d] %.17g, u_0 of the iterate %.17g, bounds [%.17g, %.17g]\n", i,
+                            u0[i], after.u[i], API(lbu)[i], API(ubu)[i]);
+                }
+                check(u0[i] == clipped, "u0 is u_0 of the iterate, clipped to the control bounds");
             }
         }
     }

@@ -81,6 +81,31 @@ def instant(solver, plant, x, xm):
     return x, fb.u0, fb.status or st
 
 
+class Handle:
+    """The generated solver with the OCP file's settings but M (and an optional work budget per
+    instant), initialised at the given guess (IPOPT's solution) by run_case."""
+
+    def __init__(self, disc, guess, M, budget=0.0):
+        from dopus_codegen.runtime.solver import CSolver
+
+        self.s, self.guess = CSolver(disc, lm=None, M=M), guess
+        if budget > 0:
+            self.s.set_work_budget(budget)
+
+    def init(self, x):
+        self.s.init(x, self.guess)
+
+    def feedback(self, x):
+        return self.s.feedback(x)
+
+    def prepare(self):
+        self.s.prepare()
+
+    @property
+    def recoveries(self):
+        return self.s.recoveries
+
+
 def run_case(make_solver, plant, x0, kind: str, K: int, after: int = AFTER, tol: float = 1e-2):
     """One run: SETTLE nominal instants, K faulty ones, `after` exact ones. Returns a dict:
     failed_settle (count), failed_during, last_failed_after (index of the last failed instant
