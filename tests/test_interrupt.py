@@ -246,7 +246,10 @@ def test_sil(tmp_path, when):
     written; late (the JSON written, the figures being drawn): the JSON is whole, every
     figure on disk is whole, no temporary file is left."""
     json_out, plots = tmp_path / "sil.json", tmp_path / "plots"
-    cmd = Command(["sil", ROBOT_ARM_FILE, "--compare", "full", "--duration", "1.5", "--json", json_out,
+    # early: a closed loop long enough (20 s of plant time, some seconds of wall time) that the
+    # interrupt surely lands in it on an idle machine too; late: a short one, to reach the figures
+    duration = "20" if when == "during the closed loop" else "1.5"
+    cmd = Command(["sil", ROBOT_ARM_FILE, "--compare", "full", "--duration", duration, "--json", json_out,
                    "--plot-dir", plots], tmp_path)
     try:
         cmd.wait_for_line("DOPUS M = 1: c backend" if when == "during the closed loop" else "JSON: ")
