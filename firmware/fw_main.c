@@ -224,53 +224,6 @@ static int fixed_study(int M)
     return 0;
 }
 
-static int closed_loop(void)
-{
-    fw_real xhat[FW_C(NX)], xnext[FW_C(NX)], u0[FW_C(NU)], k4[4];
-    int i, k, status, plant_ok = 1, first_failure = FW_C(OK);
-    uint32_t t_fb, t_prep, stack;
-
-    status = FW(setup)(&solver, NULL); /* the generated settings */
-    if (status == FW_C(OK)) {
-        status = FW(init_nominal)(&solver, FW(x0_default));
-    }
-    if (status != FW_C(OK)) {
-        return status;
-    }
-    for (i = 0; i < FW_C(NX); ++i) {
-        xhat[i] = xhat_fixed[i];
-    }
-    /* The closed-loop instant of the package (dopus_codegen/studies/loops.py): the
-     * measurement in, the returned u0 applied whatever the status; a failed instant is
-     * reported and the loop goes on. */
-    for (k = 1; k <= FW_LOOP_STEPS && plant_ok; ++k) {
-        status = iteration(xhat, u0, &t_fb, &t_prep, &stack);
-        /* the plant: the generated integrator from the measured state with the applied u0
-         * (iteration() ran prepare already: the plant step does not touch the solver) */
-        if (FW(simulate)(xhat, u0, NULL, xnext, &plant_work) != FW_C(OK)) {
-            plant_ok = 0;
-            status = FW_C(ERR_FUNCTION);
-        }
-        if (status == FW_C(OK)) {
-            status = FW(kkt_eval)(&solver, xhat, k4);
-        }
-        if (first_failure == FW_C(OK)) {
-            first_failure = status;
-        }
-        put_str("loop");
-        FW(get_settings)(&solver, &settings);
-        put_field("M", settings.M);
-        put_field("step", k);
-        put_iteration(status, qp_iterations(), t_fb, t_prep, stack, k4, u0);
-        put_reals("xhat", xhat, FW_C(NX));
-        end_line();
-        for (i = 0; i < FW_C(NX); ++i) {
-            xhat[i] = xnext[i];
-        }
-    }
-    return first_failure;
-}
-
 /* ---- the anytime budget (docs/algorithm.md section 14) on the firmware clock ------------ */
 
 /* The budgets of the budgeted closed loops, in instructions (0 ends the list). */
@@ -288,19 +241,26 @@ static double instruction_clock(void *ctx)
     return (double)fw_ticks() * (double)FW_INSTRUCTIONS_PER_TICK;
 }
 
-/* The closed loop of closed_loop() with a time budget of `budget` instructions per instant
- * on the instruction clock; lines "budget" with the extra iterations of each instant. */
-static int closed_loop_budget(double budget)
+/* The closed-loop instant of the package (dopus_codegen/studies/loops.py): the measurement
+ * in, the returned u0 applied whatever the status; a failed instant is reported and the loop
+ * goes on. budget 0: the generated settings, lines "loop", returns the first failure;
+ * budget > 0: a time budget of `budget` instructions per instant on the instruction clock,
+ * lines "budget" with the extra iterations of each instant. */
+static int closed_loop(double budget)
 {
     fw_real xhat[FW_C(NX)], xnext[FW_C(NX)], u0[FW_C(NU)], k4[4];
-    int i, k, status, plant_ok = 1;
+    int i, k, status, plant_ok = 1, first_failure = FW_C(OK);
     uint32_t t_fb, t_prep, stack;
 
-    FW(settings_default)(&settings);
-    settings.budget = budget;
-    settings.budget_unit = FW_C(BUDGET_TIME);
-    status = FW(setup)(&solver, &settings);
-    FW(set_clock)(&solver, instruction_clock, 0);
+    if (budget > 0.0) {
+        FW(settings_default)(&settings);
+        settings.budget = budget;
+        settings.budget_unit = FW_C(BUDGET_TIME);
+        status = FW(setup)(&solver, &settings);
+        FW(set_clock)(&solver, instruction_clock, 0);
+    } else {
+        status = FW(setup)(&solver, NULL); /* the generated settings */
+    }
     if (status == FW_C(OK)) {
         status = FW(init_nominal)(&solver, FW(x0_default));
     }
@@ -312,6 +272,8 @@ static int closed_loop_budget(double budget)
     }
     for (k = 1; k <= FW_LOOP_STEPS && plant_ok; ++k) {
         status = iteration(xhat, u0, &t_fb, &t_prep, &stack);
+        /* the plant: the generated integrator from the measured state with the applied u0
+         * (iteration() ran prepare already: the plant step does not touch the solver) */
         if (FW(simulate)(xhat, u0, NULL, xnext, &plant_work) != FW_C(OK)) {
             plant_ok = 0;
             status = FW_C(ERR_FUNCTION);
@@ -319,20 +281,31 @@ static int closed_loop_budget(double budget)
         if (status == FW_C(OK)) {
             status = FW(kkt_eval)(&solver, xhat, k4);
         }
-        FW(get_info)(&solver, &info);
-        put_str("budget");
-        put_field("instructions", (long)budget);
-        put_field("step", k);
-        put_field("extra", info.extra_iterations);
-        put_field("stages", info.instant_stages);
-        put_iteration(status, info.qp_iterations, t_fb, t_prep, stack, k4, u0);
+        if (first_failure == FW_C(OK)) {
+            first_failure = status;
+        }
+        if (budget > 0.0) {
+            FW(get_info)(&solver, &info);
+            put_str("budget");
+            put_field("instructions", (long)budget);
+            put_field("step", k);
+            put_field("extra", info.extra_iterations);
+            put_field("stages", info.instant_stages);
+            put_iteration(status, info.qp_iterations, t_fb, t_prep, stack, k4, u0);
+        } else {
+            put_str("loop");
+            FW(get_settings)(&solver, &settings);
+            put_field("M", settings.M);
+            put_field("step", k);
+            put_iteration(status, qp_iterations(), t_fb, t_prep, stack, k4, u0);
+        }
         put_reals("xhat", xhat, FW_C(NX));
         end_line();
         for (i = 0; i < FW_C(NX); ++i) {
             xhat[i] = xnext[i];
         }
     }
-    return FW_C(OK);
+    return budget > 0.0 ? FW_C(OK) : first_failure;
 }
 
 int main(void)
@@ -360,10 +333,10 @@ int main(void)
         status = fixed_study(m_list[i]);
     }
     if (status == 0) {
-        status = closed_loop();
+        status = closed_loop(0.0);
     }
     for (i = 0; budgets[i] > 0.0 && status == 0; ++i) {
-        status = closed_loop_budget(budgets[i]);
+        status = closed_loop(budgets[i]);
     }
     put_str("end");
     put_field("status", status);
