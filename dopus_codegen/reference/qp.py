@@ -482,6 +482,37 @@ def qp_kkt_residual(qp: dict, sol: dict) -> dict:
 _IPOPT_CACHE: dict = {}
 
 
+def _ipopt_options(max_iter):
+    """IPOPT as a QP solver: tight tolerance, no bound relaxation, constant derivatives."""
+    return {
+        "print_time": False,
+        "ipopt": {
+            "print_level": 0, "sb": "yes", "tol": 1e-12, "acceptable_iter": 0,
+            "bound_relax_factor": 0.0, "honor_original_bounds": "yes",
+            "mu_strategy": "adaptive", "max_iter": int(max_iter),
+            "hessian_constant": "yes", "jac_c_constant": "yes", "jac_d_constant": "yes",
+        },
+    }
+
+
+def _run_ipopt(solver, rows: _Rows, **args):
+    """One solve of a QP's IPOPT function over the rows (equalities, then inequalities):
+    (z, lam_eq, lam_in, lam_z, status, iterations)."""
+    lbg = np.concatenate([rows.b_eq, rows.l_in])
+    ubg = np.concatenate([rows.b_eq, rows.u_in])
+    # start inside the bounds: IPOPT pushes the start anyway, a clipped zero is as good as any
+    z0 = np.clip(np.zeros(rows.lbz.shape[0]), rows.lbz, rows.ubz)
+    z0 = np.where(np.isfinite(z0), z0, 0.0)
+    res = solver(x0=z0, lbx=rows.lbz, ubx=rows.ubz, lbg=lbg, ubg=ubg, **args)
+    interrupt.check()       # IPOPT ends a solve interrupted by Ctrl-C as a failed one
+    stats = solver.stats()
+    z = np.array(res["x"]).reshape(-1)
+    lam_g = np.array(res["lam_g"]).reshape(-1)
+    lam_x = np.array(res["lam_x"]).reshape(-1)
+    neq = rows.A_eq.shape[0]
+    return z, lam_g[:neq], lam_g[neq:], lam_x, stats.get("return_status", ""), int(stats.get("iter_count", -1))
+
+
 def _ipopt_solver(N, nx, nu, ng, nr, ne, max_iter=500):
     key = (N, nx, nu, ng, nr, ne, max_iter)
     if key in _IPOPT_CACHE:
@@ -521,16 +552,7 @@ def _ipopt_solver(N, nx, nu, ng, nr, ne, max_iter=500):
         cin.append(ca.mtimes(ca.reshape(R, nx, nr).T, xN))
     gexpr = ca.vertcat(*(cons + cin))
     p = ca.vertcat(H, g, Phi, HN, gN, C, R, Req)
-    opts = {
-        "print_time": False,
-        "ipopt": {
-            "print_level": 0, "sb": "yes", "tol": 1e-12, "acceptable_iter": 0,
-            "bound_relax_factor": 0.0, "honor_original_bounds": "yes",
-            "mu_strategy": "adaptive", "max_iter": int(max_iter),
-            "hessian_constant": "yes", "jac_c_constant": "yes", "jac_d_constant": "yes",
-        },
-    }
-    solver = ca.nlpsol("qpref_ipopt", "ipopt", {"x": z, "p": p, "f": f, "g": gexpr}, opts)
+    solver = ca.nlpsol("qpref_ipopt", "ipopt", {"x": z, "p": p, "f": f, "g": gexpr}, _ipopt_options(max_iter))
     _IPOPT_CACHE[key] = solver
     return solver
 
@@ -540,20 +562,7 @@ def _solve_ipopt(q: dict, Hz, gz, rows: _Rows, max_iter=500):
     solver = _ipopt_solver(N, nx, nu, ng, nr, ne, max_iter)
     p = np.concatenate([q["H"].reshape(-1), q["g"].reshape(-1), q["Phi"].reshape(-1), q["HN"].reshape(-1),
                         q["gN"], q["C"].reshape(-1), q["R"].reshape(-1), q["Req"].reshape(-1)])
-    lbg = np.concatenate([rows.b_eq, rows.l_in])
-    ubg = np.concatenate([rows.b_eq, rows.u_in])
-    # start inside the bounds: IPOPT pushes the start anyway, a clipped zero is as good as any
-    z0 = np.clip(np.zeros(Hz.shape[0]), rows.lbz, rows.ubz)
-    z0 = np.where(np.isfinite(z0), z0, 0.0)
-    res = solver(x0=z0, p=p, lbx=rows.lbz, ubx=rows.ubz, lbg=lbg, ubg=ubg)
-    interrupt.check()       # IPOPT ends a solve interrupted by Ctrl-C as a failed one
-    stats = solver.stats()
-    status = stats.get("return_status", "")
-    z = np.array(res["x"]).reshape(-1)
-    lam_g = np.array(res["lam_g"]).reshape(-1)
-    lam_x = np.array(res["lam_x"]).reshape(-1)
-    neq = rows.A_eq.shape[0]
-    return z, lam_g[:neq], lam_g[neq:], lam_x, status, int(stats.get("iter_count", -1))
+    return _run_ipopt(solver, rows, p=p)
 
 
 def _solve_ipopt_flat(Hz, gz, rows: _Rows, max_iter=500):
@@ -566,28 +575,8 @@ def _solve_ipopt_flat(Hz, gz, rows: _Rows, max_iter=500):
     H = ca.DM(sp.csc_matrix(Hz))
     A = ca.DM(sp.csc_matrix(sp.vstack([rows.A_eq, rows.A_in])))
     f = 0.5 * ca.dot(z, ca.mtimes(H, z)) + ca.dot(ca.DM(gz), z)
-    opts = {
-        "print_time": False,
-        "ipopt": {
-            "print_level": 0, "sb": "yes", "tol": 1e-12, "acceptable_iter": 0,
-            "bound_relax_factor": 0.0, "honor_original_bounds": "yes",
-            "mu_strategy": "adaptive", "max_iter": int(max_iter),
-            "hessian_constant": "yes", "jac_c_constant": "yes", "jac_d_constant": "yes",
-        },
-    }
-    solver = ca.nlpsol("qpref_ipopt_flat", "ipopt", {"x": z, "f": f, "g": ca.mtimes(A, z)}, opts)
-    lbg = np.concatenate([rows.b_eq, rows.l_in])
-    ubg = np.concatenate([rows.b_eq, rows.u_in])
-    z0 = np.clip(np.zeros(nz), rows.lbz, rows.ubz)
-    z0 = np.where(np.isfinite(z0), z0, 0.0)
-    res = solver(x0=z0, lbx=rows.lbz, ubx=rows.ubz, lbg=lbg, ubg=ubg)
-    stats = solver.stats()
-    status = stats.get("return_status", "")
-    zz = np.array(res["x"]).reshape(-1)
-    lam_g = np.array(res["lam_g"]).reshape(-1)
-    lam_x = np.array(res["lam_x"]).reshape(-1)
-    neq = rows.A_eq.shape[0]
-    return zz, lam_g[:neq], lam_g[neq:], lam_x, status, int(stats.get("iter_count", -1))
+    solver = ca.nlpsol("qpref_ipopt_flat", "ipopt", {"x": z, "f": f, "g": ca.mtimes(A, z)}, _ipopt_options(max_iter))
+    return _run_ipopt(solver, rows)
 
 
 # ---------------------------------------------------------------------------
