@@ -11,6 +11,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from harness.transcription import rk4_double_integrator
+
 from dopus_codegen import Ocp, build_functions
 from dopus_codegen.problem.ocp import OcpError
 from dopus_codegen.reference.dopus import ReferenceDopus
@@ -43,17 +45,9 @@ def rate():
 def _opti(x0, u_last):
     opti = ca.Opti()
     X, U = opti.variable(2, N + 1), opti.variable(1, N)
-
-    def f(x, u):
-        return ca.vertcat(x[1], u)
-
     J = 0
     for k in range(N):
-        k1 = f(X[:, k], U[k])
-        k2 = f(X[:, k] + DT / 2 * k1, U[k])
-        k3 = f(X[:, k] + DT / 2 * k2, U[k])
-        k4 = f(X[:, k] + DT * k3, U[k])
-        opti.subject_to(X[:, k + 1] == X[:, k] + DT / 6 * (k1 + 2 * k2 + 2 * k3 + k4))
+        opti.subject_to(X[:, k + 1] == rk4_double_integrator(X[:, k], U[k], DT))
         J += 0.5 * (10.0 * (X[0, k] - 1.0) ** 2 + 0.1 * X[1, k] ** 2 + 0.01 * U[k] ** 2)
         opti.subject_to(opti.bounded(-3.0, U[k], 3.0))
         prev = u_last if k == 0 else U[k - 1]

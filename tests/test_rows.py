@@ -13,6 +13,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from harness.transcription import rk4_double_integrator
+
 from dopus_codegen import Ocp, Soft, build_functions
 from dopus_codegen.errors import DopusError, qp_status_code
 from dopus_codegen.problem.ocp import OcpError
@@ -67,17 +69,9 @@ def _opti_wall(terminal: bool):
     """The same NLP written out: RK4 of (v, u), the wall at nodes 0..N-1 (and N)."""
     opti = ca.Opti()
     X, U = opti.variable(2, N + 1), opti.variable(1, N)
-
-    def f(x, u):
-        return ca.vertcat(x[1], u)
-
     J = 0
     for k in range(N):
-        k1 = f(X[:, k], U[k])
-        k2 = f(X[:, k] + DT / 2 * k1, U[k])
-        k3 = f(X[:, k] + DT / 2 * k2, U[k])
-        k4 = f(X[:, k] + DT * k3, U[k])
-        opti.subject_to(X[:, k + 1] == X[:, k] + DT / 6 * (k1 + 2 * k2 + 2 * k3 + k4))
+        opti.subject_to(X[:, k + 1] == rk4_double_integrator(X[:, k], U[k], DT))
         J += 0.5 * 0.1 * (U[k] ** 2 + X[1, k] ** 2)
         opti.subject_to(opti.bounded(-1.0, U[k], 1.0))
         if k >= 1:
@@ -169,17 +163,9 @@ def test_bad_stages(stages, message):
 def _opti_stages(stages):
     opti = ca.Opti()
     X, U = opti.variable(2, N + 1), opti.variable(1, N)
-
-    def f(x, u):
-        return ca.vertcat(x[1], u)
-
     J = 0
     for k in range(N):
-        k1 = f(X[:, k], U[k])
-        k2 = f(X[:, k] + DT / 2 * k1, U[k])
-        k3 = f(X[:, k] + DT / 2 * k2, U[k])
-        k4 = f(X[:, k] + DT * k3, U[k])
-        opti.subject_to(X[:, k + 1] == X[:, k] + DT / 6 * (k1 + 2 * k2 + 2 * k3 + k4))
+        opti.subject_to(X[:, k + 1] == rk4_double_integrator(X[:, k], U[k], DT))
         J += 0.5 * 0.1 * (U[k] ** 2 + X[1, k] ** 2)
         opti.subject_to(opti.bounded(-1.0, U[k], 1.0))
         if k in stages:
