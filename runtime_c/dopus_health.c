@@ -141,11 +141,16 @@ int dopus_diverged(const dopus_health *h, const dopus_real *xhat0, const dopus_r
     return !(h->kkt_proxy <= DOPUS_DIVERGENCE_KKT * ref);
 }
 
+const dopus_real *dopus_health_plan_control(const dopus_health *h, int k)
+{
+    int j = h->plan_age + k;
+    return h->plan_u[j > DOPUS_N - 1 ? DOPUS_N - 1 : j];
+}
+
 int dopus_health_fallback(dopus_health *h, int receding, dopus_real *u0)
 {
-    int i, clipped, j = receding ? h->plan_age : 0;
-    j = j > DOPUS_N - 1 ? DOPUS_N - 1 : j;
-    clipped = dopus_clip_u(h->plan_u[j], h->u0_out);
+    int i, clipped;
+    clipped = dopus_clip_u(receding ? dopus_health_plan_control(h, 0) : h->plan_u[0], h->u0_out);
     if (u0) {
         for (i = 0; i < DOPUS_NU; ++i) {
             u0[i] = h->u0_out[i];

@@ -59,6 +59,9 @@ DOPUS_INTERNAL dopus_real dopus_kkt_proxy(const dopus_ring *ring, const dopus_re
 DOPUS_INTERNAL int dopus_diverged(const dopus_health *h, const dopus_real *xhat0, const dopus_real *x,
                                   const dopus_real *u, const dopus_real *lam, const dopus_real *mu_b,
                                   const dopus_real *mu_bN);
+/* The control of the last good plan for the instant k sampling instants from now (its age
+ * plus k, the last control beyond the plan's end). */
+DOPUS_INTERNAL const dopus_real *dopus_health_plan_control(const dopus_health *h, int k);
 /* The fallback control of a failed feedback: the control of the last good plan for this
  * instant (plan_age shifts on in receding mode, else the first), clipped, into u0_out and
  * u0 (may be NULL). Returns 1 when it was clipped. */

@@ -941,8 +941,7 @@ static int dopus_feedback_recover(dopus_solver *s, int *qs, int *retries);
 static int dopus_model_finite_at(dopus_solver *s, const dopus_real *xs)
 {
     dopus_real l = DOPUS_R(0.0), u[DOPUS_NU], xn[DOPUS_NX];
-    int j = s->health.plan_age > DOPUS_N - 1 ? DOPUS_N - 1 : s->health.plan_age;
-    dopus_clip_u(s->health.plan_u[j], u);
+    dopus_clip_u(dopus_health_plan_control(&s->health, 0), u);
     return dopus_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
            dopus_lai_vec_finite(DOPUS_NX, xn) && dopus_lai_vec_finite(1, &l);
 }
@@ -1242,10 +1241,9 @@ static int dopus_relinearise(dopus_solver *s, double *ext_cost)
 static int dopus_simulate_plan(dopus_solver *s, int use_plan)
 {
     dopus_real l = DOPUS_R(0.0);
-    int k, j;
+    int k;
     for (k = 0; k < DOPUS_N; ++k) {
-        j = s->health.plan_age + k > DOPUS_N - 1 ? DOPUS_N - 1 : s->health.plan_age + k;
-        dopus_clip_u(use_plan ? s->health.plan_u[j] : dopus_guess_u[k], s->u[k]);
+        dopus_clip_u(use_plan ? dopus_health_plan_control(&s->health, k) : dopus_guess_u[k], s->u[k]);
         if (dopus_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->mem.ev.tmp_g,
                                   &s->mem.ev.fun_work) != 0 ||
             !dopus_lai_vec_finite(DOPUS_NX, s->x[k + 1])) {

@@ -1110,9 +1110,13 @@ class ReferenceDopus:
             return bool(np.all(np.abs(x) <= box * sx + np.abs(self._xhat_last))
                         and np.all(np.abs(u) <= box * su))
 
+    def _plan_control(self, k: int = 0) -> np.ndarray:
+        """The control of the last good plan for the instant k sampling instants from now (its
+        age plus k, the last control beyond the plan's end)."""
+        return self._plan_u[min(self._plan_age + k, self.N - 1)]
+
     def _fallback_u0(self) -> np.ndarray:
-        j = min(self._plan_age if self.mode == "receding" else 0, self.N - 1)
-        self.u0, clipped = self._clip_u(self._plan_u[j])
+        self.u0, clipped = self._clip_u(self._plan_control() if self.mode == "receding" else self._plan_u[0])
         if clipped:
             self._flag("u0_clipped")
         self._flag("fallback")
@@ -1164,8 +1168,7 @@ class ReferenceDopus:
         finite and inside the box."""
         gu = np.asarray(self.disc.initial_guess.u, float).reshape(self.N, self.n_u)
         for k in range(self.N):
-            j = min(self._plan_age + k, self.N - 1)
-            u[k] = self._clip_u(self._plan_u[j] if use_plan else gu[k])[0]
+            u[k] = self._clip_u(self._plan_control(k) if use_plan else gu[k])[0]
             try:
                 x[k + 1] = self._stage_phi(x[k], u[k], self.p[k])
             except RuntimeError:
@@ -1177,7 +1180,7 @@ class ReferenceDopus:
     def _model_finite_at(self, xs) -> bool:
         """Section 9: the model finite at the state xs with the next control of the last good
         plan (one stage evaluation)."""
-        u = self._clip_u(self._plan_u[min(self._plan_age, self.N - 1)])[0]
+        u = self._clip_u(self._plan_control())[0]
         try:
             out = self.disc.stage_eval(xs, u, self.p[0])
         except RuntimeError:

@@ -141,11 +141,16 @@ int robot_arm_diverged(const robot_arm_health *h, const robot_arm_real *xhat0, c
     return !(h->kkt_proxy <= ROBOT_ARM_DIVERGENCE_KKT * ref);
 }
 
+const robot_arm_real *robot_arm_health_plan_control(const robot_arm_health *h, int k)
+{
+    int j = h->plan_age + k;
+    return h->plan_u[j > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : j];
+}
+
 int robot_arm_health_fallback(robot_arm_health *h, int receding, robot_arm_real *u0)
 {
-    int i, clipped, j = receding ? h->plan_age : 0;
-    j = j > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : j;
-    clipped = robot_arm_clip_u(h->plan_u[j], h->u0_out);
+    int i, clipped;
+    clipped = robot_arm_clip_u(receding ? robot_arm_health_plan_control(h, 0) : h->plan_u[0], h->u0_out);
     if (u0) {
         for (i = 0; i < ROBOT_ARM_NU; ++i) {
             u0[i] = h->u0_out[i];

@@ -59,6 +59,9 @@ ROBOT_ARM_INTERNAL robot_arm_real robot_arm_kkt_proxy(const robot_arm_ring *ring
 ROBOT_ARM_INTERNAL int robot_arm_diverged(const robot_arm_health *h, const robot_arm_real *xhat0, const robot_arm_real *x,
                                   const robot_arm_real *u, const robot_arm_real *lam, const robot_arm_real *mu_b,
                                   const robot_arm_real *mu_bN);
+/* The control of the last good plan for the instant k sampling instants from now (its age
+ * plus k, the last control beyond the plan's end). */
+ROBOT_ARM_INTERNAL const robot_arm_real *robot_arm_health_plan_control(const robot_arm_health *h, int k);
 /* The fallback control of a failed feedback: the control of the last good plan for this
  * instant (plan_age shifts on in receding mode, else the first), clipped, into u0_out and
  * u0 (may be NULL). Returns 1 when it was clipped. */

@@ -941,8 +941,7 @@ static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries
 static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *xs)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0), u[ROBOT_ARM_NU], xn[ROBOT_ARM_NX];
-    int j = s->health.plan_age > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->health.plan_age;
-    robot_arm_clip_u(s->health.plan_u[j], u);
+    robot_arm_clip_u(robot_arm_health_plan_control(&s->health, 0), u);
     return robot_arm_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
            robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn) && robot_arm_lai_vec_finite(1, &l);
 }
@@ -1242,10 +1241,9 @@ static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost)
 static int robot_arm_simulate_plan(robot_arm_solver *s, int use_plan)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0);
-    int k, j;
+    int k;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        j = s->health.plan_age + k > ROBOT_ARM_N - 1 ? ROBOT_ARM_N - 1 : s->health.plan_age + k;
-        robot_arm_clip_u(use_plan ? s->health.plan_u[j] : robot_arm_guess_u[k], s->u[k]);
+        robot_arm_clip_u(use_plan ? robot_arm_health_plan_control(&s->health, k) : robot_arm_guess_u[k], s->u[k]);
         if (robot_arm_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->mem.ev.tmp_g,
                                   &s->mem.ev.fun_work) != 0 ||
             !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->x[k + 1])) {

@@ -141,11 +141,16 @@ int unicycle_diverged(const unicycle_health *h, const unicycle_real *xhat0, cons
     return !(h->kkt_proxy <= UNICYCLE_DIVERGENCE_KKT * ref);
 }
 
+const unicycle_real *unicycle_health_plan_control(const unicycle_health *h, int k)
+{
+    int j = h->plan_age + k;
+    return h->plan_u[j > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : j];
+}
+
 int unicycle_health_fallback(unicycle_health *h, int receding, unicycle_real *u0)
 {
-    int i, clipped, j = receding ? h->plan_age : 0;
-    j = j > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : j;
-    clipped = unicycle_clip_u(h->plan_u[j], h->u0_out);
+    int i, clipped;
+    clipped = unicycle_clip_u(receding ? unicycle_health_plan_control(h, 0) : h->plan_u[0], h->u0_out);
     if (u0) {
         for (i = 0; i < UNICYCLE_NU; ++i) {
             u0[i] = h->u0_out[i];

@@ -59,6 +59,9 @@ UNICYCLE_INTERNAL unicycle_real unicycle_kkt_proxy(const unicycle_ring *ring, co
 UNICYCLE_INTERNAL int unicycle_diverged(const unicycle_health *h, const unicycle_real *xhat0, const unicycle_real *x,
                                   const unicycle_real *u, const unicycle_real *lam, const unicycle_real *mu_b,
                                   const unicycle_real *mu_bN);
+/* The control of the last good plan for the instant k sampling instants from now (its age
+ * plus k, the last control beyond the plan's end). */
+UNICYCLE_INTERNAL const unicycle_real *unicycle_health_plan_control(const unicycle_health *h, int k);
 /* The fallback control of a failed feedback: the control of the last good plan for this
  * instant (plan_age shifts on in receding mode, else the first), clipped, into u0_out and
  * u0 (may be NULL). Returns 1 when it was clipped. */

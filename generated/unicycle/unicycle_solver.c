@@ -941,8 +941,7 @@ static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries);
 static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
 {
     unicycle_real l = UNICYCLE_R(0.0), u[UNICYCLE_NU], xn[UNICYCLE_NX];
-    int j = s->health.plan_age > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->health.plan_age;
-    unicycle_clip_u(s->health.plan_u[j], u);
+    unicycle_clip_u(unicycle_health_plan_control(&s->health, 0), u);
     return unicycle_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
            unicycle_lai_vec_finite(UNICYCLE_NX, xn) && unicycle_lai_vec_finite(1, &l);
 }
@@ -1242,10 +1241,9 @@ static int unicycle_relinearise(unicycle_solver *s, double *ext_cost)
 static int unicycle_simulate_plan(unicycle_solver *s, int use_plan)
 {
     unicycle_real l = UNICYCLE_R(0.0);
-    int k, j;
+    int k;
     for (k = 0; k < UNICYCLE_N; ++k) {
-        j = s->health.plan_age + k > UNICYCLE_N - 1 ? UNICYCLE_N - 1 : s->health.plan_age + k;
-        unicycle_clip_u(use_plan ? s->health.plan_u[j] : unicycle_guess_u[k], s->u[k]);
+        unicycle_clip_u(use_plan ? unicycle_health_plan_control(&s->health, k) : unicycle_guess_u[k], s->u[k]);
         if (unicycle_eval_stage_eval(s->x[k], s->u[k], s->p[k], s->x[k + 1], &l, s->mem.ev.tmp_g,
                                   &s->mem.ev.fun_work) != 0 ||
             !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[k + 1])) {
