@@ -321,19 +321,14 @@ def check_unique(qp, sol, tol=1e-9):
     return licq, red, red_eq
 
 
-def solve_clarabel(qp, tol=1e-11):
-    """Solve with Clarabel; returns (status string, solution dict in dopus_qp.h signs)."""
+def _clarabel_solve(P, q, A, b, n_eq, n_in, tol):
+    """Clarabel (an independent interior point) on min 0.5 z'Pz + q'z s.t. A z + s = b with
+    s in {0}^n_eq x R+^n_in, at tolerance tol."""
     import clarabel
 
-    P, q, Aeq, beq, D, lo, up = stacked(qp)
-    hasu = np.isfinite(up)
-    hasl = np.isfinite(lo)
-    A = np.vstack([Aeq, D[hasu], -D[hasl]])
-    bvec = np.concatenate([beq, up[hasu], -lo[hasl]])
-    cones = [clarabel.ZeroConeT(Aeq.shape[0])]
-    nin = int(hasu.sum() + hasl.sum())
-    if nin:
-        cones.append(clarabel.NonnegativeConeT(nin))
+    cones = [clarabel.ZeroConeT(n_eq)]
+    if n_in:
+        cones.append(clarabel.NonnegativeConeT(n_in))
     st = clarabel.DefaultSettings()
     st.verbose = False
     st.tol_gap_abs = tol
@@ -341,8 +336,18 @@ def solve_clarabel(qp, tol=1e-11):
     st.tol_feas = tol
     st.tol_ktratio = 1e-8
     st.max_iter = 500
-    solver = clarabel.DefaultSolver(sp.csc_matrix(np.triu(P)), q, sp.csc_matrix(A), bvec, cones, st)
-    res = solver.solve()
+    solver = clarabel.DefaultSolver(sp.csc_matrix(np.triu(P)), q, sp.csc_matrix(A), b, cones, st)
+    return solver.solve()
+
+
+def solve_clarabel(qp, tol=1e-11):
+    """Solve with Clarabel; returns (status string, solution dict in dopus_qp.h signs)."""
+    P, q, Aeq, beq, D, lo, up = stacked(qp)
+    hasu = np.isfinite(up)
+    hasl = np.isfinite(lo)
+    A = np.vstack([Aeq, D[hasu], -D[hasl]])
+    bvec = np.concatenate([beq, up[hasu], -lo[hasl]])
+    res = _clarabel_solve(P, q, A, bvec, Aeq.shape[0], int(hasu.sum() + hasl.sum()), tol)
     status = str(res.status)
     y = np.array(res.z)
     ne_rows = Aeq.shape[0]
@@ -590,8 +595,6 @@ def solve_clarabel_soft(qp, tol=1e-11):
     """Clarabel on the QP with its soft sides as explicit slack variables ``s >= 0``
     (``lo - s <= D z``, ``D z <= up + s``, cost ``zl s + 0.5 Zl s^2``); returns (status,
     solution dict in dopus_qp.h signs, slacks of the lower and upper sides per row)."""
-    import clarabel
-
     P, q, Aeq, beq, D, lo, up = stacked(qp)
     W = soft_row_weights(qp)
     n, m = P.shape[0], D.shape[0]
@@ -615,19 +618,7 @@ def solve_clarabel_soft(qp, tol=1e-11):
                    (-Dz - np.hstack([np.zeros((m, n)), Sl]))[hasl],
                    np.hstack([np.zeros((ns, n)), -np.eye(ns)])])
     bvec = np.concatenate([beq, up[hasu], -lo[hasl], np.zeros(ns)])
-    cones = [clarabel.ZeroConeT(Aeq.shape[0])]
-    nin = int(hasu.sum() + hasl.sum()) + ns
-    if nin:
-        cones.append(clarabel.NonnegativeConeT(nin))
-    st = clarabel.DefaultSettings()
-    st.verbose = False
-    st.tol_gap_abs = tol
-    st.tol_gap_rel = tol
-    st.tol_feas = tol
-    st.tol_ktratio = 1e-8
-    st.max_iter = 500
-    solver = clarabel.DefaultSolver(sp.csc_matrix(np.triu(Pz)), qz, sp.csc_matrix(A), bvec, cones, st)
-    res = solver.solve()
+    res = _clarabel_solve(Pz, qz, A, bvec, Aeq.shape[0], int(hasu.sum() + hasl.sum()) + ns, tol)
     y = np.array(res.z)
     ne_rows = Aeq.shape[0]
     yi = np.zeros(m)
