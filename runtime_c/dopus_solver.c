@@ -1226,9 +1226,8 @@ static int dopus_next_worst(const dopus_solver *s)
 
 /* Step 4: re-linearise the stale stages (dopus_stale_stage), then among the other stages of
  * 0..N-2 those with the largest rho_k: M of them (dopus_M_now), then, with a budget,
- * further stages in rho order while one more iteration still fits after them, or, when no
- * more iteration fits after the M stages, while they fit (algorithm.md section 14); each
- * only while the budget allows. The cost of the stages
+ * further stages in rho order while one more iteration still fits after them
+ * (algorithm.md section 14); each only while the budget allows. The cost of the stages
  * beyond M goes to *ext_cost. */
 static int dopus_relinearise(dopus_solver *s, double *ext_cost)
 {
@@ -1251,13 +1250,9 @@ static int dopus_relinearise(dopus_solver *s, double *ext_cost)
     }
     extend = dopus_budget_on(s);
     *ext_cost = 0.0;
-    /* the stages beyond M keep room for one more iteration after this one; when none fits
-     * after the M stages, they take the budget it would have used */
+    /* the stages beyond M keep room for one more iteration after this one */
     reserve = s->anytime.cost_qp + s->anytime.cost_prepare;
     for (m = 0; m < DOPUS_N - 1; ++m) {
-        if (m == M && extend && !dopus_budget_fits(s, reserve)) {
-            reserve = 0.0;
-        }
         if ((m >= M && !extend) || !dopus_budget_fits(s, s->anytime.cost_stage + (m >= M ? reserve : 0.0))) {
             break;
         }

@@ -1044,8 +1044,8 @@ class ReferenceDopus:
     def _relinearise_worst(self, slots, rho):
         """Step 4: fresh H for the stale stages (:meth:`_stale`), then among the other stages
         of 0..N-2 for the M with the largest rho (ties: lower index), then with a budget for
-        further stages in rho order while one more iteration still fits after them (when none
-        fits after the M stages: while they fit), each while the budget allows (section 14). Returns the stages and the cost of those beyond M."""
+        further stages in rho order while one more iteration still fits after them, each while
+        the budget allows (section 14). Returns the stages and the cost of those beyond M."""
         stale = [k for k in range(self.N - 1) if self._stale(slots, k)]
         order = sorted((k for k in range(self.N - 1) if k not in stale), key=lambda i: (-rho[i], i))
         M = self._M_now(slots, rho)
@@ -1054,12 +1054,9 @@ class ReferenceDopus:
         for i in stale:      # whatever the budget: without them the QP is infeasible
             self._relinearise_stage(slots, i)
             chosen.append(i)
-        # the stages beyond M keep room for one more iteration after this one; when none fits
-        # after the M stages, they take the budget it would have used
+        # the stages beyond M keep room for one more iteration after this one
         reserve = self._cost_qp + self._cost_prepare
         for m, i in enumerate(order):
-            if m == M and extend and not self._budget_fits(reserve):
-                reserve = 0.0
             if (m >= M and not extend) or not self._budget_fits(self._cost_stage + (reserve if m >= M else 0.0)):
                 break
             b0 = self._budget_now()
