@@ -49,7 +49,7 @@ import traceback
 import types
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, Optional
+from typing import Callable, Mapping, Optional, Tuple
 
 import casadi as ca
 import numpy as np
@@ -446,6 +446,25 @@ def _rows(expr, lb, ub, what: str) -> tuple:
     return e, lbv, ubv
 
 
+def _stage_list(stages, what: str) -> Optional[Tuple[int, ...]]:
+    """``stages=`` of a declaration (None: every stage): sorted distinct integers, checked
+    against 0..N-1 when the OCP is validated."""
+    if stages is None:
+        return None
+    try:
+        stages = tuple(stages)
+    except TypeError:
+        raise OcpError(f"{what}: stages must be stage indices (e.g. range(5, 10)), got {stages!r}") from None
+    bad = [k for k in stages if isinstance(k, bool) or not isinstance(k, (int, np.integer))]
+    if bad:
+        raise OcpError(f"{what}: stages must be integers, got {bad[0]!r}")
+    if not stages:
+        raise OcpError(f"{what}: stages is empty (leave it out for every stage)")
+    if len(set(stages)) != len(stages):
+        raise OcpError(f"{what}: stage {next(k for k in stages if stages.count(k) > 1)} given twice")
+    return tuple(sorted(int(k) for k in stages))
+
+
 def _check_bounds(lb: np.ndarray, ub: np.ndarray, what: str) -> None:
     bad = np.flatnonzero(lb > ub)
     if bad.size:
@@ -566,6 +585,7 @@ class Ocp:
         self._integrator: Integrator = RK4(1)
         self._stage_costs: list[ca.SX] = []
         self._stage_ls: list[tuple[ca.SX, np.ndarray]] = []
+        self._stage_ls_staged: list[tuple] = []   # (rows, L2 weights, stages, what): stages= terms
         self._term_costs: list[ca.SX] = []
         self._term_ls: list[tuple[ca.SX, np.ndarray]] = []
         self._rates: list[tuple] = []     # (control decl, lb, ub, name, initial, memory decl)
@@ -686,11 +706,26 @@ class Ocp:
         return W
 
     @_declaration
-    def stage_least_squares(self, residual, weights) -> None:
-        """Add ``0.5 res' W res`` to the stage cost (weights: vector = diagonal, or matrix)."""
-        what = f"stage least squares {len(self._stage_ls)}"
+    def stage_least_squares(self, residual, weights, stages=None) -> None:
+        """Add ``0.5 res' W res`` to the stage cost (weights: vector = diagonal, or matrix);
+        ``stages``: the stages (integers in 0..N-1, e.g. ``range(30, 40)``) where the term
+        applies (default: all). A term on chosen stages is carried as soft equality rows
+        ``q_i' res = 0`` on those stages with the L2 weights ``d_i`` (``W = Q diag(d) Q'``),
+        whose penalty ``0.5 d_i (q_i' res)^2`` sums to the term (docs/algorithm.md section 12);
+        the Gauss-Newton Hessian needs a term on every stage."""
+        what = f"stage least squares {len(self._stage_ls) + len(self._stage_ls_staged)}"
         res = _as_sx(residual, what)
-        self._stage_ls.append((res, self._weights(weights, res.size1(), what)))
+        W = self._weights(weights, res.size1(), what)
+        stages = _stage_list(stages, what)
+        if stages is None:
+            self._stage_ls.append((res, W))
+            return
+        d, Q = np.linalg.eigh(W)
+        keep = d > 1e-12 * max(1.0, float(np.abs(d).max(initial=0.0)))
+        if not np.any(keep):
+            raise OcpError(f"{what}: weights are all zero")
+        rows = ca.mtimes(ca.DM(Q[:, keep].T), res)
+        self._stage_ls_staged.append((rows, d[keep], stages, what))
 
     @_declaration
     def terminal_least_squares(self, residual, weights) -> None:
@@ -725,19 +760,7 @@ class Ocp:
             eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
             if eq.size:
                 raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")
-        if stages is not None:
-            try:
-                stages = tuple(stages)
-            except TypeError:
-                raise OcpError(f"{what}: stages must be stage indices (e.g. range(5, 10)), got {stages!r}") from None
-            bad = [k for k in stages if isinstance(k, bool) or not isinstance(k, (int, np.integer))]
-            if bad:
-                raise OcpError(f"{what}: stages must be integers, got {bad[0]!r}")
-            if not stages:
-                raise OcpError(f"{what}: stages is empty (leave it out for every stage)")
-            if len(set(stages)) != len(stages):
-                raise OcpError(f"{what}: stage {next(k for k in stages if stages.count(k) > 1)} given twice")
-            stages = tuple(sorted(int(k) for k in stages))
+        stages = _stage_list(stages, what)
         self._path.append((g, lbv, ubv, weights, name, stages))
         if terminal:
             self._term_con.append((g, lbv, ubv, weights, name, None))
@@ -1031,6 +1054,11 @@ class Ocp:
             if out:
                 what = f"path constraint '{name}'" if name is not None else f"path constraint {i}"
                 raise OcpError(f"{what}: stage {out[0]} is outside 0..N-1 = 0..{self._N - 1}")
+        for rows, _, stages, what in self._stage_ls_staged:
+            self._check_symbols(rows, what, "xup")
+            out = [k for k in stages if not 0 <= k <= self._N - 1]
+            if out:
+                raise OcpError(f"{what}: stage {out[0]} is outside 0..N-1 = 0..{self._N - 1}")
         for i, (r, *_) in enumerate(self._term_con):
             self._check_symbols(r, f"terminal constraint {i}", "xp")
         if self._options["hessian"] == "gauss-newton" and not self._stage_ls:
@@ -1120,7 +1148,11 @@ class Ocp:
         constraints = ConstraintSpec(
             lbx=bounds(states, "lb"), ubx=bounds(states, "ub"),
             lbu=bounds(self._controls, "lb"), ubu=bounds(self._controls, "ub"),
-            path=tuple(Rows(g, readonly(lb), readonly(ub), sw, nm, st) for g, lb, ub, sw, nm, st in path),
+            path=tuple(Rows(g, readonly(lb), readonly(ub), sw, nm, st) for g, lb, ub, sw, nm, st in path)
+            + tuple(Rows(rows, readonly(np.zeros(d.size)), readonly(np.zeros(d.size)),
+                         readonly(np.vstack([np.zeros(d.size), np.zeros(d.size), d, d])),
+                         f"stage_least_squares_{i}", st, cost=True)
+                    for i, (rows, d, st, _) in enumerate(self._stage_ls_staged)),
             terminal=tuple(Rows(r, readonly(lb), readonly(ub), sw, nm) for r, lb, ub, sw, nm, _ in self._term_con),
             soft_x=readonly(soft_x))
         return OcpSpec(name=self.name, model=model, cost=cost, constraints=constraints,

@@ -206,6 +206,7 @@ class Rows:
     soft: Optional[np.ndarray] = None
     name: Optional[str] = None    # the declared name (messages, tables, the C row names)
     stages: Optional[Tuple[int, ...]] = None   # path rows: the stages where they hold (None: all)
+    cost: bool = False    # a least-squares term on chosen stages carried as soft rows (not a constraint)
 
     def labels(self, kind: str, index: int) -> Tuple[str, ...]:
         """One label per row: ``name`` / ``name[i]``, or ``<kind> <index>`` / ``<kind> <index> row i``."""
