@@ -189,6 +189,8 @@ const char *dopus_status_string(int status)
         return "the step diverged (outside the problem's scale; no step, fallback control returned)";
     case DOPUS_ERR_ALREADY_PREPARED:
         return "already prepared (call feedback before the next prepare)";
+    case DOPUS_ERR_NOT_CONVERGED:
+        return "the globalised solve did not reach its tolerance within its limits";
     default:
         return "unknown status";
     }
@@ -2233,4 +2235,5 @@ int dopus_simulate(const dopus_real *x, const dopus_real *u, const dopus_real *p
 #include "dopus_lm.c"
 #include "dopus_health.c"
 #include "dopus_kkt.c"
+#include "dopus_globalise.c"
 #include "dopus_qp.c" /* last: its short macros (N, NX, ...) stay inside it */

@@ -298,6 +298,34 @@ const char *dopus_row_name(int kind, int index);
  * largest slack (0 without soft rows). */
 dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopus_real *viol_g,
                                  dopus_real *viol_r);
+/* The globalised first solve (docs/algorithm.md section 15), for a start far from the
+ * solution (a cold guess, an arbitrary state at power-up); off in the real-time loop. The
+ * memory of a solve is the caller's dopus_glob (dopus_globalise.h; `static dopus_glob g;`, or
+ * dopus_glob_sizeof() bytes). dopus_glob_start forgets a previous solve (the penalty, the
+ * counts). dopus_glob_step: one SQP step from the prepared iterate (after init or the
+ * previous step) for xhat0 (NULL: the one of the last init), in fixed mode whatever the
+ * setting: the QP of the iterate (every block fresh), a backtracking line search along its
+ * step on the l1 exact-penalty merit function, then init at the accepted point (every block
+ * fresh, the next QP prepared). On failure (dopus_glob_info.reason: the QP, the step box,
+ * the line search, a function) the iterate is the one before the step, prepared.
+ * dopus_init_globalised: init at the guess (x, u NULL: the OCP file's), then steps until the
+ * KKT measure (dopus_kkt_eval) is at most tol > 0: DOPUS_OK; DOPUS_ERR_NOT_CONVERGED when
+ * max_iter steps or the work limit (max_work > 0 work units from the init on, the next step
+ * estimated as the last one; 0: none) end them first, the iterate prepared for feedback
+ * either way; the status of a failed step. */
+typedef struct dopus_glob dopus_glob;
+typedef struct {
+    int iterations; /* steps since dopus_glob_start */
+    int trials;     /* merit evaluations of the last line search */
+    int reason;     /* enum dopus_glob_reason of the last call */
+    dopus_real penalty, alpha, merit, slope, kkt;
+} dopus_glob_info;
+size_t dopus_glob_sizeof(void);
+void dopus_glob_start(dopus_glob *g);
+int dopus_glob_step(dopus_solver *s, dopus_glob *g, const dopus_real *xhat0);
+int dopus_init_globalised(dopus_solver *s, dopus_glob *g, const dopus_real *xhat0, const dopus_real *x,
+                          const dopus_real *u, double max_work, int max_iter, dopus_real tol);
+void dopus_glob_get_info(const dopus_glob *g, dopus_glob_info *info);
 /* DOPUS_CDEF_END */
 
 /* Status codes returned by the functions above. */
@@ -318,8 +346,9 @@ enum dopus_status {
     DOPUS_ERR_ALREADY_PREPARED = 10, /* prepare without a feedback since the last successful
                                         init or prepare (it would shift the horizon twice);
                                         nothing changes */
-    DOPUS_ERR_DIVERGED = 11          /* the QP step leaves the problem's scale box (or is not
+    DOPUS_ERR_DIVERGED = 11,         /* the QP step leaves the problem's scale box (or is not
                                         finite): no step, the fallback control is returned */
+    DOPUS_ERR_NOT_CONVERGED = 12     /* dopus_init_globalised: a limit came before the tolerance */
 };
 
 /* Kinds of dopus_row_info and dopus_row_name. */
@@ -377,6 +406,7 @@ enum dopus_budget_unit {
 
 #include "dopus_sizes.h"
 #include "dopus_funcs.h"
+#include "dopus_globalise.h"
 #include "dopus_health.h"
 #include "dopus_lm.h"
 #include "dopus_qp.h"
