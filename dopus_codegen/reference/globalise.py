@@ -257,6 +257,9 @@ def init_globalised(be, st: GlobState, xhat0, guess=None, max_work: float = 0.0,
 
     tol = settings_mod.KKT_TOL_DEFAULT["double"] if tol is None else tol
     st.__init__()
+    if not (tol > 0) or not (max_work >= 0) or int(max_iter) < 0:
+        raise DopusError.of("invalid_argument", f"init_globalised: tol must be > 0, max_work >= 0 and max_iter >= 0, "
+                            f"got {tol!r}, {max_work!r}, {max_iter!r}")
     be.init(xhat0, guess)
     w_start = be.work
     cost = 0.0

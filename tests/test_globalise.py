@@ -1,0 +1,142 @@
+"""The globalised first solve (docs/algorithm.md section 15).
+
+- the crane of examples/crane.py (N = 32, the wall and the energy-like terminal set active)
+  from its cold guess: the globalised solve converges to IPOPT's solution of the same NLP
+  (1e-6), in both backends, and the C iterates equal the reference's step by step;
+- a variant whose line search backtracks and whose QP becomes infeasible: both backends take
+  the same step lengths and fail at the same step, and the message says what to try;
+- the firmware entry dopus_init_globalised: the work limit, then the real-time loop from the
+  converged iterate gives IPOPT's first control; bad limits are refused.
+"""
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dopus_codegen.errors import DopusError
+from dopus_codegen.problem.derivatives import build_functions
+from dopus_codegen.reference.dopus import ReferenceDopus
+from dopus_codegen.reference.offline import solve_ocp
+from dopus_codegen.studies.converge import make_start, run_globalised
+from dopus_codegen.settings import of_problem
+
+CRANE = Path(__file__).resolve().parent.parent / "examples" / "crane.py"
+
+
+def crane(**constants):
+    spec = importlib.util.spec_from_file_location("crane_example", CRANE)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    for k, v in constants.items():
+        setattr(mod, k, v)
+    mod.W2 = mod.GRAV / mod.L
+    return build_functions(mod.build())
+
+
+@pytest.fixture(scope="module")
+def disc():
+    return crane()
+
+
+@pytest.fixture(scope="module")
+def c_solver():
+    from dopus_codegen.runtime.solver import Solver
+
+    return Solver
+
+
+@pytest.fixture(scope="module")
+def ipopt(disc):
+    guess, info = solve_ocp(disc, np.array(disc.x0, float))
+    assert info["success"]
+    assert guess.mu_r[1] > 10.0 and guess.mu_r[0] > 1.0       # the terminal set and the wall at x_N active
+    assert np.abs(guess.mu_g).max() > 1.0                       # the wall active on the path
+    return guess
+
+
+@pytest.mark.parametrize("backend", ["reference", "c"])
+def test_crane_cold_start_converges_to_ipopt(disc, ipopt, c_solver, backend):
+    factory = ReferenceDopus if backend == "reference" else c_solver
+    start = make_start(disc, "cold")
+    rec, (x, u) = run_globalised(disc, 30, start, of_problem(disc), factory, 1e-9)
+    assert rec["status"] == "converged", rec["message"]
+    assert rec["kkt"][0] > 10.0 and rec["kkt"][-1] <= 1e-9
+    assert np.abs(x - ipopt.x).max() <= 1e-6 * (1 + np.abs(ipopt.x).max())
+    assert np.abs(u - ipopt.u).max() <= 1e-6 * (1 + np.abs(ipopt.u).max())
+
+
+def _steps(be, x0, n):
+    out = []
+    be.init(x0)
+    be.globalised_start()
+    for _ in range(n):
+        try:
+            be.globalised_step(x0)
+        except DopusError as exc:
+            out.append(("failed", be.glob.reason, exc.status_name))
+            break
+        out.append((be.x.copy(), be.u.copy(), be.lam.copy(), be.mu_r.copy(), be.glob.alpha, be.glob.penalty,
+                    be.glob.trials))
+    return out
+
+
+def _compare(ref, c):
+    assert len(ref) == len(c)
+    for a, b in zip(ref, c):
+        if isinstance(a[0], str):
+            assert a == b
+            continue
+        for va, vb in zip(a[:4], b[:4]):
+            assert np.abs(va - vb).max() <= 1e-6 * (1 + np.abs(va).max())
+        assert a[4] == b[4] and a[6] == b[6]                       # the same step lengths and trials
+        assert b[5] == pytest.approx(a[5], rel=1e-6)
+
+
+def test_c_equals_reference_step_by_step(disc, c_solver):
+    x0 = np.array(disc.x0, float)
+    N = disc.N
+    ref = _steps(ReferenceDopus(disc, M=N - 1, mode="fixed"), x0, 8)
+    c = _steps(c_solver(disc, M=N - 1, mode="fixed"), x0, 8)
+    _compare(ref, c)
+
+
+def test_backtracking_and_failure_alike_with_advice(c_solver):
+    """A transfer too far for its horizon: a step of the line search is halved, then a QP is
+    infeasible; both backends alike, and the study's message says what to try."""
+    d = crane(TARGET=3.0, WALL=2.98, V_MAX=1.3, A_MAX=2.0, TRACK=1e-3)
+    x0 = np.array(d.x0, float)
+    ref = _steps(ReferenceDopus(d, M=d.N - 1, mode="fixed"), x0, 12)
+    c = _steps(c_solver(d, M=d.N - 1, mode="fixed"), x0, 12)
+    _compare(ref, c)
+    assert any(not isinstance(s[0], str) and s[4] < 1.0 for s in ref)
+    assert ref[-1][:2] == ("failed", "qp")
+    rec, _ = run_globalised(d, 12, make_start(d, "cold"), of_problem(d), ReferenceDopus, 1e-8)
+    assert rec["status"] == "failed"
+    assert "try a better guess" in rec["message"] and "soft terminal rows" in rec["message"]
+
+
+def test_init_globalised_then_real_time_loop(disc, ipopt, c_solver):
+    x0 = np.array(disc.x0, float)
+    s = c_solver(disc, M=1, mode="receding")
+    assert s.init_globalised(x0, max_work=300.0) is False
+    assert s.glob.reason == "work_limit" and s.glob.iterations >= 1
+    assert s.init_globalised(x0, max_iter=2) is False and s.glob.reason == "iter_limit"
+    assert s.init_globalised(x0, tol=1e-9) is True
+    assert s.glob.kkt <= 1e-9 and s.settings.mode == "receding"
+    u0 = s.feedback(x0)
+    assert np.abs(u0 - ipopt.u[0]).max() <= 1e-6
+    ref = ReferenceDopus(disc, M=1)
+    assert ref.init_globalised(x0, tol=1e-9) is True
+    assert np.abs(ref.u - s.u).max() <= 1e-6
+
+
+@pytest.mark.parametrize("kw", [{"tol": 0.0}, {"tol": -1.0}, {"max_work": -1.0}, {"max_iter": -1}])
+def test_bad_limits_are_refused(disc, c_solver, kw):
+    x0 = np.array(disc.x0, float)
+    for be in (ReferenceDopus(disc), c_solver(disc)):
+        with pytest.raises(DopusError) as err:
+            be.init_globalised(x0, **kw)
+        assert err.value.status_name == "invalid_argument"
