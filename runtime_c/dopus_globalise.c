@@ -32,13 +32,16 @@ size_t dopus_glob_sizeof(void)
     return sizeof(dopus_glob);
 }
 
-void dopus_glob_start(dopus_glob *g)
+/* A zero-filled dopus_glob: no penalty, no counts, no KKT measure yet (kkt_best 0). */
+static void dopus_glob_reset(dopus_glob *g)
 {
     g->penalty = DOPUS_R(0.0);
     g->alpha = DOPUS_R(0.0);
     g->merit = DOPUS_R(0.0);
     g->slope = DOPUS_R(0.0);
     g->kkt = DOPUS_R(0.0);
+    g->kkt_best = DOPUS_R(0.0);
+    g->by_kkt = 0;
     g->iterations = 0;
     g->trials = 0;
     g->reason = DOPUS_GLOB_OK;
@@ -49,6 +52,7 @@ void dopus_glob_get_info(const dopus_glob *g, dopus_glob_info *info)
     info->iterations = g->iterations;
     info->trials = g->trials;
     info->reason = g->reason;
+    info->by_kkt = g->by_kkt;
     info->penalty = g->penalty;
     info->alpha = g->alpha;
     info->merit = g->merit;
@@ -153,8 +157,8 @@ static int dopus_glob_merit_parts(dopus_solver *s, const dopus_real *xhat0, cons
 
 #if DOPUS_NSOFT > 0
 /* The soft prices of rows v (n, weights w of stride ws), the hard sides ignored. */
-static dopus_real dopus_glob_soft_price(int n, const dopus_real *v, const dopus_real *lo, const dopus_real *up,
-                                        const dopus_real *w, int ws)
+static dopus_real dopus_glob_soft_price(int n, const dopus_real *v, const dopus_real *lo,
+                                        const dopus_real *up, const dopus_real *w, int ws)
 {
     dopus_real hard = DOPUS_R(0.0), price = DOPUS_R(0.0);
     dopus_glob_rows(n, v, lo, up, w, ws, &hard, &price);
@@ -205,9 +209,10 @@ static dopus_real dopus_glob_soft_change(dopus_solver *s, dopus_glob *g)
             }
             g->lin_r[j] = acc;
         }
-        total += dopus_glob_soft_price(DOPUS_NR, g->lin_r, dopus_lr, dopus_ur, DOPUS_GLOB_SOFT_R,
-                                       DOPUS_DIM(DOPUS_NR)) -
-                 dopus_glob_soft_price(DOPUS_NR, s->r, dopus_lr, dopus_ur, DOPUS_GLOB_SOFT_R, DOPUS_DIM(DOPUS_NR));
+        total +=
+            dopus_glob_soft_price(DOPUS_NR, g->lin_r, dopus_lr, dopus_ur, DOPUS_GLOB_SOFT_R,
+                                  DOPUS_DIM(DOPUS_NR)) -
+            dopus_glob_soft_price(DOPUS_NR, s->r, dopus_lr, dopus_ur, DOPUS_GLOB_SOFT_R, DOPUS_DIM(DOPUS_NR));
     }
 #else
     (void)s;
@@ -263,10 +268,24 @@ static int dopus_glob_init_at(dopus_solver *s, dopus_glob *g, const dopus_real *
                       DOPUS_NR > 0 ? g->mu_r : 0, DOPUS_NE > 0 ? g->nu : 0);
 }
 
+/* The KKT measure of the solver's iterate (dopus_kkt_eval, counted as N + 1 work units). */
+static int dopus_glob_kkt(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt)
+{
+    dopus_real kkt4[4];
+    int i, rc;
+    s->anytime.work += (double)(DOPUS_N + 1);
+    rc = dopus_kkt_eval(s, xhat0, kkt4);
+    *kkt = kkt4[0];
+    for (i = 1; i < 4; ++i) {
+        *kkt = dopus_fmax(*kkt, kkt4[i]);
+    }
+    return rc;
+}
+
 static int dopus_glob_step_fixed(dopus_solver *s, dopus_glob *g, const dopus_real *xhat0)
 {
     dopus_real f0, c0, f, c, nu, ymax, a_dot_p, slope, phi0, phi = DOPUS_R(0.0), floor_, alpha;
-    dopus_real u0[DOPUS_NU];
+    dopus_real u0[DOPUS_NU], kkt;
     int k, i, rc, trial, accepted = 0;
 
     dopus_glob_copy(&g->x[0][0], &s->x[0][0], (DOPUS_N + 1) * DOPUS_NX);
@@ -277,8 +296,14 @@ static int dopus_glob_step_fixed(dopus_solver *s, dopus_glob *g, const dopus_rea
     dopus_glob_copy(g->mu_bN, s->mu_bN, DOPUS_NX);
     dopus_glob_copy(g->mu_r, s->mu_r, DOPUS_DIM(DOPUS_NR));
     dopus_glob_copy(g->nu, s->nu, DOPUS_DIM(DOPUS_NE));
-    rc = dopus_glob_merit_parts(s, xhat0, (const dopus_real(*)[DOPUS_NX])g->x, (const dopus_real(*)[DOPUS_NU])g->u,
-                                &f0, &c0);
+    g->by_kkt = 0;
+    rc = dopus_glob_kkt(s, xhat0, &kkt);
+    if (rc == DOPUS_OK) {
+        /* 0: no KKT measure yet (a zero-filled dopus_glob) */
+        g->kkt_best = g->kkt_best > DOPUS_R(0.0) ? dopus_fmin(g->kkt_best, kkt) : kkt;
+        rc = dopus_glob_merit_parts(s, xhat0, (const dopus_real(*)[DOPUS_NX])g->x,
+                                    (const dopus_real(*)[DOPUS_NU])g->u, &f0, &c0);
+    }
     if (rc != DOPUS_OK) {
         g->reason = DOPUS_GLOB_FUNCTION;
         return rc;
@@ -318,12 +343,14 @@ static int dopus_glob_step_fixed(dopus_solver *s, dopus_glob *g, const dopus_rea
         g->trials = trial + 1;
         for (k = 0; k <= DOPUS_N; ++k) {
             for (i = 0; i < DOPUS_NX; ++i) {
-                g->xt[k][i] = alpha == DOPUS_R(1.0) ? s->x[k][i] : g->x[k][i] + alpha * (s->x[k][i] - g->x[k][i]);
+                g->xt[k][i] =
+                    alpha == DOPUS_R(1.0) ? s->x[k][i] : g->x[k][i] + alpha * (s->x[k][i] - g->x[k][i]);
             }
         }
         for (k = 0; k < DOPUS_N; ++k) {
             for (i = 0; i < DOPUS_NU; ++i) {
-                g->ut[k][i] = alpha == DOPUS_R(1.0) ? s->u[k][i] : g->u[k][i] + alpha * (s->u[k][i] - g->u[k][i]);
+                g->ut[k][i] =
+                    alpha == DOPUS_R(1.0) ? s->u[k][i] : g->u[k][i] + alpha * (s->u[k][i] - g->u[k][i]);
             }
         }
         rc = dopus_glob_merit_parts(s, xhat0, (const dopus_real(*)[DOPUS_NX])g->xt,
@@ -334,6 +361,16 @@ static int dopus_glob_step_fixed(dopus_solver *s, dopus_glob *g, const dopus_rea
                 accepted = 1;
                 break;
             }
+        }
+        /* the full step also when it lowers the KKT measure enough (the solver's iterate is
+         * the full step with the QP's multipliers): the merit function may refuse the steps
+         * of a fast local convergence along a curved constraint (the Maratos effect) */
+        if (trial == 0 && dopus_glob_kkt(s, xhat0, &kkt) == DOPUS_OK &&
+            kkt <= DOPUS_GLOB_KKT_FACTOR * g->kkt_best) {
+            g->kkt_best = kkt;
+            g->by_kkt = 1;
+            accepted = 1;
+            break;
         }
         alpha *= DOPUS_GLOB_BACKTRACK;
     }
@@ -399,7 +436,7 @@ int dopus_init_globalised(dopus_solver *s, dopus_glob *g, const dopus_real *xhat
     if (!s->set_up) {
         return DOPUS_ERR_NOT_INITIALIZED;
     }
-    dopus_glob_start(g);
+    dopus_glob_reset(g);
     if (max_iter < 0 || !(tol > DOPUS_R(0.0)) || !(max_work >= 0.0)) {
         s->status = DOPUS_ERR_INVALID_ARGUMENT;
         return s->status;

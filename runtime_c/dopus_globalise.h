@@ -4,7 +4,7 @@
  * Off in the real-time loop: feedback and prepare never call it.
  *
  * The memory of a globalised solve (the penalty, the point before the step, the QP's
- * multipliers) is the caller's dopus_glob, so the solver struct (the RAM bill of the
+ * multipliers) is the caller's struct dopus_glob, zero-filled at the start of a solve, so the solver struct (the RAM bill of the
  * real-time loop) does not grow; one dopus_glob serves any number of solvers of this problem
  * one after the other. The functions are declared in dopus_solver.h.
  */
@@ -14,12 +14,13 @@
 #include "dopus_sizes.h"
 
 /* Constants (docs/algorithm.md section 15). */
-#define DOPUS_GLOB_ARMIJO DOPUS_R(1e-4)       /* sufficient decrease: phi(a) <= phi(0) + 1e-4 a D */
-#define DOPUS_GLOB_BACKTRACK DOPUS_R(0.5)     /* a <- 0.5 a after a rejected trial */
-#define DOPUS_GLOB_MAX_TRIALS 30              /* trials of one line search at most (a >= 2^-29) */
+#define DOPUS_GLOB_ARMIJO DOPUS_R(1e-4)        /* sufficient decrease: phi(a) <= phi(0) + 1e-4 a D */
+#define DOPUS_GLOB_BACKTRACK DOPUS_R(0.5)      /* a <- 0.5 a after a rejected trial */
+#define DOPUS_GLOB_MAX_TRIALS 30               /* trials of one line search at most (a >= 2^-29) */
 #define DOPUS_GLOB_PENALTY_MARGIN DOPUS_R(1.1) /* the penalty is raised when below 1.1 |y|_inf ... */
 #define DOPUS_GLOB_PENALTY_RAISE DOPUS_R(2.0)  /* ... to 2 |y|_inf */
 #define DOPUS_GLOB_MERIT_FLOOR DOPUS_R(10.0)   /* round-off allowance: 10 eps (1 + |phi(0)|) */
+#define DOPUS_GLOB_KKT_FACTOR DOPUS_R(0.5)     /* the full step also when its KKT <= 0.5 kkt_best */
 
 /* Why the last globalised step failed (dopus_glob_info.reason). */
 enum dopus_glob_reason {
@@ -40,9 +41,11 @@ struct dopus_glob {
     dopus_real merit;    /* the merit at the iterate after the last step */
     dopus_real slope;    /* the directional derivative D of the last step */
     dopus_real kkt;      /* dopus_init_globalised: the KKT measure at the end */
-    int iterations;      /* steps taken since dopus_glob_start */
+    dopus_real kkt_best; /* the lowest KKT measure of an iterate of this solve (0: none yet) */
+    int iterations;      /* steps taken in this solve */
     int trials;          /* merit evaluations of the last line search */
     int reason;          /* enum dopus_glob_reason of the last call */
+    int by_kkt;          /* the last step was taken by the KKT test (the merit test refused it) */
     dopus_real x[DOPUS_N + 1][DOPUS_NX]; /* the iterate before the step, the trial point */
     dopus_real u[DOPUS_N][DOPUS_NU];
     dopus_real xt[DOPUS_N + 1][DOPUS_NX];

@@ -300,9 +300,9 @@ dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopu
                                  dopus_real *viol_r);
 /* The globalised first solve (docs/algorithm.md section 15), for a start far from the
  * solution (a cold guess, an arbitrary state at power-up); off in the real-time loop. The
- * memory of a solve is the caller's dopus_glob (dopus_globalise.h; `static dopus_glob g;`, or
- * dopus_glob_sizeof() bytes). dopus_glob_start forgets a previous solve (the penalty, the
- * counts). dopus_glob_step: one SQP step from the prepared iterate (after init or the
+ * memory of a solve is the caller's struct dopus_glob of dopus_globalise.h, or
+ * dopus_glob_sizeof() bytes; zero-filled it starts a solve (no penalty, no counts; `static
+ * dopus_glob g;`, memset to 0 for the next one). dopus_glob_step: one SQP step from the prepared iterate (after init or the
  * previous step) for xhat0 (NULL: the one of the last init), in fixed mode whatever the
  * setting: the QP of the iterate (every block fresh), a backtracking line search along its
  * step on the l1 exact-penalty merit function, then init at the accepted point (every block
@@ -315,13 +315,13 @@ dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopu
  * either way; the status of a failed step. */
 typedef struct dopus_glob dopus_glob;
 typedef struct {
-    int iterations; /* steps since dopus_glob_start */
+    int iterations; /* steps in this solve */
     int trials;     /* merit evaluations of the last line search */
     int reason;     /* enum dopus_glob_reason of the last call */
+    int by_kkt;     /* the last step was taken by the KKT test */
     dopus_real penalty, alpha, merit, slope, kkt;
 } dopus_glob_info;
 size_t dopus_glob_sizeof(void);
-void dopus_glob_start(dopus_glob *g);
 int dopus_glob_step(dopus_solver *s, dopus_glob *g, const dopus_real *xhat0);
 int dopus_init_globalised(dopus_solver *s, dopus_glob *g, const dopus_real *xhat0, const dopus_real *x,
                           const dopus_real *u, double max_work, int max_iter, dopus_real tol);

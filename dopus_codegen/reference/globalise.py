@@ -14,7 +14,9 @@ the initial state ``xhat0``, in fixed mode:
 3. the slope ``D = a' p - nu c + sum_soft (psi(v_lin) - psi(v))`` (``a``: the QP's gradient,
    the cost gradient when every block is fresh; ``v_lin`` the linearised rows at the full
    step), and the backtracking line search ``a = 1, 1/2, ...`` until
-   ``phi(a) <= phi(0) + 1e-4 a min(D, 0) + 10 eps (1 + |phi(0)|)``, ``phi = f + nu c``;
+   ``phi(a) <= phi(0) + 1e-4 a min(D, 0) + 10 eps (1 + |phi(0)|)``, ``phi = f + nu c``; the
+   full step is also taken when its KKT measure (with the QP's multipliers) is at most half
+   the lowest KKT measure of the solve so far (the Maratos effect);
 4. the iterate ``w + a p``, the multipliers ``y + a (y_QP - y)``, and ``init`` there (every
    block fresh, the next QP prepared).
 
@@ -76,6 +78,8 @@ class GlobState:
     merit: float = 0.0
     slope: float = 0.0
     kkt: float = float("nan")
+    kkt_best: float = float("inf")
+    by_kkt: bool = False
     iterations: int = 0
     trials: int = 0
     reason: str = "ok"
@@ -114,7 +118,7 @@ def _soft(disc, name):
 def merit_parts(be, xhat0, x, u):
     """``(f, c)`` at the primal point ``(x, u)``: the cost with the prices of the soft sides,
     and the l1 violation of the hard rows. Counts ``N + 1`` work units."""
-    disc, N, nx = be.disc, be.N, be.nx
+    disc, N = be.disc, be.N
     be.work += N + 1
     phi, l, g = eval_stages(disc.stage_eval, N, x[:N], u, be.p[:N])
     te = disc.term_eval(x[N], be.p[N])
@@ -147,7 +151,7 @@ def merit_parts(be, xhat0, x, u):
 def _soft_change(be, x, u, dx, du):
     """``sum_soft psi(v_lin) - psi(v)``: the change of the soft prices along the linearised
     rows at the full step (state bounds exact, path rows ``g + Ct dw``, terminal rows ``r + R dx_N``)."""
-    disc, N, nx = be.disc, be.N, be.nx
+    disc, N = be.disc, be.N
     if not getattr(disc, "has_soft", False):
         return 0.0
     sx, sg, sr = disc.soft_x, disc.soft_g, disc.soft_r
@@ -190,6 +194,8 @@ def _step(be, st, xhat0, C):
     N = be.N
     x0, u0 = be.x.copy(), be.u.copy()
     y0 = {k: getattr(be, k).copy() for k in _MULT}
+    st.by_kkt = False
+    st.kkt_best = min(st.kkt_best, _kkt(be, xhat0))
     parts = merit_parts(be, xhat0, x0, u0)
     if parts is None:
         st.reason = "function"
@@ -224,6 +230,13 @@ def _step(be, st, xhat0, C):
             if phi <= phi0 + C["GLOB_ARMIJO"] * alpha * min(D, 0.0) + floor:
                 accepted = True
                 break
+        # the full step also when it lowers the KKT measure enough (the backend's iterate is the
+        # full step with the QP's multipliers): the Maratos effect
+        if trial == 0:
+            kkt = _kkt(be, xhat0)
+            if kkt <= C["GLOB_KKT_FACTOR"] * st.kkt_best:
+                st.kkt_best, st.by_kkt, accepted = kkt, True, True
+                break
         alpha *= C["GLOB_BACKTRACK"]
     st.slope = D
     if not accepted:
@@ -239,7 +252,14 @@ def _step(be, st, xhat0, C):
     be.init(xhat0, _guess(xt, ut, y))
     st.alpha, st.merit = alpha, phi
     st.iterations += 1
-    st.history.append({"alpha": alpha, "penalty": nu, "merit": phi, "slope": D, "trials": st.trials})
+    st.history.append({"alpha": alpha, "penalty": nu, "merit": phi, "slope": D, "trials": st.trials,
+                       "by_kkt": st.by_kkt})
+
+
+def _kkt(be, xhat0) -> float:
+    """The KKT measure of the backend's iterate, counted as ``N + 1`` work units."""
+    be.work += be.N + 1
+    return float(be.kkt(xhat0)["kkt"])
 
 
 def _guess(x, u, y):

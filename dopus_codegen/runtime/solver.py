@@ -600,8 +600,7 @@ class Solver:
         """Forget the penalty and the counts of a previous globalised solve (section 15)."""
         size = int(self._c("glob_sizeof")())
         self._glob_buf = self._ffi.new("double[]", (size + 7) // 8)
-        self._glob = self._ffi.cast(f"{self.name}_glob *", self._glob_buf)
-        self._c("glob_start")(self._glob)
+        self._glob = self._ffi.cast(f"{self.name}_glob *", self._glob_buf)   # zero-filled: a new solve
 
     @property
     def glob(self):
@@ -617,7 +616,8 @@ class Solver:
         self._c("glob_get_info")(self._glob, info)
         return SimpleNamespace(penalty=float(info.penalty), alpha=float(info.alpha), merit=float(info.merit),
                                slope=float(info.slope), kkt=float(info.kkt), iterations=int(info.iterations),
-                               trials=int(info.trials), reason=REASONS.get(int(info.reason), str(info.reason)))
+                               trials=int(info.trials), by_kkt=bool(info.by_kkt),
+                               reason=REASONS.get(int(info.reason), str(info.reason)))
 
     def globalised_step(self, xhat0) -> None:
         """One step of the globalised first solve from the prepared iterate (section 15)."""
