@@ -161,9 +161,10 @@ def _int_list_or_full(value: str) -> list:
 def converge(ocp_file, m_list, iters, start, tol, backend, globalise, json_out, plot_out, real, **kwargs):
     """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M.
 
-    Exits with 1 when a run failed (an error of the solver or a non-finite KKT measure),
-    after writing the table, the JSON and the plot; a run that did not reach --tol in
-    --iters iterations is reported as not converged and is not a failure.
+    Exits with 1 when a run failed (an error of the solver or a non-finite KKT measure; the
+    globalised solve's too, with what to try), after writing the table, the JSON and the
+    plot; a run that did not reach --tol in --iters iterations is reported as not converged
+    and is not a failure.
     """
     from .outputs import check_output_file
     from .studies.converge import failed_runs, run_converge_cli
@@ -177,7 +178,8 @@ def converge(ocp_file, m_list, iters, start, tol, backend, globalise, json_out, 
                              tol=tol, real=real, globalise=globalise, **_runtime_values(kwargs))
     bad = failed_runs(study)
     if bad:
-        raise RunFailed(f"{len(bad)} of {len(study['runs'])} runs failed: "
+        total = len(study["runs"]) + int(study.get("globalised") is not None)
+        raise RunFailed(f"{len(bad)} of {total} runs failed: "
                         + "; ".join(f"M = {r['M']}: {r['message']}" for r in bad))
 
 

@@ -140,3 +140,47 @@ def test_bad_limits_are_refused(disc, c_solver, kw):
         with pytest.raises(DopusError) as err:
             be.init_globalised(x0, **kw)
         assert err.value.status_name == "invalid_argument"
+
+
+def test_converge_cold_runs_the_globalised_solve(tmp_path, ipopt):
+    """``converge --start cold``: the globalised row, the JSON record and its iterate at IPOPT's
+    solution; ``--no-globalise`` leaves it out."""
+    import json
+
+    from click.testing import CliRunner
+
+    from dopus_codegen.cli import main
+
+    out = tmp_path / "conv.json"
+    res = CliRunner().invoke(main, ["converge", str(CRANE), "--start", "cold", "--M", "1", "--iters", "12",
+                                    "--backend", "c", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "glob." in res.output and "step lengths 1, 1" in res.output
+    study = json.loads(out.read_text())
+    g = study["globalised"]
+    assert g["status"] == "converged" and g["kkt"][-1] <= 1e-8 and len(g["alpha"]) == len(g["kkt"]) - 1
+    assert study["solution"]["M"] == 1      # the M run converged too: its iterate is the solution
+    res = CliRunner().invoke(main, ["converge", str(CRANE), "--start", "cold", "--M", "1", "--iters", "2",
+                                    "--backend", "c", "--no-globalise", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "glob." not in res.output and json.loads(out.read_text())["globalised"] is None
+
+
+def test_converge_says_what_to_try(tmp_path):
+    """A transfer too far for its horizon: the globalised solve fails at an infeasible QP, the
+    verb exits with 1 and names what to try."""
+    from click.testing import CliRunner
+
+    from dopus_codegen.cli import main
+
+    ocp = tmp_path / "far_crane.py"
+    ocp.write_text("import importlib.util\n"
+                   f"spec = importlib.util.spec_from_file_location('crane_example', {str(CRANE)!r})\n"
+                   "crane = importlib.util.module_from_spec(spec)\nspec.loader.exec_module(crane)\n"
+                   "crane.TARGET, crane.WALL, crane.V_MAX, crane.A_MAX, crane.TRACK = 3.0, 2.98, 1.3, 2.0, 1e-3\n"
+                   "build = crane.build\n")
+    res = CliRunner().invoke(main, ["converge", str(ocp), "--start", "cold", "--M", "1", "--iters", "12",
+                                    "--backend", "c"])
+    assert res.exit_code == 1, res.output
+    assert "M = globalised" in res.output and "terminal_set" in res.output
+    assert "try a better guess" in res.output and "soft terminal rows" in res.output

@@ -289,8 +289,13 @@ CONVERGED, NOT_CONVERGED, FAILED = "converged", "not converged", "failed"
 
 
 def failed_runs(study: dict) -> list:
-    """The runs of a study whose status is ``failed``."""
-    return [r for r in study["runs"] if r["status"] == FAILED]
+    """The runs of a study whose status is ``failed`` (the globalised solve's with ``"M":
+    "globalised"``)."""
+    bad = [r for r in study["runs"] if r["status"] == FAILED]
+    g = study.get("globalised")
+    if g is not None and g["status"] == FAILED:
+        bad.append(dict(g, M="globalised"))
+    return bad
 
 
 def _infeasibility_note(disc, exc, xhat) -> str:
