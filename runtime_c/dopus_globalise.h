@@ -20,7 +20,7 @@
 #define DOPUS_GLOB_PENALTY_MARGIN DOPUS_R(1.1) /* the penalty is raised when below 1.1 |y|_inf ... */
 #define DOPUS_GLOB_PENALTY_RAISE DOPUS_R(2.0)  /* ... to 2 |y|_inf */
 #define DOPUS_GLOB_MERIT_FLOOR DOPUS_R(10.0)   /* round-off allowance: 10 eps (1 + |phi(0)|) */
-#define DOPUS_GLOB_KKT_FACTOR DOPUS_R(0.5)     /* the full step also when its KKT <= 0.5 kkt_best */
+#define DOPUS_GLOB_WATCHDOG 10                 /* relaxed full steps of a watchdog at most */
 
 /* Why the last globalised step failed (dopus_glob_info.reason). */
 enum dopus_glob_reason {
@@ -34,31 +34,38 @@ enum dopus_glob_reason {
     DOPUS_GLOB_ITER_LIMIT = 7    /* dopus_init_globalised: the iteration limit ended the iterations */
 };
 
-/* The caller's memory of a globalised solve. */
+/* The primal point as one array (x_0..x_N, then u_0..u_{N-1}) and the multipliers as one
+ * (lam, mu_g, mu_b, mu_bN, mu_r, nu, each node by node), in the layout of dopus_init. */
+#define DOPUS_GLOB_NZ ((DOPUS_N + 1) * DOPUS_NX + DOPUS_N * DOPUS_NU)
+#define DOPUS_GLOB_NY                                                                                        \
+    ((DOPUS_N + 1) * DOPUS_NX + DOPUS_N * (DOPUS_NG + DOPUS_NW) + DOPUS_NX + DOPUS_NR + DOPUS_NE)
+
+/* The caller's memory of a globalised solve; zero-filled at its start. */
 struct dopus_glob {
-    dopus_real penalty;  /* the l1 penalty weight nu of the merit function */
-    dopus_real alpha;    /* the step length of the last step */
-    dopus_real merit;    /* the merit at the iterate after the last step */
-    dopus_real slope;    /* the directional derivative D of the last step */
-    dopus_real kkt;      /* dopus_init_globalised: the KKT measure at the end */
-    dopus_real kkt_best; /* the lowest KKT measure of an iterate of this solve (0: none yet) */
-    int iterations;      /* steps taken in this solve */
-    int trials;          /* merit evaluations of the last line search */
-    int reason;          /* enum dopus_glob_reason of the last call */
-    int by_kkt;          /* the last step was taken by the KKT test (the merit test refused it) */
-    dopus_real x[DOPUS_N + 1][DOPUS_NX]; /* the iterate before the step, the trial point */
-    dopus_real u[DOPUS_N][DOPUS_NU];
-    dopus_real xt[DOPUS_N + 1][DOPUS_NX];
-    dopus_real ut[DOPUS_N][DOPUS_NU];
-    dopus_real lam[DOPUS_N + 1][DOPUS_NX]; /* multipliers before the step, then interpolated */
-    dopus_real mu_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)];
-    dopus_real mu_b[DOPUS_N][DOPUS_NW];
-    dopus_real mu_bN[DOPUS_NX];
-    dopus_real mu_r[DOPUS_DIM(DOPUS_NR)];
-    dopus_real nu[DOPUS_DIM(DOPUS_NE)];
-    dopus_real lin_g[DOPUS_N][DOPUS_DIM(DOPUS_NG)]; /* g_k + Ct_k dw_k: soft path rows at the full step */
-    dopus_real lin_r[DOPUS_DIM(DOPUS_NR)];          /* r + R dx_N */
-    dopus_real a_dot_p; /* sum_k a_k' dw_k + a_N' dx_N: the cost's slope along the step */
+    dopus_real penalty;           /* the l1 penalty weight nu of the merit function */
+    dopus_real alpha;             /* the step length of the last step */
+    dopus_real merit;             /* the merit at the iterate after the last step */
+    dopus_real slope;             /* the directional derivative D of the last line search */
+    dopus_real kkt;               /* dopus_init_globalised: the KKT measure at the end */
+    int iterations;               /* steps taken in this solve */
+    int trials;                   /* merit evaluations of the last line search */
+    int reason;                   /* enum dopus_glob_reason of the last call */
+    int relaxed;                  /* the last step was a relaxed full step of the watchdog */
+    int restores;                 /* returns to a watchdog's point in this solve */
+    int no_relax;                 /* the next refused full step is not relaxed (after a return) */
+    int watch;                    /* relaxed steps of the running watchdog (0: none) */
+    dopus_real z[DOPUS_GLOB_NZ];  /* the iterate before the step */
+    dopus_real zt[DOPUS_GLOB_NZ]; /* a trial point */
+    dopus_real dz[DOPUS_GLOB_NZ]; /* the QP's step */
+    dopus_real y[DOPUS_GLOB_NY];  /* the multipliers before the step, then the accepted ones */
+    dopus_real yq[DOPUS_GLOB_NY]; /* the QP's multipliers */
+    /* the watchdog's point: iterate, step, multipliers, merit parts and slope of the cost */
+    dopus_real wz[DOPUS_GLOB_NZ];
+    dopus_real wdz[DOPUS_GLOB_NZ];
+    dopus_real wy[DOPUS_GLOB_NY];
+    dopus_real wyq[DOPUS_GLOB_NY];
+    dopus_real wf, wc, wadp;
+    dopus_real lin[DOPUS_N * DOPUS_NG + DOPUS_NR + 1]; /* scratch: linearised soft rows */
 };
 
 #endif /* DOPUS_GLOBALISE_H */

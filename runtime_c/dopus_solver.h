@@ -318,7 +318,8 @@ typedef struct {
     int iterations; /* steps in this solve */
     int trials;     /* merit evaluations of the last line search */
     int reason;     /* enum dopus_glob_reason of the last call */
-    int by_kkt;     /* the last step was taken by the KKT test */
+    int relaxed;    /* the last step was a relaxed full step of the watchdog */
+    int restores;   /* returns to a watchdog's point in this solve */
     dopus_real penalty, alpha, merit, slope, kkt;
 } dopus_glob_info;
 size_t dopus_glob_sizeof(void);

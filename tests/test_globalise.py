@@ -68,7 +68,7 @@ def test_crane_cold_start_converges_to_ipopt(disc, ipopt, c_solver, backend):
     assert np.abs(u - ipopt.u).max() <= 1e-6 * (1 + np.abs(ipopt.u).max())
 
 
-def _steps(be, x0, n):
+def _steps(be, x0, n, tol=0.0):
     out = []
     be.init(x0)
     be.globalised_start()
@@ -78,8 +78,11 @@ def _steps(be, x0, n):
         except DopusError as exc:
             out.append(("failed", be.glob.reason, exc.status_name))
             break
-        out.append((be.x.copy(), be.u.copy(), be.lam.copy(), be.mu_r.copy(), be.glob.alpha, be.glob.penalty,
-                    be.glob.trials))
+        g = be.glob
+        out.append((be.x.copy(), be.u.copy(), be.lam.copy(), be.mu_r.copy(), g.alpha, g.penalty, g.trials,
+                    g.relaxed, g.restores))
+        if tol > 0 and be.kkt(x0)["kkt"] <= tol:
+            break
     return out
 
 
@@ -91,7 +94,7 @@ def _compare(ref, c):
             continue
         for va, vb in zip(a[:4], b[:4]):
             assert np.abs(va - vb).max(initial=0.0) <= 1e-6 * (1 + np.abs(va).max(initial=0.0))
-        assert a[4] == b[4] and a[6] == b[6]                       # the same step lengths and trials
+        assert a[4] == b[4] and a[6:] == b[6:]          # the same step lengths, trials, watchdog
         assert b[5] == pytest.approx(a[5], rel=1e-6)
 
 
@@ -103,17 +106,36 @@ def test_c_equals_reference_step_by_step(disc, c_solver):
     _compare(ref, c)
 
 
-def test_backtracking_and_failure_alike_with_advice(c_solver):
-    """A transfer too far for its horizon: a step of the line search is halved, then a QP is
-    infeasible; both backends alike, and the study's message says what to try."""
+def test_watchdog_and_backtracking_alike(c_solver):
+    """The figure-eight from its cold guess: relaxed full steps of the watchdog, returns to
+    its point with a line search there, full steps at the end; both backends alike step by
+    step, at IPOPT's solution (1e-6)."""
+    from dopus_codegen.problem.ocp import load_ocp
+
+    d = build_functions(load_ocp(str(CRANE.parent / "figure_eight.py")))
+    x0 = np.array(d.x0, float)
+    ref = _steps(ReferenceDopus(d, M=d.N - 1, mode="fixed"), x0, 40, tol=1e-9)
+    c = _steps(c_solver(d, M=d.N - 1, mode="fixed"), x0, 40, tol=1e-9)
+    _compare(ref, c)
+    assert any(s[7] for s in ref) and ref[-1][8] >= 1 and any(s[4] < 1.0 for s in ref)
+    assert all(s[4] == 1.0 and not s[7] for s in ref[-3:])      # full steps at the end
+    sol, info = solve_ocp(d, x0)
+    assert info["success"]
+    assert np.abs(c[-1][0] - sol.x).max() <= 1e-6 * (1 + np.abs(sol.x).max())
+    assert np.abs(c[-1][1] - sol.u).max() <= 1e-6 * (1 + np.abs(sol.u).max())
+
+
+def test_failure_alike_with_advice(c_solver):
+    """A transfer too far for its horizon (IPOPT too reports it infeasible): both backends end
+    at an infeasible QP, and the study's message says what to try."""
     d = crane(TARGET=3.0, WALL=2.98, V_MAX=1.3, A_MAX=2.0, TRACK=1e-3)
     x0 = np.array(d.x0, float)
-    ref = _steps(ReferenceDopus(d, M=d.N - 1, mode="fixed"), x0, 12)
-    c = _steps(c_solver(d, M=d.N - 1, mode="fixed"), x0, 12)
-    _compare(ref, c)
-    assert any(not isinstance(s[0], str) and s[4] < 1.0 for s in ref)
-    assert ref[-1][:2] == ("failed", "qp")
-    rec, _ = run_globalised(d, 12, make_start(d, "cold"), of_problem(d), ReferenceDopus, 1e-8)
+    ref = _steps(ReferenceDopus(d, M=d.N - 1, mode="fixed"), x0, 40)
+    c = _steps(c_solver(d, M=d.N - 1, mode="fixed"), x0, 40)
+    assert ref[-1][:2] == c[-1][:2] == ("failed", "qp")
+    _, info = solve_ocp(d, x0)
+    assert not info["success"]
+    rec, _ = run_globalised(d, 40, make_start(d, "cold"), of_problem(d), ReferenceDopus, 1e-8)
     assert rec["status"] == "failed"
     assert "try a better guess" in rec["message"] and "soft terminal rows" in rec["message"]
 
@@ -179,7 +201,7 @@ def test_converge_says_what_to_try(tmp_path):
                    "crane = importlib.util.module_from_spec(spec)\nspec.loader.exec_module(crane)\n"
                    "crane.TARGET, crane.WALL, crane.V_MAX, crane.A_MAX, crane.TRACK = 3.0, 2.98, 1.3, 2.0, 1e-3\n"
                    "build = crane.build\n")
-    res = CliRunner().invoke(main, ["converge", str(ocp), "--start", "cold", "--M", "1", "--iters", "12",
+    res = CliRunner().invoke(main, ["converge", str(ocp), "--start", "cold", "--M", "1", "--iters", "40",
                                     "--backend", "c"])
     assert res.exit_code == 1, res.output
     assert "M = globalised" in res.output and "terminal_set" in res.output

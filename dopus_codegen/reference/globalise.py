@@ -14,9 +14,11 @@ the initial state ``xhat0``, in fixed mode:
 3. the slope ``D = a' p - nu c + sum_soft (psi(v_lin) - psi(v))`` (``a``: the QP's gradient,
    the cost gradient when every block is fresh; ``v_lin`` the linearised rows at the full
    step), and the backtracking line search ``a = 1, 1/2, ...`` until
-   ``phi(a) <= phi(0) + 1e-4 a min(D, 0) + 10 eps (1 + |phi(0)|)``, ``phi = f + nu c``; the
-   full step is also taken when its KKT measure (with the QP's multipliers) is at most half
-   the lowest KKT measure of the solve so far (the Maratos effect);
+   ``phi(a) <= phi(0) + 1e-4 a min(D, 0) + 10 eps (1 + |phi(0)|)``, ``phi = f + nu c``; with
+   the watchdog: a full step the test refuses is taken all the same (the point before it
+   kept), and so are up to 4 more, until one meets the test against the kept point; else the
+   line search runs from the kept point along its step (and the next refused step is not
+   relaxed);
 4. the iterate ``w + a p``, the multipliers ``y + a (y_QP - y)``, and ``init`` there (every
    block fresh, the next QP prepared).
 
@@ -78,8 +80,10 @@ class GlobState:
     merit: float = 0.0
     slope: float = 0.0
     kkt: float = float("nan")
-    kkt_best: float = float("inf")
-    by_kkt: bool = False
+    relaxed: bool = False
+    relax_ok: bool = True
+    restores: int = 0
+    watch: Optional[dict] = None
     iterations: int = 0
     trials: int = 0
     reason: str = "ok"
@@ -190,12 +194,20 @@ def globalised_step(be, st: GlobState, xhat0) -> None:
         be.set_mode(mode)
 
 
+def _merit(be, xhat0, x, u, nu):
+    parts = merit_parts(be, xhat0, x, u)
+    return None if parts is None else parts[0] + nu * parts[1]
+
+
+def _armijo(phi, phi0, alpha, D, C):
+    floor = C["GLOB_MERIT_FLOOR"] * np.finfo(float).eps * (1.0 + abs(phi0))
+    return phi is not None and phi <= phi0 + C["GLOB_ARMIJO"] * alpha * min(D, 0.0) + floor
+
+
 def _step(be, st, xhat0, C):
     N = be.N
     x0, u0 = be.x.copy(), be.u.copy()
     y0 = {k: getattr(be, k).copy() for k in _MULT}
-    st.by_kkt = False
-    st.kkt_best = min(st.kkt_best, _kkt(be, xhat0))
     parts = merit_parts(be, xhat0, x0, u0)
     if parts is None:
         st.reason = "function"
@@ -206,6 +218,10 @@ def _step(be, st, xhat0, C):
     try:
         be.feedback(xhat0)
     except DopusError as exc:
+        if st.watch is not None:
+            # a relaxed step led here: back to the watchdog's point, a line search there
+            _restore(be, st, xhat0, C)
+            return
         st.reason = "step_box" if exc.status_name == "diverged" else "qp" if exc.status_name == "qp" else "function"
         raise
     dx, du = be.x - x0, be.u - u0
@@ -214,52 +230,76 @@ def _step(be, st, xhat0, C):
     if st.penalty < C["GLOB_PENALTY_MARGIN"] * ymax:
         st.penalty = C["GLOB_PENALTY_RAISE"] * ymax
     nu = st.penalty
-    a_dot_p = float(np.sum(a * np.hstack([dx[:N], du]))) + float(aN @ dx[N])
-    # the soft change needs the blocks of the iterate: the slots are those of the QP just solved
-    D = a_dot_p - nu * c0 + _soft_change(be, x0, u0, dx, du)
+    # the cost's slope along the step (the QP's gradient: every block fresh) and the change
+    # of the soft prices, measured with the blocks of the QP just solved
+    adp = (float(np.sum(a * np.hstack([dx[:N], du]))) + float(aN @ dx[N])
+           + _soft_change(be, x0, u0, dx, du))
+    D = adp - nu * c0
     phi0 = f0 + nu * c0
-    floor = C["GLOB_MERIT_FLOOR"] * np.finfo(float).eps * (1.0 + abs(phi0))
-    alpha, accepted, phi = 1.0, False, float("nan")
-    for trial in range(int(C["GLOB_MAX_TRIALS"])):
-        st.trials = trial + 1
-        xt = be.x.copy() if alpha == 1.0 else x0 + alpha * dx
-        ut = be.u.copy() if alpha == 1.0 else u0 + alpha * du
-        parts = merit_parts(be, xhat0, xt, ut)
-        if parts is not None:
-            phi = parts[0] + nu * parts[1]
-            if phi <= phi0 + C["GLOB_ARMIJO"] * alpha * min(D, 0.0) + floor:
-                accepted = True
-                break
-        # the full step also when it lowers the KKT measure enough (the backend's iterate is the
-        # full step with the QP's multipliers): the Maratos effect
-        if trial == 0:
-            kkt = _kkt(be, xhat0)
-            if kkt <= C["GLOB_KKT_FACTOR"] * st.kkt_best:
-                st.kkt_best, st.by_kkt, accepted = kkt, True, True
-                break
-        alpha *= C["GLOB_BACKTRACK"]
     st.slope = D
-    if not accepted:
-        # the iterate as it was, its QP prepared again
-        be.init(xhat0, _guess(x0, u0, y0))
-        st.reason = "line_search"
-        raise DopusError.of("diverged", f"globalised step: no step length down to {alpha / C['GLOB_BACKTRACK']:.1e} "
-                            f"decreased the merit function (slope {D:.3e}, penalty {nu:.3e})")
-    if alpha == 1.0:
-        y = yq
+    st.trials = 1
+    phi1 = _merit(be, xhat0, be.x.copy(), be.u.copy(), nu)
+    w = st.watch
+    if w is None:
+        if _armijo(phi1, phi0, 1.0, D, C):
+            _accept(be, st, xhat0, 1.0, be.x.copy(), be.u.copy(), yq, phi1)
+        elif phi1 is not None and st.relax_ok:
+            # the watchdog: the full step all the same, the point before it kept
+            st.watch = {"x": x0, "u": u0, "y": y0, "f": f0, "c": c0, "adp": adp, "dx": dx, "du": du,
+                        "yq": yq, "m": 1}
+            _accept(be, st, xhat0, 1.0, be.x.copy(), be.u.copy(), yq, phi1, relaxed=True)
+        else:
+            _line_search(be, st, xhat0, C, x0, u0, y0, dx, du, yq, phi0, D, nu)
+            st.relax_ok = True
+        return
+    phi_s, D_s = w["f"] + nu * w["c"], w["adp"] - nu * w["c"]
+    if _armijo(phi1, phi_s, 1.0, D_s, C):
+        st.watch = None
+        _accept(be, st, xhat0, 1.0, be.x.copy(), be.u.copy(), yq, phi1)
+    elif phi1 is not None and w["m"] < C["GLOB_WATCHDOG"]:
+        w["m"] += 1
+        _accept(be, st, xhat0, 1.0, be.x.copy(), be.u.copy(), yq, phi1, relaxed=True)
     else:
-        y = {k: y0[k] + alpha * (yq[k] - y0[k]) for k in _MULT}
-    be.init(xhat0, _guess(xt, ut, y))
-    st.alpha, st.merit = alpha, phi
+        _restore(be, st, xhat0, C)
+
+
+def _restore(be, st, xhat0, C):
+    """The relaxed steps did not decrease the merit enough: the line search from the
+    watchdog's point along its step, from ``alpha = 1/2`` (the full step was refused)."""
+    w, nu = st.watch, st.penalty
+    st.watch, st.relax_ok, st.trials = None, False, 0
+    st.restores += 1
+    phi_s, D_s = w["f"] + nu * w["c"], w["adp"] - nu * w["c"]
+    st.slope = D_s
+    _line_search(be, st, xhat0, C, w["x"], w["u"], w["y"], w["dx"], w["du"], w["yq"], phi_s, D_s, nu,
+                 alpha=C["GLOB_BACKTRACK"])
+
+
+def _line_search(be, st, xhat0, C, x0, u0, y0, dx, du, yq, phi0, D, nu, alpha=None):
+    """Backtracking from ``alpha`` (default: the second trial, 1/2) along ``(dx, du)`` from
+    ``(x0, u0)``; the accepted point is initialised, else the start point and a failure."""
+    alpha = C["GLOB_BACKTRACK"] if alpha is None else alpha
+    while st.trials < int(C["GLOB_MAX_TRIALS"]):
+        st.trials += 1
+        xt, ut = x0 + alpha * dx, u0 + alpha * du
+        phi = _merit(be, xhat0, xt, ut, nu)
+        if _armijo(phi, phi0, alpha, D, C):
+            y = {k: y0[k] + alpha * (yq[k] - y0[k]) for k in _MULT}
+            _accept(be, st, xhat0, alpha, xt, ut, y, phi)
+            return
+        alpha *= C["GLOB_BACKTRACK"]
+    be.init(xhat0, _guess(x0, u0, y0))      # the start point, its QP prepared again
+    st.reason = "line_search"
+    raise DopusError.of("diverged", f"globalised step: no step length down to {alpha / C['GLOB_BACKTRACK']:.1e} "
+                        f"decreased the merit function (slope {D:.3e}, penalty {nu:.3e})")
+
+
+def _accept(be, st, xhat0, alpha, x, u, y, phi, relaxed=False):
+    be.init(xhat0, _guess(x, u, y))
+    st.alpha, st.merit, st.relaxed = alpha, phi, relaxed
     st.iterations += 1
-    st.history.append({"alpha": alpha, "penalty": nu, "merit": phi, "slope": D, "trials": st.trials,
-                       "by_kkt": st.by_kkt})
-
-
-def _kkt(be, xhat0) -> float:
-    """The KKT measure of the backend's iterate, counted as ``N + 1`` work units."""
-    be.work += be.N + 1
-    return float(be.kkt(xhat0)["kkt"])
+    st.history.append({"alpha": alpha, "penalty": st.penalty, "merit": phi, "slope": st.slope,
+                       "trials": st.trials, "relaxed": relaxed, "restores": st.restores})
 
 
 def _guess(x, u, y):

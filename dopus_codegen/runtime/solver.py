@@ -616,7 +616,8 @@ class Solver:
         self._c("glob_get_info")(self._glob, info)
         return SimpleNamespace(penalty=float(info.penalty), alpha=float(info.alpha), merit=float(info.merit),
                                slope=float(info.slope), kkt=float(info.kkt), iterations=int(info.iterations),
-                               trials=int(info.trials), by_kkt=bool(info.by_kkt),
+                               trials=int(info.trials), relaxed=bool(info.relaxed),
+                               restores=int(info.restores),
                                reason=REASONS.get(int(info.reason), str(info.reason)))
 
     def globalised_step(self, xhat0) -> None:

@@ -22,7 +22,8 @@ JSON written by :func:`run_study`::
                "status": "converged" | "not converged" | "failed", "message": why or null,
                "iterations_to_tol": i or null}, ...],
      "globalised": {"kkt": [...], "stat": ..., "status": ..., "message": why and what to try or null,
-                    "iterations_to_tol": i or null, "alpha": [...], "penalty": [...], "work": units} or null,
+                    "iterations_to_tol": i or null, "alpha": [...], "relaxed": [...], "penalty": [...],
+                    "work": units} or null,
      "solution": {"M": M, "status": ..., "converged": bool, "kkt": last KKT,
                   "x": [[...]], "u": [[...]], "objective": J} or null}
 
@@ -33,8 +34,9 @@ became non-finite: it stops there and ``message`` says why (for an infeasible QP
 stage-0 rows the state violates). Non-finite numbers are written as ``null``.
 ``globalised`` (``--globalise``, the default with ``--start cold``) is the globalised first
 solve of docs/algorithm.md section 15 from the same start (every stage re-linearised, a line
-search on an l1 merit function; ``alpha[i]`` the step length of iteration ``i + 1``); when it
-fails, ``message`` says why and what to try.
+search on an l1 merit function with a watchdog; ``alpha[i]`` the step length of iteration
+``i + 1``, ``relaxed[i]`` whether it was a relaxed full step of the watchdog, shown as ``R`` in
+the table); when it fails, ``message`` says why and what to try.
 ``solution`` is the last iterate of a converged run: the full RTI (``M = N-1``) if it
 converged, else the converged run with the largest ``M``, else the globalised solve's
 (``"M": null``); when no run converged, of the
@@ -155,7 +157,7 @@ def run_globalised(disc, iters: int, start, s, backend_factory, tol: float, prog
     from ..reference.globalise import what_to_try
 
     be = backend_factory(disc, settings=s.replace(M=disc.N - 1, mode="fixed"))
-    rec = {"kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "alpha": [], "penalty": [],
+    rec = {"kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "alpha": [], "relaxed": [], "penalty": [],
            "status": None, "message": None}
 
     def record():
@@ -174,6 +176,7 @@ def run_globalised(disc, iters: int, start, s, backend_factory, tol: float, prog
                 break
             be.globalised_step(start.xhat_fixed)
             rec["alpha"].append(float(be.glob.alpha))
+            rec["relaxed"].append(bool(be.glob.relaxed))
             rec["penalty"].append(float(be.glob.penalty))
             val = record()
             if progress is not None:
@@ -358,7 +361,9 @@ def format_table(study: dict, tol: Optional[float] = None) -> str:
     if g is not None:
         it = iterations_to(g["kkt"], tol)
         last = g["kkt"][-1] if g["kkt"] else float("nan")
-        steps = ", ".join(f"{a:g}" for a in g["alpha"][:12]) + (", ..." if len(g["alpha"]) > 12 else "")
+        relaxed = g.get("relaxed") or [False] * len(g["alpha"])
+        steps = ", ".join("R" if r else f"{a:g}" for a, r in zip(g["alpha"][:12], relaxed)) \
+            + (", ..." if len(g["alpha"]) > 12 else "")
         status = g["status"] + (f": {g['message']}" if g.get("message") else "")
         lines.append(f"{'glob.':>8} {('-' if it is None else str(it)):>14} {last:10.2e}  {status}"
                      + (f" (step lengths {steps})" if steps else ""))
