@@ -20,7 +20,7 @@
 #define ROBOT_ARM_GLOB_PENALTY_MARGIN ROBOT_ARM_R(1.1) /* the penalty is raised when below 1.1 |y|_inf ... */
 #define ROBOT_ARM_GLOB_PENALTY_RAISE ROBOT_ARM_R(2.0)  /* ... to 2 |y|_inf */
 #define ROBOT_ARM_GLOB_MERIT_FLOOR ROBOT_ARM_R(10.0)   /* round-off allowance: 10 eps (1 + |phi(0)|) */
-#define ROBOT_ARM_GLOB_KKT_FACTOR ROBOT_ARM_R(0.5)     /* the full step also when its KKT <= 0.5 kkt_best */
+#define ROBOT_ARM_GLOB_WATCHDOG 10                 /* relaxed full steps of a watchdog at most */
 
 /* Why the last globalised step failed (robot_arm_glob_info.reason). */
 enum robot_arm_glob_reason {
@@ -34,31 +34,38 @@ enum robot_arm_glob_reason {
     ROBOT_ARM_GLOB_ITER_LIMIT = 7    /* robot_arm_init_globalised: the iteration limit ended the iterations */
 };
 
-/* The caller's memory of a globalised solve. */
+/* The primal point as one array (x_0..x_N, then u_0..u_{N-1}) and the multipliers as one
+ * (lam, mu_g, mu_b, mu_bN, mu_r, nu, each node by node), in the layout of robot_arm_init. */
+#define ROBOT_ARM_GLOB_NZ ((ROBOT_ARM_N + 1) * ROBOT_ARM_NX + ROBOT_ARM_N * ROBOT_ARM_NU)
+#define ROBOT_ARM_GLOB_NY                                                                                        \
+    ((ROBOT_ARM_N + 1) * ROBOT_ARM_NX + ROBOT_ARM_N * (ROBOT_ARM_NG + ROBOT_ARM_NW) + ROBOT_ARM_NX + ROBOT_ARM_NR + ROBOT_ARM_NE)
+
+/* The caller's memory of a globalised solve; zero-filled at its start. */
 struct robot_arm_glob {
-    robot_arm_real penalty;  /* the l1 penalty weight nu of the merit function */
-    robot_arm_real alpha;    /* the step length of the last step */
-    robot_arm_real merit;    /* the merit at the iterate after the last step */
-    robot_arm_real slope;    /* the directional derivative D of the last step */
-    robot_arm_real kkt;      /* robot_arm_init_globalised: the KKT measure at the end */
-    robot_arm_real kkt_best; /* the lowest KKT measure of an iterate of this solve (0: none yet) */
-    int iterations;      /* steps taken in this solve */
-    int trials;          /* merit evaluations of the last line search */
-    int reason;          /* enum robot_arm_glob_reason of the last call */
-    int by_kkt;          /* the last step was taken by the KKT test (the merit test refused it) */
-    robot_arm_real x[ROBOT_ARM_N + 1][ROBOT_ARM_NX]; /* the iterate before the step, the trial point */
-    robot_arm_real u[ROBOT_ARM_N][ROBOT_ARM_NU];
-    robot_arm_real xt[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
-    robot_arm_real ut[ROBOT_ARM_N][ROBOT_ARM_NU];
-    robot_arm_real lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX]; /* multipliers before the step, then interpolated */
-    robot_arm_real mu_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-    robot_arm_real mu_b[ROBOT_ARM_N][ROBOT_ARM_NW];
-    robot_arm_real mu_bN[ROBOT_ARM_NX];
-    robot_arm_real mu_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
-    robot_arm_real nu[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
-    robot_arm_real lin_g[ROBOT_ARM_N][ROBOT_ARM_DIM(ROBOT_ARM_NG)]; /* g_k + Ct_k dw_k: soft path rows at the full step */
-    robot_arm_real lin_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];          /* r + R dx_N */
-    robot_arm_real a_dot_p; /* sum_k a_k' dw_k + a_N' dx_N: the cost's slope along the step */
+    robot_arm_real penalty;           /* the l1 penalty weight nu of the merit function */
+    robot_arm_real alpha;             /* the step length of the last step */
+    robot_arm_real merit;             /* the merit at the iterate after the last step */
+    robot_arm_real slope;             /* the directional derivative D of the last line search */
+    robot_arm_real kkt;               /* robot_arm_init_globalised: the KKT measure at the end */
+    int iterations;               /* steps taken in this solve */
+    int trials;                   /* merit evaluations of the last line search */
+    int reason;                   /* enum robot_arm_glob_reason of the last call */
+    int relaxed;                  /* the last step was a relaxed full step of the watchdog */
+    int restores;                 /* returns to a watchdog's point in this solve */
+    int no_relax;                 /* the next refused full step is not relaxed (after a return) */
+    int watch;                    /* relaxed steps of the running watchdog (0: none) */
+    robot_arm_real z[ROBOT_ARM_GLOB_NZ];  /* the iterate before the step */
+    robot_arm_real zt[ROBOT_ARM_GLOB_NZ]; /* a trial point */
+    robot_arm_real dz[ROBOT_ARM_GLOB_NZ]; /* the QP's step */
+    robot_arm_real y[ROBOT_ARM_GLOB_NY];  /* the multipliers before the step, then the accepted ones */
+    robot_arm_real yq[ROBOT_ARM_GLOB_NY]; /* the QP's multipliers */
+    /* the watchdog's point: iterate, step, multipliers, merit parts and slope of the cost */
+    robot_arm_real wz[ROBOT_ARM_GLOB_NZ];
+    robot_arm_real wdz[ROBOT_ARM_GLOB_NZ];
+    robot_arm_real wy[ROBOT_ARM_GLOB_NY];
+    robot_arm_real wyq[ROBOT_ARM_GLOB_NY];
+    robot_arm_real wf, wc, wadp;
+    robot_arm_real lin[ROBOT_ARM_N * ROBOT_ARM_NG + ROBOT_ARM_NR + 1]; /* scratch: linearised soft rows */
 };
 
 #endif /* ROBOT_ARM_GLOBALISE_H */

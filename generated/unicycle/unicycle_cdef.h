@@ -277,7 +277,8 @@ typedef struct {
     int iterations; /* steps in this solve */
     int trials;     /* merit evaluations of the last line search */
     int reason;     /* enum unicycle_glob_reason of the last call */
-    int by_kkt;     /* the last step was taken by the KKT test */
+    int relaxed;    /* the last step was a relaxed full step of the watchdog */
+    int restores;   /* returns to a watchdog's point in this solve */
     unicycle_real penalty, alpha, merit, slope, kkt;
 } unicycle_glob_info;
 size_t unicycle_glob_sizeof(void);

@@ -32,7 +32,7 @@ size_t unicycle_glob_sizeof(void)
     return sizeof(unicycle_glob);
 }
 
-/* A zero-filled unicycle_glob: no penalty, no counts, no KKT measure yet (kkt_best 0). */
+/* A zero-filled unicycle_glob: no penalty, no counts, no watchdog. */
 static void unicycle_glob_reset(unicycle_glob *g)
 {
     g->penalty = UNICYCLE_R(0.0);
@@ -40,11 +40,13 @@ static void unicycle_glob_reset(unicycle_glob *g)
     g->merit = UNICYCLE_R(0.0);
     g->slope = UNICYCLE_R(0.0);
     g->kkt = UNICYCLE_R(0.0);
-    g->kkt_best = UNICYCLE_R(0.0);
-    g->by_kkt = 0;
     g->iterations = 0;
     g->trials = 0;
     g->reason = UNICYCLE_GLOB_OK;
+    g->relaxed = 0;
+    g->restores = 0;
+    g->no_relax = 0;
+    g->watch = 0;
 }
 
 void unicycle_glob_get_info(const unicycle_glob *g, unicycle_glob_info *info)
@@ -52,7 +54,8 @@ void unicycle_glob_get_info(const unicycle_glob *g, unicycle_glob_info *info)
     info->iterations = g->iterations;
     info->trials = g->trials;
     info->reason = g->reason;
-    info->by_kkt = g->by_kkt;
+    info->relaxed = g->relaxed;
+    info->restores = g->restores;
     info->penalty = g->penalty;
     info->alpha = g->alpha;
     info->merit = g->merit;
@@ -100,24 +103,25 @@ static void unicycle_glob_rows(int n, const unicycle_real *v, const unicycle_rea
 #define UNICYCLE_GLOB_SOFT_R ((const unicycle_real *)0)
 #endif
 
-/* f and c at the primal point (x, u) for xhat0; N + 1 work units. UNICYCLE_OK, or the status of
- * a function that failed or was not finite. */
-static int unicycle_glob_merit_parts(unicycle_solver *s, const unicycle_real *xhat0, const unicycle_real (*x)[UNICYCLE_NX],
-                                  const unicycle_real (*u)[UNICYCLE_NU], unicycle_real *f, unicycle_real *c)
+/* f and c at the primal point z (x_0..x_N, u_0..u_{N-1}) for xhat0; N + 1 work units.
+ * UNICYCLE_OK, or the status of a function that failed or was not finite. */
+static int unicycle_glob_merit_parts(unicycle_solver *s, const unicycle_real *xhat0, const unicycle_real *z,
+                                  unicycle_real *f, unicycle_real *c)
 {
+    const unicycle_real *x = z, *u = z + (UNICYCLE_N + 1) * UNICYCLE_NX;
     unicycle_real phi[UNICYCLE_NX], g[UNICYCLE_DIM(UNICYCLE_NG)], r[UNICYCLE_DIM(UNICYCLE_NR)], r_eq[UNICYCLE_DIM(UNICYCLE_NE)];
-    unicycle_real l = UNICYCLE_R(0.0), E = UNICYCLE_R(0.0), ft = UNICYCLE_R(0.0), ct = UNICYCLE_R(0.0);
-    unicycle_real sl = UNICYCLE_R(0.0), sc = UNICYCLE_R(0.0);
+    unicycle_real l = UNICYCLE_R(0.0), E = UNICYCLE_R(0.0), ft, ct = UNICYCLE_R(0.0), sl = UNICYCLE_R(0.0),
+               sc = UNICYCLE_R(0.0);
     int k, i;
 
     s->anytime.work += (double)(UNICYCLE_N + 1);
-    /* the cost and the l1 sums are added in the reference's order: the stage costs, then E;
-     * |x_0 - xhat0|, the dynamics, r_eq, then the rows node by node */
+    /* the reference's order: |x_0 - xhat0|, the dynamics, r_eq, then the rows node by node */
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        ct += unicycle_fabs(x[0][i] - xhat0[i]);
+        ct += unicycle_fabs(x[i] - xhat0[i]);
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
-        if (unicycle_eval_stage_eval(x[k], u[k], s->p[k], phi, &l, g, &s->mem.ev.fun_work) != 0) {
+        if (unicycle_eval_stage_eval(x + k * UNICYCLE_NX, u + k * UNICYCLE_NU, s->p[k], phi, &l, g,
+                                  &s->mem.ev.fun_work) != 0) {
             return UNICYCLE_ERR_FUNCTION;
         }
         if (!unicycle_lai_vec_finite(UNICYCLE_NX, phi) || !unicycle_lai_vec_finite(UNICYCLE_NG, g) || !isfinite(l)) {
@@ -125,11 +129,11 @@ static int unicycle_glob_merit_parts(unicycle_solver *s, const unicycle_real *xh
         }
         sl += l;
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            sc += unicycle_fabs(x[k + 1][i] - phi[i]);
+            sc += unicycle_fabs(x[(k + 1) * UNICYCLE_NX + i] - phi[i]);
         }
         unicycle_glob_copy(s->mem.ev.Fn_g[k], g, UNICYCLE_NG);
     }
-    if (unicycle_eval_term_eval(x[UNICYCLE_N], s->p[UNICYCLE_N], &E, r, r_eq, &s->mem.ev.fun_work) != 0) {
+    if (unicycle_eval_term_eval(x + UNICYCLE_N * UNICYCLE_NX, s->p[UNICYCLE_N], &E, r, r_eq, &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
     if (!isfinite(E) || !unicycle_lai_vec_finite(UNICYCLE_NR, r) || !unicycle_lai_vec_finite(UNICYCLE_NE, r_eq)) {
@@ -142,17 +146,28 @@ static int unicycle_glob_merit_parts(unicycle_solver *s, const unicycle_real *xh
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
         if (k > 0) {
-            unicycle_glob_rows(UNICYCLE_NX, x[k], unicycle_lbx, unicycle_ubx, UNICYCLE_GLOB_SOFT_X, UNICYCLE_NX, &ct, &ft);
+            unicycle_glob_rows(UNICYCLE_NX, x + k * UNICYCLE_NX, unicycle_lbx, unicycle_ubx, UNICYCLE_GLOB_SOFT_X, UNICYCLE_NX,
+                            &ct, &ft);
         }
-        unicycle_glob_rows(UNICYCLE_NU, u[k], unicycle_lbu, unicycle_ubu, 0, UNICYCLE_NU, &ct, &ft);
+        unicycle_glob_rows(UNICYCLE_NU, u + k * UNICYCLE_NU, unicycle_lbu, unicycle_ubu, 0, UNICYCLE_NU, &ct, &ft);
         unicycle_glob_rows(UNICYCLE_NG, s->mem.ev.Fn_g[k], unicycle_lg_k[k], unicycle_ug_k[k], UNICYCLE_GLOB_SOFT_G,
                         UNICYCLE_DIM(UNICYCLE_NG), &ct, &ft);
     }
-    unicycle_glob_rows(UNICYCLE_NX, x[UNICYCLE_N], unicycle_lbx, unicycle_ubx, UNICYCLE_GLOB_SOFT_X, UNICYCLE_NX, &ct, &ft);
+    unicycle_glob_rows(UNICYCLE_NX, x + UNICYCLE_N * UNICYCLE_NX, unicycle_lbx, unicycle_ubx, UNICYCLE_GLOB_SOFT_X, UNICYCLE_NX, &ct,
+                    &ft);
     unicycle_glob_rows(UNICYCLE_NR, r, unicycle_lr, unicycle_ur, UNICYCLE_GLOB_SOFT_R, UNICYCLE_DIM(UNICYCLE_NR), &ct, &ft);
     *f = ft;
     *c = ct;
     return UNICYCLE_OK;
+}
+
+/* The merit phi = f + nu c at z; 0 when a function is not finite there (*ok = 0). */
+static unicycle_real unicycle_glob_merit(unicycle_solver *s, const unicycle_real *xhat0, const unicycle_real *z,
+                                   unicycle_real nu, int *ok)
+{
+    unicycle_real f = UNICYCLE_R(0.0), c = UNICYCLE_R(0.0);
+    *ok = unicycle_glob_merit_parts(s, xhat0, z, &f, &c) == UNICYCLE_OK;
+    return *ok ? f + nu * c : UNICYCLE_R(0.0);
 }
 
 #if UNICYCLE_NSOFT > 0
@@ -166,52 +181,51 @@ static unicycle_real unicycle_glob_soft_price(int n, const unicycle_real *v, con
 }
 #endif
 
-/* sum_soft psi(v_lin) - psi(v) along the step (x - g->x, u - g->u) with the blocks of the
- * iterate before it (the slots and the terminal blocks of the QP just solved). */
+/* sum_soft psi(v_lin) - psi(v) along the step g->dz from g->z, with the blocks of the
+ * iterate g->z (the slots and the terminal blocks of the QP just solved). */
 static unicycle_real unicycle_glob_soft_change(unicycle_solver *s, unicycle_glob *g)
 {
     unicycle_real total = UNICYCLE_R(0.0);
 #if UNICYCLE_NSOFT > 0
-    unicycle_real v[UNICYCLE_NX], dw[UNICYCLE_NW];
+    const unicycle_real *x = g->z, *dx = g->dz, *du = g->dz + (UNICYCLE_N + 1) * UNICYCLE_NX;
     int k, i, j;
     for (k = 1; k <= UNICYCLE_N; ++k) {
-        total += unicycle_glob_soft_price(UNICYCLE_NX, s->x[k], unicycle_lbx, unicycle_ubx, UNICYCLE_GLOB_SOFT_X, UNICYCLE_NX) -
-                 unicycle_glob_soft_price(UNICYCLE_NX, g->x[k], unicycle_lbx, unicycle_ubx, UNICYCLE_GLOB_SOFT_X, UNICYCLE_NX);
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            g->zt[i] = x[k * UNICYCLE_NX + i] + dx[k * UNICYCLE_NX + i];
+        }
+        total += unicycle_glob_soft_price(UNICYCLE_NX, g->zt, unicycle_lbx, unicycle_ubx, UNICYCLE_GLOB_SOFT_X, UNICYCLE_NX) -
+                 unicycle_glob_soft_price(UNICYCLE_NX, x + k * UNICYCLE_NX, unicycle_lbx, unicycle_ubx, UNICYCLE_GLOB_SOFT_X,
+                                       UNICYCLE_NX);
     }
     for (k = 0; k < UNICYCLE_N && UNICYCLE_NG > 0; ++k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            dw[i] = s->x[k][i] - g->x[k][i];
-        }
-        for (i = 0; i < UNICYCLE_NU; ++i) {
-            dw[UNICYCLE_NX + i] = s->u[k][i] - g->u[k][i];
-        }
+        unicycle_real *lin = g->lin + k * UNICYCLE_NG;
         for (j = 0; j < UNICYCLE_NG; ++j) {
             unicycle_real acc = slot->g[j];
-            for (i = 0; i < UNICYCLE_NW; ++i) {
-                acc += slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] * dw[i];
+            for (i = 0; i < UNICYCLE_NX; ++i) {
+                acc += slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] * dx[k * UNICYCLE_NX + i];
             }
-            g->lin_g[k][j] = acc;
+            for (i = 0; i < UNICYCLE_NU; ++i) {
+                acc += slot->Ct[j + (UNICYCLE_NX + i) * UNICYCLE_DIM(UNICYCLE_NG)] * du[k * UNICYCLE_NU + i];
+            }
+            lin[j] = acc;
         }
-        total += unicycle_glob_soft_price(UNICYCLE_NG, g->lin_g[k], unicycle_lg_k[k], unicycle_ug_k[k], UNICYCLE_GLOB_SOFT_G,
+        total += unicycle_glob_soft_price(UNICYCLE_NG, lin, unicycle_lg_k[k], unicycle_ug_k[k], UNICYCLE_GLOB_SOFT_G,
                                        UNICYCLE_DIM(UNICYCLE_NG)) -
                  unicycle_glob_soft_price(UNICYCLE_NG, slot->g, unicycle_lg_k[k], unicycle_ug_k[k], UNICYCLE_GLOB_SOFT_G,
                                        UNICYCLE_DIM(UNICYCLE_NG));
     }
     if (UNICYCLE_NR > 0) {
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            v[i] = s->x[UNICYCLE_N][i] - g->x[UNICYCLE_N][i];
-        }
+        unicycle_real *lin = g->lin + UNICYCLE_N * UNICYCLE_NG;
         for (j = 0; j < UNICYCLE_NR; ++j) {
             unicycle_real acc = s->r[j];
             for (i = 0; i < UNICYCLE_NX; ++i) {
-                acc += s->R[j + i * UNICYCLE_DIM(UNICYCLE_NR)] * v[i];
+                acc += s->R[j + i * UNICYCLE_DIM(UNICYCLE_NR)] * dx[UNICYCLE_N * UNICYCLE_NX + i];
             }
-            g->lin_r[j] = acc;
+            lin[j] = acc;
         }
         total +=
-            unicycle_glob_soft_price(UNICYCLE_NR, g->lin_r, unicycle_lr, unicycle_ur, UNICYCLE_GLOB_SOFT_R,
-                                  UNICYCLE_DIM(UNICYCLE_NR)) -
+            unicycle_glob_soft_price(UNICYCLE_NR, lin, unicycle_lr, unicycle_ur, UNICYCLE_GLOB_SOFT_R, UNICYCLE_DIM(UNICYCLE_NR)) -
             unicycle_glob_soft_price(UNICYCLE_NR, s->r, unicycle_lr, unicycle_ur, UNICYCLE_GLOB_SOFT_R, UNICYCLE_DIM(UNICYCLE_NR));
     }
 #else
@@ -221,181 +235,209 @@ static unicycle_real unicycle_glob_soft_change(unicycle_solver *s, unicycle_glob
     return total;
 }
 
-/* The largest multiplier of the iterate (the QP's after the full step). */
-static unicycle_real unicycle_glob_max_multiplier(const unicycle_solver *s)
+/* The solver's primal point into z. */
+static void unicycle_glob_get_z(const unicycle_solver *s, unicycle_real *z)
 {
-    unicycle_real m = UNICYCLE_R(0.0);
-    int k, i;
-    for (k = 0; k <= UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            m = unicycle_fmax(m, unicycle_fabs(s->lam[k][i]));
-        }
-    }
+    unicycle_glob_copy(z, &s->x[0][0], (UNICYCLE_N + 1) * UNICYCLE_NX);
+    unicycle_glob_copy(z + (UNICYCLE_N + 1) * UNICYCLE_NX, &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
+}
+
+/* The solver's multipliers into y (the layout of unicycle_init). */
+static void unicycle_glob_get_y(const unicycle_solver *s, unicycle_real *y)
+{
+    int k, i, o = 0;
+    unicycle_glob_copy(y, &s->lam[0][0], (UNICYCLE_N + 1) * UNICYCLE_NX);
+    o += (UNICYCLE_N + 1) * UNICYCLE_NX;
     for (k = 0; k < UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NG; ++i) {
-            m = unicycle_fmax(m, unicycle_fabs(s->mu_g[k][i]));
-        }
-        for (i = 0; i < UNICYCLE_NW; ++i) {
-            m = unicycle_fmax(m, unicycle_fabs(s->mu_b[k][i]));
+            y[o++] = s->mu_g[k][i];
         }
     }
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        m = unicycle_fmax(m, unicycle_fabs(s->mu_bN[i]));
-    }
-    for (i = 0; i < UNICYCLE_NR; ++i) {
-        m = unicycle_fmax(m, unicycle_fabs(s->mu_r[i]));
-    }
-    for (i = 0; i < UNICYCLE_NE; ++i) {
-        m = unicycle_fmax(m, unicycle_fabs(s->nu[i]));
-    }
-    return m;
+    unicycle_glob_copy(y + o, &s->mu_b[0][0], UNICYCLE_N * UNICYCLE_NW);
+    o += UNICYCLE_N * UNICYCLE_NW;
+    unicycle_glob_copy(y + o, s->mu_bN, UNICYCLE_NX);
+    o += UNICYCLE_NX;
+    unicycle_glob_copy(y + o, s->mu_r, UNICYCLE_NR);
+    o += UNICYCLE_NR;
+    unicycle_glob_copy(y + o, s->nu, UNICYCLE_NE);
 }
 
-/* y <- y + alpha (y_QP - y) of one array: y in g, y_QP in the solver. */
-static void unicycle_glob_blend(int n, unicycle_real *y, const unicycle_real *yq, unicycle_real alpha)
+/* init at the primal point z with the multipliers y. */
+static int unicycle_glob_init_at(unicycle_solver *s, const unicycle_real *xhat0, const unicycle_real *z,
+                              const unicycle_real *y)
 {
-    int i;
-    for (i = 0; i < n; ++i) {
-        y[i] = alpha == UNICYCLE_R(1.0) ? yq[i] : y[i] + alpha * (yq[i] - y[i]);
-    }
+    const unicycle_real *mu_g = y + (UNICYCLE_N + 1) * UNICYCLE_NX;
+    const unicycle_real *mu_b = mu_g + UNICYCLE_N * UNICYCLE_NG;
+    const unicycle_real *mu_bN = mu_b + UNICYCLE_N * UNICYCLE_NW;
+    const unicycle_real *mu_r = mu_bN + UNICYCLE_NX;
+    const unicycle_real *nu = mu_r + UNICYCLE_NR;
+    return unicycle_init(s, xhat0, z, z + (UNICYCLE_N + 1) * UNICYCLE_NX, y, UNICYCLE_NG > 0 ? mu_g : 0, mu_b, mu_bN,
+                      UNICYCLE_NR > 0 ? mu_r : 0, UNICYCLE_NE > 0 ? nu : 0);
 }
 
-/* init at the point of g (x, u: xt, ut when trial, else the saved iterate) and its multipliers. */
-static int unicycle_glob_init_at(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0, int trial)
+/* The sufficient decrease test of a trial's merit phi (ok: finite) against phi0 and slope D. */
+static int unicycle_glob_armijo(int ok, unicycle_real phi, unicycle_real phi0, unicycle_real alpha, unicycle_real D)
 {
-    return unicycle_init(s, xhat0, trial ? &g->xt[0][0] : &g->x[0][0], trial ? &g->ut[0][0] : &g->u[0][0],
-                      &g->lam[0][0], UNICYCLE_NG > 0 ? &g->mu_g[0][0] : 0, &g->mu_b[0][0], g->mu_bN,
-                      UNICYCLE_NR > 0 ? g->mu_r : 0, UNICYCLE_NE > 0 ? g->nu : 0);
+    unicycle_real floor_ = UNICYCLE_GLOB_MERIT_FLOOR * UNICYCLE_REAL_EPSILON * (UNICYCLE_R(1.0) + unicycle_fabs(phi0));
+    return ok && phi <= phi0 + UNICYCLE_GLOB_ARMIJO * alpha * unicycle_fmin(D, UNICYCLE_R(0.0)) + floor_;
 }
 
-/* The KKT measure of the solver's iterate (unicycle_kkt_eval, counted as N + 1 work units). */
-static int unicycle_glob_kkt(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *kkt)
+/* Take the point zt with the multipliers y (init there); alpha, merit phi, relaxed. */
+static int unicycle_glob_accept(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0, unicycle_real alpha,
+                             unicycle_real phi, int relaxed)
 {
-    unicycle_real kkt4[4];
-    int i, rc;
-    s->anytime.work += (double)(UNICYCLE_N + 1);
-    rc = unicycle_kkt_eval(s, xhat0, kkt4);
-    *kkt = kkt4[0];
-    for (i = 1; i < 4; ++i) {
-        *kkt = unicycle_fmax(*kkt, kkt4[i]);
-    }
-    return rc;
-}
-
-static int unicycle_glob_step_fixed(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0)
-{
-    unicycle_real f0, c0, f, c, nu, ymax, a_dot_p, slope, phi0, phi = UNICYCLE_R(0.0), floor_, alpha;
-    unicycle_real u0[UNICYCLE_NU], kkt;
-    int k, i, rc, trial, accepted = 0;
-
-    unicycle_glob_copy(&g->x[0][0], &s->x[0][0], (UNICYCLE_N + 1) * UNICYCLE_NX);
-    unicycle_glob_copy(&g->u[0][0], &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
-    unicycle_glob_copy(&g->lam[0][0], &s->lam[0][0], (UNICYCLE_N + 1) * UNICYCLE_NX);
-    unicycle_glob_copy(&g->mu_g[0][0], &s->mu_g[0][0], UNICYCLE_N * UNICYCLE_DIM(UNICYCLE_NG));
-    unicycle_glob_copy(&g->mu_b[0][0], &s->mu_b[0][0], UNICYCLE_N * UNICYCLE_NW);
-    unicycle_glob_copy(g->mu_bN, s->mu_bN, UNICYCLE_NX);
-    unicycle_glob_copy(g->mu_r, s->mu_r, UNICYCLE_DIM(UNICYCLE_NR));
-    unicycle_glob_copy(g->nu, s->nu, UNICYCLE_DIM(UNICYCLE_NE));
-    g->by_kkt = 0;
-    rc = unicycle_glob_kkt(s, xhat0, &kkt);
-    if (rc == UNICYCLE_OK) {
-        /* 0: no KKT measure yet (a zero-filled unicycle_glob) */
-        g->kkt_best = g->kkt_best > UNICYCLE_R(0.0) ? unicycle_fmin(g->kkt_best, kkt) : kkt;
-        rc = unicycle_glob_merit_parts(s, xhat0, (const unicycle_real(*)[UNICYCLE_NX])g->x,
-                                    (const unicycle_real(*)[UNICYCLE_NU])g->u, &f0, &c0);
-    }
-    if (rc != UNICYCLE_OK) {
-        g->reason = UNICYCLE_GLOB_FUNCTION;
-        return rc;
-    }
-    rc = unicycle_feedback(s, xhat0, u0);
-    if (rc != UNICYCLE_OK) {
-        g->reason = rc == UNICYCLE_ERR_DIVERGED ? UNICYCLE_GLOB_STEP_BOX
-                    : rc == UNICYCLE_ERR_QP     ? UNICYCLE_GLOB_QP
-                                             : UNICYCLE_GLOB_FUNCTION;
-        return rc;
-    }
-    /* the cost's slope along the step: the QP's gradient a (every block fresh) */
-    a_dot_p = UNICYCLE_R(0.0);
-    for (k = 0; k < UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            a_dot_p += s->qp_in.g[k][i] * (s->x[k][i] - g->x[k][i]);
-        }
-        for (i = 0; i < UNICYCLE_NU; ++i) {
-            a_dot_p += s->qp_in.g[k][UNICYCLE_NX + i] * (s->u[k][i] - g->u[k][i]);
-        }
-    }
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        a_dot_p += s->qp_in.gN[i] * (s->x[UNICYCLE_N][i] - g->x[UNICYCLE_N][i]);
-    }
-    ymax = unicycle_glob_max_multiplier(s);
-    if (g->penalty < UNICYCLE_GLOB_PENALTY_MARGIN * ymax) {
-        g->penalty = UNICYCLE_GLOB_PENALTY_RAISE * ymax;
-    }
-    nu = g->penalty;
-    g->a_dot_p = a_dot_p;
-    slope = a_dot_p - nu * c0 + unicycle_glob_soft_change(s, g);
-    phi0 = f0 + nu * c0;
-    floor_ = UNICYCLE_GLOB_MERIT_FLOOR * UNICYCLE_REAL_EPSILON * (UNICYCLE_R(1.0) + unicycle_fabs(phi0));
-    alpha = UNICYCLE_R(1.0);
-    g->trials = 0;
-    for (trial = 0; trial < UNICYCLE_GLOB_MAX_TRIALS; ++trial) {
-        g->trials = trial + 1;
-        for (k = 0; k <= UNICYCLE_N; ++k) {
-            for (i = 0; i < UNICYCLE_NX; ++i) {
-                g->xt[k][i] =
-                    alpha == UNICYCLE_R(1.0) ? s->x[k][i] : g->x[k][i] + alpha * (s->x[k][i] - g->x[k][i]);
-            }
-        }
-        for (k = 0; k < UNICYCLE_N; ++k) {
-            for (i = 0; i < UNICYCLE_NU; ++i) {
-                g->ut[k][i] =
-                    alpha == UNICYCLE_R(1.0) ? s->u[k][i] : g->u[k][i] + alpha * (s->u[k][i] - g->u[k][i]);
-            }
-        }
-        rc = unicycle_glob_merit_parts(s, xhat0, (const unicycle_real(*)[UNICYCLE_NX])g->xt,
-                                    (const unicycle_real(*)[UNICYCLE_NU])g->ut, &f, &c);
-        if (rc == UNICYCLE_OK) {
-            phi = f + nu * c;
-            if (phi <= phi0 + UNICYCLE_GLOB_ARMIJO * alpha * unicycle_fmin(slope, UNICYCLE_R(0.0)) + floor_) {
-                accepted = 1;
-                break;
-            }
-        }
-        /* the full step also when it lowers the KKT measure enough (the solver's iterate is
-         * the full step with the QP's multipliers): the merit function may refuse the steps
-         * of a fast local convergence along a curved constraint (the Maratos effect) */
-        if (trial == 0 && unicycle_glob_kkt(s, xhat0, &kkt) == UNICYCLE_OK &&
-            kkt <= UNICYCLE_GLOB_KKT_FACTOR * g->kkt_best) {
-            g->kkt_best = kkt;
-            g->by_kkt = 1;
-            accepted = 1;
-            break;
-        }
-        alpha *= UNICYCLE_GLOB_BACKTRACK;
-    }
-    g->slope = slope;
-    if (!accepted) {
-        /* the iterate as it was, its QP prepared again */
-        rc = unicycle_glob_init_at(s, g, xhat0, 0);
-        g->reason = UNICYCLE_GLOB_LINE_SEARCH;
-        return rc != UNICYCLE_OK ? rc : UNICYCLE_ERR_DIVERGED;
-    }
-    unicycle_glob_blend((UNICYCLE_N + 1) * UNICYCLE_NX, &g->lam[0][0], &s->lam[0][0], alpha);
-    unicycle_glob_blend(UNICYCLE_N * UNICYCLE_DIM(UNICYCLE_NG), &g->mu_g[0][0], &s->mu_g[0][0], alpha);
-    unicycle_glob_blend(UNICYCLE_N * UNICYCLE_NW, &g->mu_b[0][0], &s->mu_b[0][0], alpha);
-    unicycle_glob_blend(UNICYCLE_NX, g->mu_bN, s->mu_bN, alpha);
-    unicycle_glob_blend(UNICYCLE_DIM(UNICYCLE_NR), g->mu_r, s->mu_r, alpha);
-    unicycle_glob_blend(UNICYCLE_DIM(UNICYCLE_NE), g->nu, s->nu, alpha);
-    rc = unicycle_glob_init_at(s, g, xhat0, 1);
+    int rc = unicycle_glob_init_at(s, xhat0, g->zt, g->y);
     if (rc != UNICYCLE_OK) {
         g->reason = UNICYCLE_GLOB_FUNCTION;
         return rc;
     }
     g->alpha = alpha;
     g->merit = phi;
+    g->relaxed = relaxed;
     g->iterations += 1;
     return UNICYCLE_OK;
+}
+
+/* Backtracking from alpha along dz from z (multipliers y0 -> yq), against phi0 and slope D;
+ * the accepted point initialised, else z (its QP prepared again) and a failure. g->y is the
+ * blend, g->zt the trial. */
+static int unicycle_glob_line_search(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0,
+                                  const unicycle_real *z, const unicycle_real *dz, const unicycle_real *y0,
+                                  const unicycle_real *yq, unicycle_real phi0, unicycle_real D, unicycle_real alpha)
+{
+    unicycle_real phi;
+    int i, ok, rc;
+    while (g->trials < UNICYCLE_GLOB_MAX_TRIALS) {
+        g->trials += 1;
+        for (i = 0; i < UNICYCLE_GLOB_NZ; ++i) {
+            g->zt[i] = z[i] + alpha * dz[i];
+        }
+        phi = unicycle_glob_merit(s, xhat0, g->zt, g->penalty, &ok);
+        if (unicycle_glob_armijo(ok, phi, phi0, alpha, D)) {
+            for (i = 0; i < UNICYCLE_GLOB_NY; ++i) {
+                g->y[i] = y0[i] + alpha * (yq[i] - y0[i]);
+            }
+            return unicycle_glob_accept(s, g, xhat0, alpha, phi, 0);
+        }
+        alpha *= UNICYCLE_GLOB_BACKTRACK;
+    }
+    /* the start point, its QP prepared again (g->y may alias y0: copied first) */
+    unicycle_glob_copy(g->zt, z, UNICYCLE_GLOB_NZ);
+    if (y0 != g->y) {
+        unicycle_glob_copy(g->y, y0, UNICYCLE_GLOB_NY);
+    }
+    rc = unicycle_glob_init_at(s, xhat0, g->zt, g->y);
+    g->reason = UNICYCLE_GLOB_LINE_SEARCH;
+    return rc != UNICYCLE_OK ? rc : UNICYCLE_ERR_DIVERGED;
+}
+
+/* The relaxed steps did not decrease the merit enough: the line search from the watchdog's
+ * point along its step, from alpha = 1/2 (its full step was refused). */
+static int unicycle_glob_restore(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0)
+{
+    unicycle_real nu = g->penalty;
+    unicycle_real phi_s = g->wf + nu * g->wc, D_s = g->wadp - nu * g->wc;
+    g->watch = 0;
+    g->no_relax = 1;
+    g->trials = 0;
+    g->restores += 1;
+    g->slope = D_s;
+    return unicycle_glob_line_search(s, g, xhat0, g->wz, g->wdz, g->wy, g->wyq, phi_s, D_s,
+                                  UNICYCLE_GLOB_BACKTRACK);
+}
+
+static int unicycle_glob_step_fixed(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0)
+{
+    unicycle_real f0 = UNICYCLE_R(0.0), c0 = UNICYCLE_R(0.0), nu, ymax = UNICYCLE_R(0.0), adp, D, phi0, phi1;
+    unicycle_real u0[UNICYCLE_NU];
+    int k, i, rc, ok;
+
+    unicycle_glob_get_z(s, g->z);
+    unicycle_glob_get_y(s, g->y);
+    rc = unicycle_glob_merit_parts(s, xhat0, g->z, &f0, &c0);
+    if (rc != UNICYCLE_OK) {
+        g->reason = UNICYCLE_GLOB_FUNCTION;
+        return rc;
+    }
+    rc = unicycle_feedback(s, xhat0, u0);
+    if (rc != UNICYCLE_OK) {
+        if (g->watch > 0) {
+            /* a relaxed step led here: back to the watchdog's point, a line search there */
+            return unicycle_glob_restore(s, g, xhat0);
+        }
+        g->reason = rc == UNICYCLE_ERR_DIVERGED ? UNICYCLE_GLOB_STEP_BOX
+                    : rc == UNICYCLE_ERR_QP     ? UNICYCLE_GLOB_QP
+                                             : UNICYCLE_GLOB_FUNCTION;
+        return rc;
+    }
+    unicycle_glob_get_z(s, g->zt); /* the full step */
+    for (i = 0; i < UNICYCLE_GLOB_NZ; ++i) {
+        g->dz[i] = g->zt[i] - g->z[i];
+    }
+    unicycle_glob_get_y(s, g->yq);
+    for (i = 0; i < UNICYCLE_GLOB_NY; ++i) {
+        ymax = unicycle_fmax(ymax, unicycle_fabs(g->yq[i]));
+    }
+    if (g->penalty < UNICYCLE_GLOB_PENALTY_MARGIN * ymax) {
+        g->penalty = UNICYCLE_GLOB_PENALTY_RAISE * ymax;
+    }
+    nu = g->penalty;
+    /* the cost's slope along the step (the QP's gradient: every block fresh) and the change
+     * of the soft prices, with the blocks of the QP just solved */
+    adp = UNICYCLE_R(0.0);
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            adp += s->qp_in.g[k][i] * g->dz[k * UNICYCLE_NX + i];
+        }
+        for (i = 0; i < UNICYCLE_NU; ++i) {
+            adp += s->qp_in.g[k][UNICYCLE_NX + i] * g->dz[(UNICYCLE_N + 1) * UNICYCLE_NX + k * UNICYCLE_NU + i];
+        }
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        adp += s->qp_in.gN[i] * g->dz[UNICYCLE_N * UNICYCLE_NX + i];
+    }
+    adp += unicycle_glob_soft_change(s, g);
+    D = adp - nu * c0;
+    phi0 = f0 + nu * c0;
+    g->slope = D;
+    g->trials = 1;
+    unicycle_glob_get_z(s, g->zt); /* (the soft change used zt as scratch) */
+    phi1 = unicycle_glob_merit(s, xhat0, g->zt, nu, &ok);
+    if (g->watch == 0) {
+        if (unicycle_glob_armijo(ok, phi1, phi0, UNICYCLE_R(1.0), D)) {
+            unicycle_glob_copy(g->y, g->yq, UNICYCLE_GLOB_NY);
+            return unicycle_glob_accept(s, g, xhat0, UNICYCLE_R(1.0), phi1, 0);
+        }
+        if (ok && !g->no_relax) {
+            /* the watchdog: the full step all the same, the point before it kept */
+            unicycle_glob_copy(g->wz, g->z, UNICYCLE_GLOB_NZ);
+            unicycle_glob_copy(g->wdz, g->dz, UNICYCLE_GLOB_NZ);
+            unicycle_glob_copy(g->wy, g->y, UNICYCLE_GLOB_NY);
+            unicycle_glob_copy(g->wyq, g->yq, UNICYCLE_GLOB_NY);
+            g->wf = f0;
+            g->wc = c0;
+            g->wadp = adp;
+            g->watch = 1;
+            unicycle_glob_copy(g->y, g->yq, UNICYCLE_GLOB_NY);
+            return unicycle_glob_accept(s, g, xhat0, UNICYCLE_R(1.0), phi1, 1);
+        }
+        rc = unicycle_glob_line_search(s, g, xhat0, g->z, g->dz, g->y, g->yq, phi0, D, UNICYCLE_GLOB_BACKTRACK);
+        if (rc == UNICYCLE_OK) {
+            g->no_relax = 0;
+        }
+        return rc;
+    }
+    if (unicycle_glob_armijo(ok, phi1, g->wf + nu * g->wc, UNICYCLE_R(1.0), g->wadp - nu * g->wc)) {
+        g->watch = 0;
+        unicycle_glob_copy(g->y, g->yq, UNICYCLE_GLOB_NY);
+        return unicycle_glob_accept(s, g, xhat0, UNICYCLE_R(1.0), phi1, 0);
+    }
+    if (ok && g->watch < UNICYCLE_GLOB_WATCHDOG) {
+        g->watch += 1;
+        unicycle_glob_copy(g->y, g->yq, UNICYCLE_GLOB_NY);
+        return unicycle_glob_accept(s, g, xhat0, UNICYCLE_R(1.0), phi1, 1);
+    }
+    return unicycle_glob_restore(s, g, xhat0);
 }
 
 int unicycle_glob_step(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0)

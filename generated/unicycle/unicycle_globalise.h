@@ -20,7 +20,7 @@
 #define UNICYCLE_GLOB_PENALTY_MARGIN UNICYCLE_R(1.1) /* the penalty is raised when below 1.1 |y|_inf ... */
 #define UNICYCLE_GLOB_PENALTY_RAISE UNICYCLE_R(2.0)  /* ... to 2 |y|_inf */
 #define UNICYCLE_GLOB_MERIT_FLOOR UNICYCLE_R(10.0)   /* round-off allowance: 10 eps (1 + |phi(0)|) */
-#define UNICYCLE_GLOB_KKT_FACTOR UNICYCLE_R(0.5)     /* the full step also when its KKT <= 0.5 kkt_best */
+#define UNICYCLE_GLOB_WATCHDOG 10                 /* relaxed full steps of a watchdog at most */
 
 /* Why the last globalised step failed (unicycle_glob_info.reason). */
 enum unicycle_glob_reason {
@@ -34,31 +34,38 @@ enum unicycle_glob_reason {
     UNICYCLE_GLOB_ITER_LIMIT = 7    /* unicycle_init_globalised: the iteration limit ended the iterations */
 };
 
-/* The caller's memory of a globalised solve. */
+/* The primal point as one array (x_0..x_N, then u_0..u_{N-1}) and the multipliers as one
+ * (lam, mu_g, mu_b, mu_bN, mu_r, nu, each node by node), in the layout of unicycle_init. */
+#define UNICYCLE_GLOB_NZ ((UNICYCLE_N + 1) * UNICYCLE_NX + UNICYCLE_N * UNICYCLE_NU)
+#define UNICYCLE_GLOB_NY                                                                                        \
+    ((UNICYCLE_N + 1) * UNICYCLE_NX + UNICYCLE_N * (UNICYCLE_NG + UNICYCLE_NW) + UNICYCLE_NX + UNICYCLE_NR + UNICYCLE_NE)
+
+/* The caller's memory of a globalised solve; zero-filled at its start. */
 struct unicycle_glob {
-    unicycle_real penalty;  /* the l1 penalty weight nu of the merit function */
-    unicycle_real alpha;    /* the step length of the last step */
-    unicycle_real merit;    /* the merit at the iterate after the last step */
-    unicycle_real slope;    /* the directional derivative D of the last step */
-    unicycle_real kkt;      /* unicycle_init_globalised: the KKT measure at the end */
-    unicycle_real kkt_best; /* the lowest KKT measure of an iterate of this solve (0: none yet) */
-    int iterations;      /* steps taken in this solve */
-    int trials;          /* merit evaluations of the last line search */
-    int reason;          /* enum unicycle_glob_reason of the last call */
-    int by_kkt;          /* the last step was taken by the KKT test (the merit test refused it) */
-    unicycle_real x[UNICYCLE_N + 1][UNICYCLE_NX]; /* the iterate before the step, the trial point */
-    unicycle_real u[UNICYCLE_N][UNICYCLE_NU];
-    unicycle_real xt[UNICYCLE_N + 1][UNICYCLE_NX];
-    unicycle_real ut[UNICYCLE_N][UNICYCLE_NU];
-    unicycle_real lam[UNICYCLE_N + 1][UNICYCLE_NX]; /* multipliers before the step, then interpolated */
-    unicycle_real mu_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)];
-    unicycle_real mu_b[UNICYCLE_N][UNICYCLE_NW];
-    unicycle_real mu_bN[UNICYCLE_NX];
-    unicycle_real mu_r[UNICYCLE_DIM(UNICYCLE_NR)];
-    unicycle_real nu[UNICYCLE_DIM(UNICYCLE_NE)];
-    unicycle_real lin_g[UNICYCLE_N][UNICYCLE_DIM(UNICYCLE_NG)]; /* g_k + Ct_k dw_k: soft path rows at the full step */
-    unicycle_real lin_r[UNICYCLE_DIM(UNICYCLE_NR)];          /* r + R dx_N */
-    unicycle_real a_dot_p; /* sum_k a_k' dw_k + a_N' dx_N: the cost's slope along the step */
+    unicycle_real penalty;           /* the l1 penalty weight nu of the merit function */
+    unicycle_real alpha;             /* the step length of the last step */
+    unicycle_real merit;             /* the merit at the iterate after the last step */
+    unicycle_real slope;             /* the directional derivative D of the last line search */
+    unicycle_real kkt;               /* unicycle_init_globalised: the KKT measure at the end */
+    int iterations;               /* steps taken in this solve */
+    int trials;                   /* merit evaluations of the last line search */
+    int reason;                   /* enum unicycle_glob_reason of the last call */
+    int relaxed;                  /* the last step was a relaxed full step of the watchdog */
+    int restores;                 /* returns to a watchdog's point in this solve */
+    int no_relax;                 /* the next refused full step is not relaxed (after a return) */
+    int watch;                    /* relaxed steps of the running watchdog (0: none) */
+    unicycle_real z[UNICYCLE_GLOB_NZ];  /* the iterate before the step */
+    unicycle_real zt[UNICYCLE_GLOB_NZ]; /* a trial point */
+    unicycle_real dz[UNICYCLE_GLOB_NZ]; /* the QP's step */
+    unicycle_real y[UNICYCLE_GLOB_NY];  /* the multipliers before the step, then the accepted ones */
+    unicycle_real yq[UNICYCLE_GLOB_NY]; /* the QP's multipliers */
+    /* the watchdog's point: iterate, step, multipliers, merit parts and slope of the cost */
+    unicycle_real wz[UNICYCLE_GLOB_NZ];
+    unicycle_real wdz[UNICYCLE_GLOB_NZ];
+    unicycle_real wy[UNICYCLE_GLOB_NY];
+    unicycle_real wyq[UNICYCLE_GLOB_NY];
+    unicycle_real wf, wc, wadp;
+    unicycle_real lin[UNICYCLE_N * UNICYCLE_NG + UNICYCLE_NR + 1]; /* scratch: linearised soft rows */
 };
 
 #endif /* UNICYCLE_GLOBALISE_H */
