@@ -310,7 +310,8 @@ def _guess(x, u, y):
 
 def init_globalised(be, st: GlobState, xhat0, guess=None, max_work: float = 0.0, max_iter: int = 100,
                     tol: Optional[float] = None) -> bool:
-    """``init`` at the guess, then globalised steps until the KKT measure is at most ``tol``
+    """``init`` at the guess (its ``x`` and ``u``; the multipliers zero), then globalised steps
+    until the KKT measure is at most ``tol``
     (True), or the iteration or work limit (``max_work`` > 0: work units from the init on)
     ends them (False, ``st.reason``). A failed step raises DopusError (the iterate prepared)."""
     from .. import settings as settings_mod
@@ -320,7 +321,8 @@ def init_globalised(be, st: GlobState, xhat0, guess=None, max_work: float = 0.0,
     if not (tol > 0) or not (max_work >= 0) or int(max_iter) < 0:
         raise DopusError.of("invalid_argument", f"init_globalised: tol must be > 0, max_work >= 0 and max_iter >= 0, "
                             f"got {tol!r}, {max_work!r}, {max_iter!r}")
-    be.init(xhat0, guess)
+    # the primal guess only (the C entry takes x and u): zero multipliers
+    be.init(xhat0, None if guess is None else _guess(guess.x, guess.u, {}))
     w_start = be.work
     cost = 0.0
     for it in range(max_iter + 1):
