@@ -228,3 +228,19 @@ def test_soft_rows_priced_in_the_merit(make, c_solver):
                                      factory, 1e-11)
         assert rec["status"] == "converged", rec["message"]
         assert np.abs(x - x_ref).max() <= 1e-6 and np.abs(u - u_ref).max() <= 1e-6
+
+
+@pytest.mark.parametrize("xhat, status", [(np.zeros(3), "invalid_argument"), ("abc", "invalid_argument"),
+                                           ([0.0, np.nan, 0.0, 0.0], "nonfinite_input")])
+def test_bad_state_is_refused(disc, c_solver, xhat, status):
+    """A measured state of the wrong size, not numbers or not finite: a one-line error naming
+    it, in both backends, and the iterate unchanged."""
+    x0 = np.array(disc.x0, float)
+    for be in (ReferenceDopus(disc, M=disc.N - 1, mode="fixed"), c_solver(disc, M=disc.N - 1, mode="fixed")):
+        be.init(x0)
+        before = be.x.copy()
+        for call in (be.globalised_step, be.init_globalised):
+            with pytest.raises(DopusError) as err:
+                call(xhat)
+            assert err.value.status_name == status and "\n" not in str(err.value) and "xhat0" in str(err.value)
+            assert np.array_equal(be.x, before)

@@ -181,7 +181,7 @@ def globalised_step(be, st: GlobState, xhat0) -> None:
     """One globalised step of the backend ``be`` (a ReferenceDopus) from its prepared iterate;
     raises DopusError on failure with ``st.reason`` set, the iterate unchanged."""
     C = constants()
-    xhat0 = np.asarray(xhat0, float).reshape(be.nx)
+    xhat0 = _xhat(be, xhat0, "globalised_step: xhat0")
     st.reason, st.trials = "ok", 0
     if not be._initialised or not be._qp_ready:
         st.reason = "not_prepared"
@@ -192,6 +192,20 @@ def globalised_step(be, st: GlobState, xhat0) -> None:
         _step(be, st, xhat0, C)
     finally:
         be.set_mode(mode)
+
+
+def _xhat(be, xhat0, what):
+    """``xhat0`` as ``nx`` finite numbers, else a DopusError naming the problem."""
+    try:
+        a = np.array(xhat0, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise DopusError.of("invalid_argument", f"{what}: not an array of numbers ({exc})") from None
+    if a.size != be.nx:
+        raise DopusError.of("invalid_argument", f"{what}: expected shape ({be.nx},), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise DopusError.of("nonfinite_input", f"{what}: NaN or Inf at index "
+                            f"{', '.join(str(int(i)) for i in np.flatnonzero(~np.isfinite(a.reshape(-1)))[:5])}")
+    return a.reshape(be.nx)
 
 
 def _merit(be, xhat0, x, u, nu):
@@ -318,6 +332,7 @@ def init_globalised(be, st: GlobState, xhat0, guess=None, max_work: float = 0.0,
 
     tol = settings_mod.KKT_TOL_DEFAULT["double"] if tol is None else tol
     st.__init__()
+    xhat0 = _xhat(be, xhat0, "init_globalised: xhat0")
     if not (tol > 0) or not (max_work >= 0) or int(max_iter) < 0:
         raise DopusError.of("invalid_argument", f"init_globalised: tol must be > 0, max_work >= 0 and max_iter >= 0, "
                             f"got {tol!r}, {max_work!r}, {max_iter!r}")
