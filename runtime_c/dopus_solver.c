@@ -191,6 +191,8 @@ const char *dopus_status_string(int status)
         return "already prepared (call feedback before the next prepare)";
     case DOPUS_ERR_MEASUREMENT_GATED:
         return "the measurement is too far from the plan's prediction (gate): handled as a missing one";
+    case DOPUS_ERR_NOT_CONVERGED:
+        return "the globalised solve did not reach its tolerance within its limits";
     default:
         return "unknown status";
     }
@@ -2286,4 +2288,5 @@ int dopus_simulate(const dopus_real *x, const dopus_real *u, const dopus_real *p
 #include "dopus_lm.c"
 #include "dopus_health.c"
 #include "dopus_kkt.c"
+#include "dopus_globalise.c"
 #include "dopus_qp.c" /* last: its short macros (N, NX, ...) stay inside it */

@@ -1434,6 +1434,29 @@ class ReferenceDopus:
         return kkt_measure(self.disc, xhat0, self.x, self.u, self.lam, self.mu_g, self.mu_b,
                            self.mu_bN, self.mu_r, self.nu, self.p)
 
+    # ------------------------------------------------------------------ globalised first solve
+    def globalised_start(self) -> None:
+        """Forget the penalty and the counts of a previous globalised solve (section 15)."""
+        from .globalise import GlobState
+
+        self.glob = GlobState()
+
+    def globalised_step(self, xhat0) -> None:
+        """One step of the globalised first solve from the prepared iterate (section 15)."""
+        from .globalise import globalised_step
+
+        if getattr(self, "glob", None) is None:
+            self.globalised_start()
+        globalised_step(self, self.glob, xhat0)
+
+    def init_globalised(self, xhat0, guess=None, max_work: float = 0.0, max_iter: int = 100, tol=None) -> bool:
+        """``init`` at the guess, then globalised steps until the KKT measure is at most
+        ``tol`` (True) or a limit ends them (False; ``glob.reason``) (section 15)."""
+        from .globalise import init_globalised
+
+        self.globalised_start()
+        return init_globalised(self, self.glob, xhat0, guess, max_work, max_iter, tol)
+
     def guess(self):
         """The current iterate as a ``Guess``."""
         from ..problem.ocp import Guess

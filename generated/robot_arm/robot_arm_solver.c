@@ -191,6 +191,8 @@ const char *robot_arm_status_string(int status)
         return "already prepared (call feedback before the next prepare)";
     case ROBOT_ARM_ERR_MEASUREMENT_GATED:
         return "the measurement is too far from the plan's prediction (gate): handled as a missing one";
+    case ROBOT_ARM_ERR_NOT_CONVERGED:
+        return "the globalised solve did not reach its tolerance within its limits";
     default:
         return "unknown status";
     }
@@ -2286,4 +2288,5 @@ int robot_arm_simulate(const robot_arm_real *x, const robot_arm_real *u, const r
 #include "robot_arm_lm.c"
 #include "robot_arm_health.c"
 #include "robot_arm_kkt.c"
+#include "robot_arm_globalise.c"
 #include "robot_arm_qp.c" /* last: its short macros (N, NX, ...) stay inside it */

@@ -191,6 +191,8 @@ const char *unicycle_status_string(int status)
         return "already prepared (call feedback before the next prepare)";
     case UNICYCLE_ERR_MEASUREMENT_GATED:
         return "the measurement is too far from the plan's prediction (gate): handled as a missing one";
+    case UNICYCLE_ERR_NOT_CONVERGED:
+        return "the globalised solve did not reach its tolerance within its limits";
     default:
         return "unknown status";
     }
@@ -2286,4 +2288,5 @@ int unicycle_simulate(const unicycle_real *x, const unicycle_real *u, const unic
 #include "unicycle_lm.c"
 #include "unicycle_health.c"
 #include "unicycle_kkt.c"
+#include "unicycle_globalise.c"
 #include "unicycle_qp.c" /* last: its short macros (N, NX, ...) stay inside it */
