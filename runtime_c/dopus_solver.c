@@ -1711,6 +1711,8 @@ int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
             kkt4[i] = parts[i];
         }
     }
+    s->kkt_rel = dopus_kkt_relative(parts, &s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0],
+                                    &s->mu_b[0][0], s->mu_bN, s->mu_r, s->nu);
     return dopus_ret(s, DOPUS_OK);
 }
 
@@ -1951,6 +1953,7 @@ void dopus_get_info(const dopus_solver *s, dopus_info *info)
         info->kkt[i] = s->kkt[i];
         info->kkt_max = s->kkt[i] > info->kkt_max ? s->kkt[i] : info->kkt_max;
     }
+    info->kkt_rel = s->kkt_rel;
     for (i = 0; i < DOPUS_N_PHASES; ++i) { /* times are double in both precisions */
         info->timings[i] = s->timer.t[i];
     }
@@ -2035,6 +2038,7 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     for (i = 0; i < 4; ++i) {
         s->kkt[i] = NAN;
     }
+    s->kkt_rel = NAN;
     dopus_timer_init(&s->timer);
     s->anytime.work = 0.0;
     s->anytime.instant_start = 0.0;

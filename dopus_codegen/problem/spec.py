@@ -260,17 +260,20 @@ class OptionsSpec:
     """The OCP file's ``options(...)``: the settings of its solver (one
     :class:`~dopus_codegen.settings.Settings`: the generated solver's defaults, and those of
     every command and handle built from the file), the generation options ``real`` and
-    ``offline_guess``, and the names the file gave (the rest are defaults)."""
+    ``offline_guess``, the relative KKT tolerance ``kkt_tol_rel`` of the studies, and the
+    names the file gave (the rest are defaults)."""
     settings: Settings
     real: str = "double"        # real-number type of the generated C: "double" or "float"
     offline_guess: bool = False
     declared: frozenset = frozenset()
+    kkt_tol_rel: Optional[float] = None   # the relative KKT tolerance of converge and sil (None: absolute)
 
     @classmethod
     def of(cls, values: Dict[str, Any], declared=()) -> "OptionsSpec":
         """The options of ``values`` (checked, any of :data:`~dopus_codegen.settings.FILE_SETTINGS`)."""
         return cls(settings=Settings.of(values), real=values.get("real", DEFAULTS["real"]),
-                   offline_guess=values.get("offline_guess", DEFAULTS["offline_guess"]), declared=frozenset(declared))
+                   offline_guess=values.get("offline_guess", DEFAULTS["offline_guess"]), declared=frozenset(declared),
+                   kkt_tol_rel=values.get("kkt_tol_rel", DEFAULTS["kkt_tol_rel"]))
 
     def as_dict(self) -> Dict[str, Any]:
         """Every option of the file by name (declared or default)."""
