@@ -32,6 +32,7 @@ class OcpError(ValueError):
 __all__ = [
     "readonly", "Variable", "ParameterTrajectory", "ModelSpec", "LeastSquares", "CostSpec", "Rows", "ConstraintSpec",
     "HorizonSpec", "OptionsSpec", "GuessSpec", "ClosedLoopSpec", "CampaignSpec", "ScenarioPart", "OcpSpec",
+    "ScalingSpec",
 ]
 
 
@@ -58,10 +59,12 @@ def _stack_syms(variables) -> ca.SX:
 # --------------------------------------------------------------------------- model
 @dataclass(frozen=True)
 class Variable:
-    """One declared state, control or parameter vector (``sym`` is its SX symbol)."""
+    """One declared state, control or parameter vector (``sym`` is its SX symbol); ``scale``:
+    the declared scale per component (NaN: not declared), None when none is declared."""
     name: str
     size: int
     sym: ca.SX
+    scale: Optional[np.ndarray] = None
 
 
 class TrajectoryError(ValueError):
@@ -206,6 +209,9 @@ class Rows:
     soft: Optional[np.ndarray] = None
     name: Optional[str] = None    # the declared name (messages, tables, the C row names)
     stages: Optional[Tuple[int, ...]] = None   # path rows: the stages where they hold (None: all)
+    scale: Optional[np.ndarray] = None   # the declared scale per row (NaN: not declared), or None
+    #: rate rows: the control rows whose scales are the rows' scales when none is declared
+    scale_controls: Optional[Tuple[int, ...]] = None
 
     def labels(self, kind: str, index: int) -> Tuple[str, ...]:
         """One label per row: ``name`` / ``name[i]``, or ``<kind> <index>`` / ``<kind> <index> row i``."""
@@ -342,6 +348,19 @@ class ScenarioPart:
     closed_loop: Optional[ClosedLoopSpec]
 
 
+# --------------------------------------------------------------------------- scaling
+@dataclass(frozen=True)
+class ScalingSpec:
+    """The declared scaling (``Ocp.scaling`` and the ``scale=`` of the declarations): ``x
+    (nx,)``, ``u (nu,)`` the declared scales (NaN: not declared: 1, or derived), ``cost`` the
+    cost scale, ``derive`` None, ``"bounds"`` or ``"nominal"``: how the scales not declared are
+    derived (docs/algorithm.md section 15). The row scales are those of :class:`Rows`."""
+    x: np.ndarray
+    u: np.ndarray
+    cost: float = 1.0
+    derive: Optional[str] = None
+
+
 # --------------------------------------------------------------------------- the whole
 @dataclass(frozen=True)
 class OcpSpec:
@@ -356,3 +375,4 @@ class OcpSpec:
     x0: np.ndarray
     guess: GuessSpec
     scenario: ScenarioPart
+    scaling: Optional[ScalingSpec] = None   # None: the problem is solved in its own units

@@ -134,6 +134,15 @@ class ReferenceDopus:
     ``qp_infeasible_row`` (the row that makes the last QP infeasible, as ``Solver`` gives it).
     """
 
+    def __new__(cls, disc=None, *args, **kwargs):
+        # a scaled problem (docs/algorithm.md section 15): the iteration runs on disc.scaled and
+        # the API converts at its boundary
+        if cls is ReferenceDopus and getattr(disc, "scaled", None) is not None:
+            from .scaled import ScaledReference
+
+            return ScaledReference(ReferenceDopus(disc.scaled, *args, **kwargs), disc)
+        return super().__new__(cls)
+
     def __init__(self, disc, settings: Optional[Settings] = None, **changes):
         """``settings``: the solver's settings (None: the OCP file's ``options(...)`` of
         ``disc``); ``changes``: settings changed from them by name (``M=3``; None: not given).

@@ -251,6 +251,7 @@ typedef struct {
                             and equality parts of the KKT measure at the prepared point */
     robot_arm_real kkt[4];    /* stat, eq, ineq, comp of the last robot_arm_kkt_eval (NaN before) */
     robot_arm_real kkt_max;   /* their largest */
+    robot_arm_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
     /* seconds per phase of the last call that ran it (enum robot_arm_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
      * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback
@@ -489,6 +490,7 @@ struct robot_arm_solver {
     robot_arm_health health; /* safe outputs, divergence test and recovery (section 9) */
     robot_arm_lm lm;         /* the Levenberg-Marquardt term (sections 3 and 10) */
     robot_arm_real kkt[4];   /* KKT parts of the last robot_arm_kkt_eval: stat, eq, ineq, comp */
+    robot_arm_real kkt_rel;  /* its relative measure */
     robot_arm_timer timer;
     robot_arm_anytime anytime; /* the budget's bookkeeping (section 14) */
 };

@@ -19,7 +19,7 @@ void unicycle_health_scales(unicycle_health *h)
         unicycle_real v = UNICYCLE_R(1.0);
         v = unicycle_absmax(unicycle_lbx[i], v);
         v = unicycle_absmax(unicycle_ubx[i], v);
-        v = unicycle_absmax(unicycle_x0_default[i], v);
+        v = unicycle_absmax(unicycle_x0_default[i] / unicycle_scale_x[i], v); /* in the solver's variables */
         for (k = 0; k <= UNICYCLE_N; ++k) {
             v = unicycle_absmax(unicycle_guess_x[k][i], v);
         }
