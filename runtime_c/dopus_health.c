@@ -34,6 +34,10 @@ void dopus_health_scales(dopus_health *h)
         }
         h->scale_u[i] = v;
     }
+    for (i = 0; i < DOPUS_NMEM; ++i) { /* a memory state carries its control */
+        k = dopus_memory_state[i];
+        h->scale_x[k] = dopus_absmax(h->scale_u[dopus_memory_control[i]], h->scale_x[k]);
+    }
 }
 
 void dopus_health_reset(dopus_health *h, const dopus_real *u)

@@ -29,8 +29,10 @@ DOPUS_INTERNAL int dopus_kkt_measure(const dopus_real *x, const dopus_real *u, c
 /* The relative measure of the same iterate (section 6): max(stat / s_d, eq / s_p, ineq / s_p,
  * comp / (s_d s_p)) with s_d = max(1, the largest multiplier) and s_p = max(1, the largest entry
  * of x and u); parts as written by dopus_kkt_measure. */
-DOPUS_INTERNAL dopus_real dopus_kkt_relative(const dopus_real *parts, const dopus_real *x, const dopus_real *u,
-                                             const dopus_real *lam, const dopus_real *mu_g, const dopus_real *mu_b,
-                                             const dopus_real *mu_bN, const dopus_real *mu_r, const dopus_real *nu);
+DOPUS_INTERNAL dopus_real dopus_kkt_relative(const dopus_real *parts, const dopus_real *x,
+                                             const dopus_real *u, const dopus_real *lam,
+                                             const dopus_real *mu_g, const dopus_real *mu_b,
+                                             const dopus_real *mu_bN, const dopus_real *mu_r,
+                                             const dopus_real *nu);
 
 #endif /* DOPUS_KKT_H */

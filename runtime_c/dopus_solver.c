@@ -648,11 +648,13 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
             s->u[k][i] = u ? u[k * DOPUS_NU + i] / dopus_scale_u[i] : dopus_guess_u[k][i];
         }
         for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i) {
-            s->mu_g[k][i] = (mu_g && i < DOPUS_NG) ? mu_g[k * DOPUS_NG + i] * dopus_scale_g[i] / dopus_scale_cost
-                                                   : DOPUS_R(0.0);
+            s->mu_g[k][i] = (mu_g && i < DOPUS_NG)
+                                ? mu_g[k * DOPUS_NG + i] * dopus_scale_g[i] / dopus_scale_cost
+                                : DOPUS_R(0.0);
         }
         for (i = 0; i < DOPUS_NW; ++i) {
-            s->mu_b[k][i] = mu_b ? mu_b[k * DOPUS_NW + i] * dopus_scale_w(i) / dopus_scale_cost : DOPUS_R(0.0);
+            s->mu_b[k][i] =
+                mu_b ? mu_b[k * DOPUS_NW + i] * dopus_scale_w(i) / dopus_scale_cost : DOPUS_R(0.0);
         }
     }
     dopus_clear_x0_multiplier(s);
@@ -1077,7 +1079,8 @@ int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
     if (!s->set_up) {
         return DOPUS_ERR_NOT_INITIALIZED;
     }
-    rc = dopus_feedback_call(s, dopus_with_memory(s, dopus_scaled_in(xhat0, dopus_scale_x, DOPUS_NX, xs), xm), u0);
+    rc = dopus_feedback_call(s, dopus_with_memory(s, dopus_scaled_in(xhat0, dopus_scale_x, DOPUS_NX, xs), xm),
+                             u0);
     if (s->initialized) {
         /* the control returned is the one applied: the next stage-0 rate row is against it */
         dopus_copy(s->u_applied, s->health.u0_out, DOPUS_NU);
@@ -1892,7 +1895,8 @@ dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopu
                     v += dopus_ring_stage_const(&s->ring, k)->Ct[i + c * DOPUS_DIM(DOPUS_NG)] *
                          (c < DOPUS_NX ? sol->x[k][c] : sol->u[k][c - DOPUS_NX]);
                 }
-                sl = dopus_soft_slack(v, in->lg[k][i], in->ug[k][i], &dopus_soft_g[0][i], DOPUS_DIM(DOPUS_NG)) *
+                sl = dopus_soft_slack(v, in->lg[k][i], in->ug[k][i], &dopus_soft_g[0][i],
+                                      DOPUS_DIM(DOPUS_NG)) *
                      dopus_scale_g[i];
                 worst = sl > worst ? sl : worst;
                 if (viol_g) {
@@ -1906,7 +1910,8 @@ dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopu
             for (c = 0; c < DOPUS_NX; ++c) {
                 v += s->R[i + c * DOPUS_DIM(DOPUS_NR)] * sol->x[DOPUS_N][c];
             }
-            sl = dopus_soft_slack(v, in->lr[i], in->ur[i], &dopus_soft_r[0][i], DOPUS_DIM(DOPUS_NR)) * dopus_scale_r[i];
+            sl = dopus_soft_slack(v, in->lr[i], in->ur[i], &dopus_soft_r[0][i], DOPUS_DIM(DOPUS_NR)) *
+                 dopus_scale_r[i];
             worst = sl > worst ? sl : worst;
             if (viol_r) {
                 viol_r[i] = sl;
@@ -1949,9 +1954,9 @@ int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
         row->index = j - DOPUS_NX - DOPUS_NR;
         row->bound = DOPUS_R(0.0);
     }
-    row->bound *= row->kind == DOPUS_ROW_STATE     ? dopus_scale_x[row->index]
-                  : row->kind == DOPUS_ROW_CONTROL ? dopus_scale_u[row->index]
-                  : row->kind == DOPUS_ROW_PATH    ? dopus_scale_g[row->index]
+    row->bound *= row->kind == DOPUS_ROW_STATE      ? dopus_scale_x[row->index]
+                  : row->kind == DOPUS_ROW_CONTROL  ? dopus_scale_u[row->index]
+                  : row->kind == DOPUS_ROW_PATH     ? dopus_scale_g[row->index]
                   : row->kind == DOPUS_ROW_TERMINAL ? dopus_scale_r[row->index]
                                                     : dopus_scale_req[row->index];
     return 1;
@@ -2275,8 +2280,8 @@ int dopus_simulate(const dopus_real *x, const dopus_real *u, const dopus_real *p
 {
     dopus_real l = DOPUS_R(0.0), g[DOPUS_DIM(DOPUS_NG)], xs[DOPUS_NX], us[DOPUS_NU], xn[DOPUS_NX];
     if (dopus_eval_stage_eval(dopus_scaled_in(x, dopus_scale_x, DOPUS_NX, xs),
-                              dopus_scaled_in(u, dopus_scale_u, DOPUS_NU, us), p ? p : dopus_p_default[0], xn, &l,
-                              g, work) != 0) {
+                              dopus_scaled_in(u, dopus_scale_u, DOPUS_NU, us), p ? p : dopus_p_default[0], xn,
+                              &l, g, work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
     dopus_scaled_out(x_next, xn, dopus_scale_x, DOPUS_NX, DOPUS_NX);

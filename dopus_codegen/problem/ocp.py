@@ -406,7 +406,7 @@ def _scales(value, size: int, what: str) -> Optional[np.ndarray]:
         raise OcpError(f"{what} scale: expected a scalar or {size} values, got shape {a.shape}")
     bad = np.flatnonzero(~(np.isfinite(a) & (a > 0)))
     if bad.size:
-        raise OcpError(f"{what} scale: must be positive and finite, got {a[bad[0]]!r} at row {int(bad[0])}")
+        raise OcpError(f"{what} scale: must be positive and finite, got {float(a[bad[0]])!r} at row {int(bad[0])}")
     return a
 
 

@@ -28,8 +28,8 @@ from typing import Optional
 import casadi as ca
 import numpy as np
 
-from .spec import (ConstraintSpec, CostSpec, GuessSpec, LeastSquares, ModelSpec, OcpError, OcpSpec, Rows,
-                   ScenarioPart, Variable, readonly)
+from .spec import (ConstraintSpec, CostSpec, GuessSpec, LeastSquares, ModelSpec, OcpError, OcpSpec, ScenarioPart,
+                   Variable, readonly)
 
 __all__ = ["Scaling", "resolve", "scaled_spec", "power_of_two"]
 

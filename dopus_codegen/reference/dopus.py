@@ -1074,7 +1074,8 @@ class ReferenceDopus:
 
     def _compute_scales(self):
         """``(scale_x, scale_u)``: the largest magnitude among the finite bounds, the OCP
-        file's guess, the default x0 and 1."""
+        file's guess, the default x0 and 1; a memory state of a rate constraint at least its
+        control's."""
         d = self.disc
         gx = np.asarray(d.initial_guess.x, float).reshape(self.N + 1, self.nx)
         gu = np.asarray(d.initial_guess.u, float).reshape(self.N, self.n_u)
@@ -1084,8 +1085,10 @@ class ReferenceDopus:
             a = np.abs(np.vstack(cols))
             a[~np.isfinite(a)] = 0.0
             return np.maximum(1.0, a.max(axis=0))
-        return (scale([self.lbx[None], self.ubx[None], x0[None], gx]),
-                scale([self.lbu[None], self.ubu[None], gu]))
+        sx, su = scale([self.lbx[None], self.ubx[None], x0[None], gx]), scale([self.lbu[None], self.ubu[None], gu])
+        for srow, crow in getattr(d.spec.model, "memory", ()) or ():
+            sx[srow] = max(sx[srow], su[crow])     # a memory state carries its control
+        return sx, su
 
     def _reset_health(self, plan_u) -> None:
         self._n_failed = 0

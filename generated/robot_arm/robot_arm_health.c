@@ -34,6 +34,10 @@ void robot_arm_health_scales(robot_arm_health *h)
         }
         h->scale_u[i] = v;
     }
+    for (i = 0; i < ROBOT_ARM_NMEM; ++i) { /* a memory state carries its control */
+        k = robot_arm_memory_state[i];
+        h->scale_x[k] = robot_arm_absmax(h->scale_u[robot_arm_memory_control[i]], h->scale_x[k]);
+    }
 }
 
 void robot_arm_health_reset(robot_arm_health *h, const robot_arm_real *u)

@@ -648,11 +648,13 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
             s->u[k][i] = u ? u[k * ROBOT_ARM_NU + i] / robot_arm_scale_u[i] : robot_arm_guess_u[k][i];
         }
         for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG); ++i) {
-            s->mu_g[k][i] = (mu_g && i < ROBOT_ARM_NG) ? mu_g[k * ROBOT_ARM_NG + i] * robot_arm_scale_g[i] / robot_arm_scale_cost
-                                                   : ROBOT_ARM_R(0.0);
+            s->mu_g[k][i] = (mu_g && i < ROBOT_ARM_NG)
+                                ? mu_g[k * ROBOT_ARM_NG + i] * robot_arm_scale_g[i] / robot_arm_scale_cost
+                                : ROBOT_ARM_R(0.0);
         }
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            s->mu_b[k][i] = mu_b ? mu_b[k * ROBOT_ARM_NW + i] * robot_arm_scale_w(i) / robot_arm_scale_cost : ROBOT_ARM_R(0.0);
+            s->mu_b[k][i] =
+                mu_b ? mu_b[k * ROBOT_ARM_NW + i] * robot_arm_scale_w(i) / robot_arm_scale_cost : ROBOT_ARM_R(0.0);
         }
     }
     robot_arm_clear_x0_multiplier(s);
@@ -1077,7 +1079,8 @@ int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
     if (!s->set_up) {
         return ROBOT_ARM_ERR_NOT_INITIALIZED;
     }
-    rc = robot_arm_feedback_call(s, robot_arm_with_memory(s, robot_arm_scaled_in(xhat0, robot_arm_scale_x, ROBOT_ARM_NX, xs), xm), u0);
+    rc = robot_arm_feedback_call(s, robot_arm_with_memory(s, robot_arm_scaled_in(xhat0, robot_arm_scale_x, ROBOT_ARM_NX, xs), xm),
+                             u0);
     if (s->initialized) {
         /* the control returned is the one applied: the next stage-0 rate row is against it */
         robot_arm_copy(s->u_applied, s->health.u0_out, ROBOT_ARM_NU);
@@ -1892,7 +1895,8 @@ robot_arm_real robot_arm_get_soft_slacks(const robot_arm_solver *s, robot_arm_re
                     v += robot_arm_ring_stage_const(&s->ring, k)->Ct[i + c * ROBOT_ARM_DIM(ROBOT_ARM_NG)] *
                          (c < ROBOT_ARM_NX ? sol->x[k][c] : sol->u[k][c - ROBOT_ARM_NX]);
                 }
-                sl = robot_arm_soft_slack(v, in->lg[k][i], in->ug[k][i], &robot_arm_soft_g[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NG)) *
+                sl = robot_arm_soft_slack(v, in->lg[k][i], in->ug[k][i], &robot_arm_soft_g[0][i],
+                                      ROBOT_ARM_DIM(ROBOT_ARM_NG)) *
                      robot_arm_scale_g[i];
                 worst = sl > worst ? sl : worst;
                 if (viol_g) {
@@ -1906,7 +1910,8 @@ robot_arm_real robot_arm_get_soft_slacks(const robot_arm_solver *s, robot_arm_re
             for (c = 0; c < ROBOT_ARM_NX; ++c) {
                 v += s->R[i + c * ROBOT_ARM_DIM(ROBOT_ARM_NR)] * sol->x[ROBOT_ARM_N][c];
             }
-            sl = robot_arm_soft_slack(v, in->lr[i], in->ur[i], &robot_arm_soft_r[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NR)) * robot_arm_scale_r[i];
+            sl = robot_arm_soft_slack(v, in->lr[i], in->ur[i], &robot_arm_soft_r[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NR)) *
+                 robot_arm_scale_r[i];
             worst = sl > worst ? sl : worst;
             if (viol_r) {
                 viol_r[i] = sl;
@@ -1949,9 +1954,9 @@ int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_inf
         row->index = j - ROBOT_ARM_NX - ROBOT_ARM_NR;
         row->bound = ROBOT_ARM_R(0.0);
     }
-    row->bound *= row->kind == ROBOT_ARM_ROW_STATE     ? robot_arm_scale_x[row->index]
-                  : row->kind == ROBOT_ARM_ROW_CONTROL ? robot_arm_scale_u[row->index]
-                  : row->kind == ROBOT_ARM_ROW_PATH    ? robot_arm_scale_g[row->index]
+    row->bound *= row->kind == ROBOT_ARM_ROW_STATE      ? robot_arm_scale_x[row->index]
+                  : row->kind == ROBOT_ARM_ROW_CONTROL  ? robot_arm_scale_u[row->index]
+                  : row->kind == ROBOT_ARM_ROW_PATH     ? robot_arm_scale_g[row->index]
                   : row->kind == ROBOT_ARM_ROW_TERMINAL ? robot_arm_scale_r[row->index]
                                                     : robot_arm_scale_req[row->index];
     return 1;
@@ -2275,8 +2280,8 @@ int robot_arm_simulate(const robot_arm_real *x, const robot_arm_real *u, const r
 {
     robot_arm_real l = ROBOT_ARM_R(0.0), g[ROBOT_ARM_DIM(ROBOT_ARM_NG)], xs[ROBOT_ARM_NX], us[ROBOT_ARM_NU], xn[ROBOT_ARM_NX];
     if (robot_arm_eval_stage_eval(robot_arm_scaled_in(x, robot_arm_scale_x, ROBOT_ARM_NX, xs),
-                              robot_arm_scaled_in(u, robot_arm_scale_u, ROBOT_ARM_NU, us), p ? p : robot_arm_p_default[0], xn, &l,
-                              g, work) != 0) {
+                              robot_arm_scaled_in(u, robot_arm_scale_u, ROBOT_ARM_NU, us), p ? p : robot_arm_p_default[0], xn,
+                              &l, g, work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
     robot_arm_scaled_out(x_next, xn, robot_arm_scale_x, ROBOT_ARM_NX, ROBOT_ARM_NX);

@@ -34,6 +34,10 @@ void unicycle_health_scales(unicycle_health *h)
         }
         h->scale_u[i] = v;
     }
+    for (i = 0; i < UNICYCLE_NMEM; ++i) { /* a memory state carries its control */
+        k = unicycle_memory_state[i];
+        h->scale_x[k] = unicycle_absmax(h->scale_u[unicycle_memory_control[i]], h->scale_x[k]);
+    }
 }
 
 void unicycle_health_reset(unicycle_health *h, const unicycle_real *u)

@@ -648,11 +648,13 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
             s->u[k][i] = u ? u[k * UNICYCLE_NU + i] / unicycle_scale_u[i] : unicycle_guess_u[k][i];
         }
         for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG); ++i) {
-            s->mu_g[k][i] = (mu_g && i < UNICYCLE_NG) ? mu_g[k * UNICYCLE_NG + i] * unicycle_scale_g[i] / unicycle_scale_cost
-                                                   : UNICYCLE_R(0.0);
+            s->mu_g[k][i] = (mu_g && i < UNICYCLE_NG)
+                                ? mu_g[k * UNICYCLE_NG + i] * unicycle_scale_g[i] / unicycle_scale_cost
+                                : UNICYCLE_R(0.0);
         }
         for (i = 0; i < UNICYCLE_NW; ++i) {
-            s->mu_b[k][i] = mu_b ? mu_b[k * UNICYCLE_NW + i] * unicycle_scale_w(i) / unicycle_scale_cost : UNICYCLE_R(0.0);
+            s->mu_b[k][i] =
+                mu_b ? mu_b[k * UNICYCLE_NW + i] * unicycle_scale_w(i) / unicycle_scale_cost : UNICYCLE_R(0.0);
         }
     }
     unicycle_clear_x0_multiplier(s);
@@ -1077,7 +1079,8 @@ int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
     if (!s->set_up) {
         return UNICYCLE_ERR_NOT_INITIALIZED;
     }
-    rc = unicycle_feedback_call(s, unicycle_with_memory(s, unicycle_scaled_in(xhat0, unicycle_scale_x, UNICYCLE_NX, xs), xm), u0);
+    rc = unicycle_feedback_call(s, unicycle_with_memory(s, unicycle_scaled_in(xhat0, unicycle_scale_x, UNICYCLE_NX, xs), xm),
+                             u0);
     if (s->initialized) {
         /* the control returned is the one applied: the next stage-0 rate row is against it */
         unicycle_copy(s->u_applied, s->health.u0_out, UNICYCLE_NU);
@@ -1892,7 +1895,8 @@ unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *
                     v += unicycle_ring_stage_const(&s->ring, k)->Ct[i + c * UNICYCLE_DIM(UNICYCLE_NG)] *
                          (c < UNICYCLE_NX ? sol->x[k][c] : sol->u[k][c - UNICYCLE_NX]);
                 }
-                sl = unicycle_soft_slack(v, in->lg[k][i], in->ug[k][i], &unicycle_soft_g[0][i], UNICYCLE_DIM(UNICYCLE_NG)) *
+                sl = unicycle_soft_slack(v, in->lg[k][i], in->ug[k][i], &unicycle_soft_g[0][i],
+                                      UNICYCLE_DIM(UNICYCLE_NG)) *
                      unicycle_scale_g[i];
                 worst = sl > worst ? sl : worst;
                 if (viol_g) {
@@ -1906,7 +1910,8 @@ unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *
             for (c = 0; c < UNICYCLE_NX; ++c) {
                 v += s->R[i + c * UNICYCLE_DIM(UNICYCLE_NR)] * sol->x[UNICYCLE_N][c];
             }
-            sl = unicycle_soft_slack(v, in->lr[i], in->ur[i], &unicycle_soft_r[0][i], UNICYCLE_DIM(UNICYCLE_NR)) * unicycle_scale_r[i];
+            sl = unicycle_soft_slack(v, in->lr[i], in->ur[i], &unicycle_soft_r[0][i], UNICYCLE_DIM(UNICYCLE_NR)) *
+                 unicycle_scale_r[i];
             worst = sl > worst ? sl : worst;
             if (viol_r) {
                 viol_r[i] = sl;
@@ -1949,9 +1954,9 @@ int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *
         row->index = j - UNICYCLE_NX - UNICYCLE_NR;
         row->bound = UNICYCLE_R(0.0);
     }
-    row->bound *= row->kind == UNICYCLE_ROW_STATE     ? unicycle_scale_x[row->index]
-                  : row->kind == UNICYCLE_ROW_CONTROL ? unicycle_scale_u[row->index]
-                  : row->kind == UNICYCLE_ROW_PATH    ? unicycle_scale_g[row->index]
+    row->bound *= row->kind == UNICYCLE_ROW_STATE      ? unicycle_scale_x[row->index]
+                  : row->kind == UNICYCLE_ROW_CONTROL  ? unicycle_scale_u[row->index]
+                  : row->kind == UNICYCLE_ROW_PATH     ? unicycle_scale_g[row->index]
                   : row->kind == UNICYCLE_ROW_TERMINAL ? unicycle_scale_r[row->index]
                                                     : unicycle_scale_req[row->index];
     return 1;
@@ -2275,8 +2280,8 @@ int unicycle_simulate(const unicycle_real *x, const unicycle_real *u, const unic
 {
     unicycle_real l = UNICYCLE_R(0.0), g[UNICYCLE_DIM(UNICYCLE_NG)], xs[UNICYCLE_NX], us[UNICYCLE_NU], xn[UNICYCLE_NX];
     if (unicycle_eval_stage_eval(unicycle_scaled_in(x, unicycle_scale_x, UNICYCLE_NX, xs),
-                              unicycle_scaled_in(u, unicycle_scale_u, UNICYCLE_NU, us), p ? p : unicycle_p_default[0], xn, &l,
-                              g, work) != 0) {
+                              unicycle_scaled_in(u, unicycle_scale_u, UNICYCLE_NU, us), p ? p : unicycle_p_default[0], xn,
+                              &l, g, work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
     unicycle_scaled_out(x_next, xn, unicycle_scale_x, UNICYCLE_NX, UNICYCLE_NX);
