@@ -240,3 +240,23 @@ def test_acados_export_refuses_a_scaled_problem():
     ocp = millimetres(soft=False, rate=False)
     with pytest.raises(OcpError, match="export: a declared scaling"):
         export_ocp(ocp)
+
+
+def test_nominal_solution_is_generated_in_the_declared_units(cart, tmp_path):
+    """dopus_x0_default and the offline solution are generated in the declared units (what
+    init takes); init_nominal converts them like any guess."""
+    from dopus_codegen.codegen.build import build
+    from dopus_codegen.codegen.generate import generate
+
+    disc, _ = cart
+    out = generate(disc, tmp_path / "cart_mm", offline_guess=True)
+    build(out)
+    text = (out / "cart_mm_problem.c").read_text()
+    assert "cart_mm_scale_x[CART_MM_NX] = {1000.0, 500.0, 1000.0}" in text.replace("1e3", "1000.0")
+    c = CSolver(disc, lib_dir=out)
+    sol, info = solve_ocp(disc, np.asarray(disc.x0, float))
+    assert info["success"]
+    c.init_nominal(disc.x0)
+    g = sol.filled(disc)
+    for got, want in ((c.x, g.x), (c.u, g.u), (c.lam, g.lam), (c.mu_b, g.mu_b)):
+        assert _rel(got, want) < 1e-13

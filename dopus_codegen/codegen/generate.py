@@ -529,9 +529,10 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
                                nx, "x0"),
         "scale_x": c_vector(np.ones(nx) if scaling is None else scaling.x, nx, "scale_x"),
         "scale_u": c_vector(np.ones(nu) if scaling is None else scaling.u, nu, "scale_u"),
-        "scale_g": c_vector(np.ones(s["ng"]) if scaling is None else scaling.g, s["ng"], "scale_g"),
-        "scale_r": c_vector(np.ones(s["nr"]) if scaling is None else scaling.r, s["nr"], "scale_r"),
-        "scale_req": c_vector(np.ones(s["ne"]) if scaling is None else scaling.r_eq, s["ne"], "scale_req"),
+        # (an empty row block has one unused entry, DOPUS_DIM: 1, like every scale that is not declared)
+        "scale_g": c_vector(_scales_of(scaling, "g", s["ng"]), max(s["ng"], 1), "scale_g"),
+        "scale_r": c_vector(_scales_of(scaling, "r", s["nr"]), max(s["nr"], 1), "scale_r"),
+        "scale_req": c_vector(_scales_of(scaling, "r_eq", s["ne"]), max(s["ne"], 1), "scale_req"),
         "scale_cost": c_double(1.0 if scaling is None else scaling.cost, "scale_cost"),
         "guess_x": c_matrix(getattr(guess, "x", None), N + 1, nx, "initial_guess.x"),
         "guess_u": c_matrix(getattr(guess, "u", None), N, nu, "initial_guess.u"),
@@ -583,6 +584,13 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
 
 
 _c_literal, _c_vector, _c_matrix = c_double, c_vector, c_matrix
+
+
+def _scales_of(scaling, key: str, n: int) -> np.ndarray:
+    """The scales of a row block (docs/algorithm.md section 15), 1 without a scaling; at least
+    one entry."""
+    a = np.ones(n) if scaling is None else np.asarray(getattr(scaling, key), dtype=float)
+    return a if n else np.ones(1)
 
 
 def _zeros_if_none(v, n):

@@ -646,17 +646,14 @@ def _with_scaling(disc: "Discretized") -> "Discretized":
     section 15); ``derive="nominal"`` solves the declared problem offline first."""
     import dataclasses
 
-    from .scaling import resolve, scaled_spec
+    from .scaling import nominal_solution, resolve, scaled_spec
 
     nominal = None
     if disc.spec.scaling.derive == "nominal":
-        from ..reference.offline import solve_ocp
-
-        nominal, info = solve_ocp(disc, numpy.asarray(disc.x0, dtype=float))
-        if not info.get("success", False):
+        nominal = nominal_solution(disc)
+        if nominal is None:
             raise OcpError(f"{disc.name}: scaling(derive='nominal'): IPOPT did not solve the OCP at the initial "
-                           f"state ({info.get('status', 'unknown status')}); declare the scales with scale= or "
-                           "use derive='bounds'")
+                           "state; declare the scales with scale= or use derive='bounds'")
     sc = resolve(disc.spec, disc, nominal)
     return dataclasses.replace(disc, scaling=sc, scaled=build_functions(scaled_spec(disc.spec, sc)))
 

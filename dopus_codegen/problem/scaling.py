@@ -31,7 +31,7 @@ import numpy as np
 from .spec import (ConstraintSpec, CostSpec, GuessSpec, LeastSquares, ModelSpec, OcpError, OcpSpec, ScenarioPart,
                    Variable, readonly)
 
-__all__ = ["Scaling", "resolve", "scaled_spec", "power_of_two"]
+__all__ = ["Scaling", "resolve", "scaled_spec", "power_of_two", "nominal_solution"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,10 +130,55 @@ def _first_nonempty(*lists):
     return out
 
 
+def nominal_solution(disc):
+    """``(x (N+1, nx), u (N, nu))``: the NLP of ``disc`` at its initial state solved with IPOPT
+    (its hard rows and bounds; soft sides left free), for ``derive="nominal"``; None when IPOPT
+    fails. Only magnitudes are taken from it, rounded to powers of two."""
+    N, nx, nu = disc.N, disc.nx, disc.nu
+    P = np.asarray(disc.p0, float)
+    X, U = ca.MX.sym("x", nx, N + 1), ca.MX.sym("u", nu, N)
+    soft = np.asarray(disc.soft_x) > 0
+    lbx = np.where(soft[0] | soft[2], -np.inf, np.asarray(disc.lbx, float))
+    ubx = np.where(soft[1] | soft[3], np.inf, np.asarray(disc.ubx, float))
+    cost, g, lbg, ubg = 0, [X[:, 0] - ca.DM(disc.x0)], [np.zeros(nx)], [np.zeros(nx)]
+    sg = np.asarray(disc.soft_g) > 0
+    for k in range(N):
+        phi, l_, gk = disc.stage_eval(X[:, k], U[:, k], P[k])
+        cost = cost + l_
+        g += [X[:, k + 1] - phi]
+        lbg += [np.zeros(nx)]
+        ubg += [np.zeros(nx)]
+        if disc.ng:
+            lo = np.asarray(disc.data.lg_stage, float)[k]
+            up = np.asarray(disc.data.ug_stage, float)[k]
+            g += [gk]
+            lbg += [np.where(sg[0] | sg[2], -np.inf, lo)]
+            ubg += [np.where(sg[1] | sg[3], np.inf, up)]
+    E, r, r_eq = disc.term_eval(X[:, N], P[N])
+    sr = np.asarray(disc.soft_r) > 0
+    g += [r, r_eq]
+    lbg += [np.where(sr[0] | sr[2], -np.inf, disc.lr), np.zeros(disc.ne)]
+    ubg += [np.where(sr[1] | sr[3], np.inf, disc.ur), np.zeros(disc.ne)]
+    V = ca.vertcat(ca.vec(X), ca.vec(U))
+    solver = ca.nlpsol("nominal", "ipopt", {"x": V, "f": cost + E, "g": ca.vertcat(*g)},
+                       {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes"})
+    lbv = np.concatenate([np.tile(lbx, N + 1), np.tile(disc.lbu, N)])
+    ubv = np.concatenate([np.tile(ubx, N + 1), np.tile(disc.ubu, N)])
+    lbv[:nx], ubv[:nx] = -np.inf, np.inf
+    v0 = np.concatenate([np.asarray(disc.initial_guess.x, float).ravel(),
+                         np.asarray(disc.initial_guess.u, float).ravel()])
+    sol = solver(x0=v0, lbx=lbv, ubx=ubv, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
+    if not solver.stats().get("success", False):
+        return None
+    v = np.asarray(sol["x"], float).ravel()
+    return v[:(N + 1) * nx].reshape(N + 1, nx), v[(N + 1) * nx:].reshape(N, nu)
+
+
 def resolve(spec: OcpSpec, disc=None, nominal=None) -> Optional[Scaling]:
     """The numbers of the declared scaling of ``spec`` (None without one). ``disc``: the
     declared problem's ``Discretized`` (for the row values at the nominal solution);
-    ``nominal``: its offline solution at the initial state (``derive="nominal"``)."""
+    ``nominal``: ``(x, u)`` of its solution at the initial state (``derive="nominal"``,
+    :func:`nominal_solution`)."""
     sc = spec.scaling
     if sc is None:
         return None
@@ -149,8 +194,8 @@ def resolve(spec: OcpSpec, disc=None, nominal=None) -> Optional[Scaling]:
         ix = [np.concatenate([[x0[i]], gx[:, i]]) for i in range(x0.size)]
         iu = [gu[:, i] for i in range(gu.shape[1])]
         if derive == "nominal":
-            nx_ = [np.concatenate([[x0[i]], np.asarray(nominal.x)[:, i]]) for i in range(x0.size)]
-            nu_ = [np.asarray(nominal.u)[:, i] for i in range(gu.shape[1])]
+            nx_ = [np.concatenate([[x0[i]], np.asarray(nominal[0])[:, i]]) for i in range(x0.size)]
+            nu_ = [np.asarray(nominal[1])[:, i] for i in range(gu.shape[1])]
             xs = _derived(x_decl, _first_nonempty(nx_, bx, ix))
             us = _derived(u_decl, _first_nonempty(nu_, bu, iu))
         else:
@@ -163,7 +208,7 @@ def resolve(spec: OcpSpec, disc=None, nominal=None) -> Optional[Scaling]:
     if derive == "nominal" and disc is not None:
         N = spec.horizon.N
         P = np.asarray(disc.p0, float)
-        g_at = np.array([np.asarray(disc.stage_eval(nominal.x[k], nominal.u[k], P[k])[2], float).reshape(-1)
+        g_at = np.array([np.asarray(disc.stage_eval(nominal[0][k], nominal[1][k], P[k])[2], float).reshape(-1)
                          for k in range(N)]).reshape(N, -1)
         r_at = None   # the terminal rows' values come from term_eval below
 
@@ -186,7 +231,7 @@ def resolve(spec: OcpSpec, disc=None, nominal=None) -> Optional[Scaling]:
 
     g = row_scales(con.path, g_at)
     if derive == "nominal" and disc is not None and con.terminal:
-        tv = disc.term_eval(nominal.x[-1], np.asarray(disc.p0, float)[-1])
+        tv = disc.term_eval(nominal[0][-1], np.asarray(disc.p0, float)[-1])
         # term_eval splits the rows into inequality and equality rows; the blocks stack them whole
         r_all = _terminal_values(con, np.asarray(tv[1], float).reshape(-1), np.asarray(tv[2], float).reshape(-1))
         r_at = r_all.reshape(1, -1)

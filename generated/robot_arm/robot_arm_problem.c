@@ -147,8 +147,8 @@ const robot_arm_real robot_arm_x0_default[ROBOT_ARM_NX] = {-0.4014418773201884, 
 /* the scales of docs/algorithm.md section 15 (1: none declared) */
 const robot_arm_real robot_arm_scale_x[ROBOT_ARM_NX] = {1.0, 1.0, 1.0, 1.0, 1.0};
 const robot_arm_real robot_arm_scale_u[ROBOT_ARM_NU] = {1.0, 1.0, 1.0};
-const robot_arm_real robot_arm_scale_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {0.0};
-const robot_arm_real robot_arm_scale_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {0.0};
+const robot_arm_real robot_arm_scale_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {1.0};
+const robot_arm_real robot_arm_scale_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {1.0};
 const robot_arm_real robot_arm_scale_req[ROBOT_ARM_DIM(ROBOT_ARM_NE)] = {1.0, 1.0};
 const robot_arm_real robot_arm_scale_cost = 1.0;
 

@@ -88,8 +88,8 @@ const unicycle_real unicycle_x0_default[UNICYCLE_NX] = {0.0, 0.0, 0.0, 0.0};
 const unicycle_real unicycle_scale_x[UNICYCLE_NX] = {1.0, 1.0, 1.0, 1.0};
 const unicycle_real unicycle_scale_u[UNICYCLE_NU] = {1.0, 1.0};
 const unicycle_real unicycle_scale_g[UNICYCLE_DIM(UNICYCLE_NG)] = {1.0};
-const unicycle_real unicycle_scale_r[UNICYCLE_DIM(UNICYCLE_NR)] = {0.0};
-const unicycle_real unicycle_scale_req[UNICYCLE_DIM(UNICYCLE_NE)] = {0.0};
+const unicycle_real unicycle_scale_r[UNICYCLE_DIM(UNICYCLE_NR)] = {1.0};
+const unicycle_real unicycle_scale_req[UNICYCLE_DIM(UNICYCLE_NE)] = {1.0};
 const unicycle_real unicycle_scale_cost = 1.0;
 
 const unicycle_real unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX] = {
