@@ -19,7 +19,8 @@ default, ``build(soft_tmax=Soft(...))`` makes it soft).
 The numbers span four decades (0.3 mol/l, 350 K, a cost of order 1): ``build(scaled=True)``
 (the OCP file's default) declares the scales of section 15 of docs/algorithm.md, so that the
 solver works with variables of order one; ``build(scaled=False)`` is the same problem without
-them. tests/test_scaling.py runs both in float and double against IPOPT.
+them, ``build(cost_scale=c)`` another cost scale. tests/test_scaling.py runs both in float and
+double against IPOPT; bench/float_scaling.py sweeps the cost scale.
 """
 import casadi as ca
 import numpy as np
@@ -57,7 +58,7 @@ def push(x):
     return x
 
 
-def build(scaled=True, soft_tmax=None, real=None):
+def build(scaled=True, soft_tmax=None, real=None, cost_scale=COST_SCALE):
     ocp = Ocp("cstr")
     x = ocp.state("x", 3, lb=[0.0, 250.0, 250.0], ub=[CAF, 450.0, 450.0],
                   scale=[0.5, 350.0, 300.0] if scaled else None)
@@ -68,7 +69,7 @@ def build(scaled=True, soft_tmax=None, real=None):
     ocp.path_constraint(x[1], ub=T_MAX, name="T_max", soft=soft_tmax, terminal=True,
                         scale=350.0 if scaled else None)
     if scaled:
-        ocp.scaling(cost=COST_SCALE)
+        ocp.scaling(cost=cost_scale)
     ocp.horizon(N=N, dt=DT)
     ocp.initial_state(X0)
     ocp.initial_guess(x=X0, u=[300.0])
