@@ -204,13 +204,12 @@ def resolve(spec: OcpSpec, disc=None, nominal=None) -> Optional[Scaling]:
     for srow, crow in model.memory:          # a memory state carries its control: the same scale
         xs[srow] = us[crow]
 
-    g_at = r_at = None
+    g_at = r_at = None     # the rows' values along the nominal solution
     if derive == "nominal" and disc is not None:
         N = spec.horizon.N
         P = np.asarray(disc.p0, float)
         g_at = np.array([np.asarray(disc.stage_eval(nominal[0][k], nominal[1][k], P[k])[2], float).reshape(-1)
                          for k in range(N)]).reshape(N, -1)
-        r_at = None   # the terminal rows' values come from term_eval below
 
     def row_scales(blocks, values=None):
         out, start = [], 0

@@ -28,7 +28,10 @@
  * mu_g N x ng, mu_b N x nw, mu_bN nx, mu_r nr, nu ne, parameters (N+1) x np. Multipliers are
  * signed (positive when the upper side of a row is active, negative for the lower side);
  * docs/algorithm.md section 1 gives the Lagrangian. Arrays of size zero are not read or
- * written (any pointer, also NULL, may be passed).
+ * written (any pointer, also NULL, may be passed). Every value of the API is in the OCP's
+ * declared units: with a declared scaling (docs/algorithm.md section 15) the solver works in
+ * scaled variables and converts at this boundary (the KKT measure of robot_arm_kkt_eval and the
+ * scales of robot_arm_get_scales are those of the scaled variables).
  *
  * Every function returning int returns a status (enum robot_arm_status below) unless stated.
  * On failure the state stays consistent: a failed feedback takes no step; a failed
