@@ -149,6 +149,10 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--tol", default=None, type=click.FloatRange(min=0, min_open=True),
               help="A run has converged when its KKT measure reaches this; the JSON 'solution' is the iterate "
                    "of a converged run. [default: 1e-8, with --real float 2e-5]")
+@click.option("--tol-rel", "tol_rel", default=None, type=click.FloatRange(min=0, min_open=True),
+              help="A run has converged when its relative KKT measure (docs/algorithm.md section 6) reaches this, "
+                   "in place of --tol: for models in physical units. [default: the OCP file's "
+                   "options(kkt_tol_rel=...), else not used]")
 @_solver_options("0: exact Newton")
 @_real_option("With --backend c, the study runs the solver generated in that type (float: see what single "
               "precision costs); the default --qp-tol follows it.")
@@ -158,7 +162,7 @@ def _int_list_or_full(value: str) -> list:
                    "a line search on an l1 merit function) from the start. [default: with --start cold]")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the study as JSON.")
 @click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None, help="Write KKT against iteration as PNG.")
-def converge(ocp_file, m_list, iters, start, tol, backend, globalise, json_out, plot_out, real, **kwargs):
+def converge(ocp_file, m_list, iters, start, tol, tol_rel, backend, globalise, json_out, plot_out, real, **kwargs):
     """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M.
 
     Exits with 1 when a run failed (an error of the solver or a non-finite KKT measure; the
@@ -175,7 +179,7 @@ def converge(ocp_file, m_list, iters, start, tol, backend, globalise, json_out, 
         check_output_file(plot_out, "--plot")
     study = run_converge_cli(ocp_file=ocp_file, m_list=None if m_list is None else _int_list_or_full(m_list),
                              iters=iters, start=start, backend=backend, json_out=json_out, plot_out=plot_out,
-                             tol=tol, real=real, globalise=globalise, **_runtime_values(kwargs))
+                             tol=tol, tol_rel=tol_rel, real=real, globalise=globalise, **_runtime_values(kwargs))
     bad = failed_runs(study)
     if bad:
         total = len(study["runs"]) + int(study.get("globalised") is not None)

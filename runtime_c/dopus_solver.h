@@ -28,7 +28,10 @@
  * mu_g N x ng, mu_b N x nw, mu_bN nx, mu_r nr, nu ne, parameters (N+1) x np. Multipliers are
  * signed (positive when the upper side of a row is active, negative for the lower side);
  * docs/algorithm.md section 1 gives the Lagrangian. Arrays of size zero are not read or
- * written (any pointer, also NULL, may be passed).
+ * written (any pointer, also NULL, may be passed). Every value of the API is in the OCP's
+ * declared units: with a declared scaling (docs/algorithm.md section 16) the solver works in
+ * scaled variables and converts at this boundary (the KKT measure of dopus_kkt_eval and the
+ * scales of dopus_get_scales are those of the scaled variables).
  *
  * Every function returning int returns a status (enum dopus_status below) unless stated.
  * On failure the state stays consistent: a failed feedback takes no step; a failed
@@ -253,6 +256,7 @@ typedef struct {
                             and equality parts of the KKT measure at the prepared point */
     dopus_real kkt[4];    /* stat, eq, ineq, comp of the last dopus_kkt_eval (NaN before) */
     dopus_real kkt_max;   /* their largest */
+    dopus_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
     /* seconds per phase of the last call that ran it (enum dopus_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
      * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback
@@ -529,6 +533,7 @@ struct dopus_solver {
     dopus_health health; /* safe outputs, divergence test and recovery (section 9) */
     dopus_lm lm;         /* the Levenberg-Marquardt term (sections 3 and 10) */
     dopus_real kkt[4];   /* KKT parts of the last dopus_kkt_eval: stat, eq, ineq, comp */
+    dopus_real kkt_rel;  /* its relative measure */
     dopus_timer timer;
     dopus_anytime anytime; /* the budget's bookkeeping (section 14) */
 };

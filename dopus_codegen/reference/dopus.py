@@ -134,6 +134,15 @@ class ReferenceDopus:
     ``qp_infeasible_row`` (the row that makes the last QP infeasible, as ``Solver`` gives it).
     """
 
+    def __new__(cls, disc=None, *args, **kwargs):
+        # a scaled problem (docs/algorithm.md section 16): the iteration runs on disc.scaled and
+        # the API converts at its boundary
+        if cls is ReferenceDopus and getattr(disc, "scaled", None) is not None:
+            from .scaled import ScaledReference
+
+            return ScaledReference(ReferenceDopus(disc.scaled, *args, **kwargs), disc)
+        return super().__new__(cls)
+
     def __init__(self, disc, settings: Optional[Settings] = None, **changes):
         """``settings``: the solver's settings (None: the OCP file's ``options(...)`` of
         ``disc``); ``changes``: settings changed from them by name (``M=3``; None: not given).
@@ -1124,7 +1133,8 @@ class ReferenceDopus:
 
     def _compute_scales(self):
         """``(scale_x, scale_u)``: the largest magnitude among the finite bounds, the OCP
-        file's guess, the default x0 and 1."""
+        file's guess, the default x0 and 1; a memory state of a rate constraint at least its
+        control's."""
         d = self.disc
         gx = np.asarray(d.initial_guess.x, float).reshape(self.N + 1, self.nx)
         gu = np.asarray(d.initial_guess.u, float).reshape(self.N, self.n_u)
@@ -1134,8 +1144,10 @@ class ReferenceDopus:
             a = np.abs(np.vstack(cols))
             a[~np.isfinite(a)] = 0.0
             return np.maximum(1.0, a.max(axis=0))
-        return (scale([self.lbx[None], self.ubx[None], x0[None], gx]),
-                scale([self.lbu[None], self.ubu[None], gu]))
+        sx, su = scale([self.lbx[None], self.ubx[None], x0[None], gx]), scale([self.lbu[None], self.ubu[None], gu])
+        for srow, crow in getattr(d.spec.model, "memory", ()) or ():
+            sx[srow] = max(sx[srow], su[crow])     # a memory state carries its control
+        return sx, su
 
     def _reset_health(self, plan_u) -> None:
         self._n_failed = 0

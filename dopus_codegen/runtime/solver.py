@@ -701,7 +701,8 @@ class Solver:
         out = self._out(4)
         self._check(self._c("kkt_eval")(self._s, self._ptr(xh), self._ptr(out)), "kkt")
         stat, eq, ineq, comp = (float(v) for v in out)
-        return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
+        return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp,
+                "rel": float(self._info().kkt_rel)}
 
     # ------------------------------------------------------------------ read-only state
     initialized = _info_property("initialized", bool)

@@ -17,8 +17,8 @@ JSON written by :func:`run_study`::
 
     {"problem": name, "N": N, "backend": "reference" | "c", "start": "cold" | "warm",
      "hessian": ..., "regularization": ..., "reg_eps": ..., "cost_hessian": "fresh" | "stored",
-     "qp_tol": ..., "qp_max_iter": ..., "tol": tol,
-     "runs": [{"M": M, "kkt": [...], "stat": [...], "eq": [...], "ineq": [...], "comp": [...],
+     "qp_tol": ..., "qp_max_iter": ..., "tol": tol, "tol_rel": tol_rel or null,
+     "runs": [{"M": M, "kkt": [...], "stat": [...], "eq": [...], "ineq": [...], "comp": [...], "rel": [...],
                "status": "converged" | "not converged" | "failed", "message": why or null,
                "iterations_to_tol": i or null}, ...],
      "globalised": {"kkt": [...], "stat": ..., "status": ..., "message": why and what to try or null,
@@ -28,7 +28,9 @@ JSON written by :func:`run_study`::
                   "x": [[...]], "u": [[...]], "objective": J} or null}
 
 ``kkt[i]`` is the measure after ``i`` iterations (``kkt[0]``: the initial point with
-``xhat_fixed``). A run is ``converged`` once ``kkt <= tol``, ``not converged`` if it ran
+``xhat_fixed``), ``rel[i]`` its relative measure (docs/algorithm.md section 6). A run is
+``converged`` once ``kkt <= tol``, or with a relative tolerance ``tol_rel`` (the OCP file's
+``options(kkt_tol_rel=...)``, ``--tol-rel``) once ``rel <= tol_rel``, ``not converged`` if it ran
 every iteration without that, ``failed`` if a call of the backend failed or the measure
 became non-finite: it stops there and ``message`` says why (for an infeasible QP, with the
 stage-0 rows the state violates). Non-finite numbers are written as ``null``.
@@ -204,7 +206,8 @@ def run_globalised(disc, iters: int, start, s, backend_factory, tol: float, prog
 
 def run_study(disc, m_list, iters: int, start, settings: Optional["settings_mod.Settings"] = None,
               backend_factory: Optional[Callable] = None, backend_name: Optional[str] = None,
-              progress: Optional[Callable] = None, tol: float = 1e-8, globalise: bool = False,
+              progress: Optional[Callable] = None, tol: float = 1e-8, tol_rel: Optional[float] = None,
+              globalise: bool = False,
               **changes) -> dict:
     """Run the study; return the JSON structure of the module docstring.
 
@@ -215,8 +218,10 @@ def run_study(disc, m_list, iters: int, start, settings: Optional["settings_mod.
     ``backend_factory(disc, settings=...)`` builds a backend (default:
     :class:`~dopus_codegen.reference.dopus.ReferenceDopus`).
     ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
-    ``tol``: the KKT measure at which a run counts as converged.
-    ``globalise``: also run the globalised first solve (:func:`run_globalised`) after the M runs.
+    ``tol``: the KKT measure at which a run counts as converged; ``tol_rel`` (None: not used):
+    the relative measure at which it does, in place of ``tol``.
+    ``globalise``: also run the globalised first solve (:func:`run_globalised`) after the M runs
+    (its convergence is on the absolute measure ``tol``).
     """
     from ..errors import DopusError
     from ..reference.dopus import ReferenceDopus
@@ -236,11 +241,12 @@ def run_study(disc, m_list, iters: int, start, settings: Optional["settings_mod.
     last_iterates = {}
     for run_index, M in enumerate(Ms):
         be = backend_factory(disc, settings=s.replace(M=M, mode="fixed"))
-        rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "status": None, "message": None}
+        rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "rel": [], "status": None,
+               "message": None}
 
         def record():
             k = be.kkt(start.xhat_fixed)
-            for key in ("kkt", "stat", "eq", "ineq", "comp"):
+            for key in ("kkt", "stat", "eq", "ineq", "comp", "rel"):
                 rec[key].append(float(k[key]))
             return k["kkt"]
 
@@ -264,7 +270,7 @@ def run_study(disc, m_list, iters: int, start, settings: Optional["settings_mod.
                 + _infeasibility_note(disc, exc, start.xhat_fixed)
             if progress is not None:
                 progress(run_index, M, iters, float("nan"))
-        rec["iterations_to_tol"] = iterations_to(rec["kkt"], tol)
+        rec["iterations_to_tol"] = iterations_to(*((rec["kkt"], tol) if tol_rel is None else (rec["rel"], tol_rel)))
         if rec["status"] is None:
             rec["status"] = CONVERGED if rec["iterations_to_tol"] is not None else NOT_CONVERGED
         runs.append(rec)
@@ -281,7 +287,7 @@ def run_study(disc, m_list, iters: int, start, settings: Optional["settings_mod.
         "start": start.label, "hessian": s.hessian, "regularization": s.regularization, "reg_eps": float(s.reg_eps),
         "cost_hessian": s.cost_hessian, "lm": s.lm if isinstance(s.lm, str) else float(s.lm), "qp_tol": s.qp_tol,
         "qp_max_iter": s.qp_max_iter,
-        "tol": float(tol), "runs": runs, "globalised": glob,
+        "tol": float(tol), "tol_rel": None if tol_rel is None else float(tol_rel), "runs": runs, "globalised": glob,
         "solution": _solution(disc, runs, last_iterates, glob),
     }
 
@@ -346,26 +352,30 @@ def format_table(study: dict, tol: Optional[float] = None) -> str:
     """Plain-text summary: per M the iterations to ``tol`` (default: the study's), the last
     KKT, the status and, for a failed run, why."""
     N = study["N"]
-    tol = study.get("tol", 1e-8) if tol is None else tol
+    tol_rel = study.get("tol_rel")
+    rel = tol_rel is not None and tol is None
+    tol = (tol_rel if rel else study.get("tol", 1e-8)) if tol is None else tol
+    head = ("iters to rel %.0e" if rel else "iters to %.0e") % tol
     lines = [f"{study['problem']}: {study['start']} start, {study['hessian']} Hessian, "
              f"regularization {study['regularization']}, cost Hessian {study.get('cost_hessian', 'fresh')}, "
              f"backend {study['backend']}",
-             f"{'M':>8} {'iters to %.0e' % tol:>14} {'last KKT':>10}  status"]
+             f"{'M':>8} {head:>18} {'last KKT':>10} {'last rel':>10}  status"]
     for r in study["runs"]:
-        it = iterations_to(r["kkt"], tol)
+        it = iterations_to(r["rel"] if rel else r["kkt"], tol)
         label = f"{r['M']} (full)" if r["M"] == N - 1 else str(r["M"])
         last = r["kkt"][-1] if r["kkt"] else float("nan")
+        last_rel = r["rel"][-1] if r.get("rel") else float("nan")
         status = r["status"] + (f": {r['message']}" if r.get("message") else "")
-        lines.append(f"{label:>8} {('-' if it is None else str(it)):>14} {last:10.2e}  {status}")
+        lines.append(f"{label:>8} {('-' if it is None else str(it)):>18} {last:10.2e} {last_rel:10.2e}  {status}")
     g = study.get("globalised")
     if g is not None:
-        it = iterations_to(g["kkt"], tol)
+        it = iterations_to(g["kkt"], study.get("tol", 1e-8) if rel else tol)
         last = g["kkt"][-1] if g["kkt"] else float("nan")
         relaxed = g.get("relaxed") or [False] * len(g["alpha"])
         steps = ", ".join("R" if r else f"{a:g}" for a, r in zip(g["alpha"][:12], relaxed)) \
             + (", ..." if len(g["alpha"]) > 12 else "")
         status = g["status"] + (f": {g['message']}" if g.get("message") else "")
-        lines.append(f"{'glob.':>8} {('-' if it is None else str(it)):>14} {last:10.2e}  {status}"
+        lines.append(f"{'glob.':>8} {('-' if it is None else str(it)):>18} {last:10.2e} {float('nan'):10.2e}  {status}"
                      + (f" (step lengths {steps})" if steps else ""))
     sol = study.get("solution")
     if sol is None:
@@ -437,7 +447,7 @@ def effective_settings(declared: dict, m_list, real: str = "double", **flags):
 
 
 def run_converge_cli(ocp_file, m_list, iters, start, backend="reference", json_out=None, plot_out=None, tol=None,
-                     real=None, globalise=None, **flags) -> dict:
+                     real=None, tol_rel=None, globalise=None, **flags) -> dict:
     """The body of ``dopus-gen converge`` (bad input raises OcpError, ValueError or
     RuntimeError with a message; the command line turns them into one line). ``flags``: the
     settings given on the command line (:data:`dopus_codegen.settings.RUNTIME_SETTINGS`,
@@ -467,6 +477,8 @@ def run_converge_cli(ocp_file, m_list, iters, start, backend="reference", json_o
     ocp.options(real=real)    # the C backend is generated in this type
     if tol is None:
         tol = settings.KKT_TOL_DEFAULT[real]
+    if tol_rel is None:
+        tol_rel = declared.get("kkt_tol_rel")
     disc = build_functions(ocp)
     if s.hessian == "gauss-newton" and disc.stage_hess_gn is None:
         raise ValueError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
@@ -496,7 +508,7 @@ def run_converge_cli(ocp_file, m_list, iters, start, backend="reference", json_o
                 done["n"] = target
 
         study = run_study(disc, Ms, iters, sp, s, backend_factory=factory, backend_name=backend,
-                          progress=progress, tol=tol, globalise=bool(globalise))
+                          progress=progress, tol=tol, tol_rel=tol_rel, globalise=bool(globalise))
     study["sources"] = {k: sources[k] for k in ("M", *settings.RUNTIME_SETTINGS, "real") if k in sources}
     study["real"] = real
     click.echo(format_table(study))

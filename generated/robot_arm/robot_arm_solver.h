@@ -28,7 +28,10 @@
  * mu_g N x ng, mu_b N x nw, mu_bN nx, mu_r nr, nu ne, parameters (N+1) x np. Multipliers are
  * signed (positive when the upper side of a row is active, negative for the lower side);
  * docs/algorithm.md section 1 gives the Lagrangian. Arrays of size zero are not read or
- * written (any pointer, also NULL, may be passed).
+ * written (any pointer, also NULL, may be passed). Every value of the API is in the OCP's
+ * declared units: with a declared scaling (docs/algorithm.md section 16) the solver works in
+ * scaled variables and converts at this boundary (the KKT measure of robot_arm_kkt_eval and the
+ * scales of robot_arm_get_scales are those of the scaled variables).
  *
  * Every function returning int returns a status (enum robot_arm_status below) unless stated.
  * On failure the state stays consistent: a failed feedback takes no step; a failed
@@ -253,6 +256,7 @@ typedef struct {
                             and equality parts of the KKT measure at the prepared point */
     robot_arm_real kkt[4];    /* stat, eq, ineq, comp of the last robot_arm_kkt_eval (NaN before) */
     robot_arm_real kkt_max;   /* their largest */
+    robot_arm_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
     /* seconds per phase of the last call that ran it (enum robot_arm_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
      * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback
@@ -529,6 +533,7 @@ struct robot_arm_solver {
     robot_arm_health health; /* safe outputs, divergence test and recovery (section 9) */
     robot_arm_lm lm;         /* the Levenberg-Marquardt term (sections 3 and 10) */
     robot_arm_real kkt[4];   /* KKT parts of the last robot_arm_kkt_eval: stat, eq, ineq, comp */
+    robot_arm_real kkt_rel;  /* its relative measure */
     robot_arm_timer timer;
     robot_arm_anytime anytime; /* the budget's bookkeeping (section 14) */
 };
