@@ -209,10 +209,10 @@ class Rows:
     soft: Optional[np.ndarray] = None
     name: Optional[str] = None    # the declared name (messages, tables, the C row names)
     stages: Optional[Tuple[int, ...]] = None   # path rows: the stages where they hold (None: all)
-    cost: bool = False    # a least-squares term on chosen stages carried as soft rows (not a constraint)
     scale: Optional[np.ndarray] = None   # the declared scale per row (NaN: not declared), or None
     #: rate rows: the control rows whose scales are the rows' scales when none is declared
     scale_controls: Optional[Tuple[int, ...]] = None
+    cost: bool = False    # a least-squares term on chosen stages carried as soft rows (not a constraint)
 
     def labels(self, kind: str, index: int) -> Tuple[str, ...]:
         """One label per row: ``name`` / ``name[i]``, or ``<kind> <index>`` / ``<kind> <index> row i``."""
