@@ -93,6 +93,9 @@
 #define CERT_RES_DUAL DOPUS_PREC(1e-9, 1e-4)
 #define CERT_RES_PRIMAL DOPUS_PREC(1e-6, 1e-3)
 #define CERT_SEP DOPUS_PREC(1e-6, 1e-3)
+/* The separation of a certificate tested after a stall or failure (see
+ * primal_infeasible_at_tol): some 5000 (double) or 100 (float) rounding units. */
+#define CERT_SEP_STALL DOPUS_PREC(1e-12, 1e-5)
 /* Reduction of the normalised certificate residual that counts as progress of the
  * iteration (see qp_last_progress). */
 #define CERT_PROGRESS DOPUS_R(0.5)
@@ -1285,26 +1288,86 @@ static int primal_infeasible(const dopus_qp_workspace *ws, const dopus_qp_in *in
     return bty > CERT_SEP * bscale;
 }
 
-/* The same certificate, tested when progress has stalled, with the separation measured
- * against the tolerance instead of CERT_SEP: a point w violates some constraint by at
- * least (b'y - |A'y|_inf |w|_1) / |y|_1, and when that exceeds tol (relative to the bounds)
- * for points of the size of the iterate, none of them meets the constraints to the
- * tolerance the solve asks for (a QP infeasible by a margin just above the tolerance, whose
- * dual iterate diverges to a certificate that is exact to round-off). The A'y term keeps a
- * residual A'y that is small but not zero from passing for a separation. */
+/* The largest coefficient of inequality row j of stage k (k = N: the terminal rows). */
+static dopus_real row_norm(const dopus_qp_in *in, int k, int j)
+{
+    dopus_real m = DOPUS_R(0.0);
+    int c;
+    if (k < N && NG > 0 && j >= NW)
+        for (c = 0; c < NW; ++c)
+            m = dmax(m, dopus_fabs(in->C[k][(j - NW) + c * NG]));
+    else if (k == N && NR > 0 && j >= NX)
+        for (c = 0; c < NX; ++c)
+            m = dmax(m, dopus_fabs(in->R[(j - NX) + c * NR]));
+    else
+        m = DOPUS_R(1.0);
+    return m;
+}
+
+/* The mass of the dual iterate with each multiplier weighted by the largest coefficient of
+ * its row, sum |y_i| |a_i|_inf over the initial-state, dynamics and terminal equality rows
+ * and the hard sides: with it, (b'y - |A'y|_inf |w|_1) / mass bounds from below the largest
+ * violation of a row in the units of its largest coefficient, so that a row written with
+ * small coefficients (a terminal equality row scaled by 1e-3) does not pass for a smaller
+ * violation than the same row normalised. */
+static dopus_real certificate_mass(const dopus_qp_workspace *ws, const dopus_qp_in *in)
+{
+    dopus_real mass = DOPUS_R(0.0);
+    int k, i, c, b, j;
+    for (i = 0; i < NX; ++i)
+        mass += dopus_fabs(ws->lam[i]);
+    for (k = 0; k < N; ++k)
+        for (i = 0; i < NX; ++i) {
+            dopus_real m = DOPUS_R(1.0);
+            for (c = 0; c < NW; ++c)
+                m = dmax(m, dopus_fabs(in->Phi[k][i + c * NX]));
+            mass += m * dopus_fabs(ws->lam[(k + 1) * NX + i]);
+        }
+    for (i = 0; i < NE; ++i) {
+        dopus_real m = DOPUS_R(0.0);
+        for (c = 0; c < NX; ++c)
+            m = dmax(m, dopus_fabs(in->Req[i + c * NE1]));
+        mass += m * dopus_fabs(ws->nu[i]);
+    }
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            const dopus_real m = row_norm(in, k, j);
+            if (ws->has_lo[b] && !(SOFT && ws->soft_lo[b]))
+                mass += m * ws->z_lo[b];
+            if (ws->has_up[b] && !(SOFT && ws->soft_up[b]))
+                mass += m * ws->z_up[b];
+        }
+    return mass;
+}
+
+/* The same certificate, tested when the iteration has stalled or failed, with the
+ * separation measured against its own accuracy instead of CERT_SEP: a point w violates
+ * some row by at least (b'y - |A'y|_inf |w|_1) / certificate_mass in the units of the row's
+ * largest coefficient (the A'y term keeps a residual A'y that is small but not zero from
+ * passing for a separation, for points of the size of the iterate), and a separation
+ * beyond CERT_SEP_STALL relative to the data (far above the round-off of b'y) proves that
+ * no point meets the constraints. A QP infeasible
+ * by a margin near the tolerance stalls before its dual iterate has grown to the regular
+ * test's certificate (its residuals cannot fall below the tolerance, and the separation of
+ * its certificate, which is exact to round-off, is the smallest violation any point can
+ * reach); the test uses the smaller of CERT_SEP_STALL and tol, so that a QP infeasible by
+ * more than the tolerance asked for is flagged whatever the tolerance. */
 static int primal_infeasible_at_tol(const dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_res *r,
                                     dopus_real data_scale, dopus_real tol)
 {
     dopus_real bscale, y1, bty, w1 = DOPUS_R(0.0);
     int i;
+    QP_TRACE("diagnosis: |y| %.3e (data %.3e) |A'y|/|y| %.3e\n", r->ny, data_scale, r->aty / r->ny);
     if (!dual_ray(r, data_scale))
         return 0;
     bty = farkas_separation(ws, in, &bscale, &y1);
     for (i = 0; i < NP; ++i)
         w1 += dopus_fabs(ws->prim[i]);
     bty -= r->aty * w1;
+    y1 = certificate_mass(ws, in);
     QP_TRACE("stalled: certificate separation %.3e (tolerance %.1e)\n", bty / (y1 * bscale), tol);
-    return y1 > DOPUS_R(0.0) && bty / y1 > tol * bscale;
+    return y1 > DOPUS_R(0.0) && bty / y1 > dmin(tol, CERT_SEP_STALL) * bscale;
 }
 
 /* Unboundedness certificate on the normalised primal iterate d = w / |w|: a feasible ray
@@ -2024,9 +2087,14 @@ static dopus_real qp_objective(const dopus_qp_in *in, const dopus_qp_sol *sol)
 static int qp_result(const qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_res *r,
                      int status, int iter, dopus_qp_sol *sol, dopus_qp_info *info)
 {
-    const int keep_best =
-        (status == DOPUS_QP_MAX_ITER || status == DOPUS_QP_STALLED || status == DOPUS_QP_NUMERICAL) &&
-        isfinite(L->best_merit) && !(merit(r) <= L->best_merit);
+    int keep_best;
+    /* a failed factorisation or the iteration limit: the diverged dual iterate may prove
+     * infeasibility as at a stall (qp_track_best) */
+    if ((status == DOPUS_QP_NUMERICAL || status == DOPUS_QP_MAX_ITER) &&
+        primal_infeasible_at_tol(ws, in, r, L->data_scale, L->st.tol))
+        status = DOPUS_QP_PRIMAL_INFEASIBLE;
+    keep_best = (status == DOPUS_QP_MAX_ITER || status == DOPUS_QP_STALLED || status == DOPUS_QP_NUMERICAL) &&
+                isfinite(L->best_merit) && !(merit(r) <= L->best_merit);
     if (info) {
         info->inertia_corrections = L->n_corr;
         info->terminal_augmentations = L->n_aug;

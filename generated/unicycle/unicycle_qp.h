@@ -62,10 +62,12 @@
  * a feasible ray with d'Hd < 0, or Hd ~ 0 and g'd < 0, proves unboundedness. On an
  * infeasible QP the residuals stop improving while the dual iterate diverges towards a
  * certificate: each halving of |A'y| / |y| counts as progress, so the iteration is not
- * stopped as stalled before the certificate is exact. When it stalls nonetheless, the
- * certificate is tested against the tolerance (every point violates some constraint by at
- * least b'y / |y|_1; above tol relative to the bounds the QP is infeasible to the accuracy
- * asked for, e.g. a QP infeasible by a relative margin of 1e-9 at tol 1e-10).
+ * stopped as stalled before the certificate is exact. When it stalls nonetheless, or the
+ * factorisation fails or the iteration limit is reached, the certificate is tested against
+ * its own accuracy: every point violates some row by at least b'y / sum |y_i| |a_i|_inf (in
+ * the units of the row's largest coefficient), and beyond 1e-12 of the data (float 1e-5; the
+ * tolerance when smaller) the QP is infeasible, e.g. a QP infeasible by a relative margin
+ * of 1e-9 at tol 1e-10, whose residuals cannot fall below the tolerance.
  *
  * Cold start: w = 0, lam = nu = 0, centred: every slack t = max(v - bound, f) and its
  * multiplier z = f / t (t z = f on every side), with f the primal infeasibility of w = 0
