@@ -86,7 +86,15 @@
  * taken from the primal point, slacks and multipliers floored at 1e-2 (relative to the
  * unit values of the cold start; smaller floors save about one iteration in the robot-arm
  * closed loop but let the warm start reach another local minimiser of nonconvex QPs more
- * often); the careful steps throughout. A restart after a stall starts cold. Feedback
+ * often); the careful steps throughout. A restart after a stall starts cold.
+ *
+ * Cold start far outside a soft side (a QP with soft rows whose measured state or its
+ * first prediction violates a soft side by more than 100): the primal start is the rollout
+ * of the dynamics from x0 (controls at the point of their box nearest to 0), the slacks of
+ * the violated soft sides take up the violation with the side's price zl + Zl s split
+ * between the side's and the slack's multiplier, and the multipliers of the dynamics and
+ * of the control boxes are those that make the stationarity rows hold at the start. From
+ * w = 0 such QPs (measurements 1e3 to 1e6 times outside the bounds) stalled. Feedback
  * (dopus_solver.c) warm-starts from the previous solution shifted with the horizon and
  * retries cold when that fails.
  *
