@@ -377,6 +377,16 @@ class ReferenceDopus:
     def _slot(self, k: int) -> int:
         return (self.ring_head + k) % self.N
 
+    @property
+    def initialized(self) -> bool:
+        """init has succeeded (and stop has not been called since)."""
+        return self._initialised
+
+    @property
+    def qp_ready(self) -> bool:
+        """A QP is prepared for the next feedback."""
+        return self._qp_ready
+
     def slot_of(self, k: int):
         """The ring-buffer slot that holds stage ``k`` (``slots[(ring_head + k) mod N]``)."""
         return self.slots[self._slot(k)]

@@ -164,7 +164,7 @@ def _soft_change(be, x, u, dx, du):
         total += _rows(x[k] + dx[k], be.lbx, be.ubx, sx)[1] - _rows(x[k], be.lbx, be.ubx, sx)[1]
     for k in range(N):
         if be.ng:
-            s = be.slots[be._slot(k)]
+            s = be.slot_of(k)
             dw = np.concatenate([dx[k], du[k]])
             total += (_rows(s.g + s.Ct @ dw, be.lg_k[k], be.ug_k[k], sg)[1]
                       - _rows(s.g, be.lg_k[k], be.ug_k[k], sg)[1])
@@ -183,7 +183,7 @@ def globalised_step(be, st: GlobState, xhat0) -> None:
     C = constants()
     xhat0 = _xhat(be, xhat0, "globalised_step: xhat0")
     st.reason, st.trials = "ok", 0
-    if not be._initialised or not be._qp_ready:
+    if not be.initialized or not be.qp_ready:
         st.reason = "not_prepared"
         raise DopusError.of("not_prepared", "globalised step: no prepared QP (call init first)")
     mode = be.mode
