@@ -146,10 +146,8 @@ def write_problem_header(build_dir: Path, name: str, xhat_fixed: Sequence[float]
 
 def _generated_sources(gen_dir: Path) -> tuple:
     meta = read_meta(gen_dir)
-    name = meta["name"]
-    srcs = [f for f in meta["files"] if f.endswith(".c") and f not in (f"{name}_main.c", f"main_{name}.c")]
-    casadi = f"{name}_casadi.c"
-    return name, [f for f in srcs if f != casadi], casadi
+    # the translation units the generated build compiles (the solver's includes its modules)
+    return meta["name"], list(meta["sources"]["strict"]), meta["sources"]["casadi"]
 
 
 def _compile(base: List[str], gen_dir: Path, build_dir: Path, fw_sources, obj_dir: Path, what: str) -> List[Path]:

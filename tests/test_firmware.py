@@ -137,7 +137,9 @@ def test_instruction_count_and_memory_figures(report):
     """The instruction count is exact: a loop of a known number of instructions reads back
     exactly; the solver struct lies in .bss; one iteration uses a measured stack."""
     s = report["targets"]["m7-double"]
-    assert s["calibration_ratio"] == 1.0
+    # exact up to the instructions of the two clock reads around the loop (their calls and the
+    # loop's set-up: a few dozen, depending on the code's layout), out of 2e6
+    assert abs(s["calibration_ratio"] - 1.0) * 2e6 <= 64, s["calibration_ratio"]
     assert s["ram_bss"] >= s["solver_bytes"]
     assert 0 < s["stack_iteration"] < 65536
     assert s["default_clock"] == 0          # bare metal: no default clock, timings say so
