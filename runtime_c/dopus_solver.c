@@ -549,6 +549,7 @@ static int dopus_init_finish(dopus_solver *s)
     }
     s->qp_status = 0;
     s->qp_iterations = 0;
+    s->qp_factorizations = 0;
 
     rc = dopus_linearize_all(s);
     if (rc != DOPUS_OK) {
@@ -770,6 +771,7 @@ static int dopus_qp_solve_bound(dopus_solver *s, int warm)
         settings.max_iter = s->anytime.qp_cap; /* a time budget (section 14) */
     }
     settings.warm_start = warm;
+    settings.active_set = warm ? DOPUS_QP_ACTIVE_SET : 0;
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
         in->H[k] = slot->Ht;
@@ -804,6 +806,7 @@ static int dopus_qp_attempt(dopus_solver *s, int warm)
     int qs;
     qs = dopus_qp_solve_bound(s, warm);
     s->qp_iterations += s->qp_info.iterations;
+    s->qp_factorizations += s->qp_info.factorizations;
     return qs;
 }
 
@@ -817,6 +820,7 @@ static int dopus_feedback_qp(dopus_solver *s)
     int qs;
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
+    s->qp_factorizations = 0;
     s->qp_cold_retry = 0;
     s->anytime.work += DOPUS_WORK_QP;
     if (s->settings.qp_warm_start) {
@@ -1661,6 +1665,7 @@ static int dopus_extra_iteration(dopus_solver *s)
 static int dopus_anytime_run(dopus_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = DOPUS_OK;
+    const int qp_factorizations = s->qp_factorizations;
     if (!dopus_budget_on(s)) {
         return DOPUS_OK;
     }
@@ -1676,6 +1681,7 @@ static int dopus_anytime_run(dopus_solver *s)
     }
     s->qp_status = qp_status;
     s->qp_iterations = qp_iterations;
+    s->qp_factorizations = qp_factorizations;
     s->qp_cold_retry = cold;
     s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
     return rc == DOPUS_ERR_QP ? DOPUS_OK : rc;
@@ -1933,6 +1939,7 @@ void dopus_get_info(const dopus_solver *s, dopus_info *info)
     info->initialized = s->set_up && s->initialized;
     info->qp_status = s->qp_status;
     info->qp_iterations = s->qp_iterations;
+    info->qp_factorizations = s->qp_factorizations;
     info->qp_cold_retry = s->qp_cold_retry;
     info->flags = s->health.flags;
     info->recoveries = s->health.n_recoveries;
@@ -2026,6 +2033,7 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     }
     s->qp_status = 0;
     s->qp_iterations = 0;
+    s->qp_factorizations = 0;
     for (k = 0; k < DOPUS_N; ++k) {
         s->rho[k] = DOPUS_R(0.0);
         s->selected[k] = 0;

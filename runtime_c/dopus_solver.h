@@ -236,6 +236,9 @@ typedef struct {
     int qp_status;        /* enum dopus_qp_status of the last feedback's QP */
     int qp_iterations;    /* its iterations (the sum over the solves of the call) */
     int qp_cold_retry;    /* 1 when its warm-started QP failed and the cold retry ran */
+    int qp_factorizations; /* its factorisations of the Riccati recursion (the sum over the solves
+                             of the call: interior-point iterations, inertia corrections, sweeps
+                             of the active-set start) */
     int flags;            /* DOPUS_FLAG_* raised by the last feedback and the prepare after it:
                             u0 clipped, fallback control, divergence, recovery, ... */
     int recoveries;       /* re-initialisations by the automatic recovery since init */
@@ -371,6 +374,10 @@ enum dopus_budget_unit {
 #define DOPUS_ADAPTIVE_ETA DOPUS_R(0.1)          /* default eta of adaptive M */
 #define DOPUS_WORK_QP DOPUS_N                    /* work units of a QP solve */
 
+/* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
+ * section 4, feedback; dopus_qp.h). */
+#define DOPUS_QP_ACTIVE_SET 8
+
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static dopus_solver s;`;
  * the fields are internal (use the functions above). */
@@ -480,6 +487,7 @@ struct dopus_solver {
     dopus_qp_info qp_info;
     int qp_status;
     int qp_iterations;
+    int qp_factorizations;
     int qp_cold_retry; /* the last feedback needed the cold retry */
 
     /* the QP's workspace and solution, live only inside feedback, share their memory with

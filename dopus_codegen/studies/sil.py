@@ -231,6 +231,7 @@ class _Record:
         self.t, self.x, self.u, self.kkt, self.parts, self.status, self.recomputed = [], [], [], [], [], [], []
         self.signals = {name: [] for name in spec.signals}
         self.qp_iterations = []
+        self.qp_factorizations = []
         self.qp_cold_retry = []
         self.timing: dict[str, list] = {"feedback": [], "prepare": [], "total": []}
         self.phase_timing: dict[str, list] = {}  # the backend's own phase timers
@@ -283,6 +284,7 @@ class _Record:
                         for k, vals in self.signals.items()},
             "recomputed": self.recomputed,
             "qp_iterations": self.qp_iterations[:len(self.status)],
+            "qp_factorizations": self.qp_factorizations[:len(self.status)],
             "qp_cold_retry": self.qp_cold_retry[:len(self.status)],
             "timing_us": {"feedback": self.timing["feedback"], "prepare": self.timing["prepare"],
                           "total": self.timing["total"],
@@ -350,6 +352,7 @@ class _Loop:
         if status != 0 and self.first_failure is None:
             self.first_failure = {"t": t_i, "message": self._failure_text(xhat)}
         self.rec.qp_iterations.append(int(getattr(self.ctrl, "qp_iterations", 0) or 0))
+        self.rec.qp_factorizations.append(int(getattr(self.ctrl, "qp_factorizations", 0) or 0))
         self.rec.qp_cold_retry.append(bool(getattr(self.ctrl, "qp_cold_retry", False)))
         phases = _split_phases("feedback", _changed(self.rec.snap, dict(getattr(self.ctrl, "timings", {}) or {})))
         kkt, status = self.kkt(xhat, status)
@@ -552,6 +555,12 @@ def summarize(run, settle: float = 0.2) -> dict:
     out["feedback_median_us"] = float(np.median(fb)) if fb.size else math.nan
     out["feedback_max_us"] = float(np.max(fb)) if fb.size else math.nan
     out["soft_violation"] = {k: float(max(v, default=0.0)) for k, v in (run.get("soft_violation") or {}).items()}
+    # the QP's work per instant: factorisations of the Riccati recursion and interior-point
+    # iterations (median, 99th percentile and largest over the instants)
+    for key in ("qp_factorizations", "qp_iterations"):
+        a = np.asarray(run.get(key) or [], dtype=float)
+        out[key] = ({"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(np.max(a))}
+                    if a.size else None)
     return out
 
 
@@ -591,6 +600,12 @@ def format_summary(summaries) -> str:
         lines.append(f"(max KKT settled: excluding the first {summaries[0]['settle']} {summaries[0]['time_unit']} "
                      "after the start "
                      f"and after each event; it = feedback + prepare, fb = feedback alone)")
+    for s in summaries:
+        f, it = s.get("qp_factorizations"), s.get("qp_iterations")
+        if f and it:
+            lines.append(f"{s['label']}: QP factorisations per instant median {f['median']:g}, 99th percentile "
+                         f"{f['p99']:g}, max {f['max']:g}; interior-point iterations median {it['median']:g}, "
+                         f"99th percentile {it['p99']:g}")
     for s in summaries:
         if s.get("soft_violation"):
             lines.append(f"{s['label']}: largest violation of the soft rows (measured state, applied control): "
