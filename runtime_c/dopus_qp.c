@@ -2055,7 +2055,7 @@ static int qp_result(const qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in
  * QP) and the refinement steps of one sweep at most. */
 #define AS_RHO DOPUS_PREC(1e6, 1e3)
 #define AS_REFINE 6
-#define AS_DROP DOPUS_R(0.5)
+#define AS_DROP DOPUS_R(0.4)
 
 /* |D_j|^2 of row j of stage k (k = N: the terminal rows). */
 static dopus_real row_norm2(const dopus_qp_in *in, int k, int j)
@@ -2154,16 +2154,18 @@ static int as_sweep(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, q
     ws->delta = DOPUS_R(0.0);
     ws->rho_aug = DOPUS_R(0.0);
     fact = riccati_factor(ws, in);
-    if (fact == 1 && NE > 0)
+    if (fact == 1 && NE > 0) {
+        QP_TRACE("active set: terminal augmentation\n");
         fact = qp_augment_terminal(L, ws, in);
+    }
     if (fact != 0) {
         QP_TRACE("active set: factorisation failed\n");
         return 0;
     }
     for (it = 0;; ++it) {
         const dopus_real ra = as_residuals(ws, in, r);
-        QP_TRACE("active set: refinement %d stat %.2e eq %.2e act %.2e ineq %.2e\n", it, r->stat_s, r->eq_s, ra,
-                 r->ineq_s);
+        QP_TRACE("active set: refinement %d stat %.2e eq %.2e act %.2e ineq %.2e\n", it, r->stat_s, r->eq_s,
+                 ra, r->ineq_s);
         if (!(isfinite(r->stat) && isfinite(r->eq) && isfinite(ra)))
             return 0;
         if (r->stat_s <= L->st.tol && r->eq_s <= L->st.tol && ra <= L->st.tol)
@@ -2185,8 +2187,7 @@ static int as_sweep(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, q
             FOR_STAGE_ROWS(ws, k, b, j)
         if (ws->act[b])
             as_set_mu(ws, b,
-                      as_mu(ws, b) +
-                          ws->pen[b] * (row_dot(in, k, j, ws->d_prim + k * NW) + as_res(ws, b)));
+                      as_mu(ws, b) + ws->pen[b] * (row_dot(in, k, j, ws->d_prim + k * NW) + as_res(ws, b)));
         dopus_lai_axpy(NP, DOPUS_R(1.0), ws->d_prim, ws->prim);
         dopus_lai_axpy((N + 1) * NX, DOPUS_R(1.0), ws->d_lam, ws->lam);
         dopus_lai_axpy(NE, DOPUS_R(1.0), ws->d_nu, ws->nu);
@@ -2254,6 +2255,23 @@ static int as_update(const qp_loop *L, dopus_qp_workspace *ws)
     return changed;
 }
 
+/* An active simple bound (a component of w_k or x_N) set to its bound exactly (it is met
+ * to round-off): the iterate plus the step then lands on the bound exactly where the
+ * bound's value minus the iterate is exact, as a clipped control would be. */
+static void as_snap_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in)
+{
+    int k, b, j;
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            dopus_real lo, up;
+            if (!ws->act[b] || (k < N && NG > 0 && j >= NW) || (k == N && NR > 0 && j >= NX))
+                continue;
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            ws->prim[k * NW + j] = ws->act[b] == -1 ? lo : up;
+        }
+}
+
 /* The active-set start (dopus_qp.h). Returns DOPUS_QP_SOLVED with the solution and info
  * written, or QP_GO_ON with the iterate set back to the warm start for the interior point. */
 static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_qp_sol *sol,
@@ -2278,7 +2296,10 @@ static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *
     ws->penalty = 0;
     ws->delta = DOPUS_R(0.0);
     ws->rho_aug = DOPUS_R(0.0);
+    QP_TRACE("active set: %s after %d sweeps\n", solved ? "solved" : "not solved", sweep - 1);
     if (solved) {
+        as_snap_bounds(ws, in);
+        as_residuals(ws, in, &r);
         const int status = qp_result(L, ws, in, &r, DOPUS_QP_SOLVED, 0, sol, info);
         if (info)
             info->active_set = sweep - 1;

@@ -360,9 +360,9 @@ typedef struct {
     signed char act[DOPUS_QP_NB];
     dopus_real pen[DOPUS_QP_NB];
     int penalty;
-    int n_fact; /* factorisations of the solve */
-    int pivot_floors;               /* pivots within round-off of zero, replaced (see linalg) */
-    dopus_real scale_stat;          /* residual scaling factors */
+    int n_fact;            /* factorisations of the solve */
+    int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
+    dopus_real scale_stat; /* residual scaling factors */
     dopus_real scale_eq;
     dopus_real scale_ineq;
     dopus_real scale_g; /* data parts of the scaling (constant during a solve) */

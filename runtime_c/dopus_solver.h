@@ -236,9 +236,6 @@ typedef struct {
     int qp_status;        /* enum dopus_qp_status of the last feedback's QP */
     int qp_iterations;    /* its iterations (the sum over the solves of the call) */
     int qp_cold_retry;    /* 1 when its warm-started QP failed and the cold retry ran */
-    int qp_factorizations; /* its factorisations of the Riccati recursion (the sum over the solves
-                             of the call: interior-point iterations, inertia corrections, sweeps
-                             of the active-set start) */
     int flags;            /* DOPUS_FLAG_* raised by the last feedback and the prepare after it:
                             u0 clipped, fallback control, divergence, recovery, ... */
     int recoveries;       /* re-initialisations by the automatic recovery since init */
@@ -254,6 +251,10 @@ typedef struct {
                             and equality parts of the KKT measure at the prepared point */
     dopus_real kkt[4];    /* stat, eq, ineq, comp of the last dopus_kkt_eval (NaN before) */
     dopus_real kkt_max;   /* their largest */
+    /* the factorisations of the Riccati recursion of the last feedback's QP (the sum over the
+     * solves of the call: interior-point iterations, inertia corrections, sweeps of the
+     * active-set start) */
+    int qp_factorizations;
     /* seconds per phase of the last call that ran it (enum dopus_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
      * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback
@@ -375,8 +376,10 @@ enum dopus_budget_unit {
 #define DOPUS_WORK_QP DOPUS_N                    /* work units of a QP solve */
 
 /* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
- * section 4, feedback; dopus_qp.h). */
+ * section 4, feedback; dopus_qp.h), and the distance of the measurement from the predicted
+ * state, in state scales, beyond which it is not tried. */
 #define DOPUS_QP_ACTIVE_SET 8
+#define DOPUS_QP_ACTIVE_SET_NEAR DOPUS_R(1.0)
 
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static dopus_solver s;`;

@@ -183,8 +183,19 @@ def run_closed_loop(disc, backend: str = "c", settings=None, duration: float | N
                      "instants_planned": n_steps,
                      "failed_instants": int(sum(1 for st in rec.status if st != 0)),
                      "first_failure": loop.first_failure,
-                     "recoveries": _recoveries(backend_obj)}
+                     "recoveries": _recoveries(backend_obj),
+                     # the QP's work per instant (docs/algorithm.md section 4, feedback)
+                     "qp_factorizations": _per_instant_stats(rec.qp_factorizations),
+                     "qp_iterations": _per_instant_stats(rec.qp_iterations)}
     return json_ready(run)
+
+
+def _per_instant_stats(values):
+    """Median, 99th percentile and largest of a per-instant count (None without instants)."""
+    a = np.asarray(values, dtype=float)
+    if not a.size:
+        return None
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(np.max(a))}
 
 
 def _recoveries(backend_obj):
@@ -558,9 +569,7 @@ def summarize(run, settle: float = 0.2) -> dict:
     # the QP's work per instant: factorisations of the Riccati recursion and interior-point
     # iterations (median, 99th percentile and largest over the instants)
     for key in ("qp_factorizations", "qp_iterations"):
-        a = np.asarray(run.get(key) or [], dtype=float)
-        out[key] = ({"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(np.max(a))}
-                    if a.size else None)
+        out[key] = _per_instant_stats(run.get(key) or [])
     return out
 
 
