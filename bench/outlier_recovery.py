@@ -16,9 +16,9 @@ bench/results/outlier_recovery_soft.json.
 """
 from __future__ import annotations
 
+import argparse
 import json
 import pathlib
-import sys
 
 import numpy as np
 
@@ -94,8 +94,10 @@ def main(ks, soft=None):
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    soft = None
-    if args[:1] == ["--soft"]:
-        soft, args = float(args[1]), args[2:]
-    main([int(a) for a in args] or [5, 10, 20, 40], soft)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("K", type=int, nargs="*", help="numbers of consecutive outliers (default 5 10 20 40)")
+    ap.add_argument("--soft", type=float, metavar="L1", default=None,
+                    help="the robot arm with soft terminal rows, Soft(l1=L1)")
+    a = ap.parse_args()
+    main(a.K or [5, 10, 20, 40], a.soft)

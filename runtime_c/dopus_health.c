@@ -56,6 +56,8 @@ void dopus_health_reset(dopus_health *h, const dopus_real *u)
     }
     h->kkt_proxy = DOPUS_R(0.0);
     h->kkt_proxy_ref = DOPUS_R(0.0);
+    h->kkt_proxy_init = DOPUS_R(0.0);
+    h->n_stalled = 0;
 }
 
 int dopus_clip_u(const dopus_real *u, dopus_real *out)
@@ -139,6 +141,22 @@ int dopus_diverged(const dopus_health *h, const dopus_real *xhat0, const dopus_r
         return 1;
     }
     return !(h->kkt_proxy <= DOPUS_DIVERGENCE_KKT * ref);
+}
+
+int dopus_health_stalled(dopus_health *h, int phase)
+{
+    dopus_real ref = h->kkt_proxy_init > DOPUS_R(1.0) ? h->kkt_proxy_init : DOPUS_R(1.0);
+    if (h->recovering > 0 || !(h->kkt_proxy > DOPUS_STALL_KKT * ref)) {
+        h->n_stalled = 0;
+        return 0;
+    }
+    h->n_stalled += 1;
+    if (h->n_stalled < DOPUS_STALL_PREPARES) {
+        return 0;
+    }
+    h->n_stalled = 0;
+    h->recovering = phase;
+    return 1;
 }
 
 const dopus_real *dopus_health_plan_control(const dopus_health *h, int k)

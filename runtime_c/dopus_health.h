@@ -12,6 +12,8 @@
 /* Constants (docs/algorithm.md section 9). */
 #define DOPUS_DIVERGENCE_BOX DOPUS_R(1e3) /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
 #define DOPUS_DIVERGENCE_KKT DOPUS_R(1e6) /* kkt proxy <= 1e6 max(1, proxy at the last init) */
+#define DOPUS_STALL_KKT DOPUS_R(1e3)      /* a stalled prepare: proxy > 1e3 max(1, proxy at init) */
+#define DOPUS_STALL_PREPARES 10           /* ... in so many prepares in a row: escalate */
 
 typedef struct {
     int n_failed;                         /* consecutive failed feedbacks */
@@ -25,8 +27,10 @@ typedef struct {
     dopus_real u0_out[DOPUS_NU];          /* the control returned by the last feedback */
     dopus_real scale_x[DOPUS_NX];         /* scales of the box test */
     dopus_real scale_u[DOPUS_NU];
-    dopus_real kkt_proxy;     /* divergence measure of the last prepare or init */
-    dopus_real kkt_proxy_ref; /* ... at the last init or re-initialisation */
+    dopus_real kkt_proxy;      /* divergence measure of the last prepare or init */
+    dopus_real kkt_proxy_ref;  /* ... at the last init or re-initialisation */
+    dopus_real kkt_proxy_init; /* ... at the last init (the stall test) */
+    int n_stalled;             /* prepares in a row with a stalled KKT proxy */
 } dopus_health;
 
 #ifndef DOPUS_INTERNAL
@@ -59,6 +63,11 @@ DOPUS_INTERNAL dopus_real dopus_kkt_proxy(const dopus_ring *ring, const dopus_re
 DOPUS_INTERNAL int dopus_diverged(const dopus_health *h, const dopus_real *xhat0, const dopus_real *x,
                                   const dopus_real *u, const dopus_real *lam, const dopus_real *mu_b,
                                   const dopus_real *mu_bN);
+/* The stall test of a prepared iterate (docs/algorithm.md section 9), outside a recovery
+ * phase: h->kkt_proxy > STALL_KKT max(1, h->kkt_proxy_init) in STALL_PREPARES prepares in a
+ * row begins a recovery phase of `phase` feedbacks without a re-initialisation. Returns 1
+ * when it did. */
+DOPUS_INTERNAL int dopus_health_stalled(dopus_health *h, int phase);
 /* The control of the last good plan for the instant k sampling instants from now (its age
  * plus k, the last control beyond the plan's end). */
 DOPUS_INTERNAL const dopus_real *dopus_health_plan_control(const dopus_health *h, int k);

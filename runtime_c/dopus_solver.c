@@ -632,6 +632,7 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
         dopus_reset_health(s);
         s->health.kkt_proxy = dopus_kkt_proxy_eval(s);
         s->health.kkt_proxy_ref = s->health.kkt_proxy;
+        s->health.kkt_proxy_init = s->health.kkt_proxy;
     }
     dopus_timer_end(&s->timer, -1, 0.0);
     return dopus_ret(s, rc);
@@ -1517,6 +1518,10 @@ int dopus_prepare(dopus_solver *s)
         rc = dopus_anytime_run(s);
     }
     s->settings.hessian = hessian;
+    if (rc == DOPUS_OK && s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING &&
+        dopus_health_stalled(&s->health, DOPUS_RECOVERY_FULL_RTI)) {
+        s->health.flags |= DOPUS_FLAG_STALLED;
+    }
     s->anytime.used = dopus_budget_now(s) - s->anytime.instant_start;
     if (rc == DOPUS_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
@@ -1685,11 +1690,16 @@ static int dopus_anytime_run(dopus_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = DOPUS_OK;
     const int qp_factorizations = s->qp_factorizations;
+    int max_iter = DOPUS_ANYTIME_MAX_ITER;
     if (!dopus_budget_on(s)) {
-        return DOPUS_OK;
+        /* without a budget: the recovery phase's extra iterations (algorithm.md section 9) */
+        if (s->health.recovering <= 0 || !s->settings.recovery || s->settings.mode != DOPUS_MODE_RECEDING) {
+            return DOPUS_OK;
+        }
+        max_iter = DOPUS_RECOVERY_EXTRA_ITER;
     }
     s->anytime.uncapped = 0;
-    while (s->anytime.extra_iterations < DOPUS_ANYTIME_MAX_ITER && s->qp_ready &&
+    while (s->anytime.extra_iterations < max_iter && s->qp_ready &&
            s->health.kkt_proxy > s->settings.anytime_tol &&
            dopus_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
         rc = dopus_extra_iteration(s);

@@ -7,8 +7,8 @@ What every run must show: no failed instant during the settling, every returned 
 within its bounds, no failed instant later than FAILED_WITHIN instants after the fault ends
 (no lock-up: before the fix, two measurements with joint velocities (1e4, -1e4) made every
 later instant fail), and the last LAST_OK instants all successful. The return to the path
-within BACK_WITHIN instants holds for the two-outlier case of the issue; over the whole grid
-it does not yet (see test_every_run_back_on_the_path).
+within BACK_WITHIN instants holds for the two-outlier case of the issue, within BACK_ALL for
+every run of the grid.
 """
 from __future__ import annotations
 
@@ -19,11 +19,14 @@ from harness.faults import AFTER, KINDS, Handle, model_plant, run_case
 
 KS = range(1, 41)
 # measured over the grid (bench/fault_suite.py): the last failed instant after the fault ends
-# at most 45 instants later (velocity outliers of 30 rad/s, K = 19, M = 1)
+# at most 36 instants later (velocity outliers of 30 rad/s, the full RTI; M = 1: 19)
 FAILED_WITHIN = 50
 LAST_OK = AFTER - FAILED_WITHIN
 # the two-outlier case of the issue: back within 1 cm 25 instants after the fault (M = 1)
 BACK_WITHIN = 40
+# every run: back within 1 cm at most 127 instants after the fault (M = 1, 30 rad/s outliers;
+# the full RTI 104), measured over the grid with the stall test of docs/algorithm.md section 9
+BACK_ALL = 140
 
 
 @pytest.fixture(scope="module")
@@ -79,12 +82,8 @@ def test_two_outliers_back_on_the_path(arm, plant, robot_solution, M, v):
     assert r["back"] is not None and r["back"] <= BACK_WITHIN, r
 
 
-@pytest.mark.xfail(strict=True, reason="not every run is back within 1 cm within 150 instants: after long "
-                   "finite faults (30 rad/s outliers, a frozen sensor, 40 outliers of 1e6) the real-time iteration "
-                   "can settle on a plan that does not move (KKT proxy about 57, every status OK); with a work budget "
-                   "of 800 units per instant (anytime DOPUS) every run is back, within 114 instants (M = 1) and 110 "
-                   "(full): bench/fault_suite.py --budget 800, docs/algorithm.md section 9")
 @pytest.mark.parametrize("M", [1, "full"])
 def test_every_run_back_on_the_path(arm, plant, robot_solution, M):
     runs = _grid(arm, plant, robot_solution, M)
-    assert all(r["back"] is not None for r in runs), [(r["kind"], r["K"]) for r in runs if r["back"] is None]
+    late = [(r["kind"], r["K"], r["back"]) for r in runs if r["back"] is None or r["back"] > BACK_ALL]
+    assert not late, late

@@ -428,6 +428,7 @@ class ReferenceDopus:
         self._reset_health(self.u)
         self.kkt_proxy = self._kkt_proxy_eval()
         self.kkt_proxy_ref = self.kkt_proxy
+        self._kkt_proxy_init = self.kkt_proxy
         self.timings = {"init": time.perf_counter() - t0}
 
     def _init_finish(self, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, who, where) -> None:
@@ -830,6 +831,22 @@ class ReferenceDopus:
         finally:
             self.hessian = hessian
             self.budget_used = self._budget_now() - self._instant_start
+        if self.recovery and self.mode == "receding" and self._stalled():
+            self._flag("stalled")
+
+    def _stalled(self) -> bool:
+        """Section 9: outside a recovery phase, a KKT proxy above STALL_KKT max(1, proxy at
+        init) in STALL_PREPARES prepares in a row begins a recovery phase without a
+        re-initialisation."""
+        if self._recovering > 0 or not self.kkt_proxy > _SAFETY["STALL_KKT"] * max(self._kkt_proxy_init, 1.0):
+            self._n_stalled = 0
+            return False
+        self._n_stalled += 1
+        if self._n_stalled < _SAFETY["STALL_PREPARES"]:
+            return False
+        self._n_stalled = 0
+        self._recovering = int(_SAFETY["RECOVERY_FULL_RTI"])
+        return True
 
     def _extra_iteration(self) -> bool:
         """Section 12: the prepared QP for the state the plan predicts (dx_0 = 0), its full
@@ -860,10 +877,14 @@ class ReferenceDopus:
     def _anytime(self) -> None:
         """Section 12: extra iterations while the KKT proxy exceeds the tolerance and one more
         fits in the budget."""
+        max_iter = _SAFETY["ANYTIME_MAX_ITER"]
         if not self._budget_on():
-            return
+            # without a budget: the recovery phase's extra iterations (section 9)
+            if self._recovering <= 0 or not self.recovery or self.mode != "receding":
+                return
+            max_iter = _SAFETY["RECOVERY_EXTRA_ITER"]
         self._uncapped = False
-        while (self.extra_iterations < _SAFETY["ANYTIME_MAX_ITER"] and self._qp_ready
+        while (self.extra_iterations < max_iter and self._qp_ready
                and self.kkt_proxy > self.anytime_tol and self._budget_fits(self._cost_qp + self._cost_prepare)):
             if not self._extra_iteration():
                 break
@@ -1108,6 +1129,8 @@ class ReferenceDopus:
         self.u0 = self._plan_u[0].copy()
         self.kkt_proxy = 0.0
         self.kkt_proxy_ref = 0.0
+        self._kkt_proxy_init = 0.0
+        self._n_stalled = 0
 
     @property
     def failed_feedbacks(self) -> int:

@@ -56,6 +56,8 @@ void robot_arm_health_reset(robot_arm_health *h, const robot_arm_real *u)
     }
     h->kkt_proxy = ROBOT_ARM_R(0.0);
     h->kkt_proxy_ref = ROBOT_ARM_R(0.0);
+    h->kkt_proxy_init = ROBOT_ARM_R(0.0);
+    h->n_stalled = 0;
 }
 
 int robot_arm_clip_u(const robot_arm_real *u, robot_arm_real *out)
@@ -139,6 +141,22 @@ int robot_arm_diverged(const robot_arm_health *h, const robot_arm_real *xhat0, c
         return 1;
     }
     return !(h->kkt_proxy <= ROBOT_ARM_DIVERGENCE_KKT * ref);
+}
+
+int robot_arm_health_stalled(robot_arm_health *h, int phase)
+{
+    robot_arm_real ref = h->kkt_proxy_init > ROBOT_ARM_R(1.0) ? h->kkt_proxy_init : ROBOT_ARM_R(1.0);
+    if (h->recovering > 0 || !(h->kkt_proxy > ROBOT_ARM_STALL_KKT * ref)) {
+        h->n_stalled = 0;
+        return 0;
+    }
+    h->n_stalled += 1;
+    if (h->n_stalled < ROBOT_ARM_STALL_PREPARES) {
+        return 0;
+    }
+    h->n_stalled = 0;
+    h->recovering = phase;
+    return 1;
 }
 
 const robot_arm_real *robot_arm_health_plan_control(const robot_arm_health *h, int k)

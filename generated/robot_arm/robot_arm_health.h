@@ -12,6 +12,8 @@
 /* Constants (docs/algorithm.md section 9). */
 #define ROBOT_ARM_DIVERGENCE_BOX ROBOT_ARM_R(1e3) /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
 #define ROBOT_ARM_DIVERGENCE_KKT ROBOT_ARM_R(1e6) /* kkt proxy <= 1e6 max(1, proxy at the last init) */
+#define ROBOT_ARM_STALL_KKT ROBOT_ARM_R(1e3)      /* a stalled prepare: proxy > 1e3 max(1, proxy at init) */
+#define ROBOT_ARM_STALL_PREPARES 10           /* ... in so many prepares in a row: escalate */
 
 typedef struct {
     int n_failed;                         /* consecutive failed feedbacks */
@@ -25,8 +27,10 @@ typedef struct {
     robot_arm_real u0_out[ROBOT_ARM_NU];          /* the control returned by the last feedback */
     robot_arm_real scale_x[ROBOT_ARM_NX];         /* scales of the box test */
     robot_arm_real scale_u[ROBOT_ARM_NU];
-    robot_arm_real kkt_proxy;     /* divergence measure of the last prepare or init */
-    robot_arm_real kkt_proxy_ref; /* ... at the last init or re-initialisation */
+    robot_arm_real kkt_proxy;      /* divergence measure of the last prepare or init */
+    robot_arm_real kkt_proxy_ref;  /* ... at the last init or re-initialisation */
+    robot_arm_real kkt_proxy_init; /* ... at the last init (the stall test) */
+    int n_stalled;             /* prepares in a row with a stalled KKT proxy */
 } robot_arm_health;
 
 #ifndef ROBOT_ARM_INTERNAL
@@ -59,6 +63,11 @@ ROBOT_ARM_INTERNAL robot_arm_real robot_arm_kkt_proxy(const robot_arm_ring *ring
 ROBOT_ARM_INTERNAL int robot_arm_diverged(const robot_arm_health *h, const robot_arm_real *xhat0, const robot_arm_real *x,
                                   const robot_arm_real *u, const robot_arm_real *lam, const robot_arm_real *mu_b,
                                   const robot_arm_real *mu_bN);
+/* The stall test of a prepared iterate (docs/algorithm.md section 9), outside a recovery
+ * phase: h->kkt_proxy > STALL_KKT max(1, h->kkt_proxy_init) in STALL_PREPARES prepares in a
+ * row begins a recovery phase of `phase` feedbacks without a re-initialisation. Returns 1
+ * when it did. */
+ROBOT_ARM_INTERNAL int robot_arm_health_stalled(robot_arm_health *h, int phase);
 /* The control of the last good plan for the instant k sampling instants from now (its age
  * plus k, the last control beyond the plan's end). */
 ROBOT_ARM_INTERNAL const robot_arm_real *robot_arm_health_plan_control(const robot_arm_health *h, int k);

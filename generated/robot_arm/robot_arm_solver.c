@@ -632,6 +632,7 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
         robot_arm_reset_health(s);
         s->health.kkt_proxy = robot_arm_kkt_proxy_eval(s);
         s->health.kkt_proxy_ref = s->health.kkt_proxy;
+        s->health.kkt_proxy_init = s->health.kkt_proxy;
     }
     robot_arm_timer_end(&s->timer, -1, 0.0);
     return robot_arm_ret(s, rc);
@@ -1517,6 +1518,10 @@ int robot_arm_prepare(robot_arm_solver *s)
         rc = robot_arm_anytime_run(s);
     }
     s->settings.hessian = hessian;
+    if (rc == ROBOT_ARM_OK && s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING &&
+        robot_arm_health_stalled(&s->health, ROBOT_ARM_RECOVERY_FULL_RTI)) {
+        s->health.flags |= ROBOT_ARM_FLAG_STALLED;
+    }
     s->anytime.used = robot_arm_budget_now(s) - s->anytime.instant_start;
     if (rc == ROBOT_ARM_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
@@ -1685,11 +1690,16 @@ static int robot_arm_anytime_run(robot_arm_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = ROBOT_ARM_OK;
     const int qp_factorizations = s->qp_factorizations;
+    int max_iter = ROBOT_ARM_ANYTIME_MAX_ITER;
     if (!robot_arm_budget_on(s)) {
-        return ROBOT_ARM_OK;
+        /* without a budget: the recovery phase's extra iterations (algorithm.md section 9) */
+        if (s->health.recovering <= 0 || !s->settings.recovery || s->settings.mode != ROBOT_ARM_MODE_RECEDING) {
+            return ROBOT_ARM_OK;
+        }
+        max_iter = ROBOT_ARM_RECOVERY_EXTRA_ITER;
     }
     s->anytime.uncapped = 0;
-    while (s->anytime.extra_iterations < ROBOT_ARM_ANYTIME_MAX_ITER && s->qp_ready &&
+    while (s->anytime.extra_iterations < max_iter && s->qp_ready &&
            s->health.kkt_proxy > s->settings.anytime_tol &&
            robot_arm_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
         rc = robot_arm_extra_iteration(s);

@@ -56,6 +56,8 @@ void unicycle_health_reset(unicycle_health *h, const unicycle_real *u)
     }
     h->kkt_proxy = UNICYCLE_R(0.0);
     h->kkt_proxy_ref = UNICYCLE_R(0.0);
+    h->kkt_proxy_init = UNICYCLE_R(0.0);
+    h->n_stalled = 0;
 }
 
 int unicycle_clip_u(const unicycle_real *u, unicycle_real *out)
@@ -139,6 +141,22 @@ int unicycle_diverged(const unicycle_health *h, const unicycle_real *xhat0, cons
         return 1;
     }
     return !(h->kkt_proxy <= UNICYCLE_DIVERGENCE_KKT * ref);
+}
+
+int unicycle_health_stalled(unicycle_health *h, int phase)
+{
+    unicycle_real ref = h->kkt_proxy_init > UNICYCLE_R(1.0) ? h->kkt_proxy_init : UNICYCLE_R(1.0);
+    if (h->recovering > 0 || !(h->kkt_proxy > UNICYCLE_STALL_KKT * ref)) {
+        h->n_stalled = 0;
+        return 0;
+    }
+    h->n_stalled += 1;
+    if (h->n_stalled < UNICYCLE_STALL_PREPARES) {
+        return 0;
+    }
+    h->n_stalled = 0;
+    h->recovering = phase;
+    return 1;
 }
 
 const unicycle_real *unicycle_health_plan_control(const unicycle_health *h, int k)

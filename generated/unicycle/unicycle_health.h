@@ -12,6 +12,8 @@
 /* Constants (docs/algorithm.md section 9). */
 #define UNICYCLE_DIVERGENCE_BOX UNICYCLE_R(1e3) /* |x_k,i| <= 1e3 scale_x_i + |xhat0_i|, same for u */
 #define UNICYCLE_DIVERGENCE_KKT UNICYCLE_R(1e6) /* kkt proxy <= 1e6 max(1, proxy at the last init) */
+#define UNICYCLE_STALL_KKT UNICYCLE_R(1e3)      /* a stalled prepare: proxy > 1e3 max(1, proxy at init) */
+#define UNICYCLE_STALL_PREPARES 10           /* ... in so many prepares in a row: escalate */
 
 typedef struct {
     int n_failed;                         /* consecutive failed feedbacks */
@@ -25,8 +27,10 @@ typedef struct {
     unicycle_real u0_out[UNICYCLE_NU];          /* the control returned by the last feedback */
     unicycle_real scale_x[UNICYCLE_NX];         /* scales of the box test */
     unicycle_real scale_u[UNICYCLE_NU];
-    unicycle_real kkt_proxy;     /* divergence measure of the last prepare or init */
-    unicycle_real kkt_proxy_ref; /* ... at the last init or re-initialisation */
+    unicycle_real kkt_proxy;      /* divergence measure of the last prepare or init */
+    unicycle_real kkt_proxy_ref;  /* ... at the last init or re-initialisation */
+    unicycle_real kkt_proxy_init; /* ... at the last init (the stall test) */
+    int n_stalled;             /* prepares in a row with a stalled KKT proxy */
 } unicycle_health;
 
 #ifndef UNICYCLE_INTERNAL
@@ -59,6 +63,11 @@ UNICYCLE_INTERNAL unicycle_real unicycle_kkt_proxy(const unicycle_ring *ring, co
 UNICYCLE_INTERNAL int unicycle_diverged(const unicycle_health *h, const unicycle_real *xhat0, const unicycle_real *x,
                                   const unicycle_real *u, const unicycle_real *lam, const unicycle_real *mu_b,
                                   const unicycle_real *mu_bN);
+/* The stall test of a prepared iterate (docs/algorithm.md section 9), outside a recovery
+ * phase: h->kkt_proxy > STALL_KKT max(1, h->kkt_proxy_init) in STALL_PREPARES prepares in a
+ * row begins a recovery phase of `phase` feedbacks without a re-initialisation. Returns 1
+ * when it did. */
+UNICYCLE_INTERNAL int unicycle_health_stalled(unicycle_health *h, int phase);
 /* The control of the last good plan for the instant k sampling instants from now (its age
  * plus k, the last control beyond the plan's end). */
 UNICYCLE_INTERNAL const unicycle_real *unicycle_health_plan_control(const unicycle_health *h, int k);

@@ -632,6 +632,7 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
         unicycle_reset_health(s);
         s->health.kkt_proxy = unicycle_kkt_proxy_eval(s);
         s->health.kkt_proxy_ref = s->health.kkt_proxy;
+        s->health.kkt_proxy_init = s->health.kkt_proxy;
     }
     unicycle_timer_end(&s->timer, -1, 0.0);
     return unicycle_ret(s, rc);
@@ -1517,6 +1518,10 @@ int unicycle_prepare(unicycle_solver *s)
         rc = unicycle_anytime_run(s);
     }
     s->settings.hessian = hessian;
+    if (rc == UNICYCLE_OK && s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING &&
+        unicycle_health_stalled(&s->health, UNICYCLE_RECOVERY_FULL_RTI)) {
+        s->health.flags |= UNICYCLE_FLAG_STALLED;
+    }
     s->anytime.used = unicycle_budget_now(s) - s->anytime.instant_start;
     if (rc == UNICYCLE_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
@@ -1685,11 +1690,16 @@ static int unicycle_anytime_run(unicycle_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = UNICYCLE_OK;
     const int qp_factorizations = s->qp_factorizations;
+    int max_iter = UNICYCLE_ANYTIME_MAX_ITER;
     if (!unicycle_budget_on(s)) {
-        return UNICYCLE_OK;
+        /* without a budget: the recovery phase's extra iterations (algorithm.md section 9) */
+        if (s->health.recovering <= 0 || !s->settings.recovery || s->settings.mode != UNICYCLE_MODE_RECEDING) {
+            return UNICYCLE_OK;
+        }
+        max_iter = UNICYCLE_RECOVERY_EXTRA_ITER;
     }
     s->anytime.uncapped = 0;
-    while (s->anytime.extra_iterations < UNICYCLE_ANYTIME_MAX_ITER && s->qp_ready &&
+    while (s->anytime.extra_iterations < max_iter && s->qp_ready &&
            s->health.kkt_proxy > s->settings.anytime_tol &&
            unicycle_budget_fits(s, s->anytime.cost_qp + s->anytime.cost_prepare)) {
         rc = unicycle_extra_iteration(s);

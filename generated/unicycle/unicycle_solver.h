@@ -337,15 +337,17 @@ enum unicycle_row_kind {
 
 /* Flags of unicycle_info.flags (docs/algorithm.md section 9). */
 enum unicycle_flag {
-    UNICYCLE_FLAG_U0_CLIPPED = 1,           /* u0 was outside the control bounds and was clipped */
-    UNICYCLE_FLAG_FALLBACK = 2,             /* feedback failed: u0 is the next control of the last good plan */
-    UNICYCLE_FLAG_DIVERGED = 4,             /* the step or the prepared iterate failed the divergence test */
-    UNICYCLE_FLAG_RECOVERED = 8,            /* prepare or feedback re-initialised (automatic recovery) */
-    UNICYCLE_FLAG_PREDICTED = 16,           /* prepare took the step of the QP for the predicted state */
-    UNICYCLE_FLAG_REINIT_GUESS = 32,        /* a re-initialisation fell back to the OCP file's guess: the
+    UNICYCLE_FLAG_U0_CLIPPED = 1,            /* u0 was outside the control bounds and was clipped */
+    UNICYCLE_FLAG_FALLBACK = 2,              /* feedback failed: u0 is the next control of the last good plan */
+    UNICYCLE_FLAG_DIVERGED = 4,              /* the step or the prepared iterate failed the divergence test */
+    UNICYCLE_FLAG_RECOVERED = 8,             /* prepare or feedback re-initialised (automatic recovery) */
+    UNICYCLE_FLAG_PREDICTED = 16,            /* prepare took the step of the QP for the predicted state */
+    UNICYCLE_FLAG_REINIT_GUESS = 32,         /* a re-initialisation fell back to the OCP file's guess: the
                                             model was not finite at the re-initialised iterate */
-    UNICYCLE_FLAG_MEASUREMENT_UNUSABLE = 64 /* the model is not finite at the (finite) measurement:
+    UNICYCLE_FLAG_MEASUREMENT_UNUSABLE = 64, /* the model is not finite at the (finite) measurement:
                                             handled as a missing one */
+    UNICYCLE_FLAG_STALLED = 128              /* the KKT proxy stalled high: a recovery phase began
+                                             without a re-initialisation */
 };
 
 /* Safety constants (docs/algorithm.md section 9; the divergence box and KKT bound are in
@@ -354,7 +356,8 @@ enum unicycle_flag {
 #define UNICYCLE_QP_TOL_DEFAULT UNICYCLE_PREC(1e-10, 1e-5) /* the QP tolerance of the defaults */
 #define UNICYCLE_QP_MAX_ITER_DEFAULT 100                /* the QP iteration limit of the defaults */
 #define UNICYCLE_RECOVERY_FAILURES 2                    /* default K: consecutive failures before recovery */
-#define UNICYCLE_RECOVERY_FULL_RTI 10 /* successful feedbacks with every block fresh after a recovery */
+#define UNICYCLE_RECOVERY_FULL_RTI 10  /* successful feedbacks with every block fresh after a recovery */
+#define UNICYCLE_RECOVERY_EXTRA_ITER 5 /* extra iterations per prepare of a recovery phase, no budget */
 
 enum unicycle_mode {
     UNICYCLE_MODE_RECEDING = 0, /* shift by one sampling interval in every prepare */
