@@ -723,11 +723,12 @@ class ReferenceDopus:
             self.work += self.N
             try:
                 # the first solve starts from the active set of the previous solution, as the C
-                # QP's warm start does when the measurement lies within the state scales of the
-                # predicted state (section 4, feedback); a retry with lm raised does not
-                near = bool(np.all(np.abs(qp["x0"]) <= _SAFETY["QP_ACTIVE_SET_NEAR"] * self.scales[0]))
+                # QP's warm start does for a QP the automatic lm made convex and a measurement
+                # near the predicted state (section 4, feedback); a retry with lm raised does not
+                start = (retries == 0 and self.lm_auto and self._lm_uncapped < 0.0
+                         and self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale and bool(np.all(np.abs(qp["x0"]) <= _SAFETY["QP_ACTIVE_SET_NEAR"] * self.scales[0])))
                 sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter,
-                                         guess=self._qp_warm_point(qp) if retries == 0 and near else None,
+                                         guess=self._qp_warm_point(qp) if start else None,
                                          guess_sweeps=int(_SAFETY["QP_ACTIVE_SET"]))
                 failure = None if self._finite(*(sol[k] for k in FIELDS_QP)) else "nonfinite"
             except QPError as exc:

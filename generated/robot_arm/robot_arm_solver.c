@@ -833,10 +833,14 @@ static int robot_arm_measurement_near(const robot_arm_solver *s)
  * (the one the closed loop has followed so far). Returns the QP status. */
 static int robot_arm_feedback_qp(robot_arm_solver *s)
 {
-    /* the active-set start only after a feedback without the cold retry: a QP that needed
-     * the inertia correction is nonconvex on the null space of its equalities, and its
-     * successors near it may have other local minimisers than the one the cold start finds */
-    const int active_set = !s->qp_cold_retry && robot_arm_measurement_near(s);
+    /* the active-set start only for a QP that is convex (the automatic term lm convexified
+     * it in prepare below its maximum and this feedback did not cap it, robot_arm_lm.h: its
+     * solution is unique, the one the interior point finds), for a measurement near the
+     * prediction, and not after a feedback that needed the cold retry (algorithm.md
+     * section 4, feedback) */
+    const int active_set = s->lm.on && s->lm.uncapped < ROBOT_ARM_R(0.0) &&
+                           s->lm.lm < ROBOT_ARM_LM_MAX_REL * s->lm.scale && robot_arm_measurement_near(s) &&
+                           !s->qp_cold_retry;
     int qs;
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
