@@ -6,8 +6,9 @@
    the largest tip deviation from the circle after the first outlier, the instants after
    the last outlier until the tip stays within 1 cm, and the failed instants after it.
    Settings: no budget (M = 1), a work budget of 800 units (M = 1 and adaptive M), 2 ms
-   (M = 1), and a solver run to convergence at every instant (a work budget of 1e9 units,
-   KKT proxy 1e-8, at most 50 iterations per instant).
+   (M = 1), a solver run to convergence at every instant (a work budget of 1e9 units,
+   KKT proxy 1e-8, at most 50 iterations per instant), and M = 1 with the measurement gate
+   (gate 10, gate_hold 25; docs/algorithm.md section 9) without a budget and with 2 ms.
 2. Budget curves on `make demo`'s scenario (dopus-gen sil, CVODES plant, the disturbance at
    1 s): tracking RMS before and after the disturbance, max after, max KKT settled and
    failed instants, against the budget, for the full RTI (M = N-1), fixed M = 1 and adaptive
@@ -41,6 +42,7 @@ from dopus_codegen.studies.sil import run_closed_loop, summarize  # noqa: E402
 SETTLE = 100          # the first outlier at t = 1 s
 AFTER = 150
 ADAPTIVE = (1, 10)    # M_min, M_max of adaptive M
+GATE = (10.0, 25)     # the measurement gate of the settings "... gate" (docs/algorithm.md section 9)
 
 
 def label(kind, budget):
@@ -54,7 +56,9 @@ def label(kind, budget):
 
 def make(arm, kind, budget):
     s = CSolver(arm, M=1, lm=None)
-    if kind == "adaptive":
+    if kind.endswith("gate"):
+        s.set_gate(*GATE)
+    if kind.startswith("adaptive"):
         s.set_M_adaptive(True, *ADAPTIVE)
     elif kind == "full":
         s.set_M(arm.N - 1)
@@ -125,7 +129,7 @@ def main(parts):
         print(f"{'setting':<22} {'K':>3} {'max dev [cm]':>12} {'back after':>10} {'failed after':>12}")
         for K in (1, 5, 20):
             for kind, budget in (("M=1", 0.0), ("M=1", "800u"), ("adaptive", "800u"), ("M=1", 2e-3),
-                                 ("converged", 0.0)):
+                                 ("converged", 0.0), ("M=1 gate", 0.0), ("M=1 gate", 2e-3)):
                 r = outliers(arm, guess, kind, budget, K)
                 r["budget"] = budget
                 out["outliers"].append(r)

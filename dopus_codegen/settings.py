@@ -293,6 +293,13 @@ TABLE: Tuple[Setting, ...] = (
     Setting("M_min", "count", lambda v: count("M_min", v), 0, "Fewest stages of adaptive M."),
     Setting("M_max", "count", lambda v: count("M_max", v), None, "Most stages of adaptive M (not given: N-1)."),
     Setting("M_eta", "positive", lambda v: positive("M_eta", v), 0.1, "Threshold of adaptive M."),
+    Setting("gate", "nonnegative", lambda v: nonnegative("gate", v), 0.0,
+            "Measurement gate (0: off): a measurement with some |xhat0_i - x_0,i| above gate times the state's "
+            "scale (x_0 the state the plan predicts) is handled as a missing one, for at most gate_hold instants "
+            "in a row (docs/algorithm.md section 9).", file=True, flag=True),
+    Setting("gate_hold", "count", lambda v: _c_int("gate_hold", count("gate_hold", v, 1)), 10,
+            "Most measurements in a row the gate holds out; the next is accepted whatever its jump.",
+            file=True, flag=True),
     Setting("real", "choice", lambda v: check_real(v), "double",
             "Real-number type of the generated C (runtime, glue and CasADi functions): double or float.",
             scope="generation", file=True),

@@ -58,6 +58,8 @@ void dopus_health_reset(dopus_health *h, const dopus_real *u)
     h->kkt_proxy_ref = DOPUS_R(0.0);
     h->kkt_proxy_init = DOPUS_R(0.0);
     h->n_stalled = 0;
+    h->n_gated = 0;
+    h->gate_rest = 0;
 }
 
 int dopus_clip_u(const dopus_real *u, dopus_real *out)

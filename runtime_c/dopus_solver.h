@@ -115,6 +115,8 @@ typedef struct {
     int M_min;
     int M_max;
     dopus_real M_eta;
+    dopus_real gate; /* 0: off; else the largest |xhat0_i - x_0,i| / scale_x_i accepted */
+    int gate_hold;   /* at most so many gated measurements in a row; the next is accepted */
 } dopus_settings;
 /* The generated defaults: M, Hessian, regularisation, eps, cost Hessian and lm from the OCP
  * file's options; receding mode, QP tolerance DOPUS_QP_TOL_DEFAULT, 100 QP iterations, warm
@@ -322,8 +324,11 @@ enum dopus_status {
     DOPUS_ERR_ALREADY_PREPARED = 10, /* prepare without a feedback since the last successful
                                         init or prepare (it would shift the horizon twice);
                                         nothing changes */
-    DOPUS_ERR_DIVERGED = 11          /* the QP step leaves the problem's scale box (or is not
+    DOPUS_ERR_DIVERGED = 11,         /* the QP step leaves the problem's scale box (or is not
                                         finite): no step, the fallback control is returned */
+    DOPUS_ERR_MEASUREMENT_GATED = 12 /* the measurement jumped further from the plan's
+                                        prediction than the gate allows: handled as a missing
+                                        one (settings gate, gate_hold) */
 };
 
 /* Kinds of dopus_row_info and dopus_row_name. */

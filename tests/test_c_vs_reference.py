@@ -27,6 +27,7 @@ import pytest
 from dopus_codegen.studies.converge import make_start
 from dopus_codegen.reference.qp import qp_kkt_residual
 from dopus_codegen.reference.dopus import ReferenceDopus
+from dopus_codegen.errors import status_code
 from dopus_codegen.runtime.solver import CSolver, DopusError
 
 REL_TOL = 1e-9
@@ -423,3 +424,39 @@ def test_reference_refuses_a_loose_qp_tolerance(robot_disc):
         CSolver(robot_disc).set_qp_tol(4.8)
     assert e_ref.value.status == e_c.value.status == 5
     assert ReferenceDopus(robot_disc, qp_tol=1e-2).qp_tol == 1e-2
+
+
+def test_robot_receding_measurement_gate(robot_disc, robot_solution):
+    """The measurement gate (docs/algorithm.md section 9) in both backends: five measurements
+    with joint velocities (30, -30) from iteration 8 against gate 5 (times the state scales),
+    gate_hold 3: the first three are held out as missing ones (status measurement_gated, the
+    fallback control, the prepare's predicted step), the fourth is accepted whatever its jump
+    (the recovery within the feedback re-initialises from it), and the gate rests for the next
+    three (the fifth outlier and two exact measurements, far from what the plan built on the
+    outlier predicts, pass). Every instant the statuses, flags and returned controls agree
+    (to REL_TOL, after the acceptance to 1e-6), the iterates to REL_TOL up to the acceptance
+    (after it the QPs of the re-initialisation from the outlier are ill-determined)."""
+    disc = robot_disc
+    c, r, x, tally, p0 = start_pair(disc, robot_solution[0], M=1, mode="receding", hessian="exact", lm=1e-4,
+                                    gate=5.0, gate_hold=3)
+    statuses = []
+    for it in range(24):
+        xm = x.copy()
+        if 8 <= it < 13:
+            xm[2:4] = [30.0, -30.0]
+        tol = REL_TOL if it < 12 else 1e-6
+        uc, sc = _call(c, "feedback", xm)
+        ur, sr = _call(r, "feedback", xm)
+        assert sc == sr, (it, sc, sr)
+        assert c.flags == r.flags, (it, c.flags, r.flags)
+        assert rel_err(np.asarray(uc), np.asarray(ur)) <= tol, (it, uc, ur)
+        pc, pr = _call(c, "prepare")[1], _call(r, "prepare")[1]
+        assert pc == pr == 0, (it, pc, pr)
+        if it < 12:
+            errs = differences(c, r)
+            field = max(errs, key=errs.get)
+            assert errs[field] <= tol, (it, field, errs[field])
+        statuses.append(sr)
+        x = np.array(disc.stage_eval(x, ur, p0)[0], dtype=float).reshape(-1)
+    g = status_code("measurement_gated")
+    assert statuses == [0] * 8 + [g] * 3 + [0] * 13, statuses

@@ -199,6 +199,10 @@ def test_bad_options():
     raises(lambda: ocp.options(offline_guess="yes"), "options: offline_guess must be True or False")
     raises(lambda: ocp.options(hesian="exact"), "options: unknown option 'hesian'; the options are M, hessian")
     raises(lambda: ocp.options(mode="fixed"), "options: unknown option 'mode'")   # the verb's, not the file's
+    raises(lambda: ocp.options(gate=-1.0), "options: gate must be finite and >= 0")
+    raises(lambda: ocp.options(gate=float("nan")), "options: gate must be finite and >= 0")
+    raises(lambda: ocp.options(gate_hold=0), "options: gate_hold must be an integer >= 1")
+    raises(lambda: ocp.options(gate_hold=2.5), "options: gate_hold must be an integer >= 1")
 
 
 def test_options_update_only_what_is_given():
@@ -207,7 +211,7 @@ def test_options_update_only_what_is_given():
     ocp.options(regularization="mirror")
     assert build_functions(ocp).options == dict(hessian="gauss-newton", regularization="mirror",
                                                 reg_eps=1e-4, M=3, offline_guess=False, lm="auto",
-                                                cost_hessian="fresh", real="double")
+                                                cost_hessian="fresh", real="double", gate=0.0, gate_hold=10)
     ocp.options(lm=2e-4)
     assert build_functions(ocp).options["lm"] == 2e-4 and build_functions(ocp).options["M"] == 3
 

@@ -529,6 +529,8 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
         "default_cost_hessian": _code("cost_hessian", options),
         "default_reg_eps": c_double(_option(options, "reg_eps", settings.DEFAULTS["reg_eps"]), "reg_eps"),
         "default_lm": c_double(settings.lm_code(_option(options, "lm", settings.DEFAULTS["lm"])), "lm"),
+        "default_gate": c_double(_option(options, "gate", settings.DEFAULTS["gate"]), "gate"),
+        "default_gate_hold": int(_option(options, "gate_hold", settings.DEFAULTS["gate_hold"])),
         "has_nominal": nominal is not None,
     }
     ctx.update(_row_names(disc))

@@ -197,6 +197,7 @@ class ReferenceDopus:
         self.budget_unit, self.budget = s.budget_unit, s.budget
         self.anytime_tol = ANYTIME_TOL if s.anytime_tol is None else s.anytime_tol
         self.set_M_adaptive(s.M_adaptive, s.M_min, s.M_max, s.M_eta)
+        self.gate, self.gate_hold = s.gate, s.gate_hold
         self.work = 0.0
         self._instant_start = 0.0
         self._cost_stage = self._cost_qp = self._cost_prepare = 0.0
@@ -235,7 +236,8 @@ class ReferenceDopus:
                         cost_hessian=self.cost_hessian, lm="auto" if self.lm_auto else self.lm, qp_tol=self.qp_tol,
                         qp_max_iter=self.qp_max_iter, mode=self.mode, budget=self.budget,
                         budget_unit=self.budget_unit, anytime_tol=self.anytime_tol, M_adaptive=self.M_adaptive,
-                        M_min=self.M_min, M_max=self.M_max, M_eta=self.M_eta)
+                        M_min=self.M_min, M_max=self.M_max, M_eta=self.M_eta, gate=self.gate,
+                        gate_hold=self.gate_hold)
 
     def set_M(self, M: int) -> None:
         """Values above N-1 mean the full RTI (N-1), as in the C runtime
@@ -331,6 +333,14 @@ class ReferenceDopus:
         v = _setting(settings.nonnegative, f"{unit}_budget", value)
         self.budget = v
         self.budget_unit = unit
+
+    def set_gate(self, gate, hold=None) -> None:
+        """The measurement gate (section 9): 0 (off) or the largest jump
+        ``|xhat0_i - x_0,i| / scale_x_i`` accepted; ``hold`` the most measurements in a row
+        held out (None: unchanged)."""
+        g = _setting(settings.validate, "gate", gate)
+        self.gate_hold = self.gate_hold if hold is None else _setting(settings.validate, "gate_hold", hold)
+        self.gate = g
 
     def set_anytime_tol(self, tol) -> None:
         self.anytime_tol = _setting(settings.positive, "anytime_tol", tol)
@@ -610,6 +620,15 @@ class ReferenceDopus:
                 self._prepare_due, self._shifted = True, False
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
+        if self._gated(xhat0):
+            # as a missing measurement: the previous one stays the last, the prepare's
+            # predicted step carries the loop (section 9)
+            self._xhat_fresh = False
+            if self.mode == "receding":
+                self._prepare_due, self._shifted = True, False
+            raise self._feedback_failed("measurement_gated", f"feedback: the measurement {xhat0} is further from "
+                                        f"the plan's prediction {self.x[0]} than the gate {self.gate:g} (times the "
+                                        "state scales) allows: handled as a missing one")
         if not self._prepared_extra:
             # after extra iterations the term the prepare convexified stays (section 14)
             self._lm_measured(xhat0)
@@ -834,6 +853,25 @@ class ReferenceDopus:
             self.budget_used = self._budget_now() - self._instant_start
         if self.recovery and self.mode == "receding" and self._stalled():
             self._flag("stalled")
+
+    def _gated(self, xhat0) -> bool:
+        """Section 9: the measurement gate (receding mode, recovery on, gate > 0): a jump
+        ``|xhat0_i - x_0,i| > gate scale_x_i`` is held out while fewer than gate_hold
+        measurements in a row were; the next is accepted, and so are the gate_hold after it."""
+        if not self.gate > 0 or not self.recovery or self.mode != "receding":
+            return False
+        if self._gate_rest > 0:
+            # after gate_hold held-out measurements the next gate_hold pass unchecked
+            self._gate_rest -= 1
+            return False
+        jump = bool(np.any(np.abs(xhat0 - self.x[0]) > self.gate * self.scales[0]))
+        if jump and self._n_gated >= self.gate_hold:
+            self._gate_rest = self.gate_hold
+        if not jump or self._n_gated >= self.gate_hold:
+            self._n_gated = 0
+            return False
+        self._n_gated += 1
+        return True
 
     def _stalled(self) -> bool:
         """Section 9: outside a recovery phase, a KKT proxy above STALL_KKT max(1, proxy at
@@ -1132,6 +1170,8 @@ class ReferenceDopus:
         self.kkt_proxy_ref = 0.0
         self._kkt_proxy_init = 0.0
         self._n_stalled = 0
+        self._n_gated = 0
+        self._gate_rest = 0
 
     @property
     def failed_feedbacks(self) -> int:

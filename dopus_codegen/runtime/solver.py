@@ -270,6 +270,7 @@ class Solver:
         if s.anytime_tol is not None:
             self.set_anytime_tol(s.anytime_tol)
         self.set_M_adaptive(s.M_adaptive, s.M_min, s.M_max, s.M_eta)
+        self.set_gate(s.gate, s.gate_hold)
 
     @property
     def settings(self) -> Settings:
@@ -279,7 +280,8 @@ class Solver:
                         cost_hessian=self.cost_hessian, lm="auto" if self.lm_auto else self.lm, qp_tol=self.qp_tol,
                         qp_max_iter=self.qp_max_iter, mode=self.mode, budget=float(st.budget),
                         budget_unit=self.budget_unit, anytime_tol=float(st.anytime_tol),
-                        M_adaptive=bool(st.M_adaptive), M_min=int(st.M_min), M_max=int(st.M_max), M_eta=float(st.M_eta))
+                        M_adaptive=bool(st.M_adaptive), M_min=int(st.M_min), M_max=int(st.M_max), M_eta=float(st.M_eta),
+                        gate=float(st.gate), gate_hold=int(st.gate_hold))
 
     # ------------------------------------------------------------------ plumbing
     def _c(self, fname: str):
@@ -480,6 +482,14 @@ class Solver:
         N; 0: off): deterministic, the unit the reference counts."""
         v = self._setting(settings.nonnegative, "work_budget", units)
         self._update("work_budget", budget=v, budget_unit=BUDGET_UNITS["work"])
+
+    def set_gate(self, gate, hold=None) -> None:
+        """The measurement gate (docs/algorithm.md section 9): ``gate`` 0 (off) or the largest
+        jump ``|xhat0_i - x_0,i| / scale_x_i`` accepted, ``hold`` the most measurements in a
+        row held out (None: unchanged)."""
+        g = self._setting(settings.validate, "gate", gate)
+        h = int(self._c_settings().gate_hold) if hold is None else self._setting(settings.validate, "gate_hold", hold)
+        self._update("gate", gate=g, gate_hold=h)
 
     def set_anytime_tol(self, tol) -> None:
         self._update("anytime_tol", anytime_tol=self._positive(tol, "anytime_tol"))

@@ -58,6 +58,8 @@ void robot_arm_health_reset(robot_arm_health *h, const robot_arm_real *u)
     h->kkt_proxy_ref = ROBOT_ARM_R(0.0);
     h->kkt_proxy_init = ROBOT_ARM_R(0.0);
     h->n_stalled = 0;
+    h->n_gated = 0;
+    h->gate_rest = 0;
 }
 
 int robot_arm_clip_u(const robot_arm_real *u, robot_arm_real *out)

@@ -31,6 +31,8 @@ typedef struct {
     robot_arm_real kkt_proxy_ref;  /* ... at the last init or re-initialisation */
     robot_arm_real kkt_proxy_init; /* ... at the last init (the stall test) */
     int n_stalled;             /* prepares in a row with a stalled KKT proxy */
+    int n_gated;               /* measurements in a row held out by the gate */
+    int gate_rest;             /* measurements left that the gate lets pass unchecked */
 } robot_arm_health;
 
 #ifndef ROBOT_ARM_INTERNAL

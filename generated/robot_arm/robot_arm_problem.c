@@ -262,6 +262,8 @@ void robot_arm_settings_default(robot_arm_settings *st)
     st->M_min = 0;
     st->M_max = ROBOT_ARM_N - 1;
     st->M_eta = ROBOT_ARM_ADAPTIVE_ETA;
+    st->gate = 0.0;
+    st->gate_hold = 10;
 }
 
 /* offline primal-dual solution at robot_arm_x0_default */

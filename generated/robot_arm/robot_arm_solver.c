@@ -189,6 +189,8 @@ const char *robot_arm_status_string(int status)
         return "the step diverged (outside the problem's scale; no step, fallback control returned)";
     case ROBOT_ARM_ERR_ALREADY_PREPARED:
         return "already prepared (call feedback before the next prepare)";
+    case ROBOT_ARM_ERR_MEASUREMENT_GATED:
+        return "the measurement is too far from the plan's prediction (gate): handled as a missing one";
     default:
         return "unknown status";
     }
@@ -706,6 +708,36 @@ static void robot_arm_qp_warm_point(robot_arm_solver *s)
 /* Feedback step 1: the call is refused before the QP when the solver is not initialised,
  * the measurement is not finite or no QP is prepared (the fallback control is returned).
  * Returns ROBOT_ARM_OK when the QP is to be solved, else the status of the failed call. */
+/* The measurement gate (algorithm.md section 9; receding mode, recovery on, gate > 0): 1 when
+ * some |xhat0_i - x_0,i| exceeds gate scale_x_i (x_0: the state the plan predicts for the
+ * instant) and fewer than gate_hold measurements in a row were gated. The measurement after
+ * gate_hold gated ones is accepted whatever its jump, and so are the next gate_hold ones (the
+ * gate rests while the loop re-converges on what it accepted). */
+static int robot_arm_gated(robot_arm_solver *s, const robot_arm_real *xhat0)
+{
+    int i, jump = 0;
+    if (!(s->settings.gate > ROBOT_ARM_R(0.0)) || !s->settings.recovery ||
+        s->settings.mode != ROBOT_ARM_MODE_RECEDING) {
+        return 0;
+    }
+    if (s->health.gate_rest > 0) {
+        s->health.gate_rest -= 1;
+        return 0;
+    }
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+        jump |= robot_arm_fabs(xhat0[i] - s->x[0][i]) > s->settings.gate * s->health.scale_x[i];
+    }
+    if (jump && s->health.n_gated >= s->settings.gate_hold) {
+        s->health.gate_rest = s->settings.gate_hold;
+    }
+    if (!jump || s->health.n_gated >= s->settings.gate_hold) {
+        s->health.n_gated = 0;
+        return 0;
+    }
+    s->health.n_gated += 1;
+    return 1;
+}
+
 static int robot_arm_feedback_admit(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
     if (!s->initialized) {
@@ -732,6 +764,16 @@ static int robot_arm_feedback_admit(robot_arm_solver *s, const robot_arm_real *x
             s->shifted = 0;
         }
         return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_NOT_PREPARED);
+    }
+    if (robot_arm_gated(s, xhat0)) {
+        /* as a missing measurement: the previous one stays the last, the prepare's predicted
+         * step carries the loop (algorithm.md section 9) */
+        s->health.xhat_fresh = 0;
+        if (s->settings.mode == ROBOT_ARM_MODE_RECEDING) {
+            s->prepare_due = 1;
+            s->shifted = 0;
+        }
+        return robot_arm_feedback_failed(s, u0, ROBOT_ARM_ERR_MEASUREMENT_GATED);
     }
     return ROBOT_ARM_OK;
 }
@@ -2022,7 +2064,8 @@ static int robot_arm_settings_check(const robot_arm_settings *st)
         (st->budget_unit != ROBOT_ARM_BUDGET_TIME && st->budget_unit != ROBOT_ARM_BUDGET_WORK) ||
         !isfinite(st->anytime_tol) || !(st->anytime_tol > ROBOT_ARM_R(0.0)) ||
         (st->M_adaptive != 0 && st->M_adaptive != 1) || st->M_min < 0 || st->M_max < st->M_min ||
-        st->M_max > ROBOT_ARM_N - 1 || !isfinite(st->M_eta) || !(st->M_eta > ROBOT_ARM_R(0.0))) {
+        st->M_max > ROBOT_ARM_N - 1 || !isfinite(st->M_eta) || !(st->M_eta > ROBOT_ARM_R(0.0)) ||
+        !isfinite(st->gate) || !(st->gate >= ROBOT_ARM_R(0.0)) || st->gate_hold < 1) {
         return ROBOT_ARM_ERR_INVALID_ARGUMENT;
     }
     return ROBOT_ARM_OK;

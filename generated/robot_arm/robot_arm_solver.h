@@ -115,6 +115,8 @@ typedef struct {
     int M_min;
     int M_max;
     robot_arm_real M_eta;
+    robot_arm_real gate; /* 0: off; else the largest |xhat0_i - x_0,i| / scale_x_i accepted */
+    int gate_hold;   /* at most so many gated measurements in a row; the next is accepted */
 } robot_arm_settings;
 /* The generated defaults: M, Hessian, regularisation, eps, cost Hessian and lm from the OCP
  * file's options; receding mode, QP tolerance ROBOT_ARM_QP_TOL_DEFAULT, 100 QP iterations, warm
@@ -322,8 +324,11 @@ enum robot_arm_status {
     ROBOT_ARM_ERR_ALREADY_PREPARED = 10, /* prepare without a feedback since the last successful
                                         init or prepare (it would shift the horizon twice);
                                         nothing changes */
-    ROBOT_ARM_ERR_DIVERGED = 11          /* the QP step leaves the problem's scale box (or is not
+    ROBOT_ARM_ERR_DIVERGED = 11,         /* the QP step leaves the problem's scale box (or is not
                                         finite): no step, the fallback control is returned */
+    ROBOT_ARM_ERR_MEASUREMENT_GATED = 12 /* the measurement jumped further from the plan's
+                                        prediction than the gate allows: handled as a missing
+                                        one (settings gate, gate_hold) */
 };
 
 /* Kinds of robot_arm_row_info and robot_arm_row_name. */

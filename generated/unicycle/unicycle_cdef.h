@@ -74,6 +74,8 @@ typedef struct {
     int M_min;
     int M_max;
     unicycle_real M_eta;
+    unicycle_real gate; /* 0: off; else the largest |xhat0_i - x_0,i| / scale_x_i accepted */
+    int gate_hold;   /* at most so many gated measurements in a row; the next is accepted */
 } unicycle_settings;
 /* The generated defaults: M, Hessian, regularisation, eps, cost Hessian and lm from the OCP
  * file's options; receding mode, QP tolerance UNICYCLE_QP_TOL_DEFAULT, 100 QP iterations, warm

@@ -58,6 +58,8 @@ void unicycle_health_reset(unicycle_health *h, const unicycle_real *u)
     h->kkt_proxy_ref = UNICYCLE_R(0.0);
     h->kkt_proxy_init = UNICYCLE_R(0.0);
     h->n_stalled = 0;
+    h->n_gated = 0;
+    h->gate_rest = 0;
 }
 
 int unicycle_clip_u(const unicycle_real *u, unicycle_real *out)

@@ -162,6 +162,8 @@ void unicycle_settings_default(unicycle_settings *st)
     st->M_min = 0;
     st->M_max = UNICYCLE_N - 1;
     st->M_eta = UNICYCLE_ADAPTIVE_ETA;
+    st->gate = 0.0;
+    st->gate_hold = 10;
 }
 
 /* offline primal-dual solution at unicycle_x0_default */

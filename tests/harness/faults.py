@@ -83,14 +83,17 @@ def instant(solver, plant, x, xm):
 
 class Handle:
     """The generated solver with the OCP file's settings but M (and an optional work budget per
-    instant), initialised at the given guess (IPOPT's solution) by run_case."""
+    instant and measurement gate ``(gate, gate_hold)``), initialised at the given guess
+    (IPOPT's solution) by run_case."""
 
-    def __init__(self, disc, guess, M, budget=0.0):
+    def __init__(self, disc, guess, M, budget=0.0, gate=None):
         from dopus_codegen.runtime.solver import CSolver
 
         self.s, self.guess = CSolver(disc, lm=None, M=M), guess
         if budget > 0:
             self.s.set_work_budget(budget)
+        if gate is not None:
+            self.s.set_gate(*gate)
 
     def init(self, x):
         self.s.init(x, self.guess)
