@@ -1576,6 +1576,8 @@ typedef struct {
      * start, or the cold start again after attempt 0 stalled) with the careful steps; 2:
      * the restart after a nonconvex stall (see qp_track_best) */
     int attempt;
+    /* sweeps of the active-set start: iterations of the solve before the interior point's */
+    int as_sweeps;
     int n_corr, n_aug;     /* delta corrections and terminal augmentations, every attempt */
     int n_corr_attempt;    /* n_corr when attempt 1 began */
     dopus_real delta_last; /* delta of the last corrected factorisation */
@@ -1691,6 +1693,7 @@ static int qp_prepare(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
     initial_point(ws, in, &L->st, sol, L->attempt == 0);
     L->data_scale = certificate_data_scale(ws, in);
     L->n_corr = L->n_aug = L->n_corr_attempt = 0;
+    L->as_sweeps = 0;
     L->delta_last = L->delta_used = DOPUS_R(0.0);
     L->mu_prev = INFINITY;
     L->sigma_min = DOPUS_R(0.0);
@@ -2277,12 +2280,14 @@ static void as_snap_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in)
 static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_qp_sol *sol,
                          dopus_qp_info *info)
 {
-    int sweep, solved = 0;
+    int solved = 0;
     qp_res r;
     if (!as_guess(ws, in, sol, L->hscale))
         return QP_GO_ON;
     ws->penalty = 1;
-    for (sweep = 1; sweep <= L->st.active_set && !solved; ++sweep) {
+    /* each sweep counts as an iteration of the solve (settings.max_iter) */
+    while (L->as_sweeps < L->st.active_set && L->as_sweeps < L->st.max_iter && !solved) {
+        ++L->as_sweeps;
         if (!as_sweep(L, ws, in, &r))
             break;
         if (!as_update(L, ws)) {
@@ -2296,13 +2301,13 @@ static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *
     ws->penalty = 0;
     ws->delta = DOPUS_R(0.0);
     ws->rho_aug = DOPUS_R(0.0);
-    QP_TRACE("active set: %s after %d sweeps\n", solved ? "solved" : "not solved", sweep - 1);
+    QP_TRACE("active set: %s after %d sweeps\n", solved ? "solved" : "not solved", L->as_sweeps);
     if (solved) {
         as_snap_bounds(ws, in);
         as_residuals(ws, in, &r);
-        const int status = qp_result(L, ws, in, &r, DOPUS_QP_SOLVED, 0, sol, info);
+        const int status = qp_result(L, ws, in, &r, DOPUS_QP_SOLVED, L->as_sweeps, sol, info);
         if (info)
-            info->active_set = sweep - 1;
+            info->active_set = L->as_sweeps;
         return status;
     }
     initial_point(ws, in, &L->st, sol, 0);
@@ -2326,7 +2331,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         if (status != QP_GO_ON)
             return status;
     }
-    for (iter = 0;; ++iter) {
+    for (iter = L.as_sweeps;; ++iter) {
         dopus_real alpha, alpha_d, alpha_aff, sigma;
         int floors_before, nref;
         /* the long steps (separate primal and dual step lengths, up to the boundary) in the

@@ -719,7 +719,8 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
 
     ``guess`` (a solution dict, the warm-start point) with ``guess_sweeps > 0``: first the C
     QP's active-set start from it (:func:`_active_set_start`; not for soft rows), IPOPT only
-    when it finds no answer. ``factorizations`` counts the factorisations of KKT systems:
+    when it finds no answer (its sweeps count as iterations: at most ``max_iter``, and
+    ``iterations`` when it gives the answer). ``factorizations`` counts the factorisations of KKT systems:
     the start's sweeps, IPOPT's iterations and the polish's sweeps; ``active_set`` the
     start's sweeps when it gave the answer, else 0.
     """
@@ -731,10 +732,12 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
         raise
     Hz, gz, rows = flatten_qp(q)
     n_fact = 0
+    if max_iter is not None:
+        guess_sweeps = min(int(guess_sweeps), int(max_iter))   # a sweep is an iteration of the solve
     if guess is not None and guess_sweeps > 0 and rows.moved is None:
         sol, n_fact = _active_set_start(q, Hz, gz, rows, guess, max(float(tol), 1e-12), int(guess_sweeps))
         if sol is not None:
-            sol.update(polished=True, iterations=0, status="active_set", factorizations=n_fact, active_set=n_fact,
+            sol.update(polished=True, iterations=n_fact, status="active_set", factorizations=n_fact, active_set=n_fact,
                        solve_time=time.perf_counter() - t0)
             return sol
     solve = _solve_ipopt_flat if rows.moved is not None else (lambda *a: _solve_ipopt(q, *a))

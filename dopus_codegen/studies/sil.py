@@ -613,7 +613,8 @@ def format_summary(summaries) -> str:
         f, it = s.get("qp_factorizations"), s.get("qp_iterations")
         if f and it:
             lines.append(f"{s['label']}: QP factorisations per instant median {f['median']:g}, 99th percentile "
-                         f"{f['p99']:g}, max {f['max']:g}; interior-point iterations median {it['median']:g}, "
+                         f"{f['p99']:g}, max {f['max']:g}; QP iterations (active-set sweeps and interior-point "
+                         f"iterations) median {it['median']:g}, "
                          f"99th percentile {it['p99']:g}")
     for s in summaries:
         if s.get("soft_violation"):

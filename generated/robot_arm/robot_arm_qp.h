@@ -266,7 +266,8 @@ typedef struct {
 
 typedef struct {
     int status;                 /* enum robot_arm_qp_status */
-    int iterations;             /* interior-point iterations taken */
+    int iterations;             /* iterations taken: sweeps of the active-set start and interior-point
+                                iterations (settings.max_iter bounds their sum) */
     int inertia_corrections;    /* factorisations retried with delta*I added to the Hessians */
     int terminal_augmentations; /* factorisations retried with rho Req'Req (exact, see top) */
     int pivot_floors;           /* Riccati pivots within their round-off estimate of zero that were
@@ -274,8 +275,8 @@ typedef struct {
     int factorizations;         /* factorisations of the Riccati recursion: one per interior-point
                                 iteration, one per inertia correction and terminal augmentation,
                                 one per sweep of the active-set start */
-    int active_set;             /* sweeps of the active-set start when it solved the QP (its
-                                iterations are then 0), else 0 */
+    int active_set;             /* sweeps of the active-set start when it solved the QP (they are
+                                then its iterations), else 0 */
     robot_arm_real delta;           /* largest delta used (0 when no correction was needed) */
     /* final residuals, infinity norms, unscaled */
     robot_arm_real res_stat; /* stationarity (both equations of the header comment) */
