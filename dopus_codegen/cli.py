@@ -149,18 +149,26 @@ def _int_list_or_full(value: str) -> list:
 @click.option("--tol", default=None, type=click.FloatRange(min=0, min_open=True),
               help="A run has converged when its KKT measure reaches this; the JSON 'solution' is the iterate "
                    "of a converged run. [default: 1e-8, with --real float 2e-5]")
+@click.option("--tol-rel", "tol_rel", default=None, type=click.FloatRange(min=0, min_open=True),
+              help="A run has converged when its relative KKT measure (docs/algorithm.md section 6) reaches this, "
+                   "in place of --tol: for models in physical units. [default: the OCP file's "
+                   "options(kkt_tol_rel=...), else not used]")
 @_solver_options("0: exact Newton")
 @_real_option("With --backend c, the study runs the solver generated in that type (float: see what single "
               "precision costs); the default --qp-tol follows it.")
 @click.option("--backend", type=click.Choice(["reference", "c"]), default="reference", show_default=True)
+@click.option("--globalise/--no-globalise", "globalise", default=None,
+              help="Also run the globalised first solve (docs/algorithm.md section 15: every stage re-linearised, "
+                   "a line search on an l1 merit function) from the start. [default: with --start cold]")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the study as JSON.")
 @click.option("--plot", "plot_out", type=click.Path(dir_okay=False), default=None, help="Write KKT against iteration as PNG.")
-def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, real, **kwargs):
+def converge(ocp_file, m_list, iters, start, tol, tol_rel, backend, globalise, json_out, plot_out, real, **kwargs):
     """Fixed-xhat_0 convergence study (paper figure 1): KKT against iteration for each M.
 
-    Exits with 1 when a run failed (an error of the solver or a non-finite KKT measure),
-    after writing the table, the JSON and the plot; a run that did not reach --tol in
-    --iters iterations is reported as not converged and is not a failure.
+    Exits with 1 when a run failed (an error of the solver or a non-finite KKT measure; the
+    globalised solve's too, with what to try), after writing the table, the JSON and the
+    plot; a run that did not reach --tol in --iters iterations is reported as not converged
+    and is not a failure.
     """
     from .outputs import check_output_file
     from .studies.converge import failed_runs, run_converge_cli
@@ -171,10 +179,11 @@ def converge(ocp_file, m_list, iters, start, tol, backend, json_out, plot_out, r
         check_output_file(plot_out, "--plot")
     study = run_converge_cli(ocp_file=ocp_file, m_list=None if m_list is None else _int_list_or_full(m_list),
                              iters=iters, start=start, backend=backend, json_out=json_out, plot_out=plot_out,
-                             tol=tol, real=real, **_runtime_values(kwargs))
+                             tol=tol, tol_rel=tol_rel, real=real, globalise=globalise, **_runtime_values(kwargs))
     bad = failed_runs(study)
     if bad:
-        raise RunFailed(f"{len(bad)} of {len(study['runs'])} runs failed: "
+        total = len(study["runs"]) + int(study.get("globalised") is not None)
+        raise RunFailed(f"{len(bad)} of {total} runs failed: "
                         + "; ".join(f"M = {r['M']}: {r['message']}" for r in bad))
 
 

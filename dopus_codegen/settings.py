@@ -306,6 +306,10 @@ TABLE: Tuple[Setting, ...] = (
     Setting("offline_guess", "flag", lambda v: _flag("offline_guess", v), False,
             "Solve the OCP with IPOPT at its initial state at generation and carry the solution.",
             scope="generation", file=True),
+    Setting("kkt_tol_rel", "positive", lambda v: positive("kkt_tol_rel", v), None,
+            "Relative KKT tolerance of converge and sil: converged once the relative KKT measure (each part "
+            "divided by the size of the multipliers or of the iterate, docs/algorithm.md section 6) reaches it. "
+            "Not given: the absolute --tol.", scope="study", file=True),
     Setting("runs", "count", lambda v: count("runs", v, 1), 100,
             "Closed-loop runs of the campaign (run i uses the random draw of (seed, i)).", scope="campaign"),
     Setting("seed", "count", lambda v: count("seed", v, 0, 2**63 - 1), 0,

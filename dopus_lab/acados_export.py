@@ -96,6 +96,9 @@ def export_ocp(ocp: Ocp) -> dict:
         raise OcpError("export: rate constraints (a memory state with x+ = u) have no acados counterpart here")
     if any(rows.stages is not None for rows in spec.constraints.path):
         raise OcpError("export: path rows on chosen stages (stages=) have no acados counterpart here")
+    if spec.scaling is not None:
+        raise OcpError("export: a declared scaling (scale=, Ocp.scaling) is not exported; acados solves the problem "
+                       "in its declared units, remove the scales to compare")
     disc = build_functions(ocp)
     m = discretize(spec)
     x, u, p = m.x, m.u, m.p

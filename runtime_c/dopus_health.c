@@ -19,7 +19,7 @@ void dopus_health_scales(dopus_health *h)
         dopus_real v = DOPUS_R(1.0);
         v = dopus_absmax(dopus_lbx[i], v);
         v = dopus_absmax(dopus_ubx[i], v);
-        v = dopus_absmax(dopus_x0_default[i], v);
+        v = dopus_absmax(dopus_x0_default[i] / dopus_scale_x[i], v); /* in the solver's variables */
         for (k = 0; k <= DOPUS_N; ++k) {
             v = dopus_absmax(dopus_guess_x[k][i], v);
         }
@@ -33,6 +33,10 @@ void dopus_health_scales(dopus_health *h)
             v = dopus_absmax(dopus_guess_u[k][i], v);
         }
         h->scale_u[i] = v;
+    }
+    for (i = 0; i < DOPUS_NMEM; ++i) { /* a memory state carries its control */
+        k = dopus_memory_state[i];
+        h->scale_x[k] = dopus_absmax(h->scale_u[dopus_memory_control[i]], h->scale_x[k]);
     }
 }
 

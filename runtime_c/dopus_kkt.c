@@ -154,3 +154,34 @@ int dopus_kkt_measure(const dopus_real *x, const dopus_real *u, const dopus_real
     parts[3] = comp;
     return DOPUS_KKT_OK;
 }
+
+/* The largest |v_i| of n entries, at least m. */
+static dopus_real dopus_kkt_big(dopus_real m, int n, const dopus_real *v)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        m = dopus_kkt_max(m, dopus_fabs(v[i]));
+    }
+    return m;
+}
+
+dopus_real dopus_kkt_relative(const dopus_real *parts, const dopus_real *x, const dopus_real *u,
+                              const dopus_real *lam, const dopus_real *mu_g, const dopus_real *mu_b,
+                              const dopus_real *mu_bN, const dopus_real *mu_r, const dopus_real *nu)
+{
+    dopus_real sd = DOPUS_R(1.0), sp = DOPUS_R(1.0), rel;
+    int k;
+    sd = dopus_kkt_big(sd, (DOPUS_N + 1) * DOPUS_NX, lam);
+    for (k = 0; k < DOPUS_N; ++k) {
+        sd = dopus_kkt_big(sd, DOPUS_NG, mu_g + k * NG1);
+    }
+    sd = dopus_kkt_big(sd, DOPUS_N * DOPUS_NW, mu_b);
+    sd = dopus_kkt_big(sd, DOPUS_NX, mu_bN);
+    sd = dopus_kkt_big(sd, DOPUS_NR, mu_r);
+    sd = dopus_kkt_big(sd, DOPUS_NE, nu);
+    sp = dopus_kkt_big(sp, (DOPUS_N + 1) * DOPUS_NX, x);
+    sp = dopus_kkt_big(sp, DOPUS_N * DOPUS_NU, u);
+    rel = dopus_kkt_max(parts[0] / sd, parts[1] / sp);
+    rel = dopus_kkt_max(rel, parts[2] / sp);
+    return dopus_kkt_max(rel, parts[3] / (sd * sp));
+}

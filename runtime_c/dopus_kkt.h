@@ -26,4 +26,13 @@ DOPUS_INTERNAL int dopus_kkt_measure(const dopus_real *x, const dopus_real *u, c
                                      const dopus_real *mu_r, const dopus_real *nu, const dopus_real *p,
                                      const dopus_real *xhat0, dopus_fun_work *work, dopus_real *parts);
 
+/* The relative measure of the same iterate (section 6): max(stat / s_d, eq / s_p, ineq / s_p,
+ * comp / (s_d s_p)) with s_d = max(1, the largest multiplier) and s_p = max(1, the largest entry
+ * of x and u); parts as written by dopus_kkt_measure. */
+DOPUS_INTERNAL dopus_real dopus_kkt_relative(const dopus_real *parts, const dopus_real *x,
+                                             const dopus_real *u, const dopus_real *lam,
+                                             const dopus_real *mu_g, const dopus_real *mu_b,
+                                             const dopus_real *mu_bN, const dopus_real *mu_r,
+                                             const dopus_real *nu);
+
 #endif /* DOPUS_KKT_H */

@@ -23,8 +23,18 @@ extern const dopus_real dopus_lr[DOPUS_DIM(DOPUS_NR)], dopus_ur[DOPUS_DIM(DOPUS_
  * a parameter declares a trajectory) */
 extern const dopus_real dopus_p_default[DOPUS_N + 1][DOPUS_DIM(DOPUS_NP)];
 extern const dopus_real dopus_dt;
+/* the default initial state, in the declared units (what dopus_init takes) */
 extern const dopus_real dopus_x0_default[DOPUS_NX];
-/* the OCP file's initial guess */
+/* Scaling (docs/algorithm.md section 16): the solver works with x / dopus_scale_x,
+ * u / dopus_scale_u, the path rows over dopus_scale_g, the terminal rows over dopus_scale_r and
+ * dopus_scale_req and the cost over dopus_scale_cost (all 1 without a declared scaling); the
+ * bounds, the guess and the soft weights here are those of the scaled problem, the API
+ * (dopus_solver.h) and x0_default and the nominal solution are in the declared units. */
+extern const dopus_real dopus_scale_x[DOPUS_NX], dopus_scale_u[DOPUS_NU];
+extern const dopus_real dopus_scale_g[DOPUS_DIM(DOPUS_NG)], dopus_scale_r[DOPUS_DIM(DOPUS_NR)];
+extern const dopus_real dopus_scale_req[DOPUS_DIM(DOPUS_NE)];
+extern const dopus_real dopus_scale_cost;
+/* the OCP file's initial guess (in the solver's variables) */
 extern const dopus_real dopus_guess_x[DOPUS_N + 1][DOPUS_NX];
 extern const dopus_real dopus_guess_u[DOPUS_N][DOPUS_NU];
 /* the rows' names (dopus_row_name): state and control labels, path rows, terminal
@@ -55,7 +65,7 @@ extern const dopus_real dopus_soft_r[4][DOPUS_DIM(DOPUS_NR)];
 
 #if DOPUS_HAS_NOMINAL
 /* offline primal-dual solution at dopus_x0_default (IPOPT at generation time), so the
- * controller starts warm (docs/design.md section 8) */
+ * controller starts warm (docs/design.md section 8); in the declared units */
 extern const dopus_real dopus_nominal_x[DOPUS_N + 1][DOPUS_NX];
 extern const dopus_real dopus_nominal_u[DOPUS_N][DOPUS_NU];
 extern const dopus_real dopus_nominal_lam[DOPUS_N + 1][DOPUS_NX];

@@ -191,6 +191,8 @@ const char *dopus_status_string(int status)
         return "already prepared (call feedback before the next prepare)";
     case DOPUS_ERR_MEASUREMENT_GATED:
         return "the measurement is too far from the plan's prediction (gate): handled as a missing one";
+    case DOPUS_ERR_NOT_CONVERGED:
+        return "the globalised solve did not reach its tolerance within its limits";
     default:
         return "unknown status";
     }
@@ -566,6 +568,45 @@ static int dopus_init_finish(dopus_solver *s)
     return DOPUS_OK;
 }
 
+/* Scaling (docs/algorithm.md section 16): the API's values are in the declared units, the
+ * iterate in the solver's: x / scale_x, u / scale_u, a multiplier of a row of scale d times
+ * d / scale_cost. */
+static dopus_real dopus_scale_w(int i)
+{
+    return i < DOPUS_NX ? dopus_scale_x[i] : dopus_scale_u[i - DOPUS_NX];
+}
+
+/* out = in / d (n entries); NULL in gives NULL */
+static const dopus_real *dopus_scaled_in(const dopus_real *in, const dopus_real *d, int n, dopus_real *out)
+{
+    int i;
+    if (in == 0) {
+        return 0;
+    }
+    for (i = 0; i < n; ++i) {
+        out[i] = in[i] / d[i];
+    }
+    return out;
+}
+
+/* out = in * d (n entries, d repeating with period nd) */
+static void dopus_scaled_out(dopus_real *out, const dopus_real *in, const dopus_real *d, int n, int nd)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        out[i] = in[i] * d[i % nd];
+    }
+}
+
+/* out = in * scale_cost / d (multipliers; d repeating with period nd) */
+static void dopus_dual_out(dopus_real *out, const dopus_real *in, const dopus_real *d, int n, int nd)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        out[i] = in[i] * dopus_scale_cost / d[i % nd];
+    }
+}
+
 int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, const dopus_real *u,
                const dopus_real *lam, const dopus_real *mu_g, const dopus_real *mu_b, const dopus_real *mu_bN,
                const dopus_real *mu_r, const dopus_real *nu)
@@ -592,7 +633,7 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
     dopus_timer_begin(&s->timer, (1u << DOPUS_N_PHASES) - 1u, DOPUS_PHASE_GRADIENTS);
 
     for (i = 0; i < DOPUS_NX; ++i) {
-        s->xhat0[i] = xhat0 ? xhat0[i] : dopus_x0_default[i];
+        s->xhat0[i] = (xhat0 ? xhat0[i] : dopus_x0_default[i]) / dopus_scale_x[i];
     }
     for (i = 0; i < DOPUS_NU; ++i) {
         s->u_applied[i] = DOPUS_R(0.0);
@@ -603,30 +644,33 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
     }
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NX; ++i) {
-            s->x[k][i] = x ? x[k * DOPUS_NX + i] : dopus_guess_x[k][i];
-            s->lam[k][i] = lam ? lam[k * DOPUS_NX + i] : DOPUS_R(0.0);
+            s->x[k][i] = x ? x[k * DOPUS_NX + i] / dopus_scale_x[i] : dopus_guess_x[k][i];
+            s->lam[k][i] = lam ? lam[k * DOPUS_NX + i] * dopus_scale_x[i] / dopus_scale_cost : DOPUS_R(0.0);
         }
     }
     for (k = 0; k < DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NU; ++i) {
-            s->u[k][i] = u ? u[k * DOPUS_NU + i] : dopus_guess_u[k][i];
+            s->u[k][i] = u ? u[k * DOPUS_NU + i] / dopus_scale_u[i] : dopus_guess_u[k][i];
         }
         for (i = 0; i < DOPUS_DIM(DOPUS_NG); ++i) {
-            s->mu_g[k][i] = (mu_g && i < DOPUS_NG) ? mu_g[k * DOPUS_NG + i] : DOPUS_R(0.0);
+            s->mu_g[k][i] = (mu_g && i < DOPUS_NG)
+                                ? mu_g[k * DOPUS_NG + i] * dopus_scale_g[i] / dopus_scale_cost
+                                : DOPUS_R(0.0);
         }
         for (i = 0; i < DOPUS_NW; ++i) {
-            s->mu_b[k][i] = mu_b ? mu_b[k * DOPUS_NW + i] : DOPUS_R(0.0);
+            s->mu_b[k][i] =
+                mu_b ? mu_b[k * DOPUS_NW + i] * dopus_scale_w(i) / dopus_scale_cost : DOPUS_R(0.0);
         }
     }
     dopus_clear_x0_multiplier(s);
     for (i = 0; i < DOPUS_NX; ++i) {
-        s->mu_bN[i] = mu_bN ? mu_bN[i] : DOPUS_R(0.0);
+        s->mu_bN[i] = mu_bN ? mu_bN[i] * dopus_scale_x[i] / dopus_scale_cost : DOPUS_R(0.0);
     }
     for (i = 0; i < DOPUS_DIM(DOPUS_NR); ++i) {
-        s->mu_r[i] = (mu_r && i < DOPUS_NR) ? mu_r[i] : DOPUS_R(0.0);
+        s->mu_r[i] = (mu_r && i < DOPUS_NR) ? mu_r[i] * dopus_scale_r[i] / dopus_scale_cost : DOPUS_R(0.0);
     }
     for (i = 0; i < DOPUS_DIM(DOPUS_NE); ++i) {
-        s->nu[i] = (nu && i < DOPUS_NE) ? nu[i] : DOPUS_R(0.0);
+        s->nu[i] = (nu && i < DOPUS_NE) ? nu[i] * dopus_scale_req[i] / dopus_scale_cost : DOPUS_R(0.0);
     }
 
     rc = dopus_init_finish(s);
@@ -1102,15 +1146,19 @@ static int dopus_feedback_call(dopus_solver *s, const dopus_real *xhat0, dopus_r
 
 int dopus_feedback(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
-    dopus_real xm[DOPUS_NX];
+    dopus_real xm[DOPUS_NX], xs[DOPUS_NX];
     int rc;
     if (!s->set_up) {
         return DOPUS_ERR_NOT_INITIALIZED;
     }
-    rc = dopus_feedback_call(s, dopus_with_memory(s, xhat0, xm), u0);
+    rc = dopus_feedback_call(s, dopus_with_memory(s, dopus_scaled_in(xhat0, dopus_scale_x, DOPUS_NX, xs), xm),
+                             u0);
     if (s->initialized) {
         /* the control returned is the one applied: the next stage-0 rate row is against it */
         dopus_copy(s->u_applied, s->health.u0_out, DOPUS_NU);
+    }
+    if (u0) { /* every feedback of a set-up solver wrote u0 = u0_out (the fallback on failure) */
+        dopus_scaled_out(u0, s->health.u0_out, dopus_scale_u, DOPUS_NU, DOPUS_NU);
     }
     return rc;
 }
@@ -1766,7 +1814,7 @@ static int dopus_anytime_run(dopus_solver *s)
 
 int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
 {
-    dopus_real parts[4], xm[DOPUS_NX];
+    dopus_real parts[4], xm[DOPUS_NX], xs[DOPUS_NX];
     int i, rc;
 
     if (!s->set_up) {
@@ -1775,7 +1823,7 @@ int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
     if (!s->initialized) {
         return dopus_ret(s, DOPUS_ERR_NOT_INITIALIZED);
     }
-    xhat0 = dopus_with_memory(s, xhat0, xm);
+    xhat0 = dopus_with_memory(s, dopus_scaled_in(xhat0, dopus_scale_x, DOPUS_NX, xs), xm);
     if (xhat0 && !dopus_lai_vec_finite(DOPUS_NX, xhat0)) {
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
@@ -1792,6 +1840,8 @@ int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
             kkt4[i] = parts[i];
         }
     }
+    s->kkt_rel = dopus_kkt_relative(parts, &s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0],
+                                    &s->mu_b[0][0], s->mu_bN, s->mu_r, s->nu);
     return dopus_ret(s, DOPUS_OK);
 }
 
@@ -1799,47 +1849,50 @@ int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
 
 void dopus_get_x(const dopus_solver *s, dopus_real *x)
 {
-    dopus_copy(x, &s->x[0][0], (DOPUS_N + 1) * DOPUS_NX);
+    dopus_scaled_out(x, &s->x[0][0], dopus_scale_x, (DOPUS_N + 1) * DOPUS_NX, DOPUS_NX);
 }
 
 void dopus_get_u(const dopus_solver *s, dopus_real *u)
 {
-    dopus_copy(u, &s->u[0][0], DOPUS_N * DOPUS_NU);
+    dopus_scaled_out(u, &s->u[0][0], dopus_scale_u, DOPUS_N * DOPUS_NU, DOPUS_NU);
 }
 
 void dopus_get_lam(const dopus_solver *s, dopus_real *lam)
 {
-    dopus_copy(lam, &s->lam[0][0], (DOPUS_N + 1) * DOPUS_NX);
+    dopus_dual_out(lam, &s->lam[0][0], dopus_scale_x, (DOPUS_N + 1) * DOPUS_NX, DOPUS_NX);
 }
 
 void dopus_get_mu_g(const dopus_solver *s, dopus_real *mu_g)
 {
-    int k, i;
+    int k;
     for (k = 0; k < DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NG; ++i) {
-            mu_g[k * DOPUS_NG + i] = s->mu_g[k][i];
-        }
+        dopus_dual_out(mu_g + k * DOPUS_NG, s->mu_g[k], dopus_scale_g, DOPUS_NG, DOPUS_DIM(DOPUS_NG));
     }
 }
 
 void dopus_get_mu_b(const dopus_solver *s, dopus_real *mu_b)
 {
-    dopus_copy(mu_b, &s->mu_b[0][0], DOPUS_N * DOPUS_NW);
+    int k, i;
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NW; ++i) {
+            mu_b[k * DOPUS_NW + i] = s->mu_b[k][i] * dopus_scale_cost / dopus_scale_w(i);
+        }
+    }
 }
 
 void dopus_get_mu_bN(const dopus_solver *s, dopus_real *mu_bN)
 {
-    dopus_copy(mu_bN, s->mu_bN, DOPUS_NX);
+    dopus_dual_out(mu_bN, s->mu_bN, dopus_scale_x, DOPUS_NX, DOPUS_NX);
 }
 
 void dopus_get_mu_r(const dopus_solver *s, dopus_real *mu_r)
 {
-    dopus_copy(mu_r, s->mu_r, DOPUS_NR);
+    dopus_dual_out(mu_r, s->mu_r, dopus_scale_r, DOPUS_NR, DOPUS_DIM(DOPUS_NR));
 }
 
 void dopus_get_nu(const dopus_solver *s, dopus_real *nu)
 {
-    dopus_copy(nu, s->nu, DOPUS_NE);
+    dopus_dual_out(nu, s->nu, dopus_scale_req, DOPUS_NE, DOPUS_DIM(DOPUS_NE));
 }
 
 void dopus_get_rho(const dopus_solver *s, dopus_real *rho)
@@ -1909,7 +1962,8 @@ dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopu
             for (i = 0; i < DOPUS_NX; ++i) {
                 const dopus_real lb = k < DOPUS_N ? in->lbw[k][i] : in->lbxN[i];
                 const dopus_real ub = k < DOPUS_N ? in->ubw[k][i] : in->ubxN[i];
-                const dopus_real sl = dopus_soft_slack(sol->x[k][i], lb, ub, &dopus_soft_x[0][i], DOPUS_NX);
+                const dopus_real sl =
+                    dopus_soft_slack(sol->x[k][i], lb, ub, &dopus_soft_x[0][i], DOPUS_NX) * dopus_scale_x[i];
                 worst = sl > worst ? sl : worst;
                 if (viol_x) {
                     viol_x[k * DOPUS_NX + i] = sl;
@@ -1924,8 +1978,9 @@ dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopu
                     v += dopus_ring_stage_const(&s->ring, k)->Ct[i + c * DOPUS_DIM(DOPUS_NG)] *
                          (c < DOPUS_NX ? sol->x[k][c] : sol->u[k][c - DOPUS_NX]);
                 }
-                sl =
-                    dopus_soft_slack(v, in->lg[k][i], in->ug[k][i], &dopus_soft_g[0][i], DOPUS_DIM(DOPUS_NG));
+                sl = dopus_soft_slack(v, in->lg[k][i], in->ug[k][i], &dopus_soft_g[0][i],
+                                      DOPUS_DIM(DOPUS_NG)) *
+                     dopus_scale_g[i];
                 worst = sl > worst ? sl : worst;
                 if (viol_g) {
                     viol_g[k * DOPUS_DIM(DOPUS_NG) + i] = sl;
@@ -1938,7 +1993,8 @@ dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopu
             for (c = 0; c < DOPUS_NX; ++c) {
                 v += s->R[i + c * DOPUS_DIM(DOPUS_NR)] * sol->x[DOPUS_N][c];
             }
-            sl = dopus_soft_slack(v, in->lr[i], in->ur[i], &dopus_soft_r[0][i], DOPUS_DIM(DOPUS_NR));
+            sl = dopus_soft_slack(v, in->lr[i], in->ur[i], &dopus_soft_r[0][i], DOPUS_DIM(DOPUS_NR)) *
+                 dopus_scale_r[i];
             worst = sl > worst ? sl : worst;
             if (viol_r) {
                 viol_r[i] = sl;
@@ -1981,12 +2037,17 @@ int dopus_get_qp_infeasible_row(const dopus_solver *s, dopus_row_info *row)
         row->index = j - DOPUS_NX - DOPUS_NR;
         row->bound = DOPUS_R(0.0);
     }
+    row->bound *= row->kind == DOPUS_ROW_STATE      ? dopus_scale_x[row->index]
+                  : row->kind == DOPUS_ROW_CONTROL  ? dopus_scale_u[row->index]
+                  : row->kind == DOPUS_ROW_PATH     ? dopus_scale_g[row->index]
+                  : row->kind == DOPUS_ROW_TERMINAL ? dopus_scale_r[row->index]
+                                                    : dopus_scale_req[row->index];
     return 1;
 }
 
 void dopus_get_u0(const dopus_solver *s, dopus_real *u0)
 {
-    dopus_copy(u0, s->health.u0_out, DOPUS_NU);
+    dopus_scaled_out(u0, s->health.u0_out, dopus_scale_u, DOPUS_NU, DOPUS_NU);
 }
 
 void dopus_get_scales(const dopus_solver *s, dopus_real *scale_x, dopus_real *scale_u)
@@ -2033,6 +2094,7 @@ void dopus_get_info(const dopus_solver *s, dopus_info *info)
         info->kkt[i] = s->kkt[i];
         info->kkt_max = s->kkt[i] > info->kkt_max ? s->kkt[i] : info->kkt_max;
     }
+    info->kkt_rel = s->kkt_rel;
     for (i = 0; i < DOPUS_N_PHASES; ++i) { /* times are double in both precisions */
         info->timings[i] = s->timer.t[i];
     }
@@ -2105,7 +2167,7 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
         s->u_applied[i] = DOPUS_R(0.0);
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        s->xhat0[i] = dopus_x0_default[i];
+        s->xhat0[i] = dopus_x0_default[i] / dopus_scale_x[i];
     }
     s->qp_status = 0;
     s->qp_iterations = 0;
@@ -2119,6 +2181,7 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     for (i = 0; i < 4; ++i) {
         s->kkt[i] = NAN;
     }
+    s->kkt_rel = NAN;
     dopus_timer_init(&s->timer);
     s->anytime.work = 0.0;
     s->anytime.instant_start = 0.0;
@@ -2301,10 +2364,13 @@ void dopus_set_clock(dopus_solver *s, double (*clock_fn)(void *ctx), void *ctx)
 int dopus_simulate(const dopus_real *x, const dopus_real *u, const dopus_real *p, dopus_real *x_next,
                    struct dopus_fun_work_s *work)
 {
-    dopus_real l = DOPUS_R(0.0), g[DOPUS_DIM(DOPUS_NG)];
-    if (dopus_eval_stage_eval(x, u, p ? p : dopus_p_default[0], x_next, &l, g, work) != 0) {
+    dopus_real l = DOPUS_R(0.0), g[DOPUS_DIM(DOPUS_NG)], xs[DOPUS_NX], us[DOPUS_NU], xn[DOPUS_NX];
+    if (dopus_eval_stage_eval(dopus_scaled_in(x, dopus_scale_x, DOPUS_NX, xs),
+                              dopus_scaled_in(u, dopus_scale_u, DOPUS_NU, us), p ? p : dopus_p_default[0], xn,
+                              &l, g, work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
+    dopus_scaled_out(x_next, xn, dopus_scale_x, DOPUS_NX, DOPUS_NX);
     return dopus_lai_vec_finite(DOPUS_NX, x_next) ? DOPUS_OK : DOPUS_ERR_NONFINITE_VALUE;
 }
 
@@ -2317,4 +2383,5 @@ int dopus_simulate(const dopus_real *x, const dopus_real *u, const dopus_real *p
 #include "dopus_lm.c"
 #include "dopus_health.c"
 #include "dopus_kkt.c"
+#include "dopus_globalise.c"
 #include "dopus_qp.c" /* last: its short macros (N, NX, ...) stay inside it */

@@ -28,7 +28,10 @@
  * mu_g N x ng, mu_b N x nw, mu_bN nx, mu_r nr, nu ne, parameters (N+1) x np. Multipliers are
  * signed (positive when the upper side of a row is active, negative for the lower side);
  * docs/algorithm.md section 1 gives the Lagrangian. Arrays of size zero are not read or
- * written (any pointer, also NULL, may be passed).
+ * written (any pointer, also NULL, may be passed). Every value of the API is in the OCP's
+ * declared units: with a declared scaling (docs/algorithm.md section 16) the solver works in
+ * scaled variables and converts at this boundary (the KKT measure of dopus_kkt_eval and the
+ * scales of dopus_get_scales are those of the scaled variables).
  *
  * Every function returning int returns a status (enum dopus_status below) unless stated.
  * On failure the state stays consistent: a failed feedback takes no step; a failed
@@ -253,6 +256,7 @@ typedef struct {
                             and equality parts of the KKT measure at the prepared point */
     dopus_real kkt[4];    /* stat, eq, ineq, comp of the last dopus_kkt_eval (NaN before) */
     dopus_real kkt_max;   /* their largest */
+    dopus_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
     /* the factorisations of the Riccati recursion of the last feedback's QP (the sum over the
      * solves of the call: interior-point iterations, inertia corrections, sweeps of the
      * active-set start) */
@@ -304,31 +308,62 @@ const char *dopus_row_name(int kind, int index);
  * largest slack (0 without soft rows). */
 dopus_real dopus_get_soft_slacks(const dopus_solver *s, dopus_real *viol_x, dopus_real *viol_g,
                                  dopus_real *viol_r);
+/* The globalised first solve (docs/algorithm.md section 15), for a start far from the
+ * solution (a cold guess, an arbitrary state at power-up); off in the real-time loop. The
+ * memory of a solve is the caller's struct dopus_glob of dopus_globalise.h, or
+ * dopus_glob_sizeof() bytes; zero-filled it starts a solve (no penalty, no counts: `static
+ * dopus_glob g;`, memset to 0 for the next one). dopus_glob_step: one SQP step from the
+ * prepared iterate (after init or the previous step) for xhat0 (NULL: the one of the last
+ * init), in fixed mode whatever the setting: the QP of the iterate (every block fresh), then
+ * along its step the l1 exact-penalty merit function decides, with a watchdog (relaxed full
+ * steps) and a backtracking line search; then init at the accepted point (every block fresh,
+ * the next QP prepared). On failure (dopus_glob_info.reason: the QP, the step box, the line
+ * search, a function) the iterate is the one before the step, prepared.
+ * dopus_init_globalised: init at the guess (x, u NULL: the OCP file's; zero multipliers),
+ * then steps until the KKT measure (dopus_kkt_eval) is at most tol > 0: DOPUS_OK;
+ * DOPUS_ERR_NOT_CONVERGED when max_iter >= 0 steps or the work limit (max_work > 0 work units
+ * from the init on, the next step estimated as the last one; 0: none) end them first, the
+ * iterate prepared for feedback either way; the status of a failed step. */
+typedef struct dopus_glob dopus_glob;
+typedef struct {
+    int iterations; /* steps in this solve */
+    int trials;     /* merit evaluations of the last line search */
+    int reason;     /* enum dopus_glob_reason of the last call */
+    int relaxed;    /* the last step was a relaxed full step of the watchdog */
+    int restores;   /* returns to a watchdog's point in this solve */
+    dopus_real penalty, alpha, merit, slope, kkt;
+} dopus_glob_info;
+size_t dopus_glob_sizeof(void);
+int dopus_glob_step(dopus_solver *s, dopus_glob *g, const dopus_real *xhat0);
+int dopus_init_globalised(dopus_solver *s, dopus_glob *g, const dopus_real *xhat0, const dopus_real *x,
+                          const dopus_real *u, double max_work, int max_iter, dopus_real tol);
+void dopus_glob_get_info(const dopus_glob *g, dopus_glob_info *info);
 /* DOPUS_CDEF_END */
 
 /* Status codes returned by the functions above. */
 enum dopus_status {
     DOPUS_OK = 0,
-    DOPUS_ERR_QP = 1,                /* QP not solved; no step; see dopus_info.qp_status */
-    DOPUS_ERR_NONFINITE_INPUT = 2,   /* NaN or Inf in an input array */
-    DOPUS_ERR_NONFINITE_VALUE = 3,   /* a generated function returned NaN or Inf */
-    DOPUS_ERR_FUNCTION = 4,          /* a generated function reported failure */
-    DOPUS_ERR_INVALID_ARGUMENT = 5,  /* M out of range, bad mode/Hessian/regularisation,
+    DOPUS_ERR_QP = 1,                 /* QP not solved; no step; see dopus_info.qp_status */
+    DOPUS_ERR_NONFINITE_INPUT = 2,    /* NaN or Inf in an input array */
+    DOPUS_ERR_NONFINITE_VALUE = 3,    /* a generated function returned NaN or Inf */
+    DOPUS_ERR_FUNCTION = 4,           /* a generated function reported failure */
+    DOPUS_ERR_INVALID_ARGUMENT = 5,   /* M out of range, bad mode/Hessian/regularisation,
                                         Gauss-Newton without least squares, bad node index */
-    DOPUS_ERR_NOT_INITIALIZED = 6,   /* a call before dopus_setup, or feedback/prepare/kkt
+    DOPUS_ERR_NOT_INITIALIZED = 6,    /* a call before dopus_setup, or feedback/prepare/kkt
                                         before a successful init */
-    DOPUS_ERR_NOT_PREPARED = 7,      /* feedback without a successful prepare since the last
+    DOPUS_ERR_NOT_PREPARED = 7,       /* feedback without a successful prepare since the last
                                         step (the QP would be stale) */
-    DOPUS_ERR_NO_NOMINAL = 8,        /* dopus_init_nominal without DOPUS_HAS_NOMINAL */
-    DOPUS_ERR_REGULARIZATION = 9,    /* eigen-decomposition did not converge */
-    DOPUS_ERR_ALREADY_PREPARED = 10, /* prepare without a feedback since the last successful
+    DOPUS_ERR_NO_NOMINAL = 8,         /* dopus_init_nominal without DOPUS_HAS_NOMINAL */
+    DOPUS_ERR_REGULARIZATION = 9,     /* eigen-decomposition did not converge */
+    DOPUS_ERR_ALREADY_PREPARED = 10,  /* prepare without a feedback since the last successful
                                         init or prepare (it would shift the horizon twice);
                                         nothing changes */
-    DOPUS_ERR_DIVERGED = 11,         /* the QP step leaves the problem's scale box (or is not
+    DOPUS_ERR_DIVERGED = 11,          /* the QP step leaves the problem's scale box (or is not
                                         finite): no step, the fallback control is returned */
-    DOPUS_ERR_MEASUREMENT_GATED = 12 /* the measurement jumped further from the plan's
+    DOPUS_ERR_MEASUREMENT_GATED = 12, /* the measurement jumped further from the plan's
                                         prediction than the gate allows: handled as a missing
                                         one (settings gate, gate_hold) */
+    DOPUS_ERR_NOT_CONVERGED = 13      /* dopus_init_globalised: a limit came before the tolerance */
 };
 
 /* Kinds of dopus_row_info and dopus_row_name. */
@@ -395,6 +430,7 @@ enum dopus_budget_unit {
 
 #include "dopus_sizes.h"
 #include "dopus_funcs.h"
+#include "dopus_globalise.h"
 #include "dopus_health.h"
 #include "dopus_lm.h"
 #include "dopus_qp.h"
@@ -508,6 +544,7 @@ struct dopus_solver {
     dopus_health health; /* safe outputs, divergence test and recovery (section 9) */
     dopus_lm lm;         /* the Levenberg-Marquardt term (sections 3 and 10) */
     dopus_real kkt[4];   /* KKT parts of the last dopus_kkt_eval: stat, eq, ineq, comp */
+    dopus_real kkt_rel;  /* its relative measure */
     dopus_timer timer;
     dopus_anytime anytime; /* the budget's bookkeeping (section 14) */
 };

@@ -141,3 +141,20 @@ def cone(N=20):
     ocp.initial_state([0.0, 0.0])
     ocp.options(hessian="gauss-newton")
     return ocp
+
+
+def all_soft(N=15):
+    """Every state-dependent row soft (a state bound L1 + L2, an L1 speed bound, an L2 path row,
+    an L1 terminal equality): the QP is feasible for every finite measurement."""
+    ocp = Ocp("soft_all")
+    p = ocp.state("p", lb=-1.0, ub=1.0, soft=Soft(l1=10.0, l2=1.0))
+    v = ocp.state("v", lb=-0.5, ub=0.5, soft=Soft(l1=10.0))
+    a = ocp.control("a", lb=-1.0, ub=1.0)
+    ocp.dynamics(ca.vertcat(v, a), integrator=RK4(1))
+    ocp.stage_least_squares(ca.vertcat(p, v, a), [1.0, 0.1, 0.1])
+    ocp.path_constraint(p + 0.5 * v, lb=-1.2, ub=1.2, soft=Soft(l2=50.0))
+    ocp.terminal_constraint(p, lb=0.0, ub=0.0, soft=Soft(l1=5.0))
+    ocp.horizon(N=N, dt=0.1)
+    ocp.initial_state([0.0, 0.0])
+    ocp.options(hessian="gauss-newton")
+    return ocp

@@ -122,8 +122,13 @@ def test_kkt_matches_python_measure(robot_disc, robot_solution, robot_c):
         kc = robot_c.kkt(xhat)
         kp = kkt_measure(robot_disc, xhat, pert.x, pert.u, pert.lam, pert.mu_g, pert.mu_b, pert.mu_bN,
                          pert.mu_r, pert.nu)
-        for key in ("kkt", "stat", "eq", "ineq", "comp"):
+        for key in ("kkt", "stat", "eq", "ineq", "comp", "rel"):
             assert kc[key] == pytest.approx(kp[key], rel=1e-12, abs=1e-14), (trial, key)
+        # the relative measure by its definition (docs/algorithm.md section 6)
+        s_d = max(1.0, *(np.max(np.abs(a)) for a in (pert.lam, pert.mu_b, pert.mu_bN, pert.nu)))
+        s_p = max(1.0, np.max(np.abs(pert.x)), np.max(np.abs(pert.u)))
+        assert kc["rel"] == pytest.approx(max(kp["stat"] / s_d, kp["eq"] / s_p, kp["ineq"] / s_p,
+                                              kp["comp"] / (s_d * s_p)), rel=1e-12)
     # at the IPOPT solution the measure is small (the solution is optimal to tol 1e-12)
     robot_c.init(robot_disc.x0, g)
     assert robot_c.kkt(robot_disc.x0)["kkt"] < 1e-8

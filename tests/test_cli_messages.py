@@ -217,6 +217,7 @@ CLI_CASES = [
     ("M-not-a-number", ["converge", "{ocp}", "--M", "full,x"], r"'x' is neither a non-negative integer nor 'full'"),
     ("M-beyond-horizon", ["converge", "{ocp}", "--M", "9"], r"M = 9 exceeds N-1 = 4"),
     ("iters-zero", ["converge", "{ocp}", "--iters", "0"], r"--iters"),
+    ("tol-rel-zero", ["converge", "{ocp}", "--tol-rel", "0"], r"--tol-rel"),
     ("ocp-file-missing", ["converge", "{tmp}/none.py"], r"'.*none\.py' does not exist"),
     ("duration-negative", ["sil", "{ocp}", "--duration", "-1"], r"--duration"),
     ("unknown-verb", ["converg", "{ocp}"], r"No such command 'converg'"),

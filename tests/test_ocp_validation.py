@@ -211,7 +211,8 @@ def test_options_update_only_what_is_given():
     ocp.options(regularization="mirror")
     assert build_functions(ocp).options == dict(hessian="gauss-newton", regularization="mirror",
                                                 reg_eps=1e-4, M=3, offline_guess=False, lm="auto",
-                                                cost_hessian="fresh", real="double", gate=0.0, gate_hold=10)
+                                                cost_hessian="fresh", real="double", gate=0.0, gate_hold=10,
+                                                kkt_tol_rel=None)
     ocp.options(lm=2e-4)
     assert build_functions(ocp).options["lm"] == 2e-4 and build_functions(ocp).options["M"] == 3
 

@@ -205,3 +205,71 @@ def test_rows_on_chosen_stages_equal_independent_transcription():
     assert np.max(np.abs(c.x - X)) < 1e-6 and np.max(np.abs(c.u - U)) < 1e-6
     k = kkt_measure(disc, disc.x0, c.x, c.u, c.lam, c.mu_g, c.mu_b, c.mu_bN, c.mu_r, c.nu)
     assert k["kkt"] < 1e-8 and c.kkt(disc.x0)["kkt"] == pytest.approx(k["kkt"], rel=1e-6, abs=1e-12)
+
+
+def _opti_staged_weights(stages, W):
+    """The written-out NLP of _staged_weights_ocp: 0.5 [x - 1, v]' W [x - 1, v] at the chosen stages."""
+    opti = ca.Opti()
+    X, U = opti.variable(2, N + 1), opti.variable(1, N)
+    J = 0
+    for k in range(N):
+        opti.subject_to(X[:, k + 1] == rk4_double_integrator(X[:, k], U[k], DT))
+        J += 0.5 * 1.0 * U[k] ** 2
+        opti.subject_to(opti.bounded(-1.0, U[k], 1.0))
+        if k in stages:
+            r = ca.vertcat(X[0, k] - 1.0, X[1, k])
+            J += 0.5 * ca.mtimes([r.T, ca.DM(W), r])
+    J += 0.5 * 1.0 * X[1, N] ** 2
+    opti.minimize(J)
+    opti.subject_to(X[:, 0] == 0)
+    opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "tol": 1e-12, "sb": "yes"})
+    sol = opti.solve()
+    return sol.value(X).T, np.atleast_1d(sol.value(U)).reshape(N, 1)
+
+
+def _staged_weights_ocp(stages, W):
+    o, x, v, u = _base("staged_weights")
+    o.stage_least_squares(u, weights=[1.0])
+    o.stage_least_squares(ca.vertcat(x - 1.0, v), weights=W, stages=stages)
+    o.terminal_least_squares(v, weights=[1.0])
+    return o
+
+
+@pytest.mark.parametrize("W", [np.diag([5.0, 0.5]), np.array([[5.0, 0.8], [0.8, 0.4]])])
+def test_weights_on_chosen_stages_equal_independent_transcription(W):
+    """stage_least_squares(..., stages=range(6, 10)): the tracking term only on the last four
+    stages (a diagonal and a full weight matrix): the offline solution, the C full RTI from
+    the cold guess and the reference equal the written-out NLP to 1e-6, and the term is
+    active (the solution with it on every stage differs)."""
+    stages = tuple(range(6, 10))
+    X, U = _opti_staged_weights(stages, W)
+    Xall, _ = _opti_staged_weights(tuple(range(N)), W)
+    assert np.max(np.abs(X - Xall)) > 1e-2
+    disc = build_functions(_staged_weights_ocp(range(6, 10), W))
+    g, info = solve_ocp(disc, disc.x0)
+    assert info["success"]
+    assert np.max(np.abs(g.x - X)) < 1e-6 and np.max(np.abs(g.u - U)) < 1e-6
+    for b in (CSolver(disc, M=N - 1, mode="fixed"), ReferenceDopus(disc, M=N - 1, mode="fixed")):
+        b.init(disc.x0)
+        for _ in range(30):
+            b.feedback(disc.x0)
+            b.prepare()
+        assert np.max(np.abs(b.x - X)) < 1e-6 and np.max(np.abs(b.u - U)) < 1e-6, type(b).__name__
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda o, x, v, u: o.stage_least_squares(x, weights=[1.0], stages=[]),
+     r"^stage least squares 0: stages is empty \(leave it out for every stage\)$"),
+    (lambda o, x, v, u: o.stage_least_squares(x, weights=[1.0], stages=[2, 2]),
+     r"^stage least squares 0: stage 2 given twice$"),
+    (lambda o, x, v, u: o.stage_least_squares(x, weights=[1.0], stages="ab"),
+     r"^stage least squares 0: stages must be integers, got 'a'$"),
+    (lambda o, x, v, u: (o.stage_least_squares(x, weights=[1.0], stages=[N]), o.validate()),
+     rf"^stage least squares 0: stage {N} is outside 0..N-1 = 0..{N - 1}$"),
+    (lambda o, x, v, u: o.stage_least_squares(x, weights=[0.0], stages=[1]),
+     r"^stage least squares 0: weights are all zero$"),
+])
+def test_bad_weight_stages(call, message):
+    o, x, v, u = _base()
+    with pytest.raises(OcpError, match=message):
+        call(o, x, v, u)

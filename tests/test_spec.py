@@ -121,7 +121,7 @@ def test_spec_holds_what_was_declared():
     assert np.array_equal(k.terminal_least_squares[0].weights, np.diag([3.0, 1.0]))
     assert spec.options.as_dict() == dict(hessian="gauss-newton", regularization="none", reg_eps=1e-4,
                                           M=2, offline_guess=False, lm=1e-3, cost_hessian="fresh",
-                                          real="double")
+                                          real="double", gate=0.0, gate_hold=10, kkt_tol_rel=None)
     assert np.array_equal(spec.x0, [1.0, 0.0])
     # default guess: x0 at every node, u = 0 clipped into [0.5, 1]
     assert np.array_equal(spec.guess.x, np.tile([1.0, 0.0], (7, 1)))

@@ -109,6 +109,9 @@ def problem_hash(disc: Any, offline_guess: Optional[bool] = None, real: Optional
     put("guess_x", _array_bytes(getattr(guess, "x", None)))
     put("guess_u", _array_bytes(getattr(guess, "u", None)))
     put("options", json.dumps(getattr(disc, "options", {}) or {}, sort_keys=True, default=repr).encode())
+    scaling = getattr(disc, "scaling", None)
+    if scaling is not None:     # the generated functions and data are those of the scaled problem
+        put("scaling", json.dumps(scaling.as_dict(), sort_keys=True).encode())
     for folder in (runtime_c_dir(), templates_dir()):
         for path in sorted(folder.iterdir()):
             if path.is_file() and path.suffix in (".c", ".h", ".j2"):

@@ -491,9 +491,14 @@ def _code(setting: str, options: Any) -> int:
         raise CodegenError(f"option {exc}") from None
 
 
-def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "double") -> Dict[str, Any]:
-    """Everything dopus_problem.c renders, pre-formatted (the template only places it)."""
+def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "double",
+                    declared: Any = None) -> Dict[str, Any]:
+    """Everything dopus_problem.c renders, pre-formatted (the template only places it).
+    ``disc``: the problem the solver works with; ``declared``: the declared problem when it
+    is scaled (docs/algorithm.md section 16: ``x0_default`` and ``nominal`` are in its units)."""
     N, nx, nu, nw = s["N"], s["nx"], s["nu"], s["nw"]
+    declared = disc if declared is None else declared
+    scaling = getattr(declared, "scaling", None)
 
     def c_double(value, what):
         return _c_literal(value, what, real)
@@ -520,7 +525,15 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
         "ur": c_vector(_attr(data, "ur"), s["nr"], "ur"),
         "p_default": c_matrix(_default_parameters(disc, s), N + 1, max(s["np"], 1), "p0"),
         "dt": c_double(_attr(data, "dt"), "dt"),
-        "x0_default": c_vector(_attr(data, "x0"), nx, "x0"),
+        "x0_default": c_vector(_attr(declared.data, "x0") if hasattr(declared, "data") else _attr(data, "x0"),
+                               nx, "x0"),
+        "scale_x": c_vector(np.ones(nx) if scaling is None else scaling.x, nx, "scale_x"),
+        "scale_u": c_vector(np.ones(nu) if scaling is None else scaling.u, nu, "scale_u"),
+        # (an empty row block has one unused entry, DOPUS_DIM: 1, like every scale that is not declared)
+        "scale_g": c_vector(_scales_of(scaling, "g", s["ng"]), max(s["ng"], 1), "scale_g"),
+        "scale_r": c_vector(_scales_of(scaling, "r", s["nr"]), max(s["nr"], 1), "scale_r"),
+        "scale_req": c_vector(_scales_of(scaling, "r_eq", s["ne"]), max(s["ne"], 1), "scale_req"),
+        "scale_cost": c_double(1.0 if scaling is None else scaling.cost, "scale_cost"),
         "guess_x": c_matrix(getattr(guess, "x", None), N + 1, nx, "initial_guess.x"),
         "guess_u": c_matrix(getattr(guess, "u", None), N, nu, "initial_guess.u"),
         "default_M": int(_option(options, "M", settings.DEFAULTS["M"])),
@@ -573,6 +586,13 @@ def problem_context(disc: Any, s: Dict[str, int], nominal: Any, real: str = "dou
 
 
 _c_literal, _c_vector, _c_matrix = c_double, c_vector, c_matrix
+
+
+def _scales_of(scaling, key: str, n: int) -> np.ndarray:
+    """The scales of a row block (docs/algorithm.md section 16), 1 without a scaling; at least
+    one entry."""
+    a = np.ones(n) if scaling is None else np.asarray(getattr(scaling, key), dtype=float)
+    return a if n else np.ones(1)
 
 
 def _zeros_if_none(v, n):
@@ -682,6 +702,8 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     name = check_name(_attr(disc.data, "name"))
     NAME = name.upper()
     real = real_of(disc, real)
+    declared = disc
+    disc = getattr(disc, "solver_problem", disc)     # a scaled problem: the solver's variables
     if real == "float" and hasattr(disc, "spec"):
         from ..problem.checks import check_float_range
 
@@ -704,7 +726,7 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
         "strict_cflags": " ".join(STRICT_CFLAGS), "casadi_cflags": " ".join(CASADI_CFLAGS),
         "default_opt": DEFAULT_OPT, "cmake_options": flags.cmake_options(),
     }
-    ctx.update(problem_context(disc, s, nominal, real))
+    ctx.update(problem_context(disc, s, nominal, real, declared))
     ctx["has_nominal"] = int(ctx["has_nominal"])
 
     env = _templates()
@@ -754,6 +776,8 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
         # `dopus-gen generate` of an unchanged problem finds both and writes nothing
         "sha256": {f: hashlib.sha256(files[f].encode("utf-8")).hexdigest() for f in sorted(files)},
     }
+    if getattr(declared, "scaling", None) is not None:
+        meta["scaling"] = declared.scaling.as_dict()     # docs/algorithm.md section 16
     if soft["nsoft"]:
         meta["soft_rows"] = soft["nsoft"]
         meta["qp_always_feasible"] = soft["always_feasible"]

@@ -237,6 +237,16 @@ class Discretized:
     data: ProblemData
     functions: StageFunctions
     scenario: Scenario
+    #: with a declared scaling (``Ocp.scaling``, ``scale=``): its numbers and the problem in the
+    #: solver's variables (docs/algorithm.md section 16), which the backends and the generated C
+    #: solve; their API converts at the boundary. None: the problem is solved as declared.
+    scaling: Optional[object] = None
+    scaled: Optional["Discretized"] = None
+
+    @property
+    def solver_problem(self) -> "Discretized":
+        """The problem the solver works with: ``scaled``, or the problem itself."""
+        return self if self.scaled is None else self.scaled
 
     @property
     def options(self) -> Mapping[str, object]:
@@ -626,7 +636,26 @@ def build_functions(problem: Union[Ocp, OcpSpec]) -> Discretized:
         soft_g=readonly(m.soft_g), soft_r=readonly(m.soft_r))
     disc = Discretized(spec=spec, data=data, functions=functions, scenario=_scenario(spec, m, ode))
     _check_finite_at_guess(disc)
+    if spec.scaling is not None:
+        disc = _with_scaling(disc)
     return disc
+
+
+def _with_scaling(disc: "Discretized") -> "Discretized":
+    """``disc`` with its scaling resolved and the scaled problem built (docs/algorithm.md
+    section 16); ``derive="nominal"`` solves the declared problem offline first."""
+    import dataclasses
+
+    from .scaling import nominal_solution, resolve, scaled_spec
+
+    nominal = None
+    if disc.spec.scaling.derive == "nominal":
+        nominal = nominal_solution(disc)
+        if nominal is None:
+            raise OcpError(f"{disc.name}: scaling(derive='nominal'): IPOPT did not solve the OCP at the initial "
+                           "state; declare the scales with scale= or use derive='bounds'")
+    sc = resolve(disc.spec, disc, nominal)
+    return dataclasses.replace(disc, scaling=sc, scaled=build_functions(scaled_spec(disc.spec, sc)))
 
 
 def _first_horizon(model, N: int, dt: float) -> numpy.ndarray:

@@ -49,14 +49,14 @@ import traceback
 import types
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, Optional
+from typing import Callable, Mapping, Optional, Tuple
 
 import casadi as ca
 import numpy as np
 
 from ..cnames import identifier_problem
 from .spec import (CampaignSpec, ClosedLoopSpec, ConstraintSpec, CostSpec, GuessSpec, HorizonSpec, LeastSquares,
-                   ModelSpec, OcpError, OcpSpec, OptionsSpec, ParameterTrajectory, Rows, ScenarioPart,
+                   ModelSpec, OcpError, OcpSpec, OptionsSpec, ParameterTrajectory, Rows, ScalingSpec, ScenarioPart,
                    TrajectoryError, Variable, readonly)
 
 __all__ = [
@@ -367,6 +367,7 @@ class _Decl:
     value: Optional[np.ndarray] = None
     trajectory: Optional[tuple] = None   # ("function", fn) or ("table", (times, values))
     soft: Optional[np.ndarray] = None
+    scale: Optional[np.ndarray] = None   # declared scales (NaN: not declared) or None
 
 
 # --------------------------------------------------------------------------- helpers
@@ -386,6 +387,26 @@ def _vector(value, size: int, what: str, allow_inf: bool = True) -> np.ndarray:
         raise OcpError(f"{what}: NaN at row {int(np.flatnonzero(np.isnan(a))[0])}")
     if not allow_inf and np.any(np.isinf(a)):
         raise OcpError(f"{what}: infinite value at row {int(np.flatnonzero(np.isinf(a))[0])}")
+    return a
+
+
+def _scales(value, size: int, what: str) -> Optional[np.ndarray]:
+    """Declared scales: None, or ``size`` positive finite numbers (a scalar broadcasts)."""
+    if value is None:
+        return None
+    try:
+        a = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise OcpError(f"{what} scale: expected a positive number or {size}, got {value!r}") from None
+    if a.ndim == 0:
+        a = np.full(size, float(a))
+    elif a.size == size and (a.ndim == 1 or (a.ndim == 2 and 1 in a.shape)):
+        a = a.reshape(size)
+    else:
+        raise OcpError(f"{what} scale: expected a scalar or {size} values, got shape {a.shape}")
+    bad = np.flatnonzero(~(np.isfinite(a) & (a > 0)))
+    if bad.size:
+        raise OcpError(f"{what} scale: must be positive and finite, got {float(a[bad[0]])!r} at row {int(bad[0])}")
     return a
 
 
@@ -444,6 +465,25 @@ def _rows(expr, lb, ub, what: str) -> tuple:
     ubv = _vector(ub, e.size1(), f"{what} ub")
     _check_bounds(lbv, ubv, what)
     return e, lbv, ubv
+
+
+def _stage_list(stages, what: str) -> Optional[Tuple[int, ...]]:
+    """``stages=`` of a declaration (None: every stage): sorted distinct integers, checked
+    against 0..N-1 when the OCP is validated."""
+    if stages is None:
+        return None
+    try:
+        stages = tuple(stages)
+    except TypeError:
+        raise OcpError(f"{what}: stages must be stage indices (e.g. range(5, 10)), got {stages!r}") from None
+    bad = [k for k in stages if isinstance(k, bool) or not isinstance(k, (int, np.integer))]
+    if bad:
+        raise OcpError(f"{what}: stages must be integers, got {bad[0]!r}")
+    if not stages:
+        raise OcpError(f"{what}: stages is empty (leave it out for every stage)")
+    if len(set(stages)) != len(stages):
+        raise OcpError(f"{what}: stage {next(k for k in stages if stages.count(k) > 1)} given twice")
+    return tuple(sorted(int(k) for k in stages))
 
 
 def _check_bounds(lb: np.ndarray, ub: np.ndarray, what: str) -> None:
@@ -566,6 +606,7 @@ class Ocp:
         self._integrator: Integrator = RK4(1)
         self._stage_costs: list[ca.SX] = []
         self._stage_ls: list[tuple[ca.SX, np.ndarray]] = []
+        self._stage_ls_staged: list[tuple] = []   # (rows, L2 weights, stages, what): stages= terms
         self._term_costs: list[ca.SX] = []
         self._term_ls: list[tuple[ca.SX, np.ndarray]] = []
         self._rates: list[tuple] = []     # (control decl, lb, ub, name, initial, memory decl)
@@ -584,6 +625,12 @@ class Ocp:
         self._scenario = None
         self._quantities: list = []
         self._campaign = None
+        # the declared scales of the path rows, terminal rows and rate rows (aligned with
+        # _path, _term_con and _rates; None: not declared) and Ocp.scaling's cost and derive
+        self._path_scale: list = []
+        self._term_scale: list = []
+        self._rate_scale: list = []
+        self._scaling = {"cost": None, "derive": None}
 
     def __setattr__(self, key, value):
         if key != "_spec":
@@ -591,7 +638,7 @@ class Ocp:
         object.__setattr__(self, key, value)
 
     # ------------------------------------------------------------------ declarations
-    def _declare(self, kind: str, store: list, name, size, lb, ub, value=None, soft=None) -> ca.SX:
+    def _declare(self, kind: str, store: list, name, size, lb, ub, value=None, soft=None, scale=None) -> ca.SX:
         _check_identifier(name, f"{kind} name")
         for decl in self._states + self._controls + self._params:
             if decl.name == name:
@@ -606,20 +653,25 @@ class Ocp:
         if value is not None:
             val = _vector(value, size, f"{kind} '{name}' value", allow_inf=False)
         weights = _soft_weights(soft, size, lbv, ubv, f"{kind} '{name}'")
+        scales = _scales(scale, size, f"{kind} '{name}'")
         sym = ca.SX.sym(name, size)
-        store.append(_Decl(name, sym, size, lbv, ubv, value=val, soft=weights))
+        store.append(_Decl(name, sym, size, lbv, ubv, value=val, soft=weights, scale=scales))
         return sym
 
     @_declaration
-    def state(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None) -> ca.SX:
+    def state(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None,
+              scale=None) -> ca.SX:
         """Declare a state vector; bounds hold on nodes 1..N. ``soft``: :class:`Soft`
-        weights that make the bounds soft (control bounds are always hard)."""
-        return self._declare("state", self._states, name, size, lb, ub, soft=soft)
+        weights that make the bounds soft (control bounds are always hard). ``scale``: its
+        typical size (a positive number, or one per component): the solver works with
+        ``x / scale`` (docs/algorithm.md section 16; :meth:`scaling`)."""
+        return self._declare("state", self._states, name, size, lb, ub, soft=soft, scale=scale)
 
     @_declaration
-    def control(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf) -> ca.SX:
-        """Declare a control vector; bounds hold on stages 0..N-1."""
-        return self._declare("control", self._controls, name, size, lb, ub)
+    def control(self, name: str, size: int = 1, lb=-math.inf, ub=math.inf, scale=None) -> ca.SX:
+        """Declare a control vector; bounds hold on stages 0..N-1. ``scale``: as for
+        :meth:`state`."""
+        return self._declare("control", self._controls, name, size, lb, ub, scale=scale)
 
     @_declaration
     def parameter(self, name: str, size: int = 1, value=None, trajectory=None) -> ca.SX:
@@ -686,11 +738,26 @@ class Ocp:
         return W
 
     @_declaration
-    def stage_least_squares(self, residual, weights) -> None:
-        """Add ``0.5 res' W res`` to the stage cost (weights: vector = diagonal, or matrix)."""
-        what = f"stage least squares {len(self._stage_ls)}"
+    def stage_least_squares(self, residual, weights, stages=None) -> None:
+        """Add ``0.5 res' W res`` to the stage cost (weights: vector = diagonal, or matrix);
+        ``stages``: the stages (integers in 0..N-1, e.g. ``range(30, 40)``) where the term
+        applies (default: all). A term on chosen stages is carried as soft equality rows
+        ``q_i' res = 0`` on those stages with the L2 weights ``d_i`` (``W = Q diag(d) Q'``),
+        whose penalty ``0.5 d_i (q_i' res)^2`` sums to the term (docs/algorithm.md section 12);
+        the Gauss-Newton Hessian needs a term on every stage."""
+        what = f"stage least squares {len(self._stage_ls) + len(self._stage_ls_staged)}"
         res = _as_sx(residual, what)
-        self._stage_ls.append((res, self._weights(weights, res.size1(), what)))
+        W = self._weights(weights, res.size1(), what)
+        stages = _stage_list(stages, what)
+        if stages is None:
+            self._stage_ls.append((res, W))
+            return
+        d, Q = np.linalg.eigh(W)
+        keep = d > 1e-12 * max(1.0, float(np.abs(d).max(initial=0.0)))
+        if not np.any(keep):
+            raise OcpError(f"{what}: weights are all zero")
+        rows = ca.mtimes(ca.DM(Q[:, keep].T), res)
+        self._stage_ls_staged.append((rows, d[keep], stages, what))
 
     @_declaration
     def terminal_least_squares(self, residual, weights) -> None:
@@ -701,14 +768,16 @@ class Ocp:
 
     @_declaration
     def path_constraint(self, expr, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None,
-                        name: Optional[str] = None, terminal: bool = False, stages=None) -> None:
+                        name: Optional[str] = None, terminal: bool = False, stages=None, scale=None) -> None:
         """``lb <= g(x, u, p) <= ub`` on stages 0..N-1 (several calls stack); ``soft``:
         :class:`Soft` weights that make the rows soft; ``name``: the rows' name in messages,
         tables and the C API's row description (``name[i]`` for row i of several; default
         ``path constraint <i>``); ``terminal=True``: the rows also hold at x_N (a terminal
         constraint of the same rows, bounds and name; they may use states and parameters only);
         ``stages``: the stages (integers in 0..N-1, e.g. ``range(5, 10)``) where the rows hold
-        (default: all); at the other stages they are absent (infinite bounds)."""
+        (default: all); at the other stages they are absent (infinite bounds); ``scale``: the
+        rows' typical size (one number or one per row): the solver works with ``g / scale``
+        (docs/algorithm.md section 16)."""
         what = f"path constraint {len(self._path)}"
         name = self._row_name(name, what)
         if name is not None:
@@ -717,6 +786,7 @@ class Ocp:
             raise OcpError(f"{what}: terminal must be True or False, got {terminal!r}")
         g, lbv, ubv = _rows(expr, lb, ub, what)
         weights = _soft_weights(soft, g.size1(), lbv, ubv, what)
+        scales = _scales(scale, g.size1(), what)
         if terminal:
             used = [d.name for d in self._controls if ca.depends_on(g, d.sym)]
             if used:
@@ -725,26 +795,16 @@ class Ocp:
             eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
             if eq.size:
                 raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")
-        if stages is not None:
-            try:
-                stages = tuple(stages)
-            except TypeError:
-                raise OcpError(f"{what}: stages must be stage indices (e.g. range(5, 10)), got {stages!r}") from None
-            bad = [k for k in stages if isinstance(k, bool) or not isinstance(k, (int, np.integer))]
-            if bad:
-                raise OcpError(f"{what}: stages must be integers, got {bad[0]!r}")
-            if not stages:
-                raise OcpError(f"{what}: stages is empty (leave it out for every stage)")
-            if len(set(stages)) != len(stages):
-                raise OcpError(f"{what}: stage {next(k for k in stages if stages.count(k) > 1)} given twice")
-            stages = tuple(sorted(int(k) for k in stages))
+        stages = _stage_list(stages, what)
         self._path.append((g, lbv, ubv, weights, name, stages))
+        self._path_scale.append(scales)
         if terminal:
             self._term_con.append((g, lbv, ubv, weights, name, None))
+            self._term_scale.append(scales)
 
     @_declaration
     def rate_constraint(self, control: str, lb=-math.inf, ub=math.inf, name: Optional[str] = None,
-                        initial=None, soft: Optional[Soft] = None) -> None:
+                        initial=None, soft: Optional[Soft] = None, scale=None) -> None:
         """``lb <= u_k - u_{k-1} <= ub`` for the control named ``control`` (the change per
         sampling interval), at stages 1..N-1 and at stage 0 against the last applied control,
         which the runtime keeps (``initial``: its value before the first feedback; default 0
@@ -752,7 +812,9 @@ class Ocp:
         declared states) carries ``u_{k-1}``: its interval map is ``x+ = u``, the measured
         state's entry is filled by the runtime, the guess and the initial state get it from
         ``initial`` and the guessed controls. ``name``: the rows' name (default
-        ``<control>_rate``); ``soft``: :class:`Soft` weights, as for :meth:`path_constraint`."""
+        ``<control>_rate``); ``soft``: :class:`Soft` weights, as for :meth:`path_constraint`;
+        ``scale``: the rows' scale (default: the control's; the memory state always has the
+        control's)."""
         if not isinstance(control, str):
             raise OcpError(f"rate constraint: control must be the name of a declared control, got {control!r}")
         decl = next((d for d in self._controls if d.name == control), None)
@@ -775,7 +837,9 @@ class Ocp:
         mem = _Decl(mem_name, ca.SX.sym(mem_name, decl.size), decl.size, np.full(decl.size, -math.inf),
                     np.full(decl.size, math.inf))
         weights = _soft_weights(soft, decl.size, lbv, ubv, what)
+        scales = _scales(scale, decl.size, what)
         self._rates.append((decl, lbv, ubv, name, init, mem, weights))
+        self._rate_scale.append(scales)
 
     def _row_name(self, name, what: str) -> Optional[str]:
         """A checked row name (an identifier, unique among the constraint names) or None."""
@@ -789,10 +853,11 @@ class Ocp:
 
     @_declaration
     def terminal_constraint(self, expr, lb=-math.inf, ub=math.inf, soft: Optional[Soft] = None,
-                            name: Optional[str] = None) -> None:
+                            name: Optional[str] = None, scale=None) -> None:
         """``lb <= r(x_N, p) <= ub``; hard rows with ``lb == ub`` become equality rows;
         ``soft``: :class:`Soft` weights that make the rows soft (a soft row with ``lb ==
-        ub`` stays a two-sided inequality row whose sides may be violated at a price)."""
+        ub`` stays a two-sided inequality row whose sides may be violated at a price);
+        ``scale``: as for :meth:`path_constraint`."""
         what = f"terminal constraint {len(self._term_con)}"
         name = self._row_name(name, what)
         if name is not None:
@@ -801,7 +866,26 @@ class Ocp:
         eq = np.flatnonzero((lbv == ubv) & np.isinf(lbv))
         if eq.size:
             raise OcpError(f"{what}: lb == ub == {lbv[eq[0]]} at row {int(eq[0])}")
+        scales = _scales(scale, r.size1(), what)
         self._term_con.append((r, lbv, ubv, _soft_weights(soft, r.size1(), lbv, ubv, what), name, None))
+        self._term_scale.append(scales)
+
+    @_declaration
+    def scaling(self, cost=None, derive: Optional[str] = None) -> None:
+        """The scaling of the problem the solver works with (docs/algorithm.md section 16):
+        ``cost``: the cost's typical size (the solver minimises ``cost / scale``); ``derive``:
+        the scales not declared with ``scale=`` are derived, ``"bounds"`` from the finite
+        bounds (else the initial state and guess), ``"nominal"`` from the offline (IPOPT)
+        solution at the initial state, rounded to powers of two; None (default): 1.
+        The solver's API stays in the declared units."""
+        if cost is not None:
+            c = _scales(cost, 1, "scaling cost")
+            if np.isnan(c[0]):
+                raise OcpError(f"scaling: cost must be a positive finite number, got {cost!r}")
+            cost = float(c[0])
+        if derive not in (None, "bounds", "nominal"):
+            raise OcpError(f"scaling: derive must be None, 'bounds' or 'nominal', got {derive!r}")
+        self._scaling = {"cost": cost, "derive": derive}
 
     # ------------------------------------------------------------------ horizon and data
     @_declaration
@@ -1031,6 +1115,11 @@ class Ocp:
             if out:
                 what = f"path constraint '{name}'" if name is not None else f"path constraint {i}"
                 raise OcpError(f"{what}: stage {out[0]} is outside 0..N-1 = 0..{self._N - 1}")
+        for rows, _, stages, what in self._stage_ls_staged:
+            self._check_symbols(rows, what, "xup")
+            out = [k for k in stages if not 0 <= k <= self._N - 1]
+            if out:
+                raise OcpError(f"{what}: stage {out[0]} is outside 0..N-1 = 0..{self._N - 1}")
         for i, (r, *_) in enumerate(self._term_con):
             self._check_symbols(r, f"terminal constraint {i}", "xp")
         if self._options["hessian"] == "gauss-newton" and not self._stage_ls:
@@ -1077,7 +1166,8 @@ class Ocp:
     def _spec_parts(self, x0, gx, gu, closed_loop) -> OcpSpec:
         """The immutable spec from declarations that passed validation."""
         def variables(decls):
-            return tuple(Variable(d.name, d.size, d.sym) for d in decls)
+            return tuple(Variable(d.name, d.size, d.sym, None if d.scale is None else readonly(d.scale))
+                         for d in decls)
 
         def bounds(decls, which):
             return readonly(np.concatenate([getattr(d, which) for d in decls]))
@@ -1086,6 +1176,7 @@ class Ocp:
         soft_x = np.hstack([d.soft if d.soft is not None else np.zeros((4, d.size)) for d in states])
         xdot = self._xdot
         memory, path = [], list(self._path)
+        path_scale = [(sc, None) for sc in self._path_scale]
         if self._rates:
             nz = sum(r[5].size for r in self._rates)
             xdot = ca.vertcat(self._xdot, ca.SX.zeros(nz))
@@ -1094,10 +1185,11 @@ class Ocp:
             for d in self._controls:
                 offsets[d.name] = start
                 start += d.size
-            for decl, lbv, ubv, name, _, mem, weights in self._rates:
+            for (decl, lbv, ubv, name, _, mem, weights), sc in zip(self._rates, self._rate_scale):
                 memory += [(row + i, offsets[decl.name] + i) for i in range(decl.size)]
                 row += decl.size
                 path.append((decl.sym - mem.sym, lbv, ubv, weights, name, None))
+                path_scale.append((sc, tuple(offsets[decl.name] + i for i in range(decl.size))))
 
         trajectory = ParameterTrajectory(tuple(
             (d.name, d.size, "constant", readonly(d.value)) if d.trajectory is None
@@ -1120,14 +1212,32 @@ class Ocp:
         constraints = ConstraintSpec(
             lbx=bounds(states, "lb"), ubx=bounds(states, "ub"),
             lbu=bounds(self._controls, "lb"), ubu=bounds(self._controls, "ub"),
-            path=tuple(Rows(g, readonly(lb), readonly(ub), sw, nm, st) for g, lb, ub, sw, nm, st in path),
-            terminal=tuple(Rows(r, readonly(lb), readonly(ub), sw, nm) for r, lb, ub, sw, nm, _ in self._term_con),
+            path=tuple(Rows(g, readonly(lb), readonly(ub), sw, nm, st, None if sc is None else readonly(sc), sctl)
+                       for (g, lb, ub, sw, nm, st), (sc, sctl) in zip(path, path_scale))
+            + tuple(Rows(rows, readonly(np.zeros(d.size)), readonly(np.zeros(d.size)),
+                         readonly(np.vstack([np.zeros(d.size), np.zeros(d.size), d, d])),
+                         f"stage_least_squares_{i}", st, cost=True)
+                    for i, (rows, d, st, _) in enumerate(self._stage_ls_staged)),
+            terminal=tuple(Rows(r, readonly(lb), readonly(ub), sw, nm, None, None if sc is None else readonly(sc))
+                           for (r, lb, ub, sw, nm, _), sc in zip(self._term_con, self._term_scale)),
             soft_x=readonly(soft_x))
+        declared = (any(d.scale is not None for d in self._states + self._controls)
+                    or any(sc is not None for sc in self._path_scale + self._term_scale + self._rate_scale)
+                    or self._scaling["cost"] is not None or self._scaling["derive"] is not None)
+        scaling = None
+        if declared:
+            def column(decls):
+                return readonly(np.concatenate([d.scale if d.scale is not None else np.full(d.size, np.nan)
+                                                for d in decls]))
+            scaling = ScalingSpec(x=column(states), u=column(self._controls),
+                                  cost=1.0 if self._scaling["cost"] is None else self._scaling["cost"],
+                                  derive=self._scaling["derive"])
         return OcpSpec(name=self.name, model=model, cost=cost, constraints=constraints,
                        horizon=HorizonSpec(N=self._N, dt=self._dt),
                        options=OptionsSpec.of(self._options, self._declared), x0=readonly(x0),
                        guess=GuessSpec(x=readonly(gx), u=readonly(gu)),
-                       scenario=ScenarioPart(disturbance=self._disturbance, closed_loop=closed_loop))
+                       scenario=ScenarioPart(disturbance=self._disturbance, closed_loop=closed_loop),
+                       scaling=scaling)
 
     @staticmethod
     def _full_vector(value, n: int, what: str) -> np.ndarray:

@@ -32,6 +32,7 @@ class OcpError(ValueError):
 __all__ = [
     "readonly", "Variable", "ParameterTrajectory", "ModelSpec", "LeastSquares", "CostSpec", "Rows", "ConstraintSpec",
     "HorizonSpec", "OptionsSpec", "GuessSpec", "ClosedLoopSpec", "CampaignSpec", "ScenarioPart", "OcpSpec",
+    "ScalingSpec",
 ]
 
 
@@ -58,10 +59,12 @@ def _stack_syms(variables) -> ca.SX:
 # --------------------------------------------------------------------------- model
 @dataclass(frozen=True)
 class Variable:
-    """One declared state, control or parameter vector (``sym`` is its SX symbol)."""
+    """One declared state, control or parameter vector (``sym`` is its SX symbol); ``scale``:
+    the declared scale per component (NaN: not declared), None when none is declared."""
     name: str
     size: int
     sym: ca.SX
+    scale: Optional[np.ndarray] = None
 
 
 class TrajectoryError(ValueError):
@@ -206,6 +209,10 @@ class Rows:
     soft: Optional[np.ndarray] = None
     name: Optional[str] = None    # the declared name (messages, tables, the C row names)
     stages: Optional[Tuple[int, ...]] = None   # path rows: the stages where they hold (None: all)
+    scale: Optional[np.ndarray] = None   # the declared scale per row (NaN: not declared), or None
+    #: rate rows: the control rows whose scales are the rows' scales when none is declared
+    scale_controls: Optional[Tuple[int, ...]] = None
+    cost: bool = False    # a least-squares term on chosen stages carried as soft rows (not a constraint)
 
     def labels(self, kind: str, index: int) -> Tuple[str, ...]:
         """One label per row: ``name`` / ``name[i]``, or ``<kind> <index>`` / ``<kind> <index> row i``."""
@@ -260,17 +267,20 @@ class OptionsSpec:
     """The OCP file's ``options(...)``: the settings of its solver (one
     :class:`~dopus_codegen.settings.Settings`: the generated solver's defaults, and those of
     every command and handle built from the file), the generation options ``real`` and
-    ``offline_guess``, and the names the file gave (the rest are defaults)."""
+    ``offline_guess``, the relative KKT tolerance ``kkt_tol_rel`` of the studies, and the
+    names the file gave (the rest are defaults)."""
     settings: Settings
     real: str = "double"        # real-number type of the generated C: "double" or "float"
     offline_guess: bool = False
     declared: frozenset = frozenset()
+    kkt_tol_rel: Optional[float] = None   # the relative KKT tolerance of converge and sil (None: absolute)
 
     @classmethod
     def of(cls, values: Dict[str, Any], declared=()) -> "OptionsSpec":
         """The options of ``values`` (checked, any of :data:`~dopus_codegen.settings.FILE_SETTINGS`)."""
         return cls(settings=Settings.of(values), real=values.get("real", DEFAULTS["real"]),
-                   offline_guess=values.get("offline_guess", DEFAULTS["offline_guess"]), declared=frozenset(declared))
+                   offline_guess=values.get("offline_guess", DEFAULTS["offline_guess"]), declared=frozenset(declared),
+                   kkt_tol_rel=values.get("kkt_tol_rel", DEFAULTS["kkt_tol_rel"]))
 
     def as_dict(self) -> Dict[str, Any]:
         """Every option of the file by name (declared or default)."""
@@ -339,6 +349,19 @@ class ScenarioPart:
     closed_loop: Optional[ClosedLoopSpec]
 
 
+# --------------------------------------------------------------------------- scaling
+@dataclass(frozen=True)
+class ScalingSpec:
+    """The declared scaling (``Ocp.scaling`` and the ``scale=`` of the declarations): ``x
+    (nx,)``, ``u (nu,)`` the declared scales (NaN: not declared: 1, or derived), ``cost`` the
+    cost scale, ``derive`` None, ``"bounds"`` or ``"nominal"``: how the scales not declared are
+    derived (docs/algorithm.md section 16). The row scales are those of :class:`Rows`."""
+    x: np.ndarray
+    u: np.ndarray
+    cost: float = 1.0
+    derive: Optional[str] = None
+
+
 # --------------------------------------------------------------------------- the whole
 @dataclass(frozen=True)
 class OcpSpec:
@@ -353,3 +376,4 @@ class OcpSpec:
     x0: np.ndarray
     guess: GuessSpec
     scenario: ScenarioPart
+    scaling: Optional[ScalingSpec] = None   # None: the problem is solved in its own units

@@ -134,6 +134,15 @@ class ReferenceDopus:
     ``qp_infeasible_row`` (the row that makes the last QP infeasible, as ``Solver`` gives it).
     """
 
+    def __new__(cls, disc=None, *args, **kwargs):
+        # a scaled problem (docs/algorithm.md section 16): the iteration runs on disc.scaled and
+        # the API converts at its boundary
+        if cls is ReferenceDopus and getattr(disc, "scaled", None) is not None:
+            from .scaled import ScaledReference
+
+            return ScaledReference(ReferenceDopus(disc.scaled, *args, **kwargs), disc)
+        return super().__new__(cls)
+
     def __init__(self, disc, settings: Optional[Settings] = None, **changes):
         """``settings``: the solver's settings (None: the OCP file's ``options(...)`` of
         ``disc``); ``changes``: settings changed from them by name (``M=3``; None: not given).
@@ -368,6 +377,16 @@ class ReferenceDopus:
     # ------------------------------------------------------------------ evaluations
     def _slot(self, k: int) -> int:
         return (self.ring_head + k) % self.N
+
+    @property
+    def initialized(self) -> bool:
+        """init has succeeded (and stop has not been called since)."""
+        return self._initialised
+
+    @property
+    def qp_ready(self) -> bool:
+        """A QP is prepared for the next feedback."""
+        return self._qp_ready
 
     def slot_of(self, k: int):
         """The ring-buffer slot that holds stage ``k`` (``slots[(ring_head + k) mod N]``)."""
@@ -1143,7 +1162,8 @@ class ReferenceDopus:
 
     def _compute_scales(self):
         """``(scale_x, scale_u)``: the largest magnitude among the finite bounds, the OCP
-        file's guess, the default x0 and 1."""
+        file's guess, the default x0 and 1; a memory state of a rate constraint at least its
+        control's."""
         d = self.disc
         gx = np.asarray(d.initial_guess.x, float).reshape(self.N + 1, self.nx)
         gu = np.asarray(d.initial_guess.u, float).reshape(self.N, self.n_u)
@@ -1153,8 +1173,10 @@ class ReferenceDopus:
             a = np.abs(np.vstack(cols))
             a[~np.isfinite(a)] = 0.0
             return np.maximum(1.0, a.max(axis=0))
-        return (scale([self.lbx[None], self.ubx[None], x0[None], gx]),
-                scale([self.lbu[None], self.ubu[None], gu]))
+        sx, su = scale([self.lbx[None], self.ubx[None], x0[None], gx]), scale([self.lbu[None], self.ubu[None], gu])
+        for srow, crow in getattr(d.spec.model, "memory", ()) or ():
+            sx[srow] = max(sx[srow], su[crow])     # a memory state carries its control
+        return sx, su
 
     def _reset_health(self, plan_u) -> None:
         self._n_failed = 0
@@ -1452,6 +1474,29 @@ class ReferenceDopus:
         xhat0 = self._with_memory(xhat0)
         return kkt_measure(self.disc, xhat0, self.x, self.u, self.lam, self.mu_g, self.mu_b,
                            self.mu_bN, self.mu_r, self.nu, self.p)
+
+    # ------------------------------------------------------------------ globalised first solve
+    def globalised_start(self) -> None:
+        """Forget the penalty and the counts of a previous globalised solve (section 15)."""
+        from .globalise import GlobState
+
+        self.glob = GlobState()
+
+    def globalised_step(self, xhat0) -> None:
+        """One step of the globalised first solve from the prepared iterate (section 15)."""
+        from .globalise import globalised_step
+
+        if getattr(self, "glob", None) is None:
+            self.globalised_start()
+        globalised_step(self, self.glob, xhat0)
+
+    def init_globalised(self, xhat0, guess=None, max_work: float = 0.0, max_iter: int = 100, tol=None) -> bool:
+        """``init`` at the guess, then globalised steps until the KKT measure is at most
+        ``tol`` (True) or a limit ends them (False; ``glob.reason``) (section 15)."""
+        from .globalise import init_globalised
+
+        self.globalised_start()
+        return init_globalised(self, self.glob, xhat0, guess, max_work, max_iter, tol)
 
     def guess(self):
         """The current iterate as a ``Guess``."""

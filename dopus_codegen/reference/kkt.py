@@ -10,6 +10,9 @@ outdated blocks::
     comp = max over signed pairs of max(mu,0)|ub - v| and max(-mu,0)|v - lb|
            (a nonzero multiplier on an infinite side contributes |mu|)
     kkt  = max(stat, eq, ineq, comp)
+    rel  = max(stat / s_d, eq / s_p, ineq / s_p, comp / (s_d s_p))      (the relative measure)
+    s_d  = max(1, |lam|_inf, |mu_g|_inf, |mu_b|_inf, |mu_bN|_inf, |mu_r|_inf, |nu|_inf)
+    s_p  = max(1, |x|_inf, |u|_inf)
 
 The x part of ``mu_b[0]`` has no bound to pair with (``x_0`` is fixed by ``xhat_0``; the
 entry is always 0 by section 1): it enters ``stat`` only, as in the C runtime.
@@ -20,7 +23,7 @@ import numpy as np
 
 from .qp import free_initial_state
 
-__all__ = ["kkt_measure", "kkt_of_guess", "node_parameters", "signed_comp", "eval_stages", "path_bounds"]
+__all__ = ["kkt_measure", "relative_kkt", "kkt_of_guess", "node_parameters", "signed_comp", "eval_stages", "path_bounds"]
 
 
 def path_bounds(disc):
@@ -104,8 +107,27 @@ def _viol(v, lo, hi) -> float:
                                                    np.asarray(lo).reshape(-1) - v))))
 
 
+def relative_kkt(parts: dict, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu) -> float:
+    """The relative KKT measure of docs/algorithm.md section 6: each part divided by the size
+    of what it sums (the multipliers for stationarity, the primal point for the equality and
+    inequality rows, both for complementarity), each size at least 1."""
+    def big(*arrays) -> float:
+        return max([1.0] + [float(np.max(np.abs(a))) for a in arrays if np.size(a)])
+
+    s_d = big(lam, mu_g, mu_b, mu_bN, mu_r, nu)
+    s_p = big(x, u)
+    return max(parts["stat"] / s_d, parts["eq"] / s_p, parts["ineq"] / s_p, parts["comp"] / (s_d * s_p))
+
+
 def kkt_measure(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p=None) -> dict:
-    """``{"kkt", "stat", "eq", "ineq", "comp"}`` of the point for initial state ``xhat0``."""
+    """``{"kkt", "stat", "eq", "ineq", "comp", "rel"}`` of the point for initial state ``xhat0``
+    (``rel``: :func:`relative_kkt`)."""
+    out = _kkt_parts(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p)
+    out["rel"] = relative_kkt(out, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu)
+    return out
+
+
+def _kkt_parts(disc, xhat0, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, p=None) -> dict:
     N, nx, nu_, ng, nr, ne = disc.N, disc.nx, disc.nu, disc.ng, disc.nr, disc.ne
     nw = nx + nu_
     P = node_parameters(disc, p)

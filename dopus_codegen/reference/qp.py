@@ -712,8 +712,9 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
     ``tol`` is the feasibility / dual-sign tolerance the polished active set must meet
     (floored at 1e-12; the polished solution itself satisfies stationarity and the active
     rows to round-off, its inactive multipliers are exactly zero). ``polished`` is False
-    when no consistent active set was found: the answer is then IPOPT's (tol 1e-12). Raises :class:`QPInfeasibleError` for an infeasible QP and
-    :class:`QPError` when IPOPT fails otherwise. ``max_iter`` (default None: 500 with the
+    when no consistent active set was found: the answer is then IPOPT's (tol 1e-12). Raises :class:`QPInfeasibleError` for an infeasible QP
+    (IPOPT's verdict, or, when IPOPT fails otherwise, a Farkas certificate of the hard rows
+    found by :func:`qp_infeasible_row`) and :class:`QPError` when IPOPT fails otherwise. ``max_iter`` (default None: 500 with the
     polish as the fallback): IPOPT's iteration limit; reaching it raises
     :class:`QPIterationLimitError`, as the C QP solver reports its limit.
 
@@ -750,6 +751,15 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
     if max_iter is not None and status == "Maximum_Iterations_Exceeded":
         raise QPIterationLimitError(f"QP iteration limit {max_iter} reached (IPOPT: {status})")
     ok_status = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    if not ok_status:
+        # the diagnosis of a failed solve, as the C solver's after a stall or failure: a
+        # Farkas certificate of the hard rows (an LP, exact to its tolerances) proves
+        # infeasibility (the iteration limit asked for is reported as such, as in C)
+        row = qp_infeasible_row(q)
+        if row is not None:
+            exc = QPInfeasibleError(f"QP is infeasible (IPOPT: {status}; a Farkas certificate)")
+            exc.row = row
+            raise exc
     out = None
     if polish and np.all(np.isfinite(z)):
         # active-set decisions at the requested tolerance, but never below round-off
@@ -902,6 +912,9 @@ def qp_row_in_certificate(qp: dict, row) -> float:
     return best
 
 
+_LP_TOL = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}
+
+
 def _certificate_row(q: dict, data_rows: bool, weigh=None):
     """:func:`qp_infeasible_row` of a checked QP dict, with or without the data rows; with
     ``weigh`` a row ``(stage, j, side)``, the largest multiplier share that row can take
@@ -945,8 +958,8 @@ def _certificate_row(q: dict, data_rows: bool, weigh=None):
     gap = np.array([(lo[i] - h[i]) if sd < 0 else -(up[i] - h[i]) for i, sd in cols])
     A_eq = np.vstack([G[idx].T * sgn, np.ones(len(cols))])
     b_eq = np.concatenate([np.zeros(G.shape[1]), [1.0]])
-    res = linprog(-gap, A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs")
-    if res.status != 0 or not -res.fun > 1e-9 * _scale(h, lo, up):
+    res = linprog(-gap, A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs", options=_LP_TOL)
+    if res.status != 0 or not -res.fun > 1e-12 * _scale(h, lo, up):
         return None
     if weigh is not None:
         cand = [col for col in range(len(cols))
@@ -956,7 +969,7 @@ def _certificate_row(q: dict, data_rows: bool, weigh=None):
             # the largest weight of this column over the certificates with a gap of at
             # least a thousandth of the largest one
             r2 = linprog(-np.eye(len(cols))[col], A_ub=-gap[None, :], b_ub=[1e-3 * res.fun],
-                         A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs")
+                         A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs", options=_LP_TOL)
             if r2.status == 0:
                 share = max(share, -r2.fun)
         return share

@@ -51,6 +51,7 @@ FLAGS = {bit: name for name, bit in vocabulary.enum("dopus_flag").codes.items()}
 #: Timed phases, in the order of enum dopus_phase (runtime_c/dopus_timer.h).
 PHASES = vocabulary.phases()
 STATUS_OK, STATUS_QP = status_code("ok"), status_code("qp")
+STATUS_NOT_CONVERGED = status_code("not_converged")
 STATUS_NONFINITE_INPUT, STATUS_INVALID_ARGUMENT = status_code("nonfinite_input"), status_code("invalid_argument")
 STATUS_ALREADY_PREPARED = status_code("already_prepared")
 _DIMS = ("N", "nx", "nu", "nw", "np", "ng", "nr", "ne", "has_gn", "has_nominal")
@@ -604,6 +605,59 @@ class Solver:
             raise
         return u0
 
+    # ------------------------------------------------------------------ globalised first solve
+    def globalised_start(self) -> None:
+        """Forget the penalty and the counts of a previous globalised solve (section 15)."""
+        size = int(self._c("glob_sizeof")())
+        self._glob_buf = self._ffi.new("double[]", (size + 7) // 8)
+        self._glob = self._ffi.cast(f"{self.name}_glob *", self._glob_buf)   # zero-filled: a new solve
+
+    @property
+    def glob(self):
+        """The state of the globalised solve: penalty, alpha, merit, slope, kkt, iterations,
+        trials, reason (a name of enum dopus_glob_reason)."""
+        from types import SimpleNamespace
+
+        from ..reference.globalise import REASONS
+
+        if getattr(self, "_glob", None) is None:
+            self.globalised_start()
+        info = self._ffi.new(f"{self.name}_glob_info *")
+        self._c("glob_get_info")(self._glob, info)
+        return SimpleNamespace(penalty=float(info.penalty), alpha=float(info.alpha), merit=float(info.merit),
+                               slope=float(info.slope), kkt=float(info.kkt), iterations=int(info.iterations),
+                               trials=int(info.trials), relaxed=bool(info.relaxed),
+                               restores=int(info.restores),
+                               reason=REASONS.get(int(info.reason), str(info.reason)))
+
+    def globalised_step(self, xhat0) -> None:
+        """One step of the globalised first solve from the prepared iterate (section 15)."""
+        if getattr(self, "_glob", None) is None:
+            self.globalised_start()
+        xh = self._array(xhat0, (self.nx,), "globalised_step: xhat0")
+        self._check(self._c("glob_step")(self._s, self._glob, self._ptr(xh)), "globalised step")
+
+    def init_globalised(self, xhat0, guess=None, max_work: float = 0.0, max_iter: int = 100, tol=None) -> bool:
+        """``init`` at the guess (x and u; None: the OCP file's), then globalised steps until
+        the KKT measure is at most ``tol`` (True) or a limit ends them (False; ``glob.reason``)
+        (section 15)."""
+        from .. import settings as settings_mod
+
+        self.globalised_start()
+        tol = settings_mod.KKT_TOL_DEFAULT["float" if self.real == "float" else "double"] if tol is None else tol
+        xh = self._array(xhat0, (self.nx,), "init_globalised: xhat0")
+        x = u = None
+        if guess is not None:
+            x = self._array(guess.x, (self.N + 1, self.nx), "init_globalised: guess.x")
+            u = self._array(guess.u, (self.N, self.n_u), "init_globalised: guess.u")
+        status = int(self._c("init_globalised")(self._s, self._glob, self._ptr(xh), self._ptr(x), self._ptr(u),
+                                                float(max_work), int(max_iter), float(tol)))
+        if status == STATUS_NOT_CONVERGED:
+            self.status = status
+            return False
+        self._check(status, "init_globalised")
+        return True
+
     # ------------------------------------------------------------------ health
     def set_recovery(self, on: bool = True, max_failures: Optional[int] = None) -> None:
         """Automatic recovery (docs/algorithm.md section 9): on/off and K, the consecutive
@@ -647,7 +701,8 @@ class Solver:
         out = self._out(4)
         self._check(self._c("kkt_eval")(self._s, self._ptr(xh), self._ptr(out)), "kkt")
         stat, eq, ineq, comp = (float(v) for v in out)
-        return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp}
+        return {"kkt": max(stat, eq, ineq, comp), "stat": stat, "eq": eq, "ineq": ineq, "comp": comp,
+                "rel": float(self._info().kkt_rel)}
 
     # ------------------------------------------------------------------ read-only state
     initialized = _info_property("initialized", bool)

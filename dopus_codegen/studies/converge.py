@@ -17,20 +17,31 @@ JSON written by :func:`run_study`::
 
     {"problem": name, "N": N, "backend": "reference" | "c", "start": "cold" | "warm",
      "hessian": ..., "regularization": ..., "reg_eps": ..., "cost_hessian": "fresh" | "stored",
-     "qp_tol": ..., "qp_max_iter": ..., "tol": tol,
-     "runs": [{"M": M, "kkt": [...], "stat": [...], "eq": [...], "ineq": [...], "comp": [...],
+     "qp_tol": ..., "qp_max_iter": ..., "tol": tol, "tol_rel": tol_rel or null,
+     "runs": [{"M": M, "kkt": [...], "stat": [...], "eq": [...], "ineq": [...], "comp": [...], "rel": [...],
                "status": "converged" | "not converged" | "failed", "message": why or null,
                "iterations_to_tol": i or null}, ...],
+     "globalised": {"kkt": [...], "stat": ..., "status": ..., "message": why and what to try or null,
+                    "iterations_to_tol": i or null, "alpha": [...], "relaxed": [...], "penalty": [...],
+                    "work": units} or null,
      "solution": {"M": M, "status": ..., "converged": bool, "kkt": last KKT,
                   "x": [[...]], "u": [[...]], "objective": J} or null}
 
 ``kkt[i]`` is the measure after ``i`` iterations (``kkt[0]``: the initial point with
-``xhat_fixed``). A run is ``converged`` once ``kkt <= tol``, ``not converged`` if it ran
+``xhat_fixed``), ``rel[i]`` its relative measure (docs/algorithm.md section 6). A run is
+``converged`` once ``kkt <= tol``, or with a relative tolerance ``tol_rel`` (the OCP file's
+``options(kkt_tol_rel=...)``, ``--tol-rel``) once ``rel <= tol_rel``, ``not converged`` if it ran
 every iteration without that, ``failed`` if a call of the backend failed or the measure
 became non-finite: it stops there and ``message`` says why (for an infeasible QP, with the
 stage-0 rows the state violates). Non-finite numbers are written as ``null``.
+``globalised`` (``--globalise``, the default with ``--start cold``) is the globalised first
+solve of docs/algorithm.md section 15 from the same start (every stage re-linearised, a line
+search on an l1 merit function with a watchdog; ``alpha[i]`` the step length of iteration
+``i + 1``, ``relaxed[i]`` whether it was a relaxed full step of the watchdog, shown as ``R`` in
+the table); when it fails, ``message`` says why and what to try.
 ``solution`` is the last iterate of a converged run: the full RTI (``M = N-1``) if it
-converged, else the converged run with the largest ``M``; when no run converged, of the
+converged, else the converged run with the largest ``M``, else the globalised solve's
+(``"M": null``); when no run converged, of the
 full RTI (else the largest ``M``) among the runs that did not fail, with ``converged:
 false``; null when every run failed.
 
@@ -139,9 +150,65 @@ def iterations_to(kkt: list, tol: float) -> Optional[int]:
     return None
 
 
+def run_globalised(disc, iters: int, start, s, backend_factory, tol: float, progress=None) -> dict:
+    """The globalised first solve (docs/algorithm.md section 15) from ``start`` for
+    ``start.xhat_fixed``: ``init``, then up to ``iters`` globalised steps, the KKT measure
+    after each; stops at ``tol``. Returns the ``globalised`` record of the module docstring
+    and the last iterate."""
+    from ..errors import DopusError
+    from ..reference.globalise import what_to_try
+
+    be = backend_factory(disc, settings=s.replace(M=disc.N - 1, mode="fixed"))
+    rec = {"kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "alpha": [], "relaxed": [], "penalty": [],
+           "status": None, "message": None}
+
+    def record():
+        k = be.kkt(start.xhat_fixed)
+        for key in ("kkt", "stat", "eq", "ineq", "comp"):
+            rec[key].append(float(k[key]))
+        return k["kkt"]
+
+    try:
+        be.init(start.xhat_init, start.guess)
+        be.globalised_start()
+        w0 = be.work
+        val = record()
+        for it in range(1, iters + 1):
+            if val <= tol:
+                break
+            be.globalised_step(start.xhat_fixed)
+            rec["alpha"].append(float(be.glob.alpha))
+            rec["relaxed"].append(bool(be.glob.relaxed))
+            rec["penalty"].append(float(be.glob.penalty))
+            val = record()
+            if progress is not None:
+                progress(it, val)
+            if not math.isfinite(val):
+                rec["status"], rec["message"] = FAILED, f"non-finite KKT measure at iteration {it}"
+                break
+        rec["work"] = float(be.work - w0)
+    except DopusError as exc:
+        it = len(rec["kkt"])
+        what = "init" if it == 0 else f"iteration {it}"
+        reason = be.glob.reason if getattr(be, "glob", None) is not None else "function"
+        rec["status"] = FAILED
+        rec["message"] = f"in {what}: {exc} (status {exc.status} {exc.status_name}); {what_to_try(reason)}"
+    rec["iterations_to_tol"] = iterations_to(rec["kkt"], tol)
+    if rec["status"] is None:
+        if rec["iterations_to_tol"] is not None:
+            rec["status"] = CONVERGED
+        else:
+            rec["status"] = NOT_CONVERGED
+            rec["message"] = (f"KKT {rec['kkt'][-1]:.2e} after {iters} iterations; "
+                              + what_to_try("iter_limit"))
+    return rec, (np.array(be.x, dtype=float), np.array(be.u, dtype=float))
+
+
 def run_study(disc, m_list, iters: int, start, settings: Optional["settings_mod.Settings"] = None,
               backend_factory: Optional[Callable] = None, backend_name: Optional[str] = None,
-              progress: Optional[Callable] = None, tol: float = 1e-8, **changes) -> dict:
+              progress: Optional[Callable] = None, tol: float = 1e-8, tol_rel: Optional[float] = None,
+              globalise: bool = False,
+              **changes) -> dict:
     """Run the study; return the JSON structure of the module docstring.
 
     ``start``: a :class:`StartPoint` or ``"cold"`` / ``"warm"`` (see :func:`make_start`).
@@ -151,7 +218,10 @@ def run_study(disc, m_list, iters: int, start, settings: Optional["settings_mod.
     ``backend_factory(disc, settings=...)`` builds a backend (default:
     :class:`~dopus_codegen.reference.dopus.ReferenceDopus`).
     ``progress(run_index, M, iteration, kkt)`` is called after every iteration.
-    ``tol``: the KKT measure at which a run counts as converged.
+    ``tol``: the KKT measure at which a run counts as converged; ``tol_rel`` (None: not used):
+    the relative measure at which it does, in place of ``tol``.
+    ``globalise``: also run the globalised first solve (:func:`run_globalised`) after the M runs
+    (its convergence is on the absolute measure ``tol``).
     """
     from ..errors import DopusError
     from ..reference.dopus import ReferenceDopus
@@ -171,11 +241,12 @@ def run_study(disc, m_list, iters: int, start, settings: Optional["settings_mod.
     last_iterates = {}
     for run_index, M in enumerate(Ms):
         be = backend_factory(disc, settings=s.replace(M=M, mode="fixed"))
-        rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "status": None, "message": None}
+        rec = {"M": M, "kkt": [], "stat": [], "eq": [], "ineq": [], "comp": [], "rel": [], "status": None,
+               "message": None}
 
         def record():
             k = be.kkt(start.xhat_fixed)
-            for key in ("kkt", "stat", "eq", "ineq", "comp"):
+            for key in ("kkt", "stat", "eq", "ineq", "comp", "rel"):
                 rec[key].append(float(k[key]))
             return k["kkt"]
 
@@ -199,18 +270,25 @@ def run_study(disc, m_list, iters: int, start, settings: Optional["settings_mod.
                 + _infeasibility_note(disc, exc, start.xhat_fixed)
             if progress is not None:
                 progress(run_index, M, iters, float("nan"))
-        rec["iterations_to_tol"] = iterations_to(rec["kkt"], tol)
+        rec["iterations_to_tol"] = iterations_to(*((rec["kkt"], tol) if tol_rel is None else (rec["rel"], tol_rel)))
         if rec["status"] is None:
             rec["status"] = CONVERGED if rec["iterations_to_tol"] is not None else NOT_CONVERGED
         runs.append(rec)
         last_iterates[M] = (np.array(be.x, dtype=float), np.array(be.u, dtype=float))
+    glob = None
+    if globalise:
+        def glob_progress(it, val):
+            if progress is not None:
+                progress(len(Ms), None, it, val)
+
+        glob, last_iterates[None] = run_globalised(disc, iters, start, s, backend_factory, tol, glob_progress)
     return {
         "problem": disc.name, "N": int(disc.N), "backend": backend_name or getattr(backend_factory, "__name__", "custom"),
         "start": start.label, "hessian": s.hessian, "regularization": s.regularization, "reg_eps": float(s.reg_eps),
         "cost_hessian": s.cost_hessian, "lm": s.lm if isinstance(s.lm, str) else float(s.lm), "qp_tol": s.qp_tol,
         "qp_max_iter": s.qp_max_iter,
-        "tol": float(tol), "runs": runs,
-        "solution": _solution(disc, runs, last_iterates),
+        "tol": float(tol), "tol_rel": None if tol_rel is None else float(tol_rel), "runs": runs, "globalised": glob,
+        "solution": _solution(disc, runs, last_iterates, glob),
     }
 
 
@@ -220,8 +298,13 @@ CONVERGED, NOT_CONVERGED, FAILED = "converged", "not converged", "failed"
 
 
 def failed_runs(study: dict) -> list:
-    """The runs of a study whose status is ``failed``."""
-    return [r for r in study["runs"] if r["status"] == FAILED]
+    """The runs of a study whose status is ``failed`` (the globalised solve's with ``"M":
+    "globalised"``)."""
+    bad = [r for r in study["runs"] if r["status"] == FAILED]
+    g = study.get("globalised")
+    if g is not None and g["status"] == FAILED:
+        bad.append(dict(g, M="globalised"))
+    return bad
 
 
 def _infeasibility_note(disc, exc, xhat) -> str:
@@ -237,46 +320,69 @@ def _infeasibility_note(disc, exc, xhat) -> str:
     return f"; the state violates at stage 0: {'; '.join(rows)}" if rows else ""
 
 
-def _solution(disc, runs, last_iterates):
+def _solution(disc, runs, last_iterates, glob=None):
     """The last iterate of the full-RTI run if it converged, else of the converged run with
-    the largest M; if none converged, of the preferred run that did not fail, marked
-    ``converged: false``; None if every run failed."""
+    the largest M, else of the globalised solve if it converged (``M`` None); if none
+    converged, of the preferred run that did not fail, marked ``converged: false``; None if
+    every run failed."""
     by_M = {r["M"]: r for r in runs}
     order = sorted(by_M, key=lambda m: (m != disc.N - 1, -m))
     pick = next((m for m in order if by_M[m]["status"] == CONVERGED), None)
+    if pick is None and glob is not None and glob["status"] == CONVERGED:
+        xs, us = last_iterates[None]
+        return _solution_record(disc, None, glob, xs, us)
     if pick is None:
         pick = next((m for m in order if by_M[m]["status"] != FAILED), None)
     if pick is None:
         return None
     xs, us = last_iterates[pick]
+    return _solution_record(disc, int(pick), by_M[pick], xs, us)
+
+
+def _solution_record(disc, M, rec, xs, us):
     try:
         obj = objective(disc, xs, us)
     except Exception:  # noqa: BLE001 - a diverged iterate may not evaluate
         obj = float("nan")
-    return {"M": int(pick), "status": by_M[pick]["status"], "converged": by_M[pick]["status"] == CONVERGED,
-            "kkt": by_M[pick]["kkt"][-1], "x": xs.tolist(), "u": us.tolist(), "objective": obj}
+    return {"M": M, "status": rec["status"], "converged": rec["status"] == CONVERGED,
+            "kkt": rec["kkt"][-1], "x": xs.tolist(), "u": us.tolist(), "objective": obj}
 
 
 def format_table(study: dict, tol: Optional[float] = None) -> str:
     """Plain-text summary: per M the iterations to ``tol`` (default: the study's), the last
     KKT, the status and, for a failed run, why."""
     N = study["N"]
-    tol = study.get("tol", 1e-8) if tol is None else tol
+    tol_rel = study.get("tol_rel")
+    rel = tol_rel is not None and tol is None
+    tol = (tol_rel if rel else study.get("tol", 1e-8)) if tol is None else tol
+    head = ("iters to rel %.0e" if rel else "iters to %.0e") % tol
     lines = [f"{study['problem']}: {study['start']} start, {study['hessian']} Hessian, "
              f"regularization {study['regularization']}, cost Hessian {study.get('cost_hessian', 'fresh')}, "
              f"backend {study['backend']}",
-             f"{'M':>8} {'iters to %.0e' % tol:>14} {'last KKT':>10}  status"]
+             f"{'M':>8} {head:>18} {'last KKT':>10} {'last rel':>10}  status"]
     for r in study["runs"]:
-        it = iterations_to(r["kkt"], tol)
+        it = iterations_to(r["rel"] if rel else r["kkt"], tol)
         label = f"{r['M']} (full)" if r["M"] == N - 1 else str(r["M"])
         last = r["kkt"][-1] if r["kkt"] else float("nan")
+        last_rel = r["rel"][-1] if r.get("rel") else float("nan")
         status = r["status"] + (f": {r['message']}" if r.get("message") else "")
-        lines.append(f"{label:>8} {('-' if it is None else str(it)):>14} {last:10.2e}  {status}")
+        lines.append(f"{label:>8} {('-' if it is None else str(it)):>18} {last:10.2e} {last_rel:10.2e}  {status}")
+    g = study.get("globalised")
+    if g is not None:
+        it = iterations_to(g["kkt"], study.get("tol", 1e-8) if rel else tol)
+        last = g["kkt"][-1] if g["kkt"] else float("nan")
+        relaxed = g.get("relaxed") or [False] * len(g["alpha"])
+        steps = ", ".join("R" if r else f"{a:g}" for a, r in zip(g["alpha"][:12], relaxed)) \
+            + (", ..." if len(g["alpha"]) > 12 else "")
+        status = g["status"] + (f": {g['message']}" if g.get("message") else "")
+        lines.append(f"{'glob.':>8} {('-' if it is None else str(it)):>18} {last:10.2e} {float('nan'):10.2e}  {status}"
+                     + (f" (step lengths {steps})" if steps else ""))
     sol = study.get("solution")
     if sol is None:
         lines.append("solution: none (every run failed)")
     else:
-        lines.append(f"solution: the last iterate of M = {sol['M']} ({sol['status']}, KKT {sol['kkt']:.2e})")
+        who = "the globalised solve" if sol["M"] is None else f"M = {sol['M']}"
+        lines.append(f"solution: the last iterate of {who} ({sol['status']}, KKT {sol['kkt']:.2e})")
     return "\n".join(lines)
 
 
@@ -290,6 +396,10 @@ def plot_study(study: dict, path: str) -> None:
         kk = np.maximum(np.array(r["kkt"], dtype=float), 1e-16)  # exact zeros cannot be drawn on a log axis
         label = f"M = {r['M']} (full RTI)" if r["M"] == N - 1 else f"M = {r['M']}"
         ax.semilogy(np.arange(kk.size), kk, marker="o", markersize=3, label=label)
+    g = study.get("globalised")
+    if g is not None and g["kkt"]:
+        kk = np.maximum(np.array(g["kkt"], dtype=float), 1e-16)
+        ax.semilogy(np.arange(kk.size), kk, marker="s", markersize=3, color="k", label="globalised")
     ax.set_xlabel("iteration [-]")
     ax.set_ylabel("KKT measure (inf-norm) [mixed units]")
     ax.set_title(f"{study['problem']}: DOPUS convergence, {study['start']} start, {study['hessian']} Hessian, "
@@ -337,7 +447,7 @@ def effective_settings(declared: dict, m_list, real: str = "double", **flags):
 
 
 def run_converge_cli(ocp_file, m_list, iters, start, backend="reference", json_out=None, plot_out=None, tol=None,
-                     real=None, **flags) -> dict:
+                     real=None, tol_rel=None, globalise=None, **flags) -> dict:
     """The body of ``dopus-gen converge`` (bad input raises OcpError, ValueError or
     RuntimeError with a message; the command line turns them into one line). ``flags``: the
     settings given on the command line (:data:`dopus_codegen.settings.RUNTIME_SETTINGS`,
@@ -367,6 +477,8 @@ def run_converge_cli(ocp_file, m_list, iters, start, backend="reference", json_o
     ocp.options(real=real)    # the C backend is generated in this type
     if tol is None:
         tol = settings.KKT_TOL_DEFAULT[real]
+    if tol_rel is None:
+        tol_rel = declared.get("kkt_tol_rel")
     disc = build_functions(ocp)
     if s.hessian == "gauss-newton" and disc.stage_hess_gn is None:
         raise ValueError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
@@ -381,7 +493,9 @@ def run_converge_cli(ocp_file, m_list, iters, start, backend="reference", json_o
     if start == "warm":
         check_initial_state(disc, sp.xhat_fixed, "the disturbed initial state (--start warm)")
 
-    total = len(Ms) * iters
+    if globalise is None:
+        globalise = start == "cold"
+    total = (len(Ms) + int(bool(globalise))) * iters
     with click.progressbar(length=total, label="DOPUS iterations", file=sys.stderr,
                            show_pos=True) as bar:
         done = {"n": 0}
@@ -394,7 +508,7 @@ def run_converge_cli(ocp_file, m_list, iters, start, backend="reference", json_o
                 done["n"] = target
 
         study = run_study(disc, Ms, iters, sp, s, backend_factory=factory, backend_name=backend,
-                          progress=progress, tol=tol)
+                          progress=progress, tol=tol, tol_rel=tol_rel, globalise=bool(globalise))
     study["sources"] = {k: sources[k] for k in ("M", *settings.RUNTIME_SETTINGS, "real") if k in sources}
     study["real"] = real
     click.echo(format_table(study))

@@ -258,7 +258,7 @@ class _Record:
         self.x.append(xhat)
         self.u.append(u0.copy())
         self.kkt.append(float(kkt["kkt"]))
-        self.parts.append({k: float(kkt[k]) for k in ("stat", "eq", "ineq", "comp") if k in kkt})
+        self.parts.append({k: float(kkt[k]) for k in ("stat", "eq", "ineq", "comp", "rel") if k in kkt})
         for name, fn in self.spec.signals.items():
             self.signals[name].append(_eval(fn, xhat, u0, p))
         if self.soft_groups:
@@ -552,6 +552,10 @@ def summarize(run, settle: float = 0.2) -> dict:
     out["settle"] = settle
     ks = kkt[settled & np.isfinite(kkt)]
     out["kkt_max_settled"] = float(np.max(ks)) if ks.size else math.nan
+    rel = np.asarray([math.nan if p.get("rel") is None else p["rel"] for p in run.get("kkt_parts", [])] or
+                     [math.nan] * kkt.size, dtype=float)
+    rs = rel[settled & np.isfinite(rel)] if rel.size == kkt.size else np.zeros(0)
+    out["kkt_rel_max_settled"] = float(np.max(rs)) if rs.size else math.nan
     out["kkt_nonfinite"] = int(np.count_nonzero(~np.isfinite(kkt)))
     out["qp_failures"] = int(np.count_nonzero(np.asarray(run["status"]) != 0))
     out["recoveries"] = (run.get("result") or {}).get("recoveries")
@@ -597,18 +601,20 @@ def format_summary(summaries) -> str:
         lines.append("(min, max: the signal's signed extremes over the stretch; RMS: its root mean square)")
         lines.append("")
     w_run = max([len("run")] + [len(s["label"]) for s in summaries])
-    head = (f"{'run':<{w_run}}  {'max KKT settled':>15}  {'QP fail':>7}  {'recoveries':>10}  {'u bound viol':>12}  "
+    head = (f"{'run':<{w_run}}  {'max KKT settled':>15}  {'max rel KKT':>11}  {'QP fail':>7}  {'recoveries':>10}  {'u bound viol':>12}  "
             f"{'median it [us]':>14}  {'max it [us]':>11}  {'median fb [us]':>14}")
     lines += [head, "-" * len(head)]
     for s in summaries:
-        lines.append(f"{s['label']:<{w_run}}  {_num(s['kkt_max_settled'], '15.3e')}  {s['qp_failures']:7d}  "
+        lines.append(f"{s['label']:<{w_run}}  {_num(s['kkt_max_settled'], '15.3e')}  "
+                     f"{_num(s.get('kkt_rel_max_settled'), '11.3e')}  {s['qp_failures']:7d}  "
                      f"{_num(s.get('recoveries'), '10d')}  "
                      f"{_num(s['bound_violation'], '12.2e')}  {_num(s['time_median_us'], '14.1f')}  "
                      f"{_num(s['time_max_us'], '11.1f')}  {_num(s['feedback_median_us'], '14.1f')}")
     if summaries:
         lines.append(f"(max KKT settled: excluding the first {summaries[0]['settle']} {summaries[0]['time_unit']} "
                      "after the start "
-                     f"and after each event; it = feedback + prepare, fb = feedback alone)")
+                     f"and after each event; rel KKT: the relative measure, docs/algorithm.md section 6; "
+                     "it = feedback + prepare, fb = feedback alone)")
     for s in summaries:
         f, it = s.get("qp_factorizations"), s.get("qp_iterations")
         if f and it:

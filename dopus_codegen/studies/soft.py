@@ -30,7 +30,7 @@ def soft_groups(disc) -> list:
         rows = np.arange(start, start + n)
         start += n
         w = block.soft_weights()
-        if np.any(w > 0):
+        if np.any(w > 0) and not getattr(block, "cost", False):
             out.append((f"path {i}", "g", rows, np.asarray(block.lb), np.asarray(block.ub),
                         (w[0] > 0) | (w[2] > 0), (w[1] > 0) | (w[3] > 0)))
     return out

@@ -212,6 +212,7 @@ typedef struct {
                             and equality parts of the KKT measure at the prepared point */
     robot_arm_real kkt[4];    /* stat, eq, ineq, comp of the last robot_arm_kkt_eval (NaN before) */
     robot_arm_real kkt_max;   /* their largest */
+    robot_arm_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
     /* the factorisations of the Riccati recursion of the last feedback's QP (the sum over the
      * solves of the call: interior-point iterations, inertia corrections, sweeps of the
      * active-set start) */
@@ -263,3 +264,33 @@ const char *robot_arm_row_name(int kind, int index);
  * largest slack (0 without soft rows). */
 robot_arm_real robot_arm_get_soft_slacks(const robot_arm_solver *s, robot_arm_real *viol_x, robot_arm_real *viol_g,
                                  robot_arm_real *viol_r);
+/* The globalised first solve (docs/algorithm.md section 15), for a start far from the
+ * solution (a cold guess, an arbitrary state at power-up); off in the real-time loop. The
+ * memory of a solve is the caller's struct robot_arm_glob of robot_arm_globalise.h, or
+ * robot_arm_glob_sizeof() bytes; zero-filled it starts a solve (no penalty, no counts: `static
+ * robot_arm_glob g;`, memset to 0 for the next one). robot_arm_glob_step: one SQP step from the
+ * prepared iterate (after init or the previous step) for xhat0 (NULL: the one of the last
+ * init), in fixed mode whatever the setting: the QP of the iterate (every block fresh), then
+ * along its step the l1 exact-penalty merit function decides, with a watchdog (relaxed full
+ * steps) and a backtracking line search; then init at the accepted point (every block fresh,
+ * the next QP prepared). On failure (robot_arm_glob_info.reason: the QP, the step box, the line
+ * search, a function) the iterate is the one before the step, prepared.
+ * robot_arm_init_globalised: init at the guess (x, u NULL: the OCP file's; zero multipliers),
+ * then steps until the KKT measure (robot_arm_kkt_eval) is at most tol > 0: ROBOT_ARM_OK;
+ * ROBOT_ARM_ERR_NOT_CONVERGED when max_iter >= 0 steps or the work limit (max_work > 0 work units
+ * from the init on, the next step estimated as the last one; 0: none) end them first, the
+ * iterate prepared for feedback either way; the status of a failed step. */
+typedef struct robot_arm_glob robot_arm_glob;
+typedef struct {
+    int iterations; /* steps in this solve */
+    int trials;     /* merit evaluations of the last line search */
+    int reason;     /* enum robot_arm_glob_reason of the last call */
+    int relaxed;    /* the last step was a relaxed full step of the watchdog */
+    int restores;   /* returns to a watchdog's point in this solve */
+    robot_arm_real penalty, alpha, merit, slope, kkt;
+} robot_arm_glob_info;
+size_t robot_arm_glob_sizeof(void);
+int robot_arm_glob_step(robot_arm_solver *s, robot_arm_glob *g, const robot_arm_real *xhat0);
+int robot_arm_init_globalised(robot_arm_solver *s, robot_arm_glob *g, const robot_arm_real *xhat0, const robot_arm_real *x,
+                          const robot_arm_real *u, double max_work, int max_iter, robot_arm_real tol);
+void robot_arm_glob_get_info(const robot_arm_glob *g, robot_arm_glob_info *info);

@@ -19,7 +19,7 @@ void robot_arm_health_scales(robot_arm_health *h)
         robot_arm_real v = ROBOT_ARM_R(1.0);
         v = robot_arm_absmax(robot_arm_lbx[i], v);
         v = robot_arm_absmax(robot_arm_ubx[i], v);
-        v = robot_arm_absmax(robot_arm_x0_default[i], v);
+        v = robot_arm_absmax(robot_arm_x0_default[i] / robot_arm_scale_x[i], v); /* in the solver's variables */
         for (k = 0; k <= ROBOT_ARM_N; ++k) {
             v = robot_arm_absmax(robot_arm_guess_x[k][i], v);
         }
@@ -33,6 +33,10 @@ void robot_arm_health_scales(robot_arm_health *h)
             v = robot_arm_absmax(robot_arm_guess_u[k][i], v);
         }
         h->scale_u[i] = v;
+    }
+    for (i = 0; i < ROBOT_ARM_NMEM; ++i) { /* a memory state carries its control */
+        k = robot_arm_memory_state[i];
+        h->scale_x[k] = robot_arm_absmax(h->scale_u[robot_arm_memory_control[i]], h->scale_x[k]);
     }
 }
 

@@ -154,3 +154,34 @@ int robot_arm_kkt_measure(const robot_arm_real *x, const robot_arm_real *u, cons
     parts[3] = comp;
     return ROBOT_ARM_KKT_OK;
 }
+
+/* The largest |v_i| of n entries, at least m. */
+static robot_arm_real robot_arm_kkt_big(robot_arm_real m, int n, const robot_arm_real *v)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        m = robot_arm_kkt_max(m, robot_arm_fabs(v[i]));
+    }
+    return m;
+}
+
+robot_arm_real robot_arm_kkt_relative(const robot_arm_real *parts, const robot_arm_real *x, const robot_arm_real *u,
+                              const robot_arm_real *lam, const robot_arm_real *mu_g, const robot_arm_real *mu_b,
+                              const robot_arm_real *mu_bN, const robot_arm_real *mu_r, const robot_arm_real *nu)
+{
+    robot_arm_real sd = ROBOT_ARM_R(1.0), sp = ROBOT_ARM_R(1.0), rel;
+    int k;
+    sd = robot_arm_kkt_big(sd, (ROBOT_ARM_N + 1) * ROBOT_ARM_NX, lam);
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        sd = robot_arm_kkt_big(sd, ROBOT_ARM_NG, mu_g + k * NG1);
+    }
+    sd = robot_arm_kkt_big(sd, ROBOT_ARM_N * ROBOT_ARM_NW, mu_b);
+    sd = robot_arm_kkt_big(sd, ROBOT_ARM_NX, mu_bN);
+    sd = robot_arm_kkt_big(sd, ROBOT_ARM_NR, mu_r);
+    sd = robot_arm_kkt_big(sd, ROBOT_ARM_NE, nu);
+    sp = robot_arm_kkt_big(sp, (ROBOT_ARM_N + 1) * ROBOT_ARM_NX, x);
+    sp = robot_arm_kkt_big(sp, ROBOT_ARM_N * ROBOT_ARM_NU, u);
+    rel = robot_arm_kkt_max(parts[0] / sd, parts[1] / sp);
+    rel = robot_arm_kkt_max(rel, parts[2] / sp);
+    return robot_arm_kkt_max(rel, parts[3] / (sd * sp));
+}

@@ -26,4 +26,13 @@ ROBOT_ARM_INTERNAL int robot_arm_kkt_measure(const robot_arm_real *x, const robo
                                      const robot_arm_real *mu_r, const robot_arm_real *nu, const robot_arm_real *p,
                                      const robot_arm_real *xhat0, robot_arm_fun_work *work, robot_arm_real *parts);
 
+/* The relative measure of the same iterate (section 6): max(stat / s_d, eq / s_p, ineq / s_p,
+ * comp / (s_d s_p)) with s_d = max(1, the largest multiplier) and s_p = max(1, the largest entry
+ * of x and u); parts as written by robot_arm_kkt_measure. */
+ROBOT_ARM_INTERNAL robot_arm_real robot_arm_kkt_relative(const robot_arm_real *parts, const robot_arm_real *x,
+                                             const robot_arm_real *u, const robot_arm_real *lam,
+                                             const robot_arm_real *mu_g, const robot_arm_real *mu_b,
+                                             const robot_arm_real *mu_bN, const robot_arm_real *mu_r,
+                                             const robot_arm_real *nu);
+
 #endif /* ROBOT_ARM_KKT_H */

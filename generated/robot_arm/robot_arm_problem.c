@@ -144,6 +144,14 @@ const robot_arm_real robot_arm_p_default[ROBOT_ARM_N + 1][ROBOT_ARM_DIM(ROBOT_AR
 const robot_arm_real robot_arm_dt = 0.01;
 const robot_arm_real robot_arm_x0_default[ROBOT_ARM_NX] = {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0};
 
+/* the scales of docs/algorithm.md section 16 (1: none declared) */
+const robot_arm_real robot_arm_scale_x[ROBOT_ARM_NX] = {1.0, 1.0, 1.0, 1.0, 1.0};
+const robot_arm_real robot_arm_scale_u[ROBOT_ARM_NU] = {1.0, 1.0, 1.0};
+const robot_arm_real robot_arm_scale_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)] = {1.0};
+const robot_arm_real robot_arm_scale_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)] = {1.0};
+const robot_arm_real robot_arm_scale_req[ROBOT_ARM_DIM(ROBOT_ARM_NE)] = {1.0, 1.0};
+const robot_arm_real robot_arm_scale_cost = 1.0;
+
 const robot_arm_real robot_arm_guess_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX] = {
     {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0},
     {-0.4014418773201884, 1.5004257618081907, 0.0, 0.0, 0.0},

@@ -23,8 +23,18 @@ extern const robot_arm_real robot_arm_lr[ROBOT_ARM_DIM(ROBOT_ARM_NR)], robot_arm
  * a parameter declares a trajectory) */
 extern const robot_arm_real robot_arm_p_default[ROBOT_ARM_N + 1][ROBOT_ARM_DIM(ROBOT_ARM_NP)];
 extern const robot_arm_real robot_arm_dt;
+/* the default initial state, in the declared units (what robot_arm_init takes) */
 extern const robot_arm_real robot_arm_x0_default[ROBOT_ARM_NX];
-/* the OCP file's initial guess */
+/* Scaling (docs/algorithm.md section 16): the solver works with x / robot_arm_scale_x,
+ * u / robot_arm_scale_u, the path rows over robot_arm_scale_g, the terminal rows over robot_arm_scale_r and
+ * robot_arm_scale_req and the cost over robot_arm_scale_cost (all 1 without a declared scaling); the
+ * bounds, the guess and the soft weights here are those of the scaled problem, the API
+ * (robot_arm_solver.h) and x0_default and the nominal solution are in the declared units. */
+extern const robot_arm_real robot_arm_scale_x[ROBOT_ARM_NX], robot_arm_scale_u[ROBOT_ARM_NU];
+extern const robot_arm_real robot_arm_scale_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)], robot_arm_scale_r[ROBOT_ARM_DIM(ROBOT_ARM_NR)];
+extern const robot_arm_real robot_arm_scale_req[ROBOT_ARM_DIM(ROBOT_ARM_NE)];
+extern const robot_arm_real robot_arm_scale_cost;
+/* the OCP file's initial guess (in the solver's variables) */
 extern const robot_arm_real robot_arm_guess_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
 extern const robot_arm_real robot_arm_guess_u[ROBOT_ARM_N][ROBOT_ARM_NU];
 /* the rows' names (robot_arm_row_name): state and control labels, path rows, terminal
@@ -55,7 +65,7 @@ extern const robot_arm_real robot_arm_soft_r[4][ROBOT_ARM_DIM(ROBOT_ARM_NR)];
 
 #if ROBOT_ARM_HAS_NOMINAL
 /* offline primal-dual solution at robot_arm_x0_default (IPOPT at generation time), so the
- * controller starts warm (docs/design.md section 8) */
+ * controller starts warm (docs/design.md section 8); in the declared units */
 extern const robot_arm_real robot_arm_nominal_x[ROBOT_ARM_N + 1][ROBOT_ARM_NX];
 extern const robot_arm_real robot_arm_nominal_u[ROBOT_ARM_N][ROBOT_ARM_NU];
 extern const robot_arm_real robot_arm_nominal_lam[ROBOT_ARM_N + 1][ROBOT_ARM_NX];

@@ -93,9 +93,19 @@
 #define CERT_RES_DUAL ROBOT_ARM_PREC(1e-9, 1e-4)
 #define CERT_RES_PRIMAL ROBOT_ARM_PREC(1e-6, 1e-3)
 #define CERT_SEP ROBOT_ARM_PREC(1e-6, 1e-3)
+/* The separation of a certificate tested after a stall or failure (see
+ * primal_infeasible_at_tol): some 5000 (double) or 100 (float) rounding units. */
+#define CERT_SEP_STALL ROBOT_ARM_PREC(1e-12, 1e-5)
 /* Reduction of the normalised certificate residual that counts as progress of the
  * iteration (see qp_last_progress). */
 #define CERT_PROGRESS ROBOT_ARM_R(0.5)
+/* A cold start whose rollout violates a soft side of stage 0 or 1 by more than SOFT_FAR
+ * starts from the rollout (see soft_rollout and soft_far); others from w = 0. With 10, the
+ * random soft QPs of tests/test_soft.py with N = 40 took up to 37 iterations instead of 18
+ * (the start from the rollout suits a violation that the unit slacks cannot take up). */
+#ifndef SOFT_FAR
+#define SOFT_FAR ROBOT_ARM_R(100.0)
+#endif
 
 static robot_arm_real dmax(robot_arm_real a, robot_arm_real b)
 {
@@ -1290,26 +1300,86 @@ static int primal_infeasible(const robot_arm_qp_workspace *ws, const robot_arm_q
     return bty > CERT_SEP * bscale;
 }
 
-/* The same certificate, tested when progress has stalled, with the separation measured
- * against the tolerance instead of CERT_SEP: a point w violates some constraint by at
- * least (b'y - |A'y|_inf |w|_1) / |y|_1, and when that exceeds tol (relative to the bounds)
- * for points of the size of the iterate, none of them meets the constraints to the
- * tolerance the solve asks for (a QP infeasible by a margin just above the tolerance, whose
- * dual iterate diverges to a certificate that is exact to round-off). The A'y term keeps a
- * residual A'y that is small but not zero from passing for a separation. */
+/* The largest coefficient of inequality row j of stage k (k = N: the terminal rows). */
+static robot_arm_real row_norm(const robot_arm_qp_in *in, int k, int j)
+{
+    robot_arm_real m = ROBOT_ARM_R(0.0);
+    int c;
+    if (k < N && NG > 0 && j >= NW)
+        for (c = 0; c < NW; ++c)
+            m = dmax(m, robot_arm_fabs(in->C[k][(j - NW) + c * NG]));
+    else if (k == N && NR > 0 && j >= NX)
+        for (c = 0; c < NX; ++c)
+            m = dmax(m, robot_arm_fabs(in->R[(j - NX) + c * NR]));
+    else
+        m = ROBOT_ARM_R(1.0);
+    return m;
+}
+
+/* The mass of the dual iterate with each multiplier weighted by the largest coefficient of
+ * its row, sum |y_i| |a_i|_inf over the initial-state, dynamics and terminal equality rows
+ * and the hard sides: with it, (b'y - |A'y|_inf |w|_1) / mass bounds from below the largest
+ * violation of a row in the units of its largest coefficient, so that a row written with
+ * small coefficients (a terminal equality row scaled by 1e-3) does not pass for a smaller
+ * violation than the same row normalised. */
+static robot_arm_real certificate_mass(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+{
+    robot_arm_real mass = ROBOT_ARM_R(0.0);
+    int k, i, c, b, j;
+    for (i = 0; i < NX; ++i)
+        mass += robot_arm_fabs(ws->lam[i]);
+    for (k = 0; k < N; ++k)
+        for (i = 0; i < NX; ++i) {
+            robot_arm_real m = ROBOT_ARM_R(1.0);
+            for (c = 0; c < NW; ++c)
+                m = dmax(m, robot_arm_fabs(in->Phi[k][i + c * NX]));
+            mass += m * robot_arm_fabs(ws->lam[(k + 1) * NX + i]);
+        }
+    for (i = 0; i < NE; ++i) {
+        robot_arm_real m = ROBOT_ARM_R(0.0);
+        for (c = 0; c < NX; ++c)
+            m = dmax(m, robot_arm_fabs(in->Req[i + c * NE1]));
+        mass += m * robot_arm_fabs(ws->nu[i]);
+    }
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            const robot_arm_real m = row_norm(in, k, j);
+            if (ws->has_lo[b] && !(SOFT && ws->soft_lo[b]))
+                mass += m * ws->z_lo[b];
+            if (ws->has_up[b] && !(SOFT && ws->soft_up[b]))
+                mass += m * ws->z_up[b];
+        }
+    return mass;
+}
+
+/* The same certificate, tested when the iteration has stalled or failed, with the
+ * separation measured against its own accuracy instead of CERT_SEP: a point w violates
+ * some row by at least (b'y - |A'y|_inf |w|_1) / certificate_mass in the units of the row's
+ * largest coefficient (the A'y term keeps a residual A'y that is small but not zero from
+ * passing for a separation, for points of the size of the iterate), and a separation
+ * beyond CERT_SEP_STALL relative to the data (far above the round-off of b'y) proves that
+ * no point meets the constraints. A QP infeasible
+ * by a margin near the tolerance stalls before its dual iterate has grown to the regular
+ * test's certificate (its residuals cannot fall below the tolerance, and the separation of
+ * its certificate, which is exact to round-off, is the smallest violation any point can
+ * reach); the test uses the smaller of CERT_SEP_STALL and tol, so that a QP infeasible by
+ * more than the tolerance asked for is flagged whatever the tolerance. */
 static int primal_infeasible_at_tol(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r,
                                     robot_arm_real data_scale, robot_arm_real tol)
 {
     robot_arm_real bscale, y1, bty, w1 = ROBOT_ARM_R(0.0);
     int i;
+    QP_TRACE("diagnosis: |y| %.3e (data %.3e) |A'y|/|y| %.3e\n", r->ny, data_scale, r->aty / r->ny);
     if (!dual_ray(r, data_scale))
         return 0;
     bty = farkas_separation(ws, in, &bscale, &y1);
     for (i = 0; i < NP; ++i)
         w1 += robot_arm_fabs(ws->prim[i]);
     bty -= r->aty * w1;
+    y1 = certificate_mass(ws, in);
     QP_TRACE("stalled: certificate separation %.3e (tolerance %.1e)\n", bty / (y1 * bscale), tol);
-    return y1 > ROBOT_ARM_R(0.0) && bty / y1 > tol * bscale;
+    return y1 > ROBOT_ARM_R(0.0) && bty / y1 > dmin(tol, CERT_SEP_STALL) * bscale;
 }
 
 /* Unboundedness certificate on the normalised primal iterate d = w / |w|: a feasible ray
@@ -1460,14 +1530,148 @@ static robot_arm_real centred_floor(const robot_arm_qp_workspace *ws, const robo
     return dmin(ROBOT_ARM_R(1.0), dmax(CENTRED_T_MIN, viol));
 }
 
+/* The primal start of a cold solve with soft sides: x_0 = x0 and the states of the
+ * dynamics from there, each control at the point of its box nearest to 0. From w = 0 a
+ * measurement far outside the soft bounds moved the rows by the whole violation in the
+ * first direction, which the slack of the row and the soft slack shared by their barrier
+ * weights, so that the row's slack blocked the step at a thousandth of it; from the
+ * rollout the soft slacks take up the violation at the start. */
+static void soft_rollout(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+{
+    int k, i;
+    for (i = 0; i < NX; ++i)
+        ws->prim[i] = in->x0[i];
+    for (k = 0; k < N; ++k) {
+        robot_arm_real *w = ws->prim + k * NW, *xn = ws->prim + (k + 1) * NW;
+        for (i = NX; i < NW; ++i)
+            w[i] = dmin(dmax(ROBOT_ARM_R(0.0), in->lbw[k][i]), in->ubw[k][i]);
+        for (i = 0; i < NX; ++i)
+            xn[i] = in->b[k][i];
+        robot_arm_lai_gemv_n(NX, NW, ROBOT_ARM_R(1.0), in->Phi[k], NX, w, ROBOT_ARM_R(1.0), xn);
+    }
+}
+
+/* Whether some bounded side is soft (a QP of a solver compiled with soft rows may have
+ * none: then it is solved as by the solver without them). */
+static int any_soft_side(const robot_arm_qp_workspace *ws)
+{
+    int b;
+    if (!SOFT)
+        return 0;
+    for (b = 0; b < ws->nb; ++b)
+        if (ws->soft_lo[b] || ws->soft_up[b])
+            return 1;
+    return 0;
+}
+
+/* The soft sides of a cold start that the rollout violates by d: the slack s = d + t
+ * takes up the violation, and the side's price zl + Zl s is split between the side's
+ * multiplier z and the slack's y in the ratio s : t (the slack's stationarity holds,
+ * t z = s y). */
+static void soft_cold_sides(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+{
+    int k, b, j;
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            robot_arm_real lo, up, w[4], price;
+            const robot_arm_real v = row_dot(in, k, j, ws->prim + k * NW);
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            soft_weights(in, ws->bidx[b], w);
+            if (ws->soft_lo[b] && lo - v > ROBOT_ARM_R(0.0)) {
+                price = w[0] + w[2] * ws->s_lo[b];
+                ws->z_lo[b] = dmax(price * ws->s_lo[b] / (ws->s_lo[b] + ws->t_lo[b]), ws->z_lo[b]);
+                ws->y_lo[b] = ws->z_lo[b] * ws->t_lo[b] / ws->s_lo[b];
+            }
+            if (ws->soft_up[b] && v - up > ROBOT_ARM_R(0.0)) {
+                price = w[1] + w[3] * ws->s_up[b];
+                ws->z_up[b] = dmax(price * ws->s_up[b] / (ws->s_up[b] + ws->t_up[b]), ws->z_up[b]);
+                ws->y_up[b] = ws->z_up[b] * ws->t_up[b] / ws->s_up[b];
+            }
+        }
+}
+
+/* The multipliers of a cold start with soft sides, backwards from x_N: lam_N and each lam_k
+ * such that the stationarity rows of the states hold at the start, and the residual of a
+ * control's row on the multiplier of the side of its hard box that can take it (that side's
+ * slack t lowered to 1/z, so that t z stays at most the unit of the cold start). With the
+ * price on the violated soft sides (soft_cold_sides), the start is then dual feasible but
+ * for the controls without a box, however far outside its soft bounds the rollout lies:
+ * without it, the stationarity residual of such a start (1e3 to 1e6 times the data of the
+ * bounds) made Newton directions of 1e6 that the control boxes cut to steps of 1e-6. */
+static void soft_dual_rollout(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+{
+    int k, i, b, j;
+    for (k = N; k >= 0; --k) {
+        const robot_arm_real *w = ws->prim + k * NW;
+        robot_arm_real a[NW];
+        if (k < N) {
+            robot_arm_lai_symv_l(NW, ROBOT_ARM_R(1.0), in->H[k], NW, w, ROBOT_ARM_R(0.0), a);
+            robot_arm_lai_axpy(NW, in->hess_shift, w, a);
+            robot_arm_lai_axpy(NW, ROBOT_ARM_R(1.0), in->g[k], a);
+            robot_arm_lai_gemv_t(NX, NW, -ROBOT_ARM_R(1.0), in->Phi[k], NX, ws->lam + (k + 1) * NX, ROBOT_ARM_R(1.0), a);
+        } else {
+            robot_arm_lai_symv_l(NX, ROBOT_ARM_R(1.0), in->HN, NX, w, ROBOT_ARM_R(0.0), a);
+            robot_arm_lai_axpy(NX, in->hess_shift, w, a);
+            robot_arm_lai_axpy(NX, ROBOT_ARM_R(1.0), in->gN, a);
+        }
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            const robot_arm_real zl = ws->has_lo[b] ? ws->z_lo[b] : ROBOT_ARM_R(0.0);
+            const robot_arm_real zu = ws->has_up[b] ? ws->z_up[b] : ROBOT_ARM_R(0.0);
+            row_axpy(in, k, j, zu - zl, a);
+        }
+        /* the controls' rows: the residual goes to the multiplier of the side of a hard box
+         * that can take it */
+        if (k < N)
+            FOR_STAGE_ROWS(ws, k, b, j)
+            {
+                if (j < NX || j >= NW)
+                    continue;
+                if (a[j] > ROBOT_ARM_R(0.0) && ws->has_lo[b] && !(SOFT && ws->soft_lo[b])) {
+                    ws->z_lo[b] += a[j];
+                    ws->t_lo[b] = dmin(ws->t_lo[b], ROBOT_ARM_R(1.0) / ws->z_lo[b]);
+                    a[j] = ROBOT_ARM_R(0.0);
+                } else if (a[j] < ROBOT_ARM_R(0.0) && ws->has_up[b] && !(SOFT && ws->soft_up[b])) {
+                    ws->z_up[b] -= a[j];
+                    ws->t_up[b] = dmin(ws->t_up[b], ROBOT_ARM_R(1.0) / ws->z_up[b]);
+                    a[j] = ROBOT_ARM_R(0.0);
+                }
+            }
+        for (i = 0; i < NX; ++i)
+            ws->lam[k * NX + i] = -a[i];
+    }
+}
+
+/* Whether the rollout violates a soft side of stage 0 or 1 (the measured state and its
+ * first prediction, before the drift of the rollout over the horizon) by more than
+ * SOFT_FAR, in the units in which the cold start's slacks and multipliers are 1. */
+static int soft_far(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+{
+    int k, b, j;
+    const robot_arm_real lim = SOFT_FAR;
+    for (k = 0; k <= N && k <= 1; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            robot_arm_real lo, up;
+            const robot_arm_real v = row_dot(in, k, j, ws->prim + k * NW);
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            if ((ws->soft_lo[b] && lo - v > lim) || (ws->soft_up[b] && v - up > lim))
+                return 1;
+        }
+    return 0;
+}
+
 /* Starting point. Cold (centred = 0): w = 0, lam = nu = 0, slacks max(1, v - lo),
  * multipliers 1. Centred cold start (centred = 1): slacks max(floor, v - lo) and
  * multipliers floor / t (centred_floor). Warm: the given primal-dual point with slacks and
- * multipliers pushed off zero. */
+ * multipliers pushed off zero. A cold start whose measurement lies far outside a soft side
+ * (soft_far) starts from the rollout instead of w = 0, with the price on the violated soft
+ * sides and the multipliers of the dual rollout. */
 static void initial_point(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const robot_arm_qp_settings *st,
                           const robot_arm_qp_sol *sol, int centred)
 {
-    int k, i, b, j;
+    int k, i, b, j, far = 0;
     const int warm = st->warm_start != 0;
     const robot_arm_real floor_c = !warm && centred ? centred_floor(ws, in) : ROBOT_ARM_R(1.0);
     for (i = 0; i < NP; ++i)
@@ -1476,6 +1680,13 @@ static void initial_point(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
         ws->lam[i] = ROBOT_ARM_R(0.0);
     for (i = 0; i < NE1; ++i)
         ws->nu[i] = ROBOT_ARM_R(0.0);
+    if (SOFT && !warm && any_soft_side(ws)) {
+        soft_rollout(ws, in);
+        far = soft_far(ws, in);
+        if (!far)
+            for (i = 0; i < NP; ++i)
+                ws->prim[i] = ROBOT_ARM_R(0.0);
+    }
     if (warm) {
         for (k = 0; k <= N; ++k)
             for (i = 0; i < NX; ++i) {
@@ -1535,6 +1746,10 @@ static void initial_point(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
                 }
             }
         }
+    if (far) {
+        soft_cold_sides(ws, in);
+        soft_dual_rollout(ws, in);
+    }
 }
 
 static robot_arm_real merit(const qp_res *r)
@@ -2035,9 +2250,14 @@ static robot_arm_real qp_objective(const robot_arm_qp_in *in, const robot_arm_qp
 static int qp_result(const qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r,
                      int status, int iter, robot_arm_qp_sol *sol, robot_arm_qp_info *info)
 {
-    const int keep_best =
-        (status == ROBOT_ARM_QP_MAX_ITER || status == ROBOT_ARM_QP_STALLED || status == ROBOT_ARM_QP_NUMERICAL) &&
-        isfinite(L->best_merit) && !(merit(r) <= L->best_merit);
+    int keep_best;
+    /* a failed factorisation or the iteration limit: the diverged dual iterate may prove
+     * infeasibility as at a stall (qp_track_best) */
+    if ((status == ROBOT_ARM_QP_NUMERICAL || status == ROBOT_ARM_QP_MAX_ITER) &&
+        primal_infeasible_at_tol(ws, in, r, L->data_scale, L->st.tol))
+        status = ROBOT_ARM_QP_PRIMAL_INFEASIBLE;
+    keep_best = (status == ROBOT_ARM_QP_MAX_ITER || status == ROBOT_ARM_QP_STALLED || status == ROBOT_ARM_QP_NUMERICAL) &&
+                isfinite(L->best_merit) && !(merit(r) <= L->best_merit);
     if (info) {
         info->inertia_corrections = L->n_corr;
         info->terminal_augmentations = L->n_aug;

@@ -62,10 +62,12 @@
  * a feasible ray with d'Hd < 0, or Hd ~ 0 and g'd < 0, proves unboundedness. On an
  * infeasible QP the residuals stop improving while the dual iterate diverges towards a
  * certificate: each halving of |A'y| / |y| counts as progress, so the iteration is not
- * stopped as stalled before the certificate is exact. When it stalls nonetheless, the
- * certificate is tested against the tolerance (every point violates some constraint by at
- * least b'y / |y|_1; above tol relative to the bounds the QP is infeasible to the accuracy
- * asked for, e.g. a QP infeasible by a relative margin of 1e-9 at tol 1e-10).
+ * stopped as stalled before the certificate is exact. When it stalls nonetheless, or the
+ * factorisation fails or the iteration limit is reached, the certificate is tested against
+ * its own accuracy: every point violates some row by at least b'y / sum |y_i| |a_i|_inf (in
+ * the units of the row's largest coefficient), and beyond 1e-12 of the data (float 1e-5; the
+ * tolerance when smaller) the QP is infeasible, e.g. a QP infeasible by a relative margin
+ * of 1e-9 at tol 1e-10, whose residuals cannot fall below the tolerance.
  *
  * Cold start: w = 0, lam = nu = 0, centred: every slack t = max(v - bound, f) and its
  * multiplier z = f / t (t z = f on every side), with f the primal infeasibility of w = 0
@@ -84,7 +86,15 @@
  * taken from the primal point, slacks and multipliers floored at 1e-2 (relative to the
  * unit values of the cold start; smaller floors save about one iteration in the robot-arm
  * closed loop but let the warm start reach another local minimiser of nonconvex QPs more
- * often); the careful steps throughout. A restart after a stall starts cold. Feedback
+ * often); the careful steps throughout. A restart after a stall starts cold.
+ *
+ * Cold start far outside a soft side (a QP with soft rows whose measured state or its
+ * first prediction violates a soft side by more than 100): the primal start is the rollout
+ * of the dynamics from x0 (controls at the point of their box nearest to 0), the slacks of
+ * the violated soft sides take up the violation with the side's price zl + Zl s split
+ * between the side's and the slack's multiplier, and the multipliers of the dynamics and
+ * of the control boxes are those that make the stationarity rows hold at the start. From
+ * w = 0 such QPs (measurements 1e3 to 1e6 times outside the bounds) stalled. Feedback
  * (robot_arm_solver.c) warm-starts from the previous solution shifted with the horizon and
  * retries cold when that fails.
  *

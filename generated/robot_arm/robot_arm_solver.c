@@ -191,6 +191,8 @@ const char *robot_arm_status_string(int status)
         return "already prepared (call feedback before the next prepare)";
     case ROBOT_ARM_ERR_MEASUREMENT_GATED:
         return "the measurement is too far from the plan's prediction (gate): handled as a missing one";
+    case ROBOT_ARM_ERR_NOT_CONVERGED:
+        return "the globalised solve did not reach its tolerance within its limits";
     default:
         return "unknown status";
     }
@@ -566,6 +568,45 @@ static int robot_arm_init_finish(robot_arm_solver *s)
     return ROBOT_ARM_OK;
 }
 
+/* Scaling (docs/algorithm.md section 16): the API's values are in the declared units, the
+ * iterate in the solver's: x / scale_x, u / scale_u, a multiplier of a row of scale d times
+ * d / scale_cost. */
+static robot_arm_real robot_arm_scale_w(int i)
+{
+    return i < ROBOT_ARM_NX ? robot_arm_scale_x[i] : robot_arm_scale_u[i - ROBOT_ARM_NX];
+}
+
+/* out = in / d (n entries); NULL in gives NULL */
+static const robot_arm_real *robot_arm_scaled_in(const robot_arm_real *in, const robot_arm_real *d, int n, robot_arm_real *out)
+{
+    int i;
+    if (in == 0) {
+        return 0;
+    }
+    for (i = 0; i < n; ++i) {
+        out[i] = in[i] / d[i];
+    }
+    return out;
+}
+
+/* out = in * d (n entries, d repeating with period nd) */
+static void robot_arm_scaled_out(robot_arm_real *out, const robot_arm_real *in, const robot_arm_real *d, int n, int nd)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        out[i] = in[i] * d[i % nd];
+    }
+}
+
+/* out = in * scale_cost / d (multipliers; d repeating with period nd) */
+static void robot_arm_dual_out(robot_arm_real *out, const robot_arm_real *in, const robot_arm_real *d, int n, int nd)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        out[i] = in[i] * robot_arm_scale_cost / d[i % nd];
+    }
+}
+
 int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot_arm_real *x, const robot_arm_real *u,
                const robot_arm_real *lam, const robot_arm_real *mu_g, const robot_arm_real *mu_b, const robot_arm_real *mu_bN,
                const robot_arm_real *mu_r, const robot_arm_real *nu)
@@ -592,7 +633,7 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
     robot_arm_timer_begin(&s->timer, (1u << ROBOT_ARM_N_PHASES) - 1u, ROBOT_ARM_PHASE_GRADIENTS);
 
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->xhat0[i] = xhat0 ? xhat0[i] : robot_arm_x0_default[i];
+        s->xhat0[i] = (xhat0 ? xhat0[i] : robot_arm_x0_default[i]) / robot_arm_scale_x[i];
     }
     for (i = 0; i < ROBOT_ARM_NU; ++i) {
         s->u_applied[i] = ROBOT_ARM_R(0.0);
@@ -603,30 +644,33 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
     }
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            s->x[k][i] = x ? x[k * ROBOT_ARM_NX + i] : robot_arm_guess_x[k][i];
-            s->lam[k][i] = lam ? lam[k * ROBOT_ARM_NX + i] : ROBOT_ARM_R(0.0);
+            s->x[k][i] = x ? x[k * ROBOT_ARM_NX + i] / robot_arm_scale_x[i] : robot_arm_guess_x[k][i];
+            s->lam[k][i] = lam ? lam[k * ROBOT_ARM_NX + i] * robot_arm_scale_x[i] / robot_arm_scale_cost : ROBOT_ARM_R(0.0);
         }
     }
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NU; ++i) {
-            s->u[k][i] = u ? u[k * ROBOT_ARM_NU + i] : robot_arm_guess_u[k][i];
+            s->u[k][i] = u ? u[k * ROBOT_ARM_NU + i] / robot_arm_scale_u[i] : robot_arm_guess_u[k][i];
         }
         for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NG); ++i) {
-            s->mu_g[k][i] = (mu_g && i < ROBOT_ARM_NG) ? mu_g[k * ROBOT_ARM_NG + i] : ROBOT_ARM_R(0.0);
+            s->mu_g[k][i] = (mu_g && i < ROBOT_ARM_NG)
+                                ? mu_g[k * ROBOT_ARM_NG + i] * robot_arm_scale_g[i] / robot_arm_scale_cost
+                                : ROBOT_ARM_R(0.0);
         }
         for (i = 0; i < ROBOT_ARM_NW; ++i) {
-            s->mu_b[k][i] = mu_b ? mu_b[k * ROBOT_ARM_NW + i] : ROBOT_ARM_R(0.0);
+            s->mu_b[k][i] =
+                mu_b ? mu_b[k * ROBOT_ARM_NW + i] * robot_arm_scale_w(i) / robot_arm_scale_cost : ROBOT_ARM_R(0.0);
         }
     }
     robot_arm_clear_x0_multiplier(s);
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->mu_bN[i] = mu_bN ? mu_bN[i] : ROBOT_ARM_R(0.0);
+        s->mu_bN[i] = mu_bN ? mu_bN[i] * robot_arm_scale_x[i] / robot_arm_scale_cost : ROBOT_ARM_R(0.0);
     }
     for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NR); ++i) {
-        s->mu_r[i] = (mu_r && i < ROBOT_ARM_NR) ? mu_r[i] : ROBOT_ARM_R(0.0);
+        s->mu_r[i] = (mu_r && i < ROBOT_ARM_NR) ? mu_r[i] * robot_arm_scale_r[i] / robot_arm_scale_cost : ROBOT_ARM_R(0.0);
     }
     for (i = 0; i < ROBOT_ARM_DIM(ROBOT_ARM_NE); ++i) {
-        s->nu[i] = (nu && i < ROBOT_ARM_NE) ? nu[i] : ROBOT_ARM_R(0.0);
+        s->nu[i] = (nu && i < ROBOT_ARM_NE) ? nu[i] * robot_arm_scale_req[i] / robot_arm_scale_cost : ROBOT_ARM_R(0.0);
     }
 
     rc = robot_arm_init_finish(s);
@@ -1102,15 +1146,19 @@ static int robot_arm_feedback_call(robot_arm_solver *s, const robot_arm_real *xh
 
 int robot_arm_feedback(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
-    robot_arm_real xm[ROBOT_ARM_NX];
+    robot_arm_real xm[ROBOT_ARM_NX], xs[ROBOT_ARM_NX];
     int rc;
     if (!s->set_up) {
         return ROBOT_ARM_ERR_NOT_INITIALIZED;
     }
-    rc = robot_arm_feedback_call(s, robot_arm_with_memory(s, xhat0, xm), u0);
+    rc = robot_arm_feedback_call(s, robot_arm_with_memory(s, robot_arm_scaled_in(xhat0, robot_arm_scale_x, ROBOT_ARM_NX, xs), xm),
+                             u0);
     if (s->initialized) {
         /* the control returned is the one applied: the next stage-0 rate row is against it */
         robot_arm_copy(s->u_applied, s->health.u0_out, ROBOT_ARM_NU);
+    }
+    if (u0) { /* every feedback of a set-up solver wrote u0 = u0_out (the fallback on failure) */
+        robot_arm_scaled_out(u0, s->health.u0_out, robot_arm_scale_u, ROBOT_ARM_NU, ROBOT_ARM_NU);
     }
     return rc;
 }
@@ -1766,7 +1814,7 @@ static int robot_arm_anytime_run(robot_arm_solver *s)
 
 int robot_arm_kkt_eval(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *kkt4)
 {
-    robot_arm_real parts[4], xm[ROBOT_ARM_NX];
+    robot_arm_real parts[4], xm[ROBOT_ARM_NX], xs[ROBOT_ARM_NX];
     int i, rc;
 
     if (!s->set_up) {
@@ -1775,7 +1823,7 @@ int robot_arm_kkt_eval(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
     if (!s->initialized) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NOT_INITIALIZED);
     }
-    xhat0 = robot_arm_with_memory(s, xhat0, xm);
+    xhat0 = robot_arm_with_memory(s, robot_arm_scaled_in(xhat0, robot_arm_scale_x, ROBOT_ARM_NX, xs), xm);
     if (xhat0 && !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
@@ -1792,6 +1840,8 @@ int robot_arm_kkt_eval(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
             kkt4[i] = parts[i];
         }
     }
+    s->kkt_rel = robot_arm_kkt_relative(parts, &s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0],
+                                    &s->mu_b[0][0], s->mu_bN, s->mu_r, s->nu);
     return robot_arm_ret(s, ROBOT_ARM_OK);
 }
 
@@ -1799,47 +1849,50 @@ int robot_arm_kkt_eval(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
 
 void robot_arm_get_x(const robot_arm_solver *s, robot_arm_real *x)
 {
-    robot_arm_copy(x, &s->x[0][0], (ROBOT_ARM_N + 1) * ROBOT_ARM_NX);
+    robot_arm_scaled_out(x, &s->x[0][0], robot_arm_scale_x, (ROBOT_ARM_N + 1) * ROBOT_ARM_NX, ROBOT_ARM_NX);
 }
 
 void robot_arm_get_u(const robot_arm_solver *s, robot_arm_real *u)
 {
-    robot_arm_copy(u, &s->u[0][0], ROBOT_ARM_N * ROBOT_ARM_NU);
+    robot_arm_scaled_out(u, &s->u[0][0], robot_arm_scale_u, ROBOT_ARM_N * ROBOT_ARM_NU, ROBOT_ARM_NU);
 }
 
 void robot_arm_get_lam(const robot_arm_solver *s, robot_arm_real *lam)
 {
-    robot_arm_copy(lam, &s->lam[0][0], (ROBOT_ARM_N + 1) * ROBOT_ARM_NX);
+    robot_arm_dual_out(lam, &s->lam[0][0], robot_arm_scale_x, (ROBOT_ARM_N + 1) * ROBOT_ARM_NX, ROBOT_ARM_NX);
 }
 
 void robot_arm_get_mu_g(const robot_arm_solver *s, robot_arm_real *mu_g)
 {
-    int k, i;
+    int k;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NG; ++i) {
-            mu_g[k * ROBOT_ARM_NG + i] = s->mu_g[k][i];
-        }
+        robot_arm_dual_out(mu_g + k * ROBOT_ARM_NG, s->mu_g[k], robot_arm_scale_g, ROBOT_ARM_NG, ROBOT_ARM_DIM(ROBOT_ARM_NG));
     }
 }
 
 void robot_arm_get_mu_b(const robot_arm_solver *s, robot_arm_real *mu_b)
 {
-    robot_arm_copy(mu_b, &s->mu_b[0][0], ROBOT_ARM_N * ROBOT_ARM_NW);
+    int k, i;
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        for (i = 0; i < ROBOT_ARM_NW; ++i) {
+            mu_b[k * ROBOT_ARM_NW + i] = s->mu_b[k][i] * robot_arm_scale_cost / robot_arm_scale_w(i);
+        }
+    }
 }
 
 void robot_arm_get_mu_bN(const robot_arm_solver *s, robot_arm_real *mu_bN)
 {
-    robot_arm_copy(mu_bN, s->mu_bN, ROBOT_ARM_NX);
+    robot_arm_dual_out(mu_bN, s->mu_bN, robot_arm_scale_x, ROBOT_ARM_NX, ROBOT_ARM_NX);
 }
 
 void robot_arm_get_mu_r(const robot_arm_solver *s, robot_arm_real *mu_r)
 {
-    robot_arm_copy(mu_r, s->mu_r, ROBOT_ARM_NR);
+    robot_arm_dual_out(mu_r, s->mu_r, robot_arm_scale_r, ROBOT_ARM_NR, ROBOT_ARM_DIM(ROBOT_ARM_NR));
 }
 
 void robot_arm_get_nu(const robot_arm_solver *s, robot_arm_real *nu)
 {
-    robot_arm_copy(nu, s->nu, ROBOT_ARM_NE);
+    robot_arm_dual_out(nu, s->nu, robot_arm_scale_req, ROBOT_ARM_NE, ROBOT_ARM_DIM(ROBOT_ARM_NE));
 }
 
 void robot_arm_get_rho(const robot_arm_solver *s, robot_arm_real *rho)
@@ -1909,7 +1962,8 @@ robot_arm_real robot_arm_get_soft_slacks(const robot_arm_solver *s, robot_arm_re
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
                 const robot_arm_real lb = k < ROBOT_ARM_N ? in->lbw[k][i] : in->lbxN[i];
                 const robot_arm_real ub = k < ROBOT_ARM_N ? in->ubw[k][i] : in->ubxN[i];
-                const robot_arm_real sl = robot_arm_soft_slack(sol->x[k][i], lb, ub, &robot_arm_soft_x[0][i], ROBOT_ARM_NX);
+                const robot_arm_real sl =
+                    robot_arm_soft_slack(sol->x[k][i], lb, ub, &robot_arm_soft_x[0][i], ROBOT_ARM_NX) * robot_arm_scale_x[i];
                 worst = sl > worst ? sl : worst;
                 if (viol_x) {
                     viol_x[k * ROBOT_ARM_NX + i] = sl;
@@ -1924,8 +1978,9 @@ robot_arm_real robot_arm_get_soft_slacks(const robot_arm_solver *s, robot_arm_re
                     v += robot_arm_ring_stage_const(&s->ring, k)->Ct[i + c * ROBOT_ARM_DIM(ROBOT_ARM_NG)] *
                          (c < ROBOT_ARM_NX ? sol->x[k][c] : sol->u[k][c - ROBOT_ARM_NX]);
                 }
-                sl =
-                    robot_arm_soft_slack(v, in->lg[k][i], in->ug[k][i], &robot_arm_soft_g[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NG));
+                sl = robot_arm_soft_slack(v, in->lg[k][i], in->ug[k][i], &robot_arm_soft_g[0][i],
+                                      ROBOT_ARM_DIM(ROBOT_ARM_NG)) *
+                     robot_arm_scale_g[i];
                 worst = sl > worst ? sl : worst;
                 if (viol_g) {
                     viol_g[k * ROBOT_ARM_DIM(ROBOT_ARM_NG) + i] = sl;
@@ -1938,7 +1993,8 @@ robot_arm_real robot_arm_get_soft_slacks(const robot_arm_solver *s, robot_arm_re
             for (c = 0; c < ROBOT_ARM_NX; ++c) {
                 v += s->R[i + c * ROBOT_ARM_DIM(ROBOT_ARM_NR)] * sol->x[ROBOT_ARM_N][c];
             }
-            sl = robot_arm_soft_slack(v, in->lr[i], in->ur[i], &robot_arm_soft_r[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NR));
+            sl = robot_arm_soft_slack(v, in->lr[i], in->ur[i], &robot_arm_soft_r[0][i], ROBOT_ARM_DIM(ROBOT_ARM_NR)) *
+                 robot_arm_scale_r[i];
             worst = sl > worst ? sl : worst;
             if (viol_r) {
                 viol_r[i] = sl;
@@ -1981,12 +2037,17 @@ int robot_arm_get_qp_infeasible_row(const robot_arm_solver *s, robot_arm_row_inf
         row->index = j - ROBOT_ARM_NX - ROBOT_ARM_NR;
         row->bound = ROBOT_ARM_R(0.0);
     }
+    row->bound *= row->kind == ROBOT_ARM_ROW_STATE      ? robot_arm_scale_x[row->index]
+                  : row->kind == ROBOT_ARM_ROW_CONTROL  ? robot_arm_scale_u[row->index]
+                  : row->kind == ROBOT_ARM_ROW_PATH     ? robot_arm_scale_g[row->index]
+                  : row->kind == ROBOT_ARM_ROW_TERMINAL ? robot_arm_scale_r[row->index]
+                                                    : robot_arm_scale_req[row->index];
     return 1;
 }
 
 void robot_arm_get_u0(const robot_arm_solver *s, robot_arm_real *u0)
 {
-    robot_arm_copy(u0, s->health.u0_out, ROBOT_ARM_NU);
+    robot_arm_scaled_out(u0, s->health.u0_out, robot_arm_scale_u, ROBOT_ARM_NU, ROBOT_ARM_NU);
 }
 
 void robot_arm_get_scales(const robot_arm_solver *s, robot_arm_real *scale_x, robot_arm_real *scale_u)
@@ -2033,6 +2094,7 @@ void robot_arm_get_info(const robot_arm_solver *s, robot_arm_info *info)
         info->kkt[i] = s->kkt[i];
         info->kkt_max = s->kkt[i] > info->kkt_max ? s->kkt[i] : info->kkt_max;
     }
+    info->kkt_rel = s->kkt_rel;
     for (i = 0; i < ROBOT_ARM_N_PHASES; ++i) { /* times are double in both precisions */
         info->timings[i] = s->timer.t[i];
     }
@@ -2105,7 +2167,7 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
         s->u_applied[i] = ROBOT_ARM_R(0.0);
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->xhat0[i] = robot_arm_x0_default[i];
+        s->xhat0[i] = robot_arm_x0_default[i] / robot_arm_scale_x[i];
     }
     s->qp_status = 0;
     s->qp_iterations = 0;
@@ -2119,6 +2181,7 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
     for (i = 0; i < 4; ++i) {
         s->kkt[i] = NAN;
     }
+    s->kkt_rel = NAN;
     robot_arm_timer_init(&s->timer);
     s->anytime.work = 0.0;
     s->anytime.instant_start = 0.0;
@@ -2301,10 +2364,13 @@ void robot_arm_set_clock(robot_arm_solver *s, double (*clock_fn)(void *ctx), voi
 int robot_arm_simulate(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p, robot_arm_real *x_next,
                    struct robot_arm_fun_work_s *work)
 {
-    robot_arm_real l = ROBOT_ARM_R(0.0), g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-    if (robot_arm_eval_stage_eval(x, u, p ? p : robot_arm_p_default[0], x_next, &l, g, work) != 0) {
+    robot_arm_real l = ROBOT_ARM_R(0.0), g[ROBOT_ARM_DIM(ROBOT_ARM_NG)], xs[ROBOT_ARM_NX], us[ROBOT_ARM_NU], xn[ROBOT_ARM_NX];
+    if (robot_arm_eval_stage_eval(robot_arm_scaled_in(x, robot_arm_scale_x, ROBOT_ARM_NX, xs),
+                              robot_arm_scaled_in(u, robot_arm_scale_u, ROBOT_ARM_NU, us), p ? p : robot_arm_p_default[0], xn,
+                              &l, g, work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
+    robot_arm_scaled_out(x_next, xn, robot_arm_scale_x, ROBOT_ARM_NX, ROBOT_ARM_NX);
     return robot_arm_lai_vec_finite(ROBOT_ARM_NX, x_next) ? ROBOT_ARM_OK : ROBOT_ARM_ERR_NONFINITE_VALUE;
 }
 
@@ -2317,4 +2383,5 @@ int robot_arm_simulate(const robot_arm_real *x, const robot_arm_real *u, const r
 #include "robot_arm_lm.c"
 #include "robot_arm_health.c"
 #include "robot_arm_kkt.c"
+#include "robot_arm_globalise.c"
 #include "robot_arm_qp.c" /* last: its short macros (N, NX, ...) stay inside it */

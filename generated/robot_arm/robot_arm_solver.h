@@ -28,7 +28,10 @@
  * mu_g N x ng, mu_b N x nw, mu_bN nx, mu_r nr, nu ne, parameters (N+1) x np. Multipliers are
  * signed (positive when the upper side of a row is active, negative for the lower side);
  * docs/algorithm.md section 1 gives the Lagrangian. Arrays of size zero are not read or
- * written (any pointer, also NULL, may be passed).
+ * written (any pointer, also NULL, may be passed). Every value of the API is in the OCP's
+ * declared units: with a declared scaling (docs/algorithm.md section 16) the solver works in
+ * scaled variables and converts at this boundary (the KKT measure of robot_arm_kkt_eval and the
+ * scales of robot_arm_get_scales are those of the scaled variables).
  *
  * Every function returning int returns a status (enum robot_arm_status below) unless stated.
  * On failure the state stays consistent: a failed feedback takes no step; a failed
@@ -253,6 +256,7 @@ typedef struct {
                             and equality parts of the KKT measure at the prepared point */
     robot_arm_real kkt[4];    /* stat, eq, ineq, comp of the last robot_arm_kkt_eval (NaN before) */
     robot_arm_real kkt_max;   /* their largest */
+    robot_arm_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
     /* the factorisations of the Riccati recursion of the last feedback's QP (the sum over the
      * solves of the call: interior-point iterations, inertia corrections, sweeps of the
      * active-set start) */
@@ -304,31 +308,62 @@ const char *robot_arm_row_name(int kind, int index);
  * largest slack (0 without soft rows). */
 robot_arm_real robot_arm_get_soft_slacks(const robot_arm_solver *s, robot_arm_real *viol_x, robot_arm_real *viol_g,
                                  robot_arm_real *viol_r);
+/* The globalised first solve (docs/algorithm.md section 15), for a start far from the
+ * solution (a cold guess, an arbitrary state at power-up); off in the real-time loop. The
+ * memory of a solve is the caller's struct robot_arm_glob of robot_arm_globalise.h, or
+ * robot_arm_glob_sizeof() bytes; zero-filled it starts a solve (no penalty, no counts: `static
+ * robot_arm_glob g;`, memset to 0 for the next one). robot_arm_glob_step: one SQP step from the
+ * prepared iterate (after init or the previous step) for xhat0 (NULL: the one of the last
+ * init), in fixed mode whatever the setting: the QP of the iterate (every block fresh), then
+ * along its step the l1 exact-penalty merit function decides, with a watchdog (relaxed full
+ * steps) and a backtracking line search; then init at the accepted point (every block fresh,
+ * the next QP prepared). On failure (robot_arm_glob_info.reason: the QP, the step box, the line
+ * search, a function) the iterate is the one before the step, prepared.
+ * robot_arm_init_globalised: init at the guess (x, u NULL: the OCP file's; zero multipliers),
+ * then steps until the KKT measure (robot_arm_kkt_eval) is at most tol > 0: ROBOT_ARM_OK;
+ * ROBOT_ARM_ERR_NOT_CONVERGED when max_iter >= 0 steps or the work limit (max_work > 0 work units
+ * from the init on, the next step estimated as the last one; 0: none) end them first, the
+ * iterate prepared for feedback either way; the status of a failed step. */
+typedef struct robot_arm_glob robot_arm_glob;
+typedef struct {
+    int iterations; /* steps in this solve */
+    int trials;     /* merit evaluations of the last line search */
+    int reason;     /* enum robot_arm_glob_reason of the last call */
+    int relaxed;    /* the last step was a relaxed full step of the watchdog */
+    int restores;   /* returns to a watchdog's point in this solve */
+    robot_arm_real penalty, alpha, merit, slope, kkt;
+} robot_arm_glob_info;
+size_t robot_arm_glob_sizeof(void);
+int robot_arm_glob_step(robot_arm_solver *s, robot_arm_glob *g, const robot_arm_real *xhat0);
+int robot_arm_init_globalised(robot_arm_solver *s, robot_arm_glob *g, const robot_arm_real *xhat0, const robot_arm_real *x,
+                          const robot_arm_real *u, double max_work, int max_iter, robot_arm_real tol);
+void robot_arm_glob_get_info(const robot_arm_glob *g, robot_arm_glob_info *info);
 /* ROBOT_ARM_CDEF_END */
 
 /* Status codes returned by the functions above. */
 enum robot_arm_status {
     ROBOT_ARM_OK = 0,
-    ROBOT_ARM_ERR_QP = 1,                /* QP not solved; no step; see robot_arm_info.qp_status */
-    ROBOT_ARM_ERR_NONFINITE_INPUT = 2,   /* NaN or Inf in an input array */
-    ROBOT_ARM_ERR_NONFINITE_VALUE = 3,   /* a generated function returned NaN or Inf */
-    ROBOT_ARM_ERR_FUNCTION = 4,          /* a generated function reported failure */
-    ROBOT_ARM_ERR_INVALID_ARGUMENT = 5,  /* M out of range, bad mode/Hessian/regularisation,
+    ROBOT_ARM_ERR_QP = 1,                 /* QP not solved; no step; see robot_arm_info.qp_status */
+    ROBOT_ARM_ERR_NONFINITE_INPUT = 2,    /* NaN or Inf in an input array */
+    ROBOT_ARM_ERR_NONFINITE_VALUE = 3,    /* a generated function returned NaN or Inf */
+    ROBOT_ARM_ERR_FUNCTION = 4,           /* a generated function reported failure */
+    ROBOT_ARM_ERR_INVALID_ARGUMENT = 5,   /* M out of range, bad mode/Hessian/regularisation,
                                         Gauss-Newton without least squares, bad node index */
-    ROBOT_ARM_ERR_NOT_INITIALIZED = 6,   /* a call before robot_arm_setup, or feedback/prepare/kkt
+    ROBOT_ARM_ERR_NOT_INITIALIZED = 6,    /* a call before robot_arm_setup, or feedback/prepare/kkt
                                         before a successful init */
-    ROBOT_ARM_ERR_NOT_PREPARED = 7,      /* feedback without a successful prepare since the last
+    ROBOT_ARM_ERR_NOT_PREPARED = 7,       /* feedback without a successful prepare since the last
                                         step (the QP would be stale) */
-    ROBOT_ARM_ERR_NO_NOMINAL = 8,        /* robot_arm_init_nominal without ROBOT_ARM_HAS_NOMINAL */
-    ROBOT_ARM_ERR_REGULARIZATION = 9,    /* eigen-decomposition did not converge */
-    ROBOT_ARM_ERR_ALREADY_PREPARED = 10, /* prepare without a feedback since the last successful
+    ROBOT_ARM_ERR_NO_NOMINAL = 8,         /* robot_arm_init_nominal without ROBOT_ARM_HAS_NOMINAL */
+    ROBOT_ARM_ERR_REGULARIZATION = 9,     /* eigen-decomposition did not converge */
+    ROBOT_ARM_ERR_ALREADY_PREPARED = 10,  /* prepare without a feedback since the last successful
                                         init or prepare (it would shift the horizon twice);
                                         nothing changes */
-    ROBOT_ARM_ERR_DIVERGED = 11,         /* the QP step leaves the problem's scale box (or is not
+    ROBOT_ARM_ERR_DIVERGED = 11,          /* the QP step leaves the problem's scale box (or is not
                                         finite): no step, the fallback control is returned */
-    ROBOT_ARM_ERR_MEASUREMENT_GATED = 12 /* the measurement jumped further from the plan's
+    ROBOT_ARM_ERR_MEASUREMENT_GATED = 12, /* the measurement jumped further from the plan's
                                         prediction than the gate allows: handled as a missing
                                         one (settings gate, gate_hold) */
+    ROBOT_ARM_ERR_NOT_CONVERGED = 13      /* robot_arm_init_globalised: a limit came before the tolerance */
 };
 
 /* Kinds of robot_arm_row_info and robot_arm_row_name. */
@@ -395,6 +430,7 @@ enum robot_arm_budget_unit {
 
 #include "robot_arm_sizes.h"
 #include "robot_arm_funcs.h"
+#include "robot_arm_globalise.h"
 #include "robot_arm_health.h"
 #include "robot_arm_lm.h"
 #include "robot_arm_qp.h"
@@ -508,6 +544,7 @@ struct robot_arm_solver {
     robot_arm_health health; /* safe outputs, divergence test and recovery (section 9) */
     robot_arm_lm lm;         /* the Levenberg-Marquardt term (sections 3 and 10) */
     robot_arm_real kkt[4];   /* KKT parts of the last robot_arm_kkt_eval: stat, eq, ineq, comp */
+    robot_arm_real kkt_rel;  /* its relative measure */
     robot_arm_timer timer;
     robot_arm_anytime anytime; /* the budget's bookkeeping (section 14) */
 };

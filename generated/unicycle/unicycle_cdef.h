@@ -212,6 +212,7 @@ typedef struct {
                             and equality parts of the KKT measure at the prepared point */
     unicycle_real kkt[4];    /* stat, eq, ineq, comp of the last unicycle_kkt_eval (NaN before) */
     unicycle_real kkt_max;   /* their largest */
+    unicycle_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
     /* the factorisations of the Riccati recursion of the last feedback's QP (the sum over the
      * solves of the call: interior-point iterations, inertia corrections, sweeps of the
      * active-set start) */
@@ -263,3 +264,33 @@ const char *unicycle_row_name(int kind, int index);
  * largest slack (0 without soft rows). */
 unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *viol_x, unicycle_real *viol_g,
                                  unicycle_real *viol_r);
+/* The globalised first solve (docs/algorithm.md section 15), for a start far from the
+ * solution (a cold guess, an arbitrary state at power-up); off in the real-time loop. The
+ * memory of a solve is the caller's struct unicycle_glob of unicycle_globalise.h, or
+ * unicycle_glob_sizeof() bytes; zero-filled it starts a solve (no penalty, no counts: `static
+ * unicycle_glob g;`, memset to 0 for the next one). unicycle_glob_step: one SQP step from the
+ * prepared iterate (after init or the previous step) for xhat0 (NULL: the one of the last
+ * init), in fixed mode whatever the setting: the QP of the iterate (every block fresh), then
+ * along its step the l1 exact-penalty merit function decides, with a watchdog (relaxed full
+ * steps) and a backtracking line search; then init at the accepted point (every block fresh,
+ * the next QP prepared). On failure (unicycle_glob_info.reason: the QP, the step box, the line
+ * search, a function) the iterate is the one before the step, prepared.
+ * unicycle_init_globalised: init at the guess (x, u NULL: the OCP file's; zero multipliers),
+ * then steps until the KKT measure (unicycle_kkt_eval) is at most tol > 0: UNICYCLE_OK;
+ * UNICYCLE_ERR_NOT_CONVERGED when max_iter >= 0 steps or the work limit (max_work > 0 work units
+ * from the init on, the next step estimated as the last one; 0: none) end them first, the
+ * iterate prepared for feedback either way; the status of a failed step. */
+typedef struct unicycle_glob unicycle_glob;
+typedef struct {
+    int iterations; /* steps in this solve */
+    int trials;     /* merit evaluations of the last line search */
+    int reason;     /* enum unicycle_glob_reason of the last call */
+    int relaxed;    /* the last step was a relaxed full step of the watchdog */
+    int restores;   /* returns to a watchdog's point in this solve */
+    unicycle_real penalty, alpha, merit, slope, kkt;
+} unicycle_glob_info;
+size_t unicycle_glob_sizeof(void);
+int unicycle_glob_step(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0);
+int unicycle_init_globalised(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0, const unicycle_real *x,
+                          const unicycle_real *u, double max_work, int max_iter, unicycle_real tol);
+void unicycle_glob_get_info(const unicycle_glob *g, unicycle_glob_info *info);

@@ -19,7 +19,7 @@ void unicycle_health_scales(unicycle_health *h)
         unicycle_real v = UNICYCLE_R(1.0);
         v = unicycle_absmax(unicycle_lbx[i], v);
         v = unicycle_absmax(unicycle_ubx[i], v);
-        v = unicycle_absmax(unicycle_x0_default[i], v);
+        v = unicycle_absmax(unicycle_x0_default[i] / unicycle_scale_x[i], v); /* in the solver's variables */
         for (k = 0; k <= UNICYCLE_N; ++k) {
             v = unicycle_absmax(unicycle_guess_x[k][i], v);
         }
@@ -33,6 +33,10 @@ void unicycle_health_scales(unicycle_health *h)
             v = unicycle_absmax(unicycle_guess_u[k][i], v);
         }
         h->scale_u[i] = v;
+    }
+    for (i = 0; i < UNICYCLE_NMEM; ++i) { /* a memory state carries its control */
+        k = unicycle_memory_state[i];
+        h->scale_x[k] = unicycle_absmax(h->scale_u[unicycle_memory_control[i]], h->scale_x[k]);
     }
 }
 

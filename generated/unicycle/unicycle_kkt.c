@@ -154,3 +154,34 @@ int unicycle_kkt_measure(const unicycle_real *x, const unicycle_real *u, const u
     parts[3] = comp;
     return UNICYCLE_KKT_OK;
 }
+
+/* The largest |v_i| of n entries, at least m. */
+static unicycle_real unicycle_kkt_big(unicycle_real m, int n, const unicycle_real *v)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        m = unicycle_kkt_max(m, unicycle_fabs(v[i]));
+    }
+    return m;
+}
+
+unicycle_real unicycle_kkt_relative(const unicycle_real *parts, const unicycle_real *x, const unicycle_real *u,
+                              const unicycle_real *lam, const unicycle_real *mu_g, const unicycle_real *mu_b,
+                              const unicycle_real *mu_bN, const unicycle_real *mu_r, const unicycle_real *nu)
+{
+    unicycle_real sd = UNICYCLE_R(1.0), sp = UNICYCLE_R(1.0), rel;
+    int k;
+    sd = unicycle_kkt_big(sd, (UNICYCLE_N + 1) * UNICYCLE_NX, lam);
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        sd = unicycle_kkt_big(sd, UNICYCLE_NG, mu_g + k * NG1);
+    }
+    sd = unicycle_kkt_big(sd, UNICYCLE_N * UNICYCLE_NW, mu_b);
+    sd = unicycle_kkt_big(sd, UNICYCLE_NX, mu_bN);
+    sd = unicycle_kkt_big(sd, UNICYCLE_NR, mu_r);
+    sd = unicycle_kkt_big(sd, UNICYCLE_NE, nu);
+    sp = unicycle_kkt_big(sp, (UNICYCLE_N + 1) * UNICYCLE_NX, x);
+    sp = unicycle_kkt_big(sp, UNICYCLE_N * UNICYCLE_NU, u);
+    rel = unicycle_kkt_max(parts[0] / sd, parts[1] / sp);
+    rel = unicycle_kkt_max(rel, parts[2] / sp);
+    return unicycle_kkt_max(rel, parts[3] / (sd * sp));
+}

@@ -26,4 +26,13 @@ UNICYCLE_INTERNAL int unicycle_kkt_measure(const unicycle_real *x, const unicycl
                                      const unicycle_real *mu_r, const unicycle_real *nu, const unicycle_real *p,
                                      const unicycle_real *xhat0, unicycle_fun_work *work, unicycle_real *parts);
 
+/* The relative measure of the same iterate (section 6): max(stat / s_d, eq / s_p, ineq / s_p,
+ * comp / (s_d s_p)) with s_d = max(1, the largest multiplier) and s_p = max(1, the largest entry
+ * of x and u); parts as written by unicycle_kkt_measure. */
+UNICYCLE_INTERNAL unicycle_real unicycle_kkt_relative(const unicycle_real *parts, const unicycle_real *x,
+                                             const unicycle_real *u, const unicycle_real *lam,
+                                             const unicycle_real *mu_g, const unicycle_real *mu_b,
+                                             const unicycle_real *mu_bN, const unicycle_real *mu_r,
+                                             const unicycle_real *nu);
+
 #endif /* UNICYCLE_KKT_H */

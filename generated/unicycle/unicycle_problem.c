@@ -84,6 +84,14 @@ const unicycle_real unicycle_p_default[UNICYCLE_N + 1][UNICYCLE_DIM(UNICYCLE_NP)
 const unicycle_real unicycle_dt = 0.1;
 const unicycle_real unicycle_x0_default[UNICYCLE_NX] = {0.0, 0.0, 0.0, 0.0};
 
+/* the scales of docs/algorithm.md section 16 (1: none declared) */
+const unicycle_real unicycle_scale_x[UNICYCLE_NX] = {1.0, 1.0, 1.0, 1.0};
+const unicycle_real unicycle_scale_u[UNICYCLE_NU] = {1.0, 1.0};
+const unicycle_real unicycle_scale_g[UNICYCLE_DIM(UNICYCLE_NG)] = {1.0};
+const unicycle_real unicycle_scale_r[UNICYCLE_DIM(UNICYCLE_NR)] = {1.0};
+const unicycle_real unicycle_scale_req[UNICYCLE_DIM(UNICYCLE_NE)] = {1.0};
+const unicycle_real unicycle_scale_cost = 1.0;
+
 const unicycle_real unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX] = {
     {0.0, 0.0, 0.0, 0.0},
     {0.0, 0.0, 0.0, 0.0},

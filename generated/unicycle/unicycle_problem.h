@@ -23,8 +23,18 @@ extern const unicycle_real unicycle_lr[UNICYCLE_DIM(UNICYCLE_NR)], unicycle_ur[U
  * a parameter declares a trajectory) */
 extern const unicycle_real unicycle_p_default[UNICYCLE_N + 1][UNICYCLE_DIM(UNICYCLE_NP)];
 extern const unicycle_real unicycle_dt;
+/* the default initial state, in the declared units (what unicycle_init takes) */
 extern const unicycle_real unicycle_x0_default[UNICYCLE_NX];
-/* the OCP file's initial guess */
+/* Scaling (docs/algorithm.md section 16): the solver works with x / unicycle_scale_x,
+ * u / unicycle_scale_u, the path rows over unicycle_scale_g, the terminal rows over unicycle_scale_r and
+ * unicycle_scale_req and the cost over unicycle_scale_cost (all 1 without a declared scaling); the
+ * bounds, the guess and the soft weights here are those of the scaled problem, the API
+ * (unicycle_solver.h) and x0_default and the nominal solution are in the declared units. */
+extern const unicycle_real unicycle_scale_x[UNICYCLE_NX], unicycle_scale_u[UNICYCLE_NU];
+extern const unicycle_real unicycle_scale_g[UNICYCLE_DIM(UNICYCLE_NG)], unicycle_scale_r[UNICYCLE_DIM(UNICYCLE_NR)];
+extern const unicycle_real unicycle_scale_req[UNICYCLE_DIM(UNICYCLE_NE)];
+extern const unicycle_real unicycle_scale_cost;
+/* the OCP file's initial guess (in the solver's variables) */
 extern const unicycle_real unicycle_guess_x[UNICYCLE_N + 1][UNICYCLE_NX];
 extern const unicycle_real unicycle_guess_u[UNICYCLE_N][UNICYCLE_NU];
 /* the rows' names (unicycle_row_name): state and control labels, path rows, terminal
@@ -55,7 +65,7 @@ extern const unicycle_real unicycle_soft_r[4][UNICYCLE_DIM(UNICYCLE_NR)];
 
 #if UNICYCLE_HAS_NOMINAL
 /* offline primal-dual solution at unicycle_x0_default (IPOPT at generation time), so the
- * controller starts warm (docs/design.md section 8) */
+ * controller starts warm (docs/design.md section 8); in the declared units */
 extern const unicycle_real unicycle_nominal_x[UNICYCLE_N + 1][UNICYCLE_NX];
 extern const unicycle_real unicycle_nominal_u[UNICYCLE_N][UNICYCLE_NU];
 extern const unicycle_real unicycle_nominal_lam[UNICYCLE_N + 1][UNICYCLE_NX];

@@ -191,6 +191,8 @@ const char *unicycle_status_string(int status)
         return "already prepared (call feedback before the next prepare)";
     case UNICYCLE_ERR_MEASUREMENT_GATED:
         return "the measurement is too far from the plan's prediction (gate): handled as a missing one";
+    case UNICYCLE_ERR_NOT_CONVERGED:
+        return "the globalised solve did not reach its tolerance within its limits";
     default:
         return "unknown status";
     }
@@ -566,6 +568,45 @@ static int unicycle_init_finish(unicycle_solver *s)
     return UNICYCLE_OK;
 }
 
+/* Scaling (docs/algorithm.md section 16): the API's values are in the declared units, the
+ * iterate in the solver's: x / scale_x, u / scale_u, a multiplier of a row of scale d times
+ * d / scale_cost. */
+static unicycle_real unicycle_scale_w(int i)
+{
+    return i < UNICYCLE_NX ? unicycle_scale_x[i] : unicycle_scale_u[i - UNICYCLE_NX];
+}
+
+/* out = in / d (n entries); NULL in gives NULL */
+static const unicycle_real *unicycle_scaled_in(const unicycle_real *in, const unicycle_real *d, int n, unicycle_real *out)
+{
+    int i;
+    if (in == 0) {
+        return 0;
+    }
+    for (i = 0; i < n; ++i) {
+        out[i] = in[i] / d[i];
+    }
+    return out;
+}
+
+/* out = in * d (n entries, d repeating with period nd) */
+static void unicycle_scaled_out(unicycle_real *out, const unicycle_real *in, const unicycle_real *d, int n, int nd)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        out[i] = in[i] * d[i % nd];
+    }
+}
+
+/* out = in * scale_cost / d (multipliers; d repeating with period nd) */
+static void unicycle_dual_out(unicycle_real *out, const unicycle_real *in, const unicycle_real *d, int n, int nd)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        out[i] = in[i] * unicycle_scale_cost / d[i % nd];
+    }
+}
+
 int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle_real *x, const unicycle_real *u,
                const unicycle_real *lam, const unicycle_real *mu_g, const unicycle_real *mu_b, const unicycle_real *mu_bN,
                const unicycle_real *mu_r, const unicycle_real *nu)
@@ -592,7 +633,7 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
     unicycle_timer_begin(&s->timer, (1u << UNICYCLE_N_PHASES) - 1u, UNICYCLE_PHASE_GRADIENTS);
 
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->xhat0[i] = xhat0 ? xhat0[i] : unicycle_x0_default[i];
+        s->xhat0[i] = (xhat0 ? xhat0[i] : unicycle_x0_default[i]) / unicycle_scale_x[i];
     }
     for (i = 0; i < UNICYCLE_NU; ++i) {
         s->u_applied[i] = UNICYCLE_R(0.0);
@@ -603,30 +644,33 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
     }
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NX; ++i) {
-            s->x[k][i] = x ? x[k * UNICYCLE_NX + i] : unicycle_guess_x[k][i];
-            s->lam[k][i] = lam ? lam[k * UNICYCLE_NX + i] : UNICYCLE_R(0.0);
+            s->x[k][i] = x ? x[k * UNICYCLE_NX + i] / unicycle_scale_x[i] : unicycle_guess_x[k][i];
+            s->lam[k][i] = lam ? lam[k * UNICYCLE_NX + i] * unicycle_scale_x[i] / unicycle_scale_cost : UNICYCLE_R(0.0);
         }
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NU; ++i) {
-            s->u[k][i] = u ? u[k * UNICYCLE_NU + i] : unicycle_guess_u[k][i];
+            s->u[k][i] = u ? u[k * UNICYCLE_NU + i] / unicycle_scale_u[i] : unicycle_guess_u[k][i];
         }
         for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NG); ++i) {
-            s->mu_g[k][i] = (mu_g && i < UNICYCLE_NG) ? mu_g[k * UNICYCLE_NG + i] : UNICYCLE_R(0.0);
+            s->mu_g[k][i] = (mu_g && i < UNICYCLE_NG)
+                                ? mu_g[k * UNICYCLE_NG + i] * unicycle_scale_g[i] / unicycle_scale_cost
+                                : UNICYCLE_R(0.0);
         }
         for (i = 0; i < UNICYCLE_NW; ++i) {
-            s->mu_b[k][i] = mu_b ? mu_b[k * UNICYCLE_NW + i] : UNICYCLE_R(0.0);
+            s->mu_b[k][i] =
+                mu_b ? mu_b[k * UNICYCLE_NW + i] * unicycle_scale_w(i) / unicycle_scale_cost : UNICYCLE_R(0.0);
         }
     }
     unicycle_clear_x0_multiplier(s);
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->mu_bN[i] = mu_bN ? mu_bN[i] : UNICYCLE_R(0.0);
+        s->mu_bN[i] = mu_bN ? mu_bN[i] * unicycle_scale_x[i] / unicycle_scale_cost : UNICYCLE_R(0.0);
     }
     for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NR); ++i) {
-        s->mu_r[i] = (mu_r && i < UNICYCLE_NR) ? mu_r[i] : UNICYCLE_R(0.0);
+        s->mu_r[i] = (mu_r && i < UNICYCLE_NR) ? mu_r[i] * unicycle_scale_r[i] / unicycle_scale_cost : UNICYCLE_R(0.0);
     }
     for (i = 0; i < UNICYCLE_DIM(UNICYCLE_NE); ++i) {
-        s->nu[i] = (nu && i < UNICYCLE_NE) ? nu[i] : UNICYCLE_R(0.0);
+        s->nu[i] = (nu && i < UNICYCLE_NE) ? nu[i] * unicycle_scale_req[i] / unicycle_scale_cost : UNICYCLE_R(0.0);
     }
 
     rc = unicycle_init_finish(s);
@@ -1102,15 +1146,19 @@ static int unicycle_feedback_call(unicycle_solver *s, const unicycle_real *xhat0
 
 int unicycle_feedback(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
-    unicycle_real xm[UNICYCLE_NX];
+    unicycle_real xm[UNICYCLE_NX], xs[UNICYCLE_NX];
     int rc;
     if (!s->set_up) {
         return UNICYCLE_ERR_NOT_INITIALIZED;
     }
-    rc = unicycle_feedback_call(s, unicycle_with_memory(s, xhat0, xm), u0);
+    rc = unicycle_feedback_call(s, unicycle_with_memory(s, unicycle_scaled_in(xhat0, unicycle_scale_x, UNICYCLE_NX, xs), xm),
+                             u0);
     if (s->initialized) {
         /* the control returned is the one applied: the next stage-0 rate row is against it */
         unicycle_copy(s->u_applied, s->health.u0_out, UNICYCLE_NU);
+    }
+    if (u0) { /* every feedback of a set-up solver wrote u0 = u0_out (the fallback on failure) */
+        unicycle_scaled_out(u0, s->health.u0_out, unicycle_scale_u, UNICYCLE_NU, UNICYCLE_NU);
     }
     return rc;
 }
@@ -1766,7 +1814,7 @@ static int unicycle_anytime_run(unicycle_solver *s)
 
 int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *kkt4)
 {
-    unicycle_real parts[4], xm[UNICYCLE_NX];
+    unicycle_real parts[4], xm[UNICYCLE_NX], xs[UNICYCLE_NX];
     int i, rc;
 
     if (!s->set_up) {
@@ -1775,7 +1823,7 @@ int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
     if (!s->initialized) {
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
     }
-    xhat0 = unicycle_with_memory(s, xhat0, xm);
+    xhat0 = unicycle_with_memory(s, unicycle_scaled_in(xhat0, unicycle_scale_x, UNICYCLE_NX, xs), xm);
     if (xhat0 && !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) {
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
@@ -1792,6 +1840,8 @@ int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
             kkt4[i] = parts[i];
         }
     }
+    s->kkt_rel = unicycle_kkt_relative(parts, &s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0],
+                                    &s->mu_b[0][0], s->mu_bN, s->mu_r, s->nu);
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
@@ -1799,47 +1849,50 @@ int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
 
 void unicycle_get_x(const unicycle_solver *s, unicycle_real *x)
 {
-    unicycle_copy(x, &s->x[0][0], (UNICYCLE_N + 1) * UNICYCLE_NX);
+    unicycle_scaled_out(x, &s->x[0][0], unicycle_scale_x, (UNICYCLE_N + 1) * UNICYCLE_NX, UNICYCLE_NX);
 }
 
 void unicycle_get_u(const unicycle_solver *s, unicycle_real *u)
 {
-    unicycle_copy(u, &s->u[0][0], UNICYCLE_N * UNICYCLE_NU);
+    unicycle_scaled_out(u, &s->u[0][0], unicycle_scale_u, UNICYCLE_N * UNICYCLE_NU, UNICYCLE_NU);
 }
 
 void unicycle_get_lam(const unicycle_solver *s, unicycle_real *lam)
 {
-    unicycle_copy(lam, &s->lam[0][0], (UNICYCLE_N + 1) * UNICYCLE_NX);
+    unicycle_dual_out(lam, &s->lam[0][0], unicycle_scale_x, (UNICYCLE_N + 1) * UNICYCLE_NX, UNICYCLE_NX);
 }
 
 void unicycle_get_mu_g(const unicycle_solver *s, unicycle_real *mu_g)
 {
-    int k, i;
+    int k;
     for (k = 0; k < UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NG; ++i) {
-            mu_g[k * UNICYCLE_NG + i] = s->mu_g[k][i];
-        }
+        unicycle_dual_out(mu_g + k * UNICYCLE_NG, s->mu_g[k], unicycle_scale_g, UNICYCLE_NG, UNICYCLE_DIM(UNICYCLE_NG));
     }
 }
 
 void unicycle_get_mu_b(const unicycle_solver *s, unicycle_real *mu_b)
 {
-    unicycle_copy(mu_b, &s->mu_b[0][0], UNICYCLE_N * UNICYCLE_NW);
+    int k, i;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NW; ++i) {
+            mu_b[k * UNICYCLE_NW + i] = s->mu_b[k][i] * unicycle_scale_cost / unicycle_scale_w(i);
+        }
+    }
 }
 
 void unicycle_get_mu_bN(const unicycle_solver *s, unicycle_real *mu_bN)
 {
-    unicycle_copy(mu_bN, s->mu_bN, UNICYCLE_NX);
+    unicycle_dual_out(mu_bN, s->mu_bN, unicycle_scale_x, UNICYCLE_NX, UNICYCLE_NX);
 }
 
 void unicycle_get_mu_r(const unicycle_solver *s, unicycle_real *mu_r)
 {
-    unicycle_copy(mu_r, s->mu_r, UNICYCLE_NR);
+    unicycle_dual_out(mu_r, s->mu_r, unicycle_scale_r, UNICYCLE_NR, UNICYCLE_DIM(UNICYCLE_NR));
 }
 
 void unicycle_get_nu(const unicycle_solver *s, unicycle_real *nu)
 {
-    unicycle_copy(nu, s->nu, UNICYCLE_NE);
+    unicycle_dual_out(nu, s->nu, unicycle_scale_req, UNICYCLE_NE, UNICYCLE_DIM(UNICYCLE_NE));
 }
 
 void unicycle_get_rho(const unicycle_solver *s, unicycle_real *rho)
@@ -1909,7 +1962,8 @@ unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *
             for (i = 0; i < UNICYCLE_NX; ++i) {
                 const unicycle_real lb = k < UNICYCLE_N ? in->lbw[k][i] : in->lbxN[i];
                 const unicycle_real ub = k < UNICYCLE_N ? in->ubw[k][i] : in->ubxN[i];
-                const unicycle_real sl = unicycle_soft_slack(sol->x[k][i], lb, ub, &unicycle_soft_x[0][i], UNICYCLE_NX);
+                const unicycle_real sl =
+                    unicycle_soft_slack(sol->x[k][i], lb, ub, &unicycle_soft_x[0][i], UNICYCLE_NX) * unicycle_scale_x[i];
                 worst = sl > worst ? sl : worst;
                 if (viol_x) {
                     viol_x[k * UNICYCLE_NX + i] = sl;
@@ -1924,8 +1978,9 @@ unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *
                     v += unicycle_ring_stage_const(&s->ring, k)->Ct[i + c * UNICYCLE_DIM(UNICYCLE_NG)] *
                          (c < UNICYCLE_NX ? sol->x[k][c] : sol->u[k][c - UNICYCLE_NX]);
                 }
-                sl =
-                    unicycle_soft_slack(v, in->lg[k][i], in->ug[k][i], &unicycle_soft_g[0][i], UNICYCLE_DIM(UNICYCLE_NG));
+                sl = unicycle_soft_slack(v, in->lg[k][i], in->ug[k][i], &unicycle_soft_g[0][i],
+                                      UNICYCLE_DIM(UNICYCLE_NG)) *
+                     unicycle_scale_g[i];
                 worst = sl > worst ? sl : worst;
                 if (viol_g) {
                     viol_g[k * UNICYCLE_DIM(UNICYCLE_NG) + i] = sl;
@@ -1938,7 +1993,8 @@ unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *
             for (c = 0; c < UNICYCLE_NX; ++c) {
                 v += s->R[i + c * UNICYCLE_DIM(UNICYCLE_NR)] * sol->x[UNICYCLE_N][c];
             }
-            sl = unicycle_soft_slack(v, in->lr[i], in->ur[i], &unicycle_soft_r[0][i], UNICYCLE_DIM(UNICYCLE_NR));
+            sl = unicycle_soft_slack(v, in->lr[i], in->ur[i], &unicycle_soft_r[0][i], UNICYCLE_DIM(UNICYCLE_NR)) *
+                 unicycle_scale_r[i];
             worst = sl > worst ? sl : worst;
             if (viol_r) {
                 viol_r[i] = sl;
@@ -1981,12 +2037,17 @@ int unicycle_get_qp_infeasible_row(const unicycle_solver *s, unicycle_row_info *
         row->index = j - UNICYCLE_NX - UNICYCLE_NR;
         row->bound = UNICYCLE_R(0.0);
     }
+    row->bound *= row->kind == UNICYCLE_ROW_STATE      ? unicycle_scale_x[row->index]
+                  : row->kind == UNICYCLE_ROW_CONTROL  ? unicycle_scale_u[row->index]
+                  : row->kind == UNICYCLE_ROW_PATH     ? unicycle_scale_g[row->index]
+                  : row->kind == UNICYCLE_ROW_TERMINAL ? unicycle_scale_r[row->index]
+                                                    : unicycle_scale_req[row->index];
     return 1;
 }
 
 void unicycle_get_u0(const unicycle_solver *s, unicycle_real *u0)
 {
-    unicycle_copy(u0, s->health.u0_out, UNICYCLE_NU);
+    unicycle_scaled_out(u0, s->health.u0_out, unicycle_scale_u, UNICYCLE_NU, UNICYCLE_NU);
 }
 
 void unicycle_get_scales(const unicycle_solver *s, unicycle_real *scale_x, unicycle_real *scale_u)
@@ -2033,6 +2094,7 @@ void unicycle_get_info(const unicycle_solver *s, unicycle_info *info)
         info->kkt[i] = s->kkt[i];
         info->kkt_max = s->kkt[i] > info->kkt_max ? s->kkt[i] : info->kkt_max;
     }
+    info->kkt_rel = s->kkt_rel;
     for (i = 0; i < UNICYCLE_N_PHASES; ++i) { /* times are double in both precisions */
         info->timings[i] = s->timer.t[i];
     }
@@ -2105,7 +2167,7 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
         s->u_applied[i] = UNICYCLE_R(0.0);
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->xhat0[i] = unicycle_x0_default[i];
+        s->xhat0[i] = unicycle_x0_default[i] / unicycle_scale_x[i];
     }
     s->qp_status = 0;
     s->qp_iterations = 0;
@@ -2119,6 +2181,7 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     for (i = 0; i < 4; ++i) {
         s->kkt[i] = NAN;
     }
+    s->kkt_rel = NAN;
     unicycle_timer_init(&s->timer);
     s->anytime.work = 0.0;
     s->anytime.instant_start = 0.0;
@@ -2301,10 +2364,13 @@ void unicycle_set_clock(unicycle_solver *s, double (*clock_fn)(void *ctx), void 
 int unicycle_simulate(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p, unicycle_real *x_next,
                    struct unicycle_fun_work_s *work)
 {
-    unicycle_real l = UNICYCLE_R(0.0), g[UNICYCLE_DIM(UNICYCLE_NG)];
-    if (unicycle_eval_stage_eval(x, u, p ? p : unicycle_p_default[0], x_next, &l, g, work) != 0) {
+    unicycle_real l = UNICYCLE_R(0.0), g[UNICYCLE_DIM(UNICYCLE_NG)], xs[UNICYCLE_NX], us[UNICYCLE_NU], xn[UNICYCLE_NX];
+    if (unicycle_eval_stage_eval(unicycle_scaled_in(x, unicycle_scale_x, UNICYCLE_NX, xs),
+                              unicycle_scaled_in(u, unicycle_scale_u, UNICYCLE_NU, us), p ? p : unicycle_p_default[0], xn,
+                              &l, g, work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
+    unicycle_scaled_out(x_next, xn, unicycle_scale_x, UNICYCLE_NX, UNICYCLE_NX);
     return unicycle_lai_vec_finite(UNICYCLE_NX, x_next) ? UNICYCLE_OK : UNICYCLE_ERR_NONFINITE_VALUE;
 }
 
@@ -2317,4 +2383,5 @@ int unicycle_simulate(const unicycle_real *x, const unicycle_real *u, const unic
 #include "unicycle_lm.c"
 #include "unicycle_health.c"
 #include "unicycle_kkt.c"
+#include "unicycle_globalise.c"
 #include "unicycle_qp.c" /* last: its short macros (N, NX, ...) stay inside it */

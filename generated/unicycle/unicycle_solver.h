@@ -28,7 +28,10 @@
  * mu_g N x ng, mu_b N x nw, mu_bN nx, mu_r nr, nu ne, parameters (N+1) x np. Multipliers are
  * signed (positive when the upper side of a row is active, negative for the lower side);
  * docs/algorithm.md section 1 gives the Lagrangian. Arrays of size zero are not read or
- * written (any pointer, also NULL, may be passed).
+ * written (any pointer, also NULL, may be passed). Every value of the API is in the OCP's
+ * declared units: with a declared scaling (docs/algorithm.md section 16) the solver works in
+ * scaled variables and converts at this boundary (the KKT measure of unicycle_kkt_eval and the
+ * scales of unicycle_get_scales are those of the scaled variables).
  *
  * Every function returning int returns a status (enum unicycle_status below) unless stated.
  * On failure the state stays consistent: a failed feedback takes no step; a failed
@@ -253,6 +256,7 @@ typedef struct {
                             and equality parts of the KKT measure at the prepared point */
     unicycle_real kkt[4];    /* stat, eq, ineq, comp of the last unicycle_kkt_eval (NaN before) */
     unicycle_real kkt_max;   /* their largest */
+    unicycle_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
     /* the factorisations of the Riccati recursion of the last feedback's QP (the sum over the
      * solves of the call: interior-point iterations, inertia corrections, sweeps of the
      * active-set start) */
@@ -304,31 +308,62 @@ const char *unicycle_row_name(int kind, int index);
  * largest slack (0 without soft rows). */
 unicycle_real unicycle_get_soft_slacks(const unicycle_solver *s, unicycle_real *viol_x, unicycle_real *viol_g,
                                  unicycle_real *viol_r);
+/* The globalised first solve (docs/algorithm.md section 15), for a start far from the
+ * solution (a cold guess, an arbitrary state at power-up); off in the real-time loop. The
+ * memory of a solve is the caller's struct unicycle_glob of unicycle_globalise.h, or
+ * unicycle_glob_sizeof() bytes; zero-filled it starts a solve (no penalty, no counts: `static
+ * unicycle_glob g;`, memset to 0 for the next one). unicycle_glob_step: one SQP step from the
+ * prepared iterate (after init or the previous step) for xhat0 (NULL: the one of the last
+ * init), in fixed mode whatever the setting: the QP of the iterate (every block fresh), then
+ * along its step the l1 exact-penalty merit function decides, with a watchdog (relaxed full
+ * steps) and a backtracking line search; then init at the accepted point (every block fresh,
+ * the next QP prepared). On failure (unicycle_glob_info.reason: the QP, the step box, the line
+ * search, a function) the iterate is the one before the step, prepared.
+ * unicycle_init_globalised: init at the guess (x, u NULL: the OCP file's; zero multipliers),
+ * then steps until the KKT measure (unicycle_kkt_eval) is at most tol > 0: UNICYCLE_OK;
+ * UNICYCLE_ERR_NOT_CONVERGED when max_iter >= 0 steps or the work limit (max_work > 0 work units
+ * from the init on, the next step estimated as the last one; 0: none) end them first, the
+ * iterate prepared for feedback either way; the status of a failed step. */
+typedef struct unicycle_glob unicycle_glob;
+typedef struct {
+    int iterations; /* steps in this solve */
+    int trials;     /* merit evaluations of the last line search */
+    int reason;     /* enum unicycle_glob_reason of the last call */
+    int relaxed;    /* the last step was a relaxed full step of the watchdog */
+    int restores;   /* returns to a watchdog's point in this solve */
+    unicycle_real penalty, alpha, merit, slope, kkt;
+} unicycle_glob_info;
+size_t unicycle_glob_sizeof(void);
+int unicycle_glob_step(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0);
+int unicycle_init_globalised(unicycle_solver *s, unicycle_glob *g, const unicycle_real *xhat0, const unicycle_real *x,
+                          const unicycle_real *u, double max_work, int max_iter, unicycle_real tol);
+void unicycle_glob_get_info(const unicycle_glob *g, unicycle_glob_info *info);
 /* UNICYCLE_CDEF_END */
 
 /* Status codes returned by the functions above. */
 enum unicycle_status {
     UNICYCLE_OK = 0,
-    UNICYCLE_ERR_QP = 1,                /* QP not solved; no step; see unicycle_info.qp_status */
-    UNICYCLE_ERR_NONFINITE_INPUT = 2,   /* NaN or Inf in an input array */
-    UNICYCLE_ERR_NONFINITE_VALUE = 3,   /* a generated function returned NaN or Inf */
-    UNICYCLE_ERR_FUNCTION = 4,          /* a generated function reported failure */
-    UNICYCLE_ERR_INVALID_ARGUMENT = 5,  /* M out of range, bad mode/Hessian/regularisation,
+    UNICYCLE_ERR_QP = 1,                 /* QP not solved; no step; see unicycle_info.qp_status */
+    UNICYCLE_ERR_NONFINITE_INPUT = 2,    /* NaN or Inf in an input array */
+    UNICYCLE_ERR_NONFINITE_VALUE = 3,    /* a generated function returned NaN or Inf */
+    UNICYCLE_ERR_FUNCTION = 4,           /* a generated function reported failure */
+    UNICYCLE_ERR_INVALID_ARGUMENT = 5,   /* M out of range, bad mode/Hessian/regularisation,
                                         Gauss-Newton without least squares, bad node index */
-    UNICYCLE_ERR_NOT_INITIALIZED = 6,   /* a call before unicycle_setup, or feedback/prepare/kkt
+    UNICYCLE_ERR_NOT_INITIALIZED = 6,    /* a call before unicycle_setup, or feedback/prepare/kkt
                                         before a successful init */
-    UNICYCLE_ERR_NOT_PREPARED = 7,      /* feedback without a successful prepare since the last
+    UNICYCLE_ERR_NOT_PREPARED = 7,       /* feedback without a successful prepare since the last
                                         step (the QP would be stale) */
-    UNICYCLE_ERR_NO_NOMINAL = 8,        /* unicycle_init_nominal without UNICYCLE_HAS_NOMINAL */
-    UNICYCLE_ERR_REGULARIZATION = 9,    /* eigen-decomposition did not converge */
-    UNICYCLE_ERR_ALREADY_PREPARED = 10, /* prepare without a feedback since the last successful
+    UNICYCLE_ERR_NO_NOMINAL = 8,         /* unicycle_init_nominal without UNICYCLE_HAS_NOMINAL */
+    UNICYCLE_ERR_REGULARIZATION = 9,     /* eigen-decomposition did not converge */
+    UNICYCLE_ERR_ALREADY_PREPARED = 10,  /* prepare without a feedback since the last successful
                                         init or prepare (it would shift the horizon twice);
                                         nothing changes */
-    UNICYCLE_ERR_DIVERGED = 11,         /* the QP step leaves the problem's scale box (or is not
+    UNICYCLE_ERR_DIVERGED = 11,          /* the QP step leaves the problem's scale box (or is not
                                         finite): no step, the fallback control is returned */
-    UNICYCLE_ERR_MEASUREMENT_GATED = 12 /* the measurement jumped further from the plan's
+    UNICYCLE_ERR_MEASUREMENT_GATED = 12, /* the measurement jumped further from the plan's
                                         prediction than the gate allows: handled as a missing
                                         one (settings gate, gate_hold) */
+    UNICYCLE_ERR_NOT_CONVERGED = 13      /* unicycle_init_globalised: a limit came before the tolerance */
 };
 
 /* Kinds of unicycle_row_info and unicycle_row_name. */
@@ -395,6 +430,7 @@ enum unicycle_budget_unit {
 
 #include "unicycle_sizes.h"
 #include "unicycle_funcs.h"
+#include "unicycle_globalise.h"
 #include "unicycle_health.h"
 #include "unicycle_lm.h"
 #include "unicycle_qp.h"
@@ -508,6 +544,7 @@ struct unicycle_solver {
     unicycle_health health; /* safe outputs, divergence test and recovery (section 9) */
     unicycle_lm lm;         /* the Levenberg-Marquardt term (sections 3 and 10) */
     unicycle_real kkt[4];   /* KKT parts of the last unicycle_kkt_eval: stat, eq, ineq, comp */
+    unicycle_real kkt_rel;  /* its relative measure */
     unicycle_timer timer;
     unicycle_anytime anytime; /* the budget's bookkeeping (section 14) */
 };

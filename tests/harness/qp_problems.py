@@ -433,9 +433,11 @@ def kkt_sigma_min(qp, sol):
 def make_infeasible(rng, N, nx, nu, ng, nr, ne, kind, margin=None):
     """A random QP made primal infeasible in one of several ways (requires the sizes the
     kind needs: 'row_vs_box' ng >= 1, 'terminal_eq_vs_box' ne >= 1, 'unreachable' nu >= 1,
-    'terminal_rows' nr >= 2). ``margin`` ('row_vs_box' only): the relative distance by
-    which the general row's range misses the control's box (default: random in [0.01, 1];
-    the random draw is made either way, so the rest of the QP does not depend on it)."""
+    'terminal_rows' nr >= 2). ``margin`` (all kinds but 'terminal_rows'): the relative
+    distance by which the general row's range misses the control's box, the terminal
+    equality's value misses the box of x_N, or the target lies beyond the reachable set
+    (default: random in [0.01, 1]; the random draw is made either way, so the rest of the
+    QP does not depend on it)."""
     qp, _ = make_qp(rng, N, nx, nu, ng, nr, ne, p_active=0.2)
     k = int(rng.integers(1, N)) if N > 1 else 0
     if kind == "row_vs_box":
@@ -453,7 +455,8 @@ def make_infeasible(rng, N, nx, nu, ng, nr, ne, kind, margin=None):
         qp["Req"][0] = 0.0
         qp["Req"][0, i] = rng.uniform(0.5, 2.0) * 10.0 ** rng.uniform(-3, 3)
         qp["lbxN"][i], qp["ubxN"][i] = -1.0, 1.0
-        qp["req"][0] = qp["Req"][0, i] * (1.0 + rng.uniform(0.01, 1.0))
+        m = rng.uniform(0.01, 1.0)
+        qp["req"][0] = qp["Req"][0, i] * (1.0 + (m if margin is None else margin))
     elif kind == "unreachable":
         # controls boxed in [-1, 1], x_1 must reach a target outside the reachable set
         qp["lbw"][0, nx:], qp["ubw"][0, nx:] = -1.0, 1.0
@@ -461,10 +464,12 @@ def make_infeasible(rng, N, nx, nu, ng, nr, ne, kind, margin=None):
         reach = np.abs(B).sum(axis=1)
         i = int(np.argmax(reach))
         centre = A[i] @ qp["x0"] + qp["b"][0, i]
-        qp["lbw"][1, i] = centre + reach[i] * (1.0 + rng.uniform(0.01, 1.0)) if N > 1 else -np.inf
+        m = rng.uniform(0.01, 1.0)
+        beyond = centre + reach[i] * (1.0 + (m if margin is None else margin))
+        qp["lbw"][1, i] = beyond if N > 1 else -np.inf
         qp["ubw"][1, i] = np.inf
         if N == 1:
-            qp["lbxN"][i] = centre + reach[i] * (1.0 + rng.uniform(0.01, 1.0))
+            qp["lbxN"][i] = beyond
             qp["ubxN"][i] = np.inf
     elif kind == "terminal_rows":
         # two terminal rows r and -r with contradicting ranges
@@ -475,8 +480,8 @@ def make_infeasible(rng, N, nx, nu, ng, nr, ne, kind, margin=None):
         qp["lr"][1], qp["ur"][1] = -0.5 * s * 2.0, np.inf
     else:
         raise ValueError(kind)
-    if margin is not None and kind != "row_vs_box":
-        raise ValueError(f"margin is implemented for row_vs_box only, not {kind}")
+    if margin is not None and kind == "terminal_rows":
+        raise ValueError("margin is not implemented for terminal_rows")
     return qp
 
 
