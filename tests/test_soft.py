@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from dopus_codegen import Ocp, OcpError, RK4, Soft
+from dopus_codegen import Ocp, OcpError, Soft
 from dopus_codegen.problem.derivatives import build_functions
 from dopus_codegen.reference.qp import qp_kkt_residual, solve_qp_reference
 
