@@ -97,16 +97,27 @@ def outliers(arm, guess, kind, budget, K):
             "budget_used_max": float(np.max(used)) if budget and kind != "converged" else None}
 
 
-def demo(arm, guess, kind, budget):
-    s = make(arm, kind, budget)
-    run = run_closed_loop(arm, backend_obj=s, M=s.M, guess=guess, duration=3.0, label=label(kind, budget))
+def closed_loop(disc, guess, kind, budget):
+    """The closed loop of the OCP file's scenario (its duration, plant and event) for one
+    setting: the record of ``run_closed_loop``."""
+    s = make(disc, kind, budget)
+    return run_closed_loop(disc, backend_obj=s, M=s.M, guess=guess, label=label(kind, budget))
+
+
+def figures(run, kind, budget, signal="deviation"):
+    """The figures of one run; ``signal``: the scenario's tracking signal (its RMS and max
+    before and after the event)."""
     sm = summarize(run)
-    seg = [g for g in sm["segments"] if g["signal"] == "deviation" and g["segment"].startswith("after")]
+    seg = [g for g in sm["segments"] if g["signal"] == signal and g["segment"].startswith("after")]
     return {"kind": kind, "budget_s": budget, "rms_after": seg[0]["rms"] if seg else None,
             "max_after": seg[0]["max"] if seg else None, "kkt_max_settled": sm["kkt_max_settled"],
             "failed": sm["qp_failures"], "time_median_us": sm["time_median_us"],
-            "rms_before": next((g["rms"] for g in sm["segments"] if g["signal"] == "deviation"
+            "rms_before": next((g["rms"] for g in sm["segments"] if g["signal"] == signal
                                 and g["segment"].startswith("before")), None)}
+
+
+def demo(arm, guess, kind, budget):
+    return figures(closed_loop(arm, guess, kind, budget), kind, budget)
 
 
 WORK = ["84u", "150u", "300u", "500u", "800u", "1500u"]   # 84 units: one M = 1 iteration

@@ -1,0 +1,86 @@
+"""bench/budget_curves.py's machinery on the chain of masses (its scenario: 20 instants).
+
+The reference is the closed loop without a budget: a work budget of one iteration (3N + 2
+units for the full RTI, 2N + 4 for M = 1) must give it bit for bit, and the search for the
+needed budget must find the criterion met there. No timing is checked.
+"""
+import pathlib
+import sys
+
+import numpy as np
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+
+import budget_curves as bc  # noqa: E402
+from anytime_budget import closed_loop, figures  # noqa: E402
+
+from dopus_codegen import build_functions, load_ocp  # noqa: E402
+from dopus_codegen.reference.offline import solve_ocp  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def chain():
+    disc = build_functions(load_ocp(ROOT / "examples" / "chain.py"))
+    guess, _ = solve_ocp(disc, disc.x0)
+    return disc, guess
+
+
+_RUNS = {}
+
+
+def run(chain, kind, budget):
+    """The closed loop of one setting, each run once in this module."""
+    if (kind, budget) not in _RUNS:
+        _RUNS[kind, budget] = closed_loop(*chain, kind, budget)
+    return _RUNS[kind, budget]
+
+
+@pytest.mark.parametrize("kind", ["full", "M=1"])
+def test_one_iteration_budget_is_the_plain_closed_loop(chain, kind):
+    disc, guess = chain
+    units = bc.costs(int(disc.N))[kind]
+    plain = run(chain, kind, 0.0)
+    budgeted = run(chain, kind, f"{units}u")
+    assert len(plain["u"]) == len(budgeted["u"]) == 20
+    np.testing.assert_array_equal(np.asarray(budgeted["u"]), np.asarray(plain["u"]))
+    np.testing.assert_array_equal(np.asarray(budgeted["x"]), np.asarray(plain["x"]))
+    assert budgeted["status"] == plain["status"]
+
+
+def test_needed_budget_on_a_tiny_grid(chain):
+    _, signal = bc.PROBLEMS["chain"]
+    c = bc.costs(int(chain[0].N))
+    ref = figures(run(chain, "full", 0.0), "full", 0.0, signal)
+    seen = []
+
+    def evaluate(b):
+        seen.append(b)
+        return figures(run(chain, "full", f"{b}u"), "full", b, signal)
+
+    need, rows = bc.smallest(evaluate, [c["M=1"], c["full"]], ref)
+    # at one full iteration the run is the reference's: the criterion holds with equality
+    assert rows[c["full"]]["rms_after"] == ref["rms_after"]
+    assert need is not None and need <= c["full"]
+    assert bc.meets(rows[need], ref)
+    assert all(not bc.meets(rows[b], ref) for b in seen if b < need)
+
+
+def test_search_and_criterion():
+    ref = {"rms_after": 1.0}
+    seen = []
+
+    def evaluate(b):  # met from 45 units on, and at 47 with a failed instant
+        seen.append(b)
+        return {"rms_after": 1.0 + 0.01 * max(0, 47 - b), "failed": int(b == 47)}
+
+    need, rows = bc.smallest(evaluate, [40, 50, 60], ref)
+    assert need == 45
+    assert seen == [40, 50, 60, 41, 42, 43, 44, 45]
+    assert sorted(rows) == sorted(seen)
+    need, _ = bc.smallest(lambda b: {"rms_after": 2.0, "failed": 0}, [40, 50], ref)
+    assert need is None
+    assert bc.meets({"rms_after": 1.02, "failed": 0}, ref)
+    assert not bc.meets({"rms_after": 1.0201, "failed": 0}, ref)
+    assert not bc.meets({"rms_after": 0.5, "failed": 1}, ref)
