@@ -44,7 +44,8 @@ the machine hits both alike. Times are the C runtime's own phase timers. Reporte
 per iteration of feedback (the QP and its bookkeeping), prepare and their sum, the ratio new
 / old (and the median of the per-instant ratios, the same instant of both loops paired), the
 QP share (feedback / iteration) and the QP iterations per instant (failed instants count
-there and as failures, not in the times). Progress goes to stderr, the table to stdout,
+there and as failures, not in the times), and the QP's factorisations per instant (median and
+99th percentile) of a folder that counts them. Progress goes to stderr, the table to stdout,
 everything with the build commands to --json (default
 bench/results/iteration_compare/<old>.json). Never passes or fails on time.
 """
@@ -256,6 +257,16 @@ class FolderHandle:
         return int(self._c("get_qp_iterations")(self._s))
 
     @property
+    def qp_factorizations(self):
+        """The factorisations of the last feedback's QP (None: the folder does not count them)."""
+        if self._settings_api:
+            try:
+                return int(self._info().qp_factorizations)
+            except AttributeError:
+                return None
+        return None
+
+    @property
     def u(self) -> np.ndarray:
         out = np.zeros((self.N, self.n_u))
         self._c("get_u")(self._s, self._ptr(out))
@@ -331,7 +342,7 @@ def main(argv=None) -> int:
         config[name]["lm"] = _lm_text(s)
 
     p0 = np.asarray(solvers["new"].p[0], dtype=float)
-    rec = {name: {"feedback": [], "prepare": [], "qp_iters": [], "failures": 0} for name in solvers}
+    rec = {name: {"feedback": [], "prepare": [], "qp_iters": [], "qp_fact": [], "failures": 0} for name in solvers}
     for run in range(args.repeat):
         say(f"run {run + 1} of {args.repeat}: {args.iters} instants each, interleaved")
         xs = {}
@@ -351,6 +362,7 @@ def main(argv=None) -> int:
                     u0, ok = s.u[0], False
                 t_fb = s.timings["feedback"]
                 rec[name]["qp_iters"].append(s.qp_iterations)
+                rec[name]["qp_fact"].append(s.qp_factorizations)
                 s.prepare()
                 t = s.timings   # a failed instant stays in the lists as NaN: instants pair by index
                 rec[name]["feedback"].append(t_fb if ok else np.nan)
@@ -365,6 +377,9 @@ def main(argv=None) -> int:
                      "qp_iters_median": float(np.median(r["qp_iters"])),
                      "qp_iters_mean": float(np.mean(r["qp_iters"])), "failures": r["failures"],
                      "instants": len(r["qp_iters"]), "sizeof": solvers[name].sizeof}
+        if all(f is not None for f in r["qp_fact"]):
+            out[name]["qp_factorizations_median"] = float(np.median(r["qp_fact"]))
+            out[name]["qp_factorizations_p99"] = float(np.percentile(r["qp_fact"], 99))
     out["ratio_new_old"] = out["new"]["iteration_us"] / out["old"]["iteration_us"]
     # the same instant of both loops ran back to back: the median of their ratios
     it_old, it_new = (np.array(rec[n]["feedback"]) + np.array(rec[n]["prepare"]) for n in ("old", "new"))
@@ -376,7 +391,9 @@ def main(argv=None) -> int:
         print(f"{name} ({what}, {flags}, lm {c['lm']}): iteration {o['iteration_us']:.1f} us (feedback "
               f"{o['feedback_us']:.1f}, prepare {o['prepare_us']:.1f}), QP share {o['qp_share']:.0%}, QP iterations "
               f"median {o['qp_iters_median']:.0f} (mean {o['qp_iters_mean']:.1f}), failures {o['failures']} of "
-              f"{o['instants']}, sizeof {o['sizeof']} B")
+              f"{o['instants']}, sizeof {o['sizeof']} B"
+              + (f", QP factorisations median {o['qp_factorizations_median']:g}, 99th percentile "
+                 f"{o['qp_factorizations_p99']:g}" if "qp_factorizations_median" in o else ""))
     print(f"new / old per iteration: {out['ratio_new_old']:.2f} (ratio of the medians), "
           f"{out['ratio_new_old_paired']:.2f} (median of the per-instant ratios)")
     path = Path(args.json) if args.json else workdir / f"{label}.json"

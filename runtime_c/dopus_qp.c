@@ -122,6 +122,7 @@ void dopus_qp_settings_default(dopus_qp_settings *settings)
     settings->max_iter = 100;
     settings->warm_start = 0;
     settings->refine_steps = 1;
+    settings->active_set = 0;
 }
 
 unsigned long dopus_qp_workspace_size(void)
@@ -434,6 +435,8 @@ static dopus_real soft_l2(const dopus_qp_in *in, const dopus_qp_workspace *ws, i
 static dopus_real row_q(const dopus_qp_workspace *ws, const dopus_qp_in *in, int b)
 {
     dopus_real q = DOPUS_R(0.0);
+    if (ws->penalty) /* the active-set start: the penalty weight of an active row */
+        return ws->act[b] ? ws->pen[b] : DOPUS_R(0.0);
     if (ws->has_lo[b]) {
         const dopus_real ql = ws->z_lo[b] / ws->t_lo[b];
         q += SOFT && ws->soft_lo[b]
@@ -641,6 +644,7 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
     r->ny = dmax(nz, dmax(nlam, NE > 0 ? dopus_lai_norm_inf(NE, ws->nu) : DOPUS_R(0.0)));
     ws->scale_stat = s_stat;
     ws->scale_eq = s_eq;
+    ws->scale_ineq = s_ineq;
 }
 
 /* ---------------------------------------------------------------- Riccati factorisation */
@@ -715,6 +719,7 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
     const dopus_real delta = ws->delta;
     dopus_real pmag, pnext;
     int b;
+    ++ws->n_fact;
 
     /* terminal: P_N = HN + D'QD + delta I + rho Req'Req, G_N = Req' */
     {
@@ -1786,6 +1791,8 @@ typedef struct {
      * start, or the cold start again after attempt 0 stalled) with the careful steps; 2:
      * the restart after a nonconvex stall (see qp_track_best) */
     int attempt;
+    /* sweeps of the active-set start: iterations of the solve before the interior point's */
+    int as_sweeps;
     int n_corr, n_aug;     /* delta corrections and terminal augmentations, every attempt */
     int n_corr_attempt;    /* n_corr when attempt 1 began */
     dopus_real delta_last; /* delta of the last corrected factorisation */
@@ -1825,6 +1832,7 @@ static void info_not_solved(dopus_qp_info *info)
     info->status = DOPUS_QP_INVALID_INPUT;
     info->iterations = info->inertia_corrections = info->terminal_augmentations = 0;
     info->pivot_floors = 0;
+    info->factorizations = info->active_set = 0;
     info->delta = DOPUS_R(0.0);
     info->res_stat = info->res_eq = info->res_ineq = info->res_comp = INFINITY;
     info->res_stat_scaled = info->res_eq_scaled = info->res_ineq_scaled = info->res_comp_scaled = INFINITY;
@@ -1880,6 +1888,8 @@ static int qp_prepare(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
     ws->delta = DOPUS_R(0.0);
     ws->rho_aug = DOPUS_R(0.0);
     ws->pivot_floors = 0;
+    ws->penalty = 0;
+    ws->n_fact = 0;
     bounds = setup_bounds(ws, in);
     if (bounds == 2) {
         /* more bounded rows than the workspace was generated for */
@@ -1898,6 +1908,7 @@ static int qp_prepare(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
     initial_point(ws, in, &L->st, sol, L->attempt == 0);
     L->data_scale = certificate_data_scale(ws, in);
     L->n_corr = L->n_aug = L->n_corr_attempt = 0;
+    L->as_sweeps = 0;
     L->delta_last = L->delta_used = DOPUS_R(0.0);
     L->mu_prev = INFINITY;
     L->sigma_min = DOPUS_R(0.0);
@@ -2252,11 +2263,275 @@ static int qp_result(const qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in
         info->terminal_augmentations = L->n_aug;
         info->pivot_floors = ws->pivot_floors;
         info->delta = L->delta_used;
+        info->factorizations = ws->n_fact;
     }
     status = finish(ws, keep_best ? &L->best_r : r, status, iter, keep_best ? NULL : sol, info);
     if (info)
         info->obj = qp_objective(in, sol);
     return status;
+}
+
+/* ---------------------------------------------------------------- active-set start */
+
+/* The penalty weight of an active row relative to the Hessian scale (a refinement step
+ * contracts the error of the active multipliers by about 1 / (1 + AS_RHO) on a well-scaled
+ * QP) and the refinement steps of one sweep at most. */
+#define AS_RHO DOPUS_PREC(1e6, 1e3)
+#define AS_REFINE 6
+#define AS_DROP DOPUS_R(0.4)
+
+/* |D_j|^2 of row j of stage k (k = N: the terminal rows). */
+static dopus_real row_norm2(const dopus_qp_in *in, int k, int j)
+{
+    dopus_real s = DOPUS_R(0.0);
+    int c;
+    if (k < N) {
+        if (NG == 0 || j < NW)
+            return DOPUS_R(1.0);
+        for (c = 0; c < NW; ++c)
+            s += in->C[k][(j - NW) + c * NG] * in->C[k][(j - NW) + c * NG];
+    } else {
+        if (NR == 0 || j < NX)
+            return DOPUS_R(1.0);
+        for (c = 0; c < NX; ++c)
+            s += in->R[(j - NX) + c * NR] * in->R[(j - NX) + c * NR];
+    }
+    return s;
+}
+
+/* The signed multiplier of bounded row b, kept in z_up (in z_lo for a row without an upper
+ * side) as write_solution and compute_residuals read it; the slacks 0 on an active row (its
+ * complementarity is exact), 1 on an inactive one (multiplier 0). */
+static void as_set_mu(dopus_qp_workspace *ws, int b, dopus_real mu)
+{
+    ws->t_lo[b] = ws->t_up[b] = ws->act[b] ? DOPUS_R(0.0) : DOPUS_R(1.0);
+    if (ws->has_up[b]) {
+        ws->z_up[b] = mu;
+        ws->z_lo[b] = DOPUS_R(0.0);
+    } else {
+        ws->z_lo[b] = -mu;
+        ws->z_up[b] = DOPUS_R(0.0);
+    }
+}
+
+static dopus_real as_mu(const dopus_qp_workspace *ws, int b)
+{
+    return ws->has_up[b] ? ws->z_up[b] : -ws->z_lo[b];
+}
+
+/* The equality residual v - bound of an active row (from vl, uv of compute_residuals), 0 for
+ * an inactive one. */
+static dopus_real as_res(const dopus_qp_workspace *ws, int b)
+{
+    return ws->act[b] == -1 ? ws->vl[b] : (ws->act[b] != 0 ? -ws->uv[b] : DOPUS_R(0.0));
+}
+
+/* The guess from the warm-start point (the primal part in the iterate, the multipliers in
+ * *sol): a side is active when its multiplier points to it and exceeds its slack, a row with
+ * lo == up always. Returns 0 when a row has a soft side (the start does not apply). */
+static int as_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_sol *sol, dopus_real hscale)
+{
+    int k, b, j;
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            const dopus_real mu = row_mu(sol, ws->bidx[b]);
+            const dopus_real v = row_dot(in, k, j, ws->prim + k * NW);
+            dopus_real lo, up;
+            if (SOFT && (ws->soft_lo[b] || ws->soft_up[b]))
+                return 0;
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            ws->act[b] = 0;
+            if (ws->has_lo[b] && ws->has_up[b] && lo == up)
+                ws->act[b] = 2;
+            else if (ws->has_up[b] && mu > DOPUS_R(0.0) && mu > up - v)
+                ws->act[b] = 1;
+            else if (ws->has_lo[b] && mu < DOPUS_R(0.0) && -mu > v - lo)
+                ws->act[b] = -1;
+            ws->pen[b] = AS_RHO * hscale / dmax(row_norm2(in, k, j), DOPUS_REAL_EPSILON);
+            as_set_mu(ws, b, ws->act[b] ? mu : DOPUS_R(0.0));
+        }
+    return 1;
+}
+
+/* The residuals of the iterate (into *r) and the largest scaled equality residual of the
+ * active rows. */
+static dopus_real as_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_res *r)
+{
+    dopus_real ra = DOPUS_R(0.0);
+    int b;
+    compute_residuals(ws, in, r);
+    for (b = 0; b < ws->nb; ++b)
+        ra = dmax(ra, dopus_fabs(as_res(ws, b)));
+    return ra / ws->scale_ineq;
+}
+
+/* One sweep: the factorisation with the penalty weights of the active rows (and the exact
+ * terminal augmentation when a pivot fails), then refinement steps to the KKT point of the
+ * active set. Each step solves (K + D_a' pen D_a) d = -r_stat - D_a' pen r_a, -r_dyn,
+ * -r_eqN and updates the active multipliers by pen (D_a d + r_a) (the method of multipliers
+ * with the factor kept). Returns 1 when the residuals reached tol (in *r), else 0. */
+static int as_sweep(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, qp_res *r)
+{
+    int it, i, k, b, j, fact;
+    ws->delta = DOPUS_R(0.0);
+    ws->rho_aug = DOPUS_R(0.0);
+    fact = riccati_factor(ws, in);
+    if (fact == 1 && NE > 0) {
+        QP_TRACE("active set: terminal augmentation\n");
+        fact = qp_augment_terminal(L, ws, in);
+    }
+    if (fact != 0) {
+        QP_TRACE("active set: factorisation failed\n");
+        return 0;
+    }
+    for (it = 0;; ++it) {
+        const dopus_real ra = as_residuals(ws, in, r);
+        QP_TRACE("active set: refinement %d stat %.2e eq %.2e act %.2e ineq %.2e\n", it, r->stat_s, r->eq_s,
+                 ra, r->ineq_s);
+        if (!(isfinite(r->stat) && isfinite(r->eq) && isfinite(ra)))
+            return 0;
+        if (r->stat_s <= L->st.tol && r->eq_s <= L->st.tol && ra <= L->st.tol)
+            return 1;
+        if (it >= AS_REFINE)
+            return 0;
+        for (i = 0; i < NP; ++i)
+            ws->d_prim[i] = -ws->r_stat[i];
+        for (k = 0; k <= N; ++k)
+            FOR_STAGE_ROWS(ws, k, b, j)
+        if (ws->act[b])
+            row_axpy(in, k, j, -ws->pen[b] * as_res(ws, b), ws->d_prim + k * NW);
+        for (i = 0; i < (N + 1) * NX; ++i)
+            ws->d_lam[i] = -ws->r_dyn[i];
+        for (i = 0; i < NE; ++i)
+            ws->d_nu[i] = -ws->r_eqN[i];
+        riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+        for (k = 0; k <= N; ++k)
+            FOR_STAGE_ROWS(ws, k, b, j)
+        if (ws->act[b])
+            as_set_mu(ws, b,
+                      as_mu(ws, b) + ws->pen[b] * (row_dot(in, k, j, ws->d_prim + k * NW) + as_res(ws, b)));
+        dopus_lai_axpy(NP, DOPUS_R(1.0), ws->d_prim, ws->prim);
+        dopus_lai_axpy((N + 1) * NX, DOPUS_R(1.0), ws->d_lam, ws->lam);
+        dopus_lai_axpy(NE, DOPUS_R(1.0), ws->d_nu, ws->nu);
+    }
+}
+
+/* The family of bounded row b: its row within the stage, or NSI + its terminal row (a
+ * component of w_k or a path row of every stage is one family). */
+#define AS_NFAM (NSI + NX + NR)
+static int as_family(const dopus_qp_workspace *ws, int b)
+{
+    const int i = ws->bidx[b];
+    return i < TOFF ? i - (i / NSI) * NSI : NSI + (i - TOFF);
+}
+
+static int as_wrong_sign(const dopus_qp_workspace *ws, int b, dopus_real mu)
+{
+    return (ws->act[b] == 1 && mu < DOPUS_R(0.0)) || (ws->act[b] == -1 && mu > DOPUS_R(0.0));
+}
+
+/* The checks of a refined sweep: an active multiplier of the wrong sign leaves the active
+ * set when it is at least AS_DROP times the largest wrong one of its family (the others
+ * wait for the next sweep; within tol times the multipliers' scale a multiplier is set to 0
+ * and its row stays), and an inactive side violated beyond tol joins it. Returns 1 when the
+ * active set changed. */
+static int as_update(const qp_loop *L, dopus_qp_workspace *ws)
+{
+    dopus_real zscale = DOPUS_R(1.0), wrong[AS_NFAM];
+    const dopus_real feas = L->st.tol * ws->scale_ineq;
+    int b, changed = 0;
+    for (b = 0; b < AS_NFAM; ++b)
+        wrong[b] = DOPUS_R(0.0);
+    for (b = 0; b < ws->nb; ++b) {
+        const dopus_real mu = as_mu(ws, b);
+        zscale = dmax(zscale, dopus_fabs(mu));
+        if (as_wrong_sign(ws, b, mu))
+            wrong[as_family(ws, b)] = dmax(wrong[as_family(ws, b)], dopus_fabs(mu));
+    }
+    zscale *= L->st.tol;
+    for (b = 0; b < ws->nb; ++b) {
+        const dopus_real mu = as_mu(ws, b);
+        if (as_wrong_sign(ws, b, mu)) {
+            QP_TRACE("active set: row %d side %d multiplier %.3e\n", (int)ws->bidx[b], (int)ws->act[b], mu);
+            if (dopus_fabs(mu) <= zscale) {
+                as_set_mu(ws, b, DOPUS_R(0.0));
+            } else if (dopus_fabs(mu) >= AS_DROP * wrong[as_family(ws, b)]) {
+                ws->act[b] = 0;
+                changed = 1;
+                as_set_mu(ws, b, DOPUS_R(0.0));
+            } else {
+                changed = 1; /* a wrong sign stays: this is no answer yet */
+            }
+        } else if (ws->act[b] == 0) {
+            const int lo = ws->has_lo[b] && ws->vl[b] < -feas;
+            const int up = ws->has_up[b] && ws->uv[b] < -feas;
+            if (lo || up) {
+                QP_TRACE("active set: row %d violated %.3e %.3e\n", (int)ws->bidx[b],
+                         ws->has_lo[b] ? ws->vl[b] : 0.0, ws->has_up[b] ? ws->uv[b] : 0.0);
+                ws->act[b] = (signed char)(lo ? -1 : 1);
+                changed = 1;
+                as_set_mu(ws, b, DOPUS_R(0.0));
+            }
+        }
+    }
+    return changed;
+}
+
+/* An active simple bound (a component of w_k or x_N) set to its bound exactly (it is met
+ * to round-off): the iterate plus the step then lands on the bound exactly where the
+ * bound's value minus the iterate is exact, as a clipped control would be. */
+static void as_snap_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in)
+{
+    int k, b, j;
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            dopus_real lo, up;
+            if (!ws->act[b] || (k < N && NG > 0 && j >= NW) || (k == N && NR > 0 && j >= NX))
+                continue;
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            ws->prim[k * NW + j] = ws->act[b] == -1 ? lo : up;
+        }
+}
+
+/* The active-set start (dopus_qp.h). Returns DOPUS_QP_SOLVED with the solution and info
+ * written, or QP_GO_ON with the iterate set back to the warm start for the interior point. */
+static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_qp_sol *sol,
+                         dopus_qp_info *info)
+{
+    int solved = 0;
+    qp_res r;
+    if (!as_guess(ws, in, sol, L->hscale))
+        return QP_GO_ON;
+    ws->penalty = 1;
+    /* each sweep counts as an iteration of the solve (settings.max_iter) */
+    while (L->as_sweeps < L->st.active_set && L->as_sweeps < L->st.max_iter && !solved) {
+        ++L->as_sweeps;
+        if (!as_sweep(L, ws, in, &r))
+            break;
+        if (!as_update(L, ws)) {
+            /* the residuals again after the multipliers set to 0 */
+            const dopus_real ra = as_residuals(ws, in, &r);
+            solved = merit(&r) <= L->st.tol && ra <= L->st.tol;
+            if (!solved)
+                break;
+        }
+    }
+    ws->penalty = 0;
+    ws->delta = DOPUS_R(0.0);
+    ws->rho_aug = DOPUS_R(0.0);
+    QP_TRACE("active set: %s after %d sweeps\n", solved ? "solved" : "not solved", L->as_sweeps);
+    if (solved) {
+        as_snap_bounds(ws, in);
+        as_residuals(ws, in, &r);
+        const int status = qp_result(L, ws, in, &r, DOPUS_QP_SOLVED, L->as_sweeps, sol, info);
+        if (info)
+            info->active_set = L->as_sweeps;
+        return status;
+    }
+    initial_point(ws, in, &L->st, sol, 0);
+    return QP_GO_ON;
 }
 
 /* Mehrotra's predictor-corrector. Per iteration: the residuals and the stopping tests (with
@@ -2271,7 +2546,12 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
 
     if (status != QP_GO_ON)
         return status;
-    for (iter = 0;; ++iter) {
+    if (L.st.warm_start && L.st.active_set > 0) {
+        status = qp_active_set(&L, ws, in, sol, info);
+        if (status != QP_GO_ON)
+            return status;
+    }
+    for (iter = L.as_sweeps;; ++iter) {
         dopus_real alpha, alpha_d, alpha_aff, sigma;
         int floors_before, nref;
         /* the long steps (separate primal and dual step lengths, up to the boundary) in the

@@ -98,6 +98,23 @@
  * (dopus_solver.c) warm-starts from the previous solution shifted with the horizon and
  * retries cold when that fails.
  *
+ * Active-set start (settings.active_set > 0 with warm_start, no soft side): before the
+ * interior point, the active set is guessed from the warm-start point (a side is active
+ * when its multiplier points to it and exceeds its slack; a row with lo == up always is),
+ * the Riccati recursion is factored once with a penalty weight on the active rows in place
+ * of the barrier weights (AS_RHO times the Hessian scale over |D_i|^2), and the
+ * equality-constrained QP of that active set is solved by iterative refinement with this
+ * one factor (each step a method-of-multipliers update: back-substitutions only). A
+ * factorisation that succeeds shows the QP convex on the null space of the active rows, the
+ * dynamics and Req. The answer is accepted when its scaled residuals (those of the
+ * termination test, the active rows' equality residual with the inequality's scale) are
+ * below tol and every active multiplier has its side's sign (a wrong sign within tol times
+ * the multipliers' scale is set to 0); otherwise the wrong-signed rows leave the active
+ * set, the violated inactive sides join it and the next sweep factors again, up to
+ * settings.active_set sweeps. Then the interior point runs from the warm start as before.
+ * The answer is the KKT point of its active set to round-off, with zero multipliers on the
+ * inactive rows.
+ *
  * Work per iteration (robot arm, N = 40, nx = 5, nu = 3, ne = 2): one factorisation and
  * two solves (predictor, corrector), plus one residual/solve pair per refinement step once
  * the residuals are below 1e-6; the flop count is tabulated in bench/README.md.
@@ -201,6 +218,9 @@ typedef struct {
     int refine_steps; /* iterative refinement steps of the corrector direction once the
                           scaled KKT residuals are below 1e-6 (more after a floored pivot);
                           default 1 */
+    int active_set;   /* with warm_start: the active-set start (see the header comment) with
+                          at most this many factorisations before the interior point; 0 (the
+                          default): the interior point alone */
 } dopus_qp_settings;
 
 typedef struct {
@@ -256,11 +276,17 @@ typedef struct {
 
 typedef struct {
     int status;                 /* enum dopus_qp_status */
-    int iterations;             /* interior-point iterations taken */
+    int iterations;             /* iterations taken: sweeps of the active-set start and interior-point
+                                iterations (settings.max_iter bounds their sum) */
     int inertia_corrections;    /* factorisations retried with delta*I added to the Hessians */
     int terminal_augmentations; /* factorisations retried with rho Req'Req (exact, see top) */
     int pivot_floors;           /* Riccati pivots within their round-off estimate of zero that were
                                 floored (cured by iterative refinement), summed over iterations */
+    int factorizations;         /* factorisations of the Riccati recursion: one per interior-point
+                                iteration, one per inertia correction and terminal augmentation,
+                                one per sweep of the active-set start */
+    int active_set;             /* sweeps of the active-set start when it solved the QP (they are
+                                then its iterations), else 0 */
     dopus_real delta;           /* largest delta used (0 when no correction was needed) */
     /* final residuals, infinity norms, unscaled */
     dopus_real res_stat; /* stationarity (both equations of the header comment) */
@@ -339,9 +365,17 @@ typedef struct {
     dopus_real delta;               /* current inertia-correction shift */
     dopus_real rho_aug;             /* current terminal augmented-Lagrangian weight */
     dopus_real noise[DOPUS_QP_NU1]; /* round-off estimate of M_uu pivots */
-    int pivot_floors;               /* pivots within round-off of zero, replaced (see linalg) */
-    dopus_real scale_stat;          /* residual scaling factors */
+    /* the active-set start: each bounded row's state (0 inactive, -1 lower side, +1 upper
+     * side, 2 a row with lo == up) and its penalty weight; penalty: 1 while the factorisation
+     * uses these weights in place of the barrier weights */
+    signed char act[DOPUS_QP_NB];
+    dopus_real pen[DOPUS_QP_NB];
+    int penalty;
+    int n_fact;            /* factorisations of the solve */
+    int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
+    dopus_real scale_stat; /* residual scaling factors */
     dopus_real scale_eq;
+    dopus_real scale_ineq;
     dopus_real scale_g; /* data parts of the scaling (constant during a solve) */
     dopus_real scale_b;
     dopus_real scale_bounds;

@@ -553,6 +553,7 @@ static int dopus_init_finish(dopus_solver *s)
     }
     s->qp_status = 0;
     s->qp_iterations = 0;
+    s->qp_factorizations = 0;
 
     rc = dopus_linearize_all(s);
     if (rc != DOPUS_OK) {
@@ -845,7 +846,7 @@ static void dopus_feedback_measure(dopus_solver *s, const dopus_real *xhat0)
  * ring slots in place and the terminal blocks. They are set just before each solve and
  * cleared after it, so the struct holds no pointer into itself between calls and a byte
  * copy (memcpy, struct assignment) is a complete, independent solver. */
-static int dopus_qp_solve_bound(dopus_solver *s, int warm)
+static int dopus_qp_solve_bound(dopus_solver *s, int warm, int active_set)
 {
     dopus_qp_in *in = &s->qp_in;
     dopus_qp_settings settings;
@@ -857,6 +858,7 @@ static int dopus_qp_solve_bound(dopus_solver *s, int warm)
         settings.max_iter = s->anytime.qp_cap; /* a time budget (section 14) */
     }
     settings.warm_start = warm;
+    settings.active_set = warm && active_set ? DOPUS_QP_ACTIVE_SET : 0;
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
         in->H[k] = slot->Ht;
@@ -884,14 +886,30 @@ static int dopus_qp_ok(const dopus_solver *s, int qs)
     return qs == DOPUS_QP_SOLVED && dopus_qp_solution_finite(&s->mem.qp.sol);
 }
 
-/* One solve of the prepared QP, warm (from the point in s->mem.qp.sol) or cold; its iterations
- * are added to those of the call. Returns the QP status. */
-static int dopus_qp_attempt(dopus_solver *s, int warm)
+/* One solve of the prepared QP, warm (from the point in s->mem.qp.sol; with active_set, the
+ * active-set start of dopus_qp.h first) or cold; its iterations and factorisations are added
+ * to those of the call. Returns the QP status. */
+static int dopus_qp_attempt(dopus_solver *s, int warm, int active_set)
 {
     int qs;
-    qs = dopus_qp_solve_bound(s, warm);
+    qs = dopus_qp_solve_bound(s, warm, active_set);
     s->qp_iterations += s->qp_info.iterations;
+    s->qp_factorizations += s->qp_info.factorizations;
     return qs;
+}
+
+/* 1 when the measurement lies near the state the plan predicted (|dx_0,i| <=
+ * DOPUS_QP_ACTIVE_SET_NEAR scale_x,i): the previous solution's active set is a guess for its
+ * QP. */
+static int dopus_measurement_near(const dopus_solver *s)
+{
+    int i;
+    for (i = 0; i < DOPUS_NX; ++i) {
+        if (!(dopus_fabs(s->qp_in.x0[i]) <= DOPUS_QP_ACTIVE_SET_NEAR * s->health.scale_x[i])) {
+            return 0;
+        }
+    }
+    return 1;
 }
 
 /* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry
@@ -901,20 +919,29 @@ static int dopus_qp_attempt(dopus_solver *s, int warm)
  * (the one the closed loop has followed so far). Returns the QP status. */
 static int dopus_feedback_qp(dopus_solver *s)
 {
+    /* the active-set start only for a QP that is convex (the automatic term lm convexified
+     * it in prepare below its maximum and this feedback did not cap it, dopus_lm.h: its
+     * solution is unique, the one the interior point finds), for a measurement near the
+     * prediction, and not after a feedback that needed the cold retry (algorithm.md
+     * section 4, feedback) */
+    const int active_set = s->lm.on && s->lm.uncapped < DOPUS_R(0.0) &&
+                           s->lm.lm < DOPUS_LM_MAX_REL * s->lm.scale && dopus_measurement_near(s) &&
+                           !s->qp_cold_retry;
     int qs;
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
+    s->qp_factorizations = 0;
     s->qp_cold_retry = 0;
     s->anytime.work += DOPUS_WORK_QP;
     if (s->settings.qp_warm_start) {
         dopus_qp_warm_point(s);
     }
-    qs = dopus_qp_attempt(s, s->settings.qp_warm_start);
+    qs = dopus_qp_attempt(s, s->settings.qp_warm_start, active_set);
     if (s->settings.qp_warm_start && qs != DOPUS_QP_INVALID_INPUT &&
         !(qs == DOPUS_QP_MAX_ITER && s->anytime.qp_cap > 0) &&
         (!dopus_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
-        qs = dopus_qp_attempt(s, 0);
+        qs = dopus_qp_attempt(s, 0, 0);
     }
     return qs;
 }
@@ -930,7 +957,7 @@ static int dopus_feedback_lm_retries(dopus_solver *s, int qs, int *retries)
         dopus_lm_raise(&s->lm);
         s->anytime.work += DOPUS_WORK_QP;
         s->qp_in.hess_shift = s->lm.lm;
-        qs = dopus_qp_attempt(s, 0);
+        qs = dopus_qp_attempt(s, 0, 0);
         *retries += 1;
     }
     return qs;
@@ -1466,7 +1493,7 @@ static int dopus_feedback_recover(dopus_solver *s, int *qs, int *retries)
     }
     s->qp_in.hess_shift = s->lm.lm;
     s->anytime.work += DOPUS_WORK_QP;
-    *qs = dopus_qp_attempt(s, 0);
+    *qs = dopus_qp_attempt(s, 0, 0);
     *qs = dopus_feedback_lm_retries(s, *qs, retries);
     return DOPUS_OK;
 }
@@ -1483,7 +1510,7 @@ static void dopus_predicted_step(dopus_solver *s)
     }
     s->qp_in.hess_shift = s->lm.lm;
     s->anytime.work += DOPUS_WORK_QP;
-    qs = dopus_qp_solve_bound(s, 0);
+    qs = dopus_qp_solve_bound(s, 0, 0);
     if (dopus_feedback_check_step(s, qs) != DOPUS_OK) {
         return;
     }
@@ -1756,6 +1783,7 @@ static int dopus_extra_iteration(dopus_solver *s)
 static int dopus_anytime_run(dopus_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = DOPUS_OK;
+    const int qp_factorizations = s->qp_factorizations;
     int max_iter = DOPUS_ANYTIME_MAX_ITER;
     if (!dopus_budget_on(s)) {
         /* without a budget: the recovery phase's extra iterations (algorithm.md section 9) */
@@ -1776,6 +1804,7 @@ static int dopus_anytime_run(dopus_solver *s)
     }
     s->qp_status = qp_status;
     s->qp_iterations = qp_iterations;
+    s->qp_factorizations = qp_factorizations;
     s->qp_cold_retry = cold;
     s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
     return rc == DOPUS_ERR_QP ? DOPUS_OK : rc;
@@ -2046,6 +2075,7 @@ void dopus_get_info(const dopus_solver *s, dopus_info *info)
     info->initialized = s->set_up && s->initialized;
     info->qp_status = s->qp_status;
     info->qp_iterations = s->qp_iterations;
+    info->qp_factorizations = s->qp_factorizations;
     info->qp_cold_retry = s->qp_cold_retry;
     info->flags = s->health.flags;
     info->recoveries = s->health.n_recoveries;
@@ -2141,6 +2171,7 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     }
     s->qp_status = 0;
     s->qp_iterations = 0;
+    s->qp_factorizations = 0;
     for (k = 0; k < DOPUS_N; ++k) {
         s->rho[k] = DOPUS_R(0.0);
         s->selected[k] = 0;

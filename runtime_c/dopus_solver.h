@@ -257,6 +257,10 @@ typedef struct {
     dopus_real kkt[4];    /* stat, eq, ineq, comp of the last dopus_kkt_eval (NaN before) */
     dopus_real kkt_max;   /* their largest */
     dopus_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
+    /* the factorisations of the Riccati recursion of the last feedback's QP (the sum over the
+     * solves of the call: interior-point iterations, inertia corrections, sweeps of the
+     * active-set start) */
+    int qp_factorizations;
     /* seconds per phase of the last call that ran it (enum dopus_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
      * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback
@@ -414,6 +418,12 @@ enum dopus_budget_unit {
 #define DOPUS_ADAPTIVE_ETA DOPUS_R(0.1)          /* default eta of adaptive M */
 #define DOPUS_WORK_QP DOPUS_N                    /* work units of a QP solve */
 
+/* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
+ * section 4, feedback; dopus_qp.h), and the distance of the measurement from the predicted
+ * state, in state scales, beyond which it is not tried. */
+#define DOPUS_QP_ACTIVE_SET 8
+#define DOPUS_QP_ACTIVE_SET_NEAR DOPUS_R(1.0)
+
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static dopus_solver s;`;
  * the fields are internal (use the functions above). */
@@ -524,6 +534,7 @@ struct dopus_solver {
     dopus_qp_info qp_info;
     int qp_status;
     int qp_iterations;
+    int qp_factorizations;
     int qp_cold_retry; /* the last feedback needed the cold retry */
 
     /* the QP's workspace and solution, live only inside feedback, share their memory with

@@ -423,7 +423,10 @@ def test_failed_qp_takes_no_step(robot_disc, robot_solution, lm):
     """A QP stopped by its iteration limit: DopusError with the QP status, no step, and the
     run goes on exactly like the reference's run that skipped that feedback (fixed lm), or
     whose QP failed the same way (the automatic lm, whose retries and raise after a failure
-    both backends make: docs/algorithm.md section 10)."""
+    both backends make: docs/algorithm.md section 10). The failing feedback's measurement
+    lies two state scales from the prediction: the QP goes to the interior point without the
+    active-set start (docs/algorithm.md section 4, feedback), which would solve the QP of
+    the nearer measurement within the limit of one iteration."""
     xhat = np.array(robot_disc.disturbance(np.array(robot_disc.x0, dtype=float)), dtype=float)
     c = CSolver(robot_disc, M=2, mode="receding", qp_tol=1e-14, lm=lm)
     r = ReferenceDopus(robot_disc, M=2, mode="receding", qp_tol=1e-14, lm=lm)
@@ -432,9 +435,11 @@ def test_failed_qp_takes_no_step(robot_disc, robot_solution, lm):
     state = {f: getattr(c, f) for f in ("x", "u", "lam", "mu_b", "nu")}
     lm0 = c.lm
     assert lm0 == r.lm
+    xfar = xhat.copy()
+    xfar[2] += 2.0 * c.scales[0][2]
     c.set_qp_max_iter(1)
     with pytest.raises(DopusError, match=r"QP status 1 \(max_iter\)") as ei:
-        c.feedback(xhat)
+        c.feedback(xfar)
     assert ei.value.status == STATUS_QP and ei.value.qp_status == 1
     for f, v in state.items():
         assert np.array_equal(getattr(c, f), v), f
@@ -444,7 +449,7 @@ def test_failed_qp_takes_no_step(robot_disc, robot_solution, lm):
         assert c.lm == pytest.approx(max(lm0, 1e-8 * c.lm_scale) * 1e3, rel=1e-12)
         r.set_qp_max_iter(1)
         with pytest.raises(DopusError) as er:
-            r.feedback(xhat)
+            r.feedback(xfar)
         assert er.value.status == STATUS_QP and er.value.qp_status == 1
         r.set_qp_max_iter(None)
         assert abs(r.lm - c.lm) <= 1e-12 * c.lm

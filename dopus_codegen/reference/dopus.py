@@ -187,6 +187,7 @@ class ReferenceDopus:
         self.status = status_code("ok")
         self.timings = {}
         self.qp_iterations = 0
+        self.qp_factorizations = 0
         self.rho = np.zeros(self.N)
         self.recomputed = []
         self.last_qp = None
@@ -485,7 +486,7 @@ class ReferenceDopus:
         self.rho = np.zeros(N)
         self.recomputed = list(range(N))
         self.qp_status = 0
-        self.qp_iterations = 0
+        self.qp_iterations = self.qp_factorizations = 0
         self.status = status_code("ok")
         self._initialised = True
         self._qp_ready = True
@@ -683,6 +684,7 @@ class ReferenceDopus:
             raise self._feedback_failed("qp", msg, exc.qp_status) from None
         self.qp_status = status_code_qp("solved")
         self.qp_iterations = int(sol.get("iterations", 0))
+        self.qp_factorizations = int(sol.get("factorizations", 0))
         t2 = time.perf_counter()
         if failure == "nonfinite":
             raise self._feedback_failed("qp", "feedback: the QP solution is not finite", "solved")
@@ -691,6 +693,7 @@ class ReferenceDopus:
                                         "not finite); no step, the fallback control is returned")
         self._take_step(sol)
         self.qp_iterations = int(sol.get("iterations", 0))
+        self.qp_factorizations = int(sol.get("factorizations", 0))
         self.last_qp = self._last_qp_tried
         self.last_qp_solution = sol
         self._qp_ready = False
@@ -738,6 +741,15 @@ class ReferenceDopus:
         out["max"] = float(max(out["x"].max(initial=0.0), out["g"].max(initial=0.0), out["r"].max(initial=0.0)))
         return out
 
+    def _qp_warm_point(self, qp: dict) -> dict:
+        """The warm-start point of the feedback's QP (dopus_qp_warm_point of the C runtime): a
+        zero step from the (shifted) iterate, x_0's step fixed by the measurement, and the
+        iterate's multipliers, which are those of the previous QP shifted with the horizon."""
+        x = np.zeros((self.N + 1, self.nx))
+        x[0] = qp["x0"]
+        return {"x": x, "u": np.zeros((self.N, self.n_u)), "lam": self.lam, "nu": self.nu, "mu_g": self.mu_g,
+                "mu_r": self.mu_r, "mu_b": self.mu_b, "mu_bN": self.mu_bN}
+
     def _solve_with_retries(self, xhat0):
         """The QP of the current iterate for xhat0, solved again with lm raised while it is not
         solved (section 10). Returns (solution, failure, retries): failure None, a QPError,
@@ -748,7 +760,14 @@ class ReferenceDopus:
             sol = None
             self.work += self.N
             try:
-                sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter)
+                # the first solve starts from the active set of the previous solution, as the C
+                # QP's warm start does for a QP the automatic lm made convex and a measurement
+                # near the predicted state (section 4, feedback); a retry with lm raised does not
+                start = (retries == 0 and self.lm_auto and self._lm_uncapped < 0.0
+                         and self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale and bool(np.all(np.abs(qp["x0"]) <= _SAFETY["QP_ACTIVE_SET_NEAR"] * self.scales[0])))
+                sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter,
+                                         guess=self._qp_warm_point(qp) if start else None,
+                                         guess_sweeps=int(_SAFETY["QP_ACTIVE_SET"]))
                 failure = None if self._finite(*(sol[k] for k in FIELDS_QP)) else "nonfinite"
             except QPError as exc:
                 failure = exc

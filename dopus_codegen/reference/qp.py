@@ -583,8 +583,30 @@ def _solve_ipopt_flat(Hz, gz, rows: _Rows, max_iter=500):
 # Active-set polish
 # ---------------------------------------------------------------------------
 
-def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol):
-    """Solve the KKT system of the active set read from (z, y_in, mu_z); refine it."""
+def _families(q: dict):
+    """The family of each entry of ``z`` and each row of ``A_in`` (flattened, without soft
+    slacks), as the C QP's active-set start numbers them: the row within the stage (a
+    component of ``w_k``: ``j``; a path row: ``nw + i``), ``nw + ng + j`` for ``x_N`` and
+    ``nw + ng + nx + i`` for the rows of ``R``."""
+    N, nx, nu, ng, nr = (q[k] for k in _INT_KEYS[:5])
+    nw, nsi = nx + nu, nx + nu + ng
+    fz = np.concatenate([np.tile(np.arange(nw), N), nsi + np.arange(nx)])
+    fin = np.concatenate([np.tile(nw + np.arange(ng), N), nsi + nx + np.arange(nr)]).astype(int)
+    return fz, fin
+
+
+#: An active row of the wrong sign leaves the active set of a sweep of the active-set start
+#: when its multiplier is at least this fraction of the largest wrong one of its family
+#: (AS_DROP of runtime_c/dopus_qp.c).
+AS_DROP = 0.4
+
+
+def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol, sweeps=10, families=None):
+    """Solve the KKT system of the active set read from (z, y_in, mu_z); refine it. Up to
+    ``sweeps`` active-set corrections; ``families`` (:func:`_families`): a wrong-signed row
+    leaves the active set only when its multiplier is at least AS_DROP times the largest
+    wrong one of its family (the C QP's active-set start), else every wrong-signed row does.
+    Returns (zp, y_eq, y_in, mu_z, factorisations), or None."""
     nz = Hz.shape[0]
     Ain = rows.A_in
     v_in = Ain @ z
@@ -602,7 +624,7 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol):
     act_z = classify(z, rows.lbz, rows.ubz, mu_z)
     act_in = classify(v_in, rows.l_in, rows.u_in, y_in)
     neq = rows.A_eq.shape[0]
-    for _sweep in range(10):
+    for sweep in range(sweeps):
         iz = np.nonzero(act_z)[0]
         ii = np.nonzero(act_in)[0]
         Ab = sp.csr_matrix((np.ones(iz.size), (np.arange(iz.size), iz)), shape=(iz.size, nz))
@@ -624,7 +646,10 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol):
             return None
         if not np.all(np.isfinite(sol)):
             return None
-        zp = sol[:nz]
+        zp = sol[:nz].copy()
+        # the active simple bounds met exactly (they are to round-off), as in the C QP's
+        # active-set start: the iterate plus the step lands on the bound
+        zp[iz] = np.where(act_z[iz] > 0, rows.ubz[iz], rows.lbz[iz])
         y = sol[nz:]
         y_eq = y[:neq]
         yin = np.zeros(Ain.shape[0]); yin[ii] = y[neq:neq + ii.size]
@@ -632,12 +657,20 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol):
         vin = Ain @ zp
         changed = False
         # dual sign of the active set: drop rows whose multiplier points the wrong way
+        wrong = []
         for act, mu, lo, hi in ((act_z, muz, rows.lbz, rows.ubz), (act_in, yin, rows.l_in, rows.u_in)):
             eqrow = np.isfinite(lo) & np.isfinite(hi) & (lo == hi)
-            bad = (~eqrow) & (((act > 0) & (mu < -tol)) | ((act < 0) & (mu > tol)))
+            wrong.append((~eqrow) & (((act > 0) & (mu < -tol)) | ((act < 0) & (mu > tol))))
+        if families is not None:
+            worst = np.zeros(int(max(np.max(families[0], initial=0), np.max(families[1], initial=0))) + 1)
+            for bad, mu, fam in zip(wrong, (muz, yin), families):
+                np.maximum.at(worst, fam[bad], np.abs(mu[bad]))
+        for bad, act, mu, k in zip(wrong, (act_z, act_in), (muz, yin), (0, 1)):
             if np.any(bad):
-                act[bad] = 0
                 changed = True
+                if families is not None:
+                    bad = bad & (np.abs(mu) >= AS_DROP * worst[families[k]])
+                act[bad] = 0
         # primal feasibility of the inactive set: add violated sides
         for act, v, lo, hi in ((act_z, zp, rows.lbz, rows.ubz), (act_in, vin, rows.l_in, rows.u_in)):
             up = (act == 0) & (v > hi + tol)
@@ -647,11 +680,33 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol):
                 act[dn] = -1
                 changed = True
         if not changed:
-            return zp, y_eq, yin, muz
+            return zp, y_eq, yin, muz, sweep + 1
     return None
 
 
-def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_iter=None) -> dict:
+def _active_set_start(q: dict, Hz, gz, rows: _Rows, guess: dict, tol: float, sweeps: int):
+    """The C QP's active-set start (runtime_c/dopus_qp.h) on the flattened QP: the active set
+    read from the warm-start point ``guess`` (a stage-wise solution dict), its KKT system
+    solved and the set corrected for up to ``sweeps`` factorisations; the answer is accepted
+    as the polish's is, and when the Hessian is positive definite on the null space of the
+    equality and active rows (the C start's factorisation succeeds only then). Returns
+    (solution dict or None, factorisations)."""
+    z, _, y_in, mu_z = flatten_solution(q, guess)
+    pol = _polish(Hz, gz, rows, z, y_in, mu_z, tol, sweeps=sweeps, families=_families(q))
+    if pol is None:
+        return None, sweeps
+    sol = _unflatten(q, *pol[:-1], rows=rows)
+    res = qp_kkt_residual(q, sol)
+    scale = max(1.0, float(np.max(np.abs(gz))), float(np.max(np.abs(Hz.data))) if Hz.nnz else 1.0)
+    if not (res["ineq"] <= tol and res["sign"] <= tol and max(res["stat"], res["eq"]) <= 1e-9 * scale):
+        return None, pol[-1]
+    if qp_reduced_hessian_min_eig(q, sol, tol=0.0) <= 0.0:
+        return None, pol[-1]
+    return sol, pol[-1]
+
+
+def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_iter=None, guess=None,
+                       guess_sweeps: int = 0) -> dict:
     """Solve a QP of the module's format; return the solution dict (see module docstring).
 
     ``tol`` is the feasibility / dual-sign tolerance the polished active set must meet
@@ -662,6 +717,13 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
     found by :func:`qp_infeasible_row`) and :class:`QPError` when IPOPT fails otherwise. ``max_iter`` (default None: 500 with the
     polish as the fallback): IPOPT's iteration limit; reaching it raises
     :class:`QPIterationLimitError`, as the C QP solver reports its limit.
+
+    ``guess`` (a solution dict, the warm-start point) with ``guess_sweeps > 0``: first the C
+    QP's active-set start from it (:func:`_active_set_start`; not for soft rows), IPOPT only
+    when it finds no answer (its sweeps count as iterations: at most ``max_iter``, and
+    ``iterations`` when it gives the answer). ``factorizations`` counts the factorisations of KKT systems:
+    the start's sweeps, IPOPT's iterations and the polish's sweeps; ``active_set`` the
+    start's sweeps when it gave the answer, else 0.
     """
     t0 = time.perf_counter()
     try:
@@ -670,8 +732,18 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
         exc.row = qp_infeasible_row(qp)
         raise
     Hz, gz, rows = flatten_qp(q)
+    n_fact = 0
+    if max_iter is not None:
+        guess_sweeps = min(int(guess_sweeps), int(max_iter))   # a sweep is an iteration of the solve
+    if guess is not None and guess_sweeps > 0 and rows.moved is None:
+        sol, n_fact = _active_set_start(q, Hz, gz, rows, guess, max(float(tol), 1e-12), int(guess_sweeps))
+        if sol is not None:
+            sol.update(polished=True, iterations=n_fact, status="active_set", factorizations=n_fact, active_set=n_fact,
+                       solve_time=time.perf_counter() - t0)
+            return sol
     solve = _solve_ipopt_flat if rows.moved is not None else (lambda *a: _solve_ipopt(q, *a))
     z, y_eq, y_in, mu_z, status, iters = solve(Hz, gz, rows, 500 if max_iter is None else max_iter)
+    n_fact += max(iters, 0)
     if status in ("Infeasible_Problem_Detected", "Restoration_Failed"):
         exc = QPInfeasibleError(f"QP is infeasible (IPOPT: {status})")
         exc.row = qp_infeasible_row(q)
@@ -694,7 +766,8 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
         ftol = max(float(tol), 1e-12)
         pol = _polish(Hz, gz, rows, z, y_in, mu_z, ftol)
         if pol is not None:
-            sol = _unflatten(q, *pol, rows=rows)
+            n_fact += pol[-1]
+            sol = _unflatten(q, *pol[:-1], rows=rows)
             res = qp_kkt_residual(q, sol)
             scale = max(1.0, float(np.max(np.abs(gz))), float(np.max(np.abs(Hz.data))) if Hz.nnz else 1.0)
             if res["ineq"] <= ftol and res["sign"] <= ftol and max(res["stat"], res["eq"]) <= 1e-9 * scale:
@@ -706,6 +779,8 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
         out = _unflatten(q, z, y_eq, y_in, mu_z, rows=rows)
         out["polished"] = False
     out["iterations"] = iters
+    out["factorizations"] = n_fact
+    out["active_set"] = 0
     out["status"] = status
     out["solve_time"] = time.perf_counter() - t0
     return out

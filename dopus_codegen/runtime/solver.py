@@ -724,6 +724,9 @@ class Solver:
 
     ring_head = _info_property("ring_head")
     qp_iterations = _info_property("qp_iterations")
+    qp_factorizations = _info_property("qp_factorizations", int,
+                                       "Factorisations of the last feedback's QP solves (interior-point "
+                                       "iterations, inertia corrections, sweeps of the active-set start).")
     qp_status = _info_property("qp_status")
     M_used = _info_property("M_used", int, "Stages the last prepare (or init) re-linearised besides stage N-1.")
 

@@ -183,8 +183,19 @@ def run_closed_loop(disc, backend: str = "c", settings=None, duration: float | N
                      "instants_planned": n_steps,
                      "failed_instants": int(sum(1 for st in rec.status if st != 0)),
                      "first_failure": loop.first_failure,
-                     "recoveries": _recoveries(backend_obj)}
+                     "recoveries": _recoveries(backend_obj),
+                     # the QP's work per instant (docs/algorithm.md section 4, feedback)
+                     "qp_factorizations": _per_instant_stats(rec.qp_factorizations),
+                     "qp_iterations": _per_instant_stats(rec.qp_iterations)}
     return json_ready(run)
+
+
+def _per_instant_stats(values):
+    """Median, 99th percentile and largest of a per-instant count (None without instants)."""
+    a = np.asarray(values, dtype=float)
+    if not a.size:
+        return None
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(np.max(a))}
 
 
 def _recoveries(backend_obj):
@@ -231,6 +242,7 @@ class _Record:
         self.t, self.x, self.u, self.kkt, self.parts, self.status, self.recomputed = [], [], [], [], [], [], []
         self.signals = {name: [] for name in spec.signals}
         self.qp_iterations = []
+        self.qp_factorizations = []
         self.qp_cold_retry = []
         self.timing: dict[str, list] = {"feedback": [], "prepare": [], "total": []}
         self.phase_timing: dict[str, list] = {}  # the backend's own phase timers
@@ -283,6 +295,7 @@ class _Record:
                         for k, vals in self.signals.items()},
             "recomputed": self.recomputed,
             "qp_iterations": self.qp_iterations[:len(self.status)],
+            "qp_factorizations": self.qp_factorizations[:len(self.status)],
             "qp_cold_retry": self.qp_cold_retry[:len(self.status)],
             "timing_us": {"feedback": self.timing["feedback"], "prepare": self.timing["prepare"],
                           "total": self.timing["total"],
@@ -350,6 +363,7 @@ class _Loop:
         if status != 0 and self.first_failure is None:
             self.first_failure = {"t": t_i, "message": self._failure_text(xhat)}
         self.rec.qp_iterations.append(int(getattr(self.ctrl, "qp_iterations", 0) or 0))
+        self.rec.qp_factorizations.append(int(getattr(self.ctrl, "qp_factorizations", 0) or 0))
         self.rec.qp_cold_retry.append(bool(getattr(self.ctrl, "qp_cold_retry", False)))
         phases = _split_phases("feedback", _changed(self.rec.snap, dict(getattr(self.ctrl, "timings", {}) or {})))
         kkt, status = self.kkt(xhat, status)
@@ -556,6 +570,10 @@ def summarize(run, settle: float = 0.2) -> dict:
     out["feedback_median_us"] = float(np.median(fb)) if fb.size else math.nan
     out["feedback_max_us"] = float(np.max(fb)) if fb.size else math.nan
     out["soft_violation"] = {k: float(max(v, default=0.0)) for k, v in (run.get("soft_violation") or {}).items()}
+    # the QP's work per instant: factorisations of the Riccati recursion and interior-point
+    # iterations (median, 99th percentile and largest over the instants)
+    for key in ("qp_factorizations", "qp_iterations"):
+        out[key] = _per_instant_stats(run.get(key) or [])
     return out
 
 
@@ -597,6 +615,13 @@ def format_summary(summaries) -> str:
                      "after the start "
                      f"and after each event; rel KKT: the relative measure, docs/algorithm.md section 6; "
                      "it = feedback + prepare, fb = feedback alone)")
+    for s in summaries:
+        f, it = s.get("qp_factorizations"), s.get("qp_iterations")
+        if f and it:
+            lines.append(f"{s['label']}: QP factorisations per instant median {f['median']:g}, 99th percentile "
+                         f"{f['p99']:g}, max {f['max']:g}; QP iterations (active-set sweeps and interior-point "
+                         f"iterations) median {it['median']:g}, "
+                         f"99th percentile {it['p99']:g}")
     for s in summaries:
         if s.get("soft_violation"):
             lines.append(f"{s['label']}: largest violation of the soft rows (measured state, applied control): "

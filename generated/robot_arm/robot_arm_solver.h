@@ -257,6 +257,10 @@ typedef struct {
     robot_arm_real kkt[4];    /* stat, eq, ineq, comp of the last robot_arm_kkt_eval (NaN before) */
     robot_arm_real kkt_max;   /* their largest */
     robot_arm_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
+    /* the factorisations of the Riccati recursion of the last feedback's QP (the sum over the
+     * solves of the call: interior-point iterations, inertia corrections, sweeps of the
+     * active-set start) */
+    int qp_factorizations;
     /* seconds per phase of the last call that ran it (enum robot_arm_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
      * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback
@@ -414,6 +418,12 @@ enum robot_arm_budget_unit {
 #define ROBOT_ARM_ADAPTIVE_ETA ROBOT_ARM_R(0.1)          /* default eta of adaptive M */
 #define ROBOT_ARM_WORK_QP ROBOT_ARM_N                    /* work units of a QP solve */
 
+/* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
+ * section 4, feedback; robot_arm_qp.h), and the distance of the measurement from the predicted
+ * state, in state scales, beyond which it is not tried. */
+#define ROBOT_ARM_QP_ACTIVE_SET 8
+#define ROBOT_ARM_QP_ACTIVE_SET_NEAR ROBOT_ARM_R(1.0)
+
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static robot_arm_solver s;`;
  * the fields are internal (use the functions above). */
@@ -524,6 +534,7 @@ struct robot_arm_solver {
     robot_arm_qp_info qp_info;
     int qp_status;
     int qp_iterations;
+    int qp_factorizations;
     int qp_cold_retry; /* the last feedback needed the cold retry */
 
     /* the QP's workspace and solution, live only inside feedback, share their memory with

@@ -213,6 +213,10 @@ typedef struct {
     unicycle_real kkt[4];    /* stat, eq, ineq, comp of the last unicycle_kkt_eval (NaN before) */
     unicycle_real kkt_max;   /* their largest */
     unicycle_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
+    /* the factorisations of the Riccati recursion of the last feedback's QP (the sum over the
+     * solves of the call: interior-point iterations, inertia corrections, sweeps of the
+     * active-set start) */
+    int qp_factorizations;
     /* seconds per phase of the last call that ran it (enum unicycle_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
      * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback

@@ -553,6 +553,7 @@ static int unicycle_init_finish(unicycle_solver *s)
     }
     s->qp_status = 0;
     s->qp_iterations = 0;
+    s->qp_factorizations = 0;
 
     rc = unicycle_linearize_all(s);
     if (rc != UNICYCLE_OK) {
@@ -845,7 +846,7 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
  * ring slots in place and the terminal blocks. They are set just before each solve and
  * cleared after it, so the struct holds no pointer into itself between calls and a byte
  * copy (memcpy, struct assignment) is a complete, independent solver. */
-static int unicycle_qp_solve_bound(unicycle_solver *s, int warm)
+static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set)
 {
     unicycle_qp_in *in = &s->qp_in;
     unicycle_qp_settings settings;
@@ -857,6 +858,7 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm)
         settings.max_iter = s->anytime.qp_cap; /* a time budget (section 14) */
     }
     settings.warm_start = warm;
+    settings.active_set = warm && active_set ? UNICYCLE_QP_ACTIVE_SET : 0;
     for (k = 0; k < UNICYCLE_N; ++k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
         in->H[k] = slot->Ht;
@@ -884,14 +886,30 @@ static int unicycle_qp_ok(const unicycle_solver *s, int qs)
     return qs == UNICYCLE_QP_SOLVED && unicycle_qp_solution_finite(&s->mem.qp.sol);
 }
 
-/* One solve of the prepared QP, warm (from the point in s->mem.qp.sol) or cold; its iterations
- * are added to those of the call. Returns the QP status. */
-static int unicycle_qp_attempt(unicycle_solver *s, int warm)
+/* One solve of the prepared QP, warm (from the point in s->mem.qp.sol; with active_set, the
+ * active-set start of unicycle_qp.h first) or cold; its iterations and factorisations are added
+ * to those of the call. Returns the QP status. */
+static int unicycle_qp_attempt(unicycle_solver *s, int warm, int active_set)
 {
     int qs;
-    qs = unicycle_qp_solve_bound(s, warm);
+    qs = unicycle_qp_solve_bound(s, warm, active_set);
     s->qp_iterations += s->qp_info.iterations;
+    s->qp_factorizations += s->qp_info.factorizations;
     return qs;
+}
+
+/* 1 when the measurement lies near the state the plan predicted (|dx_0,i| <=
+ * UNICYCLE_QP_ACTIVE_SET_NEAR scale_x,i): the previous solution's active set is a guess for its
+ * QP. */
+static int unicycle_measurement_near(const unicycle_solver *s)
+{
+    int i;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        if (!(unicycle_fabs(s->qp_in.x0[i]) <= UNICYCLE_QP_ACTIVE_SET_NEAR * s->health.scale_x[i])) {
+            return 0;
+        }
+    }
+    return 1;
 }
 
 /* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry
@@ -901,20 +919,29 @@ static int unicycle_qp_attempt(unicycle_solver *s, int warm)
  * (the one the closed loop has followed so far). Returns the QP status. */
 static int unicycle_feedback_qp(unicycle_solver *s)
 {
+    /* the active-set start only for a QP that is convex (the automatic term lm convexified
+     * it in prepare below its maximum and this feedback did not cap it, unicycle_lm.h: its
+     * solution is unique, the one the interior point finds), for a measurement near the
+     * prediction, and not after a feedback that needed the cold retry (algorithm.md
+     * section 4, feedback) */
+    const int active_set = s->lm.on && s->lm.uncapped < UNICYCLE_R(0.0) &&
+                           s->lm.lm < UNICYCLE_LM_MAX_REL * s->lm.scale && unicycle_measurement_near(s) &&
+                           !s->qp_cold_retry;
     int qs;
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
+    s->qp_factorizations = 0;
     s->qp_cold_retry = 0;
     s->anytime.work += UNICYCLE_WORK_QP;
     if (s->settings.qp_warm_start) {
         unicycle_qp_warm_point(s);
     }
-    qs = unicycle_qp_attempt(s, s->settings.qp_warm_start);
+    qs = unicycle_qp_attempt(s, s->settings.qp_warm_start, active_set);
     if (s->settings.qp_warm_start && qs != UNICYCLE_QP_INVALID_INPUT &&
         !(qs == UNICYCLE_QP_MAX_ITER && s->anytime.qp_cap > 0) &&
         (!unicycle_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
-        qs = unicycle_qp_attempt(s, 0);
+        qs = unicycle_qp_attempt(s, 0, 0);
     }
     return qs;
 }
@@ -930,7 +957,7 @@ static int unicycle_feedback_lm_retries(unicycle_solver *s, int qs, int *retries
         unicycle_lm_raise(&s->lm);
         s->anytime.work += UNICYCLE_WORK_QP;
         s->qp_in.hess_shift = s->lm.lm;
-        qs = unicycle_qp_attempt(s, 0);
+        qs = unicycle_qp_attempt(s, 0, 0);
         *retries += 1;
     }
     return qs;
@@ -1466,7 +1493,7 @@ static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries)
     }
     s->qp_in.hess_shift = s->lm.lm;
     s->anytime.work += UNICYCLE_WORK_QP;
-    *qs = unicycle_qp_attempt(s, 0);
+    *qs = unicycle_qp_attempt(s, 0, 0);
     *qs = unicycle_feedback_lm_retries(s, *qs, retries);
     return UNICYCLE_OK;
 }
@@ -1483,7 +1510,7 @@ static void unicycle_predicted_step(unicycle_solver *s)
     }
     s->qp_in.hess_shift = s->lm.lm;
     s->anytime.work += UNICYCLE_WORK_QP;
-    qs = unicycle_qp_solve_bound(s, 0);
+    qs = unicycle_qp_solve_bound(s, 0, 0);
     if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         return;
     }
@@ -1756,6 +1783,7 @@ static int unicycle_extra_iteration(unicycle_solver *s)
 static int unicycle_anytime_run(unicycle_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = UNICYCLE_OK;
+    const int qp_factorizations = s->qp_factorizations;
     int max_iter = UNICYCLE_ANYTIME_MAX_ITER;
     if (!unicycle_budget_on(s)) {
         /* without a budget: the recovery phase's extra iterations (algorithm.md section 9) */
@@ -1776,6 +1804,7 @@ static int unicycle_anytime_run(unicycle_solver *s)
     }
     s->qp_status = qp_status;
     s->qp_iterations = qp_iterations;
+    s->qp_factorizations = qp_factorizations;
     s->qp_cold_retry = cold;
     s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
     return rc == UNICYCLE_ERR_QP ? UNICYCLE_OK : rc;
@@ -2046,6 +2075,7 @@ void unicycle_get_info(const unicycle_solver *s, unicycle_info *info)
     info->initialized = s->set_up && s->initialized;
     info->qp_status = s->qp_status;
     info->qp_iterations = s->qp_iterations;
+    info->qp_factorizations = s->qp_factorizations;
     info->qp_cold_retry = s->qp_cold_retry;
     info->flags = s->health.flags;
     info->recoveries = s->health.n_recoveries;
@@ -2141,6 +2171,7 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     }
     s->qp_status = 0;
     s->qp_iterations = 0;
+    s->qp_factorizations = 0;
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->rho[k] = UNICYCLE_R(0.0);
         s->selected[k] = 0;

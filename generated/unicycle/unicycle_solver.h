@@ -257,6 +257,10 @@ typedef struct {
     unicycle_real kkt[4];    /* stat, eq, ineq, comp of the last unicycle_kkt_eval (NaN before) */
     unicycle_real kkt_max;   /* their largest */
     unicycle_real kkt_rel;   /* the relative measure of the same iterate (docs/algorithm.md section 6) */
+    /* the factorisations of the Riccati recursion of the last feedback's QP (the sum over the
+     * solves of the call: interior-point iterations, inertia corrections, sweeps of the
+     * active-set start) */
+    int qp_factorizations;
     /* seconds per phase of the last call that ran it (enum unicycle_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
      * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback
@@ -414,6 +418,12 @@ enum unicycle_budget_unit {
 #define UNICYCLE_ADAPTIVE_ETA UNICYCLE_R(0.1)          /* default eta of adaptive M */
 #define UNICYCLE_WORK_QP UNICYCLE_N                    /* work units of a QP solve */
 
+/* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
+ * section 4, feedback; unicycle_qp.h), and the distance of the measurement from the predicted
+ * state, in state scales, beyond which it is not tried. */
+#define UNICYCLE_QP_ACTIVE_SET 8
+#define UNICYCLE_QP_ACTIVE_SET_NEAR UNICYCLE_R(1.0)
+
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static unicycle_solver s;`;
  * the fields are internal (use the functions above). */
@@ -524,6 +534,7 @@ struct unicycle_solver {
     unicycle_qp_info qp_info;
     int qp_status;
     int qp_iterations;
+    int qp_factorizations;
     int qp_cold_retry; /* the last feedback needed the cold retry */
 
     /* the QP's workspace and solution, live only inside feedback, share their memory with
