@@ -359,7 +359,10 @@ static int dopus_glob_step_fixed(dopus_solver *s, dopus_glob *g, const dopus_rea
         g->reason = DOPUS_GLOB_FUNCTION;
         return rc;
     }
+    /* the interior point only: the step's QP is solved from scratch in both backends */
+    s->qp_no_active_set = 1;
     rc = dopus_feedback(s, xhat0, u0);
+    s->qp_no_active_set = 0;
     if (rc != DOPUS_OK) {
         if (g->watch > 0) {
             /* a relaxed step led here: back to the watchdog's point, a line search there */

@@ -924,7 +924,7 @@ static int dopus_feedback_qp(dopus_solver *s)
      * solution is unique, the one the interior point finds), for a measurement near the
      * prediction, and not after a feedback that needed the cold retry (algorithm.md
      * section 4, feedback) */
-    const int active_set = s->lm.on && s->lm.uncapped < DOPUS_R(0.0) &&
+    const int active_set = !s->qp_no_active_set && s->lm.on && s->lm.uncapped < DOPUS_R(0.0) &&
                            s->lm.lm < DOPUS_LM_MAX_REL * s->lm.scale && dopus_measurement_near(s) &&
                            !s->qp_cold_retry;
     int qs;
@@ -2157,6 +2157,7 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     s->qp_in.R = 0;
     s->qp_in.Req = 0;
     s->qp_cold_retry = 0;
+    s->qp_no_active_set = 0;
     for (k = 0; k <= DOPUS_N; ++k) {
         for (i = 0; i < DOPUS_NP; ++i) {
             s->p[k][i] = dopus_p_default[k][i];

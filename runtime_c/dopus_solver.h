@@ -535,7 +535,8 @@ struct dopus_solver {
     int qp_status;
     int qp_iterations;
     int qp_factorizations;
-    int qp_cold_retry; /* the last feedback needed the cold retry */
+    int qp_cold_retry;    /* the last feedback needed the cold retry */
+    int qp_no_active_set; /* 1 inside a globalised step: the interior point only */
 
     /* the QP's workspace and solution, live only inside feedback, share their memory with
      * the scratch of the function evaluations, live only outside it (dopus_solver_mem) */

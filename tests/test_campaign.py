@@ -224,13 +224,13 @@ def test_sil_and_campaign_apply_the_same_controls_through_failures(tmp_path, mon
 
     monkeypatch.setattr(campaign, "condense", keep)
     campaign.run_campaign(str(ROBOT_ARM_FILE), str(tmp_path / "c.jsonl"), workers=0, runs=2, duration=0.3,
-                          qp_max_iter=4, progress=False, echo=lambda *a, **k: None)
+                          qp_max_iter=1, progress=False, echo=lambda *a, **k: None)
     monkeypatch.undo()
     failed = 0
     for index, run in sorted(captured.items()):
         out = tmp_path / f"sil{index}.json"
         res = CliRunner().invoke(main, ["sil", str(ROBOT_ARM_FILE), "--campaign-run", str(index), "--seed", "0",
-                                        "--duration", "0.3", "--qp-max-iter", "4", "--json", str(out)])
+                                        "--duration", "0.3", "--qp-max-iter", "1", "--json", str(out)])
         assert res.exit_code == 0, res.output
         rec = json.loads(out.read_text())["runs"][0]
         assert rec["status"] == run["status"]

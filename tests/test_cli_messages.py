@@ -333,6 +333,9 @@ def test_sil_aborted_plant_exits_1(write, tmp_path):
                      res.output)
     assert "nan" not in res.output.lower().replace("nan)", "")
     run = json.loads(out.read_text())["runs"][0]
+    # the per-instant QP figures cover the feedback of the instant the plant failed in
+    per_instant = {k: run["result"].pop(k) for k in ("qp_factorizations", "qp_iterations")}
+    assert all(v["max"] >= 1 for v in per_instant.values()), per_instant
     assert run["result"] == {"status": "aborted", "instants": 0, "instants_planned": 3, "failed_instants": 0,
                              "first_failure": None, "recoveries": 0}
 

@@ -115,10 +115,12 @@ def test_same_failures_both_backends(small_disc):
         want = (DopusError, status_code(status), None if qp_status is None else qp_status_code(qp_status))
         assert got == [want, want], label
     # QP iteration limit: one interior-point iteration does not solve a QP with active bounds
+    # (a measurement more than one state scale from the prediction 0.5: the interior point
+    # from the start, not the active-set start of docs/algorithm.md section 4)
     got = []
     for b in _backends(d):
         b.set_qp_max_iter(1)
-        got.append(_failure(b, lambda b: b.feedback([0.9])))
+        got.append(_failure(b, lambda b: b.feedback([-0.95])))
         assert b.qp_status == qp_status_code("max_iter")
     want = (DopusError, status_code("qp"), qp_status_code("max_iter"))
     assert got == [want, want]

@@ -207,6 +207,7 @@ class ReferenceDopus:
         self.anytime_tol = ANYTIME_TOL if s.anytime_tol is None else s.anytime_tol
         self.set_M_adaptive(s.M_adaptive, s.M_min, s.M_max, s.M_eta)
         self.gate, self.gate_hold = s.gate, s.gate_hold
+        self.active_set_start = True    # False inside a globalised step: the QP from scratch
         self.work = 0.0
         self._instant_start = 0.0
         self._cost_stage = self._cost_qp = self._cost_prepare = 0.0
@@ -763,7 +764,7 @@ class ReferenceDopus:
                 # the first solve starts from the active set of the previous solution, as the C
                 # QP's warm start does for a QP the automatic lm made convex and a measurement
                 # near the predicted state (section 4, feedback); a retry with lm raised does not
-                start = (retries == 0 and self.lm_auto and self._lm_uncapped < 0.0
+                start = (retries == 0 and self.active_set_start and self.lm_auto and self._lm_uncapped < 0.0
                          and self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale and bool(np.all(np.abs(qp["x0"]) <= _SAFETY["QP_ACTIVE_SET_NEAR"] * self.scales[0])))
                 sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter,
                                          guess=self._qp_warm_point(qp) if start else None,

@@ -188,10 +188,12 @@ def globalised_step(be, st: GlobState, xhat0) -> None:
         raise DopusError.of("not_prepared", "globalised step: no prepared QP (call init first)")
     mode = be.mode
     be.set_mode("fixed")
+    be.active_set_start = False    # the step's QP from scratch, as the C runtime's
     try:
         _step(be, st, xhat0, C)
     finally:
         be.set_mode(mode)
+        be.active_set_start = True
 
 
 def _xhat(be, xhat0, what):

@@ -359,7 +359,10 @@ static int robot_arm_glob_step_fixed(robot_arm_solver *s, robot_arm_glob *g, con
         g->reason = ROBOT_ARM_GLOB_FUNCTION;
         return rc;
     }
+    /* the interior point only: the step's QP is solved from scratch in both backends */
+    s->qp_no_active_set = 1;
     rc = robot_arm_feedback(s, xhat0, u0);
+    s->qp_no_active_set = 0;
     if (rc != ROBOT_ARM_OK) {
         if (g->watch > 0) {
             /* a relaxed step led here: back to the watchdog's point, a line search there */

@@ -924,7 +924,7 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
      * solution is unique, the one the interior point finds), for a measurement near the
      * prediction, and not after a feedback that needed the cold retry (algorithm.md
      * section 4, feedback) */
-    const int active_set = s->lm.on && s->lm.uncapped < ROBOT_ARM_R(0.0) &&
+    const int active_set = !s->qp_no_active_set && s->lm.on && s->lm.uncapped < ROBOT_ARM_R(0.0) &&
                            s->lm.lm < ROBOT_ARM_LM_MAX_REL * s->lm.scale && robot_arm_measurement_near(s) &&
                            !s->qp_cold_retry;
     int qs;
@@ -2157,6 +2157,7 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
     s->qp_in.R = 0;
     s->qp_in.Req = 0;
     s->qp_cold_retry = 0;
+    s->qp_no_active_set = 0;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NP; ++i) {
             s->p[k][i] = robot_arm_p_default[k][i];

@@ -359,7 +359,10 @@ static int unicycle_glob_step_fixed(unicycle_solver *s, unicycle_glob *g, const 
         g->reason = UNICYCLE_GLOB_FUNCTION;
         return rc;
     }
+    /* the interior point only: the step's QP is solved from scratch in both backends */
+    s->qp_no_active_set = 1;
     rc = unicycle_feedback(s, xhat0, u0);
+    s->qp_no_active_set = 0;
     if (rc != UNICYCLE_OK) {
         if (g->watch > 0) {
             /* a relaxed step led here: back to the watchdog's point, a line search there */

@@ -924,7 +924,7 @@ static int unicycle_feedback_qp(unicycle_solver *s)
      * solution is unique, the one the interior point finds), for a measurement near the
      * prediction, and not after a feedback that needed the cold retry (algorithm.md
      * section 4, feedback) */
-    const int active_set = s->lm.on && s->lm.uncapped < UNICYCLE_R(0.0) &&
+    const int active_set = !s->qp_no_active_set && s->lm.on && s->lm.uncapped < UNICYCLE_R(0.0) &&
                            s->lm.lm < UNICYCLE_LM_MAX_REL * s->lm.scale && unicycle_measurement_near(s) &&
                            !s->qp_cold_retry;
     int qs;
@@ -2157,6 +2157,7 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     s->qp_in.R = 0;
     s->qp_in.Req = 0;
     s->qp_cold_retry = 0;
+    s->qp_no_active_set = 0;
     for (k = 0; k <= UNICYCLE_N; ++k) {
         for (i = 0; i < UNICYCLE_NP; ++i) {
             s->p[k][i] = unicycle_p_default[k][i];
