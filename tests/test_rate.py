@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from harness.transcription import rk4_double_integrator
+from harness.transcription import double_integrator_nlp, solve_nlp
 
 from dopus_codegen import Ocp, build_functions
 from dopus_codegen.problem.ocp import OcpError
@@ -43,21 +43,14 @@ def rate():
 
 
 def _opti(x0, u_last):
-    opti = ca.Opti()
-    X, U = opti.variable(2, N + 1), opti.variable(1, N)
+    opti, X, U = double_integrator_nlp(N, DT, 3.0, x0)
     J = 0
     for k in range(N):
-        opti.subject_to(X[:, k + 1] == rk4_double_integrator(X[:, k], U[k], DT))
         J += 0.5 * (10.0 * (X[0, k] - 1.0) ** 2 + 0.1 * X[1, k] ** 2 + 0.01 * U[k] ** 2)
-        opti.subject_to(opti.bounded(-3.0, U[k], 3.0))
         prev = u_last if k == 0 else U[k - 1]
         opti.subject_to(opti.bounded(-RATE, U[k] - prev, RATE))
     J += 0.5 * (10.0 * (X[0, N] - 1.0) ** 2 + X[1, N] ** 2)
-    opti.minimize(J)
-    opti.subject_to(X[:, 0] == ca.DM(x0))
-    opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "tol": 1e-12, "sb": "yes"})
-    sol = opti.solve()
-    return sol.value(X).T, np.atleast_1d(sol.value(U)).reshape(N, 1)
+    return solve_nlp(opti, J, X, U)
 
 
 @pytest.mark.parametrize("call, message", [

@@ -13,7 +13,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from harness.transcription import rk4_double_integrator
+from harness.transcription import double_integrator_nlp, solve_nlp
 
 from dopus_codegen import Ocp, Soft, build_functions
 from dopus_codegen.errors import DopusError, qp_status_code
@@ -67,23 +67,16 @@ def _wall_ocp(terminal: bool, soft=None):
 
 def _opti_wall(terminal: bool):
     """The same NLP written out: RK4 of (v, u), the wall at nodes 0..N-1 (and N)."""
-    opti = ca.Opti()
-    X, U = opti.variable(2, N + 1), opti.variable(1, N)
+    opti, X, U = double_integrator_nlp(N, DT, 1.0, [0.0, 0.0])
     J = 0
     for k in range(N):
-        opti.subject_to(X[:, k + 1] == rk4_double_integrator(X[:, k], U[k], DT))
         J += 0.5 * 0.1 * (U[k] ** 2 + X[1, k] ** 2)
-        opti.subject_to(opti.bounded(-1.0, U[k], 1.0))
         if k >= 1:
             opti.subject_to(X[0, k] <= 0.3)
     if terminal:
         opti.subject_to(X[0, N] <= 0.3)
     J += 0.5 * 100.0 * (X[0, N] - 2.0) ** 2
-    opti.minimize(J)
-    opti.subject_to(X[:, 0] == 0)
-    opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "tol": 1e-12, "sb": "yes"})
-    sol = opti.solve()
-    return sol.value(X).T, np.atleast_1d(sol.value(U)).reshape(N, 1)
+    return solve_nlp(opti, J, X, U)
 
 
 @pytest.mark.parametrize("terminal", [True, False])
@@ -161,21 +154,14 @@ def test_bad_stages(stages, message):
 
 
 def _opti_stages(stages):
-    opti = ca.Opti()
-    X, U = opti.variable(2, N + 1), opti.variable(1, N)
+    opti, X, U = double_integrator_nlp(N, DT, 1.0, [0.0, 0.0])
     J = 0
     for k in range(N):
-        opti.subject_to(X[:, k + 1] == rk4_double_integrator(X[:, k], U[k], DT))
         J += 0.5 * 0.1 * (U[k] ** 2 + X[1, k] ** 2)
-        opti.subject_to(opti.bounded(-1.0, U[k], 1.0))
         if k in stages:
             opti.subject_to(X[0, k] <= 0.1)
     J += 0.5 * 100.0 * (X[0, N] - 2.0) ** 2
-    opti.minimize(J)
-    opti.subject_to(X[:, 0] == 0)
-    opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "tol": 1e-12, "sb": "yes"})
-    sol = opti.solve()
-    return sol.value(X).T, np.atleast_1d(sol.value(U)).reshape(N, 1)
+    return solve_nlp(opti, J, X, U)
 
 
 def test_rows_on_chosen_stages_equal_independent_transcription():
@@ -209,22 +195,15 @@ def test_rows_on_chosen_stages_equal_independent_transcription():
 
 def _opti_staged_weights(stages, W):
     """The written-out NLP of _staged_weights_ocp: 0.5 [x - 1, v]' W [x - 1, v] at the chosen stages."""
-    opti = ca.Opti()
-    X, U = opti.variable(2, N + 1), opti.variable(1, N)
+    opti, X, U = double_integrator_nlp(N, DT, 1.0, [0.0, 0.0])
     J = 0
     for k in range(N):
-        opti.subject_to(X[:, k + 1] == rk4_double_integrator(X[:, k], U[k], DT))
         J += 0.5 * 1.0 * U[k] ** 2
-        opti.subject_to(opti.bounded(-1.0, U[k], 1.0))
         if k in stages:
             r = ca.vertcat(X[0, k] - 1.0, X[1, k])
             J += 0.5 * ca.mtimes([r.T, ca.DM(W), r])
     J += 0.5 * 1.0 * X[1, N] ** 2
-    opti.minimize(J)
-    opti.subject_to(X[:, 0] == 0)
-    opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "tol": 1e-12, "sb": "yes"})
-    sol = opti.solve()
-    return sol.value(X).T, np.atleast_1d(sol.value(U)).reshape(N, 1)
+    return solve_nlp(opti, J, X, U)
 
 
 def _staged_weights_ocp(stages, W):
