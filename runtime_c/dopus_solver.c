@@ -2287,7 +2287,6 @@ int dopus_set_parameters_node(dopus_solver *s, int k, const dopus_real *pk)
 
 int dopus_push_parameters(dopus_solver *s, const dopus_real *pN)
 {
-    int i, rc;
     if (!s->set_up) {
         return DOPUS_ERR_NOT_INITIALIZED;
     }
@@ -2297,23 +2296,8 @@ int dopus_push_parameters(dopus_solver *s, const dopus_real *pN)
     if (s->settings.mode != DOPUS_MODE_RECEDING) {
         return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
     }
-    if (DOPUS_NP == 0) {
-        return dopus_ret(s, DOPUS_OK);
-    }
-    if (pN == 0) {
-        return dopus_ret(s, DOPUS_ERR_INVALID_ARGUMENT);
-    }
-    if (!dopus_lai_vec_finite(DOPUS_NP, pN)) {
-        return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
-    }
-    rc = dopus_parameters_writable(s);
-    if (rc != DOPUS_OK) {
-        return dopus_ret(s, rc);
-    }
-    for (i = 0; i < DOPUS_NP; ++i) {
-        s->p[DOPUS_N][i] = pN[i];
-    }
-    return dopus_ret(s, DOPUS_OK);
+    /* the new last node's parameters: the same checks and write as for any node */
+    return dopus_set_parameters_node(s, DOPUS_N, pN);
 }
 
 void dopus_stop(dopus_solver *s)

@@ -2287,7 +2287,6 @@ int robot_arm_set_parameters_node(robot_arm_solver *s, int k, const robot_arm_re
 
 int robot_arm_push_parameters(robot_arm_solver *s, const robot_arm_real *pN)
 {
-    int i, rc;
     if (!s->set_up) {
         return ROBOT_ARM_ERR_NOT_INITIALIZED;
     }
@@ -2297,23 +2296,8 @@ int robot_arm_push_parameters(robot_arm_solver *s, const robot_arm_real *pN)
     if (s->settings.mode != ROBOT_ARM_MODE_RECEDING) {
         return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
     }
-    if (ROBOT_ARM_NP == 0) {
-        return robot_arm_ret(s, ROBOT_ARM_OK);
-    }
-    if (pN == 0) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_INVALID_ARGUMENT);
-    }
-    if (!robot_arm_lai_vec_finite(ROBOT_ARM_NP, pN)) {
-        return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
-    }
-    rc = robot_arm_parameters_writable(s);
-    if (rc != ROBOT_ARM_OK) {
-        return robot_arm_ret(s, rc);
-    }
-    for (i = 0; i < ROBOT_ARM_NP; ++i) {
-        s->p[ROBOT_ARM_N][i] = pN[i];
-    }
-    return robot_arm_ret(s, ROBOT_ARM_OK);
+    /* the new last node's parameters: the same checks and write as for any node */
+    return robot_arm_set_parameters_node(s, ROBOT_ARM_N, pN);
 }
 
 void robot_arm_stop(robot_arm_solver *s)

@@ -2287,7 +2287,6 @@ int unicycle_set_parameters_node(unicycle_solver *s, int k, const unicycle_real 
 
 int unicycle_push_parameters(unicycle_solver *s, const unicycle_real *pN)
 {
-    int i, rc;
     if (!s->set_up) {
         return UNICYCLE_ERR_NOT_INITIALIZED;
     }
@@ -2297,23 +2296,8 @@ int unicycle_push_parameters(unicycle_solver *s, const unicycle_real *pN)
     if (s->settings.mode != UNICYCLE_MODE_RECEDING) {
         return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
     }
-    if (UNICYCLE_NP == 0) {
-        return unicycle_ret(s, UNICYCLE_OK);
-    }
-    if (pN == 0) {
-        return unicycle_ret(s, UNICYCLE_ERR_INVALID_ARGUMENT);
-    }
-    if (!unicycle_lai_vec_finite(UNICYCLE_NP, pN)) {
-        return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
-    }
-    rc = unicycle_parameters_writable(s);
-    if (rc != UNICYCLE_OK) {
-        return unicycle_ret(s, rc);
-    }
-    for (i = 0; i < UNICYCLE_NP; ++i) {
-        s->p[UNICYCLE_N][i] = pN[i];
-    }
-    return unicycle_ret(s, UNICYCLE_OK);
+    /* the new last node's parameters: the same checks and write as for any node */
+    return unicycle_set_parameters_node(s, UNICYCLE_N, pN);
 }
 
 void unicycle_stop(unicycle_solver *s)
