@@ -371,18 +371,22 @@ class _Decl:
 
 
 # --------------------------------------------------------------------------- helpers
+def _broadcast(a: np.ndarray, size: int, what: str) -> np.ndarray:
+    """``a`` as a vector of length ``size``: a scalar broadcast, a row or column reshaped."""
+    if a.ndim == 0:
+        return np.full(size, float(a))
+    if a.size == size and (a.ndim == 1 or (a.ndim == 2 and 1 in a.shape)):
+        return a.reshape(size)
+    raise OcpError(f"{what}: expected a scalar or {size} values, got shape {a.shape}")
+
+
 def _vector(value, size: int, what: str, allow_inf: bool = True) -> np.ndarray:
     """A float vector of length ``size`` (scalars broadcast); NaN always rejected."""
     try:
         a = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise OcpError(f"{what}: expected numbers, got {value!r} ({exc})") from None
-    if a.ndim == 0:
-        a = np.full(size, float(a))
-    elif a.size == size and (a.ndim == 1 or (a.ndim == 2 and 1 in a.shape)):
-        a = a.reshape(size)
-    else:
-        raise OcpError(f"{what}: expected a scalar or {size} values, got shape {a.shape}")
+    a = _broadcast(a, size, what)
     if np.any(np.isnan(a)):
         raise OcpError(f"{what}: NaN at row {int(np.flatnonzero(np.isnan(a))[0])}")
     if not allow_inf and np.any(np.isinf(a)):
@@ -398,12 +402,7 @@ def _scales(value, size: int, what: str) -> Optional[np.ndarray]:
         a = np.array(value, dtype=float)
     except (TypeError, ValueError):
         raise OcpError(f"{what} scale: expected a positive number or {size}, got {value!r}") from None
-    if a.ndim == 0:
-        a = np.full(size, float(a))
-    elif a.size == size and (a.ndim == 1 or (a.ndim == 2 and 1 in a.shape)):
-        a = a.reshape(size)
-    else:
-        raise OcpError(f"{what} scale: expected a scalar or {size} values, got shape {a.shape}")
+    a = _broadcast(a, size, f"{what} scale")
     bad = np.flatnonzero(~(np.isfinite(a) & (a > 0)))
     if bad.size:
         raise OcpError(f"{what} scale: must be positive and finite, got {float(a[bad[0]])!r} at row {int(bad[0])}")
