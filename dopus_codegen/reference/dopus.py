@@ -613,6 +613,13 @@ class ReferenceDopus:
         finally:
             self.budget_used = self._budget_now() - self._instant_start
 
+    def _instant_passed(self, xhat_fresh: bool) -> None:
+        """A feedback that attempts no QP: whether its measurement counts, and in receding
+        mode the sampling instant has passed all the same, so its prepare (the shift) is due."""
+        self._xhat_fresh = xhat_fresh
+        if self.mode == "receding":
+            self._prepare_due, self._shifted = True, False
+
     def _feedback(self, xhat0) -> np.ndarray:
         t0 = time.perf_counter()
         xhat0 = np.array(xhat0, dtype=float).reshape(-1)
@@ -625,27 +632,20 @@ class ReferenceDopus:
             err.u0 = self._fallback_u0()
             raise err
         if not np.all(np.isfinite(xhat0)):
-            self._xhat_fresh = False
-            if self.mode == "receding":
-                # the sampling instant has passed all the same: its prepare (the shift) is due
-                self._prepare_due, self._shifted = True, False
+            self._instant_passed(False)
             raise self._feedback_failed("nonfinite_input",
                                         f"feedback: xhat0 must be {self.nx} finite numbers, got {xhat0}")
         if not self._qp_ready:
             # counted as a failed instant; the measurement is recorded all the same: the
             # recovery that repeated failures call for starts from it (section 9)
             self._xhat_last = xhat0.copy()
-            self._xhat_fresh = True
-            if self.mode == "receding":
-                self._prepare_due, self._shifted = True, False
+            self._instant_passed(True)
             raise self._feedback_failed("not_prepared", "feedback: no prepared QP (call prepare after a "
                                         "successful feedback)")
         if self._gated(xhat0):
             # as a missing measurement: the previous one stays the last, the prepare's
             # predicted step carries the loop (section 9)
-            self._xhat_fresh = False
-            if self.mode == "receding":
-                self._prepare_due, self._shifted = True, False
+            self._instant_passed(False)
             raise self._feedback_failed("measurement_gated", f"feedback: the measurement {xhat0} is further from "
                                         f"the plan's prediction {self.x[0]} than the gate {self.gate:g} (times the "
                                         "state scales) allows: handled as a missing one")

@@ -782,6 +782,18 @@ static int unicycle_gated(unicycle_solver *s, const unicycle_real *xhat0)
     return 1;
 }
 
+/* A feedback that attempts no QP: whether its measurement counts (xhat_fresh), and in
+ * receding mode the sampling instant has passed all the same, so its prepare (the shift)
+ * is due. */
+static void unicycle_instant_passed(unicycle_solver *s, int xhat_fresh)
+{
+    s->health.xhat_fresh = xhat_fresh;
+    if (s->settings.mode == UNICYCLE_MODE_RECEDING) {
+        s->prepare_due = 1;
+        s->shifted = 0;
+    }
+}
+
 static int unicycle_feedback_admit(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
 {
     if (!s->initialized) {
@@ -789,34 +801,21 @@ static int unicycle_feedback_admit(unicycle_solver *s, const unicycle_real *xhat
         return unicycle_ret(s, UNICYCLE_ERR_NOT_INITIALIZED);
     }
     if (xhat0 == 0 || !unicycle_lai_vec_finite(UNICYCLE_NX, xhat0)) {
-        s->health.xhat_fresh = 0;
-        if (s->settings.mode == UNICYCLE_MODE_RECEDING) {
-            /* the sampling instant has passed all the same: its prepare (the shift) is due */
-            s->prepare_due = 1;
-            s->shifted = 0;
-        }
+        unicycle_instant_passed(s, 0);
         return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     if (!s->qp_ready) {
         /* counted as a failed instant: a prepare that keeps failing ends in a recovery, which
          * starts from the newest measurement, so it is recorded all the same (algorithm.md
-         * section 9); the instant has passed: its prepare (the shift) is due */
+         * section 9) */
         unicycle_copy(s->xhat0, xhat0, UNICYCLE_NX);
-        s->health.xhat_fresh = 1;
-        if (s->settings.mode == UNICYCLE_MODE_RECEDING) {
-            s->prepare_due = 1;
-            s->shifted = 0;
-        }
+        unicycle_instant_passed(s, 1);
         return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_NOT_PREPARED);
     }
     if (unicycle_gated(s, xhat0)) {
         /* as a missing measurement: the previous one stays the last, the prepare's predicted
          * step carries the loop (algorithm.md section 9) */
-        s->health.xhat_fresh = 0;
-        if (s->settings.mode == UNICYCLE_MODE_RECEDING) {
-            s->prepare_due = 1;
-            s->shifted = 0;
-        }
+        unicycle_instant_passed(s, 0);
         return unicycle_feedback_failed(s, u0, UNICYCLE_ERR_MEASUREMENT_GATED);
     }
     return UNICYCLE_OK;
