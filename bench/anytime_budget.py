@@ -32,7 +32,7 @@ import numpy as np
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from harness.faults import model_plant, tip_deviation, instant  # noqa: E402
+from harness.faults import back_on_path, model_plant, tip_deviation, instant  # noqa: E402
 
 from dopus_codegen import build_functions, load_ocp  # noqa: E402
 from dopus_codegen.reference.offline import solve_ocp  # noqa: E402
@@ -91,7 +91,7 @@ def outliers(arm, guess, kind, budget, K):
         used.append(s.budget_used)
     dev = tip_deviation(np.array(xs))
     after = dev[K:]
-    back = next((i for i in range(after.size) if np.all(after[i:] <= 1e-2)), None)
+    back = back_on_path(after)
     return {"kind": kind, "budget_s": budget, "K": K, "max_dev": float(dev.max()), "back": back,
             "failed_after": int(sum(v != 0 for v in st_after)),
             "budget_used_max": float(np.max(used)) if budget and kind != "converged" else None}

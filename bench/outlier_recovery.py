@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import pathlib
+import sys
 
 import numpy as np
 
@@ -29,18 +30,10 @@ from dopus_codegen.studies.loops import run_instants
 from dopus_codegen.studies.plant import Plant
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from harness.faults import back_on_path, tip_deviation  # noqa: E402
 N_AFTER = 200
-
-
-def tracking(xs):
-    q1, q2, th = xs[:, 0], xs[:, 1], xs[:, 4]
-    tip = np.stack([0.4 * np.cos(q1) + 0.4 * np.cos(q1 + q2), 0.4 * np.sin(q1) + 0.4 * np.sin(q1 + q2)], 1)
-    ref = np.stack([0.4 + 0.15 * np.cos(th), 0.2 + 0.15 * np.sin(th)], 1)
-    return np.linalg.norm(tip - ref, axis=1)
-
-
-def on_path(track, tol=1e-2):
-    return next((i for i in range(track.size) if track[i:].max() <= tol), None)
 
 
 def outlier(x):
@@ -82,8 +75,8 @@ def main(ks, soft=None):
         fresh.init(x, start(solve_ocp(hard, x)[0]))
         xs_fresh, st_fresh, _ = run_instants(fresh, plant, x.copy(), N_AFTER)
         row = {"K": k, "failed_during": sum(v != 0 for v in st_bad), "failed_after": sum(v != 0 for v in st_rec),
-               "recoveries": s.recoveries, "on_path": on_path(tracking(xs_rec)),
-               "on_path_fresh": on_path(tracking(xs_fresh)), "fresh_failed": sum(v != 0 for v in st_fresh)}
+               "recoveries": s.recoveries, "on_path": back_on_path(tip_deviation(xs_rec)),
+               "on_path_fresh": back_on_path(tip_deviation(xs_fresh)), "fresh_failed": sum(v != 0 for v in st_fresh)}
         rows.append(row)
         print(f"{k:3d} {row['failed_during']:13d} {row['failed_after']:12d} {row['recoveries']:10d} "
               f"{str(row['on_path']):>8} {str(row['on_path_fresh']):>6}", flush=True)

@@ -13,6 +13,8 @@ import dataclasses
 import numpy as np
 import pytest
 
+from harness.faults import back_on_path, tip_deviation
+
 from dopus_codegen.runtime.solver import CSolver, DopusError
 from dopus_codegen.studies.loops import run_instants
 from dopus_codegen.studies.plant import Plant
@@ -119,14 +121,6 @@ def _settled(arm, robot_solution):
     return s, plant, x
 
 
-def _tracking(xs):
-    """Distance of the tip from the circle at theta (examples/robot_arm.py)."""
-    q1, q2, th = xs[:, 0], xs[:, 1], xs[:, 4]
-    tip = np.stack([0.4 * np.cos(q1) + 0.4 * np.cos(q1 + q2), 0.4 * np.sin(q1) + 0.4 * np.sin(q1 + q2)], 1)
-    ref = np.stack([0.4 + 0.15 * np.cos(th), 0.2 + 0.15 * np.sin(th)], 1)
-    return np.linalg.norm(tip - ref, axis=1)
-
-
 # instants after the good measurements return from which the recovered loop tracks the path
 # within 20 % (+ 1e-4 m) of the fresh solver's loop (measured: from the first instant on for
 # 5, 10, 20 and 40 failed instants)
@@ -156,7 +150,7 @@ def test_back_on_the_fresh_trajectory_after_failed_instants(arm, robot_solution,
     xs_fresh, st_fresh, _ = _loop(fresh, plant, x_resume.copy(), n_after)
     assert not any(st_fresh)
     # theta (the path parameter, index 4) is free progress: compare the tracking of the path
-    track_rec, track_fresh = _tracking(xs_rec), _tracking(xs_fresh)
+    track_rec, track_fresh = tip_deviation(xs_rec), tip_deviation(xs_fresh)
     print(f"n_failed {n_failed}: tracking after {RECOVERED_WITHIN} instants: recovered "
           f"{track_rec[RECOVERED_WITHIN:].max():.3e}, fresh {track_fresh[RECOVERED_WITHIN:].max():.3e}")
     assert track_rec[RECOVERED_WITHIN:].max() <= 1.2 * track_fresh[RECOVERED_WITHIN:].max() + 1e-4
@@ -189,7 +183,7 @@ def test_realistic_loop_3000_instants(arm, robot_solution):
             except DopusError:
                 failed += 1
             xs.append(x.copy())
-        tr = _tracking(np.array(xs))
+        tr = tip_deviation(np.array(xs))
         back = max(tr[k + 40] for k in range(50, 3000 - 41, 50))   # reported
         return failed, back, float(np.sqrt(np.mean(tr ** 2)))
 
@@ -216,11 +210,6 @@ def test_realistic_loop_3000_instants(arm, robot_solution):
 # faults over every K with the model as the plant.
 OUTLIER_ON_PATH_LAG = 80
 OUTLIER_FAILED_AFTER = 8
-
-
-def _on_path(track, tol=1e-2):
-    """The first instant from which the tip stays within tol of the path (None: never)."""
-    return next((i for i in range(track.size) if track[i:].max() <= tol), None)
 
 
 @pytest.mark.parametrize("n_outliers", [5, 10, 20, 40])
@@ -250,7 +239,7 @@ def test_no_failure_after_finite_outliers(arm, robot_solution, n_outliers):
     g2, _ = solve_ocp(arm, x_resume)
     fresh.init(x_resume, g2)
     xs_fresh, _, _ = _loop(fresh, plant, x_resume.copy(), n_after)
-    on_rec, on_fresh = _on_path(_tracking(xs_rec)), _on_path(_tracking(xs_fresh))
+    on_rec, on_fresh = back_on_path(tip_deviation(xs_rec)), back_on_path(tip_deviation(xs_fresh))
     print(f"{n_outliers} outliers ({sum(v != 0 for v in st)} failed), {sum(v != 0 for v in st_rec)} failed "
           "afterwards; "
           f"on the path from instant {on_rec} (fresh solver: {on_fresh}); recoveries {s.recoveries}")

@@ -71,6 +71,12 @@ def tip_deviation(xs):
     return np.linalg.norm(tip - ref, axis=1)
 
 
+def back_on_path(dev, tol: float = 1e-2):
+    """The first instant from which the deviations ``dev`` all stay within ``tol`` (None: never)."""
+    dev = np.asarray(dev)
+    return next((i for i in range(dev.size) if np.all(dev[i:] <= tol)), None)
+
+
 def instant(solver, plant, x, xm):
     """One closed-loop instant of the package (dopus_codegen.studies.loops): feedback on the
     measurement xm, the returned control applied whatever the status, prepare. Returns
@@ -133,7 +139,7 @@ def run_case(make_solver, plant, x0, kind: str, K: int, after: int = AFTER, tol:
         x, u0, st = instant(s, plant, x, x.copy())
         st_after.append(st); us.append(u0); xs_after.append(x.copy())
     dev = tip_deviation(np.array(xs_after)) if xs_after else np.array([np.inf])
-    back = next((i for i in range(dev.size) if np.all(dev[i:] <= tol)), None) if len(xs_after) == after else None
+    back = back_on_path(dev, tol) if len(xs_after) == after else None
     failed = [i for i, v in enumerate(st_after) if v]
     us = np.array(us)
     return {"kind": kind, "K": K, "failed_settle": sum(v != 0 for v in st_settle),
