@@ -369,6 +369,10 @@ def summarise(rows: list, sols: np.ndarray, refs: list, qps: list, names: list, 
         for j, name in enumerate(names):
             s = dict(row["solvers"][name])
             s["time_per_iter"] = s["t_median"] / s["iterations"] if s["iterations"] else None
+            if s.get("factorizations"):
+                # ours: per factorisation of the Riccati recursion (interior-point iterations,
+                # inertia corrections, sweeps of an active-set start)
+                s["time_per_factorization"] = s["t_median"] / s["factorizations"]
             s["err_vs_reference"] = None
             s["obj_rel_err_vs_reference"] = None
             if refs[i] is not None:
@@ -421,6 +425,11 @@ def converging_modes(entries: list, tol: float) -> dict:
                 row[f"{ours}/iter"] = med([e["solvers"][ours]["time_per_iter"] / e["solvers"][n]["time_per_iter"]
                                            for e in entries if e["solvers"][n]["time_per_iter"]
                                            and e["solvers"][ours]["time_per_iter"]])
+                # ours per factorisation against HPIPM per IPM iteration (one factorisation each)
+                row[f"{ours}/fact"] = med([e["solvers"][ours]["time_per_factorization"]
+                                           / e["solvers"][n]["time_per_iter"] for e in entries
+                                           if e["solvers"][n]["time_per_iter"]
+                                           and e["solvers"][ours].get("time_per_factorization")])
         out[n] = row
     full = [n for n, r in out.items() if r["converged"] == r["of"]]
     return {"configs": out, "best": min(full, key=lambda n: out[n]["t_median"]) if full else None}
@@ -430,13 +439,14 @@ def print_modes(title: str, modes: dict, log=print) -> None:
     log(f"\n{title}: HPIPM configurations, converged QPs (own residuals <= tol), medians, ours against each "
         f"(medians of the per-QP ratios)")
     log(f"{'config':24s} {'conv':>6s} {'us/QP':>8s} {'iters':>6s} {'us/iter':>8s} {'ours/QP':>8s} {'ours/it':>8s} "
-        f"{'alt/QP':>7s} {'alt/it':>7s}")
+        f"{'ours/fac':>8s} {'alt/QP':>7s} {'alt/it':>7s}")
     for n, r in modes["configs"].items():
         f = lambda v, w=8, d=2: f"{v:{w}.{d}f}" if v is not None else " " * (w - 1) + "-"  # noqa: E731
         log(f"{n:24s} {r['converged']:3d}/{r['of']:<2d} {f(1e6 * r['t_median'] if r['t_median'] else None, 8, 1)} "
             f"{f(r['iterations_median'], 6, 1)} "
             f"{f(1e6 * r['time_per_iter_median'] if r['time_per_iter_median'] else None, 8, 1)} "
-            f"{f(r.get('ours/qp'))} {f(r.get('ours/iter'))} {f(r.get('ours_alt/qp'), 7)} {f(r.get('ours_alt/iter'), 7)}"
+            f"{f(r.get('ours/qp'))} {f(r.get('ours/iter'))} {f(r.get('ours/fact'))} {f(r.get('ours_alt/qp'), 7)} "
+            f"{f(r.get('ours_alt/iter'), 7)}"
             + ("   <- best converging" if n == modes["best"] else ""))
 
 
@@ -477,7 +487,8 @@ def table(title: str, groups: dict, names: list, ratios: list, log=print, shown=
                     if e["solvers"][n]["err_vs_reference"] is not None]
             oerrs = [e["solvers"][n]["obj_rel_err_vs_reference"] for e in entries
                      if e["solvers"][n].get("obj_rel_err_vs_reference") is not None]
-            gs[n] = {"t_median": t, "iterations_median": it, "time_per_iter_median": tpi,
+            fac = med([e["solvers"][n].get("factorizations") for e in entries])
+            gs[n] = {"t_median": t, "iterations_median": it, "time_per_iter_median": tpi, "factorizations_median": fac,
                      "converged": ok, "count": len(entries),
                      "err_vs_reference_max": max(errs) if errs else None,
                      "obj_rel_err_vs_reference_max": max(oerrs) if oerrs else None,
@@ -741,7 +752,8 @@ def _several_tolerances(argv, tols, json_path: Path) -> int:
         r = m["configs"][b]
         print(f"  tol {tol}: {b} ({r['converged']}/{r['of']}, {1e6 * r['t_median']:.1f} us/QP, "
               f"{r['iterations_median']:g} iterations): ours/QP {r.get('ours/qp', float('nan')):.2f}, "
-              f"ours/iter {r.get('ours/iter', float('nan')):.2f}; ours_alt {r.get('ours_alt/qp', float('nan')):.2f} / "
+              f"ours/iter {r.get('ours/iter', float('nan')):.2f}, ours per factorisation / its per iteration "
+              f"{r.get('ours/fact') if r.get('ours/fact') is not None else float('nan'):.2f}; ours_alt {r.get('ours_alt/qp', float('nan')):.2f} / "
               f"{r.get('ours_alt/iter', float('nan')):.2f}")
     json_path.parent.mkdir(parents=True, exist_ok=True)
     json_path.write_text(json.dumps({"tolerances": summary}, indent=1, default=_json_default))

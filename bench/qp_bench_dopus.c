@@ -94,4 +94,6 @@ void bench_dopus_corrections(const bench_dopus *d, int *inertia, int *augment)
     *augment = d->info.terminal_augmentations;
 }
 
+int bench_dopus_factorizations(const bench_dopus *d) { return d->info.factorizations; }
+
 void bench_dopus_free(bench_dopus *d) { free(d); }

@@ -18,6 +18,9 @@ int bench_dopus_residuals(const bench_dopus *d, double res[4]);
 void bench_dopus_primal(const bench_dopus *d, double *dw);
 /* inertia corrections and terminal augmentations of the last solve */
 void bench_dopus_corrections(const bench_dopus *d, int *inertia, int *augment);
+/* Factorisations of the Riccati recursion of the last solve (interior-point iterations,
+ * inertia corrections, sweeps of the active-set start). */
+int bench_dopus_factorizations(const bench_dopus *d);
 void bench_dopus_free(bench_dopus *d);
 
 #endif /* QP_BENCH_DOPUS_H */

@@ -46,6 +46,7 @@ typedef struct {
     double res[4];
     int has_res;
     int inertia, augment; /* ours: inertia corrections and terminal augmentations */
+    int factorizations;   /* ours: Riccati factorisations of the solve */
 } solver_entry;
 
 static double now(void)
@@ -135,6 +136,7 @@ static void solver_finish(solver_entry *s, double *dw)
         s->iterations = bench_dopus_iterations(d);
         s->has_res = bench_dopus_residuals(d, s->res) == 0;
         bench_dopus_corrections(d, &s->inertia, &s->augment);
+        s->factorizations = bench_dopus_factorizations(d);
         bench_dopus_primal(d, dw);
         bench_dopus_free(d);
     }
@@ -145,6 +147,7 @@ static void solver_finish(solver_entry *s, double *dw)
         s->iterations = bench_qpbn_iterations(d);
         s->has_res = bench_qpbn_residuals(d, s->res) == 0;
         bench_qpbn_corrections(d, &s->inertia, &s->augment);
+        s->factorizations = bench_qpbn_factorizations(d);
         bench_qpbn_primal(d, dw);
         bench_qpbn_free(d);
     }
@@ -291,7 +294,8 @@ int main(int argc, char **argv)
             printf(", \"objective\": "); print_num(bench_qp_objective(&qp, dw));
             printf(", \"infeasibility\": "); print_num(bench_qp_infeasibility(&qp, dw));
             if (s->kind != 0)
-                printf(", \"inertia_corrections\": %d, \"terminal_augmentations\": %d", s->inertia, s->augment);
+                printf(", \"inertia_corrections\": %d, \"terminal_augmentations\": %d, \"factorizations\": %d",
+                       s->inertia, s->augment, s->factorizations);
             if (s->has_res) {
                 int j;
                 printf(", \"residuals\": [");

@@ -152,7 +152,7 @@ def _settings_codes(values: dict) -> dict:
             "regularization": st.code("regularization", values["regularization"]),
             "reg_eps": float(values["reg_eps"]), "cost_hessian": st.code("cost_hessian", values["cost_hessian"]),
             "lm": values["lm"] if values["lm"] == st.LM_AUTO else float(values["lm"]),
-            "qp_tol": st.qp_tol_default("double")}
+            "qp_tol": st.qp_tol_default("double") if values.get("qp_tol") is None else float(values["qp_tol"])}
 
 
 def _kkt_study(prob, Ms, values, iters, echo) -> dict:
@@ -418,6 +418,10 @@ def headline(result: dict) -> dict:
                 row["failed"] = fails
             elif med[a] and med[b]:
                 row.update(ratio=med[a] / med[b], paired_ratio=(paired.get(a) or {}).get(b))
+                ta, tb = (t[k].get("timers_total_us", {}).get("median") for k in (a, b))
+                if ta and tb:
+                    # both ours: the same ratio on the runtime's own timers (no call overhead)
+                    row["timers_ratio"] = ta / tb
             if a in track and b in track:
                 row["tracking"] = {a: track[a], b: track[b]}
             rows[name] = row
@@ -598,7 +602,8 @@ def format_table(result: dict) -> str:
                 lines.append(f"  {name:62s} no ratio: QP failures " + ", ".join(f"{k} {v}" for k, v in
                                                                             r["failed"].items()))
             elif "ratio" in r:
-                lines.append(f"  {name:62s} {r['ratio']:6.2f} / {_f(r.get('paired_ratio'), '5.2f')}{track}")
+                tim = f"  (runtime timers {r['timers_ratio']:.2f})" if r.get("timers_ratio") else ""
+                lines.append(f"  {name:62s} {r['ratio']:6.2f} / {_f(r.get('paired_ratio'), '5.2f')}{tim}{track}")
     if result.get("acados_picks"):
         lines.append("\nacados settings timed: " + "; ".join(f"{k} = {v['label']}"
                                                                for k, v in result["acados_picks"].items()))

@@ -249,7 +249,8 @@ def _real(tok: str) -> float:
     raise FirmwareError(f"a real has 8 or 16 hexadecimal digits, got {tok!r}")
 
 
-_INT_FIELDS = ("instructions", "extra", "stages", "M", "iter", "step", "status", "qp_iters", "ticks_feedback", "ticks_prepare", "stack")
+_INT_FIELDS = ("instructions", "extra", "stages", "M", "iter", "step", "status", "qp_iters", "ticks_feedback",
+               "ticks_prepare", "stack", "factorizations")
 
 
 def _parse_record(tokens: List[str]) -> Dict[str, Any]:
@@ -260,6 +261,14 @@ def _parse_record(tokens: List[str]) -> Dict[str, Any]:
         tok = tokens[i]
         if tok.startswith("0x") and key is not None:
             rec.setdefault(key, []).append(_real(tok))
+        elif tok == "phases":
+            # the instructions per phase of the solver's timers (enum dopus_phase order)
+            vals = []
+            while i + 1 < len(tokens) and tokens[i + 1].lstrip("-").isdigit():
+                vals.append(int(tokens[i + 1]))
+                i += 1
+            rec["phases"] = vals
+            key = None
         else:
             key = tok
             if tok in _INT_FIELDS or tok in ("N", "nx", "nu", "real_bytes", "solver_bytes", "default_clock",
@@ -277,7 +286,7 @@ def _parse_record(tokens: List[str]) -> Dict[str, Any]:
 
 def parse_output(text: str) -> Dict[str, Any]:
     """The records printed by fw_main.c: header, fixed runs per M, solutions, loop steps."""
-    out: Dict[str, Any] = {"fixed": {}, "solution": {}, "loop": [], "budget": [], "end": None}
+    out: Dict[str, Any] = {"fixed": {}, "solution": {}, "loop": [], "steady": [], "budget": [], "end": None}
     for line in text.splitlines():
         tokens = line.split()
         if not tokens:
@@ -291,8 +300,8 @@ def parse_output(text: str) -> Dict[str, Any]:
         elif kind == "solution":
             rec = _parse_record(rest)
             out["solution"][rec["M"]] = rec
-        elif kind == "loop":
-            out["loop"].append(_parse_record(rest))
+        elif kind in ("loop", "steady"):
+            out[kind].append(_parse_record(rest))
         elif kind == "budget":
             out["budget"].append(_parse_record(rest))
         elif kind == "end":
@@ -341,9 +350,26 @@ def _instructions(recs: List[Dict[str, Any]], per_tick: float) -> Dict[str, floa
     fb = [r["ticks_feedback"] * per_tick for r in its]
     pr = [r["ticks_prepare"] * per_tick for r in its]
     tot = [a + b for a, b in zip(fb, pr)]
-    return {"iteration_median": statistics.median(tot), "iteration_max": max(tot),
-            "feedback_median": statistics.median(fb), "prepare_median": statistics.median(pr),
-            "qp_iterations_median": statistics.median(r["qp_iters"] for r in its)}
+    out = {"iteration_median": statistics.median(tot), "iteration_max": max(tot),
+           "feedback_median": statistics.median(fb), "prepare_median": statistics.median(pr),
+           "qp_iterations_median": statistics.median(r["qp_iters"] for r in its)}
+    if its and "factorizations" in its[0]:
+        fac = [r["factorizations"] for r in its]
+        out.update(factorizations_median=statistics.median(fac), factorizations_max=max(fac),
+                   worst_instant=its[max(range(len(tot)), key=tot.__getitem__)]["iter"],
+                   per_instant=tot, factorizations=fac)
+    if its and its[0].get("phases"):
+        # the solver's phase timers on the instruction clock: per phase, the median over the
+        # instants and the value at the worst instant
+        from dopus_codegen import vocabulary
+
+        names = vocabulary.phases()
+        worst = max(range(len(tot)), key=tot.__getitem__)
+        out["phases_median"] = {n: statistics.median(r["phases"][j] for r in its) for j, n in enumerate(names)
+                                if j < len(its[0]["phases"])}
+        out["phases_worst"] = {n: its[worst]["phases"][j] for j, n in enumerate(names)
+                               if j < len(its[worst]["phases"])}
+    return out
 
 
 def summarize(target: str, build: Dict[str, Any], run: Dict[str, Any], N: int) -> Dict[str, Any]:
@@ -367,6 +393,9 @@ def summarize(target: str, build: Dict[str, Any], run: Dict[str, Any], N: int) -
         res["instructions"][label] = _instructions(recs, per_tick)
         res["kkt"][label] = [r["kkt"] for r in recs]
     res["instructions"]["loop_M1"] = _instructions([dict(r, iter=r["step"]) for r in run["loop"]], per_tick)
+    if run.get("steady"):
+        # the operating point: the closed loop from the default x0 (no disturbance)
+        res["instructions"]["steady_M1"] = _instructions([dict(r, iter=r["step"]) for r in run["steady"]], per_tick)
     res["loop"] = [{"step": r["step"], "kkt": r["kkt"], "u0": r["u0"], "xhat": r["xhat"]} for r in run["loop"]]
     # the budgeted closed loops (docs/algorithm.md section 14): instructions per instant
     res["budget"] = {}
@@ -489,6 +518,15 @@ def format_table(report: Dict[str, Any]) -> str:
         goal = 64 if s["real"] == "float" else 128
         lines.append(f"{t}: RAM (data + bss + stack of one iteration) {s['ram_total'] / 1024:.1f} KiB "
                      f"(goal: at most {goal} KiB), of which the solver struct {s['solver_bytes'] / 1024:.1f} KiB")
+    for t, s in tg.items():
+        for key, what in (("steady_M1", "closed loop at the operating point (default x0)"),
+                          ("loop_M1", "closed loop after the disturbance")):
+            r = s["instructions"].get(key)
+            if r:
+                lines.append(f"{t}: {what}, instructions per instant: median {r['iteration_median'] / 1e6:.2f} M "
+                             f"(feedback {r['feedback_median'] / 1e6:.2f} M), worst {r['iteration_max'] / 1e6:.2f} M"
+                             + (f"; QP factorisations median {r['factorizations_median']:g}, max "
+                                f"{r['factorizations_max']}" if "factorizations_median" in r else ""))
     for t, s in report["targets"].items():
         lines.append(f"{t}: calibration {s['calibration_ratio']:.6f} (counted / known instructions); "
                      f"closed-loop state deviation from the host double build {s['loop_deviation_vs_host_double']:.3g}; "

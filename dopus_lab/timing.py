@@ -608,6 +608,16 @@ def summarize(rec, ref=None):
     for p in rec["phases"]:
         keys += [k for k in p if k not in keys]
     out["phases_us"] = {k: stats([p.get(k, np.nan) for p in rec["phases"]]) for k in keys}
+    if "feedback" in keys and len(rec["phases"]) == tot.size:
+        # ours: the runtime's own timers of the step (the phases of feedback and prepare add
+        # up to t_feedback + t_prepare), without the timing process's call overhead
+        tim = np.array([sum(v for v in p.values() if np.isfinite(v)) for p in rec["phases"]], float)
+        out["timers_total_us"] = stats(tim)
+        if ref is not None and len(ref.get("phases", [])) == tim.size and ref["phases"] \
+                and "feedback" in ref["phases"][0]:
+            rtim = np.array([sum(v for v in p.values() if np.isfinite(v)) for p in ref["phases"]], float)
+            out["timers_paired_ratio"] = stats(tim / rtim)
+            out["timers_ratio"] = float(np.median(tim) / np.median(rtim))
     if rec["extra"] and "qp_iterations" in rec["extra"][0]:
         out["qp_iterations"] = stats([e["qp_iterations"] for e in rec["extra"]])
     if ref is not None and len(ref["feedback"]) == tot.size and tot.size:

@@ -18,6 +18,11 @@
  *    status (the closed-loop instant of sil and campaign), prepare.
  * 3. The same closed loop with an anytime budget per instant (docs/algorithm.md section 14)
  *    of FW_BUDGETS instructions on the instruction clock.
+ * 4. The steady closed loop at the operating point: as 2, the plant state at the default x0
+ *    (no disturbance), FW_LOOP_STEPS steps, lines "steady".
+ * The closed loops of 2 and 4 run the solver on the instruction clock (no budget: it only
+ * feeds the solver's phase timers), so each of their lines carries the instructions of every
+ * phase of dopus_info.timings ("phases", enum dopus_phase order; 0 on the host build).
  *
  * Every real number is printed as the hexadecimal bit pattern of its IEEE representation
  * (16 digits for double, 8 for float): exact, and printed without newlib's printf, whose
@@ -246,7 +251,7 @@ static double instruction_clock(void *ctx)
  * goes on. budget 0: the generated settings, lines "loop", returns the first failure;
  * budget > 0: a time budget of `budget` instructions per instant on the instruction clock,
  * lines "budget" with the extra iterations of each instant. */
-static int closed_loop(double budget)
+static int closed_loop(double budget, int steady)
 {
     fw_real xhat[FW_C(NX)], xnext[FW_C(NX)], u0[FW_C(NU)], k4[4];
     int i, k, status, plant_ok = 1, first_failure = FW_C(OK);
@@ -260,6 +265,8 @@ static int closed_loop(double budget)
         FW(set_clock)(&solver, instruction_clock, 0);
     } else {
         status = FW(setup)(&solver, NULL); /* the generated settings */
+        /* no budget: the clock only feeds the phase timers (instructions per phase) */
+        FW(set_clock)(&solver, instruction_clock, 0);
     }
     if (status == FW_C(OK)) {
         status = FW(init_nominal)(&solver, FW(x0_default));
@@ -268,7 +275,7 @@ static int closed_loop(double budget)
         return status;
     }
     for (i = 0; i < FW_C(NX); ++i) {
-        xhat[i] = xhat_fixed[i];
+        xhat[i] = steady ? FW(x0_default)[i] : xhat_fixed[i];
     }
     for (k = 1; k <= FW_LOOP_STEPS && plant_ok; ++k) {
         status = iteration(xhat, u0, &t_fb, &t_prep, &stack);
@@ -293,11 +300,19 @@ static int closed_loop(double budget)
             put_field("stages", info.instant_stages);
             put_iteration(status, info.qp_iterations, t_fb, t_prep, stack, k4, u0);
         } else {
-            put_str("loop");
+            unsigned ph;
+            put_str(steady ? "steady" : "loop");
             FW(get_settings)(&solver, &settings);
             put_field("M", settings.M);
             put_field("step", k);
             put_iteration(status, qp_iterations(), t_fb, t_prep, stack, k4, u0);
+            FW(get_info)(&solver, &info);
+            put_field("factorizations", info.qp_factorizations);
+            put_str(" phases");
+            for (ph = 0; ph < sizeof(info.timings) / sizeof(info.timings[0]); ++ph) {
+                put_char(' ');
+                put_int((long)info.timings[ph]);
+            }
         }
         put_reals("xhat", xhat, FW_C(NX));
         end_line();
@@ -333,10 +348,13 @@ int main(void)
         status = fixed_study(m_list[i]);
     }
     if (status == 0) {
-        status = closed_loop(0.0);
+        status = closed_loop(0.0, 0);
     }
     for (i = 0; budgets[i] > 0.0 && status == 0; ++i) {
-        status = closed_loop(budgets[i]);
+        status = closed_loop(budgets[i], 0);
+    }
+    if (status == 0) {
+        status = closed_loop(0.0, 1);
     }
     put_str("end");
     put_field("status", status);

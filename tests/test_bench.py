@@ -58,6 +58,14 @@ def test_bench_phases_sum_to_the_total(bench_result):
         ft = np.array(samples["full RTI"]["feedback"]) + np.array(samples["full RTI"]["prepare"])
         mt = np.array(samples["M=1"]["feedback"]) + np.array(samples["M=1"]["prepare"])
         assert m1["paired_ratio"]["median"] == pytest.approx(float(np.median(mt / ft)), rel=1e-12)
+        # the runtime's own timers of a step (every phase of feedback and prepare), recomputed
+        # from the kept samples, and their ratio in the headline
+        tims = {k: np.array([sum(ph.values()) for ph in samples[k]["phases"]]) for k in ("M=1", "full RTI")}
+        for k in tims:
+            assert t[k]["timers_total_us"]["median"] == pytest.approx(float(np.median(tims[k])), rel=1e-12)
+            assert np.all(tims[k] <= np.array(samples[k]["feedback"]) + np.array(samples[k]["prepare"]) + 2e-3)
+        assert res["headline"][phase]["M=1 / our full RTI"]["timers_ratio"] == pytest.approx(
+            float(np.median(tims["M=1"]) / np.median(tims["full RTI"])), rel=1e-12)
         head = res["headline"][phase]["M=1 / our full RTI"]
         assert head["ratio"] == m1["ratio"] and head["paired_ratio"] == m1["paired_ratio"]["median"]
         assert res["headline"][phase]["feedback latency (us, median)"]["M=1"] == m1["feedback_us"]["median"]

@@ -145,6 +145,16 @@ def test_instruction_count_and_memory_figures(report):
     assert s["default_clock"] == 0          # bare metal: no default clock, timings say so
     it = s["instructions"]["M1"]
     assert it["feedback_median"] + it["prepare_median"] >= it["iteration_median"] * 0.9
+    # the closed loops run the solver on the instruction clock: its phase timers of an instant
+    # (all but kkt, which times the program's own kkt_eval after the instant) add up to the
+    # program's count around the two calls, up to the timer reads and the tick of 40
+    for key in ("steady_M1", "loop_M1"):
+        r = s["instructions"][key]
+        worst = r["per_instant"].index(r["iteration_max"])
+        phases = sum(v for k, v in r["phases_worst"].items() if k != "kkt")
+        assert abs(phases - r["iteration_max"]) <= 0.01 * r["iteration_max"], (key, phases, r["iteration_max"])
+        assert worst + 1 == r["worst_instant"]
+        assert len(r["per_instant"]) == len(r["factorizations"]) == 20 and min(r["factorizations"]) >= 1
 
 
 def test_link_fails_on_an_allocator(toolchain, tmp_path):
