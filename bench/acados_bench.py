@@ -1,6 +1,6 @@
 """Time per iteration of our generated solver against acados on the same OCP file.
 
-    .venv/bin/python bench/acados_bench.py [OCP_FILE] [--json OUT] [--quick] [--cond 40,20,10,8,5,4,2]
+    .venv/bin/python bench/acados_bench.py [OCP_FILE] [--json OUT] [--quick] [--cond 40,20,10,8,5,4,2] [--block 1]
 
 The same as ``dopus-gen bench OCP_FILE --M 1,full --against acados`` (the work lives in
 ``dopus_lab/bench.py``, which prepares in the project's environment, and
@@ -24,12 +24,13 @@ def main(argv=None) -> int:
     ap.add_argument("--work", default=str(ROOT / "build" / "acados"))
     ap.add_argument("--quick", action="store_true", help="fewer settings and repetitions (a smoke run)")
     ap.add_argument("--cond", default="40,20,10,8,5,4,2", help="partial-condensing horizons to search")
+    ap.add_argument("--block", type=int, default=1, help="the timed settings alternate every BLOCK steps")
     a = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
     from dopus_codegen.cli import main as cli
 
     args = ["bench", a.ocp_file, "--M", "1,full", "--against", "acados", "--json", a.json, "--work", a.work,
-            "--cond", a.cond]
+            "--cond", a.cond, "--block", str(a.block)]
     if a.quick:
         args += ["--quick", "--reps", "100", "--steps", "100", "--settle", "50"]
     return cli.main(args, prog_name="dopus-gen", standalone_mode=True)

@@ -290,7 +290,7 @@ def _write_outputs(result: dict, json_out, plot_out, plot, echo) -> dict:
 def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None, json_out=None, plot_out=None,
               reps: int = 300, steps: int = 300, settle: int = 100, kkt_iters: int = 60,
               cond_list=(40, 20, 10, 8, 5, 4, 2), quick: bool = False, work=None,
-              echo: Callable = None, keep_samples: bool = False, **cli) -> dict:
+              echo: Callable = None, keep_samples: bool = False, block: int = 1, **cli) -> dict:
     """The body of ``dopus-gen bench OCP_FILE``; returns the result (also written as JSON)."""
     from dopus_codegen.problem.ocp import load_ocp
 
@@ -302,6 +302,8 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
             raise BenchError(f"{name} must be a positive integer, got {v!r}")
     if isinstance(settle, bool) or not isinstance(settle, int) or settle < 0:
         raise BenchError(f"--settle must be a non-negative integer, got {settle!r}")
+    if isinstance(block, bool) or not isinstance(block, int) or block < 1:
+        raise BenchError(f"--block must be a positive integer, got {block!r}")
     m_list = parse_m_list(m_list) if isinstance(m_list, str) else list(m_list)
     ocp = load_ocp(ocp_file)
     values, sources = _resolve_settings(ocp, cli)
@@ -328,7 +330,7 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
     ref = _label(disc.N - 1, disc.N)
     plan = {"libs": {"main": prob["spec"]}, "settings_codes": _settings_codes(values),
             "runs": [{"lib": "main", "M": M, "label": _label(M, disc.N)} for M in Ms],
-            "reps": reps, "warmup": 10, "ref_label": ref, "keep_samples": keep_samples,
+            "reps": reps, "warmup": 10, "ref_label": ref, "keep_samples": keep_samples, "block": block,
             "phases": [{"name": "operating point", "kind": "loop", "plant_lib": "main", "x_start": x0.tolist(),
                         "guess": nominal, "skip": settle, "steps": reps},
                        {"name": "closed loop", "kind": "loop", "plant_lib": "main",
@@ -341,7 +343,7 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
     result = {"problem": disc.name, "ocp_file": str(ocp_file), "N": int(disc.N), "nx": int(disc.nx),
               "nu": int(disc.nu), "dt": float(disc.dt), "settings": {k: values[k] for k in values if k != "M"},
               "sources": {k: sources[k] for k in sources if k != "M"}, "M": Ms, "reference": ref,
-              "library": prob["spec"]["lib"], "reps": reps, "settle": settle, "steps": steps,
+              "library": prob["spec"]["lib"], "reps": reps, "settle": settle, "steps": steps, "block": block,
               "nominal_objective": float(prob["nominal_info"].get("objective", float("nan"))),
               "kkt": kkt, **res}
     result["machine"] = res.get("machine_before")
@@ -549,7 +551,8 @@ def format_table(result: dict) -> str:
     ma = result.get("machine_after") or {}
     lines = [f"{result['problem']}: N={result['N']}, nx={result['nx']}, nu={result['nu']}; "
              + ", ".join(f"{k} {v}" for k, v in result.get("settings", {}).items()),
-             f"CPU {m.get('cpu')}, {m.get('cores')} cores, load {m.get('loadavg')} before, {ma.get('loadavg')} after"]
+             f"CPU {m.get('cpu')}, {m.get('cores')} cores, load {m.get('loadavg')} before, {ma.get('loadavg')} after; "
+             f"the settings alternate every {result.get('block', 1)} step(s)"]
     prep_keys = ("shift", "gradients", "rho", "hessians", "regularization", "assembly", "lm", "recovery")
     for phase, t in result.get("timed", {}).items():
         lines.append(f"\n{phase} (us per iteration: median [p10, p90]; ratio to our full RTI: of the medians / "

@@ -543,7 +543,8 @@ def _guess_for(starts, label):
     return starts[label] if "x" not in starts and label in starts else starts
 
 
-def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x0_init=None, stop_on_fail=False):
+def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x0_init=None, stop_on_fail=False,
+                block=1):
     """Each runner in its own closed loop against ``plant(x, u) -> x+``, alternating one
     sampling step of each. ``starts[label]`` (or ``starts`` itself, a dict with x, u, ...)
     is the guess of ``start(x0_init or x_start, guess)``. The first ``skip`` steps are not
@@ -553,7 +554,11 @@ def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x
     and a plant that diverges on its control is reset). Returns per label: ``fail``,
     ``feedback``/``prepare`` (us per recorded step), ``phases`` (the solver's own timers, us),
     ``x`` (the plant states, steps+1 rows), ``u`` (the applied controls). ``stop_on_fail``:
-    a runner's loop ends at its first failure (the screening only asks whether one fails)."""
+    a runner's loop ends at its first failure (the screening only asks whether one fails).
+    ``block``: the runners alternate every ``block`` sampling steps (1: every step, each
+    step then starts with the caches the other runners left; larger blocks keep a runner's
+    data in the caches from one step to the next, as on a core that runs the controller
+    alone, while load from other processes still hits all of them alike at that scale)."""
     out = {r.label: _new_record() for r in runners}
     xs = {r.label: np.array(x_start, float) for r in runners}
     for r in runners:
@@ -563,23 +568,25 @@ def closed_loop(runners, plant, x_start, starts, steps, skip=0, progress=None, x
         out[r.label]["u"] = []
     total = steps + skip
     stopped = set()
-    for i in range(total):
+    block = max(1, int(block))
+    for i0 in range(0, total, block):
         for r in runners:
-            if r.label in stopped:
-                continue
-            rec = out[r.label]
-            u, failed = _step(r, xs[r.label], rec, i >= skip)
-            rec["u"].append(np.asarray(u, float).tolist())
-            if failed and stop_on_fail:
-                stopped.add(r.label)
-            xn = plant(xs[r.label], u, i)
-            if not (np.all(np.isfinite(xn)) and np.abs(xn).max() < 1e8):
-                rec["diverged_at"] = rec.get("diverged_at", i)
-                xn = np.array(x_start, float)
-            xs[r.label] = xn
-            rec["x"].append(xn.tolist())
+            for i in range(i0, min(total, i0 + block)):
+                if r.label in stopped:
+                    break
+                rec = out[r.label]
+                u, failed = _step(r, xs[r.label], rec, i >= skip)
+                rec["u"].append(np.asarray(u, float).tolist())
+                if failed and stop_on_fail:
+                    stopped.add(r.label)
+                xn = plant(xs[r.label], u, i)
+                if not (np.all(np.isfinite(xn)) and np.abs(xn).max() < 1e8):
+                    rec["diverged_at"] = rec.get("diverged_at", i)
+                    xn = np.array(x_start, float)
+                xs[r.label] = xn
+                rec["x"].append(xn.tolist())
         if progress is not None:
-            progress.update(i + 1)
+            progress.update(min(total, i0 + block))
     return out
 
 
@@ -846,7 +853,8 @@ def run_plan(plan, quiet_acados=True):
                 rec = operating_point(rs, phase["xhat"], phase["guess"], reps, warmup=warmup, progress=pg)
             else:
                 rec = closed_loop(rs, lib.plant, phase["x_start"], phase["guess"], phase["steps"],
-                                  skip=phase.get("skip", 0), progress=pg, x0_init=phase.get("x_init"))
+                                  skip=phase.get("skip", 0), progress=pg, x0_init=phase.get("x_init"),
+                                  block=plan.get("block", 1))
             ref = rec.get(ref_label)
             # per-step ratios of every pair (ours / any) of this interleaved run
             paired = {}

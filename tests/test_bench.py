@@ -221,6 +221,24 @@ def test_bench_tracking_is_the_scenario_signal_of_each_loop(bench_result, second
         assert head == {"M=1": res["tracking"][phase]["M=1"], "full RTI": res["tracking"][phase]["full RTI"]}
 
 
+def test_blocks_of_steps_give_the_same_closed_loops(bench_result, tmp_path):
+    """--block: the settings alternate every few steps instead of every step; each closed
+    loop is its own, so the states and controls are those of the step-by-step run."""
+    from dopus_lab.bench import run_bench
+
+    res, _work = bench_result
+    blk = run_bench(SECOND_FILE, m_list="1,full", reps=25, settle=10, steps=25, kkt_iters=20, work=tmp_path,
+                    keep_samples=True, block=7)
+    assert blk["block"] == 7
+    for phase, runs in res["trajectories"].items():
+        for label, tr in runs.items():
+            np.testing.assert_array_equal(np.array(blk["trajectories"][phase][label]["x"]), np.array(tr["x"]))
+            np.testing.assert_array_equal(np.array(blk["trajectories"][phase][label]["u"]), np.array(tr["u"]))
+            assert blk["timed"][phase][label]["steps"] == 25
+    with pytest.raises(Exception, match="--block must be a positive integer"):
+        run_bench(SECOND_FILE, m_list="1,full", block=0, work=tmp_path)
+
+
 def test_headline_gives_no_ratio_for_a_pair_with_a_qp_failure():
     """A ratio only between settings without a QP failure in any timed phase; ours at its
     default tolerance and at acados' (the matched runs)."""
