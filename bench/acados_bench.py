@@ -25,12 +25,13 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="fewer settings and repetitions (a smoke run)")
     ap.add_argument("--cond", default="40,20,10,8,5,4,2", help="partial-condensing horizons to search")
     ap.add_argument("--block", type=int, default=1, help="the timed settings alternate every BLOCK steps")
+    ap.add_argument("--opt", default=None, help="compile flags of our library (default: the generated default)")
     a = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
     from dopus_codegen.cli import main as cli
 
     args = ["bench", a.ocp_file, "--M", "1,full", "--against", "acados", "--json", a.json, "--work", a.work,
-            "--cond", a.cond, "--block", str(a.block)]
+            "--cond", a.cond, "--block", str(a.block)] + (["--opt", a.opt] if a.opt else [])
     if a.quick:
         args += ["--quick", "--reps", "100", "--steps", "100", "--settle", "50"]
     return cli.main(args, prog_name="dopus-gen", standalone_mode=True)

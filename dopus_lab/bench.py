@@ -112,9 +112,13 @@ def _guess_dict(g) -> dict:
     return out
 
 
-def _problem(ocp, echo) -> dict:
+def _problem(ocp, echo, opt: Optional[str] = None, work: Optional[Path] = None) -> dict:
     """Discretise, generate and build (cached), IPOPT's nominal solution; the library spec
-    of the timing process."""
+    of the timing process. ``opt``: our library built with these compile flags instead of
+    the default, in a copy of the cached folder under ``work``."""
+    import shutil
+    import warnings
+
     from dopus_codegen import vocabulary
     from dopus_codegen.codegen.build import build
     from dopus_codegen.problem.derivatives import build_functions
@@ -124,7 +128,18 @@ def _problem(ocp, echo) -> dict:
     disc = build_functions(ocp)
     echo(f"{disc.name}: N={disc.N}, nx={disc.nx}, nu={disc.nu}: generating and building ...")
     folder = build_for(disc)
-    res = build(folder)
+    if opt:
+        # a copy, so that the shared cached folder keeps its default build
+        slug = "".join(ch if ch.isalnum() else "_" for ch in opt)
+        dst = Path(work) / f"{folder.name}_opt{slug}"
+        shutil.copytree(folder, dst, dirs_exist_ok=True)
+        folder = dst
+        echo(f"{disc.name}: our library built with '{opt}' in {folder}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = build(folder, opt=opt, echo=None)
+    else:
+        res = build(folder)
     echo(f"{disc.name}: IPOPT's nominal solution at the initial state ...")
     nominal, info = solve_ocp(disc, disc.x0)
     if not info.get("success", False):
@@ -135,6 +150,12 @@ def _problem(ocp, echo) -> dict:
             "nx": int(disc.nx), "nu": int(disc.nu), "p0": (p0[0] if p0.ndim > 1 else p0).reshape(-1).tolist(),
             "phases": list(vocabulary.phases()), "folder": str(folder)}
     return {"disc": disc, "spec": spec, "nominal": nominal, "nominal_info": info}
+
+
+def _default_opt() -> str:
+    from dopus_codegen.codegen.flags import DEFAULT_OPT
+
+    return DEFAULT_OPT
 
 
 def _disturbed(disc) -> Optional[np.ndarray]:
@@ -290,7 +311,8 @@ def _write_outputs(result: dict, json_out, plot_out, plot, echo) -> dict:
 def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None, json_out=None, plot_out=None,
               reps: int = 300, steps: int = 300, settle: int = 100, kkt_iters: int = 60,
               cond_list=(40, 20, 10, 8, 5, 4, 2), quick: bool = False, work=None,
-              echo: Callable = None, keep_samples: bool = False, block: int = 1, **cli) -> dict:
+              echo: Callable = None, keep_samples: bool = False, block: int = 1, opt: Optional[str] = None,
+              **cli) -> dict:
     """The body of ``dopus-gen bench OCP_FILE``; returns the result (also written as JSON)."""
     from dopus_codegen.problem.ocp import load_ocp
 
@@ -307,7 +329,9 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
     m_list = parse_m_list(m_list) if isinstance(m_list, str) else list(m_list)
     ocp = load_ocp(ocp_file)
     values, sources = _resolve_settings(ocp, cli)
-    prob = _problem(ocp, echo)
+    work = Path(work) if work else Path(tempfile.gettempdir()) / f"dopus-bench-{os.getuid()}"
+    work.mkdir(parents=True, exist_ok=True)
+    prob = _problem(ocp, echo, opt=opt, work=work)
     disc = prob["disc"]
     if values["hessian"] == "gauss-newton" and not disc.has_gn:
         raise BenchError(f"{disc.name}: --hessian gauss-newton needs a least-squares stage cost "
@@ -323,7 +347,6 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
     echo(f"{disc.name}: settings: M {','.join(map(str, Ms))}, "
          + st.describe({k: v for k, v in values.items() if k != "M"}, sources))
     kkt = _kkt_study(prob, Ms, values, kkt_iters, echo)
-    work = Path(work) if work else Path(tempfile.gettempdir()) / f"dopus-bench-{os.getuid()}"
     xd = _disturbed(disc)
     x0 = np.asarray(disc.x0, float)
     nominal = _guess_dict(prob["nominal"])
@@ -344,6 +367,7 @@ def run_bench(ocp_file, m_list=("1", "5", "full"), against: Optional[str] = None
               "nu": int(disc.nu), "dt": float(disc.dt), "settings": {k: values[k] for k in values if k != "M"},
               "sources": {k: sources[k] for k in sources if k != "M"}, "M": Ms, "reference": ref,
               "library": prob["spec"]["lib"], "reps": reps, "settle": settle, "steps": steps, "block": block,
+              "ours_opt": opt or _default_opt(),
               "nominal_objective": float(prob["nominal_info"].get("objective", float("nan"))),
               "kkt": kkt, **res}
     result["machine"] = res.get("machine_before")
@@ -552,7 +576,8 @@ def format_table(result: dict) -> str:
     lines = [f"{result['problem']}: N={result['N']}, nx={result['nx']}, nu={result['nu']}; "
              + ", ".join(f"{k} {v}" for k, v in result.get("settings", {}).items()),
              f"CPU {m.get('cpu')}, {m.get('cores')} cores, load {m.get('loadavg')} before, {ma.get('loadavg')} after; "
-             f"the settings alternate every {result.get('block', 1)} step(s)"]
+             f"the settings alternate every {result.get('block', 1)} step(s); ours built with "
+             f"'{result.get('ours_opt', '')}'"]
     prep_keys = ("shift", "gradients", "rho", "hessians", "regularization", "assembly", "lm", "recovery")
     for phase, t in result.get("timed", {}).items():
         lines.append(f"\n{phase} (us per iteration: median [p10, p90]; ratio to our full RTI: of the medians / "

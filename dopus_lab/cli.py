@@ -45,13 +45,16 @@ __all__ = ["bench", "firmware_report"]
               help="The timed settings alternate every BLOCK sampling steps (1: every step, each step starting "
                    "with the caches the others left; e.g. 10: a setting's data stays in the caches between its "
                    "steps, as on a core that runs the controller alone).")
+@click.option("--opt", default=None,
+              help="Compile flags of our library for the timed runs (e.g. '-O3 -march=native', as acados' fastest "
+                   "build variant) [default: the generated default, -O3].")
 @click.option("--quick", is_flag=True, help="acados: fewer settings and closed-loop steps (a smoke run).")
 @click.option("--work", type=click.Path(file_okay=False), default=None,
               help="Folder for the plan, acados' builds and the export [default: a folder in the temp dir].")
 @solver_options("0: the paper's literal QP",
                  names=("hessian", "regularization", "reg_eps", "cost_hessian", "lm"))
-def bench(ocp_file, m_list, against, json_out, plot_out, reps, settle, steps, kkt_iters, scaling, cond, block, quick,
-          work, hessian, regularization, reg_eps, cost_hessian, lm):
+def bench(ocp_file, m_list, against, json_out, plot_out, reps, settle, steps, kkt_iters, scaling, cond, block, opt,
+          quick, work, hessian, regularization, reg_eps, cost_hessian, lm):
     """Time per iteration of the generated solver on OCP_FILE, by phase, for several M.
 
     Both at the operating point (the closed loop from the nominal solution, after it has
@@ -81,7 +84,7 @@ def bench(ocp_file, m_list, against, json_out, plot_out, reps, settle, steps, kk
             raise BenchError(f"--cond: expected comma-separated integers, got {cond!r}") from None
         res = run_bench(ocp_file, m_list=m_list, against=None if against == "none" else against, json_out=json_out,
                         plot_out=plot_out, reps=reps, steps=steps, settle=settle, kkt_iters=kkt_iters,
-                        cond_list=cond_list, quick=quick, work=work, echo=echo, block=block, **cli)
+                        cond_list=cond_list, quick=quick, work=work, echo=echo, block=block, opt=opt, **cli)
     except (OcpError, SettingError) as exc:
         raise BadInput(str(exc)) from None
     except (BenchError, ValueError) as exc:

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import json
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -237,6 +239,28 @@ def test_blocks_of_steps_give_the_same_closed_loops(bench_result, tmp_path):
             assert blk["timed"][phase][label]["steps"] == 25
     with pytest.raises(Exception, match="--block must be a positive integer"):
         run_bench(SECOND_FILE, m_list="1,full", block=0, work=tmp_path)
+
+
+def test_opt_builds_a_copy_with_the_flags(bench_result, tmp_path):
+    """--opt: our library is built with the given flags in a copy of the cached folder (which
+    keeps its default build), and the closed loops follow the default build's closely."""
+    from dopus_codegen.codegen.build import recorded_opt
+    from dopus_codegen.codegen.flags import DEFAULT_OPT
+    from dopus_lab.bench import run_bench
+
+    res, _work = bench_result
+    opt = "-O2 -fno-tree-vectorize"
+    other = run_bench(SECOND_FILE, m_list="1,full", reps=25, settle=10, steps=25, kkt_iters=20, work=tmp_path,
+                      keep_samples=True, opt=opt)
+    assert other["ours_opt"] == opt and res["ours_opt"] == DEFAULT_OPT
+    # the library lives in the folder's build/ subfolder
+    lib = Path(other["library"])
+    assert lib.is_relative_to(tmp_path) and recorded_opt(lib.parent.parent) == opt
+    assert recorded_opt(Path(res["library"]).parent.parent) == DEFAULT_OPT
+    for phase, runs in res["trajectories"].items():
+        for label, tr in runs.items():
+            np.testing.assert_allclose(np.array(other["trajectories"][phase][label]["x"]), np.array(tr["x"]),
+                                       rtol=1e-9, atol=1e-9)
 
 
 def test_headline_gives_no_ratio_for_a_pair_with_a_qp_failure():
