@@ -92,7 +92,7 @@ HPIPM_CONFIGS = {
 # ratio columns (numerator, denominator)
 RANDOM_RATIOS = [("ours", "hpipm"), ("ours", "hpipm_best"), ("ours_alt", "hpipm_best")]
 ROBOT_RATIOS = [("ours", "hpipm"), ("ours", "hpipm_scaled"), ("ours", "hpipm_best"),
-                ("ours_alt", "hpipm_scaled"), ("ours_alt", "hpipm_best")]
+                ("ours_alt", "hpipm_scaled"), ("ours_alt", "hpipm_best"), ("ours_warm", "hpipm_best")]
 HARNESS_SOURCES = ("qp_bench_main.c", "qp_bench_qp.c", "qp_bench_hpipm.c")
 
 
@@ -318,6 +318,10 @@ def run_harness(exe: Path, qps: list, solvers: list, reps: int, warmup: int, tol
             cmd += ["--hpipm", s["name"], str(s["mode"]), str(s["eq_mask"]), repr(s["eq_scale"]), str(s["ric_alg"])]
         elif s["kind"] == "dopus_alt":
             cmd += ["--dopus-alt", s["name"]]
+        elif s["kind"] == "dopus_warm":
+            # the QP indices where a new sequence (run) starts: there the warm chain starts cold
+            resets = [i for i, q in enumerate(qps) if i == 0 or q.get("_run") != qps[i - 1].get("_run")]
+            cmd += ["--dopus-warm", s["name"], ",".join(map(str, resets))]
         else:
             cmd += ["--dopus", s["name"]]
     r = subprocess.run(cmd, capture_output=True, text=True)
@@ -418,7 +422,7 @@ def converging_modes(entries: list, tol: float) -> dict:
                "t_median": med([e["solvers"][n]["t_median"] for e in entries]),
                "time_per_iter_median": med([e["solvers"][n]["time_per_iter"] for e in entries]),
                "iterations_median": med([e["solvers"][n]["iterations"] for e in entries])}
-        for ours in ("ours", "ours_alt"):
+        for ours in ("ours", "ours_alt", "ours_warm"):
             if ours in entries[0]["solvers"]:
                 row[f"{ours}/qp"] = med([e["solvers"][ours]["t_median"] / e["solvers"][n]["t_median"]
                                          for e in entries if e["solvers"][n]["t_median"]])
@@ -439,14 +443,14 @@ def print_modes(title: str, modes: dict, log=print) -> None:
     log(f"\n{title}: HPIPM configurations, converged QPs (own residuals <= tol), medians, ours against each "
         f"(medians of the per-QP ratios)")
     log(f"{'config':24s} {'conv':>6s} {'us/QP':>8s} {'iters':>6s} {'us/iter':>8s} {'ours/QP':>8s} {'ours/it':>8s} "
-        f"{'ours/fac':>8s} {'alt/QP':>7s} {'alt/it':>7s}")
+        f"{'ours/fac':>8s} {'alt/QP':>7s} {'alt/it':>7s} {'warm/QP':>7s} {'warm/fac':>8s}")
     for n, r in modes["configs"].items():
         f = lambda v, w=8, d=2: f"{v:{w}.{d}f}" if v is not None else " " * (w - 1) + "-"  # noqa: E731
         log(f"{n:24s} {r['converged']:3d}/{r['of']:<2d} {f(1e6 * r['t_median'] if r['t_median'] else None, 8, 1)} "
             f"{f(r['iterations_median'], 6, 1)} "
             f"{f(1e6 * r['time_per_iter_median'] if r['time_per_iter_median'] else None, 8, 1)} "
             f"{f(r.get('ours/qp'))} {f(r.get('ours/iter'))} {f(r.get('ours/fact'))} {f(r.get('ours_alt/qp'), 7)} "
-            f"{f(r.get('ours_alt/iter'), 7)}"
+            f"{f(r.get('ours_alt/iter'), 7)} {f(r.get('ours_warm/qp'), 7)} {f(r.get('ours_warm/fact'))}"
             + ("   <- best converging" if n == modes["best"] else ""))
 
 
@@ -592,6 +596,10 @@ def main(argv=None) -> int:
         sv = []
         if with_ours and hp_name == "acados":
             sv.append({"kind": "dopus", "name": "ours"})
+            if robot:
+                # ours warm-started along each run as in the closed loop (the previous QP's
+                # multipliers, the active-set start)
+                sv.append({"kind": "dopus_warm", "name": "ours_warm"})
             if args.alt_cflags:
                 sv.append({"kind": "dopus_alt", "name": "ours_alt"})
         for name, cfg in HPIPM_CONFIGS.items():
@@ -613,7 +621,8 @@ def main(argv=None) -> int:
         entries, cmds = [], []
         for N, items in sorted(by_n.items()):
             tags = [t for t, _ in items]
-            qps = [q for _, q in items]
+            # the run a QP belongs to (its tag without the iteration): the warm chain's sequences
+            qps = [dict(q, _run=t.rsplit("_", 1)[0]) for t, q in items]
             refs = [None] * len(qps) if args.no_reference else reference_primals(qps, log)
             sizes = {k: int(qps[0][k]) for k in ("N", "nx", "nu", "ng", "nr", "ne")}
             merged, prims = None, {}
@@ -753,7 +762,9 @@ def _several_tolerances(argv, tols, json_path: Path) -> int:
         print(f"  tol {tol}: {b} ({r['converged']}/{r['of']}, {1e6 * r['t_median']:.1f} us/QP, "
               f"{r['iterations_median']:g} iterations): ours/QP {r.get('ours/qp', float('nan')):.2f}, "
               f"ours/iter {r.get('ours/iter', float('nan')):.2f}, ours per factorisation / its per iteration "
-              f"{r.get('ours/fact') if r.get('ours/fact') is not None else float('nan'):.2f}; ours_alt {r.get('ours_alt/qp', float('nan')):.2f} / "
+              f"{r.get('ours/fact') if r.get('ours/fact') is not None else float('nan'):.2f}; ours_warm (active-set "
+              f"start from the previous QP) per QP {r.get('ours_warm/qp') or float('nan'):.2f}, per factorisation "
+              f"{r.get('ours_warm/fact') or float('nan'):.2f}; ours_alt {r.get('ours_alt/qp', float('nan')):.2f} / "
               f"{r.get('ours_alt/iter', float('nan')):.2f}")
     json_path.parent.mkdir(parents=True, exist_ok=True)
     json_path.write_text(json.dumps({"tolerances": summary}, indent=1, default=_json_default))

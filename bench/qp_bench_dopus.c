@@ -12,6 +12,15 @@ struct bench_dopus {
     dopus_qp_sol sol;
     dopus_qp_info info;
     dopus_qp_settings settings;
+    const bench_dopus_warm *warm;
+};
+
+/* the sweeps of the closed loop's active-set start (DOPUS_QP_ACTIVE_SET of dopus_solver.h) */
+#define QPB_ACTIVE_SET_SWEEPS 8
+
+struct bench_dopus_warm {
+    dopus_qp_sol sol;
+    int have;
 };
 
 bench_dopus *bench_dopus_create(const bench_qp *qp, double tol, int iter_max)
@@ -46,6 +55,18 @@ void bench_dopus_set_data(bench_dopus *d, const bench_qp *qp)
             memcpy(in->lg[k], qp->lg + k * ng, sizeof(double) * (size_t)ng);
             memcpy(in->ug[k], qp->ug + k * ng, sizeof(double) * (size_t)ng);
         }
+    }
+    if (d->warm != NULL && d->warm->have) {
+        /* the warm point: the previous solution's multipliers, primal zero but x_0 */
+        memcpy(&d->sol, &d->warm->sol, sizeof(d->sol));
+        memset(d->sol.x, 0, sizeof(d->sol.x));
+        memset(d->sol.u, 0, sizeof(d->sol.u));
+        memcpy(d->sol.x[0], qp->dx0, sizeof(double) * (size_t)nx);
+        d->settings.warm_start = 1;
+        d->settings.active_set = QPB_ACTIVE_SET_SWEEPS;
+    } else {
+        d->settings.warm_start = 0;
+        d->settings.active_set = 0;
     }
     in->HN = qp->AN;
     in->R = DOPUS_NR > 0 ? qp->R : NULL;
@@ -95,5 +116,19 @@ void bench_dopus_corrections(const bench_dopus *d, int *inertia, int *augment)
 }
 
 int bench_dopus_factorizations(const bench_dopus *d) { return d->info.factorizations; }
+
+bench_dopus_warm *bench_dopus_warm_new(void) { return (bench_dopus_warm *)calloc(1, sizeof(bench_dopus_warm)); }
+
+void bench_dopus_warm_reset(bench_dopus_warm *w) { w->have = 0; }
+
+void bench_dopus_warm_keep(bench_dopus_warm *w, const bench_dopus *d)
+{
+    memcpy(&w->sol, &d->sol, sizeof(w->sol));
+    w->have = d->info.status == 0;
+}
+
+void bench_dopus_warm_use(bench_dopus *d, const bench_dopus_warm *w) { d->warm = w; }
+
+void bench_dopus_warm_free(bench_dopus_warm *w) { free(w); }
 
 void bench_dopus_free(bench_dopus *d) { free(d); }

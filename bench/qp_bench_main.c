@@ -34,11 +34,12 @@
 #include "qp_bench_qpbn.h"
 #endif
 
-#define MAX_SOLVERS 12
+#define MAX_SOLVERS 16
 
 typedef struct {
     char name[64];
-    int kind; /* 0 HPIPM, 1 ours, 2 ours compiled with the alternative flags */
+    int kind; /* 0 HPIPM, 1 ours, 2 ours compiled with the alternative flags, 3 ours warm-started
+                 along the sequence (the closed loop's warm point and active-set start) */
     bench_hpipm_opts hopts;
     void *handle;
     double *times, *set_times;
@@ -79,6 +80,11 @@ static void print_num(double v)
     else printf("null");
 }
 
+#ifdef QPB_WITH_DOPUS
+/* the solution the warm-started entry (kind 3) starts the next QP from */
+static bench_dopus_warm *warm_chain;
+#endif
+
 static int solver_create(solver_entry *s, const bench_qp *qp, double tol, int iter_max)
 {
     if (s->kind == 0) {
@@ -88,7 +94,8 @@ static int solver_create(solver_entry *s, const bench_qp *qp, double tol, int it
         return s->handle == NULL;
     }
 #ifdef QPB_WITH_DOPUS
-    if (s->kind == 1) s->handle = bench_dopus_create(qp, tol, iter_max);
+    if (s->kind == 1 || s->kind == 3) s->handle = bench_dopus_create(qp, tol, iter_max);
+    if (s->kind == 3 && s->handle != NULL) bench_dopus_warm_use((bench_dopus *)s->handle, warm_chain);
 #endif
 #ifdef QPB_WITH_DOPUS_ALT
     if (s->kind == 2) s->handle = bench_qpbn_create(qp, tol, iter_max);
@@ -100,7 +107,7 @@ static void solver_set(solver_entry *s, const bench_qp *qp)
 {
     if (s->kind == 0) bench_hpipm_set_data((bench_hpipm *)s->handle, qp);
 #ifdef QPB_WITH_DOPUS
-    else if (s->kind == 1) bench_dopus_set_data((bench_dopus *)s->handle, qp);
+    else if (s->kind == 1 || s->kind == 3) bench_dopus_set_data((bench_dopus *)s->handle, qp);
 #endif
 #ifdef QPB_WITH_DOPUS_ALT
     else if (s->kind == 2) bench_qpbn_set_data((bench_qpbn *)s->handle, qp);
@@ -111,7 +118,7 @@ static int solver_solve(solver_entry *s)
 {
     if (s->kind == 0) return bench_hpipm_solve((bench_hpipm *)s->handle);
 #ifdef QPB_WITH_DOPUS
-    if (s->kind == 1) return bench_dopus_solve((bench_dopus *)s->handle);
+    if (s->kind == 1 || s->kind == 3) return bench_dopus_solve((bench_dopus *)s->handle);
 #endif
 #ifdef QPB_WITH_DOPUS_ALT
     if (s->kind == 2) return bench_qpbn_solve((bench_qpbn *)s->handle);
@@ -131,8 +138,9 @@ static void solver_finish(solver_entry *s, double *dw)
         bench_hpipm_free(h);
     }
 #ifdef QPB_WITH_DOPUS
-    else if (s->kind == 1) {
+    else if (s->kind == 1 || s->kind == 3) {
         bench_dopus *d = (bench_dopus *)s->handle;
+        if (s->kind == 3) bench_dopus_warm_keep(warm_chain, d);
         s->iterations = bench_dopus_iterations(d);
         s->has_res = bench_dopus_residuals(d, s->res) == 0;
         bench_dopus_corrections(d, &s->inertia, &s->augment);
@@ -161,6 +169,7 @@ int main(int argc, char **argv)
     int ns = 0, reps = 100, warmup = 10, iter_max = 100, min_reps = 20, i, q, nqp;
     double tol = 1e-8, count, budget = 1e30;
     const char *qpfile = NULL, *solfile = NULL, *only = NULL;
+    const char *warm_resets = ""; /* comma-separated QP indices where the warm chain starts cold */
     FILE *f, *fsol = NULL;
 
     memset(sv, 0, sizeof(sv));
@@ -192,6 +201,17 @@ int main(int argc, char **argv)
             fprintf(stderr, "qp_bench_main: built without the alternative build of our solver\n");
             return 2;
 #endif
+        } else if (!strcmp(argv[i], "--dopus-warm") && i + 2 < argc && ns < MAX_SOLVERS) {
+#ifdef QPB_WITH_DOPUS
+            solver_entry *s = &sv[ns++];
+            strncpy(s->name, argv[i + 1], sizeof(s->name) - 1);
+            s->kind = 3;
+            warm_resets = argv[i + 2];
+            i += 2;
+#else
+            fprintf(stderr, "qp_bench_main: built without our solver (QPB_WITH_DOPUS)\n");
+            return 2;
+#endif
         } else if (!strcmp(argv[i], "--dopus") && i + 1 < argc && ns < MAX_SOLVERS) {
 #ifdef QPB_WITH_DOPUS
             solver_entry *s = &sv[ns++];
@@ -212,7 +232,8 @@ int main(int argc, char **argv)
     if (min_reps > reps) min_reps = reps;
     if (qpfile == NULL || ns == 0 || reps < 1 || min_reps < 1) {
         fprintf(stderr, "usage: qp_bench_main QPFILE [--reps R] [--warmup W] [--tol T] [--iter-max K] "
-                        "[--sol FILE] [--only NAME] (--hpipm NAME MODE EQMASK EQSCALE RICALG | --dopus NAME)...\n");
+                        "[--sol FILE] [--only NAME] (--hpipm NAME MODE EQMASK EQSCALE RICALG | --dopus NAME | "
+                        "--dopus-warm NAME RESETS)...\n");
         return 2;
     }
     if (only != NULL) {
@@ -236,6 +257,10 @@ int main(int argc, char **argv)
         if (!sv[i].times || !sv[i].set_times) return 3;
     }
 
+#ifdef QPB_WITH_DOPUS
+    warm_chain = bench_dopus_warm_new();
+    if (warm_chain == NULL) return 3;
+#endif
     for (q = 0; q < nqp; ++q) {
         bench_qp qp;
         double *dw;
@@ -244,6 +269,19 @@ int main(int argc, char **argv)
         if (rc != 0) { fprintf(stderr, "qp_bench_main: QP %d unreadable (code %d)\n", q, rc); return 3; }
         n = qp.N * (qp.nx + qp.nu) + qp.nx;
         dw = (double *)calloc((size_t)n, sizeof(double));
+#ifdef QPB_WITH_DOPUS
+        {
+            /* a new sequence starts cold at each listed index */
+            const char *p = warm_resets;
+            while (*p) {
+                if (atoi(p) == q) bench_dopus_warm_reset(warm_chain);
+                while (*p && *p != ',') ++p;
+                if (*p == ',') ++p;
+            }
+        }
+#else
+        (void)warm_resets;
+#endif
         for (i = 0; i < ns; ++i)
             if (solver_create(&sv[i], &qp, tol, iter_max)) {
                 fprintf(stderr, "qp_bench_main: solver %s could not take QP %d\n", sv[i].name, q);
