@@ -223,6 +223,31 @@ def test_bench_tracking_is_the_scenario_signal_of_each_loop(bench_result, second
         assert head == {"M=1": res["tracking"][phase]["M=1"], "full RTI": res["tracking"][phase]["full RTI"]}
 
 
+def test_headline_falls_back_to_an_alternate_that_failed_no_qp():
+    """A pick that fails a QP in a timed phase gives way to its first alternate without a
+    failure (the next fastest working setting of its group); with every candidate failed
+    there is no ratio."""
+    from dopus_lab.bench import headline
+
+    def rec(med, fails):
+        return {"total_us": {"median": med}, "feedback_us": {"median": med / 2}, "qp_failures": fails}
+
+    ex = "acados exact fastest working"
+    timed = {"M=1": rec(100.0, 0), "full RTI": rec(200.0, 0), ex: rec(350.0, 1), f"{ex} alternate 1": rec(400.0, 0),
+             f"{ex} alternate 2": rec(380.0, 0)}
+    picks = {ex: {"label": "A", "qp": {"tol": 1e-10}}, f"{ex} alternate 1": {"label": "B", "qp": {"tol": 1e-10}},
+             f"{ex} alternate 2": {"label": "C", "qp": {"tol": 1e-10}}}
+    result = {"N": 10, "timed": {"operating point": timed}, "acados_picks": picks}
+    row = headline(result)["operating point"]["our full RTI / acados fastest working exact RTI (each at its defaults)"]
+    # the first alternate in the pick's order, not the faster second one
+    assert row["b"] == f"{ex} alternate 1" and row["acados_setting"] == "B"
+    assert row["ratio"] == pytest.approx(200.0 / 400.0)
+    timed[f"{ex} alternate 1"]["qp_failures"] = 2
+    timed[f"{ex} alternate 2"]["qp_failures"] = 1
+    row = headline(result)["operating point"]["our full RTI / acados fastest working exact RTI (each at its defaults)"]
+    assert "ratio" not in row and row["failed"] == {"full RTI": 0, ex: 1}
+
+
 def test_blocks_of_steps_give_the_same_closed_loops(bench_result, tmp_path):
     """--block: the settings alternate every few steps instead of every step; each closed
     loop is its own, so the states and controls are those of the step-by-step run."""
