@@ -6,7 +6,7 @@ fault, the latest such instant, the runs back within 1 cm of the path within 150
 the median and largest instant at which they are back, the largest tip deviation after the
 fault. Writes bench/results/fault_suite.json.
 
-    .venv/bin/python bench/fault_suite.py [--M 1,full] [--budget UNITS] [--kinds K1,...] [--eps E] [K ...]
+    .venv/bin/python bench/fault_suite.py [--M 1,full] [--budget UNITS] [--kinds K1,...] [--eps=E] [K ...]
 
 --budget: a work budget per instant (anytime DOPUS, docs/algorithm.md section 14; 0: none).
 --kinds: only these kinds of fault. --eps: the initial first joint angle moved by E (the
