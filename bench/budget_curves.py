@@ -17,11 +17,23 @@ Work budgets (deterministic, work units of section 14): one full-RTI iteration c
 3N + 2 units, one M = 1 iteration 2N + 4; no budget goes below 2N + 3 (the feedback's QP,
 the gradients and the last stage are never cut), so no setting can need less than
 (2N + 3) / (3N + 2) of the full RTI's budget. Time budgets: fractions of the reference's
-median instant time on this host (noisy on a loaded machine).
+median instant time on this host (noisy on a loaded machine: each budget runs --repeat
+times, 3 by default, and each figure is the median of the runs, the failed instants too).
+
+Instruction budgets (--parts m7): the emulated Cortex-M7 in double (QEMU with -icount
+shift=0, deterministic): the firmware program's scenario command (dopus_lab/firmware.py,
+run_scenario) runs the OCP file's scenario, its event as the host's, with the generated
+integrator as the plant (the firmware has no CVODES) and the time budget on the program's
+instruction clock. The reference is the full RTI without a budget on the firmware; the grid
+is fractions of its median instructions per instant, then a bisection to 1 % of it between
+the last grid point that misses and the first that meets. Also reported: the largest
+instant at the needed budget against the reference's largest (what a controller must
+provision for), since an instant's least cost (the feedback's QP, the gradients) is never
+cut and a budget below it is exceeded.
 
 Prints the tables, writes bench/results/budget_curves.json and bench/results/budget_curves.png.
 
-    .venv/bin/python bench/budget_curves.py [--problems robot_arm,chain] [--parts work,time]
+    .venv/bin/python bench/budget_curves.py [--problems robot_arm,chain] [--parts work,time,m7] [--repeat 3]
 """
 from __future__ import annotations
 
@@ -228,9 +240,18 @@ def problem(name, parts, step, repeat=3, log=print):
                                            "ratio_kkt": None if need_kkt is None else need_kkt / denom,
                                            "rows": ordered}
             if part == "m7":
+                # what the instants took at the needed budget (the least an instant costs, the
+                # feedback's QP and the prepare's gradients, is not cut: a budget below it is
+                # exceeded), against the reference's largest instant
                 dmax = pref["instructions_max"]
+                used = None if need is None else rows[need]["instructions_max"]
                 out[part]["settings"][kind].update(ratio_max=None if need is None else need / dmax,
-                                                   ratio_kkt_max=None if need_kkt is None else need_kkt / dmax)
+                                                   ratio_kkt_max=None if need_kkt is None else need_kkt / dmax,
+                                                   used_max=used, used_max_ratio=None if used is None else used / dmax)
+                log(f"  {'':14}{kind:<9} at the needed budget: largest instant "
+                    f"{'-' if used is None else f'{used / 1e6:.3f}M'} "
+                    f"({'-' if used is None else f'{used / dmax:.3f}'} of the reference's largest, "
+                    f"{dmax / 1e6:.3f}M)")
             shown = " ".join(f"{_fmt(r['budget_s'], part, denom)}:{r['rms_after'] / pref['rms_after']:.3f}"
                              + ("F" if r["failed"] else "") for r in ordered)
             kkt = " ".join(f"{_fmt(r['budget_s'], part, denom)}:{r['kkt_max_settled'] / pref['kkt_max_settled']:.2g}"

@@ -262,7 +262,7 @@ def _real(tok: str) -> float:
     raise FirmwareError(f"a real has 8 or 16 hexadecimal digits, got {tok!r}")
 
 
-_INT_FIELDS = ("instructions", "setting", "extra", "stages", "M", "iter", "step", "status", "qp_iters", "ticks_feedback", "ticks_prepare", "stack")
+_INT_FIELDS = ("instructions", "setting", "used", "extra", "stages", "M", "iter", "step", "status", "qp_iters", "ticks_feedback", "ticks_prepare", "stack")
 
 
 def _parse_record(tokens: List[str]) -> Dict[str, Any]:

@@ -417,6 +417,7 @@ static int scenario(int setting, long budget)
         put_field("ticks_prepare", (long)(t3 - t2));
         put_str(" kkt ");
         put_real(kkt_max(k4));
+        put_field("used", (long)info.budget_used); /* the solver's own count of the instant */
         put_reals("u0", u0, FW_C(NU));
         put_reals("xhat", x, FW_C(NX));
         end_line();
