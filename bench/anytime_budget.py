@@ -12,7 +12,11 @@
 2. Budget curves on `make demo`'s scenario (dopus-gen sil, CVODES plant, the disturbance at
    1 s): tracking RMS before and after the disturbance, max after, max KKT settled and
    failed instants, against the budget, for the full RTI (M = N-1), fixed M = 1 and adaptive
-   M.
+   M; with what the OCP itself weighs: the sum of its stage cost over the closed loop
+   (before / after the disturbance) and the progress theta at the end (its terminal reward
+   -theta_N is -theta_0 - dt sum dtheta_k, so "cost - progress" is the OCP's own measure of
+   the closed loop). The work part adds the controller solved to convergence at every
+   instant (1e9 units).
 
 Budgets in work units (deterministic: 84 units are one M = 1 iteration, about 0.2 ms on an
 idle host of this kind, so 800 units are about 2 ms) and in time (this host's; noisy on a
