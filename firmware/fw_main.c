@@ -479,14 +479,15 @@ static int scenario_command(int *status)
     int setting = 0;
     long budget;
 
-    if (fw_command_line(cmd, (int)sizeof(cmd)) != 0 || !token(cmd, 1, word, (int)sizeof(word))
-        || strcmp(word, "scenario") != 0) {
+    if (fw_command_line(cmd, (int)sizeof(cmd)) != 0 || !token(cmd, 1, word, (int)sizeof(word)) ||
+        strcmp(word, "scenario") != 0) {
         return 0;
     }
     if (token(cmd, 2, word, (int)sizeof(word))) {
-        setting = strcmp(word, "full") == 0 ? FW_SETTING_FULL
-                : strcmp(word, "M1") == 0 ? FW_SETTING_M1
-                : strcmp(word, "adaptive") == 0 ? FW_SETTING_ADAPTIVE : 0;
+        setting = strcmp(word, "full") == 0       ? FW_SETTING_FULL
+                  : strcmp(word, "M1") == 0       ? FW_SETTING_M1
+                  : strcmp(word, "adaptive") == 0 ? FW_SETTING_ADAPTIVE
+                                                  : 0;
     }
     budget = token(cmd, 3, word, (int)sizeof(word)) ? parse_count(word) : -1;
     if (setting == 0 || budget < 0 || FW_SCENARIO_STEPS <= 0) {
