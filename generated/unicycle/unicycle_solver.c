@@ -130,6 +130,23 @@ static double unicycle_cost(const unicycle_solver *s, double estimate, double re
     return reading;
 }
 
+/* The price of one QP iteration for the extra iteration's cap (time budget): the reading
+ * `cost` / `iterations` of a QP, the estimate moved by 10 % at most, up or down. A QP whose
+ * iterations were unusually cheap (or one descheduled) moves it little: following such a
+ * reading (the feedback's estimate, which drops at once) left the caps too generous,
+ * measured on the emulated Cortex-M7, where instants went 30 % over their budget; a whole
+ * QP as the price cut the extra QPs short on the host (2 ms: the demo's max KKT settled 3e-2
+ * to 0.12 instead of 2e-3 to 5e-3). */
+static void unicycle_cost_qp_step(unicycle_solver *s, double cost, int iterations)
+{
+    double r, e = s->anytime.cost_qp_step;
+    if (s->settings.budget_unit != UNICYCLE_BUDGET_TIME || iterations < 1) {
+        return;
+    }
+    r = cost / (double)iterations;
+    s->anytime.cost_qp_step = !(e > 0.0) ? r : r > 1.1 * e ? 1.1 * e : r < 0.9 * e ? 0.9 * e : r;
+}
+
 /* 1 without a budget, or when `cost` more still fits in the instant's budget. */
 static int unicycle_budget_fits(const unicycle_solver *s, double cost)
 {
@@ -1096,6 +1113,9 @@ static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0,
         s->anytime.cost_qp_iter =
             unicycle_cost(s, s->anytime.cost_qp_iter, s->anytime.cost_qp / (double)s->qp_iterations);
     }
+    if (unicycle_budget_on(s)) {
+        unicycle_cost_qp_step(s, unicycle_budget_now(s) - b0, s->qp_iterations);
+    }
     s->qp_status = qs;
     rc = unicycle_feedback_check_step(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
@@ -1769,13 +1789,13 @@ static int unicycle_extra_iteration(unicycle_solver *s)
         unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
     /* a time budget caps the QP's iterations at the budget left after the prepare iteration
-     * that follows it, each iteration priced at the last whole QP (its set-up included: never
-     * less than an iteration costs; the average iteration of a longer QP is, measured on
-     * the emulated Cortex-M7, where it put instants 30 % above their budget). A QP stopped
-     * there changes nothing. */
-    unicycle_budget_cap(s, s->anytime.cost_prepare, s->anytime.cost_qp);
+     * that follows it (a QP stopped there changes nothing) */
+    unicycle_budget_cap(s, s->anytime.cost_prepare, s->anytime.cost_qp_step);
     qs = unicycle_feedback_qp(s);
     s->anytime.qp_cap = 0;
+    if (unicycle_budget_on(s)) {
+        unicycle_cost_qp_step(s, unicycle_budget_now(s) - b0, s->qp_iterations);
+    }
     if (unicycle_feedback_check_step(s, qs) != UNICYCLE_OK) {
         s->lm = lm;
         return UNICYCLE_ERR_QP;
@@ -2204,6 +2224,7 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     s->anytime.cost_qp = 0.0;
     s->anytime.cost_prepare = 0.0;
     s->anytime.cost_qp_iter = 0.0;
+    s->anytime.cost_qp_step = 0.0;
     s->anytime.cost_tail = 0.0;
     s->anytime.used = 0.0;
     s->anytime.qp_cap = 0;
