@@ -85,6 +85,9 @@ def main(argv=None) -> int:
             print(f"{kind:20s} {str(sizes):18s} {margin:7.0e}  {fmt(c_status):45s} {fmt(r_status)}", flush=True)
     total = sum(r["c"].get("primal_infeasible", 0) for r in rows)
     print(f"C solver: {total} of {args.count * len(rows)} reported primal infeasible")
+    if args.ref > 0:
+        total_ref = sum(r["reference"].get("primal_infeasible", 0) for r in rows)
+        print(f"reference: {total_ref} of {sum(sum(r['reference'].values()) for r in rows)} reported primal infeasible")
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"tol": 1e-10, "count": args.count, "rows": rows}, indent=1) + "\n")
