@@ -3,19 +3,23 @@ against the working tree's, on the same QPs.
 
 For a change that must not alter the method (a restructuring of dopus_qp.c), it checks
 that both give bit for bit the same solution arrays, status, iteration count and every
-field of dopus_qp_info (and the same row from dopus_qp_infeasible_row), and it times both
+field of dopus_qp_info (and the same row from dopus_qp_infeasible_row); for a change that
+alters the round-off, it reports the answers that both solved with their residuals against
+the tolerance and their largest differences, and every status that changed. It times both
 builds interleaved on the same QPs (solve only; the data is already in each build's
 structures) and reports the ratio of the median time per QP, working tree / base.
 
 QPs: the random QPs of tests/test_qp.py's configurations (tests/harness/qp_problems.py),
 each solved cold, warm from its cold solution after a small change of x0, and with
 max_iter 3; indefinite and strongly nonconvex ones (inertia correction, restarts);
-infeasible and unbounded ones; the stored robot-arm and unicycle QPs of tests/data; and
+infeasible and unbounded ones; random QPs of 13 and 21 states (the quadrotor's and the chain
+of masses' sizes); the stored robot-arm and unicycle QPs of tests/data; and
 (unless --no-bench-qps) the QPs of bench/qp_bench.py: the 26 robot-arm QPs and its random
 QPs with the robot's sizes, N = 10 to 160, at tolerance 1e-8.
 
     .venv/bin/python bench/qp_ab.py --base main           # equality + timing
     .venv/bin/python bench/qp_ab.py --base main --reps 0  # equality only
+    .venv/bin/python bench/qp_ab.py --base main --only bench_robot,robot_arm_qp,nx  # a subset
 
 Both builds use the QP test harness (tests/harness/qp_harness.py, its -O3 and strict
 flags). Writes bench/results/qp_ab.json.
@@ -51,6 +55,8 @@ RANDOM = [
     ("semidefinite", (15, 4, 2, 1, 1, 1), {"hessian": "psd"}, 10),
     ("badly_scaled", (15, 4, 2, 1, 1, 1), {"var_scale": 1.0, "row_scale": 1.5, "eq_row_scale": 3.0}, 10),
     ("weak", (10, 5, 3, 2, 1, 1), {"p_weak": 0.25}, 10),
+    ("nx13", (20, 13, 4, 0, 0, 0), {"p_active": 0.3}, 4),
+    ("nx21", (20, 21, 3, 0, 0, 0), {"p_active": 0.3}, 4),
 ]
 
 
@@ -141,6 +147,24 @@ def same(a, b) -> bool:
                else ia[k] == ib[k] for k in ia)
 
 
+def difference(a, b) -> dict:
+    """How far apart two answers are: the largest difference of the primal (x, u) and of the
+    multipliers (lam, nu and the row multipliers), each relative to 1 + the largest entry of
+    the base's, and the largest scaled KKT residual of each."""
+    sa, ia, _ = a
+    sb, ib, _ = b
+
+    def rel(keys):
+        va = np.concatenate([np.ravel(sa[k]) for k in keys])
+        vb = np.concatenate([np.ravel(sb[k]) for k in keys])
+        return float(np.max(np.abs(va - vb), initial=0.0) / (1.0 + np.max(np.abs(va), initial=0.0)))
+
+    def res(info):
+        return max(info[k] for k in ("res_stat_scaled", "res_eq_scaled", "res_ineq_scaled", "res_comp_scaled"))
+    return {"primal": rel(("x", "u")), "dual": rel(("lam", "mu_b", "mu_bN", "mu_g", "mu_r", "nu")),
+            "res_base": float(res(ia)), "res_work": float(res(ib))}
+
+
 def time_pair(ha, hb, reps):
     """Median time of the solve call alone, the two builds alternating (order swapped
     every repetition)."""
@@ -160,6 +184,8 @@ def main():
     ap.add_argument("--reps", type=int, default=40, help="timed repetitions per QP and build (0: no timing)")
     ap.add_argument("--warmup", type=int, default=5)
     ap.add_argument("--no-bench-qps", action="store_true", help="skip bench/qp_bench.py's QPs (robot-arm runs)")
+    ap.add_argument("--only", default="", metavar="PREFIX,...",
+                    help="only the QPs whose label starts with one of these (e.g. bench_robot,robot_arm_qp,nx)")
     ap.add_argument("--json", type=Path, default=BENCH / "results" / "qp_ab.json")
     args = ap.parse_args()
 
@@ -172,6 +198,8 @@ def main():
     cache: dict = {}
     rows, mismatches = [], []
     cases = problems() + ([] if args.no_bench_qps else bench_problems())
+    if args.only:
+        cases = [c for c in cases if c[0].startswith(tuple(args.only.split(",")))]
     for label, sizes, qp, kw in cases:
         ha, hb = build(base_dir, sizes, cache), build(work_dir, sizes, cache)
         a, b = run(ha, qp, kw), run(hb, qp, kw)
@@ -179,7 +207,8 @@ def main():
         if not ok:
             mismatches.append(label)
         row = {"qp": label, "identical": ok, "status": b[1]["status"], "iterations": b[1]["iterations"],
-               "status_base": a[1]["status"], "iterations_base": a[1]["iterations"]}
+               "status_base": a[1]["status"], "iterations_base": a[1]["iterations"],
+               "tol": kw["tol"], **({} if ok else difference(a, b))}
         if args.reps > 0 and "warm_from" not in kw and kw.get("max_iter", 100) > 3:
             time_pair(ha, hb, args.warmup)
             row["t_base"], row["t_work"] = time_pair(ha, hb, args.reps)
@@ -195,7 +224,21 @@ def main():
     print("statuses base:", statuses_base, " iterations total:", sum(r["iterations_base"] for r in rows))
     print("statuses work:", statuses, " iterations total:", sum(r["iterations"] for r in rows))
     differ = [r for r in rows if not r["identical"]]
-    if differ:
+    solved = [r for r in differ if r["status"] == r["status_base"] == "solved"]
+    if solved:
+        # answers that are not bit-identical but both solved: equal to the QP's tolerance
+        # when both meet it (the accuracy of the answer is the tolerance over the QP's
+        # conditioning, dopus_qp.h), with the largest differences of the answers
+        print(f"{len(solved)} of them solved by both: work residuals within tol in "
+              f"{sum(r['res_work'] <= r['tol'] for r in solved)}, base in "
+              f"{sum(r['res_base'] <= r['tol'] for r in solved)}; largest difference primal "
+              f"{max(r['primal'] for r in solved):.1e}, multipliers {max(r['dual'] for r in solved):.1e} "
+              f"(relative to 1 + the base's largest entry); median {np.median([r['primal'] for r in solved]):.1e}, "
+              f"{np.median([r['dual'] for r in solved]):.1e}")
+    changed = [r for r in differ if r["status"] != r["status_base"]]
+    print(f"status changed in {len(changed)}: " + ", ".join(f"{r['qp']} {r['status_base']} -> {r['status']}"
+                                                       for r in changed))
+    if differ and len(differ) <= 40:
         w = max(len(r["qp"]) for r in differ)
         print(f"{'QP that differs':{w}s} {'status base':>18s} {'it':>4s} {'status work':>18s} {'it':>4s}")
         for r in differ:
