@@ -12,7 +12,11 @@
 2. Budget curves on `make demo`'s scenario (dopus-gen sil, CVODES plant, the disturbance at
    1 s): tracking RMS before and after the disturbance, max after, max KKT settled and
    failed instants, against the budget, for the full RTI (M = N-1), fixed M = 1 and adaptive
-   M.
+   M; with what the OCP itself weighs: the sum of its stage cost over the closed loop
+   (before / after the disturbance) and the progress theta at the end (its terminal reward
+   -theta_N is -theta_0 - dt sum dtheta_k, so "cost - progress" is the OCP's own measure of
+   the closed loop). The work part adds the controller solved to convergence at every
+   instant (1e9 units).
 
 Budgets in work units (deterministic: 84 units are one M = 1 iteration, about 0.2 ms on an
 idle host of this kind, so 800 units are about 2 ms) and in time (this host's; noisy on a
@@ -47,6 +51,8 @@ GATE = (10.0, 25)     # the measurement gate of the settings "... gate" (docs/al
 
 def label(kind, budget):
     """A budget: 0 (none), seconds (float) or work units ("800u")."""
+    if kind == "converged":
+        return "converged (1e9 units)"
     if not budget:
         return f"{kind} no budget"
     if isinstance(budget, str):
@@ -104,20 +110,46 @@ def closed_loop(disc, guess, kind, budget):
     return run_closed_loop(disc, backend_obj=s, M=s.M, guess=guess, label=label(kind, budget))
 
 
-def figures(run, kind, budget, signal="deviation"):
+def figures(run, kind, budget, signal="deviation", disc=None):
     """The figures of one run; ``signal``: the scenario's tracking signal (its RMS and max
-    before and after the event)."""
+    before and after the event). With ``disc``, also what the OCP itself weighs: the
+    closed-loop cost, the sum of the OCP's stage cost l(x_k, u_k) over the instants (measured
+    state, applied control; before and after the event), and the progress, the last
+    instant's theta (a state named theta)."""
     sm = summarize(run)
     seg = [g for g in sm["segments"] if g["signal"] == signal and g["segment"].startswith("after")]
-    return {"kind": kind, "budget_s": budget, "rms_after": seg[0]["rms"] if seg else None,
-            "max_after": seg[0]["max"] if seg else None, "kkt_max_settled": sm["kkt_max_settled"],
-            "failed": sm["qp_failures"], "time_median_us": sm["time_median_us"],
-            "rms_before": next((g["rms"] for g in sm["segments"] if g["signal"] == signal
-                                and g["segment"].startswith("before")), None)}
+    out = {"kind": kind, "budget_s": budget, "rms_after": seg[0]["rms"] if seg else None,
+           "max_after": seg[0]["max"] if seg else None, "kkt_max_settled": sm["kkt_max_settled"],
+           "failed": sm["qp_failures"], "time_median_us": sm["time_median_us"],
+           "rms_before": next((g["rms"] for g in sm["segments"] if g["signal"] == signal
+                               and g["segment"].startswith("before")), None)}
+    if disc is not None:
+        out.update(closed_loop_cost(disc, run))
+    return out
+
+
+def closed_loop_cost(disc, run):
+    """The OCP's stage cost summed over the closed loop (before / after the first event) and
+    the progress theta at the last instant (None without a state theta)."""
+    x = np.asarray(run["x"], dtype=float)
+    u = np.asarray(run["u"], dtype=float)
+    t = np.asarray(run["t"], dtype=float)
+    p = np.zeros(int(disc.np))
+    cost = np.array([float(disc.stage_eval(xk, uk, p)[1]) for xk, uk in zip(x, u)])
+    t_ev = run["events"][0]["time"] if run["events"] else np.inf
+    after = t >= t_ev - 1e-9 * float(disc.dt)
+    names = list(disc.data.state_names)
+    return {"cost": float(cost.sum()), "cost_before": float(cost[~after].sum()),
+            "cost_after": float(cost[after].sum()),
+            "progress": float(x[-1, names.index("theta")]) if "theta" in names else None,
+            # the OCP's terminal reward -theta_N is -theta_0 - dt sum dtheta_k: over the closed
+            # loop the OCP weighs the stage cost against the progress one to one
+            "cost_minus_progress": (float(cost.sum() - (x[-1, names.index("theta")] - x[0, names.index("theta")]))
+                                    if "theta" in names else None)}
 
 
 def demo(arm, guess, kind, budget):
-    return figures(closed_loop(arm, guess, kind, budget), kind, budget)
+    return figures(closed_loop(arm, guess, kind, budget), kind, budget, disc=arm)
 
 
 WORK = ["84u", "150u", "300u", "500u", "800u", "1500u"]   # 84 units: one M = 1 iteration
@@ -151,14 +183,18 @@ def main(parts):
             continue
         out[part] = []
         print(f"\n{'setting':<22} {'RMS before/after [mm]':>22} {'max after [mm]':>14} {'max KKT settled':>15} "
-              f"{'failed':>6}")
-        for kind in ("full", "M=1", "adaptive"):
-            for budget in [0.0] + budgets:
-                r = demo(arm, guess, kind, budget)
-                r["budget"] = budget
-                out[part].append(r)
-                print(f"{label(kind, budget):<22} {1e3 * r['rms_before']:10.3f} {1e3 * r['rms_after']:11.3f} "
-                      f"{1e3 * r['max_after']:14.3f} {r['kkt_max_settled']:15.3e} {r['failed']:6d}", flush=True)
+              f"{'failed':>6} {'cost before/after':>19} {'progress':>9} {'cost - progress':>15}")
+        runs = [(kind, budget) for kind in ("full", "M=1", "adaptive") for budget in [0.0] + budgets]
+        if part == "work":   # solved to convergence at every instant (1e9 units)
+            runs.append(("converged", 0.0))
+        for kind, budget in runs:
+            r = demo(arm, guess, kind, budget)
+            r["budget"] = budget
+            out[part].append(r)
+            print(f"{label(kind, budget):<22} {1e3 * r['rms_before']:10.3f} {1e3 * r['rms_after']:11.3f} "
+                  f"{1e3 * r['max_after']:14.3f} {r['kkt_max_settled']:15.3e} {r['failed']:6d} "
+                  f"{r['cost_before']:9.4f} {r['cost_after']:9.4f} {r['progress']:9.4f} "
+                  f"{r['cost_minus_progress']:15.4f}", flush=True)
     path.write_text(json.dumps(out, indent=1))
     try:
         import matplotlib

@@ -17,11 +17,23 @@ Work budgets (deterministic, work units of section 14): one full-RTI iteration c
 3N + 2 units, one M = 1 iteration 2N + 4; no budget goes below 2N + 3 (the feedback's QP,
 the gradients and the last stage are never cut), so no setting can need less than
 (2N + 3) / (3N + 2) of the full RTI's budget. Time budgets: fractions of the reference's
-median instant time on this host (noisy on a loaded machine).
+median instant time on this host (noisy on a loaded machine: each budget runs --repeat
+times, 3 by default, and each figure is the median of the runs, the failed instants too).
+
+Instruction budgets (--parts m7): the emulated Cortex-M7 in double (QEMU with -icount
+shift=0, deterministic): the firmware program's scenario command (dopus_lab/firmware.py,
+run_scenario) runs the OCP file's scenario, its event as the host's, with the generated
+integrator as the plant (the firmware has no CVODES) and the time budget on the program's
+instruction clock. The reference is the full RTI without a budget on the firmware; the grid
+is fractions of its median instructions per instant, then a bisection to 1 % of it between
+the last grid point that misses and the first that meets. Also reported: the largest
+instant at the needed budget against the reference's largest (what a controller must
+provision for), since an instant's least cost (the feedback's QP, the gradients) is never
+cut and a budget below it is exceeded.
 
 Prints the tables, writes bench/results/budget_curves.json and bench/results/budget_curves.png.
 
-    .venv/bin/python bench/budget_curves.py [--problems robot_arm,chain] [--parts work,time]
+    .venv/bin/python bench/budget_curves.py [--problems robot_arm,chain] [--parts work,time,m7] [--repeat 3]
 """
 from __future__ import annotations
 
@@ -35,14 +47,21 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from anytime_budget import closed_loop, figures  # noqa: E402
 
+import numpy as np  # noqa: E402
+
 from dopus_codegen import build_functions, load_ocp  # noqa: E402
 from dopus_codegen.reference.offline import solve_ocp  # noqa: E402
+from dopus_codegen.studies.sil import summarize  # noqa: E402
 
 # the OCP file and its scenario's tracking signal
 PROBLEMS = {"robot_arm": ("robot_arm.py", "deviation"), "chain": ("chain.py", "end_error")}
 KINDS = ("full", "M=1", "adaptive")
 TOL = 0.02                                     # tracking RMS at most 2 % above the reference's
 TIME_FRACTIONS = (0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.25, 1.5, 2.0)
+# instruction budgets: fractions of the full RTI's median instructions per instant on the
+# emulated Cortex-M7, then a bisection to 1 % of it
+M7_FRACTIONS = (0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.25, 1.5, 2.0)
+M7_RESOLUTION = 0.01
 
 
 def costs(N):
@@ -57,11 +76,12 @@ def meets(row, ref, measure="rms_after"):
     return row["failed"] == 0 and row[measure] is not None and row[measure] <= (1 + TOL) * ref[measure]
 
 
-def smallest(evaluate, grid, ref, measure="rms_after", rows=None):
+def smallest(evaluate, grid, ref, measure="rms_after", rows=None, resolution=None):
     """The smallest budget meeting the criterion: ``evaluate`` on every budget of the
     ascending ``grid`` (the curve), then on each integer between the last grid point that
-    misses and the first that meets (work units). ``rows``: budgets already evaluated.
-    Returns (budget or None, {budget: row})."""
+    misses and the first that meets (work units), or, with ``resolution``, a bisection of
+    that interval down to ``resolution`` (instructions). ``rows``: budgets already
+    evaluated. Returns (budget or None, {budget: row})."""
     rows = {} if rows is None else rows
 
     def row(b):
@@ -74,6 +94,15 @@ def smallest(evaluate, grid, ref, measure="rms_after", rows=None):
         return None, rows
     first = ok[0]
     below = [b for b in grid if b < first]
+    if below and resolution is not None:
+        lo, hi = below[-1], first
+        while hi - lo > resolution:
+            mid = (lo + hi) // 2
+            if meets(row(mid), ref, measure):
+                hi = mid
+            else:
+                lo = mid
+        return hi, rows
     if below and isinstance(first, int):
         for b in range(below[-1] + 1, first):
             if meets(row(b), ref, measure):
@@ -87,14 +116,73 @@ def work_grid(N, step):
     return sorted(set(range(c["floor"], top + 1, step)) | {c["floor"], c["M=1"], c["full"], top})
 
 
-def problem(name, parts, step, log=print):
+def median_figures(rows):
+    """One row of figures from the rows of repeated runs: the median of each figure (the
+    failed instants too), the repeats' RMS and failures kept."""
+    out = dict(rows[0])
+    for key in ("rms_after", "max_after", "kkt_max_settled", "failed", "time_median_us", "rms_before"):
+        vals = [r[key] for r in rows if r[key] is not None]
+        out[key] = float(np.median(vals)) if vals else None
+    out["repeats"] = len(rows)
+    out["rms_after_runs"] = [r["rms_after"] for r in rows]
+    out["failed_runs"] = [r["failed"] for r in rows]
+    return out
+
+
+def m7_figures(disc, sc, recs, kind, budget, signal):
+    """The figures of one firmware scenario run (dopus_lab.firmware.run_scenario's records),
+    with the definitions of the host's (sil.summarize: the RMS after the event, the max KKT
+    measure settled, the failed instants); instructions per instant instead of time."""
+    fn = disc.scenario.closed_loop.signals[signal]
+    p = np.zeros(int(disc.np))
+    sig = [float(np.asarray(fn(r["xhat"], r["u0"], p), dtype=float).reshape(-1)[0]) for r in recs]
+    run = {"label": f"m7 {kind} {budget}", "t": [r["step"] * sc["dt"] for r in recs],
+           "events": [] if sc["event_step"] is None else [{"time": sc["event_time"], "label": sc["event_label"]}],
+           "settings": {"dt": sc["dt"], "lbu": [None] * len(recs[0]["u0"]), "ubu": [None] * len(recs[0]["u0"])},
+           "signals": {signal: sig}, "kkt": [r["kkt"] for r in recs], "status": [r["status"] for r in recs],
+           "u": [r["u0"] for r in recs],
+           "timing_us": {"total": [r["instructions_instant"] for r in recs], "feedback": [0.0] * len(recs)}}
+    sm = summarize(run)
+    seg = {g["segment"].split(" ")[0]: g for g in sm["segments"] if g["signal"] == signal}
+    ins = [r["instructions_instant"] for r in recs]
+    return {"kind": kind, "budget_s": budget, "rms_after": seg["after"]["rms"], "max_after": seg["after"]["max"],
+            "rms_before": seg["before"]["rms"], "kkt_max_settled": sm["kkt_max_settled"],
+            "failed": sm["qp_failures"], "instructions_median": float(np.median(ins)),
+            "instructions_max": float(max(ins)),
+            "extra_iterations": int(sum(r["extra"] for r in recs))}
+
+
+def m7_part(disc, signal, log=print):
+    """The firmware image of the problem's scenario and the figures of its closed loops on
+    the emulated Cortex-M7 (double): (evaluate(budget, kind), reference, no-budget rows, scenario)."""
+    from dopus_lab import firmware as fwm
+
+    img = fwm.scenario_image(disc, ROOT / "bench" / "results" / "firmware_scenario" / disc.name,
+                             progress=lambda *_: None)
+    sc = img["scenario"]
+
+    def evaluate(b, kind):
+        return m7_figures(disc, sc, fwm.run_scenario(img, kind, int(b)), kind, int(b), signal)
+
+    plain = {kind: evaluate(0, kind) for kind in KINDS}
+    return evaluate, plain["full"], plain, sc
+
+
+def problem(name, parts, step, repeat=3, log=print):
     ocp_file, signal = PROBLEMS[name]
     disc = build_functions(load_ocp(ROOT / "examples" / ocp_file))
     guess, _ = solve_ocp(disc, disc.x0)
     N = int(disc.N)
     c = costs(N)
+
+    def host(kind, budget, n=1):
+        return median_figures([figures(closed_loop(disc, guess, kind, budget), kind, budget, signal)
+                               for _ in range(n)])
+
     # each setting without a budget: its tracking and its median instant time on this host
-    plain = {kind: figures(closed_loop(disc, guess, kind, 0.0), kind, 0.0, signal) for kind in KINDS}
+    # (the median of `repeat` runs when time budgets are measured)
+    reps = repeat if "time" in parts else 1
+    plain = {kind: host(kind, 0.0, reps) for kind in KINDS}
     ref = plain["full"]
     out = {"N": N, "signal": signal, "costs": c, "reference": ref, "tol": TOL, "no_budget": plain}
     log(f"\n{name}: N = {N}, one full iteration {c['full']} units, one M = 1 iteration {c['M=1']}, "
@@ -107,34 +195,69 @@ def problem(name, parts, step, log=print):
             f"median instant {r['time_median_us']:.0f} us "
             f"({r['time_median_us'] / ref['time_median_us']:.2f} of the reference's)")
     for part in parts:
+        pref, resolution, extra = ref, None, {}
         if part == "work":
             grid, unit, denom = work_grid(N, step), "units", c["full"]
 
             def evaluate(b, kind):
                 return figures(closed_loop(disc, guess, kind, f"{b}u"), kind, b, signal)
-        else:
+        elif part == "time":
             denom = ref["time_median_us"] * 1e-6
             grid, unit = [round(f * denom, 7) for f in TIME_FRACTIONS], "ms"
+            extra = {"repeats": repeat, "note": f"each budget run {repeat} times, the median of each figure"}
 
             def evaluate(b, kind):
-                return figures(closed_loop(disc, guess, kind, b), kind, b, signal)
-        out[part] = {"denominator": denom, "unit": unit, "settings": {}}
+                return host(kind, b, repeat)
+        else:   # m7: the emulated Cortex-M7 (double), instructions
+            evaluate, pref, m7_plain, sc = m7_part(disc, signal, log)
+            denom = pref["instructions_median"]
+            grid, unit = sorted({int(round(f * denom)) for f in M7_FRACTIONS}), "instructions"
+            resolution = max(1, int(round(M7_RESOLUTION * denom)))
+            extra = {"reference": pref, "no_budget": m7_plain, "resolution": resolution,
+                     "denominator_max": pref["instructions_max"],
+                     "plant": "the model (the generated integrator; the firmware has no CVODES)",
+                     "scenario": {k: sc[k] for k in ("steps", "event_step", "event_label")},
+                     "count_method": "qemu -icount shift=0, the instruction clock of the firmware program"}
+            log(f"  m7 (emulated Cortex-M7, double; the model as plant): reference (full RTI, no budget) "
+                f"{signal} RMS after the event {pref['rms_after']:.6g}, failed {pref['failed']}, max KKT settled "
+                f"{pref['kkt_max_settled']:.3g}, instructions per instant median {denom:.0f}, max "
+                f"{pref['instructions_max']:.0f}")
+            for kind, r in m7_plain.items():
+                log(f"  {kind:<9} no budget: RMS after / reference {r['rms_after'] / pref['rms_after']:.3f}, "
+                    f"max KKT settled {r['kkt_max_settled']:.3g}, failed {r['failed']}, instructions median "
+                    f"{r['instructions_median'] / denom:.3f}, max {r['instructions_max'] / denom:.3f} of the "
+                    f"reference's median")
+        out[part] = {"denominator": denom, "unit": unit, **extra, "settings": {}}
         log(f"  {part} budgets: {'setting':<9} {'needed':>10} {'ratio':>6} {'for KKT':>10} {'ratio':>6}   "
             f"per budget: RMS after / reference's (F: failed instants), max KKT settled / reference's")
         for kind in KINDS:
-            need, rows = smallest(lambda b, k=kind: evaluate(b, k), grid, ref)
-            need_kkt, rows = smallest(lambda b, k=kind: evaluate(b, k), grid, ref, "kkt_max_settled", rows)
+            need, rows = smallest(lambda b, k=kind: evaluate(b, k), grid, pref, resolution=resolution)
+            need_kkt, rows = smallest(lambda b, k=kind: evaluate(b, k), grid, pref, "kkt_max_settled", rows,
+                                      resolution=resolution)
             ordered = [rows[b] for b in sorted(rows)]
             out[part]["settings"][kind] = {"needed": need, "ratio": None if need is None else need / denom,
                                            "needed_kkt": need_kkt,
                                            "ratio_kkt": None if need_kkt is None else need_kkt / denom,
                                            "rows": ordered}
-            shown = " ".join(f"{_fmt(r['budget_s'], part)}:{r['rms_after'] / ref['rms_after']:.3f}"
+            if part == "m7":
+                # what the instants took at the needed budget (the least an instant costs, the
+                # feedback's QP and the prepare's gradients, is not cut: a budget below it is
+                # exceeded), against the reference's largest instant
+                dmax = pref["instructions_max"]
+                used = None if need is None else rows[need]["instructions_max"]
+                out[part]["settings"][kind].update(ratio_max=None if need is None else need / dmax,
+                                                   ratio_kkt_max=None if need_kkt is None else need_kkt / dmax,
+                                                   used_max=used, used_max_ratio=None if used is None else used / dmax)
+                log(f"  {'':14}{kind:<9} at the needed budget: largest instant "
+                    f"{'-' if used is None else f'{used / 1e6:.3f}M'} "
+                    f"({'-' if used is None else f'{used / dmax:.3f}'} of the reference's largest, "
+                    f"{dmax / 1e6:.3f}M)")
+            shown = " ".join(f"{_fmt(r['budget_s'], part, denom)}:{r['rms_after'] / pref['rms_after']:.3f}"
                              + ("F" if r["failed"] else "") for r in ordered)
-            kkt = " ".join(f"{_fmt(r['budget_s'], part)}:{r['kkt_max_settled'] / ref['kkt_max_settled']:.2g}"
+            kkt = " ".join(f"{_fmt(r['budget_s'], part, denom)}:{r['kkt_max_settled'] / pref['kkt_max_settled']:.2g}"
                            for r in ordered)
-            log(f"  {'':14}{kind:<9} {_fmt(need, part):>10} {_ratio(need, denom):>6} {_fmt(need_kkt, part):>10} "
-                f"{_ratio(need_kkt, denom):>6}   {shown}\n  {'':52}{kkt}", flush=True)
+            log(f"  {'':14}{kind:<9} {_fmt(need, part, denom):>10} {_ratio(need, denom):>6} "
+                f"{_fmt(need_kkt, part, denom):>10} {_ratio(need_kkt, denom):>6}   {shown}\n  {'':52}{kkt}", flush=True)
     return out
 
 
@@ -142,9 +265,12 @@ def _ratio(b, denom):
     return "-" if b is None else f"{b / denom:.3f}"
 
 
-def _fmt(b, part):
+def _fmt(b, part, denom=None):
+    """A budget as the table shows it: work units, ms, or millions of instructions."""
     if b is None:
         return "not met"
+    if part == "m7":
+        return f"{b / 1e6:.3f}M"
     return f"{b:g}" if part == "work" else f"{1e3 * b:.3g}"
 
 
@@ -156,19 +282,19 @@ def plot(out, path):
     except ImportError:
         return
     names = list(out)
-    cols = [(p, m) for p in ("work", "time") if any(p in out[n] for n in names)
+    cols = [(p, m) for p in ("work", "time", "m7") if any(p in out[n] for n in names)
             for m in ("rms_after", "kkt_max_settled")]
     if not cols:
         return
     fig, ax = plt.subplots(len(names), len(cols), figsize=(5 * len(cols), 4 * len(names)), squeeze=False)
     for i, name in enumerate(names):
-        ref = out[name]["reference"]
         for j, (part, measure) in enumerate(cols):
             a = ax[i][j]
             if part not in out[name]:
                 a.set_visible(False)
                 continue
             d = out[name][part]
+            ref = d.get("reference", out[name]["reference"])
             for kind, s in d["settings"].items():
                 rows = s["rows"]
                 x = [r["budget_s"] / d["denominator"] for r in rows]
@@ -183,8 +309,8 @@ def plot(out, path):
             a.axhline(1 + TOL, color="k", lw=0.8)
             a.axvline(0.6, color="grey", lw=0.8, ls="--")
             a.set_yscale("log")
-            a.set_xlabel("budget / one full-RTI iteration" + (" (work units)" if part == "work"
-                                                               else " (its median time)"))
+            a.set_xlabel("budget / one full-RTI iteration" + {"work": " (work units)", "time": " (its median time)",
+                                                               "m7": " (its median instructions, M7)"}[part])
             what = f"{out[name]['signal']} RMS after the event" if measure == "rms_after" else "max KKT settled"
             a.set_ylabel(f"{what} / full RTI's")
             a.set_title(f"{name}, {part} budgets (x: failed instants)", fontsize=10)
@@ -196,20 +322,23 @@ def plot(out, path):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--problems", default="robot_arm,chain", help="comma-separated: robot_arm, chain")
-    ap.add_argument("--parts", default="work,time", help="comma-separated: work, time")
+    ap.add_argument("--parts", default="work,time", help="comma-separated: work, time, m7 (the emulated "
+                    "Cortex-M7 in double, instructions; needs the firmware toolchain)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per time budget, the median of each figure "
+                    "(default 3)")
     ap.add_argument("--step", type=int, default=8, help="work units between grid points (default 8)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "budget_curves.json"))
     a = ap.parse_args(argv)
     names = [n for n in a.problems.split(",") if n]
     parts = [p for p in a.parts.split(",") if p]
-    bad = [n for n in names if n not in PROBLEMS] + [p for p in parts if p not in ("work", "time")]
-    if bad or a.step < 1:
-        ap.error(f"unknown problem or part {bad}" if bad else "--step must be at least 1")
+    bad = [n for n in names if n not in PROBLEMS] + [p for p in parts if p not in ("work", "time", "m7")]
+    if bad or a.step < 1 or a.repeat < 1:
+        ap.error(f"unknown problem or part {bad}" if bad else "--step and --repeat must be at least 1")
     path = pathlib.Path(a.out)
     path.parent.mkdir(parents=True, exist_ok=True)
     out = json.loads(path.read_text()) if path.exists() else {}
     for name in names:
-        out.setdefault(name, {}).update(problem(name, parts, a.step))
+        out.setdefault(name, {}).update(problem(name, parts, a.step, a.repeat))
         path.write_text(json.dumps(out, indent=1))
     plot(out, path.with_suffix(".png"))
 

@@ -55,6 +55,8 @@ def main(argv=None) -> int:
     ap.add_argument("--count", type=int, default=60, help="QPs per kind and margin (default 60)")
     ap.add_argument("--ref", type=int, default=12, help="of which solved by the reference too (default 12)")
     ap.add_argument("--json", default=str(BENCH / "results" / "qp_margins.json"))
+    ap.add_argument("--dump", metavar="DIR", help="write each QP that a backend does not report primal infeasible "
+                    "to DIR/<kind>_<margin>_<trial>.npz (the QP dict's arrays and sizes)")
     args = ap.parse_args(argv)
     rows = []
     print(f"{'kind':20s} {'sizes':18s} {'margin':>7s}  C solver (of {args.count})"
@@ -69,14 +71,23 @@ def main(argv=None) -> int:
                 qp.update(zip(KEYS, sizes))
                 _, info = h.solve(qp, tol=1e-10)
                 c_status[info["status"]] += 1
-                if trial < args.ref:
-                    r_status[reference_status(qp)] += 1
+                ref = reference_status(qp) if trial < args.ref else None
+                if ref is not None:
+                    r_status[ref] += 1
+                if args.dump and {info["status"], ref or "primal_infeasible"} != {"primal_infeasible"}:
+                    dump = Path(args.dump)
+                    dump.mkdir(parents=True, exist_ok=True)
+                    np.savez(dump / f"{kind}_{margin:.0e}_{trial}.npz", c_status=info["status"],
+                             reference_status=str(ref), **qp)
             rows.append({"kind": kind, "sizes": list(sizes), "margin": margin, "c": dict(c_status),
                          "reference": dict(r_status)})
             fmt = lambda cnt: ", ".join(f"{k} {v}" for k, v in sorted(cnt.items()))  # noqa: E731
             print(f"{kind:20s} {str(sizes):18s} {margin:7.0e}  {fmt(c_status):45s} {fmt(r_status)}", flush=True)
     total = sum(r["c"].get("primal_infeasible", 0) for r in rows)
     print(f"C solver: {total} of {args.count * len(rows)} reported primal infeasible")
+    if args.ref > 0:
+        total_ref = sum(r["reference"].get("primal_infeasible", 0) for r in rows)
+        print(f"reference: {total_ref} of {sum(sum(r['reference'].values()) for r in rows)} reported primal infeasible")
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"tol": 1e-10, "count": args.count, "rows": rows}, indent=1) + "\n")

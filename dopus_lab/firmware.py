@@ -48,7 +48,8 @@ from dopus_codegen.codegen.folder import read_meta
 from .paths import checkout_script, firmware_dir
 
 __all__ = ["TARGETS", "FirmwareError", "firmware_dir", "toolchain_missing", "setup_toolchain",
-           "write_problem_header", "build_target", "link_image", "build_host", "run_qemu", "run_host", "parse_output",
+           "write_problem_header", "build_target", "scenario_of", "scenario_image", "run_scenario",
+           "SCENARIO_SETTINGS", "link_image", "build_host", "run_qemu", "run_host", "parse_output",
            "compare_runs", "firmware_report", "format_table", "ALLOCATOR_SYMBOLS"]
 
 
@@ -125,9 +126,18 @@ def _c_real(v: float) -> str:
 
 
 def write_problem_header(build_dir: Path, name: str, xhat_fixed: Sequence[float], m_list: Sequence[int],
-                         fixed_iters: int, loop_steps: int, fixed_lm: float = 0.0) -> Path:
-    """``fw_problem.h``: the problem's prefix for fw_main.c and the scenario."""
+                         fixed_iters: int, loop_steps: int, fixed_lm: float = 0.0,
+                         scenario: Optional[Dict[str, Any]] = None) -> Path:
+    """``fw_problem.h``: the problem's prefix for fw_main.c and the scenario; ``scenario``:
+    the OCP file's scenario of :func:`scenario_of` (the program's ``scenario`` command)."""
     up = name.upper()
+    extra = []
+    if scenario is not None:
+        extra = [f"#define FW_SCENARIO_STEPS {int(scenario['steps'])}"]
+        if scenario["event_step"] is not None:
+            extra += [f"#define FW_EVENT_STEP {int(scenario['event_step'])}",
+                      "#define FW_EVENT_SCALE {" + ", ".join(_c_real(v) for v in scenario["scale"]) + "}",
+                      "#define FW_EVENT_SHIFT {" + ", ".join(_c_real(v) for v in scenario["shift"]) + "}"]
     text = "\n".join([
         "/* The problem and scenario of the firmware program (dopus_lab/firmware.py). */",
         "#ifndef FW_PROBLEM_H", "#define FW_PROBLEM_H",
@@ -136,7 +146,7 @@ def write_problem_header(build_dir: Path, name: str, xhat_fixed: Sequence[float]
         "#define FW_XHAT_FIXED {" + ", ".join(_c_real(v) for v in xhat_fixed) + "}",
         "#define FW_M_LIST {" + ", ".join(str(int(m)) for m in m_list) + "}",
         f"#define FW_FIXED_ITERS {int(fixed_iters)}", f"#define FW_LOOP_STEPS {int(loop_steps)}",
-        f"#define FW_FIXED_LM {_c_real(fixed_lm)}",
+        f"#define FW_FIXED_LM {_c_real(fixed_lm)}", *extra,
         "#endif", ""])
     build_dir.mkdir(parents=True, exist_ok=True)
     path = build_dir / "fw_problem.h"
@@ -227,10 +237,13 @@ def build_host(gen_dir, build_dir, cc: str = "cc") -> Path:
     return exe
 
 
-def run_qemu(elf, target: str, timeout: float = 900.0) -> str:
+def run_qemu(elf, target: str, timeout: float = 900.0, args: Sequence[str] = ()) -> str:
+    """Run the image under QEMU; ``args``: the program's command line after its name
+    (semihosting)."""
     tg = TARGETS[target]
+    semi = "enable=on,target=native" + ("".join(f",arg={a}" for a in ("fw", *args)) if args else "")
     cmd = ["qemu-system-arm", "-M", tg.machine, "-nographic", "-monitor", "none", "-serial", "none",
-           "-semihosting-config", "enable=on,target=native", "-icount", "shift=0", "-kernel", str(elf)]
+           "-semihosting-config", semi, "-icount", "shift=0", "-kernel", str(elf)]
     return _run(cmd, f"{target}: emulated run", timeout=timeout)
 
 
@@ -249,8 +262,8 @@ def _real(tok: str) -> float:
     raise FirmwareError(f"a real has 8 or 16 hexadecimal digits, got {tok!r}")
 
 
-_INT_FIELDS = ("instructions", "extra", "stages", "M", "iter", "step", "status", "qp_iters", "ticks_feedback",
-               "ticks_prepare", "stack", "factorizations")
+_INT_FIELDS = ("instructions", "setting", "used", "extra", "stages", "M", "iter", "step", "status", "qp_iters",
+               "ticks_feedback", "ticks_prepare", "stack", "factorizations")
 
 
 def _parse_record(tokens: List[str]) -> Dict[str, Any]:
@@ -286,7 +299,8 @@ def _parse_record(tokens: List[str]) -> Dict[str, Any]:
 
 def parse_output(text: str) -> Dict[str, Any]:
     """The records printed by fw_main.c: header, fixed runs per M, solutions, loop steps."""
-    out: Dict[str, Any] = {"fixed": {}, "solution": {}, "loop": [], "steady": [], "budget": [], "end": None}
+    out: Dict[str, Any] = {"fixed": {}, "solution": {}, "loop": [], "steady": [], "budget": [], "scenario": [],
+                           "end": None}
     for line in text.splitlines():
         tokens = line.split()
         if not tokens:
@@ -304,6 +318,8 @@ def parse_output(text: str) -> Dict[str, Any]:
             out[kind].append(_parse_record(rest))
         elif kind == "budget":
             out["budget"].append(_parse_record(rest))
+        elif kind == "scenario":
+            out["scenario"].append(_parse_record(rest))
         elif kind == "end":
             out["end"] = _parse_record(rest)["status"]
         elif kind.startswith("firmware:"):
@@ -311,6 +327,115 @@ def parse_output(text: str) -> Dict[str, Any]:
     if "header" not in out or out["end"] is None:
         raise FirmwareError(f"incomplete output of the firmware program:\n{text[-2000:]}")
     return out
+
+
+# ---- the OCP file's scenario on the firmware (bench/budget_curves.py --parts m7) ----------
+
+#: the settings of the program's scenario command: full RTI (M = N-1), M = 1, adaptive M (1..10)
+SCENARIO_SETTINGS = {"full": 1, "M=1": 2, "adaptive": 3}
+_SCENARIO_WORDS = {"full": "full", "M=1": "M1", "adaptive": "adaptive"}
+
+
+def _event_map(ev, nx: int):
+    """(scale, shift) with ``ev.fn(x) = scale * x + shift`` entrywise, the only kind of event
+    the firmware program applies (the robot arm's disturbance: q shifted, dq set to 0; the
+    chain's shake: a velocity shifted); FirmwareError for any other map."""
+    def f(x):
+        return np.asarray(ev.fn(np.array(x, dtype=float)), dtype=float).reshape(-1)
+
+    shift = f(np.zeros(nx))
+    eye = np.eye(nx)
+    cols = np.array([f(eye[i]) - shift for i in range(nx)])
+    scale = np.diag(cols).copy()
+    rng = np.random.default_rng(0)
+    probe = rng.uniform(-2.0, 2.0, nx)
+    ok = (shift.size == nx and np.allclose(cols - np.diag(scale), 0.0, rtol=0, atol=1e-12)
+          and np.allclose(f(probe), scale * probe + shift, rtol=1e-12, atol=1e-12))
+    if not ok:
+        raise FirmwareError(f"scenario event '{ev.label}': the firmware program applies only maps "
+                            "x <- scale .* x + shift (entrywise); this event is another map")
+    return scale, shift
+
+
+def scenario_of(disc) -> Dict[str, Any]:
+    """The OCP file's closed-loop scenario as the firmware program runs it: its number of
+    instants, the instant of its event (at most one) and the event as (scale, shift). The
+    plant is the model (the generated integrator), not the scenario's plant: the firmware has
+    no CVODES."""
+    spec = disc.scenario.closed_loop
+    if spec is None:
+        raise FirmwareError(f"{disc.name}: the OCP file declares no closed-loop scenario")
+    if spec.x0 is not None and not np.array_equal(np.asarray(spec.x0, float).reshape(-1),
+                                                  np.asarray(disc.x0, float).reshape(-1)):
+        raise FirmwareError(f"{disc.name}: the firmware scenario starts at the OCP's initial state, "
+                            "the scenario declares another")
+    dt = float(disc.dt)
+    steps = int(round(float(spec.duration) / dt))
+    events = [ev for ev in spec.events if float(ev.time) < steps * dt]
+    if len(events) > 1:
+        raise FirmwareError(f"{disc.name}: the firmware scenario has at most one event, the OCP file's has "
+                            f"{len(events)}")
+    out = {"steps": steps, "dt": dt, "event_step": None, "event_time": None, "event_label": None,
+           "scale": None, "shift": None}
+    if events:
+        ev = events[0]
+        # the instant of sil's loop: the first i with i dt >= time (to 1e-9 dt)
+        step = int(math.ceil(float(ev.time) / dt - 1e-9))
+        scale, shift = _event_map(ev, int(disc.nx))
+        out.update(event_step=step, event_time=float(ev.time), event_label=ev.label,
+                   scale=scale.tolist(), shift=shift.tolist())
+    return out
+
+
+def scenario_image(disc, out_dir, target: str = "m7-double", progress=print) -> Dict[str, Any]:
+    """Generate ``disc`` (with its nominal solution) and build the firmware image of
+    ``target`` with its scenario; returns {"elf", "target", "scenario", "gen_dir"}."""
+    from dopus_codegen.codegen import generate as codegen
+
+    if target not in TARGETS:
+        raise FirmwareError(f"unknown target {target!r} (known: {', '.join(TARGETS)})")
+    missing = setup_toolchain()
+    if missing:
+        raise FirmwareError(f"missing programs {missing}: run scripts/setup_firmware.sh as root "
+                            "(Debian packages gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm)")
+    sc = scenario_of(disc)
+    out_dir = Path(out_dir)
+    real = TARGETS[target].real
+    gen = out_dir / f"generated_{real}"
+    progress(f"firmware: generating {disc.name} ({real}) into {gen}")
+    codegen.generate(disc, gen, offline_guess=True, real=real)
+    bdir = out_dir / f"build_{real}"
+    x0 = np.asarray(disc.x0, dtype=float).reshape(-1)
+    write_problem_header(bdir, disc.name, x0, [1], 0, 0, scenario=sc)
+    progress(f"firmware: building {target}")
+    b = build_target(gen, bdir, target)
+    return {"elf": b["elf"], "target": target, "scenario": sc, "gen_dir": str(gen)}
+
+
+def run_scenario(image: Dict[str, Any], setting: str, instructions: int,
+                 timeout: float = 3600.0) -> List[Dict[str, Any]]:
+    """The scenario's closed loop under QEMU for ``setting`` (a key of SCENARIO_SETTINGS) and
+    a budget of ``instructions`` per instant on the instruction clock (0: none): one record
+    per instant (step, status, ticks_feedback, ticks_prepare, extra, stages, kkt, u0, xhat)
+    plus ``instructions_instant``, the instructions of its feedback and prepare."""
+    if setting not in SCENARIO_SETTINGS:
+        raise FirmwareError(f"unknown setting {setting!r} (known: {', '.join(SCENARIO_SETTINGS)})")
+    if int(instructions) != instructions or instructions < 0:
+        raise FirmwareError(f"the budget is a non-negative number of instructions, got {instructions!r}")
+    text = run_qemu(image["elf"], image["target"], timeout=timeout,
+                    args=("scenario", _SCENARIO_WORDS[setting], str(int(instructions))))
+    run = parse_output(text)
+    if run["end"] != 0:
+        raise FirmwareError(f"the firmware scenario ({setting}, {instructions} instructions) ended with "
+                            f"status {run['end']}")
+    per_tick = run["header"]["instructions_per_tick"]
+    recs = run["scenario"]
+    if len(recs) != image["scenario"]["steps"]:
+        raise FirmwareError(f"the firmware scenario printed {len(recs)} instants, expected "
+                            f"{image['scenario']['steps']}")
+    for r in recs:
+        r["instructions_instant"] = (r["ticks_feedback"] + r["ticks_prepare"]) * per_tick
+    return recs
 
 
 def _vec_rel(a, b) -> float:

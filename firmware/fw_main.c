@@ -18,9 +18,16 @@
  *    status (the closed-loop instant of sil and campaign), prepare.
  * 3. The same closed loop with an anytime budget per instant (docs/algorithm.md section 14)
  *    of FW_BUDGETS instructions on the instruction clock.
- * 4. The steady closed loop at the operating point: as 2, the plant state at the default x0
+ * 4. Only when the command line (semihosting; the host build: the environment variable
+ *    FW_COMMAND_LINE) reads "<program> scenario SETTING INSTRUCTIONS": instead of 1 to 3 and 5,
+ *    the OCP file's scenario (bench/budget_curves.py --parts m7): FW_SCENARIO_STEPS
+ *    instants from x0_default, solver at the nominal solution, the event
+ *    x <- FW_EVENT_SCALE .* x + FW_EVENT_SHIFT at instant FW_EVENT_STEP, the generated
+ *    integrator as the plant; SETTING "full" (M = N-1), "M1" or "adaptive" (M between 1 and
+ *    10), INSTRUCTIONS the budget per instant on the instruction clock (0: none).
+ * 5. The steady closed loop at the operating point: as 2, the plant state at the default x0
  *    (no disturbance), FW_LOOP_STEPS steps, lines "steady".
- * The closed loops of 2 and 4 run the solver on the instruction clock (no budget: it only
+ * The closed loops of 2 and 5 run the solver on the instruction clock (no budget: it only
  * feeds the solver's phase timers), so each of their lines carries the instructions of every
  * phase of dopus_info.timings ("phases", enum dopus_phase order; 0 on the host build).
  *
@@ -28,6 +35,7 @@
  * (16 digits for double, 8 for float): exact, and printed without newlib's printf, whose
  * floating-point conversion allocates memory (there is no heap). The report tool decodes
  * them and prints them with %.17g. */
+#include <math.h>
 #include <stdint.h>
 #include <string.h>
 
@@ -242,8 +250,19 @@ static const double budgets[] = {FW_BUDGETS};
  * no ticks, it reads 0 (every budget then lasts: the host run is not compared). */
 static double instruction_clock(void *ctx)
 {
+    /* the ticks since the first reading, in 64 bits: the 32-bit counter wraps after 1.7e11
+     * instructions, the clock does not */
+    static uint32_t last;
+    static uint64_t total;
+    static int started;
+    uint32_t now = fw_ticks();
     (void)ctx;
-    return (double)fw_ticks() * (double)FW_INSTRUCTIONS_PER_TICK;
+    if (started) {
+        total += (uint32_t)(now - last);
+    }
+    started = 1;
+    last = now;
+    return (double)total * (double)FW_INSTRUCTIONS_PER_TICK;
 }
 
 /* The closed-loop instant of the package (dopus_codegen/studies/loops.py): the measurement
@@ -323,6 +342,179 @@ static int closed_loop(double budget, int steady)
     return budget > 0.0 ? FW_C(OK) : first_failure;
 }
 
+/* ---- the OCP file's scenario (bench/budget_curves.py --parts m7) ---------------------- */
+
+#ifndef FW_SCENARIO_STEPS
+#define FW_SCENARIO_STEPS 0
+#endif
+#ifndef FW_EVENT_STEP
+#define FW_EVENT_STEP (-1)
+#endif
+#ifdef FW_EVENT_SCALE
+static const fw_real event_scale[FW_C(NX)] = FW_EVENT_SCALE;
+static const fw_real event_shift[FW_C(NX)] = FW_EVENT_SHIFT;
+#endif
+
+enum { FW_SETTING_FULL = 1, FW_SETTING_M1 = 2, FW_SETTING_ADAPTIVE = 3 };
+#define FW_ADAPTIVE_M_MIN 1
+#define FW_ADAPTIVE_M_MAX 10
+
+/* The instant of `dopus-gen sil` (dopus_codegen/studies/sil.py): the event due, the
+ * measurement (the exact state), feedback, the KKT measure at it, the plant from the state
+ * with the returned u0 whatever the status, prepare. Only feedback and prepare are timed and
+ * count against the budget. One line "scenario" per instant. */
+static int scenario(int setting, long budget)
+{
+    fw_real x[FW_C(NX)], xnext[FW_C(NX)], u0[FW_C(NU)], k4[4];
+    int i, k, status, prepared;
+    uint32_t t0, t1, t2, t3;
+
+    FW(settings_default)(&settings); /* the OCP file's options */
+    settings.M = setting == FW_SETTING_FULL ? FW_C(N) - 1 : 1;
+    if (setting == FW_SETTING_ADAPTIVE) {
+        settings.M_adaptive = 1;
+        settings.M_min = FW_ADAPTIVE_M_MIN;
+        settings.M_max = FW_ADAPTIVE_M_MAX < FW_C(N) - 1 ? FW_ADAPTIVE_M_MAX : FW_C(N) - 1;
+    }
+    if (budget > 0) {
+        settings.budget = (double)budget;
+        settings.budget_unit = FW_C(BUDGET_TIME);
+    }
+    status = FW(setup)(&solver, &settings);
+    if (budget > 0) {
+        FW(set_clock)(&solver, instruction_clock, 0);
+    }
+    if (status == FW_C(OK)) {
+        status = FW(init_nominal)(&solver, FW(x0_default));
+    }
+    if (status != FW_C(OK)) {
+        return status;
+    }
+    for (i = 0; i < FW_C(NX); ++i) {
+        x[i] = FW(x0_default)[i];
+    }
+    memset(u0, 0, sizeof(u0));
+    for (k = 0; k < FW_SCENARIO_STEPS; ++k) {
+#ifdef FW_EVENT_SCALE
+        if (k == FW_EVENT_STEP) {
+            for (i = 0; i < FW_C(NX); ++i) {
+                x[i] = event_scale[i] * x[i] + event_shift[i];
+            }
+        }
+#endif
+        t0 = fw_ticks();
+        status = FW(feedback)(&solver, x, u0);
+        t1 = fw_ticks();
+        i = FW(kkt_eval)(&solver, x, k4);
+        if (i != FW_C(OK)) { /* no KKT measure: NaN and a failed instant, as in the host loop */
+            k4[0] = k4[1] = k4[2] = k4[3] = (fw_real)NAN;
+            status = status == FW_C(OK) ? i : status;
+        }
+        if (FW(simulate)(x, u0, NULL, xnext, &plant_work) != FW_C(OK)) {
+            return FW_C(ERR_FUNCTION);
+        }
+        t2 = fw_ticks();
+        prepared = FW(prepare)(&solver);
+        t3 = fw_ticks();
+        if (status == FW_C(OK)) {
+            status = prepared;
+        }
+        FW(get_info)(&solver, &info);
+        put_str("scenario");
+        put_field("setting", setting);
+        put_field("instructions", budget);
+        put_field("step", k);
+        put_field("extra", info.extra_iterations);
+        put_field("stages", info.instant_stages);
+        put_field("status", status);
+        put_field("qp_iters", info.qp_iterations);
+        put_field("ticks_feedback", (long)(t1 - t0));
+        put_field("ticks_prepare", (long)(t3 - t2));
+        put_str(" kkt ");
+        put_real(kkt_max(k4));
+        put_field("used", (long)info.budget_used); /* the solver's own count of the instant */
+        put_reals("u0", u0, FW_C(NU));
+        put_reals("xhat", x, FW_C(NX));
+        end_line();
+        for (i = 0; i < FW_C(NX); ++i) {
+            x[i] = xnext[i];
+        }
+    }
+    return FW_C(OK);
+}
+
+/* Token `index` (0-based, blank-separated) of `text` into `out` (at most n - 1 characters);
+ * returns 1 if it is there. */
+static int token(const char *text, int index, char *out, int n)
+{
+    int len = 0;
+    while (*text) {
+        while (*text == ' ') {
+            ++text;
+        }
+        if (!*text) {
+            break;
+        }
+        if (index-- == 0) {
+            while (*text && *text != ' ' && len < n - 1) {
+                out[len++] = *text++;
+            }
+            out[len] = '\0';
+            return 1;
+        }
+        while (*text && *text != ' ') {
+            ++text;
+        }
+    }
+    return 0;
+}
+
+/* A non-negative decimal integer of at most 2e9 (a 32-bit long), or -1. */
+static long parse_count(const char *t)
+{
+    long v = 0;
+    if (!*t) {
+        return -1;
+    }
+    for (; *t; ++t) {
+        if (*t < '0' || *t > '9' || v > 200000000L) { /* at most 2e9 (a 32-bit long) */
+            return -1;
+        }
+        v = 10 * v + (*t - '0');
+    }
+    return v;
+}
+
+/* "<program> scenario SETTING INSTRUCTIONS": runs the scenario and returns 1 with its
+ * status in *status; else 0 (the program's default runs). */
+static int scenario_command(int *status)
+{
+    static char cmd[256];
+    char word[32];
+    int setting = 0;
+    long budget;
+
+    if (fw_command_line(cmd, (int)sizeof(cmd)) != 0 || !token(cmd, 1, word, (int)sizeof(word)) ||
+        strcmp(word, "scenario") != 0) {
+        return 0;
+    }
+    if (token(cmd, 2, word, (int)sizeof(word))) {
+        setting = strcmp(word, "full") == 0       ? FW_SETTING_FULL
+                  : strcmp(word, "M1") == 0       ? FW_SETTING_M1
+                  : strcmp(word, "adaptive") == 0 ? FW_SETTING_ADAPTIVE
+                                                  : 0;
+    }
+    budget = token(cmd, 3, word, (int)sizeof(word)) ? parse_count(word) : -1;
+    if (setting == 0 || budget < 0 || FW_SCENARIO_STEPS <= 0) {
+        fw_puts("firmware: expected the command line '<program> scenario full|M1|adaptive INSTRUCTIONS' "
+                "and a scenario in fw_problem.h\n");
+        *status = 2;
+        return 1;
+    }
+    *status = scenario(setting, budget);
+    return 1;
+}
+
 int main(void)
 {
     unsigned i;
@@ -344,6 +536,12 @@ int main(void)
     put_field("calibration_instructions", (long)FW_CALIBRATION_INSTRUCTIONS);
     put_field("calibration_ticks", (long)fw_calibration_ticks());
     end_line();
+    if (scenario_command(&status)) {
+        put_str("end");
+        put_field("status", status);
+        end_line();
+        return status == 0 ? 0 : 1;
+    }
     for (i = 0; i < sizeof(m_list) / sizeof(m_list[0]) && status == 0; ++i) {
         status = fixed_study(m_list[i]);
     }

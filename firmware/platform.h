@@ -26,5 +26,10 @@ uint32_t fw_calibration_ticks(void);
  * platform without stack measurement). */
 uint32_t fw_stack_paint(void);
 uint32_t fw_stack_lowest(void);
+/* The program's command line into buf (at most n - 1 characters and a terminating 0):
+ * QEMU's semihosting command line (-semihosting-config arg=...; without arguments the image's
+ * path), on the host the environment variable FW_COMMAND_LINE (empty if unset). Returns 0,
+ * or -1 (buf empty) if there is none. */
+int fw_command_line(char *buf, int n);
 
 #endif /* FW_PLATFORM_H */

@@ -53,3 +53,18 @@ uint32_t fw_stack_lowest(void)
 {
     return 0u;
 }
+
+int fw_command_line(char *buf, int n)
+{
+    const char *s = getenv("FW_COMMAND_LINE");
+    int i = 0;
+    if (n < 1) {
+        return -1;
+    }
+    while (s && s[i] && i < n - 1) {
+        buf[i] = s[i];
+        ++i;
+    }
+    buf[i] = '\0';
+    return s ? 0 : -1;
+}

@@ -2,7 +2,8 @@
  *
  * Output and exit are Arm semihosting calls (bkpt 0xAB; QEMU runs with
  * -semihosting-config enable=on): SYS_WRITE0 writes a string to the host's stdout,
- * SYS_EXIT_EXTENDED ends QEMU with the program's status. They are issued here directly:
+ * SYS_EXIT_EXTENDED ends QEMU with the program's status, SYS_GET_CMDLINE reads the command
+ * line. They are issued here directly:
  * newlib's librdimon implements the same calls, but its system-call object pulls in
  * newlib's stdio initialisation and with it malloc, which this image must not contain.
  * The tick counter is the board's CMSDK APB timer 0 (0x40000000), a 32-bit down-counter on
@@ -18,6 +19,7 @@ extern uint32_t __stack_limit__[], __stack_top__[];
 #define FW_STACK_PATTERN 0xC5C5C5C5u
 
 #define FW_SYS_WRITE0 0x04u
+#define FW_SYS_GET_CMDLINE 0x15u
 #define FW_SYS_EXIT_EXTENDED 0x20u
 #define FW_ADP_STOPPED_APPLICATION_EXIT 0x20026u
 
@@ -103,4 +105,21 @@ uint32_t fw_stack_lowest(void)
         ++p;
     }
     return (uint32_t)(uintptr_t)p;
+}
+
+int fw_command_line(char *buf, int n)
+{
+    uint32_t block[2];
+    if (n < 2) {
+        return -1;
+    }
+    block[0] = (uint32_t)(uintptr_t)buf;
+    block[1] = (uint32_t)(n - 1);
+    buf[0] = '\0';
+    if (fw_semihost(FW_SYS_GET_CMDLINE, block) != 0u) {
+        buf[0] = '\0';
+        return -1;
+    }
+    buf[block[1] < (uint32_t)(n - 1) ? block[1] : (uint32_t)(n - 1)] = '\0';
+    return 0;
 }

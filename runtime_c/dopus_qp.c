@@ -1353,6 +1353,46 @@ static dopus_real certificate_mass(const dopus_qp_workspace *ws, const dopus_qp_
     return mass;
 }
 
+/* The data of the certificate's rows in the units of certificate_mass: the largest of 1,
+ * |x0|, |b_k,i| / max(1, |Phi_k row i|_inf), |req_i| / |Req row i|_inf and the finite
+ * bounds of the hard sides over their row's largest coefficient. A row written with large
+ * coefficients (a terminal equality row scaled by 1e3) scales the separation as much as
+ * the mass, and so does not pass for a smaller relative violation than the same row
+ * normalised. */
+static dopus_real certificate_bound_scale(const dopus_qp_workspace *ws, const dopus_qp_in *in)
+{
+    dopus_real s = dmax(DOPUS_R(1.0), dopus_lai_norm_inf(NX, in->x0));
+    int k, i, c, b, j;
+    for (k = 0; k < N; ++k)
+        for (i = 0; i < NX; ++i) {
+            dopus_real m = DOPUS_R(1.0);
+            for (c = 0; c < NW; ++c)
+                m = dmax(m, dopus_fabs(in->Phi[k][i + c * NX]));
+            s = dmax(s, dopus_fabs(in->b[k][i]) / m);
+        }
+    for (i = 0; i < NE; ++i) {
+        dopus_real m = DOPUS_R(0.0);
+        for (c = 0; c < NX; ++c)
+            m = dmax(m, dopus_fabs(in->Req[i + c * NE1]));
+        if (m > DOPUS_R(0.0))
+            s = dmax(s, dopus_fabs(in->req[i]) / m);
+    }
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            const dopus_real m = row_norm(in, k, j);
+            dopus_real lo, up;
+            if (!(m > DOPUS_R(0.0)))
+                continue;
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            if (ws->has_lo[b] && !(SOFT && ws->soft_lo[b]))
+                s = dmax(s, dopus_fabs(lo) / m);
+            if (ws->has_up[b] && !(SOFT && ws->soft_up[b]))
+                s = dmax(s, dopus_fabs(up) / m);
+        }
+    return s;
+}
+
 /* The same certificate, tested when the iteration has stalled or failed, with the
  * separation measured against its own accuracy instead of CERT_SEP: a point w violates
  * some row by at least (b'y - |A'y|_inf |w|_1) / certificate_mass in the units of the row's
@@ -1378,6 +1418,7 @@ static int primal_infeasible_at_tol(const dopus_qp_workspace *ws, const dopus_qp
         w1 += dopus_fabs(ws->prim[i]);
     bty -= r->aty * w1;
     y1 = certificate_mass(ws, in);
+    bscale = certificate_bound_scale(ws, in);
     QP_TRACE("stalled: certificate separation %.3e (tolerance %.1e)\n", bty / (y1 * bscale), tol);
     return y1 > DOPUS_R(0.0) && bty / y1 > dmin(tol, CERT_SEP_STALL) * bscale;
 }
@@ -2093,6 +2134,20 @@ static int qp_factor_with_correction(qp_loop *L, dopus_qp_workspace *ws, const d
     return fact;
 }
 
+/* A factorisation that needed a correction (a failed pivot) at an iterate whose dual
+ * iterate has diverged to a Farkas certificate: on a QP infeasible by a margin near the
+ * tolerance the barrier weights of the rows of the certificate grow beyond what the
+ * Riccati recursion resolves in floating point, and the corrected steps from here on
+ * damage the certificate (a delta of 1e10 times the Hessian scale, steps of 1e-12 that
+ * move the multipliers off their ray) until a factorisation fails outright. The
+ * certificate is tested here, before the step, as after a stall or failure
+ * (primal_infeasible_at_tol). Returns 1 when it proves infeasibility. */
+static int qp_certificate_at_failure(const qp_loop *L, const dopus_qp_workspace *ws, const dopus_qp_in *in,
+                                     const qp_res *r)
+{
+    return dual_ray(r, L->data_scale) && primal_infeasible_at_tol(ws, in, r, L->data_scale, L->st.tol);
+}
+
 /* Iterative refinement steps of the corrector's solve. */
 static int qp_refine_steps(const qp_loop *L, const dopus_qp_workspace *ws, const qp_res *r, int iter,
                            int floors_before)
@@ -2553,7 +2608,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
     }
     for (iter = L.as_sweeps;; ++iter) {
         dopus_real alpha, alpha_d, alpha_aff, sigma;
-        int floors_before, nref;
+        int floors_before, nref, corrections;
         /* the long steps (separate primal and dual step lengths, up to the boundary) in the
          * first attempt from the centred start while the QP is convex (no correction) */
         const int long_steps = L.attempt == 0 && L.n_corr == 0 && L.n_aug == 0;
@@ -2567,8 +2622,13 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
         trace_barrier_weights(ws, in, iter);
 
         floors_before = ws->pivot_floors;
+        corrections = L.n_corr + L.n_aug;
         if (qp_factor_with_correction(&L, ws, in) != 0) {
             status = DOPUS_QP_NUMERICAL;
+            break;
+        }
+        if (L.n_corr + L.n_aug > corrections && qp_certificate_at_failure(&L, ws, in, &r)) {
+            status = DOPUS_QP_PRIMAL_INFEASIBLE;
             break;
         }
         nref = qp_refine_steps(&L, ws, &r, iter, floors_before);

@@ -84,3 +84,21 @@ def test_search_and_criterion():
     assert bc.meets({"rms_after": 1.02, "failed": 0}, ref)
     assert not bc.meets({"rms_after": 1.0201, "failed": 0}, ref)
     assert not bc.meets({"rms_after": 0.5, "failed": 1}, ref)
+
+
+def test_bisection_to_a_resolution():
+    """Instruction budgets: a bisection between the last grid point that misses and the first
+    that meets, down to the resolution; it returns a budget that meets, within the resolution
+    of one that misses."""
+    ref = {"rms_after": 1.0}
+    seen = []
+
+    def evaluate(b):  # met from 3_141_593 instructions on
+        seen.append(b)
+        return {"rms_after": 1.0 if b >= 3_141_593 else 1.5, "failed": 0}
+
+    need, rows = bc.smallest(evaluate, [1_000_000, 2_000_000, 4_000_000, 8_000_000], ref, resolution=10_000)
+    assert 3_141_593 <= need < 3_141_593 + 10_000
+    assert bc.meets(rows[need], ref)
+    assert any(need - 10_000 <= b < need and not bc.meets(rows[b], ref) for b in rows)
+    assert len(seen) == 4 + 8          # the grid, then log2(2e6 / 1e4) ~ 7.6 halvings

@@ -294,6 +294,47 @@ def test_barely_infeasible_qps_are_flagged(kind, sizes, margin):
     assert np.mean(agree) >= 0.8, agree
 
 
+# The QPs of bench/qp_margins.py (its seeds: crc32(kind) + 9) that ended in a numerical
+# failure of the C solver (terminal equality against the box of x_N, Req from 4e-3 to 8e2:
+# the barrier weight of the box row grew to 1e27, the Riccati pivots failed even with
+# delta 1e11, and the certificate was tested only after corrected steps had moved the dual
+# iterate off its ray) or in an unpolished "acceptable" answer of the reference (IPOPT
+# stopped with the dynamics violated by 1e-8 .. 6e-7).
+BARELY_INFEASIBLE = [
+    ("terminal_eq_vs_box", (10, 4, 2, 1, 2, 1), 1e-9, (20, 27, 31)),
+    ("terminal_eq_vs_box", (10, 4, 2, 1, 2, 1), 1e-8, (6, 30)),
+    ("unreachable", (6, 3, 2, 0, 0, 0), 1e-9, (7, 59)),
+    ("unreachable", (6, 3, 2, 0, 0, 0), 1e-8, (41,)),
+    ("unreachable", (6, 3, 2, 0, 0, 0), 1e-7, (0, 14)),
+]
+
+
+@pytest.mark.parametrize("kind,sizes,margin,trials", BARELY_INFEASIBLE)
+def test_barely_infeasible_failures_are_diagnosed(kind, sizes, margin, trials):
+    """Both backends report these QPs infeasible and name a row of a Farkas certificate
+    (HiGHS's LP); the infeasibility is confirmed by a linear programme of the stacked data
+    (harness least_violation): no point meets the rows to better than 0.4 times the margin
+    in the units of each row, far above the tolerance 1e-10. (Clarabel and PIQP decide
+    none of them at 1e-11: numerical error, iteration limit or "almost infeasible".)"""
+    from dopus_codegen.reference.qp import QPInfeasibleError, qp_row_in_certificate, solve_qp_reference
+
+    h = solver(sizes)
+    rng = np.random.default_rng(zlib.crc32(kind.encode()) + 9)
+    for trial in range(max(trials) + 1):
+        qp = P.make_infeasible(rng, *sizes, kind, margin=margin)
+        if trial not in trials:
+            continue
+        qp.update(zip(("N", "nx", "nu", "ng", "nr", "ne"), sizes))
+        assert P.least_violation(qp) > 0.4 * margin, trial
+        _, info = h.solve(qp, tol=1e-10)
+        assert info["status"] == "primal_infeasible", (trial, info)
+        row = h.infeasible_row()
+        assert row is not None and qp_row_in_certificate(qp, row) > 1e-6, (trial, row)
+        with pytest.raises(QPInfeasibleError) as exc:
+            solve_qp_reference(qp, tol=1e-10)
+        assert exc.value.row is not None and qp_row_in_certificate(qp, exc.value.row) > 1e-6, (trial, exc.value.row)
+
+
 def test_crossed_bounds_are_infeasible():
     sizes = (3, 2, 1, 0, 0, 0)
     h = solver(sizes)

@@ -776,6 +776,18 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
     if out is None:
         if not ok_status:
             raise QPError(f"reference QP solver failed (IPOPT: {status})")
+        if status != "Solve_Succeeded":
+            # IPOPT's "acceptable" answer that no active set polishes: on a QP infeasible by
+            # a margin near the tolerance IPOPT stops at its acceptable level with the
+            # dynamics violated far beyond the tolerance (1e-8 .. 1e-6 at margins 1e-9 ..
+            # 1e-7); the diagnosis of a failed solve (a Farkas certificate) decides, as the
+            # C solver's diagnosis after a stall
+            row = qp_infeasible_row(q)
+            if row is not None:
+                exc = QPInfeasibleError(f"QP is infeasible (IPOPT: {status}, no polished active set; "
+                                        "a Farkas certificate)")
+                exc.row = row
+                raise exc
         out = _unflatten(q, z, y_eq, y_in, mu_z, rows=rows)
         out["polished"] = False
     out["iterations"] = iters
@@ -874,10 +886,20 @@ def qp_infeasible_row(qp: dict):
 
     As in the C solver, the path rows of stage 0 that do not involve ``u_0`` take no part;
     only when the other rows are feasible (this QP keeps those rows, the C solver's drops
-    them) is the certificate sought with them."""
+    them) is the certificate sought with them. When neither finds a certificate, both are
+    sought again with every row divided by its largest coefficient (multiplier mass and
+    gap in the units of each row, as the C solver's test after a stall weighs them): a row
+    written with small coefficients (a terminal equality row scaled by 4e-3) otherwise
+    carries a multiplier hundreds of times the others and its certificate's gap per unit
+    of mass falls below the LP's threshold; the row named is still the one of the largest
+    multiplier of the rows as written."""
     q = _hardened(_shaped(qp))
-    row = _certificate_row(q, data_rows=False)
-    return row if row is not None else _certificate_row(q, data_rows=True)
+    for normalised in (False, True):
+        for data_rows in (False, True):
+            row = _certificate_row(q, data_rows, normalised=normalised)
+            if row is not None:
+                return row
+    return None
 
 
 def _hardened(q: dict) -> dict:
@@ -906,19 +928,21 @@ def qp_row_in_certificate(qp: dict, row) -> float:
     any of them: a row named by a solver is valid when this is positive."""
     q = _hardened(_shaped(qp))
     best = 0.0
-    for data_rows in (False, True):
-        share = _certificate_row(q, data_rows, weigh=tuple(row))
-        best = max(best, share or 0.0)
+    for normalised in (False, True):
+        for data_rows in (False, True):
+            share = _certificate_row(q, data_rows, weigh=tuple(row), normalised=normalised)
+            best = max(best, share or 0.0)
     return best
 
 
 _LP_TOL = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}
 
 
-def _certificate_row(q: dict, data_rows: bool, weigh=None):
+def _certificate_row(q: dict, data_rows: bool, weigh=None, normalised: bool = False):
     """:func:`qp_infeasible_row` of a checked QP dict, with or without the data rows; with
     ``weigh`` a row ``(stage, j, side)``, the largest multiplier share that row can take
-    in a certificate instead (see :func:`qp_row_in_certificate`)."""
+    in a certificate instead (see :func:`qp_row_in_certificate`); ``normalised``: every row
+    divided by its largest coefficient."""
     from scipy.optimize import linprog
 
     N, nx, nu = q["N"], q["nx"], q["nu"]
@@ -945,6 +969,11 @@ def _certificate_row(q: dict, data_rows: bool, weigh=None):
     lo = np.array([r[3] for r in kept])
     up = np.array([r[4] for r in kept])
     G, h = A @ T, A @ c
+    # the rows' scales: 1 as written, else the largest coefficient of each row (the
+    # multipliers of the rows as written are those of the scaled rows over it)
+    rs = np.abs(A).max(axis=1) if normalised else np.ones(len(kept))
+    rs[rs == 0.0] = 1.0
+    G, h, lo, up = G / rs[:, None], h / rs, lo / rs, up / rs
     # Farkas: lo <= G v + h <= up has no v iff some l_lo, l_up >= 0 (on the finite sides)
     # have G'(l_up - l_lo) = 0 and l_lo'(lo - h) - l_up'(up - h) > 0; the certificate of
     # the largest gap per unit of multiplier mass (a vertex: one infeasible subsystem)
@@ -976,8 +1005,9 @@ def _certificate_row(q: dict, data_rows: bool, weigh=None):
     # the largest multiplier; on a tie the first row in the order above, its lower side
     # first (the C rule's scan)
     best = -1
+    lam = res.x / rs[idx]
     for col in sorted(range(len(cols)), key=lambda col: (idx[col], sgn[col])):
-        if res.x[col] > (res.x[best] if best >= 0 else 0.0):
+        if lam[col] > (lam[best] if best >= 0 else 0.0):
             best = col
     if best < 0:
         return None

@@ -63,9 +63,10 @@
  * infeasible QP the residuals stop improving while the dual iterate diverges towards a
  * certificate: each halving of |A'y| / |y| counts as progress, so the iteration is not
  * stopped as stalled before the certificate is exact. When it stalls nonetheless, or the
- * factorisation fails or the iteration limit is reached, the certificate is tested against
- * its own accuracy: every point violates some row by at least b'y / sum |y_i| |a_i|_inf (in
- * the units of the row's largest coefficient), and beyond 1e-12 of the data (float 1e-5; the
+ * factorisation fails or needs an inertia correction or terminal augmentation, or the
+ * iteration limit is reached, the certificate is tested against its own accuracy: every
+ * point violates some row by at least b'y / sum |y_i| |a_i|_inf (in the units of the row's
+ * largest coefficient), and beyond 1e-12 of the data in those units (float 1e-5; the
  * tolerance when smaller) the QP is infeasible, e.g. a QP infeasible by a relative margin
  * of 1e-9 at tol 1e-10, whose residuals cannot fall below the tolerance.
  *

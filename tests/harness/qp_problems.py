@@ -485,6 +485,45 @@ def make_infeasible(rng, N, nx, nu, ng, nr, ne, kind, margin=None):
     return qp
 
 
+def least_violation(qp):
+    """The smallest violation any point of the QP reaches, in the units of each row's largest
+    coefficient: the linear programme (HiGHS) min t over z and t with the initial state and
+    the dynamics exact and every other row relaxed by t, ``|Req z - req| <= t`` and
+    ``lo - t <= D z <= up + t`` with the rows of Req and D scaled to unit infinity norm
+    (the dynamics rows too, so that the LP's tolerances are relative to each row). Positive
+    for an infeasible QP (independent of the QP solvers: the stacked data of
+    :func:`stacked`, no certificate of theirs)."""
+    from scipy.optimize import linprog
+
+    P_, q, Aeq, beq, D, lo, up = stacked(qp)
+    n = Aeq.shape[1]
+    n_dyn = (int(qp["N"]) + 1) * int(qp["nx"])
+
+    def unit(A, *vecs):
+        s = np.abs(A).max(axis=1)
+        s[s == 0.0] = 1.0
+        return (A / s[:, None],) + tuple(v / s for v in vecs)
+
+    A_dyn, b_dyn = unit(Aeq[:n_dyn], beq[:n_dyn])
+    A_e, b_e = unit(Aeq[n_dyn:], beq[n_dyn:])
+    D_, lo_, up_ = unit(D, lo, up)
+    hi, lw = np.isfinite(up_), np.isfinite(lo_)
+    # rows over (z, t): D z - t <= up, -D z - t <= -lo, +-(Req z - req) - t <= 0
+    A_ub = np.vstack([np.hstack([D_[hi], -np.ones((hi.sum(), 1))]),
+                      np.hstack([-D_[lw], -np.ones((lw.sum(), 1))]),
+                      np.hstack([A_e, -np.ones((A_e.shape[0], 1))]),
+                      np.hstack([-A_e, -np.ones((A_e.shape[0], 1))])])
+    b_ub = np.concatenate([up_[hi], -lo_[lw], b_e, -b_e])
+    A_eq = np.hstack([A_dyn, np.zeros((n_dyn, 1))])
+    c = np.zeros(n + 1)
+    c[-1] = 1.0
+    res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_dyn, bounds=[(None, None)] * n + [(0, None)],
+                  method="highs", options={"primal_feasibility_tolerance": 1e-10,
+                                           "dual_feasibility_tolerance": 1e-10})
+    assert res.status == 0, res.message
+    return float(res.x[-1])
+
+
 def make_unbounded(rng, N, nx, nu, ng, nr, ne):
     """Convex QP unbounded below: one control has no curvature, no bounds, and a cost slope."""
     qp, _ = make_qp(rng, N, nx, nu, ng, nr, ne, p_active=0.0, p_free=1.0)

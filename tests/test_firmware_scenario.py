@@ -1,0 +1,144 @@
+"""The OCP file's scenario on the emulated Cortex-M7 (double): the firmware program's
+`scenario` command (dopus_lab.firmware.run_scenario), which bench/budget_curves.py --parts m7
+runs at a grid of instruction budgets.
+
+The chain of masses (its scenario: 20 instants, the shake at 1 s). References:
+
+- without a budget, the closed loop of the C runtime through Python (the host's build of
+  the runtime, the scenario's event by its Python function, the model's discrete map
+  ``stage_eval`` as the plant): the same states and controls to 1e-9 relative (the emulated
+  build differs from the host's only in newlib's maths library, tests/test_firmware.py);
+- with a budget of many iterations per instant, the extra iterations converge every instant
+  at the predicted state: the host's closed loop with a work budget of 1e9 units converges
+  to the same points (KKT proxy below anytime_tol = 1e-8), so the trajectories agree to the
+  accuracy of that convergence;
+- with a budget above the least an instant costs, no instant exceeds it by more than one
+  stage's re-linearisation (docs/algorithm.md section 14).
+"""
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dopus_lab import firmware as fwm
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def chain():
+    from dopus_codegen import build_functions, load_ocp
+    from dopus_codegen.reference.offline import solve_ocp
+
+    disc = build_functions(load_ocp(ROOT / "examples" / "chain.py"))
+    guess, _ = solve_ocp(disc, disc.x0)
+    return disc, guess
+
+
+@pytest.fixture(scope="module")
+def image(chain, tmp_path_factory):
+    missing = fwm.setup_toolchain()
+    if missing:
+        if os.geteuid() == 0:
+            pytest.fail(f"scripts/setup_firmware.sh ran as root and {missing} are still missing")
+        pytest.skip(f"firmware toolchain not installed and not root: missing {missing}")
+    return fwm.scenario_image(chain[0], tmp_path_factory.mktemp("scenario"), progress=lambda *_: None)
+
+
+_RUNS = {}
+
+
+def emulated(image, setting, instructions):
+    if (setting, instructions) not in _RUNS:
+        _RUNS[setting, instructions] = fwm.run_scenario(image, setting, instructions)
+    return _RUNS[setting, instructions]
+
+
+def host_loop(chain, setting, work=None):
+    """The scenario's closed loop with the C runtime through Python and the model as plant."""
+    from dopus_codegen.runtime.solver import CSolver
+
+    disc, guess = chain
+    s = CSolver(disc, M=int(disc.N) - 1 if setting == "full" else 1)
+    if setting == "adaptive":
+        s.set_M_adaptive(True, 1, 10)
+    if work is not None:
+        s.set_work_budget(work)
+    sc = fwm.scenario_of(disc)
+    ev = disc.scenario.closed_loop.events[0]
+    p = np.zeros(int(disc.np))
+    x = np.asarray(disc.x0, dtype=float).copy()
+    s.init(x, guess)
+    xs, us = [], []
+    for k in range(sc["steps"]):
+        if k == sc["event_step"]:
+            x = np.asarray(ev.fn(x.copy()), dtype=float)
+        u = s.feedback(x)
+        xs.append(x.copy())
+        us.append(np.array(u, dtype=float))
+        x = np.asarray(disc.stage_eval(x, u, p)[0], dtype=float).reshape(-1)
+        s.prepare()
+    return np.array(xs), np.array(us)
+
+
+def test_scenario_is_the_ocp_files(chain):
+    disc, _ = chain
+    sc = fwm.scenario_of(disc)
+    assert sc["steps"] == 20 and sc["event_step"] == 10
+    x = np.random.default_rng(1).normal(size=int(disc.nx))
+    ev = disc.scenario.closed_loop.events[0]
+    np.testing.assert_array_equal(np.array(sc["scale"]) * x + np.array(sc["shift"]), ev.fn(x.copy()))
+
+
+def test_an_event_of_another_kind_is_refused():
+    from dopus_codegen import Event
+
+    with pytest.raises(fwm.FirmwareError, match="scale .* x \\+ shift"):
+        fwm._event_map(Event(1.0, lambda x: x ** 2, "square"), 3)
+    with pytest.raises(fwm.FirmwareError, match="scale .* x \\+ shift"):
+        fwm._event_map(Event(1.0, lambda x: x[::-1].copy(), "swap"), 3)
+
+
+@pytest.mark.parametrize("setting", ["full", "adaptive"])
+def test_emulated_scenario_is_the_host_closed_loop(chain, image, setting):
+    recs = emulated(image, setting, 0)
+    xs, us = host_loop(chain, setting)
+    x_fw = np.array([r["xhat"] for r in recs])
+    u_fw = np.array([r["u0"] for r in recs])
+    assert all(r["status"] == 0 for r in recs)
+    assert np.max(np.abs(x_fw - xs)) <= 1e-9 * np.max(np.abs(xs))
+    assert np.max(np.abs(u_fw - us)) <= 1e-9 * max(1.0, np.max(np.abs(us)))
+
+
+def test_large_budget_converges_like_the_host(chain, image):
+    """Budget 20 full iterations per instant: every instant converges at its predicted state
+    (the extra iterations stop on the KKT proxy, not the budget) as the host does with 1e9
+    work units; the closed loops then agree to the convergence tolerance."""
+    full = emulated(image, "full", 0)
+    big = 20 * int(np.median([r["instructions_instant"] for r in full]))
+    recs = emulated(image, "M=1", big)
+    xs, us = host_loop(chain, "M=1", work=1e9)
+    assert all(r["status"] == 0 for r in recs)
+    assert max(r["instructions_instant"] for r in recs) < big / 2    # stopped by the tolerance
+    assert sum(r["extra"] for r in recs) >= len(recs)
+    x_fw = np.array([r["xhat"] for r in recs])
+    u_fw = np.array([r["u0"] for r in recs])
+    assert np.max(np.abs(x_fw - xs)) <= 1e-6 * np.max(np.abs(xs))
+    assert np.max(np.abs(u_fw - us)) <= 1e-6 * max(1.0, np.max(np.abs(us)))
+
+
+def test_budget_bounds_every_instant(chain, image):
+    """A budget between one M = 1 iteration and one full iteration: extra stages or
+    iterations where they fit, and no instant above the budget plus one stage's
+    re-linearisation (its instructions: the full RTI's minus M = 1's, over the N - 2 stages
+    the full RTI adds)."""
+    N = int(chain[0].N)
+    med = {s: np.median([r["instructions_instant"] for r in emulated(image, s, 0)]) for s in ("full", "M=1")}
+    stage = (med["full"] - med["M=1"]) / (N - 2)
+    budget = int(0.5 * (med["full"] + med["M=1"]))
+    recs = emulated(image, "adaptive", budget)
+    used = [r["instructions_instant"] for r in recs]
+    assert max(used) <= budget + stage, (max(used), budget, stage)
+    assert max(r["stages"] for r in recs) > 1          # the budget was spent on stages
+    assert all(r["status"] == 0 for r in recs)
