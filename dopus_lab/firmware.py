@@ -48,7 +48,7 @@ from dopus_codegen.codegen.folder import read_meta
 from .paths import checkout_script, firmware_dir
 
 __all__ = ["TARGETS", "FirmwareError", "firmware_dir", "toolchain_missing", "setup_toolchain",
-           "write_problem_header", "build_target", "scenario_of", "scenario_image", "run_scenario",
+           "write_problem_header", "build_target", "scenario_of", "event_map", "scenario_image", "run_scenario",
            "SCENARIO_SETTINGS", "link_image", "build_host", "run_qemu", "run_host", "parse_output",
            "compare_runs", "firmware_report", "format_table", "ALLOCATOR_SYMBOLS"]
 
@@ -336,7 +336,7 @@ SCENARIO_SETTINGS = {"full": 1, "M=1": 2, "adaptive": 3}
 _SCENARIO_WORDS = {"full": "full", "M=1": "M1", "adaptive": "adaptive"}
 
 
-def _event_map(ev, nx: int):
+def event_map(ev, nx: int):
     """(scale, shift) with ``ev.fn(x) = scale * x + shift`` entrywise, the only kind of event
     the firmware program applies (the robot arm's disturbance: q shifted, dq set to 0; the
     chain's shake: a velocity shifted); FirmwareError for any other map."""
@@ -381,7 +381,7 @@ def scenario_of(disc) -> Dict[str, Any]:
         ev = events[0]
         # the instant of sil's loop: the first i with i dt >= time (to 1e-9 dt)
         step = int(math.ceil(float(ev.time) / dt - 1e-9))
-        scale, shift = _event_map(ev, int(disc.nx))
+        scale, shift = event_map(ev, int(disc.nx))
         out.update(event_step=step, event_time=float(ev.time), event_label=ev.label,
                    scale=scale.tolist(), shift=shift.tolist())
     return out

@@ -95,9 +95,9 @@ def test_an_event_of_another_kind_is_refused():
     from dopus_codegen import Event
 
     with pytest.raises(fwm.FirmwareError, match="scale .* x \\+ shift"):
-        fwm._event_map(Event(1.0, lambda x: x ** 2, "square"), 3)
+        fwm.event_map(Event(1.0, lambda x: x ** 2, "square"), 3)
     with pytest.raises(fwm.FirmwareError, match="scale .* x \\+ shift"):
-        fwm._event_map(Event(1.0, lambda x: x[::-1].copy(), "swap"), 3)
+        fwm.event_map(Event(1.0, lambda x: x[::-1].copy(), "swap"), 3)
 
 
 @pytest.mark.parametrize("setting", ["full", "adaptive"])
