@@ -106,6 +106,18 @@ def setup_toolchain() -> List[str]:
     return missing
 
 
+def _require_targets(targets: Sequence[str]) -> None:
+    """Refuse an unknown target, and a machine without the ARM toolchain and QEMU (after
+    trying to install them)."""
+    for t in targets:
+        if t not in TARGETS:
+            raise FirmwareError(f"unknown target {t!r} (known: {', '.join(TARGETS)})")
+    missing = setup_toolchain()
+    if missing:
+        raise FirmwareError(f"missing programs {missing}: run scripts/setup_firmware.sh as root "
+                            "(Debian packages gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm)")
+
+
 def _run(cmd: Sequence[str], what: str, cwd: Optional[Path] = None, timeout: Optional[float] = None) -> str:
     try:
         proc = subprocess.run(list(cmd), cwd=None if cwd is None else str(cwd), stdout=subprocess.PIPE,
@@ -392,12 +404,7 @@ def scenario_image(disc, out_dir, target: str = "m7-double", progress=print) -> 
     ``target`` with its scenario; returns {"elf", "target", "scenario", "gen_dir"}."""
     from dopus_codegen.codegen import generate as codegen
 
-    if target not in TARGETS:
-        raise FirmwareError(f"unknown target {target!r} (known: {', '.join(TARGETS)})")
-    missing = setup_toolchain()
-    if missing:
-        raise FirmwareError(f"missing programs {missing}: run scripts/setup_firmware.sh as root "
-                            "(Debian packages gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm)")
+    _require_targets([target])
     sc = scenario_of(disc)
     out_dir = Path(out_dir)
     real = TARGETS[target].real
@@ -554,13 +561,7 @@ def firmware_report(ocp_file, out_dir, targets: Sequence[str] = ("m7-double",),
     from dopus_codegen.problem.derivatives import build_functions
     from dopus_codegen.problem.ocp import load_ocp
 
-    for t in targets:
-        if t not in TARGETS:
-            raise FirmwareError(f"unknown target {t!r} (known: {', '.join(TARGETS)})")
-    missing = setup_toolchain()
-    if missing:
-        raise FirmwareError(f"missing programs {missing}: run scripts/setup_firmware.sh as root "
-                            "(Debian packages gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm)")
+    _require_targets(targets)
     out_dir = Path(out_dir)
     disc = build_functions(load_ocp(ocp_file))
     if disc.disturbance is None:

@@ -265,6 +265,26 @@ static double instruction_clock(void *ctx)
     return (double)total * (double)FW_INSTRUCTIONS_PER_TICK;
 }
 
+/* Set up the solver with `settings` (the caller's choices) and a time budget of `budget`
+ * instructions per instant on the instruction clock when budget > 0 (clock 1: the clock also
+ * without a budget, for the phase timers), then start it from the nominal solution. */
+static int start_solver(double budget, int clock)
+{
+    int status;
+    if (budget > 0.0) {
+        settings.budget = budget;
+        settings.budget_unit = FW_C(BUDGET_TIME);
+    }
+    status = FW(setup)(&solver, &settings);
+    if (clock || budget > 0.0) {
+        FW(set_clock)(&solver, instruction_clock, 0);
+    }
+    if (status == FW_C(OK)) {
+        status = FW(init_nominal)(&solver, FW(x0_default));
+    }
+    return status;
+}
+
 /* The closed-loop instant of the package (dopus_codegen/studies/loops.py): the measurement
  * in, the returned u0 applied whatever the status; a failed instant is reported and the loop
  * goes on. budget 0: the generated settings, lines "loop", returns the first failure;
@@ -276,20 +296,9 @@ static int closed_loop(double budget, int steady)
     int i, k, status, plant_ok = 1, first_failure = FW_C(OK);
     uint32_t t_fb, t_prep, stack;
 
-    if (budget > 0.0) {
-        FW(settings_default)(&settings);
-        settings.budget = budget;
-        settings.budget_unit = FW_C(BUDGET_TIME);
-        status = FW(setup)(&solver, &settings);
-        FW(set_clock)(&solver, instruction_clock, 0);
-    } else {
-        status = FW(setup)(&solver, NULL); /* the generated settings */
-        /* no budget: the clock only feeds the phase timers (instructions per phase) */
-        FW(set_clock)(&solver, instruction_clock, 0);
-    }
-    if (status == FW_C(OK)) {
-        status = FW(init_nominal)(&solver, FW(x0_default));
-    }
+    FW(settings_default)(&settings); /* the generated settings */
+    /* without a budget the clock only feeds the phase timers (instructions per phase) */
+    status = start_solver(budget, 1);
     if (status != FW_C(OK)) {
         return status;
     }
@@ -376,17 +385,7 @@ static int scenario(int setting, long budget)
         settings.M_min = FW_ADAPTIVE_M_MIN;
         settings.M_max = FW_ADAPTIVE_M_MAX < FW_C(N) - 1 ? FW_ADAPTIVE_M_MAX : FW_C(N) - 1;
     }
-    if (budget > 0) {
-        settings.budget = (double)budget;
-        settings.budget_unit = FW_C(BUDGET_TIME);
-    }
-    status = FW(setup)(&solver, &settings);
-    if (budget > 0) {
-        FW(set_clock)(&solver, instruction_clock, 0);
-    }
-    if (status == FW_C(OK)) {
-        status = FW(init_nominal)(&solver, FW(x0_default));
-    }
+    status = start_solver((double)budget, 0);
     if (status != FW_C(OK)) {
         return status;
     }
