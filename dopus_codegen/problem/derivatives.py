@@ -448,9 +448,12 @@ def _stage_functions(name: str, m: StageModel, directions="auto"):
     gL = node_grad(X, U, P, MUG) + g_dyn
     stage_grad = ca.Function(f"{name}_stage_grad", ins, [gL, phi_grad, l, g], in_names,
                              ["gL", "phi", "l", "g"])
-    S = sensitivities.propagate_forward(K, xs, U, P)
-    Phi = S[-1]
-    _, H_dyn = sensitivities.propagate_adjoint(K, xs, U, P, -LAM, S)
+    if implicit and directions == "auto":
+        Phi, H_dyn = sensitivities.hessian_inlined(phi_in, g_dyn, X, U)
+    else:
+        S = sensitivities.propagate_forward(K, xs, U, P)
+        Phi = S[-1]
+        _, H_dyn = sensitivities.propagate_adjoint(K, xs, U, P, -LAM, S)
     An, C = node_hess(X, U, P, MUG)
     A = An + 0.5 * (H_dyn + H_dyn.T)
     stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [A, Phi, C], in_names, ["A", "Phi", "C"])

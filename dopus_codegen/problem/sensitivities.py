@@ -45,7 +45,7 @@ from typing import Optional
 import casadi as ca
 
 __all__ = ["SubstepKernels", "substep_kernels", "propagate_forward", "propagate_adjoint",
-           "interval_map", "interval_map_inlined", "adjoint_inlined",
+           "interval_map", "interval_map_inlined", "adjoint_inlined", "hessian_inlined",
            "DIRECTION_MODES", "chain_kernel", "chain_hessian"]
 
 _SX_OPTS = {"cse": True}
@@ -165,6 +165,13 @@ def adjoint_inlined(xn, x, u, a_n):
     (:func:`interval_map_inlined`): each rootfinder call's derivative takes the stages the
     call computed (implicit function theorem at them) instead of solving again."""
     return ca.jtimes(xn, ca.vertcat(x, u), a_n, True)
+
+
+def hessian_inlined(xn, g, x, u):
+    """``(Phi, H)`` on the inlined graph: ``Phi = d x_n / d w`` and ``H = d g / d w`` with ``g``
+    the adjoint of :func:`adjoint_inlined` (forward over reverse)."""
+    w = ca.vertcat(x, u)
+    return ca.jacobian(xn, w), ca.jacobian(g, w)
 
 
 def propagate_forward(K: SubstepKernels, xs: list, u, p) -> list:
