@@ -282,15 +282,38 @@ static void dopus_lm_started(dopus_solver *s)
 /* ---- function evaluations ----------------------------------------------------------- */
 
 /* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
+static int dopus_stage_F_of(dopus_solver *s, int k, dopus_real l);
+
 static int dopus_stage_F(dopus_solver *s, int k)
 {
     dopus_real l = DOPUS_R(0.0);
-    int i;
     s->anytime.work += 1.0;
     if (dopus_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
+    return dopus_stage_F_of(s, k, l);
+}
+
+/* dopus_stage_F and the evaluation of dopus_stage_H in one call (stage_grad_hess_exact, the
+ * exact Hessian): F_k as dopus_stage_F, A, Phi, C in s->mem.ev.tmp_A/Phi/C for
+ * dopus_stage_H_keep, the stage's slot untouched. */
+static int dopus_stage_FH(dopus_solver *s, int k)
+{
+    dopus_real l = DOPUS_R(0.0);
+    s->anytime.work += 2.0;
+    if (dopus_eval_stage_grad_hess_exact(
+            s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL, s->mem.ev.tmp_phi, &l,
+            s->mem.ev.tmp_g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    return dopus_stage_F_of(s, k, l);
+}
+
+/* The checks and tmp_F of dopus_stage_F on the evaluated gL, phi, l, g. */
+static int dopus_stage_F_of(dopus_solver *s, int k, dopus_real l)
+{
+    int i;
     if (!dopus_lai_vec_finite(DOPUS_NW, s->mem.ev.tmp_gL) ||
         !dopus_lai_vec_finite(DOPUS_NX, s->mem.ev.tmp_phi) ||
         !dopus_lai_vec_finite(DOPUS_NG, s->mem.ev.tmp_g) || !isfinite(l)) {
@@ -331,15 +354,24 @@ static int dopus_stage_Al(dopus_solver *s, int k)
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
  * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
  * leaves the slot as it was. */
+static int dopus_stage_H_store(dopus_solver *s, int k);
+
 static int dopus_stage_H_eval(dopus_solver *s, int k)
+{
+    if (dopus_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                              s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
+                              &s->mem.ev.fun_work) != 0) {
+        return DOPUS_ERR_FUNCTION;
+    }
+    return dopus_stage_H_store(s, k);
+}
+
+/* The rest of dopus_stage_H_eval on A, Phi, C in s->mem.ev.tmp_A/Phi/C: checks, A_dyn,
+ * regularisation, stage k's slot. */
+static int dopus_stage_H_store(dopus_solver *s, int k)
 {
     dopus_stage_slot *slot;
     int rc, i;
-    rc = dopus_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
-                               s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
-    if (rc != 0) {
-        return DOPUS_ERR_FUNCTION;
-    }
     if (!dopus_lai_vec_finite(DOPUS_NW * DOPUS_NW, s->mem.ev.tmp_A) ||
         !dopus_lai_vec_finite(DOPUS_NX * DOPUS_NW, s->mem.ev.tmp_Phi) ||
         !dopus_lai_vec_finite(DOPUS_NG * DOPUS_NW, s->mem.ev.tmp_C)) {
@@ -374,6 +406,35 @@ static int dopus_stage_H(dopus_solver *s, int k)
     rc = dopus_stage_H_eval(s, k);
     dopus_phase(s, prev);
     return rc;
+}
+
+/* The H_k that dopus_stage_FH evaluated, stored as dopus_stage_H stores it (phase "hessians"). */
+static int dopus_stage_H_keep(dopus_solver *s, int k)
+{
+    int prev = dopus_phase(s, DOPUS_PHASE_HESSIANS);
+    int rc = dopus_stage_H_store(s, k);
+    dopus_phase(s, prev);
+    return rc;
+}
+
+/* 1 when a stage's gradient and Hessian are evaluated in one call (the exact Hessian). */
+static int dopus_fused(const dopus_solver *s)
+{
+    return s->settings.hessian == DOPUS_HESSIAN_EXACT;
+}
+
+/* F_k then H_k of stage k (dopus_stage_F, dopus_stage_H), fused where dopus_fused allows. */
+static int dopus_stage_F_H(dopus_solver *s, int k, int store_F)
+{
+    int rc = dopus_fused(s) ? dopus_stage_FH(s, k) : dopus_stage_F(s, k);
+    if (rc != DOPUS_OK) {
+        return rc;
+    }
+    if (store_F) {
+        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                           s->mem.ev.tmp_g);
+    }
+    return dopus_fused(s) ? dopus_stage_H_keep(s, k) : dopus_stage_H(s, k);
 }
 
 /* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
@@ -530,13 +591,7 @@ static int dopus_linearize_all_eval(dopus_solver *s)
 {
     int k, rc;
     for (k = 0; k < DOPUS_N; ++k) {
-        rc = dopus_stage_F(s, k);
-        if (rc != DOPUS_OK) {
-            return rc;
-        }
-        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
-                           s->mem.ev.tmp_g);
-        rc = dopus_stage_H(s, k);
+        rc = dopus_stage_F_H(s, k, 1);
         if (rc != DOPUS_OK) {
             return rc;
         }
@@ -1378,6 +1433,25 @@ static int dopus_relinearise(dopus_solver *s, double *ext_cost)
     return rc;
 }
 
+/* 1 when step 4 re-linearises every stage of 0..N-2 whatever their rho_k: no budget and M =
+ * N-1 (fixed, or after a recovery), as dopus_M_now and dopus_relinearise decide. */
+static int dopus_every_stage_fresh(const dopus_solver *s)
+{
+    const dopus_settings *st = &s->settings;
+    return !dopus_budget_on(s) && (s->health.recovering > 0 || (!st->M_adaptive && st->M >= DOPUS_N - 1));
+}
+
+/* Step 4 when step 2 re-linearised every stage of 0..N-2 (dopus_every_stage_fresh). */
+static int dopus_all_selected(dopus_solver *s)
+{
+    int k;
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        s->selected[k] = 1;
+    }
+    s->anytime.instant_stages += DOPUS_N - 1;
+    return DOPUS_OK;
+}
+
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
  * on (use_plan) or the OCP file's guess, clipped to the bounds, into the iterate. Returns 1
  * when every node is finite and inside the box. */
@@ -1658,7 +1732,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
 {
     dopus_real xN_saved[DOPUS_NX];
     double b_start = dopus_budget_now(s), ext_cost = 0.0, b_tail;
-    int k, rc;
+    int k, rc, all_fresh;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     dopus_phase(s, DOPUS_PHASE_SHIFT);
@@ -1668,11 +1742,13 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     }
     dopus_copy(xN_saved, s->x[DOPUS_N], DOPUS_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); when step 4 will
+     *    re-linearise every one of them (all_fresh), H_k too, in the same call */
+    all_fresh = dopus_fused(s) && dopus_every_stage_fresh(s);
     for (k = 0; k < DOPUS_N - 1; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
         dopus_phase(s, DOPUS_PHASE_GRADIENTS);
-        rc = dopus_stage_F(s, k);
+        rc = all_fresh ? dopus_stage_FH(s, k) : dopus_stage_F(s, k);
         if (rc != DOPUS_OK) {
             return rc;
         }
@@ -1682,11 +1758,18 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
         dopus_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, DOPUS_NW);
         dopus_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, DOPUS_NX);
         dopus_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, DOPUS_NG);
+        if (all_fresh) {
+            /* the slot's H after the secant, which reads the old one */
+            rc = dopus_stage_H_keep(s, k);
+            if (rc != DOPUS_OK) {
+                return rc;
+            }
+        }
     }
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     dopus_phase(s, DOPUS_PHASE_GRADIENTS);
-    rc = dopus_stage_F(s, DOPUS_N - 1);
+    rc = dopus_fused(s) ? dopus_stage_FH(s, DOPUS_N - 1) : dopus_stage_F(s, DOPUS_N - 1);
     if (rc != DOPUS_OK) {
         return rc;
     }
@@ -1696,7 +1779,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[DOPUS_N - 1] = DOPUS_R(0.0);
-    rc = dopus_stage_H(s, DOPUS_N - 1);
+    rc = dopus_fused(s) ? dopus_stage_H_keep(s, DOPUS_N - 1) : dopus_stage_H(s, DOPUS_N - 1);
     if (rc == DOPUS_OK) {
         rc = dopus_term_F(s);
     }
@@ -1707,7 +1790,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == DOPUS_OK) {
         dopus_phase(s, DOPUS_PHASE_RHO);
-        rc = dopus_relinearise(s, &ext_cost);
+        rc = all_fresh ? dopus_all_selected(s) : dopus_relinearise(s, &ext_cost);
     }
     b_tail = dopus_budget_now(s);
 

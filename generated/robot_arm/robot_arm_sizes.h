@@ -43,9 +43,9 @@
 
 /* CasADi work arrays: the maximum over every generated function, at least 1 */
 #define ROBOT_ARM_SZ_ARG 5
-#define ROBOT_ARM_SZ_RES 4
+#define ROBOT_ARM_SZ_RES 7
 #define ROBOT_ARM_SZ_IW 1
-#define ROBOT_ARM_SZ_W 658
+#define ROBOT_ARM_SZ_W 677
 
 /* The real-number type of the runtime, chosen at generation (options(real=...)): 1 for
  * single precision (float), 0 for double. robot_arm_real.h defines robot_arm_real and its macros. */

@@ -282,15 +282,38 @@ static void robot_arm_lm_started(robot_arm_solver *s)
 /* ---- function evaluations ----------------------------------------------------------- */
 
 /* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
+static int robot_arm_stage_F_of(robot_arm_solver *s, int k, robot_arm_real l);
+
 static int robot_arm_stage_F(robot_arm_solver *s, int k)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0);
-    int i;
     s->anytime.work += 1.0;
     if (robot_arm_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
+    return robot_arm_stage_F_of(s, k, l);
+}
+
+/* robot_arm_stage_F and the evaluation of robot_arm_stage_H in one call (stage_grad_hess_exact, the
+ * exact Hessian): F_k as robot_arm_stage_F, A, Phi, C in s->mem.ev.tmp_A/Phi/C for
+ * robot_arm_stage_H_keep, the stage's slot untouched. */
+static int robot_arm_stage_FH(robot_arm_solver *s, int k)
+{
+    robot_arm_real l = ROBOT_ARM_R(0.0);
+    s->anytime.work += 2.0;
+    if (robot_arm_eval_stage_grad_hess_exact(
+            s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL, s->mem.ev.tmp_phi, &l,
+            s->mem.ev.tmp_g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
+        return ROBOT_ARM_ERR_FUNCTION;
+    }
+    return robot_arm_stage_F_of(s, k, l);
+}
+
+/* The checks and tmp_F of robot_arm_stage_F on the evaluated gL, phi, l, g. */
+static int robot_arm_stage_F_of(robot_arm_solver *s, int k, robot_arm_real l)
+{
+    int i;
     if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW, s->mem.ev.tmp_gL) ||
         !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->mem.ev.tmp_phi) ||
         !robot_arm_lai_vec_finite(ROBOT_ARM_NG, s->mem.ev.tmp_g) || !isfinite(l)) {
@@ -331,15 +354,24 @@ static int robot_arm_stage_Al(robot_arm_solver *s, int k)
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
  * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
  * leaves the slot as it was. */
+static int robot_arm_stage_H_store(robot_arm_solver *s, int k);
+
 static int robot_arm_stage_H_eval(robot_arm_solver *s, int k)
+{
+    if (robot_arm_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                              s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
+                              &s->mem.ev.fun_work) != 0) {
+        return ROBOT_ARM_ERR_FUNCTION;
+    }
+    return robot_arm_stage_H_store(s, k);
+}
+
+/* The rest of robot_arm_stage_H_eval on A, Phi, C in s->mem.ev.tmp_A/Phi/C: checks, A_dyn,
+ * regularisation, stage k's slot. */
+static int robot_arm_stage_H_store(robot_arm_solver *s, int k)
 {
     robot_arm_stage_slot *slot;
     int rc, i;
-    rc = robot_arm_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
-                               s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
-    if (rc != 0) {
-        return ROBOT_ARM_ERR_FUNCTION;
-    }
     if (!robot_arm_lai_vec_finite(ROBOT_ARM_NW * ROBOT_ARM_NW, s->mem.ev.tmp_A) ||
         !robot_arm_lai_vec_finite(ROBOT_ARM_NX * ROBOT_ARM_NW, s->mem.ev.tmp_Phi) ||
         !robot_arm_lai_vec_finite(ROBOT_ARM_NG * ROBOT_ARM_NW, s->mem.ev.tmp_C)) {
@@ -374,6 +406,35 @@ static int robot_arm_stage_H(robot_arm_solver *s, int k)
     rc = robot_arm_stage_H_eval(s, k);
     robot_arm_phase(s, prev);
     return rc;
+}
+
+/* The H_k that robot_arm_stage_FH evaluated, stored as robot_arm_stage_H stores it (phase "hessians"). */
+static int robot_arm_stage_H_keep(robot_arm_solver *s, int k)
+{
+    int prev = robot_arm_phase(s, ROBOT_ARM_PHASE_HESSIANS);
+    int rc = robot_arm_stage_H_store(s, k);
+    robot_arm_phase(s, prev);
+    return rc;
+}
+
+/* 1 when a stage's gradient and Hessian are evaluated in one call (the exact Hessian). */
+static int robot_arm_fused(const robot_arm_solver *s)
+{
+    return s->settings.hessian == ROBOT_ARM_HESSIAN_EXACT;
+}
+
+/* F_k then H_k of stage k (robot_arm_stage_F, robot_arm_stage_H), fused where robot_arm_fused allows. */
+static int robot_arm_stage_F_H(robot_arm_solver *s, int k, int store_F)
+{
+    int rc = robot_arm_fused(s) ? robot_arm_stage_FH(s, k) : robot_arm_stage_F(s, k);
+    if (rc != ROBOT_ARM_OK) {
+        return rc;
+    }
+    if (store_F) {
+        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                           s->mem.ev.tmp_g);
+    }
+    return robot_arm_fused(s) ? robot_arm_stage_H_keep(s, k) : robot_arm_stage_H(s, k);
 }
 
 /* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
@@ -530,13 +591,7 @@ static int robot_arm_linearize_all_eval(robot_arm_solver *s)
 {
     int k, rc;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        rc = robot_arm_stage_F(s, k);
-        if (rc != ROBOT_ARM_OK) {
-            return rc;
-        }
-        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
-                           s->mem.ev.tmp_g);
-        rc = robot_arm_stage_H(s, k);
+        rc = robot_arm_stage_F_H(s, k, 1);
         if (rc != ROBOT_ARM_OK) {
             return rc;
         }
@@ -1378,6 +1433,25 @@ static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost)
     return rc;
 }
 
+/* 1 when step 4 re-linearises every stage of 0..N-2 whatever their rho_k: no budget and M =
+ * N-1 (fixed, or after a recovery), as robot_arm_M_now and robot_arm_relinearise decide. */
+static int robot_arm_every_stage_fresh(const robot_arm_solver *s)
+{
+    const robot_arm_settings *st = &s->settings;
+    return !robot_arm_budget_on(s) && (s->health.recovering > 0 || (!st->M_adaptive && st->M >= ROBOT_ARM_N - 1));
+}
+
+/* Step 4 when step 2 re-linearised every stage of 0..N-2 (robot_arm_every_stage_fresh). */
+static int robot_arm_all_selected(robot_arm_solver *s)
+{
+    int k;
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        s->selected[k] = 1;
+    }
+    s->anytime.instant_stages += ROBOT_ARM_N - 1;
+    return ROBOT_ARM_OK;
+}
+
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
  * on (use_plan) or the OCP file's guess, clipped to the bounds, into the iterate. Returns 1
  * when every node is finite and inside the box. */
@@ -1658,7 +1732,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 {
     robot_arm_real xN_saved[ROBOT_ARM_NX];
     double b_start = robot_arm_budget_now(s), ext_cost = 0.0, b_tail;
-    int k, rc;
+    int k, rc, all_fresh;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     robot_arm_phase(s, ROBOT_ARM_PHASE_SHIFT);
@@ -1668,11 +1742,13 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     }
     robot_arm_copy(xN_saved, s->x[ROBOT_ARM_N], ROBOT_ARM_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); when step 4 will
+     *    re-linearise every one of them (all_fresh), H_k too, in the same call */
+    all_fresh = robot_arm_fused(s) && robot_arm_every_stage_fresh(s);
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
         robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
-        rc = robot_arm_stage_F(s, k);
+        rc = all_fresh ? robot_arm_stage_FH(s, k) : robot_arm_stage_F(s, k);
         if (rc != ROBOT_ARM_OK) {
             return rc;
         }
@@ -1682,11 +1758,18 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
         robot_arm_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, ROBOT_ARM_NW);
         robot_arm_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, ROBOT_ARM_NX);
         robot_arm_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, ROBOT_ARM_NG);
+        if (all_fresh) {
+            /* the slot's H after the secant, which reads the old one */
+            rc = robot_arm_stage_H_keep(s, k);
+            if (rc != ROBOT_ARM_OK) {
+                return rc;
+            }
+        }
     }
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
-    rc = robot_arm_stage_F(s, ROBOT_ARM_N - 1);
+    rc = robot_arm_fused(s) ? robot_arm_stage_FH(s, ROBOT_ARM_N - 1) : robot_arm_stage_F(s, ROBOT_ARM_N - 1);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
@@ -1696,7 +1779,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, ROBOT_ARM_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[ROBOT_ARM_N - 1] = ROBOT_ARM_R(0.0);
-    rc = robot_arm_stage_H(s, ROBOT_ARM_N - 1);
+    rc = robot_arm_fused(s) ? robot_arm_stage_H_keep(s, ROBOT_ARM_N - 1) : robot_arm_stage_H(s, ROBOT_ARM_N - 1);
     if (rc == ROBOT_ARM_OK) {
         rc = robot_arm_term_F(s);
     }
@@ -1707,7 +1790,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == ROBOT_ARM_OK) {
         robot_arm_phase(s, ROBOT_ARM_PHASE_RHO);
-        rc = robot_arm_relinearise(s, &ext_cost);
+        rc = all_fresh ? robot_arm_all_selected(s) : robot_arm_relinearise(s, &ext_cost);
     }
     b_tail = robot_arm_budget_now(s);
 

@@ -35,6 +35,7 @@ extern "C" {
 #define casadi_f0 CASADI_PREFIX(f0)
 #define casadi_f1 CASADI_PREFIX(f1)
 #define casadi_f10 CASADI_PREFIX(f10)
+#define casadi_f11 CASADI_PREFIX(f11)
 #define casadi_f2 CASADI_PREFIX(f2)
 #define casadi_f3 CASADI_PREFIX(f3)
 #define casadi_f4 CASADI_PREFIX(f4)
@@ -856,8 +857,434 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_exact_work_bytes(casadi_int *sz_arg
   return 0;
 }
 
-/* unicycle_stage_hess_gn:(x[4],u[2],p[2],lam_next[4],mu_g)->(A[6x6],Phi[4x6],C[1x6]) */
+/* unicycle_stage_grad_hess_exact:(x[4],u[2],p[2],lam_next[4],mu_g)->(gL[6],phi[4],l,g,A[6x6],Phi[4x6],C[1x6]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
+  casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
+  casadi_real a36, a37, a38, a39, a40, a41, a42, a43, a44;
+  a00=arg[0]? arg[0][0] : 0;
+  a01=1.;
+  a02=(a00-a01);
+  a03=(2.*a02);
+  a04=arg[4]? arg[4][0] : 0;
+  a05=(a03*a04);
+  a06=arg[3]? arg[3][0] : 0;
+  a05=(a05-a06);
+  a07=1.0000000000000001e-01;
+  a08=arg[2]? arg[2][0] : 0;
+  a08=(a00-a08);
+  a09=(a07*a08);
+  a05=(a05+a09);
+  if (res[0]!=0) res[0][0]=a05;
+  a05=arg[0]? arg[0][1] : 0;
+  a10=(a05-a07);
+  a11=(2.*a10);
+  a12=(a11*a04);
+  a13=arg[3]? arg[3][1] : 0;
+  a12=(a12-a13);
+  a14=arg[2]? arg[2][1] : 0;
+  a14=(a05-a14);
+  a15=(a07*a14);
+  a12=(a12+a15);
+  if (res[0]!=0) res[0][1]=a12;
+  a12=arg[0]? arg[0][2] : 0;
+  a16=arg[1]? arg[1][1] : 0;
+  a17=(a07*a16);
+  a17=(a12+a17);
+  a18=sin(a17);
+  a19=arg[0]? arg[0][3] : 0;
+  a20=arg[1]? arg[1][0] : 0;
+  a21=(a07*a20);
+  a21=(a19+a21);
+  a22=1.6666666666666666e-02;
+  a23=(a22*a06);
+  a24=(a21*a23);
+  a25=(a18*a24);
+  a17=cos(a17);
+  a26=(a22*a13);
+  a27=(a21*a26);
+  a28=(a17*a27);
+  a25=(a25-a28);
+  a28=arg[3]? arg[3][2] : 0;
+  a29=cos(a12);
+  a30=(a19*a26);
+  a31=(a29*a30);
+  a31=(a28+a31);
+  a31=(a25-a31);
+  a32=5.0000000000000003e-02;
+  a33=(a32*a16);
+  a33=(a12+a33);
+  a34=cos(a33);
+  a35=(a32*a20);
+  a35=(a19+a35);
+  a36=3.3333333333333333e-02;
+  a13=(a36*a13);
+  a13=(-a13);
+  a13=(2.*a13);
+  a37=(a35*a13);
+  a38=(a34*a37);
+  a33=sin(a33);
+  a36=(a36*a06);
+  a36=(-a36);
+  a36=(2.*a36);
+  a06=(a35*a36);
+  a39=(a33*a06);
+  a38=(a38-a39);
+  a31=(a31+a38);
+  a39=sin(a12);
+  a40=(a19*a23);
+  a41=(a39*a40);
+  a31=(a31+a41);
+  if (res[0]!=0) res[0][2]=a31;
+  a31=(a33*a13);
+  a41=(a34*a36);
+  a31=(a31+a41);
+  a41=arg[3]? arg[3][3] : 0;
+  a42=(a39*a26);
+  a42=(a41+a42);
+  a43=(a18*a26);
+  a44=(a17*a23);
+  a43=(a43+a44);
+  a42=(a42+a43);
+  a42=(a31-a42);
+  a44=(a29*a23);
+  a42=(a42-a44);
+  if (res[0]!=0) res[0][3]=a42;
+  a42=(a22*a41);
+  a44=(-a42);
+  a44=(2.*a44);
+  a44=(a44-a42);
+  a41=(a32*a41);
+  a44=(a44-a41);
+  a43=(a07*a43);
+  a44=(a44-a43);
+  a31=(a32*a31);
+  a44=(a44+a31);
+  a31=5.0000000000000010e-03;
+  a43=(a31*a20);
+  a44=(a44+a43);
+  a44=(a44+a43);
+  if (res[0]!=0) res[0][4]=a44;
+  a44=(a22*a28);
+  a43=(-a44);
+  a43=(2.*a43);
+  a43=(a43-a44);
+  a28=(a32*a28);
+  a43=(a43-a28);
+  a25=(a07*a25);
+  a43=(a43+a25);
+  a38=(a32*a38);
+  a43=(a43+a38);
+  a38=(a31*a16);
+  a43=(a43+a38);
+  a43=(a43+a38);
+  if (res[0]!=0) res[0][5]=a43;
+  a43=(a19*a29);
+  a38=(a35*a34);
+  a38=(2.*a38);
+  a43=(a43+a38);
+  a43=(a43+a38);
+  a38=(a21*a17);
+  a43=(a43+a38);
+  a43=(a22*a43);
+  a00=(a00+a43);
+  if (res[1]!=0) res[1][0]=a00;
+  a00=(a19*a39);
+  a38=(a35*a33);
+  a25=(2.*a38);
+  a28=(a00+a25);
+  a28=(a28+a25);
+  a25=(a21*a18);
+  a28=(a28+a25);
+  a28=(a22*a28);
+  a05=(a05+a28);
+  if (res[1]!=0) res[1][1]=a05;
+  a05=3.;
+  a28=(a05*a16);
+  a44=(2.*a16);
+  a28=(a28+a44);
+  a28=(a28+a16);
+  a28=(a22*a28);
+  a12=(a12+a28);
+  if (res[1]!=0) res[1][2]=a12;
+  a05=(a05*a20);
+  a12=(2.*a20);
+  a05=(a05+a12);
+  a05=(a05+a20);
+  a05=(a22*a05);
+  a19=(a19+a05);
+  if (res[1]!=0) res[1][3]=a19;
+  a19=5.0000000000000000e-01;
+  a08=(a08*a09);
+  a14=(a14*a15);
+  a08=(a08+a14);
+  a14=1.0000000000000002e-02;
+  a15=(a14*a20);
+  a20=(a20*a15);
+  a08=(a08+a20);
+  a20=(a14*a16);
+  a16=(a16*a20);
+  a08=(a08+a16);
+  a19=(a19*a08);
+  if (res[2]!=0) res[2][0]=a19;
+  a02=casadi_sq(a02);
+  a10=casadi_sq(a10);
+  a02=(a02+a10);
+  if (res[3]!=0) res[3][0]=a02;
+  a04=(2.*a04);
+  a04=(a04+a07);
+  if (res[4]!=0) res[4][0]=a04;
+  a02=0.;
+  if (res[4]!=0) res[4][1]=a02;
+  if (res[4]!=0) res[4][2]=a02;
+  if (res[4]!=0) res[4][3]=a02;
+  if (res[4]!=0) res[4][4]=a02;
+  if (res[4]!=0) res[4][5]=a02;
+  if (res[4]!=0) res[4][6]=a02;
+  if (res[4]!=0) res[4][7]=a04;
+  if (res[4]!=0) res[4][8]=a02;
+  if (res[4]!=0) res[4][9]=a02;
+  if (res[4]!=0) res[4][10]=a02;
+  if (res[4]!=0) res[4][11]=a02;
+  if (res[4]!=0) res[4][12]=a02;
+  if (res[4]!=0) res[4][13]=a02;
+  a04=(a24*a17);
+  a10=(a27*a18);
+  a04=(a04+a10);
+  a30=(a30*a39);
+  a04=(a04+a30);
+  a30=(a37*a33);
+  a10=(a06*a34);
+  a30=(a30+a10);
+  a04=(a04-a30);
+  a40=(a40*a29);
+  a04=(a04+a40);
+  if (res[4]!=0) res[4][14]=a04;
+  a04=(a13*a34);
+  a40=(a36*a33);
+  a04=(a04-a40);
+  a40=(a26*a29);
+  a30=(a26*a17);
+  a10=(a23*a18);
+  a30=(a30-a10);
+  a40=(a40+a30);
+  a40=(a04-a40);
+  a10=(a23*a39);
+  a40=(a40+a10);
+  if (res[4]!=0) res[4][15]=a40;
+  a04=(a32*a04);
+  a30=(a07*a30);
+  a04=(a04-a30);
+  if (res[4]!=0) res[4][16]=a04;
+  a30=(a07*a17);
+  a24=(a24*a30);
+  a10=(a07*a18);
+  a27=(a27*a10);
+  a24=(a24+a27);
+  a27=(a32*a33);
+  a37=(a37*a27);
+  a19=(a32*a34);
+  a06=(a06*a19);
+  a37=(a37+a06);
+  a06=(a24-a37);
+  if (res[4]!=0) res[4][17]=a06;
+  if (res[4]!=0) res[4][18]=a02;
+  if (res[4]!=0) res[4][19]=a02;
+  if (res[4]!=0) res[4][20]=a40;
+  if (res[4]!=0) res[4][21]=a02;
+  if (res[4]!=0) res[4][22]=a02;
+  a13=(a13*a19);
+  a36=(a36*a27);
+  a13=(a13-a36);
+  a26=(a26*a30);
+  a23=(a23*a10);
+  a26=(a26-a23);
+  a23=(a13-a26);
+  if (res[4]!=0) res[4][23]=a23;
+  if (res[4]!=0) res[4][24]=a02;
+  if (res[4]!=0) res[4][25]=a02;
+  if (res[4]!=0) res[4][26]=a04;
+  if (res[4]!=0) res[4][27]=a02;
+  if (res[4]!=0) res[4][28]=a14;
+  a13=(a32*a13);
+  a26=(a07*a26);
+  a13=(a13-a26);
+  if (res[4]!=0) res[4][29]=a13;
+  if (res[4]!=0) res[4][30]=a02;
+  if (res[4]!=0) res[4][31]=a02;
+  if (res[4]!=0) res[4][32]=a06;
+  if (res[4]!=0) res[4][33]=a23;
+  if (res[4]!=0) res[4][34]=a13;
+  a24=(a07*a24);
+  a32=(a32*a37);
+  a24=(a24-a32);
+  a24=(a24+a31);
+  a24=(a24+a31);
+  if (res[4]!=0) res[4][35]=a24;
+  if (res[5]!=0) res[5][0]=a01;
+  if (res[5]!=0) res[5][1]=a02;
+  if (res[5]!=0) res[5][2]=a02;
+  if (res[5]!=0) res[5][3]=a02;
+  if (res[5]!=0) res[5][4]=a02;
+  if (res[5]!=0) res[5][5]=a01;
+  if (res[5]!=0) res[5][6]=a02;
+  if (res[5]!=0) res[5][7]=a02;
+  a38=(-a38);
+  a38=(2.*a38);
+  a00=(a38-a00);
+  a00=(a00+a38);
+  a00=(a00-a25);
+  a00=(a22*a00);
+  if (res[5]!=0) res[5][8]=a00;
+  if (res[5]!=0) res[5][9]=a43;
+  if (res[5]!=0) res[5][10]=a01;
+  if (res[5]!=0) res[5][11]=a02;
+  a43=(2.*a34);
+  a29=(a29+a43);
+  a29=(a29+a43);
+  a29=(a29+a17);
+  a29=(a22*a29);
+  if (res[5]!=0) res[5][12]=a29;
+  a29=(2.*a33);
+  a39=(a39+a29);
+  a39=(a39+a29);
+  a39=(a39+a18);
+  a39=(a22*a39);
+  if (res[5]!=0) res[5][13]=a39;
+  if (res[5]!=0) res[5][14]=a02;
+  if (res[5]!=0) res[5][15]=a01;
+  a01=2.0000000000000001e-01;
+  a34=(a01*a34);
+  a34=(a34+a30);
+  a34=(a22*a34);
+  if (res[5]!=0) res[5][16]=a34;
+  a01=(a01*a33);
+  a01=(a01+a10);
+  a01=(a22*a01);
+  if (res[5]!=0) res[5][17]=a01;
+  if (res[5]!=0) res[5][18]=a02;
+  if (res[5]!=0) res[5][19]=a07;
+  a01=4.;
+  a27=(a35*a27);
+  a27=(a01*a27);
+  a10=(a21*a10);
+  a27=(a27+a10);
+  a27=(a22*a27);
+  a27=(-a27);
+  if (res[5]!=0) res[5][20]=a27;
+  a35=(a35*a19);
+  a01=(a01*a35);
+  a21=(a21*a30);
+  a01=(a01+a21);
+  a22=(a22*a01);
+  if (res[5]!=0) res[5][21]=a22;
+  if (res[5]!=0) res[5][22]=a07;
+  if (res[5]!=0) res[5][23]=a02;
+  if (res[6]!=0) res[6][0]=a03;
+  if (res[6]!=0) res[6][1]=a11;
+  if (res[6]!=0) res[6][2]=a02;
+  if (res[6]!=0) res[6][3]=a02;
+  if (res[6]!=0) res[6][4]=a02;
+  if (res[6]!=0) res[6][5]=a02;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int unicycle_stage_grad_hess_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f3(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int unicycle_stage_grad_hess_exact_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void unicycle_stage_grad_hess_exact_release(int mem) {
+  (void)mem;
+}
+
+CASADI_SYMBOL_EXPORT void unicycle_stage_grad_hess_exact_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void unicycle_stage_grad_hess_exact_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int unicycle_stage_grad_hess_exact_n_in(void) { return 5;}
+
+CASADI_SYMBOL_EXPORT casadi_int unicycle_stage_grad_hess_exact_n_out(void) { return 7;}
+
+CASADI_SYMBOL_EXPORT casadi_real unicycle_stage_grad_hess_exact_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* unicycle_stage_grad_hess_exact_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x";
+    case 1: return "u";
+    case 2: return "p";
+    case 3: return "lam_next";
+    case 4: return "mu_g";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* unicycle_stage_grad_hess_exact_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "gL";
+    case 1: return "phi";
+    case 2: return "l";
+    case 3: return "g";
+    case 4: return "A";
+    case 5: return "Phi";
+    case 6: return "C";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_grad_hess_exact_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s0;
+    case 1: return casadi_s1;
+    case 2: return casadi_s1;
+    case 3: return casadi_s0;
+    case 4: return casadi_s2;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_grad_hess_exact_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s3;
+    case 1: return casadi_s0;
+    case 2: return casadi_s2;
+    case 3: return casadi_s2;
+    case 4: return casadi_s4;
+    case 5: return casadi_s5;
+    case 6: return casadi_s6;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int unicycle_stage_grad_hess_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 5;
+  if (sz_res) *sz_res = 7;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int unicycle_stage_grad_hess_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 7*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* unicycle_stage_hess_gn:(x[4],u[2],p[2],lam_next[4],mu_g)->(A[6x6],Phi[4x6],C[1x6]) */
+static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15;
@@ -1011,7 +1438,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f3(arg, res, iw, w, mem);
+  return casadi_f4(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn_checkout(void) {
@@ -1095,7 +1522,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn_work_bytes(casadi_int *sz_arg, c
 }
 
 /* unicycle_stage_hess_cost_exact:(x[4],u[2],p[2])->(A_l[6x6]) */
-static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   const casadi_real *wr0;
   wr0 = casadi_c0;
@@ -1104,7 +1531,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f4(arg, res, iw, w, mem);
+  return casadi_f5(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_checkout(void) {
@@ -1180,7 +1607,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_work_bytes(casadi_int *s
 }
 
 /* unicycle_stage_hess_cost_gn:(x[4],u[2],p[2])->(A_l[6x6]) */
-static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   const casadi_real *wr0;
   wr0 = casadi_c0;
@@ -1189,7 +1616,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f5(arg, res, iw, w, mem);
+  return casadi_f6(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_checkout(void) {
@@ -1265,7 +1692,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_work_bytes(casadi_int *sz_a
 }
 
 /* unicycle_term_eval:(x[4],p[2])->(E,r[0],r_eq[0]) */
-static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4;
   a0=5.0000000000000000e-01;
@@ -1290,7 +1717,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_eval(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f6(arg, res, iw, w, mem);
+  return casadi_f7(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_eval_checkout(void) {
@@ -1368,7 +1795,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_eval_work_bytes(casadi_int *sz_arg, casad
 }
 
 /* unicycle_term_grad:(x[4],p[2],mu_r[0],nu[0])->(gL[4],E,r[0],r_eq[0]) */
-static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5;
   a0=10.;
@@ -1398,7 +1825,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_grad(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f7(arg, res, iw, w, mem);
+  return casadi_f8(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_grad_checkout(void) {
@@ -1482,7 +1909,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_grad_work_bytes(casadi_int *sz_arg, casad
 }
 
 /* unicycle_term_hess_exact:(x[4],p[2],mu_r[0],nu[0])->(A[4x4],R[0x4],R_eq[0x4]) */
-static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   const casadi_real *wr0;
   wr0 = casadi_c1;
@@ -1491,7 +1918,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f8(arg, res, iw, w, mem);
+  return casadi_f9(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_checkout(void) {
@@ -1573,7 +2000,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_work_bytes(casadi_int *sz_arg,
 }
 
 /* unicycle_term_hess_gn:(x[4],p[2],mu_r[0],nu[0])->(A[4x4],R[0x4],R_eq[0x4]) */
-static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   const casadi_real *wr0;
   wr0 = casadi_c1;
@@ -1582,7 +2009,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f9(arg, res, iw, w, mem);
+  return casadi_f10(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_checkout(void) {
@@ -1664,7 +2091,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_work_bytes(casadi_int *sz_arg, ca
 }
 
 /* unicycle_ode:(x[4],u[2],p[2])->(xdot[4]) */
-static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2;
   a0=arg[0]? arg[0][3] : 0;
@@ -1683,7 +2110,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_ode(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f10(arg, res, iw, w, mem);
+  return casadi_f11(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_ode_checkout(void) {

@@ -71,6 +71,24 @@ int unicycle_stage_hess_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res,
 #define unicycle_stage_hess_exact_SZ_RES 3
 #define unicycle_stage_hess_exact_SZ_IW 0
 #define unicycle_stage_hess_exact_SZ_W 0
+int unicycle_stage_grad_hess_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int unicycle_stage_grad_hess_exact_checkout(void);
+void unicycle_stage_grad_hess_exact_release(int mem);
+void unicycle_stage_grad_hess_exact_incref(void);
+void unicycle_stage_grad_hess_exact_decref(void);
+casadi_int unicycle_stage_grad_hess_exact_n_in(void);
+casadi_int unicycle_stage_grad_hess_exact_n_out(void);
+casadi_real unicycle_stage_grad_hess_exact_default_in(casadi_int i);
+const char* unicycle_stage_grad_hess_exact_name_in(casadi_int i);
+const char* unicycle_stage_grad_hess_exact_name_out(casadi_int i);
+const casadi_int* unicycle_stage_grad_hess_exact_sparsity_in(casadi_int i);
+const casadi_int* unicycle_stage_grad_hess_exact_sparsity_out(casadi_int i);
+int unicycle_stage_grad_hess_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int unicycle_stage_grad_hess_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define unicycle_stage_grad_hess_exact_SZ_ARG 5
+#define unicycle_stage_grad_hess_exact_SZ_RES 7
+#define unicycle_stage_grad_hess_exact_SZ_IW 0
+#define unicycle_stage_grad_hess_exact_SZ_W 0
 int unicycle_stage_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int unicycle_stage_hess_gn_checkout(void);
 void unicycle_stage_hess_gn_release(int mem);

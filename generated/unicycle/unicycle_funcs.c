@@ -66,6 +66,16 @@ int unicycle_eval_stage_hess(int gauss_newton, const unicycle_real *x, const uni
     return f ? unicycle_call(f, in, 5, out, 3, wk) : 1;
 }
 
+int unicycle_eval_stage_grad_hess_exact(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
+                                     const unicycle_real *lam_next, const unicycle_real *mu_g, unicycle_real *gL,
+                                     unicycle_real *phi, unicycle_real *l, unicycle_real *g, unicycle_real *A,
+                                     unicycle_real *Phi, unicycle_real *C, unicycle_fun_work *wk)
+{
+    const unicycle_real *in[5] = {x, u, p, lam_next, mu_g};
+    unicycle_real *out[7] = {gL, phi, l, g, A, Phi, C};
+    return unicycle_call(unicycle_stage_grad_hess_exact, in, 5, out, 7, wk);
+}
+
 int unicycle_eval_stage_hess_cost(int gauss_newton, const unicycle_real *x, const unicycle_real *u,
                                const unicycle_real *p, unicycle_real *A_l, unicycle_fun_work *wk)
 {

@@ -43,9 +43,9 @@
 
 /* CasADi work arrays: the maximum over every generated function, at least 1 */
 #define UNICYCLE_SZ_ARG 5
-#define UNICYCLE_SZ_RES 4
+#define UNICYCLE_SZ_RES 7
 #define UNICYCLE_SZ_IW 1
-#define UNICYCLE_SZ_W 36
+#define UNICYCLE_SZ_W 45
 
 /* The real-number type of the runtime, chosen at generation (options(real=...)): 1 for
  * single precision (float), 0 for double. unicycle_real.h defines unicycle_real and its macros. */

@@ -282,15 +282,38 @@ static void unicycle_lm_started(unicycle_solver *s)
 /* ---- function evaluations ----------------------------------------------------------- */
 
 /* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
+static int unicycle_stage_F_of(unicycle_solver *s, int k, unicycle_real l);
+
 static int unicycle_stage_F(unicycle_solver *s, int k)
 {
     unicycle_real l = UNICYCLE_R(0.0);
-    int i;
     s->anytime.work += 1.0;
     if (unicycle_eval_stage_grad(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL,
                               s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
+    return unicycle_stage_F_of(s, k, l);
+}
+
+/* unicycle_stage_F and the evaluation of unicycle_stage_H in one call (stage_grad_hess_exact, the
+ * exact Hessian): F_k as unicycle_stage_F, A, Phi, C in s->mem.ev.tmp_A/Phi/C for
+ * unicycle_stage_H_keep, the stage's slot untouched. */
+static int unicycle_stage_FH(unicycle_solver *s, int k)
+{
+    unicycle_real l = UNICYCLE_R(0.0);
+    s->anytime.work += 2.0;
+    if (unicycle_eval_stage_grad_hess_exact(
+            s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL, s->mem.ev.tmp_phi, &l,
+            s->mem.ev.tmp_g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
+        return UNICYCLE_ERR_FUNCTION;
+    }
+    return unicycle_stage_F_of(s, k, l);
+}
+
+/* The checks and tmp_F of unicycle_stage_F on the evaluated gL, phi, l, g. */
+static int unicycle_stage_F_of(unicycle_solver *s, int k, unicycle_real l)
+{
+    int i;
     if (!unicycle_lai_vec_finite(UNICYCLE_NW, s->mem.ev.tmp_gL) ||
         !unicycle_lai_vec_finite(UNICYCLE_NX, s->mem.ev.tmp_phi) ||
         !unicycle_lai_vec_finite(UNICYCLE_NG, s->mem.ev.tmp_g) || !isfinite(l)) {
@@ -331,15 +354,24 @@ static int unicycle_stage_Al(unicycle_solver *s, int k)
 /* H_k (eq. 15) at the current point, A regularised, stored in stage k's slot with
  * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
  * leaves the slot as it was. */
+static int unicycle_stage_H_store(unicycle_solver *s, int k);
+
 static int unicycle_stage_H_eval(unicycle_solver *s, int k)
+{
+    if (unicycle_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                              s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
+                              &s->mem.ev.fun_work) != 0) {
+        return UNICYCLE_ERR_FUNCTION;
+    }
+    return unicycle_stage_H_store(s, k);
+}
+
+/* The rest of unicycle_stage_H_eval on A, Phi, C in s->mem.ev.tmp_A/Phi/C: checks, A_dyn,
+ * regularisation, stage k's slot. */
+static int unicycle_stage_H_store(unicycle_solver *s, int k)
 {
     unicycle_stage_slot *slot;
     int rc, i;
-    rc = unicycle_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
-                               s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work);
-    if (rc != 0) {
-        return UNICYCLE_ERR_FUNCTION;
-    }
     if (!unicycle_lai_vec_finite(UNICYCLE_NW * UNICYCLE_NW, s->mem.ev.tmp_A) ||
         !unicycle_lai_vec_finite(UNICYCLE_NX * UNICYCLE_NW, s->mem.ev.tmp_Phi) ||
         !unicycle_lai_vec_finite(UNICYCLE_NG * UNICYCLE_NW, s->mem.ev.tmp_C)) {
@@ -374,6 +406,35 @@ static int unicycle_stage_H(unicycle_solver *s, int k)
     rc = unicycle_stage_H_eval(s, k);
     unicycle_phase(s, prev);
     return rc;
+}
+
+/* The H_k that unicycle_stage_FH evaluated, stored as unicycle_stage_H stores it (phase "hessians"). */
+static int unicycle_stage_H_keep(unicycle_solver *s, int k)
+{
+    int prev = unicycle_phase(s, UNICYCLE_PHASE_HESSIANS);
+    int rc = unicycle_stage_H_store(s, k);
+    unicycle_phase(s, prev);
+    return rc;
+}
+
+/* 1 when a stage's gradient and Hessian are evaluated in one call (the exact Hessian). */
+static int unicycle_fused(const unicycle_solver *s)
+{
+    return s->settings.hessian == UNICYCLE_HESSIAN_EXACT;
+}
+
+/* F_k then H_k of stage k (unicycle_stage_F, unicycle_stage_H), fused where unicycle_fused allows. */
+static int unicycle_stage_F_H(unicycle_solver *s, int k, int store_F)
+{
+    int rc = unicycle_fused(s) ? unicycle_stage_FH(s, k) : unicycle_stage_F(s, k);
+    if (rc != UNICYCLE_OK) {
+        return rc;
+    }
+    if (store_F) {
+        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                           s->mem.ev.tmp_g);
+    }
+    return unicycle_fused(s) ? unicycle_stage_H_keep(s, k) : unicycle_stage_H(s, k);
 }
 
 /* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
@@ -530,13 +591,7 @@ static int unicycle_linearize_all_eval(unicycle_solver *s)
 {
     int k, rc;
     for (k = 0; k < UNICYCLE_N; ++k) {
-        rc = unicycle_stage_F(s, k);
-        if (rc != UNICYCLE_OK) {
-            return rc;
-        }
-        unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
-                           s->mem.ev.tmp_g);
-        rc = unicycle_stage_H(s, k);
+        rc = unicycle_stage_F_H(s, k, 1);
         if (rc != UNICYCLE_OK) {
             return rc;
         }
@@ -1378,6 +1433,25 @@ static int unicycle_relinearise(unicycle_solver *s, double *ext_cost)
     return rc;
 }
 
+/* 1 when step 4 re-linearises every stage of 0..N-2 whatever their rho_k: no budget and M =
+ * N-1 (fixed, or after a recovery), as unicycle_M_now and unicycle_relinearise decide. */
+static int unicycle_every_stage_fresh(const unicycle_solver *s)
+{
+    const unicycle_settings *st = &s->settings;
+    return !unicycle_budget_on(s) && (s->health.recovering > 0 || (!st->M_adaptive && st->M >= UNICYCLE_N - 1));
+}
+
+/* Step 4 when step 2 re-linearised every stage of 0..N-2 (unicycle_every_stage_fresh). */
+static int unicycle_all_selected(unicycle_solver *s)
+{
+    int k;
+    for (k = 0; k < UNICYCLE_N - 1; ++k) {
+        s->selected[k] = 1;
+    }
+    s->anytime.instant_stages += UNICYCLE_N - 1;
+    return UNICYCLE_OK;
+}
+
 /* Forward simulation from x[0] with the controls of the last good plan from its current age
  * on (use_plan) or the OCP file's guess, clipped to the bounds, into the iterate. Returns 1
  * when every node is finite and inside the box. */
@@ -1658,7 +1732,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 {
     unicycle_real xN_saved[UNICYCLE_NX];
     double b_start = unicycle_budget_now(s), ext_cost = 0.0, b_tail;
-    int k, rc;
+    int k, rc, all_fresh;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     unicycle_phase(s, UNICYCLE_PHASE_SHIFT);
@@ -1668,11 +1742,13 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     }
     unicycle_copy(xN_saved, s->x[UNICYCLE_N], UNICYCLE_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6) */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); when step 4 will
+     *    re-linearise every one of them (all_fresh), H_k too, in the same call */
+    all_fresh = unicycle_fused(s) && unicycle_every_stage_fresh(s);
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
         unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
         unicycle_phase(s, UNICYCLE_PHASE_GRADIENTS);
-        rc = unicycle_stage_F(s, k);
+        rc = all_fresh ? unicycle_stage_FH(s, k) : unicycle_stage_F(s, k);
         if (rc != UNICYCLE_OK) {
             return rc;
         }
@@ -1682,11 +1758,18 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
         unicycle_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, UNICYCLE_NW);
         unicycle_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, UNICYCLE_NX);
         unicycle_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, UNICYCLE_NG);
+        if (all_fresh) {
+            /* the slot's H after the secant, which reads the old one */
+            rc = unicycle_stage_H_keep(s, k);
+            if (rc != UNICYCLE_OK) {
+                return rc;
+            }
+        }
     }
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     unicycle_phase(s, UNICYCLE_PHASE_GRADIENTS);
-    rc = unicycle_stage_F(s, UNICYCLE_N - 1);
+    rc = unicycle_fused(s) ? unicycle_stage_FH(s, UNICYCLE_N - 1) : unicycle_stage_F(s, UNICYCLE_N - 1);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
@@ -1696,7 +1779,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[UNICYCLE_N - 1] = UNICYCLE_R(0.0);
-    rc = unicycle_stage_H(s, UNICYCLE_N - 1);
+    rc = unicycle_fused(s) ? unicycle_stage_H_keep(s, UNICYCLE_N - 1) : unicycle_stage_H(s, UNICYCLE_N - 1);
     if (rc == UNICYCLE_OK) {
         rc = unicycle_term_F(s);
     }
@@ -1707,7 +1790,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == UNICYCLE_OK) {
         unicycle_phase(s, UNICYCLE_PHASE_RHO);
-        rc = unicycle_relinearise(s, &ext_cost);
+        rc = all_fresh ? unicycle_all_selected(s) : unicycle_relinearise(s, &ext_cost);
     }
     b_tail = unicycle_budget_now(s);
 
