@@ -2,7 +2,7 @@
  *
  * Generic helpers for fixed-size stage blocks: no allocation, no size limits beyond the
  * caller's arrays. Naming follows BLAS/LAPACK (potrf, trsm, gemm, ...) so the intent of a
- * call is clear; there is no BLAS behind it.
+ * call is clear; there is no BLAS behind it. The arrays passed to one call must not overlap.
  */
 #ifndef DOPUS_LINALG_H
 #define DOPUS_LINALG_H
@@ -69,7 +69,9 @@ int dopus_la_all_finite(int m, int n, const dopus_real *A, int lda);
 /* ------------------------------------------------------------------------------------
  * Inline kernels (dopus_lai_*): the same operations as static inline functions, so that
  * a caller with compile-time sizes (the QP solver) gets them specialised and unrolled.
- * The dopus_la_* functions above are linkable wrappers around them. */
+ * The dopus_la_* functions above are linkable wrappers around them. The arrays of one call
+ * must not overlap (restrict): the output then stays in registers across the loops instead
+ * of being stored and read back after every update (the input might have been it). */
 #include <float.h>
 #include <math.h>
 
@@ -171,7 +173,7 @@ static inline int dopus_lai_ldlt_l(int n, dopus_real *A, int lda, int *neg)
     return 0;
 }
 
-static inline void dopus_lai_trsv_ln(int n, const dopus_real *L, int ldl, dopus_real *x)
+static inline void dopus_lai_trsv_ln(int n, const dopus_real *restrict L, int ldl, dopus_real *restrict x)
 {
     int i, k;
     for (i = 0; i < n; ++i) {
@@ -182,7 +184,7 @@ static inline void dopus_lai_trsv_ln(int n, const dopus_real *L, int ldl, dopus_
     }
 }
 
-static inline void dopus_lai_trsv_lt(int n, const dopus_real *L, int ldl, dopus_real *x)
+static inline void dopus_lai_trsv_lt(int n, const dopus_real *restrict L, int ldl, dopus_real *restrict x)
 {
     int i, k;
     for (i = n - 1; i >= 0; --i) {
@@ -193,14 +195,16 @@ static inline void dopus_lai_trsv_lt(int n, const dopus_real *L, int ldl, dopus_
     }
 }
 
-static inline void dopus_lai_trsm_lln(int n, int m, const dopus_real *L, int ldl, dopus_real *B, int ldb)
+static inline void dopus_lai_trsm_lln(int n, int m, const dopus_real *restrict L, int ldl, dopus_real *restrict B,
+                                      int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
         dopus_lai_trsv_ln(n, L, ldl, B + j * ldb);
 }
 
-static inline void dopus_lai_trsm_llt(int n, int m, const dopus_real *L, int ldl, dopus_real *B, int ldb)
+static inline void dopus_lai_trsm_llt(int n, int m, const dopus_real *restrict L, int ldl, dopus_real *restrict B,
+                                      int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
@@ -208,7 +212,7 @@ static inline void dopus_lai_trsm_llt(int n, int m, const dopus_real *L, int ldl
 }
 
 /* y = beta y (m entries) with beta = 0 writing zeros (y may hold NaN) and beta = 1 no-op. */
-static inline void dopus_lai_scale_y(int m, dopus_real beta, dopus_real *y)
+static inline void dopus_lai_scale_y(int m, dopus_real beta, dopus_real *restrict y)
 {
     int i;
     if (beta == DOPUS_R(0.0)) {
@@ -220,8 +224,8 @@ static inline void dopus_lai_scale_y(int m, dopus_real beta, dopus_real *y)
     }
 }
 
-static inline void dopus_lai_gemv_n(int m, int n, dopus_real alpha, const dopus_real *A, int lda,
-                                    const dopus_real *x, dopus_real beta, dopus_real *y)
+static inline void dopus_lai_gemv_n(int m, int n, dopus_real alpha, const dopus_real *restrict A, int lda,
+                                    const dopus_real *restrict x, dopus_real beta, dopus_real *restrict y)
 {
     int i, j;
     dopus_lai_scale_y(m, beta, y);
@@ -232,8 +236,8 @@ static inline void dopus_lai_gemv_n(int m, int n, dopus_real alpha, const dopus_
     }
 }
 
-static inline void dopus_lai_gemv_t(int m, int n, dopus_real alpha, const dopus_real *A, int lda,
-                                    const dopus_real *x, dopus_real beta, dopus_real *y)
+static inline void dopus_lai_gemv_t(int m, int n, dopus_real alpha, const dopus_real *restrict A, int lda,
+                                    const dopus_real *restrict x, dopus_real beta, dopus_real *restrict y)
 {
     int i, j;
     for (j = 0; j < n; ++j) {
@@ -244,8 +248,8 @@ static inline void dopus_lai_gemv_t(int m, int n, dopus_real alpha, const dopus_
     }
 }
 
-static inline void dopus_lai_symv_l(int n, dopus_real alpha, const dopus_real *A, int lda,
-                                    const dopus_real *x, dopus_real beta, dopus_real *y)
+static inline void dopus_lai_symv_l(int n, dopus_real alpha, const dopus_real *restrict A, int lda,
+                                    const dopus_real *restrict x, dopus_real beta, dopus_real *restrict y)
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column (the
@@ -266,8 +270,9 @@ static inline void dopus_lai_symv_l(int n, dopus_real alpha, const dopus_real *A
     }
 }
 
-static inline void dopus_lai_gemm_nn(int m, int n, int k, dopus_real alpha, const dopus_real *A, int lda,
-                                     const dopus_real *B, int ldb, dopus_real beta, dopus_real *C, int ldc)
+static inline void dopus_lai_gemm_nn(int m, int n, int k, dopus_real alpha, const dopus_real *restrict A, int lda,
+                                     const dopus_real *restrict B, int ldb, dopus_real beta, dopus_real *restrict C,
+                                     int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -281,8 +286,9 @@ static inline void dopus_lai_gemm_nn(int m, int n, int k, dopus_real alpha, cons
     }
 }
 
-static inline void dopus_lai_gemm_tn(int m, int n, int k, dopus_real alpha, const dopus_real *A, int lda,
-                                     const dopus_real *B, int ldb, dopus_real beta, dopus_real *C, int ldc)
+static inline void dopus_lai_gemm_tn(int m, int n, int k, dopus_real alpha, const dopus_real *restrict A, int lda,
+                                     const dopus_real *restrict B, int ldb, dopus_real beta, dopus_real *restrict C,
+                                     int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -295,7 +301,8 @@ static inline void dopus_lai_gemm_tn(int m, int n, int k, dopus_real alpha, cons
     }
 }
 
-static inline void dopus_lai_copy_mat(int m, int n, const dopus_real *A, int lda, dopus_real *B, int ldb)
+static inline void dopus_lai_copy_mat(int m, int n, const dopus_real *restrict A, int lda, dopus_real *restrict B,
+                                      int ldb)
 {
     int i, j;
     for (j = 0; j < n; ++j)
@@ -320,7 +327,7 @@ static inline dopus_real dopus_lai_dot(int n, const dopus_real *x, const dopus_r
     return s;
 }
 
-static inline void dopus_lai_axpy(int n, dopus_real alpha, const dopus_real *x, dopus_real *y)
+static inline void dopus_lai_axpy(int n, dopus_real alpha, const dopus_real *restrict x, dopus_real *restrict y)
 {
     int i;
     for (i = 0; i < n; ++i)

@@ -2,7 +2,7 @@
  *
  * Generic helpers for fixed-size stage blocks: no allocation, no size limits beyond the
  * caller's arrays. Naming follows BLAS/LAPACK (potrf, trsm, gemm, ...) so the intent of a
- * call is clear; there is no BLAS behind it.
+ * call is clear; there is no BLAS behind it. The arrays passed to one call must not overlap.
  */
 #ifndef UNICYCLE_LINALG_H
 #define UNICYCLE_LINALG_H
@@ -69,7 +69,9 @@ int unicycle_la_all_finite(int m, int n, const unicycle_real *A, int lda);
 /* ------------------------------------------------------------------------------------
  * Inline kernels (unicycle_lai_*): the same operations as static inline functions, so that
  * a caller with compile-time sizes (the QP solver) gets them specialised and unrolled.
- * The unicycle_la_* functions above are linkable wrappers around them. */
+ * The unicycle_la_* functions above are linkable wrappers around them. The arrays of one call
+ * must not overlap (restrict): the output then stays in registers across the loops instead
+ * of being stored and read back after every update (the input might have been it). */
 #include <float.h>
 #include <math.h>
 
@@ -171,7 +173,7 @@ static inline int unicycle_lai_ldlt_l(int n, unicycle_real *A, int lda, int *neg
     return 0;
 }
 
-static inline void unicycle_lai_trsv_ln(int n, const unicycle_real *L, int ldl, unicycle_real *x)
+static inline void unicycle_lai_trsv_ln(int n, const unicycle_real *restrict L, int ldl, unicycle_real *restrict x)
 {
     int i, k;
     for (i = 0; i < n; ++i) {
@@ -182,7 +184,7 @@ static inline void unicycle_lai_trsv_ln(int n, const unicycle_real *L, int ldl, 
     }
 }
 
-static inline void unicycle_lai_trsv_lt(int n, const unicycle_real *L, int ldl, unicycle_real *x)
+static inline void unicycle_lai_trsv_lt(int n, const unicycle_real *restrict L, int ldl, unicycle_real *restrict x)
 {
     int i, k;
     for (i = n - 1; i >= 0; --i) {
@@ -193,14 +195,16 @@ static inline void unicycle_lai_trsv_lt(int n, const unicycle_real *L, int ldl, 
     }
 }
 
-static inline void unicycle_lai_trsm_lln(int n, int m, const unicycle_real *L, int ldl, unicycle_real *B, int ldb)
+static inline void unicycle_lai_trsm_lln(int n, int m, const unicycle_real *restrict L, int ldl, unicycle_real *restrict B,
+                                      int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
         unicycle_lai_trsv_ln(n, L, ldl, B + j * ldb);
 }
 
-static inline void unicycle_lai_trsm_llt(int n, int m, const unicycle_real *L, int ldl, unicycle_real *B, int ldb)
+static inline void unicycle_lai_trsm_llt(int n, int m, const unicycle_real *restrict L, int ldl, unicycle_real *restrict B,
+                                      int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
@@ -208,7 +212,7 @@ static inline void unicycle_lai_trsm_llt(int n, int m, const unicycle_real *L, i
 }
 
 /* y = beta y (m entries) with beta = 0 writing zeros (y may hold NaN) and beta = 1 no-op. */
-static inline void unicycle_lai_scale_y(int m, unicycle_real beta, unicycle_real *y)
+static inline void unicycle_lai_scale_y(int m, unicycle_real beta, unicycle_real *restrict y)
 {
     int i;
     if (beta == UNICYCLE_R(0.0)) {
@@ -220,8 +224,8 @@ static inline void unicycle_lai_scale_y(int m, unicycle_real beta, unicycle_real
     }
 }
 
-static inline void unicycle_lai_gemv_n(int m, int n, unicycle_real alpha, const unicycle_real *A, int lda,
-                                    const unicycle_real *x, unicycle_real beta, unicycle_real *y)
+static inline void unicycle_lai_gemv_n(int m, int n, unicycle_real alpha, const unicycle_real *restrict A, int lda,
+                                    const unicycle_real *restrict x, unicycle_real beta, unicycle_real *restrict y)
 {
     int i, j;
     unicycle_lai_scale_y(m, beta, y);
@@ -232,8 +236,8 @@ static inline void unicycle_lai_gemv_n(int m, int n, unicycle_real alpha, const 
     }
 }
 
-static inline void unicycle_lai_gemv_t(int m, int n, unicycle_real alpha, const unicycle_real *A, int lda,
-                                    const unicycle_real *x, unicycle_real beta, unicycle_real *y)
+static inline void unicycle_lai_gemv_t(int m, int n, unicycle_real alpha, const unicycle_real *restrict A, int lda,
+                                    const unicycle_real *restrict x, unicycle_real beta, unicycle_real *restrict y)
 {
     int i, j;
     for (j = 0; j < n; ++j) {
@@ -244,8 +248,8 @@ static inline void unicycle_lai_gemv_t(int m, int n, unicycle_real alpha, const 
     }
 }
 
-static inline void unicycle_lai_symv_l(int n, unicycle_real alpha, const unicycle_real *A, int lda,
-                                    const unicycle_real *x, unicycle_real beta, unicycle_real *y)
+static inline void unicycle_lai_symv_l(int n, unicycle_real alpha, const unicycle_real *restrict A, int lda,
+                                    const unicycle_real *restrict x, unicycle_real beta, unicycle_real *restrict y)
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column (the
@@ -266,8 +270,9 @@ static inline void unicycle_lai_symv_l(int n, unicycle_real alpha, const unicycl
     }
 }
 
-static inline void unicycle_lai_gemm_nn(int m, int n, int k, unicycle_real alpha, const unicycle_real *A, int lda,
-                                     const unicycle_real *B, int ldb, unicycle_real beta, unicycle_real *C, int ldc)
+static inline void unicycle_lai_gemm_nn(int m, int n, int k, unicycle_real alpha, const unicycle_real *restrict A, int lda,
+                                     const unicycle_real *restrict B, int ldb, unicycle_real beta, unicycle_real *restrict C,
+                                     int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -281,8 +286,9 @@ static inline void unicycle_lai_gemm_nn(int m, int n, int k, unicycle_real alpha
     }
 }
 
-static inline void unicycle_lai_gemm_tn(int m, int n, int k, unicycle_real alpha, const unicycle_real *A, int lda,
-                                     const unicycle_real *B, int ldb, unicycle_real beta, unicycle_real *C, int ldc)
+static inline void unicycle_lai_gemm_tn(int m, int n, int k, unicycle_real alpha, const unicycle_real *restrict A, int lda,
+                                     const unicycle_real *restrict B, int ldb, unicycle_real beta, unicycle_real *restrict C,
+                                     int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -295,7 +301,8 @@ static inline void unicycle_lai_gemm_tn(int m, int n, int k, unicycle_real alpha
     }
 }
 
-static inline void unicycle_lai_copy_mat(int m, int n, const unicycle_real *A, int lda, unicycle_real *B, int ldb)
+static inline void unicycle_lai_copy_mat(int m, int n, const unicycle_real *restrict A, int lda, unicycle_real *restrict B,
+                                      int ldb)
 {
     int i, j;
     for (j = 0; j < n; ++j)
@@ -320,7 +327,7 @@ static inline unicycle_real unicycle_lai_dot(int n, const unicycle_real *x, cons
     return s;
 }
 
-static inline void unicycle_lai_axpy(int n, unicycle_real alpha, const unicycle_real *x, unicycle_real *y)
+static inline void unicycle_lai_axpy(int n, unicycle_real alpha, const unicycle_real *restrict x, unicycle_real *restrict y)
 {
     int i;
     for (i = 0; i < n; ++i)
