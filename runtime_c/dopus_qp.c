@@ -2409,16 +2409,22 @@ static int as_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_q
     return 1;
 }
 
+/* The largest scaled equality residual of the active rows (from the last residuals). */
+static dopus_real as_active_residual(const dopus_qp_workspace *ws)
+{
+    dopus_real ra = DOPUS_R(0.0);
+    int b;
+    for (b = 0; b < ws->nb; ++b)
+        ra = dmax(ra, dopus_fabs(as_res(ws, b)));
+    return ra / ws->scale_ineq;
+}
+
 /* The residuals of the iterate (into *r) and the largest scaled equality residual of the
  * active rows. */
 static dopus_real as_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_res *r)
 {
-    dopus_real ra = DOPUS_R(0.0);
-    int b;
     compute_residuals(ws, in, r);
-    for (b = 0; b < ws->nb; ++b)
-        ra = dmax(ra, dopus_fabs(as_res(ws, b)));
-    return ra / ws->scale_ineq;
+    return as_active_residual(ws);
 }
 
 /* One sweep: the factorisation with the penalty weights of the active rows (and the exact
@@ -2490,8 +2496,8 @@ static int as_wrong_sign(const dopus_qp_workspace *ws, int b, dopus_real mu)
  * set when it is at least AS_DROP times the largest wrong one of its family (the others
  * wait for the next sweep; within tol times the multipliers' scale a multiplier is set to 0
  * and its row stays), and an inactive side violated beyond tol joins it. Returns 1 when the
- * active set changed. */
-static int as_update(const qp_loop *L, dopus_qp_workspace *ws)
+ * active set changed; *zeroed: 1 when a multiplier was set to 0 and its row stays. */
+static int as_update(const qp_loop *L, dopus_qp_workspace *ws, int *zeroed)
 {
     dopus_real zscale = DOPUS_R(1.0), wrong[AS_NFAM];
     const dopus_real feas = L->st.tol * ws->scale_ineq;
@@ -2505,12 +2511,14 @@ static int as_update(const qp_loop *L, dopus_qp_workspace *ws)
             wrong[as_family(ws, b)] = dmax(wrong[as_family(ws, b)], dopus_fabs(mu));
     }
     zscale *= L->st.tol;
+    *zeroed = 0;
     for (b = 0; b < ws->nb; ++b) {
         const dopus_real mu = as_mu(ws, b);
         if (as_wrong_sign(ws, b, mu)) {
             QP_TRACE("active set: row %d side %d multiplier %.3e\n", (int)ws->bidx[b], (int)ws->act[b], mu);
             if (dopus_fabs(mu) <= zscale) {
                 as_set_mu(ws, b, DOPUS_R(0.0));
+                *zeroed = 1;
             } else if (dopus_fabs(mu) >= AS_DROP * wrong[as_family(ws, b)]) {
                 ws->act[b] = 0;
                 changed = 1;
@@ -2555,7 +2563,7 @@ static void as_snap_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in)
 static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_qp_sol *sol,
                          dopus_qp_info *info)
 {
-    int solved = 0;
+    int solved = 0, zeroed;
     qp_res r;
     if (!as_guess(ws, in, sol, L->hscale))
         return QP_GO_ON;
@@ -2565,9 +2573,10 @@ static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *
         ++L->as_sweeps;
         if (!as_sweep(L, ws, in, &r))
             break;
-        if (!as_update(L, ws)) {
-            /* the residuals again after the multipliers set to 0 */
-            const dopus_real ra = as_residuals(ws, in, &r);
+        if (!as_update(L, ws, &zeroed)) {
+            /* the residuals again after multipliers were set to 0 (else the iterate is the
+             * sweep's, whose residuals r holds) */
+            const dopus_real ra = zeroed ? as_residuals(ws, in, &r) : as_active_residual(ws);
             solved = merit(&r) <= L->st.tol && ra <= L->st.tol;
             if (!solved)
                 break;
