@@ -301,8 +301,8 @@ static inline void dopus_lai_gemm_tn(int m, int n, int k, dopus_real alpha, cons
     }
 }
 
-static inline void dopus_lai_copy_mat(int m, int n, const dopus_real *restrict A, int lda, dopus_real *restrict B,
-                                      int ldb)
+/* (not restrict: a compiler may turn a copy between restrict arrays into a call of memmove) */
+static inline void dopus_lai_copy_mat(int m, int n, const dopus_real *A, int lda, dopus_real *B, int ldb)
 {
     int i, j;
     for (j = 0; j < n; ++j)
@@ -334,55 +334,79 @@ static inline void dopus_lai_axpy(int n, dopus_real alpha, const dopus_real *res
         y[i] += alpha * x[i];
 }
 
-/* 1 when every entry of the vector is finite (no NaN, no Inf) */
-static inline int dopus_lai_vec_finite(int n, const dopus_real *x)
+/* The larger of a and m for an accumulated maximum m (never NaN): a when a > m, else m (a
+ * NaN a leaves m). Where the core has a floating-point maximum instruction (VMAXNM, FMAXNM)
+ * fmax compiles to it and gives the same value in one instruction instead of a compare and a
+ * select: AArch64, ARMv8 with an FPU of the real type, and the Cortex-M7's FPv5 with double
+ * precision (an ARMv7E-M core; its single-precision variant cannot be told from the
+ * Cortex-M4's FPv4, which has no such instruction, by the predefined macros). Elsewhere fmax
+ * is a library call and the comparison is cheaper. */
+#if defined(__aarch64__) ||                                                                                 \
+    (defined(__ARM_FP) && defined(__ARM_ARCH) && (DOPUS_REAL_FLOAT ? (__ARM_FP & 4) : (__ARM_FP & 8)) &&     \
+     (__ARM_ARCH >= 8 || (defined(__ARM_ARCH_PROFILE) && __ARM_ARCH_PROFILE == 'M' && (__ARM_FP & 8))))
+#define DOPUS_MAX_ACC(a, m) dopus_fmax((a), (m))
+#else
+#define DOPUS_MAX_ACC(a, m) ((a) > (m) ? (a) : (m))
+#endif
+
+/* 1 when every entry of the m x n matrix A is finite (no NaN, no Inf). x * 0 is 0 for a finite
+ * x and NaN for an infinite or NaN one, so the sum of these products is 0 exactly when every
+ * entry is finite: one multiply-add per entry, no branch (two sums, independent chains). */
+static inline int dopus_lai_all_finite(int m, int n, const dopus_real *restrict A, int lda)
 {
-    int i;
-    for (i = 0; i < n; ++i)
-        if (!isfinite(x[i]))
-            return 0;
-    return 1;
+    int i, j;
+    dopus_real s0 = DOPUS_R(0.0), s1 = DOPUS_R(0.0);
+    for (j = 0; j < n; ++j) {
+        const dopus_real *a = A + j * lda;
+        for (i = 0; i + 1 < m; i += 2) {
+            s0 += a[i] * DOPUS_R(0.0);
+            s1 += a[i + 1] * DOPUS_R(0.0);
+        }
+        if (i < m)
+            s0 += a[i] * DOPUS_R(0.0);
+    }
+    return s0 + s1 == DOPUS_R(0.0);
 }
 
-/* The largest |x_i|, NaN when an entry is NaN. Branch-free: the maximum is a select (one
- * max instruction) and NaN is tracked by a flag, so the result does not depend on which
- * entries are new maxima (a data-dependent branch mispredicts half the time). */
-static inline dopus_real dopus_lai_norm_inf(int n, const dopus_real *x)
+/* 1 when every entry of the vector is finite (no NaN, no Inf) */
+static inline int dopus_lai_vec_finite(int n, const dopus_real *restrict x)
 {
-    /* four independent maxima (no chain of dependent max instructions), a NaN flag */
-    int i, c, nan = 0;
+    return dopus_lai_all_finite(n, 1, x, n);
+}
+
+/* The largest |x_i|, NaN when an entry is NaN. Branch-free: four independent maxima (no
+ * chain of dependent max instructions; the maximum is a select or one max instruction,
+ * DOPUS_MAX_ACC) and the sum of the |x_i|, which is NaN exactly when an entry is NaN (the
+ * terms are never negative, so infinite ones cannot cancel). A data-dependent branch would
+ * mispredict half the time. */
+static inline dopus_real dopus_lai_norm_inf(int n, const dopus_real *restrict x)
+{
+    int i, c;
     dopus_real m[4] = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+    dopus_real t[4] = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
     for (i = 0; i < n; i += 4)
         for (c = 0; c < 4 && i + c < n; ++c) {
             const dopus_real a = dopus_fabs(x[i + c]);
-            m[c] = a > m[c] ? a : m[c];
-            nan |= a != a;
+            m[c] = DOPUS_MAX_ACC(a, m[c]);
+            t[c] += a;
         }
-    m[0] = m[1] > m[0] ? m[1] : m[0];
-    m[2] = m[3] > m[2] ? m[3] : m[2];
-    return nan ? (dopus_real)NAN : (m[2] > m[0] ? m[2] : m[0]);
+    m[0] = DOPUS_MAX_ACC(m[1], m[0]);
+    m[2] = DOPUS_MAX_ACC(m[3], m[2]);
+    t[0] += t[1] + t[2] + t[3];
+    return t[0] != t[0] ? (dopus_real)NAN : DOPUS_MAX_ACC(m[2], m[0]);
 }
 
-static inline dopus_real dopus_lai_max_abs_mat(int m, int n, const dopus_real *A, int lda)
+/* The largest |A_ij| of the m x n matrix A, NaN when an entry is NaN. */
+static inline dopus_real dopus_lai_max_abs_mat(int m, int n, const dopus_real *restrict A, int lda)
 {
     int j, nan = 0;
     dopus_real r = DOPUS_R(0.0);
     for (j = 0; j < n; ++j) {
         const dopus_real c = dopus_lai_norm_inf(m, A + j * lda);
-        r = c > r ? c : r;
+        r = DOPUS_MAX_ACC(c, r);
         nan |= c != c;
     }
     return nan ? (dopus_real)NAN : r;
-}
-
-static inline int dopus_lai_all_finite(int m, int n, const dopus_real *A, int lda)
-{
-    int i, j;
-    for (j = 0; j < n; ++j)
-        for (i = 0; i < m; ++i)
-            if (!isfinite(A[i + j * lda]))
-                return 0;
-    return 1;
 }
 
 #endif /* DOPUS_LINALG_H */

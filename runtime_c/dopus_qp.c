@@ -497,7 +497,7 @@ static inline void absmax_acc(int n, const dopus_real *restrict x, dopus_real *r
     int i;
     for (i = 0; i < n; ++i) {
         const dopus_real a = dopus_fabs(x[i]);
-        acc[i] = a > acc[i] ? a : acc[i];
+        acc[i] = DOPUS_MAX_ACC(a, acc[i]);
     }
 }
 

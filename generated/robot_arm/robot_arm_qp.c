@@ -497,7 +497,7 @@ static inline void absmax_acc(int n, const robot_arm_real *restrict x, robot_arm
     int i;
     for (i = 0; i < n; ++i) {
         const robot_arm_real a = robot_arm_fabs(x[i]);
-        acc[i] = a > acc[i] ? a : acc[i];
+        acc[i] = ROBOT_ARM_MAX_ACC(a, acc[i]);
     }
 }
 

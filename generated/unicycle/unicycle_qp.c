@@ -497,7 +497,7 @@ static inline void absmax_acc(int n, const unicycle_real *restrict x, unicycle_r
     int i;
     for (i = 0; i < n; ++i) {
         const unicycle_real a = unicycle_fabs(x[i]);
-        acc[i] = a > acc[i] ? a : acc[i];
+        acc[i] = UNICYCLE_MAX_ACC(a, acc[i]);
     }
 }
 
