@@ -663,10 +663,11 @@ static void phit_mv(const robot_arm_real *restrict PhiT, const robot_arm_real *r
 }
 
 /* The stage update of the Riccati recursion: PhiT = Phi' (nw x nx), WT = Phi' P (nw x nx,
- * P symmetric stored full), M = H + WT Phi, and with terminal equalities Gam = Phi' G
- * (nw x ne). Every inner loop runs down a column of nw entries (fixed length, vectorised);
- * the upper triangle of M is computed too (it is never read; whole columns are cheaper
- * than the ragged lower triangle at these sizes). */
+ * P symmetric stored full), the lower triangle of M = H + WT Phi (the upper one is never
+ * read), and with terminal equalities Gam = Phi' G (nw x ne). The inner loops run down a
+ * column (vectorised where the target has vectors); the ragged columns of the triangle are
+ * unrolled. On x86 (two-wide vectors) whole columns of M took the same time (0.99 to 1.02,
+ * bench/README.md); on a scalar FPU (Cortex-M7) the triangle saves 45 % of the products. */
 static void qp_stage_update(const robot_arm_real *restrict Phi, const robot_arm_real *restrict P,
                             const robot_arm_real *restrict G, const robot_arm_real *restrict H,
                             robot_arm_real *restrict PhiT, robot_arm_real *restrict WT, robot_arm_real *restrict M,
@@ -678,16 +679,20 @@ static void qp_stage_update(const robot_arm_real *restrict Phi, const robot_arm_
             PhiT[i + l * NW] = Phi[l + i * NX];
     for (j = 0; j < NX; ++j)
         phit_mv(PhiT, P + j * NX, WT + j * NW);
+    UNROLL
     for (j = 0; j < NW; ++j) {
         robot_arm_real col[NW];
-        for (i = 0; i < NW; ++i)
+        UNROLL
+        for (i = j; i < NW; ++i)
             col[i] = H[i + j * NW];
         for (l = 0; l < NX; ++l) {
             const robot_arm_real f = Phi[l + j * NX];
-            for (i = 0; i < NW; ++i)
+            UNROLL
+            for (i = j; i < NW; ++i)
                 col[i] += WT[i + l * NW] * f;
         }
-        for (i = 0; i < NW; ++i)
+        UNROLL
+        for (i = j; i < NW; ++i)
             M[i + j * NW] = col[i];
     }
     for (j = 0; j < NE; ++j)
@@ -817,8 +822,10 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
                         M[a + c * NW] += qg * C[j + a * NG] * C[j + c * NG];
         }
 
-        /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
-        robot_arm_lai_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
+        /* M_uu = Lu Lu' (its lower triangle); a pivot below -noise is wrong inertia */
+        for (j = 0; j < NU; ++j)
+            for (i = j; i < NU; ++i)
+                Lu[i + j * NU1] = M[NX + i + (NX + j) * NW];
         if (robot_arm_lai_potrf_l_noise(NU, Lu, NU1, ws->noise, &ws->pivot_floors) != 0) {
             QP_TRACE("   pivot fail stage %d delta %.2e rho %.2e\n", k, delta, ws->rho_aug);
             return 1;
