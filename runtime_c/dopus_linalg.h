@@ -401,6 +401,8 @@ static inline dopus_real dopus_lai_max_abs_mat(int m, int n, const dopus_real *r
 {
     int j, nan = 0;
     dopus_real r = DOPUS_R(0.0);
+    if (lda == m) /* contiguous: one pass */
+        return dopus_lai_norm_inf(m * n, A);
     for (j = 0; j < n; ++j) {
         const dopus_real c = dopus_lai_norm_inf(m, A + j * lda);
         r = DOPUS_MAX_ACC(c, r);

@@ -401,6 +401,8 @@ static inline robot_arm_real robot_arm_lai_max_abs_mat(int m, int n, const robot
 {
     int j, nan = 0;
     robot_arm_real r = ROBOT_ARM_R(0.0);
+    if (lda == m) /* contiguous: one pass */
+        return robot_arm_lai_norm_inf(m * n, A);
     for (j = 0; j < n; ++j) {
         const robot_arm_real c = robot_arm_lai_norm_inf(m, A + j * lda);
         r = ROBOT_ARM_MAX_ACC(c, r);

@@ -401,6 +401,8 @@ static inline unicycle_real unicycle_lai_max_abs_mat(int m, int n, const unicycl
 {
     int j, nan = 0;
     unicycle_real r = UNICYCLE_R(0.0);
+    if (lda == m) /* contiguous: one pass */
+        return unicycle_lai_norm_inf(m * n, A);
     for (j = 0; j < n; ++j) {
         const unicycle_real c = unicycle_lai_norm_inf(m, A + j * lda);
         r = UNICYCLE_MAX_ACC(c, r);
