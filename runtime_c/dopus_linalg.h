@@ -195,16 +195,16 @@ static inline void dopus_lai_trsv_lt(int n, const dopus_real *restrict L, int ld
     }
 }
 
-static inline void dopus_lai_trsm_lln(int n, int m, const dopus_real *restrict L, int ldl, dopus_real *restrict B,
-                                      int ldb)
+static inline void dopus_lai_trsm_lln(int n, int m, const dopus_real *restrict L, int ldl,
+                                      dopus_real *restrict B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
         dopus_lai_trsv_ln(n, L, ldl, B + j * ldb);
 }
 
-static inline void dopus_lai_trsm_llt(int n, int m, const dopus_real *restrict L, int ldl, dopus_real *restrict B,
-                                      int ldb)
+static inline void dopus_lai_trsm_llt(int n, int m, const dopus_real *restrict L, int ldl,
+                                      dopus_real *restrict B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
@@ -270,9 +270,9 @@ static inline void dopus_lai_symv_l(int n, dopus_real alpha, const dopus_real *r
     }
 }
 
-static inline void dopus_lai_gemm_nn(int m, int n, int k, dopus_real alpha, const dopus_real *restrict A, int lda,
-                                     const dopus_real *restrict B, int ldb, dopus_real beta, dopus_real *restrict C,
-                                     int ldc)
+static inline void dopus_lai_gemm_nn(int m, int n, int k, dopus_real alpha, const dopus_real *restrict A,
+                                     int lda, const dopus_real *restrict B, int ldb, dopus_real beta,
+                                     dopus_real *restrict C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -286,9 +286,9 @@ static inline void dopus_lai_gemm_nn(int m, int n, int k, dopus_real alpha, cons
     }
 }
 
-static inline void dopus_lai_gemm_tn(int m, int n, int k, dopus_real alpha, const dopus_real *restrict A, int lda,
-                                     const dopus_real *restrict B, int ldb, dopus_real beta, dopus_real *restrict C,
-                                     int ldc)
+static inline void dopus_lai_gemm_tn(int m, int n, int k, dopus_real alpha, const dopus_real *restrict A,
+                                     int lda, const dopus_real *restrict B, int ldb, dopus_real beta,
+                                     dopus_real *restrict C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -327,7 +327,8 @@ static inline dopus_real dopus_lai_dot(int n, const dopus_real *x, const dopus_r
     return s;
 }
 
-static inline void dopus_lai_axpy(int n, dopus_real alpha, const dopus_real *restrict x, dopus_real *restrict y)
+static inline void dopus_lai_axpy(int n, dopus_real alpha, const dopus_real *restrict x,
+                                  dopus_real *restrict y)
 {
     int i;
     for (i = 0; i < n; ++i)
@@ -341,7 +342,7 @@ static inline void dopus_lai_axpy(int n, dopus_real alpha, const dopus_real *res
  * precision (an ARMv7E-M core; its single-precision variant cannot be told from the
  * Cortex-M4's FPv4, which has no such instruction, by the predefined macros). Elsewhere fmax
  * is a library call and the comparison is cheaper. */
-#if defined(__aarch64__) ||                                                                                 \
+#if defined(__aarch64__) ||                                                                                  \
     (defined(__ARM_FP) && defined(__ARM_ARCH) && (DOPUS_REAL_FLOAT ? (__ARM_FP & 4) : (__ARM_FP & 8)) &&     \
      (__ARM_ARCH >= 8 || (defined(__ARM_ARCH_PROFILE) && __ARM_ARCH_PROFILE == 'M' && (__ARM_FP & 8))))
 #define DOPUS_MAX_ACC(a, m) dopus_fmax((a), (m))

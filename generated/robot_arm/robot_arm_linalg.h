@@ -195,16 +195,16 @@ static inline void robot_arm_lai_trsv_lt(int n, const robot_arm_real *restrict L
     }
 }
 
-static inline void robot_arm_lai_trsm_lln(int n, int m, const robot_arm_real *restrict L, int ldl, robot_arm_real *restrict B,
-                                      int ldb)
+static inline void robot_arm_lai_trsm_lln(int n, int m, const robot_arm_real *restrict L, int ldl,
+                                      robot_arm_real *restrict B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
         robot_arm_lai_trsv_ln(n, L, ldl, B + j * ldb);
 }
 
-static inline void robot_arm_lai_trsm_llt(int n, int m, const robot_arm_real *restrict L, int ldl, robot_arm_real *restrict B,
-                                      int ldb)
+static inline void robot_arm_lai_trsm_llt(int n, int m, const robot_arm_real *restrict L, int ldl,
+                                      robot_arm_real *restrict B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
@@ -270,9 +270,9 @@ static inline void robot_arm_lai_symv_l(int n, robot_arm_real alpha, const robot
     }
 }
 
-static inline void robot_arm_lai_gemm_nn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *restrict A, int lda,
-                                     const robot_arm_real *restrict B, int ldb, robot_arm_real beta, robot_arm_real *restrict C,
-                                     int ldc)
+static inline void robot_arm_lai_gemm_nn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *restrict A,
+                                     int lda, const robot_arm_real *restrict B, int ldb, robot_arm_real beta,
+                                     robot_arm_real *restrict C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -286,9 +286,9 @@ static inline void robot_arm_lai_gemm_nn(int m, int n, int k, robot_arm_real alp
     }
 }
 
-static inline void robot_arm_lai_gemm_tn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *restrict A, int lda,
-                                     const robot_arm_real *restrict B, int ldb, robot_arm_real beta, robot_arm_real *restrict C,
-                                     int ldc)
+static inline void robot_arm_lai_gemm_tn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *restrict A,
+                                     int lda, const robot_arm_real *restrict B, int ldb, robot_arm_real beta,
+                                     robot_arm_real *restrict C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -327,7 +327,8 @@ static inline robot_arm_real robot_arm_lai_dot(int n, const robot_arm_real *x, c
     return s;
 }
 
-static inline void robot_arm_lai_axpy(int n, robot_arm_real alpha, const robot_arm_real *restrict x, robot_arm_real *restrict y)
+static inline void robot_arm_lai_axpy(int n, robot_arm_real alpha, const robot_arm_real *restrict x,
+                                  robot_arm_real *restrict y)
 {
     int i;
     for (i = 0; i < n; ++i)
@@ -341,7 +342,7 @@ static inline void robot_arm_lai_axpy(int n, robot_arm_real alpha, const robot_a
  * precision (an ARMv7E-M core; its single-precision variant cannot be told from the
  * Cortex-M4's FPv4, which has no such instruction, by the predefined macros). Elsewhere fmax
  * is a library call and the comparison is cheaper. */
-#if defined(__aarch64__) ||                                                                                 \
+#if defined(__aarch64__) ||                                                                                  \
     (defined(__ARM_FP) && defined(__ARM_ARCH) && (ROBOT_ARM_REAL_FLOAT ? (__ARM_FP & 4) : (__ARM_FP & 8)) &&     \
      (__ARM_ARCH >= 8 || (defined(__ARM_ARCH_PROFILE) && __ARM_ARCH_PROFILE == 'M' && (__ARM_FP & 8))))
 #define ROBOT_ARM_MAX_ACC(a, m) robot_arm_fmax((a), (m))

@@ -195,16 +195,16 @@ static inline void unicycle_lai_trsv_lt(int n, const unicycle_real *restrict L, 
     }
 }
 
-static inline void unicycle_lai_trsm_lln(int n, int m, const unicycle_real *restrict L, int ldl, unicycle_real *restrict B,
-                                      int ldb)
+static inline void unicycle_lai_trsm_lln(int n, int m, const unicycle_real *restrict L, int ldl,
+                                      unicycle_real *restrict B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
         unicycle_lai_trsv_ln(n, L, ldl, B + j * ldb);
 }
 
-static inline void unicycle_lai_trsm_llt(int n, int m, const unicycle_real *restrict L, int ldl, unicycle_real *restrict B,
-                                      int ldb)
+static inline void unicycle_lai_trsm_llt(int n, int m, const unicycle_real *restrict L, int ldl,
+                                      unicycle_real *restrict B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
@@ -270,9 +270,9 @@ static inline void unicycle_lai_symv_l(int n, unicycle_real alpha, const unicycl
     }
 }
 
-static inline void unicycle_lai_gemm_nn(int m, int n, int k, unicycle_real alpha, const unicycle_real *restrict A, int lda,
-                                     const unicycle_real *restrict B, int ldb, unicycle_real beta, unicycle_real *restrict C,
-                                     int ldc)
+static inline void unicycle_lai_gemm_nn(int m, int n, int k, unicycle_real alpha, const unicycle_real *restrict A,
+                                     int lda, const unicycle_real *restrict B, int ldb, unicycle_real beta,
+                                     unicycle_real *restrict C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -286,9 +286,9 @@ static inline void unicycle_lai_gemm_nn(int m, int n, int k, unicycle_real alpha
     }
 }
 
-static inline void unicycle_lai_gemm_tn(int m, int n, int k, unicycle_real alpha, const unicycle_real *restrict A, int lda,
-                                     const unicycle_real *restrict B, int ldb, unicycle_real beta, unicycle_real *restrict C,
-                                     int ldc)
+static inline void unicycle_lai_gemm_tn(int m, int n, int k, unicycle_real alpha, const unicycle_real *restrict A,
+                                     int lda, const unicycle_real *restrict B, int ldb, unicycle_real beta,
+                                     unicycle_real *restrict C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -327,7 +327,8 @@ static inline unicycle_real unicycle_lai_dot(int n, const unicycle_real *x, cons
     return s;
 }
 
-static inline void unicycle_lai_axpy(int n, unicycle_real alpha, const unicycle_real *restrict x, unicycle_real *restrict y)
+static inline void unicycle_lai_axpy(int n, unicycle_real alpha, const unicycle_real *restrict x,
+                                  unicycle_real *restrict y)
 {
     int i;
     for (i = 0; i < n; ++i)
@@ -341,7 +342,7 @@ static inline void unicycle_lai_axpy(int n, unicycle_real alpha, const unicycle_
  * precision (an ARMv7E-M core; its single-precision variant cannot be told from the
  * Cortex-M4's FPv4, which has no such instruction, by the predefined macros). Elsewhere fmax
  * is a library call and the comparison is cheaper. */
-#if defined(__aarch64__) ||                                                                                 \
+#if defined(__aarch64__) ||                                                                                  \
     (defined(__ARM_FP) && defined(__ARM_ARCH) && (UNICYCLE_REAL_FLOAT ? (__ARM_FP & 4) : (__ARM_FP & 8)) &&     \
      (__ARM_ARCH >= 8 || (defined(__ARM_ARCH_PROFILE) && __ARM_ARCH_PROFILE == 'M' && (__ARM_FP & 8))))
 #define UNICYCLE_MAX_ACC(a, m) unicycle_fmax((a), (m))
