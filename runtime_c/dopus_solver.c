@@ -1743,7 +1743,10 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_copy(xN_saved, s->x[DOPUS_N], DOPUS_NX);
 
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); when step 4 will
-     *    re-linearise every one of them (all_fresh), H_k too, in the same call */
+     *    re-linearise every one of them (all_fresh), H_k too, in the same call. Only then:
+     *    with fewer fresh stages the separate stage_hess runs too, and the fused function's
+     *    code beside it costs more in the instruction cache than the gradient it saves for
+     *    stage N-1 (robot arm, M = 1: prepare +7 to +14 us) */
     all_fresh = dopus_fused(s) && dopus_every_stage_fresh(s);
     for (k = 0; k < DOPUS_N - 1; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
@@ -1769,7 +1772,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     dopus_phase(s, DOPUS_PHASE_GRADIENTS);
-    rc = dopus_fused(s) ? dopus_stage_FH(s, DOPUS_N - 1) : dopus_stage_F(s, DOPUS_N - 1);
+    rc = all_fresh ? dopus_stage_FH(s, DOPUS_N - 1) : dopus_stage_F(s, DOPUS_N - 1);
     if (rc != DOPUS_OK) {
         return rc;
     }
@@ -1779,7 +1782,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[DOPUS_N - 1] = DOPUS_R(0.0);
-    rc = dopus_fused(s) ? dopus_stage_H_keep(s, DOPUS_N - 1) : dopus_stage_H(s, DOPUS_N - 1);
+    rc = all_fresh ? dopus_stage_H_keep(s, DOPUS_N - 1) : dopus_stage_H(s, DOPUS_N - 1);
     if (rc == DOPUS_OK) {
         rc = dopus_term_F(s);
     }

@@ -1743,7 +1743,10 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     robot_arm_copy(xN_saved, s->x[ROBOT_ARM_N], ROBOT_ARM_NX);
 
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); when step 4 will
-     *    re-linearise every one of them (all_fresh), H_k too, in the same call */
+     *    re-linearise every one of them (all_fresh), H_k too, in the same call. Only then:
+     *    with fewer fresh stages the separate stage_hess runs too, and the fused function's
+     *    code beside it costs more in the instruction cache than the gradient it saves for
+     *    stage N-1 (robot arm, M = 1: prepare +7 to +14 us) */
     all_fresh = robot_arm_fused(s) && robot_arm_every_stage_fresh(s);
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
@@ -1769,7 +1772,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
-    rc = robot_arm_fused(s) ? robot_arm_stage_FH(s, ROBOT_ARM_N - 1) : robot_arm_stage_F(s, ROBOT_ARM_N - 1);
+    rc = all_fresh ? robot_arm_stage_FH(s, ROBOT_ARM_N - 1) : robot_arm_stage_F(s, ROBOT_ARM_N - 1);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
@@ -1779,7 +1782,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, ROBOT_ARM_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[ROBOT_ARM_N - 1] = ROBOT_ARM_R(0.0);
-    rc = robot_arm_fused(s) ? robot_arm_stage_H_keep(s, ROBOT_ARM_N - 1) : robot_arm_stage_H(s, ROBOT_ARM_N - 1);
+    rc = all_fresh ? robot_arm_stage_H_keep(s, ROBOT_ARM_N - 1) : robot_arm_stage_H(s, ROBOT_ARM_N - 1);
     if (rc == ROBOT_ARM_OK) {
         rc = robot_arm_term_F(s);
     }
