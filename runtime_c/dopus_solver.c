@@ -356,8 +356,21 @@ static int dopus_stage_Al(dopus_solver *s, int k)
  * leaves the slot as it was. */
 static int dopus_stage_H_store(dopus_solver *s, int k);
 
+static int dopus_fused(const dopus_solver *s);
+
 static int dopus_stage_H_eval(dopus_solver *s, int k)
 {
+    dopus_real gL[DOPUS_NW], phi[DOPUS_NX], l, g[DOPUS_DIM(DOPUS_NG)];
+    if (dopus_fused(s)) {
+        /* the exact Hessian through the fused function, its gradient outputs unused: the one
+         * Hessian code whichever stages are fresh (the instruction cache) */
+        if (dopus_eval_stage_grad_hess_exact(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
+                                             &l, g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
+                                             &s->mem.ev.fun_work) != 0) {
+            return DOPUS_ERR_FUNCTION;
+        }
+        return dopus_stage_H_store(s, k);
+    }
     if (dopus_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
                               s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
                               &s->mem.ev.fun_work) != 0) {
@@ -1743,10 +1756,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_copy(xN_saved, s->x[DOPUS_N], DOPUS_NX);
 
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); when step 4 will
-     *    re-linearise every one of them (all_fresh), H_k too, in the same call. Only then:
-     *    with fewer fresh stages the separate stage_hess runs too, and the fused function's
-     *    code beside it costs more in the instruction cache than the gradient it saves for
-     *    stage N-1 (robot arm, M = 1: prepare +7 to +14 us) */
+     *    re-linearise every one of them (all_fresh), H_k too, in the same call */
     all_fresh = dopus_fused(s) && dopus_every_stage_fresh(s);
     for (k = 0; k < DOPUS_N - 1; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
@@ -1772,7 +1782,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     dopus_phase(s, DOPUS_PHASE_GRADIENTS);
-    rc = all_fresh ? dopus_stage_FH(s, DOPUS_N - 1) : dopus_stage_F(s, DOPUS_N - 1);
+    rc = dopus_fused(s) ? dopus_stage_FH(s, DOPUS_N - 1) : dopus_stage_F(s, DOPUS_N - 1);
     if (rc != DOPUS_OK) {
         return rc;
     }
@@ -1782,7 +1792,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[DOPUS_N - 1] = DOPUS_R(0.0);
-    rc = all_fresh ? dopus_stage_H_keep(s, DOPUS_N - 1) : dopus_stage_H(s, DOPUS_N - 1);
+    rc = dopus_fused(s) ? dopus_stage_H_keep(s, DOPUS_N - 1) : dopus_stage_H(s, DOPUS_N - 1);
     if (rc == DOPUS_OK) {
         rc = dopus_term_F(s);
     }

@@ -356,8 +356,21 @@ static int robot_arm_stage_Al(robot_arm_solver *s, int k)
  * leaves the slot as it was. */
 static int robot_arm_stage_H_store(robot_arm_solver *s, int k);
 
+static int robot_arm_fused(const robot_arm_solver *s);
+
 static int robot_arm_stage_H_eval(robot_arm_solver *s, int k)
 {
+    robot_arm_real gL[ROBOT_ARM_NW], phi[ROBOT_ARM_NX], l, g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    if (robot_arm_fused(s)) {
+        /* the exact Hessian through the fused function, its gradient outputs unused: the one
+         * Hessian code whichever stages are fresh (the instruction cache) */
+        if (robot_arm_eval_stage_grad_hess_exact(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
+                                             &l, g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
+                                             &s->mem.ev.fun_work) != 0) {
+            return ROBOT_ARM_ERR_FUNCTION;
+        }
+        return robot_arm_stage_H_store(s, k);
+    }
     if (robot_arm_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
                               s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
                               &s->mem.ev.fun_work) != 0) {
@@ -1743,10 +1756,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     robot_arm_copy(xN_saved, s->x[ROBOT_ARM_N], ROBOT_ARM_NX);
 
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); when step 4 will
-     *    re-linearise every one of them (all_fresh), H_k too, in the same call. Only then:
-     *    with fewer fresh stages the separate stage_hess runs too, and the fused function's
-     *    code beside it costs more in the instruction cache than the gradient it saves for
-     *    stage N-1 (robot arm, M = 1: prepare +7 to +14 us) */
+     *    re-linearise every one of them (all_fresh), H_k too, in the same call */
     all_fresh = robot_arm_fused(s) && robot_arm_every_stage_fresh(s);
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
@@ -1772,7 +1782,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
-    rc = all_fresh ? robot_arm_stage_FH(s, ROBOT_ARM_N - 1) : robot_arm_stage_F(s, ROBOT_ARM_N - 1);
+    rc = robot_arm_fused(s) ? robot_arm_stage_FH(s, ROBOT_ARM_N - 1) : robot_arm_stage_F(s, ROBOT_ARM_N - 1);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
@@ -1782,7 +1792,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, ROBOT_ARM_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[ROBOT_ARM_N - 1] = ROBOT_ARM_R(0.0);
-    rc = all_fresh ? robot_arm_stage_H_keep(s, ROBOT_ARM_N - 1) : robot_arm_stage_H(s, ROBOT_ARM_N - 1);
+    rc = robot_arm_fused(s) ? robot_arm_stage_H_keep(s, ROBOT_ARM_N - 1) : robot_arm_stage_H(s, ROBOT_ARM_N - 1);
     if (rc == ROBOT_ARM_OK) {
         rc = robot_arm_term_F(s);
     }

@@ -356,8 +356,21 @@ static int unicycle_stage_Al(unicycle_solver *s, int k)
  * leaves the slot as it was. */
 static int unicycle_stage_H_store(unicycle_solver *s, int k);
 
+static int unicycle_fused(const unicycle_solver *s);
+
 static int unicycle_stage_H_eval(unicycle_solver *s, int k)
 {
+    unicycle_real gL[UNICYCLE_NW], phi[UNICYCLE_NX], l, g[UNICYCLE_DIM(UNICYCLE_NG)];
+    if (unicycle_fused(s)) {
+        /* the exact Hessian through the fused function, its gradient outputs unused: the one
+         * Hessian code whichever stages are fresh (the instruction cache) */
+        if (unicycle_eval_stage_grad_hess_exact(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
+                                             &l, g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
+                                             &s->mem.ev.fun_work) != 0) {
+            return UNICYCLE_ERR_FUNCTION;
+        }
+        return unicycle_stage_H_store(s, k);
+    }
     if (unicycle_eval_stage_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
                               s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
                               &s->mem.ev.fun_work) != 0) {
@@ -1743,10 +1756,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_copy(xN_saved, s->x[UNICYCLE_N], UNICYCLE_NX);
 
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); when step 4 will
-     *    re-linearise every one of them (all_fresh), H_k too, in the same call. Only then:
-     *    with fewer fresh stages the separate stage_hess runs too, and the fused function's
-     *    code beside it costs more in the instruction cache than the gradient it saves for
-     *    stage N-1 (robot arm, M = 1: prepare +7 to +14 us) */
+     *    re-linearise every one of them (all_fresh), H_k too, in the same call */
     all_fresh = unicycle_fused(s) && unicycle_every_stage_fresh(s);
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
         unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
@@ -1772,7 +1782,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     unicycle_phase(s, UNICYCLE_PHASE_GRADIENTS);
-    rc = all_fresh ? unicycle_stage_FH(s, UNICYCLE_N - 1) : unicycle_stage_F(s, UNICYCLE_N - 1);
+    rc = unicycle_fused(s) ? unicycle_stage_FH(s, UNICYCLE_N - 1) : unicycle_stage_F(s, UNICYCLE_N - 1);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
@@ -1782,7 +1792,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[UNICYCLE_N - 1] = UNICYCLE_R(0.0);
-    rc = all_fresh ? unicycle_stage_H_keep(s, UNICYCLE_N - 1) : unicycle_stage_H(s, UNICYCLE_N - 1);
+    rc = unicycle_fused(s) ? unicycle_stage_H_keep(s, UNICYCLE_N - 1) : unicycle_stage_H(s, UNICYCLE_N - 1);
     if (rc == UNICYCLE_OK) {
         rc = unicycle_term_F(s);
     }
