@@ -895,15 +895,23 @@ class ReferenceDopus:
 
     def _stalled(self) -> bool:
         """Section 9: outside a recovery phase, a KKT proxy above STALL_KKT max(1, proxy at
-        init) in STALL_PREPARES prepares in a row begins a recovery phase without a
+        init) in STALL_PREPARES prepares in a row, or above FLAT_KKT max(1, proxy at init)
+        and not below FLAT_DROP times the proxy the stretch began with in FLAT_PREPARES
+        prepares in a row (no progress), begins a recovery phase without a
         re-initialisation."""
-        if self._recovering > 0 or not self.kkt_proxy > _SAFETY["STALL_KKT"] * max(self._kkt_proxy_init, 1.0):
-            self._n_stalled = 0
+        if self._recovering > 0:
+            self._n_stalled, self._n_flat = 0, 0
             return False
-        self._n_stalled += 1
-        if self._n_stalled < _SAFETY["STALL_PREPARES"]:
+        ref = max(self._kkt_proxy_init, 1.0)
+        high = self.kkt_proxy > _SAFETY["STALL_KKT"] * ref
+        self._n_stalled = self._n_stalled + 1 if high else 0
+        flat = self.kkt_proxy > _SAFETY["FLAT_KKT"] * ref
+        if not flat or self._n_flat == 0 or not self.kkt_proxy > _SAFETY["FLAT_DROP"] * self._kkt_flat_ref:
+            self._kkt_flat_ref, self._n_flat = self.kkt_proxy, 0
+        self._n_flat = self._n_flat + 1 if flat else 0
+        if self._n_stalled < _SAFETY["STALL_PREPARES"] and self._n_flat < _SAFETY["FLAT_PREPARES"]:
             return False
-        self._n_stalled = 0
+        self._n_stalled, self._n_flat = 0, 0
         self._recovering = int(_SAFETY["RECOVERY_FULL_RTI"])
         return True
 
@@ -1193,6 +1201,7 @@ class ReferenceDopus:
         self.kkt_proxy_ref = 0.0
         self._kkt_proxy_init = 0.0
         self._n_stalled = 0
+        self._kkt_flat_ref, self._n_flat = 0.0, 0
         self._n_gated = 0
         self._gate_rest = 0
 
