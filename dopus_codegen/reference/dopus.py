@@ -762,9 +762,11 @@ class ReferenceDopus:
             self.work += self.N
             try:
                 # the first solve starts from the active set of the previous solution, as the C
-                # QP's warm start does for a QP the automatic lm made convex and a measurement
-                # near the predicted state (section 4, feedback); a retry with lm raised does not
-                start = (retries == 0 and self.active_set_start and self.lm_auto and self._lm_uncapped < 0.0
+                # QP's warm start does for a QP the automatic lm made convex (capped by at most
+                # one raise step) and a measurement near the predicted state (section 4,
+                # feedback); a retry with lm raised does not
+                capped = self._lm_uncapped >= 0.0 and not self.lm >= _SAFETY["QP_ACTIVE_SET_CAP"] * self._lm_uncapped
+                start = (retries == 0 and self.active_set_start and self.lm_auto and not capped
                          and self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale and bool(np.all(np.abs(qp["x0"]) <= _SAFETY["QP_ACTIVE_SET_NEAR"] * self.scales[0])))
                 sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter,
                                          guess=self._qp_warm_point(qp) if start else None,
