@@ -32,41 +32,67 @@ static dopus_real dopus_lm_hessian_scale(const dopus_ring *ring, const dopus_rea
 
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
- * out) has control pivots above DOPUS_LM_PIVOT_REL h. */
+ * out) has control pivots above DOPUS_LM_PIVOT_REL h.
+ *
+ * Every product runs down whole columns of fixed length (vectorised, no reductions):
+ * W = Phi' P by columns over the transposed copy PhiT, then Z = H + lm I + W Phi by whole
+ * columns (its upper triangle is computed and never read: at these sizes whole columns are
+ * cheaper than the ragged lower triangle, as in the QP's stage update). */
 static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dopus_real *A_N, dopus_real lm,
                            dopus_real *work)
 {
     const dopus_real tol = DOPUS_LM_PIVOT_REL * st->scale;
-    dopus_real *P = work, *PA = work + DOPUS_NX * DOPUS_NX, *Z = PA + DOPUS_NX * DOPUS_NW;
+    dopus_real *P = work, *W = work + DOPUS_NX * DOPUS_NX, *Z = W + DOPUS_NW * DOPUS_NX;
+    dopus_real *PhiT = Z + DOPUS_NW * DOPUS_NW;
     dopus_real v;
     int k, i, j, l;
     for (j = 0; j < DOPUS_NX; ++j) {
-        for (i = 0; i < DOPUS_NX; ++i) {
-            P[i + j * DOPUS_NX] =
-                (i >= j ? A_N[i + j * DOPUS_NX] : A_N[j + i * DOPUS_NX]) + (i == j ? lm : DOPUS_R(0.0));
+        for (i = j; i < DOPUS_NX; ++i) {
+            P[i + j * DOPUS_NX] = A_N[i + j * DOPUS_NX];
+            P[j + i * DOPUS_NX] = A_N[i + j * DOPUS_NX];
         }
+        P[j + j * DOPUS_NX] += lm;
     }
     for (k = DOPUS_N - 1; k >= 0; --k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(ring, k);
-        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
-        for (j = 0; j < DOPUS_NW; ++j) {
-            for (i = 0; i < DOPUS_NX; ++i) {
-                v = DOPUS_R(0.0);
-                for (l = 0; l < DOPUS_NX; ++l) {
-                    v += P[i + l * DOPUS_NX] * slot->Phit[l + j * DOPUS_NX];
-                }
-                PA[i + j * DOPUS_NX] = v;
+        const dopus_real *H = slot->Ht, *Phi = slot->Phit;
+        for (l = 0; l < DOPUS_NX; ++l) {
+            for (i = 0; i < DOPUS_NW; ++i) {
+                PhiT[i + l * DOPUS_NW] = Phi[l + i * DOPUS_NX];
             }
         }
-        for (j = 0; j < DOPUS_NW; ++j) {
+        /* W = Phi' P (nw x nx) */
+        for (j = 0; j < DOPUS_NX; ++j) {
+            dopus_real col[DOPUS_NW];
             for (i = 0; i < DOPUS_NW; ++i) {
-                v = (i >= j ? slot->Ht[i + j * DOPUS_NW] : slot->Ht[j + i * DOPUS_NW]) +
-                    (i == j ? lm : DOPUS_R(0.0));
-                for (l = 0; l < DOPUS_NX; ++l) {
-                    v += slot->Phit[l + i * DOPUS_NX] * PA[l + j * DOPUS_NX];
-                }
-                Z[i + j * DOPUS_NW] = v;
+                col[i] = DOPUS_R(0.0);
             }
+            for (l = 0; l < DOPUS_NX; ++l) {
+                const dopus_real f = P[l + j * DOPUS_NX];
+                for (i = 0; i < DOPUS_NW; ++i) {
+                    col[i] += PhiT[i + l * DOPUS_NW] * f;
+                }
+            }
+            for (i = 0; i < DOPUS_NW; ++i) {
+                W[i + j * DOPUS_NW] = col[i];
+            }
+        }
+        /* Z = H + lm I + W Phi (lower triangle read) */
+        for (j = 0; j < DOPUS_NW; ++j) {
+            dopus_real col[DOPUS_NW];
+            for (i = 0; i < DOPUS_NW; ++i) {
+                col[i] = H[i + j * DOPUS_NW];
+            }
+            for (l = 0; l < DOPUS_NX; ++l) {
+                const dopus_real f = Phi[l + j * DOPUS_NX];
+                for (i = 0; i < DOPUS_NW; ++i) {
+                    col[i] += W[i + l * DOPUS_NW] * f;
+                }
+            }
+            for (i = 0; i < DOPUS_NW; ++i) {
+                Z[i + j * DOPUS_NW] = col[i];
+            }
+            Z[j + j * DOPUS_NW] += lm;
         }
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = DOPUS_NX; j < DOPUS_NW; ++j) {
@@ -90,7 +116,7 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
         if (k == 0) {
             break; /* x_0 is fixed: P_0 is not needed */
         }
-        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
+        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y (lower triangle, mirrored) */
         for (j = 0; j < DOPUS_NX; ++j) {
             for (i = DOPUS_NX; i < DOPUS_NW; ++i) {
                 v = Z[i + j * DOPUS_NW];
@@ -101,12 +127,13 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
             }
         }
         for (j = 0; j < DOPUS_NX; ++j) {
-            for (i = 0; i < DOPUS_NX; ++i) {
-                v = DOPUS_R(0.5) * (Z[i + j * DOPUS_NW] + Z[j + i * DOPUS_NW]);
+            for (i = j; i < DOPUS_NX; ++i) {
+                v = Z[i + j * DOPUS_NW];
                 for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
                     v -= Z[l + i * DOPUS_NW] * Z[l + j * DOPUS_NW];
                 }
                 P[i + j * DOPUS_NX] = v;
+                P[j + i * DOPUS_NX] = v;
             }
         }
     }

@@ -433,13 +433,27 @@ def _stage_functions(name: str, m: StageModel, directions="auto"):
     phi = xs[-1]
     l, g = node_eval(X, U, P)
     stage_eval = ca.Function(f"{name}_stage_eval", [X, U, P], [phi, l, g], ["x", "u", "p"], ["phi", "l", "g"])
-    # L_k = l - lam_next' phi + mu_g' g: the adjoint sweep starts from -lam_next
-    g_dyn, _ = sensitivities.propagate_adjoint(K, xs, U, P, -LAM)
+    implicit = not m.substep.is_a("SXFunction")
+    if implicit:
+        # An implicit substep (an MX function with a rootfinder): its graph inlined, so the
+        # derivatives of each rootfinder call take the stages it computed instead of solving
+        # the stage equations again inside a kernel (section "Integrators" of docs/usage.md)
+        phi_in = sensitivities.interval_map_inlined(m.substep, n, X, U, P)
+        g_dyn = sensitivities.adjoint_inlined(phi_in, X, U, -LAM)
+        phi_grad = phi_in
+    else:
+        # L_k = l - lam_next' phi + mu_g' g: the adjoint sweep starts from -lam_next
+        g_dyn, _ = sensitivities.propagate_adjoint(K, xs, U, P, -LAM)
+        phi_grad = phi
     gL = node_grad(X, U, P, MUG) + g_dyn
-    stage_grad = ca.Function(f"{name}_stage_grad", ins, [gL, phi, l, g], in_names, ["gL", "phi", "l", "g"])
-    S = sensitivities.propagate_forward(K, xs, U, P)
-    Phi = S[-1]
-    _, H_dyn = sensitivities.propagate_adjoint(K, xs, U, P, -LAM, S)
+    stage_grad = ca.Function(f"{name}_stage_grad", ins, [gL, phi_grad, l, g], in_names,
+                             ["gL", "phi", "l", "g"])
+    if implicit and directions == "auto":
+        Phi, H_dyn = sensitivities.hessian_inlined(phi_in, g_dyn, X, U)
+    else:
+        S = sensitivities.propagate_forward(K, xs, U, P)
+        Phi = S[-1]
+        _, H_dyn = sensitivities.propagate_adjoint(K, xs, U, P, -LAM, S)
     An, C = node_hess(X, U, P, MUG)
     A = An + 0.5 * (H_dyn + H_dyn.T)
     stage_hess_exact = ca.Function(f"{name}_stage_hess_exact", ins, [A, Phi, C], in_names, ["A", "Phi", "C"])

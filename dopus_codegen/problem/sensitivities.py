@@ -45,7 +45,8 @@ from typing import Optional
 import casadi as ca
 
 __all__ = ["SubstepKernels", "substep_kernels", "propagate_forward", "propagate_adjoint",
-           "interval_map", "DIRECTION_MODES", "chain_kernel", "chain_hessian"]
+           "interval_map", "interval_map_inlined", "adjoint_inlined", "hessian_inlined",
+           "DIRECTION_MODES", "chain_kernel", "chain_hessian"]
 
 _SX_OPTS = {"cse": True}
 
@@ -148,6 +149,29 @@ def interval_map(K: SubstepKernels, n: int, x, u, p) -> list:
     for _ in range(n):
         xs.append(K.F(xs[-1], u, p))
     return xs
+
+
+def interval_map_inlined(F: ca.Function, n: int, x, u, p):
+    """``x_n`` of the interval with the graph of the (MX) substep ``F`` inlined at every
+    substep, so that the rootfinder calls of an implicit substep are nodes of one graph."""
+    xn = x
+    for _ in range(n):
+        xn = F.call([xn, u, p], True, False)[0]
+    return xn
+
+
+def adjoint_inlined(xn, x, u, a_n):
+    """``d(a_n' x_n)/dw`` by reverse mode on the inlined graph of ``x_n``
+    (:func:`interval_map_inlined`): each rootfinder call's derivative takes the stages the
+    call computed (implicit function theorem at them) instead of solving again."""
+    return ca.jtimes(xn, ca.vertcat(x, u), a_n, True)
+
+
+def hessian_inlined(xn, g, x, u):
+    """``(Phi, H)`` on the inlined graph: ``Phi = d x_n / d w`` and ``H = d g / d w`` with ``g``
+    the adjoint of :func:`adjoint_inlined` (forward over reverse)."""
+    w = ca.vertcat(x, u)
+    return ca.jacobian(xn, w), ca.jacobian(g, w)
 
 
 def propagate_forward(K: SubstepKernels, xs: list, u, p) -> list:

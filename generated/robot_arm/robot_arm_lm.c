@@ -32,41 +32,67 @@ static robot_arm_real robot_arm_lm_hessian_scale(const robot_arm_ring *ring, con
 
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
- * out) has control pivots above ROBOT_ARM_LM_PIVOT_REL h. */
+ * out) has control pivots above ROBOT_ARM_LM_PIVOT_REL h.
+ *
+ * Every product runs down whole columns of fixed length (vectorised, no reductions):
+ * W = Phi' P by columns over the transposed copy PhiT, then Z = H + lm I + W Phi by whole
+ * columns (its upper triangle is computed and never read: at these sizes whole columns are
+ * cheaper than the ragged lower triangle, as in the QP's stage update). */
 static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *ring, const robot_arm_real *A_N, robot_arm_real lm,
                            robot_arm_real *work)
 {
     const robot_arm_real tol = ROBOT_ARM_LM_PIVOT_REL * st->scale;
-    robot_arm_real *P = work, *PA = work + ROBOT_ARM_NX * ROBOT_ARM_NX, *Z = PA + ROBOT_ARM_NX * ROBOT_ARM_NW;
+    robot_arm_real *P = work, *W = work + ROBOT_ARM_NX * ROBOT_ARM_NX, *Z = W + ROBOT_ARM_NW * ROBOT_ARM_NX;
+    robot_arm_real *PhiT = Z + ROBOT_ARM_NW * ROBOT_ARM_NW;
     robot_arm_real v;
     int k, i, j, l;
     for (j = 0; j < ROBOT_ARM_NX; ++j) {
-        for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            P[i + j * ROBOT_ARM_NX] =
-                (i >= j ? A_N[i + j * ROBOT_ARM_NX] : A_N[j + i * ROBOT_ARM_NX]) + (i == j ? lm : ROBOT_ARM_R(0.0));
+        for (i = j; i < ROBOT_ARM_NX; ++i) {
+            P[i + j * ROBOT_ARM_NX] = A_N[i + j * ROBOT_ARM_NX];
+            P[j + i * ROBOT_ARM_NX] = A_N[i + j * ROBOT_ARM_NX];
         }
+        P[j + j * ROBOT_ARM_NX] += lm;
     }
     for (k = ROBOT_ARM_N - 1; k >= 0; --k) {
         const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(ring, k);
-        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
-        for (j = 0; j < ROBOT_ARM_NW; ++j) {
-            for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                v = ROBOT_ARM_R(0.0);
-                for (l = 0; l < ROBOT_ARM_NX; ++l) {
-                    v += P[i + l * ROBOT_ARM_NX] * slot->Phit[l + j * ROBOT_ARM_NX];
-                }
-                PA[i + j * ROBOT_ARM_NX] = v;
+        const robot_arm_real *H = slot->Ht, *Phi = slot->Phit;
+        for (l = 0; l < ROBOT_ARM_NX; ++l) {
+            for (i = 0; i < ROBOT_ARM_NW; ++i) {
+                PhiT[i + l * ROBOT_ARM_NW] = Phi[l + i * ROBOT_ARM_NX];
             }
         }
-        for (j = 0; j < ROBOT_ARM_NW; ++j) {
+        /* W = Phi' P (nw x nx) */
+        for (j = 0; j < ROBOT_ARM_NX; ++j) {
+            robot_arm_real col[ROBOT_ARM_NW];
             for (i = 0; i < ROBOT_ARM_NW; ++i) {
-                v = (i >= j ? slot->Ht[i + j * ROBOT_ARM_NW] : slot->Ht[j + i * ROBOT_ARM_NW]) +
-                    (i == j ? lm : ROBOT_ARM_R(0.0));
-                for (l = 0; l < ROBOT_ARM_NX; ++l) {
-                    v += slot->Phit[l + i * ROBOT_ARM_NX] * PA[l + j * ROBOT_ARM_NX];
-                }
-                Z[i + j * ROBOT_ARM_NW] = v;
+                col[i] = ROBOT_ARM_R(0.0);
             }
+            for (l = 0; l < ROBOT_ARM_NX; ++l) {
+                const robot_arm_real f = P[l + j * ROBOT_ARM_NX];
+                for (i = 0; i < ROBOT_ARM_NW; ++i) {
+                    col[i] += PhiT[i + l * ROBOT_ARM_NW] * f;
+                }
+            }
+            for (i = 0; i < ROBOT_ARM_NW; ++i) {
+                W[i + j * ROBOT_ARM_NW] = col[i];
+            }
+        }
+        /* Z = H + lm I + W Phi (lower triangle read) */
+        for (j = 0; j < ROBOT_ARM_NW; ++j) {
+            robot_arm_real col[ROBOT_ARM_NW];
+            for (i = 0; i < ROBOT_ARM_NW; ++i) {
+                col[i] = H[i + j * ROBOT_ARM_NW];
+            }
+            for (l = 0; l < ROBOT_ARM_NX; ++l) {
+                const robot_arm_real f = Phi[l + j * ROBOT_ARM_NX];
+                for (i = 0; i < ROBOT_ARM_NW; ++i) {
+                    col[i] += W[i + l * ROBOT_ARM_NW] * f;
+                }
+            }
+            for (i = 0; i < ROBOT_ARM_NW; ++i) {
+                Z[i + j * ROBOT_ARM_NW] = col[i];
+            }
+            Z[j + j * ROBOT_ARM_NW] += lm;
         }
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = ROBOT_ARM_NX; j < ROBOT_ARM_NW; ++j) {
@@ -90,7 +116,7 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
         if (k == 0) {
             break; /* x_0 is fixed: P_0 is not needed */
         }
-        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
+        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y (lower triangle, mirrored) */
         for (j = 0; j < ROBOT_ARM_NX; ++j) {
             for (i = ROBOT_ARM_NX; i < ROBOT_ARM_NW; ++i) {
                 v = Z[i + j * ROBOT_ARM_NW];
@@ -101,12 +127,13 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
             }
         }
         for (j = 0; j < ROBOT_ARM_NX; ++j) {
-            for (i = 0; i < ROBOT_ARM_NX; ++i) {
-                v = ROBOT_ARM_R(0.5) * (Z[i + j * ROBOT_ARM_NW] + Z[j + i * ROBOT_ARM_NW]);
+            for (i = j; i < ROBOT_ARM_NX; ++i) {
+                v = Z[i + j * ROBOT_ARM_NW];
                 for (l = ROBOT_ARM_NX; l < ROBOT_ARM_NW; ++l) {
                     v -= Z[l + i * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
                 }
                 P[i + j * ROBOT_ARM_NX] = v;
+                P[j + i * ROBOT_ARM_NX] = v;
             }
         }
     }

@@ -32,41 +32,67 @@ static unicycle_real unicycle_lm_hessian_scale(const unicycle_ring *ring, const 
 
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
- * out) has control pivots above UNICYCLE_LM_PIVOT_REL h. */
+ * out) has control pivots above UNICYCLE_LM_PIVOT_REL h.
+ *
+ * Every product runs down whole columns of fixed length (vectorised, no reductions):
+ * W = Phi' P by columns over the transposed copy PhiT, then Z = H + lm I + W Phi by whole
+ * columns (its upper triangle is computed and never read: at these sizes whole columns are
+ * cheaper than the ragged lower triangle, as in the QP's stage update). */
 static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, const unicycle_real *A_N, unicycle_real lm,
                            unicycle_real *work)
 {
     const unicycle_real tol = UNICYCLE_LM_PIVOT_REL * st->scale;
-    unicycle_real *P = work, *PA = work + UNICYCLE_NX * UNICYCLE_NX, *Z = PA + UNICYCLE_NX * UNICYCLE_NW;
+    unicycle_real *P = work, *W = work + UNICYCLE_NX * UNICYCLE_NX, *Z = W + UNICYCLE_NW * UNICYCLE_NX;
+    unicycle_real *PhiT = Z + UNICYCLE_NW * UNICYCLE_NW;
     unicycle_real v;
     int k, i, j, l;
     for (j = 0; j < UNICYCLE_NX; ++j) {
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            P[i + j * UNICYCLE_NX] =
-                (i >= j ? A_N[i + j * UNICYCLE_NX] : A_N[j + i * UNICYCLE_NX]) + (i == j ? lm : UNICYCLE_R(0.0));
+        for (i = j; i < UNICYCLE_NX; ++i) {
+            P[i + j * UNICYCLE_NX] = A_N[i + j * UNICYCLE_NX];
+            P[j + i * UNICYCLE_NX] = A_N[i + j * UNICYCLE_NX];
         }
+        P[j + j * UNICYCLE_NX] += lm;
     }
     for (k = UNICYCLE_N - 1; k >= 0; --k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(ring, k);
-        /* PA = P Phi (nx x nw); Z = H + lm I + Phi' P Phi (nw x nw) */
-        for (j = 0; j < UNICYCLE_NW; ++j) {
-            for (i = 0; i < UNICYCLE_NX; ++i) {
-                v = UNICYCLE_R(0.0);
-                for (l = 0; l < UNICYCLE_NX; ++l) {
-                    v += P[i + l * UNICYCLE_NX] * slot->Phit[l + j * UNICYCLE_NX];
-                }
-                PA[i + j * UNICYCLE_NX] = v;
+        const unicycle_real *H = slot->Ht, *Phi = slot->Phit;
+        for (l = 0; l < UNICYCLE_NX; ++l) {
+            for (i = 0; i < UNICYCLE_NW; ++i) {
+                PhiT[i + l * UNICYCLE_NW] = Phi[l + i * UNICYCLE_NX];
             }
         }
-        for (j = 0; j < UNICYCLE_NW; ++j) {
+        /* W = Phi' P (nw x nx) */
+        for (j = 0; j < UNICYCLE_NX; ++j) {
+            unicycle_real col[UNICYCLE_NW];
             for (i = 0; i < UNICYCLE_NW; ++i) {
-                v = (i >= j ? slot->Ht[i + j * UNICYCLE_NW] : slot->Ht[j + i * UNICYCLE_NW]) +
-                    (i == j ? lm : UNICYCLE_R(0.0));
-                for (l = 0; l < UNICYCLE_NX; ++l) {
-                    v += slot->Phit[l + i * UNICYCLE_NX] * PA[l + j * UNICYCLE_NX];
-                }
-                Z[i + j * UNICYCLE_NW] = v;
+                col[i] = UNICYCLE_R(0.0);
             }
+            for (l = 0; l < UNICYCLE_NX; ++l) {
+                const unicycle_real f = P[l + j * UNICYCLE_NX];
+                for (i = 0; i < UNICYCLE_NW; ++i) {
+                    col[i] += PhiT[i + l * UNICYCLE_NW] * f;
+                }
+            }
+            for (i = 0; i < UNICYCLE_NW; ++i) {
+                W[i + j * UNICYCLE_NW] = col[i];
+            }
+        }
+        /* Z = H + lm I + W Phi (lower triangle read) */
+        for (j = 0; j < UNICYCLE_NW; ++j) {
+            unicycle_real col[UNICYCLE_NW];
+            for (i = 0; i < UNICYCLE_NW; ++i) {
+                col[i] = H[i + j * UNICYCLE_NW];
+            }
+            for (l = 0; l < UNICYCLE_NX; ++l) {
+                const unicycle_real f = Phi[l + j * UNICYCLE_NX];
+                for (i = 0; i < UNICYCLE_NW; ++i) {
+                    col[i] += W[i + l * UNICYCLE_NW] * f;
+                }
+            }
+            for (i = 0; i < UNICYCLE_NW; ++i) {
+                Z[i + j * UNICYCLE_NW] = col[i];
+            }
+            Z[j + j * UNICYCLE_NW] += lm;
         }
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = UNICYCLE_NX; j < UNICYCLE_NW; ++j) {
@@ -90,7 +116,7 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
         if (k == 0) {
             break; /* x_0 is fixed: P_0 is not needed */
         }
-        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y */
+        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y (lower triangle, mirrored) */
         for (j = 0; j < UNICYCLE_NX; ++j) {
             for (i = UNICYCLE_NX; i < UNICYCLE_NW; ++i) {
                 v = Z[i + j * UNICYCLE_NW];
@@ -101,12 +127,13 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
             }
         }
         for (j = 0; j < UNICYCLE_NX; ++j) {
-            for (i = 0; i < UNICYCLE_NX; ++i) {
-                v = UNICYCLE_R(0.5) * (Z[i + j * UNICYCLE_NW] + Z[j + i * UNICYCLE_NW]);
+            for (i = j; i < UNICYCLE_NX; ++i) {
+                v = Z[i + j * UNICYCLE_NW];
                 for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
                     v -= Z[l + i * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
                 }
                 P[i + j * UNICYCLE_NX] = v;
+                P[j + i * UNICYCLE_NX] = v;
             }
         }
     }
