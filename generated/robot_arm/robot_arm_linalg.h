@@ -2,7 +2,7 @@
  *
  * Generic helpers for fixed-size stage blocks: no allocation, no size limits beyond the
  * caller's arrays. Naming follows BLAS/LAPACK (potrf, trsm, gemm, ...) so the intent of a
- * call is clear; there is no BLAS behind it.
+ * call is clear; there is no BLAS behind it. The arrays passed to one call must not overlap.
  */
 #ifndef ROBOT_ARM_LINALG_H
 #define ROBOT_ARM_LINALG_H
@@ -69,7 +69,9 @@ int robot_arm_la_all_finite(int m, int n, const robot_arm_real *A, int lda);
 /* ------------------------------------------------------------------------------------
  * Inline kernels (robot_arm_lai_*): the same operations as static inline functions, so that
  * a caller with compile-time sizes (the QP solver) gets them specialised and unrolled.
- * The robot_arm_la_* functions above are linkable wrappers around them. */
+ * The robot_arm_la_* functions above are linkable wrappers around them. The arrays of one call
+ * must not overlap (restrict): the output then stays in registers across the loops instead
+ * of being stored and read back after every update (the input might have been it). */
 #include <float.h>
 #include <math.h>
 
@@ -171,7 +173,7 @@ static inline int robot_arm_lai_ldlt_l(int n, robot_arm_real *A, int lda, int *n
     return 0;
 }
 
-static inline void robot_arm_lai_trsv_ln(int n, const robot_arm_real *L, int ldl, robot_arm_real *x)
+static inline void robot_arm_lai_trsv_ln(int n, const robot_arm_real *restrict L, int ldl, robot_arm_real *restrict x)
 {
     int i, k;
     for (i = 0; i < n; ++i) {
@@ -182,7 +184,7 @@ static inline void robot_arm_lai_trsv_ln(int n, const robot_arm_real *L, int ldl
     }
 }
 
-static inline void robot_arm_lai_trsv_lt(int n, const robot_arm_real *L, int ldl, robot_arm_real *x)
+static inline void robot_arm_lai_trsv_lt(int n, const robot_arm_real *restrict L, int ldl, robot_arm_real *restrict x)
 {
     int i, k;
     for (i = n - 1; i >= 0; --i) {
@@ -193,14 +195,16 @@ static inline void robot_arm_lai_trsv_lt(int n, const robot_arm_real *L, int ldl
     }
 }
 
-static inline void robot_arm_lai_trsm_lln(int n, int m, const robot_arm_real *L, int ldl, robot_arm_real *B, int ldb)
+static inline void robot_arm_lai_trsm_lln(int n, int m, const robot_arm_real *restrict L, int ldl,
+                                      robot_arm_real *restrict B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
         robot_arm_lai_trsv_ln(n, L, ldl, B + j * ldb);
 }
 
-static inline void robot_arm_lai_trsm_llt(int n, int m, const robot_arm_real *L, int ldl, robot_arm_real *B, int ldb)
+static inline void robot_arm_lai_trsm_llt(int n, int m, const robot_arm_real *restrict L, int ldl,
+                                      robot_arm_real *restrict B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
@@ -208,7 +212,7 @@ static inline void robot_arm_lai_trsm_llt(int n, int m, const robot_arm_real *L,
 }
 
 /* y = beta y (m entries) with beta = 0 writing zeros (y may hold NaN) and beta = 1 no-op. */
-static inline void robot_arm_lai_scale_y(int m, robot_arm_real beta, robot_arm_real *y)
+static inline void robot_arm_lai_scale_y(int m, robot_arm_real beta, robot_arm_real *restrict y)
 {
     int i;
     if (beta == ROBOT_ARM_R(0.0)) {
@@ -220,8 +224,8 @@ static inline void robot_arm_lai_scale_y(int m, robot_arm_real beta, robot_arm_r
     }
 }
 
-static inline void robot_arm_lai_gemv_n(int m, int n, robot_arm_real alpha, const robot_arm_real *A, int lda,
-                                    const robot_arm_real *x, robot_arm_real beta, robot_arm_real *y)
+static inline void robot_arm_lai_gemv_n(int m, int n, robot_arm_real alpha, const robot_arm_real *restrict A, int lda,
+                                    const robot_arm_real *restrict x, robot_arm_real beta, robot_arm_real *restrict y)
 {
     int i, j;
     robot_arm_lai_scale_y(m, beta, y);
@@ -232,8 +236,8 @@ static inline void robot_arm_lai_gemv_n(int m, int n, robot_arm_real alpha, cons
     }
 }
 
-static inline void robot_arm_lai_gemv_t(int m, int n, robot_arm_real alpha, const robot_arm_real *A, int lda,
-                                    const robot_arm_real *x, robot_arm_real beta, robot_arm_real *y)
+static inline void robot_arm_lai_gemv_t(int m, int n, robot_arm_real alpha, const robot_arm_real *restrict A, int lda,
+                                    const robot_arm_real *restrict x, robot_arm_real beta, robot_arm_real *restrict y)
 {
     int i, j;
     for (j = 0; j < n; ++j) {
@@ -244,8 +248,8 @@ static inline void robot_arm_lai_gemv_t(int m, int n, robot_arm_real alpha, cons
     }
 }
 
-static inline void robot_arm_lai_symv_l(int n, robot_arm_real alpha, const robot_arm_real *A, int lda,
-                                    const robot_arm_real *x, robot_arm_real beta, robot_arm_real *y)
+static inline void robot_arm_lai_symv_l(int n, robot_arm_real alpha, const robot_arm_real *restrict A, int lda,
+                                    const robot_arm_real *restrict x, robot_arm_real beta, robot_arm_real *restrict y)
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column (the
@@ -266,8 +270,9 @@ static inline void robot_arm_lai_symv_l(int n, robot_arm_real alpha, const robot
     }
 }
 
-static inline void robot_arm_lai_gemm_nn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *A, int lda,
-                                     const robot_arm_real *B, int ldb, robot_arm_real beta, robot_arm_real *C, int ldc)
+static inline void robot_arm_lai_gemm_nn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *restrict A,
+                                     int lda, const robot_arm_real *restrict B, int ldb, robot_arm_real beta,
+                                     robot_arm_real *restrict C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -281,8 +286,9 @@ static inline void robot_arm_lai_gemm_nn(int m, int n, int k, robot_arm_real alp
     }
 }
 
-static inline void robot_arm_lai_gemm_tn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *A, int lda,
-                                     const robot_arm_real *B, int ldb, robot_arm_real beta, robot_arm_real *C, int ldc)
+static inline void robot_arm_lai_gemm_tn(int m, int n, int k, robot_arm_real alpha, const robot_arm_real *restrict A,
+                                     int lda, const robot_arm_real *restrict B, int ldb, robot_arm_real beta,
+                                     robot_arm_real *restrict C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -295,6 +301,7 @@ static inline void robot_arm_lai_gemm_tn(int m, int n, int k, robot_arm_real alp
     }
 }
 
+/* (not restrict: a compiler may turn a copy between restrict arrays into a call of memmove) */
 static inline void robot_arm_lai_copy_mat(int m, int n, const robot_arm_real *A, int lda, robot_arm_real *B, int ldb)
 {
     int i, j;
@@ -320,62 +327,89 @@ static inline robot_arm_real robot_arm_lai_dot(int n, const robot_arm_real *x, c
     return s;
 }
 
-static inline void robot_arm_lai_axpy(int n, robot_arm_real alpha, const robot_arm_real *x, robot_arm_real *y)
+static inline void robot_arm_lai_axpy(int n, robot_arm_real alpha, const robot_arm_real *restrict x,
+                                  robot_arm_real *restrict y)
 {
     int i;
     for (i = 0; i < n; ++i)
         y[i] += alpha * x[i];
 }
 
-/* 1 when every entry of the vector is finite (no NaN, no Inf) */
-static inline int robot_arm_lai_vec_finite(int n, const robot_arm_real *x)
+/* The larger of a and m for an accumulated maximum m (never NaN): a when a > m, else m (a
+ * NaN a leaves m). Where the core has a floating-point maximum instruction (VMAXNM, FMAXNM)
+ * fmax compiles to it and gives the same value in one instruction instead of a compare and a
+ * select: AArch64, ARMv8 with an FPU of the real type, and the Cortex-M7's FPv5 with double
+ * precision (an ARMv7E-M core; its single-precision variant cannot be told from the
+ * Cortex-M4's FPv4, which has no such instruction, by the predefined macros). Elsewhere fmax
+ * is a library call and the comparison is cheaper. */
+#if defined(__aarch64__) ||                                                                                  \
+    (defined(__ARM_FP) && defined(__ARM_ARCH) && (ROBOT_ARM_REAL_FLOAT ? (__ARM_FP & 4) : (__ARM_FP & 8)) &&     \
+     (__ARM_ARCH >= 8 || (defined(__ARM_ARCH_PROFILE) && __ARM_ARCH_PROFILE == 'M' && (__ARM_FP & 8))))
+#define ROBOT_ARM_MAX_ACC(a, m) robot_arm_fmax((a), (m))
+#else
+#define ROBOT_ARM_MAX_ACC(a, m) ((a) > (m) ? (a) : (m))
+#endif
+
+/* 1 when every entry of the m x n matrix A is finite (no NaN, no Inf). x * 0 is 0 for a finite
+ * x and NaN for an infinite or NaN one, so the sum of these products is 0 exactly when every
+ * entry is finite: one multiply-add per entry, no branch (two sums, independent chains). */
+static inline int robot_arm_lai_all_finite(int m, int n, const robot_arm_real *restrict A, int lda)
 {
-    int i;
-    for (i = 0; i < n; ++i)
-        if (!isfinite(x[i]))
-            return 0;
-    return 1;
+    int i, j;
+    robot_arm_real s0 = ROBOT_ARM_R(0.0), s1 = ROBOT_ARM_R(0.0);
+    for (j = 0; j < n; ++j) {
+        const robot_arm_real *a = A + j * lda;
+        for (i = 0; i + 1 < m; i += 2) {
+            s0 += a[i] * ROBOT_ARM_R(0.0);
+            s1 += a[i + 1] * ROBOT_ARM_R(0.0);
+        }
+        if (i < m)
+            s0 += a[i] * ROBOT_ARM_R(0.0);
+    }
+    return s0 + s1 == ROBOT_ARM_R(0.0);
 }
 
-/* The largest |x_i|, NaN when an entry is NaN. Branch-free: the maximum is a select (one
- * max instruction) and NaN is tracked by a flag, so the result does not depend on which
- * entries are new maxima (a data-dependent branch mispredicts half the time). */
-static inline robot_arm_real robot_arm_lai_norm_inf(int n, const robot_arm_real *x)
+/* 1 when every entry of the vector is finite (no NaN, no Inf) */
+static inline int robot_arm_lai_vec_finite(int n, const robot_arm_real *restrict x)
 {
-    /* four independent maxima (no chain of dependent max instructions), a NaN flag */
-    int i, c, nan = 0;
+    return robot_arm_lai_all_finite(n, 1, x, n);
+}
+
+/* The largest |x_i|, NaN when an entry is NaN. Branch-free: four independent maxima (no
+ * chain of dependent max instructions; the maximum is a select or one max instruction,
+ * ROBOT_ARM_MAX_ACC) and the sum of the |x_i|, which is NaN exactly when an entry is NaN (the
+ * terms are never negative, so infinite ones cannot cancel). A data-dependent branch would
+ * mispredict half the time. */
+static inline robot_arm_real robot_arm_lai_norm_inf(int n, const robot_arm_real *restrict x)
+{
+    int i, c;
     robot_arm_real m[4] = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
+    robot_arm_real t[4] = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
     for (i = 0; i < n; i += 4)
         for (c = 0; c < 4 && i + c < n; ++c) {
             const robot_arm_real a = robot_arm_fabs(x[i + c]);
-            m[c] = a > m[c] ? a : m[c];
-            nan |= a != a;
+            m[c] = ROBOT_ARM_MAX_ACC(a, m[c]);
+            t[c] += a;
         }
-    m[0] = m[1] > m[0] ? m[1] : m[0];
-    m[2] = m[3] > m[2] ? m[3] : m[2];
-    return nan ? (robot_arm_real)NAN : (m[2] > m[0] ? m[2] : m[0]);
+    m[0] = ROBOT_ARM_MAX_ACC(m[1], m[0]);
+    m[2] = ROBOT_ARM_MAX_ACC(m[3], m[2]);
+    t[0] += t[1] + t[2] + t[3];
+    return t[0] != t[0] ? (robot_arm_real)NAN : ROBOT_ARM_MAX_ACC(m[2], m[0]);
 }
 
-static inline robot_arm_real robot_arm_lai_max_abs_mat(int m, int n, const robot_arm_real *A, int lda)
+/* The largest |A_ij| of the m x n matrix A, NaN when an entry is NaN. */
+static inline robot_arm_real robot_arm_lai_max_abs_mat(int m, int n, const robot_arm_real *restrict A, int lda)
 {
     int j, nan = 0;
     robot_arm_real r = ROBOT_ARM_R(0.0);
+    if (lda == m) /* contiguous: one pass */
+        return robot_arm_lai_norm_inf(m * n, A);
     for (j = 0; j < n; ++j) {
         const robot_arm_real c = robot_arm_lai_norm_inf(m, A + j * lda);
-        r = c > r ? c : r;
+        r = ROBOT_ARM_MAX_ACC(c, r);
         nan |= c != c;
     }
     return nan ? (robot_arm_real)NAN : r;
-}
-
-static inline int robot_arm_lai_all_finite(int m, int n, const robot_arm_real *A, int lda)
-{
-    int i, j;
-    for (j = 0; j < n; ++j)
-        for (i = 0; i < m; ++i)
-            if (!isfinite(A[i + j * lda]))
-                return 0;
-    return 1;
 }
 
 #endif /* ROBOT_ARM_LINALG_H */

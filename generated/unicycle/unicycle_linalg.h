@@ -2,7 +2,7 @@
  *
  * Generic helpers for fixed-size stage blocks: no allocation, no size limits beyond the
  * caller's arrays. Naming follows BLAS/LAPACK (potrf, trsm, gemm, ...) so the intent of a
- * call is clear; there is no BLAS behind it.
+ * call is clear; there is no BLAS behind it. The arrays passed to one call must not overlap.
  */
 #ifndef UNICYCLE_LINALG_H
 #define UNICYCLE_LINALG_H
@@ -69,7 +69,9 @@ int unicycle_la_all_finite(int m, int n, const unicycle_real *A, int lda);
 /* ------------------------------------------------------------------------------------
  * Inline kernels (unicycle_lai_*): the same operations as static inline functions, so that
  * a caller with compile-time sizes (the QP solver) gets them specialised and unrolled.
- * The unicycle_la_* functions above are linkable wrappers around them. */
+ * The unicycle_la_* functions above are linkable wrappers around them. The arrays of one call
+ * must not overlap (restrict): the output then stays in registers across the loops instead
+ * of being stored and read back after every update (the input might have been it). */
 #include <float.h>
 #include <math.h>
 
@@ -171,7 +173,7 @@ static inline int unicycle_lai_ldlt_l(int n, unicycle_real *A, int lda, int *neg
     return 0;
 }
 
-static inline void unicycle_lai_trsv_ln(int n, const unicycle_real *L, int ldl, unicycle_real *x)
+static inline void unicycle_lai_trsv_ln(int n, const unicycle_real *restrict L, int ldl, unicycle_real *restrict x)
 {
     int i, k;
     for (i = 0; i < n; ++i) {
@@ -182,7 +184,7 @@ static inline void unicycle_lai_trsv_ln(int n, const unicycle_real *L, int ldl, 
     }
 }
 
-static inline void unicycle_lai_trsv_lt(int n, const unicycle_real *L, int ldl, unicycle_real *x)
+static inline void unicycle_lai_trsv_lt(int n, const unicycle_real *restrict L, int ldl, unicycle_real *restrict x)
 {
     int i, k;
     for (i = n - 1; i >= 0; --i) {
@@ -193,14 +195,16 @@ static inline void unicycle_lai_trsv_lt(int n, const unicycle_real *L, int ldl, 
     }
 }
 
-static inline void unicycle_lai_trsm_lln(int n, int m, const unicycle_real *L, int ldl, unicycle_real *B, int ldb)
+static inline void unicycle_lai_trsm_lln(int n, int m, const unicycle_real *restrict L, int ldl,
+                                      unicycle_real *restrict B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
         unicycle_lai_trsv_ln(n, L, ldl, B + j * ldb);
 }
 
-static inline void unicycle_lai_trsm_llt(int n, int m, const unicycle_real *L, int ldl, unicycle_real *B, int ldb)
+static inline void unicycle_lai_trsm_llt(int n, int m, const unicycle_real *restrict L, int ldl,
+                                      unicycle_real *restrict B, int ldb)
 {
     int j;
     for (j = 0; j < m; ++j)
@@ -208,7 +212,7 @@ static inline void unicycle_lai_trsm_llt(int n, int m, const unicycle_real *L, i
 }
 
 /* y = beta y (m entries) with beta = 0 writing zeros (y may hold NaN) and beta = 1 no-op. */
-static inline void unicycle_lai_scale_y(int m, unicycle_real beta, unicycle_real *y)
+static inline void unicycle_lai_scale_y(int m, unicycle_real beta, unicycle_real *restrict y)
 {
     int i;
     if (beta == UNICYCLE_R(0.0)) {
@@ -220,8 +224,8 @@ static inline void unicycle_lai_scale_y(int m, unicycle_real beta, unicycle_real
     }
 }
 
-static inline void unicycle_lai_gemv_n(int m, int n, unicycle_real alpha, const unicycle_real *A, int lda,
-                                    const unicycle_real *x, unicycle_real beta, unicycle_real *y)
+static inline void unicycle_lai_gemv_n(int m, int n, unicycle_real alpha, const unicycle_real *restrict A, int lda,
+                                    const unicycle_real *restrict x, unicycle_real beta, unicycle_real *restrict y)
 {
     int i, j;
     unicycle_lai_scale_y(m, beta, y);
@@ -232,8 +236,8 @@ static inline void unicycle_lai_gemv_n(int m, int n, unicycle_real alpha, const 
     }
 }
 
-static inline void unicycle_lai_gemv_t(int m, int n, unicycle_real alpha, const unicycle_real *A, int lda,
-                                    const unicycle_real *x, unicycle_real beta, unicycle_real *y)
+static inline void unicycle_lai_gemv_t(int m, int n, unicycle_real alpha, const unicycle_real *restrict A, int lda,
+                                    const unicycle_real *restrict x, unicycle_real beta, unicycle_real *restrict y)
 {
     int i, j;
     for (j = 0; j < n; ++j) {
@@ -244,8 +248,8 @@ static inline void unicycle_lai_gemv_t(int m, int n, unicycle_real alpha, const 
     }
 }
 
-static inline void unicycle_lai_symv_l(int n, unicycle_real alpha, const unicycle_real *A, int lda,
-                                    const unicycle_real *x, unicycle_real beta, unicycle_real *y)
+static inline void unicycle_lai_symv_l(int n, unicycle_real alpha, const unicycle_real *restrict A, int lda,
+                                    const unicycle_real *restrict x, unicycle_real beta, unicycle_real *restrict y)
 {
     int i, j;
     /* y = beta y + alpha (L + L' - diag) x, L the lower triangle, column by column (the
@@ -266,8 +270,9 @@ static inline void unicycle_lai_symv_l(int n, unicycle_real alpha, const unicycl
     }
 }
 
-static inline void unicycle_lai_gemm_nn(int m, int n, int k, unicycle_real alpha, const unicycle_real *A, int lda,
-                                     const unicycle_real *B, int ldb, unicycle_real beta, unicycle_real *C, int ldc)
+static inline void unicycle_lai_gemm_nn(int m, int n, int k, unicycle_real alpha, const unicycle_real *restrict A,
+                                     int lda, const unicycle_real *restrict B, int ldb, unicycle_real beta,
+                                     unicycle_real *restrict C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -281,8 +286,9 @@ static inline void unicycle_lai_gemm_nn(int m, int n, int k, unicycle_real alpha
     }
 }
 
-static inline void unicycle_lai_gemm_tn(int m, int n, int k, unicycle_real alpha, const unicycle_real *A, int lda,
-                                     const unicycle_real *B, int ldb, unicycle_real beta, unicycle_real *C, int ldc)
+static inline void unicycle_lai_gemm_tn(int m, int n, int k, unicycle_real alpha, const unicycle_real *restrict A,
+                                     int lda, const unicycle_real *restrict B, int ldb, unicycle_real beta,
+                                     unicycle_real *restrict C, int ldc)
 {
     int i, j, l;
     for (j = 0; j < n; ++j) {
@@ -295,6 +301,7 @@ static inline void unicycle_lai_gemm_tn(int m, int n, int k, unicycle_real alpha
     }
 }
 
+/* (not restrict: a compiler may turn a copy between restrict arrays into a call of memmove) */
 static inline void unicycle_lai_copy_mat(int m, int n, const unicycle_real *A, int lda, unicycle_real *B, int ldb)
 {
     int i, j;
@@ -320,62 +327,89 @@ static inline unicycle_real unicycle_lai_dot(int n, const unicycle_real *x, cons
     return s;
 }
 
-static inline void unicycle_lai_axpy(int n, unicycle_real alpha, const unicycle_real *x, unicycle_real *y)
+static inline void unicycle_lai_axpy(int n, unicycle_real alpha, const unicycle_real *restrict x,
+                                  unicycle_real *restrict y)
 {
     int i;
     for (i = 0; i < n; ++i)
         y[i] += alpha * x[i];
 }
 
-/* 1 when every entry of the vector is finite (no NaN, no Inf) */
-static inline int unicycle_lai_vec_finite(int n, const unicycle_real *x)
+/* The larger of a and m for an accumulated maximum m (never NaN): a when a > m, else m (a
+ * NaN a leaves m). Where the core has a floating-point maximum instruction (VMAXNM, FMAXNM)
+ * fmax compiles to it and gives the same value in one instruction instead of a compare and a
+ * select: AArch64, ARMv8 with an FPU of the real type, and the Cortex-M7's FPv5 with double
+ * precision (an ARMv7E-M core; its single-precision variant cannot be told from the
+ * Cortex-M4's FPv4, which has no such instruction, by the predefined macros). Elsewhere fmax
+ * is a library call and the comparison is cheaper. */
+#if defined(__aarch64__) ||                                                                                  \
+    (defined(__ARM_FP) && defined(__ARM_ARCH) && (UNICYCLE_REAL_FLOAT ? (__ARM_FP & 4) : (__ARM_FP & 8)) &&     \
+     (__ARM_ARCH >= 8 || (defined(__ARM_ARCH_PROFILE) && __ARM_ARCH_PROFILE == 'M' && (__ARM_FP & 8))))
+#define UNICYCLE_MAX_ACC(a, m) unicycle_fmax((a), (m))
+#else
+#define UNICYCLE_MAX_ACC(a, m) ((a) > (m) ? (a) : (m))
+#endif
+
+/* 1 when every entry of the m x n matrix A is finite (no NaN, no Inf). x * 0 is 0 for a finite
+ * x and NaN for an infinite or NaN one, so the sum of these products is 0 exactly when every
+ * entry is finite: one multiply-add per entry, no branch (two sums, independent chains). */
+static inline int unicycle_lai_all_finite(int m, int n, const unicycle_real *restrict A, int lda)
 {
-    int i;
-    for (i = 0; i < n; ++i)
-        if (!isfinite(x[i]))
-            return 0;
-    return 1;
+    int i, j;
+    unicycle_real s0 = UNICYCLE_R(0.0), s1 = UNICYCLE_R(0.0);
+    for (j = 0; j < n; ++j) {
+        const unicycle_real *a = A + j * lda;
+        for (i = 0; i + 1 < m; i += 2) {
+            s0 += a[i] * UNICYCLE_R(0.0);
+            s1 += a[i + 1] * UNICYCLE_R(0.0);
+        }
+        if (i < m)
+            s0 += a[i] * UNICYCLE_R(0.0);
+    }
+    return s0 + s1 == UNICYCLE_R(0.0);
 }
 
-/* The largest |x_i|, NaN when an entry is NaN. Branch-free: the maximum is a select (one
- * max instruction) and NaN is tracked by a flag, so the result does not depend on which
- * entries are new maxima (a data-dependent branch mispredicts half the time). */
-static inline unicycle_real unicycle_lai_norm_inf(int n, const unicycle_real *x)
+/* 1 when every entry of the vector is finite (no NaN, no Inf) */
+static inline int unicycle_lai_vec_finite(int n, const unicycle_real *restrict x)
 {
-    /* four independent maxima (no chain of dependent max instructions), a NaN flag */
-    int i, c, nan = 0;
+    return unicycle_lai_all_finite(n, 1, x, n);
+}
+
+/* The largest |x_i|, NaN when an entry is NaN. Branch-free: four independent maxima (no
+ * chain of dependent max instructions; the maximum is a select or one max instruction,
+ * UNICYCLE_MAX_ACC) and the sum of the |x_i|, which is NaN exactly when an entry is NaN (the
+ * terms are never negative, so infinite ones cannot cancel). A data-dependent branch would
+ * mispredict half the time. */
+static inline unicycle_real unicycle_lai_norm_inf(int n, const unicycle_real *restrict x)
+{
+    int i, c;
     unicycle_real m[4] = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
+    unicycle_real t[4] = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
     for (i = 0; i < n; i += 4)
         for (c = 0; c < 4 && i + c < n; ++c) {
             const unicycle_real a = unicycle_fabs(x[i + c]);
-            m[c] = a > m[c] ? a : m[c];
-            nan |= a != a;
+            m[c] = UNICYCLE_MAX_ACC(a, m[c]);
+            t[c] += a;
         }
-    m[0] = m[1] > m[0] ? m[1] : m[0];
-    m[2] = m[3] > m[2] ? m[3] : m[2];
-    return nan ? (unicycle_real)NAN : (m[2] > m[0] ? m[2] : m[0]);
+    m[0] = UNICYCLE_MAX_ACC(m[1], m[0]);
+    m[2] = UNICYCLE_MAX_ACC(m[3], m[2]);
+    t[0] += t[1] + t[2] + t[3];
+    return t[0] != t[0] ? (unicycle_real)NAN : UNICYCLE_MAX_ACC(m[2], m[0]);
 }
 
-static inline unicycle_real unicycle_lai_max_abs_mat(int m, int n, const unicycle_real *A, int lda)
+/* The largest |A_ij| of the m x n matrix A, NaN when an entry is NaN. */
+static inline unicycle_real unicycle_lai_max_abs_mat(int m, int n, const unicycle_real *restrict A, int lda)
 {
     int j, nan = 0;
     unicycle_real r = UNICYCLE_R(0.0);
+    if (lda == m) /* contiguous: one pass */
+        return unicycle_lai_norm_inf(m * n, A);
     for (j = 0; j < n; ++j) {
         const unicycle_real c = unicycle_lai_norm_inf(m, A + j * lda);
-        r = c > r ? c : r;
+        r = UNICYCLE_MAX_ACC(c, r);
         nan |= c != c;
     }
     return nan ? (unicycle_real)NAN : r;
-}
-
-static inline int unicycle_lai_all_finite(int m, int n, const unicycle_real *A, int lda)
-{
-    int i, j;
-    for (j = 0; j < n; ++j)
-        for (i = 0; i < m; ++i)
-            if (!isfinite(A[i + j * lda]))
-                return 0;
-    return 1;
 }
 
 #endif /* UNICYCLE_LINALG_H */

@@ -497,7 +497,7 @@ static inline void absmax_acc(int n, const unicycle_real *restrict x, unicycle_r
     int i;
     for (i = 0; i < n; ++i) {
         const unicycle_real a = unicycle_fabs(x[i]);
-        acc[i] = a > acc[i] ? a : acc[i];
+        acc[i] = UNICYCLE_MAX_ACC(a, acc[i]);
     }
 }
 
@@ -663,10 +663,11 @@ static void phit_mv(const unicycle_real *restrict PhiT, const unicycle_real *res
 }
 
 /* The stage update of the Riccati recursion: PhiT = Phi' (nw x nx), WT = Phi' P (nw x nx,
- * P symmetric stored full), M = H + WT Phi, and with terminal equalities Gam = Phi' G
- * (nw x ne). Every inner loop runs down a column of nw entries (fixed length, vectorised);
- * the upper triangle of M is computed too (it is never read; whole columns are cheaper
- * than the ragged lower triangle at these sizes). */
+ * P symmetric stored full), the lower triangle of M = H + WT Phi (the upper one is never
+ * read), and with terminal equalities Gam = Phi' G (nw x ne). The inner loops run down a
+ * column (vectorised where the target has vectors); the ragged columns of the triangle are
+ * unrolled. On x86 (two-wide vectors) whole columns of M took the same time (0.99 to 1.02,
+ * bench/README.md); on a scalar FPU (Cortex-M7) the triangle saves 45 % of the products. */
 static void qp_stage_update(const unicycle_real *restrict Phi, const unicycle_real *restrict P,
                             const unicycle_real *restrict G, const unicycle_real *restrict H,
                             unicycle_real *restrict PhiT, unicycle_real *restrict WT, unicycle_real *restrict M,
@@ -678,16 +679,20 @@ static void qp_stage_update(const unicycle_real *restrict Phi, const unicycle_re
             PhiT[i + l * NW] = Phi[l + i * NX];
     for (j = 0; j < NX; ++j)
         phit_mv(PhiT, P + j * NX, WT + j * NW);
+    UNROLL
     for (j = 0; j < NW; ++j) {
         unicycle_real col[NW];
-        for (i = 0; i < NW; ++i)
+        UNROLL
+        for (i = j; i < NW; ++i)
             col[i] = H[i + j * NW];
         for (l = 0; l < NX; ++l) {
             const unicycle_real f = Phi[l + j * NX];
-            for (i = 0; i < NW; ++i)
+            UNROLL
+            for (i = j; i < NW; ++i)
                 col[i] += WT[i + l * NW] * f;
         }
-        for (i = 0; i < NW; ++i)
+        UNROLL
+        for (i = j; i < NW; ++i)
             M[i + j * NW] = col[i];
     }
     for (j = 0; j < NE; ++j)
@@ -817,8 +822,10 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
                         M[a + c * NW] += qg * C[j + a * NG] * C[j + c * NG];
         }
 
-        /* M_uu = Lu Lu'; a pivot below -noise is wrong inertia */
-        unicycle_lai_copy_mat(NU, NU, M + NX + NX * NW, NW, Lu, NU1);
+        /* M_uu = Lu Lu' (its lower triangle); a pivot below -noise is wrong inertia */
+        for (j = 0; j < NU; ++j)
+            for (i = j; i < NU; ++i)
+                Lu[i + j * NU1] = M[NX + i + (NX + j) * NW];
         if (unicycle_lai_potrf_l_noise(NU, Lu, NU1, ws->noise, &ws->pivot_floors) != 0) {
             QP_TRACE("   pivot fail stage %d delta %.2e rho %.2e\n", k, delta, ws->rho_aug);
             return 1;
@@ -2409,16 +2416,22 @@ static int as_guess(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const u
     return 1;
 }
 
+/* The largest scaled equality residual of the active rows (from the last residuals). */
+static unicycle_real as_active_residual(const unicycle_qp_workspace *ws)
+{
+    unicycle_real ra = UNICYCLE_R(0.0);
+    int b;
+    for (b = 0; b < ws->nb; ++b)
+        ra = dmax(ra, unicycle_fabs(as_res(ws, b)));
+    return ra / ws->scale_ineq;
+}
+
 /* The residuals of the iterate (into *r) and the largest scaled equality residual of the
  * active rows. */
 static unicycle_real as_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *in, qp_res *r)
 {
-    unicycle_real ra = UNICYCLE_R(0.0);
-    int b;
     compute_residuals(ws, in, r);
-    for (b = 0; b < ws->nb; ++b)
-        ra = dmax(ra, unicycle_fabs(as_res(ws, b)));
-    return ra / ws->scale_ineq;
+    return as_active_residual(ws);
 }
 
 /* One sweep: the factorisation with the penalty weights of the active rows (and the exact
@@ -2490,8 +2503,8 @@ static int as_wrong_sign(const unicycle_qp_workspace *ws, int b, unicycle_real m
  * set when it is at least AS_DROP times the largest wrong one of its family (the others
  * wait for the next sweep; within tol times the multipliers' scale a multiplier is set to 0
  * and its row stays), and an inactive side violated beyond tol joins it. Returns 1 when the
- * active set changed. */
-static int as_update(const qp_loop *L, unicycle_qp_workspace *ws)
+ * active set changed; *zeroed: 1 when a multiplier was set to 0 and its row stays. */
+static int as_update(const qp_loop *L, unicycle_qp_workspace *ws, int *zeroed)
 {
     unicycle_real zscale = UNICYCLE_R(1.0), wrong[AS_NFAM];
     const unicycle_real feas = L->st.tol * ws->scale_ineq;
@@ -2505,12 +2518,14 @@ static int as_update(const qp_loop *L, unicycle_qp_workspace *ws)
             wrong[as_family(ws, b)] = dmax(wrong[as_family(ws, b)], unicycle_fabs(mu));
     }
     zscale *= L->st.tol;
+    *zeroed = 0;
     for (b = 0; b < ws->nb; ++b) {
         const unicycle_real mu = as_mu(ws, b);
         if (as_wrong_sign(ws, b, mu)) {
             QP_TRACE("active set: row %d side %d multiplier %.3e\n", (int)ws->bidx[b], (int)ws->act[b], mu);
             if (unicycle_fabs(mu) <= zscale) {
                 as_set_mu(ws, b, UNICYCLE_R(0.0));
+                *zeroed = 1;
             } else if (unicycle_fabs(mu) >= AS_DROP * wrong[as_family(ws, b)]) {
                 ws->act[b] = 0;
                 changed = 1;
@@ -2555,7 +2570,7 @@ static void as_snap_bounds(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 static int qp_active_set(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in, unicycle_qp_sol *sol,
                          unicycle_qp_info *info)
 {
-    int solved = 0;
+    int solved = 0, zeroed;
     qp_res r;
     if (!as_guess(ws, in, sol, L->hscale))
         return QP_GO_ON;
@@ -2565,9 +2580,10 @@ static int qp_active_set(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_q
         ++L->as_sweeps;
         if (!as_sweep(L, ws, in, &r))
             break;
-        if (!as_update(L, ws)) {
-            /* the residuals again after the multipliers set to 0 */
-            const unicycle_real ra = as_residuals(ws, in, &r);
+        if (!as_update(L, ws, &zeroed)) {
+            /* the residuals again after multipliers were set to 0 (else the iterate is the
+             * sweep's, whose residuals r holds) */
+            const unicycle_real ra = zeroed ? as_residuals(ws, in, &r) : as_active_residual(ws);
             solved = merit(&r) <= L->st.tol && ra <= L->st.tol;
             if (!solved)
                 break;
