@@ -776,9 +776,11 @@ class ReferenceDopus:
             self.work += self.N
             try:
                 # the first solve starts from the active set of the previous solution, as the C
-                # QP's warm start does for a QP the automatic lm made convex and a measurement
-                # near the predicted state (section 4, feedback); a retry with lm raised does not
-                start = (retries == 0 and self.active_set_start and self.lm_auto and self._lm_uncapped < 0.0
+                # QP's warm start does for a QP the automatic lm made convex (capped by at most
+                # one raise step) and a measurement near the predicted state (section 4,
+                # feedback); a retry with lm raised does not
+                capped = self._lm_uncapped >= 0.0 and not self.lm >= _SAFETY["QP_ACTIVE_SET_CAP"] * self._lm_uncapped
+                start = (retries == 0 and self.active_set_start and self.lm_auto and not capped
                          and self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale and bool(np.all(np.abs(qp["x0"]) <= _SAFETY["QP_ACTIVE_SET_NEAR"] * self.scales[0])))
                 sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter,
                                          guess=self._qp_warm_point(qp) if start else None,
@@ -909,15 +911,23 @@ class ReferenceDopus:
 
     def _stalled(self) -> bool:
         """Section 9: outside a recovery phase, a KKT proxy above STALL_KKT max(1, proxy at
-        init) in STALL_PREPARES prepares in a row begins a recovery phase without a
+        init) in STALL_PREPARES prepares in a row, or above FLAT_KKT max(1, proxy at init)
+        and not below FLAT_DROP times the proxy the stretch began with in FLAT_PREPARES
+        prepares in a row (no progress), begins a recovery phase without a
         re-initialisation."""
-        if self._recovering > 0 or not self.kkt_proxy > _SAFETY["STALL_KKT"] * max(self._kkt_proxy_init, 1.0):
-            self._n_stalled = 0
+        if self._recovering > 0:
+            self._n_stalled, self._n_flat = 0, 0
             return False
-        self._n_stalled += 1
-        if self._n_stalled < _SAFETY["STALL_PREPARES"]:
+        ref = max(self._kkt_proxy_init, 1.0)
+        high = self.kkt_proxy > _SAFETY["STALL_KKT"] * ref
+        self._n_stalled = self._n_stalled + 1 if high else 0
+        flat = self.kkt_proxy > _SAFETY["FLAT_KKT"] * ref
+        if not flat or self._n_flat == 0 or not self.kkt_proxy > _SAFETY["FLAT_DROP"] * self._kkt_flat_ref:
+            self._kkt_flat_ref, self._n_flat = self.kkt_proxy, 0
+        self._n_flat = self._n_flat + 1 if flat else 0
+        if self._n_stalled < _SAFETY["STALL_PREPARES"] and self._n_flat < _SAFETY["FLAT_PREPARES"]:
             return False
-        self._n_stalled = 0
+        self._n_stalled, self._n_flat = 0, 0
         self._recovering = int(_SAFETY["RECOVERY_FULL_RTI"])
         return True
 
@@ -1287,6 +1297,7 @@ class ReferenceDopus:
         self.kkt_proxy_ref = 0.0
         self._kkt_proxy_init = 0.0
         self._n_stalled = 0
+        self._kkt_flat_ref, self._n_flat = 0.0, 0
         self._n_gated = 0
         self._gate_rest = 0
 

@@ -62,6 +62,8 @@ void robot_arm_health_reset(robot_arm_health *h, const robot_arm_real *u)
     h->kkt_proxy_ref = ROBOT_ARM_R(0.0);
     h->kkt_proxy_init = ROBOT_ARM_R(0.0);
     h->n_stalled = 0;
+    h->kkt_flat_ref = ROBOT_ARM_R(0.0);
+    h->n_flat = 0;
     h->n_gated = 0;
     h->gate_rest = 0;
 }
@@ -152,15 +154,26 @@ int robot_arm_diverged(const robot_arm_health *h, const robot_arm_real *xhat0, c
 int robot_arm_health_stalled(robot_arm_health *h, int phase)
 {
     robot_arm_real ref = h->kkt_proxy_init > ROBOT_ARM_R(1.0) ? h->kkt_proxy_init : ROBOT_ARM_R(1.0);
-    if (h->recovering > 0 || !(h->kkt_proxy > ROBOT_ARM_STALL_KKT * ref)) {
+    int high, flat;
+    if (h->recovering > 0) {
         h->n_stalled = 0;
+        h->n_flat = 0;
         return 0;
     }
-    h->n_stalled += 1;
-    if (h->n_stalled < ROBOT_ARM_STALL_PREPARES) {
+    high = h->kkt_proxy > ROBOT_ARM_STALL_KKT * ref;
+    h->n_stalled = high ? h->n_stalled + 1 : 0;
+    /* a flat stretch: the proxy well above its settled level and not falling */
+    flat = h->kkt_proxy > ROBOT_ARM_FLAT_KKT * ref;
+    if (!flat || h->n_flat == 0 || !(h->kkt_proxy > ROBOT_ARM_FLAT_DROP * h->kkt_flat_ref)) {
+        h->kkt_flat_ref = h->kkt_proxy;
+        h->n_flat = 0;
+    }
+    h->n_flat = flat ? h->n_flat + 1 : 0;
+    if (h->n_stalled < ROBOT_ARM_STALL_PREPARES && h->n_flat < ROBOT_ARM_FLAT_PREPARES) {
         return 0;
     }
     h->n_stalled = 0;
+    h->n_flat = 0;
     h->recovering = phase;
     return 1;
 }

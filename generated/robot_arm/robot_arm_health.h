@@ -14,6 +14,9 @@
 #define ROBOT_ARM_DIVERGENCE_KKT ROBOT_ARM_R(1e6) /* kkt proxy <= 1e6 max(1, proxy at the last init) */
 #define ROBOT_ARM_STALL_KKT ROBOT_ARM_R(1e3)      /* a stalled prepare: proxy > 1e3 max(1, proxy at init) */
 #define ROBOT_ARM_STALL_PREPARES 10           /* ... in so many prepares in a row: escalate */
+#define ROBOT_ARM_FLAT_KKT ROBOT_ARM_R(5.0)       /* a flat prepare: proxy > 5 max(1, proxy at init) ... */
+#define ROBOT_ARM_FLAT_DROP ROBOT_ARM_R(0.5)      /* ... not below 0.5 times the proxy the stretch began with */
+#define ROBOT_ARM_FLAT_PREPARES 20            /* ... in so many prepares in a row: escalate */
 
 typedef struct {
     int n_failed;                         /* consecutive failed feedbacks */
@@ -31,6 +34,8 @@ typedef struct {
     robot_arm_real kkt_proxy_ref;  /* ... at the last init or re-initialisation */
     robot_arm_real kkt_proxy_init; /* ... at the last init (the stall test) */
     int n_stalled;             /* prepares in a row with a stalled KKT proxy */
+    robot_arm_real kkt_flat_ref;   /* the proxy a stretch of flat prepares began with */
+    int n_flat;                /* prepares in that stretch */
     int n_gated;               /* measurements in a row held out by the gate */
     int gate_rest;             /* measurements left that the gate lets pass unchecked */
 } robot_arm_health;
@@ -67,8 +72,9 @@ ROBOT_ARM_INTERNAL int robot_arm_diverged(const robot_arm_health *h, const robot
                                   const robot_arm_real *mu_bN);
 /* The stall test of a prepared iterate (docs/algorithm.md section 9), outside a recovery
  * phase: h->kkt_proxy > STALL_KKT max(1, h->kkt_proxy_init) in STALL_PREPARES prepares in a
- * row begins a recovery phase of `phase` feedbacks without a re-initialisation. Returns 1
- * when it did. */
+ * row, or > FLAT_KKT max(1, h->kkt_proxy_init) and not below FLAT_DROP times the proxy the
+ * stretch began with in FLAT_PREPARES prepares in a row (no progress), begins a recovery
+ * phase of `phase` feedbacks without a re-initialisation. Returns 1 when it did. */
 ROBOT_ARM_INTERNAL int robot_arm_health_stalled(robot_arm_health *h, int phase);
 /* The control of the last good plan for the instant k sampling instants from now (its age
  * plus k, the last control beyond the plan's end). */

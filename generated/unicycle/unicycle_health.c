@@ -62,6 +62,8 @@ void unicycle_health_reset(unicycle_health *h, const unicycle_real *u)
     h->kkt_proxy_ref = UNICYCLE_R(0.0);
     h->kkt_proxy_init = UNICYCLE_R(0.0);
     h->n_stalled = 0;
+    h->kkt_flat_ref = UNICYCLE_R(0.0);
+    h->n_flat = 0;
     h->n_gated = 0;
     h->gate_rest = 0;
 }
@@ -152,15 +154,26 @@ int unicycle_diverged(const unicycle_health *h, const unicycle_real *xhat0, cons
 int unicycle_health_stalled(unicycle_health *h, int phase)
 {
     unicycle_real ref = h->kkt_proxy_init > UNICYCLE_R(1.0) ? h->kkt_proxy_init : UNICYCLE_R(1.0);
-    if (h->recovering > 0 || !(h->kkt_proxy > UNICYCLE_STALL_KKT * ref)) {
+    int high, flat;
+    if (h->recovering > 0) {
         h->n_stalled = 0;
+        h->n_flat = 0;
         return 0;
     }
-    h->n_stalled += 1;
-    if (h->n_stalled < UNICYCLE_STALL_PREPARES) {
+    high = h->kkt_proxy > UNICYCLE_STALL_KKT * ref;
+    h->n_stalled = high ? h->n_stalled + 1 : 0;
+    /* a flat stretch: the proxy well above its settled level and not falling */
+    flat = h->kkt_proxy > UNICYCLE_FLAT_KKT * ref;
+    if (!flat || h->n_flat == 0 || !(h->kkt_proxy > UNICYCLE_FLAT_DROP * h->kkt_flat_ref)) {
+        h->kkt_flat_ref = h->kkt_proxy;
+        h->n_flat = 0;
+    }
+    h->n_flat = flat ? h->n_flat + 1 : 0;
+    if (h->n_stalled < UNICYCLE_STALL_PREPARES && h->n_flat < UNICYCLE_FLAT_PREPARES) {
         return 0;
     }
     h->n_stalled = 0;
+    h->n_flat = 0;
     h->recovering = phase;
     return 1;
 }

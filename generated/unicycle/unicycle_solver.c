@@ -976,14 +976,14 @@ static int unicycle_measurement_near(const unicycle_solver *s)
  * (the one the closed loop has followed so far). Returns the QP status. */
 static int unicycle_feedback_qp(unicycle_solver *s)
 {
-    /* the active-set start only for a QP that is convex (the automatic term lm convexified
-     * it in prepare below its maximum and this feedback did not cap it, unicycle_lm.h: its
-     * solution is unique, the one the interior point finds), for a measurement near the
-     * prediction, and not after a feedback that needed the cold retry (algorithm.md
-     * section 4, feedback) */
-    const int active_set = !s->qp_no_active_set && s->lm.on && s->lm.uncapped < UNICYCLE_R(0.0) &&
-                           s->lm.lm < UNICYCLE_LM_MAX_REL * s->lm.scale && unicycle_measurement_near(s) &&
-                           !s->qp_cold_retry;
+    /* the active-set start only for a QP that the automatic term lm convexified in prepare
+     * (below its maximum, unicycle_lm.h) and this feedback capped by at most one raise step
+     * (UNICYCLE_QP_ACTIVE_SET_CAP), for a measurement near the prediction, and not after a
+     * feedback that needed the cold retry (algorithm.md section 4, feedback) */
+    const int active_set =
+        !s->qp_no_active_set && s->lm.on &&
+        (s->lm.uncapped < UNICYCLE_R(0.0) || s->lm.lm >= UNICYCLE_QP_ACTIVE_SET_CAP * s->lm.uncapped) &&
+        s->lm.lm < UNICYCLE_LM_MAX_REL * s->lm.scale && unicycle_measurement_near(s) && !s->qp_cold_retry;
     int qs;
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
