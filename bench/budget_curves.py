@@ -14,9 +14,10 @@ point that misses and the first that meets. It is reported as a ratio to the cos
 full iteration.
 
 Work budgets (deterministic, work units of section 14): one full-RTI iteration costs
-3N + 2 units, one M = 1 iteration 2N + 4; no budget goes below 2N + 3 (the feedback's QP,
-the gradients and the last stage are never cut), so no setting can need less than
-(2N + 3) / (3N + 2) of the full RTI's budget. Time budgets: fractions of the reference's
+3N + 2 units, one M = 1 iteration 2N + 4; no budget goes below N + 4 (the feedback's QP and
+step 3 of prepare, the last stage and the terminal node, are never cut; the gradients of the
+other stages are, in stage order), so no setting can need less than (N + 4) / (3N + 2) of the
+full RTI's budget. Time budgets: fractions of the reference's
 median instant time on this host (noisy on a loaded machine: each budget runs --repeat
 times, 3 by default, and each figure is the median of the runs, the failed instants too).
 
@@ -28,8 +29,8 @@ instruction clock. The reference is the full RTI without a budget on the firmwar
 is fractions of its median instructions per instant, then a bisection to 1 % of it between
 the last grid point that misses and the first that meets. Also reported: the largest
 instant at the needed budget against the reference's largest (what a controller must
-provision for), since an instant's least cost (the feedback's QP, the gradients) is never
-cut and a budget below it is exceeded.
+provision for), since an instant's least cost (the feedback's QP, step 3 of prepare, the
+stage-cost Hessians and the lm test) is never cut and a budget below it is exceeded.
 
 Prints the tables, writes bench/results/budget_curves.json and bench/results/budget_curves.png.
 
@@ -67,7 +68,7 @@ M7_RESOLUTION = 0.01
 def costs(N):
     """Work units of one full-RTI iteration, of one M = 1 iteration and the least an
     instant can cost."""
-    return {"full": 3 * N + 2, "M=1": 2 * N + 4, "floor": 2 * N + 3}
+    return {"full": 3 * N + 2, "M=1": 2 * N + 4, "floor": N + 4}
 
 
 def meets(row, ref, measure="rms_after"):
@@ -241,7 +242,7 @@ def problem(name, parts, step, repeat=3, log=print):
                                            "rows": ordered}
             if part == "m7":
                 # what the instants took at the needed budget (the least an instant costs, the
-                # feedback's QP and the prepare's gradients, is not cut: a budget below it is
+                # feedback's QP and step 3 of prepare, is not cut: a budget below it is
                 # exceeded), against the reference's largest instant
                 dmax = pref["instructions_max"]
                 used = None if need is None else rows[need]["instructions_max"]

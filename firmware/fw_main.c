@@ -326,6 +326,7 @@ static int closed_loop(double budget, int steady)
             put_field("step", k);
             put_field("extra", info.extra_iterations);
             put_field("stages", info.instant_stages);
+            put_field("used", (long)info.budget_used); /* the solver's own count of the instant */
             put_iteration(status, info.qp_iterations, t_fb, t_prep, stack, k4, u0);
         } else {
             unsigned ph;

@@ -69,6 +69,14 @@ DOPUS_INTERNAL void dopus_ring_clear_step(dopus_stage_slot *slot);
 DOPUS_INTERNAL dopus_real dopus_ring_secant(const dopus_stage_slot *slot, const dopus_real *F_w_new,
                                             const dopus_real *phi_new, const dopus_real *g_new);
 
+/* The linear model's prediction of F at the point after the stored step (the value for which
+ * dopus_ring_secant's numerator is 0):
+ *   F_w = F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b, phi = phi_old + Phit dw,
+ *   g = g_old + Ct dw
+ * (an anytime prepare whose gradients are cut, docs/algorithm.md section 14). */
+DOPUS_INTERNAL void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_real *phi,
+                                       dopus_real *g);
+
 /* Store F_new as F_old. */
 DOPUS_INTERNAL void dopus_ring_store_F(dopus_stage_slot *slot, const dopus_real *F_w, const dopus_real *phi,
                                        const dopus_real *g);

@@ -479,7 +479,10 @@ typedef struct {
     double cost_prepare;  /* the last prepare iteration without the stages beyond M */
     double cost_qp_iter;  /* one QP iteration of the last feedback (time budget) */
     double cost_qp_step;  /* one QP iteration, moved 10 % at most per QP (the extra QP's cap) */
-    double cost_tail;     /* steps 5 to 7 of the last prepare iteration (after its stages) */
+    double cost_tail;     /* steps 6 and 7 of the last prepare iteration */
+    double cost_grad;     /* one gradient of stages 0..N-2 (step 2) */
+    double cost_head;     /* step 3: stage N-1 and the terminal node */
+    double cost_al;       /* one stage's cost-Hessian refresh (step 5) */
     double used;          /* budget used by the last instant */
     int qp_cap;           /* > 0: the feedback QP's iteration cap of a time budget */
     int extra_iterations; /* extra iterations of the last prepare */

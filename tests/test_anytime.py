@@ -187,3 +187,44 @@ def test_work_budget_bounds_every_instant(robot_disc, robot_solution):
     assert np.array_equal(runs[one][2], runs[0][2])
     assert sum(runs[800][1]) > sum(runs[300][1]) > 0
     print("extra iterations per instant: 300 units", runs[300][1], "; 800 units", runs[800][1])
+
+
+@pytest.mark.parametrize("budget", [50, 66])
+def test_c_equals_reference_with_the_gradients_cut(robot_disc, robot_solution, budget):
+    """A work budget below one iteration (the QP N units, the N - 1 gradients, step 3 4 units):
+    the prepare evaluates the gradients of stages 0..N-2 in stage order while one more and
+    step 3 fit, the others take their linear model's prediction (docs/algorithm.md section
+    14). Both backends cut at the same stage and agree to round-off."""
+    N = robot_disc.N
+    c, r = pair(robot_disc, budget, M=1)
+    closed_loop(robot_disc, robot_solution[0], c, r, 12)
+    assert r.budget_used == budget < 2 * N + 4    # every instant spent its budget, below one iteration
+
+
+def test_budget_bound_on_the_work_counter(robot_disc, robot_solution):
+    """The bound of a budget on an independent count: the work counter's growth over each
+    instant (feedback, prepare, extra iterations) stays within the budget, for budgets from the
+    least an instant costs (the feedback's QP and step 3 of prepare, N + 4 units: every
+    gradient cut) to several iterations, with fixed and adaptive M; and below one iteration
+    the prepare still keeps the closed loop (no failed instant)."""
+    N = robot_disc.N
+    for budget, adaptive in ((N + 4, None), (60, None), (100, None), (250, (1, 10)), (700, (1, 10))):
+        c = CSolver(robot_disc, M=1)
+        if adaptive:
+            c.set_M_adaptive(True, *adaptive)
+        c.set_work_budget(budget)
+        xhat = np.array(robot_disc.x0, dtype=float)
+        p0 = np.asarray(c.p[0], dtype=float)
+        c.init(xhat, robot_solution[0])
+        grown = []
+        for it in range(20):
+            if it == 0:
+                xhat = np.array(robot_disc.disturbance(xhat.copy()), dtype=float).reshape(-1)
+            w0 = c.work
+            u0 = c.feedback(xhat)
+            c.prepare()
+            assert c.status == 0, (budget, it)
+            grown.append(c.work - w0)
+            xhat = np.array(robot_disc.stage_eval(xhat, u0, p0)[0], dtype=float).reshape(-1)
+        assert max(grown) <= budget, (budget, grown)
+        print(f"work budget {budget}: units per instant {grown}")

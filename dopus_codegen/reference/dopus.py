@@ -211,6 +211,9 @@ class ReferenceDopus:
         self.work = 0.0
         self._instant_start = 0.0
         self._cost_stage = self._cost_qp = self._cost_prepare = 0.0
+        # one gradient of stages 0..N-2, step 3 of prepare, one stage-cost Hessian refresh
+        # (step 5) and steps 6 and 7: the estimates of the anytime prepare (section 14)
+        self._cost_grad = self._cost_head = self._cost_al = self._cost_tail = 0.0
         self.budget_used = 0.0
         self._prepared_extra = False
         self.extra_iterations = 0
@@ -467,18 +470,29 @@ class ReferenceDopus:
         N, nx, nu_, ng = self.N, self.nx, self.n_u, self.ng
         self._prepared_extra = False
         slots = [_Slot(nx, nu_, ng) for _ in range(N)]
+        b0 = self._budget_now()
         self.work += N
         gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, x[:N], u, self.p[:N], lam[1:], mu_g)
+        b1 = self._budget_now()
         for k in range(N):
             s = slots[k]
             s.F_w = gL[k] + mu_b[k]
             s.phi = phi[k].copy()
             s.g = gv[k].copy()
             self._set_block(s, k, x, u, lam, mu_g)
+        b2 = self._budget_now()
         term = self._term_eval(x[N], mu_r, nu)
         if not self._finite(gL, phi, lv, gv, *[v for s in slots for v in (s.Ht, s.A_dyn, s.Phit, s.Ct)],
                             *term.values()):
             raise self._fail("nonfinite_value", f"{who}: a derivative function returned a non-finite value {where}")
+        if self._budget_on():
+            # the first estimates of a budget (section 14), before any prepare measured them:
+            # a gradient, a re-linearisation, step 3 (the stage-cost Hessian refresh and steps
+            # 6 and 7 are not counted in work units; in time the later prepares measure them)
+            self._cost_grad = (b1 - b0) / N
+            self._cost_stage = (b2 - b1) / N
+            self._cost_head = self._cost_grad + self._cost_stage + (self._budget_now() - b2)
+            self._cost_al = self._cost_tail = 0.0
         self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
         self.mu_bN, self.mu_r, self.nu = mu_bN, mu_r, nu
         self.ring_head = 0
@@ -969,15 +983,28 @@ class ReferenceDopus:
             self._shifted = self.mode == "receding"
         t1 = time.perf_counter()
         slots = [s.copy() for s in self.slots]
-        stage_values = self._stage_gradients()
-        rho = self._secant_criterion(slots, stage_values)
+        # 2. the gradients of stages 0..N-2 that fit (all without a budget), then step 3
+        n_grad = self._gradients_that_fit()
+        b0 = self._budget_now()
+        stage_values = self._stage_gradients(n_grad)
+        if self._budget_on() and n_grad > 0:
+            self._cost_grad = (self._budget_now() - b0) / n_grad
+        b0 = self._budget_now()
+        stage_values = self._last_stage_gradient(stage_values)
+        rho = self._secant_criterion(slots, stage_values, n_grad)
         t2 = time.perf_counter()
         xN, term = self._fresh_last_stage(slots, stage_values, extra)
+        if self._budget_on():
+            self._cost_head = self._budget_now() - b0
         chosen, ext_cost = self._relinearise_worst(slots, rho)
         t3 = time.perf_counter()
+        b0 = self._budget_now()
         if self.cost_hessian == "fresh":
-            self._refresh_cost_hessians(slots, set(chosen) | {self.N - 1})
+            n_al = self._refresh_cost_hessians(slots, set(chosen) | {self.N - 1})
+            if self._budget_on() and n_al > 0:
+                self._cost_al = (self._budget_now() - b0) / n_al
         t4 = time.perf_counter()
+        b0 = self._budget_now()
         self._commit(slots, term, rho, chosen, xN)
         self._qp_ready = True
         self.timings.update({"prepare": time.perf_counter() - t0, "shift": t1 - t0,
@@ -986,6 +1013,7 @@ class ReferenceDopus:
         self.kkt_proxy = self._kkt_proxy_eval()
         self._lm_prepared()   # the automatic Levenberg-Marquardt term (section 10)
         if self._budget_on():
+            self._cost_tail = self._budget_now() - b0
             self._cost_prepare = self._budget_now() - b_start - ext_cost
         if self._iterate_diverged():
             self._flag("diverged")
@@ -1009,23 +1037,83 @@ class ReferenceDopus:
         self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
         self.ring_head = (self.ring_head + 1) % N
 
-    def _stage_gradients(self):
-        """``(gL, phi, g)`` of every stage at the current iterate (stage_grad)."""
-        self.work += self.N
-        gL, phi, lv, gv = eval_stages(self.disc.stage_grad, self.N, self.x[:self.N], self.u, self.p[:self.N],
-                                      self.lam[1:], self.mu_g)
-        # every output of a function is checked, the stage cost l too (as the C runtime does)
-        if not self._finite(gL, phi, lv, gv):
-            raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value")
+    def _prepare_floor(self) -> float:
+        """The least a prepare iteration costs after its gradients of stages 0..N-2: step 3
+        and steps 5 to 7 with no stage re-linearised (section 14)."""
+        al = self._cost_al * (self.N - 1) if self.cost_hessian == "fresh" else 0.0
+        return self._cost_head + al + self._cost_tail
+
+    def _rest_cost(self, fresh_al: int) -> float:
+        """Steps 5 to 7 with ``fresh_al`` stages of 0..N-2 not re-linearised (section 14)."""
+        return (self._cost_al * fresh_al if self.cost_hessian == "fresh" else 0.0) + self._cost_tail
+
+    def _gradients_that_fit(self) -> int:
+        """Step 2 with a budget (section 14): the gradients of stages 0..N-2 in stage order while
+        one more and the least rest of the iteration fit; all of them without a budget. (The C
+        runtime reads its clock before each; here each costs one work unit, in time the last
+        estimate.)"""
+        if not self._budget_on():
+            return self.N - 1
+        step = 1.0 if self.budget_unit == "work" else self._cost_grad
+        used = self._budget_now() - self._instant_start
+        floor = self._prepare_floor()
+        n = 0
+        while n < self.N - 1 and used + n * step + self._cost_grad + floor <= self.budget:
+            n += 1
+        return n
+
+    def _stage_gradients(self, n=None):
+        """``(gL, phi, g)`` of every stage at the current iterate (stage_grad); with ``n < N - 1``
+        (a budget) of stages 0..n-1 only, the rest NaN until :meth:`_last_stage_gradient`."""
+        N = self.N
+        if n is None or (n == N - 1 and not self._budget_on()):
+            self.work += N
+            gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, self.x[:N], self.u, self.p[:N],
+                                          self.lam[1:], self.mu_g)
+            # every output of a function is checked, the stage cost l too (as the C runtime does)
+            if not self._finite(gL, phi, lv, gv):
+                raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value")
+            return gL, phi, gv
+        gL = np.full((N, self.nw), np.nan)
+        phi = np.full((N, self.nx), np.nan)
+        gv = np.full((N, self.ng), np.nan)
+        if n > 0:
+            self.work += n
+            a, b, lv, c = eval_stages(self.disc.stage_grad, n, self.x[:n], self.u[:n], self.p[:n],
+                                      self.lam[1:n + 1], self.mu_g[:n])
+            if not self._finite(a, b, lv, c):
+                raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value")
+            gL[:n], phi[:n], gv[:n] = a, b, c
         return gL, phi, gv
 
-    def _secant_criterion(self, slots, stage_values) -> np.ndarray:
+    def _last_stage_gradient(self, stage_values):
+        """Stage N-1's gradient when :meth:`_stage_gradients` left it out (a budget)."""
+        gL, phi, gv = stage_values
+        k = self.N - 1
+        if np.all(np.isfinite(gL[k])):
+            return stage_values
+        self.work += 1
+        a, b, lv, c = eval_stages(self.disc.stage_grad, 1, self.x[k:k + 1], self.u[k:k + 1], self.p[k:k + 1],
+                                  self.lam[k + 1:k + 2], self.mu_g[k:k + 1])
+        if not self._finite(a, b, lv, c):
+            raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value")
+        gL[k], phi[k], gv[k] = a[0], b[0], c[0]
+        return gL, phi, gv
+
+    def _secant_criterion(self, slots, stage_values, n_grad=None) -> np.ndarray:
         """Step 2: rho_k (eq. 16) of the stages 0..N-2 with the block the last QP used, and
-        their F values moved into the slots."""
+        their F values moved into the slots; the stages from ``n_grad`` on (gradients cut by a
+        budget, section 14) take their linear model's prediction, rho_k = 0."""
         gL, phi, gv = stage_values
         rho = np.zeros(self.N)
+        n_grad = self.N - 1 if n_grad is None else n_grad
         for k in range(self.N - 1):
             s = slots[self._slot(k)]
+            if k >= n_grad:
+                s.F_w = s.F_w + s.Ht @ s.dw - s.Phit.T @ s.dlam + s.Ct.T @ s.dmu_g + s.dmu_b
+                s.phi = s.phi + s.Phit @ s.dw
+                s.g = s.g + s.Ct @ s.dw
+                continue
             F_w = gL[k] + self.mu_b[k]
             r1 = s.F_w + s.Ht @ s.dw - s.Phit.T @ s.dlam + s.Ct.T @ s.dmu_g + s.dmu_b - F_w
             r2 = -(s.phi + s.Phit @ s.dw) + phi[k]
@@ -1106,7 +1194,9 @@ class ReferenceDopus:
         # the stages beyond M keep room for one more iteration after this one
         reserve = self._cost_qp + self._cost_prepare
         for m, i in enumerate(order):
-            if (m >= M and not extend) or not self._budget_fits(self._cost_stage + (reserve if m >= M else 0.0)):
+            rest = self._rest_cost(self.N - 2 - len(chosen))   # steps 5 to 7 after this stage
+            if (m >= M and not extend) or not self._budget_fits(self._cost_stage + rest
+                                                                 + (reserve if m >= M else 0.0)):
                 break
             b0 = self._budget_now()
             self._relinearise_stage(slots, i)
@@ -1114,7 +1204,8 @@ class ReferenceDopus:
             if self._budget_on():
                 self._cost_stage = self._budget_now() - b0
                 if m >= M:
-                    ext_cost += self._cost_stage
+                    # less the step-5 refresh the stage saved: the rest is the prepare's own
+                    ext_cost += self._cost_stage - (self._cost_al if self.cost_hessian == "fresh" else 0.0)
         self.instant_stages += len(chosen)
         return chosen, ext_cost
 
@@ -1127,6 +1218,7 @@ class ReferenceDopus:
     def _refresh_cost_hessians(self, slots, fresh) -> None:
         """Step 5: the cost part of every A_k at the current point (no integrator); the other
         stages keep the curvature of dynamics and constraints A_dyn of their last H."""
+        n = 0
         for k in range(self.N):
             if k in fresh:
                 continue      # A_l,k was evaluated with its H above, at the same point
@@ -1136,6 +1228,8 @@ class ReferenceDopus:
                 raise self._fail("nonfinite_value", f"prepare: stage_hess_cost returned a non-finite value "
                                  f"at stage {k}")
             s.Ht = regularize(s.A_dyn + Al, self.regularization, self.reg_eps)
+            n += 1
+        return n
 
     def _commit(self, slots, term, rho, chosen, xN) -> None:
         if self.mode == "receding":

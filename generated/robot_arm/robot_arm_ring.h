@@ -69,6 +69,14 @@ ROBOT_ARM_INTERNAL void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);
 ROBOT_ARM_INTERNAL robot_arm_real robot_arm_ring_secant(const robot_arm_stage_slot *slot, const robot_arm_real *F_w_new,
                                             const robot_arm_real *phi_new, const robot_arm_real *g_new);
 
+/* The linear model's prediction of F at the point after the stored step (the value for which
+ * robot_arm_ring_secant's numerator is 0):
+ *   F_w = F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b, phi = phi_old + Phit dw,
+ *   g = g_old + Ct dw
+ * (an anytime prepare whose gradients are cut, docs/algorithm.md section 14). */
+ROBOT_ARM_INTERNAL void robot_arm_ring_predict(const robot_arm_stage_slot *slot, robot_arm_real *F_w, robot_arm_real *phi,
+                                       robot_arm_real *g);
+
 /* Store F_new as F_old. */
 ROBOT_ARM_INTERNAL void robot_arm_ring_store_F(robot_arm_stage_slot *slot, const robot_arm_real *F_w, const robot_arm_real *phi,
                                        const robot_arm_real *g);

@@ -153,6 +153,21 @@ static int robot_arm_budget_fits(const robot_arm_solver *s, double cost)
     return !robot_arm_budget_on(s) || robot_arm_budget_now(s) - s->anytime.instant_start + cost <= s->settings.budget;
 }
 
+/* The cost of steps 5 to 7 of a prepare iteration with `fresh_al` stages of 0..N-2 whose
+ * stage-cost Hessian step 5 refreshes (those not re-linearised): each stage re-linearised
+ * saves its refresh, so the rest of an iteration depends on how many were. */
+static double robot_arm_rest_cost(const robot_arm_solver *s, int fresh_al)
+{
+    return (s->settings.cost_hessian ? s->anytime.cost_al * (double)fresh_al : 0.0) + s->anytime.cost_tail;
+}
+
+/* The least a prepare iteration costs after its gradients of stages 0..N-2: step 3 and,
+ * without a stage re-linearised, steps 5 to 7 (the gradients are cut for it). */
+static double robot_arm_prepare_floor(const robot_arm_solver *s)
+{
+    return s->anytime.cost_head + robot_arm_rest_cost(s, ROBOT_ARM_N - 1);
+}
+
 /* ---- generic information ------------------------------------------------------------ */
 
 size_t robot_arm_solver_sizeof(void)
@@ -355,7 +370,6 @@ static int robot_arm_stage_Al(robot_arm_solver *s, int k)
  * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
  * leaves the slot as it was. */
 static int robot_arm_stage_H_store(robot_arm_solver *s, int k);
-
 static int robot_arm_fused(const robot_arm_solver *s);
 
 static int robot_arm_stage_H_eval(robot_arm_solver *s, int k)
@@ -434,20 +448,6 @@ static int robot_arm_stage_H_keep(robot_arm_solver *s, int k)
 static int robot_arm_fused(const robot_arm_solver *s)
 {
     return s->settings.hessian == ROBOT_ARM_HESSIAN_EXACT;
-}
-
-/* F_k then H_k of stage k (robot_arm_stage_F, robot_arm_stage_H), fused where robot_arm_fused allows. */
-static int robot_arm_stage_F_H(robot_arm_solver *s, int k, int store_F)
-{
-    int rc = robot_arm_fused(s) ? robot_arm_stage_FH(s, k) : robot_arm_stage_F(s, k);
-    if (rc != ROBOT_ARM_OK) {
-        return rc;
-    }
-    if (store_F) {
-        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
-                           s->mem.ev.tmp_g);
-    }
-    return robot_arm_fused(s) ? robot_arm_stage_H_keep(s, k) : robot_arm_stage_H(s, k);
 }
 
 /* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
@@ -602,18 +602,44 @@ static void robot_arm_assemble(robot_arm_solver *s)
 /* F (stored as F_old) and H of every stage, terminal F and H, at the current iterate. */
 static int robot_arm_linearize_all_eval(robot_arm_solver *s)
 {
+    double b0, t_F = 0.0, t_H = 0.0;
     int k, rc;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        rc = robot_arm_stage_F_H(s, k, 1);
+        b0 = robot_arm_budget_now(s);
+        rc = robot_arm_stage_F(s, k);
         if (rc != ROBOT_ARM_OK) {
             return rc;
         }
+        t_F += robot_arm_budget_now(s) - b0;
+        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                           s->mem.ev.tmp_g);
+        b0 = robot_arm_budget_now(s);
+        rc = robot_arm_stage_H(s, k);
+        if (rc != ROBOT_ARM_OK) {
+            return rc;
+        }
+        t_H += robot_arm_budget_now(s) - b0;
     }
+    b0 = robot_arm_budget_now(s);
     rc = robot_arm_term_F(s);
-    if (rc != ROBOT_ARM_OK) {
-        return rc;
+    if (rc == ROBOT_ARM_OK) {
+        rc = robot_arm_term_H(s);
     }
-    return robot_arm_term_H(s);
+    if (rc == ROBOT_ARM_OK && robot_arm_budget_on(s)) {
+        /* the first estimates of a budget (algorithm.md section 14): a gradient, a stage
+         * re-linearisation and step 3 of prepare, before any prepare has measured them */
+        s->anytime.cost_grad = t_F / (double)ROBOT_ARM_N;
+        s->anytime.cost_stage = t_H / (double)ROBOT_ARM_N;
+        s->anytime.cost_head = s->anytime.cost_grad + s->anytime.cost_stage + (robot_arm_budget_now(s) - b0);
+        /* one refresh of step 5 (stage 0, into scratch; not counted in work units) */
+        b0 = robot_arm_budget_now(s);
+        if (s->settings.cost_hessian && robot_arm_stage_Al(s, 0) == ROBOT_ARM_OK) {
+            robot_arm_ring_add_A_dyn(robot_arm_ring_stage(&s->ring, 0), s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
+            (void)robot_arm_regularize(s, ROBOT_ARM_NW, s->mem.ev.tmp_A);
+        }
+        s->anytime.cost_al = robot_arm_budget_now(s) - b0;
+    }
+    return rc;
 }
 
 /* robot_arm_linearize_all_eval in the phase "gradients" (the blocks in theirs). */
@@ -629,6 +655,7 @@ static int robot_arm_linearize_all(robot_arm_solver *s)
  * the terminal node, QP assembly. */
 static int robot_arm_init_finish(robot_arm_solver *s)
 {
+    double b0;
     int k, rc;
     s->anytime.prepared_extra = 0;
     robot_arm_ring_reset(&s->ring);
@@ -644,12 +671,17 @@ static int robot_arm_init_finish(robot_arm_solver *s)
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
+    b0 = robot_arm_budget_now(s);
     robot_arm_assemble(s);
     s->initialized = 1;
     s->qp_ready = 1;
     s->prepare_due = 0;
     s->shifted = 0;
     robot_arm_lm_started(s);
+    if (robot_arm_budget_on(s)) {
+        /* the first estimate of steps 6 and 7 of prepare (the assembly and the lm test) */
+        s->anytime.cost_tail = robot_arm_budget_now(s) - b0;
+    }
     return ROBOT_ARM_OK;
 }
 
@@ -1171,8 +1203,8 @@ static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xha
 
     robot_arm_copy(xhat_prev, s->xhat0, ROBOT_ARM_NX);
     robot_arm_feedback_measure(s, xhat0);
-    /* the cost of one QP iteration of the last feedback */
-    robot_arm_budget_cap(s, 0.0, s->anytime.cost_qp_iter);
+    /* the cost of one QP iteration of the last feedback; the least a prepare costs stays free */
+    robot_arm_budget_cap(s, robot_arm_prepare_floor(s), s->anytime.cost_qp_iter);
     b0 = robot_arm_budget_now(s);
     qs = robot_arm_feedback_qp(s);
     qs = robot_arm_feedback_lm_retries(s, qs, &retries);
@@ -1419,7 +1451,8 @@ static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost)
         /* the stages of M leave room for the rest of this prepare iteration, those beyond M
          * for one more iteration */
         if ((m >= M && !extend) ||
-            !robot_arm_budget_fits(s, s->anytime.cost_stage + (m >= M ? reserve : s->anytime.cost_tail))) {
+            !robot_arm_budget_fits(s, s->anytime.cost_stage + robot_arm_rest_cost(s, ROBOT_ARM_N - 2 - n) +
+                                      (m >= M ? reserve : 0.0))) {
             break;
         }
         k = robot_arm_next_worst(s);
@@ -1437,8 +1470,9 @@ static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost)
             double reading = robot_arm_budget_now(s) - b0;
             s->anytime.cost_stage = robot_arm_cost(s, s->anytime.cost_stage, reading);
             if (m >= M) {
-                /* what the stage took (not the estimate): the rest is the prepare's own cost */
-                *ext_cost += reading;
+                /* what the stage took (not the estimate) less the step-5 refresh it saved:
+                 * the rest is the prepare's own cost */
+                *ext_cost += reading - (s->settings.cost_hessian ? s->anytime.cost_al : 0.0);
             }
         }
     }
@@ -1744,8 +1778,8 @@ int robot_arm_prepare(robot_arm_solver *s)
 static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 {
     robot_arm_real xN_saved[ROBOT_ARM_NX];
-    double b_start = robot_arm_budget_now(s), ext_cost = 0.0, b_tail;
-    int k, rc, all_fresh;
+    double b_start = robot_arm_budget_now(s), ext_cost = 0.0, b_tail, b0;
+    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     robot_arm_phase(s, ROBOT_ARM_PHASE_SHIFT);
@@ -1755,11 +1789,21 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     }
     robot_arm_copy(xN_saved, s->x[ROBOT_ARM_N], ROBOT_ARM_NX);
 
-    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); when step 4 will
-     *    re-linearise every one of them (all_fresh), H_k too, in the same call */
+    /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); with a budget in
+     *    stage order while one more and the least rest of the iteration fit, the stages after
+     *    the cut keep their linear model's prediction (algorithm.md section 14); when step 4
+     *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call */
     all_fresh = robot_arm_fused(s) && robot_arm_every_stage_fresh(s);
+    b0 = robot_arm_budget_now(s);
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
+        cut = cut || !robot_arm_budget_fits(s, s->anytime.cost_grad + robot_arm_prepare_floor(s));
+        if (cut) {
+            robot_arm_ring_predict(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
+            s->rho[k] = ROBOT_ARM_R(0.0);
+            continue;
+        }
+        n_grad += 1;
         robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
         rc = all_fresh ? robot_arm_stage_FH(s, k) : robot_arm_stage_F(s, k);
         if (rc != ROBOT_ARM_OK) {
@@ -1780,7 +1824,12 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
         }
     }
 
+    if (robot_arm_budget_on(s) && n_grad > 0) {
+        s->anytime.cost_grad =
+            robot_arm_cost(s, s->anytime.cost_grad, (robot_arm_budget_now(s) - b0) / (double)n_grad);
+    }
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
+    b0 = robot_arm_budget_now(s);
     robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
     rc = robot_arm_fused(s) ? robot_arm_stage_FH(s, ROBOT_ARM_N - 1) : robot_arm_stage_F(s, ROBOT_ARM_N - 1);
     if (rc != ROBOT_ARM_OK) {
@@ -1799,13 +1848,16 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     if (rc == ROBOT_ARM_OK) {
         rc = robot_arm_term_H(s);
     }
+    if (rc == ROBOT_ARM_OK && robot_arm_budget_on(s)) {
+        s->anytime.cost_head = robot_arm_cost(s, s->anytime.cost_head, robot_arm_budget_now(s) - b0);
+    }
 
     /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
     if (rc == ROBOT_ARM_OK) {
         robot_arm_phase(s, ROBOT_ARM_PHASE_RHO);
         rc = all_fresh ? robot_arm_all_selected(s) : robot_arm_relinearise(s, &ext_cost);
     }
-    b_tail = robot_arm_budget_now(s);
+    b0 = robot_arm_budget_now(s);
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
      *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept) */
@@ -1820,6 +1872,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
             if (rc != ROBOT_ARM_OK) {
                 break;
             }
+            n_al += 1;
             robot_arm_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
             rc = robot_arm_regularize(s, ROBOT_ARM_NW, s->mem.ev.tmp_A);
             if (rc == ROBOT_ARM_OK) {
@@ -1832,6 +1885,11 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
         robot_arm_copy(s->x[ROBOT_ARM_N], xN_saved, ROBOT_ARM_NX);
         return rc;
     }
+
+    if (robot_arm_budget_on(s) && n_al > 0) {
+        s->anytime.cost_al = robot_arm_cost(s, s->anytime.cost_al, (robot_arm_budget_now(s) - b0) / (double)n_al);
+    }
+    b_tail = robot_arm_budget_now(s);
 
     /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
      *    when stored) */
@@ -2322,6 +2380,9 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
     s->anytime.cost_qp_iter = 0.0;
     s->anytime.cost_qp_step = 0.0;
     s->anytime.cost_tail = 0.0;
+    s->anytime.cost_grad = 0.0;
+    s->anytime.cost_head = 0.0;
+    s->anytime.cost_al = 0.0;
     s->anytime.used = 0.0;
     s->anytime.qp_cap = 0;
     s->anytime.extra_iterations = 0;

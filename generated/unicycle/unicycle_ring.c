@@ -70,6 +70,33 @@ void unicycle_ring_clear_step(unicycle_stage_slot *slot)
     unicycle_ring_zero(slot->dmu_b, UNICYCLE_NW);
 }
 
+void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, unicycle_real *phi, unicycle_real *g)
+{
+    int i, j;
+    for (i = 0; i < UNICYCLE_NW; ++i) {
+        unicycle_real hd = UNICYCLE_R(0.0), pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
+        for (j = 0; j < UNICYCLE_NW; ++j)
+            hd += slot->Ht[i + j * UNICYCLE_NW] * slot->dw[j];
+        for (j = 0; j < UNICYCLE_NX; ++j)
+            pl += slot->Phit[j + i * UNICYCLE_NX] * slot->dlam[j];
+        for (j = 0; j < UNICYCLE_NG; ++j)
+            cm += slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] * slot->dmu_g[j];
+        F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        unicycle_real pd = UNICYCLE_R(0.0);
+        for (j = 0; j < UNICYCLE_NW; ++j)
+            pd += slot->Phit[i + j * UNICYCLE_NX] * slot->dw[j];
+        phi[i] = slot->phi[i] + pd;
+    }
+    for (i = 0; i < UNICYCLE_NG; ++i) {
+        unicycle_real cd = UNICYCLE_R(0.0);
+        for (j = 0; j < UNICYCLE_NW; ++j)
+            cd += slot->Ct[i + j * UNICYCLE_DIM(UNICYCLE_NG)] * slot->dw[j];
+        g[i] = slot->g[i] + cd;
+    }
+}
+
 unicycle_real unicycle_ring_secant(const unicycle_stage_slot *slot, const unicycle_real *F_w_new,
                              const unicycle_real *phi_new, const unicycle_real *g_new)
 {

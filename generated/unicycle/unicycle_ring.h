@@ -69,6 +69,14 @@ UNICYCLE_INTERNAL void unicycle_ring_clear_step(unicycle_stage_slot *slot);
 UNICYCLE_INTERNAL unicycle_real unicycle_ring_secant(const unicycle_stage_slot *slot, const unicycle_real *F_w_new,
                                             const unicycle_real *phi_new, const unicycle_real *g_new);
 
+/* The linear model's prediction of F at the point after the stored step (the value for which
+ * unicycle_ring_secant's numerator is 0):
+ *   F_w = F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b, phi = phi_old + Phit dw,
+ *   g = g_old + Ct dw
+ * (an anytime prepare whose gradients are cut, docs/algorithm.md section 14). */
+UNICYCLE_INTERNAL void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, unicycle_real *phi,
+                                       unicycle_real *g);
+
 /* Store F_new as F_old. */
 UNICYCLE_INTERNAL void unicycle_ring_store_F(unicycle_stage_slot *slot, const unicycle_real *F_w, const unicycle_real *phi,
                                        const unicycle_real *g);
