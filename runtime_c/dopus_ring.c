@@ -101,34 +101,22 @@ dopus_real dopus_ring_secant(const dopus_stage_slot *slot, const dopus_real *F_w
                              const dopus_real *phi_new, const dopus_real *g_new)
 {
     dopus_real num2 = DOPUS_R(0.0), den2 = DOPUS_R(0.0), old2 = DOPUS_R(0.0), new2 = DOPUS_R(0.0);
-    int i, j;
+    dopus_real F_w[DOPUS_NW], phi[DOPUS_NX], g[DOPUS_DIM(DOPUS_NG)];
+    int i;
 
-    /* stationarity rows: F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new */
+    /* the residual of the linear model: its prediction minus F_new, row by row (stationarity,
+     * dynamics, path constraints) */
+    dopus_ring_predict(slot, F_w, phi, g);
     for (i = 0; i < DOPUS_NW; ++i) {
-        dopus_real hd = DOPUS_R(0.0), pl = DOPUS_R(0.0), cm = DOPUS_R(0.0), v;
-        for (j = 0; j < DOPUS_NW; ++j)
-            hd += slot->Ht[i + j * DOPUS_NW] * slot->dw[j];
-        for (j = 0; j < DOPUS_NX; ++j)
-            pl += slot->Phit[j + i * DOPUS_NX] * slot->dlam[j];
-        for (j = 0; j < DOPUS_NG; ++j)
-            cm += slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] * slot->dmu_g[j];
-        v = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i] - F_w_new[i];
+        dopus_real v = F_w[i] - F_w_new[i];
         num2 += v * v;
     }
-    /* dynamics rows: -(phi_old + Phit dw) + phi_new */
     for (i = 0; i < DOPUS_NX; ++i) {
-        dopus_real pd = DOPUS_R(0.0), v;
-        for (j = 0; j < DOPUS_NW; ++j)
-            pd += slot->Phit[i + j * DOPUS_NX] * slot->dw[j];
-        v = -(slot->phi[i] + pd) + phi_new[i];
+        dopus_real v = phi_new[i] - phi[i];
         num2 += v * v;
     }
-    /* path constraint rows: g_old + Ct dw - g_new */
     for (i = 0; i < DOPUS_NG; ++i) {
-        dopus_real cd = DOPUS_R(0.0), v;
-        for (j = 0; j < DOPUS_NW; ++j)
-            cd += slot->Ct[i + j * DOPUS_DIM(DOPUS_NG)] * slot->dw[j];
-        v = slot->g[i] + cd - g_new[i];
+        dopus_real v = g[i] - g_new[i];
         num2 += v * v;
     }
     for (i = 0; i < DOPUS_NW; ++i)

@@ -1109,15 +1109,17 @@ class ReferenceDopus:
         n_grad = self.N - 1 if n_grad is None else n_grad
         for k in range(self.N - 1):
             s = slots[self._slot(k)]
+            # the linear model's prediction of F after the stored step
+            p_F_w = s.F_w + s.Ht @ s.dw - s.Phit.T @ s.dlam + s.Ct.T @ s.dmu_g + s.dmu_b
+            p_phi = s.phi + s.Phit @ s.dw
+            p_g = s.g + s.Ct @ s.dw
             if k >= n_grad:
-                s.F_w = s.F_w + s.Ht @ s.dw - s.Phit.T @ s.dlam + s.Ct.T @ s.dmu_g + s.dmu_b
-                s.phi = s.phi + s.Phit @ s.dw
-                s.g = s.g + s.Ct @ s.dw
+                s.F_w, s.phi, s.g = p_F_w, p_phi, p_g
                 continue
             F_w = gL[k] + self.mu_b[k]
-            r1 = s.F_w + s.Ht @ s.dw - s.Phit.T @ s.dlam + s.Ct.T @ s.dmu_g + s.dmu_b - F_w
-            r2 = -(s.phi + s.Phit @ s.dw) + phi[k]
-            r3 = s.g + s.Ct @ s.dw - gv[k]
+            r1 = p_F_w - F_w
+            r2 = phi[k] - p_phi
+            r3 = p_g - gv[k]
             num = np.linalg.norm(np.concatenate([r1, r2, r3]))
             den = np.linalg.norm(np.concatenate([s.dw, s.dlam, s.dmu_g, s.dmu_b]))
             # a residual at the round-off level of F is noise, not a secant violation

@@ -101,34 +101,22 @@ robot_arm_real robot_arm_ring_secant(const robot_arm_stage_slot *slot, const rob
                              const robot_arm_real *phi_new, const robot_arm_real *g_new)
 {
     robot_arm_real num2 = ROBOT_ARM_R(0.0), den2 = ROBOT_ARM_R(0.0), old2 = ROBOT_ARM_R(0.0), new2 = ROBOT_ARM_R(0.0);
-    int i, j;
+    robot_arm_real F_w[ROBOT_ARM_NW], phi[ROBOT_ARM_NX], g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
+    int i;
 
-    /* stationarity rows: F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new */
+    /* the residual of the linear model: its prediction minus F_new, row by row (stationarity,
+     * dynamics, path constraints) */
+    robot_arm_ring_predict(slot, F_w, phi, g);
     for (i = 0; i < ROBOT_ARM_NW; ++i) {
-        robot_arm_real hd = ROBOT_ARM_R(0.0), pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0), v;
-        for (j = 0; j < ROBOT_ARM_NW; ++j)
-            hd += slot->Ht[i + j * ROBOT_ARM_NW] * slot->dw[j];
-        for (j = 0; j < ROBOT_ARM_NX; ++j)
-            pl += slot->Phit[j + i * ROBOT_ARM_NX] * slot->dlam[j];
-        for (j = 0; j < ROBOT_ARM_NG; ++j)
-            cm += slot->Ct[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NG)] * slot->dmu_g[j];
-        v = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i] - F_w_new[i];
+        robot_arm_real v = F_w[i] - F_w_new[i];
         num2 += v * v;
     }
-    /* dynamics rows: -(phi_old + Phit dw) + phi_new */
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        robot_arm_real pd = ROBOT_ARM_R(0.0), v;
-        for (j = 0; j < ROBOT_ARM_NW; ++j)
-            pd += slot->Phit[i + j * ROBOT_ARM_NX] * slot->dw[j];
-        v = -(slot->phi[i] + pd) + phi_new[i];
+        robot_arm_real v = phi_new[i] - phi[i];
         num2 += v * v;
     }
-    /* path constraint rows: g_old + Ct dw - g_new */
     for (i = 0; i < ROBOT_ARM_NG; ++i) {
-        robot_arm_real cd = ROBOT_ARM_R(0.0), v;
-        for (j = 0; j < ROBOT_ARM_NW; ++j)
-            cd += slot->Ct[i + j * ROBOT_ARM_DIM(ROBOT_ARM_NG)] * slot->dw[j];
-        v = slot->g[i] + cd - g_new[i];
+        robot_arm_real v = g[i] - g_new[i];
         num2 += v * v;
     }
     for (i = 0; i < ROBOT_ARM_NW; ++i)

@@ -101,34 +101,22 @@ unicycle_real unicycle_ring_secant(const unicycle_stage_slot *slot, const unicyc
                              const unicycle_real *phi_new, const unicycle_real *g_new)
 {
     unicycle_real num2 = UNICYCLE_R(0.0), den2 = UNICYCLE_R(0.0), old2 = UNICYCLE_R(0.0), new2 = UNICYCLE_R(0.0);
-    int i, j;
+    unicycle_real F_w[UNICYCLE_NW], phi[UNICYCLE_NX], g[UNICYCLE_DIM(UNICYCLE_NG)];
+    int i;
 
-    /* stationarity rows: F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b - F_w_new */
+    /* the residual of the linear model: its prediction minus F_new, row by row (stationarity,
+     * dynamics, path constraints) */
+    unicycle_ring_predict(slot, F_w, phi, g);
     for (i = 0; i < UNICYCLE_NW; ++i) {
-        unicycle_real hd = UNICYCLE_R(0.0), pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0), v;
-        for (j = 0; j < UNICYCLE_NW; ++j)
-            hd += slot->Ht[i + j * UNICYCLE_NW] * slot->dw[j];
-        for (j = 0; j < UNICYCLE_NX; ++j)
-            pl += slot->Phit[j + i * UNICYCLE_NX] * slot->dlam[j];
-        for (j = 0; j < UNICYCLE_NG; ++j)
-            cm += slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] * slot->dmu_g[j];
-        v = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i] - F_w_new[i];
+        unicycle_real v = F_w[i] - F_w_new[i];
         num2 += v * v;
     }
-    /* dynamics rows: -(phi_old + Phit dw) + phi_new */
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        unicycle_real pd = UNICYCLE_R(0.0), v;
-        for (j = 0; j < UNICYCLE_NW; ++j)
-            pd += slot->Phit[i + j * UNICYCLE_NX] * slot->dw[j];
-        v = -(slot->phi[i] + pd) + phi_new[i];
+        unicycle_real v = phi_new[i] - phi[i];
         num2 += v * v;
     }
-    /* path constraint rows: g_old + Ct dw - g_new */
     for (i = 0; i < UNICYCLE_NG; ++i) {
-        unicycle_real cd = UNICYCLE_R(0.0), v;
-        for (j = 0; j < UNICYCLE_NW; ++j)
-            cd += slot->Ct[i + j * UNICYCLE_DIM(UNICYCLE_NG)] * slot->dw[j];
-        v = slot->g[i] + cd - g_new[i];
+        unicycle_real v = g[i] - g_new[i];
         num2 += v * v;
     }
     for (i = 0; i < UNICYCLE_NW; ++i)
