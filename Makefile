@@ -33,9 +33,13 @@ demo: setup
 	    --json $(OUT)/robot_arm/converge_fresh.json --plot $(OUT)/robot_arm/converge_fresh.png
 	@echo "plots and JSON in $(abspath $(OUT))/robot_arm (Gauss-Newton runs in gauss-newton/)"
 
+# TEST_JOBS pytest processes (pytest-xdist), each test file whole on one of them so the
+# module fixtures (a firmware report, sanitizer builds) are built once; TEST_JOBS=0: one process
+TEST_JOBS ?= 2
+
 test: setup
 	-@bash scripts/setup_firmware.sh
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_JOBS) --dist loadfile
 
 bench: setup
 	$(PY) bench/runtime_bench.py
