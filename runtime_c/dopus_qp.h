@@ -187,8 +187,8 @@
 #define DOPUS_QP_NUP (DOPUS_QP_NU1 * (DOPUS_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define DOPUS_QP_NXP (DOPUS_NX * (DOPUS_NX + 1) / 2)
-/* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
-#define DOPUS_QP_NWORK (2 * DOPUS_NX * DOPUS_QP_NW + DOPUS_QP_NW * DOPUS_QP_NE1 + DOPUS_NX * DOPUS_NX)
+/* Scratch of the factorisation: Phi'P, Phi'G and one unpacked P. */
+#define DOPUS_QP_NWORK (DOPUS_NX * DOPUS_QP_NW + DOPUS_QP_NW * DOPUS_QP_NE1 + DOPUS_NX * DOPUS_NX)
 
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if DOPUS_QP_NINEQ < 65536
@@ -354,6 +354,7 @@ typedef struct {
     dopus_real dz_lo[DOPUS_QP_NB];
     dopus_real dz_up[DOPUS_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
+    dopus_real PhiT[DOPUS_N][DOPUS_QP_NW * DOPUS_NX];     /* Phi_k' (nw x nx), formed once per solve */
     dopus_real M[DOPUS_QP_NW * DOPUS_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     dopus_real P[DOPUS_N + 1][DOPUS_QP_NXP];             /* value function Hessians, packed lower */
     dopus_real G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];  /* value function x-nu coupling */
