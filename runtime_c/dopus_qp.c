@@ -454,8 +454,9 @@ static dopus_real row_q(const dopus_qp_workspace *ws, const dopus_qp_in *in, int
 
 /* ---------------------------------------------------------------- Phi' v */
 
-/* The transposed copies PhiT_k = Phi_k' (nw x nx, column-major), formed once per solve
- * (the data is constant during it): the products with Phi_k' then run down contiguous
+/* The transposed copies PhiT_k = Phi_k' (nw x nx, column-major) and the squares of the
+ * column sums of |Phi_k| (the round-off estimates of the factorisation), formed once per
+ * solve (the data is constant during it): the products with Phi_k' then run down contiguous
  * columns of length nw, vectorised where the target has vectors, instead of a sum of nx
  * products per entry. */
 static void transpose_phi(dopus_qp_workspace *ws, const dopus_qp_in *in)
@@ -464,9 +465,15 @@ static void transpose_phi(dopus_qp_workspace *ws, const dopus_qp_in *in)
     for (k = 0; k < N; ++k) {
         const dopus_real *restrict Phi = in->Phi[k];
         dopus_real *restrict PhiT = ws->PhiT[k];
-        for (l = 0; l < NX; ++l)
-            for (i = 0; i < NW; ++i)
+        dopus_real *restrict cs2 = ws->phi_cs2[k];
+        for (i = 0; i < NW; ++i) {
+            dopus_real colsum = DOPUS_R(0.0);
+            for (l = 0; l < NX; ++l) {
                 PhiT[i + l * NW] = Phi[l + i * NX];
+                colsum += dopus_fabs(Phi[l + i * NX]);
+            }
+            cs2[i] = colsum * colsum;
+        }
     }
 }
 
@@ -805,7 +812,8 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         dopus_real *M = ws->M;
         const dopus_real *Phi = in->Phi[k];
         const dopus_real *PhiT = ws->PhiT[k];
-        dopus_real q[NSI], dg[NW], colsum[NW];
+        const dopus_real *cs2 = ws->phi_cs2[k];
+        dopus_real q[NSI], dg[NW];
         dopus_real Lu[NU1 * NU1];
         dopus_real *K = ws->K[k];
         dopus_real *KN = ws->KN[k];
@@ -827,18 +835,12 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         for (j = 0; j < NG; ++j)
             for (i = 0; i < NW; ++i)
                 dg[i] += q[NW + j] * in->C[k][j + i * NG] * in->C[k][j + i * NG];
-        /* the column sums of |Phi_k|, over the rows of PhiT (each column summed in the
-         * order of its rows) */
-        for (i = 0; i < NW; ++i)
-            colsum[i] = DOPUS_R(0.0);
+        /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P (cs2: the
+         * squared column sums of |Phi_k|) */
+        for (j = 0; j < NU; ++j)
+            ws->noise[j] = RICCATI_EPS * (dopus_fabs(dg[NX + j]) + cs2[NX + j] * dmax(pmax, pmag));
         for (j = 0; j < NX; ++j)
-            for (i = 0; i < NW; ++i)
-                colsum[i] += dopus_fabs(PhiT[i + j * NW]);
-        for (j = 0; j < NU; ++j) /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P */
-            ws->noise[j] = RICCATI_EPS *
-                           (dopus_fabs(dg[NX + j]) + colsum[NX + j] * colsum[NX + j] * dmax(pmax, pmag));
-        for (j = 0; j < NX; ++j)
-            mxx = dmax(mxx, dopus_fabs(dg[j]) + colsum[j] * colsum[j] * pmax);
+            mxx = dmax(mxx, dopus_fabs(dg[j]) + cs2[j] * pmax);
         /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
          * read), Gam = Phi' G_{k+1} */
         qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam);
