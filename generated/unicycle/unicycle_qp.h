@@ -187,8 +187,8 @@
 #define UNICYCLE_QP_NUP (UNICYCLE_QP_NU1 * (UNICYCLE_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define UNICYCLE_QP_NXP (UNICYCLE_NX * (UNICYCLE_NX + 1) / 2)
-/* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
-#define UNICYCLE_QP_NWORK (2 * UNICYCLE_NX * UNICYCLE_QP_NW + UNICYCLE_QP_NW * UNICYCLE_QP_NE1 + UNICYCLE_NX * UNICYCLE_NX)
+/* Scratch of the factorisation: Phi'P, Phi'G and one unpacked P. */
+#define UNICYCLE_QP_NWORK (UNICYCLE_NX * UNICYCLE_QP_NW + UNICYCLE_QP_NW * UNICYCLE_QP_NE1 + UNICYCLE_NX * UNICYCLE_NX)
 
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if UNICYCLE_QP_NINEQ < 65536
@@ -354,6 +354,8 @@ typedef struct {
     unicycle_real dz_lo[UNICYCLE_QP_NB];
     unicycle_real dz_up[UNICYCLE_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
+    unicycle_real PhiT[UNICYCLE_N][UNICYCLE_QP_NW * UNICYCLE_NX];     /* Phi_k' (nw x nx), formed once per solve */
+    unicycle_real phi_cs2[UNICYCLE_N][UNICYCLE_QP_NW];            /* squared column sums of |Phi_k|, the same */
     unicycle_real M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];             /* value function Hessians, packed lower */
     unicycle_real G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];  /* value function x-nu coupling */
