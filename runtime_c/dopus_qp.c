@@ -757,9 +757,9 @@ static dopus_real hessian_scale(const dopus_qp_in *in)
 static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
 {
     int k, i, j;
-    dopus_real *WT = ws->work;           /* NW x NX: Phi_k' P_{k+1} */
+    dopus_real *WT = ws->work;            /* NW x NX: Phi_k' P_{k+1} */
     dopus_real *Gam = ws->work + NX * NW; /* NW x NE: Phi_k' G_{k+1} */
-    dopus_real *Pf = Gam + NW * NE1;          /* NX x NX: P_{k+1} unpacked */
+    dopus_real *Pf = Gam + NW * NE1;      /* NX x NX: P_{k+1} unpacked */
     const dopus_real delta = ws->delta;
     dopus_real pmag, pnext;
     int b;

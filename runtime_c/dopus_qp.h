@@ -354,7 +354,7 @@ typedef struct {
     dopus_real dz_lo[DOPUS_QP_NB];
     dopus_real dz_up[DOPUS_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
-    dopus_real PhiT[DOPUS_N][DOPUS_QP_NW * DOPUS_NX];     /* Phi_k' (nw x nx), formed once per solve */
+    dopus_real PhiT[DOPUS_N][DOPUS_QP_NW * DOPUS_NX];    /* Phi_k' (nw x nx), formed once per solve */
     dopus_real phi_cs2[DOPUS_N][DOPUS_QP_NW];            /* squared column sums of |Phi_k|, the same */
     dopus_real M[DOPUS_QP_NW * DOPUS_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     dopus_real P[DOPUS_N + 1][DOPUS_QP_NXP];             /* value function Hessians, packed lower */

@@ -757,9 +757,9 @@ static robot_arm_real hessian_scale(const robot_arm_qp_in *in)
 static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
 {
     int k, i, j;
-    robot_arm_real *WT = ws->work;           /* NW x NX: Phi_k' P_{k+1} */
+    robot_arm_real *WT = ws->work;            /* NW x NX: Phi_k' P_{k+1} */
     robot_arm_real *Gam = ws->work + NX * NW; /* NW x NE: Phi_k' G_{k+1} */
-    robot_arm_real *Pf = Gam + NW * NE1;          /* NX x NX: P_{k+1} unpacked */
+    robot_arm_real *Pf = Gam + NW * NE1;      /* NX x NX: P_{k+1} unpacked */
     const robot_arm_real delta = ws->delta;
     robot_arm_real pmag, pnext;
     int b;

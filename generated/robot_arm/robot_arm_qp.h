@@ -354,7 +354,7 @@ typedef struct {
     robot_arm_real dz_lo[ROBOT_ARM_QP_NB];
     robot_arm_real dz_up[ROBOT_ARM_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
-    robot_arm_real PhiT[ROBOT_ARM_N][ROBOT_ARM_QP_NW * ROBOT_ARM_NX];     /* Phi_k' (nw x nx), formed once per solve */
+    robot_arm_real PhiT[ROBOT_ARM_N][ROBOT_ARM_QP_NW * ROBOT_ARM_NX];    /* Phi_k' (nw x nx), formed once per solve */
     robot_arm_real phi_cs2[ROBOT_ARM_N][ROBOT_ARM_QP_NW];            /* squared column sums of |Phi_k|, the same */
     robot_arm_real M[ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     robot_arm_real P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NXP];             /* value function Hessians, packed lower */

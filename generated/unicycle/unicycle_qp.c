@@ -757,9 +757,9 @@ static unicycle_real hessian_scale(const unicycle_qp_in *in)
 static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 {
     int k, i, j;
-    unicycle_real *WT = ws->work;           /* NW x NX: Phi_k' P_{k+1} */
+    unicycle_real *WT = ws->work;            /* NW x NX: Phi_k' P_{k+1} */
     unicycle_real *Gam = ws->work + NX * NW; /* NW x NE: Phi_k' G_{k+1} */
-    unicycle_real *Pf = Gam + NW * NE1;          /* NX x NX: P_{k+1} unpacked */
+    unicycle_real *Pf = Gam + NW * NE1;      /* NX x NX: P_{k+1} unpacked */
     const unicycle_real delta = ws->delta;
     unicycle_real pmag, pnext;
     int b;

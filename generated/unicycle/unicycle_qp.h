@@ -354,7 +354,7 @@ typedef struct {
     unicycle_real dz_lo[UNICYCLE_QP_NB];
     unicycle_real dz_up[UNICYCLE_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
-    unicycle_real PhiT[UNICYCLE_N][UNICYCLE_QP_NW * UNICYCLE_NX];     /* Phi_k' (nw x nx), formed once per solve */
+    unicycle_real PhiT[UNICYCLE_N][UNICYCLE_QP_NW * UNICYCLE_NX];    /* Phi_k' (nw x nx), formed once per solve */
     unicycle_real phi_cs2[UNICYCLE_N][UNICYCLE_QP_NW];            /* squared column sums of |Phi_k|, the same */
     unicycle_real M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];             /* value function Hessians, packed lower */
