@@ -481,11 +481,13 @@ static void transpose_phi(dopus_qp_workspace *ws, const dopus_qp_in *in)
     for (k = 0; k < N; ++k)
         phi_stage_copy(in->Phi[k], ws->PhiT[k], ws->phi_cs2[k]);
 }
-/* PhiT_k (nw x nx) for phit_gemv */
+/* PhiT_k (nw x nx) for phit_gemv, and its entry (i, l) = Phi_k(l, i) */
 #define QP_PHIT(ws, in, k) ((const dopus_real *)(ws)->PhiT[(k)])
+#define PHIT_AT(A, i, l) ((A)[(i) + (l)*NW])
 #else
 /* without the copy, phit_gemv reads Phi_k itself (nx x nw) */
 #define QP_PHIT(ws, in, k) ((in)->Phi[(k)])
+#define PHIT_AT(A, i, l) ((A)[(l) + (i)*NX])
 #endif
 
 /* y += alpha Phi' v over QP_PHIT (y of size nw, v of size nx): the same sums in the same
@@ -493,7 +495,6 @@ static void transpose_phi(dopus_qp_workspace *ws, const dopus_qp_in *in)
 static inline void phit_gemv(const dopus_real *restrict PhiT, dopus_real alpha, const dopus_real *restrict v,
                              dopus_real *restrict y)
 {
-#if DOPUS_QP_PHIT
     dopus_real s[NW];
     int i, l;
     for (i = 0; i < NW; ++i)
@@ -501,13 +502,10 @@ static inline void phit_gemv(const dopus_real *restrict PhiT, dopus_real alpha, 
     for (l = 0; l < NX; ++l) {
         const dopus_real f = v[l];
         for (i = 0; i < NW; ++i)
-            s[i] += PhiT[i + l * NW] * f;
+            s[i] += PHIT_AT(PhiT, i, l) * f;
     }
     for (i = 0; i < NW; ++i)
         y[i] += alpha * s[i];
-#else
-    dopus_lai_gemv_t(NX, NW, alpha, PhiT, NX, v, DOPUS_R(1.0), y); /* PhiT is Phi itself here */
-#endif
 }
 
 /* ---------------------------------------------------------------- residuals */
