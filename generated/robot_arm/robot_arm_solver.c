@@ -970,8 +970,12 @@ static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm, int active_se
     robot_arm_qp_settings_default(&settings);
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
-    if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
-        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 14) */
+    if (s->anytime.qp_timed) {
+        /* a time budget (section 14): the QP reads the clock before each factorisation */
+        settings.clock = s->timer.clock;
+        settings.clock_ctx = s->timer.ctx;
+        settings.deadline = s->anytime.qp_deadline;
+        settings.iter_price = s->anytime.qp_price;
     }
     settings.warm_start = warm;
     settings.active_set = warm && active_set ? ROBOT_ARM_QP_ACTIVE_SET : 0;
@@ -1054,7 +1058,7 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
     }
     qs = robot_arm_qp_attempt(s, s->settings.qp_warm_start, active_set);
     if (s->settings.qp_warm_start && qs != ROBOT_ARM_QP_INVALID_INPUT &&
-        !(qs == ROBOT_ARM_QP_MAX_ITER && s->anytime.qp_cap > 0) &&
+        qs != ROBOT_ARM_QP_DEADLINE &&
         (!robot_arm_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = robot_arm_qp_attempt(s, 0, 0);
@@ -1069,7 +1073,7 @@ static int robot_arm_feedback_lm_retries(robot_arm_solver *s, int qs, int *retri
 {
     *retries = 0;
     while (*retries < ROBOT_ARM_LM_RETRIES && robot_arm_lm_can_raise(&s->lm) && !robot_arm_qp_ok(s, qs) &&
-           qs != ROBOT_ARM_QP_INVALID_INPUT && !(qs == ROBOT_ARM_QP_MAX_ITER && s->anytime.qp_cap > 0)) {
+           qs != ROBOT_ARM_QP_INVALID_INPUT && qs != ROBOT_ARM_QP_DEADLINE) {
         robot_arm_lm_raise(&s->lm);
         s->anytime.work += ROBOT_ARM_WORK_QP;
         s->qp_in.hess_shift = s->lm.lm;
@@ -1091,6 +1095,18 @@ static int robot_arm_feedback_check_step(const robot_arm_solver *s, int qs)
         return ROBOT_ARM_ERR_DIVERGED;
     }
     return ROBOT_ARM_OK;
+}
+
+/* Step 5 of a feedback: as robot_arm_feedback_check_step, but a QP cut by the budget's deadline
+ * with a finite best point is usable (algorithm.md section 14): that point is the step
+ * (ROBOT_ARM_FLAG_QP_CUT), not a failure that would start a recovery. */
+static int robot_arm_feedback_check_cut(robot_arm_solver *s, int qs)
+{
+    if (qs == ROBOT_ARM_QP_DEADLINE && robot_arm_qp_solution_finite(&s->mem.qp.sol)) {
+        s->health.flags |= ROBOT_ARM_FLAG_QP_CUT;
+        return robot_arm_feedback_check_step(s, ROBOT_ARM_QP_SOLVED);
+    }
+    return robot_arm_feedback_check_step(s, qs);
 }
 
 /* Step 6: the step of each stage kept in its slot for the secant criterion:
@@ -1177,22 +1193,16 @@ static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *
 }
 
 /* Feedback once admitted (steps 2 to 8). */
-/* The bounded latency of a time budget (algorithm.md section 14): the QP's iterations are
- * capped at the budget left, less `reserve`, over `per_iter` (at least 1); a QP stopped by
- * the cap is not retried (the fallback control of a feedback; an extra iteration changes
- * nothing). */
-static void robot_arm_budget_cap(robot_arm_solver *s, double reserve, double per_iter)
+/* The bounded latency of a time budget (algorithm.md section 14): the next QP solves read
+ * the clock before each factorisation and stop (ROBOT_ARM_QP_DEADLINE, their best point) when
+ * one more iteration would pass the instant's budget less `reserve`; `per_iter` prices the
+ * first iteration. A cut QP is not retried: the feedback takes its best point as the step,
+ * an extra iteration or a predicted step changes nothing. */
+static void robot_arm_budget_deadline(robot_arm_solver *s, double reserve, double per_iter)
 {
-    double n;
-    s->anytime.qp_cap = 0;
-    if (!robot_arm_budget_on(s) || s->settings.budget_unit != ROBOT_ARM_BUDGET_TIME || !(per_iter > 0.0)) {
-        return;
-    }
-    n = (s->settings.budget - (robot_arm_budget_now(s) - s->anytime.instant_start) - reserve) / per_iter;
-    n = n < 1.0 ? 1.0 : n;
-    if (n < (double)s->settings.qp_max_iter) {
-        s->anytime.qp_cap = (int)n;
-    }
+    s->anytime.qp_timed = robot_arm_budget_on(s) && s->settings.budget_unit == ROBOT_ARM_BUDGET_TIME;
+    s->anytime.qp_deadline = s->anytime.instant_start + s->settings.budget - reserve;
+    s->anytime.qp_price = per_iter > 0.0 ? per_iter : 0.0;
 }
 
 static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
@@ -1203,8 +1213,8 @@ static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xha
 
     robot_arm_copy(xhat_prev, s->xhat0, ROBOT_ARM_NX);
     robot_arm_feedback_measure(s, xhat0);
-    /* the cost of one QP iteration of the last feedback; the least a prepare costs stays free */
-    robot_arm_budget_cap(s, robot_arm_prepare_floor(s), s->anytime.cost_qp_iter);
+    /* the deadline leaves the least a prepare costs free */
+    robot_arm_budget_deadline(s, robot_arm_prepare_floor(s), s->anytime.cost_qp_iter);
     b0 = robot_arm_budget_now(s);
     qs = robot_arm_feedback_qp(s);
     qs = robot_arm_feedback_lm_retries(s, qs, &retries);
@@ -1217,11 +1227,11 @@ static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xha
         robot_arm_cost_qp_step(s, robot_arm_budget_now(s) - b0, s->qp_iterations);
     }
     s->qp_status = qs;
-    rc = robot_arm_feedback_check_step(s, qs);
+    rc = robot_arm_feedback_check_cut(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
     if (rc != ROBOT_ARM_OK && s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING &&
-        qs != ROBOT_ARM_QP_MAX_ITER && qs != ROBOT_ARM_QP_INVALID_INPUT) {
+        qs != ROBOT_ARM_QP_MAX_ITER && qs != ROBOT_ARM_QP_INVALID_INPUT && qs != ROBOT_ARM_QP_DEADLINE) {
         if (!robot_arm_model_finite_at(s, xhat0)) {
             /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
              * prepare takes the predicted step) */
@@ -1233,7 +1243,7 @@ static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xha
             rc = robot_arm_feedback_recover(s, &qs, &retries);
             if (rc == ROBOT_ARM_OK) {
                 s->qp_status = qs;
-                rc = robot_arm_feedback_check_step(s, qs);
+                rc = robot_arm_feedback_check_cut(s, qs);
             }
         }
     }
@@ -1300,7 +1310,7 @@ static int robot_arm_feedback_call(robot_arm_solver *s, const robot_arm_real *xh
     if (rc == ROBOT_ARM_OK) {
         rc = robot_arm_feedback_run(s, xhat0, u0);
     }
-    s->anytime.qp_cap = 0;
+    s->anytime.qp_timed = 0;
     s->anytime.used = robot_arm_budget_now(s) - s->anytime.instant_start;
     s->timer.locked = 0;
     robot_arm_timer_end(&s->timer, 0, start);
@@ -1733,8 +1743,11 @@ int robot_arm_prepare(robot_arm_solver *s)
     hessian = s->settings.hessian;
     if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
         s->settings.mode == ROBOT_ARM_MODE_RECEDING && !(s->health.flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
-        /* (not from the OCP file's guess: its plan is not the plant's) */
+        /* (not from the OCP file's guess: its plan is not the plant's); with a time budget
+         * its QP stops where the least prepare still fits (a cut QP changes nothing) */
+        robot_arm_budget_deadline(s, robot_arm_prepare_floor(s), s->anytime.cost_qp_step);
         robot_arm_predicted_step(s);
+        s->anytime.qp_timed = 0;
     }
     s->qp_ready = 0;
     if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && s->health.plan_age < ROBOT_ARM_N) {
@@ -1944,9 +1957,9 @@ static int robot_arm_extra_iteration(robot_arm_solver *s)
     }
     /* a time budget caps the QP's iterations at the budget left after the prepare iteration
      * that follows it (a QP stopped there changes nothing) */
-    robot_arm_budget_cap(s, s->anytime.cost_prepare, s->anytime.cost_qp_step);
+    robot_arm_budget_deadline(s, s->anytime.cost_prepare, s->anytime.cost_qp_step);
     qs = robot_arm_feedback_qp(s);
-    s->anytime.qp_cap = 0;
+    s->anytime.qp_timed = 0;
     if (robot_arm_budget_on(s)) {
         robot_arm_cost_qp_step(s, robot_arm_budget_now(s) - b0, s->qp_iterations);
     }
@@ -2384,7 +2397,7 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
     s->anytime.cost_head = 0.0;
     s->anytime.cost_al = 0.0;
     s->anytime.used = 0.0;
-    s->anytime.qp_cap = 0;
+    s->anytime.qp_timed = 0;
     s->anytime.extra_iterations = 0;
     s->anytime.instant_stages = 0;
     s->anytime.prepared_extra = 0;
