@@ -201,6 +201,40 @@ def test_c_equals_reference_with_the_gradients_cut(robot_disc, robot_solution, b
     assert r.budget_used == budget < 2 * N + 4    # every instant spent its budget, below one iteration
 
 
+def test_c_equals_reference_with_the_qp_cut(robot_disc, robot_solution):
+    """A work budget below the least an instant costs (N + 4 units): the feedback's QP would
+    pass its deadline (the budget less the least prepare, 4 units) at its first factorisation,
+    so it is cut there and its iterate 0 is the step (docs/algorithm.md section 14): the
+    warm start, a zero step from the shifted plan with x_0 moved to the measurement and the
+    multipliers floored on their bounds' sides. Both backends cut every instant (flag qp_cut,
+    QP status deadline, no failed instant) and agree to round-off; the control is then the
+    shifted plan's, the control of the instant before at the next stage (clipped)."""
+    N = robot_disc.N
+    c, r = pair(robot_disc, N + 2, M=1)
+    xhat = np.array(robot_disc.x0, dtype=float)
+    p0 = np.asarray(r.p[0], dtype=float)
+    for b in (c, r):
+        b.init(xhat, robot_solution[0])
+    u_next = None
+    for it in range(6):
+        if it == 1:
+            xhat = np.array(robot_disc.disturbance(xhat.copy()), dtype=float).reshape(-1)
+        uc, ur = c.feedback(xhat), r.feedback(xhat)
+        for b in (c, r):
+            assert b.status == 0 and "qp_cut" in b.flags, (it, b.flags)
+            assert b.qp_status == 7
+        if u_next is not None:
+            lo, up = np.asarray(robot_disc.lbu, float), np.asarray(robot_disc.ubu, float)
+            assert np.array_equal(ur, np.clip(u_next, lo, up))
+        e = max(rel_err(getattr(c, f), getattr(r, f)) for f in FIELDS)
+        assert e <= REL_TOL and rel_err(uc, ur) <= REL_TOL, (it, e)
+        for b in (c, r):
+            b.prepare()
+        assert c.work == r.work
+        u_next = np.array(r.u[0], dtype=float)     # the shifted plan's first control
+        xhat = np.array(robot_disc.stage_eval(xhat, ur, p0)[0], dtype=float).reshape(-1)
+
+
 def test_budget_bound_on_the_work_counter(robot_disc, robot_solution):
     """The bound of a budget on an independent count: the work counter's growth over each
     instant (feedback, prepare, extra iterations) stays within the budget, for budgets from the

@@ -130,6 +130,20 @@ static double robot_arm_cost(const robot_arm_solver *s, double estimate, double 
     return reading;
 }
 
+/* A reserve (the cost of step 3, of steps 6 and 7, of a prepare iteration) measured now
+ * against the last estimate: in time it rises as robot_arm_cost and falls by 10 % at most per
+ * reading, so the room kept for the rest of an instant follows its dearer recent readings
+ * (the lm test of step 7 varies by up to 40 k instructions between instants on the emulated
+ * Cortex-M7, and an instant whose rest was priced at the last, cheaper reading went up to
+ * 114 k over a budget of 6 M); in work units the reading itself. */
+static double robot_arm_cost_reserve(const robot_arm_solver *s, double estimate, double reading)
+{
+    if (s->settings.budget_unit == ROBOT_ARM_BUDGET_TIME && estimate > 0.0 && reading < 0.9 * estimate) {
+        return 0.9 * estimate;
+    }
+    return robot_arm_cost(s, estimate, reading);
+}
+
 /* The price of one QP iteration for the extra iteration's cap (time budget): the reading
  * `cost` / `iterations` of a QP, the estimate moved by 10 % at most, up or down. A QP whose
  * iterations were unusually cheap (or one descheduled) moves it little: following such a
@@ -958,6 +972,12 @@ static void robot_arm_feedback_measure(robot_arm_solver *s, const robot_arm_real
     s->shifted = 0;
 }
 
+/* The work counter as the QP's clock (a work budget; ctx: the solver). */
+static double robot_arm_work_clock(void *ctx)
+{
+    return ((const robot_arm_solver *)ctx)->anytime.work;
+}
+
 /* The QP's matrix pointers (robot_arm_qp_in.H, Phi, C, HN, R, Req) point into this struct: the
  * ring slots in place and the terminal blocks. They are set just before each solve and
  * cleared after it, so the struct holds no pointer into itself between calls and a byte
@@ -971,9 +991,11 @@ static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm, int active_se
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
     if (s->anytime.qp_timed) {
-        /* a time budget (section 14): the QP reads the clock before each factorisation */
-        settings.clock = s->timer.clock;
-        settings.clock_ctx = s->timer.ctx;
+        /* a budget (section 14): the QP reads the budget's clock before each factorisation
+         * (work units: the counter, which the QP's own N units have already moved) */
+        const int work = s->settings.budget_unit == ROBOT_ARM_BUDGET_WORK;
+        settings.clock = work ? robot_arm_work_clock : s->timer.clock;
+        settings.clock_ctx = work ? (void *)s : s->timer.ctx;
         settings.deadline = s->anytime.qp_deadline;
         settings.iter_price = s->anytime.qp_price;
     }
@@ -1066,14 +1088,27 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
     return qs;
 }
 
+/* 1 when the budget's deadline is set and one more QP solve would pass it at once (work
+ * units: its N units; time: its first iteration's price): no retry is started then. */
+static int robot_arm_qp_deadline_near(const robot_arm_solver *s)
+{
+    double next;
+    if (!s->anytime.qp_timed) {
+        return 0;
+    }
+    next = s->settings.budget_unit == ROBOT_ARM_BUDGET_WORK ? (double)ROBOT_ARM_WORK_QP : s->anytime.qp_price;
+    return robot_arm_budget_now(s) + next > s->anytime.qp_deadline;
+}
+
 /* Step 4, the automatic term (algorithm.md section 10): a QP still not solved is solved
- * again (cold) with lm raised, at most ROBOT_ARM_LM_RETRIES times. Returns the QP status; the
+ * again (cold) with lm raised, at most ROBOT_ARM_LM_RETRIES times (with a budget, while one more
+ * solve does not pass its deadline at once). Returns the QP status; the
  * number of retries in *retries. */
 static int robot_arm_feedback_lm_retries(robot_arm_solver *s, int qs, int *retries)
 {
     *retries = 0;
     while (*retries < ROBOT_ARM_LM_RETRIES && robot_arm_lm_can_raise(&s->lm) && !robot_arm_qp_ok(s, qs) &&
-           qs != ROBOT_ARM_QP_INVALID_INPUT && qs != ROBOT_ARM_QP_DEADLINE) {
+           qs != ROBOT_ARM_QP_INVALID_INPUT && qs != ROBOT_ARM_QP_DEADLINE && !robot_arm_qp_deadline_near(s)) {
         robot_arm_lm_raise(&s->lm);
         s->anytime.work += ROBOT_ARM_WORK_QP;
         s->qp_in.hess_shift = s->lm.lm;
@@ -1200,7 +1235,7 @@ static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *
  * an extra iteration or a predicted step changes nothing. */
 static void robot_arm_budget_deadline(robot_arm_solver *s, double reserve, double per_iter)
 {
-    s->anytime.qp_timed = robot_arm_budget_on(s) && s->settings.budget_unit == ROBOT_ARM_BUDGET_TIME;
+    s->anytime.qp_timed = robot_arm_budget_on(s);
     s->anytime.qp_deadline = s->anytime.instant_start + s->settings.budget - reserve;
     s->anytime.qp_price = per_iter > 0.0 ? per_iter : 0.0;
 }
@@ -1862,7 +1897,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
         rc = robot_arm_term_H(s);
     }
     if (rc == ROBOT_ARM_OK && robot_arm_budget_on(s)) {
-        s->anytime.cost_head = robot_arm_cost(s, s->anytime.cost_head, robot_arm_budget_now(s) - b0);
+        s->anytime.cost_head = robot_arm_cost_reserve(s, s->anytime.cost_head, robot_arm_budget_now(s) - b0);
     }
 
     /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
@@ -1924,8 +1959,8 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     robot_arm_phase(s, ROBOT_ARM_PHASE_RECOVERY);
     if (robot_arm_budget_on(s)) {
         s->anytime.cost_prepare =
-            robot_arm_cost(s, s->anytime.cost_prepare, robot_arm_budget_now(s) - b_start - ext_cost);
-        s->anytime.cost_tail = robot_arm_cost(s, s->anytime.cost_tail, robot_arm_budget_now(s) - b_tail);
+            robot_arm_cost_reserve(s, s->anytime.cost_prepare, robot_arm_budget_now(s) - b_start - ext_cost);
+        s->anytime.cost_tail = robot_arm_cost_reserve(s, s->anytime.cost_tail, robot_arm_budget_now(s) - b_tail);
     }
     if (robot_arm_iterate_diverged(s)) {
         s->health.flags |= ROBOT_ARM_FLAG_DIVERGED;

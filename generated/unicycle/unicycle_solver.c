@@ -130,6 +130,20 @@ static double unicycle_cost(const unicycle_solver *s, double estimate, double re
     return reading;
 }
 
+/* A reserve (the cost of step 3, of steps 6 and 7, of a prepare iteration) measured now
+ * against the last estimate: in time it rises as unicycle_cost and falls by 10 % at most per
+ * reading, so the room kept for the rest of an instant follows its dearer recent readings
+ * (the lm test of step 7 varies by up to 40 k instructions between instants on the emulated
+ * Cortex-M7, and an instant whose rest was priced at the last, cheaper reading went up to
+ * 114 k over a budget of 6 M); in work units the reading itself. */
+static double unicycle_cost_reserve(const unicycle_solver *s, double estimate, double reading)
+{
+    if (s->settings.budget_unit == UNICYCLE_BUDGET_TIME && estimate > 0.0 && reading < 0.9 * estimate) {
+        return 0.9 * estimate;
+    }
+    return unicycle_cost(s, estimate, reading);
+}
+
 /* The price of one QP iteration for the extra iteration's cap (time budget): the reading
  * `cost` / `iterations` of a QP, the estimate moved by 10 % at most, up or down. A QP whose
  * iterations were unusually cheap (or one descheduled) moves it little: following such a
@@ -958,6 +972,12 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
     s->shifted = 0;
 }
 
+/* The work counter as the QP's clock (a work budget; ctx: the solver). */
+static double unicycle_work_clock(void *ctx)
+{
+    return ((const unicycle_solver *)ctx)->anytime.work;
+}
+
 /* The QP's matrix pointers (unicycle_qp_in.H, Phi, C, HN, R, Req) point into this struct: the
  * ring slots in place and the terminal blocks. They are set just before each solve and
  * cleared after it, so the struct holds no pointer into itself between calls and a byte
@@ -971,9 +991,11 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set)
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
     if (s->anytime.qp_timed) {
-        /* a time budget (section 14): the QP reads the clock before each factorisation */
-        settings.clock = s->timer.clock;
-        settings.clock_ctx = s->timer.ctx;
+        /* a budget (section 14): the QP reads the budget's clock before each factorisation
+         * (work units: the counter, which the QP's own N units have already moved) */
+        const int work = s->settings.budget_unit == UNICYCLE_BUDGET_WORK;
+        settings.clock = work ? unicycle_work_clock : s->timer.clock;
+        settings.clock_ctx = work ? (void *)s : s->timer.ctx;
         settings.deadline = s->anytime.qp_deadline;
         settings.iter_price = s->anytime.qp_price;
     }
@@ -1066,14 +1088,27 @@ static int unicycle_feedback_qp(unicycle_solver *s)
     return qs;
 }
 
+/* 1 when the budget's deadline is set and one more QP solve would pass it at once (work
+ * units: its N units; time: its first iteration's price): no retry is started then. */
+static int unicycle_qp_deadline_near(const unicycle_solver *s)
+{
+    double next;
+    if (!s->anytime.qp_timed) {
+        return 0;
+    }
+    next = s->settings.budget_unit == UNICYCLE_BUDGET_WORK ? (double)UNICYCLE_WORK_QP : s->anytime.qp_price;
+    return unicycle_budget_now(s) + next > s->anytime.qp_deadline;
+}
+
 /* Step 4, the automatic term (algorithm.md section 10): a QP still not solved is solved
- * again (cold) with lm raised, at most UNICYCLE_LM_RETRIES times. Returns the QP status; the
+ * again (cold) with lm raised, at most UNICYCLE_LM_RETRIES times (with a budget, while one more
+ * solve does not pass its deadline at once). Returns the QP status; the
  * number of retries in *retries. */
 static int unicycle_feedback_lm_retries(unicycle_solver *s, int qs, int *retries)
 {
     *retries = 0;
     while (*retries < UNICYCLE_LM_RETRIES && unicycle_lm_can_raise(&s->lm) && !unicycle_qp_ok(s, qs) &&
-           qs != UNICYCLE_QP_INVALID_INPUT && qs != UNICYCLE_QP_DEADLINE) {
+           qs != UNICYCLE_QP_INVALID_INPUT && qs != UNICYCLE_QP_DEADLINE && !unicycle_qp_deadline_near(s)) {
         unicycle_lm_raise(&s->lm);
         s->anytime.work += UNICYCLE_WORK_QP;
         s->qp_in.hess_shift = s->lm.lm;
@@ -1200,7 +1235,7 @@ static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
  * an extra iteration or a predicted step changes nothing. */
 static void unicycle_budget_deadline(unicycle_solver *s, double reserve, double per_iter)
 {
-    s->anytime.qp_timed = unicycle_budget_on(s) && s->settings.budget_unit == UNICYCLE_BUDGET_TIME;
+    s->anytime.qp_timed = unicycle_budget_on(s);
     s->anytime.qp_deadline = s->anytime.instant_start + s->settings.budget - reserve;
     s->anytime.qp_price = per_iter > 0.0 ? per_iter : 0.0;
 }
@@ -1862,7 +1897,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
         rc = unicycle_term_H(s);
     }
     if (rc == UNICYCLE_OK && unicycle_budget_on(s)) {
-        s->anytime.cost_head = unicycle_cost(s, s->anytime.cost_head, unicycle_budget_now(s) - b0);
+        s->anytime.cost_head = unicycle_cost_reserve(s, s->anytime.cost_head, unicycle_budget_now(s) - b0);
     }
 
     /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
@@ -1924,8 +1959,8 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
     if (unicycle_budget_on(s)) {
         s->anytime.cost_prepare =
-            unicycle_cost(s, s->anytime.cost_prepare, unicycle_budget_now(s) - b_start - ext_cost);
-        s->anytime.cost_tail = unicycle_cost(s, s->anytime.cost_tail, unicycle_budget_now(s) - b_tail);
+            unicycle_cost_reserve(s, s->anytime.cost_prepare, unicycle_budget_now(s) - b_start - ext_cost);
+        s->anytime.cost_tail = unicycle_cost_reserve(s, s->anytime.cost_tail, unicycle_budget_now(s) - b_tail);
     }
     if (unicycle_iterate_diverged(s)) {
         s->health.flags |= UNICYCLE_FLAG_DIVERGED;
