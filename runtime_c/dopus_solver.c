@@ -1079,8 +1079,7 @@ static int dopus_feedback_qp(dopus_solver *s)
         dopus_qp_warm_point(s);
     }
     qs = dopus_qp_attempt(s, s->settings.qp_warm_start, active_set);
-    if (s->settings.qp_warm_start && qs != DOPUS_QP_INVALID_INPUT &&
-        qs != DOPUS_QP_DEADLINE &&
+    if (s->settings.qp_warm_start && qs != DOPUS_QP_INVALID_INPUT && qs != DOPUS_QP_DEADLINE &&
         (!dopus_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = dopus_qp_attempt(s, 0, 0);

@@ -676,7 +676,6 @@ class ReferenceDopus:
         # the QP is attempted: a prepare (with its shift) is due, whatever the outcome
         self._prepare_due, self._shifted = True, False
         t1 = time.perf_counter()
-        b0 = self._budget_now()
         # the QPs of the feedback stop where the least prepare still fits (section 14)
         self._qp_deadline = (self._instant_start + self.budget - self._prepare_floor()
                              if self._budget_on() else None)

@@ -1079,8 +1079,7 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
         robot_arm_qp_warm_point(s);
     }
     qs = robot_arm_qp_attempt(s, s->settings.qp_warm_start, active_set);
-    if (s->settings.qp_warm_start && qs != ROBOT_ARM_QP_INVALID_INPUT &&
-        qs != ROBOT_ARM_QP_DEADLINE &&
+    if (s->settings.qp_warm_start && qs != ROBOT_ARM_QP_INVALID_INPUT && qs != ROBOT_ARM_QP_DEADLINE &&
         (!robot_arm_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = robot_arm_qp_attempt(s, 0, 0);

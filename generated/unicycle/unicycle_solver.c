@@ -1079,8 +1079,7 @@ static int unicycle_feedback_qp(unicycle_solver *s)
         unicycle_qp_warm_point(s);
     }
     qs = unicycle_qp_attempt(s, s->settings.qp_warm_start, active_set);
-    if (s->settings.qp_warm_start && qs != UNICYCLE_QP_INVALID_INPUT &&
-        qs != UNICYCLE_QP_DEADLINE &&
+    if (s->settings.qp_warm_start && qs != UNICYCLE_QP_INVALID_INPUT && qs != UNICYCLE_QP_DEADLINE &&
         (!unicycle_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = unicycle_qp_attempt(s, 0, 0);
