@@ -1132,11 +1132,17 @@ static int dopus_feedback_check_step(const dopus_solver *s, int qs)
 }
 
 /* Step 5 of a feedback: as dopus_feedback_check_step, but a QP cut by the budget's deadline
- * with a finite best point is usable (algorithm.md section 14): that point is the step
- * (DOPUS_FLAG_QP_CUT), not a failure that would start a recovery. */
+ * with a finite best point is usable (algorithm.md section 14) when it was cut before its
+ * first iteration (the warm start: the shifted plan's control) or its scaled residuals are
+ * below DOPUS_ANYTIME_CUT_MERIT: that point is the step (DOPUS_FLAG_QP_CUT), not a failure
+ * that would start a recovery. A QP cut far from its solution fails the feedback. */
 static int dopus_feedback_check_cut(dopus_solver *s, int qs)
 {
-    if (qs == DOPUS_QP_DEADLINE && dopus_qp_solution_finite(&s->mem.qp.sol)) {
+    const dopus_qp_info *q = &s->qp_info;
+    const double merit = dopus_fmax(dopus_fmax(q->res_stat_scaled, q->res_eq_scaled),
+                                    dopus_fmax(q->res_ineq_scaled, q->res_comp_scaled));
+    if (qs == DOPUS_QP_DEADLINE && dopus_qp_solution_finite(&s->mem.qp.sol) &&
+        (q->iterations == 0 || merit <= DOPUS_ANYTIME_CUT_MERIT)) {
         s->health.flags |= DOPUS_FLAG_QP_CUT;
         return dopus_feedback_check_step(s, DOPUS_QP_SOLVED);
     }

@@ -1132,11 +1132,17 @@ static int robot_arm_feedback_check_step(const robot_arm_solver *s, int qs)
 }
 
 /* Step 5 of a feedback: as robot_arm_feedback_check_step, but a QP cut by the budget's deadline
- * with a finite best point is usable (algorithm.md section 14): that point is the step
- * (ROBOT_ARM_FLAG_QP_CUT), not a failure that would start a recovery. */
+ * with a finite best point is usable (algorithm.md section 14) when it was cut before its
+ * first iteration (the warm start: the shifted plan's control) or its scaled residuals are
+ * below ROBOT_ARM_ANYTIME_CUT_MERIT: that point is the step (ROBOT_ARM_FLAG_QP_CUT), not a failure
+ * that would start a recovery. A QP cut far from its solution fails the feedback. */
 static int robot_arm_feedback_check_cut(robot_arm_solver *s, int qs)
 {
-    if (qs == ROBOT_ARM_QP_DEADLINE && robot_arm_qp_solution_finite(&s->mem.qp.sol)) {
+    const robot_arm_qp_info *q = &s->qp_info;
+    const double merit = robot_arm_fmax(robot_arm_fmax(q->res_stat_scaled, q->res_eq_scaled),
+                                    robot_arm_fmax(q->res_ineq_scaled, q->res_comp_scaled));
+    if (qs == ROBOT_ARM_QP_DEADLINE && robot_arm_qp_solution_finite(&s->mem.qp.sol) &&
+        (q->iterations == 0 || merit <= ROBOT_ARM_ANYTIME_CUT_MERIT)) {
         s->health.flags |= ROBOT_ARM_FLAG_QP_CUT;
         return robot_arm_feedback_check_step(s, ROBOT_ARM_QP_SOLVED);
     }

@@ -417,8 +417,10 @@ enum robot_arm_budget_unit {
 /* Anytime constants (docs/algorithm.md section 14). */
 #define ROBOT_ARM_ANYTIME_TOL ROBOT_ARM_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
 #define ROBOT_ARM_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
-#define ROBOT_ARM_ADAPTIVE_ETA ROBOT_ARM_R(0.1)          /* default eta of adaptive M */
-#define ROBOT_ARM_WORK_QP ROBOT_ARM_N                    /* work units of a QP solve */
+#define ROBOT_ARM_ANYTIME_CUT_MERIT                                                                              \
+    1e-2 /* a feedback QP cut after iterations is a step when its scaled residuals are below */
+#define ROBOT_ARM_ADAPTIVE_ETA ROBOT_ARM_R(0.1) /* default eta of adaptive M */
+#define ROBOT_ARM_WORK_QP ROBOT_ARM_N           /* work units of a QP solve */
 
 /* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
  * section 4, feedback; robot_arm_qp.h), the distance of the measurement from the predicted

@@ -1132,11 +1132,17 @@ static int unicycle_feedback_check_step(const unicycle_solver *s, int qs)
 }
 
 /* Step 5 of a feedback: as unicycle_feedback_check_step, but a QP cut by the budget's deadline
- * with a finite best point is usable (algorithm.md section 14): that point is the step
- * (UNICYCLE_FLAG_QP_CUT), not a failure that would start a recovery. */
+ * with a finite best point is usable (algorithm.md section 14) when it was cut before its
+ * first iteration (the warm start: the shifted plan's control) or its scaled residuals are
+ * below UNICYCLE_ANYTIME_CUT_MERIT: that point is the step (UNICYCLE_FLAG_QP_CUT), not a failure
+ * that would start a recovery. A QP cut far from its solution fails the feedback. */
 static int unicycle_feedback_check_cut(unicycle_solver *s, int qs)
 {
-    if (qs == UNICYCLE_QP_DEADLINE && unicycle_qp_solution_finite(&s->mem.qp.sol)) {
+    const unicycle_qp_info *q = &s->qp_info;
+    const double merit = unicycle_fmax(unicycle_fmax(q->res_stat_scaled, q->res_eq_scaled),
+                                    unicycle_fmax(q->res_ineq_scaled, q->res_comp_scaled));
+    if (qs == UNICYCLE_QP_DEADLINE && unicycle_qp_solution_finite(&s->mem.qp.sol) &&
+        (q->iterations == 0 || merit <= UNICYCLE_ANYTIME_CUT_MERIT)) {
         s->health.flags |= UNICYCLE_FLAG_QP_CUT;
         return unicycle_feedback_check_step(s, UNICYCLE_QP_SOLVED);
     }
