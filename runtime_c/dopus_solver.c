@@ -1139,8 +1139,8 @@ static int dopus_feedback_check_step(const dopus_solver *s, int qs)
 static int dopus_feedback_check_cut(dopus_solver *s, int qs)
 {
     const dopus_qp_info *q = &s->qp_info;
-    const double merit = dopus_fmax(dopus_fmax(q->res_stat_scaled, q->res_eq_scaled),
-                                    dopus_fmax(q->res_ineq_scaled, q->res_comp_scaled));
+    const dopus_real merit = dopus_fmax(dopus_fmax(q->res_stat_scaled, q->res_eq_scaled),
+                                        dopus_fmax(q->res_ineq_scaled, q->res_comp_scaled));
     if (qs == DOPUS_QP_DEADLINE && dopus_qp_solution_finite(&s->mem.qp.sol) &&
         (q->iterations == 0 || merit <= DOPUS_ANYTIME_CUT_MERIT)) {
         s->health.flags |= DOPUS_FLAG_QP_CUT;

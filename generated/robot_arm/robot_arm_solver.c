@@ -1139,8 +1139,8 @@ static int robot_arm_feedback_check_step(const robot_arm_solver *s, int qs)
 static int robot_arm_feedback_check_cut(robot_arm_solver *s, int qs)
 {
     const robot_arm_qp_info *q = &s->qp_info;
-    const double merit = robot_arm_fmax(robot_arm_fmax(q->res_stat_scaled, q->res_eq_scaled),
-                                    robot_arm_fmax(q->res_ineq_scaled, q->res_comp_scaled));
+    const robot_arm_real merit = robot_arm_fmax(robot_arm_fmax(q->res_stat_scaled, q->res_eq_scaled),
+                                        robot_arm_fmax(q->res_ineq_scaled, q->res_comp_scaled));
     if (qs == ROBOT_ARM_QP_DEADLINE && robot_arm_qp_solution_finite(&s->mem.qp.sol) &&
         (q->iterations == 0 || merit <= ROBOT_ARM_ANYTIME_CUT_MERIT)) {
         s->health.flags |= ROBOT_ARM_FLAG_QP_CUT;

@@ -1139,8 +1139,8 @@ static int unicycle_feedback_check_step(const unicycle_solver *s, int qs)
 static int unicycle_feedback_check_cut(unicycle_solver *s, int qs)
 {
     const unicycle_qp_info *q = &s->qp_info;
-    const double merit = unicycle_fmax(unicycle_fmax(q->res_stat_scaled, q->res_eq_scaled),
-                                    unicycle_fmax(q->res_ineq_scaled, q->res_comp_scaled));
+    const unicycle_real merit = unicycle_fmax(unicycle_fmax(q->res_stat_scaled, q->res_eq_scaled),
+                                        unicycle_fmax(q->res_ineq_scaled, q->res_comp_scaled));
     if (qs == UNICYCLE_QP_DEADLINE && unicycle_qp_solution_finite(&s->mem.qp.sol) &&
         (q->iterations == 0 || merit <= UNICYCLE_ANYTIME_CUT_MERIT)) {
         s->health.flags |= UNICYCLE_FLAG_QP_CUT;

@@ -417,8 +417,8 @@ enum unicycle_budget_unit {
 /* Anytime constants (docs/algorithm.md section 14). */
 #define UNICYCLE_ANYTIME_TOL UNICYCLE_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
 #define UNICYCLE_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
-#define UNICYCLE_ANYTIME_CUT_MERIT                                                                              \
-    1e-2 /* a feedback QP cut after iterations is a step when its scaled residuals are below */
+/* a feedback QP cut after iterations is its step when its scaled residuals are at most this */
+#define UNICYCLE_ANYTIME_CUT_MERIT UNICYCLE_R(1e-2)
 #define UNICYCLE_ADAPTIVE_ETA UNICYCLE_R(0.1) /* default eta of adaptive M */
 #define UNICYCLE_WORK_QP UNICYCLE_N           /* work units of a QP solve */
 
