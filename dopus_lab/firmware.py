@@ -68,7 +68,7 @@ class Target:
 
 #: The Cortex-M7's flags. -funroll-loops: the runtime's loops have compile-time bounds, and
 #: unrolled they take 3 % fewer instructions per M = 1 instant on the robot arm (flash text
-#: +22 kB; bench/issue23/measurements.md section 12). -ffp-contract stays at C99's "off": the
+#: +22 kB; bench/issue23/measurements.md section 13). -ffp-contract stays at C99's "off": the
 #: FPU's chained VMLA.F64 is already used, fused VFMA would save no instruction and round
 #: differently.
 M7_CFLAGS = ("-mcpu=cortex-m7", "-mthumb", "-mfpu=fpv5-d16", "-mfloat-abi=hard", "-funroll-loops")

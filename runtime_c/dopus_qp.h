@@ -187,8 +187,23 @@
 #define DOPUS_QP_NUP (DOPUS_QP_NU1 * (DOPUS_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define DOPUS_QP_NXP (DOPUS_NX * (DOPUS_NX + 1) / 2)
-/* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
-#define DOPUS_QP_NWORK (2 * DOPUS_NX * DOPUS_QP_NW + DOPUS_QP_NW * DOPUS_QP_NE1 + DOPUS_NX * DOPUS_NX)
+/* DOPUS_QP_PHIT 1: the workspace keeps Phi_k' and the squared column sums of |Phi_k| for
+ * the whole solve (N nw (nx + 1) reals), so that the products with Phi_k' run down
+ * contiguous columns (vectorised where doubles come in vectors) and the factorisation
+ * neither transposes nor sums. 0 (the default on 32-bit ARM: a scalar FPU and little RAM):
+ * both are formed per stage in every factorisation. The same results either way; define it
+ * to override. */
+#ifndef DOPUS_QP_PHIT
+#if defined(__arm__) && !defined(__aarch64__)
+#define DOPUS_QP_PHIT 0
+#else
+#define DOPUS_QP_PHIT 1
+#endif
+#endif
+/* Scratch of the factorisation: Phi' (unless kept, DOPUS_QP_PHIT), Phi'P, Phi'G and one
+ * unpacked P. */
+#define DOPUS_QP_NWORK                                                                                       \
+    ((2 - DOPUS_QP_PHIT) * DOPUS_NX * DOPUS_QP_NW + DOPUS_QP_NW * DOPUS_QP_NE1 + DOPUS_NX * DOPUS_NX)
 
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if DOPUS_QP_NINEQ < 65536
@@ -354,6 +369,10 @@ typedef struct {
     dopus_real dz_lo[DOPUS_QP_NB];
     dopus_real dz_up[DOPUS_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
+#if DOPUS_QP_PHIT
+    dopus_real PhiT[DOPUS_N][DOPUS_QP_NW * DOPUS_NX]; /* Phi_k' (nw x nx), formed once per solve */
+    dopus_real phi_cs2[DOPUS_N][DOPUS_QP_NW];         /* squared column sums of |Phi_k|, the same */
+#endif
     dopus_real M[DOPUS_QP_NW * DOPUS_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     dopus_real P[DOPUS_N + 1][DOPUS_QP_NXP];             /* value function Hessians, packed lower */
     dopus_real G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];  /* value function x-nu coupling */

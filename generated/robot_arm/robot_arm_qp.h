@@ -187,8 +187,23 @@
 #define ROBOT_ARM_QP_NUP (ROBOT_ARM_QP_NU1 * (ROBOT_ARM_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define ROBOT_ARM_QP_NXP (ROBOT_ARM_NX * (ROBOT_ARM_NX + 1) / 2)
-/* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
-#define ROBOT_ARM_QP_NWORK (2 * ROBOT_ARM_NX * ROBOT_ARM_QP_NW + ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NE1 + ROBOT_ARM_NX * ROBOT_ARM_NX)
+/* ROBOT_ARM_QP_PHIT 1: the workspace keeps Phi_k' and the squared column sums of |Phi_k| for
+ * the whole solve (N nw (nx + 1) reals), so that the products with Phi_k' run down
+ * contiguous columns (vectorised where doubles come in vectors) and the factorisation
+ * neither transposes nor sums. 0 (the default on 32-bit ARM: a scalar FPU and little RAM):
+ * both are formed per stage in every factorisation. The same results either way; define it
+ * to override. */
+#ifndef ROBOT_ARM_QP_PHIT
+#if defined(__arm__) && !defined(__aarch64__)
+#define ROBOT_ARM_QP_PHIT 0
+#else
+#define ROBOT_ARM_QP_PHIT 1
+#endif
+#endif
+/* Scratch of the factorisation: Phi' (unless kept, ROBOT_ARM_QP_PHIT), Phi'P, Phi'G and one
+ * unpacked P. */
+#define ROBOT_ARM_QP_NWORK                                                                                       \
+    ((2 - ROBOT_ARM_QP_PHIT) * ROBOT_ARM_NX * ROBOT_ARM_QP_NW + ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NE1 + ROBOT_ARM_NX * ROBOT_ARM_NX)
 
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if ROBOT_ARM_QP_NINEQ < 65536
@@ -354,6 +369,10 @@ typedef struct {
     robot_arm_real dz_lo[ROBOT_ARM_QP_NB];
     robot_arm_real dz_up[ROBOT_ARM_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
+#if ROBOT_ARM_QP_PHIT
+    robot_arm_real PhiT[ROBOT_ARM_N][ROBOT_ARM_QP_NW * ROBOT_ARM_NX]; /* Phi_k' (nw x nx), formed once per solve */
+    robot_arm_real phi_cs2[ROBOT_ARM_N][ROBOT_ARM_QP_NW];         /* squared column sums of |Phi_k|, the same */
+#endif
     robot_arm_real M[ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     robot_arm_real P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NXP];             /* value function Hessians, packed lower */
     robot_arm_real G[ROBOT_ARM_N + 1][ROBOT_ARM_NX * ROBOT_ARM_QP_NE1];  /* value function x-nu coupling */

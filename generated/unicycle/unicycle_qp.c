@@ -452,6 +452,62 @@ static unicycle_real row_q(const unicycle_qp_workspace *ws, const unicycle_qp_in
     return q;
 }
 
+/* ---------------------------------------------------------------- Phi' v */
+
+/* The transposed copies PhiT_k = Phi_k' (nw x nx, column-major) and the squares of the
+ * column sums of |Phi_k| (the round-off estimates of the factorisation), formed once per
+ * solve (the data is constant during it): the products with Phi_k' then run down contiguous
+ * columns of length nw, vectorised where the target has vectors, instead of a sum of nx
+ * products per entry. */
+/* PhiT = Phi' (nw x nx, column-major) and cs2 the squares of the column sums of |Phi|. */
+static void phi_stage_copy(const unicycle_real *restrict Phi, unicycle_real *restrict PhiT,
+                           unicycle_real *restrict cs2)
+{
+    int i, l;
+    for (i = 0; i < NW; ++i) {
+        unicycle_real colsum = UNICYCLE_R(0.0);
+        for (l = 0; l < NX; ++l) {
+            PhiT[i + l * NW] = Phi[l + i * NX];
+            colsum += unicycle_fabs(Phi[l + i * NX]);
+        }
+        cs2[i] = colsum * colsum;
+    }
+}
+
+#if UNICYCLE_QP_PHIT
+static void transpose_phi(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
+{
+    int k;
+    for (k = 0; k < N; ++k)
+        phi_stage_copy(in->Phi[k], ws->PhiT[k], ws->phi_cs2[k]);
+}
+/* PhiT_k (nw x nx) for phit_gemv, and its entry (i, l) = Phi_k(l, i) */
+#define QP_PHIT(ws, in, k) ((const unicycle_real *)(ws)->PhiT[(k)])
+#define PHIT_AT(A, i, l) ((A)[(i) + (l)*NW])
+#else
+/* without the copy, phit_gemv reads Phi_k itself (nx x nw) */
+#define QP_PHIT(ws, in, k) ((in)->Phi[(k)])
+#define PHIT_AT(A, i, l) ((A)[(l) + (i)*NX])
+#endif
+
+/* y += alpha Phi' v over QP_PHIT (y of size nw, v of size nx): the same sums in the same
+ * order as unicycle_lai_gemv_t(NX, NW, alpha, Phi, NX, v, 1, y), so the same bits. */
+static inline void phit_gemv(const unicycle_real *restrict PhiT, unicycle_real alpha, const unicycle_real *restrict v,
+                             unicycle_real *restrict y)
+{
+    unicycle_real s[NW];
+    int i, l;
+    for (i = 0; i < NW; ++i)
+        s[i] = UNICYCLE_R(0.0);
+    for (l = 0; l < NX; ++l) {
+        const unicycle_real f = v[l];
+        for (i = 0; i < NW; ++i)
+            s[i] += PHIT_AT(PhiT, i, l) * f;
+    }
+    for (i = 0; i < NW; ++i)
+        y[i] += alpha * s[i];
+}
+
 /* ---------------------------------------------------------------- residuals */
 
 /* The data parts of the residual scaling (constant during a solve): |g|, |gN| into
@@ -537,7 +593,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
             unicycle_lai_axpy(NW, UNICYCLE_R(1.0), in->g[k], h);
             for (i = 0; i < NW; ++i)
                 a[i] = i < NX ? ws->lam[k * NX + i] : UNICYCLE_R(0.0);
-            unicycle_lai_gemv_t(NX, NW, -UNICYCLE_R(1.0), in->Phi[k], NX, ws->lam + (k + 1) * NX, UNICYCLE_R(1.0), a);
+            phit_gemv(QP_PHIT(ws, in, k), -UNICYCLE_R(1.0), ws->lam + (k + 1) * NX, a);
             /* r_dyn_{k+1} = x_{k+1} - Phi_k w_k - b_k */
             unicycle_lai_gemv_n(NX, NW, -UNICYCLE_R(1.0), in->Phi[k], NX, w, UNICYCLE_R(0.0), rd);
             absmax_acc(NX, rd, m_pw);
@@ -662,7 +718,7 @@ static void phit_mv(const unicycle_real *restrict PhiT, const unicycle_real *res
     }
 }
 
-/* The stage update of the Riccati recursion: PhiT = Phi' (nw x nx), WT = Phi' P (nw x nx,
+/* The stage update of the Riccati recursion from PhiT = Phi' (nw x nx): WT = Phi' P (nw x nx,
  * P symmetric stored full), the lower triangle of M = H + WT Phi (the upper one is never
  * read), and with terminal equalities Gam = Phi' G (nw x ne). The inner loops run down a
  * column (vectorised where the target has vectors); the ragged columns of the triangle are
@@ -670,13 +726,10 @@ static void phit_mv(const unicycle_real *restrict PhiT, const unicycle_real *res
  * bench/README.md); on a scalar FPU (Cortex-M7) the triangle saves 45 % of the products. */
 static void qp_stage_update(const unicycle_real *restrict Phi, const unicycle_real *restrict P,
                             const unicycle_real *restrict G, const unicycle_real *restrict H,
-                            unicycle_real *restrict PhiT, unicycle_real *restrict WT, unicycle_real *restrict M,
+                            const unicycle_real *restrict PhiT, unicycle_real *restrict WT, unicycle_real *restrict M,
                             unicycle_real *restrict Gam)
 {
     int i, j, l;
-    for (l = 0; l < NX; ++l)
-        for (i = 0; i < NW; ++i)
-            PhiT[i + l * NW] = Phi[l + i * NX];
     for (j = 0; j < NX; ++j)
         phit_mv(PhiT, P + j * NX, WT + j * NW);
     UNROLL
@@ -717,10 +770,9 @@ static unicycle_real hessian_scale(const unicycle_qp_in *in)
 static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 {
     int k, i, j;
-    unicycle_real *PhiT = ws->work;              /* NW x NX: Phi_k' */
-    unicycle_real *WT = ws->work + NX * NW;      /* NW x NX: Phi_k' P_{k+1} */
-    unicycle_real *Gam = ws->work + 2 * NX * NW; /* NW x NE: Phi_k' G_{k+1} */
-    unicycle_real *Pf = Gam + NW * NE1;          /* NX x NX: P_{k+1} unpacked */
+    unicycle_real *WT = ws->work + (1 - UNICYCLE_QP_PHIT) * NX * NW;  /* NW x NX: Phi_k' P_{k+1} */
+    unicycle_real *Gam = ws->work + (2 - UNICYCLE_QP_PHIT) * NX * NW; /* NW x NE: Phi_k' G_{k+1} */
+    unicycle_real *Pf = Gam + NW * NE1;                            /* NX x NX: P_{k+1} unpacked */
     const unicycle_real delta = ws->delta;
     unicycle_real pmag, pnext;
     int b;
@@ -772,6 +824,13 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     for (k = N - 1; k >= 0; --k) {
         unicycle_real *M = ws->M;
         const unicycle_real *Phi = in->Phi[k];
+#if UNICYCLE_QP_PHIT
+        const unicycle_real *PhiT = ws->PhiT[k];
+        const unicycle_real *cs2 = ws->phi_cs2[k];
+#else
+        unicycle_real *PhiT = ws->work; /* Phi_k' and the squared column sums, formed here */
+        unicycle_real cs2[NW];
+#endif
         unicycle_real q[NSI], dg[NW];
         unicycle_real Lu[NU1 * NU1];
         unicycle_real *K = ws->K[k];
@@ -781,6 +840,9 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         unicycle_real mxx = UNICYCLE_R(0.0), pabs;
         int l = 0;
 
+#if !UNICYCLE_QP_PHIT
+        phi_stage_copy(Phi, PhiT, cs2);
+#endif
         /* barrier weights of the stage's rows (0 on the unbounded rows) */
         for (i = 0; i < NSI; ++i)
             q[i] = UNICYCLE_R(0.0);
@@ -794,19 +856,12 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         for (j = 0; j < NG; ++j)
             for (i = 0; i < NW; ++i)
                 dg[i] += q[NW + j] * in->C[k][j + i * NG] * in->C[k][j + i * NG];
-        for (j = 0; j < NU; ++j) {
-            /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P */
-            unicycle_real colsum = UNICYCLE_R(0.0);
-            for (i = 0; i < NX; ++i)
-                colsum += unicycle_fabs(Phi[i + (NX + j) * NX]);
-            ws->noise[j] = RICCATI_EPS * (unicycle_fabs(dg[NX + j]) + colsum * colsum * dmax(pmax, pmag));
-        }
-        for (j = 0; j < NX; ++j) {
-            unicycle_real colsum = UNICYCLE_R(0.0);
-            for (i = 0; i < NX; ++i)
-                colsum += unicycle_fabs(Phi[i + j * NX]);
-            mxx = dmax(mxx, unicycle_fabs(dg[j]) + colsum * colsum * pmax);
-        }
+        /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P (cs2: the
+         * squared column sums of |Phi_k|) */
+        for (j = 0; j < NU; ++j)
+            ws->noise[j] = RICCATI_EPS * (unicycle_fabs(dg[NX + j]) + cs2[NX + j] * dmax(pmax, pmag));
+        for (j = 0; j < NX; ++j)
+            mxx = dmax(mxx, unicycle_fabs(dg[j]) + cs2[j] * pmax);
         /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
          * read), Gam = Phi' G_{k+1} */
         qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam);
@@ -920,7 +975,6 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         }
     }
     for (k = N - 1; k >= 0; --k) {
-        const unicycle_real *Phi = in->Phi[k];
         const unicycle_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
         const unicycle_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
         unicycle_real *xk = sp + k * NW, *kv = xk + NX, *pk = sl + k * NX;
@@ -930,7 +984,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         spmv_packed(ws->P[k + 1], UNICYCLE_R(1.0), c, tv);
         for (i = 0; i < NW; ++i)
             m[i] = -xk[i];
-        unicycle_lai_gemv_t(NX, NW, UNICYCLE_R(1.0), Phi, NX, tv, UNICYCLE_R(1.0), m);
+        phit_gemv(QP_PHIT(ws, in, k), UNICYCLE_R(1.0), tv, m);
         if (NE > 0)
             unicycle_lai_gemv_t(NX, NE, UNICYCLE_R(1.0), ws->G[k + 1], NX, c, UNICYCLE_R(1.0), e);
         /* p_k = m_x - K' m_u; e -= KN' m_u; kv = M_uu^{-1} m_u (off the recursion's chain) */
@@ -1005,7 +1059,7 @@ static void newton_residual(unicycle_qp_workspace *ws, const unicycle_qp_in *in,
         unicycle_lai_symv_l(NW, -UNICYCLE_R(1.0), in->H[k], NW, sp + k * NW, UNICYCLE_R(1.0), o);
         for (i = 0; i < NX; ++i)
             o[i] -= sl[k * NX + i];
-        unicycle_lai_gemv_t(NX, NW, UNICYCLE_R(1.0), in->Phi[k], NX, sl + (k + 1) * NX, UNICYCLE_R(1.0), o);
+        phit_gemv(QP_PHIT(ws, in, k), UNICYCLE_R(1.0), sl + (k + 1) * NX, o);
     }
     {
         unicycle_real *o = os + N * NW;
@@ -1938,6 +1992,9 @@ static int qp_prepare(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_i
     ws->pivot_floors = 0;
     ws->penalty = 0;
     ws->n_fact = 0;
+#if UNICYCLE_QP_PHIT
+    transpose_phi(ws, in);
+#endif
     bounds = setup_bounds(ws, in);
     if (bounds == 2) {
         /* more bounded rows than the workspace was generated for */

@@ -187,8 +187,23 @@
 #define UNICYCLE_QP_NUP (UNICYCLE_QP_NU1 * (UNICYCLE_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define UNICYCLE_QP_NXP (UNICYCLE_NX * (UNICYCLE_NX + 1) / 2)
-/* Scratch of the factorisation: Phi', P Phi, Phi'G and one unpacked P. */
-#define UNICYCLE_QP_NWORK (2 * UNICYCLE_NX * UNICYCLE_QP_NW + UNICYCLE_QP_NW * UNICYCLE_QP_NE1 + UNICYCLE_NX * UNICYCLE_NX)
+/* UNICYCLE_QP_PHIT 1: the workspace keeps Phi_k' and the squared column sums of |Phi_k| for
+ * the whole solve (N nw (nx + 1) reals), so that the products with Phi_k' run down
+ * contiguous columns (vectorised where doubles come in vectors) and the factorisation
+ * neither transposes nor sums. 0 (the default on 32-bit ARM: a scalar FPU and little RAM):
+ * both are formed per stage in every factorisation. The same results either way; define it
+ * to override. */
+#ifndef UNICYCLE_QP_PHIT
+#if defined(__arm__) && !defined(__aarch64__)
+#define UNICYCLE_QP_PHIT 0
+#else
+#define UNICYCLE_QP_PHIT 1
+#endif
+#endif
+/* Scratch of the factorisation: Phi' (unless kept, UNICYCLE_QP_PHIT), Phi'P, Phi'G and one
+ * unpacked P. */
+#define UNICYCLE_QP_NWORK                                                                                       \
+    ((2 - UNICYCLE_QP_PHIT) * UNICYCLE_NX * UNICYCLE_QP_NW + UNICYCLE_QP_NW * UNICYCLE_QP_NE1 + UNICYCLE_NX * UNICYCLE_NX)
 
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if UNICYCLE_QP_NINEQ < 65536
@@ -354,6 +369,10 @@ typedef struct {
     unicycle_real dz_lo[UNICYCLE_QP_NB];
     unicycle_real dz_up[UNICYCLE_QP_NB];
     /* Riccati factorisation: condensed stage Hessians and value-function data */
+#if UNICYCLE_QP_PHIT
+    unicycle_real PhiT[UNICYCLE_N][UNICYCLE_QP_NW * UNICYCLE_NX]; /* Phi_k' (nw x nx), formed once per solve */
+    unicycle_real phi_cs2[UNICYCLE_N][UNICYCLE_QP_NW];         /* squared column sums of |Phi_k|, the same */
+#endif
     unicycle_real M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];             /* value function Hessians, packed lower */
     unicycle_real G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];  /* value function x-nu coupling */
