@@ -1926,6 +1926,11 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
                 break;
             }
             n_al += 1;
+            if (s->settings.regularization == DOPUS_REG_NONE) {
+                /* nothing to regularise: the sum straight into the slot, no copy */
+                dopus_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, slot->Ht);
+                continue;
+            }
             dopus_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
             rc = dopus_regularize(s, DOPUS_NW, s->mem.ev.tmp_A);
             if (rc == DOPUS_OK) {

@@ -1926,6 +1926,11 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
                 break;
             }
             n_al += 1;
+            if (s->settings.regularization == ROBOT_ARM_REG_NONE) {
+                /* nothing to regularise: the sum straight into the slot, no copy */
+                robot_arm_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, slot->Ht);
+                continue;
+            }
             robot_arm_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
             rc = robot_arm_regularize(s, ROBOT_ARM_NW, s->mem.ev.tmp_A);
             if (rc == ROBOT_ARM_OK) {

@@ -1926,6 +1926,11 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
                 break;
             }
             n_al += 1;
+            if (s->settings.regularization == UNICYCLE_REG_NONE) {
+                /* nothing to regularise: the sum straight into the slot, no copy */
+                unicycle_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, slot->Ht);
+                continue;
+            }
             unicycle_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
             rc = unicycle_regularize(s, UNICYCLE_NW, s->mem.ev.tmp_A);
             if (rc == UNICYCLE_OK) {
