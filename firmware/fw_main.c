@@ -262,7 +262,11 @@ static double instruction_clock(void *ctx)
     }
     started = 1;
     last = now;
-    return (double)total * (double)FW_INSTRUCTIONS_PER_TICK;
+    /* the 64-bit count as two 32-bit halves: the FPU converts those (VCVT), a 64-bit integer
+     * would go through the C library's software conversion at every phase switch; exact,
+     * as is the count (below 2^53) */
+    return ((double)(uint32_t)(total >> 32) * 4294967296.0 + (double)(uint32_t)total) *
+           (double)FW_INSTRUCTIONS_PER_TICK;
 }
 
 /* Set up the solver with `settings` (the caller's choices) and a time budget of `budget`

@@ -34,16 +34,17 @@ static dopus_real dopus_lm_hessian_scale(const dopus_ring *ring, const dopus_rea
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
  * out) has control pivots above DOPUS_LM_PIVOT_REL h.
  *
- * Every product runs down whole columns of fixed length (vectorised, no reductions):
- * W = Phi' P by columns over the transposed copy PhiT, then Z = H + lm I + W Phi by whole
- * columns (its upper triangle is computed and never read: at these sizes whole columns are
- * cheaper than the ragged lower triangle, as in the QP's stage update). */
+ * Per stage, Y = P Phi runs down whole columns of P (vectorised, no reductions, Phi read in
+ * its stored layout: no transposed copy), then only the lower triangle of
+ * Z = H + lm I + Phi' Y, each entry a dot product of two contiguous columns of length nx
+ * (Phi's column r and Y's column j): about half the multiply-adds of the full Z, and on an
+ * in-order core without vector units (the Cortex-M) the cost is the multiply-adds and their
+ * loads. The Riccati update writes P's lower triangle and mirrors it. */
 static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dopus_real *A_N, dopus_real lm,
                            dopus_real *work)
 {
     const dopus_real tol = DOPUS_LM_PIVOT_REL * st->scale;
-    dopus_real *P = work, *W = work + DOPUS_NX * DOPUS_NX, *Z = W + DOPUS_NW * DOPUS_NX;
-    dopus_real *PhiT = Z + DOPUS_NW * DOPUS_NW;
+    dopus_real *P = work, *Y = work + DOPUS_NX * DOPUS_NX, *Z = Y + DOPUS_NX * DOPUS_NW;
     dopus_real v;
     int k, i, j, l;
     for (j = 0; j < DOPUS_NX; ++j) {
@@ -56,41 +57,35 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
     for (k = DOPUS_N - 1; k >= 0; --k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(ring, k);
         const dopus_real *H = slot->Ht, *Phi = slot->Phit;
-        for (l = 0; l < DOPUS_NX; ++l) {
-            for (i = 0; i < DOPUS_NW; ++i) {
-                PhiT[i + l * DOPUS_NW] = Phi[l + i * DOPUS_NX];
-            }
-        }
-        /* W = Phi' P (nw x nx) */
-        for (j = 0; j < DOPUS_NX; ++j) {
-            dopus_real col[DOPUS_NW];
-            for (i = 0; i < DOPUS_NW; ++i) {
+        /* Y = P Phi (nx x nw), column by column */
+        for (j = 0; j < DOPUS_NW; ++j) {
+            dopus_real col[DOPUS_NX];
+            for (i = 0; i < DOPUS_NX; ++i) {
                 col[i] = DOPUS_R(0.0);
             }
             for (l = 0; l < DOPUS_NX; ++l) {
-                const dopus_real f = P[l + j * DOPUS_NX];
-                for (i = 0; i < DOPUS_NW; ++i) {
-                    col[i] += PhiT[i + l * DOPUS_NW] * f;
+                const dopus_real f = Phi[l + j * DOPUS_NX];
+                for (i = 0; i < DOPUS_NX; ++i) {
+                    col[i] += P[i + l * DOPUS_NX] * f;
                 }
             }
-            for (i = 0; i < DOPUS_NW; ++i) {
-                W[i + j * DOPUS_NW] = col[i];
+            for (i = 0; i < DOPUS_NX; ++i) {
+                Y[i + j * DOPUS_NX] = col[i];
             }
         }
-        /* Z = H + lm I + W Phi (lower triangle read) */
+        /* Z = H + lm I + Phi' Y, lower triangle */
         for (j = 0; j < DOPUS_NW; ++j) {
-            dopus_real col[DOPUS_NW];
-            for (i = 0; i < DOPUS_NW; ++i) {
-                col[i] = H[i + j * DOPUS_NW];
-            }
+            dopus_real y[DOPUS_NX]; /* Y's column j, held in registers across the column of Z */
             for (l = 0; l < DOPUS_NX; ++l) {
-                const dopus_real f = Phi[l + j * DOPUS_NX];
-                for (i = 0; i < DOPUS_NW; ++i) {
-                    col[i] += W[i + l * DOPUS_NW] * f;
-                }
+                y[l] = Y[l + j * DOPUS_NX];
             }
-            for (i = 0; i < DOPUS_NW; ++i) {
-                Z[i + j * DOPUS_NW] = col[i];
+            for (i = j; i < DOPUS_NW; ++i) {
+                const dopus_real *ph = Phi + i * DOPUS_NX;
+                v = H[i + j * DOPUS_NW];
+                for (l = 0; l < DOPUS_NX; ++l) {
+                    v += ph[l] * y[l];
+                }
+                Z[i + j * DOPUS_NW] = v;
             }
             Z[j + j * DOPUS_NW] += lm;
         }

@@ -25,8 +25,8 @@
 #define DOPUS_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
 #define DOPUS_LM_KKT_REL DOPUS_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
 
-/* Scratch of the convexity test (P, Phi' P, the condensed block and Phi'). */
-#define DOPUS_LM_WORK (DOPUS_NX * DOPUS_NX + 2 * DOPUS_NX * DOPUS_NW + DOPUS_NW * DOPUS_NW)
+/* Scratch of the convexity test (P, P Phi and the condensed block). */
+#define DOPUS_LM_WORK (DOPUS_NX * DOPUS_NX + DOPUS_NX * DOPUS_NW + DOPUS_NW * DOPUS_NW)
 
 typedef struct {
     dopus_real lm;       /* the term of the next QP */

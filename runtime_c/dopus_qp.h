@@ -222,9 +222,11 @@ enum dopus_qp_status {
     DOPUS_QP_NUMERICAL = 4,         /* factorisation / step failure */
     DOPUS_QP_INVALID_INPUT = 5,     /* NaN or Inf in data, lb = +inf, ub = -inf, NULL ptr,
                                        more bounded rows than DOPUS_QP_NB */
-    DOPUS_QP_STALLED = 6            /* no progress in the KKT residuals nor towards an
+    DOPUS_QP_STALLED = 6,           /* no progress in the KKT residuals nor towards an
                                        infeasibility certificate for 10 iterations (before
                                        the limit); best point returned */
+    DOPUS_QP_DEADLINE = 7           /* cut by settings.deadline (settings.clock): one more
+                                       iteration would have passed it; best point returned */
 };
 
 typedef struct {
@@ -237,6 +239,17 @@ typedef struct {
     int active_set;   /* with warm_start: the active-set start (see the header comment) with
                           at most this many factorisations before the interior point; 0 (the
                           default): the interior point alone */
+    /* A deadline (optional; clock NULL, the default: none). clock(clock_ctx) reads the
+     * caller's clock (seconds, instructions, ...: any unit, increasing). Before each
+     * factorisation of the solve (an interior-point iteration or a sweep of the active-set
+     * start) the clock is read and the solve stops with DOPUS_QP_DEADLINE and its best point
+     * when now plus the price of one iteration would pass `deadline`. The price is the
+     * largest time between two reads of this solve, and `iter_price` (>= 0, the caller's
+     * estimate) before the first such reading. */
+    double (*clock)(void *clock_ctx);
+    void *clock_ctx;
+    double deadline;
+    double iter_price;
 } dopus_qp_settings;
 
 typedef struct {

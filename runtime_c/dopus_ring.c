@@ -72,27 +72,36 @@ void dopus_ring_clear_step(dopus_stage_slot *slot)
 
 void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_real *phi, dopus_real *g)
 {
+    /* the step in locals: the outputs might alias the slot for the compiler, which would
+     * then load the step again for every row */
+    dopus_real dw[DOPUS_NW], dlam[DOPUS_NX], dmu_g[DOPUS_DIM(DOPUS_NG)];
     int i, j;
+    for (j = 0; j < DOPUS_NW; ++j)
+        dw[j] = slot->dw[j];
+    for (j = 0; j < DOPUS_NX; ++j)
+        dlam[j] = slot->dlam[j];
+    for (j = 0; j < DOPUS_NG; ++j)
+        dmu_g[j] = slot->dmu_g[j];
     for (i = 0; i < DOPUS_NW; ++i) {
         dopus_real hd = DOPUS_R(0.0), pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
         for (j = 0; j < DOPUS_NW; ++j)
-            hd += slot->Ht[i + j * DOPUS_NW] * slot->dw[j];
+            hd += slot->Ht[i + j * DOPUS_NW] * dw[j];
         for (j = 0; j < DOPUS_NX; ++j)
-            pl += slot->Phit[j + i * DOPUS_NX] * slot->dlam[j];
+            pl += slot->Phit[j + i * DOPUS_NX] * dlam[j];
         for (j = 0; j < DOPUS_NG; ++j)
-            cm += slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] * slot->dmu_g[j];
+            cm += slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] * dmu_g[j];
         F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
     }
     for (i = 0; i < DOPUS_NX; ++i) {
         dopus_real pd = DOPUS_R(0.0);
         for (j = 0; j < DOPUS_NW; ++j)
-            pd += slot->Phit[i + j * DOPUS_NX] * slot->dw[j];
+            pd += slot->Phit[i + j * DOPUS_NX] * dw[j];
         phi[i] = slot->phi[i] + pd;
     }
     for (i = 0; i < DOPUS_NG; ++i) {
         dopus_real cd = DOPUS_R(0.0);
         for (j = 0; j < DOPUS_NW; ++j)
-            cd += slot->Ct[i + j * DOPUS_DIM(DOPUS_NG)] * slot->dw[j];
+            cd += slot->Ct[i + j * DOPUS_DIM(DOPUS_NG)] * dw[j];
         g[i] = slot->g[i] + cd;
     }
 }

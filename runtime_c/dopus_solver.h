@@ -386,8 +386,10 @@ enum dopus_flag {
                                             model was not finite at the re-initialised iterate */
     DOPUS_FLAG_MEASUREMENT_UNUSABLE = 64, /* the model is not finite at the (finite) measurement:
                                             handled as a missing one */
-    DOPUS_FLAG_STALLED = 128              /* the KKT proxy stalled high: a recovery phase began
+    DOPUS_FLAG_STALLED = 128,             /* the KKT proxy stalled high: a recovery phase began
                                              without a re-initialisation */
+    DOPUS_FLAG_QP_CUT = 256               /* the budget's deadline cut the feedback's QP: its best
+                                             point is the step (algorithm.md section 14) */
 };
 
 /* Safety constants (docs/algorithm.md section 9; the divergence box and KKT bound are in
@@ -415,8 +417,10 @@ enum dopus_budget_unit {
 /* Anytime constants (docs/algorithm.md section 14). */
 #define DOPUS_ANYTIME_TOL DOPUS_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
 #define DOPUS_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
-#define DOPUS_ADAPTIVE_ETA DOPUS_R(0.1)          /* default eta of adaptive M */
-#define DOPUS_WORK_QP DOPUS_N                    /* work units of a QP solve */
+/* a feedback QP cut after iterations is its step when its scaled residuals are at most this */
+#define DOPUS_ANYTIME_CUT_MERIT DOPUS_R(1e-2)
+#define DOPUS_ADAPTIVE_ETA DOPUS_R(0.1) /* default eta of adaptive M */
+#define DOPUS_WORK_QP DOPUS_N           /* work units of a QP solve */
 
 /* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
  * section 4, feedback; dopus_qp.h), the distance of the measurement from the predicted
@@ -484,7 +488,9 @@ typedef struct {
     double cost_head;     /* step 3: stage N-1 and the terminal node */
     double cost_al;       /* one stage's cost-Hessian refresh (step 5) */
     double used;          /* budget used by the last instant */
-    int qp_cap;           /* > 0: the feedback QP's iteration cap of a time budget */
+    double qp_deadline;   /* the QP's deadline on the budget's clock (qp_timed) */
+    double qp_price;      /* the QP's first estimate of one iteration (qp_timed) */
+    int qp_timed;         /* 1: the next QP solves stop at qp_deadline (a time budget) */
     int extra_iterations; /* extra iterations of the last prepare */
     int instant_stages;   /* stages re-linearised in the last instant */
     int prepared_extra;   /* the prepared QP comes from extra iterations (the feedback keeps lm) */

@@ -84,6 +84,11 @@ int dopus_timer_switch(dopus_timer *tm, int phase)
     if (tm->locked) {
         return phase;
     }
+    if (phase == prev && phase >= 0) {
+        /* no switch: the running phase keeps accumulating, no clock reading needed (the
+         * switch to -1 at the end of a call always reads it) */
+        return prev;
+    }
     now = dopus_timer_now(tm);
     if (prev >= 0 && prev < DOPUS_N_PHASES) {
         tm->t[prev] += now - tm->mark;

@@ -201,6 +201,40 @@ def test_c_equals_reference_with_the_gradients_cut(robot_disc, robot_solution, b
     assert r.budget_used == budget < 2 * N + 4    # every instant spent its budget, below one iteration
 
 
+def test_c_equals_reference_with_the_qp_cut(robot_disc, robot_solution):
+    """A work budget below the least an instant costs (N + 4 units): the feedback's QP would
+    pass its deadline (the budget less the least prepare, 4 units) at its first factorisation,
+    so it is cut there and its iterate 0 is the step (docs/algorithm.md section 14): the
+    warm start, a zero step from the shifted plan with x_0 moved to the measurement and the
+    multipliers floored on their bounds' sides. Both backends cut every instant (flag qp_cut,
+    QP status deadline, no failed instant) and agree to round-off; the control is then the
+    shifted plan's, the control of the instant before at the next stage (clipped)."""
+    N = robot_disc.N
+    c, r = pair(robot_disc, N + 2, M=1)
+    xhat = np.array(robot_disc.x0, dtype=float)
+    p0 = np.asarray(r.p[0], dtype=float)
+    for b in (c, r):
+        b.init(xhat, robot_solution[0])
+    u_next = None
+    for it in range(6):
+        if it == 1:
+            xhat = np.array(robot_disc.disturbance(xhat.copy()), dtype=float).reshape(-1)
+        uc, ur = c.feedback(xhat), r.feedback(xhat)
+        for b in (c, r):
+            assert b.status == 0 and "qp_cut" in b.flags, (it, b.flags)
+            assert b.qp_status == 7
+        if u_next is not None:
+            lo, up = np.asarray(robot_disc.lbu, float), np.asarray(robot_disc.ubu, float)
+            assert np.array_equal(ur, np.clip(u_next, lo, up))
+        e = max(rel_err(getattr(c, f), getattr(r, f)) for f in FIELDS)
+        assert e <= REL_TOL and rel_err(uc, ur) <= REL_TOL, (it, e)
+        for b in (c, r):
+            b.prepare()
+        assert c.work == r.work
+        u_next = np.array(r.u[0], dtype=float)     # the shifted plan's first control
+        xhat = np.array(robot_disc.stage_eval(xhat, ur, p0)[0], dtype=float).reshape(-1)
+
+
 def test_budget_bound_on_the_work_counter(robot_disc, robot_solution):
     """The bound of a budget on an independent count: the work counter's growth over each
     instant (feedback, prepare, extra iterations) stays within the budget, for budgets from the
@@ -228,3 +262,60 @@ def test_budget_bound_on_the_work_counter(robot_disc, robot_solution):
             xhat = np.array(robot_disc.stage_eval(xhat, u0, p0)[0], dtype=float).reshape(-1)
         assert max(grown) <= budget, (budget, grown)
         print(f"work budget {budget}: units per instant {grown}")
+
+
+def _deadline_solve(h, qp, deadline, iter_price=1.0, warm=None):
+    """The QP with a deadline on a deterministic clock (one unit per read of the clock: the QP
+    reads it once before each factorisation) after the plain solve set its data; returns the
+    solution, the info and the reads."""
+    reads = [0]
+
+    @h.ffi.callback("double(void *)")
+    def clock(_ctx):
+        reads[0] += 1
+        return float(reads[0])
+
+    h.solve(qp, tol=1e-10, max_iter=100, warm=warm)     # the data and settings in place
+    if warm is not None:
+        h._write_sol(warm)
+    st = h._set
+    st.clock, st.deadline, st.iter_price = clock, float(deadline), float(iter_price)
+    status = h.solve_again()
+    return h._read_sol(), h._read_info(status), reads[0]
+
+
+def test_qp_deadline_stops_at_the_iteration_it_leaves_room_for():
+    """dopus_qp_settings' deadline (docs/algorithm.md section 14): on a clock that reads 1, 2,
+    3, ... before each factorisation (the price of an iteration 1), a deadline of k + 1 stops
+    the interior point after k iterations with DOPUS_QP_DEADLINE and returns the point the
+    iteration limit k returns (its best iterate), bit for bit; a deadline far away changes
+    nothing (the iterates of the solve without a clock); the converged solution agrees with
+    Clarabel."""
+    from harness import qp_problems as P
+    from harness.qp_harness import build_qp_solver
+
+    sizes = (12, 4, 2, 1, 0, 1)
+    h = build_qp_solver(*sizes)
+    qp, _ = P.make_qp(np.random.default_rng(7), *sizes, p_active=0.4)
+    plain, info = h.solve(qp, tol=1e-10, max_iter=100)
+    assert info["status"] == "solved" and info["iterations"] >= 5
+    _, ref = P.solve_clarabel(qp)
+    assert max(P.compare(plain, ref).values()) <= 1e-6
+    far, info_far, reads = _deadline_solve(h, qp, 1e9)
+    assert info_far["status"] == "solved" and info_far["iterations"] == info["iterations"]
+    assert reads == info["iterations"]                  # one read per factorisation
+    for key in plain:
+        assert np.array_equal(far[key], plain[key]), key
+    for k in (1, 2, info["iterations"] - 2):
+        cut, info_cut, _ = _deadline_solve(h, qp, k + 1)
+        capped, info_cap = h.solve(qp, tol=1e-10, max_iter=k)
+        assert info_cut["status"] == "deadline" and info_cap["status"] == "max_iter"
+        assert info_cut["iterations"] == info_cap["iterations"] == k
+        for key in capped:
+            assert np.array_equal(cut[key], capped[key]), (k, key)
+    # no reading yet: iter_price prices the first iteration (a deadline before it: iterate 0)
+    cut, info_cut, reads = _deadline_solve(h, qp, 1.5, iter_price=1.0)
+    capped, _ = h.solve(qp, tol=1e-10, max_iter=0)
+    assert info_cut["status"] == "deadline" and info_cut["iterations"] == 0 and reads == 1
+    for key in capped:
+        assert np.array_equal(cut[key], capped[key]), key

@@ -40,6 +40,9 @@ from .qp import QPError, free_initial_state, solve_qp_reference
 
 # the QP solution arrays whose finiteness a step needs
 FIELDS_QP = ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu")
+#: the C QP's floor of a warm start's multipliers (WARM_FLOOR_Z of runtime_c/dopus_qp.c): the
+#: point of a QP cut by its deadline before its first iteration (section 14)
+QP_WARM_FLOOR_Z = 1e-2
 
 __all__ = ["DopusError", "ReferenceDopus", "regularize", "EPS_RHO", "FLAGS"]
 
@@ -210,6 +213,7 @@ class ReferenceDopus:
         self.active_set_start = True    # False inside a globalised step: the QP from scratch
         self.work = 0.0
         self._instant_start = 0.0
+        self._qp_deadline = None      # the deadline of the QPs of an instant (section 14)
         self._cost_stage = self._cost_qp = self._cost_prepare = 0.0
         # one gradient of stages 0..N-2, step 3 of prepare, one stage-cost Hessian refresh
         # (step 5) and steps 6 and 7: the estimates of the anytime prepare (section 14)
@@ -672,6 +676,40 @@ class ReferenceDopus:
         # the QP is attempted: a prepare (with its shift) is due, whatever the outcome
         self._prepare_due, self._shifted = True, False
         t1 = time.perf_counter()
+        # the QPs of the feedback stop where the least prepare still fits (section 14)
+        self._qp_deadline = (self._instant_start + self.budget - self._prepare_floor()
+                             if self._budget_on() else None)
+        try:
+            sol, failure, retries = self._feedback_qps(xhat0, xhat_prev)
+        finally:
+            self._qp_deadline = None
+        cut = sol is not None and failure in (None, "diverged") and bool(sol.get("cut", False))
+        if cut:
+            self._flag("qp_cut")
+        if isinstance(failure, DopusError):
+            raise self._feedback_failed(failure.status_name, str(failure)) from None
+        if isinstance(failure, QPError):
+            exc = failure
+            self.qp_status = status_code_qp(exc.qp_status)
+            self._infeasible_row = self._row_info(getattr(exc, "row", None))
+            msg = f"feedback: {exc}; QP status {self.qp_status} ({exc.qp_status})"
+            if self.qp_infeasible_row is not None:
+                msg += "; " + describe_qp_row(self.disc, self.qp_infeasible_row)
+            raise self._feedback_failed("qp", msg, exc.qp_status) from None
+        self.qp_status = status_code_qp("deadline" if cut else "solved")
+        self.qp_iterations = int(sol.get("iterations", 0))
+        self.qp_factorizations = int(sol.get("factorizations", 0))
+        t2 = time.perf_counter()
+        if failure == "nonfinite":
+            raise self._feedback_failed("qp", "feedback: the QP solution is not finite", "solved")
+        if failure == "diverged":
+            raise self._feedback_failed("diverged", "feedback: the QP step leaves the problem's scale box (or is "
+                                        "not finite); no step, the fallback control is returned")
+        return self._feedback_step_taken(sol, retries, t0, t1, t2)
+
+    def _feedback_qps(self, xhat0, xhat_prev):
+        """The feedback's QP with its retries and the recovery within the feedback (section 9).
+        Returns (solution, failure, retries)."""
         b0 = self._budget_now()
         sol, failure, retries = self._solve_with_retries(xhat0)
         self._cost_qp = self._budget_now() - b0
@@ -687,25 +725,10 @@ class ReferenceDopus:
                 raise self._feedback_failed("nonfinite_value", "feedback: the model is not finite at the measured "
                                             f"state {xhat0}: handled as a missing measurement")
             sol, failure, retries = self._feedback_recover(xhat0)
-        if isinstance(failure, DopusError):
-            raise self._feedback_failed(failure.status_name, str(failure)) from None
-        if isinstance(failure, QPError):
-            exc = failure
-            self.qp_status = status_code_qp(exc.qp_status)
-            self._infeasible_row = self._row_info(getattr(exc, "row", None))
-            msg = f"feedback: {exc}; QP status {self.qp_status} ({exc.qp_status})"
-            if self.qp_infeasible_row is not None:
-                msg += "; " + describe_qp_row(self.disc, self.qp_infeasible_row)
-            raise self._feedback_failed("qp", msg, exc.qp_status) from None
-        self.qp_status = status_code_qp("solved")
-        self.qp_iterations = int(sol.get("iterations", 0))
-        self.qp_factorizations = int(sol.get("factorizations", 0))
-        t2 = time.perf_counter()
-        if failure == "nonfinite":
-            raise self._feedback_failed("qp", "feedback: the QP solution is not finite", "solved")
-        if failure == "diverged":
-            raise self._feedback_failed("diverged", "feedback: the QP step leaves the problem's scale box (or is "
-                                        "not finite); no step, the fallback control is returned")
+        return sol, failure, retries
+
+    def _feedback_step_taken(self, sol, retries, t0, t1, t2) -> np.ndarray:
+        """Steps 6 to 8 of a feedback whose QP gave a step (solved, or cut by the deadline)."""
         self._take_step(sol)
         self.qp_iterations = int(sol.get("iterations", 0))
         self.qp_factorizations = int(sol.get("factorizations", 0))
@@ -765,6 +788,45 @@ class ReferenceDopus:
         return {"x": x, "u": np.zeros((self.N, self.n_u)), "lam": self.lam, "nu": self.nu, "mu_g": self.mu_g,
                 "mu_r": self.mu_r, "mu_b": self.mu_b, "mu_bN": self.mu_bN}
 
+    def _qp_deadline_passed(self) -> bool:
+        """A QP of the instant would pass its deadline before its first iteration (section 14;
+        the C QP reads the budget's clock before each factorisation, and in work units its N
+        units have moved the counter already)."""
+        return self._qp_deadline is not None and self._budget_now() > self._qp_deadline
+
+    def _qp_deadline_near(self) -> bool:
+        """One more QP solve would pass the deadline at once (work units: its N units; in time
+        the reference has no price of a QP iteration: 0)."""
+        nxt = self.N if self.budget_unit == "work" else 0.0
+        return self._qp_deadline is not None and self._budget_now() + nxt > self._qp_deadline
+
+    def _qp_cut_point(self, qp: dict) -> dict:
+        """The point of a QP cut by its deadline before its first iteration (section 14): the C
+        QP's iterate 0 from the warm start (dopus_qp.c, initial_point): the warm-start point with
+        the multiplier of each bounded row floored on its sides, max(mu, f) on a finite upper
+        side less max(-mu, f) on a finite lower side (f = QP_WARM_FLOOR_Z), 0 on a row without
+        a finite side."""
+        w = self._qp_warm_point(qp)
+        f = QP_WARM_FLOOR_Z
+
+        def floored(mu, lo, up):
+            mu, lo, up = (np.asarray(a, dtype=float) for a in (mu, lo, up))
+            return (np.where(np.isfinite(up), np.maximum(mu, f), 0.0)
+                    - np.where(np.isfinite(lo), np.maximum(-mu, f), 0.0))
+
+        out = {k: np.array(v, dtype=float, copy=True) for k, v in w.items()}
+        out["mu_b"] = floored(w["mu_b"], qp["lbw"], qp["ubw"])
+        out["mu_b"][0, :self.nx] = 0.0
+        if self.ng > 0:
+            out["mu_g"] = floored(w["mu_g"], qp["lg"], qp["ug"])
+            u_free = ~np.any(np.asarray(qp["C"])[0][:, self.nx:] != 0.0, axis=1)
+            out["mu_g"][0, u_free] = 0.0     # rows of C_0 fixed by x0 (dopus_qp.h)
+        out["mu_bN"] = floored(w["mu_bN"], qp["lbxN"], qp["ubxN"])
+        if self.nr > 0:
+            out["mu_r"] = floored(w["mu_r"], qp["lr"], qp["ur"])
+        out.update(iterations=0, factorizations=0, cut=True)
+        return out
+
     def _solve_with_retries(self, xhat0):
         """The QP of the current iterate for xhat0, solved again with lm raised while it is not
         solved (section 10). Returns (solution, failure, retries): failure None, a QPError,
@@ -774,6 +836,10 @@ class ReferenceDopus:
         while True:
             sol = None
             self.work += self.N
+            if self._qp_deadline_passed():
+                # cut before its first iteration (section 14): the C QP's iterate 0
+                sol, failure = self._qp_cut_point(qp), None
+                break
             try:
                 # the first solve starts from the active set of the previous solution, as the C
                 # QP's warm start does for a QP the automatic lm made convex (capped by at most
@@ -789,8 +855,9 @@ class ReferenceDopus:
             except QPError as exc:
                 failure = exc
             # the automatic term (section 10): a QP not solved is solved again with lm raised
+            # (with a budget, while one more solve does not pass the deadline at once)
             if (failure is None or not self.lm_auto or retries >= _SAFETY["LM_RETRIES"]
-                    or not self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale):
+                    or not self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale or self._qp_deadline_near()):
                 break
             self._lm_raise()
             qp = self.qp_of_current(xhat0)

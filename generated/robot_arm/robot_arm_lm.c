@@ -34,16 +34,17 @@ static robot_arm_real robot_arm_lm_hessian_scale(const robot_arm_ring *ring, con
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
  * out) has control pivots above ROBOT_ARM_LM_PIVOT_REL h.
  *
- * Every product runs down whole columns of fixed length (vectorised, no reductions):
- * W = Phi' P by columns over the transposed copy PhiT, then Z = H + lm I + W Phi by whole
- * columns (its upper triangle is computed and never read: at these sizes whole columns are
- * cheaper than the ragged lower triangle, as in the QP's stage update). */
+ * Per stage, Y = P Phi runs down whole columns of P (vectorised, no reductions, Phi read in
+ * its stored layout: no transposed copy), then only the lower triangle of
+ * Z = H + lm I + Phi' Y, each entry a dot product of two contiguous columns of length nx
+ * (Phi's column r and Y's column j): about half the multiply-adds of the full Z, and on an
+ * in-order core without vector units (the Cortex-M) the cost is the multiply-adds and their
+ * loads. The Riccati update writes P's lower triangle and mirrors it. */
 static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *ring, const robot_arm_real *A_N, robot_arm_real lm,
                            robot_arm_real *work)
 {
     const robot_arm_real tol = ROBOT_ARM_LM_PIVOT_REL * st->scale;
-    robot_arm_real *P = work, *W = work + ROBOT_ARM_NX * ROBOT_ARM_NX, *Z = W + ROBOT_ARM_NW * ROBOT_ARM_NX;
-    robot_arm_real *PhiT = Z + ROBOT_ARM_NW * ROBOT_ARM_NW;
+    robot_arm_real *P = work, *Y = work + ROBOT_ARM_NX * ROBOT_ARM_NX, *Z = Y + ROBOT_ARM_NX * ROBOT_ARM_NW;
     robot_arm_real v;
     int k, i, j, l;
     for (j = 0; j < ROBOT_ARM_NX; ++j) {
@@ -56,41 +57,35 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
     for (k = ROBOT_ARM_N - 1; k >= 0; --k) {
         const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(ring, k);
         const robot_arm_real *H = slot->Ht, *Phi = slot->Phit;
-        for (l = 0; l < ROBOT_ARM_NX; ++l) {
-            for (i = 0; i < ROBOT_ARM_NW; ++i) {
-                PhiT[i + l * ROBOT_ARM_NW] = Phi[l + i * ROBOT_ARM_NX];
-            }
-        }
-        /* W = Phi' P (nw x nx) */
-        for (j = 0; j < ROBOT_ARM_NX; ++j) {
-            robot_arm_real col[ROBOT_ARM_NW];
-            for (i = 0; i < ROBOT_ARM_NW; ++i) {
+        /* Y = P Phi (nx x nw), column by column */
+        for (j = 0; j < ROBOT_ARM_NW; ++j) {
+            robot_arm_real col[ROBOT_ARM_NX];
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
                 col[i] = ROBOT_ARM_R(0.0);
             }
             for (l = 0; l < ROBOT_ARM_NX; ++l) {
-                const robot_arm_real f = P[l + j * ROBOT_ARM_NX];
-                for (i = 0; i < ROBOT_ARM_NW; ++i) {
-                    col[i] += PhiT[i + l * ROBOT_ARM_NW] * f;
+                const robot_arm_real f = Phi[l + j * ROBOT_ARM_NX];
+                for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                    col[i] += P[i + l * ROBOT_ARM_NX] * f;
                 }
             }
-            for (i = 0; i < ROBOT_ARM_NW; ++i) {
-                W[i + j * ROBOT_ARM_NW] = col[i];
+            for (i = 0; i < ROBOT_ARM_NX; ++i) {
+                Y[i + j * ROBOT_ARM_NX] = col[i];
             }
         }
-        /* Z = H + lm I + W Phi (lower triangle read) */
+        /* Z = H + lm I + Phi' Y, lower triangle */
         for (j = 0; j < ROBOT_ARM_NW; ++j) {
-            robot_arm_real col[ROBOT_ARM_NW];
-            for (i = 0; i < ROBOT_ARM_NW; ++i) {
-                col[i] = H[i + j * ROBOT_ARM_NW];
-            }
+            robot_arm_real y[ROBOT_ARM_NX]; /* Y's column j, held in registers across the column of Z */
             for (l = 0; l < ROBOT_ARM_NX; ++l) {
-                const robot_arm_real f = Phi[l + j * ROBOT_ARM_NX];
-                for (i = 0; i < ROBOT_ARM_NW; ++i) {
-                    col[i] += W[i + l * ROBOT_ARM_NW] * f;
-                }
+                y[l] = Y[l + j * ROBOT_ARM_NX];
             }
-            for (i = 0; i < ROBOT_ARM_NW; ++i) {
-                Z[i + j * ROBOT_ARM_NW] = col[i];
+            for (i = j; i < ROBOT_ARM_NW; ++i) {
+                const robot_arm_real *ph = Phi + i * ROBOT_ARM_NX;
+                v = H[i + j * ROBOT_ARM_NW];
+                for (l = 0; l < ROBOT_ARM_NX; ++l) {
+                    v += ph[l] * y[l];
+                }
+                Z[i + j * ROBOT_ARM_NW] = v;
             }
             Z[j + j * ROBOT_ARM_NW] += lm;
         }

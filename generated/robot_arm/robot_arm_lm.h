@@ -25,8 +25,8 @@
 #define ROBOT_ARM_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
 #define ROBOT_ARM_LM_KKT_REL ROBOT_ARM_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
 
-/* Scratch of the convexity test (P, Phi' P, the condensed block and Phi'). */
-#define ROBOT_ARM_LM_WORK (ROBOT_ARM_NX * ROBOT_ARM_NX + 2 * ROBOT_ARM_NX * ROBOT_ARM_NW + ROBOT_ARM_NW * ROBOT_ARM_NW)
+/* Scratch of the convexity test (P, P Phi and the condensed block). */
+#define ROBOT_ARM_LM_WORK (ROBOT_ARM_NX * ROBOT_ARM_NX + ROBOT_ARM_NX * ROBOT_ARM_NW + ROBOT_ARM_NW * ROBOT_ARM_NW)
 
 typedef struct {
     robot_arm_real lm;       /* the term of the next QP */

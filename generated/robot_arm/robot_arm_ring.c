@@ -72,27 +72,36 @@ void robot_arm_ring_clear_step(robot_arm_stage_slot *slot)
 
 void robot_arm_ring_predict(const robot_arm_stage_slot *slot, robot_arm_real *F_w, robot_arm_real *phi, robot_arm_real *g)
 {
+    /* the step in locals: the outputs might alias the slot for the compiler, which would
+     * then load the step again for every row */
+    robot_arm_real dw[ROBOT_ARM_NW], dlam[ROBOT_ARM_NX], dmu_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
     int i, j;
+    for (j = 0; j < ROBOT_ARM_NW; ++j)
+        dw[j] = slot->dw[j];
+    for (j = 0; j < ROBOT_ARM_NX; ++j)
+        dlam[j] = slot->dlam[j];
+    for (j = 0; j < ROBOT_ARM_NG; ++j)
+        dmu_g[j] = slot->dmu_g[j];
     for (i = 0; i < ROBOT_ARM_NW; ++i) {
         robot_arm_real hd = ROBOT_ARM_R(0.0), pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0);
         for (j = 0; j < ROBOT_ARM_NW; ++j)
-            hd += slot->Ht[i + j * ROBOT_ARM_NW] * slot->dw[j];
+            hd += slot->Ht[i + j * ROBOT_ARM_NW] * dw[j];
         for (j = 0; j < ROBOT_ARM_NX; ++j)
-            pl += slot->Phit[j + i * ROBOT_ARM_NX] * slot->dlam[j];
+            pl += slot->Phit[j + i * ROBOT_ARM_NX] * dlam[j];
         for (j = 0; j < ROBOT_ARM_NG; ++j)
-            cm += slot->Ct[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NG)] * slot->dmu_g[j];
+            cm += slot->Ct[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NG)] * dmu_g[j];
         F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         robot_arm_real pd = ROBOT_ARM_R(0.0);
         for (j = 0; j < ROBOT_ARM_NW; ++j)
-            pd += slot->Phit[i + j * ROBOT_ARM_NX] * slot->dw[j];
+            pd += slot->Phit[i + j * ROBOT_ARM_NX] * dw[j];
         phi[i] = slot->phi[i] + pd;
     }
     for (i = 0; i < ROBOT_ARM_NG; ++i) {
         robot_arm_real cd = ROBOT_ARM_R(0.0);
         for (j = 0; j < ROBOT_ARM_NW; ++j)
-            cd += slot->Ct[i + j * ROBOT_ARM_DIM(ROBOT_ARM_NG)] * slot->dw[j];
+            cd += slot->Ct[i + j * ROBOT_ARM_DIM(ROBOT_ARM_NG)] * dw[j];
         g[i] = slot->g[i] + cd;
     }
 }

@@ -84,6 +84,11 @@ int robot_arm_timer_switch(robot_arm_timer *tm, int phase)
     if (tm->locked) {
         return phase;
     }
+    if (phase == prev && phase >= 0) {
+        /* no switch: the running phase keeps accumulating, no clock reading needed (the
+         * switch to -1 at the end of a call always reads it) */
+        return prev;
+    }
     now = robot_arm_timer_now(tm);
     if (prev >= 0 && prev < ROBOT_ARM_N_PHASES) {
         tm->t[prev] += now - tm->mark;

@@ -34,16 +34,17 @@ static unicycle_real unicycle_lm_hessian_scale(const unicycle_ring *ring, const 
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
  * out) has control pivots above UNICYCLE_LM_PIVOT_REL h.
  *
- * Every product runs down whole columns of fixed length (vectorised, no reductions):
- * W = Phi' P by columns over the transposed copy PhiT, then Z = H + lm I + W Phi by whole
- * columns (its upper triangle is computed and never read: at these sizes whole columns are
- * cheaper than the ragged lower triangle, as in the QP's stage update). */
+ * Per stage, Y = P Phi runs down whole columns of P (vectorised, no reductions, Phi read in
+ * its stored layout: no transposed copy), then only the lower triangle of
+ * Z = H + lm I + Phi' Y, each entry a dot product of two contiguous columns of length nx
+ * (Phi's column r and Y's column j): about half the multiply-adds of the full Z, and on an
+ * in-order core without vector units (the Cortex-M) the cost is the multiply-adds and their
+ * loads. The Riccati update writes P's lower triangle and mirrors it. */
 static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, const unicycle_real *A_N, unicycle_real lm,
                            unicycle_real *work)
 {
     const unicycle_real tol = UNICYCLE_LM_PIVOT_REL * st->scale;
-    unicycle_real *P = work, *W = work + UNICYCLE_NX * UNICYCLE_NX, *Z = W + UNICYCLE_NW * UNICYCLE_NX;
-    unicycle_real *PhiT = Z + UNICYCLE_NW * UNICYCLE_NW;
+    unicycle_real *P = work, *Y = work + UNICYCLE_NX * UNICYCLE_NX, *Z = Y + UNICYCLE_NX * UNICYCLE_NW;
     unicycle_real v;
     int k, i, j, l;
     for (j = 0; j < UNICYCLE_NX; ++j) {
@@ -56,41 +57,35 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
     for (k = UNICYCLE_N - 1; k >= 0; --k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(ring, k);
         const unicycle_real *H = slot->Ht, *Phi = slot->Phit;
-        for (l = 0; l < UNICYCLE_NX; ++l) {
-            for (i = 0; i < UNICYCLE_NW; ++i) {
-                PhiT[i + l * UNICYCLE_NW] = Phi[l + i * UNICYCLE_NX];
-            }
-        }
-        /* W = Phi' P (nw x nx) */
-        for (j = 0; j < UNICYCLE_NX; ++j) {
-            unicycle_real col[UNICYCLE_NW];
-            for (i = 0; i < UNICYCLE_NW; ++i) {
+        /* Y = P Phi (nx x nw), column by column */
+        for (j = 0; j < UNICYCLE_NW; ++j) {
+            unicycle_real col[UNICYCLE_NX];
+            for (i = 0; i < UNICYCLE_NX; ++i) {
                 col[i] = UNICYCLE_R(0.0);
             }
             for (l = 0; l < UNICYCLE_NX; ++l) {
-                const unicycle_real f = P[l + j * UNICYCLE_NX];
-                for (i = 0; i < UNICYCLE_NW; ++i) {
-                    col[i] += PhiT[i + l * UNICYCLE_NW] * f;
+                const unicycle_real f = Phi[l + j * UNICYCLE_NX];
+                for (i = 0; i < UNICYCLE_NX; ++i) {
+                    col[i] += P[i + l * UNICYCLE_NX] * f;
                 }
             }
-            for (i = 0; i < UNICYCLE_NW; ++i) {
-                W[i + j * UNICYCLE_NW] = col[i];
+            for (i = 0; i < UNICYCLE_NX; ++i) {
+                Y[i + j * UNICYCLE_NX] = col[i];
             }
         }
-        /* Z = H + lm I + W Phi (lower triangle read) */
+        /* Z = H + lm I + Phi' Y, lower triangle */
         for (j = 0; j < UNICYCLE_NW; ++j) {
-            unicycle_real col[UNICYCLE_NW];
-            for (i = 0; i < UNICYCLE_NW; ++i) {
-                col[i] = H[i + j * UNICYCLE_NW];
-            }
+            unicycle_real y[UNICYCLE_NX]; /* Y's column j, held in registers across the column of Z */
             for (l = 0; l < UNICYCLE_NX; ++l) {
-                const unicycle_real f = Phi[l + j * UNICYCLE_NX];
-                for (i = 0; i < UNICYCLE_NW; ++i) {
-                    col[i] += W[i + l * UNICYCLE_NW] * f;
-                }
+                y[l] = Y[l + j * UNICYCLE_NX];
             }
-            for (i = 0; i < UNICYCLE_NW; ++i) {
-                Z[i + j * UNICYCLE_NW] = col[i];
+            for (i = j; i < UNICYCLE_NW; ++i) {
+                const unicycle_real *ph = Phi + i * UNICYCLE_NX;
+                v = H[i + j * UNICYCLE_NW];
+                for (l = 0; l < UNICYCLE_NX; ++l) {
+                    v += ph[l] * y[l];
+                }
+                Z[i + j * UNICYCLE_NW] = v;
             }
             Z[j + j * UNICYCLE_NW] += lm;
         }

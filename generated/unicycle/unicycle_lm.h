@@ -25,8 +25,8 @@
 #define UNICYCLE_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
 #define UNICYCLE_LM_KKT_REL UNICYCLE_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
 
-/* Scratch of the convexity test (P, Phi' P, the condensed block and Phi'). */
-#define UNICYCLE_LM_WORK (UNICYCLE_NX * UNICYCLE_NX + 2 * UNICYCLE_NX * UNICYCLE_NW + UNICYCLE_NW * UNICYCLE_NW)
+/* Scratch of the convexity test (P, P Phi and the condensed block). */
+#define UNICYCLE_LM_WORK (UNICYCLE_NX * UNICYCLE_NX + UNICYCLE_NX * UNICYCLE_NW + UNICYCLE_NW * UNICYCLE_NW)
 
 typedef struct {
     unicycle_real lm;       /* the term of the next QP */

@@ -123,6 +123,10 @@ void unicycle_qp_settings_default(unicycle_qp_settings *settings)
     settings->warm_start = 0;
     settings->refine_steps = 1;
     settings->active_set = 0;
+    settings->clock = NULL;
+    settings->clock_ctx = NULL;
+    settings->deadline = 0.0;
+    settings->iter_price = 0.0;
 }
 
 unsigned long unicycle_qp_workspace_size(void)
@@ -1909,6 +1913,11 @@ typedef struct {
      * and the iteration that last reduced it by CERT_PROGRESS */
     unicycle_real best_cert;
     int cert_iter;
+    /* the deadline (settings.clock): the last read of the clock (have_read: one was made)
+     * and the price of one iteration */
+    double t_read;
+    double price;
+    int have_read;
 } qp_loop;
 
 /* ---------------------------------------------------------------- data, scales, start */
@@ -1926,6 +1935,24 @@ static void checked_settings(const unicycle_qp_settings *settings, unicycle_qp_s
         st->max_iter = 0;
     if (st->refine_steps < 0)
         st->refine_steps = 0;
+    if (!(st->iter_price >= 0.0))
+        st->iter_price = 0.0;
+}
+
+/* 1 when the caller's deadline leaves no room for one more iteration (settings.clock; 0
+ * without a clock). Read before each factorisation: the time since the last read is one
+ * iteration (or sweep) of this solve, and the price of the next is the largest of them. */
+static int qp_deadline_passed(qp_loop *L)
+{
+    double now;
+    if (L->st.clock == NULL)
+        return 0;
+    now = L->st.clock(L->st.clock_ctx);
+    if (L->have_read && now - L->t_read > L->price)
+        L->price = now - L->t_read;
+    L->t_read = now;
+    L->have_read = 1;
+    return now + L->price > L->st.deadline;
 }
 
 /* The info of a solve that stops before its first iterate. */
@@ -2021,6 +2048,9 @@ static int qp_prepare(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_i
     L->best_iter = 0;
     L->best_cert = INFINITY;
     L->cert_iter = 0;
+    L->t_read = 0.0;
+    L->price = L->st.iter_price;
+    L->have_read = 0;
     return QP_GO_ON;
 }
 
@@ -2372,10 +2402,11 @@ static int qp_result(const qp_loop *L, unicycle_qp_workspace *ws, const unicycle
     int keep_best;
     /* a failed factorisation or the iteration limit: the diverged dual iterate may prove
      * infeasibility as at a stall (qp_track_best) */
-    if ((status == UNICYCLE_QP_NUMERICAL || status == UNICYCLE_QP_MAX_ITER) &&
+    if ((status == UNICYCLE_QP_NUMERICAL || status == UNICYCLE_QP_MAX_ITER || status == UNICYCLE_QP_DEADLINE) &&
         primal_infeasible_at_tol(ws, in, r, L->data_scale, L->st.tol))
         status = UNICYCLE_QP_PRIMAL_INFEASIBLE;
-    keep_best = (status == UNICYCLE_QP_MAX_ITER || status == UNICYCLE_QP_STALLED || status == UNICYCLE_QP_NUMERICAL) &&
+    keep_best = (status == UNICYCLE_QP_MAX_ITER || status == UNICYCLE_QP_STALLED || status == UNICYCLE_QP_NUMERICAL ||
+                 status == UNICYCLE_QP_DEADLINE) &&
                 isfinite(L->best_merit) && !(merit(r) <= L->best_merit);
     if (info) {
         info->inertia_corrections = L->n_corr;
@@ -2634,6 +2665,8 @@ static int qp_active_set(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_q
     ws->penalty = 1;
     /* each sweep counts as an iteration of the solve (settings.max_iter) */
     while (L->as_sweeps < L->st.active_set && L->as_sweeps < L->st.max_iter && !solved) {
+        if (qp_deadline_passed(L))
+            break; /* the interior point stops at once with the warm start (its iterate 0) */
         ++L->as_sweeps;
         if (!as_sweep(L, ws, in, &r))
             break;
@@ -2692,6 +2725,10 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             continue;
         if (status != QP_GO_ON)
             break;
+        if (qp_deadline_passed(&L)) {
+            status = UNICYCLE_QP_DEADLINE;
+            break;
+        }
         trace_barrier_weights(ws, in, iter);
 
         floors_before = ws->pivot_floors;

@@ -72,27 +72,36 @@ void unicycle_ring_clear_step(unicycle_stage_slot *slot)
 
 void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, unicycle_real *phi, unicycle_real *g)
 {
+    /* the step in locals: the outputs might alias the slot for the compiler, which would
+     * then load the step again for every row */
+    unicycle_real dw[UNICYCLE_NW], dlam[UNICYCLE_NX], dmu_g[UNICYCLE_DIM(UNICYCLE_NG)];
     int i, j;
+    for (j = 0; j < UNICYCLE_NW; ++j)
+        dw[j] = slot->dw[j];
+    for (j = 0; j < UNICYCLE_NX; ++j)
+        dlam[j] = slot->dlam[j];
+    for (j = 0; j < UNICYCLE_NG; ++j)
+        dmu_g[j] = slot->dmu_g[j];
     for (i = 0; i < UNICYCLE_NW; ++i) {
         unicycle_real hd = UNICYCLE_R(0.0), pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
         for (j = 0; j < UNICYCLE_NW; ++j)
-            hd += slot->Ht[i + j * UNICYCLE_NW] * slot->dw[j];
+            hd += slot->Ht[i + j * UNICYCLE_NW] * dw[j];
         for (j = 0; j < UNICYCLE_NX; ++j)
-            pl += slot->Phit[j + i * UNICYCLE_NX] * slot->dlam[j];
+            pl += slot->Phit[j + i * UNICYCLE_NX] * dlam[j];
         for (j = 0; j < UNICYCLE_NG; ++j)
-            cm += slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] * slot->dmu_g[j];
+            cm += slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] * dmu_g[j];
         F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
         unicycle_real pd = UNICYCLE_R(0.0);
         for (j = 0; j < UNICYCLE_NW; ++j)
-            pd += slot->Phit[i + j * UNICYCLE_NX] * slot->dw[j];
+            pd += slot->Phit[i + j * UNICYCLE_NX] * dw[j];
         phi[i] = slot->phi[i] + pd;
     }
     for (i = 0; i < UNICYCLE_NG; ++i) {
         unicycle_real cd = UNICYCLE_R(0.0);
         for (j = 0; j < UNICYCLE_NW; ++j)
-            cd += slot->Ct[i + j * UNICYCLE_DIM(UNICYCLE_NG)] * slot->dw[j];
+            cd += slot->Ct[i + j * UNICYCLE_DIM(UNICYCLE_NG)] * dw[j];
         g[i] = slot->g[i] + cd;
     }
 }

@@ -130,6 +130,20 @@ static double unicycle_cost(const unicycle_solver *s, double estimate, double re
     return reading;
 }
 
+/* A reserve (the cost of step 3, of steps 6 and 7, of a prepare iteration) measured now
+ * against the last estimate: in time it rises as unicycle_cost and falls by 10 % at most per
+ * reading, so the room kept for the rest of an instant follows its dearer recent readings
+ * (the lm test of step 7 varies by up to 40 k instructions between instants on the emulated
+ * Cortex-M7, and an instant whose rest was priced at the last, cheaper reading went up to
+ * 114 k over a budget of 6 M); in work units the reading itself. */
+static double unicycle_cost_reserve(const unicycle_solver *s, double estimate, double reading)
+{
+    if (s->settings.budget_unit == UNICYCLE_BUDGET_TIME && estimate > 0.0 && reading < 0.9 * estimate) {
+        return 0.9 * estimate;
+    }
+    return unicycle_cost(s, estimate, reading);
+}
+
 /* The price of one QP iteration for the extra iteration's cap (time budget): the reading
  * `cost` / `iterations` of a QP, the estimate moved by 10 % at most, up or down. A QP whose
  * iterations were unusually cheap (or one descheduled) moves it little: following such a
@@ -958,6 +972,12 @@ static void unicycle_feedback_measure(unicycle_solver *s, const unicycle_real *x
     s->shifted = 0;
 }
 
+/* The work counter as the QP's clock (a work budget; ctx: the solver). */
+static double unicycle_work_clock(void *ctx)
+{
+    return ((const unicycle_solver *)ctx)->anytime.work;
+}
+
 /* The QP's matrix pointers (unicycle_qp_in.H, Phi, C, HN, R, Req) point into this struct: the
  * ring slots in place and the terminal blocks. They are set just before each solve and
  * cleared after it, so the struct holds no pointer into itself between calls and a byte
@@ -970,8 +990,14 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set)
     unicycle_qp_settings_default(&settings);
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
-    if (s->anytime.qp_cap > 0 && s->anytime.qp_cap < settings.max_iter) {
-        settings.max_iter = s->anytime.qp_cap; /* a time budget (section 14) */
+    if (s->anytime.qp_timed) {
+        /* a budget (section 14): the QP reads the budget's clock before each factorisation
+         * (work units: the counter, which the QP's own N units have already moved) */
+        const int work = s->settings.budget_unit == UNICYCLE_BUDGET_WORK;
+        settings.clock = work ? unicycle_work_clock : s->timer.clock;
+        settings.clock_ctx = work ? (void *)s : s->timer.ctx;
+        settings.deadline = s->anytime.qp_deadline;
+        settings.iter_price = s->anytime.qp_price;
     }
     settings.warm_start = warm;
     settings.active_set = warm && active_set ? UNICYCLE_QP_ACTIVE_SET : 0;
@@ -1053,8 +1079,7 @@ static int unicycle_feedback_qp(unicycle_solver *s)
         unicycle_qp_warm_point(s);
     }
     qs = unicycle_qp_attempt(s, s->settings.qp_warm_start, active_set);
-    if (s->settings.qp_warm_start && qs != UNICYCLE_QP_INVALID_INPUT &&
-        !(qs == UNICYCLE_QP_MAX_ITER && s->anytime.qp_cap > 0) &&
+    if (s->settings.qp_warm_start && qs != UNICYCLE_QP_INVALID_INPUT && qs != UNICYCLE_QP_DEADLINE &&
         (!unicycle_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
         s->qp_cold_retry = 1;
         qs = unicycle_qp_attempt(s, 0, 0);
@@ -1062,14 +1087,27 @@ static int unicycle_feedback_qp(unicycle_solver *s)
     return qs;
 }
 
+/* 1 when the budget's deadline is set and one more QP solve would pass it at once (work
+ * units: its N units; time: its first iteration's price): no retry is started then. */
+static int unicycle_qp_deadline_near(const unicycle_solver *s)
+{
+    double next;
+    if (!s->anytime.qp_timed) {
+        return 0;
+    }
+    next = s->settings.budget_unit == UNICYCLE_BUDGET_WORK ? (double)UNICYCLE_WORK_QP : s->anytime.qp_price;
+    return unicycle_budget_now(s) + next > s->anytime.qp_deadline;
+}
+
 /* Step 4, the automatic term (algorithm.md section 10): a QP still not solved is solved
- * again (cold) with lm raised, at most UNICYCLE_LM_RETRIES times. Returns the QP status; the
+ * again (cold) with lm raised, at most UNICYCLE_LM_RETRIES times (with a budget, while one more
+ * solve does not pass its deadline at once). Returns the QP status; the
  * number of retries in *retries. */
 static int unicycle_feedback_lm_retries(unicycle_solver *s, int qs, int *retries)
 {
     *retries = 0;
     while (*retries < UNICYCLE_LM_RETRIES && unicycle_lm_can_raise(&s->lm) && !unicycle_qp_ok(s, qs) &&
-           qs != UNICYCLE_QP_INVALID_INPUT && !(qs == UNICYCLE_QP_MAX_ITER && s->anytime.qp_cap > 0)) {
+           qs != UNICYCLE_QP_INVALID_INPUT && qs != UNICYCLE_QP_DEADLINE && !unicycle_qp_deadline_near(s)) {
         unicycle_lm_raise(&s->lm);
         s->anytime.work += UNICYCLE_WORK_QP;
         s->qp_in.hess_shift = s->lm.lm;
@@ -1091,6 +1129,24 @@ static int unicycle_feedback_check_step(const unicycle_solver *s, int qs)
         return UNICYCLE_ERR_DIVERGED;
     }
     return UNICYCLE_OK;
+}
+
+/* Step 5 of a feedback: as unicycle_feedback_check_step, but a QP cut by the budget's deadline
+ * with a finite best point is usable (algorithm.md section 14) when it was cut before its
+ * first iteration (the warm start: the shifted plan's control) or its scaled residuals are
+ * below UNICYCLE_ANYTIME_CUT_MERIT: that point is the step (UNICYCLE_FLAG_QP_CUT), not a failure
+ * that would start a recovery. A QP cut far from its solution fails the feedback. */
+static int unicycle_feedback_check_cut(unicycle_solver *s, int qs)
+{
+    const unicycle_qp_info *q = &s->qp_info;
+    const unicycle_real merit = unicycle_fmax(unicycle_fmax(q->res_stat_scaled, q->res_eq_scaled),
+                                        unicycle_fmax(q->res_ineq_scaled, q->res_comp_scaled));
+    if (qs == UNICYCLE_QP_DEADLINE && unicycle_qp_solution_finite(&s->mem.qp.sol) &&
+        (q->iterations == 0 || merit <= UNICYCLE_ANYTIME_CUT_MERIT)) {
+        s->health.flags |= UNICYCLE_FLAG_QP_CUT;
+        return unicycle_feedback_check_step(s, UNICYCLE_QP_SOLVED);
+    }
+    return unicycle_feedback_check_step(s, qs);
 }
 
 /* Step 6: the step of each stage kept in its slot for the secant criterion:
@@ -1177,22 +1233,16 @@ static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
 }
 
 /* Feedback once admitted (steps 2 to 8). */
-/* The bounded latency of a time budget (algorithm.md section 14): the QP's iterations are
- * capped at the budget left, less `reserve`, over `per_iter` (at least 1); a QP stopped by
- * the cap is not retried (the fallback control of a feedback; an extra iteration changes
- * nothing). */
-static void unicycle_budget_cap(unicycle_solver *s, double reserve, double per_iter)
+/* The bounded latency of a time budget (algorithm.md section 14): the next QP solves read
+ * the clock before each factorisation and stop (UNICYCLE_QP_DEADLINE, their best point) when
+ * one more iteration would pass the instant's budget less `reserve`; `per_iter` prices the
+ * first iteration. A cut QP is not retried: the feedback takes its best point as the step,
+ * an extra iteration or a predicted step changes nothing. */
+static void unicycle_budget_deadline(unicycle_solver *s, double reserve, double per_iter)
 {
-    double n;
-    s->anytime.qp_cap = 0;
-    if (!unicycle_budget_on(s) || s->settings.budget_unit != UNICYCLE_BUDGET_TIME || !(per_iter > 0.0)) {
-        return;
-    }
-    n = (s->settings.budget - (unicycle_budget_now(s) - s->anytime.instant_start) - reserve) / per_iter;
-    n = n < 1.0 ? 1.0 : n;
-    if (n < (double)s->settings.qp_max_iter) {
-        s->anytime.qp_cap = (int)n;
-    }
+    s->anytime.qp_timed = unicycle_budget_on(s);
+    s->anytime.qp_deadline = s->anytime.instant_start + s->settings.budget - reserve;
+    s->anytime.qp_price = per_iter > 0.0 ? per_iter : 0.0;
 }
 
 static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0, unicycle_real *u0)
@@ -1203,8 +1253,8 @@ static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0,
 
     unicycle_copy(xhat_prev, s->xhat0, UNICYCLE_NX);
     unicycle_feedback_measure(s, xhat0);
-    /* the cost of one QP iteration of the last feedback; the least a prepare costs stays free */
-    unicycle_budget_cap(s, unicycle_prepare_floor(s), s->anytime.cost_qp_iter);
+    /* the deadline leaves the least a prepare costs free */
+    unicycle_budget_deadline(s, unicycle_prepare_floor(s), s->anytime.cost_qp_iter);
     b0 = unicycle_budget_now(s);
     qs = unicycle_feedback_qp(s);
     qs = unicycle_feedback_lm_retries(s, qs, &retries);
@@ -1217,11 +1267,11 @@ static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0,
         unicycle_cost_qp_step(s, unicycle_budget_now(s) - b0, s->qp_iterations);
     }
     s->qp_status = qs;
-    rc = unicycle_feedback_check_step(s, qs);
+    rc = unicycle_feedback_check_cut(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
      * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
     if (rc != UNICYCLE_OK && s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING &&
-        qs != UNICYCLE_QP_MAX_ITER && qs != UNICYCLE_QP_INVALID_INPUT) {
+        qs != UNICYCLE_QP_MAX_ITER && qs != UNICYCLE_QP_INVALID_INPUT && qs != UNICYCLE_QP_DEADLINE) {
         if (!unicycle_model_finite_at(s, xhat0)) {
             /* no measurement: handled as a non-finite one (the iterate and its QP stay; the
              * prepare takes the predicted step) */
@@ -1233,7 +1283,7 @@ static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0,
             rc = unicycle_feedback_recover(s, &qs, &retries);
             if (rc == UNICYCLE_OK) {
                 s->qp_status = qs;
-                rc = unicycle_feedback_check_step(s, qs);
+                rc = unicycle_feedback_check_cut(s, qs);
             }
         }
     }
@@ -1300,7 +1350,7 @@ static int unicycle_feedback_call(unicycle_solver *s, const unicycle_real *xhat0
     if (rc == UNICYCLE_OK) {
         rc = unicycle_feedback_run(s, xhat0, u0);
     }
-    s->anytime.qp_cap = 0;
+    s->anytime.qp_timed = 0;
     s->anytime.used = unicycle_budget_now(s) - s->anytime.instant_start;
     s->timer.locked = 0;
     unicycle_timer_end(&s->timer, 0, start);
@@ -1733,8 +1783,11 @@ int unicycle_prepare(unicycle_solver *s)
     hessian = s->settings.hessian;
     if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
         s->settings.mode == UNICYCLE_MODE_RECEDING && !(s->health.flags & UNICYCLE_FLAG_REINIT_GUESS)) {
-        /* (not from the OCP file's guess: its plan is not the plant's) */
+        /* (not from the OCP file's guess: its plan is not the plant's); with a time budget
+         * its QP stops where the least prepare still fits (a cut QP changes nothing) */
+        unicycle_budget_deadline(s, unicycle_prepare_floor(s), s->anytime.cost_qp_step);
         unicycle_predicted_step(s);
+        s->anytime.qp_timed = 0;
     }
     s->qp_ready = 0;
     if (s->settings.mode == UNICYCLE_MODE_RECEDING && s->health.plan_age < UNICYCLE_N) {
@@ -1849,7 +1902,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
         rc = unicycle_term_H(s);
     }
     if (rc == UNICYCLE_OK && unicycle_budget_on(s)) {
-        s->anytime.cost_head = unicycle_cost(s, s->anytime.cost_head, unicycle_budget_now(s) - b0);
+        s->anytime.cost_head = unicycle_cost_reserve(s, s->anytime.cost_head, unicycle_budget_now(s) - b0);
     }
 
     /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
@@ -1873,6 +1926,11 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
                 break;
             }
             n_al += 1;
+            if (s->settings.regularization == UNICYCLE_REG_NONE) {
+                /* nothing to regularise: the sum straight into the slot, no copy */
+                unicycle_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, slot->Ht);
+                continue;
+            }
             unicycle_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
             rc = unicycle_regularize(s, UNICYCLE_NW, s->mem.ev.tmp_A);
             if (rc == UNICYCLE_OK) {
@@ -1911,8 +1969,8 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
     if (unicycle_budget_on(s)) {
         s->anytime.cost_prepare =
-            unicycle_cost(s, s->anytime.cost_prepare, unicycle_budget_now(s) - b_start - ext_cost);
-        s->anytime.cost_tail = unicycle_cost(s, s->anytime.cost_tail, unicycle_budget_now(s) - b_tail);
+            unicycle_cost_reserve(s, s->anytime.cost_prepare, unicycle_budget_now(s) - b_start - ext_cost);
+        s->anytime.cost_tail = unicycle_cost_reserve(s, s->anytime.cost_tail, unicycle_budget_now(s) - b_tail);
     }
     if (unicycle_iterate_diverged(s)) {
         s->health.flags |= UNICYCLE_FLAG_DIVERGED;
@@ -1944,9 +2002,9 @@ static int unicycle_extra_iteration(unicycle_solver *s)
     }
     /* a time budget caps the QP's iterations at the budget left after the prepare iteration
      * that follows it (a QP stopped there changes nothing) */
-    unicycle_budget_cap(s, s->anytime.cost_prepare, s->anytime.cost_qp_step);
+    unicycle_budget_deadline(s, s->anytime.cost_prepare, s->anytime.cost_qp_step);
     qs = unicycle_feedback_qp(s);
-    s->anytime.qp_cap = 0;
+    s->anytime.qp_timed = 0;
     if (unicycle_budget_on(s)) {
         unicycle_cost_qp_step(s, unicycle_budget_now(s) - b0, s->qp_iterations);
     }
@@ -2384,7 +2442,7 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     s->anytime.cost_head = 0.0;
     s->anytime.cost_al = 0.0;
     s->anytime.used = 0.0;
-    s->anytime.qp_cap = 0;
+    s->anytime.qp_timed = 0;
     s->anytime.extra_iterations = 0;
     s->anytime.instant_stages = 0;
     s->anytime.prepared_extra = 0;

@@ -84,6 +84,11 @@ int unicycle_timer_switch(unicycle_timer *tm, int phase)
     if (tm->locked) {
         return phase;
     }
+    if (phase == prev && phase >= 0) {
+        /* no switch: the running phase keeps accumulating, no clock reading needed (the
+         * switch to -1 at the end of a call always reads it) */
+        return prev;
+    }
     now = unicycle_timer_now(tm);
     if (prev >= 0 && prev < UNICYCLE_N_PHASES) {
         tm->t[prev] += now - tm->mark;
