@@ -276,12 +276,8 @@ def _deadline_solve(h, qp, deadline, iter_price=1.0, warm=None):
         return float(reads[0])
 
     h.solve(qp, tol=1e-10, max_iter=100, warm=warm)     # the data and settings in place
-    if warm is not None:
-        h._write_sol(warm)
-    st = h._set
-    st.clock, st.deadline, st.iter_price = clock, float(deadline), float(iter_price)
-    status = h.solve_again()
-    return h._read_sol(), h._read_info(status), reads[0]
+    sol, info = h.solve_with_deadline(clock, deadline, iter_price, warm=warm)
+    return sol, info, reads[0]
 
 
 def test_qp_deadline_stops_at_the_iteration_it_leaves_room_for():

@@ -314,6 +314,18 @@ class QPSolverHandle:
         warm-start point is the last solution, so use it after cold solves only."""
         return int(self.lib.dopus_qp_solve(self._ws, self._in, self._set, self._sol, self._info))
 
+    def solve_with_deadline(self, clock, deadline: float, iter_price: float, warm: dict | None = None):
+        """The QP and settings of the last ``solve`` solved once more with the clock hook
+        ``clock`` (a cffi callback ``double(void *)``), ``deadline`` and the price of the first
+        iteration ``iter_price`` (dopus_qp_settings, docs/algorithm.md section 14), from
+        ``warm`` when given. Returns ``(solution, info)`` as ``solve`` does."""
+        if warm is not None:
+            self._write_sol(warm)
+        st = self._set
+        st.clock, st.deadline, st.iter_price = clock, float(deadline), float(iter_price)
+        status = self.solve_again()
+        return self._read_sol(), self._read_info(status)
+
     def infeasible_row(self):
         """After a solve that returned primal_infeasible: ``(stage, j, side)`` of the row
         dopus_qp_infeasible_row names (the row with the largest multiplier of the
