@@ -1269,7 +1269,8 @@ static int dopus_feedback_run(dopus_solver *s, const dopus_real *xhat0, dopus_re
     s->qp_status = qs;
     rc = dopus_feedback_check_cut(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
-     * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
+     * iteration limit or the budget's deadline (not signs of a wrong iterate) or refused as
+     * invalid */
     if (rc != DOPUS_OK && s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING &&
         qs != DOPUS_QP_MAX_ITER && qs != DOPUS_QP_INVALID_INPUT && qs != DOPUS_QP_DEADLINE) {
         if (!dopus_model_finite_at(s, xhat0)) {
@@ -2000,8 +2001,8 @@ static int dopus_extra_iteration(dopus_solver *s)
     if (!s->anytime.uncapped) {
         dopus_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
-    /* a time budget caps the QP's iterations at the budget left after the prepare iteration
-     * that follows it (a QP stopped there changes nothing) */
+    /* the QP stops at the budget's deadline less the prepare iteration that follows it (a QP
+     * stopped there changes nothing) */
     dopus_budget_deadline(s, s->anytime.cost_prepare, s->anytime.cost_qp_step);
     qs = dopus_feedback_qp(s);
     s->anytime.qp_timed = 0;

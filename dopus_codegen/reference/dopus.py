@@ -717,7 +717,7 @@ class ReferenceDopus:
                 and getattr(failure, "qp_status", None) not in ("max_iter", "invalid_input")):
             # the recovery within the feedback (section 9): re-initialise from the measured
             # state and solve the QP of the re-initialised iterate; not for a QP stopped by
-            # its iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid
+            # its iteration limit (not a sign of a wrong iterate) or refused as invalid
             if not self._model_finite_at(xhat0):
                 # no measurement: handled as a non-finite one (the iterate and its QP stay)
                 self._xhat_last, self._xhat_fresh = xhat_prev, False

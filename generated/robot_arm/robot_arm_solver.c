@@ -1269,7 +1269,8 @@ static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xha
     s->qp_status = qs;
     rc = robot_arm_feedback_check_cut(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
-     * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
+     * iteration limit or the budget's deadline (not signs of a wrong iterate) or refused as
+     * invalid */
     if (rc != ROBOT_ARM_OK && s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING &&
         qs != ROBOT_ARM_QP_MAX_ITER && qs != ROBOT_ARM_QP_INVALID_INPUT && qs != ROBOT_ARM_QP_DEADLINE) {
         if (!robot_arm_model_finite_at(s, xhat0)) {
@@ -2000,8 +2001,8 @@ static int robot_arm_extra_iteration(robot_arm_solver *s)
     if (!s->anytime.uncapped) {
         robot_arm_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
-    /* a time budget caps the QP's iterations at the budget left after the prepare iteration
-     * that follows it (a QP stopped there changes nothing) */
+    /* the QP stops at the budget's deadline less the prepare iteration that follows it (a QP
+     * stopped there changes nothing) */
     robot_arm_budget_deadline(s, s->anytime.cost_prepare, s->anytime.cost_qp_step);
     qs = robot_arm_feedback_qp(s);
     s->anytime.qp_timed = 0;

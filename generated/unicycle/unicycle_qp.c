@@ -458,12 +458,11 @@ static unicycle_real row_q(const unicycle_qp_workspace *ws, const unicycle_qp_in
 
 /* ---------------------------------------------------------------- Phi' v */
 
-/* The transposed copies PhiT_k = Phi_k' (nw x nx, column-major) and the squares of the
- * column sums of |Phi_k| (the round-off estimates of the factorisation), formed once per
- * solve (the data is constant during it): the products with Phi_k' then run down contiguous
- * columns of length nw, vectorised where the target has vectors, instead of a sum of nx
- * products per entry. */
-/* PhiT = Phi' (nw x nx, column-major) and cs2 the squares of the column sums of |Phi|. */
+/* PhiT = Phi' (nw x nx, column-major) and cs2 the squares of the column sums of |Phi| (the
+ * round-off estimates of the factorisation). With UNICYCLE_QP_PHIT they are formed once per
+ * solve for every stage (the data is constant during it): the products with Phi_k' then run
+ * down contiguous columns of length nw, vectorised where the target has vectors, instead of
+ * a sum of nx products per entry; without it, per stage in every factorisation. */
 static void phi_stage_copy(const unicycle_real *restrict Phi, unicycle_real *restrict PhiT,
                            unicycle_real *restrict cs2)
 {

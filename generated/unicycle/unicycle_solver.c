@@ -1269,7 +1269,8 @@ static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0,
     s->qp_status = qs;
     rc = unicycle_feedback_check_cut(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
-     * iteration limit (a budget, not a sign of a wrong iterate) or refused as invalid */
+     * iteration limit or the budget's deadline (not signs of a wrong iterate) or refused as
+     * invalid */
     if (rc != UNICYCLE_OK && s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING &&
         qs != UNICYCLE_QP_MAX_ITER && qs != UNICYCLE_QP_INVALID_INPUT && qs != UNICYCLE_QP_DEADLINE) {
         if (!unicycle_model_finite_at(s, xhat0)) {
@@ -2000,8 +2001,8 @@ static int unicycle_extra_iteration(unicycle_solver *s)
     if (!s->anytime.uncapped) {
         unicycle_lm_measured(&s->lm, s->qp_in.x0, s->health.scale_x, s->health.kkt_proxy);
     }
-    /* a time budget caps the QP's iterations at the budget left after the prepare iteration
-     * that follows it (a QP stopped there changes nothing) */
+    /* the QP stops at the budget's deadline less the prepare iteration that follows it (a QP
+     * stopped there changes nothing) */
     unicycle_budget_deadline(s, s->anytime.cost_prepare, s->anytime.cost_qp_step);
     qs = unicycle_feedback_qp(s);
     s->anytime.qp_timed = 0;
