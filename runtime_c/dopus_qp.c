@@ -107,6 +107,15 @@
 #define SOFT_FAR DOPUS_R(100.0)
 #endif
 
+/* Out of line on a scalar FPU with GCC or clang (DOPUS_QP_PHIT 0, see dopus_qp.h): a kernel
+ * inlined into a long function shares its registers with the code around it, and on the
+ * Cortex-M7's 16 double registers GCC then spilled the accumulators of both. */
+#if !DOPUS_QP_PHIT && (defined(__GNUC__) || defined(__clang__))
+#define QP_NOINLINE __attribute__((noinline))
+#else
+#define QP_NOINLINE
+#endif
+
 static dopus_real dmax(dopus_real a, dopus_real b)
 {
     return a > b ? a : b;
@@ -136,13 +145,38 @@ unsigned long dopus_qp_workspace_size(void)
 
 /* ---------------------------------------------------------------- data checks */
 
-static int check_input(const dopus_qp_in *in)
+/* 1 when the n entries of x are finite (as dopus_lai_all_finite); *m = max(*m, |x_i|) (the
+ * Hessian scale, formed in the same pass). */
+static int finite_absmax(int n, const dopus_real *restrict x, dopus_real *restrict m)
+{
+    int i;
+    dopus_real s0 = DOPUS_R(0.0), s1 = DOPUS_R(0.0), m0 = *m, m1 = DOPUS_R(0.0);
+    for (i = 0; i + 1 < n; i += 2) {
+        const dopus_real a0 = dopus_fabs(x[i]), a1 = dopus_fabs(x[i + 1]);
+        s0 += x[i] * DOPUS_R(0.0);
+        s1 += x[i + 1] * DOPUS_R(0.0);
+        m0 = DOPUS_MAX_ACC(a0, m0);
+        m1 = DOPUS_MAX_ACC(a1, m1);
+    }
+    if (i < n) {
+        const dopus_real a0 = dopus_fabs(x[i]);
+        s0 += x[i] * DOPUS_R(0.0);
+        m0 = DOPUS_MAX_ACC(a0, m0);
+    }
+    *m = DOPUS_MAX_ACC(m1, m0);
+    return s0 + s1 == DOPUS_R(0.0);
+}
+
+/* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k, HN
+ * (valid when it returns 1). */
+static int check_input(const dopus_qp_in *in, dopus_real *hmax)
 {
     int k, i;
+    *hmax = DOPUS_R(0.0);
     for (k = 0; k < N; ++k) {
         if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
             return 0;
-        if (!dopus_lai_all_finite(NW, NW, in->H[k], NW) || !dopus_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+        if (!finite_absmax(NW * NW, in->H[k], hmax) || !dopus_lai_all_finite(NX, NW, in->Phi[k], NX) ||
             (NG > 0 && !dopus_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
             !dopus_lai_all_finite(NW, 1, in->g[k], NW) || !dopus_lai_all_finite(NX, 1, in->b[k], NX))
             return 0;
@@ -151,7 +185,7 @@ static int check_input(const dopus_qp_in *in)
         return 0;
     if (!(in->hess_shift >= DOPUS_R(0.0) && in->hess_shift < INFINITY))
         return 0;
-    if (!dopus_lai_all_finite(NX, NX, in->HN, NX) || !dopus_lai_all_finite(NX, 1, in->x0, NX) ||
+    if (!finite_absmax(NX * NX, in->HN, hmax) || !dopus_lai_all_finite(NX, 1, in->x0, NX) ||
         !dopus_lai_all_finite(NX, 1, in->gN, NX))
         return 0;
     if (NR > 0 && !dopus_lai_all_finite(NR, NX, in->R, NR > 0 ? NR : 1))
@@ -375,6 +409,18 @@ static inline void lu_solve_n(const dopus_real *restrict Lp, dopus_real *restric
             x[i] -= Lp[PACKED_U(i, j)] * xj;
     }
 }
+/* dst = Lu^{-1} src: lu_solve_n on a copy of src (the copy in registers) */
+static inline void lu_solve_n_from(const dopus_real *restrict Lp, const dopus_real *restrict src,
+                                   dopus_real *restrict dst)
+{
+    dopus_real x[NU1];
+    int i;
+    for (i = 0; i < NU; ++i)
+        x[i] = src[i];
+    lu_solve_n(Lp, x);
+    for (i = 0; i < NU; ++i)
+        dst[i] = x[i];
+}
 /* x = Lu'^{-1} x for the packed factor */
 static inline void lu_solve_t(const dopus_real *restrict Lp, dopus_real *restrict x)
 {
@@ -462,7 +508,10 @@ static dopus_real row_q(const dopus_qp_workspace *ws, const dopus_qp_in *in, int
  * round-off estimates of the factorisation). With DOPUS_QP_PHIT they are formed once per
  * solve for every stage (the data is constant during it): the products with Phi_k' then run
  * down contiguous columns of length nw, vectorised where the target has vectors, instead of
- * a sum of nx products per entry; without it, per stage in every factorisation. */
+ * a sum of nx products per entry; without it, the products read Phi_k (the factorisation's
+ * Phi' P as dot products of its contiguous columns) and the column sums are formed per stage
+ * in every factorisation. */
+#if DOPUS_QP_PHIT
 static void phi_stage_copy(const dopus_real *restrict Phi, dopus_real *restrict PhiT,
                            dopus_real *restrict cs2)
 {
@@ -476,6 +525,7 @@ static void phi_stage_copy(const dopus_real *restrict Phi, dopus_real *restrict 
         cs2[i] = colsum * colsum;
     }
 }
+#endif
 
 #if DOPUS_QP_PHIT
 static void transpose_phi(dopus_qp_workspace *ws, const dopus_qp_in *in)
@@ -550,14 +600,62 @@ typedef struct {
 } qp_res;
 
 /* acc_i = max(acc_i, |x_i|), entry by entry (n a compile-time size: vectorised, no chain of
- * dependent max instructions); the scales below reduce acc once at the end. */
+ * dependent max instructions); the scales below reduce acc once at the end. On a scalar FPU
+ * (where Phi_k' is not kept, DOPUS_QP_PHIT 0) the entry-wise maxima cost a load and a store
+ * of acc_i per entry: there acc_0 takes the maximum of all (the others stay 0), the same
+ * value (a maximum is exact in any order, and DOPUS_MAX_ACC never keeps a NaN of x). */
 static inline void absmax_acc(int n, const dopus_real *restrict x, dopus_real *restrict acc)
 {
     int i;
+#if DOPUS_QP_PHIT
     for (i = 0; i < n; ++i) {
         const dopus_real a = dopus_fabs(x[i]);
         acc[i] = DOPUS_MAX_ACC(a, acc[i]);
     }
+#else
+    dopus_real m = acc[0];
+    for (i = 0; i < n; ++i) {
+        const dopus_real a = dopus_fabs(x[i]);
+        m = DOPUS_MAX_ACC(a, m);
+    }
+    acc[0] = m;
+#endif
+}
+
+/* a -= Phi' v (a of size nw, v of size nx) and rd = -Phi w (rd of size nx): as phit_gemv(PhiT,
+ * -1, v, a) and dopus_lai_gemv_n(NX, NW, -1, Phi, NX, w, 0, rd), the same sums in the same
+ * order. Without the kept Phi_k' (DOPUS_QP_PHIT 0) both run over the columns of Phi_k in one
+ * pass: each entry is loaded once for its two products. */
+static inline void phi_both(const dopus_real *restrict Phi, const dopus_real *restrict PhiT,
+                            const dopus_real *restrict v, const dopus_real *restrict w,
+                            dopus_real *restrict a, dopus_real *restrict rd)
+{
+#if DOPUS_QP_PHIT
+    phit_gemv(PhiT, -DOPUS_R(1.0), v, a);
+    dopus_lai_gemv_n(NX, NW, -DOPUS_R(1.0), Phi, NX, w, DOPUS_R(0.0), rd);
+#else
+    dopus_real acc[NX], vr[NX];
+    int i, l;
+    (void)PhiT;
+    for (l = 0; l < NX; ++l) {
+        acc[l] = DOPUS_R(0.0);
+        vr[l] = v[l];
+    }
+    UNROLL
+    for (i = 0; i < NW; ++i) {
+        const dopus_real wi = -w[i];
+        dopus_real s = DOPUS_R(0.0);
+        UNROLL
+        for (l = 0; l < NX; ++l) {
+            const dopus_real p = Phi[l + i * NX];
+            s += p * vr[l];
+            acc[l] += p * wi;
+        }
+        a[i] += -s;
+    }
+    for (l = 0; l < NX; ++l)
+        rd[l] = acc[l];
+#endif
 }
 
 static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_res *r)
@@ -596,9 +694,8 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
             dopus_lai_axpy(NW, DOPUS_R(1.0), in->g[k], h);
             for (i = 0; i < NW; ++i)
                 a[i] = i < NX ? ws->lam[k * NX + i] : DOPUS_R(0.0);
-            phit_gemv(QP_PHIT(ws, in, k), -DOPUS_R(1.0), ws->lam + (k + 1) * NX, a);
-            /* r_dyn_{k+1} = x_{k+1} - Phi_k w_k - b_k */
-            dopus_lai_gemv_n(NX, NW, -DOPUS_R(1.0), in->Phi[k], NX, w, DOPUS_R(0.0), rd);
+            /* a -= Phi' lam_{k+1} and r_dyn_{k+1} = x_{k+1} - Phi_k w_k - b_k */
+            phi_both(in->Phi[k], QP_PHIT(ws, in, k), ws->lam + (k + 1) * NX, w, a, rd);
             absmax_acc(NX, rd, m_pw);
             for (i = 0; i < NX; ++i)
                 rd[i] += xn[i] - in->b[k][i];
@@ -708,6 +805,7 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
 
 /* ---------------------------------------------------------------- Riccati factorisation */
 
+#if DOPUS_QP_PHIT
 /* out = Phi' v over the transposed copy PhiT (NW x NX, column-major): out (NW), v (NX). */
 static void phit_mv(const dopus_real *restrict PhiT, const dopus_real *restrict v, dopus_real *restrict out)
 {
@@ -720,21 +818,60 @@ static void phit_mv(const dopus_real *restrict PhiT, const dopus_real *restrict 
             out[i] += PhiT[i + l * NW] * f;
     }
 }
+#endif
 
-/* The stage update of the Riccati recursion from PhiT = Phi' (nw x nx): WT = Phi' P (nw x nx,
- * P symmetric stored full), the lower triangle of M = H + WT Phi (the upper one is never
- * read), and with terminal equalities Gam = Phi' G (nw x ne). The inner loops run down a
- * column (vectorised where the target has vectors); the ragged columns of the triangle are
- * unrolled. On x86 (two-wide vectors) whole columns of M took the same time (0.99 to 1.02,
- * bench/README.md); on a scalar FPU (Cortex-M7) the triangle saves 45 % of the products. */
-static void qp_stage_update(const dopus_real *restrict Phi, const dopus_real *restrict P,
-                            const dopus_real *restrict G, const dopus_real *restrict H,
-                            const dopus_real *restrict PhiT, dopus_real *restrict WT, dopus_real *restrict M,
-                            dopus_real *restrict Gam)
+/* The stage update of the Riccati recursion from PhiT = Phi' (nw x nx; without the kept copy,
+ * DOPUS_QP_PHIT 0, Phi itself): WT = Phi' P (nw x nx, P symmetric stored full), the lower
+ * triangle of M = H + WT Phi (the upper one is never read), and with terminal equalities
+ * Gam = Phi' G (nw x ne). The inner loops run down a column (vectorised where the target has
+ * vectors); the ragged columns of the triangle are unrolled. On x86 (two-wide vectors) whole
+ * columns of M took the same time (0.99 to 1.02, bench/README.md); on a scalar FPU
+ * (Cortex-M7) the triangle saves 45 % of the products. */
+QP_NOINLINE static void qp_stage_wt(const dopus_real *restrict P, const dopus_real *restrict G,
+                                    const dopus_real *restrict PhiT, dopus_real *restrict WT,
+                                    dopus_real *restrict Gam, dopus_real *restrict cs2)
 {
-    int i, j, l;
+#if DOPUS_QP_PHIT
+    int j;
+    (void)cs2;
     for (j = 0; j < NX; ++j)
         phit_mv(PhiT, P + j * NX, WT + j * NW);
+    for (j = 0; j < NE; ++j)
+        phit_mv(PhiT, G + j * NX, Gam + j * NW);
+#else
+    int i, j, l;
+    for (i = 0; i < NW; ++i) {
+        dopus_real pc[NX], colsum;
+        for (l = 0; l < NX; ++l)
+            pc[l] = PhiT[l + i * NX];
+        colsum = dopus_fabs(pc[0]);
+        for (l = 1; l < NX; ++l)
+            colsum += dopus_fabs(pc[l]);
+        cs2[i] = colsum * colsum;
+        for (j = 0; j < NX; ++j) {
+            dopus_real s = DOPUS_R(0.0);
+            for (l = 0; l < NX; ++l)
+                s += pc[l] * P[l + j * NX];
+            WT[i + j * NW] = s;
+        }
+        for (j = 0; j < NE; ++j) {
+            dopus_real s = DOPUS_R(0.0);
+            for (l = 0; l < NX; ++l)
+                s += pc[l] * G[l + j * NX];
+            Gam[i + j * NW] = s;
+        }
+    }
+#endif
+}
+
+QP_NOINLINE static void qp_stage_update(const dopus_real *restrict Phi, const dopus_real *restrict P,
+                                        const dopus_real *restrict G, const dopus_real *restrict H,
+                                        const dopus_real *restrict PhiT, dopus_real *restrict WT,
+                                        dopus_real *restrict M, dopus_real *restrict Gam,
+                                        dopus_real *restrict cs2)
+{
+    int i, j, l;
+    qp_stage_wt(P, G, PhiT, WT, Gam, cs2);
     UNROLL
     for (j = 0; j < NW; ++j) {
         dopus_real col[NW];
@@ -751,18 +888,13 @@ static void qp_stage_update(const dopus_real *restrict Phi, const dopus_real *re
         for (i = j; i < NW; ++i)
             M[i + j * NW] = col[i];
     }
-    for (j = 0; j < NE; ++j)
-        phit_mv(PhiT, G + j * NX, Gam + j * NW);
 }
 
-/* Largest absolute entry of the Hessian data (scale of delta and rho). */
-static dopus_real hessian_scale(const dopus_qp_in *in)
+/* The scale of delta and rho: the largest absolute entry of the Hessian data (hmax, from
+ * check_input) plus the shift. */
+static dopus_real hessian_scale(const dopus_qp_in *in, dopus_real hmax)
 {
-    int k;
-    dopus_real s = dopus_lai_max_abs_mat(NX, NX, in->HN, NX);
-    for (k = 0; k < N; ++k)
-        s = dmax(s, dopus_lai_max_abs_mat(NW, NW, in->H[k], NW));
-    s += in->hess_shift;
+    const dopus_real s = hmax + in->hess_shift;
     /* a zero Hessian (an LP) still needs a scale for the inertia correction */
     return s > DOPUS_R(0.0) ? s : DOPUS_R(1.0);
 }
@@ -773,9 +905,9 @@ static dopus_real hessian_scale(const dopus_qp_in *in)
 static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
 {
     int k, i, j;
-    dopus_real *WT = ws->work + (1 - DOPUS_QP_PHIT) * NX * NW;  /* NW x NX: Phi_k' P_{k+1} */
-    dopus_real *Gam = ws->work + (2 - DOPUS_QP_PHIT) * NX * NW; /* NW x NE: Phi_k' G_{k+1} */
-    dopus_real *Pf = Gam + NW * NE1;                            /* NX x NX: P_{k+1} unpacked */
+    dopus_real *WT = ws->work;            /* NW x NX: Phi_k' P_{k+1} */
+    dopus_real *Gam = ws->work + NX * NW; /* NW x NE: Phi_k' G_{k+1} */
+    dopus_real *Pf = Gam + NW * NE1;      /* NX x NX: P_{k+1} unpacked */
     const dopus_real delta = ws->delta;
     dopus_real pmag, pnext;
     int b;
@@ -831,8 +963,8 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         const dopus_real *PhiT = ws->PhiT[k];
         const dopus_real *cs2 = ws->phi_cs2[k];
 #else
-        dopus_real *PhiT = ws->work; /* Phi_k' and the squared column sums, formed here */
-        dopus_real cs2[NW];
+        const dopus_real *PhiT = Phi; /* qp_stage_update reads Phi_k itself */
+        dopus_real cs2[NW];           /* the squared column sums, formed here */
 #endif
         dopus_real q[NSI], dg[NW];
         dopus_real Lu[NU1 * NU1];
@@ -843,9 +975,6 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         dopus_real mxx = DOPUS_R(0.0), pabs;
         int l = 0;
 
-#if !DOPUS_QP_PHIT
-        phi_stage_copy(Phi, PhiT, cs2);
-#endif
         /* barrier weights of the stage's rows (0 on the unbounded rows) */
         for (i = 0; i < NSI; ++i)
             q[i] = DOPUS_R(0.0);
@@ -859,15 +988,20 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         for (j = 0; j < NG; ++j)
             for (i = 0; i < NW; ++i)
                 dg[i] += q[NW + j] * in->C[k][j + i * NG] * in->C[k][j + i * NG];
+                /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
+         * read), Gam = Phi' G_{k+1} (and without the kept copy cs2, from the same pass over
+         * Phi_k) */
+#if DOPUS_QP_PHIT
+        qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam, NULL);
+#else
+        qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam, cs2);
+#endif
         /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P (cs2: the
          * squared column sums of |Phi_k|) */
         for (j = 0; j < NU; ++j)
             ws->noise[j] = RICCATI_EPS * (dopus_fabs(dg[NX + j]) + cs2[NX + j] * dmax(pmax, pmag));
         for (j = 0; j < NX; ++j)
             mxx = dmax(mxx, dopus_fabs(dg[j]) + cs2[j] * pmax);
-        /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
-         * read), Gam = Phi' G_{k+1} */
-        qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam);
         for (i = 0; i < NW; ++i)
             M[i + i * NW] += q[i] + delta + in->hess_shift;
         for (j = 0; j < NG; ++j) {
@@ -891,9 +1025,8 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         pmag = mxx;
         pack_lu(Lu, ws->Lu[k]);
         /* LK = Lu^{-1} M_ux (in the array of K), LKn = Lu^{-1} Gam_u (in that of KN) */
-        dopus_lai_copy_mat(NU, NX, M + NX, NW, K, NU1);
         for (j = 0; j < NX; ++j)
-            lu_solve_n(ws->Lu[k], K + j * NU1);
+            lu_solve_n_from(ws->Lu[k], M + NX + j * NW, K + j * NU1);
         /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
         pabs = DOPUS_R(0.0);
         UNROLL
@@ -913,9 +1046,8 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         for (j = 0; j < NX; ++j)
             pmag = dmax(pmag, dopus_lai_dot(NU, K + j * NU1, K + j * NU1));
         if (NE > 0) {
-            dopus_lai_copy_mat(NU, NE, Gam + NX, NW, KN, NU1);
             for (j = 0; j < NE; ++j)
-                lu_solve_n(ws->Lu[k], KN + j * NU1);
+                lu_solve_n_from(ws->Lu[k], Gam + NX + j * NW, KN + j * NU1);
             /* G_k = Gam_x - LK' LKn;  S += LKn' LKn (S = -(nu-nu block of V_0)) */
             dopus_lai_copy_mat(NX, NE, Gam, NW, ws->G[k], NX);
             dopus_lai_gemm_tn(NX, NE, NU, -DOPUS_R(1.0), K, NU1, KN, NU1, DOPUS_R(1.0), ws->G[k], NX);
@@ -1980,20 +2112,11 @@ static int warm_start_finite(const dopus_qp_sol *sol)
 }
 
 /* The largest data entry the certificates compare their diverging iterates with: the
- * finite bounds, x0, b, g, gN and req, at least 1. */
-static dopus_real certificate_data_scale(const dopus_qp_workspace *ws, const dopus_qp_in *in)
+ * finite bounds, x0, b, g, gN and req, at least 1; from the data scales (the same maxima of
+ * the finite data, data_scales). */
+static dopus_real certificate_data_scale(const dopus_qp_workspace *ws)
 {
-    int i;
-    dopus_real s = dmax(DOPUS_R(1.0), ws->scale_bounds);
-    s = dmax(s, dopus_lai_norm_inf(NX, in->x0));
-    for (i = 0; i < N; ++i) {
-        s = dmax(s, dopus_lai_norm_inf(NX, in->b[i]));
-        s = dmax(s, dopus_lai_norm_inf(NW, in->g[i]));
-    }
-    s = dmax(s, dopus_lai_norm_inf(NX, in->gN));
-    if (NE > 0)
-        s = dmax(s, dopus_lai_norm_inf(NE, in->req));
-    return s;
+    return dmax(dmax(DOPUS_R(1.0), ws->scale_bounds), dmax(ws->scale_b, ws->scale_g));
 }
 
 /* Settings, data checks, the bounded rows, the data scales and the starting point of the
@@ -2003,13 +2126,14 @@ static int qp_prepare(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
                       const dopus_qp_settings *settings, dopus_qp_sol *sol, dopus_qp_info *info)
 {
     int bounds;
+    dopus_real hmax;
     checked_settings(settings, &L->st);
     if (info)
         info_not_solved(info);
     if (ws == NULL || in == NULL || sol == NULL)
         return DOPUS_QP_INVALID_INPUT;
     /* a non-finite warm start is bad input, not a reason to produce NaN */
-    if (!check_input(in) || (L->st.warm_start && !warm_start_finite(sol))) {
+    if (!check_input(in, &hmax) || (L->st.warm_start && !warm_start_finite(sol))) {
         zero_solution(sol);
         return DOPUS_QP_INVALID_INPUT;
     }
@@ -2033,11 +2157,11 @@ static int qp_prepare(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
             info->status = DOPUS_QP_PRIMAL_INFEASIBLE;
         return DOPUS_QP_PRIMAL_INFEASIBLE;
     }
-    L->hscale = hessian_scale(in);
+    L->hscale = hessian_scale(in, hmax);
     data_scales(ws, in);
     L->attempt = L->st.warm_start ? 1 : 0;
     initial_point(ws, in, &L->st, sol, L->attempt == 0);
-    L->data_scale = certificate_data_scale(ws, in);
+    L->data_scale = certificate_data_scale(ws);
     L->n_corr = L->n_aug = L->n_corr_attempt = 0;
     L->as_sweeps = 0;
     L->delta_last = L->delta_used = DOPUS_R(0.0);

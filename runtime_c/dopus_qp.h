@@ -200,10 +200,8 @@
 #define DOPUS_QP_PHIT 1
 #endif
 #endif
-/* Scratch of the factorisation: Phi' (unless kept, DOPUS_QP_PHIT), Phi'P, Phi'G and one
- * unpacked P. */
-#define DOPUS_QP_NWORK                                                                                       \
-    ((2 - DOPUS_QP_PHIT) * DOPUS_NX * DOPUS_QP_NW + DOPUS_QP_NW * DOPUS_QP_NE1 + DOPUS_NX * DOPUS_NX)
+/* Scratch of the factorisation: Phi'P, Phi'G and one unpacked P. */
+#define DOPUS_QP_NWORK (DOPUS_NX * DOPUS_QP_NW + DOPUS_QP_NW * DOPUS_QP_NE1 + DOPUS_NX * DOPUS_NX)
 
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if DOPUS_QP_NINEQ < 65536

@@ -107,6 +107,15 @@
 #define SOFT_FAR ROBOT_ARM_R(100.0)
 #endif
 
+/* Out of line on a scalar FPU with GCC or clang (ROBOT_ARM_QP_PHIT 0, see robot_arm_qp.h): a kernel
+ * inlined into a long function shares its registers with the code around it, and on the
+ * Cortex-M7's 16 double registers GCC then spilled the accumulators of both. */
+#if !ROBOT_ARM_QP_PHIT && (defined(__GNUC__) || defined(__clang__))
+#define QP_NOINLINE __attribute__((noinline))
+#else
+#define QP_NOINLINE
+#endif
+
 static robot_arm_real dmax(robot_arm_real a, robot_arm_real b)
 {
     return a > b ? a : b;
@@ -136,13 +145,38 @@ unsigned long robot_arm_qp_workspace_size(void)
 
 /* ---------------------------------------------------------------- data checks */
 
-static int check_input(const robot_arm_qp_in *in)
+/* 1 when the n entries of x are finite (as robot_arm_lai_all_finite); *m = max(*m, |x_i|) (the
+ * Hessian scale, formed in the same pass). */
+static int finite_absmax(int n, const robot_arm_real *restrict x, robot_arm_real *restrict m)
+{
+    int i;
+    robot_arm_real s0 = ROBOT_ARM_R(0.0), s1 = ROBOT_ARM_R(0.0), m0 = *m, m1 = ROBOT_ARM_R(0.0);
+    for (i = 0; i + 1 < n; i += 2) {
+        const robot_arm_real a0 = robot_arm_fabs(x[i]), a1 = robot_arm_fabs(x[i + 1]);
+        s0 += x[i] * ROBOT_ARM_R(0.0);
+        s1 += x[i + 1] * ROBOT_ARM_R(0.0);
+        m0 = ROBOT_ARM_MAX_ACC(a0, m0);
+        m1 = ROBOT_ARM_MAX_ACC(a1, m1);
+    }
+    if (i < n) {
+        const robot_arm_real a0 = robot_arm_fabs(x[i]);
+        s0 += x[i] * ROBOT_ARM_R(0.0);
+        m0 = ROBOT_ARM_MAX_ACC(a0, m0);
+    }
+    *m = ROBOT_ARM_MAX_ACC(m1, m0);
+    return s0 + s1 == ROBOT_ARM_R(0.0);
+}
+
+/* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k, HN
+ * (valid when it returns 1). */
+static int check_input(const robot_arm_qp_in *in, robot_arm_real *hmax)
 {
     int k, i;
+    *hmax = ROBOT_ARM_R(0.0);
     for (k = 0; k < N; ++k) {
         if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
             return 0;
-        if (!robot_arm_lai_all_finite(NW, NW, in->H[k], NW) || !robot_arm_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+        if (!finite_absmax(NW * NW, in->H[k], hmax) || !robot_arm_lai_all_finite(NX, NW, in->Phi[k], NX) ||
             (NG > 0 && !robot_arm_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
             !robot_arm_lai_all_finite(NW, 1, in->g[k], NW) || !robot_arm_lai_all_finite(NX, 1, in->b[k], NX))
             return 0;
@@ -151,7 +185,7 @@ static int check_input(const robot_arm_qp_in *in)
         return 0;
     if (!(in->hess_shift >= ROBOT_ARM_R(0.0) && in->hess_shift < INFINITY))
         return 0;
-    if (!robot_arm_lai_all_finite(NX, NX, in->HN, NX) || !robot_arm_lai_all_finite(NX, 1, in->x0, NX) ||
+    if (!finite_absmax(NX * NX, in->HN, hmax) || !robot_arm_lai_all_finite(NX, 1, in->x0, NX) ||
         !robot_arm_lai_all_finite(NX, 1, in->gN, NX))
         return 0;
     if (NR > 0 && !robot_arm_lai_all_finite(NR, NX, in->R, NR > 0 ? NR : 1))
@@ -375,6 +409,18 @@ static inline void lu_solve_n(const robot_arm_real *restrict Lp, robot_arm_real 
             x[i] -= Lp[PACKED_U(i, j)] * xj;
     }
 }
+/* dst = Lu^{-1} src: lu_solve_n on a copy of src (the copy in registers) */
+static inline void lu_solve_n_from(const robot_arm_real *restrict Lp, const robot_arm_real *restrict src,
+                                   robot_arm_real *restrict dst)
+{
+    robot_arm_real x[NU1];
+    int i;
+    for (i = 0; i < NU; ++i)
+        x[i] = src[i];
+    lu_solve_n(Lp, x);
+    for (i = 0; i < NU; ++i)
+        dst[i] = x[i];
+}
 /* x = Lu'^{-1} x for the packed factor */
 static inline void lu_solve_t(const robot_arm_real *restrict Lp, robot_arm_real *restrict x)
 {
@@ -462,7 +508,10 @@ static robot_arm_real row_q(const robot_arm_qp_workspace *ws, const robot_arm_qp
  * round-off estimates of the factorisation). With ROBOT_ARM_QP_PHIT they are formed once per
  * solve for every stage (the data is constant during it): the products with Phi_k' then run
  * down contiguous columns of length nw, vectorised where the target has vectors, instead of
- * a sum of nx products per entry; without it, per stage in every factorisation. */
+ * a sum of nx products per entry; without it, the products read Phi_k (the factorisation's
+ * Phi' P as dot products of its contiguous columns) and the column sums are formed per stage
+ * in every factorisation. */
+#if ROBOT_ARM_QP_PHIT
 static void phi_stage_copy(const robot_arm_real *restrict Phi, robot_arm_real *restrict PhiT,
                            robot_arm_real *restrict cs2)
 {
@@ -476,6 +525,7 @@ static void phi_stage_copy(const robot_arm_real *restrict Phi, robot_arm_real *r
         cs2[i] = colsum * colsum;
     }
 }
+#endif
 
 #if ROBOT_ARM_QP_PHIT
 static void transpose_phi(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
@@ -550,14 +600,62 @@ typedef struct {
 } qp_res;
 
 /* acc_i = max(acc_i, |x_i|), entry by entry (n a compile-time size: vectorised, no chain of
- * dependent max instructions); the scales below reduce acc once at the end. */
+ * dependent max instructions); the scales below reduce acc once at the end. On a scalar FPU
+ * (where Phi_k' is not kept, ROBOT_ARM_QP_PHIT 0) the entry-wise maxima cost a load and a store
+ * of acc_i per entry: there acc_0 takes the maximum of all (the others stay 0), the same
+ * value (a maximum is exact in any order, and ROBOT_ARM_MAX_ACC never keeps a NaN of x). */
 static inline void absmax_acc(int n, const robot_arm_real *restrict x, robot_arm_real *restrict acc)
 {
     int i;
+#if ROBOT_ARM_QP_PHIT
     for (i = 0; i < n; ++i) {
         const robot_arm_real a = robot_arm_fabs(x[i]);
         acc[i] = ROBOT_ARM_MAX_ACC(a, acc[i]);
     }
+#else
+    robot_arm_real m = acc[0];
+    for (i = 0; i < n; ++i) {
+        const robot_arm_real a = robot_arm_fabs(x[i]);
+        m = ROBOT_ARM_MAX_ACC(a, m);
+    }
+    acc[0] = m;
+#endif
+}
+
+/* a -= Phi' v (a of size nw, v of size nx) and rd = -Phi w (rd of size nx): as phit_gemv(PhiT,
+ * -1, v, a) and robot_arm_lai_gemv_n(NX, NW, -1, Phi, NX, w, 0, rd), the same sums in the same
+ * order. Without the kept Phi_k' (ROBOT_ARM_QP_PHIT 0) both run over the columns of Phi_k in one
+ * pass: each entry is loaded once for its two products. */
+static inline void phi_both(const robot_arm_real *restrict Phi, const robot_arm_real *restrict PhiT,
+                            const robot_arm_real *restrict v, const robot_arm_real *restrict w,
+                            robot_arm_real *restrict a, robot_arm_real *restrict rd)
+{
+#if ROBOT_ARM_QP_PHIT
+    phit_gemv(PhiT, -ROBOT_ARM_R(1.0), v, a);
+    robot_arm_lai_gemv_n(NX, NW, -ROBOT_ARM_R(1.0), Phi, NX, w, ROBOT_ARM_R(0.0), rd);
+#else
+    robot_arm_real acc[NX], vr[NX];
+    int i, l;
+    (void)PhiT;
+    for (l = 0; l < NX; ++l) {
+        acc[l] = ROBOT_ARM_R(0.0);
+        vr[l] = v[l];
+    }
+    UNROLL
+    for (i = 0; i < NW; ++i) {
+        const robot_arm_real wi = -w[i];
+        robot_arm_real s = ROBOT_ARM_R(0.0);
+        UNROLL
+        for (l = 0; l < NX; ++l) {
+            const robot_arm_real p = Phi[l + i * NX];
+            s += p * vr[l];
+            acc[l] += p * wi;
+        }
+        a[i] += -s;
+    }
+    for (l = 0; l < NX; ++l)
+        rd[l] = acc[l];
+#endif
 }
 
 static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, qp_res *r)
@@ -596,9 +694,8 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
             robot_arm_lai_axpy(NW, ROBOT_ARM_R(1.0), in->g[k], h);
             for (i = 0; i < NW; ++i)
                 a[i] = i < NX ? ws->lam[k * NX + i] : ROBOT_ARM_R(0.0);
-            phit_gemv(QP_PHIT(ws, in, k), -ROBOT_ARM_R(1.0), ws->lam + (k + 1) * NX, a);
-            /* r_dyn_{k+1} = x_{k+1} - Phi_k w_k - b_k */
-            robot_arm_lai_gemv_n(NX, NW, -ROBOT_ARM_R(1.0), in->Phi[k], NX, w, ROBOT_ARM_R(0.0), rd);
+            /* a -= Phi' lam_{k+1} and r_dyn_{k+1} = x_{k+1} - Phi_k w_k - b_k */
+            phi_both(in->Phi[k], QP_PHIT(ws, in, k), ws->lam + (k + 1) * NX, w, a, rd);
             absmax_acc(NX, rd, m_pw);
             for (i = 0; i < NX; ++i)
                 rd[i] += xn[i] - in->b[k][i];
@@ -708,6 +805,7 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
 
 /* ---------------------------------------------------------------- Riccati factorisation */
 
+#if ROBOT_ARM_QP_PHIT
 /* out = Phi' v over the transposed copy PhiT (NW x NX, column-major): out (NW), v (NX). */
 static void phit_mv(const robot_arm_real *restrict PhiT, const robot_arm_real *restrict v, robot_arm_real *restrict out)
 {
@@ -720,21 +818,60 @@ static void phit_mv(const robot_arm_real *restrict PhiT, const robot_arm_real *r
             out[i] += PhiT[i + l * NW] * f;
     }
 }
+#endif
 
-/* The stage update of the Riccati recursion from PhiT = Phi' (nw x nx): WT = Phi' P (nw x nx,
- * P symmetric stored full), the lower triangle of M = H + WT Phi (the upper one is never
- * read), and with terminal equalities Gam = Phi' G (nw x ne). The inner loops run down a
- * column (vectorised where the target has vectors); the ragged columns of the triangle are
- * unrolled. On x86 (two-wide vectors) whole columns of M took the same time (0.99 to 1.02,
- * bench/README.md); on a scalar FPU (Cortex-M7) the triangle saves 45 % of the products. */
-static void qp_stage_update(const robot_arm_real *restrict Phi, const robot_arm_real *restrict P,
-                            const robot_arm_real *restrict G, const robot_arm_real *restrict H,
-                            const robot_arm_real *restrict PhiT, robot_arm_real *restrict WT, robot_arm_real *restrict M,
-                            robot_arm_real *restrict Gam)
+/* The stage update of the Riccati recursion from PhiT = Phi' (nw x nx; without the kept copy,
+ * ROBOT_ARM_QP_PHIT 0, Phi itself): WT = Phi' P (nw x nx, P symmetric stored full), the lower
+ * triangle of M = H + WT Phi (the upper one is never read), and with terminal equalities
+ * Gam = Phi' G (nw x ne). The inner loops run down a column (vectorised where the target has
+ * vectors); the ragged columns of the triangle are unrolled. On x86 (two-wide vectors) whole
+ * columns of M took the same time (0.99 to 1.02, bench/README.md); on a scalar FPU
+ * (Cortex-M7) the triangle saves 45 % of the products. */
+QP_NOINLINE static void qp_stage_wt(const robot_arm_real *restrict P, const robot_arm_real *restrict G,
+                                    const robot_arm_real *restrict PhiT, robot_arm_real *restrict WT,
+                                    robot_arm_real *restrict Gam, robot_arm_real *restrict cs2)
 {
-    int i, j, l;
+#if ROBOT_ARM_QP_PHIT
+    int j;
+    (void)cs2;
     for (j = 0; j < NX; ++j)
         phit_mv(PhiT, P + j * NX, WT + j * NW);
+    for (j = 0; j < NE; ++j)
+        phit_mv(PhiT, G + j * NX, Gam + j * NW);
+#else
+    int i, j, l;
+    for (i = 0; i < NW; ++i) {
+        robot_arm_real pc[NX], colsum;
+        for (l = 0; l < NX; ++l)
+            pc[l] = PhiT[l + i * NX];
+        colsum = robot_arm_fabs(pc[0]);
+        for (l = 1; l < NX; ++l)
+            colsum += robot_arm_fabs(pc[l]);
+        cs2[i] = colsum * colsum;
+        for (j = 0; j < NX; ++j) {
+            robot_arm_real s = ROBOT_ARM_R(0.0);
+            for (l = 0; l < NX; ++l)
+                s += pc[l] * P[l + j * NX];
+            WT[i + j * NW] = s;
+        }
+        for (j = 0; j < NE; ++j) {
+            robot_arm_real s = ROBOT_ARM_R(0.0);
+            for (l = 0; l < NX; ++l)
+                s += pc[l] * G[l + j * NX];
+            Gam[i + j * NW] = s;
+        }
+    }
+#endif
+}
+
+QP_NOINLINE static void qp_stage_update(const robot_arm_real *restrict Phi, const robot_arm_real *restrict P,
+                                        const robot_arm_real *restrict G, const robot_arm_real *restrict H,
+                                        const robot_arm_real *restrict PhiT, robot_arm_real *restrict WT,
+                                        robot_arm_real *restrict M, robot_arm_real *restrict Gam,
+                                        robot_arm_real *restrict cs2)
+{
+    int i, j, l;
+    qp_stage_wt(P, G, PhiT, WT, Gam, cs2);
     UNROLL
     for (j = 0; j < NW; ++j) {
         robot_arm_real col[NW];
@@ -751,18 +888,13 @@ static void qp_stage_update(const robot_arm_real *restrict Phi, const robot_arm_
         for (i = j; i < NW; ++i)
             M[i + j * NW] = col[i];
     }
-    for (j = 0; j < NE; ++j)
-        phit_mv(PhiT, G + j * NX, Gam + j * NW);
 }
 
-/* Largest absolute entry of the Hessian data (scale of delta and rho). */
-static robot_arm_real hessian_scale(const robot_arm_qp_in *in)
+/* The scale of delta and rho: the largest absolute entry of the Hessian data (hmax, from
+ * check_input) plus the shift. */
+static robot_arm_real hessian_scale(const robot_arm_qp_in *in, robot_arm_real hmax)
 {
-    int k;
-    robot_arm_real s = robot_arm_lai_max_abs_mat(NX, NX, in->HN, NX);
-    for (k = 0; k < N; ++k)
-        s = dmax(s, robot_arm_lai_max_abs_mat(NW, NW, in->H[k], NW));
-    s += in->hess_shift;
+    const robot_arm_real s = hmax + in->hess_shift;
     /* a zero Hessian (an LP) still needs a scale for the inertia correction */
     return s > ROBOT_ARM_R(0.0) ? s : ROBOT_ARM_R(1.0);
 }
@@ -773,9 +905,9 @@ static robot_arm_real hessian_scale(const robot_arm_qp_in *in)
 static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
 {
     int k, i, j;
-    robot_arm_real *WT = ws->work + (1 - ROBOT_ARM_QP_PHIT) * NX * NW;  /* NW x NX: Phi_k' P_{k+1} */
-    robot_arm_real *Gam = ws->work + (2 - ROBOT_ARM_QP_PHIT) * NX * NW; /* NW x NE: Phi_k' G_{k+1} */
-    robot_arm_real *Pf = Gam + NW * NE1;                            /* NX x NX: P_{k+1} unpacked */
+    robot_arm_real *WT = ws->work;            /* NW x NX: Phi_k' P_{k+1} */
+    robot_arm_real *Gam = ws->work + NX * NW; /* NW x NE: Phi_k' G_{k+1} */
+    robot_arm_real *Pf = Gam + NW * NE1;      /* NX x NX: P_{k+1} unpacked */
     const robot_arm_real delta = ws->delta;
     robot_arm_real pmag, pnext;
     int b;
@@ -831,8 +963,8 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         const robot_arm_real *PhiT = ws->PhiT[k];
         const robot_arm_real *cs2 = ws->phi_cs2[k];
 #else
-        robot_arm_real *PhiT = ws->work; /* Phi_k' and the squared column sums, formed here */
-        robot_arm_real cs2[NW];
+        const robot_arm_real *PhiT = Phi; /* qp_stage_update reads Phi_k itself */
+        robot_arm_real cs2[NW];           /* the squared column sums, formed here */
 #endif
         robot_arm_real q[NSI], dg[NW];
         robot_arm_real Lu[NU1 * NU1];
@@ -843,9 +975,6 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         robot_arm_real mxx = ROBOT_ARM_R(0.0), pabs;
         int l = 0;
 
-#if !ROBOT_ARM_QP_PHIT
-        phi_stage_copy(Phi, PhiT, cs2);
-#endif
         /* barrier weights of the stage's rows (0 on the unbounded rows) */
         for (i = 0; i < NSI; ++i)
             q[i] = ROBOT_ARM_R(0.0);
@@ -859,15 +988,20 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         for (j = 0; j < NG; ++j)
             for (i = 0; i < NW; ++i)
                 dg[i] += q[NW + j] * in->C[k][j + i * NG] * in->C[k][j + i * NG];
+                /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
+         * read), Gam = Phi' G_{k+1} (and without the kept copy cs2, from the same pass over
+         * Phi_k) */
+#if ROBOT_ARM_QP_PHIT
+        qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam, NULL);
+#else
+        qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam, cs2);
+#endif
         /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P (cs2: the
          * squared column sums of |Phi_k|) */
         for (j = 0; j < NU; ++j)
             ws->noise[j] = RICCATI_EPS * (robot_arm_fabs(dg[NX + j]) + cs2[NX + j] * dmax(pmax, pmag));
         for (j = 0; j < NX; ++j)
             mxx = dmax(mxx, robot_arm_fabs(dg[j]) + cs2[j] * pmax);
-        /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
-         * read), Gam = Phi' G_{k+1} */
-        qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam);
         for (i = 0; i < NW; ++i)
             M[i + i * NW] += q[i] + delta + in->hess_shift;
         for (j = 0; j < NG; ++j) {
@@ -891,9 +1025,8 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         pmag = mxx;
         pack_lu(Lu, ws->Lu[k]);
         /* LK = Lu^{-1} M_ux (in the array of K), LKn = Lu^{-1} Gam_u (in that of KN) */
-        robot_arm_lai_copy_mat(NU, NX, M + NX, NW, K, NU1);
         for (j = 0; j < NX; ++j)
-            lu_solve_n(ws->Lu[k], K + j * NU1);
+            lu_solve_n_from(ws->Lu[k], M + NX + j * NW, K + j * NU1);
         /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
         pabs = ROBOT_ARM_R(0.0);
         UNROLL
@@ -913,9 +1046,8 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         for (j = 0; j < NX; ++j)
             pmag = dmax(pmag, robot_arm_lai_dot(NU, K + j * NU1, K + j * NU1));
         if (NE > 0) {
-            robot_arm_lai_copy_mat(NU, NE, Gam + NX, NW, KN, NU1);
             for (j = 0; j < NE; ++j)
-                lu_solve_n(ws->Lu[k], KN + j * NU1);
+                lu_solve_n_from(ws->Lu[k], Gam + NX + j * NW, KN + j * NU1);
             /* G_k = Gam_x - LK' LKn;  S += LKn' LKn (S = -(nu-nu block of V_0)) */
             robot_arm_lai_copy_mat(NX, NE, Gam, NW, ws->G[k], NX);
             robot_arm_lai_gemm_tn(NX, NE, NU, -ROBOT_ARM_R(1.0), K, NU1, KN, NU1, ROBOT_ARM_R(1.0), ws->G[k], NX);
@@ -1980,20 +2112,11 @@ static int warm_start_finite(const robot_arm_qp_sol *sol)
 }
 
 /* The largest data entry the certificates compare their diverging iterates with: the
- * finite bounds, x0, b, g, gN and req, at least 1. */
-static robot_arm_real certificate_data_scale(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+ * finite bounds, x0, b, g, gN and req, at least 1; from the data scales (the same maxima of
+ * the finite data, data_scales). */
+static robot_arm_real certificate_data_scale(const robot_arm_qp_workspace *ws)
 {
-    int i;
-    robot_arm_real s = dmax(ROBOT_ARM_R(1.0), ws->scale_bounds);
-    s = dmax(s, robot_arm_lai_norm_inf(NX, in->x0));
-    for (i = 0; i < N; ++i) {
-        s = dmax(s, robot_arm_lai_norm_inf(NX, in->b[i]));
-        s = dmax(s, robot_arm_lai_norm_inf(NW, in->g[i]));
-    }
-    s = dmax(s, robot_arm_lai_norm_inf(NX, in->gN));
-    if (NE > 0)
-        s = dmax(s, robot_arm_lai_norm_inf(NE, in->req));
-    return s;
+    return dmax(dmax(ROBOT_ARM_R(1.0), ws->scale_bounds), dmax(ws->scale_b, ws->scale_g));
 }
 
 /* Settings, data checks, the bounded rows, the data scales and the starting point of the
@@ -2003,13 +2126,14 @@ static int qp_prepare(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp
                       const robot_arm_qp_settings *settings, robot_arm_qp_sol *sol, robot_arm_qp_info *info)
 {
     int bounds;
+    robot_arm_real hmax;
     checked_settings(settings, &L->st);
     if (info)
         info_not_solved(info);
     if (ws == NULL || in == NULL || sol == NULL)
         return ROBOT_ARM_QP_INVALID_INPUT;
     /* a non-finite warm start is bad input, not a reason to produce NaN */
-    if (!check_input(in) || (L->st.warm_start && !warm_start_finite(sol))) {
+    if (!check_input(in, &hmax) || (L->st.warm_start && !warm_start_finite(sol))) {
         zero_solution(sol);
         return ROBOT_ARM_QP_INVALID_INPUT;
     }
@@ -2033,11 +2157,11 @@ static int qp_prepare(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp
             info->status = ROBOT_ARM_QP_PRIMAL_INFEASIBLE;
         return ROBOT_ARM_QP_PRIMAL_INFEASIBLE;
     }
-    L->hscale = hessian_scale(in);
+    L->hscale = hessian_scale(in, hmax);
     data_scales(ws, in);
     L->attempt = L->st.warm_start ? 1 : 0;
     initial_point(ws, in, &L->st, sol, L->attempt == 0);
-    L->data_scale = certificate_data_scale(ws, in);
+    L->data_scale = certificate_data_scale(ws);
     L->n_corr = L->n_aug = L->n_corr_attempt = 0;
     L->as_sweeps = 0;
     L->delta_last = L->delta_used = ROBOT_ARM_R(0.0);

@@ -200,10 +200,8 @@
 #define ROBOT_ARM_QP_PHIT 1
 #endif
 #endif
-/* Scratch of the factorisation: Phi' (unless kept, ROBOT_ARM_QP_PHIT), Phi'P, Phi'G and one
- * unpacked P. */
-#define ROBOT_ARM_QP_NWORK                                                                                       \
-    ((2 - ROBOT_ARM_QP_PHIT) * ROBOT_ARM_NX * ROBOT_ARM_QP_NW + ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NE1 + ROBOT_ARM_NX * ROBOT_ARM_NX)
+/* Scratch of the factorisation: Phi'P, Phi'G and one unpacked P. */
+#define ROBOT_ARM_QP_NWORK (ROBOT_ARM_NX * ROBOT_ARM_QP_NW + ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NE1 + ROBOT_ARM_NX * ROBOT_ARM_NX)
 
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if ROBOT_ARM_QP_NINEQ < 65536

@@ -200,10 +200,8 @@
 #define UNICYCLE_QP_PHIT 1
 #endif
 #endif
-/* Scratch of the factorisation: Phi' (unless kept, UNICYCLE_QP_PHIT), Phi'P, Phi'G and one
- * unpacked P. */
-#define UNICYCLE_QP_NWORK                                                                                       \
-    ((2 - UNICYCLE_QP_PHIT) * UNICYCLE_NX * UNICYCLE_QP_NW + UNICYCLE_QP_NW * UNICYCLE_QP_NE1 + UNICYCLE_NX * UNICYCLE_NX)
+/* Scratch of the factorisation: Phi'P, Phi'G and one unpacked P. */
+#define UNICYCLE_QP_NWORK (UNICYCLE_NX * UNICYCLE_QP_NW + UNICYCLE_QP_NW * UNICYCLE_QP_NE1 + UNICYCLE_NX * UNICYCLE_NX)
 
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if UNICYCLE_QP_NINEQ < 65536
