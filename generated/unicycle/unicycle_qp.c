@@ -194,22 +194,18 @@ static int check_input(const unicycle_qp_in *in, unicycle_real *hmax)
         return 0;
     for (k = 0; k < N; ++k) {
         for (i = 0; i < NW; ++i)
-            if (in->lbw[k][i] != in->lbw[k][i] || in->ubw[k][i] != in->ubw[k][i] ||
-                in->lbw[k][i] == INFINITY || in->ubw[k][i] == -INFINITY)
-                if (k > 0 || i >= NX)
-                    return 0;
+            /* false for a NaN, lo = +inf or up = -inf */
+            if (!(in->lbw[k][i] < INFINITY && in->ubw[k][i] > -INFINITY) && (k > 0 || i >= NX))
+                return 0;
         for (i = 0; i < NG; ++i)
-            if (in->lg[k][i] != in->lg[k][i] || in->ug[k][i] != in->ug[k][i] || in->lg[k][i] == INFINITY ||
-                in->ug[k][i] == -INFINITY)
+            if (!(in->lg[k][i] < INFINITY && in->ug[k][i] > -INFINITY))
                 return 0;
     }
     for (i = 0; i < NX; ++i)
-        if (in->lbxN[i] != in->lbxN[i] || in->ubxN[i] != in->ubxN[i] || in->lbxN[i] == INFINITY ||
-            in->ubxN[i] == -INFINITY)
+        if (!(in->lbxN[i] < INFINITY && in->ubxN[i] > -INFINITY))
             return 0;
     for (i = 0; i < NR; ++i)
-        if (in->lr[i] != in->lr[i] || in->ur[i] != in->ur[i] || in->lr[i] == INFINITY ||
-            in->ur[i] == -INFINITY)
+        if (!(in->lr[i] < INFINITY && in->ur[i] > -INFINITY))
             return 0;
     if (SOFT) {
         for (i = 0; i < UNICYCLE_QP_NSS; ++i)
