@@ -191,8 +191,10 @@
  * the whole solve (N nw (nx + 1) reals), so that the products with Phi_k' run down
  * contiguous columns (vectorised where doubles come in vectors) and the factorisation
  * neither transposes nor sums. 0 (the default on 32-bit ARM: a scalar FPU and little RAM):
- * both are formed per stage in every factorisation. The same results either way; define it
- * to override. */
+ * the products read Phi_k itself (Phi_k'P as dot products of its columns) and the column
+ * sums are formed per stage in every factorisation, and the QP's kernels take the forms
+ * that suit a scalar FPU (robot_arm_qp.c). The same results either way; define it to
+ * override. */
 #ifndef ROBOT_ARM_QP_PHIT
 #if defined(__arm__) && !defined(__aarch64__)
 #define ROBOT_ARM_QP_PHIT 0
