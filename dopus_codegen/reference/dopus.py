@@ -36,6 +36,7 @@ from ..errors import PARAMETER_ORDER, DopusError, qp_status_code as status_code_
 from ..settings import SettingError, Settings, check_adaptive_M, of_problem as settings_of_problem
 from .kkt import eval_stages, kkt_measure, node_parameters
 from ..problem.checks import describe_qp_row
+from ..problem.derivatives import cost_hessian_constant
 from .qp import QPError, free_initial_state, solve_qp_reference
 
 # the QP solution arrays whose finiteness a step needs
@@ -171,6 +172,11 @@ class ReferenceDopus:
                                 "of the problem (Discretized.stage_hess_cost); use cost_hessian='stored'")
         self.regularization = s.regularization
         self.reg_eps = s.reg_eps
+        # a constant stage-cost Hessian: step 5 keeps the blocks (as the C runtime,
+        # DOPUS_COST_HESS_CONST)
+        exact_al = getattr(disc, "stage_hess_cost_exact", None)
+        self._cost_hess_const = exact_al is not None and cost_hessian_constant(
+            exact_al, getattr(disc, "stage_hess_cost_gn", None))
         self.qp_tol = s.qp_tol_of("double")
         self.lm, self.lm_auto, self.lm_scale, self._lm_kkt_prev = 0.0, False, 1.0, -1.0
         self._lm_uncapped = -1.0
@@ -1066,7 +1072,7 @@ class ReferenceDopus:
         chosen, ext_cost = self._relinearise_worst(slots, rho)
         t3 = time.perf_counter()
         b0 = self._budget_now()
-        if self.cost_hessian == "fresh":
+        if self.cost_hessian == "fresh" and not self._cost_hess_const:
             n_al = self._refresh_cost_hessians(slots, set(chosen) | {self.N - 1})
             if self._budget_on() and n_al > 0:
                 self._cost_al = (self._budget_now() - b0) / n_al
