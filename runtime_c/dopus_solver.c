@@ -148,7 +148,7 @@ static double dopus_cost_reserve(const dopus_solver *s, double estimate, double 
  * readings. A reading above the estimate raises it, to twice the estimate at most (a reading
  * taken while the process was descheduled is not the cost of the work), one below lowers it
  * by 0.1 % only: the room kept for the rest of an instant follows the dearest recent readings
- * (measured on the emulated Cortex-M7: steps 6 and 7 of the robot arm took 89 k to 218 k
+ * (measured on the emulated Cortex-M7: steps 6 and 7 of the robot arm took 93 k to 222 k
  * instructions between prepare iterations, and priced at a slowly falling last reading the
  * instants went up to 112 k over budgets of 3.2 to 10 M); in work units the reading itself. */
 static double dopus_cost_peak(const dopus_solver *s, double estimate, double reading)
