@@ -402,13 +402,22 @@ def scenario_of(disc) -> Dict[str, Any]:
     return out
 
 
-def scenario_image(disc, out_dir, target: str = "m7-double", progress=print) -> Dict[str, Any]:
+def scenario_image(disc, out_dir, target: str = "m7-double", progress=print,
+                   steps: Optional[int] = None) -> Dict[str, Any]:
     """Generate ``disc`` (with its nominal solution) and build the firmware image of
-    ``target`` with its scenario; returns {"elf", "target", "scenario", "gen_dir"}."""
+    ``target`` with its scenario; returns {"elf", "target", "scenario", "gen_dir"}. ``steps``:
+    the scenario's first so many instants only (a shorter run around its event)."""
     from dopus_codegen.codegen import generate as codegen
 
     _require_targets([target])
     sc = scenario_of(disc)
+    if steps is not None:
+        if int(steps) != steps or not 1 <= steps <= sc["steps"]:
+            raise FirmwareError(f"steps: expected an integer from 1 to the scenario's {sc['steps']} instants, "
+                                f"got {steps!r}")
+        sc["steps"] = int(steps)
+        if sc["event_step"] is not None and sc["event_step"] >= sc["steps"]:
+            sc.update(event_step=None, event_time=None, event_label=None, scale=None, shift=None)
     out_dir = Path(out_dir)
     real = TARGETS[target].real
     gen = out_dir / f"generated_{real}"

@@ -144,6 +144,24 @@ static double unicycle_cost_reserve(const unicycle_solver *s, double estimate, d
     return unicycle_cost(s, estimate, reading);
 }
 
+/* A part of the least prepare or of the work after a QP (time budget): the peak of its
+ * readings. A reading above the estimate raises it, to twice the estimate at most (a reading
+ * taken while the process was descheduled is not the cost of the work), one below lowers it
+ * by 0.1 % only: the room kept for the rest of an instant follows the dearest recent readings
+ * (measured on the emulated Cortex-M7: steps 6 and 7 of the robot arm took 93 k to 222 k
+ * instructions between prepare iterations, and priced at a slowly falling last reading the
+ * instants went up to 112 k over budgets of 3.2 to 10 M); in work units the reading itself. */
+static double unicycle_cost_peak(const unicycle_solver *s, double estimate, double reading)
+{
+    if (s->settings.budget_unit != UNICYCLE_BUDGET_TIME || !(estimate > 0.0)) {
+        return reading;
+    }
+    if (reading > estimate) {
+        return reading < 2.0 * estimate ? reading : 2.0 * estimate;
+    }
+    return reading > 0.999 * estimate ? reading : 0.999 * estimate;
+}
+
 /* The price of one QP iteration for the extra iteration's cap (time budget): the reading
  * `cost` / `iterations` of a QP, the estimate moved by 10 % at most, up or down. A QP whose
  * iterations were unusually cheap (or one descheduled) moves it little: following such a
@@ -161,6 +179,11 @@ static void unicycle_cost_qp_step(unicycle_solver *s, double cost, int iteration
     s->anytime.cost_qp_step = !(e > 0.0) ? r : r > 1.1 * e ? 1.1 * e : r < 0.9 * e ? 0.9 * e : r;
 }
 
+static double unicycle_fmax_d(double a, double b)
+{
+    return a > b ? a : b;
+}
+
 /* 1 without a budget, or when `cost` more still fits in the instant's budget. */
 static int unicycle_budget_fits(const unicycle_solver *s, double cost)
 {
@@ -168,18 +191,38 @@ static int unicycle_budget_fits(const unicycle_solver *s, double cost)
 }
 
 /* The cost of steps 5 to 7 of a prepare iteration with `fresh_al` stages of 0..N-2 whose
- * stage-cost Hessian step 5 refreshes (those not re-linearised): each stage re-linearised
- * saves its refresh, so the rest of an iteration depends on how many were. */
+ * stage-cost Hessian step 5 refreshes (those not re-linearised), and of the prepare after
+ * it: each stage re-linearised saves its refresh, so the rest of an iteration depends on how
+ * many were. */
 static double unicycle_rest_cost(const unicycle_solver *s, int fresh_al)
 {
-    return (s->settings.cost_hessian ? s->anytime.cost_al * (double)fresh_al : 0.0) + s->anytime.cost_tail;
+    /* (a constant stage-cost Hessian has no refresh, but after a change of the regularisation) */
+    const int refresh = s->settings.cost_hessian && (!UNICYCLE_COST_HESS_CONST || s->al_resync);
+    return (refresh ? s->anytime.cost_al * (double)fresh_al : 0.0) + s->anytime.cost_tail +
+           s->anytime.cost_end;
 }
 
-/* The least a prepare iteration costs after its gradients of stages 0..N-2: step 3 and,
- * without a stage re-linearised, steps 5 to 7 (the gradients are cut for it). */
+/* The least the rest of a prepare iteration costs with `predicted` stages of 0..N-2 still to
+ * predict in step 2 (their gradients cut): the iteration's own work, the predictions, step 3
+ * and, without a stage re-linearised, steps 5 to 7 and the prepare after them. */
+static double unicycle_prepare_least(const unicycle_solver *s, int predicted)
+{
+    return s->anytime.cost_fixed + s->anytime.cost_predict * (double)predicted + s->anytime.cost_head +
+           unicycle_rest_cost(s, UNICYCLE_N - 1);
+}
+
+/* The least a prepare iteration costs: every gradient of stages 0..N-2 cut. */
 static double unicycle_prepare_floor(const unicycle_solver *s)
 {
-    return s->anytime.cost_head + unicycle_rest_cost(s, UNICYCLE_N - 1);
+    return unicycle_prepare_least(s, UNICYCLE_N - 1);
+}
+
+/* What a QP's deadline leaves free after it for the work that follows it (the step taken)
+ * and a prepare iteration costing `prepare`: the QP may pass its last test of the deadline by
+ * its finishing work (cost_qp_over). */
+static double unicycle_after_qp(const unicycle_solver *s, double prepare)
+{
+    return s->anytime.cost_qp_over + s->anytime.cost_fb_tail + prepare;
 }
 
 /* ---- generic information ------------------------------------------------------------ */
@@ -652,8 +695,48 @@ static int unicycle_linearize_all_eval(unicycle_solver *s)
             (void)unicycle_regularize(s, UNICYCLE_NW, s->mem.ev.tmp_A);
         }
         s->anytime.cost_al = unicycle_budget_now(s) - b0;
+        /* one prediction of a cut stage (stage 0, into step 2's scratch) */
+        b0 = unicycle_budget_now(s);
+        unicycle_ring_predict(unicycle_ring_stage(&s->ring, 0), s->mem.ev.Fn_w[0], s->mem.ev.Fn_phi[0],
+                           s->mem.ev.Fn_g[0]);
+        s->anytime.cost_predict = unicycle_budget_now(s) - b0;
     }
     return rc;
+}
+
+static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set);
+
+/* The first price of one QP iteration (time budget, before any QP was timed): one cold
+ * iteration of the QP just assembled at init, for the measurement given to init, timed with
+ * the solve's own setup. Its result is not used (the first feedback's QP starts from its own
+ * point, warm or cold). Without it the first feedback's QP had no price for its first
+ * iteration, which could pass the deadline by one iteration. */
+static void unicycle_price_qp(unicycle_solver *s)
+{
+    const unicycle_qp_info info = s->qp_info;
+    const int max_iter = s->settings.qp_max_iter;
+    unicycle_real x0[UNICYCLE_NX];
+    double b0;
+    int i;
+    if (!unicycle_budget_on(s) || s->settings.budget_unit != UNICYCLE_BUDGET_TIME ||
+        s->anytime.cost_qp_iter > 0.0) {
+        return;
+    }
+    unicycle_copy(x0, s->qp_in.x0, UNICYCLE_NX);
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->qp_in.x0[i] = s->xhat0[i] - s->x[0][i];
+    }
+    s->qp_in.hess_shift = s->lm.lm;
+    s->settings.qp_max_iter = 1;
+    b0 = unicycle_budget_now(s);
+    (void)unicycle_qp_solve_bound(s, 0, 0);
+    s->anytime.cost_qp_iter = unicycle_budget_now(s) - b0;
+    if (!(s->anytime.cost_qp_step > 0.0)) {
+        s->anytime.cost_qp_step = s->anytime.cost_qp_iter;
+    }
+    s->settings.qp_max_iter = max_iter;
+    s->qp_info = info;
+    unicycle_copy(s->qp_in.x0, x0, UNICYCLE_NX);
 }
 
 /* unicycle_linearize_all_eval in the phase "gradients" (the blocks in theirs). */
@@ -698,6 +781,7 @@ static int unicycle_init_finish(unicycle_solver *s)
         /* the first estimate of steps 6 and 7 of prepare (the assembly and the lm test) */
         s->anytime.cost_tail = unicycle_budget_now(s) - b0;
     }
+    unicycle_price_qp(s);
     return UNICYCLE_OK;
 }
 
@@ -980,6 +1064,37 @@ static double unicycle_work_clock(void *ctx)
     return ((const unicycle_solver *)ctx)->anytime.work;
 }
 
+/* The solver's clock as the QP's (a time budget; ctx: the solver): each read kept with the
+ * price of one iteration the QP has at that read (its first price, then the largest time
+ * between two reads, as unicycle_qp.c prices it), for unicycle_qp_over. */
+static double unicycle_qp_clock(void *ctx)
+{
+    unicycle_solver *s = (unicycle_solver *)ctx;
+    const double now = s->timer.clock(s->timer.ctx);
+    if (s->anytime.qp_reads > 0 && now - s->anytime.qp_read > s->anytime.qp_read_price) {
+        s->anytime.qp_read_price = now - s->anytime.qp_read;
+    }
+    s->anytime.qp_read = now;
+    s->anytime.qp_reads += 1;
+    return now;
+}
+
+/* After a timed QP solve (time budget): how far its end passed what its last test of the
+ * deadline allowed for (the read plus one iteration's price, or the read alone when the test
+ * stopped it), kept as the peak of such readings (cost_qp_over). */
+static void unicycle_qp_over(unicycle_solver *s)
+{
+    double over;
+    if (s->anytime.qp_reads == 0) {
+        return;
+    }
+    over = s->timer.clock(s->timer.ctx) - s->anytime.qp_read;
+    if (!(s->anytime.qp_read + s->anytime.qp_read_price > s->anytime.qp_deadline)) {
+        over -= s->anytime.qp_read_price;
+    }
+    s->anytime.cost_qp_over = unicycle_cost_peak(s, s->anytime.cost_qp_over, over > 0.0 ? over : 0.0);
+}
+
 /* The QP's matrix pointers (unicycle_qp_in.H, Phi, C, HN, R, Req) point into this struct: the
  * ring slots in place and the terminal blocks. They are set just before each solve and
  * cleared after it, so the struct holds no pointer into itself between calls and a byte
@@ -996,10 +1111,12 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set)
         /* a budget (section 14): the QP reads the budget's clock before each factorisation
          * (work units: the counter, which the QP's own N units have already moved) */
         const int work = s->settings.budget_unit == UNICYCLE_BUDGET_WORK;
-        settings.clock = work ? unicycle_work_clock : s->timer.clock;
-        settings.clock_ctx = work ? (void *)s : s->timer.ctx;
+        settings.clock = work ? unicycle_work_clock : unicycle_qp_clock;
+        settings.clock_ctx = (void *)s;
         settings.deadline = s->anytime.qp_deadline;
         settings.iter_price = s->anytime.qp_price;
+        s->anytime.qp_reads = 0;
+        s->anytime.qp_read_price = s->anytime.qp_price;
     }
     settings.warm_start = warm;
     settings.active_set = warm && active_set ? UNICYCLE_QP_ACTIVE_SET : 0;
@@ -1013,6 +1130,9 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set)
     in->R = UNICYCLE_NR > 0 ? s->R : 0;
     in->Req = UNICYCLE_NE > 0 ? s->R_eq : 0;
     qs = unicycle_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
+    if (s->anytime.qp_timed && s->settings.budget_unit == UNICYCLE_BUDGET_TIME) {
+        unicycle_qp_over(s);
+    }
     for (k = 0; k < UNICYCLE_N; ++k) {
         in->H[k] = 0;
         in->Phi[k] = 0;
@@ -1251,12 +1371,12 @@ static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0,
 {
     unicycle_real xhat_prev[UNICYCLE_NX];
     double b0;
-    int rc, qs, retries;
+    int rc, qs, retries, recovered = 0;
 
     unicycle_copy(xhat_prev, s->xhat0, UNICYCLE_NX);
     unicycle_feedback_measure(s, xhat0);
-    /* the deadline leaves the least a prepare costs free */
-    unicycle_budget_deadline(s, unicycle_prepare_floor(s), s->anytime.cost_qp_iter);
+    /* the deadline leaves the step and the least a prepare costs free */
+    unicycle_budget_deadline(s, unicycle_after_qp(s, unicycle_prepare_floor(s)), s->anytime.cost_qp_iter);
     b0 = unicycle_budget_now(s);
     qs = unicycle_feedback_qp(s);
     qs = unicycle_feedback_lm_retries(s, qs, &retries);
@@ -1269,6 +1389,7 @@ static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0,
         unicycle_cost_qp_step(s, unicycle_budget_now(s) - b0, s->qp_iterations);
     }
     s->qp_status = qs;
+    b0 = unicycle_budget_now(s);
     rc = unicycle_feedback_check_cut(s, qs);
     /* the recovery within the feedback (algorithm.md section 9); not for a QP stopped by its
      * iteration limit or the budget's deadline (not signs of a wrong iterate) or refused as
@@ -1283,6 +1404,7 @@ static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0,
             s->health.flags |= UNICYCLE_FLAG_MEASUREMENT_UNUSABLE;
             rc = UNICYCLE_ERR_NONFINITE_VALUE;
         } else {
+            recovered = 1;
             rc = unicycle_feedback_recover(s, &qs, &retries);
             if (rc == UNICYCLE_OK) {
                 s->qp_status = qs;
@@ -1296,6 +1418,10 @@ static int unicycle_feedback_run(unicycle_solver *s, const unicycle_real *xhat0,
     unicycle_store_domega(s);
     unicycle_take_step(s);
     unicycle_keep_plan(s, u0, retries == 0);
+    if (unicycle_budget_on(s) && !recovered) {
+        /* the step after the QP (not after a recovery's) */
+        s->anytime.cost_fb_tail = unicycle_cost_peak(s, s->anytime.cost_fb_tail, unicycle_budget_now(s) - b0);
+    }
     return unicycle_ret(s, UNICYCLE_OK);
 }
 
@@ -1477,17 +1603,20 @@ static int unicycle_next_worst(const unicycle_solver *s)
  * further stages in rho order while one more iteration still fits after them
  * (algorithm.md section 14); each only while the budget allows. The cost of the stages
  * beyond M goes to *ext_cost. */
-static int unicycle_relinearise(unicycle_solver *s, double *ext_cost)
+static int unicycle_relinearise(unicycle_solver *s, double *ext_cost, double *stage_time)
 {
     int M = unicycle_M_now(s), m, k, n = 0, rc = UNICYCLE_OK, extend;
     double b0, reserve;
+    *stage_time = 0.0;
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->selected[k] = 0;
     }
     /* the stale stages first, whatever the budget: without them the QP is infeasible */
     for (k = 0; k < UNICYCLE_N - 1 && UNICYCLE_NG > 0; ++k) {
         if (unicycle_stale_stage(s, k)) {
+            b0 = unicycle_budget_now(s);
             rc = unicycle_stage_H(s, k);
+            *stage_time += unicycle_budget_now(s) - b0;
             if (rc != UNICYCLE_OK) {
                 s->anytime.instant_stages += n;
                 return rc;
@@ -1521,6 +1650,7 @@ static int unicycle_relinearise(unicycle_solver *s, double *ext_cost)
         n += 1;
         if (unicycle_budget_on(s)) {
             double reading = unicycle_budget_now(s) - b0;
+            *stage_time += reading;
             s->anytime.cost_stage = unicycle_cost(s, s->anytime.cost_stage, reading);
             if (m >= M) {
                 /* what the stage took (not the estimate) less the step-5 refresh it saved:
@@ -1783,12 +1913,13 @@ int unicycle_prepare(unicycle_solver *s)
     /* the instant's budget counts the solver's own calls: the feedback's part (used) and
      * this prepare from now, not the caller's time between them */
     s->anytime.instant_start = unicycle_budget_now(s) - s->anytime.used;
+    s->anytime.mark = -1.0;
     hessian = s->settings.hessian;
     if (s->qp_ready && s->health.n_failed > 0 && !s->health.recover_pending && s->settings.recovery &&
         s->settings.mode == UNICYCLE_MODE_RECEDING && !(s->health.flags & UNICYCLE_FLAG_REINIT_GUESS)) {
         /* (not from the OCP file's guess: its plan is not the plant's); with a time budget
          * its QP stops where the least prepare still fits (a cut QP changes nothing) */
-        unicycle_budget_deadline(s, unicycle_prepare_floor(s), s->anytime.cost_qp_step);
+        unicycle_budget_deadline(s, unicycle_after_qp(s, unicycle_prepare_floor(s)), s->anytime.cost_qp_step);
         unicycle_predicted_step(s);
         s->anytime.qp_timed = 0;
     }
@@ -1818,6 +1949,10 @@ int unicycle_prepare(unicycle_solver *s)
         unicycle_health_stalled(&s->health, UNICYCLE_RECOVERY_FULL_RTI)) {
         s->health.flags |= UNICYCLE_FLAG_STALLED;
     }
+    if (rc == UNICYCLE_OK && unicycle_budget_on(s) && s->anytime.mark >= 0.0) {
+        /* the prepare after its last iteration (the test for one more) */
+        s->anytime.cost_end = unicycle_cost_peak(s, s->anytime.cost_end, unicycle_budget_now(s) - s->anytime.mark);
+    }
     s->anytime.used = unicycle_budget_now(s) - s->anytime.instant_start;
     if (rc == UNICYCLE_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
@@ -1834,8 +1969,8 @@ int unicycle_prepare(unicycle_solver *s)
 static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 {
     unicycle_real xN_saved[UNICYCLE_NX];
-    double b_start = unicycle_budget_now(s), ext_cost = 0.0, b_tail, b0;
-    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer;
+    double b_start = unicycle_budget_now(s), ext_cost = 0.0, b_tail, b0, b_cut = 0.0, fixed, stage_time = 0.0;
+    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer, diverged;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     unicycle_phase(s, UNICYCLE_PHASE_SHIFT);
@@ -1855,9 +1990,13 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     all_fresh = unicycle_fused(s) && unicycle_every_stage_fresh(s);
     defer = !all_fresh && !unicycle_budget_on(s);
     b0 = unicycle_budget_now(s);
+    fixed = b0 - b_start;
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
         unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
-        cut = cut || !unicycle_budget_fits(s, s->anytime.cost_grad + unicycle_prepare_floor(s));
+        if (!cut && !unicycle_budget_fits(s, s->anytime.cost_grad + unicycle_prepare_least(s, UNICYCLE_N - 2 - k))) {
+            cut = 1;
+            b_cut = unicycle_budget_now(s);
+        }
         if (cut) {
             unicycle_ring_predict(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
             s->rho[k] = UNICYCLE_R(0.0);
@@ -1895,9 +2034,18 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
         }
     }
 
-    if (unicycle_budget_on(s) && n_grad > 0) {
-        s->anytime.cost_grad =
-            unicycle_cost(s, s->anytime.cost_grad, (unicycle_budget_now(s) - b0) / (double)n_grad);
+    if (unicycle_budget_on(s)) {
+        const double b_end = unicycle_budget_now(s);
+        if (!cut) {
+            b_cut = b_end;
+        }
+        if (n_grad > 0) {
+            s->anytime.cost_grad = unicycle_cost(s, s->anytime.cost_grad, (b_cut - b0) / (double)n_grad);
+        }
+        if (n_grad < UNICYCLE_N - 1) {
+            s->anytime.cost_predict =
+                unicycle_cost_peak(s, s->anytime.cost_predict, (b_end - b_cut) / (double)(UNICYCLE_N - 1 - n_grad));
+        }
     }
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     b0 = unicycle_budget_now(s);
@@ -1920,14 +2068,17 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
         rc = unicycle_term_H(s);
     }
     if (rc == UNICYCLE_OK && unicycle_budget_on(s)) {
-        s->anytime.cost_head = unicycle_cost_reserve(s, s->anytime.cost_head, unicycle_budget_now(s) - b0);
+        s->anytime.cost_head = unicycle_cost_peak(s, s->anytime.cost_head, unicycle_budget_now(s) - b0);
     }
 
     /* 4. re-linearise the M stages with the largest rho_k (more as the budget allows) */
+    b0 = unicycle_budget_now(s);
     if (rc == UNICYCLE_OK) {
         unicycle_phase(s, UNICYCLE_PHASE_RHO);
-        rc = all_fresh ? unicycle_all_selected(s) : unicycle_relinearise(s, &ext_cost);
+        rc = all_fresh ? unicycle_all_selected(s) : unicycle_relinearise(s, &ext_cost, &stage_time);
     }
+    /* step 4's own work beyond its stages */
+    fixed += unicycle_budget_now(s) - b0 - stage_time;
     b0 = unicycle_budget_now(s);
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
@@ -1968,7 +2119,10 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     }
 
     if (unicycle_budget_on(s) && n_al > 0) {
-        s->anytime.cost_al = unicycle_cost(s, s->anytime.cost_al, (unicycle_budget_now(s) - b0) / (double)n_al);
+        s->anytime.cost_al =
+            unicycle_cost_peak(s, s->anytime.cost_al, (unicycle_budget_now(s) - b0) / (double)n_al);
+    } else {
+        fixed += unicycle_budget_now(s) - b0;
     }
     b_tail = unicycle_budget_now(s);
 
@@ -1990,12 +2144,15 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
     unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
+    diverged = unicycle_iterate_diverged(s);
     if (unicycle_budget_on(s)) {
         s->anytime.cost_prepare =
             unicycle_cost_reserve(s, s->anytime.cost_prepare, unicycle_budget_now(s) - b_start - ext_cost);
-        s->anytime.cost_tail = unicycle_cost_reserve(s, s->anytime.cost_tail, unicycle_budget_now(s) - b_tail);
+        s->anytime.cost_tail = unicycle_cost_peak(s, s->anytime.cost_tail, unicycle_budget_now(s) - b_tail);
+        s->anytime.cost_fixed = unicycle_cost_peak(s, s->anytime.cost_fixed, fixed > 0.0 ? fixed : 0.0);
+        s->anytime.mark = unicycle_budget_now(s);
     }
-    if (unicycle_iterate_diverged(s)) {
+    if (diverged) {
         s->health.flags |= UNICYCLE_FLAG_DIVERGED;
         if (s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING) {
             return unicycle_recover(s, 1);
@@ -2025,7 +2182,9 @@ static int unicycle_extra_iteration(unicycle_solver *s)
     }
     /* the QP stops at the budget's deadline less the prepare iteration that follows it (a QP
      * stopped there changes nothing) */
-    unicycle_budget_deadline(s, s->anytime.cost_prepare, s->anytime.cost_qp_step);
+    s->anytime.mark = -1.0;
+    unicycle_budget_deadline(s, unicycle_after_qp(s, unicycle_fmax_d(s->anytime.cost_prepare, unicycle_prepare_floor(s))),
+                          s->anytime.cost_qp_step);
     qs = unicycle_feedback_qp(s);
     s->anytime.qp_timed = 0;
     if (unicycle_budget_on(s)) {
@@ -2036,9 +2195,13 @@ static int unicycle_extra_iteration(unicycle_solver *s)
         return UNICYCLE_ERR_QP;
     }
     s->anytime.cost_qp = unicycle_cost(s, s->anytime.cost_qp, unicycle_budget_now(s) - b0);
+    b0 = unicycle_budget_now(s);
     unicycle_store_domega(s);
     unicycle_take_step(s);
     unicycle_lm_feedback(&s->lm, 1);
+    if (unicycle_budget_on(s)) {
+        s->anytime.cost_fb_tail = unicycle_cost_peak(s, s->anytime.cost_fb_tail, unicycle_budget_now(s) - b0);
+    }
     rc = unicycle_prepare_iteration(s, 1);
     if (!(s->health.kkt_proxy < proxy)) {
         s->anytime.uncapped = 1;
@@ -2465,6 +2628,15 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     s->anytime.cost_grad = 0.0;
     s->anytime.cost_head = 0.0;
     s->anytime.cost_al = 0.0;
+    s->anytime.cost_predict = 0.0;
+    s->anytime.cost_fixed = 0.0;
+    s->anytime.cost_end = 0.0;
+    s->anytime.cost_fb_tail = 0.0;
+    s->anytime.cost_qp_over = 0.0;
+    s->anytime.mark = -1.0;
+    s->anytime.qp_reads = 0;
+    s->anytime.qp_read = 0.0;
+    s->anytime.qp_read_price = 0.0;
     s->anytime.used = 0.0;
     s->anytime.qp_timed = 0;
     s->anytime.extra_iterations = 0;

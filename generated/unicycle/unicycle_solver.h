@@ -487,6 +487,17 @@ typedef struct {
     double cost_grad;     /* one gradient of stages 0..N-2 (step 2) */
     double cost_head;     /* step 3: stage N-1 and the terminal node */
     double cost_al;       /* one stage's cost-Hessian refresh (step 5) */
+    /* the rest of the least prepare and of the feedback (time budget; 0 in work units), each
+     * the peak of its readings (unicycle_cost_peak) */
+    double cost_predict; /* one cut stage's prediction (step 2) */
+    double cost_fixed;   /* a prepare iteration's own work outside its priced steps */
+    double cost_end;     /* the prepare after its last iteration */
+    double cost_fb_tail; /* a feedback (or an extra iteration) after its QP: the step taken */
+    double cost_qp_over; /* a QP past its last deadline test beyond the price of one iteration */
+    double qp_read;      /* the QP's last read of the budget's clock (its price at qp_read_price) */
+    double qp_read_price;
+    double mark;          /* the end of the last prepare iteration (< 0: something else since) */
+    int qp_reads;         /* reads of the clock by the current QP solve */
     double used;          /* budget used by the last instant */
     double qp_deadline;   /* the QP's deadline on the budget's clock (qp_timed) */
     double qp_price;      /* the QP's first estimate of one iteration (qp_timed) */
