@@ -205,6 +205,10 @@
 #define DOPUS_QP_NWORK                                                                                       \
     ((2 - DOPUS_QP_PHIT) * DOPUS_NX * DOPUS_QP_NW + DOPUS_QP_NW * DOPUS_QP_NE1 + DOPUS_NX * DOPUS_NX)
 
+/* Rows the active-set start may add to the active set of a factorisation without factoring
+ * again (see the header comment). */
+#define DOPUS_QP_AS_UPDATE 3
+
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if DOPUS_QP_NINEQ < 65536
 typedef unsigned short dopus_qp_row;
@@ -404,6 +408,12 @@ typedef struct {
     signed char act[DOPUS_QP_NB];
     dopus_real pen[DOPUS_QP_NB];
     int penalty;
+    /* the rows the start added after the sweep's factorisation (DOPUS_QP_AS_UPDATE at most),
+     * held by the Schur complement of that factor: their rows, how many, and the Cholesky
+     * factor of their Schur complement plus the inverse penalty weights (packed lower) */
+    dopus_qp_row as_rows[DOPUS_QP_AS_UPDATE];
+    int as_n;
+    dopus_real as_L[DOPUS_QP_AS_UPDATE * (DOPUS_QP_AS_UPDATE + 1) / 2];
     int n_fact;            /* factorisations of the solve */
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     dopus_real scale_stat; /* residual scaling factors */

@@ -205,6 +205,10 @@
 #define ROBOT_ARM_QP_NWORK                                                                                       \
     ((2 - ROBOT_ARM_QP_PHIT) * ROBOT_ARM_NX * ROBOT_ARM_QP_NW + ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NE1 + ROBOT_ARM_NX * ROBOT_ARM_NX)
 
+/* Rows the active-set start may add to the active set of a factorisation without factoring
+ * again (see the header comment). */
+#define ROBOT_ARM_QP_AS_UPDATE 3
+
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if ROBOT_ARM_QP_NINEQ < 65536
 typedef unsigned short robot_arm_qp_row;
@@ -404,6 +408,12 @@ typedef struct {
     signed char act[ROBOT_ARM_QP_NB];
     robot_arm_real pen[ROBOT_ARM_QP_NB];
     int penalty;
+    /* the rows the start added after the sweep's factorisation (ROBOT_ARM_QP_AS_UPDATE at most),
+     * held by the Schur complement of that factor: their rows, how many, and the Cholesky
+     * factor of their Schur complement plus the inverse penalty weights (packed lower) */
+    robot_arm_qp_row as_rows[ROBOT_ARM_QP_AS_UPDATE];
+    int as_n;
+    robot_arm_real as_L[ROBOT_ARM_QP_AS_UPDATE * (ROBOT_ARM_QP_AS_UPDATE + 1) / 2];
     int n_fact;            /* factorisations of the solve */
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     robot_arm_real scale_stat; /* residual scaling factors */

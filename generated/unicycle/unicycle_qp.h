@@ -205,6 +205,10 @@
 #define UNICYCLE_QP_NWORK                                                                                       \
     ((2 - UNICYCLE_QP_PHIT) * UNICYCLE_NX * UNICYCLE_QP_NW + UNICYCLE_QP_NW * UNICYCLE_QP_NE1 + UNICYCLE_NX * UNICYCLE_NX)
 
+/* Rows the active-set start may add to the active set of a factorisation without factoring
+ * again (see the header comment). */
+#define UNICYCLE_QP_AS_UPDATE 3
+
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if UNICYCLE_QP_NINEQ < 65536
 typedef unsigned short unicycle_qp_row;
@@ -404,6 +408,12 @@ typedef struct {
     signed char act[UNICYCLE_QP_NB];
     unicycle_real pen[UNICYCLE_QP_NB];
     int penalty;
+    /* the rows the start added after the sweep's factorisation (UNICYCLE_QP_AS_UPDATE at most),
+     * held by the Schur complement of that factor: their rows, how many, and the Cholesky
+     * factor of their Schur complement plus the inverse penalty weights (packed lower) */
+    unicycle_qp_row as_rows[UNICYCLE_QP_AS_UPDATE];
+    int as_n;
+    unicycle_real as_L[UNICYCLE_QP_AS_UPDATE * (UNICYCLE_QP_AS_UPDATE + 1) / 2];
     int n_fact;            /* factorisations of the solve */
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     unicycle_real scale_stat; /* residual scaling factors */
