@@ -112,7 +112,16 @@
  * below tol and every active multiplier has its side's sign (a wrong sign within tol times
  * the multipliers' scale is set to 0); otherwise the wrong-signed rows leave the active
  * set, the violated inactive sides join it and the next sweep factors again, up to
- * settings.active_set sweeps. Then the interior point runs from the warm start as before.
+ * settings.active_set sweeps. A sweep after corrections that only added rows, at most
+ * UNICYCLE_QP_AS_UPDATE since the last factorisation, keeps the factor: the added rows are
+ * held by their Schur complement G = D_s K^-1 D_s' (one solve per row, plus 1/penalty on
+ * the diagonal, a Cholesky factor of at most 3 x 3), their multipliers moved in each
+ * refinement step by G^-1 times their residual after the step; the same KKT point without
+ * a factorisation (the factor showed convexity on a larger null space). On the robot arm's
+ * closed loop the active set moves by rows joining at the ends of a saturated stretch, and
+ * most second and last sweeps are such updates: 1 factorisation per instant in the median
+ * instead of 2, at most 4 instead of 5 (bench/issue23/measurements.md, section 15). Then
+ * the interior point runs from the warm start as before.
  * The answer is the KKT point of its active set to round-off, with zero multipliers on the
  * inactive rows.
  *
