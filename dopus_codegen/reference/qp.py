@@ -603,7 +603,7 @@ AS_DROP = 0.4
 #: again: a sweep whose corrections only added rows, at most this many since the last
 #: factorisation, solves with that factor and the Schur complement of the added rows
 #: (DOPUS_QP_AS_UPDATE of runtime_c/dopus_qp.h; the same KKT point, no factorisation).
-AS_UPDATE = 3
+AS_UPDATE = 4
 
 
 def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol, sweeps=10, families=None):

@@ -115,7 +115,7 @@
  * settings.active_set sweeps. A sweep after corrections that only added rows, at most
  * ROBOT_ARM_QP_AS_UPDATE since the last factorisation, keeps the factor: the added rows are
  * held by their Schur complement G = D_s K^-1 D_s' (one solve per row, plus 1/penalty on
- * the diagonal, a Cholesky factor of at most 3 x 3), their multipliers moved in each
+ * the diagonal, a Cholesky factor of at most 4 x 4), their multipliers moved in each
  * refinement step by G^-1 times their residual after the step; the same KKT point without
  * a factorisation (the factor showed convexity on a larger null space). On the robot arm's
  * closed loop the active set moves by rows joining at the ends of a saturated stretch, and
@@ -216,7 +216,7 @@
 
 /* Rows the active-set start may add to the active set of a factorisation without factoring
  * again (see the header comment). */
-#define ROBOT_ARM_QP_AS_UPDATE 3
+#define ROBOT_ARM_QP_AS_UPDATE 4
 
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if ROBOT_ARM_QP_NINEQ < 65536
