@@ -57,8 +57,11 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
     for (k = DOPUS_N - 1; k >= 0; --k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(ring, k);
         const dopus_real *H = slot->Ht, *Phi = slot->Phit;
+        /* stage 0 needs only the control block Z_uu (x_0 is fixed): Y's and Z's control
+         * columns, the same values as in the full block */
+        const int j0 = k == 0 ? DOPUS_NX : 0;
         /* Y = P Phi (nx x nw), column by column */
-        for (j = 0; j < DOPUS_NW; ++j) {
+        for (j = j0; j < DOPUS_NW; ++j) {
             dopus_real col[DOPUS_NX];
             for (i = 0; i < DOPUS_NX; ++i) {
                 col[i] = DOPUS_R(0.0);
@@ -74,7 +77,7 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
             }
         }
         /* Z = H + lm I + Phi' Y, lower triangle */
-        for (j = 0; j < DOPUS_NW; ++j) {
+        for (j = j0; j < DOPUS_NW; ++j) {
             dopus_real y[DOPUS_NX]; /* Y's column j, held in registers across the column of Z */
             for (l = 0; l < DOPUS_NX; ++l) {
                 y[l] = Y[l + j * DOPUS_NX];

@@ -681,10 +681,12 @@ static int dopus_init_finish(dopus_solver *s)
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
 
+    s->al_resync = 1;
     rc = dopus_linearize_all(s);
     if (rc != DOPUS_OK) {
         return rc;
     }
+    s->al_resync = 0; /* every block fresh: Ht = reg(A) = reg(A_dyn + A_l) */
     b0 = dopus_budget_now(s);
     dopus_assemble(s);
     s->initialized = 1;
@@ -1833,7 +1835,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
 {
     dopus_real xN_saved[DOPUS_NX];
     double b_start = dopus_budget_now(s), ext_cost = 0.0, b_tail, b0;
-    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh;
+    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     dopus_phase(s, DOPUS_PHASE_SHIFT);
@@ -1846,8 +1848,12 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); with a budget in
      *    stage order while one more and the least rest of the iteration fit, the stages after
      *    the cut keep their linear model's prediction (algorithm.md section 14); when step 4
-     *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call */
+     *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call.
+     *    Without a budget and with H_k apart (defer), every gradient first and then every
+     *    rho_k: the same values, two phase switches (clock readings) per prepare instead of
+     *    two per stage */
     all_fresh = dopus_fused(s) && dopus_every_stage_fresh(s);
+    defer = !all_fresh && !dopus_budget_on(s);
     b0 = dopus_budget_now(s);
     for (k = 0; k < DOPUS_N - 1; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
@@ -1863,18 +1869,29 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
         if (rc != DOPUS_OK) {
             return rc;
         }
-        dopus_phase(s, DOPUS_PHASE_RHO);
-        s->rho[k] = dopus_ring_secant(slot, s->mem.ev.tmp_F, s->mem.ev.tmp_phi, s->mem.ev.tmp_g);
         /* stored as F_old in step 6, once nothing can fail */
         dopus_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, DOPUS_NW);
         dopus_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, DOPUS_NX);
         dopus_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, DOPUS_NG);
+        if (defer) {
+            continue;
+        }
+        dopus_phase(s, DOPUS_PHASE_RHO);
+        s->rho[k] = dopus_ring_secant(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
         if (all_fresh) {
             /* the slot's H after the secant, which reads the old one */
             rc = dopus_stage_H_keep(s, k);
             if (rc != DOPUS_OK) {
                 return rc;
             }
+        }
+    }
+
+    if (defer) {
+        dopus_phase(s, DOPUS_PHASE_RHO);
+        for (k = 0; k < DOPUS_N - 1; ++k) {
+            s->rho[k] = dopus_ring_secant(dopus_ring_stage_const(&s->ring, k), s->mem.ev.Fn_w[k],
+                                          s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
         }
     }
 
@@ -1914,8 +1931,10 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     b0 = dopus_budget_now(s);
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
-     *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept) */
-    if (rc == DOPUS_OK && s->settings.cost_hessian) {
+     *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept); with a
+     *    constant A_l (DOPUS_COST_HESS_CONST) that is the block stored with A_dyn, reg(A), up
+     *    to the rounding of A - A_l + A_l: kept as it is (unless al_resync) */
+    if (rc == DOPUS_OK && s->settings.cost_hessian && (!DOPUS_COST_HESS_CONST || s->al_resync)) {
         dopus_phase(s, DOPUS_PHASE_HESSIANS);
         for (k = 0; k < DOPUS_N - 1 && rc == DOPUS_OK; ++k) {
             dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
@@ -1943,6 +1962,9 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
         /* leave the iterate as it was after step 1 */
         dopus_copy(s->x[DOPUS_N], xN_saved, DOPUS_NX);
         return rc;
+    }
+    if (s->settings.cost_hessian) {
+        s->al_resync = 0;
     }
 
     if (dopus_budget_on(s) && n_al > 0) {
@@ -2392,6 +2414,7 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     s->qp_ready = 0;
     s->prepare_due = 0;
     s->shifted = 0;
+    s->al_resync = 1;
     s->status = DOPUS_OK;
     dopus_lm_reset(&s->lm, s->settings.lm_auto, s->settings.lm);
     s->lm.scale = DOPUS_R(1.0);
@@ -2462,6 +2485,10 @@ int dopus_update_settings(dopus_solver *s, const dopus_settings *st)
     }
     old = s->settings;
     s->settings = *st;
+    if (st->regularization != old.regularization || st->reg_eps != old.reg_eps) {
+        /* the blocks were regularised with the old setting: step 5 refreshes them */
+        s->al_resync = 1;
+    }
     if (st->lm_auto && !old.lm_auto) {
         /* the automatic term restarts: from 0, raised until the prepared QP is convex */
         dopus_lm_reset(&s->lm, 1, DOPUS_R(0.0));

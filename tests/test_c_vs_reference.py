@@ -460,3 +460,58 @@ def test_robot_receding_measurement_gate(robot_disc, robot_solution):
         x = np.array(disc.stage_eval(x, ur, p0)[0], dtype=float).reshape(-1)
     g = status_code("measurement_gated")
     assert statuses == [0] * 8 + [g] * 3 + [0] * 13, statuses
+
+
+# ---------------------------------------------------------------- step 5: a constant stage-cost Hessian
+def _cost_hessians(disc, x, u):
+    """A_l of both Hessians (Gauss-Newton when the problem has it) at (x, u), stage 0's parameters."""
+    p = np.asarray(disc.p0[0], dtype=float)
+    funs = [f for f in (disc.stage_hess_cost_exact, getattr(disc, "stage_hess_cost_gn", None)) if f is not None]
+    return [np.array(f(x, u, p), dtype=float) for f in funs]
+
+
+def test_cost_hessian_constant_against_values(robot_disc, second_disc):
+    """The generator's test for a constant A_l (structural: no input enters, the same values for
+    both Hessians) against the values themselves at 20 random points: the unicycle's
+    least-squares cost of linear outputs is constant, the robot arm's (the tip, trigonometric
+    in the joint angles) is not."""
+    from dopus_codegen.problem.derivatives import cost_hessian_constant
+
+    rng = np.random.default_rng(7)
+    for disc, constant in ((robot_disc, False), (second_disc, True)):
+        at_zero = _cost_hessians(disc, np.zeros(disc.nx), np.zeros(disc.nu))
+        same = all(np.array_equal(a, at_zero[0]) for a in at_zero)
+        for _ in range(20):
+            values = _cost_hessians(disc, rng.normal(size=disc.nx), rng.normal(size=disc.nu))
+            same = same and all(np.array_equal(a, at_zero[0]) for a in values)
+        assert same == constant, disc.name
+        assert cost_hessian_constant(disc.stage_hess_cost_exact, getattr(disc, "stage_hess_cost_gn", None)) == same
+
+
+def test_regularization_change_refreshes_constant_cost_hessians(second_disc, second_solution):
+    """The unicycle's A_l is constant, so step 5 keeps its blocks; after the regularisation
+    changes (C: dopus_update_settings; reference: set_regularization) the next prepare
+    refreshes every block all the same. Both backends agree iterate by iterate across the
+    change, and the change shows: the C run with cost_hessian 'stored' (only the blocks
+    re-linearised from then on get the new regularisation) differs from it."""
+    iters, change = 12, 4
+    c, r, xhat, tally, p0 = start_pair(second_disc, second_solution[0], M=1, mode="receding",
+                                       hessian="gauss-newton")
+    stored = CSolver(second_disc, qp_tol=QP_TOL, M=1, mode="receding", hessian="gauss-newton",
+                     cost_hessian="stored")
+    stored.init(xhat, second_solution[0])
+    gap = 0.0
+    for it in range(iters):
+        if it == 0:
+            xhat = np.array(second_disc.disturbance(xhat.copy()), dtype=float).reshape(-1)
+        if it == change:
+            for b in (c, r, stored):
+                b.set_regularization("mirror", 0.1)
+        us = stored.feedback(xhat)
+        stored.prepare()
+        uc, ur = step(c, r, xhat, f"iteration {it}", tally)
+        if it > change:
+            gap = max(gap, rel_err(us, uc))
+        xhat = np.array(second_disc.stage_eval(xhat, ur, p0)[0], dtype=float).reshape(-1)
+    assert not tally.ill, str(tally)
+    assert gap > 1e-6, f"the regularisation change did not show ({gap:.1e})"

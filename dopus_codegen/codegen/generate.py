@@ -36,6 +36,7 @@ from . import flags
 from .flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
 from .folder import FUNCTION_SLOTS, CodegenError, find_meta, read_meta  # noqa: F401 - re-exported
 from ..paths import runtime_c_dir, templates_dir
+from ..problem.derivatives import cost_hessian_constant
 
 
 
@@ -676,7 +677,8 @@ def extract_cdef(header_text: str, name: str, header_name: str) -> str:
 
 def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, has_nominal: int = 0,
                         work: Optional[Dict[str, int]] = None, header: str = "",
-                        casadi_version: str = "", real: str = "double", p_schedule_nodes: int = 0) -> str:
+                        casadi_version: str = "", real: str = "double", p_schedule_nodes: int = 0,
+                        cost_hess_const: int = 0) -> str:
     """``<name>_sizes.h`` from templates/sizes.h.j2: the one sizes header of the runtime, also
     for the QP harness and the QP benchmark (which give only the QP sizes N, nx, nu, ng, nr,
     ne; the other entries then hold placeholders: no CasADi work, no Gauss-Newton)."""
@@ -690,7 +692,7 @@ def render_sizes_header(name: str, sizes: Dict[str, int], *, has_gn: int = 0, ha
     s.setdefault("nsoft", 0)
     s.setdefault("always_feasible", 0)
     ctx = {"name": name, "NAME": name.upper(), "sizes": s, "has_gn": int(has_gn),
-           "has_nominal": int(has_nominal), "header": header or f"Sizes of '{name}'",
+           "cost_hess_const": int(cost_hess_const), "has_nominal": int(has_nominal), "header": header or f"Sizes of '{name}'",
            "p_schedule_nodes": int(p_schedule_nodes),
            "casadi_version": casadi_version, "real_float": settings.REALS[settings.check_real(real)],
            "work": work or {"sz_arg": 1, "sz_res": 1, "sz_iw": 1, "sz_w": 1}}
@@ -748,7 +750,10 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
                                                    has_gn=ctx["has_gn"], has_nominal=ctx["has_nominal"],
                                                    work=ctx["work"], header=header,
                                                    casadi_version=ca.__version__, real=real,
-                                                   p_schedule_nodes=ctx["p_schedule_nodes"])
+                                                   p_schedule_nodes=ctx["p_schedule_nodes"],
+                                                   cost_hess_const=int(cost_hessian_constant(
+                                                       functions["stage_hess_cost_exact"],
+                                                       functions.get("stage_hess_cost_gn"))))
     files[f"{name}_problem.c"] = env.get_template("problem.c.j2").render(**ctx)
 
     cdef = extract_cdef(files[f"{name}_solver.h"], name, f"{name}_solver.h")

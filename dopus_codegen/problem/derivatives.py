@@ -31,12 +31,30 @@ from .discretize import StageModel, discretize
 from .ocp import Guess, Ocp, OcpError, ScenarioSpec, casadi_message
 from .spec import OcpSpec, readonly
 
-__all__ = ["Discretized", "ProblemData", "StageFunctions", "Scenario", "build_functions"]
+__all__ = ["Discretized", "ProblemData", "StageFunctions", "Scenario", "build_functions", "cost_hessian_constant"]
 
 # Common-subexpression elimination makes the generated C smaller; it is deterministic.
 _FN_OPTS = {"cse": True}
 
 _KINDS = "(expected 'exact' or 'gauss-newton')"
+
+
+def cost_hessian_constant(exact: ca.Function, gn: Optional[ca.Function] = None) -> bool:
+    """True when the stage-cost Hessian A_l is one constant matrix whatever the Hessian in
+    use: ``stage_hess_cost_exact`` (and ``stage_hess_cost_gn`` when there is one) depend on
+    no input (a quadratic stage cost, e.g. least squares with outputs linear in x, u; no
+    parameter in it) and give the same finite values. Step 5 of prepare then keeps the
+    blocks as they are: each Ht is reg(A_dyn + A_l) already (docs/algorithm.md section 4)."""
+    values = []
+    for fun in (exact, gn):
+        if fun is None:
+            continue
+        for i in range(fun.n_in()):
+            if fun.sparsity_in(i).nnz() > 0 and any(fun.which_depends(fun.name_in(i), [fun.name_out(0)], 1, False)):
+                return False
+        out = fun.call([ca.DM.zeros(fun.sparsity_in(i)) for i in range(fun.n_in())])[0]
+        values.append([float(v) for v in ca.densify(ca.DM(out)).nonzeros()])
+    return bool(values) and all(all(numpy.isfinite(vs)) and vs == values[0] for vs in values)
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from ..errors import PARAMETER_ORDER, DopusError, qp_status_code as status_code_
 from ..settings import SettingError, Settings, check_adaptive_M, of_problem as settings_of_problem
 from .kkt import eval_stages, kkt_measure, node_parameters
 from ..problem.checks import describe_qp_row
+from ..problem.derivatives import cost_hessian_constant
 from .qp import QPError, free_initial_state, solve_qp_reference
 
 # the QP solution arrays whose finiteness a step needs
@@ -171,6 +172,12 @@ class ReferenceDopus:
                                 "of the problem (Discretized.stage_hess_cost); use cost_hessian='stored'")
         self.regularization = s.regularization
         self.reg_eps = s.reg_eps
+        # a constant stage-cost Hessian: step 5 keeps the blocks (as the C runtime,
+        # DOPUS_COST_HESS_CONST)
+        exact_al = getattr(disc, "stage_hess_cost_exact", None)
+        self._cost_hess_const = exact_al is not None and cost_hessian_constant(
+            exact_al, getattr(disc, "stage_hess_cost_gn", None))
+        self._al_resync = False     # step 5 once all the same (set_regularization)
         self.qp_tol = s.qp_tol_of("double")
         self.lm, self.lm_auto, self.lm_scale, self._lm_kkt_prev = 0.0, False, 1.0, -1.0
         self._lm_uncapped = -1.0
@@ -276,6 +283,16 @@ class ReferenceDopus:
 
     def set_mode(self, mode: str) -> None:
         self.mode = _setting(settings.check, "mode", mode)
+
+    def set_regularization(self, regularization: str, reg_eps: Optional[float] = None) -> None:
+        """The regularisation of the blocks computed from now on (section 5); the next
+        prepare's step 5 refreshes every other block with it, a constant stage-cost Hessian
+        included (as the C runtime's ``dopus_update_settings``)."""
+        regularization = _setting(settings.check, "regularization", regularization)
+        eps = self.reg_eps if reg_eps is None else _setting(settings.positive, "reg_eps", reg_eps)
+        if (regularization, eps) != (self.regularization, self.reg_eps):
+            self._al_resync = True
+        self.regularization, self.reg_eps = regularization, eps
 
     def set_qp_max_iter(self, max_iter: int) -> None:
         """The QP solver's iteration limit (None: the reference QP solver's own); reaching it
@@ -501,6 +518,7 @@ class ReferenceDopus:
         self.mu_bN, self.mu_r, self.nu = mu_bN, mu_r, nu
         self.ring_head = 0
         self.slots = slots
+        self._al_resync = False     # every block fresh, with the current regularisation
         self.term = term
         self.rho = np.zeros(N)
         self.recomputed = list(range(N))
@@ -1066,10 +1084,12 @@ class ReferenceDopus:
         chosen, ext_cost = self._relinearise_worst(slots, rho)
         t3 = time.perf_counter()
         b0 = self._budget_now()
-        if self.cost_hessian == "fresh":
+        if self.cost_hessian == "fresh" and (not self._cost_hess_const or self._al_resync):
             n_al = self._refresh_cost_hessians(slots, set(chosen) | {self.N - 1})
             if self._budget_on() and n_al > 0:
                 self._cost_al = (self._budget_now() - b0) / n_al
+        if self.cost_hessian == "fresh":
+            self._al_resync = False
         t4 = time.perf_counter()
         b0 = self._budget_now()
         self._commit(slots, term, rho, chosen, xN)

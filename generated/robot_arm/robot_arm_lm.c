@@ -57,8 +57,11 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
     for (k = ROBOT_ARM_N - 1; k >= 0; --k) {
         const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(ring, k);
         const robot_arm_real *H = slot->Ht, *Phi = slot->Phit;
+        /* stage 0 needs only the control block Z_uu (x_0 is fixed): Y's and Z's control
+         * columns, the same values as in the full block */
+        const int j0 = k == 0 ? ROBOT_ARM_NX : 0;
         /* Y = P Phi (nx x nw), column by column */
-        for (j = 0; j < ROBOT_ARM_NW; ++j) {
+        for (j = j0; j < ROBOT_ARM_NW; ++j) {
             robot_arm_real col[ROBOT_ARM_NX];
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
                 col[i] = ROBOT_ARM_R(0.0);
@@ -74,7 +77,7 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
             }
         }
         /* Z = H + lm I + Phi' Y, lower triangle */
-        for (j = 0; j < ROBOT_ARM_NW; ++j) {
+        for (j = j0; j < ROBOT_ARM_NW; ++j) {
             robot_arm_real y[ROBOT_ARM_NX]; /* Y's column j, held in registers across the column of Z */
             for (l = 0; l < ROBOT_ARM_NX; ++l) {
                 y[l] = Y[l + j * ROBOT_ARM_NX];

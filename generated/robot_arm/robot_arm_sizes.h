@@ -32,6 +32,9 @@
 
 /* 1 if the OCP has a least-squares stage cost, so the Gauss-Newton Hessian exists */
 #define ROBOT_ARM_HAS_GN 1
+/* 1 if the stage-cost Hessian A_l is one constant matrix (the same for both Hessians): step 5
+ * of prepare then keeps every block as it is (docs/algorithm.md section 4) */
+#define ROBOT_ARM_COST_HESS_CONST 0
 /* 1 if the offline primal-dual solution at the default x0 is carried as data */
 #define ROBOT_ARM_HAS_NOMINAL 1
 /* 1 if a parameter declares a trajectory: robot_arm_p_schedule holds the parameters at

@@ -681,10 +681,12 @@ static int robot_arm_init_finish(robot_arm_solver *s)
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
 
+    s->al_resync = 1;
     rc = robot_arm_linearize_all(s);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
+    s->al_resync = 0; /* every block fresh: Ht = reg(A) = reg(A_dyn + A_l) */
     b0 = robot_arm_budget_now(s);
     robot_arm_assemble(s);
     s->initialized = 1;
@@ -1833,7 +1835,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 {
     robot_arm_real xN_saved[ROBOT_ARM_NX];
     double b_start = robot_arm_budget_now(s), ext_cost = 0.0, b_tail, b0;
-    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh;
+    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     robot_arm_phase(s, ROBOT_ARM_PHASE_SHIFT);
@@ -1846,8 +1848,12 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); with a budget in
      *    stage order while one more and the least rest of the iteration fit, the stages after
      *    the cut keep their linear model's prediction (algorithm.md section 14); when step 4
-     *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call */
+     *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call.
+     *    Without a budget and with H_k apart (defer), every gradient first and then every
+     *    rho_k: the same values, two phase switches (clock readings) per prepare instead of
+     *    two per stage */
     all_fresh = robot_arm_fused(s) && robot_arm_every_stage_fresh(s);
+    defer = !all_fresh && !robot_arm_budget_on(s);
     b0 = robot_arm_budget_now(s);
     for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
@@ -1863,18 +1869,29 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
         if (rc != ROBOT_ARM_OK) {
             return rc;
         }
-        robot_arm_phase(s, ROBOT_ARM_PHASE_RHO);
-        s->rho[k] = robot_arm_ring_secant(slot, s->mem.ev.tmp_F, s->mem.ev.tmp_phi, s->mem.ev.tmp_g);
         /* stored as F_old in step 6, once nothing can fail */
         robot_arm_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, ROBOT_ARM_NW);
         robot_arm_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, ROBOT_ARM_NX);
         robot_arm_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, ROBOT_ARM_NG);
+        if (defer) {
+            continue;
+        }
+        robot_arm_phase(s, ROBOT_ARM_PHASE_RHO);
+        s->rho[k] = robot_arm_ring_secant(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
         if (all_fresh) {
             /* the slot's H after the secant, which reads the old one */
             rc = robot_arm_stage_H_keep(s, k);
             if (rc != ROBOT_ARM_OK) {
                 return rc;
             }
+        }
+    }
+
+    if (defer) {
+        robot_arm_phase(s, ROBOT_ARM_PHASE_RHO);
+        for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+            s->rho[k] = robot_arm_ring_secant(robot_arm_ring_stage_const(&s->ring, k), s->mem.ev.Fn_w[k],
+                                          s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
         }
     }
 
@@ -1914,8 +1931,10 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     b0 = robot_arm_budget_now(s);
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
-     *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept) */
-    if (rc == ROBOT_ARM_OK && s->settings.cost_hessian) {
+     *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept); with a
+     *    constant A_l (ROBOT_ARM_COST_HESS_CONST) that is the block stored with A_dyn, reg(A), up
+     *    to the rounding of A - A_l + A_l: kept as it is (unless al_resync) */
+    if (rc == ROBOT_ARM_OK && s->settings.cost_hessian && (!ROBOT_ARM_COST_HESS_CONST || s->al_resync)) {
         robot_arm_phase(s, ROBOT_ARM_PHASE_HESSIANS);
         for (k = 0; k < ROBOT_ARM_N - 1 && rc == ROBOT_ARM_OK; ++k) {
             robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
@@ -1943,6 +1962,9 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
         /* leave the iterate as it was after step 1 */
         robot_arm_copy(s->x[ROBOT_ARM_N], xN_saved, ROBOT_ARM_NX);
         return rc;
+    }
+    if (s->settings.cost_hessian) {
+        s->al_resync = 0;
     }
 
     if (robot_arm_budget_on(s) && n_al > 0) {
@@ -2392,6 +2414,7 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
     s->qp_ready = 0;
     s->prepare_due = 0;
     s->shifted = 0;
+    s->al_resync = 1;
     s->status = ROBOT_ARM_OK;
     robot_arm_lm_reset(&s->lm, s->settings.lm_auto, s->settings.lm);
     s->lm.scale = ROBOT_ARM_R(1.0);
@@ -2462,6 +2485,10 @@ int robot_arm_update_settings(robot_arm_solver *s, const robot_arm_settings *st)
     }
     old = s->settings;
     s->settings = *st;
+    if (st->regularization != old.regularization || st->reg_eps != old.reg_eps) {
+        /* the blocks were regularised with the old setting: step 5 refreshes them */
+        s->al_resync = 1;
+    }
     if (st->lm_auto && !old.lm_auto) {
         /* the automatic term restarts: from 0, raised until the prepared QP is convex */
         robot_arm_lm_reset(&s->lm, 1, ROBOT_ARM_R(0.0));

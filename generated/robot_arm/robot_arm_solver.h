@@ -505,6 +505,8 @@ struct robot_arm_solver {
     int qp_ready;    /* QP assembled at the current iterate (prepare or init succeeded) */
     int prepare_due; /* a feedback reached the QP since the last successful init/prepare */
     int shifted;     /* the shift of this sampling instant is done (a prepare failed after it) */
+    int al_resync;   /* a constant A_l (ROBOT_ARM_COST_HESS_CONST): step 5 of the next prepare runs
+                        all the same (after a change of the regularisation or a failed init) */
     int p_shifted;   /* the parameters of this sampling instant are shifted (a parameter write
                         or a prepare since the feedback) */
     int status;      /* status of the last call */

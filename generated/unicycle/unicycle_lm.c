@@ -57,8 +57,11 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
     for (k = UNICYCLE_N - 1; k >= 0; --k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(ring, k);
         const unicycle_real *H = slot->Ht, *Phi = slot->Phit;
+        /* stage 0 needs only the control block Z_uu (x_0 is fixed): Y's and Z's control
+         * columns, the same values as in the full block */
+        const int j0 = k == 0 ? UNICYCLE_NX : 0;
         /* Y = P Phi (nx x nw), column by column */
-        for (j = 0; j < UNICYCLE_NW; ++j) {
+        for (j = j0; j < UNICYCLE_NW; ++j) {
             unicycle_real col[UNICYCLE_NX];
             for (i = 0; i < UNICYCLE_NX; ++i) {
                 col[i] = UNICYCLE_R(0.0);
@@ -74,7 +77,7 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
             }
         }
         /* Z = H + lm I + Phi' Y, lower triangle */
-        for (j = 0; j < UNICYCLE_NW; ++j) {
+        for (j = j0; j < UNICYCLE_NW; ++j) {
             unicycle_real y[UNICYCLE_NX]; /* Y's column j, held in registers across the column of Z */
             for (l = 0; l < UNICYCLE_NX; ++l) {
                 y[l] = Y[l + j * UNICYCLE_NX];

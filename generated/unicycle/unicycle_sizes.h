@@ -32,6 +32,9 @@
 
 /* 1 if the OCP has a least-squares stage cost, so the Gauss-Newton Hessian exists */
 #define UNICYCLE_HAS_GN 1
+/* 1 if the stage-cost Hessian A_l is one constant matrix (the same for both Hessians): step 5
+ * of prepare then keeps every block as it is (docs/algorithm.md section 4) */
+#define UNICYCLE_COST_HESS_CONST 1
 /* 1 if the offline primal-dual solution at the default x0 is carried as data */
 #define UNICYCLE_HAS_NOMINAL 1
 /* 1 if a parameter declares a trajectory: unicycle_p_schedule holds the parameters at

@@ -681,10 +681,12 @@ static int unicycle_init_finish(unicycle_solver *s)
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
 
+    s->al_resync = 1;
     rc = unicycle_linearize_all(s);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
+    s->al_resync = 0; /* every block fresh: Ht = reg(A) = reg(A_dyn + A_l) */
     b0 = unicycle_budget_now(s);
     unicycle_assemble(s);
     s->initialized = 1;
@@ -1833,7 +1835,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 {
     unicycle_real xN_saved[UNICYCLE_NX];
     double b_start = unicycle_budget_now(s), ext_cost = 0.0, b_tail, b0;
-    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh;
+    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer;
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     unicycle_phase(s, UNICYCLE_PHASE_SHIFT);
@@ -1846,8 +1848,12 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); with a budget in
      *    stage order while one more and the least rest of the iteration fit, the stages after
      *    the cut keep their linear model's prediction (algorithm.md section 14); when step 4
-     *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call */
+     *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call.
+     *    Without a budget and with H_k apart (defer), every gradient first and then every
+     *    rho_k: the same values, two phase switches (clock readings) per prepare instead of
+     *    two per stage */
     all_fresh = unicycle_fused(s) && unicycle_every_stage_fresh(s);
+    defer = !all_fresh && !unicycle_budget_on(s);
     b0 = unicycle_budget_now(s);
     for (k = 0; k < UNICYCLE_N - 1; ++k) {
         unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
@@ -1863,18 +1869,29 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
         if (rc != UNICYCLE_OK) {
             return rc;
         }
-        unicycle_phase(s, UNICYCLE_PHASE_RHO);
-        s->rho[k] = unicycle_ring_secant(slot, s->mem.ev.tmp_F, s->mem.ev.tmp_phi, s->mem.ev.tmp_g);
         /* stored as F_old in step 6, once nothing can fail */
         unicycle_copy(s->mem.ev.Fn_w[k], s->mem.ev.tmp_F, UNICYCLE_NW);
         unicycle_copy(s->mem.ev.Fn_phi[k], s->mem.ev.tmp_phi, UNICYCLE_NX);
         unicycle_copy(s->mem.ev.Fn_g[k], s->mem.ev.tmp_g, UNICYCLE_NG);
+        if (defer) {
+            continue;
+        }
+        unicycle_phase(s, UNICYCLE_PHASE_RHO);
+        s->rho[k] = unicycle_ring_secant(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
         if (all_fresh) {
             /* the slot's H after the secant, which reads the old one */
             rc = unicycle_stage_H_keep(s, k);
             if (rc != UNICYCLE_OK) {
                 return rc;
             }
+        }
+    }
+
+    if (defer) {
+        unicycle_phase(s, UNICYCLE_PHASE_RHO);
+        for (k = 0; k < UNICYCLE_N - 1; ++k) {
+            s->rho[k] = unicycle_ring_secant(unicycle_ring_stage_const(&s->ring, k), s->mem.ev.Fn_w[k],
+                                          s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
         }
     }
 
@@ -1914,8 +1931,10 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     b0 = unicycle_budget_now(s);
 
     /* 5. cost_hessian fresh: every stage whose H was not computed above gets
-     *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept) */
-    if (rc == UNICYCLE_OK && s->settings.cost_hessian) {
+     *    Ht = reg(A_dyn + A_l) with A_l at the current point (Phit, Ct, A_dyn kept); with a
+     *    constant A_l (UNICYCLE_COST_HESS_CONST) that is the block stored with A_dyn, reg(A), up
+     *    to the rounding of A - A_l + A_l: kept as it is (unless al_resync) */
+    if (rc == UNICYCLE_OK && s->settings.cost_hessian && (!UNICYCLE_COST_HESS_CONST || s->al_resync)) {
         unicycle_phase(s, UNICYCLE_PHASE_HESSIANS);
         for (k = 0; k < UNICYCLE_N - 1 && rc == UNICYCLE_OK; ++k) {
             unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
@@ -1943,6 +1962,9 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
         /* leave the iterate as it was after step 1 */
         unicycle_copy(s->x[UNICYCLE_N], xN_saved, UNICYCLE_NX);
         return rc;
+    }
+    if (s->settings.cost_hessian) {
+        s->al_resync = 0;
     }
 
     if (unicycle_budget_on(s) && n_al > 0) {
@@ -2392,6 +2414,7 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     s->qp_ready = 0;
     s->prepare_due = 0;
     s->shifted = 0;
+    s->al_resync = 1;
     s->status = UNICYCLE_OK;
     unicycle_lm_reset(&s->lm, s->settings.lm_auto, s->settings.lm);
     s->lm.scale = UNICYCLE_R(1.0);
@@ -2462,6 +2485,10 @@ int unicycle_update_settings(unicycle_solver *s, const unicycle_settings *st)
     }
     old = s->settings;
     s->settings = *st;
+    if (st->regularization != old.regularization || st->reg_eps != old.reg_eps) {
+        /* the blocks were regularised with the old setting: step 5 refreshes them */
+        s->al_resync = 1;
+    }
     if (st->lm_auto && !old.lm_auto) {
         /* the automatic term restarts: from 0, raised until the prepared QP is convex */
         unicycle_lm_reset(&s->lm, 1, UNICYCLE_R(0.0));
