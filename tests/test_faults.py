@@ -129,7 +129,8 @@ def test_bad_gate_settings_are_refused(arm, backend):
 # runs that stopped making progress without the flat stall test (the loop is chaotic, so the
 # two are the stuck runs of two versions): (shift of the initial first joint angle, K)
 STUCK = [(1e-9, 12),  # the active-set start of uncapped QPs only: 1.4 cm off, KKT proxy 11.2
-         (0.0, 11)]   # also of QPs capped by one raise step: 13.5 cm off, KKT proxy near 55
+         (0.0, 11),   # also of QPs capped by one raise step: 13.5 cm off, KKT proxy near 55
+         (1e-9, 10)]  # the start keeping its factor for added rows: the flat test fires
 
 
 def _stuck_run(arm, plant, guess, eps, K):

@@ -617,6 +617,47 @@ def test_robot_arm_sqp_warm_start(robot_qps):
     assert n_warm >= 6
 
 
+def _saturating_lq(x0, N=30, dt=0.1, umax=1.0):
+    """A double integrator steered to the origin with |u| <= umax: from a start far enough the
+    control saturates over a stretch of stages whose length moves with x0."""
+    A = np.array([[1.0, dt], [0.0, 1.0]])
+    B = np.array([[0.5 * dt * dt], [dt]])
+    H = np.zeros((N, 3, 3))
+    H[:, 0, 0], H[:, 1, 1], H[:, 2, 2] = 10.0, 1.0, 0.1
+    lbw = np.tile([-np.inf, -np.inf, -umax], (N, 1))
+    return dict(N=N, nx=2, nu=1, ng=0, nr=0, ne=0, H=H, g=np.zeros((N, 3)),
+                Phi=np.tile(np.hstack([A, B]), (N, 1, 1)), b=np.zeros((N, 2)), x0=np.asarray(x0, float),
+                HN=10.0 * np.eye(2), gN=np.zeros(2), lbw=lbw, ubw=-lbw, lbxN=np.full(2, -np.inf),
+                ubxN=np.full(2, np.inf), C=np.zeros((N, 0, 3)), lg=np.zeros((N, 0)), ug=np.zeros((N, 0)),
+                R=np.zeros((0, 2)), lr=np.zeros(0), ur=np.zeros(0), Req=np.zeros((0, 2)), req=np.zeros(0))
+
+
+@pytest.mark.parametrize("pa, pb", [(3.0, 3.3), (3.0, 3.6), (2.0, 2.2), (4.0, 3.5), (5.0, 5.5), (1.5, 2.5)])
+def test_active_set_start_with_rows_added_to_the_factor(pa, pb):
+    """The active-set start from the solution of a neighbouring QP (the saturated stretch
+    longer or shorter by a few stages): the answer agrees with Clarabel's, and the start
+    takes the sweeps and factorisations of the reference's start (a sweep after
+    corrections that only added rows solves with the factor it has and the added rows'
+    Schur complement, dopus_qp.h), fewer factorisations than sweeps where that happens."""
+    from dopus_codegen.reference.qp import solve_qp_reference
+
+    h = solver((30, 2, 1, 0, 0, 0))
+    qa, qb = _saturating_lq([pa, 0.0]), _saturating_lq([pb, 0.0])
+    sa, ia = h.solve(qa, tol=TOL_QP)
+    assert ia["status"] == "solved", ia
+    sb, ib = h.solve(qb, tol=1e-10, warm=sa, active_set=8)
+    assert ib["status"] == "solved" and ib["active_set"] > 0, ib
+    cl_status, cl = P.solve_clarabel(qb)
+    assert cl_status == "Solved"
+    assert _max_rel(P.compare(sb, cl)) <= REL, _fmt(P.compare(sb, cl))
+    ref = solve_qp_reference(qb, tol=1e-10, guess=sa, guess_sweeps=8)
+    assert ref["status"] == "active_set"
+    assert (ib["active_set"], ib["factorizations"]) == (ref["active_set"], ref["factorizations"])
+    if (pa, pb) in ((3.0, 3.3), (2.0, 2.2), (5.0, 5.5)):
+        # one or two rows join after the first sweep: the second sweep keeps its factor
+        assert (ib["active_set"], ib["factorizations"]) == (3, 2), ib
+
+
 def test_linalg_kernels_match_numpy(tmp_path):
     """The linkable dopus_la_* functions (for other runtime modules) against numpy, with
     leading dimensions larger than the matrices."""

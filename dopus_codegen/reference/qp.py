@@ -599,14 +599,21 @@ def _families(q: dict):
 #: when its multiplier is at least this fraction of the largest wrong one of its family
 #: (AS_DROP of runtime_c/dopus_qp.c).
 AS_DROP = 0.4
+#: Rows the active-set start adds to the active set of a factorisation without factoring
+#: again: a sweep whose corrections only added rows, at most this many since the last
+#: factorisation, solves with that factor and the Schur complement of the added rows
+#: (DOPUS_QP_AS_UPDATE of runtime_c/dopus_qp.h; the same KKT point, no factorisation).
+AS_UPDATE = 4
 
 
 def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol, sweeps=10, families=None):
     """Solve the KKT system of the active set read from (z, y_in, mu_z); refine it. Up to
-    ``sweeps`` active-set corrections; ``families`` (:func:`_families`): a wrong-signed row
-    leaves the active set only when its multiplier is at least AS_DROP times the largest
-    wrong one of its family (the C QP's active-set start), else every wrong-signed row does.
-    Returns (zp, y_eq, y_in, mu_z, factorisations), or None."""
+    ``sweeps`` active-set corrections; ``families`` (:func:`_families`): the C QP's active-set
+    start, where a wrong-signed row leaves the active set only when its multiplier is at
+    least AS_DROP times the largest wrong one of its family (else every wrong-signed row
+    does), and a sweep after corrections that only added rows (AS_UPDATE at most since the
+    last factorisation) is no factorisation. Returns ``(answer, factorisations, sweeps)``,
+    the answer (zp, y_eq, y_in, mu_z) or None."""
     nz = Hz.shape[0]
     Ain = rows.A_in
     v_in = Ain @ z
@@ -624,7 +631,10 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol, sweeps=10, families=None):
     act_z = classify(z, rows.lbz, rows.ubz, mu_z)
     act_in = classify(v_in, rows.l_in, rows.u_in, y_in)
     neq = rows.A_eq.shape[0]
+    n_fact, added, update = 0, 0, False
     for sweep in range(sweeps):
+        # a sweep after additions alone keeps the factor (the C start's Schur complement)
+        n_fact += 0 if update else 1
         iz = np.nonzero(act_z)[0]
         ii = np.nonzero(act_in)[0]
         Ab = sp.csr_matrix((np.ones(iz.size), (np.arange(iz.size), iz)), shape=(iz.size, nz))
@@ -643,9 +653,9 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol, sweeps=10, families=None):
                 # one step of iterative refinement against the unfactored matrix
                 sol = sol + lu.solve(rhs - K @ sol)
         except (RuntimeError, FloatingPointError):
-            return None
+            return None, n_fact, sweep + 1
         if not np.all(np.isfinite(sol)):
-            return None
+            return None, n_fact, sweep + 1
         zp = sol[:nz].copy()
         # the active simple bounds met exactly (they are to round-off), as in the C QP's
         # active-set start: the iterate plus the step lands on the bound
@@ -655,7 +665,7 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol, sweeps=10, families=None):
         yin = np.zeros(Ain.shape[0]); yin[ii] = y[neq:neq + ii.size]
         muz = np.zeros(nz); muz[iz] = y[neq + ii.size:]
         vin = Ain @ zp
-        changed = False
+        changed = dropped = False
         # dual sign of the active set: drop rows whose multiplier points the wrong way
         wrong = []
         for act, mu, lo, hi in ((act_z, muz, rows.lbz, rows.ubz), (act_in, yin, rows.l_in, rows.u_in)):
@@ -667,11 +677,12 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol, sweeps=10, families=None):
                 np.maximum.at(worst, fam[bad], np.abs(mu[bad]))
         for bad, act, mu, k in zip(wrong, (act_z, act_in), (muz, yin), (0, 1)):
             if np.any(bad):
-                changed = True
+                changed = dropped = True
                 if families is not None:
                     bad = bad & (np.abs(mu) >= AS_DROP * worst[families[k]])
                 act[bad] = 0
         # primal feasibility of the inactive set: add violated sides
+        n_add = 0
         for act, v, lo, hi in ((act_z, zp, rows.lbz, rows.ubz), (act_in, vin, rows.l_in, rows.u_in)):
             up = (act == 0) & (v > hi + tol)
             dn = (act == 0) & (v < lo - tol)
@@ -679,30 +690,35 @@ def _polish(Hz, gz, rows: _Rows, z, y_in, mu_z, tol, sweeps=10, families=None):
                 act[up] = 1
                 act[dn] = -1
                 changed = True
+                n_add += int(np.count_nonzero(up | dn))
         if not changed:
-            return zp, y_eq, yin, muz, sweep + 1
-    return None
+            return (zp, y_eq, yin, muz), n_fact, sweep + 1
+        # rows added since the last factorisation (``added``), held by its Schur complement
+        update = families is not None and not dropped and added + n_add <= AS_UPDATE
+        added = added + n_add if update else 0
+    return None, n_fact, sweeps
 
 
 def _active_set_start(q: dict, Hz, gz, rows: _Rows, guess: dict, tol: float, sweeps: int):
     """The C QP's active-set start (runtime_c/dopus_qp.h) on the flattened QP: the active set
     read from the warm-start point ``guess`` (a stage-wise solution dict), its KKT system
-    solved and the set corrected for up to ``sweeps`` factorisations; the answer is accepted
+    solved and the set corrected for up to ``sweeps`` sweeps (a factorisation each, except
+    after corrections that only added rows, :data:`AS_UPDATE`); the answer is accepted
     as the polish's is, and when the Hessian is positive definite on the null space of the
     equality and active rows (the C start's factorisation succeeds only then). Returns
-    (solution dict or None, factorisations)."""
+    (solution dict or None, factorisations, sweeps)."""
     z, _, y_in, mu_z = flatten_solution(q, guess)
-    pol = _polish(Hz, gz, rows, z, y_in, mu_z, tol, sweeps=sweeps, families=_families(q))
+    pol, n_fact, n_sweeps = _polish(Hz, gz, rows, z, y_in, mu_z, tol, sweeps=sweeps, families=_families(q))
     if pol is None:
-        return None, sweeps
-    sol = _unflatten(q, *pol[:-1], rows=rows)
+        return None, n_fact, n_sweeps
+    sol = _unflatten(q, *pol, rows=rows)
     res = qp_kkt_residual(q, sol)
     scale = max(1.0, float(np.max(np.abs(gz))), float(np.max(np.abs(Hz.data))) if Hz.nnz else 1.0)
     if not (res["ineq"] <= tol and res["sign"] <= tol and max(res["stat"], res["eq"]) <= 1e-9 * scale):
-        return None, pol[-1]
+        return None, n_fact, n_sweeps
     if qp_reduced_hessian_min_eig(q, sol, tol=0.0) <= 0.0:
-        return None, pol[-1]
-    return sol, pol[-1]
+        return None, n_fact, n_sweeps
+    return sol, n_fact, n_sweeps
 
 
 def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_iter=None, guess=None,
@@ -722,8 +738,8 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
     QP's active-set start from it (:func:`_active_set_start`; not for soft rows), IPOPT only
     when it finds no answer (its sweeps count as iterations: at most ``max_iter``, and
     ``iterations`` when it gives the answer). ``factorizations`` counts the factorisations of KKT systems:
-    the start's sweeps, IPOPT's iterations and the polish's sweeps; ``active_set`` the
-    start's sweeps when it gave the answer, else 0.
+    the start's sweeps that factor (:data:`AS_UPDATE`), IPOPT's iterations and the polish's
+    sweeps; ``active_set`` the start's sweeps when it gave the answer, else 0.
     """
     t0 = time.perf_counter()
     try:
@@ -736,9 +752,10 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
     if max_iter is not None:
         guess_sweeps = min(int(guess_sweeps), int(max_iter))   # a sweep is an iteration of the solve
     if guess is not None and guess_sweeps > 0 and rows.moved is None:
-        sol, n_fact = _active_set_start(q, Hz, gz, rows, guess, max(float(tol), 1e-12), int(guess_sweeps))
+        sol, n_fact, n_sweeps = _active_set_start(q, Hz, gz, rows, guess, max(float(tol), 1e-12), int(guess_sweeps))
         if sol is not None:
-            sol.update(polished=True, iterations=n_fact, status="active_set", factorizations=n_fact, active_set=n_fact,
+            sol.update(polished=True, iterations=n_sweeps, status="active_set", factorizations=n_fact,
+                       active_set=n_sweeps,
                        solve_time=time.perf_counter() - t0)
             return sol
     solve = _solve_ipopt_flat if rows.moved is not None else (lambda *a: _solve_ipopt(q, *a))
@@ -764,10 +781,10 @@ def solve_qp_reference(qp: dict, tol: float = 1e-9, polish: bool = True, max_ite
     if polish and np.all(np.isfinite(z)):
         # active-set decisions at the requested tolerance, but never below round-off
         ftol = max(float(tol), 1e-12)
-        pol = _polish(Hz, gz, rows, z, y_in, mu_z, ftol)
+        pol, pol_fact, _ = _polish(Hz, gz, rows, z, y_in, mu_z, ftol)
         if pol is not None:
-            n_fact += pol[-1]
-            sol = _unflatten(q, *pol[:-1], rows=rows)
+            n_fact += pol_fact
+            sol = _unflatten(q, *pol, rows=rows)
             res = qp_kkt_residual(q, sol)
             scale = max(1.0, float(np.max(np.abs(gz))), float(np.max(np.abs(Hz.data))) if Hz.nnz else 1.0)
             if res["ineq"] <= ftol and res["sign"] <= ftol and max(res["stat"], res["eq"]) <= 1e-9 * scale:

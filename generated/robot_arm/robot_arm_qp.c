@@ -2641,14 +2641,30 @@ static robot_arm_real as_residuals(robot_arm_qp_workspace *ws, const robot_arm_q
     return as_active_residual(ws);
 }
 
-/* One sweep: the factorisation with the penalty weights of the active rows (and the exact
- * terminal augmentation when a pivot fails), then refinement steps to the KKT point of the
- * active set. Each step solves (K + D_a' pen D_a) d = -r_stat - D_a' pen r_a, -r_dyn,
- * -r_eqN and updates the active multipliers by pen (D_a d + r_a) (the method of multipliers
- * with the factor kept). Returns 1 when the residuals reached tol (in *r), else 0. */
-static int as_sweep(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, qp_res *r)
+/* The stage k and row j within it of bounded row b. */
+static void as_row(const robot_arm_qp_workspace *ws, int b, int *k, int *j)
 {
-    int it, i, k, b, j, fact;
+    const int i = ws->bidx[b];
+    *k = i < TOFF ? i / NSI : N;
+    *j = i - *k * NSI;
+}
+
+/* 1 when the active row b is held by the Schur complement (added after the factorisation). */
+static int as_updated(const robot_arm_qp_workspace *ws, int b)
+{
+    int i;
+    for (i = 0; i < ws->as_n; ++i)
+        if (ws->as_rows[i] == b)
+            return 1;
+    return 0;
+}
+
+/* The factorisation of a sweep with the penalty weights of all active rows (and the exact
+ * terminal augmentation when a pivot fails). Returns 1 when it succeeded. */
+static int as_factor(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+{
+    int fact;
+    ws->as_n = 0;
     ws->delta = ROBOT_ARM_R(0.0);
     ws->rho_aug = ROBOT_ARM_R(0.0);
     fact = riccati_factor(ws, in);
@@ -2656,14 +2672,89 @@ static int as_sweep(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_i
         QP_TRACE("active set: terminal augmentation\n");
         fact = qp_augment_terminal(L, ws, in);
     }
-    if (fact != 0) {
+    if (fact != 0)
         QP_TRACE("active set: factorisation failed\n");
-        return 0;
+    return fact == 0;
+}
+
+/* The rows added since the factorisation (ws->as_rows) held by its Schur complement instead of
+ * a new factorisation: G_ij = D_i K^-1 D_j' (K the factored KKT matrix, D_i the row, one solve
+ * per row) plus 1/pen_i on the diagonal, factored by Cholesky into ws->as_L. G is positive
+ * semidefinite where the factorisation showed K convex on the null space of the equalities;
+ * returns 0 when a pivot is not positive (then the sweep factors again). */
+static int as_schur(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+{
+    const int n = ws->as_n;
+    robot_arm_real *Lp = ws->as_L;
+    int i, j, c, k, kj, ki, ji;
+    for (j = 0; j < n; ++j) {
+        for (i = 0; i < NP; ++i)
+            ws->d_prim[i] = ROBOT_ARM_R(0.0);
+        for (i = 0; i < (N + 1) * NX; ++i)
+            ws->d_lam[i] = ROBOT_ARM_R(0.0);
+        for (i = 0; i < NE; ++i)
+            ws->d_nu[i] = ROBOT_ARM_R(0.0);
+        as_row(ws, ws->as_rows[j], &k, &kj);
+        row_axpy(in, k, kj, ROBOT_ARM_R(1.0), ws->d_prim + k * NW);
+        riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+        for (i = j; i < n; ++i) {
+            as_row(ws, ws->as_rows[i], &k, &ki);
+            Lp[j * n - j * (j - 1) / 2 + (i - j)] = row_dot(in, k, ki, ws->d_prim + k * NW);
+        }
+        Lp[j * n - j * (j - 1) / 2] += ROBOT_ARM_R(1.0) / ws->pen[ws->as_rows[j]];
     }
+    /* Cholesky in place (column j at offset j n - j (j - 1) / 2), reciprocal diagonal */
+    for (j = 0; j < n; ++j) {
+        robot_arm_real *cj = Lp + j * n - j * (j - 1) / 2;
+        for (c = 0; c < j; ++c) {
+            const robot_arm_real *cc = Lp + c * n - c * (c - 1) / 2;
+            for (i = j; i < n; ++i)
+                cj[i - j] -= cc[i - c] * cc[j - c];
+        }
+        if (!(cj[0] > ROBOT_ARM_R(0.0)))
+            return 0;
+        cj[0] = ROBOT_ARM_R(1.0) / robot_arm_sqrt(cj[0]);
+        for (ji = 1; ji < n - j; ++ji)
+            cj[ji] *= cj[0];
+    }
+    return 1;
+}
+
+/* e <- (L L')^-1 e with the packed factor of as_schur (reciprocal diagonal). */
+static void as_schur_solve(const robot_arm_qp_workspace *ws, robot_arm_real *e)
+{
+    const int n = ws->as_n;
+    const robot_arm_real *Lp = ws->as_L;
+    int i, j;
+    for (j = 0; j < n; ++j) {
+        const robot_arm_real *cj = Lp + j * n - j * (j - 1) / 2;
+        e[j] *= cj[0];
+        for (i = j + 1; i < n; ++i)
+            e[i] -= cj[i - j] * e[j];
+    }
+    for (j = n - 1; j >= 0; --j) {
+        const robot_arm_real *cj = Lp + j * n - j * (j - 1) / 2;
+        for (i = j + 1; i < n; ++i)
+            e[j] -= cj[i - j] * e[i];
+        e[j] *= cj[0];
+    }
+}
+
+/* Refinement steps with the sweep's factor to the KKT point of the active set. Each step
+ * solves (K + D_a' pen D_a) d = -r_stat - D_a' pen r_a, -r_dyn, -r_eqN over the rows a of the
+ * factorisation and updates their multipliers by pen (D_a d + r_a) (the method of multipliers
+ * with the factor kept); the multipliers of the rows added since (as_schur) move by their
+ * Schur complement's answer to their residual after the step, G^-1 (D_s d + r_s), which the
+ * next step's stationarity residual carries into the primal. Returns 1 when the residuals
+ * reached tol (in *r), else 0. */
+static int as_refine(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, qp_res *r)
+{
+    int it, i, k, b, j;
+    robot_arm_real e[ROBOT_ARM_QP_AS_UPDATE];
     for (it = 0;; ++it) {
         const robot_arm_real ra = as_residuals(ws, in, r);
-        QP_TRACE("active set: refinement %d stat %.2e eq %.2e act %.2e ineq %.2e\n", it, r->stat_s, r->eq_s,
-                 ra, r->ineq_s);
+        QP_TRACE("active set: refinement %d stat %.2e eq %.2e act %.2e ineq %.2e (%d rows updated)\n", it,
+                 r->stat_s, r->eq_s, ra, r->ineq_s, ws->as_n);
         if (!(isfinite(r->stat) && isfinite(r->eq) && isfinite(ra)))
             return 0;
         if (r->stat_s <= L->st.tol && r->eq_s <= L->st.tol && ra <= L->st.tol)
@@ -2674,18 +2765,27 @@ static int as_sweep(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_i
             ws->d_prim[i] = -ws->r_stat[i];
         for (k = 0; k <= N; ++k)
             FOR_STAGE_ROWS(ws, k, b, j)
-        if (ws->act[b])
+        if (ws->act[b] && !as_updated(ws, b))
             row_axpy(in, k, j, -ws->pen[b] * as_res(ws, b), ws->d_prim + k * NW);
         for (i = 0; i < (N + 1) * NX; ++i)
             ws->d_lam[i] = -ws->r_dyn[i];
         for (i = 0; i < NE; ++i)
             ws->d_nu[i] = -ws->r_eqN[i];
         riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+        for (i = 0; i < ws->as_n; ++i) {
+            as_row(ws, ws->as_rows[i], &k, &j);
+            e[i] = row_dot(in, k, j, ws->d_prim + k * NW) + as_res(ws, ws->as_rows[i]);
+        }
         for (k = 0; k <= N; ++k)
             FOR_STAGE_ROWS(ws, k, b, j)
-        if (ws->act[b])
+        if (ws->act[b] && !as_updated(ws, b))
             as_set_mu(ws, b,
                       as_mu(ws, b) + ws->pen[b] * (row_dot(in, k, j, ws->d_prim + k * NW) + as_res(ws, b)));
+        if (ws->as_n > 0) {
+            as_schur_solve(ws, e);
+            for (i = 0; i < ws->as_n; ++i)
+                as_set_mu(ws, ws->as_rows[i], as_mu(ws, ws->as_rows[i]) + e[i]);
+        }
         robot_arm_lai_axpy(NP, ROBOT_ARM_R(1.0), ws->d_prim, ws->prim);
         robot_arm_lai_axpy((N + 1) * NX, ROBOT_ARM_R(1.0), ws->d_lam, ws->lam);
         robot_arm_lai_axpy(NE, ROBOT_ARM_R(1.0), ws->d_nu, ws->nu);
@@ -2710,12 +2810,14 @@ static int as_wrong_sign(const robot_arm_qp_workspace *ws, int b, robot_arm_real
  * set when it is at least AS_DROP times the largest wrong one of its family (the others
  * wait for the next sweep; within tol times the multipliers' scale a multiplier is set to 0
  * and its row stays), and an inactive side violated beyond tol joins it. Returns 1 when the
- * active set changed; *zeroed: 1 when a multiplier was set to 0 and its row stays. */
-static int as_update(const qp_loop *L, robot_arm_qp_workspace *ws, int *zeroed)
+ * active set changed; *zeroed: 1 when a multiplier was set to 0 and its row stays; *update: 1
+ * when the change only added rows and they join those added since the factorisation
+ * (ws->as_rows, ROBOT_ARM_QP_AS_UPDATE at most): the next sweep keeps the factor. */
+static int as_update(const qp_loop *L, robot_arm_qp_workspace *ws, int *zeroed, int *update)
 {
     robot_arm_real zscale = ROBOT_ARM_R(1.0), wrong[AS_NFAM];
     const robot_arm_real feas = L->st.tol * ws->scale_ineq;
-    int b, changed = 0;
+    int b, changed = 0, dropped = 0, n_add = ws->as_n;
     for (b = 0; b < AS_NFAM; ++b)
         wrong[b] = ROBOT_ARM_R(0.0);
     for (b = 0; b < ws->nb; ++b) {
@@ -2735,10 +2837,10 @@ static int as_update(const qp_loop *L, robot_arm_qp_workspace *ws, int *zeroed)
                 *zeroed = 1;
             } else if (robot_arm_fabs(mu) >= AS_DROP * wrong[as_family(ws, b)]) {
                 ws->act[b] = 0;
-                changed = 1;
+                changed = dropped = 1;
                 as_set_mu(ws, b, ROBOT_ARM_R(0.0));
             } else {
-                changed = 1; /* a wrong sign stays: this is no answer yet */
+                changed = dropped = 1; /* a wrong sign stays: this is no answer yet */
             }
         } else if (ws->act[b] == 0) {
             const int lo = ws->has_lo[b] && ws->vl[b] < -feas;
@@ -2749,9 +2851,15 @@ static int as_update(const qp_loop *L, robot_arm_qp_workspace *ws, int *zeroed)
                 ws->act[b] = (signed char)(lo ? -1 : 1);
                 changed = 1;
                 as_set_mu(ws, b, ROBOT_ARM_R(0.0));
+                if (n_add < ROBOT_ARM_QP_AS_UPDATE)
+                    ws->as_rows[n_add] = (robot_arm_qp_row)b;
+                ++n_add;
             }
         }
     }
+    *update = changed && !dropped && n_add <= ROBOT_ARM_QP_AS_UPDATE;
+    if (*update)
+        ws->as_n = n_add;
     return changed;
 }
 
@@ -2777,19 +2885,23 @@ static void as_snap_bounds(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in
 static int qp_active_set(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_qp_sol *sol,
                          robot_arm_qp_info *info)
 {
-    int solved = 0, zeroed;
+    int solved = 0, zeroed, update = 0;
     qp_res r;
     if (!as_guess(ws, in, sol, L->hscale))
         return QP_GO_ON;
     ws->penalty = 1;
+    ws->as_n = 0;
     /* each sweep counts as an iteration of the solve (settings.max_iter) */
     while (L->as_sweeps < L->st.active_set && L->as_sweeps < L->st.max_iter && !solved) {
         if (qp_deadline_passed(L))
             break; /* the interior point stops at once with the warm start (its iterate 0) */
         ++L->as_sweeps;
-        if (!as_sweep(L, ws, in, &r))
+        /* rows only added since the factorisation: its Schur complement, else (or when that
+         * does not converge) a new factorisation */
+        if (!(update && as_schur(ws, in) && as_refine(L, ws, in, &r)) &&
+            !(as_factor(L, ws, in) && as_refine(L, ws, in, &r)))
             break;
-        if (!as_update(L, ws, &zeroed)) {
+        if (!as_update(L, ws, &zeroed, &update)) {
             /* the residuals again after multipliers were set to 0 (else the iterate is the
              * sweep's, whose residuals r holds) */
             const robot_arm_real ra = zeroed ? as_residuals(ws, in, &r) : as_active_residual(ws);
@@ -2799,6 +2911,7 @@ static int qp_active_set(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm
         }
     }
     ws->penalty = 0;
+    ws->as_n = 0;
     ws->delta = ROBOT_ARM_R(0.0);
     ws->rho_aug = ROBOT_ARM_R(0.0);
     QP_TRACE("active set: %s after %d sweeps\n", solved ? "solved" : "not solved", L->as_sweeps);

@@ -112,7 +112,16 @@
  * below tol and every active multiplier has its side's sign (a wrong sign within tol times
  * the multipliers' scale is set to 0); otherwise the wrong-signed rows leave the active
  * set, the violated inactive sides join it and the next sweep factors again, up to
- * settings.active_set sweeps. Then the interior point runs from the warm start as before.
+ * settings.active_set sweeps. A sweep after corrections that only added rows, at most
+ * ROBOT_ARM_QP_AS_UPDATE since the last factorisation, keeps the factor: the added rows are
+ * held by their Schur complement G = D_s K^-1 D_s' (one solve per row, plus 1/penalty on
+ * the diagonal, a Cholesky factor of at most 4 x 4), their multipliers moved in each
+ * refinement step by G^-1 times their residual after the step; the same KKT point without
+ * a factorisation (the factor showed convexity on a larger null space). On the robot arm's
+ * closed loop the active set moves by rows joining at the ends of a saturated stretch, and
+ * most second and last sweeps are such updates: 1 factorisation per instant in the median
+ * instead of 2, at most 4 instead of 5 (bench/issue23/measurements.md, section 15). Then
+ * the interior point runs from the warm start as before.
  * The answer is the KKT point of its active set to round-off, with zero multipliers on the
  * inactive rows.
  *
@@ -204,6 +213,10 @@
 #endif
 /* Scratch of the factorisation: Phi'P, Phi'G and one unpacked P. */
 #define ROBOT_ARM_QP_NWORK (ROBOT_ARM_NX * ROBOT_ARM_QP_NW + ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NE1 + ROBOT_ARM_NX * ROBOT_ARM_NX)
+
+/* Rows the active-set start may add to the active set of a factorisation without factoring
+ * again (see the header comment). */
+#define ROBOT_ARM_QP_AS_UPDATE 4
 
 /* Row index type of the workspace's bounded-row list (two bytes where they suffice). */
 #if ROBOT_ARM_QP_NINEQ < 65536
@@ -404,6 +417,12 @@ typedef struct {
     signed char act[ROBOT_ARM_QP_NB];
     robot_arm_real pen[ROBOT_ARM_QP_NB];
     int penalty;
+    /* the rows the start added after the sweep's factorisation (ROBOT_ARM_QP_AS_UPDATE at most),
+     * held by the Schur complement of that factor: their rows, how many, and the Cholesky
+     * factor of their Schur complement plus the inverse penalty weights (packed lower) */
+    robot_arm_qp_row as_rows[ROBOT_ARM_QP_AS_UPDATE];
+    int as_n;
+    robot_arm_real as_L[ROBOT_ARM_QP_AS_UPDATE * (ROBOT_ARM_QP_AS_UPDATE + 1) / 2];
     int n_fact;            /* factorisations of the solve */
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     robot_arm_real scale_stat; /* residual scaling factors */

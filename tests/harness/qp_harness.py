@@ -230,7 +230,7 @@ class QPSolverHandle:
         return self.ffi.cast("double *", self.ffi.from_buffer(f))
 
     def solve(self, qp: dict, tol: float = 1e-8, max_iter: int = 100, warm: dict | None = None,
-              refine_steps: int = 1, hess_shift: float = 0.0):
+              refine_steps: int = 1, hess_shift: float = 0.0, active_set: int = 0):
         N, nx, nu, ng, nr, ne = self.sizes
         nw = nx + nu
         for key, val in (("N", N), ("nx", nx), ("nu", nu), ("ng", ng), ("nr", nr), ("ne", ne)):
@@ -302,8 +302,10 @@ class QPSolverHandle:
         st.max_iter = int(max_iter)
         st.refine_steps = int(refine_steps)
         st.warm_start = 0
+        st.active_set = 0
         if warm is not None:
             st.warm_start = 1
+            st.active_set = int(active_set)   # the active-set start (dopus_qp.h) from warm
             self._write_sol(warm)
         status = self.lib.dopus_qp_solve(self._ws, inp, st, self._sol, self._info)
         return self._read_sol(), self._read_info(status)
@@ -370,6 +372,8 @@ class QPSolverHandle:
             "status": STATUS_NAMES.get(int(status), f"unknown({status})"),
             "status_code": int(status),
             "iterations": int(i.iterations),
+            "factorizations": int(i.factorizations),
+            "active_set": int(i.active_set),
             "inertia_corrections": int(i.inertia_corrections),
             "terminal_augmentations": int(i.terminal_augmentations),
             "pivot_floors": int(i.pivot_floors),
