@@ -179,11 +179,6 @@ static void dopus_cost_qp_step(dopus_solver *s, double cost, int iterations)
     s->anytime.cost_qp_step = !(e > 0.0) ? r : r > 1.1 * e ? 1.1 * e : r < 0.9 * e ? 0.9 * e : r;
 }
 
-static double dopus_fmax_d(double a, double b)
-{
-    return a > b ? a : b;
-}
-
 /* 1 without a budget, or when `cost` more still fits in the instant's budget. */
 static int dopus_budget_fits(const dopus_solver *s, double cost)
 {
@@ -1058,19 +1053,14 @@ static void dopus_feedback_measure(dopus_solver *s, const dopus_real *xhat0)
     s->shifted = 0;
 }
 
-/* The work counter as the QP's clock (a work budget; ctx: the solver). */
-static double dopus_work_clock(void *ctx)
-{
-    return ((const dopus_solver *)ctx)->anytime.work;
-}
-
-/* The solver's clock as the QP's (a time budget; ctx: the solver): each read kept with the
- * price of one iteration the QP has at that read (its first price, then the largest time
- * between two reads, as dopus_qp.c prices it), for dopus_qp_over. */
+/* The budget's clock as the QP's (ctx: the solver): the work counter in work units, which
+ * the QP's own N units have already moved, or the solver's clock in time. Each read is kept
+ * with the price of one iteration the QP has at that read (its first price, then the largest
+ * gap between two reads, as dopus_qp.c prices it), for dopus_qp_over (time only). */
 static double dopus_qp_clock(void *ctx)
 {
     dopus_solver *s = (dopus_solver *)ctx;
-    const double now = s->timer.clock(s->timer.ctx);
+    const double now = dopus_budget_now(s);
     if (s->anytime.qp_reads > 0 && now - s->anytime.qp_read > s->anytime.qp_read_price) {
         s->anytime.qp_read_price = now - s->anytime.qp_read;
     }
@@ -1088,7 +1078,7 @@ static void dopus_qp_over(dopus_solver *s)
     if (s->anytime.qp_reads == 0) {
         return;
     }
-    over = s->timer.clock(s->timer.ctx) - s->anytime.qp_read;
+    over = dopus_budget_now(s) - s->anytime.qp_read;
     if (!(s->anytime.qp_read + s->anytime.qp_read_price > s->anytime.qp_deadline)) {
         over -= s->anytime.qp_read_price;
     }
@@ -1108,10 +1098,8 @@ static int dopus_qp_solve_bound(dopus_solver *s, int warm, int active_set)
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
     if (s->anytime.qp_timed) {
-        /* a budget (section 14): the QP reads the budget's clock before each factorisation
-         * (work units: the counter, which the QP's own N units have already moved) */
-        const int work = s->settings.budget_unit == DOPUS_BUDGET_WORK;
-        settings.clock = work ? dopus_work_clock : dopus_qp_clock;
+        /* a budget (section 14): the QP reads the budget's clock before each factorisation */
+        settings.clock = dopus_qp_clock;
         settings.clock_ctx = (void *)s;
         settings.deadline = s->anytime.qp_deadline;
         settings.iter_price = s->anytime.qp_price;
@@ -2183,7 +2171,7 @@ static int dopus_extra_iteration(dopus_solver *s)
     /* the QP stops at the budget's deadline less the prepare iteration that follows it (a QP
      * stopped there changes nothing) */
     s->anytime.mark = -1.0;
-    dopus_budget_deadline(s, dopus_after_qp(s, dopus_fmax_d(s->anytime.cost_prepare, dopus_prepare_floor(s))),
+    dopus_budget_deadline(s, dopus_after_qp(s, fmax(s->anytime.cost_prepare, dopus_prepare_floor(s))),
                           s->anytime.cost_qp_step);
     qs = dopus_feedback_qp(s);
     s->anytime.qp_timed = 0;

@@ -179,11 +179,6 @@ static void robot_arm_cost_qp_step(robot_arm_solver *s, double cost, int iterati
     s->anytime.cost_qp_step = !(e > 0.0) ? r : r > 1.1 * e ? 1.1 * e : r < 0.9 * e ? 0.9 * e : r;
 }
 
-static double robot_arm_fmax_d(double a, double b)
-{
-    return a > b ? a : b;
-}
-
 /* 1 without a budget, or when `cost` more still fits in the instant's budget. */
 static int robot_arm_budget_fits(const robot_arm_solver *s, double cost)
 {
@@ -1058,19 +1053,14 @@ static void robot_arm_feedback_measure(robot_arm_solver *s, const robot_arm_real
     s->shifted = 0;
 }
 
-/* The work counter as the QP's clock (a work budget; ctx: the solver). */
-static double robot_arm_work_clock(void *ctx)
-{
-    return ((const robot_arm_solver *)ctx)->anytime.work;
-}
-
-/* The solver's clock as the QP's (a time budget; ctx: the solver): each read kept with the
- * price of one iteration the QP has at that read (its first price, then the largest time
- * between two reads, as robot_arm_qp.c prices it), for robot_arm_qp_over. */
+/* The budget's clock as the QP's (ctx: the solver): the work counter in work units, which
+ * the QP's own N units have already moved, or the solver's clock in time. Each read is kept
+ * with the price of one iteration the QP has at that read (its first price, then the largest
+ * gap between two reads, as robot_arm_qp.c prices it), for robot_arm_qp_over (time only). */
 static double robot_arm_qp_clock(void *ctx)
 {
     robot_arm_solver *s = (robot_arm_solver *)ctx;
-    const double now = s->timer.clock(s->timer.ctx);
+    const double now = robot_arm_budget_now(s);
     if (s->anytime.qp_reads > 0 && now - s->anytime.qp_read > s->anytime.qp_read_price) {
         s->anytime.qp_read_price = now - s->anytime.qp_read;
     }
@@ -1088,7 +1078,7 @@ static void robot_arm_qp_over(robot_arm_solver *s)
     if (s->anytime.qp_reads == 0) {
         return;
     }
-    over = s->timer.clock(s->timer.ctx) - s->anytime.qp_read;
+    over = robot_arm_budget_now(s) - s->anytime.qp_read;
     if (!(s->anytime.qp_read + s->anytime.qp_read_price > s->anytime.qp_deadline)) {
         over -= s->anytime.qp_read_price;
     }
@@ -1108,10 +1098,8 @@ static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm, int active_se
     settings.tol = s->settings.qp_tol;
     settings.max_iter = s->settings.qp_max_iter;
     if (s->anytime.qp_timed) {
-        /* a budget (section 14): the QP reads the budget's clock before each factorisation
-         * (work units: the counter, which the QP's own N units have already moved) */
-        const int work = s->settings.budget_unit == ROBOT_ARM_BUDGET_WORK;
-        settings.clock = work ? robot_arm_work_clock : robot_arm_qp_clock;
+        /* a budget (section 14): the QP reads the budget's clock before each factorisation */
+        settings.clock = robot_arm_qp_clock;
         settings.clock_ctx = (void *)s;
         settings.deadline = s->anytime.qp_deadline;
         settings.iter_price = s->anytime.qp_price;
@@ -2183,7 +2171,7 @@ static int robot_arm_extra_iteration(robot_arm_solver *s)
     /* the QP stops at the budget's deadline less the prepare iteration that follows it (a QP
      * stopped there changes nothing) */
     s->anytime.mark = -1.0;
-    robot_arm_budget_deadline(s, robot_arm_after_qp(s, robot_arm_fmax_d(s->anytime.cost_prepare, robot_arm_prepare_floor(s))),
+    robot_arm_budget_deadline(s, robot_arm_after_qp(s, fmax(s->anytime.cost_prepare, robot_arm_prepare_floor(s))),
                           s->anytime.cost_qp_step);
     qs = robot_arm_feedback_qp(s);
     s->anytime.qp_timed = 0;
