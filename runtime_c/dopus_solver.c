@@ -1952,13 +1952,48 @@ int dopus_prepare(dopus_solver *s)
     return dopus_ret(s, rc);
 }
 
+/* The order of step 2's gradients with a budget (algorithm.md section 14): stages 0..N-2 by
+ * the distance their linear model's point has moved since their last evaluation, |dw_acc + dw|
+ * (2-norm, largest first, a non-finite one first, ties: the lower index); without a budget
+ * stage order. */
+static void dopus_gradient_order(const dopus_solver *s, int *order)
+{
+    dopus_real dist[DOPUS_N];
+    int i, j, k;
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        order[k] = k;
+    }
+    if (!dopus_budget_on(s)) {
+        return;
+    }
+    for (k = 0; k < DOPUS_N - 1; ++k) {
+        const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
+        dopus_real d2 = DOPUS_R(0.0);
+        for (j = 0; j < DOPUS_NW; ++j) {
+            const dopus_real v = slot->dw_acc[j] + slot->dw[j];
+            d2 += v * v;
+        }
+        dist[k] = isfinite(d2) ? d2 : DOPUS_REAL_HUGE;
+    }
+    /* a stable insertion sort, largest first */
+    for (i = 1; i < DOPUS_N - 1; ++i) {
+        const int v = order[i];
+        for (j = i - 1; j >= 0 && dist[order[j]] < dist[v]; --j) {
+            order[j + 1] = order[j];
+        }
+        order[j + 1] = v;
+    }
+}
+
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
  * anytime budget (section 14), without the shift, x_N kept. */
 static int dopus_prepare_iteration(dopus_solver *s, int extra)
 {
     dopus_real xN_saved[DOPUS_NX];
     double b_start = dopus_budget_now(s), ext_cost = 0.0, b_tail, b0, b_cut = 0.0, fixed, stage_time = 0.0;
-    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer, diverged;
+    int k, i, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer, diverged;
+    int order[DOPUS_N];
+    unsigned char evaluated[DOPUS_N];
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     dopus_phase(s, DOPUS_PHASE_SHIFT);
@@ -1969,19 +2004,24 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_copy(xN_saved, s->x[DOPUS_N], DOPUS_NX);
 
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); with a budget in
-     *    stage order while one more and the least rest of the iteration fit, the stages after
-     *    the cut keep their linear model's prediction (algorithm.md section 14); when step 4
+     *    the order of the distance their linear models have moved while one more and the
+     *    least rest of the iteration fit, the stages after the cut keep their linear model's
+     *    prediction (algorithm.md section 14); when step 4
      *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call.
      *    Without a budget and with H_k apart (defer), every gradient first and then every
      *    rho_k: the same values, two phase switches (clock readings) per prepare instead of
      *    two per stage */
     all_fresh = dopus_fused(s) && dopus_every_stage_fresh(s);
     defer = !all_fresh && !dopus_budget_on(s);
+    dopus_gradient_order(s, order);
     b0 = dopus_budget_now(s);
     fixed = b0 - b_start;
-    for (k = 0; k < DOPUS_N - 1; ++k) {
-        dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
-        if (!cut && !dopus_budget_fits(s, s->anytime.cost_grad + dopus_prepare_least(s, DOPUS_N - 2 - k))) {
+    for (i = 0; i < DOPUS_N - 1; ++i) {
+        dopus_stage_slot *slot;
+        k = order[i];
+        slot = dopus_ring_stage(&s->ring, k);
+        evaluated[k] = 0;
+        if (!cut && !dopus_budget_fits(s, s->anytime.cost_grad + dopus_prepare_least(s, DOPUS_N - 2 - i))) {
             cut = 1;
             b_cut = dopus_budget_now(s);
         }
@@ -1990,6 +2030,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
             s->rho[k] = DOPUS_R(0.0);
             continue;
         }
+        evaluated[k] = 1;
         n_grad += 1;
         dopus_phase(s, DOPUS_PHASE_GRADIENTS);
         rc = all_fresh ? dopus_stage_FH(s, k) : dopus_stage_F(s, k);
@@ -2114,12 +2155,25 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     }
     b_tail = dopus_budget_now(s);
 
-    /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
-     *    when stored) */
+    /* 6. F_new of step 2 becomes F_old, the distance moved since the last evaluation restarts
+     *    at an evaluated stage and grows by the step at a predicted one; QP vectors (the fresh
+     *    A blocks were regularised when stored) */
     dopus_phase(s, DOPUS_PHASE_GRADIENTS);
-    for (k = 0; k < DOPUS_N - 1; ++k) {
-        dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k],
-                           s->mem.ev.Fn_g[k]);
+    for (k = 0; k < DOPUS_N; ++k) {
+        dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
+        int j;
+        if (k == DOPUS_N - 1 || evaluated[k]) {
+            for (j = 0; j < DOPUS_NW; ++j) {
+                slot->dw_acc[j] = DOPUS_R(0.0);
+            }
+        } else {
+            for (j = 0; j < DOPUS_NW; ++j) {
+                slot->dw_acc[j] += slot->dw[j];
+            }
+        }
+        if (k < DOPUS_N - 1) {
+            dopus_ring_store_F(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
+        }
     }
     dopus_assemble(s);
     s->qp_ready = 1;

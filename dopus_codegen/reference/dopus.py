@@ -80,7 +80,7 @@ def regularize(A: np.ndarray, mode: str, eps: float) -> np.ndarray:
 
 class _Slot:
     """One ring-buffer slot (docs/algorithm.md section 4)."""
-    __slots__ = ("Ht", "Phit", "Ct", "F_w", "phi", "g", "dw", "dlam", "dmu_g", "dmu_b", "A_dyn")
+    __slots__ = ("Ht", "Phit", "Ct", "F_w", "phi", "g", "dw", "dlam", "dmu_g", "dmu_b", "A_dyn", "dw_acc")
 
     def __init__(self, nx, nu, ng):
         nw = nx + nu
@@ -95,6 +95,9 @@ class _Slot:
         self.dlam = np.zeros(nx)
         self.dmu_g = np.zeros(ng)
         self.dmu_b = np.zeros(nw)
+        # the steps dw since the last gradient evaluation, summed: how far the linear model's
+        # point has moved (the order of an anytime prepare's gradients, section 14)
+        self.dw_acc = np.zeros(nw)
 
     def copy(self):
         s = _Slot.__new__(_Slot)
@@ -1068,15 +1071,18 @@ class ReferenceDopus:
             self._shifted = self.mode == "receding"
         t1 = time.perf_counter()
         slots = [s.copy() for s in self.slots]
-        # 2. the gradients of stages 0..N-2 that fit (all without a budget), then step 3
+        # 2. the gradients of stages 0..N-2 that fit (all without a budget) in the order of
+        #    the distance their linear models have moved, then step 3
+        order = self._gradient_order(slots)
         n_grad = self._gradients_that_fit()
+        evaluated = sorted(order[:n_grad])
         b0 = self._budget_now()
-        stage_values = self._stage_gradients(n_grad)
+        stage_values = self._stage_gradients(evaluated)
         if self._budget_on() and n_grad > 0:
             self._cost_grad = (self._budget_now() - b0) / n_grad
         b0 = self._budget_now()
         stage_values = self._last_stage_gradient(stage_values)
-        rho = self._secant_criterion(slots, stage_values, n_grad)
+        rho = self._secant_criterion(slots, stage_values, set(evaluated))
         t2 = time.perf_counter()
         xN, term = self._fresh_last_stage(slots, stage_values, extra)
         if self._budget_on():
@@ -1134,11 +1140,27 @@ class ReferenceDopus:
         """Steps 5 to 7 with ``fresh_al`` stages of 0..N-2 not re-linearised (section 14)."""
         return (self._cost_al * fresh_al if self.cost_hessian == "fresh" else 0.0) + self._cost_tail
 
+    def _gradient_order(self, slots) -> list:
+        """Step 2's order with a budget (section 14): stages 0..N-2 by the distance their
+        linear model's point has moved since their last evaluation, |dw_acc + dw| (largest
+        first, a non-finite one first, ties: the lower index); stage order without a budget.
+        The squares are summed in index order, as the C runtime sums them."""
+        if not self._budget_on():
+            return list(range(self.N - 1))
+        dist = []
+        for k in range(self.N - 1):
+            s = slots[self._slot(k)]
+            d2 = 0.0
+            for v in s.dw_acc + s.dw:
+                d2 += float(v) * float(v)
+            dist.append(d2 if np.isfinite(d2) else np.inf)
+        return sorted(range(self.N - 1), key=lambda k: -dist[k])
+
     def _gradients_that_fit(self) -> int:
-        """Step 2 with a budget (section 14): the gradients of stages 0..N-2 in stage order while
-        one more and the least rest of the iteration fit; all of them without a budget. (The C
-        runtime reads its clock before each; here each costs one work unit, in time the last
-        estimate.)"""
+        """Step 2 with a budget (section 14): how many gradients of stages 0..N-2, in the order
+        of :meth:`_gradient_order`, while one more and the least rest of the iteration fit; all
+        of them without a budget. (The C runtime reads its clock before each; here each costs
+        one work unit, in time the last estimate.)"""
         if not self._budget_on():
             return self.N - 1
         step = 1.0 if self.budget_unit == "work" else self._cost_grad
@@ -1149,11 +1171,13 @@ class ReferenceDopus:
             n += 1
         return n
 
-    def _stage_gradients(self, n=None):
-        """``(gL, phi, g)`` of every stage at the current iterate (stage_grad); with ``n < N - 1``
-        (a budget) of stages 0..n-1 only, the rest NaN until :meth:`_last_stage_gradient`."""
+    def _stage_gradients(self, stages=None):
+        """``(gL, phi, g)`` of every stage at the current iterate (stage_grad); with ``stages``
+        (a budget: a list of stages of 0..N-2) of those only, the rest NaN until
+        :meth:`_last_stage_gradient`."""
         N = self.N
-        if n is None or (n == N - 1 and not self._budget_on()):
+        n = N - 1 if stages is None else len(stages)
+        if stages is None or (n == N - 1 and not self._budget_on()):
             self.work += N
             gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, self.x[:N], self.u, self.p[:N],
                                           self.lam[1:], self.mu_g)
@@ -1165,12 +1189,13 @@ class ReferenceDopus:
         phi = np.full((N, self.nx), np.nan)
         gv = np.full((N, self.ng), np.nan)
         if n > 0:
+            idx = np.asarray(stages, dtype=int)
             self.work += n
-            a, b, lv, c = eval_stages(self.disc.stage_grad, n, self.x[:n], self.u[:n], self.p[:n],
-                                      self.lam[1:n + 1], self.mu_g[:n])
+            a, b, lv, c = eval_stages(self.disc.stage_grad, n, self.x[idx], self.u[idx], self.p[idx],
+                                      self.lam[idx + 1], self.mu_g[idx])
             if not self._finite(a, b, lv, c):
                 raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value")
-            gL[:n], phi[:n], gv[:n] = a, b, c
+            gL[idx], phi[idx], gv[idx] = a, b, c
         return gL, phi, gv
 
     def _last_stage_gradient(self, stage_values):
@@ -1187,22 +1212,24 @@ class ReferenceDopus:
         gL[k], phi[k], gv[k] = a[0], b[0], c[0]
         return gL, phi, gv
 
-    def _secant_criterion(self, slots, stage_values, n_grad=None) -> np.ndarray:
+    def _secant_criterion(self, slots, stage_values, evaluated=None) -> np.ndarray:
         """Step 2: rho_k (eq. 16) of the stages 0..N-2 with the block the last QP used, and
-        their F values moved into the slots; the stages from ``n_grad`` on (gradients cut by a
-        budget, section 14) take their linear model's prediction, rho_k = 0."""
+        their F values moved into the slots; the stages not in ``evaluated`` (gradients cut by
+        a budget, section 14) take their linear model's prediction, rho_k = 0, and their
+        distance moved grows by the step (it restarts at 0 at an evaluated stage)."""
         gL, phi, gv = stage_values
         rho = np.zeros(self.N)
-        n_grad = self.N - 1 if n_grad is None else n_grad
         for k in range(self.N - 1):
             s = slots[self._slot(k)]
             # the linear model's prediction of F after the stored step
             p_F_w = s.F_w + s.Ht @ s.dw - s.Phit.T @ s.dlam + s.Ct.T @ s.dmu_g + s.dmu_b
             p_phi = s.phi + s.Phit @ s.dw
             p_g = s.g + s.Ct @ s.dw
-            if k >= n_grad:
+            if evaluated is not None and k not in evaluated:
                 s.F_w, s.phi, s.g = p_F_w, p_phi, p_g
+                s.dw_acc = s.dw_acc + s.dw
                 continue
+            s.dw_acc = np.zeros(self.nw)
             F_w = gL[k] + self.mu_b[k]
             r1 = p_F_w - F_w
             r2 = phi[k] - p_phi
@@ -1231,6 +1258,7 @@ class ReferenceDopus:
         s.F_w = gL[k] + self.mu_b[k]
         s.phi = phi[k].copy()
         s.g = gv[k].copy()
+        s.dw_acc = np.zeros(self.nw)
         self._set_block(s, k, self.x, self.u, self.lam, self.mu_g)
         xN = phi[k].copy() if self.mode == "receding" and not extra else self.x[self.N].copy()
         term = self._term_eval(xN, self.mu_r, self.nu)
