@@ -368,3 +368,38 @@ def test_recovery_within_the_work_budget(robot_disc, robot_solution, budget, v, 
         assert 7 in statuses, statuses       # DOPUS_ERR_NOT_PREPARED
     assert statuses[-15:] == [0] * 15, statuses
     print(f"budget {budget}, outliers {v:g} x {K}: statuses {statuses}, recoveries {r.recoveries}")
+
+
+@pytest.mark.parametrize("ticks", [2, 3, 4])
+def test_time_budget_set_after_init_prices_the_first_qp(robot_disc, robot_solution, ticks):
+    """The first price of a QP iteration (docs/algorithm.md section 14) when the time budget is
+    set after init: measured at the first feedback under the budget, as init measures it for
+    a budget set before. On a deterministic clock (one tick per read) with a budget that
+    leaves the disturbance's first feedback no room for a QP iteration, both solvers cut the
+    QP before its first iteration and step to its warm start (status OK, the same control);
+    before, the solver given its budget after init had no price, started an iteration past
+    the deadline and failed the feedback (a QP cut far from its solution)."""
+    from dopus_codegen.studies import loops
+
+    xhat = np.array(robot_disc.x0, dtype=float)
+    xd = np.array(robot_disc.disturbance(xhat.copy()), dtype=float).reshape(-1)
+    out = {}
+    for order in ("before", "after"):
+        c = CSolver(robot_disc, M=1)
+        t = {"n": 0}
+
+        def clock(t=t):
+            t["n"] += 1
+            return float(t["n"])
+
+        c.set_clock(clock)
+        if order == "before":
+            c.set_time_budget(ticks)
+        c.init(xhat, robot_solution[0])
+        if order == "after":
+            c.set_time_budget(ticks)
+        fb = loops.feedback(c, xd)
+        out[order] = (fb.status, c.qp_iterations, c.qp_status, "qp_cut" in c.flags, fb.u0)
+    for order, (status, iterations, qp_status, cut, _) in out.items():
+        assert (status, iterations, qp_status, cut) == (0, 0, 7, True), (order, out[order])
+    assert np.array_equal(out["before"][4], out["after"][4])
