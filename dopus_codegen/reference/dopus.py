@@ -230,6 +230,7 @@ class ReferenceDopus:
         self._cost_grad = self._cost_head = self._cost_al = self._cost_tail = 0.0
         self.budget_used = 0.0
         self._prepared_extra = False
+        self._reinit_next = -1        # a re-initialisation under way: its next stage (section 14)
         self.extra_iterations = 0
         self.instant_stages = 0
 
@@ -477,6 +478,7 @@ class ReferenceDopus:
         self._qp_ready = False
         self._p_shifted = False
         self._reset_health(u)
+        self._reinit_next = -1
         self._init_finish(x, u, lam, mu_g, mu_b, g.mu_bN.copy(), g.mu_r.copy(), g.nu.copy(), "init", "at the guess")
         self._xhat_last = xhat0.copy()
         self._u_applied = np.zeros(self.n_u)
@@ -896,7 +898,8 @@ class ReferenceDopus:
         n_failed = self._n_failed
         failure = None
         try:
-            self._reinit(x, u)
+            # with a budget the QP after it and the least prepare stay free (section 14)
+            self._reinit(x, u, self._cost_qp + self._prepare_floor())
         except DopusError as exc:
             failure = exc
         self._n_failed = n_failed     # still the count of consecutive failed feedbacks
@@ -906,6 +909,9 @@ class ReferenceDopus:
             failure = DopusError.of("nonfinite_value", "feedback: the model is not finite at the measured state "
                                     "(the recovery's re-initialisation from it); the iterate is the OCP file's "
                                     "guess, prepared for the next measurement")
+        if failure is None and self._reinit_next >= 0:
+            failure = DopusError.of("not_prepared", "feedback: the recovery's re-initialisation continues in the "
+                                    "prepare (the budget of the instant is spent); no QP yet")
         if failure is not None:
             return None, failure, 0
         return self._solve_with_retries(xhat0)
@@ -955,14 +961,24 @@ class ReferenceDopus:
         self._instant_start = self._budget_now() - self.budget_used
         if (self._qp_ready and self._n_failed > 0 and not self._recover_pending and self.recovery
                 and self.mode == "receding" and "reinit_guess" not in self.flags):
-            # (not from the OCP file's guess: its plan is not the plant's)
-            self._predicted_step()
+            # (not from the OCP file's guess: its plan is not the plant's; with a budget not when
+            # its QP would pass the deadline of the least prepare at once, section 14)
+            self._qp_deadline = (self._instant_start + self.budget - self._prepare_floor()
+                                 if self._budget_on() else None)
+            try:
+                if not self._qp_deadline_near():
+                    self._predicted_step()
+            finally:
+                self._qp_deadline = None
         self._qp_ready = False
         if self.mode == "receding" and self._plan_age < self.N:
             self._plan_age += 1
         hessian = self.hessian
         try:
-            if self._recover_pending and self.recovery and self.mode == "receding":
+            if self._reinit_next >= 0:
+                # a re-initialisation under way (a budget): its next evaluations
+                self._reinit_continue()
+            elif self._recover_pending and self.recovery and self.mode == "receding":
                 self._recover(shifted=False)
             else:
                 if self._recovering > 0 and self.has_gn:
@@ -1554,10 +1570,12 @@ class ReferenceDopus:
             x[0] = self._xhat_last
         self._reinit(x, u)
 
-    def _reinit(self, x, u) -> None:
+    def _reinit(self, x, u, reserve: float = 0.0) -> None:
         """The re-initialisation of section 9 from x[0] in place: a forward simulation with
         the last good plan (else the OCP file's guess controls; else the guess itself), the
-        iterate's multipliers, every block recomputed (Gauss-Newton when the problem has it)."""
+        iterate's multipliers, every block recomputed (Gauss-Newton when the problem has it).
+        With a budget the evaluations leave ``reserve`` free and may continue in the next
+        prepares (:meth:`_reinit_walk`, section 14)."""
         N, nx = self.N, self.nx
         gx = np.asarray(self.disc.initial_guess.x, float).reshape(N + 1, nx)
         gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)
@@ -1565,6 +1583,18 @@ class ReferenceDopus:
             x[1:] = gx[1:]
             for k in range(N):
                 u[k] = self._clip_u(gu[k])[0]
+        if self._budget_on():
+            try:
+                try:
+                    self._reinit_start(x, u, self.lam.copy(), self.mu_g.copy(), self.mu_b.copy(),
+                                       self.mu_bN.copy(), self.mu_r.copy(), self.nu.copy(), reserve)
+                except DopusError:
+                    self._reinit_at_guess(reserve)
+            except DopusError:
+                self._qp_ready = False
+                self._reinit_next = -1
+                raise
+            return
         hessian = self.hessian
         self.hessian = "gauss-newton" if self.has_gn else hessian
         try:
@@ -1586,6 +1616,11 @@ class ReferenceDopus:
             raise
         finally:
             self.hessian = hessian
+        self._reinit_done()
+
+    def _reinit_done(self) -> None:
+        """The bookkeeping of a re-initialisation that succeeded: the KKT proxy, the recovery
+        phase."""
         self.kkt_proxy = self._kkt_proxy_eval()
         self.kkt_proxy_ref = self.kkt_proxy
         self._n_failed = 0
@@ -1593,6 +1628,110 @@ class ReferenceDopus:
         self.recoveries += 1
         self._recovering = int(_SAFETY["RECOVERY_FULL_RTI"])
         self._flag("recovered")
+
+    def _reinit_at_guess(self, reserve: float) -> None:
+        """The last resort of a re-initialisation with a budget: the OCP file's guess whole,
+        x_0 included, with zero multipliers."""
+        N, nx = self.N, self.nx
+        gx = np.asarray(self.disc.initial_guess.x, float).reshape(N + 1, nx)
+        gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)
+        u = np.array([self._clip_u(gu[k])[0] for k in range(N)])
+        self._flag("reinit_guess")
+        z = np.zeros
+        self._reinit_start(gx.copy(), u, z((N + 1, nx)), z((N, self.ng)), z((N, self.nw)), z(nx), z(self.nr),
+                           z(self.ne), reserve)
+
+    def _reinit_start(self, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, reserve: float) -> None:
+        """A re-initialisation with a budget (section 14): the iterate in place, fresh slots,
+        then :meth:`_reinit_walk`."""
+        N = self.N
+        self._prepared_extra = False
+        self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
+        self.mu_bN, self.mu_r, self.nu = mu_bN, mu_r, nu
+        self.ring_head = 0
+        self.slots = [_Slot(self.nx, self.n_u, self.ng) for _ in range(N)]
+        self.rho = np.zeros(N)
+        self.recomputed = list(range(N))
+        self.qp_status = 0
+        self.qp_iterations = self.qp_factorizations = 0
+        self._qp_ready = False
+        self._al_resync = True
+        self._n_failed = 0
+        self._recover_pending = False
+        self._reinit_next = 0
+        self._reinit_walk(reserve)
+
+    def _reinit_walk(self, reserve: float) -> None:
+        """The evaluations of a re-initialisation with a budget (section 14): the gradient and
+        blocks of each stage in stage order while one more, the terminal node and ``reserve``
+        still fit, then the terminal node and the QP; the rest in the next prepares
+        (``_reinit_next``), whose feedbacks return the fallback control. Gauss-Newton blocks
+        when the problem has them."""
+        N = self.N
+        term_cost = self._cost_head - self._cost_grad - self._cost_stage
+        hessian = self.hessian
+        self.hessian = "gauss-newton" if self.has_gn else hessian
+        try:
+            while (self._reinit_next < N
+                   and self._budget_fits(self._cost_grad + self._cost_stage + term_cost + reserve)):
+                k = self._reinit_next
+                self.work += 1
+                gL, phi, lv, gv = eval_stages(self.disc.stage_grad, 1, self.x[k:k + 1], self.u[k:k + 1],
+                                              self.p[k:k + 1], self.lam[k + 1:k + 2], self.mu_g[k:k + 1])
+                if not self._finite(gL, phi, lv, gv):
+                    raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value at the "
+                                     "re-initialised iterate")
+                sl = self.slots[self._slot(k)]
+                sl.F_w = gL[0] + self.mu_b[k]
+                sl.phi = phi[0].copy()
+                sl.g = gv[0].copy()
+                self._set_block(sl, k, self.x, self.u, self.lam, self.mu_g)
+                if not self._finite(sl.Ht, sl.A_dyn, sl.Phit, sl.Ct):
+                    raise self._fail("nonfinite_value", "prepare: stage_hess returned a non-finite value at the "
+                                     "re-initialised iterate")
+                self._reinit_next = k + 1
+            self._prepare_due = self._shifted = self._p_shifted = False
+            if self._reinit_next == N:
+                term = self._term_eval(self.x[N], self.mu_r, self.nu)
+                if not self._finite(*term.values()):
+                    raise self._fail("nonfinite_value", "prepare: a derivative function returned a non-finite "
+                                     "value at the re-initialised iterate (terminal node)")
+                self.term = term
+                self._al_resync = False
+                self._qp_ready = True
+                self.status = status_code("ok")
+                self._lm_start()
+                self._reinit_next = -1
+                self._reinit_done()
+        finally:
+            self.hessian = hessian
+
+    def _reinit_continue(self) -> None:
+        """A prepare while a re-initialisation is under way (a budget, section 14): the shift
+        of the instant (the evaluated stages move with the ring, the new last node is simulated
+        from the one before it), then the evaluations that fit; a failed one falls back on the
+        guess."""
+        N = self.N
+        if self.mode == "receding" and not self._shifted:
+            self._shift()
+            self._shifted = True
+            self._reinit_next = max(self._reinit_next - 1, 0)
+            try:
+                xn = self._stage_phi(self.x[N - 1], self.u[N - 1], self.p[N - 1])
+            except RuntimeError:
+                xn = None
+            if xn is not None and np.all(np.isfinite(xn)):
+                self.x = self.x.copy()
+                self.x[N] = xn
+        try:
+            try:
+                self._reinit_walk(0.0)
+            except DopusError:
+                self._reinit_at_guess(0.0)
+        except DopusError:
+            self._qp_ready = False
+            self._reinit_next = -1
+            raise
 
     # ------------------------------------------------------------------ section 10: automatic lm
     def lm_hessian_scale(self) -> float:
