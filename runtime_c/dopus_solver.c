@@ -159,6 +159,10 @@ static double dopus_cost_peak(const dopus_solver *s, double estimate, double rea
     if (reading > estimate) {
         return reading < 2.0 * estimate ? reading : 2.0 * estimate;
     }
+    if (s->anytime.starved) {
+        /* the last instant proved the prices too high (dopus_starved_check) */
+        return reading > 0.9 * estimate ? reading : 0.9 * estimate;
+    }
     return reading > 0.999 * estimate ? reading : 0.999 * estimate;
 }
 
@@ -218,6 +222,24 @@ static double dopus_prepare_floor(const dopus_solver *s)
 static double dopus_after_qp(const dopus_solver *s, double prepare)
 {
     return s->anytime.cost_qp_over + s->anytime.cost_fb_tail + prepare;
+}
+
+/* At the end of an instant (time budget): its feedback QP stopped by its deadline while the
+ * instant still ended with more than half its budget unused proves the prices of the deadline
+ * too high (readings taken while the process was descheduled; a QP cut before its first
+ * iteration gives no new reading, and the reserves fall by 0.1 % per reading). Until an
+ * instant uses half its budget, the feedback QP's deadline then keeps free only what the last
+ * instant cost after its feedback QP (when less than the reserves), the QP prices its
+ * iterations by its own readings (a fresh price, taken when lower), and the reserves fall by
+ * 10 % per reading. On a deterministic clock with a budget that fits, no such instant occurs
+ * (algorithm.md section 14). */
+static void dopus_starved_check(dopus_solver *s)
+{
+    s->anytime.starved = dopus_budget_on(s) && s->settings.budget_unit == DOPUS_BUDGET_TIME &&
+                         (s->anytime.fb_qp_cut || s->anytime.starved) &&
+                         2.0 * s->anytime.used < s->settings.budget;
+    s->anytime.rest_last = s->anytime.used - s->anytime.fb_qp_end;
+    s->anytime.fb_qp_cut = 0;
 }
 
 /* ---- generic information ------------------------------------------------------------ */
@@ -1360,7 +1382,7 @@ static void dopus_budget_deadline(dopus_solver *s, double reserve, double per_it
 static int dopus_feedback_run(dopus_solver *s, const dopus_real *xhat0, dopus_real *u0)
 {
     dopus_real xhat_prev[DOPUS_NX];
-    double b0;
+    double b0, b1;
     int rc, qs, retries, recovered = 0;
 
     dopus_copy(xhat_prev, s->xhat0, DOPUS_NX);
@@ -1368,11 +1390,20 @@ static int dopus_feedback_run(dopus_solver *s, const dopus_real *xhat0, dopus_re
     /* the first price of a QP iteration when the budget was set after init */
     dopus_price_qp(s);
     /* the deadline leaves the step and the least a prepare costs free */
-    dopus_budget_deadline(s, dopus_after_qp(s, dopus_prepare_floor(s)), s->anytime.cost_qp_iter);
+    if (s->anytime.starved) {
+        /* the last instant proved the prices too high (dopus_starved_check) */
+        const double rest = dopus_after_qp(s, dopus_prepare_floor(s));
+        dopus_budget_deadline(s, rest < s->anytime.rest_last ? rest : s->anytime.rest_last, 0.0);
+    } else {
+        dopus_budget_deadline(s, dopus_after_qp(s, dopus_prepare_floor(s)), s->anytime.cost_qp_iter);
+    }
     b0 = dopus_budget_now(s);
     qs = dopus_feedback_qp(s);
     qs = dopus_feedback_lm_retries(s, qs, &retries);
-    s->anytime.cost_qp = dopus_cost(s, s->anytime.cost_qp, dopus_budget_now(s) - b0);
+    b1 = dopus_budget_now(s);
+    s->anytime.cost_qp = dopus_cost(s, s->anytime.cost_qp, b1 - b0);
+    s->anytime.fb_qp_end = b1 - s->anytime.instant_start;
+    s->anytime.fb_qp_cut = qs == DOPUS_QP_DEADLINE && s->settings.budget_unit == DOPUS_BUDGET_TIME;
     if (s->qp_iterations > 0 && s->settings.budget_unit == DOPUS_BUDGET_TIME) {
         s->anytime.cost_qp_iter =
             dopus_cost(s, s->anytime.cost_qp_iter, s->anytime.cost_qp / (double)s->qp_iterations);
@@ -2058,6 +2089,7 @@ int dopus_prepare(dopus_solver *s)
         s->anytime.cost_end = dopus_cost_peak(s, s->anytime.cost_end, dopus_budget_now(s) - s->anytime.mark);
     }
     s->anytime.used = dopus_budget_now(s) - s->anytime.instant_start;
+    dopus_starved_check(s);
     if (rc == DOPUS_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
@@ -2797,6 +2829,10 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     s->anytime.qp_read_price = 0.0;
     s->anytime.used = 0.0;
     s->anytime.qp_timed = 0;
+    s->anytime.fb_qp_cut = 0;
+    s->anytime.fb_qp_end = 0.0;
+    s->anytime.rest_last = 0.0;
+    s->anytime.starved = 0;
     s->anytime.extra_iterations = 0;
     s->anytime.instant_stages = 0;
     s->anytime.prepared_extra = 0;

@@ -434,3 +434,61 @@ def test_time_budget_set_after_init_prices_the_first_qp(robot_disc, robot_soluti
     for order, (status, iterations, qp_status, cut, _) in out.items():
         assert (status, iterations, qp_status, cut) == (0, 0, 7, True), (order, out[order])
     assert np.array_equal(out["before"][4], out["after"][4])
+
+
+def _descheduled_loop(disc, guess, jump_at, n, budget=1000.0, jump=1e4):
+    """A closed loop (M = 1, the disturbance at the first instant, the plant the discrete
+    model) on a deterministic clock (one tick per read) that, at its read `jump_at` (None:
+    never), jumps `jump` ticks forward: the process descheduled while the solver timed a
+    piece of its work. Returns the feedback QPs' iteration counts, the reads of init and the
+    last state."""
+    from dopus_codegen.studies import loops
+
+    c = CSolver(disc, M=1)
+    t = {"n": 0, "v": 0.0}
+
+    def clock():
+        t["n"] += 1
+        t["v"] += 1.0 + (jump if t["n"] == jump_at else 0.0)
+        return t["v"]
+
+    c.set_clock(clock)
+    c.set_time_budget(budget)
+    xhat = np.array(disc.x0, dtype=float)
+    c.init(xhat, guess)
+    n_init = t["n"]
+    xhat = np.array(disc.disturbance(xhat.copy()), dtype=float).reshape(-1)
+    p0 = np.asarray(c.p[0], dtype=float)
+    iterations = []
+    for _ in range(n):
+        fb = loops.feedback(c, xhat)
+        assert fb.status == 0, fb.error
+        iterations.append(c.qp_iterations)
+        assert loops.prepare(c)[0] == 0
+        xhat = np.array(disc.stage_eval(xhat, fb.u0, p0)[0], dtype=float).reshape(-1)
+    return iterations, n_init, xhat
+
+
+def test_time_budget_recovers_from_a_descheduled_reading(robot_disc, robot_solution):
+    """The prices of a time budget after a reading taken while the process was descheduled
+    (docs/algorithm.md section 14). A deterministic clock of one tick per read and a budget of
+    1000 ticks (an instant reads it 600 to 800 times); at one read near the end of init (the
+    first price of a QP iteration, a step-5 refresh's reading) the clock jumps 10^4 ticks. Before,
+    the inflated price (or reserve, which falls by 0.1 % per reading) cut every feedback QP
+    before its first iteration for the rest of the run while each instant used about 50 of its
+    1000 ticks: the controller ran open loop (the last state 96 away from the undisturbed run's,
+    |x| = 17). Now an instant whose feedback QP was cut while it used less than half its budget
+    lets the next ones price their deadline by its readings: from the second instant every
+    feedback QP iterates, and the closed loop ends where the run without the jump ends."""
+    n = 150
+    ref_iterations, n_init, x_ref = _descheduled_loop(robot_disc, robot_solution[0], None, n)
+    assert min(ref_iterations) > 0
+    # reads 15, 13 and 5 before the end of init: in the first price of a QP iteration and in
+    # readings of the reserves (every one of them locked the loop before)
+    for jump_at in (n_init - 15, n_init - 13, n_init - 5):
+        iterations, _, x = _descheduled_loop(robot_disc, robot_solution[0], jump_at, n)
+        assert iterations[0] == 0, (jump_at, iterations[:5])        # the jump's instant: cut
+        assert min(iterations[1:]) > 0, (jump_at, iterations)
+        err = float(np.linalg.norm(x - x_ref) / np.linalg.norm(x_ref))
+        print(f"jump at read {jump_at}: last state {err:.1e} relative from the undisturbed run's")
+        assert err <= 0.2, (jump_at, err)

@@ -159,6 +159,10 @@ static double robot_arm_cost_peak(const robot_arm_solver *s, double estimate, do
     if (reading > estimate) {
         return reading < 2.0 * estimate ? reading : 2.0 * estimate;
     }
+    if (s->anytime.starved) {
+        /* the last instant proved the prices too high (robot_arm_starved_check) */
+        return reading > 0.9 * estimate ? reading : 0.9 * estimate;
+    }
     return reading > 0.999 * estimate ? reading : 0.999 * estimate;
 }
 
@@ -218,6 +222,24 @@ static double robot_arm_prepare_floor(const robot_arm_solver *s)
 static double robot_arm_after_qp(const robot_arm_solver *s, double prepare)
 {
     return s->anytime.cost_qp_over + s->anytime.cost_fb_tail + prepare;
+}
+
+/* At the end of an instant (time budget): its feedback QP stopped by its deadline while the
+ * instant still ended with more than half its budget unused proves the prices of the deadline
+ * too high (readings taken while the process was descheduled; a QP cut before its first
+ * iteration gives no new reading, and the reserves fall by 0.1 % per reading). Until an
+ * instant uses half its budget, the feedback QP's deadline then keeps free only what the last
+ * instant cost after its feedback QP (when less than the reserves), the QP prices its
+ * iterations by its own readings (a fresh price, taken when lower), and the reserves fall by
+ * 10 % per reading. On a deterministic clock with a budget that fits, no such instant occurs
+ * (algorithm.md section 14). */
+static void robot_arm_starved_check(robot_arm_solver *s)
+{
+    s->anytime.starved = robot_arm_budget_on(s) && s->settings.budget_unit == ROBOT_ARM_BUDGET_TIME &&
+                         (s->anytime.fb_qp_cut || s->anytime.starved) &&
+                         2.0 * s->anytime.used < s->settings.budget;
+    s->anytime.rest_last = s->anytime.used - s->anytime.fb_qp_end;
+    s->anytime.fb_qp_cut = 0;
 }
 
 /* ---- generic information ------------------------------------------------------------ */
@@ -1360,7 +1382,7 @@ static void robot_arm_budget_deadline(robot_arm_solver *s, double reserve, doubl
 static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xhat0, robot_arm_real *u0)
 {
     robot_arm_real xhat_prev[ROBOT_ARM_NX];
-    double b0;
+    double b0, b1;
     int rc, qs, retries, recovered = 0;
 
     robot_arm_copy(xhat_prev, s->xhat0, ROBOT_ARM_NX);
@@ -1368,11 +1390,20 @@ static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xha
     /* the first price of a QP iteration when the budget was set after init */
     robot_arm_price_qp(s);
     /* the deadline leaves the step and the least a prepare costs free */
-    robot_arm_budget_deadline(s, robot_arm_after_qp(s, robot_arm_prepare_floor(s)), s->anytime.cost_qp_iter);
+    if (s->anytime.starved) {
+        /* the last instant proved the prices too high (robot_arm_starved_check) */
+        const double rest = robot_arm_after_qp(s, robot_arm_prepare_floor(s));
+        robot_arm_budget_deadline(s, rest < s->anytime.rest_last ? rest : s->anytime.rest_last, 0.0);
+    } else {
+        robot_arm_budget_deadline(s, robot_arm_after_qp(s, robot_arm_prepare_floor(s)), s->anytime.cost_qp_iter);
+    }
     b0 = robot_arm_budget_now(s);
     qs = robot_arm_feedback_qp(s);
     qs = robot_arm_feedback_lm_retries(s, qs, &retries);
-    s->anytime.cost_qp = robot_arm_cost(s, s->anytime.cost_qp, robot_arm_budget_now(s) - b0);
+    b1 = robot_arm_budget_now(s);
+    s->anytime.cost_qp = robot_arm_cost(s, s->anytime.cost_qp, b1 - b0);
+    s->anytime.fb_qp_end = b1 - s->anytime.instant_start;
+    s->anytime.fb_qp_cut = qs == ROBOT_ARM_QP_DEADLINE && s->settings.budget_unit == ROBOT_ARM_BUDGET_TIME;
     if (s->qp_iterations > 0 && s->settings.budget_unit == ROBOT_ARM_BUDGET_TIME) {
         s->anytime.cost_qp_iter =
             robot_arm_cost(s, s->anytime.cost_qp_iter, s->anytime.cost_qp / (double)s->qp_iterations);
@@ -2058,6 +2089,7 @@ int robot_arm_prepare(robot_arm_solver *s)
         s->anytime.cost_end = robot_arm_cost_peak(s, s->anytime.cost_end, robot_arm_budget_now(s) - s->anytime.mark);
     }
     s->anytime.used = robot_arm_budget_now(s) - s->anytime.instant_start;
+    robot_arm_starved_check(s);
     if (rc == ROBOT_ARM_OK) {
         /* one prepare per sampling instant: the next needs a feedback first */
         s->prepare_due = 0;
@@ -2797,6 +2829,10 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
     s->anytime.qp_read_price = 0.0;
     s->anytime.used = 0.0;
     s->anytime.qp_timed = 0;
+    s->anytime.fb_qp_cut = 0;
+    s->anytime.fb_qp_end = 0.0;
+    s->anytime.rest_last = 0.0;
+    s->anytime.starved = 0;
     s->anytime.extra_iterations = 0;
     s->anytime.instant_stages = 0;
     s->anytime.prepared_extra = 0;

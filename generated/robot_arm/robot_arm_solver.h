@@ -500,6 +500,10 @@ typedef struct {
     double qp_deadline;   /* the QP's deadline on the budget's clock (qp_timed) */
     double qp_price;      /* the QP's first estimate of one iteration (qp_timed) */
     int qp_timed;         /* 1: the next QP solves stop at qp_deadline (a time budget) */
+    double fb_qp_end;     /* the instant's feedback QP ended this far into it (time budget) */
+    double rest_last;     /* the last instant from its feedback QP's end to its end */
+    int fb_qp_cut;        /* the instant's feedback QP was stopped by its deadline (time budget) */
+    int starved;          /* the last instant proved the prices too high (time budget, section 14) */
     int extra_iterations; /* extra iterations of the last prepare */
     int instant_stages;   /* stages re-linearised in the last instant */
     int prepared_extra;   /* the prepared QP comes from extra iterations (the feedback keeps lm) */
