@@ -153,6 +153,24 @@ void dopus_lm_raise(dopus_lm *st)
     st->lm = st->lm > hi ? hi : st->lm;
 }
 
+int dopus_lm_near_convex(const dopus_lm *st, const dopus_ring *ring, const dopus_real *A_N, dopus_real *work)
+{
+    const dopus_real lo = DOPUS_LM_MIN_REL * st->scale, hi = DOPUS_LM_MAX_REL * st->scale;
+    dopus_real up;
+    if (!st->on || !(st->lm < hi)) {
+        return 0;
+    }
+    if (st->uncapped < DOPUS_R(0.0)) {
+        return 1; /* the prepared term, which the prepare's test passed (below the maximum) */
+    }
+    up = st->lm < lo ? lo : st->lm * DOPUS_LM_RAISE; /* dopus_lm_raise's step */
+    up = up > hi ? hi : up;
+    if (up >= st->uncapped && st->uncapped < hi) {
+        return 1; /* at least the prepared term (monotone test) */
+    }
+    return dopus_lm_convex(st, ring, A_N, up, work);
+}
+
 int dopus_lm_can_raise(const dopus_lm *st)
 {
     return st->on && st->lm < DOPUS_LM_MAX_REL * st->scale;

@@ -62,5 +62,13 @@ DOPUS_INTERNAL void dopus_lm_feedback(dopus_lm *lm, int solved);
  * maximum); then dopus_lm_raise. */
 DOPUS_INTERNAL int dopus_lm_can_raise(const dopus_lm *lm);
 DOPUS_INTERNAL void dopus_lm_raise(dopus_lm *lm);
+/* Feedback, once the measurement is in the QP: 1 when the automatic term is within one raise
+ * step of convex (docs/algorithm.md section 4, feedback): the term below its maximum and, when
+ * this feedback capped it, the QP convex on the dynamics with the capped term raised once
+ * (to DOPUS_LM_MIN_REL h from below it, else times DOPUS_LM_RAISE). The prepare's test
+ * certifies that when the raised term is at least the prepared one; else one convexity test
+ * at the raised term decides (work: DOPUS_LM_WORK reals). 0 for a fixed term. */
+DOPUS_INTERNAL int dopus_lm_near_convex(const dopus_lm *lm, const dopus_ring *ring, const dopus_real *A_N,
+                                        dopus_real *work);
 
 #endif /* DOPUS_LM_H */

@@ -1171,14 +1171,14 @@ static int dopus_measurement_near(const dopus_solver *s)
  * (the one the closed loop has followed so far). Returns the QP status. */
 static int dopus_feedback_qp(dopus_solver *s)
 {
-    /* the active-set start only for a QP that the automatic term lm convexified in prepare
-     * (below its maximum, dopus_lm.h) and this feedback capped by at most one raise step
-     * (DOPUS_QP_ACTIVE_SET_CAP), for a measurement near the prediction, and not after a
-     * feedback that needed the cold retry (algorithm.md section 4, feedback) */
-    const int active_set =
-        !s->qp_no_active_set && s->lm.on &&
-        (s->lm.uncapped < DOPUS_R(0.0) || s->lm.lm >= DOPUS_QP_ACTIVE_SET_CAP * s->lm.uncapped) &&
-        s->lm.lm < DOPUS_LM_MAX_REL * s->lm.scale && dopus_measurement_near(s) && !s->qp_cold_retry;
+    /* the active-set start only for a measurement near the prediction, not after a feedback
+     * that needed the cold retry, and for a QP whose automatic term lm is within one raise
+     * step of convex (dopus_lm_near_convex; its test, if any, last: before the warm point
+     * fills the QP's memory, which the test's scratch shares) (algorithm.md section 4,
+     * feedback) */
+    const int active_set = !s->qp_no_active_set && s->lm.on && dopus_measurement_near(s) &&
+                           !s->qp_cold_retry &&
+                           dopus_lm_near_convex(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
     int qs;
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;

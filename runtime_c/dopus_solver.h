@@ -423,13 +423,11 @@ enum dopus_budget_unit {
 #define DOPUS_WORK_QP DOPUS_N           /* work units of a QP solve */
 
 /* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
- * section 4, feedback; dopus_qp.h), the distance of the measurement from the predicted
- * state, in state scales, beyond which it is not tried, and the smallest fraction of the
- * prepared term lm that the feedback's cap may leave for it to be tried (one raise step of
- * dopus_lm.h below the term the prepare found convex). */
+ * section 4, feedback; dopus_qp.h) and the distance of the measurement from the predicted
+ * state, in state scales, beyond which it is not tried (the term lm it needs:
+ * dopus_lm_near_convex). */
 #define DOPUS_QP_ACTIVE_SET 8
 #define DOPUS_QP_ACTIVE_SET_NEAR DOPUS_R(1.0)
-#define DOPUS_QP_ACTIVE_SET_CAP DOPUS_R(0.1)
 
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static dopus_solver s;`;

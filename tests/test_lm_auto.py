@@ -4,6 +4,9 @@
   Hessian of the QP without inequalities (the Hessian projected on the null space of the
   dynamics with x_0 fixed, formed densely with numpy) is positive definite exactly when
   the Riccati test passes, on the robot arm's exact-Hessian QPs with a range of lm.
+- The active-set start's gate on the term (docs/algorithm.md section 4, feedback) against the
+  same computation: a capped term passes exactly when the reduced Hessian with the term
+  raised once is positive definite.
 - The robot arm with the exact Hessian and the default settings (the OCP file declares no
   lm) at N = 80, where the fixed lm = 1e-4 of earlier versions failed 247 of 300 QPs:
   closed loop of the scenario against the CVODES plant with no QP failure, DOPUS M = 1
@@ -65,6 +68,39 @@ def test_convexity_test_against_the_reduced_hessian(robot_disc, robot_solution):
         for b in (c, r):
             b.feedback(xhat)
             b.prepare()
+    assert checked[True] > 10 and checked[False] >= 3, checked
+
+
+def test_active_set_gate_against_the_reduced_hessian(robot_disc, robot_solution):
+    """The gate of the active-set start on the automatic term: the prepared term (the
+    smallest of the raise grid 1e-8 h * 10^j that the test passes) is let through, a term at
+    the maximum is not, and a capped term is let through exactly when the QP's reduced Hessian
+    (numpy, as above) with the capped term raised once (to 1e-8 h from below that, else times
+    10) is positive definite: the prepare's certificate and the gate's own test agree with it."""
+    r = ReferenceDopus(robot_disc, lm=0.0)
+    xhat = np.array(robot_disc.disturbance(np.array(robot_disc.x0, dtype=float)), dtype=float)
+    r.init(robot_disc.x0, robot_solution[0])
+    checked = {True: 0, False: 0}
+    for it in range(4):
+        qp = r.qp_of_current(xhat)      # lm = 0: the blocks themselves
+        h = r.lm_scale = r.lm_hessian_scale()
+        lm_p = next(v for v in 1e-8 * h * 10.0 ** np.arange(11) if r.lm_convex(v))
+        try:
+            r.lm_auto, r.lm, r._lm_uncapped = True, lm_p, -1.0
+            assert r.lm_near_convex()
+            r.lm = 1e2 * h
+            assert not r.lm_near_convex()
+            for c in [0.0] + list(np.logspace(-3, 0, 13, endpoint=False) * lm_p):
+                r.lm, r._lm_uncapped = c, lm_p
+                eig = reduced_hessian_min_eig(qp, 1e-8 * h if c < 1e-8 * h else 10.0 * c)
+                passes = r.lm_near_convex()
+                if abs(eig) > 1e-6 * h:          # away from the pivot threshold
+                    assert passes == (eig > 0), (it, c / lm_p, eig)
+                    checked[passes] += 1
+        finally:
+            r.lm_auto, r.lm, r._lm_uncapped = False, 0.0, -1.0
+        r.feedback(xhat)
+        r.prepare()
     assert checked[True] > 10 and checked[False] >= 3, checked
 
 

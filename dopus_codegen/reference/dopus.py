@@ -860,12 +860,12 @@ class ReferenceDopus:
                 break
             try:
                 # the first solve starts from the active set of the previous solution, as the C
-                # QP's warm start does for a QP the automatic lm made convex (capped by at most
-                # one raise step) and a measurement near the predicted state (section 4,
-                # feedback); a retry with lm raised does not
-                capped = self._lm_uncapped >= 0.0 and not self.lm >= _SAFETY["QP_ACTIVE_SET_CAP"] * self._lm_uncapped
-                start = (retries == 0 and self.active_set_start and self.lm_auto and not capped
-                         and self.lm < _SAFETY["LM_MAX_REL"] * self.lm_scale and bool(np.all(np.abs(qp["x0"]) <= _SAFETY["QP_ACTIVE_SET_NEAR"] * self.scales[0])))
+                # QP's warm start does for a measurement near the predicted state and a QP whose
+                # automatic lm is within one raise step of convex (section 4, feedback); a retry
+                # with lm raised does not
+                start = (retries == 0 and self.active_set_start and self.lm_auto
+                         and bool(np.all(np.abs(qp["x0"]) <= _SAFETY["QP_ACTIVE_SET_NEAR"] * self.scales[0]))
+                         and self.lm_near_convex())
                 sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter,
                                          guess=self._qp_warm_point(qp) if start else None,
                                          guess_sweeps=int(_SAFETY["QP_ACTIVE_SET"]))
@@ -1601,6 +1601,22 @@ class ReferenceDopus:
             Zxx = Z[:nx, :nx]
             P = 0.5 * (Zxx + Zxx.T) - Y.T @ Y
         return True
+
+    def lm_near_convex(self) -> bool:
+        """Feedback, once the measurement is in the QP: the automatic term is within one raise
+        step of convex (section 4, feedback; dopus_lm_near_convex): below its maximum and, when
+        this feedback capped it, the QP convex with the capped term raised once (to
+        LM_MIN_REL h from below it, else times LM_RAISE). The prepare's test certifies that
+        when the raised term is at least the prepared one; else one test at the raised term."""
+        lo, hi = _SAFETY["LM_MIN_REL"] * self.lm_scale, _SAFETY["LM_MAX_REL"] * self.lm_scale
+        if not (self.lm_auto and self.lm < hi):
+            return False
+        if self._lm_uncapped < 0.0:
+            return True
+        up = min(lo if self.lm < lo else self.lm * _SAFETY["LM_RAISE"], hi)
+        if up >= self._lm_uncapped and self._lm_uncapped < hi:
+            return True
+        return self.lm_convex(up)
 
     def _lm_raise(self) -> None:
         lo, hi = _SAFETY["LM_MIN_REL"] * self.lm_scale, _SAFETY["LM_MAX_REL"] * self.lm_scale

@@ -153,6 +153,24 @@ void robot_arm_lm_raise(robot_arm_lm *st)
     st->lm = st->lm > hi ? hi : st->lm;
 }
 
+int robot_arm_lm_near_convex(const robot_arm_lm *st, const robot_arm_ring *ring, const robot_arm_real *A_N, robot_arm_real *work)
+{
+    const robot_arm_real lo = ROBOT_ARM_LM_MIN_REL * st->scale, hi = ROBOT_ARM_LM_MAX_REL * st->scale;
+    robot_arm_real up;
+    if (!st->on || !(st->lm < hi)) {
+        return 0;
+    }
+    if (st->uncapped < ROBOT_ARM_R(0.0)) {
+        return 1; /* the prepared term, which the prepare's test passed (below the maximum) */
+    }
+    up = st->lm < lo ? lo : st->lm * ROBOT_ARM_LM_RAISE; /* robot_arm_lm_raise's step */
+    up = up > hi ? hi : up;
+    if (up >= st->uncapped && st->uncapped < hi) {
+        return 1; /* at least the prepared term (monotone test) */
+    }
+    return robot_arm_lm_convex(st, ring, A_N, up, work);
+}
+
 int robot_arm_lm_can_raise(const robot_arm_lm *st)
 {
     return st->on && st->lm < ROBOT_ARM_LM_MAX_REL * st->scale;

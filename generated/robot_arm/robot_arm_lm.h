@@ -62,5 +62,13 @@ ROBOT_ARM_INTERNAL void robot_arm_lm_feedback(robot_arm_lm *lm, int solved);
  * maximum); then robot_arm_lm_raise. */
 ROBOT_ARM_INTERNAL int robot_arm_lm_can_raise(const robot_arm_lm *lm);
 ROBOT_ARM_INTERNAL void robot_arm_lm_raise(robot_arm_lm *lm);
+/* Feedback, once the measurement is in the QP: 1 when the automatic term is within one raise
+ * step of convex (docs/algorithm.md section 4, feedback): the term below its maximum and, when
+ * this feedback capped it, the QP convex on the dynamics with the capped term raised once
+ * (to ROBOT_ARM_LM_MIN_REL h from below it, else times ROBOT_ARM_LM_RAISE). The prepare's test
+ * certifies that when the raised term is at least the prepared one; else one convexity test
+ * at the raised term decides (work: ROBOT_ARM_LM_WORK reals). 0 for a fixed term. */
+ROBOT_ARM_INTERNAL int robot_arm_lm_near_convex(const robot_arm_lm *lm, const robot_arm_ring *ring, const robot_arm_real *A_N,
+                                        robot_arm_real *work);
 
 #endif /* ROBOT_ARM_LM_H */

@@ -423,13 +423,11 @@ enum robot_arm_budget_unit {
 #define ROBOT_ARM_WORK_QP ROBOT_ARM_N           /* work units of a QP solve */
 
 /* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
- * section 4, feedback; robot_arm_qp.h), the distance of the measurement from the predicted
- * state, in state scales, beyond which it is not tried, and the smallest fraction of the
- * prepared term lm that the feedback's cap may leave for it to be tried (one raise step of
- * robot_arm_lm.h below the term the prepare found convex). */
+ * section 4, feedback; robot_arm_qp.h) and the distance of the measurement from the predicted
+ * state, in state scales, beyond which it is not tried (the term lm it needs:
+ * robot_arm_lm_near_convex). */
 #define ROBOT_ARM_QP_ACTIVE_SET 8
 #define ROBOT_ARM_QP_ACTIVE_SET_NEAR ROBOT_ARM_R(1.0)
-#define ROBOT_ARM_QP_ACTIVE_SET_CAP ROBOT_ARM_R(0.1)
 
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static robot_arm_solver s;`;

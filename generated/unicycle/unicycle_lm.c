@@ -153,6 +153,24 @@ void unicycle_lm_raise(unicycle_lm *st)
     st->lm = st->lm > hi ? hi : st->lm;
 }
 
+int unicycle_lm_near_convex(const unicycle_lm *st, const unicycle_ring *ring, const unicycle_real *A_N, unicycle_real *work)
+{
+    const unicycle_real lo = UNICYCLE_LM_MIN_REL * st->scale, hi = UNICYCLE_LM_MAX_REL * st->scale;
+    unicycle_real up;
+    if (!st->on || !(st->lm < hi)) {
+        return 0;
+    }
+    if (st->uncapped < UNICYCLE_R(0.0)) {
+        return 1; /* the prepared term, which the prepare's test passed (below the maximum) */
+    }
+    up = st->lm < lo ? lo : st->lm * UNICYCLE_LM_RAISE; /* unicycle_lm_raise's step */
+    up = up > hi ? hi : up;
+    if (up >= st->uncapped && st->uncapped < hi) {
+        return 1; /* at least the prepared term (monotone test) */
+    }
+    return unicycle_lm_convex(st, ring, A_N, up, work);
+}
+
 int unicycle_lm_can_raise(const unicycle_lm *st)
 {
     return st->on && st->lm < UNICYCLE_LM_MAX_REL * st->scale;

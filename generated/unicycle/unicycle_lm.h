@@ -62,5 +62,13 @@ UNICYCLE_INTERNAL void unicycle_lm_feedback(unicycle_lm *lm, int solved);
  * maximum); then unicycle_lm_raise. */
 UNICYCLE_INTERNAL int unicycle_lm_can_raise(const unicycle_lm *lm);
 UNICYCLE_INTERNAL void unicycle_lm_raise(unicycle_lm *lm);
+/* Feedback, once the measurement is in the QP: 1 when the automatic term is within one raise
+ * step of convex (docs/algorithm.md section 4, feedback): the term below its maximum and, when
+ * this feedback capped it, the QP convex on the dynamics with the capped term raised once
+ * (to UNICYCLE_LM_MIN_REL h from below it, else times UNICYCLE_LM_RAISE). The prepare's test
+ * certifies that when the raised term is at least the prepared one; else one convexity test
+ * at the raised term decides (work: UNICYCLE_LM_WORK reals). 0 for a fixed term. */
+UNICYCLE_INTERNAL int unicycle_lm_near_convex(const unicycle_lm *lm, const unicycle_ring *ring, const unicycle_real *A_N,
+                                        unicycle_real *work);
 
 #endif /* UNICYCLE_LM_H */

@@ -423,13 +423,11 @@ enum unicycle_budget_unit {
 #define UNICYCLE_WORK_QP UNICYCLE_N           /* work units of a QP solve */
 
 /* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
- * section 4, feedback; unicycle_qp.h), the distance of the measurement from the predicted
- * state, in state scales, beyond which it is not tried, and the smallest fraction of the
- * prepared term lm that the feedback's cap may leave for it to be tried (one raise step of
- * unicycle_lm.h below the term the prepare found convex). */
+ * section 4, feedback; unicycle_qp.h) and the distance of the measurement from the predicted
+ * state, in state scales, beyond which it is not tried (the term lm it needs:
+ * unicycle_lm_near_convex). */
 #define UNICYCLE_QP_ACTIVE_SET 8
 #define UNICYCLE_QP_ACTIVE_SET_NEAR UNICYCLE_R(1.0)
-#define UNICYCLE_QP_ACTIVE_SET_CAP UNICYCLE_R(0.1)
 
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static unicycle_solver s;`;
