@@ -306,13 +306,14 @@ def robot_arm_qps(gn_iters: int, exact_iters: int, log=print) -> list:
 
 # ---------------------------------------------------------------------------- running
 def run_harness(exe: Path, qps: list, solvers: list, reps: int, warmup: int, tol: float,
-                iter_max: int, workdir: Path, budget: float, min_reps: int) -> tuple:
+                iter_max: int, workdir: Path, budget: float, min_reps: int, extra: tuple = ()) -> tuple:
     """Run one harness; returns (per-QP result dicts, primal solutions [qp, solver, n])."""
     workdir.mkdir(parents=True, exist_ok=True)
     qfile, sfile = workdir / "qps.bin", workdir / "sol.bin"
     write_qps(qfile, qps)
     cmd = [str(exe), str(qfile), "--reps", str(reps), "--warmup", str(warmup), "--tol", repr(tol),
-           "--iter-max", str(iter_max), "--sol", str(sfile), "--budget", repr(budget), "--min-reps", str(min_reps)]
+           "--iter-max", str(iter_max), "--sol", str(sfile), "--budget", repr(budget), "--min-reps", str(min_reps),
+           *extra]
     for s in solvers:
         if s["kind"] == "hpipm":
             cmd += ["--hpipm", s["name"], str(s["mode"]), str(s["eq_mask"]), repr(s["eq_scale"]), str(s["ric_alg"])]
@@ -331,6 +332,89 @@ def run_harness(exe: Path, qps: list, solvers: list, reps: int, warmup: int, tol
     n = qps[0]["N"] * (qps[0]["nx"] + qps[0]["nu"]) + qps[0]["nx"]
     sol = np.fromfile(sfile, dtype="<f8").reshape(len(qps), len(solvers), n)
     return rows, sol, cmd
+
+
+TIE_QP = 0.05  # paired per-QP ratios this close to the best count as a tie for HPIPM's best mode
+
+
+def paired_ratios(exe: Path, qps: list, configs: list, eq_scale: float, reps: int, warmup: int, tol: float,
+                  iter_max: int, workdir: Path, rounds: int, log=print) -> dict:
+    """Ours against each HPIPM configuration in ``configs`` as paired ratios: one harness run
+    per round with only these solvers, the order of the solvers rotating from one repetition
+    to the next (``--rotate``), every repetition's time kept (``--times``). Per QP and
+    configuration the paired ratio is the median over the repetitions of ours' time over the
+    configuration's time in the same round of solves (a few hundred microseconds apart, so a
+    change of the machine's load or clock hits both); per IPM iteration it is that times the
+    configuration's iterations over ours (both deterministic). A round's figure is the median
+    over the QPs; the spread is given over the QPs (quartiles) and over the rounds (least and
+    largest round). ``best`` is the configuration that is fastest against ours per QP (the
+    largest median ours/QP): HPIPM's best converging mode, chosen on paired ratios so that two
+    modes of nearly equal time do not swap on the noise of their separate medians."""
+    solvers = [{"kind": "dopus", "name": "ours"}]
+    for name in configs:
+        cfg = HPIPM_CONFIGS[name]
+        solvers.append({"kind": "hpipm", "name": name, "mode": HPIPM_MODES[cfg["mode"]], "eq_mask": cfg["eq_mask"],
+                        "eq_scale": eq_scale if cfg["eq_scale"] else 0.0, "ric_alg": cfg["ric_alg"]})
+    per_round = []  # [round][config] -> (per-QP ratio per QP, per-QP ratio per iteration)
+    pooled = {c: [[] for _ in qps] for c in configs}  # every repetition's ratio per QP
+    iters = {}
+    cmd = None
+    for rnd in range(rounds):
+        rows, _, cmd = run_harness(exe, qps, solvers, reps, warmup, tol, iter_max, workdir, 1e30, reps,
+                                   extra=("--rotate", "--times"))
+        this = {}
+        for c in configs:
+            qp_r, it_r = [], []
+            for i, row in enumerate(rows):
+                o, h = row["solvers"]["ours"], row["solvers"][c]
+                ratios = np.asarray(o["t_reps"], float) / np.asarray(h["t_reps"], float)
+                pooled[c][i].extend(ratios.tolist())
+                iters[(c, i)] = (h["iterations"], o["iterations"])
+                r = float(np.median(ratios))
+                qp_r.append(r)
+                it_r.append(r * h["iterations"] / o["iterations"] if o["iterations"] and h["iterations"] else np.nan)
+            this[c] = (qp_r, it_r)
+        per_round.append(this)
+    out = {"configs": {}, "rounds": rounds, "reps": reps, "command": " ".join(shlex.quote(str(c)) for c in cmd)}
+    for c in configs:
+        qp_all = [float(np.median(v)) for v in pooled[c]]
+        it_all = [qp_all[i] * iters[(c, i)][0] / iters[(c, i)][1] if iters[(c, i)][1] and iters[(c, i)][0]
+                  else np.nan for i in range(len(qps))]
+        rq = [float(np.nanmedian(per_round[k][c][0])) for k in range(rounds)]
+        ri = [float(np.nanmedian(per_round[k][c][1])) for k in range(rounds)]
+        out["configs"][c] = {
+            "ours/qp": float(np.nanmedian(qp_all)), "ours/qp_q25_q75": [float(np.nanpercentile(qp_all, 25)),
+                                                                         float(np.nanpercentile(qp_all, 75))],
+            "ours/iter": float(np.nanmedian(it_all)), "ours/iter_q25_q75": [float(np.nanpercentile(it_all, 25)),
+                                                                             float(np.nanpercentile(it_all, 75))],
+            "ours/qp_rounds": rq, "ours/iter_rounds": ri,
+            "iterations_median": float(np.median([iters[(c, i)][0] for i in range(len(qps))])),
+            "ours_iterations_median": float(np.median([iters[(c, i)][1] for i in range(len(qps))])),
+            "per_qp_ours/qp": qp_all, "per_qp_ours/iter": it_all}
+    out["best"] = max(configs, key=lambda c: out["configs"][c]["ours/qp"]) if configs else None
+    if out["best"] is not None:
+        # configurations within TIE_QP of the best per QP are as fast as it on this machine (the
+        # choice among them is noise): the conservative per-iteration figure is the largest
+        best_qp = out["configs"][out["best"]]["ours/qp"]
+        tied = [c for c in configs if out["configs"][c]["ours/qp"] >= best_qp * (1.0 - TIE_QP)]
+        out["tied"] = tied
+        out["tied_worst_iter"] = max(tied, key=lambda c: out["configs"][c]["ours/iter"])
+    return out
+
+
+def print_paired(title: str, paired: dict, log=print) -> None:
+    log(f"\n{title}: paired ratios (ours / HPIPM in the same round of solves, order rotating), "
+        f"{paired['rounds']} rounds of {paired['reps']} repetitions; median over the QPs [quartiles over the QPs] "
+        f"(least .. largest round)")
+    log(f"{'config':24s} {'iters':>5s} {'ours':>5s} {'ours/QP':>24s} {'ours/iter':>24s}")
+    for c, r in paired["configs"].items():
+        q, it = r["ours/qp_q25_q75"], r["ours/iter_q25_q75"]
+        log(f"{c:24s} {r['iterations_median']:5.1f} {r['ours_iterations_median']:5.1f} "
+            f"{r['ours/qp']:5.3f} [{q[0]:.3f}, {q[1]:.3f}] ({min(r['ours/qp_rounds']):.3f}..{max(r['ours/qp_rounds']):.3f}) "
+            f"{r['ours/iter']:5.3f} [{it[0]:.3f}, {it[1]:.3f}] ({min(r['ours/iter_rounds']):.3f}.."
+            f"{max(r['ours/iter_rounds']):.3f})" + ("   <- best converging" if c == paired["best"] else
+                                                     "   <- tied with it per QP" if c in paired.get("tied", ())
+                                                     else ""))
 
 
 def primal_of(sol: dict) -> np.ndarray:
@@ -565,6 +649,11 @@ def main(argv=None) -> int:
     ap.add_argument("--markdown", type=Path, default=None, help="also write the tables as markdown to this file")
     ap.add_argument("--wide", action="store_true", help="print every column (the JSON always has all)")
     ap.add_argument("--quick", action="store_true", help="smoke run: few repetitions and QPs")
+    ap.add_argument("--paired-reps", type=int, default=200,
+                    help="robot arm: repetitions per round of the paired comparison of ours against every "
+                         "HPIPM configuration that converged on all QPs (0 skips it; default %(default)s)")
+    ap.add_argument("--paired-rounds", type=int, default=3,
+                    help="robot arm: separate harness runs of the paired comparison (default %(default)s)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=RESULTS / "qp_bench.json")
     args = ap.parse_args(argv)
@@ -613,12 +702,15 @@ def main(argv=None) -> int:
                        "eq_scale": args.eq_scale if cfg["eq_scale"] else 0.0, "ric_alg": cfg["ric_alg"]})
         return sv
 
+    last_run = {}  # the anchor's harness and QPs of the last set (the paired comparison reruns them)
+
     def bench_set(label: str, tagged: list, robot: bool) -> tuple:
         """Run one family of QPs (same sizes within each N) through every harness."""
         by_n = {}
         for tag, q in tagged:
             by_n.setdefault(int(q["N"]), []).append((tag, q))
         entries, cmds = [], []
+        last_run.clear()
         for N, items in sorted(by_n.items()):
             tags = [t for t, _ in items]
             # the run a QP belongs to (its tag without the iteration): the warm chain's sequences
@@ -632,6 +724,8 @@ def main(argv=None) -> int:
                                     args.cflags, args.alt_cflags if hp_name == "acados" else None)
                 rows, sols, cmd = run_harness(exe, qps, sv, args.reps, args.warmup, args.tol, args.iter_max,
                                               BUILD / f"run_{label}_{hp_name}_N{N}", args.budget, args.min_reps)
+                if hp_name == "acados":
+                    last_run.update(exe=exe, qps=qps, workdir=BUILD / f"paired_{label}_N{N}")
                 cmds.append(" ".join(shlex.quote(c) for c in cmd))
                 part = summarise(rows, sols, refs, qps, [s["name"] for s in sv], tags)
                 prims.update({s["name"]: sols[:, j] for j, s in enumerate(sv)})
@@ -705,6 +799,13 @@ def main(argv=None) -> int:
                          for e in entries}) for n in names if n != "hpipm_best"}
         log("statuses on the robot-arm QPs: " + "; ".join(f"{n}: {', '.join(v)}" for n, v in st.items()))
         print_modes(f"robot-arm QPs, tolerance {args.tol:g}", report["robot_arm"]["modes"], log)
+        modes = report["robot_arm"]["modes"]["configs"]
+        full = [n for n, r in modes.items() if r["converged"] == r["of"] and n in HPIPM_CONFIGS]
+        if with_ours and args.paired_reps > 0 and full and last_run:
+            paired = paired_ratios(last_run["exe"], last_run["qps"], full, args.eq_scale, args.paired_reps,
+                                   args.warmup, args.tol, args.iter_max, last_run["workdir"], args.paired_rounds, log)
+            report["robot_arm"]["paired"] = paired
+            print_paired(f"robot-arm QPs, tolerance {args.tol:g}", paired, log)
 
     if args.markdown is not None:
         md = [f"tolerance {args.tol:g}, commit {report['config']['git_head']}, "
@@ -750,7 +851,7 @@ def _several_tolerances(argv, tols, json_path: Path) -> int:
             return rc
         rep = json.loads(out.read_text())
         if "robot_arm" in rep:
-            summary[f"{tol:g}"] = rep["robot_arm"]["modes"]
+            summary[f"{tol:g}"] = dict(rep["robot_arm"]["modes"], paired=rep["robot_arm"].get("paired"))
     print("\nrobot-arm QPs per tolerance: HPIPM's best converging configuration and ours against it "
           "(medians of the per-QP ratios)")
     for tol, m in summary.items():
@@ -766,6 +867,23 @@ def _several_tolerances(argv, tols, json_path: Path) -> int:
               f"start from the previous QP) per QP {r.get('ours_warm/qp') or float('nan'):.2f}, per factorisation "
               f"{r.get('ours_warm/fact') or float('nan'):.2f}; ours_alt {r.get('ours_alt/qp', float('nan')):.2f} / "
               f"{r.get('ours_alt/iter', float('nan')):.2f}")
+    print("\nrobot-arm QPs per tolerance, paired ratios (ours / HPIPM in the same round of solves): HPIPM's best "
+          "converging configuration, median over the QPs [quartiles over the QPs] (least .. largest round)")
+    for tol, m in summary.items():
+        p = m.get("paired")
+        if not p or p["best"] is None:
+            print(f"  tol {tol}: no paired comparison")
+            continue
+        r = p["configs"][p["best"]]
+        q, it = r["ours/qp_q25_q75"], r["ours/iter_q25_q75"]
+        tw = p["tied_worst_iter"]
+        rt = p["configs"][tw]
+        print(f"  tol {tol}: {p['best']} ({r['iterations_median']:g} against {r['ours_iterations_median']:g} "
+              f"iterations): ours/QP {r['ours/qp']:.3f} [{q[0]:.3f}, {q[1]:.3f}] ({min(r['ours/qp_rounds']):.3f}.."
+              f"{max(r['ours/qp_rounds']):.3f}), ours/iter {r['ours/iter']:.3f} [{it[0]:.3f}, {it[1]:.3f}] "
+              f"({min(r['ours/iter_rounds']):.3f}..{max(r['ours/iter_rounds']):.3f}); tied per QP (within "
+              f"{100 * TIE_QP:g} %): {', '.join(p['tied'])}, largest ours/iter among them {rt['ours/iter']:.3f} "
+              f"({tw}, ours/QP {rt['ours/qp']:.3f})")
     json_path.parent.mkdir(parents=True, exist_ok=True)
     json_path.write_text(json.dumps({"tolerances": summary}, indent=1, default=_json_default))
     return 0

@@ -16,6 +16,10 @@
  *   --dopus NAME     add our solver (only when built with QPB_WITH_DOPUS)
  *   --dopus-alt NAME add the renamed copy of our solver built with other flags (QPB_WITH_DOPUS_ALT)
  *   --only NAME      time only that solver (for profilers)
+ *   --rotate         start each repetition's round with the next solver (the order rotates, so
+ *                    no solver always runs right after another one's cache traffic)
+ *   --times          also print every repetition's solve time in repetition order ("t_reps"),
+ *                    for ratios of the solves of one round (paired ratios)
  */
 #define _POSIX_C_SOURCE 200112L
 #include <math.h>
@@ -42,7 +46,8 @@ typedef struct {
                  along the sequence (the closed loop's warm point and active-set start) */
     bench_hpipm_opts hopts;
     void *handle;
-    double *times, *set_times;
+    double *times, *set_times; /* in repetition order */
+    double *sorted;            /* a copy of times for the quantiles */
     int status, iterations;
     double res[4];
     int has_res;
@@ -166,7 +171,7 @@ static void solver_finish(solver_entry *s, double *dw)
 int main(int argc, char **argv)
 {
     solver_entry sv[MAX_SOLVERS];
-    int ns = 0, reps = 100, warmup = 10, iter_max = 100, min_reps = 20, i, q, nqp;
+    int ns = 0, reps = 100, warmup = 10, iter_max = 100, min_reps = 20, i, q, nqp, rotate = 0, print_times = 0;
     double tol = 1e-8, count, budget = 1e30;
     const char *qpfile = NULL, *solfile = NULL, *only = NULL;
     const char *warm_resets = ""; /* comma-separated QP indices where the warm chain starts cold */
@@ -182,6 +187,8 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--iter-max") && i + 1 < argc) iter_max = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--sol") && i + 1 < argc) solfile = argv[++i];
         else if (!strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
+        else if (!strcmp(argv[i], "--rotate")) rotate = 1;
+        else if (!strcmp(argv[i], "--times")) print_times = 1;
         else if (!strcmp(argv[i], "--hpipm") && i + 5 < argc && ns < MAX_SOLVERS) {
             solver_entry *s = &sv[ns++];
             strncpy(s->name, argv[i + 1], sizeof(s->name) - 1);
@@ -254,7 +261,8 @@ int main(int argc, char **argv)
     for (i = 0; i < ns; ++i) {
         sv[i].times = (double *)malloc((size_t)reps * sizeof(double));
         sv[i].set_times = (double *)malloc((size_t)reps * sizeof(double));
-        if (!sv[i].times || !sv[i].set_times) return 3;
+        sv[i].sorted = (double *)malloc((size_t)reps * sizeof(double));
+        if (!sv[i].times || !sv[i].set_times || !sv[i].sorted) return 3;
     }
 
 #ifdef QPB_WITH_DOPUS
@@ -292,8 +300,11 @@ int main(int argc, char **argv)
             double round_time = 0.0;
             for (r = 0; r < warmup + nrep; ++r) {
                 double tr = now();
-                for (i = 0; i < ns; ++i) {
-                    double t0 = now(), t1, t2;
+                int o;
+                for (o = 0; o < ns; ++o) {
+                    double t0, t1, t2;
+                    i = rotate ? (o + r) % ns : o;
+                    t0 = now();
                     solver_set(&sv[i], &qp);
                     t1 = now();
                     sv[i].status = solver_solve(&sv[i]);
@@ -317,9 +328,13 @@ int main(int argc, char **argv)
         printf("{\"qp\": %d, \"N\": %d, \"solvers\": {", q, qp.N);
         for (i = 0; i < ns; ++i) {
             solver_entry *s = &sv[i];
-            double med = quantile(s->times, reps_done, 0.5), q25 = quantile(s->times, reps_done, 0.25),
-                   q75 = quantile(s->times, reps_done, 0.75), tmin = s->times[0],
-                   tset = quantile(s->set_times, reps_done, 0.5);
+            double med, q25, q75, tmin, tset;
+            memcpy(s->sorted, s->times, (size_t)reps_done * sizeof(double));
+            med = quantile(s->sorted, reps_done, 0.5);
+            q25 = quantile(s->sorted, reps_done, 0.25);
+            q75 = quantile(s->sorted, reps_done, 0.75);
+            tmin = s->sorted[0];
+            tset = quantile(s->set_times, reps_done, 0.5);
             solver_finish(s, dw);
             if (fsol != NULL) fwrite(dw, sizeof(double), (size_t)n, fsol);
             printf("%s\"%s\": {\"status\": %d, \"iterations\": %d, \"reps\": %d, \"t_median\": ",
@@ -334,6 +349,12 @@ int main(int argc, char **argv)
             if (s->kind != 0)
                 printf(", \"inertia_corrections\": %d, \"terminal_augmentations\": %d, \"factorizations\": %d",
                        s->inertia, s->augment, s->factorizations);
+            if (print_times) {
+                int j;
+                printf(", \"t_reps\": [");
+                for (j = 0; j < reps_done; ++j) { if (j) printf(", "); print_num(s->times[j]); }
+                printf("]");
+            }
             if (s->has_res) {
                 int j;
                 printf(", \"residuals\": [");
@@ -349,6 +370,6 @@ int main(int argc, char **argv)
     }
     fclose(f);
     if (fsol != NULL) fclose(fsol);
-    for (i = 0; i < ns; ++i) { free(sv[i].times); free(sv[i].set_times); }
+    for (i = 0; i < ns; ++i) { free(sv[i].times); free(sv[i].set_times); free(sv[i].sorted); }
     return 0;
 }
