@@ -16,8 +16,8 @@ full iteration.
 Work budgets (deterministic, work units of section 14): one full-RTI iteration costs
 3N + 2 units, one M = 1 iteration 2N + 4; no budget goes below N + 4 (the feedback's QP and
 step 3 of prepare, the last stage and the terminal node, are never cut; the gradients of the
-other stages are, in stage order), so no setting can need less than (N + 4) / (3N + 2) of the
-full RTI's budget. Time budgets: fractions of the reference's
+other stages are, the stages whose linear models have moved least since their last evaluation
+first), so no setting can need less than (N + 4) / (3N + 2) of the full RTI's budget. Time budgets: fractions of the reference's
 median instant time on this host (noisy on a loaded machine: each budget runs --repeat
 times, 3 by default, and each figure is the median of the runs, the failed instants too).
 

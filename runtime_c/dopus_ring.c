@@ -24,6 +24,7 @@ void dopus_ring_reset(dopus_ring *ring)
         dopus_ring_zero(s->F_w, DOPUS_NW);
         dopus_ring_zero(s->phi, DOPUS_NX);
         dopus_ring_zero(s->g, DOPUS_DIM(DOPUS_NG));
+        dopus_ring_zero(s->dw_acc, DOPUS_NW);
         dopus_ring_clear_step(s);
     }
     ring->ring_head = 0;

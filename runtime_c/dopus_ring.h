@@ -28,6 +28,10 @@ typedef struct {
     dopus_real dlam[DOPUS_NX];
     dopus_real dmu_g[DOPUS_DIM(DOPUS_NG)];
     dopus_real dmu_b[DOPUS_NW];
+    /* the steps dw since the last gradient evaluation of this stage, summed: how far its
+     * linear model's point has moved from the evaluation point (the order of an anytime
+     * prepare's gradients, algorithm.md section 14) */
+    dopus_real dw_acc[DOPUS_NW];
 } dopus_stage_slot;
 
 typedef struct {

@@ -80,7 +80,7 @@ def regularize(A: np.ndarray, mode: str, eps: float) -> np.ndarray:
 
 class _Slot:
     """One ring-buffer slot (docs/algorithm.md section 4)."""
-    __slots__ = ("Ht", "Phit", "Ct", "F_w", "phi", "g", "dw", "dlam", "dmu_g", "dmu_b", "A_dyn")
+    __slots__ = ("Ht", "Phit", "Ct", "F_w", "phi", "g", "dw", "dlam", "dmu_g", "dmu_b", "A_dyn", "dw_acc")
 
     def __init__(self, nx, nu, ng):
         nw = nx + nu
@@ -95,6 +95,9 @@ class _Slot:
         self.dlam = np.zeros(nx)
         self.dmu_g = np.zeros(ng)
         self.dmu_b = np.zeros(nw)
+        # the steps dw since the last gradient evaluation, summed: how far the linear model's
+        # point has moved (the order of an anytime prepare's gradients, section 14)
+        self.dw_acc = np.zeros(nw)
 
     def copy(self):
         s = _Slot.__new__(_Slot)
@@ -227,6 +230,7 @@ class ReferenceDopus:
         self._cost_grad = self._cost_head = self._cost_al = self._cost_tail = 0.0
         self.budget_used = 0.0
         self._prepared_extra = False
+        self._reinit_next = -1        # a re-initialisation under way: its next stage (section 14)
         self.extra_iterations = 0
         self.instant_stages = 0
 
@@ -474,6 +478,7 @@ class ReferenceDopus:
         self._qp_ready = False
         self._p_shifted = False
         self._reset_health(u)
+        self._reinit_next = -1
         self._init_finish(x, u, lam, mu_g, mu_b, g.mu_bN.copy(), g.mu_r.copy(), g.nu.copy(), "init", "at the guess")
         self._xhat_last = xhat0.copy()
         self._u_applied = np.zeros(self.n_u)
@@ -893,7 +898,8 @@ class ReferenceDopus:
         n_failed = self._n_failed
         failure = None
         try:
-            self._reinit(x, u)
+            # with a budget the QP after it and the least prepare stay free (section 14)
+            self._reinit(x, u, self._cost_qp + self._prepare_floor())
         except DopusError as exc:
             failure = exc
         self._n_failed = n_failed     # still the count of consecutive failed feedbacks
@@ -903,6 +909,9 @@ class ReferenceDopus:
             failure = DopusError.of("nonfinite_value", "feedback: the model is not finite at the measured state "
                                     "(the recovery's re-initialisation from it); the iterate is the OCP file's "
                                     "guess, prepared for the next measurement")
+        if failure is None and self._reinit_next >= 0:
+            failure = DopusError.of("not_prepared", "feedback: the recovery's re-initialisation continues in the "
+                                    "prepare (the budget of the instant is spent); no QP yet")
         if failure is not None:
             return None, failure, 0
         return self._solve_with_retries(xhat0)
@@ -952,14 +961,24 @@ class ReferenceDopus:
         self._instant_start = self._budget_now() - self.budget_used
         if (self._qp_ready and self._n_failed > 0 and not self._recover_pending and self.recovery
                 and self.mode == "receding" and "reinit_guess" not in self.flags):
-            # (not from the OCP file's guess: its plan is not the plant's)
-            self._predicted_step()
+            # (not from the OCP file's guess: its plan is not the plant's; with a budget not when
+            # its QP would pass the deadline of the least prepare at once, section 14)
+            self._qp_deadline = (self._instant_start + self.budget - self._prepare_floor()
+                                 if self._budget_on() else None)
+            try:
+                if not self._qp_deadline_near():
+                    self._predicted_step()
+            finally:
+                self._qp_deadline = None
         self._qp_ready = False
         if self.mode == "receding" and self._plan_age < self.N:
             self._plan_age += 1
         hessian = self.hessian
         try:
-            if self._recover_pending and self.recovery and self.mode == "receding":
+            if self._reinit_next >= 0:
+                # a re-initialisation under way (a budget): its next evaluations
+                self._reinit_continue()
+            elif self._recover_pending and self.recovery and self.mode == "receding":
                 self._recover(shifted=False)
             else:
                 if self._recovering > 0 and self.has_gn:
@@ -1068,15 +1087,18 @@ class ReferenceDopus:
             self._shifted = self.mode == "receding"
         t1 = time.perf_counter()
         slots = [s.copy() for s in self.slots]
-        # 2. the gradients of stages 0..N-2 that fit (all without a budget), then step 3
+        # 2. the gradients of stages 0..N-2 that fit (all without a budget) in the order of
+        #    the distance their linear models have moved, then step 3
+        order = self._gradient_order(slots)
         n_grad = self._gradients_that_fit()
+        evaluated = sorted(order[:n_grad])
         b0 = self._budget_now()
-        stage_values = self._stage_gradients(n_grad)
+        stage_values = self._stage_gradients(evaluated)
         if self._budget_on() and n_grad > 0:
             self._cost_grad = (self._budget_now() - b0) / n_grad
         b0 = self._budget_now()
         stage_values = self._last_stage_gradient(stage_values)
-        rho = self._secant_criterion(slots, stage_values, n_grad)
+        rho = self._secant_criterion(slots, stage_values, set(evaluated))
         t2 = time.perf_counter()
         xN, term = self._fresh_last_stage(slots, stage_values, extra)
         if self._budget_on():
@@ -1134,11 +1156,27 @@ class ReferenceDopus:
         """Steps 5 to 7 with ``fresh_al`` stages of 0..N-2 not re-linearised (section 14)."""
         return (self._cost_al * fresh_al if self.cost_hessian == "fresh" else 0.0) + self._cost_tail
 
+    def _gradient_order(self, slots) -> list:
+        """Step 2's order with a budget (section 14): stages 0..N-2 by the distance their
+        linear model's point has moved since their last evaluation, |dw_acc + dw| (largest
+        first, a non-finite one first, ties: the lower index); stage order without a budget.
+        The squares are summed in index order, as the C runtime sums them."""
+        if not self._budget_on():
+            return list(range(self.N - 1))
+        dist = []
+        for k in range(self.N - 1):
+            s = slots[self._slot(k)]
+            d2 = 0.0
+            for v in s.dw_acc + s.dw:
+                d2 += float(v) * float(v)
+            dist.append(d2 if np.isfinite(d2) else np.inf)
+        return sorted(range(self.N - 1), key=lambda k: -dist[k])
+
     def _gradients_that_fit(self) -> int:
-        """Step 2 with a budget (section 14): the gradients of stages 0..N-2 in stage order while
-        one more and the least rest of the iteration fit; all of them without a budget. (The C
-        runtime reads its clock before each; here each costs one work unit, in time the last
-        estimate.)"""
+        """Step 2 with a budget (section 14): how many gradients of stages 0..N-2, in the order
+        of :meth:`_gradient_order`, while one more and the least rest of the iteration fit; all
+        of them without a budget. (The C runtime reads its clock before each; here each costs
+        one work unit, in time the last estimate.)"""
         if not self._budget_on():
             return self.N - 1
         step = 1.0 if self.budget_unit == "work" else self._cost_grad
@@ -1149,11 +1187,13 @@ class ReferenceDopus:
             n += 1
         return n
 
-    def _stage_gradients(self, n=None):
-        """``(gL, phi, g)`` of every stage at the current iterate (stage_grad); with ``n < N - 1``
-        (a budget) of stages 0..n-1 only, the rest NaN until :meth:`_last_stage_gradient`."""
+    def _stage_gradients(self, stages=None):
+        """``(gL, phi, g)`` of every stage at the current iterate (stage_grad); with ``stages``
+        (a budget: a list of stages of 0..N-2) of those only, the rest NaN until
+        :meth:`_last_stage_gradient`."""
         N = self.N
-        if n is None or (n == N - 1 and not self._budget_on()):
+        n = N - 1 if stages is None else len(stages)
+        if stages is None or (n == N - 1 and not self._budget_on()):
             self.work += N
             gL, phi, lv, gv = eval_stages(self.disc.stage_grad, N, self.x[:N], self.u, self.p[:N],
                                           self.lam[1:], self.mu_g)
@@ -1165,12 +1205,13 @@ class ReferenceDopus:
         phi = np.full((N, self.nx), np.nan)
         gv = np.full((N, self.ng), np.nan)
         if n > 0:
+            idx = np.asarray(stages, dtype=int)
             self.work += n
-            a, b, lv, c = eval_stages(self.disc.stage_grad, n, self.x[:n], self.u[:n], self.p[:n],
-                                      self.lam[1:n + 1], self.mu_g[:n])
+            a, b, lv, c = eval_stages(self.disc.stage_grad, n, self.x[idx], self.u[idx], self.p[idx],
+                                      self.lam[idx + 1], self.mu_g[idx])
             if not self._finite(a, b, lv, c):
                 raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value")
-            gL[:n], phi[:n], gv[:n] = a, b, c
+            gL[idx], phi[idx], gv[idx] = a, b, c
         return gL, phi, gv
 
     def _last_stage_gradient(self, stage_values):
@@ -1187,22 +1228,24 @@ class ReferenceDopus:
         gL[k], phi[k], gv[k] = a[0], b[0], c[0]
         return gL, phi, gv
 
-    def _secant_criterion(self, slots, stage_values, n_grad=None) -> np.ndarray:
+    def _secant_criterion(self, slots, stage_values, evaluated=None) -> np.ndarray:
         """Step 2: rho_k (eq. 16) of the stages 0..N-2 with the block the last QP used, and
-        their F values moved into the slots; the stages from ``n_grad`` on (gradients cut by a
-        budget, section 14) take their linear model's prediction, rho_k = 0."""
+        their F values moved into the slots; the stages not in ``evaluated`` (gradients cut by
+        a budget, section 14) take their linear model's prediction, rho_k = 0, and their
+        distance moved grows by the step (it restarts at 0 at an evaluated stage)."""
         gL, phi, gv = stage_values
         rho = np.zeros(self.N)
-        n_grad = self.N - 1 if n_grad is None else n_grad
         for k in range(self.N - 1):
             s = slots[self._slot(k)]
             # the linear model's prediction of F after the stored step
             p_F_w = s.F_w + s.Ht @ s.dw - s.Phit.T @ s.dlam + s.Ct.T @ s.dmu_g + s.dmu_b
             p_phi = s.phi + s.Phit @ s.dw
             p_g = s.g + s.Ct @ s.dw
-            if k >= n_grad:
+            if evaluated is not None and k not in evaluated:
                 s.F_w, s.phi, s.g = p_F_w, p_phi, p_g
+                s.dw_acc = s.dw_acc + s.dw
                 continue
+            s.dw_acc = np.zeros(self.nw)
             F_w = gL[k] + self.mu_b[k]
             r1 = p_F_w - F_w
             r2 = phi[k] - p_phi
@@ -1231,6 +1274,7 @@ class ReferenceDopus:
         s.F_w = gL[k] + self.mu_b[k]
         s.phi = phi[k].copy()
         s.g = gv[k].copy()
+        s.dw_acc = np.zeros(self.nw)
         self._set_block(s, k, self.x, self.u, self.lam, self.mu_g)
         xN = phi[k].copy() if self.mode == "receding" and not extra else self.x[self.N].copy()
         term = self._term_eval(xN, self.mu_r, self.nu)
@@ -1526,10 +1570,12 @@ class ReferenceDopus:
             x[0] = self._xhat_last
         self._reinit(x, u)
 
-    def _reinit(self, x, u) -> None:
+    def _reinit(self, x, u, reserve: float = 0.0) -> None:
         """The re-initialisation of section 9 from x[0] in place: a forward simulation with
         the last good plan (else the OCP file's guess controls; else the guess itself), the
-        iterate's multipliers, every block recomputed (Gauss-Newton when the problem has it)."""
+        iterate's multipliers, every block recomputed (Gauss-Newton when the problem has it).
+        With a budget the evaluations leave ``reserve`` free and may continue in the next
+        prepares (:meth:`_reinit_walk`, section 14)."""
         N, nx = self.N, self.nx
         gx = np.asarray(self.disc.initial_guess.x, float).reshape(N + 1, nx)
         gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)
@@ -1537,6 +1583,18 @@ class ReferenceDopus:
             x[1:] = gx[1:]
             for k in range(N):
                 u[k] = self._clip_u(gu[k])[0]
+        if self._budget_on():
+            try:
+                try:
+                    self._reinit_start(x, u, self.lam.copy(), self.mu_g.copy(), self.mu_b.copy(),
+                                       self.mu_bN.copy(), self.mu_r.copy(), self.nu.copy(), reserve)
+                except DopusError:
+                    self._reinit_at_guess(reserve)
+            except DopusError:
+                self._qp_ready = False
+                self._reinit_next = -1
+                raise
+            return
         hessian = self.hessian
         self.hessian = "gauss-newton" if self.has_gn else hessian
         try:
@@ -1558,6 +1616,11 @@ class ReferenceDopus:
             raise
         finally:
             self.hessian = hessian
+        self._reinit_done()
+
+    def _reinit_done(self) -> None:
+        """The bookkeeping of a re-initialisation that succeeded: the KKT proxy, the recovery
+        phase."""
         self.kkt_proxy = self._kkt_proxy_eval()
         self.kkt_proxy_ref = self.kkt_proxy
         self._n_failed = 0
@@ -1565,6 +1628,110 @@ class ReferenceDopus:
         self.recoveries += 1
         self._recovering = int(_SAFETY["RECOVERY_FULL_RTI"])
         self._flag("recovered")
+
+    def _reinit_at_guess(self, reserve: float) -> None:
+        """The last resort of a re-initialisation with a budget: the OCP file's guess whole,
+        x_0 included, with zero multipliers."""
+        N, nx = self.N, self.nx
+        gx = np.asarray(self.disc.initial_guess.x, float).reshape(N + 1, nx)
+        gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)
+        u = np.array([self._clip_u(gu[k])[0] for k in range(N)])
+        self._flag("reinit_guess")
+        z = np.zeros
+        self._reinit_start(gx.copy(), u, z((N + 1, nx)), z((N, self.ng)), z((N, self.nw)), z(nx), z(self.nr),
+                           z(self.ne), reserve)
+
+    def _reinit_start(self, x, u, lam, mu_g, mu_b, mu_bN, mu_r, nu, reserve: float) -> None:
+        """A re-initialisation with a budget (section 14): the iterate in place, fresh slots,
+        then :meth:`_reinit_walk`."""
+        N = self.N
+        self._prepared_extra = False
+        self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
+        self.mu_bN, self.mu_r, self.nu = mu_bN, mu_r, nu
+        self.ring_head = 0
+        self.slots = [_Slot(self.nx, self.n_u, self.ng) for _ in range(N)]
+        self.rho = np.zeros(N)
+        self.recomputed = list(range(N))
+        self.qp_status = 0
+        self.qp_iterations = self.qp_factorizations = 0
+        self._qp_ready = False
+        self._al_resync = True
+        self._n_failed = 0
+        self._recover_pending = False
+        self._reinit_next = 0
+        self._reinit_walk(reserve)
+
+    def _reinit_walk(self, reserve: float) -> None:
+        """The evaluations of a re-initialisation with a budget (section 14): the gradient and
+        blocks of each stage in stage order while one more, the terminal node and ``reserve``
+        still fit, then the terminal node and the QP; the rest in the next prepares
+        (``_reinit_next``), whose feedbacks return the fallback control. Gauss-Newton blocks
+        when the problem has them."""
+        N = self.N
+        term_cost = self._cost_head - self._cost_grad - self._cost_stage
+        hessian = self.hessian
+        self.hessian = "gauss-newton" if self.has_gn else hessian
+        try:
+            while (self._reinit_next < N
+                   and self._budget_fits(self._cost_grad + self._cost_stage + term_cost + reserve)):
+                k = self._reinit_next
+                self.work += 1
+                gL, phi, lv, gv = eval_stages(self.disc.stage_grad, 1, self.x[k:k + 1], self.u[k:k + 1],
+                                              self.p[k:k + 1], self.lam[k + 1:k + 2], self.mu_g[k:k + 1])
+                if not self._finite(gL, phi, lv, gv):
+                    raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value at the "
+                                     "re-initialised iterate")
+                sl = self.slots[self._slot(k)]
+                sl.F_w = gL[0] + self.mu_b[k]
+                sl.phi = phi[0].copy()
+                sl.g = gv[0].copy()
+                self._set_block(sl, k, self.x, self.u, self.lam, self.mu_g)
+                if not self._finite(sl.Ht, sl.A_dyn, sl.Phit, sl.Ct):
+                    raise self._fail("nonfinite_value", "prepare: stage_hess returned a non-finite value at the "
+                                     "re-initialised iterate")
+                self._reinit_next = k + 1
+            self._prepare_due = self._shifted = self._p_shifted = False
+            if self._reinit_next == N:
+                term = self._term_eval(self.x[N], self.mu_r, self.nu)
+                if not self._finite(*term.values()):
+                    raise self._fail("nonfinite_value", "prepare: a derivative function returned a non-finite "
+                                     "value at the re-initialised iterate (terminal node)")
+                self.term = term
+                self._al_resync = False
+                self._qp_ready = True
+                self.status = status_code("ok")
+                self._lm_start()
+                self._reinit_next = -1
+                self._reinit_done()
+        finally:
+            self.hessian = hessian
+
+    def _reinit_continue(self) -> None:
+        """A prepare while a re-initialisation is under way (a budget, section 14): the shift
+        of the instant (the evaluated stages move with the ring, the new last node is simulated
+        from the one before it), then the evaluations that fit; a failed one falls back on the
+        guess."""
+        N = self.N
+        if self.mode == "receding" and not self._shifted:
+            self._shift()
+            self._shifted = True
+            self._reinit_next = max(self._reinit_next - 1, 0)
+            try:
+                xn = self._stage_phi(self.x[N - 1], self.u[N - 1], self.p[N - 1])
+            except RuntimeError:
+                xn = None
+            if xn is not None and np.all(np.isfinite(xn)):
+                self.x = self.x.copy()
+                self.x[N] = xn
+        try:
+            try:
+                self._reinit_walk(0.0)
+            except DopusError:
+                self._reinit_at_guess(0.0)
+        except DopusError:
+            self._qp_ready = False
+            self._reinit_next = -1
+            raise
 
     # ------------------------------------------------------------------ section 10: automatic lm
     def lm_hessian_scale(self) -> float:

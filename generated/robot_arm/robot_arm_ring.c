@@ -24,6 +24,7 @@ void robot_arm_ring_reset(robot_arm_ring *ring)
         robot_arm_ring_zero(s->F_w, ROBOT_ARM_NW);
         robot_arm_ring_zero(s->phi, ROBOT_ARM_NX);
         robot_arm_ring_zero(s->g, ROBOT_ARM_DIM(ROBOT_ARM_NG));
+        robot_arm_ring_zero(s->dw_acc, ROBOT_ARM_NW);
         robot_arm_ring_clear_step(s);
     }
     ring->ring_head = 0;

@@ -28,6 +28,10 @@ typedef struct {
     robot_arm_real dlam[ROBOT_ARM_NX];
     robot_arm_real dmu_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
     robot_arm_real dmu_b[ROBOT_ARM_NW];
+    /* the steps dw since the last gradient evaluation of this stage, summed: how far its
+     * linear model's point has moved from the evaluation point (the order of an anytime
+     * prepare's gradients, algorithm.md section 14) */
+    robot_arm_real dw_acc[ROBOT_ARM_NW];
 } robot_arm_stage_slot;
 
 typedef struct {

@@ -699,22 +699,24 @@ static int robot_arm_linearize_all_eval(robot_arm_solver *s)
     return rc;
 }
 
-static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm, int active_set);
+static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm, int active_set, int max_iter);
 
 /* The first price of one QP iteration (time budget, before any QP was timed): one cold
- * iteration of the QP just assembled at init, for the measurement given to init, timed with
- * the solve's own setup. Its result is not used (the first feedback's QP starts from its own
- * point, warm or cold). Without it the first feedback's QP had no price for its first
- * iteration, which could pass the deadline by one iteration. */
+ * iteration (the solve's own cap, the setting untouched) of the prepared QP, for the last
+ * measurement, timed with the solve's own setup; at init when the budget is set before it,
+ * else at the first feedback under the budget, before its QP. Its result is not used: the QP's
+ * solution buffer is live only inside a feedback (it shares its memory with the scratch of
+ * the evaluations), and the feedback's QP starts from its own point, warm or cold; the QP's
+ * figures (robot_arm_info) and its x0 stay. Without it the first feedback's QP had no price for
+ * its first iteration, which could pass the deadline by one iteration. */
 static void robot_arm_price_qp(robot_arm_solver *s)
 {
     const robot_arm_qp_info info = s->qp_info;
-    const int max_iter = s->settings.qp_max_iter;
     robot_arm_real x0[ROBOT_ARM_NX];
     double b0;
     int i;
     if (!robot_arm_budget_on(s) || s->settings.budget_unit != ROBOT_ARM_BUDGET_TIME ||
-        s->anytime.cost_qp_iter > 0.0) {
+        s->anytime.cost_qp_iter > 0.0 || !s->qp_ready) {
         return;
     }
     robot_arm_copy(x0, s->qp_in.x0, ROBOT_ARM_NX);
@@ -722,14 +724,12 @@ static void robot_arm_price_qp(robot_arm_solver *s)
         s->qp_in.x0[i] = s->xhat0[i] - s->x[0][i];
     }
     s->qp_in.hess_shift = s->lm.lm;
-    s->settings.qp_max_iter = 1;
     b0 = robot_arm_budget_now(s);
-    (void)robot_arm_qp_solve_bound(s, 0, 0);
+    (void)robot_arm_qp_solve_bound(s, 0, 0, 1);
     s->anytime.cost_qp_iter = robot_arm_budget_now(s) - b0;
     if (!(s->anytime.cost_qp_step > 0.0)) {
         s->anytime.cost_qp_step = s->anytime.cost_qp_iter;
     }
-    s->settings.qp_max_iter = max_iter;
     s->qp_info = info;
     robot_arm_copy(s->qp_in.x0, x0, ROBOT_ARM_NX);
 }
@@ -832,6 +832,7 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
     robot_arm_reset_health(s);
     s->qp_ready = 0;
     s->p_shifted = 0;
+    s->anytime.reinit_next = -1;
     if ((xhat0 && !robot_arm_lai_vec_finite(ROBOT_ARM_NX, xhat0)) ||
         (x && !robot_arm_lai_vec_finite((ROBOT_ARM_N + 1) * ROBOT_ARM_NX, x)) ||
         (u && !robot_arm_lai_vec_finite(ROBOT_ARM_N * ROBOT_ARM_NU, u)) ||
@@ -1088,15 +1089,16 @@ static void robot_arm_qp_over(robot_arm_solver *s)
 /* The QP's matrix pointers (robot_arm_qp_in.H, Phi, C, HN, R, Req) point into this struct: the
  * ring slots in place and the terminal blocks. They are set just before each solve and
  * cleared after it, so the struct holds no pointer into itself between calls and a byte
- * copy (memcpy, struct assignment) is a complete, independent solver. */
-static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm, int active_set)
+ * copy (memcpy, struct assignment) is a complete, independent solver. max_iter: the solve's
+ * iteration limit (the setting qp_max_iter, or a cap of the caller's). */
+static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm, int active_set, int max_iter)
 {
     robot_arm_qp_in *in = &s->qp_in;
     robot_arm_qp_settings settings;
     int k, qs;
     robot_arm_qp_settings_default(&settings);
     settings.tol = s->settings.qp_tol;
-    settings.max_iter = s->settings.qp_max_iter;
+    settings.max_iter = max_iter;
     if (s->anytime.qp_timed) {
         /* a budget (section 14): the QP reads the budget's clock before each factorisation */
         settings.clock = robot_arm_qp_clock;
@@ -1144,7 +1146,7 @@ static int robot_arm_qp_ok(const robot_arm_solver *s, int qs)
 static int robot_arm_qp_attempt(robot_arm_solver *s, int warm, int active_set)
 {
     int qs;
-    qs = robot_arm_qp_solve_bound(s, warm, active_set);
+    qs = robot_arm_qp_solve_bound(s, warm, active_set, s->settings.qp_max_iter);
     s->qp_iterations += s->qp_info.iterations;
     s->qp_factorizations += s->qp_info.factorizations;
     return qs;
@@ -1363,6 +1365,8 @@ static int robot_arm_feedback_run(robot_arm_solver *s, const robot_arm_real *xha
 
     robot_arm_copy(xhat_prev, s->xhat0, ROBOT_ARM_NX);
     robot_arm_feedback_measure(s, xhat0);
+    /* the first price of a QP iteration when the budget was set after init */
+    robot_arm_price_qp(s);
     /* the deadline leaves the step and the least a prepare costs free */
     robot_arm_budget_deadline(s, robot_arm_after_qp(s, robot_arm_prepare_floor(s)), s->anytime.cost_qp_iter);
     b0 = robot_arm_budget_now(s);
@@ -1700,14 +1704,91 @@ static void robot_arm_guess_primal(robot_arm_solver *s, int first)
     }
 }
 
-/* The linearisation of a re-initialisation: Gauss-Newton blocks when the problem has them
- * (convex in the cost, whatever the multipliers); the next prepares use the setting. */
-static int robot_arm_reinit_finish(robot_arm_solver *s)
+/* The bookkeeping of a re-initialisation that succeeded: the KKT proxy, the recovery phase. */
+static void robot_arm_reinit_done(robot_arm_solver *s)
 {
-    int rc, hessian = s->settings.hessian;
+    s->health.kkt_proxy = robot_arm_kkt_proxy_eval(s);
+    s->health.kkt_proxy_ref = s->health.kkt_proxy;
+    s->health.n_failed = 0;
+    s->health.recover_pending = 0;
+    s->health.n_recoveries += 1;
+    s->health.recovering = ROBOT_ARM_RECOVERY_FULL_RTI;
+    s->health.flags |= ROBOT_ARM_FLAG_RECOVERED;
+}
+
+/* A re-initialisation with a budget (algorithm.md section 14), from the iterate in place: the
+ * gradient and blocks of each stage in stage order while one more, the terminal node and
+ * `reserve` still fit, then the terminal node and the QP; what does not fit continues in the
+ * next prepares (anytime.reinit_next, the next stage; -1 when none is under way), whose
+ * feedbacks return the fallback control (no QP prepared). Gauss-Newton blocks when the problem
+ * has them. A failed evaluation returns its status (the caller falls back on the guess). */
+static int robot_arm_reinit_walk(robot_arm_solver *s, double reserve)
+{
+    const double term = s->anytime.cost_head - s->anytime.cost_grad - s->anytime.cost_stage;
+    const int hessian = s->settings.hessian;
+    int k, rc = ROBOT_ARM_OK;
+    s->settings.hessian = ROBOT_ARM_HAS_GN ? ROBOT_ARM_HESSIAN_GAUSS_NEWTON : hessian;
+    while ((k = s->anytime.reinit_next) < ROBOT_ARM_N &&
+           robot_arm_budget_fits(s, s->anytime.cost_grad + s->anytime.cost_stage + term + reserve)) {
+        rc = robot_arm_stage_F(s, k);
+        if (rc != ROBOT_ARM_OK) {
+            break;
+        }
+        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
+                           s->mem.ev.tmp_g);
+        rc = robot_arm_stage_H(s, k);
+        if (rc != ROBOT_ARM_OK) {
+            break;
+        }
+        s->anytime.reinit_next = k + 1;
+    }
+    if (rc == ROBOT_ARM_OK && s->anytime.reinit_next == ROBOT_ARM_N) {
+        rc = robot_arm_term_F(s);
+        if (rc == ROBOT_ARM_OK) {
+            rc = robot_arm_term_H(s);
+        }
+        if (rc == ROBOT_ARM_OK) {
+            s->al_resync = 0; /* every block fresh */
+            robot_arm_assemble(s);
+            s->qp_ready = 1;
+            robot_arm_lm_started(s);
+            s->anytime.reinit_next = -1;
+            robot_arm_reinit_done(s);
+        }
+    }
+    s->settings.hessian = hessian;
+    return rc;
+}
+
+/* The linearisation of a re-initialisation: Gauss-Newton blocks when the problem has them
+ * (convex in the cost, whatever the multipliers); the next prepares use the setting. With a
+ * budget, spread over the prepares (robot_arm_reinit_walk; `reserve`: what it leaves free). */
+static int robot_arm_reinit_finish(robot_arm_solver *s, double reserve)
+{
+    int k, rc, hessian = s->settings.hessian;
+    if (robot_arm_budget_on(s)) {
+        s->anytime.prepared_extra = 0;
+        robot_arm_ring_reset(&s->ring);
+        for (k = 0; k < ROBOT_ARM_N; ++k) {
+            s->rho[k] = ROBOT_ARM_R(0.0);
+            s->selected[k] = 1;
+        }
+        s->qp_status = 0;
+        s->qp_iterations = 0;
+        s->qp_factorizations = 0;
+        s->qp_ready = 0;
+        s->al_resync = 1;
+        s->health.n_failed = 0;
+        s->health.recover_pending = 0;
+        s->anytime.reinit_next = 0;
+        return robot_arm_reinit_walk(s, reserve);
+    }
     s->settings.hessian = ROBOT_ARM_HAS_GN ? ROBOT_ARM_HESSIAN_GAUSS_NEWTON : hessian;
     rc = robot_arm_init_finish(s);
     s->settings.hessian = hessian;
+    if (rc == ROBOT_ARM_OK) {
+        robot_arm_reinit_done(s);
+    }
     return rc;
 }
 
@@ -1715,7 +1796,7 @@ static int robot_arm_reinit_finish(robot_arm_solver *s)
  * finite at the measured or predicted state, e.g. an outlier of 1e6 rad/s): the OCP file's
  * guess whole, x_0 included, with zero multipliers; the next feedback's QP steps from it to
  * the measurement. Flag ROBOT_ARM_FLAG_REINIT_GUESS. */
-static int robot_arm_reinit_at_guess(robot_arm_solver *s)
+static int robot_arm_reinit_at_guess(robot_arm_solver *s, double reserve)
 {
     robot_arm_guess_primal(s, 0);
     robot_arm_zero((ROBOT_ARM_N + 1) * ROBOT_ARM_NX, &s->lam[0][0]);
@@ -1725,35 +1806,59 @@ static int robot_arm_reinit_at_guess(robot_arm_solver *s)
     robot_arm_zero(ROBOT_ARM_DIM(ROBOT_ARM_NR), s->mu_r);
     robot_arm_zero(ROBOT_ARM_DIM(ROBOT_ARM_NE), s->nu);
     s->health.flags |= ROBOT_ARM_FLAG_REINIT_GUESS;
-    return robot_arm_reinit_finish(s);
+    return robot_arm_reinit_finish(s, reserve);
 }
 
 /* The re-initialisation of the recovery from x_0 in place: a forward simulation with the last
  * good plan (else with the OCP file's guess controls; else the guess itself), the multipliers
  * of the iterate, every block recomputed (Gauss-Newton when the problem has it); when the
- * model fails there, the OCP file's guess whole (robot_arm_reinit_at_guess). */
-static int robot_arm_reinit(robot_arm_solver *s)
+ * model fails there, the OCP file's guess whole (robot_arm_reinit_at_guess). With a budget the
+ * evaluations leave `reserve` free and may continue in the next prepares (robot_arm_reinit_walk). */
+static int robot_arm_reinit(robot_arm_solver *s, double reserve)
 {
     int rc;
     if (!robot_arm_simulate_plan(s, 1) && !robot_arm_simulate_plan(s, 0)) {
         robot_arm_guess_primal(s, 1);
     }
-    rc = robot_arm_reinit_finish(s);
+    rc = robot_arm_reinit_finish(s, reserve);
     if (rc != ROBOT_ARM_OK) {
-        rc = robot_arm_reinit_at_guess(s);
+        rc = robot_arm_reinit_at_guess(s, reserve);
     }
     if (rc != ROBOT_ARM_OK) {
         s->qp_ready = 0;
-        return rc;
+        s->anytime.reinit_next = -1;
     }
-    s->health.kkt_proxy = robot_arm_kkt_proxy_eval(s);
-    s->health.kkt_proxy_ref = s->health.kkt_proxy;
-    s->health.n_failed = 0;
-    s->health.recover_pending = 0;
-    s->health.n_recoveries += 1;
-    s->health.recovering = ROBOT_ARM_RECOVERY_FULL_RTI;
-    s->health.flags |= ROBOT_ARM_FLAG_RECOVERED;
-    return ROBOT_ARM_OK;
+    return rc;
+}
+
+/* A prepare while a re-initialisation is under way (a budget): the shift of the instant (the
+ * evaluated stages move with the ring, the new last node is simulated from the one before it),
+ * then the evaluations that fit (robot_arm_reinit_walk); a failed one falls back on the guess. */
+static int robot_arm_reinit_continue(robot_arm_solver *s)
+{
+    robot_arm_real l = ROBOT_ARM_R(0.0), xn[ROBOT_ARM_NX];
+    int rc;
+    if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && !s->shifted) {
+        robot_arm_shift(s);
+        s->shifted = 1;
+        if (s->anytime.reinit_next > 0) {
+            s->anytime.reinit_next -= 1;
+        }
+        if (robot_arm_eval_stage_eval(s->x[ROBOT_ARM_N - 1], s->u[ROBOT_ARM_N - 1], s->p[ROBOT_ARM_N - 1], xn, &l,
+                                  s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+            robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn)) {
+            robot_arm_copy(s->x[ROBOT_ARM_N], xn, ROBOT_ARM_NX);
+        }
+    }
+    rc = robot_arm_reinit_walk(s, s->anytime.cost_end);
+    if (rc != ROBOT_ARM_OK) {
+        rc = robot_arm_reinit_at_guess(s, s->anytime.cost_end);
+    }
+    if (rc != ROBOT_ARM_OK) {
+        s->qp_ready = 0;
+        s->anytime.reinit_next = -1;
+    }
+    return rc;
 }
 
 /* The automatic recovery (algorithm.md section 9): re-initialise from a forward simulation of
@@ -1780,7 +1885,7 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
             break;
         }
     }
-    return robot_arm_reinit(s);
+    return robot_arm_reinit(s, s->anytime.cost_end);
 }
 
 /* The recovery within a feedback (algorithm.md section 9): the QP of a finite measurement
@@ -1793,7 +1898,8 @@ static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries
 {
     int i, rc, n_failed = s->health.n_failed;
     robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
-    rc = robot_arm_reinit(s);
+    /* with a budget the QP after it and the least prepare stay free */
+    rc = robot_arm_reinit(s, s->anytime.cost_qp + robot_arm_after_qp(s, robot_arm_prepare_floor(s)));
     s->health.n_failed = n_failed; /* still the count of consecutive failed feedbacks */
     /* the measurement's instant: its prepare (with the shift) is still due */
     s->prepare_due = 1;
@@ -1801,6 +1907,10 @@ static int robot_arm_feedback_recover(robot_arm_solver *s, int *qs, int *retries
     if (rc == ROBOT_ARM_OK && (s->health.flags & ROBOT_ARM_FLAG_REINIT_GUESS)) {
         /* the model failed at the measured state: no QP from it */
         rc = ROBOT_ARM_ERR_NONFINITE_VALUE;
+    }
+    if (rc == ROBOT_ARM_OK && s->anytime.reinit_next >= 0) {
+        /* the evaluations continue in the prepare (a budget): no QP yet */
+        rc = ROBOT_ARM_ERR_NOT_PREPARED;
     }
     if (rc != ROBOT_ARM_OK) {
         return rc;
@@ -1827,7 +1937,7 @@ static void robot_arm_predicted_step(robot_arm_solver *s)
     }
     s->qp_in.hess_shift = s->lm.lm;
     s->anytime.work += ROBOT_ARM_WORK_QP;
-    qs = robot_arm_qp_solve_bound(s, 0, 0);
+    qs = robot_arm_qp_solve_bound(s, 0, 0, s->settings.qp_max_iter);
     if (robot_arm_feedback_check_step(s, qs) != ROBOT_ARM_OK) {
         return;
     }
@@ -1908,14 +2018,20 @@ int robot_arm_prepare(robot_arm_solver *s)
         /* (not from the OCP file's guess: its plan is not the plant's); with a time budget
          * its QP stops where the least prepare still fits (a cut QP changes nothing) */
         robot_arm_budget_deadline(s, robot_arm_after_qp(s, robot_arm_prepare_floor(s)), s->anytime.cost_qp_step);
-        robot_arm_predicted_step(s);
+        if (!robot_arm_qp_deadline_near(s)) {
+            /* (not when it would pass the deadline at once: in work units its N units) */
+            robot_arm_predicted_step(s);
+        }
         s->anytime.qp_timed = 0;
     }
     s->qp_ready = 0;
     if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && s->health.plan_age < ROBOT_ARM_N) {
         s->health.plan_age += 1;
     }
-    if (s->health.recover_pending && s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING) {
+    if (s->anytime.reinit_next >= 0) {
+        /* a re-initialisation under way (a budget): its next evaluations */
+        rc = robot_arm_reinit_continue(s);
+    } else if (s->health.recover_pending && s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING) {
         rc = robot_arm_recover(s, 0);
     } else {
         /* the recovery phase: Gauss-Newton blocks (convex in the cost whatever the
@@ -1952,13 +2068,48 @@ int robot_arm_prepare(robot_arm_solver *s)
     return robot_arm_ret(s, rc);
 }
 
+/* The order of step 2's gradients with a budget (algorithm.md section 14): stages 0..N-2 by
+ * the distance their linear model's point has moved since their last evaluation, |dw_acc + dw|
+ * (2-norm, largest first, a non-finite one first, ties: the lower index); without a budget
+ * stage order. */
+static void robot_arm_gradient_order(const robot_arm_solver *s, int *order)
+{
+    robot_arm_real dist[ROBOT_ARM_N];
+    int i, j, k;
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        order[k] = k;
+    }
+    if (!robot_arm_budget_on(s)) {
+        return;
+    }
+    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
+        const robot_arm_stage_slot *slot = robot_arm_ring_stage_const(&s->ring, k);
+        robot_arm_real d2 = ROBOT_ARM_R(0.0);
+        for (j = 0; j < ROBOT_ARM_NW; ++j) {
+            const robot_arm_real v = slot->dw_acc[j] + slot->dw[j];
+            d2 += v * v;
+        }
+        dist[k] = isfinite(d2) ? d2 : ROBOT_ARM_REAL_HUGE;
+    }
+    /* a stable insertion sort, largest first */
+    for (i = 1; i < ROBOT_ARM_N - 1; ++i) {
+        const int v = order[i];
+        for (j = i - 1; j >= 0 && dist[order[j]] < dist[v]; --j) {
+            order[j + 1] = order[j];
+        }
+        order[j + 1] = v;
+    }
+}
+
 /* Steps 1 to 7 of prepare (algorithm.md sections 4 and 9); extra: an iteration of the
  * anytime budget (section 14), without the shift, x_N kept. */
 static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 {
     robot_arm_real xN_saved[ROBOT_ARM_NX];
     double b_start = robot_arm_budget_now(s), ext_cost = 0.0, b_tail, b0, b_cut = 0.0, fixed, stage_time = 0.0;
-    int k, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer, diverged;
+    int k, i, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer, diverged;
+    int order[ROBOT_ARM_N];
+    unsigned char evaluated[ROBOT_ARM_N];
 
     /* 1. shift (once per sampling instant: a retry after a failed prepare does not) */
     robot_arm_phase(s, ROBOT_ARM_PHASE_SHIFT);
@@ -1969,19 +2120,24 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     robot_arm_copy(xN_saved, s->x[ROBOT_ARM_N], ROBOT_ARM_NX);
 
     /* 2. F_k and rho_k (eq. 16) of stages 0..N-2 (F_new kept for step 6); with a budget in
-     *    stage order while one more and the least rest of the iteration fit, the stages after
-     *    the cut keep their linear model's prediction (algorithm.md section 14); when step 4
+     *    the order of the distance their linear models have moved while one more and the
+     *    least rest of the iteration fit, the stages after the cut keep their linear model's
+     *    prediction (algorithm.md section 14); when step 4
      *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call.
      *    Without a budget and with H_k apart (defer), every gradient first and then every
      *    rho_k: the same values, two phase switches (clock readings) per prepare instead of
      *    two per stage */
     all_fresh = robot_arm_fused(s) && robot_arm_every_stage_fresh(s);
     defer = !all_fresh && !robot_arm_budget_on(s);
+    robot_arm_gradient_order(s, order);
     b0 = robot_arm_budget_now(s);
     fixed = b0 - b_start;
-    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
-        robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
-        if (!cut && !robot_arm_budget_fits(s, s->anytime.cost_grad + robot_arm_prepare_least(s, ROBOT_ARM_N - 2 - k))) {
+    for (i = 0; i < ROBOT_ARM_N - 1; ++i) {
+        robot_arm_stage_slot *slot;
+        k = order[i];
+        slot = robot_arm_ring_stage(&s->ring, k);
+        evaluated[k] = 0;
+        if (!cut && !robot_arm_budget_fits(s, s->anytime.cost_grad + robot_arm_prepare_least(s, ROBOT_ARM_N - 2 - i))) {
             cut = 1;
             b_cut = robot_arm_budget_now(s);
         }
@@ -1990,6 +2146,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
             s->rho[k] = ROBOT_ARM_R(0.0);
             continue;
         }
+        evaluated[k] = 1;
         n_grad += 1;
         robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
         rc = all_fresh ? robot_arm_stage_FH(s, k) : robot_arm_stage_F(s, k);
@@ -2114,12 +2271,25 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     }
     b_tail = robot_arm_budget_now(s);
 
-    /* 6. F_new of step 2 becomes F_old; QP vectors (the fresh A blocks were regularised
-     *    when stored) */
+    /* 6. F_new of step 2 becomes F_old, the distance moved since the last evaluation restarts
+     *    at an evaluated stage and grows by the step at a predicted one; QP vectors (the fresh
+     *    A blocks were regularised when stored) */
     robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
-    for (k = 0; k < ROBOT_ARM_N - 1; ++k) {
-        robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, k), s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k],
-                           s->mem.ev.Fn_g[k]);
+    for (k = 0; k < ROBOT_ARM_N; ++k) {
+        robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
+        int j;
+        if (k == ROBOT_ARM_N - 1 || evaluated[k]) {
+            for (j = 0; j < ROBOT_ARM_NW; ++j) {
+                slot->dw_acc[j] = ROBOT_ARM_R(0.0);
+            }
+        } else {
+            for (j = 0; j < ROBOT_ARM_NW; ++j) {
+                slot->dw_acc[j] += slot->dw[j];
+            }
+        }
+        if (k < ROBOT_ARM_N - 1) {
+            robot_arm_ring_store_F(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
+        }
     }
     robot_arm_assemble(s);
     s->qp_ready = 1;
@@ -2631,6 +2801,7 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
     s->anytime.instant_stages = 0;
     s->anytime.prepared_extra = 0;
     s->anytime.uncapped = 0;
+    s->anytime.reinit_next = -1;
     return robot_arm_ret(s, rc);
 }
 

@@ -24,6 +24,7 @@ void unicycle_ring_reset(unicycle_ring *ring)
         unicycle_ring_zero(s->F_w, UNICYCLE_NW);
         unicycle_ring_zero(s->phi, UNICYCLE_NX);
         unicycle_ring_zero(s->g, UNICYCLE_DIM(UNICYCLE_NG));
+        unicycle_ring_zero(s->dw_acc, UNICYCLE_NW);
         unicycle_ring_clear_step(s);
     }
     ring->ring_head = 0;

@@ -28,6 +28,10 @@ typedef struct {
     unicycle_real dlam[UNICYCLE_NX];
     unicycle_real dmu_g[UNICYCLE_DIM(UNICYCLE_NG)];
     unicycle_real dmu_b[UNICYCLE_NW];
+    /* the steps dw since the last gradient evaluation of this stage, summed: how far its
+     * linear model's point has moved from the evaluation point (the order of an anytime
+     * prepare's gradients, algorithm.md section 14) */
+    unicycle_real dw_acc[UNICYCLE_NW];
 } unicycle_stage_slot;
 
 typedef struct {

@@ -504,6 +504,7 @@ typedef struct {
     int instant_stages;   /* stages re-linearised in the last instant */
     int prepared_extra;   /* the prepared QP comes from extra iterations (the feedback keeps lm) */
     int uncapped;         /* an extra iteration of this instant raised the KKT proxy */
+    int reinit_next;      /* a re-initialisation under way: its next stage (-1: none) */
 } unicycle_anytime;
 
 /* One object per concept: lifecycle, settings, iterate, stage slots, terminal node, secant
