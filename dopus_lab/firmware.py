@@ -191,13 +191,15 @@ def _compile(base: List[str], gen_dir: Path, build_dir: Path, fw_sources, obj_di
     return objs
 
 
-def build_target(gen_dir, build_dir, target: str) -> Dict[str, Any]:
-    """Compile and link the firmware image of ``target``; returns the ELF path and its sizes."""
+def build_target(gen_dir, build_dir, target: str, extra_cflags: Sequence[str] = ()) -> Dict[str, Any]:
+    """Compile and link the firmware image of ``target``; returns the ELF path and its sizes.
+    ``extra_cflags``: appended to the target's flags (bench/m7_profile.py: ``-g``)."""
     tg = TARGETS[target]
     gen_dir, build_dir = Path(gen_dir).resolve(), Path(build_dir).resolve()
     name = read_meta(gen_dir)["name"]
     obj_dir = build_dir / target
-    base = ["arm-none-eabi-gcc", *tg.cflags, OPT, "-ffunction-sections", "-fdata-sections", "-fstack-usage"]
+    base = ["arm-none-eabi-gcc", *tg.cflags, OPT, *extra_cflags, "-ffunction-sections", "-fdata-sections",
+            "-fstack-usage"]
     objs = _compile(base, gen_dir, build_dir, FW_SOURCES, obj_dir, target)
     elf = obj_dir / f"{name}_{target}.elf"
     link_image(target, objs, elf)

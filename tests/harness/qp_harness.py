@@ -74,7 +74,8 @@ def _cdef_from_header(header_dir: Path, build_dir: Path) -> str:
     plain numbers), obtained from the C preprocessor so Python and C cannot drift apart."""
     src = build_dir / "cdef_src.c"
     src.write_text('#include "dopus_qp.h"\n')
-    out = subprocess.run([_cc(), "-E", "-P", f"-I{build_dir}", f"-I{header_dir}", str(src)],
+    # with the build's flags: they may change the workspace (DOPUS_QP_PHIT)
+    out = subprocess.run([_cc(), "-E", "-P", *_extra_cflags(), f"-I{build_dir}", f"-I{header_dir}", str(src)],
                          check=True, capture_output=True, text=True).stdout
 
     def fold(m: re.Match) -> str:
@@ -92,7 +93,9 @@ def _extra_cflags() -> list:
 
 
 def _source_hash(sizes: tuple) -> str:
-    h = hashlib.sha256(repr((sizes, _extra_cflags())).encode())
+    # "cdef-flags": the declarations are preprocessed with the extra flags (a build cached
+    # before that may declare a workspace of another layout)
+    h = hashlib.sha256(repr((sizes, _extra_cflags(), "cdef-flags")).encode())
     for name in _SOURCES:
         h.update((runtime_c_dir() / name).read_bytes())
     return h.hexdigest()[:16]
@@ -151,7 +154,7 @@ def _build(build_dir: Path, sizes: tuple, modname: str, soft: int = 0) -> None:
     ffi = cffi.FFI()
     ffi.cdef(_cdef_from_header(rc, build_dir))
     ffi.set_source(modname, '#include "dopus_qp.h"\n', include_dirs=[str(build_dir), str(rc)],
-                   extra_objects=objs, extra_compile_args=[DEFAULT_OPT], libraries=["m"])
+                   extra_objects=objs, extra_compile_args=[DEFAULT_OPT, *_extra_cflags()], libraries=["m"])
     ffi.compile(tmpdir=str(build_dir), verbose=False)
 
 
