@@ -28,8 +28,8 @@ def main() -> None:
 
     records, feedbacks = [], [0]
     convex = ref.ReferenceDopus.lm_convex
-    convexify = ref.ReferenceDopus._lm_convexify
-    solve = ref.ReferenceDopus._solve_with_retries
+    convexify = ref.ReferenceDopus.lm_convexify
+    solve = ref.ReferenceDopus.solve_with_retries
 
     def logged_convexify(self):
         tried = []
@@ -49,15 +49,15 @@ def main() -> None:
         i = feedbacks[0]
         feedbacks[0] += 1
         rec = None
-        if self.lm_auto and self._lm_uncapped >= 0.0:
-            lo, hi = 1e-14 * self.lm_scale, self._lm_uncapped
+        if self.lm_auto and self.lm_uncapped >= 0.0:
+            lo, hi = 1e-14 * self.lm_scale, self.lm_uncapped
             if convex(self, 0.0):
                 hi = 0.0
             else:
                 for _ in range(60):
                     mid = float(np.sqrt(lo * hi))
                     lo, hi = (lo, mid) if convex(self, mid) else (mid, hi)
-            rec = dict(instant=i, lm=float(self.lm), lm_prepared=float(self._lm_uncapped), h=float(self.lm_scale),
+            rec = dict(instant=i, lm=float(self.lm), lm_prepared=float(self.lm_uncapped), h=float(self.lm_scale),
                        convex_at_capped=bool(convex(self, self.lm)), lm_convex_threshold=hi,
                        prepare_tests=list(getattr(self, "_gate_tried", [])))
         out = solve(self, xhat0)
@@ -66,8 +66,8 @@ def main() -> None:
             records.append(rec)
         return out
 
-    ref.ReferenceDopus._lm_convexify = logged_convexify
-    ref.ReferenceDopus._solve_with_retries = logged_solve
+    ref.ReferenceDopus.lm_convexify = logged_convexify
+    ref.ReferenceDopus.solve_with_retries = logged_solve
     run_sil_cli(args.ocp_file, M=1, backend="reference", progress=False)
     with open(args.json, "w") as f:
         json.dump({"instants": records}, f, indent=1)

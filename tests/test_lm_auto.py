@@ -86,19 +86,19 @@ def test_active_set_gate_against_the_reduced_hessian(robot_disc, robot_solution)
         h = r.lm_scale = r.lm_hessian_scale()
         lm_p = next(v for v in 1e-8 * h * 10.0 ** np.arange(11) if r.lm_convex(v))
         try:
-            r.lm_auto, r.lm, r._lm_uncapped = True, lm_p, -1.0
+            r.lm_auto, r.lm, r.lm_uncapped = True, lm_p, -1.0
             assert r.lm_near_convex()
             r.lm = 1e2 * h
             assert not r.lm_near_convex()
             for c in [0.0] + list(np.logspace(-3, 0, 13, endpoint=False) * lm_p):
-                r.lm, r._lm_uncapped = c, lm_p
+                r.lm, r.lm_uncapped = c, lm_p
                 eig = reduced_hessian_min_eig(qp, 1e-8 * h if c < 1e-8 * h else 10.0 * c)
                 passes = r.lm_near_convex()
                 if abs(eig) > 1e-6 * h:          # away from the pivot threshold
                     assert passes == (eig > 0), (it, c / lm_p, eig)
                     checked[passes] += 1
         finally:
-            r.lm_auto, r.lm, r._lm_uncapped = False, 0.0, -1.0
+            r.lm_auto, r.lm, r.lm_uncapped = False, 0.0, -1.0
         r.feedback(xhat)
         r.prepare()
     assert checked[True] > 10 and checked[False] >= 3, checked

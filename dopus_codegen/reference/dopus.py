@@ -183,7 +183,8 @@ class ReferenceDopus:
         self._al_resync = False     # step 5 once all the same (set_regularization)
         self.qp_tol = s.qp_tol_of("double")
         self.lm, self.lm_auto, self.lm_scale, self._lm_kkt_prev = 0.0, False, 1.0, -1.0
-        self._lm_uncapped = -1.0
+        # the prepared automatic term before this feedback's cap (-1: not capped; C's lm.uncapped)
+        self.lm_uncapped = -1.0
         self.set_levenberg_marquardt(s.lm)
         self.qp_max_iter = None
         if s.qp_max_iter is not None:
@@ -734,7 +735,7 @@ class ReferenceDopus:
         """The feedback's QP with its retries and the recovery within the feedback (section 9).
         Returns (solution, failure, retries)."""
         b0 = self._budget_now()
-        sol, failure, retries = self._solve_with_retries(xhat0)
+        sol, failure, retries = self.solve_with_retries(xhat0)
         self._cost_qp = self._budget_now() - b0
         if (failure is not None and self.recovery and self.mode == "receding"
                 and getattr(failure, "qp_status", None) not in ("max_iter", "invalid_input")):
@@ -850,7 +851,7 @@ class ReferenceDopus:
         out.update(iterations=0, factorizations=0, cut=True)
         return out
 
-    def _solve_with_retries(self, xhat0):
+    def solve_with_retries(self, xhat0):
         """The QP of the current iterate for xhat0, solved again with lm raised while it is not
         solved (section 10). Returns (solution, failure, retries): failure None, a QPError,
         "nonfinite" or "diverged" (the step fails the box test of section 9)."""
@@ -914,7 +915,7 @@ class ReferenceDopus:
                                     "prepare (the budget of the instant is spent); no QP yet")
         if failure is not None:
             return None, failure, 0
-        return self._solve_with_retries(xhat0)
+        return self.solve_with_retries(xhat0)
 
     def _take_step(self, sol) -> None:
         """``domega`` of each stage into its slot, then the full step (eq. 4): primal
@@ -1051,7 +1052,7 @@ class ReferenceDopus:
             sol = None
         if (sol is None or not self._finite(*(sol[k] for k in FIELDS_QP))
                 or not self._box_ok(self.x + sol["x"], self.u + sol["u"])):
-            self.lm, self._lm_uncapped = lm, -1.0
+            self.lm, self.lm_uncapped = lm, -1.0
             return False
         self._cost_qp = self._budget_now() - b0
         self._take_step(sol)
@@ -1778,22 +1779,23 @@ class ReferenceDopus:
         lo, hi = _SAFETY["LM_MIN_REL"] * self.lm_scale, _SAFETY["LM_MAX_REL"] * self.lm_scale
         if not (self.lm_auto and self.lm < hi):
             return False
-        if self._lm_uncapped < 0.0:
+        if self.lm_uncapped < 0.0:
             return True
         up = min(lo if self.lm < lo else self.lm * _SAFETY["LM_RAISE"], hi)
-        if up >= self._lm_uncapped and self._lm_uncapped < hi:
+        if up >= self.lm_uncapped and self.lm_uncapped < hi:
             return True
         return self.lm_convex(up)
 
     def _lm_raise(self) -> None:
         lo, hi = _SAFETY["LM_MIN_REL"] * self.lm_scale, _SAFETY["LM_MAX_REL"] * self.lm_scale
-        if self._lm_uncapped > self.lm:
+        if self.lm_uncapped > self.lm:
             # the first raise after the cap of _lm_measured restores the term it capped
-            self.lm, self._lm_uncapped = self._lm_uncapped, -1.0
+            self.lm, self.lm_uncapped = self.lm_uncapped, -1.0
             return
         self.lm = min(lo if self.lm < lo else self.lm * _SAFETY["LM_RAISE"], hi)
 
-    def _lm_convexify(self) -> None:
+    def lm_convexify(self) -> None:
+        """The automatic term raised (section 10's steps) until the QP is convex or at its maximum."""
         hi = _SAFETY["LM_MAX_REL"] * self.lm_scale
         while not self.lm_convex(self.lm) and self.lm < hi:
             self._lm_raise()
@@ -1805,8 +1807,8 @@ class ReferenceDopus:
         self.lm_scale = self.lm_hessian_scale()
         self.lm = 0.0
         self._lm_kkt_prev = -1.0
-        self._lm_uncapped = -1.0
-        self._lm_convexify()
+        self.lm_uncapped = -1.0
+        self.lm_convexify()
 
     def _lm_prepared(self) -> None:
         """After a prepare: the scale, a raise when the KKT proxy grew, then convex."""
@@ -1815,23 +1817,23 @@ class ReferenceDopus:
         floor = 1e-8 * max(self.kkt_proxy_ref, 1.0)
         prev = max(self._lm_kkt_prev, floor)
         self.lm_scale = self.lm_hessian_scale()
-        self._lm_uncapped = -1.0
+        self.lm_uncapped = -1.0
         if self._lm_kkt_prev >= 0.0 and not self.kkt_proxy <= _SAFETY["LM_KKT_GROWTH"] * prev:
             self._lm_raise()
         self._lm_kkt_prev = self.kkt_proxy
-        self._lm_convexify()
+        self.lm_convexify()
 
     def _lm_measured(self, xhat0) -> None:
         """Feedback, once the measurement is known: the term capped by the distance from the
         solution, ``LM_KKT_REL h d^2`` with ``d = max(proxy, max_i |dx0_i| / scale_x_i)`` (0
         below ``LM_MIN_REL h``)."""
-        self._lm_uncapped = -1.0
+        self.lm_uncapped = -1.0
         if not self.lm_auto:
             return
         d = max(self.kkt_proxy, float(np.max(np.abs(xhat0 - self.x[0]) / self.scales[0])))
         cap = _SAFETY["LM_KKT_REL"] * self.lm_scale * d * d
         if not self.lm <= cap:
-            self._lm_uncapped = self.lm
+            self.lm_uncapped = self.lm
             self.lm = 0.0 if cap < _SAFETY["LM_MIN_REL"] * self.lm_scale else cap
 
     def _lm_feedback(self, status: str) -> None:
