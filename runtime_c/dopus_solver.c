@@ -767,10 +767,11 @@ static int dopus_linearize_all(dopus_solver *s)
 
 /* The second half of init with the iterate in place: ring reset, F and H of every stage and
  * the terminal node, QP assembly. */
-static int dopus_init_finish(dopus_solver *s)
+/* Before every stage is linearised afresh (init, a re-initialisation): an empty ring, every
+ * stage selected, no QP figures, the stage-cost Hessians to be refreshed. */
+static void dopus_fresh_start(dopus_solver *s)
 {
-    double b0;
-    int k, rc;
+    int k;
     s->anytime.prepared_extra = 0;
     dopus_ring_reset(&s->ring);
     for (k = 0; k < DOPUS_N; ++k) {
@@ -780,8 +781,14 @@ static int dopus_init_finish(dopus_solver *s)
     s->qp_status = 0;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
-
     s->al_resync = 1;
+}
+
+static int dopus_init_finish(dopus_solver *s)
+{
+    double b0;
+    int rc;
+    dopus_fresh_start(s);
     rc = dopus_linearize_all(s);
     if (rc != DOPUS_OK) {
         return rc;
@@ -1796,19 +1803,10 @@ static int dopus_reinit_walk(dopus_solver *s, double reserve)
  * budget, spread over the prepares (dopus_reinit_walk; `reserve`: what it leaves free). */
 static int dopus_reinit_finish(dopus_solver *s, double reserve)
 {
-    int k, rc, hessian = s->settings.hessian;
+    int rc, hessian = s->settings.hessian;
     if (dopus_budget_on(s)) {
-        s->anytime.prepared_extra = 0;
-        dopus_ring_reset(&s->ring);
-        for (k = 0; k < DOPUS_N; ++k) {
-            s->rho[k] = DOPUS_R(0.0);
-            s->selected[k] = 1;
-        }
-        s->qp_status = 0;
-        s->qp_iterations = 0;
-        s->qp_factorizations = 0;
+        dopus_fresh_start(s);
         s->qp_ready = 0;
-        s->al_resync = 1;
         s->health.n_failed = 0;
         s->health.recover_pending = 0;
         s->anytime.reinit_next = 0;

@@ -767,10 +767,11 @@ static int unicycle_linearize_all(unicycle_solver *s)
 
 /* The second half of init with the iterate in place: ring reset, F and H of every stage and
  * the terminal node, QP assembly. */
-static int unicycle_init_finish(unicycle_solver *s)
+/* Before every stage is linearised afresh (init, a re-initialisation): an empty ring, every
+ * stage selected, no QP figures, the stage-cost Hessians to be refreshed. */
+static void unicycle_fresh_start(unicycle_solver *s)
 {
-    double b0;
-    int k, rc;
+    int k;
     s->anytime.prepared_extra = 0;
     unicycle_ring_reset(&s->ring);
     for (k = 0; k < UNICYCLE_N; ++k) {
@@ -780,8 +781,14 @@ static int unicycle_init_finish(unicycle_solver *s)
     s->qp_status = 0;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
-
     s->al_resync = 1;
+}
+
+static int unicycle_init_finish(unicycle_solver *s)
+{
+    double b0;
+    int rc;
+    unicycle_fresh_start(s);
     rc = unicycle_linearize_all(s);
     if (rc != UNICYCLE_OK) {
         return rc;
@@ -1796,19 +1803,10 @@ static int unicycle_reinit_walk(unicycle_solver *s, double reserve)
  * budget, spread over the prepares (unicycle_reinit_walk; `reserve`: what it leaves free). */
 static int unicycle_reinit_finish(unicycle_solver *s, double reserve)
 {
-    int k, rc, hessian = s->settings.hessian;
+    int rc, hessian = s->settings.hessian;
     if (unicycle_budget_on(s)) {
-        s->anytime.prepared_extra = 0;
-        unicycle_ring_reset(&s->ring);
-        for (k = 0; k < UNICYCLE_N; ++k) {
-            s->rho[k] = UNICYCLE_R(0.0);
-            s->selected[k] = 1;
-        }
-        s->qp_status = 0;
-        s->qp_iterations = 0;
-        s->qp_factorizations = 0;
+        unicycle_fresh_start(s);
         s->qp_ready = 0;
-        s->al_resync = 1;
         s->health.n_failed = 0;
         s->health.recover_pending = 0;
         s->anytime.reinit_next = 0;
