@@ -2307,15 +2307,10 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_phase(s, DOPUS_PHASE_GRADIENTS);
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *slot = dopus_ring_stage(&s->ring, k);
-        int j;
         if (k == DOPUS_N - 1 || evaluated[k]) {
-            for (j = 0; j < DOPUS_NW; ++j) {
-                slot->dw_acc[j] = DOPUS_R(0.0);
-            }
+            dopus_zero(DOPUS_NW, slot->dw_acc);
         } else {
-            for (j = 0; j < DOPUS_NW; ++j) {
-                slot->dw_acc[j] += slot->dw[j];
-            }
+            dopus_lai_axpy(DOPUS_NW, DOPUS_R(1.0), slot->dw, slot->dw_acc);
         }
         if (k < DOPUS_N - 1) {
             dopus_ring_store_F(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);

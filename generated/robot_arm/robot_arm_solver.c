@@ -2307,15 +2307,10 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         robot_arm_stage_slot *slot = robot_arm_ring_stage(&s->ring, k);
-        int j;
         if (k == ROBOT_ARM_N - 1 || evaluated[k]) {
-            for (j = 0; j < ROBOT_ARM_NW; ++j) {
-                slot->dw_acc[j] = ROBOT_ARM_R(0.0);
-            }
+            robot_arm_zero(ROBOT_ARM_NW, slot->dw_acc);
         } else {
-            for (j = 0; j < ROBOT_ARM_NW; ++j) {
-                slot->dw_acc[j] += slot->dw[j];
-            }
+            robot_arm_lai_axpy(ROBOT_ARM_NW, ROBOT_ARM_R(1.0), slot->dw, slot->dw_acc);
         }
         if (k < ROBOT_ARM_N - 1) {
             robot_arm_ring_store_F(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);

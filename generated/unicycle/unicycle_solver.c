@@ -2307,15 +2307,10 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_phase(s, UNICYCLE_PHASE_GRADIENTS);
     for (k = 0; k < UNICYCLE_N; ++k) {
         unicycle_stage_slot *slot = unicycle_ring_stage(&s->ring, k);
-        int j;
         if (k == UNICYCLE_N - 1 || evaluated[k]) {
-            for (j = 0; j < UNICYCLE_NW; ++j) {
-                slot->dw_acc[j] = UNICYCLE_R(0.0);
-            }
+            unicycle_zero(UNICYCLE_NW, slot->dw_acc);
         } else {
-            for (j = 0; j < UNICYCLE_NW; ++j) {
-                slot->dw_acc[j] += slot->dw[j];
-            }
+            unicycle_lai_axpy(UNICYCLE_NW, UNICYCLE_R(1.0), slot->dw, slot->dw_acc);
         }
         if (k < UNICYCLE_N - 1) {
             unicycle_ring_store_F(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
