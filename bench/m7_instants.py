@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import json
 import pathlib
-import subprocess
 import sys
 import time
 
@@ -36,6 +35,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 from budget_curves import PROBLEMS, m7_figures  # noqa: E402
 
 from dopus_codegen import build_functions, load_ocp  # noqa: E402
+from dopus_lab.paths import checkout_commit  # noqa: E402
 
 AFTER = 20          # the instants from the disturbance on
 
@@ -65,14 +65,6 @@ def _k(v):
 
 def _yes(v):
     return "-" if v is None else "yes" if v else "NO"
-
-
-def _commit():
-    try:
-        return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
 
 
 def main(argv=None):
@@ -136,7 +128,7 @@ def main(argv=None):
               f"{r['largest_after'] / 1e6:>12.3f}M {r['median_after'] / 1e6:>6.3f}M "
               f"{_yes(r['within_bound_after']):>5} "
               f"{r['median'] / 1e6:>6.3f}M {r['rms_after']:>10.3e} {r['failed']:>6} {r['extra_iterations']:>5}")
-    out = {"problem": disc.name, "commit": _commit(), "N": N, "steps": sc["steps"], "event_step": sc["event_step"],
+    out = {"problem": disc.name, "commit": checkout_commit(), "N": N, "steps": sc["steps"], "event_step": sc["event_step"],
            "after": AFTER, "stage": stage, "median_no_budget": med,
            "count_method": "qemu -icount shift=0; an instant: its feedback and prepare on the board's timer",
            "plant": "the model (the generated integrator)", "rows": rows}

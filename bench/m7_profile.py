@@ -51,16 +51,9 @@ from collections import Counter
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from dopus_lab.paths import checkout_commit  # noqa: E402
 
 LIBM = "(libc/libm)"
-
-
-def _commit():
-    try:
-        return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
 
 
 def build(ocp_file, out_dir, target, progress):
@@ -365,7 +358,7 @@ def main(argv=None):
     print(f"m7_profile: attributing ({time.time() - t0:.0f} s)", file=sys.stderr)
     src = source_attribution(elf, prof.results, prof.tb, a.lines)
     fname = lambda i: fns[i][2] if i >= 0 else "?"
-    report = {"problem": name, "target": a.target, "commit": _commit(), "elf_flash_text": b["flash_text"],
+    report = {"problem": name, "target": a.target, "commit": checkout_commit(), "elf_flash_text": b["flash_text"],
               "method": "qemu -icount shift=0 -d in_asm,exec,nochain; instant = feedback entry .. fw_stack_lowest",
               "instants": []}
     for w in wanted:

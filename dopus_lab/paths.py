@@ -7,6 +7,7 @@ toolchain) exists in a checkout only.
 from __future__ import annotations
 
 import importlib.util
+import subprocess
 from pathlib import Path
 from typing import Optional
 
@@ -31,3 +32,13 @@ def checkout_script(name: str) -> Optional[Path]:
     """``scripts/<name>`` of the checkout, or None in an installation (which has none)."""
     path = ROOT / "scripts" / name
     return path if path.is_file() else None
+
+
+def checkout_commit() -> Optional[str]:
+    """The checkout's HEAD as a short commit id (for a benchmark's JSON), or None outside a
+    git checkout."""
+    try:
+        return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
