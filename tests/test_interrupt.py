@@ -285,3 +285,31 @@ def test_converge_with_the_reference_backend(tmp_path):
     _assert_interrupted(cmd, rc)
     assert "failed" not in cmd.output
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_ctrl_c_casadi_swallowed_stops_the_plant():
+    """A Ctrl-C that CasADi swallowed whole (inside CVODES a failed right-hand side may be
+    retried with a smaller step, and the integration then succeeds) still stops the next
+    plant step: the closed loop does not run to its end and write its files. Without the
+    recorded interrupt the same step gives the state of an independent integration."""
+    import casadi as ca
+    import numpy as np
+    from scipy.integrate import solve_ivp
+
+    from dopus_codegen import interrupt
+    from dopus_codegen.studies.plant import Plant
+
+    x, u = ca.SX.sym("x", 2), ca.SX.sym("u")
+    ode = ca.Function("ode", [x, u, ca.SX.sym("p", 0)], [ca.vertcat(x[1], u - ca.sin(x[0]))])
+    plant = Plant(ode, 0.1, 0)
+    ref = solve_ivp(lambda t, s: [s[1], 0.5 - np.sin(s[0])], (0, 0.1), [0.3, 0.0], rtol=1e-12, atol=1e-12).y[:, -1]
+    assert np.allclose(plant.step([0.3, 0.0], [0.5]), ref, atol=1e-8)
+    with interrupt.handling():
+        with pytest.raises(KeyboardInterrupt):
+            with interrupt.deferred():           # records the Ctrl-C; raises it at the end
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.01)
+        assert interrupt.interrupted()            # as after CasADi swallowed it
+        with pytest.raises(KeyboardInterrupt):
+            plant.step([0.3, 0.0], [0.5])
+    assert not interrupt.interrupted()

@@ -113,6 +113,9 @@ class Plant:
             interrupt.check()        # or CasADi's report of a Ctrl-C
             raise PlantError(f"Plant: CVODES failed over a step of {h} s from x = {x}, u = {u}: "
                              f"{str(err).splitlines()[-1] if str(err) else err}") from None
+        # CasADi may also swallow a Ctrl-C whole: inside CVODES a failed right-hand side can be
+        # retried with a smaller step, and the integration then succeeds
+        interrupt.check()
         xf = np.asarray(res["xf"], dtype=float).reshape(-1)
         if not np.all(np.isfinite(xf)):
             raise PlantError(f"Plant: the state became non-finite over a step from x = {x}, u = {u}")

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import settings
+from .. import interrupt, settings
 from ..errors import DopusError
 from . import loops
 from .plant import Plant, PlantError
@@ -334,6 +334,7 @@ class _Loop:
         try:
             for i in range(n_steps):
                 x = self.instant(i, x)
+                interrupt.check()   # a Ctrl-C that a CasADi call of the instant swallowed
                 if progress and bar is None and time.perf_counter() - t_start > _PROGRESS_AFTER:
                     import click
                     bar = click.progressbar(length=n_steps, label=f"{label:>12}", file=sys.stderr,
