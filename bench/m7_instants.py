@@ -13,7 +13,9 @@ re-linearises more. The bound: every instant at most the budget plus one stage e
 Per setting and budget: the largest instant of the run, the largest and the median of the
 20 instants from the disturbance on, the run's median, its excess over the budget, whether
 the bound holds on the run and on the 20 instants, the tracking RMS after the disturbance
-(the tip's deviation from the circle, m), the failed instants and the extra iterations.
+(the tip's deviation from the circle, m), the failed instants and the extra iterations; then
+the largest feedback of the run (its QP and the step: what sets the budget a setting needs),
+the feedback QPs the deadline cut and each failed instant with its QP's iterations and status.
 
 Prints a table, writes bench/results/m7_instants.json (--out).
 
@@ -48,6 +50,14 @@ def summary(disc, sc, recs, kind, budget, stage, signal):
     after = ins[e:e + AFTER]
     worst = int(np.argmax(ins))
     bound = budget + stage if budget else None
+    # the feedback's share of each instant (its QP and the step) and the failed instants with
+    # what their QP did (iterations, dopus_qp_status: 7 the budget's deadline; flags
+    # DOPUS_FLAG_*: 256 a cut QP taken as the step)
+    fb = [r["ticks_feedback"] * r["instructions_instant"] / max(1, r["ticks_feedback"] + r["ticks_prepare"])
+          for r in recs]
+    hard = int(np.argmax(fb))
+    failed_at = [{"step": r["step"], "status": r["status"], "qp_iterations": r["qp_iters"],
+                  "qp_status": r.get("qp_status"), "flags": r.get("flags")} for r in recs if r["status"] != 0]
     return {"setting": kind, "budget": budget, "largest": max(ins), "largest_instant": worst,
             "largest_after": max(after), "median_after": float(np.median(after)),
             "median": float(np.median(ins)),
@@ -56,7 +66,11 @@ def summary(disc, sc, recs, kind, budget, stage, signal):
             "within_bound_after": None if not budget else bool(max(after) <= bound),
             "rms_after": fig["rms_after"], "failed": fig["failed"],
             "extra_iterations": fig["extra_iterations"], "kkt_max_settled": fig["kkt_max_settled"],
-            "per_instant": ins}
+            "feedback_largest": fb[hard], "feedback_largest_instant": hard,
+            "feedback_largest_qp_iterations": recs[hard]["qp_iters"], "failed_at": failed_at,
+            "qp_cut": sum(1 for r in recs if r.get("qp_status") == 7),
+            "per_instant": ins, "per_instant_feedback": fb,
+            "per_instant_qp_iterations": [r["qp_iters"] for r in recs]}
 
 
 def _k(v):
@@ -128,6 +142,15 @@ def main(argv=None):
               f"{r['largest_after'] / 1e6:>12.3f}M {r['median_after'] / 1e6:>6.3f}M "
               f"{_yes(r['within_bound_after']):>5} "
               f"{r['median'] / 1e6:>6.3f}M {r['rms_after']:>10.3e} {r['failed']:>6} {r['extra_iterations']:>5}")
+    print("\nthe largest feedback (its QP and the step) of each run, the feedback QPs cut by the deadline, the "
+          "failed instants (instant: QP iterations, status of the QP; 7 = cut by the deadline)")
+    for r in rows:
+        b = r["budget"]
+        fails = ", ".join(f"{f['step']}: {f['qp_iterations']}/{f['qp_status']}" for f in r["failed_at"][:8])
+        more = f" (+{len(r['failed_at']) - 8})" if len(r["failed_at"]) > 8 else ""
+        print(f"{r['setting']:<9} {(f'{b / 1e6:g} M' if b else 'none'):>7} feedback {r['feedback_largest'] / 1e6:.3f}M at "
+              f"{r['feedback_largest_instant']} ({r['feedback_largest_qp_iterations']} QP iterations), "
+              f"cut QPs {r['qp_cut']}, failed: {fails or '-'}{more}")
     out = {"problem": disc.name, "commit": checkout_commit(), "N": N, "steps": sc["steps"], "event_step": sc["event_step"],
            "after": AFTER, "stage": stage, "median_no_budget": med,
            "count_method": "qemu -icount shift=0; an instant: its feedback and prepare on the board's timer",

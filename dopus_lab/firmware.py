@@ -280,6 +280,7 @@ def _real(tok: str) -> float:
 
 
 _INT_FIELDS = ("instructions", "setting", "used", "extra", "stages", "M", "iter", "step", "status", "qp_iters",
+               "qp_status", "flags",
                "ticks_feedback", "ticks_prepare", "stack", "factorizations")
 
 

@@ -432,6 +432,8 @@ static int scenario(int setting, long budget)
         put_field("stages", info.instant_stages);
         put_field("status", status);
         put_field("qp_iters", info.qp_iterations);
+        put_field("qp_status", info.qp_status);
+        put_field("flags", info.flags);
         put_field("ticks_feedback", (long)(t1 - t0));
         put_field("ticks_prepare", (long)(t3 - t2));
         put_str(" kkt ");
