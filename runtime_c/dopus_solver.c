@@ -1754,12 +1754,48 @@ static void dopus_reinit_done(dopus_solver *s)
     s->health.flags |= DOPUS_FLAG_RECOVERED;
 }
 
+/* The controls of a re-initialisation's forward simulation (anytime.reinit_sim 1: the last
+ * good plan's, 2: the guess's; clipped) into the iterate. */
+static void dopus_reinit_controls(dopus_solver *s)
+{
+    int k;
+    for (k = 0; k < DOPUS_N; ++k) {
+        dopus_clip_u(s->anytime.reinit_sim == 1 ? dopus_health_plan_control(&s->health, k) : dopus_guess_u[k],
+                     s->u[k]);
+    }
+}
+
+/* 1 when node k (state x, control u) of a forward simulation lies in the box of the
+ * divergence test (algorithm.md section 9), as dopus_box_ok tests a whole trajectory. */
+static int dopus_node_box_ok(const dopus_solver *s, const dopus_real *x, const dopus_real *u)
+{
+    int i;
+    for (i = 0; i < DOPUS_NX; ++i) {
+        if (!(dopus_fabs(x[i]) <= DOPUS_DIVERGENCE_BOX * s->health.scale_x[i] + dopus_fabs(s->xhat0[i]))) {
+            return 0;
+        }
+    }
+    for (i = 0; i < DOPUS_NU && u; ++i) {
+        if (!(dopus_fabs(u[i]) <= DOPUS_DIVERGENCE_BOX * s->health.scale_u[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
 /* A re-initialisation with a budget (algorithm.md section 14), from the iterate in place: the
  * gradient and blocks of each stage in stage order while one more, the terminal node and
  * `reserve` still fit, then the terminal node and the QP; what does not fit continues in the
  * next prepares (anytime.reinit_next, the next stage; -1 when none is under way), whose
  * feedbacks return the fallback control (no QP prepared). Gauss-Newton blocks when the problem
- * has them. A failed evaluation returns its status (the caller falls back on the guess). */
+ * has them; the terminal node's price (the step-3 reading less a stage's) and the assembly
+ * with the lm test's (steps 6 and 7, cost_tail) stay free after each stage: measured on the
+ * emulated Cortex-M7, a walk that ended in a feedback passed the budget by 63 k instructions
+ * without the latter. The forward simulation is done by the stage evaluations (anytime.reinit_sim):
+ * x_{k+1} is the phi of stage k's gradient, so it is priced as they are; a stage whose
+ * evaluation fails or leaves the box starts the walk again from stage 0 with the guess
+ * controls, then from the guess (as dopus_reinit's simulations fall back). A failed
+ * evaluation without a simulation returns its status (the caller falls back on the guess). */
 static int dopus_reinit_walk(dopus_solver *s, double reserve)
 {
     const double term = s->anytime.cost_head - s->anytime.cost_grad - s->anytime.cost_stage;
@@ -1767,10 +1803,27 @@ static int dopus_reinit_walk(dopus_solver *s, double reserve)
     int k, rc = DOPUS_OK;
     s->settings.hessian = DOPUS_HAS_GN ? DOPUS_HESSIAN_GAUSS_NEWTON : hessian;
     while ((k = s->anytime.reinit_next) < DOPUS_N &&
-           dopus_budget_fits(s, s->anytime.cost_grad + s->anytime.cost_stage + term + reserve)) {
+           dopus_budget_fits(s, s->anytime.cost_grad + s->anytime.cost_stage + term + s->anytime.cost_tail +
+                                    reserve)) {
         rc = dopus_stage_F(s, k);
+        if (s->anytime.reinit_sim && (rc != DOPUS_OK || (k == 0 && !dopus_node_box_ok(s, s->x[0], 0)) ||
+                                      !dopus_node_box_ok(s, s->mem.ev.tmp_phi, s->u[k]))) {
+            /* the simulation failed: again from stage 0 with the guess controls, else the guess */
+            s->anytime.reinit_sim = s->anytime.reinit_sim == 1 ? 2 : 0;
+            if (s->anytime.reinit_sim) {
+                dopus_reinit_controls(s);
+            } else {
+                dopus_guess_primal(s, 1);
+            }
+            s->anytime.reinit_next = 0;
+            rc = DOPUS_OK;
+            continue;
+        }
         if (rc != DOPUS_OK) {
             break;
+        }
+        if (s->anytime.reinit_sim) {
+            dopus_copy(s->x[k + 1], s->mem.ev.tmp_phi, DOPUS_NX);
         }
         dopus_ring_store_F(dopus_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                            s->mem.ev.tmp_g);
@@ -1828,6 +1881,7 @@ static int dopus_reinit_finish(dopus_solver *s, double reserve)
 static int dopus_reinit_at_guess(dopus_solver *s, double reserve)
 {
     dopus_guess_primal(s, 0);
+    s->anytime.reinit_sim = 0;
     dopus_zero((DOPUS_N + 1) * DOPUS_NX, &s->lam[0][0]);
     dopus_zero(DOPUS_N * DOPUS_NW, &s->mu_b[0][0]);
     dopus_zero(DOPUS_NX, s->mu_bN);
@@ -1846,7 +1900,12 @@ static int dopus_reinit_at_guess(dopus_solver *s, double reserve)
 static int dopus_reinit(dopus_solver *s, double reserve)
 {
     int rc;
-    if (!dopus_simulate_plan(s, 1) && !dopus_simulate_plan(s, 0)) {
+    if (dopus_budget_on(s)) {
+        /* the forward simulation in the stage evaluations of dopus_reinit_walk, priced as they
+         * are (algorithm.md section 14) */
+        s->anytime.reinit_sim = 1;
+        dopus_reinit_controls(s);
+    } else if (!dopus_simulate_plan(s, 1) && !dopus_simulate_plan(s, 0)) {
         dopus_guess_primal(s, 1);
     }
     rc = dopus_reinit_finish(s, reserve);
@@ -1868,12 +1927,22 @@ static int dopus_reinit_continue(dopus_solver *s)
     dopus_real l = DOPUS_R(0.0), xn[DOPUS_NX];
     int rc;
     if (s->settings.mode == DOPUS_MODE_RECEDING && !s->shifted) {
+        /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now */
+        const int first = s->anytime.reinit_sim && s->anytime.reinit_next == 0;
+        if (first &&
+            dopus_eval_stage_eval(s->x[0], s->u[0], s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) ==
+                0 &&
+            dopus_lai_vec_finite(DOPUS_NX, xn)) {
+            dopus_copy(s->x[1], xn, DOPUS_NX);
+        }
         dopus_shift(s);
         s->shifted = 1;
         if (s->anytime.reinit_next > 0) {
             s->anytime.reinit_next -= 1;
         }
-        if (dopus_eval_stage_eval(s->x[DOPUS_N - 1], s->u[DOPUS_N - 1], s->p[DOPUS_N - 1], xn, &l,
+        /* the new last node: simulated by the walk, or (no simulation) from the one before it */
+        if (!s->anytime.reinit_sim &&
+            dopus_eval_stage_eval(s->x[DOPUS_N - 1], s->u[DOPUS_N - 1], s->p[DOPUS_N - 1], xn, &l,
                                   s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
             dopus_lai_vec_finite(DOPUS_NX, xn)) {
             dopus_copy(s->x[DOPUS_N], xn, DOPUS_NX);

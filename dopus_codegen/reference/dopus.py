@@ -232,6 +232,7 @@ class ReferenceDopus:
         self.budget_used = 0.0
         self._prepared_extra = False
         self._reinit_next = -1        # a re-initialisation under way: its next stage (section 14)
+        self._reinit_sim = 0          # its forward simulation: 1 the plan's controls, 2 the guess's, 0 none
         self.extra_iterations = 0
         self.instant_stages = 0
 
@@ -1580,7 +1581,12 @@ class ReferenceDopus:
         N, nx = self.N, self.nx
         gx = np.asarray(self.disc.initial_guess.x, float).reshape(N + 1, nx)
         gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)
-        if not self._simulate(x, u, True) and not self._simulate(x, u, False):
+        if self._budget_on():
+            # the forward simulation in the stage evaluations of _reinit_walk, priced as they
+            # are (section 14)
+            self._reinit_sim = 1
+            self._reinit_controls(u)
+        elif not self._simulate(x, u, True) and not self._simulate(x, u, False):
             x[1:] = gx[1:]
             for k in range(N):
                 u[k] = self._clip_u(gu[k])[0]
@@ -1638,6 +1644,7 @@ class ReferenceDopus:
         gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)
         u = np.array([self._clip_u(gu[k])[0] for k in range(N)])
         self._flag("reinit_guess")
+        self._reinit_sim = 0
         z = np.zeros
         self._reinit_start(gx.copy(), u, z((N + 1, nx)), z((N, self.ng)), z((N, self.nw)), z(nx), z(self.nr),
                            z(self.ne), reserve)
@@ -1662,26 +1669,70 @@ class ReferenceDopus:
         self._reinit_next = 0
         self._reinit_walk(reserve)
 
+    def _reinit_controls(self, u) -> None:
+        """The controls of a re-initialisation's forward simulation (``_reinit_sim`` 1: the last
+        good plan's, 2: the guess's; clipped) into ``u``."""
+        gu = np.asarray(self.disc.initial_guess.u, float).reshape(self.N, self.n_u)
+        for k in range(self.N):
+            u[k] = self._clip_u(self._plan_control(k) if self._reinit_sim == 1 else gu[k])[0]
+
+    def _node_box_ok(self, x, u=None) -> bool:
+        """The box test of section 9 on one node of a forward simulation (state, control)."""
+        box = _SAFETY["DIVERGENCE_BOX"]
+        sx, su = self.scales
+        with np.errstate(invalid="ignore"):
+            return bool(np.all(np.abs(x) <= box * sx + np.abs(self._xhat_last))
+                        and (u is None or np.all(np.abs(u) <= box * su)))
+
     def _reinit_walk(self, reserve: float) -> None:
         """The evaluations of a re-initialisation with a budget (section 14): the gradient and
         blocks of each stage in stage order while one more, the terminal node and ``reserve``
         still fit, then the terminal node and the QP; the rest in the next prepares
         (``_reinit_next``), whose feedbacks return the fallback control. Gauss-Newton blocks
-        when the problem has them."""
+        when the problem has them. The forward simulation is done by the stage evaluations
+        (``_reinit_sim``): x_{k+1} is the phi of stage k's gradient, priced as they are; a stage
+        whose evaluation fails or leaves the box starts the walk again from stage 0 with the
+        guess controls, then from the guess (as the simulations of :meth:`_reinit` fall
+        back)."""
         N = self.N
         term_cost = self._cost_head - self._cost_grad - self._cost_stage
         hessian = self.hessian
         self.hessian = "gauss-newton" if self.has_gn else hessian
         try:
             while (self._reinit_next < N
-                   and self._budget_fits(self._cost_grad + self._cost_stage + term_cost + reserve)):
+                   and self._budget_fits(self._cost_grad + self._cost_stage + term_cost + self._cost_tail
+                                         + reserve)):
                 k = self._reinit_next
                 self.work += 1
-                gL, phi, lv, gv = eval_stages(self.disc.stage_grad, 1, self.x[k:k + 1], self.u[k:k + 1],
-                                              self.p[k:k + 1], self.lam[k + 1:k + 2], self.mu_g[k:k + 1])
-                if not self._finite(gL, phi, lv, gv):
+                try:
+                    gL, phi, lv, gv = eval_stages(self.disc.stage_grad, 1, self.x[k:k + 1], self.u[k:k + 1],
+                                                  self.p[k:k + 1], self.lam[k + 1:k + 2], self.mu_g[k:k + 1])
+                    ok = self._finite(gL, phi, lv, gv)
+                except RuntimeError:
+                    if not self._reinit_sim:
+                        raise
+                    ok = False
+                if self._reinit_sim and (not ok or (k == 0 and not self._node_box_ok(self.x[0]))
+                                         or not self._node_box_ok(phi[0], self.u[k])):
+                    # the simulation failed: again from stage 0 with the guess controls, else the guess
+                    self._reinit_sim = 2 if self._reinit_sim == 1 else 0
+                    self.x, self.u = self.x.copy(), self.u.copy()
+                    if self._reinit_sim:
+                        self._reinit_controls(self.u)
+                    else:
+                        gx = np.asarray(self.disc.initial_guess.x, float).reshape(N + 1, self.nx)
+                        gu = np.asarray(self.disc.initial_guess.u, float).reshape(N, self.n_u)
+                        self.x[1:] = gx[1:]
+                        for j in range(N):
+                            self.u[j] = self._clip_u(gu[j])[0]
+                    self._reinit_next = 0
+                    continue
+                if not ok:
                     raise self._fail("nonfinite_value", "prepare: stage_grad returned a non-finite value at the "
                                      "re-initialised iterate")
+                if self._reinit_sim:
+                    self.x = self.x.copy()
+                    self.x[k + 1] = phi[0]
                 sl = self.slots[self._slot(k)]
                 sl.F_w = gL[0] + self.mu_b[k]
                 sl.phi = phi[0].copy()
@@ -1714,11 +1765,21 @@ class ReferenceDopus:
         guess."""
         N = self.N
         if self.mode == "receding" and not self._shifted:
+            if self._reinit_sim and self._reinit_next == 0:
+                # the node that becomes x_0, not simulated by the walk yet
+                try:
+                    x1 = self._stage_phi(self.x[0], self.u[0], self.p[0])
+                except RuntimeError:
+                    x1 = None
+                if x1 is not None and np.all(np.isfinite(x1)):
+                    self.x = self.x.copy()
+                    self.x[1] = x1
             self._shift()
             self._shifted = True
             self._reinit_next = max(self._reinit_next - 1, 0)
+            # the new last node: simulated by the walk, or (no simulation) from the one before it
             try:
-                xn = self._stage_phi(self.x[N - 1], self.u[N - 1], self.p[N - 1])
+                xn = None if self._reinit_sim else self._stage_phi(self.x[N - 1], self.u[N - 1], self.p[N - 1])
             except RuntimeError:
                 xn = None
             if xn is not None and np.all(np.isfinite(xn)):

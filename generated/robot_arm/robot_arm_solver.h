@@ -509,6 +509,8 @@ typedef struct {
     int prepared_extra;   /* the prepared QP comes from extra iterations (the feedback keeps lm) */
     int uncapped;         /* an extra iteration of this instant raised the KKT proxy */
     int reinit_next;      /* a re-initialisation under way: its next stage (-1: none) */
+    int reinit_sim;       /* its forward simulation, done by its stage evaluations: 1 with the last
+                            good plan's controls, 2 with the guess controls, 0 none (the guess) */
 } robot_arm_anytime;
 
 /* One object per concept: lifecycle, settings, iterate, stage slots, terminal node, secant

@@ -1754,12 +1754,48 @@ static void unicycle_reinit_done(unicycle_solver *s)
     s->health.flags |= UNICYCLE_FLAG_RECOVERED;
 }
 
+/* The controls of a re-initialisation's forward simulation (anytime.reinit_sim 1: the last
+ * good plan's, 2: the guess's; clipped) into the iterate. */
+static void unicycle_reinit_controls(unicycle_solver *s)
+{
+    int k;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        unicycle_clip_u(s->anytime.reinit_sim == 1 ? unicycle_health_plan_control(&s->health, k) : unicycle_guess_u[k],
+                     s->u[k]);
+    }
+}
+
+/* 1 when node k (state x, control u) of a forward simulation lies in the box of the
+ * divergence test (algorithm.md section 9), as unicycle_box_ok tests a whole trajectory. */
+static int unicycle_node_box_ok(const unicycle_solver *s, const unicycle_real *x, const unicycle_real *u)
+{
+    int i;
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        if (!(unicycle_fabs(x[i]) <= UNICYCLE_DIVERGENCE_BOX * s->health.scale_x[i] + unicycle_fabs(s->xhat0[i]))) {
+            return 0;
+        }
+    }
+    for (i = 0; i < UNICYCLE_NU && u; ++i) {
+        if (!(unicycle_fabs(u[i]) <= UNICYCLE_DIVERGENCE_BOX * s->health.scale_u[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
 /* A re-initialisation with a budget (algorithm.md section 14), from the iterate in place: the
  * gradient and blocks of each stage in stage order while one more, the terminal node and
  * `reserve` still fit, then the terminal node and the QP; what does not fit continues in the
  * next prepares (anytime.reinit_next, the next stage; -1 when none is under way), whose
  * feedbacks return the fallback control (no QP prepared). Gauss-Newton blocks when the problem
- * has them. A failed evaluation returns its status (the caller falls back on the guess). */
+ * has them; the terminal node's price (the step-3 reading less a stage's) and the assembly
+ * with the lm test's (steps 6 and 7, cost_tail) stay free after each stage: measured on the
+ * emulated Cortex-M7, a walk that ended in a feedback passed the budget by 63 k instructions
+ * without the latter. The forward simulation is done by the stage evaluations (anytime.reinit_sim):
+ * x_{k+1} is the phi of stage k's gradient, so it is priced as they are; a stage whose
+ * evaluation fails or leaves the box starts the walk again from stage 0 with the guess
+ * controls, then from the guess (as unicycle_reinit's simulations fall back). A failed
+ * evaluation without a simulation returns its status (the caller falls back on the guess). */
 static int unicycle_reinit_walk(unicycle_solver *s, double reserve)
 {
     const double term = s->anytime.cost_head - s->anytime.cost_grad - s->anytime.cost_stage;
@@ -1767,10 +1803,27 @@ static int unicycle_reinit_walk(unicycle_solver *s, double reserve)
     int k, rc = UNICYCLE_OK;
     s->settings.hessian = UNICYCLE_HAS_GN ? UNICYCLE_HESSIAN_GAUSS_NEWTON : hessian;
     while ((k = s->anytime.reinit_next) < UNICYCLE_N &&
-           unicycle_budget_fits(s, s->anytime.cost_grad + s->anytime.cost_stage + term + reserve)) {
+           unicycle_budget_fits(s, s->anytime.cost_grad + s->anytime.cost_stage + term + s->anytime.cost_tail +
+                                    reserve)) {
         rc = unicycle_stage_F(s, k);
+        if (s->anytime.reinit_sim && (rc != UNICYCLE_OK || (k == 0 && !unicycle_node_box_ok(s, s->x[0], 0)) ||
+                                      !unicycle_node_box_ok(s, s->mem.ev.tmp_phi, s->u[k]))) {
+            /* the simulation failed: again from stage 0 with the guess controls, else the guess */
+            s->anytime.reinit_sim = s->anytime.reinit_sim == 1 ? 2 : 0;
+            if (s->anytime.reinit_sim) {
+                unicycle_reinit_controls(s);
+            } else {
+                unicycle_guess_primal(s, 1);
+            }
+            s->anytime.reinit_next = 0;
+            rc = UNICYCLE_OK;
+            continue;
+        }
         if (rc != UNICYCLE_OK) {
             break;
+        }
+        if (s->anytime.reinit_sim) {
+            unicycle_copy(s->x[k + 1], s->mem.ev.tmp_phi, UNICYCLE_NX);
         }
         unicycle_ring_store_F(unicycle_ring_stage(&s->ring, k), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                            s->mem.ev.tmp_g);
@@ -1828,6 +1881,7 @@ static int unicycle_reinit_finish(unicycle_solver *s, double reserve)
 static int unicycle_reinit_at_guess(unicycle_solver *s, double reserve)
 {
     unicycle_guess_primal(s, 0);
+    s->anytime.reinit_sim = 0;
     unicycle_zero((UNICYCLE_N + 1) * UNICYCLE_NX, &s->lam[0][0]);
     unicycle_zero(UNICYCLE_N * UNICYCLE_NW, &s->mu_b[0][0]);
     unicycle_zero(UNICYCLE_NX, s->mu_bN);
@@ -1846,7 +1900,12 @@ static int unicycle_reinit_at_guess(unicycle_solver *s, double reserve)
 static int unicycle_reinit(unicycle_solver *s, double reserve)
 {
     int rc;
-    if (!unicycle_simulate_plan(s, 1) && !unicycle_simulate_plan(s, 0)) {
+    if (unicycle_budget_on(s)) {
+        /* the forward simulation in the stage evaluations of unicycle_reinit_walk, priced as they
+         * are (algorithm.md section 14) */
+        s->anytime.reinit_sim = 1;
+        unicycle_reinit_controls(s);
+    } else if (!unicycle_simulate_plan(s, 1) && !unicycle_simulate_plan(s, 0)) {
         unicycle_guess_primal(s, 1);
     }
     rc = unicycle_reinit_finish(s, reserve);
@@ -1868,12 +1927,22 @@ static int unicycle_reinit_continue(unicycle_solver *s)
     unicycle_real l = UNICYCLE_R(0.0), xn[UNICYCLE_NX];
     int rc;
     if (s->settings.mode == UNICYCLE_MODE_RECEDING && !s->shifted) {
+        /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now */
+        const int first = s->anytime.reinit_sim && s->anytime.reinit_next == 0;
+        if (first &&
+            unicycle_eval_stage_eval(s->x[0], s->u[0], s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) ==
+                0 &&
+            unicycle_lai_vec_finite(UNICYCLE_NX, xn)) {
+            unicycle_copy(s->x[1], xn, UNICYCLE_NX);
+        }
         unicycle_shift(s);
         s->shifted = 1;
         if (s->anytime.reinit_next > 0) {
             s->anytime.reinit_next -= 1;
         }
-        if (unicycle_eval_stage_eval(s->x[UNICYCLE_N - 1], s->u[UNICYCLE_N - 1], s->p[UNICYCLE_N - 1], xn, &l,
+        /* the new last node: simulated by the walk, or (no simulation) from the one before it */
+        if (!s->anytime.reinit_sim &&
+            unicycle_eval_stage_eval(s->x[UNICYCLE_N - 1], s->u[UNICYCLE_N - 1], s->p[UNICYCLE_N - 1], xn, &l,
                                   s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
             unicycle_lai_vec_finite(UNICYCLE_NX, xn)) {
             unicycle_copy(s->x[UNICYCLE_N], xn, UNICYCLE_NX);
