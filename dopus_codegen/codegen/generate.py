@@ -3,7 +3,8 @@
 The folder holds (names after renaming ``dopus_`` -> ``<name>_``):
 
 - ``<name>_casadi.c/.h``: every per-stage CasADi function of docs/algorithm.md section 2,
-  emitted by one ``casadi.CodeGenerator`` with explicit options;
+  emitted by one ``casadi.CodeGenerator`` with explicit options, in double each sin/cos pair
+  of one variable computed by one call (:mod:`.trig`, ``runtime_c/dopus_trig.h``);
 - ``<name>_sizes.h``, ``<name>_problem.c``: sizes and problem data, rendered from
   ``templates/*.j2``;
 - the hand-written ``runtime_c/*.c|*.h``, copied with the prefix renamed (among them the

@@ -10,10 +10,11 @@ again; on a Cortex-M with newlib the two calls cost about 140 instructions.
 ``w=cos(a);`` (either order) of the same local variable ``a`` that is not assigned between
 them, and rewrites the first into one call of the runtime's ``<name>_sincos``
 (runtime_c/dopus_trig.h: one reduction, both kernels) that keeps the second result in a new
-local for the second line. Only plain assignments of CasADi's SX code are followed: any other
-statement between the two (a call, a branch, a loop, a brace) ends the search, and a variable
-whose address is taken anywhere in the function is never paired, so every rewritten pair
-computes the same argument. Double precision only (the float build keeps ``sinf`` and
+local for the second line. Only plain assignments of CasADi's SX code are followed (one
+local or one output entry assigned, no ``&``): any other statement between the two (a
+function called on its own, a branch, a loop, a brace, an array store) ends the search, and a
+variable whose address is taken anywhere in the function is never paired, so every
+rewritten pair computes the same argument. Double precision only (the float build keeps ``sinf`` and
 ``cosf``). docs/design.md, "The generated stage functions", states the accuracy.
 """
 from __future__ import annotations
