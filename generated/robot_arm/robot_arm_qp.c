@@ -2790,21 +2790,61 @@ static void as_schur_solve(const robot_arm_qp_workspace *ws, robot_arm_real *e)
     }
 }
 
-/* Every active simple bound (a component of w_k or x_N) set to its bound exactly (after a
- * refinement step it is met to round-off), before each evaluation of the residuals: the
- * tests of a sweep and the answer are those of the iterate with its active bounds met, and
- * the answer's control lands on the bound exactly, as a clipped control would. */
-static void as_snap_bounds(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+/* The residuals of compute_residuals moved with component j of w_k (k = N: of x_N) by dv:
+ * H_k's column j (and the shift) into r_stat, the dynamics rows of x_k and x_{k+1} (Req for
+ * x_N) and the values of the stage's bounded rows. */
+static void as_move_var(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int k, int j, robot_arm_real dv)
+{
+    const int ld = k < N ? NW : NX;
+    const robot_arm_real *H = k < N ? in->H[k] : in->HN;
+    robot_arm_real *rs = ws->r_stat + k * NW;
+    int i, b, jj;
+    for (i = 0; i < ld; ++i)
+        rs[i] += (i >= j ? H[i + j * ld] : H[j + i * ld]) * dv;
+    rs[j] += in->hess_shift * dv;
+    if (j < NX)
+        ws->r_dyn[k * NX + j] += dv;
+    if (k < N) {
+        for (i = 0; i < NX; ++i)
+            ws->r_dyn[(k + 1) * NX + i] -= in->Phi[k][i + j * NX] * dv;
+    } else {
+        for (i = 0; i < NE; ++i)
+            ws->r_eqN[i] += in->Req[i + j * NE1] * dv;
+    }
+    FOR_STAGE_ROWS(ws, k, b, jj)
+    {
+        robot_arm_real c;
+        if (k < N)
+            c = NG == 0 || jj < NW ? (jj == j ? ROBOT_ARM_R(1.0) : ROBOT_ARM_R(0.0)) : in->C[k][(jj - NW) + j * NG];
+        else
+            c = NR == 0 || jj < NX ? (jj == j ? ROBOT_ARM_R(1.0) : ROBOT_ARM_R(0.0)) : in->R[(jj - NX) + j * NR];
+        if (c != ROBOT_ARM_R(0.0))
+            as_res_add(ws, b, c * dv);
+    }
+}
+
+/* Every active simple bound (a component of w_k or x_N) set to its bound exactly: before
+ * each evaluation of the residuals (after a refinement step it is met to round-off), so
+ * that the tests of a sweep and the answer are those of the iterate with its active bounds
+ * met, and the answer's control lands on the bound exactly, as a clipped control would;
+ * and (moved != 0) the bounds that joined the active set, with the residuals of the last
+ * evaluation moved with them (as_move_var): their violation then enters the next step
+ * through the stationarity and dynamics residuals instead of as the penalty weight times
+ * it, whose round-off (1e-9 of the scale with AS_RHO 1e6) took a second refinement step. */
+static void as_snap_bounds(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int moved)
 {
     int k, b, j;
     for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
         {
-            robot_arm_real lo, up;
+            robot_arm_real lo, up, v;
             if (!ws->act[b] || (k < N && NG > 0 && j >= NW) || (k == N && NR > 0 && j >= NX))
                 continue;
             row_bounds(in, ws->bidx[b], &lo, &up);
-            ws->prim[k * NW + j] = ws->act[b] == -1 ? lo : up;
+            v = ws->act[b] == -1 ? lo : up;
+            if (moved && v != ws->prim[k * NW + j])
+                as_move_var(ws, in, k, j, v - ws->prim[k * NW + j]);
+            ws->prim[k * NW + j] = v;
         }
 }
 
@@ -2833,7 +2873,7 @@ static int as_refine(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_
         int predict;
         if (!known) {
             robot_arm_real ra;
-            as_snap_bounds(ws, in);
+            as_snap_bounds(ws, in, 0);
             ra = as_residuals(ws, in, r);
             QP_TRACE("active set: refinement %d stat %.2e eq %.2e act %.2e ineq %.2e (%d rows updated)\n", it,
                      r->stat_s, r->eq_s, ra, r->ineq_s, ws->as_n);
@@ -3009,7 +3049,9 @@ static int qp_active_set(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm
         if (!refined && !(as_factor(L, ws, in) && as_refine(L, ws, in, &r, known)))
             break;
         known = as_update(L, ws, in, &zeroed, &update);
-        if (!known) {
+        if (known) {
+            as_snap_bounds(ws, in, 1); /* the bounds that joined, from the last evaluation */
+        } else {
             /* the residuals again after multipliers were set to 0 (else the iterate is the
              * sweep's, whose residuals r holds) */
             const robot_arm_real ra = zeroed ? as_residuals(ws, in, &r) : as_active_residual(ws);

@@ -108,7 +108,10 @@
  * one factor (each step a method-of-multipliers update: back-substitutions only), the
  * active simple bounds set to their bounds before each evaluation of the residuals. The
  * residuals are evaluated before a sweep's first step only in the first sweep (a later
- * sweep starts from the last evaluation, updated for the multipliers set to 0) and after
+ * sweep starts from the last evaluation, updated for the multipliers set to 0 and for the
+ * simple bounds that joined the active set, which are set to their bounds at once: their
+ * violation then enters the step through the stationarity and dynamics residuals rather
+ * than as the penalty weight times it, whose round-off took a second step) and after
  * every step, but in a sweep with rows held by the Schur complement (below) after every
  * second one: the step that follows an evaluation (or the sweep's start) gives its
  * residuals itself, the stationarity part D_s' G^-1 (D_s d + r_s), the dynamics and Req
