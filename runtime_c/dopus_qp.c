@@ -876,8 +876,8 @@ QP_NOINLINE static void qp_stage_update(const dopus_real *restrict Phi, const do
 /* A pivot of M_uu at or below zero is judged against an estimate of its round-off (see
  * riccati_factor). The estimate is formed only then, from what the recursion keeps: it
  * needs the diagonal of stage k's terms before Phi' P Phi, the column sums of |Phi_k|, the
- * largest entries of P_{k+1} and P_{k+2} and the largest squared column of stage k+1's
- * Lu^{-1} M_ux (kmag), all unchanged since they were formed. The estimates are the same as
+ * largest entries of P_{k+1} and P_{k+2} and the columns of stage k+1's Lu^{-1} M_ux (K),
+ * all unchanged since they were formed. The estimates are the same as
  * when they were formed for every stage. */
 
 /* dg = the diagonal of H_k + D'QD + delta I (the terms of M before Phi' P Phi) */
@@ -941,7 +941,8 @@ QP_COLD static void stage_noise(const dopus_qp_workspace *ws, const dopus_qp_in 
         pmag = DOPUS_R(0.0);
         for (j = 0; j < NX; ++j)
             pmag = dmax(pmag, dopus_fabs(dg[j]) + cs2[j] * pmax1);
-        pmag = dmax(pmag, ws->kmag[k + 1]);
+        for (j = 0; j < NX; ++j)
+            pmag = dmax(pmag, dopus_lai_dot(NU, ws->K[k + 1] + j * NU1, ws->K[k + 1] + j * NU1));
     }
     stage_diag(ws, in, k, dg);
     stage_cs2(in->Phi[k], cs2);
@@ -1069,16 +1070,9 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
             }
         }
         pack_lu(Lu, ws->Lu[k]);
-        /* LK = Lu^{-1} M_ux (in the array of K); the largest squared column of LK for the
-         * round-off estimate of stage k - 1 (stage_noise) */
+        /* LK = Lu^{-1} M_ux (in K) */
         for (j = 0; j < NX; ++j)
             lu_solve_n_from(ws->Lu[k], M + NX + j * NW, K + j * NU1);
-        {
-            dopus_real kmag = DOPUS_R(0.0);
-            for (j = 0; j < NX; ++j)
-                kmag = dmax(kmag, dopus_lai_dot(NU, K + j * NU1, K + j * NU1));
-            ws->kmag[k] = kmag;
-        }
         /* P_k = M_xx - LK' LK */
         UNROLL
         for (j = 0; j < NX; ++j)
@@ -1093,20 +1087,14 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
             Pf[j + i * NX] = sum;
         }
         if (NE > 0) {
-            /* LKn = Lu^{-1} Gam_u (in the array of KN); G_k = Gam_x - LK' LKn; S += LKn' LKn
+            /* LKn = Lu^{-1} Gam_u (in KN); G_k = Gam_x - LK' LKn; S += LKn' LKn
              * (S = -(nu-nu block of V_0)) */
             for (j = 0; j < NE; ++j)
                 lu_solve_n_from(ws->Lu[k], Gam + NX + j * NW, KN + j * NU1);
             dopus_lai_copy_mat(NX, NE, Gam, NW, ws->G[k], NX);
             dopus_lai_gemm_tn(NX, NE, NU, -DOPUS_R(1.0), K, NU1, KN, NU1, DOPUS_R(1.0), ws->G[k], NX);
             dopus_lai_gemm_tn(NE, NE, NU, DOPUS_R(1.0), KN, NU1, KN, NU1, DOPUS_R(1.0), ws->S, NE1);
-            /* KN = Lu'^{-1} LKn = M_uu^{-1} Gam_u */
-            for (j = 0; j < NE; ++j)
-                lu_solve_t(ws->Lu[k], KN + j * NU1);
         }
-        /* the gain K = Lu'^{-1} LK = M_uu^{-1} M_ux */
-        for (j = 0; j < NX; ++j)
-            lu_solve_t(ws->Lu[k], K + j * NU1);
     }
     if (NE > 0) {
         /* S is positive definite iff Req has full row rank on the states reachable from
@@ -1132,7 +1120,7 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
  * value-function vectors, nu at stage 0, forward sweep of the primal and the costates
  * lam_k = -dV_k/dx. The sweep vectors live in the arrays they become: once stage k's
  * rhs_stat has been read, its x part takes rhs_dyn_k (x_k is formed there), its u part
- * the vector kv_k = M_uu^{-1} m_u (u_k is formed there), and sl_k the vector p_k (lam_k is formed there). */
+ * the vector y_k = Lu^{-1} m_u (u_k is formed there), and sl_k the vector p_k (lam_k is formed there). */
 static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp, dopus_real *sl,
                           dopus_real *sn)
 {
@@ -1166,7 +1154,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
     for (k = N - 1; k >= 0; --k) {
         const dopus_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
         const dopus_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
-        dopus_real *xk = sp + k * NW, *kv = xk + NX, *pk = sl + k * NX;
+        dopus_real *xk = sp + k * NW, *yk = xk + NX, *pk = sl + k * NX;
         /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
         for (i = 0; i < NX; ++i)
             tv[i] = pn[i];
@@ -1177,38 +1165,36 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
         if (NE > 0) {
             dopus_lai_gemv_t(NX, NE, DOPUS_R(1.0), ws->G[k + 1], NX, c, DOPUS_R(1.0), e);
         }
-        /* p_k = m_x - K' m_u; e -= KN' m_u; kv = M_uu^{-1} m_u (off the recursion's chain); on
-         * the host path p_k and kv are formed in local arrays and stored once */
+        /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
+         * where u_k is formed (the forward sweep applies Lu'^{-1}); on the host path p_k and y
+         * are formed in local arrays and stored once */
 #if DOPUS_QP_PHIT
-        for (i = 0; i < NX; ++i)
-            xk[i] = pk[i];
-        dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, m + NX, DOPUS_R(1.0), m);
-        for (i = 0; i < NX; ++i)
-            pk[i] = m[i];
+        {
+            dopus_real y[NU1];
+            for (i = 0; i < NU; ++i)
+                y[i] = m[NX + i];
+            lu_solve_n(ws->Lu[k], y);
+            for (i = 0; i < NX; ++i)
+                xk[i] = pk[i];
+            dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, y, DOPUS_R(1.0), m);
+            for (i = 0; i < NX; ++i)
+                pk[i] = m[i];
+            if (NE > 0)
+                dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, y, DOPUS_R(1.0), e);
+            for (i = 0; i < NU; ++i)
+                yk[i] = y[i];
+        }
 #else
+        lu_solve_n(ws->Lu[k], m + NX);
         for (i = 0; i < NX; ++i) {
             xk[i] = pk[i];
             pk[i] = m[i];
         }
         dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, m + NX, DOPUS_R(1.0), pk);
-#endif
         if (NE > 0)
             dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, m + NX, DOPUS_R(1.0), e);
-#if DOPUS_QP_PHIT
-        {
-            dopus_real kl[NU1];
-            for (i = 0; i < NU; ++i)
-                kl[i] = m[NX + i];
-            lu_solve_n(ws->Lu[k], kl);
-            lu_solve_t(ws->Lu[k], kl);
-            for (i = 0; i < NU; ++i)
-                kv[i] = kl[i];
-        }
-#else
         for (i = 0; i < NU; ++i)
-            kv[i] = m[NX + i];
-        lu_solve_n(ws->Lu[k], kv);
-        lu_solve_t(ws->Lu[k], kv);
+            yk[i] = m[NX + i];
 #endif
     }
     /* stage 0: x_0 = rhs_dyn_0 (in place); dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
@@ -1223,7 +1209,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
         dopus_real *w = sp + k * NW;
         dopus_real *u = w + NX;
         dopus_real *lamk = sl + k * NX;
-        /* u_k = -(K x_k + kv + KN nu) */
+        /* u_k = -M_uu^{-1} (M_ux x_k + m_u + Gam_u nu) = -Lu'^{-1} (LK x_k + y_k + LKn nu) */
 #if DOPUS_QP_PHIT
         {
             dopus_real ul[NU1]; /* formed locally, stored once */
@@ -1232,6 +1218,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
             dopus_lai_gemv_n(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, w, DOPUS_R(1.0), ul);
             if (NE > 0)
                 dopus_lai_gemv_n(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, sn, DOPUS_R(1.0), ul);
+            lu_solve_t(ws->Lu[k], ul);
             for (i = 0; i < NU; ++i)
                 u[i] = ul[i];
         }
@@ -1241,6 +1228,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
         dopus_lai_gemv_n(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, w, DOPUS_R(1.0), u);
         if (NE > 0)
             dopus_lai_gemv_n(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, sn, DOPUS_R(1.0), u);
+        lu_solve_t(ws->Lu[k], u);
 #endif
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
