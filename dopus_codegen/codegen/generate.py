@@ -3,7 +3,8 @@
 The folder holds (names after renaming ``dopus_`` -> ``<name>_``):
 
 - ``<name>_casadi.c/.h``: every per-stage CasADi function of docs/algorithm.md section 2,
-  emitted by one ``casadi.CodeGenerator`` with explicit options;
+  emitted by one ``casadi.CodeGenerator`` with explicit options, in double each sin/cos pair
+  of one variable computed by one call (:mod:`.trig`, ``runtime_c/dopus_trig.h``);
 - ``<name>_sizes.h``, ``<name>_problem.c``: sizes and problem data, rendered from
   ``templates/*.j2``;
 - the hand-written ``runtime_c/*.c|*.h``, copied with the prefix renamed (among them the
@@ -34,6 +35,7 @@ from ..cnames import identifier_problem, rename_placeholder
 from ..outputs import write_bytes
 from . import flags
 from .flags import CASADI_CFLAGS, DEFAULT_OPT, STRICT_CFLAGS
+from .trig import pair_sincos
 from .folder import FUNCTION_SLOTS, CodegenError, find_meta, read_meta  # noqa: F401 - re-exported
 from ..paths import runtime_c_dir, templates_dir
 from ..problem.derivatives import cost_hessian_constant
@@ -324,7 +326,8 @@ def _check_float_literals(source: str) -> None:
 
 
 def casadi_sources(functions: Dict[str, ca.Function], name: str, real: str = "double") -> Dict[str, str]:
-    """``<name>_casadi.c`` and ``.h`` from one CodeGenerator with explicit options."""
+    """``<name>_casadi.c`` and ``.h`` from one CodeGenerator with explicit options; in double,
+    each sin/cos pair of one argument computed by one ``<name>_sincos`` call (:mod:`.trig`)."""
     opts = {"casadi_int": "int", "casadi_real": real, "mex": False, "with_header": True,
             "verbose": False, "main": False, "cpp": False, "with_mem": False}
     base = f"{name}_casadi"
@@ -336,6 +339,8 @@ def casadi_sources(functions: Dict[str, ca.Function], name: str, real: str = "do
         source = silence_unused_parameters((Path(tmp) / f"{base}.c").read_text())
         if real == "float":
             _check_float_literals(source)
+        else:
+            source = pair_sincos(source, name)[0]     # sin(a) and cos(a) in one call (codegen/trig.py)
         out = {f"{base}.c": single_precision(source) if real == "float" else source,
                f"{base}.h": (Path(tmp) / f"{base}.h").read_text()}
     _refuse_without_codegen(out[f"{base}.c"], functions)

@@ -19,6 +19,7 @@ extern "C" {
 #endif
 
 #include <math.h>
+#include "unicycle_trig.h"
 
 #ifndef casadi_real
 #define casadi_real double
@@ -123,7 +124,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a01=1.6666666666666666e-02;
   a02=arg[0]? arg[0][3] : 0;
   a03=arg[0]? arg[0][2] : 0;
-  a04=cos(a03);
+  unicycle_sincos_pair sc_0=unicycle_sincos(a03); a04=sc_0.c;
   a04=(a02*a04);
   a05=5.0000000000000003e-02;
   a06=arg[1]? arg[1][0] : 0;
@@ -132,7 +133,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a08=arg[1]? arg[1][1] : 0;
   a05=(a05*a08);
   a05=(a03+a05);
-  a09=cos(a05);
+  unicycle_sincos_pair sc_1=unicycle_sincos(a05); a09=sc_1.c;
   a09=(a07*a09);
   a09=(2.*a09);
   a04=(a04+a09);
@@ -142,21 +143,21 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a10=(a02+a10);
   a11=(a09*a08);
   a11=(a03+a11);
-  a12=cos(a11);
+  unicycle_sincos_pair sc_2=unicycle_sincos(a11); a12=sc_2.c;
   a12=(a10*a12);
   a04=(a04+a12);
   a04=(a01*a04);
   a04=(a00+a04);
   if (res[0]!=0) res[0][0]=a04;
   a04=arg[0]? arg[0][1] : 0;
-  a12=sin(a03);
+  a12=sc_0.s;
   a12=(a02*a12);
-  a05=sin(a05);
+  a05=sc_1.s;
   a07=(a07*a05);
   a07=(2.*a07);
   a12=(a12+a07);
   a12=(a12+a07);
-  a11=sin(a11);
+  a11=sc_2.s;
   a10=(a10*a11);
   a12=(a12+a10);
   a12=(a01*a12);
@@ -321,7 +322,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a12=arg[1]? arg[1][1] : 0;
   a13=(a05*a12);
   a13=(a09+a13);
-  a14=sin(a13);
+  unicycle_sincos_pair sc_3=unicycle_sincos(a13); a14=sc_3.s;
   a15=arg[0]? arg[0][3] : 0;
   a16=arg[1]? arg[1][0] : 0;
   a17=(a05*a16);
@@ -330,13 +331,13 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a19=(a18*a04);
   a20=(a17*a19);
   a20=(a14*a20);
-  a13=cos(a13);
+  a13=sc_3.c;
   a21=(a18*a03);
   a22=(a17*a21);
   a22=(a13*a22);
   a20=(a20-a22);
   a22=arg[3]? arg[3][2] : 0;
-  a23=cos(a09);
+  unicycle_sincos_pair sc_4=unicycle_sincos(a09); a23=sc_4.c;
   a24=(a15*a21);
   a24=(a23*a24);
   a24=(a22+a24);
@@ -344,7 +345,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a25=5.0000000000000003e-02;
   a26=(a25*a12);
   a26=(a09+a26);
-  a27=cos(a26);
+  unicycle_sincos_pair sc_5=unicycle_sincos(a26); a27=sc_5.c;
   a28=(a25*a16);
   a28=(a15+a28);
   a29=3.3333333333333333e-02;
@@ -353,7 +354,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a03=(2.*a03);
   a30=(a28*a03);
   a30=(a27*a30);
-  a26=sin(a26);
+  a26=sc_5.s;
   a29=(a29*a04);
   a29=(-a29);
   a29=(2.*a29);
@@ -361,7 +362,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a04=(a26*a04);
   a30=(a30-a04);
   a24=(a24+a30);
-  a04=sin(a09);
+  a04=sc_4.s;
   a31=(a15*a19);
   a31=(a04*a31);
   a24=(a24+a31);
@@ -587,16 +588,16 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a10=arg[1]? arg[1][1] : 0;
   a11=(a01*a10);
   a11=(a09+a11);
-  a12=cos(a11);
+  unicycle_sincos_pair sc_6=unicycle_sincos(a11); a12=sc_6.c;
   a13=(a08*a12);
   a14=arg[3]? arg[3][1] : 0;
   a15=(a05*a14);
   a16=(a04*a15);
-  a11=sin(a11);
+  a11=sc_6.s;
   a17=(a16*a11);
   a13=(a13+a17);
   a17=(a00*a15);
-  a18=sin(a09);
+  unicycle_sincos_pair sc_7=unicycle_sincos(a09); a18=sc_7.s;
   a17=(a17*a18);
   a13=(a13+a17);
   a17=5.0000000000000003e-02;
@@ -609,18 +610,18 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a20=(a03*a14);
   a10=(a17*a10);
   a10=(a09+a10);
-  a21=sin(a10);
+  unicycle_sincos_pair sc_8=unicycle_sincos(a10); a21=sc_8.s;
   a22=(a20*a21);
   a19=(a19*a06);
   a19=(-a19);
   a19=(2.*a19);
   a06=(a03*a19);
-  a10=cos(a10);
+  a10=sc_8.c;
   a23=(a06*a10);
   a22=(a22+a23);
   a13=(a13-a22);
   a22=(a00*a07);
-  a09=cos(a09);
+  a09=sc_7.c;
   a22=(a22*a09);
   a13=(a13+a22);
   if (res[0]!=0) res[0][14]=a13;
@@ -893,7 +894,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a16=arg[1]? arg[1][1] : 0;
   a17=(a07*a16);
   a17=(a12+a17);
-  a18=sin(a17);
+  unicycle_sincos_pair sc_9=unicycle_sincos(a17); a18=sc_9.s;
   a19=arg[0]? arg[0][3] : 0;
   a20=arg[1]? arg[1][0] : 0;
   a21=(a07*a20);
@@ -902,13 +903,13 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a23=(a22*a06);
   a24=(a21*a23);
   a25=(a18*a24);
-  a17=cos(a17);
+  a17=sc_9.c;
   a26=(a22*a13);
   a27=(a21*a26);
   a28=(a17*a27);
   a25=(a25-a28);
   a28=arg[3]? arg[3][2] : 0;
-  a29=cos(a12);
+  unicycle_sincos_pair sc_10=unicycle_sincos(a12); a29=sc_10.c;
   a30=(a19*a26);
   a31=(a29*a30);
   a31=(a28+a31);
@@ -916,7 +917,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a32=5.0000000000000003e-02;
   a33=(a32*a16);
   a33=(a12+a33);
-  a34=cos(a33);
+  unicycle_sincos_pair sc_11=unicycle_sincos(a33); a34=sc_11.c;
   a35=(a32*a20);
   a35=(a19+a35);
   a36=3.3333333333333333e-02;
@@ -925,7 +926,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a13=(2.*a13);
   a37=(a35*a13);
   a38=(a34*a37);
-  a33=sin(a33);
+  a33=sc_11.s;
   a36=(a36*a06);
   a36=(-a36);
   a36=(2.*a36);
@@ -933,7 +934,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a39=(a33*a06);
   a38=(a38-a39);
   a31=(a31+a38);
-  a39=sin(a12);
+  a39=sc_10.s;
   a40=(a19*a23);
   a41=(a39*a40);
   a31=(a31+a41);
@@ -1346,11 +1347,11 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a09=arg[1]? arg[1][1] : 0;
   a10=(a05*a09);
   a10=(a08+a10);
-  a11=sin(a10);
+  unicycle_sincos_pair sc_12=unicycle_sincos(a10); a11=sc_12.s;
   a12=(a07*a11);
   a12=(-a12);
   a12=(2.*a12);
-  a13=sin(a08);
+  unicycle_sincos_pair sc_13=unicycle_sincos(a08); a13=sc_13.s;
   a14=(a04*a13);
   a14=(a12-a14);
   a14=(a14+a12);
@@ -1358,19 +1359,19 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a06=(a04+a06);
   a09=(a00*a09);
   a09=(a08+a09);
-  a12=sin(a09);
+  unicycle_sincos_pair sc_14=unicycle_sincos(a09); a12=sc_14.s;
   a15=(a06*a12);
   a14=(a14-a15);
   a14=(a03*a14);
   if (res[1]!=0) res[1][8]=a14;
-  a08=cos(a08);
+  a08=sc_13.c;
   a04=(a04*a08);
-  a10=cos(a10);
+  a10=sc_12.c;
   a14=(a07*a10);
   a14=(2.*a14);
   a04=(a04+a14);
   a04=(a04+a14);
-  a09=cos(a09);
+  a09=sc_14.c;
   a14=(a06*a09);
   a04=(a04+a14);
   a04=(a03*a04);
@@ -2096,10 +2097,10 @@ static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw
   casadi_real a0, a1, a2;
   a0=arg[0]? arg[0][3] : 0;
   a1=arg[0]? arg[0][2] : 0;
-  a2=cos(a1);
+  unicycle_sincos_pair sc_15=unicycle_sincos(a1); a2=sc_15.c;
   a2=(a0*a2);
   if (res[0]!=0) res[0][0]=a2;
-  a1=sin(a1);
+  a1=sc_15.s;
   a0=(a0*a1);
   if (res[0]!=0) res[0][1]=a0;
   a0=arg[1]? arg[1][1] : 0;
