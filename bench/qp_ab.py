@@ -60,15 +60,22 @@ RANDOM = [
 ]
 
 
-def bench_problems(random_per_n: int = 2):
+def bench_problems(random_per_n: int = 2, warm_chain: bool = False):
     """The QPs of bench/qp_bench.py (robot arm: 20 cold Gauss-Newton, 6 warm exact-Hessian;
-    random ones with the robot's sizes), tolerance 1e-8."""
+    random ones with the robot's sizes), tolerance 1e-8. ``warm_chain``: also each robot-arm
+    QP but a run's first warm-started from the previous QP's solution of its run (as
+    qp_bench's ``ours_warm``)."""
     import qp_bench as QB
 
     out = []
+    prev: dict = {}
     for tag, qp in QB.robot_arm_qps(20, 6, log=lambda *a: None):
         sz = tuple(int(qp[k]) for k in ("N", "nx", "nu", "ng", "nr", "ne"))
-        out.append((f"bench_robot_{tag.rsplit('_', 1)[0]}/{tag}", sz, qp, {"tol": 1e-8}))
+        group = tag.rsplit('_', 1)[0]
+        out.append((f"bench_robot_{group}/{tag}", sz, qp, {"tol": 1e-8}))
+        if warm_chain and group in prev:
+            out.append((f"bench_robot_{group}/{tag}/warm", sz, qp, {"tol": 1e-8, "warm_from": prev[group]}))
+        prev[group] = qp
     rng = np.random.default_rng(0)
     for n in QB.RANDOM_NS:
         for t in range(random_per_n):
@@ -128,10 +135,12 @@ def build(rc_dir: Path, sizes, cache: dict):
     return cache[key]
 
 
-def run(h, qp, kw):
+def run(h, qp, kw, active_set: int = 0):
     kw = dict(kw)
     warm_from = kw.pop("warm_from", None)
     warm = h.solve(warm_from, tol=kw["tol"])[0] if warm_from is not None else None
+    if warm is not None and active_set > 0:
+        kw["active_set"] = active_set
     sol, info = h.solve(qp, warm=warm, **kw)
     return sol, info, h.infeasible_row()
 
@@ -186,6 +195,9 @@ def main():
     ap.add_argument("--no-bench-qps", action="store_true", help="skip bench/qp_bench.py's QPs (robot-arm runs)")
     ap.add_argument("--only", default="", metavar="PREFIX,...",
                     help="only the QPs whose label starts with one of these (e.g. bench_robot,robot_arm_qp,nx)")
+    ap.add_argument("--active-set", type=int, default=0, metavar="SWEEPS",
+                    help="the warm solves with the active-set start of at most SWEEPS sweeps (settings."
+                         "active_set), and the robot-arm QPs also warm-started along their runs (default 0: off)")
     ap.add_argument("--json", type=Path, default=BENCH / "results" / "qp_ab.json")
     args = ap.parse_args()
 
@@ -197,17 +209,19 @@ def main():
     work_dir = ROOT / "runtime_c"
     cache: dict = {}
     rows, mismatches = [], []
-    cases = problems() + ([] if args.no_bench_qps else bench_problems())
+    cases = problems() + ([] if args.no_bench_qps else bench_problems(warm_chain=args.active_set > 0))
     if args.only:
         cases = [c for c in cases if c[0].startswith(tuple(args.only.split(",")))]
     for label, sizes, qp, kw in cases:
         ha, hb = build(base_dir, sizes, cache), build(work_dir, sizes, cache)
-        a, b = run(ha, qp, kw), run(hb, qp, kw)
+        a, b = run(ha, qp, kw, args.active_set), run(hb, qp, kw, args.active_set)
         ok = same(a, b)
         if not ok:
             mismatches.append(label)
         row = {"qp": label, "identical": ok, "status": b[1]["status"], "iterations": b[1]["iterations"],
                "status_base": a[1]["status"], "iterations_base": a[1]["iterations"],
+               "active_set": b[1]["active_set"], "active_set_base": a[1]["active_set"],
+               "factorizations": b[1]["factorizations"], "factorizations_base": a[1]["factorizations"],
                "tol": kw["tol"], **({} if ok else difference(a, b))}
         if args.reps > 0 and "warm_from" not in kw and kw.get("max_iter", 100) > 3:
             time_pair(ha, hb, args.warmup)
@@ -235,6 +249,13 @@ def main():
               f"{max(r['primal'] for r in solved):.1e}, multipliers {max(r['dual'] for r in solved):.1e} "
               f"(relative to 1 + the base's largest entry); median {np.median([r['primal'] for r in solved]):.1e}, "
               f"{np.median([r['dual'] for r in solved]):.1e}")
+    started = [r for r in rows if r["active_set"] > 0 or r["active_set_base"] > 0]
+    if args.active_set > 0:
+        # the solves the active-set start answered (info.active_set: its sweeps) in either build
+        print(f"active-set start: solved {sum(r['active_set'] > 0 for r in rows)} (base "
+              f"{sum(r['active_set_base'] > 0 for r in rows)}); of these the same sweeps in "
+              f"{sum(r['active_set'] == r['active_set_base'] for r in started)} of {len(started)}, the same "
+              f"factorisations in {sum(r['factorizations'] == r['factorizations_base'] for r in started)}")
     changed = [r for r in differ if r["status"] != r["status_base"]]
     print(f"status changed in {len(changed)}: " + ", ".join(f"{r['qp']} {r['status_base']} -> {r['status']}"
                                                        for r in changed))
@@ -246,7 +267,8 @@ def main():
                   f"{r['iterations']:4d}")
     timed = [r for r in rows if "ratio" in r]
     summary = {"base": args.base, "solves": len(rows), "identical": len(rows) - len(mismatches),
-               "mismatches": mismatches, "statuses": statuses, "statuses_base": statuses_base}
+               "mismatches": mismatches, "statuses": statuses, "statuses_base": statuses_base,
+               "active_set": args.active_set}
     if timed:
         w = max(len(r["qp"].split("/")[0]) for r in timed)
         print(f"{'group':{w}s} {'QPs':>4s} {'t_base us':>10s} {'t_work us':>10s} {'median ratio':>13s} "

@@ -2676,6 +2676,15 @@ static dopus_real as_res(const dopus_qp_workspace *ws, int b)
     return ws->act[b] == -1 ? ws->vl[b] : (ws->act[b] != 0 ? -ws->uv[b] : DOPUS_R(0.0));
 }
 
+/* The row values of row b moved by dv (its residuals vl, uv of compute_residuals). */
+static void as_res_add(dopus_qp_workspace *ws, int b, dopus_real dv)
+{
+    if (ws->has_lo[b])
+        ws->vl[b] += dv;
+    if (ws->has_up[b])
+        ws->uv[b] -= dv;
+}
+
 /* The guess from the warm-start point (the primal part in the iterate, the multipliers in
  * *sol): a side is active when its multiplier points to it and exceeds its slack, a row with
  * lo == up always. Returns 0 when a row has a soft side (the start does not apply). */
@@ -2821,27 +2830,102 @@ static void as_schur_solve(const dopus_qp_workspace *ws, dopus_real *e)
     }
 }
 
+/* The residuals of compute_residuals moved with component j of w_k (k = N: of x_N) by dv:
+ * H_k's column j (and the shift) into r_stat, the dynamics rows of x_k and x_{k+1} (Req for
+ * x_N) and the values of the stage's bounded rows. */
+static void as_move_var(dopus_qp_workspace *ws, const dopus_qp_in *in, int k, int j, dopus_real dv)
+{
+    const int ld = k < N ? NW : NX;
+    const dopus_real *H = k < N ? in->H[k] : in->HN;
+    dopus_real *rs = ws->r_stat + k * NW;
+    int i, b, jj;
+    for (i = 0; i < ld; ++i)
+        rs[i] += (i >= j ? H[i + j * ld] : H[j + i * ld]) * dv;
+    rs[j] += in->hess_shift * dv;
+    if (j < NX)
+        ws->r_dyn[k * NX + j] += dv;
+    if (k < N) {
+        for (i = 0; i < NX; ++i)
+            ws->r_dyn[(k + 1) * NX + i] -= in->Phi[k][i + j * NX] * dv;
+    } else {
+        for (i = 0; i < NE; ++i)
+            ws->r_eqN[i] += in->Req[i + j * NE1] * dv;
+    }
+    FOR_STAGE_ROWS(ws, k, b, jj)
+    {
+        dopus_real c;
+        if (k < N)
+            c = NG == 0 || jj < NW ? (jj == j ? DOPUS_R(1.0) : DOPUS_R(0.0)) : in->C[k][(jj - NW) + j * NG];
+        else
+            c = NR == 0 || jj < NX ? (jj == j ? DOPUS_R(1.0) : DOPUS_R(0.0)) : in->R[(jj - NX) + j * NR];
+        if (c != DOPUS_R(0.0))
+            as_res_add(ws, b, c * dv);
+    }
+}
+
+/* Every active simple bound (a component of w_k or x_N) set to its bound exactly: before
+ * each evaluation of the residuals (after a refinement step it is met to round-off), so
+ * that the tests of a sweep and the answer are those of the iterate with its active bounds
+ * met, and the answer's control lands on the bound exactly, as a clipped control would;
+ * and (moved != 0) the bounds that joined the active set, with the residuals of the last
+ * evaluation moved with them (as_move_var): their violation then enters the next step
+ * through the stationarity and dynamics residuals instead of as the penalty weight times
+ * it, whose round-off (1e-9 of the scale with AS_RHO 1e6) took a second refinement step. */
+static void as_snap_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in, int moved)
+{
+    int k, b, j;
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            dopus_real lo, up, v;
+            if (!ws->act[b] || (k < N && NG > 0 && j >= NW) || (k == N && NR > 0 && j >= NX))
+                continue;
+            row_bounds(in, ws->bidx[b], &lo, &up);
+            v = ws->act[b] == -1 ? lo : up;
+            if (moved && v != ws->prim[k * NW + j])
+                as_move_var(ws, in, k, j, v - ws->prim[k * NW + j]);
+            ws->prim[k * NW + j] = v;
+        }
+}
+
 /* Refinement steps with the sweep's factor to the KKT point of the active set. Each step
  * solves (K + D_a' pen D_a) d = -r_stat - D_a' pen r_a, -r_dyn, -r_eqN over the rows a of the
  * factorisation and updates their multipliers by pen (D_a d + r_a) (the method of multipliers
  * with the factor kept); the multipliers of the rows added since (as_schur) move by their
  * Schur complement's answer to their residual after the step, G^-1 (D_s d + r_s), which the
- * next step's stationarity residual carries into the primal. Returns 1 when the residuals
- * reached tol (in *r), else 0. */
-static int as_refine(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, qp_res *r)
+ * next step's stationarity residual carries into the primal.
+ *
+ * The residuals are evaluated (compute_residuals, after the active simple bounds are set to
+ * their bounds) before the first step and after every step, except where the step itself
+ * gives them: known != 0 when the residual vectors of ws already hold those of the iterate
+ * (the previous sweep's last evaluation, updated by as_update for the multipliers it set to
+ * 0; the first step is then taken without a test), and after a step of a sweep with rows
+ * held by the Schur complement that followed an evaluation: the step solves the linear
+ * system, so the stationarity residual is D_s' G^-1 (D_s d + r_s), the dynamics and Req
+ * residuals 0 and the active rows' values moved by D_a d (to round-off, which the
+ * evaluation after the next step measures). Returns 1 when the evaluated residuals reached
+ * tol (in *r), else 0. */
+static int as_refine(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, qp_res *r, int known)
 {
-    int it, i, k, b, j;
+    int it, i, k, b, j, predicted = 0;
     dopus_real e[DOPUS_QP_AS_UPDATE];
     for (it = 0;; ++it) {
-        const dopus_real ra = as_residuals(ws, in, r);
-        QP_TRACE("active set: refinement %d stat %.2e eq %.2e act %.2e ineq %.2e (%d rows updated)\n", it,
-                 r->stat_s, r->eq_s, ra, r->ineq_s, ws->as_n);
-        if (!(isfinite(r->stat) && isfinite(r->eq) && isfinite(ra)))
-            return 0;
-        if (r->stat_s <= L->st.tol && r->eq_s <= L->st.tol && ra <= L->st.tol)
-            return 1;
+        int predict;
+        if (!known) {
+            dopus_real ra;
+            as_snap_bounds(ws, in, 0);
+            ra = as_residuals(ws, in, r);
+            QP_TRACE("active set: refinement %d stat %.2e eq %.2e act %.2e ineq %.2e (%d rows updated)\n", it,
+                     r->stat_s, r->eq_s, ra, r->ineq_s, ws->as_n);
+            if (!(isfinite(r->stat) && isfinite(r->eq) && isfinite(ra)))
+                return 0;
+            if (r->stat_s <= L->st.tol && r->eq_s <= L->st.tol && ra <= L->st.tol)
+                return 1;
+        }
         if (it >= AS_REFINE)
             return 0;
+        /* the residuals after this step from the step itself (see above) */
+        predict = ws->as_n > 0 && !predicted;
         for (i = 0; i < NP; ++i)
             ws->d_prim[i] = -ws->r_stat[i];
         for (k = 0; k <= N; ++k)
@@ -2854,14 +2938,21 @@ static int as_refine(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, 
             ws->d_nu[i] = -ws->r_eqN[i];
         riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
         for (i = 0; i < ws->as_n; ++i) {
+            dopus_real dv;
             as_row(ws, ws->as_rows[i], &k, &j);
-            e[i] = row_dot(in, k, j, ws->d_prim + k * NW) + as_res(ws, ws->as_rows[i]);
+            dv = row_dot(in, k, j, ws->d_prim + k * NW);
+            e[i] = dv + as_res(ws, ws->as_rows[i]);
+            if (predict)
+                as_res_add(ws, ws->as_rows[i], dv);
         }
         for (k = 0; k <= N; ++k)
             FOR_STAGE_ROWS(ws, k, b, j)
-        if (ws->act[b] && !as_updated(ws, b))
-            as_set_mu(ws, b,
-                      as_mu(ws, b) + ws->pen[b] * (row_dot(in, k, j, ws->d_prim + k * NW) + as_res(ws, b)));
+        if (ws->act[b] && !as_updated(ws, b)) {
+            const dopus_real dv = row_dot(in, k, j, ws->d_prim + k * NW);
+            as_set_mu(ws, b, as_mu(ws, b) + ws->pen[b] * (dv + as_res(ws, b)));
+            if (predict)
+                as_res_add(ws, b, dv);
+        }
         if (ws->as_n > 0) {
             as_schur_solve(ws, e);
             for (i = 0; i < ws->as_n; ++i)
@@ -2870,6 +2961,19 @@ static int as_refine(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, 
         dopus_lai_axpy(NP, DOPUS_R(1.0), ws->d_prim, ws->prim);
         dopus_lai_axpy((N + 1) * NX, DOPUS_R(1.0), ws->d_lam, ws->lam);
         dopus_lai_axpy(NE, DOPUS_R(1.0), ws->d_nu, ws->nu);
+        if (predict) {
+            for (i = 0; i < NP; ++i)
+                ws->r_stat[i] = DOPUS_R(0.0);
+            for (i = 0; i < (N + 1) * NX; ++i)
+                ws->r_dyn[i] = DOPUS_R(0.0);
+            for (i = 0; i < NE; ++i)
+                ws->r_eqN[i] = DOPUS_R(0.0);
+            for (i = 0; i < ws->as_n; ++i) {
+                as_row(ws, ws->as_rows[i], &k, &j);
+                row_axpy(in, k, j, e[i], ws->r_stat + k * NW);
+            }
+        }
+        known = predicted = predict;
     }
 }
 
@@ -2887,14 +2991,28 @@ static int as_wrong_sign(const dopus_qp_workspace *ws, int b, dopus_real mu)
     return (ws->act[b] == 1 && mu < DOPUS_R(0.0)) || (ws->act[b] == -1 && mu > DOPUS_R(0.0));
 }
 
+/* Multiplier mu of active row b set to 0, the stationarity residual r_stat of the last
+ * evaluation updated by D_b' (0 - mu) (compute_residuals' A'y). */
+static void as_zero_mu(dopus_qp_workspace *ws, const dopus_qp_in *in, int b, dopus_real mu)
+{
+    int k, j;
+    as_row(ws, b, &k, &j);
+    row_axpy(in, k, j, -mu, ws->r_stat + k * NW);
+    as_set_mu(ws, b, DOPUS_R(0.0));
+}
+
 /* The checks of a refined sweep: an active multiplier of the wrong sign leaves the active
  * set when it is at least AS_DROP times the largest wrong one of its family (the others
  * wait for the next sweep; within tol times the multipliers' scale a multiplier is set to 0
  * and its row stays), and an inactive side violated beyond tol joins it. Returns 1 when the
  * active set changed; *zeroed: 1 when a multiplier was set to 0 and its row stays; *update: 1
  * when the change only added rows and they join those added since the factorisation
- * (ws->as_rows, DOPUS_QP_AS_UPDATE at most): the next sweep keeps the factor. */
-static int as_update(const qp_loop *L, dopus_qp_workspace *ws, int *zeroed, int *update)
+ * (ws->as_rows, DOPUS_QP_AS_UPDATE at most): the next sweep keeps the factor. The primal
+ * iterate does not change: the residuals of the last evaluation stay those of the iterate
+ * but for the multipliers set to 0 (as_zero_mu), and the next sweep starts from them
+ * (as_refine's known). */
+static int as_update(const qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, int *zeroed,
+                     int *update)
 {
     dopus_real zscale = DOPUS_R(1.0), wrong[AS_NFAM];
     const dopus_real feas = L->st.tol * ws->scale_ineq;
@@ -2914,12 +3032,12 @@ static int as_update(const qp_loop *L, dopus_qp_workspace *ws, int *zeroed, int 
         if (as_wrong_sign(ws, b, mu)) {
             QP_TRACE("active set: row %d side %d multiplier %.3e\n", (int)ws->bidx[b], (int)ws->act[b], mu);
             if (dopus_fabs(mu) <= zscale) {
-                as_set_mu(ws, b, DOPUS_R(0.0));
+                as_zero_mu(ws, in, b, mu);
                 *zeroed = 1;
             } else if (dopus_fabs(mu) >= AS_DROP * wrong[as_family(ws, b)]) {
                 ws->act[b] = 0;
                 changed = dropped = 1;
-                as_set_mu(ws, b, DOPUS_R(0.0));
+                as_zero_mu(ws, in, b, mu);
             } else {
                 changed = dropped = 1; /* a wrong sign stays: this is no answer yet */
             }
@@ -2944,29 +3062,12 @@ static int as_update(const qp_loop *L, dopus_qp_workspace *ws, int *zeroed, int 
     return changed;
 }
 
-/* An active simple bound (a component of w_k or x_N) set to its bound exactly (it is met
- * to round-off): the iterate plus the step then lands on the bound exactly where the
- * bound's value minus the iterate is exact, as a clipped control would be. */
-static void as_snap_bounds(dopus_qp_workspace *ws, const dopus_qp_in *in)
-{
-    int k, b, j;
-    for (k = 0; k <= N; ++k)
-        FOR_STAGE_ROWS(ws, k, b, j)
-        {
-            dopus_real lo, up;
-            if (!ws->act[b] || (k < N && NG > 0 && j >= NW) || (k == N && NR > 0 && j >= NX))
-                continue;
-            row_bounds(in, ws->bidx[b], &lo, &up);
-            ws->prim[k * NW + j] = ws->act[b] == -1 ? lo : up;
-        }
-}
-
 /* The active-set start (dopus_qp.h). Returns DOPUS_QP_SOLVED with the solution and info
  * written, or QP_GO_ON with the iterate set back to the warm start for the interior point. */
 static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_qp_sol *sol,
                          dopus_qp_info *info)
 {
-    int solved = 0, zeroed, update = 0;
+    int solved = 0, zeroed, update = 0, known = 0, refined;
     qp_res r;
     if (!as_guess(ws, in, sol, L->hscale))
         return QP_GO_ON;
@@ -2978,11 +3079,19 @@ static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *
             break; /* the interior point stops at once with the warm start (its iterate 0) */
         ++L->as_sweeps;
         /* rows only added since the factorisation: its Schur complement, else (or when that
-         * does not converge) a new factorisation */
-        if (!(update && as_schur(ws, in) && as_refine(L, ws, in, &r)) &&
-            !(as_factor(L, ws, in) && as_refine(L, ws, in, &r)))
+         * does not converge: from an evaluation) a new factorisation */
+        if (update && as_schur(ws, in)) {
+            refined = as_refine(L, ws, in, &r, known);
+            known = 0;
+        } else {
+            refined = 0;
+        }
+        if (!refined && !(as_factor(L, ws, in) && as_refine(L, ws, in, &r, known)))
             break;
-        if (!as_update(L, ws, &zeroed, &update)) {
+        known = as_update(L, ws, in, &zeroed, &update);
+        if (known) {
+            as_snap_bounds(ws, in, 1); /* the bounds that joined, from the last evaluation */
+        } else {
             /* the residuals again after multipliers were set to 0 (else the iterate is the
              * sweep's, whose residuals r holds) */
             const dopus_real ra = zeroed ? as_residuals(ws, in, &r) : as_active_residual(ws);
@@ -2997,8 +3106,7 @@ static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *
     ws->rho_aug = DOPUS_R(0.0);
     QP_TRACE("active set: %s after %d sweeps\n", solved ? "solved" : "not solved", L->as_sweeps);
     if (solved) {
-        as_snap_bounds(ws, in);
-        as_residuals(ws, in, &r);
+        /* the iterate with its active simple bounds set, as evaluated in r */
         const int status = qp_result(L, ws, in, &r, DOPUS_QP_SOLVED, L->as_sweeps, sol, info);
         if (info)
             info->active_set = L->as_sweeps;

@@ -126,11 +126,12 @@ def test_bad_gate_settings_are_refused(arm, backend):
         assert b.update_settings_c(gate=-1.0) == 5 and b.update_settings_c(gate_hold=0) == 5
 
 
-# runs that stopped making progress without the flat stall test (the loop is chaotic, so the
-# two are the stuck runs of two versions): (shift of the initial first joint angle, K)
+# runs that stopped making progress without the flat stall test (the loop is chaotic, so each
+# is the stuck run of a version): (shift of the initial first joint angle, K)
 STUCK = [(1e-9, 12),  # the active-set start of uncapped QPs only: 1.4 cm off, KKT proxy 11.2
          (0.0, 11),   # also of QPs capped by one raise step: 13.5 cm off, KKT proxy near 55
-         (1e-9, 10)]  # the start keeping its factor for added rows: the flat test fires
+         (1e-9, 10),  # the start keeping its factor for added rows: the flat test fires
+         (1e-8, 13)]  # the start's residuals from its steps, added bounds set at once: the same
 
 
 def _stuck_run(arm, plant, guess, eps, K):

@@ -105,7 +105,17 @@
  * the Riccati recursion is factored once with a penalty weight on the active rows in place
  * of the barrier weights (AS_RHO times the Hessian scale over |D_i|^2), and the
  * equality-constrained QP of that active set is solved by iterative refinement with this
- * one factor (each step a method-of-multipliers update: back-substitutions only). A
+ * one factor (each step a method-of-multipliers update: back-substitutions only), the
+ * active simple bounds set to their bounds before each evaluation of the residuals. The
+ * residuals are evaluated before a sweep's first step only in the first sweep (a later
+ * sweep starts from the last evaluation, updated for the multipliers set to 0 and for the
+ * simple bounds that joined the active set, which are set to their bounds at once: their
+ * violation then enters the step through the stationarity and dynamics residuals rather
+ * than as the penalty weight times it, whose round-off took a second step) and after
+ * every step, but in a sweep with rows held by the Schur complement (below) after every
+ * second one: the step that follows an evaluation (or the sweep's start) gives its
+ * residuals itself, the stationarity part D_s' G^-1 (D_s d + r_s), the dynamics and Req
+ * parts 0 and the active rows' values moved by D d (to round-off). A
  * factorisation that succeeds shows the QP convex on the null space of the active rows, the
  * dynamics and Req. The answer is accepted when its scaled residuals (those of the
  * termination test, the active rows' equality residual with the inequality's scale) are
