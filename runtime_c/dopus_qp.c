@@ -116,6 +116,13 @@
 #define QP_NOINLINE
 #endif
 
+/* Out of line and optimised for size: code that runs only after a failed pivot. */
+#if defined(__GNUC__) || defined(__clang__)
+#define QP_COLD __attribute__((noinline, cold))
+#else
+#define QP_COLD
+#endif
+
 static dopus_real dmax(dopus_real a, dopus_real b)
 {
     return a > b ? a : b;
@@ -500,35 +507,19 @@ static dopus_real row_q(const dopus_qp_workspace *ws, const dopus_qp_in *in, int
 
 /* ---------------------------------------------------------------- Phi' v */
 
-/* PhiT = Phi' (nw x nx, column-major) and cs2 the squares of the column sums of |Phi| (the
- * round-off estimates of the factorisation). With DOPUS_QP_PHIT they are formed once per
- * solve for every stage (the data is constant during it): the products with Phi_k' then run
- * down contiguous columns of length nw, vectorised where the target has vectors, instead of
- * a sum of nx products per entry; without it, the products read Phi_k (the factorisation's
- * Phi' P as dot products of its contiguous columns) and the column sums are formed per stage
- * in every factorisation. */
-#if DOPUS_QP_PHIT
-static void phi_stage_copy(const dopus_real *restrict Phi, dopus_real *restrict PhiT,
-                           dopus_real *restrict cs2)
-{
-    int i, l;
-    for (i = 0; i < NW; ++i) {
-        dopus_real colsum = DOPUS_R(0.0);
-        for (l = 0; l < NX; ++l) {
-            PhiT[i + l * NW] = Phi[l + i * NX];
-            colsum += dopus_fabs(Phi[l + i * NX]);
-        }
-        cs2[i] = colsum * colsum;
-    }
-}
-#endif
-
+/* PhiT = Phi' (nw x nx, column-major). With DOPUS_QP_PHIT it is formed once per solve for
+ * every stage (the data is constant during it): the products with Phi_k' then run down
+ * contiguous columns of length nw, vectorised where the target has vectors, instead of a sum
+ * of nx products per entry; without it, the products read Phi_k (the factorisation's Phi' P
+ * as dot products of its contiguous columns). */
 #if DOPUS_QP_PHIT
 static void transpose_phi(dopus_qp_workspace *ws, const dopus_qp_in *in)
 {
-    int k;
+    int k, i, l;
     for (k = 0; k < N; ++k)
-        phi_stage_copy(in->Phi[k], ws->PhiT[k], ws->phi_cs2[k]);
+        for (i = 0; i < NW; ++i)
+            for (l = 0; l < NX; ++l)
+                ws->PhiT[k][i + l * NW] = in->Phi[k][l + i * NX];
 }
 /* PhiT_k (nw x nx) for phit_gemv, and its entry (i, l) = Phi_k(l, i) */
 #define QP_PHIT(ws, in, k) ((const dopus_real *)(ws)->PhiT[(k)])
@@ -825,11 +816,10 @@ static void phit_mv(const dopus_real *restrict PhiT, const dopus_real *restrict 
  * (Cortex-M7) the triangle saves 45 % of the products. */
 QP_NOINLINE static void qp_stage_wt(const dopus_real *restrict P, const dopus_real *restrict G,
                                     const dopus_real *restrict PhiT, dopus_real *restrict WT,
-                                    dopus_real *restrict Gam, dopus_real *restrict cs2)
+                                    dopus_real *restrict Gam)
 {
 #if DOPUS_QP_PHIT
     int j;
-    (void)cs2;
     for (j = 0; j < NX; ++j)
         phit_mv(PhiT, P + j * NX, WT + j * NW);
     for (j = 0; j < NE; ++j)
@@ -837,13 +827,9 @@ QP_NOINLINE static void qp_stage_wt(const dopus_real *restrict P, const dopus_re
 #else
     int i, j, l;
     for (i = 0; i < NW; ++i) {
-        dopus_real pc[NX], colsum;
+        dopus_real pc[NX];
         for (l = 0; l < NX; ++l)
             pc[l] = PhiT[l + i * NX];
-        colsum = dopus_fabs(pc[0]);
-        for (l = 1; l < NX; ++l)
-            colsum += dopus_fabs(pc[l]);
-        cs2[i] = colsum * colsum;
         for (j = 0; j < NX; ++j) {
             dopus_real s = DOPUS_R(0.0);
             for (l = 0; l < NX; ++l)
@@ -863,11 +849,10 @@ QP_NOINLINE static void qp_stage_wt(const dopus_real *restrict P, const dopus_re
 QP_NOINLINE static void qp_stage_update(const dopus_real *restrict Phi, const dopus_real *restrict P,
                                         const dopus_real *restrict G, const dopus_real *restrict H,
                                         const dopus_real *restrict PhiT, dopus_real *restrict WT,
-                                        dopus_real *restrict M, dopus_real *restrict Gam,
-                                        dopus_real *restrict cs2)
+                                        dopus_real *restrict M, dopus_real *restrict Gam)
 {
     int i, j, l;
-    qp_stage_wt(P, G, PhiT, WT, Gam, cs2);
+    qp_stage_wt(P, G, PhiT, WT, Gam);
     UNROLL
     for (j = 0; j < NW; ++j) {
         dopus_real col[NW];
@@ -886,6 +871,85 @@ QP_NOINLINE static void qp_stage_update(const dopus_real *restrict Phi, const do
     }
 }
 
+/* ---------------------------------------------------------------- round-off of the pivots */
+
+/* A pivot of M_uu at or below zero is judged against an estimate of its round-off (see
+ * riccati_factor). The estimate is formed only then, from what the recursion keeps: it
+ * needs the diagonal of stage k's terms before Phi' P Phi, the column sums of |Phi_k|, the
+ * largest entries of P_{k+1} and P_{k+2} and the columns of stage k+1's Lu^{-1} M_ux (K),
+ * all unchanged since they were formed. The estimates are the same as
+ * when they were formed for every stage. */
+
+/* dg = the diagonal of H_k + D'QD + delta I (the terms of M before Phi' P Phi) */
+static void stage_diag(const dopus_qp_workspace *ws, const dopus_qp_in *in, int k, dopus_real *dg)
+{
+    dopus_real q[NSI];
+    int i, j, b;
+    for (i = 0; i < NSI; ++i)
+        q[i] = DOPUS_R(0.0);
+    for (b = ws->bstart[k]; b < ws->bstart[k + 1]; ++b)
+        q[ws->bidx[b] - k * NSI] = row_q(ws, in, b);
+    for (i = 0; i < NW; ++i)
+        dg[i] = in->H[k][i + i * NW] + q[i] + ws->delta + in->hess_shift;
+    for (j = 0; j < NG; ++j)
+        for (i = 0; i < NW; ++i)
+            dg[i] += q[NW + j] * in->C[k][j + i * NG] * in->C[k][j + i * NG];
+}
+
+/* cs2 = the squares of the column sums of |Phi_k| */
+static void stage_cs2(const dopus_real *Phi, dopus_real *cs2)
+{
+    int i, l;
+    for (i = 0; i < NW; ++i) {
+        dopus_real colsum = dopus_fabs(Phi[i * NX]);
+        for (l = 1; l < NX; ++l)
+            colsum += dopus_fabs(Phi[l + i * NX]);
+        cs2[i] = colsum * colsum;
+    }
+}
+
+/* The largest |entry| of P_k (k < N, packed; pmagN for P_N) */
+static dopus_real p_absmax(const dopus_qp_workspace *ws, int k, dopus_real pmagN)
+{
+    dopus_real m = DOPUS_R(0.0);
+    int l;
+    if (k == N)
+        return pmagN;
+    for (l = 0; l < DOPUS_QP_NXP; ++l)
+        m = dmax(m, dopus_fabs(ws->P[k][l]));
+    return m;
+}
+
+/* noise[j], the round-off estimate of pivot j of stage k's M_uu: the rounding of its terms
+ * plus the error of P_{k+1} propagated through B' P B. P_{k+1} = M_xx - M_xu M_uu^{-1} M_ux
+ * of stage k+1 may cancel large barrier terms (an active state bound enters M_xx, is
+ * absorbed by the controls of the stage before and cancels), leaving an absolute error of
+ * about eps times the magnitude pmag of the cancelled terms: the largest of M_xx's diagonal
+ * terms with their propagated error and of the squared columns of Lu^{-1} M_ux (for k = N - 1,
+ * the largest entry of P_N). */
+QP_COLD static void stage_noise(const dopus_qp_workspace *ws, const dopus_qp_in *in, int k, dopus_real pmagN,
+                                dopus_real *noise)
+{
+    dopus_real dg[NW], cs2[NW];
+    const dopus_real pmax = p_absmax(ws, k + 1, pmagN);
+    dopus_real pmag = pmax;
+    int j;
+    if (k + 1 < N) {
+        const dopus_real pmax1 = p_absmax(ws, k + 2, pmagN);
+        stage_diag(ws, in, k + 1, dg);
+        stage_cs2(in->Phi[k + 1], cs2);
+        pmag = DOPUS_R(0.0);
+        for (j = 0; j < NX; ++j)
+            pmag = dmax(pmag, dopus_fabs(dg[j]) + cs2[j] * pmax1);
+        for (j = 0; j < NX; ++j)
+            pmag = dmax(pmag, dopus_lai_dot(NU, ws->K[k + 1] + j * NU1, ws->K[k + 1] + j * NU1));
+    }
+    stage_diag(ws, in, k, dg);
+    stage_cs2(in->Phi[k], cs2);
+    for (j = 0; j < NU; ++j)
+        noise[j] = RICCATI_EPS * (dopus_fabs(dg[NX + j]) + cs2[NX + j] * dmax(pmax, pmag));
+}
+
 /* The scale of delta and rho: the largest absolute entry of the Hessian data (hmax, from
  * check_input) plus the shift. */
 static dopus_real hessian_scale(const dopus_qp_in *in, dopus_real hmax)
@@ -897,7 +961,10 @@ static dopus_real hessian_scale(const dopus_qp_in *in, dopus_real hmax)
 
 /* Factor the Newton system for the current barrier weights (row_q), delta and rho.
  * Returns 0, or 1 when a stage pivot block M_uu is not positive definite (wrong inertia),
- * or 2 when the terminal-multiplier block S is singular. */
+ * or 2 when the terminal-multiplier block S is singular. Per stage it keeps P_k (packed),
+ * the packed factor Lu of M_uu = Lu Lu' and Lu^{-1} M_ux in K (with terminal equalities
+ * G_k and Lu^{-1} Gam_u in KN); the solve applies Lu'^{-1} (the gain M_uu^{-1} M_ux is never
+ * formed). */
 static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
 {
     int k, i, j;
@@ -905,7 +972,7 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
     dopus_real *Gam = ws->work + NX * NW; /* NW x NE: Phi_k' G_{k+1} */
     dopus_real *Pf = Gam + NW * NE1;      /* NX x NX: P_{k+1} unpacked */
     const dopus_real delta = ws->delta;
-    dopus_real pmag, pnext;
+    dopus_real pmagN;
     int b;
     ++ws->n_fact;
 
@@ -944,31 +1011,22 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
     }
     for (i = 0; i < NE1 * NE1; ++i)
         ws->S[i] = DOPUS_R(0.0);
+    /* the largest |entry| of P_N, for the round-off estimate of a pivot (stage_noise) */
+    pmagN = dopus_lai_max_abs_mat(NX, NX, Pf, NX);
 
-    /* Round-off of the Schur complements: P_{k+1} = M_xx - M_xu M_uu^{-1} M_ux may cancel
-     * large barrier terms (an active state bound enters M_xx, is absorbed by the controls
-     * of the stage before and cancels), leaving an absolute error of about eps times the
-     * magnitude `pmag` of the cancelled terms. That error reaches the pivots of M_uu of
-     * stage k through B' P B, so a negative pivot within that noise is a numerical zero. */
-    pmag = dopus_lai_max_abs_mat(NX, NX, Pf, NX);
-    pnext = pmag; /* largest |entry| of P_{k+1}, kept along the recursion */
     for (k = N - 1; k >= 0; --k) {
         dopus_real *M = ws->M;
         const dopus_real *Phi = in->Phi[k];
 #if DOPUS_QP_PHIT
         const dopus_real *PhiT = ws->PhiT[k];
-        const dopus_real *cs2 = ws->phi_cs2[k];
 #else
         const dopus_real *PhiT = Phi; /* qp_stage_update reads Phi_k itself */
-        dopus_real cs2[NW];           /* the squared column sums, formed here */
 #endif
-        dopus_real q[NSI], dg[NW];
+        dopus_real q[NSI];
         dopus_real Lu[NU1 * NU1];
         dopus_real *K = ws->K[k];
         dopus_real *KN = ws->KN[k];
         dopus_real *P = ws->P[k];
-        const dopus_real pmax = pnext;
-        dopus_real mxx = DOPUS_R(0.0), pabs;
         int l = 0;
 
         /* barrier weights of the stage's rows (0 on the unbounded rows) */
@@ -977,27 +1035,11 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         for (b = ws->bstart[k]; b < ws->bstart[k + 1]; ++b)
             q[ws->bidx[b] - k * NSI] = row_q(ws, in, b);
 
-        /* dg = the diagonal of H_k + D'QD + delta I (the terms before Phi' P Phi: the
-         * round-off estimates below are taken from them) */
-        for (i = 0; i < NW; ++i)
-            dg[i] = in->H[k][i + i * NW] + q[i] + delta + in->hess_shift;
-        for (j = 0; j < NG; ++j)
-            for (i = 0; i < NW; ++i)
-                dg[i] += q[NW + j] * in->C[k][j + i * NG] * in->C[k][j + i * NG];
-                /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
-         * read), Gam = Phi' G_{k+1} (and without the kept copy cs2, from the same pass over
-         * Phi_k) */
-#if DOPUS_QP_PHIT
-        qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam, NULL);
-#else
-        qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam, cs2);
-#endif
-        /* noise of M_uu(j,j): rounding of its terms plus the propagated error of P (cs2: the
-         * squared column sums of |Phi_k|) */
-        for (j = 0; j < NU; ++j)
-            ws->noise[j] = RICCATI_EPS * (dopus_fabs(dg[NX + j]) + cs2[NX + j] * dmax(pmax, pmag));
-        for (j = 0; j < NX; ++j)
-            mxx = dmax(mxx, dopus_fabs(dg[j]) + cs2[j] * pmax);
+        /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
+         * read), Gam = Phi' G_{k+1} */
+        qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam);
+        /* (hess_shift read here: with a local copy read before the stage update, GCC 12 at -O3
+         * no longer vectorised the triangle of M, 1.5 times its instructions) */
         for (i = 0; i < NW; ++i)
             M[i + i * NW] += q[i] + delta + in->hess_shift;
         for (j = 0; j < NG; ++j) {
@@ -1010,21 +1052,28 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
                         M[a + c * NW] += qg * C[j + a * NG] * C[j + c * NG];
         }
 
-        /* M_uu = Lu Lu' (its lower triangle); a pivot below -noise is wrong inertia */
+        /* M_uu = Lu Lu' (its lower triangle). A pivot at or below zero is tried again
+         * against its round-off estimate (stage_noise): within the noise it is a numerical
+         * zero and floored, below -noise it is wrong inertia. Positive pivots are the same
+         * either way. */
         for (j = 0; j < NU; ++j)
             for (i = j; i < NU; ++i)
                 Lu[i + j * NU1] = M[NX + i + (NX + j) * NW];
-        if (dopus_lai_potrf_l_noise(NU, Lu, NU1, ws->noise, &ws->pivot_floors) != 0) {
-            QP_TRACE("   pivot fail stage %d delta %.2e rho %.2e\n", k, delta, ws->rho_aug);
-            return 1;
+        if (dopus_lai_potrf_l(NU, Lu, NU1) != 0) {
+            stage_noise(ws, in, k, pmagN, ws->noise);
+            for (j = 0; j < NU; ++j)
+                for (i = j; i < NU; ++i)
+                    Lu[i + j * NU1] = M[NX + i + (NX + j) * NW];
+            if (dopus_lai_potrf_l_noise(NU, Lu, NU1, ws->noise, &ws->pivot_floors) != 0) {
+                QP_TRACE("   pivot fail stage %d delta %.2e rho %.2e\n", k, delta, ws->rho_aug);
+                return 1;
+            }
         }
-        pmag = mxx;
         pack_lu(Lu, ws->Lu[k]);
-        /* LK = Lu^{-1} M_ux (in the array of K), LKn = Lu^{-1} Gam_u (in that of KN) */
+        /* LK = Lu^{-1} M_ux (in K) */
         for (j = 0; j < NX; ++j)
             lu_solve_n_from(ws->Lu[k], M + NX + j * NW, K + j * NU1);
-        /* P_k = M_xx - LK' LK; the magnitude of the cancelled terms sets the noise */
-        pabs = DOPUS_R(0.0);
+        /* P_k = M_xx - LK' LK */
         UNROLL
         for (j = 0; j < NX; ++j)
             UNROLL
@@ -1036,25 +1085,16 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
             P[l++] = sum;
             Pf[i + j * NX] = sum;
             Pf[j + i * NX] = sum;
-            pabs = dmax(pabs, dopus_fabs(sum));
         }
-        pnext = pabs;
-        for (j = 0; j < NX; ++j)
-            pmag = dmax(pmag, dopus_lai_dot(NU, K + j * NU1, K + j * NU1));
         if (NE > 0) {
+            /* LKn = Lu^{-1} Gam_u (in KN); G_k = Gam_x - LK' LKn; S += LKn' LKn
+             * (S = -(nu-nu block of V_0)) */
             for (j = 0; j < NE; ++j)
                 lu_solve_n_from(ws->Lu[k], Gam + NX + j * NW, KN + j * NU1);
-            /* G_k = Gam_x - LK' LKn;  S += LKn' LKn (S = -(nu-nu block of V_0)) */
             dopus_lai_copy_mat(NX, NE, Gam, NW, ws->G[k], NX);
             dopus_lai_gemm_tn(NX, NE, NU, -DOPUS_R(1.0), K, NU1, KN, NU1, DOPUS_R(1.0), ws->G[k], NX);
             dopus_lai_gemm_tn(NE, NE, NU, DOPUS_R(1.0), KN, NU1, KN, NU1, DOPUS_R(1.0), ws->S, NE1);
-            /* KN = Lu'^{-1} LKn = M_uu^{-1} Gam_u */
-            for (j = 0; j < NE; ++j)
-                lu_solve_t(ws->Lu[k], KN + j * NU1);
         }
-        /* the gain K = Lu'^{-1} LK = M_uu^{-1} M_ux */
-        for (j = 0; j < NX; ++j)
-            lu_solve_t(ws->Lu[k], K + j * NU1);
     }
     if (NE > 0) {
         /* S is positive definite iff Req has full row rank on the states reachable from
@@ -1080,7 +1120,7 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
  * value-function vectors, nu at stage 0, forward sweep of the primal and the costates
  * lam_k = -dV_k/dx. The sweep vectors live in the arrays they become: once stage k's
  * rhs_stat has been read, its x part takes rhs_dyn_k (x_k is formed there), its u part
- * the vector kv_k = M_uu^{-1} m_u (u_k is formed there), and sl_k the vector p_k (lam_k is formed there). */
+ * the vector y_k = Lu^{-1} m_u (u_k is formed there), and sl_k the vector p_k (lam_k is formed there). */
 static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp, dopus_real *sl,
                           dopus_real *sn)
 {
@@ -1090,8 +1130,8 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
      * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
     dopus_real tv[NX], m[NW];
 #else
-    dopus_real *tv = ws->work;     /* NX */
-    dopus_real *m = ws->work + NX; /* NW */
+    dopus_real *tv = ws->work;        /* NX */
+    dopus_real *m = ws->work + NX;    /* NW */
 #endif
     dopus_real *e = ws->e;
 
@@ -1114,7 +1154,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
     for (k = N - 1; k >= 0; --k) {
         const dopus_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
         const dopus_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
-        dopus_real *xk = sp + k * NW, *kv = xk + NX, *pk = sl + k * NX;
+        dopus_real *xk = sp + k * NW, *yk = xk + NX, *pk = sl + k * NX;
         /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
         for (i = 0; i < NX; ++i)
             tv[i] = pn[i];
@@ -1125,38 +1165,36 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
         if (NE > 0) {
             dopus_lai_gemv_t(NX, NE, DOPUS_R(1.0), ws->G[k + 1], NX, c, DOPUS_R(1.0), e);
         }
-        /* p_k = m_x - K' m_u; e -= KN' m_u; kv = M_uu^{-1} m_u (off the recursion's chain); on
-         * the host path p_k and kv are formed in local arrays and stored once */
+        /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
+         * where u_k is formed (the forward sweep applies Lu'^{-1}); on the host path p_k and y
+         * are formed in local arrays and stored once */
 #if DOPUS_QP_PHIT
-        for (i = 0; i < NX; ++i)
-            xk[i] = pk[i];
-        dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, m + NX, DOPUS_R(1.0), m);
-        for (i = 0; i < NX; ++i)
-            pk[i] = m[i];
+        {
+            dopus_real y[NU1];
+            for (i = 0; i < NU; ++i)
+                y[i] = m[NX + i];
+            lu_solve_n(ws->Lu[k], y);
+            for (i = 0; i < NX; ++i)
+                xk[i] = pk[i];
+            dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, y, DOPUS_R(1.0), m);
+            for (i = 0; i < NX; ++i)
+                pk[i] = m[i];
+            if (NE > 0)
+                dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, y, DOPUS_R(1.0), e);
+            for (i = 0; i < NU; ++i)
+                yk[i] = y[i];
+        }
 #else
+        lu_solve_n(ws->Lu[k], m + NX);
         for (i = 0; i < NX; ++i) {
             xk[i] = pk[i];
             pk[i] = m[i];
         }
         dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, m + NX, DOPUS_R(1.0), pk);
-#endif
         if (NE > 0)
             dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, m + NX, DOPUS_R(1.0), e);
-#if DOPUS_QP_PHIT
-        {
-            dopus_real kl[NU1];
-            for (i = 0; i < NU; ++i)
-                kl[i] = m[NX + i];
-            lu_solve_n(ws->Lu[k], kl);
-            lu_solve_t(ws->Lu[k], kl);
-            for (i = 0; i < NU; ++i)
-                kv[i] = kl[i];
-        }
-#else
         for (i = 0; i < NU; ++i)
-            kv[i] = m[NX + i];
-        lu_solve_n(ws->Lu[k], kv);
-        lu_solve_t(ws->Lu[k], kv);
+            yk[i] = m[NX + i];
 #endif
     }
     /* stage 0: x_0 = rhs_dyn_0 (in place); dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
@@ -1171,7 +1209,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
         dopus_real *w = sp + k * NW;
         dopus_real *u = w + NX;
         dopus_real *lamk = sl + k * NX;
-        /* u_k = -(K x_k + kv + KN nu) */
+        /* u_k = -M_uu^{-1} (M_ux x_k + m_u + Gam_u nu) = -Lu'^{-1} (LK x_k + y_k + LKn nu) */
 #if DOPUS_QP_PHIT
         {
             dopus_real ul[NU1]; /* formed locally, stored once */
@@ -1180,6 +1218,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
             dopus_lai_gemv_n(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, w, DOPUS_R(1.0), ul);
             if (NE > 0)
                 dopus_lai_gemv_n(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, sn, DOPUS_R(1.0), ul);
+            lu_solve_t(ws->Lu[k], ul);
             for (i = 0; i < NU; ++i)
                 u[i] = ul[i];
         }
@@ -1189,6 +1228,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
         dopus_lai_gemv_n(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, w, DOPUS_R(1.0), u);
         if (NE > 0)
             dopus_lai_gemv_n(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, sn, DOPUS_R(1.0), u);
+        lu_solve_t(ws->Lu[k], u);
 #endif
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)

@@ -206,14 +206,12 @@
 #define DOPUS_QP_NUP (DOPUS_QP_NU1 * (DOPUS_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define DOPUS_QP_NXP (DOPUS_NX * (DOPUS_NX + 1) / 2)
-/* DOPUS_QP_PHIT 1: the workspace keeps Phi_k' and the squared column sums of |Phi_k| for
- * the whole solve (N nw (nx + 1) reals), so that the products with Phi_k' run down
- * contiguous columns (vectorised where doubles come in vectors) and the factorisation
- * neither transposes nor sums. 0 (the default on 32-bit ARM: a scalar FPU and little RAM):
- * the products read Phi_k itself (Phi_k'P as dot products of its columns) and the column
- * sums are formed per stage in every factorisation, and the QP's kernels take the forms
- * that suit a scalar FPU (dopus_qp.c). The same results either way; define it to
- * override. */
+/* DOPUS_QP_PHIT 1: the workspace keeps Phi_k' for the whole solve (N nw nx reals), so that
+ * the products with Phi_k' run down contiguous columns (vectorised where doubles come in
+ * vectors) and the factorisation does not transpose. 0 (the default on 32-bit ARM: a
+ * scalar FPU and little RAM): the products read Phi_k itself (Phi_k'P as dot products of
+ * its columns), and the QP's kernels take the forms that suit a scalar FPU (dopus_qp.c).
+ * The same results either way; define it to override. */
 #ifndef DOPUS_QP_PHIT
 #if defined(__arm__) && !defined(__aarch64__)
 #define DOPUS_QP_PHIT 0
@@ -407,14 +405,13 @@ typedef struct {
     /* Riccati factorisation: condensed stage Hessians and value-function data */
 #if DOPUS_QP_PHIT
     dopus_real PhiT[DOPUS_N][DOPUS_QP_NW * DOPUS_NX]; /* Phi_k' (nw x nx), formed once per solve */
-    dopus_real phi_cs2[DOPUS_N][DOPUS_QP_NW];         /* squared column sums of |Phi_k|, the same */
 #endif
     dopus_real M[DOPUS_QP_NW * DOPUS_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     dopus_real P[DOPUS_N + 1][DOPUS_QP_NXP];             /* value function Hessians, packed lower */
     dopus_real G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];  /* value function x-nu coupling */
     dopus_real Lu[DOPUS_N][DOPUS_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
-    dopus_real K[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* gain M_uu^{-1} M_ux */
-    dopus_real KN[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* M_uu^{-1} (Phi'G)_u */
+    dopus_real K[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux (the gain is Lu'^{-1} of it) */
+    dopus_real KN[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     dopus_real S[DOPUS_QP_NE1 * DOPUS_QP_NE1];           /* -(nu-nu block) at stage 0, factored */
     dopus_real e[DOPUS_QP_NE1];
     dopus_real work[DOPUS_QP_NWORK];

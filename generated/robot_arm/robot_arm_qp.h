@@ -206,14 +206,12 @@
 #define ROBOT_ARM_QP_NUP (ROBOT_ARM_QP_NU1 * (ROBOT_ARM_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define ROBOT_ARM_QP_NXP (ROBOT_ARM_NX * (ROBOT_ARM_NX + 1) / 2)
-/* ROBOT_ARM_QP_PHIT 1: the workspace keeps Phi_k' and the squared column sums of |Phi_k| for
- * the whole solve (N nw (nx + 1) reals), so that the products with Phi_k' run down
- * contiguous columns (vectorised where doubles come in vectors) and the factorisation
- * neither transposes nor sums. 0 (the default on 32-bit ARM: a scalar FPU and little RAM):
- * the products read Phi_k itself (Phi_k'P as dot products of its columns) and the column
- * sums are formed per stage in every factorisation, and the QP's kernels take the forms
- * that suit a scalar FPU (robot_arm_qp.c). The same results either way; define it to
- * override. */
+/* ROBOT_ARM_QP_PHIT 1: the workspace keeps Phi_k' for the whole solve (N nw nx reals), so that
+ * the products with Phi_k' run down contiguous columns (vectorised where doubles come in
+ * vectors) and the factorisation does not transpose. 0 (the default on 32-bit ARM: a
+ * scalar FPU and little RAM): the products read Phi_k itself (Phi_k'P as dot products of
+ * its columns), and the QP's kernels take the forms that suit a scalar FPU (robot_arm_qp.c).
+ * The same results either way; define it to override. */
 #ifndef ROBOT_ARM_QP_PHIT
 #if defined(__arm__) && !defined(__aarch64__)
 #define ROBOT_ARM_QP_PHIT 0
@@ -407,14 +405,13 @@ typedef struct {
     /* Riccati factorisation: condensed stage Hessians and value-function data */
 #if ROBOT_ARM_QP_PHIT
     robot_arm_real PhiT[ROBOT_ARM_N][ROBOT_ARM_QP_NW * ROBOT_ARM_NX]; /* Phi_k' (nw x nx), formed once per solve */
-    robot_arm_real phi_cs2[ROBOT_ARM_N][ROBOT_ARM_QP_NW];         /* squared column sums of |Phi_k|, the same */
 #endif
     robot_arm_real M[ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     robot_arm_real P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NXP];             /* value function Hessians, packed lower */
     robot_arm_real G[ROBOT_ARM_N + 1][ROBOT_ARM_NX * ROBOT_ARM_QP_NE1];  /* value function x-nu coupling */
     robot_arm_real Lu[ROBOT_ARM_N][ROBOT_ARM_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
-    robot_arm_real K[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_NX];      /* gain M_uu^{-1} M_ux */
-    robot_arm_real KN[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_QP_NE1]; /* M_uu^{-1} (Phi'G)_u */
+    robot_arm_real K[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_NX];      /* Lu^{-1} M_ux (the gain is Lu'^{-1} of it) */
+    robot_arm_real KN[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     robot_arm_real S[ROBOT_ARM_QP_NE1 * ROBOT_ARM_QP_NE1];           /* -(nu-nu block) at stage 0, factored */
     robot_arm_real e[ROBOT_ARM_QP_NE1];
     robot_arm_real work[ROBOT_ARM_QP_NWORK];

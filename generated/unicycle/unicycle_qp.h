@@ -206,14 +206,12 @@
 #define UNICYCLE_QP_NUP (UNICYCLE_QP_NU1 * (UNICYCLE_QP_NU1 + 1) / 2)
 /* A symmetric nx x nx matrix packed by lower columns. */
 #define UNICYCLE_QP_NXP (UNICYCLE_NX * (UNICYCLE_NX + 1) / 2)
-/* UNICYCLE_QP_PHIT 1: the workspace keeps Phi_k' and the squared column sums of |Phi_k| for
- * the whole solve (N nw (nx + 1) reals), so that the products with Phi_k' run down
- * contiguous columns (vectorised where doubles come in vectors) and the factorisation
- * neither transposes nor sums. 0 (the default on 32-bit ARM: a scalar FPU and little RAM):
- * the products read Phi_k itself (Phi_k'P as dot products of its columns) and the column
- * sums are formed per stage in every factorisation, and the QP's kernels take the forms
- * that suit a scalar FPU (unicycle_qp.c). The same results either way; define it to
- * override. */
+/* UNICYCLE_QP_PHIT 1: the workspace keeps Phi_k' for the whole solve (N nw nx reals), so that
+ * the products with Phi_k' run down contiguous columns (vectorised where doubles come in
+ * vectors) and the factorisation does not transpose. 0 (the default on 32-bit ARM: a
+ * scalar FPU and little RAM): the products read Phi_k itself (Phi_k'P as dot products of
+ * its columns), and the QP's kernels take the forms that suit a scalar FPU (unicycle_qp.c).
+ * The same results either way; define it to override. */
 #ifndef UNICYCLE_QP_PHIT
 #if defined(__arm__) && !defined(__aarch64__)
 #define UNICYCLE_QP_PHIT 0
@@ -407,14 +405,13 @@ typedef struct {
     /* Riccati factorisation: condensed stage Hessians and value-function data */
 #if UNICYCLE_QP_PHIT
     unicycle_real PhiT[UNICYCLE_N][UNICYCLE_QP_NW * UNICYCLE_NX]; /* Phi_k' (nw x nx), formed once per solve */
-    unicycle_real phi_cs2[UNICYCLE_N][UNICYCLE_QP_NW];         /* squared column sums of |Phi_k|, the same */
 #endif
     unicycle_real M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];             /* value function Hessians, packed lower */
     unicycle_real G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];  /* value function x-nu coupling */
     unicycle_real Lu[UNICYCLE_N][UNICYCLE_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
-    unicycle_real K[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* gain M_uu^{-1} M_ux */
-    unicycle_real KN[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* M_uu^{-1} (Phi'G)_u */
+    unicycle_real K[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* Lu^{-1} M_ux (the gain is Lu'^{-1} of it) */
+    unicycle_real KN[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     unicycle_real S[UNICYCLE_QP_NE1 * UNICYCLE_QP_NE1];           /* -(nu-nu block) at stage 0, factored */
     unicycle_real e[UNICYCLE_QP_NE1];
     unicycle_real work[UNICYCLE_QP_NWORK];
