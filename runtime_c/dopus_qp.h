@@ -410,7 +410,7 @@ typedef struct {
     dopus_real P[DOPUS_N + 1][DOPUS_QP_NXP];             /* value function Hessians, packed lower */
     dopus_real G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];  /* value function x-nu coupling */
     dopus_real Lu[DOPUS_N][DOPUS_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
-    dopus_real K[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* (Lu^{-1} M_ux)', NX x NU by columns */
+    dopus_real K[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux (the gain is Lu'^{-1} of it) */
     dopus_real KN[DOPUS_N][DOPUS_QP_NU1 * DOPUS_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     dopus_real S[DOPUS_QP_NE1 * DOPUS_QP_NE1];           /* -(nu-nu block) at stage 0, factored */
     dopus_real e[DOPUS_QP_NE1];

@@ -410,7 +410,7 @@ typedef struct {
     robot_arm_real P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NXP];             /* value function Hessians, packed lower */
     robot_arm_real G[ROBOT_ARM_N + 1][ROBOT_ARM_NX * ROBOT_ARM_QP_NE1];  /* value function x-nu coupling */
     robot_arm_real Lu[ROBOT_ARM_N][ROBOT_ARM_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
-    robot_arm_real K[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_NX];      /* (Lu^{-1} M_ux)', NX x NU by columns */
+    robot_arm_real K[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_NX];      /* Lu^{-1} M_ux (the gain is Lu'^{-1} of it) */
     robot_arm_real KN[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     robot_arm_real S[ROBOT_ARM_QP_NE1 * ROBOT_ARM_QP_NE1];           /* -(nu-nu block) at stage 0, factored */
     robot_arm_real e[ROBOT_ARM_QP_NE1];

@@ -438,55 +438,6 @@ static inline void lu_solve_t(const unicycle_real *restrict Lp, unicycle_real *r
     }
 }
 
-/* Lu^{-1} M_ux is kept transposed, KT = (Lu^{-1} M_ux)' (NX x NU, column c of length NX), so
- * that the products with it run down columns of NX entries. Each entry is formed by the same
- * operations in the same order as with the untransposed layout. */
-/* KT = M_xu Lu'^{-1}: row j of KT is Lu^{-1} of column j of M_ux (M, NW x NW, lower) */
-static inline void kt_form(const unicycle_real *restrict Lp, const unicycle_real *restrict M, unicycle_real *restrict KT)
-{
-    int i, j, c;
-    for (c = 0; c < NU; ++c)
-        for (j = 0; j < NX; ++j)
-            KT[j + c * NX] = M[NX + c + j * NW];
-    UNROLL
-    for (c = 0; c < NU; ++c) {
-        const unicycle_real d = Lp[PACKED_U(c, c)];
-        unicycle_real *kc = KT + c * NX;
-        for (j = 0; j < NX; ++j)
-            kc[j] = kc[j] * d;
-        UNROLL
-        for (i = c + 1; i < NU; ++i) {
-            const unicycle_real a = Lp[PACKED_U(i, c)];
-            unicycle_real *ki = KT + i * NX;
-            for (j = 0; j < NX; ++j)
-                ki[j] -= a * kc[j];
-        }
-    }
-}
-/* out -= KT y (NX): the sum over c formed first, from zero, as unicycle_lai_gemv_t does */
-static inline void kt_sub_mv(const unicycle_real *restrict KT, const unicycle_real *restrict y, unicycle_real *restrict out)
-{
-    unicycle_real s[NX];
-    int j, c;
-    for (j = 0; j < NX; ++j)
-        s[j] = UNICYCLE_R(0.0);
-    for (c = 0; c < NU; ++c)
-        for (j = 0; j < NX; ++j)
-            s[j] += KT[j + c * NX] * y[c];
-    for (j = 0; j < NX; ++j)
-        out[j] += -s[j];
-}
-/* out -= KT' w (NU), in the order of unicycle_lai_gemv_n */
-static inline void kt_sub_tv(const unicycle_real *restrict KT, const unicycle_real *restrict w, unicycle_real *restrict out)
-{
-    int j, c;
-    for (j = 0; j < NX; ++j) {
-        const unicycle_real a = -w[j];
-        for (c = 0; c < NU; ++c)
-            out[c] += KT[j + c * NX] * a;
-    }
-}
-
 /* Per bounded row b: the residuals of the slack equations, r_lo = v - lo - t_lo and
  * r_up = up - v - t_up (vl = v - lo and uv = up - v are kept), the slack steps of the current direction, dt_lo = dv + r_lo and
  * dt_up = r_up - dv (dv = D dw), and the barrier weight q = z_lo/t_lo + z_up/t_up, formed
@@ -991,13 +942,7 @@ QP_COLD static void stage_noise(const unicycle_qp_workspace *ws, const unicycle_
         for (j = 0; j < NX; ++j)
             pmag = dmax(pmag, unicycle_fabs(dg[j]) + cs2[j] * pmax1);
         for (j = 0; j < NX; ++j)
-            {
-                unicycle_real s = UNICYCLE_R(0.0);
-                int c;
-                for (c = 0; c < NU; ++c)
-                    s += ws->K[k + 1][j + c * NX] * ws->K[k + 1][j + c * NX];
-                pmag = dmax(pmag, s);
-            }
+            pmag = dmax(pmag, unicycle_lai_dot(NU, ws->K[k + 1] + j * NU1, ws->K[k + 1] + j * NU1));
     }
     stage_diag(ws, in, k, dg);
     stage_cs2(in->Phi[k], cs2);
@@ -1017,7 +962,7 @@ static unicycle_real hessian_scale(const unicycle_qp_in *in, unicycle_real hmax)
 /* Factor the Newton system for the current barrier weights (row_q), delta and rho.
  * Returns 0, or 1 when a stage pivot block M_uu is not positive definite (wrong inertia),
  * or 2 when the terminal-multiplier block S is singular. Per stage it keeps P_k (packed),
- * the packed factor Lu of M_uu = Lu Lu' and Lu^{-1} M_ux transposed in K (with terminal equalities
+ * the packed factor Lu of M_uu = Lu Lu' and Lu^{-1} M_ux in K (with terminal equalities
  * G_k and Lu^{-1} Gam_u in KN); the solve applies Lu'^{-1} (the gain M_uu^{-1} M_ux is never
  * formed). */
 static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
@@ -1125,25 +1070,21 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             }
         }
         pack_lu(Lu, ws->Lu[k]);
-        /* LK = Lu^{-1} M_ux, kept transposed in K */
-        kt_form(ws->Lu[k], M, K);
-        /* P_k = M_xx - LK' LK, column j of its lower triangle down the columns of K */
+        /* LK = Lu^{-1} M_ux (in K) */
+        for (j = 0; j < NX; ++j)
+            lu_solve_n_from(ws->Lu[k], M + NX + j * NW, K + j * NU1);
+        /* P_k = M_xx - LK' LK */
         UNROLL
-        for (j = 0; j < NX; ++j) {
-            unicycle_real pc[NX];
+        for (j = 0; j < NX; ++j)
+            UNROLL
+        for (i = j; i < NX; ++i) {
+            unicycle_real sum = M[i + j * NW];
             int c;
-            for (i = j; i < NX; ++i)
-                pc[i] = M[i + j * NW];
-            for (c = 0; c < NU; ++c) {
-                const unicycle_real kj = K[j + c * NX];
-                for (i = j; i < NX; ++i)
-                    pc[i] -= K[i + c * NX] * kj;
-            }
-            for (i = j; i < NX; ++i) {
-                P[l++] = pc[i];
-                Pf[i + j * NX] = pc[i];
-                Pf[j + i * NX] = pc[i];
-            }
+            for (c = 0; c < NU; ++c)
+                sum -= K[c + i * NU1] * K[c + j * NU1];
+            P[l++] = sum;
+            Pf[i + j * NX] = sum;
+            Pf[j + i * NX] = sum;
         }
         if (NE > 0) {
             /* LKn = Lu^{-1} Gam_u (in KN); G_k = Gam_x - LK' LKn; S += LKn' LKn
@@ -1151,8 +1092,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             for (j = 0; j < NE; ++j)
                 lu_solve_n_from(ws->Lu[k], Gam + NX + j * NW, KN + j * NU1);
             unicycle_lai_copy_mat(NX, NE, Gam, NW, ws->G[k], NX);
-            for (j = 0; j < NE; ++j)
-                kt_sub_mv(K, KN + j * NU1, ws->G[k] + j * NX);
+            unicycle_lai_gemm_tn(NX, NE, NU, -UNICYCLE_R(1.0), K, NU1, KN, NU1, UNICYCLE_R(1.0), ws->G[k], NX);
             unicycle_lai_gemm_tn(NE, NE, NU, UNICYCLE_R(1.0), KN, NU1, KN, NU1, UNICYCLE_R(1.0), ws->S, NE1);
         }
     }
@@ -1236,7 +1176,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
             lu_solve_n(ws->Lu[k], y);
             for (i = 0; i < NX; ++i)
                 xk[i] = pk[i];
-            kt_sub_mv(ws->K[k], y, m);
+            unicycle_lai_gemv_t(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, y, UNICYCLE_R(1.0), m);
             for (i = 0; i < NX; ++i)
                 pk[i] = m[i];
             if (NE > 0)
@@ -1250,7 +1190,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
             xk[i] = pk[i];
             pk[i] = m[i];
         }
-        kt_sub_mv(ws->K[k], m + NX, pk);
+        unicycle_lai_gemv_t(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, m + NX, UNICYCLE_R(1.0), pk);
         if (NE > 0)
             unicycle_lai_gemv_t(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, m + NX, UNICYCLE_R(1.0), e);
         for (i = 0; i < NU; ++i)
@@ -1275,7 +1215,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
             unicycle_real ul[NU1]; /* formed locally, stored once */
             for (i = 0; i < NU; ++i)
                 ul[i] = -u[i];
-            kt_sub_tv(ws->K[k], w, ul);
+            unicycle_lai_gemv_n(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, w, UNICYCLE_R(1.0), ul);
             if (NE > 0)
                 unicycle_lai_gemv_n(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, sn, UNICYCLE_R(1.0), ul);
             lu_solve_t(ws->Lu[k], ul);
@@ -1285,7 +1225,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
 #else
         for (i = 0; i < NU; ++i)
             u[i] = -u[i];
-        kt_sub_tv(ws->K[k], w, u);
+        unicycle_lai_gemv_n(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, w, UNICYCLE_R(1.0), u);
         if (NE > 0)
             unicycle_lai_gemv_n(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, sn, UNICYCLE_R(1.0), u);
         lu_solve_t(ws->Lu[k], u);

@@ -410,7 +410,7 @@ typedef struct {
     unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];             /* value function Hessians, packed lower */
     unicycle_real G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];  /* value function x-nu coupling */
     unicycle_real Lu[UNICYCLE_N][UNICYCLE_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
-    unicycle_real K[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* (Lu^{-1} M_ux)', NX x NU by columns */
+    unicycle_real K[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* Lu^{-1} M_ux (the gain is Lu'^{-1} of it) */
     unicycle_real KN[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_QP_NE1]; /* Lu^{-1} (Phi'G)_u */
     unicycle_real S[UNICYCLE_QP_NE1 * UNICYCLE_QP_NE1];           /* -(nu-nu block) at stage 0, factored */
     unicycle_real e[UNICYCLE_QP_NE1];
