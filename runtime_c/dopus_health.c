@@ -87,24 +87,37 @@ int dopus_clip_u(const dopus_real *u, dopus_real *out)
     return clipped;
 }
 
+int dopus_box_node_ok(const dopus_health *h, const dopus_real *xhat0, const dopus_real *x,
+                      const dopus_real *dx, const dopus_real *u, const dopus_real *du)
+{
+    int i;
+    for (i = 0; i < DOPUS_NX && x; ++i) {
+        dopus_real v = x[i] + (dx ? dx[i] : DOPUS_R(0.0));
+        if (!(dopus_fabs(v) <= DOPUS_DIVERGENCE_BOX * h->scale_x[i] + dopus_fabs(xhat0[i]))) {
+            return 0;
+        }
+    }
+    for (i = 0; i < DOPUS_NU && u; ++i) {
+        dopus_real v = u[i] + (du ? du[i] : DOPUS_R(0.0));
+        if (!(dopus_fabs(v) <= DOPUS_DIVERGENCE_BOX * h->scale_u[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
 int dopus_box_ok(const dopus_health *h, const dopus_real *xhat0, const dopus_real *x, const dopus_real *dx,
                  int dx_stride, const dopus_real *u, const dopus_real *du, int du_stride)
 {
-    int k, i;
+    int k;
     for (k = 0; k <= DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NX; ++i) {
-            dopus_real v = x[k * DOPUS_NX + i] + (dx ? dx[k * dx_stride + i] : DOPUS_R(0.0));
-            if (!(dopus_fabs(v) <= DOPUS_DIVERGENCE_BOX * h->scale_x[i] + dopus_fabs(xhat0[i]))) {
-                return 0;
-            }
+        if (!dopus_box_node_ok(h, xhat0, x + k * DOPUS_NX, dx ? dx + k * dx_stride : 0, 0, 0)) {
+            return 0;
         }
     }
     for (k = 0; k < DOPUS_N; ++k) {
-        for (i = 0; i < DOPUS_NU; ++i) {
-            dopus_real v = u[k * DOPUS_NU + i] + (du ? du[k * du_stride + i] : DOPUS_R(0.0));
-            if (!(dopus_fabs(v) <= DOPUS_DIVERGENCE_BOX * h->scale_u[i])) {
-                return 0;
-            }
+        if (!dopus_box_node_ok(h, xhat0, 0, 0, u + k * DOPUS_NU, du ? du + k * du_stride : 0)) {
+            return 0;
         }
     }
     return 1;

@@ -52,6 +52,10 @@ DOPUS_INTERNAL void dopus_health_reset(dopus_health *h, const dopus_real *u);
 /* u (nu) clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1
  * when an entry changed. */
 DOPUS_INTERNAL int dopus_clip_u(const dopus_real *u, dopus_real *out);
+/* The box test of one node (x nx, u nu, each NULL: not tested) plus an optional step (dx, du;
+ * NULL: none): every entry finite and inside the box of dopus_box_ok. Returns 1 when it passes. */
+DOPUS_INTERNAL int dopus_box_node_ok(const dopus_health *h, const dopus_real *xhat0, const dopus_real *x,
+                                     const dopus_real *dx, const dopus_real *u, const dopus_real *du);
 /* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as x, u plus an
  * optional step (dx with row stride dx_stride, du with du_stride; NULL: none): every entry
  * finite and |v_i| <= BOX scale_x_i + |xhat0_i| (states), BOX scale_u_i (controls). Returns 1

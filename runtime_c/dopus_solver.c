@@ -1765,24 +1765,6 @@ static void dopus_reinit_controls(dopus_solver *s)
     }
 }
 
-/* 1 when node k (state x, control u) of a forward simulation lies in the box of the
- * divergence test (algorithm.md section 9), as dopus_box_ok tests a whole trajectory. */
-static int dopus_node_box_ok(const dopus_solver *s, const dopus_real *x, const dopus_real *u)
-{
-    int i;
-    for (i = 0; i < DOPUS_NX; ++i) {
-        if (!(dopus_fabs(x[i]) <= DOPUS_DIVERGENCE_BOX * s->health.scale_x[i] + dopus_fabs(s->xhat0[i]))) {
-            return 0;
-        }
-    }
-    for (i = 0; i < DOPUS_NU && u; ++i) {
-        if (!(dopus_fabs(u[i]) <= DOPUS_DIVERGENCE_BOX * s->health.scale_u[i])) {
-            return 0;
-        }
-    }
-    return 1;
-}
-
 /* A re-initialisation with a budget (algorithm.md section 14), from the iterate in place: the
  * gradient and blocks of each stage in stage order while one more, the terminal node and
  * `reserve` still fit, then the terminal node and the QP; what does not fit continues in the
@@ -1806,8 +1788,9 @@ static int dopus_reinit_walk(dopus_solver *s, double reserve)
            dopus_budget_fits(s, s->anytime.cost_grad + s->anytime.cost_stage + term + s->anytime.cost_tail +
                                     reserve)) {
         rc = dopus_stage_F(s, k);
-        if (s->anytime.reinit_sim && (rc != DOPUS_OK || (k == 0 && !dopus_node_box_ok(s, s->x[0], 0)) ||
-                                      !dopus_node_box_ok(s, s->mem.ev.tmp_phi, s->u[k]))) {
+        if (s->anytime.reinit_sim &&
+            (rc != DOPUS_OK || (k == 0 && !dopus_box_node_ok(&s->health, s->xhat0, s->x[0], 0, 0, 0)) ||
+             !dopus_box_node_ok(&s->health, s->xhat0, s->mem.ev.tmp_phi, 0, s->u[k], 0))) {
             /* the simulation failed: again from stage 0 with the guess controls, else the guess */
             s->anytime.reinit_sim = s->anytime.reinit_sim == 1 ? 2 : 0;
             if (s->anytime.reinit_sim) {

@@ -1447,13 +1447,14 @@ class ReferenceDopus:
         v = np.minimum(np.maximum(np.where(np.isnan(u), 0.0, u), self.lbu), self.ubu)
         return v, bool(np.any(~(v == u)))
 
-    def _box_ok(self, x, u) -> bool:
-        """The box test of section 9 on a primal point (finite and inside the scale box)."""
+    def _box_ok(self, x, u=None) -> bool:
+        """The box test of section 9 on a primal point, or one node of it (finite and inside
+        the scale box; u None: the states alone)."""
         box = _SAFETY["DIVERGENCE_BOX"]
         sx, su = self.scales
         with np.errstate(invalid="ignore"):
             return bool(np.all(np.abs(x) <= box * sx + np.abs(self._xhat_last))
-                        and np.all(np.abs(u) <= box * su))
+                        and (u is None or np.all(np.abs(u) <= box * su)))
 
     def _plan_control(self, k: int = 0) -> np.ndarray:
         """The control of the last good plan for the instant k sampling instants from now (its
@@ -1567,8 +1568,7 @@ class ReferenceDopus:
             except RuntimeError:
                 x0 = np.full(nx, np.nan)
             x[0] = x0 if np.all(np.isfinite(x0)) else self._xhat_last
-        box = _SAFETY["DIVERGENCE_BOX"]
-        if not np.all(np.abs(x[0]) <= box * self.scales[0] + np.abs(self._xhat_last)):
+        if not self._box_ok(x[0]):
             x[0] = self._xhat_last
         self._reinit(x, u)
 
@@ -1676,14 +1676,6 @@ class ReferenceDopus:
         for k in range(self.N):
             u[k] = self._clip_u(self._plan_control(k) if self._reinit_sim == 1 else gu[k])[0]
 
-    def _node_box_ok(self, x, u=None) -> bool:
-        """The box test of section 9 on one node of a forward simulation (state, control)."""
-        box = _SAFETY["DIVERGENCE_BOX"]
-        sx, su = self.scales
-        with np.errstate(invalid="ignore"):
-            return bool(np.all(np.abs(x) <= box * sx + np.abs(self._xhat_last))
-                        and (u is None or np.all(np.abs(u) <= box * su)))
-
     def _reinit_walk(self, reserve: float) -> None:
         """The evaluations of a re-initialisation with a budget (section 14): the gradient and
         blocks of each stage in stage order while one more, the terminal node and ``reserve``
@@ -1712,8 +1704,8 @@ class ReferenceDopus:
                     if not self._reinit_sim:
                         raise
                     ok = False
-                if self._reinit_sim and (not ok or (k == 0 and not self._node_box_ok(self.x[0]))
-                                         or not self._node_box_ok(phi[0], self.u[k])):
+                if self._reinit_sim and (not ok or (k == 0 and not self._box_ok(self.x[0]))
+                                         or not self._box_ok(phi[0], self.u[k])):
                     # the simulation failed: again from stage 0 with the guess controls, else the guess
                     self._reinit_sim = 2 if self._reinit_sim == 1 else 0
                     self.x, self.u = self.x.copy(), self.u.copy()

@@ -87,24 +87,37 @@ int robot_arm_clip_u(const robot_arm_real *u, robot_arm_real *out)
     return clipped;
 }
 
+int robot_arm_box_node_ok(const robot_arm_health *h, const robot_arm_real *xhat0, const robot_arm_real *x,
+                      const robot_arm_real *dx, const robot_arm_real *u, const robot_arm_real *du)
+{
+    int i;
+    for (i = 0; i < ROBOT_ARM_NX && x; ++i) {
+        robot_arm_real v = x[i] + (dx ? dx[i] : ROBOT_ARM_R(0.0));
+        if (!(robot_arm_fabs(v) <= ROBOT_ARM_DIVERGENCE_BOX * h->scale_x[i] + robot_arm_fabs(xhat0[i]))) {
+            return 0;
+        }
+    }
+    for (i = 0; i < ROBOT_ARM_NU && u; ++i) {
+        robot_arm_real v = u[i] + (du ? du[i] : ROBOT_ARM_R(0.0));
+        if (!(robot_arm_fabs(v) <= ROBOT_ARM_DIVERGENCE_BOX * h->scale_u[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
 int robot_arm_box_ok(const robot_arm_health *h, const robot_arm_real *xhat0, const robot_arm_real *x, const robot_arm_real *dx,
                  int dx_stride, const robot_arm_real *u, const robot_arm_real *du, int du_stride)
 {
-    int k, i;
+    int k;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NX; ++i) {
-            robot_arm_real v = x[k * ROBOT_ARM_NX + i] + (dx ? dx[k * dx_stride + i] : ROBOT_ARM_R(0.0));
-            if (!(robot_arm_fabs(v) <= ROBOT_ARM_DIVERGENCE_BOX * h->scale_x[i] + robot_arm_fabs(xhat0[i]))) {
-                return 0;
-            }
+        if (!robot_arm_box_node_ok(h, xhat0, x + k * ROBOT_ARM_NX, dx ? dx + k * dx_stride : 0, 0, 0)) {
+            return 0;
         }
     }
     for (k = 0; k < ROBOT_ARM_N; ++k) {
-        for (i = 0; i < ROBOT_ARM_NU; ++i) {
-            robot_arm_real v = u[k * ROBOT_ARM_NU + i] + (du ? du[k * du_stride + i] : ROBOT_ARM_R(0.0));
-            if (!(robot_arm_fabs(v) <= ROBOT_ARM_DIVERGENCE_BOX * h->scale_u[i])) {
-                return 0;
-            }
+        if (!robot_arm_box_node_ok(h, xhat0, 0, 0, u + k * ROBOT_ARM_NU, du ? du + k * du_stride : 0)) {
+            return 0;
         }
     }
     return 1;

@@ -52,6 +52,10 @@ ROBOT_ARM_INTERNAL void robot_arm_health_reset(robot_arm_health *h, const robot_
 /* u (nu) clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1
  * when an entry changed. */
 ROBOT_ARM_INTERNAL int robot_arm_clip_u(const robot_arm_real *u, robot_arm_real *out);
+/* The box test of one node (x nx, u nu, each NULL: not tested) plus an optional step (dx, du;
+ * NULL: none): every entry finite and inside the box of robot_arm_box_ok. Returns 1 when it passes. */
+ROBOT_ARM_INTERNAL int robot_arm_box_node_ok(const robot_arm_health *h, const robot_arm_real *xhat0, const robot_arm_real *x,
+                                     const robot_arm_real *dx, const robot_arm_real *u, const robot_arm_real *du);
 /* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as x, u plus an
  * optional step (dx with row stride dx_stride, du with du_stride; NULL: none): every entry
  * finite and |v_i| <= BOX scale_x_i + |xhat0_i| (states), BOX scale_u_i (controls). Returns 1

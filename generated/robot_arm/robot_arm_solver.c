@@ -1765,24 +1765,6 @@ static void robot_arm_reinit_controls(robot_arm_solver *s)
     }
 }
 
-/* 1 when node k (state x, control u) of a forward simulation lies in the box of the
- * divergence test (algorithm.md section 9), as robot_arm_box_ok tests a whole trajectory. */
-static int robot_arm_node_box_ok(const robot_arm_solver *s, const robot_arm_real *x, const robot_arm_real *u)
-{
-    int i;
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        if (!(robot_arm_fabs(x[i]) <= ROBOT_ARM_DIVERGENCE_BOX * s->health.scale_x[i] + robot_arm_fabs(s->xhat0[i]))) {
-            return 0;
-        }
-    }
-    for (i = 0; i < ROBOT_ARM_NU && u; ++i) {
-        if (!(robot_arm_fabs(u[i]) <= ROBOT_ARM_DIVERGENCE_BOX * s->health.scale_u[i])) {
-            return 0;
-        }
-    }
-    return 1;
-}
-
 /* A re-initialisation with a budget (algorithm.md section 14), from the iterate in place: the
  * gradient and blocks of each stage in stage order while one more, the terminal node and
  * `reserve` still fit, then the terminal node and the QP; what does not fit continues in the
@@ -1806,8 +1788,9 @@ static int robot_arm_reinit_walk(robot_arm_solver *s, double reserve)
            robot_arm_budget_fits(s, s->anytime.cost_grad + s->anytime.cost_stage + term + s->anytime.cost_tail +
                                     reserve)) {
         rc = robot_arm_stage_F(s, k);
-        if (s->anytime.reinit_sim && (rc != ROBOT_ARM_OK || (k == 0 && !robot_arm_node_box_ok(s, s->x[0], 0)) ||
-                                      !robot_arm_node_box_ok(s, s->mem.ev.tmp_phi, s->u[k]))) {
+        if (s->anytime.reinit_sim &&
+            (rc != ROBOT_ARM_OK || (k == 0 && !robot_arm_box_node_ok(&s->health, s->xhat0, s->x[0], 0, 0, 0)) ||
+             !robot_arm_box_node_ok(&s->health, s->xhat0, s->mem.ev.tmp_phi, 0, s->u[k], 0))) {
             /* the simulation failed: again from stage 0 with the guess controls, else the guess */
             s->anytime.reinit_sim = s->anytime.reinit_sim == 1 ? 2 : 0;
             if (s->anytime.reinit_sim) {

@@ -87,24 +87,37 @@ int unicycle_clip_u(const unicycle_real *u, unicycle_real *out)
     return clipped;
 }
 
+int unicycle_box_node_ok(const unicycle_health *h, const unicycle_real *xhat0, const unicycle_real *x,
+                      const unicycle_real *dx, const unicycle_real *u, const unicycle_real *du)
+{
+    int i;
+    for (i = 0; i < UNICYCLE_NX && x; ++i) {
+        unicycle_real v = x[i] + (dx ? dx[i] : UNICYCLE_R(0.0));
+        if (!(unicycle_fabs(v) <= UNICYCLE_DIVERGENCE_BOX * h->scale_x[i] + unicycle_fabs(xhat0[i]))) {
+            return 0;
+        }
+    }
+    for (i = 0; i < UNICYCLE_NU && u; ++i) {
+        unicycle_real v = u[i] + (du ? du[i] : UNICYCLE_R(0.0));
+        if (!(unicycle_fabs(v) <= UNICYCLE_DIVERGENCE_BOX * h->scale_u[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
 int unicycle_box_ok(const unicycle_health *h, const unicycle_real *xhat0, const unicycle_real *x, const unicycle_real *dx,
                  int dx_stride, const unicycle_real *u, const unicycle_real *du, int du_stride)
 {
-    int k, i;
+    int k;
     for (k = 0; k <= UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            unicycle_real v = x[k * UNICYCLE_NX + i] + (dx ? dx[k * dx_stride + i] : UNICYCLE_R(0.0));
-            if (!(unicycle_fabs(v) <= UNICYCLE_DIVERGENCE_BOX * h->scale_x[i] + unicycle_fabs(xhat0[i]))) {
-                return 0;
-            }
+        if (!unicycle_box_node_ok(h, xhat0, x + k * UNICYCLE_NX, dx ? dx + k * dx_stride : 0, 0, 0)) {
+            return 0;
         }
     }
     for (k = 0; k < UNICYCLE_N; ++k) {
-        for (i = 0; i < UNICYCLE_NU; ++i) {
-            unicycle_real v = u[k * UNICYCLE_NU + i] + (du ? du[k * du_stride + i] : UNICYCLE_R(0.0));
-            if (!(unicycle_fabs(v) <= UNICYCLE_DIVERGENCE_BOX * h->scale_u[i])) {
-                return 0;
-            }
+        if (!unicycle_box_node_ok(h, xhat0, 0, 0, u + k * UNICYCLE_NU, du ? du + k * du_stride : 0)) {
+            return 0;
         }
     }
     return 1;

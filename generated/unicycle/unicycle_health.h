@@ -52,6 +52,10 @@ UNICYCLE_INTERNAL void unicycle_health_reset(unicycle_health *h, const unicycle_
 /* u (nu) clipped to the control bounds into out (NaN: 0 clipped to the bounds); returns 1
  * when an entry changed. */
 UNICYCLE_INTERNAL int unicycle_clip_u(const unicycle_real *u, unicycle_real *out);
+/* The box test of one node (x nx, u nu, each NULL: not tested) plus an optional step (dx, du;
+ * NULL: none): every entry finite and inside the box of unicycle_box_ok. Returns 1 when it passes. */
+UNICYCLE_INTERNAL int unicycle_box_node_ok(const unicycle_health *h, const unicycle_real *xhat0, const unicycle_real *x,
+                                     const unicycle_real *dx, const unicycle_real *u, const unicycle_real *du);
 /* The box test of a primal point (x (N+1) x nx, u N x nu, row-major) given as x, u plus an
  * optional step (dx with row stride dx_stride, du with du_stride; NULL: none): every entry
  * finite and |v_i| <= BOX scale_x_i + |xhat0_i| (states), BOX scale_u_i (controls). Returns 1
