@@ -1905,18 +1905,23 @@ static int dopus_reinit(dopus_solver *s, double reserve)
 /* A prepare while a re-initialisation is under way (a budget): the shift of the instant (the
  * evaluated stages move with the ring, the new last node is simulated from the one before it),
  * then the evaluations that fit (dopus_reinit_walk); a failed one falls back on the guess. */
-static int dopus_reinit_continue(dopus_solver *s)
+/* x_{k+1} = phi_k(x_k, u_k), kept only when the evaluation succeeds and is finite. */
+static void dopus_simulate_node(dopus_solver *s, int k)
 {
     dopus_real l = DOPUS_R(0.0), xn[DOPUS_NX];
+    if (dopus_eval_stage_eval(s->x[k], s->u[k], s->p[k], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+        dopus_lai_vec_finite(DOPUS_NX, xn)) {
+        dopus_copy(s->x[k + 1], xn, DOPUS_NX);
+    }
+}
+
+static int dopus_reinit_continue(dopus_solver *s)
+{
     int rc;
     if (s->settings.mode == DOPUS_MODE_RECEDING && !s->shifted) {
         /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now */
-        const int first = s->anytime.reinit_sim && s->anytime.reinit_next == 0;
-        if (first &&
-            dopus_eval_stage_eval(s->x[0], s->u[0], s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) ==
-                0 &&
-            dopus_lai_vec_finite(DOPUS_NX, xn)) {
-            dopus_copy(s->x[1], xn, DOPUS_NX);
+        if (s->anytime.reinit_sim && s->anytime.reinit_next == 0) {
+            dopus_simulate_node(s, 0);
         }
         dopus_shift(s);
         s->shifted = 1;
@@ -1924,11 +1929,8 @@ static int dopus_reinit_continue(dopus_solver *s)
             s->anytime.reinit_next -= 1;
         }
         /* the new last node: simulated by the walk, or (no simulation) from the one before it */
-        if (!s->anytime.reinit_sim &&
-            dopus_eval_stage_eval(s->x[DOPUS_N - 1], s->u[DOPUS_N - 1], s->p[DOPUS_N - 1], xn, &l,
-                                  s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
-            dopus_lai_vec_finite(DOPUS_NX, xn)) {
-            dopus_copy(s->x[DOPUS_N], xn, DOPUS_NX);
+        if (!s->anytime.reinit_sim) {
+            dopus_simulate_node(s, DOPUS_N - 1);
         }
     }
     rc = dopus_reinit_walk(s, s->anytime.cost_end);

@@ -1905,18 +1905,23 @@ static int robot_arm_reinit(robot_arm_solver *s, double reserve)
 /* A prepare while a re-initialisation is under way (a budget): the shift of the instant (the
  * evaluated stages move with the ring, the new last node is simulated from the one before it),
  * then the evaluations that fit (robot_arm_reinit_walk); a failed one falls back on the guess. */
-static int robot_arm_reinit_continue(robot_arm_solver *s)
+/* x_{k+1} = phi_k(x_k, u_k), kept only when the evaluation succeeds and is finite. */
+static void robot_arm_simulate_node(robot_arm_solver *s, int k)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0), xn[ROBOT_ARM_NX];
+    if (robot_arm_eval_stage_eval(s->x[k], s->u[k], s->p[k], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+        robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn)) {
+        robot_arm_copy(s->x[k + 1], xn, ROBOT_ARM_NX);
+    }
+}
+
+static int robot_arm_reinit_continue(robot_arm_solver *s)
+{
     int rc;
     if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && !s->shifted) {
         /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now */
-        const int first = s->anytime.reinit_sim && s->anytime.reinit_next == 0;
-        if (first &&
-            robot_arm_eval_stage_eval(s->x[0], s->u[0], s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) ==
-                0 &&
-            robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn)) {
-            robot_arm_copy(s->x[1], xn, ROBOT_ARM_NX);
+        if (s->anytime.reinit_sim && s->anytime.reinit_next == 0) {
+            robot_arm_simulate_node(s, 0);
         }
         robot_arm_shift(s);
         s->shifted = 1;
@@ -1924,11 +1929,8 @@ static int robot_arm_reinit_continue(robot_arm_solver *s)
             s->anytime.reinit_next -= 1;
         }
         /* the new last node: simulated by the walk, or (no simulation) from the one before it */
-        if (!s->anytime.reinit_sim &&
-            robot_arm_eval_stage_eval(s->x[ROBOT_ARM_N - 1], s->u[ROBOT_ARM_N - 1], s->p[ROBOT_ARM_N - 1], xn, &l,
-                                  s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
-            robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn)) {
-            robot_arm_copy(s->x[ROBOT_ARM_N], xn, ROBOT_ARM_NX);
+        if (!s->anytime.reinit_sim) {
+            robot_arm_simulate_node(s, ROBOT_ARM_N - 1);
         }
     }
     rc = robot_arm_reinit_walk(s, s->anytime.cost_end);

@@ -1905,18 +1905,23 @@ static int unicycle_reinit(unicycle_solver *s, double reserve)
 /* A prepare while a re-initialisation is under way (a budget): the shift of the instant (the
  * evaluated stages move with the ring, the new last node is simulated from the one before it),
  * then the evaluations that fit (unicycle_reinit_walk); a failed one falls back on the guess. */
-static int unicycle_reinit_continue(unicycle_solver *s)
+/* x_{k+1} = phi_k(x_k, u_k), kept only when the evaluation succeeds and is finite. */
+static void unicycle_simulate_node(unicycle_solver *s, int k)
 {
     unicycle_real l = UNICYCLE_R(0.0), xn[UNICYCLE_NX];
+    if (unicycle_eval_stage_eval(s->x[k], s->u[k], s->p[k], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+        unicycle_lai_vec_finite(UNICYCLE_NX, xn)) {
+        unicycle_copy(s->x[k + 1], xn, UNICYCLE_NX);
+    }
+}
+
+static int unicycle_reinit_continue(unicycle_solver *s)
+{
     int rc;
     if (s->settings.mode == UNICYCLE_MODE_RECEDING && !s->shifted) {
         /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now */
-        const int first = s->anytime.reinit_sim && s->anytime.reinit_next == 0;
-        if (first &&
-            unicycle_eval_stage_eval(s->x[0], s->u[0], s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) ==
-                0 &&
-            unicycle_lai_vec_finite(UNICYCLE_NX, xn)) {
-            unicycle_copy(s->x[1], xn, UNICYCLE_NX);
+        if (s->anytime.reinit_sim && s->anytime.reinit_next == 0) {
+            unicycle_simulate_node(s, 0);
         }
         unicycle_shift(s);
         s->shifted = 1;
@@ -1924,11 +1929,8 @@ static int unicycle_reinit_continue(unicycle_solver *s)
             s->anytime.reinit_next -= 1;
         }
         /* the new last node: simulated by the walk, or (no simulation) from the one before it */
-        if (!s->anytime.reinit_sim &&
-            unicycle_eval_stage_eval(s->x[UNICYCLE_N - 1], s->u[UNICYCLE_N - 1], s->p[UNICYCLE_N - 1], xn, &l,
-                                  s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
-            unicycle_lai_vec_finite(UNICYCLE_NX, xn)) {
-            unicycle_copy(s->x[UNICYCLE_N], xn, UNICYCLE_NX);
+        if (!s->anytime.reinit_sim) {
+            unicycle_simulate_node(s, UNICYCLE_N - 1);
         }
     }
     rc = unicycle_reinit_walk(s, s->anytime.cost_end);
