@@ -138,6 +138,7 @@ def main(argv=None) -> int:
     for tool in (a.cc, "valgrind", "callgrind_annotate"):
         if shutil.which(tool) is None:
             ap.error(f"{tool} is not on PATH (valgrind: apt-get install valgrind)")
+    from dopus_codegen.codegen.flags import CASADI_CFLAGS, DEFAULT_OPT
     from dopus_codegen.problem.derivatives import build_functions
     from dopus_codegen.problem.ocp import load_ocp
 
@@ -148,7 +149,9 @@ def main(argv=None) -> int:
         subprocess.run([sys.executable, "-m", "dopus_codegen.cli", "generate", a.ocp_file, "-o", str(folder / "gen")],
                        check=True, capture_output=True)
         casadi_c = folder / "gen" / f"{name}_casadi.c"
-        subprocess.run([a.cc, "-O3", "-g", "-std=c99", "-c", str(casadi_c), "-o", str(folder / "casadi.o")], check=True)
+        # compiled as dopus-gen build compiles it, plus -g
+        subprocess.run([a.cc, DEFAULT_OPT, "-g", *CASADI_CFLAGS, "-c", str(casadi_c), "-o", str(folder / "casadi.o")],
+                       check=True)
         sigs = signatures(casadi_c.read_text(), name)
         fns = a.functions.split(",") if a.functions else [f for f in sigs if f.startswith("stage_")]
         unknown = [f for f in fns if f not in sigs]
