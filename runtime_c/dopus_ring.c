@@ -106,9 +106,11 @@ void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_rea
     /* the step in locals: the outputs might alias the slot for the compiler, which would
      * then load the step again for every row */
     dopus_real dw[DOPUS_NW], dlam[DOPUS_NX], dmu_g[DOPUS_DIM(DOPUS_NG)];
-    /* H dw and Phi dw (each entry the sum over j of its products in the order of j) */
-    dopus_real hd[DOPUS_NW], pd[DOPUS_NX];
     int i, j;
+#if DOPUS_LAI_VEC
+    /* H dw and Phi dw down the columns (each entry the sum of the dot product below) */
+    dopus_real hd[DOPUS_NW], pd[DOPUS_NX];
+#endif
     for (j = 0; j < DOPUS_NW; ++j)
         dw[j] = slot->dw[j];
     for (j = 0; j < DOPUS_NX; ++j)
@@ -118,30 +120,32 @@ void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_rea
 #if DOPUS_LAI_VEC
     DOPUS_RING_GEMV(DOPUS_NW, slot->Ht, dw, hd);
     DOPUS_RING_GEMV(DOPUS_NX, slot->Phit, dw, pd);
-#else
-    for (i = 0; i < DOPUS_NW; ++i) {
-        dopus_real v = DOPUS_R(0.0);
-        for (j = 0; j < DOPUS_NW; ++j)
-            v += slot->Ht[i + j * DOPUS_NW] * dw[j];
-        hd[i] = v;
-    }
-    for (i = 0; i < DOPUS_NX; ++i) {
-        dopus_real v = DOPUS_R(0.0);
-        for (j = 0; j < DOPUS_NW; ++j)
-            v += slot->Phit[i + j * DOPUS_NX] * dw[j];
-        pd[i] = v;
-    }
 #endif
     for (i = 0; i < DOPUS_NW; ++i) {
         dopus_real pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
+#if DOPUS_LAI_VEC
+        const dopus_real h = hd[i];
+#else
+        dopus_real h = DOPUS_R(0.0);
+        for (j = 0; j < DOPUS_NW; ++j)
+            h += slot->Ht[i + j * DOPUS_NW] * dw[j];
+#endif
         for (j = 0; j < DOPUS_NX; ++j)
             pl += slot->Phit[j + i * DOPUS_NX] * dlam[j];
         for (j = 0; j < DOPUS_NG; ++j)
             cm += slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] * dmu_g[j];
-        F_w[i] = slot->F_w[i] + hd[i] - pl + cm + slot->dmu_b[i];
+        F_w[i] = slot->F_w[i] + h - pl + cm + slot->dmu_b[i];
     }
-    for (i = 0; i < DOPUS_NX; ++i)
+    for (i = 0; i < DOPUS_NX; ++i) {
+#if DOPUS_LAI_VEC
         phi[i] = slot->phi[i] + pd[i];
+#else
+        dopus_real p = DOPUS_R(0.0);
+        for (j = 0; j < DOPUS_NW; ++j)
+            p += slot->Phit[i + j * DOPUS_NX] * dw[j];
+        phi[i] = slot->phi[i] + p;
+#endif
+    }
     for (i = 0; i < DOPUS_NG; ++i) {
         dopus_real cd = DOPUS_R(0.0);
         for (j = 0; j < DOPUS_NW; ++j)

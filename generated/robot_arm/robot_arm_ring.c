@@ -106,9 +106,11 @@ void robot_arm_ring_predict(const robot_arm_stage_slot *slot, robot_arm_real *F_
     /* the step in locals: the outputs might alias the slot for the compiler, which would
      * then load the step again for every row */
     robot_arm_real dw[ROBOT_ARM_NW], dlam[ROBOT_ARM_NX], dmu_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-    /* H dw and Phi dw (each entry the sum over j of its products in the order of j) */
-    robot_arm_real hd[ROBOT_ARM_NW], pd[ROBOT_ARM_NX];
     int i, j;
+#if ROBOT_ARM_LAI_VEC
+    /* H dw and Phi dw down the columns (each entry the sum of the dot product below) */
+    robot_arm_real hd[ROBOT_ARM_NW], pd[ROBOT_ARM_NX];
+#endif
     for (j = 0; j < ROBOT_ARM_NW; ++j)
         dw[j] = slot->dw[j];
     for (j = 0; j < ROBOT_ARM_NX; ++j)
@@ -118,30 +120,32 @@ void robot_arm_ring_predict(const robot_arm_stage_slot *slot, robot_arm_real *F_
 #if ROBOT_ARM_LAI_VEC
     ROBOT_ARM_RING_GEMV(ROBOT_ARM_NW, slot->Ht, dw, hd);
     ROBOT_ARM_RING_GEMV(ROBOT_ARM_NX, slot->Phit, dw, pd);
-#else
-    for (i = 0; i < ROBOT_ARM_NW; ++i) {
-        robot_arm_real v = ROBOT_ARM_R(0.0);
-        for (j = 0; j < ROBOT_ARM_NW; ++j)
-            v += slot->Ht[i + j * ROBOT_ARM_NW] * dw[j];
-        hd[i] = v;
-    }
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        robot_arm_real v = ROBOT_ARM_R(0.0);
-        for (j = 0; j < ROBOT_ARM_NW; ++j)
-            v += slot->Phit[i + j * ROBOT_ARM_NX] * dw[j];
-        pd[i] = v;
-    }
 #endif
     for (i = 0; i < ROBOT_ARM_NW; ++i) {
         robot_arm_real pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0);
+#if ROBOT_ARM_LAI_VEC
+        const robot_arm_real h = hd[i];
+#else
+        robot_arm_real h = ROBOT_ARM_R(0.0);
+        for (j = 0; j < ROBOT_ARM_NW; ++j)
+            h += slot->Ht[i + j * ROBOT_ARM_NW] * dw[j];
+#endif
         for (j = 0; j < ROBOT_ARM_NX; ++j)
             pl += slot->Phit[j + i * ROBOT_ARM_NX] * dlam[j];
         for (j = 0; j < ROBOT_ARM_NG; ++j)
             cm += slot->Ct[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NG)] * dmu_g[j];
-        F_w[i] = slot->F_w[i] + hd[i] - pl + cm + slot->dmu_b[i];
+        F_w[i] = slot->F_w[i] + h - pl + cm + slot->dmu_b[i];
     }
-    for (i = 0; i < ROBOT_ARM_NX; ++i)
+    for (i = 0; i < ROBOT_ARM_NX; ++i) {
+#if ROBOT_ARM_LAI_VEC
         phi[i] = slot->phi[i] + pd[i];
+#else
+        robot_arm_real p = ROBOT_ARM_R(0.0);
+        for (j = 0; j < ROBOT_ARM_NW; ++j)
+            p += slot->Phit[i + j * ROBOT_ARM_NX] * dw[j];
+        phi[i] = slot->phi[i] + p;
+#endif
+    }
     for (i = 0; i < ROBOT_ARM_NG; ++i) {
         robot_arm_real cd = ROBOT_ARM_R(0.0);
         for (j = 0; j < ROBOT_ARM_NW; ++j)

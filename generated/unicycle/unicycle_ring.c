@@ -106,9 +106,11 @@ void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, 
     /* the step in locals: the outputs might alias the slot for the compiler, which would
      * then load the step again for every row */
     unicycle_real dw[UNICYCLE_NW], dlam[UNICYCLE_NX], dmu_g[UNICYCLE_DIM(UNICYCLE_NG)];
-    /* H dw and Phi dw (each entry the sum over j of its products in the order of j) */
-    unicycle_real hd[UNICYCLE_NW], pd[UNICYCLE_NX];
     int i, j;
+#if UNICYCLE_LAI_VEC
+    /* H dw and Phi dw down the columns (each entry the sum of the dot product below) */
+    unicycle_real hd[UNICYCLE_NW], pd[UNICYCLE_NX];
+#endif
     for (j = 0; j < UNICYCLE_NW; ++j)
         dw[j] = slot->dw[j];
     for (j = 0; j < UNICYCLE_NX; ++j)
@@ -118,30 +120,32 @@ void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, 
 #if UNICYCLE_LAI_VEC
     UNICYCLE_RING_GEMV(UNICYCLE_NW, slot->Ht, dw, hd);
     UNICYCLE_RING_GEMV(UNICYCLE_NX, slot->Phit, dw, pd);
-#else
-    for (i = 0; i < UNICYCLE_NW; ++i) {
-        unicycle_real v = UNICYCLE_R(0.0);
-        for (j = 0; j < UNICYCLE_NW; ++j)
-            v += slot->Ht[i + j * UNICYCLE_NW] * dw[j];
-        hd[i] = v;
-    }
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        unicycle_real v = UNICYCLE_R(0.0);
-        for (j = 0; j < UNICYCLE_NW; ++j)
-            v += slot->Phit[i + j * UNICYCLE_NX] * dw[j];
-        pd[i] = v;
-    }
 #endif
     for (i = 0; i < UNICYCLE_NW; ++i) {
         unicycle_real pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
+#if UNICYCLE_LAI_VEC
+        const unicycle_real h = hd[i];
+#else
+        unicycle_real h = UNICYCLE_R(0.0);
+        for (j = 0; j < UNICYCLE_NW; ++j)
+            h += slot->Ht[i + j * UNICYCLE_NW] * dw[j];
+#endif
         for (j = 0; j < UNICYCLE_NX; ++j)
             pl += slot->Phit[j + i * UNICYCLE_NX] * dlam[j];
         for (j = 0; j < UNICYCLE_NG; ++j)
             cm += slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] * dmu_g[j];
-        F_w[i] = slot->F_w[i] + hd[i] - pl + cm + slot->dmu_b[i];
+        F_w[i] = slot->F_w[i] + h - pl + cm + slot->dmu_b[i];
     }
-    for (i = 0; i < UNICYCLE_NX; ++i)
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+#if UNICYCLE_LAI_VEC
         phi[i] = slot->phi[i] + pd[i];
+#else
+        unicycle_real p = UNICYCLE_R(0.0);
+        for (j = 0; j < UNICYCLE_NW; ++j)
+            p += slot->Phit[i + j * UNICYCLE_NX] * dw[j];
+        phi[i] = slot->phi[i] + p;
+#endif
+    }
     for (i = 0; i < UNICYCLE_NG; ++i) {
         unicycle_real cd = UNICYCLE_R(0.0);
         for (j = 0; j < UNICYCLE_NW; ++j)
