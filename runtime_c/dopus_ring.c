@@ -4,6 +4,8 @@
 
 #include "dopus_ring.h"
 
+#include "dopus_linalg.h"
+
 static void dopus_ring_zero(dopus_real *v, int n)
 {
     int i;
@@ -71,33 +73,78 @@ void dopus_ring_clear_step(dopus_stage_slot *slot)
     dopus_ring_zero(slot->dmu_b, DOPUS_NW);
 }
 
+#if DOPUS_LAI_VEC
+/* out = A x for the m x nw column-major A, as the sum over the columns j of A(:, j) x_j in
+ * the order of j (the order of the dot products below), two rows at a time with the
+ * accumulators in registers: A's columns read down instead of its rows across */
+#define DOPUS_RING_GEMV(m, A, x, out)                                                                        \
+    do {                                                                                                     \
+        dopus_lai_v2 acc_[DOPUS_DIM((m) / 2)];                                                               \
+        dopus_real last_ = DOPUS_R(0.0);                                                                     \
+        int i_, j_;                                                                                          \
+        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
+            acc_[i_] = (dopus_lai_v2){DOPUS_R(0.0), DOPUS_R(0.0)};                                           \
+        for (j_ = 0; j_ < DOPUS_NW; ++j_) {                                                                  \
+            const dopus_real f_ = (x)[j_];                                                                   \
+            const dopus_real *a_ = (A) + j_ * (m);                                                           \
+            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
+                acc_[i_] += dopus_lai_v2_load(a_ + 2 * i_) * f_;                                             \
+            if ((m) % 2)                                                                                     \
+                last_ += a_[(m)-1] * f_;                                                                     \
+        }                                                                                                    \
+        for (i_ = 0; i_ < (m) / 2; ++i_) {                                                                   \
+            (out)[2 * i_] = acc_[i_][0];                                                                     \
+            (out)[2 * i_ + 1] = acc_[i_][1];                                                                 \
+        }                                                                                                    \
+        if ((m) % 2)                                                                                         \
+            (out)[(m)-1] = last_;                                                                            \
+    } while (0)
+#endif
+
 void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_real *phi, dopus_real *g)
 {
     /* the step in locals: the outputs might alias the slot for the compiler, which would
      * then load the step again for every row */
     dopus_real dw[DOPUS_NW], dlam[DOPUS_NX], dmu_g[DOPUS_DIM(DOPUS_NG)];
     int i, j;
+#if DOPUS_LAI_VEC
+    /* H dw and Phi dw down the columns (each entry the sum of the dot product below) */
+    dopus_real hd[DOPUS_NW], pd[DOPUS_NX];
+#endif
     for (j = 0; j < DOPUS_NW; ++j)
         dw[j] = slot->dw[j];
     for (j = 0; j < DOPUS_NX; ++j)
         dlam[j] = slot->dlam[j];
     for (j = 0; j < DOPUS_NG; ++j)
         dmu_g[j] = slot->dmu_g[j];
+#if DOPUS_LAI_VEC
+    DOPUS_RING_GEMV(DOPUS_NW, slot->Ht, dw, hd);
+    DOPUS_RING_GEMV(DOPUS_NX, slot->Phit, dw, pd);
+#endif
     for (i = 0; i < DOPUS_NW; ++i) {
-        dopus_real hd = DOPUS_R(0.0), pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
+        dopus_real pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
+#if DOPUS_LAI_VEC
+        const dopus_real h = hd[i];
+#else
+        dopus_real h = DOPUS_R(0.0);
         for (j = 0; j < DOPUS_NW; ++j)
-            hd += slot->Ht[i + j * DOPUS_NW] * dw[j];
+            h += slot->Ht[i + j * DOPUS_NW] * dw[j];
+#endif
         for (j = 0; j < DOPUS_NX; ++j)
             pl += slot->Phit[j + i * DOPUS_NX] * dlam[j];
         for (j = 0; j < DOPUS_NG; ++j)
             cm += slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] * dmu_g[j];
-        F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
+        F_w[i] = slot->F_w[i] + h - pl + cm + slot->dmu_b[i];
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        dopus_real pd = DOPUS_R(0.0);
+#if DOPUS_LAI_VEC
+        phi[i] = slot->phi[i] + pd[i];
+#else
+        dopus_real p = DOPUS_R(0.0);
         for (j = 0; j < DOPUS_NW; ++j)
-            pd += slot->Phit[i + j * DOPUS_NX] * dw[j];
-        phi[i] = slot->phi[i] + pd;
+            p += slot->Phit[i + j * DOPUS_NX] * dw[j];
+        phi[i] = slot->phi[i] + p;
+#endif
     }
     for (i = 0; i < DOPUS_NG; ++i) {
         dopus_real cd = DOPUS_R(0.0);

@@ -4,6 +4,8 @@
 
 #include "robot_arm_ring.h"
 
+#include "robot_arm_linalg.h"
+
 static void robot_arm_ring_zero(robot_arm_real *v, int n)
 {
     int i;
@@ -71,33 +73,78 @@ void robot_arm_ring_clear_step(robot_arm_stage_slot *slot)
     robot_arm_ring_zero(slot->dmu_b, ROBOT_ARM_NW);
 }
 
+#if ROBOT_ARM_LAI_VEC
+/* out = A x for the m x nw column-major A, as the sum over the columns j of A(:, j) x_j in
+ * the order of j (the order of the dot products below), two rows at a time with the
+ * accumulators in registers: A's columns read down instead of its rows across */
+#define ROBOT_ARM_RING_GEMV(m, A, x, out)                                                                        \
+    do {                                                                                                     \
+        robot_arm_lai_v2 acc_[ROBOT_ARM_DIM((m) / 2)];                                                               \
+        robot_arm_real last_ = ROBOT_ARM_R(0.0);                                                                     \
+        int i_, j_;                                                                                          \
+        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
+            acc_[i_] = (robot_arm_lai_v2){ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};                                           \
+        for (j_ = 0; j_ < ROBOT_ARM_NW; ++j_) {                                                                  \
+            const robot_arm_real f_ = (x)[j_];                                                                   \
+            const robot_arm_real *a_ = (A) + j_ * (m);                                                           \
+            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
+                acc_[i_] += robot_arm_lai_v2_load(a_ + 2 * i_) * f_;                                             \
+            if ((m) % 2)                                                                                     \
+                last_ += a_[(m)-1] * f_;                                                                     \
+        }                                                                                                    \
+        for (i_ = 0; i_ < (m) / 2; ++i_) {                                                                   \
+            (out)[2 * i_] = acc_[i_][0];                                                                     \
+            (out)[2 * i_ + 1] = acc_[i_][1];                                                                 \
+        }                                                                                                    \
+        if ((m) % 2)                                                                                         \
+            (out)[(m)-1] = last_;                                                                            \
+    } while (0)
+#endif
+
 void robot_arm_ring_predict(const robot_arm_stage_slot *slot, robot_arm_real *F_w, robot_arm_real *phi, robot_arm_real *g)
 {
     /* the step in locals: the outputs might alias the slot for the compiler, which would
      * then load the step again for every row */
     robot_arm_real dw[ROBOT_ARM_NW], dlam[ROBOT_ARM_NX], dmu_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
     int i, j;
+#if ROBOT_ARM_LAI_VEC
+    /* H dw and Phi dw down the columns (each entry the sum of the dot product below) */
+    robot_arm_real hd[ROBOT_ARM_NW], pd[ROBOT_ARM_NX];
+#endif
     for (j = 0; j < ROBOT_ARM_NW; ++j)
         dw[j] = slot->dw[j];
     for (j = 0; j < ROBOT_ARM_NX; ++j)
         dlam[j] = slot->dlam[j];
     for (j = 0; j < ROBOT_ARM_NG; ++j)
         dmu_g[j] = slot->dmu_g[j];
+#if ROBOT_ARM_LAI_VEC
+    ROBOT_ARM_RING_GEMV(ROBOT_ARM_NW, slot->Ht, dw, hd);
+    ROBOT_ARM_RING_GEMV(ROBOT_ARM_NX, slot->Phit, dw, pd);
+#endif
     for (i = 0; i < ROBOT_ARM_NW; ++i) {
-        robot_arm_real hd = ROBOT_ARM_R(0.0), pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0);
+        robot_arm_real pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0);
+#if ROBOT_ARM_LAI_VEC
+        const robot_arm_real h = hd[i];
+#else
+        robot_arm_real h = ROBOT_ARM_R(0.0);
         for (j = 0; j < ROBOT_ARM_NW; ++j)
-            hd += slot->Ht[i + j * ROBOT_ARM_NW] * dw[j];
+            h += slot->Ht[i + j * ROBOT_ARM_NW] * dw[j];
+#endif
         for (j = 0; j < ROBOT_ARM_NX; ++j)
             pl += slot->Phit[j + i * ROBOT_ARM_NX] * dlam[j];
         for (j = 0; j < ROBOT_ARM_NG; ++j)
             cm += slot->Ct[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NG)] * dmu_g[j];
-        F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
+        F_w[i] = slot->F_w[i] + h - pl + cm + slot->dmu_b[i];
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        robot_arm_real pd = ROBOT_ARM_R(0.0);
+#if ROBOT_ARM_LAI_VEC
+        phi[i] = slot->phi[i] + pd[i];
+#else
+        robot_arm_real p = ROBOT_ARM_R(0.0);
         for (j = 0; j < ROBOT_ARM_NW; ++j)
-            pd += slot->Phit[i + j * ROBOT_ARM_NX] * dw[j];
-        phi[i] = slot->phi[i] + pd;
+            p += slot->Phit[i + j * ROBOT_ARM_NX] * dw[j];
+        phi[i] = slot->phi[i] + p;
+#endif
     }
     for (i = 0; i < ROBOT_ARM_NG; ++i) {
         robot_arm_real cd = ROBOT_ARM_R(0.0);
