@@ -18,7 +18,7 @@ void dopus_ring_reset(dopus_ring *ring)
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *s = &ring->slot[k];
         dopus_ring_zero(s->Ht, DOPUS_NW * DOPUS_NW);
-        dopus_ring_zero(s->A_dyn, DOPUS_NW * (DOPUS_NW + 1) / 2);
+        dopus_ring_zero(s->A_dyn_diag, DOPUS_NW);
         dopus_ring_zero(s->Phit, DOPUS_NX * DOPUS_NW);
         dopus_ring_zero(s->Ct, DOPUS_DIM(DOPUS_NG * DOPUS_NW));
         dopus_ring_zero(s->F_w, DOPUS_NW);
@@ -30,22 +30,45 @@ void dopus_ring_reset(dopus_ring *ring)
     ring->ring_head = 0;
 }
 
-void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const dopus_real *A)
+void dopus_ring_set_H(dopus_stage_slot *slot, const dopus_real *A)
 {
-    int i, j, l = 0;
+    int i, j;
     for (j = 0; j < DOPUS_NW; ++j)
         for (i = j; i < DOPUS_NW; ++i)
-            slot->A_dyn[l++] = A[i + j * DOPUS_NW];
+            slot->Ht[i + j * DOPUS_NW] = A[i + j * DOPUS_NW];
+}
+
+void dopus_ring_set_A_dyn(dopus_stage_slot *slot, const dopus_real *A)
+{
+    int i, j;
+    for (j = 0; j < DOPUS_NW; ++j) {
+        slot->A_dyn_diag[j] = A[j + j * DOPUS_NW];
+        for (i = j + 1; i < DOPUS_NW; ++i)
+            slot->Ht[j + i * DOPUS_NW] = A[i + j * DOPUS_NW];
+    }
 }
 
 void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const dopus_real *A_l, dopus_real *A)
 {
-    int i, j, l = 0;
-    for (j = 0; j < DOPUS_NW; ++j)
-        for (i = j; i < DOPUS_NW; ++i, ++l) {
-            A[i + j * DOPUS_NW] = slot->A_dyn[l] + A_l[i + j * DOPUS_NW];
-            A[j + i * DOPUS_NW] = slot->A_dyn[l] + A_l[j + i * DOPUS_NW];
+    int i, j;
+    for (j = 0; j < DOPUS_NW; ++j) {
+        A[j + j * DOPUS_NW] = slot->A_dyn_diag[j] + A_l[j + j * DOPUS_NW];
+        for (i = j + 1; i < DOPUS_NW; ++i) {
+            const dopus_real a = slot->Ht[j + i * DOPUS_NW];
+            A[i + j * DOPUS_NW] = a + A_l[i + j * DOPUS_NW];
+            A[j + i * DOPUS_NW] = a + A_l[j + i * DOPUS_NW];
         }
+    }
+}
+
+void dopus_ring_set_H_A_dyn(dopus_stage_slot *slot, const dopus_real *A_l)
+{
+    int i, j;
+    for (j = 0; j < DOPUS_NW; ++j) {
+        slot->Ht[j + j * DOPUS_NW] = slot->A_dyn_diag[j] + A_l[j + j * DOPUS_NW];
+        for (i = j + 1; i < DOPUS_NW; ++i)
+            slot->Ht[i + j * DOPUS_NW] = slot->Ht[j + i * DOPUS_NW] + A_l[i + j * DOPUS_NW];
+    }
 }
 
 dopus_stage_slot *dopus_ring_stage(dopus_ring *ring, int k)
@@ -85,8 +108,12 @@ void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_rea
         dmu_g[j] = slot->dmu_g[j];
     for (i = 0; i < DOPUS_NW; ++i) {
         dopus_real hd = DOPUS_R(0.0), pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
-        for (j = 0; j < DOPUS_NW; ++j)
+        /* Ht dw from its lower triangle: row i is Ht's row i up to the diagonal, then its
+         * column i below it */
+        for (j = 0; j <= i; ++j)
             hd += slot->Ht[i + j * DOPUS_NW] * dw[j];
+        for (j = i + 1; j < DOPUS_NW; ++j)
+            hd += slot->Ht[j + i * DOPUS_NW] * dw[j];
         for (j = 0; j < DOPUS_NX; ++j)
             pl += slot->Phit[j + i * DOPUS_NX] * dlam[j];
         for (j = 0; j < DOPUS_NG; ++j)

@@ -18,7 +18,7 @@ void unicycle_ring_reset(unicycle_ring *ring)
     for (k = 0; k < UNICYCLE_N; ++k) {
         unicycle_stage_slot *s = &ring->slot[k];
         unicycle_ring_zero(s->Ht, UNICYCLE_NW * UNICYCLE_NW);
-        unicycle_ring_zero(s->A_dyn, UNICYCLE_NW * (UNICYCLE_NW + 1) / 2);
+        unicycle_ring_zero(s->A_dyn_diag, UNICYCLE_NW);
         unicycle_ring_zero(s->Phit, UNICYCLE_NX * UNICYCLE_NW);
         unicycle_ring_zero(s->Ct, UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW));
         unicycle_ring_zero(s->F_w, UNICYCLE_NW);
@@ -30,22 +30,45 @@ void unicycle_ring_reset(unicycle_ring *ring)
     ring->ring_head = 0;
 }
 
-void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A)
+void unicycle_ring_set_H(unicycle_stage_slot *slot, const unicycle_real *A)
 {
-    int i, j, l = 0;
+    int i, j;
     for (j = 0; j < UNICYCLE_NW; ++j)
         for (i = j; i < UNICYCLE_NW; ++i)
-            slot->A_dyn[l++] = A[i + j * UNICYCLE_NW];
+            slot->Ht[i + j * UNICYCLE_NW] = A[i + j * UNICYCLE_NW];
+}
+
+void unicycle_ring_set_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A)
+{
+    int i, j;
+    for (j = 0; j < UNICYCLE_NW; ++j) {
+        slot->A_dyn_diag[j] = A[j + j * UNICYCLE_NW];
+        for (i = j + 1; i < UNICYCLE_NW; ++i)
+            slot->Ht[j + i * UNICYCLE_NW] = A[i + j * UNICYCLE_NW];
+    }
 }
 
 void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const unicycle_real *A_l, unicycle_real *A)
 {
-    int i, j, l = 0;
-    for (j = 0; j < UNICYCLE_NW; ++j)
-        for (i = j; i < UNICYCLE_NW; ++i, ++l) {
-            A[i + j * UNICYCLE_NW] = slot->A_dyn[l] + A_l[i + j * UNICYCLE_NW];
-            A[j + i * UNICYCLE_NW] = slot->A_dyn[l] + A_l[j + i * UNICYCLE_NW];
+    int i, j;
+    for (j = 0; j < UNICYCLE_NW; ++j) {
+        A[j + j * UNICYCLE_NW] = slot->A_dyn_diag[j] + A_l[j + j * UNICYCLE_NW];
+        for (i = j + 1; i < UNICYCLE_NW; ++i) {
+            const unicycle_real a = slot->Ht[j + i * UNICYCLE_NW];
+            A[i + j * UNICYCLE_NW] = a + A_l[i + j * UNICYCLE_NW];
+            A[j + i * UNICYCLE_NW] = a + A_l[j + i * UNICYCLE_NW];
         }
+    }
+}
+
+void unicycle_ring_set_H_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A_l)
+{
+    int i, j;
+    for (j = 0; j < UNICYCLE_NW; ++j) {
+        slot->Ht[j + j * UNICYCLE_NW] = slot->A_dyn_diag[j] + A_l[j + j * UNICYCLE_NW];
+        for (i = j + 1; i < UNICYCLE_NW; ++i)
+            slot->Ht[i + j * UNICYCLE_NW] = slot->Ht[j + i * UNICYCLE_NW] + A_l[i + j * UNICYCLE_NW];
+    }
 }
 
 unicycle_stage_slot *unicycle_ring_stage(unicycle_ring *ring, int k)
@@ -85,8 +108,12 @@ void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, 
         dmu_g[j] = slot->dmu_g[j];
     for (i = 0; i < UNICYCLE_NW; ++i) {
         unicycle_real hd = UNICYCLE_R(0.0), pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
-        for (j = 0; j < UNICYCLE_NW; ++j)
+        /* Ht dw from its lower triangle: row i is Ht's row i up to the diagonal, then its
+         * column i below it */
+        for (j = 0; j <= i; ++j)
             hd += slot->Ht[i + j * UNICYCLE_NW] * dw[j];
+        for (j = i + 1; j < UNICYCLE_NW; ++j)
+            hd += slot->Ht[j + i * UNICYCLE_NW] * dw[j];
         for (j = 0; j < UNICYCLE_NX; ++j)
             pl += slot->Phit[j + i * UNICYCLE_NX] * dlam[j];
         for (j = 0; j < UNICYCLE_NG; ++j)
