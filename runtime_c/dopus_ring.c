@@ -20,7 +20,7 @@ void dopus_ring_reset(dopus_ring *ring)
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *s = &ring->slot[k];
         dopus_ring_zero(s->Ht, DOPUS_NW * DOPUS_NW);
-        dopus_ring_zero(s->A_dyn, DOPUS_NW * (DOPUS_NW + 1) / 2);
+        dopus_ring_zero(s->A_dyn_diag, DOPUS_NW);
         dopus_ring_zero(s->Phit, DOPUS_NX * DOPUS_NW);
         dopus_ring_zero(s->Ct, DOPUS_DIM(DOPUS_NG * DOPUS_NW));
         dopus_ring_zero(s->F_w, DOPUS_NW);
@@ -32,22 +32,45 @@ void dopus_ring_reset(dopus_ring *ring)
     ring->ring_head = 0;
 }
 
-void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const dopus_real *A)
+void dopus_ring_set_H(dopus_stage_slot *slot, const dopus_real *A)
 {
-    int i, j, l = 0;
+    int i, j;
     for (j = 0; j < DOPUS_NW; ++j)
         for (i = j; i < DOPUS_NW; ++i)
-            slot->A_dyn[l++] = A[i + j * DOPUS_NW];
+            slot->Ht[i + j * DOPUS_NW] = A[i + j * DOPUS_NW];
+}
+
+void dopus_ring_set_A_dyn(dopus_stage_slot *slot, const dopus_real *A)
+{
+    int i, j;
+    for (j = 0; j < DOPUS_NW; ++j) {
+        slot->A_dyn_diag[j] = A[j + j * DOPUS_NW];
+        for (i = j + 1; i < DOPUS_NW; ++i)
+            slot->Ht[j + i * DOPUS_NW] = A[i + j * DOPUS_NW];
+    }
 }
 
 void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const dopus_real *A_l, dopus_real *A)
 {
-    int i, j, l = 0;
-    for (j = 0; j < DOPUS_NW; ++j)
-        for (i = j; i < DOPUS_NW; ++i, ++l) {
-            A[i + j * DOPUS_NW] = slot->A_dyn[l] + A_l[i + j * DOPUS_NW];
-            A[j + i * DOPUS_NW] = slot->A_dyn[l] + A_l[j + i * DOPUS_NW];
+    int i, j;
+    for (j = 0; j < DOPUS_NW; ++j) {
+        A[j + j * DOPUS_NW] = slot->A_dyn_diag[j] + A_l[j + j * DOPUS_NW];
+        for (i = j + 1; i < DOPUS_NW; ++i) {
+            const dopus_real a = slot->Ht[j + i * DOPUS_NW];
+            A[i + j * DOPUS_NW] = a + A_l[i + j * DOPUS_NW];
+            A[j + i * DOPUS_NW] = a + A_l[j + i * DOPUS_NW];
         }
+    }
+}
+
+void dopus_ring_set_H_A_dyn(dopus_stage_slot *slot, const dopus_real *A_l)
+{
+    int i, j;
+    for (j = 0; j < DOPUS_NW; ++j) {
+        slot->Ht[j + j * DOPUS_NW] = slot->A_dyn_diag[j] + A_l[j + j * DOPUS_NW];
+        for (i = j + 1; i < DOPUS_NW; ++i)
+            slot->Ht[i + j * DOPUS_NW] = slot->Ht[j + i * DOPUS_NW] + A_l[i + j * DOPUS_NW];
+    }
 }
 
 dopus_stage_slot *dopus_ring_stage(dopus_ring *ring, int k)
@@ -108,8 +131,8 @@ void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_rea
     dopus_real dw[DOPUS_NW], dlam[DOPUS_NX], dmu_g[DOPUS_DIM(DOPUS_NG)];
     int i, j;
 #if DOPUS_LAI_VEC
-    /* H dw and Phi dw down the columns (each entry the sum of the dot product below) */
-    dopus_real hd[DOPUS_NW], pd[DOPUS_NX];
+    /* Phi dw down the columns (each entry the sum of the dot product below) */
+    dopus_real pd[DOPUS_NX];
 #endif
     for (j = 0; j < DOPUS_NW; ++j)
         dw[j] = slot->dw[j];
@@ -118,23 +141,21 @@ void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_rea
     for (j = 0; j < DOPUS_NG; ++j)
         dmu_g[j] = slot->dmu_g[j];
 #if DOPUS_LAI_VEC
-    DOPUS_RING_GEMV(DOPUS_NW, slot->Ht, dw, hd);
     DOPUS_RING_GEMV(DOPUS_NX, slot->Phit, dw, pd);
 #endif
     for (i = 0; i < DOPUS_NW; ++i) {
-        dopus_real pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
-#if DOPUS_LAI_VEC
-        const dopus_real h = hd[i];
-#else
-        dopus_real h = DOPUS_R(0.0);
-        for (j = 0; j < DOPUS_NW; ++j)
-            h += slot->Ht[i + j * DOPUS_NW] * dw[j];
-#endif
+        dopus_real hd = DOPUS_R(0.0), pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
+        /* Ht dw from its lower triangle: row i is Ht's row i up to the diagonal, then its
+         * column i below it */
+        for (j = 0; j <= i; ++j)
+            hd += slot->Ht[i + j * DOPUS_NW] * dw[j];
+        for (j = i + 1; j < DOPUS_NW; ++j)
+            hd += slot->Ht[j + i * DOPUS_NW] * dw[j];
         for (j = 0; j < DOPUS_NX; ++j)
             pl += slot->Phit[j + i * DOPUS_NX] * dlam[j];
         for (j = 0; j < DOPUS_NG; ++j)
             cm += slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)] * dmu_g[j];
-        F_w[i] = slot->F_w[i] + h - pl + cm + slot->dmu_b[i];
+        F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
     }
     for (i = 0; i < DOPUS_NX; ++i) {
 #if DOPUS_LAI_VEC

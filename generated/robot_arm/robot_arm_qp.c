@@ -174,8 +174,24 @@ static int finite_absmax(int n, const robot_arm_real *restrict x, robot_arm_real
     return s0 + s1 == ROBOT_ARM_R(0.0);
 }
 
-/* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k, HN
- * (valid when it returns 1). */
+/* finite_absmax over the lower triangle (with the diagonal) of the n x n column-major A (the
+ * QP reads only that triangle of H_k). */
+static int finite_absmax_lower(int n, const robot_arm_real *restrict A, robot_arm_real *restrict m)
+{
+    int i, j;
+    robot_arm_real s = ROBOT_ARM_R(0.0), mm = *m;
+    for (j = 0; j < n; ++j)
+        for (i = j; i < n; ++i) {
+            const robot_arm_real a = robot_arm_fabs(A[i + j * n]);
+            s += A[i + j * n] * ROBOT_ARM_R(0.0);
+            mm = ROBOT_ARM_MAX_ACC(a, mm);
+        }
+    *m = mm;
+    return s == ROBOT_ARM_R(0.0);
+}
+
+/* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k
+ * (lower triangles) and HN (valid when it returns 1). */
 static int check_input(const robot_arm_qp_in *in, robot_arm_real *hmax)
 {
     int k, i;
@@ -183,7 +199,7 @@ static int check_input(const robot_arm_qp_in *in, robot_arm_real *hmax)
     for (k = 0; k < N; ++k) {
         if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
             return 0;
-        if (!finite_absmax(NW * NW, in->H[k], hmax) || !robot_arm_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+        if (!finite_absmax_lower(NW, in->H[k], hmax) || !robot_arm_lai_all_finite(NX, NW, in->Phi[k], NX) ||
             (NG > 0 && !robot_arm_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
             !robot_arm_lai_all_finite(NW, 1, in->g[k], NW) || !robot_arm_lai_all_finite(NX, 1, in->b[k], NX))
             return 0;

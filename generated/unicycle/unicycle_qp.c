@@ -174,8 +174,24 @@ static int finite_absmax(int n, const unicycle_real *restrict x, unicycle_real *
     return s0 + s1 == UNICYCLE_R(0.0);
 }
 
-/* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k, HN
- * (valid when it returns 1). */
+/* finite_absmax over the lower triangle (with the diagonal) of the n x n column-major A (the
+ * QP reads only that triangle of H_k). */
+static int finite_absmax_lower(int n, const unicycle_real *restrict A, unicycle_real *restrict m)
+{
+    int i, j;
+    unicycle_real s = UNICYCLE_R(0.0), mm = *m;
+    for (j = 0; j < n; ++j)
+        for (i = j; i < n; ++i) {
+            const unicycle_real a = unicycle_fabs(A[i + j * n]);
+            s += A[i + j * n] * UNICYCLE_R(0.0);
+            mm = UNICYCLE_MAX_ACC(a, mm);
+        }
+    *m = mm;
+    return s == UNICYCLE_R(0.0);
+}
+
+/* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k
+ * (lower triangles) and HN (valid when it returns 1). */
 static int check_input(const unicycle_qp_in *in, unicycle_real *hmax)
 {
     int k, i;
@@ -183,7 +199,7 @@ static int check_input(const unicycle_qp_in *in, unicycle_real *hmax)
     for (k = 0; k < N; ++k) {
         if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
             return 0;
-        if (!finite_absmax(NW * NW, in->H[k], hmax) || !unicycle_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+        if (!finite_absmax_lower(NW, in->H[k], hmax) || !unicycle_lai_all_finite(NX, NW, in->Phi[k], NX) ||
             (NG > 0 && !unicycle_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
             !unicycle_lai_all_finite(NW, 1, in->g[k], NW) || !unicycle_lai_all_finite(NX, 1, in->b[k], NX))
             return 0;

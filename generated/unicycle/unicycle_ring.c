@@ -20,7 +20,7 @@ void unicycle_ring_reset(unicycle_ring *ring)
     for (k = 0; k < UNICYCLE_N; ++k) {
         unicycle_stage_slot *s = &ring->slot[k];
         unicycle_ring_zero(s->Ht, UNICYCLE_NW * UNICYCLE_NW);
-        unicycle_ring_zero(s->A_dyn, UNICYCLE_NW * (UNICYCLE_NW + 1) / 2);
+        unicycle_ring_zero(s->A_dyn_diag, UNICYCLE_NW);
         unicycle_ring_zero(s->Phit, UNICYCLE_NX * UNICYCLE_NW);
         unicycle_ring_zero(s->Ct, UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW));
         unicycle_ring_zero(s->F_w, UNICYCLE_NW);
@@ -32,22 +32,45 @@ void unicycle_ring_reset(unicycle_ring *ring)
     ring->ring_head = 0;
 }
 
-void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A)
+void unicycle_ring_set_H(unicycle_stage_slot *slot, const unicycle_real *A)
 {
-    int i, j, l = 0;
+    int i, j;
     for (j = 0; j < UNICYCLE_NW; ++j)
         for (i = j; i < UNICYCLE_NW; ++i)
-            slot->A_dyn[l++] = A[i + j * UNICYCLE_NW];
+            slot->Ht[i + j * UNICYCLE_NW] = A[i + j * UNICYCLE_NW];
+}
+
+void unicycle_ring_set_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A)
+{
+    int i, j;
+    for (j = 0; j < UNICYCLE_NW; ++j) {
+        slot->A_dyn_diag[j] = A[j + j * UNICYCLE_NW];
+        for (i = j + 1; i < UNICYCLE_NW; ++i)
+            slot->Ht[j + i * UNICYCLE_NW] = A[i + j * UNICYCLE_NW];
+    }
 }
 
 void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const unicycle_real *A_l, unicycle_real *A)
 {
-    int i, j, l = 0;
-    for (j = 0; j < UNICYCLE_NW; ++j)
-        for (i = j; i < UNICYCLE_NW; ++i, ++l) {
-            A[i + j * UNICYCLE_NW] = slot->A_dyn[l] + A_l[i + j * UNICYCLE_NW];
-            A[j + i * UNICYCLE_NW] = slot->A_dyn[l] + A_l[j + i * UNICYCLE_NW];
+    int i, j;
+    for (j = 0; j < UNICYCLE_NW; ++j) {
+        A[j + j * UNICYCLE_NW] = slot->A_dyn_diag[j] + A_l[j + j * UNICYCLE_NW];
+        for (i = j + 1; i < UNICYCLE_NW; ++i) {
+            const unicycle_real a = slot->Ht[j + i * UNICYCLE_NW];
+            A[i + j * UNICYCLE_NW] = a + A_l[i + j * UNICYCLE_NW];
+            A[j + i * UNICYCLE_NW] = a + A_l[j + i * UNICYCLE_NW];
         }
+    }
+}
+
+void unicycle_ring_set_H_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A_l)
+{
+    int i, j;
+    for (j = 0; j < UNICYCLE_NW; ++j) {
+        slot->Ht[j + j * UNICYCLE_NW] = slot->A_dyn_diag[j] + A_l[j + j * UNICYCLE_NW];
+        for (i = j + 1; i < UNICYCLE_NW; ++i)
+            slot->Ht[i + j * UNICYCLE_NW] = slot->Ht[j + i * UNICYCLE_NW] + A_l[i + j * UNICYCLE_NW];
+    }
 }
 
 unicycle_stage_slot *unicycle_ring_stage(unicycle_ring *ring, int k)
@@ -108,8 +131,8 @@ void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, 
     unicycle_real dw[UNICYCLE_NW], dlam[UNICYCLE_NX], dmu_g[UNICYCLE_DIM(UNICYCLE_NG)];
     int i, j;
 #if UNICYCLE_LAI_VEC
-    /* H dw and Phi dw down the columns (each entry the sum of the dot product below) */
-    unicycle_real hd[UNICYCLE_NW], pd[UNICYCLE_NX];
+    /* Phi dw down the columns (each entry the sum of the dot product below) */
+    unicycle_real pd[UNICYCLE_NX];
 #endif
     for (j = 0; j < UNICYCLE_NW; ++j)
         dw[j] = slot->dw[j];
@@ -118,23 +141,21 @@ void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, 
     for (j = 0; j < UNICYCLE_NG; ++j)
         dmu_g[j] = slot->dmu_g[j];
 #if UNICYCLE_LAI_VEC
-    UNICYCLE_RING_GEMV(UNICYCLE_NW, slot->Ht, dw, hd);
     UNICYCLE_RING_GEMV(UNICYCLE_NX, slot->Phit, dw, pd);
 #endif
     for (i = 0; i < UNICYCLE_NW; ++i) {
-        unicycle_real pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
-#if UNICYCLE_LAI_VEC
-        const unicycle_real h = hd[i];
-#else
-        unicycle_real h = UNICYCLE_R(0.0);
-        for (j = 0; j < UNICYCLE_NW; ++j)
-            h += slot->Ht[i + j * UNICYCLE_NW] * dw[j];
-#endif
+        unicycle_real hd = UNICYCLE_R(0.0), pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
+        /* Ht dw from its lower triangle: row i is Ht's row i up to the diagonal, then its
+         * column i below it */
+        for (j = 0; j <= i; ++j)
+            hd += slot->Ht[i + j * UNICYCLE_NW] * dw[j];
+        for (j = i + 1; j < UNICYCLE_NW; ++j)
+            hd += slot->Ht[j + i * UNICYCLE_NW] * dw[j];
         for (j = 0; j < UNICYCLE_NX; ++j)
             pl += slot->Phit[j + i * UNICYCLE_NX] * dlam[j];
         for (j = 0; j < UNICYCLE_NG; ++j)
             cm += slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)] * dmu_g[j];
-        F_w[i] = slot->F_w[i] + h - pl + cm + slot->dmu_b[i];
+        F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
 #if UNICYCLE_LAI_VEC
