@@ -81,6 +81,12 @@ TARGETS: Dict[str, Target] = {
                         "Cortex-M4F"),
 }
 
+#: Every target: no errno from the math functions. The solver never reads errno, and newlib's
+#: sqrt wrapper setting it for a negative argument links the C library's re-entrancy struct
+#: (1 064 B of RAM in .data); without it GCC emits the FPU's square root alone (the same
+#: correctly rounded value). bench/issue23/measurements.md section 29.
+FW_CFLAGS = ("-fno-math-errno",)
+
 ALLOCATOR_SYMBOLS = ("malloc", "_malloc_r", "calloc", "_calloc_r", "realloc", "_realloc_r", "free",
                      "_free_r", "_sbrk", "_sbrk_r")
 FW_SOURCES = ("fw_main.c", "platform_qemu.c", "startup.c")
@@ -198,8 +204,8 @@ def build_target(gen_dir, build_dir, target: str, extra_cflags: Sequence[str] = 
     gen_dir, build_dir = Path(gen_dir).resolve(), Path(build_dir).resolve()
     name = read_meta(gen_dir)["name"]
     obj_dir = build_dir / target
-    base = ["arm-none-eabi-gcc", *tg.cflags, OPT, *extra_cflags, "-ffunction-sections", "-fdata-sections",
-            "-fstack-usage"]
+    base = ["arm-none-eabi-gcc", *tg.cflags, *FW_CFLAGS, OPT, *extra_cflags, "-ffunction-sections",
+            "-fdata-sections", "-fstack-usage"]
     objs = _compile(base, gen_dir, build_dir, FW_SOURCES, obj_dir, target)
     elf = obj_dir / f"{name}_{target}.elf"
     link_image(target, objs, elf)

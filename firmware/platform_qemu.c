@@ -8,7 +8,7 @@
  * newlib's stdio initialisation and with it malloc, which this image must not contain.
  * The tick counter is the board's CMSDK APB timer 0 (0x40000000), a 32-bit down-counter on
  * the 25 MHz system clock. The stack is painted with a pattern and scanned for the lowest
- * word that changed. */
+ * word that changed. errno is one static int (__errno below). */
 #include "platform.h"
 
 extern uint32_t __stack_limit__[], __stack_top__[];
@@ -122,4 +122,14 @@ int fw_command_line(char *buf, int n)
     }
     buf[block[1] < (uint32_t)(n - 1) ? block[1] : (uint32_t)(n - 1)] = '\0';
     return 0;
+}
+
+/* errno of the C library for a program with one thread: newlib's own __errno keeps it in its
+ * re-entrancy struct (1 064 B of .data, linked only for it: the math functions' error paths,
+ * such as cosf of an infinity, set errno). bench/issue23/measurements.md section 29. */
+int *__errno(void);
+int *__errno(void)
+{
+    static int fw_errno;
+    return &fw_errno;
 }

@@ -412,4 +412,35 @@ static inline dopus_real dopus_lai_max_abs_mat(int m, int n, const dopus_real *r
     return nan ? (dopus_real)NAN : r;
 }
 
+/* Two-wide vectors of the real type (the vector extension of GCC and clang) where the target
+ * has them for double: x86-64 (SSE2) and AArch64; 0 elsewhere (a scalar FPU such as the
+ * Cortex-M's, or float), where the kernels that use them take plain loops. Lane-wise
+ * arithmetic, so an entry computed two at a time takes the same operations in the same order
+ * as alone: the same values either way. Define it to override. */
+#ifndef DOPUS_LAI_VEC
+#if (defined(__GNUC__) || defined(__clang__)) && !DOPUS_REAL_FLOAT &&                                        \
+    (defined(__SSE2__) || defined(__aarch64__))
+#define DOPUS_LAI_VEC 1
+#else
+#define DOPUS_LAI_VEC 0
+#endif
+#endif
+
+#if DOPUS_LAI_VEC
+typedef dopus_real dopus_lai_v2 __attribute__((vector_size(2 * sizeof(dopus_real))));
+
+/* x[0], x[1] (any alignment) */
+static inline dopus_lai_v2 dopus_lai_v2_load(const dopus_real *x)
+{
+    dopus_lai_v2 v;
+    __builtin_memcpy(&v, x, sizeof v);
+    return v;
+}
+
+static inline void dopus_lai_v2_store(dopus_real *x, dopus_lai_v2 v)
+{
+    __builtin_memcpy(x, &v, sizeof v);
+}
+#endif
+
 #endif /* DOPUS_LINALG_H */

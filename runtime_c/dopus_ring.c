@@ -4,6 +4,8 @@
 
 #include "dopus_ring.h"
 
+#include "dopus_linalg.h"
+
 static void dopus_ring_zero(dopus_real *v, int n)
 {
     int i;
@@ -18,7 +20,7 @@ void dopus_ring_reset(dopus_ring *ring)
     for (k = 0; k < DOPUS_N; ++k) {
         dopus_stage_slot *s = &ring->slot[k];
         dopus_ring_zero(s->Ht, DOPUS_NW * DOPUS_NW);
-        dopus_ring_zero(s->A_dyn, DOPUS_NW * (DOPUS_NW + 1) / 2);
+        dopus_ring_zero(s->A_dyn_diag, DOPUS_NW);
         dopus_ring_zero(s->Phit, DOPUS_NX * DOPUS_NW);
         dopus_ring_zero(s->Ct, DOPUS_DIM(DOPUS_NG * DOPUS_NW));
         dopus_ring_zero(s->F_w, DOPUS_NW);
@@ -30,22 +32,45 @@ void dopus_ring_reset(dopus_ring *ring)
     ring->ring_head = 0;
 }
 
-void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const dopus_real *A)
+void dopus_ring_set_H(dopus_stage_slot *slot, const dopus_real *A)
 {
-    int i, j, l = 0;
+    int i, j;
     for (j = 0; j < DOPUS_NW; ++j)
         for (i = j; i < DOPUS_NW; ++i)
-            slot->A_dyn[l++] = A[i + j * DOPUS_NW];
+            slot->Ht[i + j * DOPUS_NW] = A[i + j * DOPUS_NW];
+}
+
+void dopus_ring_set_A_dyn(dopus_stage_slot *slot, const dopus_real *A)
+{
+    int i, j;
+    for (j = 0; j < DOPUS_NW; ++j) {
+        slot->A_dyn_diag[j] = A[j + j * DOPUS_NW];
+        for (i = j + 1; i < DOPUS_NW; ++i)
+            slot->Ht[j + i * DOPUS_NW] = A[i + j * DOPUS_NW];
+    }
 }
 
 void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const dopus_real *A_l, dopus_real *A)
 {
-    int i, j, l = 0;
-    for (j = 0; j < DOPUS_NW; ++j)
-        for (i = j; i < DOPUS_NW; ++i, ++l) {
-            A[i + j * DOPUS_NW] = slot->A_dyn[l] + A_l[i + j * DOPUS_NW];
-            A[j + i * DOPUS_NW] = slot->A_dyn[l] + A_l[j + i * DOPUS_NW];
+    int i, j;
+    for (j = 0; j < DOPUS_NW; ++j) {
+        A[j + j * DOPUS_NW] = slot->A_dyn_diag[j] + A_l[j + j * DOPUS_NW];
+        for (i = j + 1; i < DOPUS_NW; ++i) {
+            const dopus_real a = slot->Ht[j + i * DOPUS_NW];
+            A[i + j * DOPUS_NW] = a + A_l[i + j * DOPUS_NW];
+            A[j + i * DOPUS_NW] = a + A_l[j + i * DOPUS_NW];
         }
+    }
+}
+
+void dopus_ring_set_H_A_dyn(dopus_stage_slot *slot, const dopus_real *A_l)
+{
+    int i, j;
+    for (j = 0; j < DOPUS_NW; ++j) {
+        slot->Ht[j + j * DOPUS_NW] = slot->A_dyn_diag[j] + A_l[j + j * DOPUS_NW];
+        for (i = j + 1; i < DOPUS_NW; ++i)
+            slot->Ht[i + j * DOPUS_NW] = slot->Ht[j + i * DOPUS_NW] + A_l[i + j * DOPUS_NW];
+    }
 }
 
 dopus_stage_slot *dopus_ring_stage(dopus_ring *ring, int k)
@@ -71,22 +96,61 @@ void dopus_ring_clear_step(dopus_stage_slot *slot)
     dopus_ring_zero(slot->dmu_b, DOPUS_NW);
 }
 
+#if DOPUS_LAI_VEC
+/* out = A x for the m x nw column-major A, as the sum over the columns j of A(:, j) x_j in
+ * the order of j (the order of the dot products below), two rows at a time with the
+ * accumulators in registers: A's columns read down instead of its rows across */
+#define DOPUS_RING_GEMV(m, A, x, out)                                                                        \
+    do {                                                                                                     \
+        dopus_lai_v2 acc_[DOPUS_DIM((m) / 2)];                                                               \
+        dopus_real last_ = DOPUS_R(0.0);                                                                     \
+        int i_, j_;                                                                                          \
+        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
+            acc_[i_] = (dopus_lai_v2){DOPUS_R(0.0), DOPUS_R(0.0)};                                           \
+        for (j_ = 0; j_ < DOPUS_NW; ++j_) {                                                                  \
+            const dopus_real f_ = (x)[j_];                                                                   \
+            const dopus_real *a_ = (A) + j_ * (m);                                                           \
+            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
+                acc_[i_] += dopus_lai_v2_load(a_ + 2 * i_) * f_;                                             \
+            if ((m) % 2)                                                                                     \
+                last_ += a_[(m)-1] * f_;                                                                     \
+        }                                                                                                    \
+        for (i_ = 0; i_ < (m) / 2; ++i_) {                                                                   \
+            (out)[2 * i_] = acc_[i_][0];                                                                     \
+            (out)[2 * i_ + 1] = acc_[i_][1];                                                                 \
+        }                                                                                                    \
+        if ((m) % 2)                                                                                         \
+            (out)[(m)-1] = last_;                                                                            \
+    } while (0)
+#endif
+
 void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_real *phi, dopus_real *g)
 {
     /* the step in locals: the outputs might alias the slot for the compiler, which would
      * then load the step again for every row */
     dopus_real dw[DOPUS_NW], dlam[DOPUS_NX], dmu_g[DOPUS_DIM(DOPUS_NG)];
     int i, j;
+#if DOPUS_LAI_VEC
+    /* Phi dw down the columns (each entry the sum of the dot product below) */
+    dopus_real pd[DOPUS_NX];
+#endif
     for (j = 0; j < DOPUS_NW; ++j)
         dw[j] = slot->dw[j];
     for (j = 0; j < DOPUS_NX; ++j)
         dlam[j] = slot->dlam[j];
     for (j = 0; j < DOPUS_NG; ++j)
         dmu_g[j] = slot->dmu_g[j];
+#if DOPUS_LAI_VEC
+    DOPUS_RING_GEMV(DOPUS_NX, slot->Phit, dw, pd);
+#endif
     for (i = 0; i < DOPUS_NW; ++i) {
         dopus_real hd = DOPUS_R(0.0), pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
-        for (j = 0; j < DOPUS_NW; ++j)
+        /* Ht dw from its lower triangle: row i is Ht's row i up to the diagonal, then its
+         * column i below it */
+        for (j = 0; j <= i; ++j)
             hd += slot->Ht[i + j * DOPUS_NW] * dw[j];
+        for (j = i + 1; j < DOPUS_NW; ++j)
+            hd += slot->Ht[j + i * DOPUS_NW] * dw[j];
         for (j = 0; j < DOPUS_NX; ++j)
             pl += slot->Phit[j + i * DOPUS_NX] * dlam[j];
         for (j = 0; j < DOPUS_NG; ++j)
@@ -94,10 +158,14 @@ void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_rea
         F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
     }
     for (i = 0; i < DOPUS_NX; ++i) {
-        dopus_real pd = DOPUS_R(0.0);
+#if DOPUS_LAI_VEC
+        phi[i] = slot->phi[i] + pd[i];
+#else
+        dopus_real p = DOPUS_R(0.0);
         for (j = 0; j < DOPUS_NW; ++j)
-            pd += slot->Phit[i + j * DOPUS_NX] * dw[j];
-        phi[i] = slot->phi[i] + pd;
+            p += slot->Phit[i + j * DOPUS_NX] * dw[j];
+        phi[i] = slot->phi[i] + p;
+#endif
     }
     for (i = 0; i < DOPUS_NG; ++i) {
         dopus_real cd = DOPUS_R(0.0);

@@ -11,12 +11,15 @@
 #include "dopus_sizes.h"
 
 typedef struct {
-    /* the blocks the QP uses (possibly outdated, A regularised), column-major */
-    dopus_real Ht[DOPUS_NW * DOPUS_NW]; /* nw x nw */
-    /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
-     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l;
-     * symmetric, its lower triangle packed by columns (dopus_ring_store_A_dyn) */
-    dopus_real A_dyn[DOPUS_NW * (DOPUS_NW + 1) / 2];
+    /* the blocks the QP uses (possibly outdated, A regularised), column-major. Ht (nw x nw)
+     * holds two symmetric matrices: its lower triangle with the diagonal is the QP's block
+     * (the QP reads only that, dopus_qp.h), its strict upper triangle the strict lower
+     * triangle of A_dyn = A - A_l of the last H evaluation (unregularised: the curvature of
+     * dynamics and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l),
+     * A_dyn(i, j) for i > j at Ht[j + i nw]; A_dyn_diag its diagonal
+     * (dopus_ring_set_H, dopus_ring_set_A_dyn) */
+    dopus_real Ht[DOPUS_NW * DOPUS_NW];
+    dopus_real A_dyn_diag[DOPUS_NW];
     dopus_real Phit[DOPUS_NX * DOPUS_NW];          /* nx x nw, [A_k B_k] */
     dopus_real Ct[DOPUS_DIM(DOPUS_NG * DOPUS_NW)]; /* ng x nw (leading dimension ng) */
     /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
@@ -53,10 +56,15 @@ DOPUS_INTERNAL const dopus_stage_slot *dopus_ring_stage_const(const dopus_ring *
 /* One sampling interval: ring_head <- (ring_head + 1) mod N. */
 DOPUS_INTERNAL void dopus_ring_advance(dopus_ring *ring);
 
-/* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
-DOPUS_INTERNAL void dopus_ring_store_A_dyn(dopus_stage_slot *slot, const dopus_real *A);
-/* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
+/* The QP's block of the slot (Ht's lower triangle) from the lower triangle of the nw x nw
+ * column-major A; A_dyn kept. */
+DOPUS_INTERNAL void dopus_ring_set_H(dopus_stage_slot *slot, const dopus_real *A);
+/* A_dyn of the slot from the lower triangle of the nw x nw column-major A; the QP's block kept. */
+DOPUS_INTERNAL void dopus_ring_set_A_dyn(dopus_stage_slot *slot, const dopus_real *A);
+/* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric; A not the slot's). */
 DOPUS_INTERNAL void dopus_ring_add_A_dyn(const dopus_stage_slot *slot, const dopus_real *A_l, dopus_real *A);
+/* The QP's block of the slot = A_dyn + A_l (the lower triangle of A_l read), in place. */
+DOPUS_INTERNAL void dopus_ring_set_H_A_dyn(dopus_stage_slot *slot, const dopus_real *A_l);
 
 /* Zero the step domega of a slot. */
 DOPUS_INTERNAL void dopus_ring_clear_step(dopus_stage_slot *slot);
@@ -74,7 +82,7 @@ DOPUS_INTERNAL dopus_real dopus_ring_secant(const dopus_stage_slot *slot, const 
                                             const dopus_real *phi_new, const dopus_real *g_new);
 
 /* The linear model's prediction of F at the point after the stored step (the value for which
- * dopus_ring_secant's numerator is 0):
+ * dopus_ring_secant's numerator is 0; Ht the QP's symmetric block, its lower triangle read):
  *   F_w = F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b, phi = phi_old + Phit dw,
  *   g = g_old + Ct dw
  * (an anytime prepare whose gradients are cut, docs/algorithm.md section 14). */

@@ -491,8 +491,8 @@ static int dopus_stage_H_store(dopus_solver *s, int k)
         return rc;
     }
     slot = dopus_ring_stage(&s->ring, k);
-    dopus_copy(slot->Ht, s->mem.ev.tmp_A, DOPUS_NW * DOPUS_NW);
-    dopus_ring_store_A_dyn(slot, s->mem.ev.tmp_Al);
+    dopus_ring_set_H(slot, s->mem.ev.tmp_A);
+    dopus_ring_set_A_dyn(slot, s->mem.ev.tmp_Al);
     dopus_copy(slot->Phit, s->mem.ev.tmp_Phi, DOPUS_NX * DOPUS_NW);
     dopus_copy(slot->Ct, s->mem.ev.tmp_C, DOPUS_NG * DOPUS_NW);
     return DOPUS_OK;
@@ -2328,13 +2328,13 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
             n_al += 1;
             if (s->settings.regularization == DOPUS_REG_NONE) {
                 /* nothing to regularise: the sum straight into the slot, no copy */
-                dopus_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, slot->Ht);
+                dopus_ring_set_H_A_dyn(slot, s->mem.ev.tmp_Al);
                 continue;
             }
             dopus_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
             rc = dopus_regularize(s, DOPUS_NW, s->mem.ev.tmp_A);
             if (rc == DOPUS_OK) {
-                dopus_copy(slot->Ht, s->mem.ev.tmp_A, DOPUS_NW * DOPUS_NW);
+                dopus_ring_set_H(slot, s->mem.ev.tmp_A);
             }
         }
     }

@@ -372,13 +372,49 @@ def _refuse_without_codegen(source: str, functions: Dict[str, ca.Function]) -> N
               "(an explicit integrator, or the rootfinder plugin 'fast_newton')")
 
 
-def work_sizes(functions: Dict[str, ca.Function]) -> Dict[str, int]:
-    """SZ_ARG/RES/IW/W: the max over every emitted function, at least 1 (C99 arrays)."""
+_FORWARD_CALL = re.compile(r"\b(\w+)\(arg, res, iw, w, \w+\)")
+_C_DEFINITION = re.compile(r"^(?:static |CASADI_SYMBOL_EXPORT )?[A-Za-z_][\w \*]*?\b(\w+)\(([^()]*)\) ?\{$")
+
+
+def work_array_used(source: str) -> bool:
+    """Whether a function of CasADi's C reads or writes its work array ``w``. CasADi's
+    CodeGenerator keeps the intermediate values of an SX function in local variables
+    (``a0, a1, ...``: its option avoid_stack is off), so the SX functions the project generates
+    leave ``w`` alone and their ``sz_w`` (CasADi's count of those values) needs no memory. A
+    function uses ``w`` when its body names it other than in passing its own (arg, res, iw, w,
+    mem) on to a function of the file that does not use it; a call passing ``w`` to a function
+    the file does not define counts as a use."""
+    lines = source.split("\n")
+    direct: Dict[str, bool] = {}
+    forwards: Dict[str, List[str]] = {}
+    i = 0
+    while i < len(lines):
+        m = _C_DEFINITION.match(lines[i])
+        i += 1
+        if not m:
+            continue
+        j = i
+        while j < len(lines) and lines[j] != "}":
+            j += 1
+        body = "\n".join(lines[i:j]).replace("(void)w;", "")
+        params = [re.findall(r"\w+", prm)[-1] for prm in m.group(2).split(",") if re.findall(r"\w+", prm)]
+        if "w" in params:
+            forwards[m.group(1)] = _FORWARD_CALL.findall(body)
+            direct[m.group(1)] = re.search(r"\bw\b", _FORWARD_CALL.sub("", body)) is not None
+        i = j
+    return any(direct.values()) or any(c not in direct for calls in forwards.values() for c in calls)
+
+
+def work_sizes(functions: Dict[str, ca.Function], source: Optional[str] = None) -> Dict[str, int]:
+    """SZ_ARG/RES/IW/W: the max over every emitted function, at least 1 (C99 arrays); SZ_W 1
+    when ``source`` (the generated CasADi C) is given and no function of it uses its work array
+    (:func:`work_array_used`)."""
     return {
         "sz_arg": max([1] + [int(f.sz_arg()) for f in functions.values()]),
         "sz_res": max([1] + [int(f.sz_res()) for f in functions.values()]),
         "sz_iw": max([1] + [int(f.sz_iw()) for f in functions.values()]),
-        "sz_w": max([1] + [int(f.sz_w()) for f in functions.values()]),
+        "sz_w": (max([1] + [int(f.sz_w()) for f in functions.values()])
+                 if source is None or work_array_used(source) else 1),
     }
 
 
@@ -740,7 +776,7 @@ def render_folder(disc: Any, nominal: Any = None, problem_hash: Optional[str] = 
     main_file = f"{name}_main.c"
     ctx: Dict[str, Any] = {
         "name": name, "NAME": NAME, "header": header, "casadi_version": ca.__version__,
-        "has_gn": int(has_gn), "sizes": s, "work": work_sizes(functions), "main_file": main_file,
+        "has_gn": int(has_gn), "sizes": s, "work": work_sizes(functions, files[f"{name}_casadi.c"]), "main_file": main_file,
         "strict_cflags": " ".join(STRICT_CFLAGS), "casadi_cflags": " ".join(CASADI_CFLAGS),
         "default_opt": DEFAULT_OPT, "cmake_options": flags.cmake_options(),
     }

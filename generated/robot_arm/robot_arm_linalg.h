@@ -412,4 +412,35 @@ static inline robot_arm_real robot_arm_lai_max_abs_mat(int m, int n, const robot
     return nan ? (robot_arm_real)NAN : r;
 }
 
+/* Two-wide vectors of the real type (the vector extension of GCC and clang) where the target
+ * has them for double: x86-64 (SSE2) and AArch64; 0 elsewhere (a scalar FPU such as the
+ * Cortex-M's, or float), where the kernels that use them take plain loops. Lane-wise
+ * arithmetic, so an entry computed two at a time takes the same operations in the same order
+ * as alone: the same values either way. Define it to override. */
+#ifndef ROBOT_ARM_LAI_VEC
+#if (defined(__GNUC__) || defined(__clang__)) && !ROBOT_ARM_REAL_FLOAT &&                                        \
+    (defined(__SSE2__) || defined(__aarch64__))
+#define ROBOT_ARM_LAI_VEC 1
+#else
+#define ROBOT_ARM_LAI_VEC 0
+#endif
+#endif
+
+#if ROBOT_ARM_LAI_VEC
+typedef robot_arm_real robot_arm_lai_v2 __attribute__((vector_size(2 * sizeof(robot_arm_real))));
+
+/* x[0], x[1] (any alignment) */
+static inline robot_arm_lai_v2 robot_arm_lai_v2_load(const robot_arm_real *x)
+{
+    robot_arm_lai_v2 v;
+    __builtin_memcpy(&v, x, sizeof v);
+    return v;
+}
+
+static inline void robot_arm_lai_v2_store(robot_arm_real *x, robot_arm_lai_v2 v)
+{
+    __builtin_memcpy(x, &v, sizeof v);
+}
+#endif
+
 #endif /* ROBOT_ARM_LINALG_H */

@@ -4,6 +4,8 @@
 
 #include "robot_arm_ring.h"
 
+#include "robot_arm_linalg.h"
+
 static void robot_arm_ring_zero(robot_arm_real *v, int n)
 {
     int i;
@@ -18,7 +20,7 @@ void robot_arm_ring_reset(robot_arm_ring *ring)
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         robot_arm_stage_slot *s = &ring->slot[k];
         robot_arm_ring_zero(s->Ht, ROBOT_ARM_NW * ROBOT_ARM_NW);
-        robot_arm_ring_zero(s->A_dyn, ROBOT_ARM_NW * (ROBOT_ARM_NW + 1) / 2);
+        robot_arm_ring_zero(s->A_dyn_diag, ROBOT_ARM_NW);
         robot_arm_ring_zero(s->Phit, ROBOT_ARM_NX * ROBOT_ARM_NW);
         robot_arm_ring_zero(s->Ct, ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW));
         robot_arm_ring_zero(s->F_w, ROBOT_ARM_NW);
@@ -30,22 +32,45 @@ void robot_arm_ring_reset(robot_arm_ring *ring)
     ring->ring_head = 0;
 }
 
-void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A)
+void robot_arm_ring_set_H(robot_arm_stage_slot *slot, const robot_arm_real *A)
 {
-    int i, j, l = 0;
+    int i, j;
     for (j = 0; j < ROBOT_ARM_NW; ++j)
         for (i = j; i < ROBOT_ARM_NW; ++i)
-            slot->A_dyn[l++] = A[i + j * ROBOT_ARM_NW];
+            slot->Ht[i + j * ROBOT_ARM_NW] = A[i + j * ROBOT_ARM_NW];
+}
+
+void robot_arm_ring_set_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A)
+{
+    int i, j;
+    for (j = 0; j < ROBOT_ARM_NW; ++j) {
+        slot->A_dyn_diag[j] = A[j + j * ROBOT_ARM_NW];
+        for (i = j + 1; i < ROBOT_ARM_NW; ++i)
+            slot->Ht[j + i * ROBOT_ARM_NW] = A[i + j * ROBOT_ARM_NW];
+    }
 }
 
 void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const robot_arm_real *A_l, robot_arm_real *A)
 {
-    int i, j, l = 0;
-    for (j = 0; j < ROBOT_ARM_NW; ++j)
-        for (i = j; i < ROBOT_ARM_NW; ++i, ++l) {
-            A[i + j * ROBOT_ARM_NW] = slot->A_dyn[l] + A_l[i + j * ROBOT_ARM_NW];
-            A[j + i * ROBOT_ARM_NW] = slot->A_dyn[l] + A_l[j + i * ROBOT_ARM_NW];
+    int i, j;
+    for (j = 0; j < ROBOT_ARM_NW; ++j) {
+        A[j + j * ROBOT_ARM_NW] = slot->A_dyn_diag[j] + A_l[j + j * ROBOT_ARM_NW];
+        for (i = j + 1; i < ROBOT_ARM_NW; ++i) {
+            const robot_arm_real a = slot->Ht[j + i * ROBOT_ARM_NW];
+            A[i + j * ROBOT_ARM_NW] = a + A_l[i + j * ROBOT_ARM_NW];
+            A[j + i * ROBOT_ARM_NW] = a + A_l[j + i * ROBOT_ARM_NW];
         }
+    }
+}
+
+void robot_arm_ring_set_H_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A_l)
+{
+    int i, j;
+    for (j = 0; j < ROBOT_ARM_NW; ++j) {
+        slot->Ht[j + j * ROBOT_ARM_NW] = slot->A_dyn_diag[j] + A_l[j + j * ROBOT_ARM_NW];
+        for (i = j + 1; i < ROBOT_ARM_NW; ++i)
+            slot->Ht[i + j * ROBOT_ARM_NW] = slot->Ht[j + i * ROBOT_ARM_NW] + A_l[i + j * ROBOT_ARM_NW];
+    }
 }
 
 robot_arm_stage_slot *robot_arm_ring_stage(robot_arm_ring *ring, int k)
@@ -71,22 +96,61 @@ void robot_arm_ring_clear_step(robot_arm_stage_slot *slot)
     robot_arm_ring_zero(slot->dmu_b, ROBOT_ARM_NW);
 }
 
+#if ROBOT_ARM_LAI_VEC
+/* out = A x for the m x nw column-major A, as the sum over the columns j of A(:, j) x_j in
+ * the order of j (the order of the dot products below), two rows at a time with the
+ * accumulators in registers: A's columns read down instead of its rows across */
+#define ROBOT_ARM_RING_GEMV(m, A, x, out)                                                                        \
+    do {                                                                                                     \
+        robot_arm_lai_v2 acc_[ROBOT_ARM_DIM((m) / 2)];                                                               \
+        robot_arm_real last_ = ROBOT_ARM_R(0.0);                                                                     \
+        int i_, j_;                                                                                          \
+        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
+            acc_[i_] = (robot_arm_lai_v2){ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};                                           \
+        for (j_ = 0; j_ < ROBOT_ARM_NW; ++j_) {                                                                  \
+            const robot_arm_real f_ = (x)[j_];                                                                   \
+            const robot_arm_real *a_ = (A) + j_ * (m);                                                           \
+            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
+                acc_[i_] += robot_arm_lai_v2_load(a_ + 2 * i_) * f_;                                             \
+            if ((m) % 2)                                                                                     \
+                last_ += a_[(m)-1] * f_;                                                                     \
+        }                                                                                                    \
+        for (i_ = 0; i_ < (m) / 2; ++i_) {                                                                   \
+            (out)[2 * i_] = acc_[i_][0];                                                                     \
+            (out)[2 * i_ + 1] = acc_[i_][1];                                                                 \
+        }                                                                                                    \
+        if ((m) % 2)                                                                                         \
+            (out)[(m)-1] = last_;                                                                            \
+    } while (0)
+#endif
+
 void robot_arm_ring_predict(const robot_arm_stage_slot *slot, robot_arm_real *F_w, robot_arm_real *phi, robot_arm_real *g)
 {
     /* the step in locals: the outputs might alias the slot for the compiler, which would
      * then load the step again for every row */
     robot_arm_real dw[ROBOT_ARM_NW], dlam[ROBOT_ARM_NX], dmu_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
     int i, j;
+#if ROBOT_ARM_LAI_VEC
+    /* Phi dw down the columns (each entry the sum of the dot product below) */
+    robot_arm_real pd[ROBOT_ARM_NX];
+#endif
     for (j = 0; j < ROBOT_ARM_NW; ++j)
         dw[j] = slot->dw[j];
     for (j = 0; j < ROBOT_ARM_NX; ++j)
         dlam[j] = slot->dlam[j];
     for (j = 0; j < ROBOT_ARM_NG; ++j)
         dmu_g[j] = slot->dmu_g[j];
+#if ROBOT_ARM_LAI_VEC
+    ROBOT_ARM_RING_GEMV(ROBOT_ARM_NX, slot->Phit, dw, pd);
+#endif
     for (i = 0; i < ROBOT_ARM_NW; ++i) {
         robot_arm_real hd = ROBOT_ARM_R(0.0), pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0);
-        for (j = 0; j < ROBOT_ARM_NW; ++j)
+        /* Ht dw from its lower triangle: row i is Ht's row i up to the diagonal, then its
+         * column i below it */
+        for (j = 0; j <= i; ++j)
             hd += slot->Ht[i + j * ROBOT_ARM_NW] * dw[j];
+        for (j = i + 1; j < ROBOT_ARM_NW; ++j)
+            hd += slot->Ht[j + i * ROBOT_ARM_NW] * dw[j];
         for (j = 0; j < ROBOT_ARM_NX; ++j)
             pl += slot->Phit[j + i * ROBOT_ARM_NX] * dlam[j];
         for (j = 0; j < ROBOT_ARM_NG; ++j)
@@ -94,10 +158,14 @@ void robot_arm_ring_predict(const robot_arm_stage_slot *slot, robot_arm_real *F_
         F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        robot_arm_real pd = ROBOT_ARM_R(0.0);
+#if ROBOT_ARM_LAI_VEC
+        phi[i] = slot->phi[i] + pd[i];
+#else
+        robot_arm_real p = ROBOT_ARM_R(0.0);
         for (j = 0; j < ROBOT_ARM_NW; ++j)
-            pd += slot->Phit[i + j * ROBOT_ARM_NX] * dw[j];
-        phi[i] = slot->phi[i] + pd;
+            p += slot->Phit[i + j * ROBOT_ARM_NX] * dw[j];
+        phi[i] = slot->phi[i] + p;
+#endif
     }
     for (i = 0; i < ROBOT_ARM_NG; ++i) {
         robot_arm_real cd = ROBOT_ARM_R(0.0);

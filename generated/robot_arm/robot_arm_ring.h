@@ -11,12 +11,15 @@
 #include "robot_arm_sizes.h"
 
 typedef struct {
-    /* the blocks the QP uses (possibly outdated, A regularised), column-major */
-    robot_arm_real Ht[ROBOT_ARM_NW * ROBOT_ARM_NW]; /* nw x nw */
-    /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
-     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l;
-     * symmetric, its lower triangle packed by columns (robot_arm_ring_store_A_dyn) */
-    robot_arm_real A_dyn[ROBOT_ARM_NW * (ROBOT_ARM_NW + 1) / 2];
+    /* the blocks the QP uses (possibly outdated, A regularised), column-major. Ht (nw x nw)
+     * holds two symmetric matrices: its lower triangle with the diagonal is the QP's block
+     * (the QP reads only that, robot_arm_qp.h), its strict upper triangle the strict lower
+     * triangle of A_dyn = A - A_l of the last H evaluation (unregularised: the curvature of
+     * dynamics and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l),
+     * A_dyn(i, j) for i > j at Ht[j + i nw]; A_dyn_diag its diagonal
+     * (robot_arm_ring_set_H, robot_arm_ring_set_A_dyn) */
+    robot_arm_real Ht[ROBOT_ARM_NW * ROBOT_ARM_NW];
+    robot_arm_real A_dyn_diag[ROBOT_ARM_NW];
     robot_arm_real Phit[ROBOT_ARM_NX * ROBOT_ARM_NW];          /* nx x nw, [A_k B_k] */
     robot_arm_real Ct[ROBOT_ARM_DIM(ROBOT_ARM_NG * ROBOT_ARM_NW)]; /* ng x nw (leading dimension ng) */
     /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
@@ -53,10 +56,15 @@ ROBOT_ARM_INTERNAL const robot_arm_stage_slot *robot_arm_ring_stage_const(const 
 /* One sampling interval: ring_head <- (ring_head + 1) mod N. */
 ROBOT_ARM_INTERNAL void robot_arm_ring_advance(robot_arm_ring *ring);
 
-/* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
-ROBOT_ARM_INTERNAL void robot_arm_ring_store_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A);
-/* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
+/* The QP's block of the slot (Ht's lower triangle) from the lower triangle of the nw x nw
+ * column-major A; A_dyn kept. */
+ROBOT_ARM_INTERNAL void robot_arm_ring_set_H(robot_arm_stage_slot *slot, const robot_arm_real *A);
+/* A_dyn of the slot from the lower triangle of the nw x nw column-major A; the QP's block kept. */
+ROBOT_ARM_INTERNAL void robot_arm_ring_set_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A);
+/* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric; A not the slot's). */
 ROBOT_ARM_INTERNAL void robot_arm_ring_add_A_dyn(const robot_arm_stage_slot *slot, const robot_arm_real *A_l, robot_arm_real *A);
+/* The QP's block of the slot = A_dyn + A_l (the lower triangle of A_l read), in place. */
+ROBOT_ARM_INTERNAL void robot_arm_ring_set_H_A_dyn(robot_arm_stage_slot *slot, const robot_arm_real *A_l);
 
 /* Zero the step domega of a slot. */
 ROBOT_ARM_INTERNAL void robot_arm_ring_clear_step(robot_arm_stage_slot *slot);
@@ -74,7 +82,7 @@ ROBOT_ARM_INTERNAL robot_arm_real robot_arm_ring_secant(const robot_arm_stage_sl
                                             const robot_arm_real *phi_new, const robot_arm_real *g_new);
 
 /* The linear model's prediction of F at the point after the stored step (the value for which
- * robot_arm_ring_secant's numerator is 0):
+ * robot_arm_ring_secant's numerator is 0; Ht the QP's symmetric block, its lower triangle read):
  *   F_w = F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b, phi = phi_old + Phit dw,
  *   g = g_old + Ct dw
  * (an anytime prepare whose gradients are cut, docs/algorithm.md section 14). */

@@ -44,11 +44,12 @@
 #define ROBOT_ARM_HAS_P_SCHEDULE 0
 #define ROBOT_ARM_P_SCHEDULE_NODES 1
 
-/* CasADi work arrays: the maximum over every generated function, at least 1 */
+/* CasADi work arrays: the maximum over every generated function, at least 1; SZ_W 1 when no
+ * generated function uses its work array (their intermediate values are local variables) */
 #define ROBOT_ARM_SZ_ARG 5
 #define ROBOT_ARM_SZ_RES 7
 #define ROBOT_ARM_SZ_IW 1
-#define ROBOT_ARM_SZ_W 677
+#define ROBOT_ARM_SZ_W 1
 
 /* The real-number type of the runtime, chosen at generation (options(real=...)): 1 for
  * single precision (float), 0 for double. robot_arm_real.h defines robot_arm_real and its macros. */

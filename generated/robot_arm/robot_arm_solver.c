@@ -491,8 +491,8 @@ static int robot_arm_stage_H_store(robot_arm_solver *s, int k)
         return rc;
     }
     slot = robot_arm_ring_stage(&s->ring, k);
-    robot_arm_copy(slot->Ht, s->mem.ev.tmp_A, ROBOT_ARM_NW * ROBOT_ARM_NW);
-    robot_arm_ring_store_A_dyn(slot, s->mem.ev.tmp_Al);
+    robot_arm_ring_set_H(slot, s->mem.ev.tmp_A);
+    robot_arm_ring_set_A_dyn(slot, s->mem.ev.tmp_Al);
     robot_arm_copy(slot->Phit, s->mem.ev.tmp_Phi, ROBOT_ARM_NX * ROBOT_ARM_NW);
     robot_arm_copy(slot->Ct, s->mem.ev.tmp_C, ROBOT_ARM_NG * ROBOT_ARM_NW);
     return ROBOT_ARM_OK;
@@ -2328,13 +2328,13 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
             n_al += 1;
             if (s->settings.regularization == ROBOT_ARM_REG_NONE) {
                 /* nothing to regularise: the sum straight into the slot, no copy */
-                robot_arm_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, slot->Ht);
+                robot_arm_ring_set_H_A_dyn(slot, s->mem.ev.tmp_Al);
                 continue;
             }
             robot_arm_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
             rc = robot_arm_regularize(s, ROBOT_ARM_NW, s->mem.ev.tmp_A);
             if (rc == ROBOT_ARM_OK) {
-                robot_arm_copy(slot->Ht, s->mem.ev.tmp_A, ROBOT_ARM_NW * ROBOT_ARM_NW);
+                robot_arm_ring_set_H(slot, s->mem.ev.tmp_A);
             }
         }
     }

@@ -1,6 +1,8 @@
 /* The automatic Levenberg-Marquardt term (unicycle_lm.h, docs/algorithm.md section 10). */
 #include "unicycle_lm.h"
 
+#include "unicycle_linalg.h"
+
 #include <math.h>
 
 void unicycle_lm_reset(unicycle_lm *lm, int on, unicycle_real fixed)
@@ -30,16 +32,146 @@ static unicycle_real unicycle_lm_hessian_scale(const unicycle_ring *ring, const 
     return h;
 }
 
+/* The two-wide kernels (UNICYCLE_LAI_VEC) pay from about nx = 8 on: 30 % less time for the
+ * test at nx = 21 on x86-64, but 5 % more instructions at nx = 5 (short rows); smaller
+ * states and targets without vectors take the plain loops. The same values either way. */
+#define UNICYCLE_LM_VEC (UNICYCLE_LAI_VEC && UNICYCLE_NX >= 8)
+
+#if UNICYCLE_LM_VEC
+/* Y = P Phi (nx x nw) stored by rows (row l at Y + l nw) and the lower triangle of Z (nw x nw)
+ * by rows (row i at Z + i nw): the kernels below run along the rows */
+#define UNICYCLE_LM_Y(l, j) Y[(j) + (l)*UNICYCLE_NW]
+#define UNICYCLE_LM_Z(i, j) Z[(j) + (i)*UNICYCLE_NW]
+
+/* entries (i, j) and (i, j + 1) of an nw x nw column-major block */
+static unicycle_lai_v2 unicycle_lm_pair(const unicycle_real *A, int i, int j)
+{
+    unicycle_lai_v2 v = {A[i + j * UNICYCLE_NW], A[i + (j + 1) * UNICYCLE_NW]};
+    return v;
+}
+
+/* Column j of Y = P Phi: the sum over l of P's column l times Phi(l, j) in the order of l,
+ * the column's accumulators in registers across the sum. */
+static void unicycle_lm_y_col(const unicycle_real *P, const unicycle_real *phi, unicycle_real *Y, int j)
+{
+    unicycle_lai_v2 acc[UNICYCLE_NX / 2];
+    unicycle_real last = UNICYCLE_R(0.0);
+    int i, l;
+    for (i = 0; i < UNICYCLE_NX / 2; ++i) {
+        acc[i] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
+    }
+    for (l = 0; l < UNICYCLE_NX; ++l) {
+        const unicycle_real f = phi[l];
+        const unicycle_real *p = P + l * UNICYCLE_NX;
+        for (i = 0; i < UNICYCLE_NX / 2; ++i) {
+            acc[i] += unicycle_lai_v2_load(p + 2 * i) * f;
+        }
+        if (UNICYCLE_NX % 2) {
+            last += p[UNICYCLE_NX - 1] * f;
+        }
+    }
+    for (i = 0; i < UNICYCLE_NX / 2; ++i) {
+        UNICYCLE_LM_Y(2 * i, j) = acc[i][0];
+        UNICYCLE_LM_Y(2 * i + 1, j) = acc[i][1];
+    }
+    if (UNICYCLE_NX % 2) {
+        UNICYCLE_LM_Y(UNICYCLE_NX - 1, j) = last;
+    }
+}
+
+/* Row i of Z's lower triangle from column j0 on: Z(i, j) = H(i, j) + sum_l Phi(l, i) Y(l, j)
+ * in the order of l, two entries at a time (blocks of 8, then 4 and 2, one entry alone) with
+ * the accumulators in registers across the sum. */
+static void unicycle_lm_z_row(const unicycle_real *H, const unicycle_real *Phi, const unicycle_real *Y, unicycle_real *Z,
+                           int i, int j0)
+{
+    const unicycle_real *ph = Phi + i * UNICYCLE_NX;
+    unicycle_real *z = Z + i * UNICYCLE_NW;
+    int j = j0, l;
+    for (; j + 8 <= i + 1; j += 8) {
+        unicycle_lai_v2 a0 = unicycle_lm_pair(H, i, j), a1 = unicycle_lm_pair(H, i, j + 2);
+        unicycle_lai_v2 a2 = unicycle_lm_pair(H, i, j + 4), a3 = unicycle_lm_pair(H, i, j + 6);
+        for (l = 0; l < UNICYCLE_NX; ++l) {
+            const unicycle_real *y = Y + j + l * UNICYCLE_NW;
+            a0 += ph[l] * unicycle_lai_v2_load(y);
+            a1 += ph[l] * unicycle_lai_v2_load(y + 2);
+            a2 += ph[l] * unicycle_lai_v2_load(y + 4);
+            a3 += ph[l] * unicycle_lai_v2_load(y + 6);
+        }
+        unicycle_lai_v2_store(z + j, a0);
+        unicycle_lai_v2_store(z + j + 2, a1);
+        unicycle_lai_v2_store(z + j + 4, a2);
+        unicycle_lai_v2_store(z + j + 6, a3);
+    }
+    if (j + 4 <= i + 1) {
+        unicycle_lai_v2 a0 = unicycle_lm_pair(H, i, j), a1 = unicycle_lm_pair(H, i, j + 2);
+        for (l = 0; l < UNICYCLE_NX; ++l) {
+            const unicycle_real *y = Y + j + l * UNICYCLE_NW;
+            a0 += ph[l] * unicycle_lai_v2_load(y);
+            a1 += ph[l] * unicycle_lai_v2_load(y + 2);
+        }
+        unicycle_lai_v2_store(z + j, a0);
+        unicycle_lai_v2_store(z + j + 2, a1);
+        j += 4;
+    }
+    if (j + 2 <= i + 1) {
+        unicycle_lai_v2 a0 = unicycle_lm_pair(H, i, j);
+        for (l = 0; l < UNICYCLE_NX; ++l) {
+            a0 += ph[l] * unicycle_lai_v2_load(Y + j + l * UNICYCLE_NW);
+        }
+        unicycle_lai_v2_store(z + j, a0);
+        j += 2;
+    }
+    if (j <= i) {
+        unicycle_real v = H[i + j * UNICYCLE_NW];
+        for (l = 0; l < UNICYCLE_NX; ++l) {
+            v += ph[l] * UNICYCLE_LM_Y(l, j);
+        }
+        z[j] = v;
+    }
+}
+
+/* Row i of the Riccati update P = Z_xx - K'K (K = L^-1 Z_ux in Z's control rows), entries
+ * j <= i: Z(i, j) - sum_l Z(l, i) Z(l, j) in the order of l, two at a time, stored with their
+ * mirror. */
+static void unicycle_lm_p_row(const unicycle_real *Z, unicycle_real *P, int i)
+{
+    int j = 0, l;
+    for (; j + 2 <= i + 1; j += 2) {
+        unicycle_lai_v2 v = unicycle_lai_v2_load(Z + j + i * UNICYCLE_NW);
+        for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
+            v -= UNICYCLE_LM_Z(l, i) * unicycle_lai_v2_load(Z + j + l * UNICYCLE_NW);
+        }
+        unicycle_lai_v2_store(P + j + i * UNICYCLE_NX, v);
+        P[i + j * UNICYCLE_NX] = v[0];
+        P[i + (j + 1) * UNICYCLE_NX] = v[1];
+    }
+    if (j <= i) {
+        unicycle_real v = UNICYCLE_LM_Z(i, j);
+        for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
+            v -= UNICYCLE_LM_Z(l, i) * UNICYCLE_LM_Z(l, j);
+        }
+        P[i + j * UNICYCLE_NX] = v;
+        P[j + i * UNICYCLE_NX] = v;
+    }
+}
+#else
+/* Y = P Phi (nx x nw) and the lower triangle of Z (nw x nw) column-major */
+#define UNICYCLE_LM_Z(i, j) Z[(i) + (j)*UNICYCLE_NW]
+#endif
+
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
  * out) has control pivots above UNICYCLE_LM_PIVOT_REL h.
  *
- * Per stage, Y = P Phi runs down whole columns of P (vectorised, no reductions, Phi read in
- * its stored layout: no transposed copy), then only the lower triangle of
- * Z = H + lm I + Phi' Y, each entry a dot product of two contiguous columns of length nx
- * (Phi's column r and Y's column j): about half the multiply-adds of the full Z, and on an
- * in-order core without vector units (the Cortex-M) the cost is the multiply-adds and their
- * loads. The Riccati update writes P's lower triangle and mirrors it. */
+ * Per stage, Y = P Phi runs down whole columns of P (Phi read in its stored layout: no
+ * transposed copy), then only the lower triangle of Z = H + lm I + Phi' Y: about half the
+ * multiply-adds of the full Z, and on an in-order core without vector units (the Cortex-M)
+ * the cost is the multiply-adds and their loads; there each entry of Z is a dot product of
+ * two contiguous columns of length nx (Phi's column i and Y's column j). The Riccati update
+ * writes P's lower triangle and mirrors it. With two-wide vectors (UNICYCLE_LM_VEC) Y, Z and
+ * the update run two entries at a time with their accumulators in registers, Y and Z stored
+ * by rows; every entry takes the same operations in the same order. */
 static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, const unicycle_real *A_N, unicycle_real lm,
                            unicycle_real *work)
 {
@@ -60,6 +192,16 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
         /* stage 0 needs only the control block Z_uu (x_0 is fixed): Y's and Z's control
          * columns, the same values as in the full block */
         const int j0 = k == 0 ? UNICYCLE_NX : 0;
+#if UNICYCLE_LM_VEC
+        /* Y = P Phi, then Z = H + lm I + Phi' Y by rows */
+        for (j = j0; j < UNICYCLE_NW; ++j) {
+            unicycle_lm_y_col(P, Phi + j * UNICYCLE_NX, Y, j);
+        }
+        for (i = j0; i < UNICYCLE_NW; ++i) {
+            unicycle_lm_z_row(H, Phi, Y, Z, i, j0);
+            UNICYCLE_LM_Z(i, i) += lm;
+        }
+#else
         /* Y = P Phi (nx x nw), column by column */
         for (j = j0; j < UNICYCLE_NW; ++j) {
             unicycle_real col[UNICYCLE_NX];
@@ -92,38 +234,44 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
             }
             Z[j + j * UNICYCLE_NW] += lm;
         }
+#endif
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = UNICYCLE_NX; j < UNICYCLE_NW; ++j) {
-            unicycle_real d = Z[j + j * UNICYCLE_NW];
+            unicycle_real d = UNICYCLE_LM_Z(j, j);
             for (l = UNICYCLE_NX; l < j; ++l) {
-                d -= Z[j + l * UNICYCLE_NW] * Z[j + l * UNICYCLE_NW];
+                d -= UNICYCLE_LM_Z(j, l) * UNICYCLE_LM_Z(j, l);
             }
             if (!(d > tol)) {
                 return 0;
             }
             d = unicycle_sqrt(d);
-            Z[j + j * UNICYCLE_NW] = d;
+            UNICYCLE_LM_Z(j, j) = d;
             for (i = j + 1; i < UNICYCLE_NW; ++i) {
-                v = Z[i + j * UNICYCLE_NW];
+                v = UNICYCLE_LM_Z(i, j);
                 for (l = UNICYCLE_NX; l < j; ++l) {
-                    v -= Z[i + l * UNICYCLE_NW] * Z[j + l * UNICYCLE_NW];
+                    v -= UNICYCLE_LM_Z(i, l) * UNICYCLE_LM_Z(j, l);
                 }
-                Z[i + j * UNICYCLE_NW] = v / d;
+                UNICYCLE_LM_Z(i, j) = v / d;
             }
         }
         if (k == 0) {
             break; /* x_0 is fixed: P_0 is not needed */
         }
-        /* Y = L^-1 Z_ux in place, then P = Z_xx - Y' Y (lower triangle, mirrored) */
+        /* K = L^-1 Z_ux in place, then P = Z_xx - K'K (lower triangle, mirrored) */
         for (j = 0; j < UNICYCLE_NX; ++j) {
             for (i = UNICYCLE_NX; i < UNICYCLE_NW; ++i) {
-                v = Z[i + j * UNICYCLE_NW];
+                v = UNICYCLE_LM_Z(i, j);
                 for (l = UNICYCLE_NX; l < i; ++l) {
-                    v -= Z[i + l * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
+                    v -= UNICYCLE_LM_Z(i, l) * UNICYCLE_LM_Z(l, j);
                 }
-                Z[i + j * UNICYCLE_NW] = v / Z[i + i * UNICYCLE_NW];
+                UNICYCLE_LM_Z(i, j) = v / UNICYCLE_LM_Z(i, i);
             }
         }
+#if UNICYCLE_LM_VEC
+        for (i = 0; i < UNICYCLE_NX; ++i) {
+            unicycle_lm_p_row(Z, P, i);
+        }
+#else
         for (j = 0; j < UNICYCLE_NX; ++j) {
             for (i = j; i < UNICYCLE_NX; ++i) {
                 v = Z[i + j * UNICYCLE_NW];
@@ -134,6 +282,7 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
                 P[j + i * UNICYCLE_NX] = v;
             }
         }
+#endif
     }
     return 1;
 }

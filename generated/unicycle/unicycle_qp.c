@@ -174,8 +174,24 @@ static int finite_absmax(int n, const unicycle_real *restrict x, unicycle_real *
     return s0 + s1 == UNICYCLE_R(0.0);
 }
 
-/* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k, HN
- * (valid when it returns 1). */
+/* finite_absmax over the lower triangle (with the diagonal) of the n x n column-major A (the
+ * QP reads only that triangle of H_k). */
+static int finite_absmax_lower(int n, const unicycle_real *restrict A, unicycle_real *restrict m)
+{
+    int i, j;
+    unicycle_real s = UNICYCLE_R(0.0), mm = *m;
+    for (j = 0; j < n; ++j)
+        for (i = j; i < n; ++i) {
+            const unicycle_real a = unicycle_fabs(A[i + j * n]);
+            s += A[i + j * n] * UNICYCLE_R(0.0);
+            mm = UNICYCLE_MAX_ACC(a, mm);
+        }
+    *m = mm;
+    return s == UNICYCLE_R(0.0);
+}
+
+/* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k
+ * (lower triangles) and HN (valid when it returns 1). */
 static int check_input(const unicycle_qp_in *in, unicycle_real *hmax)
 {
     int k, i;
@@ -183,7 +199,7 @@ static int check_input(const unicycle_qp_in *in, unicycle_real *hmax)
     for (k = 0; k < N; ++k) {
         if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
             return 0;
-        if (!finite_absmax(NW * NW, in->H[k], hmax) || !unicycle_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+        if (!finite_absmax_lower(NW, in->H[k], hmax) || !unicycle_lai_all_finite(NX, NW, in->Phi[k], NX) ||
             (NG > 0 && !unicycle_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
             !unicycle_lai_all_finite(NW, 1, in->g[k], NW) || !unicycle_lai_all_finite(NX, 1, in->b[k], NX))
             return 0;
@@ -847,20 +863,19 @@ QP_NOINLINE static void qp_stage_wt(const unicycle_real *restrict P, const unicy
 }
 
 /* The triangle of M in two-wide vectors (UNICYCLE_QP_V2). By default it is used with the kept
- * Phi_k' in double precision under GCC or clang (their vector extension) when nw > 17: GCC 12
+ * Phi_k' where unicycle_linalg.h has two-wide vectors (UNICYCLE_LAI_VEC) when nw > 17: GCC 12
  * (-O3, SSE2) unrolls the scalar loops below completely up to nw = 17 and vectorises them as
  * well as this kernel (the robot arm's 8, the quadrotor's 17), but above that it leaves a
  * loop per column with a variable start and the column in memory, and the kernel takes 0.76
  * to 0.77 of the factorisation's instructions (nw = 18, 20, 24; bench/issue23/measurements.md
- * section 27). -DUNICYCLE_QP_V2=1 uses the kernel at every size, 0 never. Each entry of M is one
- * sum in the same order as in the scalar loops (two entries of one column per vector, never
- * a sum split across lanes): both give the same bits. Columns j, j + 1 (j even) are formed
- * together in blocks of up to V2_ROWS vectors of rows, the accumulators in registers; the
- * entries above the diagonal in those blocks are formed from 0 (H's upper triangle is not
- * read) and never read. */
+ * section 27). -DUNICYCLE_QP_V2=1 uses the kernel at every size (with UNICYCLE_LAI_VEC), 0 never.
+ * Each entry of M is one sum in the same order as in the scalar loops (two entries of one
+ * column per vector, never a sum split across lanes): both give the same bits. Columns j,
+ * j + 1 (j even) are formed together in blocks of up to V2_ROWS vectors of rows, the
+ * accumulators in registers; the entries above the diagonal in those blocks are formed from
+ * 0 (H's upper triangle is not read) and never read. */
 #if !defined(UNICYCLE_QP_V2) || UNICYCLE_QP_V2
-#if UNICYCLE_QP_PHIT && !UNICYCLE_REAL_FLOAT && (defined(__GNUC__) || defined(__clang__)) &&                       \
-    (defined(UNICYCLE_QP_V2) || NW > 17)
+#if UNICYCLE_QP_PHIT && UNICYCLE_LAI_VEC && (defined(UNICYCLE_QP_V2) || NW > 17)
 #define QP_V2 1
 #endif
 #endif
@@ -869,78 +884,67 @@ QP_NOINLINE static void qp_stage_wt(const unicycle_real *restrict P, const unicy
 #endif
 
 #if QP_V2
-typedef double qp_v2 __attribute__((vector_size(16)));
 #define V2_ROWS 4 /* vectors of rows per block: 2 x 4 accumulators, 2 broadcasts, 1 load */
-static inline qp_v2 v2_load(const double *p)
+static inline unicycle_lai_v2 v2_splat(unicycle_real a)
 {
-    qp_v2 v;
-    __builtin_memcpy(&v, p, sizeof v);
-    return v;
-}
-static inline void v2_store(double *p, qp_v2 v)
-{
-    __builtin_memcpy(p, &v, sizeof v);
-}
-static inline qp_v2 v2_splat(double a)
-{
-    const qp_v2 v = {a, a};
+    const unicycle_lai_v2 v = {a, a};
     return v;
 }
 /* one entry: s + sum_l WT(r, l) f[l], l = 0..NX-1 in order (the odd last row) */
-static inline double v2_row(double s, const double *restrict WTr, const double *restrict f)
+static inline unicycle_real v2_row(unicycle_real s, const unicycle_real *restrict WTr, const unicycle_real *restrict f)
 {
     int l;
     for (l = 0; l < NX; ++l)
         s += WTr[l * NW] * f[l];
     return s;
 }
-QP_NOINLINE static void qp_stage_update(const double *restrict Phi, const double *restrict P,
-                                        const double *restrict G, const double *restrict H,
-                                        const double *restrict PhiT, double *restrict WT, double *restrict M,
-                                        double *restrict Gam)
+QP_NOINLINE static void qp_stage_update(const unicycle_real *restrict Phi, const unicycle_real *restrict P,
+                                        const unicycle_real *restrict G, const unicycle_real *restrict H,
+                                        const unicycle_real *restrict PhiT, unicycle_real *restrict WT,
+                                        unicycle_real *restrict M, unicycle_real *restrict Gam)
 {
     int j, r, v, l;
     qp_stage_wt(P, G, PhiT, WT, Gam);
     UNROLL
     for (j = 0; j + 1 < NW; j += 2) {
-        const double *h0 = H + j * NW, *h1 = H + (j + 1) * NW;
-        const double *f0 = Phi + j * NX, *f1 = Phi + (j + 1) * NX;
-        double *m0 = M + j * NW, *m1 = M + (j + 1) * NW;
+        const unicycle_real *h0 = H + j * NW, *h1 = H + (j + 1) * NW;
+        const unicycle_real *f0 = Phi + j * NX, *f1 = Phi + (j + 1) * NX;
+        unicycle_real *m0 = M + j * NW, *m1 = M + (j + 1) * NW;
         /* the rows from j, or from j - 1 when that makes their count even */
         const int r0 = ((NW - j) % 2 && j > 0) ? j - 1 : j;
         UNROLL
         for (r = r0; r + 1 < NW; r += 2 * V2_ROWS) {
             const int nv = (NW - r) / 2 < V2_ROWS ? (NW - r) / 2 : V2_ROWS;
-            qp_v2 a0[V2_ROWS], a1[V2_ROWS];
+            unicycle_lai_v2 a0[V2_ROWS], a1[V2_ROWS];
             UNROLL
             for (v = 0; v < nv; ++v) {
                 const int i = r + 2 * v; /* rows i, i + 1 */
                 if (i + 1 == j) {
-                    const qp_v2 d0 = {0.0, h0[j]}, d1 = {0.0, 0.0};
+                    const unicycle_lai_v2 d0 = {UNICYCLE_R(0.0), h0[j]}, d1 = {UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
                     a0[v] = d0;
                     a1[v] = d1;
                 } else if (i == j) {
-                    const qp_v2 d1 = {0.0, h1[j + 1]};
-                    a0[v] = v2_load(h0 + i);
+                    const unicycle_lai_v2 d1 = {UNICYCLE_R(0.0), h1[j + 1]};
+                    a0[v] = unicycle_lai_v2_load(h0 + i);
                     a1[v] = d1;
                 } else {
-                    a0[v] = v2_load(h0 + i);
-                    a1[v] = v2_load(h1 + i);
+                    a0[v] = unicycle_lai_v2_load(h0 + i);
+                    a1[v] = unicycle_lai_v2_load(h1 + i);
                 }
             }
             for (l = 0; l < NX; ++l) {
-                const qp_v2 s0 = v2_splat(f0[l]), s1 = v2_splat(f1[l]);
+                const unicycle_lai_v2 s0 = v2_splat(f0[l]), s1 = v2_splat(f1[l]);
                 UNROLL
                 for (v = 0; v < nv; ++v) {
-                    const qp_v2 x = v2_load(WT + r + 2 * v + l * NW);
+                    const unicycle_lai_v2 x = unicycle_lai_v2_load(WT + r + 2 * v + l * NW);
                     a0[v] += x * s0;
                     a1[v] += x * s1;
                 }
             }
             UNROLL
             for (v = 0; v < nv; ++v) {
-                v2_store(m0 + r + 2 * v, a0[v]);
-                v2_store(m1 + r + 2 * v, a1[v]);
+                unicycle_lai_v2_store(m0 + r + 2 * v, a0[v]);
+                unicycle_lai_v2_store(m1 + r + 2 * v, a1[v]);
             }
         }
         if ((NW - r0) % 2) {

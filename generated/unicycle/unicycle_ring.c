@@ -4,6 +4,8 @@
 
 #include "unicycle_ring.h"
 
+#include "unicycle_linalg.h"
+
 static void unicycle_ring_zero(unicycle_real *v, int n)
 {
     int i;
@@ -18,7 +20,7 @@ void unicycle_ring_reset(unicycle_ring *ring)
     for (k = 0; k < UNICYCLE_N; ++k) {
         unicycle_stage_slot *s = &ring->slot[k];
         unicycle_ring_zero(s->Ht, UNICYCLE_NW * UNICYCLE_NW);
-        unicycle_ring_zero(s->A_dyn, UNICYCLE_NW * (UNICYCLE_NW + 1) / 2);
+        unicycle_ring_zero(s->A_dyn_diag, UNICYCLE_NW);
         unicycle_ring_zero(s->Phit, UNICYCLE_NX * UNICYCLE_NW);
         unicycle_ring_zero(s->Ct, UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW));
         unicycle_ring_zero(s->F_w, UNICYCLE_NW);
@@ -30,22 +32,45 @@ void unicycle_ring_reset(unicycle_ring *ring)
     ring->ring_head = 0;
 }
 
-void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A)
+void unicycle_ring_set_H(unicycle_stage_slot *slot, const unicycle_real *A)
 {
-    int i, j, l = 0;
+    int i, j;
     for (j = 0; j < UNICYCLE_NW; ++j)
         for (i = j; i < UNICYCLE_NW; ++i)
-            slot->A_dyn[l++] = A[i + j * UNICYCLE_NW];
+            slot->Ht[i + j * UNICYCLE_NW] = A[i + j * UNICYCLE_NW];
+}
+
+void unicycle_ring_set_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A)
+{
+    int i, j;
+    for (j = 0; j < UNICYCLE_NW; ++j) {
+        slot->A_dyn_diag[j] = A[j + j * UNICYCLE_NW];
+        for (i = j + 1; i < UNICYCLE_NW; ++i)
+            slot->Ht[j + i * UNICYCLE_NW] = A[i + j * UNICYCLE_NW];
+    }
 }
 
 void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const unicycle_real *A_l, unicycle_real *A)
 {
-    int i, j, l = 0;
-    for (j = 0; j < UNICYCLE_NW; ++j)
-        for (i = j; i < UNICYCLE_NW; ++i, ++l) {
-            A[i + j * UNICYCLE_NW] = slot->A_dyn[l] + A_l[i + j * UNICYCLE_NW];
-            A[j + i * UNICYCLE_NW] = slot->A_dyn[l] + A_l[j + i * UNICYCLE_NW];
+    int i, j;
+    for (j = 0; j < UNICYCLE_NW; ++j) {
+        A[j + j * UNICYCLE_NW] = slot->A_dyn_diag[j] + A_l[j + j * UNICYCLE_NW];
+        for (i = j + 1; i < UNICYCLE_NW; ++i) {
+            const unicycle_real a = slot->Ht[j + i * UNICYCLE_NW];
+            A[i + j * UNICYCLE_NW] = a + A_l[i + j * UNICYCLE_NW];
+            A[j + i * UNICYCLE_NW] = a + A_l[j + i * UNICYCLE_NW];
         }
+    }
+}
+
+void unicycle_ring_set_H_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A_l)
+{
+    int i, j;
+    for (j = 0; j < UNICYCLE_NW; ++j) {
+        slot->Ht[j + j * UNICYCLE_NW] = slot->A_dyn_diag[j] + A_l[j + j * UNICYCLE_NW];
+        for (i = j + 1; i < UNICYCLE_NW; ++i)
+            slot->Ht[i + j * UNICYCLE_NW] = slot->Ht[j + i * UNICYCLE_NW] + A_l[i + j * UNICYCLE_NW];
+    }
 }
 
 unicycle_stage_slot *unicycle_ring_stage(unicycle_ring *ring, int k)
@@ -71,22 +96,61 @@ void unicycle_ring_clear_step(unicycle_stage_slot *slot)
     unicycle_ring_zero(slot->dmu_b, UNICYCLE_NW);
 }
 
+#if UNICYCLE_LAI_VEC
+/* out = A x for the m x nw column-major A, as the sum over the columns j of A(:, j) x_j in
+ * the order of j (the order of the dot products below), two rows at a time with the
+ * accumulators in registers: A's columns read down instead of its rows across */
+#define UNICYCLE_RING_GEMV(m, A, x, out)                                                                        \
+    do {                                                                                                     \
+        unicycle_lai_v2 acc_[UNICYCLE_DIM((m) / 2)];                                                               \
+        unicycle_real last_ = UNICYCLE_R(0.0);                                                                     \
+        int i_, j_;                                                                                          \
+        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
+            acc_[i_] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};                                           \
+        for (j_ = 0; j_ < UNICYCLE_NW; ++j_) {                                                                  \
+            const unicycle_real f_ = (x)[j_];                                                                   \
+            const unicycle_real *a_ = (A) + j_ * (m);                                                           \
+            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
+                acc_[i_] += unicycle_lai_v2_load(a_ + 2 * i_) * f_;                                             \
+            if ((m) % 2)                                                                                     \
+                last_ += a_[(m)-1] * f_;                                                                     \
+        }                                                                                                    \
+        for (i_ = 0; i_ < (m) / 2; ++i_) {                                                                   \
+            (out)[2 * i_] = acc_[i_][0];                                                                     \
+            (out)[2 * i_ + 1] = acc_[i_][1];                                                                 \
+        }                                                                                                    \
+        if ((m) % 2)                                                                                         \
+            (out)[(m)-1] = last_;                                                                            \
+    } while (0)
+#endif
+
 void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, unicycle_real *phi, unicycle_real *g)
 {
     /* the step in locals: the outputs might alias the slot for the compiler, which would
      * then load the step again for every row */
     unicycle_real dw[UNICYCLE_NW], dlam[UNICYCLE_NX], dmu_g[UNICYCLE_DIM(UNICYCLE_NG)];
     int i, j;
+#if UNICYCLE_LAI_VEC
+    /* Phi dw down the columns (each entry the sum of the dot product below) */
+    unicycle_real pd[UNICYCLE_NX];
+#endif
     for (j = 0; j < UNICYCLE_NW; ++j)
         dw[j] = slot->dw[j];
     for (j = 0; j < UNICYCLE_NX; ++j)
         dlam[j] = slot->dlam[j];
     for (j = 0; j < UNICYCLE_NG; ++j)
         dmu_g[j] = slot->dmu_g[j];
+#if UNICYCLE_LAI_VEC
+    UNICYCLE_RING_GEMV(UNICYCLE_NX, slot->Phit, dw, pd);
+#endif
     for (i = 0; i < UNICYCLE_NW; ++i) {
         unicycle_real hd = UNICYCLE_R(0.0), pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
-        for (j = 0; j < UNICYCLE_NW; ++j)
+        /* Ht dw from its lower triangle: row i is Ht's row i up to the diagonal, then its
+         * column i below it */
+        for (j = 0; j <= i; ++j)
             hd += slot->Ht[i + j * UNICYCLE_NW] * dw[j];
+        for (j = i + 1; j < UNICYCLE_NW; ++j)
+            hd += slot->Ht[j + i * UNICYCLE_NW] * dw[j];
         for (j = 0; j < UNICYCLE_NX; ++j)
             pl += slot->Phit[j + i * UNICYCLE_NX] * dlam[j];
         for (j = 0; j < UNICYCLE_NG; ++j)
@@ -94,10 +158,14 @@ void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, 
         F_w[i] = slot->F_w[i] + hd - pl + cm + slot->dmu_b[i];
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
-        unicycle_real pd = UNICYCLE_R(0.0);
+#if UNICYCLE_LAI_VEC
+        phi[i] = slot->phi[i] + pd[i];
+#else
+        unicycle_real p = UNICYCLE_R(0.0);
         for (j = 0; j < UNICYCLE_NW; ++j)
-            pd += slot->Phit[i + j * UNICYCLE_NX] * dw[j];
-        phi[i] = slot->phi[i] + pd;
+            p += slot->Phit[i + j * UNICYCLE_NX] * dw[j];
+        phi[i] = slot->phi[i] + p;
+#endif
     }
     for (i = 0; i < UNICYCLE_NG; ++i) {
         unicycle_real cd = UNICYCLE_R(0.0);

@@ -11,12 +11,15 @@
 #include "unicycle_sizes.h"
 
 typedef struct {
-    /* the blocks the QP uses (possibly outdated, A regularised), column-major */
-    unicycle_real Ht[UNICYCLE_NW * UNICYCLE_NW]; /* nw x nw */
-    /* A_dyn = A - A_l of the last H evaluation (unregularised): the curvature of dynamics
-     * and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l;
-     * symmetric, its lower triangle packed by columns (unicycle_ring_store_A_dyn) */
-    unicycle_real A_dyn[UNICYCLE_NW * (UNICYCLE_NW + 1) / 2];
+    /* the blocks the QP uses (possibly outdated, A regularised), column-major. Ht (nw x nw)
+     * holds two symmetric matrices: its lower triangle with the diagonal is the QP's block
+     * (the QP reads only that, unicycle_qp.h), its strict upper triangle the strict lower
+     * triangle of A_dyn = A - A_l of the last H evaluation (unregularised: the curvature of
+     * dynamics and path constraints, to which step 5 of prepare adds a fresh stage-cost A_l),
+     * A_dyn(i, j) for i > j at Ht[j + i nw]; A_dyn_diag its diagonal
+     * (unicycle_ring_set_H, unicycle_ring_set_A_dyn) */
+    unicycle_real Ht[UNICYCLE_NW * UNICYCLE_NW];
+    unicycle_real A_dyn_diag[UNICYCLE_NW];
     unicycle_real Phit[UNICYCLE_NX * UNICYCLE_NW];          /* nx x nw, [A_k B_k] */
     unicycle_real Ct[UNICYCLE_DIM(UNICYCLE_NG * UNICYCLE_NW)]; /* ng x nw (leading dimension ng) */
     /* F_old = (F_w, phi, g) of the last gradient evaluation of this stage (eq. 14) */
@@ -53,10 +56,15 @@ UNICYCLE_INTERNAL const unicycle_stage_slot *unicycle_ring_stage_const(const uni
 /* One sampling interval: ring_head <- (ring_head + 1) mod N. */
 UNICYCLE_INTERNAL void unicycle_ring_advance(unicycle_ring *ring);
 
-/* A_dyn of the slot from the lower triangle of the nw x nw column-major A. */
-UNICYCLE_INTERNAL void unicycle_ring_store_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A);
-/* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric). */
+/* The QP's block of the slot (Ht's lower triangle) from the lower triangle of the nw x nw
+ * column-major A; A_dyn kept. */
+UNICYCLE_INTERNAL void unicycle_ring_set_H(unicycle_stage_slot *slot, const unicycle_real *A);
+/* A_dyn of the slot from the lower triangle of the nw x nw column-major A; the QP's block kept. */
+UNICYCLE_INTERNAL void unicycle_ring_set_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A);
+/* A = A_dyn + A_l (nw x nw column-major, both triangles; A_dyn symmetric; A not the slot's). */
 UNICYCLE_INTERNAL void unicycle_ring_add_A_dyn(const unicycle_stage_slot *slot, const unicycle_real *A_l, unicycle_real *A);
+/* The QP's block of the slot = A_dyn + A_l (the lower triangle of A_l read), in place. */
+UNICYCLE_INTERNAL void unicycle_ring_set_H_A_dyn(unicycle_stage_slot *slot, const unicycle_real *A_l);
 
 /* Zero the step domega of a slot. */
 UNICYCLE_INTERNAL void unicycle_ring_clear_step(unicycle_stage_slot *slot);
@@ -74,7 +82,7 @@ UNICYCLE_INTERNAL unicycle_real unicycle_ring_secant(const unicycle_stage_slot *
                                             const unicycle_real *phi_new, const unicycle_real *g_new);
 
 /* The linear model's prediction of F at the point after the stored step (the value for which
- * unicycle_ring_secant's numerator is 0):
+ * unicycle_ring_secant's numerator is 0; Ht the QP's symmetric block, its lower triangle read):
  *   F_w = F_w_old + Ht dw - Phit' dlam + Ct' dmu_g + dmu_b, phi = phi_old + Phit dw,
  *   g = g_old + Ct dw
  * (an anytime prepare whose gradients are cut, docs/algorithm.md section 14). */

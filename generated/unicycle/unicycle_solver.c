@@ -491,8 +491,8 @@ static int unicycle_stage_H_store(unicycle_solver *s, int k)
         return rc;
     }
     slot = unicycle_ring_stage(&s->ring, k);
-    unicycle_copy(slot->Ht, s->mem.ev.tmp_A, UNICYCLE_NW * UNICYCLE_NW);
-    unicycle_ring_store_A_dyn(slot, s->mem.ev.tmp_Al);
+    unicycle_ring_set_H(slot, s->mem.ev.tmp_A);
+    unicycle_ring_set_A_dyn(slot, s->mem.ev.tmp_Al);
     unicycle_copy(slot->Phit, s->mem.ev.tmp_Phi, UNICYCLE_NX * UNICYCLE_NW);
     unicycle_copy(slot->Ct, s->mem.ev.tmp_C, UNICYCLE_NG * UNICYCLE_NW);
     return UNICYCLE_OK;
@@ -2328,13 +2328,13 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
             n_al += 1;
             if (s->settings.regularization == UNICYCLE_REG_NONE) {
                 /* nothing to regularise: the sum straight into the slot, no copy */
-                unicycle_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, slot->Ht);
+                unicycle_ring_set_H_A_dyn(slot, s->mem.ev.tmp_Al);
                 continue;
             }
             unicycle_ring_add_A_dyn(slot, s->mem.ev.tmp_Al, s->mem.ev.tmp_A);
             rc = unicycle_regularize(s, UNICYCLE_NW, s->mem.ev.tmp_A);
             if (rc == UNICYCLE_OK) {
-                unicycle_copy(slot->Ht, s->mem.ev.tmp_A, UNICYCLE_NW * UNICYCLE_NW);
+                unicycle_ring_set_H(slot, s->mem.ev.tmp_A);
             }
         }
     }
