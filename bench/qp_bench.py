@@ -349,7 +349,10 @@ def paired_ratios(exe: Path, qps: list, configs: list, eq_scale: float, reps: in
     over the QPs; the spread is given over the QPs (quartiles) and over the rounds (least and
     largest round). ``best`` is the configuration that is fastest against ours per QP (the
     largest median ours/QP): HPIPM's best converging mode, chosen on paired ratios so that two
-    modes of nearly equal time do not swap on the noise of their separate medians."""
+    modes of nearly equal time do not swap on the noise of their separate medians. Needs at
+    least one round and one repetition (the command line's 0 skips the comparison)."""
+    if rounds < 1 or reps < 1:
+        raise ValueError(f"paired_ratios: rounds and reps must be at least 1, got {rounds} and {reps}")
     solvers = [{"kind": "dopus", "name": "ours"}]
     for name in configs:
         cfg = HPIPM_CONFIGS[name]
@@ -653,7 +656,8 @@ def main(argv=None) -> int:
                     help="robot arm: repetitions per round of the paired comparison of ours against every "
                          "HPIPM configuration that converged on all QPs (0 skips it; default %(default)s)")
     ap.add_argument("--paired-rounds", type=int, default=3,
-                    help="robot arm: separate harness runs of the paired comparison (default %(default)s)")
+                    help="robot arm: separate harness runs of the paired comparison (0 skips it; default "
+                         "%(default)s)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=RESULTS / "qp_bench.json")
     args = ap.parse_args(argv)
@@ -661,6 +665,9 @@ def main(argv=None) -> int:
         tols = [float(t) for t in str(args.tol).split(",")]
     except ValueError:
         ap.error(f"--tol: expected numbers, got {args.tol!r}")
+    for opt in ("paired_reps", "paired_rounds"):
+        if getattr(args, opt) < 0:
+            ap.error(f"--{opt.replace('_', '-')}: expected 0 or more, got {getattr(args, opt)}")
     if len(tols) > 1:
         return _several_tolerances(argv, tols, args.json)
     args.tol = tols[0]
@@ -801,7 +808,7 @@ def main(argv=None) -> int:
         print_modes(f"robot-arm QPs, tolerance {args.tol:g}", report["robot_arm"]["modes"], log)
         modes = report["robot_arm"]["modes"]["configs"]
         full = [n for n, r in modes.items() if r["converged"] == r["of"] and n in HPIPM_CONFIGS]
-        if with_ours and args.paired_reps > 0 and full and last_run:
+        if with_ours and args.paired_reps > 0 and args.paired_rounds > 0 and full and last_run:
             paired = paired_ratios(last_run["exe"], last_run["qps"], full, args.eq_scale, args.paired_reps,
                                    args.warmup, args.tol, args.iter_max, last_run["workdir"], args.paired_rounds, log)
             report["robot_arm"]["paired"] = paired
