@@ -483,6 +483,7 @@ typedef struct {
     double cost_qp_step;  /* one QP iteration, moved 10 % at most per QP (the extra QP's cap) */
     double cost_tail;     /* steps 6 and 7 of the last prepare iteration */
     double cost_grad;     /* one gradient of stages 0..N-2 (step 2) */
+    double cost_fh;       /* one gradient and re-linearisation in one call (step 2 of the full RTI) */
     double cost_head;     /* step 3: stage N-1 and the terminal node */
     double cost_al;       /* one stage's cost-Hessian refresh (step 5) */
     /* the rest of the least prepare and of the feedback (time budget; 0 in work units), each
