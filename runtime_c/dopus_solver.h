@@ -417,8 +417,9 @@ enum dopus_budget_unit {
 /* Anytime constants (docs/algorithm.md section 14). */
 #define DOPUS_ANYTIME_TOL DOPUS_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
 #define DOPUS_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
-/* a feedback QP cut after iterations is its step when its scaled residuals are at most this */
-#define DOPUS_ANYTIME_CUT_MERIT DOPUS_R(1e-2)
+/* a feedback QP cut after iterations is its step when its scaled residuals are at most this
+ * (an interior-point iterate; the warm start a cut active-set start leaves is refused) */
+#define DOPUS_ANYTIME_CUT_MERIT DOPUS_R(1e-1)
 #define DOPUS_ADAPTIVE_ETA DOPUS_R(0.1) /* default eta of adaptive M */
 #define DOPUS_WORK_QP DOPUS_N           /* work units of a QP solve */
 

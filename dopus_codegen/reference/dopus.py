@@ -875,7 +875,7 @@ class ReferenceDopus:
                 # with lm raised does not
                 start = (retries == 0 and self.active_set_start and self.lm_auto
                          and bool(np.all(np.abs(qp["x0"]) <= _SAFETY["QP_ACTIVE_SET_NEAR"] * self.scales[0]))
-                         and self.lm_near_convex())
+                         and self._active_set_fits() and self.lm_near_convex())
                 sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter,
                                          guess=self._qp_warm_point(qp) if start else None,
                                          guess_sweeps=int(_SAFETY["QP_ACTIVE_SET"]))
@@ -894,6 +894,18 @@ class ReferenceDopus:
             failure = "diverged"
         self._last_qp_tried = qp
         return sol, failure, retries
+
+    def _active_set_fits(self) -> bool:
+        """Section 14: with a time budget's deadline the active-set start only when the time
+        left before it fits its most sweeps (QP_ACTIVE_SET) at the price of one QP iteration
+        (here the last feedback QP's time over its iterations): a start cut short leaves the
+        warm start, which fails the feedback, where the interior point's cut iterates are
+        steps. In work units (a QP is cut only before its first factorisation) always, as in
+        the C runtime."""
+        if self._qp_deadline is None or self.budget_unit != "time":
+            return True
+        price = self._cost_qp / max(1, self.qp_iterations)
+        return self._budget_now() + _SAFETY["QP_ACTIVE_SET"] * price <= self._qp_deadline
 
     def _feedback_recover(self, xhat0):
         """Section 9: the QP of a finite measurement failed; re-initialise from the measured

@@ -417,8 +417,9 @@ enum robot_arm_budget_unit {
 /* Anytime constants (docs/algorithm.md section 14). */
 #define ROBOT_ARM_ANYTIME_TOL ROBOT_ARM_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
 #define ROBOT_ARM_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
-/* a feedback QP cut after iterations is its step when its scaled residuals are at most this */
-#define ROBOT_ARM_ANYTIME_CUT_MERIT ROBOT_ARM_R(1e-2)
+/* a feedback QP cut after iterations is its step when its scaled residuals are at most this
+ * (an interior-point iterate; the warm start a cut active-set start leaves is refused) */
+#define ROBOT_ARM_ANYTIME_CUT_MERIT ROBOT_ARM_R(1e-1)
 #define ROBOT_ARM_ADAPTIVE_ETA ROBOT_ARM_R(0.1) /* default eta of adaptive M */
 #define ROBOT_ARM_WORK_QP ROBOT_ARM_N           /* work units of a QP solve */
 

@@ -1196,6 +1196,18 @@ static int unicycle_measurement_near(const unicycle_solver *s)
     return 1;
 }
 
+/* With a time budget's deadline (algorithm.md section 14): 1 when the time left before it fits
+ * the most sweeps of the active-set start (UNICYCLE_QP_ACTIVE_SET) at the price of one QP
+ * iteration. Its sweeps give the exact KKT point only at the last one: a start the deadline
+ * cuts short leaves the warm start, whose residuals fail the feedback (scaled 0.44 on the
+ * robot arm), where the interior point's cut iterates are steps. Without a deadline, and in
+ * work units (the QP is cut only before its first factorisation), 1. */
+static int unicycle_active_set_fits(const unicycle_solver *s)
+{
+    return !s->anytime.qp_timed || s->settings.budget_unit != UNICYCLE_BUDGET_TIME ||
+           unicycle_budget_now(s) + (double)UNICYCLE_QP_ACTIVE_SET * s->anytime.qp_price <= s->anytime.qp_deadline;
+}
+
 /* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry
  * in the same call when the warm start failed or needed the inertia correction: the QP is
  * then nonconvex on the null space of its equalities and may have several local
@@ -1207,9 +1219,10 @@ static int unicycle_feedback_qp(unicycle_solver *s)
      * that needed the cold retry, and for a QP whose automatic term lm is within one raise
      * step of convex (unicycle_lm_near_convex; its test, if any, last: before the warm point
      * fills the QP's memory, which the test's scratch shares) (algorithm.md section 4,
-     * feedback) */
+     * feedback); with a time budget only when its sweeps fit before the deadline
+     * (unicycle_active_set_fits, section 14) */
     const int active_set = !s->qp_no_active_set && s->lm.on && unicycle_measurement_near(s) &&
-                           !s->qp_cold_retry &&
+                           !s->qp_cold_retry && unicycle_active_set_fits(s) &&
                            unicycle_lm_near_convex(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
     int qs;
     s->qp_in.hess_shift = s->lm.lm;
