@@ -421,7 +421,9 @@ enum dopus_budget_unit {
  * (an interior-point iterate; the warm start a cut active-set start leaves is refused) */
 #define DOPUS_ANYTIME_CUT_MERIT DOPUS_R(1e-1)
 #define DOPUS_ADAPTIVE_ETA DOPUS_R(0.1) /* default eta of adaptive M */
-#define DOPUS_WORK_QP DOPUS_N           /* work units of a QP solve */
+/* QP iterations a time budget's deadline must leave for the interior point alone */
+#define DOPUS_ANYTIME_IPM_ITER 4
+#define DOPUS_WORK_QP DOPUS_N /* work units of a QP solve */
 
 /* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
  * section 4, feedback; dopus_qp.h) and the distance of the measurement from the predicted

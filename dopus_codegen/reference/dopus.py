@@ -896,16 +896,17 @@ class ReferenceDopus:
         return sol, failure, retries
 
     def _active_set_fits(self) -> bool:
-        """Section 14: with a time budget's deadline the active-set start only when the time
-        left before it fits its most sweeps (QP_ACTIVE_SET) at the price of one QP iteration
-        (here the last feedback QP's time over its iterations): a start cut short leaves the
-        warm start, which fails the feedback, where the interior point's cut iterates are
-        steps. In work units (a QP is cut only before its first factorisation) always, as in
-        the C runtime."""
-        if self._qp_deadline is None or self.budget_unit != "time":
-            return True
+        """Section 14: with a time budget's deadline, not when the time left before it fits
+        ANYTIME_IPM_ITER QP iterations (at the price of one: here the last feedback QP's time
+        over its iterations) but not the start's most sweeps (QP_ACTIVE_SET): a start cut short
+        leaves the warm start, which fails the feedback, where the interior point's cut
+        iterates are steps. In work units (a QP is cut only before its first factorisation)
+        always, as in the C runtime."""
         price = self._cost_qp / max(1, self.qp_iterations)
-        return self._budget_now() + _SAFETY["QP_ACTIVE_SET"] * price <= self._qp_deadline
+        if self._qp_deadline is None or self.budget_unit != "time" or not price > 0.0:
+            return True
+        fit = (self._qp_deadline - self._budget_now()) / price
+        return fit >= _SAFETY["QP_ACTIVE_SET"] or fit < _SAFETY["ANYTIME_IPM_ITER"]
 
     def _feedback_recover(self, xhat0):
         """Section 9: the QP of a finite measurement failed; re-initialise from the measured

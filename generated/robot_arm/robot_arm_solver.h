@@ -421,7 +421,9 @@ enum robot_arm_budget_unit {
  * (an interior-point iterate; the warm start a cut active-set start leaves is refused) */
 #define ROBOT_ARM_ANYTIME_CUT_MERIT ROBOT_ARM_R(1e-1)
 #define ROBOT_ARM_ADAPTIVE_ETA ROBOT_ARM_R(0.1) /* default eta of adaptive M */
-#define ROBOT_ARM_WORK_QP ROBOT_ARM_N           /* work units of a QP solve */
+/* QP iterations a time budget's deadline must leave for the interior point alone */
+#define ROBOT_ARM_ANYTIME_IPM_ITER 4
+#define ROBOT_ARM_WORK_QP ROBOT_ARM_N /* work units of a QP solve */
 
 /* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
  * section 4, feedback; robot_arm_qp.h) and the distance of the measurement from the predicted

@@ -1196,16 +1196,23 @@ static int unicycle_measurement_near(const unicycle_solver *s)
     return 1;
 }
 
-/* With a time budget's deadline (algorithm.md section 14): 1 when the time left before it fits
- * the most sweeps of the active-set start (UNICYCLE_QP_ACTIVE_SET) at the price of one QP
- * iteration. Its sweeps give the exact KKT point only at the last one: a start the deadline
- * cuts short leaves the warm start, whose residuals fail the feedback (scaled 0.44 on the
- * robot arm), where the interior point's cut iterates are steps. Without a deadline, and in
- * work units (the QP is cut only before its first factorisation), 1. */
+/* With a time budget's deadline (algorithm.md section 14): 1 unless the time left before it
+ * fits UNICYCLE_ANYTIME_IPM_ITER QP iterations (at the price of one) but not the most sweeps of
+ * the active-set start (UNICYCLE_QP_ACTIVE_SET): the interior point alone then. The start's sweeps
+ * give the exact KKT point only at the last one: a start the deadline cuts short leaves the
+ * warm start, whose residuals fail the feedback (scaled 0.44 on the robot arm), where the
+ * interior point's cut iterates are steps after a few iterations. With room for fewer, the
+ * start as before (the chain of masses: one sweep, 2.7 M instructions). Without a deadline,
+ * and in work units (the QP is cut only before its first factorisation), 1. */
 static int unicycle_active_set_fits(const unicycle_solver *s)
 {
-    return !s->anytime.qp_timed || s->settings.budget_unit != UNICYCLE_BUDGET_TIME ||
-           unicycle_budget_now(s) + (double)UNICYCLE_QP_ACTIVE_SET * s->anytime.qp_price <= s->anytime.qp_deadline;
+    double fit;
+    if (!s->anytime.qp_timed || s->settings.budget_unit != UNICYCLE_BUDGET_TIME ||
+        !(s->anytime.qp_price > 0.0)) {
+        return 1;
+    }
+    fit = (s->anytime.qp_deadline - unicycle_budget_now(s)) / s->anytime.qp_price;
+    return fit >= (double)UNICYCLE_QP_ACTIVE_SET || fit < (double)UNICYCLE_ANYTIME_IPM_ITER;
 }
 
 /* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry

@@ -421,7 +421,9 @@ enum unicycle_budget_unit {
  * (an interior-point iterate; the warm start a cut active-set start leaves is refused) */
 #define UNICYCLE_ANYTIME_CUT_MERIT UNICYCLE_R(1e-1)
 #define UNICYCLE_ADAPTIVE_ETA UNICYCLE_R(0.1) /* default eta of adaptive M */
-#define UNICYCLE_WORK_QP UNICYCLE_N           /* work units of a QP solve */
+/* QP iterations a time budget's deadline must leave for the interior point alone */
+#define UNICYCLE_ANYTIME_IPM_ITER 4
+#define UNICYCLE_WORK_QP UNICYCLE_N /* work units of a QP solve */
 
 /* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
  * section 4, feedback; unicycle_qp.h) and the distance of the measurement from the predicted
