@@ -204,3 +204,24 @@ def test_robot_arm_budget_bounds_the_disturbance(arm_image, setting, budget):
     assert all(r["status"] == 0 for r in recs)
     # without the budget the disturbance's instant passes it: the budget is what bounds it
     assert max(r["instructions_instant"] for r in runs[setting][event:]) > budget + stage
+
+
+def test_robot_arm_below_the_active_set_start_cuts_to_interior_point_steps(arm_image):
+    """Adaptive M at 1.8 M instructions per instant, below the budget its feedback QPs' active-
+    set start needs (docs/algorithm.md section 14): where the deadline leaves room for a few QP
+    iterations but not the start's most sweeps, the QP runs the interior point alone and the
+    deadline cuts it (qp_status 7) at an iterate that is the step (flag DOPUS_FLAG_QP_CUT,
+    status OK). No instant of the run fails, the disturbance and the 30 instants after it
+    included; before, the start cut short left its warm start, the disturbance's feedback
+    failed and the loop fell into a cycle of re-initialisations (bench/issue24/measurements.md
+    section 9). Every instant stays within the budget plus one stage evaluation."""
+    disc, img = arm_image
+    budget = 1_800_000
+    recs = fwm.run_scenario(img, "adaptive", budget)
+    used = [r["instructions_instant"] for r in recs]
+    cut = [r for r in recs if r["qp_status"] == 7]
+    print(f"adaptive, budget {budget}: largest instant {max(used)}, QPs cut {len(cut)} of {len(recs)}, "
+          f"statuses {sorted(set(r['status'] for r in recs))}")
+    assert all(r["status"] == 0 for r in recs)
+    assert len(cut) > len(recs) // 2 and all(r["flags"] & 256 for r in cut)
+    assert max(used) <= budget + 40e3

@@ -229,6 +229,8 @@ class ReferenceDopus:
         # one gradient of stages 0..N-2, step 3 of prepare, one stage-cost Hessian refresh
         # (step 5) and steps 6 and 7: the estimates of the anytime prepare (section 14)
         self._cost_grad = self._cost_head = self._cost_al = self._cost_tail = 0.0
+        # one gradient and re-linearisation in one call (step 2 of the budgeted full RTI)
+        self._cost_fh = 0.0
         self.budget_used = 0.0
         self._prepared_extra = False
         self._reinit_next = -1        # a re-initialisation under way: its next stage (section 14)
@@ -520,6 +522,7 @@ class ReferenceDopus:
             self._cost_grad = (b1 - b0) / N
             self._cost_stage = (b2 - b1) / N
             self._cost_head = self._cost_grad + self._cost_stage + (self._budget_now() - b2)
+            self._cost_fh = self._cost_grad + self._cost_stage
             self._cost_al = self._cost_tail = 0.0
         self.x, self.u, self.lam, self.mu_g, self.mu_b = x, u, lam, mu_g, mu_b
         self.mu_bN, self.mu_r, self.nu = mu_bN, mu_r, nu
@@ -872,7 +875,7 @@ class ReferenceDopus:
                 # with lm raised does not
                 start = (retries == 0 and self.active_set_start and self.lm_auto
                          and bool(np.all(np.abs(qp["x0"]) <= _SAFETY["QP_ACTIVE_SET_NEAR"] * self.scales[0]))
-                         and self.lm_near_convex())
+                         and self._active_set_fits() and self.lm_near_convex())
                 sol = solve_qp_reference(qp, tol=self.qp_tol, max_iter=self.qp_max_iter,
                                          guess=self._qp_warm_point(qp) if start else None,
                                          guess_sweeps=int(_SAFETY["QP_ACTIVE_SET"]))
@@ -891,6 +894,19 @@ class ReferenceDopus:
             failure = "diverged"
         self._last_qp_tried = qp
         return sol, failure, retries
+
+    def _active_set_fits(self) -> bool:
+        """Section 14: with a time budget's deadline, not when the time left before it fits
+        ANYTIME_IPM_ITER QP iterations (at the price of one: here the last feedback QP's time
+        over its iterations) but not the start's most sweeps (QP_ACTIVE_SET): a start cut short
+        leaves the warm start, which fails the feedback, where the interior point's cut
+        iterates are steps. In work units (a QP is cut only before its first factorisation)
+        always, as in the C runtime."""
+        price = self._cost_qp / max(1, self.qp_iterations)
+        if self._qp_deadline is None or self.budget_unit != "time" or not price > 0.0:
+            return True
+        fit = (self._qp_deadline - self._budget_now()) / price
+        return fit >= _SAFETY["QP_ACTIVE_SET"] or fit < _SAFETY["ANYTIME_IPM_ITER"]
 
     def _feedback_recover(self, xhat0):
         """Section 9: the QP of a finite measurement failed; re-initialise from the measured
@@ -1092,11 +1108,11 @@ class ReferenceDopus:
         # 2. the gradients of stages 0..N-2 that fit (all without a budget) in the order of
         #    the distance their linear models have moved, then step 3
         order = self._gradient_order(slots)
-        n_grad = self._gradients_that_fit()
+        n_fh, n_grad = self._gradients_that_fit()
         evaluated = sorted(order[:n_grad])
         b0 = self._budget_now()
         stage_values = self._stage_gradients(evaluated)
-        if self._budget_on() and n_grad > 0:
+        if self._budget_on() and n_grad > n_fh:
             self._cost_grad = (self._budget_now() - b0) / n_grad
         b0 = self._budget_now()
         stage_values = self._last_stage_gradient(stage_values)
@@ -1105,7 +1121,11 @@ class ReferenceDopus:
         xN, term = self._fresh_last_stage(slots, stage_values, extra)
         if self._budget_on():
             self._cost_head = self._budget_now() - b0
-        chosen, ext_cost = self._relinearise_worst(slots, rho)
+        chosen, ext_cost = self._relinearise_worst(slots, rho, order[:n_fh])
+        if self._budget_on() and n_fh > 0:
+            # the C runtime's reading of its fused calls: two units each (in time, here, the
+            # gradient's and the re-linearisation's estimates)
+            self._cost_fh = 2.0 if self.budget_unit == "work" else self._cost_grad + self._cost_stage
         t3 = time.perf_counter()
         b0 = self._budget_now()
         if self.cost_hessian == "fresh" and (not self._cost_hess_const or self._al_resync):
@@ -1174,20 +1194,36 @@ class ReferenceDopus:
             dist.append(d2 if np.isfinite(d2) else np.inf)
         return sorted(range(self.N - 1), key=lambda k: -dist[k])
 
-    def _gradients_that_fit(self) -> int:
-        """Step 2 with a budget (section 14): how many gradients of stages 0..N-2, in the order
-        of :meth:`_gradient_order`, while one more and the least rest of the iteration fit; all
-        of them without a budget. (The C runtime reads its clock before each; here each costs
-        one work unit, in time the last estimate.)"""
+    def _setting_full(self) -> bool:
+        """The setting re-linearises every stage of 0..N-2: M = N-1 (fixed, or after a
+        recovery)."""
+        return self._recovering > 0 or (not self.M_adaptive and self.M >= self.N - 1)
+
+    def _gradients_that_fit(self):
+        """Step 2 with a budget (section 14): ``(n_fh, n_grad)``, how many gradients of stages
+        0..N-2, in the order of :meth:`_gradient_order`, while one more and the least rest of
+        the iteration fit, the first ``n_fh`` of them with their blocks in the same call (the
+        full RTI with the exact Hessian, as the C runtime's fused function: while that call, the
+        gradients of the stages after it and the least rest fit); all gradients without a
+        budget. (The C runtime reads its clock before each; here a gradient costs one work
+        unit and the fused call two, in time the last estimates.)"""
         if not self._budget_on():
-            return self.N - 1
-        step = 1.0 if self.budget_unit == "work" else self._cost_grad
+            return 0, self.N - 1
+        work = self.budget_unit == "work"
+        step = 1.0 if work else self._cost_grad
+        fh = 2.0 if work else self._cost_fh
         used = self._budget_now() - self._instant_start
         floor = self._prepare_floor()
-        n = 0
-        while n < self.N - 1 and used + n * step + self._cost_grad + floor <= self.budget:
+        n_fh = 0
+        if self.hessian == "exact" and self._setting_full():
+            while (n_fh < self.N - 1
+                   and used + n_fh * fh + self._cost_fh + (self.N - 2 - n_fh) * self._cost_grad + floor
+                   <= self.budget):
+                n_fh += 1
+        n = n_fh
+        while n < self.N - 1 and used + n_fh * fh + (n - n_fh) * step + self._cost_grad + floor <= self.budget:
             n += 1
-        return n
+        return n_fh, n
 
     def _stage_gradients(self, stages=None):
         """``(gL, phi, g)`` of every stage at the current iterate (stage_grad); with ``stages``
@@ -1313,22 +1349,25 @@ class ReferenceDopus:
         zero = ~np.any(s.Ct != 0.0, axis=1)
         return bool(np.any(zero & ((hard_lo & (s.g < self.lg_k[k])) | (hard_up & (s.g > self.ug_k[k])))))
 
-    def _relinearise_worst(self, slots, rho):
-        """Step 4: fresh H for the stale stages (:meth:`_stale`), then among the other stages
-        of 0..N-2 for the M with the largest rho (ties: lower index), then with a budget for
-        further stages in rho order while one more iteration still fits after them, each while
-        the budget allows (section 14). Returns the stages and the cost of those beyond M."""
-        stale = [k for k in range(self.N - 1) if self._stale(slots, k)]
-        order = sorted((k for k in range(self.N - 1) if k not in stale), key=lambda i: (-rho[i], i))
+    def _relinearise_worst(self, slots, rho, fused=()):
+        """Step 4: fresh H for the stages ``fused`` (the budgeted full RTI's of step 2, whose
+        blocks the C runtime evaluates with their gradients; they count among the M), for the
+        stale stages (:meth:`_stale`), then among the other stages of 0..N-2 for the M with the
+        largest rho (ties: lower index), then with a budget for further stages in rho order
+        while one more iteration still fits after them, each while the budget allows (section
+        14). Returns the stages and the cost of those beyond M."""
+        stale = [k for k in range(self.N - 1) if k not in fused and self._stale(slots, k)]
+        order = sorted((k for k in range(self.N - 1) if k not in stale and k not in fused),
+                       key=lambda i: (-rho[i], i))
         M = self._M_now(slots, rho)
         extend = self._budget_on()
         chosen, ext_cost = [], 0.0
-        for i in stale:      # whatever the budget: without them the QP is infeasible
+        for i in list(fused) + stale:      # stale: whatever the budget, else the QP is infeasible
             self._relinearise_stage(slots, i)
             chosen.append(i)
         # the stages beyond M keep room for one more iteration after this one
         reserve = self._cost_qp + self._cost_prepare
-        for m, i in enumerate(order):
+        for m, i in enumerate(order, start=len(fused)):
             rest = self._rest_cost(self.N - 2 - len(chosen))   # steps 5 to 7 after this stage
             if (m >= M and not extend) or not self._budget_fits(self._cost_stage + rest
                                                                  + (reserve if m >= M else 0.0)):
@@ -1758,7 +1797,9 @@ class ReferenceDopus:
         N = self.N
         if self.mode == "receding" and not self._shifted:
             if self._reinit_sim and self._reinit_next == 0:
-                # the node that becomes x_0, not simulated by the walk yet
+                # the node that becomes x_0, not simulated by the walk yet: one stage
+                # evaluation of the budget (1 work unit)
+                self.work += 1
                 try:
                     x1 = self._stage_phi(self.x[0], self.u[0], self.p[0])
                 except RuntimeError:

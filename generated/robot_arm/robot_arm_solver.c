@@ -704,6 +704,7 @@ static int robot_arm_linearize_all_eval(robot_arm_solver *s)
          * re-linearisation and step 3 of prepare, before any prepare has measured them */
         s->anytime.cost_grad = t_F / (double)ROBOT_ARM_N;
         s->anytime.cost_stage = t_H / (double)ROBOT_ARM_N;
+        s->anytime.cost_fh = s->anytime.cost_grad + s->anytime.cost_stage;
         s->anytime.cost_head = s->anytime.cost_grad + s->anytime.cost_stage + (robot_arm_budget_now(s) - b0);
         /* one refresh of step 5 (stage 0, into scratch; not counted in work units) */
         b0 = robot_arm_budget_now(s);
@@ -1195,6 +1196,25 @@ static int robot_arm_measurement_near(const robot_arm_solver *s)
     return 1;
 }
 
+/* With a time budget's deadline (algorithm.md section 14): 1 unless the time left before it
+ * fits ROBOT_ARM_ANYTIME_IPM_ITER QP iterations (at the price of one) but not the most sweeps of
+ * the active-set start (ROBOT_ARM_QP_ACTIVE_SET): the interior point alone then. The start's sweeps
+ * give the exact KKT point only at the last one: a start the deadline cuts short leaves the
+ * warm start, whose residuals fail the feedback (scaled 0.44 on the robot arm), where the
+ * interior point's cut iterates are steps after a few iterations. With room for fewer, the
+ * start as before (the chain of masses: one sweep, 2.7 M instructions). Without a deadline,
+ * and in work units (the QP is cut only before its first factorisation), 1. */
+static int robot_arm_active_set_fits(const robot_arm_solver *s)
+{
+    double fit;
+    if (!s->anytime.qp_timed || s->settings.budget_unit != ROBOT_ARM_BUDGET_TIME ||
+        !(s->anytime.qp_price > 0.0)) {
+        return 1;
+    }
+    fit = (s->anytime.qp_deadline - robot_arm_budget_now(s)) / s->anytime.qp_price;
+    return fit >= (double)ROBOT_ARM_QP_ACTIVE_SET || fit < (double)ROBOT_ARM_ANYTIME_IPM_ITER;
+}
+
 /* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry
  * in the same call when the warm start failed or needed the inertia correction: the QP is
  * then nonconvex on the null space of its equalities and may have several local
@@ -1206,9 +1226,10 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
      * that needed the cold retry, and for a QP whose automatic term lm is within one raise
      * step of convex (robot_arm_lm_near_convex; its test, if any, last: before the warm point
      * fills the QP's memory, which the test's scratch shares) (algorithm.md section 4,
-     * feedback) */
+     * feedback); with a time budget only when its sweeps fit before the deadline
+     * (robot_arm_active_set_fits, section 14) */
     const int active_set = !s->qp_no_active_set && s->lm.on && robot_arm_measurement_near(s) &&
-                           !s->qp_cold_retry &&
+                           !s->qp_cold_retry && robot_arm_active_set_fits(s) &&
                            robot_arm_lm_near_convex(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
     int qs;
     s->qp_in.hess_shift = s->lm.lm;
@@ -1628,22 +1649,25 @@ static int robot_arm_next_worst(const robot_arm_solver *s)
     return best;
 }
 
-/* Step 4: re-linearise the stale stages (robot_arm_stale_stage), then among the other stages of
- * 0..N-2 those with the largest rho_k: M of them (robot_arm_M_now), then, with a budget,
+/* Step 4: re-linearise the stale stages (robot_arm_stale_stage) not re-linearised in step 2 (the
+ * n_fh of the budgeted full RTI), then among the other stages of 0..N-2 those with the largest
+ * rho_k: M of them (robot_arm_M_now; the n_fh count among them), then, with a budget,
  * further stages in rho order while one more iteration still fits after them
  * (algorithm.md section 14); each only while the budget allows. The cost of the stages
  * beyond M goes to *ext_cost. */
-static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost, double *stage_time)
+static int robot_arm_relinearise(robot_arm_solver *s, int n_fh, double *ext_cost, double *stage_time)
 {
-    int M = robot_arm_M_now(s), m, k, n = 0, rc = ROBOT_ARM_OK, extend;
+    int M = robot_arm_M_now(s), m, k, n = n_fh, rc = ROBOT_ARM_OK, extend;
     double b0, reserve;
     *stage_time = 0.0;
-    for (k = 0; k < ROBOT_ARM_N; ++k) {
+    /* the n_fh stages step 2 re-linearised with their gradients (the budgeted full RTI, each
+     * selected there) count among the M */
+    for (k = 0; k < ROBOT_ARM_N && n_fh == 0; ++k) {
         s->selected[k] = 0;
     }
     /* the stale stages first, whatever the budget: without them the QP is infeasible */
     for (k = 0; k < ROBOT_ARM_N - 1 && ROBOT_ARM_NG > 0; ++k) {
-        if (robot_arm_stale_stage(s, k)) {
+        if (!s->selected[k] && robot_arm_stale_stage(s, k)) {
             b0 = robot_arm_budget_now(s);
             rc = robot_arm_stage_H(s, k);
             *stage_time += robot_arm_budget_now(s) - b0;
@@ -1659,7 +1683,7 @@ static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost, double *
     *ext_cost = 0.0;
     /* the stages beyond M keep room for one more iteration after this one */
     reserve = s->anytime.cost_qp + s->anytime.cost_prepare;
-    for (m = 0; m < ROBOT_ARM_N - 1; ++m) {
+    for (m = n_fh; m < ROBOT_ARM_N - 1; ++m) {
         /* the stages of M leave room for the rest of this prepare iteration, those beyond M
          * for one more iteration */
         if ((m >= M && !extend) ||
@@ -1693,12 +1717,19 @@ static int robot_arm_relinearise(robot_arm_solver *s, double *ext_cost, double *
     return rc;
 }
 
-/* 1 when step 4 re-linearises every stage of 0..N-2 whatever their rho_k: no budget and M =
- * N-1 (fixed, or after a recovery), as robot_arm_M_now and robot_arm_relinearise decide. */
-static int robot_arm_every_stage_fresh(const robot_arm_solver *s)
+/* 1 when the setting re-linearises every stage of 0..N-2 whatever their rho_k: M = N-1
+ * (fixed, or after a recovery), as robot_arm_M_now decides. */
+static int robot_arm_setting_full(const robot_arm_solver *s)
 {
     const robot_arm_settings *st = &s->settings;
-    return !robot_arm_budget_on(s) && (s->health.recovering > 0 || (!st->M_adaptive && st->M >= ROBOT_ARM_N - 1));
+    return s->health.recovering > 0 || (!st->M_adaptive && st->M >= ROBOT_ARM_N - 1);
+}
+
+/* 1 when step 4 re-linearises every stage of 0..N-2 whatever their rho_k: no budget and the
+ * full RTI (robot_arm_setting_full), as robot_arm_relinearise decides. */
+static int robot_arm_every_stage_fresh(const robot_arm_solver *s)
+{
+    return !robot_arm_budget_on(s) && robot_arm_setting_full(s);
 }
 
 /* Step 4 when step 2 re-linearised every stage of 0..N-2 (robot_arm_every_stage_fresh). */
@@ -1919,8 +1950,10 @@ static int robot_arm_reinit_continue(robot_arm_solver *s)
 {
     int rc;
     if (s->settings.mode == ROBOT_ARM_MODE_RECEDING && !s->shifted) {
-        /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now */
+        /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now,
+         * one stage evaluation of the budget (1 work unit; in time the walk's tests read it) */
         if (s->anytime.reinit_sim && s->anytime.reinit_next == 0) {
+            s->anytime.work += 1.0;
             robot_arm_simulate_node(s, 0);
         }
         robot_arm_shift(s);
@@ -2190,8 +2223,10 @@ static void robot_arm_gradient_order(const robot_arm_solver *s, int *order)
 static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
 {
     robot_arm_real xN_saved[ROBOT_ARM_NX];
-    double b_start = robot_arm_budget_now(s), ext_cost = 0.0, b_tail, b0, b_cut = 0.0, fixed, stage_time = 0.0;
-    int k, i, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer, diverged;
+    double b_start = robot_arm_budget_now(s), ext_cost = 0.0, b_tail, b0, b1, b_cut = 0.0, fixed,
+           stage_time = 0.0;
+    double t_fh = 0.0;
+    int k, i, rc, n_grad = 0, n_fh = 0, n_al = 0, cut = 0, all_fresh, fuse, defer, diverged;
     int order[ROBOT_ARM_N];
     unsigned char evaluated[ROBOT_ARM_N];
 
@@ -2210,10 +2245,16 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
      *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call.
      *    Without a budget and with H_k apart (defer), every gradient first and then every
      *    rho_k: the same values, two phase switches (clock readings) per prepare instead of
-     *    two per stage */
+     *    two per stage. With a budget the full RTI (fuse) evaluates H_k in the same call too
+     *    while that call, the gradients of the stages after it and the least rest of the
+     *    iteration fit (algorithm.md section 14); those stages are re-linearised (selected) */
     all_fresh = robot_arm_fused(s) && robot_arm_every_stage_fresh(s);
+    fuse = !all_fresh && robot_arm_budget_on(s) && robot_arm_fused(s) && robot_arm_setting_full(s);
     defer = !all_fresh && !robot_arm_budget_on(s);
     robot_arm_gradient_order(s, order);
+    for (k = 0; k < ROBOT_ARM_N && fuse; ++k) {
+        s->selected[k] = 0;
+    }
     b0 = robot_arm_budget_now(s);
     fixed = b0 - b_start;
     for (i = 0; i < ROBOT_ARM_N - 1; ++i) {
@@ -2232,8 +2273,14 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
         }
         evaluated[k] = 1;
         n_grad += 1;
+        if (fuse &&
+            !robot_arm_budget_fits(s, s->anytime.cost_fh + s->anytime.cost_grad * (double)(ROBOT_ARM_N - 2 - i) +
+                                      robot_arm_prepare_least(s, 0))) {
+            fuse = 0;
+        }
+        b1 = robot_arm_budget_now(s);
         robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
-        rc = all_fresh ? robot_arm_stage_FH(s, k) : robot_arm_stage_F(s, k);
+        rc = all_fresh || fuse ? robot_arm_stage_FH(s, k) : robot_arm_stage_F(s, k);
         if (rc != ROBOT_ARM_OK) {
             return rc;
         }
@@ -2246,12 +2293,17 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
         }
         robot_arm_phase(s, ROBOT_ARM_PHASE_RHO);
         s->rho[k] = robot_arm_ring_secant(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
-        if (all_fresh) {
+        if (all_fresh || fuse) {
             /* the slot's H after the secant, which reads the old one */
             rc = robot_arm_stage_H_keep(s, k);
             if (rc != ROBOT_ARM_OK) {
                 return rc;
             }
+        }
+        if (fuse) {
+            s->selected[k] = 1;
+            n_fh += 1;
+            t_fh += robot_arm_budget_now(s) - b1;
         }
     }
 
@@ -2268,8 +2320,12 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
         if (!cut) {
             b_cut = b_end;
         }
-        if (n_grad > 0) {
-            s->anytime.cost_grad = robot_arm_cost(s, s->anytime.cost_grad, (b_cut - b0) / (double)n_grad);
+        if (n_grad > n_fh) {
+            s->anytime.cost_grad =
+                robot_arm_cost(s, s->anytime.cost_grad, (b_cut - b0 - t_fh) / (double)(n_grad - n_fh));
+        }
+        if (n_fh > 0) {
+            s->anytime.cost_fh = robot_arm_cost(s, s->anytime.cost_fh, t_fh / (double)n_fh);
         }
         if (n_grad < ROBOT_ARM_N - 1) {
             s->anytime.cost_predict =
@@ -2304,7 +2360,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     b0 = robot_arm_budget_now(s);
     if (rc == ROBOT_ARM_OK) {
         robot_arm_phase(s, ROBOT_ARM_PHASE_RHO);
-        rc = all_fresh ? robot_arm_all_selected(s) : robot_arm_relinearise(s, &ext_cost, &stage_time);
+        rc = all_fresh ? robot_arm_all_selected(s) : robot_arm_relinearise(s, n_fh, &ext_cost, &stage_time);
     }
     /* step 4's own work beyond its stages */
     fixed += robot_arm_budget_now(s) - b0 - stage_time;

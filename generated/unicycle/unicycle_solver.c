@@ -704,6 +704,7 @@ static int unicycle_linearize_all_eval(unicycle_solver *s)
          * re-linearisation and step 3 of prepare, before any prepare has measured them */
         s->anytime.cost_grad = t_F / (double)UNICYCLE_N;
         s->anytime.cost_stage = t_H / (double)UNICYCLE_N;
+        s->anytime.cost_fh = s->anytime.cost_grad + s->anytime.cost_stage;
         s->anytime.cost_head = s->anytime.cost_grad + s->anytime.cost_stage + (unicycle_budget_now(s) - b0);
         /* one refresh of step 5 (stage 0, into scratch; not counted in work units) */
         b0 = unicycle_budget_now(s);
@@ -1195,6 +1196,25 @@ static int unicycle_measurement_near(const unicycle_solver *s)
     return 1;
 }
 
+/* With a time budget's deadline (algorithm.md section 14): 1 unless the time left before it
+ * fits UNICYCLE_ANYTIME_IPM_ITER QP iterations (at the price of one) but not the most sweeps of
+ * the active-set start (UNICYCLE_QP_ACTIVE_SET): the interior point alone then. The start's sweeps
+ * give the exact KKT point only at the last one: a start the deadline cuts short leaves the
+ * warm start, whose residuals fail the feedback (scaled 0.44 on the robot arm), where the
+ * interior point's cut iterates are steps after a few iterations. With room for fewer, the
+ * start as before (the chain of masses: one sweep, 2.7 M instructions). Without a deadline,
+ * and in work units (the QP is cut only before its first factorisation), 1. */
+static int unicycle_active_set_fits(const unicycle_solver *s)
+{
+    double fit;
+    if (!s->anytime.qp_timed || s->settings.budget_unit != UNICYCLE_BUDGET_TIME ||
+        !(s->anytime.qp_price > 0.0)) {
+        return 1;
+    }
+    fit = (s->anytime.qp_deadline - unicycle_budget_now(s)) / s->anytime.qp_price;
+    return fit >= (double)UNICYCLE_QP_ACTIVE_SET || fit < (double)UNICYCLE_ANYTIME_IPM_ITER;
+}
+
 /* Step 3: the QP with the current term lm, warm-started when that is on, and the cold retry
  * in the same call when the warm start failed or needed the inertia correction: the QP is
  * then nonconvex on the null space of its equalities and may have several local
@@ -1206,9 +1226,10 @@ static int unicycle_feedback_qp(unicycle_solver *s)
      * that needed the cold retry, and for a QP whose automatic term lm is within one raise
      * step of convex (unicycle_lm_near_convex; its test, if any, last: before the warm point
      * fills the QP's memory, which the test's scratch shares) (algorithm.md section 4,
-     * feedback) */
+     * feedback); with a time budget only when its sweeps fit before the deadline
+     * (unicycle_active_set_fits, section 14) */
     const int active_set = !s->qp_no_active_set && s->lm.on && unicycle_measurement_near(s) &&
-                           !s->qp_cold_retry &&
+                           !s->qp_cold_retry && unicycle_active_set_fits(s) &&
                            unicycle_lm_near_convex(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
     int qs;
     s->qp_in.hess_shift = s->lm.lm;
@@ -1628,22 +1649,25 @@ static int unicycle_next_worst(const unicycle_solver *s)
     return best;
 }
 
-/* Step 4: re-linearise the stale stages (unicycle_stale_stage), then among the other stages of
- * 0..N-2 those with the largest rho_k: M of them (unicycle_M_now), then, with a budget,
+/* Step 4: re-linearise the stale stages (unicycle_stale_stage) not re-linearised in step 2 (the
+ * n_fh of the budgeted full RTI), then among the other stages of 0..N-2 those with the largest
+ * rho_k: M of them (unicycle_M_now; the n_fh count among them), then, with a budget,
  * further stages in rho order while one more iteration still fits after them
  * (algorithm.md section 14); each only while the budget allows. The cost of the stages
  * beyond M goes to *ext_cost. */
-static int unicycle_relinearise(unicycle_solver *s, double *ext_cost, double *stage_time)
+static int unicycle_relinearise(unicycle_solver *s, int n_fh, double *ext_cost, double *stage_time)
 {
-    int M = unicycle_M_now(s), m, k, n = 0, rc = UNICYCLE_OK, extend;
+    int M = unicycle_M_now(s), m, k, n = n_fh, rc = UNICYCLE_OK, extend;
     double b0, reserve;
     *stage_time = 0.0;
-    for (k = 0; k < UNICYCLE_N; ++k) {
+    /* the n_fh stages step 2 re-linearised with their gradients (the budgeted full RTI, each
+     * selected there) count among the M */
+    for (k = 0; k < UNICYCLE_N && n_fh == 0; ++k) {
         s->selected[k] = 0;
     }
     /* the stale stages first, whatever the budget: without them the QP is infeasible */
     for (k = 0; k < UNICYCLE_N - 1 && UNICYCLE_NG > 0; ++k) {
-        if (unicycle_stale_stage(s, k)) {
+        if (!s->selected[k] && unicycle_stale_stage(s, k)) {
             b0 = unicycle_budget_now(s);
             rc = unicycle_stage_H(s, k);
             *stage_time += unicycle_budget_now(s) - b0;
@@ -1659,7 +1683,7 @@ static int unicycle_relinearise(unicycle_solver *s, double *ext_cost, double *st
     *ext_cost = 0.0;
     /* the stages beyond M keep room for one more iteration after this one */
     reserve = s->anytime.cost_qp + s->anytime.cost_prepare;
-    for (m = 0; m < UNICYCLE_N - 1; ++m) {
+    for (m = n_fh; m < UNICYCLE_N - 1; ++m) {
         /* the stages of M leave room for the rest of this prepare iteration, those beyond M
          * for one more iteration */
         if ((m >= M && !extend) ||
@@ -1693,12 +1717,19 @@ static int unicycle_relinearise(unicycle_solver *s, double *ext_cost, double *st
     return rc;
 }
 
-/* 1 when step 4 re-linearises every stage of 0..N-2 whatever their rho_k: no budget and M =
- * N-1 (fixed, or after a recovery), as unicycle_M_now and unicycle_relinearise decide. */
-static int unicycle_every_stage_fresh(const unicycle_solver *s)
+/* 1 when the setting re-linearises every stage of 0..N-2 whatever their rho_k: M = N-1
+ * (fixed, or after a recovery), as unicycle_M_now decides. */
+static int unicycle_setting_full(const unicycle_solver *s)
 {
     const unicycle_settings *st = &s->settings;
-    return !unicycle_budget_on(s) && (s->health.recovering > 0 || (!st->M_adaptive && st->M >= UNICYCLE_N - 1));
+    return s->health.recovering > 0 || (!st->M_adaptive && st->M >= UNICYCLE_N - 1);
+}
+
+/* 1 when step 4 re-linearises every stage of 0..N-2 whatever their rho_k: no budget and the
+ * full RTI (unicycle_setting_full), as unicycle_relinearise decides. */
+static int unicycle_every_stage_fresh(const unicycle_solver *s)
+{
+    return !unicycle_budget_on(s) && unicycle_setting_full(s);
 }
 
 /* Step 4 when step 2 re-linearised every stage of 0..N-2 (unicycle_every_stage_fresh). */
@@ -1919,8 +1950,10 @@ static int unicycle_reinit_continue(unicycle_solver *s)
 {
     int rc;
     if (s->settings.mode == UNICYCLE_MODE_RECEDING && !s->shifted) {
-        /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now */
+        /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now,
+         * one stage evaluation of the budget (1 work unit; in time the walk's tests read it) */
         if (s->anytime.reinit_sim && s->anytime.reinit_next == 0) {
+            s->anytime.work += 1.0;
             unicycle_simulate_node(s, 0);
         }
         unicycle_shift(s);
@@ -2190,8 +2223,10 @@ static void unicycle_gradient_order(const unicycle_solver *s, int *order)
 static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
 {
     unicycle_real xN_saved[UNICYCLE_NX];
-    double b_start = unicycle_budget_now(s), ext_cost = 0.0, b_tail, b0, b_cut = 0.0, fixed, stage_time = 0.0;
-    int k, i, rc, n_grad = 0, n_al = 0, cut = 0, all_fresh, defer, diverged;
+    double b_start = unicycle_budget_now(s), ext_cost = 0.0, b_tail, b0, b1, b_cut = 0.0, fixed,
+           stage_time = 0.0;
+    double t_fh = 0.0;
+    int k, i, rc, n_grad = 0, n_fh = 0, n_al = 0, cut = 0, all_fresh, fuse, defer, diverged;
     int order[UNICYCLE_N];
     unsigned char evaluated[UNICYCLE_N];
 
@@ -2210,10 +2245,16 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
      *    will re-linearise every one of them (all_fresh: no budget), H_k too, in the same call.
      *    Without a budget and with H_k apart (defer), every gradient first and then every
      *    rho_k: the same values, two phase switches (clock readings) per prepare instead of
-     *    two per stage */
+     *    two per stage. With a budget the full RTI (fuse) evaluates H_k in the same call too
+     *    while that call, the gradients of the stages after it and the least rest of the
+     *    iteration fit (algorithm.md section 14); those stages are re-linearised (selected) */
     all_fresh = unicycle_fused(s) && unicycle_every_stage_fresh(s);
+    fuse = !all_fresh && unicycle_budget_on(s) && unicycle_fused(s) && unicycle_setting_full(s);
     defer = !all_fresh && !unicycle_budget_on(s);
     unicycle_gradient_order(s, order);
+    for (k = 0; k < UNICYCLE_N && fuse; ++k) {
+        s->selected[k] = 0;
+    }
     b0 = unicycle_budget_now(s);
     fixed = b0 - b_start;
     for (i = 0; i < UNICYCLE_N - 1; ++i) {
@@ -2232,8 +2273,14 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
         }
         evaluated[k] = 1;
         n_grad += 1;
+        if (fuse &&
+            !unicycle_budget_fits(s, s->anytime.cost_fh + s->anytime.cost_grad * (double)(UNICYCLE_N - 2 - i) +
+                                      unicycle_prepare_least(s, 0))) {
+            fuse = 0;
+        }
+        b1 = unicycle_budget_now(s);
         unicycle_phase(s, UNICYCLE_PHASE_GRADIENTS);
-        rc = all_fresh ? unicycle_stage_FH(s, k) : unicycle_stage_F(s, k);
+        rc = all_fresh || fuse ? unicycle_stage_FH(s, k) : unicycle_stage_F(s, k);
         if (rc != UNICYCLE_OK) {
             return rc;
         }
@@ -2246,12 +2293,17 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
         }
         unicycle_phase(s, UNICYCLE_PHASE_RHO);
         s->rho[k] = unicycle_ring_secant(slot, s->mem.ev.Fn_w[k], s->mem.ev.Fn_phi[k], s->mem.ev.Fn_g[k]);
-        if (all_fresh) {
+        if (all_fresh || fuse) {
             /* the slot's H after the secant, which reads the old one */
             rc = unicycle_stage_H_keep(s, k);
             if (rc != UNICYCLE_OK) {
                 return rc;
             }
+        }
+        if (fuse) {
+            s->selected[k] = 1;
+            n_fh += 1;
+            t_fh += unicycle_budget_now(s) - b1;
         }
     }
 
@@ -2268,8 +2320,12 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
         if (!cut) {
             b_cut = b_end;
         }
-        if (n_grad > 0) {
-            s->anytime.cost_grad = unicycle_cost(s, s->anytime.cost_grad, (b_cut - b0) / (double)n_grad);
+        if (n_grad > n_fh) {
+            s->anytime.cost_grad =
+                unicycle_cost(s, s->anytime.cost_grad, (b_cut - b0 - t_fh) / (double)(n_grad - n_fh));
+        }
+        if (n_fh > 0) {
+            s->anytime.cost_fh = unicycle_cost(s, s->anytime.cost_fh, t_fh / (double)n_fh);
         }
         if (n_grad < UNICYCLE_N - 1) {
             s->anytime.cost_predict =
@@ -2304,7 +2360,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     b0 = unicycle_budget_now(s);
     if (rc == UNICYCLE_OK) {
         unicycle_phase(s, UNICYCLE_PHASE_RHO);
-        rc = all_fresh ? unicycle_all_selected(s) : unicycle_relinearise(s, &ext_cost, &stage_time);
+        rc = all_fresh ? unicycle_all_selected(s) : unicycle_relinearise(s, n_fh, &ext_cost, &stage_time);
     }
     /* step 4's own work beyond its stages */
     fixed += unicycle_budget_now(s) - b0 - stage_time;

@@ -417,10 +417,13 @@ enum unicycle_budget_unit {
 /* Anytime constants (docs/algorithm.md section 14). */
 #define UNICYCLE_ANYTIME_TOL UNICYCLE_PREC(1e-8, 2e-5) /* default KKT proxy target of the extra iterations */
 #define UNICYCLE_ANYTIME_MAX_ITER 50                /* extra iterations per instant at most */
-/* a feedback QP cut after iterations is its step when its scaled residuals are at most this */
-#define UNICYCLE_ANYTIME_CUT_MERIT UNICYCLE_R(1e-2)
+/* a feedback QP cut after iterations is its step when its scaled residuals are at most this
+ * (an interior-point iterate; the warm start a cut active-set start leaves is refused) */
+#define UNICYCLE_ANYTIME_CUT_MERIT UNICYCLE_R(1e-1)
 #define UNICYCLE_ADAPTIVE_ETA UNICYCLE_R(0.1) /* default eta of adaptive M */
-#define UNICYCLE_WORK_QP UNICYCLE_N           /* work units of a QP solve */
+/* QP iterations a time budget's deadline must leave for the interior point alone */
+#define UNICYCLE_ANYTIME_IPM_ITER 4
+#define UNICYCLE_WORK_QP UNICYCLE_N /* work units of a QP solve */
 
 /* Factorisations of the active-set start of a warm-started QP at most (docs/algorithm.md
  * section 4, feedback; unicycle_qp.h) and the distance of the measurement from the predicted
@@ -483,6 +486,7 @@ typedef struct {
     double cost_qp_step;  /* one QP iteration, moved 10 % at most per QP (the extra QP's cap) */
     double cost_tail;     /* steps 6 and 7 of the last prepare iteration */
     double cost_grad;     /* one gradient of stages 0..N-2 (step 2) */
+    double cost_fh;       /* one gradient and re-linearisation in one call (step 2 of the full RTI) */
     double cost_head;     /* step 3: stage N-1 and the terminal node */
     double cost_al;       /* one stage's cost-Hessian refresh (step 5) */
     /* the rest of the least prepare and of the feedback (time budget; 0 in work units), each
