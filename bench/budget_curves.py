@@ -32,6 +32,14 @@ instant at the needed budget against the reference's largest (what a controller 
 provision for), since an instant's least cost (the feedback's QP, step 3 of prepare, the
 stage-cost Hessians and the lm test) is never cut and a budget below it is exceeded.
 
+The criterion need not be monotone in the budget (a single failed instant at some budget
+above the bisection's figure): beside the bisection's figure ("needed") each setting reports
+the robust reading ("needed_robust"), the least evaluated budget from which every evaluated
+budget meets the criterion. The evaluated budgets are the grid, the bisection's and, for time
+and instruction budgets, ENVELOPE_FRACTIONS of the reference above the bisection's figure
+(the JSON's rows list them all). Both readings' adaptive / full ratios are printed and saved
+("adaptive_over_full").
+
 Prints the tables, writes bench/results/budget_curves.json and bench/results/budget_curves.png.
 
     .venv/bin/python bench/budget_curves.py [--problems robot_arm,chain] [--parts work,time,m7] [--repeat 3]
@@ -63,6 +71,9 @@ TIME_FRACTIONS = (0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.25, 1.5, 2.0)
 # emulated Cortex-M7, then a bisection to 1 % of it
 M7_FRACTIONS = (0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.25, 1.5, 2.0)
 M7_RESOLUTION = 0.01
+# the robust reading: fractions of the reference (time, instructions) evaluated above the
+# needed budget besides the curve's grid, halving the grid's steps above one iteration
+ENVELOPE_FRACTIONS = (1.125, 1.375, 1.75)
 
 
 def costs(N):
@@ -109,6 +120,18 @@ def smallest(evaluate, grid, ref, measure="rms_after", rows=None, resolution=Non
             if meets(row(b), ref, measure):
                 return b, rows
     return first, rows
+
+
+def envelope(passes):
+    """The robust reading of evaluated budgets: the least budget B of ``passes`` ({budget:
+    meets the criterion}) such that every evaluated budget >= B meets it; None if the
+    largest evaluated budget misses (or nothing was evaluated)."""
+    need = None
+    for b in sorted(passes, reverse=True):
+        if not passes[b]:
+            break
+        need = b
+    return need
 
 
 def work_grid(N, step):
@@ -231,14 +254,27 @@ def problem(name, parts, step, repeat=3, log=print):
         out[part] = {"denominator": denom, "unit": unit, **extra, "settings": {}}
         log(f"  {part} budgets: {'setting':<9} {'needed':>10} {'ratio':>6} {'for KKT':>10} {'ratio':>6}   "
             f"per budget: RMS after / reference's (F: failed instants), max KKT settled / reference's")
+        above = [] if part == "work" else sorted({round(f * denom, 7) if part == "time" else int(round(f * denom))
+                                                  for f in ENVELOPE_FRACTIONS})
+        out[part]["envelope_extra"] = above
         for kind in KINDS:
             need, rows = smallest(lambda b, k=kind: evaluate(b, k), grid, pref, resolution=resolution)
             need_kkt, rows = smallest(lambda b, k=kind: evaluate(b, k), grid, pref, "kkt_max_settled", rows,
                                       resolution=resolution)
+            found = [n for n in (need, need_kkt) if n is not None]
+            for b in above:     # the robust reading's extra points, above the bisection's figures
+                if found and b > min(found) and b not in rows:
+                    rows[b] = evaluate(b, kind)
+            rob = envelope({b: meets(r, pref) for b, r in rows.items()})
+            rob_kkt = envelope({b: meets(r, pref, "kkt_max_settled") for b, r in rows.items()})
             ordered = [rows[b] for b in sorted(rows)]
             out[part]["settings"][kind] = {"needed": need, "ratio": None if need is None else need / denom,
                                            "needed_kkt": need_kkt,
                                            "ratio_kkt": None if need_kkt is None else need_kkt / denom,
+                                           "needed_robust": rob,
+                                           "ratio_robust": None if rob is None else rob / denom,
+                                           "needed_kkt_robust": rob_kkt,
+                                           "ratio_kkt_robust": None if rob_kkt is None else rob_kkt / denom,
                                            "rows": ordered}
             if part == "m7":
                 # what the instants took at the needed budget (the least an instant costs, the
@@ -246,9 +282,12 @@ def problem(name, parts, step, repeat=3, log=print):
                 # exceeded), against the reference's largest instant
                 dmax = pref["instructions_max"]
                 used = None if need is None else rows[need]["instructions_max"]
+                used_rob = None if rob is None else rows[rob]["instructions_max"]
                 out[part]["settings"][kind].update(ratio_max=None if need is None else need / dmax,
                                                    ratio_kkt_max=None if need_kkt is None else need_kkt / dmax,
-                                                   used_max=used, used_max_ratio=None if used is None else used / dmax)
+                                                   used_max=used, used_max_ratio=None if used is None else used / dmax,
+                                                   ratio_robust_max=None if rob is None else rob / dmax,
+                                                   used_max_robust=used_rob)
                 log(f"  {'':14}{kind:<9} at the needed budget: largest instant "
                     f"{'-' if used is None else f'{used / 1e6:.3f}M'} "
                     f"({'-' if used is None else f'{used / dmax:.3f}'} of the reference's largest, "
@@ -259,7 +298,22 @@ def problem(name, parts, step, repeat=3, log=print):
                            for r in ordered)
             log(f"  {'':14}{kind:<9} {_fmt(need, part, denom):>10} {_ratio(need, denom):>6} "
                 f"{_fmt(need_kkt, part, denom):>10} {_ratio(need_kkt, denom):>6}   {shown}\n  {'':52}{kkt}", flush=True)
+            log(f"  {'':14}{kind:<9} robust (every evaluated budget from it on meets the criterion): "
+                f"{_fmt(rob, part, denom)} ({_ratio(rob, denom)}), for KKT {_fmt(rob_kkt, part, denom)} "
+                f"({_ratio(rob_kkt, denom)})", flush=True)
+        st = out[part]["settings"]
+        out[part]["adaptive_over_full"] = {
+            "bisection": _over(st["adaptive"]["needed"], st["full"]["needed"]),
+            "robust": _over(st["adaptive"]["needed_robust"], st["full"]["needed_robust"])}
+        r = out[part]["adaptive_over_full"]
+        log(f"  {part} budgets, adaptive / full: bisection {_ratio(r['bisection'], 1)}, robust "
+            f"{_ratio(r['robust'], 1)} (extra budgets for the robust reading: "
+            f"{' '.join(_fmt(b, part, denom) for b in above) or 'none, the grid'})", flush=True)
     return out
+
+
+def _over(a, b):
+    return None if a is None or b is None else a / b
 
 
 def _ratio(b, denom):

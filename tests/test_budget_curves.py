@@ -102,3 +102,45 @@ def test_bisection_to_a_resolution():
     assert bc.meets(rows[need], ref)
     assert any(need - 10_000 <= b < need and not bc.meets(rows[b], ref) for b in rows)
     assert len(seen) == 4 + 8          # the grid, then log2(2e6 / 1e4) ~ 7.6 halvings
+
+
+def _envelope_brute_force(passes):
+    """The robust reading by its definition: every evaluated budget B, kept if every
+    evaluated budget >= B meets the criterion; the least kept, or None."""
+    kept = [b for b in passes if all(passes[c] for c in passes if c >= b)]
+    return min(kept) if kept else None
+
+
+def test_envelope_rule_against_brute_force():
+    """The robust reading of the needed budget on synthetic pass/fail data: the least
+    evaluated budget from which every evaluated budget meets the criterion."""
+    # the Cortex-M7 pattern of the full RTI: met at 1.521 M, a failed instant at 1.975 M
+    passes = {1_422_000: False, 1_521_000: True, 1_580_000: True, 1_975_000: False, 2_370_000: True,
+              3_160_000: True}
+    assert bc.envelope(passes) == 2_370_000 == _envelope_brute_force(passes)
+    assert bc.envelope({1: True, 2: True}) == 1
+    assert bc.envelope({1: True, 2: False}) is None
+    assert bc.envelope({}) is None
+    rng = np.random.default_rng(24)
+    for _ in range(2000):
+        budgets = rng.choice(10_000, size=int(rng.integers(1, 12)), replace=False)
+        passes = {int(b): bool(rng.random() < 0.7) for b in budgets}
+        assert bc.envelope(passes) == _envelope_brute_force(passes)
+
+
+def test_robust_reading_from_evaluated_rows():
+    """The robust reading of rows a search evaluated: the criterion not monotone (a failed
+    instant above the bisection's figure) moves it above the failure; it is never below the
+    least budget that meets and every budget from it on meets."""
+    ref = {"rms_after": 1.0}
+
+    def evaluate(b):  # met from 3_141_593 on, except a failed instant at 6_000_000
+        return {"rms_after": 1.0 if b >= 3_141_593 else 1.5, "failed": int(b == 6_000_000)}
+
+    need, rows = bc.smallest(evaluate, [1_000_000, 2_000_000, 4_000_000, 6_000_000, 8_000_000], ref,
+                             resolution=10_000)
+    passes = {b: bc.meets(r, ref) for b, r in rows.items()}
+    assert bc.envelope(passes) == 8_000_000 == _envelope_brute_force(passes)
+    assert 3_141_593 <= need < 3_141_593 + 10_000
+    del rows[6_000_000]
+    assert bc.envelope({b: bc.meets(r, ref) for b, r in rows.items()}) == need
