@@ -1564,8 +1564,10 @@ class ReferenceDopus:
 
     def _model_finite_at(self, xs) -> bool:
         """Section 9: the model finite at the state xs with the next control of the last good
-        plan (one stage evaluation)."""
+        plan (one stage evaluation, 1 work unit; nothing tests before it that it fits,
+        section 14)."""
         u = self._clip_u(self._plan_control())[0]
+        self.work += 1
         try:
             out = self.disc.stage_eval(xs, u, self.p[0])
         except RuntimeError:
@@ -1602,6 +1604,8 @@ class ReferenceDopus:
             if not shifted:
                 x[0] = x[1]
         else:
+            # the predicted state: one stage evaluation, 1 work unit (section 14)
+            self.work += 1
             try:
                 x0 = self._stage_phi(self._xhat_last, self.u0, self.p[0])
             except RuntimeError:

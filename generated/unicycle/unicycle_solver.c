@@ -1384,12 +1384,15 @@ static void unicycle_keep_plan(unicycle_solver *s, unicycle_real *u0, int lowere
 static int unicycle_feedback_recover(unicycle_solver *s, int *qs, int *retries);
 
 /* 1 when the model is finite at the state xs with the next control of the last good plan (one
- * stage evaluation). A finite measurement at which it is not (an outlier of 1e6 rad/s, say)
- * cannot start a re-initialisation: it is no measurement (algorithm.md section 9). */
+ * stage evaluation, 1 work unit of the budget; nothing tests before it that it fits: without
+ * it the feedback could not tell a measurement from no measurement, algorithm.md section 14).
+ * A finite measurement at which it is not (an outlier of 1e6 rad/s, say) cannot start a
+ * re-initialisation: it is no measurement (algorithm.md section 9). */
 static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
 {
     unicycle_real l = UNICYCLE_R(0.0), u[UNICYCLE_NU], xn[UNICYCLE_NX];
     unicycle_clip_u(unicycle_health_plan_control(&s->health, 0), u);
+    s->anytime.work += 1.0;
     return unicycle_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
            unicycle_lai_vec_finite(UNICYCLE_NX, xn) && unicycle_lai_vec_finite(1, &l);
 }
@@ -1983,16 +1986,22 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
 {
     unicycle_real l = UNICYCLE_R(0.0);
     int i;
-    /* x_0: the state predicted for this instant from the last measurement and control; when
-     * the last feedback had no usable measurement, the (shifted) iterate's x_0 */
+    /* x_0: the state predicted for this instant from the last measurement and control (one
+     * stage evaluation, 1 work unit of the budget; nothing tests before it that it fits: x_0 =
+     * xhat0 instead would change the re-initialisation; the walk's tests after it read it,
+     * algorithm.md section 14); when the last feedback had no usable measurement, the
+     * (shifted) iterate's x_0 */
     if (!s->health.xhat_fresh) {
         if (!shifted) {
             unicycle_copy(s->x[0], s->x[1], UNICYCLE_NX);
         }
-    } else if (unicycle_eval_stage_eval(s->xhat0, s->health.u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
-                                     &s->mem.ev.fun_work) != 0 ||
-               !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[0])) {
-        unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
+    } else {
+        s->anytime.work += 1.0;
+        if (unicycle_eval_stage_eval(s->xhat0, s->health.u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
+                                  &s->mem.ev.fun_work) != 0 ||
+            !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[0])) {
+            unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
+        }
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
         if (!(unicycle_fabs(s->x[0][i]) <=
