@@ -4,12 +4,13 @@ The closed loop of tests/test_anytime.py's outlier loop (three measurements with
 velocities (v, -v) from instant 5, both backends fed the same measurements, the reference's
 control applied): per instant the feedback's status, the automatic lm after the feedback (its
 retries included) and after the prepare, the work of the instant (feedback and prepare), the
-flags, the KKT proxy and the largest relative difference of the iterates. Before each prepare that follows a failed feedback it
-takes the QP of the predicted step (docs/algorithm.md section 9: the prepared QP, lm after the
-retries, dx_0 = 0) and solves it with the C QP (tests/harness/qp_harness.py) at the loop's QP
-tolerance and with the reference QP solver: the C status, its scaled stationarity, that of the
-reference's solution in the C QP's measure, the largest multiplier lam and the round-off floor
-eps |lam|_max / scale. bench/issue24/measurements.md section 12.
+flags, the KKT proxy and the largest relative difference of the iterates. Before each prepare
+that follows a failed feedback it takes the QP of the predicted step (docs/algorithm.md
+section 9: the prepared QP, lm after the retries, dx_0 = 0) and solves it with the C QP
+(tests/harness/qp_harness.py) at the loop's QP tolerance and with the reference QP solver:
+the C status, its scaled stationarity, that of the reference's solution in the C QP's
+measure, the largest multiplier lam and the round-off floor eps |lam|_max / scale.
+bench/issue24/measurements.md section 12.
 
     .venv/bin/python bench/outlier_split.py [--budget 300] [--v 1e4] [--qp-tol 1e-14] [--iters 14]
 """
