@@ -441,8 +441,11 @@ def test_model_at_the_measurement_is_priced(robot_disc, robot_solution, budget, 
     counts its QP solves (N units each, the lm retries that fit) and that evaluation, so its
     work is 1 modulo N, and the C runtime equals the reference instant by instant (statuses,
     work, recoveries, iterates to round-off) through the recovery that follows the repeated
-    failures. (At 300 units and 1e4 rad/s the two backends part at the second outlier, the C
-    runtime's lm after its retries 71, the reference's 712, on main 54f2cbe as well.)"""
+    failures. (At 300 units and 1e4 rad/s the two backends part in the prepare after the
+    second outlier: both have lm 71.2 after the feedback's retries, the predicted step's QP
+    stalls in C at its round-off floor, 2.0e-14 scaled against qp_tol 1e-14, where the
+    reference takes the step and raises lm to 712; bench/issue24/measurements.md section 12,
+    bench/outlier_split.py.)"""
     N = robot_disc.N
     c, r = pair(robot_disc, budget, M=1)
     unusable = []
