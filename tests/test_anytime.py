@@ -367,7 +367,7 @@ def test_qp_deadline_stops_at_the_iteration_it_leaves_room_for():
         assert np.array_equal(cut[key], capped[key]), key
 
 
-def _outlier_loop(disc, guess, c, r, budget, v, K, start=5, iters=40, unusable=None):
+def _outlier_loop(disc, guess, c, r, budget, v, K, start=5, iters=40, unusable=None, at_guess=None):
     """The closed loop of closed_loop with K measurements whose joint velocities are (v, -v)
     from instant `start` on (the fault suite's outliers, tests/harness/faults.py), both
     backends fed the same measurements and the reference's control applied whatever the
@@ -375,7 +375,9 @@ def _outlier_loop(disc, guess, c, r, budget, v, K, start=5, iters=40, unusable=N
     `unusable` (a list) collects (instant, the feedback's work) of each feedback that found
     the model not finite at its measurement (DOPUS_FLAG_MEASUREMENT_UNUSABLE). Such an
     instant may pass the budget by that evaluation, 1 unit, and no more: it is counted, but
-    nothing tests before it that it fits (docs/algorithm.md section 14)."""
+    nothing tests before it that it fits (docs/algorithm.md section 14). `at_guess` (a list)
+    collects the instants whose prepare re-initialised at the OCP file's guess
+    (DOPUS_FLAG_REINIT_GUESS)."""
     from dopus_codegen.studies import loops
 
     x = np.array(disc.x0, dtype=float)
@@ -395,6 +397,9 @@ def _outlier_loop(disc, guess, c, r, budget, v, K, start=5, iters=40, unusable=N
             unusable.append((it, c.work - w0))
         pc, pr = loops.prepare(c)[0], loops.prepare(r)[0]
         where = f"budget {budget}, outliers {v:g} x {K}, instant {it}"
+        assert ("reinit_guess" in c.flags) == ("reinit_guess" in r.flags), where
+        if "reinit_guess" in r.flags and at_guess is not None:
+            at_guess.append(it)
         assert (fc.status, pc) == (fr.status, pr), where
         assert c.work == r.work and c.recoveries == r.recoveries, where
         assert c.work - w0 <= budget + (1 if bad else 0), (where, c.work - w0)
@@ -456,6 +461,30 @@ def test_model_at_the_measurement_is_priced(robot_disc, robot_solution, budget, 
     assert statuses[-15:] == [0] * 15, statuses
     print(f"budget {budget}: statuses {statuses}, unusable measurements (instant, feedback work) {unusable}, "
           f"recoveries {r.recoveries}")
+
+
+@pytest.mark.parametrize("v, K", [(5e3, 1), (6e3, 3)])
+def test_reinit_at_the_guess_is_priced(robot_disc, robot_solution, v, K):
+    """A re-initialisation that falls back on the OCP file's guess under a work budget
+    (docs/algorithm.md sections 9 and 14): outliers of 5e3 or 6e3 rad/s are usable
+    measurements (the model finite there), but the re-initialisation's stage evaluations are
+    not finite at them with either control, so the recovery re-initialises at the guess; at
+    160 units its evaluations continue in the next prepare, which simulates the new last node
+    from the one before it (no forward simulation of the walk): one stage evaluation, 1 unit
+    in both backends. The C runtime equals the reference instant by instant (statuses, work,
+    recoveries, iterates to round-off), each instant within its budget, through the prepare
+    that continues the last re-initialisation at the guess. (The instant after it the two
+    backends part, the C runtime 38 units over the reference at 5e3 rad/s, on main c7da4b5
+    as well: not this evaluation, whose unit both count alike.)"""
+    budget = 160
+    c, r = pair(robot_disc, budget, M=1)
+    at_guess = []
+    statuses = _outlier_loop(robot_disc, robot_solution[0], c, r, budget, v, K, iters=5 + 2 * K, at_guess=at_guess)
+    assert at_guess[:1] == [5] and r.recoveries >= 1, (statuses, at_guess)
+    for it in at_guess:
+        # the re-initialisation continued in the next prepare: a feedback without a QP
+        assert statuses[it + 1] == 7, (it, statuses)      # DOPUS_ERR_NOT_PREPARED
+    print(f"outliers {v:g} x {K}: statuses {statuses}, at the guess {at_guess}, recoveries {r.recoveries}")
 
 
 @pytest.mark.parametrize("ticks", [2, 3, 4])

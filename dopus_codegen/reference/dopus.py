@@ -1814,11 +1814,16 @@ class ReferenceDopus:
             self._shift()
             self._shifted = True
             self._reinit_next = max(self._reinit_next - 1, 0)
-            # the new last node: simulated by the walk, or (no simulation) from the one before it
-            try:
-                xn = None if self._reinit_sim else self._stage_phi(self.x[N - 1], self.u[N - 1], self.p[N - 1])
-            except RuntimeError:
-                xn = None
+            # the new last node: simulated by the walk, or (no simulation: after the OCP file's
+            # guess) from the one before it, one stage evaluation of the budget (1 work unit;
+            # nothing tests before it that it fits, section 14)
+            xn = None
+            if not self._reinit_sim:
+                self.work += 1
+                try:
+                    xn = self._stage_phi(self.x[N - 1], self.u[N - 1], self.p[N - 1])
+                except RuntimeError:
+                    xn = None
             if xn is not None and np.all(np.isfinite(xn)):
                 self.x = self.x.copy()
                 self.x[N] = xn

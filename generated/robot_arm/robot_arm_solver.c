@@ -1964,8 +1964,12 @@ static int robot_arm_reinit_continue(robot_arm_solver *s)
         if (s->anytime.reinit_next > 0) {
             s->anytime.reinit_next -= 1;
         }
-        /* the new last node: simulated by the walk, or (no simulation) from the one before it */
+        /* the new last node: simulated by the walk, or (no simulation: after the OCP file's
+         * guess) from the one before it, one stage evaluation of the budget (1 work unit;
+         * nothing tests before it that it fits: without it the guess's last node would not
+         * move with the ring; the walk's tests after it read it, algorithm.md section 14) */
         if (!s->anytime.reinit_sim) {
+            s->anytime.work += 1.0;
             robot_arm_simulate_node(s, ROBOT_ARM_N - 1);
         }
     }
