@@ -441,6 +441,33 @@ static inline void dopus_lai_v2_store(dopus_real *x, dopus_lai_v2 v)
 {
     __builtin_memcpy(x, &v, sizeof v);
 }
+
+/* out = A x for the m x n column-major A, as the sum over the columns j of A(:, j) x_j in the
+ * order of j (the order of a row's dot product), two rows at a time with the accumulators in
+ * registers: A's columns read down instead of its rows across. Entry i goes to out[i os]. m
+ * and n are compile-time constants (the accumulators are an array of m / 2 vectors). */
+#define DOPUS_LAI_V2_GEMV(m, n, A, x, out, os)                                                               \
+    do {                                                                                                     \
+        dopus_lai_v2 acc_[DOPUS_DIM((m) / 2)];                                                               \
+        dopus_real last_ = DOPUS_R(0.0);                                                                     \
+        int i_, j_;                                                                                          \
+        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
+            acc_[i_] = (dopus_lai_v2){DOPUS_R(0.0), DOPUS_R(0.0)};                                           \
+        for (j_ = 0; j_ < (n); ++j_) {                                                                       \
+            const dopus_real f_ = (x)[j_];                                                                   \
+            const dopus_real *a_ = (A) + j_ * (m);                                                           \
+            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
+                acc_[i_] += dopus_lai_v2_load(a_ + 2 * i_) * f_;                                             \
+            if ((m) % 2)                                                                                     \
+                last_ += a_[(m)-1] * f_;                                                                     \
+        }                                                                                                    \
+        for (i_ = 0; i_ < (m) / 2; ++i_) {                                                                   \
+            (out)[2 * i_ * (os)] = acc_[i_][0];                                                              \
+            (out)[(2 * i_ + 1) * (os)] = acc_[i_][1];                                                        \
+        }                                                                                                    \
+        if ((m) % 2)                                                                                         \
+            (out)[((m)-1) * (os)] = last_;                                                                   \
+    } while (0)
 #endif
 
 #endif /* DOPUS_LINALG_H */

@@ -50,35 +50,6 @@ static dopus_lai_v2 dopus_lm_pair(const dopus_real *A, int i, int j)
     return v;
 }
 
-/* Column j of Y = P Phi: the sum over l of P's column l times Phi(l, j) in the order of l,
- * the column's accumulators in registers across the sum. */
-static void dopus_lm_y_col(const dopus_real *P, const dopus_real *phi, dopus_real *Y, int j)
-{
-    dopus_lai_v2 acc[DOPUS_NX / 2];
-    dopus_real last = DOPUS_R(0.0);
-    int i, l;
-    for (i = 0; i < DOPUS_NX / 2; ++i) {
-        acc[i] = (dopus_lai_v2){DOPUS_R(0.0), DOPUS_R(0.0)};
-    }
-    for (l = 0; l < DOPUS_NX; ++l) {
-        const dopus_real f = phi[l];
-        const dopus_real *p = P + l * DOPUS_NX;
-        for (i = 0; i < DOPUS_NX / 2; ++i) {
-            acc[i] += dopus_lai_v2_load(p + 2 * i) * f;
-        }
-        if (DOPUS_NX % 2) {
-            last += p[DOPUS_NX - 1] * f;
-        }
-    }
-    for (i = 0; i < DOPUS_NX / 2; ++i) {
-        DOPUS_LM_Y(2 * i, j) = acc[i][0];
-        DOPUS_LM_Y(2 * i + 1, j) = acc[i][1];
-    }
-    if (DOPUS_NX % 2) {
-        DOPUS_LM_Y(DOPUS_NX - 1, j) = last;
-    }
-}
-
 /* Row i of Z's lower triangle from column j0 on: Z(i, j) = H(i, j) + sum_l Phi(l, i) Y(l, j)
  * in the order of l, two entries at a time (blocks of 8, then 4 and 2, one entry alone) with
  * the accumulators in registers across the sum. */
@@ -195,7 +166,8 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
 #if DOPUS_LM_VEC
         /* Y = P Phi, then Z = H + lm I + Phi' Y by rows */
         for (j = j0; j < DOPUS_NW; ++j) {
-            dopus_lm_y_col(P, Phi + j * DOPUS_NX, Y, j);
+            /* column j of Y: P times Phi's column j */
+            DOPUS_LAI_V2_GEMV(DOPUS_NX, DOPUS_NX, P, Phi + j * DOPUS_NX, &DOPUS_LM_Y(0, j), DOPUS_NW);
         }
         for (i = j0; i < DOPUS_NW; ++i) {
             dopus_lm_z_row(H, Phi, Y, Z, i, j0);

@@ -96,34 +96,6 @@ void dopus_ring_clear_step(dopus_stage_slot *slot)
     dopus_ring_zero(slot->dmu_b, DOPUS_NW);
 }
 
-#if DOPUS_LAI_VEC
-/* out = A x for the m x nw column-major A, as the sum over the columns j of A(:, j) x_j in
- * the order of j (the order of the dot products below), two rows at a time with the
- * accumulators in registers: A's columns read down instead of its rows across */
-#define DOPUS_RING_GEMV(m, A, x, out)                                                                        \
-    do {                                                                                                     \
-        dopus_lai_v2 acc_[DOPUS_DIM((m) / 2)];                                                               \
-        dopus_real last_ = DOPUS_R(0.0);                                                                     \
-        int i_, j_;                                                                                          \
-        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
-            acc_[i_] = (dopus_lai_v2){DOPUS_R(0.0), DOPUS_R(0.0)};                                           \
-        for (j_ = 0; j_ < DOPUS_NW; ++j_) {                                                                  \
-            const dopus_real f_ = (x)[j_];                                                                   \
-            const dopus_real *a_ = (A) + j_ * (m);                                                           \
-            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
-                acc_[i_] += dopus_lai_v2_load(a_ + 2 * i_) * f_;                                             \
-            if ((m) % 2)                                                                                     \
-                last_ += a_[(m)-1] * f_;                                                                     \
-        }                                                                                                    \
-        for (i_ = 0; i_ < (m) / 2; ++i_) {                                                                   \
-            (out)[2 * i_] = acc_[i_][0];                                                                     \
-            (out)[2 * i_ + 1] = acc_[i_][1];                                                                 \
-        }                                                                                                    \
-        if ((m) % 2)                                                                                         \
-            (out)[(m)-1] = last_;                                                                            \
-    } while (0)
-#endif
-
 void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_real *phi, dopus_real *g)
 {
     /* the step in locals: the outputs might alias the slot for the compiler, which would
@@ -141,7 +113,7 @@ void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_rea
     for (j = 0; j < DOPUS_NG; ++j)
         dmu_g[j] = slot->dmu_g[j];
 #if DOPUS_LAI_VEC
-    DOPUS_RING_GEMV(DOPUS_NX, slot->Phit, dw, pd);
+    DOPUS_LAI_V2_GEMV(DOPUS_NX, DOPUS_NW, slot->Phit, dw, pd, 1);
 #endif
     for (i = 0; i < DOPUS_NW; ++i) {
         dopus_real hd = DOPUS_R(0.0), pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);

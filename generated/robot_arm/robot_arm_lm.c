@@ -50,35 +50,6 @@ static robot_arm_lai_v2 robot_arm_lm_pair(const robot_arm_real *A, int i, int j)
     return v;
 }
 
-/* Column j of Y = P Phi: the sum over l of P's column l times Phi(l, j) in the order of l,
- * the column's accumulators in registers across the sum. */
-static void robot_arm_lm_y_col(const robot_arm_real *P, const robot_arm_real *phi, robot_arm_real *Y, int j)
-{
-    robot_arm_lai_v2 acc[ROBOT_ARM_NX / 2];
-    robot_arm_real last = ROBOT_ARM_R(0.0);
-    int i, l;
-    for (i = 0; i < ROBOT_ARM_NX / 2; ++i) {
-        acc[i] = (robot_arm_lai_v2){ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
-    }
-    for (l = 0; l < ROBOT_ARM_NX; ++l) {
-        const robot_arm_real f = phi[l];
-        const robot_arm_real *p = P + l * ROBOT_ARM_NX;
-        for (i = 0; i < ROBOT_ARM_NX / 2; ++i) {
-            acc[i] += robot_arm_lai_v2_load(p + 2 * i) * f;
-        }
-        if (ROBOT_ARM_NX % 2) {
-            last += p[ROBOT_ARM_NX - 1] * f;
-        }
-    }
-    for (i = 0; i < ROBOT_ARM_NX / 2; ++i) {
-        ROBOT_ARM_LM_Y(2 * i, j) = acc[i][0];
-        ROBOT_ARM_LM_Y(2 * i + 1, j) = acc[i][1];
-    }
-    if (ROBOT_ARM_NX % 2) {
-        ROBOT_ARM_LM_Y(ROBOT_ARM_NX - 1, j) = last;
-    }
-}
-
 /* Row i of Z's lower triangle from column j0 on: Z(i, j) = H(i, j) + sum_l Phi(l, i) Y(l, j)
  * in the order of l, two entries at a time (blocks of 8, then 4 and 2, one entry alone) with
  * the accumulators in registers across the sum. */
@@ -195,7 +166,8 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
 #if ROBOT_ARM_LM_VEC
         /* Y = P Phi, then Z = H + lm I + Phi' Y by rows */
         for (j = j0; j < ROBOT_ARM_NW; ++j) {
-            robot_arm_lm_y_col(P, Phi + j * ROBOT_ARM_NX, Y, j);
+            /* column j of Y: P times Phi's column j */
+            ROBOT_ARM_LAI_V2_GEMV(ROBOT_ARM_NX, ROBOT_ARM_NX, P, Phi + j * ROBOT_ARM_NX, &ROBOT_ARM_LM_Y(0, j), ROBOT_ARM_NW);
         }
         for (i = j0; i < ROBOT_ARM_NW; ++i) {
             robot_arm_lm_z_row(H, Phi, Y, Z, i, j0);

@@ -96,34 +96,6 @@ void robot_arm_ring_clear_step(robot_arm_stage_slot *slot)
     robot_arm_ring_zero(slot->dmu_b, ROBOT_ARM_NW);
 }
 
-#if ROBOT_ARM_LAI_VEC
-/* out = A x for the m x nw column-major A, as the sum over the columns j of A(:, j) x_j in
- * the order of j (the order of the dot products below), two rows at a time with the
- * accumulators in registers: A's columns read down instead of its rows across */
-#define ROBOT_ARM_RING_GEMV(m, A, x, out)                                                                        \
-    do {                                                                                                     \
-        robot_arm_lai_v2 acc_[ROBOT_ARM_DIM((m) / 2)];                                                               \
-        robot_arm_real last_ = ROBOT_ARM_R(0.0);                                                                     \
-        int i_, j_;                                                                                          \
-        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
-            acc_[i_] = (robot_arm_lai_v2){ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};                                           \
-        for (j_ = 0; j_ < ROBOT_ARM_NW; ++j_) {                                                                  \
-            const robot_arm_real f_ = (x)[j_];                                                                   \
-            const robot_arm_real *a_ = (A) + j_ * (m);                                                           \
-            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
-                acc_[i_] += robot_arm_lai_v2_load(a_ + 2 * i_) * f_;                                             \
-            if ((m) % 2)                                                                                     \
-                last_ += a_[(m)-1] * f_;                                                                     \
-        }                                                                                                    \
-        for (i_ = 0; i_ < (m) / 2; ++i_) {                                                                   \
-            (out)[2 * i_] = acc_[i_][0];                                                                     \
-            (out)[2 * i_ + 1] = acc_[i_][1];                                                                 \
-        }                                                                                                    \
-        if ((m) % 2)                                                                                         \
-            (out)[(m)-1] = last_;                                                                            \
-    } while (0)
-#endif
-
 void robot_arm_ring_predict(const robot_arm_stage_slot *slot, robot_arm_real *F_w, robot_arm_real *phi, robot_arm_real *g)
 {
     /* the step in locals: the outputs might alias the slot for the compiler, which would
@@ -141,7 +113,7 @@ void robot_arm_ring_predict(const robot_arm_stage_slot *slot, robot_arm_real *F_
     for (j = 0; j < ROBOT_ARM_NG; ++j)
         dmu_g[j] = slot->dmu_g[j];
 #if ROBOT_ARM_LAI_VEC
-    ROBOT_ARM_RING_GEMV(ROBOT_ARM_NX, slot->Phit, dw, pd);
+    ROBOT_ARM_LAI_V2_GEMV(ROBOT_ARM_NX, ROBOT_ARM_NW, slot->Phit, dw, pd, 1);
 #endif
     for (i = 0; i < ROBOT_ARM_NW; ++i) {
         robot_arm_real hd = ROBOT_ARM_R(0.0), pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0);

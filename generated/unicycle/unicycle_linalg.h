@@ -441,6 +441,33 @@ static inline void unicycle_lai_v2_store(unicycle_real *x, unicycle_lai_v2 v)
 {
     __builtin_memcpy(x, &v, sizeof v);
 }
+
+/* out = A x for the m x n column-major A, as the sum over the columns j of A(:, j) x_j in the
+ * order of j (the order of a row's dot product), two rows at a time with the accumulators in
+ * registers: A's columns read down instead of its rows across. Entry i goes to out[i os]. m
+ * and n are compile-time constants (the accumulators are an array of m / 2 vectors). */
+#define UNICYCLE_LAI_V2_GEMV(m, n, A, x, out, os)                                                               \
+    do {                                                                                                     \
+        unicycle_lai_v2 acc_[UNICYCLE_DIM((m) / 2)];                                                               \
+        unicycle_real last_ = UNICYCLE_R(0.0);                                                                     \
+        int i_, j_;                                                                                          \
+        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
+            acc_[i_] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};                                           \
+        for (j_ = 0; j_ < (n); ++j_) {                                                                       \
+            const unicycle_real f_ = (x)[j_];                                                                   \
+            const unicycle_real *a_ = (A) + j_ * (m);                                                           \
+            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
+                acc_[i_] += unicycle_lai_v2_load(a_ + 2 * i_) * f_;                                             \
+            if ((m) % 2)                                                                                     \
+                last_ += a_[(m)-1] * f_;                                                                     \
+        }                                                                                                    \
+        for (i_ = 0; i_ < (m) / 2; ++i_) {                                                                   \
+            (out)[2 * i_ * (os)] = acc_[i_][0];                                                              \
+            (out)[(2 * i_ + 1) * (os)] = acc_[i_][1];                                                        \
+        }                                                                                                    \
+        if ((m) % 2)                                                                                         \
+            (out)[((m)-1) * (os)] = last_;                                                                   \
+    } while (0)
 #endif
 
 #endif /* UNICYCLE_LINALG_H */

@@ -50,35 +50,6 @@ static unicycle_lai_v2 unicycle_lm_pair(const unicycle_real *A, int i, int j)
     return v;
 }
 
-/* Column j of Y = P Phi: the sum over l of P's column l times Phi(l, j) in the order of l,
- * the column's accumulators in registers across the sum. */
-static void unicycle_lm_y_col(const unicycle_real *P, const unicycle_real *phi, unicycle_real *Y, int j)
-{
-    unicycle_lai_v2 acc[UNICYCLE_NX / 2];
-    unicycle_real last = UNICYCLE_R(0.0);
-    int i, l;
-    for (i = 0; i < UNICYCLE_NX / 2; ++i) {
-        acc[i] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
-    }
-    for (l = 0; l < UNICYCLE_NX; ++l) {
-        const unicycle_real f = phi[l];
-        const unicycle_real *p = P + l * UNICYCLE_NX;
-        for (i = 0; i < UNICYCLE_NX / 2; ++i) {
-            acc[i] += unicycle_lai_v2_load(p + 2 * i) * f;
-        }
-        if (UNICYCLE_NX % 2) {
-            last += p[UNICYCLE_NX - 1] * f;
-        }
-    }
-    for (i = 0; i < UNICYCLE_NX / 2; ++i) {
-        UNICYCLE_LM_Y(2 * i, j) = acc[i][0];
-        UNICYCLE_LM_Y(2 * i + 1, j) = acc[i][1];
-    }
-    if (UNICYCLE_NX % 2) {
-        UNICYCLE_LM_Y(UNICYCLE_NX - 1, j) = last;
-    }
-}
-
 /* Row i of Z's lower triangle from column j0 on: Z(i, j) = H(i, j) + sum_l Phi(l, i) Y(l, j)
  * in the order of l, two entries at a time (blocks of 8, then 4 and 2, one entry alone) with
  * the accumulators in registers across the sum. */
@@ -195,7 +166,8 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
 #if UNICYCLE_LM_VEC
         /* Y = P Phi, then Z = H + lm I + Phi' Y by rows */
         for (j = j0; j < UNICYCLE_NW; ++j) {
-            unicycle_lm_y_col(P, Phi + j * UNICYCLE_NX, Y, j);
+            /* column j of Y: P times Phi's column j */
+            UNICYCLE_LAI_V2_GEMV(UNICYCLE_NX, UNICYCLE_NX, P, Phi + j * UNICYCLE_NX, &UNICYCLE_LM_Y(0, j), UNICYCLE_NW);
         }
         for (i = j0; i < UNICYCLE_NW; ++i) {
             unicycle_lm_z_row(H, Phi, Y, Z, i, j0);

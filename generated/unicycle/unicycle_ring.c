@@ -96,34 +96,6 @@ void unicycle_ring_clear_step(unicycle_stage_slot *slot)
     unicycle_ring_zero(slot->dmu_b, UNICYCLE_NW);
 }
 
-#if UNICYCLE_LAI_VEC
-/* out = A x for the m x nw column-major A, as the sum over the columns j of A(:, j) x_j in
- * the order of j (the order of the dot products below), two rows at a time with the
- * accumulators in registers: A's columns read down instead of its rows across */
-#define UNICYCLE_RING_GEMV(m, A, x, out)                                                                        \
-    do {                                                                                                     \
-        unicycle_lai_v2 acc_[UNICYCLE_DIM((m) / 2)];                                                               \
-        unicycle_real last_ = UNICYCLE_R(0.0);                                                                     \
-        int i_, j_;                                                                                          \
-        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
-            acc_[i_] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};                                           \
-        for (j_ = 0; j_ < UNICYCLE_NW; ++j_) {                                                                  \
-            const unicycle_real f_ = (x)[j_];                                                                   \
-            const unicycle_real *a_ = (A) + j_ * (m);                                                           \
-            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
-                acc_[i_] += unicycle_lai_v2_load(a_ + 2 * i_) * f_;                                             \
-            if ((m) % 2)                                                                                     \
-                last_ += a_[(m)-1] * f_;                                                                     \
-        }                                                                                                    \
-        for (i_ = 0; i_ < (m) / 2; ++i_) {                                                                   \
-            (out)[2 * i_] = acc_[i_][0];                                                                     \
-            (out)[2 * i_ + 1] = acc_[i_][1];                                                                 \
-        }                                                                                                    \
-        if ((m) % 2)                                                                                         \
-            (out)[(m)-1] = last_;                                                                            \
-    } while (0)
-#endif
-
 void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, unicycle_real *phi, unicycle_real *g)
 {
     /* the step in locals: the outputs might alias the slot for the compiler, which would
@@ -141,7 +113,7 @@ void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, 
     for (j = 0; j < UNICYCLE_NG; ++j)
         dmu_g[j] = slot->dmu_g[j];
 #if UNICYCLE_LAI_VEC
-    UNICYCLE_RING_GEMV(UNICYCLE_NX, slot->Phit, dw, pd);
+    UNICYCLE_LAI_V2_GEMV(UNICYCLE_NX, UNICYCLE_NW, slot->Phit, dw, pd, 1);
 #endif
     for (i = 0; i < UNICYCLE_NW; ++i) {
         unicycle_real hd = UNICYCLE_R(0.0), pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
