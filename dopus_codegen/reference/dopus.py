@@ -1547,6 +1547,16 @@ class ReferenceDopus:
         phi = np.array(self.disc.stage_eval(x, u, p)[0], float).reshape(self.nx)
         return phi
 
+    def _node_phi(self, x, u, k):
+        """phi_k(x, u) outside the stage functions of a walk (a predicted or simulated node):
+        one stage evaluation, 1 work unit (section 14); None when it fails or is not finite."""
+        self.work += 1
+        try:
+            xn = self._stage_phi(x, u, self.p[k])
+        except RuntimeError:
+            return None
+        return xn if np.all(np.isfinite(xn)) else None
+
     def _simulate(self, x, u, use_plan: bool) -> bool:
         """Forward simulation from x[0] with the last good plan from its current age on (or
         the OCP file's guess controls), clipped, into x and u; True when every node is
@@ -1598,19 +1608,14 @@ class ReferenceDopus:
         """The automatic recovery of section 9: re-initialise from a forward simulation of the
         predicted state with the last good plan, the iterate's multipliers, every block
         recomputed (Gauss-Newton when the problem has it)."""
-        nx = self.nx
         x, u = self.x.copy(), self.u.copy()
         if not self._xhat_fresh:
             if not shifted:
                 x[0] = x[1]
         else:
             # the predicted state: one stage evaluation, 1 work unit (section 14)
-            self.work += 1
-            try:
-                x0 = self._stage_phi(self._xhat_last, self.u0, self.p[0])
-            except RuntimeError:
-                x0 = np.full(nx, np.nan)
-            x[0] = x0 if np.all(np.isfinite(x0)) else self._xhat_last
+            x0 = self._node_phi(self._xhat_last, self.u0, 0)
+            x[0] = x0 if x0 is not None else self._xhat_last
         if not self._box_ok(x[0]):
             x[0] = self._xhat_last
         self._reinit(x, u)
@@ -1803,12 +1808,8 @@ class ReferenceDopus:
             if self._reinit_sim and self._reinit_next == 0:
                 # the node that becomes x_0, not simulated by the walk yet: one stage
                 # evaluation of the budget (1 work unit)
-                self.work += 1
-                try:
-                    x1 = self._stage_phi(self.x[0], self.u[0], self.p[0])
-                except RuntimeError:
-                    x1 = None
-                if x1 is not None and np.all(np.isfinite(x1)):
+                x1 = self._node_phi(self.x[0], self.u[0], 0)
+                if x1 is not None:
                     self.x = self.x.copy()
                     self.x[1] = x1
             self._shift()
@@ -1817,14 +1818,8 @@ class ReferenceDopus:
             # the new last node: simulated by the walk, or (no simulation: after the OCP file's
             # guess) from the one before it, one stage evaluation of the budget (1 work unit;
             # nothing tests before it that it fits, section 14)
-            xn = None
-            if not self._reinit_sim:
-                self.work += 1
-                try:
-                    xn = self._stage_phi(self.x[N - 1], self.u[N - 1], self.p[N - 1])
-                except RuntimeError:
-                    xn = None
-            if xn is not None and np.all(np.isfinite(xn)):
+            xn = None if self._reinit_sim else self._node_phi(self.x[N - 1], self.u[N - 1], N - 1)
+            if xn is not None:
                 self.x = self.x.copy()
                 self.x[N] = xn
         try:

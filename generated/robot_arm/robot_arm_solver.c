@@ -373,6 +373,17 @@ static void robot_arm_lm_started(robot_arm_solver *s)
 /* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
 static int robot_arm_stage_F_of(robot_arm_solver *s, int k, robot_arm_real l);
 
+/* xn = phi(x, u) with stage k's parameters and the stage cost into *l: one stage evaluation
+ * outside the stage functions of a walk (the model at a measurement, a simulated node), 1 work
+ * unit of the budget; 1 when it succeeded and xn is finite. */
+static int robot_arm_eval_node(robot_arm_solver *s, int k, const robot_arm_real *x, const robot_arm_real *u, robot_arm_real *xn,
+                           robot_arm_real *l)
+{
+    s->anytime.work += 1.0;
+    return robot_arm_eval_stage_eval(x, u, s->p[k], xn, l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+           robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn);
+}
+
 static int robot_arm_stage_F(robot_arm_solver *s, int k)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0);
@@ -1392,9 +1403,7 @@ static int robot_arm_model_finite_at(robot_arm_solver *s, const robot_arm_real *
 {
     robot_arm_real l = ROBOT_ARM_R(0.0), u[ROBOT_ARM_NU], xn[ROBOT_ARM_NX];
     robot_arm_clip_u(robot_arm_health_plan_control(&s->health, 0), u);
-    s->anytime.work += 1.0;
-    return robot_arm_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
-           robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn) && robot_arm_lai_vec_finite(1, &l);
+    return robot_arm_eval_node(s, 0, xs, u, xn, &l) && robot_arm_lai_vec_finite(1, &l);
 }
 
 /* Feedback once admitted (steps 2 to 8). */
@@ -1936,19 +1945,19 @@ static int robot_arm_reinit(robot_arm_solver *s, double reserve)
     return rc;
 }
 
-/* A prepare while a re-initialisation is under way (a budget): the shift of the instant (the
- * evaluated stages move with the ring, the new last node is simulated from the one before it),
- * then the evaluations that fit (robot_arm_reinit_walk); a failed one falls back on the guess. */
-/* x_{k+1} = phi_k(x_k, u_k), kept only when the evaluation succeeds and is finite. */
+/* x_{k+1} = phi_k(x_k, u_k) (1 work unit, robot_arm_eval_node), kept only when the evaluation
+ * succeeds and is finite. */
 static void robot_arm_simulate_node(robot_arm_solver *s, int k)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0), xn[ROBOT_ARM_NX];
-    if (robot_arm_eval_stage_eval(s->x[k], s->u[k], s->p[k], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
-        robot_arm_lai_vec_finite(ROBOT_ARM_NX, xn)) {
+    if (robot_arm_eval_node(s, k, s->x[k], s->u[k], xn, &l)) {
         robot_arm_copy(s->x[k + 1], xn, ROBOT_ARM_NX);
     }
 }
 
+/* A prepare while a re-initialisation is under way (a budget): the shift of the instant (the
+ * evaluated stages move with the ring, the new last node is simulated from the one before it),
+ * then the evaluations that fit (robot_arm_reinit_walk); a failed one falls back on the guess. */
 static int robot_arm_reinit_continue(robot_arm_solver *s)
 {
     int rc;
@@ -1956,7 +1965,6 @@ static int robot_arm_reinit_continue(robot_arm_solver *s)
         /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now,
          * one stage evaluation of the budget (1 work unit; in time the walk's tests read it) */
         if (s->anytime.reinit_sim && s->anytime.reinit_next == 0) {
-            s->anytime.work += 1.0;
             robot_arm_simulate_node(s, 0);
         }
         robot_arm_shift(s);
@@ -1969,7 +1977,6 @@ static int robot_arm_reinit_continue(robot_arm_solver *s)
          * nothing tests before it that it fits: without it the guess's last node would not
          * move with the ring; the walk's tests after it read it, algorithm.md section 14) */
         if (!s->anytime.reinit_sim) {
-            s->anytime.work += 1.0;
             robot_arm_simulate_node(s, ROBOT_ARM_N - 1);
         }
     }
@@ -1999,13 +2006,8 @@ static int robot_arm_recover(robot_arm_solver *s, int shifted)
         if (!shifted) {
             robot_arm_copy(s->x[0], s->x[1], ROBOT_ARM_NX);
         }
-    } else {
-        s->anytime.work += 1.0;
-        if (robot_arm_eval_stage_eval(s->xhat0, s->health.u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
-                                  &s->mem.ev.fun_work) != 0 ||
-            !robot_arm_lai_vec_finite(ROBOT_ARM_NX, s->x[0])) {
-            robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
-        }
+    } else if (!robot_arm_eval_node(s, 0, s->xhat0, s->health.u0_out, s->x[0], &l)) {
+        robot_arm_copy(s->x[0], s->xhat0, ROBOT_ARM_NX);
     }
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         if (!(robot_arm_fabs(s->x[0][i]) <=

@@ -373,6 +373,17 @@ static void unicycle_lm_started(unicycle_solver *s)
 /* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
 static int unicycle_stage_F_of(unicycle_solver *s, int k, unicycle_real l);
 
+/* xn = phi(x, u) with stage k's parameters and the stage cost into *l: one stage evaluation
+ * outside the stage functions of a walk (the model at a measurement, a simulated node), 1 work
+ * unit of the budget; 1 when it succeeded and xn is finite. */
+static int unicycle_eval_node(unicycle_solver *s, int k, const unicycle_real *x, const unicycle_real *u, unicycle_real *xn,
+                           unicycle_real *l)
+{
+    s->anytime.work += 1.0;
+    return unicycle_eval_stage_eval(x, u, s->p[k], xn, l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
+           unicycle_lai_vec_finite(UNICYCLE_NX, xn);
+}
+
 static int unicycle_stage_F(unicycle_solver *s, int k)
 {
     unicycle_real l = UNICYCLE_R(0.0);
@@ -1392,9 +1403,7 @@ static int unicycle_model_finite_at(unicycle_solver *s, const unicycle_real *xs)
 {
     unicycle_real l = UNICYCLE_R(0.0), u[UNICYCLE_NU], xn[UNICYCLE_NX];
     unicycle_clip_u(unicycle_health_plan_control(&s->health, 0), u);
-    s->anytime.work += 1.0;
-    return unicycle_eval_stage_eval(xs, u, s->p[0], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
-           unicycle_lai_vec_finite(UNICYCLE_NX, xn) && unicycle_lai_vec_finite(1, &l);
+    return unicycle_eval_node(s, 0, xs, u, xn, &l) && unicycle_lai_vec_finite(1, &l);
 }
 
 /* Feedback once admitted (steps 2 to 8). */
@@ -1936,19 +1945,19 @@ static int unicycle_reinit(unicycle_solver *s, double reserve)
     return rc;
 }
 
-/* A prepare while a re-initialisation is under way (a budget): the shift of the instant (the
- * evaluated stages move with the ring, the new last node is simulated from the one before it),
- * then the evaluations that fit (unicycle_reinit_walk); a failed one falls back on the guess. */
-/* x_{k+1} = phi_k(x_k, u_k), kept only when the evaluation succeeds and is finite. */
+/* x_{k+1} = phi_k(x_k, u_k) (1 work unit, unicycle_eval_node), kept only when the evaluation
+ * succeeds and is finite. */
 static void unicycle_simulate_node(unicycle_solver *s, int k)
 {
     unicycle_real l = UNICYCLE_R(0.0), xn[UNICYCLE_NX];
-    if (unicycle_eval_stage_eval(s->x[k], s->u[k], s->p[k], xn, &l, s->mem.ev.tmp_g, &s->mem.ev.fun_work) == 0 &&
-        unicycle_lai_vec_finite(UNICYCLE_NX, xn)) {
+    if (unicycle_eval_node(s, k, s->x[k], s->u[k], xn, &l)) {
         unicycle_copy(s->x[k + 1], xn, UNICYCLE_NX);
     }
 }
 
+/* A prepare while a re-initialisation is under way (a budget): the shift of the instant (the
+ * evaluated stages move with the ring, the new last node is simulated from the one before it),
+ * then the evaluations that fit (unicycle_reinit_walk); a failed one falls back on the guess. */
 static int unicycle_reinit_continue(unicycle_solver *s)
 {
     int rc;
@@ -1956,7 +1965,6 @@ static int unicycle_reinit_continue(unicycle_solver *s)
         /* the node that becomes x_0: simulated by the walk, or (no stage evaluated yet) now,
          * one stage evaluation of the budget (1 work unit; in time the walk's tests read it) */
         if (s->anytime.reinit_sim && s->anytime.reinit_next == 0) {
-            s->anytime.work += 1.0;
             unicycle_simulate_node(s, 0);
         }
         unicycle_shift(s);
@@ -1969,7 +1977,6 @@ static int unicycle_reinit_continue(unicycle_solver *s)
          * nothing tests before it that it fits: without it the guess's last node would not
          * move with the ring; the walk's tests after it read it, algorithm.md section 14) */
         if (!s->anytime.reinit_sim) {
-            s->anytime.work += 1.0;
             unicycle_simulate_node(s, UNICYCLE_N - 1);
         }
     }
@@ -1999,13 +2006,8 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
         if (!shifted) {
             unicycle_copy(s->x[0], s->x[1], UNICYCLE_NX);
         }
-    } else {
-        s->anytime.work += 1.0;
-        if (unicycle_eval_stage_eval(s->xhat0, s->health.u0_out, s->p[0], s->x[0], &l, s->mem.ev.tmp_g,
-                                  &s->mem.ev.fun_work) != 0 ||
-            !unicycle_lai_vec_finite(UNICYCLE_NX, s->x[0])) {
-            unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
-        }
+    } else if (!unicycle_eval_node(s, 0, s->xhat0, s->health.u0_out, s->x[0], &l)) {
+        unicycle_copy(s->x[0], s->xhat0, UNICYCLE_NX);
     }
     for (i = 0; i < UNICYCLE_NX; ++i) {
         if (!(unicycle_fabs(s->x[0][i]) <=
