@@ -178,16 +178,10 @@ static int finite_absmax(int n, const dopus_real *restrict x, dopus_real *restri
  * QP reads only that triangle of H_k). */
 static int finite_absmax_lower(int n, const dopus_real *restrict A, dopus_real *restrict m)
 {
-    int i, j;
-    dopus_real s = DOPUS_R(0.0), mm = *m;
-    for (j = 0; j < n; ++j)
-        for (i = j; i < n; ++i) {
-            const dopus_real a = dopus_fabs(A[i + j * n]);
-            s += A[i + j * n] * DOPUS_R(0.0);
-            mm = DOPUS_MAX_ACC(a, mm);
-        }
-    *m = mm;
-    return s == DOPUS_R(0.0);
+    int j, ok = 1;
+    for (j = 0; j < n; ++j) /* column j from the diagonal down */
+        ok &= finite_absmax(n - j, A + j + j * n, m);
+    return ok;
 }
 
 /* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k

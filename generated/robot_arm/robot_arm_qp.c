@@ -178,16 +178,10 @@ static int finite_absmax(int n, const robot_arm_real *restrict x, robot_arm_real
  * QP reads only that triangle of H_k). */
 static int finite_absmax_lower(int n, const robot_arm_real *restrict A, robot_arm_real *restrict m)
 {
-    int i, j;
-    robot_arm_real s = ROBOT_ARM_R(0.0), mm = *m;
-    for (j = 0; j < n; ++j)
-        for (i = j; i < n; ++i) {
-            const robot_arm_real a = robot_arm_fabs(A[i + j * n]);
-            s += A[i + j * n] * ROBOT_ARM_R(0.0);
-            mm = ROBOT_ARM_MAX_ACC(a, mm);
-        }
-    *m = mm;
-    return s == ROBOT_ARM_R(0.0);
+    int j, ok = 1;
+    for (j = 0; j < n; ++j) /* column j from the diagonal down */
+        ok &= finite_absmax(n - j, A + j + j * n, m);
+    return ok;
 }
 
 /* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k
