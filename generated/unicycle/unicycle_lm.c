@@ -37,98 +37,127 @@ static unicycle_real unicycle_lm_hessian_scale(const unicycle_ring *ring, const 
  * states and targets without vectors take the plain loops. The same values either way. */
 #define UNICYCLE_LM_VEC (UNICYCLE_LAI_VEC && UNICYCLE_NX >= 8)
 
-#if UNICYCLE_LM_VEC
-/* Y = P Phi (nx x nw) stored by rows (row l at Y + l nw) and the lower triangle of Z (nw x nw)
- * by rows (row i at Z + i nw): the kernels below run along the rows */
-#define UNICYCLE_LM_Y(l, j) Y[(j) + (l)*UNICYCLE_NW]
-#define UNICYCLE_LM_Z(i, j) Z[(j) + (i)*UNICYCLE_NW]
-
-/* entries (i, j) and (i, j + 1) of an nw x nw column-major block */
-static unicycle_lai_v2 unicycle_lm_pair(const unicycle_real *A, int i, int j)
-{
-    unicycle_lai_v2 v = {A[i + j * UNICYCLE_NW], A[i + (j + 1) * UNICYCLE_NW]};
-    return v;
-}
-
-/* Row i of Z's lower triangle from column j0 on: Z(i, j) = H(i, j) + sum_l Phi(l, i) Y(l, j)
- * in the order of l, two entries at a time (blocks of 8, then 4 and 2, one entry alone) with
- * the accumulators in registers across the sum. */
-static void unicycle_lm_z_row(const unicycle_real *H, const unicycle_real *Phi, const unicycle_real *Y, unicycle_real *Z,
-                           int i, int j0)
-{
-    const unicycle_real *ph = Phi + i * UNICYCLE_NX;
-    unicycle_real *z = Z + i * UNICYCLE_NW;
-    int j = j0, l;
-    for (; j + 8 <= i + 1; j += 8) {
-        unicycle_lai_v2 a0 = unicycle_lm_pair(H, i, j), a1 = unicycle_lm_pair(H, i, j + 2);
-        unicycle_lai_v2 a2 = unicycle_lm_pair(H, i, j + 4), a3 = unicycle_lm_pair(H, i, j + 6);
-        for (l = 0; l < UNICYCLE_NX; ++l) {
-            const unicycle_real *y = Y + j + l * UNICYCLE_NW;
-            a0 += ph[l] * unicycle_lai_v2_load(y);
-            a1 += ph[l] * unicycle_lai_v2_load(y + 2);
-            a2 += ph[l] * unicycle_lai_v2_load(y + 4);
-            a3 += ph[l] * unicycle_lai_v2_load(y + 6);
-        }
-        unicycle_lai_v2_store(z + j, a0);
-        unicycle_lai_v2_store(z + j + 2, a1);
-        unicycle_lai_v2_store(z + j + 4, a2);
-        unicycle_lai_v2_store(z + j + 6, a3);
-    }
-    if (j + 4 <= i + 1) {
-        unicycle_lai_v2 a0 = unicycle_lm_pair(H, i, j), a1 = unicycle_lm_pair(H, i, j + 2);
-        for (l = 0; l < UNICYCLE_NX; ++l) {
-            const unicycle_real *y = Y + j + l * UNICYCLE_NW;
-            a0 += ph[l] * unicycle_lai_v2_load(y);
-            a1 += ph[l] * unicycle_lai_v2_load(y + 2);
-        }
-        unicycle_lai_v2_store(z + j, a0);
-        unicycle_lai_v2_store(z + j + 2, a1);
-        j += 4;
-    }
-    if (j + 2 <= i + 1) {
-        unicycle_lai_v2 a0 = unicycle_lm_pair(H, i, j);
-        for (l = 0; l < UNICYCLE_NX; ++l) {
-            a0 += ph[l] * unicycle_lai_v2_load(Y + j + l * UNICYCLE_NW);
-        }
-        unicycle_lai_v2_store(z + j, a0);
-        j += 2;
-    }
-    if (j <= i) {
-        unicycle_real v = H[i + j * UNICYCLE_NW];
-        for (l = 0; l < UNICYCLE_NX; ++l) {
-            v += ph[l] * UNICYCLE_LM_Y(l, j);
-        }
-        z[j] = v;
-    }
-}
-
-/* Row i of the Riccati update P = Z_xx - K'K (K = L^-1 Z_ux in Z's control rows), entries
- * j <= i: Z(i, j) - sum_l Z(l, i) Z(l, j) in the order of l, two at a time, stored with their
- * mirror. */
-static void unicycle_lm_p_row(const unicycle_real *Z, unicycle_real *P, int i)
-{
-    int j = 0, l;
-    for (; j + 2 <= i + 1; j += 2) {
-        unicycle_lai_v2 v = unicycle_lai_v2_load(Z + j + i * UNICYCLE_NW);
-        for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
-            v -= UNICYCLE_LM_Z(l, i) * unicycle_lai_v2_load(Z + j + l * UNICYCLE_NW);
-        }
-        unicycle_lai_v2_store(P + j + i * UNICYCLE_NX, v);
-        P[i + j * UNICYCLE_NX] = v[0];
-        P[i + (j + 1) * UNICYCLE_NX] = v[1];
-    }
-    if (j <= i) {
-        unicycle_real v = UNICYCLE_LM_Z(i, j);
-        for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
-            v -= UNICYCLE_LM_Z(l, i) * UNICYCLE_LM_Z(l, j);
-        }
-        P[i + j * UNICYCLE_NX] = v;
-        P[j + i * UNICYCLE_NX] = v;
-    }
-}
-#else
 /* Y = P Phi (nx x nw) and the lower triangle of Z (nw x nw) column-major */
 #define UNICYCLE_LM_Z(i, j) Z[(i) + (j)*UNICYCLE_NW]
+
+#if UNICYCLE_LM_VEC
+/* Columns c0 = c0_init + A b0 and c1 = c1_init + A b1 of a product, rows r..m-1 (A's rows r..m-1:
+ * column l of A at A + l lda, contiguous rows; b0, b1 of length UNICYCLE_NX): each entry its
+ * initial value plus the sum over l in the order of l, two rows of both columns at a time
+ * (blocks of 8, 4 and 2 rows, an odd last row alone) with the accumulators in registers and
+ * one load of A's pair of rows for both columns. c0_init, c1_init: NULL for 0; hrow: the
+ * first row whose c1 initial value is read (c1's rows above it start from 0: the lower
+ * triangle of a symmetric block whose upper triangle holds other data). */
+static void unicycle_lm_cols2(const unicycle_real *A, int lda, const unicycle_real *b0, const unicycle_real *b1,
+                           const unicycle_real *c0_init, const unicycle_real *c1_init, int hrow, unicycle_real *c0,
+                           unicycle_real *c1, int r, int m)
+{
+    int l, v;
+    for (; r + 2 <= m;) {
+        const int nv = r + 8 <= m ? 4 : (r + 4 <= m ? 2 : 1);
+        unicycle_lai_v2 a0[4], a1[4];
+        for (v = 0; v < 4; ++v) {
+            const int i = r + 2 * v;
+            if (v < nv) {
+                if (c0_init) {
+                    a0[v] = unicycle_lai_v2_load(c0_init + i);
+                } else {
+                    a0[v] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
+                }
+                if (c1_init && i >= hrow) {
+                    a1[v] = unicycle_lai_v2_load(c1_init + i);
+                } else if (c1_init && i + 1 == hrow) {
+                    a1[v] = (unicycle_lai_v2){UNICYCLE_R(0.0), c1_init[i + 1]};
+                } else {
+                    a1[v] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
+                }
+            }
+        }
+        if (nv == 4) {
+            for (l = 0; l < UNICYCLE_NX; ++l) {
+                const unicycle_real *a = A + r + l * lda;
+                const unicycle_lai_v2 s0 = {b0[l], b0[l]}, s1 = {b1[l], b1[l]};
+                const unicycle_lai_v2 x0 = unicycle_lai_v2_load(a), x1 = unicycle_lai_v2_load(a + 2);
+                const unicycle_lai_v2 x2 = unicycle_lai_v2_load(a + 4), x3 = unicycle_lai_v2_load(a + 6);
+                a0[0] += x0 * s0;
+                a1[0] += x0 * s1;
+                a0[1] += x1 * s0;
+                a1[1] += x1 * s1;
+                a0[2] += x2 * s0;
+                a1[2] += x2 * s1;
+                a0[3] += x3 * s0;
+                a1[3] += x3 * s1;
+            }
+        } else if (nv == 2) {
+            for (l = 0; l < UNICYCLE_NX; ++l) {
+                const unicycle_real *a = A + r + l * lda;
+                const unicycle_lai_v2 s0 = {b0[l], b0[l]}, s1 = {b1[l], b1[l]};
+                const unicycle_lai_v2 x0 = unicycle_lai_v2_load(a), x1 = unicycle_lai_v2_load(a + 2);
+                a0[0] += x0 * s0;
+                a1[0] += x0 * s1;
+                a0[1] += x1 * s0;
+                a1[1] += x1 * s1;
+            }
+        } else {
+            for (l = 0; l < UNICYCLE_NX; ++l) {
+                const unicycle_lai_v2 s0 = {b0[l], b0[l]}, s1 = {b1[l], b1[l]};
+                const unicycle_lai_v2 x0 = unicycle_lai_v2_load(A + r + l * lda);
+                a0[0] += x0 * s0;
+                a1[0] += x0 * s1;
+            }
+        }
+        for (v = 0; v < nv; ++v) {
+            unicycle_lai_v2_store(c0 + r + 2 * v, a0[v]);
+            unicycle_lai_v2_store(c1 + r + 2 * v, a1[v]);
+        }
+        r += 2 * nv;
+    }
+    if (r < m) {
+        unicycle_real v0 = c0_init ? c0_init[r] : UNICYCLE_R(0.0);
+        unicycle_real v1 = c1_init && r >= hrow ? c1_init[r] : UNICYCLE_R(0.0);
+        for (l = 0; l < UNICYCLE_NX; ++l) {
+            v0 += A[r + l * lda] * b0[l];
+            v1 += A[r + l * lda] * b1[l];
+        }
+        c0[r] = v0;
+        c1[r] = v1;
+    }
+}
+
+/* One column c = c_init + A b, rows r..m-1, as unicycle_lm_cols2 (c_init: NULL for 0). */
+static void unicycle_lm_col1(const unicycle_real *A, int lda, const unicycle_real *b, const unicycle_real *c_init,
+                          unicycle_real *c, int r, int m)
+{
+    int l, v;
+    for (; r + 2 <= m;) {
+        const int nv = r + 8 <= m ? 4 : (r + 4 <= m ? 2 : 1);
+        unicycle_lai_v2 a[4];
+        for (v = 0; v < nv; ++v) {
+            if (c_init) {
+                a[v] = unicycle_lai_v2_load(c_init + r + 2 * v);
+            } else {
+                a[v] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
+            }
+        }
+        for (l = 0; l < UNICYCLE_NX; ++l) {
+            const unicycle_lai_v2 s = {b[l], b[l]};
+            for (v = 0; v < nv; ++v) {
+                a[v] += unicycle_lai_v2_load(A + r + 2 * v + l * lda) * s;
+            }
+        }
+        for (v = 0; v < nv; ++v) {
+            unicycle_lai_v2_store(c + r + 2 * v, a[v]);
+        }
+        r += 2 * nv;
+    }
+    if (r < m) {
+        unicycle_real v0 = c_init ? c_init[r] : UNICYCLE_R(0.0);
+        for (l = 0; l < UNICYCLE_NX; ++l) {
+            v0 += A[r + l * lda] * b[l];
+        }
+        c[r] = v0;
+    }
+}
 #endif
 
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
@@ -148,6 +177,9 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
 {
     const unicycle_real tol = UNICYCLE_LM_PIVOT_REL * st->scale;
     unicycle_real *P = work, *Y = work + UNICYCLE_NX * UNICYCLE_NX, *Z = Y + UNICYCLE_NX * UNICYCLE_NW;
+#if UNICYCLE_LM_VEC
+    unicycle_real PhiT[UNICYCLE_NW * UNICYCLE_NX]; /* Phi_k' */
+#endif
     unicycle_real v;
     int k, i, j, l;
     for (j = 0; j < UNICYCLE_NX; ++j) {
@@ -164,14 +196,28 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
          * columns, the same values as in the full block */
         const int j0 = k == 0 ? UNICYCLE_NX : 0;
 #if UNICYCLE_LM_VEC
-        /* Y = P Phi, then Z = H + lm I + Phi' Y by rows */
+        /* Phi' (nw x nx, its rows from j0), then Y = P Phi and Z = H + lm I + Phi' Y two
+         * columns at a time */
+        for (l = 0; l < UNICYCLE_NX; ++l) {
+            for (i = j0; i < UNICYCLE_NW; ++i) {
+                PhiT[i + l * UNICYCLE_NW] = Phi[l + i * UNICYCLE_NX];
+            }
+        }
         for (j = j0; j < UNICYCLE_NW; ++j) {
             /* column j of Y: P times Phi's column j */
-            UNICYCLE_LAI_V2_GEMV(UNICYCLE_NX, UNICYCLE_NX, P, Phi + j * UNICYCLE_NX, &UNICYCLE_LM_Y(0, j), UNICYCLE_NW);
+            UNICYCLE_LAI_V2_GEMV(UNICYCLE_NX, UNICYCLE_NX, P, Phi + j * UNICYCLE_NX, Y + j * UNICYCLE_NX, 1);
         }
-        for (i = j0; i < UNICYCLE_NW; ++i) {
-            unicycle_lm_z_row(H, Phi, Y, Z, i, j0);
-            UNICYCLE_LM_Z(i, i) += lm;
+        for (j = j0; j + 1 < UNICYCLE_NW; j += 2) {
+            /* columns j, j + 1 from row j (Z(j, j + 1) above the diagonal: formed, never read) */
+            unicycle_lm_cols2(PhiT, UNICYCLE_NW, Y + j * UNICYCLE_NX, Y + (j + 1) * UNICYCLE_NX, H + j * UNICYCLE_NW,
+                           H + (j + 1) * UNICYCLE_NW, j + 1, Z + j * UNICYCLE_NW, Z + (j + 1) * UNICYCLE_NW, j,
+                           UNICYCLE_NW);
+        }
+        if (j < UNICYCLE_NW) {
+            unicycle_lm_col1(PhiT, UNICYCLE_NW, Y + j * UNICYCLE_NX, H + j * UNICYCLE_NW, Z + j * UNICYCLE_NW, j, UNICYCLE_NW);
+        }
+        for (j = j0; j < UNICYCLE_NW; ++j) {
+            Z[j + j * UNICYCLE_NW] += lm;
         }
 #else
         /* Y = P Phi (nx x nw), column by column */
@@ -240,8 +286,31 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
             }
         }
 #if UNICYCLE_LM_VEC
-        for (i = 0; i < UNICYCLE_NX; ++i) {
-            unicycle_lm_p_row(Z, P, i);
+        /* K' (nx x nu) in Y's place, then P down the columns two rows at a time */
+        for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
+            for (i = 0; i < UNICYCLE_NX; ++i) {
+                Y[i + (l - UNICYCLE_NX) * UNICYCLE_NX] = Z[l + i * UNICYCLE_NW];
+            }
+        }
+        for (j = 0; j < UNICYCLE_NX; ++j) {
+            for (i = j; i + 2 <= UNICYCLE_NX; i += 2) {
+                unicycle_lai_v2 p2 = unicycle_lai_v2_load(Z + i + j * UNICYCLE_NW);
+                for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
+                    const unicycle_lai_v2 kj = {Z[l + j * UNICYCLE_NW], Z[l + j * UNICYCLE_NW]};
+                    p2 -= unicycle_lai_v2_load(Y + i + (l - UNICYCLE_NX) * UNICYCLE_NX) * kj;
+                }
+                unicycle_lai_v2_store(P + i + j * UNICYCLE_NX, p2);
+                P[j + i * UNICYCLE_NX] = p2[0];
+                P[j + (i + 1) * UNICYCLE_NX] = p2[1];
+            }
+            if (i < UNICYCLE_NX) {
+                v = Z[i + j * UNICYCLE_NW];
+                for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
+                    v -= Z[l + i * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
+                }
+                P[i + j * UNICYCLE_NX] = v;
+                P[j + i * UNICYCLE_NX] = v;
+            }
         }
 #else
         for (j = 0; j < UNICYCLE_NX; ++j) {
