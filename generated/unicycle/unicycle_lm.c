@@ -41,42 +41,35 @@ static unicycle_real unicycle_lm_hessian_scale(const unicycle_ring *ring, const 
 #define UNICYCLE_LM_Z(i, j) Z[(i) + (j)*UNICYCLE_NW]
 
 #if UNICYCLE_LM_VEC
-/* Columns c0 = c0_init + A b0 and c1 = c1_init + A b1 of a product, rows r..m-1 (A's rows r..m-1:
- * column l of A at A + l lda, contiguous rows; b0, b1 of length UNICYCLE_NX): each entry its
- * initial value plus the sum over l in the order of l, two rows of both columns at a time
- * (blocks of 8, 4 and 2 rows, an odd last row alone) with the accumulators in registers and
- * one load of A's pair of rows for both columns. c0_init, c1_init: NULL for 0; hrow: the
- * first row whose c1 initial value is read (c1's rows above it start from 0: the lower
- * triangle of a symmetric block whose upper triangle holds other data). */
-static void unicycle_lm_cols2(const unicycle_real *A, int lda, const unicycle_real *b0, const unicycle_real *b1,
-                           const unicycle_real *c0_init, const unicycle_real *c1_init, int hrow, unicycle_real *c0,
-                           unicycle_real *c1, int r, int m)
+/* Columns j and j + 1 of Z's lower triangle (j + 1 < nw): Z(i, c) = H(i, c) + sum_l Phi(l, i)
+ * Y(l, c) for the rows i from j on, the sum in the order of l as in the plain loops, over
+ * PhiT = Phi' (nw x nx, column-major: Phi's pairs of columns are contiguous pairs of rows of
+ * PhiT). Two rows of both columns at a time (blocks of 8, 4 and 2 rows, an odd last row alone)
+ * with the accumulators in registers and one load of PhiT's pair of rows for both columns;
+ * Z(j, j + 1), above the diagonal, is formed from 0 (H's upper triangle holds other data) and
+ * never read. */
+static void unicycle_lm_z_cols2(const unicycle_real *PhiT, const unicycle_real *Y, const unicycle_real *H, unicycle_real *Z,
+                             int j)
 {
-    int l, v;
-    for (; r + 2 <= m;) {
-        const int nv = r + 8 <= m ? 4 : (r + 4 <= m ? 2 : 1);
+    const unicycle_real *y0 = Y + j * UNICYCLE_NX, *y1 = y0 + UNICYCLE_NX, *h0 = H + j * UNICYCLE_NW, *h1 = h0 + UNICYCLE_NW;
+    unicycle_real *z0 = Z + j * UNICYCLE_NW, *z1 = z0 + UNICYCLE_NW;
+    int r = j, l, v;
+    while (r + 2 <= UNICYCLE_NW) {
+        const int nv = r + 8 <= UNICYCLE_NW ? 4 : (r + 4 <= UNICYCLE_NW ? 2 : 1);
         unicycle_lai_v2 a0[4], a1[4];
-        for (v = 0; v < 4; ++v) {
+        for (v = 0; v < nv; ++v) {
             const int i = r + 2 * v;
-            if (v < nv) {
-                if (c0_init) {
-                    a0[v] = unicycle_lai_v2_load(c0_init + i);
-                } else {
-                    a0[v] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
-                }
-                if (c1_init && i >= hrow) {
-                    a1[v] = unicycle_lai_v2_load(c1_init + i);
-                } else if (c1_init && i + 1 == hrow) {
-                    a1[v] = (unicycle_lai_v2){UNICYCLE_R(0.0), c1_init[i + 1]};
-                } else {
-                    a1[v] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
-                }
+            a0[v] = unicycle_lai_v2_load(h0 + i);
+            if (i > j) {
+                a1[v] = unicycle_lai_v2_load(h1 + i);
+            } else {
+                a1[v] = (unicycle_lai_v2){UNICYCLE_R(0.0), h1[i + 1]};
             }
         }
         if (nv == 4) {
             for (l = 0; l < UNICYCLE_NX; ++l) {
-                const unicycle_real *a = A + r + l * lda;
-                const unicycle_lai_v2 s0 = {b0[l], b0[l]}, s1 = {b1[l], b1[l]};
+                const unicycle_real *a = PhiT + r + l * UNICYCLE_NW;
+                const unicycle_lai_v2 s0 = {y0[l], y0[l]}, s1 = {y1[l], y1[l]};
                 const unicycle_lai_v2 x0 = unicycle_lai_v2_load(a), x1 = unicycle_lai_v2_load(a + 2);
                 const unicycle_lai_v2 x2 = unicycle_lai_v2_load(a + 4), x3 = unicycle_lai_v2_load(a + 6);
                 a0[0] += x0 * s0;
@@ -90,8 +83,8 @@ static void unicycle_lm_cols2(const unicycle_real *A, int lda, const unicycle_re
             }
         } else if (nv == 2) {
             for (l = 0; l < UNICYCLE_NX; ++l) {
-                const unicycle_real *a = A + r + l * lda;
-                const unicycle_lai_v2 s0 = {b0[l], b0[l]}, s1 = {b1[l], b1[l]};
+                const unicycle_real *a = PhiT + r + l * UNICYCLE_NW;
+                const unicycle_lai_v2 s0 = {y0[l], y0[l]}, s1 = {y1[l], y1[l]};
                 const unicycle_lai_v2 x0 = unicycle_lai_v2_load(a), x1 = unicycle_lai_v2_load(a + 2);
                 a0[0] += x0 * s0;
                 a1[0] += x0 * s1;
@@ -100,62 +93,59 @@ static void unicycle_lm_cols2(const unicycle_real *A, int lda, const unicycle_re
             }
         } else {
             for (l = 0; l < UNICYCLE_NX; ++l) {
-                const unicycle_lai_v2 s0 = {b0[l], b0[l]}, s1 = {b1[l], b1[l]};
-                const unicycle_lai_v2 x0 = unicycle_lai_v2_load(A + r + l * lda);
+                const unicycle_lai_v2 s0 = {y0[l], y0[l]}, s1 = {y1[l], y1[l]};
+                const unicycle_lai_v2 x0 = unicycle_lai_v2_load(PhiT + r + l * UNICYCLE_NW);
                 a0[0] += x0 * s0;
                 a1[0] += x0 * s1;
             }
         }
         for (v = 0; v < nv; ++v) {
-            unicycle_lai_v2_store(c0 + r + 2 * v, a0[v]);
-            unicycle_lai_v2_store(c1 + r + 2 * v, a1[v]);
+            unicycle_lai_v2_store(z0 + r + 2 * v, a0[v]);
+            unicycle_lai_v2_store(z1 + r + 2 * v, a1[v]);
         }
         r += 2 * nv;
     }
-    if (r < m) {
-        unicycle_real v0 = c0_init ? c0_init[r] : UNICYCLE_R(0.0);
-        unicycle_real v1 = c1_init && r >= hrow ? c1_init[r] : UNICYCLE_R(0.0);
+    if (r < UNICYCLE_NW) {
+        unicycle_real v0 = h0[r], v1 = h1[r];
         for (l = 0; l < UNICYCLE_NX; ++l) {
-            v0 += A[r + l * lda] * b0[l];
-            v1 += A[r + l * lda] * b1[l];
+            v0 += PhiT[r + l * UNICYCLE_NW] * y0[l];
+            v1 += PhiT[r + l * UNICYCLE_NW] * y1[l];
         }
-        c0[r] = v0;
-        c1[r] = v1;
+        z0[r] = v0;
+        z1[r] = v1;
     }
 }
 
-/* One column c = c_init + A b, rows r..m-1, as unicycle_lm_cols2 (c_init: NULL for 0). */
-static void unicycle_lm_col1(const unicycle_real *A, int lda, const unicycle_real *b, const unicycle_real *c_init,
-                          unicycle_real *c, int r, int m)
+/* Column j of Z's lower triangle alone (the last one of an odd count), as unicycle_lm_z_cols2. */
+static void unicycle_lm_z_col1(const unicycle_real *PhiT, const unicycle_real *Y, const unicycle_real *H, unicycle_real *Z,
+                            int j)
 {
-    int l, v;
-    for (; r + 2 <= m;) {
-        const int nv = r + 8 <= m ? 4 : (r + 4 <= m ? 2 : 1);
+    const unicycle_real *y = Y + j * UNICYCLE_NX, *h = H + j * UNICYCLE_NW;
+    unicycle_real *z = Z + j * UNICYCLE_NW;
+    int r = j, l, v;
+    while (r + 2 <= UNICYCLE_NW) {
+        const int nv = r + 8 <= UNICYCLE_NW ? 4 : (r + 4 <= UNICYCLE_NW ? 2 : 1);
         unicycle_lai_v2 a[4];
         for (v = 0; v < nv; ++v) {
-            if (c_init) {
-                a[v] = unicycle_lai_v2_load(c_init + r + 2 * v);
-            } else {
-                a[v] = (unicycle_lai_v2){UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
-            }
+            a[v] = unicycle_lai_v2_load(h + r + 2 * v);
         }
         for (l = 0; l < UNICYCLE_NX; ++l) {
-            const unicycle_lai_v2 s = {b[l], b[l]};
+            const unicycle_lai_v2 s = {y[l], y[l]};
             for (v = 0; v < nv; ++v) {
-                a[v] += unicycle_lai_v2_load(A + r + 2 * v + l * lda) * s;
+                a[v] += unicycle_lai_v2_load(PhiT + r + 2 * v + l * UNICYCLE_NW) * s;
             }
         }
         for (v = 0; v < nv; ++v) {
-            unicycle_lai_v2_store(c + r + 2 * v, a[v]);
+            unicycle_lai_v2_store(z + r + 2 * v, a[v]);
         }
         r += 2 * nv;
     }
-    if (r < m) {
-        unicycle_real v0 = c_init ? c_init[r] : UNICYCLE_R(0.0);
+    if (r < UNICYCLE_NW) {
+        unicycle_real v0 = h[r];
         for (l = 0; l < UNICYCLE_NX; ++l) {
-            v0 += A[r + l * lda] * b[l];
+            v0 += PhiT[r + l * UNICYCLE_NW] * y[l];
         }
-        c[r] = v0;
+        z[r] = v0;
     }
 }
 #endif
@@ -169,9 +159,10 @@ static void unicycle_lm_col1(const unicycle_real *A, int lda, const unicycle_rea
  * multiply-adds of the full Z, and on an in-order core without vector units (the Cortex-M)
  * the cost is the multiply-adds and their loads; there each entry of Z is a dot product of
  * two contiguous columns of length nx (Phi's column i and Y's column j). The Riccati update
- * writes P's lower triangle and mirrors it. With two-wide vectors (UNICYCLE_LM_VEC) Y, Z and
- * the update run two entries at a time with their accumulators in registers, Y and Z stored
- * by rows; every entry takes the same operations in the same order. */
+ * writes P's lower triangle and mirrors it. With two-wide vectors (UNICYCLE_LM_VEC) Y's columns
+ * (UNICYCLE_LAI_V2_GEMV), Z's pairs of columns over a copy of Phi' (unicycle_lm_z_cols2) and the
+ * update over a copy of K' run two entries at a time with their accumulators in registers,
+ * every entry with the same operations in the same order. */
 static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, const unicycle_real *A_N, unicycle_real lm,
                            unicycle_real *work)
 {
@@ -208,13 +199,10 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
             UNICYCLE_LAI_V2_GEMV(UNICYCLE_NX, UNICYCLE_NX, P, Phi + j * UNICYCLE_NX, Y + j * UNICYCLE_NX, 1);
         }
         for (j = j0; j + 1 < UNICYCLE_NW; j += 2) {
-            /* columns j, j + 1 from row j (Z(j, j + 1) above the diagonal: formed, never read) */
-            unicycle_lm_cols2(PhiT, UNICYCLE_NW, Y + j * UNICYCLE_NX, Y + (j + 1) * UNICYCLE_NX, H + j * UNICYCLE_NW,
-                           H + (j + 1) * UNICYCLE_NW, j + 1, Z + j * UNICYCLE_NW, Z + (j + 1) * UNICYCLE_NW, j,
-                           UNICYCLE_NW);
+            unicycle_lm_z_cols2(PhiT, Y, H, Z, j);
         }
         if (j < UNICYCLE_NW) {
-            unicycle_lm_col1(PhiT, UNICYCLE_NW, Y + j * UNICYCLE_NX, H + j * UNICYCLE_NW, Z + j * UNICYCLE_NW, j, UNICYCLE_NW);
+            unicycle_lm_z_col1(PhiT, Y, H, Z, j);
         }
         for (j = j0; j < UNICYCLE_NW; ++j) {
             Z[j + j * UNICYCLE_NW] += lm;
