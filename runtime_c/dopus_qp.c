@@ -603,9 +603,15 @@ typedef struct {
  * value (a maximum is exact in any order, and DOPUS_MAX_ACC never keeps a NaN of x). */
 static inline void absmax_acc(int n, const dopus_real *restrict x, dopus_real *restrict acc)
 {
-    int i;
+    int i = 0;
 #if DOPUS_QP_PHIT
-    for (i = 0; i < n; ++i) {
+#if DOPUS_LAI_V2_MAX
+    /* two entries per vector (the same maxima) */
+    for (; i + 1 < n; i += 2)
+        dopus_lai_v2_store(acc + i, dopus_lai_v2_max_acc(dopus_lai_v2_abs(dopus_lai_v2_load(x + i)),
+                                                         dopus_lai_v2_load(acc + i)));
+#endif
+    for (; i < n; ++i) {
         const dopus_real a = dopus_fabs(x[i]);
         acc[i] = DOPUS_MAX_ACC(a, acc[i]);
     }

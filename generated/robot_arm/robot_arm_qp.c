@@ -603,9 +603,15 @@ typedef struct {
  * value (a maximum is exact in any order, and ROBOT_ARM_MAX_ACC never keeps a NaN of x). */
 static inline void absmax_acc(int n, const robot_arm_real *restrict x, robot_arm_real *restrict acc)
 {
-    int i;
+    int i = 0;
 #if ROBOT_ARM_QP_PHIT
-    for (i = 0; i < n; ++i) {
+#if ROBOT_ARM_LAI_V2_MAX
+    /* two entries per vector (the same maxima) */
+    for (; i + 1 < n; i += 2)
+        robot_arm_lai_v2_store(acc + i, robot_arm_lai_v2_max_acc(robot_arm_lai_v2_abs(robot_arm_lai_v2_load(x + i)),
+                                                         robot_arm_lai_v2_load(acc + i)));
+#endif
+    for (; i < n; ++i) {
         const robot_arm_real a = robot_arm_fabs(x[i]);
         acc[i] = ROBOT_ARM_MAX_ACC(a, acc[i]);
     }

@@ -603,9 +603,15 @@ typedef struct {
  * value (a maximum is exact in any order, and UNICYCLE_MAX_ACC never keeps a NaN of x). */
 static inline void absmax_acc(int n, const unicycle_real *restrict x, unicycle_real *restrict acc)
 {
-    int i;
+    int i = 0;
 #if UNICYCLE_QP_PHIT
-    for (i = 0; i < n; ++i) {
+#if UNICYCLE_LAI_V2_MAX
+    /* two entries per vector (the same maxima) */
+    for (; i + 1 < n; i += 2)
+        unicycle_lai_v2_store(acc + i, unicycle_lai_v2_max_acc(unicycle_lai_v2_abs(unicycle_lai_v2_load(x + i)),
+                                                         unicycle_lai_v2_load(acc + i)));
+#endif
+    for (; i < n; ++i) {
         const unicycle_real a = unicycle_fabs(x[i]);
         acc[i] = UNICYCLE_MAX_ACC(a, acc[i]);
     }
