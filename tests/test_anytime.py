@@ -403,7 +403,7 @@ def _outlier_loop(disc, guess, c, r, budget, v, K, start=5, iters=40, unusable=N
         # finds the QP infeasible)
         assert (c.qp_status == 0) == (r.qp_status == 0), (where, c.qp_status, r.qp_status)
         assert (c.qp_status == QP_DEADLINE) == (r.qp_status == QP_DEADLINE), (where, c.qp_status, r.qp_status)
-        assert (fc.error is None or fc.error.qp_status is None) == (fr.error is None or fr.error.qp_status is None), where
+        assert (getattr(fc.error, "qp_status", None) is None) == (getattr(fr.error, "qp_status", None) is None), where
         if bad:
             assert c.qp_status in QP_FAILED and r.qp_status in QP_FAILED, (where, c.qp_status, r.qp_status)
             if unusable is not None:
