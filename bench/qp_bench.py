@@ -338,7 +338,7 @@ TIE_QP = 0.05  # paired per-QP ratios this close to the best count as a tie for 
 
 
 def paired_ratios(exe: Path, qps: list, configs: list, eq_scale: float, reps: int, warmup: int, tol: float,
-                  iter_max: int, workdir: Path, rounds: int, log=print) -> dict:
+                  iter_max: int, workdir: Path, rounds: int, log=print, alt: bool = False) -> dict:
     """Ours against each HPIPM configuration in ``configs`` as paired ratios: one harness run
     per round with only these solvers, the order of the solvers rotating from one repetition
     to the next (``--rotate``), every repetition's time kept (``--times``). Per QP and
@@ -349,51 +349,57 @@ def paired_ratios(exe: Path, qps: list, configs: list, eq_scale: float, reps: in
     over the QPs; the spread is given over the QPs (quartiles) and over the rounds (least and
     largest round). ``best`` is the configuration that is fastest against ours per QP (the
     largest median ours/QP): HPIPM's best converging mode, chosen on paired ratios so that two
-    modes of nearly equal time do not swap on the noise of their separate medians. Needs at
-    least one round and one repetition (the command line's 0 skips the comparison)."""
+    modes of nearly equal time do not swap on the noise of their separate medians. With ``alt``
+    (the harness has the copy of our solver built with --alt-cflags) that copy runs in the same
+    rounds and gets the same ratios under the keys ``alt/...``; ``best`` is chosen on ours. Needs
+    at least one round and one repetition (the command line's 0 skips the comparison)."""
     if rounds < 1 or reps < 1:
         raise ValueError(f"paired_ratios: rounds and reps must be at least 1, got {rounds} and {reps}")
     solvers = [{"kind": "dopus", "name": "ours"}]
+    mine = {"ours": "ours"}
+    if alt:
+        solvers.append({"kind": "dopus_alt", "name": "ours_alt"})
+        mine["alt"] = "ours_alt"
     for name in configs:
         cfg = HPIPM_CONFIGS[name]
         solvers.append({"kind": "hpipm", "name": name, "mode": HPIPM_MODES[cfg["mode"]], "eq_mask": cfg["eq_mask"],
                         "eq_scale": eq_scale if cfg["eq_scale"] else 0.0, "ric_alg": cfg["ric_alg"]})
-    per_round = []  # [round][config] -> (per-QP ratio per QP, per-QP ratio per iteration)
-    pooled = {c: [[] for _ in qps] for c in configs}  # every repetition's ratio per QP
+    per_round = []  # [round][(who, config)] -> (per-QP ratio per QP, per-QP ratio per iteration)
+    pooled = {(w, c): [[] for _ in qps] for w in mine for c in configs}  # every repetition's ratio per QP
     iters = {}
     cmd = None
     for rnd in range(rounds):
         rows, _, cmd = run_harness(exe, qps, solvers, reps, warmup, tol, iter_max, workdir, 1e30, reps,
                                    extra=("--rotate", "--times"))
         this = {}
-        for c in configs:
+        for w, c in pooled:
             qp_r, it_r = [], []
             for i, row in enumerate(rows):
-                o, h = row["solvers"]["ours"], row["solvers"][c]
+                o, h = row["solvers"][mine[w]], row["solvers"][c]
                 ratios = np.asarray(o["t_reps"], float) / np.asarray(h["t_reps"], float)
-                pooled[c][i].extend(ratios.tolist())
-                iters[(c, i)] = (h["iterations"], o["iterations"])
+                pooled[(w, c)][i].extend(ratios.tolist())
+                iters[(w, c, i)] = (h["iterations"], o["iterations"])
                 r = float(np.median(ratios))
                 qp_r.append(r)
                 it_r.append(r * h["iterations"] / o["iterations"] if o["iterations"] and h["iterations"] else np.nan)
-            this[c] = (qp_r, it_r)
+            this[(w, c)] = (qp_r, it_r)
         per_round.append(this)
     out = {"configs": {}, "rounds": rounds, "reps": reps, "command": " ".join(shlex.quote(str(c)) for c in cmd)}
-    for c in configs:
-        qp_all = [float(np.median(v)) for v in pooled[c]]
-        it_all = [qp_all[i] * iters[(c, i)][0] / iters[(c, i)][1] if iters[(c, i)][1] and iters[(c, i)][0]
-                  else np.nan for i in range(len(qps))]
-        rq = [float(np.nanmedian(per_round[k][c][0])) for k in range(rounds)]
-        ri = [float(np.nanmedian(per_round[k][c][1])) for k in range(rounds)]
-        out["configs"][c] = {
-            "ours/qp": float(np.nanmedian(qp_all)), "ours/qp_q25_q75": [float(np.nanpercentile(qp_all, 25)),
+    for w, c in pooled:
+        qp_all = [float(np.median(v)) for v in pooled[(w, c)]]
+        it_all = [qp_all[i] * iters[(w, c, i)][0] / iters[(w, c, i)][1]
+                  if iters[(w, c, i)][1] and iters[(w, c, i)][0] else np.nan for i in range(len(qps))]
+        rq = [float(np.nanmedian(per_round[k][(w, c)][0])) for k in range(rounds)]
+        ri = [float(np.nanmedian(per_round[k][(w, c)][1])) for k in range(rounds)]
+        out["configs"].setdefault(c, {}).update({
+            f"{w}/qp": float(np.nanmedian(qp_all)), f"{w}/qp_q25_q75": [float(np.nanpercentile(qp_all, 25)),
                                                                          float(np.nanpercentile(qp_all, 75))],
-            "ours/iter": float(np.nanmedian(it_all)), "ours/iter_q25_q75": [float(np.nanpercentile(it_all, 25)),
+            f"{w}/iter": float(np.nanmedian(it_all)), f"{w}/iter_q25_q75": [float(np.nanpercentile(it_all, 25)),
                                                                              float(np.nanpercentile(it_all, 75))],
-            "ours/qp_rounds": rq, "ours/iter_rounds": ri,
-            "iterations_median": float(np.median([iters[(c, i)][0] for i in range(len(qps))])),
-            "ours_iterations_median": float(np.median([iters[(c, i)][1] for i in range(len(qps))])),
-            "per_qp_ours/qp": qp_all, "per_qp_ours/iter": it_all}
+            f"{w}/qp_rounds": rq, f"{w}/iter_rounds": ri,
+            "iterations_median": float(np.median([iters[(w, c, i)][0] for i in range(len(qps))])),
+            f"{w}_iterations_median": float(np.median([iters[(w, c, i)][1] for i in range(len(qps))])),
+            f"per_qp_{w}/qp": qp_all, f"per_qp_{w}/iter": it_all})
     out["best"] = max(configs, key=lambda c: out["configs"][c]["ours/qp"]) if configs else None
     if out["best"] is not None:
         # configurations within TIE_QP of the best per QP are as fast as it on this machine (the
@@ -418,6 +424,12 @@ def print_paired(title: str, paired: dict, log=print) -> None:
             f"{max(r['ours/iter_rounds']):.3f})" + ("   <- best converging" if c == paired["best"] else
                                                      "   <- tied with it per QP" if c in paired.get("tied", ())
                                                      else ""))
+        if "alt/qp" in r:
+            q, it = r["alt/qp_q25_q75"], r["alt/iter_q25_q75"]
+            log(f"{'  ours_alt':24s} {r['iterations_median']:5.1f} {r['alt_iterations_median']:5.1f} "
+                f"{r['alt/qp']:5.3f} [{q[0]:.3f}, {q[1]:.3f}] ({min(r['alt/qp_rounds']):.3f}..{max(r['alt/qp_rounds']):.3f}) "
+                f"{r['alt/iter']:5.3f} [{it[0]:.3f}, {it[1]:.3f}] ({min(r['alt/iter_rounds']):.3f}.."
+                f"{max(r['alt/iter_rounds']):.3f})")
 
 
 def primal_of(sol: dict) -> np.ndarray:
@@ -810,7 +822,8 @@ def main(argv=None) -> int:
         full = [n for n, r in modes.items() if r["converged"] == r["of"] and n in HPIPM_CONFIGS]
         if with_ours and args.paired_reps > 0 and args.paired_rounds > 0 and full and last_run:
             paired = paired_ratios(last_run["exe"], last_run["qps"], full, args.eq_scale, args.paired_reps,
-                                   args.warmup, args.tol, args.iter_max, last_run["workdir"], args.paired_rounds, log)
+                                   args.warmup, args.tol, args.iter_max, last_run["workdir"], args.paired_rounds, log,
+                                   alt=bool(args.alt_cflags))
             report["robot_arm"]["paired"] = paired
             print_paired(f"robot-arm QPs, tolerance {args.tol:g}", paired, log)
 
@@ -891,6 +904,11 @@ def _several_tolerances(argv, tols, json_path: Path) -> int:
               f"({min(r['ours/iter_rounds']):.3f}..{max(r['ours/iter_rounds']):.3f}); tied per QP (within "
               f"{100 * TIE_QP:g} %): {', '.join(p['tied'])}, largest ours/iter among them {rt['ours/iter']:.3f} "
               f"({tw}, ours/QP {rt['ours/qp']:.3f})")
+        if "alt/qp" in r:
+            q, it = r["alt/qp_q25_q75"], r["alt/iter_q25_q75"]
+            print(f"           ours_alt against {p['best']}: alt/QP {r['alt/qp']:.3f} [{q[0]:.3f}, {q[1]:.3f}], "
+                  f"alt/iter {r['alt/iter']:.3f} [{it[0]:.3f}, {it[1]:.3f}] ({min(r['alt/iter_rounds']):.3f}.."
+                  f"{max(r['alt/iter_rounds']):.3f}); against {tw}: alt/iter {rt['alt/iter']:.3f}")
     json_path.parent.mkdir(parents=True, exist_ok=True)
     json_path.write_text(json.dumps({"tolerances": summary}, indent=1, default=_json_default))
     return 0

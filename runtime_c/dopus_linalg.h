@@ -335,6 +335,45 @@ static inline void dopus_lai_axpy(int n, dopus_real alpha, const dopus_real *res
         y[i] += alpha * x[i];
 }
 
+/* Two-wide vectors of the real type (the vector extension of GCC and clang) where the target
+ * has them for double: x86-64 (SSE2) and AArch64; 0 elsewhere (a scalar FPU such as the
+ * Cortex-M's, or float), where the kernels that use them take plain loops. Lane-wise
+ * arithmetic, so an entry computed two at a time takes the same operations in the same order
+ * as alone: the same values either way. Define it to override. */
+#ifndef DOPUS_LAI_VEC
+#if (defined(__GNUC__) || defined(__clang__)) && !DOPUS_REAL_FLOAT &&                                        \
+    (defined(__SSE2__) || defined(__aarch64__))
+#define DOPUS_LAI_VEC 1
+#else
+#define DOPUS_LAI_VEC 0
+#endif
+#endif
+
+#if DOPUS_LAI_VEC
+typedef dopus_real dopus_lai_v2 __attribute__((vector_size(2 * sizeof(dopus_real))));
+
+/* x[0], x[1] (any alignment) */
+static inline dopus_lai_v2 dopus_lai_v2_load(const dopus_real *x)
+{
+    dopus_lai_v2 v;
+    __builtin_memcpy(&v, x, sizeof v);
+    return v;
+}
+
+static inline void dopus_lai_v2_store(dopus_real *x, dopus_lai_v2 v)
+{
+    __builtin_memcpy(x, &v, sizeof v);
+}
+
+/* |x| lane-wise (the sign bits cleared) */
+static inline dopus_lai_v2 dopus_lai_v2_abs(dopus_lai_v2 x)
+{
+    typedef long long dopus_lai_v2_bits __attribute__((vector_size(sizeof(dopus_lai_v2))));
+    const dopus_lai_v2_bits mask = {0x7fffffffffffffffLL, 0x7fffffffffffffffLL};
+    return (dopus_lai_v2)((dopus_lai_v2_bits)x & mask);
+}
+#endif
+
 /* The larger of a and m for an accumulated maximum m (never NaN): a when a > m, else m (a
  * NaN a leaves m). Where the core has a floating-point maximum instruction (VMAXNM, FMAXNM)
  * fmax compiles to it and gives the same value in one instruction instead of a compare and a
@@ -348,6 +387,20 @@ static inline void dopus_lai_axpy(int n, dopus_real alpha, const dopus_real *res
 #define DOPUS_MAX_ACC(a, m) dopus_fmax((a), (m))
 #else
 #define DOPUS_MAX_ACC(a, m) ((a) > (m) ? (a) : (m))
+#endif
+
+/* DOPUS_MAX_ACC on two lanes at once where the target has it as one instruction: x86-64's
+ * MAXPD gives its second operand when either is NaN or both are zero, so MAXPD(a, m) is
+ * a > m ? a : m lane by lane, the same value as the select (1 there; 0 elsewhere, where the
+ * callers keep their scalar loops). */
+#if DOPUS_LAI_VEC && defined(__SSE2__)
+#define DOPUS_LAI_V2_MAX 1
+static inline dopus_lai_v2 dopus_lai_v2_max_acc(dopus_lai_v2 a, dopus_lai_v2 m)
+{
+    return __builtin_ia32_maxpd(a, m);
+}
+#else
+#define DOPUS_LAI_V2_MAX 0
 #endif
 
 /* 1 when every entry of the m x n matrix A is finite (no NaN, no Inf). x * 0 is 0 for a finite
@@ -385,6 +438,31 @@ static inline dopus_real dopus_lai_norm_inf(int n, const dopus_real *restrict x)
     int i, c;
     dopus_real m[4] = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
     dopus_real t[4] = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+#if DOPUS_LAI_V2_MAX
+    /* the same four maxima and sums, two lanes per vector: the same values */
+    {
+        const dopus_lai_v2 zero = {DOPUS_R(0.0), DOPUS_R(0.0)};
+        dopus_lai_v2 m01 = zero, m23 = zero, t01 = zero, t23 = zero;
+        for (i = 0; i + 4 <= n; i += 4) {
+            const dopus_lai_v2 a01 = dopus_lai_v2_abs(dopus_lai_v2_load(x + i));
+            const dopus_lai_v2 a23 = dopus_lai_v2_abs(dopus_lai_v2_load(x + i + 2));
+            m01 = dopus_lai_v2_max_acc(a01, m01);
+            m23 = dopus_lai_v2_max_acc(a23, m23);
+            t01 += a01;
+            t23 += a23;
+        }
+        m[0] = m01[0];
+        m[1] = m01[1];
+        m[2] = m23[0];
+        m[3] = m23[1];
+        t[0] = t01[0];
+        t[1] = t01[1];
+        t[2] = t23[0];
+        t[3] = t23[1];
+        x += i;
+        n -= i;
+    }
+#endif
     for (i = 0; i < n; i += 4)
         for (c = 0; c < 4 && i + c < n; ++c) {
             const dopus_real a = dopus_fabs(x[i + c]);
@@ -412,36 +490,7 @@ static inline dopus_real dopus_lai_max_abs_mat(int m, int n, const dopus_real *r
     return nan ? (dopus_real)NAN : r;
 }
 
-/* Two-wide vectors of the real type (the vector extension of GCC and clang) where the target
- * has them for double: x86-64 (SSE2) and AArch64; 0 elsewhere (a scalar FPU such as the
- * Cortex-M's, or float), where the kernels that use them take plain loops. Lane-wise
- * arithmetic, so an entry computed two at a time takes the same operations in the same order
- * as alone: the same values either way. Define it to override. */
-#ifndef DOPUS_LAI_VEC
-#if (defined(__GNUC__) || defined(__clang__)) && !DOPUS_REAL_FLOAT &&                                        \
-    (defined(__SSE2__) || defined(__aarch64__))
-#define DOPUS_LAI_VEC 1
-#else
-#define DOPUS_LAI_VEC 0
-#endif
-#endif
-
 #if DOPUS_LAI_VEC
-typedef dopus_real dopus_lai_v2 __attribute__((vector_size(2 * sizeof(dopus_real))));
-
-/* x[0], x[1] (any alignment) */
-static inline dopus_lai_v2 dopus_lai_v2_load(const dopus_real *x)
-{
-    dopus_lai_v2 v;
-    __builtin_memcpy(&v, x, sizeof v);
-    return v;
-}
-
-static inline void dopus_lai_v2_store(dopus_real *x, dopus_lai_v2 v)
-{
-    __builtin_memcpy(x, &v, sizeof v);
-}
-
 /* out = A x for the m x n column-major A, as the sum over the columns j of A(:, j) x_j in the
  * order of j (the order of a row's dot product), two rows at a time with the accumulators in
  * registers: A's columns read down instead of its rows across. Entry i goes to out[i os]. m

@@ -235,7 +235,11 @@ typedef int dopus_qp_row;
 
 /* Status codes (dopus_qp_solve return value and dopus_qp_info.status). */
 enum dopus_qp_status {
-    DOPUS_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
+    DOPUS_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol; or, at a
+                                       stall, the best point's equality, inequality and
+                                       complementarity residuals below it and its
+                                       stationarity residual within its round-off (a
+                                       tolerance below that round-off; that point returned) */
     DOPUS_QP_MAX_ITER = 1,          /* iteration limit (settings.max_iter) reached; best
                                        point returned */
     DOPUS_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */

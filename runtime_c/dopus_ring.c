@@ -6,6 +6,11 @@
 
 #include "dopus_linalg.h"
 
+/* The prediction's rows of F_w two at a time where doubles come in two-wide vectors and the
+ * blocks are large enough to pay (nx >= 8, as the lm test's kernels); the same values as the
+ * rows one at a time. */
+#define DOPUS_RING_V2 (DOPUS_LAI_VEC && DOPUS_NX >= 8)
+
 static void dopus_ring_zero(dopus_real *v, int n)
 {
     int i;
@@ -115,7 +120,39 @@ void dopus_ring_predict(const dopus_stage_slot *slot, dopus_real *F_w, dopus_rea
 #if DOPUS_LAI_VEC
     DOPUS_LAI_V2_GEMV(DOPUS_NX, DOPUS_NW, slot->Phit, dw, pd, 1);
 #endif
-    for (i = 0; i < DOPUS_NW; ++i) {
+    i = 0;
+#if DOPUS_RING_V2
+    /* rows i, i + 1 of F_w together, each lane the sums below in the same order: Ht's pair
+     * of rows (its lower triangle: a pair of a column up to row i, then strided pairs of the
+     * columns i and i + 1 below it) and Phi's pair of columns times a broadcast step */
+    {
+        dopus_lai_v2 dwb[DOPUS_NW], dlb[DOPUS_NX];
+        for (j = 0; j < DOPUS_NW; ++j)
+            dwb[j] = (dopus_lai_v2){dw[j], dw[j]};
+        for (j = 0; j < DOPUS_NX; ++j)
+            dlb[j] = (dopus_lai_v2){dlam[j], dlam[j]};
+        for (; i + 1 < DOPUS_NW; i += 2) {
+            const dopus_real *h0 = slot->Ht + i * DOPUS_NW, *h1 = h0 + DOPUS_NW;
+            const dopus_real *f0 = slot->Phit + i * DOPUS_NX, *f1 = f0 + DOPUS_NX;
+            dopus_lai_v2 hd = {DOPUS_R(0.0), DOPUS_R(0.0)}, pl = hd, cm = hd, r;
+            for (j = 0; j <= i; ++j)
+                hd += dopus_lai_v2_load(slot->Ht + i + j * DOPUS_NW) * dwb[j];
+            hd += (dopus_lai_v2){h0[i + 1], h1[i + 1]} * dwb[i + 1];
+            for (j = i + 2; j < DOPUS_NW; ++j)
+                hd += (dopus_lai_v2){h0[j], h1[j]} * dwb[j];
+            DOPUS_UNROLL
+            for (j = 0; j < DOPUS_NX; ++j)
+                pl += (dopus_lai_v2){f0[j], f1[j]} * dlb[j];
+            for (j = 0; j < DOPUS_NG; ++j)
+                cm += (dopus_lai_v2){slot->Ct[j + i * DOPUS_DIM(DOPUS_NG)],
+                                     slot->Ct[j + (i + 1) * DOPUS_DIM(DOPUS_NG)]} *
+                      dmu_g[j];
+            r = dopus_lai_v2_load(slot->F_w + i) + hd - pl + cm + dopus_lai_v2_load(slot->dmu_b + i);
+            dopus_lai_v2_store(F_w + i, r);
+        }
+    }
+#endif
+    for (; i < DOPUS_NW; ++i) {
         dopus_real hd = DOPUS_R(0.0), pl = DOPUS_R(0.0), cm = DOPUS_R(0.0);
         /* Ht dw from its lower triangle: row i is Ht's row i up to the diagonal, then its
          * column i below it */

@@ -718,13 +718,10 @@ class ReferenceDopus:
             raise self._feedback_failed(failure.status_name, str(failure)) from None
         if isinstance(failure, QPError):
             exc = failure
-            self.qp_status = status_code_qp(exc.qp_status)
-            self._infeasible_row = self._row_info(getattr(exc, "row", None))
             msg = f"feedback: {exc}; QP status {self.qp_status} ({exc.qp_status})"
             if self.qp_infeasible_row is not None:
                 msg += "; " + describe_qp_row(self.disc, self.qp_infeasible_row)
             raise self._feedback_failed("qp", msg, exc.qp_status) from None
-        self.qp_status = status_code_qp("deadline" if cut else "solved")
         self.qp_iterations = int(sol.get("iterations", 0))
         self.qp_factorizations = int(sol.get("factorizations", 0))
         t2 = time.perf_counter()
@@ -741,6 +738,10 @@ class ReferenceDopus:
         b0 = self._budget_now()
         sol, failure, retries = self.solve_with_retries(xhat0)
         self._cost_qp = self._budget_now() - b0
+        # qp_status: the status of the feedback's QP as soon as it was tried (as the C
+        # runtime's dopus_info.qp_status), so a failure raised before the end of the feedback
+        # (an unusable measurement, a recovery that builds no QP) reports the QP that failed
+        self._set_qp_status(sol, failure)
         if (failure is not None and self.recovery and self.mode == "receding"
                 and getattr(failure, "qp_status", None) not in ("max_iter", "invalid_input")):
             # the recovery within the feedback (section 9): re-initialise from the measured
@@ -753,7 +754,21 @@ class ReferenceDopus:
                 raise self._feedback_failed("nonfinite_value", "feedback: the model is not finite at the measured "
                                             f"state {xhat0}: handled as a missing measurement")
             sol, failure, retries = self._feedback_recover(xhat0)
+            if not isinstance(failure, DopusError):
+                # the recovery's QP (its re-initialisation reset qp_status to 0)
+                self._set_qp_status(sol, failure)
         return sol, failure, retries
+
+    def _set_qp_status(self, sol, failure) -> None:
+        """qp_status (and the infeasible row) of a feedback's QP as solve_with_retries
+        returns it: the QPError's status, "deadline" for a cut QP whose point is the step,
+        else "solved" (also for a solution that is not finite or a step that diverged)."""
+        if isinstance(failure, QPError):
+            self.qp_status = status_code_qp(failure.qp_status)
+            self._infeasible_row = self._row_info(getattr(failure, "row", None))
+            return
+        cut = sol is not None and failure in (None, "diverged") and bool(sol.get("cut", False))
+        self.qp_status = status_code_qp("deadline" if cut else "solved")
 
     def _feedback_step_taken(self, sol, retries, t0, t1, t2) -> np.ndarray:
         """Steps 6 to 8 of a feedback whose QP gave a step (solved, or cut by the deadline)."""

@@ -335,6 +335,45 @@ static inline void robot_arm_lai_axpy(int n, robot_arm_real alpha, const robot_a
         y[i] += alpha * x[i];
 }
 
+/* Two-wide vectors of the real type (the vector extension of GCC and clang) where the target
+ * has them for double: x86-64 (SSE2) and AArch64; 0 elsewhere (a scalar FPU such as the
+ * Cortex-M's, or float), where the kernels that use them take plain loops. Lane-wise
+ * arithmetic, so an entry computed two at a time takes the same operations in the same order
+ * as alone: the same values either way. Define it to override. */
+#ifndef ROBOT_ARM_LAI_VEC
+#if (defined(__GNUC__) || defined(__clang__)) && !ROBOT_ARM_REAL_FLOAT &&                                        \
+    (defined(__SSE2__) || defined(__aarch64__))
+#define ROBOT_ARM_LAI_VEC 1
+#else
+#define ROBOT_ARM_LAI_VEC 0
+#endif
+#endif
+
+#if ROBOT_ARM_LAI_VEC
+typedef robot_arm_real robot_arm_lai_v2 __attribute__((vector_size(2 * sizeof(robot_arm_real))));
+
+/* x[0], x[1] (any alignment) */
+static inline robot_arm_lai_v2 robot_arm_lai_v2_load(const robot_arm_real *x)
+{
+    robot_arm_lai_v2 v;
+    __builtin_memcpy(&v, x, sizeof v);
+    return v;
+}
+
+static inline void robot_arm_lai_v2_store(robot_arm_real *x, robot_arm_lai_v2 v)
+{
+    __builtin_memcpy(x, &v, sizeof v);
+}
+
+/* |x| lane-wise (the sign bits cleared) */
+static inline robot_arm_lai_v2 robot_arm_lai_v2_abs(robot_arm_lai_v2 x)
+{
+    typedef long long robot_arm_lai_v2_bits __attribute__((vector_size(sizeof(robot_arm_lai_v2))));
+    const robot_arm_lai_v2_bits mask = {0x7fffffffffffffffLL, 0x7fffffffffffffffLL};
+    return (robot_arm_lai_v2)((robot_arm_lai_v2_bits)x & mask);
+}
+#endif
+
 /* The larger of a and m for an accumulated maximum m (never NaN): a when a > m, else m (a
  * NaN a leaves m). Where the core has a floating-point maximum instruction (VMAXNM, FMAXNM)
  * fmax compiles to it and gives the same value in one instruction instead of a compare and a
@@ -348,6 +387,20 @@ static inline void robot_arm_lai_axpy(int n, robot_arm_real alpha, const robot_a
 #define ROBOT_ARM_MAX_ACC(a, m) robot_arm_fmax((a), (m))
 #else
 #define ROBOT_ARM_MAX_ACC(a, m) ((a) > (m) ? (a) : (m))
+#endif
+
+/* ROBOT_ARM_MAX_ACC on two lanes at once where the target has it as one instruction: x86-64's
+ * MAXPD gives its second operand when either is NaN or both are zero, so MAXPD(a, m) is
+ * a > m ? a : m lane by lane, the same value as the select (1 there; 0 elsewhere, where the
+ * callers keep their scalar loops). */
+#if ROBOT_ARM_LAI_VEC && defined(__SSE2__)
+#define ROBOT_ARM_LAI_V2_MAX 1
+static inline robot_arm_lai_v2 robot_arm_lai_v2_max_acc(robot_arm_lai_v2 a, robot_arm_lai_v2 m)
+{
+    return __builtin_ia32_maxpd(a, m);
+}
+#else
+#define ROBOT_ARM_LAI_V2_MAX 0
 #endif
 
 /* 1 when every entry of the m x n matrix A is finite (no NaN, no Inf). x * 0 is 0 for a finite
@@ -385,6 +438,31 @@ static inline robot_arm_real robot_arm_lai_norm_inf(int n, const robot_arm_real 
     int i, c;
     robot_arm_real m[4] = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
     robot_arm_real t[4] = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
+#if ROBOT_ARM_LAI_V2_MAX
+    /* the same four maxima and sums, two lanes per vector: the same values */
+    {
+        const robot_arm_lai_v2 zero = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
+        robot_arm_lai_v2 m01 = zero, m23 = zero, t01 = zero, t23 = zero;
+        for (i = 0; i + 4 <= n; i += 4) {
+            const robot_arm_lai_v2 a01 = robot_arm_lai_v2_abs(robot_arm_lai_v2_load(x + i));
+            const robot_arm_lai_v2 a23 = robot_arm_lai_v2_abs(robot_arm_lai_v2_load(x + i + 2));
+            m01 = robot_arm_lai_v2_max_acc(a01, m01);
+            m23 = robot_arm_lai_v2_max_acc(a23, m23);
+            t01 += a01;
+            t23 += a23;
+        }
+        m[0] = m01[0];
+        m[1] = m01[1];
+        m[2] = m23[0];
+        m[3] = m23[1];
+        t[0] = t01[0];
+        t[1] = t01[1];
+        t[2] = t23[0];
+        t[3] = t23[1];
+        x += i;
+        n -= i;
+    }
+#endif
     for (i = 0; i < n; i += 4)
         for (c = 0; c < 4 && i + c < n; ++c) {
             const robot_arm_real a = robot_arm_fabs(x[i + c]);
@@ -412,36 +490,7 @@ static inline robot_arm_real robot_arm_lai_max_abs_mat(int m, int n, const robot
     return nan ? (robot_arm_real)NAN : r;
 }
 
-/* Two-wide vectors of the real type (the vector extension of GCC and clang) where the target
- * has them for double: x86-64 (SSE2) and AArch64; 0 elsewhere (a scalar FPU such as the
- * Cortex-M's, or float), where the kernels that use them take plain loops. Lane-wise
- * arithmetic, so an entry computed two at a time takes the same operations in the same order
- * as alone: the same values either way. Define it to override. */
-#ifndef ROBOT_ARM_LAI_VEC
-#if (defined(__GNUC__) || defined(__clang__)) && !ROBOT_ARM_REAL_FLOAT &&                                        \
-    (defined(__SSE2__) || defined(__aarch64__))
-#define ROBOT_ARM_LAI_VEC 1
-#else
-#define ROBOT_ARM_LAI_VEC 0
-#endif
-#endif
-
 #if ROBOT_ARM_LAI_VEC
-typedef robot_arm_real robot_arm_lai_v2 __attribute__((vector_size(2 * sizeof(robot_arm_real))));
-
-/* x[0], x[1] (any alignment) */
-static inline robot_arm_lai_v2 robot_arm_lai_v2_load(const robot_arm_real *x)
-{
-    robot_arm_lai_v2 v;
-    __builtin_memcpy(&v, x, sizeof v);
-    return v;
-}
-
-static inline void robot_arm_lai_v2_store(robot_arm_real *x, robot_arm_lai_v2 v)
-{
-    __builtin_memcpy(x, &v, sizeof v);
-}
-
 /* out = A x for the m x n column-major A, as the sum over the columns j of A(:, j) x_j in the
  * order of j (the order of a row's dot product), two rows at a time with the accumulators in
  * registers: A's columns read down instead of its rows across. Entry i goes to out[i os]. m

@@ -235,7 +235,11 @@ typedef int robot_arm_qp_row;
 
 /* Status codes (robot_arm_qp_solve return value and robot_arm_qp_info.status). */
 enum robot_arm_qp_status {
-    ROBOT_ARM_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
+    ROBOT_ARM_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol; or, at a
+                                       stall, the best point's equality, inequality and
+                                       complementarity residuals below it and its
+                                       stationarity residual within its round-off (a
+                                       tolerance below that round-off; that point returned) */
     ROBOT_ARM_QP_MAX_ITER = 1,          /* iteration limit (settings.max_iter) reached; best
                                        point returned */
     ROBOT_ARM_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */

@@ -6,6 +6,11 @@
 
 #include "robot_arm_linalg.h"
 
+/* The prediction's rows of F_w two at a time where doubles come in two-wide vectors and the
+ * blocks are large enough to pay (nx >= 8, as the lm test's kernels); the same values as the
+ * rows one at a time. */
+#define ROBOT_ARM_RING_V2 (ROBOT_ARM_LAI_VEC && ROBOT_ARM_NX >= 8)
+
 static void robot_arm_ring_zero(robot_arm_real *v, int n)
 {
     int i;
@@ -115,7 +120,39 @@ void robot_arm_ring_predict(const robot_arm_stage_slot *slot, robot_arm_real *F_
 #if ROBOT_ARM_LAI_VEC
     ROBOT_ARM_LAI_V2_GEMV(ROBOT_ARM_NX, ROBOT_ARM_NW, slot->Phit, dw, pd, 1);
 #endif
-    for (i = 0; i < ROBOT_ARM_NW; ++i) {
+    i = 0;
+#if ROBOT_ARM_RING_V2
+    /* rows i, i + 1 of F_w together, each lane the sums below in the same order: Ht's pair
+     * of rows (its lower triangle: a pair of a column up to row i, then strided pairs of the
+     * columns i and i + 1 below it) and Phi's pair of columns times a broadcast step */
+    {
+        robot_arm_lai_v2 dwb[ROBOT_ARM_NW], dlb[ROBOT_ARM_NX];
+        for (j = 0; j < ROBOT_ARM_NW; ++j)
+            dwb[j] = (robot_arm_lai_v2){dw[j], dw[j]};
+        for (j = 0; j < ROBOT_ARM_NX; ++j)
+            dlb[j] = (robot_arm_lai_v2){dlam[j], dlam[j]};
+        for (; i + 1 < ROBOT_ARM_NW; i += 2) {
+            const robot_arm_real *h0 = slot->Ht + i * ROBOT_ARM_NW, *h1 = h0 + ROBOT_ARM_NW;
+            const robot_arm_real *f0 = slot->Phit + i * ROBOT_ARM_NX, *f1 = f0 + ROBOT_ARM_NX;
+            robot_arm_lai_v2 hd = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)}, pl = hd, cm = hd, r;
+            for (j = 0; j <= i; ++j)
+                hd += robot_arm_lai_v2_load(slot->Ht + i + j * ROBOT_ARM_NW) * dwb[j];
+            hd += (robot_arm_lai_v2){h0[i + 1], h1[i + 1]} * dwb[i + 1];
+            for (j = i + 2; j < ROBOT_ARM_NW; ++j)
+                hd += (robot_arm_lai_v2){h0[j], h1[j]} * dwb[j];
+            ROBOT_ARM_UNROLL
+            for (j = 0; j < ROBOT_ARM_NX; ++j)
+                pl += (robot_arm_lai_v2){f0[j], f1[j]} * dlb[j];
+            for (j = 0; j < ROBOT_ARM_NG; ++j)
+                cm += (robot_arm_lai_v2){slot->Ct[j + i * ROBOT_ARM_DIM(ROBOT_ARM_NG)],
+                                     slot->Ct[j + (i + 1) * ROBOT_ARM_DIM(ROBOT_ARM_NG)]} *
+                      dmu_g[j];
+            r = robot_arm_lai_v2_load(slot->F_w + i) + hd - pl + cm + robot_arm_lai_v2_load(slot->dmu_b + i);
+            robot_arm_lai_v2_store(F_w + i, r);
+        }
+    }
+#endif
+    for (; i < ROBOT_ARM_NW; ++i) {
         robot_arm_real hd = ROBOT_ARM_R(0.0), pl = ROBOT_ARM_R(0.0), cm = ROBOT_ARM_R(0.0);
         /* Ht dw from its lower triangle: row i is Ht's row i up to the diagonal, then its
          * column i below it */

@@ -194,7 +194,9 @@ void unicycle_get_scales(const unicycle_solver *s, unicycle_real *scale_x, unicy
 typedef struct {
     int status;           /* status of the last call that returns one */
     int initialized;      /* a successful init happened */
-    int qp_status;        /* enum unicycle_qp_status of the last feedback's QP */
+    int qp_status;        /* enum unicycle_qp_status of the last feedback's QP (also when the
+                            feedback failed after it: an unusable measurement; 0 after a
+                            re-initialisation until its QP) */
     int qp_iterations;    /* its iterations (the sum over the solves of the call) */
     int qp_cold_retry;    /* 1 when its warm-started QP failed and the cold retry ran */
     int flags;            /* UNICYCLE_FLAG_* raised by the last feedback and the prepare after it:

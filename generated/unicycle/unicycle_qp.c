@@ -603,9 +603,15 @@ typedef struct {
  * value (a maximum is exact in any order, and UNICYCLE_MAX_ACC never keeps a NaN of x). */
 static inline void absmax_acc(int n, const unicycle_real *restrict x, unicycle_real *restrict acc)
 {
-    int i;
+    int i = 0;
 #if UNICYCLE_QP_PHIT
-    for (i = 0; i < n; ++i) {
+#if UNICYCLE_LAI_V2_MAX
+    /* two entries per vector (the same maxima) */
+    for (; i + 1 < n; i += 2)
+        unicycle_lai_v2_store(acc + i, unicycle_lai_v2_max_acc(unicycle_lai_v2_abs(unicycle_lai_v2_load(x + i)),
+                                                         unicycle_lai_v2_load(acc + i)));
+#endif
+    for (; i < n; ++i) {
         const unicycle_real a = unicycle_fabs(x[i]);
         acc[i] = UNICYCLE_MAX_ACC(a, acc[i]);
     }
@@ -2220,6 +2226,7 @@ typedef struct {
     unicycle_real sigma_min;  /* SIGMA_MIN_RESTART after a restart */
     unicycle_real best_merit; /* the best iterate so far (it is in *sol) */
     int best_iter;
+    int best_solved; /* the stall ended at the best iterate's round-off: it is the solution */
     qp_res best_r;
     /* progress towards an infeasibility certificate (see qp_track_best): the smallest
      * normalised constraint residual |A'y| / |y| of a dual iterate beyond the data scale,
@@ -2344,6 +2351,7 @@ static int qp_prepare(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_i
     L->attempt = L->st.warm_start ? 1 : 0;
     initial_point(ws, in, &L->st, sol, L->attempt == 0);
     L->data_scale = certificate_data_scale(ws);
+    L->best_solved = 0;
     L->n_corr = L->n_aug = L->n_corr_attempt = 0;
     L->as_sweeps = 0;
     L->delta_last = L->delta_used = UNICYCLE_R(0.0);
@@ -2392,9 +2400,42 @@ static int qp_last_progress(qp_loop *L, const qp_res *r, int iter)
     return L->best_iter > L->cert_iter ? L->best_iter : L->cert_iter;
 }
 
+/* 1 when the best iterate, at a stall, is the solution to the precision its residuals can
+ * have: the equality, inequality and complementarity residuals within the tolerance, and the
+ * stationarity residual within its round-off, the rounding unit times the terms its sums
+ * add up (the largest |H w|, |Phi_k' lam_{k+1}|, |C' mu_g|, |R' mu_r|, |Req' nu| entry
+ * bounded by the sum's length times the largest data entry times the largest |w| or
+ * multiplier, plus |g| and |lam_k|, |mu_b|). Below a tolerance smaller than that round-off
+ * (the cancellation of terms far larger than their sum: a long step of the robot arm's QP
+ * from the OCP file's guess to the measurement, |H| 68 times |w| 18 against a residual
+ * scale of 1), whether an iterate meets the tolerance is chance; the Python reference's
+ * QP solves to round-off (docs/algorithm.md section 13). Evaluated once, at a stall. */
+static int qp_best_at_roundoff(const qp_loop *L, const unicycle_qp_workspace *ws, const unicycle_qp_in *in)
+{
+    const qp_res *r = &L->best_r;
+    const unicycle_real tol = L->st.tol;
+    unicycle_real pmax = UNICYCLE_R(0.0), cmax = UNICYCLE_R(0.0), rmax = UNICYCLE_R(0.0), emax = UNICYCLE_R(0.0), terms;
+    int k;
+    if (!(r->eq_s <= tol && r->ineq_s <= tol && r->comp_s <= tol))
+        return 0;
+    for (k = 0; k < N; ++k) {
+        pmax = dmax(pmax, unicycle_lai_max_abs_mat(NX, NW, in->Phi[k], NX));
+        if (NG > 0)
+            cmax = dmax(cmax, unicycle_lai_max_abs_mat(NG, NW, in->C[k], NG));
+    }
+    if (NR > 0)
+        rmax = unicycle_lai_max_abs_mat(NR, NX, in->R, NR);
+    if (NE > 0)
+        emax = unicycle_lai_max_abs_mat(NE, NX, in->Req, NE1);
+    terms = (UNICYCLE_R(1.0) * NW) * L->hscale * r->nw +
+            (UNICYCLE_R(1.0) + NX * pmax + NG * cmax + NR * rmax + NE * emax) * r->ny + ws->scale_g;
+    return r->stat <= UNICYCLE_REAL_EPSILON * terms;
+}
+
 /* The best iterate so far, and what to do when progress stalls: restart (QP_RESTARTED) or
  * give up (UNICYCLE_QP_STALLED, or UNICYCLE_QP_PRIMAL_INFEASIBLE when the diverged dual iterate
- * proves that no point meets the constraints to the tolerance); else QP_GO_ON. */
+ * proves that no point meets the constraints to the tolerance; UNICYCLE_QP_SOLVED when the
+ * best iterate meets them to its round-off, qp_best_at_roundoff); else QP_GO_ON. */
 static int qp_track_best(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in, unicycle_qp_sol *sol,
                          const qp_res *r, int iter)
 {
@@ -2435,6 +2476,10 @@ static int qp_track_best(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_q
         QP_TRACE("restart at iteration %d\n", iter);
         return QP_RESTARTED;
     } else if (iter - last >= STALL_ITERS) {
+        if (qp_best_at_roundoff(L, ws, in)) {
+            L->best_solved = 1;
+            return UNICYCLE_QP_SOLVED;
+        }
         return primal_infeasible_at_tol(ws, in, r, L->data_scale, L->st.tol) ? UNICYCLE_QP_PRIMAL_INFEASIBLE
                                                                              : UNICYCLE_QP_STALLED;
     }
@@ -2710,9 +2755,9 @@ static int qp_result(const qp_loop *L, unicycle_qp_workspace *ws, const unicycle
     if ((status == UNICYCLE_QP_NUMERICAL || status == UNICYCLE_QP_MAX_ITER || status == UNICYCLE_QP_DEADLINE) &&
         primal_infeasible_at_tol(ws, in, r, L->data_scale, L->st.tol))
         status = UNICYCLE_QP_PRIMAL_INFEASIBLE;
-    keep_best = (status == UNICYCLE_QP_MAX_ITER || status == UNICYCLE_QP_STALLED || status == UNICYCLE_QP_NUMERICAL ||
-                 status == UNICYCLE_QP_DEADLINE) &&
-                isfinite(L->best_merit) && !(merit(r) <= L->best_merit);
+    keep_best = L->best_solved || ((status == UNICYCLE_QP_MAX_ITER || status == UNICYCLE_QP_STALLED ||
+                                    status == UNICYCLE_QP_NUMERICAL || status == UNICYCLE_QP_DEADLINE) &&
+                                   isfinite(L->best_merit) && !(merit(r) <= L->best_merit));
     if (info) {
         info->inertia_corrections = L->n_corr;
         info->terminal_augmentations = L->n_aug;

@@ -235,7 +235,11 @@ typedef int unicycle_qp_row;
 
 /* Status codes (unicycle_qp_solve return value and unicycle_qp_info.status). */
 enum unicycle_qp_status {
-    UNICYCLE_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol */
+    UNICYCLE_QP_SOLVED = 0,            /* scaled KKT residuals below settings.tol; or, at a
+                                       stall, the best point's equality, inequality and
+                                       complementarity residuals below it and its
+                                       stationarity residual within its round-off (a
+                                       tolerance below that round-off; that point returned) */
     UNICYCLE_QP_MAX_ITER = 1,          /* iteration limit (settings.max_iter) reached; best
                                        point returned */
     UNICYCLE_QP_PRIMAL_INFEASIBLE = 2, /* Farkas certificate found (or lb > ub) */

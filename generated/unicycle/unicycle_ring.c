@@ -6,6 +6,11 @@
 
 #include "unicycle_linalg.h"
 
+/* The prediction's rows of F_w two at a time where doubles come in two-wide vectors and the
+ * blocks are large enough to pay (nx >= 8, as the lm test's kernels); the same values as the
+ * rows one at a time. */
+#define UNICYCLE_RING_V2 (UNICYCLE_LAI_VEC && UNICYCLE_NX >= 8)
+
 static void unicycle_ring_zero(unicycle_real *v, int n)
 {
     int i;
@@ -115,7 +120,39 @@ void unicycle_ring_predict(const unicycle_stage_slot *slot, unicycle_real *F_w, 
 #if UNICYCLE_LAI_VEC
     UNICYCLE_LAI_V2_GEMV(UNICYCLE_NX, UNICYCLE_NW, slot->Phit, dw, pd, 1);
 #endif
-    for (i = 0; i < UNICYCLE_NW; ++i) {
+    i = 0;
+#if UNICYCLE_RING_V2
+    /* rows i, i + 1 of F_w together, each lane the sums below in the same order: Ht's pair
+     * of rows (its lower triangle: a pair of a column up to row i, then strided pairs of the
+     * columns i and i + 1 below it) and Phi's pair of columns times a broadcast step */
+    {
+        unicycle_lai_v2 dwb[UNICYCLE_NW], dlb[UNICYCLE_NX];
+        for (j = 0; j < UNICYCLE_NW; ++j)
+            dwb[j] = (unicycle_lai_v2){dw[j], dw[j]};
+        for (j = 0; j < UNICYCLE_NX; ++j)
+            dlb[j] = (unicycle_lai_v2){dlam[j], dlam[j]};
+        for (; i + 1 < UNICYCLE_NW; i += 2) {
+            const unicycle_real *h0 = slot->Ht + i * UNICYCLE_NW, *h1 = h0 + UNICYCLE_NW;
+            const unicycle_real *f0 = slot->Phit + i * UNICYCLE_NX, *f1 = f0 + UNICYCLE_NX;
+            unicycle_lai_v2 hd = {UNICYCLE_R(0.0), UNICYCLE_R(0.0)}, pl = hd, cm = hd, r;
+            for (j = 0; j <= i; ++j)
+                hd += unicycle_lai_v2_load(slot->Ht + i + j * UNICYCLE_NW) * dwb[j];
+            hd += (unicycle_lai_v2){h0[i + 1], h1[i + 1]} * dwb[i + 1];
+            for (j = i + 2; j < UNICYCLE_NW; ++j)
+                hd += (unicycle_lai_v2){h0[j], h1[j]} * dwb[j];
+            UNICYCLE_UNROLL
+            for (j = 0; j < UNICYCLE_NX; ++j)
+                pl += (unicycle_lai_v2){f0[j], f1[j]} * dlb[j];
+            for (j = 0; j < UNICYCLE_NG; ++j)
+                cm += (unicycle_lai_v2){slot->Ct[j + i * UNICYCLE_DIM(UNICYCLE_NG)],
+                                     slot->Ct[j + (i + 1) * UNICYCLE_DIM(UNICYCLE_NG)]} *
+                      dmu_g[j];
+            r = unicycle_lai_v2_load(slot->F_w + i) + hd - pl + cm + unicycle_lai_v2_load(slot->dmu_b + i);
+            unicycle_lai_v2_store(F_w + i, r);
+        }
+    }
+#endif
+    for (; i < UNICYCLE_NW; ++i) {
         unicycle_real hd = UNICYCLE_R(0.0), pl = UNICYCLE_R(0.0), cm = UNICYCLE_R(0.0);
         /* Ht dw from its lower triangle: row i is Ht's row i up to the diagonal, then its
          * column i below it */
