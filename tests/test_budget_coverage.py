@@ -63,7 +63,7 @@ def lockstep(c, r, x, budget, where):
     return fr, pc, c.work - w0, c.work - w1
 
 
-@pytest.mark.parametrize("budget, K", [(120, 2), (200, 1), (600, 1)])
+@pytest.mark.parametrize("budget, K", [(120, 2), (200, 1), (300, 1)])
 def test_predicted_x0_of_a_recovery_is_priced(robot_disc, robot_solution, budget, K):
     """The robot arm (M = 1), the OCP file's disturbance at instant 3 and the QP's iteration
     limit 1 for K instants from there: each feedback fails (its QP and the lm retries that
@@ -74,7 +74,7 @@ def test_predicted_x0_of_a_recovery_is_priced(robot_disc, robot_solution, budget
     odd: the walk's evaluations come in pairs per stage (gradient and blocks) and the
     terminal node's pair, its QP N units (N = 40 even), so the one unit over is the predicted
     x_0. With budgets 120 and 200 the walk goes on in the next prepare (a feedback without a
-    QP), with 600 it ends in that prepare; the loop then runs back to status 0."""
+    QP), with 300 it ends in that prepare; the loop then runs back to status 0."""
     disc = robot_disc
     N = disc.N
     assert N % 2 == 0
@@ -127,7 +127,7 @@ def test_walk_fallback_on_the_guess_states_is_priced(robot_disc, robot_solution,
     states (the controls the guess's, clipped), exactly. (From the second instant after it
     the iterates part: 8e-10, 4e-9, ... up to 2.5e-6 at instant 12, then about 5e-7 while
     both run at status 0 with the same work, the C QP taking up to twice the reference's
-    iterations from the guess states; bench/issue24/measurements.md section 13. So the
+    iterations from the guess states; bench/issue24/measurements.md section 15. So the
     later instants compare statuses and work only.)"""
     disc = robot_disc
     N = disc.N
