@@ -17,6 +17,7 @@ from __future__ import annotations
 import re
 
 import numpy as np
+import pytest
 
 from dopus_codegen import build_functions, load_ocp
 from dopus_codegen.reference.dopus import ReferenceDopus
@@ -258,3 +259,226 @@ def test_active_set_gate_c_against_the_reference(robot_disc, robot_solution, tmp
     print("gate decisions (True, False):", {k: (v.count(True), v.count(False)) for k, v in decided.items()})
     assert decided["lm* below"] and not any(decided["lm* below"]) and all(decided["lm* above"]), decided
     assert decided["edge refused"] and not any(decided["edge refused"]), decided
+
+
+# ------------------------------------------------------------------ the two-wide vector path (nx >= 8)
+_VEC_HARNESS = r"""
+#include "{name}_lm.h"
+
+/* The convexity test through dopus_lm_near_convex with a capped term lm (its raised term
+ * lm * DOPUS_LM_RAISE tested, the prepared term at the maximum: no certificate) on the stage
+ * blocks Ht (N nw x nw), Phit (N nx x nw) and A_N (nx x nx), column-major; P out: the
+ * test's P (nx x nx) when it returns (P_1 after a pass, P_(k+1) after a refusal at stage k).
+ * lm_start: the term dopus_lm_start reaches from 0 on the same blocks. */
+static {name}_ring ring;
+static void vec_fill(const {name}_real *Ht, const {name}_real *Phit)
+{{
+    int k, i;
+    {name}_ring_reset(&ring);
+    for (k = 0; k < {NAME}_N; ++k) {{
+        {name}_stage_slot *slot = {name}_ring_stage(&ring, k);
+        for (i = 0; i < {NAME}_NW * {NAME}_NW; ++i)
+            slot->Ht[i] = Ht[k * {NAME}_NW * {NAME}_NW + i];
+        for (i = 0; i < {NAME}_NX * {NAME}_NW; ++i)
+            slot->Phit[i] = Phit[k * {NAME}_NX * {NAME}_NW + i];
+    }}
+}}
+int vec_test(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *A_N, {name}_real scale,
+             {name}_real lm, {name}_real *P);
+int vec_test(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *A_N, {name}_real scale,
+             {name}_real lm, {name}_real *P)
+{{
+    {name}_real work[{NAME}_LM_WORK];
+    {name}_lm st;
+    int i, r;
+    vec_fill(Ht, Phit);
+    {name}_lm_reset(&st, 1, 0.0);
+    st.lm = lm;
+    st.scale = scale;
+    st.uncapped = {NAME}_LM_MAX_REL * scale;
+    r = {name}_lm_near_convex(&st, &ring, A_N, work);
+    for (i = 0; i < {NAME}_NX * {NAME}_NX; ++i)
+        P[i] = work[i];
+    return r;
+}}
+{name}_real vec_start(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *A_N);
+{name}_real vec_start(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *A_N)
+{{
+    {name}_real work[{NAME}_LM_WORK];
+    {name}_lm st;
+    vec_fill(Ht, Phit);
+    {name}_lm_reset(&st, 1, 0.0);
+    {name}_lm_start(&st, &ring, A_N, work);
+    return st.lm;
+}}
+/* The secant's linear model (dopus_ring_predict) of one slot. */
+void vec_predict(const {name}_real *in, {name}_real *F_w, {name}_real *phi, {name}_real *g);
+void vec_predict(const {name}_real *in, {name}_real *F_w, {name}_real *phi, {name}_real *g)
+{{
+    {name}_stage_slot *slot = {name}_ring_stage(&ring, 0);
+    {name}_real *f[] = {{slot->Ht, slot->Phit, slot->Ct, slot->F_w, slot->phi, slot->g, slot->dw, slot->dlam,
+                         slot->dmu_g, slot->dmu_b}};
+    const int n[] = {{{NAME}_NW * {NAME}_NW, {NAME}_NX * {NAME}_NW, {NAME}_NG * {NAME}_NW, {NAME}_NW, {NAME}_NX,
+                      {NAME}_NG, {NAME}_NW, {NAME}_NX, {NAME}_NG, {NAME}_NW}};
+    int a, i;
+    for (a = 0; a < 10; ++a) {{
+        for (i = 0; i < n[a]; ++i)
+            f[a][i] = *in++;
+    }}
+    {name}_ring_predict(slot, F_w, phi, g);
+}}
+"""
+
+
+def _vec_library(disc, tmp_path, vec: int):
+    """The lm and ring modules with _VEC_HARNESS, the two-wide vectors on (vec = 1, the
+    default on x86-64 and AArch64) or off (DOPUS_LAI_VEC = 0, prefixed with the problem name in
+    the generated folder: the plain loops)."""
+    import subprocess
+
+    import cffi
+
+    from dopus_codegen.codegen.flags import DEFAULT_OPT, PIC, STRICT_CFLAGS
+    from dopus_codegen.codegen.generate import generate
+
+    folder = tmp_path / "gen"
+    if not folder.exists():
+        generate(disc, folder, offline_guess=False)
+    name = disc.data.name
+    src = tmp_path / "vec.c"
+    src.write_text(_VEC_HARNESS.format(name=name, NAME=name.upper()))
+    so = tmp_path / f"libvec{vec}.so"
+    subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, f"-D{name.upper()}_LAI_VEC={vec}", "-shared", f"-I{folder}",
+                    str(src), str(folder / f"{name}_lm.c"), str(folder / f"{name}_ring.c"), "-o", str(so), "-lm"],
+                   check=True)
+    ffi = cffi.FFI()
+    ffi.cdef("int vec_test(const double *Ht, const double *Phit, const double *A_N, double scale, double lm,"
+             " double *P); double vec_start(const double *Ht, const double *Phit, const double *A_N);"
+             " void vec_predict(const double *in, double *F_w, double *phi, double *g);")
+    return ffi, ffi.dlopen(str(so))
+
+
+def _riccati_P(H, Phi, A_N, lm, tol):
+    """The Riccati recursion of the convexity test by dense solves, independent of the
+    reference's and the C runtime's Cholesky: (passed, P) with P = P_1 after a pass and
+    P_(k+1) (the one that stage k's pivots failed on) after a refusal."""
+    nx, nw = Phi[0].shape
+    P = A_N + lm * np.eye(nx)
+    for k in range(len(H) - 1, -1, -1):
+        Z = H[k] + lm * np.eye(nw) + Phi[k].T @ P @ Phi[k]
+        Zuu = Z[nx:, nx:]
+        try:
+            L = np.linalg.cholesky(Zuu)
+        except np.linalg.LinAlgError:
+            return False, P
+        if not np.diag(L).min() ** 2 > tol:
+            return False, P
+        if k == 0:
+            return True, P
+        Pn = Z[:nx, :nx] - Z[:nx, nx:] @ np.linalg.solve(Zuu, Z[nx:, :nx])
+        P = 0.5 * (Pn + Pn.T)
+
+
+@pytest.fixture(scope="module")
+def chain_disc():
+    from conftest import ROOT
+    return build_functions(load_ocp(ROOT / "examples" / "chain.py"))
+
+
+def test_convexity_test_vector_path_against_the_reference(chain_disc, tmp_path):
+    """The convexity test and the secant's linear model at nx = 21 (the chain of masses),
+    where the two-wide kernels run (DOPUS_LM_VEC, DOPUS_RING_V2: nx >= 8; odd nx, even nw, an
+    odd count of control columns at stage 0), on random indefinite stage blocks: the C
+    decision equals the reference's (ReferenceDopus.lm_convex) 1e-6 relative on either side of
+    lm* (the smallest term the reference passes, by bisection) and at a grid of terms; the C
+    test's P equals a Riccati recursion by dense solves (1e-8 relative) and the plain loops'
+    P (DOPUS_LAI_VEC = 0) bit for bit; dopus_lm_start's term equals the reference's
+    lm_convexify; dopus_ring_predict equals the linear model of the reference's secant
+    criterion (F + [H -Phi' C' I] domega, phi + Phi dw, g + C dw) and the plain loops bit
+    for bit."""
+    disc = chain_disc
+    nx, nw, N = disc.nx, disc.nx + disc.nu, disc.N
+    assert nx >= 8 and nx % 2 == 1 and nw % 2 == 0
+    libs = {v: _vec_library(disc, tmp_path, v) for v in (1, 0)}
+    r = ReferenceDopus(disc, lm=0.0)
+    r.init(disc.x0)
+    rng = np.random.default_rng(24)
+    dbl = "double[]"
+    decided = {True: 0, False: 0}
+    for trial in range(6):
+        # random blocks: H symmetric with its control block shifted down (indefinite: some
+        # term needed), its strict upper triangle NaN for C (the runtime's H holds other data
+        # there); Phi = [A B] with A about I
+        H, Phi = [], []
+        for k in range(N):
+            G = rng.standard_normal((nw, nw))
+            Hk = G @ G.T / nw
+            Hk[nx:, nx:] -= np.diag(rng.uniform(0.0, 1.0 + trial, nw - nx))
+            H.append(Hk)
+            Phi.append(np.hstack([np.eye(nx) + 0.3 * rng.standard_normal((nx, nx)) / np.sqrt(nx),
+                                  0.1 * rng.standard_normal((nx, nw - nx))]))
+        G = rng.standard_normal((nx, nx))
+        A_N = G @ G.T / nx
+        for k in range(N):
+            r.slot_of(k).Ht, r.slot_of(k).Phit = H[k].copy(), Phi[k].copy()
+        r.term["A"] = A_N.copy()
+        h = r.lm_scale = r.lm_hessian_scale()
+        tol = 1e-10 * h
+        Hc = np.concatenate([np.where(np.tril(np.ones((nw, nw))) > 0, Hk, np.nan).ravel(order="F") for Hk in H])
+        Pc = np.concatenate([p.ravel(order="F") for p in Phi])
+        Ac = A_N.ravel(order="F").copy()
+        lo, hi = 1e-8 * h, 1e2 * h
+        assert not r.lm_convex(lo) and r.lm_convex(hi), trial
+        star = _smallest_convex_term(r, lo, hi)
+
+        def c_test(lm, v):
+            ffi, lib = libs[v]
+            P = np.zeros(nx * nx)
+            d = lib.vec_test(ffi.from_buffer(dbl, Hc), ffi.from_buffer(dbl, Pc), ffi.from_buffer(dbl, Ac), h,
+                             lm, ffi.from_buffer(dbl, P))
+            return bool(d), P.reshape((nx, nx), order="F")
+
+        # the capped term c is tested at its raise 10 c (the same product in both backends)
+        terms = [star / 10.0 * (1.0 - 1e-6), star / 10.0 * (1.0 + 1e-6)]
+        terms += list(star / 10.0 * np.logspace(-2, 2, 9))
+        terms = [c for c in terms if lo <= c and 10.0 * c <= hi]
+        for c in terms:
+            ref = r.lm_convex(10.0 * c)
+            dec, P = c_test(c, 1)
+            dec0, P0 = c_test(c, 0)
+            assert dec == ref == dec0, (trial, c / star, ref, dec, dec0)
+            assert np.array_equal(P, P0), (trial, c / star)
+            passed, P_ref = _riccati_P(H, Phi, A_N, 10.0 * c, tol)
+            assert passed == ref, (trial, c / star)
+            if abs(10.0 * c / star - 1.0) > 1e-3:      # P off the threshold (well conditioned)
+                np.testing.assert_allclose(P, P_ref, rtol=0, atol=1e-8 * np.abs(P_ref).max())
+            decided[ref] += 1
+        # the start: lm from 0 raised until convex, the same term in both backends
+        r.lm_auto, r.lm, r.lm_uncapped = True, 0.0, -1.0
+        r.lm_convexify()
+        for v in (1, 0):
+            ffi, lib = libs[v]
+            lm_c = lib.vec_start(ffi.from_buffer(dbl, Hc), ffi.from_buffer(dbl, Pc), ffi.from_buffer(dbl, Ac))
+            assert lm_c == r.lm, (trial, v, lm_c, r.lm)
+        r.lm_auto, r.lm = False, 0.0
+        # the secant's linear model of one slot
+        ng = disc.ng
+        parts = [H[0], Phi[0], rng.standard_normal((ng, nw)), rng.standard_normal(nw), rng.standard_normal(nx),
+                 rng.standard_normal(ng), rng.standard_normal(nw), rng.standard_normal(nx),
+                 rng.standard_normal(ng), rng.standard_normal(nw)]
+        Ht, Phit, Ct, F_w, phi, g, dw, dlam, dmu_g, dmu_b = parts
+        flat = np.concatenate([p.ravel(order="F") for p in parts])
+        flat[:nw * nw] = Hc[:nw * nw]
+        ref_F = F_w + Ht @ dw - Phit.T @ dlam + Ct.T @ dmu_g + dmu_b
+        ref_phi, ref_g = phi + Phit @ dw, g + Ct @ dw
+        out = {}
+        for v in (1, 0):
+            ffi, lib = libs[v]
+            o = (np.zeros(nw), np.zeros(nx), np.zeros(max(ng, 1)))
+            lib.vec_predict(ffi.from_buffer(dbl, flat), *(ffi.from_buffer(dbl, a) for a in o))
+            out[v] = o
+        for a, b, ref in zip(out[1], out[0], (ref_F, ref_phi, ref_g)):
+            assert np.array_equal(a, b)
+            np.testing.assert_allclose(a[:ref.size], ref, rtol=0, atol=1e-12 * (1.0 + np.max(np.abs(ref), initial=0.0)) * nw)
+    print("vector path decisions (passed, refused):", decided)
+    assert decided[True] >= 12 and decided[False] >= 12, decided
