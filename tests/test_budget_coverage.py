@@ -134,9 +134,9 @@ def test_walk_fallback_on_the_guess_states_is_priced(robot_disc, robot_solution,
     in three instants. The QPs are no worse conditioned than on the path (KKT condition 5e5
     to 6e6 on the active set, the Hessian positive definite on the dynamics' null space) and
     the C QP solves the reference's QPs to within 2.5e-11 of the reference QP solver; the C
-    runtime's larger iteration counts (45 against 21 at instant 8) are a warm start followed
-    by its cold retry, whose 27 iterations match the C QP's cold count on the reference's
-    data. So the later instants compare statuses and work only.)"""
+    runtime's larger iteration counts (45 against 21 at instant 8) are a warm start that
+    stalls with its residuals about 1 (18 iterations) and the cold retry, whose 27 match the
+    C QP's cold count on the reference's data. So the later instants compare statuses and work only.)"""
     disc = robot_disc
     N = disc.N
     c, r = pair(disc, budget, 3)
