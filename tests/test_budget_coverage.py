@@ -128,7 +128,7 @@ def test_walk_fallback_on_the_guess_states_is_priced(robot_disc, robot_solution,
     the iterates part: 8e-10, 4e-9, ... up to 2.5e-6 at instant 12, then about 1e-6 while
     both run at status 0 with the same work; bench/issue24/measurements.md sections 16 and
     17. Not a backend's error: the loop, far from its path after the guess states (lm 0, the
-    active set growing from 43 to 93 bounds), amplifies differences about x10 per instant;
+    active set growing from 43 to 93 rows), amplifies differences about x10 per instant;
     the reference against itself with one measurement 1e-11 apart at instant 6 parts the
     same way, at the same entries, while without a budget that perturbation decays to 1e-14
     in three instants. The QPs are no worse conditioned than on the path (KKT condition 5e5
