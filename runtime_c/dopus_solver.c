@@ -1394,20 +1394,16 @@ static void dopus_keep_plan(dopus_solver *s, dopus_real *u0, int lowered)
 
 static int dopus_feedback_recover(dopus_solver *s, int *qs, int *retries);
 
-/* 1 when the model is finite at the state xs with the next control of the last good plan and
- * the state it gives is inside the box of section 9 (one stage evaluation, 1 work unit of the
- * budget; nothing tests before it that it fits: without it the feedback could not tell a
- * measurement from no measurement, algorithm.md section 14). A finite measurement at which it
- * is not (an outlier of 1e6 rad/s, say, or one of 1e3 rad/s whose next state on the robot arm
- * is 1e98: the stage the walk of a re-initialisation would refuse, whose linearisation the lm
- * test reads only as round-off) cannot start a re-initialisation: it is no measurement
- * (algorithm.md section 9). */
+/* 1 when the model is finite at the state xs with the next control of the last good plan (one
+ * stage evaluation, 1 work unit of the budget; nothing tests before it that it fits: without
+ * it the feedback could not tell a measurement from no measurement, algorithm.md section 14).
+ * A finite measurement at which it is not (an outlier of 1e6 rad/s, say) cannot start a
+ * re-initialisation: it is no measurement (algorithm.md section 9). */
 static int dopus_model_finite_at(dopus_solver *s, const dopus_real *xs)
 {
     dopus_real l = DOPUS_R(0.0), u[DOPUS_NU], xn[DOPUS_NX];
     dopus_clip_u(dopus_health_plan_control(&s->health, 0), u);
-    return dopus_eval_node(s, 0, xs, u, xn, &l) && dopus_lai_vec_finite(1, &l) &&
-           dopus_box_node_ok(&s->health, s->xhat0, xn, 0, 0, 0);
+    return dopus_eval_node(s, 0, xs, u, xn, &l) && dopus_lai_vec_finite(1, &l);
 }
 
 /* Feedback once admitted (steps 2 to 8). */

@@ -1589,16 +1589,15 @@ class ReferenceDopus:
 
     def _model_finite_at(self, xs) -> bool:
         """Section 9: the model finite at the state xs with the next control of the last good
-        plan and the state it gives inside the box of section 9 (one stage evaluation, 1 work
-        unit; nothing tests before it that it fits, section 14)."""
+        plan (one stage evaluation, 1 work unit; nothing tests before it that it fits,
+        section 14)."""
         u = self._clip_u(self._plan_control())[0]
         self.work += 1
         try:
             out = self.disc.stage_eval(xs, u, self.p[0])
         except RuntimeError:
             return False
-        return (all(np.all(np.isfinite(np.asarray(v, float))) for v in out[:2])
-                and self._box_ok(np.asarray(out[0], float).reshape(-1)))
+        return all(np.all(np.isfinite(np.asarray(v, float))) for v in out[:2])
 
     def _predicted_step(self) -> None:
         """Section 9: after a failed feedback whose QP is still the prepared one, the step of
@@ -1870,9 +1869,12 @@ class ReferenceDopus:
             nu = nw - nx
             L = np.zeros((nu, nu))
             Zuu = Z[nx:, nx:]
+            # the pivot floor: tol, or the round-off of a pivot formed from entries of Z_uu's
+            # size (DOPUS_LM_ROUNDOFF: nw rounding units of its largest |diagonal entry|)
+            floor = max(tol, nw * np.finfo(float).eps * float(np.abs(np.diag(Zuu)).max()))
             for j in range(nu):
                 d = Zuu[j, j] - L[j, :j] @ L[j, :j]
-                if not d > tol:
+                if not d > floor:
                     return False
                 L[j, j] = np.sqrt(d)
                 for i in range(j + 1, nu):

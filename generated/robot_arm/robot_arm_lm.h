@@ -21,6 +21,8 @@
 #define ROBOT_ARM_LM_RAISE ROBOT_ARM_R(10.0)      /* factor of a raise */
 #define ROBOT_ARM_LM_LOWER ROBOT_ARM_R(0.1)       /* factor after a successful feedback */
 #define ROBOT_ARM_LM_PIVOT_REL ROBOT_ARM_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
+/* ... and their round-off: nw rounding units of the stage's largest |Z_uu diagonal entry| */
+#define ROBOT_ARM_LM_ROUNDOFF (ROBOT_ARM_NW * ROBOT_ARM_REAL_EPSILON)
 #define ROBOT_ARM_LM_KKT_GROWTH ROBOT_ARM_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
 #define ROBOT_ARM_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
 #define ROBOT_ARM_LM_KKT_REL ROBOT_ARM_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */

@@ -21,6 +21,8 @@
 #define UNICYCLE_LM_RAISE UNICYCLE_R(10.0)      /* factor of a raise */
 #define UNICYCLE_LM_LOWER UNICYCLE_R(0.1)       /* factor after a successful feedback */
 #define UNICYCLE_LM_PIVOT_REL UNICYCLE_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
+/* ... and their round-off: nw rounding units of the stage's largest |Z_uu diagonal entry| */
+#define UNICYCLE_LM_ROUNDOFF (UNICYCLE_NW * UNICYCLE_REAL_EPSILON)
 #define UNICYCLE_LM_KKT_GROWTH UNICYCLE_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
 #define UNICYCLE_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
 #define UNICYCLE_LM_KKT_REL UNICYCLE_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */
