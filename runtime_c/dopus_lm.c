@@ -152,7 +152,8 @@ static void dopus_lm_z_col1(const dopus_real *PhiT, const dopus_real *Y, const d
 
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
- * out) has control pivots above DOPUS_LM_PIVOT_REL h.
+ * out) has control pivots above DOPUS_LM_PIVOT_REL h and above their round-off,
+ * DOPUS_LM_ROUNDOFF times the stage's largest |Z_uu diagonal entry|.
  *
  * Per stage, Y = P Phi runs down whole columns of P (Phi read in its stored layout: no
  * transposed copy), then only the lower triangle of Z = H + lm I + Phi' Y: about half the
@@ -171,7 +172,7 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
 #if DOPUS_LM_VEC
     dopus_real PhiT[DOPUS_NW * DOPUS_NX]; /* Phi_k' */
 #endif
-    dopus_real v;
+    dopus_real v, floor_;
     int k, i, j, l;
     for (j = 0; j < DOPUS_NX; ++j) {
         for (i = j; i < DOPUS_NX; ++i) {
@@ -241,13 +242,22 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
             Z[j + j * DOPUS_NW] += lm;
         }
 #endif
+        /* the pivot floor: tol, or the round-off of a pivot formed from entries of Z_uu's size
+         * when that is larger (a linearisation far outside the state's scale: blocks Phi of
+         * 1e125 give Z_uu of 1e250, whose pivots after the first are round-off of 1e234 and
+         * certify nothing; docs/algorithm.md section 10) */
+        floor_ = tol;
+        for (j = DOPUS_NX; j < DOPUS_NW; ++j) {
+            v = DOPUS_LM_ROUNDOFF * dopus_fabs(DOPUS_LM_Z(j, j));
+            floor_ = v > floor_ ? v : floor_;
+        }
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = DOPUS_NX; j < DOPUS_NW; ++j) {
             dopus_real d = DOPUS_LM_Z(j, j);
             for (l = DOPUS_NX; l < j; ++l) {
                 d -= DOPUS_LM_Z(j, l) * DOPUS_LM_Z(j, l);
             }
-            if (!(d > tol)) {
+            if (!(d > floor_)) {
                 return 0;
             }
             d = dopus_sqrt(d);

@@ -21,6 +21,10 @@
 #define DOPUS_LM_RAISE DOPUS_R(10.0)      /* factor of a raise */
 #define DOPUS_LM_LOWER DOPUS_R(0.1)       /* factor after a successful feedback */
 #define DOPUS_LM_PIVOT_REL DOPUS_R(1e-10) /* Riccati pivots must exceed 1e-10 h */
+/* ... and their round-off: nw double rounding units (2^-52) of the stage's largest |Z_uu diagonal
+ * entry|, the double's in both precisions as the limits above (the float's would raise the floor
+ * to about 1e-6 h on the robot arm's QPs, the raise docs/algorithm.md section 11 rejected) */
+#define DOPUS_LM_ROUNDOFF (DOPUS_NW * DOPUS_R(2.220446049250313080847263336181640625e-16))
 #define DOPUS_LM_KKT_GROWTH DOPUS_R(10.0) /* raise when the KKT proxy grows 10x in one prepare */
 #define DOPUS_LM_RETRIES 2                /* QP solves again with lm raised after a failure */
 #define DOPUS_LM_KKT_REL DOPUS_R(1e-2)    /* feedback: lm <= 1e-2 h d^2, d the distance from the solution */

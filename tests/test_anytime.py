@@ -370,7 +370,7 @@ def test_qp_deadline_stops_at_the_iteration_it_leaves_room_for():
         assert np.array_equal(cut[key], capped[key]), key
 
 
-def _outlier_loop(disc, guess, c, r, budget, v, K, start=5, iters=40, unusable=None, at_guess=None):
+def _outlier_loop(disc, guess, c, r, budget, v, K, start=5, iters=40, unusable=None, at_guess=None, lms=None):
     """The closed loop of closed_loop with K measurements whose joint velocities are (v, -v)
     from instant `start` on (the fault suite's outliers, tests/harness/faults.py), both
     backends fed the same measurements and the reference's control applied whatever the
@@ -380,7 +380,8 @@ def _outlier_loop(disc, guess, c, r, budget, v, K, start=5, iters=40, unusable=N
     instant may pass the budget by that evaluation, 1 unit, and no more: it is counted, but
     nothing tests before it that it fits (docs/algorithm.md section 14). `at_guess` (a list)
     collects the instants whose prepare re-initialised at the OCP file's guess
-    (DOPUS_FLAG_REINIT_GUESS)."""
+    (DOPUS_FLAG_REINIT_GUESS). `lms` (a list): the automatic lm after each feedback (its retries
+    included) compared to round-off and collected as (instant, lm, its scale h)."""
     from dopus_codegen.studies import loops
 
     x = np.array(disc.x0, dtype=float)
@@ -404,6 +405,9 @@ def _outlier_loop(disc, guess, c, r, budget, v, K, start=5, iters=40, unusable=N
         assert (c.qp_status == 0) == (r.qp_status == 0), (where, c.qp_status, r.qp_status)
         assert (c.qp_status == QP_DEADLINE) == (r.qp_status == QP_DEADLINE), (where, c.qp_status, r.qp_status)
         assert (getattr(fc.error, "qp_status", None) is None) == (getattr(fr.error, "qp_status", None) is None), where
+        if lms is not None:
+            assert abs(c.lm - r.lm) <= REL_TOL * max(1.0, abs(r.lm)), (where, c.lm, r.lm)
+            lms.append((it, r.lm, r.lm_scale))
         if bad:
             assert c.qp_status in QP_FAILED and r.qp_status in QP_FAILED, (where, c.qp_status, r.qp_status)
             if unusable is not None:
@@ -506,6 +510,28 @@ def test_reinit_at_the_guess_is_priced(robot_disc, robot_solution, v, K, iters):
     # the QPs from the guess solved: the closed loop runs on with steps
     assert statuses[at_guess[-1] + 2] == 0, statuses
     print(f"outliers {v:g} x {K}: statuses {statuses}, at the guess {at_guess}, recoveries {r.recoveries}")
+
+
+def test_lm_test_on_blocks_far_outside_the_scale(robot_disc, robot_solution):
+    """The lm test's pivots above their round-off (docs/algorithm.md section 10): at 400 units
+    one outlier of 1e3 rad/s makes the feedback's QP fail, and the recovery within the
+    feedback linearises stage 0 at the measurement, Phi of 1e125 (the model is finite there):
+    Z_uu reaches 1e250 and its pivots after the first are round-off (up to 1e230, either sign).
+    Before, the test's verdict was chance and the backends summed in different orders: the
+    automatic lm after the re-initialisation was 1e-7 h in C and 1e-4 h in the reference and
+    the loops parted (instant 8: 284 against 366 units, iterates order 10). Now no term
+    certifies that QP, lm is 1e2 h in both, and the C runtime equals the reference instant by
+    instant through 40 instants (work, statuses, QP statuses, flags, recoveries, lm, iterates
+    to round-off; bench/issue24/measurements.md section 18)."""
+    budget = 400
+    c, r = pair(robot_disc, budget, M=1)
+    lms = []
+    statuses = _outlier_loop(robot_disc, robot_solution[0], c, r, budget, 1e3, 1, lms=lms)
+    assert r.recoveries == 1 and statuses[5] != 0, statuses
+    # the recovery's lm: its test passes no term below the maximum, 1e2 h (DOPUS_LM_MAX_REL)
+    assert lms[5][1] == pytest.approx(1e2 * lms[5][2], rel=1e-12), lms[5]
+    assert statuses[-30:] == [0] * 30, statuses
+    print(f"statuses {statuses}, lm after the feedbacks {[f'{lm:.3g}' for _, lm, _ in lms]}")
 
 
 @pytest.mark.parametrize("ticks", [2, 3, 4])

@@ -1869,9 +1869,12 @@ class ReferenceDopus:
             nu = nw - nx
             L = np.zeros((nu, nu))
             Zuu = Z[nx:, nx:]
+            # the pivot floor: tol, or the round-off of a pivot formed from entries of Z_uu's
+            # size (DOPUS_LM_ROUNDOFF: nw rounding units of its largest |diagonal entry|)
+            floor = max(tol, nw * np.finfo(float).eps * float(np.abs(np.diag(Zuu)).max()))
             for j in range(nu):
                 d = Zuu[j, j] - L[j, :j] @ L[j, :j]
-                if not d > tol:
+                if not d > floor:
                     return False
                 L[j, j] = np.sqrt(d)
                 for i in range(j + 1, nu):

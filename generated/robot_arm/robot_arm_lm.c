@@ -152,7 +152,8 @@ static void robot_arm_lm_z_col1(const robot_arm_real *PhiT, const robot_arm_real
 
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
- * out) has control pivots above ROBOT_ARM_LM_PIVOT_REL h.
+ * out) has control pivots above ROBOT_ARM_LM_PIVOT_REL h and above their round-off,
+ * ROBOT_ARM_LM_ROUNDOFF times the stage's largest |Z_uu diagonal entry|.
  *
  * Per stage, Y = P Phi runs down whole columns of P (Phi read in its stored layout: no
  * transposed copy), then only the lower triangle of Z = H + lm I + Phi' Y: about half the
@@ -171,7 +172,7 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
 #if ROBOT_ARM_LM_VEC
     robot_arm_real PhiT[ROBOT_ARM_NW * ROBOT_ARM_NX]; /* Phi_k' */
 #endif
-    robot_arm_real v;
+    robot_arm_real v, floor_;
     int k, i, j, l;
     for (j = 0; j < ROBOT_ARM_NX; ++j) {
         for (i = j; i < ROBOT_ARM_NX; ++i) {
@@ -241,13 +242,22 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
             Z[j + j * ROBOT_ARM_NW] += lm;
         }
 #endif
+        /* the pivot floor: tol, or the round-off of a pivot formed from entries of Z_uu's size
+         * when that is larger (a linearisation far outside the state's scale: blocks Phi of
+         * 1e125 give Z_uu of 1e250, whose pivots after the first are round-off of 1e234 and
+         * certify nothing; docs/algorithm.md section 10) */
+        floor_ = tol;
+        for (j = ROBOT_ARM_NX; j < ROBOT_ARM_NW; ++j) {
+            v = ROBOT_ARM_LM_ROUNDOFF * robot_arm_fabs(ROBOT_ARM_LM_Z(j, j));
+            floor_ = v > floor_ ? v : floor_;
+        }
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = ROBOT_ARM_NX; j < ROBOT_ARM_NW; ++j) {
             robot_arm_real d = ROBOT_ARM_LM_Z(j, j);
             for (l = ROBOT_ARM_NX; l < j; ++l) {
                 d -= ROBOT_ARM_LM_Z(j, l) * ROBOT_ARM_LM_Z(j, l);
             }
-            if (!(d > tol)) {
+            if (!(d > floor_)) {
                 return 0;
             }
             d = robot_arm_sqrt(d);

@@ -152,7 +152,8 @@ static void unicycle_lm_z_col1(const unicycle_real *PhiT, const unicycle_real *Y
 
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
- * out) has control pivots above UNICYCLE_LM_PIVOT_REL h.
+ * out) has control pivots above UNICYCLE_LM_PIVOT_REL h and above their round-off,
+ * UNICYCLE_LM_ROUNDOFF times the stage's largest |Z_uu diagonal entry|.
  *
  * Per stage, Y = P Phi runs down whole columns of P (Phi read in its stored layout: no
  * transposed copy), then only the lower triangle of Z = H + lm I + Phi' Y: about half the
@@ -171,7 +172,7 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
 #if UNICYCLE_LM_VEC
     unicycle_real PhiT[UNICYCLE_NW * UNICYCLE_NX]; /* Phi_k' */
 #endif
-    unicycle_real v;
+    unicycle_real v, floor_;
     int k, i, j, l;
     for (j = 0; j < UNICYCLE_NX; ++j) {
         for (i = j; i < UNICYCLE_NX; ++i) {
@@ -241,13 +242,22 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
             Z[j + j * UNICYCLE_NW] += lm;
         }
 #endif
+        /* the pivot floor: tol, or the round-off of a pivot formed from entries of Z_uu's size
+         * when that is larger (a linearisation far outside the state's scale: blocks Phi of
+         * 1e125 give Z_uu of 1e250, whose pivots after the first are round-off of 1e234 and
+         * certify nothing; docs/algorithm.md section 10) */
+        floor_ = tol;
+        for (j = UNICYCLE_NX; j < UNICYCLE_NW; ++j) {
+            v = UNICYCLE_LM_ROUNDOFF * unicycle_fabs(UNICYCLE_LM_Z(j, j));
+            floor_ = v > floor_ ? v : floor_;
+        }
         /* Cholesky of the control block Z_uu in place (lower triangle) */
         for (j = UNICYCLE_NX; j < UNICYCLE_NW; ++j) {
             unicycle_real d = UNICYCLE_LM_Z(j, j);
             for (l = UNICYCLE_NX; l < j; ++l) {
                 d -= UNICYCLE_LM_Z(j, l) * UNICYCLE_LM_Z(j, l);
             }
-            if (!(d > tol)) {
+            if (!(d > floor_)) {
                 return 0;
             }
             d = unicycle_sqrt(d);
