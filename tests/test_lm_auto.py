@@ -134,19 +134,14 @@ def test_robot_arm_exact_hessian_default_settings_n80(tmp_path):
 
 
 # ------------------------------------------------------------------ the gate, C against the reference
-_GATE_HARNESS = r"""
+# A file-scope ring filled with the stage blocks Ht (N nw x nw) and Phit (N nx x nw),
+# column-major: the start of every harness below.
+_RING_FILL = r"""
 #include "{name}_lm.h"
 
-/* dopus_lm_near_convex on the stage blocks Ht (N nw x nw), Phit (N nx x nw) and the terminal
- * block A_N (nx x nx), all column-major, with the term's state (scale, lm, uncapped, on). */
-int gate_decision(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *A_N, {name}_real scale,
-                  {name}_real lm, {name}_real uncapped, int on);
-int gate_decision(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *A_N, {name}_real scale,
-                  {name}_real lm, {name}_real uncapped, int on)
+static {name}_ring ring;
+static void ring_fill(const {name}_real *Ht, const {name}_real *Phit)
 {{
-    static {name}_ring ring;
-    {name}_real work[{NAME}_LM_WORK];
-    {name}_lm st;
     int k, i;
     {name}_ring_reset(&ring);
     for (k = 0; k < {NAME}_N; ++k) {{
@@ -156,6 +151,20 @@ int gate_decision(const {name}_real *Ht, const {name}_real *Phit, const {name}_r
         for (i = 0; i < {NAME}_NX * {NAME}_NW; ++i)
             slot->Phit[i] = Phit[k * {NAME}_NX * {NAME}_NW + i];
     }}
+}}
+"""
+
+_GATE_HARNESS = _RING_FILL + r"""
+/* dopus_lm_near_convex on the stage blocks Ht (N nw x nw), Phit (N nx x nw) and the terminal
+ * block A_N (nx x nx), all column-major, with the term's state (scale, lm, uncapped, on). */
+int gate_decision(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *A_N, {name}_real scale,
+                  {name}_real lm, {name}_real uncapped, int on);
+int gate_decision(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *A_N, {name}_real scale,
+                  {name}_real lm, {name}_real uncapped, int on)
+{{
+    {name}_real work[{NAME}_LM_WORK];
+    {name}_lm st;
+    ring_fill(Ht, Phit);
     {name}_lm_reset(&st, on, lm);
     st.lm = lm;
     st.scale = scale;
@@ -165,9 +174,10 @@ int gate_decision(const {name}_real *Ht, const {name}_real *Phit, const {name}_r
 """
 
 
-def _gate_library(disc, tmp_path):
-    """The lm and ring modules of the generated folder alone, with a harness that fills a ring
-    and calls the gate (dopus_lm_near_convex), as a shared library (cffi)."""
+def _harness_library(disc, tmp_path, harness: str, cdef: str, stem: str, defines=()):
+    """The lm and ring modules of the generated folder (tmp_path / "gen", generated once)
+    alone, with a C harness (a format string of name and NAME), compiled with the project's
+    strict flags and -D defines as the shared library lib<stem>.so (cffi, declared by cdef)."""
     import subprocess
 
     import cffi
@@ -175,17 +185,26 @@ def _gate_library(disc, tmp_path):
     from dopus_codegen.codegen.flags import DEFAULT_OPT, PIC, STRICT_CFLAGS
     from dopus_codegen.codegen.generate import generate
 
-    folder = generate(disc, tmp_path / "gen", offline_guess=False)
+    folder = tmp_path / "gen"
+    if not folder.exists():
+        generate(disc, folder, offline_guess=False)
     name = disc.data.name
-    src = tmp_path / "gate.c"
-    src.write_text(_GATE_HARNESS.format(name=name, NAME=name.upper()))
-    so = tmp_path / "libgate.so"
-    subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, "-shared", f"-I{folder}", str(src),
-                    str(folder / f"{name}_lm.c"), str(folder / f"{name}_ring.c"), "-o", str(so), "-lm"], check=True)
+    src = tmp_path / f"{stem}.c"
+    src.write_text(harness.format(name=name, NAME=name.upper()))
+    so = tmp_path / f"lib{stem}.so"
+    subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, *(f"-D{d}" for d in defines), "-shared", f"-I{folder}",
+                    str(src), str(folder / f"{name}_lm.c"), str(folder / f"{name}_ring.c"), "-o", str(so), "-lm"],
+                   check=True)
     ffi = cffi.FFI()
-    ffi.cdef("int gate_decision(const double *Ht, const double *Phit, const double *A_N, double scale,"
-             " double lm, double uncapped, int on);")
+    ffi.cdef(cdef)
     return ffi, ffi.dlopen(str(so))
+
+
+def _gate_library(disc, tmp_path):
+    """A ring filled and the gate (dopus_lm_near_convex) called, as a shared library (cffi)."""
+    return _harness_library(disc, tmp_path, _GATE_HARNESS,
+                            "int gate_decision(const double *Ht, const double *Phit, const double *A_N, double scale,"
+                            " double lm, double uncapped, int on);", "gate")
 
 
 def _smallest_convex_term(r, lo, hi):
@@ -262,27 +281,12 @@ def test_active_set_gate_c_against_the_reference(robot_disc, robot_solution, tmp
 
 
 # ------------------------------------------------------------------ the two-wide vector path (nx >= 8)
-_VEC_HARNESS = r"""
-#include "{name}_lm.h"
-
+_VEC_HARNESS = _RING_FILL + r"""
 /* The convexity test through dopus_lm_near_convex with a capped term lm (its raised term
  * lm * DOPUS_LM_RAISE tested, the prepared term at the maximum: no certificate) on the stage
  * blocks Ht (N nw x nw), Phit (N nx x nw) and A_N (nx x nx), column-major; P out: the
  * test's P (nx x nx) when it returns (P_1 after a pass, P_(k+1) after a refusal at stage k).
  * lm_start: the term dopus_lm_start reaches from 0 on the same blocks. */
-static {name}_ring ring;
-static void vec_fill(const {name}_real *Ht, const {name}_real *Phit)
-{{
-    int k, i;
-    {name}_ring_reset(&ring);
-    for (k = 0; k < {NAME}_N; ++k) {{
-        {name}_stage_slot *slot = {name}_ring_stage(&ring, k);
-        for (i = 0; i < {NAME}_NW * {NAME}_NW; ++i)
-            slot->Ht[i] = Ht[k * {NAME}_NW * {NAME}_NW + i];
-        for (i = 0; i < {NAME}_NX * {NAME}_NW; ++i)
-            slot->Phit[i] = Phit[k * {NAME}_NX * {NAME}_NW + i];
-    }}
-}}
 int vec_test(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *A_N, {name}_real scale,
              {name}_real lm, {name}_real *P);
 int vec_test(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *A_N, {name}_real scale,
@@ -291,7 +295,7 @@ int vec_test(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *
     {name}_real work[{NAME}_LM_WORK];
     {name}_lm st;
     int i, r;
-    vec_fill(Ht, Phit);
+    ring_fill(Ht, Phit);
     {name}_lm_reset(&st, 1, 0.0);
     st.lm = lm;
     st.scale = scale;
@@ -306,7 +310,7 @@ int vec_test(const {name}_real *Ht, const {name}_real *Phit, const {name}_real *
 {{
     {name}_real work[{NAME}_LM_WORK];
     {name}_lm st;
-    vec_fill(Ht, Phit);
+    ring_fill(Ht, Phit);
     {name}_lm_reset(&st, 1, 0.0);
     {name}_lm_start(&st, &ring, A_N, work);
     return st.lm;
@@ -334,28 +338,11 @@ def _vec_library(disc, tmp_path, vec: int):
     """The lm and ring modules with _VEC_HARNESS, the two-wide vectors on (vec = 1, the
     default on x86-64 and AArch64) or off (DOPUS_LAI_VEC = 0, prefixed with the problem name in
     the generated folder: the plain loops)."""
-    import subprocess
-
-    import cffi
-
-    from dopus_codegen.codegen.flags import DEFAULT_OPT, PIC, STRICT_CFLAGS
-    from dopus_codegen.codegen.generate import generate
-
-    folder = tmp_path / "gen"
-    if not folder.exists():
-        generate(disc, folder, offline_guess=False)
-    name = disc.data.name
-    src = tmp_path / "vec.c"
-    src.write_text(_VEC_HARNESS.format(name=name, NAME=name.upper()))
-    so = tmp_path / f"libvec{vec}.so"
-    subprocess.run(["cc", *STRICT_CFLAGS, DEFAULT_OPT, PIC, f"-D{name.upper()}_LAI_VEC={vec}", "-shared", f"-I{folder}",
-                    str(src), str(folder / f"{name}_lm.c"), str(folder / f"{name}_ring.c"), "-o", str(so), "-lm"],
-                   check=True)
-    ffi = cffi.FFI()
-    ffi.cdef("int vec_test(const double *Ht, const double *Phit, const double *A_N, double scale, double lm,"
-             " double *P); double vec_start(const double *Ht, const double *Phit, const double *A_N);"
-             " void vec_predict(const double *in, double *F_w, double *phi, double *g);")
-    return ffi, ffi.dlopen(str(so))
+    return _harness_library(disc, tmp_path, _VEC_HARNESS,
+                            "int vec_test(const double *Ht, const double *Phit, const double *A_N, double scale,"
+                            " double lm, double *P); double vec_start(const double *Ht, const double *Phit,"
+                            " const double *A_N); void vec_predict(const double *in, double *F_w, double *phi,"
+                            " double *g);", f"vec{vec}", (f"{disc.data.name.upper()}_LAI_VEC={vec}",))
 
 
 def _riccati_P(H, Phi, A_N, lm, tol):
