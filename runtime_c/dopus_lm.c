@@ -284,14 +284,18 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
             }
         }
 #if DOPUS_LM_VEC
-        /* K' (nx x nu) in Y's place, then P down the columns two rows at a time */
+        /* K' (nx x nu) in Y's place, then P down the columns two rows at a time (an odd last
+         * row by the plain loop below) */
         for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
             for (i = 0; i < DOPUS_NX; ++i) {
                 Y[i + (l - DOPUS_NX) * DOPUS_NX] = Z[l + i * DOPUS_NW];
             }
         }
+#endif
         for (j = 0; j < DOPUS_NX; ++j) {
-            for (i = j; i + 2 <= DOPUS_NX; i += 2) {
+            i = j;
+#if DOPUS_LM_VEC
+            for (; i + 2 <= DOPUS_NX; i += 2) {
                 dopus_lai_v2 p2 = dopus_lai_v2_load(Z + i + j * DOPUS_NW);
                 for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
                     const dopus_lai_v2 kj = {Z[l + j * DOPUS_NW], Z[l + j * DOPUS_NW]};
@@ -301,27 +305,16 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
                 P[j + i * DOPUS_NX] = p2[0];
                 P[j + (i + 1) * DOPUS_NX] = p2[1];
             }
-            if (i < DOPUS_NX) {
-                v = Z[i + j * DOPUS_NW];
-                for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
-                    v -= Z[l + i * DOPUS_NW] * Z[l + j * DOPUS_NW];
-                }
-                P[i + j * DOPUS_NX] = v;
-                P[j + i * DOPUS_NX] = v;
-            }
-        }
-#else
-        for (j = 0; j < DOPUS_NX; ++j) {
-            for (i = j; i < DOPUS_NX; ++i) {
-                v = Z[i + j * DOPUS_NW];
-                for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
-                    v -= Z[l + i * DOPUS_NW] * Z[l + j * DOPUS_NW];
-                }
-                P[i + j * DOPUS_NX] = v;
-                P[j + i * DOPUS_NX] = v;
-            }
-        }
 #endif
+            for (; i < DOPUS_NX; ++i) {
+                v = Z[i + j * DOPUS_NW];
+                for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
+                    v -= Z[l + i * DOPUS_NW] * Z[l + j * DOPUS_NW];
+                }
+                P[i + j * DOPUS_NX] = v;
+                P[j + i * DOPUS_NX] = v;
+            }
+        }
     }
     return 1;
 }

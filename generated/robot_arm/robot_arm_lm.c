@@ -284,14 +284,18 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
             }
         }
 #if ROBOT_ARM_LM_VEC
-        /* K' (nx x nu) in Y's place, then P down the columns two rows at a time */
+        /* K' (nx x nu) in Y's place, then P down the columns two rows at a time (an odd last
+         * row by the plain loop below) */
         for (l = ROBOT_ARM_NX; l < ROBOT_ARM_NW; ++l) {
             for (i = 0; i < ROBOT_ARM_NX; ++i) {
                 Y[i + (l - ROBOT_ARM_NX) * ROBOT_ARM_NX] = Z[l + i * ROBOT_ARM_NW];
             }
         }
+#endif
         for (j = 0; j < ROBOT_ARM_NX; ++j) {
-            for (i = j; i + 2 <= ROBOT_ARM_NX; i += 2) {
+            i = j;
+#if ROBOT_ARM_LM_VEC
+            for (; i + 2 <= ROBOT_ARM_NX; i += 2) {
                 robot_arm_lai_v2 p2 = robot_arm_lai_v2_load(Z + i + j * ROBOT_ARM_NW);
                 for (l = ROBOT_ARM_NX; l < ROBOT_ARM_NW; ++l) {
                     const robot_arm_lai_v2 kj = {Z[l + j * ROBOT_ARM_NW], Z[l + j * ROBOT_ARM_NW]};
@@ -301,27 +305,16 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
                 P[j + i * ROBOT_ARM_NX] = p2[0];
                 P[j + (i + 1) * ROBOT_ARM_NX] = p2[1];
             }
-            if (i < ROBOT_ARM_NX) {
-                v = Z[i + j * ROBOT_ARM_NW];
-                for (l = ROBOT_ARM_NX; l < ROBOT_ARM_NW; ++l) {
-                    v -= Z[l + i * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
-                }
-                P[i + j * ROBOT_ARM_NX] = v;
-                P[j + i * ROBOT_ARM_NX] = v;
-            }
-        }
-#else
-        for (j = 0; j < ROBOT_ARM_NX; ++j) {
-            for (i = j; i < ROBOT_ARM_NX; ++i) {
-                v = Z[i + j * ROBOT_ARM_NW];
-                for (l = ROBOT_ARM_NX; l < ROBOT_ARM_NW; ++l) {
-                    v -= Z[l + i * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
-                }
-                P[i + j * ROBOT_ARM_NX] = v;
-                P[j + i * ROBOT_ARM_NX] = v;
-            }
-        }
 #endif
+            for (; i < ROBOT_ARM_NX; ++i) {
+                v = Z[i + j * ROBOT_ARM_NW];
+                for (l = ROBOT_ARM_NX; l < ROBOT_ARM_NW; ++l) {
+                    v -= Z[l + i * ROBOT_ARM_NW] * Z[l + j * ROBOT_ARM_NW];
+                }
+                P[i + j * ROBOT_ARM_NX] = v;
+                P[j + i * ROBOT_ARM_NX] = v;
+            }
+        }
     }
     return 1;
 }

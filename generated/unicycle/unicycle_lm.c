@@ -284,14 +284,18 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
             }
         }
 #if UNICYCLE_LM_VEC
-        /* K' (nx x nu) in Y's place, then P down the columns two rows at a time */
+        /* K' (nx x nu) in Y's place, then P down the columns two rows at a time (an odd last
+         * row by the plain loop below) */
         for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
             for (i = 0; i < UNICYCLE_NX; ++i) {
                 Y[i + (l - UNICYCLE_NX) * UNICYCLE_NX] = Z[l + i * UNICYCLE_NW];
             }
         }
+#endif
         for (j = 0; j < UNICYCLE_NX; ++j) {
-            for (i = j; i + 2 <= UNICYCLE_NX; i += 2) {
+            i = j;
+#if UNICYCLE_LM_VEC
+            for (; i + 2 <= UNICYCLE_NX; i += 2) {
                 unicycle_lai_v2 p2 = unicycle_lai_v2_load(Z + i + j * UNICYCLE_NW);
                 for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
                     const unicycle_lai_v2 kj = {Z[l + j * UNICYCLE_NW], Z[l + j * UNICYCLE_NW]};
@@ -301,27 +305,16 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
                 P[j + i * UNICYCLE_NX] = p2[0];
                 P[j + (i + 1) * UNICYCLE_NX] = p2[1];
             }
-            if (i < UNICYCLE_NX) {
-                v = Z[i + j * UNICYCLE_NW];
-                for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
-                    v -= Z[l + i * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
-                }
-                P[i + j * UNICYCLE_NX] = v;
-                P[j + i * UNICYCLE_NX] = v;
-            }
-        }
-#else
-        for (j = 0; j < UNICYCLE_NX; ++j) {
-            for (i = j; i < UNICYCLE_NX; ++i) {
-                v = Z[i + j * UNICYCLE_NW];
-                for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
-                    v -= Z[l + i * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
-                }
-                P[i + j * UNICYCLE_NX] = v;
-                P[j + i * UNICYCLE_NX] = v;
-            }
-        }
 #endif
+            for (; i < UNICYCLE_NX; ++i) {
+                v = Z[i + j * UNICYCLE_NW];
+                for (l = UNICYCLE_NX; l < UNICYCLE_NW; ++l) {
+                    v -= Z[l + i * UNICYCLE_NW] * Z[l + j * UNICYCLE_NW];
+                }
+                P[i + j * UNICYCLE_NX] = v;
+                P[j + i * UNICYCLE_NX] = v;
+            }
+        }
     }
     return 1;
 }
