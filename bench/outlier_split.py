@@ -32,16 +32,8 @@ from dopus_codegen.studies import loops
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
+from harness.compare import rel_err, iterate_err  # noqa: E402
 from harness.qp_harness import build_qp_solver  # noqa: E402
-
-FIELDS = ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu")
-
-
-def rel_err(c, r) -> float:
-    c, r = np.asarray(c), np.asarray(r)
-    if r.size == 0:
-        return 0.0
-    return float(np.max(np.abs(c - r)) / max(1.0, float(np.max(np.abs(r)))))
 
 
 def stationarity(qp: dict, sol: dict) -> tuple:
@@ -106,7 +98,7 @@ def main() -> None:
             print(f"  instant {it}, the predicted step's QP: {predicted_qp(r, a.qp_tol, harness)}")
         loops.prepare(c)
         loops.prepare(r)
-        e = max(rel_err(getattr(c, f), getattr(r, f)) for f in FIELDS)
+        e = iterate_err(c, r)
         print(f"instant {it}: status {fc.status}/{fr.status}, lm after feedback {lm_fb[0]:.6g}/{lm_fb[1]:.6g}, "
               f"after prepare {c.lm:.6g}/{r.lm:.6g}, instant work {c.work - w0[0]:g}/{r.work - w0[1]:g}, "
               f"work {c.work:g}/{r.work:g}, kkt {c.kkt_proxy:.4g}/{r.kkt_proxy:.4g}, iterates {e:.2g}, "

@@ -34,17 +34,10 @@ from dopus_codegen.studies import loops
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
+from harness.compare import FIELDS, rel_err  # noqa: E402
 from harness.qp_harness import build_qp_solver  # noqa: E402
 
-FIELDS = ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu")
 TOL = 1e-14
-
-
-def rel_err(c, r) -> float:
-    c, r = np.asarray(c), np.asarray(r)
-    if r.size == 0:
-        return 0.0
-    return float(np.max(np.abs(c - r)) / max(1.0, float(np.max(np.abs(r)))))
 
 
 def iterate_err(a, b) -> tuple:

@@ -19,20 +19,13 @@ from dopus_codegen.errors import qp_status_code
 from dopus_codegen.reference.dopus import ReferenceDopus
 from dopus_codegen.reference.offline import solve_ocp
 from dopus_codegen.runtime.solver import CSolver, DopusError
+from harness.compare import FIELDS, rel_err, iterate_err
 
 REL_TOL = 1e-9
 ILL_TOL = 1e-7    # an instant whose QPs are ill-determined (counted, see closed_loop)
 QP_TOL = 1e-14
-FIELDS = ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu")
 QP_DEADLINE = qp_status_code("deadline")
 QP_FAILED = {qp_status_code(name) for name in ("primal_infeasible", "dual_infeasible", "numerical", "stalled")}
-
-
-def rel_err(c, r) -> float:
-    c, r = np.asarray(c), np.asarray(r)
-    if r.size == 0:
-        return 0.0
-    return float(np.max(np.abs(c - r)) / max(1.0, float(np.max(np.abs(r)))))
 
 
 def pair(disc, budget, adaptive=None, **kw):
@@ -68,7 +61,7 @@ def closed_loop(disc, guess, c, r, iters, disturb_at=(0,)):
         assert c.budget_used == r.budget_used, where
         assert c.recomputed == r.recomputed, where
         assert c.work == r.work, where
-        e = max(rel_err(getattr(c, f), getattr(r, f)) for f in FIELDS)
+        e = iterate_err(c, r)
         assert e <= ILL_TOL, f"{where}: the iterates differ by {e:.2e} relative"
         if e > REL_TOL:
             ill.append((it, e))
@@ -279,7 +272,7 @@ def test_c_equals_reference_with_the_qp_cut(robot_disc, robot_solution):
         if u_next is not None:
             lo, up = np.asarray(robot_disc.lbu, float), np.asarray(robot_disc.ubu, float)
             assert np.array_equal(ur, np.clip(u_next, lo, up))
-        e = max(rel_err(getattr(c, f), getattr(r, f)) for f in FIELDS)
+        e = iterate_err(c, r)
         assert e <= REL_TOL and rel_err(uc, ur) <= REL_TOL, (it, e)
         for b in (c, r):
             b.prepare()
@@ -419,7 +412,7 @@ def _outlier_loop(disc, guess, c, r, budget, v, K, start=5, iters=40, unusable=N
         assert (fc.status, pc) == (fr.status, pr), where
         assert c.work == r.work and c.recoveries == r.recoveries, where
         assert c.work - w0 <= budget + (1 if bad else 0), (where, c.work - w0)
-        e = max(rel_err(getattr(c, f), getattr(r, f)) for f in FIELDS)
+        e = iterate_err(c, r)
         assert e <= REL_TOL and rel_err(fc.u0, fr.u0) <= REL_TOL, (where, e)
         statuses.append(fc.status or pc)
         x = np.array(disc.stage_eval(x, fr.u0, p0)[0], dtype=float).reshape(-1)

@@ -29,18 +29,12 @@ from dopus_codegen.reference.qp import qp_kkt_residual
 from dopus_codegen.reference.dopus import ReferenceDopus
 from dopus_codegen.errors import status_code
 from dopus_codegen.runtime.solver import CSolver, DopusError
+from harness.compare import FIELDS, rel_err
 
 REL_TOL = 1e-9
 QP_TOL = 1e-14
 QP_KKT_TOL = 1e-11
 KKT_FLOOR = 1e-8
-FIELDS = ("x", "u", "lam", "mu_g", "mu_b", "mu_bN", "mu_r", "nu")
-
-
-def rel_err(c: np.ndarray, r: np.ndarray) -> float:
-    if r.size == 0:
-        return 0.0
-    return float(np.max(np.abs(c - r)) / max(1.0, float(np.max(np.abs(r)))))
 
 
 class Tally:
