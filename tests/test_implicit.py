@@ -3,7 +3,9 @@
 - Their interval maps against CVODES (BDF, tolerances 1e-13) on the stiff example, where
   RK4 needs about 20 substeps per interval to be stable and as accurate.
 - Their sensitivities (implicit function theorem, forward over adjoint) against central
-  finite differences of the interval map and of the stage gradient.
+  finite differences of the interval map and of the stage gradient; Phi and the Hessian
+  taken on the inlined interval graph (the default) against the substep's derivative
+  kernels (``directions="one"``, ``"all"``).
 - On a non-stiff problem (the unicycle) IPOPT's solution with Gauss-Legendre equals the one
   with RK4 within the discretisation difference.
 - The stiff example: both backends reach IPOPT's solution of the same discretisation, and
@@ -116,6 +118,26 @@ def test_implicit_sensitivities_by_finite_differences(stiff, integ):
     # the gradient's dynamics part is -Phi' lam (node part: gL at lam = 0)
     g0 = np.array(d.stage_grad(x, u, [], np.zeros(d.nx), [])[0]).ravel()
     np.testing.assert_allclose(gL(w) - g0, -Phi.T @ lam, rtol=0, atol=1e-12 * (1 + np.abs(Phi).max()))
+
+
+@pytest.mark.parametrize("directions", ["one", "all"])
+def test_implicit_kernels_equal_the_inlined_graph(stiff, directions):
+    """Two constructions of Phi and the dynamics' Hessian: the default (forward over reverse
+    on the interval's graph with the substeps inlined) and the forward and
+    forward-over-adjoint kernels of one substep (``directions="one"``/``"all"``)."""
+    d = build_functions(stiff.build(RadauIIA(2, 2, 4)))
+    dk = build_functions(stiff.build(RadauIIA(2, 2, 4, directions=directions)))
+    rng = np.random.default_rng(11)
+    for _ in range(3):
+        x = np.array([0.3, 1.0, 0.5]) + 0.2 * rng.standard_normal(d.nx)
+        u = 2.0 + rng.standard_normal(d.nu)
+        lam, mu_g = rng.standard_normal(d.nx), rng.standard_normal(d.ng)
+        for fn, fk in ((d.stage_hess_exact, dk.stage_hess_exact), (d.stage_hess_gn, dk.stage_hess_gn)):
+            for a, b in zip(fn(x, u, [], lam, mu_g), fk(x, u, [], lam, mu_g)):
+                a, b = np.array(a), np.array(b)
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * (1 + np.abs(b).max(initial=0.0)))
+        np.testing.assert_array_equal(np.array(d.stage_grad(x, u, [], lam, mu_g)[0]),
+                                      np.array(dk.stage_grad(x, u, [], lam, mu_g)[0]))
 
 
 def test_non_stiff_problem_same_solution_as_rk4_within_discretisation():
