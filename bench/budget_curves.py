@@ -43,6 +43,19 @@ and instruction budgets, ENVELOPE_FRACTIONS of the reference above the bisection
 Prints the tables, writes bench/results/budget_curves.json and bench/results/budget_curves.png.
 
     .venv/bin/python bench/budget_curves.py [--problems robot_arm,chain] [--parts work,time,m7] [--repeat 3]
+
+A fine grid on the emulated Cortex-M7 (--grid START:STOP:STEP, millions of instructions; no
+bisection): the reference (the full RTI without a budget), then every budget of the grid for
+each of --grid-settings (in that order per budget), each run read by ``m7_figures`` as the
+curve reads its budgets, plus the feedback QPs the deadline cut, the stages re-linearised per
+instant from the event on and the budget left unused at the cut instants. A grid budget is
+``int(v * 1e6)`` of the grid value v rounded to the decimals given (2.03 M is 2 029 999
+instructions, as in the grid of bench/issue24/measurements.md section 15, which this
+reproduces). Prints one line per budget and the criterion per setting (+ meets it, - misses
+it by the RMS alone, F failed instants), writes the JSON (--out, default
+bench/results/m7_fine_grid.json) and its plot beside it (.png).
+
+    .venv/bin/python bench/budget_curves.py --problems robot_arm --grid 1.40:2.60:0.03 [--grid-settings adaptive,full]
 """
 from __future__ import annotations
 
@@ -74,6 +87,7 @@ M7_RESOLUTION = 0.01
 # the robust reading: fractions of the reference (time, instructions) evaluated above the
 # needed budget besides the curve's grid, halving the grid's steps above one iteration
 ENVELOPE_FRACTIONS = (1.125, 1.375, 1.75)
+FLAG_QP_CUT = 256       # DOPUS_FLAG_QP_CUT (runtime_c/dopus_solver.h): the deadline's cut QP was the step
 
 
 def costs(N):
@@ -176,19 +190,27 @@ def m7_figures(disc, sc, recs, kind, budget, signal):
             "extra_iterations": int(sum(r["extra"] for r in recs))}
 
 
-def m7_part(disc, signal, log=print):
-    """The firmware image of the problem's scenario and the figures of its closed loops on
-    the emulated Cortex-M7 (double): (evaluate(budget, kind), reference, no-budget rows, scenario)."""
+def m7_image(disc):
+    """The firmware image of the problem's scenario (dopus_lab.firmware.scenario_image)."""
     from dopus_lab import firmware as fwm
 
-    img = fwm.scenario_image(disc, ROOT / "bench" / "results" / "firmware_scenario" / disc.name,
-                             progress=lambda *_: None)
+    return fwm.scenario_image(disc, ROOT / "bench" / "results" / "firmware_scenario" / disc.name,
+                              progress=lambda *_: None)
+
+
+def m7_part(disc, signal, log=print, plain_kinds=KINDS):
+    """The firmware image of the problem's scenario and the figures of its closed loops on
+    the emulated Cortex-M7 (double): (evaluate(budget, kind), reference, no-budget rows, scenario);
+    ``plain_kinds``: the settings run without a budget (the full RTI, the reference, among them)."""
+    from dopus_lab import firmware as fwm
+
+    img = m7_image(disc)
     sc = img["scenario"]
 
     def evaluate(b, kind):
         return m7_figures(disc, sc, fwm.run_scenario(img, kind, int(b)), kind, int(b), signal)
 
-    plain = {kind: evaluate(0, kind) for kind in KINDS}
+    plain = {kind: evaluate(0, kind) for kind in plain_kinds}
     return evaluate, plain["full"], plain, sc
 
 
@@ -312,6 +334,109 @@ def problem(name, parts, step, repeat=3, log=print):
     return out
 
 
+def grid_budgets(spec):
+    """``START:STOP:STEP`` (millions of instructions) -> the grid's budgets in instructions:
+    ``int(v * 1e6)`` of each value v = START + i STEP rounded to the decimals given."""
+    parts = spec.split(":")
+    if len(parts) != 3:
+        raise ValueError(f"expected START:STOP:STEP, got {spec!r}")
+    start, stop, step = (float(v) for v in parts)
+    dec = max(len(v.split(".")[1]) if "." in v else 0 for v in parts)
+    n = round((stop - start) / step)
+    if step <= 0 or start <= 0 or n < 0 or abs(start + n * step - stop) > 1e-9 * max(1.0, stop):
+        raise ValueError(f"{spec!r}: START > 0, STEP > 0 and STOP = START + n STEP for some n >= 0")
+    return [int(round(start + i * step, dec) * 1e6) for i in range(n + 1)]
+
+
+def grid_row(disc, sc, recs, kind, budget, signal, ref):
+    """One row of the fine grid: the curve's figures of the run (``m7_figures``) and the
+    feedback QPs the deadline cut (QP status 7), the stages re-linearised per instant from the
+    event on and the median of the budget left unused at the instants whose cut QP was the step
+    (flag DOPUS_FLAG_QP_CUT; for an even count the upper of the two middle values: an instant's
+    own figure)."""
+    fig = m7_figures(disc, sc, recs, kind, budget, signal)
+    cut = [r for r in recs if r.get("qp_status") == 7]
+    unused = [budget - r["instructions_instant"] for r in recs if (r.get("flags") or 0) & FLAG_QP_CUT]
+    after = recs[sc["event_step"] or 0:]
+    return {"setting": kind, "budget": budget, "rms_after": fig["rms_after"],
+            "rms_after_over_reference": fig["rms_after"] / ref["rms_after"], "failed": fig["failed"],
+            "qp_cut": len(cut), "median_instant": fig["instructions_median"],
+            "largest_instant": fig["instructions_max"], "extra_iterations": fig["extra_iterations"],
+            "meets": meets(fig, ref), "stages_per_instant_after_event": float(np.mean([r["stages"] for r in after])),
+            "unused_at_cut_instants": sorted(unused)[len(unused) // 2] if unused else None}
+
+
+def _mark(row):
+    return "F" if row["failed"] else "+" if row["meets"] else "-"
+
+
+def fine_grid(name, spec, kinds, log=print):
+    """Every budget of ``spec`` (START:STOP:STEP) for each setting of ``kinds`` on the emulated
+    Cortex-M7: the JSON of bench/issue24/m7_fine_grid_*.json."""
+    from dopus_lab import firmware as fwm
+    from dopus_lab.paths import checkout_commit
+
+    budgets = grid_budgets(spec)
+    ocp_file, signal = PROBLEMS[name]
+    disc = build_functions(load_ocp(ROOT / "examples" / ocp_file))
+    img = m7_image(disc)
+    sc = img["scenario"]
+    ref = m7_figures(disc, sc, fwm.run_scenario(img, "full", 0), "full", 0, signal)
+    reference = {k: ref[k] for k in ("rms_after", "instructions_median", "instructions_max")}
+    log(f"{name}: reference (full RTI, no budget) {signal} RMS after the event {ref['rms_after']:.6g}, "
+        f"instructions per instant median {ref['instructions_median']:.0f}, max {ref['instructions_max']:.0f}; "
+        f"{len(budgets)} budgets x {len(kinds)} settings", flush=True)
+    rows = []
+    for b in budgets:
+        for kind in kinds:
+            r = grid_row(disc, sc, fwm.run_scenario(img, kind, b), kind, b, signal, ref)
+            rows.append(r)
+            log(f"  {kind:<9} {b / 1e6:.3f}M {_mark(r)} RMS after / reference {r['rms_after_over_reference']:.3f}, "
+                f"failed {r['failed']}, cut QPs {r['qp_cut']}, instants median {r['median_instant'] / 1e6:.3f}M, "
+                f"largest {r['largest_instant'] / 1e6:.3f}M, stages per instant after the event "
+                f"{r['stages_per_instant_after_event']:.3f}", flush=True)
+    for kind in kinds:
+        mine = [r for r in rows if r["setting"] == kind]
+        log(f"{kind:<9} meets the criterion at {sum(r['meets'] for r in mine)} of {len(mine)} budgets: "
+            + " ".join(f"{r['budget'] / 1e6:.2f}:{_mark(r)}" for r in mine))
+    lo, hi, st = spec.split(":")
+    return {"problem": name, "commit": checkout_commit(),
+            "what": f"emulated Cortex-M7 (double), the {name.replace('_', ' ')}'s scenario, every budget of a fine "
+                    f"grid ({lo} to {hi} M instructions, step {st} M); criterion: no failed instant and {signal} RMS "
+                    f"after the event at most {1 + TOL:g} of the full RTI's without a budget",
+            "reference": reference, "rows": rows}
+
+
+def plot_grid(out, path):
+    """The fine grid: RMS after the event over the reference's and the cut feedback QPs per
+    budget, one line per setting (x: failed instants)."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return
+    fig, ax = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    for kind in dict.fromkeys(r["setting"] for r in out["rows"]):
+        rows = [r for r in out["rows"] if r["setting"] == kind]
+        x = [r["budget"] / 1e6 for r in rows]
+        line, = ax[0].plot(x, [r["rms_after_over_reference"] for r in rows], ".-", label=kind)
+        bad = [(xi, r["rms_after_over_reference"]) for xi, r in zip(x, rows) if r["failed"]]
+        if bad:
+            ax[0].plot(*zip(*bad), "x", color=line.get_color())
+        ax[1].plot(x, [r["qp_cut"] for r in rows], ".-", color=line.get_color(), label=kind)
+    ax[0].axhline(1 + TOL, color="k", lw=0.8)
+    ax[0].set_yscale("log")
+    ax[0].set_ylabel("RMS after the event / full RTI's")
+    at = f" on {out['commit']}" if out["commit"] else ""
+    ax[0].set_title(f"{out['problem']}, emulated Cortex-M7, fine grid{at} (x: failed instants)", fontsize=10)
+    ax[0].legend(fontsize=8)
+    ax[1].set_ylabel("feedback QPs cut by the deadline")
+    ax[1].set_xlabel("budget per instant (M instructions)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
 def _over(a, b):
     return None if a is None or b is None else a / b
 
@@ -376,20 +501,45 @@ def plot(out, path):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--problems", default="robot_arm,chain", help="comma-separated: robot_arm, chain")
+    ap.add_argument("--problems", default=None, help="comma-separated: robot_arm, chain (default both; "
+                    "with --grid one, default robot_arm)")
     ap.add_argument("--parts", default="work,time", help="comma-separated: work, time, m7 (the emulated "
                     "Cortex-M7 in double, instructions; needs the firmware toolchain)")
     ap.add_argument("--repeat", type=int, default=3, help="runs per time budget, the median of each figure "
                     "(default 3)")
     ap.add_argument("--step", type=int, default=8, help="work units between grid points (default 8)")
-    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "budget_curves.json"))
+    ap.add_argument("--grid", default=None, metavar="START:STOP:STEP",
+                    help="a fine grid on the emulated Cortex-M7 instead of the curves: every budget from START "
+                         "to STOP millions of instructions in steps of STEP (e.g. 1.40:2.60:0.03)")
+    ap.add_argument("--grid-settings", default="adaptive,full",
+                    help="with --grid: comma-separated settings, each budget's runs in this order (default "
+                         "adaptive,full)")
+    ap.add_argument("--out", default=None, help="the JSON (default bench/results/budget_curves.json, with --grid "
+                    "bench/results/m7_fine_grid.json); the plot beside it")
     a = ap.parse_args(argv)
-    names = [n for n in a.problems.split(",") if n]
+    if a.grid is not None:
+        names = [n for n in (a.problems or "robot_arm").split(",") if n]
+        kinds = [k for k in a.grid_settings.split(",") if k]
+        try:
+            grid_budgets(a.grid)
+        except ValueError as e:
+            ap.error(f"--grid: {e}")
+        bad = [n for n in names if n not in PROBLEMS] + [k for k in kinds if k not in KINDS]
+        if bad or len(names) != 1 or not kinds:
+            ap.error(f"unknown problem or setting {bad}" if bad else "--grid takes one problem and a setting")
+        path = pathlib.Path(a.out or ROOT / "bench" / "results" / "m7_fine_grid.json")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        out = fine_grid(names[0], a.grid, kinds)
+        path.write_text(json.dumps(out, indent=1))
+        plot_grid(out, path.with_suffix(".png"))
+        print(f"wrote {path}")
+        return
+    names = [n for n in (a.problems or "robot_arm,chain").split(",") if n]
     parts = [p for p in a.parts.split(",") if p]
     bad = [n for n in names if n not in PROBLEMS] + [p for p in parts if p not in ("work", "time", "m7")]
     if bad or a.step < 1 or a.repeat < 1:
         ap.error(f"unknown problem or part {bad}" if bad else "--step and --repeat must be at least 1")
-    path = pathlib.Path(a.out)
+    path = pathlib.Path(a.out or ROOT / "bench" / "results" / "budget_curves.json")
     path.parent.mkdir(parents=True, exist_ok=True)
     out = json.loads(path.read_text()) if path.exists() else {}
     for name in names:
