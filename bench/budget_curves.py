@@ -342,8 +342,8 @@ def grid_budgets(spec):
         raise ValueError(f"expected START:STOP:STEP, got {spec!r}")
     start, stop, step = (float(v) for v in parts)
     dec = max(len(v.split(".")[1]) if "." in v else 0 for v in parts)
-    n = round((stop - start) / step)
-    if step <= 0 or start <= 0 or n < 0 or abs(start + n * step - stop) > 1e-9 * max(1.0, stop):
+    n = round((stop - start) / step) if step > 0 else -1
+    if start <= 0 or n < 0 or abs(start + n * step - stop) > 1e-9 * max(1.0, stop):
         raise ValueError(f"{spec!r}: START > 0, STEP > 0 and STOP = START + n STEP for some n >= 0")
     return [int(round(start + i * step, dec) * 1e6) for i in range(n + 1)]
 

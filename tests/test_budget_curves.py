@@ -144,3 +144,20 @@ def test_robust_reading_from_evaluated_rows():
     assert 3_141_593 <= need < 3_141_593 + 10_000
     del rows[6_000_000]
     assert bc.envelope({b: bc.meets(r, ref) for b, r in rows.items()}) == need
+
+
+def test_fine_grid_budgets():
+    """--grid START:STOP:STEP gives the budgets of the stored fine grid of
+    bench/issue24/measurements.md section 15 (each budget, both settings, in its JSON), a
+    sub-grid of it gives its own budgets, and a STEP that does not reach STOP is refused."""
+    import json
+
+    stored = json.loads((ROOT / "bench" / "issue24" / "m7_fine_grid_main_6caedf5.json").read_text())
+    budgets = bc.grid_budgets("1.40:2.60:0.03")
+    assert budgets == sorted({r["budget"] for r in stored["rows"]})
+    assert [(r["budget"], r["setting"]) for r in stored["rows"]] == [(b, k) for b in budgets
+                                                                     for k in ("adaptive", "full")]
+    assert bc.grid_budgets("2.00:2.06:0.03") == budgets[20:23]
+    for bad in ("1.40:2.60", "1.40:2.61:0.03", "1.40:2.60:0", "2.60:1.40:0.03", "a:b:c"):
+        with pytest.raises(ValueError):
+            bc.grid_budgets(bad)
