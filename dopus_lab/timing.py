@@ -51,9 +51,15 @@ class Ours:
         self.spec = spec
         self.name, self.N, self.nx, self.nu = spec["name"], spec["N"], spec["nx"], spec["nu"]
         self.phase_names = list(spec.get("phases", []))
-        self.ffi, self.lib, _meta = load_library(spec["folder"])
+        self.ffi, self.lib, meta = load_library(spec["folder"])
         n = self.name
-        # the plant: the generated discrete model phi (the OCP file's integrator and substeps)
+        # the plant: the generated discrete model phi (the OCP file's integrator and substeps).
+        # A scaled problem's stage_eval is phi_s(xs, us) = phi(Dx xs, Du us) / Dx in the solver's
+        # variables (docs/algorithm.md section 16); the plant speaks the declared units, as
+        # <name>_simulate does: x / Dx and u / Du in, phi_s Dx out
+        scaling = meta.get("scaling") or {}
+        self.scale_x = np.array(scaling.get("x") or np.ones(self.nx), float).reshape(self.nx)
+        self.scale_u = np.array(scaling.get("u") or np.ones(self.nu), float).reshape(self.nu)
         self.ffi.cdef(f"int {n}_stage_eval(const double** arg, double** res, int* iw, double* w, int mem);"
                       f"int {n}_stage_eval_work(int *sz_arg, int* sz_res, int *sz_iw, int *sz_w);"
                       f"int {n}_stage_eval_n_out(void);", override=True)
@@ -156,8 +162,8 @@ class Ours:
     def plant(self, x, u, instant=None):
         """One step of the generated discrete model phi(x, u, p) (p: p0, or the schedule's row
         of the sampling instant)."""
-        xa = np.ascontiguousarray(x, dtype=float)
-        ua = np.ascontiguousarray(u, dtype=float)
+        xa = np.ascontiguousarray(np.asarray(x, dtype=float).reshape(self.nx) / self.scale_x)
+        ua = np.ascontiguousarray(np.asarray(u, dtype=float).reshape(self.nu) / self.scale_u)
         pa = self.p0 if self.schedule is None or instant is None else np.ascontiguousarray(self.schedule[instant])
         self._arg[0] = self.ffi.cast("double *", xa.ctypes.data)
         self._arg[1] = self.ffi.cast("double *", ua.ctypes.data)
@@ -168,7 +174,7 @@ class Ours:
         st = self.c("stage_eval")(self._arg, self._res, self._iw, self._w, 0)
         if st != 0:
             raise RuntimeError(f"{self.name}_stage_eval returned {st}")
-        return np.frombuffer(self.ffi.buffer(self._phi, 8 * self.nx), dtype=float).copy()
+        return np.frombuffer(self.ffi.buffer(self._phi, 8 * self.nx), dtype=float) * self.scale_x
 
 
 # ===================================================================== acados
