@@ -319,3 +319,54 @@ def test_headline_gives_no_ratio_for_a_pair_with_a_qp_failure():
             # the exact-Hessian setting failed a QP in the closed loop: no ratio in any phase
             assert "ratio" not in row and row["failed"]["acados exact fastest working"] == 1, (phase, name)
         assert h["feedback latency (us, median)"]["M=1"] == pytest.approx(50.0 * scale)
+
+
+def test_bench_of_a_scaled_problem_plants_in_declared_units(tmp_path):
+    """examples/cstr.py declares scales (docs/algorithm.md section 16): the generated phi works
+    in the solver's variables, the bench's plant in the declared units. Its plant steps IPOPT's
+    nominal solution (the declared NLP, the same Radau IIA discretisation) node to node; the
+    bench's loops from that solution solve every QP, the closed loop equals CSolver's replayed
+    against the declared model, and its first control is IPOPT's at the initial state."""
+    from dopus_codegen import build_functions, load_ocp
+    from dopus_codegen.reference.offline import solve_ocp
+    from dopus_codegen.runtime.solver import CSolver, build_for
+    from dopus_lab.bench import run_bench
+    from dopus_lab.timing import Ours
+
+    path = Path(SECOND_FILE).parent / "cstr.py"
+    disc = build_functions(load_ocp(path))
+    assert disc.scaling is not None
+    nominal, info = solve_ocp(disc, disc.x0)
+    assert info["success"]
+    folder = build_for(disc)
+    spec = {"name": disc.name, "folder": str(folder), "N": disc.N, "nx": disc.nx, "nu": disc.nu,
+            "p0": np.asarray(disc.p0, float).reshape(-1).tolist()}
+    plant = Ours(spec).plant
+    xs, us = np.asarray(nominal.x, float), np.asarray(nominal.u, float)
+    for k in range(disc.N):
+        np.testing.assert_allclose(plant(xs[k], us[k]), xs[k + 1], rtol=1e-8, atol=1e-10)
+
+    res = run_bench(path, m_list="1,full", reps=10, settle=5, steps=15, kkt_iters=5, work=tmp_path,
+                    keep_samples=True)
+    for phase in ("operating point", "closed loop"):
+        for label in ("M=1", "full RTI"):
+            assert res["timed"][phase][label]["qp_failures"] == 0, (phase, label)
+    xd = np.array(disc.scenario.disturbance(np.array(disc.x0, float).copy()), float)
+    for label, M in (("M=1", 1), ("full RTI", disc.N - 1)):
+        got = res["samples"]["closed loop"][label]
+        s = CSolver(disc, M=M, mode="receding", hessian=res["settings"]["hessian"],
+                    regularization=res["settings"]["regularization"], lm=res["settings"]["lm"])
+        s.init(np.array(disc.x0, float), nominal)
+        x, replay = xd.copy(), [xd.copy()]
+        for _ in range(15):
+            u = s.feedback(x)
+            s.prepare()
+            x = np.array(disc.stage_eval(x, u, np.asarray(disc.p0, float).reshape(-1))[0], float).reshape(-1)
+            replay.append(x.copy())
+        np.testing.assert_allclose(np.array(got["x"]), np.array(replay), rtol=1e-9, atol=1e-12)
+    # the operating point's loop starts at the initial state from IPOPT's solution there: its
+    # first control and the state it leads to are IPOPT's
+    for label in ("M=1", "full RTI"):
+        op = res["trajectories"]["operating point"][label]
+        np.testing.assert_allclose(op["u"][0], us[0], rtol=1e-6)
+        np.testing.assert_allclose(op["x"][1], xs[1], rtol=1e-6)
