@@ -32,10 +32,13 @@ RHO, CP, DH, ER, K0, UA = 1000.0, 0.239, -5e4, 8750.0, 7.2e10, 5e4   # g/l, J/(g
 VJ, FJ, CPJ = 2.0, 400.0, 4.18                     # l, l/min, J/(g K)
 TC_MIN, TC_MAX = 280.0, 330.0                      # K
 T_MAX = 355.0                                      # K
-# the target: the steady state with cA = 0.5 mol/l (k(T) = q/V (cAf - cA) / cA = 1 1/min)
+# the target: the steady state with cA = 0.5 mol/l, the three ODEs below with dx/dt = 0 solved
+# in turn: dcA/dt = 0 gives the rate k(T) cA = q/V (cAf - cA) (k(T) = 1 1/min, T = E/R / ln k0);
+# dT/dt = 0 the jacket temperature, dTj/dt = 0 the coolant's (Tj 300.0 K, Tc 298.5 K)
 CA_REF = 0.5
-T_REF = ER / np.log(K0)                            # 351.4 K
-TJ_REF = T_REF - (Q / V * (T_REF - TF) - (-DH) / (RHO * CP) * CA_REF) / (UA / (V * RHO * CP))
+RATE_REF = Q / V * (CAF - CA_REF)                  # k(T_REF) CA_REF, mol/(l min)
+T_REF = ER / np.log(K0 * CA_REF / RATE_REF)        # 350.0 K
+TJ_REF = T_REF - (Q / V * (TF - T_REF) + (-DH) / (RHO * CP) * RATE_REF) / (UA / (V * RHO * CP))
 TC_REF = TJ_REF - UA / (RHO * CPJ * VJ) * (T_REF - TJ_REF) / (FJ / VJ)
 COST_SCALE = 10.0                                  # the cost's typical size (a few units of 10)
 N, DT = 30, 0.05                                   # intervals of 0.05 min (3 s)
