@@ -1,6 +1,6 @@
 """What scaling buys a float build of a model in physical units (docs/algorithm.md section 16).
 
-    python bench/float_scaling.py [--cost 1,10,30,100,300] [--iters 12] [--json OUT]
+    python bench/float_scaling.py [--cost 1,10,30,100,300] [--iters 20] [--json OUT]
 
 The reactor of ``examples/cstr.py`` (temperatures about 350 K), the warm-start study of
 ``dopus-gen converge`` with the generated C solver (full RTI and M = 1), built in double and
@@ -53,7 +53,7 @@ def study(ocp, iters: int) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cost", default="1,10,30,100,300", help="cost scales of the scaled builds")
-    ap.add_argument("--iters", type=int, default=12)
+    ap.add_argument("--iters", type=int, default=20)
     ap.add_argument("--json", type=Path, default=ROOT / "bench" / "results" / "float_scaling.json")
     args = ap.parse_args(argv)
     cases = [("no scales", cstr.build(scaled=False))]
