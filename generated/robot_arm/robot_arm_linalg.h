@@ -525,20 +525,7 @@ static inline robot_arm_real robot_arm_lai_max_abs_mat(int m, int n, const robot
             (out)[((m)-1) * (os)] = last_;                                                                   \
     } while (0)
 
-/* The lower triangle of C = H + A' B for n x n C and H, n x m A' (AT) and m x n B, all
- * column-major with the leading dimension of their row count (n, n, n and m); only H's lower
- * triangle is read. Each entry is one sum in the order of l, H(i, c) + sum_l AT(i, l) B(l, c)
- * with a multiply and an add per term, as the plain loop over l gives it: two rows of one
- * column per vector (never a sum split across lanes), so the same bits. Columns j, j + 1 are
- * formed together, two rows of both at a time in blocks of up to 4 vectors (2 x 4
- * accumulators in registers, 2 broadcasts and 1 load per term) and one load of AT's pair of rows for both columns; the
- * entries above the diagonal in those blocks are formed from 0 and never meant to be read.
- * The columns from j0 (their rows from the diagonal down); with early, a pair of columns whose
- * count of rows is odd starts a row early (its rows from j - 1, AT's row j - 1 read, C(j - 1,
- * j) and C(j - 1, j + 1) written), so that only the first pair can have an odd last row,
- * which is formed alone (as is the last column of an odd count, its diagonal entry). Used by
- * the QP's stage update (M = H + WT' Phi, compile-time j0 = 0: the loops over the columns and
- * the blocks unroll) and the lm test (Z = H + Phi' Y from a run-time j0). */
+/* The kernel of robot_arm_lai_v2_lower_atb (below): */
 /* s + sum_l AT(r, l) b[l], l = 0..m-1 in order (atr = AT + r, the leading dimension n) */
 static inline robot_arm_real robot_arm_lai_atb_entry(int n, int m, robot_arm_real s, const robot_arm_real *restrict atr,
                                              const robot_arm_real *restrict b)
@@ -590,6 +577,20 @@ static inline void robot_arm_lai_v2_atb_block(int n, int m, int nv, const robot_
     }
 }
 
+/* The lower triangle of C = H + A' B for n x n C and H, n x m A' (AT) and m x n B, all
+ * column-major with the leading dimension of their row count (n, n, n and m); only H's lower
+ * triangle is read. Each entry is one sum in the order of l, H(i, c) + sum_l AT(i, l) B(l, c)
+ * with a multiply and an add per term, as the plain loop over l gives it: two rows of one
+ * column per vector (never a sum split across lanes), so the same bits. Columns j, j + 1 are
+ * formed together, two rows of both at a time in blocks of up to 4 vectors (2 x 4
+ * accumulators in registers, 2 broadcasts and 1 load per term) and one load of AT's pair of rows for both columns; the
+ * entries above the diagonal in those blocks are formed from 0 and never meant to be read.
+ * The columns from j0 (their rows from the diagonal down); with early, a pair of columns whose
+ * count of rows is odd starts a row early (its rows from j - 1, AT's row j - 1 read, C(j - 1,
+ * j) and C(j - 1, j + 1) written), so that only the first pair can have an odd last row,
+ * which is formed alone (as is the last column of an odd count, its diagonal entry). Used by
+ * the QP's stage update (M = H + WT' Phi, compile-time j0 = 0: the loops over the columns and
+ * the blocks unroll) and the lm test (Z = H + Phi' Y from a run-time j0). */
 static inline void robot_arm_lai_v2_lower_atb(int n, int m, const robot_arm_real *restrict AT,
                                           const robot_arm_real *restrict B, const robot_arm_real *restrict H,
                                           robot_arm_real *restrict C, int j0, int early)
