@@ -581,41 +581,53 @@ static inline void dopus_lai_v2_atb_block(int n, int m, int nv, const dopus_real
  * column-major with the leading dimension of their row count (n, n, n and m); only H's lower
  * triangle is read. Each entry is one sum in the order of l, H(i, c) + sum_l AT(i, l) B(l, c)
  * with a multiply and an add per term, as the plain loop over l gives it: two rows of one
- * column per vector (never a sum split across lanes), so the same bits. Columns j, j + 1 are
- * formed together, two rows of both at a time in blocks of up to 4 vectors (2 x 4
- * accumulators in registers, 2 broadcasts and 1 load per term) and one load of AT's pair of rows for both columns; the
- * entries above the diagonal in those blocks are formed from 0 and never meant to be read.
- * The columns from j0 (their rows from the diagonal down); with early, a pair of columns whose
- * count of rows is odd starts a row early (its rows from j - 1, AT's row j - 1 read, C(j - 1,
- * j) and C(j - 1, j + 1) written), so that only the first pair can have an odd last row,
- * which is formed alone (as is the last column of an odd count, its diagonal entry). Used by
- * the QP's stage update (M = H + WT' Phi, compile-time j0 = 0: the loops over the columns and
- * the blocks unroll) and the lm test (Z = H + Phi' Y from a run-time j0). */
+ * column per vector (never a sum split across lanes), so the same bits. Used by the QP's stage
+ * update (M = H + WT' Phi, dopus_lai_v2_lower_atb) and the lm test (Z = H + Phi' Y from a
+ * run-time first column, its own loop over dopus_lai_v2_atb_cols2).
+ *
+ * dopus_lai_v2_atb_cols2: columns j and j + 1 (j + 1 < n), their rows from the diagonal down,
+ * two rows of both at a time in blocks of up to 4 vectors (2 x 4 accumulators in registers, 2
+ * broadcasts and one load of AT's pair of rows per term); the entries above the diagonal in
+ * those blocks are formed from 0 and never meant to be read. With early, a pair whose count of
+ * rows is odd starts a row early (its rows from j - 1: AT's row j - 1 read, C(j - 1, j) and
+ * C(j - 1, j + 1) written), so that only a pair from j = 0 can have an odd last row; without,
+ * the odd last row is formed alone. */
+static inline void dopus_lai_v2_atb_cols2(int n, int m, const dopus_real *restrict AT,
+                                          const dopus_real *restrict B, const dopus_real *restrict H,
+                                          dopus_real *restrict C, int j, int early)
+{
+    const dopus_real *b0 = B + j * m, *b1 = b0 + m, *h0 = H + j * n, *h1 = h0 + n;
+    dopus_real *c0 = C + j * n, *c1 = c0 + n;
+    const int r0 = early && (n - j) % 2 && j > 0 ? j - 1 : j;
+    int r;
+    DOPUS_UNROLL
+    for (r = r0; r + 8 <= n; r += 8)
+        dopus_lai_v2_atb_block(n, m, 4, AT, b0, b1, h0, h1, c0, c1, j, r);
+    /* the last block: the pairs of rows left (3, 2 or 1) */
+    if (n - r >= 6)
+        dopus_lai_v2_atb_block(n, m, 3, AT, b0, b1, h0, h1, c0, c1, j, r);
+    else if (n - r >= 4)
+        dopus_lai_v2_atb_block(n, m, 2, AT, b0, b1, h0, h1, c0, c1, j, r);
+    else if (n - r >= 2)
+        dopus_lai_v2_atb_block(n, m, 1, AT, b0, b1, h0, h1, c0, c1, j, r);
+    if ((n - r0) % 2) {
+        c0[n - 1] = dopus_lai_atb_entry(n, m, h0[n - 1], AT + n - 1, b0);
+        c1[n - 1] = dopus_lai_atb_entry(n, m, h1[n - 1], AT + n - 1, b1);
+    }
+}
+
+/* The whole triangle from column j0 = 0 with the loop over the pairs unrolled (compile-time
+ * sizes: the QP). A caller with a run-time j0 (the lm test) runs its own loop over the pairs of
+ * dopus_lai_v2_atb_cols2 without the pragma: clang cannot unroll a loop of run-time count
+ * around the unrolled blocks (-Wpass-failed), and GCC copies the pairs up to its bound. */
 static inline void dopus_lai_v2_lower_atb(int n, int m, const dopus_real *restrict AT,
                                           const dopus_real *restrict B, const dopus_real *restrict H,
-                                          dopus_real *restrict C, int j0, int early)
+                                          dopus_real *restrict C)
 {
-    int j, r;
+    int j;
     DOPUS_UNROLL
-    for (j = j0; j + 1 < n; j += 2) {
-        const dopus_real *b0 = B + j * m, *b1 = b0 + m, *h0 = H + j * n, *h1 = h0 + n;
-        dopus_real *c0 = C + j * n, *c1 = c0 + n;
-        const int r0 = early && (n - j) % 2 && j > 0 ? j - 1 : j;
-        DOPUS_UNROLL
-        for (r = r0; r + 8 <= n; r += 8)
-            dopus_lai_v2_atb_block(n, m, 4, AT, b0, b1, h0, h1, c0, c1, j, r);
-        /* the last block: the pairs of rows left (3, 2 or 1) */
-        if (n - r >= 6)
-            dopus_lai_v2_atb_block(n, m, 3, AT, b0, b1, h0, h1, c0, c1, j, r);
-        else if (n - r >= 4)
-            dopus_lai_v2_atb_block(n, m, 2, AT, b0, b1, h0, h1, c0, c1, j, r);
-        else if (n - r >= 2)
-            dopus_lai_v2_atb_block(n, m, 1, AT, b0, b1, h0, h1, c0, c1, j, r);
-        if ((n - r0) % 2) {
-            c0[n - 1] = dopus_lai_atb_entry(n, m, h0[n - 1], AT + n - 1, b0);
-            c1[n - 1] = dopus_lai_atb_entry(n, m, h1[n - 1], AT + n - 1, b1);
-        }
-    }
+    for (j = 0; j + 1 < n; j += 2)
+        dopus_lai_v2_atb_cols2(n, m, AT, B, H, C, j, 1);
     if (j < n)
         C[j + j * n] = dopus_lai_atb_entry(n, m, H[j + j * n], AT + j, B + j * m);
 }

@@ -51,7 +51,7 @@ static dopus_real dopus_lm_hessian_scale(const dopus_ring *ring, const dopus_rea
  * the cost is the multiply-adds and their loads; there each entry of Z is a dot product of
  * two contiguous columns of length nx (Phi's column i and Y's column j). The Riccati update
  * writes P's lower triangle and mirrors it. With two-wide vectors (DOPUS_LM_VEC) Y's columns
- * (DOPUS_LAI_V2_GEMV), Z's pairs of columns over a copy of Phi' (dopus_lai_v2_lower_atb, the
+ * (DOPUS_LAI_V2_GEMV), Z's pairs of columns over a copy of Phi' (dopus_lai_v2_atb_cols2, the
  * QP's kernel for its stage update; the rows of a pair from its diagonal) and the
  * update over a copy of K' run two entries at a time with their accumulators in registers,
  * every entry with the same operations in the same order. */
@@ -90,7 +90,13 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
             /* column j of Y: P times Phi's column j */
             DOPUS_LAI_V2_GEMV(DOPUS_NX, DOPUS_NX, P, Phi + j * DOPUS_NX, Y + j * DOPUS_NX, 1);
         }
-        dopus_lai_v2_lower_atb(DOPUS_NW, DOPUS_NX, PhiT, Y, H, Z, j0, 0);
+        for (j = j0; j + 1 < DOPUS_NW; j += 2) {
+            dopus_lai_v2_atb_cols2(DOPUS_NW, DOPUS_NX, PhiT, Y, H, Z, j, 0);
+        }
+        if (j < DOPUS_NW) {
+            Z[j + j * DOPUS_NW] =
+                dopus_lai_atb_entry(DOPUS_NW, DOPUS_NX, H[j + j * DOPUS_NW], PhiT + j, Y + j * DOPUS_NX);
+        }
         for (j = j0; j < DOPUS_NW; ++j) {
             Z[j + j * DOPUS_NW] += lm;
         }

@@ -51,7 +51,7 @@ static robot_arm_real robot_arm_lm_hessian_scale(const robot_arm_ring *ring, con
  * the cost is the multiply-adds and their loads; there each entry of Z is a dot product of
  * two contiguous columns of length nx (Phi's column i and Y's column j). The Riccati update
  * writes P's lower triangle and mirrors it. With two-wide vectors (ROBOT_ARM_LM_VEC) Y's columns
- * (ROBOT_ARM_LAI_V2_GEMV), Z's pairs of columns over a copy of Phi' (robot_arm_lai_v2_lower_atb, the
+ * (ROBOT_ARM_LAI_V2_GEMV), Z's pairs of columns over a copy of Phi' (robot_arm_lai_v2_atb_cols2, the
  * QP's kernel for its stage update; the rows of a pair from its diagonal) and the
  * update over a copy of K' run two entries at a time with their accumulators in registers,
  * every entry with the same operations in the same order. */
@@ -90,7 +90,13 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
             /* column j of Y: P times Phi's column j */
             ROBOT_ARM_LAI_V2_GEMV(ROBOT_ARM_NX, ROBOT_ARM_NX, P, Phi + j * ROBOT_ARM_NX, Y + j * ROBOT_ARM_NX, 1);
         }
-        robot_arm_lai_v2_lower_atb(ROBOT_ARM_NW, ROBOT_ARM_NX, PhiT, Y, H, Z, j0, 0);
+        for (j = j0; j + 1 < ROBOT_ARM_NW; j += 2) {
+            robot_arm_lai_v2_atb_cols2(ROBOT_ARM_NW, ROBOT_ARM_NX, PhiT, Y, H, Z, j, 0);
+        }
+        if (j < ROBOT_ARM_NW) {
+            Z[j + j * ROBOT_ARM_NW] =
+                robot_arm_lai_atb_entry(ROBOT_ARM_NW, ROBOT_ARM_NX, H[j + j * ROBOT_ARM_NW], PhiT + j, Y + j * ROBOT_ARM_NX);
+        }
         for (j = j0; j < ROBOT_ARM_NW; ++j) {
             Z[j + j * ROBOT_ARM_NW] += lm;
         }

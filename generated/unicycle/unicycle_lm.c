@@ -51,7 +51,7 @@ static unicycle_real unicycle_lm_hessian_scale(const unicycle_ring *ring, const 
  * the cost is the multiply-adds and their loads; there each entry of Z is a dot product of
  * two contiguous columns of length nx (Phi's column i and Y's column j). The Riccati update
  * writes P's lower triangle and mirrors it. With two-wide vectors (UNICYCLE_LM_VEC) Y's columns
- * (UNICYCLE_LAI_V2_GEMV), Z's pairs of columns over a copy of Phi' (unicycle_lai_v2_lower_atb, the
+ * (UNICYCLE_LAI_V2_GEMV), Z's pairs of columns over a copy of Phi' (unicycle_lai_v2_atb_cols2, the
  * QP's kernel for its stage update; the rows of a pair from its diagonal) and the
  * update over a copy of K' run two entries at a time with their accumulators in registers,
  * every entry with the same operations in the same order. */
@@ -90,7 +90,13 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
             /* column j of Y: P times Phi's column j */
             UNICYCLE_LAI_V2_GEMV(UNICYCLE_NX, UNICYCLE_NX, P, Phi + j * UNICYCLE_NX, Y + j * UNICYCLE_NX, 1);
         }
-        unicycle_lai_v2_lower_atb(UNICYCLE_NW, UNICYCLE_NX, PhiT, Y, H, Z, j0, 0);
+        for (j = j0; j + 1 < UNICYCLE_NW; j += 2) {
+            unicycle_lai_v2_atb_cols2(UNICYCLE_NW, UNICYCLE_NX, PhiT, Y, H, Z, j, 0);
+        }
+        if (j < UNICYCLE_NW) {
+            Z[j + j * UNICYCLE_NW] =
+                unicycle_lai_atb_entry(UNICYCLE_NW, UNICYCLE_NX, H[j + j * UNICYCLE_NW], PhiT + j, Y + j * UNICYCLE_NX);
+        }
         for (j = j0; j < UNICYCLE_NW; ++j) {
             Z[j + j * UNICYCLE_NW] += lm;
         }

@@ -869,11 +869,12 @@ QP_NOINLINE static void qp_stage_wt(const unicycle_real *restrict P, const unicy
  * loop per column with a variable start and the column in memory, and the kernel takes 0.76
  * to 0.77 of the factorisation's instructions (nw = 18, 20, 24; bench/issue23/measurements.md
  * section 27). -DUNICYCLE_QP_V2=1 uses the kernel at every size (with UNICYCLE_LAI_VEC), 0 never.
- * The kernel is unicycle_linalg.h's unicycle_lai_v2_lower_atb (also the lm test's): each entry of M
- * is one sum in the same order as in the scalar loops (two entries of one column per vector,
- * never a sum split across lanes), so both give the same bits; columns j, j + 1 (j even)
- * together, a pair whose count of rows is odd starting a row early, the accumulators in
- * registers, the entries above the diagonal (H's upper triangle is not read) never read. */
+ * The kernel is unicycle_linalg.h's unicycle_lai_v2_lower_atb (its pairs of columns also the lm
+ * test's): each entry of M is one sum in the same order as in the scalar loops (two entries of
+ * one column per vector, never a sum split across lanes), so both give the same bits; columns
+ * j, j + 1 (j even) together, a pair whose count of rows is odd starting a row early, the
+ * accumulators in registers, the entries above the diagonal (H's upper triangle is not read)
+ * never read. */
 #if !defined(UNICYCLE_QP_V2) || UNICYCLE_QP_V2
 #if UNICYCLE_QP_PHIT && UNICYCLE_LAI_VEC && (defined(UNICYCLE_QP_V2) || NW > 17)
 #define QP_V2 1
@@ -890,7 +891,7 @@ QP_NOINLINE static void qp_stage_update(const unicycle_real *restrict Phi, const
                                         unicycle_real *restrict M, unicycle_real *restrict Gam)
 {
     qp_stage_wt(P, G, PhiT, WT, Gam);
-    unicycle_lai_v2_lower_atb(NW, NX, WT, Phi, H, M, 0, 1);
+    unicycle_lai_v2_lower_atb(NW, NX, WT, Phi, H, M);
 }
 #else
 QP_NOINLINE static void qp_stage_update(const unicycle_real *restrict Phi, const unicycle_real *restrict P,
