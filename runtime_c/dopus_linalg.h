@@ -525,8 +525,8 @@ static inline dopus_real dopus_lai_max_abs_mat(int m, int n, const dopus_real *r
             (out)[((m)-1) * (os)] = last_;                                                                   \
     } while (0)
 
-/* The kernel of dopus_lai_v2_lower_atb (below): */
-/* s + sum_l AT(r, l) b[l], l = 0..m-1 in order (atr = AT + r, the leading dimension n) */
+/* The parts of dopus_lai_v2_atb_cols2 and dopus_lai_v2_lower_atb (described below them).
+ * s + sum_l AT(r, l) b[l], l = 0..m-1 in order (atr = AT + r, the leading dimension n) */
 static inline dopus_real dopus_lai_atb_entry(int n, int m, dopus_real s, const dopus_real *restrict atr,
                                              const dopus_real *restrict b)
 {
@@ -536,7 +536,7 @@ static inline dopus_real dopus_lai_atb_entry(int n, int m, dopus_real s, const d
     return s;
 }
 
-/* Rows r .. r + 2 nv - 1 of columns j, j + 1 of dopus_lai_v2_lower_atb (nv <= 4;
+/* Rows r .. r + 2 nv - 1 of columns j, j + 1 of dopus_lai_v2_atb_cols2 (nv <= 4;
  * b0, h0, c0 and b1, h1, c1 the two columns of B, H and C). */
 static inline void dopus_lai_v2_atb_block(int n, int m, int nv, const dopus_real *restrict AT,
                                           const dopus_real *restrict b0, const dopus_real *restrict b1,

@@ -525,8 +525,8 @@ static inline robot_arm_real robot_arm_lai_max_abs_mat(int m, int n, const robot
             (out)[((m)-1) * (os)] = last_;                                                                   \
     } while (0)
 
-/* The kernel of robot_arm_lai_v2_lower_atb (below): */
-/* s + sum_l AT(r, l) b[l], l = 0..m-1 in order (atr = AT + r, the leading dimension n) */
+/* The parts of robot_arm_lai_v2_atb_cols2 and robot_arm_lai_v2_lower_atb (described below them).
+ * s + sum_l AT(r, l) b[l], l = 0..m-1 in order (atr = AT + r, the leading dimension n) */
 static inline robot_arm_real robot_arm_lai_atb_entry(int n, int m, robot_arm_real s, const robot_arm_real *restrict atr,
                                              const robot_arm_real *restrict b)
 {
@@ -536,7 +536,7 @@ static inline robot_arm_real robot_arm_lai_atb_entry(int n, int m, robot_arm_rea
     return s;
 }
 
-/* Rows r .. r + 2 nv - 1 of columns j, j + 1 of robot_arm_lai_v2_lower_atb (nv <= 4;
+/* Rows r .. r + 2 nv - 1 of columns j, j + 1 of robot_arm_lai_v2_atb_cols2 (nv <= 4;
  * b0, h0, c0 and b1, h1, c1 the two columns of B, H and C). */
 static inline void robot_arm_lai_v2_atb_block(int n, int m, int nv, const robot_arm_real *restrict AT,
                                           const robot_arm_real *restrict b0, const robot_arm_real *restrict b1,

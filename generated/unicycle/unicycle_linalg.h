@@ -525,8 +525,8 @@ static inline unicycle_real unicycle_lai_max_abs_mat(int m, int n, const unicycl
             (out)[((m)-1) * (os)] = last_;                                                                   \
     } while (0)
 
-/* The kernel of unicycle_lai_v2_lower_atb (below): */
-/* s + sum_l AT(r, l) b[l], l = 0..m-1 in order (atr = AT + r, the leading dimension n) */
+/* The parts of unicycle_lai_v2_atb_cols2 and unicycle_lai_v2_lower_atb (described below them).
+ * s + sum_l AT(r, l) b[l], l = 0..m-1 in order (atr = AT + r, the leading dimension n) */
 static inline unicycle_real unicycle_lai_atb_entry(int n, int m, unicycle_real s, const unicycle_real *restrict atr,
                                              const unicycle_real *restrict b)
 {
@@ -536,7 +536,7 @@ static inline unicycle_real unicycle_lai_atb_entry(int n, int m, unicycle_real s
     return s;
 }
 
-/* Rows r .. r + 2 nv - 1 of columns j, j + 1 of unicycle_lai_v2_lower_atb (nv <= 4;
+/* Rows r .. r + 2 nv - 1 of columns j, j + 1 of unicycle_lai_v2_atb_cols2 (nv <= 4;
  * b0, h0, c0 and b1, h1, c1 the two columns of B, H and C). */
 static inline void unicycle_lai_v2_atb_block(int n, int m, int nv, const unicycle_real *restrict AT,
                                           const unicycle_real *restrict b0, const unicycle_real *restrict b1,
