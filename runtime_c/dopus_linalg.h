@@ -372,6 +372,13 @@ static inline dopus_lai_v2 dopus_lai_v2_abs(dopus_lai_v2 x)
     const dopus_lai_v2_bits mask = {0x7fffffffffffffffLL, 0x7fffffffffffffffLL};
     return (dopus_lai_v2)((dopus_lai_v2_bits)x & mask);
 }
+
+/* {a, a} */
+static inline dopus_lai_v2 dopus_lai_v2_splat(dopus_real a)
+{
+    const dopus_lai_v2 v = {a, a};
+    return v;
+}
 #endif
 
 /* The larger of a and m for an accumulated maximum m (never NaN): a when a > m, else m (a
@@ -517,6 +524,113 @@ static inline dopus_real dopus_lai_max_abs_mat(int m, int n, const dopus_real *r
         if ((m) % 2)                                                                                         \
             (out)[((m)-1) * (os)] = last_;                                                                   \
     } while (0)
+
+/* The parts of dopus_lai_v2_atb_cols2 and dopus_lai_v2_lower_atb (described below them).
+ * s + sum_l AT(r, l) b[l], l = 0..m-1 in order (atr = AT + r, the leading dimension n) */
+static inline dopus_real dopus_lai_atb_entry(int n, int m, dopus_real s, const dopus_real *restrict atr,
+                                             const dopus_real *restrict b)
+{
+    int l;
+    for (l = 0; l < m; ++l)
+        s += atr[l * n] * b[l];
+    return s;
+}
+
+/* Rows r .. r + 2 nv - 1 of columns j, j + 1 of dopus_lai_v2_atb_cols2 (nv <= 4;
+ * b0, h0, c0 and b1, h1, c1 the two columns of B, H and C). */
+static inline void dopus_lai_v2_atb_block(int n, int m, int nv, const dopus_real *restrict AT,
+                                          const dopus_real *restrict b0, const dopus_real *restrict b1,
+                                          const dopus_real *restrict h0, const dopus_real *restrict h1,
+                                          dopus_real *restrict c0, dopus_real *restrict c1, int j, int r)
+{
+    dopus_lai_v2 a0[4], a1[4];
+    int v, l;
+    DOPUS_UNROLL
+    for (v = 0; v < nv; ++v) {
+        const int i = r + 2 * v; /* rows i, i + 1 */
+        if (i + 1 == j) {
+            const dopus_lai_v2 d0 = {DOPUS_R(0.0), h0[j]}, d1 = {DOPUS_R(0.0), DOPUS_R(0.0)};
+            a0[v] = d0;
+            a1[v] = d1;
+        } else if (i == j) {
+            const dopus_lai_v2 d1 = {DOPUS_R(0.0), h1[j + 1]};
+            a0[v] = dopus_lai_v2_load(h0 + i);
+            a1[v] = d1;
+        } else {
+            a0[v] = dopus_lai_v2_load(h0 + i);
+            a1[v] = dopus_lai_v2_load(h1 + i);
+        }
+    }
+    for (l = 0; l < m; ++l) {
+        const dopus_lai_v2 s0 = dopus_lai_v2_splat(b0[l]), s1 = dopus_lai_v2_splat(b1[l]);
+        DOPUS_UNROLL
+        for (v = 0; v < nv; ++v) {
+            const dopus_lai_v2 x = dopus_lai_v2_load(AT + r + 2 * v + l * n);
+            a0[v] += x * s0;
+            a1[v] += x * s1;
+        }
+    }
+    DOPUS_UNROLL
+    for (v = 0; v < nv; ++v) {
+        dopus_lai_v2_store(c0 + r + 2 * v, a0[v]);
+        dopus_lai_v2_store(c1 + r + 2 * v, a1[v]);
+    }
+}
+
+/* The lower triangle of C = H + A' B for n x n C and H, n x m A' (AT) and m x n B, all
+ * column-major with the leading dimension of their row count (n, n, n and m); only H's lower
+ * triangle is read. Each entry is one sum in the order of l, H(i, c) + sum_l AT(i, l) B(l, c)
+ * with a multiply and an add per term, as the plain loop over l gives it: two rows of one
+ * column per vector (never a sum split across lanes), so the same bits. Used by the QP's stage
+ * update (M = H + WT' Phi, dopus_lai_v2_lower_atb) and the lm test (Z = H + Phi' Y from a
+ * run-time first column, its own loop over dopus_lai_v2_atb_cols2).
+ *
+ * dopus_lai_v2_atb_cols2: columns j and j + 1 (j + 1 < n), their rows from the diagonal down,
+ * two rows of both at a time in blocks of up to 4 vectors (2 x 4 accumulators in registers, 2
+ * broadcasts and one load of AT's pair of rows per term); the entries above the diagonal in
+ * those blocks are formed from 0 and never meant to be read. With early, a pair whose count of
+ * rows is odd starts a row early (its rows from j - 1: AT's row j - 1 read, C(j - 1, j) and
+ * C(j - 1, j + 1) written), so that only a pair from j = 0 can have an odd last row; without,
+ * the odd last row is formed alone. */
+static inline void dopus_lai_v2_atb_cols2(int n, int m, const dopus_real *restrict AT,
+                                          const dopus_real *restrict B, const dopus_real *restrict H,
+                                          dopus_real *restrict C, int j, int early)
+{
+    const dopus_real *b0 = B + j * m, *b1 = b0 + m, *h0 = H + j * n, *h1 = h0 + n;
+    dopus_real *c0 = C + j * n, *c1 = c0 + n;
+    const int r0 = early && (n - j) % 2 && j > 0 ? j - 1 : j;
+    int r;
+    DOPUS_UNROLL
+    for (r = r0; r + 8 <= n; r += 8)
+        dopus_lai_v2_atb_block(n, m, 4, AT, b0, b1, h0, h1, c0, c1, j, r);
+    /* the last block: the pairs of rows left (3, 2 or 1) */
+    if (n - r >= 6)
+        dopus_lai_v2_atb_block(n, m, 3, AT, b0, b1, h0, h1, c0, c1, j, r);
+    else if (n - r >= 4)
+        dopus_lai_v2_atb_block(n, m, 2, AT, b0, b1, h0, h1, c0, c1, j, r);
+    else if (n - r >= 2)
+        dopus_lai_v2_atb_block(n, m, 1, AT, b0, b1, h0, h1, c0, c1, j, r);
+    if ((n - r0) % 2) {
+        c0[n - 1] = dopus_lai_atb_entry(n, m, h0[n - 1], AT + n - 1, b0);
+        c1[n - 1] = dopus_lai_atb_entry(n, m, h1[n - 1], AT + n - 1, b1);
+    }
+}
+
+/* The whole triangle from column j0 = 0 with the loop over the pairs unrolled (compile-time
+ * sizes: the QP). A caller with a run-time j0 (the lm test) runs its own loop over the pairs of
+ * dopus_lai_v2_atb_cols2 without the pragma: clang cannot unroll a loop of run-time count
+ * around the unrolled blocks (-Wpass-failed), and GCC copies the pairs up to its bound. */
+static inline void dopus_lai_v2_lower_atb(int n, int m, const dopus_real *restrict AT,
+                                          const dopus_real *restrict B, const dopus_real *restrict H,
+                                          dopus_real *restrict C)
+{
+    int j;
+    DOPUS_UNROLL
+    for (j = 0; j + 1 < n; j += 2)
+        dopus_lai_v2_atb_cols2(n, m, AT, B, H, C, j, 1);
+    if (j < n)
+        C[j + j * n] = dopus_lai_atb_entry(n, m, H[j + j * n], AT + j, B + j * m);
+}
 #endif
 
 #endif /* DOPUS_LINALG_H */

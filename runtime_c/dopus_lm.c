@@ -40,116 +40,6 @@ static dopus_real dopus_lm_hessian_scale(const dopus_ring *ring, const dopus_rea
 /* Y = P Phi (nx x nw) and the lower triangle of Z (nw x nw) column-major */
 #define DOPUS_LM_Z(i, j) Z[(i) + (j)*DOPUS_NW]
 
-#if DOPUS_LM_VEC
-/* Columns j and j + 1 of Z's lower triangle (j + 1 < nw): Z(i, c) = H(i, c) + sum_l Phi(l, i)
- * Y(l, c) for the rows i from j on, the sum in the order of l as in the plain loops, over
- * PhiT = Phi' (nw x nx, column-major: Phi's pairs of columns are contiguous pairs of rows of
- * PhiT). Two rows of both columns at a time (blocks of 8, 4 and 2 rows, an odd last row alone)
- * with the accumulators in registers and one load of PhiT's pair of rows for both columns;
- * Z(j, j + 1), above the diagonal, is formed from 0 (H's upper triangle holds other data) and
- * never read. */
-static void dopus_lm_z_cols2(const dopus_real *PhiT, const dopus_real *Y, const dopus_real *H, dopus_real *Z,
-                             int j)
-{
-    const dopus_real *y0 = Y + j * DOPUS_NX, *y1 = y0 + DOPUS_NX, *h0 = H + j * DOPUS_NW, *h1 = h0 + DOPUS_NW;
-    dopus_real *z0 = Z + j * DOPUS_NW, *z1 = z0 + DOPUS_NW;
-    int r = j, l, v;
-    while (r + 2 <= DOPUS_NW) {
-        const int nv = r + 8 <= DOPUS_NW ? 4 : (r + 4 <= DOPUS_NW ? 2 : 1);
-        dopus_lai_v2 a0[4], a1[4];
-        for (v = 0; v < nv; ++v) {
-            const int i = r + 2 * v;
-            a0[v] = dopus_lai_v2_load(h0 + i);
-            if (i > j) {
-                a1[v] = dopus_lai_v2_load(h1 + i);
-            } else {
-                a1[v] = (dopus_lai_v2){DOPUS_R(0.0), h1[i + 1]};
-            }
-        }
-        if (nv == 4) {
-            for (l = 0; l < DOPUS_NX; ++l) {
-                const dopus_real *a = PhiT + r + l * DOPUS_NW;
-                const dopus_lai_v2 s0 = {y0[l], y0[l]}, s1 = {y1[l], y1[l]};
-                const dopus_lai_v2 x0 = dopus_lai_v2_load(a), x1 = dopus_lai_v2_load(a + 2);
-                const dopus_lai_v2 x2 = dopus_lai_v2_load(a + 4), x3 = dopus_lai_v2_load(a + 6);
-                a0[0] += x0 * s0;
-                a1[0] += x0 * s1;
-                a0[1] += x1 * s0;
-                a1[1] += x1 * s1;
-                a0[2] += x2 * s0;
-                a1[2] += x2 * s1;
-                a0[3] += x3 * s0;
-                a1[3] += x3 * s1;
-            }
-        } else if (nv == 2) {
-            for (l = 0; l < DOPUS_NX; ++l) {
-                const dopus_real *a = PhiT + r + l * DOPUS_NW;
-                const dopus_lai_v2 s0 = {y0[l], y0[l]}, s1 = {y1[l], y1[l]};
-                const dopus_lai_v2 x0 = dopus_lai_v2_load(a), x1 = dopus_lai_v2_load(a + 2);
-                a0[0] += x0 * s0;
-                a1[0] += x0 * s1;
-                a0[1] += x1 * s0;
-                a1[1] += x1 * s1;
-            }
-        } else {
-            for (l = 0; l < DOPUS_NX; ++l) {
-                const dopus_lai_v2 s0 = {y0[l], y0[l]}, s1 = {y1[l], y1[l]};
-                const dopus_lai_v2 x0 = dopus_lai_v2_load(PhiT + r + l * DOPUS_NW);
-                a0[0] += x0 * s0;
-                a1[0] += x0 * s1;
-            }
-        }
-        for (v = 0; v < nv; ++v) {
-            dopus_lai_v2_store(z0 + r + 2 * v, a0[v]);
-            dopus_lai_v2_store(z1 + r + 2 * v, a1[v]);
-        }
-        r += 2 * nv;
-    }
-    if (r < DOPUS_NW) {
-        dopus_real v0 = h0[r], v1 = h1[r];
-        for (l = 0; l < DOPUS_NX; ++l) {
-            v0 += PhiT[r + l * DOPUS_NW] * y0[l];
-            v1 += PhiT[r + l * DOPUS_NW] * y1[l];
-        }
-        z0[r] = v0;
-        z1[r] = v1;
-    }
-}
-
-/* Column j of Z's lower triangle alone (the last one of an odd count), as dopus_lm_z_cols2. */
-static void dopus_lm_z_col1(const dopus_real *PhiT, const dopus_real *Y, const dopus_real *H, dopus_real *Z,
-                            int j)
-{
-    const dopus_real *y = Y + j * DOPUS_NX, *h = H + j * DOPUS_NW;
-    dopus_real *z = Z + j * DOPUS_NW;
-    int r = j, l, v;
-    while (r + 2 <= DOPUS_NW) {
-        const int nv = r + 8 <= DOPUS_NW ? 4 : (r + 4 <= DOPUS_NW ? 2 : 1);
-        dopus_lai_v2 a[4];
-        for (v = 0; v < nv; ++v) {
-            a[v] = dopus_lai_v2_load(h + r + 2 * v);
-        }
-        for (l = 0; l < DOPUS_NX; ++l) {
-            const dopus_lai_v2 s = {y[l], y[l]};
-            for (v = 0; v < nv; ++v) {
-                a[v] += dopus_lai_v2_load(PhiT + r + 2 * v + l * DOPUS_NW) * s;
-            }
-        }
-        for (v = 0; v < nv; ++v) {
-            dopus_lai_v2_store(z + r + 2 * v, a[v]);
-        }
-        r += 2 * nv;
-    }
-    if (r < DOPUS_NW) {
-        dopus_real v0 = h[r];
-        for (l = 0; l < DOPUS_NX; ++l) {
-            v0 += PhiT[r + l * DOPUS_NW] * y[l];
-        }
-        z[r] = v0;
-    }
-}
-#endif
-
 /* 1 when the QP with the term lm is strictly convex on the dynamics: the Riccati recursion
  * of its Hessian blocks (lower triangles read; inequalities and terminal constraints left
  * out) has control pivots above DOPUS_LM_PIVOT_REL h and above their round-off,
@@ -161,7 +51,8 @@ static void dopus_lm_z_col1(const dopus_real *PhiT, const dopus_real *Y, const d
  * the cost is the multiply-adds and their loads; there each entry of Z is a dot product of
  * two contiguous columns of length nx (Phi's column i and Y's column j). The Riccati update
  * writes P's lower triangle and mirrors it. With two-wide vectors (DOPUS_LM_VEC) Y's columns
- * (DOPUS_LAI_V2_GEMV), Z's pairs of columns over a copy of Phi' (dopus_lm_z_cols2) and the
+ * (DOPUS_LAI_V2_GEMV), Z's pairs of columns over a copy of Phi' (dopus_lai_v2_atb_cols2, the
+ * QP's kernel for its stage update; the rows of a pair from its diagonal) and the
  * update over a copy of K' run two entries at a time with their accumulators in registers,
  * every entry with the same operations in the same order. */
 static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dopus_real *A_N, dopus_real lm,
@@ -200,10 +91,11 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
             DOPUS_LAI_V2_GEMV(DOPUS_NX, DOPUS_NX, P, Phi + j * DOPUS_NX, Y + j * DOPUS_NX, 1);
         }
         for (j = j0; j + 1 < DOPUS_NW; j += 2) {
-            dopus_lm_z_cols2(PhiT, Y, H, Z, j);
+            dopus_lai_v2_atb_cols2(DOPUS_NW, DOPUS_NX, PhiT, Y, H, Z, j, 0);
         }
         if (j < DOPUS_NW) {
-            dopus_lm_z_col1(PhiT, Y, H, Z, j);
+            Z[j + j * DOPUS_NW] =
+                dopus_lai_atb_entry(DOPUS_NW, DOPUS_NX, H[j + j * DOPUS_NW], PhiT + j, Y + j * DOPUS_NX);
         }
         for (j = j0; j < DOPUS_NW; ++j) {
             Z[j + j * DOPUS_NW] += lm;
@@ -298,8 +190,8 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
             for (; i + 2 <= DOPUS_NX; i += 2) {
                 dopus_lai_v2 p2 = dopus_lai_v2_load(Z + i + j * DOPUS_NW);
                 for (l = DOPUS_NX; l < DOPUS_NW; ++l) {
-                    const dopus_lai_v2 kj = {Z[l + j * DOPUS_NW], Z[l + j * DOPUS_NW]};
-                    p2 -= dopus_lai_v2_load(Y + i + (l - DOPUS_NX) * DOPUS_NX) * kj;
+                    p2 -= dopus_lai_v2_load(Y + i + (l - DOPUS_NX) * DOPUS_NX) *
+                          dopus_lai_v2_splat(Z[l + j * DOPUS_NW]);
                 }
                 dopus_lai_v2_store(P + i + j * DOPUS_NX, p2);
                 P[j + i * DOPUS_NX] = p2[0];

@@ -869,11 +869,12 @@ QP_NOINLINE static void qp_stage_wt(const robot_arm_real *restrict P, const robo
  * loop per column with a variable start and the column in memory, and the kernel takes 0.76
  * to 0.77 of the factorisation's instructions (nw = 18, 20, 24; bench/issue23/measurements.md
  * section 27). -DROBOT_ARM_QP_V2=1 uses the kernel at every size (with ROBOT_ARM_LAI_VEC), 0 never.
- * Each entry of M is one sum in the same order as in the scalar loops (two entries of one
- * column per vector, never a sum split across lanes): both give the same bits. Columns j,
- * j + 1 (j even) are formed together in blocks of up to V2_ROWS vectors of rows, the
- * accumulators in registers; the entries above the diagonal in those blocks are formed from
- * 0 (H's upper triangle is not read) and never read. */
+ * The kernel is robot_arm_linalg.h's robot_arm_lai_v2_lower_atb (its pairs of columns also the lm
+ * test's): each entry of M is one sum in the same order as in the scalar loops (two entries of
+ * one column per vector, never a sum split across lanes), so both give the same bits; columns
+ * j, j + 1 (j even) together, a pair whose count of rows is odd starting a row early, the
+ * accumulators in registers, the entries above the diagonal (H's upper triangle is not read)
+ * never read. */
 #if !defined(ROBOT_ARM_QP_V2) || ROBOT_ARM_QP_V2
 #if ROBOT_ARM_QP_PHIT && ROBOT_ARM_LAI_VEC && (defined(ROBOT_ARM_QP_V2) || NW > 17)
 #define QP_V2 1
@@ -884,76 +885,13 @@ QP_NOINLINE static void qp_stage_wt(const robot_arm_real *restrict P, const robo
 #endif
 
 #if QP_V2
-#define V2_ROWS 4 /* vectors of rows per block: 2 x 4 accumulators, 2 broadcasts, 1 load */
-static inline robot_arm_lai_v2 v2_splat(robot_arm_real a)
-{
-    const robot_arm_lai_v2 v = {a, a};
-    return v;
-}
-/* one entry: s + sum_l WT(r, l) f[l], l = 0..NX-1 in order (the odd last row) */
-static inline robot_arm_real v2_row(robot_arm_real s, const robot_arm_real *restrict WTr, const robot_arm_real *restrict f)
-{
-    int l;
-    for (l = 0; l < NX; ++l)
-        s += WTr[l * NW] * f[l];
-    return s;
-}
 QP_NOINLINE static void qp_stage_update(const robot_arm_real *restrict Phi, const robot_arm_real *restrict P,
                                         const robot_arm_real *restrict G, const robot_arm_real *restrict H,
                                         const robot_arm_real *restrict PhiT, robot_arm_real *restrict WT,
                                         robot_arm_real *restrict M, robot_arm_real *restrict Gam)
 {
-    int j, r, v, l;
     qp_stage_wt(P, G, PhiT, WT, Gam);
-    UNROLL
-    for (j = 0; j + 1 < NW; j += 2) {
-        const robot_arm_real *h0 = H + j * NW, *h1 = H + (j + 1) * NW;
-        const robot_arm_real *f0 = Phi + j * NX, *f1 = Phi + (j + 1) * NX;
-        robot_arm_real *m0 = M + j * NW, *m1 = M + (j + 1) * NW;
-        /* the rows from j, or from j - 1 when that makes their count even */
-        const int r0 = ((NW - j) % 2 && j > 0) ? j - 1 : j;
-        UNROLL
-        for (r = r0; r + 1 < NW; r += 2 * V2_ROWS) {
-            const int nv = (NW - r) / 2 < V2_ROWS ? (NW - r) / 2 : V2_ROWS;
-            robot_arm_lai_v2 a0[V2_ROWS], a1[V2_ROWS];
-            UNROLL
-            for (v = 0; v < nv; ++v) {
-                const int i = r + 2 * v; /* rows i, i + 1 */
-                if (i + 1 == j) {
-                    const robot_arm_lai_v2 d0 = {ROBOT_ARM_R(0.0), h0[j]}, d1 = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
-                    a0[v] = d0;
-                    a1[v] = d1;
-                } else if (i == j) {
-                    const robot_arm_lai_v2 d1 = {ROBOT_ARM_R(0.0), h1[j + 1]};
-                    a0[v] = robot_arm_lai_v2_load(h0 + i);
-                    a1[v] = d1;
-                } else {
-                    a0[v] = robot_arm_lai_v2_load(h0 + i);
-                    a1[v] = robot_arm_lai_v2_load(h1 + i);
-                }
-            }
-            for (l = 0; l < NX; ++l) {
-                const robot_arm_lai_v2 s0 = v2_splat(f0[l]), s1 = v2_splat(f1[l]);
-                UNROLL
-                for (v = 0; v < nv; ++v) {
-                    const robot_arm_lai_v2 x = robot_arm_lai_v2_load(WT + r + 2 * v + l * NW);
-                    a0[v] += x * s0;
-                    a1[v] += x * s1;
-                }
-            }
-            UNROLL
-            for (v = 0; v < nv; ++v) {
-                robot_arm_lai_v2_store(m0 + r + 2 * v, a0[v]);
-                robot_arm_lai_v2_store(m1 + r + 2 * v, a1[v]);
-            }
-        }
-        if ((NW - r0) % 2) {
-            m0[NW - 1] = v2_row(h0[NW - 1], WT + NW - 1, f0);
-            m1[NW - 1] = v2_row(h1[NW - 1], WT + NW - 1, f1);
-        }
-    }
-    if (NW % 2)
-        M[(NW - 1) * (NW + 1)] = v2_row(H[(NW - 1) * (NW + 1)], WT + NW - 1, Phi + (NW - 1) * NX);
+    robot_arm_lai_v2_lower_atb(NW, NX, WT, Phi, H, M);
 }
 #else
 QP_NOINLINE static void qp_stage_update(const robot_arm_real *restrict Phi, const robot_arm_real *restrict P,
