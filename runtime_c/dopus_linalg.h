@@ -519,4 +519,107 @@ static inline dopus_real dopus_lai_max_abs_mat(int m, int n, const dopus_real *r
     } while (0)
 #endif
 
+#if DOPUS_LAI_VEC
+/* y += A (alpha x) for the m x n column-major A (lda m): the same operations in the same order
+ * as dopus_lai_gemv_n(m, n, alpha, A, m, x, 1, y), two rows at a time with y's entries in
+ * registers (m and n compile-time constants). */
+#define DOPUS_LAI_V2_GEMV_ACC(m, n, alpha, A, x, y)                                                          \
+    do {                                                                                                     \
+        dopus_lai_v2 acc_[DOPUS_DIM((m) / 2)];                                                               \
+        dopus_real last_ = (m) % 2 ? (y)[(m)-1] : DOPUS_R(0.0);                                              \
+        int i_, j_;                                                                                          \
+        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
+            acc_[i_] = dopus_lai_v2_load((y) + 2 * i_);                                                      \
+        for (j_ = 0; j_ < (n); ++j_) {                                                                       \
+            const dopus_real f_ = (alpha) * (x)[j_];                                                         \
+            const dopus_real *a_ = (A) + j_ * (m);                                                           \
+            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
+                acc_[i_] += dopus_lai_v2_load(a_ + 2 * i_) * f_;                                             \
+            if ((m) % 2)                                                                                     \
+                last_ += a_[(m)-1] * f_;                                                                     \
+        }                                                                                                    \
+        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
+            dopus_lai_v2_store((y) + 2 * i_, acc_[i_]);                                                      \
+        if ((m) % 2)                                                                                         \
+            (y)[(m)-1] = last_;                                                                              \
+    } while (0)
+#endif
+
+#if DOPUS_LAI_VEC
+/* out = A x for the symmetric n x n A stored full (column-major, lda), each entry as two sums
+ * in the order of the lower-triangle loops (dopus_lai_symv_l, the packed P x of the QP):
+ * row i's terms of the columns before i (lo), and of the columns after i (up), each in the
+ * order of the columns and from 0, the diagonal term last in lo (diag_up 0) or first in up
+ * (diag_up 1); out_i = lo_i + up_i. Two rows per vector, in blocks of up to four vectors
+ * (the accumulators in registers), the columns in three ranges: before the block (every row
+ * in lo), across it (per row), after it (every row in up). A pair of rows split between lo
+ * and up at a column adds the product with x_j to one lane of each sum and a product with 0
+ * to the other: that lane's sum is then 0 (not started) or complete and never -0 (a sum from
+ * +0 in round-to-nearest), so adding +-0 leaves it as it is (A finite). n a compile-time
+ * size: the same sums as the scalar loops, so the same bits. */
+static inline void dopus_lai_v2_symv_split(int n, const dopus_real *restrict A, int lda,
+                                           const dopus_real *restrict x, int diag_up,
+                                           dopus_real *restrict out)
+{
+    const dopus_lai_v2 zero = {DOPUS_R(0.0), DOPUS_R(0.0)};
+    int r0, v, j;
+    DOPUS_UNROLL
+    for (r0 = 0; r0 + 1 < n; r0 += 8) {
+        const int nv = (n - r0) / 2 < 4 ? (n - r0) / 2 : 4;
+        dopus_lai_v2 lo[4], up[4];
+        DOPUS_UNROLL
+        for (v = 0; v < 4; ++v)
+            lo[v] = up[v] = zero;
+        for (j = 0; j < r0; ++j) {
+            const dopus_lai_v2 s = {x[j], x[j]};
+            DOPUS_UNROLL
+            for (v = 0; v < nv; ++v)
+                lo[v] += dopus_lai_v2_load(A + r0 + 2 * v + j * lda) * s;
+        }
+        DOPUS_UNROLL
+        for (j = r0; j < r0 + 2 * nv; ++j) {
+            const dopus_lai_v2 s = {x[j], x[j]}, s0 = {x[j], DOPUS_R(0.0)}, s1 = {DOPUS_R(0.0), x[j]};
+            DOPUS_UNROLL
+            for (v = 0; v < nv; ++v) {
+                const int i0 = r0 + 2 * v;
+                const int u0 = i0 < j || (i0 == j && diag_up), u1 = i0 + 1 < j || (i0 + 1 == j && diag_up);
+                const dopus_lai_v2 a = dopus_lai_v2_load(A + i0 + j * lda);
+                if (u0 && u1) {
+                    up[v] += a * s;
+                } else if (!u0 && !u1) {
+                    lo[v] += a * s;
+                } else if (u0) {
+                    up[v] += a * s0;
+                    lo[v] += a * s1;
+                } else {
+                    lo[v] += a * s0;
+                    up[v] += a * s1;
+                }
+            }
+        }
+        for (j = r0 + 2 * nv; j < n; ++j) {
+            const dopus_lai_v2 s = {x[j], x[j]};
+            DOPUS_UNROLL
+            for (v = 0; v < nv; ++v)
+                up[v] += dopus_lai_v2_load(A + r0 + 2 * v + j * lda) * s;
+        }
+        DOPUS_UNROLL
+        for (v = 0; v < nv; ++v)
+            dopus_lai_v2_store(out + r0 + 2 * v, lo[v] + up[v]);
+    }
+    if (n % 2) {
+        /* the last row: every column before it in lo, the diagonal in lo or alone in up */
+        const int r = n - 1;
+        dopus_real lo = DOPUS_R(0.0), up = DOPUS_R(0.0);
+        for (j = 0; j < r; ++j)
+            lo += A[r + j * lda] * x[j];
+        if (diag_up)
+            up += A[r + r * lda] * x[r];
+        else
+            lo += A[r + r * lda] * x[r];
+        out[r] = lo + up;
+    }
+}
+#endif
+
 #endif /* DOPUS_LINALG_H */
