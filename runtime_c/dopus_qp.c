@@ -377,18 +377,18 @@ static void row_axpy(const dopus_qp_in *in, int k, int j, dopus_real a, dopus_re
 #define P_AT(Pp, i, j) ((Pp)[(j)*NX - (j) * ((j)-1) / 2 + (i) - (j)])
 #endif
 
-/* y += alpha P x for the stored P_k: entry i is alpha times the sum of its terms from the
- * columns before i (acc_i) plus the sum of the diagonal term and those after it (s_i). With
- * the full P_k and two-wide vectors the columns are read down two rows at a time
- * (dopus_lai_v2_symv_split, the same sums); else one sequential pass over the lower
- * triangle, each entry used twice (below the diagonal). */
+/* y += alpha P x for the stored P_k. With the full P_k and two-wide vectors the columns are
+ * read down two rows at a time, the sums in registers (entry i: its terms in the order of the
+ * columns); else one sequential pass over the lower triangle, each entry used twice (below
+ * the diagonal): entry i the sum of its terms from the columns before i plus the sum of the
+ * diagonal term and those after it. */
 static inline void spmv_packed(const dopus_real *restrict Pp, dopus_real alpha, const dopus_real *restrict x,
                                dopus_real *restrict y)
 {
     dopus_real acc[NX];
     int i;
 #if DOPUS_QP_PHIT && DOPUS_LAI_VEC
-    dopus_lai_v2_symv_split(NX, Pp, NX, x, 1, acc);
+    DOPUS_LAI_V2_GEMV(NX, NX, Pp, x, acc, 1);
 #else
     int j;
     for (i = 0; i < NX; ++i)
@@ -736,9 +736,10 @@ static void compute_residuals(dopus_qp_workspace *ws, const dopus_qp_in *in, qp_
             dopus_real *rd = ws->r_dyn + (k + 1) * NX;
             const dopus_real *xn = ws->prim + (k + 1) * NW;
 #if DOPUS_QP_HFULL && DOPUS_LAI_VEC
-            /* the same sums as dopus_lai_symv_l on the lower triangle, down the columns of
-             * the kept full H_k */
-            dopus_lai_v2_symv_split(NW, ws->Hf[k], NW, w, 0, h);
+            /* down the columns of the kept full H_k, two rows at a time (each entry's sum in
+             * the order of the columns: not the order of dopus_lai_symv_l's, which splits it
+             * at the diagonal) */
+            DOPUS_LAI_V2_GEMV(NW, NW, ws->Hf[k], w, h, 1);
 #else
             dopus_lai_symv_l(NW, DOPUS_R(1.0), in->H[k], NW, w, DOPUS_R(0.0), h);
 #endif

@@ -220,7 +220,8 @@
 #endif
 #endif
 /* The stored P_k: with the kept Phi_k' full (nx x nx, column-major: the solves' products
- * with P_k run down its columns, two-wide where doubles come in vectors), else packed. */
+ * with P_k run down its columns, two-wide where doubles come in vectors), else packed by
+ * lower columns. */
 #if DOPUS_QP_PHIT
 #define DOPUS_QP_NPK (DOPUS_NX * DOPUS_NX)
 #else
@@ -229,7 +230,8 @@
 /* DOPUS_QP_HFULL 1: the workspace keeps each H_k with both triangles for the solve (N nw nw
  * reals), so that the residuals' products with H_k run down its columns two at a time: with
  * the kept Phi_k' where doubles come in two-wide vectors (dopus_linalg.h's DOPUS_LAI_VEC).
- * The same results either way; define it to override (0 without DOPUS_LAI_VEC). */
+ * The products' sums then run in the order of the columns (the round-off differs from the
+ * lower-triangle loops'); define it to override (0 without DOPUS_LAI_VEC). */
 #ifndef DOPUS_QP_HFULL
 #if DOPUS_QP_PHIT && !DOPUS_REAL_FLOAT && (defined(__GNUC__) || defined(__clang__)) &&                       \
     (defined(__SSE2__) || defined(__aarch64__))
