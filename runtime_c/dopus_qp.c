@@ -551,12 +551,14 @@ static void transpose_phi(dopus_qp_workspace *ws, const dopus_qp_in *in)
     for (k = 0; k < N; ++k) {
         const dopus_real *restrict H = in->H[k];
         dopus_real *restrict Hf = ws->Hf[k];
+        UNROLL
         for (l = 0; l < NW; ++l)
-            for (i = l; i < NW; ++i) {
-                const dopus_real h = H[i + l * NW];
-                Hf[i + l * NW] = h;
-                Hf[l + i * NW] = h;
-            }
+            UNROLL
+        for (i = l; i < NW; ++i) {
+            const dopus_real h = H[i + l * NW];
+            Hf[i + l * NW] = h;
+            Hf[l + i * NW] = h;
+        }
     }
 #endif
 }

@@ -551,12 +551,14 @@ static void transpose_phi(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
     for (k = 0; k < N; ++k) {
         const robot_arm_real *restrict H = in->H[k];
         robot_arm_real *restrict Hf = ws->Hf[k];
+        UNROLL
         for (l = 0; l < NW; ++l)
-            for (i = l; i < NW; ++i) {
-                const robot_arm_real h = H[i + l * NW];
-                Hf[i + l * NW] = h;
-                Hf[l + i * NW] = h;
-            }
+            UNROLL
+        for (i = l; i < NW; ++i) {
+            const robot_arm_real h = H[i + l * NW];
+            Hf[i + l * NW] = h;
+            Hf[l + i * NW] = h;
+        }
     }
 #endif
 }

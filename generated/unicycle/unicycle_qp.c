@@ -551,12 +551,14 @@ static void transpose_phi(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     for (k = 0; k < N; ++k) {
         const unicycle_real *restrict H = in->H[k];
         unicycle_real *restrict Hf = ws->Hf[k];
+        UNROLL
         for (l = 0; l < NW; ++l)
-            for (i = l; i < NW; ++i) {
-                const unicycle_real h = H[i + l * NW];
-                Hf[i + l * NW] = h;
-                Hf[l + i * NW] = h;
-            }
+            UNROLL
+        for (i = l; i < NW; ++i) {
+            const unicycle_real h = H[i + l * NW];
+            Hf[i + l * NW] = h;
+            Hf[l + i * NW] = h;
+        }
     }
 #endif
 }
