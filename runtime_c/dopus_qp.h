@@ -229,12 +229,13 @@
 #endif
 /* DOPUS_QP_HFULL 1: the workspace keeps each H_k with both triangles for the solve (N nw nw
  * reals), so that the residuals' products with H_k run down its columns two at a time: with
- * the kept Phi_k' where doubles come in two-wide vectors (dopus_linalg.h's DOPUS_LAI_VEC).
+ * the kept Phi_k' where doubles come in two-wide vectors (dopus_linalg.h's DOPUS_LAI_VEC), not
+ * with AVX (there GCC's four-wide code of the lower-triangle loops took fewer instructions).
  * The products' sums then run in the order of the columns (the round-off differs from the
  * lower-triangle loops'); define it to override (0 without DOPUS_LAI_VEC). */
 #ifndef DOPUS_QP_HFULL
 #if DOPUS_QP_PHIT && !DOPUS_REAL_FLOAT && (defined(__GNUC__) || defined(__clang__)) &&                       \
-    (defined(__SSE2__) || defined(__aarch64__))
+    (defined(__SSE2__) || defined(__aarch64__)) && !defined(__AVX__)
 #define DOPUS_QP_HFULL 1
 #else
 #define DOPUS_QP_HFULL 0

@@ -116,6 +116,16 @@
 #define QP_NOINLINE
 #endif
 
+/* The column products written with two-wide vectors (ROBOT_ARM_LAI_V2_GEMV and _ACC: the sums in
+ * registers, two rows per vector) where vectors of doubles are two wide (SSE2 without AVX,
+ * AArch64). With AVX, GCC vectorises the plain loops four wide, which the two-wide code would
+ * keep from it; both take the same sums in the same order. */
+#if ROBOT_ARM_LAI_VEC && !defined(__AVX__)
+#define QP_COLS2 1
+#else
+#define QP_COLS2 0
+#endif
+
 /* Out of line and optimised for size: code that runs only after a failed pivot. */
 #if defined(__GNUC__) || defined(__clang__)
 #define QP_COLD __attribute__((noinline, cold))
@@ -388,7 +398,11 @@ static inline void spmv_packed(const robot_arm_real *restrict Pp, robot_arm_real
     robot_arm_real acc[NX];
     int i;
 #if ROBOT_ARM_QP_PHIT && ROBOT_ARM_LAI_VEC
+#if QP_COLS2
     ROBOT_ARM_LAI_V2_GEMV(NX, NX, Pp, x, acc, 1);
+#else
+    robot_arm_lai_gemv_n(NX, NX, ROBOT_ARM_R(1.0), Pp, NX, x, ROBOT_ARM_R(0.0), acc);
+#endif
 #else
     int j;
     for (i = 0; i < NX; ++i)
@@ -578,7 +592,7 @@ static inline void phit_gemv(const robot_arm_real *restrict PhiT, robot_arm_real
 {
     robot_arm_real s[NW];
     int i;
-#if ROBOT_ARM_QP_PHIT && ROBOT_ARM_LAI_VEC
+#if ROBOT_ARM_QP_PHIT && QP_COLS2
     /* two rows per vector, the sums in registers (the same sums) */
     ROBOT_ARM_LAI_V2_GEMV(NW, NX, PhiT, v, s, 1);
 #else
@@ -672,7 +686,7 @@ static inline void phi_both(const robot_arm_real *restrict Phi, const robot_arm_
 {
 #if ROBOT_ARM_QP_PHIT
     phit_gemv(PhiT, -ROBOT_ARM_R(1.0), v, a);
-#if ROBOT_ARM_LAI_VEC
+#if QP_COLS2
     {
         int i;
         for (i = 0; i < NX; ++i)
@@ -741,7 +755,11 @@ static void compute_residuals(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
             /* down the columns of the kept full H_k, two rows at a time (each entry's sum in
              * the order of the columns: not the order of robot_arm_lai_symv_l's, which splits it
              * at the diagonal) */
+#if QP_COLS2
             ROBOT_ARM_LAI_V2_GEMV(NW, NW, ws->Hf[k], w, h, 1);
+#else
+            robot_arm_lai_gemv_n(NW, NW, ROBOT_ARM_R(1.0), ws->Hf[k], NW, w, ROBOT_ARM_R(0.0), h);
+#endif
 #else
             robot_arm_lai_symv_l(NW, ROBOT_ARM_R(1.0), in->H[k], NW, w, ROBOT_ARM_R(0.0), h);
 #endif
@@ -1424,7 +1442,7 @@ static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
         if (NE > 0)
             robot_arm_lai_gemv_n(NX, NE, -ROBOT_ARM_R(1.0), ws->G[k], NX, sn, ROBOT_ARM_R(1.0), lamk);
             /* x_{k+1} = Phi_k w_k + c_k */
-#if ROBOT_ARM_QP_PHIT && ROBOT_ARM_LAI_VEC
+#if ROBOT_ARM_QP_PHIT && QP_COLS2
         ROBOT_ARM_LAI_V2_GEMV_ACC(NX, NW, ROBOT_ARM_R(1.0), in->Phi[k], w, sp + (k + 1) * NW);
 #else
         robot_arm_lai_gemv_n(NX, NW, ROBOT_ARM_R(1.0), in->Phi[k], NX, w, ROBOT_ARM_R(1.0), sp + (k + 1) * NW);
