@@ -271,8 +271,8 @@ def test_float_reactor_with_scaling_converges_to_the_double_build(reactor):
     set by the terminal node, whose cost has the curvature 1225 in the temperature (0.1 / K^2
     declared, the scale 350 K, the cost scale 10) at x_N about 1: one float step of x_N (6e-8)
     moves its stationarity by 7.3e-5. The largest entry of the measure is that one: x_N's
-    temperature alternates between two adjacent floats, the measure between 3.9e-5 and 7.0e-5
-    (0.27 to 0.48 B; the relative measure between 9e-6 and 1.6e-5, so it does not stay below
+    temperature alternates between two adjacent floats, the measure between 3.7e-5 and 7.0e-5
+    (0.25 to 0.48 B; the relative measure between 8e-6 and 1.6e-5, so it does not stay below
     1e-5), the active set unchanged; the stages' entries, evaluated in double, stay below
     1.7e-5 (their part of B 4.4e-5: the collocation's stage equations have condition number 38). The QP tolerance does
     not set the floor (the same with qp_tol 3e-7), and the double build is at 5.7e-12 there."""
