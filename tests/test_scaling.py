@@ -265,16 +265,16 @@ def test_float_reactor_with_scaling_converges_to_the_double_build(reactor):
     The floor. Once the relative measure reached 1e-5 (3 iterations for the full RTI, 8 for
     M = 1) the stationarity of every iterate stays below 2 B, B the round-off bound of
     `_stationarity_roundoff` at the solution: the iterate solves the QP of float data (the
-    gradient and the Jacobians of the previous linearisation, each entry off by at most B)
-    and the measure evaluates the stationarity in float once more (at most B again): c = 2.
-    Measured (bench/float_floor.py, bench/issue23/measurements.md section 41): B = 1.46e-4,
-    set by the terminal node, whose cost has the curvature 1225 in the temperature (0.1 / K^2
-    declared, the scale 350 K, the cost scale 10) at x_N about 1: one float step of x_N (6e-8)
-    moves its stationarity by 7.3e-5. The largest entry of the measure is that one: x_N's
-    temperature alternates between two adjacent floats, the measure between 3.7e-5 and 7.0e-5
-    (0.25 to 0.48 B; the relative measure between 8e-6 and 1.6e-5, so it does not stay below
-    1e-5), the active set unchanged; the stages' entries, evaluated in double, stay below
-    1.7e-5 (their part of B 4.4e-5: the collocation's stage equations have condition number 38). The QP tolerance does
+    gradient and the Jacobians of the previous linearisation, each entry off by at most B) and
+    the measure evaluates the stationarity in float once more (at most B again): c = 2. Measured
+    (bench/float_floor.py, bench/issue23/measurements.md section 41): B = 1.46e-4, set by the
+    terminal node, whose cost has the curvature 1225 in the temperature (0.1 / K^2 declared, the
+    scale 350 K, the cost scale 10) at x_N about 1: one float step of x_N (6e-8) moves its
+    stationarity by 7.3e-5. The largest entry of the measure is that one: x_N's temperature
+    alternates between two adjacent floats, the measure between 3.7e-5 and 7.0e-5 (0.25 to
+    0.48 B; the relative measure between 8e-6 and 1.6e-5, so it does not stay below 1e-5), the active
+    set unchanged; the stages' entries, evaluated in double, stay below 1.7e-5 (their part of B
+    4.4e-5: the collocation's stage equations have condition number 38). The QP tolerance does
     not set the floor (the same with qp_tol 3e-7), and the double build is at 5.7e-12 there."""
     disc, start = reactor[True]["disc"], reactor[True]["start"]
     fl, db = reactor[True]["float"], reactor[True]["double"]
