@@ -633,30 +633,4 @@ static inline void dopus_lai_v2_lower_atb(int n, int m, const dopus_real *restri
 }
 #endif
 
-#if DOPUS_LAI_VEC
-/* y += A (alpha x) for the m x n column-major A (lda m): the same operations in the same order
- * as dopus_lai_gemv_n(m, n, alpha, A, m, x, 1, y), two rows at a time with y's entries in
- * registers (m and n compile-time constants). */
-#define DOPUS_LAI_V2_GEMV_ACC(m, n, alpha, A, x, y)                                                          \
-    do {                                                                                                     \
-        dopus_lai_v2 acc_[DOPUS_DIM((m) / 2)];                                                               \
-        dopus_real last_ = (m) % 2 ? (y)[(m)-1] : DOPUS_R(0.0);                                              \
-        int i_, j_;                                                                                          \
-        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
-            acc_[i_] = dopus_lai_v2_load((y) + 2 * i_);                                                      \
-        for (j_ = 0; j_ < (n); ++j_) {                                                                       \
-            const dopus_real f_ = (alpha) * (x)[j_];                                                         \
-            const dopus_real *a_ = (A) + j_ * (m);                                                           \
-            for (i_ = 0; i_ < (m) / 2; ++i_)                                                                 \
-                acc_[i_] += dopus_lai_v2_load(a_ + 2 * i_) * f_;                                             \
-            if ((m) % 2)                                                                                     \
-                last_ += a_[(m)-1] * f_;                                                                     \
-        }                                                                                                    \
-        for (i_ = 0; i_ < (m) / 2; ++i_)                                                                     \
-            dopus_lai_v2_store((y) + 2 * i_, acc_[i_]);                                                      \
-        if ((m) % 2)                                                                                         \
-            (y)[(m)-1] = last_;                                                                              \
-    } while (0)
-#endif
-
 #endif /* DOPUS_LINALG_H */

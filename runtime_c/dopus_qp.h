@@ -219,28 +219,6 @@
 #define DOPUS_QP_PHIT 1
 #endif
 #endif
-/* The stored P_k: with the kept Phi_k' full (nx x nx, column-major: the solves' products
- * with P_k run down its columns, two-wide where doubles come in vectors), else packed by
- * lower columns. */
-#if DOPUS_QP_PHIT
-#define DOPUS_QP_NPK (DOPUS_NX * DOPUS_NX)
-#else
-#define DOPUS_QP_NPK DOPUS_QP_NXP
-#endif
-/* DOPUS_QP_HFULL 1: the workspace keeps each H_k with both triangles for the solve (N nw nw
- * reals), so that the residuals' products with H_k run down its columns two at a time: with
- * the kept Phi_k' where doubles come in two-wide vectors (dopus_linalg.h's DOPUS_LAI_VEC), not
- * with AVX (there GCC's four-wide code of the lower-triangle loops took fewer instructions).
- * The products' sums then run in the order of the columns (the round-off differs from the
- * lower-triangle loops'); define it to override (0 without DOPUS_LAI_VEC). */
-#ifndef DOPUS_QP_HFULL
-#if DOPUS_QP_PHIT && !DOPUS_REAL_FLOAT && (defined(__GNUC__) || defined(__clang__)) &&                       \
-    (defined(__SSE2__) || defined(__aarch64__)) && !defined(__AVX__)
-#define DOPUS_QP_HFULL 1
-#else
-#define DOPUS_QP_HFULL 0
-#endif
-#endif
 /* Scratch of the factorisation: Phi'P, Phi'G and one unpacked P. */
 #define DOPUS_QP_NWORK (DOPUS_NX * DOPUS_QP_NW + DOPUS_QP_NW * DOPUS_QP_NE1 + DOPUS_NX * DOPUS_NX)
 
@@ -432,11 +410,8 @@ typedef struct {
 #if DOPUS_QP_PHIT
     dopus_real PhiT[DOPUS_N][DOPUS_QP_NW * DOPUS_NX]; /* Phi_k' (nw x nx), formed once per solve */
 #endif
-#if DOPUS_QP_HFULL
-    dopus_real Hf[DOPUS_N][DOPUS_QP_NW * DOPUS_QP_NW]; /* H_k with both triangles, formed once per solve */
-#endif
     dopus_real M[DOPUS_QP_NW * DOPUS_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
-    dopus_real P[DOPUS_N + 1][DOPUS_QP_NPK];             /* value function Hessians (DOPUS_QP_NPK) */
+    dopus_real P[DOPUS_N + 1][DOPUS_QP_NXP];             /* value function Hessians, packed lower */
     dopus_real G[DOPUS_N + 1][DOPUS_NX * DOPUS_QP_NE1];  /* value function x-nu coupling */
     dopus_real Lu[DOPUS_N][DOPUS_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
     dopus_real K[DOPUS_N][DOPUS_QP_NU1 * DOPUS_NX];      /* Lu^{-1} M_ux (the gain is Lu'^{-1} of it) */

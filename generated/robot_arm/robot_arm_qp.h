@@ -219,28 +219,6 @@
 #define ROBOT_ARM_QP_PHIT 1
 #endif
 #endif
-/* The stored P_k: with the kept Phi_k' full (nx x nx, column-major: the solves' products
- * with P_k run down its columns, two-wide where doubles come in vectors), else packed by
- * lower columns. */
-#if ROBOT_ARM_QP_PHIT
-#define ROBOT_ARM_QP_NPK (ROBOT_ARM_NX * ROBOT_ARM_NX)
-#else
-#define ROBOT_ARM_QP_NPK ROBOT_ARM_QP_NXP
-#endif
-/* ROBOT_ARM_QP_HFULL 1: the workspace keeps each H_k with both triangles for the solve (N nw nw
- * reals), so that the residuals' products with H_k run down its columns two at a time: with
- * the kept Phi_k' where doubles come in two-wide vectors (robot_arm_linalg.h's ROBOT_ARM_LAI_VEC), not
- * with AVX (there GCC's four-wide code of the lower-triangle loops took fewer instructions).
- * The products' sums then run in the order of the columns (the round-off differs from the
- * lower-triangle loops'); define it to override (0 without ROBOT_ARM_LAI_VEC). */
-#ifndef ROBOT_ARM_QP_HFULL
-#if ROBOT_ARM_QP_PHIT && !ROBOT_ARM_REAL_FLOAT && (defined(__GNUC__) || defined(__clang__)) &&                       \
-    (defined(__SSE2__) || defined(__aarch64__)) && !defined(__AVX__)
-#define ROBOT_ARM_QP_HFULL 1
-#else
-#define ROBOT_ARM_QP_HFULL 0
-#endif
-#endif
 /* Scratch of the factorisation: Phi'P, Phi'G and one unpacked P. */
 #define ROBOT_ARM_QP_NWORK (ROBOT_ARM_NX * ROBOT_ARM_QP_NW + ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NE1 + ROBOT_ARM_NX * ROBOT_ARM_NX)
 
@@ -432,11 +410,8 @@ typedef struct {
 #if ROBOT_ARM_QP_PHIT
     robot_arm_real PhiT[ROBOT_ARM_N][ROBOT_ARM_QP_NW * ROBOT_ARM_NX]; /* Phi_k' (nw x nx), formed once per solve */
 #endif
-#if ROBOT_ARM_QP_HFULL
-    robot_arm_real Hf[ROBOT_ARM_N][ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NW]; /* H_k with both triangles, formed once per solve */
-#endif
     robot_arm_real M[ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
-    robot_arm_real P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NPK];             /* value function Hessians (ROBOT_ARM_QP_NPK) */
+    robot_arm_real P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NXP];             /* value function Hessians, packed lower */
     robot_arm_real G[ROBOT_ARM_N + 1][ROBOT_ARM_NX * ROBOT_ARM_QP_NE1];  /* value function x-nu coupling */
     robot_arm_real Lu[ROBOT_ARM_N][ROBOT_ARM_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
     robot_arm_real K[ROBOT_ARM_N][ROBOT_ARM_QP_NU1 * ROBOT_ARM_NX];      /* Lu^{-1} M_ux (the gain is Lu'^{-1} of it) */

@@ -116,16 +116,6 @@
 #define QP_NOINLINE
 #endif
 
-/* The column products written with two-wide vectors (UNICYCLE_LAI_V2_GEMV and _ACC: the sums in
- * registers, two rows per vector) where vectors of doubles are two wide (SSE2 without AVX,
- * AArch64). With AVX, GCC vectorises the plain loops four wide, which the two-wide code would
- * keep from it; both take the same sums in the same order. */
-#if UNICYCLE_LAI_VEC && !defined(__AVX__)
-#define QP_COLS2 1
-#else
-#define QP_COLS2 0
-#endif
-
 /* Out of line and optimised for size: code that runs only after a failed pivot. */
 #if defined(__GNUC__) || defined(__clang__)
 #define QP_COLD __attribute__((noinline, cold))
@@ -379,46 +369,26 @@ static void row_axpy(const unicycle_qp_in *in, int k, int j, unicycle_real a, un
     }
 }
 
-/* Entry (i, j), i >= j, of a stored P_k (UNICYCLE_QP_NPK: full with the kept Phi_k', else
- * packed by lower columns). */
-#if UNICYCLE_QP_PHIT
-#define P_AT(Pp, i, j) ((Pp)[(i) + (j)*NX])
-#else
-#define P_AT(Pp, i, j) ((Pp)[(j)*NX - (j) * ((j)-1) / 2 + (i) - (j)])
-#endif
-
-/* y += alpha P x for the stored P_k. With the full P_k and two-wide vectors the columns are
- * read down two rows at a time, the sums in registers (entry i: its terms in the order of the
- * columns); else one sequential pass over the lower triangle, each entry used twice (below
- * the diagonal): entry i the sum of its terms from the columns before i plus the sum of the
- * diagonal term and those after it. */
+/* y += alpha P x for P packed by lower columns: one sequential pass over the packed
+ * entries, each used twice (below the diagonal), the sums kept in a local vector. */
 static inline void spmv_packed(const unicycle_real *restrict Pp, unicycle_real alpha, const unicycle_real *restrict x,
                                unicycle_real *restrict y)
 {
     unicycle_real acc[NX];
-    int i;
-#if UNICYCLE_QP_PHIT && UNICYCLE_LAI_VEC
-#if QP_COLS2
-    UNICYCLE_LAI_V2_GEMV(NX, NX, Pp, x, acc, 1);
-#else
-    unicycle_lai_gemv_n(NX, NX, UNICYCLE_R(1.0), Pp, NX, x, UNICYCLE_R(0.0), acc);
-#endif
-#else
-    int j;
+    int i, j, l = 0;
     for (i = 0; i < NX; ++i)
         acc[i] = UNICYCLE_R(0.0);
     UNROLL
     for (j = 0; j < NX; ++j) {
         const unicycle_real xj = x[j];
-        unicycle_real s = P_AT(Pp, j, j) * xj;
+        unicycle_real s = Pp[l++] * xj;
         UNROLL
-        for (i = j + 1; i < NX; ++i) {
-            acc[i] += P_AT(Pp, i, j) * xj;
-            s += P_AT(Pp, i, j) * x[i];
+        for (i = j + 1; i < NX; ++i, ++l) {
+            acc[i] += Pp[l] * xj;
+            s += Pp[l] * x[i];
         }
         acc[j] += s;
     }
-#endif
     for (i = 0; i < NX; ++i)
         y[i] += alpha * acc[i];
 }
@@ -560,21 +530,6 @@ static void transpose_phi(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         for (i = 0; i < NW; ++i)
             for (l = 0; l < NX; ++l)
                 ws->PhiT[k][i + l * NW] = in->Phi[k][l + i * NX];
-#if UNICYCLE_QP_HFULL
-    /* H_k with both triangles from its lower one (the upper one of the input is not read) */
-    for (k = 0; k < N; ++k) {
-        const unicycle_real *restrict H = in->H[k];
-        unicycle_real *restrict Hf = ws->Hf[k];
-        UNROLL
-        for (l = 0; l < NW; ++l)
-            UNROLL
-        for (i = l; i < NW; ++i) {
-            const unicycle_real h = H[i + l * NW];
-            Hf[i + l * NW] = h;
-            Hf[l + i * NW] = h;
-        }
-    }
-#endif
 }
 /* PhiT_k (nw x nx) for phit_gemv, and its entry (i, l) = Phi_k(l, i) */
 #define QP_PHIT(ws, in, k) ((const unicycle_real *)(ws)->PhiT[(k)])
@@ -591,12 +546,7 @@ static inline void phit_gemv(const unicycle_real *restrict PhiT, unicycle_real a
                              unicycle_real *restrict y)
 {
     unicycle_real s[NW];
-    int i;
-#if UNICYCLE_QP_PHIT && QP_COLS2
-    /* two rows per vector, the sums in registers (the same sums) */
-    UNICYCLE_LAI_V2_GEMV(NW, NX, PhiT, v, s, 1);
-#else
-    int l;
+    int i, l;
     for (i = 0; i < NW; ++i)
         s[i] = UNICYCLE_R(0.0);
     for (l = 0; l < NX; ++l) {
@@ -604,7 +554,6 @@ static inline void phit_gemv(const unicycle_real *restrict PhiT, unicycle_real a
         for (i = 0; i < NW; ++i)
             s[i] += PHIT_AT(PhiT, i, l) * f;
     }
-#endif
     for (i = 0; i < NW; ++i)
         y[i] += alpha * s[i];
 }
@@ -686,16 +635,7 @@ static inline void phi_both(const unicycle_real *restrict Phi, const unicycle_re
 {
 #if UNICYCLE_QP_PHIT
     phit_gemv(PhiT, -UNICYCLE_R(1.0), v, a);
-#if QP_COLS2
-    {
-        int i;
-        for (i = 0; i < NX; ++i)
-            rd[i] = UNICYCLE_R(0.0);
-        UNICYCLE_LAI_V2_GEMV_ACC(NX, NW, -UNICYCLE_R(1.0), Phi, w, rd);
-    }
-#else
     unicycle_lai_gemv_n(NX, NW, -UNICYCLE_R(1.0), Phi, NX, w, UNICYCLE_R(0.0), rd);
-#endif
 #else
     unicycle_real acc[NX], vr[NX];
     int i, l;
@@ -751,18 +691,7 @@ static void compute_residuals(unicycle_qp_workspace *ws, const unicycle_qp_in *i
         if (k < N) {
             unicycle_real *rd = ws->r_dyn + (k + 1) * NX;
             const unicycle_real *xn = ws->prim + (k + 1) * NW;
-#if UNICYCLE_QP_HFULL && UNICYCLE_LAI_VEC
-            /* down the columns of the kept full H_k, two rows at a time (each entry's sum in
-             * the order of the columns: not the order of unicycle_lai_symv_l's, which splits it
-             * at the diagonal) */
-#if QP_COLS2
-            UNICYCLE_LAI_V2_GEMV(NW, NW, ws->Hf[k], w, h, 1);
-#else
-            unicycle_lai_gemv_n(NW, NW, UNICYCLE_R(1.0), ws->Hf[k], NW, w, UNICYCLE_R(0.0), h);
-#endif
-#else
             unicycle_lai_symv_l(NW, UNICYCLE_R(1.0), in->H[k], NW, w, UNICYCLE_R(0.0), h);
-#endif
             unicycle_lai_axpy(NW, in->hess_shift, w, h);
             absmax_acc(NW, h, m_h);
             unicycle_lai_axpy(NW, UNICYCLE_R(1.0), in->g[k], h);
@@ -1028,14 +957,14 @@ static void stage_cs2(const unicycle_real *Phi, unicycle_real *cs2)
     }
 }
 
-/* The largest |entry| of P_k (k < N, as stored; pmagN for P_N) */
+/* The largest |entry| of P_k (k < N, packed; pmagN for P_N) */
 static unicycle_real p_absmax(const unicycle_qp_workspace *ws, int k, unicycle_real pmagN)
 {
     unicycle_real m = UNICYCLE_R(0.0);
     int l;
     if (k == N)
         return pmagN;
-    for (l = 0; l < UNICYCLE_QP_NPK; ++l)
+    for (l = 0; l < UNICYCLE_QP_NXP; ++l)
         m = dmax(m, unicycle_fabs(ws->P[k][l]));
     return m;
 }
@@ -1125,19 +1054,9 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
                 for (i = 0; i < NX; ++i)
                     ws->G[N][i + j * NX] = in->Req[j + i * NE1];
         }
-#if UNICYCLE_QP_PHIT
-        /* the lower triangle mirrored (the R and Req terms above are not symmetric to the bit) */
-        (void)l;
-        for (j = 0; j < NX; ++j)
-            for (i = j; i < NX; ++i) {
-                ws->P[N][i + j * NX] = P[i + j * NX];
-                ws->P[N][j + i * NX] = P[i + j * NX];
-            }
-#else
         for (j = 0; j < NX; ++j)
             for (i = j; i < NX; ++i)
                 ws->P[N][l++] = P[i + j * NX];
-#endif
     }
     for (i = 0; i < NE1 * NE1; ++i)
         ws->S[i] = UNICYCLE_R(0.0);
@@ -1157,9 +1076,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         unicycle_real *K = ws->K[k];
         unicycle_real *KN = ws->KN[k];
         unicycle_real *P = ws->P[k];
-#if !UNICYCLE_QP_PHIT
-        int l = 0; /* packed P_k */
-#endif
+        int l = 0;
 
         /* barrier weights of the stage's rows (0 on the unbounded rows) */
         for (i = 0; i < NSI; ++i)
@@ -1167,15 +1084,9 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         for (b = ws->bstart[k]; b < ws->bstart[k + 1]; ++b)
             q[ws->bidx[b] - k * NSI] = row_q(ws, in, b);
 
-            /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
+        /* M = H_k + Phi' P_{k+1} Phi + D'QD + delta I (the upper triangle of M is never
          * read), Gam = Phi' G_{k+1} */
-#if UNICYCLE_QP_PHIT
-        /* P_{k+1} as stored (full); P_N from Pf, whose upper triangle the stage update has
-         * always read as formed */
-        qp_stage_update(Phi, k == N - 1 ? Pf : ws->P[k + 1], ws->G[k + 1], in->H[k], PhiT, WT, M, Gam);
-#else
         qp_stage_update(Phi, Pf, ws->G[k + 1], in->H[k], PhiT, WT, M, Gam);
-#endif
         /* (hess_shift read here: with a local copy read before the stage update, GCC 12 at -O3
          * no longer vectorised the triangle of M, 1.5 times its instructions) */
         for (i = 0; i < NW; ++i)
@@ -1220,14 +1131,9 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             int c;
             for (c = 0; c < NU; ++c)
                 sum -= K[c + i * NU1] * K[c + j * NU1];
-#if UNICYCLE_QP_PHIT
-            P[i + j * NX] = sum;
-            P[j + i * NX] = sum;
-#else
             P[l++] = sum;
             Pf[i + j * NX] = sum;
             Pf[j + i * NX] = sum;
-#endif
         }
         if (NE > 0) {
             /* LKn = Lu^{-1} Gam_u (in KN); G_k = Gam_x - LK' LKn; S += LKn' LKn
@@ -1273,8 +1179,8 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
      * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
     unicycle_real tv[NX], m[NW];
 #else
-    unicycle_real *tv = ws->work;     /* NX */
-    unicycle_real *m = ws->work + NX; /* NW */
+    unicycle_real *tv = ws->work;        /* NX */
+    unicycle_real *m = ws->work + NX;    /* NW */
 #endif
     unicycle_real *e = ws->e;
 
@@ -1379,12 +1285,8 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         spmv_packed(ws->P[k], -UNICYCLE_R(1.0), w, lamk);
         if (NE > 0)
             unicycle_lai_gemv_n(NX, NE, -UNICYCLE_R(1.0), ws->G[k], NX, sn, UNICYCLE_R(1.0), lamk);
-            /* x_{k+1} = Phi_k w_k + c_k */
-#if UNICYCLE_QP_PHIT && QP_COLS2
-        UNICYCLE_LAI_V2_GEMV_ACC(NX, NW, UNICYCLE_R(1.0), in->Phi[k], w, sp + (k + 1) * NW);
-#else
+        /* x_{k+1} = Phi_k w_k + c_k */
         unicycle_lai_gemv_n(NX, NW, UNICYCLE_R(1.0), in->Phi[k], NX, w, UNICYCLE_R(1.0), sp + (k + 1) * NW);
-#endif
     }
     {
         const unicycle_real *xN = sp + N * NW;

@@ -219,28 +219,6 @@
 #define UNICYCLE_QP_PHIT 1
 #endif
 #endif
-/* The stored P_k: with the kept Phi_k' full (nx x nx, column-major: the solves' products
- * with P_k run down its columns, two-wide where doubles come in vectors), else packed by
- * lower columns. */
-#if UNICYCLE_QP_PHIT
-#define UNICYCLE_QP_NPK (UNICYCLE_NX * UNICYCLE_NX)
-#else
-#define UNICYCLE_QP_NPK UNICYCLE_QP_NXP
-#endif
-/* UNICYCLE_QP_HFULL 1: the workspace keeps each H_k with both triangles for the solve (N nw nw
- * reals), so that the residuals' products with H_k run down its columns two at a time: with
- * the kept Phi_k' where doubles come in two-wide vectors (unicycle_linalg.h's UNICYCLE_LAI_VEC), not
- * with AVX (there GCC's four-wide code of the lower-triangle loops took fewer instructions).
- * The products' sums then run in the order of the columns (the round-off differs from the
- * lower-triangle loops'); define it to override (0 without UNICYCLE_LAI_VEC). */
-#ifndef UNICYCLE_QP_HFULL
-#if UNICYCLE_QP_PHIT && !UNICYCLE_REAL_FLOAT && (defined(__GNUC__) || defined(__clang__)) &&                       \
-    (defined(__SSE2__) || defined(__aarch64__)) && !defined(__AVX__)
-#define UNICYCLE_QP_HFULL 1
-#else
-#define UNICYCLE_QP_HFULL 0
-#endif
-#endif
 /* Scratch of the factorisation: Phi'P, Phi'G and one unpacked P. */
 #define UNICYCLE_QP_NWORK (UNICYCLE_NX * UNICYCLE_QP_NW + UNICYCLE_QP_NW * UNICYCLE_QP_NE1 + UNICYCLE_NX * UNICYCLE_NX)
 
@@ -432,11 +410,8 @@ typedef struct {
 #if UNICYCLE_QP_PHIT
     unicycle_real PhiT[UNICYCLE_N][UNICYCLE_QP_NW * UNICYCLE_NX]; /* Phi_k' (nw x nx), formed once per solve */
 #endif
-#if UNICYCLE_QP_HFULL
-    unicycle_real Hf[UNICYCLE_N][UNICYCLE_QP_NW * UNICYCLE_QP_NW]; /* H_k with both triangles, formed once per solve */
-#endif
     unicycle_real M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
-    unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NPK];             /* value function Hessians (UNICYCLE_QP_NPK) */
+    unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];             /* value function Hessians, packed lower */
     unicycle_real G[UNICYCLE_N + 1][UNICYCLE_NX * UNICYCLE_QP_NE1];  /* value function x-nu coupling */
     unicycle_real Lu[UNICYCLE_N][UNICYCLE_QP_NUP];                /* Cholesky factor of M_uu, packed, 1/diagonal */
     unicycle_real K[UNICYCLE_N][UNICYCLE_QP_NU1 * UNICYCLE_NX];      /* Lu^{-1} M_ux (the gain is Lu'^{-1} of it) */
