@@ -11,9 +11,12 @@ control error of every 5th feedback against IPOPT's optimum at the same state st
 loop's iterate (max over the controls of |u0 - u0_ipopt| / control range), median and max;
 the tip deviation at the end; the health flags seen after the fault; failed instants after it;
 the longest stretch after the fault with the proxy in the flat test's blind band [1, 5) and no
-stall flag (its length, proxy, KKT measure and control error); the class (see classify).
+stall flag (its length, proxy, KKT measure and control error); the class (see classify); the
+instants (after the fault; negative: before its end) at which the flat test with a lower
+threshold would fire on the run's proxy series (offline, flat_fires).
 
     .venv/bin/python bench/stuck_sweep.py [--eps E1,E2,...] [--K K1,K2,...] [--out FILE]
+    .venv/bin/python bench/stuck_sweep.py --table [JSON ...]
 
 Defaults: the eps and K of the sweep of section 42; --out bench/issue23/stuck_sweep.json
 (rewritten after every run). Classes (given the K = 0 runs' KKT medians as the unfaulted
@@ -44,6 +47,8 @@ KS = [10, 11, 12, 13]
 TAIL = 50       # the last instants measured
 EVERY = 5       # IPOPT on every 5th instant after the fault (the last one included)
 FLAT_KKT, FLAT_PREPARES = 5.0, 20    # runtime_c/dopus_health.h: DOPUS_FLAT_KKT, DOPUS_FLAT_PREPARES
+FLAT_DROP = 0.5                      # ... DOPUS_FLAT_DROP
+LOWER = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)    # flat thresholds tried offline on the proxy series (5: the check)
 BAND_FLOOR = 1.0    # the blind band's floor: above the unfaulted run's proxy (largest 0.55, last 50)
 SETTLED_KKT = 1.0   # a settled tail: KKT median at most this (unfaulted run: 0.515)
 UERR_STUCK = 0.15   # a stuck control: median error above this share of the control range
@@ -61,6 +66,26 @@ def stretches(mask):
     return out
 
 
+def flat_fires(proxies, recovering, threshold):
+    """The instants at which the flat stall test with DOPUS_FLAT_KKT replaced by ``threshold``
+    would fire on this series of proxies (runtime_c/dopus_health.c, the reference max(1, proxy
+    at init) = 1 here; offline: the loop is the one of the unchanged runtime). The counter is
+    reset in the prepares of a recovery phase, as the runtime's (read as M_used = N - 1)."""
+    fires, n_flat, ref = [], 0, 0.0
+    for j, (p, rec) in enumerate(zip(proxies, recovering)):
+        if rec:
+            n_flat = 0
+            continue
+        flat = p > threshold
+        if not flat or n_flat == 0 or not p > FLAT_DROP * ref:
+            ref, n_flat = p, 0
+        n_flat = n_flat + 1 if flat else 0
+        if n_flat >= FLAT_PREPARES:
+            fires.append(j)
+            n_flat = 0
+    return fires
+
+
 def run(arm, plant, guess, span, eps, K):
     h = Handle(arm, guess, 1)
     x = np.asarray(arm.x0, float).copy()
@@ -69,7 +94,7 @@ def run(arm, plant, guess, span, eps, K):
     proxy_init = h.s.kkt_proxy
     n = SETTLE + K + AFTER
     flags, failed, kkts, proxies, errs, stalled = set(), 0, [], [], {}, []
-    flag_instants = {}
+    flag_instants, series, full = {}, [], []
     for i in range(n):
         xm = KINDS["velocity 30"](x, None) if SETTLE <= i < SETTLE + K else x.copy()
         j = i - SETTLE - K
@@ -82,6 +107,8 @@ def run(arm, plant, guess, span, eps, K):
             st = fb.status or st2
         else:
             x, _, st = instant(h, plant, x, xm)
+        series.append(float(h.s.kkt_proxy))
+        full.append(h.s.M_used >= arm.N - 1)
         if j >= 0:
             failed += st != 0
             for f in h.s.flags:
@@ -114,6 +141,7 @@ def run(arm, plant, guess, span, eps, K):
             "dev_end": float(tip_deviation(x)[0]), "flags": sorted(flags),
             "flag_first_last": {f: [v[0], v[-1]] for f, v in flag_instants.items()},
             "failed_after": int(failed), "recoveries": int(h.s.recoveries), "blind": blind,
+            "lower_fires": {str(t): [j - SETTLE - K for j in flat_fires(series, full, t)] for t in LOWER},
             "class": classify(float(np.median(kt)), float(np.nanmedian(et)), "stalled" in flags, blind)}
 
 
@@ -132,6 +160,54 @@ def classify(kkt_median, uerr_median, stalled, blind):
     return "settled"
 
 
+def table(paths):
+    """The markdown table and the counts per class of the runs in the JSON files."""
+    rows = [r for p in paths for r in json.loads(pathlib.Path(p).read_text())["runs"]]
+    print("| eps | K | KKT med / min (last 50) | proxy med / min | u err med / max | dev end [mm] "
+          "| failed | flags | blind band: instants, proxy med (min-max), KKT med, u err med | class |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for r in sorted(rows, key=lambda r: (r["K"], r["eps"])):
+        b = r["blind"]
+        bb = (f"{b['length']} from {b['start']}: {b['proxy_median']:.2f} ({b['proxy_min']:.2f}-{b['proxy_max']:.2f}), "
+              f"{b['kkt_median']:.2f}, {100 * (b['uerr_median'] or 0):.0f} %") if b["length"] else "0"
+        fl = ", ".join(f for f in r["flags"] if f in ("stalled", "diverged", "fallback", "recovered"))
+        print(f"| {r['eps']:.1e} | {r['K']} | {r['kkt_median']:.2f} / {r['kkt_min']:.2f} | "
+              f"{r['proxy_median']:.2f} / {r['proxy_min']:.3f} | {100 * r['uerr_median']:.1f} / {100 * r['uerr_max']:.0f} % "
+              f"| {1e3 * r['dev_end']:.1f} | {r['failed_after']} | {fl} | {bb} | {r['class']} |")
+    counts = {}
+    for r in rows:
+        counts.setdefault(r["K"], {}).setdefault(r["class"], 0)
+        counts[r["K"]][r["class"]] += 1
+    print()
+    for K in sorted(counts):
+        print(f"K = {K}: " + ", ".join(f"{c} {n}" for c, n in sorted(counts[K].items())))
+    print()
+    print("| flat threshold | runs it fires in (first time: after the fault / before its end) | K = 0 runs "
+          "| missed runs it fires in within their blind stretch (median prepares into it) "
+          "| other runs in which it fires first where 5 does not |")
+    print("|---|---|---|---|---|")
+    nm = sum(r["class"].startswith("missed") for r in rows)
+    for t in LOWER:
+        after = before = k0 = missed = other = 0
+        into = []
+        for r in rows:
+            f, f5 = r["lower_fires"][str(t)][:1], r["lower_fires"]["5.0"][:1]  # the first fire changes the loop
+            if not f:
+                continue
+            after += f[0] >= 0
+            before += f[0] < 0
+            k0 += r["K"] == 0
+            b = r["blind"]
+            if r["class"].startswith("missed"):
+                if b["start"] <= f[0] < b["start"] + b["length"]:
+                    missed += 1
+                    into.append(f[0] - b["start"] + 1)
+            elif r["K"] > 0 and f != f5:
+                other += 1
+        print(f"| {t} | {after} / {before} of {len(rows)} | {k0} | {missed} of {nm} "
+              f"({np.median(into) if into else '-'}) | {other} |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -140,7 +216,12 @@ def main():
     ap.add_argument("--out", default=str(pathlib.Path("bench") / "issue23" / "stuck_sweep.json"),
                     help="JSON output (relative to the repository root unless absolute)")
     ap.add_argument("--append", action="store_true", help="add to the runs already in --out")
+    ap.add_argument("--table", nargs="*", default=None, metavar="JSON",
+                    help="print the markdown table and counts of these JSON files instead of running")
     a = ap.parse_args()
+    if a.table is not None:
+        table(a.table or [ROOT / "bench" / "issue23" / "stuck_sweep.json"])
+        return
     eps = EPS if a.eps is None else [float(v) for v in a.eps.split(",")]
     ks = KS if a.K is None else [int(v) for v in a.K.split(",")]
     out = pathlib.Path(a.out)
