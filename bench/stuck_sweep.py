@@ -18,7 +18,7 @@ threshold would fire on the run's proxy series (offline, flat_fires).
     .venv/bin/python bench/stuck_sweep.py [--eps E1,E2,...] [--K K1,K2,...] [--out FILE]
     .venv/bin/python bench/stuck_sweep.py --table [JSON ...]
 
-Defaults: the eps and K of the sweep of section 42; --out bench/issue23/stuck_sweep.json
+Defaults: the 30 eps of section 42's first sweep, K 10..13; --out bench/issue23/stuck_sweep.json
 (rewritten after every run). Classes (given the K = 0 runs' KKT medians as the unfaulted
 level): see classify.
 """
@@ -149,7 +149,7 @@ def classify(kkt_median, uerr_median, stalled, blind):
     """missed at the end: the last 50 instants' KKT median above SETTLED_KKT and their median
     control error above UERR_STUCK, no stall flag; missed, then free: such a stretch of at least
     FLAT_PREPARES instants earlier in the window (proxy in the blind band, median control error
-    above UERR_STUCK) that ended without a flag; caught: the stall flag seen after the fault;
+    above UERR_STUCK) with no stall flag in it; caught: the stall flag seen after the fault;
     settled: otherwise."""
     if kkt_median > SETTLED_KKT and uerr_median > UERR_STUCK and not stalled:
         return "missed at the end"
