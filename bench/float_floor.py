@@ -33,14 +33,13 @@ def stationarity_in_double(disc, be):
     """Largest |stationarity| of the backend's iterate over the stages (with its stage and
     component) and at the terminal node, in the solver's variables, evaluated in double."""
     sc, S = disc.scaling, disc.scaled
-    N, nx, c = disc.N, disc.nx, sc.cost
-    x, u = be.x / sc.x, be.u / sc.u
-    lam, mu_g = be.lam * sc.x / c, be.mu_g * sc.g / c
-    mu_b, mu_bN, mu_r = be.mu_b * np.concatenate([sc.x, sc.u]) / c, be.mu_bN * sc.x / c, be.mu_r * sc.r / c
+    N, nx = disc.N, disc.nx
+    pt = sc.guess_in(be.guess())   # the iterate in the solver's variables
+    x, u, lam, mu_g, mu_b, mu_bN, mu_r = pt.x, pt.u, pt.lam, pt.mu_g, pt.mu_b, pt.mu_bN, pt.mu_r
     P = node_parameters(S)
     sk = eval_stages(S.stage_grad, N, x[:N], u, P[:N], lam[1:], mu_g)[0] + mu_b
     sk[:, :nx] += lam[:N]
-    sN = np.asarray(S.term_grad(x[N], P[N], mu_r, be.nu)[0], float).ravel() + mu_bN + lam[N]
+    sN = np.asarray(S.term_grad(x[N], P[N], mu_r, pt.nu)[0], float).ravel() + mu_bN + lam[N]
     k, j = np.unravel_index(np.argmax(np.abs(sk)), sk.shape)
     return float(np.abs(sk[k, j])), int(k), int(j), float(np.max(np.abs(sN))), int(np.argmax(np.abs(sN))), x[N]
 

@@ -221,10 +221,8 @@ def _stationarity_roundoff(disc, sol):
     assert integ.substeps == 1
     eps = float(np.finfo(np.float32).eps)
     N, nx, nu = disc.N, disc.nx, disc.nu
-    c = sc.cost
-    x, u = sol.x / sc.x, sol.u / sc.u
-    lam, mu_g = sol.lam * sc.x / c, sol.mu_g * sc.g / c
-    mu_b, mu_bN, mu_r = sol.mu_b * np.concatenate([sc.x, sc.u]) / c, sol.mu_bN * sc.x / c, sol.mu_r * sc.r / c
+    pt = sc.guess_in(sol)   # the solution in the solver's variables
+    x, u, lam, mu_g, mu_b, mu_bN, mu_r = pt.x, pt.u, pt.lam, pt.mu_g, pt.mu_b, pt.mu_bN, pt.mu_r
     P = node_parameters(S)
     xs, us, ps = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("p", S.np)
     f = S.ode(xs, us, ps)
@@ -249,8 +247,8 @@ def _stationarity_roundoff(disc, sol):
                  + np.abs(Ck).T @ np.abs(mu_g[k]) + np.abs(mu_b[k]))
         terms[:nx] += np.abs(lam[k])
         out = max(out, eps * float(np.max(terms)))
-    gE = np.asarray(S.term_grad(x[N], P[N], np.zeros_like(mu_r), sol.nu)[0], float).ravel()
-    AN, RN, _ = (np.asarray(v, float) for v in S.term_hess_exact(x[N], P[N], mu_r, sol.nu))
+    gE = np.asarray(S.term_grad(x[N], P[N], np.zeros_like(mu_r), pt.nu)[0], float).ravel()
+    AN, RN, _ = (np.asarray(v, float) for v in S.term_hess_exact(x[N], P[N], mu_r, pt.nu))
     terms = np.abs(AN) @ np.abs(x[N]) + np.abs(gE) + np.abs(RN).T @ np.abs(mu_r) + np.abs(mu_bN) + np.abs(lam[N])
     out = max(out, eps * float(np.max(terms)))
     s_d = max([1.0] + [float(np.max(np.abs(a))) for a in (lam, mu_g, mu_b, mu_bN, mu_r) if np.size(a)])
