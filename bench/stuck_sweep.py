@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from harness.faults import AFTER, KINDS, SETTLE, Handle, instant, model_plant, tip_deviation  # noqa: E402
 
-from dopus_codegen import build_functions, load_ocp  # noqa: E402
+from dopus_codegen import build_functions, load_ocp, vocabulary  # noqa: E402
 from dopus_codegen.reference.offline import solve_ocp  # noqa: E402
 from dopus_codegen.studies import loops  # noqa: E402
 
@@ -46,8 +46,8 @@ EPS = [0.0, 1e-9, -1e-9, 1e-8, -1e-8, 1e-7, -1e-7, 1e-6, -1e-6, 3e-9, -3e-9, 3e-
 KS = [10, 11, 12, 13]
 TAIL = 50       # the last instants measured
 EVERY = 5       # IPOPT on every 5th instant after the fault (the last one included)
-FLAT_KKT, FLAT_PREPARES = 5.0, 20    # runtime_c/dopus_health.h: DOPUS_FLAT_KKT, DOPUS_FLAT_PREPARES
-FLAT_DROP = 0.5                      # ... DOPUS_FLAT_DROP
+# the flat test's constants, read from runtime_c/dopus_health.h (DOPUS_FLAT_KKT, _PREPARES, _DROP)
+FLAT_KKT, FLAT_PREPARES, FLAT_DROP = (vocabulary.constants()[k] for k in ("FLAT_KKT", "FLAT_PREPARES", "FLAT_DROP"))
 LOWER = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)    # flat thresholds tried offline on the proxy series (5: the check)
 BAND_FLOOR = 1.0    # the blind band's floor: above the unfaulted run's proxy (largest 0.55, last 50)
 SETTLED_KKT = 1.0   # a settled tail: KKT median at most this (unfaulted run: 0.515)
