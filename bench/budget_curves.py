@@ -71,7 +71,8 @@ from anytime_budget import closed_loop, figures  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from dopus_codegen import build_functions, load_ocp  # noqa: E402
+from dopus_codegen import build_functions, load_ocp, vocabulary  # noqa: E402
+from dopus_codegen.errors import qp_status_code  # noqa: E402
 from dopus_codegen.reference.offline import solve_ocp  # noqa: E402
 from dopus_codegen.studies.sil import summarize  # noqa: E402
 
@@ -87,7 +88,9 @@ M7_RESOLUTION = 0.01
 # the robust reading: fractions of the reference (time, instructions) evaluated above the
 # needed budget besides the curve's grid, halving the grid's steps above one iteration
 ENVELOPE_FRACTIONS = (1.125, 1.375, 1.75)
-FLAG_QP_CUT = 256       # DOPUS_FLAG_QP_CUT (runtime_c/dopus_solver.h): the deadline's cut QP was the step
+# DOPUS_FLAG_QP_CUT (runtime_c/dopus_solver.h: the deadline's cut QP was the step) and DOPUS_QP_DEADLINE (dopus_qp.h)
+FLAG_QP_CUT = vocabulary.enum("dopus_flag").codes["qp_cut"]
+QP_DEADLINE = qp_status_code("deadline")
 
 
 def costs(N):
@@ -350,12 +353,12 @@ def grid_budgets(spec):
 
 def grid_row(disc, sc, recs, kind, budget, signal, ref):
     """One row of the fine grid: the curve's figures of the run (``m7_figures``) and the
-    feedback QPs the deadline cut (QP status 7), the stages re-linearised per instant from the
+    feedback QPs the deadline cut (QP status DOPUS_QP_DEADLINE), the stages re-linearised per instant from the
     event on and the median of the budget left unused at the instants whose cut QP was the step
     (flag DOPUS_FLAG_QP_CUT; for an even count the upper of the two middle values: an instant's
     own figure)."""
     fig = m7_figures(disc, sc, recs, kind, budget, signal)
-    cut = [r for r in recs if r.get("qp_status") == 7]
+    cut = [r for r in recs if r.get("qp_status") == QP_DEADLINE]
     unused = [budget - r["instructions_instant"] for r in recs if (r.get("flags") or 0) & FLAG_QP_CUT]
     after = recs[sc["event_step"] or 0:]
     return {"setting": kind, "budget": budget, "rms_after": fig["rms_after"],

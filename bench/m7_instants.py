@@ -34,7 +34,7 @@ import numpy as np
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 
-from budget_curves import PROBLEMS, m7_figures  # noqa: E402
+from budget_curves import PROBLEMS, QP_DEADLINE, m7_figures  # noqa: E402
 
 from dopus_codegen import build_functions, load_ocp  # noqa: E402
 from dopus_lab.paths import checkout_commit  # noqa: E402
@@ -68,7 +68,7 @@ def summary(disc, sc, recs, kind, budget, stage, signal):
             "extra_iterations": fig["extra_iterations"], "kkt_max_settled": fig["kkt_max_settled"],
             "feedback_largest": fb[hard], "feedback_largest_instant": hard,
             "feedback_largest_qp_iterations": recs[hard]["qp_iters"], "failed_at": failed_at,
-            "qp_cut": sum(1 for r in recs if r.get("qp_status") == 7),
+            "qp_cut": sum(1 for r in recs if r.get("qp_status") == QP_DEADLINE),
             "per_instant": ins, "per_instant_feedback": fb,
             "per_instant_qp_iterations": [r["qp_iters"] for r in recs]}
 
