@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conftest import SECOND_FILE
+from conftest import EXAMPLES, SECOND_FILE
 
 PREP = ("shift", "gradients", "rho", "hessians", "regularization", "assembly")
 
@@ -333,7 +333,7 @@ def test_bench_of_a_scaled_problem_plants_in_declared_units(tmp_path):
     from dopus_lab.bench import run_bench
     from dopus_lab.timing import Ours
 
-    path = Path(SECOND_FILE).parent / "cstr.py"
+    path = EXAMPLES / "cstr.py"
     disc = build_functions(load_ocp(path))
     assert disc.scaling is not None
     nominal, info = solve_ocp(disc, disc.x0)
