@@ -48,24 +48,38 @@ def _failed_feedback(s, xhat):
     return ei.value
 
 
+def _warm_point(r: ReferenceDopus, qp: dict) -> dict:
+    """The C runtime's warm-start point of the feedback's QP (dopus_qp_warm_point): a zero
+    step with x_0's step fixed by the measurement, and the iterate's multipliers."""
+    x = np.zeros((N + 1, r.nx))
+    x[0] = qp["x0"]
+    pt = {"x": x, "u": np.zeros((N, r.n_u)), "lam": r.lam, "mu_b": r.mu_b, "mu_bN": r.mu_bN}
+    for key, n in (("mu_g", r.ng), ("mu_r", r.nr), ("nu", r.ne)):
+        if n:
+            pt[key] = getattr(r, key)
+    return pt
+
+
 @pytest.mark.parametrize("lm", [0.0, None])
 def test_certified_warm_start_spends_no_cold_solve(reach, lm):
     """The C runtime's warm-started QP certifies infeasibility: the feedback reports its
-    status (primal infeasible, the terminal row) with no cold retry, and spends at most the
-    QP iterations of a copy of the solver that starts the same QP cold (with the cold retry
-    it spent the warm solve's and then as many as the cold start's). Clarabel finds the QP
-    (the reference backend's copy) primal infeasible, and the C QP solver certifies it
-    (dopus_qp_info.certified); the reference backend reports the same status and row.
-    lm=None: the OCP's automatic term, whose raises still follow the certificate (the rows do
-    not depend on the term, but a raise moves it: docs/algorithm.md section 10), in both
-    backends alike."""
+    status (primal infeasible, the terminal row) with no cold retry, and its QP iterations
+    are those of the warm solve alone: the C QP solver on the reference backend's copy of the
+    QP from the runtime's warm point takes as many, a copy of the solver with the warm start
+    off as many as the cold start (with the cold retry the feedback spent both; lm fixed). Clarabel
+    finds the QP primal infeasible; the reference backend reports the same status and row.
+    The recovery within the feedback is off (its re-initialised QP would be the one
+    reported). lm=None: the OCP's automatic term, whose raises still follow the certificate
+    (the rows do not depend on the term, but a raise moves it: docs/algorithm.md section
+    10), the same in both backends and in both C solvers."""
     kw = {} if lm is None else {"lm": lm}
     c = CSolver(reach, M=1, **kw)
     cold = CSolver(reach, M=1, **kw)
     r = ReferenceDopus(reach, M=1, **kw)
     assert c.qp_warm_start
-    c.init([0.0])
-    r.init([0.0])
+    for s in (c, r):
+        s.set_recovery(False)
+        s.init([0.0])
     cold.copy_state_from(c)
     cold.set_qp_warm_start(False)
     qp = r.qp_of_current([0.0])
@@ -73,9 +87,13 @@ def test_certified_warm_start_spends_no_cold_solve(reach, lm):
     # an independent solver: the QP is infeasible
     status, _ = P.solve_clarabel(qp)
     assert "Infeasible" in status and "Primal" in status, status
+    # the C QP solver on the same QP, warm from the runtime's warm point (a certificate the
+    # runtime trusts: certified) and cold
     h = build_qp_solver(N, r.nx, r.n_u, r.ng, r.nr, r.ne)
-    _, info = h.solve(qp, tol=c.qp_tol, max_iter=c.qp_max_iter)
-    assert info["status"] == "primal_infeasible" and info["certified"], info
+    _, warm = h.solve(qp, tol=c.qp_tol, max_iter=c.qp_max_iter, warm=_warm_point(r, qp))
+    assert warm["status"] == "primal_infeasible" and warm["certified"], warm
+    _, cold_qp = h.solve(qp, tol=c.qp_tol, max_iter=c.qp_max_iter)
+    assert cold_qp["status"] == "primal_infeasible", cold_qp
 
     infeasible = qp_status_code("primal_infeasible")
     for s in (c, cold, r):
@@ -84,8 +102,11 @@ def test_certified_warm_start_spends_no_cold_solve(reach, lm):
     row = {"stage": N, "kind": "terminal", "index": 0, "side": "lower", "bound": 5.0}
     assert c.qp_infeasible_row == cold.qp_infeasible_row == r.qp_infeasible_row == row
     assert c.qp_cold_retry is False and cold.qp_cold_retry is False
-    assert 0 < c.qp_iterations <= cold.qp_iterations, (c.qp_iterations, cold.qp_iterations)
     assert c.lm == cold.lm == r.lm
+    if lm is not None:
+        # no raise of lm follows, and no active-set start (a fixed term): the feedback's QP
+        # iterations are the warm solve's alone, the copy's the cold solve's
+        assert (c.qp_iterations, cold.qp_iterations) == (warm["iterations"], cold_qp["iterations"])
 
 
 def test_certified_flag_of_the_qp_solver():
