@@ -519,7 +519,8 @@ class Solver:
 
     qp_warm_start = _settings_property("qp_warm_start", bool)
     qp_cold_retry = _info_property("qp_cold_retry", bool,
-                                   "True when the last feedback's warm-started QP failed and the cold retry ran.")
+                                   "True when the last feedback's warm-started QP failed and the cold retry ran "
+                                   "(not after a warm start that certified primal infeasibility).")
 
     def _check_parameters(self, status: int, what: str) -> None:
         if int(status) == STATUS_ALREADY_PREPARED:

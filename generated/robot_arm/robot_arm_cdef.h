@@ -198,7 +198,9 @@ typedef struct {
                             feedback failed after it: an unusable measurement; 0 after a
                             re-initialisation until its QP) */
     int qp_iterations;    /* its iterations (the sum over the solves of the call) */
-    int qp_cold_retry;    /* 1 when its warm-started QP failed and the cold retry ran */
+    int qp_cold_retry;    /* 1 when its warm-started QP failed and the cold retry ran; 0 after a
+                            warm start that certified primal infeasibility (no retry: qp_status
+                            is that certificate's 2, or a later raise of lm's) */
     int flags;            /* ROBOT_ARM_FLAG_* raised by the last feedback and the prepare after it:
                             u0 clipped, fallback control, divergence, recovery, ... */
     int recoveries;       /* re-initialisations by the automatic recovery since init */

@@ -1611,14 +1611,16 @@ static int dual_ray(const qp_res *r, robot_arm_real data_scale)
 }
 
 /* Farkas certificate on the normalised dual iterate y / |y|_inf once it has diverged:
- * A'y = 0 to CERT_RES_DUAL and a separating value b'y beyond CERT_SEP. */
+ * A'y = 0 to CERT_RES_DUAL and a separating value b'y beyond CERT_SEP. *certified: 1 when
+ * b'y separates beyond the tolerance tol as well (robot_arm_qp_info.certified). */
 static int primal_infeasible(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r,
-                             robot_arm_real data_scale)
+                             robot_arm_real data_scale, robot_arm_real tol, int *certified)
 {
     robot_arm_real bscale, y1, bty;
     if (!dual_ray(r, data_scale))
         return 0;
     bty = farkas_separation(ws, in, &bscale, &y1) / r->ny;
+    *certified = bty > dmax(CERT_SEP, tol) * bscale;
     return bty > CERT_SEP * bscale;
 }
 
@@ -2165,6 +2167,7 @@ typedef struct {
     robot_arm_real best_merit; /* the best iterate so far (it is in *sol) */
     int best_iter;
     int best_solved; /* the stall ended at the best iterate's round-off: it is the solution */
+    int certified;   /* the regular test's certificate (primal_infeasible) ended the solve */
     qp_res best_r;
     /* progress towards an infeasibility certificate (see qp_track_best): the smallest
      * normalised constraint residual |A'y| / |y| of a dual iterate beyond the data scale,
@@ -2219,7 +2222,7 @@ static void info_not_solved(robot_arm_qp_info *info)
     info->status = ROBOT_ARM_QP_INVALID_INPUT;
     info->iterations = info->inertia_corrections = info->terminal_augmentations = 0;
     info->pivot_floors = 0;
-    info->factorizations = info->active_set = 0;
+    info->factorizations = info->active_set = info->certified = 0;
     info->delta = ROBOT_ARM_R(0.0);
     info->res_stat = info->res_eq = info->res_ineq = info->res_comp = INFINITY;
     info->res_stat_scaled = info->res_eq_scaled = info->res_ineq_scaled = info->res_comp_scaled = INFINITY;
@@ -2255,6 +2258,7 @@ static int qp_prepare(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp
     int bounds;
     robot_arm_real hmax;
     checked_settings(settings, &L->st);
+    L->certified = 0;
     if (info)
         info_not_solved(info);
     if (ws == NULL || in == NULL || sol == NULL)
@@ -2280,8 +2284,10 @@ static int qp_prepare(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp
     }
     if (bounds == 1) {
         zero_solution(sol);
-        if (info)
+        if (info) {
             info->status = ROBOT_ARM_QP_PRIMAL_INFEASIBLE;
+            info->certified = 1;
+        }
         return ROBOT_ARM_QP_PRIMAL_INFEASIBLE;
     }
     L->hscale = hessian_scale(in, hmax);
@@ -2439,7 +2445,7 @@ static int qp_stopping_tests(qp_loop *L, robot_arm_qp_workspace *ws, const robot
     s = qp_track_best(L, ws, in, sol, r, iter);
     if (s != QP_GO_ON)
         return s;
-    if (primal_infeasible(ws, in, r, L->data_scale))
+    if (primal_infeasible(ws, in, r, L->data_scale, tol, &L->certified))
         return ROBOT_ARM_QP_PRIMAL_INFEASIBLE;
     if (dual_infeasible(ws, in, r, L->data_scale, L->hscale))
         return ROBOT_ARM_QP_DUAL_INFEASIBLE;
@@ -2702,6 +2708,7 @@ static int qp_result(const qp_loop *L, robot_arm_qp_workspace *ws, const robot_a
         info->pivot_floors = ws->pivot_floors;
         info->delta = L->delta_used;
         info->factorizations = ws->n_fact;
+        info->certified = status == ROBOT_ARM_QP_PRIMAL_INFEASIBLE && L->certified;
     }
     status = finish(ws, keep_best ? &L->best_r : r, status, iter, keep_best ? NULL : sol, info);
     if (info)

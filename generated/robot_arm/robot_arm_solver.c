@@ -1230,23 +1230,27 @@ static int robot_arm_active_set_fits(const robot_arm_solver *s)
  * in the same call when the warm start failed or needed the inertia correction: the QP is
  * then nonconvex on the null space of its equalities and may have several local
  * minimisers, and the warm start may have reached another one than the cold start finds
- * (the one the closed loop has followed so far). Returns the QP status. */
+ * (the one the closed loop has followed so far). Not after a warm start that certified
+ * primal infeasibility beyond CERT_SEP and the tolerance (robot_arm_qp_info.certified): the
+ * rows do not depend on the start, and no such retry was solved (algorithm.md section 4).
+ * Returns the QP status. */
 static int robot_arm_feedback_qp(robot_arm_solver *s)
 {
     /* the active-set start only for a measurement near the prediction, not after a feedback
-     * that needed the cold retry, and for a QP whose automatic term lm is within one raise
+     * whose warm start failed, and for a QP whose automatic term lm is within one raise
      * step of convex (robot_arm_lm_near_convex; its test, if any, last: before the warm point
      * fills the QP's memory, which the test's scratch shares) (algorithm.md section 4,
      * feedback); with a time budget only when its sweeps fit before the deadline
      * (robot_arm_active_set_fits, section 14) */
     const int active_set = !s->qp_no_active_set && s->lm.on && robot_arm_measurement_near(s) &&
-                           !s->qp_cold_retry && robot_arm_active_set_fits(s) &&
+                           !s->qp_warm_failed && robot_arm_active_set_fits(s) &&
                            robot_arm_lm_near_convex(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
     int qs;
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
     s->qp_cold_retry = 0;
+    s->qp_warm_failed = 0;
     s->anytime.work += ROBOT_ARM_WORK_QP;
     if (s->settings.qp_warm_start) {
         robot_arm_qp_warm_point(s);
@@ -1254,8 +1258,11 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
     qs = robot_arm_qp_attempt(s, s->settings.qp_warm_start, active_set);
     if (s->settings.qp_warm_start && qs != ROBOT_ARM_QP_INVALID_INPUT && qs != ROBOT_ARM_QP_DEADLINE &&
         (!robot_arm_qp_ok(s, qs) || s->qp_info.inertia_corrections > 0)) {
-        s->qp_cold_retry = 1;
-        qs = robot_arm_qp_attempt(s, 0, 0);
+        s->qp_warm_failed = 1;
+        if (!(qs == ROBOT_ARM_QP_PRIMAL_INFEASIBLE && s->qp_info.certified)) {
+            s->qp_cold_retry = 1;
+            qs = robot_arm_qp_attempt(s, 0, 0);
+        }
     }
     return qs;
 }
@@ -2523,6 +2530,7 @@ static int robot_arm_extra_iteration(robot_arm_solver *s)
 static int robot_arm_anytime_run(robot_arm_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = ROBOT_ARM_OK;
+    const int warm_failed = s->qp_warm_failed;
     const int qp_factorizations = s->qp_factorizations;
     int max_iter = ROBOT_ARM_ANYTIME_MAX_ITER;
     if (!robot_arm_budget_on(s)) {
@@ -2546,6 +2554,7 @@ static int robot_arm_anytime_run(robot_arm_solver *s)
     s->qp_iterations = qp_iterations;
     s->qp_factorizations = qp_factorizations;
     s->qp_cold_retry = cold;
+    s->qp_warm_failed = warm_failed;
     s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
     return rc == ROBOT_ARM_ERR_QP ? ROBOT_ARM_OK : rc;
 }
@@ -2898,6 +2907,7 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
     s->qp_in.R = 0;
     s->qp_in.Req = 0;
     s->qp_cold_retry = 0;
+    s->qp_warm_failed = 0;
     s->qp_no_active_set = 0;
     for (k = 0; k <= ROBOT_ARM_N; ++k) {
         for (i = 0; i < ROBOT_ARM_NP; ++i) {

@@ -242,7 +242,9 @@ typedef struct {
                             feedback failed after it: an unusable measurement; 0 after a
                             re-initialisation until its QP) */
     int qp_iterations;    /* its iterations (the sum over the solves of the call) */
-    int qp_cold_retry;    /* 1 when its warm-started QP failed and the cold retry ran */
+    int qp_cold_retry;    /* 1 when its warm-started QP failed and the cold retry ran; 0 after a
+                            warm start that certified primal infeasibility (no retry: qp_status
+                            is that certificate's 2, or a later raise of lm's) */
     int flags;            /* ROBOT_ARM_FLAG_* raised by the last feedback and the prepare after it:
                             u0 clipped, fallback control, divergence, recovery, ... */
     int recoveries;       /* re-initialisations by the automatic recovery since init */
@@ -573,7 +575,9 @@ struct robot_arm_solver {
     int qp_status;
     int qp_iterations;
     int qp_factorizations;
-    int qp_cold_retry;    /* the last feedback needed the cold retry */
+    int qp_cold_retry;    /* the last feedback's cold retry ran */
+    int qp_warm_failed;   /* the last feedback's warm start failed (retried cold, or certified
+                             infeasibility: no retry) */
     int qp_no_active_set; /* 1 inside a globalised step: the interior point only */
 
     /* the QP's workspace and solution, live only inside feedback, share their memory with

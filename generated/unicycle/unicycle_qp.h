@@ -341,6 +341,12 @@ typedef struct {
                                 one per sweep of the active-set start */
     int active_set;             /* sweeps of the active-set start when it solved the QP (they are
                                 then its iterations), else 0 */
+    int certified;              /* status UNICYCLE_QP_PRIMAL_INFEASIBLE: 1 when a row's lower bound lies
+                                above its upper bound, or the certificate of the test during the
+                                iteration separated beyond CERT_SEP and the tolerance (no point meets
+                                the rows to the tolerance, from any start); 0 for one found only
+                                after a stall, failure or the iteration limit (a separation down to
+                                CERT_SEP_STALL) and for every other status */
     unicycle_real delta;           /* largest delta used (0 when no correction was needed) */
     /* final residuals, infinity norms, unscaled */
     unicycle_real res_stat; /* stationarity (both equations of the header comment) */

@@ -377,6 +377,7 @@ class QPSolverHandle:
             "iterations": int(i.iterations),
             "factorizations": int(i.factorizations),
             "active_set": int(i.active_set),
+            "certified": bool(i.certified),
             "inertia_corrections": int(i.inertia_corrections),
             "terminal_augmentations": int(i.terminal_augmentations),
             "pivot_floors": int(i.pivot_floors),
