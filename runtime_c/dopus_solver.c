@@ -2181,7 +2181,7 @@ int dopus_prepare(dopus_solver *s)
     }
     s->settings.hessian = hessian;
     if (rc == DOPUS_OK && s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING &&
-        dopus_health_stalled(&s->health, DOPUS_RECOVERY_FULL_RTI)) {
+        dopus_health_stalled(&s->health, DOPUS_RECOVERY_FULL_RTI, s->lm.held)) {
         s->health.flags |= DOPUS_FLAG_STALLED;
     }
     if (rc == DOPUS_OK && dopus_budget_on(s) && s->anytime.mark >= 0.0) {

@@ -2181,7 +2181,7 @@ int robot_arm_prepare(robot_arm_solver *s)
     }
     s->settings.hessian = hessian;
     if (rc == ROBOT_ARM_OK && s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING &&
-        robot_arm_health_stalled(&s->health, ROBOT_ARM_RECOVERY_FULL_RTI)) {
+        robot_arm_health_stalled(&s->health, ROBOT_ARM_RECOVERY_FULL_RTI, s->lm.held)) {
         s->health.flags |= ROBOT_ARM_FLAG_STALLED;
     }
     if (rc == ROBOT_ARM_OK && robot_arm_budget_on(s) && s->anytime.mark >= 0.0) {

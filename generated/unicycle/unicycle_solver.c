@@ -2181,7 +2181,7 @@ int unicycle_prepare(unicycle_solver *s)
     }
     s->settings.hessian = hessian;
     if (rc == UNICYCLE_OK && s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING &&
-        unicycle_health_stalled(&s->health, UNICYCLE_RECOVERY_FULL_RTI)) {
+        unicycle_health_stalled(&s->health, UNICYCLE_RECOVERY_FULL_RTI, s->lm.held)) {
         s->health.flags |= UNICYCLE_FLAG_STALLED;
     }
     if (rc == UNICYCLE_OK && unicycle_budget_on(s) && s->anytime.mark >= 0.0) {
