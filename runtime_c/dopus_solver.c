@@ -2828,6 +2828,7 @@ void dopus_get_info(const dopus_solver *s, dopus_info *info)
     info->has_clock = dopus_has_clock(s);
     info->lm = s->lm.lm;
     info->lm_scale = s->lm.scale;
+    info->lm_held = s->lm.held;
     info->kkt_proxy = s->health.kkt_proxy;
     info->kkt_max = s->kkt[0];
     for (i = 0; i < 4; ++i) {

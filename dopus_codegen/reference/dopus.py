@@ -186,7 +186,7 @@ class ReferenceDopus:
         # the prepared automatic term before this feedback's cap (-1: not capped; C's lm.uncapped)
         self.lm_uncapped = -1.0
         # the last prepare's convexity test raised the automatic term (C's lm.held; section 9)
-        self._lm_held = False
+        self.lm_held = False
         self.set_levenberg_marquardt(s.lm)
         self.qp_max_iter = None
         if s.qp_max_iter is not None:
@@ -282,11 +282,11 @@ class ReferenceDopus:
         """``"auto"``: the automatic, adaptive term of section 10; a number >= 0: fixed."""
         v = _setting(settings.levenberg_marquardt, lm)
         if v == settings.LM_AUTO:
-            self.lm_auto, self.lm, self._lm_kkt_prev, self._lm_held = True, 0.0, -1.0, False
+            self.lm_auto, self.lm, self._lm_kkt_prev, self.lm_held = True, 0.0, -1.0, False
             if self._initialised_and_ready():
                 self._lm_start()
         else:
-            self.lm_auto, self.lm, self._lm_held = False, float(v), False
+            self.lm_auto, self.lm, self.lm_held = False, float(v), False
 
     def _initialised_and_ready(self) -> bool:
         return bool(getattr(self, "_initialised", False) and getattr(self, "_qp_ready", False))
@@ -1062,7 +1062,7 @@ class ReferenceDopus:
         high = self.kkt_proxy > _SAFETY["STALL_KKT"] * ref
         self._n_stalled = self._n_stalled + 1 if high else 0
         flat = (self.kkt_proxy > _SAFETY["FLAT_KKT"] * ref
-                or (self._lm_held and self.kkt_proxy > _SAFETY["FLAT_HELD_KKT"] * ref))
+                or (self.lm_held and self.kkt_proxy > _SAFETY["FLAT_HELD_KKT"] * ref))
         if not flat or self._n_flat == 0 or not self.kkt_proxy > _SAFETY["FLAT_DROP"] * self._kkt_flat_ref:
             self._kkt_flat_ref, self._n_flat = self.kkt_proxy, 0
         self._n_flat = self._n_flat + 1 if flat else 0
@@ -1928,13 +1928,13 @@ class ReferenceDopus:
         self.lm = 0.0
         self._lm_kkt_prev = -1.0
         self.lm_uncapped = -1.0
-        self._lm_held = False
+        self.lm_held = False
         self.lm_convexify()
 
     def _lm_prepared(self) -> None:
         """After a prepare: the scale, a raise when the KKT proxy grew, then convex; held when
         that last test raised the term (the feedback's decay undone: the stall test, section 9)."""
-        self._lm_held = False
+        self.lm_held = False
         if not self.lm_auto:
             return
         floor = 1e-8 * max(self.kkt_proxy_ref, 1.0)
@@ -1946,7 +1946,7 @@ class ReferenceDopus:
         self._lm_kkt_prev = self.kkt_proxy
         before = self.lm
         self.lm_convexify()
-        self._lm_held = self.lm > before
+        self.lm_held = self.lm > before
 
     def _lm_measured(self, xhat0) -> None:
         """Feedback, once the measurement is known: the term capped by the distance from the
