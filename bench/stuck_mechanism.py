@@ -7,7 +7,9 @@ loop goes on for 60 instants once per variant: unchanged, the Levenberg-Marquard
 full RTI for 10 instants), the Gauss-Newton Hessian. Per variant: the KKT proxy after 0, 5, 10,
 20, 40 and 59 instants, the term at the end, the control error against IPOPT's optimum at the
 same state (every 10th instant, share of the control range) and the tip's distance from the
-circle at the end.
+circle at the end. The stuck state is that of a runtime without the held-lm flat test of
+docs/algorithm.md section 9 (main ae64192, where section 43's table was measured): with it
+the run (6e-6, 12) is flagged at instant 45 after the fault and is no longer stuck at 100.
 
     .venv/bin/python bench/stuck_mechanism.py [EPS K J]      (default: 6e-6 12 100)
 """
