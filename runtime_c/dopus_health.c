@@ -164,7 +164,7 @@ int dopus_diverged(const dopus_health *h, const dopus_real *xhat0, const dopus_r
     return !(h->kkt_proxy <= DOPUS_DIVERGENCE_KKT * ref);
 }
 
-int dopus_health_stalled(dopus_health *h, int phase)
+int dopus_health_stalled(dopus_health *h, int phase, int lm_held)
 {
     dopus_real ref = h->kkt_proxy_init > DOPUS_R(1.0) ? h->kkt_proxy_init : DOPUS_R(1.0);
     int high, flat;
@@ -175,8 +175,10 @@ int dopus_health_stalled(dopus_health *h, int phase)
     }
     high = h->kkt_proxy > DOPUS_STALL_KKT * ref;
     h->n_stalled = high ? h->n_stalled + 1 : 0;
-    /* a flat stretch: the proxy well above its settled level and not falling */
-    flat = h->kkt_proxy > DOPUS_FLAT_KKT * ref;
+    /* a flat stretch: the proxy well above its settled level, or above it with the automatic
+     * lm held up by the convexity test (the damping that keeps the iterate from progressing),
+     * and not falling */
+    flat = h->kkt_proxy > DOPUS_FLAT_KKT * ref || (lm_held && h->kkt_proxy > DOPUS_FLAT_HELD_KKT * ref);
     if (!flat || h->n_flat == 0 || !(h->kkt_proxy > DOPUS_FLAT_DROP * h->kkt_flat_ref)) {
         h->kkt_flat_ref = h->kkt_proxy;
         h->n_flat = 0;

@@ -17,6 +17,7 @@
 #define DOPUS_FLAT_KKT DOPUS_R(5.0)       /* a flat prepare: proxy > 5 max(1, proxy at init) ... */
 #define DOPUS_FLAT_DROP DOPUS_R(0.5)      /* ... not below 0.5 times the proxy the stretch began with */
 #define DOPUS_FLAT_PREPARES 20            /* ... in so many prepares in a row: escalate */
+#define DOPUS_FLAT_HELD_KKT DOPUS_R(1.0)  /* flat too: proxy > 1 max(1, proxy at init), lm held up */
 
 typedef struct {
     int n_failed;                         /* consecutive failed feedbacks */
@@ -76,10 +77,12 @@ DOPUS_INTERNAL int dopus_diverged(const dopus_health *h, const dopus_real *xhat0
                                   const dopus_real *mu_bN);
 /* The stall test of a prepared iterate (docs/algorithm.md section 9), outside a recovery
  * phase: h->kkt_proxy > STALL_KKT max(1, h->kkt_proxy_init) in STALL_PREPARES prepares in a
- * row, or > FLAT_KKT max(1, h->kkt_proxy_init) and not below FLAT_DROP times the proxy the
- * stretch began with in FLAT_PREPARES prepares in a row (no progress), begins a recovery
- * phase of `phase` feedbacks without a re-initialisation. Returns 1 when it did. */
-DOPUS_INTERNAL int dopus_health_stalled(dopus_health *h, int phase);
+ * row, or flat (> FLAT_KKT max(1, h->kkt_proxy_init), or > FLAT_HELD_KKT max(1,
+ * h->kkt_proxy_init) with lm_held: the prepare's convexity test raised the automatic
+ * Levenberg-Marquardt term) and not below FLAT_DROP times the proxy the stretch began with in
+ * FLAT_PREPARES prepares in a row (no progress), begins a recovery phase of `phase` feedbacks
+ * without a re-initialisation. Returns 1 when it did. */
+DOPUS_INTERNAL int dopus_health_stalled(dopus_health *h, int phase, int lm_held);
 /* The control of the last good plan for the instant k sampling instants from now (its age
  * plus k, the last control beyond the plan's end). */
 DOPUS_INTERNAL const dopus_real *dopus_health_plan_control(const dopus_health *h, int k);

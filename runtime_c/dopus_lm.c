@@ -11,6 +11,7 @@ void dopus_lm_reset(dopus_lm *lm, int on, dopus_real fixed)
     lm->lm = on ? DOPUS_R(0.0) : fixed;
     lm->kkt_prev = -DOPUS_R(1.0);
     lm->uncapped = -DOPUS_R(1.0);
+    lm->held = 0;
 }
 
 /* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
@@ -267,6 +268,7 @@ void dopus_lm_start(dopus_lm *st, const dopus_ring *ring, const dopus_real *A_N,
     st->lm = DOPUS_R(0.0);
     st->kkt_prev = -DOPUS_R(1.0);
     st->uncapped = -DOPUS_R(1.0);
+    st->held = 0;
     dopus_lm_convexify(st, ring, A_N, work);
 }
 
@@ -275,6 +277,8 @@ void dopus_lm_prepared(dopus_lm *st, const dopus_ring *ring, const dopus_real *A
 {
     dopus_real floor_ = DOPUS_PREC(1e-8, 1e-5) * (proxy_ref > DOPUS_R(1.0) ? proxy_ref : DOPUS_R(1.0));
     dopus_real prev = st->kkt_prev > floor_ ? st->kkt_prev : floor_;
+    dopus_real before;
+    st->held = 0;
     if (!st->on) {
         return;
     }
@@ -284,7 +288,9 @@ void dopus_lm_prepared(dopus_lm *st, const dopus_ring *ring, const dopus_real *A
         dopus_lm_raise(st);
     }
     st->kkt_prev = kkt_proxy;
+    before = st->lm;
     dopus_lm_convexify(st, ring, A_N, work);
+    st->held = st->lm > before;
 }
 
 void dopus_lm_measured(dopus_lm *st, const dopus_real *dx0, const dopus_real *scale_x, dopus_real kkt_proxy)

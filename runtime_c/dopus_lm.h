@@ -38,6 +38,7 @@ typedef struct {
     dopus_real kkt_prev; /* KKT proxy of the previous prepare (< 0: none since the start) */
     dopus_real uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     int on;              /* 1: automatic; 0: the fixed term lm */
+    int held;            /* 1: the last prepare's convexity test raised the term (the stall test) */
 } dopus_lm;
 
 #ifndef DOPUS_INTERNAL
@@ -52,7 +53,8 @@ DOPUS_INTERNAL void dopus_lm_start(dopus_lm *lm, const dopus_ring *ring, const d
                                    dopus_real *work);
 /* After a prepare (QP assembled, KKT proxy evaluated): the scale, a raise when the proxy grew
  * DOPUS_LM_KKT_GROWTH times (proxy_ref: the proxy at the last init, a floor of the growth
- * test), then raised until convex. */
+ * test), then raised until convex; held = 1 when that last test raised the term (the decay of
+ * the feedback undone: the term held up by the test, docs/algorithm.md section 9). */
 DOPUS_INTERNAL void dopus_lm_prepared(dopus_lm *lm, const dopus_ring *ring, const dopus_real *A_N,
                                       dopus_real kkt_proxy, dopus_real proxy_ref, dopus_real *work);
 /* Feedback, once the measurement is in the QP: the term capped by DOPUS_LM_KKT_REL h d^2 with

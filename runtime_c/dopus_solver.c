@@ -2188,7 +2188,7 @@ int dopus_prepare(dopus_solver *s)
     }
     s->settings.hessian = hessian;
     if (rc == DOPUS_OK && s->settings.recovery && s->settings.mode == DOPUS_MODE_RECEDING &&
-        dopus_health_stalled(&s->health, DOPUS_RECOVERY_FULL_RTI)) {
+        dopus_health_stalled(&s->health, DOPUS_RECOVERY_FULL_RTI, s->lm.held)) {
         s->health.flags |= DOPUS_FLAG_STALLED;
     }
     if (rc == DOPUS_OK && dopus_budget_on(s) && s->anytime.mark >= 0.0) {
@@ -2837,6 +2837,7 @@ void dopus_get_info(const dopus_solver *s, dopus_info *info)
     info->has_clock = dopus_has_clock(s);
     info->lm = s->lm.lm;
     info->lm_scale = s->lm.scale;
+    info->lm_held = s->lm.held;
     info->kkt_proxy = s->health.kkt_proxy;
     info->kkt_max = s->kkt[0];
     for (i = 0; i < 4; ++i) {

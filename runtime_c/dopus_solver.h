@@ -256,6 +256,8 @@ typedef struct {
                             default clock exists on this platform), 0 if they read 0 */
     dopus_real lm;        /* the Levenberg-Marquardt term of the next QP (fixed or automatic) */
     dopus_real lm_scale;  /* the Hessian scale of the automatic term */
+    int lm_held;          /* 1: the last prepare's convexity test raised the automatic term (the
+                            flat stall test of docs/algorithm.md section 9) */
     dopus_real kkt_proxy; /* divergence measure of the last prepare or init: the stationarity
                             and equality parts of the KKT measure at the prepared point */
     dopus_real kkt[4];    /* stat, eq, ineq, comp of the last dopus_kkt_eval (NaN before) */

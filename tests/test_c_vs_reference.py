@@ -45,6 +45,7 @@ class Tally:
         self.worst = 0.0
         self.ill = []
         self.n = 0
+        self.held = 0   # iterations whose prepare's convexity test raised the automatic lm
 
     def __str__(self):
         ill = "" if not self.ill else (f"; {len(self.ill)} ill-determined QP(s): "
@@ -113,6 +114,11 @@ def step(c, r, xhat0, where: str, tally: Tally):
     errs["u0"] = rel_err(uc, ur)
     # the Levenberg-Marquardt term of the next QP (the automatic one adapts: section 10)
     assert c.lm_auto == r.lm_auto and abs(c.lm - r.lm) <= REL_TOL * r.lm, f"{where}: lm {c.lm} != {r.lm}"
+    # the term held up by the prepare's test (the flat stall test's input, section 9) and the
+    # stall flag: the same decision in both backends
+    assert c.lm_held == r.lm_held, f"{where}: lm held {c.lm_held} != {r.lm_held}"
+    assert ("stalled" in c.flags) == ("stalled" in r.flags), f"{where}: stalled {c.flags} != {r.flags}"
+    tally.held += r.lm_held
     field = max(errs, key=errs.get)
     tally.n += 1
     if errs[field] <= REL_TOL:
@@ -286,7 +292,9 @@ def test_robot_receding_from_solution_stored_m1(robot_disc, robot_solution, hess
 def test_robot_receding(robot_disc, robot_solution, M):
     M = robot_disc.N - 1 if M == "full" else M
     tally = run_receding(robot_disc, robot_solution[0], M)
-    print(f"robot_arm receding M={M}: {tally}")
+    print(f"robot_arm receding M={M}: {tally}; lm held up by the prepare's test in {tally.held}")
+    # the automatic term (the default): its held decision was compared in both states
+    assert 0 < tally.held < tally.n, tally.held
 
 
 # The Levenberg-Marquardt term of the closed loop (the default of `dopus-gen sil`): both

@@ -185,6 +185,8 @@ class ReferenceDopus:
         self.lm, self.lm_auto, self.lm_scale, self._lm_kkt_prev = 0.0, False, 1.0, -1.0
         # the prepared automatic term before this feedback's cap (-1: not capped; C's lm.uncapped)
         self.lm_uncapped = -1.0
+        # the last prepare's convexity test raised the automatic term (C's lm.held; section 9)
+        self.lm_held = False
         self.set_levenberg_marquardt(s.lm)
         self.qp_max_iter = None
         if s.qp_max_iter is not None:
@@ -280,11 +282,11 @@ class ReferenceDopus:
         """``"auto"``: the automatic, adaptive term of section 10; a number >= 0: fixed."""
         v = _setting(settings.levenberg_marquardt, lm)
         if v == settings.LM_AUTO:
-            self.lm_auto, self.lm, self._lm_kkt_prev = True, 0.0, -1.0
+            self.lm_auto, self.lm, self._lm_kkt_prev, self.lm_held = True, 0.0, -1.0, False
             if self._initialised_and_ready():
                 self._lm_start()
         else:
-            self.lm_auto, self.lm = False, float(v)
+            self.lm_auto, self.lm, self.lm_held = False, float(v), False
 
     def _initialised_and_ready(self) -> bool:
         return bool(getattr(self, "_initialised", False) and getattr(self, "_qp_ready", False))
@@ -1048,17 +1050,19 @@ class ReferenceDopus:
 
     def _stalled(self) -> bool:
         """Section 9: outside a recovery phase, a KKT proxy above STALL_KKT max(1, proxy at
-        init) in STALL_PREPARES prepares in a row, or above FLAT_KKT max(1, proxy at init)
-        and not below FLAT_DROP times the proxy the stretch began with in FLAT_PREPARES
-        prepares in a row (no progress), begins a recovery phase without a
-        re-initialisation."""
+        init) in STALL_PREPARES prepares in a row, or flat (above FLAT_KKT max(1, proxy at
+        init), or above FLAT_HELD_KKT max(1, proxy at init) with the automatic term held up
+        by the prepare's convexity test) and not below FLAT_DROP times the proxy the stretch
+        began with in FLAT_PREPARES prepares in a row (no progress), begins a recovery phase
+        without a re-initialisation."""
         if self._recovering > 0:
             self._n_stalled, self._n_flat = 0, 0
             return False
         ref = max(self._kkt_proxy_init, 1.0)
         high = self.kkt_proxy > _SAFETY["STALL_KKT"] * ref
         self._n_stalled = self._n_stalled + 1 if high else 0
-        flat = self.kkt_proxy > _SAFETY["FLAT_KKT"] * ref
+        flat = (self.kkt_proxy > _SAFETY["FLAT_KKT"] * ref
+                or (self.lm_held and self.kkt_proxy > _SAFETY["FLAT_HELD_KKT"] * ref))
         if not flat or self._n_flat == 0 or not self.kkt_proxy > _SAFETY["FLAT_DROP"] * self._kkt_flat_ref:
             self._kkt_flat_ref, self._n_flat = self.kkt_proxy, 0
         self._n_flat = self._n_flat + 1 if flat else 0
@@ -1924,10 +1928,13 @@ class ReferenceDopus:
         self.lm = 0.0
         self._lm_kkt_prev = -1.0
         self.lm_uncapped = -1.0
+        self.lm_held = False
         self.lm_convexify()
 
     def _lm_prepared(self) -> None:
-        """After a prepare: the scale, a raise when the KKT proxy grew, then convex."""
+        """After a prepare: the scale, a raise when the KKT proxy grew, then convex; held when
+        that last test raised the term (the feedback's decay undone: the stall test, section 9)."""
+        self.lm_held = False
         if not self.lm_auto:
             return
         floor = 1e-8 * max(self.kkt_proxy_ref, 1.0)
@@ -1937,7 +1944,9 @@ class ReferenceDopus:
         if self._lm_kkt_prev >= 0.0 and not self.kkt_proxy <= _SAFETY["LM_KKT_GROWTH"] * prev:
             self._lm_raise()
         self._lm_kkt_prev = self.kkt_proxy
+        before = self.lm
         self.lm_convexify()
+        self.lm_held = self.lm > before
 
     def _lm_measured(self, xhat0) -> None:
         """Feedback, once the measurement is known: the term capped by the distance from the

@@ -459,6 +459,8 @@ class Solver:
     lm = _info_property("lm", float, "The term of the next QP (fixed, or the current automatic value).")
     lm_auto = _settings_property("lm_auto", bool)
     lm_scale = _info_property("lm_scale", float, "The Hessian scale of the automatic term (section 10).")
+    lm_held = _info_property("lm_held", bool, "The last prepare's convexity test raised the automatic term "
+                             "(the flat stall test of section 9).")
 
     def set_qp_tol(self, tol: float) -> None:
         self._update("qp_tol", qp_tol=self._positive(tol, "qp_tol"))

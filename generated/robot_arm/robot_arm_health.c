@@ -164,7 +164,7 @@ int robot_arm_diverged(const robot_arm_health *h, const robot_arm_real *xhat0, c
     return !(h->kkt_proxy <= ROBOT_ARM_DIVERGENCE_KKT * ref);
 }
 
-int robot_arm_health_stalled(robot_arm_health *h, int phase)
+int robot_arm_health_stalled(robot_arm_health *h, int phase, int lm_held)
 {
     robot_arm_real ref = h->kkt_proxy_init > ROBOT_ARM_R(1.0) ? h->kkt_proxy_init : ROBOT_ARM_R(1.0);
     int high, flat;
@@ -175,8 +175,10 @@ int robot_arm_health_stalled(robot_arm_health *h, int phase)
     }
     high = h->kkt_proxy > ROBOT_ARM_STALL_KKT * ref;
     h->n_stalled = high ? h->n_stalled + 1 : 0;
-    /* a flat stretch: the proxy well above its settled level and not falling */
-    flat = h->kkt_proxy > ROBOT_ARM_FLAT_KKT * ref;
+    /* a flat stretch: the proxy well above its settled level, or above it with the automatic
+     * lm held up by the convexity test (the damping that keeps the iterate from progressing),
+     * and not falling */
+    flat = h->kkt_proxy > ROBOT_ARM_FLAT_KKT * ref || (lm_held && h->kkt_proxy > ROBOT_ARM_FLAT_HELD_KKT * ref);
     if (!flat || h->n_flat == 0 || !(h->kkt_proxy > ROBOT_ARM_FLAT_DROP * h->kkt_flat_ref)) {
         h->kkt_flat_ref = h->kkt_proxy;
         h->n_flat = 0;

@@ -17,6 +17,7 @@
 #define ROBOT_ARM_FLAT_KKT ROBOT_ARM_R(5.0)       /* a flat prepare: proxy > 5 max(1, proxy at init) ... */
 #define ROBOT_ARM_FLAT_DROP ROBOT_ARM_R(0.5)      /* ... not below 0.5 times the proxy the stretch began with */
 #define ROBOT_ARM_FLAT_PREPARES 20            /* ... in so many prepares in a row: escalate */
+#define ROBOT_ARM_FLAT_HELD_KKT ROBOT_ARM_R(1.0)  /* flat too: proxy > 1 max(1, proxy at init), lm held up */
 
 typedef struct {
     int n_failed;                         /* consecutive failed feedbacks */
@@ -76,10 +77,12 @@ ROBOT_ARM_INTERNAL int robot_arm_diverged(const robot_arm_health *h, const robot
                                   const robot_arm_real *mu_bN);
 /* The stall test of a prepared iterate (docs/algorithm.md section 9), outside a recovery
  * phase: h->kkt_proxy > STALL_KKT max(1, h->kkt_proxy_init) in STALL_PREPARES prepares in a
- * row, or > FLAT_KKT max(1, h->kkt_proxy_init) and not below FLAT_DROP times the proxy the
- * stretch began with in FLAT_PREPARES prepares in a row (no progress), begins a recovery
- * phase of `phase` feedbacks without a re-initialisation. Returns 1 when it did. */
-ROBOT_ARM_INTERNAL int robot_arm_health_stalled(robot_arm_health *h, int phase);
+ * row, or flat (> FLAT_KKT max(1, h->kkt_proxy_init), or > FLAT_HELD_KKT max(1,
+ * h->kkt_proxy_init) with lm_held: the prepare's convexity test raised the automatic
+ * Levenberg-Marquardt term) and not below FLAT_DROP times the proxy the stretch began with in
+ * FLAT_PREPARES prepares in a row (no progress), begins a recovery phase of `phase` feedbacks
+ * without a re-initialisation. Returns 1 when it did. */
+ROBOT_ARM_INTERNAL int robot_arm_health_stalled(robot_arm_health *h, int phase, int lm_held);
 /* The control of the last good plan for the instant k sampling instants from now (its age
  * plus k, the last control beyond the plan's end). */
 ROBOT_ARM_INTERNAL const robot_arm_real *robot_arm_health_plan_control(const robot_arm_health *h, int k);

@@ -11,6 +11,7 @@ void robot_arm_lm_reset(robot_arm_lm *lm, int on, robot_arm_real fixed)
     lm->lm = on ? ROBOT_ARM_R(0.0) : fixed;
     lm->kkt_prev = -ROBOT_ARM_R(1.0);
     lm->uncapped = -ROBOT_ARM_R(1.0);
+    lm->held = 0;
 }
 
 /* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
@@ -267,6 +268,7 @@ void robot_arm_lm_start(robot_arm_lm *st, const robot_arm_ring *ring, const robo
     st->lm = ROBOT_ARM_R(0.0);
     st->kkt_prev = -ROBOT_ARM_R(1.0);
     st->uncapped = -ROBOT_ARM_R(1.0);
+    st->held = 0;
     robot_arm_lm_convexify(st, ring, A_N, work);
 }
 
@@ -275,6 +277,8 @@ void robot_arm_lm_prepared(robot_arm_lm *st, const robot_arm_ring *ring, const r
 {
     robot_arm_real floor_ = ROBOT_ARM_PREC(1e-8, 1e-5) * (proxy_ref > ROBOT_ARM_R(1.0) ? proxy_ref : ROBOT_ARM_R(1.0));
     robot_arm_real prev = st->kkt_prev > floor_ ? st->kkt_prev : floor_;
+    robot_arm_real before;
+    st->held = 0;
     if (!st->on) {
         return;
     }
@@ -284,7 +288,9 @@ void robot_arm_lm_prepared(robot_arm_lm *st, const robot_arm_ring *ring, const r
         robot_arm_lm_raise(st);
     }
     st->kkt_prev = kkt_proxy;
+    before = st->lm;
     robot_arm_lm_convexify(st, ring, A_N, work);
+    st->held = st->lm > before;
 }
 
 void robot_arm_lm_measured(robot_arm_lm *st, const robot_arm_real *dx0, const robot_arm_real *scale_x, robot_arm_real kkt_proxy)

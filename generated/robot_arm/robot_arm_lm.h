@@ -38,6 +38,7 @@ typedef struct {
     robot_arm_real kkt_prev; /* KKT proxy of the previous prepare (< 0: none since the start) */
     robot_arm_real uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     int on;              /* 1: automatic; 0: the fixed term lm */
+    int held;            /* 1: the last prepare's convexity test raised the term (the stall test) */
 } robot_arm_lm;
 
 #ifndef ROBOT_ARM_INTERNAL
@@ -52,7 +53,8 @@ ROBOT_ARM_INTERNAL void robot_arm_lm_start(robot_arm_lm *lm, const robot_arm_rin
                                    robot_arm_real *work);
 /* After a prepare (QP assembled, KKT proxy evaluated): the scale, a raise when the proxy grew
  * ROBOT_ARM_LM_KKT_GROWTH times (proxy_ref: the proxy at the last init, a floor of the growth
- * test), then raised until convex. */
+ * test), then raised until convex; held = 1 when that last test raised the term (the decay of
+ * the feedback undone: the term held up by the test, docs/algorithm.md section 9). */
 ROBOT_ARM_INTERNAL void robot_arm_lm_prepared(robot_arm_lm *lm, const robot_arm_ring *ring, const robot_arm_real *A_N,
                                       robot_arm_real kkt_proxy, robot_arm_real proxy_ref, robot_arm_real *work);
 /* Feedback, once the measurement is in the QP: the term capped by ROBOT_ARM_LM_KKT_REL h d^2 with

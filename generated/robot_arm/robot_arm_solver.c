@@ -2188,7 +2188,7 @@ int robot_arm_prepare(robot_arm_solver *s)
     }
     s->settings.hessian = hessian;
     if (rc == ROBOT_ARM_OK && s->settings.recovery && s->settings.mode == ROBOT_ARM_MODE_RECEDING &&
-        robot_arm_health_stalled(&s->health, ROBOT_ARM_RECOVERY_FULL_RTI)) {
+        robot_arm_health_stalled(&s->health, ROBOT_ARM_RECOVERY_FULL_RTI, s->lm.held)) {
         s->health.flags |= ROBOT_ARM_FLAG_STALLED;
     }
     if (rc == ROBOT_ARM_OK && robot_arm_budget_on(s) && s->anytime.mark >= 0.0) {
@@ -2837,6 +2837,7 @@ void robot_arm_get_info(const robot_arm_solver *s, robot_arm_info *info)
     info->has_clock = robot_arm_has_clock(s);
     info->lm = s->lm.lm;
     info->lm_scale = s->lm.scale;
+    info->lm_held = s->lm.held;
     info->kkt_proxy = s->health.kkt_proxy;
     info->kkt_max = s->kkt[0];
     for (i = 0; i < 4; ++i) {

@@ -11,6 +11,7 @@ void unicycle_lm_reset(unicycle_lm *lm, int on, unicycle_real fixed)
     lm->lm = on ? UNICYCLE_R(0.0) : fixed;
     lm->kkt_prev = -UNICYCLE_R(1.0);
     lm->uncapped = -UNICYCLE_R(1.0);
+    lm->held = 0;
 }
 
 /* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
@@ -267,6 +268,7 @@ void unicycle_lm_start(unicycle_lm *st, const unicycle_ring *ring, const unicycl
     st->lm = UNICYCLE_R(0.0);
     st->kkt_prev = -UNICYCLE_R(1.0);
     st->uncapped = -UNICYCLE_R(1.0);
+    st->held = 0;
     unicycle_lm_convexify(st, ring, A_N, work);
 }
 
@@ -275,6 +277,8 @@ void unicycle_lm_prepared(unicycle_lm *st, const unicycle_ring *ring, const unic
 {
     unicycle_real floor_ = UNICYCLE_PREC(1e-8, 1e-5) * (proxy_ref > UNICYCLE_R(1.0) ? proxy_ref : UNICYCLE_R(1.0));
     unicycle_real prev = st->kkt_prev > floor_ ? st->kkt_prev : floor_;
+    unicycle_real before;
+    st->held = 0;
     if (!st->on) {
         return;
     }
@@ -284,7 +288,9 @@ void unicycle_lm_prepared(unicycle_lm *st, const unicycle_ring *ring, const unic
         unicycle_lm_raise(st);
     }
     st->kkt_prev = kkt_proxy;
+    before = st->lm;
     unicycle_lm_convexify(st, ring, A_N, work);
+    st->held = st->lm > before;
 }
 
 void unicycle_lm_measured(unicycle_lm *st, const unicycle_real *dx0, const unicycle_real *scale_x, unicycle_real kkt_proxy)

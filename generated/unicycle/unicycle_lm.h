@@ -38,6 +38,7 @@ typedef struct {
     unicycle_real kkt_prev; /* KKT proxy of the previous prepare (< 0: none since the start) */
     unicycle_real uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     int on;              /* 1: automatic; 0: the fixed term lm */
+    int held;            /* 1: the last prepare's convexity test raised the term (the stall test) */
 } unicycle_lm;
 
 #ifndef UNICYCLE_INTERNAL
@@ -52,7 +53,8 @@ UNICYCLE_INTERNAL void unicycle_lm_start(unicycle_lm *lm, const unicycle_ring *r
                                    unicycle_real *work);
 /* After a prepare (QP assembled, KKT proxy evaluated): the scale, a raise when the proxy grew
  * UNICYCLE_LM_KKT_GROWTH times (proxy_ref: the proxy at the last init, a floor of the growth
- * test), then raised until convex. */
+ * test), then raised until convex; held = 1 when that last test raised the term (the decay of
+ * the feedback undone: the term held up by the test, docs/algorithm.md section 9). */
 UNICYCLE_INTERNAL void unicycle_lm_prepared(unicycle_lm *lm, const unicycle_ring *ring, const unicycle_real *A_N,
                                       unicycle_real kkt_proxy, unicycle_real proxy_ref, unicycle_real *work);
 /* Feedback, once the measurement is in the QP: the term capped by UNICYCLE_LM_KKT_REL h d^2 with

@@ -2188,7 +2188,7 @@ int unicycle_prepare(unicycle_solver *s)
     }
     s->settings.hessian = hessian;
     if (rc == UNICYCLE_OK && s->settings.recovery && s->settings.mode == UNICYCLE_MODE_RECEDING &&
-        unicycle_health_stalled(&s->health, UNICYCLE_RECOVERY_FULL_RTI)) {
+        unicycle_health_stalled(&s->health, UNICYCLE_RECOVERY_FULL_RTI, s->lm.held)) {
         s->health.flags |= UNICYCLE_FLAG_STALLED;
     }
     if (rc == UNICYCLE_OK && unicycle_budget_on(s) && s->anytime.mark >= 0.0) {
@@ -2837,6 +2837,7 @@ void unicycle_get_info(const unicycle_solver *s, unicycle_info *info)
     info->has_clock = unicycle_has_clock(s);
     info->lm = s->lm.lm;
     info->lm_scale = s->lm.scale;
+    info->lm_held = s->lm.held;
     info->kkt_proxy = s->health.kkt_proxy;
     info->kkt_max = s->kkt[0];
     for (i = 0; i < 4; ++i) {
