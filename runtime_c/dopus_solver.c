@@ -393,11 +393,39 @@ static void dopus_lm_hook(dopus_solver *s, int on)
 static void dopus_lm_started(dopus_solver *s)
 {
     int prev = dopus_phase(s, DOPUS_PHASE_LM);
-    dopus_lm_hook(s, 1);
     dopus_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
-    dopus_lm_hook(s, 0);
-    s->qp_prefactored = 0;
     dopus_phase(s, prev);
+}
+
+/* 1 when the next feedback's active-set start will guess no active row (a sufficient test:
+ * every bound multiplier of the shifted iterate 0, the warm start's, and no row with equal
+ * bounds): only then can the QP reuse the prepare's test as its factorisation. */
+static int dopus_guess_empty(const dopus_solver *s)
+{
+    int k, i;
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NW; ++i) {
+            if (s->mu_b[k][i] != DOPUS_R(0.0) || s->qp_in.lbw[k][i] == s->qp_in.ubw[k][i]) {
+                return 0;
+            }
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            if (s->mu_g[k][i] != DOPUS_R(0.0) || s->qp_in.lg[k][i] == s->qp_in.ug[k][i]) {
+                return 0;
+            }
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        if (s->mu_bN[i] != DOPUS_R(0.0) || s->qp_in.lbxN[i] == s->qp_in.ubxN[i]) {
+            return 0;
+        }
+    }
+    for (i = 0; i < DOPUS_NR; ++i) {
+        if (s->mu_r[i] != DOPUS_R(0.0) || s->qp_in.lr[i] == s->qp_in.ur[i]) {
+            return 0;
+        }
+    }
+    return 1;
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */
@@ -1290,12 +1318,10 @@ static int dopus_feedback_qp(dopus_solver *s)
      * fills the QP's memory, which the test's scratch shares) (algorithm.md section 4,
      * feedback); with a time budget only when its sweeps fit before the deadline
      * (dopus_active_set_fits, section 14) */
-    int active_set, qs;
-    dopus_lm_hook(s, 1);
-    active_set = !s->qp_no_active_set && s->lm.on && dopus_measurement_near(s) && !s->qp_cold_retry &&
-                 dopus_active_set_fits(s) &&
-                 dopus_lm_near_convex(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
-    dopus_lm_hook(s, 0);
+    const int active_set = !s->qp_no_active_set && s->lm.on && dopus_measurement_near(s) &&
+                           !s->qp_cold_retry && dopus_active_set_fits(s) &&
+                           dopus_lm_near_convex(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
+    int qs;
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
@@ -2504,7 +2530,11 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_phase(s, DOPUS_PHASE_RECOVERY);
     s->health.kkt_proxy = dopus_kkt_proxy_eval(s);
     dopus_phase(s, DOPUS_PHASE_LM);
-    dopus_lm_hook(s, 1);
+    /* the test as the QP's factorisation where the feedback may reuse it, else dopus_lm.c's
+     * (the same test; on the robot arm, whose start always has active rows, the QP's form cost
+     * 29 % more on the Cortex-M7: bench/issue23/measurements.md section 44) */
+    s->qp_pre_ok = 0;
+    dopus_lm_hook(s, dopus_guess_empty(s));
     dopus_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
     dopus_lm_hook(s, 0);
@@ -3041,9 +3071,7 @@ int dopus_update_settings(dopus_solver *s, const dopus_settings *st)
         /* the automatic term restarts: from 0, raised until the prepared QP is convex */
         dopus_lm_reset(&s->lm, 1, DOPUS_R(0.0));
         if (s->initialized && s->qp_ready) {
-            dopus_lm_hook(s, 1);
             dopus_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
-            dopus_lm_hook(s, 0);
         }
     } else if (!st->lm_auto) {
         dopus_lm_reset(&s->lm, 0, st->lm);

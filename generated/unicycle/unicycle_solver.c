@@ -393,11 +393,39 @@ static void unicycle_lm_hook(unicycle_solver *s, int on)
 static void unicycle_lm_started(unicycle_solver *s)
 {
     int prev = unicycle_phase(s, UNICYCLE_PHASE_LM);
-    unicycle_lm_hook(s, 1);
     unicycle_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
-    unicycle_lm_hook(s, 0);
-    s->qp_prefactored = 0;
     unicycle_phase(s, prev);
+}
+
+/* 1 when the next feedback's active-set start will guess no active row (a sufficient test:
+ * every bound multiplier of the shifted iterate 0, the warm start's, and no row with equal
+ * bounds): only then can the QP reuse the prepare's test as its factorisation. */
+static int unicycle_guess_empty(const unicycle_solver *s)
+{
+    int k, i;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NW; ++i) {
+            if (s->mu_b[k][i] != UNICYCLE_R(0.0) || s->qp_in.lbw[k][i] == s->qp_in.ubw[k][i]) {
+                return 0;
+            }
+        }
+        for (i = 0; i < UNICYCLE_NG; ++i) {
+            if (s->mu_g[k][i] != UNICYCLE_R(0.0) || s->qp_in.lg[k][i] == s->qp_in.ug[k][i]) {
+                return 0;
+            }
+        }
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        if (s->mu_bN[i] != UNICYCLE_R(0.0) || s->qp_in.lbxN[i] == s->qp_in.ubxN[i]) {
+            return 0;
+        }
+    }
+    for (i = 0; i < UNICYCLE_NR; ++i) {
+        if (s->mu_r[i] != UNICYCLE_R(0.0) || s->qp_in.lr[i] == s->qp_in.ur[i]) {
+            return 0;
+        }
+    }
+    return 1;
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */
@@ -1290,12 +1318,10 @@ static int unicycle_feedback_qp(unicycle_solver *s)
      * fills the QP's memory, which the test's scratch shares) (algorithm.md section 4,
      * feedback); with a time budget only when its sweeps fit before the deadline
      * (unicycle_active_set_fits, section 14) */
-    int active_set, qs;
-    unicycle_lm_hook(s, 1);
-    active_set = !s->qp_no_active_set && s->lm.on && unicycle_measurement_near(s) && !s->qp_cold_retry &&
-                 unicycle_active_set_fits(s) &&
-                 unicycle_lm_near_convex(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
-    unicycle_lm_hook(s, 0);
+    const int active_set = !s->qp_no_active_set && s->lm.on && unicycle_measurement_near(s) &&
+                           !s->qp_cold_retry && unicycle_active_set_fits(s) &&
+                           unicycle_lm_near_convex(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
+    int qs;
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
@@ -2504,7 +2530,11 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
     s->health.kkt_proxy = unicycle_kkt_proxy_eval(s);
     unicycle_phase(s, UNICYCLE_PHASE_LM);
-    unicycle_lm_hook(s, 1);
+    /* the test as the QP's factorisation where the feedback may reuse it, else unicycle_lm.c's
+     * (the same test; on the robot arm, whose start always has active rows, the QP's form cost
+     * 29 % more on the Cortex-M7: bench/issue23/measurements.md section 44) */
+    s->qp_pre_ok = 0;
+    unicycle_lm_hook(s, unicycle_guess_empty(s));
     unicycle_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
     unicycle_lm_hook(s, 0);
@@ -3041,9 +3071,7 @@ int unicycle_update_settings(unicycle_solver *s, const unicycle_settings *st)
         /* the automatic term restarts: from 0, raised until the prepared QP is convex */
         unicycle_lm_reset(&s->lm, 1, UNICYCLE_R(0.0));
         if (s->initialized && s->qp_ready) {
-            unicycle_lm_hook(s, 1);
             unicycle_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
-            unicycle_lm_hook(s, 0);
         }
     } else if (!st->lm_auto) {
         unicycle_lm_reset(&s->lm, 0, st->lm);
