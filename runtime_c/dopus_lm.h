@@ -38,9 +38,9 @@ typedef struct {
     dopus_real kkt_prev; /* KKT proxy of the previous prepare (< 0: none since the start) */
     dopus_real uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     int on;              /* 1: automatic; 0: the fixed term lm */
-    /* the convexity test when set (the solver's: the QP's own factorisation, dopus_qp_prefactor,
-     * which the feedback's QP then reuses; set around each call into this module and NULL
-     * between them): test(test_ctx, lm, tol) with the pivot floor tol = DOPUS_LM_PIVOT_REL h and
+    /* the convexity test when set (the solver's prepare, when the feedback's QP may reuse it:
+     * the QP's own factorisation, dopus_qp_prefactor; set around that call and NULL between
+     * calls): test(test_ctx, lm, tol) with the pivot floor tol = DOPUS_LM_PIVOT_REL h and
      * the round-off DOPUS_LM_ROUNDOFF, the work argument then unused; NULL (dopus_lm_reset): the
      * recursion of dopus_lm.c in work */
     int (*test)(void *test_ctx, dopus_real lm, dopus_real tol);
