@@ -465,7 +465,9 @@ int dopus_glob_step(dopus_solver *s, dopus_glob *g, const dopus_real *xhat0)
     dopus_glob_copy(xh, xhat0 ? xhat0 : s->xhat0, DOPUS_NX);
     mode = s->settings.mode;
     s->settings.mode = DOPUS_MODE_FIXED;
+    s->qp_prefactored = 0; /* the step's evaluations use the QP's memory */
     rc = dopus_glob_step_fixed(s, g, xh);
+    s->qp_prefactored = 0;
     s->settings.mode = mode;
     s->status = rc;
     return rc;

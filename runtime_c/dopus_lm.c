@@ -12,6 +12,8 @@ void dopus_lm_reset(dopus_lm *lm, int on, dopus_real fixed)
     lm->kkt_prev = -DOPUS_R(1.0);
     lm->uncapped = -DOPUS_R(1.0);
     lm->held = 0;
+    lm->test = 0;
+    lm->test_ctx = 0;
 }
 
 /* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
@@ -60,12 +62,18 @@ static int dopus_lm_convex(const dopus_lm *st, const dopus_ring *ring, const dop
                            dopus_real *work)
 {
     const dopus_real tol = DOPUS_LM_PIVOT_REL * st->scale;
-    dopus_real *P = work, *Y = work + DOPUS_NX * DOPUS_NX, *Z = Y + DOPUS_NX * DOPUS_NW;
+    dopus_real *P, *Y, *Z;
 #if DOPUS_LM_VEC
     dopus_real PhiT[DOPUS_NW * DOPUS_NX]; /* Phi_k' */
 #endif
     dopus_real v, floor_;
     int k, i, j, l;
+    if (st->test) {
+        return st->test(st->test_ctx, lm, tol); /* the same test as the QP's factorisation */
+    }
+    P = work;
+    Y = work + DOPUS_NX * DOPUS_NX;
+    Z = Y + DOPUS_NX * DOPUS_NW;
     for (j = 0; j < DOPUS_NX; ++j) {
         for (i = j; i < DOPUS_NX; ++i) {
             P[i + j * DOPUS_NX] = A_N[i + j * DOPUS_NX];

@@ -275,6 +275,12 @@ typedef struct {
     void *clock_ctx;
     double deadline;
     double iter_price;
+    /* 1: the workspace holds the factorisation dopus_qp_prefactor formed of this QP (the same
+     * blocks and hess_shift; nothing has solved or factored in it since) and found convex; the
+     * active-set start's first sweep uses it when its guess has no active row (then that sweep's
+     * factorisation is this one: the same operations, counted in dopus_qp_info.factorizations).
+     * 0 (the default): every factorisation formed in the solve. */
+    int prefactored;
 } dopus_qp_settings;
 
 typedef struct {
@@ -440,6 +446,13 @@ typedef struct {
     dopus_qp_row as_rows[DOPUS_QP_AS_UPDATE];
     int as_n;
     dopus_real as_L[DOPUS_QP_AS_UPDATE * (DOPUS_QP_AS_UPDATE + 1) / 2];
+    /* dopus_qp_prefactor: its pivot floor (pre_tol > 0 while it factors: the floor max(pre_tol,
+     * pre_roundoff times the largest |diagonal entry| of each stage's M_uu)), and what its
+     * factorisation returned (-1: none kept: a pivot at or below the floor or not finite, or a
+     * factorisation since) */
+    dopus_real pre_tol;
+    dopus_real pre_roundoff;
+    int pre_status;
     int n_fact;            /* factorisations of the solve */
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     dopus_real scale_stat; /* residual scaling factors */
@@ -465,6 +478,17 @@ DOPUS_INTERNAL unsigned long dopus_qp_workspace_size(void);
  * NULL. Returns the status (enum dopus_qp_status). */
 DOPUS_INTERNAL int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in,
                                   const dopus_qp_settings *settings, dopus_qp_sol *sol, dopus_qp_info *info);
+
+/* The convexity test of the automatic Levenberg-Marquardt term (dopus_lm.h) as the QP's own
+ * factorisation: the Riccati recursion of the solve's first factorisation with no active row
+ * (the active-set start's first sweep when its guess is empty: H_k + hess_shift I, no barrier
+ * or penalty weight, no inertia correction, no terminal augmentation; C and R not read), every
+ * control pivot required above max(tol, roundoff times the largest |diagonal entry| of its
+ * stage's M_uu). Returns 1 when every pivot is (the QP convex on the dynamics), else 0. The
+ * factorisation stays in ws for a solve of the same QP with settings.prefactored; any other use
+ * of ws discards it. */
+DOPUS_INTERNAL int dopus_qp_prefactor(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real tol,
+                                      dopus_real roundoff);
 
 /* After dopus_qp_solve returned DOPUS_QP_PRIMAL_INFEASIBLE (ws and in as they were then): the
  * row with the largest multiplier of the infeasibility certificate among the bounded rows

@@ -360,12 +360,72 @@ static int dopus_iterate_diverged(const dopus_solver *s)
                           s->mu_bN);
 }
 
+static void dopus_qp_bind(dopus_solver *s);
+static void dopus_qp_unbind(dopus_solver *s);
+
+/* The convexity test of the automatic lm (dopus_lm.h, its test hook; ctx: the solver): the QP's
+ * factorisation with no active row at the term lm (dopus_qp_prefactor, in the QP's workspace),
+ * its pivots above tol and their round-off DOPUS_LM_ROUNDOFF. Any run discards a kept one
+ * (qp_prefactored); the prepare keeps the last when it passed at the term it leaves. */
+static int dopus_lm_qp_test(void *ctx, dopus_real lm, dopus_real tol)
+{
+    dopus_solver *s = (dopus_solver *)ctx;
+    const dopus_real shift = s->qp_in.hess_shift;
+    s->qp_prefactored = 0;
+    dopus_qp_bind(s);
+    s->qp_in.hess_shift = lm;
+    s->qp_pre_ok = dopus_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, DOPUS_LM_ROUNDOFF);
+    s->qp_pre_lm = lm;
+    s->qp_in.hess_shift = shift;
+    dopus_qp_unbind(s);
+    return s->qp_pre_ok;
+}
+
+/* The lm module's test hook, set around each call into it (no pointer into the solver stays
+ * between calls). */
+static void dopus_lm_hook(dopus_solver *s, int on)
+{
+    s->lm.test = on ? dopus_lm_qp_test : 0;
+    s->lm.test_ctx = on ? (void *)s : 0;
+}
+
 /* The automatic lm after init or a re-initialisation (QP assembled), in its phase. */
 static void dopus_lm_started(dopus_solver *s)
 {
     int prev = dopus_phase(s, DOPUS_PHASE_LM);
     dopus_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
     dopus_phase(s, prev);
+}
+
+/* 1 when the next feedback's active-set start will guess no active row (a sufficient test:
+ * every bound multiplier of the shifted iterate 0, the warm start's, and no row with equal
+ * bounds): only then can the QP reuse the prepare's test as its factorisation. */
+static int dopus_guess_empty(const dopus_solver *s)
+{
+    int k, i;
+    for (k = 0; k < DOPUS_N; ++k) {
+        for (i = 0; i < DOPUS_NW; ++i) {
+            if (s->mu_b[k][i] != DOPUS_R(0.0) || s->qp_in.lbw[k][i] == s->qp_in.ubw[k][i]) {
+                return 0;
+            }
+        }
+        for (i = 0; i < DOPUS_NG; ++i) {
+            if (s->mu_g[k][i] != DOPUS_R(0.0) || s->qp_in.lg[k][i] == s->qp_in.ug[k][i]) {
+                return 0;
+            }
+        }
+    }
+    for (i = 0; i < DOPUS_NX; ++i) {
+        if (s->mu_bN[i] != DOPUS_R(0.0) || s->qp_in.lbxN[i] == s->qp_in.ubxN[i]) {
+            return 0;
+        }
+    }
+    for (i = 0; i < DOPUS_NR; ++i) {
+        if (s->mu_r[i] != DOPUS_R(0.0) || s->qp_in.lr[i] == s->qp_in.ur[i]) {
+            return 0;
+        }
+    }
+    return 1;
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */
@@ -870,6 +930,7 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
         return DOPUS_ERR_NOT_INITIALIZED;
     }
     s->initialized = 0;
+    s->qp_prefactored = 0;
     dopus_reset_health(s);
     s->qp_ready = 0;
     s->p_shifted = 0;
@@ -1136,7 +1197,7 @@ static int dopus_qp_solve_bound(dopus_solver *s, int warm, int active_set, int m
 {
     dopus_qp_in *in = &s->qp_in;
     dopus_qp_settings settings;
-    int k, qs;
+    int qs;
     dopus_qp_settings_default(&settings);
     settings.tol = s->settings.qp_tol;
     settings.max_iter = max_iter;
@@ -1151,6 +1212,23 @@ static int dopus_qp_solve_bound(dopus_solver *s, int warm, int active_set, int m
     }
     settings.warm_start = warm;
     settings.active_set = warm && active_set ? DOPUS_QP_ACTIVE_SET : 0;
+    /* the prepare's lm test factored this QP at this term: its first sweep may start from it */
+    settings.prefactored = settings.active_set > 0 && s->qp_prefactored && in->hess_shift == s->qp_pre_lm;
+    s->qp_prefactored = 0;
+    dopus_qp_bind(s);
+    qs = dopus_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
+    if (s->anytime.qp_timed && s->settings.budget_unit == DOPUS_BUDGET_TIME) {
+        dopus_qp_over(s);
+    }
+    dopus_qp_unbind(s);
+    return qs;
+}
+
+/* The QP's matrix pointers into the ring slots and the terminal blocks, and their clearing. */
+static void dopus_qp_bind(dopus_solver *s)
+{
+    dopus_qp_in *in = &s->qp_in;
+    int k;
     for (k = 0; k < DOPUS_N; ++k) {
         const dopus_stage_slot *slot = dopus_ring_stage_const(&s->ring, k);
         in->H[k] = slot->Ht;
@@ -1160,10 +1238,12 @@ static int dopus_qp_solve_bound(dopus_solver *s, int warm, int active_set, int m
     in->HN = s->A_N;
     in->R = DOPUS_NR > 0 ? s->R : 0;
     in->Req = DOPUS_NE > 0 ? s->R_eq : 0;
-    qs = dopus_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
-    if (s->anytime.qp_timed && s->settings.budget_unit == DOPUS_BUDGET_TIME) {
-        dopus_qp_over(s);
-    }
+}
+
+static void dopus_qp_unbind(dopus_solver *s)
+{
+    dopus_qp_in *in = &s->qp_in;
+    int k;
     for (k = 0; k < DOPUS_N; ++k) {
         in->H[k] = 0;
         in->Phi[k] = 0;
@@ -1172,7 +1252,6 @@ static int dopus_qp_solve_bound(dopus_solver *s, int warm, int active_set, int m
     in->HN = 0;
     in->R = 0;
     in->Req = 0;
-    return qs;
 }
 
 /* 1 when the QP status is "solved" and its solution finite. */
@@ -2004,6 +2083,7 @@ static int dopus_recover(dopus_solver *s, int shifted)
 {
     dopus_real l = DOPUS_R(0.0);
     int i;
+    s->qp_prefactored = 0;
     /* x_0: the state predicted for this instant from the last measurement and control (one
      * stage evaluation, 1 work unit of the budget; nothing tests before it that it fits: x_0 =
      * xhat0 instead would change the re-initialisation; the walk's tests after it read it,
@@ -2143,6 +2223,7 @@ int dopus_prepare(dopus_solver *s)
     }
     dopus_timer_begin(&s->timer, DOPUS_PREPARE_PHASES, DOPUS_PHASE_RECOVERY);
     start = s->timer.mark;
+    s->qp_prefactored = 0; /* (the memory is the evaluations' now) */
     dopus_shift_parameters(s);
     s->anytime.extra_iterations = 0;
     s->anytime.prepared_extra = 0;
@@ -2456,8 +2537,16 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_phase(s, DOPUS_PHASE_RECOVERY);
     s->health.kkt_proxy = dopus_kkt_proxy_eval(s);
     dopus_phase(s, DOPUS_PHASE_LM);
+    /* the test as the QP's factorisation where the feedback may reuse it, else dopus_lm.c's
+     * (the same test; on the robot arm, whose start always has active rows, the QP's form cost
+     * 29 % more on the Cortex-M7: bench/issue23/measurements.md section 45) */
+    s->qp_pre_ok = 0;
+    dopus_lm_hook(s, dopus_guess_empty(s));
     dopus_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
+    dopus_lm_hook(s, 0);
+    /* the test's factorisation at the term the feedback's QP starts from (unless capped) */
+    s->qp_prefactored = s->lm.on && s->qp_pre_ok && s->qp_pre_lm == s->lm.lm;
     dopus_phase(s, DOPUS_PHASE_RECOVERY);
     diverged = dopus_iterate_diverged(s);
     if (dopus_budget_on(s)) {
@@ -2577,6 +2666,7 @@ int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
     dopus_timer_begin(&s->timer, 1u << DOPUS_PHASE_KKT, DOPUS_PHASE_KKT);
+    s->qp_prefactored = 0; /* (the evaluations' memory) */
     rc = dopus_kkt_measure(&s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0], &s->mu_b[0][0], s->mu_bN,
                            s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->mem.ev.fun_work, parts);
     dopus_timer_end(&s->timer, -1, 0.0);
@@ -2897,6 +2987,9 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     s->shifted = 0;
     s->al_resync = 1;
     s->status = DOPUS_OK;
+    s->qp_prefactored = 0;
+    s->qp_pre_ok = 0;
+    s->qp_pre_lm = DOPUS_R(0.0);
     dopus_lm_reset(&s->lm, s->settings.lm_auto, s->settings.lm);
     s->lm.scale = DOPUS_R(1.0);
     for (k = 0; k < DOPUS_N; ++k) { /* set only during a QP solve (dopus_qp_solve_bound) */

@@ -453,9 +453,10 @@ enum dopus_budget_unit {
 #include "dopus_timer.h"
 
 /* Memory that is live only in some calls: the QP's workspace and its solution (also the
- * warm-start point) in feedback; the scratch of the generated functions, the regularisation,
- * the convexity test of the automatic lm and F_new in init, prepare and kkt. Never both at
- * once, so they share it. */
+ * warm-start point) in feedback, and the QP's workspace in the prepare's convexity test of the
+ * automatic lm in the QP's form (its factorisation, which the feedback's QP may reuse:
+ * solver.qp_prefactored); the scratch of the generated functions, the regularisation and F_new
+ * in init, prepare and kkt. Never both at once, so they share it. */
 typedef union {
     struct {
         dopus_qp_workspace work;
@@ -477,7 +478,8 @@ typedef union {
         dopus_real tmp_phi[DOPUS_NX];
         dopus_real tmp_g[DOPUS_DIM(DOPUS_NG)];
         dopus_real reg_work[2 * DOPUS_NW * DOPUS_NW];
-        dopus_real lm_work[DOPUS_LM_WORK]; /* the convexity test of the automatic lm */
+        /* the scratch of dopus_lm.c's own recursion (the lm test outside the QP's form) */
+        dopus_real lm_work[DOPUS_LM_WORK];
     } ev;
 } dopus_solver_mem;
 
@@ -577,9 +579,16 @@ struct dopus_solver {
     int qp_status;
     int qp_iterations;
     int qp_factorizations;
-    int qp_cold_retry;    /* the last feedback's cold retry ran */
-    int qp_warm_failed;   /* the last feedback's warm start failed (retried cold, or certified
+    int qp_cold_retry;  /* the last feedback's cold retry ran */
+    int qp_warm_failed; /* the last feedback's warm start failed (retried cold, or certified
                              infeasibility: no retry) */
+    /* the prepare's lm test in the QP's form (dopus_qp_prefactor, kept in mem.qp.work; when the
+     * next active-set start will guess no row): the term of its last run and its verdict;
+     * qp_prefactored: 1 from that test until anything else uses mem or solves (the feedback's
+     * QP may then reuse it) */
+    dopus_real qp_pre_lm;
+    int qp_pre_ok;
+    int qp_prefactored;
     int qp_no_active_set; /* 1 inside a globalised step: the interior point only */
 
     /* the QP's workspace and solution, live only inside feedback, share their memory with

@@ -465,7 +465,9 @@ int robot_arm_glob_step(robot_arm_solver *s, robot_arm_glob *g, const robot_arm_
     robot_arm_glob_copy(xh, xhat0 ? xhat0 : s->xhat0, ROBOT_ARM_NX);
     mode = s->settings.mode;
     s->settings.mode = ROBOT_ARM_MODE_FIXED;
+    s->qp_prefactored = 0; /* the step's evaluations use the QP's memory */
     rc = robot_arm_glob_step_fixed(s, g, xh);
+    s->qp_prefactored = 0;
     s->settings.mode = mode;
     s->status = rc;
     return rc;

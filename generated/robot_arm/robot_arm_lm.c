@@ -12,6 +12,8 @@ void robot_arm_lm_reset(robot_arm_lm *lm, int on, robot_arm_real fixed)
     lm->kkt_prev = -ROBOT_ARM_R(1.0);
     lm->uncapped = -ROBOT_ARM_R(1.0);
     lm->held = 0;
+    lm->test = 0;
+    lm->test_ctx = 0;
 }
 
 /* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
@@ -60,12 +62,18 @@ static int robot_arm_lm_convex(const robot_arm_lm *st, const robot_arm_ring *rin
                            robot_arm_real *work)
 {
     const robot_arm_real tol = ROBOT_ARM_LM_PIVOT_REL * st->scale;
-    robot_arm_real *P = work, *Y = work + ROBOT_ARM_NX * ROBOT_ARM_NX, *Z = Y + ROBOT_ARM_NX * ROBOT_ARM_NW;
+    robot_arm_real *P, *Y, *Z;
 #if ROBOT_ARM_LM_VEC
     robot_arm_real PhiT[ROBOT_ARM_NW * ROBOT_ARM_NX]; /* Phi_k' */
 #endif
     robot_arm_real v, floor_;
     int k, i, j, l;
+    if (st->test) {
+        return st->test(st->test_ctx, lm, tol); /* the same test as the QP's factorisation */
+    }
+    P = work;
+    Y = work + ROBOT_ARM_NX * ROBOT_ARM_NX;
+    Z = Y + ROBOT_ARM_NX * ROBOT_ARM_NW;
     for (j = 0; j < ROBOT_ARM_NX; ++j) {
         for (i = j; i < ROBOT_ARM_NX; ++i) {
             P[i + j * ROBOT_ARM_NX] = A_N[i + j * ROBOT_ARM_NX];

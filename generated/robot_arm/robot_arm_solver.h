@@ -453,9 +453,10 @@ enum robot_arm_budget_unit {
 #include "robot_arm_timer.h"
 
 /* Memory that is live only in some calls: the QP's workspace and its solution (also the
- * warm-start point) in feedback; the scratch of the generated functions, the regularisation,
- * the convexity test of the automatic lm and F_new in init, prepare and kkt. Never both at
- * once, so they share it. */
+ * warm-start point) in feedback, and the QP's workspace in the prepare's convexity test of the
+ * automatic lm in the QP's form (its factorisation, which the feedback's QP may reuse:
+ * solver.qp_prefactored); the scratch of the generated functions, the regularisation and F_new
+ * in init, prepare and kkt. Never both at once, so they share it. */
 typedef union {
     struct {
         robot_arm_qp_workspace work;
@@ -477,7 +478,8 @@ typedef union {
         robot_arm_real tmp_phi[ROBOT_ARM_NX];
         robot_arm_real tmp_g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
         robot_arm_real reg_work[2 * ROBOT_ARM_NW * ROBOT_ARM_NW];
-        robot_arm_real lm_work[ROBOT_ARM_LM_WORK]; /* the convexity test of the automatic lm */
+        /* the scratch of robot_arm_lm.c's own recursion (the lm test outside the QP's form) */
+        robot_arm_real lm_work[ROBOT_ARM_LM_WORK];
     } ev;
 } robot_arm_solver_mem;
 
@@ -577,9 +579,16 @@ struct robot_arm_solver {
     int qp_status;
     int qp_iterations;
     int qp_factorizations;
-    int qp_cold_retry;    /* the last feedback's cold retry ran */
-    int qp_warm_failed;   /* the last feedback's warm start failed (retried cold, or certified
+    int qp_cold_retry;  /* the last feedback's cold retry ran */
+    int qp_warm_failed; /* the last feedback's warm start failed (retried cold, or certified
                              infeasibility: no retry) */
+    /* the prepare's lm test in the QP's form (robot_arm_qp_prefactor, kept in mem.qp.work; when the
+     * next active-set start will guess no row): the term of its last run and its verdict;
+     * qp_prefactored: 1 from that test until anything else uses mem or solves (the feedback's
+     * QP may then reuse it) */
+    robot_arm_real qp_pre_lm;
+    int qp_pre_ok;
+    int qp_prefactored;
     int qp_no_active_set; /* 1 inside a globalised step: the interior point only */
 
     /* the QP's workspace and solution, live only inside feedback, share their memory with

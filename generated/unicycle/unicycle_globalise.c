@@ -465,7 +465,9 @@ int unicycle_glob_step(unicycle_solver *s, unicycle_glob *g, const unicycle_real
     unicycle_glob_copy(xh, xhat0 ? xhat0 : s->xhat0, UNICYCLE_NX);
     mode = s->settings.mode;
     s->settings.mode = UNICYCLE_MODE_FIXED;
+    s->qp_prefactored = 0; /* the step's evaluations use the QP's memory */
     rc = unicycle_glob_step_fixed(s, g, xh);
+    s->qp_prefactored = 0;
     s->settings.mode = mode;
     s->status = rc;
     return rc;

@@ -12,6 +12,8 @@ void unicycle_lm_reset(unicycle_lm *lm, int on, unicycle_real fixed)
     lm->kkt_prev = -UNICYCLE_R(1.0);
     lm->uncapped = -UNICYCLE_R(1.0);
     lm->held = 0;
+    lm->test = 0;
+    lm->test_ctx = 0;
 }
 
 /* The Hessian scale h: the largest |diagonal entry| of the QP's stage and terminal blocks. */
@@ -60,12 +62,18 @@ static int unicycle_lm_convex(const unicycle_lm *st, const unicycle_ring *ring, 
                            unicycle_real *work)
 {
     const unicycle_real tol = UNICYCLE_LM_PIVOT_REL * st->scale;
-    unicycle_real *P = work, *Y = work + UNICYCLE_NX * UNICYCLE_NX, *Z = Y + UNICYCLE_NX * UNICYCLE_NW;
+    unicycle_real *P, *Y, *Z;
 #if UNICYCLE_LM_VEC
     unicycle_real PhiT[UNICYCLE_NW * UNICYCLE_NX]; /* Phi_k' */
 #endif
     unicycle_real v, floor_;
     int k, i, j, l;
+    if (st->test) {
+        return st->test(st->test_ctx, lm, tol); /* the same test as the QP's factorisation */
+    }
+    P = work;
+    Y = work + UNICYCLE_NX * UNICYCLE_NX;
+    Z = Y + UNICYCLE_NX * UNICYCLE_NW;
     for (j = 0; j < UNICYCLE_NX; ++j) {
         for (i = j; i < UNICYCLE_NX; ++i) {
             P[i + j * UNICYCLE_NX] = A_N[i + j * UNICYCLE_NX];

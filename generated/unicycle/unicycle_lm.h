@@ -39,6 +39,13 @@ typedef struct {
     unicycle_real uncapped; /* the term before the cap of this feedback (< 0: not capped) */
     int on;              /* 1: automatic; 0: the fixed term lm */
     int held;            /* 1: the last prepare's convexity test raised the term (the stall test) */
+    /* the convexity test when set (the solver's prepare, when the feedback's QP may reuse it:
+     * the QP's own factorisation, unicycle_qp_prefactor; set around that call and NULL between
+     * calls): test(test_ctx, lm, tol) with the pivot floor tol = UNICYCLE_LM_PIVOT_REL h and
+     * the round-off UNICYCLE_LM_ROUNDOFF, the work argument then unused; NULL (unicycle_lm_reset): the
+     * recursion of unicycle_lm.c in work */
+    int (*test)(void *test_ctx, unicycle_real lm, unicycle_real tol);
+    void *test_ctx;
 } unicycle_lm;
 
 #ifndef UNICYCLE_INTERNAL

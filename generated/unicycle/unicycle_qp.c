@@ -143,6 +143,7 @@ void unicycle_qp_settings_default(unicycle_qp_settings *settings)
     settings->clock_ctx = NULL;
     settings->deadline = 0.0;
     settings->iter_price = 0.0;
+    settings->prefactored = 0;
 }
 
 unsigned long unicycle_qp_workspace_size(void)
@@ -1008,6 +1009,30 @@ static unicycle_real hessian_scale(const unicycle_qp_in *in, unicycle_real hmax)
     return s > UNICYCLE_R(0.0) ? s : UNICYCLE_R(1.0);
 }
 
+/* The Cholesky factorisation of M_uu (in Lu, lower triangle) for unicycle_qp_prefactor: 1 when
+ * every pivot exceeds the floor max(pre_tol, pre_roundoff max_j |M_uu,jj|), each column formed
+ * as unicycle_lai_potrf_l forms it (the same factor when all pass); 0 at the first that does not
+ * (a NaN included). A pivot of +inf passes the test but leaves nothing to keep (pre_roundoff
+ * then negative: no factor kept). */
+static int pivots_above_floor(unicycle_qp_workspace *ws, unicycle_real *Lu)
+{
+    unicycle_real floor_ = ws->pre_tol, v;
+    int j;
+    for (j = 0; j < NU; ++j) {
+        v = unicycle_fabs(ws->pre_roundoff) * unicycle_fabs(Lu[j + j * NU1]);
+        floor_ = v > floor_ ? v : floor_;
+    }
+    for (j = 0; j < NU; ++j) {
+        const unicycle_real d = unicycle_lai_potrf_pivot(Lu, NU1, j);
+        if (!(d > floor_))
+            return 0;
+        if (!isfinite(d))
+            ws->pre_roundoff = -unicycle_fabs(ws->pre_roundoff);
+        unicycle_lai_potrf_column(NU, Lu, NU1, j, d);
+    }
+    return 1;
+}
+
 /* Factor the Newton system for the current barrier weights (row_q), delta and rho.
  * Returns 0, or 1 when a stage pivot block M_uu is not positive definite (wrong inertia),
  * or 2 when the terminal-multiplier block S is singular. Per stage it keeps P_k (packed),
@@ -1024,6 +1049,7 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     unicycle_real pmagN;
     int b;
     ++ws->n_fact;
+    ws->pre_status = -1; /* the factor below replaces one unicycle_qp_prefactor kept */
 
     /* terminal: P_N = HN + D'QD + delta I + rho Req'Req, G_N = Req' */
     {
@@ -1108,7 +1134,11 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         for (j = 0; j < NU; ++j)
             for (i = j; i < NU; ++i)
                 Lu[i + j * NU1] = M[NX + i + (NX + j) * NW];
-        if (unicycle_lai_potrf_l(NU, Lu, NU1) != 0) {
+        if (ws->pre_tol > UNICYCLE_R(0.0)) {
+            /* unicycle_qp_prefactor: the pivots above its floor, the factor that of potrf_l */
+            if (!pivots_above_floor(ws, Lu))
+                return 1;
+        } else if (unicycle_lai_potrf_l(NU, Lu, NU1) != 0) {
             stage_noise(ws, in, k, pmagN, ws->noise);
             for (j = 0; j < NU; ++j)
                 for (i = j; i < NU; ++i)
@@ -2273,6 +2303,7 @@ static int qp_prepare(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_i
     ws->pivot_floors = 0;
     ws->penalty = 0;
     ws->n_fact = 0;
+    ws->pre_tol = UNICYCLE_R(0.0); /* (the workspace may hold anything between solves) */
 #if UNICYCLE_QP_PHIT
     transpose_phi(ws, in);
 #endif
@@ -2848,11 +2879,20 @@ static int as_updated(const unicycle_qp_workspace *ws, int b)
  * terminal augmentation when a pivot fails). Returns 1 when it succeeded. */
 static int as_factor(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 {
-    int fact;
+    int fact, b, empty = 1;
     ws->as_n = 0;
     ws->delta = UNICYCLE_R(0.0);
     ws->rho_aug = UNICYCLE_R(0.0);
-    fact = riccati_factor(ws, in);
+    for (b = 0; b < ws->nb; ++b)
+        empty &= ws->act[b] == 0;
+    if (L->st.prefactored && L->as_sweeps == 1 && empty && ws->pre_status >= 0) {
+        /* the first sweep with no active row: the factorisation unicycle_qp_prefactor kept (that
+         * of riccati_factor with all weights 0) */
+        ++ws->n_fact;
+        fact = ws->pre_status;
+    } else {
+        fact = riccati_factor(ws, in);
+    }
     if (fact == 1 && NE > 0) {
         QP_TRACE("active set: terminal augmentation\n");
         fact = qp_augment_terminal(L, ws, in);
@@ -3209,6 +3249,29 @@ static int qp_active_set(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_q
     }
     initial_point(ws, in, &L->st, sol, 0);
     return QP_GO_ON;
+}
+
+int unicycle_qp_prefactor(unicycle_qp_workspace *ws, const unicycle_qp_in *in, unicycle_real tol, unicycle_real roundoff)
+{
+    int k, fact;
+    /* no bounded row (every weight 0), no correction, no augmentation */
+    ws->nb = 0;
+    for (k = 0; k < N + 2; ++k)
+        ws->bstart[k] = 0;
+    ws->penalty = 0;
+    ws->delta = UNICYCLE_R(0.0);
+    ws->rho_aug = UNICYCLE_R(0.0);
+    ws->pivot_floors = 0;
+    ws->n_fact = 0;
+#if UNICYCLE_QP_PHIT
+    transpose_phi(ws, in);
+#endif
+    ws->pre_tol = tol > UNICYCLE_REAL_TINY ? tol : UNICYCLE_REAL_TINY;
+    ws->pre_roundoff = roundoff;
+    fact = riccati_factor(ws, in);
+    ws->pre_status = fact != 1 && ws->pre_roundoff >= UNICYCLE_R(0.0) ? fact : -1;
+    ws->pre_tol = UNICYCLE_R(0.0);
+    return fact != 1;
 }
 
 /* Mehrotra's predictor-corrector. Per iteration: the residuals and the stopping tests (with

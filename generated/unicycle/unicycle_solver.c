@@ -360,12 +360,72 @@ static int unicycle_iterate_diverged(const unicycle_solver *s)
                           s->mu_bN);
 }
 
+static void unicycle_qp_bind(unicycle_solver *s);
+static void unicycle_qp_unbind(unicycle_solver *s);
+
+/* The convexity test of the automatic lm (unicycle_lm.h, its test hook; ctx: the solver): the QP's
+ * factorisation with no active row at the term lm (unicycle_qp_prefactor, in the QP's workspace),
+ * its pivots above tol and their round-off UNICYCLE_LM_ROUNDOFF. Any run discards a kept one
+ * (qp_prefactored); the prepare keeps the last when it passed at the term it leaves. */
+static int unicycle_lm_qp_test(void *ctx, unicycle_real lm, unicycle_real tol)
+{
+    unicycle_solver *s = (unicycle_solver *)ctx;
+    const unicycle_real shift = s->qp_in.hess_shift;
+    s->qp_prefactored = 0;
+    unicycle_qp_bind(s);
+    s->qp_in.hess_shift = lm;
+    s->qp_pre_ok = unicycle_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, UNICYCLE_LM_ROUNDOFF);
+    s->qp_pre_lm = lm;
+    s->qp_in.hess_shift = shift;
+    unicycle_qp_unbind(s);
+    return s->qp_pre_ok;
+}
+
+/* The lm module's test hook, set around each call into it (no pointer into the solver stays
+ * between calls). */
+static void unicycle_lm_hook(unicycle_solver *s, int on)
+{
+    s->lm.test = on ? unicycle_lm_qp_test : 0;
+    s->lm.test_ctx = on ? (void *)s : 0;
+}
+
 /* The automatic lm after init or a re-initialisation (QP assembled), in its phase. */
 static void unicycle_lm_started(unicycle_solver *s)
 {
     int prev = unicycle_phase(s, UNICYCLE_PHASE_LM);
     unicycle_lm_start(&s->lm, &s->ring, s->A_N, s->mem.ev.lm_work);
     unicycle_phase(s, prev);
+}
+
+/* 1 when the next feedback's active-set start will guess no active row (a sufficient test:
+ * every bound multiplier of the shifted iterate 0, the warm start's, and no row with equal
+ * bounds): only then can the QP reuse the prepare's test as its factorisation. */
+static int unicycle_guess_empty(const unicycle_solver *s)
+{
+    int k, i;
+    for (k = 0; k < UNICYCLE_N; ++k) {
+        for (i = 0; i < UNICYCLE_NW; ++i) {
+            if (s->mu_b[k][i] != UNICYCLE_R(0.0) || s->qp_in.lbw[k][i] == s->qp_in.ubw[k][i]) {
+                return 0;
+            }
+        }
+        for (i = 0; i < UNICYCLE_NG; ++i) {
+            if (s->mu_g[k][i] != UNICYCLE_R(0.0) || s->qp_in.lg[k][i] == s->qp_in.ug[k][i]) {
+                return 0;
+            }
+        }
+    }
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        if (s->mu_bN[i] != UNICYCLE_R(0.0) || s->qp_in.lbxN[i] == s->qp_in.ubxN[i]) {
+            return 0;
+        }
+    }
+    for (i = 0; i < UNICYCLE_NR; ++i) {
+        if (s->mu_r[i] != UNICYCLE_R(0.0) || s->qp_in.lr[i] == s->qp_in.ur[i]) {
+            return 0;
+        }
+    }
+    return 1;
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */
@@ -870,6 +930,7 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
         return UNICYCLE_ERR_NOT_INITIALIZED;
     }
     s->initialized = 0;
+    s->qp_prefactored = 0;
     unicycle_reset_health(s);
     s->qp_ready = 0;
     s->p_shifted = 0;
@@ -1136,7 +1197,7 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set,
 {
     unicycle_qp_in *in = &s->qp_in;
     unicycle_qp_settings settings;
-    int k, qs;
+    int qs;
     unicycle_qp_settings_default(&settings);
     settings.tol = s->settings.qp_tol;
     settings.max_iter = max_iter;
@@ -1151,6 +1212,23 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set,
     }
     settings.warm_start = warm;
     settings.active_set = warm && active_set ? UNICYCLE_QP_ACTIVE_SET : 0;
+    /* the prepare's lm test factored this QP at this term: its first sweep may start from it */
+    settings.prefactored = settings.active_set > 0 && s->qp_prefactored && in->hess_shift == s->qp_pre_lm;
+    s->qp_prefactored = 0;
+    unicycle_qp_bind(s);
+    qs = unicycle_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
+    if (s->anytime.qp_timed && s->settings.budget_unit == UNICYCLE_BUDGET_TIME) {
+        unicycle_qp_over(s);
+    }
+    unicycle_qp_unbind(s);
+    return qs;
+}
+
+/* The QP's matrix pointers into the ring slots and the terminal blocks, and their clearing. */
+static void unicycle_qp_bind(unicycle_solver *s)
+{
+    unicycle_qp_in *in = &s->qp_in;
+    int k;
     for (k = 0; k < UNICYCLE_N; ++k) {
         const unicycle_stage_slot *slot = unicycle_ring_stage_const(&s->ring, k);
         in->H[k] = slot->Ht;
@@ -1160,10 +1238,12 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set,
     in->HN = s->A_N;
     in->R = UNICYCLE_NR > 0 ? s->R : 0;
     in->Req = UNICYCLE_NE > 0 ? s->R_eq : 0;
-    qs = unicycle_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
-    if (s->anytime.qp_timed && s->settings.budget_unit == UNICYCLE_BUDGET_TIME) {
-        unicycle_qp_over(s);
-    }
+}
+
+static void unicycle_qp_unbind(unicycle_solver *s)
+{
+    unicycle_qp_in *in = &s->qp_in;
+    int k;
     for (k = 0; k < UNICYCLE_N; ++k) {
         in->H[k] = 0;
         in->Phi[k] = 0;
@@ -1172,7 +1252,6 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set,
     in->HN = 0;
     in->R = 0;
     in->Req = 0;
-    return qs;
 }
 
 /* 1 when the QP status is "solved" and its solution finite. */
@@ -2004,6 +2083,7 @@ static int unicycle_recover(unicycle_solver *s, int shifted)
 {
     unicycle_real l = UNICYCLE_R(0.0);
     int i;
+    s->qp_prefactored = 0;
     /* x_0: the state predicted for this instant from the last measurement and control (one
      * stage evaluation, 1 work unit of the budget; nothing tests before it that it fits: x_0 =
      * xhat0 instead would change the re-initialisation; the walk's tests after it read it,
@@ -2143,6 +2223,7 @@ int unicycle_prepare(unicycle_solver *s)
     }
     unicycle_timer_begin(&s->timer, UNICYCLE_PREPARE_PHASES, UNICYCLE_PHASE_RECOVERY);
     start = s->timer.mark;
+    s->qp_prefactored = 0; /* (the memory is the evaluations' now) */
     unicycle_shift_parameters(s);
     s->anytime.extra_iterations = 0;
     s->anytime.prepared_extra = 0;
@@ -2456,8 +2537,16 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
     s->health.kkt_proxy = unicycle_kkt_proxy_eval(s);
     unicycle_phase(s, UNICYCLE_PHASE_LM);
+    /* the test as the QP's factorisation where the feedback may reuse it, else unicycle_lm.c's
+     * (the same test; on the robot arm, whose start always has active rows, the QP's form cost
+     * 29 % more on the Cortex-M7: bench/issue23/measurements.md section 45) */
+    s->qp_pre_ok = 0;
+    unicycle_lm_hook(s, unicycle_guess_empty(s));
     unicycle_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
+    unicycle_lm_hook(s, 0);
+    /* the test's factorisation at the term the feedback's QP starts from (unless capped) */
+    s->qp_prefactored = s->lm.on && s->qp_pre_ok && s->qp_pre_lm == s->lm.lm;
     unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
     diverged = unicycle_iterate_diverged(s);
     if (unicycle_budget_on(s)) {
@@ -2577,6 +2666,7 @@ int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     unicycle_timer_begin(&s->timer, 1u << UNICYCLE_PHASE_KKT, UNICYCLE_PHASE_KKT);
+    s->qp_prefactored = 0; /* (the evaluations' memory) */
     rc = unicycle_kkt_measure(&s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0], &s->mu_b[0][0], s->mu_bN,
                            s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->mem.ev.fun_work, parts);
     unicycle_timer_end(&s->timer, -1, 0.0);
@@ -2897,6 +2987,9 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     s->shifted = 0;
     s->al_resync = 1;
     s->status = UNICYCLE_OK;
+    s->qp_prefactored = 0;
+    s->qp_pre_ok = 0;
+    s->qp_pre_lm = UNICYCLE_R(0.0);
     unicycle_lm_reset(&s->lm, s->settings.lm_auto, s->settings.lm);
     s->lm.scale = UNICYCLE_R(1.0);
     for (k = 0; k < UNICYCLE_N; ++k) { /* set only during a QP solve (unicycle_qp_solve_bound) */
