@@ -2252,7 +2252,7 @@ static void info_not_solved(dopus_qp_info *info)
     info->status = DOPUS_QP_INVALID_INPUT;
     info->iterations = info->inertia_corrections = info->terminal_augmentations = 0;
     info->pivot_floors = 0;
-    info->factorizations = info->active_set = info->certified = 0;
+    info->factorizations = info->active_set = info->certified = info->prefactored = 0;
     info->delta = DOPUS_R(0.0);
     info->res_stat = info->res_eq = info->res_ineq = info->res_comp = INFINITY;
     info->res_stat_scaled = info->res_eq_scaled = info->res_ineq_scaled = info->res_comp_scaled = INFINITY;
@@ -2303,6 +2303,7 @@ static int qp_prepare(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
     ws->pivot_floors = 0;
     ws->penalty = 0;
     ws->n_fact = 0;
+    ws->n_pre = 0;
     ws->pre_tol = DOPUS_R(0.0); /* (the workspace may hold anything between solves) */
 #if DOPUS_QP_PHIT
     transpose_phi(ws, in);
@@ -2739,6 +2740,7 @@ static int qp_result(const qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in
         info->pivot_floors = ws->pivot_floors;
         info->delta = L->delta_used;
         info->factorizations = ws->n_fact;
+        info->prefactored = ws->n_pre;
         info->certified = status == DOPUS_QP_PRIMAL_INFEASIBLE && L->certified;
     }
     status = finish(ws, keep_best ? &L->best_r : r, status, iter, keep_best ? NULL : sol, info);
@@ -2889,6 +2891,7 @@ static int as_factor(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
         /* the first sweep with no active row: the factorisation dopus_qp_prefactor kept (that
          * of riccati_factor with all weights 0) */
         ++ws->n_fact;
+        ws->n_pre = 1;
         fact = ws->pre_status;
     } else {
         fact = riccati_factor(ws, in);

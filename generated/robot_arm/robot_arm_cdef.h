@@ -223,6 +223,9 @@ typedef struct {
      * solves of the call: interior-point iterations, inertia corrections, sweeps of the
      * active-set start) */
     int qp_factorizations;
+    /* 1 when the last feedback's QP took the factorisation of the prepare's convexity test as
+     * that of its first sweep (docs/algorithm.md section 10), else 0 */
+    int qp_prefactored;
     /* seconds per phase of the last call that ran it (enum robot_arm_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
      * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback

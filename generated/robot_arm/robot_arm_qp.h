@@ -347,6 +347,8 @@ typedef struct {
                                 one per sweep of the active-set start */
     int active_set;             /* sweeps of the active-set start when it solved the QP (they are
                                 then its iterations), else 0 */
+    int prefactored;            /* 1 when the start's first sweep took the factorisation
+                                robot_arm_qp_prefactor kept (settings.prefactored), else 0 */
     int certified;              /* status ROBOT_ARM_QP_PRIMAL_INFEASIBLE: 1 when a row's lower bound lies
                                 above its upper bound, or the certificate of the test during the
                                 iteration separated beyond CERT_SEP and the tolerance (no point meets
@@ -454,6 +456,7 @@ typedef struct {
     robot_arm_real pre_roundoff;
     int pre_status;
     int n_fact;            /* factorisations of the solve */
+    int n_pre;             /* of them, the one robot_arm_qp_prefactor kept (0 or 1) */
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     robot_arm_real scale_stat; /* residual scaling factors */
     robot_arm_real scale_eq;

@@ -853,6 +853,7 @@ static void robot_arm_fresh_start(robot_arm_solver *s)
     s->qp_status = 0;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
+    s->qp_pre_used = 0;
     s->al_resync = 1;
 }
 
@@ -1269,6 +1270,7 @@ static int robot_arm_qp_attempt(robot_arm_solver *s, int warm, int active_set)
     qs = robot_arm_qp_solve_bound(s, warm, active_set, s->settings.qp_max_iter);
     s->qp_iterations += s->qp_info.iterations;
     s->qp_factorizations += s->qp_info.factorizations;
+    s->qp_pre_used |= s->qp_info.prefactored;
     return qs;
 }
 
@@ -1328,6 +1330,7 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
+    s->qp_pre_used = 0;
     s->qp_cold_retry = 0;
     s->qp_warm_failed = 0;
     s->anytime.work += ROBOT_ARM_WORK_QP;
@@ -2620,7 +2623,7 @@ static int robot_arm_anytime_run(robot_arm_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = ROBOT_ARM_OK;
     const int warm_failed = s->qp_warm_failed;
-    const int qp_factorizations = s->qp_factorizations;
+    const int qp_factorizations = s->qp_factorizations, pre_used = s->qp_pre_used;
     int max_iter = ROBOT_ARM_ANYTIME_MAX_ITER;
     if (!robot_arm_budget_on(s)) {
         /* without a budget: the recovery phase's extra iterations (algorithm.md section 9) */
@@ -2642,6 +2645,7 @@ static int robot_arm_anytime_run(robot_arm_solver *s)
     s->qp_status = qp_status;
     s->qp_iterations = qp_iterations;
     s->qp_factorizations = qp_factorizations;
+    s->qp_pre_used = pre_used;
     s->qp_cold_retry = cold;
     s->qp_warm_failed = warm_failed;
     s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
@@ -2915,6 +2919,7 @@ void robot_arm_get_info(const robot_arm_solver *s, robot_arm_info *info)
     info->qp_status = s->qp_status;
     info->qp_iterations = s->qp_iterations;
     info->qp_factorizations = s->qp_factorizations;
+    info->qp_prefactored = s->qp_pre_used;
     info->qp_cold_retry = s->qp_cold_retry;
     info->flags = s->health.flags;
     info->recoveries = s->health.n_recoveries;
@@ -3018,6 +3023,7 @@ int robot_arm_setup(robot_arm_solver *s, const robot_arm_settings *st)
     s->qp_status = 0;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
+    s->qp_pre_used = 0;
     for (k = 0; k < ROBOT_ARM_N; ++k) {
         s->rho[k] = ROBOT_ARM_R(0.0);
         s->selected[k] = 0;

@@ -267,6 +267,9 @@ typedef struct {
      * solves of the call: interior-point iterations, inertia corrections, sweeps of the
      * active-set start) */
     int qp_factorizations;
+    /* 1 when the last feedback's QP took the factorisation of the prepare's convexity test as
+     * that of its first sweep (docs/algorithm.md section 10), else 0 */
+    int qp_prefactored;
     /* seconds per phase of the last call that ran it (enum robot_arm_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
      * the phases it runs too); the phases of a feedback (prepare) add up to t_feedback
@@ -589,6 +592,7 @@ struct robot_arm_solver {
     robot_arm_real qp_pre_lm;
     int qp_pre_ok;
     int qp_prefactored;
+    int qp_pre_used;      /* the last feedback's QP took that factorisation (robot_arm_info.qp_prefactored) */
     int qp_no_active_set; /* 1 inside a globalised step: the interior point only */
 
     /* the QP's workspace and solution, live only inside feedback, share their memory with

@@ -853,6 +853,7 @@ static void unicycle_fresh_start(unicycle_solver *s)
     s->qp_status = 0;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
+    s->qp_pre_used = 0;
     s->al_resync = 1;
 }
 
@@ -1269,6 +1270,7 @@ static int unicycle_qp_attempt(unicycle_solver *s, int warm, int active_set)
     qs = unicycle_qp_solve_bound(s, warm, active_set, s->settings.qp_max_iter);
     s->qp_iterations += s->qp_info.iterations;
     s->qp_factorizations += s->qp_info.factorizations;
+    s->qp_pre_used |= s->qp_info.prefactored;
     return qs;
 }
 
@@ -1328,6 +1330,7 @@ static int unicycle_feedback_qp(unicycle_solver *s)
     s->qp_in.hess_shift = s->lm.lm;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
+    s->qp_pre_used = 0;
     s->qp_cold_retry = 0;
     s->qp_warm_failed = 0;
     s->anytime.work += UNICYCLE_WORK_QP;
@@ -2620,7 +2623,7 @@ static int unicycle_anytime_run(unicycle_solver *s)
 {
     int qp_status = s->qp_status, qp_iterations = s->qp_iterations, cold = s->qp_cold_retry, rc = UNICYCLE_OK;
     const int warm_failed = s->qp_warm_failed;
-    const int qp_factorizations = s->qp_factorizations;
+    const int qp_factorizations = s->qp_factorizations, pre_used = s->qp_pre_used;
     int max_iter = UNICYCLE_ANYTIME_MAX_ITER;
     if (!unicycle_budget_on(s)) {
         /* without a budget: the recovery phase's extra iterations (algorithm.md section 9) */
@@ -2642,6 +2645,7 @@ static int unicycle_anytime_run(unicycle_solver *s)
     s->qp_status = qp_status;
     s->qp_iterations = qp_iterations;
     s->qp_factorizations = qp_factorizations;
+    s->qp_pre_used = pre_used;
     s->qp_cold_retry = cold;
     s->qp_warm_failed = warm_failed;
     s->anytime.prepared_extra = s->anytime.extra_iterations > 0 && s->qp_ready;
@@ -2915,6 +2919,7 @@ void unicycle_get_info(const unicycle_solver *s, unicycle_info *info)
     info->qp_status = s->qp_status;
     info->qp_iterations = s->qp_iterations;
     info->qp_factorizations = s->qp_factorizations;
+    info->qp_prefactored = s->qp_pre_used;
     info->qp_cold_retry = s->qp_cold_retry;
     info->flags = s->health.flags;
     info->recoveries = s->health.n_recoveries;
@@ -3018,6 +3023,7 @@ int unicycle_setup(unicycle_solver *s, const unicycle_settings *st)
     s->qp_status = 0;
     s->qp_iterations = 0;
     s->qp_factorizations = 0;
+    s->qp_pre_used = 0;
     for (k = 0; k < UNICYCLE_N; ++k) {
         s->rho[k] = UNICYCLE_R(0.0);
         s->selected[k] = 0;
