@@ -3080,6 +3080,9 @@ int dopus_update_settings(dopus_solver *s, const dopus_settings *st)
     }
     old = s->settings;
     s->settings = *st;
+    /* the prepared factor was formed under the old settings (and the lm restart below reuses
+     * its memory): the feedback factorises afresh */
+    s->qp_prefactored = 0;
     if (st->regularization != old.regularization || st->reg_eps != old.reg_eps) {
         /* the blocks were regularised with the old setting: step 5 refreshes them */
         s->al_resync = 1;

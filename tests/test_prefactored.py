@@ -12,8 +12,9 @@ test in the QP's form and the feedback's QP takes that factorisation for its fir
   Python reference backend's (which factors every QP itself) to 1e-9 relative.
 - What lies between prepare and feedback: a KKT evaluation clears the stamp (the feedback
   refactors, its step still the reference's); a restart of the automatic term (``lm='auto'``
-  again: its own test runs outside the QP's form, in the evaluations' scratch) leaves the same
-  term on the same QP, and the reused factor still gives the fresh factorisation's step; a
+  again: its own test runs outside the QP's form, in scratch that may share the kept factor's
+  memory) is a settings update, which clears the stamp: the feedback refactors and gives the
+  fresh factorisation's step bit for bit; a
   fixed term set after the prepare is not the one the test factored: the feedback refactors
   and its step is the reference's with the same change (both QPs at tolerance 1e-14, as in
   test_chain.py: the interior point runs then).
@@ -104,7 +105,7 @@ def test_kkt_evaluation_between_prepare_and_feedback(chain):
     assert_close(iterate(reused), iterate(r), "reused")
 
 
-def test_restarted_term_reuses_an_intact_factor(chain):
+def test_restarted_term_refactors(chain):
     disc, xhat = chain
     c, r = started(disc, xhat)
     fresh = CSolver(disc)
@@ -116,7 +117,7 @@ def test_restarted_term_reuses_an_intact_factor(chain):
     c.feedback(xhat)
     fresh.feedback(xhat)
     r.feedback(xhat)
-    assert c.qp_prefactored and not fresh.qp_prefactored
+    assert not c.qp_prefactored and not fresh.qp_prefactored
     assert_same(iterate(c), iterate(fresh), "restarted term")
     assert_close(iterate(c), iterate(r), "restarted term")
 

@@ -3080,6 +3080,9 @@ int robot_arm_update_settings(robot_arm_solver *s, const robot_arm_settings *st)
     }
     old = s->settings;
     s->settings = *st;
+    /* the prepared factor was formed under the old settings (and the lm restart below reuses
+     * its memory): the feedback factorises afresh */
+    s->qp_prefactored = 0;
     if (st->regularization != old.regularization || st->reg_eps != old.reg_eps) {
         /* the blocks were regularised with the old setting: step 5 refreshes them */
         s->al_resync = 1;
