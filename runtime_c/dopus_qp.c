@@ -2877,17 +2877,25 @@ static int as_updated(const dopus_qp_workspace *ws, int b)
     return 0;
 }
 
+/* 1 when the working set has no row. */
+static int as_none_active(const dopus_qp_workspace *ws)
+{
+    int b;
+    for (b = 0; b < ws->nb; ++b)
+        if (ws->act[b] != 0)
+            return 0;
+    return 1;
+}
+
 /* The factorisation of a sweep with the penalty weights of all active rows (and the exact
  * terminal augmentation when a pivot fails). Returns 1 when it succeeded. */
 static int as_factor(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
 {
-    int fact, b, empty = 1;
+    int fact;
     ws->as_n = 0;
     ws->delta = DOPUS_R(0.0);
     ws->rho_aug = DOPUS_R(0.0);
-    for (b = 0; b < ws->nb; ++b)
-        empty &= ws->act[b] == 0;
-    if (L->st.prefactored && L->as_sweeps == 1 && empty && ws->pre_status >= 0) {
+    if (L->st.prefactored && L->as_sweeps == 1 && ws->pre_status >= 0 && as_none_active(ws)) {
         /* the first sweep with no active row: the factorisation dopus_qp_prefactor kept (that
          * of riccati_factor with all weights 0) */
         ++ws->n_fact;

@@ -365,20 +365,20 @@ static void dopus_qp_unbind(dopus_solver *s);
 
 /* The convexity test of the automatic lm (dopus_lm.h, its test hook; ctx: the solver): the QP's
  * factorisation with no active row at the term lm (dopus_qp_prefactor, in the QP's workspace),
- * its pivots above tol and their round-off DOPUS_LM_ROUNDOFF. Any run discards a kept one
- * (qp_prefactored); the prepare keeps the last when it passed at the term it leaves. */
+ * its pivots above tol and their round-off DOPUS_LM_ROUNDOFF. Each run replaces a kept one:
+ * qp_prefactored is its verdict at qp_pre_lm; the prepare keeps the last when it passed at the
+ * term it leaves. */
 static int dopus_lm_qp_test(void *ctx, dopus_real lm, dopus_real tol)
 {
     dopus_solver *s = (dopus_solver *)ctx;
     const dopus_real shift = s->qp_in.hess_shift;
-    s->qp_prefactored = 0;
     dopus_qp_bind(s);
     s->qp_in.hess_shift = lm;
-    s->qp_pre_ok = dopus_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, DOPUS_LM_ROUNDOFF);
+    s->qp_prefactored = dopus_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, DOPUS_LM_ROUNDOFF);
     s->qp_pre_lm = lm;
     s->qp_in.hess_shift = shift;
     dopus_qp_unbind(s);
-    return s->qp_pre_ok;
+    return s->qp_prefactored;
 }
 
 /* The lm module's test hook, set around each call into it (no pointer into the solver stays
@@ -2543,13 +2543,13 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     /* the test as the QP's factorisation where the feedback may reuse it, else dopus_lm.c's
      * (the same test; on the robot arm, whose start always has active rows, the QP's form cost
      * 29 % more on the Cortex-M7: bench/issue23/measurements.md section 45) */
-    s->qp_pre_ok = 0;
+    s->qp_prefactored = 0; /* (a previous iteration's: the evaluations used the memory since) */
     dopus_lm_hook(s, dopus_guess_empty(s));
     dopus_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
     dopus_lm_hook(s, 0);
     /* the test's factorisation at the term the feedback's QP starts from (unless capped) */
-    s->qp_prefactored = s->lm.on && s->qp_pre_ok && s->qp_pre_lm == s->lm.lm;
+    s->qp_prefactored = s->qp_prefactored && s->qp_pre_lm == s->lm.lm;
     dopus_phase(s, DOPUS_PHASE_RECOVERY);
     diverged = dopus_iterate_diverged(s);
     if (dopus_budget_on(s)) {
@@ -2993,7 +2993,6 @@ int dopus_setup(dopus_solver *s, const dopus_settings *st)
     s->al_resync = 1;
     s->status = DOPUS_OK;
     s->qp_prefactored = 0;
-    s->qp_pre_ok = 0;
     s->qp_pre_lm = DOPUS_R(0.0);
     dopus_lm_reset(&s->lm, s->settings.lm_auto, s->settings.lm);
     s->lm.scale = DOPUS_R(1.0);

@@ -586,11 +586,10 @@ struct robot_arm_solver {
     int qp_warm_failed; /* the last feedback's warm start failed (retried cold, or certified
                              infeasibility: no retry) */
     /* the prepare's lm test in the QP's form (robot_arm_qp_prefactor, kept in mem.qp.work; when the
-     * next active-set start will guess no row): the term of its last run and its verdict;
-     * qp_prefactored: 1 from that test until anything else uses mem or solves (the feedback's
-     * QP may then reuse it) */
+     * next active-set start will guess no row): the term of its last run; qp_prefactored: 1
+     * when that run passed (at the end of the prepare: at the term it leaves) until anything
+     * else uses mem or solves (the feedback's QP may then reuse it) */
     robot_arm_real qp_pre_lm;
-    int qp_pre_ok;
     int qp_prefactored;
     int qp_pre_used;      /* the last feedback's QP took that factorisation (robot_arm_info.qp_prefactored) */
     int qp_no_active_set; /* 1 inside a globalised step: the interior point only */
