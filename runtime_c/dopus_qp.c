@@ -2279,6 +2279,22 @@ static dopus_real certificate_data_scale(const dopus_qp_workspace *ws)
     return dmax(dmax(DOPUS_R(1.0), ws->scale_bounds), dmax(ws->scale_b, ws->scale_g));
 }
 
+/* The state the factorisations start from in a solve or dopus_qp_prefactor: no correction,
+ * no augmentation, no penalty, the counters 0, and Phi_k' formed where it is kept. */
+static void factor_state_reset(dopus_qp_workspace *ws, const dopus_qp_in *in)
+{
+    ws->delta = DOPUS_R(0.0);
+    ws->rho_aug = DOPUS_R(0.0);
+    ws->pivot_floors = 0;
+    ws->penalty = 0;
+    ws->n_fact = 0;
+#if DOPUS_QP_PHIT
+    transpose_phi(ws, in);
+#else
+    (void)in;
+#endif
+}
+
 /* Settings, data checks, the bounded rows, the data scales and the starting point of the
  * first attempt. Returns QP_GO_ON, or the status of a solve that ends here (*sol zeroed
  * unless a pointer was NULL). */
@@ -2298,16 +2314,9 @@ static int qp_prepare(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
         zero_solution(sol);
         return DOPUS_QP_INVALID_INPUT;
     }
-    ws->delta = DOPUS_R(0.0);
-    ws->rho_aug = DOPUS_R(0.0);
-    ws->pivot_floors = 0;
-    ws->penalty = 0;
-    ws->n_fact = 0;
+    factor_state_reset(ws, in);
     ws->n_pre = 0;
     ws->pre_tol = DOPUS_R(0.0); /* (the workspace may hold anything between solves) */
-#if DOPUS_QP_PHIT
-    transpose_phi(ws, in);
-#endif
     bounds = setup_bounds(ws, in);
     if (bounds == 2) {
         /* more bounded rows than the workspace was generated for */
@@ -3269,14 +3278,7 @@ int dopus_qp_prefactor(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real
     ws->nb = 0;
     for (k = 0; k < N + 2; ++k)
         ws->bstart[k] = 0;
-    ws->penalty = 0;
-    ws->delta = DOPUS_R(0.0);
-    ws->rho_aug = DOPUS_R(0.0);
-    ws->pivot_floors = 0;
-    ws->n_fact = 0;
-#if DOPUS_QP_PHIT
-    transpose_phi(ws, in);
-#endif
+    factor_state_reset(ws, in);
     ws->pre_tol = tol > DOPUS_REAL_TINY ? tol : DOPUS_REAL_TINY;
     ws->pre_roundoff = roundoff;
     fact = riccati_factor(ws, in);
