@@ -19,27 +19,16 @@ import zlib
 import numpy as np
 import pytest
 
-from dopus_codegen import Ocp, build_functions
 from dopus_codegen.errors import DopusError, qp_status_code
 from dopus_codegen.reference.dopus import ReferenceDopus
 from dopus_codegen.runtime.solver import CSolver
 from harness import qp_problems as P
+from harness.integrator import N, integrator_model
 from harness.qp_harness import build_qp_solver
-
-N, DT = 10, 0.1
-
 
 @pytest.fixture(scope="module")
 def reach():
-    ocp = Ocp("reach_retry")
-    x = ocp.state("x")
-    u = ocp.control("u", lb=-1.0, ub=1.0)
-    ocp.dynamics(u)
-    ocp.stage_least_squares(u, weights=[1.0])
-    ocp.terminal_constraint(x, lb=5.0, ub=np.inf)
-    ocp.horizon(N=N, dt=DT)
-    ocp.initial_state([0.0])
-    return build_functions(ocp)
+    return integrator_model("reach_retry", 0.0, terminal=(5.0, np.inf))
 
 
 def _failed_feedback(s, xhat):

@@ -30,46 +30,25 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from dopus_codegen import Ocp, build_functions
 from dopus_codegen.cli import main as cli_main
 from dopus_codegen.errors import DopusError, qp_status_code
 from dopus_codegen.reference.dopus import ReferenceDopus
 from dopus_codegen.runtime.solver import CSolver
-
-N, DT = 10, 0.1
-
-
-def _model(name, x0, terminal=None, parameter=False, upper=None):
-    ocp = Ocp(name)
-    x = ocp.state("x")
-    u = ocp.control("u", lb=-1.0, ub=1.0)
-    ocp.dynamics(u)
-    ocp.stage_least_squares(u, weights=[1.0])
-    if parameter:
-        p = ocp.parameter("p", value=-10.0)
-        ocp.path_constraint(x - p, lb=0.0)
-    if upper is not None:
-        ocp.path_constraint(x, ub=upper)
-    if terminal is not None:
-        ocp.terminal_constraint(x, lb=terminal[0], ub=terminal[1])
-    ocp.horizon(N=N, dt=DT)
-    ocp.initial_state([x0])
-    return build_functions(ocp)
-
+from harness.integrator import N, integrator_model
 
 @pytest.fixture(scope="module")
 def late():
-    return _model("late", 0.0, parameter=True)
+    return integrator_model("late", 0.0, parameter=True)
 
 
 @pytest.fixture(scope="module")
 def reach():
-    return _model("reach", 0.0, terminal=(5.0, np.inf))
+    return integrator_model("reach", 0.0, terminal=(5.0, np.inf))
 
 
 @pytest.fixture(scope="module")
 def home():
-    return _model("home", 3.0, terminal=(0.0, 0.0))
+    return integrator_model("home", 3.0, terminal=(0.0, 0.0))
 
 
 @pytest.fixture(params=["c", "reference"])
@@ -79,7 +58,7 @@ def backend(request):
 
 @pytest.fixture(scope="module")
 def start():
-    return _model("start", 0.0, upper=1.0)
+    return integrator_model("start", 0.0, upper=1.0)
 
 
 def _params(p3):
