@@ -2824,8 +2824,11 @@ static void as_res_add(dopus_qp_workspace *ws, int b, dopus_real dv)
 
 /* The guess from the warm-start point (the primal part in the iterate, the multipliers in
  * *sol): a side is active when its multiplier points to it and exceeds its slack, a row with
- * lo == up always. Returns 0 when a row has a soft side (the start does not apply). */
-static int as_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_sol *sol, dopus_real hscale)
+ * lo == up always. Returns 0 when a row has a soft side (the start does not apply). compare:
+ * the factor a prefactor kept is discarded (pre_status -1) unless this guess has its active
+ * rows with the same penalty weights (act and pen as the prefactor left them). */
+static int as_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_sol *sol, dopus_real hscale,
+                    int compare)
 {
     int k, b, j;
     for (k = 0; k <= N; ++k)
@@ -2833,6 +2836,8 @@ static int as_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_q
         {
             const dopus_real mu = row_mu(sol, ws->bidx[b]);
             const dopus_real v = row_dot(in, k, j, ws->prim + k * NW);
+            const int was = ws->act[b] != 0;
+            const dopus_real pen_was = ws->pen[b];
             dopus_real lo, up;
             if (SOFT && (ws->soft_lo[b] || ws->soft_up[b]))
                 return 0;
@@ -2845,6 +2850,10 @@ static int as_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_q
             else if (ws->has_lo[b] && mu < DOPUS_R(0.0) && -mu > v - lo)
                 ws->act[b] = -1;
             ws->pen[b] = AS_RHO * hscale / dmax(row_norm2(in, k, j), DOPUS_REAL_EPSILON);
+            /* the kept factor's rows (act, pen as the prefactor left them): the factorisation
+             * reads a row's weight only when it is active (row_q) */
+            if (compare && (was != (ws->act[b] != 0) || (was && pen_was != ws->pen[b])))
+                ws->pre_status = -1;
             as_set_mu(ws, b, ws->act[b] ? mu : DOPUS_R(0.0));
         }
     return 1;
@@ -2886,16 +2895,6 @@ static int as_updated(const dopus_qp_workspace *ws, int b)
     return 0;
 }
 
-/* 1 when the working set has no row. */
-static int as_none_active(const dopus_qp_workspace *ws)
-{
-    int b;
-    for (b = 0; b < ws->nb; ++b)
-        if (ws->act[b] != 0)
-            return 0;
-    return 1;
-}
-
 /* The factorisation of a sweep with the penalty weights of all active rows (and the exact
  * terminal augmentation when a pivot fails). Returns 1 when it succeeded. */
 static int as_factor(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
@@ -2904,9 +2903,9 @@ static int as_factor(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
     ws->as_n = 0;
     ws->delta = DOPUS_R(0.0);
     ws->rho_aug = DOPUS_R(0.0);
-    if (L->st.prefactored && L->as_sweeps == 1 && ws->pre_status >= 0 && as_none_active(ws)) {
-        /* the first sweep with no active row: the factorisation dopus_qp_prefactor kept (that
-         * of riccati_factor with all weights 0) */
+    if (L->st.prefactored && L->as_sweeps == 1 && ws->pre_status >= 0) {
+        /* the first sweep: the factorisation a prefactor kept of this guess (as_guess compared
+         * the working sets: riccati_factor with these rows' penalty weights, or with none) */
         ++ws->n_fact;
         ws->n_pre = 1;
         fact = ws->pre_status;
@@ -3224,7 +3223,7 @@ static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *
 {
     int solved = 0, zeroed, update = 0, known = 0, refined;
     qp_res r;
-    if (!as_guess(ws, in, sol, L->hscale))
+    if (!as_guess(ws, in, sol, L->hscale, L->st.prefactored && ws->pre_status >= 0))
         return QP_GO_ON;
     ws->penalty = 1;
     ws->as_n = 0;
@@ -3278,6 +3277,8 @@ int dopus_qp_prefactor(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real
     ws->nb = 0;
     for (k = 0; k < N + 2; ++k)
         ws->bstart[k] = 0;
+    for (k = 0; k < DOPUS_QP_NB; ++k)
+        ws->act[k] = 0; /* the working set the factor is kept for: no active row */
     factor_state_reset(ws, in);
     ws->pre_tol = tol > DOPUS_REAL_TINY ? tol : DOPUS_REAL_TINY;
     ws->pre_roundoff = roundoff;
@@ -3285,6 +3286,42 @@ int dopus_qp_prefactor(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real
     ws->pre_status = fact != 1 && ws->pre_roundoff >= DOPUS_R(0.0) ? fact : -1;
     ws->pre_tol = DOPUS_R(0.0);
     return fact != 1;
+}
+
+int dopus_qp_prefactor_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_sol *sol)
+{
+    dopus_real hmax = DOPUS_R(0.0);
+    int k, i, fact;
+    ws->pre_status = -1;
+    /* the Hessian scale of the solve (check_input's hmax) and its bounded rows */
+    for (k = 0; k < N; ++k)
+        if (in->H[k] == NULL || in->Phi[k] == NULL || !finite_absmax_lower(NW, in->H[k], &hmax))
+            return 0;
+    if (in->HN == NULL || (NE > 0 && in->Req == NULL) || !finite_absmax(NX * NX, in->HN, &hmax) ||
+        !(in->hess_shift >= DOPUS_R(0.0) && in->hess_shift < INFINITY) || setup_bounds(ws, in) != 0)
+        return 0;
+    factor_state_reset(ws, in);
+    ws->pre_tol = DOPUS_R(0.0);
+    /* the warm start's primal part (initial_point's), the guess of the active-set start */
+    for (i = 0; i < NP; ++i)
+        ws->prim[i] = DOPUS_R(0.0);
+    for (k = 0; k <= N; ++k)
+        for (i = 0; i < NX; ++i)
+            ws->prim[k * NW + i] = sol->x[k][i];
+    for (k = 0; k < N; ++k)
+        for (i = 0; i < NU; ++i)
+            ws->prim[k * NW + NX + i] = sol->u[k][i];
+    if (!as_guess(ws, in, sol, hessian_scale(in, hmax), 0))
+        return 0;
+    /* as_factor's first sweep: the penalty weights of the active rows, no correction */
+    ws->penalty = 1;
+    ws->as_n = 0;
+    fact = riccati_factor(ws, in);
+    ws->penalty = 0;
+    /* kept when it is the sweep's whole factorisation: no augmentation follows (a pivot
+     * failed: status 1) and no pivot was floored (the solve's count starts at 0) */
+    ws->pre_status = fact != 1 && ws->pivot_floors == 0 ? fact : -1;
+    return ws->pre_status >= 0;
 }
 
 /* Mehrotra's predictor-corrector. Per iteration: the residuals and the stopping tests (with
