@@ -276,12 +276,14 @@ typedef struct {
     double deadline;
     double iter_price;
     /* 1: the workspace holds the factorisation robot_arm_qp_prefactor (found convex) or
-     * robot_arm_qp_prefactor_guess formed of this QP (the same blocks and hess_shift; nothing has
-     * solved or factored in it since); the active-set start's first sweep uses it when its guess
-     * has the rows that factor was formed with (none for robot_arm_qp_prefactor; the same active
-     * rows and penalty weights for robot_arm_qp_prefactor_guess): that sweep's factorisation is
-     * this one, the same operations, counted in robot_arm_qp_info.factorizations. 0 (the default):
-     * every factorisation formed in the solve. */
+     * robot_arm_qp_prefactor_guess formed of this QP (the same data but x0, the same hess_shift;
+     * nothing has solved or factored in it since); the solve takes the preparation the prefactor
+     * did (Phi_k'; robot_arm_qp_prefactor_guess: the bounded rows and the Hessian scale too), and the
+     * active-set start's first sweep uses the factor when its guess has the rows it was formed
+     * with (none for robot_arm_qp_prefactor; the same active rows and penalty weights for
+     * robot_arm_qp_prefactor_guess): that sweep's factorisation is this one, the same operations,
+     * counted in robot_arm_qp_info.factorizations. 0 (the default): every factorisation formed in
+     * the solve. */
     int prefactored;
 } robot_arm_qp_settings;
 
@@ -459,6 +461,11 @@ typedef struct {
     robot_arm_real pre_tol;
     robot_arm_real pre_roundoff;
     int pre_status;
+    /* robot_arm_qp_prefactor_guess: 1 when it set up the bounded rows (bidx, bstart, has_lo, has_up,
+     * nb) as the solve would, with pre_hmax the solve's Hessian scale (check_input's hmax); a
+     * solve with settings.prefactored and a kept factor takes them (and Phi_k') as they are */
+    int pre_rows;
+    robot_arm_real pre_hmax;
     int n_fact;            /* factorisations of the solve */
     int n_pre;             /* of them, the one a prefactor kept (0 or 1) */
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */

@@ -186,15 +186,18 @@ static int finite_absmax_lower(int n, const unicycle_real *restrict A, unicycle_
 }
 
 /* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k
- * (lower triangles) and HN (valid when it returns 1). */
+ * (lower triangles) and HN (valid when it returns 1). hmax NULL: H_k and HN are known finite
+ * (a prefactor scanned them, ws->pre_hmax) and are not read. */
 static int check_input(const unicycle_qp_in *in, unicycle_real *hmax)
 {
     int k, i;
-    *hmax = UNICYCLE_R(0.0);
+    if (hmax)
+        *hmax = UNICYCLE_R(0.0);
     for (k = 0; k < N; ++k) {
         if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
             return 0;
-        if (!finite_absmax_lower(NW, in->H[k], hmax) || !unicycle_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+        if ((hmax && !finite_absmax_lower(NW, in->H[k], hmax)) ||
+            !unicycle_lai_all_finite(NX, NW, in->Phi[k], NX) ||
             (NG > 0 && !unicycle_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
             !unicycle_lai_all_finite(NW, 1, in->g[k], NW) || !unicycle_lai_all_finite(NX, 1, in->b[k], NX))
             return 0;
@@ -203,7 +206,7 @@ static int check_input(const unicycle_qp_in *in, unicycle_real *hmax)
         return 0;
     if (!(in->hess_shift >= UNICYCLE_R(0.0) && in->hess_shift < INFINITY))
         return 0;
-    if (!finite_absmax(NX * NX, in->HN, hmax) || !unicycle_lai_all_finite(NX, 1, in->x0, NX) ||
+    if ((hmax && !finite_absmax(NX * NX, in->HN, hmax)) || !unicycle_lai_all_finite(NX, 1, in->x0, NX) ||
         !unicycle_lai_all_finite(NX, 1, in->gN, NX))
         return 0;
     if (NR > 0 && !unicycle_lai_all_finite(NR, NX, in->R, NR > 0 ? NR : 1))
@@ -2279,9 +2282,10 @@ static unicycle_real certificate_data_scale(const unicycle_qp_workspace *ws)
     return dmax(dmax(UNICYCLE_R(1.0), ws->scale_bounds), dmax(ws->scale_b, ws->scale_g));
 }
 
-/* The state the factorisations start from in a solve or unicycle_qp_prefactor: no correction,
- * no augmentation, no penalty, the counters 0, and Phi_k' formed where it is kept. */
-static void factor_state_reset(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
+/* The state the factorisations start from in a solve or a prefactor: no correction, no
+ * augmentation, no penalty, the counters 0, and Phi_k' formed where it is kept (phit 0: it is,
+ * by the prefactor of the same data). */
+static void factor_state_reset(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int phit)
 {
     ws->delta = UNICYCLE_R(0.0);
     ws->rho_aug = UNICYCLE_R(0.0);
@@ -2289,9 +2293,11 @@ static void factor_state_reset(unicycle_qp_workspace *ws, const unicycle_qp_in *
     ws->penalty = 0;
     ws->n_fact = 0;
 #if UNICYCLE_QP_PHIT
-    transpose_phi(ws, in);
+    if (phit)
+        transpose_phi(ws, in);
 #else
     (void)in;
+    (void)phit;
 #endif
 }
 
@@ -2301,7 +2307,7 @@ static void factor_state_reset(unicycle_qp_workspace *ws, const unicycle_qp_in *
 static int qp_prepare(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in,
                       const unicycle_qp_settings *settings, unicycle_qp_sol *sol, unicycle_qp_info *info)
 {
-    int bounds;
+    int bounds, kept, rows;
     unicycle_real hmax;
     checked_settings(settings, &L->st);
     L->certified = 0;
@@ -2309,15 +2315,21 @@ static int qp_prepare(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_i
         info_not_solved(info);
     if (ws == NULL || in == NULL || sol == NULL)
         return UNICYCLE_QP_INVALID_INPUT;
+    /* a prefactor's factorisation of these data: the preparation it did is this solve's (Phi_k'
+     * formed; unicycle_qp_prefactor_guess: the bounded rows and the Hessian scale too) */
+    kept = L->st.prefactored && ws->pre_status >= 0;
+    rows = kept && ws->pre_rows;
     /* a non-finite warm start is bad input, not a reason to produce NaN */
-    if (!check_input(in, &hmax) || (L->st.warm_start && !warm_start_finite(sol))) {
+    if (!check_input(in, rows ? NULL : &hmax) || (L->st.warm_start && !warm_start_finite(sol))) {
         zero_solution(sol);
         return UNICYCLE_QP_INVALID_INPUT;
     }
-    factor_state_reset(ws, in);
+    if (rows)
+        hmax = ws->pre_hmax;
+    factor_state_reset(ws, in, !kept);
     ws->n_pre = 0;
     ws->pre_tol = UNICYCLE_R(0.0); /* (the workspace may hold anything between solves) */
-    bounds = setup_bounds(ws, in);
+    bounds = rows ? 0 : setup_bounds(ws, in);
     if (bounds == 2) {
         /* more bounded rows than the workspace was generated for */
         zero_solution(sol);
@@ -3279,7 +3291,8 @@ int unicycle_qp_prefactor(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         ws->bstart[k] = 0;
     for (k = 0; k < UNICYCLE_QP_NB; ++k)
         ws->act[k] = 0; /* the working set the factor is kept for: no active row */
-    factor_state_reset(ws, in);
+    ws->pre_rows = 0;
+    factor_state_reset(ws, in, 1);
     ws->pre_tol = tol > UNICYCLE_REAL_TINY ? tol : UNICYCLE_REAL_TINY;
     ws->pre_roundoff = roundoff;
     fact = riccati_factor(ws, in);
@@ -3293,6 +3306,7 @@ int unicycle_qp_prefactor_guess(unicycle_qp_workspace *ws, const unicycle_qp_in 
     unicycle_real hmax = UNICYCLE_R(0.0);
     int k, i, fact;
     ws->pre_status = -1;
+    ws->pre_rows = 0;
     /* the Hessian scale of the solve (check_input's hmax) and its bounded rows */
     for (k = 0; k < N; ++k)
         if (in->H[k] == NULL || in->Phi[k] == NULL || !finite_absmax_lower(NW, in->H[k], &hmax))
@@ -3300,7 +3314,7 @@ int unicycle_qp_prefactor_guess(unicycle_qp_workspace *ws, const unicycle_qp_in 
     if (in->HN == NULL || (NE > 0 && in->Req == NULL) || !finite_absmax(NX * NX, in->HN, &hmax) ||
         !(in->hess_shift >= UNICYCLE_R(0.0) && in->hess_shift < INFINITY) || setup_bounds(ws, in) != 0)
         return 0;
-    factor_state_reset(ws, in);
+    factor_state_reset(ws, in, 1);
     ws->pre_tol = UNICYCLE_R(0.0);
     /* the warm start's primal part (initial_point's), the guess of the active-set start */
     for (i = 0; i < NP; ++i)
@@ -3321,6 +3335,8 @@ int unicycle_qp_prefactor_guess(unicycle_qp_workspace *ws, const unicycle_qp_in 
     /* kept when it is the sweep's whole factorisation: no augmentation follows (a pivot
      * failed: status 1) and no pivot was floored (the solve's count starts at 0) */
     ws->pre_status = fact != 1 && ws->pivot_floors == 0 ? fact : -1;
+    ws->pre_rows = 1;
+    ws->pre_hmax = hmax;
     return ws->pre_status >= 0;
 }
 
