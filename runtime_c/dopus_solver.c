@@ -2715,9 +2715,9 @@ int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
     dopus_timer_begin(&s->timer, 1u << DOPUS_PHASE_KKT, DOPUS_PHASE_KKT);
-    s->qp_prefactored = 0; /* (the evaluations' memory) */
+    /* (its own scratch: the prepared factorisation in mem stays) */
     rc = dopus_kkt_measure(&s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0], &s->mu_b[0][0], s->mu_bN,
-                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->mem.ev.fun_work, parts);
+                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->kkt_work, parts);
     dopus_timer_end(&s->timer, -1, 0.0);
     if (rc != DOPUS_KKT_OK) {
         return dopus_ret(s, rc == DOPUS_KKT_FUNCTION ? DOPUS_ERR_FUNCTION : DOPUS_ERR_NONFINITE_VALUE);

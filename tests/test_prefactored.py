@@ -7,11 +7,12 @@ test in the QP's form and the feedback's QP takes that factorisation for its fir
 (examples/chain.py) takes this path at nearly every instant of its closed loop.
 
 - A reused factor gives the same step as a fresh factorisation: each instant, a byte copy of
-  the prepared solver whose stamp a KKT evaluation cleared (``kkt``: its scratch shares the
-  QP's memory) refactors; both feedbacks return bit-identical iterates, and both equal the
-  Python reference backend's (which factors every QP itself) to 1e-9 relative.
-- What lies between prepare and feedback: a KKT evaluation clears the stamp (the feedback
-  refactors, its step still the reference's); a restart of the automatic term (``lm='auto'``
+  the prepared solver whose stamp a settings update cleared (one that changes no number)
+  refactors; both feedbacks return bit-identical iterates, and both equal the Python
+  reference backend's (which factors every QP itself) to 1e-9 relative.
+- What lies between prepare and feedback: a KKT evaluation leaves the factor (its scratch is
+  its own, outside the QP's memory: the feedback reuses it, its step still the fresh
+  factorisation's and the reference's); a restart of the automatic term (``lm='auto'``
   again: its own test runs outside the QP's form, in scratch that may share the kept factor's
   memory) is a settings update, which clears the stamp: the feedback refactors and gives the
   fresh factorisation's step bit for bit; a
@@ -30,8 +31,9 @@ guess has the same active rows and weights (bench/issue23/measurements.md sectio
   from a warm start with one guessed row fewer (a different working set) the kept factor is
   not taken, and the solve is the fresh one bit for bit;
 - the closed loop: each instant's feedback reuses the factor unless the prepared term lies
-  above the cap of the predicted state (then the prepare forms none), bit-identical to a copy
-  whose stamp a KKT evaluation cleared, and where it is reused (a convex QP: the prepared term
+  above the cap of the predicted state (then the prepare forms none), also after a KKT
+  evaluation between prepare and feedback (the firmware's loop has one), bit-identical to a
+  copy whose stamp a settings update cleared, and where it is reused (a convex QP: the prepared term
   passed the convexity test) its step is PIQP's on the reference backend's copy of the QP to
   1e-6; a settings update between prepare and feedback clears the stamp.
 """
@@ -59,6 +61,12 @@ def chain():
     disc = build_functions(load_ocp(EXAMPLES / "chain.py"))
     xhat = np.array(disc.disturbance(np.array(disc.x0, dtype=float)), dtype=float)
     return disc, xhat
+
+
+def cleared(s) -> None:
+    """A settings update that changes no number: it clears the prepared factor's stamp (the
+    feedback then factors anew)."""
+    s.set_recovery(s.recovery)
 
 
 def iterate(s) -> dict:
@@ -93,7 +101,7 @@ def test_reused_factor_equals_a_fresh_factorisation(chain):
     x = xhat
     for k in range(INSTANTS):
         fresh.copy_state_from(c)
-        fresh.kkt(x)                       # clears the copy's stamp: its QP factors anew
+        cleared(fresh)                     # the copy's QP factors anew
         u_c, u_f, u_r = c.feedback(x), fresh.feedback(x), r.feedback(x)
         assert c.qp_prefactored and not fresh.qp_prefactored, k
         assert c.qp_status == fresh.qp_status == 0, k
@@ -110,17 +118,19 @@ def test_reused_factor_equals_a_fresh_factorisation(chain):
 def test_kkt_evaluation_between_prepare_and_feedback(chain):
     disc, xhat = chain
     c, r = started(disc, xhat)
-    reused = CSolver(disc)
+    reused, fresh = CSolver(disc), CSolver(disc)
     reused.copy_state_from(c)
+    fresh.copy_state_from(c)
+    cleared(fresh)
     c.kkt(xhat)
     r.kkt(xhat)
-    c.feedback(xhat)
-    r.feedback(xhat)
-    reused.feedback(xhat)
-    assert reused.qp_prefactored and not c.qp_prefactored
+    for s in (c, r, reused, fresh):
+        s.feedback(xhat)
+    assert c.qp_prefactored and reused.qp_prefactored and not fresh.qp_prefactored
     assert c.qp_status == 0
+    assert_same(iterate(c), iterate(fresh), "after kkt")
+    assert_same(iterate(reused), iterate(fresh), "reused")
     assert_close(iterate(c), iterate(r), "after kkt")
-    assert_close(iterate(reused), iterate(r), "reused")
 
 
 def test_restarted_term_refactors(chain):
@@ -128,7 +138,7 @@ def test_restarted_term_refactors(chain):
     c, r = started(disc, xhat)
     fresh = CSolver(disc)
     fresh.copy_state_from(c)
-    fresh.kkt(xhat)
+    cleared(fresh)
     c.set_levenberg_marquardt(0.0)
     c.set_levenberg_marquardt("auto")      # the lm module's own test, in the evaluations' scratch
     assert c.lm == fresh.lm == 0.0
@@ -243,7 +253,8 @@ def test_guessed_rows_factor_reused_in_the_closed_loop(arm):
         expect = not capped_at_predicted_state(c)
         qp = r.qp_of_current(x)
         fresh.copy_state_from(c)
-        fresh.kkt(x)                       # clears the copy's stamp: its QP factors anew
+        cleared(fresh)                     # the copy's QP factors anew
+        c.kkt(x)                           # leaves the prepared factor
         before = {"x": np.array(c.x, dtype=float), "u": np.array(c.u, dtype=float)}
         u_c, u_f = c.feedback(x), fresh.feedback(x)
         r.feedback(x)
@@ -281,8 +292,8 @@ def test_guessed_rows_settings_update_refactors(arm):
     reused, fresh = CSolver(disc), CSolver(disc)
     reused.copy_state_from(c)
     fresh.copy_state_from(c)
-    fresh.kkt(x0)
-    c.set_recovery(c.recovery)             # a settings update that changes no number
+    fresh.set_qp_tol(fresh.qp_tol)         # another settings update
+    cleared(c)
     x = np.array(c.x[0], dtype=float, copy=True)
     for s in (c, reused, fresh):
         s.feedback(x)

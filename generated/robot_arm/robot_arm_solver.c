@@ -2715,9 +2715,9 @@ int robot_arm_kkt_eval(robot_arm_solver *s, const robot_arm_real *xhat0, robot_a
         return robot_arm_ret(s, ROBOT_ARM_ERR_NONFINITE_INPUT);
     }
     robot_arm_timer_begin(&s->timer, 1u << ROBOT_ARM_PHASE_KKT, ROBOT_ARM_PHASE_KKT);
-    s->qp_prefactored = 0; /* (the evaluations' memory) */
+    /* (its own scratch: the prepared factorisation in mem stays) */
     rc = robot_arm_kkt_measure(&s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0], &s->mu_b[0][0], s->mu_bN,
-                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->mem.ev.fun_work, parts);
+                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->kkt_work, parts);
     robot_arm_timer_end(&s->timer, -1, 0.0);
     if (rc != ROBOT_ARM_KKT_OK) {
         return robot_arm_ret(s, rc == ROBOT_ARM_KKT_FUNCTION ? ROBOT_ARM_ERR_FUNCTION : ROBOT_ARM_ERR_NONFINITE_VALUE);

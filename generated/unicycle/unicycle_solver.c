@@ -2715,9 +2715,9 @@ int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     unicycle_timer_begin(&s->timer, 1u << UNICYCLE_PHASE_KKT, UNICYCLE_PHASE_KKT);
-    s->qp_prefactored = 0; /* (the evaluations' memory) */
+    /* (its own scratch: the prepared factorisation in mem stays) */
     rc = unicycle_kkt_measure(&s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0], &s->mu_b[0][0], s->mu_bN,
-                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->mem.ev.fun_work, parts);
+                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->kkt_work, parts);
     unicycle_timer_end(&s->timer, -1, 0.0);
     if (rc != UNICYCLE_KKT_OK) {
         return unicycle_ret(s, rc == UNICYCLE_KKT_FUNCTION ? UNICYCLE_ERR_FUNCTION : UNICYCLE_ERR_NONFINITE_VALUE);
