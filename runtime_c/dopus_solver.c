@@ -1036,6 +1036,10 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
         s->health.kkt_proxy = dopus_kkt_proxy_eval(s);
         s->health.kkt_proxy_ref = s->health.kkt_proxy;
         s->health.kkt_proxy_init = s->health.kkt_proxy;
+        /* the first feedback's first factorisation, as a prepare leaves it */
+        if (dopus_start_prefactor_due(s, 0)) {
+            dopus_start_prefactor(s);
+        }
     }
     dopus_timer_end(&s->timer, -1, 0.0);
     return dopus_ret(s, rc);

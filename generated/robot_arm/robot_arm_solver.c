@@ -1036,6 +1036,10 @@ int robot_arm_init(robot_arm_solver *s, const robot_arm_real *xhat0, const robot
         s->health.kkt_proxy = robot_arm_kkt_proxy_eval(s);
         s->health.kkt_proxy_ref = s->health.kkt_proxy;
         s->health.kkt_proxy_init = s->health.kkt_proxy;
+        /* the first feedback's first factorisation, as a prepare leaves it */
+        if (robot_arm_start_prefactor_due(s, 0)) {
+            robot_arm_start_prefactor(s);
+        }
     }
     robot_arm_timer_end(&s->timer, -1, 0.0);
     return robot_arm_ret(s, rc);

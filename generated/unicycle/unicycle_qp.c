@@ -185,19 +185,28 @@ static int finite_absmax_lower(int n, const unicycle_real *restrict A, unicycle_
     return ok;
 }
 
+/* 1 when the Hessians H_k (lower triangles) and HN are finite; *hmax: their largest |entry|
+ * (H_0 .. H_{N-1}, then HN; the pointers checked by the caller). */
+static int hessians_absmax(const unicycle_qp_in *in, unicycle_real *hmax)
+{
+    int k;
+    *hmax = UNICYCLE_R(0.0);
+    for (k = 0; k < N; ++k)
+        if (!finite_absmax_lower(NW, in->H[k], hmax))
+            return 0;
+    return finite_absmax(NX * NX, in->HN, hmax);
+}
+
 /* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k
  * (lower triangles) and HN (valid when it returns 1). hmax NULL: H_k and HN are known finite
  * (a prefactor scanned them, ws->pre_hmax) and are not read. */
 static int check_input(const unicycle_qp_in *in, unicycle_real *hmax)
 {
     int k, i;
-    if (hmax)
-        *hmax = UNICYCLE_R(0.0);
     for (k = 0; k < N; ++k) {
         if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
             return 0;
-        if ((hmax && !finite_absmax_lower(NW, in->H[k], hmax)) ||
-            !unicycle_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+        if (!unicycle_lai_all_finite(NX, NW, in->Phi[k], NX) ||
             (NG > 0 && !unicycle_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
             !unicycle_lai_all_finite(NW, 1, in->g[k], NW) || !unicycle_lai_all_finite(NX, 1, in->b[k], NX))
             return 0;
@@ -206,7 +215,7 @@ static int check_input(const unicycle_qp_in *in, unicycle_real *hmax)
         return 0;
     if (!(in->hess_shift >= UNICYCLE_R(0.0) && in->hess_shift < INFINITY))
         return 0;
-    if ((hmax && !finite_absmax(NX * NX, in->HN, hmax)) || !unicycle_lai_all_finite(NX, 1, in->x0, NX) ||
+    if ((hmax && !hessians_absmax(in, hmax)) || !unicycle_lai_all_finite(NX, 1, in->x0, NX) ||
         !unicycle_lai_all_finite(NX, 1, in->gN, NX))
         return 0;
     if (NR > 0 && !unicycle_lai_all_finite(NR, NX, in->R, NR > 0 ? NR : 1))
@@ -3309,9 +3318,9 @@ int unicycle_qp_prefactor_guess(unicycle_qp_workspace *ws, const unicycle_qp_in 
     ws->pre_rows = 0;
     /* the Hessian scale of the solve (check_input's hmax) and its bounded rows */
     for (k = 0; k < N; ++k)
-        if (in->H[k] == NULL || in->Phi[k] == NULL || !finite_absmax_lower(NW, in->H[k], &hmax))
+        if (in->H[k] == NULL || in->Phi[k] == NULL)
             return 0;
-    if (in->HN == NULL || (NE > 0 && in->Req == NULL) || !finite_absmax(NX * NX, in->HN, &hmax) ||
+    if (in->HN == NULL || (NE > 0 && in->Req == NULL) || !hessians_absmax(in, &hmax) ||
         !(in->hess_shift >= UNICYCLE_R(0.0) && in->hess_shift < INFINITY) || setup_bounds(ws, in) != 0)
         return 0;
     factor_state_reset(ws, in, 1);

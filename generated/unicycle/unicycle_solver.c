@@ -1036,6 +1036,10 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
         s->health.kkt_proxy = unicycle_kkt_proxy_eval(s);
         s->health.kkt_proxy_ref = s->health.kkt_proxy;
         s->health.kkt_proxy_init = s->health.kkt_proxy;
+        /* the first feedback's first factorisation, as a prepare leaves it */
+        if (unicycle_start_prefactor_due(s, 0)) {
+            unicycle_start_prefactor(s);
+        }
     }
     unicycle_timer_end(&s->timer, -1, 0.0);
     return unicycle_ret(s, rc);
