@@ -434,14 +434,16 @@ static void unicycle_qp_warm_point(unicycle_solver *s);
  * and take the term the prepare leaves (algorithm.md sections 4 and 10): warm start on, the
  * automatic term below its maximum and not capped at that state (the cap only falls as the
  * measurement moves away: when it does not bind at dx_0 = 0 it does not bind at all), the last
- * warm start not failed. After an extra iteration (extra) the feedback keeps the term (no cap,
- * section 14). */
+ * warm start not failed; and no budget (section 14: the factorisation would move into the
+ * least prepare the feedback's deadline keeps free; on the emulated Cortex-M7 the full RTI then
+ * needed 1.5 times the budget it needs without; bench/issue23/measurements.md section 49).
+ * After an extra iteration (extra) the feedback keeps the term (no cap, section 14). */
 static int unicycle_start_prefactor_due(const unicycle_solver *s, int extra)
 {
     static const unicycle_real dx0[UNICYCLE_NX] = {UNICYCLE_R(0.0)};
     unicycle_lm lm = s->lm;
     if (!s->settings.qp_warm_start || !s->lm.on || s->qp_no_active_set || s->qp_warm_failed ||
-        !unicycle_lm_can_raise(&s->lm)) {
+        !unicycle_lm_can_raise(&s->lm) || unicycle_budget_on(s)) {
         return 0;
     }
     if (!extra) {
