@@ -78,7 +78,7 @@ int main(int argc, char **argv)
 
 #: inclusive parts reported per step (function names without the problem's prefix)
 PARTS = ("qp_solve", "lm_convex", "stage_grad_hess_exact", "stage_grad", "stage_hess", "ring_secant",
-         "ring_predict", "assemble", "kkt_proxy")
+         "ring_predict", "assemble", "kkt_proxy", "qp_prefactor_guess", "riccati_factor")
 
 
 def profile(exe: Path, folder: Path, name: str, m: int, settle: int, steps: int) -> dict:

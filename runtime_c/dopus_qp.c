@@ -185,16 +185,28 @@ static int finite_absmax_lower(int n, const dopus_real *restrict A, dopus_real *
     return ok;
 }
 
+/* 1 when the Hessians H_k (lower triangles) and HN are finite; *hmax: their largest |entry|
+ * (H_0 .. H_{N-1}, then HN; the pointers checked by the caller). */
+static int hessians_absmax(const dopus_qp_in *in, dopus_real *hmax)
+{
+    int k;
+    *hmax = DOPUS_R(0.0);
+    for (k = 0; k < N; ++k)
+        if (!finite_absmax_lower(NW, in->H[k], hmax))
+            return 0;
+    return finite_absmax(NX * NX, in->HN, hmax);
+}
+
 /* 1 when the data is complete and finite; *hmax: the largest |entry| of the Hessians H_k
- * (lower triangles) and HN (valid when it returns 1). */
+ * (lower triangles) and HN (valid when it returns 1). hmax NULL: H_k and HN are known finite
+ * (a prefactor scanned them, ws->pre_hmax) and are not read. */
 static int check_input(const dopus_qp_in *in, dopus_real *hmax)
 {
     int k, i;
-    *hmax = DOPUS_R(0.0);
     for (k = 0; k < N; ++k) {
         if (in->H[k] == NULL || in->Phi[k] == NULL || (NG > 0 && in->C[k] == NULL))
             return 0;
-        if (!finite_absmax_lower(NW, in->H[k], hmax) || !dopus_lai_all_finite(NX, NW, in->Phi[k], NX) ||
+        if (!dopus_lai_all_finite(NX, NW, in->Phi[k], NX) ||
             (NG > 0 && !dopus_lai_all_finite(NG, NW, in->C[k], NG > 0 ? NG : 1)) ||
             !dopus_lai_all_finite(NW, 1, in->g[k], NW) || !dopus_lai_all_finite(NX, 1, in->b[k], NX))
             return 0;
@@ -203,7 +215,7 @@ static int check_input(const dopus_qp_in *in, dopus_real *hmax)
         return 0;
     if (!(in->hess_shift >= DOPUS_R(0.0) && in->hess_shift < INFINITY))
         return 0;
-    if (!finite_absmax(NX * NX, in->HN, hmax) || !dopus_lai_all_finite(NX, 1, in->x0, NX) ||
+    if ((hmax && !hessians_absmax(in, hmax)) || !dopus_lai_all_finite(NX, 1, in->x0, NX) ||
         !dopus_lai_all_finite(NX, 1, in->gN, NX))
         return 0;
     if (NR > 0 && !dopus_lai_all_finite(NR, NX, in->R, NR > 0 ? NR : 1))
@@ -2279,9 +2291,10 @@ static dopus_real certificate_data_scale(const dopus_qp_workspace *ws)
     return dmax(dmax(DOPUS_R(1.0), ws->scale_bounds), dmax(ws->scale_b, ws->scale_g));
 }
 
-/* The state the factorisations start from in a solve or dopus_qp_prefactor: no correction,
- * no augmentation, no penalty, the counters 0, and Phi_k' formed where it is kept. */
-static void factor_state_reset(dopus_qp_workspace *ws, const dopus_qp_in *in)
+/* The state the factorisations start from in a solve or a prefactor: no correction, no
+ * augmentation, no penalty, the counters 0, and Phi_k' formed where it is kept (phit 0: it is,
+ * by the prefactor of the same data). */
+static void factor_state_reset(dopus_qp_workspace *ws, const dopus_qp_in *in, int phit)
 {
     ws->delta = DOPUS_R(0.0);
     ws->rho_aug = DOPUS_R(0.0);
@@ -2289,9 +2302,11 @@ static void factor_state_reset(dopus_qp_workspace *ws, const dopus_qp_in *in)
     ws->penalty = 0;
     ws->n_fact = 0;
 #if DOPUS_QP_PHIT
-    transpose_phi(ws, in);
+    if (phit)
+        transpose_phi(ws, in);
 #else
     (void)in;
+    (void)phit;
 #endif
 }
 
@@ -2301,7 +2316,7 @@ static void factor_state_reset(dopus_qp_workspace *ws, const dopus_qp_in *in)
 static int qp_prepare(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
                       const dopus_qp_settings *settings, dopus_qp_sol *sol, dopus_qp_info *info)
 {
-    int bounds;
+    int bounds, kept, rows;
     dopus_real hmax;
     checked_settings(settings, &L->st);
     L->certified = 0;
@@ -2309,15 +2324,21 @@ static int qp_prepare(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
         info_not_solved(info);
     if (ws == NULL || in == NULL || sol == NULL)
         return DOPUS_QP_INVALID_INPUT;
+    /* a prefactor's factorisation of these data: the preparation it did is this solve's (Phi_k'
+     * formed; dopus_qp_prefactor_guess: the bounded rows and the Hessian scale too) */
+    kept = L->st.prefactored && ws->pre_status >= 0;
+    rows = kept && ws->pre_rows;
     /* a non-finite warm start is bad input, not a reason to produce NaN */
-    if (!check_input(in, &hmax) || (L->st.warm_start && !warm_start_finite(sol))) {
+    if (!check_input(in, rows ? NULL : &hmax) || (L->st.warm_start && !warm_start_finite(sol))) {
         zero_solution(sol);
         return DOPUS_QP_INVALID_INPUT;
     }
-    factor_state_reset(ws, in);
+    if (rows)
+        hmax = ws->pre_hmax;
+    factor_state_reset(ws, in, !kept);
     ws->n_pre = 0;
     ws->pre_tol = DOPUS_R(0.0); /* (the workspace may hold anything between solves) */
-    bounds = setup_bounds(ws, in);
+    bounds = rows ? 0 : setup_bounds(ws, in);
     if (bounds == 2) {
         /* more bounded rows than the workspace was generated for */
         zero_solution(sol);
@@ -2824,8 +2845,11 @@ static void as_res_add(dopus_qp_workspace *ws, int b, dopus_real dv)
 
 /* The guess from the warm-start point (the primal part in the iterate, the multipliers in
  * *sol): a side is active when its multiplier points to it and exceeds its slack, a row with
- * lo == up always. Returns 0 when a row has a soft side (the start does not apply). */
-static int as_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_sol *sol, dopus_real hscale)
+ * lo == up always. Returns 0 when a row has a soft side (the start does not apply). compare:
+ * the factor a prefactor kept is discarded (pre_status -1) unless this guess has its active
+ * rows with the same penalty weights (act and pen as the prefactor left them). */
+static int as_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_sol *sol, dopus_real hscale,
+                    int compare)
 {
     int k, b, j;
     for (k = 0; k <= N; ++k)
@@ -2833,6 +2857,8 @@ static int as_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_q
         {
             const dopus_real mu = row_mu(sol, ws->bidx[b]);
             const dopus_real v = row_dot(in, k, j, ws->prim + k * NW);
+            const int was = ws->act[b] != 0;
+            const dopus_real pen_was = ws->pen[b];
             dopus_real lo, up;
             if (SOFT && (ws->soft_lo[b] || ws->soft_up[b]))
                 return 0;
@@ -2845,6 +2871,10 @@ static int as_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_q
             else if (ws->has_lo[b] && mu < DOPUS_R(0.0) && -mu > v - lo)
                 ws->act[b] = -1;
             ws->pen[b] = AS_RHO * hscale / dmax(row_norm2(in, k, j), DOPUS_REAL_EPSILON);
+            /* the kept factor's rows (act, pen as the prefactor left them): the factorisation
+             * reads a row's weight only when it is active (row_q) */
+            if (compare && (was != (ws->act[b] != 0) || (was && pen_was != ws->pen[b])))
+                ws->pre_status = -1;
             as_set_mu(ws, b, ws->act[b] ? mu : DOPUS_R(0.0));
         }
     return 1;
@@ -2886,16 +2916,6 @@ static int as_updated(const dopus_qp_workspace *ws, int b)
     return 0;
 }
 
-/* 1 when the working set has no row. */
-static int as_none_active(const dopus_qp_workspace *ws)
-{
-    int b;
-    for (b = 0; b < ws->nb; ++b)
-        if (ws->act[b] != 0)
-            return 0;
-    return 1;
-}
-
 /* The factorisation of a sweep with the penalty weights of all active rows (and the exact
  * terminal augmentation when a pivot fails). Returns 1 when it succeeded. */
 static int as_factor(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
@@ -2904,9 +2924,9 @@ static int as_factor(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
     ws->as_n = 0;
     ws->delta = DOPUS_R(0.0);
     ws->rho_aug = DOPUS_R(0.0);
-    if (L->st.prefactored && L->as_sweeps == 1 && ws->pre_status >= 0 && as_none_active(ws)) {
-        /* the first sweep with no active row: the factorisation dopus_qp_prefactor kept (that
-         * of riccati_factor with all weights 0) */
+    if (L->st.prefactored && L->as_sweeps == 1 && ws->pre_status >= 0) {
+        /* the first sweep: the factorisation a prefactor kept of this guess (as_guess compared
+         * the working sets: riccati_factor with these rows' penalty weights, or with none) */
         ++ws->n_fact;
         ws->n_pre = 1;
         fact = ws->pre_status;
@@ -3224,7 +3244,7 @@ static int qp_active_set(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *
 {
     int solved = 0, zeroed, update = 0, known = 0, refined;
     qp_res r;
-    if (!as_guess(ws, in, sol, L->hscale))
+    if (!as_guess(ws, in, sol, L->hscale, L->st.prefactored && ws->pre_status >= 0))
         return QP_GO_ON;
     ws->penalty = 1;
     ws->as_n = 0;
@@ -3278,13 +3298,55 @@ int dopus_qp_prefactor(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real
     ws->nb = 0;
     for (k = 0; k < N + 2; ++k)
         ws->bstart[k] = 0;
-    factor_state_reset(ws, in);
+    for (k = 0; k < DOPUS_QP_NB; ++k)
+        ws->act[k] = 0; /* the working set the factor is kept for: no active row */
+    ws->pre_rows = 0;
+    factor_state_reset(ws, in, 1);
     ws->pre_tol = tol > DOPUS_REAL_TINY ? tol : DOPUS_REAL_TINY;
     ws->pre_roundoff = roundoff;
     fact = riccati_factor(ws, in);
     ws->pre_status = fact != 1 && ws->pre_roundoff >= DOPUS_R(0.0) ? fact : -1;
     ws->pre_tol = DOPUS_R(0.0);
     return fact != 1;
+}
+
+int dopus_qp_prefactor_guess(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp_sol *sol)
+{
+    dopus_real hmax = DOPUS_R(0.0);
+    int k, i, fact;
+    ws->pre_status = -1;
+    ws->pre_rows = 0;
+    /* the Hessian scale of the solve (check_input's hmax) and its bounded rows */
+    for (k = 0; k < N; ++k)
+        if (in->H[k] == NULL || in->Phi[k] == NULL)
+            return 0;
+    if (in->HN == NULL || (NE > 0 && in->Req == NULL) || !hessians_absmax(in, &hmax) ||
+        !(in->hess_shift >= DOPUS_R(0.0) && in->hess_shift < INFINITY) || setup_bounds(ws, in) != 0)
+        return 0;
+    factor_state_reset(ws, in, 1);
+    ws->pre_tol = DOPUS_R(0.0);
+    /* the warm start's primal part (initial_point's), the guess of the active-set start */
+    for (i = 0; i < NP; ++i)
+        ws->prim[i] = DOPUS_R(0.0);
+    for (k = 0; k <= N; ++k)
+        for (i = 0; i < NX; ++i)
+            ws->prim[k * NW + i] = sol->x[k][i];
+    for (k = 0; k < N; ++k)
+        for (i = 0; i < NU; ++i)
+            ws->prim[k * NW + NX + i] = sol->u[k][i];
+    if (!as_guess(ws, in, sol, hessian_scale(in, hmax), 0))
+        return 0;
+    /* as_factor's first sweep: the penalty weights of the active rows, no correction */
+    ws->penalty = 1;
+    ws->as_n = 0;
+    fact = riccati_factor(ws, in);
+    ws->penalty = 0;
+    /* kept when it is the sweep's whole factorisation: no augmentation follows (a pivot
+     * failed: status 1) and no pivot was floored (the solve's count starts at 0) */
+    ws->pre_status = fact != 1 && ws->pivot_floors == 0 ? fact : -1;
+    ws->pre_rows = 1;
+    ws->pre_hmax = hmax;
+    return ws->pre_status >= 0;
 }
 
 /* Mehrotra's predictor-corrector. Per iteration: the residuals and the stopping tests (with

@@ -428,6 +428,49 @@ static int dopus_guess_empty(const dopus_solver *s)
     return 1;
 }
 
+static void dopus_qp_warm_point(dopus_solver *s);
+
+/* 1 when the next QP's active-set start will run for the state the plan predicts (dx_0 = 0)
+ * and take the term the prepare leaves (algorithm.md sections 4 and 10): warm start on, the
+ * automatic term below its maximum and not capped at that state (the cap only falls as the
+ * measurement moves away: when it does not bind at dx_0 = 0 it does not bind at all), the last
+ * warm start not failed; and no budget (section 14: the factorisation would move into the
+ * least prepare the feedback's deadline keeps free; on the emulated Cortex-M7 the full RTI then
+ * needed 1.5 times the budget it needs without; bench/issue23/measurements.md section 49).
+ * After an extra iteration (extra) the feedback keeps the term (no cap, section 14). */
+static int dopus_start_prefactor_due(const dopus_solver *s, int extra)
+{
+    static const dopus_real dx0[DOPUS_NX] = {DOPUS_R(0.0)};
+    dopus_lm lm = s->lm;
+    if (!s->settings.qp_warm_start || !s->lm.on || s->qp_no_active_set || s->qp_warm_failed ||
+        !dopus_lm_can_raise(&s->lm) || dopus_budget_on(s)) {
+        return 0;
+    }
+    if (!extra) {
+        dopus_lm_measured(&lm, dx0, s->health.scale_x, s->health.kkt_proxy);
+    }
+    return lm.lm == s->lm.lm;
+}
+
+/* The active-set start's first factorisation of the next QP (its guess from the warm start at
+ * the predicted state) into the QP's workspace, stamped at the prepared term: the feedback's
+ * first sweep takes it when its guess is the same (dopus_qp_prefactor_guess). */
+static void dopus_start_prefactor(dopus_solver *s)
+{
+    const dopus_real shift = s->qp_in.hess_shift;
+    int i;
+    dopus_qp_warm_point(s);
+    for (i = 0; i < DOPUS_NX; ++i) {
+        s->mem.qp.sol.x[0][i] = DOPUS_R(0.0);
+    }
+    dopus_qp_bind(s);
+    s->qp_in.hess_shift = s->lm.lm;
+    s->qp_prefactored = dopus_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol);
+    s->qp_pre_lm = s->lm.lm;
+    s->qp_in.hess_shift = shift;
+    dopus_qp_unbind(s);
+}
+
 /* ---- function evaluations ----------------------------------------------------------- */
 
 /* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
@@ -995,6 +1038,10 @@ int dopus_init(dopus_solver *s, const dopus_real *xhat0, const dopus_real *x, co
         s->health.kkt_proxy = dopus_kkt_proxy_eval(s);
         s->health.kkt_proxy_ref = s->health.kkt_proxy;
         s->health.kkt_proxy_init = s->health.kkt_proxy;
+        /* the first feedback's first factorisation, as a prepare leaves it */
+        if (dopus_start_prefactor_due(s, 0)) {
+            dopus_start_prefactor(s);
+        }
     }
     dopus_timer_end(&s->timer, -1, 0.0);
     return dopus_ret(s, rc);
@@ -2548,8 +2595,12 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
     dopus_lm_hook(s, 0);
-    /* the test's factorisation at the term the feedback's QP starts from (unless capped) */
+    /* the test's factorisation at the term the feedback's QP starts from (unless capped); else
+     * the start's first factorisation with the rows it will guess, where it will run */
     s->qp_prefactored = s->qp_prefactored && s->qp_pre_lm == s->lm.lm;
+    if (!s->qp_prefactored && dopus_start_prefactor_due(s, extra)) {
+        dopus_start_prefactor(s);
+    }
     dopus_phase(s, DOPUS_PHASE_RECOVERY);
     diverged = dopus_iterate_diverged(s);
     if (dopus_budget_on(s)) {
@@ -2670,9 +2721,9 @@ int dopus_kkt_eval(dopus_solver *s, const dopus_real *xhat0, dopus_real *kkt4)
         return dopus_ret(s, DOPUS_ERR_NONFINITE_INPUT);
     }
     dopus_timer_begin(&s->timer, 1u << DOPUS_PHASE_KKT, DOPUS_PHASE_KKT);
-    s->qp_prefactored = 0; /* (the evaluations' memory) */
+    /* (its own scratch: the prepared factorisation in mem stays) */
     rc = dopus_kkt_measure(&s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0], &s->mu_b[0][0], s->mu_bN,
-                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->mem.ev.fun_work, parts);
+                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->kkt_work, parts);
     dopus_timer_end(&s->timer, -1, 0.0);
     if (rc != DOPUS_KKT_OK) {
         return dopus_ret(s, rc == DOPUS_KKT_FUNCTION ? DOPUS_ERR_FUNCTION : DOPUS_ERR_NONFINITE_VALUE);

@@ -456,10 +456,11 @@ enum dopus_budget_unit {
 #include "dopus_timer.h"
 
 /* Memory that is live only in some calls: the QP's workspace and its solution (also the
- * warm-start point) in feedback, and the QP's workspace in the prepare's convexity test of the
- * automatic lm in the QP's form (its factorisation, which the feedback's QP may reuse:
- * solver.qp_prefactored); the scratch of the generated functions, the regularisation and F_new
- * in init, prepare and kkt. Never both at once, so they share it. */
+ * warm-start point) in feedback, and the QP's workspace at the end of the prepare, where the
+ * feedback QP's first factorisation may be formed (the convexity test of the automatic lm in
+ * the QP's form, or the active-set start's first factorisation: solver.qp_prefactored); the
+ * scratch of the generated functions, the regularisation and F_new in init and prepare (kkt
+ * has its own, solver.kkt_work). Never both at once, so they share it. */
 typedef union {
     struct {
         dopus_qp_workspace work;
@@ -586,9 +587,10 @@ struct dopus_solver {
     int qp_warm_failed; /* the last feedback's warm start failed (retried cold, or certified
                              infeasibility: no retry) */
     /* the prepare's lm test in the QP's form (dopus_qp_prefactor, kept in mem.qp.work; when the
-     * next active-set start will guess no row): the term of its last run; qp_prefactored: 1
-     * when that run passed (at the end of the prepare: at the term it leaves) until anything
-     * else uses mem or solves (the feedback's QP may then reuse it) */
+     * next active-set start will guess no row), or else the start's first factorisation with
+     * its guessed rows (dopus_qp_prefactor_guess): the term it was formed at; qp_prefactored: 1
+     * when it is kept (at the end of the prepare: at the term it leaves) until anything else
+     * uses mem or solves (the feedback's QP may then reuse it) */
     dopus_real qp_pre_lm;
     int qp_prefactored;
     int qp_pre_used;      /* the last feedback's QP took that factorisation (dopus_info.qp_prefactored) */
@@ -597,6 +599,9 @@ struct dopus_solver {
     /* the QP's workspace and solution, live only inside feedback, share their memory with
      * the scratch of the function evaluations, live only outside it (dopus_solver_mem) */
     dopus_solver_mem mem;
+    /* the generated functions' scratch of dopus_kkt_eval, outside mem: a KKT evaluation
+     * between prepare and feedback leaves the prepared factorisation in place */
+    dopus_fun_work kkt_work;
 
     dopus_health health; /* safe outputs, divergence test and recovery (section 9) */
     dopus_lm lm;         /* the Levenberg-Marquardt term (sections 3 and 10) */

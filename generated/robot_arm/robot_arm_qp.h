@@ -275,11 +275,15 @@ typedef struct {
     void *clock_ctx;
     double deadline;
     double iter_price;
-    /* 1: the workspace holds the factorisation robot_arm_qp_prefactor formed of this QP (the same
-     * blocks and hess_shift; nothing has solved or factored in it since) and found convex; the
-     * active-set start's first sweep uses it when its guess has no active row (then that sweep's
-     * factorisation is this one: the same operations, counted in robot_arm_qp_info.factorizations).
-     * 0 (the default): every factorisation formed in the solve. */
+    /* 1: the workspace holds the factorisation robot_arm_qp_prefactor (found convex) or
+     * robot_arm_qp_prefactor_guess formed of this QP (the same data but x0, the same hess_shift;
+     * nothing has solved or factored in it since); the solve takes the preparation the prefactor
+     * did (Phi_k'; robot_arm_qp_prefactor_guess: the bounded rows and the Hessian scale too), and the
+     * active-set start's first sweep uses the factor when its guess has the rows it was formed
+     * with (none for robot_arm_qp_prefactor; the same active rows and penalty weights for
+     * robot_arm_qp_prefactor_guess): that sweep's factorisation is this one, the same operations,
+     * counted in robot_arm_qp_info.factorizations. 0 (the default): every factorisation formed in
+     * the solve. */
     int prefactored;
 } robot_arm_qp_settings;
 
@@ -348,7 +352,8 @@ typedef struct {
     int active_set;             /* sweeps of the active-set start when it solved the QP (they are
                                 then its iterations), else 0 */
     int prefactored;            /* 1 when the start's first sweep took the factorisation
-                                robot_arm_qp_prefactor kept (settings.prefactored), else 0 */
+                                robot_arm_qp_prefactor or robot_arm_qp_prefactor_guess kept
+                                (settings.prefactored), else 0 */
     int certified;              /* status ROBOT_ARM_QP_PRIMAL_INFEASIBLE: 1 when a row's lower bound lies
                                 above its upper bound, or the certificate of the test during the
                                 iteration separated beyond CERT_SEP and the tolerance (no point meets
@@ -449,14 +454,20 @@ typedef struct {
     int as_n;
     robot_arm_real as_L[ROBOT_ARM_QP_AS_UPDATE * (ROBOT_ARM_QP_AS_UPDATE + 1) / 2];
     /* robot_arm_qp_prefactor: its pivot floor (pre_tol > 0 while it factors: the floor max(pre_tol,
-     * pre_roundoff times the largest |diagonal entry| of each stage's M_uu)), and what its
-     * factorisation returned (-1: none kept: a pivot at or below the floor or not finite, or a
-     * factorisation since) */
+     * pre_roundoff times the largest |diagonal entry| of each stage's M_uu)), and what its or
+     * robot_arm_qp_prefactor_guess's factorisation returned (-1: none kept: a pivot at or below the
+     * floor or not finite, a factorisation since, or a guess without the kept working set,
+     * which act and pen hold until the solve's guess) */
     robot_arm_real pre_tol;
     robot_arm_real pre_roundoff;
     int pre_status;
+    /* robot_arm_qp_prefactor_guess: 1 when it set up the bounded rows (bidx, bstart, has_lo, has_up,
+     * nb) as the solve would, with pre_hmax the solve's Hessian scale (check_input's hmax); a
+     * solve with settings.prefactored and a kept factor takes them (and Phi_k') as they are */
+    int pre_rows;
+    robot_arm_real pre_hmax;
     int n_fact;            /* factorisations of the solve */
-    int n_pre;             /* of them, the one robot_arm_qp_prefactor kept (0 or 1) */
+    int n_pre;             /* of them, the one a prefactor kept (0 or 1) */
     int pivot_floors;      /* pivots within round-off of zero, replaced (see linalg) */
     robot_arm_real scale_stat; /* residual scaling factors */
     robot_arm_real scale_eq;
@@ -492,6 +503,16 @@ ROBOT_ARM_INTERNAL int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robo
  * of ws discards it. */
 ROBOT_ARM_INTERNAL int robot_arm_qp_prefactor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_real tol,
                                       robot_arm_real roundoff);
+
+/* The active-set start's first factorisation of this QP from the warm start *sol, formed as a
+ * solve with settings.warm_start and active_set forms it (its guess from the multipliers of
+ * *sol, its primal part and the bounds; the penalty weights of the guessed active rows at the
+ * Hessian scale with hess_shift). Returns 1 when it kept the factorisation in ws (it succeeded,
+ * or found S singular, with no pivot floored), else 0. A solve of the same QP with
+ * settings.prefactored then takes it for its first sweep when its own guess has the same
+ * active rows with the same weights (else it factors); any other use of ws discards it. */
+ROBOT_ARM_INTERNAL int robot_arm_qp_prefactor_guess(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
+                                            const robot_arm_qp_sol *sol);
 
 /* After robot_arm_qp_solve returned ROBOT_ARM_QP_PRIMAL_INFEASIBLE (ws and in as they were then): the
  * row with the largest multiplier of the infeasibility certificate among the bounded rows

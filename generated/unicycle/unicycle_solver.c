@@ -428,6 +428,49 @@ static int unicycle_guess_empty(const unicycle_solver *s)
     return 1;
 }
 
+static void unicycle_qp_warm_point(unicycle_solver *s);
+
+/* 1 when the next QP's active-set start will run for the state the plan predicts (dx_0 = 0)
+ * and take the term the prepare leaves (algorithm.md sections 4 and 10): warm start on, the
+ * automatic term below its maximum and not capped at that state (the cap only falls as the
+ * measurement moves away: when it does not bind at dx_0 = 0 it does not bind at all), the last
+ * warm start not failed; and no budget (section 14: the factorisation would move into the
+ * least prepare the feedback's deadline keeps free; on the emulated Cortex-M7 the full RTI then
+ * needed 1.5 times the budget it needs without; bench/issue23/measurements.md section 49).
+ * After an extra iteration (extra) the feedback keeps the term (no cap, section 14). */
+static int unicycle_start_prefactor_due(const unicycle_solver *s, int extra)
+{
+    static const unicycle_real dx0[UNICYCLE_NX] = {UNICYCLE_R(0.0)};
+    unicycle_lm lm = s->lm;
+    if (!s->settings.qp_warm_start || !s->lm.on || s->qp_no_active_set || s->qp_warm_failed ||
+        !unicycle_lm_can_raise(&s->lm) || unicycle_budget_on(s)) {
+        return 0;
+    }
+    if (!extra) {
+        unicycle_lm_measured(&lm, dx0, s->health.scale_x, s->health.kkt_proxy);
+    }
+    return lm.lm == s->lm.lm;
+}
+
+/* The active-set start's first factorisation of the next QP (its guess from the warm start at
+ * the predicted state) into the QP's workspace, stamped at the prepared term: the feedback's
+ * first sweep takes it when its guess is the same (unicycle_qp_prefactor_guess). */
+static void unicycle_start_prefactor(unicycle_solver *s)
+{
+    const unicycle_real shift = s->qp_in.hess_shift;
+    int i;
+    unicycle_qp_warm_point(s);
+    for (i = 0; i < UNICYCLE_NX; ++i) {
+        s->mem.qp.sol.x[0][i] = UNICYCLE_R(0.0);
+    }
+    unicycle_qp_bind(s);
+    s->qp_in.hess_shift = s->lm.lm;
+    s->qp_prefactored = unicycle_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol);
+    s->qp_pre_lm = s->lm.lm;
+    s->qp_in.hess_shift = shift;
+    unicycle_qp_unbind(s);
+}
+
 /* ---- function evaluations ----------------------------------------------------------- */
 
 /* F_k (eq. 14) at the current point into s->mem.ev.tmp_F (= gL + mu_b_k), s->mem.ev.tmp_phi, s->mem.ev.tmp_g. */
@@ -995,6 +1038,10 @@ int unicycle_init(unicycle_solver *s, const unicycle_real *xhat0, const unicycle
         s->health.kkt_proxy = unicycle_kkt_proxy_eval(s);
         s->health.kkt_proxy_ref = s->health.kkt_proxy;
         s->health.kkt_proxy_init = s->health.kkt_proxy;
+        /* the first feedback's first factorisation, as a prepare leaves it */
+        if (unicycle_start_prefactor_due(s, 0)) {
+            unicycle_start_prefactor(s);
+        }
     }
     unicycle_timer_end(&s->timer, -1, 0.0);
     return unicycle_ret(s, rc);
@@ -2548,8 +2595,12 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_lm_prepared(&s->lm, &s->ring, s->A_N, s->health.kkt_proxy, s->health.kkt_proxy_ref,
                       s->mem.ev.lm_work);
     unicycle_lm_hook(s, 0);
-    /* the test's factorisation at the term the feedback's QP starts from (unless capped) */
+    /* the test's factorisation at the term the feedback's QP starts from (unless capped); else
+     * the start's first factorisation with the rows it will guess, where it will run */
     s->qp_prefactored = s->qp_prefactored && s->qp_pre_lm == s->lm.lm;
+    if (!s->qp_prefactored && unicycle_start_prefactor_due(s, extra)) {
+        unicycle_start_prefactor(s);
+    }
     unicycle_phase(s, UNICYCLE_PHASE_RECOVERY);
     diverged = unicycle_iterate_diverged(s);
     if (unicycle_budget_on(s)) {
@@ -2670,9 +2721,9 @@ int unicycle_kkt_eval(unicycle_solver *s, const unicycle_real *xhat0, unicycle_r
         return unicycle_ret(s, UNICYCLE_ERR_NONFINITE_INPUT);
     }
     unicycle_timer_begin(&s->timer, 1u << UNICYCLE_PHASE_KKT, UNICYCLE_PHASE_KKT);
-    s->qp_prefactored = 0; /* (the evaluations' memory) */
+    /* (its own scratch: the prepared factorisation in mem stays) */
     rc = unicycle_kkt_measure(&s->x[0][0], &s->u[0][0], &s->lam[0][0], &s->mu_g[0][0], &s->mu_b[0][0], s->mu_bN,
-                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->mem.ev.fun_work, parts);
+                           s->mu_r, s->nu, &s->p[0][0], xhat0 ? xhat0 : s->xhat0, &s->kkt_work, parts);
     unicycle_timer_end(&s->timer, -1, 0.0);
     if (rc != UNICYCLE_KKT_OK) {
         return unicycle_ret(s, rc == UNICYCLE_KKT_FUNCTION ? UNICYCLE_ERR_FUNCTION : UNICYCLE_ERR_NONFINITE_VALUE);

@@ -331,6 +331,24 @@ class QPSolverHandle:
         status = self.solve_again()
         return self._read_sol(), self._read_info(status)
 
+    def prefactor_guess(self, warm: dict) -> bool:
+        """dopus_qp_prefactor_guess on the QP of the last ``solve`` (its data and hess_shift in
+        place) from the warm-start point ``warm``: the active-set start's first factorisation,
+        kept in the workspace for ``solve_prefactored``. Returns whether it was kept."""
+        self._write_sol(warm)
+        return bool(self.lib.dopus_qp_prefactor_guess(self._ws, self._in, self._sol))
+
+    def solve_prefactored(self, warm: dict, active_set: int = 8):
+        """The QP and tolerances of the last ``solve`` solved once more from ``warm`` with the
+        active-set start and ``settings.prefactored`` (the factorisation ``prefactor_guess``
+        kept, for the first sweep when its guess is the same). Returns ``(solution, info)``."""
+        st = self._set
+        st.warm_start, st.active_set, st.prefactored = 1, int(active_set), 1
+        self._write_sol(warm)
+        status = self.lib.dopus_qp_solve(self._ws, self._in, st, self._sol, self._info)
+        st.prefactored = 0
+        return self._read_sol(), self._read_info(status)
+
     def infeasible_row(self):
         """After a solve that returned primal_infeasible: ``(stage, j, side)`` of the row
         dopus_qp_infeasible_row names (the row with the largest multiplier of the
@@ -377,6 +395,7 @@ class QPSolverHandle:
             "iterations": int(i.iterations),
             "factorizations": int(i.factorizations),
             "active_set": int(i.active_set),
+            "prefactored": bool(i.prefactored),
             "certified": bool(i.certified),
             "inertia_corrections": int(i.inertia_corrections),
             "terminal_augmentations": int(i.terminal_augmentations),
