@@ -363,6 +363,23 @@ static int dopus_iterate_diverged(const dopus_solver *s)
 static void dopus_qp_bind(dopus_solver *s);
 static void dopus_qp_unbind(dopus_solver *s);
 
+/* A factorisation of the next QP at the term lm into the QP's workspace (its data bound for
+ * the call, hess_shift restored after), stamped: qp_prefactored its verdict, qp_pre_lm the term.
+ * guess 0: dopus_qp_prefactor with no active row, pivots above tol; 1: the active-set start's
+ * first factorisation from the warm point in mem.qp.sol (dopus_qp_prefactor_guess). */
+static int dopus_prefactor_at(dopus_solver *s, dopus_real lm, dopus_real tol, int guess)
+{
+    const dopus_real shift = s->qp_in.hess_shift;
+    dopus_qp_bind(s);
+    s->qp_in.hess_shift = lm;
+    s->qp_prefactored = guess ? dopus_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol)
+                              : dopus_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, DOPUS_LM_ROUNDOFF);
+    s->qp_pre_lm = lm;
+    s->qp_in.hess_shift = shift;
+    dopus_qp_unbind(s);
+    return s->qp_prefactored;
+}
+
 /* The convexity test of the automatic lm (dopus_lm.h, its test hook; ctx: the solver): the QP's
  * factorisation with no active row at the term lm (dopus_qp_prefactor, in the QP's workspace),
  * its pivots above tol and their round-off DOPUS_LM_ROUNDOFF. Each run replaces a kept one:
@@ -370,15 +387,7 @@ static void dopus_qp_unbind(dopus_solver *s);
  * term it leaves. */
 static int dopus_lm_qp_test(void *ctx, dopus_real lm, dopus_real tol)
 {
-    dopus_solver *s = (dopus_solver *)ctx;
-    const dopus_real shift = s->qp_in.hess_shift;
-    dopus_qp_bind(s);
-    s->qp_in.hess_shift = lm;
-    s->qp_prefactored = dopus_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, DOPUS_LM_ROUNDOFF);
-    s->qp_pre_lm = lm;
-    s->qp_in.hess_shift = shift;
-    dopus_qp_unbind(s);
-    return s->qp_prefactored;
+    return dopus_prefactor_at((dopus_solver *)ctx, lm, tol, 0);
 }
 
 /* The lm module's test hook, set around each call into it (no pointer into the solver stays
@@ -457,18 +466,12 @@ static int dopus_start_prefactor_due(const dopus_solver *s, int extra)
  * first sweep takes it when its guess is the same (dopus_qp_prefactor_guess). */
 static void dopus_start_prefactor(dopus_solver *s)
 {
-    const dopus_real shift = s->qp_in.hess_shift;
     int i;
     dopus_qp_warm_point(s);
     for (i = 0; i < DOPUS_NX; ++i) {
         s->mem.qp.sol.x[0][i] = DOPUS_R(0.0);
     }
-    dopus_qp_bind(s);
-    s->qp_in.hess_shift = s->lm.lm;
-    s->qp_prefactored = dopus_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol);
-    s->qp_pre_lm = s->lm.lm;
-    s->qp_in.hess_shift = shift;
-    dopus_qp_unbind(s);
+    (void)dopus_prefactor_at(s, s->lm.lm, DOPUS_R(0.0), 1);
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */

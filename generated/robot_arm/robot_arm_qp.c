@@ -2069,6 +2069,18 @@ static int soft_far(const robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
     return 0;
 }
 
+/* The primal part of the warm-start point *sol in ws->prim (x_k and u_k; the rest as it is). */
+static void warm_primal(robot_arm_qp_workspace *ws, const robot_arm_qp_sol *sol)
+{
+    int k, i;
+    for (k = 0; k <= N; ++k)
+        for (i = 0; i < NX; ++i)
+            ws->prim[k * NW + i] = sol->x[k][i];
+    for (k = 0; k < N; ++k)
+        for (i = 0; i < NU; ++i)
+            ws->prim[k * NW + NX + i] = sol->u[k][i];
+}
+
 /* Starting point. Cold (centred = 0): w = 0, lam = nu = 0, slacks max(1, v - lo),
  * multipliers 1. Centred cold start (centred = 1): slacks max(floor, v - lo) and
  * multipliers floor / t (centred_floor). Warm: the given primal-dual point with slacks and
@@ -2095,14 +2107,10 @@ static void initial_point(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
                 ws->prim[i] = ROBOT_ARM_R(0.0);
     }
     if (warm) {
+        warm_primal(ws, sol);
         for (k = 0; k <= N; ++k)
-            for (i = 0; i < NX; ++i) {
-                ws->prim[k * NW + i] = sol->x[k][i];
+            for (i = 0; i < NX; ++i)
                 ws->lam[k * NX + i] = sol->lam[k][i];
-            }
-        for (k = 0; k < N; ++k)
-            for (i = 0; i < NU; ++i)
-                ws->prim[k * NW + NX + i] = sol->u[k][i];
         for (i = 0; i < NE; ++i)
             ws->nu[i] = sol->nu[i];
     }
@@ -3325,15 +3333,10 @@ int robot_arm_qp_prefactor_guess(robot_arm_qp_workspace *ws, const robot_arm_qp_
         return 0;
     factor_state_reset(ws, in, 1);
     ws->pre_tol = ROBOT_ARM_R(0.0);
-    /* the warm start's primal part (initial_point's), the guess of the active-set start */
+    /* the warm start's primal part (as initial_point sets it), the guess of the active-set start */
     for (i = 0; i < NP; ++i)
         ws->prim[i] = ROBOT_ARM_R(0.0);
-    for (k = 0; k <= N; ++k)
-        for (i = 0; i < NX; ++i)
-            ws->prim[k * NW + i] = sol->x[k][i];
-    for (k = 0; k < N; ++k)
-        for (i = 0; i < NU; ++i)
-            ws->prim[k * NW + NX + i] = sol->u[k][i];
+    warm_primal(ws, sol);
     if (!as_guess(ws, in, sol, hessian_scale(in, hmax), 0))
         return 0;
     /* as_factor's first sweep: the penalty weights of the active rows, no correction */

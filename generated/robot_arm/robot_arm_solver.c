@@ -363,6 +363,23 @@ static int robot_arm_iterate_diverged(const robot_arm_solver *s)
 static void robot_arm_qp_bind(robot_arm_solver *s);
 static void robot_arm_qp_unbind(robot_arm_solver *s);
 
+/* A factorisation of the next QP at the term lm into the QP's workspace (its data bound for
+ * the call, hess_shift restored after), stamped: qp_prefactored its verdict, qp_pre_lm the term.
+ * guess 0: robot_arm_qp_prefactor with no active row, pivots above tol; 1: the active-set start's
+ * first factorisation from the warm point in mem.qp.sol (robot_arm_qp_prefactor_guess). */
+static int robot_arm_prefactor_at(robot_arm_solver *s, robot_arm_real lm, robot_arm_real tol, int guess)
+{
+    const robot_arm_real shift = s->qp_in.hess_shift;
+    robot_arm_qp_bind(s);
+    s->qp_in.hess_shift = lm;
+    s->qp_prefactored = guess ? robot_arm_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol)
+                              : robot_arm_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, ROBOT_ARM_LM_ROUNDOFF);
+    s->qp_pre_lm = lm;
+    s->qp_in.hess_shift = shift;
+    robot_arm_qp_unbind(s);
+    return s->qp_prefactored;
+}
+
 /* The convexity test of the automatic lm (robot_arm_lm.h, its test hook; ctx: the solver): the QP's
  * factorisation with no active row at the term lm (robot_arm_qp_prefactor, in the QP's workspace),
  * its pivots above tol and their round-off ROBOT_ARM_LM_ROUNDOFF. Each run replaces a kept one:
@@ -370,15 +387,7 @@ static void robot_arm_qp_unbind(robot_arm_solver *s);
  * term it leaves. */
 static int robot_arm_lm_qp_test(void *ctx, robot_arm_real lm, robot_arm_real tol)
 {
-    robot_arm_solver *s = (robot_arm_solver *)ctx;
-    const robot_arm_real shift = s->qp_in.hess_shift;
-    robot_arm_qp_bind(s);
-    s->qp_in.hess_shift = lm;
-    s->qp_prefactored = robot_arm_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, ROBOT_ARM_LM_ROUNDOFF);
-    s->qp_pre_lm = lm;
-    s->qp_in.hess_shift = shift;
-    robot_arm_qp_unbind(s);
-    return s->qp_prefactored;
+    return robot_arm_prefactor_at((robot_arm_solver *)ctx, lm, tol, 0);
 }
 
 /* The lm module's test hook, set around each call into it (no pointer into the solver stays
@@ -457,18 +466,12 @@ static int robot_arm_start_prefactor_due(const robot_arm_solver *s, int extra)
  * first sweep takes it when its guess is the same (robot_arm_qp_prefactor_guess). */
 static void robot_arm_start_prefactor(robot_arm_solver *s)
 {
-    const robot_arm_real shift = s->qp_in.hess_shift;
     int i;
     robot_arm_qp_warm_point(s);
     for (i = 0; i < ROBOT_ARM_NX; ++i) {
         s->mem.qp.sol.x[0][i] = ROBOT_ARM_R(0.0);
     }
-    robot_arm_qp_bind(s);
-    s->qp_in.hess_shift = s->lm.lm;
-    s->qp_prefactored = robot_arm_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol);
-    s->qp_pre_lm = s->lm.lm;
-    s->qp_in.hess_shift = shift;
-    robot_arm_qp_unbind(s);
+    (void)robot_arm_prefactor_at(s, s->lm.lm, ROBOT_ARM_R(0.0), 1);
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */

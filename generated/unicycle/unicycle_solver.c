@@ -363,6 +363,23 @@ static int unicycle_iterate_diverged(const unicycle_solver *s)
 static void unicycle_qp_bind(unicycle_solver *s);
 static void unicycle_qp_unbind(unicycle_solver *s);
 
+/* A factorisation of the next QP at the term lm into the QP's workspace (its data bound for
+ * the call, hess_shift restored after), stamped: qp_prefactored its verdict, qp_pre_lm the term.
+ * guess 0: unicycle_qp_prefactor with no active row, pivots above tol; 1: the active-set start's
+ * first factorisation from the warm point in mem.qp.sol (unicycle_qp_prefactor_guess). */
+static int unicycle_prefactor_at(unicycle_solver *s, unicycle_real lm, unicycle_real tol, int guess)
+{
+    const unicycle_real shift = s->qp_in.hess_shift;
+    unicycle_qp_bind(s);
+    s->qp_in.hess_shift = lm;
+    s->qp_prefactored = guess ? unicycle_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol)
+                              : unicycle_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, UNICYCLE_LM_ROUNDOFF);
+    s->qp_pre_lm = lm;
+    s->qp_in.hess_shift = shift;
+    unicycle_qp_unbind(s);
+    return s->qp_prefactored;
+}
+
 /* The convexity test of the automatic lm (unicycle_lm.h, its test hook; ctx: the solver): the QP's
  * factorisation with no active row at the term lm (unicycle_qp_prefactor, in the QP's workspace),
  * its pivots above tol and their round-off UNICYCLE_LM_ROUNDOFF. Each run replaces a kept one:
@@ -370,15 +387,7 @@ static void unicycle_qp_unbind(unicycle_solver *s);
  * term it leaves. */
 static int unicycle_lm_qp_test(void *ctx, unicycle_real lm, unicycle_real tol)
 {
-    unicycle_solver *s = (unicycle_solver *)ctx;
-    const unicycle_real shift = s->qp_in.hess_shift;
-    unicycle_qp_bind(s);
-    s->qp_in.hess_shift = lm;
-    s->qp_prefactored = unicycle_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, UNICYCLE_LM_ROUNDOFF);
-    s->qp_pre_lm = lm;
-    s->qp_in.hess_shift = shift;
-    unicycle_qp_unbind(s);
-    return s->qp_prefactored;
+    return unicycle_prefactor_at((unicycle_solver *)ctx, lm, tol, 0);
 }
 
 /* The lm module's test hook, set around each call into it (no pointer into the solver stays
@@ -457,18 +466,12 @@ static int unicycle_start_prefactor_due(const unicycle_solver *s, int extra)
  * first sweep takes it when its guess is the same (unicycle_qp_prefactor_guess). */
 static void unicycle_start_prefactor(unicycle_solver *s)
 {
-    const unicycle_real shift = s->qp_in.hess_shift;
     int i;
     unicycle_qp_warm_point(s);
     for (i = 0; i < UNICYCLE_NX; ++i) {
         s->mem.qp.sol.x[0][i] = UNICYCLE_R(0.0);
     }
-    unicycle_qp_bind(s);
-    s->qp_in.hess_shift = s->lm.lm;
-    s->qp_prefactored = unicycle_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol);
-    s->qp_pre_lm = s->lm.lm;
-    s->qp_in.hess_shift = shift;
-    unicycle_qp_unbind(s);
+    (void)unicycle_prefactor_at(s, s->lm.lm, UNICYCLE_R(0.0), 1);
 }
 
 /* ---- function evaluations ----------------------------------------------------------- */
