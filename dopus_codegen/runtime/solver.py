@@ -731,8 +731,9 @@ class Solver:
                                        "Factorisations of the last feedback's QP solves (interior-point "
                                        "iterations, inertia corrections, sweeps of the active-set start).")
     qp_prefactored = _info_property("qp_prefactored", bool,
-                                    "The last feedback's QP took the factorisation of the prepare's "
-                                    "convexity test as that of its first sweep (section 10).")
+                                    "The last feedback's QP took a factorisation the prepare formed (its "
+                                    "convexity test's, or the active-set start's with the guessed rows) as "
+                                    "that of its first sweep (section 10).")
     qp_status = _info_property("qp_status")
     M_used = _info_property("M_used", int, "Stages the last prepare (or init) re-linearised besides stage N-1.")
 

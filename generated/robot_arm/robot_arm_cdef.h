@@ -223,8 +223,9 @@ typedef struct {
      * solves of the call: interior-point iterations, inertia corrections, sweeps of the
      * active-set start) */
     int qp_factorizations;
-    /* 1 when the last feedback's QP took the factorisation of the prepare's convexity test as
-     * that of its first sweep (docs/algorithm.md section 10), else 0 */
+    /* 1 when the last feedback's QP took a factorisation the prepare formed (its convexity
+     * test's, or the active-set start's with the guessed rows) as that of its first sweep
+     * (docs/algorithm.md section 10), else 0 */
     int qp_prefactored;
     /* seconds per phase of the last call that ran it (enum robot_arm_phase: feedback, shift,
      * gradients, rho, hessians, regularization, assembly, kkt, lm, recovery; init fills
