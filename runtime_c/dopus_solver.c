@@ -445,14 +445,17 @@ static void dopus_qp_warm_point(dopus_solver *s);
  * measurement moves away: when it does not bind at dx_0 = 0 it does not bind at all), the last
  * warm start not failed; and no budget (section 14: the factorisation would move into the
  * least prepare the feedback's deadline keeps free; on the emulated Cortex-M7 the full RTI then
- * needed 1.5 times the budget it needs without; bench/issue23/measurements.md section 49).
+ * needed 1.5 times the budget it needs without; bench/issue23/measurements.md section 49); and
+ * the last QP factorised itself at most DOPUS_PREFACTOR_AFTER times (after a longer one the
+ * factorisation would add to the instant's worst case; section 51).
  * After an extra iteration (extra) the feedback keeps the term (no cap, section 14). */
 static int dopus_start_prefactor_due(const dopus_solver *s, int extra)
 {
     static const dopus_real dx0[DOPUS_NX] = {DOPUS_R(0.0)};
     dopus_lm lm = s->lm;
     if (!s->settings.qp_warm_start || !s->lm.on || s->qp_no_active_set || s->qp_warm_failed ||
-        !dopus_lm_can_raise(&s->lm) || dopus_budget_on(s)) {
+        !dopus_lm_can_raise(&s->lm) || dopus_budget_on(s) ||
+        s->qp_factorizations - s->qp_pre_used > DOPUS_PREFACTOR_AFTER) {
         return 0;
     }
     if (!extra) {

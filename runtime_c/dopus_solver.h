@@ -442,6 +442,13 @@ enum dopus_budget_unit {
 #define DOPUS_QP_ACTIVE_SET 8
 #define DOPUS_QP_ACTIVE_SET_NEAR DOPUS_R(1.0)
 
+/* The prepare forms the next feedback's first factorisation (its active-set start's, with the
+ * guessed rows) only after a QP that factorised itself at most this many times (a
+ * factorisation it took from the prepare not counted): an instant that forms it factorises at
+ * most this many times plus one, and a long feedback (after a disturbance) is not followed by
+ * one more factorisation in its prepare (bench/issue23/measurements.md section 51). */
+#define DOPUS_PREFACTOR_AFTER 3
+
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static dopus_solver s;`;
  * the fields are internal (use the functions above). */

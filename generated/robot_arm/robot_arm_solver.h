@@ -442,6 +442,13 @@ enum robot_arm_budget_unit {
 #define ROBOT_ARM_QP_ACTIVE_SET 8
 #define ROBOT_ARM_QP_ACTIVE_SET_NEAR ROBOT_ARM_R(1.0)
 
+/* The prepare forms the next feedback's first factorisation (its active-set start's, with the
+ * guessed rows) only after a QP that factorised itself at most this many times (a
+ * factorisation it took from the prepare not counted): an instant that forms it factorises at
+ * most this many times plus one, and a long feedback (after a disturbance) is not followed by
+ * one more factorisation in its prepare (bench/issue23/measurements.md section 51). */
+#define ROBOT_ARM_PREFACTOR_AFTER 3
+
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static robot_arm_solver s;`;
  * the fields are internal (use the functions above). */
