@@ -215,6 +215,16 @@ def test_guessed_rows_factor_kept_in_the_qp(rel_shift):
     err = P.compare(sol, ref_s, keys=("x", "u", "lam", "mu_b", "mu_bN", "nu"))
     assert max(err.values()) <= REL_QP, err
 
+    # the solver's form (settings.prefactored 2): the prefactor from the warm start with x_0 = 0,
+    # the solve from the same multipliers with x_0; the guess beyond stage 0 is the prefactor's
+    at_zero = dict(warm, x=np.array(warm["x"], copy=True))
+    at_zero["x"][0] = 0.0
+    assert h.prefactor_guess(at_zero)
+    sol_2, info_2 = h.solve_prefactored(warm, prefactored=2)
+    assert info_2 == info
+    for k in fresh:
+        assert np.array_equal(sol_2[k], fresh[k]), k
+
     # one guessed row fewer (the largest multiplier set to 0): another working set, the kept
     # factor is not taken and the solve is the fresh one from that start
     other = {k: np.array(v, copy=True) for k, v in warm.items()}
