@@ -1120,10 +1120,10 @@ static void unicycle_qp_warm_point(unicycle_solver *s)
     }
 }
 
-/* The warm-start point of the feedback's QP. kept: the active-set start's prefactor is stamped
- * at this term (qp_prefactored 2): mem.qp.sol holds the warm point it was formed from, which
- * nothing has changed since (the stamp is cleared by anything that uses the memory or moves the
- * iterate), but x_0, 0 there: only x_0's step is set. */
+/* The warm-start point of the feedback's QP. kept: the active-set start will run and the
+ * start's prefactor is stamped at this term (qp_prefactored 2): mem.qp.sol holds the warm point
+ * it was formed from, which nothing has changed since (the stamp is cleared by anything that
+ * uses the memory or moves the iterate), but x_0, 0 there: only x_0's step is set. */
 static void unicycle_qp_warm_point_at(unicycle_solver *s, int kept)
 {
     int i;
@@ -1409,7 +1409,9 @@ static int unicycle_feedback_qp(unicycle_solver *s)
     s->qp_warm_failed = 0;
     s->anytime.work += UNICYCLE_WORK_QP;
     if (s->settings.qp_warm_start) {
-        unicycle_qp_warm_point_at(s, s->qp_prefactored == 2 && s->qp_in.hess_shift == s->qp_pre_lm);
+        /* (kept: the start runs and its QP takes the prefactor, settings.prefactored 2) */
+        unicycle_qp_warm_point_at(s,
+                               active_set && s->qp_prefactored == 2 && s->qp_in.hess_shift == s->qp_pre_lm);
     }
     qs = unicycle_qp_attempt(s, s->settings.qp_warm_start, active_set);
     if (s->settings.qp_warm_start && qs != UNICYCLE_QP_INVALID_INPUT && qs != UNICYCLE_QP_DEADLINE &&
