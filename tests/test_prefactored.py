@@ -29,9 +29,14 @@ guess has the same active rows and weights (bench/issue23/measurements.md sectio
   step 0 but x_0, the multipliers of the solution): the solve from the kept factor equals a
   solve without it bit for bit (solution and every info field) and PIQP's solution to 1e-6;
   from a warm start with one guessed row fewer (a different working set) the kept factor is
-  not taken, and the solve is the fresh one bit for bit;
-- the closed loop: each instant's feedback reuses the factor unless the prepared term lies
-  above the cap of the predicted state (then the prepare forms none), also after a KKT
+  not taken, and the solve is the fresh one bit for bit; the solver's form
+  (``settings.prefactored`` 2: the prefactor from the warm start with x_0 = 0, the solve from
+  the same multipliers with x_0, the guess beyond stage 0 taken from the prefactor) is the
+  fresh solve bit for bit (bench/issue23/measurements.md section 51);
+- the closed loop, from the offline solution and from the disturbed state: each instant's
+  feedback reuses the factor unless the prepared term lies above the cap of the predicted
+  state or the last QP factorised itself more than ``DOPUS_PREFACTOR_AFTER`` times (then the
+  prepare forms none; section 51), also after a KKT
   evaluation between prepare and feedback (the firmware's loop has one), bit-identical to a
   copy whose stamp a settings update cleared, and where it is reused (a convex QP: the prepared term
   passed the convexity test) its step is PIQP's on the reference backend's copy of the QP to
