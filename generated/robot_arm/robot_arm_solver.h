@@ -442,6 +442,13 @@ enum robot_arm_budget_unit {
 #define ROBOT_ARM_QP_ACTIVE_SET 8
 #define ROBOT_ARM_QP_ACTIVE_SET_NEAR ROBOT_ARM_R(1.0)
 
+/* The prepare forms the next feedback's first factorisation (its active-set start's, with the
+ * guessed rows) only after a QP that factorised itself at most this many times (a
+ * factorisation it took from the prepare not counted): an instant that forms it factorises at
+ * most this many times plus one, and a long feedback (after a disturbance) is not followed by
+ * one more factorisation in its prepare (bench/issue23/measurements.md section 51). */
+#define ROBOT_ARM_PREFACTOR_AFTER 3
+
 /* ------------------------------------------------------------------------------------- */
 /* The full state. Its layout is public so firmware can declare `static robot_arm_solver s;`;
  * the fields are internal (use the functions above). */
@@ -590,8 +597,9 @@ struct robot_arm_solver {
     /* the prepare's lm test in the QP's form (robot_arm_qp_prefactor, kept in mem.qp.work; when the
      * next active-set start will guess no row), or else the start's first factorisation with
      * its guessed rows (robot_arm_qp_prefactor_guess): the term it was formed at; qp_prefactored: 1
-     * when it is kept (at the end of the prepare: at the term it leaves) until anything else
-     * uses mem or solves (the feedback's QP may then reuse it) */
+     * (the lm test's) or 2 (the start's, its warm point in mem.qp.sol) when it is kept (at the
+     * end of the prepare: at the term it leaves) until anything else uses mem or solves (the
+     * feedback's QP may then reuse it, from that warm point) */
     robot_arm_real qp_pre_lm;
     int qp_prefactored;
     int qp_pre_used;      /* the last feedback's QP took that factorisation (robot_arm_info.qp_prefactored) */
