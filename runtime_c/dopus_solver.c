@@ -366,19 +366,18 @@ static void dopus_qp_unbind(dopus_solver *s);
 /* A factorisation of the next QP at the term lm into the QP's workspace (its data bound for
  * the call, hess_shift restored after), stamped: qp_prefactored its verdict, qp_pre_lm the term.
  * guess 0: dopus_qp_prefactor with no active row, pivots above tol; 1: the active-set start's
- * first factorisation from the warm point in mem.qp.sol (dopus_qp_prefactor_guess; its stamp
- * is 2: that warm point stays in mem.qp.sol with the factor). Returns 1 when it is kept. */
+ * first factorisation from the warm point in mem.qp.sol (dopus_qp_prefactor_guess). */
 static int dopus_prefactor_at(dopus_solver *s, dopus_real lm, dopus_real tol, int guess)
 {
     const dopus_real shift = s->qp_in.hess_shift;
     dopus_qp_bind(s);
     s->qp_in.hess_shift = lm;
-    s->qp_prefactored = guess ? 2 * dopus_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol)
+    s->qp_prefactored = guess ? dopus_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol)
                               : dopus_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, DOPUS_LM_ROUNDOFF);
     s->qp_pre_lm = lm;
     s->qp_in.hess_shift = shift;
     dopus_qp_unbind(s);
-    return s->qp_prefactored != 0;
+    return s->qp_prefactored;
 }
 
 /* The convexity test of the automatic lm (dopus_lm.h, its test hook; ctx: the solver): the QP's
@@ -439,7 +438,6 @@ static int dopus_guess_empty(const dopus_solver *s)
 }
 
 static void dopus_qp_warm_point(dopus_solver *s);
-static void dopus_qp_warm_point_at(dopus_solver *s, int kept);
 
 /* 1 when the next QP's active-set start will run for the state the plan predicts (dx_0 = 0)
  * and take the term the prepare leaves (algorithm.md sections 4 and 10): warm start on, the
@@ -1120,22 +1118,6 @@ static void dopus_qp_warm_point(dopus_solver *s)
     }
 }
 
-/* The warm-start point of the feedback's QP. kept: the active-set start will run and the
- * start's prefactor is stamped at this term (qp_prefactored 2): mem.qp.sol holds the warm point
- * it was formed from, which nothing has changed since (the stamp is cleared by anything that
- * uses the memory or moves the iterate), but x_0, 0 there: only x_0's step is set. */
-static void dopus_qp_warm_point_at(dopus_solver *s, int kept)
-{
-    int i;
-    if (!kept) {
-        dopus_qp_warm_point(s);
-        return;
-    }
-    for (i = 0; i < DOPUS_NX; ++i) {
-        s->mem.qp.sol.x[0][i] = s->qp_in.x0[i];
-    }
-}
-
 /* Feedback step 1: the call is refused before the QP when the solver is not initialised,
  * the measurement is not finite or no QP is prepared (the fallback control is returned).
  * Returns DOPUS_OK when the QP is to be solved, else the status of the failed call. */
@@ -1284,11 +1266,8 @@ static int dopus_qp_solve_bound(dopus_solver *s, int warm, int active_set, int m
     }
     settings.warm_start = warm;
     settings.active_set = warm && active_set ? DOPUS_QP_ACTIVE_SET : 0;
-    /* the prepare's lm test factored this QP at this term: its first sweep may start from it
-     * (2: the active-set start's prefactor, from the warm start in mem.qp.sol as it is) */
-    settings.prefactored = settings.active_set > 0 && s->qp_prefactored && in->hess_shift == s->qp_pre_lm
-                               ? s->qp_prefactored
-                               : 0;
+    /* the prepare's lm test factored this QP at this term: its first sweep may start from it */
+    settings.prefactored = settings.active_set > 0 && s->qp_prefactored && in->hess_shift == s->qp_pre_lm;
     s->qp_prefactored = 0;
     dopus_qp_bind(s);
     qs = dopus_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
@@ -1409,9 +1388,7 @@ static int dopus_feedback_qp(dopus_solver *s)
     s->qp_warm_failed = 0;
     s->anytime.work += DOPUS_WORK_QP;
     if (s->settings.qp_warm_start) {
-        /* (kept: the start runs and its QP takes the prefactor, settings.prefactored 2) */
-        dopus_qp_warm_point_at(s,
-                               active_set && s->qp_prefactored == 2 && s->qp_in.hess_shift == s->qp_pre_lm);
+        dopus_qp_warm_point(s);
     }
     qs = dopus_qp_attempt(s, s->settings.qp_warm_start, active_set);
     if (s->settings.qp_warm_start && qs != DOPUS_QP_INVALID_INPUT && qs != DOPUS_QP_DEADLINE &&

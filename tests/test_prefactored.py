@@ -29,10 +29,7 @@ guess has the same active rows and weights (bench/issue23/measurements.md sectio
   step 0 but x_0, the multipliers of the solution): the solve from the kept factor equals a
   solve without it bit for bit (solution and every info field) and PIQP's solution to 1e-6;
   from a warm start with one guessed row fewer (a different working set) the kept factor is
-  not taken, and the solve is the fresh one bit for bit; the solver's form
-  (``settings.prefactored`` 2: the prefactor from the warm start with x_0 = 0, the solve from
-  the same multipliers with x_0, the guess beyond stage 0 taken from the prefactor) is the
-  fresh solve bit for bit (bench/issue23/measurements.md section 51);
+  not taken, and the solve is the fresh one bit for bit;
 - the closed loop, from the offline solution and from the disturbed state: each instant's
   feedback reuses the factor unless the prepared term lies above the cap of the predicted
   state or the last QP factorised itself more than ``DOPUS_PREFACTOR_AFTER`` times (then the
@@ -219,16 +216,6 @@ def test_guessed_rows_factor_kept_in_the_qp(rel_shift):
     assert status == "solved"
     err = P.compare(sol, ref_s, keys=("x", "u", "lam", "mu_b", "mu_bN", "nu"))
     assert max(err.values()) <= REL_QP, err
-
-    # the solver's form (settings.prefactored 2): the prefactor from the warm start with x_0 = 0,
-    # the solve from the same multipliers with x_0; the guess beyond stage 0 is the prefactor's
-    at_zero = dict(warm, x=np.array(warm["x"], copy=True))
-    at_zero["x"][0] = 0.0
-    assert h.prefactor_guess(at_zero)
-    sol_2, info_2 = h.solve_prefactored(warm, prefactored=2)
-    assert info_2 == info
-    for k in fresh:
-        assert np.array_equal(sol_2[k], fresh[k]), k
 
     # one guessed row fewer (the largest multiplier set to 0): another working set, the kept
     # factor is not taken and the solve is the fresh one from that start

@@ -366,19 +366,18 @@ static void robot_arm_qp_unbind(robot_arm_solver *s);
 /* A factorisation of the next QP at the term lm into the QP's workspace (its data bound for
  * the call, hess_shift restored after), stamped: qp_prefactored its verdict, qp_pre_lm the term.
  * guess 0: robot_arm_qp_prefactor with no active row, pivots above tol; 1: the active-set start's
- * first factorisation from the warm point in mem.qp.sol (robot_arm_qp_prefactor_guess; its stamp
- * is 2: that warm point stays in mem.qp.sol with the factor). Returns 1 when it is kept. */
+ * first factorisation from the warm point in mem.qp.sol (robot_arm_qp_prefactor_guess). */
 static int robot_arm_prefactor_at(robot_arm_solver *s, robot_arm_real lm, robot_arm_real tol, int guess)
 {
     const robot_arm_real shift = s->qp_in.hess_shift;
     robot_arm_qp_bind(s);
     s->qp_in.hess_shift = lm;
-    s->qp_prefactored = guess ? 2 * robot_arm_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol)
+    s->qp_prefactored = guess ? robot_arm_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol)
                               : robot_arm_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, ROBOT_ARM_LM_ROUNDOFF);
     s->qp_pre_lm = lm;
     s->qp_in.hess_shift = shift;
     robot_arm_qp_unbind(s);
-    return s->qp_prefactored != 0;
+    return s->qp_prefactored;
 }
 
 /* The convexity test of the automatic lm (robot_arm_lm.h, its test hook; ctx: the solver): the QP's
@@ -439,7 +438,6 @@ static int robot_arm_guess_empty(const robot_arm_solver *s)
 }
 
 static void robot_arm_qp_warm_point(robot_arm_solver *s);
-static void robot_arm_qp_warm_point_at(robot_arm_solver *s, int kept);
 
 /* 1 when the next QP's active-set start will run for the state the plan predicts (dx_0 = 0)
  * and take the term the prepare leaves (algorithm.md sections 4 and 10): warm start on, the
@@ -1120,22 +1118,6 @@ static void robot_arm_qp_warm_point(robot_arm_solver *s)
     }
 }
 
-/* The warm-start point of the feedback's QP. kept: the active-set start will run and the
- * start's prefactor is stamped at this term (qp_prefactored 2): mem.qp.sol holds the warm point
- * it was formed from, which nothing has changed since (the stamp is cleared by anything that
- * uses the memory or moves the iterate), but x_0, 0 there: only x_0's step is set. */
-static void robot_arm_qp_warm_point_at(robot_arm_solver *s, int kept)
-{
-    int i;
-    if (!kept) {
-        robot_arm_qp_warm_point(s);
-        return;
-    }
-    for (i = 0; i < ROBOT_ARM_NX; ++i) {
-        s->mem.qp.sol.x[0][i] = s->qp_in.x0[i];
-    }
-}
-
 /* Feedback step 1: the call is refused before the QP when the solver is not initialised,
  * the measurement is not finite or no QP is prepared (the fallback control is returned).
  * Returns ROBOT_ARM_OK when the QP is to be solved, else the status of the failed call. */
@@ -1284,11 +1266,8 @@ static int robot_arm_qp_solve_bound(robot_arm_solver *s, int warm, int active_se
     }
     settings.warm_start = warm;
     settings.active_set = warm && active_set ? ROBOT_ARM_QP_ACTIVE_SET : 0;
-    /* the prepare's lm test factored this QP at this term: its first sweep may start from it
-     * (2: the active-set start's prefactor, from the warm start in mem.qp.sol as it is) */
-    settings.prefactored = settings.active_set > 0 && s->qp_prefactored && in->hess_shift == s->qp_pre_lm
-                               ? s->qp_prefactored
-                               : 0;
+    /* the prepare's lm test factored this QP at this term: its first sweep may start from it */
+    settings.prefactored = settings.active_set > 0 && s->qp_prefactored && in->hess_shift == s->qp_pre_lm;
     s->qp_prefactored = 0;
     robot_arm_qp_bind(s);
     qs = robot_arm_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
@@ -1409,9 +1388,7 @@ static int robot_arm_feedback_qp(robot_arm_solver *s)
     s->qp_warm_failed = 0;
     s->anytime.work += ROBOT_ARM_WORK_QP;
     if (s->settings.qp_warm_start) {
-        /* (kept: the start runs and its QP takes the prefactor, settings.prefactored 2) */
-        robot_arm_qp_warm_point_at(s,
-                               active_set && s->qp_prefactored == 2 && s->qp_in.hess_shift == s->qp_pre_lm);
+        robot_arm_qp_warm_point(s);
     }
     qs = robot_arm_qp_attempt(s, s->settings.qp_warm_start, active_set);
     if (s->settings.qp_warm_start && qs != ROBOT_ARM_QP_INVALID_INPUT && qs != ROBOT_ARM_QP_DEADLINE &&

@@ -597,9 +597,8 @@ struct robot_arm_solver {
     /* the prepare's lm test in the QP's form (robot_arm_qp_prefactor, kept in mem.qp.work; when the
      * next active-set start will guess no row), or else the start's first factorisation with
      * its guessed rows (robot_arm_qp_prefactor_guess): the term it was formed at; qp_prefactored: 1
-     * (the lm test's) or 2 (the start's, its warm point in mem.qp.sol) when it is kept (at the
-     * end of the prepare: at the term it leaves) until anything else uses mem or solves (the
-     * feedback's QP may then reuse it, from that warm point) */
+     * when it is kept (at the end of the prepare: at the term it leaves) until anything else
+     * uses mem or solves (the feedback's QP may then reuse it) */
     robot_arm_real qp_pre_lm;
     int qp_prefactored;
     int qp_pre_used;      /* the last feedback's QP took that factorisation (robot_arm_info.qp_prefactored) */

@@ -2855,16 +2855,12 @@ static void as_res_add(unicycle_qp_workspace *ws, int b, unicycle_real dv)
  * *sol): a side is active when its multiplier points to it and exceeds its slack, a row with
  * lo == up always. Returns 0 when a row has a soft side (the start does not apply). compare:
  * the factor a prefactor kept is discarded (pre_status -1) unless this guess has its active
- * rows with the same penalty weights (act and pen as the prefactor left them); 2: a factor of
- * unicycle_qp_prefactor_guess from this warm start (settings.prefactored 2), whose guess of the
- * rows beyond stage 0 (their primal part 0 in both) is taken as it is: only their multipliers
- * are set, and stage 0's rows, which may read x_0, are guessed and compared. */
+ * rows with the same penalty weights (act and pen as the prefactor left them). */
 static int as_guess(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const unicycle_qp_sol *sol, unicycle_real hscale,
                     int compare)
 {
-    const int guessed = compare == 2 ? 1 : N + 1; /* the stages whose rows are guessed here */
     int k, b, j;
-    for (k = 0; k < guessed; ++k)
+    for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
         {
             const unicycle_real mu = row_mu(sol, ws->bidx[b]);
@@ -2889,9 +2885,6 @@ static int as_guess(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const u
                 ws->pre_status = -1;
             as_set_mu(ws, b, ws->act[b] ? mu : UNICYCLE_R(0.0));
         }
-    /* compare 2: the prefactor's guess of the later stages' rows (act as it left them) */
-    for (b = ws->bstart[guessed]; b < ws->bstart[N + 1]; ++b)
-        as_set_mu(ws, b, ws->act[b] ? row_mu(sol, ws->bidx[b]) : UNICYCLE_R(0.0));
     return 1;
 }
 
@@ -3259,10 +3252,7 @@ static int qp_active_set(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_q
 {
     int solved = 0, zeroed, update = 0, known = 0, refined;
     qp_res r;
-    /* (settings.prefactored 2 only for a factor with the guessed rows: pre_rows) */
-    if (!as_guess(ws, in, sol, L->hscale,
-                  ws->pre_status < 0 ? 0
-                                     : (L->st.prefactored == 2 && ws->pre_rows ? 2 : L->st.prefactored != 0)))
+    if (!as_guess(ws, in, sol, L->hscale, L->st.prefactored && ws->pre_status >= 0))
         return QP_GO_ON;
     ws->penalty = 1;
     ws->as_n = 0;

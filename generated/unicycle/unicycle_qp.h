@@ -282,10 +282,8 @@ typedef struct {
      * active-set start's first sweep uses the factor when its guess has the rows it was formed
      * with (none for unicycle_qp_prefactor; the same active rows and penalty weights for
      * unicycle_qp_prefactor_guess): that sweep's factorisation is this one, the same operations,
-     * counted in unicycle_qp_info.factorizations. 2: as 1 for a factor of
-     * unicycle_qp_prefactor_guess whose warm start was this one (the same multipliers; only x_0
-     * may differ): the start takes that guess of the rows beyond stage 0 as it is and forms
-     * only stage 0's again. 0 (the default): every factorisation formed in the solve. */
+     * counted in unicycle_qp_info.factorizations. 0 (the default): every factorisation formed in
+     * the solve. */
     int prefactored;
 } unicycle_qp_settings;
 

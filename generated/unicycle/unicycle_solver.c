@@ -366,19 +366,18 @@ static void unicycle_qp_unbind(unicycle_solver *s);
 /* A factorisation of the next QP at the term lm into the QP's workspace (its data bound for
  * the call, hess_shift restored after), stamped: qp_prefactored its verdict, qp_pre_lm the term.
  * guess 0: unicycle_qp_prefactor with no active row, pivots above tol; 1: the active-set start's
- * first factorisation from the warm point in mem.qp.sol (unicycle_qp_prefactor_guess; its stamp
- * is 2: that warm point stays in mem.qp.sol with the factor). Returns 1 when it is kept. */
+ * first factorisation from the warm point in mem.qp.sol (unicycle_qp_prefactor_guess). */
 static int unicycle_prefactor_at(unicycle_solver *s, unicycle_real lm, unicycle_real tol, int guess)
 {
     const unicycle_real shift = s->qp_in.hess_shift;
     unicycle_qp_bind(s);
     s->qp_in.hess_shift = lm;
-    s->qp_prefactored = guess ? 2 * unicycle_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol)
+    s->qp_prefactored = guess ? unicycle_qp_prefactor_guess(&s->mem.qp.work, &s->qp_in, &s->mem.qp.sol)
                               : unicycle_qp_prefactor(&s->mem.qp.work, &s->qp_in, tol, UNICYCLE_LM_ROUNDOFF);
     s->qp_pre_lm = lm;
     s->qp_in.hess_shift = shift;
     unicycle_qp_unbind(s);
-    return s->qp_prefactored != 0;
+    return s->qp_prefactored;
 }
 
 /* The convexity test of the automatic lm (unicycle_lm.h, its test hook; ctx: the solver): the QP's
@@ -439,7 +438,6 @@ static int unicycle_guess_empty(const unicycle_solver *s)
 }
 
 static void unicycle_qp_warm_point(unicycle_solver *s);
-static void unicycle_qp_warm_point_at(unicycle_solver *s, int kept);
 
 /* 1 when the next QP's active-set start will run for the state the plan predicts (dx_0 = 0)
  * and take the term the prepare leaves (algorithm.md sections 4 and 10): warm start on, the
@@ -1120,22 +1118,6 @@ static void unicycle_qp_warm_point(unicycle_solver *s)
     }
 }
 
-/* The warm-start point of the feedback's QP. kept: the active-set start will run and the
- * start's prefactor is stamped at this term (qp_prefactored 2): mem.qp.sol holds the warm point
- * it was formed from, which nothing has changed since (the stamp is cleared by anything that
- * uses the memory or moves the iterate), but x_0, 0 there: only x_0's step is set. */
-static void unicycle_qp_warm_point_at(unicycle_solver *s, int kept)
-{
-    int i;
-    if (!kept) {
-        unicycle_qp_warm_point(s);
-        return;
-    }
-    for (i = 0; i < UNICYCLE_NX; ++i) {
-        s->mem.qp.sol.x[0][i] = s->qp_in.x0[i];
-    }
-}
-
 /* Feedback step 1: the call is refused before the QP when the solver is not initialised,
  * the measurement is not finite or no QP is prepared (the fallback control is returned).
  * Returns UNICYCLE_OK when the QP is to be solved, else the status of the failed call. */
@@ -1284,11 +1266,8 @@ static int unicycle_qp_solve_bound(unicycle_solver *s, int warm, int active_set,
     }
     settings.warm_start = warm;
     settings.active_set = warm && active_set ? UNICYCLE_QP_ACTIVE_SET : 0;
-    /* the prepare's lm test factored this QP at this term: its first sweep may start from it
-     * (2: the active-set start's prefactor, from the warm start in mem.qp.sol as it is) */
-    settings.prefactored = settings.active_set > 0 && s->qp_prefactored && in->hess_shift == s->qp_pre_lm
-                               ? s->qp_prefactored
-                               : 0;
+    /* the prepare's lm test factored this QP at this term: its first sweep may start from it */
+    settings.prefactored = settings.active_set > 0 && s->qp_prefactored && in->hess_shift == s->qp_pre_lm;
     s->qp_prefactored = 0;
     unicycle_qp_bind(s);
     qs = unicycle_qp_solve(&s->mem.qp.work, in, &settings, &s->mem.qp.sol, &s->qp_info);
@@ -1409,9 +1388,7 @@ static int unicycle_feedback_qp(unicycle_solver *s)
     s->qp_warm_failed = 0;
     s->anytime.work += UNICYCLE_WORK_QP;
     if (s->settings.qp_warm_start) {
-        /* (kept: the start runs and its QP takes the prefactor, settings.prefactored 2) */
-        unicycle_qp_warm_point_at(s,
-                               active_set && s->qp_prefactored == 2 && s->qp_in.hess_shift == s->qp_pre_lm);
+        unicycle_qp_warm_point(s);
     }
     qs = unicycle_qp_attempt(s, s->settings.qp_warm_start, active_set);
     if (s->settings.qp_warm_start && qs != UNICYCLE_QP_INVALID_INPUT && qs != UNICYCLE_QP_DEADLINE &&

@@ -338,14 +338,12 @@ class QPSolverHandle:
         self._write_sol(warm)
         return bool(self.lib.dopus_qp_prefactor_guess(self._ws, self._in, self._sol))
 
-    def solve_prefactored(self, warm: dict, active_set: int = 8, prefactored: int = 1):
+    def solve_prefactored(self, warm: dict, active_set: int = 8):
         """The QP and tolerances of the last ``solve`` solved once more from ``warm`` with the
         active-set start and ``settings.prefactored`` (the factorisation ``prefactor_guess``
-        kept, for the first sweep when its guess is the same; ``prefactored=2``: ``warm`` has
-        the multipliers ``prefactor_guess`` read, only x_0 may differ). Returns
-        ``(solution, info)``."""
+        kept, for the first sweep when its guess is the same). Returns ``(solution, info)``."""
         st = self._set
-        st.warm_start, st.active_set, st.prefactored = 1, int(active_set), int(prefactored)
+        st.warm_start, st.active_set, st.prefactored = 1, int(active_set), 1
         self._write_sol(warm)
         status = self.lib.dopus_qp_solve(self._ws, self._in, st, self._sol, self._info)
         st.prefactored = 0
