@@ -1296,31 +1296,58 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
         dopus_lai_trsv_ln(NE, ws->S, NE1, sn);
         dopus_lai_trsv_lt(NE, ws->S, NE1, sn);
     }
+#if DOPUS_QP_PHIT
+    /* the forward sweep with w_k = (x_k, u_k) and x_{k+1} in local arrays, stored once (the
+     * compiler then knows that they alias none of the arrays it reads: the products with
+     * LK and Phi_k run as vectors, with the same sums in the same order) */
+    {
+        dopus_real wl[NW], xn[NX];
+        for (i = 0; i < NX; ++i)
+            wl[i] = sp[i];
+        for (k = 0; k < N; ++k) {
+            dopus_real *u = sp + k * NW + NX;
+            dopus_real *lamk = sl + k * NX;
+            dopus_real *xs = sp + (k + 1) * NW;
+            /* u_k = -M_uu^{-1} (M_ux x_k + m_u + Gam_u nu) = -Lu'^{-1} (LK x_k + y_k + LKn nu) */
+            dopus_real ul[NU1];
+            for (i = 0; i < NU; ++i)
+                ul[i] = -u[i];
+            dopus_lai_gemv_n(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, wl, DOPUS_R(1.0), ul);
+            if (NE > 0)
+                dopus_lai_gemv_n(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, sn, DOPUS_R(1.0), ul);
+            lu_solve_t(ws->Lu[k], ul);
+            for (i = 0; i < NU; ++i) {
+                u[i] = ul[i];
+                wl[NX + i] = ul[i];
+            }
+            /* lam_k = -(P_k x_k + p_k + G_k nu) */
+            for (i = 0; i < NX; ++i)
+                lamk[i] = -lamk[i];
+            spmv_packed(ws->P[k], -DOPUS_R(1.0), wl, lamk);
+            if (NE > 0)
+                dopus_lai_gemv_n(NX, NE, -DOPUS_R(1.0), ws->G[k], NX, sn, DOPUS_R(1.0), lamk);
+            /* x_{k+1} = Phi_k w_k + c_k */
+            for (i = 0; i < NX; ++i)
+                xn[i] = xs[i];
+            dopus_lai_gemv_n(NX, NW, DOPUS_R(1.0), in->Phi[k], NX, wl, DOPUS_R(1.0), xn);
+            for (i = 0; i < NX; ++i) {
+                xs[i] = xn[i];
+                wl[i] = xn[i];
+            }
+        }
+    }
+#else
     for (k = 0; k < N; ++k) {
         dopus_real *w = sp + k * NW;
         dopus_real *u = w + NX;
         dopus_real *lamk = sl + k * NX;
         /* u_k = -M_uu^{-1} (M_ux x_k + m_u + Gam_u nu) = -Lu'^{-1} (LK x_k + y_k + LKn nu) */
-#if DOPUS_QP_PHIT
-        {
-            dopus_real ul[NU1]; /* formed locally, stored once */
-            for (i = 0; i < NU; ++i)
-                ul[i] = -u[i];
-            dopus_lai_gemv_n(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, w, DOPUS_R(1.0), ul);
-            if (NE > 0)
-                dopus_lai_gemv_n(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, sn, DOPUS_R(1.0), ul);
-            lu_solve_t(ws->Lu[k], ul);
-            for (i = 0; i < NU; ++i)
-                u[i] = ul[i];
-        }
-#else
         for (i = 0; i < NU; ++i)
             u[i] = -u[i];
         dopus_lai_gemv_n(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, w, DOPUS_R(1.0), u);
         if (NE > 0)
             dopus_lai_gemv_n(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, sn, DOPUS_R(1.0), u);
         lu_solve_t(ws->Lu[k], u);
-#endif
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
             lamk[i] = -lamk[i];
@@ -1330,6 +1357,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
         /* x_{k+1} = Phi_k w_k + c_k */
         dopus_lai_gemv_n(NX, NW, DOPUS_R(1.0), in->Phi[k], NX, w, DOPUS_R(1.0), sp + (k + 1) * NW);
     }
+#endif
     {
         const dopus_real *xN = sp + N * NW;
         dopus_real *lamN = sl + N * NX;
