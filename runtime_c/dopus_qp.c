@@ -1086,13 +1086,88 @@ static int pivots_above_floor(dopus_qp_workspace *ws, dopus_real *Lu)
     return 1;
 }
 
+/* The parts of the sweeps, inlined where they are called (a call per stage of the backward
+ * sweep cost 7 % of the time of a robot-arm QP) */
+#if defined(__GNUC__)
+#define QP_SWEEP_INLINE static inline __attribute__((always_inline))
+#else
+#define QP_SWEEP_INLINE static inline
+#endif
+
+#if DOPUS_QP_PHIT
+/* The backward sweep of riccati_solve (below) in parts: its terminal step and stage k's step,
+ * which needs only the factors of stages k and k + 1. With the kept Phi_k' the factorisation
+ * runs the predictor's sweep stage by stage beside its own recursion (riccati_factor_fused):
+ * two chains of dependent operations that the core overlaps, each entry the same operations
+ * in the same order as in riccati_solve. */
+QP_SWEEP_INLINE void riccati_back_terminal(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp,
+                                           dopus_real *sl, const dopus_real *sn)
+{
+    /* p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
+    dopus_real tv[NX];
+    dopus_real *xN = sp + N * NW, *pN = sl + N * NX;
+    int i;
+    for (i = 0; i < NX; ++i)
+        tv[i] = -xN[i];
+    if (NE > 0) {
+        if (ws->rho_aug > DOPUS_R(0.0))
+            dopus_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, sn, DOPUS_R(1.0), tv);
+        for (i = 0; i < NE; ++i)
+            ws->e[i] = -sn[i];
+    }
+    for (i = 0; i < NX; ++i) {
+        xN[i] = pN[i];
+        pN[i] = tv[i];
+    }
+}
+
+QP_SWEEP_INLINE void riccati_back_stage(dopus_qp_workspace *ws, const dopus_qp_in *in, int k, dopus_real *sp,
+                                        dopus_real *sl)
+{
+    /* the sweep vectors in local arrays: the compiler then knows that they alias none of
+     * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
+    dopus_real tv[NX], m[NW], y[NU1];
+    dopus_real *e = ws->e;
+    const dopus_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
+    const dopus_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
+    dopus_real *xk = sp + k * NW, *yk = xk + NX, *pk = sl + k * NX;
+    int i;
+    (void)in; /* (QP_PHIT reads the kept copy) */
+    /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
+    for (i = 0; i < NX; ++i)
+        tv[i] = pn[i];
+    spmv_packed(ws->P[k + 1], DOPUS_R(1.0), c, tv);
+    for (i = 0; i < NW; ++i)
+        m[i] = -xk[i];
+    phit_gemv(QP_PHIT(ws, in, k), DOPUS_R(1.0), tv, m);
+    if (NE > 0) {
+        dopus_lai_gemv_t(NX, NE, DOPUS_R(1.0), ws->G[k + 1], NX, c, DOPUS_R(1.0), e);
+    }
+    /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
+     * where u_k is formed (the forward sweep applies Lu'^{-1}); p_k and y are formed in
+     * local arrays and stored once */
+    for (i = 0; i < NU; ++i)
+        y[i] = m[NX + i];
+    lu_solve_n(ws->Lu[k], y);
+    for (i = 0; i < NX; ++i)
+        xk[i] = pk[i];
+    dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, y, DOPUS_R(1.0), m);
+    for (i = 0; i < NX; ++i)
+        pk[i] = m[i];
+    if (NE > 0)
+        dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, y, DOPUS_R(1.0), e);
+    for (i = 0; i < NU; ++i)
+        yk[i] = y[i];
+}
+#endif
+
 /* Factor the Newton system for the current barrier weights (row_q), delta and rho.
  * Returns 0, or 1 when a stage pivot block M_uu is not positive definite (wrong inertia),
  * or 2 when the terminal-multiplier block S is singular. Per stage it keeps P_k (packed),
  * the packed factor Lu of M_uu = Lu Lu' and Lu^{-1} M_ux in K (with terminal equalities
  * G_k and Lu^{-1} Gam_u in KN); the solve applies Lu'^{-1} (the gain M_uu^{-1} M_ux is never
  * formed). */
-static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
+static int riccati_factor_fused(dopus_qp_workspace *ws, const dopus_qp_in *in, int fused)
 {
     int k, i, j;
     dopus_real *WT = ws->work;            /* NW x NX: Phi_k' P_{k+1} */
@@ -1141,6 +1216,12 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         ws->S[i] = DOPUS_R(0.0);
     /* the largest |entry| of P_N, for the round-off estimate of a pivot (stage_noise) */
     pmagN = dopus_lai_max_abs_mat(NX, NX, Pf, NX);
+#if DOPUS_QP_PHIT
+    if (fused)
+        riccati_back_terminal(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+#else
+    (void)fused;
+#endif
 
     for (k = N - 1; k >= 0; --k) {
         dopus_real *M = ws->M;
@@ -1227,6 +1308,10 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
             dopus_lai_gemm_tn(NX, NE, NU, -DOPUS_R(1.0), K, NU1, KN, NU1, DOPUS_R(1.0), ws->G[k], NX);
             dopus_lai_gemm_tn(NE, NE, NU, DOPUS_R(1.0), KN, NU1, KN, NU1, DOPUS_R(1.0), ws->S, NE1);
         }
+#if DOPUS_QP_PHIT
+        if (fused)
+            riccati_back_stage(ws, in, k, ws->d_prim, ws->d_lam);
+#endif
     }
     if (NE > 0) {
         /* S is positive definite iff Req has full row rank on the states reachable from
@@ -1247,6 +1332,15 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
     return 0;
 }
 
+#define riccati_factor(ws, in) riccati_factor_fused((ws), (in), 0)
+/* the predictor's backward sweep run with the factorisation (the host path) */
+#ifndef QP_FUSE
+#define QP_FUSE DOPUS_QP_PHIT
+#endif
+
+QP_SWEEP_INLINE void riccati_forward(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp,
+                                     dopus_real *sl, dopus_real *sn);
+
 /* Solve the factored Newton system in place: (sp, sl, sn) holds the right-hand side
  * (rhs_stat, rhs_dyn, rhs_eqN) on entry and the solution on exit. Backward sweep of the
  * value-function vectors, nu at stage 0, forward sweep of the primal and the costates
@@ -1256,15 +1350,15 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
 static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp, dopus_real *sl,
                           dopus_real *sn)
 {
-    int k, i;
+    int k;
 #if DOPUS_QP_PHIT
-    /* the sweep vectors in local arrays: the compiler then knows that they alias none of
-     * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
-    dopus_real tv[NX], m[NW];
+    riccati_back_terminal(ws, in, sp, sl, sn);
+    for (k = N - 1; k >= 0; --k)
+        riccati_back_stage(ws, in, k, sp, sl);
 #else
-    dopus_real *tv = ws->work;        /* NX */
-    dopus_real *m = ws->work + NX;    /* NW */
-#endif
+    int i;
+    dopus_real *tv = ws->work;     /* NX */
+    dopus_real *m = ws->work + NX; /* NW */
     dopus_real *e = ws->e;
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
@@ -1298,25 +1392,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
             dopus_lai_gemv_t(NX, NE, DOPUS_R(1.0), ws->G[k + 1], NX, c, DOPUS_R(1.0), e);
         }
         /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
-         * where u_k is formed (the forward sweep applies Lu'^{-1}); on the host path p_k and y
-         * are formed in local arrays and stored once */
-#if DOPUS_QP_PHIT
-        {
-            dopus_real y[NU1];
-            for (i = 0; i < NU; ++i)
-                y[i] = m[NX + i];
-            lu_solve_n(ws->Lu[k], y);
-            for (i = 0; i < NX; ++i)
-                xk[i] = pk[i];
-            dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, y, DOPUS_R(1.0), m);
-            for (i = 0; i < NX; ++i)
-                pk[i] = m[i];
-            if (NE > 0)
-                dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, y, DOPUS_R(1.0), e);
-            for (i = 0; i < NU; ++i)
-                yk[i] = y[i];
-        }
-#else
+         * where u_k is formed (the forward sweep applies Lu'^{-1}) */
         lu_solve_n(ws->Lu[k], m + NX);
         for (i = 0; i < NX; ++i) {
             xk[i] = pk[i];
@@ -1327,8 +1403,17 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
             dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, m + NX, DOPUS_R(1.0), e);
         for (i = 0; i < NU; ++i)
             yk[i] = m[NX + i];
-#endif
     }
+#endif
+    riccati_forward(ws, in, sp, sl, sn);
+}
+
+/* riccati_solve's part after the backward sweep: nu, the forward sweep and the costates. */
+QP_SWEEP_INLINE void riccati_forward(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp,
+                                     dopus_real *sl, dopus_real *sn)
+{
+    int k, i;
+    const dopus_real *e = ws->e;
     /* stage 0: x_0 = rhs_dyn_0 (in place); dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
     if (NE > 0) {
         for (i = 0; i < NE; ++i)
@@ -1556,6 +1641,23 @@ static void newton_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_c
         oe[i] = -ws->r_eqN[i];
 }
 
+/* The factorisation; given the predictor's centring (rhs), with the host path's fused sweep:
+ * the predictor's right-hand side formed first (at every try, as a failed try leaves the
+ * sweep half done) and its backward sweep run beside the recursion, so that the predictor
+ * only runs the forward sweep (newton_direction with swept 1). */
+static int riccati_factor_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_centring *rhs)
+{
+#if DOPUS_QP_PHIT
+    if (rhs != NULL) {
+        newton_rhs(ws, in, rhs, ws->d_prim, ws->d_lam, ws->d_nu);
+        return riccati_factor_fused(ws, in, 1);
+    }
+#else
+    (void)rhs;
+#endif
+    return riccati_factor(ws, in);
+}
+
 /* Newton direction for the barrier right-hand side rc (t z - target per side): form the
  * condensed right-hand side in the direction arrays, solve in place, refine, recover slack
  * and multiplier steps. A refinement step forms the right-hand side again in the residual
@@ -1563,11 +1665,15 @@ static void newton_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_c
  * are formed anew at the next iterate), computes the residual of the Newton system and
  * the correction there in place; a further step first forms the iterate's residuals again. */
 static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int refine_steps,
-                             const qp_centring *cc)
+                             const qp_centring *cc, int swept)
 {
     int it, k, b, j;
-    newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
-    riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    if (QP_FUSE && swept) { /* right-hand side and backward sweep done with the factorisation */
+        riccati_forward(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    } else {
+        newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
+        riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    }
     for (it = 0; it < refine_steps; ++it) {
         if (it > 0) {
             qp_res again; /* the same values as at the start of the iteration */
@@ -2613,7 +2719,8 @@ static void trace_barrier_weights(const dopus_qp_workspace *ws, const dopus_qp_i
 
 /* Exact terminal augmentation rho Req'Req after a failed pivot: rho grows from the Hessian
  * scale over |Req|^2 by factors of 100. Returns riccati_factor's code of the last try. */
-static int qp_augment_terminal(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
+static int qp_augment_terminal(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
+                               const qp_centring *rhs)
 {
     int tries, fact = 1;
     dopus_real rho0 = L->hscale / dmax(dopus_lai_max_abs_mat(NE, NX, in->Req, NE1), DOPUS_REAL_SQRT_TINY);
@@ -2621,14 +2728,14 @@ static int qp_augment_terminal(qp_loop *L, dopus_qp_workspace *ws, const dopus_q
     for (tries = 0; tries < RHO_TRIES && fact == 1 && ws->rho_aug < rho0 * RHO_MAX_REL; ++tries) {
         ws->rho_aug = ws->rho_aug > DOPUS_R(0.0) ? DOPUS_R(100.0) * ws->rho_aug : rho0;
         ++L->n_aug;
-        fact = riccati_factor(ws, in);
+        fact = riccati_factor_rhs(ws, in, rhs);
     }
     return fact;
 }
 
 /* Inertia correction delta I after a failed pivot, growing geometrically from a third of
  * the last one used. Returns riccati_factor's code of the last try. */
-static int qp_correct_delta(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
+static int qp_correct_delta(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_centring *rhs)
 {
     int tries, fact;
     ws->delta = L->delta_last > DOPUS_R(0.0) ? dmax(DOPUS_R(1e-20) * L->hscale, L->delta_last / DOPUS_R(3.0))
@@ -2637,7 +2744,7 @@ static int qp_correct_delta(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_i
      * test alone may never fire (NaN compares false, inf * 10 stays inf) */
     for (tries = 0;; ++tries) {
         ++L->n_corr;
-        fact = riccati_factor(ws, in);
+        fact = riccati_factor_rhs(ws, in, rhs);
         if (fact != 1 || !(ws->delta <= DELTA_MAX_REL * L->hscale) || tries >= DELTA_TRIES)
             break;
         ws->delta *= DELTA_GROW;
@@ -2649,15 +2756,16 @@ static int qp_correct_delta(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_i
 
 /* Factorisation with minimal inertia correction: first the exact terminal augmentation
  * rho Req'Req, then delta I growing geometrically. Returns 0 when factorised. */
-static int qp_factor_with_correction(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
+static int qp_factor_with_correction(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in,
+                                     const qp_centring *rhs)
 {
     int fact;
     ws->delta = DOPUS_R(0.0);
-    fact = riccati_factor(ws, in);
+    fact = riccati_factor_rhs(ws, in, rhs);
     if (fact == 1 && NE > 0)
-        fact = qp_augment_terminal(L, ws, in);
+        fact = qp_augment_terminal(L, ws, in, rhs);
     if (fact == 1)
-        fact = qp_correct_delta(L, ws, in);
+        fact = qp_correct_delta(L, ws, in, rhs);
     return fact;
 }
 
@@ -2697,7 +2805,7 @@ static int qp_refine_steps(const qp_loop *L, const dopus_qp_workspace *ws, const
 static void qp_newton_step(dopus_qp_workspace *ws, const dopus_qp_in *in, int nref)
 {
     const qp_centring none = {0, DOPUS_R(0.0), DOPUS_R(0.0)}; /* no bounded side: rc is never formed */
-    newton_direction(ws, in, nref, &none);
+    newton_direction(ws, in, nref, &none, 0);
     dopus_lai_axpy(NP, DOPUS_R(1.0), ws->d_prim, ws->prim);
     dopus_lai_axpy((N + 1) * NX, DOPUS_R(1.0), ws->d_lam, ws->lam);
     dopus_lai_axpy(NE, DOPUS_R(1.0), ws->d_nu, ws->nu);
@@ -2707,12 +2815,12 @@ static void qp_newton_step(dopus_qp_workspace *ws, const dopus_qp_in *in, int nr
  * (*alpha_aff, primal; one length for both unless long_steps) and the average
  * complementarity mu_aff that step would reach, returned. */
 static dopus_real qp_predictor(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_res *r, int long_steps,
-                               dopus_real *alpha_aff)
+                               int swept, dopus_real *alpha_aff)
 {
     const qp_centring pred = {0, DOPUS_R(0.0), DOPUS_R(0.0)};
     dopus_real alpha, alpha_d, mu_aff = DOPUS_R(0.0);
     int i, full[2];
-    newton_direction(ws, in, 0, &pred);
+    newton_direction(ws, in, 0, &pred, swept);
     max_steps(ws, &alpha, &alpha_d, full);
     if (!long_steps)
         alpha = alpha_d = dmin(alpha, alpha_d);
@@ -2766,7 +2874,7 @@ static void qp_corrector(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *
     corr.eta = (iter > 0 && r->mu > L->mu_prev && dmax(r->stat_s, r->eq_s) < r->comp_s) ? DOPUS_R(0.0)
                                                                                         : DOPUS_R(1.0);
     L->mu_prev = r->mu;
-    newton_direction(ws, in, nref, &corr);
+    newton_direction(ws, in, nref, &corr, 0);
     max_steps(ws, alpha, alpha_d, full);
     if (long_steps) {
         *alpha = step_to_boundary(*alpha, full[0]);
@@ -3012,7 +3120,7 @@ static int as_factor(qp_loop *L, dopus_qp_workspace *ws, const dopus_qp_in *in)
     }
     if (fact == 1 && NE > 0) {
         QP_TRACE("active set: terminal augmentation\n");
-        fact = qp_augment_terminal(L, ws, in);
+        fact = qp_augment_terminal(L, ws, in, NULL);
     }
     if (fact != 0)
         QP_TRACE("active set: factorisation failed\n");
@@ -3439,6 +3547,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             return status;
     }
     for (iter = L.as_sweeps;; ++iter) {
+        const qp_centring pred = {0, DOPUS_R(0.0), DOPUS_R(0.0)}; /* the predictor's */
         dopus_real alpha, alpha_d, alpha_aff, sigma;
         int floors_before, nref, corrections;
         /* the long steps (separate primal and dual step lengths, up to the boundary) in the
@@ -3459,7 +3568,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
 
         floors_before = ws->pivot_floors;
         corrections = L.n_corr + L.n_aug;
-        if (qp_factor_with_correction(&L, ws, in) != 0) {
+        if (qp_factor_with_correction(&L, ws, in, QP_FUSE && r.nsides > 0 ? &pred : NULL) != 0) {
             status = DOPUS_QP_NUMERICAL;
             break;
         }
@@ -3472,7 +3581,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
             qp_newton_step(ws, in, nref);
             continue;
         }
-        sigma = qp_sigma(&L, ws, &r, qp_predictor(ws, in, &r, long_steps, &alpha_aff));
+        sigma = qp_sigma(&L, ws, &r, qp_predictor(ws, in, &r, long_steps, QP_FUSE, &alpha_aff));
         qp_corrector(&L, ws, in, &r, iter, nref, sigma, long_steps, &alpha, &alpha_d);
         QP_TRACE("it %2d mu %.2e stat %.2e eq %.2e ineq %.2e comp %.2e | a_aff %.3f sigma %.2e "
                  "alpha %.3e delta %.1e rho %.1e floors %d |dp| %.2e\n",
