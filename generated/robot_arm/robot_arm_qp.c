@@ -382,6 +382,41 @@ static void row_axpy(const robot_arm_qp_in *in, int k, int j, robot_arm_real a, 
     }
 }
 
+/* y = beta y + alpha A x (A m x n, column-major) as robot_arm_lai_gemv_n: each entry the sum over
+ * the columns in their order, with beta 0 (y overwritten) or 1. With AVX (ROBOT_ARM_QP_V4) four
+ * rows per vector with the sums in registers and the rows left over alone: the same
+ * operations on each entry in the same order, so the same values (GCC 12 left the product
+ * with Phi_k at nx = 5 scalar, two instructions per product). */
+#if ROBOT_ARM_QP_PHIT && ROBOT_ARM_LAI_VEC && defined(__AVX__)
+#define ROBOT_ARM_QP_V4 1
+typedef robot_arm_real qp_v4 __attribute__((vector_size(4 * sizeof(robot_arm_real))));
+static inline void qp_gemv_n(int m, int n, robot_arm_real alpha, const robot_arm_real *restrict A, int lda,
+                             const robot_arm_real *restrict x, robot_arm_real beta, robot_arm_real *restrict y)
+{
+    int i = 0, j;
+    for (; i + 4 <= m; i += 4) {
+        qp_v4 acc = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
+        if (beta != ROBOT_ARM_R(0.0))
+            __builtin_memcpy(&acc, y + i, sizeof acc);
+        for (j = 0; j < n; ++j) {
+            qp_v4 a;
+            __builtin_memcpy(&a, A + i + j * lda, sizeof a);
+            acc += a * (alpha * x[j]);
+        }
+        __builtin_memcpy(y + i, &acc, sizeof acc);
+    }
+    for (; i < m; ++i) {
+        robot_arm_real s = beta != ROBOT_ARM_R(0.0) ? y[i] : ROBOT_ARM_R(0.0);
+        for (j = 0; j < n; ++j)
+            s += A[i + j * lda] * (alpha * x[j]);
+        y[i] = s;
+    }
+}
+#else
+#define ROBOT_ARM_QP_V4 0
+#define qp_gemv_n robot_arm_lai_gemv_n
+#endif
+
 /* y += alpha P x for P packed by lower columns: one sequential pass over the packed
  * entries, each used twice (below the diagonal), the sums kept in a local vector. */
 static inline void spmv_packed(const robot_arm_real *restrict Pp, robot_arm_real alpha, const robot_arm_real *restrict x,
@@ -618,6 +653,12 @@ static inline void absmax_acc(int n, const robot_arm_real *restrict x, robot_arm
 {
     int i = 0;
 #if ROBOT_ARM_QP_PHIT
+#if ROBOT_ARM_LAI_V4_MAX
+    /* four entries per vector (the same maxima) */
+    for (; i + 3 < n; i += 4)
+        robot_arm_lai_v4_store(acc + i, robot_arm_lai_v4_max_acc(robot_arm_lai_v4_abs(robot_arm_lai_v4_load(x + i)),
+                                                         robot_arm_lai_v4_load(acc + i)));
+#endif
 #if ROBOT_ARM_LAI_V2_MAX
     /* two entries per vector (the same maxima) */
     for (; i + 1 < n; i += 2)
@@ -648,7 +689,7 @@ static inline void phi_both(const robot_arm_real *restrict Phi, const robot_arm_
 {
 #if ROBOT_ARM_QP_PHIT
     phit_gemv(PhiT, -ROBOT_ARM_R(1.0), v, a);
-    robot_arm_lai_gemv_n(NX, NW, -ROBOT_ARM_R(1.0), Phi, NX, w, ROBOT_ARM_R(0.0), rd);
+    qp_gemv_n(NX, NW, -ROBOT_ARM_R(1.0), Phi, NX, w, ROBOT_ARM_R(0.0), rd);
 #else
     robot_arm_real acc[NX], vr[NX];
     int i, l;
@@ -1045,13 +1086,88 @@ static int pivots_above_floor(robot_arm_qp_workspace *ws, robot_arm_real *Lu)
     return 1;
 }
 
+/* The parts of the sweeps, inlined where they are called (a call per stage of the backward
+ * sweep cost 7 % of the time of a robot-arm QP) */
+#if defined(__GNUC__)
+#define QP_SWEEP_INLINE static inline __attribute__((always_inline))
+#else
+#define QP_SWEEP_INLINE static inline
+#endif
+
+#if ROBOT_ARM_QP_PHIT
+/* The backward sweep of riccati_solve (below) in parts: its terminal step and stage k's step,
+ * which needs only the factors of stages k and k + 1. With the kept Phi_k' the factorisation
+ * runs the predictor's sweep stage by stage beside its own recursion (riccati_factor_fused):
+ * two chains of dependent operations that the core overlaps, each entry the same operations
+ * in the same order as in riccati_solve. */
+QP_SWEEP_INLINE void riccati_back_terminal(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_real *sp,
+                                           robot_arm_real *sl, const robot_arm_real *sn)
+{
+    /* p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
+    robot_arm_real tv[NX];
+    robot_arm_real *xN = sp + N * NW, *pN = sl + N * NX;
+    int i;
+    for (i = 0; i < NX; ++i)
+        tv[i] = -xN[i];
+    if (NE > 0) {
+        if (ws->rho_aug > ROBOT_ARM_R(0.0))
+            robot_arm_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, sn, ROBOT_ARM_R(1.0), tv);
+        for (i = 0; i < NE; ++i)
+            ws->e[i] = -sn[i];
+    }
+    for (i = 0; i < NX; ++i) {
+        xN[i] = pN[i];
+        pN[i] = tv[i];
+    }
+}
+
+QP_SWEEP_INLINE void riccati_back_stage(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int k, robot_arm_real *sp,
+                                        robot_arm_real *sl)
+{
+    /* the sweep vectors in local arrays: the compiler then knows that they alias none of
+     * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
+    robot_arm_real tv[NX], m[NW], y[NU1];
+    robot_arm_real *e = ws->e;
+    const robot_arm_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
+    const robot_arm_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
+    robot_arm_real *xk = sp + k * NW, *yk = xk + NX, *pk = sl + k * NX;
+    int i;
+    (void)in; /* (QP_PHIT reads the kept copy) */
+    /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
+    for (i = 0; i < NX; ++i)
+        tv[i] = pn[i];
+    spmv_packed(ws->P[k + 1], ROBOT_ARM_R(1.0), c, tv);
+    for (i = 0; i < NW; ++i)
+        m[i] = -xk[i];
+    phit_gemv(QP_PHIT(ws, in, k), ROBOT_ARM_R(1.0), tv, m);
+    if (NE > 0) {
+        robot_arm_lai_gemv_t(NX, NE, ROBOT_ARM_R(1.0), ws->G[k + 1], NX, c, ROBOT_ARM_R(1.0), e);
+    }
+    /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
+     * where u_k is formed (the forward sweep applies Lu'^{-1}); p_k and y are formed in
+     * local arrays and stored once */
+    for (i = 0; i < NU; ++i)
+        y[i] = m[NX + i];
+    lu_solve_n(ws->Lu[k], y);
+    for (i = 0; i < NX; ++i)
+        xk[i] = pk[i];
+    robot_arm_lai_gemv_t(NU, NX, -ROBOT_ARM_R(1.0), ws->K[k], NU1, y, ROBOT_ARM_R(1.0), m);
+    for (i = 0; i < NX; ++i)
+        pk[i] = m[i];
+    if (NE > 0)
+        robot_arm_lai_gemv_t(NU, NE, -ROBOT_ARM_R(1.0), ws->KN[k], NU1, y, ROBOT_ARM_R(1.0), e);
+    for (i = 0; i < NU; ++i)
+        yk[i] = y[i];
+}
+#endif
+
 /* Factor the Newton system for the current barrier weights (row_q), delta and rho.
  * Returns 0, or 1 when a stage pivot block M_uu is not positive definite (wrong inertia),
  * or 2 when the terminal-multiplier block S is singular. Per stage it keeps P_k (packed),
  * the packed factor Lu of M_uu = Lu Lu' and Lu^{-1} M_ux in K (with terminal equalities
  * G_k and Lu^{-1} Gam_u in KN); the solve applies Lu'^{-1} (the gain M_uu^{-1} M_ux is never
  * formed). */
-static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+static int riccati_factor_fused(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int fused)
 {
     int k, i, j;
     robot_arm_real *WT = ws->work;            /* NW x NX: Phi_k' P_{k+1} */
@@ -1100,6 +1216,12 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
         ws->S[i] = ROBOT_ARM_R(0.0);
     /* the largest |entry| of P_N, for the round-off estimate of a pivot (stage_noise) */
     pmagN = robot_arm_lai_max_abs_mat(NX, NX, Pf, NX);
+#if ROBOT_ARM_QP_PHIT
+    if (fused)
+        riccati_back_terminal(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+#else
+    (void)fused;
+#endif
 
     for (k = N - 1; k >= 0; --k) {
         robot_arm_real *M = ws->M;
@@ -1186,6 +1308,10 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
             robot_arm_lai_gemm_tn(NX, NE, NU, -ROBOT_ARM_R(1.0), K, NU1, KN, NU1, ROBOT_ARM_R(1.0), ws->G[k], NX);
             robot_arm_lai_gemm_tn(NE, NE, NU, ROBOT_ARM_R(1.0), KN, NU1, KN, NU1, ROBOT_ARM_R(1.0), ws->S, NE1);
         }
+#if ROBOT_ARM_QP_PHIT
+        if (fused)
+            riccati_back_stage(ws, in, k, ws->d_prim, ws->d_lam);
+#endif
     }
     if (NE > 0) {
         /* S is positive definite iff Req has full row rank on the states reachable from
@@ -1206,6 +1332,15 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
     return 0;
 }
 
+#define riccati_factor(ws, in) riccati_factor_fused((ws), (in), 0)
+/* the predictor's backward sweep run with the factorisation (the host path) */
+#ifndef QP_FUSE
+#define QP_FUSE ROBOT_ARM_QP_PHIT
+#endif
+
+QP_SWEEP_INLINE void riccati_forward(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_real *sp,
+                                     robot_arm_real *sl, robot_arm_real *sn);
+
 /* Solve the factored Newton system in place: (sp, sl, sn) holds the right-hand side
  * (rhs_stat, rhs_dyn, rhs_eqN) on entry and the solution on exit. Backward sweep of the
  * value-function vectors, nu at stage 0, forward sweep of the primal and the costates
@@ -1215,15 +1350,15 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
 static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_real *sp, robot_arm_real *sl,
                           robot_arm_real *sn)
 {
-    int k, i;
+    int k;
 #if ROBOT_ARM_QP_PHIT
-    /* the sweep vectors in local arrays: the compiler then knows that they alias none of
-     * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
-    robot_arm_real tv[NX], m[NW];
+    riccati_back_terminal(ws, in, sp, sl, sn);
+    for (k = N - 1; k >= 0; --k)
+        riccati_back_stage(ws, in, k, sp, sl);
 #else
-    robot_arm_real *tv = ws->work;        /* NX */
-    robot_arm_real *m = ws->work + NX;    /* NW */
-#endif
+    int i;
+    robot_arm_real *tv = ws->work;     /* NX */
+    robot_arm_real *m = ws->work + NX; /* NW */
     robot_arm_real *e = ws->e;
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
@@ -1257,25 +1392,7 @@ static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
             robot_arm_lai_gemv_t(NX, NE, ROBOT_ARM_R(1.0), ws->G[k + 1], NX, c, ROBOT_ARM_R(1.0), e);
         }
         /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
-         * where u_k is formed (the forward sweep applies Lu'^{-1}); on the host path p_k and y
-         * are formed in local arrays and stored once */
-#if ROBOT_ARM_QP_PHIT
-        {
-            robot_arm_real y[NU1];
-            for (i = 0; i < NU; ++i)
-                y[i] = m[NX + i];
-            lu_solve_n(ws->Lu[k], y);
-            for (i = 0; i < NX; ++i)
-                xk[i] = pk[i];
-            robot_arm_lai_gemv_t(NU, NX, -ROBOT_ARM_R(1.0), ws->K[k], NU1, y, ROBOT_ARM_R(1.0), m);
-            for (i = 0; i < NX; ++i)
-                pk[i] = m[i];
-            if (NE > 0)
-                robot_arm_lai_gemv_t(NU, NE, -ROBOT_ARM_R(1.0), ws->KN[k], NU1, y, ROBOT_ARM_R(1.0), e);
-            for (i = 0; i < NU; ++i)
-                yk[i] = y[i];
-        }
-#else
+         * where u_k is formed (the forward sweep applies Lu'^{-1}) */
         lu_solve_n(ws->Lu[k], m + NX);
         for (i = 0; i < NX; ++i) {
             xk[i] = pk[i];
@@ -1286,8 +1403,17 @@ static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
             robot_arm_lai_gemv_t(NU, NE, -ROBOT_ARM_R(1.0), ws->KN[k], NU1, m + NX, ROBOT_ARM_R(1.0), e);
         for (i = 0; i < NU; ++i)
             yk[i] = m[NX + i];
-#endif
     }
+#endif
+    riccati_forward(ws, in, sp, sl, sn);
+}
+
+/* riccati_solve's part after the backward sweep: nu, the forward sweep and the costates. */
+QP_SWEEP_INLINE void riccati_forward(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_real *sp,
+                                     robot_arm_real *sl, robot_arm_real *sn)
+{
+    int k, i;
+    const robot_arm_real *e = ws->e;
     /* stage 0: x_0 = rhs_dyn_0 (in place); dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
     if (NE > 0) {
         for (i = 0; i < NE; ++i)
@@ -1296,31 +1422,58 @@ static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
         robot_arm_lai_trsv_ln(NE, ws->S, NE1, sn);
         robot_arm_lai_trsv_lt(NE, ws->S, NE1, sn);
     }
+#if ROBOT_ARM_QP_PHIT
+    /* the forward sweep with w_k = (x_k, u_k) and x_{k+1} in local arrays, stored once (the
+     * compiler then knows that they alias none of the arrays it reads: the products with
+     * LK and Phi_k run as vectors, with the same sums in the same order) */
+    {
+        robot_arm_real wl[NW], xn[NX];
+        for (i = 0; i < NX; ++i)
+            wl[i] = sp[i];
+        for (k = 0; k < N; ++k) {
+            robot_arm_real *u = sp + k * NW + NX;
+            robot_arm_real *lamk = sl + k * NX;
+            robot_arm_real *xs = sp + (k + 1) * NW;
+            /* u_k = -M_uu^{-1} (M_ux x_k + m_u + Gam_u nu) = -Lu'^{-1} (LK x_k + y_k + LKn nu) */
+            robot_arm_real ul[NU1];
+            for (i = 0; i < NU; ++i)
+                ul[i] = -u[i];
+            robot_arm_lai_gemv_n(NU, NX, -ROBOT_ARM_R(1.0), ws->K[k], NU1, wl, ROBOT_ARM_R(1.0), ul);
+            if (NE > 0)
+                robot_arm_lai_gemv_n(NU, NE, -ROBOT_ARM_R(1.0), ws->KN[k], NU1, sn, ROBOT_ARM_R(1.0), ul);
+            lu_solve_t(ws->Lu[k], ul);
+            for (i = 0; i < NU; ++i) {
+                u[i] = ul[i];
+                wl[NX + i] = ul[i];
+            }
+            /* lam_k = -(P_k x_k + p_k + G_k nu) */
+            for (i = 0; i < NX; ++i)
+                lamk[i] = -lamk[i];
+            spmv_packed(ws->P[k], -ROBOT_ARM_R(1.0), wl, lamk);
+            if (NE > 0)
+                robot_arm_lai_gemv_n(NX, NE, -ROBOT_ARM_R(1.0), ws->G[k], NX, sn, ROBOT_ARM_R(1.0), lamk);
+            /* x_{k+1} = Phi_k w_k + c_k */
+            for (i = 0; i < NX; ++i)
+                xn[i] = xs[i];
+            qp_gemv_n(NX, NW, ROBOT_ARM_R(1.0), in->Phi[k], NX, wl, ROBOT_ARM_R(1.0), xn);
+            for (i = 0; i < NX; ++i) {
+                xs[i] = xn[i];
+                wl[i] = xn[i];
+            }
+        }
+    }
+#else
     for (k = 0; k < N; ++k) {
         robot_arm_real *w = sp + k * NW;
         robot_arm_real *u = w + NX;
         robot_arm_real *lamk = sl + k * NX;
         /* u_k = -M_uu^{-1} (M_ux x_k + m_u + Gam_u nu) = -Lu'^{-1} (LK x_k + y_k + LKn nu) */
-#if ROBOT_ARM_QP_PHIT
-        {
-            robot_arm_real ul[NU1]; /* formed locally, stored once */
-            for (i = 0; i < NU; ++i)
-                ul[i] = -u[i];
-            robot_arm_lai_gemv_n(NU, NX, -ROBOT_ARM_R(1.0), ws->K[k], NU1, w, ROBOT_ARM_R(1.0), ul);
-            if (NE > 0)
-                robot_arm_lai_gemv_n(NU, NE, -ROBOT_ARM_R(1.0), ws->KN[k], NU1, sn, ROBOT_ARM_R(1.0), ul);
-            lu_solve_t(ws->Lu[k], ul);
-            for (i = 0; i < NU; ++i)
-                u[i] = ul[i];
-        }
-#else
         for (i = 0; i < NU; ++i)
             u[i] = -u[i];
         robot_arm_lai_gemv_n(NU, NX, -ROBOT_ARM_R(1.0), ws->K[k], NU1, w, ROBOT_ARM_R(1.0), u);
         if (NE > 0)
             robot_arm_lai_gemv_n(NU, NE, -ROBOT_ARM_R(1.0), ws->KN[k], NU1, sn, ROBOT_ARM_R(1.0), u);
         lu_solve_t(ws->Lu[k], u);
-#endif
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
             lamk[i] = -lamk[i];
@@ -1330,6 +1483,7 @@ static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
         /* x_{k+1} = Phi_k w_k + c_k */
         robot_arm_lai_gemv_n(NX, NW, ROBOT_ARM_R(1.0), in->Phi[k], NX, w, ROBOT_ARM_R(1.0), sp + (k + 1) * NW);
     }
+#endif
     {
         const robot_arm_real *xN = sp + N * NW;
         robot_arm_real *lamN = sl + N * NX;
@@ -1487,6 +1641,23 @@ static void newton_rhs(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
         oe[i] = -ws->r_eqN[i];
 }
 
+/* The factorisation; given the predictor's centring (rhs), with the host path's fused sweep:
+ * the predictor's right-hand side formed first (at every try, as a failed try leaves the
+ * sweep half done) and its backward sweep run beside the recursion, so that the predictor
+ * only runs the forward sweep (newton_direction with swept 1). */
+static int riccati_factor_rhs(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_centring *rhs)
+{
+#if ROBOT_ARM_QP_PHIT
+    if (rhs != NULL) {
+        newton_rhs(ws, in, rhs, ws->d_prim, ws->d_lam, ws->d_nu);
+        return riccati_factor_fused(ws, in, 1);
+    }
+#else
+    (void)rhs;
+#endif
+    return riccati_factor(ws, in);
+}
+
 /* Newton direction for the barrier right-hand side rc (t z - target per side): form the
  * condensed right-hand side in the direction arrays, solve in place, refine, recover slack
  * and multiplier steps. A refinement step forms the right-hand side again in the residual
@@ -1494,11 +1665,15 @@ static void newton_rhs(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
  * are formed anew at the next iterate), computes the residual of the Newton system and
  * the correction there in place; a further step first forms the iterate's residuals again. */
 static void newton_direction(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int refine_steps,
-                             const qp_centring *cc)
+                             const qp_centring *cc, int swept)
 {
     int it, k, b, j;
-    newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
-    riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    if (QP_FUSE && swept) { /* right-hand side and backward sweep done with the factorisation */
+        riccati_forward(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    } else {
+        newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
+        riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    }
     for (it = 0; it < refine_steps; ++it) {
         if (it > 0) {
             qp_res again; /* the same values as at the start of the iteration */
@@ -2544,7 +2719,8 @@ static void trace_barrier_weights(const robot_arm_qp_workspace *ws, const robot_
 
 /* Exact terminal augmentation rho Req'Req after a failed pivot: rho grows from the Hessian
  * scale over |Req|^2 by factors of 100. Returns riccati_factor's code of the last try. */
-static int qp_augment_terminal(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+static int qp_augment_terminal(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
+                               const qp_centring *rhs)
 {
     int tries, fact = 1;
     robot_arm_real rho0 = L->hscale / dmax(robot_arm_lai_max_abs_mat(NE, NX, in->Req, NE1), ROBOT_ARM_REAL_SQRT_TINY);
@@ -2552,14 +2728,14 @@ static int qp_augment_terminal(qp_loop *L, robot_arm_qp_workspace *ws, const rob
     for (tries = 0; tries < RHO_TRIES && fact == 1 && ws->rho_aug < rho0 * RHO_MAX_REL; ++tries) {
         ws->rho_aug = ws->rho_aug > ROBOT_ARM_R(0.0) ? ROBOT_ARM_R(100.0) * ws->rho_aug : rho0;
         ++L->n_aug;
-        fact = riccati_factor(ws, in);
+        fact = riccati_factor_rhs(ws, in, rhs);
     }
     return fact;
 }
 
 /* Inertia correction delta I after a failed pivot, growing geometrically from a third of
  * the last one used. Returns riccati_factor's code of the last try. */
-static int qp_correct_delta(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+static int qp_correct_delta(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_centring *rhs)
 {
     int tries, fact;
     ws->delta = L->delta_last > ROBOT_ARM_R(0.0) ? dmax(ROBOT_ARM_R(1e-20) * L->hscale, L->delta_last / ROBOT_ARM_R(3.0))
@@ -2568,7 +2744,7 @@ static int qp_correct_delta(qp_loop *L, robot_arm_qp_workspace *ws, const robot_
      * test alone may never fire (NaN compares false, inf * 10 stays inf) */
     for (tries = 0;; ++tries) {
         ++L->n_corr;
-        fact = riccati_factor(ws, in);
+        fact = riccati_factor_rhs(ws, in, rhs);
         if (fact != 1 || !(ws->delta <= DELTA_MAX_REL * L->hscale) || tries >= DELTA_TRIES)
             break;
         ws->delta *= DELTA_GROW;
@@ -2580,15 +2756,16 @@ static int qp_correct_delta(qp_loop *L, robot_arm_qp_workspace *ws, const robot_
 
 /* Factorisation with minimal inertia correction: first the exact terminal augmentation
  * rho Req'Req, then delta I growing geometrically. Returns 0 when factorised. */
-static int qp_factor_with_correction(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
+static int qp_factor_with_correction(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
+                                     const qp_centring *rhs)
 {
     int fact;
     ws->delta = ROBOT_ARM_R(0.0);
-    fact = riccati_factor(ws, in);
+    fact = riccati_factor_rhs(ws, in, rhs);
     if (fact == 1 && NE > 0)
-        fact = qp_augment_terminal(L, ws, in);
+        fact = qp_augment_terminal(L, ws, in, rhs);
     if (fact == 1)
-        fact = qp_correct_delta(L, ws, in);
+        fact = qp_correct_delta(L, ws, in, rhs);
     return fact;
 }
 
@@ -2628,7 +2805,7 @@ static int qp_refine_steps(const qp_loop *L, const robot_arm_qp_workspace *ws, c
 static void qp_newton_step(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int nref)
 {
     const qp_centring none = {0, ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)}; /* no bounded side: rc is never formed */
-    newton_direction(ws, in, nref, &none);
+    newton_direction(ws, in, nref, &none, 0);
     robot_arm_lai_axpy(NP, ROBOT_ARM_R(1.0), ws->d_prim, ws->prim);
     robot_arm_lai_axpy((N + 1) * NX, ROBOT_ARM_R(1.0), ws->d_lam, ws->lam);
     robot_arm_lai_axpy(NE, ROBOT_ARM_R(1.0), ws->d_nu, ws->nu);
@@ -2638,12 +2815,12 @@ static void qp_newton_step(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in
  * (*alpha_aff, primal; one length for both unless long_steps) and the average
  * complementarity mu_aff that step would reach, returned. */
 static robot_arm_real qp_predictor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r, int long_steps,
-                               robot_arm_real *alpha_aff)
+                               int swept, robot_arm_real *alpha_aff)
 {
     const qp_centring pred = {0, ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
     robot_arm_real alpha, alpha_d, mu_aff = ROBOT_ARM_R(0.0);
     int i, full[2];
-    newton_direction(ws, in, 0, &pred);
+    newton_direction(ws, in, 0, &pred, swept);
     max_steps(ws, &alpha, &alpha_d, full);
     if (!long_steps)
         alpha = alpha_d = dmin(alpha, alpha_d);
@@ -2697,7 +2874,7 @@ static void qp_corrector(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm
     corr.eta = (iter > 0 && r->mu > L->mu_prev && dmax(r->stat_s, r->eq_s) < r->comp_s) ? ROBOT_ARM_R(0.0)
                                                                                         : ROBOT_ARM_R(1.0);
     L->mu_prev = r->mu;
-    newton_direction(ws, in, nref, &corr);
+    newton_direction(ws, in, nref, &corr, 0);
     max_steps(ws, alpha, alpha_d, full);
     if (long_steps) {
         *alpha = step_to_boundary(*alpha, full[0]);
@@ -2943,7 +3120,7 @@ static int as_factor(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_
     }
     if (fact == 1 && NE > 0) {
         QP_TRACE("active set: terminal augmentation\n");
-        fact = qp_augment_terminal(L, ws, in);
+        fact = qp_augment_terminal(L, ws, in, NULL);
     }
     if (fact != 0)
         QP_TRACE("active set: factorisation failed\n");
@@ -3370,6 +3547,7 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
             return status;
     }
     for (iter = L.as_sweeps;; ++iter) {
+        const qp_centring pred = {0, ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)}; /* the predictor's */
         robot_arm_real alpha, alpha_d, alpha_aff, sigma;
         int floors_before, nref, corrections;
         /* the long steps (separate primal and dual step lengths, up to the boundary) in the
@@ -3390,7 +3568,7 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
 
         floors_before = ws->pivot_floors;
         corrections = L.n_corr + L.n_aug;
-        if (qp_factor_with_correction(&L, ws, in) != 0) {
+        if (qp_factor_with_correction(&L, ws, in, QP_FUSE && r.nsides > 0 ? &pred : NULL) != 0) {
             status = ROBOT_ARM_QP_NUMERICAL;
             break;
         }
@@ -3403,7 +3581,7 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
             qp_newton_step(ws, in, nref);
             continue;
         }
-        sigma = qp_sigma(&L, ws, &r, qp_predictor(ws, in, &r, long_steps, &alpha_aff));
+        sigma = qp_sigma(&L, ws, &r, qp_predictor(ws, in, &r, long_steps, QP_FUSE, &alpha_aff));
         qp_corrector(&L, ws, in, &r, iter, nref, sigma, long_steps, &alpha, &alpha_d);
         QP_TRACE("it %2d mu %.2e stat %.2e eq %.2e ineq %.2e comp %.2e | a_aff %.3f sigma %.2e "
                  "alpha %.3e delta %.1e rho %.1e floors %d |dp| %.2e\n",

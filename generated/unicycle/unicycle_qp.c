@@ -382,6 +382,41 @@ static void row_axpy(const unicycle_qp_in *in, int k, int j, unicycle_real a, un
     }
 }
 
+/* y = beta y + alpha A x (A m x n, column-major) as unicycle_lai_gemv_n: each entry the sum over
+ * the columns in their order, with beta 0 (y overwritten) or 1. With AVX (UNICYCLE_QP_V4) four
+ * rows per vector with the sums in registers and the rows left over alone: the same
+ * operations on each entry in the same order, so the same values (GCC 12 left the product
+ * with Phi_k at nx = 5 scalar, two instructions per product). */
+#if UNICYCLE_QP_PHIT && UNICYCLE_LAI_VEC && defined(__AVX__)
+#define UNICYCLE_QP_V4 1
+typedef unicycle_real qp_v4 __attribute__((vector_size(4 * sizeof(unicycle_real))));
+static inline void qp_gemv_n(int m, int n, unicycle_real alpha, const unicycle_real *restrict A, int lda,
+                             const unicycle_real *restrict x, unicycle_real beta, unicycle_real *restrict y)
+{
+    int i = 0, j;
+    for (; i + 4 <= m; i += 4) {
+        qp_v4 acc = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
+        if (beta != UNICYCLE_R(0.0))
+            __builtin_memcpy(&acc, y + i, sizeof acc);
+        for (j = 0; j < n; ++j) {
+            qp_v4 a;
+            __builtin_memcpy(&a, A + i + j * lda, sizeof a);
+            acc += a * (alpha * x[j]);
+        }
+        __builtin_memcpy(y + i, &acc, sizeof acc);
+    }
+    for (; i < m; ++i) {
+        unicycle_real s = beta != UNICYCLE_R(0.0) ? y[i] : UNICYCLE_R(0.0);
+        for (j = 0; j < n; ++j)
+            s += A[i + j * lda] * (alpha * x[j]);
+        y[i] = s;
+    }
+}
+#else
+#define UNICYCLE_QP_V4 0
+#define qp_gemv_n unicycle_lai_gemv_n
+#endif
+
 /* y += alpha P x for P packed by lower columns: one sequential pass over the packed
  * entries, each used twice (below the diagonal), the sums kept in a local vector. */
 static inline void spmv_packed(const unicycle_real *restrict Pp, unicycle_real alpha, const unicycle_real *restrict x,
@@ -618,6 +653,12 @@ static inline void absmax_acc(int n, const unicycle_real *restrict x, unicycle_r
 {
     int i = 0;
 #if UNICYCLE_QP_PHIT
+#if UNICYCLE_LAI_V4_MAX
+    /* four entries per vector (the same maxima) */
+    for (; i + 3 < n; i += 4)
+        unicycle_lai_v4_store(acc + i, unicycle_lai_v4_max_acc(unicycle_lai_v4_abs(unicycle_lai_v4_load(x + i)),
+                                                         unicycle_lai_v4_load(acc + i)));
+#endif
 #if UNICYCLE_LAI_V2_MAX
     /* two entries per vector (the same maxima) */
     for (; i + 1 < n; i += 2)
@@ -648,7 +689,7 @@ static inline void phi_both(const unicycle_real *restrict Phi, const unicycle_re
 {
 #if UNICYCLE_QP_PHIT
     phit_gemv(PhiT, -UNICYCLE_R(1.0), v, a);
-    unicycle_lai_gemv_n(NX, NW, -UNICYCLE_R(1.0), Phi, NX, w, UNICYCLE_R(0.0), rd);
+    qp_gemv_n(NX, NW, -UNICYCLE_R(1.0), Phi, NX, w, UNICYCLE_R(0.0), rd);
 #else
     unicycle_real acc[NX], vr[NX];
     int i, l;
@@ -1045,13 +1086,88 @@ static int pivots_above_floor(unicycle_qp_workspace *ws, unicycle_real *Lu)
     return 1;
 }
 
+/* The parts of the sweeps, inlined where they are called (a call per stage of the backward
+ * sweep cost 7 % of the time of a robot-arm QP) */
+#if defined(__GNUC__)
+#define QP_SWEEP_INLINE static inline __attribute__((always_inline))
+#else
+#define QP_SWEEP_INLINE static inline
+#endif
+
+#if UNICYCLE_QP_PHIT
+/* The backward sweep of riccati_solve (below) in parts: its terminal step and stage k's step,
+ * which needs only the factors of stages k and k + 1. With the kept Phi_k' the factorisation
+ * runs the predictor's sweep stage by stage beside its own recursion (riccati_factor_fused):
+ * two chains of dependent operations that the core overlaps, each entry the same operations
+ * in the same order as in riccati_solve. */
+QP_SWEEP_INLINE void riccati_back_terminal(unicycle_qp_workspace *ws, const unicycle_qp_in *in, unicycle_real *sp,
+                                           unicycle_real *sl, const unicycle_real *sn)
+{
+    /* p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
+    unicycle_real tv[NX];
+    unicycle_real *xN = sp + N * NW, *pN = sl + N * NX;
+    int i;
+    for (i = 0; i < NX; ++i)
+        tv[i] = -xN[i];
+    if (NE > 0) {
+        if (ws->rho_aug > UNICYCLE_R(0.0))
+            unicycle_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, sn, UNICYCLE_R(1.0), tv);
+        for (i = 0; i < NE; ++i)
+            ws->e[i] = -sn[i];
+    }
+    for (i = 0; i < NX; ++i) {
+        xN[i] = pN[i];
+        pN[i] = tv[i];
+    }
+}
+
+QP_SWEEP_INLINE void riccati_back_stage(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int k, unicycle_real *sp,
+                                        unicycle_real *sl)
+{
+    /* the sweep vectors in local arrays: the compiler then knows that they alias none of
+     * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
+    unicycle_real tv[NX], m[NW], y[NU1];
+    unicycle_real *e = ws->e;
+    const unicycle_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
+    const unicycle_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
+    unicycle_real *xk = sp + k * NW, *yk = xk + NX, *pk = sl + k * NX;
+    int i;
+    (void)in; /* (QP_PHIT reads the kept copy) */
+    /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
+    for (i = 0; i < NX; ++i)
+        tv[i] = pn[i];
+    spmv_packed(ws->P[k + 1], UNICYCLE_R(1.0), c, tv);
+    for (i = 0; i < NW; ++i)
+        m[i] = -xk[i];
+    phit_gemv(QP_PHIT(ws, in, k), UNICYCLE_R(1.0), tv, m);
+    if (NE > 0) {
+        unicycle_lai_gemv_t(NX, NE, UNICYCLE_R(1.0), ws->G[k + 1], NX, c, UNICYCLE_R(1.0), e);
+    }
+    /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
+     * where u_k is formed (the forward sweep applies Lu'^{-1}); p_k and y are formed in
+     * local arrays and stored once */
+    for (i = 0; i < NU; ++i)
+        y[i] = m[NX + i];
+    lu_solve_n(ws->Lu[k], y);
+    for (i = 0; i < NX; ++i)
+        xk[i] = pk[i];
+    unicycle_lai_gemv_t(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, y, UNICYCLE_R(1.0), m);
+    for (i = 0; i < NX; ++i)
+        pk[i] = m[i];
+    if (NE > 0)
+        unicycle_lai_gemv_t(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, y, UNICYCLE_R(1.0), e);
+    for (i = 0; i < NU; ++i)
+        yk[i] = y[i];
+}
+#endif
+
 /* Factor the Newton system for the current barrier weights (row_q), delta and rho.
  * Returns 0, or 1 when a stage pivot block M_uu is not positive definite (wrong inertia),
  * or 2 when the terminal-multiplier block S is singular. Per stage it keeps P_k (packed),
  * the packed factor Lu of M_uu = Lu Lu' and Lu^{-1} M_ux in K (with terminal equalities
  * G_k and Lu^{-1} Gam_u in KN); the solve applies Lu'^{-1} (the gain M_uu^{-1} M_ux is never
  * formed). */
-static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
+static int riccati_factor_fused(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int fused)
 {
     int k, i, j;
     unicycle_real *WT = ws->work;            /* NW x NX: Phi_k' P_{k+1} */
@@ -1100,6 +1216,12 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
         ws->S[i] = UNICYCLE_R(0.0);
     /* the largest |entry| of P_N, for the round-off estimate of a pivot (stage_noise) */
     pmagN = unicycle_lai_max_abs_mat(NX, NX, Pf, NX);
+#if UNICYCLE_QP_PHIT
+    if (fused)
+        riccati_back_terminal(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+#else
+    (void)fused;
+#endif
 
     for (k = N - 1; k >= 0; --k) {
         unicycle_real *M = ws->M;
@@ -1186,6 +1308,10 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
             unicycle_lai_gemm_tn(NX, NE, NU, -UNICYCLE_R(1.0), K, NU1, KN, NU1, UNICYCLE_R(1.0), ws->G[k], NX);
             unicycle_lai_gemm_tn(NE, NE, NU, UNICYCLE_R(1.0), KN, NU1, KN, NU1, UNICYCLE_R(1.0), ws->S, NE1);
         }
+#if UNICYCLE_QP_PHIT
+        if (fused)
+            riccati_back_stage(ws, in, k, ws->d_prim, ws->d_lam);
+#endif
     }
     if (NE > 0) {
         /* S is positive definite iff Req has full row rank on the states reachable from
@@ -1206,6 +1332,15 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
     return 0;
 }
 
+#define riccati_factor(ws, in) riccati_factor_fused((ws), (in), 0)
+/* the predictor's backward sweep run with the factorisation (the host path) */
+#ifndef QP_FUSE
+#define QP_FUSE UNICYCLE_QP_PHIT
+#endif
+
+QP_SWEEP_INLINE void riccati_forward(unicycle_qp_workspace *ws, const unicycle_qp_in *in, unicycle_real *sp,
+                                     unicycle_real *sl, unicycle_real *sn);
+
 /* Solve the factored Newton system in place: (sp, sl, sn) holds the right-hand side
  * (rhs_stat, rhs_dyn, rhs_eqN) on entry and the solution on exit. Backward sweep of the
  * value-function vectors, nu at stage 0, forward sweep of the primal and the costates
@@ -1215,15 +1350,15 @@ static int riccati_factor(unicycle_qp_workspace *ws, const unicycle_qp_in *in)
 static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, unicycle_real *sp, unicycle_real *sl,
                           unicycle_real *sn)
 {
-    int k, i;
+    int k;
 #if UNICYCLE_QP_PHIT
-    /* the sweep vectors in local arrays: the compiler then knows that they alias none of
-     * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
-    unicycle_real tv[NX], m[NW];
+    riccati_back_terminal(ws, in, sp, sl, sn);
+    for (k = N - 1; k >= 0; --k)
+        riccati_back_stage(ws, in, k, sp, sl);
 #else
-    unicycle_real *tv = ws->work;        /* NX */
-    unicycle_real *m = ws->work + NX;    /* NW */
-#endif
+    int i;
+    unicycle_real *tv = ws->work;     /* NX */
+    unicycle_real *m = ws->work + NX; /* NW */
     unicycle_real *e = ws->e;
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
@@ -1257,25 +1392,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
             unicycle_lai_gemv_t(NX, NE, UNICYCLE_R(1.0), ws->G[k + 1], NX, c, UNICYCLE_R(1.0), e);
         }
         /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
-         * where u_k is formed (the forward sweep applies Lu'^{-1}); on the host path p_k and y
-         * are formed in local arrays and stored once */
-#if UNICYCLE_QP_PHIT
-        {
-            unicycle_real y[NU1];
-            for (i = 0; i < NU; ++i)
-                y[i] = m[NX + i];
-            lu_solve_n(ws->Lu[k], y);
-            for (i = 0; i < NX; ++i)
-                xk[i] = pk[i];
-            unicycle_lai_gemv_t(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, y, UNICYCLE_R(1.0), m);
-            for (i = 0; i < NX; ++i)
-                pk[i] = m[i];
-            if (NE > 0)
-                unicycle_lai_gemv_t(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, y, UNICYCLE_R(1.0), e);
-            for (i = 0; i < NU; ++i)
-                yk[i] = y[i];
-        }
-#else
+         * where u_k is formed (the forward sweep applies Lu'^{-1}) */
         lu_solve_n(ws->Lu[k], m + NX);
         for (i = 0; i < NX; ++i) {
             xk[i] = pk[i];
@@ -1286,8 +1403,17 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
             unicycle_lai_gemv_t(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, m + NX, UNICYCLE_R(1.0), e);
         for (i = 0; i < NU; ++i)
             yk[i] = m[NX + i];
-#endif
     }
+#endif
+    riccati_forward(ws, in, sp, sl, sn);
+}
+
+/* riccati_solve's part after the backward sweep: nu, the forward sweep and the costates. */
+QP_SWEEP_INLINE void riccati_forward(unicycle_qp_workspace *ws, const unicycle_qp_in *in, unicycle_real *sp,
+                                     unicycle_real *sl, unicycle_real *sn)
+{
+    int k, i;
+    const unicycle_real *e = ws->e;
     /* stage 0: x_0 = rhs_dyn_0 (in place); dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
     if (NE > 0) {
         for (i = 0; i < NE; ++i)
@@ -1296,31 +1422,58 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         unicycle_lai_trsv_ln(NE, ws->S, NE1, sn);
         unicycle_lai_trsv_lt(NE, ws->S, NE1, sn);
     }
+#if UNICYCLE_QP_PHIT
+    /* the forward sweep with w_k = (x_k, u_k) and x_{k+1} in local arrays, stored once (the
+     * compiler then knows that they alias none of the arrays it reads: the products with
+     * LK and Phi_k run as vectors, with the same sums in the same order) */
+    {
+        unicycle_real wl[NW], xn[NX];
+        for (i = 0; i < NX; ++i)
+            wl[i] = sp[i];
+        for (k = 0; k < N; ++k) {
+            unicycle_real *u = sp + k * NW + NX;
+            unicycle_real *lamk = sl + k * NX;
+            unicycle_real *xs = sp + (k + 1) * NW;
+            /* u_k = -M_uu^{-1} (M_ux x_k + m_u + Gam_u nu) = -Lu'^{-1} (LK x_k + y_k + LKn nu) */
+            unicycle_real ul[NU1];
+            for (i = 0; i < NU; ++i)
+                ul[i] = -u[i];
+            unicycle_lai_gemv_n(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, wl, UNICYCLE_R(1.0), ul);
+            if (NE > 0)
+                unicycle_lai_gemv_n(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, sn, UNICYCLE_R(1.0), ul);
+            lu_solve_t(ws->Lu[k], ul);
+            for (i = 0; i < NU; ++i) {
+                u[i] = ul[i];
+                wl[NX + i] = ul[i];
+            }
+            /* lam_k = -(P_k x_k + p_k + G_k nu) */
+            for (i = 0; i < NX; ++i)
+                lamk[i] = -lamk[i];
+            spmv_packed(ws->P[k], -UNICYCLE_R(1.0), wl, lamk);
+            if (NE > 0)
+                unicycle_lai_gemv_n(NX, NE, -UNICYCLE_R(1.0), ws->G[k], NX, sn, UNICYCLE_R(1.0), lamk);
+            /* x_{k+1} = Phi_k w_k + c_k */
+            for (i = 0; i < NX; ++i)
+                xn[i] = xs[i];
+            qp_gemv_n(NX, NW, UNICYCLE_R(1.0), in->Phi[k], NX, wl, UNICYCLE_R(1.0), xn);
+            for (i = 0; i < NX; ++i) {
+                xs[i] = xn[i];
+                wl[i] = xn[i];
+            }
+        }
+    }
+#else
     for (k = 0; k < N; ++k) {
         unicycle_real *w = sp + k * NW;
         unicycle_real *u = w + NX;
         unicycle_real *lamk = sl + k * NX;
         /* u_k = -M_uu^{-1} (M_ux x_k + m_u + Gam_u nu) = -Lu'^{-1} (LK x_k + y_k + LKn nu) */
-#if UNICYCLE_QP_PHIT
-        {
-            unicycle_real ul[NU1]; /* formed locally, stored once */
-            for (i = 0; i < NU; ++i)
-                ul[i] = -u[i];
-            unicycle_lai_gemv_n(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, w, UNICYCLE_R(1.0), ul);
-            if (NE > 0)
-                unicycle_lai_gemv_n(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, sn, UNICYCLE_R(1.0), ul);
-            lu_solve_t(ws->Lu[k], ul);
-            for (i = 0; i < NU; ++i)
-                u[i] = ul[i];
-        }
-#else
         for (i = 0; i < NU; ++i)
             u[i] = -u[i];
         unicycle_lai_gemv_n(NU, NX, -UNICYCLE_R(1.0), ws->K[k], NU1, w, UNICYCLE_R(1.0), u);
         if (NE > 0)
             unicycle_lai_gemv_n(NU, NE, -UNICYCLE_R(1.0), ws->KN[k], NU1, sn, UNICYCLE_R(1.0), u);
         lu_solve_t(ws->Lu[k], u);
-#endif
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
             lamk[i] = -lamk[i];
@@ -1330,6 +1483,7 @@ static void riccati_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, u
         /* x_{k+1} = Phi_k w_k + c_k */
         unicycle_lai_gemv_n(NX, NW, UNICYCLE_R(1.0), in->Phi[k], NX, w, UNICYCLE_R(1.0), sp + (k + 1) * NW);
     }
+#endif
     {
         const unicycle_real *xN = sp + N * NW;
         unicycle_real *lamN = sl + N * NX;
@@ -1487,6 +1641,23 @@ static void newton_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, cons
         oe[i] = -ws->r_eqN[i];
 }
 
+/* The factorisation; given the predictor's centring (rhs), with the host path's fused sweep:
+ * the predictor's right-hand side formed first (at every try, as a failed try leaves the
+ * sweep half done) and its backward sweep run beside the recursion, so that the predictor
+ * only runs the forward sweep (newton_direction with swept 1). */
+static int riccati_factor_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const qp_centring *rhs)
+{
+#if UNICYCLE_QP_PHIT
+    if (rhs != NULL) {
+        newton_rhs(ws, in, rhs, ws->d_prim, ws->d_lam, ws->d_nu);
+        return riccati_factor_fused(ws, in, 1);
+    }
+#else
+    (void)rhs;
+#endif
+    return riccati_factor(ws, in);
+}
+
 /* Newton direction for the barrier right-hand side rc (t z - target per side): form the
  * condensed right-hand side in the direction arrays, solve in place, refine, recover slack
  * and multiplier steps. A refinement step forms the right-hand side again in the residual
@@ -1494,11 +1665,15 @@ static void newton_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, cons
  * are formed anew at the next iterate), computes the residual of the Newton system and
  * the correction there in place; a further step first forms the iterate's residuals again. */
 static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int refine_steps,
-                             const qp_centring *cc)
+                             const qp_centring *cc, int swept)
 {
     int it, k, b, j;
-    newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
-    riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    if (QP_FUSE && swept) { /* right-hand side and backward sweep done with the factorisation */
+        riccati_forward(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    } else {
+        newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
+        riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    }
     for (it = 0; it < refine_steps; ++it) {
         if (it > 0) {
             qp_res again; /* the same values as at the start of the iteration */
@@ -2544,7 +2719,8 @@ static void trace_barrier_weights(const unicycle_qp_workspace *ws, const unicycl
 
 /* Exact terminal augmentation rho Req'Req after a failed pivot: rho grows from the Hessian
  * scale over |Req|^2 by factors of 100. Returns riccati_factor's code of the last try. */
-static int qp_augment_terminal(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in)
+static int qp_augment_terminal(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in,
+                               const qp_centring *rhs)
 {
     int tries, fact = 1;
     unicycle_real rho0 = L->hscale / dmax(unicycle_lai_max_abs_mat(NE, NX, in->Req, NE1), UNICYCLE_REAL_SQRT_TINY);
@@ -2552,14 +2728,14 @@ static int qp_augment_terminal(qp_loop *L, unicycle_qp_workspace *ws, const unic
     for (tries = 0; tries < RHO_TRIES && fact == 1 && ws->rho_aug < rho0 * RHO_MAX_REL; ++tries) {
         ws->rho_aug = ws->rho_aug > UNICYCLE_R(0.0) ? UNICYCLE_R(100.0) * ws->rho_aug : rho0;
         ++L->n_aug;
-        fact = riccati_factor(ws, in);
+        fact = riccati_factor_rhs(ws, in, rhs);
     }
     return fact;
 }
 
 /* Inertia correction delta I after a failed pivot, growing geometrically from a third of
  * the last one used. Returns riccati_factor's code of the last try. */
-static int qp_correct_delta(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in)
+static int qp_correct_delta(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in, const qp_centring *rhs)
 {
     int tries, fact;
     ws->delta = L->delta_last > UNICYCLE_R(0.0) ? dmax(UNICYCLE_R(1e-20) * L->hscale, L->delta_last / UNICYCLE_R(3.0))
@@ -2568,7 +2744,7 @@ static int qp_correct_delta(qp_loop *L, unicycle_qp_workspace *ws, const unicycl
      * test alone may never fire (NaN compares false, inf * 10 stays inf) */
     for (tries = 0;; ++tries) {
         ++L->n_corr;
-        fact = riccati_factor(ws, in);
+        fact = riccati_factor_rhs(ws, in, rhs);
         if (fact != 1 || !(ws->delta <= DELTA_MAX_REL * L->hscale) || tries >= DELTA_TRIES)
             break;
         ws->delta *= DELTA_GROW;
@@ -2580,15 +2756,16 @@ static int qp_correct_delta(qp_loop *L, unicycle_qp_workspace *ws, const unicycl
 
 /* Factorisation with minimal inertia correction: first the exact terminal augmentation
  * rho Req'Req, then delta I growing geometrically. Returns 0 when factorised. */
-static int qp_factor_with_correction(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in)
+static int qp_factor_with_correction(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in *in,
+                                     const qp_centring *rhs)
 {
     int fact;
     ws->delta = UNICYCLE_R(0.0);
-    fact = riccati_factor(ws, in);
+    fact = riccati_factor_rhs(ws, in, rhs);
     if (fact == 1 && NE > 0)
-        fact = qp_augment_terminal(L, ws, in);
+        fact = qp_augment_terminal(L, ws, in, rhs);
     if (fact == 1)
-        fact = qp_correct_delta(L, ws, in);
+        fact = qp_correct_delta(L, ws, in, rhs);
     return fact;
 }
 
@@ -2628,7 +2805,7 @@ static int qp_refine_steps(const qp_loop *L, const unicycle_qp_workspace *ws, co
 static void qp_newton_step(unicycle_qp_workspace *ws, const unicycle_qp_in *in, int nref)
 {
     const qp_centring none = {0, UNICYCLE_R(0.0), UNICYCLE_R(0.0)}; /* no bounded side: rc is never formed */
-    newton_direction(ws, in, nref, &none);
+    newton_direction(ws, in, nref, &none, 0);
     unicycle_lai_axpy(NP, UNICYCLE_R(1.0), ws->d_prim, ws->prim);
     unicycle_lai_axpy((N + 1) * NX, UNICYCLE_R(1.0), ws->d_lam, ws->lam);
     unicycle_lai_axpy(NE, UNICYCLE_R(1.0), ws->d_nu, ws->nu);
@@ -2638,12 +2815,12 @@ static void qp_newton_step(unicycle_qp_workspace *ws, const unicycle_qp_in *in, 
  * (*alpha_aff, primal; one length for both unless long_steps) and the average
  * complementarity mu_aff that step would reach, returned. */
 static unicycle_real qp_predictor(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const qp_res *r, int long_steps,
-                               unicycle_real *alpha_aff)
+                               int swept, unicycle_real *alpha_aff)
 {
     const qp_centring pred = {0, UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
     unicycle_real alpha, alpha_d, mu_aff = UNICYCLE_R(0.0);
     int i, full[2];
-    newton_direction(ws, in, 0, &pred);
+    newton_direction(ws, in, 0, &pred, swept);
     max_steps(ws, &alpha, &alpha_d, full);
     if (!long_steps)
         alpha = alpha_d = dmin(alpha, alpha_d);
@@ -2697,7 +2874,7 @@ static void qp_corrector(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_q
     corr.eta = (iter > 0 && r->mu > L->mu_prev && dmax(r->stat_s, r->eq_s) < r->comp_s) ? UNICYCLE_R(0.0)
                                                                                         : UNICYCLE_R(1.0);
     L->mu_prev = r->mu;
-    newton_direction(ws, in, nref, &corr);
+    newton_direction(ws, in, nref, &corr, 0);
     max_steps(ws, alpha, alpha_d, full);
     if (long_steps) {
         *alpha = step_to_boundary(*alpha, full[0]);
@@ -2943,7 +3120,7 @@ static int as_factor(qp_loop *L, unicycle_qp_workspace *ws, const unicycle_qp_in
     }
     if (fact == 1 && NE > 0) {
         QP_TRACE("active set: terminal augmentation\n");
-        fact = qp_augment_terminal(L, ws, in);
+        fact = qp_augment_terminal(L, ws, in, NULL);
     }
     if (fact != 0)
         QP_TRACE("active set: factorisation failed\n");
@@ -3370,6 +3547,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             return status;
     }
     for (iter = L.as_sweeps;; ++iter) {
+        const qp_centring pred = {0, UNICYCLE_R(0.0), UNICYCLE_R(0.0)}; /* the predictor's */
         unicycle_real alpha, alpha_d, alpha_aff, sigma;
         int floors_before, nref, corrections;
         /* the long steps (separate primal and dual step lengths, up to the boundary) in the
@@ -3390,7 +3568,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
 
         floors_before = ws->pivot_floors;
         corrections = L.n_corr + L.n_aug;
-        if (qp_factor_with_correction(&L, ws, in) != 0) {
+        if (qp_factor_with_correction(&L, ws, in, QP_FUSE && r.nsides > 0 ? &pred : NULL) != 0) {
             status = UNICYCLE_QP_NUMERICAL;
             break;
         }
@@ -3403,7 +3581,7 @@ int unicycle_qp_solve(unicycle_qp_workspace *ws, const unicycle_qp_in *in, const
             qp_newton_step(ws, in, nref);
             continue;
         }
-        sigma = qp_sigma(&L, ws, &r, qp_predictor(ws, in, &r, long_steps, &alpha_aff));
+        sigma = qp_sigma(&L, ws, &r, qp_predictor(ws, in, &r, long_steps, QP_FUSE, &alpha_aff));
         qp_corrector(&L, ws, in, &r, iter, nref, sigma, long_steps, &alpha, &alpha_d);
         QP_TRACE("it %2d mu %.2e stat %.2e eq %.2e ineq %.2e comp %.2e | a_aff %.3f sigma %.2e "
                  "alpha %.3e delta %.1e rho %.1e floors %d |dp| %.2e\n",
