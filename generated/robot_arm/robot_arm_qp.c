@@ -1094,10 +1094,27 @@ static int pivots_above_floor(robot_arm_qp_workspace *ws, robot_arm_real *Lu)
 #define QP_SWEEP_INLINE static inline
 #endif
 
+/* Barrier right-hand side of one side, rc = t z (predictor) or, for the corrector,
+ * t z + eta dt_aff dz_aff - target with the predictor's steps still in dt, dz (so rc
+ * needs no storage of its own). */
+typedef struct {
+    int corrector;
+    robot_arm_real eta, target;
+} qp_centring;
+
+/* the predictor's backward sweep run with the factorisation (the host path) */
+#ifndef QP_FUSE
+#define QP_FUSE ROBOT_ARM_QP_PHIT
+#endif
+#if QP_FUSE
+static void newton_rhs(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_centring *cc, robot_arm_real *os,
+                       robot_arm_real *od, robot_arm_real *oe);
+#endif
+
 #if ROBOT_ARM_QP_PHIT
 /* The backward sweep of riccati_solve (below) in parts: its terminal step and stage k's step,
  * which needs only the factors of stages k and k + 1. With the kept Phi_k' the factorisation
- * runs the predictor's sweep stage by stage beside its own recursion (riccati_factor_fused):
+ * runs the predictor's sweep stage by stage beside its own recursion (riccati_factor with ws->fuse):
  * two chains of dependent operations that the core overlaps, each entry the same operations
  * in the same order as in riccati_solve. */
 QP_SWEEP_INLINE void riccati_back_terminal(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_real *sp,
@@ -1167,7 +1184,7 @@ QP_SWEEP_INLINE void riccati_back_stage(robot_arm_qp_workspace *ws, const robot_
  * the packed factor Lu of M_uu = Lu Lu' and Lu^{-1} M_ux in K (with terminal equalities
  * G_k and Lu^{-1} Gam_u in KN); the solve applies Lu'^{-1} (the gain M_uu^{-1} M_ux is never
  * formed). */
-static int riccati_factor_fused(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int fused)
+static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
 {
     int k, i, j;
     robot_arm_real *WT = ws->work;            /* NW x NX: Phi_k' P_{k+1} */
@@ -1176,6 +1193,16 @@ static int riccati_factor_fused(robot_arm_qp_workspace *ws, const robot_arm_qp_i
     const robot_arm_real delta = ws->delta;
     robot_arm_real pmagN;
     int b;
+#if QP_FUSE
+    /* the predictor's right-hand side formed at every try (a failed try leaves its sweep
+     * half done) */
+    const int fused = ws->fuse;
+    ws->swept = 0;
+    if (fused) {
+        const qp_centring pred = {0, ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
+        newton_rhs(ws, in, &pred, ws->d_prim, ws->d_lam, ws->d_nu);
+    }
+#endif
     ++ws->n_fact;
     ws->pre_status = -1; /* the factor below replaces one robot_arm_qp_prefactor kept */
 
@@ -1216,11 +1243,9 @@ static int riccati_factor_fused(robot_arm_qp_workspace *ws, const robot_arm_qp_i
         ws->S[i] = ROBOT_ARM_R(0.0);
     /* the largest |entry| of P_N, for the round-off estimate of a pivot (stage_noise) */
     pmagN = robot_arm_lai_max_abs_mat(NX, NX, Pf, NX);
-#if ROBOT_ARM_QP_PHIT
+#if QP_FUSE
     if (fused)
         riccati_back_terminal(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
-#else
-    (void)fused;
 #endif
 
     for (k = N - 1; k >= 0; --k) {
@@ -1308,7 +1333,7 @@ static int riccati_factor_fused(robot_arm_qp_workspace *ws, const robot_arm_qp_i
             robot_arm_lai_gemm_tn(NX, NE, NU, -ROBOT_ARM_R(1.0), K, NU1, KN, NU1, ROBOT_ARM_R(1.0), ws->G[k], NX);
             robot_arm_lai_gemm_tn(NE, NE, NU, ROBOT_ARM_R(1.0), KN, NU1, KN, NU1, ROBOT_ARM_R(1.0), ws->S, NE1);
         }
-#if ROBOT_ARM_QP_PHIT
+#if QP_FUSE
         if (fused)
             riccati_back_stage(ws, in, k, ws->d_prim, ws->d_lam);
 #endif
@@ -1329,14 +1354,11 @@ static int riccati_factor_fused(robot_arm_qp_workspace *ws, const robot_arm_qp_i
                 return 2;
         }
     }
+#if QP_FUSE
+    ws->swept = fused;
+#endif
     return 0;
 }
-
-#define riccati_factor(ws, in) riccati_factor_fused((ws), (in), 0)
-/* the predictor's backward sweep run with the factorisation (the host path) */
-#ifndef QP_FUSE
-#define QP_FUSE ROBOT_ARM_QP_PHIT
-#endif
 
 QP_SWEEP_INLINE void riccati_forward(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_real *sp,
                                      robot_arm_real *sl, robot_arm_real *sn);
@@ -1541,14 +1563,6 @@ static void newton_residual(robot_arm_qp_workspace *ws, const robot_arm_qp_in *i
     }
 }
 
-/* Barrier right-hand side of one side, rc = t z (predictor) or, for the corrector,
- * t z + eta dt_aff dz_aff - target with the predictor's steps still in dt, dz (so rc
- * needs no storage of its own). */
-typedef struct {
-    int corrector;
-    robot_arm_real eta, target;
-} qp_centring;
-
 /* rc of the lower (rc_lo) and the upper side (rc_up) of bounded row b; the predictor's
  * steps dt, dz are read only for the corrector (before the first corrector they are unset) */
 static robot_arm_real rc_lo(const robot_arm_qp_workspace *ws, int b, const qp_centring *cc)
@@ -1641,23 +1655,6 @@ static void newton_rhs(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
         oe[i] = -ws->r_eqN[i];
 }
 
-/* The factorisation; given the predictor's centring (rhs), with the host path's fused sweep:
- * the predictor's right-hand side formed first (at every try, as a failed try leaves the
- * sweep half done) and its backward sweep run beside the recursion, so that the predictor
- * only runs the forward sweep (newton_direction with swept 1). */
-static int riccati_factor_rhs(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_centring *rhs)
-{
-#if ROBOT_ARM_QP_PHIT
-    if (rhs != NULL) {
-        newton_rhs(ws, in, rhs, ws->d_prim, ws->d_lam, ws->d_nu);
-        return riccati_factor_fused(ws, in, 1);
-    }
-#else
-    (void)rhs;
-#endif
-    return riccati_factor(ws, in);
-}
-
 /* Newton direction for the barrier right-hand side rc (t z - target per side): form the
  * condensed right-hand side in the direction arrays, solve in place, refine, recover slack
  * and multiplier steps. A refinement step forms the right-hand side again in the residual
@@ -1665,12 +1662,16 @@ static int riccati_factor_rhs(robot_arm_qp_workspace *ws, const robot_arm_qp_in 
  * are formed anew at the next iterate), computes the residual of the Newton system and
  * the correction there in place; a further step first forms the iterate's residuals again. */
 static void newton_direction(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int refine_steps,
-                             const qp_centring *cc, int swept)
+                             const qp_centring *cc)
 {
     int it, k, b, j;
-    if (QP_FUSE && swept) { /* right-hand side and backward sweep done with the factorisation */
+#if QP_FUSE
+    if (ws->swept) { /* the predictor's right-hand side and backward sweep: done */
+        ws->swept = 0;
         riccati_forward(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
-    } else {
+    } else
+#endif
+    {
         newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
         riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
     }
@@ -2719,8 +2720,7 @@ static void trace_barrier_weights(const robot_arm_qp_workspace *ws, const robot_
 
 /* Exact terminal augmentation rho Req'Req after a failed pivot: rho grows from the Hessian
  * scale over |Req|^2 by factors of 100. Returns riccati_factor's code of the last try. */
-static int qp_augment_terminal(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
-                               const qp_centring *rhs)
+static int qp_augment_terminal(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
 {
     int tries, fact = 1;
     robot_arm_real rho0 = L->hscale / dmax(robot_arm_lai_max_abs_mat(NE, NX, in->Req, NE1), ROBOT_ARM_REAL_SQRT_TINY);
@@ -2728,14 +2728,14 @@ static int qp_augment_terminal(qp_loop *L, robot_arm_qp_workspace *ws, const rob
     for (tries = 0; tries < RHO_TRIES && fact == 1 && ws->rho_aug < rho0 * RHO_MAX_REL; ++tries) {
         ws->rho_aug = ws->rho_aug > ROBOT_ARM_R(0.0) ? ROBOT_ARM_R(100.0) * ws->rho_aug : rho0;
         ++L->n_aug;
-        fact = riccati_factor_rhs(ws, in, rhs);
+        fact = riccati_factor(ws, in);
     }
     return fact;
 }
 
 /* Inertia correction delta I after a failed pivot, growing geometrically from a third of
  * the last one used. Returns riccati_factor's code of the last try. */
-static int qp_correct_delta(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_centring *rhs)
+static int qp_correct_delta(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
 {
     int tries, fact;
     ws->delta = L->delta_last > ROBOT_ARM_R(0.0) ? dmax(ROBOT_ARM_R(1e-20) * L->hscale, L->delta_last / ROBOT_ARM_R(3.0))
@@ -2744,7 +2744,7 @@ static int qp_correct_delta(qp_loop *L, robot_arm_qp_workspace *ws, const robot_
      * test alone may never fire (NaN compares false, inf * 10 stays inf) */
     for (tries = 0;; ++tries) {
         ++L->n_corr;
-        fact = riccati_factor_rhs(ws, in, rhs);
+        fact = riccati_factor(ws, in);
         if (fact != 1 || !(ws->delta <= DELTA_MAX_REL * L->hscale) || tries >= DELTA_TRIES)
             break;
         ws->delta *= DELTA_GROW;
@@ -2756,16 +2756,15 @@ static int qp_correct_delta(qp_loop *L, robot_arm_qp_workspace *ws, const robot_
 
 /* Factorisation with minimal inertia correction: first the exact terminal augmentation
  * rho Req'Req, then delta I growing geometrically. Returns 0 when factorised. */
-static int qp_factor_with_correction(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
-                                     const qp_centring *rhs)
+static int qp_factor_with_correction(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
 {
     int fact;
     ws->delta = ROBOT_ARM_R(0.0);
-    fact = riccati_factor_rhs(ws, in, rhs);
+    fact = riccati_factor(ws, in);
     if (fact == 1 && NE > 0)
-        fact = qp_augment_terminal(L, ws, in, rhs);
+        fact = qp_augment_terminal(L, ws, in);
     if (fact == 1)
-        fact = qp_correct_delta(L, ws, in, rhs);
+        fact = qp_correct_delta(L, ws, in);
     return fact;
 }
 
@@ -2805,7 +2804,7 @@ static int qp_refine_steps(const qp_loop *L, const robot_arm_qp_workspace *ws, c
 static void qp_newton_step(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int nref)
 {
     const qp_centring none = {0, ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)}; /* no bounded side: rc is never formed */
-    newton_direction(ws, in, nref, &none, 0);
+    newton_direction(ws, in, nref, &none);
     robot_arm_lai_axpy(NP, ROBOT_ARM_R(1.0), ws->d_prim, ws->prim);
     robot_arm_lai_axpy((N + 1) * NX, ROBOT_ARM_R(1.0), ws->d_lam, ws->lam);
     robot_arm_lai_axpy(NE, ROBOT_ARM_R(1.0), ws->d_nu, ws->nu);
@@ -2815,12 +2814,12 @@ static void qp_newton_step(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in
  * (*alpha_aff, primal; one length for both unless long_steps) and the average
  * complementarity mu_aff that step would reach, returned. */
 static robot_arm_real qp_predictor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, const qp_res *r, int long_steps,
-                               int swept, robot_arm_real *alpha_aff)
+                               robot_arm_real *alpha_aff)
 {
     const qp_centring pred = {0, ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
     robot_arm_real alpha, alpha_d, mu_aff = ROBOT_ARM_R(0.0);
     int i, full[2];
-    newton_direction(ws, in, 0, &pred, swept);
+    newton_direction(ws, in, 0, &pred);
     max_steps(ws, &alpha, &alpha_d, full);
     if (!long_steps)
         alpha = alpha_d = dmin(alpha, alpha_d);
@@ -2874,7 +2873,7 @@ static void qp_corrector(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm
     corr.eta = (iter > 0 && r->mu > L->mu_prev && dmax(r->stat_s, r->eq_s) < r->comp_s) ? ROBOT_ARM_R(0.0)
                                                                                         : ROBOT_ARM_R(1.0);
     L->mu_prev = r->mu;
-    newton_direction(ws, in, nref, &corr, 0);
+    newton_direction(ws, in, nref, &corr);
     max_steps(ws, alpha, alpha_d, full);
     if (long_steps) {
         *alpha = step_to_boundary(*alpha, full[0]);
@@ -3120,7 +3119,7 @@ static int as_factor(qp_loop *L, robot_arm_qp_workspace *ws, const robot_arm_qp_
     }
     if (fact == 1 && NE > 0) {
         QP_TRACE("active set: terminal augmentation\n");
-        fact = qp_augment_terminal(L, ws, in, NULL);
+        fact = qp_augment_terminal(L, ws, in);
     }
     if (fact != 0)
         QP_TRACE("active set: factorisation failed\n");
@@ -3547,9 +3546,8 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
             return status;
     }
     for (iter = L.as_sweeps;; ++iter) {
-        const qp_centring pred = {0, ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)}; /* the predictor's */
         robot_arm_real alpha, alpha_d, alpha_aff, sigma;
-        int floors_before, nref, corrections;
+        int floors_before, nref, corrections, fact;
         /* the long steps (separate primal and dual step lengths, up to the boundary) in the
          * first attempt from the centred start while the QP is convex (no correction) */
         const int long_steps = L.attempt == 0 && L.n_corr == 0 && L.n_aug == 0;
@@ -3568,7 +3566,14 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
 
         floors_before = ws->pivot_floors;
         corrections = L.n_corr + L.n_aug;
-        if (qp_factor_with_correction(&L, ws, in, QP_FUSE && r.nsides > 0 ? &pred : NULL) != 0) {
+#if QP_FUSE
+        ws->fuse = r.nsides > 0; /* the predictor follows */
+#endif
+        fact = qp_factor_with_correction(&L, ws, in);
+#if QP_FUSE
+        ws->fuse = 0;
+#endif
+        if (fact != 0) {
             status = ROBOT_ARM_QP_NUMERICAL;
             break;
         }
@@ -3581,7 +3586,7 @@ int robot_arm_qp_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
             qp_newton_step(ws, in, nref);
             continue;
         }
-        sigma = qp_sigma(&L, ws, &r, qp_predictor(ws, in, &r, long_steps, QP_FUSE, &alpha_aff));
+        sigma = qp_sigma(&L, ws, &r, qp_predictor(ws, in, &r, long_steps, &alpha_aff));
         qp_corrector(&L, ws, in, &r, iter, nref, sigma, long_steps, &alpha, &alpha_d);
         QP_TRACE("it %2d mu %.2e stat %.2e eq %.2e ineq %.2e comp %.2e | a_aff %.3f sigma %.2e "
                  "alpha %.3e delta %.1e rho %.1e floors %d |dp| %.2e\n",
