@@ -2486,6 +2486,8 @@ static void factor_state_reset(robot_arm_qp_workspace *ws, const robot_arm_qp_in
     ws->penalty = 0;
     ws->n_fact = 0;
 #if ROBOT_ARM_QP_PHIT
+    ws->fuse = 0; /* (only the solve's loop fuses the predictor's sweep) */
+    ws->swept = 0;
     if (phit)
         transpose_phi(ws, in);
 #else
