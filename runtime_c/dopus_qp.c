@@ -382,6 +382,41 @@ static void row_axpy(const dopus_qp_in *in, int k, int j, dopus_real a, dopus_re
     }
 }
 
+/* y = beta y + alpha A x (A m x n, column-major) as dopus_lai_gemv_n: each entry the sum over
+ * the columns in their order, with beta 0 (y overwritten) or 1. With AVX (DOPUS_QP_V4) four
+ * rows per vector with the sums in registers and the rows left over alone: the same
+ * operations on each entry in the same order, so the same values (GCC 12 left the product
+ * with Phi_k at nx = 5 scalar, two instructions per product). */
+#if DOPUS_QP_PHIT && DOPUS_LAI_VEC && defined(__AVX__)
+#define DOPUS_QP_V4 1
+typedef dopus_real qp_v4 __attribute__((vector_size(4 * sizeof(dopus_real))));
+static inline void qp_gemv_n(int m, int n, dopus_real alpha, const dopus_real *restrict A, int lda,
+                             const dopus_real *restrict x, dopus_real beta, dopus_real *restrict y)
+{
+    int i = 0, j;
+    for (; i + 4 <= m; i += 4) {
+        qp_v4 acc = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+        if (beta != DOPUS_R(0.0))
+            __builtin_memcpy(&acc, y + i, sizeof acc);
+        for (j = 0; j < n; ++j) {
+            qp_v4 a;
+            __builtin_memcpy(&a, A + i + j * lda, sizeof a);
+            acc += a * (alpha * x[j]);
+        }
+        __builtin_memcpy(y + i, &acc, sizeof acc);
+    }
+    for (; i < m; ++i) {
+        dopus_real s = beta != DOPUS_R(0.0) ? y[i] : DOPUS_R(0.0);
+        for (j = 0; j < n; ++j)
+            s += A[i + j * lda] * (alpha * x[j]);
+        y[i] = s;
+    }
+}
+#else
+#define DOPUS_QP_V4 0
+#define qp_gemv_n dopus_lai_gemv_n
+#endif
+
 /* y += alpha P x for P packed by lower columns: one sequential pass over the packed
  * entries, each used twice (below the diagonal), the sums kept in a local vector. */
 static inline void spmv_packed(const dopus_real *restrict Pp, dopus_real alpha, const dopus_real *restrict x,
@@ -618,6 +653,12 @@ static inline void absmax_acc(int n, const dopus_real *restrict x, dopus_real *r
 {
     int i = 0;
 #if DOPUS_QP_PHIT
+#if DOPUS_LAI_V4_MAX
+    /* four entries per vector (the same maxima) */
+    for (; i + 3 < n; i += 4)
+        dopus_lai_v4_store(acc + i, dopus_lai_v4_max_acc(dopus_lai_v4_abs(dopus_lai_v4_load(x + i)),
+                                                         dopus_lai_v4_load(acc + i)));
+#endif
 #if DOPUS_LAI_V2_MAX
     /* two entries per vector (the same maxima) */
     for (; i + 1 < n; i += 2)
@@ -648,7 +689,7 @@ static inline void phi_both(const dopus_real *restrict Phi, const dopus_real *re
 {
 #if DOPUS_QP_PHIT
     phit_gemv(PhiT, -DOPUS_R(1.0), v, a);
-    dopus_lai_gemv_n(NX, NW, -DOPUS_R(1.0), Phi, NX, w, DOPUS_R(0.0), rd);
+    qp_gemv_n(NX, NW, -DOPUS_R(1.0), Phi, NX, w, DOPUS_R(0.0), rd);
 #else
     dopus_real acc[NX], vr[NX];
     int i, l;
@@ -1045,6 +1086,98 @@ static int pivots_above_floor(dopus_qp_workspace *ws, dopus_real *Lu)
     return 1;
 }
 
+/* The parts of the sweeps, inlined where they are called (a call per stage of the backward
+ * sweep cost 7 % of the time of a robot-arm QP) */
+#if defined(__GNUC__)
+#define QP_SWEEP_INLINE static inline __attribute__((always_inline))
+#else
+#define QP_SWEEP_INLINE static inline
+#endif
+
+/* Barrier right-hand side of one side, rc = t z (predictor) or, for the corrector,
+ * t z + eta dt_aff dz_aff - target with the predictor's steps still in dt, dz (so rc
+ * needs no storage of its own). */
+typedef struct {
+    int corrector;
+    dopus_real eta, target;
+} qp_centring;
+
+/* the predictor's backward sweep run with the factorisation (the host path) */
+#ifndef QP_FUSE
+#define QP_FUSE DOPUS_QP_PHIT
+#endif
+#if QP_FUSE
+static void newton_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_centring *cc, dopus_real *os,
+                       dopus_real *od, dopus_real *oe);
+#endif
+
+#if DOPUS_QP_PHIT
+/* The backward sweep of riccati_solve (below) in parts: its terminal step and stage k's step,
+ * which needs only the factors of stages k and k + 1. With the kept Phi_k' the factorisation
+ * runs the predictor's sweep stage by stage beside its own recursion (riccati_factor with ws->fuse):
+ * two chains of dependent operations that the core overlaps, each entry the same operations
+ * in the same order as in riccati_solve. */
+QP_SWEEP_INLINE void riccati_back_terminal(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp,
+                                           dopus_real *sl, const dopus_real *sn)
+{
+    /* p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
+    dopus_real tv[NX];
+    dopus_real *xN = sp + N * NW, *pN = sl + N * NX;
+    int i;
+    for (i = 0; i < NX; ++i)
+        tv[i] = -xN[i];
+    if (NE > 0) {
+        if (ws->rho_aug > DOPUS_R(0.0))
+            dopus_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, sn, DOPUS_R(1.0), tv);
+        for (i = 0; i < NE; ++i)
+            ws->e[i] = -sn[i];
+    }
+    for (i = 0; i < NX; ++i) {
+        xN[i] = pN[i];
+        pN[i] = tv[i];
+    }
+}
+
+QP_SWEEP_INLINE void riccati_back_stage(dopus_qp_workspace *ws, const dopus_qp_in *in, int k, dopus_real *sp,
+                                        dopus_real *sl)
+{
+    /* the sweep vectors in local arrays: the compiler then knows that they alias none of
+     * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
+    dopus_real tv[NX], m[NW], y[NU1];
+    dopus_real *e = ws->e;
+    const dopus_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
+    const dopus_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
+    dopus_real *xk = sp + k * NW, *yk = xk + NX, *pk = sl + k * NX;
+    int i;
+    (void)in; /* (QP_PHIT reads the kept copy) */
+    /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
+    for (i = 0; i < NX; ++i)
+        tv[i] = pn[i];
+    spmv_packed(ws->P[k + 1], DOPUS_R(1.0), c, tv);
+    for (i = 0; i < NW; ++i)
+        m[i] = -xk[i];
+    phit_gemv(QP_PHIT(ws, in, k), DOPUS_R(1.0), tv, m);
+    if (NE > 0) {
+        dopus_lai_gemv_t(NX, NE, DOPUS_R(1.0), ws->G[k + 1], NX, c, DOPUS_R(1.0), e);
+    }
+    /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
+     * where u_k is formed (the forward sweep applies Lu'^{-1}); p_k and y are formed in
+     * local arrays and stored once */
+    for (i = 0; i < NU; ++i)
+        y[i] = m[NX + i];
+    lu_solve_n(ws->Lu[k], y);
+    for (i = 0; i < NX; ++i)
+        xk[i] = pk[i];
+    dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, y, DOPUS_R(1.0), m);
+    for (i = 0; i < NX; ++i)
+        pk[i] = m[i];
+    if (NE > 0)
+        dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, y, DOPUS_R(1.0), e);
+    for (i = 0; i < NU; ++i)
+        yk[i] = y[i];
+}
+#endif
+
 /* Factor the Newton system for the current barrier weights (row_q), delta and rho.
  * Returns 0, or 1 when a stage pivot block M_uu is not positive definite (wrong inertia),
  * or 2 when the terminal-multiplier block S is singular. Per stage it keeps P_k (packed),
@@ -1060,6 +1193,16 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
     const dopus_real delta = ws->delta;
     dopus_real pmagN;
     int b;
+#if QP_FUSE
+    /* the predictor's right-hand side formed at every try (a failed try leaves its sweep
+     * half done) */
+    const int fused = ws->fuse;
+    ws->swept = 0;
+    if (fused) {
+        const qp_centring pred = {0, DOPUS_R(0.0), DOPUS_R(0.0)};
+        newton_rhs(ws, in, &pred, ws->d_prim, ws->d_lam, ws->d_nu);
+    }
+#endif
     ++ws->n_fact;
     ws->pre_status = -1; /* the factor below replaces one dopus_qp_prefactor kept */
 
@@ -1100,6 +1243,10 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
         ws->S[i] = DOPUS_R(0.0);
     /* the largest |entry| of P_N, for the round-off estimate of a pivot (stage_noise) */
     pmagN = dopus_lai_max_abs_mat(NX, NX, Pf, NX);
+#if QP_FUSE
+    if (fused)
+        riccati_back_terminal(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+#endif
 
     for (k = N - 1; k >= 0; --k) {
         dopus_real *M = ws->M;
@@ -1186,6 +1333,10 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
             dopus_lai_gemm_tn(NX, NE, NU, -DOPUS_R(1.0), K, NU1, KN, NU1, DOPUS_R(1.0), ws->G[k], NX);
             dopus_lai_gemm_tn(NE, NE, NU, DOPUS_R(1.0), KN, NU1, KN, NU1, DOPUS_R(1.0), ws->S, NE1);
         }
+#if QP_FUSE
+        if (fused)
+            riccati_back_stage(ws, in, k, ws->d_prim, ws->d_lam);
+#endif
     }
     if (NE > 0) {
         /* S is positive definite iff Req has full row rank on the states reachable from
@@ -1203,8 +1354,14 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
                 return 2;
         }
     }
+#if QP_FUSE
+    ws->swept = fused;
+#endif
     return 0;
 }
+
+QP_SWEEP_INLINE void riccati_forward(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp,
+                                     dopus_real *sl, dopus_real *sn);
 
 /* Solve the factored Newton system in place: (sp, sl, sn) holds the right-hand side
  * (rhs_stat, rhs_dyn, rhs_eqN) on entry and the solution on exit. Backward sweep of the
@@ -1215,15 +1372,15 @@ static int riccati_factor(dopus_qp_workspace *ws, const dopus_qp_in *in)
 static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp, dopus_real *sl,
                           dopus_real *sn)
 {
-    int k, i;
+    int k;
 #if DOPUS_QP_PHIT
-    /* the sweep vectors in local arrays: the compiler then knows that they alias none of
-     * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
-    dopus_real tv[NX], m[NW];
+    riccati_back_terminal(ws, in, sp, sl, sn);
+    for (k = N - 1; k >= 0; --k)
+        riccati_back_stage(ws, in, k, sp, sl);
 #else
-    dopus_real *tv = ws->work;        /* NX */
-    dopus_real *m = ws->work + NX;    /* NW */
-#endif
+    int i;
+    dopus_real *tv = ws->work;     /* NX */
+    dopus_real *m = ws->work + NX; /* NW */
     dopus_real *e = ws->e;
 
     /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
@@ -1257,25 +1414,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
             dopus_lai_gemv_t(NX, NE, DOPUS_R(1.0), ws->G[k + 1], NX, c, DOPUS_R(1.0), e);
         }
         /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
-         * where u_k is formed (the forward sweep applies Lu'^{-1}); on the host path p_k and y
-         * are formed in local arrays and stored once */
-#if DOPUS_QP_PHIT
-        {
-            dopus_real y[NU1];
-            for (i = 0; i < NU; ++i)
-                y[i] = m[NX + i];
-            lu_solve_n(ws->Lu[k], y);
-            for (i = 0; i < NX; ++i)
-                xk[i] = pk[i];
-            dopus_lai_gemv_t(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, y, DOPUS_R(1.0), m);
-            for (i = 0; i < NX; ++i)
-                pk[i] = m[i];
-            if (NE > 0)
-                dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, y, DOPUS_R(1.0), e);
-            for (i = 0; i < NU; ++i)
-                yk[i] = y[i];
-        }
-#else
+         * where u_k is formed (the forward sweep applies Lu'^{-1}) */
         lu_solve_n(ws->Lu[k], m + NX);
         for (i = 0; i < NX; ++i) {
             xk[i] = pk[i];
@@ -1286,8 +1425,17 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
             dopus_lai_gemv_t(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, m + NX, DOPUS_R(1.0), e);
         for (i = 0; i < NU; ++i)
             yk[i] = m[NX + i];
-#endif
     }
+#endif
+    riccati_forward(ws, in, sp, sl, sn);
+}
+
+/* riccati_solve's part after the backward sweep: nu, the forward sweep and the costates. */
+QP_SWEEP_INLINE void riccati_forward(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_real *sp,
+                                     dopus_real *sl, dopus_real *sn)
+{
+    int k, i;
+    const dopus_real *e = ws->e;
     /* stage 0: x_0 = rhs_dyn_0 (in place); dV_0/dnu = G_0' x_0 + e_0 - S nu = 0 */
     if (NE > 0) {
         for (i = 0; i < NE; ++i)
@@ -1296,31 +1444,58 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
         dopus_lai_trsv_ln(NE, ws->S, NE1, sn);
         dopus_lai_trsv_lt(NE, ws->S, NE1, sn);
     }
+#if DOPUS_QP_PHIT
+    /* the forward sweep with w_k = (x_k, u_k) and x_{k+1} in local arrays, stored once (the
+     * compiler then knows that they alias none of the arrays it reads: the products with
+     * LK and Phi_k run as vectors, with the same sums in the same order) */
+    {
+        dopus_real wl[NW], xn[NX];
+        for (i = 0; i < NX; ++i)
+            wl[i] = sp[i];
+        for (k = 0; k < N; ++k) {
+            dopus_real *u = sp + k * NW + NX;
+            dopus_real *lamk = sl + k * NX;
+            dopus_real *xs = sp + (k + 1) * NW;
+            /* u_k = -M_uu^{-1} (M_ux x_k + m_u + Gam_u nu) = -Lu'^{-1} (LK x_k + y_k + LKn nu) */
+            dopus_real ul[NU1];
+            for (i = 0; i < NU; ++i)
+                ul[i] = -u[i];
+            dopus_lai_gemv_n(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, wl, DOPUS_R(1.0), ul);
+            if (NE > 0)
+                dopus_lai_gemv_n(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, sn, DOPUS_R(1.0), ul);
+            lu_solve_t(ws->Lu[k], ul);
+            for (i = 0; i < NU; ++i) {
+                u[i] = ul[i];
+                wl[NX + i] = ul[i];
+            }
+            /* lam_k = -(P_k x_k + p_k + G_k nu) */
+            for (i = 0; i < NX; ++i)
+                lamk[i] = -lamk[i];
+            spmv_packed(ws->P[k], -DOPUS_R(1.0), wl, lamk);
+            if (NE > 0)
+                dopus_lai_gemv_n(NX, NE, -DOPUS_R(1.0), ws->G[k], NX, sn, DOPUS_R(1.0), lamk);
+            /* x_{k+1} = Phi_k w_k + c_k */
+            for (i = 0; i < NX; ++i)
+                xn[i] = xs[i];
+            qp_gemv_n(NX, NW, DOPUS_R(1.0), in->Phi[k], NX, wl, DOPUS_R(1.0), xn);
+            for (i = 0; i < NX; ++i) {
+                xs[i] = xn[i];
+                wl[i] = xn[i];
+            }
+        }
+    }
+#else
     for (k = 0; k < N; ++k) {
         dopus_real *w = sp + k * NW;
         dopus_real *u = w + NX;
         dopus_real *lamk = sl + k * NX;
         /* u_k = -M_uu^{-1} (M_ux x_k + m_u + Gam_u nu) = -Lu'^{-1} (LK x_k + y_k + LKn nu) */
-#if DOPUS_QP_PHIT
-        {
-            dopus_real ul[NU1]; /* formed locally, stored once */
-            for (i = 0; i < NU; ++i)
-                ul[i] = -u[i];
-            dopus_lai_gemv_n(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, w, DOPUS_R(1.0), ul);
-            if (NE > 0)
-                dopus_lai_gemv_n(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, sn, DOPUS_R(1.0), ul);
-            lu_solve_t(ws->Lu[k], ul);
-            for (i = 0; i < NU; ++i)
-                u[i] = ul[i];
-        }
-#else
         for (i = 0; i < NU; ++i)
             u[i] = -u[i];
         dopus_lai_gemv_n(NU, NX, -DOPUS_R(1.0), ws->K[k], NU1, w, DOPUS_R(1.0), u);
         if (NE > 0)
             dopus_lai_gemv_n(NU, NE, -DOPUS_R(1.0), ws->KN[k], NU1, sn, DOPUS_R(1.0), u);
         lu_solve_t(ws->Lu[k], u);
-#endif
         /* lam_k = -(P_k x_k + p_k + G_k nu) */
         for (i = 0; i < NX; ++i)
             lamk[i] = -lamk[i];
@@ -1330,6 +1505,7 @@ static void riccati_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, dopus_r
         /* x_{k+1} = Phi_k w_k + c_k */
         dopus_lai_gemv_n(NX, NW, DOPUS_R(1.0), in->Phi[k], NX, w, DOPUS_R(1.0), sp + (k + 1) * NW);
     }
+#endif
     {
         const dopus_real *xN = sp + N * NW;
         dopus_real *lamN = sl + N * NX;
@@ -1386,14 +1562,6 @@ static void newton_residual(dopus_qp_workspace *ws, const dopus_qp_in *in, const
         dopus_lai_gemv_n(NE, NX, -DOPUS_R(1.0), in->Req, NE1, sp + N * NW, DOPUS_R(1.0), oe);
     }
 }
-
-/* Barrier right-hand side of one side, rc = t z (predictor) or, for the corrector,
- * t z + eta dt_aff dz_aff - target with the predictor's steps still in dt, dz (so rc
- * needs no storage of its own). */
-typedef struct {
-    int corrector;
-    dopus_real eta, target;
-} qp_centring;
 
 /* rc of the lower (rc_lo) and the upper side (rc_up) of bounded row b; the predictor's
  * steps dt, dz are read only for the corrector (before the first corrector they are unset) */
@@ -1497,8 +1665,16 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
                              const qp_centring *cc)
 {
     int it, k, b, j;
-    newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
-    riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+#if QP_FUSE
+    if (ws->swept) { /* the predictor's right-hand side and backward sweep: done */
+        ws->swept = 0;
+        riccati_forward(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    } else
+#endif
+    {
+        newton_rhs(ws, in, cc, ws->d_prim, ws->d_lam, ws->d_nu);
+        riccati_solve(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    }
     for (it = 0; it < refine_steps; ++it) {
         if (it > 0) {
             qp_res again; /* the same values as at the start of the iteration */
@@ -2310,6 +2486,8 @@ static void factor_state_reset(dopus_qp_workspace *ws, const dopus_qp_in *in, in
     ws->penalty = 0;
     ws->n_fact = 0;
 #if DOPUS_QP_PHIT
+    ws->fuse = 0; /* (only the solve's loop fuses the predictor's sweep) */
+    ws->swept = 0;
     if (phit)
         transpose_phi(ws, in);
 #else
@@ -3371,7 +3549,7 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
     }
     for (iter = L.as_sweeps;; ++iter) {
         dopus_real alpha, alpha_d, alpha_aff, sigma;
-        int floors_before, nref, corrections;
+        int floors_before, nref, corrections, fact;
         /* the long steps (separate primal and dual step lengths, up to the boundary) in the
          * first attempt from the centred start while the QP is convex (no correction) */
         const int long_steps = L.attempt == 0 && L.n_corr == 0 && L.n_aug == 0;
@@ -3390,7 +3568,14 @@ int dopus_qp_solve(dopus_qp_workspace *ws, const dopus_qp_in *in, const dopus_qp
 
         floors_before = ws->pivot_floors;
         corrections = L.n_corr + L.n_aug;
-        if (qp_factor_with_correction(&L, ws, in) != 0) {
+#if QP_FUSE
+        ws->fuse = r.nsides > 0; /* the predictor follows */
+#endif
+        fact = qp_factor_with_correction(&L, ws, in);
+#if QP_FUSE
+        ws->fuse = 0;
+#endif
+        if (fact != 0) {
             status = DOPUS_QP_NUMERICAL;
             break;
         }

@@ -428,6 +428,10 @@ typedef struct {
     /* Riccati factorisation: condensed stage Hessians and value-function data */
 #if DOPUS_QP_PHIT
     dopus_real PhiT[DOPUS_N][DOPUS_QP_NW * DOPUS_NX]; /* Phi_k' (nw x nx), formed once per solve */
+    /* fuse: 1 while the solve's factorisation runs the predictor's backward sweep beside its
+     * recursion; swept: 1 when the last factorisation did (the predictor's direction needs
+     * only the forward sweep) */
+    int fuse, swept;
 #endif
     dopus_real M[DOPUS_QP_NW * DOPUS_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     dopus_real P[DOPUS_N + 1][DOPUS_QP_NXP];             /* value function Hessians, packed lower */

@@ -428,6 +428,10 @@ typedef struct {
     /* Riccati factorisation: condensed stage Hessians and value-function data */
 #if ROBOT_ARM_QP_PHIT
     robot_arm_real PhiT[ROBOT_ARM_N][ROBOT_ARM_QP_NW * ROBOT_ARM_NX]; /* Phi_k' (nw x nx), formed once per solve */
+    /* fuse: 1 while the solve's factorisation runs the predictor's backward sweep beside its
+     * recursion; swept: 1 when the last factorisation did (the predictor's direction needs
+     * only the forward sweep) */
+    int fuse, swept;
 #endif
     robot_arm_real M[ROBOT_ARM_QP_NW * ROBOT_ARM_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     robot_arm_real P[ROBOT_ARM_N + 1][ROBOT_ARM_QP_NXP];             /* value function Hessians, packed lower */

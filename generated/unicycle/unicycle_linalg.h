@@ -410,6 +410,39 @@ static inline unicycle_lai_v2 unicycle_lai_v2_max_acc(unicycle_lai_v2 a, unicycl
 #define UNICYCLE_LAI_V2_MAX 0
 #endif
 
+/* The same four lanes in one vector where the target has AVX (VMAXPD on four lanes, the
+ * same select as MAXPD lane by lane). */
+#if UNICYCLE_LAI_V2_MAX && defined(__AVX__)
+#define UNICYCLE_LAI_V4_MAX 1
+typedef unicycle_real unicycle_lai_v4 __attribute__((vector_size(4 * sizeof(unicycle_real))));
+static inline unicycle_lai_v4 unicycle_lai_v4_load(const unicycle_real *x)
+{
+    unicycle_lai_v4 v;
+    __builtin_memcpy(&v, x, sizeof v);
+    return v;
+}
+
+static inline void unicycle_lai_v4_store(unicycle_real *x, unicycle_lai_v4 v)
+{
+    __builtin_memcpy(x, &v, sizeof v);
+}
+
+static inline unicycle_lai_v4 unicycle_lai_v4_abs(unicycle_lai_v4 x)
+{
+    typedef long long unicycle_lai_v4_bits __attribute__((vector_size(sizeof(unicycle_lai_v4))));
+    const unicycle_lai_v4_bits mask = {0x7fffffffffffffffLL, 0x7fffffffffffffffLL, 0x7fffffffffffffffLL,
+                                    0x7fffffffffffffffLL};
+    return (unicycle_lai_v4)((unicycle_lai_v4_bits)x & mask);
+}
+
+static inline unicycle_lai_v4 unicycle_lai_v4_max_acc(unicycle_lai_v4 a, unicycle_lai_v4 m)
+{
+    return __builtin_ia32_maxpd256(a, m);
+}
+#else
+#define UNICYCLE_LAI_V4_MAX 0
+#endif
+
 /* 1 when every entry of the m x n matrix A is finite (no NaN, no Inf). x * 0 is 0 for a finite
  * x and NaN for an infinite or NaN one, so the sum of these products is 0 exactly when every
  * entry is finite: one multiply-add per entry, no branch (two sums, independent chains). */
@@ -445,7 +478,23 @@ static inline unicycle_real unicycle_lai_norm_inf(int n, const unicycle_real *re
     int i, c;
     unicycle_real m[4] = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
     unicycle_real t[4] = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
-#if UNICYCLE_LAI_V2_MAX
+#if UNICYCLE_LAI_V4_MAX
+    /* the same four maxima and sums, the four lanes in one vector: the same values */
+    {
+        unicycle_lai_v4 m4 = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)}, t4 = m4;
+        for (i = 0; i + 4 <= n; i += 4) {
+            const unicycle_lai_v4 a4 = unicycle_lai_v4_abs(unicycle_lai_v4_load(x + i));
+            m4 = unicycle_lai_v4_max_acc(a4, m4);
+            t4 += a4;
+        }
+        for (c = 0; c < 4; ++c) {
+            m[c] = m4[c];
+            t[c] = t4[c];
+        }
+        x += i;
+        n -= i;
+    }
+#elif UNICYCLE_LAI_V2_MAX
     /* the same four maxima and sums, two lanes per vector: the same values */
     {
         const unicycle_lai_v2 zero = {UNICYCLE_R(0.0), UNICYCLE_R(0.0)};

@@ -428,6 +428,10 @@ typedef struct {
     /* Riccati factorisation: condensed stage Hessians and value-function data */
 #if UNICYCLE_QP_PHIT
     unicycle_real PhiT[UNICYCLE_N][UNICYCLE_QP_NW * UNICYCLE_NX]; /* Phi_k' (nw x nx), formed once per solve */
+    /* fuse: 1 while the solve's factorisation runs the predictor's backward sweep beside its
+     * recursion; swept: 1 when the last factorisation did (the predictor's direction needs
+     * only the forward sweep) */
+    int fuse, swept;
 #endif
     unicycle_real M[UNICYCLE_QP_NW * UNICYCLE_QP_NW];             /* H + D'QD + delta I + Phi'P Phi */
     unicycle_real P[UNICYCLE_N + 1][UNICYCLE_QP_NXP];             /* value function Hessians, packed lower */
