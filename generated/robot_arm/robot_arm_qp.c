@@ -1111,17 +1111,17 @@ static void newton_rhs(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, co
                        robot_arm_real *od, robot_arm_real *oe);
 #endif
 
-#if ROBOT_ARM_QP_PHIT
 /* The backward sweep of riccati_solve (below) in parts: its terminal step and stage k's step,
  * which needs only the factors of stages k and k + 1. With the kept Phi_k' the factorisation
  * runs the predictor's sweep stage by stage beside its own recursion (riccati_factor with ws->fuse):
  * two chains of dependent operations that the core overlaps, each entry the same operations
- * in the same order as in riccati_solve. */
+ * in the same order as in riccati_solve. tv (NX) and m (NW): the sweep vectors, local arrays
+ * on the host path (the compiler then knows that they alias none of the arrays solved in
+ * place: on x86 13 % fewer instructions in the solve), ws->work otherwise. */
 QP_SWEEP_INLINE void riccati_back_terminal(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, robot_arm_real *sp,
-                                           robot_arm_real *sl, const robot_arm_real *sn)
+                                           robot_arm_real *sl, const robot_arm_real *sn, robot_arm_real *tv)
 {
     /* p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
-    robot_arm_real tv[NX];
     robot_arm_real *xN = sp + N * NW, *pN = sl + N * NX;
     int i;
     for (i = 0; i < NX; ++i)
@@ -1138,19 +1138,15 @@ QP_SWEEP_INLINE void riccati_back_terminal(robot_arm_qp_workspace *ws, const rob
     }
 }
 
-QP_SWEEP_INLINE void riccati_back_stage(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int k, robot_arm_real *sp,
-                                        robot_arm_real *sl)
+/* Stage k's step up to m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}), with e += G_{k+1}' c */
+QP_SWEEP_INLINE void riccati_back_m(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int k,
+                                    const robot_arm_real *sp, const robot_arm_real *sl, robot_arm_real *tv, robot_arm_real *m)
 {
-    /* the sweep vectors in local arrays: the compiler then knows that they alias none of
-     * the arrays solved in place (on x86 13 % fewer instructions in the solve) */
-    robot_arm_real tv[NX], m[NW], y[NU1];
-    robot_arm_real *e = ws->e;
     const robot_arm_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
     const robot_arm_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
-    robot_arm_real *xk = sp + k * NW, *yk = xk + NX, *pk = sl + k * NX;
+    const robot_arm_real *xk = sp + k * NW;
     int i;
-    (void)in; /* (QP_PHIT reads the kept copy) */
-    /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
+    (void)in; /* (QP_PHIT reads the kept copy on the host path) */
     for (i = 0; i < NX; ++i)
         tv[i] = pn[i];
     spmv_packed(ws->P[k + 1], ROBOT_ARM_R(1.0), c, tv);
@@ -1158,8 +1154,19 @@ QP_SWEEP_INLINE void riccati_back_stage(robot_arm_qp_workspace *ws, const robot_
         m[i] = -xk[i];
     phit_gemv(QP_PHIT(ws, in, k), ROBOT_ARM_R(1.0), tv, m);
     if (NE > 0) {
-        robot_arm_lai_gemv_t(NX, NE, ROBOT_ARM_R(1.0), ws->G[k + 1], NX, c, ROBOT_ARM_R(1.0), e);
+        robot_arm_lai_gemv_t(NX, NE, ROBOT_ARM_R(1.0), ws->G[k + 1], NX, c, ROBOT_ARM_R(1.0), ws->e);
     }
+}
+
+#if ROBOT_ARM_QP_PHIT
+QP_SWEEP_INLINE void riccati_back_stage(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in, int k, robot_arm_real *sp,
+                                        robot_arm_real *sl)
+{
+    robot_arm_real tv[NX], m[NW], y[NU1];
+    robot_arm_real *e = ws->e;
+    robot_arm_real *xk = sp + k * NW, *yk = xk + NX, *pk = sl + k * NX;
+    int i;
+    riccati_back_m(ws, in, k, sp, sl, tv, m);
     /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
      * where u_k is formed (the forward sweep applies Lu'^{-1}); p_k and y are formed in
      * local arrays and stored once */
@@ -1244,8 +1251,10 @@ static int riccati_factor(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in)
     /* the largest |entry| of P_N, for the round-off estimate of a pivot (stage_noise) */
     pmagN = robot_arm_lai_max_abs_mat(NX, NX, Pf, NX);
 #if QP_FUSE
-    if (fused)
-        riccati_back_terminal(ws, in, ws->d_prim, ws->d_lam, ws->d_nu);
+    if (fused) {
+        robot_arm_real tv[NX];
+        riccati_back_terminal(ws, in, ws->d_prim, ws->d_lam, ws->d_nu, tv);
+    }
 #endif
 
     for (k = N - 1; k >= 0; --k) {
@@ -1374,7 +1383,10 @@ static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
 {
     int k;
 #if ROBOT_ARM_QP_PHIT
-    riccati_back_terminal(ws, in, sp, sl, sn);
+    {
+        robot_arm_real tv[NX];
+        riccati_back_terminal(ws, in, sp, sl, sn, tv);
+    }
     for (k = N - 1; k >= 0; --k)
         riccati_back_stage(ws, in, k, sp, sl);
 #else
@@ -1383,36 +1395,10 @@ static void riccati_solve(robot_arm_qp_workspace *ws, const robot_arm_qp_in *in,
     robot_arm_real *m = ws->work + NX; /* NW */
     robot_arm_real *e = ws->e;
 
-    /* terminal: p_N = -(rhs_stat_N + rho Req' rhs_eqN), e_N = -rhs_eqN */
-    {
-        robot_arm_real *xN = sp + N * NW, *pN = sl + N * NX;
-        for (i = 0; i < NX; ++i)
-            tv[i] = -xN[i];
-        if (NE > 0) {
-            if (ws->rho_aug > ROBOT_ARM_R(0.0))
-                robot_arm_lai_gemv_t(NE, NX, -ws->rho_aug, in->Req, NE1, sn, ROBOT_ARM_R(1.0), tv);
-            for (i = 0; i < NE; ++i)
-                e[i] = -sn[i];
-        }
-        for (i = 0; i < NX; ++i) {
-            xN[i] = pN[i];
-            pN[i] = tv[i];
-        }
-    }
+    riccati_back_terminal(ws, in, sp, sl, sn, tv);
     for (k = N - 1; k >= 0; --k) {
-        const robot_arm_real *c = sp + (k + 1) * NW;  /* rhs_dyn_{k+1} */
-        const robot_arm_real *pn = sl + (k + 1) * NX; /* p_{k+1} */
         robot_arm_real *xk = sp + k * NW, *yk = xk + NX, *pk = sl + k * NX;
-        /* m = -rhs_stat_k + Phi' (P_{k+1} c + p_{k+1}) */
-        for (i = 0; i < NX; ++i)
-            tv[i] = pn[i];
-        spmv_packed(ws->P[k + 1], ROBOT_ARM_R(1.0), c, tv);
-        for (i = 0; i < NW; ++i)
-            m[i] = -xk[i];
-        phit_gemv(QP_PHIT(ws, in, k), ROBOT_ARM_R(1.0), tv, m);
-        if (NE > 0) {
-            robot_arm_lai_gemv_t(NX, NE, ROBOT_ARM_R(1.0), ws->G[k + 1], NX, c, ROBOT_ARM_R(1.0), e);
-        }
+        riccati_back_m(ws, in, k, sp, sl, tv, m);
         /* y = Lu^{-1} m_u; p_k = m_x - M_xu M_uu^{-1} m_u = m_x - LK' y; e -= LKn' y; y is kept
          * where u_k is formed (the forward sweep applies Lu'^{-1}) */
         lu_solve_n(ws->Lu[k], m + NX);
