@@ -1714,11 +1714,67 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
 
 /* Largest steps in (0, 1] keeping t + ap dt >= 0 (ap, the primal step) and z + ad dz >= 0
  * (ad, the dual step), and whether no side blocks the full primal or dual step. */
+#if DOPUS_QP_V4 && !SOFT
+#define QP_V4_STEPS 1
+typedef long long qp_v4_bits __attribute__((vector_size(sizeof(qp_v4))));
+
+/* The candidates -t/dt of four sides (t, dt) where the side exists (has) and dt < 0, 2 where not. */
+static inline qp_v4 qp_v4_ratio(qp_v4 t, qp_v4 dt, qp_v4 has)
+{
+    const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+    const qp_v4 two = {DOPUS_R(2.0), DOPUS_R(2.0), DOPUS_R(2.0), DOPUS_R(2.0)};
+    const qp_v4_bits m = (has != zero) & (dt < zero);
+    const qp_v4 r = -t / dt;
+    return (qp_v4)(((qp_v4_bits)r & m) | ((qp_v4_bits)two & ~m));
+}
+
+static inline qp_v4 qp_v4_flags(const unsigned char *f)
+{
+    const qp_v4 v = {(dopus_real)f[0], (dopus_real)f[1], (dopus_real)f[2], (dopus_real)f[3]};
+    return v;
+}
+#else
+#define QP_V4_STEPS 0
+#endif
+
 static void max_steps(const dopus_qp_workspace *ws, dopus_real *ap, dopus_real *ad, int *full)
 {
-    int i;
+    int i = 0;
     dopus_real a = DOPUS_R(2.0), d = DOPUS_R(2.0);
-    for (i = 0; i < ws->nb; ++i) {
+#if QP_V4_STEPS
+    /* four rows per vector: the same candidates -t/dt (each an exact IEEE quotient) and the same
+     * selection (MINPD is dmin lane by lane), so the same a and d as the loop below */
+    if (ws->nb >= 4) {
+        qp_v4 va = {DOPUS_R(2.0), DOPUS_R(2.0), DOPUS_R(2.0), DOPUS_R(2.0)}, vd = va;
+        dopus_real la[4], ld[4];
+        int q;
+        for (; i + 4 <= ws->nb; i += 4) {
+            qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv;
+            const qp_v4 hl = qp_v4_flags(ws->has_lo + i), hu = qp_v4_flags(ws->has_up + i);
+            __builtin_memcpy(&tl, ws->t_lo + i, sizeof tl);
+            __builtin_memcpy(&tu, ws->t_up + i, sizeof tu);
+            __builtin_memcpy(&zl, ws->z_lo + i, sizeof zl);
+            __builtin_memcpy(&zu, ws->z_up + i, sizeof zu);
+            __builtin_memcpy(&dzl, ws->dz_lo + i, sizeof dzl);
+            __builtin_memcpy(&dzu, ws->dz_up + i, sizeof dzu);
+            __builtin_memcpy(&vl, ws->vl + i, sizeof vl);
+            __builtin_memcpy(&uv, ws->uv + i, sizeof uv);
+            __builtin_memcpy(&dv, ws->dv + i, sizeof dv);
+            /* dt_lo = dv + r_lo, r_lo = vl - t_lo; dt_up = r_up - dv, r_up = uv - t_up */
+            va = __builtin_ia32_minpd256(va, qp_v4_ratio(tl, dv + (vl - tl), hl));
+            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(zl, dzl, hl));
+            va = __builtin_ia32_minpd256(va, qp_v4_ratio(tu, (uv - tu) - dv, hu));
+            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(zu, dzu, hu));
+        }
+        __builtin_memcpy(la, &va, sizeof la);
+        __builtin_memcpy(ld, &vd, sizeof ld);
+        for (q = 0; q < 4; ++q) {
+            a = dmin(a, la[q]);
+            d = dmin(d, ld[q]);
+        }
+    }
+#endif
+    for (; i < ws->nb; ++i) {
         if (ws->has_lo[i]) {
             const dopus_real dt = dt_lo(ws, i);
             if (dt < DOPUS_R(0.0))

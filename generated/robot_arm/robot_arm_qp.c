@@ -1714,11 +1714,67 @@ static void newton_direction(robot_arm_qp_workspace *ws, const robot_arm_qp_in *
 
 /* Largest steps in (0, 1] keeping t + ap dt >= 0 (ap, the primal step) and z + ad dz >= 0
  * (ad, the dual step), and whether no side blocks the full primal or dual step. */
+#if ROBOT_ARM_QP_V4 && !SOFT
+#define QP_V4_STEPS 1
+typedef long long qp_v4_bits __attribute__((vector_size(sizeof(qp_v4))));
+
+/* The candidates -t/dt of four sides (t, dt) where the side exists (has) and dt < 0, 2 where not. */
+static inline qp_v4 qp_v4_ratio(qp_v4 t, qp_v4 dt, qp_v4 has)
+{
+    const qp_v4 zero = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
+    const qp_v4 two = {ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0)};
+    const qp_v4_bits m = (has != zero) & (dt < zero);
+    const qp_v4 r = -t / dt;
+    return (qp_v4)(((qp_v4_bits)r & m) | ((qp_v4_bits)two & ~m));
+}
+
+static inline qp_v4 qp_v4_flags(const unsigned char *f)
+{
+    const qp_v4 v = {(robot_arm_real)f[0], (robot_arm_real)f[1], (robot_arm_real)f[2], (robot_arm_real)f[3]};
+    return v;
+}
+#else
+#define QP_V4_STEPS 0
+#endif
+
 static void max_steps(const robot_arm_qp_workspace *ws, robot_arm_real *ap, robot_arm_real *ad, int *full)
 {
-    int i;
+    int i = 0;
     robot_arm_real a = ROBOT_ARM_R(2.0), d = ROBOT_ARM_R(2.0);
-    for (i = 0; i < ws->nb; ++i) {
+#if QP_V4_STEPS
+    /* four rows per vector: the same candidates -t/dt (each an exact IEEE quotient) and the same
+     * selection (MINPD is dmin lane by lane), so the same a and d as the loop below */
+    if (ws->nb >= 4) {
+        qp_v4 va = {ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0)}, vd = va;
+        robot_arm_real la[4], ld[4];
+        int q;
+        for (; i + 4 <= ws->nb; i += 4) {
+            qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv;
+            const qp_v4 hl = qp_v4_flags(ws->has_lo + i), hu = qp_v4_flags(ws->has_up + i);
+            __builtin_memcpy(&tl, ws->t_lo + i, sizeof tl);
+            __builtin_memcpy(&tu, ws->t_up + i, sizeof tu);
+            __builtin_memcpy(&zl, ws->z_lo + i, sizeof zl);
+            __builtin_memcpy(&zu, ws->z_up + i, sizeof zu);
+            __builtin_memcpy(&dzl, ws->dz_lo + i, sizeof dzl);
+            __builtin_memcpy(&dzu, ws->dz_up + i, sizeof dzu);
+            __builtin_memcpy(&vl, ws->vl + i, sizeof vl);
+            __builtin_memcpy(&uv, ws->uv + i, sizeof uv);
+            __builtin_memcpy(&dv, ws->dv + i, sizeof dv);
+            /* dt_lo = dv + r_lo, r_lo = vl - t_lo; dt_up = r_up - dv, r_up = uv - t_up */
+            va = __builtin_ia32_minpd256(va, qp_v4_ratio(tl, dv + (vl - tl), hl));
+            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(zl, dzl, hl));
+            va = __builtin_ia32_minpd256(va, qp_v4_ratio(tu, (uv - tu) - dv, hu));
+            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(zu, dzu, hu));
+        }
+        __builtin_memcpy(la, &va, sizeof la);
+        __builtin_memcpy(ld, &vd, sizeof ld);
+        for (q = 0; q < 4; ++q) {
+            a = dmin(a, la[q]);
+            d = dmin(d, ld[q]);
+        }
+    }
+#endif
+    for (; i < ws->nb; ++i) {
         if (ws->has_lo[i]) {
             const robot_arm_real dt = dt_lo(ws, i);
             if (dt < ROBOT_ARM_R(0.0))
