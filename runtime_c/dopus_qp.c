@@ -2868,7 +2868,41 @@ static dopus_real qp_predictor(dopus_qp_workspace *ws, const dopus_qp_in *in, co
     if (!long_steps)
         alpha = alpha_d = dmin(alpha, alpha_d);
     *alpha_aff = alpha;
-    for (i = 0; i < ws->nb; ++i) {
+    i = 0;
+#if QP_V4_STEPS
+    /* the products of four rows per vector, summed in the loop's order (a side that does not
+     * exist adds +0, which leaves every sum that starts at +0 as it is) */
+    if (ws->nb >= 4) {
+        const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+        for (; i + 4 <= ws->nb; i += 4) {
+            qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv, pl, pu;
+            dopus_real sl[4], su[4];
+            int q;
+            const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero,
+                             mup = qp_v4_flags(ws->has_up + i) != zero;
+            __builtin_memcpy(&tl, ws->t_lo + i, sizeof tl);
+            __builtin_memcpy(&tu, ws->t_up + i, sizeof tu);
+            __builtin_memcpy(&zl, ws->z_lo + i, sizeof zl);
+            __builtin_memcpy(&zu, ws->z_up + i, sizeof zu);
+            __builtin_memcpy(&dzl, ws->dz_lo + i, sizeof dzl);
+            __builtin_memcpy(&dzu, ws->dz_up + i, sizeof dzu);
+            __builtin_memcpy(&vl, ws->vl + i, sizeof vl);
+            __builtin_memcpy(&uv, ws->uv + i, sizeof uv);
+            __builtin_memcpy(&dv, ws->dv + i, sizeof dv);
+            pl = (tl + alpha * (dv + (vl - tl))) * (zl + alpha_d * dzl);
+            pu = (tu + alpha * ((uv - tu) - dv)) * (zu + alpha_d * dzu);
+            pl = (qp_v4)((qp_v4_bits)pl & mlo);
+            pu = (qp_v4)((qp_v4_bits)pu & mup);
+            __builtin_memcpy(sl, &pl, sizeof sl);
+            __builtin_memcpy(su, &pu, sizeof su);
+            for (q = 0; q < 4; ++q) {
+                mu_aff += sl[q];
+                mu_aff += su[q];
+            }
+        }
+    }
+#endif
+    for (; i < ws->nb; ++i) {
         if (ws->has_lo[i])
             mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha_d * ws->dz_lo[i]);
         if (ws->has_up[i])
@@ -2934,7 +2968,41 @@ static void qp_take_step(dopus_qp_workspace *ws, dopus_real alpha, dopus_real al
     dopus_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
     dopus_lai_axpy((N + 1) * NX, alpha_d, ws->d_lam, ws->lam);
     dopus_lai_axpy(NE, alpha_d, ws->d_nu, ws->nu);
-    for (i = 0; i < ws->nb; ++i) {
+    i = 0;
+#if QP_V4_STEPS
+    /* four rows per vector: a side that exists takes the loop's update, one that does not keeps
+     * its entries */
+    {
+        const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+        for (; i + 4 <= ws->nb; i += 4) {
+            qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv, ntl, ntu, nzl, nzu;
+            const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero,
+                             mup = qp_v4_flags(ws->has_up + i) != zero;
+            __builtin_memcpy(&tl, ws->t_lo + i, sizeof tl);
+            __builtin_memcpy(&tu, ws->t_up + i, sizeof tu);
+            __builtin_memcpy(&zl, ws->z_lo + i, sizeof zl);
+            __builtin_memcpy(&zu, ws->z_up + i, sizeof zu);
+            __builtin_memcpy(&dzl, ws->dz_lo + i, sizeof dzl);
+            __builtin_memcpy(&dzu, ws->dz_up + i, sizeof dzu);
+            __builtin_memcpy(&vl, ws->vl + i, sizeof vl);
+            __builtin_memcpy(&uv, ws->uv + i, sizeof uv);
+            __builtin_memcpy(&dv, ws->dv + i, sizeof dv);
+            ntl = tl + alpha * (dv + (vl - tl));
+            nzl = zl + alpha_d * dzl;
+            ntu = tu + alpha * ((uv - tu) - dv);
+            nzu = zu + alpha_d * dzu;
+            ntl = (qp_v4)(((qp_v4_bits)ntl & mlo) | ((qp_v4_bits)tl & ~mlo));
+            nzl = (qp_v4)(((qp_v4_bits)nzl & mlo) | ((qp_v4_bits)zl & ~mlo));
+            ntu = (qp_v4)(((qp_v4_bits)ntu & mup) | ((qp_v4_bits)tu & ~mup));
+            nzu = (qp_v4)(((qp_v4_bits)nzu & mup) | ((qp_v4_bits)zu & ~mup));
+            __builtin_memcpy(ws->t_lo + i, &ntl, sizeof ntl);
+            __builtin_memcpy(ws->z_lo + i, &nzl, sizeof nzl);
+            __builtin_memcpy(ws->t_up + i, &ntu, sizeof ntu);
+            __builtin_memcpy(ws->z_up + i, &nzu, sizeof nzu);
+        }
+    }
+#endif
+    for (; i < ws->nb; ++i) {
         if (ws->has_lo[i]) {
             ws->t_lo[i] += alpha * dt_lo(ws, i);
             ws->z_lo[i] += alpha_d * ws->dz_lo[i];
