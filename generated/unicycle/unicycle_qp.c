@@ -1641,6 +1641,105 @@ static void newton_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, cons
         oe[i] = -ws->r_eqN[i];
 }
 
+#if UNICYCLE_QP_V4 && !SOFT
+#define QP_V4_STEPS 1
+typedef long long qp_v4_bits __attribute__((vector_size(sizeof(qp_v4))));
+
+/* The candidates -t/dt of four sides (t, dt) where the side exists (has) and dt < 0, 2 where not. */
+static inline qp_v4 qp_v4_ratio(qp_v4 t, qp_v4 dt, qp_v4 has)
+{
+    const qp_v4 zero = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
+    const qp_v4 two = {UNICYCLE_R(2.0), UNICYCLE_R(2.0), UNICYCLE_R(2.0), UNICYCLE_R(2.0)};
+    const qp_v4_bits m = (has != zero) & (dt < zero);
+    const qp_v4 r = -t / dt;
+    return (qp_v4)(((qp_v4_bits)r & m) | ((qp_v4_bits)two & ~m));
+}
+
+static inline qp_v4 qp_v4_flags(const unsigned char *f)
+{
+    const qp_v4 v = {(unicycle_real)f[0], (unicycle_real)f[1], (unicycle_real)f[2], (unicycle_real)f[3]};
+    return v;
+}
+#else
+#define QP_V4_STEPS 0
+#endif
+
+#if QP_V4_STEPS
+/* Four rows per vector (t, z, dz, vl, uv, dv of rows i..i+3). */
+typedef struct {
+    qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv;
+} qp_v4_rows;
+
+static inline void qp_v4_load_rows(const unicycle_qp_workspace *ws, int i, qp_v4_rows *r)
+{
+    __builtin_memcpy(&r->tl, ws->t_lo + i, sizeof r->tl);
+    __builtin_memcpy(&r->tu, ws->t_up + i, sizeof r->tu);
+    __builtin_memcpy(&r->zl, ws->z_lo + i, sizeof r->zl);
+    __builtin_memcpy(&r->zu, ws->z_up + i, sizeof r->zu);
+    __builtin_memcpy(&r->dzl, ws->dz_lo + i, sizeof r->dzl);
+    __builtin_memcpy(&r->dzu, ws->dz_up + i, sizeof r->dzu);
+    __builtin_memcpy(&r->vl, ws->vl + i, sizeof r->vl);
+    __builtin_memcpy(&r->uv, ws->uv + i, sizeof r->uv);
+    __builtin_memcpy(&r->dv, ws->dv + i, sizeof r->dv);
+}
+
+static inline qp_v4 qp_v4_select(qp_v4_bits m, qp_v4 a, qp_v4 b)
+{
+    return (qp_v4)(((qp_v4_bits)a & m) | ((qp_v4_bits)b & ~m));
+}
+
+/* rc_lo and rc_up of every row (as the functions compute them) into rcl, rcu: four rows per
+ * vector, the rows left over alone; the entries of a side that does not exist are not read. */
+static void qp_v4_rc(const unicycle_qp_workspace *ws, const qp_centring *cc, unicycle_real *rcl, unicycle_real *rcu)
+{
+    const qp_v4 eta = {cc->eta, cc->eta, cc->eta, cc->eta};
+    const qp_v4 target = {cc->target, cc->target, cc->target, cc->target};
+    int i = 0;
+    for (; i + 4 <= ws->nb; i += 4) {
+        qp_v4_rows r;
+        qp_v4 a, b;
+        qp_v4_load_rows(ws, i, &r);
+        a = r.tl * r.zl;
+        b = r.tu * r.zu;
+        if (cc->corrector) {
+            a += eta * (r.dv + (r.vl - r.tl)) * r.dzl - target;
+            b += eta * ((r.uv - r.tu) - r.dv) * r.dzu - target;
+        }
+        __builtin_memcpy(rcl + i, &a, sizeof a);
+        __builtin_memcpy(rcu + i, &b, sizeof b);
+    }
+    for (; i < ws->nb; ++i) {
+        rcl[i] = rc_lo(ws, i, cc);
+        rcu[i] = rc_up(ws, i, cc);
+    }
+}
+
+/* dz = -(rc + z dt) / t of every side that exists (dt of the new dv), four rows per vector. */
+static void qp_v4_dz(unicycle_qp_workspace *ws, const unicycle_real *rcl, const unicycle_real *rcu)
+{
+    const qp_v4 zero = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
+    int i = 0;
+    for (; i + 4 <= ws->nb; i += 4) {
+        qp_v4_rows r;
+        qp_v4 a, b;
+        const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero, mup = qp_v4_flags(ws->has_up + i) != zero;
+        qp_v4_load_rows(ws, i, &r);
+        __builtin_memcpy(&a, rcl + i, sizeof a);
+        __builtin_memcpy(&b, rcu + i, sizeof b);
+        a = qp_v4_select(mlo, -(a + r.zl * (r.dv + (r.vl - r.tl))) / r.tl, r.dzl);
+        b = qp_v4_select(mup, -(b + r.zu * ((r.uv - r.tu) - r.dv)) / r.tu, r.dzu);
+        __builtin_memcpy(ws->dz_lo + i, &a, sizeof a);
+        __builtin_memcpy(ws->dz_up + i, &b, sizeof b);
+    }
+    for (; i < ws->nb; ++i) {
+        if (ws->has_lo[i])
+            ws->dz_lo[i] = -(rcl[i] + ws->z_lo[i] * dt_lo(ws, i)) / ws->t_lo[i];
+        if (ws->has_up[i])
+            ws->dz_up[i] = -(rcu[i] + ws->z_up[i] * dt_up(ws, i)) / ws->t_up[i];
+    }
+}
+#endif
+
 /* Newton direction for the barrier right-hand side rc (t z - target per side): form the
  * condensed right-hand side in the direction arrays, solve in place, refine, recover slack
  * and multiplier steps. A refinement step forms the right-hand side again in the residual
@@ -1678,6 +1777,17 @@ static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in
 
     /* dv = D dw (dt_lo = dv + r_lo, dt_up = r_up - dv; a soft side adds its ds, soft_f),
      * dz = -(rc + z dt) / t, dy = -(rcs + y ds) / s */
+#if QP_V4_STEPS
+    {
+        /* rc from the previous (predictor) direction first, then dv, then dz: the loop below */
+        unicycle_real rcl[UNICYCLE_QP_NB], rcu[UNICYCLE_QP_NB];
+        qp_v4_rc(ws, cc, rcl, rcu);
+        for (k = 0; k <= N; ++k)
+            FOR_STAGE_ROWS(ws, k, b, j)
+        ws->dv[b] = row_dot(in, k, j, ws->d_prim + k * NW);
+        qp_v4_dz(ws, rcl, rcu);
+    }
+#else
     for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
         {
@@ -1710,32 +1820,11 @@ static void newton_direction(unicycle_qp_workspace *ws, const unicycle_qp_in *in
             if (ws->has_up[b])
                 ws->dz_up[b] = -(rcu + ws->z_up[b] * dt_up(ws, b)) / ws->t_up[b];
         }
+#endif
 }
 
 /* Largest steps in (0, 1] keeping t + ap dt >= 0 (ap, the primal step) and z + ad dz >= 0
  * (ad, the dual step), and whether no side blocks the full primal or dual step. */
-#if UNICYCLE_QP_V4 && !SOFT
-#define QP_V4_STEPS 1
-typedef long long qp_v4_bits __attribute__((vector_size(sizeof(qp_v4))));
-
-/* The candidates -t/dt of four sides (t, dt) where the side exists (has) and dt < 0, 2 where not. */
-static inline qp_v4 qp_v4_ratio(qp_v4 t, qp_v4 dt, qp_v4 has)
-{
-    const qp_v4 zero = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
-    const qp_v4 two = {UNICYCLE_R(2.0), UNICYCLE_R(2.0), UNICYCLE_R(2.0), UNICYCLE_R(2.0)};
-    const qp_v4_bits m = (has != zero) & (dt < zero);
-    const qp_v4 r = -t / dt;
-    return (qp_v4)(((qp_v4_bits)r & m) | ((qp_v4_bits)two & ~m));
-}
-
-static inline qp_v4 qp_v4_flags(const unsigned char *f)
-{
-    const qp_v4 v = {(unicycle_real)f[0], (unicycle_real)f[1], (unicycle_real)f[2], (unicycle_real)f[3]};
-    return v;
-}
-#else
-#define QP_V4_STEPS 0
-#endif
 
 static void max_steps(const unicycle_qp_workspace *ws, unicycle_real *ap, unicycle_real *ad, int *full)
 {
