@@ -1567,6 +1567,7 @@ static dopus_real rc_up(const dopus_qp_workspace *ws, int b, const qp_centring *
     return rc;
 }
 
+#if !(DOPUS_QP_V4 && !SOFT) /* else qp_v4_side_sums and qp_v4_dz */
 /* rcs of the pair s y of a soft side, as rc_lo and rc_up for t z but without Mehrotra's
  * second-order term: with it, a two-sided soft row whose sides are both nearly active (a
  * soft equality row met at the solution) made the corrector cycle between a long and a
@@ -1616,30 +1617,7 @@ static dopus_real side_rhs_up(const dopus_qp_workspace *ws, const dopus_qp_in *i
     }
     return a;
 }
-
-/* Newton right-hand side for the barrier right-hand side rc (t z - target per side) into
- * (os, od, oe): -r_stat + D'y, -r_dyn, -r_eqN (os may be r_stat itself, and so on). */
-static void newton_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_centring *cc, dopus_real *os,
-                       dopus_real *od, dopus_real *oe)
-{
-    int i, k, b, j;
-    for (i = 0; i < NP; ++i)
-        os[i] = -ws->r_stat[i];
-    for (k = 0; k <= N; ++k)
-        FOR_STAGE_ROWS(ws, k, b, j)
-        {
-            dopus_real s = DOPUS_R(0.0);
-            if (ws->has_lo[b])
-                s += side_rhs_lo(ws, in, b, cc);
-            if (ws->has_up[b])
-                s -= side_rhs_up(ws, in, b, cc);
-            row_axpy(in, k, j, -s, os + k * NW);
-        }
-    for (i = 0; i < (N + 1) * NX; ++i)
-        od[i] = -ws->r_dyn[i];
-    for (i = 0; i < NE; ++i)
-        oe[i] = -ws->r_eqN[i];
-}
+#endif
 
 #if DOPUS_QP_V4 && !SOFT
 #define QP_V4_STEPS 1
@@ -1739,6 +1717,77 @@ static void qp_v4_dz(dopus_qp_workspace *ws, const dopus_real *rcl, const dopus_
     }
 }
 #endif
+
+#if QP_V4_STEPS
+/* The row sums of newton_rhs: s = 0 + (rc_lo + z_lo r_lo) / t_lo - (rc_up + z_up r_up) / t_up,
+ * each side's term only where the side exists, four rows per vector. */
+static void qp_v4_side_sums(const dopus_qp_workspace *ws, const qp_centring *cc, dopus_real *sv)
+{
+    const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+    const qp_v4 eta = {cc->eta, cc->eta, cc->eta, cc->eta};
+    const qp_v4 target = {cc->target, cc->target, cc->target, cc->target};
+    int i = 0;
+    for (; i + 4 <= ws->nb; i += 4) {
+        qp_v4_rows r;
+        qp_v4 a, b, sum;
+        const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero, mup = qp_v4_flags(ws->has_up + i) != zero;
+        qp_v4_load_rows(ws, i, &r);
+        a = r.tl * r.zl;
+        b = r.tu * r.zu;
+        if (cc->corrector) {
+            a += eta * (r.dv + (r.vl - r.tl)) * r.dzl - target;
+            b += eta * ((r.uv - r.tu) - r.dv) * r.dzu - target;
+        }
+        a = (a + r.zl * (r.vl - r.tl)) / r.tl;
+        b = (b + r.zu * (r.uv - r.tu)) / r.tu;
+        sum = zero + qp_v4_select(mlo, a, zero);
+        sum = qp_v4_select(mup, sum - b, sum);
+        __builtin_memcpy(sv + i, &sum, sizeof sum);
+    }
+    for (; i < ws->nb; ++i) {
+        dopus_real t = DOPUS_R(0.0);
+        if (ws->has_lo[i])
+            t += (rc_lo(ws, i, cc) + ws->z_lo[i] * r_lo(ws, i)) / ws->t_lo[i];
+        if (ws->has_up[i])
+            t -= (rc_up(ws, i, cc) + ws->z_up[i] * r_up(ws, i)) / ws->t_up[i];
+        sv[i] = t;
+    }
+}
+#endif
+
+/* Newton right-hand side for the barrier right-hand side rc (t z - target per side) into
+ * (os, od, oe): -r_stat + D'y, -r_dyn, -r_eqN (os may be r_stat itself, and so on). */
+static void newton_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_centring *cc, dopus_real *os,
+                       dopus_real *od, dopus_real *oe)
+{
+    int i, k, b, j;
+    for (i = 0; i < NP; ++i)
+        os[i] = -ws->r_stat[i];
+#if QP_V4_STEPS
+    {
+        dopus_real sv[DOPUS_QP_NB];
+        qp_v4_side_sums(ws, cc, sv);
+        for (k = 0; k <= N; ++k)
+            FOR_STAGE_ROWS(ws, k, b, j)
+        row_axpy(in, k, j, -sv[b], os + k * NW);
+    }
+#else
+    for (k = 0; k <= N; ++k)
+        FOR_STAGE_ROWS(ws, k, b, j)
+        {
+            dopus_real s = DOPUS_R(0.0);
+            if (ws->has_lo[b])
+                s += side_rhs_lo(ws, in, b, cc);
+            if (ws->has_up[b])
+                s -= side_rhs_up(ws, in, b, cc);
+            row_axpy(in, k, j, -s, os + k * NW);
+        }
+#endif
+    for (i = 0; i < (N + 1) * NX; ++i)
+        od[i] = -ws->r_dyn[i];
+    for (i = 0; i < NE; ++i)
+        oe[i] = -ws->r_eqN[i];
+}
 
 /* Newton direction for the barrier right-hand side rc (t z - target per side): form the
  * condensed right-hand side in the direction arrays, solve in place, refine, recover slack
