@@ -1567,6 +1567,7 @@ static dopus_real rc_up(const dopus_qp_workspace *ws, int b, const qp_centring *
     return rc;
 }
 
+#if !(DOPUS_QP_V4 && !SOFT) /* else qp_v4_side_sums and qp_v4_dz */
 /* rcs of the pair s y of a soft side, as rc_lo and rc_up for t z but without Mehrotra's
  * second-order term: with it, a two-sided soft row whose sides are both nearly active (a
  * soft equality row met at the solution) made the corrector cycle between a long and a
@@ -1616,6 +1617,143 @@ static dopus_real side_rhs_up(const dopus_qp_workspace *ws, const dopus_qp_in *i
     }
     return a;
 }
+#endif
+
+#if DOPUS_QP_V4 && !SOFT
+#define QP_V4_STEPS 1
+typedef long long qp_v4_bits __attribute__((vector_size(sizeof(qp_v4))));
+
+/* The candidates -t/dt of four sides (t, dt) where the side exists (has) and dt < 0, 2 where not. */
+static inline qp_v4 qp_v4_ratio(qp_v4 t, qp_v4 dt, qp_v4 has)
+{
+    const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+    const qp_v4 two = {DOPUS_R(2.0), DOPUS_R(2.0), DOPUS_R(2.0), DOPUS_R(2.0)};
+    const qp_v4_bits m = (has != zero) & (dt < zero);
+    const qp_v4 r = -t / dt;
+    return (qp_v4)(((qp_v4_bits)r & m) | ((qp_v4_bits)two & ~m));
+}
+
+static inline qp_v4 qp_v4_flags(const unsigned char *f)
+{
+    const qp_v4 v = {(dopus_real)f[0], (dopus_real)f[1], (dopus_real)f[2], (dopus_real)f[3]};
+    return v;
+}
+#else
+#define QP_V4_STEPS 0
+#endif
+
+#if QP_V4_STEPS
+/* Four rows per vector (t, z, dz, vl, uv, dv of rows i..i+3). */
+typedef struct {
+    qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv;
+} qp_v4_rows;
+
+static inline void qp_v4_load_rows(const dopus_qp_workspace *ws, int i, qp_v4_rows *r)
+{
+    __builtin_memcpy(&r->tl, ws->t_lo + i, sizeof r->tl);
+    __builtin_memcpy(&r->tu, ws->t_up + i, sizeof r->tu);
+    __builtin_memcpy(&r->zl, ws->z_lo + i, sizeof r->zl);
+    __builtin_memcpy(&r->zu, ws->z_up + i, sizeof r->zu);
+    __builtin_memcpy(&r->dzl, ws->dz_lo + i, sizeof r->dzl);
+    __builtin_memcpy(&r->dzu, ws->dz_up + i, sizeof r->dzu);
+    __builtin_memcpy(&r->vl, ws->vl + i, sizeof r->vl);
+    __builtin_memcpy(&r->uv, ws->uv + i, sizeof r->uv);
+    __builtin_memcpy(&r->dv, ws->dv + i, sizeof r->dv);
+}
+
+static inline qp_v4 qp_v4_select(qp_v4_bits m, qp_v4 a, qp_v4 b)
+{
+    return (qp_v4)(((qp_v4_bits)a & m) | ((qp_v4_bits)b & ~m));
+}
+
+/* rc_lo and rc_up of every row (as the functions compute them) into rcl, rcu: four rows per
+ * vector, the rows left over alone; the entries of a side that does not exist are not read. */
+static void qp_v4_rc(const dopus_qp_workspace *ws, const qp_centring *cc, dopus_real *rcl, dopus_real *rcu)
+{
+    const qp_v4 eta = {cc->eta, cc->eta, cc->eta, cc->eta};
+    const qp_v4 target = {cc->target, cc->target, cc->target, cc->target};
+    int i = 0;
+    for (; i + 4 <= ws->nb; i += 4) {
+        qp_v4_rows r;
+        qp_v4 a, b;
+        qp_v4_load_rows(ws, i, &r);
+        a = r.tl * r.zl;
+        b = r.tu * r.zu;
+        if (cc->corrector) {
+            a += eta * (r.dv + (r.vl - r.tl)) * r.dzl - target;
+            b += eta * ((r.uv - r.tu) - r.dv) * r.dzu - target;
+        }
+        __builtin_memcpy(rcl + i, &a, sizeof a);
+        __builtin_memcpy(rcu + i, &b, sizeof b);
+    }
+    for (; i < ws->nb; ++i) {
+        rcl[i] = rc_lo(ws, i, cc);
+        rcu[i] = rc_up(ws, i, cc);
+    }
+}
+
+/* dz = -(rc + z dt) / t of every side that exists (dt of the new dv), four rows per vector. */
+static void qp_v4_dz(dopus_qp_workspace *ws, const dopus_real *rcl, const dopus_real *rcu)
+{
+    const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+    int i = 0;
+    for (; i + 4 <= ws->nb; i += 4) {
+        qp_v4_rows r;
+        qp_v4 a, b;
+        const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero, mup = qp_v4_flags(ws->has_up + i) != zero;
+        qp_v4_load_rows(ws, i, &r);
+        __builtin_memcpy(&a, rcl + i, sizeof a);
+        __builtin_memcpy(&b, rcu + i, sizeof b);
+        a = qp_v4_select(mlo, -(a + r.zl * (r.dv + (r.vl - r.tl))) / r.tl, r.dzl);
+        b = qp_v4_select(mup, -(b + r.zu * ((r.uv - r.tu) - r.dv)) / r.tu, r.dzu);
+        __builtin_memcpy(ws->dz_lo + i, &a, sizeof a);
+        __builtin_memcpy(ws->dz_up + i, &b, sizeof b);
+    }
+    for (; i < ws->nb; ++i) {
+        if (ws->has_lo[i])
+            ws->dz_lo[i] = -(rcl[i] + ws->z_lo[i] * dt_lo(ws, i)) / ws->t_lo[i];
+        if (ws->has_up[i])
+            ws->dz_up[i] = -(rcu[i] + ws->z_up[i] * dt_up(ws, i)) / ws->t_up[i];
+    }
+}
+#endif
+
+#if QP_V4_STEPS
+/* The row sums of newton_rhs: s = 0 + (rc_lo + z_lo r_lo) / t_lo - (rc_up + z_up r_up) / t_up,
+ * each side's term only where the side exists, four rows per vector. */
+static void qp_v4_side_sums(const dopus_qp_workspace *ws, const qp_centring *cc, dopus_real *sv)
+{
+    const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+    const qp_v4 eta = {cc->eta, cc->eta, cc->eta, cc->eta};
+    const qp_v4 target = {cc->target, cc->target, cc->target, cc->target};
+    int i = 0;
+    for (; i + 4 <= ws->nb; i += 4) {
+        qp_v4_rows r;
+        qp_v4 a, b, sum;
+        const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero, mup = qp_v4_flags(ws->has_up + i) != zero;
+        qp_v4_load_rows(ws, i, &r);
+        a = r.tl * r.zl;
+        b = r.tu * r.zu;
+        if (cc->corrector) {
+            a += eta * (r.dv + (r.vl - r.tl)) * r.dzl - target;
+            b += eta * ((r.uv - r.tu) - r.dv) * r.dzu - target;
+        }
+        a = (a + r.zl * (r.vl - r.tl)) / r.tl;
+        b = (b + r.zu * (r.uv - r.tu)) / r.tu;
+        sum = zero + qp_v4_select(mlo, a, zero);
+        sum = qp_v4_select(mup, sum - b, sum);
+        __builtin_memcpy(sv + i, &sum, sizeof sum);
+    }
+    for (; i < ws->nb; ++i) {
+        dopus_real t = DOPUS_R(0.0);
+        if (ws->has_lo[i])
+            t += (rc_lo(ws, i, cc) + ws->z_lo[i] * r_lo(ws, i)) / ws->t_lo[i];
+        if (ws->has_up[i])
+            t -= (rc_up(ws, i, cc) + ws->z_up[i] * r_up(ws, i)) / ws->t_up[i];
+        sv[i] = t;
+    }
+}
+#endif
 
 /* Newton right-hand side for the barrier right-hand side rc (t z - target per side) into
  * (os, od, oe): -r_stat + D'y, -r_dyn, -r_eqN (os may be r_stat itself, and so on). */
@@ -1625,6 +1763,15 @@ static void newton_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_c
     int i, k, b, j;
     for (i = 0; i < NP; ++i)
         os[i] = -ws->r_stat[i];
+#if QP_V4_STEPS
+    {
+        dopus_real sv[DOPUS_QP_NB];
+        qp_v4_side_sums(ws, cc, sv);
+        for (k = 0; k <= N; ++k)
+            FOR_STAGE_ROWS(ws, k, b, j)
+        row_axpy(in, k, j, -sv[b], os + k * NW);
+    }
+#else
     for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
         {
@@ -1635,6 +1782,7 @@ static void newton_rhs(dopus_qp_workspace *ws, const dopus_qp_in *in, const qp_c
                 s -= side_rhs_up(ws, in, b, cc);
             row_axpy(in, k, j, -s, os + k * NW);
         }
+#endif
     for (i = 0; i < (N + 1) * NX; ++i)
         od[i] = -ws->r_dyn[i];
     for (i = 0; i < NE; ++i)
@@ -1678,6 +1826,17 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
 
     /* dv = D dw (dt_lo = dv + r_lo, dt_up = r_up - dv; a soft side adds its ds, soft_f),
      * dz = -(rc + z dt) / t, dy = -(rcs + y ds) / s */
+#if QP_V4_STEPS
+    {
+        /* rc from the previous (predictor) direction first, then dv, then dz: the loop below */
+        dopus_real rcl[DOPUS_QP_NB], rcu[DOPUS_QP_NB];
+        qp_v4_rc(ws, cc, rcl, rcu);
+        for (k = 0; k <= N; ++k)
+            FOR_STAGE_ROWS(ws, k, b, j)
+        ws->dv[b] = row_dot(in, k, j, ws->d_prim + k * NW);
+        qp_v4_dz(ws, rcl, rcu);
+    }
+#else
     for (k = 0; k <= N; ++k)
         FOR_STAGE_ROWS(ws, k, b, j)
         {
@@ -1710,15 +1869,50 @@ static void newton_direction(dopus_qp_workspace *ws, const dopus_qp_in *in, int 
             if (ws->has_up[b])
                 ws->dz_up[b] = -(rcu + ws->z_up[b] * dt_up(ws, b)) / ws->t_up[b];
         }
+#endif
 }
 
 /* Largest steps in (0, 1] keeping t + ap dt >= 0 (ap, the primal step) and z + ad dz >= 0
  * (ad, the dual step), and whether no side blocks the full primal or dual step. */
+
 static void max_steps(const dopus_qp_workspace *ws, dopus_real *ap, dopus_real *ad, int *full)
 {
-    int i;
+    int i = 0;
     dopus_real a = DOPUS_R(2.0), d = DOPUS_R(2.0);
-    for (i = 0; i < ws->nb; ++i) {
+#if QP_V4_STEPS
+    /* four rows per vector: the same candidates -t/dt (each an exact IEEE quotient) and the same
+     * selection (MINPD is dmin lane by lane), so the same a and d as the loop below */
+    if (ws->nb >= 4) {
+        qp_v4 va = {DOPUS_R(2.0), DOPUS_R(2.0), DOPUS_R(2.0), DOPUS_R(2.0)}, vd = va;
+        dopus_real la[4], ld[4];
+        int q;
+        for (; i + 4 <= ws->nb; i += 4) {
+            qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv;
+            const qp_v4 hl = qp_v4_flags(ws->has_lo + i), hu = qp_v4_flags(ws->has_up + i);
+            __builtin_memcpy(&tl, ws->t_lo + i, sizeof tl);
+            __builtin_memcpy(&tu, ws->t_up + i, sizeof tu);
+            __builtin_memcpy(&zl, ws->z_lo + i, sizeof zl);
+            __builtin_memcpy(&zu, ws->z_up + i, sizeof zu);
+            __builtin_memcpy(&dzl, ws->dz_lo + i, sizeof dzl);
+            __builtin_memcpy(&dzu, ws->dz_up + i, sizeof dzu);
+            __builtin_memcpy(&vl, ws->vl + i, sizeof vl);
+            __builtin_memcpy(&uv, ws->uv + i, sizeof uv);
+            __builtin_memcpy(&dv, ws->dv + i, sizeof dv);
+            /* dt_lo = dv + r_lo, r_lo = vl - t_lo; dt_up = r_up - dv, r_up = uv - t_up */
+            va = __builtin_ia32_minpd256(va, qp_v4_ratio(tl, dv + (vl - tl), hl));
+            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(zl, dzl, hl));
+            va = __builtin_ia32_minpd256(va, qp_v4_ratio(tu, (uv - tu) - dv, hu));
+            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(zu, dzu, hu));
+        }
+        __builtin_memcpy(la, &va, sizeof la);
+        __builtin_memcpy(ld, &vd, sizeof ld);
+        for (q = 0; q < 4; ++q) {
+            a = dmin(a, la[q]);
+            d = dmin(d, ld[q]);
+        }
+    }
+#endif
+    for (; i < ws->nb; ++i) {
         if (ws->has_lo[i]) {
             const dopus_real dt = dt_lo(ws, i);
             if (dt < DOPUS_R(0.0))
@@ -2812,7 +3006,41 @@ static dopus_real qp_predictor(dopus_qp_workspace *ws, const dopus_qp_in *in, co
     if (!long_steps)
         alpha = alpha_d = dmin(alpha, alpha_d);
     *alpha_aff = alpha;
-    for (i = 0; i < ws->nb; ++i) {
+    i = 0;
+#if QP_V4_STEPS
+    /* the products of four rows per vector, summed in the loop's order (a side that does not
+     * exist adds +0, which leaves every sum that starts at +0 as it is) */
+    if (ws->nb >= 4) {
+        const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+        for (; i + 4 <= ws->nb; i += 4) {
+            qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv, pl, pu;
+            dopus_real sl[4], su[4];
+            int q;
+            const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero,
+                             mup = qp_v4_flags(ws->has_up + i) != zero;
+            __builtin_memcpy(&tl, ws->t_lo + i, sizeof tl);
+            __builtin_memcpy(&tu, ws->t_up + i, sizeof tu);
+            __builtin_memcpy(&zl, ws->z_lo + i, sizeof zl);
+            __builtin_memcpy(&zu, ws->z_up + i, sizeof zu);
+            __builtin_memcpy(&dzl, ws->dz_lo + i, sizeof dzl);
+            __builtin_memcpy(&dzu, ws->dz_up + i, sizeof dzu);
+            __builtin_memcpy(&vl, ws->vl + i, sizeof vl);
+            __builtin_memcpy(&uv, ws->uv + i, sizeof uv);
+            __builtin_memcpy(&dv, ws->dv + i, sizeof dv);
+            pl = (tl + alpha * (dv + (vl - tl))) * (zl + alpha_d * dzl);
+            pu = (tu + alpha * ((uv - tu) - dv)) * (zu + alpha_d * dzu);
+            pl = (qp_v4)((qp_v4_bits)pl & mlo);
+            pu = (qp_v4)((qp_v4_bits)pu & mup);
+            __builtin_memcpy(sl, &pl, sizeof sl);
+            __builtin_memcpy(su, &pu, sizeof su);
+            for (q = 0; q < 4; ++q) {
+                mu_aff += sl[q];
+                mu_aff += su[q];
+            }
+        }
+    }
+#endif
+    for (; i < ws->nb; ++i) {
         if (ws->has_lo[i])
             mu_aff += (ws->t_lo[i] + alpha * dt_lo(ws, i)) * (ws->z_lo[i] + alpha_d * ws->dz_lo[i]);
         if (ws->has_up[i])
@@ -2878,7 +3106,41 @@ static void qp_take_step(dopus_qp_workspace *ws, dopus_real alpha, dopus_real al
     dopus_lai_axpy(NP, alpha, ws->d_prim, ws->prim);
     dopus_lai_axpy((N + 1) * NX, alpha_d, ws->d_lam, ws->lam);
     dopus_lai_axpy(NE, alpha_d, ws->d_nu, ws->nu);
-    for (i = 0; i < ws->nb; ++i) {
+    i = 0;
+#if QP_V4_STEPS
+    /* four rows per vector: a side that exists takes the loop's update, one that does not keeps
+     * its entries */
+    {
+        const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
+        for (; i + 4 <= ws->nb; i += 4) {
+            qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv, ntl, ntu, nzl, nzu;
+            const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero,
+                             mup = qp_v4_flags(ws->has_up + i) != zero;
+            __builtin_memcpy(&tl, ws->t_lo + i, sizeof tl);
+            __builtin_memcpy(&tu, ws->t_up + i, sizeof tu);
+            __builtin_memcpy(&zl, ws->z_lo + i, sizeof zl);
+            __builtin_memcpy(&zu, ws->z_up + i, sizeof zu);
+            __builtin_memcpy(&dzl, ws->dz_lo + i, sizeof dzl);
+            __builtin_memcpy(&dzu, ws->dz_up + i, sizeof dzu);
+            __builtin_memcpy(&vl, ws->vl + i, sizeof vl);
+            __builtin_memcpy(&uv, ws->uv + i, sizeof uv);
+            __builtin_memcpy(&dv, ws->dv + i, sizeof dv);
+            ntl = tl + alpha * (dv + (vl - tl));
+            nzl = zl + alpha_d * dzl;
+            ntu = tu + alpha * ((uv - tu) - dv);
+            nzu = zu + alpha_d * dzu;
+            ntl = (qp_v4)(((qp_v4_bits)ntl & mlo) | ((qp_v4_bits)tl & ~mlo));
+            nzl = (qp_v4)(((qp_v4_bits)nzl & mlo) | ((qp_v4_bits)zl & ~mlo));
+            ntu = (qp_v4)(((qp_v4_bits)ntu & mup) | ((qp_v4_bits)tu & ~mup));
+            nzu = (qp_v4)(((qp_v4_bits)nzu & mup) | ((qp_v4_bits)zu & ~mup));
+            __builtin_memcpy(ws->t_lo + i, &ntl, sizeof ntl);
+            __builtin_memcpy(ws->z_lo + i, &nzl, sizeof nzl);
+            __builtin_memcpy(ws->t_up + i, &ntu, sizeof ntu);
+            __builtin_memcpy(ws->z_up + i, &nzu, sizeof nzu);
+        }
+    }
+#endif
+    for (; i < ws->nb; ++i) {
         if (ws->has_lo[i]) {
             ws->t_lo[i] += alpha * dt_lo(ws, i);
             ws->z_lo[i] += alpha_d * ws->dz_lo[i];
