@@ -66,14 +66,15 @@ int dopus_eval_stage_hess(int gauss_newton, const dopus_real *x, const dopus_rea
     return f ? dopus_call(f, in, 5, out, 3, wk) : 1;
 }
 
-int dopus_eval_stage_grad_hess_exact(const dopus_real *x, const dopus_real *u, const dopus_real *p,
-                                     const dopus_real *lam_next, const dopus_real *mu_g, dopus_real *gL,
-                                     dopus_real *phi, dopus_real *l, dopus_real *g, dopus_real *A,
-                                     dopus_real *Phi, dopus_real *C, dopus_fun_work *wk)
+int dopus_eval_stage_grad_hess(int gauss_newton, const dopus_real *x, const dopus_real *u,
+                               const dopus_real *p, const dopus_real *lam_next, const dopus_real *mu_g,
+                               dopus_real *gL, dopus_real *phi, dopus_real *l, dopus_real *g, dopus_real *A,
+                               dopus_real *Phi, dopus_real *C, dopus_fun_work *wk)
 {
     const dopus_real *in[5] = {x, u, p, lam_next, mu_g};
     dopus_real *out[7] = {gL, phi, l, g, A, Phi, C};
-    return dopus_call(dopus_stage_grad_hess_exact, in, 5, out, 7, wk);
+    dopus_casadi_fn f = DOPUS_STAGE_FN(gauss_newton, dopus_stage_grad_hess);
+    return f ? dopus_call(f, in, 5, out, 7, wk) : 1;
 }
 
 int dopus_eval_stage_hess_cost(int gauss_newton, const dopus_real *x, const dopus_real *u,

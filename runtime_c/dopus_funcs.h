@@ -41,14 +41,14 @@ DOPUS_INTERNAL int dopus_eval_stage_hess(int gauss_newton, const dopus_real *x, 
                                          const dopus_real *mu_g, dopus_real *A, dopus_real *Phi,
                                          dopus_real *C, dopus_fun_work *wk);
 
-/* stage_grad and the exact stage_hess in one call (one generated function sharing what the
- * two compute in common): gL, phi, l, g as dopus_eval_stage_grad, A, Phi, C as
- * dopus_eval_stage_hess with the exact Hessian */
-DOPUS_INTERNAL int dopus_eval_stage_grad_hess_exact(const dopus_real *x, const dopus_real *u,
-                                                    const dopus_real *p, const dopus_real *lam_next,
-                                                    const dopus_real *mu_g, dopus_real *gL, dopus_real *phi,
-                                                    dopus_real *l, dopus_real *g, dopus_real *A,
-                                                    dopus_real *Phi, dopus_real *C, dopus_fun_work *wk);
+/* stage_grad and stage_hess in one call (one generated function sharing what the two compute
+ * in common, stage_grad_hess_exact or _gn): gL, phi, l, g as dopus_eval_stage_grad, A, Phi, C
+ * as dopus_eval_stage_hess with the same gauss_newton (nonzero return if !DOPUS_HAS_GN then) */
+DOPUS_INTERNAL int dopus_eval_stage_grad_hess(int gauss_newton, const dopus_real *x, const dopus_real *u,
+                                              const dopus_real *p, const dopus_real *lam_next,
+                                              const dopus_real *mu_g, dopus_real *gL, dopus_real *phi,
+                                              dopus_real *l, dopus_real *g, dopus_real *A, dopus_real *Phi,
+                                              dopus_real *C, dopus_fun_work *wk);
 
 /* stage_hess_cost: A_l (nw x nw), the stage-cost part of A (docs/algorithm.md section 4
  * step 5): exact hess_w l, or with gauss_newton != 0 J' W J + hess_w l_extra (nonzero

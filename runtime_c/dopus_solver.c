@@ -504,16 +504,16 @@ static int dopus_stage_F(dopus_solver *s, int k)
     return dopus_stage_F_of(s, k, l);
 }
 
-/* dopus_stage_F and the evaluation of dopus_stage_H in one call (stage_grad_hess_exact, the
- * exact Hessian): F_k as dopus_stage_F, A, Phi, C in s->mem.ev.tmp_A/Phi/C for
+/* dopus_stage_F and the evaluation of dopus_stage_H in one call (stage_grad_hess_exact or
+ * _gn, the setting's Hessian): F_k as dopus_stage_F, A, Phi, C in s->mem.ev.tmp_A/Phi/C for
  * dopus_stage_H_keep, the stage's slot untouched. */
 static int dopus_stage_FH(dopus_solver *s, int k)
 {
     dopus_real l = DOPUS_R(0.0);
     s->anytime.work += 2.0;
-    if (dopus_eval_stage_grad_hess_exact(
-            s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL, s->mem.ev.tmp_phi, &l,
-            s->mem.ev.tmp_g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
+    if (dopus_eval_stage_grad_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                                   s->mem.ev.tmp_gL, s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, s->mem.ev.tmp_A,
+                                   s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
         return DOPUS_ERR_FUNCTION;
     }
     return dopus_stage_F_of(s, k, l);
@@ -564,17 +564,18 @@ static int dopus_stage_Al(dopus_solver *s, int k)
  * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
  * leaves the slot as it was. */
 static int dopus_stage_H_store(dopus_solver *s, int k);
-static int dopus_fused(const dopus_solver *s);
 
 static int dopus_stage_H_eval(dopus_solver *s, int k)
 {
     dopus_real gL[DOPUS_NW], phi[DOPUS_NX], l, g[DOPUS_DIM(DOPUS_NG)];
-    if (dopus_fused(s)) {
+    if (s->settings.hessian == DOPUS_HESSIAN_EXACT) {
         /* the exact Hessian through the fused function, its gradient outputs unused: the one
-         * Hessian code whichever stages are fresh (the instruction cache) */
-        if (dopus_eval_stage_grad_hess_exact(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
-                                             &l, g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
-                                             &s->mem.ev.fun_work) != 0) {
+         * Hessian code whichever stages are fresh (the instruction cache; its forward-over-
+         * adjoint pass needs the adjoint anyway). The Gauss-Newton blocks need no adjoint:
+         * stage_hess_gn alone. */
+        if (dopus_eval_stage_grad_hess(DOPUS_HESSIAN_EXACT, s->x[k], s->u[k], s->p[k], s->lam[k + 1],
+                                       s->mu_g[k], gL, phi, &l, g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi,
+                                       s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
             return DOPUS_ERR_FUNCTION;
         }
         return dopus_stage_H_store(s, k);
@@ -636,12 +637,6 @@ static int dopus_stage_H_keep(dopus_solver *s, int k)
     int rc = dopus_stage_H_store(s, k);
     dopus_phase(s, prev);
     return rc;
-}
-
-/* 1 when a stage's gradient and Hessian are evaluated in one call (the exact Hessian). */
-static int dopus_fused(const dopus_solver *s)
-{
-    return s->settings.hessian == DOPUS_HESSIAN_EXACT;
 }
 
 /* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
@@ -2407,8 +2402,8 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
      *    two per stage. With a budget the full RTI (fuse) evaluates H_k in the same call too
      *    while that call, the gradients of the stages after it and the least rest of the
      *    iteration fit (algorithm.md section 14); those stages are re-linearised (selected) */
-    all_fresh = dopus_fused(s) && dopus_every_stage_fresh(s);
-    fuse = !all_fresh && dopus_budget_on(s) && dopus_fused(s) && dopus_setting_full(s);
+    all_fresh = dopus_every_stage_fresh(s);
+    fuse = !all_fresh && dopus_budget_on(s) && dopus_setting_full(s);
     defer = !all_fresh && !dopus_budget_on(s);
     dopus_gradient_order(s, order);
     for (k = 0; k < DOPUS_N && fuse; ++k) {
@@ -2494,7 +2489,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     b0 = dopus_budget_now(s);
     dopus_phase(s, DOPUS_PHASE_GRADIENTS);
-    rc = dopus_fused(s) ? dopus_stage_FH(s, DOPUS_N - 1) : dopus_stage_F(s, DOPUS_N - 1);
+    rc = dopus_stage_FH(s, DOPUS_N - 1);
     if (rc != DOPUS_OK) {
         return rc;
     }
@@ -2504,7 +2499,7 @@ static int dopus_prepare_iteration(dopus_solver *s, int extra)
     dopus_ring_store_F(dopus_ring_stage(&s->ring, DOPUS_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[DOPUS_N - 1] = DOPUS_R(0.0);
-    rc = dopus_fused(s) ? dopus_stage_H_keep(s, DOPUS_N - 1) : dopus_stage_H(s, DOPUS_N - 1);
+    rc = dopus_stage_H_keep(s, DOPUS_N - 1);
     if (rc == DOPUS_OK) {
         rc = dopus_term_F(s);
     }

@@ -14,13 +14,15 @@ __all__ = ["FUNCTION_SLOTS", "CodegenError", "find_meta", "read_meta"]
 
 #: The functions of docs/algorithm.md section 2 in the order they are emitted, with the
 #: attribute of ``Discretized`` that holds them and whether they may be absent
-#: (``stage_grad_hess_exact`` absent: the generator composes it of the two it fuses).
+#: (``stage_grad_hess_exact`` / ``stage_grad_hess_gn`` absent: the generator composes it of
+#: the two it fuses).
 FUNCTION_SLOTS = (
     ("stage_eval", False),
     ("stage_grad", False),
     ("stage_hess_exact", False),
     ("stage_grad_hess_exact", True),
     ("stage_hess_gn", True),
+    ("stage_grad_hess_gn", True),
     ("stage_hess_cost_exact", False),
     ("stage_hess_cost_gn", True),
     ("term_eval", False),

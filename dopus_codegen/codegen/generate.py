@@ -123,6 +123,7 @@ def _expected_io(slot: str, s: Dict[str, int]) -> tuple:
         "stage_hess_exact": (stage_in_dual, [(nw, nw), (nx, nw), (ng, nw)]),
         "stage_grad_hess_exact": (stage_in_dual, [(nw, 1), (nx, 1), (1, 1), (ng, 1), (nw, nw), (nx, nw), (ng, nw)]),
         "stage_hess_gn": (stage_in_dual, [(nw, nw), (nx, nw), (ng, nw)]),
+        "stage_grad_hess_gn": (stage_in_dual, [(nw, 1), (nx, 1), (1, 1), (ng, 1), (nw, nw), (nx, nw), (ng, nw)]),
         "stage_hess_cost_exact": (stage_in, [(nw, nw)]),
         "stage_hess_cost_gn": (stage_in, [(nw, nw)]),
         "term_eval": (term_in, [(1, 1), (nr, 1), (ne, 1)]),
@@ -214,11 +215,11 @@ def _compact(fun: ca.Function, emitted: Dict[str, ca.Function]) -> ca.Function:
     return ca.Function(fun.name(), ins, first.call(ins), fun.name_in(), fun.name_out())
 
 
-def _composed_grad_hess(name: str, grad: ca.Function, hess: ca.Function) -> ca.Function:
-    """``stage_grad_hess_exact`` of a problem whose functions give none: an MX function
-    calling ``stage_grad`` and ``stage_hess_exact`` (the runtime's one call, nothing shared)."""
+def _composed_grad_hess(name: str, grad: ca.Function, hess: ca.Function, kind: str) -> ca.Function:
+    """``stage_grad_hess_<kind>`` of a problem whose functions give none: an MX function
+    calling ``stage_grad`` and ``stage_hess_<kind>`` (the runtime's one call, nothing shared)."""
     ins = _mx_inputs(grad)
-    return ca.Function(f"{name}_stage_grad_hess_exact", ins, grad.call(ins) + hess.call(ins), grad.name_in(),
+    return ca.Function(f"{name}_stage_grad_hess_{kind}", ins, grad.call(ins) + hess.call(ins), grad.name_in(),
                        grad.name_out() + hess.name_out())
 
 
@@ -229,8 +230,9 @@ def casadi_functions(disc: Any, name: str, sizes: Dict[str, int]) -> Dict[str, c
     emitted: Dict[str, ca.Function] = {}
     for slot, optional in FUNCTION_SLOTS:
         fun = getattr(disc.functions, slot, None)
-        if fun is None and slot == "stage_grad_hess_exact" and "stage_grad" in out:
-            fun = _composed_grad_hess(name, out["stage_grad"], out["stage_hess_exact"])
+        kind = slot[len("stage_grad_hess_"):] if slot.startswith("stage_grad_hess_") else None
+        if fun is None and kind and "stage_grad" in out and f"stage_hess_{kind}" in out:
+            fun = _composed_grad_hess(name, out["stage_grad"], out[f"stage_hess_{kind}"], kind)
         if fun is None:
             if optional:
                 continue

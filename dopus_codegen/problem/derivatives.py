@@ -201,6 +201,11 @@ class StageFunctions:
     #: gradient's reverse pass); the runtime calls it where a stage needs both in the same
     #: step. None: the generator composes it from the two.
     stage_grad_hess_exact: Optional[ca.Function] = None
+    #: ``stage_grad`` and ``stage_hess_gn`` in one function, ``(x, u, p, lam_next, mu_g) ->
+    #: (gL, phi, l, g, A, Phi, C)`` with the Gauss-Newton ``A``, from the same graph (the
+    #: interval's forward pass once); None without a least-squares stage cost, or where the
+    #: two share no graph (the generator then composes it from the two).
+    stage_grad_hess_gn: Optional[ca.Function] = None
 
     def __iter__(self) -> Iterator[ca.Function]:
         fns = [self.stage_eval, self.stage_grad, self.stage_hess_exact, self.stage_hess_gn,
@@ -342,7 +347,7 @@ _shortcuts("data", ("name", "N", "dt", "nx", "nu", "nw", "np", "ng", "nr", "ne",
 _shortcuts("functions", ("stage_eval", "stage_grad", "stage_hess_exact", "stage_hess_gn",
                          "stage_hess_cost_exact", "stage_hess_cost_gn", "term_eval", "term_grad",
                          "term_hess_exact", "term_hess_gn", "ode", "stage_residual", "term_residual",
-                         "stage_grad_hess_exact", "has_gn"))
+                         "stage_grad_hess_exact", "stage_grad_hess_gn", "has_gn"))
 
 
 def _d(e):
@@ -352,10 +357,11 @@ def _d(e):
 _FUSED_OUT = ["gL", "phi", "l", "g", "A", "Phi", "C"]
 
 
-def _fused(name: str, ins, in_names, grad_outs, hess_outs, opts=None) -> ca.Function:
-    """``stage_grad_hess_exact``: the outputs of ``stage_grad`` and ``stage_hess_exact`` as
-    one function of the same expressions (see :class:`StageFunctions`)."""
-    return ca.Function(f"{name}_stage_grad_hess_exact", ins, list(grad_outs) + list(hess_outs), in_names,
+def _fused(name: str, ins, in_names, grad_outs, hess_outs, opts=None, kind="exact") -> ca.Function:
+    """``stage_grad_hess_exact`` (``stage_grad_hess_gn``): the outputs of ``stage_grad`` and
+    ``stage_hess_exact`` (``stage_hess_gn``) as one function of the same expressions (see
+    :class:`StageFunctions`)."""
+    return ca.Function(f"{name}_stage_grad_hess_{kind}", ins, list(grad_outs) + list(hess_outs), in_names,
                        _FUSED_OUT, *([opts] if opts else []))
 
 
@@ -396,12 +402,14 @@ def _stage_functions_unrolled(name: str, m: StageModel, phi: ca.SX):
                                    in_names, ["A", "Phi", "C"], _FN_OPTS)
     fused = _fused(name, ins, in_names, [_d(gL), _d(phi), _d(m.l), _d(m.g)], [_d(A), _d(Phi), _d(C)], _FN_OPTS)
     stage_hess_cost_exact, stage_hess_cost_gn, A_gn = _stage_cost_hessians(name, m)
-    stage_hess_gn = None
+    stage_hess_gn = fused_gn = None
     if A_gn is not None:
         stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [_d(A_gn), _d(Phi), _d(C)],
                                     in_names, ["A", "Phi", "C"], _FN_OPTS)
+        fused_gn = _fused(name, ins, in_names, [_d(gL), _d(phi), _d(m.l), _d(m.g)], [_d(A_gn), _d(Phi), _d(C)],
+                          _FN_OPTS, "gn")
     return (stage_eval, stage_grad, stage_hess_exact, stage_hess_gn, stage_hess_cost_exact, stage_hess_cost_gn,
-            fused)
+            fused, fused_gn)
 
 
 def _stage_cost_hessians(name: str, m: StageModel) -> tuple:
@@ -496,7 +504,7 @@ def _stage_functions(name: str, m: StageModel, directions="auto"):
     # one MX graph: the interval's forward pass (and, inlined, the gradient's reverse pass) once
     fused = _fused(name, ins, in_names, [gL, phi_grad, l, g], [A, Phi, C])
     stage_hess_cost_exact, stage_hess_cost_gn, A_gn = _stage_cost_hessians(name, m)
-    stage_hess_gn = None
+    stage_hess_gn = fused_gn = None
     if A_gn is not None:
         node_gn = ca.Function(f"{name}_node_gn", node_in, [_d(A_gn), _d(C_sx)], node_names, ["A", "C"],
                               _FN_OPTS)
@@ -506,8 +514,9 @@ def _stage_functions(name: str, m: StageModel, directions="auto"):
         A_gn_mx, C_gn = node_gn(X, U, P, MUG)
         stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [A_gn_mx, Phi, C_gn], in_names,
                                     ["A", "Phi", "C"])
+        fused_gn = _fused(name, ins, in_names, [gL, phi_grad, l, g], [A_gn_mx, Phi, C_gn], kind="gn")
     return (stage_eval, stage_grad, stage_hess_exact, stage_hess_gn, stage_hess_cost_exact, stage_hess_cost_gn,
-            fused)
+            fused, fused_gn)
 
 
 def _stage_functions_chained(name: str, m: StageModel):
@@ -551,7 +560,7 @@ def _stage_functions_chained(name: str, m: StageModel):
         stage_hess_gn = ca.Function(f"{name}_stage_hess_gn", ins, [A_gn_mx, Phi_gn, C_gn], in_names,
                                     ["A", "Phi", "C"])
     # the gradient (unrolled SX) and the chained Hessian share no graph: no fused function
-    return (stage_eval, unrolled[1], stage_hess_exact, stage_hess_gn, unrolled[4], unrolled[5], None)
+    return (stage_eval, unrolled[1], stage_hess_exact, stage_hess_gn, unrolled[4], unrolled[5], None, None)
 
 
 
@@ -674,7 +683,8 @@ def build_functions(problem: Union[Ocp, OcpSpec]) -> Discretized:
         name=name, stage_eval=stage[0], stage_grad=stage[1], stage_hess_exact=stage[2],
         stage_hess_gn=stage[3], stage_hess_cost_exact=stage[4], stage_hess_cost_gn=stage[5],
         term_eval=term[0], term_grad=term[1], term_hess_exact=term[2], term_hess_gn=term[3], ode=ode,
-        stage_residual=stage_residual, term_residual=term_residual, stage_grad_hess_exact=stage[6])
+        stage_residual=stage_residual, term_residual=term_residual, stage_grad_hess_exact=stage[6],
+        stage_grad_hess_gn=stage[7])
     model, con, N = spec.model, spec.constraints, spec.horizon.N
     nx, nu, np_ = m.x.size1(), m.u.size1(), m.p.size1()
     data = ProblemData(

@@ -1222,7 +1222,7 @@ class ReferenceDopus:
         """Step 2 with a budget (section 14): ``(n_fh, n_grad)``, how many gradients of stages
         0..N-2, in the order of :meth:`_gradient_order`, while one more and the least rest of
         the iteration fit, the first ``n_fh`` of them with their blocks in the same call (the
-        full RTI with the exact Hessian, as the C runtime's fused function: while that call, the
+        full RTI, as the C runtime's fused function of either Hessian: while that call, the
         gradients of the stages after it and the least rest fit); all gradients without a
         budget. (The C runtime reads its clock before each; here a gradient costs one work
         unit and the fused call two, in time the last estimates.)"""
@@ -1234,7 +1234,7 @@ class ReferenceDopus:
         used = self._budget_now() - self._instant_start
         floor = self._prepare_floor()
         n_fh = 0
-        if self.hessian == "exact" and self._setting_full():
+        if self._setting_full():
             while (n_fh < self.N - 1
                    and used + n_fh * fh + self._cost_fh + (self.N - 2 - n_fh) * self._cost_grad + floor
                    <= self.budget):

@@ -66,14 +66,15 @@ int robot_arm_eval_stage_hess(int gauss_newton, const robot_arm_real *x, const r
     return f ? robot_arm_call(f, in, 5, out, 3, wk) : 1;
 }
 
-int robot_arm_eval_stage_grad_hess_exact(const robot_arm_real *x, const robot_arm_real *u, const robot_arm_real *p,
-                                     const robot_arm_real *lam_next, const robot_arm_real *mu_g, robot_arm_real *gL,
-                                     robot_arm_real *phi, robot_arm_real *l, robot_arm_real *g, robot_arm_real *A,
-                                     robot_arm_real *Phi, robot_arm_real *C, robot_arm_fun_work *wk)
+int robot_arm_eval_stage_grad_hess(int gauss_newton, const robot_arm_real *x, const robot_arm_real *u,
+                               const robot_arm_real *p, const robot_arm_real *lam_next, const robot_arm_real *mu_g,
+                               robot_arm_real *gL, robot_arm_real *phi, robot_arm_real *l, robot_arm_real *g, robot_arm_real *A,
+                               robot_arm_real *Phi, robot_arm_real *C, robot_arm_fun_work *wk)
 {
     const robot_arm_real *in[5] = {x, u, p, lam_next, mu_g};
     robot_arm_real *out[7] = {gL, phi, l, g, A, Phi, C};
-    return robot_arm_call(robot_arm_stage_grad_hess_exact, in, 5, out, 7, wk);
+    robot_arm_casadi_fn f = ROBOT_ARM_STAGE_FN(gauss_newton, robot_arm_stage_grad_hess);
+    return f ? robot_arm_call(f, in, 5, out, 7, wk) : 1;
 }
 
 int robot_arm_eval_stage_hess_cost(int gauss_newton, const robot_arm_real *x, const robot_arm_real *u,

@@ -41,14 +41,14 @@ ROBOT_ARM_INTERNAL int robot_arm_eval_stage_hess(int gauss_newton, const robot_a
                                          const robot_arm_real *mu_g, robot_arm_real *A, robot_arm_real *Phi,
                                          robot_arm_real *C, robot_arm_fun_work *wk);
 
-/* stage_grad and the exact stage_hess in one call (one generated function sharing what the
- * two compute in common): gL, phi, l, g as robot_arm_eval_stage_grad, A, Phi, C as
- * robot_arm_eval_stage_hess with the exact Hessian */
-ROBOT_ARM_INTERNAL int robot_arm_eval_stage_grad_hess_exact(const robot_arm_real *x, const robot_arm_real *u,
-                                                    const robot_arm_real *p, const robot_arm_real *lam_next,
-                                                    const robot_arm_real *mu_g, robot_arm_real *gL, robot_arm_real *phi,
-                                                    robot_arm_real *l, robot_arm_real *g, robot_arm_real *A,
-                                                    robot_arm_real *Phi, robot_arm_real *C, robot_arm_fun_work *wk);
+/* stage_grad and stage_hess in one call (one generated function sharing what the two compute
+ * in common, stage_grad_hess_exact or _gn): gL, phi, l, g as robot_arm_eval_stage_grad, A, Phi, C
+ * as robot_arm_eval_stage_hess with the same gauss_newton (nonzero return if !ROBOT_ARM_HAS_GN then) */
+ROBOT_ARM_INTERNAL int robot_arm_eval_stage_grad_hess(int gauss_newton, const robot_arm_real *x, const robot_arm_real *u,
+                                              const robot_arm_real *p, const robot_arm_real *lam_next,
+                                              const robot_arm_real *mu_g, robot_arm_real *gL, robot_arm_real *phi,
+                                              robot_arm_real *l, robot_arm_real *g, robot_arm_real *A, robot_arm_real *Phi,
+                                              robot_arm_real *C, robot_arm_fun_work *wk);
 
 /* stage_hess_cost: A_l (nw x nw), the stage-cost part of A (docs/algorithm.md section 4
  * step 5): exact hess_w l, or with gauss_newton != 0 J' W J + hess_w l_extra (nonzero

@@ -504,16 +504,16 @@ static int robot_arm_stage_F(robot_arm_solver *s, int k)
     return robot_arm_stage_F_of(s, k, l);
 }
 
-/* robot_arm_stage_F and the evaluation of robot_arm_stage_H in one call (stage_grad_hess_exact, the
- * exact Hessian): F_k as robot_arm_stage_F, A, Phi, C in s->mem.ev.tmp_A/Phi/C for
+/* robot_arm_stage_F and the evaluation of robot_arm_stage_H in one call (stage_grad_hess_exact or
+ * _gn, the setting's Hessian): F_k as robot_arm_stage_F, A, Phi, C in s->mem.ev.tmp_A/Phi/C for
  * robot_arm_stage_H_keep, the stage's slot untouched. */
 static int robot_arm_stage_FH(robot_arm_solver *s, int k)
 {
     robot_arm_real l = ROBOT_ARM_R(0.0);
     s->anytime.work += 2.0;
-    if (robot_arm_eval_stage_grad_hess_exact(
-            s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL, s->mem.ev.tmp_phi, &l,
-            s->mem.ev.tmp_g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
+    if (robot_arm_eval_stage_grad_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                                   s->mem.ev.tmp_gL, s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, s->mem.ev.tmp_A,
+                                   s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
         return ROBOT_ARM_ERR_FUNCTION;
     }
     return robot_arm_stage_F_of(s, k, l);
@@ -564,17 +564,18 @@ static int robot_arm_stage_Al(robot_arm_solver *s, int k)
  * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
  * leaves the slot as it was. */
 static int robot_arm_stage_H_store(robot_arm_solver *s, int k);
-static int robot_arm_fused(const robot_arm_solver *s);
 
 static int robot_arm_stage_H_eval(robot_arm_solver *s, int k)
 {
     robot_arm_real gL[ROBOT_ARM_NW], phi[ROBOT_ARM_NX], l, g[ROBOT_ARM_DIM(ROBOT_ARM_NG)];
-    if (robot_arm_fused(s)) {
+    if (s->settings.hessian == ROBOT_ARM_HESSIAN_EXACT) {
         /* the exact Hessian through the fused function, its gradient outputs unused: the one
-         * Hessian code whichever stages are fresh (the instruction cache) */
-        if (robot_arm_eval_stage_grad_hess_exact(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
-                                             &l, g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
-                                             &s->mem.ev.fun_work) != 0) {
+         * Hessian code whichever stages are fresh (the instruction cache; its forward-over-
+         * adjoint pass needs the adjoint anyway). The Gauss-Newton blocks need no adjoint:
+         * stage_hess_gn alone. */
+        if (robot_arm_eval_stage_grad_hess(ROBOT_ARM_HESSIAN_EXACT, s->x[k], s->u[k], s->p[k], s->lam[k + 1],
+                                       s->mu_g[k], gL, phi, &l, g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi,
+                                       s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
             return ROBOT_ARM_ERR_FUNCTION;
         }
         return robot_arm_stage_H_store(s, k);
@@ -636,12 +637,6 @@ static int robot_arm_stage_H_keep(robot_arm_solver *s, int k)
     int rc = robot_arm_stage_H_store(s, k);
     robot_arm_phase(s, prev);
     return rc;
-}
-
-/* 1 when a stage's gradient and Hessian are evaluated in one call (the exact Hessian). */
-static int robot_arm_fused(const robot_arm_solver *s)
-{
-    return s->settings.hessian == ROBOT_ARM_HESSIAN_EXACT;
 }
 
 /* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
@@ -2407,8 +2402,8 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
      *    two per stage. With a budget the full RTI (fuse) evaluates H_k in the same call too
      *    while that call, the gradients of the stages after it and the least rest of the
      *    iteration fit (algorithm.md section 14); those stages are re-linearised (selected) */
-    all_fresh = robot_arm_fused(s) && robot_arm_every_stage_fresh(s);
-    fuse = !all_fresh && robot_arm_budget_on(s) && robot_arm_fused(s) && robot_arm_setting_full(s);
+    all_fresh = robot_arm_every_stage_fresh(s);
+    fuse = !all_fresh && robot_arm_budget_on(s) && robot_arm_setting_full(s);
     defer = !all_fresh && !robot_arm_budget_on(s);
     robot_arm_gradient_order(s, order);
     for (k = 0; k < ROBOT_ARM_N && fuse; ++k) {
@@ -2494,7 +2489,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     b0 = robot_arm_budget_now(s);
     robot_arm_phase(s, ROBOT_ARM_PHASE_GRADIENTS);
-    rc = robot_arm_fused(s) ? robot_arm_stage_FH(s, ROBOT_ARM_N - 1) : robot_arm_stage_F(s, ROBOT_ARM_N - 1);
+    rc = robot_arm_stage_FH(s, ROBOT_ARM_N - 1);
     if (rc != ROBOT_ARM_OK) {
         return rc;
     }
@@ -2504,7 +2499,7 @@ static int robot_arm_prepare_iteration(robot_arm_solver *s, int extra)
     robot_arm_ring_store_F(robot_arm_ring_stage(&s->ring, ROBOT_ARM_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[ROBOT_ARM_N - 1] = ROBOT_ARM_R(0.0);
-    rc = robot_arm_fused(s) ? robot_arm_stage_H_keep(s, ROBOT_ARM_N - 1) : robot_arm_stage_H(s, ROBOT_ARM_N - 1);
+    rc = robot_arm_stage_H_keep(s, ROBOT_ARM_N - 1);
     if (rc == ROBOT_ARM_OK) {
         rc = robot_arm_term_F(s);
     }

@@ -66,14 +66,15 @@ int unicycle_eval_stage_hess(int gauss_newton, const unicycle_real *x, const uni
     return f ? unicycle_call(f, in, 5, out, 3, wk) : 1;
 }
 
-int unicycle_eval_stage_grad_hess_exact(const unicycle_real *x, const unicycle_real *u, const unicycle_real *p,
-                                     const unicycle_real *lam_next, const unicycle_real *mu_g, unicycle_real *gL,
-                                     unicycle_real *phi, unicycle_real *l, unicycle_real *g, unicycle_real *A,
-                                     unicycle_real *Phi, unicycle_real *C, unicycle_fun_work *wk)
+int unicycle_eval_stage_grad_hess(int gauss_newton, const unicycle_real *x, const unicycle_real *u,
+                               const unicycle_real *p, const unicycle_real *lam_next, const unicycle_real *mu_g,
+                               unicycle_real *gL, unicycle_real *phi, unicycle_real *l, unicycle_real *g, unicycle_real *A,
+                               unicycle_real *Phi, unicycle_real *C, unicycle_fun_work *wk)
 {
     const unicycle_real *in[5] = {x, u, p, lam_next, mu_g};
     unicycle_real *out[7] = {gL, phi, l, g, A, Phi, C};
-    return unicycle_call(unicycle_stage_grad_hess_exact, in, 5, out, 7, wk);
+    unicycle_casadi_fn f = UNICYCLE_STAGE_FN(gauss_newton, unicycle_stage_grad_hess);
+    return f ? unicycle_call(f, in, 5, out, 7, wk) : 1;
 }
 
 int unicycle_eval_stage_hess_cost(int gauss_newton, const unicycle_real *x, const unicycle_real *u,

@@ -41,14 +41,14 @@ UNICYCLE_INTERNAL int unicycle_eval_stage_hess(int gauss_newton, const unicycle_
                                          const unicycle_real *mu_g, unicycle_real *A, unicycle_real *Phi,
                                          unicycle_real *C, unicycle_fun_work *wk);
 
-/* stage_grad and the exact stage_hess in one call (one generated function sharing what the
- * two compute in common): gL, phi, l, g as unicycle_eval_stage_grad, A, Phi, C as
- * unicycle_eval_stage_hess with the exact Hessian */
-UNICYCLE_INTERNAL int unicycle_eval_stage_grad_hess_exact(const unicycle_real *x, const unicycle_real *u,
-                                                    const unicycle_real *p, const unicycle_real *lam_next,
-                                                    const unicycle_real *mu_g, unicycle_real *gL, unicycle_real *phi,
-                                                    unicycle_real *l, unicycle_real *g, unicycle_real *A,
-                                                    unicycle_real *Phi, unicycle_real *C, unicycle_fun_work *wk);
+/* stage_grad and stage_hess in one call (one generated function sharing what the two compute
+ * in common, stage_grad_hess_exact or _gn): gL, phi, l, g as unicycle_eval_stage_grad, A, Phi, C
+ * as unicycle_eval_stage_hess with the same gauss_newton (nonzero return if !UNICYCLE_HAS_GN then) */
+UNICYCLE_INTERNAL int unicycle_eval_stage_grad_hess(int gauss_newton, const unicycle_real *x, const unicycle_real *u,
+                                              const unicycle_real *p, const unicycle_real *lam_next,
+                                              const unicycle_real *mu_g, unicycle_real *gL, unicycle_real *phi,
+                                              unicycle_real *l, unicycle_real *g, unicycle_real *A, unicycle_real *Phi,
+                                              unicycle_real *C, unicycle_fun_work *wk);
 
 /* stage_hess_cost: A_l (nw x nw), the stage-cost part of A (docs/algorithm.md section 4
  * step 5): exact hess_w l, or with gauss_newton != 0 J' W J + hess_w l_extra (nonzero

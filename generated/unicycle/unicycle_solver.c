@@ -504,16 +504,16 @@ static int unicycle_stage_F(unicycle_solver *s, int k)
     return unicycle_stage_F_of(s, k, l);
 }
 
-/* unicycle_stage_F and the evaluation of unicycle_stage_H in one call (stage_grad_hess_exact, the
- * exact Hessian): F_k as unicycle_stage_F, A, Phi, C in s->mem.ev.tmp_A/Phi/C for
+/* unicycle_stage_F and the evaluation of unicycle_stage_H in one call (stage_grad_hess_exact or
+ * _gn, the setting's Hessian): F_k as unicycle_stage_F, A, Phi, C in s->mem.ev.tmp_A/Phi/C for
  * unicycle_stage_H_keep, the stage's slot untouched. */
 static int unicycle_stage_FH(unicycle_solver *s, int k)
 {
     unicycle_real l = UNICYCLE_R(0.0);
     s->anytime.work += 2.0;
-    if (unicycle_eval_stage_grad_hess_exact(
-            s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], s->mem.ev.tmp_gL, s->mem.ev.tmp_phi, &l,
-            s->mem.ev.tmp_g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
+    if (unicycle_eval_stage_grad_hess(s->settings.hessian, s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k],
+                                   s->mem.ev.tmp_gL, s->mem.ev.tmp_phi, &l, s->mem.ev.tmp_g, s->mem.ev.tmp_A,
+                                   s->mem.ev.tmp_Phi, s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
         return UNICYCLE_ERR_FUNCTION;
     }
     return unicycle_stage_F_of(s, k, l);
@@ -564,17 +564,18 @@ static int unicycle_stage_Al(unicycle_solver *s, int k)
  * A_dyn = A - A_l (unregularised). Evaluated into scratch first, so a failed evaluation
  * leaves the slot as it was. */
 static int unicycle_stage_H_store(unicycle_solver *s, int k);
-static int unicycle_fused(const unicycle_solver *s);
 
 static int unicycle_stage_H_eval(unicycle_solver *s, int k)
 {
     unicycle_real gL[UNICYCLE_NW], phi[UNICYCLE_NX], l, g[UNICYCLE_DIM(UNICYCLE_NG)];
-    if (unicycle_fused(s)) {
+    if (s->settings.hessian == UNICYCLE_HESSIAN_EXACT) {
         /* the exact Hessian through the fused function, its gradient outputs unused: the one
-         * Hessian code whichever stages are fresh (the instruction cache) */
-        if (unicycle_eval_stage_grad_hess_exact(s->x[k], s->u[k], s->p[k], s->lam[k + 1], s->mu_g[k], gL, phi,
-                                             &l, g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi, s->mem.ev.tmp_C,
-                                             &s->mem.ev.fun_work) != 0) {
+         * Hessian code whichever stages are fresh (the instruction cache; its forward-over-
+         * adjoint pass needs the adjoint anyway). The Gauss-Newton blocks need no adjoint:
+         * stage_hess_gn alone. */
+        if (unicycle_eval_stage_grad_hess(UNICYCLE_HESSIAN_EXACT, s->x[k], s->u[k], s->p[k], s->lam[k + 1],
+                                       s->mu_g[k], gL, phi, &l, g, s->mem.ev.tmp_A, s->mem.ev.tmp_Phi,
+                                       s->mem.ev.tmp_C, &s->mem.ev.fun_work) != 0) {
             return UNICYCLE_ERR_FUNCTION;
         }
         return unicycle_stage_H_store(s, k);
@@ -636,12 +637,6 @@ static int unicycle_stage_H_keep(unicycle_solver *s, int k)
     int rc = unicycle_stage_H_store(s, k);
     unicycle_phase(s, prev);
     return rc;
-}
-
-/* 1 when a stage's gradient and Hessian are evaluated in one call (the exact Hessian). */
-static int unicycle_fused(const unicycle_solver *s)
-{
-    return s->settings.hessian == UNICYCLE_HESSIAN_EXACT;
 }
 
 /* The terminal gradient (term_grad) at the current point: gL (nx), E, r (nr), r_eq (ne).
@@ -2407,8 +2402,8 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
      *    two per stage. With a budget the full RTI (fuse) evaluates H_k in the same call too
      *    while that call, the gradients of the stages after it and the least rest of the
      *    iteration fit (algorithm.md section 14); those stages are re-linearised (selected) */
-    all_fresh = unicycle_fused(s) && unicycle_every_stage_fresh(s);
-    fuse = !all_fresh && unicycle_budget_on(s) && unicycle_fused(s) && unicycle_setting_full(s);
+    all_fresh = unicycle_every_stage_fresh(s);
+    fuse = !all_fresh && unicycle_budget_on(s) && unicycle_setting_full(s);
     defer = !all_fresh && !unicycle_budget_on(s);
     unicycle_gradient_order(s, order);
     for (k = 0; k < UNICYCLE_N && fuse; ++k) {
@@ -2494,7 +2489,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     /* 3. stage N-1 fresh; in receding mode x_N <- phi_{N-1} before the terminal node */
     b0 = unicycle_budget_now(s);
     unicycle_phase(s, UNICYCLE_PHASE_GRADIENTS);
-    rc = unicycle_fused(s) ? unicycle_stage_FH(s, UNICYCLE_N - 1) : unicycle_stage_F(s, UNICYCLE_N - 1);
+    rc = unicycle_stage_FH(s, UNICYCLE_N - 1);
     if (rc != UNICYCLE_OK) {
         return rc;
     }
@@ -2504,7 +2499,7 @@ static int unicycle_prepare_iteration(unicycle_solver *s, int extra)
     unicycle_ring_store_F(unicycle_ring_stage(&s->ring, UNICYCLE_N - 1), s->mem.ev.tmp_F, s->mem.ev.tmp_phi,
                        s->mem.ev.tmp_g);
     s->rho[UNICYCLE_N - 1] = UNICYCLE_R(0.0);
-    rc = unicycle_fused(s) ? unicycle_stage_H_keep(s, UNICYCLE_N - 1) : unicycle_stage_H(s, UNICYCLE_N - 1);
+    rc = unicycle_stage_H_keep(s, UNICYCLE_N - 1);
     if (rc == UNICYCLE_OK) {
         rc = unicycle_term_F(s);
     }
