@@ -73,8 +73,18 @@ int dopus_eval_stage_grad_hess(int gauss_newton, const dopus_real *x, const dopu
 {
     const dopus_real *in[5] = {x, u, p, lam_next, mu_g};
     dopus_real *out[7] = {gL, phi, l, g, A, Phi, C};
+#if DOPUS_HAS_GN_FUSED
     dopus_casadi_fn f = DOPUS_STAGE_FN(gauss_newton, dopus_stage_grad_hess);
-    return f ? dopus_call(f, in, 5, out, 7, wk) : 1;
+    return dopus_call(f, in, 5, out, 7, wk);
+#else
+    /* no fused Gauss-Newton function generated (the OCP file chooses the exact Hessian): the
+     * two calls, the same values */
+    if (gauss_newton) {
+        return dopus_eval_stage_grad(x, u, p, lam_next, mu_g, gL, phi, l, g, wk) != 0 ||
+               dopus_eval_stage_hess(1, x, u, p, lam_next, mu_g, A, Phi, C, wk) != 0;
+    }
+    return dopus_call(dopus_stage_grad_hess_exact, in, 5, out, 7, wk);
+#endif
 }
 
 int dopus_eval_stage_hess_cost(int gauss_newton, const dopus_real *x, const dopus_real *u,

@@ -73,8 +73,18 @@ int robot_arm_eval_stage_grad_hess(int gauss_newton, const robot_arm_real *x, co
 {
     const robot_arm_real *in[5] = {x, u, p, lam_next, mu_g};
     robot_arm_real *out[7] = {gL, phi, l, g, A, Phi, C};
+#if ROBOT_ARM_HAS_GN_FUSED
     robot_arm_casadi_fn f = ROBOT_ARM_STAGE_FN(gauss_newton, robot_arm_stage_grad_hess);
-    return f ? robot_arm_call(f, in, 5, out, 7, wk) : 1;
+    return robot_arm_call(f, in, 5, out, 7, wk);
+#else
+    /* no fused Gauss-Newton function generated (the OCP file chooses the exact Hessian): the
+     * two calls, the same values */
+    if (gauss_newton) {
+        return robot_arm_eval_stage_grad(x, u, p, lam_next, mu_g, gL, phi, l, g, wk) != 0 ||
+               robot_arm_eval_stage_hess(1, x, u, p, lam_next, mu_g, A, Phi, C, wk) != 0;
+    }
+    return robot_arm_call(robot_arm_stage_grad_hess_exact, in, 5, out, 7, wk);
+#endif
 }
 
 int robot_arm_eval_stage_hess_cost(int gauss_newton, const robot_arm_real *x, const robot_arm_real *u,

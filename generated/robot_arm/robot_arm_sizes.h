@@ -32,6 +32,9 @@
 
 /* 1 if the OCP has a least-squares stage cost, so the Gauss-Newton Hessian exists */
 #define ROBOT_ARM_HAS_GN 1
+/* 1 if stage_grad_hess_gn was generated (the OCP file chooses the Gauss-Newton Hessian); 0:
+ * the runtime calls stage_grad and stage_hess_gn where it would call it */
+#define ROBOT_ARM_HAS_GN_FUSED 0
 /* 1 if the stage-cost Hessian A_l is one constant matrix (the same for both Hessians): step 5
  * of prepare then keeps every block as it is (docs/algorithm.md section 4) */
 #define ROBOT_ARM_COST_HESS_CONST 0

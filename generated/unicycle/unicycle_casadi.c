@@ -37,7 +37,6 @@ extern "C" {
 #define casadi_f1 CASADI_PREFIX(f1)
 #define casadi_f10 CASADI_PREFIX(f10)
 #define casadi_f11 CASADI_PREFIX(f11)
-#define casadi_f12 CASADI_PREFIX(f12)
 #define casadi_f2 CASADI_PREFIX(f2)
 #define casadi_f3 CASADI_PREFIX(f3)
 #define casadi_f4 CASADI_PREFIX(f4)
@@ -1523,384 +1522,8 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_gn_work_bytes(casadi_int *sz_arg, c
   return 0;
 }
 
-/* unicycle_stage_grad_hess_gn:(x[4],u[2],p[2],lam_next[4],mu_g)->(gL[6],phi[4],l,g,A[6x6],Phi[4x6],C[1x6]) */
-static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
-  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
-  casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34;
-  a00=arg[0]? arg[0][0] : 0;
-  a01=1.;
-  a02=(a00-a01);
-  a03=(2.*a02);
-  a04=arg[4]? arg[4][0] : 0;
-  a05=(a03*a04);
-  a06=arg[3]? arg[3][0] : 0;
-  a05=(a05-a06);
-  a07=1.0000000000000001e-01;
-  a08=arg[2]? arg[2][0] : 0;
-  a08=(a00-a08);
-  a09=(a07*a08);
-  a05=(a05+a09);
-  if (res[0]!=0) res[0][0]=a05;
-  a05=arg[0]? arg[0][1] : 0;
-  a10=(a05-a07);
-  a11=(2.*a10);
-  a04=(a11*a04);
-  a12=arg[3]? arg[3][1] : 0;
-  a04=(a04-a12);
-  a13=arg[2]? arg[2][1] : 0;
-  a13=(a05-a13);
-  a14=(a07*a13);
-  a04=(a04+a14);
-  if (res[0]!=0) res[0][1]=a04;
-  a04=arg[0]? arg[0][2] : 0;
-  a15=arg[1]? arg[1][1] : 0;
-  a16=(a07*a15);
-  a16=(a04+a16);
-  unicycle_sincos_pair sc_15=unicycle_sincos(a16); a17=sc_15.s;
-  a18=arg[0]? arg[0][3] : 0;
-  a19=arg[1]? arg[1][0] : 0;
-  a20=(a07*a19);
-  a20=(a18+a20);
-  a21=1.6666666666666666e-02;
-  a22=(a21*a06);
-  a23=(a20*a22);
-  a23=(a17*a23);
-  a16=sc_15.c;
-  a24=(a21*a12);
-  a25=(a20*a24);
-  a25=(a16*a25);
-  a23=(a23-a25);
-  a25=arg[3]? arg[3][2] : 0;
-  unicycle_sincos_pair sc_16=unicycle_sincos(a04); a26=sc_16.c;
-  a27=(a18*a24);
-  a27=(a26*a27);
-  a27=(a25+a27);
-  a27=(a23-a27);
-  a28=5.0000000000000003e-02;
-  a29=(a28*a15);
-  a29=(a04+a29);
-  unicycle_sincos_pair sc_17=unicycle_sincos(a29); a30=sc_17.c;
-  a31=(a28*a19);
-  a31=(a18+a31);
-  a32=3.3333333333333333e-02;
-  a12=(a32*a12);
-  a12=(-a12);
-  a12=(2.*a12);
-  a33=(a31*a12);
-  a33=(a30*a33);
-  a29=sc_17.s;
-  a32=(a32*a06);
-  a32=(-a32);
-  a32=(2.*a32);
-  a06=(a31*a32);
-  a06=(a29*a06);
-  a33=(a33-a06);
-  a27=(a27+a33);
-  a06=sc_16.s;
-  a34=(a18*a22);
-  a34=(a06*a34);
-  a27=(a27+a34);
-  if (res[0]!=0) res[0][2]=a27;
-  a12=(a29*a12);
-  a32=(a30*a32);
-  a12=(a12+a32);
-  a32=arg[3]? arg[3][3] : 0;
-  a27=(a06*a24);
-  a27=(a32+a27);
-  a24=(a17*a24);
-  a34=(a16*a22);
-  a24=(a24+a34);
-  a27=(a27+a24);
-  a27=(a12-a27);
-  a22=(a26*a22);
-  a27=(a27-a22);
-  if (res[0]!=0) res[0][3]=a27;
-  a27=(a21*a32);
-  a22=(-a27);
-  a22=(2.*a22);
-  a22=(a22-a27);
-  a32=(a28*a32);
-  a22=(a22-a32);
-  a24=(a07*a24);
-  a22=(a22-a24);
-  a12=(a28*a12);
-  a22=(a22+a12);
-  a12=5.0000000000000010e-03;
-  a24=(a12*a19);
-  a22=(a22+a24);
-  a22=(a22+a24);
-  if (res[0]!=0) res[0][4]=a22;
-  a22=(a21*a25);
-  a24=(-a22);
-  a24=(2.*a24);
-  a24=(a24-a22);
-  a25=(a28*a25);
-  a24=(a24-a25);
-  a23=(a07*a23);
-  a24=(a24+a23);
-  a33=(a28*a33);
-  a24=(a24+a33);
-  a12=(a12*a15);
-  a24=(a24+a12);
-  a24=(a24+a12);
-  if (res[0]!=0) res[0][5]=a24;
-  a24=(a18*a26);
-  a12=(a31*a30);
-  a12=(2.*a12);
-  a24=(a24+a12);
-  a24=(a24+a12);
-  a12=(a20*a16);
-  a24=(a24+a12);
-  a24=(a21*a24);
-  a00=(a00+a24);
-  if (res[1]!=0) res[1][0]=a00;
-  a00=(a18*a06);
-  a12=(a31*a29);
-  a33=(2.*a12);
-  a23=(a00+a33);
-  a23=(a23+a33);
-  a33=(a20*a17);
-  a23=(a23+a33);
-  a23=(a21*a23);
-  a05=(a05+a23);
-  if (res[1]!=0) res[1][1]=a05;
-  a05=3.;
-  a23=(a05*a15);
-  a25=(2.*a15);
-  a23=(a23+a25);
-  a23=(a23+a15);
-  a23=(a21*a23);
-  a04=(a04+a23);
-  if (res[1]!=0) res[1][2]=a04;
-  a05=(a05*a19);
-  a04=(2.*a19);
-  a05=(a05+a04);
-  a05=(a05+a19);
-  a05=(a21*a05);
-  a18=(a18+a05);
-  if (res[1]!=0) res[1][3]=a18;
-  a18=5.0000000000000000e-01;
-  a08=(a08*a09);
-  a13=(a13*a14);
-  a08=(a08+a13);
-  a13=1.0000000000000002e-02;
-  a14=(a13*a19);
-  a19=(a19*a14);
-  a08=(a08+a19);
-  a19=(a13*a15);
-  a15=(a15*a19);
-  a08=(a08+a15);
-  a18=(a18*a08);
-  if (res[2]!=0) res[2][0]=a18;
-  a02=casadi_sq(a02);
-  a10=casadi_sq(a10);
-  a02=(a02+a10);
-  if (res[3]!=0) res[3][0]=a02;
-  if (res[4]!=0) res[4][0]=a07;
-  a02=0.;
-  if (res[4]!=0) res[4][1]=a02;
-  if (res[4]!=0) res[4][2]=a02;
-  if (res[4]!=0) res[4][3]=a02;
-  if (res[4]!=0) res[4][4]=a02;
-  if (res[4]!=0) res[4][5]=a02;
-  if (res[4]!=0) res[4][6]=a02;
-  if (res[4]!=0) res[4][7]=a07;
-  if (res[4]!=0) res[4][8]=a02;
-  if (res[4]!=0) res[4][9]=a02;
-  if (res[4]!=0) res[4][10]=a02;
-  if (res[4]!=0) res[4][11]=a02;
-  if (res[4]!=0) res[4][12]=a02;
-  if (res[4]!=0) res[4][13]=a02;
-  if (res[4]!=0) res[4][14]=a02;
-  if (res[4]!=0) res[4][15]=a02;
-  if (res[4]!=0) res[4][16]=a02;
-  if (res[4]!=0) res[4][17]=a02;
-  if (res[4]!=0) res[4][18]=a02;
-  if (res[4]!=0) res[4][19]=a02;
-  if (res[4]!=0) res[4][20]=a02;
-  if (res[4]!=0) res[4][21]=a02;
-  if (res[4]!=0) res[4][22]=a02;
-  if (res[4]!=0) res[4][23]=a02;
-  if (res[4]!=0) res[4][24]=a02;
-  if (res[4]!=0) res[4][25]=a02;
-  if (res[4]!=0) res[4][26]=a02;
-  if (res[4]!=0) res[4][27]=a02;
-  if (res[4]!=0) res[4][28]=a13;
-  if (res[4]!=0) res[4][29]=a02;
-  if (res[4]!=0) res[4][30]=a02;
-  if (res[4]!=0) res[4][31]=a02;
-  if (res[4]!=0) res[4][32]=a02;
-  if (res[4]!=0) res[4][33]=a02;
-  if (res[4]!=0) res[4][34]=a02;
-  if (res[4]!=0) res[4][35]=a13;
-  if (res[5]!=0) res[5][0]=a01;
-  if (res[5]!=0) res[5][1]=a02;
-  if (res[5]!=0) res[5][2]=a02;
-  if (res[5]!=0) res[5][3]=a02;
-  if (res[5]!=0) res[5][4]=a02;
-  if (res[5]!=0) res[5][5]=a01;
-  if (res[5]!=0) res[5][6]=a02;
-  if (res[5]!=0) res[5][7]=a02;
-  a12=(-a12);
-  a12=(2.*a12);
-  a00=(a12-a00);
-  a00=(a00+a12);
-  a00=(a00-a33);
-  a00=(a21*a00);
-  if (res[5]!=0) res[5][8]=a00;
-  if (res[5]!=0) res[5][9]=a24;
-  if (res[5]!=0) res[5][10]=a01;
-  if (res[5]!=0) res[5][11]=a02;
-  a24=(2.*a30);
-  a26=(a26+a24);
-  a26=(a26+a24);
-  a26=(a26+a16);
-  a26=(a21*a26);
-  if (res[5]!=0) res[5][12]=a26;
-  a26=(2.*a29);
-  a06=(a06+a26);
-  a06=(a06+a26);
-  a06=(a06+a17);
-  a06=(a21*a06);
-  if (res[5]!=0) res[5][13]=a06;
-  if (res[5]!=0) res[5][14]=a02;
-  if (res[5]!=0) res[5][15]=a01;
-  a01=2.0000000000000001e-01;
-  a06=(a01*a30);
-  a16=(a07*a16);
-  a06=(a06+a16);
-  a06=(a21*a06);
-  if (res[5]!=0) res[5][16]=a06;
-  a01=(a01*a29);
-  a17=(a07*a17);
-  a01=(a01+a17);
-  a01=(a21*a01);
-  if (res[5]!=0) res[5][17]=a01;
-  if (res[5]!=0) res[5][18]=a02;
-  if (res[5]!=0) res[5][19]=a07;
-  a01=4.;
-  a29=(a28*a29);
-  a29=(a31*a29);
-  a29=(a01*a29);
-  a17=(a20*a17);
-  a29=(a29+a17);
-  a29=(a21*a29);
-  a29=(-a29);
-  if (res[5]!=0) res[5][20]=a29;
-  a28=(a28*a30);
-  a31=(a31*a28);
-  a01=(a01*a31);
-  a20=(a20*a16);
-  a01=(a01+a20);
-  a21=(a21*a01);
-  if (res[5]!=0) res[5][21]=a21;
-  if (res[5]!=0) res[5][22]=a07;
-  if (res[5]!=0) res[5][23]=a02;
-  if (res[6]!=0) res[6][0]=a03;
-  if (res[6]!=0) res[6][1]=a11;
-  if (res[6]!=0) res[6][2]=a02;
-  if (res[6]!=0) res[6][3]=a02;
-  if (res[6]!=0) res[6][4]=a02;
-  if (res[6]!=0) res[6][5]=a02;
-  return 0;
-}
-
-CASADI_SYMBOL_EXPORT int unicycle_stage_grad_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f5(arg, res, iw, w, mem);
-}
-
-CASADI_SYMBOL_EXPORT int unicycle_stage_grad_hess_gn_checkout(void) {
-  return 0;
-}
-
-CASADI_SYMBOL_EXPORT void unicycle_stage_grad_hess_gn_release(int mem) {
-  (void)mem;
-}
-
-CASADI_SYMBOL_EXPORT void unicycle_stage_grad_hess_gn_incref(void) {
-}
-
-CASADI_SYMBOL_EXPORT void unicycle_stage_grad_hess_gn_decref(void) {
-}
-
-CASADI_SYMBOL_EXPORT casadi_int unicycle_stage_grad_hess_gn_n_in(void) { return 5;}
-
-CASADI_SYMBOL_EXPORT casadi_int unicycle_stage_grad_hess_gn_n_out(void) { return 7;}
-
-CASADI_SYMBOL_EXPORT casadi_real unicycle_stage_grad_hess_gn_default_in(casadi_int i) {
-  switch (i) {
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const char* unicycle_stage_grad_hess_gn_name_in(casadi_int i) {
-  switch (i) {
-    case 0: return "x";
-    case 1: return "u";
-    case 2: return "p";
-    case 3: return "lam_next";
-    case 4: return "mu_g";
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const char* unicycle_stage_grad_hess_gn_name_out(casadi_int i) {
-  switch (i) {
-    case 0: return "gL";
-    case 1: return "phi";
-    case 2: return "l";
-    case 3: return "g";
-    case 4: return "A";
-    case 5: return "Phi";
-    case 6: return "C";
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_grad_hess_gn_sparsity_in(casadi_int i) {
-  switch (i) {
-    case 0: return casadi_s0;
-    case 1: return casadi_s1;
-    case 2: return casadi_s1;
-    case 3: return casadi_s0;
-    case 4: return casadi_s2;
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const casadi_int* unicycle_stage_grad_hess_gn_sparsity_out(casadi_int i) {
-  switch (i) {
-    case 0: return casadi_s3;
-    case 1: return casadi_s0;
-    case 2: return casadi_s2;
-    case 3: return casadi_s2;
-    case 4: return casadi_s4;
-    case 5: return casadi_s5;
-    case 6: return casadi_s6;
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT int unicycle_stage_grad_hess_gn_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 5;
-  if (sz_res) *sz_res = 7;
-  if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 0;
-  return 0;
-}
-
-CASADI_SYMBOL_EXPORT int unicycle_stage_grad_hess_gn_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 7*sizeof(casadi_real*);
-  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 0*sizeof(casadi_real);
-  return 0;
-}
-
 /* unicycle_stage_hess_cost_exact:(x[4],u[2],p[2])->(A_l[6x6]) */
-static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   const casadi_real *wr0;
   wr0 = casadi_c0;
@@ -1909,7 +1532,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f6(arg, res, iw, w, mem);
+  return casadi_f5(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_checkout(void) {
@@ -1985,7 +1608,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_exact_work_bytes(casadi_int *s
 }
 
 /* unicycle_stage_hess_cost_gn:(x[4],u[2],p[2])->(A_l[6x6]) */
-static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   const casadi_real *wr0;
   wr0 = casadi_c0;
@@ -1994,7 +1617,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f7(arg, res, iw, w, mem);
+  return casadi_f6(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_checkout(void) {
@@ -2070,7 +1693,7 @@ CASADI_SYMBOL_EXPORT int unicycle_stage_hess_cost_gn_work_bytes(casadi_int *sz_a
 }
 
 /* unicycle_term_eval:(x[4],p[2])->(E,r[0],r_eq[0]) */
-static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4;
   a0=5.0000000000000000e-01;
@@ -2095,7 +1718,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_eval(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f8(arg, res, iw, w, mem);
+  return casadi_f7(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_eval_checkout(void) {
@@ -2173,7 +1796,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_eval_work_bytes(casadi_int *sz_arg, casad
 }
 
 /* unicycle_term_grad:(x[4],p[2],mu_r[0],nu[0])->(gL[4],E,r[0],r_eq[0]) */
-static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5;
   a0=10.;
@@ -2203,7 +1826,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_grad(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f9(arg, res, iw, w, mem);
+  return casadi_f8(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_grad_checkout(void) {
@@ -2287,7 +1910,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_grad_work_bytes(casadi_int *sz_arg, casad
 }
 
 /* unicycle_term_hess_exact:(x[4],p[2],mu_r[0],nu[0])->(A[4x4],R[0x4],R_eq[0x4]) */
-static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   const casadi_real *wr0;
   wr0 = casadi_c1;
@@ -2296,7 +1919,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f10(arg, res, iw, w, mem);
+  return casadi_f9(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_checkout(void) {
@@ -2378,7 +2001,7 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_exact_work_bytes(casadi_int *sz_arg,
 }
 
 /* unicycle_term_hess_gn:(x[4],p[2],mu_r[0],nu[0])->(A[4x4],R[0x4],R_eq[0x4]) */
-static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   const casadi_real *wr0;
   wr0 = casadi_c1;
@@ -2387,7 +2010,7 @@ static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f11(arg, res, iw, w, mem);
+  return casadi_f10(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_checkout(void) {
@@ -2469,15 +2092,15 @@ CASADI_SYMBOL_EXPORT int unicycle_term_hess_gn_work_bytes(casadi_int *sz_arg, ca
 }
 
 /* unicycle_ode:(x[4],u[2],p[2])->(xdot[4]) */
-static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2;
   a0=arg[0]? arg[0][3] : 0;
   a1=arg[0]? arg[0][2] : 0;
-  unicycle_sincos_pair sc_18=unicycle_sincos(a1); a2=sc_18.c;
+  unicycle_sincos_pair sc_15=unicycle_sincos(a1); a2=sc_15.c;
   a2=(a0*a2);
   if (res[0]!=0) res[0][0]=a2;
-  a1=sc_18.s;
+  a1=sc_15.s;
   a0=(a0*a1);
   if (res[0]!=0) res[0][1]=a0;
   a0=arg[1]? arg[1][1] : 0;
@@ -2488,7 +2111,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_ode(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f12(arg, res, iw, w, mem);
+  return casadi_f11(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int unicycle_ode_checkout(void) {

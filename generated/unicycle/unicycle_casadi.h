@@ -107,24 +107,6 @@ int unicycle_stage_hess_gn_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, ca
 #define unicycle_stage_hess_gn_SZ_RES 3
 #define unicycle_stage_hess_gn_SZ_IW 0
 #define unicycle_stage_hess_gn_SZ_W 0
-int unicycle_stage_grad_hess_gn(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int unicycle_stage_grad_hess_gn_checkout(void);
-void unicycle_stage_grad_hess_gn_release(int mem);
-void unicycle_stage_grad_hess_gn_incref(void);
-void unicycle_stage_grad_hess_gn_decref(void);
-casadi_int unicycle_stage_grad_hess_gn_n_in(void);
-casadi_int unicycle_stage_grad_hess_gn_n_out(void);
-casadi_real unicycle_stage_grad_hess_gn_default_in(casadi_int i);
-const char* unicycle_stage_grad_hess_gn_name_in(casadi_int i);
-const char* unicycle_stage_grad_hess_gn_name_out(casadi_int i);
-const casadi_int* unicycle_stage_grad_hess_gn_sparsity_in(casadi_int i);
-const casadi_int* unicycle_stage_grad_hess_gn_sparsity_out(casadi_int i);
-int unicycle_stage_grad_hess_gn_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int unicycle_stage_grad_hess_gn_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define unicycle_stage_grad_hess_gn_SZ_ARG 5
-#define unicycle_stage_grad_hess_gn_SZ_RES 7
-#define unicycle_stage_grad_hess_gn_SZ_IW 0
-#define unicycle_stage_grad_hess_gn_SZ_W 0
 int unicycle_stage_hess_cost_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int unicycle_stage_hess_cost_exact_checkout(void);
 void unicycle_stage_hess_cost_exact_release(int mem);

@@ -73,8 +73,18 @@ int unicycle_eval_stage_grad_hess(int gauss_newton, const unicycle_real *x, cons
 {
     const unicycle_real *in[5] = {x, u, p, lam_next, mu_g};
     unicycle_real *out[7] = {gL, phi, l, g, A, Phi, C};
+#if UNICYCLE_HAS_GN_FUSED
     unicycle_casadi_fn f = UNICYCLE_STAGE_FN(gauss_newton, unicycle_stage_grad_hess);
-    return f ? unicycle_call(f, in, 5, out, 7, wk) : 1;
+    return unicycle_call(f, in, 5, out, 7, wk);
+#else
+    /* no fused Gauss-Newton function generated (the OCP file chooses the exact Hessian): the
+     * two calls, the same values */
+    if (gauss_newton) {
+        return unicycle_eval_stage_grad(x, u, p, lam_next, mu_g, gL, phi, l, g, wk) != 0 ||
+               unicycle_eval_stage_hess(1, x, u, p, lam_next, mu_g, A, Phi, C, wk) != 0;
+    }
+    return unicycle_call(unicycle_stage_grad_hess_exact, in, 5, out, 7, wk);
+#endif
 }
 
 int unicycle_eval_stage_hess_cost(int gauss_newton, const unicycle_real *x, const unicycle_real *u,
