@@ -202,9 +202,10 @@ def test_c_equals_reference_with_the_gradients_cut(robot_disc, robot_solution, b
     assert sum(moved) == n_cut and moved != [False] * (N - 1 - n_cut) + [True] * n_cut, moved
 
 
+@pytest.mark.parametrize("hessian", ["exact", "gauss-newton"])
 @pytest.mark.parametrize("budget", [100, 115, 300])
-def test_c_equals_reference_full_rti_fused(robot_disc, robot_solution, budget):
-    """The full RTI (M = N - 1, the exact Hessian) with a work budget: the C runtime evaluates
+def test_c_equals_reference_full_rti_fused(robot_disc, robot_solution, budget, hessian):
+    """The full RTI (M = N - 1, either Hessian) with a work budget: the C runtime evaluates
     a stage's gradient and blocks in one call (2 units) in step 2 while that call, the
     gradients of the stages after it and the least rest fit, as it does without a budget; the
     stages after it get their gradients, then blocks in rho order while they fit (docs/
@@ -213,7 +214,7 @@ def test_c_equals_reference_full_rti_fused(robot_disc, robot_solution, budget):
     40, the N - 1 gradients 39, step 3 4) some stages keep their old blocks, at 300
     every one is fresh and extra iterations follow."""
     N = robot_disc.N
-    c, r = pair(robot_disc, budget, M=N - 1)
+    c, r = pair(robot_disc, budget, M=N - 1, hessian=hessian)
     extras, _ = closed_loop(robot_disc, robot_solution[0], c, r, 12)
     if budget < 3 * N + 2:
         assert len(r.recomputed) < N and sum(extras) == 0, (r.recomputed, extras)

@@ -9,7 +9,7 @@ import pytest
 
 from dopus_codegen import build_functions, load_ocp
 
-from conftest import ROBOT_ARM_FILE
+from conftest import EXAMPLES, ROBOT_ARM_FILE
 
 H1 = 1e-6     # central differences of first derivatives
 H2 = 1e-5     # central differences of gradients (second derivatives)
@@ -280,3 +280,35 @@ def test_build_is_deterministic(robot_disc):
     for f1, f2 in zip(robot_disc.functions, again.functions):
         assert f1.name() == f2.name()
         assert f1.serialize() == f2.serialize(), f1.name()
+
+
+FUSED_EXAMPLES = sorted(p.stem for p in EXAMPLES.glob("*.py"))
+FUSED_SOFT = ["cart_l1", "orbit_l2", "reach_both", "cone", "all_soft"]
+
+
+@pytest.mark.parametrize("source", [f"examples/{e}" for e in FUSED_EXAMPLES] + [f"soft/{s}" for s in FUSED_SOFT])
+def test_fused_stage_functions_equal_the_separate_calls_bit_for_bit(source):
+    """``stage_grad_hess_exact`` and ``stage_grad_hess_gn`` (docs/algorithm.md section 2)
+    give the outputs of ``stage_grad`` then those of ``stage_hess_exact`` /
+    ``stage_hess_gn`` at random points, the same numbers bit for bit (one graph, the same
+    operations), for every example and every soft test problem that has them."""
+    import soft_problems
+
+    kind, name = source.split("/")
+    disc = build_functions(load_ocp(EXAMPLES / f"{name}.py") if kind == "examples"
+                           else getattr(soft_problems, name)())
+    f = disc.functions
+    pairs = [(f.stage_grad_hess_exact, f.stage_hess_exact), (f.stage_grad_hess_gn, f.stage_hess_gn)]
+    pairs = [(fused, hess) for fused, hess in pairs if fused is not None]
+    if f.stage_hess_gn is not None and f.stage_grad_hess_exact is not None:
+        # a Gauss-Newton Hessian next to a fused exact one: the fused Gauss-Newton one exists too
+        assert f.stage_grad_hess_gn is not None
+    rng = np.random.default_rng(23)
+    for point in random_points(disc, rng, 5):
+        separate_grad = [dm(v) for v in f.stage_grad(*point)]
+        for fused, hess in pairs:
+            got = [dm(v) for v in fused(*point)]
+            want = separate_grad + [dm(v) for v in hess(*point)]
+            assert len(got) == len(want) == 7
+            for i, (a, b) in enumerate(zip(got, want)):
+                assert a.shape == b.shape and np.array_equal(a, b), (fused.name(), fused.name_out(i))
