@@ -1887,22 +1887,14 @@ static void max_steps(const dopus_qp_workspace *ws, dopus_real *ap, dopus_real *
         dopus_real la[4], ld[4];
         int q;
         for (; i + 4 <= ws->nb; i += 4) {
-            qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv;
+            qp_v4_rows r;
             const qp_v4 hl = qp_v4_flags(ws->has_lo + i), hu = qp_v4_flags(ws->has_up + i);
-            __builtin_memcpy(&tl, ws->t_lo + i, sizeof tl);
-            __builtin_memcpy(&tu, ws->t_up + i, sizeof tu);
-            __builtin_memcpy(&zl, ws->z_lo + i, sizeof zl);
-            __builtin_memcpy(&zu, ws->z_up + i, sizeof zu);
-            __builtin_memcpy(&dzl, ws->dz_lo + i, sizeof dzl);
-            __builtin_memcpy(&dzu, ws->dz_up + i, sizeof dzu);
-            __builtin_memcpy(&vl, ws->vl + i, sizeof vl);
-            __builtin_memcpy(&uv, ws->uv + i, sizeof uv);
-            __builtin_memcpy(&dv, ws->dv + i, sizeof dv);
+            qp_v4_load_rows(ws, i, &r);
             /* dt_lo = dv + r_lo, r_lo = vl - t_lo; dt_up = r_up - dv, r_up = uv - t_up */
-            va = __builtin_ia32_minpd256(va, qp_v4_ratio(tl, dv + (vl - tl), hl));
-            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(zl, dzl, hl));
-            va = __builtin_ia32_minpd256(va, qp_v4_ratio(tu, (uv - tu) - dv, hu));
-            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(zu, dzu, hu));
+            va = __builtin_ia32_minpd256(va, qp_v4_ratio(r.tl, r.dv + (r.vl - r.tl), hl));
+            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(r.zl, r.dzl, hl));
+            va = __builtin_ia32_minpd256(va, qp_v4_ratio(r.tu, (r.uv - r.tu) - r.dv, hu));
+            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(r.zu, r.dzu, hu));
         }
         __builtin_memcpy(la, &va, sizeof la);
         __builtin_memcpy(ld, &vd, sizeof ld);
@@ -3013,24 +3005,17 @@ static dopus_real qp_predictor(dopus_qp_workspace *ws, const dopus_qp_in *in, co
     if (ws->nb >= 4) {
         const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
         for (; i + 4 <= ws->nb; i += 4) {
-            qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv, pl, pu;
+            qp_v4_rows r;
+            qp_v4 pl, pu;
             dopus_real sl[4], su[4];
             int q;
             const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero,
                              mup = qp_v4_flags(ws->has_up + i) != zero;
-            __builtin_memcpy(&tl, ws->t_lo + i, sizeof tl);
-            __builtin_memcpy(&tu, ws->t_up + i, sizeof tu);
-            __builtin_memcpy(&zl, ws->z_lo + i, sizeof zl);
-            __builtin_memcpy(&zu, ws->z_up + i, sizeof zu);
-            __builtin_memcpy(&dzl, ws->dz_lo + i, sizeof dzl);
-            __builtin_memcpy(&dzu, ws->dz_up + i, sizeof dzu);
-            __builtin_memcpy(&vl, ws->vl + i, sizeof vl);
-            __builtin_memcpy(&uv, ws->uv + i, sizeof uv);
-            __builtin_memcpy(&dv, ws->dv + i, sizeof dv);
-            pl = (tl + alpha * (dv + (vl - tl))) * (zl + alpha_d * dzl);
-            pu = (tu + alpha * ((uv - tu) - dv)) * (zu + alpha_d * dzu);
-            pl = (qp_v4)((qp_v4_bits)pl & mlo);
-            pu = (qp_v4)((qp_v4_bits)pu & mup);
+            qp_v4_load_rows(ws, i, &r);
+            pl = (r.tl + alpha * (r.dv + (r.vl - r.tl))) * (r.zl + alpha_d * r.dzl);
+            pu = (r.tu + alpha * ((r.uv - r.tu) - r.dv)) * (r.zu + alpha_d * r.dzu);
+            pl = qp_v4_select(mlo, pl, zero);
+            pu = qp_v4_select(mup, pu, zero);
             __builtin_memcpy(sl, &pl, sizeof sl);
             __builtin_memcpy(su, &pu, sizeof su);
             for (q = 0; q < 4; ++q) {
@@ -3113,26 +3098,15 @@ static void qp_take_step(dopus_qp_workspace *ws, dopus_real alpha, dopus_real al
     {
         const qp_v4 zero = {DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0), DOPUS_R(0.0)};
         for (; i + 4 <= ws->nb; i += 4) {
-            qp_v4 tl, tu, zl, zu, dzl, dzu, vl, uv, dv, ntl, ntu, nzl, nzu;
+            qp_v4_rows r;
+            qp_v4 ntl, ntu, nzl, nzu;
             const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero,
                              mup = qp_v4_flags(ws->has_up + i) != zero;
-            __builtin_memcpy(&tl, ws->t_lo + i, sizeof tl);
-            __builtin_memcpy(&tu, ws->t_up + i, sizeof tu);
-            __builtin_memcpy(&zl, ws->z_lo + i, sizeof zl);
-            __builtin_memcpy(&zu, ws->z_up + i, sizeof zu);
-            __builtin_memcpy(&dzl, ws->dz_lo + i, sizeof dzl);
-            __builtin_memcpy(&dzu, ws->dz_up + i, sizeof dzu);
-            __builtin_memcpy(&vl, ws->vl + i, sizeof vl);
-            __builtin_memcpy(&uv, ws->uv + i, sizeof uv);
-            __builtin_memcpy(&dv, ws->dv + i, sizeof dv);
-            ntl = tl + alpha * (dv + (vl - tl));
-            nzl = zl + alpha_d * dzl;
-            ntu = tu + alpha * ((uv - tu) - dv);
-            nzu = zu + alpha_d * dzu;
-            ntl = (qp_v4)(((qp_v4_bits)ntl & mlo) | ((qp_v4_bits)tl & ~mlo));
-            nzl = (qp_v4)(((qp_v4_bits)nzl & mlo) | ((qp_v4_bits)zl & ~mlo));
-            ntu = (qp_v4)(((qp_v4_bits)ntu & mup) | ((qp_v4_bits)tu & ~mup));
-            nzu = (qp_v4)(((qp_v4_bits)nzu & mup) | ((qp_v4_bits)zu & ~mup));
+            qp_v4_load_rows(ws, i, &r);
+            ntl = qp_v4_select(mlo, r.tl + alpha * (r.dv + (r.vl - r.tl)), r.tl);
+            nzl = qp_v4_select(mlo, r.zl + alpha_d * r.dzl, r.zl);
+            ntu = qp_v4_select(mup, r.tu + alpha * ((r.uv - r.tu) - r.dv), r.tu);
+            nzu = qp_v4_select(mup, r.zu + alpha_d * r.dzu, r.zu);
             __builtin_memcpy(ws->t_lo + i, &ntl, sizeof ntl);
             __builtin_memcpy(ws->z_lo + i, &nzl, sizeof nzl);
             __builtin_memcpy(ws->t_up + i, &ntu, sizeof ntu);
