@@ -1624,12 +1624,14 @@ static robot_arm_real side_rhs_up(const robot_arm_qp_workspace *ws, const robot_
 typedef long long qp_v4_bits __attribute__((vector_size(sizeof(qp_v4))));
 
 /* The candidates -t/dt of four sides (t, dt) where the side exists (has) and dt < 0, 2 where not. */
-static inline qp_v4 qp_v4_ratio(qp_v4 t, qp_v4 dt, qp_v4 has)
+static inline qp_v4 qp_v4_ratio(qp_v4 t, qp_v4 dt, qp_v4 has, qp_v4_bits *odd)
 {
     const qp_v4 zero = {ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0), ROBOT_ARM_R(0.0)};
     const qp_v4 two = {ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0)};
     const qp_v4_bits m = (has != zero) & (dt < zero);
     const qp_v4 r = -t / dt;
+    /* a NaN or a zero candidate: the minimum can depend on the order (NaN, +0 against -0) */
+    *odd |= m & ((r != r) | (r == zero));
     return (qp_v4)(((qp_v4_bits)r & m) | ((qp_v4_bits)two & ~m));
 }
 
@@ -1881,9 +1883,12 @@ static void max_steps(const robot_arm_qp_workspace *ws, robot_arm_real *ap, robo
     robot_arm_real a = ROBOT_ARM_R(2.0), d = ROBOT_ARM_R(2.0);
 #if QP_V4_STEPS
     /* four rows per vector: the same candidates -t/dt (each an exact IEEE quotient) and the same
-     * selection (MINPD is dmin lane by lane), so the same a and d as the loop below */
+     * selection (MINPD is dmin lane by lane), so the same a and d as the loop below, whose order
+     * matters only when a candidate is NaN or zero: then the loop from the first row */
     if (ws->nb >= 4) {
         qp_v4 va = {ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0), ROBOT_ARM_R(2.0)}, vd = va;
+        qp_v4_bits odd = {0, 0, 0, 0};
+        long long lo[4];
         robot_arm_real la[4], ld[4];
         int q;
         for (; i + 4 <= ws->nb; i += 4) {
@@ -1891,16 +1896,21 @@ static void max_steps(const robot_arm_qp_workspace *ws, robot_arm_real *ap, robo
             const qp_v4 hl = qp_v4_flags(ws->has_lo + i), hu = qp_v4_flags(ws->has_up + i);
             qp_v4_load_rows(ws, i, &r);
             /* dt_lo = dv + r_lo, r_lo = vl - t_lo; dt_up = r_up - dv, r_up = uv - t_up */
-            va = __builtin_ia32_minpd256(va, qp_v4_ratio(r.tl, r.dv + (r.vl - r.tl), hl));
-            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(r.zl, r.dzl, hl));
-            va = __builtin_ia32_minpd256(va, qp_v4_ratio(r.tu, (r.uv - r.tu) - r.dv, hu));
-            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(r.zu, r.dzu, hu));
+            va = __builtin_ia32_minpd256(va, qp_v4_ratio(r.tl, r.dv + (r.vl - r.tl), hl, &odd));
+            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(r.zl, r.dzl, hl, &odd));
+            va = __builtin_ia32_minpd256(va, qp_v4_ratio(r.tu, (r.uv - r.tu) - r.dv, hu, &odd));
+            vd = __builtin_ia32_minpd256(vd, qp_v4_ratio(r.zu, r.dzu, hu, &odd));
         }
         __builtin_memcpy(la, &va, sizeof la);
         __builtin_memcpy(ld, &vd, sizeof ld);
+        __builtin_memcpy(lo, &odd, sizeof lo);
         for (q = 0; q < 4; ++q) {
             a = dmin(a, la[q]);
             d = dmin(d, ld[q]);
+        }
+        if (lo[0] | lo[1] | lo[2] | lo[3]) {
+            a = d = ROBOT_ARM_R(2.0);
+            i = 0;
         }
     }
 #endif
