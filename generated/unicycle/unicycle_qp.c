@@ -1623,22 +1623,24 @@ static unicycle_real side_rhs_up(const unicycle_qp_workspace *ws, const unicycle
 #define QP_V4_STEPS 1
 typedef long long qp_v4_bits __attribute__((vector_size(sizeof(qp_v4))));
 
-/* The candidates -t/dt of four sides (t, dt) where the side exists (has) and dt < 0, 2 where not. */
-static inline qp_v4 qp_v4_ratio(qp_v4 t, qp_v4 dt, qp_v4 has, qp_v4_bits *odd)
+/* The candidates -t/dt of four sides (t, dt) where the side exists (has, qp_v4_mask) and dt < 0,
+ * 2 where not. */
+static inline qp_v4 qp_v4_ratio(qp_v4 t, qp_v4 dt, qp_v4_bits has, qp_v4_bits *odd)
 {
     const qp_v4 zero = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
     const qp_v4 two = {UNICYCLE_R(2.0), UNICYCLE_R(2.0), UNICYCLE_R(2.0), UNICYCLE_R(2.0)};
-    const qp_v4_bits m = (has != zero) & (dt < zero);
+    const qp_v4_bits m = has & (dt < zero);
     const qp_v4 r = -t / dt;
     /* a NaN or a zero candidate: the minimum can depend on the order (NaN, +0 against -0) */
     *odd |= m & ((r != r) | (r == zero));
     return (qp_v4)(((qp_v4_bits)r & m) | ((qp_v4_bits)two & ~m));
 }
 
-static inline qp_v4 qp_v4_flags(const unsigned char *f)
+/* All bits set in the lanes of the four rows whose flag f is set (has_lo, has_up). */
+static inline qp_v4_bits qp_v4_mask(const unsigned char *f)
 {
-    const qp_v4 v = {(unicycle_real)f[0], (unicycle_real)f[1], (unicycle_real)f[2], (unicycle_real)f[3]};
-    return v;
+    const qp_v4_bits v = {f[0], f[1], f[2], f[3]}, zero = {0, 0, 0, 0};
+    return v != zero;
 }
 #else
 #define QP_V4_STEPS 0
@@ -1668,23 +1670,29 @@ static inline qp_v4 qp_v4_select(qp_v4_bits m, qp_v4 a, qp_v4 b)
     return (qp_v4)(((qp_v4_bits)a & m) | ((qp_v4_bits)b & ~m));
 }
 
-/* rc_lo and rc_up of every row (as the functions compute them) into rcl, rcu: four rows per
- * vector, the rows left over alone; the entries of a side that does not exist are not read. */
+/* rc_lo (*a) and rc_up (*b) of four rows, as the functions compute them. */
+static inline void qp_v4_rc_rows(const qp_v4_rows *r, const qp_centring *cc, qp_v4 *a, qp_v4 *b)
+{
+    *a = r->tl * r->zl;
+    *b = r->tu * r->zu;
+    if (cc->corrector) {
+        const qp_v4 eta = {cc->eta, cc->eta, cc->eta, cc->eta};
+        const qp_v4 target = {cc->target, cc->target, cc->target, cc->target};
+        *a += eta * (r->dv + (r->vl - r->tl)) * r->dzl - target;
+        *b += eta * ((r->uv - r->tu) - r->dv) * r->dzu - target;
+    }
+}
+
+/* rc_lo and rc_up of every row into rcl, rcu: four rows per vector, the rows left over alone;
+ * the entries of a side that does not exist are not read. */
 static void qp_v4_rc(const unicycle_qp_workspace *ws, const qp_centring *cc, unicycle_real *rcl, unicycle_real *rcu)
 {
-    const qp_v4 eta = {cc->eta, cc->eta, cc->eta, cc->eta};
-    const qp_v4 target = {cc->target, cc->target, cc->target, cc->target};
     int i = 0;
     for (; i + 4 <= ws->nb; i += 4) {
         qp_v4_rows r;
         qp_v4 a, b;
         qp_v4_load_rows(ws, i, &r);
-        a = r.tl * r.zl;
-        b = r.tu * r.zu;
-        if (cc->corrector) {
-            a += eta * (r.dv + (r.vl - r.tl)) * r.dzl - target;
-            b += eta * ((r.uv - r.tu) - r.dv) * r.dzu - target;
-        }
+        qp_v4_rc_rows(&r, cc, &a, &b);
         __builtin_memcpy(rcl + i, &a, sizeof a);
         __builtin_memcpy(rcu + i, &b, sizeof b);
     }
@@ -1697,12 +1705,11 @@ static void qp_v4_rc(const unicycle_qp_workspace *ws, const qp_centring *cc, uni
 /* dz = -(rc + z dt) / t of every side that exists (dt of the new dv), four rows per vector. */
 static void qp_v4_dz(unicycle_qp_workspace *ws, const unicycle_real *rcl, const unicycle_real *rcu)
 {
-    const qp_v4 zero = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
     int i = 0;
     for (; i + 4 <= ws->nb; i += 4) {
         qp_v4_rows r;
         qp_v4 a, b;
-        const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero, mup = qp_v4_flags(ws->has_up + i) != zero;
+        const qp_v4_bits mlo = qp_v4_mask(ws->has_lo + i), mup = qp_v4_mask(ws->has_up + i);
         qp_v4_load_rows(ws, i, &r);
         __builtin_memcpy(&a, rcl + i, sizeof a);
         __builtin_memcpy(&b, rcu + i, sizeof b);
@@ -1718,28 +1725,19 @@ static void qp_v4_dz(unicycle_qp_workspace *ws, const unicycle_real *rcl, const 
             ws->dz_up[i] = -(rcu[i] + ws->z_up[i] * dt_up(ws, i)) / ws->t_up[i];
     }
 }
-#endif
 
-#if QP_V4_STEPS
 /* The row sums of newton_rhs: s = 0 + (rc_lo + z_lo r_lo) / t_lo - (rc_up + z_up r_up) / t_up,
  * each side's term only where the side exists, four rows per vector. */
 static void qp_v4_side_sums(const unicycle_qp_workspace *ws, const qp_centring *cc, unicycle_real *sv)
 {
     const qp_v4 zero = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
-    const qp_v4 eta = {cc->eta, cc->eta, cc->eta, cc->eta};
-    const qp_v4 target = {cc->target, cc->target, cc->target, cc->target};
     int i = 0;
     for (; i + 4 <= ws->nb; i += 4) {
         qp_v4_rows r;
         qp_v4 a, b, sum;
-        const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero, mup = qp_v4_flags(ws->has_up + i) != zero;
+        const qp_v4_bits mlo = qp_v4_mask(ws->has_lo + i), mup = qp_v4_mask(ws->has_up + i);
         qp_v4_load_rows(ws, i, &r);
-        a = r.tl * r.zl;
-        b = r.tu * r.zu;
-        if (cc->corrector) {
-            a += eta * (r.dv + (r.vl - r.tl)) * r.dzl - target;
-            b += eta * ((r.uv - r.tu) - r.dv) * r.dzu - target;
-        }
+        qp_v4_rc_rows(&r, cc, &a, &b);
         a = (a + r.zl * (r.vl - r.tl)) / r.tl;
         b = (b + r.zu * (r.uv - r.tu)) / r.tu;
         sum = zero + qp_v4_select(mlo, a, zero);
@@ -1771,7 +1769,9 @@ static void newton_rhs(unicycle_qp_workspace *ws, const unicycle_qp_in *in, cons
         qp_v4_side_sums(ws, cc, sv);
         for (k = 0; k <= N; ++k)
             FOR_STAGE_ROWS(ws, k, b, j)
-        row_axpy(in, k, j, -sv[b], os + k * NW);
+            {
+                row_axpy(in, k, j, -sv[b], os + k * NW);
+            }
     }
 #else
     for (k = 0; k <= N; ++k)
@@ -1893,7 +1893,7 @@ static void max_steps(const unicycle_qp_workspace *ws, unicycle_real *ap, unicyc
         int q;
         for (; i + 4 <= ws->nb; i += 4) {
             qp_v4_rows r;
-            const qp_v4 hl = qp_v4_flags(ws->has_lo + i), hu = qp_v4_flags(ws->has_up + i);
+            const qp_v4_bits hl = qp_v4_mask(ws->has_lo + i), hu = qp_v4_mask(ws->has_up + i);
             qp_v4_load_rows(ws, i, &r);
             /* dt_lo = dv + r_lo, r_lo = vl - t_lo; dt_up = r_up - dv, r_up = uv - t_up */
             va = __builtin_ia32_minpd256(va, qp_v4_ratio(r.tl, r.dv + (r.vl - r.tl), hl, &odd));
@@ -3019,8 +3019,7 @@ static unicycle_real qp_predictor(unicycle_qp_workspace *ws, const unicycle_qp_i
             qp_v4 pl, pu;
             unicycle_real sl[4], su[4];
             int q;
-            const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero,
-                             mup = qp_v4_flags(ws->has_up + i) != zero;
+            const qp_v4_bits mlo = qp_v4_mask(ws->has_lo + i), mup = qp_v4_mask(ws->has_up + i);
             qp_v4_load_rows(ws, i, &r);
             pl = (r.tl + alpha * (r.dv + (r.vl - r.tl))) * (r.zl + alpha_d * r.dzl);
             pu = (r.tu + alpha * ((r.uv - r.tu) - r.dv)) * (r.zu + alpha_d * r.dzu);
@@ -3105,23 +3104,19 @@ static void qp_take_step(unicycle_qp_workspace *ws, unicycle_real alpha, unicycl
 #if QP_V4_STEPS
     /* four rows per vector: a side that exists takes the loop's update, one that does not keeps
      * its entries */
-    {
-        const qp_v4 zero = {UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0), UNICYCLE_R(0.0)};
-        for (; i + 4 <= ws->nb; i += 4) {
-            qp_v4_rows r;
-            qp_v4 ntl, ntu, nzl, nzu;
-            const qp_v4_bits mlo = qp_v4_flags(ws->has_lo + i) != zero,
-                             mup = qp_v4_flags(ws->has_up + i) != zero;
-            qp_v4_load_rows(ws, i, &r);
-            ntl = qp_v4_select(mlo, r.tl + alpha * (r.dv + (r.vl - r.tl)), r.tl);
-            nzl = qp_v4_select(mlo, r.zl + alpha_d * r.dzl, r.zl);
-            ntu = qp_v4_select(mup, r.tu + alpha * ((r.uv - r.tu) - r.dv), r.tu);
-            nzu = qp_v4_select(mup, r.zu + alpha_d * r.dzu, r.zu);
-            __builtin_memcpy(ws->t_lo + i, &ntl, sizeof ntl);
-            __builtin_memcpy(ws->z_lo + i, &nzl, sizeof nzl);
-            __builtin_memcpy(ws->t_up + i, &ntu, sizeof ntu);
-            __builtin_memcpy(ws->z_up + i, &nzu, sizeof nzu);
-        }
+    for (; i + 4 <= ws->nb; i += 4) {
+        qp_v4_rows r;
+        qp_v4 ntl, ntu, nzl, nzu;
+        const qp_v4_bits mlo = qp_v4_mask(ws->has_lo + i), mup = qp_v4_mask(ws->has_up + i);
+        qp_v4_load_rows(ws, i, &r);
+        ntl = qp_v4_select(mlo, r.tl + alpha * (r.dv + (r.vl - r.tl)), r.tl);
+        nzl = qp_v4_select(mlo, r.zl + alpha_d * r.dzl, r.zl);
+        ntu = qp_v4_select(mup, r.tu + alpha * ((r.uv - r.tu) - r.dv), r.tu);
+        nzu = qp_v4_select(mup, r.zu + alpha_d * r.dzu, r.zu);
+        __builtin_memcpy(ws->t_lo + i, &ntl, sizeof ntl);
+        __builtin_memcpy(ws->z_lo + i, &nzl, sizeof nzl);
+        __builtin_memcpy(ws->t_up + i, &ntu, sizeof ntu);
+        __builtin_memcpy(ws->z_up + i, &nzu, sizeof nzu);
     }
 #endif
     for (; i < ws->nb; ++i) {
